@@ -1,0 +1,80 @@
+"""The `trustroute` command: one click group; each subcommand lives in harness/commands/.
+
+Subcommand modules are imported only when their command runs, so `trustroute --help`
+stays fast and a broken optional dependency cannot stop unrelated commands.
+Bad input (InputError) becomes one line on stderr and exit code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import click
+
+from networks.errors import InputError
+
+# name -> (module, attribute, one-line help)
+COMMANDS: dict[str, tuple[str, str, str]] = {
+    "net": ("harness.commands.net", "net", "Build and inspect the SUMO network of a town."),
+    "spec": ("harness.commands.spec", "spec", "Check scLDTL spec files."),
+    "synth": ("harness.commands.synth", "synth", "Synthesize a trust-aware policy with bounds."),
+    "baseline": ("harness.commands.synth", "baseline", "The trust-free shortest baseline route."),
+    "evaluate": ("harness.commands.synth", "evaluate", "Exact satisfaction probability of a policy."),
+    "run": ("harness.commands.run", "run", "Run one episode in SUMO."),
+    "study": ("harness.commands.study", "study", "Run a simulated within-subject study."),
+    "analyze": ("harness.commands.study", "analyze", "Analyse a study directory."),
+    "fit": ("harness.commands.study", "fit", "Fit a driver model to a study's logs."),
+    "demo": ("harness.commands.demo", "demo", "Run a small study on the defaults."),
+    "model": ("harness.commands.model", "model", "Summarise the trust POMDP of a town and model."),
+}
+
+
+class LazyGroup(click.Group):
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in COMMANDS:
+            return None
+        module_name, attribute, _ = COMMANDS[name]
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name == module_name:
+                return None
+            raise
+        return getattr(module, attribute)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(name, COMMANDS[name][2]) for name in sorted(COMMANDS)]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+@click.group(cls=LazyGroup)
+@click.version_option(package_name="trustroute")
+def cli() -> None:
+    """trustroute: trust-aware routing of an autonomous vehicle, studied on SUMO."""
+
+
+def main(argv: list[str] | None = None) -> None:
+    try:
+        cli.main(args=argv, prog_name="trustroute", standalone_mode=False)
+    except InputError as exc:
+        click.echo(f"error: {exc.one_line()}", err=True)
+        sys.exit(2)
+    except click.exceptions.Abort:
+        click.echo("aborted", err=True)
+        sys.exit(130)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(2 if exc.exit_code == 2 else exc.exit_code)
+    except KeyboardInterrupt:
+        click.echo("interrupted", err=True)
+        sys.exit(130)
+    sys.exit(0)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,247 @@
+"""Town files: schema, validation, directed-road states, actions, lengths, shortest paths.
+
+A town file is JSON with `junctions` (name -> [x, y] in metres), `roads` (list of
+undirected [U, V] pairs, each a two-way road) and `incidents` (one entry per
+directed road "U-V": obstacle, pedestrian, truck or none). A state of the model
+is a directed road "U-V": the vehicle has just arrived at V from U.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import heapq
+import json
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from networks.errors import InputError
+
+DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town.json"
+INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", "none")
+
+
+def road_name(from_junction: str, to_junction: str) -> str:
+    return f"{from_junction}-{to_junction}"
+
+
+def split_road(directed_road: str) -> tuple[str, str]:
+    from_junction, _, to_junction = directed_road.partition("-")
+    return from_junction, to_junction
+
+
+@dataclass(frozen=True)
+class Town:
+    """A validated town. `states` are the directed roads in a fixed sorted order."""
+
+    junctions: dict[str, tuple[float, float]]
+    roads: tuple[tuple[str, str], ...]
+    incidents: dict[str, str]
+    source_path: str = ""
+    provenance: str = ""
+    states: tuple[str, ...] = field(init=False)
+    neighbours: dict[str, tuple[str, ...]] = field(init=False)
+
+    def __post_init__(self) -> None:
+        neighbours: dict[str, list[str]] = {name: [] for name in self.junctions}
+        for u, v in self.roads:
+            neighbours[u].append(v)
+            neighbours[v].append(u)
+        object.__setattr__(
+            self, "neighbours", {k: tuple(sorted(v)) for k, v in neighbours.items()}
+        )
+        states = sorted(road_name(u, v) for a, b in self.roads for u, v in ((a, b), (b, a)))
+        object.__setattr__(self, "states", tuple(states))
+
+    # -- identity -----------------------------------------------------------
+    @property
+    def content_hash(self) -> str:
+        """SHA-256 of the town's content (not its file name or formatting)."""
+        canonical = json.dumps(
+            {
+                "junctions": {k: list(v) for k, v in sorted(self.junctions.items())},
+                "roads": sorted(sorted(r) for r in self.roads),
+                "incidents": dict(sorted(self.incidents.items())),
+            },
+            sort_keys=True,
+            separators=(",", ":"),
+        )
+        return hashlib.sha256(canonical.encode()).hexdigest()
+
+    # -- states and actions -------------------------------------------------
+    def state_index(self, directed_road: str) -> int:
+        return self.states.index(directed_road)
+
+    def actions(self, directed_road: str) -> tuple[str, ...]:
+        """Next junctions from state U-V: neighbours of V except U, unless V is a dead end."""
+        came_from, at = split_road(directed_road)
+        options = tuple(w for w in self.neighbours[at] if w != came_from)
+        return options if options else (came_from,)
+
+    def successor(self, directed_road: str, next_junction: str) -> str:
+        _, at = split_road(directed_road)
+        if next_junction not in self.actions(directed_road):
+            raise ValueError(f"{next_junction} is not a legal move from {directed_road}")
+        return road_name(at, next_junction)
+
+    def successors(self, directed_road: str) -> tuple[str, ...]:
+        return tuple(self.successor(directed_road, w) for w in self.actions(directed_road))
+
+    def incident(self, directed_road: str) -> str:
+        return self.incidents[directed_road]
+
+    # -- geometry -----------------------------------------------------------
+    def length(self, directed_road: str) -> float:
+        """Model road length: centre-to-centre Euclidean distance in metres."""
+        u, v = split_road(directed_road)
+        (x1, y1), (x2, y2) = self.junctions[u], self.junctions[v]
+        return math.hypot(x2 - x1, y2 - y1)
+
+    def route_length(self, route: Sequence[str]) -> float:
+        """Length driven along a route of directed roads, not counting the first (start) road."""
+        return sum(self.length(r) for r in route[1:])
+
+    def shortest_route(self, start: str, targets: Iterable[str]) -> list[str] | None:
+        """Shortest legal route (list of directed roads, start included) from state
+        `start` to any state in `targets`; the start itself counts if it is a target.
+        Returns None when no target is reachable."""
+        target_set = set(targets)
+        best = {start: 0.0}
+        previous: dict[str, str] = {}
+        queue = [(0.0, start)]
+        while queue:
+            dist, state = heapq.heappop(queue)
+            if dist > best[state]:
+                continue
+            if state in target_set:
+                route = [state]
+                while route[-1] in previous:
+                    route.append(previous[route[-1]])
+                return route[::-1]
+            for nxt in self.successors(state):
+                nd = dist + self.length(nxt)
+                if nd < best.get(nxt, math.inf):
+                    best[nxt] = nd
+                    previous[nxt] = state
+                    heapq.heappush(queue, (nd, nxt))
+        return None
+
+    def reachable_states(self, start: str) -> set[str]:
+        seen = {start}
+        stack = [start]
+        while stack:
+            for nxt in self.successors(stack.pop()):
+                if nxt not in seen:
+                    seen.add(nxt)
+                    stack.append(nxt)
+        return seen
+
+
+# -- loading and validation -------------------------------------------------
+
+def _fail(path: str, place: str, problem: str, fix: str) -> InputError:
+    return InputError(path, place, problem, fix)
+
+
+def town_from_dict(data: object, path: str = "<town>") -> Town:
+    """Validate a parsed town document and build a Town, or raise InputError."""
+    if not isinstance(data, dict):
+        raise _fail(path, "top level", "expected a JSON object", "write {\"junctions\": ..., "
+                    "\"roads\": ..., \"incidents\": ...}")
+    for key in ("junctions", "roads", "incidents"):
+        if key not in data:
+            raise _fail(path, key, f"missing key '{key}'", f"add a '{key}' entry as in the default "
+                        "town (trustroute net build --help)")
+    raw_junctions = data["junctions"]
+    if not isinstance(raw_junctions, dict) or not raw_junctions:
+        raise _fail(path, "junctions", "expected a non-empty object of name -> [x, y]",
+                    "list each junction as \"A\": [x, y] in metres")
+    junctions: dict[str, tuple[float, float]] = {}
+    for name, xy in raw_junctions.items():
+        if not isinstance(name, str) or not name or "-" in name:
+            raise _fail(path, f"junctions.{name}", "junction names must be non-empty and contain "
+                        "no '-'", "rename the junction")
+        ok = (isinstance(xy, list) and len(xy) == 2
+              and all(isinstance(c, int | float) and not isinstance(c, bool)
+                      and math.isfinite(c) for c in xy))
+        if not ok:
+            raise _fail(path, f"junctions.{name}", f"coordinates {xy!r} are not two finite numbers",
+                        "write [x, y] in metres, e.g. [0, 700]")
+        junctions[name] = (float(xy[0]), float(xy[1]))
+
+    raw_roads = data["roads"]
+    if not isinstance(raw_roads, list) or not raw_roads:
+        raise _fail(path, "roads", "expected a non-empty list of [U, V] pairs",
+                    "list each two-way road once as [\"A\", \"B\"]")
+    roads: list[tuple[str, str]] = []
+    seen: set[frozenset[str]] = set()
+    for i, road in enumerate(raw_roads):
+        place = f"roads[{i}]"
+        if not (isinstance(road, list) and len(road) == 2 and all(isinstance(j, str) for j in road)):
+            raise _fail(path, place, f"{road!r} is not a pair of junction names",
+                        "write the road as [\"U\", \"V\"]")
+        u, v = road
+        for j in (u, v):
+            if j not in junctions:
+                raise _fail(path, place, f"road {u}-{v} names unknown junction '{j}'",
+                            f"add '{j}' to junctions or fix the road")
+        if u == v:
+            raise _fail(path, place, f"road {u}-{v} is a self-loop", "remove it; roads join two "
+                        "different junctions")
+        if frozenset((u, v)) in seen:
+            raise _fail(path, place, f"road {u}-{v} is listed twice (roads are two-way)",
+                        "list each road once")
+        seen.add(frozenset((u, v)))
+        roads.append((u, v))
+
+    raw_incidents = data["incidents"]
+    if not isinstance(raw_incidents, dict):
+        raise _fail(path, "incidents", "expected an object of \"U-V\" -> incident type",
+                    "write one entry per directed road")
+    directed = {road_name(a, b) for u, v in roads for a, b in ((u, v), (v, u))}
+    for key in sorted(directed):
+        if key not in raw_incidents:
+            raise _fail(path, f"incidents.{key}", f"missing incident entry for directed road {key}",
+                        f"add \"{key}\": one of {', '.join(INCIDENT_TYPES)}")
+    for key, kind in raw_incidents.items():
+        if key not in directed:
+            raise _fail(path, f"incidents.{key}", f"'{key}' is not a directed road of this town",
+                        "remove the entry or add the road")
+        if kind not in INCIDENT_TYPES:
+            raise _fail(path, f"incidents.{key}", f"unknown incident type {kind!r}",
+                        f"use one of {', '.join(INCIDENT_TYPES)}")
+
+    town = Town(junctions=junctions, roads=tuple(roads), incidents=dict(raw_incidents),
+                source_path=path, provenance=str(data.get("source", "")))
+    # connectivity over the undirected road graph
+    first = next(iter(junctions))
+    reached = {first}
+    stack = [first]
+    while stack:
+        for w in town.neighbours[stack.pop()]:
+            if w not in reached:
+                reached.add(w)
+                stack.append(w)
+    if len(reached) != len(junctions):
+        missing = sorted(set(junctions) - reached)
+        raise _fail(path, "roads", f"the town is disconnected: {', '.join(missing)} cannot be "
+                    f"reached from {first}", "add roads joining every junction")
+    return town
+
+
+def load_town(path: str | Path | None = None) -> Town:
+    """Load and validate a town file (the packaged default when `path` is None)."""
+    file_path = Path(path) if path is not None else DEFAULT_TOWN_PATH
+    shown = str(path) if path is not None else "default town"
+    try:
+        text = file_path.read_text()
+    except OSError as exc:
+        raise InputError(shown, "", f"cannot read the town file ({exc.strerror})",
+                         "pass an existing file with --town") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(shown, f"line {exc.lineno} column {exc.colno}",
+                         f"not valid JSON ({exc.msg})", "fix the JSON syntax") from None
+    return town_from_dict(data, shown)

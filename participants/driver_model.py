@@ -1,0 +1,267 @@
+"""Driver model files: trust dynamics, takeover model, AV failure model; validation.
+
+Schema (JSON, as the packaged default `data/driver_model.json`):
+- `trust_levels`: [1, ..., 7]
+- `incident_types`: the incident kinds the model covers
+- `takeover_probability`: {incident: [P(takeover | θ) for θ in trust_levels]}
+- `trust_transition`: {incident: {"takeover": M, "standstill": M}} with M a row-stochastic
+  |Θ|x|Θ| matrix (row = trust before, column = trust after). To let trust depend on the
+  AV's performance, M may instead be {"succ": M_succ, "fail": M_fail}.
+- `failure_probability` (optional): {incident: [P(e = fail | θ) ...]}; absent means the AV
+  always succeeds (the default model).
+- `initial_belief` (optional, uniform when absent), `source` (provenance text).
+
+Index conventions used by every array here and in `policies/`:
+h = 0 standstill, 1 takeover; e = 0 succ, 1 fail.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from networks.errors import InputError
+
+DEFAULT_DRIVER_MODEL_PATH = Path(__file__).parent / "data" / "driver_model.json"
+HUMAN_ACTIONS: tuple[str, ...] = ("standstill", "takeover")
+PERFORMANCES: tuple[str, ...] = ("succ", "fail")
+ROW_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class DriverModel:
+    """A validated driver model; arrays are read-only.
+
+    takeover_probability[i, θ]      = P(h = takeover | θ, incident i)
+    failure_probability[i, θ]       = P(e = fail | θ, incident i)
+    trust_transition[i, h, e, θ, θ'] = P(θ' | θ, incident i, h, e)
+    """
+
+    trust_levels: tuple[int, ...]
+    incident_types: tuple[str, ...]
+    takeover_probability: np.ndarray
+    failure_probability: np.ndarray
+    trust_transition: np.ndarray
+    initial_belief: np.ndarray
+    trust_free_takeover_probability: dict[str, float]
+    source_path: str = ""
+    provenance: str = ""
+
+    def __post_init__(self) -> None:
+        for name in ("takeover_probability", "failure_probability", "trust_transition",
+                     "initial_belief"):
+            array = np.array(getattr(self, name), dtype=float)
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+
+    @property
+    def n_trust(self) -> int:
+        return len(self.trust_levels)
+
+    def incident_index(self, incident: str) -> int:
+        return self.incident_types.index(incident)
+
+    @property
+    def depends_on_performance(self) -> bool:
+        return bool(self.failure_probability.any())
+
+    @property
+    def content_hash(self) -> str:
+        digest = hashlib.sha256()
+        digest.update(json.dumps([list(self.trust_levels), list(self.incident_types)]).encode())
+        for array in (self.takeover_probability, self.failure_probability,
+                      self.trust_transition, self.initial_belief):
+            digest.update(np.ascontiguousarray(array, dtype="<f8").tobytes())
+        return digest.hexdigest()
+
+    def to_dict(self) -> dict:
+        """The file form of this model (always the explicit succ/fail form when it needs it)."""
+        transitions: dict[str, dict] = {}
+        for i, incident in enumerate(self.incident_types):
+            transitions[incident] = {}
+            for h, action in enumerate(HUMAN_ACTIONS):
+                if self.depends_on_performance:
+                    transitions[incident][action] = {
+                        perf: self.trust_transition[i, h, e].tolist()
+                        for e, perf in enumerate(PERFORMANCES)
+                    }
+                else:
+                    transitions[incident][action] = self.trust_transition[i, h, 0].tolist()
+        out = {
+            "trust_levels": list(self.trust_levels),
+            "incident_types": list(self.incident_types),
+            "takeover_probability": {
+                inc: self.takeover_probability[i].tolist()
+                for i, inc in enumerate(self.incident_types)
+            },
+            "trust_transition": transitions,
+            "trust_free_takeover_probability": dict(self.trust_free_takeover_probability),
+            "initial_belief": self.initial_belief.tolist(),
+            "source": self.provenance,
+        }
+        if self.depends_on_performance:
+            out["failure_probability"] = {
+                inc: self.failure_probability[i].tolist()
+                for i, inc in enumerate(self.incident_types)
+            }
+        return out
+
+
+def _probabilities(value: object, length: int, path: str, place: str) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(path, place, f"expected {length} numbers", "write a list of "
+                         f"{length} probabilities") from None
+    if array.shape != (length,):
+        raise InputError(path, place, f"expected {length} numbers, got shape {array.shape}",
+                         f"give one probability per trust level ({length})")
+    if not np.all(np.isfinite(array)) or array.min() < 0 or array.max() > 1:
+        raise InputError(path, place, "probabilities must lie in [0, 1]",
+                         "fix the out-of-range entries")
+    return array
+
+
+def _stochastic_matrix(value: object, n: int, path: str, place: str) -> np.ndarray:
+    try:
+        matrix = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(path, place, "expected a matrix of numbers",
+                         f"write a {n}x{n} row-stochastic matrix") from None
+    if matrix.shape != (n, n):
+        raise InputError(path, place, f"expected a {n}x{n} matrix, got shape {matrix.shape}",
+                         "give one row per trust level before and one column per level after")
+    if not np.all(np.isfinite(matrix)) or matrix.min() < 0 or matrix.max() > 1:
+        raise InputError(path, place, "entries must lie in [0, 1]",
+                         "fix the out-of-range entries")
+    sums = matrix.sum(axis=1)
+    bad = np.flatnonzero(np.abs(sums - 1) > ROW_TOLERANCE)
+    if bad.size:
+        row = int(bad[0])
+        raise InputError(path, f"{place}[{row}]", f"row sums to {sums[row]:.12g}, not 1 "
+                         f"(tolerance {ROW_TOLERANCE:g})", "renormalise the row")
+    return matrix
+
+
+def driver_model_from_dict(data: object, path: str = "<driver model>") -> DriverModel:
+    """Validate a parsed driver-model document, or raise InputError."""
+    if not isinstance(data, dict):
+        raise InputError(path, "top level", "expected a JSON object",
+                         "start from the default model (participants/data/driver_model.json)")
+    for key in ("trust_levels", "incident_types", "takeover_probability", "trust_transition"):
+        if key not in data:
+            raise InputError(path, key, f"missing key '{key}'", f"add '{key}' as in the default "
+                             "model")
+    levels = data["trust_levels"]
+    if not (isinstance(levels, list) and len(levels) >= 2
+            and all(isinstance(t, int) and not isinstance(t, bool) for t in levels)
+            and levels == sorted(set(levels))):
+        raise InputError(path, "trust_levels", f"{levels!r} is not an increasing list of integers",
+                         "write e.g. [1, 2, 3, 4, 5, 6, 7]")
+    n = len(levels)
+    incidents = data["incident_types"]
+    if not (isinstance(incidents, list) and incidents and all(isinstance(i, str) for i in incidents)
+            and len(set(incidents)) == len(incidents)):
+        raise InputError(path, "incident_types", "expected a list of distinct incident names",
+                         "write e.g. [\"obstacle\", \"pedestrian\", \"truck\", \"none\"]")
+    takeover_table = data["takeover_probability"]
+    transition_table = data["trust_transition"]
+    failure_table = data.get("failure_probability", {})
+    for key, table in (("takeover_probability", takeover_table),
+                       ("trust_transition", transition_table),
+                       ("failure_probability", failure_table)):
+        if not isinstance(table, dict):
+            raise InputError(path, key, "expected an object keyed by incident type",
+                             "write {\"obstacle\": ..., ...}")
+        extra = sorted(set(table) - set(incidents))
+        if extra:
+            raise InputError(path, f"{key}.{extra[0]}", f"'{extra[0]}' is not in incident_types",
+                             "add it to incident_types or remove the entry")
+
+    takeover = np.zeros((len(incidents), n))
+    failure = np.zeros((len(incidents), n))
+    transition = np.zeros((len(incidents), 2, 2, n, n))
+    for i, incident in enumerate(incidents):
+        if incident not in takeover_table:
+            raise InputError(path, f"takeover_probability.{incident}",
+                             f"missing takeover probabilities for '{incident}'",
+                             f"add {n} probabilities, one per trust level")
+        takeover[i] = _probabilities(takeover_table[incident], n, path,
+                                     f"takeover_probability.{incident}")
+        if incident in failure_table:
+            failure[i] = _probabilities(failure_table[incident], n, path,
+                                        f"failure_probability.{incident}")
+        rows = transition_table.get(incident)
+        if not isinstance(rows, dict):
+            raise InputError(path, f"trust_transition.{incident}",
+                             f"missing trust transition for '{incident}'",
+                             "add {\"takeover\": M, \"standstill\": M}")
+        for h, action in enumerate(HUMAN_ACTIONS):
+            place = f"trust_transition.{incident}.{action}"
+            if action not in rows:
+                raise InputError(path, place, f"missing '{action}' matrix",
+                                 f"add a {n}x{n} row-stochastic matrix")
+            entry = rows[action]
+            if isinstance(entry, dict):
+                for e, perf in enumerate(PERFORMANCES):
+                    if perf not in entry:
+                        raise InputError(path, f"{place}.{perf}", f"missing '{perf}' matrix",
+                                         "give both 'succ' and 'fail' matrices")
+                    transition[i, h, e] = _stochastic_matrix(entry[perf], n, path,
+                                                             f"{place}.{perf}")
+            else:
+                matrix = _stochastic_matrix(entry, n, path, place)
+                transition[i, h, 0] = matrix
+                transition[i, h, 1] = matrix
+
+    if "initial_belief" in data:
+        initial = _probabilities(data["initial_belief"], n, path, "initial_belief")
+        if abs(initial.sum() - 1) > ROW_TOLERANCE:
+            raise InputError(path, "initial_belief", f"sums to {initial.sum():.12g}, not 1",
+                             "renormalise the initial belief")
+    else:
+        initial = np.full(n, 1.0 / n)
+    free = data.get("trust_free_takeover_probability", {})
+    if not isinstance(free, dict):
+        raise InputError(path, "trust_free_takeover_probability", "expected an object",
+                         "write {incident: probability}")
+    return DriverModel(
+        trust_levels=tuple(levels),
+        incident_types=tuple(incidents),
+        takeover_probability=takeover,
+        failure_probability=failure,
+        trust_transition=transition,
+        initial_belief=initial,
+        trust_free_takeover_probability={str(k): float(v) for k, v in free.items()},
+        source_path=path,
+        provenance=str(data.get("source", "")),
+    )
+
+
+def load_driver_model(path: str | Path | None = None) -> DriverModel:
+    """Load and validate a driver model file (the packaged default when `path` is None)."""
+    file_path = Path(path) if path is not None else DEFAULT_DRIVER_MODEL_PATH
+    shown = str(path) if path is not None else "default driver model"
+    try:
+        data = json.loads(file_path.read_text())
+    except OSError as exc:
+        raise InputError(shown, "", f"cannot read the driver model ({exc.strerror})",
+                         "pass an existing file with --driver") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(shown, f"line {exc.lineno} column {exc.colno}",
+                         f"not valid JSON ({exc.msg})", "fix the JSON syntax") from None
+    return driver_model_from_dict(data, shown)
+
+
+def check_covers_town(model: DriverModel, town_incidents: set[str], town_source: str) -> None:
+    """Every incident type the town uses must be in the driver model."""
+    missing = sorted(town_incidents - set(model.incident_types))
+    if missing:
+        raise InputError(model.source_path, "incident_types",
+                         f"the town {town_source} uses incident '{missing[0]}' which the model "
+                         "does not cover", f"add '{missing[0]}' with its takeover probabilities "
+                         "and trust transitions")

@@ -1,0 +1,6 @@
+"""policies: deciding routes.
+
+Owns the trust POMDP, the Bayes belief filter, the scLDTL language and its DFA,
+the product belief MDP, synthesis with certified bounds, policy files, the
+trust-free baseline and the pomdp-py adapter. Must not know about SUMO.
+"""
