@@ -1,0 +1,221 @@
+"""`trustroute synth`, `trustroute baseline`, `trustroute evaluate`: policies and their values.
+
+synth     synthesize a trust-aware policy with certified bounds (policies.synthesis, imported lazily)
+baseline  the trust-free shortest route completing the spec's state-only task, and its exact value
+evaluate  the exact satisfaction probability and expected final trust of any policy
+          ("free", "aware" or a policy file), with the study's 20-junction fallback by default
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import json
+import math
+from pathlib import Path
+
+import click
+
+from networks.errors import InputError
+
+DEFAULT_POLICY_CACHE = Path.home() / ".cache" / "trustroute" / "policies"
+
+
+def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None):
+    from networks.town import load_town
+    from participants.driver_model import load_driver_model
+    from policies.spec import load_spec
+    from policies.trust_pomdp import build_pomdp
+
+    town = load_town(town_path)
+    driver = load_driver_model(driver_path)
+    spec = load_spec(spec_path, town)
+    return town, driver, spec, build_pomdp(town, driver)
+
+
+def _optional_module(name: str, what: str):
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        if exc.name != name:
+            raise
+        raise InputError(name, "", f"{what} is not available in this installation",
+                         "update trustroute (the module is missing)") from None
+
+
+def _finite(value: float) -> float | None:
+    return None if value is None or (isinstance(value, float) and math.isnan(value)) else value
+
+
+def _jsonable(value: object) -> object:
+    """numpy scalars and arrays (e.g. in synthesis stats) as plain JSON values."""
+    tolist = getattr(value, "tolist", None)
+    if callable(tolist):
+        return tolist()
+    if isinstance(value, Path | set | frozenset | tuple):
+        return str(value) if isinstance(value, Path) else list(value)
+    return str(value)
+
+
+def _emit(as_json: bool, payload: dict, lines: list[str]) -> None:
+    if as_json:
+        click.echo(json.dumps(payload, default=_jsonable))
+    else:
+        for line in lines:
+            click.echo(line)
+
+
+def resolve_named_policy(name_or_path: str, town, driver, spec, cache_dir: Path):
+    """"free", "aware" (synthesized if not cached) or a policy file, as a RoutingPolicy."""
+    if name_or_path == "free":
+        from policies.baseline import trust_free_policy
+
+        return trust_free_policy(town, spec)
+    try:
+        resolve = importlib.import_module("policies.resolve")
+    except ModuleNotFoundError as exc:
+        if exc.name != "policies.resolve":
+            raise
+        resolve = None
+    if resolve is not None:
+        return resolve.resolve_policy(name_or_path, town, driver, spec, cache_dir)
+    if name_or_path == "aware":
+        raise InputError("aware", "", "synthesized policies are not available in this installation",
+                         "pass 'free' or a policy file")
+    if not Path(name_or_path).is_file():
+        raise InputError(name_or_path, "", "not a policy file and not 'free' or 'aware'",
+                         "pass 'free', 'aware' or the path of a policy file written by trustroute synth")
+    policy_file = _optional_module("policies.policy_file", "reading policy files")
+    return policy_file.load_policy(name_or_path, town, driver, spec)
+
+
+def _save_policy(save_policy, result, out_path: str, town, driver, spec, pomdp):
+    """Call policy_file.save_policy with whatever of these it asks for, by parameter name
+    (its signature belongs to the synthesis engineer and may carry the result or just the policy)."""
+    available = {"result": result, "synthesis": result, "policy": result.policy, "path": out_path,
+                 "out": out_path, "out_path": out_path, "town": town, "driver": driver, "spec": spec,
+                 "pomdp": pomdp, "model": pomdp, "lower": result.lower, "upper": result.upper,
+                 "stats": result.stats}
+    arguments = {}
+    for name, parameter in inspect.signature(save_policy).parameters.items():
+        if name in available:
+            arguments[name] = available[name]
+        elif parameter.default is inspect.Parameter.empty and parameter.kind not in (
+                inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD):
+            raise TypeError(f"save_policy needs {name!r}, which trustroute synth cannot supply")
+    return save_policy(**arguments)
+
+
+town_option = click.option("--town", "town_path", type=click.Path(), default=None,
+                           help="Town file (default: the packaged town).")
+driver_option = click.option("--driver", "driver_path", type=click.Path(), default=None,
+                             help="Driver model file (default: the packaged model).")
+json_option = click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]), default="bayes",
+                           show_default=True,
+                           help="AV belief filter: exact Bayes, or the authors' released update.")
+
+
+@click.command("synth")
+@click.argument("spec_path", metavar="SPEC")
+@town_option
+@driver_option
+@click.option("--tau", type=float, default=1e-3, show_default=True, help="Target gap upper - lower.")
+@click.option("--horizon", type=int, default=None, help="At most H junctions (default: unbounded).")
+@click.option("--time-limit", type=float, default=60.0, show_default=True, help="Seconds.")
+@rule_option
+@click.option("--out", "out_path", type=click.Path(), default="policy.json", show_default=True,
+              help="Policy file to write.")
+@json_option
+def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: float,
+          horizon: int | None, time_limit: float, belief_rule: str, out_path: str,
+          as_json: bool) -> None:
+    """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
+    if tau <= 0:
+        raise InputError("--tau", "", f"tau must be positive, got {tau}", "pass e.g. --tau 1e-3")
+    if horizon is not None and horizon < 1:
+        raise InputError("--horizon", "", f"horizon must be at least 1, got {horizon}",
+                         "pass a positive number of junctions or omit --horizon")
+    town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
+    synthesis = _optional_module("policies.synthesis", "policy synthesis")
+    policy_file = _optional_module("policies.policy_file", "writing policy files")
+    result = synthesis.synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
+                                  belief_rule=belief_rule)
+    written = _save_policy(policy_file.save_policy, result, out_path, town, driver, spec, pomdp)
+    path = str(written) if isinstance(written, str | Path) else out_path
+    payload = {"spec": spec.name, "lower": result.lower, "upper": result.upper, "gap": result.gap,
+               "seconds": result.seconds, "tau": tau, "horizon": horizon, "belief_rule": belief_rule,
+               "policy": path, "stats": result.stats}
+    _emit(as_json, payload, [
+        f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
+        f"{result.seconds:.1f} s)",
+        f"policy written to {path}"])
+
+
+@click.command("baseline")
+@click.argument("spec_path", metavar="SPEC")
+@town_option
+@driver_option
+@rule_option
+@json_option
+def baseline(spec_path: str, town_path: str | None, driver_path: str | None, belief_rule: str,
+             as_json: bool) -> None:
+    """The trust-free baseline for SPEC: shortest route completing its state-only task."""
+    from policies.baseline import baseline_route, trust_free_policy
+    from policies.evaluate import evaluate as evaluate_policy
+
+    town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
+    route = baseline_route(town, spec)
+    value = evaluate_policy(pomdp, spec, trust_free_policy(town, spec), fallback_after=None,
+                            belief_rule=belief_rule)
+    payload = {"spec": spec.name, "route": route, "length_m": town.route_length(route),
+               "junctions": len(route) - 1, "satisfaction_probability": value.satisfaction_probability,
+               "lower": value.lower, "upper": value.upper,
+               "expected_final_trust": _finite(value.expected_final_trust), "belief_rule": belief_rule}
+    _emit(as_json, payload, [
+        f"{spec.name} trust-free route ({len(route) - 1} junctions, {payload['length_m']:.0f} m): "
+        + " ".join(route),
+        f"P(satisfied) = {value.satisfaction_probability:.6f}, E[final trust] = "
+        f"{value.expected_final_trust:.4f}"])
+
+
+@click.command("evaluate")
+@click.argument("spec_path", metavar="SPEC")
+@click.argument("policy_name", metavar="POLICY")
+@town_option
+@driver_option
+@click.option("--fallback-after", type=int, default=20, show_default=True,
+              help="Switch to the shortest completion after this many junctions.")
+@click.option("--no-fallback", is_flag=True, help="Evaluate the policy without the fallback rule.")
+@click.option("--max-junctions", type=int, default=None, help="Episode cap (default 60).")
+@rule_option
+@click.option("--cache-dir", type=click.Path(), default=None,
+              help=f"Where 'aware' policies are cached (default {DEFAULT_POLICY_CACHE}).")
+@json_option
+def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_path: str | None,
+             fallback_after: int, no_fallback: bool, max_junctions: int | None, belief_rule: str,
+             cache_dir: str | None, as_json: bool) -> None:
+    """Exact probability that POLICY ("free", "aware" or a file) satisfies SPEC, and final trust."""
+    from policies.evaluate import EPISODE_JUNCTION_CAP
+    from policies.evaluate import evaluate as evaluate_policy
+
+    if fallback_after < 0:
+        raise InputError("--fallback-after", "", f"must be >= 0, got {fallback_after}",
+                         "pass a number of junctions or --no-fallback")
+    cap = EPISODE_JUNCTION_CAP if max_junctions is None else max_junctions
+    if cap < 0:
+        raise InputError("--max-junctions", "", f"must be >= 0, got {cap}", "pass e.g. 60")
+    town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
+    policy = resolve_named_policy(policy_name, town, driver, spec,
+                                  Path(cache_dir) if cache_dir else DEFAULT_POLICY_CACHE)
+    value = evaluate_policy(pomdp, spec, policy, fallback_after=None if no_fallback else fallback_after,
+                            max_junctions=cap, belief_rule=belief_rule)
+    payload = value.to_dict()
+    payload["spec"] = spec.name
+    payload["expected_final_trust"] = _finite(value.expected_final_trust)
+    payload["expected_junctions"] = _finite(value.expected_junctions)
+    _emit(as_json, payload, [
+        f"{spec.name} / {value.policy}: P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], "
+        f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
+        f"{value.expected_junctions:.2f}, P(fallback fired) = {value.fallback_probability:.4f}",
+        "episode ends: " + ", ".join(f"{k} {v:.4f}" for k, v in value.end_mass.items())])

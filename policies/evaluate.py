@@ -1,0 +1,260 @@
+"""Exact evaluation of any routing policy in the trust POMDP: P(spec satisfied), final trust.
+
+Unfolds the policy's tree of episodes level by level (one level per junction), in numpy.
+A node is one history of observations: its route, the spec's DFA state q_t, the AV's belief
+b_t (which drives decisions and belief labels) and the true posterior over trust given the
+observations (Bayes; equal to the AV's belief under the default rule). Because trust is hidden
+and the posterior is the exact conditional law of θ given the history, the probability of each
+observation at a node is Σθ posterior(θ) P(h, e | θ, inc) and the expected final trust is
+Σ P(node) posterior_node · levels over the nodes where episodes end — no sampling anywhere.
+
+A branch ends when the DFA accepts (satisfied), when it can no longer accept (rejected), when
+the policy declares it finished (destination reached: the trust-free route or the fallback
+completion is done), or at the episode's junction cap. Branches with tiny probability are
+pruned and their mass reported, so the result is a certified interval [lower, upper]
+(lower = mass proven satisfied, upper = lower + pruned mass).
+
+Policies are asked once per distinct (route, DFA state, AV belief). A policy may also offer
+`route_determined(context) -> bool` (True: its decision and `finished` here are the same for
+every belief and non-accepting DFA state on this route, as for the trust-free policy and the
+fallback phase); it is then asked once per route, which keeps deep trees fast.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from policies.dfa import build_dfa
+from policies.fallback import FallbackPolicy, fallback_fired, policy_finished, with_fallback
+from policies.labelling import Labeller
+from policies.policy import DecisionContext, RoutingPolicy
+from policies.spec import Spec
+from policies.trust_pomdp import BeliefRule, TrustPOMDP
+
+EPISODE_JUNCTION_CAP = 60
+DEFAULT_PRUNE_BELOW = 1e-12
+DEFAULT_MAX_NODES = 2_000_000
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Certified value of a policy: lower <= P(satisfied) <= upper, and trust at episode end.
+
+    end_mass: probability of each way an episode ends ("accepted", "rejected", "destination",
+    "cap") plus "pruned" (branches not followed to the end; the width of the interval).
+    """
+
+    policy: str
+    lower: float
+    upper: float
+    expected_final_trust: float
+    final_trust_lower: float
+    final_trust_upper: float
+    expected_junctions: float
+    fallback_probability: float
+    end_mass: dict[str, float]
+    nodes: int
+    max_frontier: int
+    seconds: float
+    belief_rule: str
+    fallback_after: int | None
+    max_junctions: int
+
+    @property
+    def gap(self) -> float:
+        return self.upper - self.lower
+
+    @property
+    def satisfaction_probability(self) -> float:
+        """Midpoint of the certified interval (equal to both ends when nothing was pruned)."""
+        return 0.5 * (self.lower + self.upper)
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["gap"] = self.gap
+        out["satisfaction_probability"] = self.satisfaction_probability
+        return out
+
+
+def _route_determined(policy: RoutingPolicy, context: DecisionContext) -> bool:
+    """Whether the policy promises the same decision for every live node with this route."""
+    method = getattr(policy, "route_determined", None)
+    return bool(method(context)) if method is not None else False
+
+
+def _decide(policy: RoutingPolicy, context: DecisionContext, road: int, level: int, max_junctions: int,
+            fallback_level: int | None, successor_index: dict) -> tuple[bool, bool, int]:
+    """(finished here, fallback drives here, next road index or -1)."""
+    if policy_finished(policy, context):
+        return True, False, -1
+    if level == max_junctions:
+        return False, False, -1
+    junction = policy.next_junction(context)
+    successor = successor_index.get((road, junction))
+    if successor is None:
+        legal = ", ".join(sorted(j for x, j in successor_index if x == road))
+        raise ValueError(f"policy {policy.name!r} chose {junction!r}, not a legal move from "
+                         f"{context.road} (legal: {legal})")
+    return (False, fallback_level == level and fallback_fired(policy, context), successor)
+
+
+def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
+             fallback_after: int | None = 20, max_junctions: int = EPISODE_JUNCTION_CAP,
+             belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
+             max_nodes: int = DEFAULT_MAX_NODES) -> Evaluation:
+    """Exact (or tightly certified) satisfaction probability of `policy` for `spec`.
+
+    fallback_after: wrap the policy with the study's rule after that many junctions
+    (None: evaluate the policy as given; a policy already wrapped is not wrapped again).
+    max_junctions: the episode's hard cap; an episode still running there is unsatisfied.
+    belief_rule: the AV's filter ("bayes", or the authors' "paper" update); observation
+    probabilities and the final trust always use the true (Bayes) posterior.
+    prune_below / max_nodes: branches below this probability, or beyond this frontier size
+    (smallest first), are not followed; their mass widens [lower, upper].
+    """
+    started = time.perf_counter()
+    town, driver = pomdp.town, pomdp.driver
+    if fallback_after is not None and not isinstance(policy, FallbackPolicy):
+        policy = with_fallback(policy, town, spec, after=fallback_after)
+    fallback_level = policy.after if isinstance(policy, FallbackPolicy) else None
+    dfa = build_dfa(spec)
+    labeller = Labeller(spec, dfa, town)
+    accepting = np.asarray(dfa.accepting, dtype=bool)
+    rejecting = np.asarray(dfa.rejecting, dtype=bool)
+    levels = np.asarray(driver.trust_levels, dtype=float)
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
+    successor_index = {(x, j): town.state_index(town.successor(road, j))
+                       for x, road in enumerate(town.states) for j in town.actions(road)}
+
+    start = town.state_index(spec.start)
+    town_size = len(town.states)
+    routes: list[tuple[str, ...]] = [(spec.start,)]
+    route_id = np.zeros(1, dtype=np.int64)
+    road = np.array([start], dtype=np.int64)
+    belief_av = np.asarray(pomdp.initial_belief, dtype=float)[None, :].copy()
+    posterior = belief_av.copy()
+    probability = np.ones(1)
+    q = np.asarray(labeller.step(np.array([dfa.initial]), road, belief_av), dtype=np.int64)
+
+    mass = {"accepted": 0.0, "rejected": 0.0, "destination": 0.0, "cap": 0.0, "pruned": 0.0}
+    trust_sum = 0.0          # Σ P(end node) E[θ | node] over ended (non-pruned) nodes
+    junction_sum = 0.0
+    fallback_mass = 0.0
+    nodes = 1
+    max_frontier = 1
+
+    def end(mask: np.ndarray, reason: str, level: int) -> None:
+        nonlocal trust_sum, junction_sum
+        p = probability[mask]
+        mass[reason] += float(p.sum())
+        trust_sum += float(p @ (posterior[mask] @ levels))
+        junction_sum += float(p.sum()) * level
+
+    for level in range(max_junctions + 1):
+        accepted = accepting[q]
+        rejected = rejecting[q] & ~accepted
+        end(accepted, "accepted", level)
+        end(rejected, "rejected", level)
+        alive = ~(accepted | rejected)
+        tiny = alive & (probability < prune_below)
+        mass["pruned"] += float(probability[tiny].sum())
+        alive &= ~tiny
+        if not alive.any():
+            break
+        keep = np.flatnonzero(alive)
+
+        # One decision per distinct (route, DFA state, AV belief), or per route when the policy
+        # says its decision there depends on the route only (trust-free route, fallback phase).
+        finished = np.zeros(keep.size, dtype=bool)
+        fired = np.zeros(keep.size, dtype=bool)
+        chosen = np.full(keep.size, -1, dtype=np.int64)
+        unique_routes, first, inverse = np.unique(route_id[keep], return_index=True, return_inverse=True)
+        order = np.argsort(inverse, kind="stable")
+        bounds = np.searchsorted(inverse[order], np.arange(unique_routes.size + 1))
+        for r, rid in enumerate(unique_routes.tolist()):
+            members = order[bounds[r]:bounds[r + 1]]
+            i0 = keep[first[r]]
+            context = DecisionContext(route=routes[rid], dfa_state=int(q[i0]), belief=belief_av[i0])
+            if _route_determined(policy, context):
+                finished[members], fired[members], chosen[members] = _decide(
+                    policy, context, int(road[i0]), level, max_junctions, fallback_level,
+                    successor_index)
+                continue
+            decisions: dict[tuple[int, bytes], tuple[bool, bool, int]] = {}
+            for k in members.tolist():
+                i = keep[k]
+                key = (int(q[i]), belief_av[i].tobytes())
+                decision = decisions.get(key)
+                if decision is None:
+                    context = DecisionContext(route=routes[rid], dfa_state=key[0], belief=belief_av[i])
+                    decision = _decide(policy, context, int(road[i]), level, max_junctions,
+                                       fallback_level, successor_index)
+                    decisions[key] = decision
+                finished[k], fired[k], chosen[k] = decision
+        end(keep[finished], "destination", level)
+        if level == max_junctions:
+            end(keep[~finished], "cap", level)
+            break
+        fallback_mass += float(probability[keep[fired]].sum())
+        keep, chosen = keep[~finished], chosen[~finished]
+        if keep.size == 0:
+            break
+
+        # New routes: one per distinct (old route, next road).
+        pair = route_id[keep] * town_size + chosen
+        unique_pairs, pair_inverse = np.unique(pair, return_inverse=True)
+        pair_ids = np.arange(len(routes), len(routes) + unique_pairs.size)
+        for rid, x2 in zip((unique_pairs // town_size).tolist(), (unique_pairs % town_size).tolist(),
+                           strict=True):
+            routes.append(routes[rid] + (town.states[x2],))
+        new_route_ids = pair_ids[pair_inverse]
+
+        # Branch on the observation (h, e) at the new road.
+        incident = pomdp.road_incident[chosen]
+        parts = []
+        for h, e in outcomes:
+            new_posterior, p_obs = pomdp.belief_update(posterior[keep], incident, h, e, rule="bayes")
+            if belief_rule == "bayes":
+                new_av = new_posterior
+            else:
+                new_av, _ = pomdp.belief_update(belief_av[keep], incident, h, e, rule=belief_rule)
+            possible = p_obs > 0
+            parts.append((new_route_ids[possible], chosen[possible], q[keep][possible],
+                          new_av[possible], new_posterior[possible],
+                          probability[keep][possible] * p_obs[possible]))
+        route_id, road, q_before, belief_av, posterior, probability = (
+            np.concatenate([part[j] for part in parts]) for j in range(6))
+        q = np.asarray(labeller.step(q_before, road, belief_av), dtype=np.int64)
+        if probability.size > max_nodes:
+            order = np.argsort(probability)
+            dropped = order[: probability.size - max_nodes]
+            mass["pruned"] += float(probability[dropped].sum())
+            kept = np.sort(order[probability.size - max_nodes:])
+            route_id, road, q, belief_av, posterior, probability = (
+                a[kept] for a in (route_id, road, q, belief_av, posterior, probability))
+        nodes += probability.size
+        max_frontier = max(max_frontier, probability.size)
+
+    ended = 1.0 - mass["pruned"]
+    pruned = mass["pruned"]
+    trust_point = trust_sum / ended if ended > 0 else float("nan")
+    return Evaluation(
+        policy=policy.name,
+        lower=mass["accepted"],
+        upper=min(1.0, mass["accepted"] + pruned),
+        expected_final_trust=trust_point,
+        final_trust_lower=trust_sum + pruned * float(levels.min()),
+        final_trust_upper=trust_sum + pruned * float(levels.max()),
+        expected_junctions=junction_sum / ended if ended > 0 else float("nan"),
+        fallback_probability=fallback_mass,
+        end_mass=mass,
+        nodes=nodes,
+        max_frontier=max_frontier,
+        seconds=time.perf_counter() - started,
+        belief_rule=belief_rule,
+        fallback_after=fallback_level,
+        max_junctions=max_junctions,
+    )
