@@ -229,6 +229,10 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
     if not isinstance(free, dict):
         raise InputError(path, "trust_free_takeover_probability", "expected an object",
                          "write {incident: probability}")
+    for key, value in free.items():
+        if not (isinstance(value, int | float) and not isinstance(value, bool) and 0 <= value <= 1):
+            raise InputError(path, f"trust_free_takeover_probability.{key}",
+                             f"{value!r} is not a probability in [0, 1]", "give a number in [0, 1]")
     return DriverModel(
         trust_levels=tuple(levels),
         incident_types=tuple(incidents),

@@ -1,4 +1,12 @@
-from networks.town import load_town
+"""The town: default shape, actions, lengths, hashing, shortest paths (against Bellman-Ford)."""
+
+import itertools
+import json
+import math
+
+import pytest
+
+from networks.town import DEFAULT_TOWN_PATH, load_town, town_from_dict
 
 
 def test_default_town_shape(town):
@@ -17,9 +25,7 @@ def test_actions_exclude_u_turns(town):
 
 
 def test_content_hash_ignores_formatting(tmp_path, town):
-    import json
-    data = json.loads(open(town.source_path if town.source_path != "default town" else
-                           __import__("networks.town").town.DEFAULT_TOWN_PATH).read())
+    data = json.loads(DEFAULT_TOWN_PATH.read_text())
     (tmp_path / "t.json").write_text(json.dumps(data, indent=None))
     assert load_town(tmp_path / "t.json").content_hash == town.content_hash
 
@@ -29,3 +35,73 @@ def test_shortest_route_reaches_target(town):
     assert route[0] == "E-A" and route[-1] in {"B-G", "F-G", "I-G"}
     for a, b in zip(route, route[1:], strict=False):
         assert b in town.successors(a)
+
+
+def small_town_with_dead_end():
+    return town_from_dict({
+        "junctions": {"A": [0, 0], "B": [100, 0], "C": [100, 100], "D": [200, 0]},
+        "roads": [["A", "B"], ["B", "C"], ["B", "D"], ["C", "D"]],
+        "incidents": {"A-B": "none", "B-A": "truck", "B-C": "obstacle", "C-B": "none",
+                      "B-D": "pedestrian", "D-B": "none", "C-D": "none", "D-C": "none"},
+    }, "<small>")
+
+
+def test_dead_end_allows_the_u_turn():
+    town = small_town_with_dead_end()
+    assert town.actions("B-A") == ("B",)
+    assert town.successors("B-A") == ("A-B",)
+    assert town.actions("A-B") == ("C", "D")
+
+
+def test_states_sorted_and_indexed(town):
+    assert list(town.states) == sorted(town.states)
+    for i, state in enumerate(town.states):
+        assert town.state_index(state) == i
+        u, v = state.split("-")
+        assert v in town.neighbours[u]
+
+
+def test_lengths_are_euclidean_and_symmetric(town):
+    for state in town.states:
+        u, v = state.split("-")
+        (x1, y1), (x2, y2) = town.junctions[u], town.junctions[v]
+        assert town.length(state) == math.hypot(x2 - x1, y2 - y1) > 0
+        assert town.length(state) == town.length(f"{v}-{u}")
+    route = ["E-A", "A-B", "B-G"]
+    assert town.route_length(route) == town.length("A-B") + town.length("B-G")
+
+
+def test_content_hash_changes_with_content(town):
+    data = {"junctions": {k: list(v) for k, v in town.junctions.items()},
+            "roads": [list(r) for r in town.roads], "incidents": dict(town.incidents)}
+    data["incidents"]["A-B"] = "truck" if town.incidents["A-B"] != "truck" else "none"
+    assert town_from_dict(data, "<changed>").content_hash != town.content_hash
+
+
+def bellman_ford(town, start):
+    """Shortest legal distance to every state by relaxation (independent of Dijkstra)."""
+    dist = {s: math.inf for s in town.states}
+    dist[start] = 0.0
+    for _ in range(len(town.states)):
+        for s in town.states:
+            for nxt in town.successors(s):
+                dist[nxt] = min(dist[nxt], dist[s] + town.length(nxt))
+    return dist
+
+
+def test_shortest_route_is_shortest(town):
+    for start, targets in itertools.product(["E-A", "L-H", "B-C"], [{"B-G", "F-G", "I-G"},
+                                                                    {"K-L"}, {"D-E", "A-E"}]):
+        dist = bellman_ford(town, start)
+        route = town.shortest_route(start, targets)
+        assert route[0] == start and route[-1] in targets
+        for a, b in zip(route, route[1:], strict=False):
+            assert b in town.successors(a)
+        best = min(dist[t] for t in targets) if start not in targets else 0.0
+        assert town.route_length(route) == pytest.approx(best, rel=1e-12)
+
+
+def test_shortest_route_start_is_target_and_unreachable(town):
+    assert town.shortest_route("E-A", {"E-A"}) == ["E-A"]
+    assert town.shortest_route("E-A", set()) is None
+    assert town.reachable_states("E-A") == set(town.states)

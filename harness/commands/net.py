@@ -1,0 +1,33 @@
+"""`trustroute net build`: build (or take from the cache) the SUMO network of a town."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+
+@click.group("net")
+def net() -> None:
+    """Build and inspect the SUMO network of a town."""
+
+
+@net.command("build")
+@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
+@click.option("--out", "out_dir", type=click.Path(), default=None,
+              help="Net cache directory (default ~/.cache/trustroute/nets).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def build(town_path: str | None, out_dir: str | None, as_json: bool) -> None:
+    """Build the town's .net.xml with netconvert, cached by the town's content hash."""
+    from networks.sumo_net import build_net
+    from networks.town import load_town
+
+    result = build_net(load_town(town_path), Path(out_dir) if out_dir else None)
+    if as_json:
+        click.echo(json.dumps(result.to_dict()))
+        return
+    click.echo(str(result.path))
+    click.echo(f"{result.edges} edges, {result.junctions} junctions, {result.connections} connections, "
+               f"{result.crossings} crossings; {'cached' if result.cached else 'built'} in "
+               f"{result.seconds:.3f} s")

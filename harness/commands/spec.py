@@ -1,0 +1,83 @@
+"""`trustroute spec check SPEC`: parse a spec, translate it to its DFA and lint it.
+
+Prints the DFA size and the warnings of policies/lint.py (against the default town unless
+--town is given); --json prints one object; --dot writes the DFA as Graphviz dot.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import click
+
+from networks.errors import InputError
+
+
+def spec_report(spec_path: str, town_path: str | None) -> tuple[dict, str]:
+    """(the JSON-ready summary of a spec check, the DFA as dot text)."""
+    from networks.town import load_town
+    from policies.dfa import dfa_from_formula
+    from policies.lint import lint
+    from policies.spec import load_spec
+
+    town = load_town(town_path)
+    spec = load_spec(spec_path, town)
+    started = time.perf_counter()
+    dfa = dfa_from_formula(spec.formula, spec.formula_atoms)
+    seconds = time.perf_counter() - started
+    warnings = lint(spec, town, dfa)
+    summary = {
+        "name": spec.name,
+        "file": spec.source_path,
+        "start": spec.start,
+        "formula": spec.formula_text,
+        "content_hash": spec.content_hash,
+        "town": town.source_path,
+        "atoms": list(dfa.atoms),
+        "state_atoms": sorted(a for a in spec.state_atoms if a in dfa.atoms),
+        "belief_atoms": sorted(a for a in spec.belief_atoms if a in dfa.atoms),
+        "dfa_states": dfa.n_states,
+        "accepting_states": int(dfa.accepting.sum()),
+        "rejecting_states": int(dfa.rejecting.sum()),
+        "translation_seconds": seconds,
+        "warnings": [{"code": w.code, "message": w.message, "atom": w.atom} for w in warnings],
+    }
+    return summary, dfa.to_dot(spec.name)
+
+
+@click.group("spec")
+def spec() -> None:
+    """Check scLDTL spec files."""
+
+
+@spec.command("check")
+@click.argument("spec_path", metavar="SPEC")
+@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--dot", "dot_path", type=click.Path(), default=None, help="Write the DFA as Graphviz dot.")
+def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | None) -> None:
+    """Parse SPEC, print its DFA size and the linter's warnings."""
+    summary, dot = spec_report(spec_path, town_path)
+    if dot_path is not None:
+        try:
+            Path(dot_path).write_text(dot)
+        except OSError as exc:
+            raise InputError(dot_path, "", f"cannot write the dot file ({exc.strerror})",
+                             "pass a writable path to --dot") from None
+    if as_json:
+        click.echo(json.dumps(summary))
+        return
+    click.echo(f"{summary['name']} ({summary['file']}): start {summary['start']}, "
+               f"formula {summary['formula']}")
+    click.echo(f"DFA: {summary['dfa_states']} states ({summary['accepting_states']} accepting, "
+               f"{summary['rejecting_states']} rejecting) over {len(summary['atoms'])} atoms "
+               f"({', '.join(summary['atoms'])}), "
+               f"translated in {summary['translation_seconds'] * 1e3:.1f} ms")
+    if not summary["warnings"]:
+        click.echo("no warnings")
+    for warning in summary["warnings"]:
+        click.echo(f"warning [{warning['code']}]: {warning['message']}")
+    if dot_path is not None:
+        click.echo(f"wrote {dot_path}")

@@ -1,0 +1,173 @@
+"""`trustroute study`, `trustroute analyze`, `trustroute fit`: run, analyse and learn from studies.
+
+study    run (or resume) a simulated within-subject study from a TOML config, consolidate the
+         dataset, then analyse it (tables, plots, report) unless --no-report
+analyze  the per spec and condition table of a study directory (--json: one JSON object)
+fit      estimate a driver model (trust dynamics, takeover model) from a study's logs
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import click
+
+from networks.errors import InputError
+
+DEFAULT_STUDIES_DIR = Path("studies")
+
+
+def study_directory(config, out: str | None) -> Path:
+    if out is not None:
+        return Path(out)
+    if config.output is not None:
+        return Path(config.output)
+    return DEFAULT_STUDIES_DIR / config.name
+
+
+def expected_values(config) -> dict:
+    """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluate),
+    and the synthesized bounds when the policy carries them."""
+    from harness.study.runner import study_context
+    from policies.evaluate import evaluate
+    from policies.trust_pomdp import build_pomdp
+
+    context = study_context(config)
+    pomdp = build_pomdp(context.town, context.nominal)
+    out: dict = {}
+    for (spec_name, condition), policy in context.policies.items():
+        started = time.perf_counter()
+        value = evaluate(pomdp, context.specs[spec_name], policy, fallback_after=config.fallback_after,
+                         max_junctions=config.junction_cap, belief_rule=config.belief_rule)
+        entry = {"exact_lower": value.lower, "exact_upper": value.upper,
+                 "expected_final_trust": value.expected_final_trust,
+                 "fallback_probability": value.fallback_probability,
+                 "seconds": time.perf_counter() - started}
+        bounds = synthesized_bounds(policy)
+        if bounds is not None:
+            entry["synthesized_lower"], entry["synthesized_upper"] = bounds
+        out.setdefault(spec_name, {})[condition] = entry
+    return out
+
+
+def synthesized_bounds(policy) -> tuple[float, float] | None:
+    """[lower, upper] of Pr_max that synthesis certified for this policy, if it says."""
+    for holder in (policy, getattr(policy, "inner", None), getattr(policy, "result", None)):
+        if holder is None:
+            continue
+        lower, upper = getattr(holder, "lower", None), getattr(holder, "upper", None)
+        if isinstance(lower, int | float) and isinstance(upper, int | float):
+            return float(lower), float(upper)
+        bounds = getattr(holder, "bounds", None)
+        if isinstance(bounds, tuple | list) and len(bounds) == 2:
+            return float(bounds[0]), float(bounds[1])
+    return None
+
+
+def run_and_consolidate(config, study_dir: Path, workers: int, scheduler: str | None,
+                        progress: bool = True, echo=click.echo) -> tuple[object, dict]:
+    from harness.study.manifest import consolidate
+    from harness.study.plan import plan_episodes
+    from harness.study.runner import run_study
+
+    run = run_study(config, study_dir, workers=workers, scheduler=scheduler, progress=progress)
+    echo(f"{run.planned} episodes planned: {run.skipped} already done, {run.ran - run.retried} run"
+         f"{f', {run.retried} retried' if run.retried else ''}, {len(run.failed)} failed"
+         f"{f', {len(run.damaged)} damaged parts re-run' if run.damaged else ''} "
+         f"({run.backend}, {run.seconds:.1f} s)")
+    expected = expected_values(config)
+    manifest = consolidate(run.study_dir, config, plan_episodes(config), config.content_hash, expected,
+                           {"backend": run.backend, "seconds": run.seconds, "skipped": run.skipped,
+                            "damaged": run.damaged, "retried": run.retried})
+    return run, manifest
+
+
+@click.command("study")
+@click.argument("config_path", metavar="CONFIG", type=click.Path())
+@click.option("--out", "out", type=click.Path(), default=None,
+              help="Study directory (default: the config's output, else studies/<name>).")
+@click.option("--workers", type=int, default=None, help="Local worker processes (default: CPU count).")
+@click.option("--scheduler", default=None,
+              help="Dask scheduler ADDRESS, or 'local' for a local Dask cluster (default: local pool).")
+@click.option("--engine", type=click.Choice(["sumo", "model"]), default=None,
+              help="Override the config's engine.")
+@click.option("--no-report", is_flag=True, help="Do not analyse or write the report.")
+def study(config_path: str, out: str | None, workers: int | None, scheduler: str | None,
+          engine: str | None, no_report: bool) -> None:
+    """Run (or resume) the simulated within-subject study described by CONFIG."""
+    from harness.study.config import load_study_config
+
+    config = load_study_config(config_path).with_overrides(engine=engine)
+    if workers is not None and workers < 1:
+        raise InputError("--workers", "", f"must be >= 1, got {workers}", "pass e.g. --workers 2")
+    workers = workers if workers is not None else (os.cpu_count() or 1)
+    study_dir = study_directory(config, out)
+    run, _ = run_and_consolidate(config, study_dir, workers, scheduler)
+    click.echo(f"dataset: {run.study_dir / 'episodes.parquet'}, {run.study_dir / 'roads.parquet'}")
+    if run.failed:
+        click.echo(f"failed episodes (see {run.study_dir / 'failures'}): {', '.join(run.failed[:5])}"
+                   f"{' ...' if len(run.failed) > 5 else ''}")
+    if not no_report:
+        from analysis.report import write_report
+
+        paths = write_report(run.study_dir)
+        click.echo(paths.table_text)
+        click.echo(f"report: {paths.markdown} and {paths.html}")
+
+
+@click.command("analyze")
+@click.argument("study_dir", metavar="DIR", type=click.Path())
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--belief-source", type=click.Choice(["filter", "reported"]), default="filter",
+              show_default=True, help="Beliefs the spec is evaluated on: the AV's filter, or induced "
+              "from reported trust.")
+@click.option("--report/--no-report", default=True, help="Also (re)write the report and plots.")
+def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> None:
+    """Per spec and condition: n, satisfaction rate with CI, mean trust, paired tests."""
+    from analysis.tables import study_analysis
+
+    analysis = study_analysis(Path(study_dir), belief_source=belief_source)
+    paths = None
+    if report:
+        from analysis.report import write_report
+
+        paths = write_report(Path(study_dir), analysis=analysis)
+    if as_json:
+        payload = analysis.to_dict()
+        if paths is not None:
+            payload["report"] = {"markdown": str(paths.markdown), "html": str(paths.html)}
+        click.echo(json.dumps(payload, default=str))
+        return
+    from analysis.tables import format_table
+
+    click.echo(format_table(analysis))
+    if paths is not None:
+        click.echo(f"report: {paths.markdown} and {paths.html}")
+
+
+@click.command("fit")
+@click.argument("study_dir", metavar="DIR", type=click.Path())
+@click.option("--out", "out", type=click.Path(), default="driver.json", show_default=True,
+              help="Driver model file to write.")
+@click.option("--method", type=click.Choice(["auto", "counts", "em"]), default="auto", show_default=True,
+              help="counts: reports are exact trust; em: reports are noisy (EM over hidden trust); "
+              "auto: counts when the study's report accuracy is 1 and trust is reported every road.")
+@click.option("--iterations", type=int, default=200, show_default=True, help="EM iterations at most.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def fit(study_dir: str, out: str, method: str, iterations: int, as_json: bool) -> None:
+    """Estimate trust dynamics and the takeover model from a study's logs; write a driver model."""
+    from analysis.fit import fit_study
+
+    result = fit_study(Path(study_dir), method=method, iterations=iterations)
+    path = result.write(Path(out))
+    payload = {"driver_model": str(path), **result.summary()}
+    if as_json:
+        click.echo(json.dumps(payload, default=str))
+        return
+    click.echo(f"fitted by {result.method} on {result.episodes} episodes ({result.transitions} roads driven)"
+               f"{f', report accuracy {result.report_accuracy:.3f}' if result.report_accuracy is not None else ''}"
+               f"{f', EM {result.iterations} iterations' if result.method == 'em' else ''}")
+    click.echo(f"driver model written to {path}")

@@ -1,0 +1,237 @@
+"""The AV's side of one episode, pure Python (no SUMO): route, belief, DFA state, end, logs.
+
+Shared by the SUMO engine (harness/episode.py) and the model engine (harness/model_engine.py)
+so the two can never disagree on the logic. The semantics are those of
+`policies.evaluate.evaluate` (DESIGN.md, "Positions of a trace", "The study's 20-junction rule"):
+
+- position 0 is (spec.start, initial belief); q_0 = Labeller.step(dfa.initial, start, b_0);
+- at every position, in this order: the DFA accepts -> "accepted"; the DFA can no longer
+  accept -> "rejected"; the policy (with the fallback) declares itself finished -> "destination";
+  `junction_cap` junctions driven -> "cap"; otherwise the policy picks the next junction;
+- after driving a road the AV observes (incident, takeover, performance), applies its belief
+  filter (setup.belief_rule) and steps the DFA on (road, new belief).
+
+Row 0 of the roads table is the start road: no observation (incident "", performance "",
+reported_trust -1), trust_before = trust_after = the initial true trust.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from policies.labelling import Labeller
+
+from networks.town import Town
+from participants.driver_model import DriverModel
+from policies.dfa import DFA, build_dfa
+from policies.fallback import FallbackPolicy, fallback_fired, policy_finished, with_fallback
+from policies.policy import DecisionContext, RoutingPolicy
+from policies.spec import Spec
+from policies.trust_pomdp import TrustPOMDP, build_pomdp
+
+ROAD_COLUMNS: tuple[str, ...] = (
+    "episode_id", "index", "directed_road", "action", "incident", "takeover", "performance",
+    "trust_before", "trust_after", "reported_trust", "belief_before", "belief_after", "dfa_state",
+    "fallback", "sim_time_in", "sim_time_out",
+)
+END_REASONS: tuple[str, ...] = ("accepted", "destination", "rejected", "cap")
+PERFORMANCE_INDEX = {"succ": 0, "fail": 1}
+
+
+@dataclass(frozen=True, eq=False)
+class EpisodeSetup:
+    """Everything an episode needs besides the policy, the driver and the seed."""
+
+    town: Town
+    driver_model: DriverModel      # the nominal model the AV's belief filter uses
+    spec: Spec
+    junction_cap: int = 60
+    fallback_after: int | None = 20
+    report_every: int = 1          # the driver reports trust every N roads
+    belief_rule: str = "bayes"
+
+
+@dataclass(frozen=True, eq=False)
+class _Model:
+    pomdp: TrustPOMDP
+    dfa: DFA
+    labeller: Labeller
+
+
+_MODELS: dict[tuple[str, str, str], _Model] = {}
+
+
+def _model(setup: EpisodeSetup) -> _Model:
+    # Built once per (town, driver, spec): hundreds of episodes share the arrays.
+    key = (setup.town.content_hash, setup.driver_model.content_hash, setup.spec.content_hash)
+    model = _MODELS.get(key)
+    if model is None:
+        dfa = build_dfa(setup.spec)
+        model = _Model(pomdp=build_pomdp(setup.town, setup.driver_model), dfa=dfa,
+                       labeller=Labeller(setup.spec, dfa, setup.town))
+        if len(_MODELS) > 32:
+            _MODELS.clear()
+        _MODELS[key] = model
+    return model
+
+
+class EpisodeTracker:
+    """Route, online Bayes belief, DFA state and the roads table of one episode."""
+
+    def __init__(self, setup: EpisodeSetup, policy: RoutingPolicy, episode_id: str,
+                 initial_trust: int, sim_time: float = 0.0) -> None:
+        if setup.junction_cap < 0:
+            raise ValueError(f"junction_cap must be >= 0, got {setup.junction_cap}")
+        if setup.report_every < 1:
+            raise ValueError(f"report_every must be >= 1, got {setup.report_every}")
+        if setup.belief_rule not in ("bayes", "paper"):
+            raise ValueError(f"unknown belief rule {setup.belief_rule!r}; use 'bayes' or 'paper'")
+        self.setup = setup
+        self.episode_id = str(episode_id)
+        model = _model(setup)
+        self._pomdp, self.dfa, self._labeller = model.pomdp, model.dfa, model.labeller
+        if setup.fallback_after is not None and not isinstance(policy, FallbackPolicy):
+            policy = with_fallback(policy, setup.town, setup.spec, after=setup.fallback_after)
+        self.policy = policy
+        start = setup.spec.start
+        self.route: list[str] = [start]
+        self.belief: np.ndarray = np.asarray(self._pomdp.initial_belief, dtype=float).copy()
+        self.dfa_state: int = self._step_dfa(int(self.dfa.initial), start, self.belief)
+        self.end_reason: str | None = None
+        self.fallback_fired = False
+        self.fallback_junction: int | None = None   # junctions driven when the fallback first drove
+        self._chosen: str | None = None            # next junction chosen at the current road
+        self._rows: list[dict] = [{
+            "episode_id": self.episode_id, "index": 0, "directed_road": start, "action": "",
+            "incident": "", "takeover": False, "performance": "",
+            "trust_before": int(initial_trust), "trust_after": int(initial_trust),
+            "reported_trust": -1, "belief_before": self.belief.tolist(),
+            "belief_after": self.belief.tolist(), "dfa_state": self.dfa_state, "fallback": False,
+            "sim_time_in": float(sim_time), "sim_time_out": math.nan,
+        }]
+        self._check_dfa_end()
+
+    # -- internals -----------------------------------------------------------
+    def _step_dfa(self, q: int, road: str, belief: np.ndarray) -> int:
+        x = self.setup.town.state_index(road)
+        return int(self._labeller.step(np.array([q]), np.array([x]), belief[None, :])[0])
+
+    def _check_dfa_end(self) -> None:
+        if bool(self.dfa.accepting[self.dfa_state]):
+            self.end_reason = "accepted"
+        elif bool(self.dfa.rejecting[self.dfa_state]):
+            self.end_reason = "rejected"
+
+    def _context(self) -> DecisionContext:
+        return DecisionContext(route=tuple(self.route), dfa_state=self.dfa_state, belief=self.belief.copy())
+
+    # -- the episode's API ---------------------------------------------------
+    @property
+    def junctions(self) -> int:
+        return len(self.route) - 1
+
+    @property
+    def road(self) -> str:
+        return self.route[-1]
+
+    def next_junction(self) -> str | None:
+        """The policy's choice at the current road (with the 20-junction fallback); None when the
+        episode is over (end_reason set). Asking twice at the same road gives the same answer."""
+        if self.end_reason is not None:
+            return None
+        if self._chosen is not None:
+            return self._chosen
+        context = self._context()
+        if policy_finished(self.policy, context):
+            self.end_reason = "destination"
+            return None
+        if self.junctions >= self.setup.junction_cap:
+            self.end_reason = "cap"
+            return None
+        junction = self.policy.next_junction(context)
+        legal = self.setup.town.actions(self.road)
+        if junction not in legal:
+            raise ValueError(f"policy {self.policy.name!r} chose {junction!r}, not a legal move from "
+                             f"{self.road} (legal: {', '.join(legal)})")
+        fired = fallback_fired(self.policy, context)
+        if fired and not self.fallback_fired:
+            self.fallback_fired = True
+            self.fallback_junction = self.junctions
+        self._rows[-1]["action"] = junction
+        self._rows[-1]["fallback"] = bool(fired)
+        self._chosen = junction
+        return junction
+
+    def expected_road(self) -> str | None:
+        """The road the vehicle drives next (after next_junction), or None."""
+        if self._chosen is None:
+            return None
+        return self.setup.town.successor(self.road, self._chosen)
+
+    def record_road(self, road: str, incident: str, takeover: bool, performance: str,
+                    trust_before: int, trust_after: int, reported_trust: int,
+                    sim_time_in: float, sim_time_out: float) -> None:
+        """Append the row of a driven road, apply the belief filter on (incident, takeover,
+        performance), step the DFA, and set end_reason when the DFA accepts or rejects."""
+        if self.end_reason is not None:
+            raise ValueError(f"episode {self.episode_id} is over ({self.end_reason}); no more roads")
+        expected = self.expected_road()
+        if expected is None:
+            raise ValueError("record_road before next_junction: the policy has not chosen a road")
+        if road != expected:
+            raise ValueError(f"drove {road!r} but the policy chose {expected!r}")
+        if performance not in PERFORMANCE_INDEX:
+            raise ValueError(f"performance must be 'succ' or 'fail', got {performance!r}")
+        incident_index = self.setup.driver_model.incident_index(incident)
+        before = self.belief
+        posterior, _ = self._pomdp.belief_update(before, incident_index, int(bool(takeover)),
+                                                 PERFORMANCE_INDEX[performance],
+                                                 rule=self.setup.belief_rule)
+        after = posterior[0]
+        if not after.sum() > 0:
+            # An observation the AV's model deems impossible: keep the prior rather than a zero vector.
+            after = before.copy()
+        self.belief = after
+        self.dfa_state = self._step_dfa(self.dfa_state, road, after)
+        self.route.append(road)
+        self._chosen = None
+        self._rows[-1]["sim_time_out"] = float(sim_time_in)
+        self._rows.append({
+            "episode_id": self.episode_id, "index": len(self._rows), "directed_road": road,
+            "action": "", "incident": incident, "takeover": bool(takeover), "performance": performance,
+            "trust_before": int(trust_before), "trust_after": int(trust_after),
+            "reported_trust": int(reported_trust), "belief_before": before.tolist(),
+            "belief_after": after.tolist(), "dfa_state": self.dfa_state, "fallback": False,
+            "sim_time_in": float(sim_time_in), "sim_time_out": float(sim_time_out),
+        })
+        self._check_dfa_end()
+
+    def should_report(self) -> bool:
+        """Whether the driver reports trust on the road about to be recorded (every report_every)."""
+        return len(self._rows) % self.setup.report_every == 0
+
+    def roads_frame(self) -> pd.DataFrame:
+        """The roads table of the contract, one row per position."""
+        frame = pd.DataFrame(self._rows, columns=list(ROAD_COLUMNS))
+        return frame.astype({"index": "int64", "takeover": "bool", "trust_before": "int64",
+                             "trust_after": "int64", "reported_trust": "int64", "dfa_state": "int64",
+                             "fallback": "bool", "sim_time_in": "float64", "sim_time_out": "float64"})
+
+    def summary(self, wall_seconds: float, sim_seconds: float) -> dict:
+        """The episode summary dict; mean_trust is the mean true trust over all positions."""
+        trust = [row["trust_after"] for row in self._rows]
+        return {
+            "episode_id": self.episode_id,
+            "satisfied": self.end_reason == "accepted",
+            "junctions": self.junctions,
+            "takeovers": int(sum(row["takeover"] for row in self._rows)),
+            "final_trust": int(trust[-1]),
+            "mean_trust": float(np.mean(trust)),
+            "end_reason": self.end_reason if self.end_reason is not None else "",
+            "fallback_fired": self.fallback_fired,
+            "sim_seconds": float(sim_seconds),
+            "wall_seconds": float(wall_seconds),
+        }

@@ -1,0 +1,9 @@
+"""harness.study: simulated within-subject studies at scale.
+
+config        the TOML study config (frozen dataclass, one-line errors)
+latin_square  the counterbalanced order of conditions per participant (Williams design)
+plan          the episodes of a study with their seeds and drivers (deterministic)
+parts         one atomic Parquet part per episode; resume, corruption check, failure records
+runner        local process pool or Dask, through one code path
+manifest      the consolidated dataset and its manifest (hashes, versions, seeds, git revision)
+"""

@@ -1,0 +1,132 @@
+"""The consolidated dataset of a study and its manifest.
+
+From the per-episode parts, in plan order (participant, position), whatever order they finished:
+    episodes.parquet    one row per finished episode: the plan (participant, position, spec,
+                        condition, seed) and the episode summary, plus reported-trust statistics
+    roads.parquet       every episode's roads table, concatenated
+    kinematics.parquet  SUMO only
+    manifest.json       config and its hash, package versions, git revision, per-episode seeds,
+                        counts, failures, the exact values of the policies (policies.evaluate)
+Only `wall_seconds` differs between two runs of the same config; everything else is a function of
+the config (tests/harness/test_study_runner.py checks this across kills, resumes and backends).
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import subprocess
+import sys
+import time
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from harness.study.config import StudyConfig
+from harness.study.parts import KINEMATICS_SCHEMA, ROADS_SCHEMA, kinematics_path, part_path, read_failures, read_part
+from harness.study.plan import EpisodeTask
+
+PACKAGES: tuple[str, ...] = ("trustroute", "numpy", "scipy", "pandas", "pyarrow", "eclipse-sumo", "libsumo",
+                             "sumolib", "dask", "distributed", "matplotlib", "rerun-sdk", "pomdp-py")
+REPO_ROOT = Path(__file__).resolve().parents[2]
+MANIFEST_FILE = "manifest.json"
+
+
+def package_versions() -> dict[str, str]:
+    versions = {"python": platform.python_version()}
+    for name in PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def git_revision() -> str:
+    """The repository's HEAD commit (with "+dirty" when the tree has changes), or "unknown"."""
+    try:
+        head = subprocess.run(["git", "-C", str(REPO_ROOT), "rev-parse", "HEAD"], capture_output=True,
+                              text=True, timeout=10, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(REPO_ROOT), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return head + ("+dirty" if dirty else "")
+
+
+def _reported(roads: pd.DataFrame) -> tuple[float, int]:
+    reports = roads["reported_trust"].to_numpy()
+    reports = reports[reports >= 0]
+    return (float(reports.mean()) if reports.size else float("nan")), int(reports.size)
+
+
+def consolidate(study_dir: Path, config: StudyConfig, tasks: list[EpisodeTask], config_hash: str,
+                expected: dict | None = None, run_info: dict | None = None) -> dict:
+    """Write episodes/roads/kinematics Parquet files and manifest.json; return the manifest."""
+    study_dir = Path(study_dir)
+    episode_rows, roads_tables, kinematics_tables = [], [], []
+    for task in tasks:
+        path = part_path(study_dir, task.episode_id)
+        if not path.exists():
+            continue
+        summary, _, roads = read_part(path)
+        mean_reported, reports = _reported(roads)
+        episode_rows.append({"episode_id": task.episode_id, "participant": task.participant,
+                             "position": task.position, "spec": task.spec, "condition": task.condition,
+                             "seed": task.seed, **{k: v for k, v in summary.items() if k != "episode_id"},
+                             "mean_reported_trust": mean_reported, "reports": reports})
+        roads_tables.append(pq.read_table(path).replace_schema_metadata(None))
+        kin = kinematics_path(study_dir, task.episode_id)
+        if kin.exists():
+            kinematics_tables.append(pq.read_table(kin))
+    episodes = pd.DataFrame(episode_rows)
+    episodes.to_parquet(study_dir / "episodes.parquet", index=False)
+    roads = (pa.concat_tables(roads_tables) if roads_tables
+             else ROADS_SCHEMA.empty_table())
+    pq.write_table(roads, study_dir / "roads.parquet")
+    if kinematics_tables:
+        pq.write_table(pa.concat_tables(kinematics_tables), study_dir / "kinematics.parquet")
+    elif config.engine == "sumo":
+        pq.write_table(KINEMATICS_SCHEMA.empty_table(), study_dir / "kinematics.parquet")
+    failures = read_failures(study_dir)
+    manifest = {
+        "study": config.name,
+        "config_path": config.source_path,
+        "config": json.loads(json.dumps(config.to_dict(), default=str)),
+        "config_hash": config_hash,
+        "engine": config.engine,
+        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "git_revision": git_revision(),
+        "packages": package_versions(),
+        "command": sys.argv,
+        "planned_episodes": len(tasks),
+        "finished_episodes": len(episode_rows),
+        "failed_episodes": [{"episode_id": f.get("episode_id"), "error": f.get("error"),
+                             "attempts": f.get("attempts")} for f in failures],
+        "seeds": {"study": config.seed, "episodes": {t.episode_id: t.seed for t in tasks},
+                  "derivation": "numpy SeedSequence(study seed, spawn_key=(1, participant, spec index, "
+                                "condition index)); drivers of a [population]: spawn_key=(2,)"},
+        "files": {"episodes": "episodes.parquet", "roads": "roads.parquet",
+                  **({"kinematics": "kinematics.parquet"} if config.engine == "sumo" else {})},
+        "expected": expected or {},
+        "run": run_info or {},
+    }
+    (study_dir / MANIFEST_FILE).write_text(json.dumps(manifest, indent=1, default=_jsonable))
+    return manifest
+
+
+def _jsonable(value: object) -> object:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
+
+
+def load_manifest(study_dir: Path) -> dict:
+    path = Path(study_dir) / MANIFEST_FILE
+    return json.loads(path.read_text()) if path.exists() else {}

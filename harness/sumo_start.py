@@ -1,0 +1,83 @@
+"""Starting and closing SUMO: the one place that builds the command line (every option in one list).
+
+libsumo runs one simulation per process; `sumo_session` starts it and always closes it, so
+hundreds of episodes can run one after another in a process. Nothing happens at import time
+(libsumo itself is imported when a simulation starts).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+from networks.errors import InputError
+from networks.sumo_net import find_binary
+
+
+@dataclass(frozen=True)
+class SumoConfig:
+    """Simulation settings of an episode."""
+
+    step_length: float = 0.5        # seconds; large steps keep episodes fast, 0.5 s keeps yielding sane
+    max_sim_seconds: float = 7200.0  # a stuck ego is a bug: the runner stops with an error here
+
+
+@lru_cache(maxsize=1)
+def sumo_binary() -> str:
+    """The sumo binary of the eclipse-sumo wheel (libsumo needs its installation, not the process)."""
+    return find_binary("sumo")
+
+
+def sumo_command(net_path: Path, seed: int, config: SumoConfig) -> list[str]:
+    """The whole SUMO command line of an episode."""
+    return [
+        sumo_binary(),
+        "--net-file", str(net_path),
+        "--seed", str(int(seed)),
+        "--step-length", f"{config.step_length:g}",
+        "--time-to-teleport", "-1",             # never teleport: a stuck ego must show up as stuck
+        "--collision.action", "warn",           # collisions are logged and measured, never fatal
+        "--collision.check-junctions", "true",  # pedestrians on crossings are inside junctions
+        "--collision.mingap-factor", "0",       # a collision is a real overlap, not a minGap breach
+        "--pedestrian.model", "striping",
+        "--default.action-step-length", f"{config.step_length:g}",
+        "--no-step-log", "true",
+        "--no-warnings", "true",
+        "--duration-log.disable", "true",
+        "--verbose", "false",
+    ]
+
+
+def _libsumo():
+    import libsumo
+
+    return libsumo
+
+
+@contextlib.contextmanager
+def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[object]:
+    """Start libsumo on `net_path`, yield the libsumo module, always close it.
+
+    An unreadable net or an unusable SUMO installation is an InputError (one line, exit 2).
+    """
+    command = sumo_command(net_path, seed, config)
+    if not Path(net_path).is_file():
+        raise InputError(str(net_path), "", "the SUMO net file does not exist",
+                         "run `trustroute net build` or pass an existing .net.xml")
+    sumo = _libsumo()
+    try:
+        sumo.start(command)
+    except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError types
+        with contextlib.suppress(Exception):
+            sumo.close()
+        message = str(exc).strip().splitlines()
+        raise InputError(str(net_path), "", "SUMO cannot load the net"
+                         + (f" ({message[-1]})" if message else ""),
+                         "rebuild it with `trustroute net build` (delete the cached file)") from None
+    try:
+        yield sumo
+    finally:
+        sumo.close()

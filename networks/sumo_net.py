@@ -1,0 +1,197 @@
+"""The SUMO network of a town: plain XML -> netconvert -> `.net.xml`, cached by content hash.
+
+Recipe (one place: `plain_xml` and `netconvert_command`): one edge per directed road with id
+"U-V", one vehicle lane at 13.89 m/s (lane 1) beside a sidewalk (lane 0) on every edge; a
+prioritised pedestrian crossing over each road with a pedestrian incident, at both of its ends
+(the person of a `U-V` incident crosses at U, ahead of the ego as it turns into `U-V`); explicit
+connections to every non-U-turn successor (U-turns only at dead ends, `--no-turnarounds`);
+narrow lanes and small junction radii so that driven lengths (edge + internal lanes of the
+connection taken) stay within 5 % of the model's Euclidean lengths (DESIGN.md, "Road lengths").
+One vehicle lane keeps lane choice out of routing: the route can be extended one road ahead late
+on the current road, after its incident has been observed.
+
+The net is written atomically (temp file + rename) to `<cache>/<town hash>-<recipe>.net.xml`; a
+second build of the same town is a cache hit. netconvert comes from the eclipse-sumo wheel via
+`sumolib.checkBinary`, so no SUMO_HOME is needed.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+from networks.errors import InputError
+from networks.town import Town, road_name
+
+NET_RECIPE = "r1"                      # bump when the recipe below changes: invalidates caches
+DEFAULT_NET_CACHE = Path.home() / ".cache" / "trustroute" / "nets"
+ROAD_SPEED = 13.89                     # m/s (50 km/h)
+LANE_WIDTH = 3.0
+SIDEWALK_WIDTH = 1.5
+VEHICLE_LANES = 1
+
+
+@dataclass(frozen=True)
+class NetBuild:
+    """A built (or cached) SUMO net and its counts (internal and pedestrian elements excluded
+    from `edges` and `connections`; `crossings` counts pedestrian crossings)."""
+
+    path: Path
+    cached: bool
+    seconds: float
+    edges: int
+    junctions: int
+    connections: int
+    crossings: int
+
+    def to_dict(self) -> dict:
+        return {"path": str(self.path), "cached": self.cached, "seconds": self.seconds,
+                "edges": self.edges, "junctions": self.junctions, "connections": self.connections,
+                "crossings": self.crossings}
+
+
+def find_binary(name: str) -> str:
+    """Path of a SUMO binary from the eclipse-sumo wheel (or SUMO_HOME), or InputError."""
+    import sumolib
+
+    found = sumolib.checkBinary(name)
+    if not os.path.isfile(found):
+        found = shutil.which(found) or ""
+    if not found or not os.access(found, os.X_OK):
+        raise InputError(name, "", f"the SUMO binary '{name}' was not found",
+                         "install the pinned eclipse-sumo wheel (pip install -e .) or set SUMO_HOME")
+    return found
+
+
+def pedestrian_roads(town: Town) -> list[tuple[str, str]]:
+    """Undirected roads (sorted pairs) with a pedestrian incident in either direction."""
+    return sorted({tuple(sorted((u, v))) for u, v in town.roads
+                   if "pedestrian" in (town.incident(road_name(u, v)), town.incident(road_name(v, u)))})
+
+
+def lane_count(town: Town, directed_road: str) -> int:
+    """Vehicle lanes of a road (the sidewalk not counted)."""
+    return VEHICLE_LANES
+
+
+def plain_xml(town: Town) -> dict[str, str]:
+    """The plain-XML inputs of netconvert: {"nod": ..., "edg": ..., "con": ...}."""
+    walk = {frozenset(pair) for pair in pedestrian_roads(town)}
+    nodes = ["<nodes>"]
+    for name, (x, y) in sorted(town.junctions.items()):
+        nodes.append(f"  <node id={quoteattr(name)} x=\"{x:.3f}\" y=\"{y:.3f}\" type=\"priority\"/>")
+    nodes.append("</nodes>")
+    edges = ["<edges>"]
+    for road in town.states:
+        u, v = road.split("-")
+        edges.append(f"  <edge id={quoteattr(road)} from={quoteattr(u)} to={quoteattr(v)} priority=\"1\" "
+                     f"numLanes=\"{lane_count(town, road)}\" speed=\"{ROAD_SPEED}\" "
+                     f"width=\"{LANE_WIDTH}\" sidewalkWidth=\"{SIDEWALK_WIDTH}\" spreadType=\"right\"/>")
+    edges.append("</edges>")
+    connections = ["<connections>"]
+    for road in town.states:
+        for nxt in town.successors(road):
+            # Lane 0 of every edge is its sidewalk: vehicle lanes start at 1.
+            for lane in range(1, lane_count(town, road) + 1):
+                connections.append(f"  <connection from={quoteattr(road)} to={quoteattr(nxt)} "
+                                   f"fromLane=\"{lane}\" toLane=\"1\"/>")
+    for u, v in sorted(tuple(sorted(p)) for p in walk):
+        for at in (u, v):
+            connections.append(f"  <crossing node={quoteattr(at)} edges=\"{road_name(u, v)} "
+                               f"{road_name(v, u)}\" priority=\"true\"/>")
+    connections.append("</connections>")
+    return {"nod": "\n".join(nodes) + "\n", "edg": "\n".join(edges) + "\n",
+            "con": "\n".join(connections) + "\n"}
+
+
+def netconvert_command(binary: str, plain: dict[str, Path], output: Path) -> list[str]:
+    """Every netconvert option of the recipe, in one list."""
+    return [
+        binary,
+        "--node-files", str(plain["nod"]),
+        "--edge-files", str(plain["edg"]),
+        "--connection-files", str(plain["con"]),
+        "--output-file", str(output),
+        "--no-turnarounds", "true",             # U-turns only where the connection file asks (dead ends)
+        "--offset.disable-normalization", "true",  # keep the town's coordinates
+        "--default.junctions.radius", "2",
+        "--junctions.corner-detail", "0",
+        "--walkingareas", "true",
+        "--crossings.guess", "false",
+        "--no-warnings", "true",
+        "--seed", "1",
+    ]
+
+
+def net_counts(path: Path) -> dict[str, int]:
+    """Counts of a .net.xml; InputError when it is unreadable or not a SUMO net."""
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as exc:
+        raise InputError(str(path), "", f"not a readable SUMO net ({exc})",
+                         "delete the file and run `trustroute net build` again") from None
+    if root.tag != "net":
+        raise InputError(str(path), "", f"not a SUMO net (root element <{root.tag}>)",
+                         "pass a .net.xml written by netconvert (`trustroute net build`)")
+    edges = [e for e in root.iter("edge") if e.get("function") is None]
+    crossings = [e for e in root.iter("edge") if e.get("function") == "crossing"]
+    junctions = [j for j in root.iter("junction") if j.get("type") != "internal"]
+    road_ids = {e.get("id") for e in edges}
+    connections = [c for c in root.iter("connection")
+                   if c.get("from") in road_ids and c.get("to") in road_ids]
+    return {"edges": len(edges), "junctions": len(junctions), "connections": len(connections),
+            "crossings": len(crossings)}
+
+
+def net_path(town: Town, cache_dir: Path | None = None) -> Path:
+    directory = Path(cache_dir) if cache_dir is not None else DEFAULT_NET_CACHE
+    return directory / f"{town.content_hash}-{NET_RECIPE}.net.xml"
+
+
+def _looks_complete(path: Path) -> bool:
+    # A cheap cache check: a net cut short by a crash lacks the closing tag.
+    try:
+        with path.open("rb") as handle:
+            handle.seek(max(0, path.stat().st_size - 64))
+            return b"</net>" in handle.read()
+    except OSError:
+        return False
+
+
+def build_net(town: Town, cache_dir: Path | None = None) -> NetBuild:
+    """The SUMO net of `town`, built with netconvert or taken from the cache."""
+    started = time.perf_counter()
+    target = net_path(town, cache_dir)
+    if target.is_file() and _looks_complete(target):
+        counts = net_counts(target)
+        return NetBuild(path=target, cached=True, seconds=time.perf_counter() - started, **counts)
+    binary = find_binary("netconvert")
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(str(target.parent), "", f"cannot create the net cache ({exc.strerror})",
+                         "pass a writable directory with --out") from None
+    with tempfile.TemporaryDirectory(prefix="trustroute-net-", dir=target.parent) as work:
+        work_dir = Path(work)
+        plain = {}
+        for kind, text in plain_xml(town).items():
+            plain[kind] = work_dir / f"town.{kind}.xml"
+            plain[kind].write_text(text)
+        output = work_dir / "town.net.xml"
+        result = subprocess.run(netconvert_command(binary, plain, output), capture_output=True, text=True,
+                                check=False)
+        if result.returncode != 0 or not output.is_file():
+            message = (result.stderr or result.stdout).strip().splitlines()
+            raise InputError(town.source_path or "town", "", "netconvert failed: "
+                             + (message[-1] if message else f"exit {result.returncode}"),
+                             "check the town's coordinates (roads must have positive length)")
+        os.replace(output, target)   # atomic on one file system: readers never see half a net
+    counts = net_counts(target)
+    return NetBuild(path=target, cached=False, seconds=time.perf_counter() - started, **counts)

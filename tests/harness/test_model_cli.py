@@ -1,0 +1,62 @@
+"""`trustroute model`: the summary of the default town and driver model, and its error path."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from harness.cli import main
+from participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
+
+
+def run(argv: list[str], capsys) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    captured = capsys.readouterr()
+    return exit_info.value.code, captured.out, captured.err
+
+
+def test_summary_text(capsys):
+    code, out, err = run(["model"], capsys)
+    assert code == 0 and err == ""
+    assert "12 junctions, 18 two-way roads, 36 states" in out
+    assert "trust levels 1..7" in out
+    assert "performance-dependent dynamics: False" in out
+
+
+def test_summary_json_matches_the_files(capsys, town, driver):
+    code, out, _ = run(["model", "--json"], capsys)
+    assert code == 0
+    summary = json.loads(out)
+    assert summary["states"] == len(town.states) == 36
+    assert sum(summary["incidents_per_type"].values()) == 36
+    for kind, count in summary["incidents_per_type"].items():
+        assert count == sum(1 for v in town.incidents.values() if v == kind)
+    assert summary["town_hash"] == town.content_hash[:12]
+    assert summary["driver_hash"] == driver.content_hash[:12]
+    for i, kind in enumerate(driver.incident_types):
+        assert np.allclose(summary["takeover_probability"][kind], driver.takeover_probability[i],
+                           atol=5e-4)
+
+
+def test_model_not_covering_the_town_exits_2(tmp_path, capsys):
+    data = json.loads(DEFAULT_DRIVER_MODEL_PATH.read_text())
+    data["incident_types"].remove("pedestrian")
+    for key in ("takeover_probability", "trust_transition", "trust_free_takeover_probability"):
+        del data[key]["pedestrian"]
+    path = tmp_path / "driver.json"
+    path.write_text(json.dumps(data))
+    code, out, err = run(["model", "--driver", str(path)], capsys)
+    assert code == 2 and out == ""
+    assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    assert "uses incident 'pedestrian' which the model does not cover" in err
+    assert "(fix: add 'pedestrian'" in err
+
+
+def test_unknown_option_is_a_usage_error(capsys):
+    code, _, err = run(["model", "--no-such-option"], capsys)
+    assert code == 2
+    assert "Traceback" not in err

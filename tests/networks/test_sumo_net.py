@@ -1,0 +1,155 @@
+"""The SUMO net of the default town: loads in libsumo, lengths, connections, cache, bad input."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import pytest
+import sumolib
+
+from networks.errors import InputError
+from networks.sumo_net import build_net, net_counts
+from networks.town import split_road
+
+
+@pytest.fixture(scope="module")
+def built(town, tmp_path_factory):
+    return build_net(town, cache_dir=tmp_path_factory.mktemp("nets"))
+
+
+@pytest.fixture(scope="module")
+def net(built):
+    return sumolib.net.readNet(str(built.path), withInternal=True)
+
+
+def _internal_length(net, connection) -> float:
+    """Length of the internal lanes a vehicle drives through for one connection."""
+    total = 0.0
+    via = connection.getViaLaneID()
+    while via:
+        lane = net.getLane(via)
+        total += lane.getLength()
+        via = next((c.getToLane().getID() for c in lane.getOutgoing()
+                    if c.getToLane().getEdge().getFunction() == "internal"), None)
+    return total
+
+
+def test_net_loads_in_libsumo(built, town):
+    import libsumo
+
+    libsumo.start(["sumo", "-n", str(built.path), "--no-step-log", "true", "--no-warnings", "true"])
+    try:
+        edges = {e for e in libsumo.edge.getIDList() if not e.startswith(":")}
+        libsumo.simulationStep()
+    finally:
+        libsumo.close()
+    assert edges == set(town.states)
+
+
+def test_counts(built, town):
+    assert (built.edges, built.junctions) == (len(town.states), len(town.junctions))
+    assert built.connections == sum(len(town.successors(s)) for s in town.states)
+    pedestrian_roads = {frozenset(split_road(r)) for r in town.states if town.incident(r) == "pedestrian"}
+    assert built.crossings == 2 * len(pedestrian_roads)
+
+
+def test_driven_lengths_close_to_euclidean(net, town):
+    checked = 0
+    for road in town.states:
+        edge = net.getEdge(road)
+        u, v = split_road(road)
+        assert (edge.getFromNode().getID(), edge.getToNode().getID()) == (u, v)
+        euclidean = math.dist(town.junctions[u], town.junctions[v])
+        assert town.length(road) == pytest.approx(euclidean)
+        for successor, connections in edge.getOutgoing().items():
+            if successor.getFunction():
+                continue  # walking areas
+            for connection in connections:
+                driven = edge.getLength() + _internal_length(net, connection)
+                assert abs(driven / euclidean - 1) <= 0.05, (road, successor.getID(), driven, euclidean)
+                checked += 1
+    assert checked == sum(len(town.successors(s)) for s in town.states)
+
+
+def test_movements_and_no_u_turns(net, town):
+    for road in town.states:
+        edge = net.getEdge(road)
+        vehicle_targets = {nxt.getID() for nxt in edge.getOutgoing() if not nxt.getFunction()}
+        assert vehicle_targets == set(town.successors(road)), road
+        u, v = split_road(road)
+        assert f"{v}-{u}" not in vehicle_targets  # no dead ends in the default town
+
+
+def test_pedestrian_roads_have_crossings_at_both_ends(net, town):
+    crossings = {}
+    for edge in net.getEdges(withInternal=True):
+        if edge.getFunction() == "crossing":
+            crossings.setdefault(edge.getFromNode().getID(), []).append(
+                frozenset(e.getID() for e in edge.getCrossingEdges()))
+    for road in town.states:
+        if town.incident(road) == "pedestrian":
+            u, v = split_road(road)
+            assert frozenset((road, f"{v}-{u}")) in crossings.get(u, []), road
+
+
+def test_second_build_is_cache_hit(town, tmp_path):
+    first = build_net(town, cache_dir=tmp_path)
+    second = build_net(town, cache_dir=tmp_path)
+    assert not first.cached and second.cached
+    assert first.path == second.path and first.path.parent == tmp_path
+    assert first.path.name.startswith(town.content_hash)
+    assert first.connections == second.connections
+    assert [p.name for p in tmp_path.iterdir()] == [first.path.name]  # no temp files left
+
+
+def test_truncated_cache_is_rebuilt(town, tmp_path):
+    path = build_net(town, cache_dir=tmp_path).path
+    path.write_text(path.read_text()[:500])
+    again = build_net(town, cache_dir=tmp_path)
+    assert not again.cached and again.edges == len(town.states)
+
+
+def test_corrupt_net_gives_clear_error(tmp_path):
+    bad = tmp_path / "bad.net.xml"
+    bad.write_text("<net><edge id='x'")
+    with pytest.raises(InputError, match="not a readable SUMO net"):
+        net_counts(bad)
+    other = tmp_path / "other.xml"
+    other.write_text("<routes/>")
+    with pytest.raises(InputError, match="not a SUMO net"):
+        net_counts(other)
+
+
+def test_missing_netconvert_is_input_error(town, tmp_path, monkeypatch):
+    monkeypatch.setattr(sumolib, "checkBinary", lambda name, bindir=None: "netconvert-not-installed")
+    monkeypatch.setenv("PATH", "")
+    with pytest.raises(InputError, match="netconvert"):
+        build_net(town, cache_dir=tmp_path)
+
+
+def test_net_cli(tmp_path):
+    from click.testing import CliRunner
+
+    from harness.cli import cli
+
+    result = CliRunner().invoke(cli, ["net", "build", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    path = Path(result.output.splitlines()[0])
+    assert path.is_file() and "36 edges, 12 junctions" in result.output and "built" in result.output
+    result = CliRunner().invoke(cli, ["net", "build", "--out", str(tmp_path)])
+    assert "cached" in result.output
+
+
+def test_missing_binary_cli_exit_2(tmp_path):
+    import subprocess
+    import sys
+
+    code = ("import sumolib; sumolib.checkBinary = lambda name, bindir=None: 'no-such-netconvert'\n"
+            f"from harness.cli import main; main(['net', 'build', '--out', {str(tmp_path)!r}])")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            env={**os.environ, "PATH": ""})
+    assert result.returncode == 2
+    assert result.stderr.count("\n") == 1 and "netconvert" in result.stderr
+

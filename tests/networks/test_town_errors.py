@@ -1,0 +1,145 @@
+"""Malformed town files: each gives its own one-line error and exit code 2 through the CLI."""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import pytest
+
+from harness.cli import main
+from networks.errors import InputError
+from networks.town import DEFAULT_TOWN_PATH, load_town
+
+
+def default_town() -> dict:
+    return json.loads(DEFAULT_TOWN_PATH.read_text())
+
+
+def unknown_junction(t: dict) -> None:
+    t["roads"].append(["A", "Z"])
+
+
+def duplicate_road(t: dict) -> None:
+    t["roads"].append(["A", "B"])
+
+
+def reversed_duplicate_road(t: dict) -> None:
+    t["roads"].append(["B", "A"])
+
+
+def self_loop(t: dict) -> None:
+    t["roads"].append(["C", "C"])
+
+
+def missing_incident(t: dict) -> None:
+    del t["incidents"]["C-J"]
+
+
+def extra_incident(t: dict) -> None:
+    t["incidents"]["A-C"] = "none"
+
+
+def unknown_incident_type(t: dict) -> None:
+    t["incidents"]["A-B"] = "cow"
+
+
+def non_numeric_coordinates(t: dict) -> None:
+    t["junctions"]["D"] = ["-411", -566]
+
+
+def one_coordinate(t: dict) -> None:
+    t["junctions"]["D"] = [5.0]
+
+
+def disconnected(t: dict) -> None:
+    t["junctions"]["M"] = [2000, 2000]
+    t["junctions"]["N"] = [2100, 2000]
+    t["roads"].append(["M", "N"])
+    t["incidents"]["M-N"] = "none"
+    t["incidents"]["N-M"] = "none"
+
+
+def missing_roads_key(t: dict) -> None:
+    del t["roads"]
+
+
+def dashed_junction_name(t: dict) -> None:
+    t["junctions"]["X-Y"] = [1, 1]
+
+
+# (mutation, the place the message must name, words of the specific problem)
+CASES = [
+    (unknown_junction, "roads[18]", "unknown junction 'Z'"),
+    (duplicate_road, "roads[18]", "listed twice"),
+    (reversed_duplicate_road, "roads[18]", "listed twice"),
+    (self_loop, "roads[18]", "self-loop"),
+    (missing_incident, "incidents.C-J", "missing incident entry"),
+    (extra_incident, "incidents.A-C", "not a directed road"),
+    (unknown_incident_type, "incidents.A-B", "unknown incident type 'cow'"),
+    (non_numeric_coordinates, "junctions.D", "not two finite numbers"),
+    (one_coordinate, "junctions.D", "not two finite numbers"),
+    (disconnected, "roads", "disconnected: M, N"),
+    (missing_roads_key, "roads", "missing key 'roads'"),
+    (dashed_junction_name, "junctions.X-Y", "contain no '-'"),
+]
+
+
+def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    captured = capsys.readouterr()
+    return exit_info.value.code, captured.out, captured.err
+
+
+def assert_one_line_error(code: int, err: str, *fragments: str) -> None:
+    assert code == 2
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("error: ")
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+    assert "(fix: " in lines[0]
+
+
+@pytest.mark.parametrize("mutate, place, problem", CASES, ids=[c[0].__name__ for c in CASES])
+def test_malformed_town_gives_its_error_and_exit_2(tmp_path, capsys, mutate, place, problem):
+    data = copy.deepcopy(default_town())
+    mutate(data)
+    path = tmp_path / "town.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(InputError) as error:
+        load_town(path)
+    assert error.value.place == place
+    assert problem in error.value.problem
+    code, out, err = run_cli(["model", "--town", str(path)], capsys)
+    assert_one_line_error(code, err, str(path), place, problem)
+    assert out == ""
+
+
+def test_bad_json_names_line_and_column(tmp_path, capsys):
+    path = tmp_path / "town.json"
+    path.write_text('{"junctions": {"A": [0, 0],}\n')
+    code, _, err = run_cli(["model", "--town", str(path)], capsys)
+    assert_one_line_error(code, err, str(path), "line 1 column", "not valid JSON")
+
+
+def test_missing_file(tmp_path, capsys):
+    code, _, err = run_cli(["model", "--town", str(tmp_path / "absent.json")], capsys)
+    assert_one_line_error(code, err, "absent.json", "cannot read the town file")
+
+
+def test_top_level_not_an_object(tmp_path, capsys):
+    path = tmp_path / "town.json"
+    path.write_text("[1, 2]")
+    code, _, err = run_cli(["model", "--town", str(path)], capsys)
+    assert_one_line_error(code, err, "top level", "expected a JSON object")
+
+
+def test_the_unmodified_default_passes(tmp_path, capsys):
+    path = tmp_path / "town.json"
+    path.write_text(json.dumps(default_town()))
+    code, out, err = run_cli(["model", "--town", str(path)], capsys)
+    assert code == 0 and err == ""
+    assert "12 junctions, 18 two-way roads, 36 states" in out
