@@ -22,12 +22,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from policies.labelling import Labeller
 
 from networks.town import Town
 from participants.driver_model import DriverModel
 from policies.dfa import DFA, build_dfa
 from policies.fallback import FallbackPolicy, fallback_fired, policy_finished, with_fallback
+from policies.labelling import Labeller
 from policies.policy import DecisionContext, RoutingPolicy
 from policies.spec import Spec
 from policies.trust_pomdp import TrustPOMDP, build_pomdp

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from harness.episode import EpisodeRecord
 from harness.episode_tracker import EpisodeSetup, EpisodeTracker, _model
 from participants.driver_model import DriverModel
 from participants.synthetic_driver import SyntheticDriver
@@ -31,16 +32,6 @@ from policies.policy import DecisionContext, RoutingPolicy
 
 KINEMATICS_COLUMNS: tuple[str, ...] = ("episode_id", "time", "x", "y", "speed", "lane", "mode")
 END_CODES: tuple[str, ...] = ("", "accepted", "rejected", "destination", "cap")
-
-try:  # one record type for both engines once the SUMO engine is installed
-    from harness.episode import EpisodeRecord
-except ImportError:  # pragma: no cover - only while harness/episode.py is absent
-    @dataclass(frozen=True, eq=False)
-    class EpisodeRecord:  # type: ignore[no-redef]
-        summary: dict
-        roads: pd.DataFrame
-        kinematics: pd.DataFrame
-
 
 def empty_kinematics() -> pd.DataFrame:
     return pd.DataFrame({

@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-FAIL_DECELERATION = 4.5     # m/s²: harder than SUMO's comfortable default decel is an emergency
-TTC_THRESHOLD = 1.5         # seconds
+FAIL_DECELERATION = 5.0     # m/s²: beyond the comfortable maximum (4.5) is an emergency brake
+TTC_THRESHOLD = 1.0         # seconds, on the bumper-to-bumper gap
 LEADER_HORIZON = 100.0      # metres
 
 
@@ -35,7 +35,9 @@ class PerformanceMonitor:
             if leader and leader[0]:
                 closing = speed - sumo.vehicle.getSpeed(leader[0])
                 if closing > 0:
-                    self.min_ttc = min(self.min_ttc, max(leader[1], 0.0) / closing)
+                    # getLeader's distance leaves out the ego's minGap: add it back for the real gap.
+                    gap = max(leader[1] + sumo.vehicle.getMinGap(ego_id), 0.0)
+                    self.min_ttc = min(self.min_ttc, gap / closing)
 
     def result(self) -> str:
         failed = (self.collided or self.max_deceleration > FAIL_DECELERATION

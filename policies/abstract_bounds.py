@@ -56,7 +56,6 @@ def abstract_backup(abstraction: Abstraction, value_next: np.ndarray) -> np.ndar
     if live.size == 0:
         return out
     road_incident = tables.pomdp.road_incident
-    cell_index = np.arange(n_c)
     for x in range(n_x):
         best = np.zeros((live.size, n_c))
         for x2 in tables.successors[x]:
@@ -76,7 +75,6 @@ def abstract_backup(abstraction: Abstraction, value_next: np.ndarray) -> np.ndar
             action_value = np.einsum("cvk,qck->qcv", cells.vertices, weighted).max(axis=2)
             best = np.maximum(best, action_value)
         out[x, live, :] = np.minimum(best, 1.0)
-    del cell_index
     return out
 
 
@@ -99,14 +97,40 @@ class UnboundedUpper:
     seconds: float
 
 
+def can_accept(tables: ProductTables) -> np.ndarray:
+    """bool [n_x, n_q]: acceptance reachable in the road × DFA graph with belief atoms free.
+
+    An over-approximation of reachability in the product belief MDP (every belief label value
+    allowed at every step), so a False here is a sound 0 for the value.
+    """
+    n_x, n_q = tables.n_x, tables.n_q
+    reached = np.zeros((n_x, n_q), dtype=bool)
+    reached[:, tables.accepting] = True
+    live = ~(tables.accepting | tables.rejecting)
+    while True:
+        grown = reached.copy()
+        for x in range(n_x):
+            for x2 in tables.successors[x]:
+                if x2 < 0:
+                    continue
+                # q can reach acceptance via x2 if some label value leads to a reaching state.
+                grown[x] |= live & reached[x2][tables.next_q[:, x2, :]].any(axis=1)
+        if (grown == reached).all():
+            return reached
+        reached = grown
+
+
 def unbounded_upper(abstraction: Abstraction, time_limit: float, tolerance: float = 1e-6,
                     max_iterations: int = 2000) -> UnboundedUpper:
-    """Iterate T̄ from 1 (every iterate is sound; see the module docstring) until it stalls."""
+    """Iterate T̄ from 1 (every iterate is sound; see the module docstring) until it stalls.
+
+    States that cannot reach acceptance at all (can_accept) start at 0, which removes the
+    greatest-fixed-point excess on end components from which acceptance is unreachable.
+    """
     started = time.perf_counter()
     tables = abstraction.tables
     shape = (tables.n_x, tables.n_q, abstraction.cells.n_cells)
-    value = np.ones(shape)
-    value[:, tables.rejecting, :] = 0.0
+    value = np.broadcast_to(can_accept(tables)[:, :, None], shape).astype(float)
     change = np.inf
     iterations = 0
     while iterations < max_iterations and time.perf_counter() - started < time_limit:

@@ -126,16 +126,48 @@ class DFA:
         lines.append(f"  init -> q{self.initial};")
         for q in range(self.n_states):
             for target, cubes in self.transitions(q).items():
-                lines.append(f'  q{q} -> q{target} [label="{guard_text(cubes)}"];')
+                lines.append(f'  q{q} -> q{target} [label="{guard_text(cubes, self.atoms)}"];')
         lines.append("}")
         return "\n".join(lines) + "\n"
 
 
-def guard_text(cubes: Sequence[Cube]) -> str:
-    """A guard as text: `true`, or cubes joined by ` | `, literals by ` & `."""
-    if any(not cube for cube in cubes):
+def merge_cubes(cubes: Sequence[Cube], order: Sequence[str] = ()) -> list[Cube]:
+    """A shorter equivalent disjunction: merge cubes differing in one literal's sign
+    (x & a | x & !a = x) and drop cubes implied by others, until nothing changes. Literals are
+    listed in `order` (atom order; others alphabetically after)."""
+    current = {frozenset(c) for c in cubes}
+    changed = True
+    while changed:
+        changed = False
+        for first in list(current):
+            for atom, value in first:
+                partner = (first - {(atom, value)}) | {(atom, not value)}
+                if partner in current:
+                    current -= {first, partner}
+                    current.add(first - {(atom, value)})
+                    changed = True
+                    break
+            if changed:
+                break
+        implied = {c for c in current if any(o < c for o in current)}
+        if implied:
+            current -= implied
+            changed = True
+    rank = {a: i for i, a in enumerate(order)}
+
+    def literal_key(literal: tuple[str, bool]) -> tuple[int, str]:
+        return rank.get(literal[0], len(rank)), literal[0]
+
+    merged = [tuple(sorted(c, key=literal_key)) for c in current]
+    return sorted(merged, key=lambda c: (len(c), [literal_key(lit) for lit in c], c))
+
+
+def guard_text(cubes: Sequence[Cube], order: Sequence[str] = ()) -> str:
+    """A guard as text: `true`, or merged cubes joined by ` | `, literals by ` & `."""
+    merged = merge_cubes(cubes, order)
+    if any(not cube for cube in merged):
         return "true"
-    return " | ".join(" & ".join(a if v else "!" + a for a, v in cube) for cube in cubes)
+    return " | ".join(" & ".join(a if v else "!" + a for a, v in cube) for cube in merged)
 
 
 # -- construction -------------------------------------------------------------------------------
@@ -182,16 +214,6 @@ def _cofactor(formula: Formula, atom: str, value: bool, memo: dict[tuple[Formula
     return cached
 
 
-def _now_atoms(formula: Formula, rank: Mapping[str, int]) -> int | None:
-    """Smallest atom rank among the Now literals of `formula` (None if there are none)."""
-    if isinstance(formula, Now):
-        return rank[formula.atom]
-    if isinstance(formula, And | Or):
-        ranks = [r for r in (_now_atoms(p, rank) for p in formula.parts) if r is not None]
-        return min(ranks) if ranks else None
-    return None
-
-
 class _Builder:
     """Explores the progression automaton; diagrams are hash-consed into one node pool."""
 
@@ -207,7 +229,21 @@ class _Builder:
         self.progress_memo: dict[Formula, Formula] = {}
         self.cofactor_memo: dict[tuple[Formula, str, bool], Formula] = {}
         self.expand_memo: dict[Formula, int] = {}
+        self.now_memo: dict[Formula, int | None] = {}
         self.queue: deque[int] = deque()
+
+    def first_now(self, formula: Formula) -> int | None:
+        """Smallest atom rank among the Now literals of `formula` (memoised per formula)."""
+        if isinstance(formula, Now):
+            return self.rank[formula.atom]
+        if not isinstance(formula, And | Or):
+            return None
+        if formula in self.now_memo:
+            return self.now_memo[formula]
+        ranks = [r for r in map(self.first_now, formula.parts) if r is not None]
+        found = min(ranks) if ranks else None
+        self.now_memo[formula] = found
+        return found
 
     def node(self, entry: tuple[int, int, int]) -> int:
         found = self.node_ids.get(entry)
@@ -231,7 +267,7 @@ class _Builder:
         cached = self.expand_memo.get(formula)
         if cached is not None:
             return cached
-        rank = _now_atoms(formula, self.rank)
+        rank = self.first_now(formula)
         if rank is None:
             target = self.state(formula)
             result = self.node((-1, target, target))
@@ -255,19 +291,12 @@ class _Builder:
             assert len(self.roots) == q + 1  # states are expanded in creation order
 
 
-def _leaf_targets(nodes: list[tuple[int, int, int]], root: int) -> set[int]:
-    targets: set[int] = set()
-    stack, seen = [root], set()
-    while stack:
-        k = stack.pop()
-        if k in seen:
-            continue
-        seen.add(k)
-        rank, low, high = nodes[k]
-        if rank < 0:
-            targets.add(low)
-        else:
-            stack.extend((low, high))
+def _leaf_targets(nodes: list[tuple[int, int, int]]) -> list[frozenset[int]]:
+    """For every node of a pool, the set of leaf targets below it (children precede parents in
+    a pool, since nodes are created bottom-up)."""
+    targets: list[frozenset[int]] = []
+    for rank, low, high in nodes:
+        targets.append(frozenset((low,)) if rank < 0 else targets[low] | targets[high])
     return targets
 
 
@@ -357,7 +386,8 @@ def dfa_from_formula(formula: Formula, atoms: Sequence[str] | None = None) -> DF
         raise ValueError(f"atoms {sorted(missing)} of the formula are not in the atom order")
     builder = _Builder(atom_order)
     builder.explore(canonical(formula))
-    successors = [_leaf_targets(builder.nodes, r) for r in builder.roots]
+    below = _leaf_targets(builder.nodes)
+    successors = [set(below[r]) for r in builder.roots]
     # Valid obligations (hold on every continuation): least fixpoint of
     # valid(q) = (q is `true`) or every successor of q is valid.
     valid = _backward_closure(successors, np.array([f == TRUE for f in builder.formulas]), every=True)
@@ -369,8 +399,10 @@ def dfa_from_formula(formula: Formula, atoms: Sequence[str] | None = None) -> DF
     block, pool, block_roots = _minimise(nodes, roots, valid)
 
     # Number the minimal states breadth-first from the initial state (deterministic ids).
+    pool_below = _leaf_targets(pool)
+
     def targets_of(b: int) -> list[int]:
-        return sorted(_leaf_targets(pool, block_roots[b]))
+        return sorted(pool_below[block_roots[b]])
 
     order = {int(block[0]): 0}
     queue = deque([int(block[0])])
@@ -401,7 +433,7 @@ def dfa_from_formula(formula: Formula, atoms: Sequence[str] | None = None) -> DF
         root[new] = block_roots[b]
 
     # Rejecting: acceptance unreachable (backward reachability from accepting states).
-    forward = [{int(node_target[k]) for k in _leaf_nodes(pool, int(root[q]))} for q in range(n_states)]
+    forward = [{order[b] for b in pool_below[int(root[q])]} for q in range(n_states)]
     can_accept = _backward_closure(forward, accepting, every=False)
     rejecting = ~can_accept
     for array in (accepting, rejecting, root, node_atom, node_low, node_high, node_target):
@@ -410,20 +442,6 @@ def dfa_from_formula(formula: Formula, atoms: Sequence[str] | None = None) -> DF
     return DFA(atoms=atom_order, n_states=n_states, initial=0, accepting=accepting, rejecting=rejecting,
                root=root, node_atom=node_atom, node_low=node_low, node_high=node_high,
                node_target=node_target, state_formulas=formulas)
-
-
-def _leaf_nodes(pool: list[tuple[int, int, int]], root: int) -> list[int]:
-    leaves, stack, seen = [], [root], set()
-    while stack:
-        k = stack.pop()
-        if k in seen:
-            continue
-        seen.add(k)
-        if pool[k][0] < 0:
-            leaves.append(k)
-        else:
-            stack.extend(pool[k][1:])
-    return leaves
 
 
 _CACHE: dict[str, DFA] = {}

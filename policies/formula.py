@@ -181,10 +181,11 @@ def _junction(parts: Iterable[Formula], conjunction: bool) -> Formula:
     for part in parts:
         members = part.parts if isinstance(part, kind) else (part,)
         for member in members:
-            if member == zero:
-                return zero
-            if member != unit:
-                flat.setdefault(member.key, member)
+            if isinstance(member, Const):
+                if member.value == zero.value:
+                    return zero
+                continue  # the unit
+            flat.setdefault(member.key, member)
     for member in flat.values():
         negated = _negated(member)
         if negated is not None and negated.key in flat:

@@ -18,9 +18,9 @@ Method (bounded heuristic search over the product belief MDP, with a sound abstr
   value is at least `lower`. It is a policies.table_policy.BeliefTablePolicy (acts on any belief).
 
 Horizon H: at most H junctions (the study measures "policy, then fallback after 20", so H = 20 is
-the natural companion). Unbounded (horizon=None): nodes deeper than `max_depth` are left
-unexpanded (L = 0, U = abstract bound), and the abstraction's bound is sound but may be loose
-(see abstract_bounds.unbounded_upper).
+the natural companion). Unbounded (horizon=None): upper is the abstraction's unbounded bound
+(abstract_bounds.unbounded_upper: sound, possibly loose); lower is the best value of bounded searches
+with growing H, whose policies are policies for the unbounded problem too.
 """
 
 from __future__ import annotations
@@ -38,8 +38,8 @@ from policies.table_policy import BeliefTablePolicy, PolicyTable
 from policies.trust_pomdp import BeliefRule, TrustPOMDP
 
 DEFAULT_SUFFIX_LENGTH = 4
-DEFAULT_MAX_DEPTH = 200
 DEFAULT_BATCH = 4096
+UNBOUNDED_HORIZONS = (20, 30, 40, 60, 80, 120, 160)
 
 FRONTIER, EXPANDED, ACCEPTED, ZERO = 0, 1, 2, 3
 
@@ -131,25 +131,16 @@ class _Graph:
 
 
 class _Search:
-    def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int | None, suffix_length: int,
-                 time_limit: float, max_depth: int, started: float) -> None:
+    def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int, suffix_length: int,
+                 started: float) -> None:
         self.tables, self.rule, self.horizon = tables, rule, horizon
-        self.started, self.time_limit = started, time_limit
-        self.max_depth = horizon if horizon is not None else max_depth
+        self.started = started
         pomdp = tables.pomdp
         self.symbols = observation_symbols(pomdp, rule)
         self.cells = suffix_cells(self.symbols, suffix_length)
         abstraction = build_abstraction(tables, self.symbols, self.cells)
-        budget = max(1.0, 0.3 * time_limit)
-        if horizon is not None:
-            self.bound = bounded_upper(abstraction, horizon)
-            self.bound_note = "exact backward induction on the abstraction"
-        else:
-            result = unbounded_upper(abstraction, budget)
-            self.bound = result.value
-            self.bound_note = (f"{result.iterations} iterations of the abstract operator from 1 "
-                               f"(last change {result.last_change:.2e}; sound, possibly above the "
-                               f"least fixed point)")
+        self.bound = bounded_upper(abstraction, horizon)
+        self.bound_note = "exact backward induction on the abstraction"
         self.abstraction_seconds = time.perf_counter() - started
         n_outcomes = max(len(s) for s in self.symbols.by_incident)
         self.slot_of_symbol = np.zeros(self.symbols.n_symbols, dtype=np.int64)
@@ -159,9 +150,7 @@ class _Search:
         self.graph = _Graph(pomdp.n_trust, tables.successors.shape[1], n_outcomes)
 
     def frontier_upper(self, level: int, x: np.ndarray, q: np.ndarray, cell: np.ndarray) -> np.ndarray:
-        if self.horizon is not None:
-            return self.bound[level][x, q, cell]
-        return self.bound[x, q, cell]
+        return self.bound[level][x, q, cell]
 
     def classify(self, ids: np.ndarray, level: int) -> None:
         """Initialise new nodes: terminal values, or the frontier's abstract bound."""
@@ -175,7 +164,7 @@ class _Search:
             return
         upper = np.minimum(1.0, self.frontier_upper(level, g.x[rest], g.q[rest], g.cell[rest]))
         dead = tables.rejecting[g.q[rest]] | (upper <= 0.0)
-        if self.horizon is not None and level >= self.horizon:
+        if level >= self.horizon:
             dead[:] = True
         g.kind[rest[dead]] = ZERO
         g.upper[rest[dead]] = 0.0
@@ -278,31 +267,18 @@ class _Search:
                            action=action)
 
 
-def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
-               horizon: int | None = None, belief_rule: BeliefRule = "bayes",
-               suffix_length: int = DEFAULT_SUFFIX_LENGTH, max_depth: int = DEFAULT_MAX_DEPTH,
-               batch: int = DEFAULT_BATCH) -> SynthesisResult:
-    """Maximal probability of satisfying `spec` from (spec.start, initial belief), with a policy.
-
-    horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter and the
-    belief MDP's dynamics ("bayes", or the authors' "paper" update with the Bayes observation
-    probabilities of that belief). Returns lower <= Pr_max <= upper with lower the value of the
-    returned policy; stops when upper - lower <= tau or after time_limit seconds.
-    """
-    if tau <= 0:
-        raise ValueError("tau must be positive")
-    if horizon is not None and horizon < 0:
-        raise ValueError("horizon must be >= 0")
-    started = time.perf_counter()
-    tables = build_product(pomdp, spec)
-    search = _Search(tables, belief_rule, horizon, suffix_length, time_limit, max_depth, started)
+def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int, tau: float,
+                    suffix_length: int, batch: int, started: float, deadline: float
+                    ) -> tuple[float, float, PolicyTable, dict]:
+    """One AO*-style search for P(accepted within `horizon`); returns (lower, upper, table, stats)."""
+    search = _Search(tables, belief_rule, horizon, suffix_length, started)
     g = search.graph
     root = search.root()
     iterations = 0
     expanded = 0
-    while g.upper[root] - g.lower[root] > tau and time.perf_counter() - started < time_limit:
+    while g.upper[root] - g.lower[root] > tau and time.perf_counter() < deadline:
         reach = search.reach(root)
-        frontier = np.flatnonzero((g.kind[: g.n] == FRONTIER) & (g.level[: g.n] < search.max_depth))
+        frontier = np.flatnonzero((g.kind[: g.n] == FRONTIER) & (g.level[: g.n] < horizon))
         weight = reach[frontier] * (g.upper[frontier] - g.lower[frontier])
         positive = weight > 0
         frontier, weight = frontier[positive], weight[positive]
@@ -319,29 +295,91 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     search.backup()
     lower, upper = float(g.lower[root]), float(g.upper[root])
     table = search.policy_table()
-    policy = BeliefTablePolicy(table, pomdp.town, spec)
-    frontier_mass = search.reach(root)
-    open_nodes = (g.kind[: g.n] == FRONTIER)
+    open_nodes = g.kind[: g.n] == FRONTIER
     stats = {
-        "method": "AO*-style expansion of the product belief MDP with suffix-abstraction upper bounds",
+        "horizon": horizon,
         "suffix_length": suffix_length,
         "abstract_cells": search.cells.n_cells,
         "abstraction_seconds": search.abstraction_seconds,
         "abstraction_bound": search.bound_note,
-        "abstraction_root_upper": float(search.frontier_upper(0, np.array([tables.start]),
-                                                             np.array([tables.initial_q]),
-                                                             np.array([0]))[0]),
+        "abstraction_root_upper": float(search.frontier_upper(
+            0, np.array([tables.start]), np.array([tables.initial_q]), np.array([0]))[0]),
         "nodes": int(g.n),
         "expanded_nodes": int(expanded),
         "open_frontier_nodes": int(open_nodes.sum()),
-        "open_frontier_mass_upper_policy": float(frontier_mass[: g.n][open_nodes].sum()),
+        "open_frontier_mass_upper_policy": float(search.reach(root)[open_nodes].sum()),
         "iterations": iterations,
         "policy_rows": table.rows,
-        "max_depth": search.max_depth,
+        "lower": lower,
+        "upper": upper,
+    }
+    return lower, upper, table, stats
+
+
+def _unbounded_upper(tables: ProductTables, belief_rule: BeliefRule, suffix_length: int,
+                     time_limit: float) -> tuple[float, str]:
+    symbols = observation_symbols(tables.pomdp, belief_rule)
+    cells = suffix_cells(symbols, suffix_length)
+    result = unbounded_upper(build_abstraction(tables, symbols, cells), time_limit)
+    note = (f"{result.iterations} iterations of the abstract operator from 1 (last change "
+            f"{result.last_change:.2e}; every iterate is sound; may lie above the least fixed point)")
+    return float(min(1.0, result.value[tables.start, tables.initial_q, 0])), note
+
+
+def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
+               horizon: int | None = None, belief_rule: BeliefRule = "bayes",
+               suffix_length: int = DEFAULT_SUFFIX_LENGTH,
+               batch: int = DEFAULT_BATCH) -> SynthesisResult:
+    """Maximal probability of satisfying `spec` from (spec.start, initial belief), with a policy.
+
+    horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter and the
+    belief MDP's dynamics ("bayes", or the authors' "paper" update with observation probabilities
+    b·P(o|θ) of that belief). Returns lower <= Pr_max <= upper with lower the value of the returned
+    policy; stops when upper - lower <= tau or after about time_limit seconds.
+
+    Unbounded: upper is the abstraction's bound (unbounded_upper); lower is the best
+    P(accepted within H junctions) of bounded searches with growing H (UNBOUNDED_HORIZONS): a policy
+    accepting within H with probability L satisfies the unbounded spec with probability >= L.
+    """
+    if tau <= 0:
+        raise ValueError("tau must be positive")
+    if horizon is not None and horizon < 0:
+        raise ValueError("horizon must be >= 0")
+    if belief_rule not in ("bayes", "paper"):
+        raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
+    started = time.perf_counter()
+    deadline = started + time_limit
+    tables = build_product(pomdp, spec)
+    if horizon is not None:
+        lower, upper, table, stats = _bounded_search(tables, belief_rule, horizon, tau, suffix_length,
+                                                     batch, started, deadline)
+        runs = [stats]
+    else:
+        upper, note = _unbounded_upper(tables, belief_rule, suffix_length, 0.2 * time_limit)
+        lower, table, runs = -1.0, None, []
+        for depth in UNBOUNDED_HORIZONS:
+            if runs and time.perf_counter() >= deadline:
+                break
+            run_lower, _, run_table, stats = _bounded_search(
+                tables, belief_rule, depth, 0.5 * tau, suffix_length, batch, started, deadline)
+            runs.append(stats)
+            if run_lower > lower:
+                lower, table = run_lower, run_table
+            if upper - lower <= tau:
+                break
+        lower = max(lower, 0.0)
+    policy = BeliefTablePolicy(table, pomdp.town, spec)
+    stats = {
+        "method": "AO*-style expansion of the product belief MDP with suffix-abstraction upper bounds",
+        "belief_rule": belief_rule,
         "converged": bool(upper - lower <= tau),
         "tau": tau,
-        "belief_symbols": search.symbols.n_changing,
+        "runs": runs,
+        "policy_rows": table.rows,
     }
+    if horizon is None:
+        stats["unbounded_upper"] = note
+        stats["lower_from_horizon"] = max(runs, key=lambda r: r["lower"])["horizon"]
     return SynthesisResult(policy=policy, lower=lower, upper=upper,
                            seconds=time.perf_counter() - started, stats=stats, horizon=horizon,
                            belief_rule=belief_rule)

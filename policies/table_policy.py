@@ -15,7 +15,7 @@ decision whose value the synthesis certified.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -44,11 +44,6 @@ class PolicyTable:
     @property
     def rows(self) -> int:
         return int(self.t.size)
-
-
-@dataclass(eq=False)
-class _Index:
-    trees: dict[tuple[int, ...], tuple[cKDTree, np.ndarray]] = field(default_factory=dict)
 
 
 def _group(keys: np.ndarray, beliefs: np.ndarray) -> dict[tuple[int, ...], tuple[cKDTree, np.ndarray]]:

@@ -37,6 +37,7 @@ def expected_values(config) -> dict:
 
     context = study_context(config)
     pomdp = build_pomdp(context.town, context.nominal)
+    condition_path = dict(zip(config.condition_names, config.conditions, strict=True))
     out: dict = {}
     for (spec_name, condition), policy in context.policies.items():
         started = time.perf_counter()
@@ -46,24 +47,37 @@ def expected_values(config) -> dict:
                  "expected_final_trust": value.expected_final_trust,
                  "fallback_probability": value.fallback_probability,
                  "seconds": time.perf_counter() - started}
-        bounds = synthesized_bounds(policy)
+        bounds = synthesized_bounds(policy, condition_path.get(condition), context, spec_name, config)
         if bounds is not None:
-            entry["synthesized_lower"], entry["synthesized_upper"] = bounds
+            entry["synthesized_lower"], entry["synthesized_upper"] = bounds[0], bounds[1]
+            entry["synthesized_horizon"] = bounds[2]
         out.setdefault(spec_name, {})[condition] = entry
     return out
 
 
-def synthesized_bounds(policy) -> tuple[float, float] | None:
-    """[lower, upper] of Pr_max that synthesis certified for this policy, if it says."""
-    for holder in (policy, getattr(policy, "inner", None), getattr(policy, "result", None)):
-        if holder is None:
-            continue
-        lower, upper = getattr(holder, "lower", None), getattr(holder, "upper", None)
-        if isinstance(lower, int | float) and isinstance(upper, int | float):
-            return float(lower), float(upper)
-        bounds = getattr(holder, "bounds", None)
-        if isinstance(bounds, tuple | list) and len(bounds) == 2:
-            return float(bounds[0]), float(bounds[1])
+def synthesized_bounds(policy, condition: str | None, context, spec_name: str,
+                       config) -> tuple[float, float, int | None] | None:
+    """[lower, upper] (and horizon) that synthesis certified for this policy: from the policy
+    file ("aware": the resolver's cache entry), else from attributes of the policy; None if unknown."""
+    if condition is not None and condition != "free":
+        try:
+            from policies.policy_file import read_policy_document
+
+            if condition == "aware":
+                from policies.resolve import aware_cache_path
+
+                path = aware_cache_path(context.town, context.nominal, context.specs[spec_name],
+                                        Path(config.policy_cache))
+            else:
+                path = Path(condition)
+            document = read_policy_document(path)
+            if document.get("lower") is not None and document.get("upper") is not None:
+                return float(document["lower"]), float(document["upper"]), document.get("horizon")
+        except (ImportError, OSError, InputError, ValueError, KeyError):
+            pass
+    lower, upper = getattr(policy, "lower", None), getattr(policy, "upper", None)
+    if isinstance(lower, int | float) and isinstance(upper, int | float):
+        return float(lower), float(upper), None
     return None
 
 

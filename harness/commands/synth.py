@@ -1,6 +1,6 @@
 """`trustroute synth`, `trustroute baseline`, `trustroute evaluate`: policies and their values.
 
-synth     synthesize a trust-aware policy with certified bounds (policies.synthesis, imported lazily)
+synth     synthesize a trust-aware policy with certified bounds (policies.synthesis) and write its file
 baseline  the trust-free shortest route completing the spec's state-only task, and its exact value
 evaluate  the exact satisfaction probability and expected final trust of any policy
           ("free", "aware" or a policy file), with the study's 20-junction fallback by default
@@ -8,8 +8,6 @@ evaluate  the exact satisfaction probability and expected final trust of any pol
 
 from __future__ import annotations
 
-import importlib
-import inspect
 import json
 import math
 from pathlib import Path
@@ -33,16 +31,6 @@ def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None
     return town, driver, spec, build_pomdp(town, driver)
 
 
-def _optional_module(name: str, what: str):
-    try:
-        return importlib.import_module(name)
-    except ModuleNotFoundError as exc:
-        if exc.name != name:
-            raise
-        raise InputError(name, "", f"{what} is not available in this installation",
-                         "update trustroute (the module is missing)") from None
-
-
 def _finite(value: float) -> float | None:
     return None if value is None or (isinstance(value, float) and math.isnan(value)) else value
 
@@ -63,47 +51,6 @@ def _emit(as_json: bool, payload: dict, lines: list[str]) -> None:
     else:
         for line in lines:
             click.echo(line)
-
-
-def resolve_named_policy(name_or_path: str, town, driver, spec, cache_dir: Path):
-    """"free", "aware" (synthesized if not cached) or a policy file, as a RoutingPolicy."""
-    if name_or_path == "free":
-        from policies.baseline import trust_free_policy
-
-        return trust_free_policy(town, spec)
-    try:
-        resolve = importlib.import_module("policies.resolve")
-    except ModuleNotFoundError as exc:
-        if exc.name != "policies.resolve":
-            raise
-        resolve = None
-    if resolve is not None:
-        return resolve.resolve_policy(name_or_path, town, driver, spec, cache_dir)
-    if name_or_path == "aware":
-        raise InputError("aware", "", "synthesized policies are not available in this installation",
-                         "pass 'free' or a policy file")
-    if not Path(name_or_path).is_file():
-        raise InputError(name_or_path, "", "not a policy file and not 'free' or 'aware'",
-                         "pass 'free', 'aware' or the path of a policy file written by trustroute synth")
-    policy_file = _optional_module("policies.policy_file", "reading policy files")
-    return policy_file.load_policy(name_or_path, town, driver, spec)
-
-
-def _save_policy(save_policy, result, out_path: str, town, driver, spec, pomdp):
-    """Call policy_file.save_policy with whatever of these it asks for, by parameter name
-    (its signature belongs to the synthesis engineer and may carry the result or just the policy)."""
-    available = {"result": result, "synthesis": result, "policy": result.policy, "path": out_path,
-                 "out": out_path, "out_path": out_path, "town": town, "driver": driver, "spec": spec,
-                 "pomdp": pomdp, "model": pomdp, "lower": result.lower, "upper": result.upper,
-                 "stats": result.stats}
-    arguments = {}
-    for name, parameter in inspect.signature(save_policy).parameters.items():
-        if name in available:
-            arguments[name] = available[name]
-        elif parameter.default is inspect.Parameter.empty and parameter.kind not in (
-                inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD):
-            raise TypeError(f"save_policy needs {name!r}, which trustroute synth cannot supply")
-    return save_policy(**arguments)
 
 
 town_option = click.option("--town", "town_path", type=click.Path(), default=None,
@@ -137,12 +84,14 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
         raise InputError("--horizon", "", f"horizon must be at least 1, got {horizon}",
                          "pass a positive number of junctions or omit --horizon")
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
-    synthesis = _optional_module("policies.synthesis", "policy synthesis")
-    policy_file = _optional_module("policies.policy_file", "writing policy files")
-    result = synthesis.synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                                  belief_rule=belief_rule)
-    written = _save_policy(policy_file.save_policy, result, out_path, town, driver, spec, pomdp)
-    path = str(written) if isinstance(written, str | Path) else out_path
+    from policies.policy_file import save_policy
+    from policies.synthesis import synthesize
+
+    if time_limit <= 0:
+        raise InputError("--time-limit", "", f"must be positive, got {time_limit}", "pass e.g. 60")
+    result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
+                        belief_rule=belief_rule)
+    path = str(save_policy(result, out_path, town, driver, spec))
     payload = {"spec": spec.name, "lower": result.lower, "upper": result.upper, "gap": result.gap,
                "seconds": result.seconds, "tau": tau, "horizon": horizon, "belief_rule": belief_rule,
                "policy": path, "stats": result.stats}
@@ -195,7 +144,10 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
 def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_path: str | None,
              fallback_after: int, no_fallback: bool, max_junctions: int | None, belief_rule: str,
              cache_dir: str | None, as_json: bool) -> None:
-    """Exact probability that POLICY ("free", "aware" or a file) satisfies SPEC, and final trust."""
+    """Exact probability that POLICY ("free", "aware" or a file) satisfies SPEC, and final trust.
+
+    "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached.
+    """
     from policies.evaluate import EPISODE_JUNCTION_CAP
     from policies.evaluate import evaluate as evaluate_policy
 
@@ -206,8 +158,10 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     if cap < 0:
         raise InputError("--max-junctions", "", f"must be >= 0, got {cap}", "pass e.g. 60")
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
-    policy = resolve_named_policy(policy_name, town, driver, spec,
-                                  Path(cache_dir) if cache_dir else DEFAULT_POLICY_CACHE)
+    from policies.resolve import resolve_policy
+
+    policy = resolve_policy(policy_name, town, driver, spec,
+                            Path(cache_dir) if cache_dir else DEFAULT_POLICY_CACHE)
     value = evaluate_policy(pomdp, spec, policy, fallback_after=None if no_fallback else fallback_after,
                             max_junctions=cap, belief_rule=belief_rule)
     payload = value.to_dict()

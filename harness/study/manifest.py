@@ -27,7 +27,15 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from harness.study.config import StudyConfig
-from harness.study.parts import KINEMATICS_SCHEMA, ROADS_SCHEMA, kinematics_path, part_path, read_failures, read_part
+from harness.study.parts import (
+    KINEMATICS_SCHEMA,
+    ROADS_SCHEMA,
+    incidents_path,
+    kinematics_path,
+    part_path,
+    read_failures,
+    read_part,
+)
 from harness.study.plan import EpisodeTask
 
 PACKAGES: tuple[str, ...] = ("trustroute", "numpy", "scipy", "pandas", "pyarrow", "eclipse-sumo", "libsumo",
@@ -68,7 +76,7 @@ def consolidate(study_dir: Path, config: StudyConfig, tasks: list[EpisodeTask], 
                 expected: dict | None = None, run_info: dict | None = None) -> dict:
     """Write episodes/roads/kinematics Parquet files and manifest.json; return the manifest."""
     study_dir = Path(study_dir)
-    episode_rows, roads_tables, kinematics_tables = [], [], []
+    episode_rows, roads_tables, kinematics_tables, incident_frames = [], [], [], []
     for task in tasks:
         path = part_path(study_dir, task.episode_id)
         if not path.exists():
@@ -83,6 +91,9 @@ def consolidate(study_dir: Path, config: StudyConfig, tasks: list[EpisodeTask], 
         kin = kinematics_path(study_dir, task.episode_id)
         if kin.exists():
             kinematics_tables.append(pq.read_table(kin))
+        incidents = incidents_path(study_dir, task.episode_id)
+        if incidents.exists():
+            incident_frames.append(pd.read_parquet(incidents))
     episodes = pd.DataFrame(episode_rows)
     episodes.to_parquet(study_dir / "episodes.parquet", index=False)
     roads = (pa.concat_tables(roads_tables) if roads_tables
@@ -92,6 +103,8 @@ def consolidate(study_dir: Path, config: StudyConfig, tasks: list[EpisodeTask], 
         pq.write_table(pa.concat_tables(kinematics_tables), study_dir / "kinematics.parquet")
     elif config.engine == "sumo":
         pq.write_table(KINEMATICS_SCHEMA.empty_table(), study_dir / "kinematics.parquet")
+    if incident_frames:
+        pd.concat(incident_frames, ignore_index=True).to_parquet(study_dir / "incidents.parquet", index=False)
     failures = read_failures(study_dir)
     manifest = {
         "study": config.name,
@@ -111,7 +124,8 @@ def consolidate(study_dir: Path, config: StudyConfig, tasks: list[EpisodeTask], 
                   "derivation": "numpy SeedSequence(study seed, spawn_key=(1, participant, spec index, "
                                 "condition index)); drivers of a [population]: spawn_key=(2,)"},
         "files": {"episodes": "episodes.parquet", "roads": "roads.parquet",
-                  **({"kinematics": "kinematics.parquet"} if config.engine == "sumo" else {})},
+                  **({"kinematics": "kinematics.parquet"} if config.engine == "sumo" else {}),
+                  **({"incidents": "incidents.parquet"} if incident_frames else {})},
         "expected": expected or {},
         "run": run_info or {},
     }

@@ -4,6 +4,7 @@ Layout of a study directory (all written here):
     parts/<episode_id>.parquet        the episode's roads table; its schema metadata holds the
                                       episode summary and the planned task (JSON)
     kinematics/<episode_id>.parquet   SUMO only, written before the roads part
+    incidents/<episode_id>.parquet    SUMO only (incident objects, takeovers), before the roads part
     failures/<episode_id>.json        the last error of an episode that failed (cleared on success)
 
 A part is written to a temporary file in the same folder and renamed into place (os.replace is
@@ -55,6 +56,10 @@ def kinematics_path(study_dir: Path, episode_id: str) -> Path:
     return Path(study_dir) / "kinematics" / f"{episode_id}.parquet"
 
 
+def incidents_path(study_dir: Path, episode_id: str) -> Path:
+    return Path(study_dir) / "incidents" / f"{episode_id}.parquet"
+
+
 def failure_path(study_dir: Path, episode_id: str) -> Path:
     return Path(study_dir) / "failures" / f"{episode_id}.json"
 
@@ -86,8 +91,11 @@ def _plain(value: object) -> object:
 
 
 def write_part(study_dir: Path, task: EpisodeTask, summary: dict, roads: pd.DataFrame,
-               kinematics: pd.DataFrame | None = None) -> Path:
-    """Write an episode's kinematics (if any) and then its roads part, each atomically."""
+               kinematics: pd.DataFrame | None = None, incidents: pd.DataFrame | None = None) -> Path:
+    """Write an episode's kinematics and incidents (SUMO) and then its roads part, each atomically."""
+    if incidents is not None and len(incidents):
+        _atomic_write_table(pa.Table.from_pandas(incidents, preserve_index=False),
+                            incidents_path(study_dir, task.episode_id))
     if kinematics is not None and len(kinematics):
         kin = pa.Table.from_pandas(kinematics[list(KINEMATICS_SCHEMA.names)], schema=KINEMATICS_SCHEMA,
                                    preserve_index=False)
@@ -131,7 +139,7 @@ def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[st
     from the plan (another config wrote it) counts as damaged.
     """
     study_dir = Path(study_dir)
-    for folder in ("parts", "kinematics", "failures"):
+    for folder in ("parts", "kinematics", "incidents", "failures"):
         for temp in (study_dir / folder).glob(f"{TEMP_PREFIX}*"):
             temp.unlink(missing_ok=True)
     done: set[str] = set()

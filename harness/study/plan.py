@@ -36,7 +36,7 @@ class EpisodeTask:
     spec_index: int
     condition: str         # condition label
     condition_index: int
-    seed: int              # simulator seed (uint32)
+    seed: int              # simulator seed (31 bits: SUMO takes a signed int)
     driver_entropy: tuple[int, ...]   # (study seed, spawn key...) of the driver's SeedSequence
 
     def driver_rng(self) -> np.random.Generator:
@@ -66,7 +66,7 @@ def plan_episodes(config: StudyConfig) -> list[EpisodeTask]:
             tasks.append(EpisodeTask(
                 episode_id=episode_id(p, spec_names[s], condition_names[c]), participant=p,
                 position=position, spec=spec_names[s], spec_index=s, condition=condition_names[c],
-                condition_index=c, seed=int(sequence.generate_state(1)[0]),
+                condition_index=c, seed=int(sequence.generate_state(1)[0] & 0x7FFFFFFF),
                 driver_entropy=(config.seed, EPISODE_KEY, p, s, c)))
     return tasks
 

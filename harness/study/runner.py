@@ -15,7 +15,6 @@ from __future__ import annotations
 import functools
 import inspect
 import json
-import os
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
@@ -133,7 +132,8 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
         record = engine_function(config.engine)(
             context.setups[task.spec], context.policies[(task.spec, task.condition)], driver,
             task.episode_id, task.seed)
-        write_part(Path(study_dir), task, record.summary, record.roads, record.kinematics)
+        write_part(Path(study_dir), task, record.summary, record.roads, record.kinematics,
+                   getattr(record, "incidents", None))
     except Exception as exc:  # one bad episode must never stop the study
         return EpisodeOutcome(task.episode_id, False, f"{type(exc).__name__}: {exc}",
                               traceback.format_exc(), time.perf_counter() - started)
@@ -160,13 +160,11 @@ def _process_pool(function: Callable, tasks: list, workers: int) -> Iterator:
                 yield EpisodeOutcome(task.episode_id, False, f"worker died: {type(exc).__name__}: {exc}")
 
 
-def _dask(function: Callable, tasks: list, scheduler: str, workers: int) -> Iterator:
+def _dask(function: Callable, tasks: list, scheduler: str, workers: int, processes: bool) -> Iterator:
     from distributed import Client, LocalCluster, as_completed
 
     cluster = None
     if scheduler == "local":
-        # Threads in one process are enough for tests; real runs give --scheduler an address.
-        processes = os.environ.get("TRUSTROUTE_DASK_PROCESSES", "1") == "1"
         cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=processes,
                                dashboard_address=None)
         client = Client(cluster)
@@ -191,11 +189,12 @@ def _dask(function: Callable, tasks: list, scheduler: str, workers: int) -> Iter
             cluster.close()
 
 
-def _outcomes(function: Callable, tasks: list, workers: int, scheduler: str | None) -> Iterator:
+def _outcomes(function: Callable, tasks: list, workers: int, scheduler: str | None,
+              dask_processes: bool = True) -> Iterator:
     if not tasks:
         return iter(())
     if scheduler is not None:
-        return _dask(function, tasks, scheduler, workers)
+        return _dask(function, tasks, scheduler, workers, dask_processes)
     if workers <= 1:
         return _serial(function, tasks)
     return _process_pool(function, tasks, min(workers, len(tasks)))
@@ -230,8 +229,13 @@ def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> N
 
 
 def run_study(config: StudyConfig, study_dir: Path, workers: int = 1, scheduler: str | None = None,
-              progress: bool = True, on_outcome: Callable[[EpisodeOutcome], None] | None = None) -> StudyRun:
-    """Run (or resume) every episode of `config` in `study_dir`; return what happened."""
+              progress: bool = True, on_outcome: Callable[[EpisodeOutcome], None] | None = None,
+              dask_processes: bool = True) -> StudyRun:
+    """Run (or resume) every episode of `config` in `study_dir`; return what happened.
+
+    workers: local processes (1: in this process); scheduler: a Dask scheduler address, or
+    "local" for a local Dask cluster of `workers` workers (threads in this process when
+    dask_processes is False, which tests use). on_outcome: called after every episode."""
     started = time.perf_counter()
     study_dir = Path(study_dir).resolve()
     config_hash = config.content_hash
@@ -260,10 +264,10 @@ def run_study(config: StudyConfig, study_dir: Path, workers: int = 1, scheduler:
             if on_outcome is not None:
                 on_outcome(outcome)
 
-    consume(_outcomes(function, todo, workers, scheduler))
+    consume(_outcomes(function, todo, workers, scheduler, dask_processes))
     retry = [task for task, _ in failed.values()]
     if retry:   # once, after everything else: a transient failure gets a second chance
-        consume(_outcomes(function, retry, workers, scheduler))
+        consume(_outcomes(function, retry, workers, scheduler, dask_processes))
     bar.close()
     for task, outcome in failed.values():
         write_failure(study_dir, task, outcome.error, outcome.traceback, attempts=2)

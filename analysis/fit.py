@@ -1,0 +1,391 @@
+"""Fitting a driver model to a study's logs: trust dynamics, takeover model, report accuracy.
+
+Only what a real study could observe is used: per road the incident, the takeover h, the AV's
+performance e and the reported trust (when reported); the true trust columns of the logs are
+never read. The model (DESIGN.md, "The model") is a hidden Markov model over trust θ_t:
+θ_0 ~ π; on road t, h_t ~ P(h | θ_{t-1}, inc_t), e_t ~ P(e | θ_{t-1}, inc_t),
+θ_t ~ T[inc_t][h_t][e_t](θ_{t-1}, ·); the report r_t is θ_t with probability a, else one level
+up or down (equal chance, clipped at the ends: participants.synthetic_driver).
+
+- method "em": Baum-Welch (forward-backward with scaling, vectorised over episodes) for π, the
+  takeover and failure probabilities, every T row and a. Rows with little expected data keep
+  their starting value (a generic banded matrix) and are listed in `sparse_rows`.
+- method "counts": reports are exact (a = 1) and given on every road, so θ_t = r_t for t >= 1
+  and the rows are plain counts over the roads t >= 2 (θ_0 is never reported: π is then fitted
+  by EM on θ_0 alone, with the counted model).
+- method "auto": "counts" when the study's config says reports are exact and on every road
+  (report accuracy 1, report_every 1), else "em".
+
+Recovery on synthetic data: tests/analysis/test_fit.py (stated tolerances there).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from networks.errors import InputError
+from participants.driver_model import PERFORMANCES, DriverModel, driver_model_from_dict
+
+MIN_ROW_WEIGHT = 5.0        # expected visits below which a T row keeps its starting value
+EM_TOLERANCE = 1e-7         # stop when the mean log-likelihood per road improves less than this
+
+
+@dataclass(frozen=True)
+class Observations:
+    """Padded per-episode sequences: steps t = 1..L (roads after the start)."""
+
+    incident: np.ndarray     # int [n, S] driver-model incident index (0 on padding)
+    takeover: np.ndarray     # int [n, S]
+    performance: np.ndarray  # int [n, S]
+    report: np.ndarray       # int [n, S+1] trust index reported after step t (column 0: at the start), -1 none
+    mask: np.ndarray         # bool [n, S] step exists
+
+    @property
+    def episodes(self) -> int:
+        return int(self.mask.shape[0])
+
+    @property
+    def steps(self) -> int:
+        return int(self.mask.sum())
+
+
+def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observations:
+    """The observable part of a roads table (incident, takeover, performance, reported trust)."""
+    roads = roads.sort_values(["episode_id", "index"], kind="stable")
+    ids, starts, lengths = np.unique(roads["episode_id"].to_numpy(), return_index=True, return_counts=True)
+    n, width = ids.size, int(lengths.max()) if ids.size else 1
+    row = np.repeat(np.arange(n), lengths)
+    col = np.arange(len(roads)) - np.repeat(starts, lengths)
+    incident_of = {name: i for i, name in enumerate(model.incident_types)}
+    incident_of[""] = 0
+    unknown = set(roads["incident"].unique()) - set(incident_of)
+    if unknown:
+        raise InputError("roads.parquet", "incident", f"incident {sorted(unknown)[0]!r} is not in the "
+                         "driver model", "fit with a driver model covering the town's incidents")
+    level_of = np.full(max(model.trust_levels) + 2, -1, dtype=np.int64)
+    level_of[list(model.trust_levels)] = np.arange(model.n_trust)
+    reported = roads["reported_trust"].to_numpy()
+    reported = np.where(reported >= 0, level_of[np.clip(reported, 0, level_of.size - 1)], -1)
+    shape = (n, width)
+    incident = np.zeros(shape, dtype=np.int64)
+    takeover = np.zeros(shape, dtype=np.int64)
+    performance = np.zeros(shape, dtype=np.int64)
+    report = np.full(shape, -1, dtype=np.int64)
+    present = np.zeros(shape, dtype=bool)
+    incident[row, col] = roads["incident"].map(incident_of).to_numpy()
+    takeover[row, col] = roads["takeover"].to_numpy().astype(np.int64)
+    performance[row, col] = (roads["performance"].to_numpy() == "fail").astype(np.int64)
+    report[row, col] = reported
+    present[row, col] = True
+    # Step t (1..L) is column t of the padded rows; column 0 is the start road (no observation).
+    return Observations(incident=incident[:, 1:], takeover=takeover[:, 1:], performance=performance[:, 1:],
+                        report=report, mask=present[:, 1:])
+
+
+def report_matrix(accuracy: float, k: int) -> np.ndarray:
+    """R[θ, r] = P(report r | trust θ): a on the diagonal, (1-a)/2 one level off, clipped at the ends."""
+    matrix = np.zeros((k, k))
+    for theta in range(k):
+        matrix[theta, theta] += accuracy
+        matrix[theta, max(theta - 1, 0)] += (1 - accuracy) / 2
+        matrix[theta, min(theta + 1, k - 1)] += (1 - accuracy) / 2
+    return matrix
+
+
+@dataclass
+class Parameters:
+    initial: np.ndarray        # [k]
+    takeover: np.ndarray       # [I, k]
+    failure: np.ndarray        # [I, k]
+    transition: np.ndarray     # [I, 2, 2, k, k]
+    accuracy: float
+
+
+def starting_parameters(n_incidents: int, k: int, observations: Observations) -> Parameters:
+    """A generic start, not the truth: uniform π, banded T (0.5 stay, the rest to neighbours),
+    takeover 0.5 where takeovers occur (0 on incidents never taken over), accuracy 0.7."""
+    band = np.zeros((k, k))
+    for i in range(k):
+        for j in range(k):
+            band[i, j] = {0: 4.0, 1: 2.0, 2: 1.0}.get(abs(i - j), 0.1)
+    band /= band.sum(axis=1, keepdims=True)
+    takeover = np.full((n_incidents, k), 0.5)
+    failure = np.zeros((n_incidents, k))
+    for i in range(n_incidents):
+        on = observations.mask & (observations.incident == i)
+        if not observations.takeover[on].any():
+            takeover[i] = 0.0
+        if observations.performance[on].any():
+            failure[i] = 0.2
+    transition = np.broadcast_to(band, (n_incidents, 2, 2, k, k)).copy()
+    return Parameters(initial=np.full(k, 1.0 / k), takeover=takeover, failure=failure,
+                      transition=transition, accuracy=0.7)
+
+
+@dataclass
+class Statistics:
+    loglik: float
+    initial: np.ndarray
+    takeover_num: np.ndarray
+    failure_num: np.ndarray
+    visits: np.ndarray          # [I, k] expected trust-before counts per incident
+    transition: np.ndarray      # [I, 2, 2, k, k] expected transition counts
+    report: np.ndarray          # [k, k] expected (θ, r) counts
+
+
+def expectation(obs: Observations, p: Parameters) -> Statistics:
+    """Forward-backward over every episode at once (scaled), expected sufficient statistics."""
+    n, steps = obs.mask.shape
+    k = p.initial.size
+    R = report_matrix(p.accuracy, k)
+    inc, h, e, mask = obs.incident, obs.takeover, obs.performance, obs.mask
+
+    def emission(reports: np.ndarray) -> np.ndarray:
+        out = np.ones((reports.size, k))
+        has = reports >= 0
+        out[has] = R[:, reports[has]].T
+        return out
+
+    p_h = np.where(h[..., None] == 1, p.takeover[inc], 1 - p.takeover[inc])       # [n, S, k]
+    p_e = np.where(e[..., None] == 1, p.failure[inc], 1 - p.failure[inc])
+    like = p_h * p_e
+    alpha = np.zeros((n, steps + 1, k))
+    scale = np.ones((n, steps + 1))
+    a0 = p.initial[None, :] * emission(obs.report[:, 0])
+    scale[:, 0] = a0.sum(axis=1)
+    alpha[:, 0] = a0 / scale[:, 0:1]
+    matrices = []
+    for t in range(steps):
+        M = like[:, t, :, None] * p.transition[inc[:, t], h[:, t], e[:, t]] * emission(obs.report[:, t + 1])[:, None, :]
+        M[~mask[:, t]] = np.eye(k)
+        matrices.append(M)
+        a = np.einsum("ni,nij->nj", alpha[:, t], M)
+        s = a.sum(axis=1)
+        s = np.where(s > 0, s, 1e-300)
+        scale[:, t + 1] = s
+        alpha[:, t + 1] = a / s[:, None]
+    beta = np.ones((n, k))
+    stats_transition = np.zeros_like(p.transition)
+    visits = np.zeros_like(p.takeover)
+    take_num = np.zeros_like(p.takeover)
+    fail_num = np.zeros_like(p.failure)
+    report_counts = np.zeros((k, k))
+    groups = p.transition.shape[0] * 4
+    for t in range(steps - 1, -1, -1):
+        M = matrices[t]
+        xi = alpha[:, t, :, None] * M * beta[:, None, :] / scale[:, t + 1, None, None]
+        xi *= mask[:, t, None, None]
+        g = (inc[:, t] * 2 + h[:, t]) * 2 + e[:, t]
+        onehot = np.zeros((n, groups))
+        onehot[np.arange(n), g] = mask[:, t]
+        stats_transition += np.einsum("ng,nij->gij", onehot, xi).reshape(stats_transition.shape)
+        before = xi.sum(axis=2)                                  # posterior of θ_{t-1}
+        inc_hot = np.zeros((n, p.takeover.shape[0]))
+        inc_hot[np.arange(n), inc[:, t]] = mask[:, t]
+        visits += inc_hot.T @ before
+        take_num += (inc_hot * h[:, t, None]).T @ before
+        fail_num += (inc_hot * e[:, t, None]).T @ before
+        after = xi.sum(axis=1)                                   # posterior of θ_t
+        reports = obs.report[:, t + 1]
+        has = (reports >= 0) & mask[:, t]
+        np.add.at(report_counts.T, reports[has], after[has])
+        beta = np.einsum("nij,nj->ni", M, beta) / scale[:, t + 1, None]
+    gamma0 = alpha[:, 0] * beta
+    gamma0 /= gamma0.sum(axis=1, keepdims=True)
+    has0 = obs.report[:, 0] >= 0
+    np.add.at(report_counts.T, obs.report[has0, 0], gamma0[has0])
+    return Statistics(loglik=float(np.log(scale).sum()), initial=gamma0.sum(axis=0), takeover_num=take_num,
+                      failure_num=fail_num, visits=visits, transition=stats_transition, report=report_counts)
+
+
+def _fit_accuracy(report_counts: np.ndarray, k: int) -> float:
+    """argmax_a Σ counts log R_a (grid then a local refinement; concave in a on [0, 1])."""
+    def score(a: float) -> float:
+        R = report_matrix(a, k)
+        with np.errstate(divide="ignore"):
+            logs = np.where(report_counts > 0, np.log(np.maximum(R, 1e-300)), 0.0)
+        return float((report_counts * logs).sum())
+
+    grid = np.linspace(0.0, 1.0, 201)
+    best = grid[int(np.argmax([score(a) for a in grid]))]
+    fine = np.linspace(max(0.0, best - 0.005), min(1.0, best + 0.005), 101)
+    return float(fine[int(np.argmax([score(a) for a in fine]))])
+
+
+def maximisation(stats: Statistics, previous: Parameters, fixed_accuracy: float | None) -> Parameters:
+    k = previous.initial.size
+    transition = previous.transition.copy()
+    totals = stats.transition.sum(axis=-1)
+    enough = totals >= MIN_ROW_WEIGHT
+    transition[enough] = stats.transition[enough] / totals[enough][:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        takeover = np.where(stats.visits > 0, stats.takeover_num / stats.visits, previous.takeover)
+        failure = np.where(stats.visits > 0, stats.failure_num / stats.visits, previous.failure)
+    takeover[previous.takeover == 0] = 0.0      # structural zeros (never taken over) stay zero
+    failure[previous.failure == 0] = 0.0
+    accuracy = fixed_accuracy if fixed_accuracy is not None else _fit_accuracy(stats.report, k)
+    initial = stats.initial / stats.initial.sum()
+    return Parameters(initial=initial, takeover=takeover, failure=failure, transition=transition,
+                      accuracy=accuracy)
+
+
+@dataclass
+class FitResult:
+    method: str
+    template: DriverModel
+    parameters: Parameters
+    episodes: int
+    transitions: int
+    iterations: int
+    loglik: float
+    row_weight: np.ndarray          # [I, 2, 2, k] expected visits of each T row
+    report_accuracy: float | None
+    source: str = ""
+    history: list[float] = field(default_factory=list)
+
+    @property
+    def performance_dependent(self) -> bool:
+        return bool(self.parameters.failure.any())
+
+    def model_dict(self) -> dict:
+        """The fitted model in the driver-model file format (validated on write)."""
+        p, model = self.parameters, self.template
+        transitions: dict = {}
+        for i, incident in enumerate(model.incident_types):
+            transitions[incident] = {}
+            for h, action in enumerate(("standstill", "takeover")):
+                if self.performance_dependent:
+                    transitions[incident][action] = {perf: _rows(p.transition[i, h, e])
+                                                     for e, perf in enumerate(PERFORMANCES)}
+                else:
+                    transitions[incident][action] = _rows(p.transition[i, h, 0])
+        out = {
+            "trust_levels": list(model.trust_levels),
+            "incident_types": list(model.incident_types),
+            "takeover_probability": {inc: p.takeover[i].tolist() for i, inc in enumerate(model.incident_types)},
+            "trust_transition": transitions,
+            "trust_free_takeover_probability": dict(model.trust_free_takeover_probability),
+            "initial_belief": _rows(p.initial[None, :])[0],
+            "source": f"fitted by trustroute fit ({self.method}) from {self.source}: {self.episodes} episodes, "
+                      f"{self.transitions} roads; report accuracy "
+                      f"{'%.4f' % self.report_accuracy if self.report_accuracy is not None else 'n/a'}",
+        }
+        if self.performance_dependent:
+            out["failure_probability"] = {inc: p.failure[i].tolist() for i, inc in enumerate(model.incident_types)}
+        return out
+
+    def model(self) -> DriverModel:
+        return driver_model_from_dict(self.model_dict(), "fitted model")
+
+    def write(self, path: Path) -> Path:
+        self.model()   # validates
+        Path(path).write_text(json.dumps(self.model_dict(), indent=1))
+        return Path(path)
+
+    def sparse_rows(self) -> list[str]:
+        names = []
+        for (i, h, e, theta) in zip(*np.nonzero(self.row_weight < MIN_ROW_WEIGHT), strict=True):
+            if e == 1 and not self.performance_dependent:
+                continue
+            names.append(f"{self.template.incident_types[i]}/{('standstill', 'takeover')[h]}/"
+                         f"{PERFORMANCES[e]}/trust {self.template.trust_levels[theta]}")
+        return names
+
+    def summary(self) -> dict:
+        return {"method": self.method, "episodes": self.episodes, "roads": self.transitions,
+                "iterations": self.iterations, "loglik": self.loglik, "report_accuracy": self.report_accuracy,
+                "rows_kept_at_start_value": len(self.sparse_rows())}
+
+
+def _rows(matrix: np.ndarray) -> list[list[float]]:
+    """Rows renormalised in float64 so the file passes the 1e-9 row-sum check."""
+    m = np.clip(np.asarray(matrix, dtype=float), 0.0, 1.0)
+    m = m / m.sum(axis=1, keepdims=True)
+    return m.tolist()
+
+
+def fit_em(obs: Observations, template: DriverModel, iterations: int = 200,
+           fixed_accuracy: float | None = None, start: Parameters | None = None) -> FitResult:
+    params = start if start is not None else starting_parameters(len(template.incident_types), template.n_trust, obs)
+    if fixed_accuracy is not None:
+        params.accuracy = fixed_accuracy
+    history: list[float] = []
+    stats = expectation(obs, params)
+    done = 0
+    for done in range(1, iterations + 1):
+        params = maximisation(stats, params, fixed_accuracy)
+        stats = expectation(obs, params)
+        history.append(stats.loglik)
+        if len(history) > 1 and (history[-1] - history[-2]) < EM_TOLERANCE * max(1, obs.steps):
+            break
+    return FitResult(method="em", template=template, parameters=params, episodes=obs.episodes,
+                     transitions=obs.steps, iterations=done, loglik=stats.loglik,
+                     row_weight=stats.transition.sum(axis=-1), report_accuracy=params.accuracy, history=history)
+
+
+def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
+    """Exact reports on every road: count transitions r_{t-1} -> r_t and takeovers at r_{t-1}."""
+    if ((obs.report[:, 1:] < 0) & obs.mask).any():
+        raise InputError("roads.parquet", "reported_trust", "some roads carry no trust report",
+                         "fit with --method em (reports every N roads or noisy reports)")
+    k, n_inc = template.n_trust, len(template.incident_types)
+    params = starting_parameters(n_inc, k, obs)
+    counts = np.zeros_like(params.transition)
+    visits = np.zeros_like(params.takeover)
+    take = np.zeros_like(params.takeover)
+    fail = np.zeros_like(params.failure)
+    both = obs.mask[:, 1:]          # steps t >= 2: the trust before the road was reported at t-1
+    before = obs.report[:, 1:-1][both]
+    after = obs.report[:, 2:][both]
+    inc, h, e = (a[:, 1:][both] for a in (obs.incident, obs.takeover, obs.performance))
+    np.add.at(counts, (inc, h, e, before, after), 1.0)
+    np.add.at(visits, (inc, before), 1.0)
+    np.add.at(take, (inc, before), h.astype(float))
+    np.add.at(fail, (inc, before), e.astype(float))
+    totals = counts.sum(axis=-1)
+    enough = totals >= MIN_ROW_WEIGHT
+    params.transition[enough] = counts[enough] / totals[enough][:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        params.takeover = np.where(visits > 0, take / visits, params.takeover)
+        params.failure = np.where(visits > 0, fail / visits, params.failure)
+    params.accuracy = 1.0
+    # θ_0 is never reported: fit π alone by EM with the counted model held fixed.
+    for _ in range(30):
+        stats = expectation(obs, params)
+        params.initial = stats.initial / stats.initial.sum()
+    return FitResult(method="counts", template=template, parameters=params, episodes=obs.episodes,
+                     transitions=obs.steps, iterations=0, loglik=stats.loglik, row_weight=totals,
+                     report_accuracy=1.0)
+
+
+def fit_roads(roads: pd.DataFrame, template: DriverModel, method: str = "em", iterations: int = 200) -> FitResult:
+    obs = observations_from_roads(roads, template)
+    if obs.steps == 0:
+        raise InputError("roads.parquet", "", "no roads driven in the logs", "run a study with episodes first")
+    if method == "counts":
+        return fit_counts(obs, template)
+    if method == "em":
+        return fit_em(obs, template, iterations)
+    raise ValueError(f"unknown fitting method {method!r}")
+
+
+def fit_study(study_dir: Path, method: str = "auto", iterations: int = 200) -> FitResult:
+    """Fit a driver model to the consolidated logs of a study directory."""
+    from analysis.tables import load_study, study_inputs
+
+    if iterations < 1:
+        raise InputError("--iterations", "", f"must be >= 1, got {iterations}", "pass e.g. --iterations 200")
+    manifest, _, roads = load_study(Path(study_dir))
+    _, template, _ = study_inputs(manifest)
+    config = manifest.get("config", {})
+    if method == "auto":
+        accuracy = (config.get("population") or {}).get("report_accuracy", 0.8)
+        method = "counts" if accuracy == 1 and config.get("report_every", 1) == 1 else "em"
+    result = fit_roads(roads, template, method, iterations)
+    result.source = str(study_dir)
+    return result

@@ -1,0 +1,87 @@
+"""One SUMO episode (phi1, trust-free policy, driver, incidents) vs a bare libsumo loop on the same route.
+
+The bare loop starts SUMO with the same command line, inserts the ego with the whole baseline route
+and steps until it arrives: no policy, driver, incidents or logging. Both are measured in the same
+run; the ratio is episode / bare. Also: memory growth over 200 episodes in one process.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from benchmarks.timing import best_seconds
+from harness.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
+from harness.episode_tracker import EpisodeSetup
+from harness.sumo_start import SumoConfig, sumo_session
+from networks.sumo_net import build_net
+from networks.town import load_town
+from participants.driver_model import load_driver_model
+from participants.synthetic_driver import SyntheticDriver
+from policies.baseline import baseline_route, trust_free_policy
+from policies.spec import load_spec
+
+SEED = 3
+
+
+def _bare_loop(net, route: list[str], config: SumoConfig) -> float:
+    """Drive `route` in SUMO with nothing else; returns the sim seconds."""
+    with sumo_session(net, SEED, config) as sumo:
+        sumo.route.add("r", route)
+        # Same start point as the episode's ego; it drives the route to its very end.
+        depart = max(0.0, sumo.lane.getLength(f"{route[0]}_1") - COMMIT_DISTANCE - START_BEFORE_COMMIT)
+        sumo.vehicle.add("ego", "r", depart="now", departPos=f"{depart:.2f}", departSpeed="max")
+        sumo.vehicle.subscribe("ego", [sumo.VAR_ROAD_ID, sumo.VAR_POSITION, sumo.VAR_SPEED])
+        seen = False
+        while True:
+            sumo.simulationStep()
+            if sumo.vehicle.getSubscriptionResults("ego"):
+                seen = True
+            elif seen:
+                return sumo.simulation.getTime()
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/statm") as handle:
+        return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def run() -> list[dict]:
+    town = load_town()
+    driver_model = load_driver_model()
+    spec = load_spec(os.path.join(os.path.dirname(__file__), "..", "policies", "specs", "phi1.toml"), town)
+    setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
+    policy = trust_free_policy(town, spec)
+    net = build_net(town).path
+    config = SumoConfig()
+    route = baseline_route(town, spec)
+
+    def episode(seed: int = SEED):
+        driver = SyntheticDriver(driver_model, np.random.default_rng(seed))
+        return run_episode(setup, policy, driver, f"bench{seed}", seed, net_path=net, config=config)
+
+    episode()
+    _bare_loop(net, route, config)   # warm both paths
+    episode_seconds = best_seconds(episode, repeats=7)
+    bare_seconds = best_seconds(lambda: _bare_loop(net, route, config), repeats=7)
+    record = episode()
+    bare_sim = _bare_loop(net, route, config)
+
+    for seed in range(20):
+        episode(100 + seed)
+    before = _rss_mb()
+    started = time.perf_counter()
+    for seed in range(200):
+        episode(1000 + seed)
+    many_seconds = time.perf_counter() - started
+    growth = _rss_mb() - before
+    return [
+        {"name": "episode_phi1_wall", "value": episode_seconds, "unit": "s", "baseline": bare_seconds,
+         "ratio": episode_seconds / bare_seconds, "sim_seconds": record.summary["sim_seconds"],
+         "bare_sim_seconds": bare_sim, "step_length": config.step_length},
+        {"name": "episode_phi1_bare_libsumo", "value": bare_seconds, "unit": "s"},
+        {"name": "episodes_200_wall", "value": many_seconds, "unit": "s"},
+        {"name": "episodes_200_rss_growth", "value": growth, "unit": "MB"},
+    ]

@@ -1,0 +1,110 @@
+"""`trustroute run`: one episode in SUMO with a synthetic driver; logs to Parquet, optional Rerun."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from networks.errors import InputError
+
+DEFAULT_POLICY_CACHE = Path.home() / ".cache" / "trustroute" / "policies"
+
+
+def resolve_run_policy(name_or_path: str, town, driver_model, spec, cache_dir: Path):
+    """`policies.resolve.resolve_policy` ("free", "aware" or a file); only "free" when it is absent."""
+    import importlib
+
+    try:
+        resolve = importlib.import_module("policies.resolve")
+    except ModuleNotFoundError as exc:
+        if not (exc.name or "").startswith("policies."):
+            raise
+        resolve = None
+    if resolve is not None:
+        return resolve.resolve_policy(name_or_path, town, driver_model, spec, cache_dir)
+    if name_or_path == "free":
+        from policies.baseline import trust_free_policy
+
+        return trust_free_policy(town, spec)
+    raise InputError(name_or_path, "", "only the trust-free policy is available in this installation",
+                     "pass --policy free")
+
+
+def _write_logs(out_dir: Path, record) -> list[Path]:
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(str(out_dir), "", f"cannot create the output directory ({exc.strerror})",
+                         "pass a writable directory with --out") from None
+    written = []
+    for name in ("roads", "kinematics", "incidents"):
+        path = out_dir / f"{name}.parquet"
+        getattr(record, name).to_parquet(path, index=False)
+        written.append(path)
+    summary = out_dir / "summary.json"
+    summary.write_text(json.dumps(record.summary, indent=1) + "\n")
+    written.append(summary)
+    return written
+
+
+@click.command("run")
+@click.option("--spec", "spec_path", required=True, type=click.Path(),
+              help="Spec file (e.g. specs/phi1.toml).")
+@click.option("--policy", "policy_name", default="free", show_default=True,
+              help="'aware', 'free' or a policy file.")
+@click.option("--seed", type=int, default=0, show_default=True, help="SUMO seed and driver seed.")
+@click.option("--rrd", "rrd_path", type=click.Path(), default=None, help="Write a Rerun recording here.")
+@click.option("--out", "out_dir", type=click.Path(), default=None,
+              help="Write roads/kinematics/incidents Parquet and summary.json here.")
+@click.option("--json", "as_json", is_flag=True, help="Print the episode summary as one JSON object.")
+@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
+@click.option("--driver", "driver_path", type=click.Path(), default=None,
+              help="Driver model file (default model).")
+@click.option("--net", "net_path", type=click.Path(), default=None,
+              help="SUMO net to use (default: the town's cached net, built if missing).")
+@click.option("--initial-trust", type=int, default=None, help="Driver's initial trust (default: drawn).")
+@click.option("--cache-dir", type=click.Path(), default=None, help="Where 'aware' policies are cached.")
+def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_dir: str | None,
+        as_json: bool, town_path: str | None, driver_path: str | None, net_path: str | None,
+        initial_trust: int | None, cache_dir: str | None) -> None:
+    """Run one episode of SPEC in SUMO with POLICY and a synthetic driver."""
+    import numpy as np
+
+    from harness.episode import run_episode
+    from harness.episode_tracker import EpisodeSetup
+    from networks.town import load_town
+    from participants.driver_model import load_driver_model
+    from participants.synthetic_driver import SyntheticDriver
+    from policies.spec import load_spec
+
+    if seed < 0:
+        raise InputError("--seed", "", f"must be >= 0, got {seed}", "pass a non-negative integer")
+    town = load_town(town_path)
+    driver_model = load_driver_model(driver_path)
+    spec = load_spec(spec_path, town)
+    if initial_trust is not None and initial_trust not in driver_model.trust_levels:
+        raise InputError("--initial-trust", "", f"{initial_trust} is not a trust level of the model",
+                         f"pass one of {list(driver_model.trust_levels)}")
+    policy = resolve_run_policy(policy_name, town, driver_model, spec,
+                                  Path(cache_dir) if cache_dir else DEFAULT_POLICY_CACHE)
+    setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
+    driver = SyntheticDriver(driver_model, np.random.default_rng(seed), initial_trust=initial_trust)
+    episode_id = f"{spec.name}-{policy.name}-s{seed}"
+    record = run_episode(setup, policy, driver, episode_id, seed,
+                         rrd_path=Path(rrd_path) if rrd_path else None,
+                         net_path=Path(net_path) if net_path else None)
+    written = _write_logs(Path(out_dir), record) if out_dir else []
+    summary = dict(record.summary)
+    summary["route"] = record.roads["directed_road"].tolist()
+    if as_json:
+        click.echo(json.dumps(summary))
+        return
+    click.echo(f"{episode_id}: {summary['end_reason']} after {summary['junctions']} junctions, "
+               f"satisfied={summary['satisfied']}, takeovers={summary['takeovers']}, final trust "
+               f"{summary['final_trust']}, sim {summary['sim_seconds']:.1f} s, wall "
+               f"{summary['wall_seconds']:.2f} s")
+    click.echo("route: " + " ".join(summary["route"]))
+    for path in written + ([Path(rrd_path)] if rrd_path else []):
+        click.echo(f"wrote {path}")

@@ -1,0 +1,342 @@
+"""The SUMO engine: one study episode of the ego AV on libsumo.
+
+The ego is inserted on the spec's start road. On each road, `COMMIT_DISTANCE` metres before its
+end (before the ego must commit to the next junction), the runner closes the road's observation
+(incident, takeover, performance measured from SUMO), lets the driver's trust move and report,
+hands it to the EpisodeTracker (belief filter, DFA, end of episode), asks the tracker for the
+next junction and extends the ego's route one road ahead (vehicle.setRoute). The next road's
+incident is injected at that moment so its SUMO objects are in place when the ego arrives; when
+the incident comes into view the synthetic driver decides takeover from its current trust; a
+takeover switches the ego to manual control until that road's commit point, before the next
+junction. Per step the runner reads one subscription of the ego; everything else runs only
+while an incident is live.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from harness import incidents as incident_kinds
+from harness.episode_tracker import EpisodeSetup, EpisodeTracker
+from harness.incidents import EgoState, Incident, Scene
+from harness.performance import PerformanceMonitor
+from harness.sumo_start import SumoConfig, sumo_session
+from harness.takeover import AUTOPILOT, apply_style, hand_back, take_over
+from networks.errors import InputError
+from networks.sumo_net import build_net, net_counts
+from networks.town import split_road
+from policies.policy import RoutingPolicy
+
+log = logging.getLogger(__name__)
+
+EGO_ID = "ego"
+EGO_TYPE = "trustroute_ego"
+COMMIT_DISTANCE = 30.0      # metres before a road's end: decide the next junction here
+VIEW_DISTANCE = 80.0        # metres: an incident object this close to the ego is in view
+START_BEFORE_COMMIT = 40.0  # the ego is inserted this far before the start road's commit point
+INSERT_TIMEOUT = 30.0       # seconds of sim time for the ego to appear
+
+KINEMATIC_COLUMNS = ("episode_id", "time", "x", "y", "speed", "lane", "mode")
+INCIDENT_COLUMNS = ("episode_id", "index", "directed_road", "incident", "sumo_ids", "injected_time",
+                    "in_view_time", "x", "y", "passed_time", "removed_time", "takeover", "takeover_start",
+                    "takeover_end", "performance", "min_ttc", "max_deceleration", "collided")
+
+
+def _empty_incidents() -> pd.DataFrame:
+    return pd.DataFrame(columns=list(INCIDENT_COLUMNS))
+
+
+@dataclass(frozen=True, eq=False)
+class EpisodeRecord:
+    """The logs of one episode (the caller writes them to Parquet). `incidents` (SUMO engine only):
+    one row per road with an incident or a takeover, with the SUMO ids of its objects."""
+
+    summary: dict
+    roads: pd.DataFrame
+    kinematics: pd.DataFrame
+    incidents: pd.DataFrame = field(default_factory=_empty_incidents)
+
+
+@dataclass
+class _RoadRun:
+    """What happens on one road of the episode (mutable while the ego drives it)."""
+
+    index: int
+    road: str
+    kind: str
+    incident: Incident | None = None
+    injected_time: float = math.nan
+    time_in: float = math.nan
+    in_view_time: float = math.nan
+    x: float = math.nan           # where the incident object was when it came into view
+    y: float = math.nan
+    passed_time: float = math.nan
+    removed_time: float = math.nan
+    decided: bool = False
+    took_over: bool = False
+    takeover_start: float = math.nan
+    takeover_end: float = math.nan
+    committed: bool = False
+    monitor: PerformanceMonitor = field(default_factory=PerformanceMonitor)
+
+
+def _define_ego_type(sumo) -> None:
+    sumo.vehicletype.copy("DEFAULT_VEHTYPE", EGO_TYPE)
+    sumo.vehicletype.setImperfection(EGO_TYPE, 0.0)   # the AV drives without driver noise
+    sumo.vehicletype.setSpeedDeviation(EGO_TYPE, 0.0)
+
+
+def _check_net_matches(sumo, setup: EpisodeSetup, net_path: Path) -> None:
+    edges = set(sumo.edge.getIDList())
+    missing = sorted(set(setup.town.states) - edges)
+    if missing:
+        raise InputError(str(net_path), "", f"the net has no edge for road(s) {', '.join(missing[:4])} of "
+                         f"town {setup.town.source_path or 'town'}",
+                         "build the net of this town with `trustroute net build --town FILE`")
+
+
+_READABLE: set[tuple[str, float]] = set()
+
+
+def _check_readable(net_path: Path) -> None:
+    """Parse a net passed in once per (path, mtime): a clear one-line error before SUMO prints its own."""
+    try:
+        key = (str(net_path.resolve()), net_path.stat().st_mtime)
+    except OSError:
+        raise InputError(str(net_path), "", "the SUMO net file does not exist",
+                         "run `trustroute net build` or pass an existing .net.xml") from None
+    if key not in _READABLE:
+        net_counts(net_path)
+        _READABLE.add(key)
+
+
+class _Episode:
+    """One run of the loop; SUMO calls stay in here and in the incident/takeover modules."""
+
+    def __init__(self, sumo, setup: EpisodeSetup, tracker: EpisodeTracker, driver, config: SumoConfig,
+                 observer: Callable | None) -> None:
+        self.sumo = sumo
+        self.setup = setup
+        self.tracker = tracker
+        self.driver = driver
+        self.config = config
+        self.observer = observer
+        self.mode = AUTOPILOT.name
+        self.runs: list[_RoadRun] = []
+        self.kinematics: dict[str, list] = {k: [] for k in ("time", "x", "y", "speed", "lane", "mode")}
+        self.lengths: dict[str, float] = {}
+
+    def length(self, road: str) -> float:
+        if road not in self.lengths:
+            self.lengths[road] = self.sumo.lane.getLength(f"{road}_1")
+        return self.lengths[road]
+
+    # -- driver and incidents -------------------------------------------------
+    def decide(self, run: _RoadRun, now: float) -> None:
+        run.decided = True
+        run.took_over = bool(self.driver.decides_takeover(run.kind))
+        if run.took_over:
+            self.mode = take_over(self.sumo, EGO_ID)
+            run.takeover_start = now
+
+    def inject(self, run: _RoadRun, now: float) -> None:
+        u, v = split_road(run.road)
+        reverse = f"{v}-{u}" if f"{v}-{u}" in self.setup.town.incidents else None
+        scene = Scene(road=run.road, reverse_road=reverse, road_length=self.length(run.road),
+                      prefix=f"inc{run.index}", ego_id=EGO_ID, time=now)
+        run.incident = incident_kinds.inject(run.kind, self.sumo, scene)
+        run.injected_time = now
+        if run.incident is not None:
+            log.debug("%s: %s incident on %s as %s", self.tracker.episode_id, run.kind, run.road,
+                      ",".join(run.incident.sumo_ids))
+
+    def remove_incident(self, run: _RoadRun, now: float) -> None:
+        if run.incident is not None and math.isnan(run.removed_time):
+            run.incident.remove(self.sumo)
+            run.removed_time = now
+
+    def watch(self, run: _RoadRun, ego: EgoState, acceleration: float, collided: bool) -> None:
+        """Per-step work for the road whose observation is open (its incident, the driver, performance)."""
+        incident = run.incident
+        live = incident is not None and math.isnan(run.removed_time)
+        if live:
+            incident.step(self.sumo, ego)
+            if not run.decided:
+                where = incident.position(self.sumo)
+                if where is not None and math.dist(where, (ego.x, ego.y)) <= VIEW_DISTANCE:
+                    run.in_view_time = ego.time
+                    run.x, run.y = where
+                    self.decide(run, ego.time)
+            if math.isnan(run.passed_time) and incident.is_passed(self.sumo, ego):
+                run.passed_time = ego.time
+                self.remove_incident(run, ego.time)
+                live = False
+        elif run.kind == "none" and not run.decided and ego.road == run.road:
+            self.decide(run, ego.time)   # nothing to see: the driver decides on entering the road
+        if self.mode == AUTOPILOT.name:
+            run.monitor.observe(self.sumo, EGO_ID, ego.speed, acceleration, collided,
+                                check_leader=live and run.kind in ("obstacle", "truck"))
+
+    # -- the road's end -------------------------------------------------------
+    def close_road(self, run: _RoadRun, now: float) -> None:
+        """The observation of `run` is complete: hand back, trust moves, the tracker records it."""
+        if not run.decided:
+            self.decide(run, now)   # the incident never came into view: decide now, as the model does
+        if self.mode != AUTOPILOT.name:
+            self.mode = hand_back(self.sumo, EGO_ID)
+            run.takeover_end = now
+        self.remove_incident(run, now)
+        performance = run.monitor.result()
+        trust_before = self.driver.trust
+        trust_after = self.driver.move_trust(run.kind, run.took_over, performance)
+        reported = self.driver.report_trust() if self.tracker.should_report() else -1
+        self.tracker.record_road(run.road, run.kind, run.took_over, performance, trust_before,
+                                 trust_after, reported, run.time_in, now)
+
+    def commit(self, run: _RoadRun, now: float) -> _RoadRun | None:
+        """At the commit point of `run`: close it, choose the next road, extend the route."""
+        run.committed = True
+        if run.index > 0:
+            self.close_road(run, now)
+        had_fallback = self.tracker.fallback_fired
+        junction = self.tracker.next_junction()
+        if self.tracker.fallback_fired and not had_fallback:
+            log.info("%s: 20-junction fallback fired at junction %d on %s", self.tracker.episode_id,
+                     self.tracker.junctions, run.road)
+        if junction is None:
+            return None
+        nxt = self.setup.town.successor(run.road, junction)
+        self.sumo.vehicle.setRoute(EGO_ID, [run.road, nxt])
+        upcoming = _RoadRun(index=run.index + 1, road=nxt, kind=self.setup.town.incident(nxt))
+        self.inject(upcoming, now)
+        self.runs.append(upcoming)
+        return upcoming
+
+    # -- the loop -------------------------------------------------------------
+    def run(self) -> float:
+        sumo = self.sumo
+        start = self.setup.spec.start
+        _define_ego_type(sumo)
+        incident_kinds.define_types(sumo)
+        sumo.route.add("ego_route", [start])
+        depart = max(0.0, self.length(start) - COMMIT_DISTANCE - START_BEFORE_COMMIT)
+        sumo.vehicle.add(EGO_ID, "ego_route", typeID=EGO_TYPE, depart="now", departLane="best",
+                         departPos=f"{depart:.2f}", departSpeed="max")
+        apply_style(sumo, EGO_ID, AUTOPILOT)
+        sumo.vehicle.subscribe(EGO_ID, [sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION,
+                                        sumo.VAR_SPEED, sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID])
+        road_id, position_id, xy_id, speed_id, accel_id, lane_id = (
+            sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION, sumo.VAR_SPEED,
+            sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID)
+        current = _RoadRun(index=0, road=start, kind="")
+        self.runs.append(current)
+        upcoming: _RoadRun | None = None
+        kin = self.kinematics
+        step = self.config.step_length
+        now = 0.0
+        while True:
+            sumo.simulationStep()
+            now = sumo.simulation.getTime()
+            result = sumo.vehicle.getSubscriptionResults(EGO_ID)
+            if not result:
+                if now > INSERT_TIMEOUT:
+                    raise RuntimeError(f"the ego could not be inserted on {start} within {INSERT_TIMEOUT} s")
+                continue
+            if math.isnan(current.time_in):
+                current.time_in = now
+            x, y = result[xy_id]
+            ego = EgoState(time=now, road=result[road_id], lane_position=result[position_id], x=x, y=y,
+                           speed=result[speed_id])
+            if upcoming is not None and ego.road == upcoming.road:
+                current, upcoming = upcoming, None
+                current.time_in = now
+            collided = (sumo.simulation.getCollidingVehiclesNumber() > 0
+                        and EGO_ID in sumo.simulation.getCollidingVehiclesIDList())
+            open_run = upcoming if upcoming is not None else current
+            if open_run.index > 0:
+                self.watch(open_run, ego, result[accel_id], collided)
+            finished = False
+            if (not current.committed and ego.road == current.road
+                    and self.length(current.road) - ego.lane_position <= COMMIT_DISTANCE + ego.speed * step):
+                upcoming = self.commit(current, now)
+                finished = upcoming is None
+            # Logged after this step's decisions, so `mode` is the control the ego drives on with.
+            kin["time"].append(now)
+            kin["x"].append(x)
+            kin["y"].append(y)
+            kin["speed"].append(ego.speed)
+            kin["lane"].append(result[lane_id])
+            kin["mode"].append(self.mode)
+            if self.observer is not None:
+                self.observer(sumo, ego, self.mode, open_run.road)
+            if finished:
+                break
+            if now > self.config.max_sim_seconds:
+                raise RuntimeError(f"episode {self.tracker.episode_id} still running after "
+                                   f"{self.config.max_sim_seconds:.0f} s of sim time on {ego.road}")
+        return now
+
+    def incidents_frame(self) -> pd.DataFrame:
+        rows = []
+        for run in self.runs:
+            if run.index == 0 or not run.committed and run.incident is None:
+                continue
+            if run.incident is None and not run.took_over:
+                continue
+            rows.append({
+                "episode_id": self.tracker.episode_id, "index": run.index, "directed_road": run.road,
+                "incident": run.kind,
+                "sumo_ids": ",".join(run.incident.sumo_ids) if run.incident is not None else "",
+                "injected_time": run.injected_time, "in_view_time": run.in_view_time, "x": run.x, "y": run.y,
+                "passed_time": run.passed_time, "removed_time": run.removed_time,
+                "takeover": run.took_over, "takeover_start": run.takeover_start,
+                "takeover_end": run.takeover_end, "performance": run.monitor.result(),
+                "min_ttc": run.monitor.min_ttc, "max_deceleration": run.monitor.max_deceleration,
+                "collided": run.monitor.collided,
+            })
+        return pd.DataFrame(rows, columns=list(INCIDENT_COLUMNS))
+
+    def kinematics_frame(self) -> pd.DataFrame:
+        frame = pd.DataFrame(self.kinematics)
+        frame.insert(0, "episode_id", self.tracker.episode_id)
+        return frame.astype({"time": "float64", "x": "float64", "y": "float64", "speed": "float64"})
+
+
+def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: str, seed: int,
+                rrd_path: Path | None = None, *, net_path: Path | None = None,
+                config: SumoConfig | None = None, observer: Callable | None = None) -> EpisodeRecord:
+    """Run one episode in SUMO and return its logs.
+
+    driver: a participants.synthetic_driver.SyntheticDriver (decides_takeover, move_trust, report_trust,
+    trust). seed: SUMO's seed (the driver carries its own Generator). net_path: the town's net
+    (default: build_net(setup.town), cached). observer(sumo, ego, mode, road): called every step
+    (tests use it to read SUMO state). rrd_path: also write a Rerun recording.
+    """
+    started = time.perf_counter()
+    config = config if config is not None else SumoConfig()
+    if net_path is None:
+        net = build_net(setup.town).path
+    else:
+        net = Path(net_path)
+        _check_readable(net)
+    tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=0.0)
+    with sumo_session(net, seed, config) as sumo:
+        _check_net_matches(sumo, setup, net)
+        episode = _Episode(sumo, setup, tracker, driver, config, observer)
+        sim_seconds = episode.run()
+    record = EpisodeRecord(summary=tracker.summary(wall_seconds=time.perf_counter() - started,
+                                                   sim_seconds=sim_seconds),
+                           roads=tracker.roads_frame(), kinematics=episode.kinematics_frame(),
+                           incidents=episode.incidents_frame())
+    if rrd_path is not None:
+        from harness.rerun_log import write_recording
+
+        write_recording(Path(rrd_path), net, record, setup)
+    return record

@@ -1,0 +1,56 @@
+"""Policy names to policies: "free", "aware" (synthesized once, then cached) or a policy file.
+
+"aware" is `synthesize(pomdp, spec, horizon=AWARE_HORIZON, tau=AWARE_TAU)` with the Bayes filter:
+H = 20 junctions because the study measures "policy, then the shortest completion after 20
+junctions" (policies.fallback), so maximising P(accepted within 20) is the objective the study
+actually scores. It is cached in `cache_dir` under a key made of the content hashes of town,
+driver model and spec and these settings; a cache entry is a policy file like any other.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from networks.errors import InputError
+from networks.town import Town
+from participants.driver_model import DriverModel
+from policies.baseline import trust_free_policy
+from policies.policy import RoutingPolicy
+from policies.policy_file import load_policy, save_policy
+from policies.spec import Spec
+from policies.synthesis import synthesize
+from policies.trust_pomdp import build_pomdp
+
+AWARE_HORIZON = 20
+AWARE_TAU = 1e-3
+AWARE_TIME_LIMIT = 120.0
+
+
+def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: Path) -> Path:
+    key = hashlib.sha256("|".join((town.content_hash, driver.content_hash, spec.content_hash,
+                                   f"H={AWARE_HORIZON}", f"tau={AWARE_TAU}", "bayes")).encode())
+    return Path(cache_dir) / f"aware-{spec.name}-{key.hexdigest()[:16]}.json"
+
+
+def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: Path) -> RoutingPolicy:
+    path = aware_cache_path(town, driver, spec, cache_dir)
+    if path.is_file():
+        return load_policy(path, town, driver, spec)
+    result = synthesize(build_pomdp(town, driver), spec, tau=AWARE_TAU, time_limit=AWARE_TIME_LIMIT,
+                        horizon=AWARE_HORIZON)
+    save_policy(result, path, town, driver, spec)
+    return result.policy
+
+
+def resolve_policy(name_or_path: str, town: Town, driver: DriverModel, spec: Spec,
+                   cache_dir: str | Path) -> RoutingPolicy:
+    """"free", "aware" or the path of a policy file, as a RoutingPolicy for this town/model/spec."""
+    if name_or_path == "free":
+        return trust_free_policy(town, spec)
+    if name_or_path == "aware":
+        return aware_policy(town, driver, spec, Path(cache_dir))
+    if not Path(name_or_path).is_file():
+        raise InputError(name_or_path, "", "not a policy file and not 'free' or 'aware'",
+                         "pass 'free', 'aware' or the path of a policy file written by trustroute synth")
+    return load_policy(name_or_path, town, driver, spec)

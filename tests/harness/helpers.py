@@ -1,0 +1,48 @@
+"""Shared test helpers for the harness tests: spec paths, a fixed-route policy, forced drivers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import policies
+
+SPECS = Path(policies.__file__).parent / "specs"
+# Start E-A, then a pedestrian road, a plain road, an obstacle road and a truck road.
+INCIDENT_ROUTE = ("E-A", "A-B", "B-C", "C-J", "J-K")
+
+
+class FixedRoute:
+    """Drives a given route of directed roads, then declares itself finished."""
+
+    name = "fixed"
+
+    def __init__(self, route) -> None:
+        self.route = tuple(route)
+
+    def finished(self, context) -> bool:
+        return len(context.route) >= len(self.route)
+
+    def next_junction(self, context) -> str:
+        return self.route[len(context.route)].split("-")[1]
+
+
+class ForcedTakeover:
+    """A synthetic driver that takes over at every incident of the given kinds (test stand-in)."""
+
+    def __init__(self, driver, kinds=("pedestrian", "obstacle", "truck")) -> None:
+        self.inner = driver
+        self.kinds = tuple(kinds)
+
+    @property
+    def trust(self) -> int:
+        return self.inner.trust
+
+    def decides_takeover(self, incident: str) -> bool:
+        self.inner.decides_takeover(incident)
+        return incident in self.kinds
+
+    def move_trust(self, incident: str, took_over: bool, performance: str = "succ") -> int:
+        return self.inner.move_trust(incident, took_over, performance)
+
+    def report_trust(self) -> int:
+        return self.inner.report_trust()

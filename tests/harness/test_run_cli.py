@@ -1,0 +1,102 @@
+"""`trustroute run`: JSON summary, Parquet logs, Rerun file, and one-line errors with exit 2."""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from harness.cli import cli, main
+from harness.episode import KINEMATIC_COLUMNS
+from harness.episode_tracker import ROAD_COLUMNS
+from networks.sumo_net import build_net
+from tests.harness.helpers import SPECS
+
+PHI1 = str(SPECS / "phi1.toml")
+
+
+@pytest.fixture(scope="module")
+def net(town, tmp_path_factory):
+    return str(build_net(town, cache_dir=tmp_path_factory.mktemp("nets")).path)
+
+
+def _main(args: list[str], capsys) -> tuple[int, str]:
+    """Run the real entry point in-process: (exit code, stderr)."""
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exited:
+        main(args)
+    return exited.value.code, capsys.readouterr().err
+
+
+def test_json_summary_and_logs(net, tmp_path):
+    out = tmp_path / "out"
+    rrd = tmp_path / "e.rrd"
+    result = CliRunner().invoke(cli, ["run", "--spec", PHI1, "--policy", "free", "--seed", "4", "--json",
+                                      "--net", net, "--out", str(out), "--rrd", str(rrd)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.output)
+    for key in ("satisfied", "junctions", "takeovers", "final_trust", "end_reason", "sim_seconds",
+                "wall_seconds"):
+        assert key in summary
+    assert summary["route"][0] == "E-A" and summary["junctions"] == len(summary["route"]) - 1
+    roads = pd.read_parquet(out / "roads.parquet")
+    kinematics = pd.read_parquet(out / "kinematics.parquet")
+    assert tuple(roads.columns) == ROAD_COLUMNS and tuple(kinematics.columns) == KINEMATIC_COLUMNS
+    assert roads["directed_road"].tolist() == summary["route"]
+    assert isinstance(roads.loc[1, "belief_after"][0], float)
+    assert json.loads((out / "summary.json").read_text())["end_reason"] == summary["end_reason"]
+    assert rrd.stat().st_size > 1000
+
+
+def test_same_seed_same_output(net):
+    runs = [CliRunner().invoke(cli, ["run", "--spec", PHI1, "--seed", "9", "--json", "--net", net])
+            for _ in range(2)]
+    first, second = (json.loads(r.output) for r in runs)
+    first.pop("wall_seconds")
+    second.pop("wall_seconds")
+    assert first == second
+
+
+def _one_line_error(outcome: tuple[int, str], needle: str) -> None:
+    code, stderr = outcome
+    assert code == 2, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and needle in lines[0], stderr
+    assert "Traceback" not in stderr
+
+
+def test_unreadable_net_exit_2(tmp_path, capsys):
+    bad = tmp_path / "bad.net.xml"
+    bad.write_text("<net><edge id=")
+    _one_line_error(_main(["run", "--spec", PHI1, "--net", str(bad)], capsys), "not a readable SUMO net")
+
+
+def test_missing_sumo_binary_exit_2(net, capsys, monkeypatch):
+    import sumolib
+
+    from harness import sumo_start
+
+    monkeypatch.setattr(sumolib, "checkBinary", lambda name, bindir=None: "no-such-" + name)
+    monkeypatch.setenv("PATH", "")
+    sumo_start.sumo_binary.cache_clear()
+    try:
+        _one_line_error(_main(["run", "--spec", PHI1, "--net", net], capsys),
+                        "SUMO binary 'sumo' was not found")
+    finally:
+        sumo_start.sumo_binary.cache_clear()
+
+
+def test_unknown_policy_exit_2(net, tmp_path, capsys):
+    _one_line_error(_main(["run", "--spec", PHI1, "--net", net, "--policy", str(tmp_path / "nope.json")],
+                          capsys), "nope.json")
+
+
+def test_policy_file_for_another_spec_exit_2(net, tmp_path, capsys):
+    pytest.importorskip("policies.policy_file")
+    policy = tmp_path / "phi2.json"
+    code, stderr = _main(["synth", str(SPECS / "phi2.toml"), "--horizon", "3", "--tau", "0.5",
+                          "--time-limit", "20", "--out", str(policy)], capsys)
+    assert code == 0 and policy.is_file(), stderr
+    _one_line_error(_main(["run", "--spec", PHI1, "--net", net, "--policy", str(policy)], capsys), "phi2")

@@ -1,0 +1,122 @@
+"""The study config: the minimal form works as written; bad configs give one line and exit 2."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from harness.cli import main
+from harness.study.config import load_study_config
+from networks.errors import InputError
+
+REPO = Path(__file__).resolve().parents[2]
+MINIMAL = """[study]
+participants = 21
+seed = 1
+engine = "sumo"
+specs = ["specs/phi1.toml", "specs/phi2.toml"]
+conditions = ["aware", "free"]
+"""
+
+
+def _write(tmp_path: Path, text: str, name: str = "study.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_minimal_config_as_written_from_repo_root(tmp_path, monkeypatch):
+    monkeypatch.chdir(REPO)
+    config = load_study_config(_write(tmp_path, MINIMAL))
+    assert config.participants == 21 and config.seed == 1 and config.engine == "sumo"
+    assert config.spec_names == ("phi1", "phi2")
+    assert config.conditions == ("aware", "free")
+    assert config.fallback_after == 20 and config.population is None
+    assert all(Path(s).is_absolute() and Path(s).is_file() for s in config.specs)
+
+
+def test_minimal_config_from_elsewhere_uses_packaged_specs(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    config = load_study_config(_write(tmp_path, MINIMAL.replace("specs/phi1.toml", "phi1")))
+    assert config.spec_names == ("phi1", "phi2")
+
+
+def test_relative_paths_resolve_against_the_config_folder(tmp_path, monkeypatch):
+    folder = tmp_path / "cfg"
+    folder.mkdir()
+    (folder / "mine.toml").write_text((REPO / "specs" / "phi1.toml").read_text())
+    monkeypatch.chdir(tmp_path)
+    config = load_study_config(_write(folder, MINIMAL.replace('"specs/phi1.toml", "specs/phi2.toml"',
+                                                              '"mine.toml"')))
+    assert config.specs == (str((folder / "mine.toml").resolve()),)
+
+
+def test_optional_keys_and_population(tmp_path, monkeypatch):
+    monkeypatch.chdir(REPO)
+    text = MINIMAL + 'fallback_after = false\nhorizon = 12\noutput = "out/x"\n\n[population]\n' \
+                     'concentration = 30.0\nreport_accuracy = 1.0\n'
+    config = load_study_config(_write(tmp_path, text))
+    assert config.fallback_after is None and config.horizon == 12
+    assert config.output == str((tmp_path / "out" / "x").resolve())
+    assert config.population == {"concentration": 30.0, "report_accuracy": 1.0}
+    assert config.report_accuracy == 1.0
+
+
+def test_hash_ignores_formatting_but_not_settings(tmp_path, monkeypatch):
+    monkeypatch.chdir(REPO)
+    a = load_study_config(_write(tmp_path, MINIMAL, "a.toml"))
+    b = load_study_config(_write(tmp_path, "# comment\n" + MINIMAL.replace(" = ", "=") + 'output = "o"\n', "b.toml"))
+    c = load_study_config(_write(tmp_path, MINIMAL.replace("seed = 1", "seed = 2"), "c.toml"))
+    assert a.content_hash == b.content_hash != c.content_hash
+
+
+BAD = {
+    "not toml": ("[study\nparticipants = 1", "not valid TOML"),
+    "no study table": ("[population]\nconcentration = 1.0\n", "missing [study]"),
+    "zero participants": (MINIMAL.replace("participants = 21", "participants = 0"), "study.participants"),
+    "bool participants": (MINIMAL.replace("participants = 21", "participants = true"), "study.participants"),
+    "missing seed": (MINIMAL.replace("seed = 1\n", ""), "study.seed"),
+    "unknown engine": (MINIMAL.replace('"sumo"', '"carla"'), "study.engine"),
+    "missing spec file": (MINIMAL.replace("specs/phi1.toml", "specs/nope.toml"), "study.specs"),
+    "empty conditions": (MINIMAL.replace('["aware", "free"]', "[]"), "study.conditions"),
+    "unknown condition": (MINIMAL.replace('"free"]', '"reckless"]'), "study.conditions"),
+    "typo key": (MINIMAL + "particpants = 3\n", "study.particpants"),
+    "bad population": (MINIMAL + "[population]\nreport_accuracy = 2\n", "population.report_accuracy"),
+    "unknown table": (MINIMAL + "[drivers]\nx = 1\n", "drivers"),
+    "bad belief rule": (MINIMAL + 'belief_rule = "magic"\n', "study.belief_rule"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD))
+def test_malformed_config_one_line_exit_2(kind, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(REPO)
+    text, place = BAD[kind]
+    path = _write(tmp_path, text)
+    with pytest.raises(InputError) as info:
+        load_study_config(path)
+    assert place in info.value.one_line()
+    with pytest.raises(SystemExit) as exit_info:
+        main(["study", str(path), "--out", str(tmp_path / "out"), "--engine", "model"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2
+    assert err.count("\n") == 1 and err.startswith("error: ") and "fix:" in err
+    assert "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_missing_config_file_exit_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["study", str(tmp_path / "absent.toml")])
+    assert exit_info.value.code == 2
+    assert "cannot read the study config" in capsys.readouterr().err
+
+
+def test_example_configs_load(monkeypatch):
+    monkeypatch.chdir(REPO)
+    examples = sorted((REPO / "harness" / "study" / "examples").glob("*.toml"))
+    assert examples
+    for path in examples:
+        load_study_config(path)
+    assert os.path.basename(str(examples[0])).endswith(".toml")
