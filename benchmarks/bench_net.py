@@ -25,5 +25,6 @@ def run() -> list[dict]:
     first = min(firsts)
     return [
         {"name": "net_build_first", "value": first, "unit": "s"},
-        {"name": "net_build_cached", "value": cached, "unit": "s", "baseline": first, "ratio": cached / first},
+        {"name": "net_build_cached", "value": cached, "unit": "s", "baseline": first,
+         "ratio": cached / first},
     ]

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from harness import incidents as incident_kinds
@@ -42,6 +43,7 @@ COMMIT_DISTANCE = 30.0      # metres before a road's end: decide the next juncti
 VIEW_DISTANCE = 80.0        # metres: an incident object this close to the ego is in view
 START_BEFORE_COMMIT = 40.0  # the ego is inserted this far before the start road's commit point
 INSERT_TIMEOUT = 30.0       # seconds of sim time for the ego to appear
+LEADER_HORIZON = 100.0      # metres: how far ahead the subscription looks for a leader
 
 KINEMATIC_COLUMNS = ("episode_id", "time", "x", "y", "speed", "lane", "mode")
 INCIDENT_COLUMNS = ("episode_id", "index", "directed_road", "incident", "sumo_ids", "injected_time",
@@ -132,6 +134,7 @@ class _Episode:
         self.runs: list[_RoadRun] = []
         self.kinematics: dict[str, list] = {k: [] for k in ("time", "x", "y", "speed", "lane", "mode")}
         self.lengths: dict[str, float] = {}
+        self.min_gap = 2.5
 
     def length(self, road: str) -> float:
         if road not in self.lengths:
@@ -162,27 +165,29 @@ class _Episode:
             run.incident.remove(self.sumo)
             run.removed_time = now
 
-    def watch(self, run: _RoadRun, ego: EgoState, acceleration: float, collided: bool) -> None:
-        """Per-step work for the road whose observation is open (its incident, the driver, performance)."""
+    def needs_watching(self, run: _RoadRun) -> bool:
+        """Whether the road's incident or the driver still has something to do this step."""
+        if run.incident is not None:
+            return math.isnan(run.removed_time)
+        return not run.decided
+
+    def watch(self, run: _RoadRun, ego: EgoState) -> None:
+        """Per-step work for the open road's incident and the driver (only while there is some)."""
         incident = run.incident
-        live = incident is not None and math.isnan(run.removed_time)
-        if live:
-            incident.step(self.sumo, ego)
-            if not run.decided:
-                where = incident.position(self.sumo)
-                if where is not None and math.dist(where, (ego.x, ego.y)) <= VIEW_DISTANCE:
-                    run.in_view_time = ego.time
-                    run.x, run.y = where
-                    self.decide(run, ego.time)
-            if math.isnan(run.passed_time) and incident.is_passed(self.sumo, ego):
-                run.passed_time = ego.time
-                self.remove_incident(run, ego.time)
-                live = False
-        elif run.kind == "none" and not run.decided and ego.road == run.road:
-            self.decide(run, ego.time)   # nothing to see: the driver decides on entering the road
-        if self.mode == AUTOPILOT.name:
-            run.monitor.observe(self.sumo, EGO_ID, ego.speed, acceleration, collided,
-                                check_leader=live and run.kind in ("obstacle", "truck"))
+        if incident is None:
+            if ego.road == run.road:
+                self.decide(run, ego.time)   # nothing to see: the driver decides on entering the road
+            return
+        incident.step(self.sumo, ego)
+        if not run.decided:
+            where = incident.position(self.sumo)
+            if where is not None and math.dist(where, (ego.x, ego.y)) <= VIEW_DISTANCE:
+                run.in_view_time = ego.time
+                run.x, run.y = where
+                self.decide(run, ego.time)
+        if math.isnan(run.passed_time) and incident.is_passed(self.sumo, ego):
+            run.passed_time = ego.time
+            self.remove_incident(run, ego.time)
 
     # -- the road's end -------------------------------------------------------
     def close_road(self, run: _RoadRun, now: float) -> None:
@@ -230,57 +235,74 @@ class _Episode:
         sumo.vehicle.add(EGO_ID, "ego_route", typeID=EGO_TYPE, depart="now", departLane="best",
                          departPos=f"{depart:.2f}", departSpeed="max")
         apply_style(sumo, EGO_ID, AUTOPILOT)
+        # One subscription carries everything the loop reads each step, the leader included.
         sumo.vehicle.subscribe(EGO_ID, [sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION,
-                                        sumo.VAR_SPEED, sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID])
-        road_id, position_id, xy_id, speed_id, accel_id, lane_id = (
+                                        sumo.VAR_SPEED, sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID,
+                                        sumo.VAR_LEADER], 0.0, 1e9, {sumo.VAR_LEADER: LEADER_HORIZON})
+        road_id, position_id, xy_id, speed_id, accel_id, lane_id, leader_id = (
             sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION, sumo.VAR_SPEED,
-            sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID)
+            sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID, sumo.VAR_LEADER)
+        self.min_gap = sumo.vehicle.getMinGap(EGO_ID)
         current = _RoadRun(index=0, road=start, kind="")
         self.runs.append(current)
         upcoming: _RoadRun | None = None
         kin = self.kinematics
         step = self.config.step_length
         now = 0.0
+        # Hot loop: local names, one subscription read, Python work only where something happens.
+        simulation_step = sumo.simulationStep
+        get_time = sumo.simulation.getTime
+        get_results = sumo.vehicle.getSubscriptionResults
+        colliding_number = sumo.simulation.getCollidingVehiclesNumber
+        auto = AUTOPILOT.name
+        append_time, append_x, append_y = kin["time"].append, kin["x"].append, kin["y"].append
+        append_speed, append_lane, append_mode = kin["speed"].append, kin["lane"].append, kin["mode"].append
+        commit_at = self.length(start) - COMMIT_DISTANCE
         while True:
-            sumo.simulationStep()
-            now = sumo.simulation.getTime()
-            result = sumo.vehicle.getSubscriptionResults(EGO_ID)
+            simulation_step()
+            now = get_time()
+            result = get_results(EGO_ID)
             if not result:
                 if now > INSERT_TIMEOUT:
                     raise RuntimeError(f"the ego could not be inserted on {start} within {INSERT_TIMEOUT} s")
                 continue
             if math.isnan(current.time_in):
                 current.time_in = now
+            road = result[road_id]
+            position = result[position_id]
+            speed = result[speed_id]
             x, y = result[xy_id]
-            ego = EgoState(time=now, road=result[road_id], lane_position=result[position_id], x=x, y=y,
-                           speed=result[speed_id])
-            if upcoming is not None and ego.road == upcoming.road:
+            if upcoming is not None and road == upcoming.road:
                 current, upcoming = upcoming, None
                 current.time_in = now
-            collided = (sumo.simulation.getCollidingVehiclesNumber() > 0
-                        and EGO_ID in sumo.simulation.getCollidingVehiclesIDList())
+                commit_at = self.length(road) - COMMIT_DISTANCE
             open_run = upcoming if upcoming is not None else current
             if open_run.index > 0:
-                self.watch(open_run, ego, result[accel_id], collided)
+                if self.needs_watching(open_run):
+                    self.watch(open_run, EgoState(now, road, position, x, y, speed))
+                if self.mode == auto:
+                    collided = (colliding_number() > 0
+                                and EGO_ID in sumo.simulation.getCollidingVehiclesIDList())
+                    open_run.monitor.observe(sumo, speed, result[accel_id], collided, result[leader_id],
+                                             self.min_gap)
             finished = False
-            if (not current.committed and ego.road == current.road
-                    and self.length(current.road) - ego.lane_position <= COMMIT_DISTANCE + ego.speed * step):
+            if not current.committed and road == current.road and position + speed * step >= commit_at:
                 upcoming = self.commit(current, now)
                 finished = upcoming is None
             # Logged after this step's decisions, so `mode` is the control the ego drives on with.
-            kin["time"].append(now)
-            kin["x"].append(x)
-            kin["y"].append(y)
-            kin["speed"].append(ego.speed)
-            kin["lane"].append(result[lane_id])
-            kin["mode"].append(self.mode)
+            append_time(now)
+            append_x(x)
+            append_y(y)
+            append_speed(speed)
+            append_lane(result[lane_id])
+            append_mode(self.mode)
             if self.observer is not None:
-                self.observer(sumo, ego, self.mode, open_run.road)
+                self.observer(sumo, EgoState(now, road, position, x, y, speed), self.mode, open_run.road)
             if finished:
                 break
             if now > self.config.max_sim_seconds:
                 raise RuntimeError(f"episode {self.tracker.episode_id} still running after "
-                                   f"{self.config.max_sim_seconds:.0f} s of sim time on {ego.road}")
+                                   f"{self.config.max_sim_seconds:.0f} s of sim time on {road}")
         return now
 
     def incidents_frame(self) -> pd.DataFrame:
@@ -304,9 +326,13 @@ class _Episode:
         return pd.DataFrame(rows, columns=list(INCIDENT_COLUMNS))
 
     def kinematics_frame(self) -> pd.DataFrame:
-        frame = pd.DataFrame(self.kinematics)
-        frame.insert(0, "episode_id", self.tracker.episode_id)
-        return frame.astype({"time": "float64", "x": "float64", "y": "float64", "speed": "float64"})
+        kin = self.kinematics
+        columns: dict[str, object] = {"episode_id": [self.tracker.episode_id] * len(kin["time"])}
+        for name in ("time", "x", "y", "speed"):
+            columns[name] = np.asarray(kin[name], dtype=np.float64)
+        columns["lane"] = kin["lane"]
+        columns["mode"] = kin["mode"]
+        return pd.DataFrame(columns)
 
 
 def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: str, seed: int,

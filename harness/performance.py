@@ -15,7 +15,6 @@ from dataclasses import dataclass
 
 FAIL_DECELERATION = 5.0     # m/s²: beyond the comfortable maximum (4.5) is an emergency brake
 TTC_THRESHOLD = 1.0         # seconds, on the bumper-to-bumper gap
-LEADER_HORIZON = 100.0      # metres
 
 
 @dataclass
@@ -24,19 +23,21 @@ class PerformanceMonitor:
 
     collided: bool = False
     max_deceleration: float = 0.0
-    min_ttc: float = math.inf
+    min_ttc: float = math.inf      # measured only below TTC_THRESHOLD (inf: never that close)
 
-    def observe(self, sumo, ego_id: str, speed: float, acceleration: float, collided: bool,
-                check_leader: bool) -> None:
+    def observe(self, sumo, speed: float, acceleration: float, collided: bool,
+                leader: tuple[str, float] | None, min_gap: float) -> None:
+        """One step. leader: (id, gap without minGap) from the ego's subscription, or None."""
         self.collided |= collided
-        self.max_deceleration = max(self.max_deceleration, -acceleration)
-        if check_leader:
-            leader = sumo.vehicle.getLeader(ego_id, LEADER_HORIZON)
-            if leader and leader[0]:
+        if -acceleration > self.max_deceleration:
+            self.max_deceleration = -acceleration
+        if leader and leader[0]:
+            gap = max(leader[1] + min_gap, 0.0)   # bumper to bumper
+            # TTC = gap / (speed - leader speed) >= gap / speed: only a leader this close can bring it
+            # below the threshold, so its speed is asked for only then (the verdict is exact).
+            if gap < speed * TTC_THRESHOLD:
                 closing = speed - sumo.vehicle.getSpeed(leader[0])
                 if closing > 0:
-                    # getLeader's distance leaves out the ego's minGap: add it back for the real gap.
-                    gap = max(leader[1] + sumo.vehicle.getMinGap(ego_id), 0.0)
                     self.min_ttc = min(self.min_ttc, gap / closing)
 
     def result(self) -> str:

@@ -21,7 +21,7 @@ from networks.sumo_net import find_binary
 class SumoConfig:
     """Simulation settings of an episode."""
 
-    step_length: float = 0.5        # seconds; large steps keep episodes fast, 0.5 s keeps yielding sane
+    step_length: float = 0.5        # seconds: large steps keep episodes fast, 0.5 s keeps yielding sane
     max_sim_seconds: float = 7200.0  # a stuck ego is a bug: the runner stops with an error here
 
 

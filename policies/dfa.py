@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from networks.errors import InputError
 from policies.formula import (
     TRUE,
     And,
@@ -35,6 +36,7 @@ from policies.formula import (
     Until,
     atoms_in_order,
     canonical,
+    disjunctive_normal_form,
     format_formula,
     make_and,
     make_or,
@@ -42,6 +44,13 @@ from policies.formula import (
 from policies.spec import Spec
 
 Cube = tuple[tuple[str, bool], ...]  # a conjunction of literals (atom, value)
+# LTL-to-DFA is doubly exponential in the worst case: stop exploring beyond these sizes.
+MAX_STATES = 20_000
+MAX_NODES = 1_000_000
+
+
+class DFATooLarge(ValueError):
+    """The progression automaton outgrew MAX_STATES or MAX_NODES."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -217,8 +226,9 @@ def _cofactor(formula: Formula, atom: str, value: bool, memo: dict[tuple[Formula
 class _Builder:
     """Explores the progression automaton; diagrams are hash-consed into one node pool."""
 
-    def __init__(self, atoms: Sequence[str]) -> None:
+    def __init__(self, atoms: Sequence[str], max_states: int, max_nodes: int) -> None:
         self.atoms = tuple(atoms)
+        self.max_states, self.max_nodes = max_states, max_nodes
         self.rank = {a: i for i, a in enumerate(self.atoms)}
         self.states: dict[Formula, int] = {}
         self.formulas: list[Formula] = []
@@ -248,6 +258,8 @@ class _Builder:
     def node(self, entry: tuple[int, int, int]) -> int:
         found = self.node_ids.get(entry)
         if found is None:
+            if len(self.nodes) >= self.max_nodes:
+                raise DFATooLarge(f"more than {self.max_nodes} guard nodes")
             found = len(self.nodes)
             self.nodes.append(entry)
             self.node_ids[entry] = found
@@ -256,6 +268,8 @@ class _Builder:
     def state(self, formula: Formula) -> int:
         found = self.states.get(formula)
         if found is None:
+            if len(self.formulas) >= self.max_states:
+                raise DFATooLarge(f"more than {self.max_states} DFA states before minimisation")
             found = len(self.formulas)
             self.states[formula] = found
             self.formulas.append(formula)
@@ -269,7 +283,7 @@ class _Builder:
             return cached
         rank = self.first_now(formula)
         if rank is None:
-            target = self.state(formula)
+            target = self.state(disjunctive_normal_form(formula))
             result = self.node((-1, target, target))
         else:
             atom = self.atoms[rank]
@@ -377,15 +391,18 @@ def _backward_closure(successors: list[set[int]], seed: np.ndarray, every: bool)
     return inside
 
 
-def dfa_from_formula(formula: Formula, atoms: Sequence[str] | None = None) -> DFA:
+def dfa_from_formula(formula: Formula, atoms: Sequence[str] | None = None, max_states: int | None = None,
+                     max_nodes: int | None = None) -> DFA:
     """Translate a formula into its complete minimal DFA over `atoms` (default: the formula's
-    atoms in order of first occurrence; extra atoms are allowed and simply never tested)."""
+    atoms in order of first occurrence; extra atoms are allowed and simply never tested).
+    Raises DFATooLarge when the exploration exceeds `max_states` or `max_nodes`."""
     atom_order = tuple(atoms) if atoms is not None else atoms_in_order(formula)
     missing = set(atoms_in_order(formula)) - set(atom_order)
     if missing:
         raise ValueError(f"atoms {sorted(missing)} of the formula are not in the atom order")
-    builder = _Builder(atom_order)
-    builder.explore(canonical(formula))
+    builder = _Builder(atom_order, MAX_STATES if max_states is None else max_states,
+                       MAX_NODES if max_nodes is None else max_nodes)
+    builder.explore(disjunctive_normal_form(canonical(formula)))
     below = _leaf_targets(builder.nodes)
     successors = [set(below[r]) for r in builder.roots]
     # Valid obligations (hold on every continuation): least fixpoint of
@@ -451,5 +468,9 @@ def build_dfa(spec: Spec) -> DFA:
     """The minimal DFA of `spec.formula` over the atoms it uses, cached by the spec's content hash."""
     key = spec.content_hash
     if key not in _CACHE:
-        _CACHE[key] = dfa_from_formula(spec.formula, spec.formula_atoms)
+        try:
+            _CACHE[key] = dfa_from_formula(spec.formula, spec.formula_atoms)
+        except DFATooLarge as exc:
+            raise InputError(spec.source_path or spec.name, "formula", f"the formula is too large to "
+                             f"translate ({exc})", "split the task or simplify the formula") from None
     return _CACHE[key]

@@ -23,7 +23,7 @@ ordering, hashing and equality, so large formulas hash in constant time.
 from __future__ import annotations
 
 import re
-from collections.abc import Collection, Iterable, Iterator
+from collections.abc import Callable, Collection, Iterable, Iterator
 from dataclasses import dataclass, field
 
 from networks.errors import InputError
@@ -147,7 +147,7 @@ def walk(formula: Formula) -> Iterator[Formula]:
         yield from walk(formula.right)
 
 
-def map_literals(formula: Formula, replace) -> Formula:  # noqa: ANN001 - replace: Literal -> Formula
+def map_literals(formula: Formula, replace: Callable[[Literal], Formula]) -> Formula:
     """Rebuild `formula` canonically with every Literal replaced by `replace(literal)`."""
     if isinstance(formula, Literal):
         return replace(formula)
@@ -241,6 +241,41 @@ def canonical(formula: Formula) -> Formula:
     if isinstance(formula, Until):
         return make_until(canonical(formula.left), canonical(formula.right))
     return formula
+
+
+def disjunctive_normal_form(formula: Formula) -> Formula:
+    """The minimal DNF of `formula` seen as a positive Boolean combination of its non-Boolean
+    nodes (literals and temporal subformulas): an antichain of conjunctions, unique for that view.
+
+    Formula progression keeps producing nested And/Or of the same temporal subformulas
+    (e.g. `F p U F q`); the nesting grows without bound unless states are normalised like this.
+    With finitely many temporal subformulas there are then finitely many states."""
+    terms = _dnf_terms(formula)
+    return make_or(make_and(term) for term in sorted(terms, key=lambda t: sorted(p.key for p in t)))
+
+
+def _minimal(terms: Iterable[frozenset[Formula]]) -> set[frozenset[Formula]]:
+    unique = set(terms)
+    return {t for t in unique if not any(o < t for o in unique)}
+
+
+def _dnf_terms(formula: Formula) -> set[frozenset[Formula]]:
+    if isinstance(formula, Const):
+        return {frozenset()} if formula.value else set()
+    if isinstance(formula, Or):
+        return _minimal(t for p in formula.parts for t in _dnf_terms(p))
+    if isinstance(formula, And):
+        terms: set[frozenset[Formula]] = {frozenset()}
+        for part in formula.parts:
+            product = []
+            for left in terms:
+                for right in _dnf_terms(part):
+                    term = left | right
+                    if not any(n is not None and n in term for n in map(_negated, term)):
+                        product.append(term)  # skip terms with a & !a
+            terms = _minimal(product)
+        return terms
+    return {frozenset((formula,))}
 
 
 # -- printing -----------------------------------------------------------------------------------

@@ -6,6 +6,10 @@ Checks (each warning has a stable `code`):
   always true iff min(coeffs) > offset.
 - `atom-no-effect`: an atom of the formula that no reachable state of the minimal DFA tests
   (its value never changes the successor), e.g. `a` in `a U (F b)`, which is `F b`.
+- `subformula-no-effect`: a compound subformula whose replacement by true and by false both leave
+  the DFA's language unchanged (negation only on atoms, so the formula is monotone in it: then no
+  value matters), e.g. `b & c` in `(b & c) U (F b)`. Not repeated for subformulas whose atoms
+  are all reported by `atom-no-effect`, nor inside a reported subformula.
 - `unused-atom`: defined in the file but not used by the formula.
 - `unsatisfiable`: the DFA's initial state cannot reach acceptance.
 With a town:
@@ -21,7 +25,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from networks.town import Town
-from policies.dfa import DFA, build_dfa
+from policies.dfa import DFA, build_dfa, dfa_from_formula
+from policies.formula import (
+    FALSE,
+    TRUE,
+    And,
+    Const,
+    Eventually,
+    Formula,
+    Literal,
+    Next,
+    Or,
+    Until,
+    atoms_in_order,
+    format_formula,
+    walk,
+)
 from policies.labelling import Labeller
 from policies.spec import Spec, state_only_projection
 
@@ -52,9 +71,86 @@ def no_effect_warnings(spec: Spec, dfa: DFA) -> list[LintWarning]:
     tested: set[str] = set()
     for q in range(dfa.n_states):
         tested.update(dfa.tested_atoms(q))
-    return [LintWarning("atom-no-effect", f"atom '{atom}' cannot affect satisfaction: no state of the "
-                        f"minimal DFA tests it (the subformulas using it are redundant)", atom)
-            for atom in dfa.atoms if atom not in tested]
+    warnings = []
+    for atom in dfa.atoms:
+        if atom in tested:
+            continue
+        uses = sorted({format_formula(n) for n in walk(spec.formula)
+                       if isinstance(n, Literal) and n.atom == atom})
+        warnings.append(LintWarning(
+            "atom-no-effect", f"atom '{atom}' cannot affect satisfaction: no state of the minimal DFA "
+            f"tests it, so {' and '.join(uses)} in the formula constrains nothing "
+            "(as in a U (F b), which is F b)", atom))
+    return warnings
+
+
+MAX_STATES_FOR_SUBFORMULA_CHECK = 300
+
+
+def equivalent(first: DFA, second: DFA) -> bool:
+    """Language equivalence of two DFAs over possibly different atoms: breadth-first search over
+    pairs of states, a pair's successors read off consistent pairs of guard cubes."""
+    seen = {(first.initial, second.initial)}
+    stack = [(first.initial, second.initial)]
+    while stack:
+        p, q = stack.pop()
+        if first.accepting[p] != second.accepting[q]:
+            return False
+        for p2, cubes1 in first.transitions(p).items():
+            for q2, cubes2 in second.transitions(q).items():
+                if (p2, q2) in seen:
+                    continue
+                if any(_consistent(c1, c2) for c1 in cubes1 for c2 in cubes2):
+                    seen.add((p2, q2))
+                    stack.append((p2, q2))
+    return True
+
+
+def _consistent(first, second) -> bool:
+    values = dict(first)
+    return all(values.get(atom, value) == value for atom, value in second)
+
+
+def _replace_at(formula: Formula, target: int, replacement: Formula) -> tuple[Formula, int]:
+    """`formula` with its pre-order node number `target` replaced; returns (new formula, nodes seen)."""
+    if target == 0:
+        return replacement, sum(1 for _ in walk(formula))
+    seen = 1
+    if isinstance(formula, And | Or):
+        parts = []
+        for part in formula.parts:
+            new, count = _replace_at(part, target - seen, replacement)
+            parts.append(new)
+            seen += count
+        return type(formula)(tuple(parts)), seen
+    if isinstance(formula, Next | Eventually):
+        body, count = _replace_at(formula.body, target - 1, replacement)
+        return type(formula)(body), count + 1
+    if isinstance(formula, Until):
+        left, count_left = _replace_at(formula.left, target - 1, replacement)
+        right, count_right = _replace_at(formula.right, target - 1 - count_left, replacement)
+        return Until(left, right), 1 + count_left + count_right
+    return formula, 1
+
+
+def subformula_warnings(spec: Spec, dfa: DFA, atoms_without_effect: set[str]) -> list[LintWarning]:
+    if dfa.n_states > MAX_STATES_FOR_SUBFORMULA_CHECK:
+        return []  # each candidate costs two translations: keep the linter fast on huge specs
+    nodes = list(walk(spec.formula))
+    warnings: list[LintWarning] = []
+    reported_until = -1   # pre-order: the nodes inside a reported subformula come right after it
+    for index, node in enumerate(nodes):
+        if index == 0 or index < reported_until or isinstance(node, Const | Literal):
+            continue
+        if set(atoms_in_order(node)) <= atoms_without_effect:
+            continue
+        variants = (_replace_at(spec.formula, index, value)[0] for value in (TRUE, FALSE))
+        if all(equivalent(dfa, dfa_from_formula(v, dfa.atoms)) for v in variants):
+            warnings.append(LintWarning(
+                "subformula-no-effect", f"subformula '{format_formula(node)}' cannot affect satisfaction: "
+                "the spec means the same with it replaced by true or by false"))
+            reported_until = index + sum(1 for _ in walk(node))
+    return warnings
 
 
 def unused_warnings(spec: Spec) -> list[LintWarning]:
@@ -101,7 +197,9 @@ def town_satisfiable(spec: Spec, town: Town) -> bool:
 def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None) -> list[LintWarning]:
     """Every warning that applies to `spec` (and to `town` when given)."""
     dfa = dfa if dfa is not None else build_dfa(spec)
-    warnings = belief_warnings(spec) + no_effect_warnings(spec, dfa) + unused_warnings(spec)
+    no_effect = no_effect_warnings(spec, dfa)
+    warnings = (belief_warnings(spec) + no_effect
+                + subformula_warnings(spec, dfa, {w.atom for w in no_effect}) + unused_warnings(spec))
     if dfa.rejecting[dfa.initial]:
         warnings.append(LintWarning("unsatisfiable", "no trace satisfies the formula (the DFA's "
                                     "initial state cannot reach acceptance)"))

@@ -10,8 +10,9 @@ of the state a simulation must track. Rewards: 1 on the transition into an accep
 trust-free shortest completion (a random rollout almost never visits three waypoints in order).
 Every random draw goes through the numpy Generator passed in (pomdp-py's UCB is deterministic).
 
-The models are built here directly on pomdp-py's framework classes; policies/pomdp_py_adapter.py
-(the foundation's adapter) was not available when this was written.
+The models are built here directly on pomdp-py's framework classes: the foundation's adapter
+(policies/pomdp_adapter.py) models plain reachability of a road set, while this baseline must plan
+on the product with the spec's DFA, whose state is driven by the AV belief.
 """
 
 from __future__ import annotations

@@ -37,7 +37,7 @@ from policies.spec import Spec
 from policies.table_policy import BeliefTablePolicy, PolicyTable
 from policies.trust_pomdp import BeliefRule, TrustPOMDP
 
-DEFAULT_SUFFIX_LENGTH = 4
+CELL_BUDGET = 5000          # automatic suffix length: the longest k with n_symbols**k <= this
 DEFAULT_BATCH = 4096
 UNBOUNDED_HORIZONS = (20, 30, 40, 60, 80, 120, 160)
 
@@ -267,6 +267,16 @@ class _Search:
                            action=action)
 
 
+def automatic_suffix_length(n_changing: int) -> int:
+    """Longest suffix k with at most CELL_BUDGET words of exactly k belief-changing symbols."""
+    if n_changing <= 1:
+        return 8
+    k = 1
+    while n_changing ** (k + 1) <= CELL_BUDGET and k < 8:
+        k += 1
+    return k
+
+
 def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int, tau: float,
                     suffix_length: int, batch: int, started: float, deadline: float
                     ) -> tuple[float, float, PolicyTable, dict]:
@@ -328,7 +338,7 @@ def _unbounded_upper(tables: ProductTables, belief_rule: BeliefRule, suffix_leng
 
 def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
                horizon: int | None = None, belief_rule: BeliefRule = "bayes",
-               suffix_length: int = DEFAULT_SUFFIX_LENGTH,
+               suffix_length: int | None = None,
                batch: int = DEFAULT_BATCH) -> SynthesisResult:
     """Maximal probability of satisfying `spec` from (spec.start, initial belief), with a policy.
 
@@ -350,6 +360,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     started = time.perf_counter()
     deadline = started + time_limit
     tables = build_product(pomdp, spec)
+    if suffix_length is None:
+        suffix_length = automatic_suffix_length(observation_symbols(pomdp, belief_rule).n_changing)
     if horizon is not None:
         lower, upper, table, stats = _bounded_search(tables, belief_rule, horizon, tau, suffix_length,
                                                      batch, started, deadline)

@@ -10,12 +10,11 @@ the ego is past it; `remove` takes every SUMO object out (idempotent). Kinds liv
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 
-@dataclass(frozen=True)
-class EgoState:
-    """The ego as the runner read it this step (one subscription)."""
+class EgoState(NamedTuple):
+    """The ego as the runner read it this step (one subscription); a NamedTuple: built every step."""
 
     time: float
     road: str          # edge id; internal junction edges start with ':'

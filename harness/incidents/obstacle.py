@@ -7,6 +7,7 @@ on. The obstacle stands at `POSITION_FRACTION` of the road.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 
 from harness.incidents.base import EgoState, Scene
@@ -48,8 +49,6 @@ class ObstacleIncident:
         return tuple(sumo.vehicle.getPosition(self.vehicle_id)) if self._alive(sumo) else None
 
     def step(self, sumo, ego: EgoState) -> None:
-        if self._alive(sumo):
-            sumo.vehicle.setSpeed(self.vehicle_id, 0.0)   # stays put even if inserted moving
         dt = 0.0 if self._last_time is None else ego.time - self._last_time
         self._last_time = ego.time
         if self.cleared_at is not None or ego.road != self.road:
@@ -65,7 +64,8 @@ class ObstacleIncident:
         return ego.road == self.road and ego.lane_position > self.position_on_road
 
     def remove(self, sumo) -> None:
-        if self._alive(sumo):
+        # Also reaches an object still waiting for insertion; one already gone raises, and that is fine.
+        with contextlib.suppress(sumo.TraCIException):
             sumo.vehicle.remove(self.vehicle_id)
 
 

@@ -92,6 +92,30 @@ def test_same_seed_same_logs(setup, net_path):
                 and other.kinematics.equals(first.kinematics))
 
 
+class LoopPolicy:
+    """Circles F-G-I-H-F (never finished): the 20-junction rule has to end the loop."""
+
+    name = "loop"
+    ring = {"F": "G", "G": "I", "I": "H", "H": "F"}
+
+    def next_junction(self, context):
+        return self.ring.get(context.road.split("-")[1], "F")
+
+
+def test_fallback_fires_and_is_logged(town, driver, phi1, net_path, caplog):
+    setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1, fallback_after=4)
+    synthetic = SyntheticDriver(driver, np.random.default_rng(0), initial_trust=6)
+    with caplog.at_level("INFO", logger="harness.episode"):
+        record = run_episode(setup, LoopPolicy(), synthetic, "fb", 0, net_path=net_path)
+    roads = record.roads
+    assert record.summary["fallback_fired"]
+    assert roads["fallback"].tolist().index(True) == 4 and not roads["fallback"].iloc[:4].any()
+    assert any("fallback fired at junction 4" in m for m in caplog.messages)
+    assert roads["directed_road"].tolist()[:5] == ["E-A", "A-F", "F-G", "G-I", "I-H"]
+    assert record.summary["end_reason"] in ("accepted", "destination")
+    assert _roads_driven(record.kinematics) == roads["directed_road"].tolist()
+
+
 def test_unreadable_net(setup, tmp_path):
     bad = tmp_path / "bad.net.xml"
     bad.write_text("<net><edge")
@@ -141,3 +165,18 @@ def test_two_hundred_episodes_keep_memory_flat(setup, net_path):
         assert record.summary["end_reason"] in ("accepted", "destination")
     growth = _rss_mb() - before
     assert growth < 25.0, f"RSS grew by {growth:.1f} MB over 200 episodes"
+
+
+@pytest.mark.slow
+def test_sumo_episodes_match_the_exact_evaluation(setup, net_path, pomdp):
+    """End to end: satisfaction and final trust of SUMO episodes vs the exact tree evaluation."""
+    from policies.evaluate import evaluate
+
+    exact = evaluate(pomdp, setup.spec, trust_free_policy(setup.town, setup.spec), fallback_after=20)
+    n = 300
+    records = [_episode(setup, net_path, 5000 + seed) for seed in range(n)]
+    satisfied = np.mean([r.summary["satisfied"] for r in records])
+    final_trust = np.mean([r.summary["final_trust"] for r in records])
+    p = exact.satisfaction_probability
+    assert abs(satisfied - p) < 4 * np.sqrt(p * (1 - p) / n)
+    assert abs(final_trust - exact.expected_final_trust) < 0.2

@@ -153,3 +153,17 @@ def test_missing_binary_cli_exit_2(tmp_path):
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and "netconvert" in result.stderr
 
+
+
+def test_dead_end_allows_only_its_u_turn(tmp_path):
+    from networks.town import town_from_dict
+
+    data = {"junctions": {"P": [0, 0], "Q": [300, 0], "R": [0, 300], "S": [-250, -250]},
+            "roads": [["P", "Q"], ["Q", "R"], ["R", "P"], ["P", "S"]],
+            "incidents": {r: "none" for r in ("P-Q", "Q-P", "Q-R", "R-Q", "R-P", "P-R", "P-S", "S-P")}}
+    town = town_from_dict(data, "dead_end.json")
+    net = sumolib.net.readNet(str(build_net(town, cache_dir=tmp_path).path))
+    for road in town.states:
+        targets = {nxt.getID() for nxt in net.getEdge(road).getOutgoing() if not nxt.getFunction()}
+        assert targets == set(town.successors(road)), road
+    assert {nxt.getID() for nxt in net.getEdge("P-S").getOutgoing()} == {"S-P"}

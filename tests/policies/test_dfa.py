@@ -14,10 +14,10 @@ from collections import deque
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given, reject, settings
 from hypothesis import strategies as st
 
-from policies.dfa import build_dfa, dfa_from_formula, merge_cubes
+from policies.dfa import DFATooLarge, build_dfa, dfa_from_formula, merge_cubes
 from policies.formula import (
     And,
     Const,
@@ -27,6 +27,8 @@ from policies.formula import (
     Next,
     Or,
     Until,
+    canonical,
+    disjunctive_normal_form,
     parse_formula,
 )
 from policies.spec import load_spec
@@ -220,7 +222,10 @@ def test_small_formula_dfas_are_minimal(text):
 @given(st.one_of(formulas(max_leaves=6), formulas(max_leaves=14, constants=False)), st.integers(0, 2**32 - 1))
 def test_random_formula_dfa_agrees_with_lasso_semantics(formula, seed):
     atoms = ("a", "b", "c", "v1", "hightrust")
-    dfa = dfa_from_formula(formula, atoms)
+    try:
+        dfa = dfa_from_formula(formula, atoms, max_states=2000)
+    except DFATooLarge:
+        reject()  # LTL to DFA is doubly exponential in the worst case; not what this test is about
     index = {a: i for i, a in enumerate(atoms)}
     rng = np.random.default_rng(seed)
     for prefix, period in ((0, 1), (1, 2), (2, 3), (3, 1), (0, 4)):
@@ -237,9 +242,56 @@ def test_random_formula_dfa_agrees_with_lasso_semantics(formula, seed):
         assert not (dfa.rejecting[q] & expected).any()
 
 
+@settings(max_examples=100, deadline=None)
+@given(formulas(max_leaves=12, constants=False))
+def test_random_formula_dfas_are_minimal(formula):
+    try:
+        dfa = dfa_from_formula(formula, max_states=500)
+    except DFATooLarge:
+        reject()
+    assert_minimal_and_complete(dfa)
+
+
 @pytest.mark.parametrize(("stages", "guarded"), [(3, 2), (2, 2), (4, 1)])
 def test_guarded_chain_dfas_are_minimal(stages, guarded):
     assert_minimal_and_complete(dfa_from_formula(parse_formula(guarded_chain(stages, guarded))))
+
+
+@settings(max_examples=200, deadline=None)
+@given(formulas(max_leaves=12), st.integers(0, 2**32 - 1))
+def test_canonical_form_and_dnf_keep_the_meaning(formula, seed):
+    atoms = ("a", "b", "c", "v1", "hightrust")
+    index = {a: i for i, a in enumerate(atoms)}
+    rng = np.random.default_rng(seed)
+    values = rng.random((60, 4, len(atoms))) < 0.5
+    expected = lasso_satisfies(formula, index, values, 1)
+    np.testing.assert_array_equal(lasso_satisfies(canonical(formula), index, values, 1), expected)
+    np.testing.assert_array_equal(lasso_satisfies(disjunctive_normal_form(formula), index, values, 1),
+                                  expected)
+
+
+@pytest.mark.parametrize("text", ["F a U F b", "(X a U v1) U F !a", "(F a U F b) U (F c U X a)"])
+def test_progression_terminates_on_nested_temporal_operators(text):
+    # Without a normal form for states, progression of F a U F b nests And/Or forever.
+    dfa = dfa_from_formula(parse_formula(text))
+    assert dfa.n_states <= 8
+    assert_minimal_and_complete(dfa)
+
+
+def test_too_large_formula_is_an_input_error(monkeypatch):
+    from networks.errors import InputError
+    from policies.spec import spec_from_text
+
+    text = " & ".join(f"F a{i}" for i in range(8))
+    with pytest.raises(DFATooLarge):
+        dfa_from_formula(parse_formula(text), max_states=100)
+    assert dfa_from_formula(parse_formula(text)).n_states == 2**8
+    states = "\n".join(f'a{i} = ["A-B"]' for i in range(8))
+    spec = spec_from_text(f'name = "big"\nstart = "A-B"\nformula = "{text}"\n[states]\n{states}\n')
+    monkeypatch.setattr("policies.dfa.MAX_STATES", 100)
+    monkeypatch.setattr("policies.dfa._CACHE", {})
+    with pytest.raises(InputError, match="too large to translate"):
+        build_dfa(spec)
 
 
 def test_acceptance_is_at_the_first_good_prefix_even_when_not_informative():

@@ -95,6 +95,39 @@ def test_atom_without_effect_agrees_with_brute_force_on_the_dfa():
         assert flagged == set(dfa.atoms) - matters
 
 
+@pytest.mark.parametrize(("formula", "expected"), [
+    ("(b & c) U F b", [("atom-no-effect", "c"), ("subformula-no-effect", "b & c")]),
+    ("X ((a | b) U F b) & F c", [("atom-no-effect", "a"), ("subformula-no-effect", "a | b")]),
+    ("(a & c) U F b", [("atom-no-effect", "a"), ("atom-no-effect", "c")]),  # not repeated
+    # F b & F (b | c) = F b, so c is irrelevant; but F (b | c) is not: replaced by false, the spec fails
+    ("F b & F (b | c)", [("atom-no-effect", "c")]),
+    ("(a & F b) | F b", [("atom-no-effect", "a")]),
+])
+def test_subformula_without_effect(formula, expected):
+    spec = spec_from_text(spec_text(formula, states={"a": ["A-B"], "b": ["B-C"], "c": ["C-D"]}))
+    found = []
+    for w in lint(spec):
+        if w.code == "unused-atom":
+            continue
+        if w.code == "subformula-no-effect":
+            found.append((w.code, w.message.split("'")[1]))
+        else:
+            found.append((w.code, w.atom))
+    assert sorted(found) == expected
+
+
+def test_dfa_equivalence_against_brute_force():
+    from policies.dfa import dfa_from_formula
+    from policies.formula import parse_formula
+    from policies.lint import equivalent
+    pairs = [("a U F b", "F b", True), ("a U b", "b", False), ("F (a | b)", "F a | F b", True),
+             ("X a & X b", "X (a & b)", True), ("F (a & X b)", "F a & F b", False),
+             ("(a | b) U c", "(b | a) U (c | c & a)", True), ("X a", "X X a", False)]
+    for left, right, same in pairs:
+        assert equivalent(dfa_from_formula(parse_formula(left), ("a", "b", "c")),
+                          dfa_from_formula(parse_formula(right), ("a", "b", "c"))) == same
+
+
 def test_unused_atom_and_unsatisfiable_formula():
     spec = spec_from_text(spec_text("F a", states={"a": ["A-B"], "b": ["B-C"]}))
     assert codes(lint(spec)) == [("unused-atom", "b")]

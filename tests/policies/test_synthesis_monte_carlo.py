@@ -93,5 +93,6 @@ def test_vectorised_and_scalar_decisions_agree(pomdp):
     assert (exact == policy.table.action[rows]).all()
     for i in range(200):
         road = town.states[x[i]]
-        context = DecisionContext(route=("L-H",) * int(t[i]) + (road,), dfa_state=int(q[i]), belief=beliefs[i])
+        context = DecisionContext(route=("L-H",) * int(t[i]) + (road,), dfa_state=int(q[i]),
+                                  belief=beliefs[i])
         assert policy.next_junction(context) == town.actions(road)[slots[i]]

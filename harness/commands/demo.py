@@ -1,0 +1,90 @@
+"""`trustroute demo`: the paper-size study on the defaults, analysed, with a recording of one episode.
+
+21 participants x (aware, free) x (φ1, φ2) = 84 episodes in SUMO (counterbalanced), then the
+analysis and report, then one episode (participant 0, φ1, aware) replayed with the same seeds into
+a Rerun `.rrd`. Resumable: a rerun skips finished episodes. When the SUMO engine is not installed
+the demo says so and runs the model engine instead (no recording).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import click
+
+from networks.errors import InputError
+
+DEFAULT_OUT = Path("out") / "demo"
+DEMO_STUDY = {"name": "demo", "participants": 21, "seed": 1, "specs": ["phi1", "phi2"],
+              "conditions": ["aware", "free"]}
+
+
+def _sumo_engine_missing() -> str | None:
+    try:
+        import harness.episode  # noqa: F401
+        import networks.sumo_net  # noqa: F401
+    except ImportError as exc:
+        return str(exc)
+    return None
+
+
+def record_episode(config, study_dir: Path, episode_id: str) -> Path:
+    """Replay one planned episode in SUMO with its seeds and write `<study>/<episode_id>.rrd`."""
+    from harness.episode import run_episode
+    from harness.study.plan import plan_episodes
+    from harness.study.runner import study_context
+    from participants.synthetic_driver import SyntheticDriver
+
+    task = next(t for t in plan_episodes(config) if t.episode_id == episode_id)
+    context = study_context(config)
+    driver = SyntheticDriver(context.driver_model(task.participant), task.driver_rng(),
+                             report_accuracy=config.report_accuracy)
+    path = Path(study_dir) / f"{episode_id}.rrd"
+    if not path.exists():
+        run_episode(context.setups[task.spec], context.policies[(task.spec, task.condition)], driver,
+                    task.episode_id, task.seed, rrd_path=path)
+    return path
+
+
+@click.command("demo")
+@click.option("--out", "out", type=click.Path(), default=str(DEFAULT_OUT), show_default=True,
+              help="Study directory (a rerun resumes).")
+@click.option("--workers", type=int, default=None, help="Local worker processes (default: CPU count).")
+@click.option("--engine", type=click.Choice(["sumo", "model"]), default="sumo", show_default=True)
+@click.option("--participants", type=int, default=21, show_default=True)
+def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
+    """Run the paper-size study (21 participants) on the defaults and show where the results are."""
+    from harness.commands.study import run_and_consolidate
+    from harness.study.config import study_config_from_dict
+
+    if participants < 1:
+        raise InputError("--participants", "", f"must be >= 1, got {participants}", "pass e.g. 21")
+    missing = _sumo_engine_missing() if engine == "sumo" else None
+    if missing is not None:
+        click.echo(f"note: the SUMO engine is not available here ({missing}); running the model engine "
+                   "instead (trust POMDP without SUMO, no .rrd recording)")
+        engine = "model"
+    config = study_config_from_dict({"study": {**DEMO_STUDY, "participants": participants, "engine": engine}},
+                                    "trustroute demo", Path.cwd())
+    study_dir = Path(out)
+    workers = workers if workers is not None else (os.cpu_count() or 1)
+    click.echo(f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}")
+    run, _ = run_and_consolidate(config, study_dir, workers, None)
+    from analysis.report import write_report
+
+    paths = write_report(run.study_dir)
+    click.echo("")
+    click.echo(paths.table_text)
+    click.echo("")
+    click.echo(f"results: {run.study_dir / 'episodes.parquet'} (episodes), {run.study_dir / 'roads.parquet'} (roads)")
+    click.echo(f"report:  {paths.markdown}  and  {paths.html}")
+    if engine == "sumo":
+        episode_id = f"p{0:05d}-phi1-aware"
+        try:
+            rrd = record_episode(config, run.study_dir, episode_id)
+            click.echo(f"episode recording: {rrd}  (open with: rerun {rrd})")
+        except Exception as exc:  # the study is done; a failed recording must not hide it
+            click.echo(f"episode recording failed: {type(exc).__name__}: {exc}")
+    if run.failed:
+        click.echo(f"{len(run.failed)} episodes failed: see {run.study_dir / 'failures'}")
