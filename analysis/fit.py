@@ -31,19 +31,19 @@ import pandas as pd
 from networks.errors import InputError
 from participants.driver_model import PERFORMANCES, DriverModel, driver_model_from_dict
 
-MIN_ROW_WEIGHT = 5.0        # expected visits below which a T row keeps its starting value
-EM_TOLERANCE = 1e-7         # stop when the mean log-likelihood per road improves less than this
+MIN_ROW_WEIGHT = 5.0  # expected visits below which a T row keeps its starting value
+EM_TOLERANCE = 1e-7  # stop when the mean log-likelihood per road improves less than this
 
 
 @dataclass(frozen=True)
 class Observations:
     """Padded per-episode sequences: steps t = 1..L (roads after the start)."""
 
-    incident: np.ndarray     # int [n, S] driver-model incident index (0 on padding)
-    takeover: np.ndarray     # int [n, S]
+    incident: np.ndarray  # int [n, S] driver-model incident index (0 on padding)
+    takeover: np.ndarray  # int [n, S]
     performance: np.ndarray  # int [n, S]
-    report: np.ndarray       # int [n, S+1] trust index reported after step t (column 0: at the start), -1 none
-    mask: np.ndarray         # bool [n, S] step exists
+    report: np.ndarray  # int [n, S+1] trust index reported after step t (column 0: at the start), -1 none
+    mask: np.ndarray  # bool [n, S] step exists
 
     @property
     def episodes(self) -> int:
@@ -65,8 +65,12 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observat
     incident_of[""] = 0
     unknown = set(roads["incident"].unique()) - set(incident_of)
     if unknown:
-        raise InputError("roads.parquet", "incident", f"incident {sorted(unknown)[0]!r} is not in the "
-                         "driver model", "fit with a driver model covering the town's incidents")
+        raise InputError(
+            "roads.parquet",
+            "incident",
+            f"incident {sorted(unknown)[0]!r} is not in the driver model",
+            "fit with a driver model covering the town's incidents",
+        )
     level_of = np.full(max(model.trust_levels) + 2, -1, dtype=np.int64)
     level_of[list(model.trust_levels)] = np.arange(model.n_trust)
     reported = roads["reported_trust"].to_numpy()
@@ -83,8 +87,13 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observat
     report[row, col] = reported
     present[row, col] = True
     # Step t (1..L) is column t of the padded rows; column 0 is the start road (no observation).
-    return Observations(incident=incident[:, 1:], takeover=takeover[:, 1:], performance=performance[:, 1:],
-                        report=report, mask=present[:, 1:])
+    return Observations(
+        incident=incident[:, 1:],
+        takeover=takeover[:, 1:],
+        performance=performance[:, 1:],
+        report=report,
+        mask=present[:, 1:],
+    )
 
 
 def report_matrix(accuracy: float, k: int) -> np.ndarray:
@@ -99,10 +108,10 @@ def report_matrix(accuracy: float, k: int) -> np.ndarray:
 
 @dataclass
 class Parameters:
-    initial: np.ndarray        # [k]
-    takeover: np.ndarray       # [I, k]
-    failure: np.ndarray        # [I, k]
-    transition: np.ndarray     # [I, 2, 2, k, k]
+    initial: np.ndarray  # [k]
+    takeover: np.ndarray  # [I, k]
+    failure: np.ndarray  # [I, k]
+    transition: np.ndarray  # [I, 2, 2, k, k]
     accuracy: float
 
 
@@ -123,8 +132,9 @@ def starting_parameters(n_incidents: int, k: int, observations: Observations) ->
         if observations.performance[on].any():
             failure[i] = 0.2
     transition = np.broadcast_to(band, (n_incidents, 2, 2, k, k)).copy()
-    return Parameters(initial=np.full(k, 1.0 / k), takeover=takeover, failure=failure,
-                      transition=transition, accuracy=0.7)
+    return Parameters(
+        initial=np.full(k, 1.0 / k), takeover=takeover, failure=failure, transition=transition, accuracy=0.7
+    )
 
 
 @dataclass
@@ -133,9 +143,9 @@ class Statistics:
     initial: np.ndarray
     takeover_num: np.ndarray
     failure_num: np.ndarray
-    visits: np.ndarray          # [I, k] expected trust-before counts per incident
-    transition: np.ndarray      # [I, 2, 2, k, k] expected transition counts
-    report: np.ndarray          # [k, k] expected (θ, r) counts
+    visits: np.ndarray  # [I, k] expected trust-before counts per incident
+    transition: np.ndarray  # [I, 2, 2, k, k] expected transition counts
+    report: np.ndarray  # [k, k] expected (θ, r) counts
 
 
 def expectation(obs: Observations, p: Parameters) -> Statistics:
@@ -151,7 +161,7 @@ def expectation(obs: Observations, p: Parameters) -> Statistics:
         out[has] = R[:, reports[has]].T
         return out
 
-    p_h = np.where(h[..., None] == 1, p.takeover[inc], 1 - p.takeover[inc])       # [n, S, k]
+    p_h = np.where(h[..., None] == 1, p.takeover[inc], 1 - p.takeover[inc])  # [n, S, k]
     p_e = np.where(e[..., None] == 1, p.failure[inc], 1 - p.failure[inc])
     like = p_h * p_e
     alpha = np.zeros((n, steps + 1, k))
@@ -161,7 +171,11 @@ def expectation(obs: Observations, p: Parameters) -> Statistics:
     alpha[:, 0] = a0 / scale[:, 0:1]
     matrices = []
     for t in range(steps):
-        M = like[:, t, :, None] * p.transition[inc[:, t], h[:, t], e[:, t]] * emission(obs.report[:, t + 1])[:, None, :]
+        M = (
+            like[:, t, :, None]
+            * p.transition[inc[:, t], h[:, t], e[:, t]]
+            * emission(obs.report[:, t + 1])[:, None, :]
+        )
         M[~mask[:, t]] = np.eye(k)
         matrices.append(M)
         a = np.einsum("ni,nij->nj", alpha[:, t], M)
@@ -184,13 +198,13 @@ def expectation(obs: Observations, p: Parameters) -> Statistics:
         onehot = np.zeros((n, groups))
         onehot[np.arange(n), g] = mask[:, t]
         stats_transition += np.einsum("ng,nij->gij", onehot, xi).reshape(stats_transition.shape)
-        before = xi.sum(axis=2)                                  # posterior of θ_{t-1}
+        before = xi.sum(axis=2)  # posterior of θ_{t-1}
         inc_hot = np.zeros((n, p.takeover.shape[0]))
         inc_hot[np.arange(n), inc[:, t]] = mask[:, t]
         visits += inc_hot.T @ before
         take_num += (inc_hot * h[:, t, None]).T @ before
         fail_num += (inc_hot * e[:, t, None]).T @ before
-        after = xi.sum(axis=1)                                   # posterior of θ_t
+        after = xi.sum(axis=1)  # posterior of θ_t
         reports = obs.report[:, t + 1]
         has = (reports >= 0) & mask[:, t]
         np.add.at(report_counts.T, reports[has], after[has])
@@ -199,12 +213,20 @@ def expectation(obs: Observations, p: Parameters) -> Statistics:
     gamma0 /= gamma0.sum(axis=1, keepdims=True)
     has0 = obs.report[:, 0] >= 0
     np.add.at(report_counts.T, obs.report[has0, 0], gamma0[has0])
-    return Statistics(loglik=float(np.log(scale).sum()), initial=gamma0.sum(axis=0), takeover_num=take_num,
-                      failure_num=fail_num, visits=visits, transition=stats_transition, report=report_counts)
+    return Statistics(
+        loglik=float(np.log(scale).sum()),
+        initial=gamma0.sum(axis=0),
+        takeover_num=take_num,
+        failure_num=fail_num,
+        visits=visits,
+        transition=stats_transition,
+        report=report_counts,
+    )
 
 
 def _fit_accuracy(report_counts: np.ndarray, k: int) -> float:
     """argmax_a Σ counts log R_a (grid then a local refinement; concave in a on [0, 1])."""
+
     def score(a: float) -> float:
         R = report_matrix(a, k)
         with np.errstate(divide="ignore"):
@@ -226,12 +248,13 @@ def maximisation(stats: Statistics, previous: Parameters, fixed_accuracy: float 
     with np.errstate(invalid="ignore", divide="ignore"):
         takeover = np.where(stats.visits > 0, stats.takeover_num / stats.visits, previous.takeover)
         failure = np.where(stats.visits > 0, stats.failure_num / stats.visits, previous.failure)
-    takeover[previous.takeover == 0] = 0.0      # structural zeros (never taken over) stay zero
+    takeover[previous.takeover == 0] = 0.0  # structural zeros (never taken over) stay zero
     failure[previous.failure == 0] = 0.0
     accuracy = fixed_accuracy if fixed_accuracy is not None else _fit_accuracy(stats.report, k)
     initial = stats.initial / stats.initial.sum()
-    return Parameters(initial=initial, takeover=takeover, failure=failure, transition=transition,
-                      accuracy=accuracy)
+    return Parameters(
+        initial=initial, takeover=takeover, failure=failure, transition=transition, accuracy=accuracy
+    )
 
 
 @dataclass
@@ -243,7 +266,7 @@ class FitResult:
     transitions: int
     iterations: int
     loglik: float
-    row_weight: np.ndarray          # [I, 2, 2, k] expected visits of each T row
+    row_weight: np.ndarray  # [I, 2, 2, k] expected visits of each T row
     report_accuracy: float | None
     source: str = ""
     history: list[float] = field(default_factory=list)
@@ -255,51 +278,64 @@ class FitResult:
     def model_dict(self) -> dict:
         """The fitted model in the driver-model file format (validated on write)."""
         p, model = self.parameters, self.template
+        accuracy = "n/a" if self.report_accuracy is None else f"{self.report_accuracy:.4f}"
         transitions: dict = {}
         for i, incident in enumerate(model.incident_types):
             transitions[incident] = {}
             for h, action in enumerate(("standstill", "takeover")):
                 if self.performance_dependent:
-                    transitions[incident][action] = {perf: _rows(p.transition[i, h, e])
-                                                     for e, perf in enumerate(PERFORMANCES)}
+                    transitions[incident][action] = {
+                        perf: _rows(p.transition[i, h, e]) for e, perf in enumerate(PERFORMANCES)
+                    }
                 else:
                     transitions[incident][action] = _rows(p.transition[i, h, 0])
         out = {
             "trust_levels": list(model.trust_levels),
             "incident_types": list(model.incident_types),
-            "takeover_probability": {inc: p.takeover[i].tolist() for i, inc in enumerate(model.incident_types)},
+            "takeover_probability": {
+                inc: p.takeover[i].tolist() for i, inc in enumerate(model.incident_types)
+            },
             "trust_transition": transitions,
             "trust_free_takeover_probability": dict(model.trust_free_takeover_probability),
             "initial_belief": _rows(p.initial[None, :])[0],
-            "source": f"fitted by trustroute fit ({self.method}) from {self.source}: {self.episodes} episodes, "
-                      f"{self.transitions} roads; report accuracy "
-                      f"{'%.4f' % self.report_accuracy if self.report_accuracy is not None else 'n/a'}",
+            "source": f"fitted by trustroute fit ({self.method}) from {self.source}: "
+            f"{self.episodes} episodes, {self.transitions} roads; report accuracy {accuracy}",
         }
         if self.performance_dependent:
-            out["failure_probability"] = {inc: p.failure[i].tolist() for i, inc in enumerate(model.incident_types)}
+            out["failure_probability"] = {
+                inc: p.failure[i].tolist() for i, inc in enumerate(model.incident_types)
+            }
         return out
 
     def model(self) -> DriverModel:
         return driver_model_from_dict(self.model_dict(), "fitted model")
 
     def write(self, path: Path) -> Path:
-        self.model()   # validates
+        self.model()  # validates
         Path(path).write_text(json.dumps(self.model_dict(), indent=1))
         return Path(path)
 
     def sparse_rows(self) -> list[str]:
         names = []
-        for (i, h, e, theta) in zip(*np.nonzero(self.row_weight < MIN_ROW_WEIGHT), strict=True):
+        for i, h, e, theta in zip(*np.nonzero(self.row_weight < MIN_ROW_WEIGHT), strict=True):
             if e == 1 and not self.performance_dependent:
                 continue
-            names.append(f"{self.template.incident_types[i]}/{('standstill', 'takeover')[h]}/"
-                         f"{PERFORMANCES[e]}/trust {self.template.trust_levels[theta]}")
+            names.append(
+                f"{self.template.incident_types[i]}/{('standstill', 'takeover')[h]}/"
+                f"{PERFORMANCES[e]}/trust {self.template.trust_levels[theta]}"
+            )
         return names
 
     def summary(self) -> dict:
-        return {"method": self.method, "episodes": self.episodes, "roads": self.transitions,
-                "iterations": self.iterations, "loglik": self.loglik, "report_accuracy": self.report_accuracy,
-                "rows_kept_at_start_value": len(self.sparse_rows())}
+        return {
+            "method": self.method,
+            "episodes": self.episodes,
+            "roads": self.transitions,
+            "iterations": self.iterations,
+            "loglik": self.loglik,
+            "report_accuracy": self.report_accuracy,
+            "rows_kept_at_start_value": len(self.sparse_rows()),
+        }
 
 
 def _rows(matrix: np.ndarray) -> list[list[float]]:
@@ -309,37 +345,58 @@ def _rows(matrix: np.ndarray) -> list[list[float]]:
     return m.tolist()
 
 
-def fit_em(obs: Observations, template: DriverModel, iterations: int = 200,
-           fixed_accuracy: float | None = None, start: Parameters | None = None) -> FitResult:
-    params = start if start is not None else starting_parameters(len(template.incident_types), template.n_trust, obs)
+def fit_em(
+    obs: Observations,
+    template: DriverModel,
+    iterations: int = 200,
+    fixed_accuracy: float | None = None,
+    start: Parameters | None = None,
+) -> FitResult:
+    params = (
+        start
+        if start is not None
+        else starting_parameters(len(template.incident_types), template.n_trust, obs)
+    )
     if fixed_accuracy is not None:
         params.accuracy = fixed_accuracy
     history: list[float] = []
     stats = expectation(obs, params)
-    done = 0
-    for done in range(1, iterations + 1):
+    for _ in range(iterations):
         params = maximisation(stats, params, fixed_accuracy)
         stats = expectation(obs, params)
         history.append(stats.loglik)
         if len(history) > 1 and (history[-1] - history[-2]) < EM_TOLERANCE * max(1, obs.steps):
             break
-    return FitResult(method="em", template=template, parameters=params, episodes=obs.episodes,
-                     transitions=obs.steps, iterations=done, loglik=stats.loglik,
-                     row_weight=stats.transition.sum(axis=-1), report_accuracy=params.accuracy, history=history)
+    return FitResult(
+        method="em",
+        template=template,
+        parameters=params,
+        episodes=obs.episodes,
+        transitions=obs.steps,
+        iterations=len(history),
+        loglik=stats.loglik,
+        row_weight=stats.transition.sum(axis=-1),
+        report_accuracy=params.accuracy,
+        history=history,
+    )
 
 
 def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
     """Exact reports on every road: count transitions r_{t-1} -> r_t and takeovers at r_{t-1}."""
     if ((obs.report[:, 1:] < 0) & obs.mask).any():
-        raise InputError("roads.parquet", "reported_trust", "some roads carry no trust report",
-                         "fit with --method em (reports every N roads or noisy reports)")
+        raise InputError(
+            "roads.parquet",
+            "reported_trust",
+            "some roads carry no trust report",
+            "fit with --method em (reports every N roads or noisy reports)",
+        )
     k, n_inc = template.n_trust, len(template.incident_types)
     params = starting_parameters(n_inc, k, obs)
     counts = np.zeros_like(params.transition)
     visits = np.zeros_like(params.takeover)
     take = np.zeros_like(params.takeover)
     fail = np.zeros_like(params.failure)
-    both = obs.mask[:, 1:]          # steps t >= 2: the trust before the road was reported at t-1
+    both = obs.mask[:, 1:]  # steps t >= 2: the trust before the road was reported at t-1
     before = obs.report[:, 1:-1][both]
     after = obs.report[:, 2:][both]
     inc, h, e = (a[:, 1:][both] for a in (obs.incident, obs.takeover, obs.performance))
@@ -358,15 +415,27 @@ def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
     for _ in range(30):
         stats = expectation(obs, params)
         params.initial = stats.initial / stats.initial.sum()
-    return FitResult(method="counts", template=template, parameters=params, episodes=obs.episodes,
-                     transitions=obs.steps, iterations=0, loglik=stats.loglik, row_weight=totals,
-                     report_accuracy=1.0)
+    return FitResult(
+        method="counts",
+        template=template,
+        parameters=params,
+        episodes=obs.episodes,
+        transitions=obs.steps,
+        iterations=0,
+        loglik=stats.loglik,
+        row_weight=totals,
+        report_accuracy=1.0,
+    )
 
 
-def fit_roads(roads: pd.DataFrame, template: DriverModel, method: str = "em", iterations: int = 200) -> FitResult:
+def fit_roads(
+    roads: pd.DataFrame, template: DriverModel, method: str = "em", iterations: int = 200
+) -> FitResult:
     obs = observations_from_roads(roads, template)
     if obs.steps == 0:
-        raise InputError("roads.parquet", "", "no roads driven in the logs", "run a study with episodes first")
+        raise InputError(
+            "roads.parquet", "", "no roads driven in the logs", "run a study with episodes first"
+        )
     if method == "counts":
         return fit_counts(obs, template)
     if method == "em":

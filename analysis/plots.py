@@ -40,19 +40,41 @@ def satisfaction_plot(cells: list[dict], path: Path, belief_source: str) -> Path
                 continue
             x = i + (j - (len(conditions) - 1) / 2) * width
             rate = cell["satisfaction_rate"]
-            ax.bar(x, rate, width * 0.9, color=COLOURS[j % len(COLOURS)], alpha=0.8,
-                   label=condition if i == 0 else None)
+            ax.bar(
+                x,
+                rate,
+                width * 0.9,
+                color=COLOURS[j % len(COLOURS)],
+                alpha=0.8,
+                label=condition if i == 0 else None,
+            )
             if cell["ci_low"] is not None:
-                ax.errorbar(x, rate, yerr=[[rate - cell["ci_low"]], [cell["ci_high"] - rate]], color="black",
-                            capsize=4, lw=1)
+                ax.errorbar(
+                    x,
+                    rate,
+                    yerr=[[rate - cell["ci_low"]], [cell["ci_high"] - rate]],
+                    color="black",
+                    capsize=4,
+                    lw=1,
+                )
             if cell.get("exact_lower") is not None:
-                ax.plot([x - width * 0.4, x + width * 0.4], [cell["exact_lower"]] * 2, color="black", ls="--",
-                        lw=1.2, label="exact value (nominal driver)" if i == 0 and j == 0 else None)
+                ax.plot(
+                    [x - width * 0.4, x + width * 0.4],
+                    [cell["exact_lower"]] * 2,
+                    color="black",
+                    ls="--",
+                    lw=1.2,
+                    label="exact value (nominal driver)" if i == 0 and j == 0 else None,
+                )
             if cell.get("synthesized_lower") is not None:
-                ax.fill_between([x - width * 0.45, x + width * 0.45], cell["synthesized_lower"],
-                                max(cell["synthesized_upper"], cell["synthesized_lower"] + 0.004),
-                                color="orange", alpha=0.6,
-                                label="synthesized [L, U] (no fallback)" if i == 0 and j == 0 else None)
+                ax.fill_between(
+                    [x - width * 0.45, x + width * 0.45],
+                    cell["synthesized_lower"],
+                    max(cell["synthesized_upper"], cell["synthesized_lower"] + 0.004),
+                    color="orange",
+                    alpha=0.6,
+                    label="synthesized [L, U] (no fallback)" if i == 0 and j == 0 else None,
+                )
     ax.set_xticks(range(len(specs)), specs)
     ax.set_ylim(0, 1.05)
     ax.set_ylabel("satisfaction rate")
@@ -67,7 +89,8 @@ def satisfaction_plot(cells: list[dict], path: Path, belief_source: str) -> Path
 def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_index: int = 30) -> Path:
     plt = _pyplot()
     merged = roads[["episode_id", "index", "trust_after", "reported_trust"]].merge(
-        episodes[["episode_id", "spec", "condition"]], on="episode_id")
+        episodes[["episode_id", "spec", "condition"]], on="episode_id"
+    )
     merged = merged[merged["index"] <= max_index]
     specs = list(dict.fromkeys(episodes["spec"]))
     fig, axes = plt.subplots(1, max(1, len(specs)), figsize=(4.2 * max(1, len(specs)), 3.4), squeeze=False)
@@ -100,27 +123,39 @@ def route_plot(town: Town, roads: pd.DataFrame, episodes: pd.DataFrame, path: Pa
     specs = list(dict.fromkeys(episodes["spec"]))
     conditions = list(dict.fromkeys(episodes["condition"]))
     merged = roads[["episode_id", "index", "directed_road"]].merge(
-        episodes[["episode_id", "spec", "condition"]], on="episode_id")
+        episodes[["episode_id", "spec", "condition"]], on="episode_id"
+    )
     merged = merged[merged["index"] > 0]
-    fig, axes = plt.subplots(len(specs) or 1, len(conditions) or 1,
-                             figsize=(3.3 * max(1, len(conditions)), 3.3 * max(1, len(specs))), squeeze=False)
+    fig, axes = plt.subplots(
+        len(specs) or 1,
+        len(conditions) or 1,
+        figsize=(3.3 * max(1, len(conditions)), 3.3 * max(1, len(specs))),
+        squeeze=False,
+    )
     xy = town.junctions
     for i, spec in enumerate(specs):
         for j, condition in enumerate(conditions):
             ax = axes[i][j]
             group = merged[(merged["spec"] == spec) & (merged["condition"] == condition)]
             count = episodes[(episodes["spec"] == spec) & (episodes["condition"] == condition)].shape[0]
-            undirected = group.assign(road=group["directed_road"].map(
-                lambda r: "-".join(sorted(split_road(r)))))
-            share = (undirected.drop_duplicates(["episode_id", "road"]).groupby("road").size() / max(1, count))
+            undirected = group.assign(
+                road=group["directed_road"].map(lambda r: "-".join(sorted(split_road(r))))
+            )
+            share = undirected.drop_duplicates(["episode_id", "road"]).groupby("road").size() / max(1, count)
             for u, v in town.roads:
                 key = "-".join(sorted((u, v)))
                 s = float(share.get(key, 0.0))
                 (x1, y1), (x2, y2) = xy[u], xy[v]
                 ax.plot([x1, x2], [y1, y2], color="lightgrey", lw=1, zorder=1)
                 if s > 0:
-                    ax.plot([x1, x2], [y1, y2], color=plt.cm.viridis(s), lw=1 + 7 * s, zorder=2,
-                            solid_capstyle="round")
+                    ax.plot(
+                        [x1, x2],
+                        [y1, y2],
+                        color=plt.cm.viridis(s),
+                        lw=1 + 7 * s,
+                        zorder=2,
+                        solid_capstyle="round",
+                    )
             for name, (x, y) in xy.items():
                 ax.scatter([x], [y], s=60, color="white", edgecolor="black", zorder=3)
                 ax.text(x, y, name, ha="center", va="center", fontsize=6, zorder=4)
@@ -134,8 +169,14 @@ def route_plot(town: Town, roads: pd.DataFrame, episodes: pd.DataFrame, path: Pa
     return path
 
 
-def write_plots(study_dir: Path, town: Town, cells: list[dict], roads: pd.DataFrame, episodes: pd.DataFrame,
-                belief_source: str) -> dict[str, Path]:
+def write_plots(
+    study_dir: Path,
+    town: Town,
+    cells: list[dict],
+    roads: pd.DataFrame,
+    episodes: pd.DataFrame,
+    belief_source: str,
+) -> dict[str, Path]:
     folder = Path(study_dir) / "plots"
     folder.mkdir(parents=True, exist_ok=True)
     return {
@@ -143,5 +184,3 @@ def write_plots(study_dir: Path, town: Town, cells: list[dict], roads: pd.DataFr
         "trust": trust_plot(roads, episodes, folder / "trust.png"),
         "routes": route_plot(town, roads, episodes, folder / "routes.png"),
     }
-
-

@@ -60,39 +60,87 @@ def _sections(primary: StudyAnalysis, secondary: StudyAnalysis) -> list[tuple[st
     manifest = primary.manifest
     config = manifest.get("config", {})
     sections: list[tuple[str, object]] = []
-    sections.append(("Study", [
-        f"{manifest.get('study')}: {config.get('participants')} participants x {len(config.get('specs', []))} specs "
-        f"x {len(config.get('conditions', []))} conditions, {manifest.get('engine')} engine, seed "
-        f"{config.get('seed')}, counterbalanced by a Williams Latin square.",
-        f"Episodes: {manifest.get('finished_episodes')} finished of {manifest.get('planned_episodes')} planned; "
-        f"{len(manifest.get('failed_episodes', []))} failed.",
-        f"Config {manifest.get('config_path')} (hash {str(manifest.get('config_hash'))[:16]}), git "
-        f"{manifest.get('git_revision')}, created {manifest.get('created_utc')}.",
-        "Packages: " + ", ".join(f"{k} {v}" for k, v in manifest.get("packages", {}).items()),
-    ]))
+    n_specs, n_conditions = len(config.get("specs", [])), len(config.get("conditions", []))
+    failed = len(manifest.get("failed_episodes", []))
+    packages = ", ".join(f"{k} {v}" for k, v in manifest.get("packages", {}).items())
+    sections.append(
+        (
+            "Study",
+            [
+                f"{manifest.get('study')}: {config.get('participants')} participants x {n_specs} specs x "
+                f"{n_conditions} conditions, {manifest.get('engine')} engine, seed {config.get('seed')}, "
+                "counterbalanced by a Williams Latin square.",
+                f"Episodes: {manifest.get('finished_episodes')} finished of "
+                f"{manifest.get('planned_episodes')} planned; {failed} failed.",
+                f"Config {manifest.get('config_path')} (hash {str(manifest.get('config_hash'))[:16]}), git "
+                f"{manifest.get('git_revision')}, created {manifest.get('created_utc')}.",
+                f"Packages: {packages}",
+            ],
+        )
+    )
     for analysis in (primary, secondary):
         header, rows = cell_rows(analysis)
-        sections.append((f"Satisfaction and trust per spec and condition (beliefs: {analysis.belief_source})",
-                         (header, rows)))
+        sections.append(
+            (
+                f"Satisfaction and trust per spec and condition (beliefs: {analysis.belief_source})",
+                (header, rows),
+            )
+        )
     for analysis in (primary, secondary):
         if analysis.paired:
-            sections.append((f"Paired tests over participants (beliefs: {analysis.belief_source})", (
-                ["spec", "pair", "pairs", "only A satisfied", "only B satisfied", "McNemar exact p",
-                 "Wilcoxon p (reported trust)", "median trust difference"],
-                [[p["spec"], f"{p['condition_a']} vs {p['condition_b']}", p["pairs"], p["only_a_satisfied"],
-                  p["only_b_satisfied"], f"{p['mcnemar_p']:.4f}", f"{p['wilcoxon_p']:.4f}",
-                  "-" if p["median_trust_difference"] is None else f"{p['median_trust_difference']:.3f}"]
-                 for p in analysis.paired])))
+            sections.append(
+                (
+                    f"Paired tests over participants (beliefs: {analysis.belief_source})",
+                    (
+                        [
+                            "spec",
+                            "pair",
+                            "pairs",
+                            "only A satisfied",
+                            "only B satisfied",
+                            "McNemar exact p",
+                            "Wilcoxon p (reported trust)",
+                            "median trust difference",
+                        ],
+                        [
+                            [
+                                p["spec"],
+                                f"{p['condition_a']} vs {p['condition_b']}",
+                                p["pairs"],
+                                p["only_a_satisfied"],
+                                p["only_b_satisfied"],
+                                f"{p['mcnemar_p']:.4f}",
+                                f"{p['wilcoxon_p']:.4f}",
+                                "-"
+                                if p["median_trust_difference"] is None
+                                else f"{p['median_trust_difference']:.3f}",
+                            ]
+                            for p in analysis.paired
+                        ],
+                    ),
+                )
+            )
     for analysis in (primary, secondary):
-        sections.append((f"The paper beside this study (beliefs: {analysis.belief_source})",
-                         (["figure", "paper", "ours"], [[r["figure"], r["paper"], r["ours"]] for r in analysis.paper])))
+        sections.append(
+            (
+                f"The paper beside this study (beliefs: {analysis.belief_source})",
+                (["figure", "paper", "ours"], [[r["figure"], r["paper"], r["ours"]] for r in analysis.paper]),
+            )
+        )
     sections.append(("Satisfaction with CIs", ("img", "satisfaction")))
     sections.append(("Trust trajectories", ("img", "trust")))
     sections.append(("Routes driven", ("img", "routes")))
     failures = manifest.get("failed_episodes", [])
     if failures:
-        sections.append(("Failed episodes", (["episode", "attempts", "error"],
-                                             [[f["episode_id"], f.get("attempts"), f.get("error")] for f in failures])))
+        sections.append(
+            (
+                "Failed episodes",
+                (
+                    ["episode", "attempts", "error"],
+                    [[f["episode_id"], f.get("attempts"), f.get("error")] for f in failures],
+                ),
+            )
+        )
     sections.append(("Notes", NOTES))
     return sections
 
@@ -103,8 +151,10 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
     primary = analysis if analysis is not None else study_analysis(study_dir, "filter")
     secondary = study_analysis(study_dir, "reported" if primary.belief_source == "filter" else "filter")
     town, _, _ = study_inputs(primary.manifest)
-    roads = pd.read_parquet(study_dir / "roads.parquet",
-                            columns=["episode_id", "index", "directed_road", "trust_after", "reported_trust"])
+    roads = pd.read_parquet(
+        study_dir / "roads.parquet",
+        columns=["episode_id", "index", "directed_road", "trust_after", "reported_trust"],
+    )
     plots = write_plots(study_dir, town, primary.cells, roads, primary.episodes, primary.belief_source)
     sections = _sections(primary, secondary)
     title = f"trustroute study report: {primary.manifest.get('study')}"
@@ -125,12 +175,16 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
         else:
             md += [_md_table(*content), ""]
             body.append(_html_table(*content))
-    style = ("body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em}"
-             "table{border-collapse:collapse;margin:1em 0;font-size:0.85em}"
-             "td,th{border:1px solid #ccc;padding:3px 6px;text-align:left}th{background:#f3f3f3}"
-             "img{max-width:100%}")
-    page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-            f"<style>{style}</style></head><body>{''.join(body)}</body></html>")
+    style = (
+        "body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em}"
+        "table{border-collapse:collapse;margin:1em 0;font-size:0.85em}"
+        "td,th{border:1px solid #ccc;padding:3px 6px;text-align:left}th{background:#f3f3f3}"
+        "img{max-width:100%}"
+    )
+    page = (
+        f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+        f"<style>{style}</style></head><body>{''.join(body)}</body></html>"
+    )
     markdown_path, html_path = study_dir / "report.md", study_dir / "report.html"
     markdown_path.write_text("\n".join(md))
     html_path.write_text(page)

@@ -25,8 +25,9 @@ from policies.trace import evaluate_traces
 BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported")
 
 
-def _padded(roads: pd.DataFrame, town: Town, n_trust: int) -> tuple[list[str], np.ndarray, np.ndarray,
-                                                                    np.ndarray, np.ndarray]:
+def _padded(
+    roads: pd.DataFrame, town: Town, n_trust: int
+) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(episode ids, states [n, T], filter beliefs [n, T, k], reports [n, T], lengths [n])."""
     roads = roads.sort_values(["episode_id", "index"], kind="stable")
     ids, starts, lengths = np.unique(roads["episode_id"].to_numpy(), return_index=True, return_counts=True)
@@ -65,8 +66,14 @@ def reported_beliefs(filter_beliefs: np.ndarray, reports: np.ndarray, levels: tu
     return out
 
 
-def episode_satisfaction(roads: pd.DataFrame, episodes: pd.DataFrame, specs: dict[str, Spec], town: Town,
-                         trust_levels: tuple[int, ...], source: str = "filter") -> pd.DataFrame:
+def episode_satisfaction(
+    roads: pd.DataFrame,
+    episodes: pd.DataFrame,
+    specs: dict[str, Spec],
+    town: Town,
+    trust_levels: tuple[int, ...],
+    source: str = "filter",
+) -> pd.DataFrame:
     """Per episode: `episode_id`, `satisfied` and `first_accepting` (position, -1 if never) of the
     spec the episode was driven for (episodes["spec"]), on beliefs from `source`."""
     if source not in BELIEF_SOURCES:
@@ -81,11 +88,19 @@ def episode_satisfaction(roads: pd.DataFrame, episodes: pd.DataFrame, specs: dic
         if source == "reported":
             beliefs = reported_beliefs(beliefs, reports, trust_levels)
         result = evaluate_traces(spec, town, states, beliefs, lengths)
-        frames.append(pd.DataFrame({"episode_id": ids, "satisfied": result.satisfied,
-                                    "first_accepting": result.first_accepting}))
+        frames.append(
+            pd.DataFrame(
+                {"episode_id": ids, "satisfied": result.satisfied, "first_accepting": result.first_accepting}
+            )
+        )
     if not frames:
-        return pd.DataFrame({"episode_id": pd.Series(dtype=str), "satisfied": pd.Series(dtype=bool),
-                             "first_accepting": pd.Series(dtype="int64")})
+        return pd.DataFrame(
+            {
+                "episode_id": pd.Series(dtype=str),
+                "satisfied": pd.Series(dtype=bool),
+                "first_accepting": pd.Series(dtype="int64"),
+            }
+        )
     out = pd.concat(frames, ignore_index=True)
     order = {eid: i for i, eid in enumerate(episodes["episode_id"])}
     return out.sort_values("episode_id", key=lambda s: s.map(order)).reset_index(drop=True)

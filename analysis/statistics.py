@@ -19,12 +19,16 @@ from scipy import stats
 
 DEFAULT_RESAMPLES = 10_000
 DEFAULT_LEVEL = 0.95
-_CHUNK_CELLS = 4_000_000   # resample indices held in memory at once
+_CHUNK_CELLS = 4_000_000  # resample indices held in memory at once
 
 
-def bootstrap_ci(values: np.ndarray, rng: np.random.Generator, resamples: int = DEFAULT_RESAMPLES,
-                 level: float = DEFAULT_LEVEL,
-                 statistic: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[float, float]:
+def bootstrap_ci(
+    values: np.ndarray,
+    rng: np.random.Generator,
+    resamples: int = DEFAULT_RESAMPLES,
+    level: float = DEFAULT_LEVEL,
+    statistic: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> tuple[float, float]:
     """Percentile bootstrap interval of `statistic` (row-wise over resamples [B, n]; default mean).
 
     NaN values are dropped first; an empty sample gives (nan, nan).
@@ -51,8 +55,8 @@ def bootstrap_ci(values: np.ndarray, rng: np.random.Generator, resamples: int = 
 @dataclass(frozen=True)
 class McNemar:
     pairs: int
-    only_first: int      # pairs where A succeeded and B failed
-    only_second: int     # pairs where B succeeded and A failed
+    only_first: int  # pairs where A succeeded and B failed
+    only_second: int  # pairs where B succeeded and A failed
     p_value: float
 
 
@@ -90,8 +94,14 @@ def wilcoxon_paired(first: np.ndarray, second: np.ndarray) -> Wilcoxon:
     nonzero = int(np.count_nonzero(difference))
     median = float(np.median(difference)) if difference.size else math.nan
     if nonzero == 0:
-        return Wilcoxon(pairs=int(a.size), nonzero=0, statistic=math.nan, p_value=1.0,
-                        median_difference=median)
+        return Wilcoxon(
+            pairs=int(a.size), nonzero=0, statistic=math.nan, p_value=1.0, median_difference=median
+        )
     result = stats.wilcoxon(a, b, zero_method="wilcox", alternative="two-sided")
-    return Wilcoxon(pairs=int(a.size), nonzero=nonzero, statistic=float(result.statistic),
-                    p_value=float(result.pvalue), median_difference=median)
+    return Wilcoxon(
+        pairs=int(a.size),
+        nonzero=nonzero,
+        statistic=float(result.statistic),
+        p_value=float(result.pvalue),
+        median_difference=median,
+    )

@@ -33,7 +33,7 @@ PAPER = {
     "mean_trust": {"aware": 4.6018, "free": 4.3933},
     "pr_max": {"phi1": 0.8357, "phi2": 0.7288},
 }
-ANALYSIS_SEED = 20240513   # bootstrap resampling: fixed, so an analysis is reproducible
+ANALYSIS_SEED = 20240513  # bootstrap resampling: fixed, so an analysis is reproducible
 
 
 @dataclass
@@ -44,14 +44,20 @@ class StudyAnalysis:
     cells: list[dict]
     paired: list[dict]
     paper: list[dict]
-    satisfaction: pd.DataFrame = field(repr=False)   # per episode, both sources
+    satisfaction: pd.DataFrame = field(repr=False)  # per episode, both sources
     episodes: pd.DataFrame = field(repr=False)
 
     def to_dict(self) -> dict:
-        return {"study_dir": str(self.study_dir), "study": self.manifest.get("study"),
-                "engine": self.manifest.get("engine"), "belief_source": self.belief_source,
-                "cells": self.cells, "paired": self.paired, "paper_comparison": self.paper,
-                "failed_episodes": len(self.manifest.get("failed_episodes", []))}
+        return {
+            "study_dir": str(self.study_dir),
+            "study": self.manifest.get("study"),
+            "engine": self.manifest.get("engine"),
+            "belief_source": self.belief_source,
+            "cells": self.cells,
+            "paired": self.paired,
+            "paper_comparison": self.paper,
+            "failed_episodes": len(self.manifest.get("failed_episodes", [])),
+        }
 
 
 def _finite(value: float) -> float | None:
@@ -62,15 +68,23 @@ def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     study_dir = Path(study_dir)
     manifest_path = study_dir / "manifest.json"
     if not manifest_path.exists():
-        raise InputError(str(study_dir), "manifest.json", "not a finished study directory (no manifest)",
-                         "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
+        raise InputError(
+            str(study_dir),
+            "manifest.json",
+            "not a finished study directory (no manifest)",
+            "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)",
+        )
     try:
         manifest = json.loads(manifest_path.read_text())
         episodes = pd.read_parquet(study_dir / "episodes.parquet")
         roads = pd.read_parquet(study_dir / "roads.parquet")
     except (OSError, ValueError) as exc:
-        raise InputError(str(study_dir), "dataset", f"cannot read the consolidated dataset ({exc})",
-                         "rerun `trustroute study` on this directory to rebuild it") from None
+        raise InputError(
+            str(study_dir),
+            "dataset",
+            f"cannot read the consolidated dataset ({exc})",
+            "rerun `trustroute study` on this directory to rebuild it",
+        ) from None
     return manifest, episodes, roads
 
 
@@ -95,24 +109,32 @@ def _pair_conditions(conditions: list[str]) -> tuple[str, str] | None:
 
 def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: int = 10_000) -> StudyAnalysis:
     if belief_source not in BELIEF_SOURCES:
-        raise InputError("--belief-source", "", f"unknown belief source {belief_source!r}",
-                         f"use one of {', '.join(BELIEF_SOURCES)}")
+        raise InputError(
+            "--belief-source",
+            "",
+            f"unknown belief source {belief_source!r}",
+            f"use one of {', '.join(BELIEF_SOURCES)}",
+        )
     manifest, episodes, roads = load_study(study_dir)
     town, driver, specs = study_inputs(manifest)
     satisfaction = episodes[["episode_id", "participant", "spec", "condition"]].copy()
     for source in BELIEF_SOURCES:
         result = episode_satisfaction(roads, episodes, specs, town, driver.trust_levels, source)
         mapped = dict(zip(result["episode_id"], result["satisfied"], strict=True))
-        satisfaction[f"satisfied_{source}"] = satisfaction["episode_id"].map(mapped).fillna(False).astype(bool)
-    episodes = episodes.merge(satisfaction[["episode_id", "satisfied_filter", "satisfied_reported"]],
-                              on="episode_id", how="left")
+        satisfaction[f"satisfied_{source}"] = (
+            satisfaction["episode_id"].map(mapped).fillna(False).astype(bool)
+        )
+    episodes = episodes.merge(
+        satisfaction[["episode_id", "satisfied_filter", "satisfied_reported"]], on="episode_id", how="left"
+    )
     other = [s for s in BELIEF_SOURCES if s != belief_source][0]
     expected = manifest.get("expected", {})
     rng = np.random.default_rng(ANALYSIS_SEED)
     spec_order = [Path(p).stem for p in manifest["config"]["specs"]]
     condition_order = list(dict.fromkeys(episodes["condition"])) if len(episodes) else []
-    config_conditions = [c if c in ("aware", "free") else Path(c).stem
-                         for c in manifest["config"]["conditions"]]
+    config_conditions = [
+        c if c in ("aware", "free") else Path(c).stem for c in manifest["config"]["conditions"]
+    ]
     condition_order = [c for c in config_conditions if c in condition_order] or condition_order
 
     cells = []
@@ -124,25 +146,34 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
             low, high = bootstrap_ci(sat, rng, resamples)
             trust_low, trust_high = bootstrap_ci(trust, rng, resamples)
             exp = expected.get(spec, {}).get(condition, {})
-            cells.append({
-                "spec": spec, "condition": condition, "n": int(len(group)),
-                "satisfied": int(sat.sum()),
-                "satisfaction_rate": _finite(sat.mean()) if len(group) else None,
-                "ci_low": _finite(low), "ci_high": _finite(high),
-                f"satisfaction_rate_{other}": _finite(group[f"satisfied_{other}"].mean()) if len(group) else None,
-                "logged_satisfaction_rate": _finite(group["satisfied"].mean()) if len(group) else None,
-                "mean_trust": _finite(np.nanmean(trust)) if np.isfinite(trust).any() else None,
-                "trust_ci_low": _finite(trust_low), "trust_ci_high": _finite(trust_high),
-                "mean_true_trust": _finite(group["mean_trust"].mean()) if len(group) else None,
-                "mean_final_trust": _finite(group["final_trust"].mean()) if len(group) else None,
-                "mean_junctions": _finite(group["junctions"].mean()) if len(group) else None,
-                "takeovers_per_episode": _finite(group["takeovers"].mean()) if len(group) else None,
-                "fallback_rate": _finite(group["fallback_fired"].mean()) if len(group) else None,
-                "exact_lower": exp.get("exact_lower"), "exact_upper": exp.get("exact_upper"),
-                "exact_final_trust": exp.get("expected_final_trust"),
-                "synthesized_lower": exp.get("synthesized_lower"),
-                "synthesized_upper": exp.get("synthesized_upper"),
-            })
+            cells.append(
+                {
+                    "spec": spec,
+                    "condition": condition,
+                    "n": int(len(group)),
+                    "satisfied": int(sat.sum()),
+                    "satisfaction_rate": _finite(sat.mean()) if len(group) else None,
+                    "ci_low": _finite(low),
+                    "ci_high": _finite(high),
+                    f"satisfaction_rate_{other}": _finite(group[f"satisfied_{other}"].mean())
+                    if len(group)
+                    else None,
+                    "logged_satisfaction_rate": _finite(group["satisfied"].mean()) if len(group) else None,
+                    "mean_trust": _finite(np.nanmean(trust)) if np.isfinite(trust).any() else None,
+                    "trust_ci_low": _finite(trust_low),
+                    "trust_ci_high": _finite(trust_high),
+                    "mean_true_trust": _finite(group["mean_trust"].mean()) if len(group) else None,
+                    "mean_final_trust": _finite(group["final_trust"].mean()) if len(group) else None,
+                    "mean_junctions": _finite(group["junctions"].mean()) if len(group) else None,
+                    "takeovers_per_episode": _finite(group["takeovers"].mean()) if len(group) else None,
+                    "fallback_rate": _finite(group["fallback_fired"].mean()) if len(group) else None,
+                    "exact_lower": exp.get("exact_lower"),
+                    "exact_upper": exp.get("exact_upper"),
+                    "exact_final_trust": exp.get("expected_final_trust"),
+                    "synthesized_lower": exp.get("synthesized_lower"),
+                    "synthesized_upper": exp.get("synthesized_upper"),
+                }
+            )
 
     paired = []
     pair = _pair_conditions(condition_order)
@@ -150,9 +181,12 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
         a, b = pair
         for spec in [*spec_order, "all"]:
             subset = episodes if spec == "all" else episodes[episodes["spec"] == spec]
-            wide = subset.pivot_table(index=["participant", "spec"], columns="condition",
-                                      values=[f"satisfied_{belief_source}", "mean_reported_trust"],
-                                      aggfunc="first")
+            wide = subset.pivot_table(
+                index=["participant", "spec"],
+                columns="condition",
+                values=[f"satisfied_{belief_source}", "mean_reported_trust"],
+                aggfunc="first",
+            )
             column = f"satisfied_{belief_source}"
             if (column, a) not in wide or (column, b) not in wide:
                 continue
@@ -161,14 +195,31 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
             trust_a = wide[("mean_reported_trust", a)].to_numpy(dtype=float)
             trust_b = wide[("mean_reported_trust", b)].to_numpy(dtype=float)
             wx = wilcoxon_paired(trust_a, trust_b)
-            paired.append({"spec": spec, "condition_a": a, "condition_b": b, "pairs": mc.pairs,
-                           "only_a_satisfied": mc.only_first, "only_b_satisfied": mc.only_second,
-                           "mcnemar_p": mc.p_value, "wilcoxon_pairs": wx.pairs,
-                           "wilcoxon_statistic": _finite(wx.statistic), "wilcoxon_p": wx.p_value,
-                           "median_trust_difference": _finite(wx.median_difference)})
-    analysis = StudyAnalysis(study_dir=Path(study_dir), belief_source=belief_source, manifest=manifest,
-                             cells=cells, paired=paired, paper=[], satisfaction=satisfaction,
-                             episodes=episodes)
+            paired.append(
+                {
+                    "spec": spec,
+                    "condition_a": a,
+                    "condition_b": b,
+                    "pairs": mc.pairs,
+                    "only_a_satisfied": mc.only_first,
+                    "only_b_satisfied": mc.only_second,
+                    "mcnemar_p": mc.p_value,
+                    "wilcoxon_pairs": wx.pairs,
+                    "wilcoxon_statistic": _finite(wx.statistic),
+                    "wilcoxon_p": wx.p_value,
+                    "median_trust_difference": _finite(wx.median_difference),
+                }
+            )
+    analysis = StudyAnalysis(
+        study_dir=Path(study_dir),
+        belief_source=belief_source,
+        manifest=manifest,
+        cells=cells,
+        paired=paired,
+        paper=[],
+        satisfaction=satisfaction,
+        episodes=episodes,
+    )
     analysis.paper = paper_comparison(analysis)
     return analysis
 
@@ -189,10 +240,20 @@ def paper_comparison(analysis: StudyAnalysis) -> list[dict]:
             values.append(f"{group[column].mean():.{digits}f}" if len(group) else "not run")
         return " vs ".join(values)
 
-    rows.append({"figure": "satisfaction aware vs free", "paper": "0.85 vs 0.775",
-                 "ours": by_condition(f"satisfied_{source}", 3)})
-    rows.append({"figure": "average trust aware vs free (reported)", "paper": "4.6018 vs 4.3933",
-                 "ours": by_condition("mean_reported_trust", 4)})
+    rows.append(
+        {
+            "figure": "satisfaction aware vs free",
+            "paper": "0.85 vs 0.775",
+            "ours": by_condition(f"satisfied_{source}", 3),
+        }
+    )
+    rows.append(
+        {
+            "figure": "average trust aware vs free (reported)",
+            "paper": "4.6018 vs 4.3933",
+            "ours": by_condition("mean_reported_trust", 4),
+        }
+    )
     cells = {(c["spec"], c["condition"]): c for c in analysis.cells}
     for spec, value in PAPER["pr_max"].items():
         cell = cells.get((spec, "aware"), {})
@@ -213,38 +274,90 @@ def _fmt(value: object, digits: int = 3) -> str:
 def cell_rows(analysis: StudyAnalysis) -> tuple[list[str], list[list[str]]]:
     """Header and rows of the main table (for the terminal and the report)."""
     other = [s for s in BELIEF_SOURCES if s != analysis.belief_source][0]
-    header = ["spec", "condition", "n", "satisfied", "rate", "95% CI", f"rate ({other})", "exact [L, U]",
-              "synthesized [L, U]", "mean trust (reported)", "trust 95% CI", "mean true trust", "junctions",
-              "fallback"]
+    header = [
+        "spec",
+        "condition",
+        "n",
+        "satisfied",
+        "rate",
+        "95% CI",
+        f"rate ({other})",
+        "exact [L, U]",
+        "synthesized [L, U]",
+        "mean trust (reported)",
+        "trust 95% CI",
+        "mean true trust",
+        "junctions",
+        "fallback",
+    ]
     rows = []
     for c in analysis.cells:
-        exact = (f"[{c['exact_lower']:.3f}, {c['exact_upper']:.3f}]" if c["exact_lower"] is not None else "-")
-        synth = (f"[{c['synthesized_lower']:.3f}, {c['synthesized_upper']:.3f}]"
-                 if c["synthesized_lower"] is not None else "-")
-        rows.append([c["spec"], c["condition"], str(c["n"]), str(c["satisfied"]), _fmt(c["satisfaction_rate"]),
-                     f"[{_fmt(c['ci_low'])}, {_fmt(c['ci_high'])}]", _fmt(c[f"satisfaction_rate_{other}"]),
-                     exact, synth, _fmt(c["mean_trust"], 3),
-                     f"[{_fmt(c['trust_ci_low'], 2)}, {_fmt(c['trust_ci_high'], 2)}]",
-                     _fmt(c["mean_true_trust"], 3), _fmt(c["mean_junctions"], 1), _fmt(c["fallback_rate"], 2)])
+        exact = f"[{c['exact_lower']:.3f}, {c['exact_upper']:.3f}]" if c["exact_lower"] is not None else "-"
+        synth = (
+            f"[{c['synthesized_lower']:.3f}, {c['synthesized_upper']:.3f}]"
+            if c["synthesized_lower"] is not None
+            else "-"
+        )
+        rows.append(
+            [
+                c["spec"],
+                c["condition"],
+                str(c["n"]),
+                str(c["satisfied"]),
+                _fmt(c["satisfaction_rate"]),
+                f"[{_fmt(c['ci_low'])}, {_fmt(c['ci_high'])}]",
+                _fmt(c[f"satisfaction_rate_{other}"]),
+                exact,
+                synth,
+                _fmt(c["mean_trust"], 3),
+                f"[{_fmt(c['trust_ci_low'], 2)}, {_fmt(c['trust_ci_high'], 2)}]",
+                _fmt(c["mean_true_trust"], 3),
+                _fmt(c["mean_junctions"], 1),
+                _fmt(c["fallback_rate"], 2),
+            ]
+        )
     return header, rows
 
 
 def format_table(analysis: StudyAnalysis) -> str:
     """Plain-text tables for the terminal."""
     header, rows = cell_rows(analysis)
-    lines = [f"study {analysis.manifest.get('study')} ({analysis.manifest.get('engine')} engine); "
-             f"satisfaction on beliefs from: {analysis.belief_source}"]
+    lines = [
+        f"study {analysis.manifest.get('study')} ({analysis.manifest.get('engine')} engine); "
+        f"satisfaction on beliefs from: {analysis.belief_source}"
+    ]
     lines += _aligned(header, rows)
     if analysis.paired:
         lines.append("")
-        lines += _aligned(["spec", "pair", "pairs", "only A sat.", "only B sat.", "McNemar p", "Wilcoxon p",
-                           "median trust diff"],
-                          [[p["spec"], f"{p['condition_a']} vs {p['condition_b']}", str(p["pairs"]),
-                            str(p["only_a_satisfied"]), str(p["only_b_satisfied"]), f"{p['mcnemar_p']:.4f}",
-                            f"{p['wilcoxon_p']:.4f}", _fmt(p["median_trust_difference"], 3)]
-                           for p in analysis.paired])
+        lines += _aligned(
+            [
+                "spec",
+                "pair",
+                "pairs",
+                "only A sat.",
+                "only B sat.",
+                "McNemar p",
+                "Wilcoxon p",
+                "median trust diff",
+            ],
+            [
+                [
+                    p["spec"],
+                    f"{p['condition_a']} vs {p['condition_b']}",
+                    str(p["pairs"]),
+                    str(p["only_a_satisfied"]),
+                    str(p["only_b_satisfied"]),
+                    f"{p['mcnemar_p']:.4f}",
+                    f"{p['wilcoxon_p']:.4f}",
+                    _fmt(p["median_trust_difference"], 3),
+                ]
+                for p in analysis.paired
+            ],
+        )
     lines.append("")
-    lines += _aligned(["figure", "paper", "ours"], [[r["figure"], r["paper"], r["ours"]] for r in analysis.paper])
+    lines += _aligned(
+        ["figure", "paper", "ours"], [[r["figure"], r["paper"], r["ours"]] for r in analysis.paper]
+    )
     return "\n".join(lines)
 
 

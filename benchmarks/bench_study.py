@@ -46,10 +46,20 @@ def _study(participants: int, engine: str, out: Path) -> tuple[float, object]:
     from harness.commands.study import run_and_consolidate
     from harness.study.config import study_config_from_dict
 
-    config = study_config_from_dict({"study": {"name": f"bench-{engine}-{participants}",
-                                               "participants": participants, "seed": 1, "engine": engine,
-                                               "specs": ["phi1", "phi2"], "conditions": ["aware", "free"]}},
-                                    "bench_study", Path.cwd())
+    config = study_config_from_dict(
+        {
+            "study": {
+                "name": f"bench-{engine}-{participants}",
+                "participants": participants,
+                "seed": 1,
+                "engine": engine,
+                "specs": ["phi1", "phi2"],
+                "conditions": ["aware", "free"],
+            }
+        },
+        "bench_study",
+        Path.cwd(),
+    )
     started = time.perf_counter()
     run, _ = run_and_consolidate(config, out, WORKERS, None, progress=False, echo=lambda *_: None)
     return time.perf_counter() - started, run
@@ -70,35 +80,76 @@ def run() -> list[dict]:
         for i in range(SINGLE_EPISODES):
             run_model_episode(setup, policy, SyntheticDriver(driver, rng), f"e{i}", 0)
         single = SINGLE_EPISODES / (time.perf_counter() - started) * 60
-        simulate_batch(setup, policy, 1000, np.random.default_rng(0))     # warm caches
+        simulate_batch(setup, policy, 1000, np.random.default_rng(0))  # warm caches
         started = time.perf_counter()
         batch = simulate_batch(setup, policy, BATCH_EPISODES, np.random.default_rng(2))
         seconds = time.perf_counter() - started
         per_minute = BATCH_EPISODES / seconds * 60
-        results.append({"name": f"study.model_engine.batch.{name}.episodes_per_minute", "value": per_minute,
-                        "unit": "episodes/min", "baseline": single, "ratio": per_minute / single,
-                        "baseline_what": f"per-episode path (EpisodeTracker), {SINGLE_EPISODES} episodes",
-                        "target": 100_000, "episodes": BATCH_EPISODES, "seconds": seconds,
-                        "satisfaction": float(batch.satisfied.mean()), "policy_calls": batch.policy_calls})
+        results.append(
+            {
+                "name": f"study.model_engine.batch.{name}.episodes_per_minute",
+                "value": per_minute,
+                "unit": "episodes/min",
+                "baseline": single,
+                "ratio": per_minute / single,
+                "baseline_what": f"per-episode path (EpisodeTracker), {SINGLE_EPISODES} episodes",
+                "target": 100_000,
+                "episodes": BATCH_EPISODES,
+                "seconds": seconds,
+                "satisfaction": float(batch.satisfied.mean()),
+                "policy_calls": batch.policy_calls,
+            }
+        )
 
     with tempfile.TemporaryDirectory(prefix="trustroute-bench-") as folder:
         seconds, run_info = _study(RUNNER_PARTICIPANTS, "model", Path(folder) / "model")
         episodes = RUNNER_PARTICIPANTS * 4
-        results.append({"name": "study.runner.model_engine.episodes_per_minute", "value": episodes / seconds * 60,
-                        "unit": "episodes/min", "episodes": episodes, "seconds": seconds, "workers": WORKERS,
-                        "failed": len(run_info.failed), "what": "per-episode Parquet parts, consolidation, "
-                        "exact evaluation of the 4 policies"})
+        results.append(
+            {
+                "name": "study.runner.model_engine.episodes_per_minute",
+                "value": episodes / seconds * 60,
+                "unit": "episodes/min",
+                "episodes": episodes,
+                "seconds": seconds,
+                "workers": WORKERS,
+                "failed": len(run_info.failed),
+                "what": "per-episode Parquet parts, consolidation, exact evaluation of the 4 policies",
+            }
+        )
         try:
             import harness.episode  # noqa: F401
         except ImportError as exc:
-            results.append({"name": "study.sumo.paper_size.seconds", "value": None, "unit": "s",
-                            "skipped": f"SUMO engine not installed ({exc})"})
+            results.append(
+                {
+                    "name": "study.sumo.paper_size.seconds",
+                    "value": None,
+                    "unit": "s",
+                    "skipped": f"SUMO engine not installed ({exc})",
+                }
+            )
             return results
         seconds, run_info = _study(21, "sumo", Path(folder) / "paper")
-        results.append({"name": "study.sumo.paper_size.seconds", "value": seconds, "unit": "s", "episodes": 84,
-                        "workers": WORKERS, "target": 60.0, "failed": len(run_info.failed)})
+        results.append(
+            {
+                "name": "study.sumo.paper_size.seconds",
+                "value": seconds,
+                "unit": "s",
+                "episodes": 84,
+                "workers": WORKERS,
+                "target": 60.0,
+                "failed": len(run_info.failed),
+            }
+        )
         seconds, run_info = _study(SUMO_LARGE_PARTICIPANTS, "sumo", Path(folder) / "large")
-        results.append({"name": "study.sumo.4000_episodes.seconds", "value": seconds, "unit": "s",
-                        "episodes": SUMO_LARGE_PARTICIPANTS * 4, "workers": WORKERS, "target": 900.0,
-                        "failed": len(run_info.failed)})
+        results.append(
+            {
+                "name": "study.sumo.4000_episodes.seconds",
+                "value": seconds,
+                "unit": "s",
+                "episodes": SUMO_LARGE_PARTICIPANTS * 4,
+                "workers": WORKERS,
+                "target": 900.0,
+                "failed": len(run_info.failed),
+            }
+        )
     return results

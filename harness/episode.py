@@ -95,13 +95,21 @@ def _define_ego_type(sumo) -> None:
     sumo.vehicletype.setSpeedDeviation(EGO_TYPE, 0.0)
 
 
+_MATCHING_NETS: set[tuple[str, float, str]] = set()
+
+
 def _check_net_matches(sumo, setup: EpisodeSetup, net_path: Path) -> None:
+    """The net has an edge for every road of the town (checked once per net and town per process)."""
+    key = (str(net_path), net_path.stat().st_mtime, setup.town.content_hash)
+    if key in _MATCHING_NETS:
+        return
     edges = set(sumo.edge.getIDList())
     missing = sorted(set(setup.town.states) - edges)
     if missing:
         raise InputError(str(net_path), "", f"the net has no edge for road(s) {', '.join(missing[:4])} of "
                          f"town {setup.town.source_path or 'town'}",
                          "build the net of this town with `trustroute net build --town FILE`")
+    _MATCHING_NETS.add(key)
 
 
 _READABLE: set[tuple[str, float]] = set()
@@ -306,24 +314,26 @@ class _Episode:
         return now
 
     def incidents_frame(self) -> pd.DataFrame:
-        rows = []
-        for run in self.runs:
-            if run.index == 0 or not run.committed and run.incident is None:
-                continue
-            if run.incident is None and not run.took_over:
-                continue
-            rows.append({
-                "episode_id": self.tracker.episode_id, "index": run.index, "directed_road": run.road,
-                "incident": run.kind,
-                "sumo_ids": ",".join(run.incident.sumo_ids) if run.incident is not None else "",
-                "injected_time": run.injected_time, "in_view_time": run.in_view_time, "x": run.x, "y": run.y,
-                "passed_time": run.passed_time, "removed_time": run.removed_time,
-                "takeover": run.took_over, "takeover_start": run.takeover_start,
-                "takeover_end": run.takeover_end, "performance": run.monitor.result(),
-                "min_ttc": run.monitor.min_ttc, "max_deceleration": run.monitor.max_deceleration,
-                "collided": run.monitor.collided,
-            })
-        return pd.DataFrame(rows, columns=list(INCIDENT_COLUMNS))
+        """One row per road with an incident object or a takeover (row 0, the start road, never)."""
+        runs = [run for run in self.runs if run.index > 0 and (run.incident is not None or run.took_over)]
+        columns = {
+            "episode_id": [self.tracker.episode_id] * len(runs),
+            "index": np.array([run.index for run in runs], dtype=np.int64),
+            "directed_road": [run.road for run in runs],
+            "incident": [run.kind for run in runs],
+            "sumo_ids": [",".join(run.incident.sumo_ids) if run.incident is not None else "" for run in runs],
+        }
+        for name in ("injected_time", "in_view_time", "x", "y", "passed_time", "removed_time"):
+            columns[name] = np.array([getattr(run, name) for run in runs], dtype=np.float64)
+        columns["takeover"] = np.array([run.took_over for run in runs], dtype=bool)
+        columns["takeover_start"] = np.array([run.takeover_start for run in runs], dtype=np.float64)
+        columns["takeover_end"] = np.array([run.takeover_end for run in runs], dtype=np.float64)
+        columns["performance"] = [run.monitor.result() for run in runs]
+        columns["min_ttc"] = np.array([run.monitor.min_ttc for run in runs], dtype=np.float64)
+        columns["max_deceleration"] = np.array([run.monitor.max_deceleration for run in runs],
+                                               dtype=np.float64)
+        columns["collided"] = np.array([run.monitor.collided for run in runs], dtype=bool)
+        return pd.DataFrame({name: columns[name] for name in INCIDENT_COLUMNS})
 
     def kinematics_frame(self) -> pd.DataFrame:
         kin = self.kinematics

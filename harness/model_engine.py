@@ -33,16 +33,24 @@ from policies.policy import DecisionContext, RoutingPolicy
 KINEMATICS_COLUMNS: tuple[str, ...] = ("episode_id", "time", "x", "y", "speed", "lane", "mode")
 END_CODES: tuple[str, ...] = ("", "accepted", "rejected", "destination", "cap")
 
+
 def empty_kinematics() -> pd.DataFrame:
-    return pd.DataFrame({
-        "episode_id": pd.Series(dtype="str"), "time": pd.Series(dtype="float64"),
-        "x": pd.Series(dtype="float64"), "y": pd.Series(dtype="float64"),
-        "speed": pd.Series(dtype="float64"), "lane": pd.Series(dtype="str"),
-        "mode": pd.Series(dtype="str")})
+    return pd.DataFrame(
+        {
+            "episode_id": pd.Series(dtype="str"),
+            "time": pd.Series(dtype="float64"),
+            "x": pd.Series(dtype="float64"),
+            "y": pd.Series(dtype="float64"),
+            "speed": pd.Series(dtype="float64"),
+            "lane": pd.Series(dtype="str"),
+            "mode": pd.Series(dtype="str"),
+        }
+    )
 
 
-def run_model_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver: SyntheticDriver,
-                      episode_id: str, seed: int) -> EpisodeRecord:
+def run_model_episode(
+    setup: EpisodeSetup, policy: RoutingPolicy, driver: SyntheticDriver, episode_id: str, seed: int
+) -> EpisodeRecord:
     """One episode in the trust POMDP. `seed` is recorded by the caller only: every draw is the
     driver's (its Generator), so the episode is a function of the driver's seed."""
     del seed  # the model engine has no simulator of its own to seed
@@ -57,13 +65,15 @@ def run_model_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver: Synthe
         performance = driver.performance(incident)
         after = driver.move_trust(incident, took_over, performance)
         reported = driver.report_trust() if tracker.should_report() else -1
-        tracker.record_road(road, incident, took_over, performance, before, after, reported,
-                            math.nan, math.nan)
+        tracker.record_road(
+            road, incident, took_over, performance, before, after, reported, math.nan, math.nan
+        )
     summary = tracker.summary(wall_seconds=time.perf_counter() - started, sim_seconds=math.nan)
     return EpisodeRecord(summary=summary, roads=tracker.roads_frame(), kinematics=empty_kinematics())
 
 
 # -- the vectorised path -------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class BatchResult:
@@ -74,16 +84,23 @@ class BatchResult:
     takeovers: np.ndarray
     final_trust: np.ndarray
     mean_trust: np.ndarray
-    end_reason: np.ndarray        # str
+    end_reason: np.ndarray  # str
     fallback_fired: np.ndarray
     policy_calls: int
     seconds: float
 
     def frame(self) -> pd.DataFrame:
-        return pd.DataFrame({"satisfied": self.satisfied, "junctions": self.junctions,
-                             "takeovers": self.takeovers, "final_trust": self.final_trust,
-                             "mean_trust": self.mean_trust, "end_reason": self.end_reason,
-                             "fallback_fired": self.fallback_fired})
+        return pd.DataFrame(
+            {
+                "satisfied": self.satisfied,
+                "junctions": self.junctions,
+                "takeovers": self.takeovers,
+                "final_trust": self.final_trust,
+                "mean_trust": self.mean_trust,
+                "end_reason": self.end_reason,
+                "fallback_fired": self.fallback_fired,
+            }
+        )
 
 
 def _draw_rows(cdf: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -92,9 +109,14 @@ def _draw_rows(cdf: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.minimum((cdf <= u[:, None]).sum(axis=1), cdf.shape[1] - 1)
 
 
-def simulate_batch(setup: EpisodeSetup, policy: RoutingPolicy, count: int, rng: np.random.Generator,
-                   drivers: Sequence[DriverModel] | None = None,
-                   driver_index: np.ndarray | None = None) -> BatchResult:
+def simulate_batch(
+    setup: EpisodeSetup,
+    policy: RoutingPolicy,
+    count: int,
+    rng: np.random.Generator,
+    drivers: Sequence[DriverModel] | None = None,
+    driver_index: np.ndarray | None = None,
+) -> BatchResult:
     """`count` model-engine episodes at once; returns the per-episode summaries.
 
     drivers: the true driver models (default: the AV's nominal model); episode i is driven by
@@ -109,21 +131,25 @@ def simulate_batch(setup: EpisodeSetup, policy: RoutingPolicy, count: int, rng: 
     if setup.fallback_after is not None and not isinstance(policy, FallbackPolicy):
         policy = with_fallback(policy, town, setup.spec, after=setup.fallback_after)
     drivers = list(drivers) if drivers is not None else [setup.driver_model]
-    index = (np.zeros(count, dtype=np.int64) if driver_index is None
-             else np.asarray(driver_index, dtype=np.int64))
+    index = (
+        np.zeros(count, dtype=np.int64) if driver_index is None else np.asarray(driver_index, dtype=np.int64)
+    )
     if index.shape != (count,):
         raise ValueError(f"driver_index must have {count} entries, got shape {index.shape}")
     nominal = setup.driver_model
     incident_map = np.array([[d.incident_index(inc) for inc in nominal.incident_types] for d in drivers])
-    takeover = np.stack([d.takeover_probability for d in drivers])           # [k, inc, θ]
+    takeover = np.stack([d.takeover_probability for d in drivers])  # [k, inc, θ]
     failure = np.stack([d.failure_probability for d in drivers])
     transition_cdf = np.cumsum(np.stack([d.trust_transition for d in drivers]), axis=-1)
     initial_cdf = np.cumsum(np.stack([d.initial_belief for d in drivers]), axis=-1)
     levels = np.asarray(nominal.trust_levels, dtype=float)
     accepting = np.asarray(dfa.accepting, dtype=bool)
     rejecting = np.asarray(dfa.rejecting, dtype=bool)
-    successor_of = {(x, j): town.state_index(town.successor(road, j))
-                    for x, road in enumerate(town.states) for j in town.actions(road)}
+    successor_of = {
+        (x, j): town.state_index(town.successor(road, j))
+        for x, road in enumerate(town.states)
+        for j in town.actions(road)
+    }
 
     theta = _draw_rows(initial_cdf[index], rng)
     start = town.state_index(setup.spec.start)
@@ -133,7 +159,7 @@ def simulate_batch(setup: EpisodeSetup, policy: RoutingPolicy, count: int, rng: 
     routes: list[tuple[str, ...]] = [(setup.spec.start,)]
     children: dict[tuple[int, int], int] = {}
     route_id = np.zeros(count, dtype=np.int64)
-    end = np.zeros(count, dtype=np.int64)              # index into END_CODES; 0 = running
+    end = np.zeros(count, dtype=np.int64)  # index into END_CODES; 0 = running
     junctions = np.zeros(count, dtype=np.int64)
     takeovers = np.zeros(count, dtype=np.int64)
     trust_sum = levels[theta].copy()
@@ -154,7 +180,7 @@ def simulate_batch(setup: EpisodeSetup, policy: RoutingPolicy, count: int, rng: 
         ids, starts = np.unique(route_id[live][order], return_index=True)
         bounds = np.append(starts, live.size)
         for r, rid in enumerate(ids.tolist()):
-            members = order[bounds[r]:bounds[r + 1]]
+            members = order[bounds[r] : bounds[r + 1]]
             first = live[members[0]]
             context = DecisionContext(route=routes[rid], dfa_state=int(q[first]), belief=belief[first])
             determined = getattr(policy, "route_determined", None)
@@ -164,9 +190,13 @@ def simulate_batch(setup: EpisodeSetup, policy: RoutingPolicy, count: int, rng: 
                 keyed: dict[tuple[int, bytes], list[int]] = {}
                 for m in members.tolist():
                     keyed.setdefault((int(q[live[m]]), belief[live[m]].tobytes()), []).append(m)
-                groups = [(np.array(ms), DecisionContext(route=routes[rid], dfa_state=key[0],
-                                                        belief=belief[live[ms[0]]]))
-                          for key, ms in keyed.items()]
+                groups = [
+                    (
+                        np.array(ms),
+                        DecisionContext(route=routes[rid], dfa_state=key[0], belief=belief[live[ms[0]]]),
+                    )
+                    for key, ms in keyed.items()
+                ]
             for group, ctx in groups:
                 policy_calls += 1
                 if policy_finished(policy, ctx):
@@ -177,8 +207,9 @@ def simulate_batch(setup: EpisodeSetup, policy: RoutingPolicy, count: int, rng: 
                 junction = policy.next_junction(ctx)
                 nxt = successor_of.get((int(road[first]), junction))
                 if nxt is None:
-                    raise ValueError(f"policy {policy.name!r} chose {junction!r}, not a legal move from "
-                                     f"{ctx.road}")
+                    raise ValueError(
+                        f"policy {policy.name!r} chose {junction!r}, not a legal move from {ctx.road}"
+                    )
                 chosen[group] = nxt
                 fired[group] = fallback_fired(policy, ctx)
         end[live[finished]] = 3
@@ -221,7 +252,13 @@ def simulate_batch(setup: EpisodeSetup, policy: RoutingPolicy, count: int, rng: 
         end[end == 0] = 4
 
     return BatchResult(
-        satisfied=end == 1, junctions=junctions, takeovers=takeovers,
-        final_trust=levels[theta].astype(np.int64), mean_trust=trust_sum / (junctions + 1),
-        end_reason=np.array(END_CODES, dtype=object)[end], fallback_fired=fired_any,
-        policy_calls=policy_calls, seconds=time.perf_counter() - started)
+        satisfied=end == 1,
+        junctions=junctions,
+        takeovers=takeovers,
+        final_trust=levels[theta].astype(np.int64),
+        mean_trust=trust_sum / (junctions + 1),
+        end_reason=np.array(END_CODES, dtype=object)[end],
+        fallback_fired=fired_any,
+        policy_calls=policy_calls,
+        seconds=time.perf_counter() - started,
+    )

@@ -116,4 +116,6 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
     if table.rows and (table.x.max() >= n_x or table.beliefs.shape[1] != driver.n_trust):
         raise InputError(str(arrays), "", "decision table does not fit this town and driver model",
                          "re-run trustroute synth")
-    return BeliefTablePolicy(table, town, spec, name=str(document.get("name", "aware")))
+    return BeliefTablePolicy(table, town, spec, name=str(document.get("name", "aware")),
+                             lower=document.get("lower"), upper=document.get("upper"),
+                             horizon=document.get("horizon"))

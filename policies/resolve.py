@@ -27,29 +27,35 @@ AWARE_TAU = 1e-3
 AWARE_TIME_LIMIT = 120.0
 
 
-def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: Path) -> Path:
+def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path,
+                     horizon: int | None = AWARE_HORIZON) -> Path:
+    """Cache entry of the "aware" policy for these inputs (horizon None: unbounded)."""
     key = hashlib.sha256("|".join((town.content_hash, driver.content_hash, spec.content_hash,
-                                   f"H={AWARE_HORIZON}", f"tau={AWARE_TAU}", "bayes")).encode())
+                                   f"H={horizon}", f"tau={AWARE_TAU}", "bayes")).encode())
     return Path(cache_dir) / f"aware-{spec.name}-{key.hexdigest()[:16]}.json"
 
 
-def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: Path) -> RoutingPolicy:
-    path = aware_cache_path(town, driver, spec, cache_dir)
+def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path,
+                 horizon: int | None = AWARE_HORIZON) -> RoutingPolicy:
+    path = aware_cache_path(town, driver, spec, cache_dir, horizon)
     if path.is_file():
         return load_policy(path, town, driver, spec)
     result = synthesize(build_pomdp(town, driver), spec, tau=AWARE_TAU, time_limit=AWARE_TIME_LIMIT,
-                        horizon=AWARE_HORIZON)
+                        horizon=horizon)
     save_policy(result, path, town, driver, spec)
     return result.policy
 
 
 def resolve_policy(name_or_path: str, town: Town, driver: DriverModel, spec: Spec,
-                   cache_dir: str | Path) -> RoutingPolicy:
-    """"free", "aware" or the path of a policy file, as a RoutingPolicy for this town/model/spec."""
+                   cache_dir: str | Path, horizon: int | None = AWARE_HORIZON) -> RoutingPolicy:
+    """"free", "aware" or the path of a policy file, as a RoutingPolicy for this town/model/spec.
+
+    horizon: the junction horizon "aware" is synthesized for (default 20; None: unbounded).
+    """
     if name_or_path == "free":
         return trust_free_policy(town, spec)
     if name_or_path == "aware":
-        return aware_policy(town, driver, spec, Path(cache_dir))
+        return aware_policy(town, driver, spec, cache_dir, horizon)
     if not Path(name_or_path).is_file():
         raise InputError(name_or_path, "", "not a policy file and not 'free' or 'aware'",
                          "pass 'free', 'aware' or the path of a policy file written by trustroute synth")

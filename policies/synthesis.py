@@ -380,7 +380,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             if upper - lower <= tau:
                 break
         lower = max(lower, 0.0)
-    policy = BeliefTablePolicy(table, pomdp.town, spec)
+    policy = BeliefTablePolicy(table, pomdp.town, spec, lower=lower, upper=upper, horizon=horizon)
     stats = {
         "method": "AO*-style expansion of the product belief MDP with suffix-abstraction upper bounds",
         "belief_rule": belief_rule,

@@ -63,8 +63,11 @@ def _group(keys: np.ndarray, beliefs: np.ndarray) -> dict[tuple[int, ...], tuple
 class BeliefTablePolicy:
     """RoutingPolicy "aware": nearest stored belief at the same (junctions, road, DFA state)."""
 
-    def __init__(self, table: PolicyTable, town: Town, spec: Spec, name: str = "aware") -> None:
+    def __init__(self, table: PolicyTable, town: Town, spec: Spec, name: str = "aware",
+                 lower: float | None = None, upper: float | None = None,
+                 horizon: int | None = None) -> None:
         self.table = table
+        self.lower, self.upper, self.horizon = lower, upper, horizon   # as certified by synthesis
         self.town = town
         self.spec = spec
         self.name = name

@@ -16,8 +16,13 @@ import click
 from networks.errors import InputError
 
 DEFAULT_OUT = Path("out") / "demo"
-DEMO_STUDY = {"name": "demo", "participants": 21, "seed": 1, "specs": ["phi1", "phi2"],
-              "conditions": ["aware", "free"]}
+DEMO_STUDY = {
+    "name": "demo",
+    "participants": 21,
+    "seed": 1,
+    "specs": ["phi1", "phi2"],
+    "conditions": ["aware", "free"],
+}
 
 
 def _sumo_engine_missing() -> str | None:
@@ -38,18 +43,31 @@ def record_episode(config, study_dir: Path, episode_id: str) -> Path:
 
     task = next(t for t in plan_episodes(config) if t.episode_id == episode_id)
     context = study_context(config)
-    driver = SyntheticDriver(context.driver_model(task.participant), task.driver_rng(),
-                             report_accuracy=config.report_accuracy)
+    driver = SyntheticDriver(
+        context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
+    )
     path = Path(study_dir) / f"{episode_id}.rrd"
     if not path.exists():
-        run_episode(context.setups[task.spec], context.policies[(task.spec, task.condition)], driver,
-                    task.episode_id, task.seed, rrd_path=path)
+        run_episode(
+            context.setups[task.spec],
+            context.policies[(task.spec, task.condition)],
+            driver,
+            task.episode_id,
+            task.seed,
+            rrd_path=path,
+        )
     return path
 
 
 @click.command("demo")
-@click.option("--out", "out", type=click.Path(), default=str(DEFAULT_OUT), show_default=True,
-              help="Study directory (a rerun resumes).")
+@click.option(
+    "--out",
+    "out",
+    type=click.Path(),
+    default=str(DEFAULT_OUT),
+    show_default=True,
+    help="Study directory (a rerun resumes).",
+)
 @click.option("--workers", type=int, default=None, help="Local worker processes (default: CPU count).")
 @click.option("--engine", type=click.Choice(["sumo", "model"]), default="sumo", show_default=True)
 @click.option("--participants", type=int, default=21, show_default=True)
@@ -62,14 +80,21 @@ def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
         raise InputError("--participants", "", f"must be >= 1, got {participants}", "pass e.g. 21")
     missing = _sumo_engine_missing() if engine == "sumo" else None
     if missing is not None:
-        click.echo(f"note: the SUMO engine is not available here ({missing}); running the model engine "
-                   "instead (trust POMDP without SUMO, no .rrd recording)")
+        click.echo(
+            f"note: the SUMO engine is not available here ({missing}); running the model engine "
+            "instead (trust POMDP without SUMO, no .rrd recording)"
+        )
         engine = "model"
-    config = study_config_from_dict({"study": {**DEMO_STUDY, "participants": participants, "engine": engine}},
-                                    "trustroute demo", Path.cwd())
+    config = study_config_from_dict(
+        {"study": {**DEMO_STUDY, "participants": participants, "engine": engine}},
+        "trustroute demo",
+        Path.cwd(),
+    )
     study_dir = Path(out)
     workers = workers if workers is not None else (os.cpu_count() or 1)
-    click.echo(f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}")
+    click.echo(
+        f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}"
+    )
     run, _ = run_and_consolidate(config, study_dir, workers, None)
     from analysis.report import write_report
 
@@ -77,7 +102,9 @@ def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
     click.echo("")
     click.echo(paths.table_text)
     click.echo("")
-    click.echo(f"results: {run.study_dir / 'episodes.parquet'} (episodes), {run.study_dir / 'roads.parquet'} (roads)")
+    click.echo(
+        f"results: {run.study_dir / 'episodes.parquet'} (episodes), {run.study_dir / 'roads.parquet'} (roads)"
+    )
     click.echo(f"report:  {paths.markdown}  and  {paths.html}")
     if engine == "sumo":
         episode_id = f"p{0:05d}-phi1-aware"

@@ -41,12 +41,21 @@ def expected_values(config) -> dict:
     out: dict = {}
     for (spec_name, condition), policy in context.policies.items():
         started = time.perf_counter()
-        value = evaluate(pomdp, context.specs[spec_name], policy, fallback_after=config.fallback_after,
-                         max_junctions=config.junction_cap, belief_rule=config.belief_rule)
-        entry = {"exact_lower": value.lower, "exact_upper": value.upper,
-                 "expected_final_trust": value.expected_final_trust,
-                 "fallback_probability": value.fallback_probability,
-                 "seconds": time.perf_counter() - started}
+        value = evaluate(
+            pomdp,
+            context.specs[spec_name],
+            policy,
+            fallback_after=config.fallback_after,
+            max_junctions=config.junction_cap,
+            belief_rule=config.belief_rule,
+        )
+        entry = {
+            "exact_lower": value.lower,
+            "exact_upper": value.upper,
+            "expected_final_trust": value.expected_final_trust,
+            "fallback_probability": value.fallback_probability,
+            "seconds": time.perf_counter() - started,
+        }
         bounds = synthesized_bounds(policy, condition_path.get(condition), context, spec_name, config)
         if bounds is not None:
             entry["synthesized_lower"], entry["synthesized_upper"] = bounds[0], bounds[1]
@@ -55,8 +64,9 @@ def expected_values(config) -> dict:
     return out
 
 
-def synthesized_bounds(policy, condition: str | None, context, spec_name: str,
-                       config) -> tuple[float, float, int | None] | None:
+def synthesized_bounds(
+    policy, condition: str | None, context, spec_name: str, config
+) -> tuple[float, float, int | None] | None:
     """[lower, upper] (and horizon) that synthesis certified for this policy: from the policy
     file ("aware": the resolver's cache entry), else from attributes of the policy; None if unknown."""
     if condition is not None and condition != "free":
@@ -66,8 +76,9 @@ def synthesized_bounds(policy, condition: str | None, context, spec_name: str,
             if condition == "aware":
                 from policies.resolve import aware_cache_path
 
-                path = aware_cache_path(context.town, context.nominal, context.specs[spec_name],
-                                        Path(config.policy_cache))
+                path = aware_cache_path(
+                    context.town, context.nominal, context.specs[spec_name], Path(config.policy_cache)
+                )
             else:
                 path = Path(condition)
             document = read_policy_document(path)
@@ -81,36 +92,65 @@ def synthesized_bounds(policy, condition: str | None, context, spec_name: str,
     return None
 
 
-def run_and_consolidate(config, study_dir: Path, workers: int, scheduler: str | None,
-                        progress: bool = True, echo=click.echo) -> tuple[object, dict]:
+def run_and_consolidate(
+    config, study_dir: Path, workers: int, scheduler: str | None, progress: bool = True, echo=click.echo
+) -> tuple[object, dict]:
     from harness.study.manifest import consolidate
     from harness.study.plan import plan_episodes
     from harness.study.runner import run_study
 
     run = run_study(config, study_dir, workers=workers, scheduler=scheduler, progress=progress)
-    echo(f"{run.planned} episodes planned: {run.skipped} already done, {run.ran - run.retried} run"
-         f"{f', {run.retried} retried' if run.retried else ''}, {len(run.failed)} failed"
-         f"{f', {len(run.damaged)} damaged parts re-run' if run.damaged else ''} "
-         f"({run.backend}, {run.seconds:.1f} s)")
+    echo(
+        f"{run.planned} episodes planned: {run.skipped} already done, {run.ran - run.retried} run"
+        f"{f', {run.retried} retried' if run.retried else ''}, {len(run.failed)} failed"
+        f"{f', {len(run.damaged)} damaged parts re-run' if run.damaged else ''} "
+        f"({run.backend}, {run.seconds:.1f} s)"
+    )
     expected = expected_values(config)
-    manifest = consolidate(run.study_dir, config, plan_episodes(config), config.content_hash, expected,
-                           {"backend": run.backend, "seconds": run.seconds, "skipped": run.skipped,
-                            "damaged": run.damaged, "retried": run.retried})
+    manifest = consolidate(
+        run.study_dir,
+        config,
+        plan_episodes(config),
+        config.content_hash,
+        expected,
+        {
+            "backend": run.backend,
+            "seconds": run.seconds,
+            "skipped": run.skipped,
+            "damaged": run.damaged,
+            "retried": run.retried,
+        },
+    )
     return run, manifest
 
 
 @click.command("study")
 @click.argument("config_path", metavar="CONFIG", type=click.Path())
-@click.option("--out", "out", type=click.Path(), default=None,
-              help="Study directory (default: the config's output, else studies/<name>).")
+@click.option(
+    "--out",
+    "out",
+    type=click.Path(),
+    default=None,
+    help="Study directory (default: the config's output, else studies/<name>).",
+)
 @click.option("--workers", type=int, default=None, help="Local worker processes (default: CPU count).")
-@click.option("--scheduler", default=None,
-              help="Dask scheduler ADDRESS, or 'local' for a local Dask cluster (default: local pool).")
-@click.option("--engine", type=click.Choice(["sumo", "model"]), default=None,
-              help="Override the config's engine.")
+@click.option(
+    "--scheduler",
+    default=None,
+    help="Dask scheduler ADDRESS, or 'local' for a local Dask cluster (default: local pool).",
+)
+@click.option(
+    "--engine", type=click.Choice(["sumo", "model"]), default=None, help="Override the config's engine."
+)
 @click.option("--no-report", is_flag=True, help="Do not analyse or write the report.")
-def study(config_path: str, out: str | None, workers: int | None, scheduler: str | None,
-          engine: str | None, no_report: bool) -> None:
+def study(
+    config_path: str,
+    out: str | None,
+    workers: int | None,
+    scheduler: str | None,
+    engine: str | None,
+    no_report: bool,
+) -> None:
     """Run (or resume) the simulated within-subject study described by CONFIG."""
     from harness.study.config import load_study_config
 
@@ -122,8 +162,10 @@ def study(config_path: str, out: str | None, workers: int | None, scheduler: str
     run, _ = run_and_consolidate(config, study_dir, workers, scheduler)
     click.echo(f"dataset: {run.study_dir / 'episodes.parquet'}, {run.study_dir / 'roads.parquet'}")
     if run.failed:
-        click.echo(f"failed episodes (see {run.study_dir / 'failures'}): {', '.join(run.failed[:5])}"
-                   f"{' ...' if len(run.failed) > 5 else ''}")
+        click.echo(
+            f"failed episodes (see {run.study_dir / 'failures'}): {', '.join(run.failed[:5])}"
+            f"{' ...' if len(run.failed) > 5 else ''}"
+        )
     if not no_report:
         from analysis.report import write_report
 
@@ -135,9 +177,13 @@ def study(config_path: str, out: str | None, workers: int | None, scheduler: str
 @click.command("analyze")
 @click.argument("study_dir", metavar="DIR", type=click.Path())
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-@click.option("--belief-source", type=click.Choice(["filter", "reported"]), default="filter",
-              show_default=True, help="Beliefs the spec is evaluated on: the AV's filter, or induced "
-              "from reported trust.")
+@click.option(
+    "--belief-source",
+    type=click.Choice(["filter", "reported"]),
+    default="filter",
+    show_default=True,
+    help="Beliefs the spec is evaluated on: the AV's filter, or induced from reported trust.",
+)
 @click.option("--report/--no-report", default=True, help="Also (re)write the report and plots.")
 def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> None:
     """Per spec and condition: n, satisfaction rate with CI, mean trust, paired tests."""
@@ -164,11 +210,22 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
 
 @click.command("fit")
 @click.argument("study_dir", metavar="DIR", type=click.Path())
-@click.option("--out", "out", type=click.Path(), default="driver.json", show_default=True,
-              help="Driver model file to write.")
-@click.option("--method", type=click.Choice(["auto", "counts", "em"]), default="auto", show_default=True,
-              help="counts: reports are exact trust; em: reports are noisy (EM over hidden trust); "
-              "auto: counts when the study's report accuracy is 1 and trust is reported every road.")
+@click.option(
+    "--out",
+    "out",
+    type=click.Path(),
+    default="driver.json",
+    show_default=True,
+    help="Driver model file to write.",
+)
+@click.option(
+    "--method",
+    type=click.Choice(["auto", "counts", "em"]),
+    default="auto",
+    show_default=True,
+    help="counts: reports are exact trust; em: reports are noisy (EM over hidden trust); "
+    "auto: counts when the study's report accuracy is 1 and trust is reported every road.",
+)
 @click.option("--iterations", type=int, default=200, show_default=True, help="EM iterations at most.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def fit(study_dir: str, out: str, method: str, iterations: int, as_json: bool) -> None:
@@ -181,7 +238,9 @@ def fit(study_dir: str, out: str, method: str, iterations: int, as_json: bool) -
     if as_json:
         click.echo(json.dumps(payload, default=str))
         return
-    click.echo(f"fitted by {result.method} on {result.episodes} episodes ({result.transitions} roads driven)"
-               f"{f', report accuracy {result.report_accuracy:.3f}' if result.report_accuracy is not None else ''}"
-               f"{f', EM {result.iterations} iterations' if result.method == 'em' else ''}")
+    click.echo(
+        f"fitted by {result.method} on {result.episodes} episodes ({result.transitions} roads driven)"
+        f"{f', report accuracy {result.report_accuracy:.3f}' if result.report_accuracy is not None else ''}"
+        f"{f', EM {result.iterations} iterations' if result.method == 'em' else ''}"
+    )
     click.echo(f"driver model written to {path}")

@@ -36,8 +36,21 @@ ENGINES: tuple[str, ...] = ("sumo", "model")
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free")
 BELIEF_RULES: tuple[str, ...] = ("bayes", "paper")
 STUDY_KEYS: tuple[str, ...] = (
-    "participants", "seed", "engine", "specs", "conditions", "name", "town", "driver_model", "horizon",
-    "fallback_after", "junction_cap", "report_every", "belief_rule", "output", "policy_cache",
+    "participants",
+    "seed",
+    "engine",
+    "specs",
+    "conditions",
+    "name",
+    "town",
+    "driver_model",
+    "horizon",
+    "fallback_after",
+    "junction_cap",
+    "report_every",
+    "belief_rule",
+    "output",
+    "policy_cache",
 )
 DEFAULT_REPORT_ACCURACY = 0.8
 DEFAULT_POLICY_CACHE = Path.home() / ".cache" / "trustroute" / "policies"
@@ -52,8 +65,8 @@ class StudyConfig:
     participants: int
     seed: int
     engine: str
-    specs: tuple[str, ...]            # absolute spec file paths
-    conditions: tuple[str, ...]       # "aware", "free" or absolute policy file paths
+    specs: tuple[str, ...]  # absolute spec file paths
+    conditions: tuple[str, ...]  # "aware", "free" or absolute policy file paths
     town: str | None = None
     driver_model: str | None = None
     horizon: int | None = None
@@ -108,8 +121,7 @@ def _resolve_path(value: str, base: Path, source: str, key: str, what: str, fix:
     for candidate in candidates:
         if candidate.is_file():
             return candidate.resolve()
-    raise InputError(source, key, f"{what} {value!r} not found (looked in {base} and {Path.cwd()})",
-                     fix)
+    raise InputError(source, key, f"{what} {value!r} not found (looked in {base} and {Path.cwd()})", fix)
 
 
 def _resolve_spec(value: str, base: Path, source: str, key: str) -> Path:
@@ -124,18 +136,27 @@ def _resolve_spec(value: str, base: Path, source: str, key: str) -> Path:
             return candidate.resolve()
     packaged = sorted(p.stem for p in PACKAGED_SPECS.glob("*.toml")) if PACKAGED_SPECS.is_dir() else []
     shipped = f" or a packaged spec ({', '.join(packaged)})" if packaged else ""
-    raise InputError(source, key, f"spec {value!r} not found (looked in {base}, {Path.cwd()} and the "
-                     "packaged specs)", f"give the path of an existing spec file{shipped}")
+    raise InputError(
+        source,
+        key,
+        f"spec {value!r} not found (looked in {base}, {Path.cwd()} and the packaged specs)",
+        f"give the path of an existing spec file{shipped}",
+    )
 
 
-def _integer(study: dict, key: str, source: str, minimum: int, default: int | None = None,
-             fix: str = "") -> int | None:
+def _integer(
+    study: dict, key: str, source: str, minimum: int, default: int | None = None, fix: str = ""
+) -> int | None:
     if key not in study:
         return default
     value = study[key]
     if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise InputError(source, f"study.{key}", f"expected an integer >= {minimum}, got {value!r}",
-                         fix or f"write e.g. {key} = {max(minimum, 1)}")
+        raise InputError(
+            source,
+            f"study.{key}",
+            f"expected an integer >= {minimum}, got {value!r}",
+            fix or f"write e.g. {key} = {max(minimum, 1)}",
+        )
     return value
 
 
@@ -144,8 +165,7 @@ def _string_list(study: dict, key: str, source: str, fix: str) -> list[str]:
         raise InputError(source, f"study.{key}", f"missing key '{key}'", fix)
     value = study[key]
     if not (isinstance(value, list) and value and all(isinstance(v, str) and v for v in value)):
-        raise InputError(source, f"study.{key}", f"expected a non-empty list of strings, got {value!r}",
-                         fix)
+        raise InputError(source, f"study.{key}", f"expected a non-empty list of strings, got {value!r}", fix)
     if len(set(value)) != len(value):
         raise InputError(source, f"study.{key}", "lists the same entry twice", "list each entry once")
     return value
@@ -168,44 +188,76 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         raise InputError(source, "top level", "expected a TOML table", "start with a [study] table")
     unknown_tables = sorted(set(data) - {"study", "population"})
     if unknown_tables:
-        raise InputError(source, unknown_tables[0], f"unknown table or key '{unknown_tables[0]}'",
-                         "use only [study] and [population]")
+        raise InputError(
+            source,
+            unknown_tables[0],
+            f"unknown table or key '{unknown_tables[0]}'",
+            "use only [study] and [population]",
+        )
     study = data.get("study")
     if not isinstance(study, dict):
-        raise InputError(source, "study", "missing [study] table",
-                         "add [study] with participants, seed, engine, specs and conditions")
+        raise InputError(
+            source,
+            "study",
+            "missing [study] table",
+            "add [study] with participants, seed, engine, specs and conditions",
+        )
     unknown = sorted(set(study) - set(STUDY_KEYS))
     if unknown:
-        raise InputError(source, f"study.{unknown[0]}", f"unknown key '{unknown[0]}'",
-                         f"use only {', '.join(STUDY_KEYS)}")
+        raise InputError(
+            source, f"study.{unknown[0]}", f"unknown key '{unknown[0]}'", f"use only {', '.join(STUDY_KEYS)}"
+        )
     for key in ("participants", "seed"):
         if key not in study:
-            raise InputError(source, f"study.{key}", f"missing key '{key}'", f"add {key} = 21"
-                             if key == "participants" else "add seed = 1")
-    participants = _integer(study, "participants", source, 1, fix="write the number of participants, "
-                            "e.g. participants = 21")
+            raise InputError(
+                source,
+                f"study.{key}",
+                f"missing key '{key}'",
+                f"add {key} = 21" if key == "participants" else "add seed = 1",
+            )
+    participants = _integer(
+        study, "participants", source, 1, fix="write the number of participants, e.g. participants = 21"
+    )
     seed = _integer(study, "seed", source, 0, fix="write a non-negative integer, e.g. seed = 1")
     engine = study.get("engine", "sumo")
     if engine not in ENGINES:
-        raise InputError(source, "study.engine", f"unknown engine {engine!r}",
-                         f"use one of {', '.join(repr(e) for e in ENGINES)}")
+        raise InputError(
+            source,
+            "study.engine",
+            f"unknown engine {engine!r}",
+            f"use one of {', '.join(repr(e) for e in ENGINES)}",
+        )
     spec_values = _string_list(study, "specs", source, 'write specs = ["specs/phi1.toml", "specs/phi2.toml"]')
     specs = tuple(str(_resolve_spec(v, base, source, "study.specs")) for v in spec_values)
     if len({Path(s).stem for s in specs}) != len(specs):
-        raise InputError(source, "study.specs", "two specs share a file name",
-                         "give every spec file a distinct name (the name labels the tables)")
+        raise InputError(
+            source,
+            "study.specs",
+            "two specs share a file name",
+            "give every spec file a distinct name (the name labels the tables)",
+        )
     condition_values = _string_list(study, "conditions", source, 'write conditions = ["aware", "free"]')
     conditions = []
     for value in condition_values:
         if value in NAMED_CONDITIONS:
             conditions.append(value)
         else:
-            conditions.append(str(_resolve_path(
-                value, base, source, "study.conditions", "policy file",
-                'use "aware", "free" or the path of a policy file written by trustroute synth')))
+            conditions.append(
+                str(
+                    _resolve_path(
+                        value,
+                        base,
+                        source,
+                        "study.conditions",
+                        "policy file",
+                        'use "aware", "free" or the path of a policy file written by trustroute synth',
+                    )
+                )
+            )
     if len({condition_label(c) for c in conditions}) != len(conditions):
-        raise InputError(source, "study.conditions", "two conditions share a name",
-                         "give policy files distinct names")
+        raise InputError(
+            source, "study.conditions", "two conditions share a name", "give policy files distinct names"
+        )
 
     def optional_file(key: str, what: str, fix: str) -> str | None:
         if key not in study:
@@ -215,43 +267,75 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         return str(_resolve_path(study[key], base, source, f"study.{key}", what, fix))
 
     town = optional_file("town", "town file", "give an existing town file or omit town (the default)")
-    driver_model = optional_file("driver_model", "driver model file",
-                                 "give an existing driver model file or omit driver_model (the default)")
-    horizon = _integer(study, "horizon", source, 1, fix="write a positive number of junctions or omit "
-                       "horizon (unbounded)")
+    driver_model = optional_file(
+        "driver_model",
+        "driver model file",
+        "give an existing driver model file or omit driver_model (the default)",
+    )
+    horizon = _integer(
+        study, "horizon", source, 1, fix="write a positive number of junctions or omit horizon (unbounded)"
+    )
     fallback_value = study.get("fallback_after", 20)
     if fallback_value is False:
         fallback_after = None
     else:
-        fallback_after = _integer(study, "fallback_after", source, 0, default=20,
-                                  fix="write fallback_after = 20, or false to disable the rule")
+        fallback_after = _integer(
+            study,
+            "fallback_after",
+            source,
+            0,
+            default=20,
+            fix="write fallback_after = 20, or false to disable the rule",
+        )
     junction_cap = _integer(study, "junction_cap", source, 1, default=60)
     report_every = _integer(study, "report_every", source, 1, default=1)
     belief_rule = study.get("belief_rule", "bayes")
     if belief_rule not in BELIEF_RULES:
-        raise InputError(source, "study.belief_rule", f"unknown belief rule {belief_rule!r}",
-                         "use 'bayes' or 'paper'")
+        raise InputError(
+            source, "study.belief_rule", f"unknown belief rule {belief_rule!r}", "use 'bayes' or 'paper'"
+        )
     name = study.get("name", Path(source).stem if source.endswith(".toml") else "study")
     if not isinstance(name, str) or not name:
-        raise InputError(source, "study.name", f"expected a non-empty string, got {name!r}",
-                         'write name = "paper"')
+        raise InputError(
+            source, "study.name", f"expected a non-empty string, got {name!r}", 'write name = "paper"'
+        )
     output = None
     if "output" in study:
         if not isinstance(study["output"], str) or not study["output"]:
-            raise InputError(source, "study.output", f"expected a directory path, got {study['output']!r}",
-                             'write output = "out/paper"')
+            raise InputError(
+                source,
+                "study.output",
+                f"expected a directory path, got {study['output']!r}",
+                'write output = "out/paper"',
+            )
         output = str((base / study["output"]).resolve())
     policy_cache = str(DEFAULT_POLICY_CACHE)
     if "policy_cache" in study:
         if not isinstance(study["policy_cache"], str) or not study["policy_cache"]:
-            raise InputError(source, "study.policy_cache", "expected a directory path",
-                             'write policy_cache = "cache/policies" or omit it')
+            raise InputError(
+                source,
+                "study.policy_cache",
+                "expected a directory path",
+                'write policy_cache = "cache/policies" or omit it',
+            )
         policy_cache = str((base / study["policy_cache"]).resolve())
     return StudyConfig(
-        source_path=source, name=name, participants=participants, seed=seed, engine=engine,
-        specs=specs, conditions=tuple(conditions), town=town, driver_model=driver_model, horizon=horizon,
-        fallback_after=fallback_after, junction_cap=junction_cap, report_every=report_every,
-        belief_rule=belief_rule, output=output, policy_cache=policy_cache,
+        source_path=source,
+        name=name,
+        participants=participants,
+        seed=seed,
+        engine=engine,
+        specs=specs,
+        conditions=tuple(conditions),
+        town=town,
+        driver_model=driver_model,
+        horizon=horizon,
+        fallback_after=fallback_after,
+        junction_cap=junction_cap,
+        report_every=report_every,
+        belief_rule=belief_rule,
+        output=output,
+        policy_cache=policy_cache,
         population=_population(data.get("population"), source),
     )
 
@@ -262,8 +346,12 @@ def load_study_config(path: str | Path) -> StudyConfig:
     try:
         text = Path(path).read_text()
     except OSError as exc:
-        raise InputError(shown, "", f"cannot read the study config ({exc.strerror})",
-                         "pass an existing TOML file (see harness/study/examples/)") from None
+        raise InputError(
+            shown,
+            "",
+            f"cannot read the study config ({exc.strerror})",
+            "pass an existing TOML file (see harness/study/examples/)",
+        ) from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -34,12 +34,25 @@ from harness.study.parts import (
     kinematics_path,
     part_path,
     read_failures,
-    read_part,
+    read_part_table,
 )
 from harness.study.plan import EpisodeTask
 
-PACKAGES: tuple[str, ...] = ("trustroute", "numpy", "scipy", "pandas", "pyarrow", "eclipse-sumo", "libsumo",
-                             "sumolib", "dask", "distributed", "matplotlib", "rerun-sdk", "pomdp-py")
+PACKAGES: tuple[str, ...] = (
+    "trustroute",
+    "numpy",
+    "scipy",
+    "pandas",
+    "pyarrow",
+    "eclipse-sumo",
+    "libsumo",
+    "sumolib",
+    "dask",
+    "distributed",
+    "matplotlib",
+    "rerun-sdk",
+    "pomdp-py",
+)
 REPO_ROOT = Path(__file__).resolve().parents[2]
 MANIFEST_FILE = "manifest.json"
 
@@ -57,23 +70,37 @@ def package_versions() -> dict[str, str]:
 def git_revision() -> str:
     """The repository's HEAD commit (with "+dirty" when the tree has changes), or "unknown"."""
     try:
-        head = subprocess.run(["git", "-C", str(REPO_ROOT), "rev-parse", "HEAD"], capture_output=True,
-                              text=True, timeout=10, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(REPO_ROOT), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
+        head = subprocess.run(
+            ["git", "-C", str(REPO_ROOT), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(REPO_ROOT), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return head + ("+dirty" if dirty else "")
 
 
-def _reported(roads: pd.DataFrame) -> tuple[float, int]:
-    reports = roads["reported_trust"].to_numpy()
+def _reported(reports: np.ndarray) -> tuple[float, int]:
     reports = reports[reports >= 0]
     return (float(reports.mean()) if reports.size else float("nan")), int(reports.size)
 
 
-def consolidate(study_dir: Path, config: StudyConfig, tasks: list[EpisodeTask], config_hash: str,
-                expected: dict | None = None, run_info: dict | None = None) -> dict:
+def consolidate(
+    study_dir: Path,
+    config: StudyConfig,
+    tasks: list[EpisodeTask],
+    config_hash: str,
+    expected: dict | None = None,
+    run_info: dict | None = None,
+) -> dict:
     """Write episodes/roads/kinematics Parquet files and manifest.json; return the manifest."""
     study_dir = Path(study_dir)
     episode_rows, roads_tables, kinematics_tables, incident_frames = [], [], [], []
@@ -81,13 +108,22 @@ def consolidate(study_dir: Path, config: StudyConfig, tasks: list[EpisodeTask], 
         path = part_path(study_dir, task.episode_id)
         if not path.exists():
             continue
-        summary, _, roads = read_part(path)
-        mean_reported, reports = _reported(roads)
-        episode_rows.append({"episode_id": task.episode_id, "participant": task.participant,
-                             "position": task.position, "spec": task.spec, "condition": task.condition,
-                             "seed": task.seed, **{k: v for k, v in summary.items() if k != "episode_id"},
-                             "mean_reported_trust": mean_reported, "reports": reports})
-        roads_tables.append(pq.read_table(path).replace_schema_metadata(None))
+        summary, _, table = read_part_table(path)
+        mean_reported, reports = _reported(table.column("reported_trust").to_numpy())
+        episode_rows.append(
+            {
+                "episode_id": task.episode_id,
+                "participant": task.participant,
+                "position": task.position,
+                "spec": task.spec,
+                "condition": task.condition,
+                "seed": task.seed,
+                **{k: v for k, v in summary.items() if k != "episode_id"},
+                "mean_reported_trust": mean_reported,
+                "reports": reports,
+            }
+        )
+        roads_tables.append(table)
         kin = kinematics_path(study_dir, task.episode_id)
         if kin.exists():
             kinematics_tables.append(pq.read_table(kin))
@@ -96,8 +132,7 @@ def consolidate(study_dir: Path, config: StudyConfig, tasks: list[EpisodeTask], 
             incident_frames.append(pd.read_parquet(incidents))
     episodes = pd.DataFrame(episode_rows)
     episodes.to_parquet(study_dir / "episodes.parquet", index=False)
-    roads = (pa.concat_tables(roads_tables) if roads_tables
-             else ROADS_SCHEMA.empty_table())
+    roads = pa.concat_tables(roads_tables) if roads_tables else ROADS_SCHEMA.empty_table()
     pq.write_table(roads, study_dir / "roads.parquet")
     if kinematics_tables:
         pq.write_table(pa.concat_tables(kinematics_tables), study_dir / "kinematics.parquet")
@@ -118,14 +153,22 @@ def consolidate(study_dir: Path, config: StudyConfig, tasks: list[EpisodeTask], 
         "command": sys.argv,
         "planned_episodes": len(tasks),
         "finished_episodes": len(episode_rows),
-        "failed_episodes": [{"episode_id": f.get("episode_id"), "error": f.get("error"),
-                             "attempts": f.get("attempts")} for f in failures],
-        "seeds": {"study": config.seed, "episodes": {t.episode_id: t.seed for t in tasks},
-                  "derivation": "numpy SeedSequence(study seed, spawn_key=(1, participant, spec index, "
-                                "condition index)); drivers of a [population]: spawn_key=(2,)"},
-        "files": {"episodes": "episodes.parquet", "roads": "roads.parquet",
-                  **({"kinematics": "kinematics.parquet"} if config.engine == "sumo" else {}),
-                  **({"incidents": "incidents.parquet"} if incident_frames else {})},
+        "failed_episodes": [
+            {"episode_id": f.get("episode_id"), "error": f.get("error"), "attempts": f.get("attempts")}
+            for f in failures
+        ],
+        "seeds": {
+            "study": config.seed,
+            "episodes": {t.episode_id: t.seed for t in tasks},
+            "derivation": "numpy SeedSequence(study seed, spawn_key=(1, participant, spec index, "
+            "condition index)); drivers of a [population]: spawn_key=(2,)",
+        },
+        "files": {
+            "episodes": "episodes.parquet",
+            "roads": "roads.parquet",
+            **({"kinematics": "kinematics.parquet"} if config.engine == "sumo" else {}),
+            **({"incidents": "incidents.parquet"} if incident_frames else {}),
+        },
         "expected": expected or {},
         "run": run_info or {},
     }

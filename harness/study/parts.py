@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pandas as pd
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from harness.study.plan import EpisodeTask
@@ -30,18 +31,37 @@ SUMMARY_KEY = b"trustroute.summary"
 TASK_KEY = b"trustroute.task"
 TEMP_PREFIX = ".tmp-"
 
-ROADS_SCHEMA = pa.schema([
-    ("episode_id", pa.string()), ("index", pa.int64()), ("directed_road", pa.string()),
-    ("action", pa.string()), ("incident", pa.string()), ("takeover", pa.bool_()),
-    ("performance", pa.string()), ("trust_before", pa.int64()), ("trust_after", pa.int64()),
-    ("reported_trust", pa.int64()), ("belief_before", pa.list_(pa.float64())),
-    ("belief_after", pa.list_(pa.float64())), ("dfa_state", pa.int64()), ("fallback", pa.bool_()),
-    ("sim_time_in", pa.float64()), ("sim_time_out", pa.float64()),
-])
-KINEMATICS_SCHEMA = pa.schema([
-    ("episode_id", pa.string()), ("time", pa.float64()), ("x", pa.float64()), ("y", pa.float64()),
-    ("speed", pa.float64()), ("lane", pa.string()), ("mode", pa.string()),
-])
+ROADS_SCHEMA = pa.schema(
+    [
+        ("episode_id", pa.string()),
+        ("index", pa.int64()),
+        ("directed_road", pa.string()),
+        ("action", pa.string()),
+        ("incident", pa.string()),
+        ("takeover", pa.bool_()),
+        ("performance", pa.string()),
+        ("trust_before", pa.int64()),
+        ("trust_after", pa.int64()),
+        ("reported_trust", pa.int64()),
+        ("belief_before", pa.list_(pa.float64())),
+        ("belief_after", pa.list_(pa.float64())),
+        ("dfa_state", pa.int64()),
+        ("fallback", pa.bool_()),
+        ("sim_time_in", pa.float64()),
+        ("sim_time_out", pa.float64()),
+    ]
+)
+KINEMATICS_SCHEMA = pa.schema(
+    [
+        ("episode_id", pa.string()),
+        ("time", pa.float64()),
+        ("x", pa.float64()),
+        ("y", pa.float64()),
+        ("speed", pa.float64()),
+        ("lane", pa.string()),
+        ("mode", pa.string()),
+    ]
+)
 
 
 class PartError(Exception):
@@ -90,19 +110,29 @@ def _plain(value: object) -> object:
     return item() if callable(item) else value
 
 
-def write_part(study_dir: Path, task: EpisodeTask, summary: dict, roads: pd.DataFrame,
-               kinematics: pd.DataFrame | None = None, incidents: pd.DataFrame | None = None) -> Path:
+def write_part(
+    study_dir: Path,
+    task: EpisodeTask,
+    summary: dict,
+    roads: pd.DataFrame,
+    kinematics: pd.DataFrame | None = None,
+    incidents: pd.DataFrame | None = None,
+) -> Path:
     """Write an episode's kinematics and incidents (SUMO) and then its roads part, each atomically."""
     if incidents is not None and len(incidents):
-        _atomic_write_table(pa.Table.from_pandas(incidents, preserve_index=False),
-                            incidents_path(study_dir, task.episode_id))
+        _atomic_write_table(
+            pa.Table.from_pandas(incidents, preserve_index=False), incidents_path(study_dir, task.episode_id)
+        )
     if kinematics is not None and len(kinematics):
-        kin = pa.Table.from_pandas(kinematics[list(KINEMATICS_SCHEMA.names)], schema=KINEMATICS_SCHEMA,
-                                   preserve_index=False)
+        kin = pa.Table.from_pandas(
+            kinematics[list(KINEMATICS_SCHEMA.names)], schema=KINEMATICS_SCHEMA, preserve_index=False
+        )
         _atomic_write_table(kin, kinematics_path(study_dir, task.episode_id))
     table = pa.Table.from_pandas(roads[list(ROADS_SCHEMA.names)], schema=ROADS_SCHEMA, preserve_index=False)
-    metadata = {SUMMARY_KEY: json.dumps({k: _plain(v) for k, v in summary.items()}).encode(),
-                TASK_KEY: json.dumps(asdict(task)).encode()}
+    metadata = {
+        SUMMARY_KEY: json.dumps({k: _plain(v) for k, v in summary.items()}).encode(),
+        TASK_KEY: json.dumps(asdict(task)).encode(),
+    }
     table = table.replace_schema_metadata(metadata)
     path = part_path(study_dir, task.episode_id)
     _atomic_write_table(table, path)
@@ -112,8 +142,8 @@ def write_part(study_dir: Path, task: EpisodeTask, summary: dict, roads: pd.Data
     return path
 
 
-def read_part(path: Path) -> tuple[dict, dict, pd.DataFrame]:
-    """(summary, task, roads) of a part; PartError when it is damaged or inconsistent."""
+def read_part_table(path: Path) -> tuple[dict, dict, pa.Table]:
+    """(summary, task, roads as an Arrow table) of a part; PartError when damaged or inconsistent."""
     try:
         table = pq.read_table(path, page_checksum_verification=True)
         metadata = table.schema.metadata or {}
@@ -121,15 +151,22 @@ def read_part(path: Path) -> tuple[dict, dict, pd.DataFrame]:
         task = json.loads(metadata[TASK_KEY])
     except Exception as exc:  # any failure to read is a damaged part
         raise PartError(f"{path}: {type(exc).__name__}: {exc}") from None
-    if table.schema.remove_metadata() != ROADS_SCHEMA:
+    table = table.replace_schema_metadata(None)
+    if table.schema != ROADS_SCHEMA:
         raise PartError(f"{path}: unexpected columns")
-    roads = table.replace_schema_metadata(None).to_pandas()
     episode = task.get("episode_id")
-    if summary.get("episode_id") != episode or path.stem != episode:
+    if summary.get("episode_id") != episode or Path(path).stem != episode:
         raise PartError(f"{path}: belongs to episode {episode!r}")
-    if len(roads) != int(summary.get("junctions", -1)) + 1 or not (roads["episode_id"] == episode).all():
-        raise PartError(f"{path}: {len(roads)} rows for {summary.get('junctions')} junctions")
-    return summary, task, roads
+    ids = table.column("episode_id")
+    if table.num_rows != int(summary.get("junctions", -1)) + 1 or not pc.all(pc.equal(ids, episode)).as_py():
+        raise PartError(f"{path}: {table.num_rows} rows for {summary.get('junctions')} junctions")
+    return summary, task, table
+
+
+def read_part(path: Path) -> tuple[dict, dict, pd.DataFrame]:
+    """(summary, task, roads) of a part; PartError when it is damaged or inconsistent."""
+    summary, task, table = read_part_table(path)
+    return summary, task, table.to_pandas()
 
 
 def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[str], list[str]]:
@@ -149,7 +186,7 @@ def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[st
         if not path.exists():
             continue
         try:
-            _, recorded, _ = read_part(path)
+            _, recorded, _ = read_part_table(path)
             if recorded != json.loads(json.dumps(asdict(task))):
                 raise PartError(f"{path}: written for a different plan")
         except PartError:
@@ -163,8 +200,13 @@ def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[st
 
 
 def write_failure(study_dir: Path, task: EpisodeTask, error: str, traceback_text: str, attempts: int) -> None:
-    record = {"episode_id": task.episode_id, "attempts": attempts, "error": error,
-              "traceback": traceback_text, "task": asdict(task)}
+    record = {
+        "episode_id": task.episode_id,
+        "attempts": attempts,
+        "error": error,
+        "traceback": traceback_text,
+        "task": asdict(task),
+    }
     _atomic_write_text(json.dumps(record, indent=1), failure_path(study_dir, task.episode_id))
 
 

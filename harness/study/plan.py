@@ -31,13 +31,13 @@ class EpisodeTask:
 
     episode_id: str
     participant: int
-    position: int          # 0-based place in the participant's order
-    spec: str              # spec name (file stem)
+    position: int  # 0-based place in the participant's order
+    spec: str  # spec name (file stem)
     spec_index: int
-    condition: str         # condition label
+    condition: str  # condition label
     condition_index: int
-    seed: int              # simulator seed (31 bits: SUMO takes a signed int)
-    driver_entropy: tuple[int, ...]   # (study seed, spawn key...) of the driver's SeedSequence
+    seed: int  # simulator seed (31 bits: SUMO takes a signed int)
+    driver_entropy: tuple[int, ...]  # (study seed, spawn key...) of the driver's SeedSequence
 
     def driver_rng(self) -> np.random.Generator:
         seed, *spawn_key = self.driver_entropy
@@ -48,10 +48,12 @@ def episode_id(participant: int, spec: str, condition: str) -> str:
     return f"p{participant:05d}-{spec}-{condition}"
 
 
-def episode_seed_sequence(study_seed: int, participant: int, spec_index: int,
-                          condition_index: int) -> np.random.SeedSequence:
-    return np.random.SeedSequence(study_seed, spawn_key=(EPISODE_KEY, participant, spec_index,
-                                                         condition_index))
+def episode_seed_sequence(
+    study_seed: int, participant: int, spec_index: int, condition_index: int
+) -> np.random.SeedSequence:
+    return np.random.SeedSequence(
+        study_seed, spawn_key=(EPISODE_KEY, participant, spec_index, condition_index)
+    )
 
 
 def plan_episodes(config: StudyConfig) -> list[EpisodeTask]:
@@ -63,11 +65,19 @@ def plan_episodes(config: StudyConfig) -> list[EpisodeTask]:
         for position, cell in enumerate(participant_order(p, len(cells))):
             s, c = cells[cell]
             sequence = episode_seed_sequence(config.seed, p, s, c)
-            tasks.append(EpisodeTask(
-                episode_id=episode_id(p, spec_names[s], condition_names[c]), participant=p,
-                position=position, spec=spec_names[s], spec_index=s, condition=condition_names[c],
-                condition_index=c, seed=int(sequence.generate_state(1)[0] & 0x7FFFFFFF),
-                driver_entropy=(config.seed, EPISODE_KEY, p, s, c)))
+            tasks.append(
+                EpisodeTask(
+                    episode_id=episode_id(p, spec_names[s], condition_names[c]),
+                    participant=p,
+                    position=position,
+                    spec=spec_names[s],
+                    spec_index=s,
+                    condition=condition_names[c],
+                    condition_index=c,
+                    seed=int(sequence.generate_state(1)[0] & 0x7FFFFFFF),
+                    driver_entropy=(config.seed, EPISODE_KEY, p, s, c),
+                )
+            )
     return tasks
 
 

@@ -53,6 +53,7 @@ class StudyRun:
 
 # -- the study's context, built once per worker process -----------------------------------------
 
+
 @dataclass(frozen=True, eq=False)
 class StudyContext:
     config: StudyConfig
@@ -60,7 +61,7 @@ class StudyContext:
     nominal: object
     specs: dict
     setups: dict
-    policies: dict            # (spec name, condition label) -> RoutingPolicy
+    policies: dict  # (spec name, condition label) -> RoutingPolicy
     participants: list | None  # per-participant DriverModel, None: nominal
 
     def driver_model(self, participant: int):
@@ -68,7 +69,7 @@ class StudyContext:
 
 
 def resolve_condition_policy(condition: str, town, driver, spec, config: StudyConfig):
-    """"free", "aware" (synthesized and cached if missing) or a policy file, as a RoutingPolicy."""
+    """ "free", "aware" (synthesized and cached if missing) or a policy file, as a RoutingPolicy."""
     if condition == "free":
         from policies.baseline import trust_free_policy
 
@@ -76,9 +77,12 @@ def resolve_condition_policy(condition: str, town, driver, spec, config: StudyCo
     try:
         from policies.resolve import resolve_policy
     except ImportError:
-        raise InputError(config.source_path, "study.conditions", f"condition {condition!r} needs "
-                         "policies.resolve, which is not installed yet", "use conditions = [\"free\"] "
-                         "until policy synthesis is available") from None
+        raise InputError(
+            config.source_path,
+            "study.conditions",
+            f"condition {condition!r} needs policies.resolve, which is not installed yet",
+            'use conditions = ["free"] until policy synthesis is available',
+        ) from None
     extra = {}
     if config.horizon is not None and "horizon" in inspect.signature(resolve_policy).parameters:
         extra["horizon"] = config.horizon
@@ -95,15 +99,32 @@ def study_context(config: StudyConfig) -> StudyContext:
     town = load_town(config.town)
     nominal = load_driver_model(config.driver_model)
     specs = {Path(path).stem: load_spec(path, town) for path in config.specs}
-    setups = {name: EpisodeSetup(town=town, driver_model=nominal, spec=spec, junction_cap=config.junction_cap,
-                                 fallback_after=config.fallback_after, report_every=config.report_every,
-                                 belief_rule=config.belief_rule)
-              for name, spec in specs.items()}
-    policies = {(name, label): resolve_condition_policy(condition, town, nominal, spec, config)
-                for name, spec in specs.items()
-                for condition, label in zip(config.conditions, config.condition_names, strict=True)}
-    return StudyContext(config=config, town=town, nominal=nominal, specs=specs, setups=setups,
-                        policies=policies, participants=participant_models(config, nominal))
+    setups = {
+        name: EpisodeSetup(
+            town=town,
+            driver_model=nominal,
+            spec=spec,
+            junction_cap=config.junction_cap,
+            fallback_after=config.fallback_after,
+            report_every=config.report_every,
+            belief_rule=config.belief_rule,
+        )
+        for name, spec in specs.items()
+    }
+    policies = {
+        (name, label): resolve_condition_policy(condition, town, nominal, spec, config)
+        for name, spec in specs.items()
+        for condition, label in zip(config.conditions, config.condition_names, strict=True)
+    }
+    return StudyContext(
+        config=config,
+        town=town,
+        nominal=nominal,
+        specs=specs,
+        setups=setups,
+        policies=policies,
+        participants=participant_models(config, nominal),
+    )
 
 
 def engine_function(engine: str) -> Callable:
@@ -115,8 +136,12 @@ def engine_function(engine: str) -> Callable:
     try:
         from harness.episode import run_episode
     except ImportError as exc:
-        raise InputError("engine", "sumo", f"the SUMO engine is not available ({exc})",
-                         "use --engine model, or install the SUMO episode runner") from None
+        raise InputError(
+            "engine",
+            "sumo",
+            f"the SUMO engine is not available ({exc})",
+            "use --engine model, or install the SUMO episode runner",
+        ) from None
     return run_episode
 
 
@@ -127,20 +152,37 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
         from participants.synthetic_driver import SyntheticDriver
 
         context = study_context(config)
-        driver = SyntheticDriver(context.driver_model(task.participant), task.driver_rng(),
-                                 report_accuracy=config.report_accuracy)
+        driver = SyntheticDriver(
+            context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
+        )
         record = engine_function(config.engine)(
-            context.setups[task.spec], context.policies[(task.spec, task.condition)], driver,
-            task.episode_id, task.seed)
-        write_part(Path(study_dir), task, record.summary, record.roads, record.kinematics,
-                   getattr(record, "incidents", None))
+            context.setups[task.spec],
+            context.policies[(task.spec, task.condition)],
+            driver,
+            task.episode_id,
+            task.seed,
+        )
+        write_part(
+            Path(study_dir),
+            task,
+            record.summary,
+            record.roads,
+            record.kinematics,
+            getattr(record, "incidents", None),
+        )
     except Exception as exc:  # one bad episode must never stop the study
-        return EpisodeOutcome(task.episode_id, False, f"{type(exc).__name__}: {exc}",
-                              traceback.format_exc(), time.perf_counter() - started)
+        return EpisodeOutcome(
+            task.episode_id,
+            False,
+            f"{type(exc).__name__}: {exc}",
+            traceback.format_exc(),
+            time.perf_counter() - started,
+        )
     return EpisodeOutcome(task.episode_id, True, wall_seconds=time.perf_counter() - started)
 
 
 # -- backends: each yields outcomes as they complete -------------------------------------------
+
 
 def _serial(function: Callable, tasks: list) -> Iterator:
     for task in tasks:
@@ -165,16 +207,20 @@ def _dask(function: Callable, tasks: list, scheduler: str, workers: int, process
 
     cluster = None
     if scheduler == "local":
-        cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=processes,
-                               dashboard_address=None)
+        cluster = LocalCluster(
+            n_workers=max(1, workers), threads_per_worker=1, processes=processes, dashboard_address=None
+        )
         client = Client(cluster)
     else:
         try:
             client = Client(scheduler, timeout=10)
         except OSError as exc:
-            raise InputError("--scheduler", scheduler, f"cannot reach the Dask scheduler ({exc})",
-                             "start one with `dask scheduler` and pass its address, or use --scheduler "
-                             "local") from None
+            raise InputError(
+                "--scheduler",
+                scheduler,
+                f"cannot reach the Dask scheduler ({exc})",
+                "start one with `dask scheduler` and pass its address, or use --scheduler local",
+            ) from None
     try:
         futures = {client.submit(function, task, pure=False): task for task in tasks}
         for future in as_completed(futures):
@@ -189,8 +235,9 @@ def _dask(function: Callable, tasks: list, scheduler: str, workers: int, process
             cluster.close()
 
 
-def _outcomes(function: Callable, tasks: list, workers: int, scheduler: str | None,
-              dask_processes: bool = True) -> Iterator:
+def _outcomes(
+    function: Callable, tasks: list, workers: int, scheduler: str | None, dask_processes: bool = True
+) -> Iterator:
     if not tasks:
         return iter(())
     if scheduler is not None:
@@ -208,6 +255,7 @@ def backend_name(workers: int, scheduler: str | None) -> str:
 
 # -- the study ---------------------------------------------------------------------------------
 
+
 def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:
     """Create the study directory, or check that it holds this study (resume) and not another."""
     study_dir.mkdir(parents=True, exist_ok=True)
@@ -218,19 +266,27 @@ def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> N
         except (OSError, json.JSONDecodeError):
             recorded = None
         if recorded is not None and recorded != config_hash:
-            raise InputError(str(study_dir), STUDY_FILE, "the directory holds a study with a different "
-                             "config (hash mismatch)", "pass another --out, or delete the directory to "
-                             "start over")
+            raise InputError(
+                str(study_dir),
+                STUDY_FILE,
+                "the directory holds a study with a different config (hash mismatch)",
+                "pass another --out, or delete the directory to start over",
+            )
         if recorded == config_hash:
             return
     config_dict = asdict(config)
-    marker.write_text(json.dumps({"config_hash": config_hash, "config": config_dict}, indent=1,
-                                 default=str))
+    marker.write_text(json.dumps({"config_hash": config_hash, "config": config_dict}, indent=1, default=str))
 
 
-def run_study(config: StudyConfig, study_dir: Path, workers: int = 1, scheduler: str | None = None,
-              progress: bool = True, on_outcome: Callable[[EpisodeOutcome], None] | None = None,
-              dask_processes: bool = True) -> StudyRun:
+def run_study(
+    config: StudyConfig,
+    study_dir: Path,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: bool = True,
+    on_outcome: Callable[[EpisodeOutcome], None] | None = None,
+    dask_processes: bool = True,
+) -> StudyRun:
     """Run (or resume) every episode of `config` in `study_dir`; return what happened.
 
     workers: local processes (1: in this process); scheduler: a Dask scheduler address, or
@@ -240,8 +296,8 @@ def run_study(config: StudyConfig, study_dir: Path, workers: int = 1, scheduler:
     study_dir = Path(study_dir).resolve()
     config_hash = config.content_hash
     check_study_dir(study_dir, config, config_hash)
-    engine_function(config.engine)      # fail fast, once, if the engine is missing
-    context = study_context(config)     # resolves (and synthesizes) policies once, before any worker
+    engine_function(config.engine)  # fail fast, once, if the engine is missing
+    context = study_context(config)  # resolves (and synthesizes) policies once, before any worker
     del context
     tasks = plan_episodes(config)
     done, damaged = finished_episodes(study_dir, tasks)
@@ -266,18 +322,32 @@ def run_study(config: StudyConfig, study_dir: Path, workers: int = 1, scheduler:
 
     consume(_outcomes(function, todo, workers, scheduler, dask_processes))
     retry = [task for task, _ in failed.values()]
-    if retry:   # once, after everything else: a transient failure gets a second chance
+    if retry:  # once, after everything else: a transient failure gets a second chance
         consume(_outcomes(function, retry, workers, scheduler, dask_processes))
     bar.close()
     for task, outcome in failed.values():
         write_failure(study_dir, task, outcome.error, outcome.traceback, attempts=2)
-    return StudyRun(study_dir=study_dir, planned=len(tasks), skipped=len(done), damaged=damaged,
-                    ran=ran, failed=sorted(failed), retried=len(retry),
-                    seconds=time.perf_counter() - started, backend=backend_name(workers, scheduler))
+    return StudyRun(
+        study_dir=study_dir,
+        planned=len(tasks),
+        skipped=len(done),
+        damaged=damaged,
+        ran=ran,
+        failed=sorted(failed),
+        retried=len(retry),
+        seconds=time.perf_counter() - started,
+        backend=backend_name(workers, scheduler),
+    )
 
 
 def _progress_bar(total: int, initial: int, enabled: bool):
     from tqdm import tqdm
 
-    return tqdm(total=total, initial=initial, unit="episode", disable=None if enabled else True,
-                dynamic_ncols=True, leave=False)
+    return tqdm(
+        total=total,
+        initial=initial,
+        unit="episode",
+        disable=None if enabled else True,
+        dynamic_ncols=True,
+        leave=False,
+    )

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.fit import fit_roads, starting_parameters, observations_from_roads
+from analysis.fit import fit_roads, observations_from_roads, starting_parameters
 from harness.cli import main
 from harness.episode_tracker import EpisodeSetup
 from harness.model_engine import run_model_episode
@@ -45,8 +45,12 @@ def _logs(town, driver, episodes, accuracy, seed):
     spec = load_spec("specs/phi2_strict.toml", town)
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec, junction_cap=30, fallback_after=None)
     rng = np.random.default_rng(seed)
-    frames = [run_model_episode(setup, RandomRoutes(town, rng), SyntheticDriver(driver, rng, accuracy),
-                                f"e{i:05d}", 0).roads for i in range(episodes)]
+    frames = [
+        run_model_episode(
+            setup, RandomRoutes(town, rng), SyntheticDriver(driver, rng, accuracy), f"e{i:05d}", 0
+        ).roads
+        for i in range(episodes)
+    ]
     return pd.concat(frames, ignore_index=True)
 
 
@@ -59,7 +63,7 @@ def _row_errors(result, driver):
 @pytest.mark.slow
 def test_em_recovers_transition_rows_from_noisy_reports(town, driver):
     roads = _logs(town, driver, 1500, 0.8, seed=11)
-    assert {"trust_before", "trust_after"} <= set(roads.columns)   # present, but never read by fit
+    assert {"trust_before", "trust_after"} <= set(roads.columns)  # present, but never read by fit
     result = fit_roads(roads.drop(columns=["trust_before", "trust_after"]), driver, "em", 300)
     informed, errors = _row_errors(result, driver)
     assert informed.sum() >= 10, "too few informed rows for a meaningful test"
@@ -69,7 +73,9 @@ def test_em_recovers_transition_rows_from_noisy_reports(town, driver):
     assert takeover_error.size >= 10 and takeover_error.max() <= TOLERANCE_EM
     assert abs(result.report_accuracy - 0.8) <= 0.02
     # the generic start is far from the truth on the same rows: recovery is not an artefact
-    start = starting_parameters(len(driver.incident_types), driver.n_trust, observations_from_roads(roads, driver))
+    start = starting_parameters(
+        len(driver.incident_types), driver.n_trust, observations_from_roads(roads, driver)
+    )
     assert np.abs(start.transition - driver.trust_transition).max(axis=-1)[informed].max() > 3 * TOLERANCE_EM
     # the log-likelihood never decreases (EM)
     assert all(b >= a - 1e-6 for a, b in zip(result.history, result.history[1:], strict=False))

@@ -44,8 +44,16 @@ def test_analyze_json_and_self_contained_report(model_study, capsys):
     assert html.count("data:image/png;base64,") == 3
     assert "http://" not in html and "https://" not in html and "<script" not in html
     markdown = (model_study / "report.md").read_text()
-    for needle in ("beliefs: filter", "beliefs: reported", "0.85 vs 0.775", "4.6018 vs 4.3933", "18/21",
-                   "17/21", "synthesized [L, U]", "McNemar"):
+    for needle in (
+        "beliefs: filter",
+        "beliefs: reported",
+        "0.85 vs 0.775",
+        "4.6018 vs 4.3933",
+        "18/21",
+        "17/21",
+        "synthesized [L, U]",
+        "McNemar",
+    ):
         assert needle in markdown
     for name in ("satisfaction", "trust", "routes"):
         assert (model_study / "plots" / f"{name}.png").stat().st_size > 1000

@@ -22,7 +22,9 @@ def test_filter_source_reproduces_logged_satisfaction(model_study):
     assert (result["satisfied"].to_numpy() == episodes["satisfied"].to_numpy()).all()
     # accepted episodes end exactly at their first accepting position
     accepted = episodes["end_reason"].to_numpy() == "accepted"
-    assert (result["first_accepting"].to_numpy()[accepted] == episodes["junctions"].to_numpy()[accepted]).all()
+    assert (
+        result["first_accepting"].to_numpy()[accepted] == episodes["junctions"].to_numpy()[accepted]
+    ).all()
 
 
 def test_reported_beliefs_carry_the_last_report_forward():
@@ -40,8 +42,15 @@ def _trace(town, route, reports, spec_name):
     rows = []
     uniform = [1 / 7] * 7
     for i, road in enumerate(route):
-        rows.append({"episode_id": "e", "index": i, "directed_road": road, "belief_after": uniform,
-                     "reported_trust": reports[i]})
+        rows.append(
+            {
+                "episode_id": "e",
+                "index": i,
+                "directed_road": road,
+                "belief_after": uniform,
+                "reported_trust": reports[i],
+            }
+        )
     roads = pd.DataFrame(rows)
     episodes = pd.DataFrame({"episode_id": ["e"], "spec": [spec_name]})
     return roads, episodes

@@ -35,7 +35,7 @@ def test_mcnemar_no_discordant_pairs():
 def _wilcoxon_exact(x: np.ndarray, y: np.ndarray) -> float:
     d = x - y
     d = d[d != 0]
-    ranks = np.argsort(np.argsort(np.abs(d))) + 1.0    # no ties in the test data
+    ranks = np.argsort(np.argsort(np.abs(d))) + 1.0  # no ties in the test data
     observed = min(ranks[d > 0].sum(), ranks[d < 0].sum())
     total = 0
     count = 0
@@ -65,7 +65,9 @@ def test_wilcoxon_all_equal_and_nan_pairs():
 def test_bootstrap_is_seeded_and_covers_the_mean():
     rng = np.random.default_rng(0)
     values = rng.random(50) < 0.8
-    assert bootstrap_ci(values, np.random.default_rng(1), 2000) == bootstrap_ci(values, np.random.default_rng(1), 2000)
+    assert bootstrap_ci(values, np.random.default_rng(1), 2000) == bootstrap_ci(
+        values, np.random.default_rng(1), 2000
+    )
     hits = 0
     trials = 150
     for _ in range(trials):

@@ -41,8 +41,10 @@ class LoopingPolicy:
 
 def _per_episode(setup, policy, driver, count, seed):
     rng = np.random.default_rng(seed)
-    summaries = [run_model_episode(setup, policy, SyntheticDriver(driver, rng), f"e{i}", 0).summary
-                 for i in range(count)]
+    summaries = [
+        run_model_episode(setup, policy, SyntheticDriver(driver, rng), f"e{i}", 0).summary
+        for i in range(count)
+    ]
     return summaries
 
 
@@ -79,9 +81,13 @@ def test_per_episode_path_matches_exact_and_batch_for_looping_policy(town, drive
     assert _close(batch.satisfied.mean(), p, math.sqrt(p * (1 - p) / n_batch))
     # fallback and end reasons agree between the two simulation paths
     fired_single = np.mean([s["fallback_fired"] for s in single])
-    assert _close(fired_single, batch.fallback_fired.mean(),
-                  math.sqrt(0.25 / n_single + 0.25 / n_batch))
+    assert _close(fired_single, batch.fallback_fired.mean(), math.sqrt(0.25 / n_single + 0.25 / n_batch))
     assert _close(fired_single, exact.fallback_probability, math.sqrt(0.25 / n_single))
+    # episode length against the exact expectation (catches a fallback one junction early or late)
+    se_junctions = batch.junctions.std() / math.sqrt(n_batch) + 1e-9
+    assert _close(batch.junctions.mean(), exact.expected_junctions, se_junctions)
+    se_trust = batch.final_trust.std() / math.sqrt(n_batch)
+    assert _close(batch.final_trust.mean(), exact.expected_final_trust, se_trust)
     for reason in ("accepted", "destination", "rejected", "cap"):
         a = np.mean([s["end_reason"] == reason for s in single])
         b = np.mean(batch.end_reason == reason)
@@ -104,8 +110,14 @@ def test_batch_with_a_population_of_drivers(town, driver):
     spec = load_spec("specs/phi2.toml", town)
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec)
     index = np.arange(2000) % 2
-    batch = simulate_batch(setup, trust_free_policy(town, spec), 2000, np.random.default_rng(5),
-                           drivers=[driver, calm], driver_index=index)
+    batch = simulate_batch(
+        setup,
+        trust_free_policy(town, spec),
+        2000,
+        np.random.default_rng(5),
+        drivers=[driver, calm],
+        driver_index=index,
+    )
     assert batch.takeovers[index == 1].sum() == 0
     assert batch.takeovers[index == 0].sum() > 0
 
@@ -113,8 +125,9 @@ def test_batch_with_a_population_of_drivers(town, driver):
 def test_model_episode_log_columns(town, driver):
     spec = load_spec("specs/phi1.toml", town)
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec)
-    record = run_model_episode(setup, trust_free_policy(town, spec), SyntheticDriver(driver, np.random.default_rng(0)),
-                               "x", 0)
+    record = run_model_episode(
+        setup, trust_free_policy(town, spec), SyntheticDriver(driver, np.random.default_rng(0)), "x", 0
+    )
     roads = record.roads
     assert list(roads["index"]) == list(range(len(roads)))
     assert roads["sim_time_in"].isna().all() and roads["sim_time_out"].isna().all()

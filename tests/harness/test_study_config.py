@@ -48,15 +48,18 @@ def test_relative_paths_resolve_against_the_config_folder(tmp_path, monkeypatch)
     folder.mkdir()
     (folder / "mine.toml").write_text((REPO / "specs" / "phi1.toml").read_text())
     monkeypatch.chdir(tmp_path)
-    config = load_study_config(_write(folder, MINIMAL.replace('"specs/phi1.toml", "specs/phi2.toml"',
-                                                              '"mine.toml"')))
+    config = load_study_config(
+        _write(folder, MINIMAL.replace('"specs/phi1.toml", "specs/phi2.toml"', '"mine.toml"'))
+    )
     assert config.specs == (str((folder / "mine.toml").resolve()),)
 
 
 def test_optional_keys_and_population(tmp_path, monkeypatch):
     monkeypatch.chdir(REPO)
-    text = MINIMAL + 'fallback_after = false\nhorizon = 12\noutput = "out/x"\n\n[population]\n' \
-                     'concentration = 30.0\nreport_accuracy = 1.0\n'
+    text = (
+        MINIMAL + 'fallback_after = false\nhorizon = 12\noutput = "out/x"\n\n[population]\n'
+        "concentration = 30.0\nreport_accuracy = 1.0\n"
+    )
     config = load_study_config(_write(tmp_path, text))
     assert config.fallback_after is None and config.horizon == 12
     assert config.output == str((tmp_path / "out" / "x").resolve())
@@ -67,7 +70,9 @@ def test_optional_keys_and_population(tmp_path, monkeypatch):
 def test_hash_ignores_formatting_but_not_settings(tmp_path, monkeypatch):
     monkeypatch.chdir(REPO)
     a = load_study_config(_write(tmp_path, MINIMAL, "a.toml"))
-    b = load_study_config(_write(tmp_path, "# comment\n" + MINIMAL.replace(" = ", "=") + 'output = "o"\n', "b.toml"))
+    b = load_study_config(
+        _write(tmp_path, "# comment\n" + MINIMAL.replace(" = ", "=") + 'output = "o"\n', "b.toml")
+    )
     c = load_study_config(_write(tmp_path, MINIMAL.replace("seed = 1", "seed = 2"), "c.toml"))
     assert a.content_hash == b.content_hash != c.content_hash
 

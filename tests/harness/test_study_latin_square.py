@@ -33,7 +33,7 @@ def test_first_order_carryover_balanced(n):
     pairs = Counter(pair for row in rows for pair in pairwise(row))
     expected = {(a, b) for a in range(n) for b in range(n) if a != b}
     assert set(pairs) == expected
-    assert len(set(pairs.values())) == 1        # every ordered pair equally often (once / twice)
+    assert len(set(pairs.values())) == 1  # every ordered pair equally often (once / twice)
 
 
 def test_paper_design_four_conditions_over_participants():
@@ -46,8 +46,15 @@ def test_paper_design_four_conditions_over_participants():
 
 
 def _config(participants=8, seed=1):
-    data = {"study": {"participants": participants, "seed": seed, "engine": "model",
-                      "specs": ["phi1", "phi2"], "conditions": ["aware", "free"]}}
+    data = {
+        "study": {
+            "participants": participants,
+            "seed": seed,
+            "engine": "model",
+            "specs": ["phi1", "phi2"],
+            "conditions": ["aware", "free"],
+        }
+    }
     return study_config_from_dict(data, "test.toml", REPO)
 
 

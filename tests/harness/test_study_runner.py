@@ -47,7 +47,9 @@ takeover_spread = 0.4
 
 
 def _run(config, out: Path, workers: int = 1, scheduler: str | None = None, **kwargs):
-    return run_and_consolidate(config, out, workers, scheduler, progress=False, echo=lambda *_: None, **kwargs)
+    return run_and_consolidate(
+        config, out, workers, scheduler, progress=False, echo=lambda *_: None, **kwargs
+    )
 
 
 def _dataset(study_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -66,7 +68,7 @@ def _assert_same(a: Path, b: Path) -> None:
 def _assert_complete(study_dir: Path, config) -> None:
     episodes, roads = _dataset(study_dir)
     planned = [t.episode_id for t in plan_episodes(config)]
-    assert list(episodes["episode_id"]) == planned                       # no gaps, no duplicates
+    assert list(episodes["episode_id"]) == planned  # no gaps, no duplicates
     assert roads.groupby("episode_id").size().loc[planned].tolist() == (episodes["junctions"] + 1).tolist()
     assert not roads.duplicated(["episode_id", "index"]).any()
 
@@ -76,10 +78,21 @@ def test_sigkill_mid_run_then_rerun_equals_uninterrupted(tmp_path):
     config_path = _config_file(tmp_path, participants=200)
     config = load_study_config(config_path)
     killed = tmp_path / "killed"
-    command = [PYTHON, "-m", "harness", "study", str(config_path), "--out", str(killed), "--workers", "2",
-               "--no-report"]
-    process = subprocess.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                               start_new_session=True)
+    command = [
+        PYTHON,
+        "-m",
+        "harness",
+        "study",
+        str(config_path),
+        "--out",
+        str(killed),
+        "--workers",
+        "2",
+        "--no-report",
+    ]
+    process = subprocess.Popen(
+        command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
     parts = killed / "parts"
     deadline = time.monotonic() + 60
     try:
@@ -89,7 +102,7 @@ def test_sigkill_mid_run_then_rerun_equals_uninterrupted(tmp_path):
             time.sleep(0.005)
     finally:
         if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)     # the study's own process group only
+            os.killpg(process.pid, signal.SIGKILL)  # the study's own process group only
         process.wait(timeout=30)
     assert process.returncode == -signal.SIGKILL, "the study finished before it could be killed"
     done_before = sum(1 for _ in parts.glob("*.parquet"))
@@ -118,7 +131,7 @@ def test_damaged_parts_are_detected_and_rerun(tmp_path):
     flipped = part_path(study, tasks[4].episode_id)
     data = bytearray(flipped.read_bytes())
     middle = len(data) // 3
-    data[middle: middle + 8] = bytes(b ^ 0xFF for b in data[middle: middle + 8])
+    data[middle : middle + 8] = bytes(b ^ 0xFF for b in data[middle : middle + 8])
     flipped.write_bytes(bytes(data))
     (study / "parts" / f".tmp-{tasks[2].episode_id}.parquet.999").write_bytes(b"half a file")
     run, _ = _run(config, study)
