@@ -73,7 +73,7 @@ def satisfaction_plot(cells: list[dict], path: Path, belief_source: str) -> Path
                     max(cell["synthesized_upper"], cell["synthesized_lower"] + 0.004),
                     color="orange",
                     alpha=0.6,
-                    label="synthesized [L, U] (no fallback)" if i == 0 and j == 0 else None,
+                    label="synthesized [L, U] (its own objective)" if i == 0 and j == 0 else None,
                 )
     ax.set_xticks(range(len(specs)), specs)
     ax.set_ylim(0, 1.05)
@@ -100,8 +100,12 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
             if group.empty:
                 continue
             colour = COLOURS[j % len(COLOURS)]
-            true = group.groupby("index")["trust_after"].mean()
+            # Only indices where enough episodes are still running: a mean of two episodes is noise.
+            running = group.groupby("index").size()
+            enough = running.index[running >= max(3, 0.02 * running.iloc[0])]
+            true = group.groupby("index")["trust_after"].mean().loc[enough]
             reported = group[group["reported_trust"] >= 0].groupby("index")["reported_trust"].mean()
+            reported = reported.loc[reported.index.isin(enough)]
             ax.plot(reported.index, reported.values, color=colour, label=f"{condition} reported")
             ax.plot(true.index, true.values, color=colour, ls="--", lw=1, label=f"{condition} true")
         ax.set_title(spec, fontsize=10)
@@ -110,7 +114,7 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("mean trust (Muir 1-7)")
     axes[0][0].legend(fontsize=7)
-    fig.suptitle("Trust along the episodes (episodes still running at each index)", fontsize=10)
+    fig.suptitle("Trust along the episodes (mean over episodes still running, >= 2% of them)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

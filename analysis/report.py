@@ -26,8 +26,10 @@ NOTES = [
     "reported); mean true trust = the synthetic driver's hidden trust averaged over positions.",
     "exact [L, U] = policies.evaluate of the same policy with the study's fallback rule, for the nominal "
     "driver model: with a [population] the simulated drivers differ from it, so the rates may differ.",
-    "synthesized [L, U] bounds Pr_max without the 20-junction fallback; the study measures the policy "
-    "with the fallback, which can only be lower or equal when the fallback cuts loops short.",
+    "synthesized [L, U] = the bounds synthesis certified for the policy's own objective (for 'aware': "
+    "the probability of acceptance within its synthesis horizon H, 20 by default, not the unbounded "
+    "Pr_max of the paper); the study measures the policy followed by the 20-junction fallback, whose "
+    "exact value is the 'exact [L, U]' column.",
     "The paper's lowtrust clause `(!lowtrust) U ...` constrains nothing as written (1 - b(1) < 0 is "
     "never true on the simplex, and a U (F b) = F b): see DESIGN.md; the strict spec variants differ.",
     "The paper ran 21 people in CARLA; ours are synthetic drivers from the driver model, so agreement "

@@ -172,6 +172,7 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
                     "exact_final_trust": exp.get("expected_final_trust"),
                     "synthesized_lower": exp.get("synthesized_lower"),
                     "synthesized_upper": exp.get("synthesized_upper"),
+                    "synthesized_horizon": exp.get("synthesized_horizon"),
                 }
             )
 
@@ -227,11 +228,22 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
 def paper_comparison(analysis: StudyAnalysis) -> list[dict]:
     """The paper's headline figures beside this study's (DESIGN.md, "Headline figures")."""
     episodes, source = analysis.episodes, analysis.belief_source
+    names = list(dict.fromkeys(episodes["spec"])) if len(episodes) else []
+
+    def ours_for(paper_spec: str) -> str | None:
+        """This study's spec for the paper's: the same name, else a variant ("phi1_strict")."""
+        for name in names:
+            if name == paper_spec:
+                return name
+        return next((name for name in names if name.startswith(f"{paper_spec}_")), None)
+
     rows = []
-    for spec, (k, n) in PAPER["satisfied_aware"].items():
+    for paper_spec, (k, n) in PAPER["satisfied_aware"].items():
+        spec = ours_for(paper_spec)
         group = episodes[(episodes["spec"] == spec) & (episodes["condition"] == "aware")]
         ours = f"{int(group[f'satisfied_{source}'].sum())}/{len(group)}" if len(group) else "not run"
-        rows.append({"figure": f"participants satisfying {spec} (aware)", "paper": f"{k}/{n}", "ours": ours})
+        label = paper_spec if spec in (None, paper_spec) else f"{paper_spec} (ours: {spec})"
+        rows.append({"figure": f"participants satisfying {label} (aware)", "paper": f"{k}/{n}", "ours": ours})
 
     def by_condition(column: str, digits: int) -> str:
         values = []
@@ -255,11 +267,15 @@ def paper_comparison(analysis: StudyAnalysis) -> list[dict]:
         }
     )
     cells = {(c["spec"], c["condition"]): c for c in analysis.cells}
-    for spec, value in PAPER["pr_max"].items():
+    for paper_spec, value in PAPER["pr_max"].items():
+        spec = ours_for(paper_spec)
         cell = cells.get((spec, "aware"), {})
         lower, upper = cell.get("synthesized_lower"), cell.get("synthesized_upper")
         ours = f"[{lower:.4f}, {upper:.4f}]" if lower is not None and upper is not None else "not available"
-        rows.append({"figure": f"Pr_max({spec}) synthesized", "paper": f"{value}", "ours": ours})
+        label = paper_spec if spec in (None, paper_spec) else f"{paper_spec} (ours: {spec})"
+        horizon = cell.get("synthesized_horizon")
+        within = f", ours within H={horizon} junctions" if horizon else ""
+        rows.append({"figure": f"Pr_max({label}), synthesized{within}", "paper": f"{value}", "ours": ours})
     return rows
 
 

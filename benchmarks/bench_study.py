@@ -43,8 +43,8 @@ def _aware_policy(town, driver, spec):
 
 
 def _study(participants: int, engine: str, out: Path) -> tuple[float, object]:
-    from harness.commands.study import run_and_consolidate
     from harness.study.config import study_config_from_dict
+    from harness.study.runner import run_and_consolidate
 
     config = study_config_from_dict(
         {

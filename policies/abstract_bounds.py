@@ -12,8 +12,10 @@ V*(x, q, b) ≤ Ū(x, q, cell(b)) for every belief of every history.
 Horizon H: Ū_H = [q accepting], Ū_t = T̄ Ū_{t+1} (exact backward induction on the abstraction).
 Unbounded: every iterate T̄^n(1) is an upper bound of the true value (V* = T V* ≤ T̄ V* ≤ T̄^n 1 by
 monotonicity), but the iteration converges to the greatest fixed point, which end components that
-never accept can hold above the least one; `unbounded_upper` returns the last iterate, sound but
-possibly loose (stats say so).
+never accept can hold above the least one. `unbounded_upper` starts from 0 on states that cannot
+reach acceptance at all (can_accept, a graph analysis) and from 1 elsewhere, and returns the last
+iterate: sound, exact where acceptance is unreachable, possibly loose on end components from which
+acceptance is reachable but not forced (the stats say so). No end-component collapsing is done.
 """
 
 from __future__ import annotations

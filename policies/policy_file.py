@@ -94,12 +94,15 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
     path = Path(path)
     where = str(path)
     document = read_policy_document(path)
-    for key, what, value, option in (("town_hash", "town", town.content_hash, "--town"),
-                                     ("driver_hash", "driver model", driver.content_hash, "--driver"),
-                                     ("spec_hash", "spec", spec.content_hash, "SPEC")):
+    made_for = {"town": "", "driver model": "", "spec": f" {document.get('spec')!r}"}
+    for key, what, value, option, name in (
+            ("town_hash", "town", town.content_hash, "--town", ""),
+            ("driver_hash", "driver model", driver.content_hash, "--driver", ""),
+            ("spec_hash", "spec", spec.content_hash, "SPEC", f" {spec.name!r}")):
         if document.get(key) != value:
-            raise InputError(where, key, f"policy was synthesized for another {what} "
-                             f"({str(document.get(key))[:12]}..., this {what} is {value[:12]}...)",
+            raise InputError(where, key, f"policy was synthesized for another {what}{made_for[what]} "
+                             f"(hash {str(document.get(key))[:12]}...; this {what}{name} has "
+                             f"{value[:12]}...)",
                              f"re-run trustroute synth for this {what}, or pass the {what} it was "
                              f"made for ({option})")
     arrays = path.parent / str(document.get("arrays", ""))

@@ -18,9 +18,11 @@ Method (bounded heuristic search over the product belief MDP, with a sound abstr
   value is at least `lower`. It is a policies.table_policy.BeliefTablePolicy (acts on any belief).
 
 Horizon H: at most H junctions (the study measures "policy, then fallback after 20", so H = 20 is
-the natural companion). Unbounded (horizon=None): upper is the abstraction's unbounded bound
-(abstract_bounds.unbounded_upper: sound, possibly loose); lower is the best value of bounded searches
-with growing H, whose policies are policies for the unbounded problem too.
+the natural companion). Unbounded (horizon=None): lower is the best value of bounded searches with
+growing H (their policies are policies for the unbounded problem too, worth at least their bounded
+value); upper is the abstraction's unbounded bound (abstract_bounds.unbounded_upper), tightened when
+it leaves a gap by one search of the unbounded problem itself (open nodes, including those deeper
+than UNBOUNDED_DEPTH, valued by that bound).
 """
 
 from __future__ import annotations
@@ -40,12 +42,19 @@ from policies.trust_pomdp import BeliefRule, TrustPOMDP
 CELL_BUDGET = 5000          # automatic suffix length: the longest k with n_symbols**k <= this
 DEFAULT_BATCH = 4096
 UNBOUNDED_HORIZONS = (20, 30, 40, 60, 80, 120, 160)
+UNBOUNDED_DEPTH = 60
 
 FRONTIER, EXPANDED, ACCEPTED, ZERO = 0, 1, 2, 3
 
 
 @dataclass(frozen=True, eq=False)
 class SynthesisResult:
+    """lower <= Pr_max <= upper; lower is the value of `policy` (a certified lower bound of it).
+
+    horizon: the junction horizon solved for (None: unbounded); stats: how the bounds were obtained
+    (per bounded run: nodes, expanded nodes, open frontier, the abstraction's root bound).
+    """
+
     policy: BeliefTablePolicy
     lower: float
     upper: float
@@ -131,16 +140,21 @@ class _Graph:
 
 
 class _Search:
-    def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int, suffix_length: int,
-                 started: float) -> None:
+    def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int | None, suffix_length: int,
+                 started: float, unbounded_value: np.ndarray | None = None) -> None:
         self.tables, self.rule, self.horizon = tables, rule, horizon
         self.started = started
         pomdp = tables.pomdp
         self.symbols = observation_symbols(pomdp, rule)
         self.cells = suffix_cells(self.symbols, suffix_length)
-        abstraction = build_abstraction(tables, self.symbols, self.cells)
-        self.bound = bounded_upper(abstraction, horizon)
-        self.bound_note = "exact backward induction on the abstraction"
+        if horizon is not None:
+            abstraction = build_abstraction(tables, self.symbols, self.cells)
+            self.bound = bounded_upper(abstraction, horizon)
+            self.bound_note = "exact backward induction on the abstraction"
+        else:
+            assert unbounded_value is not None
+            self.bound = [unbounded_value]
+            self.bound_note = "the unbounded abstraction's bound (abstract_bounds.unbounded_upper)"
         self.abstraction_seconds = time.perf_counter() - started
         n_outcomes = max(len(s) for s in self.symbols.by_incident)
         self.slot_of_symbol = np.zeros(self.symbols.n_symbols, dtype=np.int64)
@@ -150,7 +164,7 @@ class _Search:
         self.graph = _Graph(pomdp.n_trust, tables.successors.shape[1], n_outcomes)
 
     def frontier_upper(self, level: int, x: np.ndarray, q: np.ndarray, cell: np.ndarray) -> np.ndarray:
-        return self.bound[level][x, q, cell]
+        return self.bound[min(level, len(self.bound) - 1)][x, q, cell]
 
     def classify(self, ids: np.ndarray, level: int) -> None:
         """Initialise new nodes: terminal values, or the frontier's abstract bound."""
@@ -164,7 +178,7 @@ class _Search:
             return
         upper = np.minimum(1.0, self.frontier_upper(level, g.x[rest], g.q[rest], g.cell[rest]))
         dead = tables.rejecting[g.q[rest]] | (upper <= 0.0)
-        if level >= self.horizon:
+        if self.horizon is not None and level >= self.horizon:
             dead[:] = True
         g.kind[rest[dead]] = ZERO
         g.upper[rest[dead]] = 0.0
@@ -277,18 +291,23 @@ def automatic_suffix_length(n_changing: int) -> int:
     return k
 
 
-def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int, tau: float,
-                    suffix_length: int, batch: int, started: float, deadline: float
-                    ) -> tuple[float, float, PolicyTable, dict]:
-    """One AO*-style search for P(accepted within `horizon`); returns (lower, upper, table, stats)."""
-    search = _Search(tables, belief_rule, horizon, suffix_length, started)
+def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int | None, tau: float,
+                    suffix_length: int, batch: int, started: float, deadline: float,
+                    unbounded_value: np.ndarray | None = None) -> tuple[float, float, PolicyTable, dict]:
+    """One AO*-style search; returns (lower, upper, table, stats).
+
+    horizon H: P(accepted within H junctions). None: the unbounded problem, nodes deeper than
+    UNBOUNDED_DEPTH left open with the unbounded abstraction's bound `unbounded_value`.
+    """
+    search = _Search(tables, belief_rule, horizon, suffix_length, started, unbounded_value)
     g = search.graph
     root = search.root()
+    depth_cap = horizon if horizon is not None else UNBOUNDED_DEPTH
     iterations = 0
     expanded = 0
     while g.upper[root] - g.lower[root] > tau and time.perf_counter() < deadline:
         reach = search.reach(root)
-        frontier = np.flatnonzero((g.kind[: g.n] == FRONTIER) & (g.level[: g.n] < horizon))
+        frontier = np.flatnonzero((g.kind[: g.n] == FRONTIER) & (g.level[: g.n] < depth_cap))
         weight = reach[frontier] * (g.upper[frontier] - g.lower[frontier])
         positive = weight > 0
         frontier, weight = frontier[positive], weight[positive]
@@ -327,13 +346,13 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
 
 
 def _unbounded_upper(tables: ProductTables, belief_rule: BeliefRule, suffix_length: int,
-                     time_limit: float) -> tuple[float, str]:
+                     time_limit: float) -> tuple[np.ndarray, str]:
     symbols = observation_symbols(tables.pomdp, belief_rule)
     cells = suffix_cells(symbols, suffix_length)
     result = unbounded_upper(build_abstraction(tables, symbols, cells), time_limit)
-    note = (f"{result.iterations} iterations of the abstract operator from 1 (last change "
-            f"{result.last_change:.2e}; every iterate is sound; may lie above the least fixed point)")
-    return float(min(1.0, result.value[tables.start, tables.initial_q, 0])), note
+    note = (f"{result.iterations} iterations of the abstract operator (from 0 where acceptance is "
+            f"unreachable, 1 elsewhere; last change {result.last_change:.2e}; every iterate is sound)")
+    return np.minimum(result.value, 1.0), note
 
 
 def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
@@ -347,9 +366,10 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     b·P(o|θ) of that belief). Returns lower <= Pr_max <= upper with lower the value of the returned
     policy; stops when upper - lower <= tau or after about time_limit seconds.
 
-    Unbounded: upper is the abstraction's bound (unbounded_upper); lower is the best
-    P(accepted within H junctions) of bounded searches with growing H (UNBOUNDED_HORIZONS): a policy
-    accepting within H with probability L satisfies the unbounded spec with probability >= L.
+    Unbounded: lower is the best P(accepted within H junctions) of bounded searches with growing H
+    (UNBOUNDED_HORIZONS): a policy accepting within H with probability L satisfies the unbounded spec
+    with probability >= L. upper is the unbounded abstraction's bound, tightened by a search of the
+    unbounded problem when a gap remains.
     """
     if tau <= 0:
         raise ValueError("tau must be positive")
@@ -367,7 +387,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                                                      batch, started, deadline)
         runs = [stats]
     else:
-        upper, note = _unbounded_upper(tables, belief_rule, suffix_length, 0.2 * time_limit)
+        bound, note = _unbounded_upper(tables, belief_rule, suffix_length, 0.2 * time_limit)
+        upper = float(bound[tables.start, tables.initial_q, 0])
         lower, table, runs = -1.0, None, []
         for depth in UNBOUNDED_HORIZONS:
             if runs and time.perf_counter() >= deadline:
@@ -379,6 +400,19 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 lower, table = run_lower, run_table
             if upper - lower <= tau:
                 break
+            if len(runs) == 1:
+                # The abstraction alone leaves a gap: search the unbounded problem itself, with the
+                # abstraction's bound on open nodes, for half the remaining time (tightens upper).
+                remaining = deadline - time.perf_counter()
+                run_lower, run_upper, run_table, stats = _bounded_search(
+                    tables, belief_rule, None, tau, suffix_length, batch, started,
+                    time.perf_counter() + 0.5 * max(remaining, 0.0), bound)
+                runs.append(stats)
+                upper = min(upper, run_upper)
+                if run_lower > lower:
+                    lower, table = run_lower, run_table
+                if upper - lower <= tau:
+                    break
         lower = max(lower, 0.0)
     policy = BeliefTablePolicy(table, pomdp.town, spec, lower=lower, upper=upper, horizon=horizon)
     stats = {

@@ -73,8 +73,8 @@ def record_episode(config, study_dir: Path, episode_id: str) -> Path:
 @click.option("--participants", type=int, default=21, show_default=True)
 def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
     """Run the paper-size study (21 participants) on the defaults and show where the results are."""
-    from harness.commands.study import run_and_consolidate
     from harness.study.config import study_config_from_dict
+    from harness.study.runner import run_and_consolidate
 
     if participants < 1:
         raise InputError("--participants", "", f"must be >= 1, got {participants}", "pass e.g. 21")
@@ -95,7 +95,7 @@ def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
     click.echo(
         f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}"
     )
-    run, _ = run_and_consolidate(config, study_dir, workers, None)
+    run, _ = run_and_consolidate(config, study_dir, workers, None, echo=click.echo)
     from analysis.report import write_report
 
     paths = write_report(run.study_dir)

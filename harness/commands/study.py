@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import time
 from pathlib import Path
 
 import click
@@ -26,102 +25,6 @@ def study_directory(config, out: str | None) -> Path:
     if config.output is not None:
         return Path(config.output)
     return DEFAULT_STUDIES_DIR / config.name
-
-
-def expected_values(config) -> dict:
-    """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluate),
-    and the synthesized bounds when the policy carries them."""
-    from harness.study.runner import study_context
-    from policies.evaluate import evaluate
-    from policies.trust_pomdp import build_pomdp
-
-    context = study_context(config)
-    pomdp = build_pomdp(context.town, context.nominal)
-    condition_path = dict(zip(config.condition_names, config.conditions, strict=True))
-    out: dict = {}
-    for (spec_name, condition), policy in context.policies.items():
-        started = time.perf_counter()
-        value = evaluate(
-            pomdp,
-            context.specs[spec_name],
-            policy,
-            fallback_after=config.fallback_after,
-            max_junctions=config.junction_cap,
-            belief_rule=config.belief_rule,
-        )
-        entry = {
-            "exact_lower": value.lower,
-            "exact_upper": value.upper,
-            "expected_final_trust": value.expected_final_trust,
-            "fallback_probability": value.fallback_probability,
-            "seconds": time.perf_counter() - started,
-        }
-        bounds = synthesized_bounds(policy, condition_path.get(condition), context, spec_name, config)
-        if bounds is not None:
-            entry["synthesized_lower"], entry["synthesized_upper"] = bounds[0], bounds[1]
-            entry["synthesized_horizon"] = bounds[2]
-        out.setdefault(spec_name, {})[condition] = entry
-    return out
-
-
-def synthesized_bounds(
-    policy, condition: str | None, context, spec_name: str, config
-) -> tuple[float, float, int | None] | None:
-    """[lower, upper] (and horizon) that synthesis certified for this policy: from the policy
-    file ("aware": the resolver's cache entry), else from attributes of the policy; None if unknown."""
-    if condition is not None and condition != "free":
-        try:
-            from policies.policy_file import read_policy_document
-
-            if condition == "aware":
-                from policies.resolve import aware_cache_path
-
-                path = aware_cache_path(
-                    context.town, context.nominal, context.specs[spec_name], Path(config.policy_cache)
-                )
-            else:
-                path = Path(condition)
-            document = read_policy_document(path)
-            if document.get("lower") is not None and document.get("upper") is not None:
-                return float(document["lower"]), float(document["upper"]), document.get("horizon")
-        except (ImportError, OSError, InputError, ValueError, KeyError):
-            pass
-    lower, upper = getattr(policy, "lower", None), getattr(policy, "upper", None)
-    if isinstance(lower, int | float) and isinstance(upper, int | float):
-        return float(lower), float(upper), None
-    return None
-
-
-def run_and_consolidate(
-    config, study_dir: Path, workers: int, scheduler: str | None, progress: bool = True, echo=click.echo
-) -> tuple[object, dict]:
-    from harness.study.manifest import consolidate
-    from harness.study.plan import plan_episodes
-    from harness.study.runner import run_study
-
-    run = run_study(config, study_dir, workers=workers, scheduler=scheduler, progress=progress)
-    echo(
-        f"{run.planned} episodes planned: {run.skipped} already done, {run.ran - run.retried} run"
-        f"{f', {run.retried} retried' if run.retried else ''}, {len(run.failed)} failed"
-        f"{f', {len(run.damaged)} damaged parts re-run' if run.damaged else ''} "
-        f"({run.backend}, {run.seconds:.1f} s)"
-    )
-    expected = expected_values(config)
-    manifest = consolidate(
-        run.study_dir,
-        config,
-        plan_episodes(config),
-        config.content_hash,
-        expected,
-        {
-            "backend": run.backend,
-            "seconds": run.seconds,
-            "skipped": run.skipped,
-            "damaged": run.damaged,
-            "retried": run.retried,
-        },
-    )
-    return run, manifest
 
 
 @click.command("study")
@@ -159,7 +62,9 @@ def study(
         raise InputError("--workers", "", f"must be >= 1, got {workers}", "pass e.g. --workers 2")
     workers = workers if workers is not None else (os.cpu_count() or 1)
     study_dir = study_directory(config, out)
-    run, _ = run_and_consolidate(config, study_dir, workers, scheduler)
+    from harness.study.runner import run_and_consolidate
+
+    run, _ = run_and_consolidate(config, study_dir, workers, scheduler, echo=click.echo)
     click.echo(f"dataset: {run.study_dir / 'episodes.parquet'}, {run.study_dir / 'roads.parquet'}")
     if run.failed:
         click.echo(

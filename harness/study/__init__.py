@@ -6,4 +6,6 @@ plan          the episodes of a study with their seeds and drivers (deterministi
 parts         one atomic Parquet part per episode; resume, corruption check, failure records
 runner        local process pool or Dask, through one code path
 manifest      the consolidated dataset and its manifest (hashes, versions, seeds, git revision)
+expected      exact values and synthesized bounds of the study's policies (beside the simulated rates)
+examples/     example study configs (paper.toml, paper_strict.toml, population_model.toml)
 """

@@ -29,9 +29,10 @@ import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+import policies
 from networks.errors import InputError
 
-PACKAGED_SPECS = Path(__file__).resolve().parents[2] / "policies" / "specs"
+PACKAGED_SPECS = Path(policies.__file__).resolve().parent / "specs"
 ENGINES: tuple[str, ...] = ("sumo", "model")
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free")
 BELIEF_RULES: tuple[str, ...] = ("bayes", "paper")

@@ -13,7 +13,7 @@ failures/ and the study goes on. A rerun resumes: valid parts are skipped, damag
 from __future__ import annotations
 
 import functools
-import inspect
+import hashlib
 import json
 import time
 import traceback
@@ -21,10 +21,15 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from harness.episode_tracker import EpisodeSetup
 from harness.study.config import StudyConfig
 from harness.study.parts import finished_episodes, write_failure, write_part
 from harness.study.plan import EpisodeTask, participant_models, plan_episodes
 from networks.errors import InputError
+from networks.town import Town
+from participants.driver_model import DriverModel
+from policies.policy import RoutingPolicy
+from policies.spec import Spec
 
 STUDY_FILE = "study.json"
 
@@ -56,26 +61,54 @@ class StudyRun:
 
 @dataclass(frozen=True, eq=False)
 class StudyContext:
-    config: StudyConfig
-    town: object
-    nominal: object
-    specs: dict
-    setups: dict
-    policies: dict  # (spec name, condition label) -> RoutingPolicy
-    participants: list | None  # per-participant DriverModel, None: nominal
+    """What every episode of a study shares; built from the config alone."""
 
-    def driver_model(self, participant: int):
+    config: StudyConfig
+    town: Town
+    nominal: DriverModel  # the AV's model (its belief filter) and the default driver
+    specs: dict[str, Spec]
+    setups: dict[str, EpisodeSetup]
+    policies: dict[tuple[str, str], RoutingPolicy]  # (spec name, condition label) -> policy
+    participants: list[DriverModel] | None  # per-participant driver models; None: all nominal
+
+    def driver_model(self, participant: int) -> DriverModel:
         return self.nominal if self.participants is None else self.participants[participant]
 
 
-def resolve_condition_policy(condition: str, town, driver, spec, config: StudyConfig):
-    """ "free", "aware" (synthesized and cached if missing) or a policy file, as a RoutingPolicy."""
+def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: StudyConfig) -> Path | None:
+    """Where the "aware" policy of this study is cached: the resolver's entry (horizon H = 20), or
+    this module's own entry when the config asks for another synthesis horizon."""
+    try:
+        from policies.resolve import AWARE_HORIZON, AWARE_TAU, aware_cache_path
+    except ImportError:
+        return None
+    if config.horizon is None or config.horizon == AWARE_HORIZON:
+        return aware_cache_path(town, driver, spec, Path(config.policy_cache))
+    key = hashlib.sha256(
+        "|".join(
+            (
+                town.content_hash,
+                driver.content_hash,
+                spec.content_hash,
+                f"H={config.horizon}",
+                f"tau={AWARE_TAU}",
+                config.belief_rule,
+            )
+        ).encode()
+    )
+    return Path(config.policy_cache) / f"aware-{spec.name}-H{config.horizon}-{key.hexdigest()[:16]}.json"
+
+
+def resolve_condition_policy(
+    condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig
+) -> RoutingPolicy:
+    """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
     if condition == "free":
         from policies.baseline import trust_free_policy
 
         return trust_free_policy(town, spec)
     try:
-        from policies.resolve import resolve_policy
+        from policies.resolve import AWARE_TAU, AWARE_TIME_LIMIT, resolve_policy
     except ImportError:
         raise InputError(
             config.source_path,
@@ -83,15 +116,30 @@ def resolve_condition_policy(condition: str, town, driver, spec, config: StudyCo
             f"condition {condition!r} needs policies.resolve, which is not installed yet",
             'use conditions = ["free"] until policy synthesis is available',
         ) from None
-    extra = {}
-    if config.horizon is not None and "horizon" in inspect.signature(resolve_policy).parameters:
-        extra["horizon"] = config.horizon
-    return resolve_policy(condition, town, driver, spec, Path(config.policy_cache), **extra)
+    if condition == "aware" and config.horizon is not None:
+        # A synthesis horizon other than the resolver's: synthesize with it and cache it alike.
+        path = aware_policy_path(town, driver, spec, config)
+        if not path.is_file():
+            from policies.policy_file import save_policy
+            from policies.synthesis import synthesize
+            from policies.trust_pomdp import build_pomdp
+
+            result = synthesize(
+                build_pomdp(town, driver),
+                spec,
+                tau=AWARE_TAU,
+                time_limit=AWARE_TIME_LIMIT,
+                horizon=config.horizon,
+                belief_rule=config.belief_rule,
+            )
+            save_policy(result, path, town, driver, spec)
+        return resolve_policy(str(path), town, driver, spec, Path(config.policy_cache))
+    return resolve_policy(condition, town, driver, spec, Path(config.policy_cache))
 
 
 @functools.lru_cache(maxsize=4)
 def study_context(config: StudyConfig) -> StudyContext:
-    from harness.episode_tracker import EpisodeSetup
+    """The study's shared context, built once per process (cached by the config)."""
     from networks.town import load_town
     from participants.driver_model import load_driver_model
     from policies.spec import load_spec
@@ -351,3 +399,49 @@ def _progress_bar(total: int, initial: int, enabled: bool):
         dynamic_ncols=True,
         leave=False,
     )
+
+
+def run_and_consolidate(
+    config: StudyConfig,
+    study_dir: Path,
+    workers: int,
+    scheduler: str | None,
+    progress: bool = True,
+    echo: Callable[[str], object] = print,
+    dask_processes: bool = True,
+) -> tuple[StudyRun, dict]:
+    """Run (or resume) the study, then write the consolidated dataset and manifest (with the
+    exact values and synthesized bounds of its policies). `echo` gets one summary line."""
+    from harness.study.expected import expected_values
+    from harness.study.manifest import consolidate
+
+    run = run_study(
+        config,
+        study_dir,
+        workers=workers,
+        scheduler=scheduler,
+        progress=progress,
+        dask_processes=dask_processes,
+    )
+    echo(
+        f"{run.planned} episodes planned: {run.skipped} already done, {run.ran - run.retried} run"
+        f"{f', {run.retried} retried' if run.retried else ''}, {len(run.failed)} failed"
+        f"{f', {len(run.damaged)} damaged parts re-run' if run.damaged else ''} "
+        f"({run.backend}, {run.seconds:.1f} s)"
+    )
+    expected = expected_values(config)
+    manifest = consolidate(
+        run.study_dir,
+        config,
+        plan_episodes(config),
+        config.content_hash,
+        expected,
+        {
+            "backend": run.backend,
+            "seconds": run.seconds,
+            "skipped": run.skipped,
+            "damaged": run.damaged,
+            "retried": run.retried,
+        },
+    )
+    return run, manifest

@@ -14,16 +14,19 @@ def _cli(capsys, *args):
     return info.value.code, captured.out, captured.err
 
 
+@pytest.mark.slow
 def test_demo_model_engine_small_and_resumable(tmp_path, capsys):
     out = tmp_path / "demo"
-    code, text, err = _cli(capsys, "demo", "--engine", "model", "--participants", "3", "--out", str(out),
-                           "--workers", "1")
+    code, text, err = _cli(
+        capsys, "demo", "--engine", "model", "--participants", "3", "--out", str(out), "--workers", "1"
+    )
     assert code == 0, err
     assert "12 episodes planned: 0 already done" in text
     assert "0.85 vs 0.775" in text and "report:" in text
     assert (out / "report.html").exists() and (out / "manifest.json").exists()
-    code, text, _ = _cli(capsys, "demo", "--engine", "model", "--participants", "3", "--out", str(out),
-                         "--workers", "1")
+    code, text, _ = _cli(
+        capsys, "demo", "--engine", "model", "--participants", "3", "--out", str(out), "--workers", "1"
+    )
     assert code == 0 and "12 already done, 0 run" in text
 
 

@@ -18,12 +18,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from harness.commands.study import run_and_consolidate
 from harness.study import runner as runner_module
 from harness.study.config import load_study_config
 from harness.study.parts import part_path
 from harness.study.plan import plan_episodes
-from harness.study.runner import run_study
+from harness.study.runner import run_and_consolidate, run_study
 from networks.errors import InputError
 
 REPO = Path(__file__).resolve().parents[2]
@@ -185,7 +184,7 @@ def test_dask_and_local_pool_give_identical_datasets(tmp_path):
     _run(config, pool, workers=2)
     run = run_study(config, dask, workers=2, scheduler="local", progress=False, dask_processes=False)
     assert run.backend.startswith("dask") and not run.failed
-    from harness.commands.study import expected_values
+    from harness.study.expected import expected_values
     from harness.study.manifest import consolidate
 
     consolidate(dask, config, plan_episodes(config), config.content_hash, expected_values(config))

@@ -114,3 +114,18 @@ def test_unbounded_phi1_reaches_the_target_gap(pomdp):
     assert result.upper == pytest.approx(1.0)
     assert result.gap <= 1e-3
     assert result.stats["converged"]
+
+
+def test_unbounded_upper_closes_on_unavoidable_risk(pomdp):
+    """Reaching D-K from E-A without ever showing low trust: every route crosses incident roads, so
+    the value is below 1. The abstraction alone says 1 (optimistic labels); the unbounded search must
+    bring upper down to the value of the returned policy, which the independent evaluator confirms."""
+    town = pomdp.town
+    spec = spec_from_text('name = "risky"\nstart = "E-A"\nformula = "(!lowtrust) U target"\n'
+                          '[states]\ntarget = ["D-K"]\n'
+                          '[beliefs.lowtrust]\ncoeffs = [1, 1, 0, 0, 0, 0, 0]\noffset = 0.3\n', town=town)
+    result = synthesize(pomdp, spec, tau=1e-3, time_limit=20)
+    assert result.gap <= 1e-3 and 0.5 < result.upper < 0.9
+    assert exact_optimum(pomdp, spec, 8) <= result.upper + EXACT_TOLERANCE
+    value = evaluate(pomdp, spec, result.policy, fallback_after=None)
+    assert result.lower - EXACT_TOLERANCE <= value.lower <= result.upper + EXACT_TOLERANCE

@@ -1,0 +1,78 @@
+"""What a study's simulated rates are compared with: exact values and synthesized bounds.
+
+For every (spec, condition) policy of a study: its exact satisfaction probability with the study's
+fallback rule and junction cap (policies.evaluate, for the nominal driver model: no sampling) and
+the [lower, upper] that synthesis certified for it (read from its policy file), stored in the
+manifest by the runner and shown beside the simulated rates by the analysis.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from harness.study.config import StudyConfig
+from networks.errors import InputError
+from policies.policy import RoutingPolicy
+
+
+def expected_values(config: StudyConfig) -> dict:
+    """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluate),
+    and the synthesized bounds when the policy carries them."""
+    from harness.study.runner import study_context
+    from policies.evaluate import evaluate
+    from policies.trust_pomdp import build_pomdp
+
+    context = study_context(config)
+    pomdp = build_pomdp(context.town, context.nominal)
+    condition_path = dict(zip(config.condition_names, config.conditions, strict=True))
+    out: dict = {}
+    for (spec_name, condition), policy in context.policies.items():
+        started = time.perf_counter()
+        value = evaluate(
+            pomdp,
+            context.specs[spec_name],
+            policy,
+            fallback_after=config.fallback_after,
+            max_junctions=config.junction_cap,
+            belief_rule=config.belief_rule,
+        )
+        entry = {
+            "exact_lower": value.lower,
+            "exact_upper": value.upper,
+            "expected_final_trust": value.expected_final_trust,
+            "fallback_probability": value.fallback_probability,
+            "seconds": time.perf_counter() - started,
+        }
+        bounds = synthesized_bounds(policy, condition_path.get(condition), context, spec_name, config)
+        if bounds is not None:
+            entry["synthesized_lower"], entry["synthesized_upper"] = bounds[0], bounds[1]
+            entry["synthesized_horizon"] = bounds[2]
+        out.setdefault(spec_name, {})[condition] = entry
+    return out
+
+
+def synthesized_bounds(
+    policy: RoutingPolicy, condition: str | None, context, spec_name: str, config: StudyConfig
+) -> tuple[float, float, int | None] | None:
+    """[lower, upper] (and horizon) that synthesis certified for this policy: from the policy
+    file ("aware": the resolver's cache entry), else from attributes of the policy; None if unknown."""
+    if condition is not None and condition != "free":
+        try:
+            from policies.policy_file import read_policy_document
+
+            if condition == "aware":
+                from harness.study.runner import aware_policy_path
+
+                path = aware_policy_path(context.town, context.nominal, context.specs[spec_name], config)
+            else:
+                path = Path(condition)
+            document = read_policy_document(path)
+            if document.get("lower") is not None and document.get("upper") is not None:
+                return float(document["lower"]), float(document["upper"]), document.get("horizon")
+        except (ImportError, OSError, InputError, ValueError, KeyError):
+            pass
+    lower, upper = getattr(policy, "lower", None), getattr(policy, "upper", None)
+    if isinstance(lower, int | float) and isinstance(upper, int | float):
+        return float(lower), float(upper), None
+    return None
