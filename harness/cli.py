@@ -25,7 +25,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "study": ("harness.commands.study", "study", "Run a simulated within-subject study."),
     "analyze": ("harness.commands.study", "analyze", "Analyse a study directory."),
     "fit": ("harness.commands.study", "fit", "Fit a driver model to a study's logs."),
-    "demo": ("harness.commands.demo", "demo", "Run the paper-size study (21 drivers) on the defaults and report."),
+    "demo": ("harness.commands.demo", "demo", "Run the paper-size study (21 drivers) and report."),
     "model": ("harness.commands.model", "model", "Summarise the trust POMDP of a town and model."),
 }
 

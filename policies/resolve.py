@@ -20,7 +20,7 @@ from policies.policy import RoutingPolicy
 from policies.policy_file import load_policy, save_policy
 from policies.spec import Spec
 from policies.synthesis import synthesize
-from policies.trust_pomdp import build_pomdp
+from policies.trust_pomdp import BeliefRule, build_pomdp
 
 AWARE_HORIZON = 20
 AWARE_TAU = 1e-3
@@ -28,34 +28,36 @@ AWARE_TIME_LIMIT = 120.0
 
 
 def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path,
-                     horizon: int | None = AWARE_HORIZON) -> Path:
+                     horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes") -> Path:
     """Cache entry of the "aware" policy for these inputs (horizon None: unbounded)."""
     key = hashlib.sha256("|".join((town.content_hash, driver.content_hash, spec.content_hash,
-                                   f"H={horizon}", f"tau={AWARE_TAU}", "bayes")).encode())
+                                   f"H={horizon}", f"tau={AWARE_TAU}", belief_rule)).encode())
     return Path(cache_dir) / f"aware-{spec.name}-{key.hexdigest()[:16]}.json"
 
 
 def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path,
-                 horizon: int | None = AWARE_HORIZON) -> RoutingPolicy:
-    path = aware_cache_path(town, driver, spec, cache_dir, horizon)
+                 horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes") -> RoutingPolicy:
+    path = aware_cache_path(town, driver, spec, cache_dir, horizon, belief_rule)
     if path.is_file():
         return load_policy(path, town, driver, spec)
     result = synthesize(build_pomdp(town, driver), spec, tau=AWARE_TAU, time_limit=AWARE_TIME_LIMIT,
-                        horizon=horizon)
+                        horizon=horizon, belief_rule=belief_rule)
     save_policy(result, path, town, driver, spec)
     return result.policy
 
 
 def resolve_policy(name_or_path: str, town: Town, driver: DriverModel, spec: Spec,
-                   cache_dir: str | Path, horizon: int | None = AWARE_HORIZON) -> RoutingPolicy:
+                   cache_dir: str | Path, horizon: int | None = AWARE_HORIZON,
+                   belief_rule: BeliefRule = "bayes") -> RoutingPolicy:
     """"free", "aware" or the path of a policy file, as a RoutingPolicy for this town/model/spec.
 
     horizon: the junction horizon "aware" is synthesized for (default 20; None: unbounded).
+    belief_rule: the AV filter "aware" is synthesized for.
     """
     if name_or_path == "free":
         return trust_free_policy(town, spec)
     if name_or_path == "aware":
-        return aware_policy(town, driver, spec, cache_dir, horizon)
+        return aware_policy(town, driver, spec, cache_dir, horizon, belief_rule)
     if not Path(name_or_path).is_file():
         raise InputError(name_or_path, "", "not a policy file and not 'free' or 'aware'",
                          "pass 'free', 'aware' or the path of a policy file written by trustroute synth")

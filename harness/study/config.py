@@ -10,8 +10,8 @@ Minimal form (every other key is optional)::
     conditions = ["aware", "free"]   # or policy files
 
 Optional `[study]` keys: `name`, `town`, `driver_model`, `horizon` (synthesis horizon of "aware"
-policies, junctions), `fallback_after` (20; `false` disables the 20-junction rule), `junction_cap`
-(60), `report_every` (1), `belief_rule` ("bayes" or "paper"), `output` (study directory),
+policies, junctions; default 20), `fallback_after` (20; `false` disables the 20-junction rule),
+`junction_cap` (60), `report_every` (1), `belief_rule` ("bayes" or "paper"), `output` (study directory),
 `policy_cache` (where synthesized policies are cached). Optional `[population]` table: individual
 variation of the drivers (participants.population.PopulationConfig; omitted: every driver is the
 nominal model, reporting trust with accuracy 0.8).
@@ -274,7 +274,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         "give an existing driver model file or omit driver_model (the default)",
     )
     horizon = _integer(
-        study, "horizon", source, 1, fix="write a positive number of junctions or omit horizon (unbounded)"
+        study, "horizon", source, 1, fix="write a positive number of junctions or omit horizon (20)"
     )
     fallback_value = study.get("fallback_after", 20)
     if fallback_value is False:

@@ -13,7 +13,6 @@ failures/ and the study goes on. A rerun resumes: valid parts are skipped, damag
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
 import time
 import traceback
@@ -75,66 +74,29 @@ class StudyContext:
         return self.nominal if self.participants is None else self.participants[participant]
 
 
-def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: StudyConfig) -> Path | None:
-    """Where the "aware" policy of this study is cached: the resolver's entry (horizon H = 20), or
-    this module's own entry when the config asks for another synthesis horizon."""
-    try:
-        from policies.resolve import AWARE_HORIZON, AWARE_TAU, aware_cache_path
-    except ImportError:
-        return None
-    if config.horizon is None or config.horizon == AWARE_HORIZON:
-        return aware_cache_path(town, driver, spec, Path(config.policy_cache))
-    key = hashlib.sha256(
-        "|".join(
-            (
-                town.content_hash,
-                driver.content_hash,
-                spec.content_hash,
-                f"H={config.horizon}",
-                f"tau={AWARE_TAU}",
-                config.belief_rule,
-            )
-        ).encode()
-    )
-    return Path(config.policy_cache) / f"aware-{spec.name}-H{config.horizon}-{key.hexdigest()[:16]}.json"
+def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: StudyConfig) -> Path:
+    """Where the "aware" policy of this study is cached (the resolver's entry for its horizon and filter)."""
+    from policies.resolve import aware_cache_path
+
+    return aware_cache_path(town, driver, spec, Path(config.policy_cache), aware_horizon(config),
+                            config.belief_rule)
+
+
+def aware_horizon(config: StudyConfig) -> int:
+    """The synthesis horizon of "aware": the config's, else the resolver's default (20 junctions)."""
+    from policies.resolve import AWARE_HORIZON
+
+    return AWARE_HORIZON if config.horizon is None else config.horizon
 
 
 def resolve_condition_policy(
     condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig
 ) -> RoutingPolicy:
     """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
-    if condition == "free":
-        from policies.baseline import trust_free_policy
+    from policies.resolve import resolve_policy
 
-        return trust_free_policy(town, spec)
-    try:
-        from policies.resolve import AWARE_TAU, AWARE_TIME_LIMIT, resolve_policy
-    except ImportError:
-        raise InputError(
-            config.source_path,
-            "study.conditions",
-            f"condition {condition!r} needs policies.resolve, which is not installed yet",
-            'use conditions = ["free"] until policy synthesis is available',
-        ) from None
-    if condition == "aware" and config.horizon is not None:
-        # A synthesis horizon other than the resolver's: synthesize with it and cache it alike.
-        path = aware_policy_path(town, driver, spec, config)
-        if not path.is_file():
-            from policies.policy_file import save_policy
-            from policies.synthesis import synthesize
-            from policies.trust_pomdp import build_pomdp
-
-            result = synthesize(
-                build_pomdp(town, driver),
-                spec,
-                tau=AWARE_TAU,
-                time_limit=AWARE_TIME_LIMIT,
-                horizon=config.horizon,
-                belief_rule=config.belief_rule,
-            )
-            save_policy(result, path, town, driver, spec)
-        return resolve_policy(str(path), town, driver, spec, Path(config.policy_cache))
-    return resolve_policy(condition, town, driver, spec, Path(config.policy_cache))
+    return resolve_policy(condition, town, driver, spec, Path(config.policy_cache), aware_horizon(config),
+                          config.belief_rule)
 
 
 @functools.lru_cache(maxsize=4)

@@ -207,3 +207,32 @@ def test_manifest_and_refusing_a_different_study(tmp_path):
     other = load_study_config(_config_file(tmp_path, participants=3, name="other.toml"))
     with pytest.raises(InputError, match="different config"):
         _run(other, study)
+
+
+def test_study_horizon_selects_the_policy_synthesized_for_it(tmp_path):
+    """`horizon = 6` synthesizes "aware" for 6 junctions, caches it under that horizon, and the
+    expected values report that policy's own certified bounds (not the default H = 20 entry)."""
+    from harness.study.expected import expected_values
+    from harness.study.runner import aware_policy_path, study_context
+
+    path = tmp_path / "study.toml"
+    path.write_text(f"""[study]
+participants = 2
+seed = 3
+engine = "model"
+specs = ["phi1"]
+conditions = ["aware"]
+horizon = 6
+policy_cache = "{tmp_path / 'cache'}"
+""")
+    config = load_study_config(path)
+    context = study_context(config)
+    cached = aware_policy_path(context.town, context.nominal, context.specs["phi1"], config)
+    assert cached.is_file() and "aware-phi1-" in cached.name
+    document = json.loads(cached.read_text())
+    assert document["horizon"] == 6
+    entry = expected_values(config)["phi1"]["aware"]
+    assert entry["synthesized_horizon"] == 6
+    assert entry["synthesized_lower"] == pytest.approx(document["lower"])
+    # Within 6 junctions phi1 is worth what its shortest completion is worth (0.87), far below H = 20's ~1.
+    assert entry["synthesized_upper"] < 0.95
