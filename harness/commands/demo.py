@@ -9,6 +9,7 @@ the demo says so and runs the model engine instead (no recording).
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import click
@@ -110,8 +111,14 @@ def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
         episode_id = f"p{0:05d}-phi1-aware"
         try:
             rrd = record_episode(config, run.study_dir, episode_id)
-            click.echo(f"episode recording: {rrd}  (open with: rerun {rrd})")
+            click.echo(f"episode recording: {rrd}  (open with: {_rerun_command()} {rrd})")
         except Exception as exc:  # the study is done; a failed recording must not hide it
             click.echo(f"episode recording failed: {type(exc).__name__}: {exc}")
     if run.failed:
         click.echo(f"{len(run.failed)} episodes failed: see {run.study_dir / 'failures'}")
+
+
+def _rerun_command() -> str:
+    """The rerun viewer installed beside this Python (e.g. .venv/bin/rerun), else plain `rerun`."""
+    beside = Path(sys.executable).parent / "rerun"
+    return os.path.relpath(beside) if beside.is_file() else "rerun"
