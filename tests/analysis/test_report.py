@@ -6,19 +6,12 @@ import json
 
 import pytest
 
-from harness.cli import main
-
-
-def _cli(capsys, *args):
-    with pytest.raises(SystemExit) as info:
-        main(list(args))
-    captured = capsys.readouterr()
-    return info.value.code, captured.out, captured.err
+from tests.cli import run_cli
 
 
 @pytest.mark.slow
 def test_analyze_json_and_self_contained_report(model_study, capsys):
-    code, out, err = _cli(capsys, "analyze", str(model_study), "--json")
+    code, out, err = run_cli(capsys, "analyze", str(model_study), "--json")
     assert code == 0, err
     payload = json.loads(out)
     cells = {(c["spec"], c["condition"]): c for c in payload["cells"]}
@@ -61,11 +54,11 @@ def test_analyze_json_and_self_contained_report(model_study, capsys):
 
 @pytest.mark.slow
 def test_analyze_reported_source_text(model_study, capsys):
-    code, out, _ = _cli(capsys, "analyze", str(model_study), "--belief-source", "reported", "--no-report")
+    code, out, _ = run_cli(capsys, "analyze", str(model_study), "--belief-source", "reported", "--no-report")
     assert code == 0
     assert "satisfaction on beliefs from: reported" in out
 
 
 def test_analyze_not_a_study_exit_2(tmp_path, capsys):
-    code, _, err = _cli(capsys, "analyze", str(tmp_path))
+    code, _, err = run_cli(capsys, "analyze", str(tmp_path))
     assert code == 2 and "not a finished study directory" in err

@@ -5,21 +5,13 @@ from __future__ import annotations
 import json
 
 import numpy as np
-import pytest
 
-from harness.cli import main
 from participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
-
-
-def run(argv: list[str], capsys) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as exit_info:
-        main(argv)
-    captured = capsys.readouterr()
-    return exit_info.value.code, captured.out, captured.err
+from tests.cli import run_cli
 
 
 def test_summary_text(capsys):
-    code, out, err = run(["model"], capsys)
+    code, out, err = run_cli(capsys, "model")
     assert code == 0 and err == ""
     assert "12 junctions, 18 two-way roads, 36 states" in out
     assert "trust levels 1..7" in out
@@ -27,7 +19,7 @@ def test_summary_text(capsys):
 
 
 def test_summary_json_matches_the_files(capsys, town, driver):
-    code, out, _ = run(["model", "--json"], capsys)
+    code, out, _ = run_cli(capsys, "model", "--json")
     assert code == 0
     summary = json.loads(out)
     assert summary["states"] == len(town.states) == 36
@@ -48,7 +40,7 @@ def test_model_not_covering_the_town_exits_2(tmp_path, capsys):
         del data[key]["pedestrian"]
     path = tmp_path / "driver.json"
     path.write_text(json.dumps(data))
-    code, out, err = run(["model", "--driver", str(path)], capsys)
+    code, out, err = run_cli(capsys, "model", "--driver", str(path))
     assert code == 2 and out == ""
     assert "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
@@ -57,6 +49,6 @@ def test_model_not_covering_the_town_exits_2(tmp_path, capsys):
 
 
 def test_unknown_option_is_a_usage_error(capsys):
-    code, _, err = run(["model", "--no-such-option"], capsys)
+    code, _, err = run_cli(capsys, "model", "--no-such-option")
     assert code == 2
     assert "Traceback" not in err

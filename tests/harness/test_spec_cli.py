@@ -7,14 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from harness.cli import main
-
-
-def run_cli(capsys, *args):
-    with pytest.raises(SystemExit) as exit_info:
-        main(list(args))
-    captured = capsys.readouterr()
-    return exit_info.value.code, captured.out, captured.err
+from tests.cli import run_cli
 
 
 def test_phi1_text_output_lists_the_two_warnings(capsys):

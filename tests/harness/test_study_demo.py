@@ -4,27 +4,20 @@ from __future__ import annotations
 
 import pytest
 
-from harness.cli import main
-
-
-def _cli(capsys, *args):
-    with pytest.raises(SystemExit) as info:
-        main(list(args))
-    captured = capsys.readouterr()
-    return info.value.code, captured.out, captured.err
+from tests.cli import run_cli
 
 
 @pytest.mark.slow
 def test_demo_model_engine_small_and_resumable(tmp_path, capsys):
     out = tmp_path / "demo"
-    code, text, err = _cli(
+    code, text, err = run_cli(
         capsys, "demo", "--engine", "model", "--participants", "3", "--out", str(out), "--workers", "1"
     )
     assert code == 0, err
     assert "12 episodes planned: 0 already done" in text
     assert "0.85 vs 0.775" in text and "report:" in text
     assert (out / "report.html").exists() and (out / "manifest.json").exists()
-    code, text, _ = _cli(
+    code, text, _ = run_cli(
         capsys, "demo", "--engine", "model", "--participants", "3", "--out", str(out), "--workers", "1"
     )
     assert code == 0 and "12 already done, 0 run" in text
@@ -34,7 +27,7 @@ def test_demo_model_engine_small_and_resumable(tmp_path, capsys):
 def test_demo_paper_size_in_sumo_with_recording(tmp_path, capsys):
     pytest.importorskip("libsumo")
     out = tmp_path / "demo"
-    code, text, err = _cli(capsys, "demo", "--out", str(out), "--workers", "2")
+    code, text, err = run_cli(capsys, "demo", "--out", str(out), "--workers", "2")
     assert code == 0, err
     assert "84 episodes planned" in text and "sumo engine" in text
     assert (out / "p00000-phi1-aware.rrd").stat().st_size > 0

@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from harness.cli import main
 from networks.errors import InputError
 from networks.town import DEFAULT_TOWN_PATH, load_town
+from tests.cli import run_cli
 
 
 def default_town() -> dict:
@@ -85,13 +85,6 @@ CASES = [
 ]
 
 
-def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as exit_info:
-        main(argv)
-    captured = capsys.readouterr()
-    return exit_info.value.code, captured.out, captured.err
-
-
 def assert_one_line_error(code: int, err: str, *fragments: str) -> None:
     assert code == 2
     assert "Traceback" not in err
@@ -113,7 +106,7 @@ def test_malformed_town_gives_its_error_and_exit_2(tmp_path, capsys, mutate, pla
         load_town(path)
     assert error.value.place == place
     assert problem in error.value.problem
-    code, out, err = run_cli(["model", "--town", str(path)], capsys)
+    code, out, err = run_cli(capsys, "model", "--town", str(path))
     assert_one_line_error(code, err, str(path), place, problem)
     assert out == ""
 
@@ -121,25 +114,25 @@ def test_malformed_town_gives_its_error_and_exit_2(tmp_path, capsys, mutate, pla
 def test_bad_json_names_line_and_column(tmp_path, capsys):
     path = tmp_path / "town.json"
     path.write_text('{"junctions": {"A": [0, 0],}\n')
-    code, _, err = run_cli(["model", "--town", str(path)], capsys)
+    code, _, err = run_cli(capsys, "model", "--town", str(path))
     assert_one_line_error(code, err, str(path), "line 1 column", "not valid JSON")
 
 
 def test_missing_file(tmp_path, capsys):
-    code, _, err = run_cli(["model", "--town", str(tmp_path / "absent.json")], capsys)
+    code, _, err = run_cli(capsys, "model", "--town", str(tmp_path / "absent.json"))
     assert_one_line_error(code, err, "absent.json", "cannot read the town file")
 
 
 def test_top_level_not_an_object(tmp_path, capsys):
     path = tmp_path / "town.json"
     path.write_text("[1, 2]")
-    code, _, err = run_cli(["model", "--town", str(path)], capsys)
+    code, _, err = run_cli(capsys, "model", "--town", str(path))
     assert_one_line_error(code, err, "top level", "expected a JSON object")
 
 
 def test_the_unmodified_default_passes(tmp_path, capsys):
     path = tmp_path / "town.json"
     path.write_text(json.dumps(default_town()))
-    code, out, err = run_cli(["model", "--town", str(path)], capsys)
+    code, out, err = run_cli(capsys, "model", "--town", str(path))
     assert code == 0 and err == ""
     assert "12 junctions, 18 two-way roads, 36 states" in out

@@ -9,7 +9,8 @@ import pytest
 
 from networks.errors import InputError
 from participants.driver_model import DEFAULT_DRIVER_MODEL_PATH, driver_model_from_dict, load_driver_model
-from tests.networks.test_town_errors import assert_one_line_error, run_cli
+from tests.cli import run_cli
+from tests.networks.test_town_errors import assert_one_line_error
 
 
 def default_model() -> dict:
@@ -104,7 +105,7 @@ def test_malformed_driver_model_gives_its_error_and_exit_2(tmp_path, capsys, mut
         load_driver_model(path)
     assert error.value.place == place
     assert problem in error.value.problem
-    code, out, err = run_cli(["model", "--driver", str(path)], capsys)
+    code, out, err = run_cli(capsys, "model", "--driver", str(path))
     assert_one_line_error(code, err, str(path), place, problem)
     assert out == ""
 
@@ -124,7 +125,7 @@ def test_town_incident_missing_from_model(tmp_path, capsys):
     path = tmp_path / "driver.json"
     path.write_text(json.dumps(data))
     load_driver_model(path)
-    code, out, err = run_cli(["model", "--driver", str(path)], capsys)
+    code, out, err = run_cli(capsys, "model", "--driver", str(path))
     assert_one_line_error(code, err, str(path), "incident_types", "uses incident 'truck'")
     assert out == ""
 
@@ -132,12 +133,12 @@ def test_town_incident_missing_from_model(tmp_path, capsys):
 def test_bad_json(tmp_path, capsys):
     path = tmp_path / "driver.json"
     path.write_text('{"trust_levels": [1, 2, 3\n')
-    code, _, err = run_cli(["model", "--driver", str(path)], capsys)
+    code, _, err = run_cli(capsys, "model", "--driver", str(path))
     assert_one_line_error(code, err, str(path), "line 2 column", "not valid JSON")
 
 
 def test_missing_file(tmp_path, capsys):
-    code, _, err = run_cli(["model", "--driver", str(tmp_path / "absent.json")], capsys)
+    code, _, err = run_cli(capsys, "model", "--driver", str(tmp_path / "absent.json"))
     assert_one_line_error(code, err, "absent.json", "cannot read the driver model")
 
 

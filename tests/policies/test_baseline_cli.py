@@ -6,16 +6,9 @@ import json
 
 import pytest
 
-from harness.cli import main
 from policies.baseline import baseline_route
 from policies.spec import load_spec
-
-
-def run_cli(capsys, *args):
-    with pytest.raises(SystemExit) as exit_info:
-        main(list(args))
-    captured = capsys.readouterr()
-    return exit_info.value.code, captured.out, captured.err
+from tests.cli import run_cli
 
 
 def test_baseline_json(capsys, town):

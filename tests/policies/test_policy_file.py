@@ -8,7 +8,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from harness.cli import main
 from networks.errors import InputError
 from networks.town import town_from_dict
 from policies.evaluate import evaluate
@@ -17,6 +16,7 @@ from policies.policy_file import array_path, load_policy, save_policy
 from policies.resolve import aware_cache_path, resolve_policy
 from policies.spec import load_spec
 from policies.synthesis import synthesize
+from tests.cli import run_cli
 
 
 @pytest.fixture(scope="module")
@@ -90,13 +90,6 @@ def test_resolve_free_aware_and_files(pomdp, town, driver, phi1_result, tmp_path
     assert resolve_policy(str(path), town, driver, spec, tmp_path).table.rows == result.policy.table.rows
     with pytest.raises(InputError, match="not a policy file"):
         resolve_policy(str(tmp_path / "nope.json"), town, driver, spec, tmp_path)
-
-
-def run_cli(capsys, *args):
-    with pytest.raises(SystemExit) as exit_info:
-        main(list(args))
-    captured = capsys.readouterr()
-    return exit_info.value.code, captured.out, captured.err
 
 
 def test_cli_synth_then_evaluate_and_mismatch_exit_code(capsys, tmp_path):
