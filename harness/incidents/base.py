@@ -9,6 +9,7 @@ the ego is past it; `remove` takes every SUMO object out (idempotent). Kinds liv
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
@@ -52,3 +53,21 @@ class Incident(Protocol):
 
     def remove(self, sumo) -> None:
         """Take every SUMO object of the incident out of the simulation (safe to call twice)."""
+
+
+# The vehicle-backed kinds (obstacle, truck) share these: one SUMO vehicle per incident.
+
+def vehicle_present(sumo, vehicle_id: str) -> bool:
+    return vehicle_id in sumo.vehicle.getIDList()
+
+
+def vehicle_position(sumo, vehicle_id: str) -> tuple[float, float] | None:
+    """Where the incident's vehicle is, or None once it has left the simulation."""
+    return tuple(sumo.vehicle.getPosition(vehicle_id)) if vehicle_present(sumo, vehicle_id) else None
+
+
+def remove_vehicle(sumo, vehicle_id: str) -> None:
+    """Take the vehicle out; also reaches one still waiting for insertion, and one already gone
+    raises inside SUMO, which is fine (removal is idempotent)."""
+    with contextlib.suppress(sumo.TraCIException):
+        sumo.vehicle.remove(vehicle_id)

@@ -7,10 +7,9 @@ on. The obstacle stands at `POSITION_FRACTION` of the road.
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass, field
 
-from harness.incidents.base import EgoState, Scene
+from harness.incidents.base import EgoState, Scene, remove_vehicle, vehicle_position
 
 KIND = "obstacle"
 TYPE_ID = "trustroute_obstacle"
@@ -42,11 +41,8 @@ class ObstacleIncident:
     def __post_init__(self) -> None:
         self.sumo_ids = (self.vehicle_id,)
 
-    def _alive(self, sumo) -> bool:
-        return self.vehicle_id in sumo.vehicle.getIDList()
-
     def position(self, sumo) -> tuple[float, float] | None:
-        return tuple(sumo.vehicle.getPosition(self.vehicle_id)) if self._alive(sumo) else None
+        return vehicle_position(sumo, self.vehicle_id)
 
     def step(self, sumo, ego: EgoState) -> None:
         dt = 0.0 if self._last_time is None else ego.time - self._last_time
@@ -64,9 +60,7 @@ class ObstacleIncident:
         return ego.road == self.road and ego.lane_position > self.position_on_road
 
     def remove(self, sumo) -> None:
-        # Also reaches an object still waiting for insertion; one already gone raises, and that is fine.
-        with contextlib.suppress(sumo.TraCIException):
-            sumo.vehicle.remove(self.vehicle_id)
+        remove_vehicle(sumo, self.vehicle_id)
 
 
 def inject(sumo, scene: Scene) -> ObstacleIncident:

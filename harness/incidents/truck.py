@@ -6,10 +6,9 @@ The truck is inserted a short way into the road when the ego commits to it, driv
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass, field
 
-from harness.incidents.base import EgoState, Scene
+from harness.incidents.base import EgoState, Scene, remove_vehicle, vehicle_position, vehicle_present
 
 KIND = "truck"
 TYPE_ID = "trustroute_truck"
@@ -38,23 +37,18 @@ class TruckIncident:
     def __post_init__(self) -> None:
         self.sumo_ids = (self.vehicle_id,)
 
-    def _alive(self, sumo) -> bool:
-        return self.vehicle_id in sumo.vehicle.getIDList()
-
     def position(self, sumo) -> tuple[float, float] | None:
-        return tuple(sumo.vehicle.getPosition(self.vehicle_id)) if self._alive(sumo) else None
+        return vehicle_position(sumo, self.vehicle_id)
 
     def step(self, sumo, ego: EgoState) -> None:
         return None
 
     def is_passed(self, sumo, ego: EgoState) -> bool:
         # Passed once the truck has left the ego's road (it drives off at the road's end).
-        return ego.road == self.road and not self._alive(sumo)
+        return ego.road == self.road and not vehicle_present(sumo, self.vehicle_id)
 
     def remove(self, sumo) -> None:
-        # Also reaches an object still waiting for insertion; one already gone raises, and that is fine.
-        with contextlib.suppress(sumo.TraCIException):
-            sumo.vehicle.remove(self.vehicle_id)
+        remove_vehicle(sumo, self.vehicle_id)
 
 
 def inject(sumo, scene: Scene) -> TruckIncident:
