@@ -24,6 +24,7 @@ from networks.town import load_town
 from participants.driver_model import load_driver_model
 from participants.synthetic_driver import SyntheticDriver
 from policies.baseline import trust_free_policy
+from policies.resolve import resolve_policy
 from policies.spec import load_spec
 
 BATCH_EPISODES = 100_000
@@ -31,15 +32,6 @@ SINGLE_EPISODES = 500
 RUNNER_PARTICIPANTS = 1000
 SUMO_LARGE_PARTICIPANTS = 1000
 WORKERS = 2
-
-
-def _aware_policy(town, driver, spec):
-    try:
-        from harness.study.config import DEFAULT_POLICY_CACHE
-        from policies.resolve import resolve_policy
-    except ImportError:
-        return None
-    return resolve_policy("aware", town, driver, spec, DEFAULT_POLICY_CACHE)
 
 
 def _study(participants: int, engine: str, out: Path) -> tuple[float, object]:
@@ -70,10 +62,7 @@ def run() -> list[dict]:
     spec = load_spec("specs/phi1.toml", town)
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec)
     results: list[dict] = []
-    policies = {"free": trust_free_policy(town, spec)}
-    aware = _aware_policy(town, driver, spec)
-    if aware is not None:
-        policies["aware"] = aware
+    policies = {"free": trust_free_policy(town, spec), "aware": resolve_policy("aware", town, driver, spec)}
     for name, policy in policies.items():
         rng = np.random.default_rng(1)
         started = time.perf_counter()
@@ -116,18 +105,6 @@ def run() -> list[dict]:
                 "what": "per-episode Parquet parts, consolidation, exact evaluation of the 4 policies",
             }
         )
-        try:
-            import harness.episode  # noqa: F401
-        except ImportError as exc:
-            results.append(
-                {
-                    "name": "study.sumo.paper_size.seconds",
-                    "value": None,
-                    "unit": "s",
-                    "skipped": f"SUMO engine not installed ({exc})",
-                }
-            )
-            return results
         seconds, run_info = _study(21, "sumo", Path(folder) / "paper")
         results.append(
             {

@@ -25,17 +25,19 @@ from policies.trust_pomdp import BeliefRule, build_pomdp
 AWARE_HORIZON = 20
 AWARE_TAU = 1e-3
 AWARE_TIME_LIMIT = 120.0
+DEFAULT_POLICY_CACHE = Path.home() / ".cache" / "trustroute" / "policies"
 
 
-def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path,
+def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path | None,
                      horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes") -> Path:
-    """Cache entry of the "aware" policy for these inputs (horizon None: unbounded)."""
+    """Cache entry of the "aware" policy for these inputs (horizon None: unbounded; cache_dir None:
+    DEFAULT_POLICY_CACHE)."""
     key = hashlib.sha256("|".join((town.content_hash, driver.content_hash, spec.content_hash,
                                    f"H={horizon}", f"tau={AWARE_TAU}", belief_rule)).encode())
-    return Path(cache_dir) / f"aware-{spec.name}-{key.hexdigest()[:16]}.json"
+    return Path(cache_dir or DEFAULT_POLICY_CACHE) / f"aware-{spec.name}-{key.hexdigest()[:16]}.json"
 
 
-def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path,
+def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path | None,
                  horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes") -> RoutingPolicy:
     path = aware_cache_path(town, driver, spec, cache_dir, horizon, belief_rule)
     if path.is_file():
@@ -47,7 +49,7 @@ def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | P
 
 
 def resolve_policy(name_or_path: str, town: Town, driver: DriverModel, spec: Spec,
-                   cache_dir: str | Path, horizon: int | None = AWARE_HORIZON,
+                   cache_dir: str | Path | None = None, horizon: int | None = AWARE_HORIZON,
                    belief_rule: BeliefRule = "bayes") -> RoutingPolicy:
     """"free", "aware" or the path of a policy file, as a RoutingPolicy for this town/model/spec.
 

@@ -26,15 +26,6 @@ DEMO_STUDY = {
 }
 
 
-def _sumo_engine_missing() -> str | None:
-    try:
-        import harness.episode  # noqa: F401
-        import networks.sumo_net  # noqa: F401
-    except ImportError as exc:
-        return str(exc)
-    return None
-
-
 def record_episode(config, study_dir: Path, episode_id: str) -> Path:
     """Replay one planned episode in SUMO with its seeds and write `<study>/<episode_id>.rrd`."""
     from harness.episode import run_episode
@@ -79,13 +70,6 @@ def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
 
     if participants < 1:
         raise InputError("--participants", "", f"must be >= 1, got {participants}", "pass e.g. 21")
-    missing = _sumo_engine_missing() if engine == "sumo" else None
-    if missing is not None:
-        click.echo(
-            f"note: the SUMO engine is not available here ({missing}); running the model engine "
-            "instead (trust POMDP without SUMO, no .rrd recording)"
-        )
-        engine = "model"
     config = study_config_from_dict(
         {"study": {**DEMO_STUDY, "participants": participants, "engine": engine}},
         "trustroute demo",

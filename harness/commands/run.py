@@ -9,28 +9,6 @@ import click
 
 from networks.errors import InputError
 
-DEFAULT_POLICY_CACHE = Path.home() / ".cache" / "trustroute" / "policies"
-
-
-def resolve_run_policy(name_or_path: str, town, driver_model, spec, cache_dir: Path):
-    """`policies.resolve.resolve_policy` ("free", "aware" or a file); only "free" when it is absent."""
-    import importlib
-
-    try:
-        resolve = importlib.import_module("policies.resolve")
-    except ModuleNotFoundError as exc:
-        if not (exc.name or "").startswith("policies."):
-            raise
-        resolve = None
-    if resolve is not None:
-        return resolve.resolve_policy(name_or_path, town, driver_model, spec, cache_dir)
-    if name_or_path == "free":
-        from policies.baseline import trust_free_policy
-
-        return trust_free_policy(town, spec)
-    raise InputError(name_or_path, "", "only the trust-free policy is available in this installation",
-                     "pass --policy free")
-
 
 def _write_logs(out_dir: Path, record) -> list[Path]:
     try:
@@ -77,6 +55,7 @@ def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_d
     from networks.town import load_town
     from participants.driver_model import load_driver_model
     from participants.synthetic_driver import SyntheticDriver
+    from policies.resolve import resolve_policy
     from policies.spec import load_spec
 
     if seed < 0:
@@ -87,8 +66,7 @@ def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_d
     if initial_trust is not None and initial_trust not in driver_model.trust_levels:
         raise InputError("--initial-trust", "", f"{initial_trust} is not a trust level of the model",
                          f"pass one of {list(driver_model.trust_levels)}")
-    policy = resolve_run_policy(policy_name, town, driver_model, spec,
-                                  Path(cache_dir) if cache_dir else DEFAULT_POLICY_CACHE)
+    policy = resolve_policy(policy_name, town, driver_model, spec, cache_dir)
     setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
     driver = SyntheticDriver(driver_model, np.random.default_rng(seed), initial_trust=initial_trust)
     episode_id = f"{spec.name}-{policy.name}-s{seed}"

@@ -16,8 +16,6 @@ import click
 
 from networks.errors import InputError
 
-DEFAULT_POLICY_CACHE = Path.home() / ".cache" / "trustroute" / "policies"
-
 
 def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None):
     from networks.town import load_town
@@ -139,7 +137,7 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
 @click.option("--max-junctions", type=int, default=None, help="Episode cap (default 60).")
 @rule_option
 @click.option("--cache-dir", type=click.Path(), default=None,
-              help=f"Where 'aware' policies are cached (default {DEFAULT_POLICY_CACHE}).")
+              help="Where 'aware' policies are cached (default ~/.cache/trustroute/policies).")
 @json_option
 def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_path: str | None,
              fallback_after: int, no_fallback: bool, max_junctions: int | None, belief_rule: str,
@@ -160,8 +158,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from policies.resolve import resolve_policy
 
-    policy = resolve_policy(policy_name, town, driver, spec,
-                            Path(cache_dir) if cache_dir else DEFAULT_POLICY_CACHE)
+    policy = resolve_policy(policy_name, town, driver, spec, cache_dir)
     value = evaluate_policy(pomdp, spec, policy, fallback_after=None if no_fallback else fallback_after,
                             max_junctions=cap, belief_rule=belief_rule)
     payload = value.to_dict()

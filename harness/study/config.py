@@ -54,7 +54,6 @@ STUDY_KEYS: tuple[str, ...] = (
     "policy_cache",
 )
 DEFAULT_REPORT_ACCURACY = 0.8
-DEFAULT_POLICY_CACHE = Path.home() / ".cache" / "trustroute" / "policies"
 
 
 @dataclass(frozen=True)
@@ -76,7 +75,7 @@ class StudyConfig:
     report_every: int = 1
     belief_rule: str = "bayes"
     output: str | None = None
-    policy_cache: str = str(DEFAULT_POLICY_CACHE)
+    policy_cache: str | None = None   # None: the resolver's default cache
     population: dict | None = field(default=None, compare=False, hash=False)
 
     @property
@@ -310,7 +309,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
                 'write output = "out/paper"',
             )
         output = str((base / study["output"]).resolve())
-    policy_cache = str(DEFAULT_POLICY_CACHE)
+    policy_cache = None
     if "policy_cache" in study:
         if not isinstance(study["policy_cache"], str) or not study["policy_cache"]:
             raise InputError(

@@ -78,7 +78,7 @@ def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: Study
     """Where the "aware" policy of this study is cached (the resolver's entry for its horizon and filter)."""
     from policies.resolve import aware_cache_path
 
-    return aware_cache_path(town, driver, spec, Path(config.policy_cache), aware_horizon(config),
+    return aware_cache_path(town, driver, spec, config.policy_cache, aware_horizon(config),
                             config.belief_rule)
 
 
@@ -95,7 +95,7 @@ def resolve_condition_policy(
     """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
     from policies.resolve import resolve_policy
 
-    return resolve_policy(condition, town, driver, spec, Path(config.policy_cache), aware_horizon(config),
+    return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
                           config.belief_rule)
 
 
@@ -143,15 +143,8 @@ def engine_function(engine: str) -> Callable:
         from harness.model_engine import run_model_episode
 
         return run_model_episode
-    try:
-        from harness.episode import run_episode
-    except ImportError as exc:
-        raise InputError(
-            "engine",
-            "sumo",
-            f"the SUMO engine is not available ({exc})",
-            "use --engine model, or install the SUMO episode runner",
-        ) from None
+    from harness.episode import run_episode
+
     return run_episode
 
 
