@@ -70,7 +70,7 @@ def synthesized_bounds(
             document = read_policy_document(path)
             if document.get("lower") is not None and document.get("upper") is not None:
                 return float(document["lower"]), float(document["upper"]), document.get("horizon")
-        except (ImportError, OSError, InputError, ValueError, KeyError):
+        except (OSError, InputError, ValueError, KeyError):
             pass
     lower, upper = getattr(policy, "lower", None), getattr(policy, "upper", None)
     if isinstance(lower, int | float) and isinstance(upper, int | float):
