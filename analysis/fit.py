@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from networks.errors import InputError
-from participants.driver_model import PERFORMANCES, DriverModel, driver_model_from_dict
+from trustroute.networks.errors import InputError
+from trustroute.participants.driver_model import PERFORMANCES, DriverModel, driver_model_from_dict
 
 MIN_ROW_WEIGHT = 5.0  # expected visits below which a T row keeps its starting value
 EM_TOLERANCE = 1e-7  # stop when the mean log-likelihood per road improves less than this
@@ -445,7 +445,7 @@ def fit_roads(
 
 def fit_study(study_dir: Path, method: str = "auto", iterations: int = 200) -> FitResult:
     """Fit a driver model to the consolidated logs of a study directory."""
-    from analysis.tables import load_study, study_inputs
+    from trustroute.analysis.tables import load_study, study_inputs
 
     if iterations < 1:
         raise InputError("--iterations", "", f"must be >= 1, got {iterations}", "pass e.g. --iterations 200")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from networks.town import Town, split_road
+from trustroute.networks.town import Town, split_road
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
 

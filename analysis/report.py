@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.plots import write_plots
-from analysis.tables import StudyAnalysis, cell_rows, study_analysis, study_inputs
+from trustroute.analysis.plots import write_plots
+from trustroute.analysis.tables import StudyAnalysis, cell_rows, study_analysis, study_inputs
 
 NOTES = [
     "Satisfaction is re-evaluated from the logged roads with the spec's DFA (policies.trace). "
@@ -190,6 +190,6 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
     markdown_path, html_path = study_dir / "report.md", study_dir / "report.html"
     markdown_path.write_text("\n".join(md))
     html_path.write_text(page)
-    from analysis.tables import format_table
+    from trustroute.analysis.tables import format_table
 
     return ReportPaths(markdown=markdown_path, html=html_path, plots=plots, table_text=format_table(primary))

@@ -18,9 +18,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from networks.town import Town
-from policies.spec import Spec
-from policies.trace import evaluate_traces
+from trustroute.networks.town import Town
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.logic.trace import evaluate_traces
 
 BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported")
 

@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.satisfaction import BELIEF_SOURCES, episode_satisfaction
-from analysis.statistics import bootstrap_ci, mcnemar_exact, wilcoxon_paired
-from networks.errors import InputError
+from trustroute.analysis.satisfaction import BELIEF_SOURCES, episode_satisfaction
+from trustroute.analysis.statistics import bootstrap_ci, mcnemar_exact, wilcoxon_paired
+from trustroute.networks.errors import InputError
 
 PAPER = {
     "satisfied_aware": {"phi1": (18, 21), "phi2": (17, 21)},
@@ -90,9 +90,9 @@ def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
 
 def study_inputs(manifest: dict):
     """(town, nominal driver model, {spec name: Spec}) named by the study's config."""
-    from networks.town import load_town
-    from participants.driver_model import load_driver_model
-    from policies.spec import load_spec
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.spec import load_spec
 
     config = manifest["config"]
     town = load_town(config.get("town"))

@@ -13,15 +13,15 @@ import time
 import numpy as np
 
 from benchmarks.timing import best_seconds
-from harness.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
-from harness.episode_tracker import EpisodeSetup
-from harness.sumo_start import SumoConfig, sumo_session
-from networks.sumo_net import build_net
-from networks.town import load_town
-from participants.driver_model import load_driver_model
-from participants.synthetic_driver import SyntheticDriver
-from policies.baseline import baseline_route, trust_free_policy
-from policies.spec import load_spec
+from trustroute.harness.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
+from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.harness.sumo_start import SumoConfig, sumo_session
+from trustroute.networks.sumo_net import build_net
+from trustroute.networks.town import load_town
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import baseline_route, trust_free_policy
 
 SEED = 3
 

@@ -14,10 +14,10 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.timing import best_seconds
-from networks.town import load_town
-from participants.driver_model import load_driver_model
-from participants.synthetic_driver import SyntheticDriver
-from policies.trust_pomdp import build_pomdp
+from trustroute.networks.town import load_town
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.model.trust_pomdp import build_pomdp
 
 BATCH = 100_000
 LOOP = 20_000

@@ -7,8 +7,8 @@ import time
 from pathlib import Path
 
 from benchmarks.timing import best_seconds
-from networks.sumo_net import build_net
-from networks.town import load_town
+from trustroute.networks.sumo_net import build_net
+from trustroute.networks.town import load_town
 
 
 def run() -> list[dict]:

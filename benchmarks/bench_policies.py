@@ -11,13 +11,13 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.timing import best_seconds
-from networks.town import load_town
-from participants.driver_model import load_driver_model
-from policies.baseline import trust_free_policy
-from policies.evaluate import evaluate
-from policies.pouct_baseline import monte_carlo
-from policies.spec import load_spec
-from policies.trust_pomdp import build_pomdp
+from trustroute.networks.town import load_town
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.policies.evaluate import evaluate
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.pomdp_py.pouct import monte_carlo
+from trustroute.policies.routing.free import trust_free_policy
 
 SPECS = ("phi1", "phi2")
 PAPER_TRUST_FREE_RATE = 0.775
@@ -59,7 +59,7 @@ def run() -> list[dict]:
     spec = load_spec("specs/phi1.toml", town)
     deep = _FixedRandomPolicy(town, np.random.default_rng(2))
     tree = evaluate(pomdp, spec, deep, fallback_after=28)
-    results.append({"name": "policies.evaluate.deep_tree_nodes_per_second",
+    results.append({"name": "trustroute.policies.evaluate.deep_tree_nodes_per_second",
                     "value": tree.nodes / tree.seconds, "unit": "nodes/s", "nodes": tree.nodes,
                     "max_frontier": tree.max_frontier, "seconds": tree.seconds, "gap": tree.gap})
     return results

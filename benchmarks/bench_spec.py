@@ -16,11 +16,11 @@ import time
 import numpy as np
 
 from benchmarks.timing import best_seconds
-from networks.town import load_town
-from policies.dfa import build_dfa, dfa_from_formula
-from policies.formula import parse_formula
-from policies.spec import load_spec
-from policies.trace import evaluate_traces
+from trustroute.networks.town import load_town
+from trustroute.policies.logic.dfa import build_dfa, dfa_from_formula
+from trustroute.policies.logic.formula import parse_formula
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.logic.trace import evaluate_traces
 
 SHIPPED = ("phi1", "phi2", "phi1_strict", "phi2_strict")
 N_TRACES = 100_000

@@ -18,14 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.episode_tracker import EpisodeSetup
-from harness.model_engine import run_model_episode, simulate_batch
-from networks.town import load_town
-from participants.driver_model import load_driver_model
-from participants.synthetic_driver import SyntheticDriver
-from policies.baseline import trust_free_policy
-from policies.resolve import resolve_policy
-from policies.spec import load_spec
+from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.harness.model_engine import run_model_episode, simulate_batch
+from trustroute.networks.town import load_town
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.routing.resolve import resolve_policy
 
 BATCH_EPISODES = 100_000
 SINGLE_EPISODES = 500
@@ -35,8 +35,8 @@ WORKERS = 2
 
 
 def _study(participants: int, engine: str, out: Path) -> tuple[float, object]:
-    from harness.study.config import study_config_from_dict
-    from harness.study.runner import run_and_consolidate
+    from trustroute.harness.study.config import study_config_from_dict
+    from trustroute.harness.study.runner import run_and_consolidate
 
     config = study_config_from_dict(
         {

@@ -22,15 +22,15 @@ import itertools
 import numpy as np
 from scipy.spatial import cKDTree
 
-from networks.town import load_town
-from participants.driver_model import load_driver_model
-from policies.belief_abstraction import apply_symbol, observation_symbols
-from policies.evaluate import evaluate
-from policies.pouct_baseline import monte_carlo, pouct_policy
-from policies.product_mdp import build_product
-from policies.spec import load_spec
-from policies.synthesis import synthesize
-from policies.trust_pomdp import build_pomdp
+from trustroute.networks.town import load_town
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.policies.evaluate import evaluate
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.model.product_mdp import build_product
+from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.pomdp_py.pouct import monte_carlo, pouct_policy
+from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols
+from trustroute.policies.synthesis.search import synthesize
 
 SPECS = ("phi1", "phi2", "phi1_strict", "phi2_strict")
 RULES = ("bayes", "paper")

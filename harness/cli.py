@@ -12,21 +12,21 @@ import sys
 
 import click
 
-from networks.errors import InputError
+from trustroute.networks.errors import InputError
 
 # name -> (module, attribute, one-line help)
 COMMANDS: dict[str, tuple[str, str, str]] = {
-    "net": ("harness.commands.net", "net", "Build and inspect the SUMO network of a town."),
-    "spec": ("harness.commands.spec", "spec", "Check scLDTL spec files."),
-    "synth": ("harness.commands.synth", "synth", "Synthesize a trust-aware policy with bounds."),
-    "baseline": ("harness.commands.synth", "baseline", "The trust-free shortest baseline route."),
-    "evaluate": ("harness.commands.synth", "evaluate", "Exact satisfaction probability of a policy."),
-    "run": ("harness.commands.run", "run", "Run one episode in SUMO."),
-    "study": ("harness.commands.study", "study", "Run a simulated within-subject study."),
-    "analyze": ("harness.commands.study", "analyze", "Analyse a study directory."),
-    "fit": ("harness.commands.study", "fit", "Fit a driver model to a study's logs."),
-    "demo": ("harness.commands.demo", "demo", "Run the paper-size study (21 drivers) and report."),
-    "model": ("harness.commands.model", "model", "Summarise the trust POMDP of a town and model."),
+    "net": ("trustroute.harness.commands.net", "net", "Build and inspect the SUMO network of a town."),
+    "spec": ("trustroute.harness.commands.spec", "spec", "Check scLDTL spec files."),
+    "synth": ("trustroute.harness.commands.synth", "synth", "Synthesize a trust-aware policy with bounds."),
+    "baseline": ("trustroute.harness.commands.synth", "baseline", "The trust-free shortest baseline route."),
+    "evaluate": ("trustroute.harness.commands.synth", "evaluate", "Exact satisfaction probability."),
+    "run": ("trustroute.harness.commands.run", "run", "Run one episode in SUMO."),
+    "study": ("trustroute.harness.commands.study", "study", "Run a simulated within-subject study."),
+    "analyze": ("trustroute.harness.commands.study", "analyze", "Analyse a study directory."),
+    "fit": ("trustroute.harness.commands.study", "fit", "Fit a driver model to a study's logs."),
+    "demo": ("trustroute.harness.commands.demo", "demo", "Run the paper-size study (21 drivers) and report."),
+    "model": ("trustroute.harness.commands.model", "model", "Summarise the trust POMDP of a town and model."),
 }
 
 

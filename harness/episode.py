@@ -24,16 +24,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from harness import incidents as incident_kinds
-from harness.episode_tracker import EpisodeSetup, EpisodeTracker
-from harness.incidents import EgoState, Incident, Scene
-from harness.performance import PerformanceMonitor
-from harness.sumo_start import SumoConfig, sumo_session
-from harness.takeover import AUTOPILOT, apply_style, hand_back, take_over
-from networks.errors import InputError
-from networks.sumo_net import build_net, net_counts
-from networks.town import split_road
-from policies.policy import RoutingPolicy
+from trustroute.harness import incidents as incident_kinds
+from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker
+from trustroute.harness.incidents import EgoState, Incident, Scene
+from trustroute.harness.performance import PerformanceMonitor
+from trustroute.harness.sumo_start import SumoConfig, sumo_session
+from trustroute.harness.takeover import AUTOPILOT, apply_style, hand_back, take_over
+from trustroute.networks.errors import InputError
+from trustroute.networks.sumo_net import build_net, net_counts
+from trustroute.networks.town import split_road
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 log = logging.getLogger(__name__)
 
@@ -372,7 +372,7 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
                            roads=tracker.roads_frame(), kinematics=episode.kinematics_frame(),
                            incidents=episode.incidents_frame())
     if rrd_path is not None:
-        from harness.rerun_log import write_recording
+        from trustroute.harness.rerun_log import write_recording
 
         write_recording(Path(rrd_path), net, record, setup)
     return record

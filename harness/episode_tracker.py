@@ -23,14 +23,19 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from networks.town import Town
-from participants.driver_model import DriverModel
-from policies.dfa import DFA, build_dfa
-from policies.fallback import FallbackPolicy, fallback_fired, policy_finished, with_fallback
-from policies.labelling import Labeller
-from policies.policy import DecisionContext, RoutingPolicy
-from policies.spec import Spec
-from policies.trust_pomdp import TrustPOMDP, build_pomdp
+from trustroute.networks.town import Town
+from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.logic.dfa import DFA, build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp
+from trustroute.policies.routing.fallback import (
+    FallbackPolicy,
+    fallback_fired,
+    policy_finished,
+    with_fallback,
+)
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 ROAD_COLUMNS: tuple[str, ...] = (
     "episode_id", "index", "directed_road", "action", "incident", "takeover", "performance",

@@ -23,12 +23,17 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from harness.episode import EpisodeRecord
-from harness.episode_tracker import EpisodeSetup, EpisodeTracker, _model
-from participants.driver_model import DriverModel
-from participants.synthetic_driver import SyntheticDriver
-from policies.fallback import FallbackPolicy, fallback_fired, policy_finished, with_fallback
-from policies.policy import DecisionContext, RoutingPolicy
+from trustroute.harness.episode import EpisodeRecord
+from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker, _model
+from trustroute.participants.driver_model import DriverModel
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.routing.fallback import (
+    FallbackPolicy,
+    fallback_fired,
+    policy_finished,
+    with_fallback,
+)
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 KINEMATICS_COLUMNS: tuple[str, ...] = ("episode_id", "time", "x", "y", "speed", "lane", "mode")
 END_CODES: tuple[str, ...] = ("", "accepted", "rejected", "destination", "cap")

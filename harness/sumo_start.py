@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
-from networks.errors import InputError
-from networks.sumo_net import find_binary
+from trustroute.networks.errors import InputError
+from trustroute.networks.sumo_net import find_binary
 
 
 @dataclass(frozen=True)

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from networks.errors import InputError
-from networks.town import Town, road_name
+from trustroute.networks.errors import InputError
+from trustroute.networks.town import Town, road_name
 
 NET_RECIPE = "r1"                      # bump when the recipe below changes: invalidates caches
 DEFAULT_NET_CACHE = Path.home() / ".cache" / "trustroute" / "nets"

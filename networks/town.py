@@ -16,7 +16,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from networks.errors import InputError
+from trustroute.networks.errors import InputError
 
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town.json"
 INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", "none")

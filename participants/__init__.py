@@ -5,15 +5,19 @@ validation, the synthetic driver and populations with individual variation.
 Must not know about SUMO.
 """
 
-from participants.driver_model import (
+from trustroute.participants.driver_model import (
     DEFAULT_DRIVER_MODEL_PATH,
     DriverModel,
     check_covers_town,
     driver_model_from_dict,
     load_driver_model,
 )
-from participants.population import PopulationConfig, population_config_from_dict, sample_population
-from participants.synthetic_driver import SyntheticDriver
+from trustroute.participants.population import (
+    PopulationConfig,
+    population_config_from_dict,
+    sample_population,
+)
+from trustroute.participants.synthetic_driver import SyntheticDriver
 
 __all__ = [
     "DEFAULT_DRIVER_MODEL_PATH",

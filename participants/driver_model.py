@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from networks.errors import InputError
+from trustroute.networks.errors import InputError
 
 DEFAULT_DRIVER_MODEL_PATH = Path(__file__).parent / "data" / "driver_model.json"
 HUMAN_ACTIONS: tuple[str, ...] = ("standstill", "takeover")

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from networks.errors import InputError
-from participants.driver_model import ROW_TOLERANCE, DriverModel
+from trustroute.networks.errors import InputError
+from trustroute.participants.driver_model import ROW_TOLERANCE, DriverModel
 
 
 @dataclass(frozen=True)

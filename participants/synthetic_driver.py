@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from participants.driver_model import PERFORMANCES, DriverModel
+from trustroute.participants.driver_model import PERFORMANCES, DriverModel
 
 
 def _draw_index(probabilities: np.ndarray, rng: np.random.Generator) -> int:

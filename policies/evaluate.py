@@ -27,12 +27,17 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from policies.dfa import build_dfa
-from policies.fallback import FallbackPolicy, fallback_fired, policy_finished, with_fallback
-from policies.labelling import Labeller
-from policies.policy import DecisionContext, RoutingPolicy
-from policies.spec import Spec
-from policies.trust_pomdp import BeliefRule, TrustPOMDP
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+from trustroute.policies.routing.fallback import (
+    FallbackPolicy,
+    fallback_fired,
+    policy_finished,
+    with_fallback,
+)
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 EPISODE_JUNCTION_CAP = 60
 DEFAULT_PRUNE_BELOW = 1e-12

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from networks.town import load_town
-from participants.driver_model import load_driver_model
-from policies.trust_pomdp import build_pomdp
+from trustroute.networks.town import load_town
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.policies.model.trust_pomdp import build_pomdp
 
 
 @pytest.fixture(scope="session")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import click
 
-from networks.errors import InputError
+from trustroute.networks.errors import InputError
 
 DEFAULT_OUT = Path("out") / "demo"
 DEMO_STUDY = {
@@ -28,10 +28,10 @@ DEMO_STUDY = {
 
 def record_episode(config, study_dir: Path, episode_id: str) -> Path:
     """Replay one planned episode in SUMO with its seeds and write `<study>/<episode_id>.rrd`."""
-    from harness.episode import run_episode
-    from harness.study.plan import plan_episodes
-    from harness.study.runner import study_context
-    from participants.synthetic_driver import SyntheticDriver
+    from trustroute.harness.episode import run_episode
+    from trustroute.harness.study.plan import plan_episodes
+    from trustroute.harness.study.runner import study_context
+    from trustroute.participants.synthetic_driver import SyntheticDriver
 
     task = next(t for t in plan_episodes(config) if t.episode_id == episode_id)
     context = study_context(config)
@@ -65,8 +65,8 @@ def record_episode(config, study_dir: Path, episode_id: str) -> Path:
 @click.option("--participants", type=int, default=21, show_default=True)
 def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
     """Run the paper-size study (21 participants) on the defaults and show where the results are."""
-    from harness.study.config import study_config_from_dict
-    from harness.study.runner import run_and_consolidate
+    from trustroute.harness.study.config import study_config_from_dict
+    from trustroute.harness.study.runner import run_and_consolidate
 
     if participants < 1:
         raise InputError("--participants", "", f"must be >= 1, got {participants}", "pass e.g. 21")
@@ -81,7 +81,7 @@ def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
         f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}"
     )
     run, _ = run_and_consolidate(config, study_dir, workers, None, echo=click.echo)
-    from analysis.report import write_report
+    from trustroute.analysis.report import write_report
 
     paths = write_report(run.study_dir)
     click.echo("")

@@ -7,9 +7,9 @@ import json
 import click
 import numpy as np
 
-from networks.town import load_town
-from participants.driver_model import load_driver_model
-from policies.trust_pomdp import build_pomdp
+from trustroute.networks.town import load_town
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.policies.model.trust_pomdp import build_pomdp
 
 
 def model_summary(town_path: str | None, driver_path: str | None) -> dict:

@@ -20,8 +20,8 @@ def net() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def build(town_path: str | None, out_dir: str | None, as_json: bool) -> None:
     """Build the town's .net.xml with netconvert, cached by the town's content hash."""
-    from networks.sumo_net import build_net
-    from networks.town import load_town
+    from trustroute.networks.sumo_net import build_net
+    from trustroute.networks.town import load_town
 
     result = build_net(load_town(town_path), Path(out_dir) if out_dir else None)
     if as_json:

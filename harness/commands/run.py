@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from networks.errors import InputError
+from trustroute.networks.errors import InputError
 
 
 def _write_logs(out_dir: Path, record) -> list[Path]:
@@ -50,13 +50,13 @@ def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_d
     """Run one episode of SPEC in SUMO with POLICY and a synthetic driver."""
     import numpy as np
 
-    from harness.episode import run_episode
-    from harness.episode_tracker import EpisodeSetup
-    from networks.town import load_town
-    from participants.driver_model import load_driver_model
-    from participants.synthetic_driver import SyntheticDriver
-    from policies.resolve import resolve_policy
-    from policies.spec import load_spec
+    from trustroute.harness.episode import run_episode
+    from trustroute.harness.episode_tracker import EpisodeSetup
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.participants.synthetic_driver import SyntheticDriver
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.routing.resolve import resolve_policy
 
     if seed < 0:
         raise InputError("--seed", "", f"must be >= 0, got {seed}", "pass a non-negative integer")

@@ -1,6 +1,6 @@
 """`trustroute spec check SPEC`: parse a spec, translate it to its DFA and lint it.
 
-Prints the DFA size and the warnings of policies/lint.py (against the default town unless
+Prints the DFA size and the warnings of policies/logic/lint.py (against the default town unless
 --town is given); --json prints one object; --dot writes the DFA as Graphviz dot.
 """
 
@@ -12,15 +12,15 @@ from pathlib import Path
 
 import click
 
-from networks.errors import InputError
+from trustroute.networks.errors import InputError
 
 
 def spec_report(spec_path: str, town_path: str | None) -> tuple[dict, str]:
     """(the JSON-ready summary of a spec check, the DFA as dot text)."""
-    from networks.town import load_town
-    from policies.dfa import dfa_from_formula
-    from policies.lint import lint
-    from policies.spec import load_spec
+    from trustroute.networks.town import load_town
+    from trustroute.policies.logic.dfa import dfa_from_formula
+    from trustroute.policies.logic.lint import lint
+    from trustroute.policies.logic.spec import load_spec
 
     town = load_town(town_path)
     spec = load_spec(spec_path, town)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import click
 
-from networks.errors import InputError
+from trustroute.networks.errors import InputError
 
 DEFAULT_STUDIES_DIR = Path("studies")
 
@@ -55,14 +55,14 @@ def study(
     no_report: bool,
 ) -> None:
     """Run (or resume) the simulated within-subject study described by CONFIG."""
-    from harness.study.config import load_study_config
+    from trustroute.harness.study.config import load_study_config
 
     config = load_study_config(config_path).with_overrides(engine=engine)
     if workers is not None and workers < 1:
         raise InputError("--workers", "", f"must be >= 1, got {workers}", "pass e.g. --workers 2")
     workers = workers if workers is not None else (os.cpu_count() or 1)
     study_dir = study_directory(config, out)
-    from harness.study.runner import run_and_consolidate
+    from trustroute.harness.study.runner import run_and_consolidate
 
     run, _ = run_and_consolidate(config, study_dir, workers, scheduler, echo=click.echo)
     click.echo(f"dataset: {run.study_dir / 'episodes.parquet'}, {run.study_dir / 'roads.parquet'}")
@@ -72,7 +72,7 @@ def study(
             f"{' ...' if len(run.failed) > 5 else ''}"
         )
     if not no_report:
-        from analysis.report import write_report
+        from trustroute.analysis.report import write_report
 
         paths = write_report(run.study_dir)
         click.echo(paths.table_text)
@@ -92,12 +92,12 @@ def study(
 @click.option("--report/--no-report", default=True, help="Also (re)write the report and plots.")
 def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> None:
     """Per spec and condition: n, satisfaction rate with CI, mean trust, paired tests."""
-    from analysis.tables import study_analysis
+    from trustroute.analysis.tables import study_analysis
 
     analysis = study_analysis(Path(study_dir), belief_source=belief_source)
     paths = None
     if report:
-        from analysis.report import write_report
+        from trustroute.analysis.report import write_report
 
         paths = write_report(Path(study_dir), analysis=analysis)
     if as_json:
@@ -106,7 +106,7 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
             payload["report"] = {"markdown": str(paths.markdown), "html": str(paths.html)}
         click.echo(json.dumps(payload, default=str))
         return
-    from analysis.tables import format_table
+    from trustroute.analysis.tables import format_table
 
     click.echo(format_table(analysis))
     if paths is not None:
@@ -135,7 +135,7 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def fit(study_dir: str, out: str, method: str, iterations: int, as_json: bool) -> None:
     """Estimate trust dynamics and the takeover model from a study's logs; write a driver model."""
-    from analysis.fit import fit_study
+    from trustroute.analysis.fit import fit_study
 
     result = fit_study(Path(study_dir), method=method, iterations=iterations)
     path = result.write(Path(out))

@@ -14,14 +14,14 @@ from pathlib import Path
 
 import click
 
-from networks.errors import InputError
+from trustroute.networks.errors import InputError
 
 
 def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None):
-    from networks.town import load_town
-    from participants.driver_model import load_driver_model
-    from policies.spec import load_spec
-    from policies.trust_pomdp import build_pomdp
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.model.trust_pomdp import build_pomdp
 
     town = load_town(town_path)
     driver = load_driver_model(driver_path)
@@ -82,8 +82,8 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
         raise InputError("--horizon", "", f"horizon must be at least 1, got {horizon}",
                          "pass a positive number of junctions or omit --horizon")
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
-    from policies.policy_file import save_policy
-    from policies.synthesis import synthesize
+    from trustroute.policies.routing.files import save_policy
+    from trustroute.policies.synthesis.search import synthesize
 
     if time_limit <= 0:
         raise InputError("--time-limit", "", f"must be positive, got {time_limit}", "pass e.g. 60")
@@ -108,8 +108,8 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
 def baseline(spec_path: str, town_path: str | None, driver_path: str | None, belief_rule: str,
              as_json: bool) -> None:
     """The trust-free baseline for SPEC: shortest route completing its state-only task."""
-    from policies.baseline import baseline_route, trust_free_policy
-    from policies.evaluate import evaluate as evaluate_policy
+    from trustroute.policies.evaluate import evaluate as evaluate_policy
+    from trustroute.policies.routing.free import baseline_route, trust_free_policy
 
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     route = baseline_route(town, spec)
@@ -146,8 +146,8 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
 
     "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached.
     """
-    from policies.evaluate import EPISODE_JUNCTION_CAP
-    from policies.evaluate import evaluate as evaluate_policy
+    from trustroute.policies.evaluate import EPISODE_JUNCTION_CAP
+    from trustroute.policies.evaluate import evaluate as evaluate_policy
 
     if fallback_after < 0:
         raise InputError("--fallback-after", "", f"must be >= 0, got {fallback_after}",
@@ -156,7 +156,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     if cap < 0:
         raise InputError("--max-junctions", "", f"must be >= 0, got {cap}", "pass e.g. 60")
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
-    from policies.resolve import resolve_policy
+    from trustroute.policies.routing.resolve import resolve_policy
 
     policy = resolve_policy(policy_name, town, driver, spec, cache_dir)
     value = evaluate_policy(pomdp, spec, policy, fallback_after=None if no_fallback else fallback_after,

@@ -7,8 +7,8 @@ steps it, and removes it once the ego has passed it or leaves its road.
 
 from __future__ import annotations
 
-from harness.incidents import obstacle, pedestrian, truck
-from harness.incidents.base import EgoState, Incident, Scene
+from trustroute.harness.incidents import obstacle, pedestrian, truck
+from trustroute.harness.incidents.base import EgoState, Incident, Scene
 
 INJECTORS = {
     "pedestrian": pedestrian.inject,

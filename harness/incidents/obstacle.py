@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from harness.incidents.base import EgoState, Scene, remove_vehicle, vehicle_position
+from trustroute.harness.incidents.base import EgoState, Scene, remove_vehicle, vehicle_position
 
 KIND = "obstacle"
 TYPE_ID = "trustroute_obstacle"

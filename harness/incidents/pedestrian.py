@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 from dataclasses import dataclass, field
 
-from harness.incidents.base import EgoState, Scene
+from trustroute.harness.incidents.base import EgoState, Scene
 
 KIND = "pedestrian"
 START_BEFORE_JUNCTION = 3.0   # metres before the end of the opposite sidewalk

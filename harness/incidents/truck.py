@@ -8,7 +8,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from harness.incidents.base import EgoState, Scene, remove_vehicle, vehicle_position, vehicle_present
+from trustroute.harness.incidents.base import (
+    EgoState,
+    Scene,
+    remove_vehicle,
+    vehicle_position,
+    vehicle_present,
+)
 
 KIND = "truck"
 TYPE_ID = "trustroute_truck"

@@ -29,8 +29,8 @@ import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-import policies
-from networks.errors import InputError
+import trustroute.policies as policies
+from trustroute.networks.errors import InputError
 
 PACKAGED_SPECS = Path(policies.__file__).resolve().parent / "specs"
 ENGINES: tuple[str, ...] = ("sumo", "model")
@@ -175,7 +175,7 @@ def _population(table: object, source: str) -> dict | None:
     """The raw [population] table, validated by participants.population."""
     if table is None:
         return None
-    from participants.population import population_config_from_dict
+    from trustroute.participants.population import population_config_from_dict
 
     population_config_from_dict(table, source)  # raises InputError naming the key
     return dict(table)

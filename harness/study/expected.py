@@ -11,17 +11,17 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from harness.study.config import StudyConfig
-from networks.errors import InputError
-from policies.policy import RoutingPolicy
+from trustroute.harness.study.config import StudyConfig
+from trustroute.networks.errors import InputError
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 
 def expected_values(config: StudyConfig) -> dict:
     """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluate),
     and the synthesized bounds when the policy carries them."""
-    from harness.study.runner import study_context
-    from policies.evaluate import evaluate
-    from policies.trust_pomdp import build_pomdp
+    from trustroute.harness.study.runner import study_context
+    from trustroute.policies.evaluate import evaluate
+    from trustroute.policies.model.trust_pomdp import build_pomdp
 
     context = study_context(config)
     pomdp = build_pomdp(context.town, context.nominal)
@@ -59,10 +59,10 @@ def synthesized_bounds(
     file ("aware": the resolver's cache entry), else from attributes of the policy; None if unknown."""
     if condition is not None and condition != "free":
         try:
-            from policies.policy_file import read_policy_document
+            from trustroute.policies.routing.files import read_policy_document
 
             if condition == "aware":
-                from harness.study.runner import aware_policy_path
+                from trustroute.harness.study.runner import aware_policy_path
 
                 path = aware_policy_path(context.town, context.nominal, context.specs[spec_name], config)
             else:

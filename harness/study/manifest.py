@@ -26,8 +26,8 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from harness.study.config import StudyConfig
-from harness.study.parts import (
+from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.parts import (
     KINEMATICS_SCHEMA,
     ROADS_SCHEMA,
     incidents_path,
@@ -36,7 +36,7 @@ from harness.study.parts import (
     read_failures,
     read_part_table,
 )
-from harness.study.plan import EpisodeTask
+from trustroute.harness.study.plan import EpisodeTask
 
 PACKAGES: tuple[str, ...] = (
     "trustroute",

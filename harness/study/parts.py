@@ -25,7 +25,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from harness.study.plan import EpisodeTask
+from trustroute.harness.study.plan import EpisodeTask
 
 SUMMARY_KEY = b"trustroute.summary"
 TASK_KEY = b"trustroute.task"

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.study.config import StudyConfig
-from harness.study.latin_square import participant_order
-from participants.driver_model import DriverModel
+from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.latin_square import participant_order
+from trustroute.participants.driver_model import DriverModel
 
 EPISODE_KEY = 1
 POPULATION_KEY = 2
@@ -85,7 +85,7 @@ def participant_models(config: StudyConfig, nominal: DriverModel) -> list[Driver
     """The participants' driver models, or None when every driver is the nominal model."""
     if config.population is None:
         return None
-    from participants.population import population_config_from_dict, sample_population
+    from trustroute.participants.population import population_config_from_dict, sample_population
 
     population = population_config_from_dict(config.population, config.source_path, nominal.n_trust)
     rng = np.random.default_rng(np.random.SeedSequence(config.seed, spawn_key=(POPULATION_KEY,)))

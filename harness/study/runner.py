@@ -20,15 +20,15 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from harness.episode_tracker import EpisodeSetup
-from harness.study.config import StudyConfig
-from harness.study.parts import finished_episodes, write_failure, write_part
-from harness.study.plan import EpisodeTask, participant_models, plan_episodes
-from networks.errors import InputError
-from networks.town import Town
-from participants.driver_model import DriverModel
-from policies.policy import RoutingPolicy
-from policies.spec import Spec
+from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.parts import finished_episodes, write_failure, write_part
+from trustroute.harness.study.plan import EpisodeTask, participant_models, plan_episodes
+from trustroute.networks.errors import InputError
+from trustroute.networks.town import Town
+from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 STUDY_FILE = "study.json"
 
@@ -76,7 +76,7 @@ class StudyContext:
 
 def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: StudyConfig) -> Path:
     """Where the "aware" policy of this study is cached (the resolver's entry for its horizon and filter)."""
-    from policies.resolve import aware_cache_path
+    from trustroute.policies.routing.resolve import aware_cache_path
 
     return aware_cache_path(town, driver, spec, config.policy_cache, aware_horizon(config),
                             config.belief_rule)
@@ -84,7 +84,7 @@ def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: Study
 
 def aware_horizon(config: StudyConfig) -> int:
     """The synthesis horizon of "aware": the config's, else the resolver's default (20 junctions)."""
-    from policies.resolve import AWARE_HORIZON
+    from trustroute.policies.routing.resolve import AWARE_HORIZON
 
     return AWARE_HORIZON if config.horizon is None else config.horizon
 
@@ -93,7 +93,7 @@ def resolve_condition_policy(
     condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig
 ) -> RoutingPolicy:
     """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
-    from policies.resolve import resolve_policy
+    from trustroute.policies.routing.resolve import resolve_policy
 
     return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
                           config.belief_rule)
@@ -102,9 +102,9 @@ def resolve_condition_policy(
 @functools.lru_cache(maxsize=4)
 def study_context(config: StudyConfig) -> StudyContext:
     """The study's shared context, built once per process (cached by the config)."""
-    from networks.town import load_town
-    from participants.driver_model import load_driver_model
-    from policies.spec import load_spec
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.spec import load_spec
 
     town = load_town(config.town)
     nominal = load_driver_model(config.driver_model)
@@ -140,10 +140,10 @@ def study_context(config: StudyConfig) -> StudyContext:
 def engine_function(engine: str) -> Callable:
     """The episode function of an engine (run_episode for SUMO, run_model_episode for the model)."""
     if engine == "model":
-        from harness.model_engine import run_model_episode
+        from trustroute.harness.model_engine import run_model_episode
 
         return run_model_episode
-    from harness.episode import run_episode
+    from trustroute.harness.episode import run_episode
 
     return run_episode
 
@@ -152,7 +152,7 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
     """Run one episode and write its part. Never raises: errors come back in the outcome."""
     started = time.perf_counter()
     try:
-        from participants.synthetic_driver import SyntheticDriver
+        from trustroute.participants.synthetic_driver import SyntheticDriver
 
         context = study_context(config)
         driver = SyntheticDriver(
@@ -367,8 +367,8 @@ def run_and_consolidate(
 ) -> tuple[StudyRun, dict]:
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line."""
-    from harness.study.expected import expected_values
-    from harness.study.manifest import consolidate
+    from trustroute.harness.study.expected import expected_values
+    from trustroute.harness.study.manifest import consolidate
 
     run = run_study(
         config,

@@ -9,8 +9,8 @@ import pytest
 
 @pytest.fixture(scope="session")
 def model_study(tmp_path_factory) -> Path:
-    from harness.study.config import load_study_config
-    from harness.study.runner import run_and_consolidate
+    from trustroute.harness.study.config import load_study_config
+    from trustroute.harness.study.runner import run_and_consolidate
 
     root = tmp_path_factory.mktemp("study")
     cache = tmp_path_factory.mktemp("policies")

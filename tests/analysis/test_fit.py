@@ -17,13 +17,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.fit import fit_roads, observations_from_roads, starting_parameters
-from harness.cli import main
-from harness.episode_tracker import EpisodeSetup
-from harness.model_engine import run_model_episode
-from participants.driver_model import load_driver_model
-from participants.synthetic_driver import SyntheticDriver
-from policies.spec import load_spec
+from trustroute.analysis.fit import fit_roads, observations_from_roads, starting_parameters
+from trustroute.harness.cli import main
+from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.harness.model_engine import run_model_episode
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
 
 MIN_VISITS = 500
 TOLERANCE_EM = 0.08
@@ -95,7 +95,7 @@ def test_counts_recover_rows_from_exact_reports(town, driver):
 def test_counts_refuse_missing_reports(town, driver):
     roads = _logs(town, driver, 5, 0.8, seed=1)
     roads.loc[roads["index"] == 2, "reported_trust"] = -1
-    from networks.errors import InputError
+    from trustroute.networks.errors import InputError
 
     with pytest.raises(InputError, match="no trust report"):
         fit_roads(roads, driver, "counts")

@@ -7,10 +7,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.satisfaction import episode_satisfaction, reported_beliefs
-from analysis.tables import load_study, study_inputs
-from policies.baseline import baseline_route
-from policies.spec import load_spec
+from trustroute.analysis.satisfaction import episode_satisfaction, reported_beliefs
+from trustroute.analysis.tables import load_study, study_inputs
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import baseline_route
 
 
 @pytest.mark.slow

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from analysis.statistics import bootstrap_ci, mcnemar_exact, wilcoxon_paired
+from trustroute.analysis.statistics import bootstrap_ci, mcnemar_exact, wilcoxon_paired
 
 
 def _binomial_two_sided(k: int, n: int) -> float:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import policies
+import trustroute.policies as policies
 
 SPECS = Path(policies.__file__).parent / "specs"
 # Start E-A, then a pedestrian road, a plain road, an obstacle road and a truck road.

@@ -6,16 +6,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from harness import sumo_start
-from harness.episode import KINEMATIC_COLUMNS, run_episode
-from harness.episode_tracker import ROAD_COLUMNS, EpisodeSetup
-from networks.errors import InputError
-from networks.sumo_net import build_net
-from networks.town import town_from_dict
-from participants.synthetic_driver import SyntheticDriver
-from policies.baseline import baseline_route, trust_free_policy
-from policies.spec import load_spec
 from tests.harness.helpers import SPECS
+from trustroute.harness import sumo_start
+from trustroute.harness.episode import KINEMATIC_COLUMNS, run_episode
+from trustroute.harness.episode_tracker import ROAD_COLUMNS, EpisodeSetup
+from trustroute.networks.errors import InputError
+from trustroute.networks.sumo_net import build_net
+from trustroute.networks.town import town_from_dict
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import baseline_route, trust_free_policy
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +105,7 @@ class LoopPolicy:
 def test_fallback_fires_and_is_logged(town, driver, phi1, net_path, caplog):
     setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1, fallback_after=4)
     synthetic = SyntheticDriver(driver, np.random.default_rng(0), initial_trust=6)
-    with caplog.at_level("INFO", logger="harness.episode"):
+    with caplog.at_level("INFO", logger="trustroute.harness.episode"):
         record = run_episode(setup, LoopPolicy(), synthetic, "fb", 0, net_path=net_path)
     roads = record.roads
     assert record.summary["fallback_fired"]
@@ -170,7 +170,7 @@ def test_two_hundred_episodes_keep_memory_flat(setup, net_path):
 @pytest.mark.slow
 def test_sumo_episodes_match_the_exact_evaluation(setup, net_path, pomdp):
     """End to end: satisfaction and final trust of SUMO episodes vs the exact tree evaluation."""
-    from policies.evaluate import evaluate
+    from trustroute.policies.evaluate import evaluate
 
     exact = evaluate(pomdp, setup.spec, trust_free_policy(setup.town, setup.spec), fallback_after=20)
     n = 300

@@ -7,14 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from harness.episode_tracker import ROAD_COLUMNS, EpisodeSetup, EpisodeTracker
-from participants.synthetic_driver import SyntheticDriver
-from policies.baseline import baseline_route, trust_free_policy
-from policies.dfa import build_dfa
-from policies.evaluate import evaluate
-from policies.labelling import Labeller
-from policies.spec import load_spec
 from tests.harness.helpers import SPECS, FixedRoute
+from trustroute.harness.episode_tracker import ROAD_COLUMNS, EpisodeSetup, EpisodeTracker
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.evaluate import evaluate
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import baseline_route, trust_free_policy
 
 
 @pytest.fixture(scope="module")

@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from harness.episode import EGO_ID, run_episode
-from harness.episode_tracker import EpisodeSetup
-from harness.incidents import obstacle
-from networks.sumo_net import build_net
-from participants.synthetic_driver import SyntheticDriver
-from policies.spec import load_spec
 from tests.harness.helpers import INCIDENT_ROUTE, SPECS, FixedRoute, ForcedTakeover
+from trustroute.harness.episode import EGO_ID, run_episode
+from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.harness.incidents import obstacle
+from trustroute.networks.sumo_net import build_net
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
 
 
 class Recorder:

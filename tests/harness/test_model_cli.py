@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 
-from participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
 from tests.cli import run_cli
+from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
 
 
 def test_summary_text(capsys):

@@ -14,12 +14,12 @@ import math
 import numpy as np
 import pytest
 
-from harness.episode_tracker import EpisodeSetup
-from harness.model_engine import run_model_episode, simulate_batch
-from participants.synthetic_driver import SyntheticDriver
-from policies.baseline import trust_free_policy
-from policies.evaluate import evaluate
-from policies.spec import load_spec
+from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.harness.model_engine import run_model_episode, simulate_batch
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.evaluate import evaluate
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import trust_free_policy
 
 Z = 4.5
 
@@ -102,7 +102,7 @@ def test_per_episode_path_matches_exact_and_batch_for_looping_policy(town, drive
 def test_batch_with_a_population_of_drivers(town, driver):
     """Drivers who never take over and trust fully vs the nominal: the batch must use each
     episode's own driver model (a mix-up shows in the takeover counts)."""
-    from participants.driver_model import driver_model_from_dict
+    from trustroute.participants.driver_model import driver_model_from_dict
 
     data = driver.to_dict()
     data["takeover_probability"] = {k: [0.0] * 7 for k in data["takeover_probability"]}

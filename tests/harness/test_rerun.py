@@ -6,12 +6,12 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from harness.episode import run_episode
-from harness.episode_tracker import EpisodeSetup
-from networks.sumo_net import build_net
-from participants.synthetic_driver import SyntheticDriver
-from policies.spec import load_spec
 from tests.harness.helpers import INCIDENT_ROUTE, SPECS, FixedRoute, ForcedTakeover
+from trustroute.harness.episode import run_episode
+from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.networks.sumo_net import build_net
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
 
 NANOS = 1e9
 

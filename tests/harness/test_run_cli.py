@@ -8,11 +8,11 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
-from harness.cli import cli, main
-from harness.episode import KINEMATIC_COLUMNS
-from harness.episode_tracker import ROAD_COLUMNS
-from networks.sumo_net import build_net
 from tests.harness.helpers import SPECS
+from trustroute.harness.cli import cli, main
+from trustroute.harness.episode import KINEMATIC_COLUMNS
+from trustroute.harness.episode_tracker import ROAD_COLUMNS
+from trustroute.networks.sumo_net import build_net
 
 PHI1 = str(SPECS / "phi1.toml")
 
@@ -76,7 +76,7 @@ def test_unreadable_net_exit_2(tmp_path, capsys):
 def test_missing_sumo_binary_exit_2(net, capsys, monkeypatch):
     import sumolib
 
-    from harness import sumo_start
+    from trustroute.harness import sumo_start
 
     monkeypatch.setattr(sumolib, "checkBinary", lambda name, bindir=None: "no-such-" + name)
     monkeypatch.setenv("PATH", "")
@@ -94,7 +94,7 @@ def test_unknown_policy_exit_2(net, tmp_path, capsys):
 
 
 def test_policy_file_for_another_spec_exit_2(net, tmp_path, capsys):
-    pytest.importorskip("policies.policy_file")
+    pytest.importorskip("trustroute.policies.routing.files")
     policy = tmp_path / "phi2.json"
     code, stderr = _main(["synth", str(SPECS / "phi2.toml"), "--horizon", "3", "--tau", "0.5",
                           "--time-limit", "20", "--out", str(policy)], capsys)

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from harness.cli import main
-from harness.study.config import load_study_config
-from networks.errors import InputError
+from trustroute.harness.cli import main
+from trustroute.harness.study.config import load_study_config
+from trustroute.networks.errors import InputError
 
 REPO = Path(__file__).resolve().parents[2]
 MINIMAL = """[study]

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from harness.study.config import study_config_from_dict
-from harness.study.latin_square import participant_order, williams_rows
-from harness.study.plan import plan_episodes
+from trustroute.harness.study.config import study_config_from_dict
+from trustroute.harness.study.latin_square import participant_order, williams_rows
+from trustroute.harness.study.plan import plan_episodes
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -18,12 +18,12 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from harness.study import runner as runner_module
-from harness.study.config import load_study_config
-from harness.study.parts import part_path
-from harness.study.plan import plan_episodes
-from harness.study.runner import run_and_consolidate, run_study
-from networks.errors import InputError
+from trustroute.harness.study import runner as runner_module
+from trustroute.harness.study.config import load_study_config
+from trustroute.harness.study.parts import part_path
+from trustroute.harness.study.plan import plan_episodes
+from trustroute.harness.study.runner import run_and_consolidate, run_study
+from trustroute.networks.errors import InputError
 
 REPO = Path(__file__).resolve().parents[2]
 PYTHON = sys.executable
@@ -80,7 +80,7 @@ def test_sigkill_mid_run_then_rerun_equals_uninterrupted(tmp_path):
     command = [
         PYTHON,
         "-m",
-        "harness",
+        "trustroute",
         "study",
         str(config_path),
         "--out",
@@ -184,8 +184,8 @@ def test_dask_and_local_pool_give_identical_datasets(tmp_path):
     _run(config, pool, workers=2)
     run = run_study(config, dask, workers=2, scheduler="local", progress=False, dask_processes=False)
     assert run.backend.startswith("dask") and not run.failed
-    from harness.study.expected import expected_values
-    from harness.study.manifest import consolidate
+    from trustroute.harness.study.expected import expected_values
+    from trustroute.harness.study.manifest import consolidate
 
     consolidate(dask, config, plan_episodes(config), config.content_hash, expected_values(config))
     _assert_complete(pool, config)
@@ -212,8 +212,8 @@ def test_manifest_and_refusing_a_different_study(tmp_path):
 def test_study_horizon_selects_the_policy_synthesized_for_it(tmp_path):
     """`horizon = 6` synthesizes "aware" for 6 junctions, caches it under that horizon, and the
     expected values report that policy's own certified bounds (not the default H = 20 entry)."""
-    from harness.study.expected import expected_values
-    from harness.study.runner import aware_policy_path, study_context
+    from trustroute.harness.study.expected import expected_values
+    from trustroute.harness.study.runner import aware_policy_path, study_context
 
     path = tmp_path / "study.toml"
     path.write_text(f"""[study]

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from harness.episode import EGO_ID, run_episode
-from harness.episode_tracker import EpisodeSetup
-from harness.takeover import AUTOPILOT, MANUAL
-from networks.sumo_net import build_net
-from participants.synthetic_driver import SyntheticDriver
-from policies.spec import load_spec
 from tests.harness.helpers import INCIDENT_ROUTE, SPECS, FixedRoute, ForcedTakeover
+from trustroute.harness.episode import EGO_ID, run_episode
+from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.harness.takeover import AUTOPILOT, MANUAL
+from trustroute.networks.sumo_net import build_net
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
 
 
 def _run(town, driver, net, kinds):

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 import sumolib
 
-from networks.errors import InputError
-from networks.sumo_net import build_net, net_counts
-from networks.town import split_road
+from trustroute.networks.errors import InputError
+from trustroute.networks.sumo_net import build_net, net_counts
+from trustroute.networks.town import split_road
 
 
 @pytest.fixture(scope="module")
@@ -132,7 +132,7 @@ def test_missing_netconvert_is_input_error(town, tmp_path, monkeypatch):
 def test_net_cli(tmp_path):
     from click.testing import CliRunner
 
-    from harness.cli import cli
+    from trustroute.harness.cli import cli
 
     result = CliRunner().invoke(cli, ["net", "build", "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
@@ -156,7 +156,7 @@ def test_missing_binary_cli_exit_2(tmp_path):
 
 
 def test_dead_end_allows_only_its_u_turn(tmp_path):
-    from networks.town import town_from_dict
+    from trustroute.networks.town import town_from_dict
 
     data = {"junctions": {"P": [0, 0], "Q": [300, 0], "R": [0, 300], "S": [-250, -250]},
             "roads": [["P", "Q"], ["Q", "R"], ["R", "P"], ["P", "S"]],

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from networks.town import DEFAULT_TOWN_PATH, load_town, town_from_dict
+from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town, town_from_dict
 
 
 def test_default_town_shape(town):

@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from networks.errors import InputError
-from networks.town import DEFAULT_TOWN_PATH, load_town
 from tests.cli import run_cli
+from trustroute.networks.errors import InputError
+from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
 
 
 def default_town() -> dict:

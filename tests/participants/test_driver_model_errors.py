@@ -7,10 +7,14 @@ import json
 
 import pytest
 
-from networks.errors import InputError
-from participants.driver_model import DEFAULT_DRIVER_MODEL_PATH, driver_model_from_dict, load_driver_model
 from tests.cli import run_cli
 from tests.networks.test_town_errors import assert_one_line_error
+from trustroute.networks.errors import InputError
+from trustroute.participants.driver_model import (
+    DEFAULT_DRIVER_MODEL_PATH,
+    driver_model_from_dict,
+    load_driver_model,
+)
 
 
 def default_model() -> dict:

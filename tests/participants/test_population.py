@@ -9,10 +9,14 @@ import tomllib
 import numpy as np
 import pytest
 
-from networks.errors import InputError
-from participants.driver_model import driver_model_from_dict
-from participants.population import PopulationConfig, population_config_from_dict, sample_population
-from tests.policies.test_trust_pomdp import random_model
+from tests.policies.model.test_trust_pomdp import random_model
+from trustroute.networks.errors import InputError
+from trustroute.participants.driver_model import driver_model_from_dict
+from trustroute.participants.population import (
+    PopulationConfig,
+    population_config_from_dict,
+    sample_population,
+)
 
 
 def test_infinite_concentration_is_the_nominal_model(driver):

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from participants.synthetic_driver import SyntheticDriver
-from tests.policies.test_trust_pomdp import random_model
+from tests.policies.model.test_trust_pomdp import random_model
+from trustroute.participants.synthetic_driver import SyntheticDriver
 
 ALPHA = 1e-4
 

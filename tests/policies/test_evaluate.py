@@ -10,13 +10,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from policies.baseline import trust_free_policy
-from policies.dfa import build_dfa
-from policies.evaluate import evaluate
-from policies.fallback import FallbackPolicy, policy_finished, with_fallback
-from policies.labelling import Labeller
-from policies.policy import DecisionContext
-from policies.spec import load_spec
+from trustroute.policies.evaluate import evaluate
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.fallback import FallbackPolicy, policy_finished, with_fallback
+from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.routing.protocol import DecisionContext
 
 RANDOM_POLICY_SEED = {"phi1": 9, "phi2": 6}
 

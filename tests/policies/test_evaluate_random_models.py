@@ -7,13 +7,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from participants.driver_model import DriverModel
-from policies.baseline import trust_free_policy
-from policies.evaluate import evaluate
-from policies.fallback import with_fallback
-from policies.spec import load_spec
-from policies.trust_pomdp import build_pomdp
 from tests.policies.test_evaluate import RandomStationaryPolicy, recursive_value
+from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.evaluate import evaluate
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.routing.fallback import with_fallback
+from trustroute.policies.routing.free import trust_free_policy
 
 
 def random_driver(rng: np.random.Generator, incident_types: tuple[str, ...]) -> DriverModel:

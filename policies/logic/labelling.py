@@ -1,0 +1,65 @@
+"""The labelling function L(x, b) of the trust POMDP feeding a spec's DFA, vectorised.
+
+State atoms are read from a membership table [n_state_atoms, n_roads]; belief atoms are
+`offset - coeffs·b < 0`, i.e. `beliefs @ coeffs > offset` (strict; DESIGN.md, "scLDTL").
+Columns follow `dfa.atoms`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from trustroute.networks.errors import InputError
+from trustroute.networks.town import Town
+from trustroute.policies.logic.dfa import DFA
+from trustroute.policies.logic.spec import Spec
+
+
+class Labeller:
+    """L(x, b) for many positions at once, and the DFA step it drives."""
+
+    def __init__(self, spec: Spec, dfa: DFA, town: Town) -> None:
+        self.spec = spec
+        self.dfa = dfa
+        self.town = town
+        road_index = {road: i for i, road in enumerate(town.states)}
+        state_columns, belief_columns = [], []
+        membership, coeffs, offsets = [], [], []
+        for column, atom in enumerate(dfa.atoms):
+            if atom in spec.state_atoms:
+                row = np.zeros(len(town.states), dtype=bool)
+                for road in spec.state_atoms[atom]:
+                    if road not in road_index:
+                        raise InputError(spec.source_path or spec.name, f"states.{atom}",
+                                         f"'{road}' is not a directed road of the town",
+                                         "load the spec with the town it is meant for")
+                    row[road_index[road]] = True
+                state_columns.append(column)
+                membership.append(row)
+            elif atom in spec.belief_atoms:
+                belief_columns.append(column)
+                coeffs.append(spec.belief_atoms[atom].coeffs)
+                offsets.append(spec.belief_atoms[atom].offset)
+            else:
+                raise ValueError(f"DFA atom {atom!r} is not defined in spec {spec.name!r}")
+        self.state_columns = np.array(state_columns, dtype=np.int64)
+        self.belief_columns = np.array(belief_columns, dtype=np.int64)
+        self.membership = (np.array(membership, dtype=bool) if membership
+                           else np.zeros((0, len(town.states)), dtype=bool))
+        self.coeffs = (np.array(coeffs, dtype=float).T if coeffs
+                       else np.zeros((0, 0), dtype=float))   # [n_trust, n_belief_atoms]
+        self.offsets = np.array(offsets, dtype=float)
+
+    def valuations(self, x: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
+        """bool [n, len(dfa.atoms)]: the atoms at positions (x[i], beliefs[i])."""
+        x = np.asarray(x, dtype=np.int64)
+        out = np.empty((x.shape[0], len(self.dfa.atoms)), dtype=bool)
+        if self.state_columns.size:
+            out[:, self.state_columns] = self.membership[:, x].T
+        if self.belief_columns.size:
+            out[:, self.belief_columns] = np.asarray(beliefs) @ self.coeffs > self.offsets
+        return out
+
+    def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
+        """int [n]: DFA states after reading positions (x, beliefs) from states q."""
+        return self.dfa.step_many(q, self.valuations(x, beliefs))

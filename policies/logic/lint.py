@@ -1,0 +1,212 @@
+"""Warnings about scLDTL specs that parse but do not mean what their author likely intended.
+
+Checks (each warning has a stable `code`):
+- `belief-never-true` / `belief-always-true`: g(b) = offset - coeffs.b is linear, so its extremes
+  over the probability simplex are at the vertices: the atom is never true iff max(coeffs) <= offset,
+  always true iff min(coeffs) > offset.
+- `atom-no-effect`: an atom of the formula that no reachable state of the minimal DFA tests
+  (its value never changes the successor), e.g. `a` in `a U (F b)`, which is `F b`.
+- `subformula-no-effect`: a compound subformula whose replacement by true and by false both leave
+  the DFA's language unchanged (negation only on atoms, so the formula is monotone in it: then no
+  value matters), e.g. `b & c` in `(b & c) U (F b)`. Not repeated for subformulas whose atoms
+  are all reported by `atom-no-effect`, nor inside a reported subformula.
+- `unused-atom`: defined in the file but not used by the formula.
+- `unsatisfiable`: the DFA's initial state cannot reach acceptance.
+With a town:
+- `state-unreachable`: a state atom none of whose roads can be reached from the start.
+- `town-unsatisfiable`: no route satisfies even the state-only projection (every belief literal
+  true): no accepting (road, q) is reachable in the town × projected-DFA product.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.networks.town import Town
+from trustroute.policies.logic.dfa import DFA, build_dfa, dfa_from_formula
+from trustroute.policies.logic.formula import (
+    FALSE,
+    TRUE,
+    And,
+    Const,
+    Eventually,
+    Formula,
+    Literal,
+    Next,
+    Or,
+    Until,
+    atoms_in_order,
+    format_formula,
+    walk,
+)
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import Spec, state_only_projection
+
+
+@dataclass(frozen=True)
+class LintWarning:
+    code: str
+    message: str
+    atom: str = ""
+
+
+def belief_warnings(spec: Spec) -> list[LintWarning]:
+    warnings = []
+    for name, atom in spec.belief_atoms.items():
+        high, low = max(atom.coeffs), min(atom.coeffs)
+        if high <= atom.offset:
+            warnings.append(LintWarning(
+                "belief-never-true", f"belief atom '{name}' is never true on the probability simplex: "
+                f"coeffs.b <= max(coeffs) = {high:g} <= offset {atom.offset:g}", name))
+        elif low > atom.offset:
+            warnings.append(LintWarning(
+                "belief-always-true", f"belief atom '{name}' is always true on the probability simplex: "
+                f"coeffs.b >= min(coeffs) = {low:g} > offset {atom.offset:g}", name))
+    return warnings
+
+
+def no_effect_warnings(spec: Spec, dfa: DFA) -> list[LintWarning]:
+    tested: set[str] = set()
+    for q in range(dfa.n_states):
+        tested.update(dfa.tested_atoms(q))
+    warnings = []
+    for atom in dfa.atoms:
+        if atom in tested:
+            continue
+        uses = sorted({format_formula(n) for n in walk(spec.formula)
+                       if isinstance(n, Literal) and n.atom == atom})
+        warnings.append(LintWarning(
+            "atom-no-effect", f"atom '{atom}' cannot affect satisfaction: no state of the minimal DFA "
+            f"tests it, so {' and '.join(uses)} in the formula constrains nothing "
+            "(as in a U (F b), which is F b)", atom))
+    return warnings
+
+
+MAX_STATES_FOR_SUBFORMULA_CHECK = 300
+
+
+def equivalent(first: DFA, second: DFA) -> bool:
+    """Language equivalence of two DFAs over possibly different atoms: breadth-first search over
+    pairs of states, a pair's successors read off consistent pairs of guard cubes."""
+    seen = {(first.initial, second.initial)}
+    stack = [(first.initial, second.initial)]
+    while stack:
+        p, q = stack.pop()
+        if first.accepting[p] != second.accepting[q]:
+            return False
+        for p2, cubes1 in first.transitions(p).items():
+            for q2, cubes2 in second.transitions(q).items():
+                if (p2, q2) in seen:
+                    continue
+                if any(_consistent(c1, c2) for c1 in cubes1 for c2 in cubes2):
+                    seen.add((p2, q2))
+                    stack.append((p2, q2))
+    return True
+
+
+def _consistent(first, second) -> bool:
+    values = dict(first)
+    return all(values.get(atom, value) == value for atom, value in second)
+
+
+def _replace_at(formula: Formula, target: int, replacement: Formula) -> tuple[Formula, int]:
+    """`formula` with its pre-order node number `target` replaced; returns (new formula, nodes seen)."""
+    if target == 0:
+        return replacement, sum(1 for _ in walk(formula))
+    seen = 1
+    if isinstance(formula, And | Or):
+        parts = []
+        for part in formula.parts:
+            new, count = _replace_at(part, target - seen, replacement)
+            parts.append(new)
+            seen += count
+        return type(formula)(tuple(parts)), seen
+    if isinstance(formula, Next | Eventually):
+        body, count = _replace_at(formula.body, target - 1, replacement)
+        return type(formula)(body), count + 1
+    if isinstance(formula, Until):
+        left, count_left = _replace_at(formula.left, target - 1, replacement)
+        right, count_right = _replace_at(formula.right, target - 1 - count_left, replacement)
+        return Until(left, right), 1 + count_left + count_right
+    return formula, 1
+
+
+def subformula_warnings(spec: Spec, dfa: DFA, atoms_without_effect: set[str]) -> list[LintWarning]:
+    if dfa.n_states > MAX_STATES_FOR_SUBFORMULA_CHECK:
+        return []  # each candidate costs two translations: keep the linter fast on huge specs
+    nodes = list(walk(spec.formula))
+    warnings: list[LintWarning] = []
+    reported_until = -1   # pre-order: the nodes inside a reported subformula come right after it
+    for index, node in enumerate(nodes):
+        if index == 0 or index < reported_until or isinstance(node, Const | Literal):
+            continue
+        if set(atoms_in_order(node)) <= atoms_without_effect:
+            continue
+        variants = (_replace_at(spec.formula, index, value)[0] for value in (TRUE, FALSE))
+        if all(equivalent(dfa, dfa_from_formula(v, dfa.atoms)) for v in variants):
+            warnings.append(LintWarning(
+                "subformula-no-effect", f"subformula '{format_formula(node)}' cannot affect satisfaction: "
+                "the spec means the same with it replaced by true or by false"))
+            reported_until = index + sum(1 for _ in walk(node))
+    return warnings
+
+
+def unused_warnings(spec: Spec) -> list[LintWarning]:
+    used = set(spec.formula_atoms)
+    return [LintWarning("unused-atom", f"atom '{atom}' is defined but the formula does not use it", atom)
+            for atom in spec.atoms if atom not in used]
+
+
+def unreachable_warnings(spec: Spec, town: Town) -> list[LintWarning]:
+    reachable = town.reachable_states(spec.start)
+    used = set(spec.formula_atoms)
+    return [LintWarning("state-unreachable", f"state atom '{atom}': none of its roads can be reached "
+                        f"from the start {spec.start}", atom)
+            for atom, roads in spec.state_atoms.items() if atom in used and not roads & reachable]
+
+
+def town_satisfiable(spec: Spec, town: Town) -> bool:
+    """True iff some route from the start satisfies the state-only projection of `spec`."""
+    projected = state_only_projection(spec)
+    dfa = build_dfa(projected)
+    labeller = Labeller(projected, dfa, town)
+    n_roads = len(town.states)
+    beliefs = np.full((1, 7), 1.0 / 7.0)  # no belief atoms remain: any belief labels the same
+    q0 = int(labeller.step(np.array([dfa.initial]), np.array([town.state_index(spec.start)]), beliefs)[0])
+    next_state = labeller.step(
+        np.repeat(np.arange(dfa.n_states), n_roads), np.tile(np.arange(n_roads), dfa.n_states),
+        np.broadcast_to(beliefs, (dfa.n_states * n_roads, 7))).reshape(dfa.n_states, n_roads)
+    successors = [[town.state_index(s) for s in town.successors(r)] for r in town.states]
+    start = (town.state_index(spec.start), q0)
+    seen = {start}
+    stack = [start]
+    while stack:
+        x, q = stack.pop()
+        if dfa.accepting[q]:
+            return True
+        for x2 in successors[x]:
+            nxt = (x2, int(next_state[q, x2]))
+            if nxt not in seen:
+                seen.add(nxt)
+                stack.append(nxt)
+    return False
+
+
+def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None) -> list[LintWarning]:
+    """Every warning that applies to `spec` (and to `town` when given)."""
+    dfa = dfa if dfa is not None else build_dfa(spec)
+    no_effect = no_effect_warnings(spec, dfa)
+    warnings = (belief_warnings(spec) + no_effect
+                + subformula_warnings(spec, dfa, {w.atom for w in no_effect}) + unused_warnings(spec))
+    if dfa.rejecting[dfa.initial]:
+        warnings.append(LintWarning("unsatisfiable", "no trace satisfies the formula (the DFA's "
+                                    "initial state cannot reach acceptance)"))
+    elif town is not None:
+        warnings += unreachable_warnings(spec, town)
+        if not town_satisfiable(spec, town):
+            warnings.append(LintWarning(
+                "town-unsatisfiable", f"no route from {spec.start} satisfies the spec on this town, "
+                "even with every belief atom true"))
+    return warnings

@@ -1,0 +1,251 @@
+"""scLDTL spec files: TOML schema, validation (optionally against a town), identity, projection.
+
+A spec file (e.g. specs/phi1.toml) has `name`, `start` (directed road "U-V", position 0),
+`formula` (policies/logic/formula.py grammar), a `[states]` table (atom -> list of directed roads) and
+`[beliefs.NAME]` tables with `coeffs` (one per trust level, 7) and `offset`: a belief atom is true
+iff `offset - coeffs·b < 0` (strict; DESIGN.md, "scLDTL"). Every error is an InputError naming
+the file, line and column.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from trustroute.networks.errors import InputError
+from trustroute.networks.town import Town
+from trustroute.policies.logic.formula import (
+    ATOM_PATTERN,
+    KEYWORDS,
+    TRUE,
+    Formula,
+    Literal,
+    atoms_in_order,
+    format_formula,
+    map_literals,
+    parse_formula,
+)
+
+N_TRUST_LEVELS = 7  # the Muir scale 1..7: belief vectors have this length
+TOP_LEVEL_KEYS = ("name", "start", "formula", "states", "beliefs")
+
+
+@dataclass(frozen=True)
+class BeliefAtom:
+    """True iff offset - coeffs·b < 0 (strict)."""
+
+    coeffs: tuple[float, ...]
+    offset: float
+
+
+@dataclass(frozen=True, eq=False)
+class Spec:
+    name: str
+    start: str
+    formula_text: str
+    formula: Formula
+    state_atoms: dict[str, frozenset[str]]
+    belief_atoms: dict[str, BeliefAtom]
+    source_path: str = ""
+
+    @property
+    def content_hash(self) -> str:
+        """SHA-256 of the meaning (start, parsed formula, atom definitions), not name or formatting."""
+        canonical = json.dumps(
+            {
+                "start": self.start,
+                "formula": format_formula(self.formula),
+                "states": {k: sorted(v) for k, v in sorted(self.state_atoms.items())},
+                "beliefs": {k: {"coeffs": [float(c) for c in v.coeffs], "offset": float(v.offset)}
+                            for k, v in sorted(self.belief_atoms.items())},
+            },
+            sort_keys=True,
+            separators=(",", ":"),
+        )
+        return hashlib.sha256(canonical.encode()).hexdigest()
+
+    @property
+    def atoms(self) -> tuple[str, ...]:
+        """Every defined atom: state atoms sorted, then belief atoms sorted."""
+        return tuple(sorted(self.state_atoms)) + tuple(sorted(self.belief_atoms))
+
+    @property
+    def formula_atoms(self) -> tuple[str, ...]:
+        """Atoms the formula uses, in order of first occurrence."""
+        return atoms_in_order(self.formula)
+
+
+# -- locating things in the TOML text (for error messages) ------------------------------------------
+
+def _locate(text: str, *needles: str) -> tuple[int, int] | None:
+    """(line, column), 1-based, of the last needle, found in order line by line; None if absent."""
+    lines = text.splitlines()
+    row = 0
+    found = None
+    for needle in needles:
+        pattern = re.compile(needle)
+        for r in range(row, len(lines)):
+            match = pattern.search(lines[r])
+            if match:
+                skipped = len(match.group()) - len(match.group().lstrip())
+                found = (r + 1, match.start() + skipped + 1)
+                row = r
+                break
+        else:
+            return found
+    return found
+
+
+def _place(text: str, label: str, *needles: str) -> str:
+    found = _locate(text, *needles)
+    return f"line {found[0]} column {found[1]} ({label})" if found else label
+
+
+def _formula_position(text: str) -> tuple[int, int]:
+    """Line and column of the first character inside the formula string (best effort)."""
+    for number, line in enumerate(text.splitlines(), start=1):
+        match = re.match(r"\s*formula\s*=\s*(\"\"\"|'''|\"|')", line)
+        if match:
+            return number, match.end() + 1
+    return 1, 1
+
+
+# -- loading --------------------------------------------------------------------------------------
+
+def _number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) -> Spec:
+    """Parse and validate a spec's TOML text; with `town`, check its roads exist there."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        where = re.search(r"\(at line (\d+), column (\d+)\)", str(exc))
+        place = f"line {where.group(1)} column {where.group(2)}" if where else ""
+        message = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(exc))
+        raise InputError(source, place, f"not valid TOML ({message})", "fix the TOML syntax") from None
+
+    def fail(label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
+        return InputError(source, _place(text, label, *needles), problem, fix)
+
+    for key in data:
+        if key not in TOP_LEVEL_KEYS:
+            raise fail(key, (rf"^\s*\[?{re.escape(key)}\b",), f"unknown key '{key}'",
+                       f"use only {', '.join(TOP_LEVEL_KEYS)}")
+    for key in ("name", "start", "formula"):
+        if key not in data:
+            raise InputError(source, key, f"missing key '{key}'",
+                             f"add {key} = \"...\" at the top of the file (see specs/phi1.toml)")
+        if not isinstance(data[key], str):
+            raise fail(key, (rf"^\s*{key}\s*=",), f"'{key}' must be a string", f'write {key} = "..."')
+    name, start, formula_text = data["name"], data["start"], data["formula"]
+    if not name.strip():
+        raise fail("name", (r"^\s*name\s*=",), "'name' is empty", 'write name = "phi1"')
+
+    raw_states = data.get("states", {})
+    raw_beliefs = data.get("beliefs", {})
+    if not isinstance(raw_states, dict):
+        raise fail("states", (r"^\s*states\s*=",), "'states' must be a table of atom -> roads",
+                   'write [states] then v1 = ["B-G", "F-G"]')
+    if not isinstance(raw_beliefs, dict):
+        raise fail("beliefs", (r"^\s*beliefs\s*=",), "'beliefs' must be a table of tables",
+                   "write [beliefs.NAME] with coeffs = [...] and offset = ...")
+
+    def check_atom_name(atom: str, table: str) -> None:
+        if not ATOM_PATTERN.fullmatch(atom) or atom in KEYWORDS:
+            raise fail(f"{table}.{atom}", (re.escape(atom),), f"'{atom}' is not a valid atom name",
+                       "use letters, digits and '_' (not starting with a digit), and not "
+                       + ", ".join(sorted(KEYWORDS)))
+
+    state_atoms: dict[str, frozenset[str]] = {}
+    for atom in sorted(raw_states):
+        roads = raw_states[atom]
+        check_atom_name(atom, "states")
+        label = f"states.{atom}"
+        needles = (r"^\s*\[states\]", rf"^\s*{re.escape(atom)}\s*=")
+        if not (isinstance(roads, list) and all(isinstance(r, str) for r in roads)):
+            raise fail(label, needles, f"state atom '{atom}' must be a list of directed roads",
+                       f'write {atom} = ["U-V", ...]')
+        for road in roads:
+            if "-" not in road:
+                raise fail(label, needles + (re.escape(f'"{road}"'),),
+                           f"'{road}' is not a directed road \"U-V\"", "write roads as \"U-V\"")
+            if town is not None and road not in town.states:
+                raise fail(label, needles + (re.escape(f'"{road}"'),),
+                           f"state atom '{atom}': '{road}' is not a directed road of the town "
+                           f"({town.source_path or 'given town'})",
+                           "use directed roads 'U-V' of the town (trustroute model lists them)")
+        state_atoms[atom] = frozenset(roads)
+
+    belief_atoms: dict[str, BeliefAtom] = {}
+    for atom in sorted(raw_beliefs):
+        table = raw_beliefs[atom]
+        check_atom_name(atom, "beliefs")
+        label = f"beliefs.{atom}"
+        header = (rf"^\s*\[beliefs\.{re.escape(atom)}\]",)
+        if atom in state_atoms:
+            raise fail(label, header, f"atom '{atom}' is defined both under [states] and [beliefs]",
+                       "rename one of them")
+        if not isinstance(table, dict):
+            raise fail(label, header, f"belief atom '{atom}' must be a table",
+                       f"write [beliefs.{atom}] with coeffs = [...] and offset = ...")
+        for key in table:
+            if key not in ("coeffs", "offset"):
+                raise fail(label, header + (rf"^\s*{re.escape(key)}\s*=",),
+                           f"unknown key '{key}' in belief atom '{atom}'", "use only coeffs and offset")
+        for key in ("coeffs", "offset"):
+            if key not in table:
+                raise fail(label, header, f"belief atom '{atom}' is missing '{key}'",
+                           f"add {key} = ... under [beliefs.{atom}]")
+        coeffs, offset = table["coeffs"], table["offset"]
+        coeffs_place = header + (r"^\s*coeffs\s*=",)
+        if not (isinstance(coeffs, list) and all(_number(c) for c in coeffs)):
+            raise fail(label, coeffs_place, f"belief atom '{atom}': coeffs must be a list of finite "
+                       "numbers", "write coeffs = [1, 0, 0, 0, 0, 0, 0]")
+        if len(coeffs) != N_TRUST_LEVELS:
+            raise fail(label, coeffs_place, f"belief atom '{atom}': coeffs has {len(coeffs)} entries, "
+                       f"expected {N_TRUST_LEVELS} (one per trust level 1..{N_TRUST_LEVELS})",
+                       f"give exactly {N_TRUST_LEVELS} coefficients")
+        if not _number(offset):
+            raise fail(label, header + (r"^\s*offset\s*=",), f"belief atom '{atom}': offset must be "
+                       "a finite number", "write offset = 0.5")
+        belief_atoms[atom] = BeliefAtom(tuple(float(c) for c in coeffs), float(offset))
+
+    line, column = _formula_position(text)
+    formula = parse_formula(formula_text, set(state_atoms) | set(belief_atoms), source, line, column)
+    if town is not None and start not in town.states:
+        raise fail("start", (r"^\s*start\s*=",), f"start road '{start}' is not a directed road of the "
+                   f"town ({town.source_path or 'given town'})", "use a directed road 'U-V' of the town")
+    if "-" not in start:
+        raise fail("start", (r"^\s*start\s*=",), f"start '{start}' is not a directed road \"U-V\"",
+                   'write start = "E-A"')
+    return Spec(name=name, start=start, formula_text=formula_text, formula=formula,
+                state_atoms=state_atoms, belief_atoms=belief_atoms, source_path=source)
+
+
+def load_spec(path: str | Path, town: Town | None = None) -> Spec:
+    """Load and validate a spec file; with `town`, also check its roads against the town."""
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise InputError(str(path), "", f"cannot read the spec file ({exc.strerror})",
+                         "pass an existing .toml file, e.g. specs/phi1.toml") from None
+    return spec_from_text(text, str(path), town)
+
+
+def state_only_projection(spec: Spec) -> Spec:
+    """The spec with every belief literal (positive or negated) replaced by true."""
+
+    def replace(literal: Literal) -> Formula:
+        return TRUE if literal.atom in spec.belief_atoms else literal
+
+    formula = map_literals(spec.formula, replace)
+    return Spec(name=f"{spec.name} (state-only)", start=spec.start, formula_text=format_formula(formula),
+                formula=formula, state_atoms=dict(spec.state_atoms), belief_atoms={},
+                source_path=spec.source_path)

@@ -1,0 +1,89 @@
+"""The product of the trust belief MDP with a spec's DFA, as lookup tables.
+
+A product state is (x, q, b): directed road x, DFA state q after reading position (x, b), AV
+belief b. Choosing the next junction moves to road x'; the symbol o seen on x' updates the belief
+to b' = f_o(b) and the DFA reads position (x', b'): q' = δ(q, L(x', b')). Positions and labels
+follow DESIGN.md, "scLDTL"; the DFA is the scLDTL helper's (policies/logic/dfa.py).
+
+`next_q[q, x', bits]` tabulates δ for every road and every valuation of the belief atoms
+(bit j of `bits` = value of `belief_atoms[j]`), so abstract solvers can branch on label
+values without touching beliefs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.policies.logic.dfa import DFA, build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import TrustPOMDP
+
+
+@dataclass(frozen=True, eq=False)
+class ProductTables:
+    pomdp: TrustPOMDP
+    spec: Spec
+    dfa: DFA
+    labeller: Labeller
+    start: int                      # road index of position 0
+    initial_q: int                  # DFA state after reading position 0 with the initial belief
+    accepting: np.ndarray           # bool [n_q]
+    rejecting: np.ndarray           # bool [n_q] (and not accepting)
+    successors: np.ndarray          # [n_x, n_actions] road index or -1
+    belief_atom_names: tuple[str, ...]
+    belief_coeffs: np.ndarray       # [n_atoms, n_trust]
+    belief_offsets: np.ndarray      # [n_atoms]
+    next_q: np.ndarray              # [n_q, n_x, 2**n_atoms]
+
+    @property
+    def n_q(self) -> int:
+        return int(self.dfa.n_states)
+
+    @property
+    def n_x(self) -> int:
+        return int(self.successors.shape[0])
+
+    def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
+        """Exact DFA step on positions (x, b), through the spec helper's labeller."""
+        if q.size == 0:
+            return np.zeros(0, dtype=np.int64)
+        return np.asarray(self.labeller.step(q, x, beliefs), dtype=np.int64)
+
+
+def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
+    town = pomdp.town
+    dfa = build_dfa(spec)
+    labeller = Labeller(spec, dfa, town)
+    atoms = tuple(dfa.atoms)
+    belief_names = tuple(a for a in atoms if a in spec.belief_atoms)
+    n_x, n_q, m = len(town.states), int(dfa.n_states), len(belief_names)
+    coeffs = np.array([spec.belief_atoms[a].coeffs for a in belief_names], dtype=float).reshape(
+        m, pomdp.n_trust)
+    offsets = np.array([spec.belief_atoms[a].offset for a in belief_names], dtype=float)
+    # Valuations for every (q, x, bits): state atoms from the road, belief atoms from the bits.
+    q_grid, x_grid, bits_grid = np.meshgrid(np.arange(n_q), np.arange(n_x), np.arange(2 ** m),
+                                            indexing="ij")
+    valuations = np.zeros((q_grid.size, len(atoms)), dtype=bool)
+    roads = np.array(town.states)[x_grid.ravel()]
+    for j, atom in enumerate(atoms):
+        if atom in spec.belief_atoms:
+            bit = belief_names.index(atom)
+            valuations[:, j] = (bits_grid.ravel() >> bit) & 1
+        else:
+            members = spec.state_atoms.get(atom, frozenset())
+            valuations[:, j] = np.isin(roads, list(members))
+    next_q = np.asarray(dfa.step_many(q_grid.ravel(), valuations), dtype=np.int64).reshape(
+        n_q, n_x, 2 ** m)
+    start = town.state_index(spec.start)
+    initial_q = int(labeller.step(np.array([dfa.initial]), np.array([start]),
+                                  np.asarray(pomdp.initial_belief, dtype=float)[None])[0])
+    accepting = np.asarray(dfa.accepting, dtype=bool)
+    rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
+    return ProductTables(pomdp=pomdp, spec=spec, dfa=dfa, labeller=labeller, start=start,
+                         initial_q=initial_q, accepting=accepting, rejecting=rejecting,
+                         successors=np.asarray(pomdp.successor_table, dtype=np.int64),
+                         belief_atom_names=belief_names, belief_coeffs=coeffs,
+                         belief_offsets=offsets, next_q=next_q)

@@ -1,0 +1,110 @@
+"""The trust POMDP of a town and a driver model, and its exact Bayes belief filter.
+
+States are (x, θ): x a directed road of the town (observed), θ the human's trust (hidden).
+An action at x is the next junction. After driving road x' the vehicle observes
+o = (incident of x', human action h, AV performance e). See ../shared/DESIGN.md, "The model".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from trustroute.networks.town import Town
+from trustroute.participants.driver_model import DriverModel, check_covers_town
+
+BeliefRule = Literal["bayes", "paper"]
+
+
+@dataclass(frozen=True, eq=False)
+class TrustPOMDP:
+    """Arrays indexed by state index (town.states order) and driver-model incident index."""
+
+    town: Town
+    driver: DriverModel
+    road_incident: np.ndarray = field(init=False)       # [n_states] incident index of each road
+    successor_table: np.ndarray = field(init=False)     # [n_states, max_actions] state idx or -1
+    action_junctions: tuple[tuple[str, ...], ...] = field(init=False)
+    observation_likelihood: np.ndarray = field(init=False)  # [n_inc, 2(h), 2(e), n_trust]
+    weighted_transition: np.ndarray = field(init=False)     # [n_inc, 2, 2, n_trust, n_trust]
+
+    def __post_init__(self) -> None:
+        town, driver = self.town, self.driver
+        check_covers_town(driver, set(town.incidents.values()), town.source_path)
+        road_incident = np.array([driver.incident_index(town.incident(s)) for s in town.states])
+        actions = tuple(town.actions(s) for s in town.states)
+        width = max(len(a) for a in actions)
+        successors = np.full((len(town.states), width), -1, dtype=np.int64)
+        for i, state in enumerate(town.states):
+            for k, junction in enumerate(actions[i]):
+                successors[i, k] = town.state_index(town.successor(state, junction))
+        takeover = driver.takeover_probability                    # [n_inc, θ]
+        failure = driver.failure_probability
+        p_h = np.stack([1 - takeover, takeover], axis=1)          # [n_inc, h, θ]
+        p_e = np.stack([1 - failure, failure], axis=1)            # [n_inc, e, θ]
+        likelihood = p_h[:, :, None, :] * p_e[:, None, :, :]      # [n_inc, h, e, θ]
+        weighted = likelihood[..., :, None] * driver.trust_transition
+        for name, value in (("road_incident", road_incident), ("successor_table", successors),
+                            ("action_junctions", actions),
+                            ("observation_likelihood", likelihood),
+                            ("weighted_transition", weighted)):
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @property
+    def n_states(self) -> int:
+        return len(self.town.states)
+
+    @property
+    def n_trust(self) -> int:
+        return self.driver.n_trust
+
+    @property
+    def initial_belief(self) -> np.ndarray:
+        return self.driver.initial_belief
+
+    def observation_probability(self, beliefs: np.ndarray, incident: np.ndarray | int,
+                                human_action: np.ndarray | int,
+                                performance: np.ndarray | int = 0) -> np.ndarray:
+        """P(h, e | b, inc) = Σθ b(θ) P(h | θ, inc) P(e | θ, inc), for each row of `beliefs`."""
+        beliefs = np.atleast_2d(beliefs)
+        likelihood = self.observation_likelihood[incident, human_action, performance]
+        return np.einsum("nk,nk->n", beliefs, np.broadcast_to(likelihood, beliefs.shape))
+
+    def belief_update(self, beliefs: np.ndarray, incident: np.ndarray | int,
+                      human_action: np.ndarray | int, performance: np.ndarray | int = 0,
+                      rule: BeliefRule = "bayes") -> tuple[np.ndarray, np.ndarray]:
+        """Bayes filter, vectorised over rows: returns (posteriors, observation probabilities).
+
+        b'(θ') ∝ Σθ b(θ) P(h|θ,inc) P(e|θ,inc) T[inc][h][e](θ,θ')   (DESIGN.md, "Belief").
+        rule="paper" is the authors' released update b' ∝ b·T[inc][h] (no likelihood weighting);
+        the returned probabilities are the Bayes ones in both cases.
+        An observation of probability 0 gives a zero row of probability 0 (never NaN).
+        """
+        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        n = beliefs.shape[0]
+        incident = np.broadcast_to(np.asarray(incident), (n,))
+        human_action = np.broadcast_to(np.asarray(human_action), (n,))
+        performance = np.broadcast_to(np.asarray(performance), (n,))
+        probability = self.observation_probability(beliefs, incident, human_action, performance)
+        if rule == "bayes":
+            matrices = self.weighted_transition[incident, human_action, performance]
+        elif rule == "paper":
+            matrices = self.driver.trust_transition[incident, human_action, performance]
+        else:
+            raise ValueError(f"unknown belief rule {rule!r}; use 'bayes' or 'paper'")
+        unnormalised = np.einsum("nk,nkl->nl", beliefs, matrices)
+        total = unnormalised.sum(axis=1, keepdims=True)
+        posterior = np.divide(unnormalised, total, out=np.zeros_like(unnormalised),
+                              where=total > 0)
+        return posterior, probability
+
+    def next_state(self, state: int, action_slot: int) -> int:
+        return int(self.successor_table[state, action_slot])
+
+
+def build_pomdp(town: Town, driver: DriverModel) -> TrustPOMDP:
+    return TrustPOMDP(town=town, driver=driver)

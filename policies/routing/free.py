@@ -1,0 +1,224 @@
+"""The trust-free baseline: the shortest route completing a spec's state-only task.
+
+Owns the state-only task of a spec on a town (the product town × DFA of the spec's
+state-only projection, every belief literal replaced by true; DESIGN.md, "Synthesis"),
+its distance-to-completion table, the baseline route and the trust-free policy ("free").
+
+The table is computed once by a backward Dijkstra over the product: for each directed road x
+and projected DFA state q (the state after reading the position on x), the shortest distance
+(model road lengths) still to drive until the projected DFA accepts, and the next junction
+that starts such a shortest completion. Ties are broken by fewer roads, then by the order of
+`town.actions`, so following the table from any product state is itself a shortest completion:
+the baseline route and every re-plan from a point on it agree.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.networks.errors import InputError
+from trustroute.networks.town import Town
+from trustroute.policies.logic.dfa import DFA, build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import Spec, state_only_projection
+from trustroute.policies.routing.protocol import DecisionContext
+
+ROUTE_CACHE_SIZE = 4096
+
+
+@dataclass(frozen=True, eq=False)
+class StateOnlyTask:
+    """The state-only projection of a spec on a town, with shortest completions.
+
+    next_state[q, x]: projected DFA state after reading road x from state q.
+    distance[x, q]: metres still to drive from product state (x, q) to acceptance (inf: impossible).
+    next_slot[x, q]: index into town.actions(x) of the first move of a shortest completion
+    (-1 when (x, q) is already accepting or cannot complete).
+    """
+
+    town: Town
+    spec: Spec            # the state-only projection
+    dfa: DFA
+    initial_state: int    # projected DFA state after reading position 0 (the spec's start road)
+    next_state: np.ndarray
+    distance: np.ndarray
+    hops: np.ndarray
+    next_slot: np.ndarray
+    road_index: dict[str, int]
+
+    def projected_state(self, route: Sequence[str]) -> int:
+        """Projected DFA state after reading every road of `route` (route[0] = position 0)."""
+        q = int(self.dfa.initial)
+        for road in route:
+            q = int(self.next_state[q, self.road_index[road]])
+        return q
+
+    def next_junction(self, road: str, q: int) -> str | None:
+        """First junction of the shortest completion from (road, q); None if complete or impossible."""
+        slot = int(self.next_slot[self.road_index[road], q])
+        return None if slot < 0 else self.town.actions(road)[slot]
+
+    def completion(self, road: str, q: int) -> list[str] | None:
+        """Shortest completion from product state (road, q): roads from `road` (included) on."""
+        x = self.town.state_index(road)
+        if not np.isfinite(self.distance[x, q]):
+            return None
+        route = [road]
+        while not self.dfa.accepting[q]:
+            junction = self.next_junction(route[-1], q)
+            assert junction is not None  # finite distance and not accepting: a move exists
+            nxt = self.town.successor(route[-1], junction)
+            q = int(self.next_state[q, self.town.state_index(nxt)])
+            route.append(nxt)
+        return route
+
+
+def _uniform_beliefs(count: int) -> np.ndarray:
+    # The projection has no belief atoms, so any belief labels the same; 7 = the Muir scale.
+    return np.full((count, 7), 1.0 / 7.0)
+
+
+def build_state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
+    """Project `spec` onto its state atoms and compute shortest completions on `town`."""
+    projected = state_only_projection(spec)
+    dfa = build_dfa(projected)
+    labeller = Labeller(projected, dfa, town)
+    n_x, n_q = len(town.states), int(dfa.n_states)
+    q_grid, x_grid = np.meshgrid(np.arange(n_q), np.arange(n_x), indexing="ij")
+    next_state = np.asarray(
+        labeller.step(q_grid.ravel(), x_grid.ravel(), _uniform_beliefs(n_q * n_x)), dtype=np.int64
+    ).reshape(n_q, n_x)
+
+    # Backward Dijkstra from every accepting product state, keys (metres, roads) lexicographic.
+    successors = [[town.state_index(s) for s in town.successors(r)] for r in town.states]
+    lengths = np.array([town.length(r) for r in town.states])
+    predecessors: list[list[tuple[int, int]]] = [[] for _ in range(n_x * n_q)]
+    for x in range(n_x):
+        for q in range(n_q):
+            if dfa.accepting[q]:
+                continue  # absorbing targets: no need to leave them
+            for x2 in successors[x]:
+                q2 = int(next_state[q, x2])
+                predecessors[x2 * n_q + q2].append((x, q))
+    distance = np.full((n_x, n_q), np.inf)
+    hops = np.full((n_x, n_q), np.iinfo(np.int64).max, dtype=np.int64)
+    queue: list[tuple[float, int, int, int]] = []
+    for q in np.flatnonzero(dfa.accepting):
+        for x in range(n_x):
+            distance[x, q] = 0.0
+            hops[x, q] = 0
+            queue.append((0.0, 0, x, int(q)))
+    heapq.heapify(queue)
+    while queue:
+        dist, hop, x2, q2 = heapq.heappop(queue)
+        if (dist, hop) > (distance[x2, q2], hops[x2, q2]):
+            continue
+        for x, q in predecessors[x2 * n_q + q2]:
+            key = (dist + lengths[x2], hop + 1)
+            if key < (distance[x, q], hops[x, q]):
+                distance[x, q], hops[x, q] = key
+                heapq.heappush(queue, (key[0], key[1], x, q))
+
+    next_slot = np.full((n_x, n_q), -1, dtype=np.int64)
+    for x in range(n_x):
+        for q in range(n_q):
+            if dfa.accepting[q] or not np.isfinite(distance[x, q]):
+                continue
+            best = None
+            for slot, x2 in enumerate(successors[x]):
+                q2 = int(next_state[q, x2])
+                key = (lengths[x2] + distance[x2, q2], 1 + int(hops[x2, q2]))
+                # Strictly fewer hops among equal distances guarantees the greedy walk terminates.
+                if np.isfinite(key[0]) and (best is None or key < best[0]):
+                    best = (key, slot)
+            next_slot[x, q] = best[1]
+    initial = int(next_state[int(dfa.initial), town.state_index(spec.start)])
+    for array in (next_state, distance, hops, next_slot):
+        array.setflags(write=False)
+    return StateOnlyTask(town=town, spec=projected, dfa=dfa, initial_state=initial,
+                         next_state=next_state, distance=distance, hops=hops, next_slot=next_slot,
+                         road_index={road: i for i, road in enumerate(town.states)})
+
+
+_TASKS: dict[tuple[str, str], StateOnlyTask] = {}
+
+
+def state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
+    """`build_state_only_task`, cached by the town's and the spec's content hashes."""
+    key = (town.content_hash, spec.content_hash)
+    if key not in _TASKS:
+        if spec.start not in town.states:
+            raise InputError(spec.source_path or spec.name, "start",
+                             f"start road {spec.start!r} is not a directed road of the town",
+                             "use a road 'U-V' of the town the spec is checked against")
+        _TASKS[key] = build_state_only_task(town, spec)
+    return _TASKS[key]
+
+
+def completion_route(town: Town, spec: Spec, route: Sequence[str]) -> list[str] | None:
+    """Shortest route completing the remaining state-only task after driving `route`.
+
+    Starts with route[-1]; just [route[-1]] when the state-only task is already complete;
+    None when it can no longer be completed.
+    """
+    task = state_only_task(town, spec)
+    return task.completion(route[-1], task.projected_state(route))
+
+
+def baseline_route(town: Town, spec: Spec) -> list[str]:
+    """The trust-free baseline: shortest route (start road first) satisfying the state-only projection."""
+    task = state_only_task(town, spec)
+    route = task.completion(spec.start, task.initial_state)
+    if route is None:
+        raise InputError(spec.source_path or spec.name, "formula",
+                         f"no route from {spec.start} satisfies the state-only part of the spec on "
+                         f"this town", "check the spec's state atoms and start road against the town")
+    return route
+
+
+class TrustFreePolicy:
+    """Drive the shortest state-only completion from wherever the vehicle is ("free").
+
+    On the baseline route this follows the baseline route; off it (a context route that
+    differs) it re-plans from the current road and the projected DFA state of the route.
+    `finished(context)` is True once the state-only task is complete (the destination) or
+    can no longer be completed; the episode then ends.
+    """
+
+    name = "free"
+
+    def __init__(self, task: StateOnlyTask) -> None:
+        self.task = task
+        self._projected: OrderedDict[tuple[str, ...], int] = OrderedDict()
+
+    def projected_state(self, route: tuple[str, ...]) -> int:
+        # Evaluation asks for the same route once per observation branch: cache by route.
+        cached = self._projected.get(route)
+        if cached is None:
+            cached = self.task.projected_state(route)
+            self._projected[route] = cached
+            if len(self._projected) > ROUTE_CACHE_SIZE:
+                self._projected.popitem(last=False)
+        return cached
+
+    def route_determined(self, context: DecisionContext) -> bool:
+        """Always: the trust-free policy looks at the roads driven only (lets evaluation batch)."""
+        return True
+
+    def finished(self, context: DecisionContext) -> bool:
+        return self.task.next_junction(context.road, self.projected_state(tuple(context.route))) is None
+
+    def next_junction(self, context: DecisionContext) -> str:
+        junction = self.task.next_junction(context.road, self.projected_state(tuple(context.route)))
+        # Asked after the task is done: any legal move; the episode should have ended.
+        return junction if junction is not None else self.task.town.actions(context.road)[0]
+
+
+def trust_free_policy(town: Town, spec: Spec) -> TrustFreePolicy:
+    """The trust-free baseline as a RoutingPolicy named "free"."""
+    return TrustFreePolicy(state_only_task(town, spec))

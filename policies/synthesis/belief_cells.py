@@ -1,0 +1,190 @@
+"""Observation symbols of the belief MDP and the finite 'suffix' abstraction of belief space.
+
+An observation symbol o = (incident, h, e) has a likelihood vector L_o[θ] = P(h, e | θ, inc) and
+an update matrix W_o: the filter is the linear-fractional map f_o(b) = b W_o / (b W_o 1)
+(Bayes: W_o = diag(L_o) T[inc][h][e]; the authors' "paper" rule: W_o = T[inc][h][e], with the
+probability of o still b·L_o). Symbols with W_o = c·I (the default model's 'none' incident)
+leave the belief unchanged and are not counted as belief-changing.
+
+Suffix cells: a cell is a word w of at most k belief-changing symbols and stands for the polytope
+P_w = f_w(simplex) = conv{f_w(e_i)}. A belief whose history of belief-changing symbols ends in w
+lies in P_w (f_{uw}(Δ) ⊆ f_w(Δ)), so the cell of the last k symbols always contains the belief.
+Because f_o maps the hull of points to the hull of their images, the vertices of P_w are the
+images of the simplex corners; a belief atom (affine in b) is all-true / all-false / mixed on a
+cell by its signs at the vertices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+
+IDENTITY_TOLERANCE = 1e-12
+LABEL_TOLERANCE = 1e-12     # a vertex this close to an atom's hyperplane counts as either side
+
+
+@dataclass(frozen=True, eq=False)
+class ObservationSymbols:
+    """Symbols with nonzero probability for some trust level, per incident.
+
+    incident[o], human_action[o], performance[o]: the symbol's parts.
+    likelihood[o]: P(o | θ) as a vector over θ; update[o]: W_o; identity[o]: W_o = c·I and L_o = c·1.
+    by_incident[i]: symbol ids of incident i. changing_id[o]: index among belief-changing symbols
+    (-1 for identity symbols).
+    """
+
+    incident: np.ndarray
+    human_action: np.ndarray
+    performance: np.ndarray
+    likelihood: np.ndarray      # [n_symbols, n_trust]
+    update: np.ndarray          # [n_symbols, n_trust, n_trust]
+    identity: np.ndarray        # bool [n_symbols]
+    by_incident: tuple[tuple[int, ...], ...]
+    changing_id: np.ndarray     # [n_symbols]
+
+    @property
+    def n_symbols(self) -> int:
+        return int(self.incident.size)
+
+    @property
+    def n_changing(self) -> int:
+        return int((~self.identity).sum())
+
+
+def observation_symbols(pomdp: TrustPOMDP, rule: BeliefRule = "bayes") -> ObservationSymbols:
+    if rule not in ("bayes", "paper"):
+        raise ValueError(f"unknown belief rule {rule!r}; use 'bayes' or 'paper'")
+    driver = pomdp.driver
+    n_inc = len(driver.incident_types)
+    performances = (0, 1) if driver.depends_on_performance else (0,)
+    rows: list[tuple[int, int, int]] = []
+    likelihoods, updates, identities = [], [], []
+    by_incident: list[list[int]] = [[] for _ in range(n_inc)]
+    for i in range(n_inc):
+        for h in (0, 1):
+            for e in performances:
+                likelihood = np.asarray(pomdp.observation_likelihood[i, h, e], dtype=float)
+                if not (likelihood > 0).any():
+                    continue
+                if rule == "bayes":
+                    update = np.asarray(pomdp.weighted_transition[i, h, e], dtype=float)
+                else:
+                    update = np.asarray(driver.trust_transition[i, h, e], dtype=float)
+                c = update[0, 0]
+                identity = bool(np.allclose(update, c * np.eye(update.shape[0]), rtol=0,
+                                            atol=IDENTITY_TOLERANCE)
+                                and np.allclose(likelihood, likelihood[0], rtol=0, atol=IDENTITY_TOLERANCE)
+                                and c > 0)
+                by_incident[i].append(len(rows))
+                rows.append((i, h, e))
+                likelihoods.append(likelihood)
+                updates.append(update)
+                identities.append(identity)
+    identity_array = np.array(identities, dtype=bool)
+    changing_id = np.full(len(rows), -1, dtype=np.int64)
+    changing_id[~identity_array] = np.arange(int((~identity_array).sum()))
+    parts = np.array(rows, dtype=np.int64).reshape(-1, 3)
+    return ObservationSymbols(
+        incident=parts[:, 0], human_action=parts[:, 1], performance=parts[:, 2],
+        likelihood=np.array(likelihoods), update=np.array(updates), identity=identity_array,
+        by_incident=tuple(tuple(s) for s in by_incident), changing_id=changing_id)
+
+
+def apply_symbol(beliefs: np.ndarray, symbols: ObservationSymbols, symbol: np.ndarray | int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(f_o(b), P(o | b)) for each row; identity symbols return b itself (bit for bit)."""
+    beliefs = np.atleast_2d(beliefs)
+    symbol = np.broadcast_to(np.asarray(symbol), (beliefs.shape[0],))
+    probability = np.einsum("nk,nk->n", beliefs, symbols.likelihood[symbol])
+    unnormalised = np.einsum("nk,nkl->nl", beliefs, symbols.update[symbol])
+    total = unnormalised.sum(axis=1, keepdims=True)
+    posterior = np.divide(unnormalised, total, out=np.zeros_like(unnormalised), where=total > 0)
+    same = symbols.identity[symbol]
+    if same.any():
+        posterior[same] = beliefs[same]
+        probability[same] = symbols.likelihood[symbol[same], 0]
+    return posterior, probability
+
+
+@dataclass(frozen=True, eq=False)
+class SuffixCells:
+    """All words of at most k belief-changing symbols (cell 0 = the empty word = the simplex).
+
+    vertices[c]: [n_trust, n_trust], row i = f_w(e_i) (the corners of P_w).
+    next_cell[c, o]: cell of the last k belief-changing symbols after reading symbol o
+    (identity symbols keep the cell).
+    successor_vertices are not stored: `image_vertices(c, o)` gives the corners of f_{wo}(Δ) ⊆ P_next.
+    """
+
+    k: int
+    words: tuple[tuple[int, ...], ...]
+    vertices: np.ndarray
+    next_cell: np.ndarray
+
+    @property
+    def n_cells(self) -> int:
+        return len(self.words)
+
+
+def _normalise_rows(matrix: np.ndarray) -> np.ndarray:
+    total = matrix.sum(axis=-1, keepdims=True)
+    return np.divide(matrix, total, out=np.zeros_like(matrix), where=total > 0)
+
+
+def suffix_cells(symbols: ObservationSymbols, k: int) -> SuffixCells:
+    if k < 0:
+        raise ValueError("suffix length k must be >= 0")
+    changing = np.flatnonzero(~symbols.identity)
+    n_trust = symbols.likelihood.shape[1]
+    words: list[tuple[int, ...]] = [()]
+    vertices = [np.eye(n_trust)]
+    index = {(): 0}
+    frontier = [()]
+    for _ in range(k):
+        grown = []
+        for word in frontier:
+            for o in changing.tolist():
+                new = word + (o,)
+                index[new] = len(words)
+                words.append(new)
+                vertices.append(_normalise_rows(vertices[index[word]] @ symbols.update[o]))
+                grown.append(new)
+        frontier = grown
+    # Cells of a vertex row that is zero (f_w undefined at a corner: P(w | e_i) = 0) carry a zero
+    # row; it is dropped from every max over vertices below by using -inf weights.
+    next_cell = np.zeros((len(words), symbols.n_symbols), dtype=np.int64)
+    for c, word in enumerate(words):
+        for o in range(symbols.n_symbols):
+            if symbols.identity[o]:
+                next_cell[c, o] = c
+            else:
+                new = (word + (o,))[-k:] if k > 0 else ()
+                next_cell[c, o] = index[new]
+    return SuffixCells(k=k, words=tuple(words), vertices=np.array(vertices), next_cell=next_cell)
+
+
+def vertex_mask(cells: SuffixCells) -> np.ndarray:
+    """bool [n_cells, n_trust]: which corner images exist (nonzero rows)."""
+    return cells.vertices.sum(axis=-1) > 0
+
+
+def image_label_status(cells: SuffixCells, symbols: ObservationSymbols, coeffs: np.ndarray,
+                       offset: float) -> np.ndarray:
+    """int8 [n_cells, n_symbols]: status of the atom (offset - coeffs·b < 0) on f_o(P_c).
+
+    1 all true, 0 all false, 2 mixed (either value possible). Vertices with zero weight (P(o|v)=0)
+    are dropped (they contribute nothing to the hull of the image).
+    """
+    status = np.zeros((cells.n_cells, symbols.n_symbols), dtype=np.int8)
+    for o in range(symbols.n_symbols):
+        image = cells.vertices @ symbols.update[o]                        # [c, v, θ]
+        total = image.sum(axis=-1)
+        valid = total > 0
+        value = offset - np.einsum("cvk,k->cv", _normalise_rows(image), coeffs)
+        true_somewhere = (valid & (value < LABEL_TOLERANCE)).any(axis=1)
+        false_somewhere = (valid & (value > -LABEL_TOLERANCE)).any(axis=1)
+        status[:, o] = np.where(true_somewhere & false_somewhere, 2, np.where(true_somewhere, 1, 0))
+    return status

@@ -1,0 +1,63 @@
+"""Exact optimum for small horizons by depth-first search over the action/observation tree.
+
+V_t(x, q, b) = 1 if q accepts; 0 if q rejects or t = H; else
+max over next junctions of Σ_o P(o | b) V_{t+1}(x', δ(q, L(x', f_o(b))), f_o(b)),
+memoised on (t, x, q, belief bytes). No abstraction, no pruning: the reference the scalable
+solver (policies/synthesis/search.py) is tested against. Exponential in H; meant for H <= 12.
+It shares only the model arrays (TrustPOMDP) and the labeller with the solver.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+
+MAX_EXACT_HORIZON = 12
+
+
+def exact_optimum(pomdp: TrustPOMDP, spec: Spec, horizon: int, belief_rule: BeliefRule = "bayes") -> float:
+    """max over policies of P(spec accepted within `horizon` junctions), exactly (float arithmetic)."""
+    if not 0 <= horizon <= MAX_EXACT_HORIZON:
+        raise ValueError(f"exact search is for horizons 0..{MAX_EXACT_HORIZON}, got {horizon}")
+    town, driver = pomdp.town, pomdp.driver
+    dfa = build_dfa(spec)
+    labeller = Labeller(spec, dfa, town)
+    accepting = np.asarray(dfa.accepting, dtype=bool)
+    rejecting = np.asarray(dfa.rejecting, dtype=bool)
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
+    successors = [[town.state_index(s) for s in town.successors(road)] for road in town.states]
+    memo: dict[tuple[int, int, int, bytes], float] = {}
+
+    def value(t: int, x: int, q: int, belief: np.ndarray) -> float:
+        if accepting[q]:
+            return 1.0
+        if rejecting[q] or t == horizon:
+            return 0.0
+        key = (t, x, q, belief.tobytes())
+        cached = memo.get(key)
+        if cached is not None:
+            return cached
+        best = 0.0
+        for x2 in successors[x]:
+            incident = int(pomdp.road_incident[x2])
+            total = 0.0
+            for h, e in outcomes:
+                posterior, probability = pomdp.belief_update(belief, incident, h, e, rule=belief_rule)
+                p = float(probability[0])
+                if p <= 0.0:
+                    continue
+                b2 = posterior[0]
+                q2 = int(labeller.step(np.array([q]), np.array([x2]), b2[None])[0])
+                total += p * value(t + 1, x2, q2, b2)
+            best = max(best, total)
+        memo[key] = best
+        return best
+
+    start = town.state_index(spec.start)
+    b0 = np.asarray(pomdp.initial_belief, dtype=float)
+    q0 = int(labeller.step(np.array([dfa.initial]), np.array([start]), b0[None])[0])
+    return value(0, start, q0, b0)

@@ -1,0 +1,146 @@
+"""Sound upper bounds on the product value from the suffix abstraction of belief space.
+
+The abstract state is (x, q, cell). Abstract Bellman operator (DESIGN.md, "Synthesis"):
+
+    Ū(x, q, c) = max_a max_{v vertex of P_c} Σ_o P(o | v) max_{q' ∈ Q'} Ū(x', q', next_cell(c, o))
+
+with Q' the DFA successors over every label value possible on f_o(P_c) (a belief atom mixed on
+the image resolves both ways, optimistically). Σ_o P(o|b) Ū_o is linear in b, so its max over the
+polytope P_c is attained at a vertex; with the true belief always inside its cell, induction gives
+V*(x, q, b) ≤ Ū(x, q, cell(b)) for every belief of every history.
+
+Horizon H: Ū_H = [q accepting], Ū_t = T̄ Ū_{t+1} (exact backward induction on the abstraction).
+Unbounded: every iterate T̄^n(1) is an upper bound of the true value (V* = T V* ≤ T̄ V* ≤ T̄^n 1 by
+monotonicity), but the iteration converges to the greatest fixed point, which end components that
+never accept can hold above the least one. `unbounded_upper` starts from 0 on states that cannot
+reach acceptance at all (can_accept, a graph analysis) and from 1 elsewhere, and returns the last
+iterate: sound, exact where acceptance is unreachable, possibly loose on end components from which
+acceptance is reachable but not forced (the stats say so). No end-component collapsing is done.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.policies.model.product_mdp import ProductTables
+from trustroute.policies.synthesis.belief_cells import ObservationSymbols, SuffixCells, image_label_status
+
+
+@dataclass(frozen=True, eq=False)
+class Abstraction:
+    tables: ProductTables
+    symbols: ObservationSymbols
+    cells: SuffixCells
+    possible_bits: np.ndarray     # bool [n_cells, n_symbols, 2**n_atoms]
+
+
+def build_abstraction(tables: ProductTables, symbols: ObservationSymbols, cells: SuffixCells
+                      ) -> Abstraction:
+    m = len(tables.belief_atom_names)
+    possible = np.ones((cells.n_cells, symbols.n_symbols, 2 ** m), dtype=bool)
+    for j in range(m):
+        status = image_label_status(cells, symbols, tables.belief_coeffs[j], tables.belief_offsets[j])
+        bit = (np.arange(2 ** m) >> j) & 1                                # [β]
+        possible &= (status[:, :, None] == 2) | (status[:, :, None] == bit[None, None, :])
+    return Abstraction(tables=tables, symbols=symbols, cells=cells, possible_bits=possible)
+
+
+def abstract_backup(abstraction: Abstraction, value_next: np.ndarray) -> np.ndarray:
+    """One application of T̄ to value_next [n_x, n_q, n_cells]; terminal DFA states fixed."""
+    tables, symbols, cells = abstraction.tables, abstraction.symbols, abstraction.cells
+    n_x, n_q, n_c = value_next.shape
+    live = np.flatnonzero(~(tables.accepting | tables.rejecting))
+    out = np.zeros_like(value_next)
+    out[:, tables.accepting, :] = 1.0
+    if live.size == 0:
+        return out
+    road_incident = tables.pomdp.road_incident
+    for x in range(n_x):
+        best = np.zeros((live.size, n_c))
+        for x2 in tables.successors[x]:
+            if x2 < 0:
+                continue
+            weighted = np.zeros((live.size, n_c, symbols.likelihood.shape[1]))
+            for o in symbols.by_incident[int(road_incident[x2])]:
+                c2 = cells.next_cell[:, o]
+                branch = np.zeros((live.size, n_c))
+                for bits in range(abstraction.possible_bits.shape[2]):
+                    q2 = tables.next_q[live, x2, bits]                    # [n_live]
+                    candidate = value_next[x2][q2[:, None], c2[None, :]]
+                    allowed = abstraction.possible_bits[:, o, bits][None, :]
+                    branch = np.where(allowed, np.maximum(branch, candidate), branch)
+                weighted += branch[:, :, None] * symbols.likelihood[o][None, None, :]
+            # max over the cell's vertices of Σ_o P(o|v) value_o
+            action_value = np.einsum("cvk,qck->qcv", cells.vertices, weighted).max(axis=2)
+            best = np.maximum(best, action_value)
+        out[x, live, :] = np.minimum(best, 1.0)
+    return out
+
+
+def bounded_upper(abstraction: Abstraction, horizon: int) -> np.ndarray:
+    """Ū_t for t = 0..H as [H+1, n_x, n_q, n_cells] (Ū_t bounds P(accept within H - t more junctions))."""
+    tables = abstraction.tables
+    shape = (tables.n_x, tables.n_q, abstraction.cells.n_cells)
+    values = np.zeros((horizon + 1,) + shape)
+    values[horizon] = np.broadcast_to(tables.accepting[None, :, None], shape)
+    for t in range(horizon - 1, -1, -1):
+        values[t] = abstract_backup(abstraction, values[t + 1])
+    return values
+
+
+@dataclass(frozen=True)
+class UnboundedUpper:
+    value: np.ndarray          # [n_x, n_q, n_cells]
+    iterations: int
+    last_change: float
+    seconds: float
+
+
+def can_accept(tables: ProductTables) -> np.ndarray:
+    """bool [n_x, n_q]: acceptance reachable in the road × DFA graph with belief atoms free.
+
+    An over-approximation of reachability in the product belief MDP (every belief label value
+    allowed at every step), so a False here is a sound 0 for the value.
+    """
+    n_x, n_q = tables.n_x, tables.n_q
+    reached = np.zeros((n_x, n_q), dtype=bool)
+    reached[:, tables.accepting] = True
+    live = ~(tables.accepting | tables.rejecting)
+    while True:
+        grown = reached.copy()
+        for x in range(n_x):
+            for x2 in tables.successors[x]:
+                if x2 < 0:
+                    continue
+                # q can reach acceptance via x2 if some label value leads to a reaching state.
+                grown[x] |= live & reached[x2][tables.next_q[:, x2, :]].any(axis=1)
+        if (grown == reached).all():
+            return reached
+        reached = grown
+
+
+def unbounded_upper(abstraction: Abstraction, time_limit: float, tolerance: float = 1e-6,
+                    max_iterations: int = 2000) -> UnboundedUpper:
+    """Iterate T̄ from 1 (every iterate is sound; see the module docstring) until it stalls.
+
+    States that cannot reach acceptance at all (can_accept) start at 0, which removes the
+    greatest-fixed-point excess on end components from which acceptance is unreachable.
+    """
+    started = time.perf_counter()
+    tables = abstraction.tables
+    shape = (tables.n_x, tables.n_q, abstraction.cells.n_cells)
+    value = np.broadcast_to(can_accept(tables)[:, :, None], shape).astype(float)
+    change = np.inf
+    iterations = 0
+    while iterations < max_iterations and time.perf_counter() - started < time_limit:
+        new = np.minimum(value, abstract_backup(abstraction, value))
+        change = float(np.abs(new - value).max())
+        value = new
+        iterations += 1
+        if change <= tolerance:
+            break
+    return UnboundedUpper(value=value, iterations=iterations, last_change=change,
+                          seconds=time.perf_counter() - started)

@@ -1,0 +1,161 @@
+"""Spec files: the four shipped specs, the schema's errors (with file, line, column), identity, projection."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from trustroute.networks.errors import InputError
+from trustroute.policies.logic.formula import Eventually, Literal, canonical, format_formula, parse_formula
+from trustroute.policies.logic.spec import BeliefAtom, load_spec, spec_from_text, state_only_projection
+
+PHI1_TEXT = Path("specs/phi1.toml").read_text()
+PAPER_FORMULA = "(!lowtrust) U (F (v1 & F (v2 & F (v3 & hightrust))))"
+
+
+def test_phi1_as_in_the_paper(town):
+    spec = load_spec("specs/phi1.toml", town)
+    assert spec.name == "phi1" and spec.start == "E-A"
+    assert spec.formula_text == PAPER_FORMULA
+    assert spec.formula == parse_formula(PAPER_FORMULA)
+    assert spec.state_atoms == {"v1": frozenset({"B-G", "F-G", "I-G"}),
+                                "v2": frozenset({"I-J", "C-J", "K-J"}),
+                                "v3": frozenset({"K-L", "E-L", "H-L"})}
+    assert spec.belief_atoms == {"hightrust": BeliefAtom((0, 0, 0, 0, 0, 1.0, 1.0), 0.5),
+                                 "lowtrust": BeliefAtom((1.0, 0, 0, 0, 0, 0, 0), 1.0)}
+    assert spec.atoms == ("v1", "v2", "v3", "hightrust", "lowtrust")
+    assert spec.source_path == "specs/phi1.toml"
+
+
+def test_phi2_as_in_the_paper(town):
+    spec = load_spec("specs/phi2.toml", town)
+    assert spec.start == "L-H"
+    assert spec.formula == parse_formula(PAPER_FORMULA.replace("v1", "v4").replace("v2", "v5")
+                                         .replace("v3", "v6"))
+    assert spec.state_atoms == {"v4": frozenset({"A-B", "G-B", "C-B"}),
+                                "v5": frozenset({"D-K", "J-K", "L-K"}),
+                                "v6": frozenset({"A-E", "D-E", "L-E"})}
+    assert spec.belief_atoms == load_spec("specs/phi1.toml").belief_atoms
+
+
+@pytest.mark.parametrize(("name", "paper"), [("phi1_strict", "phi1"), ("phi2_strict", "phi2")])
+def test_strict_variants(town, name, paper):
+    spec, original = load_spec(f"specs/{name}.toml", town), load_spec(f"specs/{paper}.toml", town)
+    v = sorted(original.state_atoms)
+    assert spec.formula == parse_formula(f"(!lowtrust) U ({v[0]} & F ({v[1]} & F ({v[2]} & hightrust)))")
+    assert spec.start == original.start and spec.state_atoms == original.state_atoms
+    assert spec.belief_atoms["lowtrust"] == BeliefAtom((1, 1, 0, 0, 0, 0, 0), 0.3)  # P(trust <= 2) > 0.3
+    assert spec.belief_atoms["hightrust"] == original.belief_atoms["hightrust"]
+
+
+def test_packaged_spec_directory_is_the_specs_symlink():
+    assert Path("specs").resolve() == (Path("policies") / "specs").resolve()
+    assert sorted(p.stem for p in Path("specs").glob("*.toml")) == ["phi1", "phi1_strict", "phi2",
+                                                                   "phi2_strict"]
+
+
+def test_content_hash_ignores_formatting_but_not_meaning():
+    spec = spec_from_text(PHI1_TEXT)
+    reformatted = (PHI1_TEXT.replace(PAPER_FORMULA, "(!lowtrust)   U(F(v1&F(v2&F(v3&hightrust))))")
+                   .replace('["B-G", "F-G", "I-G"]', '["I-G", "B-G", "F-G"]')
+                   .replace("offset = 1\n", "offset = 1.0\n")
+                   .replace('name = "phi1"', 'name = "renamed"'))
+    assert spec_from_text(reformatted).content_hash == spec.content_hash
+    changed = PHI1_TEXT.replace("offset = 0.5", "offset = 0.6")
+    assert spec_from_text(changed).content_hash != spec.content_hash
+    moved = PHI1_TEXT.replace('start = "E-A"', 'start = "A-E"')
+    assert spec_from_text(moved).content_hash != spec.content_hash
+
+
+def test_state_only_projection_drops_every_belief_literal():
+    projected = state_only_projection(spec_from_text(PHI1_TEXT))
+    assert projected.belief_atoms == {}
+    # (true) U F (v1 & F (v2 & F (v3 & true))) = F (v1 & F (v2 & F v3))
+    assert projected.formula == canonical(Eventually(parse_formula("v1 & F (v2 & F v3)")))
+    assert parse_formula(projected.formula_text) == projected.formula
+    strict = state_only_projection(load_spec("specs/phi1_strict.toml"))
+    assert format_formula(strict.formula) == "F (F (F v3 & v2) & v1)"
+    assert Literal("lowtrust", False) not in list(_literals(strict.formula))
+
+
+def _literals(formula):
+    from trustroute.policies.logic.formula import walk
+    return [n for n in walk(formula) if isinstance(n, Literal)]
+
+
+def error(text: str, town=None) -> str:
+    with pytest.raises(InputError) as info:
+        spec_from_text(text, "bad.toml", town)
+    return info.value.one_line()
+
+
+def test_unknown_atom_names_file_line_and_column():
+    message = error(PHI1_TEXT.replace("F (v3 & hightrust)", "F (v9 & hightrust)"))
+    first, formula_line, caret = message.split("\n")
+    line = next(i for i, x in enumerate(PHI1_TEXT.splitlines(), start=1) if x.startswith("formula"))
+    column = len('formula = "') + PAPER_FORMULA.index("v3") + 1
+    assert first.startswith(f"bad.toml: line {line} column {column}: unknown atom 'v9'")
+    assert caret.index("^") == formula_line.index("v9")
+
+
+def test_state_not_in_the_town(town):
+    text = PHI1_TEXT.replace('"F-G"', '"F-Z"')
+    assert spec_from_text(text).state_atoms["v1"] == {"B-G", "F-Z", "I-G"}  # no town: not checked
+    message = error(text, town)
+    assert "bad.toml: line 8 column 14 (states.v1)" in message
+    assert "'F-Z' is not a directed road of the town" in message
+    message = error(PHI1_TEXT.replace('start = "E-A"', 'start = "E-B"'), town)
+    assert "line 4" in message and "start road 'E-B'" in message
+
+
+@pytest.mark.parametrize("coeffs", ["[1, 0, 0]", "[1, 0, 0, 0, 0, 0, 0, 0]", "[]"])
+def test_coefficients_of_the_wrong_length(coeffs):
+    message = error(PHI1_TEXT.replace("coeffs = [1, 0, 0, 0, 0, 0, 0]", f"coeffs = {coeffs}"))
+    assert "bad.toml: line 13 column 1 (beliefs.lowtrust)" in message
+    assert "expected 7 (one per trust level" in message
+
+
+@pytest.mark.parametrize(("formula", "words"), [
+    ("G v1", ["'G' (globally) is not co-safe"]),
+    ("!(v1 & v2)", ["negation of a compound formula is not co-safe"]),
+    ("(v1 & F v2", ["unbalanced parentheses", "expected ')'"]),
+    ("v1)", ["unbalanced parentheses"]),
+    ("", ["empty formula"]),
+])
+def test_formula_errors_in_a_file(formula, words):
+    message = error(PHI1_TEXT.replace(PAPER_FORMULA, formula))
+    assert message.startswith("bad.toml: line 5 column ")
+    for word in words:
+        assert word in message
+
+
+@pytest.mark.parametrize(("text", "words"), [
+    ('name = "x"\nstart = "E-A"\n', ["missing key 'formula'"]),
+    ('start = "E-A"\nformula = "true"\n', ["missing key 'name'"]),
+    ('name = "x"\nstart = "E-A"\nformula = "true"\nfrobnicate = 1\n', ["line 4", "unknown key 'frobnicate'"]),
+    ('name = "x"\nstart = "E-A"\nformula = 3\n', ["line 3", "'formula' must be a string"]),
+    ('name = "x"\nstart = "E-A\nformula = "true"\n', ["line 2", "not valid TOML"]),
+    ('name = "x"\nstart = "E-A"\nformula = "a"\n[states]\na = "B-G"\n', ["line 5", "must be a list"]),
+    ('name = "x"\nstart = "E-A"\nformula = "a"\n[states]\na = ["BG"]\n', ["not a directed road"]),
+    ('name = "x"\nstart = "E-A"\nformula = "a"\n[beliefs.a]\ncoeffs = [0,0,0,0,0,0,1]\n',
+     ["line 4", "missing 'offset'"]),
+    ('name = "x"\nstart = "E-A"\nformula = "a"\n[beliefs.a]\ncoeffs = [0,0,0,0,0,0,true]\noffset = 1\n',
+     ["line 5", "finite numbers"]),
+    ('name = "x"\nstart = "E-A"\nformula = "a"\n[beliefs.a]\ncoeffs = [0,0,0,0,0,0,1]\noffset = 1\n'
+     'scale = 2\n',
+     ["line 7", "unknown key 'scale'"]),
+    ('name = "x"\nstart = "E-A"\nformula = "a"\n[states]\na = ["B-G"]\n[beliefs.a]\n'
+     'coeffs = [0,0,0,0,0,0,1]\noffset = 1\n', ["defined both"]),
+    ('name = "x"\nstart = "E-A"\nformula = "F"\n[states]\nF = ["B-G"]\n', ["not a valid atom name"]),
+])
+def test_schema_errors(text, words):
+    message = error(text)
+    assert message.startswith("bad.toml: ")
+    for word in words:
+        assert word in message
+
+
+def test_missing_file_is_an_input_error(tmp_path):
+    with pytest.raises(InputError, match="cannot read the spec file"):
+        load_spec(tmp_path / "missing.toml")

@@ -1,0 +1,46 @@
+"""`trustroute baseline` and `trustroute evaluate` end to end (JSON output, exit codes)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.cli import run_cli
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import baseline_route
+
+
+def test_baseline_json(capsys, town):
+    code, out, _ = run_cli(capsys, "baseline", "specs/phi1.toml", "--json")
+    assert code == 0
+    payload = json.loads(out)
+    route = baseline_route(town, load_spec("specs/phi1.toml", town))
+    assert payload["route"] == route
+    assert payload["length_m"] == pytest.approx(town.route_length(route))
+    assert 0.0 < payload["satisfaction_probability"] < 1.0
+    assert payload["lower"] == payload["upper"] == payload["satisfaction_probability"]
+
+
+def test_evaluate_free_json_matches_baseline(capsys):
+    code, out, _ = run_cli(capsys, "baseline", "specs/phi2.toml", "--json")
+    baseline_value = json.loads(out)["satisfaction_probability"]
+    code, out, _ = run_cli(capsys, "evaluate", "specs/phi2.toml", "free", "--json")
+    assert code == 0
+    payload = json.loads(out)
+    assert payload["satisfaction_probability"] == pytest.approx(baseline_value, abs=1e-12)
+    assert 1.0 <= payload["expected_final_trust"] <= 7.0
+    assert payload["fallback_after"] == 20
+
+
+def test_evaluate_rejects_an_unknown_policy_with_exit_code_2(capsys, tmp_path):
+    code, out, err = run_cli(capsys, "evaluate", "specs/phi1.toml", str(tmp_path / "missing.json"))
+    assert code == 2
+    assert out == ""
+    assert err.startswith("error: ") and len(err.strip().splitlines()) == 1
+
+
+def test_evaluate_rejects_a_negative_fallback(capsys):
+    code, _, err = run_cli(capsys, "evaluate", "specs/phi1.toml", "free", "--fallback-after", "-1")
+    assert code == 2
+    assert "fallback" in err

@@ -1,0 +1,113 @@
+"""Policy files: round trip, hash checks (town, driver model, spec), damaged files, resolve, CLI."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from tests.cli import run_cli
+from trustroute.networks.errors import InputError
+from trustroute.networks.town import town_from_dict
+from trustroute.policies.evaluate import evaluate
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.files import array_path, load_policy, save_policy
+from trustroute.policies.routing.protocol import DecisionContext
+from trustroute.policies.routing.resolve import aware_cache_path, resolve_policy
+from trustroute.policies.synthesis.search import synthesize
+
+
+@pytest.fixture(scope="module")
+def phi1_result(pomdp):
+    spec = load_spec("specs/phi1.toml", pomdp.town)
+    return spec, synthesize(pomdp, spec, horizon=8)
+
+
+def test_round_trip_keeps_every_decision_and_the_value(pomdp, driver, phi1_result, tmp_path):
+    spec, result = phi1_result
+    path = save_policy(result, tmp_path / "phi1.json", pomdp.town, driver, spec)
+    document = json.loads(path.read_text())
+    assert document["lower"] == result.lower and document["horizon"] == 8
+    assert document["spec_hash"] == spec.content_hash
+    loaded = load_policy(path, pomdp.town, driver, spec)
+    for name in ("t", "x", "q", "beliefs", "action"):
+        assert np.array_equal(getattr(loaded.table, name), getattr(result.policy.table, name))
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        road = str(rng.choice(pomdp.town.states))
+        context = DecisionContext(route=("E-A",) * int(rng.integers(10)) + (road,),
+                                  dfa_state=int(rng.integers(4)), belief=rng.dirichlet(np.ones(7)))
+        assert loaded.next_junction(context) == result.policy.next_junction(context)
+    value = evaluate(pomdp, spec, loaded, fallback_after=None, max_junctions=8)
+    assert value.lower == pytest.approx(result.lower, abs=1e-12)
+
+
+def test_another_town_driver_or_spec_is_a_clear_error(pomdp, town, driver, phi1_result, tmp_path):
+    spec, result = phi1_result
+    path = save_policy(result, tmp_path / "phi1.json", town, driver, spec)
+    other_spec = load_spec("specs/phi2.toml", town)
+    other_driver = replace(driver, initial_belief=np.r_[0.4, np.full(6, 0.1)])
+    data = json.loads(open("networks/data/town.json").read())
+    data["incidents"]["A-F"] = "truck"
+    other_town = town_from_dict(data, "<edited town>")
+    for args, word in (((town, driver, other_spec), "spec"), ((town, other_driver, spec), "driver"),
+                       ((other_town, driver, spec), "town")):
+        with pytest.raises(InputError) as error:
+            load_policy(path, *args)
+        message = error.value.one_line()
+        assert str(path) in message and f"another {word}" in message and "trustroute synth" in message
+
+
+def test_damaged_files_are_input_errors(town, driver, phi1_result, tmp_path):
+    spec, result = phi1_result
+    path = save_policy(result, tmp_path / "p.json", town, driver, spec)
+    arrays = array_path(path)
+    arrays.write_bytes(arrays.read_bytes()[:-3] + b"xyz")
+    with pytest.raises(InputError, match="does not match"):
+        load_policy(path, town, driver, spec)
+    arrays.unlink()
+    with pytest.raises(InputError, match="missing"):
+        load_policy(path, town, driver, spec)
+    (tmp_path / "bad.json").write_text("{not json")
+    with pytest.raises(InputError, match="not a JSON policy file"):
+        load_policy(tmp_path / "bad.json", town, driver, spec)
+    (tmp_path / "other.json").write_text('{"format": "something else"}')
+    with pytest.raises(InputError, match="not a trustroute policy file"):
+        load_policy(tmp_path / "other.json", town, driver, spec)
+
+
+def test_resolve_free_aware_and_files(pomdp, town, driver, phi1_result, tmp_path, monkeypatch):
+    spec, result = phi1_result
+    assert resolve_policy("free", town, driver, spec, tmp_path).name == "free"
+    # A cached "aware" entry is loaded, not recomputed: plant one and make synthesis fail.
+    save_policy(result, aware_cache_path(town, driver, spec, tmp_path), town, driver, spec)
+    monkeypatch.setattr(
+        "trustroute.policies.routing.resolve.synthesize", lambda *a, **k: pytest.fail("re-synthesized")
+    )
+    aware = resolve_policy("aware", town, driver, spec, tmp_path)
+    assert aware.table.rows == result.policy.table.rows
+    path = save_policy(result, tmp_path / "file.json", town, driver, spec)
+    assert resolve_policy(str(path), town, driver, spec, tmp_path).table.rows == result.policy.table.rows
+    with pytest.raises(InputError, match="not a policy file"):
+        resolve_policy(str(tmp_path / "nope.json"), town, driver, spec, tmp_path)
+
+
+def test_cli_synth_then_evaluate_and_mismatch_exit_code(capsys, tmp_path):
+    out_path = tmp_path / "phi1.json"
+    code, out, _ = run_cli(capsys, "synth", "specs/phi1.toml", "--horizon", "8", "--out", str(out_path),
+                           "--json")
+    assert code == 0
+    payload = json.loads(out)
+    assert {"lower", "upper", "gap", "seconds", "policy"} <= set(payload)
+    assert payload["lower"] <= payload["upper"] and payload["policy"] == str(out_path)
+    code, out, _ = run_cli(capsys, "evaluate", "specs/phi1.toml", str(out_path), "--no-fallback",
+                           "--max-junctions", "8", "--json")
+    assert code == 0
+    assert json.loads(out)["lower"] == pytest.approx(payload["lower"], abs=1e-12)
+    code, out, err = run_cli(capsys, "evaluate", "specs/phi2.toml", str(out_path))
+    assert code == 2 and out == ""
+    assert err.startswith("error: ") and len(err.strip().splitlines()) == 1 and "another spec" in err
+    code, _, err = run_cli(capsys, "synth", "specs/phi1.toml", "--tau", "0", "--out", str(out_path))
+    assert code == 2 and "tau" in err

@@ -1,0 +1,98 @@
+"""(b) 10^5 simulated episodes of the synthesized policy agree with its certified value.
+
+The simulation samples the hidden trust path from the driver model (θ0 from the initial belief,
+takeovers and failures from θ, θ' from the trust dynamics) and runs the AV's Bayes filter on what
+it sees, all vectorised over episodes; it shares with the solver only the model arrays, the labeller
+and the policy's own decision function.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trustroute.policies.evaluate import evaluate
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.protocol import DecisionContext
+from trustroute.policies.synthesis.search import synthesize
+
+EPISODES = 100_000
+HORIZON = 20
+
+
+def draw(cdf: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """One index per row of a row-wise cumulative distribution."""
+    u = rng.random(cdf.shape[0])[:, None] * cdf[:, -1:]
+    return np.minimum((cdf <= u).sum(axis=1), cdf.shape[1] - 1)
+
+
+def simulate_policy(pomdp, spec, policy, episodes, horizon, rng):
+    """Satisfied-within-horizon flags, vectorised over episodes."""
+    town, driver = pomdp.town, pomdp.driver
+    dfa = build_dfa(spec)
+    labeller = Labeller(spec, dfa, town)
+    theta = draw(np.broadcast_to(np.cumsum(driver.initial_belief), (episodes, driver.n_trust)), rng)
+    belief = np.tile(np.asarray(driver.initial_belief, dtype=float), (episodes, 1))
+    x = np.full(episodes, town.state_index(spec.start))
+    q = np.asarray(labeller.step(np.full(episodes, dfa.initial), x, belief), dtype=np.int64)
+    satisfied = np.asarray(dfa.accepting, dtype=bool)[q].copy()
+    alive = ~satisfied & ~np.asarray(dfa.rejecting, dtype=bool)[q]
+    transition_cdf = np.cumsum(driver.trust_transition, axis=-1)
+    for t in range(horizon):
+        live = np.flatnonzero(alive)
+        if live.size == 0:
+            break
+        slot = policy.action_slots(np.full(live.size, t), x[live], q[live], belief[live])
+        for i in np.flatnonzero(slot < 0):  # no stored row: the scalar rule (shortest completion)
+            n = live[i]
+            context = DecisionContext(route=(spec.start,) * t + (town.states[x[n]],), dfa_state=int(q[n]),
+                                      belief=belief[n])
+            slot[i] = town.actions(town.states[x[n]]).index(policy.next_junction(context))
+        x2 = pomdp.successor_table[x[live], slot]
+        incident = pomdp.road_incident[x2]
+        th = theta[live]
+        h = (rng.random(live.size) < driver.takeover_probability[incident, th]).astype(np.int64)
+        e = (rng.random(live.size) < driver.failure_probability[incident, th]).astype(np.int64)
+        theta[live] = draw(transition_cdf[incident, h, e, th], rng)
+        belief[live] = pomdp.belief_update(belief[live], incident, h, e)[0]
+        x[live] = x2
+        q[live] = labeller.step(q[live], x2, belief[live])
+        accepted = np.asarray(dfa.accepting, dtype=bool)[q[live]]
+        satisfied[live[accepted]] = True
+        alive[live[accepted | np.asarray(dfa.rejecting, dtype=bool)[q[live]]]] = False
+    return satisfied
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["phi1", "phi2"])
+def test_monte_carlo_agrees_with_the_certified_value(pomdp, name):
+    spec = load_spec(f"specs/{name}.toml", pomdp.town)
+    result = synthesize(pomdp, spec, tau=1e-3, horizon=HORIZON)
+    satisfied = simulate_policy(pomdp, spec, result.policy, EPISODES, HORIZON, np.random.default_rng(5))
+    rate = satisfied.mean()
+    se = max(np.sqrt(rate * (1 - rate) / EPISODES), 1.0 / EPISODES)
+    # The policy's value lies in [lower, upper]; the simulation estimates it.
+    assert result.lower - 4 * se <= rate <= result.upper + 4 * se, (rate, result.lower, result.upper, se)
+    # and agrees with the exact value of the same policy computed by the independent evaluator.
+    exact = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=HORIZON)
+    assert abs(rate - exact.lower) <= 4 * se + exact.gap, (rate, exact.lower, se)
+
+
+def test_vectorised_and_scalar_decisions_agree(pomdp):
+    spec = load_spec("specs/phi2.toml", pomdp.town)
+    policy = synthesize(pomdp, spec, horizon=10).policy
+    rng = np.random.default_rng(2)
+    town = pomdp.town
+    rows = rng.integers(policy.table.rows, size=200)
+    beliefs = policy.table.beliefs[rows] + rng.normal(0, 1e-3, size=(200, 7))
+    t, x, q = policy.table.t[rows], policy.table.x[rows], policy.table.q[rows]
+    slots = policy.action_slots(t, x, q, beliefs)
+    exact = policy.action_slots(t, x, q, policy.table.beliefs[rows])
+    assert (exact == policy.table.action[rows]).all()
+    for i in range(200):
+        road = town.states[x[i]]
+        context = DecisionContext(route=("L-H",) * int(t[i]) + (road,), dfa_state=int(q[i]),
+                                  belief=beliefs[i])
+        assert policy.next_junction(context) == town.actions(road)[slots[i]]

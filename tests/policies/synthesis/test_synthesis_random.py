@@ -1,0 +1,79 @@
+"""(d) On random small towns and random driver models, the bounds bracket the brute-force optimum.
+
+Towns (4-5 junctions) and driver models (with AV failures, so up to 4 symbols per incident and
+no identity incident) are drawn by hypothesis; specs mix state and belief atoms. For H <= 4 the
+exact optimum of policies.exact_search must lie in [lower, upper] of the solver, the raw abstraction
+bound at the root must be above it, and the unbounded problem's upper bound must be above it too.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tests.policies.test_evaluate_random_models import random_driver
+from trustroute.networks.town import INCIDENT_TYPES, town_from_dict
+from trustroute.policies.logic.spec import spec_from_text
+from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.synthesis.exact_search import exact_optimum
+from trustroute.policies.synthesis.search import synthesize
+
+FORMULAS = ("F (a & F (b & high))", "(!high) U a", "F (a & high)", "(!high) U (a & X (F (b & high)))")
+TOLERANCE = 1e-9
+
+
+def random_town(rng: np.random.Generator):
+    n = int(rng.integers(4, 6))
+    names = [chr(ord("A") + i) for i in range(n)]
+    junctions = {name: [float(v) for v in rng.uniform(0, 500, size=2)] for name in names}
+    roads = {tuple(sorted((names[i], names[int(rng.integers(i))]))) for i in range(1, n)}  # a tree
+    for _ in range(int(rng.integers(1, n))):
+        u, v = rng.choice(n, size=2, replace=False)
+        roads.add(tuple(sorted((names[u], names[v]))))
+    directed = [f"{u}-{v}" for a, b in roads for u, v in ((a, b), (b, a))]
+    incidents = {road: str(rng.choice(INCIDENT_TYPES)) for road in directed}
+    return town_from_dict({"junctions": junctions, "roads": [list(r) for r in sorted(roads)],
+                           "incidents": incidents}, "<random town>")
+
+
+def random_spec(rng: np.random.Generator, town, initial_belief: np.ndarray):
+    """Waypoints a, b among roads reachable within 1-2 and 2-4 junctions of the start; the belief
+    atom's threshold near its value at the initial belief, so that it can go either way."""
+    start = str(rng.choice(town.states))
+    rings = [{start}]
+    for _ in range(4):
+        rings.append({nxt for road in rings[-1] for nxt in town.successors(road)})
+    near = sorted(rings[1] | rings[2])
+    far = sorted(rings[2] | rings[3] | rings[4])
+    a = sorted(rng.choice(near, size=min(len(near), int(rng.integers(1, 3))), replace=False).tolist())
+    b = sorted(rng.choice(far, size=min(len(far), int(rng.integers(1, 3))), replace=False).tolist())
+    coeffs = rng.integers(0, 2, size=7).astype(float)
+    coeffs[int(rng.integers(7))] = 1.0
+    offset = float(coeffs @ initial_belief + rng.uniform(-0.15, 0.15))
+    text = (f'name = "random"\nstart = "{start}"\n'
+            f'formula = "{FORMULAS[int(rng.integers(len(FORMULAS)))]}"\n'
+            f"[states]\na = {a}\nb = {b}\n".replace("'", '"')
+            + f"[beliefs.high]\ncoeffs = {coeffs.tolist()}\noffset = {offset}\n")
+    return spec_from_text(text, "<random spec>", town)
+
+
+@pytest.mark.slow
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**32 - 1), horizon=st.integers(3, 5),
+       belief_rule=st.sampled_from(["bayes", "paper"]))
+def test_bounds_bracket_brute_force_on_random_problems(driver, seed, horizon, belief_rule):
+    rng = np.random.default_rng(seed)
+    town = random_town(rng)
+    pomdp = build_pomdp(town, random_driver(rng, driver.incident_types))
+    spec = random_spec(rng, town, pomdp.initial_belief)
+    optimum = exact_optimum(pomdp, spec, horizon, belief_rule)
+    for tau in (1e-12, 0.2):
+        result = synthesize(pomdp, spec, tau=tau, horizon=horizon, belief_rule=belief_rule, time_limit=20,
+                            suffix_length=int(rng.integers(0, 3)))
+        assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE, (result.lower, optimum)
+        assert result.stats["runs"][0]["abstraction_root_upper"] >= optimum - TOLERANCE
+    unbounded = synthesize(pomdp, spec, belief_rule=belief_rule, time_limit=1.0, suffix_length=2)
+    assert unbounded.upper >= optimum - TOLERANCE
+    assert unbounded.lower <= unbounded.upper + TOLERANCE

@@ -1,0 +1,3 @@
+from trustroute.harness.cli import main
+
+main()
