@@ -18,5 +18,12 @@ class InputError(Exception):
         super().__init__(self.one_line())
 
     def one_line(self) -> str:
-        where = f"{self.source}: {self.place}" if self.place else self.source
-        return f"{where}: {self.problem} (fix: {self.fix})"
+        """The message on one line: control characters escaped, each part capped in length (a file
+        name or key taken from bad input must not spill over lines or screens)."""
+        where = f"{_clean(self.source)}: {_clean(self.place)}" if self.place else _clean(self.source)
+        return f"{where}: {_clean(self.problem, 400)} (fix: {_clean(self.fix, 300)})"
+
+
+def _clean(text: str, limit: int = 200) -> str:
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
+    return text if len(text) <= limit else text[: limit - 3] + "..."

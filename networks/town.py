@@ -12,6 +12,7 @@ import hashlib
 import heapq
 import json
 import math
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +21,13 @@ from trustroute.networks.errors import InputError
 
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town.json"
 INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", "none")
+TOWN_KEYS: tuple[str, ...] = ("junctions", "roads", "incidents", "source")
+# SUMO works in metres with float coordinates: a town beyond 1000 km, or a road shorter than a car,
+# passes the schema but breaks netconvert or makes every length degenerate.
+MAX_COORDINATE = 1.0e6
+MIN_ROAD_LENGTH = 10.0
+MAX_JUNCTION_NAME = 64
+JUNCTION_NAME = re.compile(r"[A-Za-z0-9_]+")
 
 
 def road_name(from_junction: str, to_junction: str) -> str:
@@ -149,6 +157,9 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
     if not isinstance(data, dict):
         raise _fail(path, "top level", "expected a JSON object", "write {\"junctions\": ..., "
                     "\"roads\": ..., \"incidents\": ...}")
+    from trustroute.input_files import check_keys
+
+    check_keys(data, TOWN_KEYS, path, "", "town file")
     for key in ("junctions", "roads", "incidents"):
         if key not in data:
             raise _fail(path, key, f"missing key '{key}'", f"add a '{key}' entry as in the default "
@@ -159,15 +170,21 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
                     "list each junction as \"A\": [x, y] in metres")
     junctions: dict[str, tuple[float, float]] = {}
     for name, xy in raw_junctions.items():
-        if not isinstance(name, str) or not name or "-" in name:
-            raise _fail(path, f"junctions.{name}", "junction names must be non-empty and contain "
-                        "no '-'", "rename the junction")
+        if (not isinstance(name, str) or not name or len(name) > MAX_JUNCTION_NAME
+                or not JUNCTION_NAME.fullmatch(name)):
+            raise _fail(path, f"junctions.{name}", "junction names must be 1-"
+                        f"{MAX_JUNCTION_NAME} letters, digits or '_' and contain no '-' (it joins road "
+                        "names)",
+                        "rename the junction")
         ok = (isinstance(xy, list) and len(xy) == 2
               and all(isinstance(c, int | float) and not isinstance(c, bool)
                       and math.isfinite(c) for c in xy))
         if not ok:
-            raise _fail(path, f"junctions.{name}", f"coordinates {xy!r} are not two finite numbers",
+            raise _fail(path, f"junctions.{name}", f"coordinates {str(xy)[:60]} are not two finite numbers",
                         "write [x, y] in metres, e.g. [0, 700]")
+        if max(abs(xy[0]), abs(xy[1])) > MAX_COORDINATE:
+            raise _fail(path, f"junctions.{name}", f"coordinates {xy!r} lie more than "
+                        f"{MAX_COORDINATE:g} m from the origin", "give coordinates in metres of one town")
         junctions[name] = (float(xy[0]), float(xy[1]))
 
     raw_roads = data["roads"]
@@ -189,6 +206,10 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
         if u == v:
             raise _fail(path, place, f"road {u}-{v} is a self-loop", "remove it; roads join two "
                         "different junctions")
+        if math.dist(junctions[u], junctions[v]) < MIN_ROAD_LENGTH:
+            raise _fail(path, place, f"road {u}-{v} is {math.dist(junctions[u], junctions[v]):.3g} m long "
+                        f"(junctions {u} and {v} almost coincide)", f"place the junctions at least "
+                        f"{MIN_ROAD_LENGTH:g} m apart")
         if frozenset((u, v)) in seen:
             raise _fail(path, place, f"road {u}-{v} is listed twice (roads are two-way)",
                         "list each road once")
@@ -231,17 +252,11 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
 
 
 def load_town(path: str | Path | None = None) -> Town:
-    """Load and validate a town file (the packaged default when `path` is None)."""
+    """Load and validate a town file (the packaged default when `path` is None), read through the
+    guarded reader (trustroute.input_files)."""
+    from trustroute.input_files import parse_json, read_input_text
+
     file_path = Path(path) if path is not None else DEFAULT_TOWN_PATH
     shown = str(path) if path is not None else "default town"
-    try:
-        text = file_path.read_text()
-    except OSError as exc:
-        raise InputError(shown, "", f"cannot read the town file ({exc.strerror})",
-                         "pass an existing file with --town") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(shown, f"line {exc.lineno} column {exc.colno}",
-                         f"not valid JSON ({exc.msg})", "fix the JSON syntax") from None
-    return town_from_dict(data, shown)
+    text = read_input_text(file_path, "town file", fix="pass an existing town file with --town")
+    return town_from_dict(parse_json(text, shown, "town file"), shown)

@@ -30,6 +30,12 @@ DEFAULT_DRIVER_MODEL_PATH = Path(__file__).parent / "data" / "driver_model.json"
 HUMAN_ACTIONS: tuple[str, ...] = ("standstill", "takeover")
 PERFORMANCES: tuple[str, ...] = ("succ", "fail")
 ROW_TOLERANCE = 1e-9
+DRIVER_MODEL_KEYS: tuple[str, ...] = ("trust_levels", "incident_types", "takeover_probability",
+                                      "trust_transition", "failure_probability", "initial_belief",
+                                      "trust_free_takeover_probability", "source")
+MAX_TRUST_LEVELS = 100  # the model is dense in |Θ|^2 per incident; real scales have 5-11 levels
+MAX_INCIDENT_TYPES = 64
+MAX_NAME = 64
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,6 +158,9 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
     if not isinstance(data, dict):
         raise InputError(path, "top level", "expected a JSON object",
                          "start from the default model (participants/data/driver_model.json)")
+    from trustroute.input_files import check_keys
+
+    check_keys(data, DRIVER_MODEL_KEYS, path, "", "driver model")
     for key in ("trust_levels", "incident_types", "takeover_probability", "trust_transition"):
         if key not in data:
             raise InputError(path, key, f"missing key '{key}'", f"add '{key}' as in the default "
@@ -159,12 +168,13 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
     levels = data["trust_levels"]
     if not (isinstance(levels, list) and len(levels) >= 2
             and all(isinstance(t, int) and not isinstance(t, bool) for t in levels)
-            and levels == sorted(set(levels))):
-        raise InputError(path, "trust_levels", f"{levels!r} is not an increasing list of integers",
-                         "write e.g. [1, 2, 3, 4, 5, 6, 7]")
+            and len(levels) <= MAX_TRUST_LEVELS and levels == sorted(set(levels))):
+        raise InputError(path, "trust_levels", f"{str(levels)[:60]} is not an increasing list of 2 to "
+                         f"{MAX_TRUST_LEVELS} integers", "write e.g. [1, 2, 3, 4, 5, 6, 7]")
     n = len(levels)
     incidents = data["incident_types"]
-    if not (isinstance(incidents, list) and incidents and all(isinstance(i, str) for i in incidents)
+    if not (isinstance(incidents, list) and incidents and len(incidents) <= MAX_INCIDENT_TYPES
+            and all(isinstance(i, str) and 0 < len(i) <= MAX_NAME for i in incidents)
             and len(set(incidents)) == len(incidents)):
         raise InputError(path, "incident_types", "expected a list of distinct incident names",
                          "write e.g. [\"obstacle\", \"pedestrian\", \"truck\", \"none\"]")
@@ -200,6 +210,7 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
             raise InputError(path, f"trust_transition.{incident}",
                              f"missing trust transition for '{incident}'",
                              "add {\"takeover\": M, \"standstill\": M}")
+        check_keys(rows, HUMAN_ACTIONS, path, f"trust_transition.{incident}", "driver model")
         for h, action in enumerate(HUMAN_ACTIONS):
             place = f"trust_transition.{incident}.{action}"
             if action not in rows:
@@ -207,6 +218,7 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
                                  f"add a {n}x{n} row-stochastic matrix")
             entry = rows[action]
             if isinstance(entry, dict):
+                check_keys(entry, PERFORMANCES, path, place, "driver model")
                 for e, perf in enumerate(PERFORMANCES):
                     if perf not in entry:
                         raise InputError(path, f"{place}.{perf}", f"missing '{perf}' matrix",
@@ -247,18 +259,14 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
 
 
 def load_driver_model(path: str | Path | None = None) -> DriverModel:
-    """Load and validate a driver model file (the packaged default when `path` is None)."""
+    """Load and validate a driver model file (the packaged default when `path` is None), read
+    through the guarded reader (trustroute.input_files)."""
+    from trustroute.input_files import parse_json, read_input_text
+
     file_path = Path(path) if path is not None else DEFAULT_DRIVER_MODEL_PATH
     shown = str(path) if path is not None else "default driver model"
-    try:
-        data = json.loads(file_path.read_text())
-    except OSError as exc:
-        raise InputError(shown, "", f"cannot read the driver model ({exc.strerror})",
-                         "pass an existing file with --driver") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(shown, f"line {exc.lineno} column {exc.colno}",
-                         f"not valid JSON ({exc.msg})", "fix the JSON syntax") from None
-    return driver_model_from_dict(data, shown)
+    text = read_input_text(file_path, "driver model", fix="pass an existing driver model file with --driver")
+    return driver_model_from_dict(parse_json(text, shown, "driver model"), shown)
 
 
 def check_covers_town(model: DriverModel, town_incidents: set[str], town_source: str) -> None:

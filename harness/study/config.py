@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -54,6 +53,16 @@ STUDY_KEYS: tuple[str, ...] = (
     "policy_cache",
 )
 DEFAULT_REPORT_ACCURACY = 0.8
+# Upper limits checked before any work starts: a typo such as participants = 2**63 - 1 must be an
+# error, not a plan that grows until memory runs out.
+MAXIMUM: dict[str, int] = {
+    "participants": 100_000,
+    "seed": 2**63 - 1,
+    "horizon": 1_000,
+    "fallback_after": 10_000,
+    "junction_cap": 10_000,
+    "report_every": 10_000,
+}
 
 
 @dataclass(frozen=True)
@@ -150,11 +159,12 @@ def _integer(
     if key not in study:
         return default
     value = study[key]
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+    maximum = MAXIMUM[key]
+    if isinstance(value, bool) or not isinstance(value, int) or not minimum <= value <= maximum:
         raise InputError(
             source,
             f"study.{key}",
-            f"expected an integer >= {minimum}, got {value!r}",
+            f"expected an integer from {minimum} to {maximum}, got {str(value)[:40]}",
             fix or f"write e.g. {key} = {max(minimum, 1)}",
         )
     return value
@@ -342,18 +352,8 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
 
 def load_study_config(path: str | Path) -> StudyConfig:
     """Read and validate a study config file, or raise InputError."""
+    from trustroute.input_files import read_toml
+
     shown = str(path)
-    try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise InputError(
-            shown,
-            "",
-            f"cannot read the study config ({exc.strerror})",
-            "pass an existing TOML file (see harness/study/examples/)",
-        ) from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(shown, "", f"not valid TOML ({exc})", "fix the TOML syntax") from None
+    data = read_toml(path, "study config", fix="pass an existing TOML file (see harness/study/examples/)")
     return study_config_from_dict(data, shown, Path(path).resolve().parent)

@@ -13,7 +13,6 @@ import hashlib
 import json
 import math
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,6 +32,15 @@ from trustroute.policies.logic.formula import (
 
 N_TRUST_LEVELS = 7  # the Muir scale 1..7: belief vectors have this length
 TOP_LEVEL_KEYS = ("name", "start", "formula", "states", "beliefs")
+MAX_SPEC_NAME = 64
+# Names become file names (policy cache entries): no path separators, NUL or leading dot.
+SPEC_NAME = re.compile(rf"[A-Za-z0-9_][A-Za-z0-9_.+-]{{0,{MAX_SPEC_NAME - 1}}}")
+# The parser and DFA construction recurse over the formula; these limits keep them far from
+# Python's recursion limit while allowing any task a person would write.
+MAX_FORMULA_CHARS = 20_000
+MAX_FORMULA_NESTING = 100
+MAX_ATOMS = 200
+MAX_STATE_ROADS = 10_000
 
 
 @dataclass(frozen=True)
@@ -121,15 +129,22 @@ def _number(value: object) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
+def _paren_depth(text: str) -> int:
+    depth = deepest = 0
+    for char in text:
+        if char == "(":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif char == ")":
+            depth -= 1
+    return deepest
+
+
 def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) -> Spec:
     """Parse and validate a spec's TOML text; with `town`, check its roads exist there."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        where = re.search(r"\(at line (\d+), column (\d+)\)", str(exc))
-        place = f"line {where.group(1)} column {where.group(2)}" if where else ""
-        message = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(exc))
-        raise InputError(source, place, f"not valid TOML ({message})", "fix the TOML syntax") from None
+    from trustroute.input_files import parse_toml
+
+    data = parse_toml(text, source, "spec file")
 
     def fail(label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
         return InputError(source, _place(text, label, *needles), problem, fix)
@@ -147,6 +162,17 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
     name, start, formula_text = data["name"], data["start"], data["formula"]
     if not name.strip():
         raise fail("name", (r"^\s*name\s*=",), "'name' is empty", 'write name = "phi1"')
+    if not SPEC_NAME.fullmatch(name):
+        raise fail("name", (r"^\s*name\s*=",), f"spec name {name[:40]!r}{'...' if len(name) > 40 else ''} "
+                   f"is not 1-{MAX_SPEC_NAME} letters, digits, '_', '.' or '-' (it names cache files)",
+                   'write e.g. name = "phi1"')
+    if len(formula_text) > MAX_FORMULA_CHARS:
+        raise fail("formula", (r"^\s*formula\s*=",), f"the formula has {len(formula_text)} characters "
+                   f"(the limit is {MAX_FORMULA_CHARS})", "split the task or simplify the formula")
+    nesting = _paren_depth(formula_text)
+    if nesting > MAX_FORMULA_NESTING:
+        raise fail("formula", (r"^\s*formula\s*=",), f"the formula nests parentheses {nesting} deep "
+                   f"(the limit is {MAX_FORMULA_NESTING})", "simplify the formula")
 
     raw_states = data.get("states", {})
     raw_beliefs = data.get("beliefs", {})
@@ -156,6 +182,10 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
     if not isinstance(raw_beliefs, dict):
         raise fail("beliefs", (r"^\s*beliefs\s*=",), "'beliefs' must be a table of tables",
                    "write [beliefs.NAME] with coeffs = [...] and offset = ...")
+
+    if len(raw_states) + len(raw_beliefs) > MAX_ATOMS:
+        raise InputError(source, "states", f"{len(raw_states) + len(raw_beliefs)} atoms (the limit is "
+                         f"{MAX_ATOMS})", "define fewer atoms")
 
     def check_atom_name(atom: str, table: str) -> None:
         if not ATOM_PATTERN.fullmatch(atom) or atom in KEYWORDS:
@@ -169,7 +199,8 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
         check_atom_name(atom, "states")
         label = f"states.{atom}"
         needles = (r"^\s*\[states\]", rf"^\s*{re.escape(atom)}\s*=")
-        if not (isinstance(roads, list) and all(isinstance(r, str) for r in roads)):
+        if not (isinstance(roads, list) and len(roads) <= MAX_STATE_ROADS
+                and all(isinstance(r, str) for r in roads)):
             raise fail(label, needles, f"state atom '{atom}' must be a list of directed roads",
                        f'write {atom} = ["U-V", ...]')
         for road in roads:
@@ -218,7 +249,11 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
         belief_atoms[atom] = BeliefAtom(tuple(float(c) for c in coeffs), float(offset))
 
     line, column = _formula_position(text)
-    formula = parse_formula(formula_text, set(state_atoms) | set(belief_atoms), source, line, column)
+    try:
+        formula = parse_formula(formula_text, set(state_atoms) | set(belief_atoms), source, line, column)
+    except RecursionError:
+        raise fail("formula", (r"^\s*formula\s*=",), "the formula is nested too deeply to parse",
+                   "simplify the formula") from None
     if town is not None and start not in town.states:
         raise fail("start", (r"^\s*start\s*=",), f"start road '{start}' is not a directed road of the "
                    f"town ({town.source_path or 'given town'})", "use a directed road 'U-V' of the town")
@@ -230,13 +265,23 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
 
 
 def load_spec(path: str | Path, town: Town | None = None) -> Spec:
-    """Load and validate a spec file; with `town`, also check its roads against the town."""
-    try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise InputError(str(path), "", f"cannot read the spec file ({exc.strerror})",
-                         "pass an existing .toml file, e.g. specs/phi1.toml") from None
+    """Load and validate a spec file (through the guarded reader, trustroute.input_files); with
+    `town`, also check its roads against the town."""
+    from trustroute.input_files import read_input_text
+
+    text = read_input_text(path, "spec file", fix="pass an existing .toml file, e.g. specs/phi1.toml")
     return spec_from_text(text, str(path), town)
+
+
+def check_trust_levels(spec: Spec, n_trust: int, driver_source: str) -> None:
+    """A spec's belief atoms weigh one coefficient per trust level of the driver model."""
+    for atom, belief in sorted(spec.belief_atoms.items()):
+        if len(belief.coeffs) != n_trust:
+            raise InputError(spec.source_path or spec.name, f"beliefs.{atom}",
+                             f"belief atom '{atom}' has {len(belief.coeffs)} coefficients but the driver "
+                             f"model {driver_source} has {n_trust} trust levels",
+                             f"give {n_trust} coefficients, or use a driver model with "
+                             f"{len(belief.coeffs)} trust levels")
 
 
 def state_only_projection(spec: Spec) -> Spec:

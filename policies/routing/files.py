@@ -10,7 +10,10 @@ the format and all three hashes and raises InputError naming the file and the fi
 from __future__ import annotations
 
 import hashlib
+import io
 import json
+import math
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +31,11 @@ ACTING_RULE = ("action of the stored row with the same (junctions driven, road, 
                "junction count; else the trust-free shortest completion of the state-only task")
 
 
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+ARRAY_NAMES = ("t", "x", "q", "beliefs", "action")
+DOCUMENT_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "spec_hash", "horizon",
+                 "belief_rule", "lower", "upper", "gap", "seconds", "rows", "acting_rule", "arrays",
+                 "arrays_sha256")
+RESYNTH = "re-run trustroute synth to write both files again"
 
 
 def array_path(path: str | Path) -> Path:
@@ -38,13 +44,16 @@ def array_path(path: str | Path) -> Path:
 
 def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec: Spec) -> Path:
     """Write the policy of a SynthesisResult to `path` (+ `.npz`); returns the JSON path."""
+    from trustroute.output_files import atomic_write_bytes, atomic_write_text
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     table: PolicyTable = result.policy.table
     arrays = array_path(path)
-    with arrays.open("wb") as handle:
-        np.savez_compressed(handle, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs,
-                            action=table.action)
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs, action=table.action)
+    array_bytes = buffer.getvalue()
+    # The arrays first, the JSON (which names their hash) last: the JSON is the commit mark.
+    atomic_write_bytes(arrays, array_bytes, "policy array file", "pass a writable --out path")
     document = {
         "format": FORMAT,
         "version": VERSION,
@@ -62,31 +71,100 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
         "rows": table.rows,
         "acting_rule": ACTING_RULE,
         "arrays": arrays.name,
-        "arrays_sha256": _sha256(arrays),
+        "arrays_sha256": hashlib.sha256(array_bytes).hexdigest(),
     }
-    path.write_text(json.dumps(document, indent=1) + "\n")
+    atomic_write_text(path, json.dumps(document, indent=1) + "\n", "policy file",
+                      "pass a writable --out path")
     return path
 
 
 def read_policy_document(path: str | Path) -> dict:
     """The JSON part of a policy file, checked for format (InputError otherwise)."""
+    from trustroute.input_files import check_keys, read_json
+
     path = Path(path)
     where = str(path)
-    if not path.is_file():
-        raise InputError(where, "", "policy file not found",
-                         "pass 'free', 'aware' or a file written by trustroute synth --out")
-    try:
-        document = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(where, "", f"not a JSON policy file ({exc})",
-                         "pass a file written by trustroute synth --out") from None
+    document = read_json(path, "policy file", fix="pass 'free', 'aware' or a file written by trustroute "
+                         "synth --out")
     if not isinstance(document, dict) or document.get("format") != FORMAT:
         raise InputError(where, "format", f"not a trustroute policy file (format {FORMAT!r} expected)",
                          "pass a file written by trustroute synth --out")
     if document.get("version") != VERSION:
         raise InputError(where, "version", f"policy file version {document.get('version')!r}, this "
                          f"trustroute reads version {VERSION}", "re-run trustroute synth")
+    check_keys(document, DOCUMENT_KEYS, where, "", "policy file")
+    for key in ("lower", "upper"):
+        value = document.get(key)
+        if value is not None and not (isinstance(value, int | float) and not isinstance(value, bool)
+                                      and math.isfinite(value) and 0 <= value <= 1):
+            raise InputError(where, key, f"{key} bound {str(value)[:30]} is not a probability", RESYNTH)
+    if not isinstance(document.get("arrays"), str) or Path(document["arrays"]).name != document["arrays"]:
+        raise InputError(where, "arrays", "must name the .npz file beside the policy file", RESYNTH)
     return document
+
+
+def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverModel,
+                      spec: Spec) -> PolicyTable:
+    """The decision table of a policy file, verified: the hash its JSON records, a readable .npz
+    without pickles, the five arrays with consistent shapes and integer types, and every entry in
+    range for this town, driver model and spec (InputError otherwise)."""
+    from trustroute.input_files import MAX_ARRAY_BYTES, read_input_bytes
+    from trustroute.policies.logic.dfa import build_dfa
+
+    where = str(arrays)
+    if not arrays.exists():
+        raise InputError(where, "arrays", "the policy's array file is missing",
+                         "keep the .npz next to the policy file, or re-run trustroute synth")
+    data = read_input_bytes(arrays, "policy array file", MAX_ARRAY_BYTES,
+                            fix="keep the .npz next to the policy file, or re-run trustroute synth")
+    if hashlib.sha256(data).hexdigest() != document.get("arrays_sha256"):
+        raise InputError(where, "", "array file does not match its policy file (hash differs)", RESYNTH)
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as archive:
+            missing = [name for name in ARRAY_NAMES if name not in archive.files]
+            if missing:
+                raise InputError(where, missing[0], f"array '{missing[0]}' is missing", RESYNTH)
+            arrays_read = {name: archive[name] for name in ARRAY_NAMES}
+    except InputError:
+        raise
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zipfile.LargeZipFile) as exc:
+        raise InputError(where, "", f"not a readable .npz array file ({type(exc).__name__})",
+                         RESYNTH) from None
+    rows = arrays_read["t"].shape[0] if arrays_read["t"].ndim == 1 else -1
+    for name in ("t", "x", "q", "action"):
+        array = arrays_read[name]
+        if array.ndim != 1 or array.shape[0] != rows or array.dtype.kind not in "iu":
+            raise InputError(where, name, f"array '{name}' is not {max(rows, 0)} integers "
+                             f"(shape {array.shape}, type {array.dtype})", RESYNTH)
+    beliefs = arrays_read["beliefs"]
+    if beliefs.shape != (rows, driver.n_trust) or beliefs.dtype.kind != "f":
+        raise InputError(where, "beliefs", f"beliefs have shape {beliefs.shape}, expected ({rows}, "
+                         f"{driver.n_trust}) for this driver model", RESYNTH)
+    if rows != document.get("rows"):
+        raise InputError(where, "", f"{rows} rows but the policy file records {document.get('rows')}",
+                         RESYNTH)
+    if rows == 0:
+        raise InputError(where, "", "the decision table is empty", RESYNTH)
+    n_x = len(town.states)
+    t, x, q, action = (arrays_read[name].astype(np.int64) for name in ("t", "x", "q", "action"))
+    n_q = build_dfa(spec).n_states
+    slots = np.array([len(town.actions(state)) for state in town.states], dtype=np.int64)
+    problems = [
+        ("t", (t < 0).any(), "negative junction counts"),
+        ("x", ((x < 0) | (x >= n_x)).any(), f"roads outside 0..{n_x - 1}"),
+        ("q", ((q < 0) | (q >= n_q)).any(), f"DFA states outside 0..{n_q - 1}"),
+    ]
+    for name, bad, what in problems:
+        if bad:
+            raise InputError(where, name, f"decision table has {what}", RESYNTH)
+    if ((action < 0) | (action >= slots[x])).any():
+        row = int(np.flatnonzero((action < 0) | (action >= slots[x]))[0])
+        raise InputError(where, "action", f"row {row}: action {int(action[row])} is not one of the "
+                         f"{int(slots[x[row]])} moves from road {town.states[x[row]]}", RESYNTH)
+    if (not np.isfinite(beliefs).all() or (beliefs < 0).any() or (beliefs > 1).any()
+            or (np.abs(beliefs.sum(axis=1) - 1) > 1e-6).any()):
+        raise InputError(where, "beliefs", "beliefs are not probability vectors", RESYNTH)
+    return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action)
 
 
 def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -> BeliefTablePolicy:
@@ -105,20 +183,7 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
                              f"{value[:12]}...)",
                              f"re-run trustroute synth for this {what}, or pass the {what} it was "
                              f"made for ({option})")
-    arrays = path.parent / str(document.get("arrays", ""))
-    if not arrays.is_file():
-        raise InputError(where, "arrays", f"array file {arrays} is missing",
-                         "keep the .npz next to the policy file, or re-run trustroute synth")
-    if _sha256(arrays) != document.get("arrays_sha256"):
-        raise InputError(str(arrays), "", "array file does not match its policy file (hash differs)",
-                         "re-run trustroute synth to write both files again")
-    with np.load(arrays) as data:
-        table = PolicyTable(t=data["t"], x=data["x"], q=data["q"], beliefs=data["beliefs"],
-                            action=data["action"])
-    n_x = len(town.states)
-    if table.rows and (table.x.max() >= n_x or table.beliefs.shape[1] != driver.n_trust):
-        raise InputError(str(arrays), "", "decision table does not fit this town and driver model",
-                         "re-run trustroute synth")
+    table = read_policy_table(path.parent / document["arrays"], document, town, driver, spec)
     return BeliefTablePolicy(table, town, spec, name=str(document.get("name", "aware")),
                              lower=document.get("lower"), upper=document.get("upper"),
                              horizon=document.get("horizon"))

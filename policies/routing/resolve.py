@@ -9,7 +9,11 @@ driver model and spec and these settings; a cache entry is a policy file like an
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import re
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from trustroute.networks.errors import InputError
@@ -17,7 +21,7 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, build_pomdp
-from trustroute.policies.routing.files import load_policy, save_policy
+from trustroute.policies.routing.files import array_path, load_policy, save_policy
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.search import synthesize
@@ -34,17 +38,53 @@ def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str
     DEFAULT_POLICY_CACHE)."""
     key = hashlib.sha256("|".join((town.content_hash, driver.content_hash, spec.content_hash,
                                    f"H={horizon}", f"tau={AWARE_TAU}", belief_rule)).encode())
-    return Path(cache_dir or DEFAULT_POLICY_CACHE) / f"aware-{spec.name}-{key.hexdigest()[:16]}.json"
+    # The spec name is only a readable label here (the key identifies the entry): keep it to
+    # file-name characters so no name can point outside the cache.
+    label = re.sub(r"[^A-Za-z0-9_.+-]", "_", spec.name)[:48].lstrip(".") or "spec"
+    return Path(cache_dir or DEFAULT_POLICY_CACHE) / f"aware-{label}-{key.hexdigest()[:16]}.json"
+
+
+def _cached_policy(path: Path, town: Town, driver: DriverModel, spec: Spec,
+                   notice: Callable[[str], object]) -> RoutingPolicy | None:
+    """The cache entry at `path` if it verifies; a damaged entry is discarded (with a notice)."""
+    if not path.exists() and not array_path(path).exists():
+        return None
+    try:
+        return load_policy(path, town, driver, spec)
+    except InputError as exc:
+        notice(f"notice: discarding the damaged policy cache entry {path.name} ({exc.problem}); "
+               "synthesizing it again")
+        for stale in (path, array_path(path)):
+            with contextlib.suppress(FileNotFoundError):
+                stale.unlink()
+        return None
+
+
+def _stderr(message: str) -> None:
+    print(message, file=sys.stderr)
 
 
 def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path | None,
-                 horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes") -> RoutingPolicy:
+                 horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes",
+                 notice: Callable[[str], object] = _stderr) -> RoutingPolicy:
+    """The cached "aware" policy, synthesized when missing or damaged. Entries are written atomically
+    (policies.routing.files), filled under a lock (two processes never synthesize one entry at once,
+    and the second reads what the first wrote) and verified on every read."""
+    from trustroute.output_files import file_lock
+
     path = aware_cache_path(town, driver, spec, cache_dir, horizon, belief_rule)
     if path.is_file():
-        return load_policy(path, town, driver, spec)
-    result = synthesize(build_pomdp(town, driver), spec, tau=AWARE_TAU, time_limit=AWARE_TIME_LIMIT,
-                        horizon=horizon, belief_rule=belief_rule)
-    save_policy(result, path, town, driver, spec)
+        policy = _cached_policy(path, town, driver, spec, notice)
+        if policy is not None:
+            return policy
+    with file_lock(path.with_name(path.name + ".lock"), "policy cache entry", wait=True,
+                   fix="pass a writable --cache-dir"):
+        policy = _cached_policy(path, town, driver, spec, notice)  # filled while we waited?
+        if policy is not None:
+            return policy
+        result = synthesize(build_pomdp(town, driver), spec, tau=AWARE_TAU, time_limit=AWARE_TIME_LIMIT,
+                            horizon=horizon, belief_rule=belief_rule)
+        save_policy(result, path, town, driver, spec)
     return result.policy
 
 

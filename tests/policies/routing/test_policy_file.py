@@ -71,7 +71,7 @@ def test_damaged_files_are_input_errors(town, driver, phi1_result, tmp_path):
     with pytest.raises(InputError, match="missing"):
         load_policy(path, town, driver, spec)
     (tmp_path / "bad.json").write_text("{not json")
-    with pytest.raises(InputError, match="not a JSON policy file"):
+    with pytest.raises(InputError, match="not valid JSON"):
         load_policy(tmp_path / "bad.json", town, driver, spec)
     (tmp_path / "other.json").write_text('{"format": "something else"}')
     with pytest.raises(InputError, match="not a trustroute policy file"):
