@@ -199,11 +199,14 @@ def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[st
     return done, damaged
 
 
-def write_failure(study_dir: Path, task: EpisodeTask, error: str, traceback_text: str, attempts: int) -> None:
+def write_failure(study_dir: Path, task: EpisodeTask, error: str, traceback_text: str, attempts: int,
+                  errors: list[str] | None = None) -> None:
+    """Record why an episode failed: the last error and its traceback, and every attempt's reason."""
     record = {
         "episode_id": task.episode_id,
         "attempts": attempts,
         "error": error,
+        "errors": list(errors or [error]),
         "traceback": traceback_text,
         "task": asdict(task),
     }

@@ -6,12 +6,20 @@ in-process (`workers=1`), a local process pool (`workers=N`), and Dask distribut
 (`scheduler="ADDRESS"`, or `scheduler="local"` for a local Dask cluster). Each worker process
 builds the study's context (town, specs, policies, participants' driver models) once, from the
 config alone, so nothing large travels with the tasks and the result cannot depend on the
-backend. A failed episode is retried once; if it fails again its error is recorded in
+backend. A failed episode (an error, or its worker process dying) is retried up to
+`attempts - 1` times (default: once); if it still fails, every attempt's reason is recorded in
 failures/ and the study goes on. A rerun resumes: valid parts are skipped, damaged parts re-run.
+
+Nothing is written before every input has validated (town, driver model, specs, policies,
+population: `study_context`) and the output directory is known to be writable; a study directory
+is locked (`study.lock`, fcntl.flock) for the whole run, so a second run on it is refused with
+the holder's pid, host and start time. The local pool is harness/study/workers.py (workers that
+die with the parent, a worker death failing only its own episode).
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import time
@@ -31,6 +39,9 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 STUDY_FILE = "study.json"
+LOCK_FILE = "study.lock"
+DEFAULT_ATTEMPTS = 2
+MAX_ATTEMPTS = 10
 
 
 @dataclass(frozen=True)
@@ -104,11 +115,13 @@ def study_context(config: StudyConfig) -> StudyContext:
     """The study's shared context, built once per process (cached by the config)."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.logic.spec import check_trust_levels, load_spec
 
     town = load_town(config.town)
     nominal = load_driver_model(config.driver_model)
     specs = {Path(path).stem: load_spec(path, town) for path in config.specs}
+    for spec in specs.values():
+        check_trust_levels(spec, nominal.n_trust, nominal.source_path)
     setups = {
         name: EpisodeSetup(
             town=town,
@@ -193,16 +206,12 @@ def _serial(function: Callable, tasks: list) -> Iterator:
 
 
 def _process_pool(function: Callable, tasks: list, workers: int) -> Iterator:
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from trustroute.harness.study.workers import process_pool
 
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(function, task): task for task in tasks}
-        for future in as_completed(futures):
-            try:
-                yield future.result()
-            except Exception as exc:  # a worker process died (killed, out of memory)
-                task = futures[future]
-                yield EpisodeOutcome(task.episode_id, False, f"worker died: {type(exc).__name__}: {exc}")
+    def died(task: EpisodeTask, reason: str) -> EpisodeOutcome:
+        return EpisodeOutcome(task.episode_id, False, f"worker died: {reason}")
+
+    return process_pool(function, tasks, workers, died)
 
 
 def _dask(function: Callable, tasks: list, scheduler: str, workers: int, processes: bool) -> Iterator:
@@ -217,7 +226,7 @@ def _dask(function: Callable, tasks: list, scheduler: str, workers: int, process
     else:
         try:
             client = Client(scheduler, timeout=10)
-        except OSError as exc:
+        except (OSError, ValueError, TypeError) as exc:
             raise InputError(
                 "--scheduler",
                 scheduler,
@@ -260,13 +269,15 @@ def backend_name(workers: int, scheduler: str | None) -> str:
 
 
 def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:
-    """Create the study directory, or check that it holds this study (resume) and not another."""
-    study_dir.mkdir(parents=True, exist_ok=True)
+    """Check that the study directory holds this study (resume) and not another; mark it as this
+    study's (the directory exists: `study_lock` made it)."""
+    from trustroute.output_files import atomic_write_text
+
     marker = study_dir / STUDY_FILE
     if marker.exists():
         try:
             recorded = json.loads(marker.read_text()).get("config_hash")
-        except (OSError, json.JSONDecodeError):
+        except (OSError, ValueError, AttributeError):
             recorded = None
         if recorded is not None and recorded != config_hash:
             raise InputError(
@@ -278,7 +289,45 @@ def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> N
         if recorded == config_hash:
             return
     config_dict = asdict(config)
-    marker.write_text(json.dumps({"config_hash": config_hash, "config": config_dict}, indent=1, default=str))
+    atomic_write_text(marker, json.dumps({"config_hash": config_hash, "config": config_dict}, indent=1,
+                                         default=str), "study marker", "pass a writable --out")
+
+
+@contextlib.contextmanager
+def study_lock(study_dir: Path) -> Iterator[None]:
+    """Create the study directory (checked writable first) and hold its lock, or InputError naming
+    the run that holds it."""
+    from trustroute.output_files import check_output_dir, file_lock
+
+    check_output_dir(study_dir, "--out", "study directory")
+    with file_lock(Path(study_dir) / LOCK_FILE, "study directory", wait=False,
+                   fix="wait for that run to finish (or stop it), or pass another --out"):
+        yield
+
+
+def validate_study(config: StudyConfig, scheduler: str | None = None,
+                   attempts: int = DEFAULT_ATTEMPTS) -> None:
+    """Every input of the study, checked before anything is written: the engine, the town, driver
+    model, specs, policies and population (building the context, synthesizing missing "aware"
+    policies into the policy cache), the retry bound and the scheduler address."""
+    if not 1 <= attempts <= MAX_ATTEMPTS:
+        raise InputError("--attempts", "", f"must be from 1 to {MAX_ATTEMPTS}, got {attempts}",
+                         "pass e.g. --attempts 2")
+    if scheduler is not None and scheduler != "local":
+        check_scheduler_address(scheduler)
+    engine_function(config.engine)  # fail fast, once, if the engine is missing
+    study_context(config)  # every input file, and the policies, once, before any worker
+    plan_episodes(config)
+
+
+def check_scheduler_address(scheduler: str) -> None:
+    """A Dask scheduler address must look like tcp://HOST:PORT (or HOST:PORT) before we dial it."""
+    import re
+
+    match = re.fullmatch(r"(?:(tcp|tls|ws|wss|inproc|ucx)://)?([A-Za-z0-9_.\-\[\]:]+):(\d{1,5})", scheduler)
+    if match is None or not 0 < int(match.group(3)) < 65536:
+        raise InputError("--scheduler", scheduler[:80], "not a Dask scheduler address",
+                         "pass tcp://HOST:PORT (from `dask scheduler`), or 'local'")
 
 
 def run_study(
@@ -289,25 +338,43 @@ def run_study(
     progress: bool = True,
     on_outcome: Callable[[EpisodeOutcome], None] | None = None,
     dask_processes: bool = True,
+    attempts: int = DEFAULT_ATTEMPTS,
 ) -> StudyRun:
     """Run (or resume) every episode of `config` in `study_dir`; return what happened.
 
     workers: local processes (1: in this process); scheduler: a Dask scheduler address, or
     "local" for a local Dask cluster of `workers` workers (threads in this process when
-    dask_processes is False, which tests use). on_outcome: called after every episode."""
-    started = time.perf_counter()
+    dask_processes is False, which tests use). on_outcome: called after every episode.
+    attempts: runs of a failing episode at most (the first and its retries)."""
+    validate_study(config, scheduler, attempts)
     study_dir = Path(study_dir).resolve()
+    with study_lock(study_dir):
+        return _run_locked(config, study_dir, workers, scheduler, progress, on_outcome, dask_processes,
+                           attempts)
+
+
+def _run_locked(
+    config: StudyConfig,
+    study_dir: Path,
+    workers: int,
+    scheduler: str | None,
+    progress: bool,
+    on_outcome: Callable[[EpisodeOutcome], None] | None,
+    dask_processes: bool,
+    attempts: int,
+) -> StudyRun:
+    from trustroute.harness.study.workers import sigterm_raises
+
+    started = time.perf_counter()
     config_hash = config.content_hash
     check_study_dir(study_dir, config, config_hash)
-    engine_function(config.engine)  # fail fast, once, if the engine is missing
-    context = study_context(config)  # resolves (and synthesizes) policies once, before any worker
-    del context
     tasks = plan_episodes(config)
     done, damaged = finished_episodes(study_dir, tasks)
     todo = [t for t in tasks if t.episode_id not in done]
     function = functools.partial(run_task, config, str(study_dir))
-    ran = 0
+    ran = retried = 0
     failed: dict[str, tuple[EpisodeTask, EpisodeOutcome]] = {}
+    errors: dict[str, list[str]] = {}
     by_id = {t.episode_id: t for t in todo}
     bar = _progress_bar(len(tasks), len(done), progress)
 
@@ -320,16 +387,22 @@ def run_study(
                 bar.update(1)
             else:
                 failed[outcome.episode_id] = (by_id[outcome.episode_id], outcome)
+                errors.setdefault(outcome.episode_id, []).append(outcome.error)
             if on_outcome is not None:
                 on_outcome(outcome)
 
-    consume(_outcomes(function, todo, workers, scheduler, dask_processes))
-    retry = [task for task, _ in failed.values()]
-    if retry:  # once, after everything else: a transient failure gets a second chance
-        consume(_outcomes(function, retry, workers, scheduler, dask_processes))
+    with sigterm_raises():
+        consume(_outcomes(function, todo, workers, scheduler, dask_processes))
+        for _ in range(attempts - 1):  # after everything else: a transient failure gets another chance
+            retry = [task for task, _ in failed.values()]
+            if not retry:
+                break
+            retried += len(retry)
+            consume(_outcomes(function, retry, workers, scheduler, dask_processes))
     bar.close()
     for task, outcome in failed.values():
-        write_failure(study_dir, task, outcome.error, outcome.traceback, attempts=2)
+        history = errors[task.episode_id]
+        write_failure(study_dir, task, outcome.error, outcome.traceback, len(history), history)
     return StudyRun(
         study_dir=study_dir,
         planned=len(tasks),
@@ -337,7 +410,7 @@ def run_study(
         damaged=damaged,
         ran=ran,
         failed=sorted(failed),
-        retried=len(retry),
+        retried=retried,
         seconds=time.perf_counter() - started,
         backend=backend_name(workers, scheduler),
     )
@@ -364,20 +437,22 @@ def run_and_consolidate(
     progress: bool = True,
     echo: Callable[[str], object] = print,
     dask_processes: bool = True,
+    attempts: int = DEFAULT_ATTEMPTS,
 ) -> tuple[StudyRun, dict]:
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
-    exact values and synthesized bounds of its policies). `echo` gets one summary line."""
+    exact values and synthesized bounds of its policies). `echo` gets one summary line. The study
+    directory stays locked until the manifest is written."""
+    validate_study(config, scheduler, attempts)
+    study_dir = Path(study_dir).resolve()
+    with study_lock(study_dir):
+        run = _run_locked(config, study_dir, workers, scheduler, progress, None, dask_processes, attempts)
+        return run, _consolidate_run(config, run, echo)
+
+
+def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], object]) -> dict:
     from trustroute.harness.study.expected import expected_values
     from trustroute.harness.study.manifest import consolidate
 
-    run = run_study(
-        config,
-        study_dir,
-        workers=workers,
-        scheduler=scheduler,
-        progress=progress,
-        dask_processes=dask_processes,
-    )
     echo(
         f"{run.planned} episodes planned: {run.skipped} already done, {run.ran - run.retried} run"
         f"{f', {run.retried} retried' if run.retried else ''}, {len(run.failed)} failed"
@@ -385,7 +460,7 @@ def run_and_consolidate(
         f"({run.backend}, {run.seconds:.1f} s)"
     )
     expected = expected_values(config)
-    manifest = consolidate(
+    return consolidate(
         run.study_dir,
         config,
         plan_episodes(config),
@@ -399,4 +474,3 @@ def run_and_consolidate(
             "retried": run.retried,
         },
     )
-    return run, manifest
