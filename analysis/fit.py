@@ -311,9 +311,11 @@ class FitResult:
         return driver_model_from_dict(self.model_dict(), "fitted model")
 
     def write(self, path: Path) -> Path:
+        from trustroute.output_files import atomic_write_text
+
         self.model()  # validates
-        Path(path).write_text(json.dumps(self.model_dict(), indent=1))
-        return Path(path)
+        return atomic_write_text(Path(path), json.dumps(self.model_dict(), indent=1), "driver model file",
+                                 "pass a writable path with --out")
 
     def sparse_rows(self) -> list[str]:
         names = []

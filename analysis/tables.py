@@ -15,7 +15,7 @@ roads.parquet, manifest.json) and returns a `StudyAnalysis`:
 
 from __future__ import annotations
 
-import json
+import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +33,7 @@ PAPER = {
     "mean_trust": {"aware": 4.6018, "free": 4.3933},
     "pr_max": {"phi1": 0.8357, "phi2": 0.7288},
 }
+MAX_LOG_BYTES = 8 * 1024**3  # a consolidated log is read whole; larger means it is not ours
 ANALYSIS_SEED = 20240513  # bootstrap resampling: fixed, so an analysis is reproducible
 
 
@@ -74,10 +75,17 @@ def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
             "not a finished study directory (no manifest)",
             "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)",
         )
+    from trustroute.input_files import read_input_bytes, read_json
+
     try:
-        manifest = json.loads(manifest_path.read_text())
-        episodes = pd.read_parquet(study_dir / "episodes.parquet")
-        roads = pd.read_parquet(study_dir / "roads.parquet")
+        manifest = read_json(manifest_path, "study manifest")
+        # Through the guarded reader: a FIFO or a device in place of a log file must not block.
+        episodes = pd.read_parquet(io.BytesIO(read_input_bytes(study_dir / "episodes.parquet", "episodes log",
+                                                               MAX_LOG_BYTES)))
+        roads = pd.read_parquet(io.BytesIO(read_input_bytes(study_dir / "roads.parquet", "roads log",
+                                                            MAX_LOG_BYTES)))
+    except InputError:
+        raise
     except (OSError, ValueError) as exc:
         raise InputError(
             str(study_dir),

@@ -60,20 +60,36 @@ def cli() -> None:
 
 def main(argv: list[str] | None = None) -> None:
     try:
-        cli.main(args=argv, prog_name="trustroute", standalone_mode=False)
+        code = cli.main(args=argv, prog_name="trustroute", standalone_mode=False)
     except InputError as exc:
         click.echo(f"error: {exc.one_line()}", err=True)
         sys.exit(2)
     except click.exceptions.Abort:
         click.echo("aborted", err=True)
         sys.exit(130)
+    except click.UsageError as exc:
+        # One line (click would print the usage, a hint and a blank line first).
+        command = exc.ctx.command_path if exc.ctx is not None else "trustroute"
+        message = " ".join(exc.format_message().split())
+        click.echo(f"error: {message} (see {command} --help)", err=True)
+        sys.exit(2)
     except click.ClickException as exc:
-        exc.show()
+        click.echo(f"error: {' '.join(exc.format_message().split())}", err=True)
         sys.exit(2 if exc.exit_code == 2 else exc.exit_code)
     except KeyboardInterrupt:
         click.echo("interrupted", err=True)
         sys.exit(130)
-    sys.exit(0)
+    except OSError as exc:
+        # The last net under every command: an I/O failure no command foresaw (a disk that filled
+        # up, a folder that became read-only) is still one line, not a traceback.
+        from trustroute.output_files import os_error_text
+
+        where = exc.filename if exc.filename is not None else "trustroute"
+        error = InputError(str(where), "", os_error_text(exc), "free disk space or fix the permissions, "
+                           "then rerun")
+        click.echo(f"error: {error.one_line()}", err=True)
+        sys.exit(2)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import click
 
-from trustroute.networks.errors import InputError
+from trustroute.harness.commands.options import WORKERS, bounded_int
 
 DEFAULT_OUT = Path("out") / "demo"
 DEMO_STUDY = {
@@ -60,16 +60,15 @@ def record_episode(config, study_dir: Path, episode_id: str) -> Path:
     show_default=True,
     help="Study directory (a rerun resumes).",
 )
-@click.option("--workers", type=int, default=None, help="Local worker processes (default: CPU count).")
+@click.option("--workers", type=WORKERS, default=None, help="Local worker processes (default: CPU count).")
 @click.option("--engine", type=click.Choice(["sumo", "model"]), default="sumo", show_default=True)
-@click.option("--participants", type=int, default=21, show_default=True)
-def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
+@click.option("--participants", type=bounded_int(1, 100_000), default=21, show_default=True)
+@click.pass_context
+def demo(ctx: click.Context, out: str, workers: int | None, engine: str, participants: int) -> None:
     """Run the paper-size study (21 participants) on the defaults and show where the results are."""
     from trustroute.harness.study.config import study_config_from_dict
     from trustroute.harness.study.runner import run_and_consolidate
 
-    if participants < 1:
-        raise InputError("--participants", "", f"must be >= 1, got {participants}", "pass e.g. 21")
     config = study_config_from_dict(
         {"study": {**DEMO_STUDY, "participants": participants, "engine": engine}},
         "trustroute demo",
@@ -81,6 +80,10 @@ def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
         f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}"
     )
     run, _ = run_and_consolidate(config, study_dir, workers, None, echo=click.echo)
+    if run.failed:
+        click.echo(f"error: {len(run.failed)} episodes failed (reasons in {run.study_dir / 'failures'}; "
+                   f"rerun the demo to retry them): {', '.join(run.failed[:10])}", err=True)
+        ctx.exit(1)
     from trustroute.analysis.report import write_report
 
     paths = write_report(run.study_dir)
@@ -98,8 +101,6 @@ def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
             click.echo(f"episode recording: {rrd}  (open with: {_rerun_command()} {rrd})")
         except Exception as exc:  # the study is done; a failed recording must not hide it
             click.echo(f"episode recording failed: {type(exc).__name__}: {exc}")
-    if run.failed:
-        click.echo(f"{len(run.failed)} episodes failed: see {run.study_dir / 'failures'}")
 
 
 def _rerun_command() -> str:

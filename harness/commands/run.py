@@ -7,22 +7,26 @@ from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.options import SEED
 from trustroute.networks.errors import InputError
 
 
 def _write_logs(out_dir: Path, record) -> list[Path]:
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(str(out_dir), "", f"cannot create the output directory ({exc.strerror})",
-                         "pass a writable directory with --out") from None
+    """Each log file written atomically (a full disk leaves the old file or none, never half)."""
+    import io
+
+    from trustroute.output_files import atomic_write_bytes, atomic_write_text
+
     written = []
     for name in ("roads", "kinematics", "incidents"):
         path = out_dir / f"{name}.parquet"
-        getattr(record, name).to_parquet(path, index=False)
+        buffer = io.BytesIO()
+        getattr(record, name).to_parquet(buffer, index=False)
+        atomic_write_bytes(path, buffer.getvalue(), f"{name} log", "pass a writable directory with --out")
         written.append(path)
     summary = out_dir / "summary.json"
-    summary.write_text(json.dumps(record.summary, indent=1) + "\n")
+    atomic_write_text(summary, json.dumps(record.summary, indent=1) + "\n", "episode summary",
+                      "pass a writable directory with --out")
     written.append(summary)
     return written
 
@@ -32,7 +36,7 @@ def _write_logs(out_dir: Path, record) -> list[Path]:
               help="Spec file (e.g. specs/phi1.toml).")
 @click.option("--policy", "policy_name", default="free", show_default=True,
               help="'aware', 'free' or a policy file.")
-@click.option("--seed", type=int, default=0, show_default=True, help="SUMO seed and driver seed.")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="SUMO seed and driver seed.")
 @click.option("--rrd", "rrd_path", type=click.Path(), default=None, help="Write a Rerun recording here.")
 @click.option("--out", "out_dir", type=click.Path(), default=None,
               help="Write roads/kinematics/incidents Parquet and summary.json here.")
@@ -53,16 +57,27 @@ def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_d
     from trustroute.harness.episode import run_episode
     from trustroute.harness.episode_tracker import EpisodeSetup
     from trustroute.networks.town import load_town
+    from trustroute.output_files import check_output_dir, check_output_file
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.participants.synthetic_driver import SyntheticDriver
-    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.logic.spec import check_trust_levels, load_spec
     from trustroute.policies.routing.resolve import resolve_policy
 
-    if seed < 0:
-        raise InputError("--seed", "", f"must be >= 0, got {seed}", "pass a non-negative integer")
+    if out_dir is not None:
+        check_output_dir(out_dir, "--out", "log directory")
+    if rrd_path is not None:
+        check_output_file(rrd_path, "--rrd", "Rerun recording")
+    if cache_dir is not None:
+        check_output_dir(cache_dir, "--cache-dir", "policy cache")
+    if net_path is not None:
+        from trustroute.input_files import read_input_bytes
+
+        read_input_bytes(net_path, "SUMO net", max_bytes=1 << 30, fix="pass a .net.xml written by "
+                         "`trustroute net build`")
     town = load_town(town_path)
     driver_model = load_driver_model(driver_path)
     spec = load_spec(spec_path, town)
+    check_trust_levels(spec, driver_model.n_trust, driver_model.source_path)
     if initial_trust is not None and initial_trust not in driver_model.trust_levels:
         raise InputError("--initial-trust", "", f"{initial_trust} is not a trust level of the model",
                          f"pass one of {list(driver_model.trust_levels)}")

@@ -18,14 +18,21 @@ from trustroute.networks.errors import InputError
 def spec_report(spec_path: str, town_path: str | None) -> tuple[dict, str]:
     """(the JSON-ready summary of a spec check, the DFA as dot text)."""
     from trustroute.networks.town import load_town
-    from trustroute.policies.logic.dfa import dfa_from_formula
+    from trustroute.policies.logic.dfa import DFATooLarge, dfa_from_formula
     from trustroute.policies.logic.lint import lint
     from trustroute.policies.logic.spec import load_spec
 
     town = load_town(town_path)
     spec = load_spec(spec_path, town)
     started = time.perf_counter()
-    dfa = dfa_from_formula(spec.formula, spec.formula_atoms)
+    try:
+        dfa = dfa_from_formula(spec.formula, spec.formula_atoms)
+    except DFATooLarge as exc:
+        raise InputError(spec.source_path, "formula", f"the formula is too large to translate ({exc})",
+                         "split the task or simplify the formula") from None
+    except RecursionError:
+        raise InputError(spec.source_path, "formula", "the formula is nested too deeply to translate",
+                         "simplify the formula") from None
     seconds = time.perf_counter() - started
     warnings = lint(spec, town, dfa)
     summary = {
@@ -59,13 +66,13 @@ def spec() -> None:
 @click.option("--dot", "dot_path", type=click.Path(), default=None, help="Write the DFA as Graphviz dot.")
 def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | None) -> None:
     """Parse SPEC, print its DFA size and the linter's warnings."""
+    from trustroute.output_files import atomic_write_text, check_output_file
+
+    if dot_path is not None:
+        check_output_file(dot_path, "--dot", "dot file")
     summary, dot = spec_report(spec_path, town_path)
     if dot_path is not None:
-        try:
-            Path(dot_path).write_text(dot)
-        except OSError as exc:
-            raise InputError(dot_path, "", f"cannot write the dot file ({exc.strerror})",
-                             "pass a writable path to --dot") from None
+        atomic_write_text(Path(dot_path), dot, "dot file", "pass a writable path to --dot")
     if as_json:
         click.echo(json.dumps(summary))
         return

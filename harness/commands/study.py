@@ -1,7 +1,8 @@
 """`trustroute study`, `trustroute analyze`, `trustroute fit`: run, analyse and learn from studies.
 
 study    run (or resume) a simulated within-subject study from a TOML config, consolidate the
-         dataset, then analyse it (tables, plots, report) unless --no-report
+         dataset, then analyse it (tables, plots, report) unless --no-report; when episodes failed
+         it names them and exits 1, and writes the report only with --report-anyway
 analyze  the per spec and condition table of a study directory (--json: one JSON object)
 fit      estimate a driver model (trust dynamics, takeover model) from a study's logs
 """
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import click
 
-from trustroute.networks.errors import InputError
+from trustroute.harness.commands.options import WORKERS, bounded_int
 
 DEFAULT_STUDIES_DIR = Path("studies")
 
@@ -36,7 +37,7 @@ def study_directory(config, out: str | None) -> Path:
     default=None,
     help="Study directory (default: the config's output, else studies/<name>).",
 )
-@click.option("--workers", type=int, default=None, help="Local worker processes (default: CPU count).")
+@click.option("--workers", type=WORKERS, default=None, help="Local worker processes (default: CPU count).")
 @click.option(
     "--scheduler",
     default=None,
@@ -46,37 +47,48 @@ def study_directory(config, out: str | None) -> Path:
     "--engine", type=click.Choice(["sumo", "model"]), default=None, help="Override the config's engine."
 )
 @click.option("--no-report", is_flag=True, help="Do not analyse or write the report.")
+@click.option("--report-anyway", is_flag=True,
+              help="Write the report even when some episodes failed (default: only a complete study).")
+@click.option("--attempts", type=bounded_int(1, 10), default=2, show_default=True,
+              help="Runs of a failing episode at most (the first and its retries).")
+@click.pass_context
 def study(
+    ctx: click.Context,
     config_path: str,
     out: str | None,
     workers: int | None,
     scheduler: str | None,
     engine: str | None,
     no_report: bool,
+    report_anyway: bool,
+    attempts: int,
 ) -> None:
-    """Run (or resume) the simulated within-subject study described by CONFIG."""
+    """Run (or resume) the simulated within-subject study described by CONFIG.
+
+    Exit code 1 when episodes failed (they are named; a rerun retries them), 2 for bad input."""
     from trustroute.harness.study.config import load_study_config
 
     config = load_study_config(config_path).with_overrides(engine=engine)
-    if workers is not None and workers < 1:
-        raise InputError("--workers", "", f"must be >= 1, got {workers}", "pass e.g. --workers 2")
     workers = workers if workers is not None else (os.cpu_count() or 1)
     study_dir = study_directory(config, out)
     from trustroute.harness.study.runner import run_and_consolidate
 
-    run, _ = run_and_consolidate(config, study_dir, workers, scheduler, echo=click.echo)
+    run, _ = run_and_consolidate(config, study_dir, workers, scheduler, echo=click.echo, attempts=attempts)
     click.echo(f"dataset: {run.study_dir / 'episodes.parquet'}, {run.study_dir / 'roads.parquet'}")
     if run.failed:
         click.echo(
-            f"failed episodes (see {run.study_dir / 'failures'}): {', '.join(run.failed[:5])}"
-            f"{' ...' if len(run.failed) > 5 else ''}"
+            f"error: {len(run.failed)} episodes failed (reasons in {run.study_dir / 'failures'}; a rerun "
+            f"retries them): {', '.join(run.failed[:10])}{' ...' if len(run.failed) > 10 else ''}",
+            err=True,
         )
-    if not no_report:
+    if not no_report and (not run.failed or report_anyway):
         from trustroute.analysis.report import write_report
 
         paths = write_report(run.study_dir)
         click.echo(paths.table_text)
         click.echo(f"report: {paths.markdown} and {paths.html}")
+    if run.failed:
+        ctx.exit(1)
 
 
 @click.command("analyze")
@@ -131,12 +143,15 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
     help="counts: reports are exact trust; em: reports are noisy (EM over hidden trust); "
     "auto: counts when the study's report accuracy is 1 and trust is reported every road.",
 )
-@click.option("--iterations", type=int, default=200, show_default=True, help="EM iterations at most.")
+@click.option("--iterations", type=bounded_int(1, 100_000), default=200, show_default=True,
+              help="EM iterations at most.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def fit(study_dir: str, out: str, method: str, iterations: int, as_json: bool) -> None:
     """Estimate trust dynamics and the takeover model from a study's logs; write a driver model."""
     from trustroute.analysis.fit import fit_study
+    from trustroute.output_files import check_output_file
 
+    check_output_file(out, "--out", "driver model file")
     result = fit_study(Path(study_dir), method=method, iterations=iterations)
     path = result.write(Path(out))
     payload = {"driver_model": str(path), **result.summary()}

@@ -14,18 +14,20 @@ from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
 from trustroute.networks.errors import InputError
 
 
 def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None):
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.logic.spec import check_trust_levels, load_spec
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     town = load_town(town_path)
     driver = load_driver_model(driver_path)
     spec = load_spec(spec_path, town)
+    check_trust_levels(spec, driver.n_trust, driver.source_path)
     return town, driver, spec, build_pomdp(town, driver)
 
 
@@ -65,9 +67,11 @@ rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]
 @click.argument("spec_path", metavar="SPEC")
 @town_option
 @driver_option
-@click.option("--tau", type=float, default=1e-3, show_default=True, help="Target gap upper - lower.")
-@click.option("--horizon", type=int, default=None, help="At most H junctions (default: unbounded).")
-@click.option("--time-limit", type=float, default=60.0, show_default=True, help="Seconds.")
+@click.option("--tau", type=FiniteFloat(0.0, 1.0, open_minimum=True), default=1e-3, show_default=True,
+              help="Target gap upper - lower.")
+@click.option("--horizon", type=HORIZON, default=None, help="At most H junctions (default: unbounded).")
+@click.option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), default=60.0,
+              show_default=True, help="Seconds.")
 @rule_option
 @click.option("--out", "out_path", type=click.Path(), default="policy.json", show_default=True,
               help="Policy file to write.")
@@ -81,12 +85,13 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     if horizon is not None and horizon < 1:
         raise InputError("--horizon", "", f"horizon must be at least 1, got {horizon}",
                          "pass a positive number of junctions or omit --horizon")
+    from trustroute.output_files import check_output_file
+
+    check_output_file(out_path, "--out", "policy file")
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from trustroute.policies.routing.files import save_policy
     from trustroute.policies.synthesis.search import synthesize
 
-    if time_limit <= 0:
-        raise InputError("--time-limit", "", f"must be positive, got {time_limit}", "pass e.g. 60")
     result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
                         belief_rule=belief_rule)
     path = str(save_policy(result, out_path, town, driver, spec))
@@ -131,10 +136,10 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
 @click.argument("policy_name", metavar="POLICY")
 @town_option
 @driver_option
-@click.option("--fallback-after", type=int, default=20, show_default=True,
+@click.option("--fallback-after", type=JUNCTIONS, default=20, show_default=True,
               help="Switch to the shortest completion after this many junctions.")
 @click.option("--no-fallback", is_flag=True, help="Evaluate the policy without the fallback rule.")
-@click.option("--max-junctions", type=int, default=None, help="Episode cap (default 60).")
+@click.option("--max-junctions", type=JUNCTIONS, default=None, help="Episode cap (default 60).")
 @rule_option
 @click.option("--cache-dir", type=click.Path(), default=None,
               help="Where 'aware' policies are cached (default ~/.cache/trustroute/policies).")
@@ -155,6 +160,10 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     cap = EPISODE_JUNCTION_CAP if max_junctions is None else max_junctions
     if cap < 0:
         raise InputError("--max-junctions", "", f"must be >= 0, got {cap}", "pass e.g. 60")
+    if cache_dir is not None:
+        from trustroute.output_files import check_output_dir
+
+        check_output_dir(cache_dir, "--cache-dir", "policy cache")
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from trustroute.policies.routing.resolve import resolve_policy
 
