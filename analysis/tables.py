@@ -15,7 +15,6 @@ roads.parquet, manifest.json) and returns a `StudyAnalysis`:
 
 from __future__ import annotations
 
-import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.dataset import read_episodes, read_manifest, read_roads
 from trustroute.analysis.satisfaction import BELIEF_SOURCES, episode_satisfaction
 from trustroute.analysis.statistics import bootstrap_ci, mcnemar_exact, wilcoxon_paired
 from trustroute.networks.errors import InputError
@@ -33,7 +33,6 @@ PAPER = {
     "mean_trust": {"aware": 4.6018, "free": 4.3933},
     "pr_max": {"phi1": 0.8357, "phi2": 0.7288},
 }
-MAX_LOG_BYTES = 8 * 1024**3  # a consolidated log is read whole; larger means it is not ours
 ANALYSIS_SEED = 20240513  # bootstrap resampling: fixed, so an analysis is reproducible
 
 
@@ -66,34 +65,10 @@ def _finite(value: float) -> float | None:
 
 
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    """(manifest, episodes, roads) of a consolidated study, read through trustroute.analysis.dataset."""
     study_dir = Path(study_dir)
-    manifest_path = study_dir / "manifest.json"
-    if not manifest_path.exists():
-        raise InputError(
-            str(study_dir),
-            "manifest.json",
-            "not a finished study directory (no manifest)",
-            "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)",
-        )
-    from trustroute.input_files import read_input_bytes, read_json
-
-    try:
-        manifest = read_json(manifest_path, "study manifest")
-        # Through the guarded reader: a FIFO or a device in place of a log file must not block.
-        episodes = pd.read_parquet(io.BytesIO(read_input_bytes(study_dir / "episodes.parquet", "episodes log",
-                                                               MAX_LOG_BYTES)))
-        roads = pd.read_parquet(io.BytesIO(read_input_bytes(study_dir / "roads.parquet", "roads log",
-                                                            MAX_LOG_BYTES)))
-    except InputError:
-        raise
-    except (OSError, ValueError) as exc:
-        raise InputError(
-            str(study_dir),
-            "dataset",
-            f"cannot read the consolidated dataset ({exc})",
-            "rerun `trustroute study` on this directory to rebuild it",
-        ) from None
-    return manifest, episodes, roads
+    manifest = read_manifest(study_dir)
+    return manifest, read_episodes(study_dir), read_roads(study_dir)
 
 
 def study_inputs(manifest: dict):

@@ -20,7 +20,8 @@ from pathlib import Path
 from trustroute.networks.errors import InputError
 
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town.json"
-INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", "none")
+NO_INCIDENT = "none"  # a road without an incident (and the start road of an episode)
+INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", NO_INCIDENT)
 TOWN_KEYS: tuple[str, ...] = ("junctions", "roads", "incidents", "source")
 # SUMO works in metres with float coordinates: a town beyond 1000 km, or a road shorter than a car,
 # passes the schema but breaks netconvert or makes every length degenerate.

@@ -13,18 +13,25 @@ from trustroute.networks.errors import InputError
 
 def _write_logs(out_dir: Path, record) -> list[Path]:
     """Each log file written atomically (a full disk leaves the old file or none, never half)."""
-    import io
-
-    from trustroute.output_files import atomic_write_bytes, atomic_write_text
+    from trustroute.analysis.dataset import (
+        INCIDENTS_FILE,
+        INCIDENTS_SCHEMA,
+        KINEMATICS_FILE,
+        KINEMATICS_SCHEMA,
+        ROADS_FILE,
+        ROADS_SCHEMA,
+        SUMMARY_FILE,
+        table_from_frame,
+        write_table,
+    )
+    from trustroute.output_files import atomic_write_text
 
     written = []
-    for name in ("roads", "kinematics", "incidents"):
-        path = out_dir / f"{name}.parquet"
-        buffer = io.BytesIO()
-        getattr(record, name).to_parquet(buffer, index=False)
-        atomic_write_bytes(path, buffer.getvalue(), f"{name} log", "pass a writable directory with --out")
-        written.append(path)
-    summary = out_dir / "summary.json"
+    for frame, file_name, schema in ((record.roads, ROADS_FILE, ROADS_SCHEMA),
+                                     (record.kinematics, KINEMATICS_FILE, KINEMATICS_SCHEMA),
+                                     (record.incidents, INCIDENTS_FILE, INCIDENTS_SCHEMA)):
+        written.append(write_table(table_from_frame(frame, schema), out_dir / file_name))
+    summary = out_dir / SUMMARY_FILE
     atomic_write_text(summary, json.dumps(record.summary, indent=1) + "\n", "episode summary",
                       "pass a writable directory with --out")
     written.append(summary)

@@ -74,10 +74,12 @@ def study(
     from trustroute.harness.study.runner import run_and_consolidate
 
     run, _ = run_and_consolidate(config, study_dir, workers, scheduler, echo=click.echo, attempts=attempts)
-    click.echo(f"dataset: {run.study_dir / 'episodes.parquet'}, {run.study_dir / 'roads.parquet'}")
+    from trustroute.analysis.dataset import EPISODES_FILE, FAILURES_DIR, ROADS_FILE
+
+    click.echo(f"dataset: {run.study_dir / EPISODES_FILE}, {run.study_dir / ROADS_FILE}")
     if run.failed:
         click.echo(
-            f"error: {len(run.failed)} episodes failed (reasons in {run.study_dir / 'failures'}; a rerun "
+            f"error: {len(run.failed)} episodes failed (reasons in {run.study_dir / FAILURES_DIR}; a rerun "
             f"retries them): {', '.join(run.failed[:10])}{' ...' if len(run.failed) > 10 else ''}",
             err=True,
         )

@@ -28,6 +28,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from trustroute.analysis.dataset import LOCK_FILE, STUDY_FILE
 from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.parts import finished_episodes, write_failure, write_part
@@ -38,8 +39,6 @@ from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.protocol import RoutingPolicy
 
-STUDY_FILE = "study.json"
-LOCK_FILE = "study.lock"
 DEFAULT_ATTEMPTS = 2
 MAX_ATTEMPTS = 10
 
