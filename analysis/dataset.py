@@ -36,30 +36,16 @@ REPORT_MARKDOWN_FILE = "report.md"
 REPORT_HTML_FILE = "report.html"
 PLOTS_DIR = "plots"
 # Per-episode files while a study runs (one file per episode id in each folder).
-PARTS_DIR = "parts"                  # <episode_id>.parquet: the roads table, the commit mark
-KINEMATICS_DIR = "kinematics"
-INCIDENTS_DIR = "incidents"
-FAILURES_DIR = "failures"            # <episode_id>.json: the last error of a failed episode
-DAMAGED_DIR = "damaged"              # parts found damaged on resume, moved aside
-PART_FOLDERS: tuple[str, ...] = (PARTS_DIR, KINEMATICS_DIR, INCIDENTS_DIR, FAILURES_DIR)
-
+PARTS_DIR = "parts"                  # <episode_id>.zip: every table of the episode + checksum
+FAILURES_DIR = "failures"            # <episode_id>.json: every attempt's error of a failed episode
+DAMAGED_DIR = "damaged"              # parts found damaged or foreign, moved aside
+PART_FOLDERS: tuple[str, ...] = (PARTS_DIR, FAILURES_DIR)
+PART_SUFFIX = ".zip"                 # the part format: harness/study/parts.py
 MAX_TABLE_BYTES = 8 * 1024**3  # a table is read whole; a larger file is not one of ours
-
-# Keys of a part's Parquet schema metadata (JSON values).
-PART_SUMMARY_KEY = b"trustroute.summary"
-PART_TASK_KEY = b"trustroute.task"
 
 
 def part_path(study_dir: Path, episode_id: str) -> Path:
-    return Path(study_dir) / PARTS_DIR / f"{episode_id}.parquet"
-
-
-def kinematics_part_path(study_dir: Path, episode_id: str) -> Path:
-    return Path(study_dir) / KINEMATICS_DIR / f"{episode_id}.parquet"
-
-
-def incidents_part_path(study_dir: Path, episode_id: str) -> Path:
-    return Path(study_dir) / INCIDENTS_DIR / f"{episode_id}.parquet"
+    return Path(study_dir) / PARTS_DIR / f"{episode_id}{PART_SUFFIX}"
 
 
 def failure_path(study_dir: Path, episode_id: str) -> Path:

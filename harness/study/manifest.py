@@ -10,6 +10,12 @@ From the per-episode parts, in plan order (participant, position), whatever orde
                         counts, failures, the exact values of the policies (policies.evaluate)
 Only `wall_seconds` differs between two runs of the same config; everything else is a function of
 the config (tests/harness/test_study_runner.py checks this across kills, resumes and backends).
+
+Consolidation verifies every part again (harness/study/parts.py: checksum, tables, episode ids)
+and refuses damaged ones (`DamagedParts`: they are moved aside; the runner re-runs them). It is
+atomic: the old manifest is removed first, each table is replaced atomically, and the manifest,
+written last, marks a consistent dataset; a consolidation cut short leaves no manifest, and the
+next run consolidates again.
 """
 
 from __future__ import annotations
@@ -30,22 +36,18 @@ from trustroute.analysis.dataset import (
     EPISODES_FILE,
     EPISODES_SCHEMA,
     INCIDENTS_FILE,
-    INCIDENTS_SCHEMA,
     KINEMATICS_FILE,
     KINEMATICS_SCHEMA,
     MANIFEST_FILE,
     MANIFEST_KEYS,
     ROADS_FILE,
     ROADS_SCHEMA,
-    incidents_part_path,
-    kinematics_part_path,
     part_path,
-    read_table,
     table_from_columns,
     write_table,
 )
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.parts import read_failures, read_part_table
+from trustroute.harness.study.parts import PartError, quarantine_part, read_failures, read_part
 from trustroute.harness.study.plan import EpisodeTask
 
 PACKAGES: tuple[str, ...] = (
@@ -111,14 +113,22 @@ def consolidate(
     expected: dict | None = None,
     run_info: dict | None = None,
 ) -> dict:
-    """Write episodes/roads/kinematics Parquet files and manifest.json; return the manifest."""
+    """Write episodes/roads/kinematics Parquet files and manifest.json; return the manifest.
+    Raises DamagedParts (after moving them aside) when a part fails verification."""
     study_dir = Path(study_dir)
     episode_rows, roads_tables, kinematics_tables, incident_tables = [], [], [], []
+    damaged: list[str] = []
     for task in tasks:
         path = part_path(study_dir, task.episode_id)
         if not path.exists():
             continue
-        summary, _, table = read_part_table(path)
+        try:
+            part = read_part(path)
+        except PartError:
+            damaged.append(task.episode_id)
+            quarantine_part(study_dir, task.episode_id)
+            continue
+        summary, table = part.summary, part.tables["roads"]
         mean_reported, reports = _reported(table.column("reported_trust"))
         episode_rows.append(
             {
@@ -134,12 +144,13 @@ def consolidate(
             }
         )
         roads_tables.append(table)
-        kin = kinematics_part_path(study_dir, task.episode_id)
-        if kin.exists():
-            kinematics_tables.append(read_table(kin, KINEMATICS_SCHEMA))
-        incidents = incidents_part_path(study_dir, task.episode_id)
-        if incidents.exists():
-            incident_tables.append(read_table(incidents, INCIDENTS_SCHEMA))
+        if part.tables["kinematics"].num_rows:
+            kinematics_tables.append(part.tables["kinematics"])
+        if part.tables["incidents"].num_rows:
+            incident_tables.append(part.tables["incidents"])
+    if damaged:
+        raise DamagedParts(damaged)
+    (study_dir / MANIFEST_FILE).unlink(missing_ok=True)  # no manifest until the tables are consistent
     episodes = table_from_columns(
         {name: [row[name] for row in episode_rows] for name in EPISODES_SCHEMA.names}, EPISODES_SCHEMA
     )
@@ -186,8 +197,19 @@ def consolidate(
     }
     if tuple(manifest) != MANIFEST_KEYS:  # the dataset's definition and this writer must agree
         raise RuntimeError(f"manifest keys {tuple(manifest)} differ from the dataset's {MANIFEST_KEYS}")
-    (study_dir / MANIFEST_FILE).write_text(json.dumps(manifest, indent=1, default=_jsonable))
+    from trustroute.output_files import atomic_write_text
+
+    atomic_write_text(study_dir / MANIFEST_FILE, json.dumps(manifest, indent=1, default=_jsonable),
+                      "study manifest", "free disk space or pass a writable --out, then rerun")
     return manifest
+
+
+class DamagedParts(Exception):
+    """Parts that failed verification at consolidation (moved aside; their episodes must re-run)."""
+
+    def __init__(self, episode_ids: list[str]) -> None:
+        self.episode_ids = list(episode_ids)
+        super().__init__(f"{len(episode_ids)} damaged parts: {', '.join(episode_ids[:5])}")
 
 
 def _jsonable(value: object) -> object:

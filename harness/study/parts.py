@@ -1,30 +1,43 @@
-"""One Parquet part per episode, written atomically; what a rerun may skip; failure records.
+"""One part file per episode holding every table of it, with a checksum; resume checks; failures.
 
-Layout of a study directory (all written here; names and schemas: trustroute.analysis.dataset,
-docs/dataset.md):
-    parts/<episode_id>.parquet        the episode's roads table; its schema metadata holds the
-                                      episode summary and the planned task (JSON)
-    kinematics/<episode_id>.parquet   SUMO only, written before the roads part
-    incidents/<episode_id>.parquet    SUMO only (incident objects, takeovers), before the roads part
-    failures/<episode_id>.json        the last error of an episode that failed (cleared on success)
+Layout of a study directory while it runs (names: trustroute.analysis.dataset, docs/dataset.md):
+    parts/<episode_id>.zip      the episode's part: every table of the episode and its checksum
+    failures/<episode_id>.json  every attempt's error of an episode that failed (cleared on success)
+    damaged/<episode_id>.zip    parts found damaged, missing a table or foreign, moved aside
 
-A part is written to a temporary file in the same folder and renamed into place (os.replace is
-atomic on POSIX), so a killed run leaves either a whole part or none; the roads part is written
-last and is the commit mark of an episode. Parquet page checksums are written and verified on
-read, so a part whose bytes were damaged later is detected (`PartError`) and the episode re-run.
+A part is a zip archive (stored, not compressed; fixed entry dates, so the same episode gives the
+same bytes) of
+    part.json           format, version, episode id, the planned task, the episode summary, and
+                        per table its row count and SHA-256
+    roads.arrows        the roads table        (Arrow IPC stream, trustroute.analysis.dataset schemas)
+    kinematics.arrows   the kinematics table   (empty in the model engine)
+    incidents.arrows    the incidents table    (empty in the model engine)
+    checksum.sha256     SHA-256 over part.json and every table's bytes, in that order
+`read_part` verifies all of it (zip CRCs, the checksum, each table's SHA-256 and schema, the
+episode id of the file name, of part.json and of every row, the row count of the roads), so one
+flipped bit in any table, a truncated or a swapped-in part is a `PartError`, on resume
+(`finished_episodes`: the part is moved aside and the episode re-run) and again at consolidation.
+
+A part is written to a temporary file beside it and renamed into place, so a killed run leaves a
+whole part or none. The study does not fsync every part: it syncs the file system once per batch
+(`sync_parts`) and at the end, before consolidation. A part that a power loss left incomplete
+fails its checksum on resume and is re-run, so the resume guarantee does not depend on the sync.
 """
 
 from __future__ import annotations
 
+import ctypes
+import hashlib
+import io
 import json
 import os
-from dataclasses import asdict
+import zipfile
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
-import pyarrow.parquet as pq
 
 from trustroute.analysis.dataset import (
     DAMAGED_DIR,
@@ -32,50 +45,86 @@ from trustroute.analysis.dataset import (
     INCIDENTS_SCHEMA,
     KINEMATICS_SCHEMA,
     PART_FOLDERS,
-    PART_SUMMARY_KEY,
-    PART_TASK_KEY,
     ROADS_SCHEMA,
     SchemaError,
     check_table,
     failure_path,
-    incidents_part_path,
-    kinematics_part_path,
     part_path,
     table_from_frame,
 )
 from trustroute.harness.study.plan import EpisodeTask
+from trustroute.networks.errors import InputError
+from trustroute.output_files import TEMP_PREFIX, atomic_write_bytes, atomic_write_text
 
-TEMP_PREFIX = ".tmp-"
+PART_FORMAT = "trustroute-part"
+PART_VERSION = 1
+META_ENTRY = "part.json"
+CHECKSUM_ENTRY = "checksum.sha256"
+PART_TABLES: dict[str, pa.Schema] = {
+    "roads": ROADS_SCHEMA,
+    "kinematics": KINEMATICS_SCHEMA,
+    "incidents": INCIDENTS_SCHEMA,
+}
+MAX_PART_BYTES = 1024**3
+ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed: the bytes of a part depend on its content only
 
 
 class PartError(Exception):
-    """A part file that cannot be trusted (truncated, damaged, inconsistent)."""
+    """A part file that cannot be trusted (truncated, damaged, foreign, inconsistent)."""
 
 
-def _atomic_write_table(table: pa.Table, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temp = path.with_name(f"{TEMP_PREFIX}{path.name}.{os.getpid()}")
-    try:
-        pq.write_table(table, temp, write_page_checksum=True)
-        with open(temp, "rb+") as handle:
-            os.fsync(handle.fileno())
-        os.replace(temp, path)
-    finally:
-        if temp.exists():
-            temp.unlink()
+@dataclass(frozen=True, eq=False)
+class Part:
+    """A verified part: the planned task, the episode summary and the episode's tables."""
 
-
-def _atomic_write_text(text: str, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temp = path.with_name(f"{TEMP_PREFIX}{path.name}.{os.getpid()}")
-    temp.write_text(text)
-    os.replace(temp, path)
+    episode_id: str
+    task: dict
+    summary: dict
+    tables: dict[str, pa.Table]
 
 
 def _plain(value: object) -> object:
     """numpy scalars as JSON values."""
     item = getattr(value, "item", None)
     return item() if callable(item) else value
+
+
+def _ipc_bytes(table: pa.Table) -> bytes:
+    sink = pa.BufferOutputStream()
+    with pa.ipc.new_stream(sink, table.schema) as writer:
+        writer.write_table(table)
+    return sink.getvalue().to_pybytes()
+
+
+def _table(frame: pd.DataFrame | None, schema: pa.Schema) -> pa.Table:
+    if frame is None or not len(frame):
+        return schema.empty_table()
+    return table_from_frame(frame, schema)
+
+
+def encode_part(task: EpisodeTask, summary: dict, tables: dict[str, pa.Table]) -> bytes:
+    """The bytes of a part file (deterministic: same content, same bytes)."""
+    blobs = {name: _ipc_bytes(tables[name]) for name in PART_TABLES}
+    meta = {
+        "format": PART_FORMAT,
+        "version": PART_VERSION,
+        "episode_id": task.episode_id,
+        "task": asdict(task),
+        "summary": {k: _plain(v) for k, v in summary.items()},
+        "tables": {name: {"rows": tables[name].num_rows, "sha256": hashlib.sha256(blob).hexdigest()}
+                   for name, blob in blobs.items()},
+    }
+    meta_bytes = json.dumps(meta, sort_keys=True).encode()
+    checksum = hashlib.sha256(meta_bytes)
+    for name in PART_TABLES:
+        checksum.update(blobs[name])
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_STORED) as archive:
+        entries = [(META_ENTRY, meta_bytes), *((f"{name}.arrows", blobs[name]) for name in PART_TABLES),
+                   (CHECKSUM_ENTRY, checksum.hexdigest().encode())]
+        for entry, data in entries:
+            archive.writestr(zipfile.ZipInfo(entry, date_time=ZIP_DATE), data)
+    return buffer.getvalue()
 
 
 def write_part(
@@ -85,52 +134,89 @@ def write_part(
     roads: pd.DataFrame,
     kinematics: pd.DataFrame | None = None,
     incidents: pd.DataFrame | None = None,
+    sync: bool = False,
 ) -> Path:
-    """Write an episode's kinematics and incidents (SUMO) and then its roads part, each atomically."""
-    if incidents is not None and len(incidents):
-        _atomic_write_table(table_from_frame(incidents, INCIDENTS_SCHEMA),
-                            incidents_part_path(study_dir, task.episode_id))
-    if kinematics is not None and len(kinematics):
-        _atomic_write_table(table_from_frame(kinematics, KINEMATICS_SCHEMA),
-                            kinematics_part_path(study_dir, task.episode_id))
-    table = table_from_frame(roads, ROADS_SCHEMA)
-    metadata = {
-        PART_SUMMARY_KEY: json.dumps({k: _plain(v) for k, v in summary.items()}).encode(),
-        PART_TASK_KEY: json.dumps(asdict(task)).encode(),
-    }
-    table = table.replace_schema_metadata(metadata)
+    """Write an episode's part (all its tables, one file) atomically; clear its failure record."""
+    tables = {"roads": table_from_frame(roads, ROADS_SCHEMA),
+              "kinematics": _table(kinematics, KINEMATICS_SCHEMA),
+              "incidents": _table(incidents, INCIDENTS_SCHEMA)}
     path = part_path(study_dir, task.episode_id)
-    _atomic_write_table(table, path)
+    atomic_write_bytes(path, encode_part(task, summary, tables), "episode part",
+                       "free disk space or pass a writable --out, then rerun (the study resumes)", sync=sync)
     failure = failure_path(study_dir, task.episode_id)
     if failure.exists():
         failure.unlink()
     return path
 
 
-def read_part_table(path: Path) -> tuple[dict, dict, pa.Table]:
-    """(summary, task, roads as an Arrow table) of a part; PartError when damaged or inconsistent."""
+def read_part(path: Path) -> Part:
+    """A part, verified in full (module docstring); PartError naming what is wrong otherwise."""
+    from trustroute.input_files import read_input_bytes
+
+    path = Path(path)
     try:
-        table = pq.read_table(path, page_checksum_verification=True)
-        metadata = table.schema.metadata or {}
-        summary = json.loads(metadata[PART_SUMMARY_KEY])
-        task = json.loads(metadata[PART_TASK_KEY])
-    except Exception as exc:  # any failure to read is a damaged part
-        raise PartError(f"{path}: {type(exc).__name__}: {exc}") from None
+        data = read_input_bytes(path, "episode part", MAX_PART_BYTES)
+    except InputError as exc:
+        raise PartError(f"{path}: {exc.problem}") from None
     try:
-        table = check_table(table.replace_schema_metadata(None), ROADS_SCHEMA, str(path))
-    except SchemaError as exc:
-        raise PartError(str(exc)) from None
-    episode = task.get("episode_id")
-    if summary.get("episode_id") != episode or Path(path).stem != episode:
-        raise PartError(f"{path}: belongs to episode {episode!r}")
-    ids = table.column("episode_id")
-    if table.num_rows != int(summary.get("junctions", -1)) + 1 or not pc.all(pc.equal(ids, episode)).as_py():
-        raise PartError(f"{path}: {table.num_rows} rows for {summary.get('junctions')} junctions")
-    return summary, task, table
+        with zipfile.ZipFile(io.BytesIO(data)) as archive:
+            names = archive.namelist()
+            expected = [META_ENTRY, *(f"{name}.arrows" for name in PART_TABLES), CHECKSUM_ENTRY]
+            if names != expected:
+                raise PartError(f"{path}: entries {names}, expected {expected}")
+            entries = {name: archive.read(name) for name in names}  # checks each entry's CRC-32
+    except PartError:
+        raise
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, ValueError, EOFError, KeyError) as exc:
+        raise PartError(f"{path}: not a readable part ({type(exc).__name__}: {exc})") from None
+    checksum = hashlib.sha256(entries[META_ENTRY])
+    for name in PART_TABLES:
+        checksum.update(entries[f"{name}.arrows"])
+    if entries[CHECKSUM_ENTRY] != checksum.hexdigest().encode():
+        raise PartError(f"{path}: checksum mismatch (the part was damaged after it was written)")
+    try:
+        meta = json.loads(entries[META_ENTRY])
+    except ValueError as exc:
+        raise PartError(f"{path}: unreadable part.json ({exc})") from None
+    if not isinstance(meta, dict) or meta.get("format") != PART_FORMAT or meta.get("version") != PART_VERSION:
+        raise PartError(f"{path}: not a part of format {PART_FORMAT} version {PART_VERSION}")
+    episode = meta.get("episode_id")
+    task, summary = meta.get("task"), meta.get("summary")
+    if not (isinstance(task, dict) and isinstance(summary, dict)):
+        raise PartError(f"{path}: part.json lacks the task or the summary")
+    if path.stem != episode or task.get("episode_id") != episode or summary.get("episode_id") != episode:
+        raise PartError(f"{path}: belongs to episode {episode!r} (a foreign part)")
+    tables = {}
+    for name, schema in PART_TABLES.items():
+        blob = entries[f"{name}.arrows"]
+        recorded = (meta.get("tables") or {}).get(name) or {}
+        if recorded.get("sha256") != hashlib.sha256(blob).hexdigest():
+            raise PartError(f"{path}: table {name} does not match its SHA-256")
+        try:
+            table = check_table(pa.ipc.open_stream(blob).read_all(), schema, f"{path.name}:{name}")
+        except (pa.ArrowException, SchemaError, ValueError) as exc:
+            raise PartError(f"{path}: table {name}: {exc}") from None
+        if table.num_rows != recorded.get("rows"):
+            raise PartError(f"{path}: table {name} has {table.num_rows} rows, part.json says "
+                            f"{recorded.get('rows')}")
+        if table.num_rows and not pc.all(pc.equal(table.column("episode_id"), episode)).as_py():
+            raise PartError(f"{path}: table {name} holds rows of another episode")
+        tables[name] = table
+    if tables["roads"].num_rows != int(summary.get("junctions", -1)) + 1:
+        raise PartError(f"{path}: {tables['roads'].num_rows} roads for {summary.get('junctions')} junctions")
+    return Part(episode_id=episode, task=task, summary=summary, tables=tables)
+
+
+def quarantine_part(study_dir: Path, episode_id: str) -> None:
+    """Move a part that failed verification to damaged/ (kept for inspection, out of the way)."""
+    path = part_path(study_dir, episode_id)
+    target = Path(study_dir) / DAMAGED_DIR / path.name
+    target.parent.mkdir(parents=True, exist_ok=True)
+    os.replace(path, target)
 
 
 def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[str], list[str]]:
-    """(episode ids with a valid part, episode ids whose part was damaged and has been removed).
+    """(episode ids with a valid part, episode ids whose part was damaged and has been moved aside).
 
     Also removes temporary files a killed run left behind. A part whose recorded task differs
     from the plan (another config wrote it) counts as damaged.
@@ -146,17 +232,32 @@ def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[st
         if not path.exists():
             continue
         try:
-            _, recorded, _ = read_part_table(path)
-            if recorded != json.loads(json.dumps(asdict(task))):
+            part = read_part(path)
+            if part.task != json.loads(json.dumps(asdict(task))):
                 raise PartError(f"{path}: written for a different plan")
         except PartError:
             damaged.append(task.episode_id)
-            quarantine = study_dir / DAMAGED_DIR / path.name
-            quarantine.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(path, quarantine)
+            quarantine_part(study_dir, task.episode_id)
             continue
         done.add(task.episode_id)
     return done, damaged
+
+
+def sync_parts(study_dir: Path) -> None:
+    """Flush the study directory's file system to disk: one syncfs per batch of parts instead of
+    an fsync per part (os.sync where syncfs is unavailable)."""
+    try:
+        descriptor = os.open(study_dir, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.syncfs(descriptor) != 0:
+            os.sync()
+    except (OSError, AttributeError):
+        os.sync()
+    finally:
+        os.close(descriptor)
 
 
 def write_failure(study_dir: Path, task: EpisodeTask, error: str, traceback_text: str, attempts: int,
@@ -170,7 +271,8 @@ def write_failure(study_dir: Path, task: EpisodeTask, error: str, traceback_text
         "traceback": traceback_text,
         "task": asdict(task),
     }
-    _atomic_write_text(json.dumps(record, indent=1), failure_path(study_dir, task.episode_id))
+    atomic_write_text(failure_path(study_dir, task.episode_id), json.dumps(record, indent=1),
+                      "failure record", "free disk space, then rerun")
 
 
 def read_failures(study_dir: Path) -> list[dict]:

@@ -31,7 +31,7 @@ from pathlib import Path
 from trustroute.analysis.dataset import LOCK_FILE, STUDY_FILE
 from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.parts import finished_episodes, write_failure, write_part
+from trustroute.harness.study.parts import finished_episodes, sync_parts, write_failure, write_part
 from trustroute.harness.study.plan import EpisodeTask, participant_models, plan_episodes
 from trustroute.networks.errors import InputError
 from trustroute.networks.town import Town
@@ -40,6 +40,8 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 DEFAULT_ATTEMPTS = 2
+CONSOLIDATION_ROUNDS = 3
+SYNC_EVERY = 64  # parts per file-system sync (harness/study/parts.py: sync_parts)
 MAX_ATTEMPTS = 10
 
 
@@ -381,6 +383,8 @@ def _run_locked(
         nonlocal ran
         for outcome in outcomes:
             ran += 1
+            if ran % SYNC_EVERY == 0:
+                sync_parts(study_dir)
             if outcome.ok:
                 failed.pop(outcome.episode_id, None)
                 bar.update(1)
@@ -399,6 +403,7 @@ def _run_locked(
             retried += len(retry)
             consume(_outcomes(function, retry, workers, scheduler, dask_processes))
     bar.close()
+    sync_parts(study_dir)
     for task, outcome in failed.values():
         history = errors[task.episode_id]
         write_failure(study_dir, task, outcome.error, outcome.traceback, len(history), history)
@@ -441,11 +446,19 @@ def run_and_consolidate(
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line. The study
     directory stays locked until the manifest is written."""
+    from trustroute.harness.study.manifest import DamagedParts
+
     validate_study(config, scheduler, attempts)
     study_dir = Path(study_dir).resolve()
     with study_lock(study_dir):
-        run = _run_locked(config, study_dir, workers, scheduler, progress, None, dask_processes, attempts)
-        return run, _consolidate_run(config, run, echo)
+        for _ in range(CONSOLIDATION_ROUNDS):
+            run = _run_locked(config, study_dir, workers, scheduler, progress, None, dask_processes, attempts)
+            try:
+                return run, _consolidate_run(config, run, echo)
+            except DamagedParts as exc:  # damaged between the run and consolidation: moved aside
+                echo(f"notice: consolidation found {exc}; running them again")
+    raise InputError(str(study_dir), "parts", "parts fail verification as soon as they are written",
+                     "check the disk holding the study directory")
 
 
 def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], object]) -> dict:

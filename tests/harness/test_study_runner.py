@@ -18,9 +18,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from trustroute.analysis.dataset import part_path
 from trustroute.harness.study import runner as runner_module
 from trustroute.harness.study.config import load_study_config
-from trustroute.harness.study.parts import part_path
 from trustroute.harness.study.plan import plan_episodes
 from trustroute.harness.study.runner import run_and_consolidate, run_study
 from trustroute.networks.errors import InputError
@@ -96,7 +96,7 @@ def test_sigkill_mid_run_then_rerun_equals_uninterrupted(tmp_path):
     deadline = time.monotonic() + 60
     try:
         while time.monotonic() < deadline and process.poll() is None:
-            if parts.is_dir() and sum(1 for _ in parts.glob("*.parquet")) >= 30:
+            if parts.is_dir() and sum(1 for _ in parts.glob("*.zip")) >= 30:
                 break
             time.sleep(0.005)
     finally:
@@ -104,7 +104,7 @@ def test_sigkill_mid_run_then_rerun_equals_uninterrupted(tmp_path):
             os.killpg(process.pid, signal.SIGKILL)  # the study's own process group only
         process.wait(timeout=30)
     assert process.returncode == -signal.SIGKILL, "the study finished before it could be killed"
-    done_before = sum(1 for _ in parts.glob("*.parquet"))
+    done_before = sum(1 for _ in parts.glob("*.zip"))
     assert 0 < done_before < 400
     assert not (killed / "episodes.parquet").exists()
 
@@ -132,7 +132,7 @@ def test_damaged_parts_are_detected_and_rerun(tmp_path):
     middle = len(data) // 3
     data[middle : middle + 8] = bytes(b ^ 0xFF for b in data[middle : middle + 8])
     flipped.write_bytes(bytes(data))
-    (study / "parts" / f".tmp-{tasks[2].episode_id}.parquet.999").write_bytes(b"half a file")
+    (study / "parts" / f".tmp-{tasks[2].episode_id}.zip.999").write_bytes(b"half a file")
     run, _ = _run(config, study)
     assert sorted(run.damaged) == sorted([tasks[1].episode_id, tasks[4].episode_id])
     assert run.skipped == len(tasks) - 2 and run.ran == 2
