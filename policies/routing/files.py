@@ -14,6 +14,7 @@ import io
 import json
 import math
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -127,7 +128,8 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
             arrays_read = {name: archive[name] for name in ARRAY_NAMES}
     except InputError:
         raise
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zipfile.LargeZipFile) as exc:
+    except (OSError, ValueError, EOFError, KeyError, NotImplementedError, zipfile.BadZipFile,
+            zipfile.LargeZipFile, zlib.error) as exc:
         raise InputError(where, "", f"not a readable .npz array file ({type(exc).__name__})",
                          RESYNTH) from None
     rows = arrays_read["t"].shape[0] if arrays_read["t"].ndim == 1 else -1
@@ -143,8 +145,6 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     if rows != document.get("rows"):
         raise InputError(where, "", f"{rows} rows but the policy file records {document.get('rows')}",
                          RESYNTH)
-    if rows == 0:
-        raise InputError(where, "", "the decision table is empty", RESYNTH)
     n_x = len(town.states)
     t, x, q, action = (arrays_read[name].astype(np.int64) for name in ("t", "x", "q", "action"))
     n_q = build_dfa(spec).n_states

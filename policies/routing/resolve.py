@@ -100,7 +100,7 @@ def resolve_policy(name_or_path: str, town: Town, driver: DriverModel, spec: Spe
         return trust_free_policy(town, spec)
     if name_or_path == "aware":
         return aware_policy(town, driver, spec, cache_dir, horizon, belief_rule)
-    if not Path(name_or_path).is_file():
+    if not Path(name_or_path).exists():  # anything that exists goes to the guarded reader
         raise InputError(name_or_path, "", "not a policy file and not 'free' or 'aware'",
                          "pass 'free', 'aware' or the path of a policy file written by trustroute synth")
     return load_policy(name_or_path, town, driver, spec)
