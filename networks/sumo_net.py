@@ -17,12 +17,15 @@ second build of the same town is a cache hit. netconvert comes from the eclipse-
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
@@ -165,19 +168,60 @@ def _looks_complete(path: Path) -> bool:
         return False
 
 
-def build_net(town: Town, cache_dir: Path | None = None) -> NetBuild:
-    """The SUMO net of `town`, built with netconvert or taken from the cache."""
+def _cached(town: Town, target: Path, started: float, notice: Callable[[str], object]) -> NetBuild | None:
+    """The cache entry if it verifies (complete, parses as a SUMO net); a damaged one is removed
+    with a one-line notice so that it is rebuilt."""
+    if not target.exists():
+        return None
+    try:
+        if not (target.is_file() and _looks_complete(target)):
+            raise InputError(str(target), "", "the cached net is incomplete", "")
+        counts = net_counts(target)
+        if counts["edges"] != len(town.states):
+            raise InputError(str(target), "", f"the cached net has {counts['edges']} roads, the town "
+                             f"{len(town.states)}", "")
+    except InputError as exc:
+        notice(f"notice: discarding the damaged net cache entry {target.name} ({exc.problem}); "
+               "building it again")
+        with contextlib.suppress(FileNotFoundError):
+            target.unlink()
+        return None
+    return NetBuild(path=target, cached=True, seconds=time.perf_counter() - started, **counts)
+
+
+def _stderr(message: str) -> None:
+    print(message, file=sys.stderr)
+
+
+def build_net(town: Town, cache_dir: Path | None = None,
+              notice: Callable[[str], object] = _stderr) -> NetBuild:
+    """The SUMO net of `town`, built with netconvert or taken from the cache. The entry is verified
+    on every read, built under a lock (two processes never build one entry at once) and written
+    atomically (fsync, then rename)."""
+    from trustroute.output_files import file_lock
+
     started = time.perf_counter()
     target = net_path(town, cache_dir)
-    if target.is_file() and _looks_complete(target):
-        counts = net_counts(target)
-        return NetBuild(path=target, cached=True, seconds=time.perf_counter() - started, **counts)
+    found = _cached(town, target, started, notice)
+    if found is not None:
+        return found
     binary = find_binary("netconvert")
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(str(target.parent), "", f"cannot create the net cache ({exc.strerror})",
                          "pass a writable directory with --out") from None
+    with file_lock(target.with_name(target.name + ".lock"), "net cache entry", wait=True,
+                   fix="pass a writable directory with --out"):
+        found = _cached(town, target, started, notice)  # built while we waited?
+        if found is not None:
+            return found
+        _netconvert(town, binary, target)
+    counts = net_counts(target)
+    return NetBuild(path=target, cached=False, seconds=time.perf_counter() - started, **counts)
+
+
+def _netconvert(town: Town, binary: str, target: Path) -> None:
     with tempfile.TemporaryDirectory(prefix="trustroute-net-", dir=target.parent) as work:
         work_dir = Path(work)
         plain = {}
@@ -192,6 +236,6 @@ def build_net(town: Town, cache_dir: Path | None = None) -> NetBuild:
             raise InputError(town.source_path or "town", "", "netconvert failed: "
                              + (message[-1] if message else f"exit {result.returncode}"),
                              "check the town's coordinates (roads must have positive length)")
+        with open(output, "rb+") as handle:
+            os.fsync(handle.fileno())
         os.replace(output, target)   # atomic on one file system: readers never see half a net
-    counts = net_counts(target)
-    return NetBuild(path=target, cached=False, seconds=time.perf_counter() - started, **counts)

@@ -101,7 +101,8 @@ def test_second_build_is_cache_hit(town, tmp_path):
     assert first.path == second.path and first.path.parent == tmp_path
     assert first.path.name.startswith(town.content_hash)
     assert first.connections == second.connections
-    assert [p.name for p in tmp_path.iterdir()] == [first.path.name]  # no temp files left
+    # no temp files left (the lock file of the entry stays: removing it would race other builders)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [first.path.name, first.path.name + ".lock"]
 
 
 def test_truncated_cache_is_rebuilt(town, tmp_path):
@@ -109,6 +110,16 @@ def test_truncated_cache_is_rebuilt(town, tmp_path):
     path.write_text(path.read_text()[:500])
     again = build_net(town, cache_dir=tmp_path)
     assert not again.cached and again.edges == len(town.states)
+
+
+def test_damaged_cache_entry_is_rebuilt_with_a_notice(town, tmp_path):
+    path = build_net(town, cache_dir=tmp_path).path
+    notices = []
+    for damage in ("<net>\n</net>\n", "x" * 100 + "</net>", ""):
+        path.write_text(damage)
+        again = build_net(town, cache_dir=tmp_path, notice=notices.append)
+        assert not again.cached and again.edges == len(town.states)
+    assert len(notices) == 3 and all(path.name in n and "\n" not in n for n in notices)
 
 
 def test_corrupt_net_gives_clear_error(tmp_path):
