@@ -140,6 +140,12 @@ def write_part(
     tables = {"roads": table_from_frame(roads, ROADS_SCHEMA),
               "kinematics": _table(kinematics, KINEMATICS_SCHEMA),
               "incidents": _table(incidents, INCIDENTS_SCHEMA)}
+    return write_part_tables(study_dir, task, summary, tables, sync)
+
+
+def write_part_tables(study_dir: Path, task: EpisodeTask, summary: dict, tables: dict[str, pa.Table],
+                      sync: bool = False) -> Path:
+    """`write_part` for tables already in Arrow form (checked against their schemas)."""
     path = part_path(study_dir, task.episode_id)
     atomic_write_bytes(path, encode_part(task, summary, tables), "episode part",
                        "free disk space or pass a writable --out, then rerun (the study resumes)", sync=sync)
