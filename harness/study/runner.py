@@ -5,8 +5,8 @@ never raises (an error comes back as a failed `EpisodeOutcome`). Three backends 
 in-process (`workers=1`), a local process pool (`workers=N`), and Dask distributed
 (`scheduler="ADDRESS"`, or `scheduler="local"` for a local Dask cluster). Each worker process
 builds the study's context (town, specs, policies, participants' driver models) once, from the
-config alone, so nothing large travels with the tasks and the result cannot depend on the
-backend. A failed episode is retried once; if it fails again its error is recorded in
+config alone (harness/study/context.py), so nothing large travels with the tasks and the result
+cannot depend on the backend. A failed episode is retried once; if it fails again its error is recorded in
 failures/ and the study goes on. A rerun resumes: valid parts are skipped, damaged parts re-run.
 """
 
@@ -21,15 +21,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from trustroute.analysis.dataset import STUDY_FILE
-from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.context import study_context
+from trustroute.harness.study.expected import expected_values
+from trustroute.harness.study.manifest import consolidate
 from trustroute.harness.study.parts import finished_episodes, write_failure, write_part
-from trustroute.harness.study.plan import EpisodeTask, participant_models, plan_episodes
+from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.networks.errors import InputError
-from trustroute.networks.town import Town
-from trustroute.participants.driver_model import DriverModel
-from trustroute.policies.logic.spec import Spec
-from trustroute.policies.routing.protocol import RoutingPolicy
 
 
 @dataclass(frozen=True)
@@ -52,88 +50,6 @@ class StudyRun:
     retried: int
     seconds: float
     backend: str
-
-
-# -- the study's context, built once per worker process -----------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class StudyContext:
-    """What every episode of a study shares; built from the config alone."""
-
-    config: StudyConfig
-    town: Town
-    nominal: DriverModel  # the AV's model (its belief filter) and the default driver
-    specs: dict[str, Spec]
-    setups: dict[str, EpisodeSetup]
-    policies: dict[tuple[str, str], RoutingPolicy]  # (spec name, condition label) -> policy
-    participants: list[DriverModel] | None  # per-participant driver models; None: all nominal
-
-    def driver_model(self, participant: int) -> DriverModel:
-        return self.nominal if self.participants is None else self.participants[participant]
-
-
-def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: StudyConfig) -> Path:
-    """Where the "aware" policy of this study is cached (the resolver's entry for its horizon and filter)."""
-    from trustroute.policies.routing.resolve import aware_cache_path
-
-    return aware_cache_path(town, driver, spec, config.policy_cache, aware_horizon(config),
-                            config.belief_rule)
-
-
-def aware_horizon(config: StudyConfig) -> int:
-    """The synthesis horizon of "aware": the config's, else the resolver's default (20 junctions)."""
-    from trustroute.policies.routing.resolve import AWARE_HORIZON
-
-    return AWARE_HORIZON if config.horizon is None else config.horizon
-
-
-def resolve_condition_policy(
-    condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig
-) -> RoutingPolicy:
-    """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
-    from trustroute.policies.routing.resolve import resolve_policy
-
-    return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
-                          config.belief_rule)
-
-
-@functools.lru_cache(maxsize=4)
-def study_context(config: StudyConfig) -> StudyContext:
-    """The study's shared context, built once per process (cached by the config)."""
-    from trustroute.networks.town import load_town
-    from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import load_spec
-
-    town = load_town(config.town)
-    nominal = load_driver_model(config.driver_model)
-    specs = {Path(path).stem: load_spec(path, town) for path in config.specs}
-    setups = {
-        name: EpisodeSetup(
-            town=town,
-            driver_model=nominal,
-            spec=spec,
-            junction_cap=config.junction_cap,
-            fallback_after=config.fallback_after,
-            report_every=config.report_every,
-            belief_rule=config.belief_rule,
-        )
-        for name, spec in specs.items()
-    }
-    policies = {
-        (name, label): resolve_condition_policy(condition, town, nominal, spec, config)
-        for name, spec in specs.items()
-        for condition, label in zip(config.conditions, config.condition_names, strict=True)
-    }
-    return StudyContext(
-        config=config,
-        town=town,
-        nominal=nominal,
-        specs=specs,
-        setups=setups,
-        policies=policies,
-        participants=participant_models(config, nominal),
-    )
 
 
 def engine_function(engine: str) -> Callable:
@@ -366,9 +282,6 @@ def run_and_consolidate(
 ) -> tuple[StudyRun, dict]:
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line."""
-    from trustroute.harness.study.expected import expected_values
-    from trustroute.harness.study.manifest import consolidate
-
     run = run_study(
         config,
         study_dir,

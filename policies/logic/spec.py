@@ -9,16 +9,17 @@ the file, line and column.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.networks.errors import InputError
 from trustroute.networks.town import Town
+from trustroute.networks.validation import parse_toml, read_text, require_keys
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
     KEYWORDS,
@@ -53,7 +54,7 @@ class Spec:
     belief_atoms: dict[str, BeliefAtom]
     source_path: str = ""
 
-    @property
+    @functools.cached_property
     def content_hash(self) -> str:
         """SHA-256 of the meaning (start, parsed formula, atom definitions), not name or formatting."""
         canonical = json.dumps(
@@ -123,13 +124,7 @@ def _number(value: object) -> bool:
 
 def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) -> Spec:
     """Parse and validate a spec's TOML text; with `town`, check its roads exist there."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        where = re.search(r"\(at line (\d+), column (\d+)\)", str(exc))
-        place = f"line {where.group(1)} column {where.group(2)}" if where else ""
-        message = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(exc))
-        raise InputError(source, place, f"not valid TOML ({message})", "fix the TOML syntax") from None
+    data = parse_toml(text, source)
 
     def fail(label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
         return InputError(source, _place(text, label, *needles), problem, fix)
@@ -138,10 +133,9 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
         if key not in TOP_LEVEL_KEYS:
             raise fail(key, (rf"^\s*\[?{re.escape(key)}\b",), f"unknown key '{key}'",
                        f"use only {', '.join(TOP_LEVEL_KEYS)}")
+    require_keys(data, ("name", "start", "formula"), source,
+                 lambda key: f"add {key} = \"...\" at the top of the file (see specs/phi1.toml)")
     for key in ("name", "start", "formula"):
-        if key not in data:
-            raise InputError(source, key, f"missing key '{key}'",
-                             f"add {key} = \"...\" at the top of the file (see specs/phi1.toml)")
         if not isinstance(data[key], str):
             raise fail(key, (rf"^\s*{key}\s*=",), f"'{key}' must be a string", f'write {key} = "..."')
     name, start, formula_text = data["name"], data["start"], data["formula"]
@@ -231,11 +225,7 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
 
 def load_spec(path: str | Path, town: Town | None = None) -> Spec:
     """Load and validate a spec file; with `town`, also check its roads against the town."""
-    try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise InputError(str(path), "", f"cannot read the spec file ({exc.strerror})",
-                         "pass an existing .toml file, e.g. specs/phi1.toml") from None
+    text = read_text(path, str(path), "the spec file", "pass an existing .toml file, e.g. specs/phi1.toml")
     return spec_from_text(text, str(path), town)
 
 
