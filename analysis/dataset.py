@@ -217,7 +217,7 @@ def write_table(table: pa.Table, path: Path) -> Path:
 def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None) -> pa.Table:
     """A dataset table file checked against its schema; InputError naming the file when it is
     missing, unreadable or of another schema."""
-    from trustroute.input_files import read_input_bytes
+    from trustroute.networks.validation import read_input_bytes
 
     path = Path(path)
     if not path.exists():
@@ -271,7 +271,7 @@ def read_manifest(study_dir: Path) -> dict:
     if not path.exists():
         raise InputError(str(study_dir), MANIFEST_FILE, "not a finished study directory (no manifest)",
                          "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
-    from trustroute.input_files import read_json
+    from trustroute.networks.validation import read_json
 
     manifest = read_json(path, "study manifest",
                          fix="rerun `trustroute study` on this directory to rebuild it")

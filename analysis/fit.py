@@ -5,7 +5,7 @@ performance e and the reported trust (when reported); the true trust columns of 
 never read. The model (DESIGN.md, "The model") is a hidden Markov model over trust θ_t:
 θ_0 ~ π; on road t, h_t ~ P(h | θ_{t-1}, inc_t), e_t ~ P(e | θ_{t-1}, inc_t),
 θ_t ~ T[inc_t][h_t][e_t](θ_{t-1}, ·); the report r_t is θ_t with probability a, else one level
-up or down (equal chance, clipped at the ends: participants.synthetic_driver).
+up or down (equal chance, clipped at the ends: the driver model's `report_matrix`).
 
 - method "em": Baum-Welch (forward-backward with scaling, vectorised over episodes) for π, the
   takeover and failure probabilities, every T row and a. Rows with little expected data keep
@@ -29,7 +29,13 @@ import numpy as np
 import pandas as pd
 
 from trustroute.networks.errors import InputError
-from trustroute.participants.driver_model import PERFORMANCES, DriverModel, driver_model_from_dict
+from trustroute.participants.driver_model import (
+    DEFAULT_REPORT_ACCURACY,
+    PERFORMANCES,
+    DriverModel,
+    driver_model_from_dict,
+    report_matrix,
+)
 
 MIN_ROW_WEIGHT = 5.0  # expected visits below which a T row keeps its starting value
 EM_TOLERANCE = 1e-7  # stop when the mean log-likelihood per road improves less than this
@@ -93,16 +99,6 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observat
         report=report,
         mask=present[:, 1:],
     )
-
-
-def report_matrix(accuracy: float, k: int) -> np.ndarray:
-    """R[θ, r] = P(report r | trust θ): a on the diagonal, (1-a)/2 one level off, clipped at the ends."""
-    matrix = np.zeros((k, k))
-    for theta in range(k):
-        matrix[theta, theta] += accuracy
-        matrix[theta, max(theta - 1, 0)] += (1 - accuracy) / 2
-        matrix[theta, min(theta + 1, k - 1)] += (1 - accuracy) / 2
-    return matrix
 
 
 @dataclass
@@ -454,7 +450,7 @@ def fit_study(study_dir: Path, method: str = "auto", iterations: int = 200) -> F
     _, template, _ = study_inputs(manifest)
     config = manifest.get("config", {})
     if method == "auto":
-        accuracy = (config.get("population") or {}).get("report_accuracy", 0.8)
+        accuracy = (config.get("population") or {}).get("report_accuracy", DEFAULT_REPORT_ACCURACY)
         method = "counts" if accuracy == 1 and config.get("report_every", 1) == 1 else "em"
     result = fit_roads(roads, template, method, iterations)
     result.source = str(study_dir)

@@ -18,13 +18,14 @@ from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.pomdp_py.pouct import monte_carlo
 from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 SPECS = ("phi1", "phi2")
 PAPER_TRUST_FREE_RATE = 0.775
 MC_EPISODES = 2000
 
 
-class _FixedRandomPolicy:
+class _FixedRandomPolicy(RoutingPolicy):
     """Random junction per road (seeded): loops, so the fallback at 20 gives a deep tree."""
 
     name = "random"

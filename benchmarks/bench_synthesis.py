@@ -29,6 +29,7 @@ from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.product_mdp import build_product
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.pomdp_py.pouct import monte_carlo, pouct_policy
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols
 from trustroute.policies.synthesis.search import synthesize
 
@@ -124,10 +125,11 @@ def run() -> list[dict]:
                        "gap": result.gap, "seconds": result.seconds, "converged": result.stats["converged"],
                        "policy_rows": result.stats["policy_rows"],
                        "paper_pr_max": PAPER_PR_MAX.get(name)}
-                if horizon == 20:
+                if horizon == DEFAULT_FALLBACK_AFTER:
                     # What the study measures: the policy, then the fallback after 20 junctions, with
                     # the true (Bayes) observation probabilities even when the AV filters by "paper".
-                    study = evaluate(pomdp, spec, result.policy, fallback_after=20, belief_rule=rule)
+                    study = evaluate(pomdp, spec, result.policy, fallback_after=DEFAULT_FALLBACK_AFTER,
+                                     belief_rule=rule)
                     row.update({"with_fallback20_lower": study.lower, "with_fallback20_upper": study.upper,
                                 "with_fallback20_final_trust": study.expected_final_trust})
                 results.append(row)

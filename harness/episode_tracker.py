@@ -1,13 +1,12 @@
 """The AV's side of one episode, pure Python (no SUMO): route, belief, DFA state, end, logs.
 
 Shared by the SUMO engine (harness/episode.py) and the model engine (harness/model_engine.py)
-so the two can never disagree on the logic. The semantics are those of
-`policies.evaluate.evaluate` (DESIGN.md, "Positions of a trace", "The study's 20-junction rule"):
+so the two can never disagree on the logic. The rules (when an episode ends, the fallback, legal
+moves) are policies/routing/episode_rules.py's, the same the exact evaluation uses:
 
-- position 0 is (spec.start, initial belief); q_0 = Labeller.step(dfa.initial, start, b_0);
-- at every position, in this order: the DFA accepts -> "accepted"; the DFA can no longer
-  accept -> "rejected"; the policy (with the fallback) declares itself finished -> "destination";
-  `junction_cap` junctions driven -> "cap"; otherwise the policy picks the next junction;
+- position 0 is (spec.start, initial belief); q_0 = the compiled spec's initial state;
+- at every position the rules end the episode ("accepted", "rejected", "destination", "cap")
+  or ask the policy (with the fallback) for the next junction;
 - after driving a road the AV observes (incident, takeover, performance), applies its belief
   filter (setup.belief_rule) and steps the DFA on (road, new belief).
 
@@ -26,16 +25,16 @@ import pandas as pd
 from trustroute.analysis.dataset import ROADS_SCHEMA, frame_from_table, table_from_columns
 from trustroute.networks.town import NO_INCIDENT, Town
 from trustroute.participants.driver_model import DriverModel
-from trustroute.policies.logic.dfa import DFA, build_dfa
-from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp
-from trustroute.policies.routing.fallback import (
-    FallbackPolicy,
-    fallback_fired,
-    policy_finished,
-    with_fallback,
+from trustroute.policies.routing.episode_rules import (
+    DEFAULT_JUNCTION_CAP,
+    decide,
+    dfa_verdict,
+    episode_policy,
 )
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 PERFORMANCE_INDEX = {"succ": 0, "fail": 1}
@@ -48,43 +47,33 @@ class EpisodeSetup:
     town: Town
     driver_model: DriverModel      # the nominal model the AV's belief filter uses
     spec: Spec
-    junction_cap: int = 60
-    fallback_after: int | None = 20
+    junction_cap: int = DEFAULT_JUNCTION_CAP
+    fallback_after: int | None = DEFAULT_FALLBACK_AFTER
     report_every: int = 1          # the driver reports trust every N roads
     belief_rule: str = "bayes"
 
 
 @dataclass(frozen=True, eq=False)
-class _Model:
+class EpisodeModel:
+    """The arrays an episode reads: the AV's trust POMDP and the spec compiled on the town."""
+
     pomdp: TrustPOMDP
-    dfa: DFA
-    labeller: Labeller
+    compiled: CompiledSpec
 
 
-_MODELS: dict[tuple[str, str, str], _Model] = {}
-_BY_IDENTITY: dict[tuple[int, int, int], tuple[object, object, object, _Model]] = {}
+_MODELS: dict[tuple[str, str, str], EpisodeModel] = {}
 
 
-def _model(setup: EpisodeSetup) -> _Model:
-    # Built once per (town, driver, spec) content: hundreds of episodes share the arrays. The
-    # identity memo skips hashing the contents on every episode (it keeps the objects alive, so
-    # their ids cannot be reused while they are keys).
-    identity = (id(setup.town), id(setup.driver_model), id(setup.spec))
-    known = _BY_IDENTITY.get(identity)
-    if known is not None:
-        return known[3]
+def episode_model(setup: EpisodeSetup) -> EpisodeModel:
+    """Built once per (town, driver, spec) content: hundreds of episodes share the arrays."""
     key = (setup.town.content_hash, setup.driver_model.content_hash, setup.spec.content_hash)
     model = _MODELS.get(key)
     if model is None:
-        dfa = build_dfa(setup.spec)
-        model = _Model(pomdp=build_pomdp(setup.town, setup.driver_model), dfa=dfa,
-                       labeller=Labeller(setup.spec, dfa, setup.town))
+        model = EpisodeModel(pomdp=build_pomdp(setup.town, setup.driver_model),
+                             compiled=compile_spec(setup.spec, setup.town))
         if len(_MODELS) > 32:
             _MODELS.clear()
         _MODELS[key] = model
-    if len(_BY_IDENTITY) > 64:
-        _BY_IDENTITY.clear()
-    _BY_IDENTITY[identity] = (setup.town, setup.driver_model, setup.spec, model)
     return model
 
 
@@ -101,16 +90,15 @@ class EpisodeTracker:
             raise ValueError(f"unknown belief rule {setup.belief_rule!r}; use 'bayes' or 'paper'")
         self.setup = setup
         self.episode_id = str(episode_id)
-        model = _model(setup)
-        self._pomdp, self.dfa, self._labeller = model.pomdp, model.dfa, model.labeller
-        if setup.fallback_after is not None and not isinstance(policy, FallbackPolicy):
-            policy = with_fallback(policy, setup.town, setup.spec, after=setup.fallback_after)
-        self.policy = policy
+        model = episode_model(setup)
+        self._pomdp, self._compiled = model.pomdp, model.compiled
+        self.dfa = model.compiled.dfa
+        self.policy = episode_policy(policy, setup.town, setup.spec, setup.fallback_after)
         start = setup.spec.start
         self.route: list[str] = [start]
         self.belief: np.ndarray = np.asarray(self._pomdp.initial_belief, dtype=float).copy()
-        self.dfa_state: int = self._step_dfa(int(self.dfa.initial), start, self.belief)
-        self.end_reason: str | None = None
+        self.dfa_state: int = self._compiled.initial_state(self.belief)
+        self.end_reason: str | None = dfa_verdict(self._compiled, self.dfa_state)
         self.fallback_fired = False
         self.fallback_junction: int | None = None   # junctions driven when the fallback first drove
         self._chosen: str | None = None            # next junction chosen at the current road
@@ -122,19 +110,8 @@ class EpisodeTracker:
             "belief_after": self.belief.tolist(), "dfa_state": self.dfa_state, "fallback": False,
             "sim_time_in": float(sim_time), "sim_time_out": None,
         }]
-        self._check_dfa_end()
 
     # -- internals -----------------------------------------------------------
-    def _step_dfa(self, q: int, road: str, belief: np.ndarray) -> int:
-        x = self.setup.town.state_index(road)
-        return int(self._labeller.step(np.array([q]), np.array([x]), belief[None, :])[0])
-
-    def _check_dfa_end(self) -> None:
-        if bool(self.dfa.accepting[self.dfa_state]):
-            self.end_reason = "accepted"
-        elif bool(self.dfa.rejecting[self.dfa_state]):
-            self.end_reason = "rejected"
-
     def _context(self) -> DecisionContext:
         return DecisionContext(route=tuple(self.route), dfa_state=self.dfa_state, belief=self.belief.copy())
 
@@ -154,19 +131,11 @@ class EpisodeTracker:
             return None
         if self._chosen is not None:
             return self._chosen
-        context = self._context()
-        if policy_finished(self.policy, context):
-            self.end_reason = "destination"
+        decision = decide(self.policy, self._context(), self.setup.town, self.setup.junction_cap)
+        if decision.end is not None:
+            self.end_reason = decision.end
             return None
-        if self.junctions >= self.setup.junction_cap:
-            self.end_reason = "cap"
-            return None
-        junction = self.policy.next_junction(context)
-        legal = self.setup.town.actions(self.road)
-        if junction not in legal:
-            raise ValueError(f"policy {self.policy.name!r} chose {junction!r}, not a legal move from "
-                             f"{self.road} (legal: {', '.join(legal)})")
-        fired = fallback_fired(self.policy, context)
+        junction, fired = decision.junction, decision.fallback
         if fired and not self.fallback_fired:
             self.fallback_fired = True
             self.fallback_junction = self.junctions
@@ -207,7 +176,7 @@ class EpisodeTracker:
             # An observation the AV's model deems impossible: keep the prior rather than a zero vector.
             after = before.copy()
         self.belief = after
-        self.dfa_state = self._step_dfa(self.dfa_state, road, after)
+        self.dfa_state = self._compiled.step_road(self.dfa_state, road, after)
         self.route.append(road)
         self._chosen = None
         self._rows[-1]["sim_time_out"] = float(sim_time_in)
@@ -220,7 +189,7 @@ class EpisodeTracker:
             "belief_after": after.tolist(), "dfa_state": self.dfa_state, "fallback": False,
             "sim_time_in": float(sim_time_in), "sim_time_out": float(sim_time_out),
         })
-        self._check_dfa_end()
+        self.end_reason = dfa_verdict(self._compiled, self.dfa_state)
 
     def should_report(self) -> bool:
         """Whether the driver reports trust on the road about to be recorded (every report_every)."""

@@ -1,6 +1,6 @@
 """The model engine: episodes in the abstract trust POMDP, without SUMO, for fast what-ifs.
 
-Two paths with the same episode rules (those of harness/episode_tracker.py):
+Two paths with the same episode rules (policies/routing/episode_rules.py):
 
 - `run_model_episode(setup, policy, driver, episode_id, seed)`: one episode through the very
   `EpisodeTracker` the SUMO engine uses, with a `SyntheticDriver`; writes the full roads table
@@ -25,18 +25,20 @@ import pandas as pd
 
 from trustroute.analysis.dataset import KINEMATICS_SCHEMA, frame_from_table
 from trustroute.harness.episode import EpisodeRecord
-from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker, _model
+from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker, episode_model
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.synthetic_driver import SyntheticDriver
-from trustroute.policies.routing.fallback import (
-    FallbackPolicy,
-    fallback_fired,
-    policy_finished,
-    with_fallback,
+from trustroute.policies.routing.episode_rules import (
+    ACCEPTED,
+    END_REASONS,
+    REJECTED,
+    decide,
+    dfa_verdicts,
+    episode_policy,
 )
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
-END_CODES: tuple[str, ...] = ("", "accepted", "rejected", "destination", "cap")
+END_CODES: tuple[str, ...] = ("", *END_REASONS)  # index 0: still running
 
 
 def empty_kinematics() -> pd.DataFrame:
@@ -116,15 +118,14 @@ def simulate_batch(
 
     drivers: the true driver models (default: the AV's nominal model); episode i is driven by
     drivers[driver_index[i]] (default: all by drivers[0]). Initial trust is drawn from each
-    driver's initial distribution, as SyntheticDriver does. Same rules as the tracker: at every
-    position accepted, rejected, policy finished ("destination"), junction cap, else decide.
+    driver's initial distribution, as SyntheticDriver does. The episode rules are the tracker's
+    (policies/routing/episode_rules.py).
     """
     started = time.perf_counter()
     town = setup.town
-    model = _model(setup)
-    pomdp, dfa, labeller = model.pomdp, model.dfa, model.labeller
-    if setup.fallback_after is not None and not isinstance(policy, FallbackPolicy):
-        policy = with_fallback(policy, town, setup.spec, after=setup.fallback_after)
+    model = episode_model(setup)
+    pomdp, compiled = model.pomdp, model.compiled
+    policy = episode_policy(policy, town, setup.spec, setup.fallback_after)
     drivers = list(drivers) if drivers is not None else [setup.driver_model]
     index = (
         np.zeros(count, dtype=np.int64) if driver_index is None else np.asarray(driver_index, dtype=np.int64)
@@ -138,8 +139,6 @@ def simulate_batch(
     transition_cdf = np.cumsum(np.stack([d.trust_transition for d in drivers]), axis=-1)
     initial_cdf = np.cumsum(np.stack([d.initial_belief for d in drivers]), axis=-1)
     levels = np.asarray(nominal.trust_levels, dtype=float)
-    accepting = np.asarray(dfa.accepting, dtype=bool)
-    rejecting = np.asarray(dfa.rejecting, dtype=bool)
     successor_of = {
         (x, j): town.state_index(town.successor(road, j))
         for x, road in enumerate(town.states)
@@ -150,7 +149,7 @@ def simulate_batch(
     start = town.state_index(setup.spec.start)
     road = np.full(count, start, dtype=np.int64)
     belief = np.tile(np.asarray(pomdp.initial_belief, dtype=float), (count, 1))
-    q = np.asarray(labeller.step(np.full(count, dfa.initial), road, belief), dtype=np.int64)
+    q = compiled.initial_states(belief)
     routes: list[tuple[str, ...]] = [(setup.spec.start,)]
     children: dict[tuple[int, int], int] = {}
     route_id = np.zeros(count, dtype=np.int64)
@@ -161,10 +160,11 @@ def simulate_batch(
     fired_any = np.zeros(count, dtype=bool)
     policy_calls = 0
 
-    for level in range(setup.junction_cap + 1):
+    for _level in range(setup.junction_cap + 1):
         running = end == 0
-        end[running & accepting[q]] = 1
-        end[running & ~accepting[q] & rejecting[q]] = 2
+        verdict = dfa_verdicts(compiled, q)
+        end[running & (verdict == ACCEPTED)] = END_CODES.index("accepted")
+        end[running & (verdict == REJECTED)] = END_CODES.index("rejected")
         live = np.flatnonzero(end == 0)
         if live.size == 0:
             break
@@ -178,8 +178,7 @@ def simulate_batch(
             members = order[bounds[r] : bounds[r + 1]]
             first = live[members[0]]
             context = DecisionContext(route=routes[rid], dfa_state=int(q[first]), belief=belief[first])
-            determined = getattr(policy, "route_determined", None)
-            if determined is not None and determined(context):
+            if policy.route_determined(context):
                 groups = [(members, context)]
             else:
                 keyed: dict[tuple[int, bytes], list[int]] = {}
@@ -194,22 +193,15 @@ def simulate_batch(
                 ]
             for group, ctx in groups:
                 policy_calls += 1
-                if policy_finished(policy, ctx):
-                    finished[group] = True
+                decision = decide(policy, ctx, town, setup.junction_cap)
+                if decision.end is not None:
+                    finished[group] = decision.end == "destination"
                     continue
-                if level >= setup.junction_cap:
-                    continue
-                junction = policy.next_junction(ctx)
-                nxt = successor_of.get((int(road[first]), junction))
-                if nxt is None:
-                    raise ValueError(
-                        f"policy {policy.name!r} chose {junction!r}, not a legal move from {ctx.road}"
-                    )
-                chosen[group] = nxt
-                fired[group] = fallback_fired(policy, ctx)
-        end[live[finished]] = 3
+                chosen[group] = successor_of[(int(road[first]), decision.junction)]
+                fired[group] = decision.fallback
+        end[live[finished]] = END_CODES.index("destination")
         capped = ~finished & (chosen < 0)
-        end[live[capped]] = 4
+        end[live[capped]] = END_CODES.index("cap")
         go = ~finished & ~capped
         movers, x2 = live[go], chosen[go]
         fired_any[movers] |= fired[go]
@@ -238,16 +230,16 @@ def simulate_batch(
         impossible = ~(posterior.sum(axis=1) > 0)
         posterior[impossible] = belief[movers][impossible]
         belief[movers] = posterior
-        q[movers] = np.asarray(labeller.step(q[movers], x2, posterior), dtype=np.int64)
+        q[movers] = compiled.step(q[movers], x2, posterior)
         road[movers] = x2
         junctions[movers] += 1
         takeovers[movers] += h
         trust_sum[movers] += levels[new_theta]
     else:
-        end[end == 0] = 4
+        end[end == 0] = END_CODES.index("cap")
 
     return BatchResult(
-        satisfied=end == 1,
+        satisfied=end == END_CODES.index("accepted"),
         junctions=junctions,
         takeovers=takeovers,
         final_trust=levels[theta].astype(np.int64),

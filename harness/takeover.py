@@ -48,9 +48,3 @@ def hand_back(sumo, vehicle_id: str) -> str:
     """Back to autopilot (before the next junction); returns the new mode name."""
     apply_style(sumo, vehicle_id, AUTOPILOT)
     return AUTOPILOT.name
-
-
-def current_style(sumo, vehicle_id: str) -> str:
-    """Which style the ego is driving with, read back from SUMO (for tests and checks)."""
-    factor = sumo.vehicle.getSpeedFactor(vehicle_id)
-    return MANUAL.name if abs(factor - MANUAL.speed_factor) < 1e-9 else AUTOPILOT.name

@@ -30,11 +30,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
+from trustroute.networks.cache import NETS
+from trustroute.networks.cache import cache_dir as default_cache_dir
 from trustroute.networks.errors import InputError
 from trustroute.networks.town import Town, road_name
 
 NET_RECIPE = "r1"                      # bump when the recipe below changes: invalidates caches
-DEFAULT_NET_CACHE = Path.home() / ".cache" / "trustroute" / "nets"
 ROAD_SPEED = 13.89                     # m/s (50 km/h)
 LANE_WIDTH = 3.0
 SIDEWALK_WIDTH = 1.5
@@ -154,7 +155,7 @@ def net_counts(path: Path) -> dict[str, int]:
 
 
 def net_path(town: Town, cache_dir: Path | None = None) -> Path:
-    directory = Path(cache_dir) if cache_dir is not None else DEFAULT_NET_CACHE
+    directory = Path(cache_dir) if cache_dir is not None else default_cache_dir(NETS)
     return directory / f"{town.content_hash}-{NET_RECIPE}.net.xml"
 
 

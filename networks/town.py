@@ -8,6 +8,7 @@ is a directed road "U-V": the vehicle has just arrived at V from U.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import heapq
 import json
@@ -18,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from trustroute.networks.errors import InputError
+from trustroute.networks.validation import check_keys, parse_json, read_text, require_keys, require_object
 
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town.json"
 NO_INCIDENT = "none"  # a road without an incident (and the start road of an episode)
@@ -64,7 +66,7 @@ class Town:
         object.__setattr__(self, "states", tuple(states))
 
     # -- identity -----------------------------------------------------------
-    @property
+    @functools.cached_property
     def content_hash(self) -> str:
         """SHA-256 of the town's content (not its file name or formatting)."""
         canonical = json.dumps(
@@ -155,16 +157,10 @@ def _fail(path: str, place: str, problem: str, fix: str) -> InputError:
 
 def town_from_dict(data: object, path: str = "<town>") -> Town:
     """Validate a parsed town document and build a Town, or raise InputError."""
-    if not isinstance(data, dict):
-        raise _fail(path, "top level", "expected a JSON object", "write {\"junctions\": ..., "
-                    "\"roads\": ..., \"incidents\": ...}")
-    from trustroute.input_files import check_keys
-
+    data = require_object(data, path, "write {\"junctions\": ..., \"roads\": ..., \"incidents\": ...}")
     check_keys(data, TOWN_KEYS, path, "", "town file")
-    for key in ("junctions", "roads", "incidents"):
-        if key not in data:
-            raise _fail(path, key, f"missing key '{key}'", f"add a '{key}' entry as in the default "
-                        "town (trustroute net build --help)")
+    require_keys(data, ("junctions", "roads", "incidents"), path,
+                 lambda key: f"add a '{key}' entry as in the default town (trustroute net build --help)")
     raw_junctions = data["junctions"]
     if not isinstance(raw_junctions, dict) or not raw_junctions:
         raise _fail(path, "junctions", "expected a non-empty object of name -> [x, y]",
@@ -254,10 +250,8 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
 
 def load_town(path: str | Path | None = None) -> Town:
     """Load and validate a town file (the packaged default when `path` is None), read through the
-    guarded reader (trustroute.input_files)."""
-    from trustroute.input_files import parse_json, read_input_text
-
+    guarded reader (trustroute.networks.validation)."""
     file_path = Path(path) if path is not None else DEFAULT_TOWN_PATH
     shown = str(path) if path is not None else "default town"
-    text = read_input_text(file_path, "town file", fix="pass an existing town file with --town")
+    text = read_text(file_path, shown, "the town file", "pass an existing town file with --town")
     return town_from_dict(parse_json(text, shown, "town file"), shown)

@@ -13,10 +13,16 @@ Schema (JSON, as the packaged default `data/driver_model.json`):
 
 Index conventions used by every array here and in `policies/`:
 h = 0 standstill, 1 takeover; e = 0 succ, 1 fail.
+
+Also owns the trust-report noise model (`report_matrix`, `draw_report`): a driver reports its true
+trust with probability `accuracy`, else one level up or down (equal chance), clipped at the ends
+(so at the lowest and highest level a wrong report can still equal the truth). The synthetic
+driver draws reports with it and analysis/fit.py fits it.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from dataclasses import dataclass
@@ -25,11 +31,32 @@ from pathlib import Path
 import numpy as np
 
 from trustroute.networks.errors import InputError
+from trustroute.networks.validation import check_keys, parse_json, read_text, require_keys, require_object
 
 DEFAULT_DRIVER_MODEL_PATH = Path(__file__).parent / "data" / "driver_model.json"
 HUMAN_ACTIONS: tuple[str, ...] = ("standstill", "takeover")
 PERFORMANCES: tuple[str, ...] = ("succ", "fail")
 ROW_TOLERANCE = 1e-9
+DEFAULT_REPORT_ACCURACY = 0.8   # P(a trust report is the true level)
+
+
+def report_matrix(accuracy: float, k: int) -> np.ndarray:
+    """R[θ, r] = P(report index r | trust index θ) over k levels: the noise model of reports."""
+    matrix = np.zeros((k, k))
+    for theta in range(k):
+        matrix[theta, theta] += accuracy
+        matrix[theta, max(theta - 1, 0)] += (1 - accuracy) / 2
+        matrix[theta, min(theta + 1, k - 1)] += (1 - accuracy) / 2
+    return matrix
+
+
+def draw_report(theta: int, accuracy: float, k: int, rng: np.random.Generator) -> int:
+    """One report index drawn from row θ of `report_matrix(accuracy, k)` (through `rng`)."""
+    if rng.random() < accuracy:
+        return theta
+    step = -1 if rng.random() < 0.5 else 1
+    return min(max(theta + step, 0), k - 1)
+
 DRIVER_MODEL_KEYS: tuple[str, ...] = ("trust_levels", "incident_types", "takeover_probability",
                                       "trust_transition", "failure_probability", "initial_belief",
                                       "trust_free_takeover_probability", "source")
@@ -75,7 +102,7 @@ class DriverModel:
     def depends_on_performance(self) -> bool:
         return bool(self.failure_probability.any())
 
-    @property
+    @functools.cached_property
     def content_hash(self) -> str:
         digest = hashlib.sha256()
         digest.update(json.dumps([list(self.trust_levels), list(self.incident_types)]).encode())
@@ -155,16 +182,10 @@ def _stochastic_matrix(value: object, n: int, path: str, place: str) -> np.ndarr
 
 def driver_model_from_dict(data: object, path: str = "<driver model>") -> DriverModel:
     """Validate a parsed driver-model document, or raise InputError."""
-    if not isinstance(data, dict):
-        raise InputError(path, "top level", "expected a JSON object",
-                         "start from the default model (participants/data/driver_model.json)")
-    from trustroute.input_files import check_keys
-
+    data = require_object(data, path, "start from the default model (participants/data/driver_model.json)")
     check_keys(data, DRIVER_MODEL_KEYS, path, "", "driver model")
-    for key in ("trust_levels", "incident_types", "takeover_probability", "trust_transition"):
-        if key not in data:
-            raise InputError(path, key, f"missing key '{key}'", f"add '{key}' as in the default "
-                             "model")
+    require_keys(data, ("trust_levels", "incident_types", "takeover_probability", "trust_transition"), path,
+                 lambda key: f"add '{key}' as in the default model")
     levels = data["trust_levels"]
     if not (isinstance(levels, list) and len(levels) >= 2
             and all(isinstance(t, int) and not isinstance(t, bool) for t in levels)
@@ -260,12 +281,10 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
 
 def load_driver_model(path: str | Path | None = None) -> DriverModel:
     """Load and validate a driver model file (the packaged default when `path` is None), read
-    through the guarded reader (trustroute.input_files)."""
-    from trustroute.input_files import parse_json, read_input_text
-
+    through the guarded reader (trustroute.networks.validation)."""
     file_path = Path(path) if path is not None else DEFAULT_DRIVER_MODEL_PATH
     shown = str(path) if path is not None else "default driver model"
-    text = read_input_text(file_path, "driver model", fix="pass an existing driver model file with --driver")
+    text = read_text(file_path, shown, "the driver model", "pass an existing driver model file with --driver")
     return driver_model_from_dict(parse_json(text, shown, "driver model"), shown)
 
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.networks.errors import InputError
-from trustroute.participants.driver_model import ROW_TOLERANCE, DriverModel
+from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, ROW_TOLERANCE, DriverModel
 
 
 @dataclass(frozen=True)
@@ -30,7 +30,7 @@ class PopulationConfig:
     concentration: float = math.inf    # Dirichlet concentration around each nominal row; inf = nominal
     takeover_spread: float = 0.0       # sd of a per-driver logit shift of takeover probabilities
     initial_trust: tuple[float, ...] | None = None   # per-driver initial distribution (None: model's)
-    report_accuracy: float = 0.8
+    report_accuracy: float = DEFAULT_REPORT_ACCURACY
 
     def __post_init__(self) -> None:
         if not (self.concentration > 0):   # also rejects NaN

@@ -5,14 +5,20 @@ model engine. Its trust is hidden from the AV; it decides takeovers from its cur
 (the driver model's takeover probability), moves its trust by the model's trust dynamics
 T[inc][h][e](θ, θ'), and reports its trust with a configurable accuracy. In the model engine
 it also draws the AV's performance from the model's failure probability.
-See ../shared/DESIGN.md, "The model". Every draw goes through the Generator passed in.
+The report noise model is the driver model's (participants/driver_model.py). Every draw goes
+through the Generator passed in.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from trustroute.participants.driver_model import PERFORMANCES, DriverModel
+from trustroute.participants.driver_model import (
+    DEFAULT_REPORT_ACCURACY,
+    PERFORMANCES,
+    DriverModel,
+    draw_report,
+)
 
 
 def _draw_index(probabilities: np.ndarray, rng: np.random.Generator) -> int:
@@ -24,8 +30,8 @@ def _draw_index(probabilities: np.ndarray, rng: np.random.Generator) -> int:
 class SyntheticDriver:
     """A participant-episode: hidden true trust `trust` (a level of model.trust_levels)."""
 
-    def __init__(self, model: DriverModel, rng: np.random.Generator, report_accuracy: float = 0.8,
-                 initial_trust: int | None = None) -> None:
+    def __init__(self, model: DriverModel, rng: np.random.Generator,
+                 report_accuracy: float = DEFAULT_REPORT_ACCURACY, initial_trust: int | None = None) -> None:
         if not 0.0 <= report_accuracy <= 1.0:
             raise ValueError(f"report_accuracy {report_accuracy!r} is not a probability in [0, 1]")
         self.model = model
@@ -78,10 +84,7 @@ class SyntheticDriver:
         return self.trust
 
     def report_trust(self) -> int:
-        """True trust with probability report_accuracy, else one level up or down (equal chance),
-        clipped to the model's levels (so at 1 and 7 a wrong report can still equal the truth)."""
-        if self.rng.random() < self.report_accuracy:
-            return self.trust
-        step = -1 if self.rng.random() < 0.5 else 1
-        reported = min(max(self._theta + step, 0), self.model.n_trust - 1)
+        """A report of the current trust through the driver model's noise model (draw_report):
+        the true level with probability report_accuracy, else one level off, clipped."""
+        reported = draw_report(self._theta, self.report_accuracy, self.model.n_trust, self.rng)
         return self.model.trust_levels[reported]

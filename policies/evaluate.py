@@ -8,9 +8,10 @@ and the posterior is the exact conditional law of θ given the history, the prob
 observation at a node is Σθ posterior(θ) P(h, e | θ, inc) and the expected final trust is
 Σ P(node) posterior_node · levels over the nodes where episodes end — no sampling anywhere.
 
-A branch ends when the DFA accepts (satisfied), when it can no longer accept (rejected), when
-the policy declares it finished (destination reached: the trust-free route or the fallback
-completion is done), or at the episode's junction cap. Branches with tiny probability are
+A branch ends by the episode rules (policies/routing/episode_rules.py): when the DFA accepts
+(satisfied), when it can no longer accept (rejected), when the policy declares it finished
+(destination reached: the trust-free route or the fallback completion is done), or at the
+episode's junction cap. Branches with tiny probability are
 pruned and their mass reported, so the result is a certified interval [lower, upper]
 (lower = mass proven satisfied, upper = lower + pruned mass).
 
@@ -27,19 +28,21 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from trustroute.policies.logic.dfa import build_dfa
-from trustroute.policies.logic.labelling import Labeller
+from trustroute.networks.town import Town
+from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
-from trustroute.policies.routing.fallback import (
-    FallbackPolicy,
-    fallback_fired,
-    policy_finished,
-    with_fallback,
+from trustroute.policies.routing.episode_rules import (
+    ACCEPTED,
+    DEFAULT_JUNCTION_CAP,
+    REJECTED,
+    decide,
+    dfa_verdicts,
+    episode_policy,
 )
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER, FallbackPolicy
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
-EPISODE_JUNCTION_CAP = 60
 DEFAULT_PRUNE_BELOW = 1e-12
 DEFAULT_MAX_NODES = 2_000_000
 
@@ -84,30 +87,18 @@ class Evaluation:
         return out
 
 
-def _route_determined(policy: RoutingPolicy, context: DecisionContext) -> bool:
-    """Whether the policy promises the same decision for every live node with this route."""
-    method = getattr(policy, "route_determined", None)
-    return bool(method(context)) if method is not None else False
-
-
-def _decide(policy: RoutingPolicy, context: DecisionContext, road: int, level: int, max_junctions: int,
-            fallback_level: int | None, successor_index: dict) -> tuple[bool, bool, int]:
-    """(finished here, fallback drives here, next road index or -1)."""
-    if policy_finished(policy, context):
-        return True, False, -1
-    if level == max_junctions:
-        return False, False, -1
-    junction = policy.next_junction(context)
-    successor = successor_index.get((road, junction))
-    if successor is None:
-        legal = ", ".join(sorted(j for x, j in successor_index if x == road))
-        raise ValueError(f"policy {policy.name!r} chose {junction!r}, not a legal move from "
-                         f"{context.road} (legal: {legal})")
-    return (False, fallback_level == level and fallback_fired(policy, context), successor)
+def _decide(policy: RoutingPolicy, context: DecisionContext, town: Town, road: int, level: int,
+            max_junctions: int, fallback_level: int | None, successor_index: dict) -> tuple[bool, bool, int]:
+    """(finished here, the fallback first drives here, next road index or -1), by the episode rules;
+    road is the index of context.road."""
+    decision = decide(policy, context, town, max_junctions)
+    if decision.end is not None:
+        return decision.end == "destination", False, -1
+    return (False, fallback_level == level and decision.fallback, successor_index[(road, decision.junction)])
 
 
 def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
-             fallback_after: int | None = 20, max_junctions: int = EPISODE_JUNCTION_CAP,
+             fallback_after: int | None = DEFAULT_FALLBACK_AFTER, max_junctions: int = DEFAULT_JUNCTION_CAP,
              belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
              max_nodes: int = DEFAULT_MAX_NODES) -> Evaluation:
     """Exact (or tightly certified) satisfaction probability of `policy` for `spec`.
@@ -122,13 +113,9 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     """
     started = time.perf_counter()
     town, driver = pomdp.town, pomdp.driver
-    if fallback_after is not None and not isinstance(policy, FallbackPolicy):
-        policy = with_fallback(policy, town, spec, after=fallback_after)
+    policy = episode_policy(policy, town, spec, fallback_after)
     fallback_level = policy.after if isinstance(policy, FallbackPolicy) else None
-    dfa = build_dfa(spec)
-    labeller = Labeller(spec, dfa, town)
-    accepting = np.asarray(dfa.accepting, dtype=bool)
-    rejecting = np.asarray(dfa.rejecting, dtype=bool)
+    compiled = compile_spec(spec, town)
     levels = np.asarray(driver.trust_levels, dtype=float)
     outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
     successor_index = {(x, j): town.state_index(town.successor(road, j))
@@ -142,7 +129,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     belief_av = np.asarray(pomdp.initial_belief, dtype=float)[None, :].copy()
     posterior = belief_av.copy()
     probability = np.ones(1)
-    q = np.asarray(labeller.step(np.array([dfa.initial]), road, belief_av), dtype=np.int64)
+    q = compiled.initial_states(belief_av)
 
     mass = {"accepted": 0.0, "rejected": 0.0, "destination": 0.0, "cap": 0.0, "pruned": 0.0}
     trust_sum = 0.0          # Σ P(end node) E[θ | node] over ended (non-pruned) nodes
@@ -159,8 +146,8 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
         junction_sum += float(p.sum()) * level
 
     for level in range(max_junctions + 1):
-        accepted = accepting[q]
-        rejected = rejecting[q] & ~accepted
+        verdict = dfa_verdicts(compiled, q)
+        accepted, rejected = verdict == ACCEPTED, verdict == REJECTED
         end(accepted, "accepted", level)
         end(rejected, "rejected", level)
         alive = ~(accepted | rejected)
@@ -183,9 +170,9 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
             members = order[bounds[r]:bounds[r + 1]]
             i0 = keep[first[r]]
             context = DecisionContext(route=routes[rid], dfa_state=int(q[i0]), belief=belief_av[i0])
-            if _route_determined(policy, context):
+            if policy.route_determined(context):
                 finished[members], fired[members], chosen[members] = _decide(
-                    policy, context, int(road[i0]), level, max_junctions, fallback_level,
+                    policy, context, town, int(road[i0]), level, max_junctions, fallback_level,
                     successor_index)
                 continue
             decisions: dict[tuple[int, bytes], tuple[bool, bool, int]] = {}
@@ -195,7 +182,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                 decision = decisions.get(key)
                 if decision is None:
                     context = DecisionContext(route=routes[rid], dfa_state=key[0], belief=belief_av[i])
-                    decision = _decide(policy, context, int(road[i]), level, max_junctions,
+                    decision = _decide(policy, context, town, int(road[i]), level, max_junctions,
                                        fallback_level, successor_index)
                     decisions[key] = decision
                 finished[k], fired[k], chosen[k] = decision
@@ -232,7 +219,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                           probability[keep][possible] * p_obs[possible]))
         route_id, road, q_before, belief_av, posterior, probability = (
             np.concatenate([part[j] for part in parts]) for j in range(6))
-        q = np.asarray(labeller.step(q_before, road, belief_av), dtype=np.int64)
+        q = compiled.step(q_before, road, belief_av)
         if probability.size > max_nodes:
             order = np.argsort(probability)
             dropped = order[: probability.size - max_nodes]

@@ -29,8 +29,8 @@ DEMO_STUDY = {
 def record_episode(config, study_dir: Path, episode_id: str) -> Path:
     """Replay one planned episode in SUMO with its seeds and write `<study>/<episode_id>.rrd`."""
     from trustroute.harness.episode import run_episode
+    from trustroute.harness.study.context import study_context
     from trustroute.harness.study.plan import plan_episodes
-    from trustroute.harness.study.runner import study_context
     from trustroute.participants.synthetic_driver import SyntheticDriver
 
     task = next(t for t in plan_episodes(config) if t.episode_id == episode_id)

@@ -16,7 +16,8 @@ def net() -> None:
 @net.command("build")
 @click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
 @click.option("--out", "out_dir", type=click.Path(), default=None,
-              help="Net cache directory (default ~/.cache/trustroute/nets).")
+              help="Net cache directory (default: $XDG_CACHE_HOME/trustroute/nets, XDG_CACHE_HOME "
+              "defaulting to ~/.cache).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def build(town_path: str | None, out_dir: str | None, as_json: bool) -> None:
     """Build the town's .net.xml with netconvert, cached by the town's content hash."""

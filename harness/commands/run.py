@@ -77,7 +77,7 @@ def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_d
     if cache_dir is not None:
         check_output_dir(cache_dir, "--cache-dir", "policy cache")
     if net_path is not None:
-        from trustroute.input_files import read_input_bytes
+        from trustroute.networks.validation import read_input_bytes
 
         read_input_bytes(net_path, "SUMO net", max_bytes=1 << 30, fix="pass a .net.xml written by "
                          "`trustroute net build`")

@@ -16,6 +16,8 @@ import click
 
 from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
 from trustroute.networks.errors import InputError
+from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
 
 def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None):
@@ -136,13 +138,15 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
 @click.argument("policy_name", metavar="POLICY")
 @town_option
 @driver_option
-@click.option("--fallback-after", type=JUNCTIONS, default=20, show_default=True,
+@click.option("--fallback-after", type=JUNCTIONS, default=DEFAULT_FALLBACK_AFTER, show_default=True,
               help="Switch to the shortest completion after this many junctions.")
 @click.option("--no-fallback", is_flag=True, help="Evaluate the policy without the fallback rule.")
-@click.option("--max-junctions", type=JUNCTIONS, default=None, help="Episode cap (default 60).")
+@click.option("--max-junctions", type=JUNCTIONS, default=None,
+              help=f"Episode cap (default {DEFAULT_JUNCTION_CAP}).")
 @rule_option
 @click.option("--cache-dir", type=click.Path(), default=None,
-              help="Where 'aware' policies are cached (default ~/.cache/trustroute/policies).")
+              help="Where 'aware' policies are cached (default: $XDG_CACHE_HOME/trustroute/policies, "
+              "XDG_CACHE_HOME defaulting to ~/.cache).")
 @json_option
 def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_path: str | None,
              fallback_after: int, no_fallback: bool, max_junctions: int | None, belief_rule: str,
@@ -151,13 +155,12 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
 
     "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached.
     """
-    from trustroute.policies.evaluate import EPISODE_JUNCTION_CAP
     from trustroute.policies.evaluate import evaluate as evaluate_policy
 
     if fallback_after < 0:
         raise InputError("--fallback-after", "", f"must be >= 0, got {fallback_after}",
                          "pass a number of junctions or --no-fallback")
-    cap = EPISODE_JUNCTION_CAP if max_junctions is None else max_junctions
+    cap = DEFAULT_JUNCTION_CAP if max_junctions is None else max_junctions
     if cap < 0:
         raise InputError("--max-junctions", "", f"must be >= 0, got {cap}", "pass e.g. 60")
     if cache_dir is not None:

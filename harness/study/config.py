@@ -23,13 +23,18 @@ naming the file, the key and the fix.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import trustroute.policies as policies
 from trustroute.networks.errors import InputError
+from trustroute.networks.validation import parse_toml, read_text
+from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY
+from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
 PACKAGED_SPECS = Path(policies.__file__).resolve().parent / "specs"
 ENGINES: tuple[str, ...] = ("sumo", "model")
@@ -52,7 +57,6 @@ STUDY_KEYS: tuple[str, ...] = (
     "output",
     "policy_cache",
 )
-DEFAULT_REPORT_ACCURACY = 0.8
 # Upper limits checked before any work starts: a typo such as participants = 2**63 - 1 must be an
 # error, not a plan that grows until memory runs out.
 MAXIMUM: dict[str, int] = {
@@ -79,13 +83,19 @@ class StudyConfig:
     town: str | None = None
     driver_model: str | None = None
     horizon: int | None = None
-    fallback_after: int | None = 20
-    junction_cap: int = 60
+    fallback_after: int | None = DEFAULT_FALLBACK_AFTER
+    junction_cap: int = DEFAULT_JUNCTION_CAP
     report_every: int = 1
     belief_rule: str = "bayes"
     output: str | None = None
     policy_cache: str | None = None   # None: the resolver's default cache
-    population: dict | None = field(default=None, compare=False, hash=False)
+    population: dict | None = None   # compared by value; hashed through its canonical JSON (__hash__)
+
+    def __hash__(self) -> int:
+        # Every field, [population] included: configs that differ only there must never share a
+        # cached study context (harness/study/context.py). The dict is hashed as canonical JSON.
+        values = tuple(getattr(self, f.name) for f in fields(self) if f.name != "population")
+        return hash((values, json.dumps(self.population, sort_keys=True, default=str)))
 
     @property
     def condition_names(self) -> tuple[str, ...]:
@@ -104,7 +114,7 @@ class StudyConfig:
     def to_dict(self) -> dict:
         return asdict(self)
 
-    @property
+    @functools.cached_property
     def content_hash(self) -> str:
         """SHA-256 of what determines the dataset: every setting (not the file's formatting or its
         location, nor the output directory) plus the content of the spec, town, model and policy
@@ -283,9 +293,10 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         "give an existing driver model file or omit driver_model (the default)",
     )
     horizon = _integer(
-        study, "horizon", source, 1, fix="write a positive number of junctions or omit horizon (20)"
+        study, "horizon", source, 1,
+        fix=f"write a positive number of junctions or omit horizon ({DEFAULT_FALLBACK_AFTER})",
     )
-    fallback_value = study.get("fallback_after", 20)
+    fallback_value = study.get("fallback_after", DEFAULT_FALLBACK_AFTER)
     if fallback_value is False:
         fallback_after = None
     else:
@@ -294,10 +305,10 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
             "fallback_after",
             source,
             0,
-            default=20,
-            fix="write fallback_after = 20, or false to disable the rule",
+            default=DEFAULT_FALLBACK_AFTER,
+            fix=f"write fallback_after = {DEFAULT_FALLBACK_AFTER}, or false to disable the rule",
         )
-    junction_cap = _integer(study, "junction_cap", source, 1, default=60)
+    junction_cap = _integer(study, "junction_cap", source, 1, default=DEFAULT_JUNCTION_CAP)
     report_every = _integer(study, "report_every", source, 1, default=1)
     belief_rule = study.get("belief_rule", "bayes")
     if belief_rule not in BELIEF_RULES:
@@ -352,8 +363,8 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
 
 def load_study_config(path: str | Path) -> StudyConfig:
     """Read and validate a study config file, or raise InputError."""
-    from trustroute.input_files import read_toml
-
     shown = str(path)
-    data = read_toml(path, "study config", fix="pass an existing TOML file (see harness/study/examples/)")
+    text = read_text(path, shown, "the study config",
+                     "pass an existing TOML file (see harness/study/examples/)")
+    data = parse_toml(text, shown, "study config")
     return study_config_from_dict(data, shown, Path(path).resolve().parent)

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.context import StudyContext, aware_policy_path, study_context
 from trustroute.networks.errors import InputError
 from trustroute.policies.routing.protocol import RoutingPolicy
 
@@ -19,7 +20,6 @@ from trustroute.policies.routing.protocol import RoutingPolicy
 def expected_values(config: StudyConfig) -> dict:
     """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluate),
     and the synthesized bounds when the policy carries them."""
-    from trustroute.harness.study.runner import study_context
     from trustroute.policies.evaluate import evaluate
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
@@ -53,17 +53,15 @@ def expected_values(config: StudyConfig) -> dict:
 
 
 def synthesized_bounds(
-    policy: RoutingPolicy, condition: str | None, context, spec_name: str, config: StudyConfig
+    policy: RoutingPolicy, condition: str | None, context: StudyContext, spec_name: str, config: StudyConfig
 ) -> tuple[float, float, int | None] | None:
     """[lower, upper] (and horizon) that synthesis certified for this policy: from the policy
-    file ("aware": the resolver's cache entry), else from attributes of the policy; None if unknown."""
+    file ("aware": the resolver's cache entry), else the policy's certified_bounds(); None if unknown."""
     if condition is not None and condition != "free":
         try:
             from trustroute.policies.routing.files import read_policy_document
 
             if condition == "aware":
-                from trustroute.harness.study.runner import aware_policy_path
-
                 path = aware_policy_path(context.town, context.nominal, context.specs[spec_name], config)
             else:
                 path = Path(condition)
@@ -72,7 +70,5 @@ def synthesized_bounds(
                 return float(document["lower"]), float(document["upper"]), document.get("horizon")
         except (OSError, InputError, ValueError, KeyError):
             pass
-    lower, upper = getattr(policy, "lower", None), getattr(policy, "upper", None)
-    if isinstance(lower, int | float) and isinstance(upper, int | float):
-        return float(lower), float(upper), None
-    return None
+    bounds = policy.certified_bounds()
+    return None if bounds is None else (bounds[0], bounds[1], None)

@@ -157,7 +157,7 @@ def write_part_tables(study_dir: Path, task: EpisodeTask, summary: dict, tables:
 
 def read_part(path: Path) -> Part:
     """A part, verified in full (module docstring); PartError naming what is wrong otherwise."""
-    from trustroute.input_files import read_input_bytes
+    from trustroute.networks.validation import read_input_bytes
 
     path = Path(path)
     try:

@@ -5,8 +5,8 @@ never raises (an error comes back as a failed `EpisodeOutcome`). Three backends 
 in-process (`workers=1`), a local process pool (`workers=N`), and Dask distributed
 (`scheduler="ADDRESS"`, or `scheduler="local"` for a local Dask cluster). Each worker process
 builds the study's context (town, specs, policies, participants' driver models) once, from the
-config alone, so nothing large travels with the tasks and the result cannot depend on the
-backend. A failed episode (an error, or its worker process dying) is retried up to
+config alone (harness/study/context.py), so nothing large travels with the tasks and the result
+cannot depend on the backend. A failed episode (an error, or its worker process dying) is retried up to
 `attempts - 1` times (default: once); if it still fails, every attempt's reason is recorded in
 failures/ and the study goes on. A rerun resumes: valid parts are skipped, damaged parts re-run.
 
@@ -29,15 +29,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from trustroute.analysis.dataset import LOCK_FILE, STUDY_FILE
-from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.context import study_context
+from trustroute.harness.study.expected import expected_values
+from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import finished_episodes, sync_parts, write_failure, write_part
-from trustroute.harness.study.plan import EpisodeTask, participant_models, plan_episodes
+from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.networks.errors import InputError
-from trustroute.networks.town import Town
-from trustroute.participants.driver_model import DriverModel
-from trustroute.policies.logic.spec import Spec
-from trustroute.policies.routing.protocol import RoutingPolicy
 
 DEFAULT_ATTEMPTS = 2
 CONSOLIDATION_ROUNDS = 3
@@ -65,90 +63,6 @@ class StudyRun:
     retried: int
     seconds: float
     backend: str
-
-
-# -- the study's context, built once per worker process -----------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class StudyContext:
-    """What every episode of a study shares; built from the config alone."""
-
-    config: StudyConfig
-    town: Town
-    nominal: DriverModel  # the AV's model (its belief filter) and the default driver
-    specs: dict[str, Spec]
-    setups: dict[str, EpisodeSetup]
-    policies: dict[tuple[str, str], RoutingPolicy]  # (spec name, condition label) -> policy
-    participants: list[DriverModel] | None  # per-participant driver models; None: all nominal
-
-    def driver_model(self, participant: int) -> DriverModel:
-        return self.nominal if self.participants is None else self.participants[participant]
-
-
-def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: StudyConfig) -> Path:
-    """Where the "aware" policy of this study is cached (the resolver's entry for its horizon and filter)."""
-    from trustroute.policies.routing.resolve import aware_cache_path
-
-    return aware_cache_path(town, driver, spec, config.policy_cache, aware_horizon(config),
-                            config.belief_rule)
-
-
-def aware_horizon(config: StudyConfig) -> int:
-    """The synthesis horizon of "aware": the config's, else the resolver's default (20 junctions)."""
-    from trustroute.policies.routing.resolve import AWARE_HORIZON
-
-    return AWARE_HORIZON if config.horizon is None else config.horizon
-
-
-def resolve_condition_policy(
-    condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig
-) -> RoutingPolicy:
-    """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
-    from trustroute.policies.routing.resolve import resolve_policy
-
-    return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
-                          config.belief_rule)
-
-
-@functools.lru_cache(maxsize=4)
-def study_context(config: StudyConfig) -> StudyContext:
-    """The study's shared context, built once per process (cached by the config)."""
-    from trustroute.networks.town import load_town
-    from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import check_trust_levels, load_spec
-
-    town = load_town(config.town)
-    nominal = load_driver_model(config.driver_model)
-    specs = {Path(path).stem: load_spec(path, town) for path in config.specs}
-    for spec in specs.values():
-        check_trust_levels(spec, nominal.n_trust, nominal.source_path)
-    setups = {
-        name: EpisodeSetup(
-            town=town,
-            driver_model=nominal,
-            spec=spec,
-            junction_cap=config.junction_cap,
-            fallback_after=config.fallback_after,
-            report_every=config.report_every,
-            belief_rule=config.belief_rule,
-        )
-        for name, spec in specs.items()
-    }
-    policies = {
-        (name, label): resolve_condition_policy(condition, town, nominal, spec, config)
-        for name, spec in specs.items()
-        for condition, label in zip(config.conditions, config.condition_names, strict=True)
-    }
-    return StudyContext(
-        config=config,
-        town=town,
-        nominal=nominal,
-        specs=specs,
-        setups=setups,
-        policies=policies,
-        participants=participant_models(config, nominal),
-    )
 
 
 def engine_function(engine: str) -> Callable:
@@ -446,8 +360,6 @@ def run_and_consolidate(
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line. The study
     directory stays locked until the manifest is written."""
-    from trustroute.harness.study.manifest import DamagedParts
-
     validate_study(config, scheduler, attempts)
     study_dir = Path(study_dir).resolve()
     with study_lock(study_dir):
@@ -462,9 +374,6 @@ def run_and_consolidate(
 
 
 def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], object]) -> dict:
-    from trustroute.harness.study.expected import expected_values
-    from trustroute.harness.study.manifest import consolidate
-
     echo(
         f"{run.planned} episodes planned: {run.skipped} already done, {run.ran - run.retried} run"
         f"{f', {run.retried} retried' if run.retried else ''}, {len(run.failed)} failed"

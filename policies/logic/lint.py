@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.networks.town import Town
+from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA, build_dfa, dfa_from_formula
 from trustroute.policies.logic.formula import (
     FALSE,
@@ -41,7 +42,6 @@ from trustroute.policies.logic.formula import (
     format_formula,
     walk,
 )
-from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import Spec, state_only_projection
 
 
@@ -170,8 +170,8 @@ def unreachable_warnings(spec: Spec, town: Town) -> list[LintWarning]:
 def town_satisfiable(spec: Spec, town: Town) -> bool:
     """True iff some route from the start satisfies the state-only projection of `spec`."""
     projected = state_only_projection(spec)
-    dfa = build_dfa(projected)
-    labeller = Labeller(projected, dfa, town)
+    compiled = compile_spec(projected, town)
+    dfa, labeller = compiled.dfa, compiled.labeller
     n_roads = len(town.states)
     beliefs = np.full((1, 7), 1.0 / 7.0)  # no belief atoms remain: any belief labels the same
     q0 = int(labeller.step(np.array([dfa.initial]), np.array([town.state_index(spec.start)]), beliefs)[0])

@@ -9,6 +9,7 @@ the file, line and column.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -18,6 +19,7 @@ from pathlib import Path
 
 from trustroute.networks.errors import InputError
 from trustroute.networks.town import Town
+from trustroute.networks.validation import parse_toml, read_text, require_keys
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
     KEYWORDS,
@@ -61,7 +63,7 @@ class Spec:
     belief_atoms: dict[str, BeliefAtom]
     source_path: str = ""
 
-    @property
+    @functools.cached_property
     def content_hash(self) -> str:
         """SHA-256 of the meaning (start, parsed formula, atom definitions), not name or formatting."""
         canonical = json.dumps(
@@ -142,8 +144,6 @@ def _paren_depth(text: str) -> int:
 
 def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) -> Spec:
     """Parse and validate a spec's TOML text; with `town`, check its roads exist there."""
-    from trustroute.input_files import parse_toml
-
     data = parse_toml(text, source, "spec file")
 
     def fail(label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
@@ -153,10 +153,9 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
         if key not in TOP_LEVEL_KEYS:
             raise fail(key, (rf"^\s*\[?{re.escape(key)}\b",), f"unknown key '{key}'",
                        f"use only {', '.join(TOP_LEVEL_KEYS)}")
+    require_keys(data, ("name", "start", "formula"), source,
+                 lambda key: f"add {key} = \"...\" at the top of the file (see specs/phi1.toml)")
     for key in ("name", "start", "formula"):
-        if key not in data:
-            raise InputError(source, key, f"missing key '{key}'",
-                             f"add {key} = \"...\" at the top of the file (see specs/phi1.toml)")
         if not isinstance(data[key], str):
             raise fail(key, (rf"^\s*{key}\s*=",), f"'{key}' must be a string", f'write {key} = "..."')
     name, start, formula_text = data["name"], data["start"], data["formula"]
@@ -265,11 +264,9 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
 
 
 def load_spec(path: str | Path, town: Town | None = None) -> Spec:
-    """Load and validate a spec file (through the guarded reader, trustroute.input_files); with
+    """Load and validate a spec file (through the guarded reader, networks/validation.py); with
     `town`, also check its roads against the town."""
-    from trustroute.input_files import read_input_text
-
-    text = read_input_text(path, "spec file", fix="pass an existing .toml file, e.g. specs/phi1.toml")
+    text = read_text(path, str(path), "the spec file", "pass an existing .toml file, e.g. specs/phi1.toml")
     return spec_from_text(text, str(path), town)
 
 

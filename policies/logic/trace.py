@@ -13,8 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.networks.town import Town
-from trustroute.policies.logic.dfa import build_dfa
-from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 
 
@@ -42,8 +41,8 @@ def evaluate_traces(spec: Spec, town: Town, states: np.ndarray, beliefs: np.ndar
                else np.asarray(lengths, dtype=np.int64))
     if lengths.shape != (n,) or (lengths < 0).any() or (lengths > horizon).any():
         raise ValueError(f"lengths must be [n] integers in 0..{horizon}")
-    dfa = build_dfa(spec)
-    labeller = Labeller(spec, dfa, town)
+    compiled = compile_spec(spec, town)
+    dfa, labeller = compiled.dfa, compiled.labeller
     runs = np.full((n, horizon), -1, dtype=np.int64)
     q = np.full(n, dfa.initial, dtype=np.int64)
     # Only traces still running (not yet accepted or rejected, within their length) are stepped:

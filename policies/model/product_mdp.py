@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trustroute.policies.logic.dfa import DFA, build_dfa
+from trustroute.policies.logic.compiled import compile_spec
+from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import TrustPOMDP
@@ -55,8 +56,8 @@ class ProductTables:
 
 def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
     town = pomdp.town
-    dfa = build_dfa(spec)
-    labeller = Labeller(spec, dfa, town)
+    compiled = compile_spec(spec, town)
+    dfa, labeller = compiled.dfa, compiled.labeller
     atoms = tuple(dfa.atoms)
     belief_names = tuple(a for a in atoms if a in spec.belief_atoms)
     n_x, n_q, m = len(town.states), int(dfa.n_states), len(belief_names)
@@ -78,8 +79,7 @@ def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
     next_q = np.asarray(dfa.step_many(q_grid.ravel(), valuations), dtype=np.int64).reshape(
         n_q, n_x, 2 ** m)
     start = town.state_index(spec.start)
-    initial_q = int(labeller.step(np.array([dfa.initial]), np.array([start]),
-                                  np.asarray(pomdp.initial_belief, dtype=float)[None])[0])
+    initial_q = compiled.initial_state(pomdp.initial_belief)
     accepting = np.asarray(dfa.accepting, dtype=bool)
     rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
     return ProductTables(pomdp=pomdp, spec=spec, dfa=dfa, labeller=labeller, start=start,

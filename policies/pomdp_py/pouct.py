@@ -23,11 +23,16 @@ from dataclasses import dataclass
 import numpy as np
 import pomdp_py
 
-from trustroute.policies.logic.dfa import build_dfa
-from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
-from trustroute.policies.routing.fallback import FallbackPolicy, policy_finished, with_fallback
+from trustroute.policies.routing.episode_rules import (
+    DEFAULT_JUNCTION_CAP,
+    decide,
+    dfa_verdict,
+    episode_policy,
+)
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.routing.free import StateOnlyTask, state_only_task
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
@@ -93,9 +98,7 @@ class ProductModel:
     pomdp: TrustPOMDP
     spec: Spec
     task: StateOnlyTask
-    labeller: Labeller
-    accepting: np.ndarray
-    rejecting: np.ndarray
+    compiled: CompiledSpec
     actions: tuple[tuple[RoadAction, ...], ...]   # per road index
     transition_cdf: np.ndarray                     # [inc, h, e, θ, θ'] cumulative
     belief_matrices: np.ndarray                    # [inc, h, e, θ, θ'] the AV filter's matrices
@@ -114,18 +117,18 @@ class ProductModel:
         unnormalised = state.belief @ self.belief_matrices[inc, h, e]
         total = unnormalised.sum()
         belief = unnormalised / total if total > 0 else unnormalised
-        q = int(self.labeller.step(np.array([state.q]), np.array([road]), belief[None])[0])
+        q = int(self.compiled.step(np.array([state.q]), np.array([road]), belief[None])[0])
         q_projected = int(self.task.next_state[state.q_projected, road])
         # Like a real episode without the fallback, a simulation goes on after the state-only task
         # is done (the planner may come back to a waypoint with more trust); it ends on acceptance
         # or rejection, or at the search depth.
-        over = bool(self.accepting[q] or self.rejecting[q])
+        over = dfa_verdict(self.compiled, q) is not None
         return ProductState(road, theta, q, q_projected, belief, (h, e), over)
 
 
 def build_product_model(pomdp: TrustPOMDP, spec: Spec, belief_rule: BeliefRule = "bayes") -> ProductModel:
     town, driver = pomdp.town, pomdp.driver
-    dfa = build_dfa(spec)
+    compiled = compile_spec(spec, town)
     actions = tuple(
         tuple(RoadAction(town.state_index(town.successor(road, j)), j) for j in town.actions(road))
         for road in town.states)
@@ -136,8 +139,7 @@ def build_product_model(pomdp: TrustPOMDP, spec: Spec, belief_rule: BeliefRule =
     else:
         raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
     return ProductModel(
-        pomdp=pomdp, spec=spec, task=state_only_task(town, spec), labeller=Labeller(spec, dfa, town),
-        accepting=np.asarray(dfa.accepting, dtype=bool), rejecting=np.asarray(dfa.rejecting, dtype=bool),
+        pomdp=pomdp, spec=spec, task=state_only_task(town, spec), compiled=compiled,
         actions=actions, transition_cdf=np.cumsum(driver.trust_transition, axis=-1),
         belief_matrices=np.asarray(matrices), takeover=driver.takeover_probability,
         failure=driver.failure_probability)
@@ -162,7 +164,7 @@ class _RewardModel(pomdp_py.RewardModel):
         self.model = model
 
     def sample(self, state, action, next_state):
-        return float(not state.over and bool(self.model.accepting[next_state.q]))
+        return float(not state.over and bool(self.model.compiled.accepting[next_state.q]))
 
 
 class _PolicyModel(pomdp_py.RolloutPolicy):
@@ -201,7 +203,7 @@ class _TrustBelief(pomdp_py.GenerativeDistribution):
         return self.random()
 
 
-class POUCTPolicy:
+class POUCTPolicy(RoutingPolicy):
     """Plan each decision with pomdp-py's POUCT from the current belief ("pouct").
 
     Under the Bayes rule the AV's belief is the true posterior of θ, which is what the root
@@ -258,18 +260,17 @@ class MonteCarloResult:
 
 
 def monte_carlo(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, episodes: int,
-                rng: np.random.Generator, fallback_after: int | None = 20, max_junctions: int = 60,
+                rng: np.random.Generator, fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
+                max_junctions: int = DEFAULT_JUNCTION_CAP,
                 belief_rule: BeliefRule = "bayes") -> MonteCarloResult:
     """Run `policy` (with the study's fallback unless None) in the trust model `episodes` times.
 
-    Same episode rules as policies.evaluate: accepted / rejected / policy finished / junction cap.
+    The episode rules are policies/routing/episode_rules.py's, as in policies.evaluate.
     """
     started = time.perf_counter()
     town, driver = pomdp.town, pomdp.driver
-    if fallback_after is not None and not isinstance(policy, FallbackPolicy):
-        policy = with_fallback(policy, town, spec, after=fallback_after)
-    dfa = build_dfa(spec)
-    labeller = Labeller(spec, dfa, town)
+    policy = episode_policy(policy, town, spec, fallback_after)
+    compiled = compile_spec(spec, town)
     transition_cdf = np.cumsum(driver.trust_transition, axis=-1)
     initial_cdf = np.cumsum(driver.initial_belief)
     satisfied = np.zeros(episodes, dtype=bool)
@@ -284,27 +285,27 @@ def monte_carlo(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, episodes: 
         theta = draw(initial_cdf)
         belief = np.array(driver.initial_belief, dtype=float)
         route = [spec.start]
-        q = int(labeller.step(np.array([dfa.initial]), np.array([town.state_index(spec.start)]),
-                              belief[None])[0])
-        for level in range(max_junctions + 1):
-            if dfa.accepting[q]:
-                satisfied[n] = True
+        q = compiled.initial_state(belief)
+        while True:
+            verdict = dfa_verdict(compiled, q)
+            if verdict is not None:
+                satisfied[n] = verdict == "accepted"
                 break
             context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
-            if dfa.rejecting[q] or policy_finished(policy, context) or level == max_junctions:
-                break
             tick = time.perf_counter()
-            junction = policy.next_junction(context)
+            decision = decide(policy, context, town, max_junctions)
+            if decision.end is not None:
+                break
             decision_seconds += time.perf_counter() - tick
             decisions += 1
-            road = town.successor(route[-1], junction)
+            road = town.successor(route[-1], decision.junction)
             inc = driver.incident_index(town.incident(road))
             h = int(rng.random() < driver.takeover_probability[inc, theta])
             e = int(rng.random() < driver.failure_probability[inc, theta])
             theta = draw(transition_cdf[inc, h, e, theta])
             belief = pomdp.belief_update(belief, inc, h, e, rule=belief_rule)[0][0]
             route.append(road)
-            q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None])[0])
+            q = compiled.step_road(q, road, belief)
         final_trust[n] = driver.trust_levels[theta]
     rate = float(satisfied.mean()) if episodes else float("nan")
     return MonteCarloResult(

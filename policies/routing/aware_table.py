@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 from trustroute.networks.town import Town
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.free import state_only_task
-from trustroute.policies.routing.protocol import DecisionContext
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,7 +60,7 @@ def _group(keys: np.ndarray, beliefs: np.ndarray) -> dict[tuple[int, ...], tuple
     return out
 
 
-class BeliefTablePolicy:
+class BeliefTablePolicy(RoutingPolicy):
     """RoutingPolicy "aware": nearest stored belief at the same (junctions, road, DFA state)."""
 
     def __init__(self, table: PolicyTable, town: Town, spec: Spec, name: str = "aware",
@@ -99,6 +99,11 @@ class BeliefTablePolicy:
                 out[members] = self.table.action[rows[np.asarray(nearest)]]
         return out
 
+    def certified_bounds(self) -> tuple[float, float] | None:
+        if self.lower is None or self.upper is None:
+            return None
+        return float(self.lower), float(self.upper)
+
     def next_junction(self, context: DecisionContext) -> str:
         road = context.road
         x = self.town.state_index(road)
@@ -107,5 +112,5 @@ class BeliefTablePolicy:
         actions = self.town.actions(road)
         if 0 <= slot < len(actions):
             return actions[slot]
-        junction = self.task.next_junction(road, self.task.projected_state(tuple(context.route)))
+        junction = self.task.next_junction(road, self.task.projected_state(context.route))
         return junction if junction is not None else actions[0]

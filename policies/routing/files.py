@@ -81,7 +81,7 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
 
 def read_policy_document(path: str | Path) -> dict:
     """The JSON part of a policy file, checked for format (InputError otherwise)."""
-    from trustroute.input_files import check_keys, read_json
+    from trustroute.networks.validation import check_keys, read_json
 
     path = Path(path)
     where = str(path)
@@ -109,7 +109,7 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     """The decision table of a policy file, verified: the hash its JSON records, a readable .npz
     without pickles, the five arrays with consistent shapes and integer types, and every entry in
     range for this town, driver model and spec (InputError otherwise)."""
-    from trustroute.input_files import MAX_ARRAY_BYTES, read_input_bytes
+    from trustroute.networks.validation import MAX_ARRAY_BYTES, read_input_bytes
     from trustroute.policies.logic.dfa import build_dfa
 
     where = str(arrays)

@@ -17,16 +17,16 @@ from __future__ import annotations
 import heapq
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from trustroute.networks.errors import InputError
 from trustroute.networks.town import Town
-from trustroute.policies.logic.dfa import DFA, build_dfa
-from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.compiled import compile_spec
+from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.spec import Spec, state_only_projection
-from trustroute.policies.routing.protocol import DecisionContext
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 ROUTE_CACHE_SIZE = 4096
 
@@ -51,11 +51,21 @@ class StateOnlyTask:
     next_slot: np.ndarray
     road_index: dict[str, int]
 
+    route_cache: OrderedDict = field(default_factory=OrderedDict, repr=False)
+
     def projected_state(self, route: Sequence[str]) -> int:
         """Projected DFA state after reading every road of `route` (route[0] = position 0)."""
+        # Evaluation asks for the same route once per observation branch: cached by route.
+        key = tuple(route)
+        cached = self.route_cache.get(key)
+        if cached is not None:
+            return cached
         q = int(self.dfa.initial)
-        for road in route:
+        for road in key:
             q = int(self.next_state[q, self.road_index[road]])
+        self.route_cache[key] = q
+        if len(self.route_cache) > ROUTE_CACHE_SIZE:
+            self.route_cache.popitem(last=False)
         return q
 
     def next_junction(self, road: str, q: int) -> str | None:
@@ -86,8 +96,8 @@ def _uniform_beliefs(count: int) -> np.ndarray:
 def build_state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
     """Project `spec` onto its state atoms and compute shortest completions on `town`."""
     projected = state_only_projection(spec)
-    dfa = build_dfa(projected)
-    labeller = Labeller(projected, dfa, town)
+    compiled = compile_spec(projected, town)
+    dfa, labeller = compiled.dfa, compiled.labeller
     n_x, n_q = len(town.states), int(dfa.n_states)
     q_grid, x_grid = np.meshgrid(np.arange(n_q), np.arange(n_x), indexing="ij")
     next_state = np.asarray(
@@ -181,7 +191,7 @@ def baseline_route(town: Town, spec: Spec) -> list[str]:
     return route
 
 
-class TrustFreePolicy:
+class TrustFreePolicy(RoutingPolicy):
     """Drive the shortest state-only completion from wherever the vehicle is ("free").
 
     On the baseline route this follows the baseline route; off it (a context route that
@@ -194,27 +204,16 @@ class TrustFreePolicy:
 
     def __init__(self, task: StateOnlyTask) -> None:
         self.task = task
-        self._projected: OrderedDict[tuple[str, ...], int] = OrderedDict()
-
-    def projected_state(self, route: tuple[str, ...]) -> int:
-        # Evaluation asks for the same route once per observation branch: cache by route.
-        cached = self._projected.get(route)
-        if cached is None:
-            cached = self.task.projected_state(route)
-            self._projected[route] = cached
-            if len(self._projected) > ROUTE_CACHE_SIZE:
-                self._projected.popitem(last=False)
-        return cached
 
     def route_determined(self, context: DecisionContext) -> bool:
         """Always: the trust-free policy looks at the roads driven only (lets evaluation batch)."""
         return True
 
     def finished(self, context: DecisionContext) -> bool:
-        return self.task.next_junction(context.road, self.projected_state(tuple(context.route))) is None
+        return self.task.next_junction(context.road, self.task.projected_state(context.route)) is None
 
     def next_junction(self, context: DecisionContext) -> str:
-        junction = self.task.next_junction(context.road, self.projected_state(tuple(context.route)))
+        junction = self.task.next_junction(context.road, self.task.projected_state(context.route))
         # Asked after the task is done: any legal move; the episode should have ended.
         return junction if junction is not None else self.task.town.actions(context.road)[0]
 

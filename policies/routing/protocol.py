@@ -4,7 +4,8 @@ A policy is asked at each road, before the vehicle commits to a lane, for the ne
 junction. It sees only what the AV knows online: the roads driven so far, the
 spec's DFA state after the current position, and the AV's Bayes belief over trust.
 Policies are stateless between calls: everything they need is in the context, so
-one policy object can drive many episodes (and processes) at once.
+one policy object can drive many episodes (and processes) at once. The rules of an episode
+around the policy (when it ends, the fallback) are in policies/routing/episode_rules.py.
 """
 
 from __future__ import annotations
@@ -39,8 +40,34 @@ class DecisionContext:
 
 @runtime_checkable
 class RoutingPolicy(Protocol):
-    """Anything with a name that maps a DecisionContext to a next junction."""
+    """A route chooser: a name and the next junction at a DecisionContext.
+
+    Policies subclass this protocol explicitly and inherit the defaults of the optional
+    methods, so every caller (episode rules, exact evaluation, the model engine, the fallback,
+    the study's expected values) calls them directly:
+
+    - `finished(context)`: the policy declares the episode over here (destination reached);
+      default never.
+    - `route_determined(context)`: the decision and `finished` here depend on the roads driven
+      only (any belief, any non-accepting DFA state), so evaluators may ask once per route;
+      default no.
+    - `fallback_active(context)`: the 20-junction fallback, not the policy, drives here;
+      default no (only the fallback wrapper says yes).
+    - `certified_bounds()`: the (lower, upper) synthesis certified for this policy, or None.
+    """
 
     name: str
 
     def next_junction(self, context: DecisionContext) -> str: ...
+
+    def finished(self, context: DecisionContext) -> bool:
+        return False
+
+    def route_determined(self, context: DecisionContext) -> bool:
+        return False
+
+    def fallback_active(self, context: DecisionContext) -> bool:
+        return False
+
+    def certified_bounds(self) -> tuple[float, float] | None:
+        return None

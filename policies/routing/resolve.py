@@ -4,7 +4,8 @@
 H = 20 junctions because the study measures "policy, then the shortest completion after 20
 junctions" (policies.fallback), so maximising P(accepted within 20) is the objective the study
 actually scores. It is cached in `cache_dir` under a key made of the content hashes of town,
-driver model and spec and these settings; a cache entry is a policy file like any other.
+driver model and spec, these settings and the synthesis code's version
+(policies/synthesis/version.py); a cache entry is a policy file like any other.
 """
 
 from __future__ import annotations
@@ -16,32 +17,38 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from trustroute.networks.cache import POLICIES
+from trustroute.networks.cache import cache_dir as cache_dir_of
 from trustroute.networks.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, build_pomdp
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.routing.files import array_path, load_policy, save_policy
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.search import synthesize
+from trustroute.policies.synthesis.version import SYNTHESIS_VERSION
 
-AWARE_HORIZON = 20
+AWARE_HORIZON = DEFAULT_FALLBACK_AFTER   # synthesize for the junctions before the fallback takes over
 AWARE_TAU = 1e-3
 AWARE_TIME_LIMIT = 120.0
-DEFAULT_POLICY_CACHE = Path.home() / ".cache" / "trustroute" / "policies"
 
 
 def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path | None,
                      horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes") -> Path:
     """Cache entry of the "aware" policy for these inputs (horizon None: unbounded; cache_dir None:
-    DEFAULT_POLICY_CACHE)."""
+    the policies folder of the cache root, trustroute.networks.cache). The key covers the inputs'
+    contents, the settings and the synthesis code's version (SYNTHESIS_VERSION)."""
     key = hashlib.sha256("|".join((town.content_hash, driver.content_hash, spec.content_hash,
-                                   f"H={horizon}", f"tau={AWARE_TAU}", belief_rule)).encode())
+                                   f"H={horizon}", f"tau={AWARE_TAU}", belief_rule,
+                                   f"synthesis={SYNTHESIS_VERSION}")).encode())
+    folder = Path(cache_dir) if cache_dir else cache_dir_of(POLICIES)
     # The spec name is only a readable label here (the key identifies the entry): keep it to
     # file-name characters so no name can point outside the cache.
     label = re.sub(r"[^A-Za-z0-9_.+-]", "_", spec.name)[:48].lstrip(".") or "spec"
-    return Path(cache_dir or DEFAULT_POLICY_CACHE) / f"aware-{label}-{key.hexdigest()[:16]}.json"
+    return folder / f"aware-{label}-{key.hexdigest()[:16]}.json"
 
 
 def _cached_policy(path: Path, town: Town, driver: DriverModel, spec: Spec,

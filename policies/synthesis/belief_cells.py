@@ -166,11 +166,6 @@ def suffix_cells(symbols: ObservationSymbols, k: int) -> SuffixCells:
     return SuffixCells(k=k, words=tuple(words), vertices=np.array(vertices), next_cell=next_cell)
 
 
-def vertex_mask(cells: SuffixCells) -> np.ndarray:
-    """bool [n_cells, n_trust]: which corner images exist (nonzero rows)."""
-    return cells.vertices.sum(axis=-1) > 0
-
-
 def image_label_status(cells: SuffixCells, symbols: ObservationSymbols, coeffs: np.ndarray,
                        offset: float) -> np.ndarray:
     """int8 [n_cells, n_symbols]: status of the atom (offset - coeffs·b < 0) on f_o(P_c).

@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from trustroute.policies.logic.dfa import build_dfa
-from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 
@@ -24,10 +23,8 @@ def exact_optimum(pomdp: TrustPOMDP, spec: Spec, horizon: int, belief_rule: Beli
     if not 0 <= horizon <= MAX_EXACT_HORIZON:
         raise ValueError(f"exact search is for horizons 0..{MAX_EXACT_HORIZON}, got {horizon}")
     town, driver = pomdp.town, pomdp.driver
-    dfa = build_dfa(spec)
-    labeller = Labeller(spec, dfa, town)
-    accepting = np.asarray(dfa.accepting, dtype=bool)
-    rejecting = np.asarray(dfa.rejecting, dtype=bool)
+    compiled = compile_spec(spec, town)
+    accepting, rejecting = compiled.accepting, compiled.rejecting
     outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
     successors = [[town.state_index(s) for s in town.successors(road)] for road in town.states]
     memo: dict[tuple[int, int, int, bytes], float] = {}
@@ -51,7 +48,7 @@ def exact_optimum(pomdp: TrustPOMDP, spec: Spec, horizon: int, belief_rule: Beli
                 if p <= 0.0:
                     continue
                 b2 = posterior[0]
-                q2 = int(labeller.step(np.array([q]), np.array([x2]), b2[None])[0])
+                q2 = int(compiled.step(np.array([q]), np.array([x2]), b2[None])[0])
                 total += p * value(t + 1, x2, q2, b2)
             best = max(best, total)
         memo[key] = best
@@ -59,5 +56,5 @@ def exact_optimum(pomdp: TrustPOMDP, spec: Spec, horizon: int, belief_rule: Beli
 
     start = town.state_index(spec.start)
     b0 = np.asarray(pomdp.initial_belief, dtype=float)
-    q0 = int(labeller.step(np.array([dfa.initial]), np.array([start]), b0[None])[0])
+    q0 = compiled.initial_state(b0)
     return value(0, start, q0, b0)

@@ -24,13 +24,14 @@ from trustroute.harness.model_engine import run_model_episode
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 MIN_VISITS = 500
 TOLERANCE_EM = 0.08
 TOLERANCE_COUNTS = 0.07
 
 
-class RandomRoutes:
+class RandomRoutes(RoutingPolicy):
     name = "random"
 
     def __init__(self, town, rng):

@@ -5,13 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import trustroute.policies as policies
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 SPECS = Path(policies.__file__).parent / "specs"
 # Start E-A, then a pedestrian road, a plain road, an obstacle road and a truck road.
 INCIDENT_ROUTE = ("E-A", "A-B", "B-C", "C-J", "J-K")
 
 
-class FixedRoute:
+class FixedRoute(RoutingPolicy):
     """Drives a given route of directed roads, then declares itself finished."""
 
     name = "fixed"

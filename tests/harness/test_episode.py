@@ -17,6 +17,7 @@ from trustroute.networks.town import town_from_dict
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +95,7 @@ def test_same_seed_same_logs(setup, net_path):
                 and other.kinematics.equals(first.kinematics))
 
 
-class LoopPolicy:
+class LoopPolicy(RoutingPolicy):
     """Circles F-G-I-H-F (never finished): the 20-junction rule has to end the loop."""
 
     name = "loop"

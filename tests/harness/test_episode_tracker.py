@@ -17,6 +17,7 @@ from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +30,7 @@ def phi1_strict(town):
     return load_spec(SPECS / "phi1_strict.toml", town)
 
 
-class LoopPolicy:
+class LoopPolicy(RoutingPolicy):
     """Circles F-G-I-H-F for ever (never finished): exercises the cap and the fallback."""
 
     name = "loop"

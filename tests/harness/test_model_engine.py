@@ -21,11 +21,12 @@ from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.evaluate import evaluate
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 Z = 4.5
 
 
-class LoopingPolicy:
+class LoopingPolicy(RoutingPolicy):
     """Deterministic, belief-dependent, loops: exercises the fallback and many distinct decisions."""
 
     name = "looping"

@@ -93,7 +93,6 @@ def test_unknown_policy_exit_2(net, tmp_path, capsys):
 
 
 def test_policy_file_for_another_spec_exit_2(net, tmp_path, capsys):
-    pytest.importorskip("trustroute.policies.routing.files")
     policy = tmp_path / "phi2.json"
     code, stderr = _main(["synth", str(SPECS / "phi2.toml"), "--horizon", "3", "--tau", "0.5",
                           "--time-limit", "20", "--out", str(policy)], capsys)

@@ -212,8 +212,8 @@ def test_manifest_and_refusing_a_different_study(tmp_path):
 def test_study_horizon_selects_the_policy_synthesized_for_it(tmp_path):
     """`horizon = 6` synthesizes "aware" for 6 junctions, caches it under that horizon, and the
     expected values report that policy's own certified bounds (not the default H = 20 entry)."""
+    from trustroute.harness.study.context import aware_policy_path, study_context
     from trustroute.harness.study.expected import expected_values
-    from trustroute.harness.study.runner import aware_policy_path, study_context
 
     path = tmp_path / "study.toml"
     path.write_text(f"""[study]

@@ -14,14 +14,14 @@ from trustroute.policies.evaluate import evaluate
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.routing.fallback import FallbackPolicy, policy_finished, with_fallback
+from trustroute.policies.routing.fallback import FallbackPolicy, with_fallback
 from trustroute.policies.routing.free import trust_free_policy
-from trustroute.policies.routing.protocol import DecisionContext
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 RANDOM_POLICY_SEED = {"phi1": 9, "phi2": 6}
 
 
-class RandomStationaryPolicy:
+class RandomStationaryPolicy(RoutingPolicy):
     """A fixed random map (road, E[θ] >= 4.5) -> next junction, drawn from `rng`."""
 
     name = "random"
@@ -59,7 +59,7 @@ def simulate(pomdp, spec, policy, episodes, rng, max_junctions, belief_rule="bay
             if dfa.rejecting[q]:
                 break
             context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
-            if policy_finished(policy, context) or level == max_junctions:
+            if policy.finished(context) or level == max_junctions:
                 break
             road = town.successor(route[-1], policy.next_junction(context))
             inc = driver.incident_index(town.incident(road))
@@ -162,7 +162,7 @@ def recursive_value(pomdp, spec, policy, max_junctions, belief_rule):
         if dfa.accepting[q]:
             return 1.0, float(posterior @ levels)
         context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
-        if dfa.rejecting[q] or policy_finished(policy, context) or len(route) - 1 == max_junctions:
+        if dfa.rejecting[q] or policy.finished(context) or len(route) - 1 == max_junctions:
             return 0.0, float(posterior @ levels)
         road = town.successor(route[-1], policy.next_junction(context))
         inc = driver.incident_index(town.incident(road))

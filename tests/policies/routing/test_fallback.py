@@ -9,12 +9,12 @@ from trustroute.networks.town import split_road
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.routing.fallback import fallback_fired, policy_finished, with_fallback
+from trustroute.policies.routing.fallback import with_fallback
 from trustroute.policies.routing.free import completion_route
-from trustroute.policies.routing.protocol import DecisionContext
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 
-class AlwaysFirst:
+class AlwaysFirst(RoutingPolicy):
     """Always the first legal move (loops for ever on the default town): never completes alone."""
 
     name = "first"
@@ -38,7 +38,7 @@ def drive(town, spec, policy, junctions):
     for _ in range(junctions + 1):
         context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
         contexts.append(context)
-        if dfa.accepting[q] or policy_finished(policy, context):
+        if dfa.accepting[q] or policy.finished(context):
             break
         nxt = town.successor(route[-1], policy.next_junction(context))
         q = int(labeller.step(np.array([q]), np.array([town.state_index(nxt)]), belief[None])[0])
@@ -53,16 +53,16 @@ def test_fallback_delegates_then_completes_the_state_only_task(town, after):
     policy = with_fallback(inner, town, spec, after=after)
     contexts = drive(town, spec, policy, after + 30)
     for context in contexts[:after]:
-        assert not fallback_fired(policy, context)
+        assert not policy.fallback_active(context)
         assert policy.next_junction(context) == inner.next_junction(context)
     switch = contexts[after]
-    assert fallback_fired(policy, switch)
+    assert policy.fallback_active(switch)
     expected = completion_route(town, spec, switch.route)
     assert expected is not None
     # From the switch on, the vehicle drives exactly the shortest completion and then stops.
     final = contexts[-1]
     assert list(final.route[after:]) == expected
-    assert policy_finished(policy, final)
+    assert policy.finished(final)
     arrivals = [split_road(r)[1] for r in final.route]
     # The state-only task of φ1 (G, then J, then L) is done at the end.
     g = arrivals.index("G")

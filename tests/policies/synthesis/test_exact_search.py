@@ -6,10 +6,11 @@ import pytest
 
 from trustroute.policies.evaluate import evaluate
 from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.exact_search import exact_optimum
 
 
-class FixedRoutePolicy:
+class FixedRoutePolicy(RoutingPolicy):
     """Drive a given route, ignoring beliefs (an open-loop policy)."""
 
     name = "route"

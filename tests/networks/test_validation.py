@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from trustroute.input_files import MAX_DEPTH, check_keys, parse_json, parse_toml, read_input_text
 from trustroute.networks.errors import InputError
+from trustroute.networks.validation import MAX_DEPTH, check_keys, parse_json, parse_toml, read_input_text
 
 
 def test_ordinary_values_pass():

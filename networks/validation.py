@@ -1,4 +1,5 @@
-"""The guarded reader: the one way trustroute reads an input file (docs/input_files.md).
+"""Input validation every loader uses: the guarded reader of input files, limited JSON and TOML
+parsing, the strict key policy, required objects and keys (docs/input_files.md).
 
 Every input file kind (town JSON, driver model JSON, spec TOML, study config TOML, policy JSON and
 its .npz, a study's Parquet logs) is read through here, so every kind gets the same checks before
@@ -15,7 +16,8 @@ any parser sees a byte:
   limit and converts integers of any length); nan is rejected (inf is left to the keys that
   allow it).
 
-Every failure is an InputError naming the file, the place and the fix.
+Every failure is an InputError (networks/errors.py) naming the file, the place and the fix, so a
+bad input is one line on stderr and exit code 2 whatever kind of file it is.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import os
 import re
 import stat
 import tomllib
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -46,9 +49,11 @@ _TOML_COMMENT = re.compile(r"#[^\n]*")
 _TOML_INTEGER = re.compile(rf"(?<![\w.])[+-]?(?:0[xob])?[0-9a-fA-F_]{{{MAX_INT_DIGITS + 1},}}(?![\w.])")
 
 
-def read_input_bytes(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix: str = "") -> bytes:
-    """The bytes of a regular file of at most `max_bytes`, or InputError (never blocks on a FIFO)."""
-    shown = str(path)
+def read_input_bytes(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix: str = "",
+                     shown: str | None = None) -> bytes:
+    """The bytes of a regular file of at most `max_bytes`, or InputError (never blocks on a FIFO).
+    `shown` names the file in errors (default: the path)."""
+    shown = str(path) if shown is None else shown
     fix = fix or f"pass an existing {what}"
     if "\x00" in shown:
         raise InputError(repr(shown), "", f"the {what} path contains a NUL byte", fix)
@@ -96,8 +101,16 @@ def decode_utf8(data: bytes, source: str, what: str) -> str:
                          f"(byte 0x{data[exc.start]:02x})", "save the file as UTF-8") from None
 
 
-def read_input_text(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix: str = "") -> str:
-    return decode_utf8(read_input_bytes(path, what, max_bytes, fix), str(path), what)
+def read_input_text(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix: str = "",
+                    shown: str | None = None) -> str:
+    shown = str(path) if shown is None else shown
+    return decode_utf8(read_input_bytes(path, what, max_bytes, fix, shown), shown, what)
+
+
+def read_text(path: str | Path, shown: str, what: str, fix: str) -> str:
+    """The text of an input file through the guarded reader; `what` as in "the town file"."""
+    noun = what[4:] if what.startswith("the ") else what
+    return read_input_text(path, noun, fix=fix, shown=shown)
 
 
 # -- JSON -----------------------------------------------------------------------------------------
@@ -128,7 +141,7 @@ def _blank(match: re.Match) -> str:
     return "".join("\n" if c == "\n" else " " for c in match.group())
 
 
-def parse_json(text: str, source: str, what: str) -> object:
+def parse_json(text: str, source: str, what: str = "file") -> object:
     """JSON with depth, number-size and duplicate-key limits, or InputError."""
     stripped = _JSON_STRING.sub(_blank, text)
     deepest, offset = _max_bracket_depth(stripped, "[{", "]}")
@@ -186,7 +199,7 @@ def read_json(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix:
 # -- TOML -----------------------------------------------------------------------------------------
 
 
-def parse_toml(text: str, source: str, what: str) -> dict:
+def parse_toml(text: str, source: str, what: str = "file") -> dict:
     """TOML with depth, integer-size and finiteness limits, or InputError."""
     stripped = _TOML_STRINGS.sub(_blank, text)
     stripped = _TOML_COMMENT.sub(_blank, stripped)
@@ -257,3 +270,17 @@ def check_keys(data: dict, allowed: tuple[str, ...], source: str, place: str, wh
         where = f"{place}.{unknown[0]}" if place else unknown[0]
         raise InputError(source, where, f"unknown key {unknown[0][:60]!r} in the {what}",
                          f"use only {', '.join(allowed)} (a misspelt key would be ignored otherwise)")
+
+
+def require_object(data: object, shown: str, fix: str) -> dict:
+    """`data` itself when it is a JSON object (a dict); InputError at "top level" otherwise."""
+    if not isinstance(data, dict):
+        raise InputError(shown, "top level", "expected a JSON object", fix)
+    return data
+
+
+def require_keys(data: dict, keys: Iterable[str], shown: str, fix: Callable[[str], str]) -> None:
+    """InputError "missing key 'k'" at the first of `keys` absent from `data`; fix(k) says how."""
+    for key in keys:
+        if key not in data:
+            raise InputError(shown, key, f"missing key '{key}'", fix(key))

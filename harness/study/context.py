@@ -1,0 +1,103 @@
+"""The study's context: what every episode of a study shares, built from the config alone.
+
+Town, nominal driver model, specs, episode setups, the policies of every (spec, condition) and the
+participants' driver models. Built once per process and cached by the config (StudyConfig's
+equality covers every setting, [population] included); the runner (harness/study/runner.py), the
+expected values (harness/study/expected.py) and the demo read it from here.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.plan import participant_models
+from trustroute.networks.town import Town
+from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.routing.protocol import RoutingPolicy
+
+
+@dataclass(frozen=True, eq=False)
+class StudyContext:
+    """What every episode of a study shares; built from the config alone."""
+
+    config: StudyConfig
+    town: Town
+    nominal: DriverModel  # the AV's model (its belief filter) and the default driver
+    specs: dict[str, Spec]
+    setups: dict[str, EpisodeSetup]
+    policies: dict[tuple[str, str], RoutingPolicy]  # (spec name, condition label) -> policy
+    participants: list[DriverModel] | None  # per-participant driver models; None: all nominal
+
+    def driver_model(self, participant: int) -> DriverModel:
+        return self.nominal if self.participants is None else self.participants[participant]
+
+
+def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: StudyConfig) -> Path:
+    """Where the "aware" policy of this study is cached (the resolver's entry for its horizon and filter)."""
+    from trustroute.policies.routing.resolve import aware_cache_path
+
+    return aware_cache_path(town, driver, spec, config.policy_cache, aware_horizon(config),
+                            config.belief_rule)
+
+
+def aware_horizon(config: StudyConfig) -> int:
+    """The synthesis horizon of "aware": the config's, else the resolver's default (20 junctions)."""
+    from trustroute.policies.routing.resolve import AWARE_HORIZON
+
+    return AWARE_HORIZON if config.horizon is None else config.horizon
+
+
+def resolve_condition_policy(
+    condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig
+) -> RoutingPolicy:
+    """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
+    from trustroute.policies.routing.resolve import resolve_policy
+
+    return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
+                          config.belief_rule)
+
+
+@functools.lru_cache(maxsize=4)
+def study_context(config: StudyConfig) -> StudyContext:
+    """The study's shared context, built once per process (cached by the config: equal configs,
+    every setting and the [population] table included, share one context)."""
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.spec import check_trust_levels, load_spec
+
+    town = load_town(config.town)
+    nominal = load_driver_model(config.driver_model)
+    specs = {Path(path).stem: load_spec(path, town) for path in config.specs}
+    for spec in specs.values():  # a spec's belief atoms weigh one coefficient per trust level
+        check_trust_levels(spec, nominal.n_trust, nominal.source_path)
+    setups = {
+        name: EpisodeSetup(
+            town=town,
+            driver_model=nominal,
+            spec=spec,
+            junction_cap=config.junction_cap,
+            fallback_after=config.fallback_after,
+            report_every=config.report_every,
+            belief_rule=config.belief_rule,
+        )
+        for name, spec in specs.items()
+    }
+    policies = {
+        (name, label): resolve_condition_policy(condition, town, nominal, spec, config)
+        for name, spec in specs.items()
+        for condition, label in zip(config.conditions, config.condition_names, strict=True)
+    }
+    return StudyContext(
+        config=config,
+        town=town,
+        nominal=nominal,
+        specs=specs,
+        setups=setups,
+        policies=policies,
+        participants=participant_models(config, nominal),
+    )

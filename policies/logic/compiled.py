@@ -1,0 +1,79 @@
+"""A spec compiled against a town: its DFA, the labeller feeding it, the initial state and the step.
+
+`compile_spec(spec, town)` is the one place the DFA-plus-labeller pair is built. Episodes, the exact
+evaluation, synthesis, POUCT, trace evaluation, the linter and the state-only task all read a spec
+through it. Position 0 of a trace is the spec's start road: q_0 = step(dfa.initial, start, b_0).
+Cached by the spec's and the town's content hashes, so episodes share the arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.networks.errors import InputError
+from trustroute.networks.town import Town
+from trustroute.policies.logic.dfa import DFA, build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import Spec
+
+CACHE_SIZE = 64
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledSpec:
+    """The DFA of `spec`, the labeller L(x, b) on `town`, and the DFA step on positions (x, b)."""
+
+    spec: Spec
+    town: Town
+    dfa: DFA
+    labeller: Labeller
+    accepting: np.ndarray   # bool [n_states]
+    rejecting: np.ndarray   # bool [n_states]: can no longer accept
+    start: int              # index of the spec's start road in town.states
+
+    def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
+        """int64 [n]: DFA states after reading positions (x[i], beliefs[i]) from states q[i]."""
+        if np.size(q) == 0:
+            return np.zeros(0, dtype=np.int64)
+        return np.asarray(self.labeller.step(q, x, beliefs), dtype=np.int64)
+
+    def initial_states(self, beliefs: np.ndarray) -> np.ndarray:
+        """int64 [n]: q_0 of n episodes whose initial beliefs are the rows of `beliefs`."""
+        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        n = beliefs.shape[0]
+        return self.step(np.full(n, self.dfa.initial, dtype=np.int64), np.full(n, self.start), beliefs)
+
+    def initial_state(self, belief: np.ndarray) -> int:
+        """q_0 of one episode with initial belief `belief`."""
+        return int(self.initial_states(np.asarray(belief, dtype=float)[None, :])[0])
+
+    def step_road(self, q: int, road: str, belief: np.ndarray) -> int:
+        """The DFA state after reading one position (road, belief) from state q."""
+        x = self.town.state_index(road)
+        return int(self.step(np.array([q]), np.array([x]), np.asarray(belief, dtype=float)[None, :])[0])
+
+
+_COMPILED: dict[tuple[str, str], CompiledSpec] = {}
+
+
+def compile_spec(spec: Spec, town: Town) -> CompiledSpec:
+    """`spec` compiled against `town` (cached by their content hashes)."""
+    key = (spec.content_hash, town.content_hash)
+    compiled = _COMPILED.get(key)
+    if compiled is None:
+        if spec.start not in town.states:
+            raise InputError(spec.source_path or spec.name, "start",
+                             f"start road {spec.start!r} is not a directed road of the town",
+                             "use a road 'U-V' of the town the spec is checked against")
+        dfa = build_dfa(spec)
+        labeller = Labeller(spec, dfa, town)
+        compiled = CompiledSpec(spec=spec, town=town, dfa=dfa, labeller=labeller,
+                                accepting=np.asarray(dfa.accepting, dtype=bool),
+                                rejecting=np.asarray(dfa.rejecting, dtype=bool),
+                                start=town.state_index(spec.start))
+        if len(_COMPILED) >= CACHE_SIZE:
+            _COMPILED.clear()
+        _COMPILED[key] = compiled
+    return compiled

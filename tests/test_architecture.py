@@ -1,0 +1,117 @@
+"""The package's import graph, read with `ast`: no cycle anywhere (imports inside functions
+included), and no module imports another module's `_private` names."""
+
+from __future__ import annotations
+
+import ast
+import tomllib
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def package_modules() -> dict[str, Path]:
+    """Module name -> file, for every module of the trustroute namespace (pyproject's package-dir)."""
+    config = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
+    modules: dict[str, Path] = {}
+    for package, folder in config["package-dir"].items():
+        for path in sorted((REPO / folder).rglob("*.py")):
+            parts = path.relative_to(REPO / folder).with_suffix("").parts
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            modules[".".join((package, *parts))] = path
+    return modules
+
+
+def imports(path: Path, module: str, known: dict[str, Path]) -> list[tuple[str, str | None, int]]:
+    """(imported module, imported name or None, line) of every import statement in the file."""
+    is_package = path.name == "__init__.py"
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [(alias.name, None, node.lineno) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = module.split(".") if is_package else module.split(".")[:-1]
+                anchor = anchor[: len(anchor) - (node.level - 1)]
+                base = ".".join([*anchor, base] if base else anchor)
+            for alias in node.names:
+                target = f"{base}.{alias.name}"
+                if target in known:
+                    out.append((target, None, node.lineno))
+                else:
+                    out.append((base, alias.name, node.lineno))
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    known = package_modules()
+    return {
+        module: {t for t, _, _ in imports(path, module, known) if t in known and t != module}
+        for module, path in known.items()
+    }
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for nxt in sorted(graph[node]):
+            if nxt not in index:
+                visit(nxt)
+                low[node] = min(low[node], low[nxt])
+            elif nxt in on_stack:
+                low[node] = min(low[node], index[nxt])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return found
+
+
+def test_the_graph_is_read():
+    graph = import_graph()
+    assert "trustroute.harness.study.runner" in graph
+    assert "trustroute.harness.study.context" in graph["trustroute.harness.study.runner"]
+
+
+def test_cycle_detection_finds_a_cycle():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert cycles(graph) == [["a", "b", "c"]]
+
+
+def test_no_import_cycle():
+    assert cycles(import_graph()) == []
+
+
+def test_no_module_imports_another_modules_private_names():
+    known = package_modules()
+    files = dict(known)
+    files.update({f"tests.{p.stem}": p for p in (REPO / "tests").rglob("*.py")})
+    offending = [
+        f"{path.relative_to(REPO)}:{line}: {name} from {target}"
+        for module, path in files.items()
+        for target, name, line in imports(path, module, known)
+        if target.startswith("trustroute") and target != module and name is not None
+        and name.startswith("_") and not name.startswith("__")
+    ]
+    assert offending == []
