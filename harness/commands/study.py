@@ -95,13 +95,22 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
     from trustroute.analysis.tables import study_analysis
 
     analysis = study_analysis(Path(study_dir), belief_source=belief_source)
+    real = None
+    if analysis.manifest.get("engine") == "carla-logs":
+        from trustroute.analysis.real_study import real_study_analysis, write_real_study_report
+
+        real = real_study_analysis(Path(study_dir))
     paths = None
     if report:
         from trustroute.analysis.report import write_report
 
         paths = write_report(Path(study_dir), analysis=analysis)
+        if real is not None:
+            write_real_study_report(real, Path(study_dir))
     if as_json:
         payload = analysis.to_dict()
+        if real is not None:
+            payload["real_study"] = real.to_dict()
         if paths is not None:
             payload["report"] = {"markdown": str(paths.markdown), "html": str(paths.html)}
         click.echo(json.dumps(payload, default=str))
@@ -109,6 +118,11 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
     from trustroute.analysis.tables import format_table
 
     click.echo(format_table(analysis))
+    if real is not None:
+        from trustroute.analysis.real_study import format_real_study
+
+        click.echo("")
+        click.echo(format_real_study(real))
     if paths is not None:
         click.echo(f"report: {paths.markdown} and {paths.html}")
 
