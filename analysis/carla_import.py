@@ -12,8 +12,9 @@ autopilot was on, and the belief the AV logged. This module
 - per road records the takeover (any tick with the autopilot off), the trust displayed on
   arrival, the number of trust changes, the AV's logged belief, and the exact Bayes filter of
   the packaged driver model run on the observed incidents and takeovers;
-- writes episodes.parquet, roads.parquet, ticks.parquet (lossless run-length encoding of trust
-  and autopilot per tick), kinematics.parquet (positions, thinned) and manifest.json.
+- writes the dataset's episodes.parquet, roads.parquet, kinematics.parquet (positions, thinned)
+  and manifest.json through trustroute.analysis.dataset, and beside them real_episodes.parquet,
+  real_roads.parquet and ticks.parquet (lossless run-length encoding of trust and autopilot).
 
 The format is documented in docs/real_study.md. Bad input raises InputError (one line, exit 2).
 """
@@ -29,11 +30,60 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pyarrow as pa
-import pyarrow.parquet as pq
 
+from trustroute.analysis import dataset
 from trustroute.analysis.carla_tables import ARRIVAL_RADIUS_M, CarlaTables, load_carla_tables
 from trustroute.networks.errors import InputError
 
+# --sync runs CARLA with settings.fixed_delta_seconds = 0.05 (the driver script's game_loop)
+TICK_SECONDS = 0.05
+# The real-study tables beside the dataset's (docs/real_study.md, "The study directory").
+REAL_EPISODES_FILE = "real_episodes.parquet"
+REAL_ROADS_FILE = "real_roads.parquet"
+TICKS_FILE = "ticks.parquet"
+REAL_EPISODES_SCHEMA = pa.schema(
+    [
+        pa.field("episode_id", pa.string(), nullable=False),
+        pa.field("trial", pa.int64(), nullable=False),
+        pa.field("source_file", pa.string(), nullable=False),
+        pa.field("ticks", pa.int64(), nullable=False),
+        pa.field("manual_ticks", pa.int64(), nullable=False),
+        pa.field("trust_changes", pa.int64(), nullable=False),
+        pa.field("final_reported_trust", pa.int64(), nullable=False),
+        pa.field("log_end", pa.string(), nullable=False),
+    ]
+)
+REAL_ROADS_SCHEMA = pa.schema(
+    [
+        pa.field("episode_id", pa.string(), nullable=False),
+        pa.field("index", pa.int64(), nullable=False),
+        pa.field("authors_state", pa.string(), nullable=False),
+        pa.field("logged_belief", pa.list_(pa.float64()), nullable=False),
+        pa.field("arrived", pa.bool_(), nullable=False),
+        pa.field("tick_first", pa.int64(), nullable=False),
+        pa.field("tick_last", pa.int64(), nullable=False),
+        pa.field("ticks", pa.int64(), nullable=False),
+        pa.field("manual_ticks", pa.int64(), nullable=False),
+        pa.field("trust_changes", pa.int64(), nullable=False),
+    ]
+)
+TICKS_SCHEMA = pa.schema(
+    [
+        pa.field("episode_id", pa.string(), nullable=False),
+        pa.field("tick_first", pa.int64(), nullable=False),
+        pa.field("tick_last", pa.int64(), nullable=False),
+        pa.field("rows", pa.int64(), nullable=False),
+        pa.field("road_index", pa.int64(), nullable=False),
+        pa.field("carla_road", pa.int64(), nullable=False),
+        pa.field("trust", pa.int64(), nullable=False),
+        pa.field("autopilot", pa.bool_(), nullable=False),
+    ]
+)
+REAL_TABLES = {
+    "real_episodes": (REAL_EPISODES_FILE, REAL_EPISODES_SCHEMA),
+    "real_roads": (REAL_ROADS_FILE, REAL_ROADS_SCHEMA),
+    "ticks": (TICKS_FILE, TICKS_SCHEMA),
+}
 LOG_COLUMNS = ("trust_level", "location", "if_autopilot", "trust_belief")
 LOG_NAME = re.compile(
     r"trust_level_record_driver_(?P<driver>\d+)_trial_(?P<trial>\d+)_if_baseline_(?P<baseline>[01])"
@@ -233,7 +283,7 @@ def episode_tables(
         span = slice(cut.first, cut.last + 1)
         road_of_tick[span] = i
         takeover = bool((~auto[span]).any()) if i > 0 else False
-        incident = tables.incidents[road] if i > 0 else ""
+        incident = tables.incidents[road] if i > 0 else "none"
         before = belief.copy()
         if i > 0:
             posterior, _ = pomdp.belief_update(before, driver_model.incident_index(incident), int(takeover))
@@ -244,19 +294,21 @@ def episode_tables(
                 "episode_id": log.episode_id,
                 "index": i,
                 "directed_road": road,
-                "action": "",
+                "action": None,
                 "incident": incident,
-                "takeover": takeover,
-                "performance": "succ" if i > 0 else "",
-                "trust_before": -1,
-                "trust_after": -1,  # hidden trust: unknown for real participants
+                "takeover": takeover if i > 0 else None,  # the start road has no observation
+                "performance": "succ" if i > 0 else None,  # their model has no AV performance
+                "trust_before": None,
+                "trust_after": None,  # hidden trust: unknown for real participants
                 "reported_trust": int(trust[cut.last]),
                 "belief_before": before.tolist(),
                 "belief_after": belief.tolist(),
-                "dfa_state": -1,
+                "dfa_state": -1,  # not run at import; analysis evaluates the specs
                 "fallback": False,
-                "sim_time_in": float(ticks["tick"].iloc[cut.first]),
-                "sim_time_out": float(ticks["tick"].iloc[cut.last]),
+                "sim_time_in": float(ticks["tick"].iloc[cut.first]) * TICK_SECONDS,
+                "sim_time_out": float(ticks["tick"].iloc[cut.last]) * TICK_SECONDS,
+                "tick_first": int(ticks["tick"].iloc[cut.first]),
+                "tick_last": int(ticks["tick"].iloc[cut.last]),
                 # real-study columns (docs/real_study.md)
                 "authors_state": cut.state,
                 # the middle tick: the logged belief changes a tick after the simulator's arrival
@@ -272,6 +324,10 @@ def episode_tables(
     for i in range(len(rows) - 1):
         rows[i]["action"] = rows[i + 1]["directed_road"].split("-")[1]
     roads = pd.DataFrame(rows)
+    for column in ("takeover",):
+        roads[column] = roads[column].astype("boolean")
+    for column in ("trust_before", "trust_after"):
+        roads[column] = roads[column].astype("Int64")
     carla_road = ticks["carla_road"].to_numpy()
     change = (
         np.flatnonzero(
@@ -297,21 +353,28 @@ def episode_tables(
         }
     )
     driven = roads.iloc[1:]
+    goal = tables.trials[log.trial]["goal"]
+    reached_goal = bool((roads["arrived"] & roads["directed_road"].str.endswith(f"-{goal}")).any())
     episode = {
         "episode_id": log.episode_id,
         "participant": log.driver,
         "position": SESSION_ORDER[(log.trial, log.baseline)],
         "spec": tables.trials[log.trial]["spec"],
         "condition": CONDITIONS[log.baseline],
-        "seed": -1,
+        "seed": -1,  # a real participant: no seed
         "trial": log.trial,
         "source_file": log.relative,
         "junctions": int(len(roads) - 1),
         "takeovers": int(driven["takeover"].sum()),
-        "final_trust": int(trust[-1]),
-        "mean_trust": float("nan"),
+        "final_trust": None,  # hidden trust: unknown (the displayed trust is final_reported_trust)
+        "final_reported_trust": int(trust[-1]),
+        "mean_trust": None,
         "fallback_fired": bool(log.baseline == 0 and len(roads) - 1 > 20),
-        "end_reason": "destination" if bool(roads["arrived"].iloc[-1]) else "log ended",
+        # the car reached the goal junction on some road (their run ends there, or loops on)
+        "end_reason": "destination" if reached_goal else "cap",
+        "log_end": "arrived" if bool(roads["arrived"].iloc[-1]) else "log ended on the road",
+        "sim_seconds": float(ticks["tick"].iloc[-1] - ticks["tick"].iloc[0]) * TICK_SECONDS,
+        "wall_seconds": 0.0,  # not run by trustroute
         "ticks": int(len(ticks)),
         "manual_ticks": int((~auto).sum()),
         "mean_reported_trust": float(driven["reported_trust"].mean()) if len(driven) else float("nan"),
@@ -413,14 +476,17 @@ def import_carla_logs(source: Path, out: Path, echo=None, listed_absent: list[st
         road_frames.append(roads)
         run_frames.append(runs)
         kept = ticks.iloc[::KINEMATICS_EVERY]
+        seconds = kept["tick"].to_numpy(dtype=float) * TICK_SECONDS
+        step = np.hypot(np.diff(kept["x"].to_numpy()), np.diff(kept["y"].to_numpy()))
+        speed = np.concatenate([[0.0], step / np.maximum(np.diff(seconds), TICK_SECONDS)])
         kin_frames.append(
             pd.DataFrame(
                 {
                     "episode_id": log.episode_id,
-                    "time": kept["tick"].to_numpy(dtype=float),
+                    "time": seconds,
                     "x": kept["x"].to_numpy(),
                     "y": kept["y"].to_numpy(),
-                    "speed": np.nan,
+                    "speed": speed,  # of the logged waypoint, over the kept ticks
                     "lane": (
                         kept["carla_road"].astype(str) + ":" + kept["carla_lane"].astype(str)
                     ).to_numpy(),
@@ -447,12 +513,24 @@ def import_carla_logs(source: Path, out: Path, echo=None, listed_absent: list[st
     ]
     episodes["satisfied"] = _logged_satisfaction(episodes, roads, town, driver_model)
     out.mkdir(parents=True, exist_ok=True)
-    write_parquet(episodes, out / "episodes.parquet")
-    write_parquet(roads, out / "roads.parquet")
-    write_parquet(pd.concat(run_frames, ignore_index=True), out / "ticks.parquet")
-    write_parquet(pd.concat(kin_frames, ignore_index=True), out / "kinematics.parquet")
+    write_checked(episodes, dataset.EPISODES_SCHEMA, out / dataset.EPISODES_FILE)
+    write_checked(roads, dataset.ROADS_SCHEMA, out / dataset.ROADS_FILE)
+    write_checked(episodes, REAL_EPISODES_SCHEMA, out / REAL_EPISODES_FILE)
+    write_checked(roads, REAL_ROADS_SCHEMA, out / REAL_ROADS_FILE)
+    write_checked(pd.concat(run_frames, ignore_index=True), TICKS_SCHEMA, out / TICKS_FILE)
+    write_checked(
+        pd.concat(kin_frames, ignore_index=True), dataset.KINEMATICS_SCHEMA, out / dataset.KINEMATICS_FILE
+    )
+    command = ["trustroute", "import", "carla-logs", str(source), "--out", str(out)]
     manifest = {
         "study": "carla-real-study",
+        "config_path": None,
+        "config_hash": None,
+        "command": command,
+        "planned_episodes": int(len(episodes)),
+        "finished_episodes": int(len(episodes)),
+        "seeds": {},
+        "run": {"importer": "trustroute.analysis.carla_import", "tick_seconds": TICK_SECONDS},
         "engine": "carla-logs",
         "config": {
             "name": "carla-real-study",
@@ -467,10 +545,12 @@ def import_carla_logs(source: Path, out: Path, echo=None, listed_absent: list[st
         "packages": package_versions(),
         "source": str(source),
         "files": {
-            "episodes": "episodes.parquet",
-            "roads": "roads.parquet",
-            "ticks": "ticks.parquet",
-            "kinematics": "kinematics.parquet",
+            "episodes": dataset.EPISODES_FILE,
+            "roads": dataset.ROADS_FILE,
+            "kinematics": dataset.KINEMATICS_FILE,
+            "real_episodes": REAL_EPISODES_FILE,
+            "real_roads": REAL_ROADS_FILE,
+            "ticks": TICKS_FILE,
         },
         "failed_episodes": [],
         "expected": {},
@@ -502,8 +582,15 @@ def _logged_satisfaction(episodes: pd.DataFrame, roads: pd.DataFrame, town, driv
     return sat["satisfied_logged"].fillna(False).to_numpy(dtype=bool)
 
 
-def write_parquet(frame: pd.DataFrame, path: Path) -> None:
-    table = pa.Table.from_pandas(frame.reset_index(drop=True), preserve_index=False)
+def write_checked(frame: pd.DataFrame, schema: pa.Schema, path: Path) -> None:
+    """`frame`'s columns of `schema`, checked (trustroute.analysis.dataset) and written atomically."""
+    table = dataset.table_from_frame(frame.reset_index(drop=True), schema)
     temporary = path.with_name(f".tmp-{path.name}")
-    pq.write_table(table, temporary, compression="zstd")
+    dataset.write_table(table, temporary)
     temporary.replace(path)
+
+
+def read_real_table(study_dir: Path, name: str) -> pd.DataFrame:
+    """real_episodes, real_roads or ticks of an imported study, checked against its schema."""
+    file_name, schema = REAL_TABLES[name]
+    return dataset.frame_from_table(dataset.read_table(Path(study_dir) / file_name, schema))

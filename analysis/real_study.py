@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.carla_import import read_real_table
 from trustroute.analysis.satisfaction import episode_satisfaction
 
 BELIEF_SOURCES: tuple[str, ...] = ("logged", "reported", "bayes")
@@ -140,7 +141,7 @@ def authors_belief_replay(roads: pd.DataFrame, trial: int, tables, driver) -> np
     roads = roads.sort_values("index")
     belief = np.full(driver.n_trust, 1.0 / driver.n_trust)
     out = [belief]
-    takeovers = roads["takeover"].to_numpy()
+    takeovers = roads["takeover"].fillna(False).to_numpy(dtype=bool)  # null: the start road
     incidents = roads["incident"].to_numpy()
     for i in range(1, len(roads)):
         if incidents[i] != "none":
@@ -199,13 +200,24 @@ def _subset_drivers(manifest: dict) -> set[int] | None:
     return {int(m.group(1)) for n in names if (m := re.search(r"driver_(\d+)_", n))}
 
 
+def with_real_columns(
+    study_dir: Path, episodes: pd.DataFrame, roads: pd.DataFrame
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The dataset's episodes and roads joined with the imported study's real-study columns."""
+    real_episodes = read_real_table(study_dir, "real_episodes")
+    real_roads = read_real_table(study_dir, "real_roads")
+    roads = roads.merge(real_roads, on=["episode_id", "index"], how="left", suffixes=("", "_real"))
+    return episodes.merge(real_episodes, on="episode_id", how="left"), roads
+
+
 def real_study_analysis(study_dir: Path) -> RealStudyAnalysis:
     from trustroute.analysis.tables import load_study, study_inputs
 
     study_dir = Path(study_dir)
     manifest, episodes, roads = load_study(study_dir)
+    episodes, roads = with_real_columns(study_dir, episodes, roads)
     town, driver, specs = study_inputs(manifest)
-    ticks = pd.read_parquet(study_dir / "ticks.parquet")
+    ticks = read_real_table(study_dir, "ticks")
     sat = satisfaction_by_source(episodes, roads, specs, town, driver.trust_levels)
     per = (
         episodes.merge(sat, on="episode_id")

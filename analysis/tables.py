@@ -61,7 +61,10 @@ class StudyAnalysis:
 
 
 def _finite(value: float) -> float | None:
-    return None if value is None or (isinstance(value, float) and math.isnan(value)) else float(value)
+    # pd.NA: the mean of a nullable column with no values (e.g. final_trust of real participants)
+    if value is None or value is pd.NA or (isinstance(value, float) and math.isnan(value)):
+        return None
+    return float(value)
 
 
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:

@@ -12,9 +12,15 @@ import pandas as pd
 import pytest
 
 from tests.cli import run_cli
-from trustroute.analysis.carla_import import import_carla_logs
+from trustroute.analysis.carla_import import import_carla_logs, read_real_table
 from trustroute.analysis.carla_tables import load_carla_tables
-from trustroute.analysis.real_study import authors_belief_replay, authors_point_rule, authors_segment_rule
+from trustroute.analysis.dataset import read_episodes, read_roads
+from trustroute.analysis.real_study import (
+    authors_belief_replay,
+    authors_point_rule,
+    authors_segment_rule,
+    with_real_columns,
+)
 from trustroute.participants.driver_model import load_driver_model
 
 RAW = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "raw"
@@ -28,12 +34,17 @@ def imported(tmp_path_factory) -> Path:
     return out
 
 
+def _tables(study: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    episodes, roads = with_real_columns(study, read_episodes(study), read_roads(study))
+    return episodes, roads
+
+
 def _roads(study: Path) -> pd.DataFrame:
-    return pd.read_parquet(study / "roads.parquet")
+    return _tables(study)[1]
 
 
 def _episodes(study: Path) -> pd.DataFrame:
-    return pd.read_parquet(study / "episodes.parquet")
+    return _tables(study)[0]
 
 
 def test_free_episodes_drive_the_authors_preset_baseline_routes(imported):
@@ -93,9 +104,11 @@ def test_takeovers_and_reports_come_from_the_ticks(imported):
     group = roads[roads["episode_id"] == "d04-t1-aware"].sort_values("index")
     manual = raw.index[raw["if_autopilot"].astype(str) == "False"].to_numpy()
     for row in group.itertuples():
-        inside = ((manual >= row.sim_time_in) & (manual <= row.sim_time_out)).any()
-        assert row.takeover == (bool(inside) and row.index > 0)
-        assert row.reported_trust == raw.loc[int(row.sim_time_out), "trust_level"]
+        if row.index == 0:
+            assert pd.isna(row.takeover)  # the start road has no observation
+        else:
+            assert row.takeover == bool(((manual >= row.tick_first) & (manual <= row.tick_last)).any())
+        assert row.reported_trust == raw.loc[int(row.tick_last), "trust_level"]
 
 
 def _authors_point_loop(frame: pd.DataFrame) -> tuple[bool, float, float]:
@@ -132,7 +145,7 @@ def _authors_segment_loop(frame: pd.DataFrame) -> float:
 
 
 def test_authors_rules_match_literal_runs_of_their_loops(imported):
-    ticks = pd.read_parquet(imported / "ticks.parquet")
+    ticks = read_real_table(imported, "ticks")
     point = authors_point_rule(ticks).set_index("episode_id")
     segment = authors_segment_rule(ticks).set_index("episode_id")
     episodes = _episodes(imported).set_index("episode_id")
