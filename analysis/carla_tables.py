@@ -177,3 +177,17 @@ def write_carla_tables(checkout: Path, path: Path | None = None) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(build_carla_tables(checkout), indent=1) + "\n")
     return path
+
+
+def town01_town_dict(tables: CarlaTables, base: dict) -> dict:
+    """A town file (networks/town.py schema) with the roads and incidents of `base` and the junction
+    coordinates of Town01: the mean of the arrival points of the three roads entering each junction,
+    y negated (CARLA's frame is left-handed; the town's plane is right-handed)."""
+    points: dict[str, list[tuple[float, float]]] = {}
+    for state, road in tables.road_of_state.items():
+        points.setdefault(road.split("-")[1], []).append(tables.arrival_point[state])
+    centres = {j: np.mean(np.asarray(p), axis=0) for j, p in sorted(points.items())}
+    return {
+        **base,
+        "junctions": {j: [round(float(c[0]), 2), round(float(-c[1]), 2)] for j, c in centres.items()},
+    }
