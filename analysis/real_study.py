@@ -17,7 +17,7 @@ those ticks; takeover probability is the fraction of ticks with the autopilot of
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -152,12 +152,59 @@ def authors_belief_replay(roads: pd.DataFrame, trial: int, tables, driver) -> np
     return np.stack(out)
 
 
+def authors_paired_tests(per: pd.DataFrame) -> list[dict]:
+    """The paired t-tests of statistic_test_point_based.py (scipy.stats.ttest_rel, aware vs free),
+    with files paired by participant (their script pairs the i-th file of two os.listdir calls,
+    which is the same pairing when both folders list the same drivers in the same order)."""
+    from scipy import stats
+
+    rows = []
+    quantities = {
+        "fraction of autopilot ticks with trust >= 2": "fraction_trust_at_least_2",
+        "average trust (autopilot ticks)": "authors_average_trust",
+        "takeover probability (free - aware)": "authors_takeover_probability",
+        "LDTL satisfied (0/1)": "authors_satisfied",
+    }
+    subsets = {
+        "authors' drivers, trial 1 (their point-based script's folders)": per[per["in_authors_subset"]]
+    }
+    subsets["all participants, trial 1"] = per
+    for name, frame in subsets.items():
+        frame = frame[frame["trial"] == 1]
+        wide = frame.pivot_table(
+            index="participant", columns="condition", values=list(quantities.values()), aggfunc="first"
+        )
+        for label, column in quantities.items():
+            if (column, "aware") not in wide or (column, "free") not in wide:
+                continue
+            both = wide[[(column, "aware"), (column, "free")]].dropna().astype(float)
+            a, b = both[(column, "aware")].to_numpy(), both[(column, "free")].to_numpy()
+            if column == "authors_takeover_probability":
+                a, b = b, a  # their script tests free against aware here
+            if len(a) < 2 or np.allclose(a - b, 0):
+                t, p_value = float("nan"), float("nan")
+            else:
+                result = stats.ttest_rel(a, b)
+                t, p_value = float(result.statistic), float(result.pvalue)
+            rows.append(
+                {
+                    "subset": name,
+                    "quantity": label,
+                    "pairs": int(len(a)),
+                    "t_statistic": None if np.isnan(t) else t,
+                    "p_value": None if np.isnan(p_value) else p_value,
+                }
+            )
+    return rows
+
+
 @dataclass
 class RealStudyAnalysis:
     per_episode: pd.DataFrame
     figures: list[dict]
     matches: list[dict]
     manifest: dict
+    paired_tests: list[dict] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         info = self.manifest.get("real_study", {})
@@ -183,6 +230,7 @@ class RealStudyAnalysis:
             "per_episode": per.to_dict(orient="records"),
             "figures": self.figures,
             "paper_matches": self.matches,
+            "authors_paired_tests": self.paired_tests,
             "missing_sessions": info.get("missing_sessions", []),
             "excluded_files": [e for e in info.get("inventory", []) if e.get("status") != "imported"],
             "authors_subsets": {k: len(v) for k, v in info.get("authors_subsets", {}).items()},
@@ -227,7 +275,7 @@ def real_study_analysis(study_dir: Path) -> RealStudyAnalysis:
     subset = _subset_drivers(manifest)
     per["in_authors_subset"] = per["participant"].isin(subset) if subset is not None else False
     figures = figure_table(per, roads, ticks, subset)
-    return RealStudyAnalysis(per, figures, paper_matches(figures), manifest)
+    return RealStudyAnalysis(per, figures, paper_matches(figures), manifest, authors_paired_tests(per))
 
 
 def figure_table(
@@ -418,6 +466,14 @@ def format_real_study(analysis: RealStudyAnalysis) -> str:
             or "no reading reproduces it"
         )
         lines.append(f"paper {m['figure']} = {m['paper']}: {found}")
+    lines.append("")
+    for test in analysis.paired_tests:
+        t = "-" if test["t_statistic"] is None else f"{test['t_statistic']:.4f}"
+        p = "-" if test["p_value"] is None else f"{test['p_value']:.4g}"
+        lines.append(
+            f"authors' paired t-test, {test['subset']}: {test['quantity']}: t = {t}, p = {p} "
+            f"({test['pairs']} pairs)"
+        )
     info = analysis.manifest.get("real_study", {})
     lines.append("")
     lines.append(f"missing sessions: {', '.join(info.get('missing_sessions', [])) or 'none'}")
@@ -432,5 +488,26 @@ def format_real_study(analysis: RealStudyAnalysis) -> str:
 def write_real_study_report(analysis: RealStudyAnalysis, study_dir: Path) -> Path:
     path = Path(study_dir) / "real_study.json"
     path.write_text(json.dumps(analysis.to_dict(), indent=1, default=str))
-    (Path(study_dir) / "real_study.txt").write_text(format_real_study(analysis) + "\n")
+    text = format_real_study(analysis)
+    (Path(study_dir) / "real_study.txt").write_text(text + "\n")
+    _append_to_report(Path(study_dir), text)
     return path
+
+
+def _append_to_report(study_dir: Path, text: str) -> None:
+    """The real-study section at the end of report.md and report.html (written just before)."""
+    import html
+
+    from trustroute.analysis.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE
+
+    heading = "Real CARLA study: the paper's figures recomputed from the released logs"
+    markdown = Path(study_dir) / REPORT_MARKDOWN_FILE
+    if markdown.exists():
+        markdown.write_text(markdown.read_text() + f"\n## {heading}\n\n```\n{text}\n```\n")
+    page = Path(study_dir) / REPORT_HTML_FILE
+    if page.exists():
+        block = f"<h2>{html.escape(heading)}</h2><pre>{html.escape(text)}</pre>"
+        content = page.read_text()
+        page.write_text(
+            content.replace("</body>", block + "</body>") if "</body>" in content else content + block
+        )

@@ -272,4 +272,8 @@ def test_committed_study_is_analysed_with_every_file_accounted_for(tmp_path, cap
     statuses = {e["status"] for e in real["excluded_files"]}
     assert any("warm-up" in s for s in statuses) and any("pilot" in s for s in statuses)
     assert len(real["missing_sessions"]) == 10
-    assert (study / "real_study.json").exists() and (study / "report.md").exists()
+    assert (study / "real_study.json").exists()
+    assert "Real CARLA study" in (study / "report.md").read_text()
+    tests = real["authors_paired_tests"]
+    assert {t["quantity"] for t in tests} >= {"average trust (autopilot ticks)", "LDTL satisfied (0/1)"}
+    assert all(t["pairs"] in (20, 21) for t in tests)
