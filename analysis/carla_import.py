@@ -418,7 +418,9 @@ def authors_subsets(source: Path) -> dict[str, list[str]]:
     return out
 
 
-def import_carla_logs(source: Path, out: Path, echo=None, listed_absent: list[str] | None = None) -> dict:
+def import_carla_logs(
+    source: Path, out: Path, echo=None, listed_absent: list[str] | None = None, progress: bool = False
+) -> dict:
     """Convert the logs under `source` into the study directory `out`; return the manifest.
 
     `listed_absent`: files the source's index lists but whose content is absent (the git tree of
@@ -435,7 +437,9 @@ def import_carla_logs(source: Path, out: Path, echo=None, listed_absent: list[st
     seen: dict[str, LogFile] = {}
     inventory, episode_rows, road_frames, run_frames, kin_frames = [], [], [], [], []
     worst_distance = 0.0
-    iterator = logs
+    from tqdm import tqdm
+
+    iterator = tqdm(logs, desc="import", unit="log", disable=not progress)
     for log in iterator:
         entry = {
             "file": log.relative,

@@ -21,14 +21,13 @@ def import_group() -> None:
 @import_group.command("carla-logs")
 @click.argument("source", metavar="DIR", type=click.Path())
 @click.option("--out", "out", type=click.Path(), required=True, help="Study directory to write.")
-@click.option("--quiet", is_flag=True, help="No per-file lines.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the import summary as one JSON object.")
 def carla_logs(source: str, out: str, quiet: bool, as_json: bool) -> None:
     """Import the authors' CARLA logs under DIR into the study directory --out."""
     from trustroute.analysis.carla_import import import_carla_logs
 
-    echo = None if (quiet or as_json) else click.echo
-    manifest = import_carla_logs(Path(source), Path(out), echo=echo)
+    manifest = import_carla_logs(Path(source), Path(out), progress=not (quiet or as_json))
     info = manifest["real_study"]
     imported = [e for e in info["inventory"] if e.get("status") == "imported"]
     summary = {
