@@ -439,7 +439,8 @@ def import_carla_logs(
     worst_distance = 0.0
     from tqdm import tqdm
 
-    iterator = tqdm(logs, desc="import", unit="log", disable=not progress)
+    # disable=None: tqdm shows the bar only on a terminal, so an error stays one line in logs
+    iterator = tqdm(logs, desc="import", unit="log", disable=None if progress else True)
     for log in iterator:
         entry = {
             "file": log.relative,
