@@ -2,7 +2,8 @@
 
 The bare loop starts SUMO with the same command line, inserts the ego with the whole baseline route
 and steps until it arrives: no policy, driver, incidents or logging. Both are measured in the same
-run; the ratio is episode / bare. Also: memory growth over 200 episodes in one process.
+run; the ratio is episode / bare. Also: memory growth over 200 episodes in one process, and the
+measured failure rate, takeover rate and time lost per incident kind over those episodes.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import os
 import time
 
 import numpy as np
+import pandas as pd
 
 from benchmarks.timing import best_seconds
 from trustroute.harness.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
@@ -76,10 +78,18 @@ def run() -> list[dict]:
         episode(100 + seed)
     before = _rss_mb()
     started = time.perf_counter()
-    for seed in range(200):
-        episode(1000 + seed)
+    incidents = [episode(1000 + seed).incidents for seed in range(200)]
     many_seconds = time.perf_counter() - started
     growth = _rss_mb() - before
+    rows = pd.concat(incidents, ignore_index=True)
+    rates = []
+    for kind, group in rows.groupby("incident"):
+        auto = group[~group["takeover"]]   # performance is measured on autopilot only
+        failed = float((auto["performance"] == "fail").mean()) if len(auto) else float("nan")
+        rates.append({"name": f"episode_failure_rate.{kind}", "value": failed, "unit": "fraction",
+                      "roads_on_autopilot": int(len(auto)),
+                      "takeover_rate": float(group["takeover"].mean()),
+                      "mean_time_lost": float(group["time_lost"].mean()), "episodes": 200})
     return [
         {"name": "episode_phi1_wall", "value": episode_seconds, "unit": "s", "baseline": bare_seconds,
          "ratio": episode_seconds / bare_seconds, "sim_seconds": record.summary["sim_seconds"],
@@ -90,4 +100,5 @@ def run() -> list[dict]:
         {"name": "episode_phi1_bare_libsumo", "value": bare_seconds, "unit": "s"},
         {"name": "episodes_200_wall", "value": many_seconds, "unit": "s"},
         {"name": "episodes_200_rss_growth", "value": growth, "unit": "MB"},
+        *rates,
     ]
