@@ -6,10 +6,11 @@ The person waits on the sidewalk of W-V just before V; as the ego turns into V-W
 ahead of it. The timing is drawn from the episode's scene generator (docs/scenes.md):
 - "early" (`P_EARLY`): the person is there when the incident is injected and steps onto the
   crossing within a second or two, well before the ego arrives; the ego yields.
-- "late" (`P_LATE`): the person steps out from the kerb on the ego's own side, straight into
-  its lane, when the ego is only `LATE_MARGIN` metres (drawn) beyond the distance it needs to
-  stop with an emergency brake (`EMERGENCY_DECEL`, after one `REACTION` step); the ego can
-  always stop, but the smaller the margin, the harder it brakes and the closer it comes.
+- "late" (`P_LATE`): the person runs onto the crossing and is in the ego's lane (inserted on
+  the crossing, `LATE_BEFORE_LANE` metres before the ego's path) when the ego is only
+  `LATE_MARGIN` metres (drawn) beyond the distance it needs to stop with an emergency brake
+  (`EMERGENCY_DECEL`, after one `REACTION` step); the smaller the margin, the harder the ego
+  brakes and the closer it comes.
 - "none" (the rest): the person stands at the kerb and never crosses.
 """
 
@@ -26,11 +27,10 @@ TIMINGS = ("early", "late", "none")
 P_EARLY = 0.75
 P_LATE = 0.10                 # P(none) = 1 - P_EARLY - P_LATE
 EARLY_START = (0.0, 2.0)      # metres before the kerb where an early person starts (uniform)
-LATE_MARGIN = (0.0, 10.0)     # metres beyond the emergency stopping distance (uniform)
+LATE_MARGIN = (3.0, 12.0)     # metres beyond the emergency stopping distance (uniform)
 EMERGENCY_DECEL = 9.0         # m/s²: SUMO's default emergency deceleration of a passenger car
 REACTION = 0.5                # s: one simulation step before the ego reacts
-TO_THE_LANE = 1.0             # s: a late person's walk from the kerb into the ego's lane
-KERB_START = 0.3              # metres before the kerb: a late person steps out at once
+LATE_BEFORE_LANE = 0.5        # metres: where on the crossing a late person appears, before the ego's path
 START_BEFORE_JUNCTION = 1.0   # metres before the end of the opposite sidewalk: the kerb
 ARRIVAL_POSITION = 6.0        # metres along the incident road's sidewalk
 WALKING_SPEED = 1.2           # m/s
@@ -48,6 +48,7 @@ class PedestrianIncident:
     margin: float
     kerb: float                    # lane position of the kerb on the opposite sidewalk
     crossing_xy: tuple[float, float]
+    crossing: CrossingPath
     kind: str = KIND
     sumo_ids: tuple[str, ...] = field(init=False)
     inserted: bool = False
@@ -56,17 +57,7 @@ class PedestrianIncident:
     def __post_init__(self) -> None:
         self.sumo_ids = (self.person_id,)
 
-    def insert(self, sumo, time: float, before_kerb: float, crosses: bool, near_side: bool = False) -> None:
-        if near_side:
-            # From the kerb of the ego's own side: straight into the ego's lane.
-            sumo.person.add(self.person_id, self.road, KERB_START, depart=-3, typeID="DEFAULT_PEDTYPE")
-            sumo.person.setSpeed(self.person_id, LATE_WALKING_SPEED)
-            sumo.person.appendWalkingStage(self.person_id, [self.road, self.reverse_road],
-                                           max(0.0, self.kerb - ARRIVAL_POSITION))
-            sumo.person.setColor(self.person_id, (255, 140, 0, 255))
-            self.inserted = True
-            self.stepped_out = time
-            return
+    def insert(self, sumo, time: float, before_kerb: float, crosses: bool) -> None:
         sumo.person.add(self.person_id, self.reverse_road, max(0.0, self.kerb - before_kerb), depart=-3,
                         typeID="DEFAULT_PEDTYPE")
         sumo.person.setSpeed(self.person_id, WALKING_SPEED)
@@ -86,13 +77,22 @@ class PedestrianIncident:
         except sumo.TraCIException:
             return None
 
+    def insert_on_crossing(self, sumo, time: float) -> None:
+        crossing = self.crossing
+        sumo.person.add(self.person_id, crossing.edge, crossing.start, depart=-3, typeID="DEFAULT_PEDTYPE")
+        sumo.person.setSpeed(self.person_id, LATE_WALKING_SPEED)
+        sumo.person.appendWalkingStage(self.person_id, list(crossing.walk), crossing.arrival)
+        sumo.person.setColor(self.person_id, (255, 140, 0, 255))
+        self.inserted = True
+        self.stepped_out = time
+
     def step(self, sumo, ego: EgoState) -> None:
         if self.inserted or self.timing != "late":
             return
         distance = math.dist((ego.x, ego.y), self.crossing_xy)
-        stopping = ego.speed * ego.speed / (2 * EMERGENCY_DECEL) + ego.speed * (REACTION + TO_THE_LANE)
+        stopping = ego.speed * ego.speed / (2 * EMERGENCY_DECEL) + ego.speed * REACTION
         if distance <= stopping + self.margin:
-            self.insert(sumo, ego.time, KERB_START, crosses=True, near_side=True)
+            self.insert_on_crossing(sumo, ego.time)
 
     def measure(self, sumo, ego: EgoState, monitor) -> None:
         if not self.inserted or self.timing == "none":
@@ -117,20 +117,45 @@ class PedestrianIncident:
         return f"timing={self.timing} margin={self.margin:.2f} stepped_out={self.stepped_out:.1f}"
 
 
-def crossing_point(sumo, road: str) -> tuple[float, float]:
-    """Where the ego's lane meets the crossing at the start of `road` (the crossing's point
-    nearest the start of the road's vehicle lane)."""
-    start = tuple(sumo.lane.getShape(f"{road}_1")[0])
+@dataclass(frozen=True)
+class CrossingPath:
+    """The crossing at the start of a road as the ego meets it: the point of its path on the
+    crossing and a walk over the crossing that starts just before that point."""
+
+    edge: str                        # the crossing's edge id, e.g. ":A_c0"
+    conflict: tuple[float, float]    # where the ego's lane centre meets the crossing
+    start: float                     # position on the crossing where a late person appears
+    walk: tuple[str, ...]            # crossing, walking area, sidewalk
+    arrival: float
+
+
+def crossing_path(sumo, road: str) -> CrossingPath:
+    """The crossing over `road` at its start junction (networks/sumo_net.py puts one there)."""
+    lane_start = sumo.lane.getShape(f"{road}_1")[0]
     junction = road.split("-")[0]
-    best, best_distance = start, math.inf
+    best = None
     for edge in sumo.junction.getOutgoingEdges(junction):
         if not edge.startswith(f":{junction}_c"):
             continue
-        for point in sumo.lane.getShape(f"{edge}_0"):
-            distance = math.dist(point, start)
-            if distance < best_distance:
-                best, best_distance = tuple(point), distance
-    return best
+        (x0, y0), (x1, y1) = sumo.lane.getShape(f"{edge}_0")[0], sumo.lane.getShape(f"{edge}_0")[-1]
+        dx, dy = x1 - x0, y1 - y0
+        t = ((lane_start[0] - x0) * dx + (lane_start[1] - y0) * dy) / (dx * dx + dy * dy)
+        t = min(max(t, 0.0), 1.0)
+        point = (x0 + t * dx, y0 + t * dy)
+        distance = math.dist(point, lane_start)
+        if best is None or distance < best[0]:
+            best = (distance, edge, point, t)
+    if best is None:
+        raise ValueError(f"pedestrian incident on {road}: the net has no crossing at {junction}")
+    _, edge, point, t = best
+    length = sumo.lane.getLength(f"{edge}_0")
+    walking_area = sumo.lane.getLinks(f"{edge}_0")[0][0]     # the crossing leads to one walking area
+    sidewalk = next(link[0] for link in sumo.lane.getLinks(walking_area) if not link[0].startswith(":"))
+    sidewalk_edge = sidewalk.rsplit("_", 1)[0]
+    ends_here = sidewalk_edge.split("-")[1] == junction
+    arrival = max(0.0, sumo.lane.getLength(sidewalk) - 2.0) if ends_here else 2.0
+    return CrossingPath(edge=edge, conflict=point, start=max(0.0, t * length - LATE_BEFORE_LANE),
+                        walk=(edge, walking_area.rsplit("_", 1)[0], sidewalk_edge), arrival=arrival)
 
 
 def inject(sumo, scene: Scene) -> PedestrianIncident:
@@ -144,11 +169,11 @@ def inject(sumo, scene: Scene) -> PedestrianIncident:
     margin = float(scene.draw("late_margin", lambda rng: rng.uniform(*LATE_MARGIN)))
     before_kerb = float(scene.draw("early_start", lambda rng: rng.uniform(*EARLY_START)))
     kerb = max(0.0, sumo.lane.getLength(f"{scene.reverse_road}_0") - START_BEFORE_JUNCTION)
-    crossing_xy = crossing_point(sumo, scene.road)
+    crossing = crossing_path(sumo, scene.road)
     incident = PedestrianIncident(road=scene.road, reverse_road=scene.reverse_road,
                                   person_id=f"{scene.prefix}.pedestrian", timing=timing,
                                   margin=margin if timing == "late" else math.nan, kerb=kerb,
-                                  crossing_xy=crossing_xy)
+                                  crossing_xy=crossing.conflict, crossing=crossing)
     if timing == "early":
         incident.insert(sumo, scene.time, before_kerb, crosses=True)
     elif timing == "none":

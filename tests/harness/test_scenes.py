@@ -114,11 +114,19 @@ def test_every_incident_is_in_sumo_where_and_when_the_log_says(setup, net):
     assert "parked=yes" in truck.scene and truck.sumo_ids.count(",") == 1
 
 
+SEEDS = range(40)
+
+
+@pytest.fixture(scope="module")
+def nominal_records(setup, net):
+    return [_run(setup, net, seed) for seed in SEEDS]
+
+
 @pytest.mark.slow
-def test_no_pedestrian_collision_under_autopilot_and_measured_failures(setup, net):
+def test_no_pedestrian_collision_under_autopilot_and_measured_failures(nominal_records):
     """Default scenes over seeded episodes: never a collision with a person, the timing draws vary,
     and the measured performance is `fail` in a few episodes (rare, not zero)."""
-    records = [_run(setup, net, seed) for seed in range(40)]
+    records = nominal_records
     incidents = [r.incidents for r in records]
     pedestrians = [f[f["incident"] == "pedestrian"].iloc[0] for f in incidents]
     assert not any(p.collided for p in pedestrians)
@@ -137,15 +145,14 @@ def test_no_pedestrian_collision_under_autopilot_and_measured_failures(setup, ne
 
 
 @pytest.mark.slow
-def test_a_succ_fail_dependent_driver_changes_trust_trajectories(setup, net):
+def test_a_succ_fail_dependent_driver_changes_trust_trajectories(setup, net, nominal_records):
     """End to end in SUMO: the same seeded episodes with the default driver and with the example
     model whose trust drops after a failure. Where SUMO measured no failure the trajectories are
     identical (same draws); where it did, trust ends lower."""
     example = load_driver_model(PERFORMANCE_MODEL)
     assert example.depends_on_performance
     differ = 0
-    for seed in range(40):
-        nominal = _run(setup, net, seed)
+    for seed, nominal in zip(SEEDS, nominal_records, strict=True):
         sensitive = _run(setup, net, seed, model=example)
         assert nominal.incidents["performance"].tolist() == sensitive.incidents["performance"].tolist()
         same = nominal.roads["trust_after"].tolist() == sensitive.roads["trust_after"].tolist()
@@ -189,3 +196,18 @@ def test_background_traffic_is_seeded(setup, net):
         runs.append((record.kinematics.copy(), list(counts)))
     assert runs[0][0].equals(runs[1][0]) and runs[0][1] == runs[1][1]
     assert max(runs[0][1]) == 6 and min(runs[0][1][5:]) >= 4
+
+
+def test_a_forced_late_pedestrian_is_a_measured_fail(setup, net):
+    """A person who is on the crossing in the ego's lane when the ego is just at its emergency
+    stopping distance: SUMO's ego does not stop in time, and the measures say `fail`. With the
+    default margins (docs/scenes.md) the same person is yielded to."""
+    late = _run(setup, net, 3, {"pedestrian": {"timing": "late", "late_margin": 0.0}})
+    row = late.incidents[late.incidents["incident"] == "pedestrian"].iloc[0]
+    assert row.scene.startswith("timing=late margin=0.00")
+    assert row.performance == "fail" and row.failed_measures
+    assert row.min_pedestrian_distance < 2.0
+    assert late.roads.set_index("directed_road").loc["A-B", "performance"] == "fail"
+    yielded = _run(setup, net, 3, {"pedestrian": {"timing": "late", "late_margin": 6.0}})
+    row = yielded.incidents[yielded.incidents["incident"] == "pedestrian"].iloc[0]
+    assert row.performance == "succ" and not row.collided and row.min_pedestrian_distance > 2.0
