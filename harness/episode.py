@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
 from trustroute.harness import incidents as incident_kinds
 from trustroute.harness.background import BackgroundTraffic
@@ -67,15 +68,71 @@ def _empty_incidents() -> pd.DataFrame:
     return pd.DataFrame(columns=list(INCIDENT_COLUMNS))
 
 
-@dataclass(frozen=True, eq=False)
+# Arrow types of the columns that are not float64 (the roads, kinematics and incidents tables).
+_ARROW_TYPES = {name: pa.string() for name in (
+    "episode_id", "lane", "mode", "directed_road", "action", "incident", "sumo_ids", "performance",
+    "failed_measures", "scene")}
+_ARROW_TYPES.update({name: pa.int64() for name in (
+    "index", "trust_before", "trust_after", "reported_trust", "dfa_state")})
+_ARROW_TYPES.update({name: pa.bool_() for name in ("takeover", "collided", "fallback")})
+_ARROW_TYPES.update({name: pa.list_(pa.float64()) for name in ("belief_before", "belief_after")})
+
+
+def _arrow(columns: dict) -> pa.Table:
+    return pa.table({name: pa.array(values, type=_ARROW_TYPES.get(name, pa.float64()))
+                     for name, values in columns.items()})
+
+
 class EpisodeRecord:
     """The logs of one episode (the caller writes them to Parquet). `incidents` (SUMO engine only):
-    one row per road with an incident or a takeover, with the SUMO ids of its objects."""
+    one row per road with an incident or a takeover, with the SUMO ids of its objects.
 
-    summary: dict
-    roads: pd.DataFrame
-    kinematics: pd.DataFrame
-    incidents: pd.DataFrame = field(default_factory=_empty_incidents)
+    Each table is given as a DataFrame, or as columns ({name: list or numpy array}) or a function
+    returning a DataFrame; `roads`, `kinematics` and `incidents` are DataFrames built on first
+    use, and `tables()` hands the same logs back as Arrow tables without going through pandas
+    where the columns are at hand (the cheap path for writers: a study writes Arrow).
+    """
+
+    def __init__(self, summary: dict, roads, kinematics, incidents=None) -> None:
+        self.summary = summary
+        self._sources = {"roads": roads, "kinematics": kinematics,
+                         "incidents": incidents if incidents is not None else _empty_incidents}
+        self._frames: dict[str, pd.DataFrame] = {}
+
+    def _frame(self, name: str) -> pd.DataFrame:
+        frame = self._frames.get(name)
+        if frame is None:
+            source = self._sources[name]
+            if isinstance(source, pd.DataFrame):
+                frame = source
+            elif isinstance(source, dict):
+                frame = pd.DataFrame(source)
+            else:
+                frame = source()
+            self._frames[name] = frame
+        return frame
+
+    @property
+    def roads(self) -> pd.DataFrame:
+        return self._frame("roads")
+
+    @property
+    def kinematics(self) -> pd.DataFrame:
+        return self._frame("kinematics")
+
+    @property
+    def incidents(self) -> pd.DataFrame:
+        return self._frame("incidents")
+
+    def tables(self) -> dict[str, pa.Table]:
+        """{"roads", "kinematics", "incidents"} as Arrow tables."""
+        out = {}
+        for name, source in self._sources.items():
+            if isinstance(source, dict):
+                out[name] = _arrow(source)
+            else:
+                out[name] = pa.Table.from_pandas(self._frame(name), preserve_index=False)
+        return out
 
 
 @dataclass
@@ -130,7 +187,7 @@ _READABLE: set[tuple[str, float]] = set()
 def _check_readable(net_path: Path) -> None:
     """Parse a net passed in once per (path, mtime): a clear one-line error before SUMO prints its own."""
     try:
-        key = (str(net_path.resolve()), net_path.stat().st_mtime)
+        key = (str(net_path), net_path.stat().st_mtime)
     except OSError:
         raise InputError(str(net_path), "", "the SUMO net file does not exist",
                          "run `trustroute net build` or pass an existing .net.xml") from None
@@ -352,7 +409,7 @@ class _Episode:
                                    f"{self.config.max_sim_seconds:.0f} s of sim time on {road}")
         return now
 
-    def incidents_frame(self) -> pd.DataFrame:
+    def incidents_columns(self) -> dict:
         """One row per road with an incident object or a takeover (row 0, the start road, never)."""
         runs = [run for run in self.runs if run.index > 0 and (run.incident is not None or run.took_over)]
         columns = {
@@ -378,16 +435,16 @@ class _Episode:
         columns["time_lost"] = np.array([run.monitor.time_lost for run in runs], dtype=np.float64)
         columns["failed_measures"] = [",".join(run.monitor.failed_measures(self.limits(run))) for run in runs]
         columns["scene"] = [run.incident.details() if run.incident is not None else "" for run in runs]
-        return pd.DataFrame({name: columns[name] for name in INCIDENT_COLUMNS})
+        return {name: columns[name] for name in INCIDENT_COLUMNS}
 
-    def kinematics_frame(self) -> pd.DataFrame:
+    def kinematics_columns(self) -> dict:
         kin = self.kinematics
         columns: dict[str, object] = {"episode_id": [self.tracker.episode_id] * len(kin["time"])}
         for name in ("time", "x", "y", "speed"):
             columns[name] = np.asarray(kin[name], dtype=np.float64)
         columns["lane"] = kin["lane"]
         columns["mode"] = kin["mode"]
-        return pd.DataFrame(columns)
+        return columns
 
 
 def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: str, seed: int,
@@ -416,8 +473,8 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
         sim_seconds = episode.run()
     record = EpisodeRecord(summary=tracker.summary(wall_seconds=time.perf_counter() - started,
                                                    sim_seconds=sim_seconds),
-                           roads=tracker.roads_frame(), kinematics=episode.kinematics_frame(),
-                           incidents=episode.incidents_frame())
+                           roads=tracker.roads_columns(), kinematics=episode.kinematics_columns(),
+                           incidents=episode.incidents_columns())
     if rrd_path is not None:
         from trustroute.harness.rerun_log import write_recording
 

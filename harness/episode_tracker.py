@@ -231,8 +231,8 @@ class EpisodeTracker:
         """Whether the driver reports trust on the road about to be recorded (every report_every)."""
         return len(self._rows) % self.setup.report_every == 0
 
-    def roads_frame(self) -> pd.DataFrame:
-        """The roads table of the contract, one row per position."""
+    def roads_columns(self) -> dict[str, object]:
+        """The roads table as columns ({name: numpy array or list}), in ROAD_COLUMNS order."""
         # Built column by column with explicit dtypes: much cheaper than DataFrame(rows).astype(...).
         rows = self._rows
         columns: dict[str, object] = {}
@@ -240,7 +240,11 @@ class EpisodeTracker:
             values = [row[name] for row in rows]
             dtype = _ROAD_DTYPES.get(name)
             columns[name] = np.asarray(values, dtype=dtype) if dtype is not None else values
-        return pd.DataFrame(columns)
+        return columns
+
+    def roads_frame(self) -> pd.DataFrame:
+        """The roads table of the contract, one row per position."""
+        return pd.DataFrame(self.roads_columns())
 
     def summary(self, wall_seconds: float, sim_seconds: float) -> dict:
         """The episode summary dict; mean_trust is the mean true trust over all positions."""

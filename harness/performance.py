@@ -7,7 +7,8 @@ injected until the road's observation is recorded:
 - `min_ttc` (s): the smallest time-to-collision with the leader in the ego's lane (bumper to
   bumper, when closing in);
 - `min_head_on_ttc` (s): the smallest time to a head-on collision with an oncoming incident
-  vehicle in the same lane (one of the two overtaking through the oncoming lane);
+  vehicle in the same lane (one of the two overtaking through the oncoming lane); measured
+  below 3 s (`incidents.oncoming.WATCH_HORIZON`), inf when never that close;
 - `min_pedestrian_distance` (m): the closest the ego's front came to the incident's person
   while the person was on the crossing;
 - `time_lost` (s): the delay against free driving, the sum of (1 - v / v_free) dt.

@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from trustroute.harness.incidents.base import (
     EgoState,
     Scene,
-    head_on_ttc,
     park_vehicle,
     remove_vehicle,
     vehicle_position,
@@ -67,8 +66,8 @@ class ObstacleIncident:
             self.oncoming.step(sumo, ego)
 
     def measure(self, sumo, ego: EgoState, monitor) -> None:
-        if self.oncoming is not None and self.oncoming.inserted:
-            monitor.head_on(head_on_ttc(sumo, ego, self.oncoming.vehicle_id))
+        if self.oncoming is not None:
+            self.oncoming.measure(sumo, ego, monitor)
 
     def is_passed(self, sumo, ego: EgoState) -> bool:
         # Past it on its own road, or on the oncoming lane beside and beyond it.

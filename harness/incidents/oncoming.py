@@ -4,7 +4,13 @@
 reaches the point `meet_at` metres into the ego's road `meet_in` seconds from now. When that
 needs more road than the opposite road has, the truck enters at the road's far end later, at
 the time that keeps the meeting. `OncomingVehicle` records where and when the two actually
-passed each other in SUMO (`met_time`, `met_x`, `met_y`).
+passed each other in SUMO (`met_time`, `met_x`, `met_y`) and feeds the head-on TTC to the
+road's PerformanceMonitor.
+
+Both checks read the truck from SUMO only when they can matter: the gap between the two
+fronts shrinks by at most `MAX_CLOSING` m/s, so while it is large the next read is scheduled
+for when it could first come within `WATCH_HORIZON` seconds of a meeting (an exact bound,
+not a sampling: the head-on TTC below the horizon and the meeting time are unchanged).
 """
 
 from __future__ import annotations
@@ -12,11 +18,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from trustroute.harness.incidents.base import EgoState, Scene, remove_vehicle
+from trustroute.harness.incidents.base import EgoState, Scene, head_on_ttc, remove_vehicle
 
 TYPE_ID = "trustroute_truck"
 TRUCK_SPEED = 11.0     # m/s (40 km/h): a loaded truck on a 50 km/h town road
 TRUCK_LENGTH = 12.0
+MAX_CLOSING = 30.0     # m/s: above the ego's 13.89 plus the truck's 11 (both at most at their limits)
+WATCH_HORIZON = 3.0    # s: above every head-on TTC limit (harness/performance.py)
 
 
 def define_type(sumo) -> None:
@@ -46,28 +54,48 @@ class OncomingVehicle:
     met_x: float = math.nan
     met_y: float = math.nan
     _gone: bool = False
+    _next_meeting_check: float = -math.inf
+    _next_ttc_check: float = -math.inf
 
     def insert(self, sumo) -> None:
         sumo.vehicle.add(self.vehicle_id, self.route_id, typeID=TYPE_ID, depart="now", departLane="1",
                          departPos=f"{self.depart_position:.2f}", departSpeed="max")
         self.inserted = True
 
+    def _quiet_until(self, now: float, gap: float) -> float:
+        """The earliest time the gap could come within WATCH_HORIZON seconds of closing."""
+        return now + max(0.0, gap - MAX_CLOSING * WATCH_HORIZON) / MAX_CLOSING
+
     def step(self, sumo, ego: EgoState) -> None:
         if not self.inserted:
             if ego.time >= self.insert_time:
                 self.insert(sumo)
             return
-        if self._gone or not math.isnan(self.met_time):
+        if self._gone or not math.isnan(self.met_time) or ego.time < self._next_meeting_check:
             return
         try:
             x, y = sumo.vehicle.getPosition(self.vehicle_id)
-            angle = math.radians(sumo.vehicle.getAngle(self.vehicle_id))
         except sumo.TraCIException:
             self._gone = True
             return
+        self._next_meeting_check = self._quiet_until(ego.time, math.dist((x, y), (ego.x, ego.y)))
+        angle = math.radians(sumo.vehicle.getAngle(self.vehicle_id))
         # Met: the ego is no longer ahead of the truck along the truck's heading.
         if (ego.x - x) * math.sin(angle) + (ego.y - y) * math.cos(angle) <= 0:
             self.met_time, self.met_x, self.met_y = ego.time, x, y
+
+    def measure(self, sumo, ego: EgoState, monitor) -> None:
+        """The head-on TTC of this step, when it can be below WATCH_HORIZON."""
+        if not self.inserted or self._gone or ego.time < self._next_ttc_check:
+            return
+        try:
+            x, y = sumo.vehicle.getPosition(self.vehicle_id)
+        except sumo.TraCIException:
+            return
+        self._next_ttc_check = self._quiet_until(ego.time, math.dist((x, y), (ego.x, ego.y)))
+        ttc = head_on_ttc(sumo, ego, self.vehicle_id)
+        if ttc < WATCH_HORIZON:
+            monitor.head_on(ttc)
 
     def remove(self, sumo) -> None:
         remove_vehicle(sumo, self.vehicle_id)

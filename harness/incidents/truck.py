@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from trustroute.harness.incidents.base import (
     EgoState,
     Scene,
-    head_on_ttc,
     park_vehicle,
     remove_vehicle,
     vehicle_position,
@@ -58,8 +57,7 @@ class TruckIncident:
         self.oncoming.step(sumo, ego)
 
     def measure(self, sumo, ego: EgoState, monitor) -> None:
-        if self.oncoming.inserted:
-            monitor.head_on(head_on_ttc(sumo, ego, self.oncoming.vehicle_id))
+        self.oncoming.measure(sumo, ego, monitor)
 
     def is_passed(self, sumo, ego: EgoState) -> bool:
         return not math.isnan(self.oncoming.met_time)   # they have met
