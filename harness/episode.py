@@ -46,6 +46,7 @@ EGO_ID = "ego"
 EGO_TYPE = "trustroute_ego"
 COMMIT_DISTANCE = 30.0      # metres before a road's end: decide the next junction here
 VIEW_DISTANCE = 80.0        # metres: an incident object this close to the ego is in view
+MAX_CLOSING = 30.0          # m/s: no incident object and the ego close in on each other faster
 START_BEFORE_COMMIT = 40.0  # the ego is inserted this far before the start road's commit point
 INSERT_TIMEOUT = 30.0       # seconds of sim time for the ego to appear
 LEADER_HORIZON = 100.0      # metres: how far ahead the subscription looks for a leader
@@ -155,6 +156,7 @@ class _RoadRun:
     takeover_start: float = math.nan
     takeover_end: float = math.nan
     committed: bool = False
+    next_view_check: float = -math.inf
     monitor: PerformanceMonitor = field(default_factory=PerformanceMonitor)
 
 
@@ -266,12 +268,17 @@ class _Episode:
                 self.decide(run, ego.time)   # nothing to see: the driver decides on entering the road
             return
         incident.step(self.sumo, ego)
-        if not run.decided:
+        if not run.decided and ego.time >= run.next_view_check:
             where = incident.position(self.sumo)
-            if where is not None and math.dist(where, (ego.x, ego.y)) <= VIEW_DISTANCE:
-                run.in_view_time = ego.time
-                run.x, run.y = where
-                self.decide(run, ego.time)
+            if where is not None:
+                distance = math.dist(where, (ego.x, ego.y))
+                if distance <= VIEW_DISTANCE:
+                    run.in_view_time = ego.time
+                    run.x, run.y = where
+                    self.decide(run, ego.time)
+                else:
+                    # The gap closes at most MAX_CLOSING m/s: no need to look again before then.
+                    run.next_view_check = ego.time + (distance - VIEW_DISTANCE) / MAX_CLOSING
         # The objects stay after the ego has passed (an obstacle never leaves by itself); they are
         # taken out when the road's observation closes.
         if math.isnan(run.passed_time) and incident.is_passed(self.sumo, ego):

@@ -20,6 +20,8 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
+NOT_ON_THE_NET = 1e8   # metres: beyond any town; SUMO's invalid position is about -1.07e9
+
 
 class EgoState(NamedTuple):
     """The ego as the runner read it this step (one subscription); a NamedTuple: built every step."""
@@ -100,9 +102,11 @@ def vehicle_present(sumo, vehicle_id: str) -> bool:
 def vehicle_position(sumo, vehicle_id: str) -> tuple[float, float] | None:
     """Where the incident's vehicle is, or None when it is not in the simulation."""
     try:
-        return tuple(sumo.vehicle.getPosition(vehicle_id))
+        x, y = sumo.vehicle.getPosition(vehicle_id)
     except sumo.TraCIException:
         return None
+    # A vehicle added this step but not yet inserted reports SUMO's invalid position.
+    return None if abs(x) > NOT_ON_THE_NET or abs(y) > NOT_ON_THE_NET else (x, y)
 
 
 def remove_vehicle(sumo, vehicle_id: str) -> None:

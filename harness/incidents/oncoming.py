@@ -18,7 +18,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from trustroute.harness.incidents.base import EgoState, Scene, head_on_ttc, remove_vehicle
+from trustroute.harness.incidents.base import (
+    EgoState,
+    Scene,
+    head_on_ttc,
+    remove_vehicle,
+    vehicle_position,
+    vehicle_present,
+)
 
 TYPE_ID = "trustroute_truck"
 TRUCK_SPEED = 11.0     # m/s (40 km/h): a loaded truck on a 50 km/h town road
@@ -73,11 +80,11 @@ class OncomingVehicle:
             return
         if self._gone or not math.isnan(self.met_time) or ego.time < self._next_meeting_check:
             return
-        try:
-            x, y = sumo.vehicle.getPosition(self.vehicle_id)
-        except sumo.TraCIException:
-            self._gone = True
+        where = vehicle_position(sumo, self.vehicle_id)
+        if where is None:
+            self._gone = self._gone or not vehicle_present(sumo, self.vehicle_id)
             return
+        x, y = where
         self._next_meeting_check = self._quiet_until(ego.time, math.dist((x, y), (ego.x, ego.y)))
         angle = math.radians(sumo.vehicle.getAngle(self.vehicle_id))
         # Met: the ego is no longer ahead of the truck along the truck's heading.
@@ -88,10 +95,10 @@ class OncomingVehicle:
         """The head-on TTC of this step, when it can be below WATCH_HORIZON."""
         if not self.inserted or self._gone or ego.time < self._next_ttc_check:
             return
-        try:
-            x, y = sumo.vehicle.getPosition(self.vehicle_id)
-        except sumo.TraCIException:
+        where = vehicle_position(sumo, self.vehicle_id)
+        if where is None:
             return
+        x, y = where
         self._next_ttc_check = self._quiet_until(ego.time, math.dist((x, y), (ego.x, ego.y)))
         ttc = head_on_ttc(sumo, ego, self.vehicle_id)
         if ttc < WATCH_HORIZON:

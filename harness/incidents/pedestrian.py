@@ -36,6 +36,7 @@ ARRIVAL_POSITION = 6.0        # metres along the incident road's sidewalk
 WALKING_SPEED = 1.2           # m/s
 LATE_WALKING_SPEED = 1.6      # m/s: someone who steps out late is in a hurry
 WAIT_SECONDS = 600.0          # a person who does not cross stands this long (the road ends first)
+MEASURE_NEAR = 40.0           # metres from the crossing: the person's distance is read only this near
 PASSED_AFTER = 25.0           # metres into the road: the crossing is behind the ego
 
 
@@ -96,6 +97,9 @@ class PedestrianIncident:
 
     def measure(self, sumo, ego: EgoState, monitor) -> None:
         if not self.inserted or self.timing == "none":
+            return
+        # Only near the crossing can the ego come close to a person on it (no SUMO call otherwise).
+        if math.dist((ego.x, ego.y), self.crossing_xy) > MEASURE_NEAR:
             return
         try:
             where = sumo.person.getRoadID(self.person_id)

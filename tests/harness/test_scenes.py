@@ -211,3 +211,22 @@ def test_a_forced_late_pedestrian_is_a_measured_fail(setup, net):
     yielded = _run(setup, net, 3, {"pedestrian": {"timing": "late", "late_margin": 6.0}})
     row = yielded.incidents[yielded.incidents["incident"] == "pedestrian"].iloc[0]
     assert row.performance == "succ" and not row.collided and row.min_pedestrian_distance > 2.0
+
+
+def test_skipped_reads_change_nothing(setup, net, monkeypatch):
+    """The runner and the oncoming truck skip SUMO reads while a bound on the closing speed says
+    nothing can happen; with the bound switched off (a read every step) the logs are the same."""
+    import pandas as pd
+
+    from trustroute.harness import episode
+    from trustroute.harness.incidents import oncoming
+
+    overrides = {"obstacle": {"oncoming": True, "oncoming_offset": -1.0}, "truck": {"parked": True}}
+    bounded = [_run(setup, net, seed, overrides, takeovers=("truck",)) for seed in (2, 9)]
+    monkeypatch.setattr(episode, "MAX_CLOSING", float("inf"))
+    monkeypatch.setattr(oncoming.OncomingVehicle, "_quiet_until", lambda self, now, gap: now)
+    every_step = [_run(setup, net, seed, overrides, takeovers=("truck",)) for seed in (2, 9)]
+    for a, b in zip(bounded, every_step, strict=True):
+        pd.testing.assert_frame_equal(a.incidents, b.incidents)
+        pd.testing.assert_frame_equal(a.kinematics, b.kinematics)
+        assert a.incidents["in_view_time"].notna().all()
