@@ -4,7 +4,8 @@ The bare loop starts SUMO with the same command line, inserts the ego with the w
 and steps until it arrives: no policy, driver, incidents or logging. The episode includes handing
 its logs back as Arrow tables (EpisodeRecord.tables), the form a study writes. Both are measured in the same
 run; the ratio is episode / bare. Also: memory growth over 200 episodes in one process, and the
-measured failure rate, takeover rate and time lost per incident kind over those episodes.
+measured failure rate, takeover rate and time lost per incident kind over 200 episodes on a route
+through every kind (RATE_ROUTE).
 """
 
 from __future__ import annotations
@@ -27,6 +28,22 @@ from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 
 SEED = 3
+RATE_ROUTE = ("E-A", "A-B", "B-C", "C-J", "J-K")   # start, pedestrian, none, obstacle, truck
+
+
+class _FixedRoute:
+    """Drives RATE_ROUTE, then declares itself finished."""
+
+    name = "fixed"
+
+    def __init__(self, route) -> None:
+        self.route = tuple(route)
+
+    def finished(self, context) -> bool:
+        return len(context.route) >= len(self.route)
+
+    def next_junction(self, context) -> str:
+        return self.route[len(context.route)].split("-")[1]
 
 
 def _bare_loop(net, route: list[str], config: SumoConfig) -> float:
@@ -81,9 +98,17 @@ def run() -> list[dict]:
         episode(100 + seed)
     before = _rss_mb()
     started = time.perf_counter()
-    incidents = [episode(1000 + seed).incidents for seed in range(200)]
+    for seed in range(200):
+        episode(1000 + seed)
     many_seconds = time.perf_counter() - started
     growth = _rss_mb() - before
+    # Failure rates on a route through every incident kind (the phi1 route has no obstacle).
+    scenes = EpisodeSetup(town=town, driver_model=driver_model, spec=spec, fallback_after=None)
+    incidents = []
+    for seed in range(200):
+        driver = SyntheticDriver(driver_model, np.random.default_rng(2000 + seed))
+        incidents.append(run_episode(scenes, _FixedRoute(RATE_ROUTE), driver, f"rates{seed}", 2000 + seed,
+                                     net_path=net, config=config).incidents)
     rows = pd.concat(incidents, ignore_index=True)
     rates = []
     for kind, group in rows.groupby("incident"):
@@ -92,7 +117,8 @@ def run() -> list[dict]:
         rates.append({"name": f"episode_failure_rate.{kind}", "value": failed, "unit": "fraction",
                       "roads_on_autopilot": int(len(auto)),
                       "takeover_rate": float(group["takeover"].mean()),
-                      "mean_time_lost": float(group["time_lost"].mean()), "episodes": 200})
+                      "mean_time_lost": float(group["time_lost"].mean()), "episodes": 200,
+                      "route": "-".join(RATE_ROUTE)})
     return [
         {"name": "episode_phi1_wall", "value": episode_seconds, "unit": "s", "baseline": bare_seconds,
          "ratio": episode_seconds / bare_seconds, "sim_seconds": record.summary["sim_seconds"],
