@@ -28,6 +28,14 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from trustroute.analysis.dataset import (
+    INCIDENTS_SCHEMA,
+    KINEMATICS_SCHEMA,
+    ROADS_SCHEMA,
+    frame_from_table,
+    table_from_columns,
+    table_from_frame,
+)
 from trustroute.harness import incidents as incident_kinds
 from trustroute.harness.background import BackgroundTraffic
 from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker
@@ -37,7 +45,7 @@ from trustroute.harness.sumo_start import SumoConfig, sumo_session
 from trustroute.harness.takeover import AUTOPILOT, apply_style, hand_back, take_over
 from trustroute.networks.errors import InputError
 from trustroute.networks.sumo_net import ROAD_SPEED, build_net, net_counts
-from trustroute.networks.town import split_road
+from trustroute.networks.town import NO_INCIDENT, split_road
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 log = logging.getLogger(__name__)
@@ -53,63 +61,35 @@ LEADER_HORIZON = 100.0      # metres: how far ahead the subscription looks for a
 JUNCTION_LENGTH = 8.0       # metres: a typical internal lane, for timing scenes from the commit point
 SCENE_STREAM = 0x5CE7E      # the scene generator's stream: SeedSequence([seed, SCENE_STREAM])
 
-KINEMATIC_COLUMNS = ("episode_id", "time", "x", "y", "speed", "lane", "mode")
-INCIDENT_COLUMNS = ("episode_id", "index", "directed_road", "incident", "sumo_ids", "injected_time",
-                    "in_view_time", "x", "y", "passed_time", "removed_time", "takeover", "takeover_start",
-                    "takeover_end", "performance", "min_ttc", "max_deceleration", "collided",
-                    "min_head_on_ttc", "min_pedestrian_distance", "time_lost", "failed_measures", "scene")
-
-
 def scene_rng(seed: int) -> np.random.Generator:
     """The episode's scene generator (every draw of the incidents and background traffic)."""
     return np.random.default_rng(np.random.SeedSequence([int(seed), SCENE_STREAM]))
 
 
-def _empty_incidents() -> pd.DataFrame:
-    return pd.DataFrame(columns=list(INCIDENT_COLUMNS))
-
-
-# Arrow types of the columns that are not float64 (the roads, kinematics and incidents tables).
-_ARROW_TYPES = {name: pa.string() for name in (
-    "episode_id", "lane", "mode", "directed_road", "action", "incident", "sumo_ids", "performance",
-    "failed_measures", "scene")}
-_ARROW_TYPES.update({name: pa.int64() for name in (
-    "index", "trust_before", "trust_after", "reported_trust", "dfa_state")})
-_ARROW_TYPES.update({name: pa.bool_() for name in ("takeover", "collided", "fallback")})
-_ARROW_TYPES.update({name: pa.list_(pa.float64()) for name in ("belief_before", "belief_after")})
-
-
-def _arrow(columns: dict) -> pa.Table:
-    return pa.table({name: pa.array(values, type=_ARROW_TYPES.get(name, pa.float64()))
-                     for name, values in columns.items()})
+_SCHEMAS = {"roads": ROADS_SCHEMA, "kinematics": KINEMATICS_SCHEMA, "incidents": INCIDENTS_SCHEMA}
 
 
 class EpisodeRecord:
     """The logs of one episode (the caller writes them to Parquet). `incidents` (SUMO engine only):
     one row per road with an incident or a takeover, with the SUMO ids of its objects.
 
-    Each table is given as a DataFrame, or as columns ({name: list or numpy array}) or a function
-    returning a DataFrame; `roads`, `kinematics` and `incidents` are DataFrames built on first
-    use, and `tables()` hands the same logs back as Arrow tables without going through pandas
-    where the columns are at hand (the cheap path for writers: a study writes Arrow).
+    Each table is given as an Arrow table of its dataset schema (trustroute.analysis.dataset), or
+    as a DataFrame; `roads`, `kinematics` and `incidents` are DataFrames built on first use, and
+    `tables()` hands the logs back as Arrow tables without going through pandas when they were
+    given as Arrow (the SUMO engine's case: the cheap path for writers, a study writes Arrow).
     """
 
     def __init__(self, summary: dict, roads, kinematics, incidents=None) -> None:
         self.summary = summary
         self._sources = {"roads": roads, "kinematics": kinematics,
-                         "incidents": incidents if incidents is not None else _empty_incidents}
+                         "incidents": incidents if incidents is not None else INCIDENTS_SCHEMA.empty_table()}
         self._frames: dict[str, pd.DataFrame] = {}
 
     def _frame(self, name: str) -> pd.DataFrame:
         frame = self._frames.get(name)
         if frame is None:
             source = self._sources[name]
-            if isinstance(source, pd.DataFrame):
-                frame = source
-            elif isinstance(source, dict):
-                frame = pd.DataFrame(source)
-            else:
-                frame = source()
+            frame = source if isinstance(source, pd.DataFrame) else frame_from_table(source)
             self._frames[name] = frame
         return frame
 
@@ -129,10 +109,10 @@ class EpisodeRecord:
         """{"roads", "kinematics", "incidents"} as Arrow tables."""
         out = {}
         for name, source in self._sources.items():
-            if isinstance(source, dict):
-                out[name] = _arrow(source)
+            if isinstance(source, pa.Table):
+                out[name] = source
             else:
-                out[name] = pa.Table.from_pandas(self._frame(name), preserve_index=False)
+                out[name] = table_from_frame(source, _SCHEMAS[name])
         return out
 
 
@@ -232,7 +212,7 @@ class _Episode:
             run.takeover_start = now
 
     def new_run(self, index: int, road: str) -> _RoadRun:
-        kind = self.setup.town.incident(road) if index > 0 else ""
+        kind = self.setup.town.incident(road) if index > 0 else NO_INCIDENT
         limits = limits_for(self.config.performance_limits, kind or "none")
         return _RoadRun(index=index, road=road, kind=kind,
                         monitor=PerformanceMonitor(ttc_horizon=limits.min_ttc))
@@ -296,7 +276,7 @@ class _Episode:
         performance = run.monitor.result(self.limits(run))
         trust_before = self.driver.trust
         trust_after = self.driver.move_trust(run.kind, run.took_over, performance)
-        reported = self.driver.report_trust() if self.tracker.should_report() else -1
+        reported = self.driver.report_trust() if self.tracker.should_report() else None
         self.tracker.record_road(run.road, run.kind, run.took_over, performance, trust_before,
                                  trust_after, reported, run.time_in, now)
 
@@ -416,7 +396,7 @@ class _Episode:
                                    f"{self.config.max_sim_seconds:.0f} s of sim time on {road}")
         return now
 
-    def incidents_columns(self) -> dict:
+    def incidents_table(self) -> pa.Table:
         """One row per road with an incident object or a takeover (row 0, the start road, never)."""
         runs = [run for run in self.runs if run.index > 0 and (run.incident is not None or run.took_over)]
         columns = {
@@ -424,7 +404,8 @@ class _Episode:
             "index": np.array([run.index for run in runs], dtype=np.int64),
             "directed_road": [run.road for run in runs],
             "incident": [run.kind for run in runs],
-            "sumo_ids": [",".join(run.incident.sumo_ids) if run.incident is not None else "" for run in runs],
+            "sumo_ids": [",".join(run.incident.sumo_ids) if run.incident is not None else None
+                         for run in runs],
         }
         for name in ("injected_time", "in_view_time", "x", "y", "passed_time", "removed_time"):
             columns[name] = np.array([getattr(run, name) for run in runs], dtype=np.float64)
@@ -440,18 +421,19 @@ class _Episode:
         columns["min_pedestrian_distance"] = np.array([run.monitor.min_pedestrian_distance for run in runs],
                                                       dtype=np.float64)
         columns["time_lost"] = np.array([run.monitor.time_lost for run in runs], dtype=np.float64)
-        columns["failed_measures"] = [",".join(run.monitor.failed_measures(self.limits(run))) for run in runs]
-        columns["scene"] = [run.incident.details() if run.incident is not None else "" for run in runs]
-        return {name: columns[name] for name in INCIDENT_COLUMNS}
+        columns["failed_measures"] = [",".join(run.monitor.failed_measures(self.limits(run))) or None
+                                      for run in runs]
+        columns["scene"] = [run.incident.details() if run.incident is not None else None for run in runs]
+        return table_from_columns(columns, INCIDENTS_SCHEMA)
 
-    def kinematics_columns(self) -> dict:
+    def kinematics_table(self) -> pa.Table:
         kin = self.kinematics
         columns: dict[str, object] = {"episode_id": [self.tracker.episode_id] * len(kin["time"])}
         for name in ("time", "x", "y", "speed"):
             columns[name] = np.asarray(kin[name], dtype=np.float64)
         columns["lane"] = kin["lane"]
         columns["mode"] = kin["mode"]
-        return columns
+        return table_from_columns(columns, KINEMATICS_SCHEMA)
 
 
 def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: str, seed: int,
@@ -480,8 +462,8 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
         sim_seconds = episode.run()
     record = EpisodeRecord(summary=tracker.summary(wall_seconds=time.perf_counter() - started,
                                                    sim_seconds=sim_seconds),
-                           roads=tracker.roads_columns(), kinematics=episode.kinematics_columns(),
-                           incidents=episode.incidents_columns())
+                           roads=tracker.roads_table(), kinematics=episode.kinematics_table(),
+                           incidents=episode.incidents_table())
     if rrd_path is not None:
         from trustroute.harness.rerun_log import write_recording
 
