@@ -130,4 +130,44 @@ def run() -> list[dict]:
         {"name": "episodes_200_wall", "value": many_seconds, "unit": "s"},
         {"name": "episodes_200_rss_growth", "value": growth, "unit": "MB"},
         *rates,
+        study_against_bare(),
     ]
+
+
+def _bare_route(args) -> float:
+    """One bare loop (process-pool worker): (net path, route) -> sim seconds."""
+    net, route = args
+    return _bare_loop(net, list(route), SumoConfig())
+
+
+def study_against_bare(participants: int = 21, workers: int = 2) -> dict:
+    """A SUMO study (free condition, phi1 and phi2, `workers` processes, parts written and
+    consolidated) against bare libsumo loops driving the very routes its episodes drove, on the
+    same number of processes; the ratio is study wall / bare wall (throughput ratio)."""
+    import tempfile
+    from concurrent.futures import ProcessPoolExecutor
+    from pathlib import Path
+
+    from trustroute.analysis.dataset import read_roads
+    from trustroute.harness.study.config import study_config_from_dict
+    from trustroute.harness.study.runner import run_and_consolidate
+
+    net = build_net(load_town()).path
+    config = study_config_from_dict({"study": {
+        "name": "bench-study-vs-bare", "participants": participants, "seed": 1, "engine": "sumo",
+        "specs": ["phi1", "phi2"], "conditions": ["free"]}}, "bench_episode", Path.cwd())
+    with tempfile.TemporaryDirectory(prefix="trustroute-bench-") as folder:
+        started = time.perf_counter()
+        run, _ = run_and_consolidate(config, Path(folder) / "study", workers, None, progress=False,
+                                     echo=lambda *_: None)
+        study_seconds = time.perf_counter() - started
+        roads = read_roads(Path(folder) / "study")
+    routes = [tuple(group.sort_values("index")["directed_road"]) for _, group in roads.groupby("episode_id")]
+    started = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        list(pool.map(_bare_route, [(net, route) for route in routes]))
+    bare_seconds = time.perf_counter() - started
+    return {"name": "study_sumo_vs_bare_libsumo", "value": study_seconds, "unit": "s",
+            "baseline": bare_seconds, "ratio": study_seconds / bare_seconds, "episodes": len(routes),
+            "workers": workers, "failed": len(run.failed), "target_ratio": 2.0,
+            "what": "free condition only (no synthesis); bare = the same routes, same process count"}
