@@ -23,6 +23,8 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.logic.trace import evaluate_traces
 
 BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported")
+# Real study logs (analysis/real_study.py): the belief the AV logged, induced from reports, or Bayes.
+LOGGED_BELIEF_SOURCES: tuple[str, ...] = ("logged", "reported", "bayes")
 
 
 def _padded(
@@ -104,3 +106,21 @@ def episode_satisfaction(
     out = pd.concat(frames, ignore_index=True)
     order = {eid: i for i, eid in enumerate(episodes["episode_id"])}
     return out.sort_values("episode_id", key=lambda s: s.map(order)).reset_index(drop=True)
+
+
+def satisfaction_by_source(
+    episodes: pd.DataFrame, roads: pd.DataFrame, specs: dict, town, trust_levels
+) -> pd.DataFrame:
+    """Per episode (with a spec): satisfied_logged, satisfied_reported, satisfied_bayes."""
+    out = episodes[["episode_id"]].copy()
+    analysed = episodes[episodes["spec"].isin(list(specs))]
+    for source in LOGGED_BELIEF_SOURCES:
+        variant = roads
+        if source == "logged":
+            variant = roads.assign(belief_after=roads["logged_belief"])
+        result = episode_satisfaction(
+            variant, analysed, specs, town, trust_levels, "reported" if source == "reported" else "filter"
+        )
+        mapped = dict(zip(result["episode_id"], result["satisfied"], strict=True))
+        out[f"satisfied_{source}"] = out["episode_id"].map(mapped).astype("boolean")
+    return out

@@ -145,7 +145,11 @@ def write_part(
 
 def write_part_tables(study_dir: Path, task: EpisodeTask, summary: dict, tables: dict[str, pa.Table],
                       sync: bool = False) -> Path:
-    """`write_part` for tables already in Arrow form (checked against their schemas)."""
+    """`write_part` for tables already in Arrow form (checked against their schemas here; a table
+    that is absent is written empty)."""
+    tables = {name: check_table(tables[name].replace_schema_metadata(None), schema, name)
+              if tables.get(name) is not None else schema.empty_table()
+              for name, schema in PART_TABLES.items()}
     path = part_path(study_dir, task.episode_id)
     atomic_write_bytes(path, encode_part(task, summary, tables), "episode part",
                        "free disk space or pass a writable --out, then rerun (the study resumes)", sync=sync)

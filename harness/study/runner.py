@@ -33,7 +33,7 @@ from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.expected import expected_values
 from trustroute.harness.study.manifest import DamagedParts, consolidate
-from trustroute.harness.study.parts import finished_episodes, sync_parts, write_failure, write_part
+from trustroute.harness.study.parts import finished_episodes, sync_parts, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.networks.errors import InputError
 
@@ -86,21 +86,20 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
         driver = SyntheticDriver(
             context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
         )
+        extra = {}
+        if config.engine == "sumo" and config.background_vehicles:
+            from trustroute.harness.sumo_start import SumoConfig
+
+            extra["config"] = SumoConfig(background_vehicles=config.background_vehicles)
         record = engine_function(config.engine)(
             context.setups[task.spec],
             context.policies[(task.spec, task.condition)],
             driver,
             task.episode_id,
             task.seed,
+            **extra,
         )
-        write_part(
-            Path(study_dir),
-            task,
-            record.summary,
-            record.roads,
-            record.kinematics,
-            getattr(record, "incidents", None),
-        )
+        write_part_tables(Path(study_dir), task, record.summary, record.tables())
     except Exception as exc:  # one bad episode must never stop the study
         return EpisodeOutcome(
             task.episode_id,
