@@ -111,6 +111,13 @@ class StudyConfig:
         return replace(self, **{k: v for k, v in changes.items() if v is not None})
 
 
+def packaged_spec_path(name: str) -> Path | None:
+    """The packaged spec called `name` ("phi1" or "phi1.toml"), or None when there is none."""
+    stem = Path(name).name
+    candidate = PACKAGED_SPECS / (stem if stem.endswith(".toml") else f"{stem}.toml")
+    return candidate if candidate.is_file() else None
+
+
 def condition_label(condition: str) -> str:
     return condition if condition in NAMED_CONDITIONS else Path(condition).stem
 
