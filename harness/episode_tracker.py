@@ -2,7 +2,7 @@
 
 Shared by the SUMO engine (harness/episode.py) and the model engine (harness/model_engine.py)
 so the two can never disagree on the logic. The semantics are those of
-`policies.evaluate.evaluate` (DESIGN.md, "Positions of a trace", "The study's 20-junction rule"):
+`policies.evaluate.evaluate` (docs/model.md, "Positions of a trace", "Episodes"):
 
 - position 0 is (spec.start, initial belief); q_0 = Labeller.step(dfa.initial, start, b_0);
 - at every position, in this order: the DFA accepts -> "accepted"; the DFA can no longer

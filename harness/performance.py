@@ -1,6 +1,6 @@
 """The AV's performance on a road, measured from SUMO: "fail" on a collision of the ego, an
 emergency braking (deceleration above `FAIL_DECELERATION`), or a time-to-collision with its
-leader below `TTC_THRESHOLD`; otherwise "succ" (DESIGN.md, "Observation": e ∈ {succ, fail}).
+leader below `TTC_THRESHOLD`; otherwise "succ" (docs/model.md, "The model": e ∈ {succ, fail}).
 
 Only the AV's own driving counts: the runner measures while the ego is on autopilot, from the
 moment the road's incident is injected until the road's observation is recorded. The leader

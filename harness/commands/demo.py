@@ -14,6 +14,7 @@ from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 from trustroute.networks.errors import InputError
 
 DEFAULT_OUT = Path("out") / "demo"
@@ -58,13 +59,16 @@ def record_episode(config, study_dir: Path, episode_id: str) -> Path:
     type=click.Path(),
     default=str(DEFAULT_OUT),
     show_default=True,
-    help="Study directory (a rerun resumes).",
+    help="Study DIRECTORY (a rerun resumes).",
 )
 @click.option("--workers", type=int, default=None, help="Local worker processes (default: CPU count).")
 @click.option("--engine", type=click.Choice(["sumo", "model"]), default="sumo", show_default=True)
 @click.option("--participants", type=int, default=21, show_default=True)
-def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
+@json_option
+@quiet_option
+def demo(out: str, workers: int | None, engine: str, participants: int, as_json: bool, quiet: bool) -> None:
     """Run the paper-size study (21 participants) on the defaults and show where the results are."""
+    from trustroute.harness.commands.study import dataset_paths, report_paths
     from trustroute.harness.study.config import study_config_from_dict
     from trustroute.harness.study.runner import run_and_consolidate
 
@@ -77,29 +81,37 @@ def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
     )
     study_dir = Path(out)
     workers = workers if workers is not None else (os.cpu_count() or 1)
-    click.echo(
-        f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}"
-    )
-    run, _ = run_and_consolidate(config, study_dir, workers, None, echo=click.echo)
+    silent = quiet or as_json
+    say = (lambda line: None) if silent else click.echo
+    say(f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}")
+    run, manifest = run_and_consolidate(config, study_dir, workers, None, progress=not silent, echo=say)
     from trustroute.analysis.report import write_report
+    from trustroute.analysis.tables import study_analysis
 
-    paths = write_report(run.study_dir)
-    click.echo("")
-    click.echo(paths.table_text)
-    click.echo("")
-    click.echo(
-        f"results: {run.study_dir / 'episodes.parquet'} (episodes), {run.study_dir / 'roads.parquet'} (roads)"
-    )
-    click.echo(f"report:  {paths.markdown}  and  {paths.html}")
+    analysis = study_analysis(run.study_dir)
+    written = write_report(run.study_dir, analysis=analysis)
+    paths = {**dataset_paths(run.study_dir, manifest), **report_paths(written)}
+    lines = [
+        "",
+        written.table_text,
+        "",
+        f"results: {paths['episodes']} (episodes), {paths['roads']} (roads)",
+        f"report:  {written.markdown}  and  {written.html}",
+    ]
+    payload = {"study_dir": str(run.study_dir), "engine": engine, "failed": run.failed,
+               "analysis": analysis.to_dict()}
     if engine == "sumo":
         episode_id = f"p{0:05d}-phi1-aware"
         try:
             rrd = record_episode(config, run.study_dir, episode_id)
-            click.echo(f"episode recording: {rrd}  (open with: {_rerun_command()} {rrd})")
+            paths["rrd"] = rrd
+            lines.append(f"episode recording: {rrd}  (open with: {_rerun_command()} {rrd})")
         except Exception as exc:  # the study is done; a failed recording must not hide it
-            click.echo(f"episode recording failed: {type(exc).__name__}: {exc}")
+            payload["recording_error"] = f"{type(exc).__name__}: {exc}"
+            lines.append(f"episode recording failed: {payload['recording_error']}")
     if run.failed:
-        click.echo(f"{len(run.failed)} episodes failed: see {run.study_dir / 'failures'}")
+        lines.append(f"{len(run.failed)} episodes failed: see {run.study_dir / 'failures'}")
+    emit(as_json, with_paths(payload, paths), lines)
 
 
 def _rerun_command() -> str:

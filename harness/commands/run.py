@@ -7,36 +7,37 @@ from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.output import json_option, with_paths
 from trustroute.networks.errors import InputError
 
 
-def _write_logs(out_dir: Path, record) -> list[Path]:
+def _write_logs(out_dir: Path, record) -> dict[str, Path]:
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(str(out_dir), "", f"cannot create the output directory ({exc.strerror})",
                          "pass a writable directory with --out") from None
-    written = []
-    for name in ("roads", "kinematics", "incidents"):
-        path = out_dir / f"{name}.parquet"
-        getattr(record, name).to_parquet(path, index=False)
-        written.append(path)
-    summary = out_dir / "summary.json"
-    summary.write_text(json.dumps(record.summary, indent=1) + "\n")
-    written.append(summary)
+    written = {}
+    for name, frame in (("roads", record.roads), ("kinematics", record.kinematics),
+                        ("incidents", record.incidents)):
+        written[name] = out_dir / f"{name}.parquet"
+        frame.to_parquet(written[name], index=False)
+    written["summary"] = out_dir / "summary.json"
+    written["summary"].write_text(json.dumps(record.summary, indent=1) + "\n")
     return written
 
 
 @click.command("run")
-@click.option("--spec", "spec_path", required=True, type=click.Path(),
-              help="Spec file (e.g. specs/phi1.toml).")
+@click.argument("spec_argument", metavar="SPEC", required=False, type=click.Path())
+@click.option("--spec", "spec_option", type=click.Path(), default=None, hidden=True,
+              help="Deprecated spelling of the SPEC argument.")
 @click.option("--policy", "policy_name", default="free", show_default=True,
               help="'aware', 'free' or a policy file.")
 @click.option("--seed", type=int, default=0, show_default=True, help="SUMO seed and driver seed.")
 @click.option("--rrd", "rrd_path", type=click.Path(), default=None, help="Write a Rerun recording here.")
 @click.option("--out", "out_dir", type=click.Path(), default=None,
-              help="Write roads/kinematics/incidents Parquet and summary.json here.")
-@click.option("--json", "as_json", is_flag=True, help="Print the episode summary as one JSON object.")
+              help="DIRECTORY to write roads/kinematics/incidents Parquet and summary.json into.")
+@json_option
 @click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
 @click.option("--driver", "driver_path", type=click.Path(), default=None,
               help="Driver model file (default model).")
@@ -44,10 +45,11 @@ def _write_logs(out_dir: Path, record) -> list[Path]:
               help="SUMO net to use (default: the town's cached net, built if missing).")
 @click.option("--initial-trust", type=int, default=None, help="Driver's initial trust (default: drawn).")
 @click.option("--cache-dir", type=click.Path(), default=None, help="Where 'aware' policies are cached.")
-def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_dir: str | None,
-        as_json: bool, town_path: str | None, driver_path: str | None, net_path: str | None,
-        initial_trust: int | None, cache_dir: str | None) -> None:
-    """Run one episode of SPEC in SUMO with POLICY and a synthetic driver."""
+def run(spec_argument: str | None, spec_option: str | None, policy_name: str, seed: int,
+        rrd_path: str | None, out_dir: str | None, as_json: bool, town_path: str | None,
+        driver_path: str | None, net_path: str | None, initial_trust: int | None,
+        cache_dir: str | None) -> None:
+    """Run one episode of SPEC (a spec file) in SUMO with POLICY and a synthetic driver."""
     import numpy as np
 
     from trustroute.harness.episode import run_episode
@@ -58,6 +60,11 @@ def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_d
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.routing.resolve import resolve_policy
 
+    if spec_argument is not None and spec_option is not None:
+        raise click.UsageError("give the spec once: as the SPEC argument (--spec is its old spelling)")
+    spec_path = spec_argument if spec_argument is not None else spec_option
+    if spec_path is None:
+        raise click.UsageError("missing argument SPEC (a spec file, e.g. specs/phi1.toml)")
     if seed < 0:
         raise InputError("--seed", "", f"must be >= 0, got {seed}", "pass a non-negative integer")
     town = load_town(town_path)
@@ -73,16 +80,18 @@ def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_d
     record = run_episode(setup, policy, driver, episode_id, seed,
                          rrd_path=Path(rrd_path) if rrd_path else None,
                          net_path=Path(net_path) if net_path else None)
-    written = _write_logs(Path(out_dir), record) if out_dir else []
+    written = _write_logs(Path(out_dir), record) if out_dir else {}
+    if rrd_path:
+        written["rrd"] = Path(rrd_path)
     summary = dict(record.summary)
     summary["route"] = record.roads["directed_road"].tolist()
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(json.dumps(with_paths(summary, written)))
         return
     click.echo(f"{episode_id}: {summary['end_reason']} after {summary['junctions']} junctions, "
                f"satisfied={summary['satisfied']}, takeovers={summary['takeovers']}, final trust "
                f"{summary['final_trust']}, sim {summary['sim_seconds']:.1f} s, wall "
                f"{summary['wall_seconds']:.2f} s")
     click.echo("route: " + " ".join(summary["route"]))
-    for path in written + ([Path(rrd_path)] if rrd_path else []):
+    for path in written.values():
         click.echo(f"wrote {path}")

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.output import json_option, with_paths
 from trustroute.networks.errors import InputError
 
 
@@ -55,8 +56,9 @@ def spec() -> None:
 @spec.command("check")
 @click.argument("spec_path", metavar="SPEC")
 @click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-@click.option("--dot", "dot_path", type=click.Path(), default=None, help="Write the DFA as Graphviz dot.")
+@json_option
+@click.option("--dot", "dot_path", type=click.Path(), default=None,
+              help="FILE to write the DFA into, as Graphviz dot.")
 def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | None) -> None:
     """Parse SPEC, print its DFA size and the linter's warnings."""
     summary, dot = spec_report(spec_path, town_path)
@@ -67,7 +69,7 @@ def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | 
             raise InputError(dot_path, "", f"cannot write the dot file ({exc.strerror})",
                              "pass a writable path to --dot") from None
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(json.dumps(with_paths(summary, {"dot": dot_path})))
         return
     click.echo(f"{summary['name']} ({summary['file']}): start {summary['start']}, "
                f"formula {summary['formula']}")

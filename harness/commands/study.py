@@ -14,6 +14,7 @@ from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 from trustroute.networks.errors import InputError
 
 DEFAULT_STUDIES_DIR = Path("studies")
@@ -27,6 +28,19 @@ def study_directory(config, out: str | None) -> Path:
     return DEFAULT_STUDIES_DIR / config.name
 
 
+def dataset_paths(study_dir: Path, manifest: dict) -> dict[str, Path]:
+    """The consolidated dataset's files (manifest "files") and the manifest, by name."""
+    from trustroute.harness.study.manifest import MANIFEST_FILE
+
+    files = {name: study_dir / file for name, file in manifest.get("files", {}).items()}
+    return {**files, "manifest": study_dir / MANIFEST_FILE}
+
+
+def report_paths(paths) -> dict[str, Path]:
+    """The files of analysis.report.write_report, by name."""
+    return {"report_markdown": paths.markdown, "report_html": paths.html}
+
+
 @click.command("study")
 @click.argument("config_path", metavar="CONFIG", type=click.Path())
 @click.option(
@@ -34,7 +48,7 @@ def study_directory(config, out: str | None) -> Path:
     "out",
     type=click.Path(),
     default=None,
-    help="Study directory (default: the config's output, else studies/<name>).",
+    help="Study DIRECTORY (default: the config's output, else studies/<name>).",
 )
 @click.option("--workers", type=int, default=None, help="Local worker processes (default: CPU count).")
 @click.option(
@@ -46,6 +60,8 @@ def study_directory(config, out: str | None) -> Path:
     "--engine", type=click.Choice(["sumo", "model"]), default=None, help="Override the config's engine."
 )
 @click.option("--no-report", is_flag=True, help="Do not analyse or write the report.")
+@json_option
+@quiet_option
 def study(
     config_path: str,
     out: str | None,
@@ -53,8 +69,10 @@ def study(
     scheduler: str | None,
     engine: str | None,
     no_report: bool,
+    as_json: bool,
+    quiet: bool,
 ) -> None:
-    """Run (or resume) the simulated within-subject study described by CONFIG."""
+    """Run (or resume) the simulated within-subject study described by CONFIG (a TOML file)."""
     from trustroute.harness.study.config import load_study_config
 
     config = load_study_config(config_path).with_overrides(engine=engine)
@@ -64,24 +82,34 @@ def study(
     study_dir = study_directory(config, out)
     from trustroute.harness.study.runner import run_and_consolidate
 
-    run, _ = run_and_consolidate(config, study_dir, workers, scheduler, echo=click.echo)
-    click.echo(f"dataset: {run.study_dir / 'episodes.parquet'}, {run.study_dir / 'roads.parquet'}")
+    silent = quiet or as_json
+    run, manifest = run_and_consolidate(config, study_dir, workers, scheduler, progress=not silent,
+                                        echo=(lambda line: None) if silent else click.echo)
+    paths = dataset_paths(run.study_dir, manifest)
+    lines = [f"dataset: {run.study_dir / 'episodes.parquet'}, {run.study_dir / 'roads.parquet'}"]
     if run.failed:
-        click.echo(
+        lines.append(
             f"failed episodes (see {run.study_dir / 'failures'}): {', '.join(run.failed[:5])}"
             f"{' ...' if len(run.failed) > 5 else ''}"
         )
+    payload = {"study_dir": str(run.study_dir), "planned": run.planned, "skipped": run.skipped,
+               "ran": run.ran, "retried": run.retried, "failed": run.failed, "backend": run.backend,
+               "seconds": run.seconds}
     if not no_report:
         from trustroute.analysis.report import write_report
+        from trustroute.analysis.tables import study_analysis
 
-        paths = write_report(run.study_dir)
-        click.echo(paths.table_text)
-        click.echo(f"report: {paths.markdown} and {paths.html}")
+        analysis = study_analysis(run.study_dir)
+        written = write_report(run.study_dir, analysis=analysis)
+        paths.update(report_paths(written))
+        payload["analysis"] = analysis.to_dict()
+        lines += [written.table_text, f"report: {written.markdown} and {written.html}"]
+    emit(as_json, with_paths(payload, paths), lines)
 
 
 @click.command("analyze")
 @click.argument("study_dir", metavar="DIR", type=click.Path())
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@json_option
 @click.option(
     "--belief-source",
     type=click.Choice(["filter", "reported"]),
@@ -89,21 +117,25 @@ def study(
     show_default=True,
     help="Beliefs the spec is evaluated on: the AV's filter, or induced from reported trust.",
 )
-@click.option("--report/--no-report", default=True, help="Also (re)write the report and plots.")
-def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> None:
-    """Per spec and condition: n, satisfaction rate with CI, mean trust, paired tests."""
+@click.option(
+    "--report/--no-report",
+    default=None,
+    help="(Re)write report.md, report.html and plots/ in DIR (default: yes, but no with --json).",
+)
+def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool | None) -> None:
+    """Per spec and condition of the study directory DIR: n, satisfaction rate with CI, mean trust,
+    paired tests."""
     from trustroute.analysis.tables import study_analysis
 
     analysis = study_analysis(Path(study_dir), belief_source=belief_source)
     paths = None
-    if report:
+    write = (not as_json) if report is None else report
+    if write:
         from trustroute.analysis.report import write_report
 
         paths = write_report(Path(study_dir), analysis=analysis)
     if as_json:
-        payload = analysis.to_dict()
-        if paths is not None:
-            payload["report"] = {"markdown": str(paths.markdown), "html": str(paths.html)}
+        payload = with_paths(analysis.to_dict(), report_paths(paths) if paths is not None else {})
         click.echo(json.dumps(payload, default=str))
         return
     from trustroute.analysis.tables import format_table
@@ -121,7 +153,7 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
     type=click.Path(),
     default="driver.json",
     show_default=True,
-    help="Driver model file to write.",
+    help="Driver model FILE to write.",
 )
 @click.option(
     "--method",
@@ -132,14 +164,14 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
     "auto: counts when the study's report accuracy is 1 and trust is reported every road.",
 )
 @click.option("--iterations", type=int, default=200, show_default=True, help="EM iterations at most.")
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@json_option
 def fit(study_dir: str, out: str, method: str, iterations: int, as_json: bool) -> None:
     """Estimate trust dynamics and the takeover model from a study's logs; write a driver model."""
     from trustroute.analysis.fit import fit_study
 
     result = fit_study(Path(study_dir), method=method, iterations=iterations)
     path = result.write(Path(out))
-    payload = {"driver_model": str(path), **result.summary()}
+    payload = with_paths(result.summary(), {"driver_model": path})
     if as_json:
         click.echo(json.dumps(payload, default=str))
         return

@@ -16,6 +16,8 @@ policies, junctions; default 20), `fallback_after` (20; `false` disables the 20-
 variation of the drivers (participants.population.PopulationConfig; omitted: every driver is the
 nominal model, reporting trust with accuracy 0.8).
 
+Every key, its default and its check: docs/formats/study_config.md.
+
 Relative paths resolve against the config file's folder, then the current directory; spec names
 also resolve against the packaged specs (`phi1`, `specs/phi1.toml`). Bad input raises InputError
 naming the file, the key and the fix.

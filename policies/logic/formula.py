@@ -1,6 +1,6 @@
 """scLDTL formulas: the abstract syntax tree, its parser and printer, and a canonical form.
 
-Grammar (DESIGN.md, "scLDTL"), lowest precedence first:
+Grammar (docs/formats/spec.md, "Formula grammar"), lowest precedence first:
 
     formula := or
     or      := and ('|' and)*

@@ -1,7 +1,7 @@
 """The labelling function L(x, b) of the trust POMDP feeding a spec's DFA, vectorised.
 
 State atoms are read from a membership table [n_state_atoms, n_roads]; belief atoms are
-`offset - coeffs·b < 0`, i.e. `beliefs @ coeffs > offset` (strict; DESIGN.md, "scLDTL").
+`offset - coeffs·b < 0`, i.e. `beliefs @ coeffs > offset` (strict; docs/model.md, "scLDTL").
 Columns follow `dfa.atoms`.
 """
 

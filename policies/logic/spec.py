@@ -3,8 +3,8 @@
 A spec file (e.g. specs/phi1.toml) has `name`, `start` (directed road "U-V", position 0),
 `formula` (policies/logic/formula.py grammar), a `[states]` table (atom -> list of directed roads) and
 `[beliefs.NAME]` tables with `coeffs` (one per trust level, 7) and `offset`: a belief atom is true
-iff `offset - coeffs·b < 0` (strict; DESIGN.md, "scLDTL"). Every error is an InputError naming
-the file, line and column.
+iff `offset - coeffs·b < 0` (strict; docs/model.md, "scLDTL"). Every key: docs/formats/spec.md.
+Every error is an InputError naming the file, line and column.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Position 0 of every trace is its start position; the DFA run starts in `dfa.initial` and
 q_t is the state after reading position t. A trace satisfies the spec iff some q_t with
-t < length is accepting (a good prefix; DESIGN.md, "scLDTL"). Used by `analysis/` on logged
+t < length is accepting (a good prefix; docs/model.md, "scLDTL"). Used by `analysis/` on logged
 episodes and by the tests as the batch counterpart of the step-by-step DFA.
 """
 

@@ -3,7 +3,8 @@
 A product state is (x, q, b): directed road x, DFA state q after reading position (x, b), AV
 belief b. Choosing the next junction moves to road x'; the symbol o seen on x' updates the belief
 to b' = f_o(b) and the DFA reads position (x', b'): q' = δ(q, L(x', b')). Positions and labels
-follow DESIGN.md, "scLDTL"; the DFA is the scLDTL helper's (policies/logic/dfa.py).
+follow docs/model.md, "Positions of a trace" and "The product"; the DFA is the scLDTL helper's
+(policies/logic/dfa.py).
 
 `next_q[q, x', bits]` tabulates δ for every road and every valuation of the belief atoms
 (bit j of `bits` = value of `belief_atoms[j]`), so abstract solvers can branch on label

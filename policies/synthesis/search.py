@@ -1,4 +1,5 @@
-"""Policy synthesis with certified bounds: lower <= Pr_max(spec) <= upper (DESIGN.md, "Synthesis").
+"""Policy synthesis with certified bounds: lower <= Pr_max(spec) <= upper (docs/model.md, "What L and U
+mean").
 
 Method (bounded heuristic search over the product belief MDP, with a sound abstraction at the frontier):
 

@@ -1,6 +1,6 @@
 """Sound upper bounds on the product value from the suffix abstraction of belief space.
 
-The abstract state is (x, q, cell). Abstract Bellman operator (DESIGN.md, "Synthesis"):
+The abstract state is (x, q, cell). Abstract Bellman operator (docs/model.md, "What L and U mean"):
 
     Ū(x, q, c) = max_a max_{v vertex of P_c} Σ_o P(o | v) max_{q' ∈ Q'} Ū(x', q', next_cell(c, o))
 
