@@ -34,7 +34,7 @@ def _write_logs(out_dir: Path, record) -> dict[str, Path]:
 @click.option("--policy", "policy_name", default="free", show_default=True,
               help="'aware', 'free' or a policy file.")
 @click.option("--seed", type=int, default=0, show_default=True, help="SUMO seed and driver seed.")
-@click.option("--rrd", "rrd_path", type=click.Path(), default=None, help="Write a Rerun recording here.")
+@click.option("--rrd", "rrd_path", type=click.Path(), default=None, help="Rerun recording FILE to write.")
 @click.option("--out", "out_dir", type=click.Path(), default=None,
               help="DIRECTORY to write roads/kinematics/incidents Parquet and summary.json into.")
 @json_option
