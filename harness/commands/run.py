@@ -17,12 +17,25 @@ def _write_logs(out_dir: Path, record) -> dict[str, Path]:
     except OSError as exc:
         raise InputError(str(out_dir), "", f"cannot create the output directory ({exc.strerror})",
                          "pass a writable directory with --out") from None
+    from trustroute.analysis.dataset import (
+        INCIDENTS_FILE,
+        INCIDENTS_SCHEMA,
+        KINEMATICS_FILE,
+        KINEMATICS_SCHEMA,
+        ROADS_FILE,
+        ROADS_SCHEMA,
+        SUMMARY_FILE,
+        table_from_frame,
+        write_table,
+    )
+
     written = {}
-    for name, frame in (("roads", record.roads), ("kinematics", record.kinematics),
-                        ("incidents", record.incidents)):
-        written[name] = out_dir / f"{name}.parquet"
-        frame.to_parquet(written[name], index=False)
-    written["summary"] = out_dir / "summary.json"
+    for name, frame, file_name, schema in (
+            ("roads", record.roads, ROADS_FILE, ROADS_SCHEMA),
+            ("kinematics", record.kinematics, KINEMATICS_FILE, KINEMATICS_SCHEMA),
+            ("incidents", record.incidents, INCIDENTS_FILE, INCIDENTS_SCHEMA)):
+        written[name] = write_table(table_from_frame(frame, schema), out_dir / file_name)
+    written["summary"] = out_dir / SUMMARY_FILE
     written["summary"].write_text(json.dumps(record.summary, indent=1) + "\n")
     return written
 

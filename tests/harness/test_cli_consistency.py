@@ -9,9 +9,10 @@ import pytest
 from tests.cli import run_cli
 
 RESULT_COMMANDS = [("net", "build"), ("spec", "check"), ("model",), ("synth",), ("baseline",),
-                   ("evaluate",), ("run",), ("study",), ("analyze",), ("fit",), ("demo",)]
+                   ("evaluate",), ("run",), ("study",), ("analyze",), ("fit",), ("demo",),
+                   ("import", "carla-logs")]
 OUT_IS = {("synth",): "FILE", ("fit",): "FILE", ("run",): "DIRECTORY", ("study",): "DIRECTORY",
-          ("demo",): "DIRECTORY", ("net", "build"): "DIRECTORY"}
+          ("demo",): "DIRECTORY", ("net", "build"): "DIRECTORY", ("import", "carla-logs"): "DIRECTORY"}
 
 
 @pytest.mark.parametrize("command", RESULT_COMMANDS, ids=" ".join)
@@ -20,7 +21,7 @@ def test_every_result_command_has_json_and_says_what_out_is(command, capsys):
     assert code == 0
     assert "--json" in text and '"paths"' in text
     if command in OUT_IS:
-        out_help = text[text.index("--out"):].split("\n  -")[0]
+        out_help = text[text.index("\n  --out "):].split("\n  -")[1]
         assert OUT_IS[command] in out_help, out_help
 
 
