@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "fit": ("trustroute.harness.commands.study", "fit", "Fit a driver model to a study's logs."),
     "demo": ("trustroute.harness.commands.demo", "demo", "Run the paper-size study (21 drivers) and report."),
     "model": ("trustroute.harness.commands.model", "model", "Summarise the trust POMDP of a town and model."),
+    "peer": ("trustroute.harness.commands.peer", "peer", "Independent solvers (Storm) beside ours."),
 }
 
 

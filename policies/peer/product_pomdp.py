@@ -41,8 +41,11 @@ PROPERTY = f'Pmax=? [F "{GOAL_LABEL}"]'
 
 
 def check_exportable(spec: Spec) -> None:
-    """InputError unless every atom of the formula is a road or trust-state atom."""
-    belief = [a for a in spec.formula_atoms if a in spec.belief_atoms]
+    """InputError unless every atom the spec's minimal DFA tests is a road or trust-state atom
+    (a belief atom no state tests, like lowtrust in the paper's φ1, does not matter)."""
+    dfa = build_dfa(spec)
+    tested = {atom for q in range(dfa.n_states) for atom in dfa.tested_atoms(q)}
+    belief = [a for a in spec.formula_atoms if a in spec.belief_atoms and a in tested]
     if belief:
         raise InputError(spec.source_path or spec.name, "formula",
                          f"belief atoms ({', '.join(belief)}) cannot be exported to a POMDP model: "
