@@ -17,7 +17,8 @@ separately; the lower one is the value of the policy taking the lower arg-max, s
 lower <= Pr_max <= upper. With `horizon` = depth the objective is "accepted within H junctions"
 and the result is exact (lower = upper) unless nodes were cut. R is computed by backward
 induction (bounded) or by value iteration from above (unbounded), each iterate plus a margin of
-1e-12 so that floating-point rounding cannot take it below the true value.
+1e-12 so that floating-point rounding cannot take it below the true value; the root's upper
+value gets the same allowance.
 """
 
 from __future__ import annotations
@@ -215,6 +216,8 @@ def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
             low = np.where(grow, best_low, low)
             high = np.where(grow, np.minimum(1.0, best_high), high)
         lower, upper = low, high
-    return JointBounds(lower=float(lower[0]), upper=float(upper[0]), depth=depth, horizon=horizon,
+    # The backed-up upper value is a float sum of products: allow for its rounding.
+    return JointBounds(lower=float(lower[0]), upper=min(1.0, float(upper[0]) + RELAXATION_MARGIN),
+                       depth=depth, horizon=horizon,
                        nodes=int(sum(lv["x"].size for lv in levels)), cut_nodes=cut_total,
                        seconds=time.perf_counter() - started, belief_rule=belief_rule)
