@@ -74,7 +74,7 @@ class JointFilter:
         q2 = self.labeller.step(qs, road[rows], belief_av[rows], thetas)
         flat = (rows * n_t + thetas) * n_q + q2
         out = np.bincount(flat, weights=predicted[rows, thetas, qs], minlength=n * n_t * n_q)
-        return out.reshape(n, n_t, n_q)
+        return out.astype(float, copy=False).reshape(n, n_t, n_q)   # (bincount of nothing is int)
 
     def q_marginal(self, joint: np.ndarray) -> np.ndarray:
         return joint.sum(axis=1)
