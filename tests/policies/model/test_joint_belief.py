@@ -60,4 +60,15 @@ def test_with_trust_atoms_the_joint_is_a_law_whose_marginal_is_the_belief(pomdp)
     # Accepted exactly when the trust at v3 is 6 or 7: the belief's mass there.
     assert abs(accepted[0] - history[-2][1][0, 5:].sum()) < 1e-12
     assert 0 < accepted[0] < 1 and abs(accepted[0] + live[0] - 1) < 1e-12
-    assert filter_.masses(history[-1][0])[0][0] >= accepted[0] - 1e-15   # accepting is absorbing
+    # Accepting is absorbing, so P(accepted) is a martingale: averaged over the next observation
+    # it stays, although each observation moves it.
+    joint, belief, _ = history[-2]
+    x = np.array([pomdp.town.state_index("L-H")])   # a truck: takeovers are possible
+    incident = pomdp.road_incident[x]
+    total, moved = 0.0, []
+    for h in (0, 1):
+        posterior, p = pomdp.belief_update(belief, incident, h, 0)
+        after = filter_.masses(filter_.update(joint, posterior, posterior, x, incident, h, 0, p))[0][0]
+        total += float(p[0]) * after
+        moved.append(after)
+    assert abs(total - accepted[0]) < 1e-12 and min(abs(m - accepted[0]) for m in moved) > 1e-3
