@@ -15,7 +15,7 @@ import time
 HORIZON = 20
 STORM_TIME_LIMIT = 60          # seconds of Storm's belief unfolding (its lower bound)
 STORM_RESOLUTION = 2           # Storm's discretisation (its upper bound)
-OUR_MAX_NODES = 20_000         # our belief nodes per level
+OUR_MAX_NODES = 2_000          # our belief nodes per level
 
 
 def _problem():

@@ -10,10 +10,12 @@ and decision depend on nothing else), then backs values up:
 
 Leaves: a settled node (no live mass) is worth J(accepting) exactly; a node at the depth or cut
 off (probability below `prune_below`, or beyond `max_nodes` per level) is worth at least
-J(accepting) and at most J(accepting) + Σ_{live θ, q} J(θ, q) R(x, θ, q), where R is the value of
-the relaxation that observes θ and q and may choose the value of every belief atom — an upper
-bound on any policy's value from that state (`relaxed_values`). Lower and upper are backed up
-separately; the lower one is the value of the policy taking the lower arg-max, so
+J(accepting) — or, when no label reads the belief, the exact value of an open-loop continuation
+that ignores observations and follows the relaxation's best move (to the horizon, or 30
+junctions for the unbounded objective) — and at most J(accepting) + Σ_{live θ, q} J(θ, q) R(x, θ, q),
+where R is the value of the relaxation that observes θ and q and may choose the value of every
+belief atom — an upper bound on any policy's value from that state (`relaxed_values`). Lower
+and upper are backed up separately; the lower one is the value of the policy taking the lower arg-max, so
 lower <= Pr_max <= upper. With `horizon` = depth the objective is "accepted within H junctions"
 and the result is exact (lower = upper) unless nodes were cut. R is computed by backward
 induction (bounded) or by value iteration from above (unbounded), each iterate plus a margin of
@@ -117,6 +119,45 @@ def relaxed_values(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) ->
     return values
 
 
+OPEN_LOOP_STEPS = 30          # junctions of the open-loop continuation at unbounded leaves
+OPEN_LOOP_CHUNK = 20_000      # nodes per vectorised batch of the open-loop continuation
+
+
+def _open_loop_accepted(pomdp: TrustPOMDP, next_q: np.ndarray, move: np.ndarray, guide,
+                        x: np.ndarray, joint: np.ndarray, steps: int,
+                        accepting: np.ndarray) -> np.ndarray:
+    """P(accepted within `steps` more junctions) of the policy that ignores observations and moves,
+    at each step, to the successor with the largest relaxed value `guide(k)` (k junctions left
+    after the move). The labels must not depend on the belief (then the observations can be
+    summed out). Exact for that policy, so a lower bound on the optimum from each node."""
+    n, n_t, n_q = joint.shape
+    rows = np.arange(n)[:, None]
+    thetas = np.arange(n_t)[None, :]
+    successors = pomdp.successor_table
+    for k in range(steps):
+        table = guide(steps - k - 1)
+        best_score = np.full(n, -np.inf)
+        best_joint = joint
+        best_x = x
+        for slot in range(successors.shape[1]):
+            x2 = successors[x, slot]
+            valid = x2 >= 0
+            if not valid.any():
+                continue
+            x2 = np.where(valid, x2, 0)
+            predicted = np.einsum("ntq,ntu->nuq", joint, move[pomdp.road_incident[x2]])
+            moved = np.zeros_like(predicted)
+            for q in range(n_q):
+                moved[rows, thetas, next_q[q][x2]] += predicted[:, :, q]
+            score = np.where(valid, np.einsum("ntq,ntq->n", moved, table[x2]), -np.inf)
+            better = score > best_score
+            best_score = np.where(better, score, best_score)
+            best_joint = np.where(better[:, None, None], moved, best_joint)
+            best_x = np.where(better, x2, best_x)
+        joint, x = best_joint, best_x
+    return joint[:, :, accepting].sum(axis=(1, 2))
+
+
 def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
                  belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
                  max_nodes: int = 200_000) -> JointBounds:
@@ -135,6 +176,24 @@ def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     live_q = ~(accepting | rejecting)
     outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
     slots = pomdp.successor_table.shape[1]
+
+    # Where the labels do not read the belief, cut nodes and unbounded leaves get the value of an
+    # open-loop continuation as their lower bound instead of their accepted mass alone.
+    relaxed_q = _relaxed_next_q(pomdp, spec, dfa, labeller)
+    open_loop = bool(np.all(relaxed_q == relaxed_q[..., :1]))
+    move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, driver.trust_transition)
+
+    def guide(k: int) -> np.ndarray:
+        return relaxed[min(k, horizon)] if horizon is not None else relaxed
+
+    def open_loop_lower(x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        steps = left if horizon is not None else OPEN_LOOP_STEPS
+        out = np.empty(x.size)
+        for begin in range(0, x.size, OPEN_LOOP_CHUNK):
+            part = slice(begin, begin + OPEN_LOOP_CHUNK)
+            out[part] = _open_loop_accepted(pomdp, relaxed_q[..., 0], move, guide, x[part],
+                                            joint[part], steps, accepting)
+        return out
 
     def leaf_bounds(x: np.ndarray, joint: np.ndarray, left: int) -> tuple[np.ndarray, np.ndarray]:
         table = relaxed[left] if horizon is not None else relaxed
@@ -201,6 +260,10 @@ def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         nodes = levels[level]
         left = depth - level
         low, high = leaf_bounds(nodes["x"], nodes["joint"], left)
+        leaf = ~expandable[level] if level < len(expandable) else np.ones(low.size, dtype=bool)
+        leaf &= filter_.masses(nodes["joint"])[2] > 0
+        if open_loop and leaf.any() and (horizon is None or left > 0):
+            low[leaf] = np.maximum(low[leaf], open_loop_lower(nodes["x"][leaf], nodes["joint"][leaf], left))
         if level < n_levels - 1:
             parent, slot_of, child, p_obs = edges[level]
             grow = expandable[level]

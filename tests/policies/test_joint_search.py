@@ -17,9 +17,9 @@ TOLERANCE = 1e-9
 
 
 @pytest.mark.slow
-@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(["trust", "belief", "mixed"]),
-       horizon=st.integers(1, 4))
+       horizon=st.integers(1, 3))
 def test_bounds_bracket_the_brute_force_optimum(driver, seed, kind, horizon):
     rng = np.random.default_rng(seed)
     pomdp, spec = random_problem(rng, driver, kind)
@@ -32,7 +32,8 @@ def test_bounds_bracket_the_brute_force_optimum(driver, seed, kind, horizon):
     assert cut.lower - TOLERANCE <= reference <= cut.upper + TOLERANCE
     unbounded = joint_bounds(pomdp, spec, depth=horizon)
     assert unbounded.upper >= reference - TOLERANCE
-    assert unbounded.lower == pytest.approx(bounded.lower, abs=TOLERANCE)
+    # Unbounded: at least the bounded optimum (the leaves continue open-loop), at most the upper.
+    assert bounded.lower - TOLERANCE <= unbounded.lower <= unbounded.upper + TOLERANCE
     assert float(relaxed_values(pomdp, spec, horizon)[horizon].max()) <= 1.0
 
 
@@ -43,3 +44,13 @@ def test_without_trust_atoms_the_search_equals_the_belief_only_exact_search(pomd
         bounds = joint_bounds(pomdp, spec, depth=0, horizon=horizon)
         assert bounds.lower == pytest.approx(exact_optimum(pomdp, spec, horizon), abs=1e-12)
         assert bounds.gap <= 1e-11
+
+
+def test_a_search_cut_to_few_nodes_still_brackets_the_exact_value(pomdp):
+    """φ1 with the trust atom: cut nodes get the open-loop lower bound and the relaxation's upper."""
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    exact = joint_bounds(pomdp, spec, depth=0, horizon=8)
+    cut = joint_bounds(pomdp, spec, depth=0, horizon=8, max_nodes=50)
+    assert cut.cut_nodes > 0 and exact.cut_nodes == 0
+    assert cut.lower - TOLERANCE <= exact.lower <= cut.upper + TOLERANCE
+    assert cut.nodes < exact.nodes / 10
