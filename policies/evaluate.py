@@ -90,9 +90,9 @@ def _route_determined(policy: RoutingPolicy, context: DecisionContext) -> bool:
     return bool(method(context)) if method is not None else False
 
 
-def _decide(policy: RoutingPolicy, context: DecisionContext, road: int, level: int, max_junctions: int,
+def decide(policy: RoutingPolicy, context: DecisionContext, road: int, level: int, max_junctions: int,
             fallback_level: int | None, successor_index: dict) -> tuple[bool, bool, int]:
-    """(finished here, fallback drives here, next road index or -1)."""
+    """(finished here, fallback drives here, next road index or -1) for one tree node."""
     if policy_finished(policy, context):
         return True, False, -1
     if level == max_junctions:
@@ -184,7 +184,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
             i0 = keep[first[r]]
             context = DecisionContext(route=routes[rid], dfa_state=int(q[i0]), belief=belief_av[i0])
             if _route_determined(policy, context):
-                finished[members], fired[members], chosen[members] = _decide(
+                finished[members], fired[members], chosen[members] = decide(
                     policy, context, int(road[i0]), level, max_junctions, fallback_level,
                     successor_index)
                 continue
@@ -195,7 +195,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                 decision = decisions.get(key)
                 if decision is None:
                     context = DecisionContext(route=routes[rid], dfa_state=key[0], belief=belief_av[i])
-                    decision = _decide(policy, context, int(road[i]), level, max_junctions,
+                    decision = decide(policy, context, int(road[i]), level, max_junctions,
                                        fallback_level, successor_index)
                     decisions[key] = decision
                 finished[k], fired[k], chosen[k] = decision

@@ -39,6 +39,7 @@ def spec_report(spec_path: str, town_path: str | None) -> tuple[dict, str]:
         "atoms": list(dfa.atoms),
         "state_atoms": sorted(a for a in spec.state_atoms if a in dfa.atoms),
         "belief_atoms": sorted(a for a in spec.belief_atoms if a in dfa.atoms),
+        "trust_atoms": sorted(a for a in spec.trust_atoms if a in dfa.atoms),
         "dfa_states": dfa.n_states,
         "accepting_states": int(dfa.accepting.sum()),
         "rejecting_states": int(dfa.rejecting.sum()),

@@ -2,7 +2,9 @@
 
 State atoms are read from a membership table [n_state_atoms, n_roads]; belief atoms are
 `offset - coeffs·b < 0`, i.e. `beliefs @ coeffs > offset` (strict; docs/model.md, "scLDTL").
-Columns follow `dfa.atoms`.
+Trust-state atoms (docs/trust_states.md) read the hidden trust as well: they are true iff the
+road is one of theirs and the trust level index is one of theirs, so they need `trust` (int [n],
+trust level indices 0..6) beside the belief. Columns follow `dfa.atoms`.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import numpy as np
 from trustroute.networks.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.policies.logic.dfa import DFA
-from trustroute.policies.logic.spec import Spec
+from trustroute.policies.logic.spec import N_TRUST_LEVELS, Spec
 
 
 class Labeller:
@@ -23,7 +25,8 @@ class Labeller:
         self.dfa = dfa
         self.town = town
         road_index = {road: i for i, road in enumerate(town.states)}
-        state_columns, belief_columns = [], []
+        state_columns, belief_columns, trust_columns = [], [], []
+        trust_roads, trust_levels = [], []
         membership, coeffs, offsets = [], [], []
         for column, atom in enumerate(dfa.atoms):
             if atom in spec.state_atoms:
@@ -40,6 +43,18 @@ class Labeller:
                 belief_columns.append(column)
                 coeffs.append(spec.belief_atoms[atom].coeffs)
                 offsets.append(spec.belief_atoms[atom].offset)
+            elif atom in spec.trust_atoms:
+                trust_columns.append(column)
+                definition = spec.trust_atoms[atom]
+                roads = sorted(definition.roads) if definition.roads is not None else town.states
+                for road in roads:
+                    if road not in road_index:
+                        raise InputError(spec.source_path or spec.name, f"trust_states.{atom}",
+                                         f"'{road}' is not a directed road of the town",
+                                         "load the spec with the town it is meant for")
+                trust_roads.append(np.isin(np.arange(len(town.states)),
+                                           [road_index[r] for r in roads]))
+                trust_levels.append([level in definition.trust for level in range(1, N_TRUST_LEVELS + 1)])
             else:
                 raise ValueError(f"DFA atom {atom!r} is not defined in spec {spec.name!r}")
         self.state_columns = np.array(state_columns, dtype=np.int64)
@@ -49,17 +64,35 @@ class Labeller:
         self.coeffs = (np.array(coeffs, dtype=float).T if coeffs
                        else np.zeros((0, 0), dtype=float))   # [n_trust, n_belief_atoms]
         self.offsets = np.array(offsets, dtype=float)
+        self.trust_columns = np.array(trust_columns, dtype=np.int64)
+        self.trust_roads = (np.array(trust_roads, dtype=bool) if trust_roads
+                            else np.zeros((0, len(town.states)), dtype=bool))   # [n_trust_atoms, n_x]
+        self.trust_levels = (np.array(trust_levels, dtype=bool) if trust_levels
+                             else np.zeros((0, N_TRUST_LEVELS), dtype=bool))   # [n_trust_atoms, n_trust]
 
-    def valuations(self, x: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
-        """bool [n, len(dfa.atoms)]: the atoms at positions (x[i], beliefs[i])."""
+    @property
+    def reads_trust(self) -> bool:
+        """True iff some atom of the DFA is a trust-state atom (then `trust` must be given)."""
+        return bool(self.trust_columns.size)
+
+    def valuations(self, x: np.ndarray, beliefs: np.ndarray, trust: np.ndarray | None = None
+                   ) -> np.ndarray:
+        """bool [n, len(dfa.atoms)]: the atoms at positions (x[i], beliefs[i], trust[i])."""
         x = np.asarray(x, dtype=np.int64)
         out = np.empty((x.shape[0], len(self.dfa.atoms)), dtype=bool)
         if self.state_columns.size:
             out[:, self.state_columns] = self.membership[:, x].T
         if self.belief_columns.size:
             out[:, self.belief_columns] = np.asarray(beliefs) @ self.coeffs > self.offsets
+        if self.trust_columns.size:
+            if trust is None:
+                raise ValueError(f"spec {self.spec.name!r} has trust-state atoms: the trust level "
+                                 "of each position is needed (docs/trust_states.md)")
+            trust = np.asarray(trust, dtype=np.int64)
+            out[:, self.trust_columns] = (self.trust_roads[:, x] & self.trust_levels[:, trust]).T
         return out
 
-    def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
-        """int [n]: DFA states after reading positions (x, beliefs) from states q."""
-        return self.dfa.step_many(q, self.valuations(x, beliefs))
+    def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray,
+             trust: np.ndarray | None = None) -> np.ndarray:
+        """int [n]: DFA states after reading positions (x, beliefs, trust) from states q."""
+        return self.dfa.step_many(q, self.valuations(x, beliefs, trust))

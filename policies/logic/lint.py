@@ -16,6 +16,9 @@ With a town:
 - `state-unreachable`: a state atom none of whose roads can be reached from the start.
 - `town-unsatisfiable`: no route satisfies even the state-only projection (every belief literal
   true): no accepting (road, q) is reachable in the town × projected-DFA product.
+Trust-state atoms (docs/trust_states.md):
+- `trust-every-level`: the atom names every trust level, so it tests the road only (a state atom).
+- `trust-unreachable` (with a town): none of the atom's roads can be reached from the start.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from trustroute.policies.logic.formula import (
     walk,
 )
 from trustroute.policies.logic.labelling import Labeller
-from trustroute.policies.logic.spec import Spec, state_only_projection
+from trustroute.policies.logic.spec import N_TRUST_LEVELS, Spec, state_only_projection
 
 
 @dataclass(frozen=True)
@@ -194,12 +197,29 @@ def town_satisfiable(spec: Spec, town: Town) -> bool:
     return False
 
 
+def trust_warnings(spec: Spec, town: Town | None = None) -> list[LintWarning]:
+    warnings = []
+    used = set(spec.formula_atoms)
+    reachable = town.reachable_states(spec.start) if town is not None else None
+    for name, atom in sorted(spec.trust_atoms.items()):
+        if len(atom.trust) == N_TRUST_LEVELS:
+            warnings.append(LintWarning(
+                "trust-every-level", f"trust-state atom '{name}' names every trust level: it tests the "
+                "road only (write it under [states])", name))
+        if reachable is not None and atom.roads is not None and name in used and not atom.roads & reachable:
+            warnings.append(LintWarning(
+                "trust-unreachable", f"trust-state atom '{name}': none of its roads can be reached from "
+                f"the start {spec.start}", name))
+    return warnings
+
+
 def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None) -> list[LintWarning]:
     """Every warning that applies to `spec` (and to `town` when given)."""
     dfa = dfa if dfa is not None else build_dfa(spec)
     no_effect = no_effect_warnings(spec, dfa)
     warnings = (belief_warnings(spec) + no_effect
-                + subformula_warnings(spec, dfa, {w.atom for w in no_effect}) + unused_warnings(spec))
+                + subformula_warnings(spec, dfa, {w.atom for w in no_effect}) + unused_warnings(spec)
+                + trust_warnings(spec, town))
     if dfa.rejecting[dfa.initial]:
         warnings.append(LintWarning("unsatisfiable", "no trace satisfies the formula (the DFA's "
                                     "initial state cannot reach acceptance)"))

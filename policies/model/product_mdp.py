@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.networks.errors import InputError
 from trustroute.policies.logic.dfa import DFA, build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import Spec
@@ -55,6 +56,11 @@ class ProductTables:
 
 
 def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
+    if spec.uses_trust_atoms:
+        raise InputError(spec.source_path or spec.name, "formula",
+                         "the belief-MDP product cannot test the hidden trust (trust-state atoms)",
+                         "evaluate with policies.evaluate_joint or bound with policies.joint_search "
+                         "(docs/trust_states.md)")
     town = pomdp.town
     dfa = build_dfa(spec)
     labeller = Labeller(spec, dfa, town)
