@@ -87,6 +87,36 @@ class _Graph:
         self.prob = np.zeros((capacity, n_actions, n_outcomes))
         self.memo: list[dict[tuple[int, int, bytes], int]] = []
         self.expanded_by_level: list[list[int]] = []
+        # Labels at thresholds: an outcome whose belief is within the rounding margin of a belief
+        # atom's hyperplane has one child per DFA state it could lead to. child/prob hold the one
+        # the strict label reads; the others are "alternates" (parent, slot, outcome, child),
+        # grouped by the parent's level. L takes the minimum over them, U the maximum.
+        self.alternates: dict[int, list[np.ndarray]] = {}
+        self._alternates_joined: dict[int, tuple[np.ndarray, ...]] = {}
+
+    def add_alternates(self, level: int, parent: np.ndarray, slot: np.ndarray, outcome: np.ndarray,
+                       child: np.ndarray) -> None:
+        if parent.size == 0:
+            return
+        self.alternates.setdefault(level, []).append(np.stack([parent, slot, outcome, child]))
+        self._alternates_joined.pop(level, None)
+
+    def alternates_of(self, level: int | None) -> tuple[np.ndarray, ...]:
+        """(parent, slot, outcome, child) of the alternates of parents at `level` (None: all)."""
+        if level is None:
+            parts = [self.alternates_of(lv) for lv in sorted(self.alternates)]
+            if not parts:
+                return tuple(np.zeros(0, dtype=np.int64) for _ in range(4))
+            return tuple(np.concatenate([p[j] for p in parts]) for j in range(4))
+        joined = self._alternates_joined.get(level)
+        if joined is None:
+            chunks = self.alternates.get(level)
+            if not chunks:
+                return tuple(np.zeros(0, dtype=np.int64) for _ in range(4))
+            stacked = np.concatenate(chunks, axis=1)
+            joined = tuple(stacked[j] for j in range(4))
+            self._alternates_joined[level] = joined
+        return joined
 
     def _grow(self, needed: int) -> None:
         capacity = self.level.shape[0]
@@ -187,13 +217,51 @@ class _Search:
         g.upper[live] = upper[~dead]
         g.lower[live] = 0.0
 
-    def root(self) -> int:
+    def possible_q(self, q: np.ndarray, x2: np.ndarray, belief: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """DFA states after reading (x2, belief) from q: (strict, rows, other).
+
+        strict[i]: the state the labeller reads (what the vehicle and `evaluate` do); (rows, other):
+        for row rows[j] the further state other[j] that a label within the rounding margin of its
+        threshold could give (labelling.Labeller.belief_margins).
+        """
+        tables = self.tables
+        strict = tables.step(q, x2, belief)
+        empty = np.zeros(0, dtype=np.int64)
+        if not tables.belief_atom_names or q.size == 0:
+            return strict, empty, empty
+        truth, either = tables.labeller.belief_margins(belief)
+        ambiguous = np.flatnonzero(either.any(axis=1))
+        if ambiguous.size == 0:
+            return strict, empty, empty
+        m = truth.shape[1]
+        rows, other = [], []
+        for bits in range(2 ** m):
+            value = ((bits >> np.arange(m)) & 1).astype(bool)
+            fits = ((value[None, :] == truth[ambiguous]) | either[ambiguous]).all(axis=1)
+            members = ambiguous[fits]
+            q_bits = tables.next_q[q[members], x2[members], bits]
+            differs = q_bits != strict[members]
+            rows.append(members[differs])
+            other.append(q_bits[differs])
+        rows_all, other_all = np.concatenate(rows), np.concatenate(other)
+        if rows_all.size:
+            pair = np.unique(np.stack([rows_all, other_all], axis=1), axis=0)
+            rows_all, other_all = pair[:, 0], pair[:, 1]
+        return strict, rows_all, other_all
+
+    def roots(self) -> np.ndarray:
+        """Root nodes: one per DFA state position 0 can be read as (one unless the prior sits on a
+        threshold); the root value is the minimum of their L and the maximum of their U."""
         tables = self.tables
         b0 = np.asarray(tables.pomdp.initial_belief, dtype=float)[None, :]
-        ids, _ = self.graph.add(0, np.array([tables.start]), np.array([tables.initial_q]),
-                                np.array([0]), b0)
+        x0 = np.array([tables.start])
+        strict, _, other = self.possible_q(np.array([tables.dfa.initial]), x0, b0)
+        qs = np.concatenate([strict, other])
+        ids, _ = self.graph.add(0, np.repeat(x0, qs.size), qs, np.zeros(qs.size, dtype=np.int64),
+                                np.repeat(b0, qs.size, axis=0))
         self.classify(ids, 0)
-        return int(ids[0])
+        return ids
 
     def expand(self, nodes: np.ndarray) -> None:
         g, tables, symbols = self.graph, self.tables, self.symbols
@@ -222,19 +290,42 @@ class _Search:
             keep = probability > 0
             parent, slot, symbol, x2, belief, probability = (
                 a[keep] for a in (parent, slot, symbol, x2, belief, probability))
-            q2 = tables.step(g.q[parent], x2, belief)
+            q2, alt_rows, alt_q = self.possible_q(g.q[parent], x2, belief)
             cell2 = self.cells.next_cell[g.cell[parent], symbol]
             ids, new = g.add(level + 1, x2, q2, cell2, belief)
-            g.child[parent, slot, self.slot_of_symbol[symbol]] = ids
-            g.prob[parent, slot, self.slot_of_symbol[symbol]] = probability
+            outcome = self.slot_of_symbol[symbol]
+            g.child[parent, slot, outcome] = ids
+            g.prob[parent, slot, outcome] = probability
             self.classify(ids[new], level + 1)
+            if alt_rows.size:
+                alt_ids, alt_new = g.add(level + 1, x2[alt_rows], alt_q, cell2[alt_rows],
+                                         belief[alt_rows])
+                self.classify(alt_ids[alt_new], level + 1)
+                g.add_alternates(level, parent[alt_rows], slot[alt_rows], outcome[alt_rows], alt_ids)
             g.kind[parents] = EXPANDED
             g.expanded_by_level[level].extend(members)
 
-    def action_values(self, nodes: np.ndarray, values: np.ndarray) -> np.ndarray:
+    def action_values(self, nodes: np.ndarray, values: np.ndarray, pessimistic: bool,
+                      level: int | None = None) -> np.ndarray:
+        """Σ_o p(o) value(child) per legal action (-1 for illegal slots), for expanded `nodes`.
+
+        An outcome with alternates (a label within the rounding margin) takes the minimum of its
+        children's values when `pessimistic` (L), the maximum otherwise (U). `level`: all nodes
+        are at this level (only that level's alternates are looked at)."""
         g = self.graph
         child = g.child[nodes]
         child_value = np.where(child >= 0, values[np.maximum(child, 0)], 0.0)
+        parent, slot, outcome, alt_child = g.alternates_of(level)
+        if parent.size:
+            order = np.argsort(nodes, kind="stable")
+            sorted_nodes = nodes[order]
+            where = np.searchsorted(sorted_nodes, parent)
+            where = np.minimum(where, sorted_nodes.size - 1)
+            hit = sorted_nodes[where] == parent
+            if hit.any():
+                index = (order[where[hit]], slot[hit], outcome[hit])
+                combine = np.minimum.at if pessimistic else np.maximum.at
+                combine(child_value, index, values[alt_child[hit]])
         q = (g.prob[nodes] * child_value).sum(axis=2)
         legal = self.tables.successors[g.x[nodes]] >= 0
         return np.where(legal, q, -1.0)
@@ -246,33 +337,44 @@ class _Search:
             if not members:
                 continue
             nodes = np.array(members, dtype=np.int64)
-            g.upper[nodes] = np.minimum(g.upper[nodes], self.action_values(nodes, g.upper).max(axis=1))
-            g.lower[nodes] = np.maximum(g.lower[nodes], self.action_values(nodes, g.lower).max(axis=1))
+            g.upper[nodes] = np.minimum(
+                g.upper[nodes], self.action_values(nodes, g.upper, False, level).max(axis=1))
+            g.lower[nodes] = np.maximum(
+                g.lower[nodes], self.action_values(nodes, g.lower, True, level).max(axis=1))
 
-    def reach(self, root: int) -> np.ndarray:
-        """Probability of reaching each node under the upper-greedy policy."""
+    def reach(self, roots: np.ndarray) -> np.ndarray:
+        """Probability of reaching each node under the upper-greedy policy (alternates of an
+        outcome each get its full probability: either may be the one that happens)."""
         g = self.graph
         reach = np.zeros(g.n)
-        reach[root] = 1.0
-        for members in g.expanded_by_level:
+        reach[roots] = 1.0
+        for level, members in enumerate(g.expanded_by_level):
             if not members:
                 continue
             nodes = np.array(members, dtype=np.int64)
             nodes = nodes[reach[nodes] > 0]
             if nodes.size == 0:
                 continue
-            best = self.action_values(nodes, g.upper).argmax(axis=1)
+            best = self.action_values(nodes, g.upper, False, level).argmax(axis=1)
             child = g.child[nodes, best]
             mass = reach[nodes, None] * g.prob[nodes, best]
             ok = child >= 0
             np.add.at(reach, child[ok], mass[ok])
+            parent, slot, outcome, alt_child = g.alternates_of(level)
+            if parent.size:
+                position = dict(zip(nodes.tolist(), range(nodes.size), strict=True))
+                for p, a, o, c in zip(parent.tolist(), slot.tolist(), outcome.tolist(),
+                                      alt_child.tolist(), strict=True):
+                    i = position.get(p)
+                    if i is not None and best[i] == a:
+                        reach[c] += mass[i, o]
         return reach
 
     def policy_table(self) -> PolicyTable:
         g = self.graph
         nodes = np.flatnonzero(g.kind[: g.n] == EXPANDED)
-        lower_q = self.action_values(nodes, g.lower)
-        upper_q = self.action_values(nodes, g.upper)
+        lower_q = self.action_values(nodes, g.lower, True)
+        upper_q = self.action_values(nodes, g.upper, False)
         # argmax of L, ties broken by U (then the first slot): the policy whose value `lower` is.
         best_lower = lower_q.max(axis=1, keepdims=True)
         score = np.where(lower_q >= best_lower, upper_q, -np.inf)
@@ -301,12 +403,16 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
     """
     search = _Search(tables, belief_rule, horizon, suffix_length, started, unbounded_value)
     g = search.graph
-    root = search.root()
+    roots = search.roots()
+
+    def root_bounds() -> tuple[float, float]:
+        return float(g.lower[roots].min()), float(g.upper[roots].max())
+
     depth_cap = horizon if horizon is not None else UNBOUNDED_DEPTH
     iterations = 0
     expanded = 0
-    while g.upper[root] - g.lower[root] > tau and time.perf_counter() < deadline:
-        reach = search.reach(root)
+    while np.subtract(*root_bounds()[::-1]) > tau and time.perf_counter() < deadline:
+        reach = search.reach(roots)
         frontier = np.flatnonzero((g.kind[: g.n] == FRONTIER) & (g.level[: g.n] < depth_cap))
         weight = reach[frontier] * (g.upper[frontier] - g.lower[frontier])
         positive = weight > 0
@@ -322,7 +428,7 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         search.backup()
         iterations += 1
     search.backup()
-    lower, upper = float(g.lower[root]), float(g.upper[root])
+    lower, upper = root_bounds()
     table = search.policy_table()
     open_nodes = g.kind[: g.n] == FRONTIER
     stats = {
@@ -332,11 +438,13 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         "abstraction_seconds": search.abstraction_seconds,
         "abstraction_bound": search.bound_note,
         "abstraction_root_upper": float(search.frontier_upper(
-            0, np.array([tables.start]), np.array([tables.initial_q]), np.array([0]))[0]),
+            0, g.x[roots], g.q[roots], g.cell[roots]).max()),
+        "root_dfa_states": g.q[roots].tolist(),
+        "threshold_alternates": int(g.alternates_of(None)[0].size),
         "nodes": int(g.n),
         "expanded_nodes": int(expanded),
         "open_frontier_nodes": int(open_nodes.sum()),
-        "open_frontier_mass_upper_policy": float(search.reach(root)[open_nodes].sum()),
+        "open_frontier_mass_upper_policy": float(search.reach(roots)[open_nodes].sum()),
         "iterations": iterations,
         "policy_rows": table.rows,
         "lower": lower,
