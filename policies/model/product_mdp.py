@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.policies.logic.dfa import DFA, build_dfa
-from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.labelling import Labeller, check_coefficient_length
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import TrustPOMDP
 
@@ -55,6 +55,7 @@ class ProductTables:
 
 def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
     town = pomdp.town
+    check_coefficient_length(spec, pomdp.n_trust, pomdp.driver.source_path)
     dfa = build_dfa(spec)
     labeller = Labeller(spec, dfa, town)
     atoms = tuple(dfa.atoms)
