@@ -37,12 +37,15 @@ from trustroute.policies.model.product_mdp import ProductTables, build_product
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols, suffix_cells
-from trustroute.policies.synthesis.upper_bound import bounded_upper, build_abstraction, unbounded_upper
+from trustroute.policies.synthesis.end_components import unbounded_bound
+from trustroute.policies.synthesis.upper_bound import acceptance_distance, bounded_upper, build_abstraction
 
 CELL_BUDGET = 5000          # automatic suffix length: the longest k with n_symbols**k <= this
 DEFAULT_BATCH = 4096
 UNBOUNDED_HORIZONS = (20, 30, 40, 60, 80, 120, 160)
-UNBOUNDED_DEPTH = 60
+UNBOUNDED_DEPTH = 60        # the unbounded search leaves nodes this deep open (<= evaluate's cap)
+UNBOUNDED_STATE_BUDGET = 20_000
+UNBOUNDED_BOUND_SHARE = 0.3  # share of the time limit the end-component bound may take
 
 FRONTIER, EXPANDED, ACCEPTED, ZERO = 0, 1, 2, 3
 
@@ -171,20 +174,21 @@ class _Graph:
 
 class _Search:
     def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int | None, suffix_length: int,
-                 started: float, unbounded_value: np.ndarray | None = None) -> None:
+                 started: float, deadline: float, unbounded_value: np.ndarray | None = None) -> None:
         self.tables, self.rule, self.horizon = tables, rule, horizon
         self.started = started
         pomdp = tables.pomdp
         self.symbols = observation_symbols(pomdp, rule)
         self.cells = suffix_cells(self.symbols, suffix_length)
+        self.distance = acceptance_distance(tables)
         if horizon is not None:
             abstraction = build_abstraction(tables, self.symbols, self.cells)
-            self.bound = bounded_upper(abstraction, horizon)
+            self.bound = bounded_upper(abstraction, horizon, deadline, unbounded_value)
             self.bound_note = "exact backward induction on the abstraction"
         else:
-            assert unbounded_value is not None
             self.bound = [unbounded_value]
-            self.bound_note = "the unbounded abstraction's bound (abstract_bounds.unbounded_upper)"
+            self.bound_note = ("the unbounded abstraction's least fixed point from above, end "
+                               "components collapsed (policies/synthesis/end_components.py)")
         self.abstraction_seconds = time.perf_counter() - started
         n_outcomes = max(len(s) for s in self.symbols.by_incident)
         self.slot_of_symbol = np.zeros(self.symbols.n_symbols, dtype=np.int64)
@@ -208,8 +212,9 @@ class _Search:
             return
         upper = np.minimum(1.0, self.frontier_upper(level, g.x[rest], g.q[rest], g.cell[rest]))
         dead = tables.rejecting[g.q[rest]] | (upper <= 0.0)
-        if self.horizon is not None and level >= self.horizon:
-            dead[:] = True
+        if self.horizon is not None:
+            # graph distance: acceptance needs more junctions than are left -> exactly 0
+            dead |= self.distance[g.x[rest], g.q[rest]] > self.horizon - level
         g.kind[rest[dead]] = ZERO
         g.upper[rest[dead]] = 0.0
         g.lower[rest[dead]] = 0.0
@@ -401,7 +406,7 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
     horizon H: P(accepted within H junctions). None: the unbounded problem, nodes deeper than
     UNBOUNDED_DEPTH left open with the unbounded abstraction's bound `unbounded_value`.
     """
-    search = _Search(tables, belief_rule, horizon, suffix_length, started, unbounded_value)
+    search = _Search(tables, belief_rule, horizon, suffix_length, started, deadline, unbounded_value)
     g = search.graph
     roots = search.roots()
 
@@ -453,14 +458,16 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
     return lower, upper, table, stats
 
 
-def _unbounded_upper(tables: ProductTables, belief_rule: BeliefRule, suffix_length: int,
-                     time_limit: float) -> tuple[np.ndarray, str]:
-    symbols = observation_symbols(tables.pomdp, belief_rule)
-    cells = suffix_cells(symbols, suffix_length)
-    result = unbounded_upper(build_abstraction(tables, symbols, cells), time_limit)
-    note = (f"{result.iterations} iterations of the abstract operator (from 0 where acceptance is "
-            f"unreachable, 1 elsewhere; last change {result.last_change:.2e}; every iterate is sound)")
-    return np.minimum(result.value, 1.0), note
+def unbounded_suffix_length(tables: ProductTables, n_changing: int, automatic: int) -> int:
+    """Longest k <= automatic with n_x * n_q * cells(k) <= UNBOUNDED_STATE_BUDGET (the explicit MDP
+    of end_components.py has about (n_symbols + 1) times as many states)."""
+    k = 0
+    while k < automatic:
+        cells = sum(n_changing ** j for j in range(k + 2))
+        if tables.n_x * tables.n_q * cells > UNBOUNDED_STATE_BUDGET:
+            break
+        k += 1
+    return k
 
 
 def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
@@ -490,37 +497,57 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     tables = build_product(pomdp, spec)
     if suffix_length is None:
         suffix_length = automatic_suffix_length(observation_symbols(pomdp, belief_rule).n_changing)
-    if horizon is not None:
+    distance = acceptance_distance(tables)
+    b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
+    _, either0 = tables.labeller.belief_margins(b0)
+    q0 = {tables.initial_q} | ({int(q) for q in tables.next_q[tables.dfa.initial, tables.start]}
+                               if either0.any() else set())
+    shortest = int(min(distance[tables.start, q] for q in q0))
+    never = shortest > tables.n_x * tables.n_q      # unreachable in the road x DFA graph
+    if never or (horizon is not None and shortest > horizon):
+        # Answered by graph distance alone: no route accepts within H junctions, whatever the labels.
+        table = PolicyTable(t=[], x=[], q=[], beliefs=np.zeros((0, pomdp.n_trust)), action=[])
+        lower = upper = 0.0
+        note = ("graph distance: acceptance is unreachable" if never else
+                f"graph distance: acceptance needs at least {shortest} junctions")
+        runs = [{"horizon": horizon, "lower": 0.0, "upper": 0.0, "nodes": 0, "abstraction_root_upper": 0.0,
+                 "abstraction_bound": note}]
+        if horizon is None:
+            note = "graph distance: acceptance is unreachable"
+    elif horizon is not None:
         lower, upper, table, stats = _bounded_search(tables, belief_rule, horizon, tau, suffix_length,
                                                      batch, started, deadline)
         runs = [stats]
     else:
-        bound, note = _unbounded_upper(tables, belief_rule, suffix_length, 0.2 * time_limit)
-        upper = float(bound[tables.start, tables.initial_q, 0])
-        lower, table, runs = -1.0, None, []
+        symbols = observation_symbols(pomdp, belief_rule)
+        k = unbounded_suffix_length(tables, symbols.n_changing, suffix_length)
+        abstraction = build_abstraction(tables, symbols, suffix_cells(symbols, k))
+        bound = unbounded_bound(abstraction, started + UNBOUNDED_BOUND_SHARE * time_limit)
+        note = (f"suffix length {k}: {bound.end_components} end components collapsed, "
+                f"{bound.iterations} iterations from above and below (largest remaining gap "
+                f"{bound.gap:.2e}; every iterate from above is sound)" if bound.complete else
+                "end-component bound stopped by the time limit: 1 wherever acceptance is possible")
+        value = np.minimum(bound.value, 1.0)
+        upper = float(max(value[tables.start, q, 0] for q in q0))
+        # 1. the unbounded problem itself (open nodes valued by the bound) for a quarter of the time:
+        #    lowers upper where the bound is loose; its policy is worth its lower.
+        remaining = max(deadline - time.perf_counter(), 0.0)
+        lower, run_upper, table, stats = _bounded_search(
+            tables, belief_rule, None, tau, k, batch, started,
+            time.perf_counter() + 0.25 * remaining, value)
+        stats["end_component_seconds"] = bound.seconds
+        upper = min(upper, run_upper)
+        runs = [stats]
+        # 2. bounded horizons (a policy accepting within H with probability L satisfies the unbounded
+        #    spec with probability >= L), frontier valued by the same bound (no rebuilds).
         for depth in UNBOUNDED_HORIZONS:
-            if runs and time.perf_counter() >= deadline:
+            if upper - lower <= tau or time.perf_counter() >= deadline:
                 break
             run_lower, _, run_table, stats = _bounded_search(
-                tables, belief_rule, depth, 0.5 * tau, suffix_length, batch, started, deadline)
+                tables, belief_rule, depth, 0.5 * tau, k, batch, started, deadline, value)
             runs.append(stats)
             if run_lower > lower:
                 lower, table = run_lower, run_table
-            if upper - lower <= tau:
-                break
-            if len(runs) == 1:
-                # The abstraction alone leaves a gap: search the unbounded problem itself, with the
-                # abstraction's bound on open nodes, for half the remaining time (tightens upper).
-                remaining = deadline - time.perf_counter()
-                run_lower, run_upper, run_table, stats = _bounded_search(
-                    tables, belief_rule, None, tau, suffix_length, batch, started,
-                    time.perf_counter() + 0.5 * max(remaining, 0.0), bound)
-                runs.append(stats)
-                upper = min(upper, run_upper)
-                if run_lower > lower:
-                    lower, table = run_lower, run_table
-                if upper - lower <= tau:
-                    break
         lower = max(lower, 0.0)
     policy = BeliefTablePolicy(table, pomdp.town, spec, lower=lower, upper=upper, horizon=horizon)
     stats = {
