@@ -15,14 +15,19 @@ Method (bounded heuristic search over the product belief MDP, with a sound abstr
   root, the frontier is exhausted, or the time limit.
 * The returned policy takes at every expanded node the action maximising L (ties: U); lower is the
   value of exactly that policy with every unexpanded node counted as failure, so the policy's true
-  value is at least `lower`. It is a policies.table_policy.BeliefTablePolicy (acts on any belief).
+  value is at least `lower`. It is a policies.routing.aware_table.BeliefTablePolicy (acts on any belief).
 
 Horizon H: at most H junctions (the study measures "policy, then fallback after 20", so H = 20 is
-the natural companion). Unbounded (horizon=None): lower is the best value of bounded searches with
-growing H (their policies are policies for the unbounded problem too, worth at least their bounded
-value); upper is the abstraction's unbounded bound (abstract_bounds.unbounded_upper), tightened when
-it leaves a gap by one search of the unbounded problem itself (open nodes, including those deeper
-than UNBOUNDED_DEPTH, valued by that bound).
+the natural companion). Unbounded (horizon=None): upper is the abstraction's least fixed point with
+end components collapsed (policies/synthesis/end_components.py), tightened by a search of the
+unbounded problem itself (open nodes, including those deeper than UNBOUNDED_DEPTH, valued by that
+bound); lower is the best of that search and bounded searches with growing H (their policies are
+policies for the unbounded problem too, worth at least their bounded value).
+
+Labels at thresholds: a belief within the rounding margin of a belief atom's hyperplane
+(labelling.Labeller.belief_margins) gives one child per DFA state it could lead to; L takes the
+minimum over them and U the maximum (docs/synthesis.md, "Labels at thresholds"). Horizons shorter
+than the road x DFA graph distance to acceptance are answered without search (L = U = 0).
 """
 
 from __future__ import annotations
@@ -38,7 +43,12 @@ from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols, suffix_cells
 from trustroute.policies.synthesis.end_components import unbounded_bound
-from trustroute.policies.synthesis.upper_bound import acceptance_distance, bounded_upper, build_abstraction
+from trustroute.policies.synthesis.upper_bound import (
+    Abstraction,
+    acceptance_distance,
+    bounded_upper,
+    build_abstraction,
+)
 
 CELL_BUDGET = 5000          # automatic suffix length: the longest k with n_symbols**k <= this
 DEFAULT_BATCH = 4096
@@ -46,6 +56,8 @@ UNBOUNDED_HORIZONS = (20, 30, 40, 60, 80, 120, 160)
 UNBOUNDED_DEPTH = 60        # the unbounded search leaves nodes this deep open (<= evaluate's cap)
 UNBOUNDED_STATE_BUDGET = 20_000
 UNBOUNDED_BOUND_SHARE = 0.3  # share of the time limit the end-component bound may take
+BOUNDED_ENTRY_BUDGET = 20_000_000   # floats of the bounded abstraction (160 MB)
+FINISH_SHARE = 0.04          # share of the time limit kept for finishing after the last check
 
 FRONTIER, EXPANDED, ACCEPTED, ZERO = 0, 1, 2, 3
 
@@ -174,15 +186,20 @@ class _Graph:
 
 class _Search:
     def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int | None, suffix_length: int,
-                 started: float, deadline: float, unbounded_value: np.ndarray | None = None) -> None:
+                 started: float, deadline: float, unbounded_value: np.ndarray | None = None,
+                 abstraction: Abstraction | None = None) -> None:
         self.tables, self.rule, self.horizon = tables, rule, horizon
         self.started = started
         pomdp = tables.pomdp
-        self.symbols = observation_symbols(pomdp, rule)
-        self.cells = suffix_cells(self.symbols, suffix_length)
+        if abstraction is not None:        # built once per synthesize call and shared by its runs
+            self.symbols, self.cells = abstraction.symbols, abstraction.cells
+        else:
+            self.symbols = observation_symbols(pomdp, rule)
+            self.cells = suffix_cells(self.symbols, suffix_length)
         self.distance = acceptance_distance(tables)
         if horizon is not None:
-            abstraction = build_abstraction(tables, self.symbols, self.cells)
+            if abstraction is None:
+                abstraction = build_abstraction(tables, self.symbols, self.cells)
             self.bound = bounded_upper(abstraction, horizon, deadline, unbounded_value)
             self.bound_note = "exact backward induction on the abstraction"
         else:
@@ -400,13 +417,15 @@ def automatic_suffix_length(n_changing: int) -> int:
 
 def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int | None, tau: float,
                     suffix_length: int, batch: int, started: float, deadline: float,
-                    unbounded_value: np.ndarray | None = None) -> tuple[float, float, PolicyTable, dict]:
+                    unbounded_value: np.ndarray | None = None, abstraction: Abstraction | None = None
+                    ) -> tuple[float, float, PolicyTable, dict]:
     """One AO*-style search; returns (lower, upper, table, stats).
 
     horizon H: P(accepted within H junctions). None: the unbounded problem, nodes deeper than
     UNBOUNDED_DEPTH left open with the unbounded abstraction's bound `unbounded_value`.
     """
-    search = _Search(tables, belief_rule, horizon, suffix_length, started, deadline, unbounded_value)
+    search = _Search(tables, belief_rule, horizon, suffix_length, started, deadline, unbounded_value,
+                     abstraction)
     g = search.graph
     roots = search.roots()
 
@@ -458,6 +477,18 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
     return lower, upper, table, stats
 
 
+def bounded_suffix_length(tables: ProductTables, n_changing: int, automatic: int, horizon: int) -> int:
+    """Longest k <= automatic whose bounded abstraction, (H + 1) * n_x * n_q * cells(k) floats,
+    fits BOUNDED_ENTRY_BUDGET."""
+    k = 0
+    while k < automatic:
+        cells = sum(n_changing ** j for j in range(k + 2))
+        if (horizon + 1) * tables.n_x * tables.n_q * cells > BOUNDED_ENTRY_BUDGET:
+            break
+        k += 1
+    return k
+
+
 def unbounded_suffix_length(tables: ProductTables, n_changing: int, automatic: int) -> int:
     """Longest k <= automatic with n_x * n_q * cells(k) <= UNBOUNDED_STATE_BUDGET (the explicit MDP
     of end_components.py has about (n_symbols + 1) times as many states)."""
@@ -493,10 +524,15 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     if belief_rule not in ("bayes", "paper"):
         raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
     started = time.perf_counter()
-    deadline = started + time_limit
+    # The last few per cent are kept for the work after the deadline check (final backup, the
+    # policy table, the stats), so that the whole call ends within the limit.
+    deadline = started + (1.0 - FINISH_SHARE) * time_limit
     tables = build_product(pomdp, spec)
     if suffix_length is None:
-        suffix_length = automatic_suffix_length(observation_symbols(pomdp, belief_rule).n_changing)
+        n_changing = observation_symbols(pomdp, belief_rule).n_changing
+        suffix_length = automatic_suffix_length(n_changing)
+        if horizon is not None:
+            suffix_length = bounded_suffix_length(tables, n_changing, suffix_length, horizon)
     distance = acceptance_distance(tables)
     b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
     _, either0 = tables.labeller.belief_margins(b0)
@@ -534,7 +570,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         remaining = max(deadline - time.perf_counter(), 0.0)
         lower, run_upper, table, stats = _bounded_search(
             tables, belief_rule, None, tau, k, batch, started,
-            time.perf_counter() + 0.25 * remaining, value)
+            time.perf_counter() + 0.25 * remaining, value, abstraction)
         stats["end_component_seconds"] = bound.seconds
         upper = min(upper, run_upper)
         runs = [stats]
@@ -544,7 +580,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             if upper - lower <= tau or time.perf_counter() >= deadline:
                 break
             run_lower, _, run_table, stats = _bounded_search(
-                tables, belief_rule, depth, 0.5 * tau, k, batch, started, deadline, value)
+                tables, belief_rule, depth, 0.5 * tau, k, batch, started, deadline, value, abstraction)
             runs.append(stats)
             if run_lower > lower:
                 lower, table = run_lower, run_table

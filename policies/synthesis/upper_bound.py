@@ -15,7 +15,8 @@ monotonicity), but the iteration converges to the greatest fixed point, which en
 never accept can hold above the least one. `unbounded_upper` starts from 0 on states that cannot
 reach acceptance at all (can_accept, a graph analysis) and from 1 elsewhere, and returns the last
 iterate: sound, exact where acceptance is unreachable, possibly loose on end components from which
-acceptance is reachable but not forced (the stats say so). No end-component collapsing is done.
+acceptance is reachable but not forced. Synthesis uses policies/synthesis/end_components.py
+instead, which collapses end components and converges to the least fixed point.
 """
 
 from __future__ import annotations
@@ -48,8 +49,10 @@ def build_abstraction(tables: ProductTables, symbols: ObservationSymbols, cells:
     return Abstraction(tables=tables, symbols=symbols, cells=cells, possible_bits=possible)
 
 
-def abstract_backup(abstraction: Abstraction, value_next: np.ndarray) -> np.ndarray:
-    """One application of T̄ to value_next [n_x, n_q, n_cells]; terminal DFA states fixed."""
+def abstract_backup(abstraction: Abstraction, value_next: np.ndarray,
+                    deadline: float | None = None) -> np.ndarray | None:
+    """One application of T̄ to value_next [n_x, n_q, n_cells]; terminal DFA states fixed.
+    None if `deadline` passes before it is complete."""
     tables, symbols, cells = abstraction.tables, abstraction.symbols, abstraction.cells
     n_x, n_q, n_c = value_next.shape
     live = np.flatnonzero(~(tables.accepting | tables.rejecting))
@@ -59,6 +62,8 @@ def abstract_backup(abstraction: Abstraction, value_next: np.ndarray) -> np.ndar
         return out
     road_incident = tables.pomdp.road_incident
     for x in range(n_x):
+        if deadline is not None and x % 16 == 0 and time.perf_counter() > deadline:
+            return None
         best = np.zeros((live.size, n_c))
         for x2 in tables.successors[x]:
             if x2 < 0:
@@ -95,10 +100,11 @@ def bounded_upper(abstraction: Abstraction, horizon: int, deadline: float | None
     values = np.zeros((horizon + 1,) + shape)
     values[horizon] = np.broadcast_to(tables.accepting[None, :, None], shape)
     for t in range(horizon - 1, -1, -1):
-        if deadline is not None and time.perf_counter() > deadline:
+        backed = abstract_backup(abstraction, values[t + 1], deadline)
+        if backed is None:
             values[: t + 1] = cap
             break
-        values[t] = np.minimum(abstract_backup(abstraction, values[t + 1]), cap)
+        values[t] = np.minimum(backed, cap)
     return values
 
 
