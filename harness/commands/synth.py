@@ -97,6 +97,12 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
                "policy": path, "stats": result.stats}
     lines = [f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
              f"{result.seconds:.1f} s)"]
+    alternates = sum(run.get("threshold_alternates", 0) for run in result.stats.get("runs", []))
+    if alternates:
+        strict = max(run.get("lower_strict_labels", 0.0) for run in result.stats["runs"])
+        lines.append(f"{alternates} outcomes sit on a belief threshold (within rounding): L reads them "
+                     f"the worse way, U the better; with this machine's labels the policy is worth at "
+                     f"least {strict:.6f} (spec check warns about such thresholds)")
     if belief_rule == "paper":
         # L and U are about the authors' belief MDP (their filter drives beliefs and labels); a
         # study measures the real process: observations drawn from the Bayes posterior.

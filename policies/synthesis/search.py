@@ -97,6 +97,9 @@ class _Graph:
         self.belief = np.zeros((capacity, n_trust))
         self.upper = np.zeros(capacity)
         self.lower = np.zeros(capacity)
+        # value of the L-greedy choice with every label read strictly, as this machine's labeller
+        # does (no alternates): the tie-breaker among actions of equal L, and a reported figure.
+        self.strict = np.zeros(capacity)
         self.kind = np.zeros(capacity, dtype=np.int8)
         self.child = np.full((capacity, n_actions, n_outcomes), -1, dtype=np.int64)
         self.prob = np.zeros((capacity, n_actions, n_outcomes))
@@ -138,7 +141,7 @@ class _Graph:
         if needed <= capacity:
             return
         new = max(needed, 2 * capacity)
-        for name in ("level", "x", "q", "cell", "upper", "lower", "kind"):
+        for name in ("level", "x", "q", "cell", "upper", "lower", "strict", "kind"):
             old = getattr(self, name)
             grown = np.zeros(new, dtype=old.dtype)
             grown[:capacity] = old
@@ -223,7 +226,7 @@ class _Search:
         q = g.q[ids]
         accepted = tables.accepting[q]
         g.kind[ids[accepted]] = ACCEPTED
-        g.upper[ids[accepted]] = g.lower[ids[accepted]] = 1.0
+        g.upper[ids[accepted]] = g.lower[ids[accepted]] = g.strict[ids[accepted]] = 1.0
         rest = ids[~accepted]
         if rest.size == 0:
             return
@@ -235,9 +238,11 @@ class _Search:
         g.kind[rest[dead]] = ZERO
         g.upper[rest[dead]] = 0.0
         g.lower[rest[dead]] = 0.0
+        g.strict[rest[dead]] = 0.0
         live = rest[~dead]
         g.upper[live] = upper[~dead]
         g.lower[live] = 0.0
+        g.strict[live] = 0.0
 
     def possible_q(self, q: np.ndarray, x2: np.ndarray, belief: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -327,17 +332,18 @@ class _Search:
             g.kind[parents] = EXPANDED
             g.expanded_by_level[level].extend(members)
 
-    def action_values(self, nodes: np.ndarray, values: np.ndarray, pessimistic: bool,
+    def action_values(self, nodes: np.ndarray, values: np.ndarray, pessimistic: bool | None,
                       level: int | None = None) -> np.ndarray:
         """Σ_o p(o) value(child) per legal action (-1 for illegal slots), for expanded `nodes`.
 
         An outcome with alternates (a label within the rounding margin) takes the minimum of its
         children's values when `pessimistic` (L), the maximum otherwise (U). `level`: all nodes
-        are at this level (only that level's alternates are looked at)."""
+        are at this level (only that level's alternates are looked at). pessimistic None: the
+        strict children only (alternates ignored)."""
         g = self.graph
         child = g.child[nodes]
         child_value = np.where(child >= 0, values[np.maximum(child, 0)], 0.0)
-        parent, slot, outcome, alt_child = g.alternates_of(level)
+        parent, slot, outcome, alt_child = g.alternates_of(level if pessimistic is not None else -1)
         if parent.size:
             order = np.argsort(nodes, kind="stable")
             sorted_nodes = nodes[order]
@@ -361,12 +367,18 @@ class _Search:
             nodes = np.array(members, dtype=np.int64)
             g.upper[nodes] = np.minimum(
                 g.upper[nodes], self.action_values(nodes, g.upper, False, level).max(axis=1))
-            g.lower[nodes] = np.maximum(
-                g.lower[nodes], self.action_values(nodes, g.lower, True, level).max(axis=1))
+            lower_q = self.action_values(nodes, g.lower, True, level)
+            g.lower[nodes] = np.maximum(g.lower[nodes], lower_q.max(axis=1))
+            # strict value of the policy's own choice (best L, ties by strict value)
+            strict_q = self.action_values(nodes, g.strict, None, level)
+            tied = lower_q >= lower_q.max(axis=1, keepdims=True)
+            g.strict[nodes] = np.where(tied, strict_q, -1.0).max(axis=1)
 
-    def reach(self, roots: np.ndarray) -> np.ndarray:
+    def reach(self, roots: np.ndarray, every_action: bool = False) -> np.ndarray:
         """Probability of reaching each node under the upper-greedy policy (alternates of an
-        outcome each get its full probability: either may be the one that happens)."""
+        outcome each get its full probability: either may be the one that happens). every_action:
+        every action carries the node's full mass instead (used once the upper-greedy frontier is
+        closed while the gap is not, as at thresholds where L takes the worse alternate)."""
         g = self.graph
         reach = np.zeros(g.n)
         reach[roots] = 1.0
@@ -377,9 +389,14 @@ class _Search:
             nodes = nodes[reach[nodes] > 0]
             if nodes.size == 0:
                 continue
-            best = self.action_values(nodes, g.upper, False, level).argmax(axis=1)
-            child = g.child[nodes, best]
-            mass = reach[nodes, None] * g.prob[nodes, best]
+            values = self.action_values(nodes, g.upper, False, level)
+            if every_action:
+                chosen = values >= 0                                   # [nodes, actions]
+            else:
+                chosen = np.zeros(values.shape, dtype=bool)
+                chosen[np.arange(nodes.size), values.argmax(axis=1)] = True
+            mass = reach[nodes, None, None] * g.prob[nodes] * chosen[:, :, None]
+            child = g.child[nodes]
             ok = child >= 0
             np.add.at(reach, child[ok], mass[ok])
             parent, slot, outcome, alt_child = g.alternates_of(level)
@@ -388,18 +405,22 @@ class _Search:
                 for p, a, o, c in zip(parent.tolist(), slot.tolist(), outcome.tolist(),
                                       alt_child.tolist(), strict=True):
                     i = position.get(p)
-                    if i is not None and best[i] == a:
-                        reach[c] += mass[i, o]
-        return reach
+                    if i is not None:
+                        reach[c] += mass[i, a, o]
+        return np.minimum(reach, 1.0)
 
     def policy_table(self) -> PolicyTable:
         g = self.graph
         nodes = np.flatnonzero(g.kind[: g.n] == EXPANDED)
         lower_q = self.action_values(nodes, g.lower, True)
+        strict_q = self.action_values(nodes, g.strict, None)
         upper_q = self.action_values(nodes, g.upper, False)
-        # argmax of L, ties broken by U (then the first slot): the policy whose value `lower` is.
+        # argmax of L, ties broken by the strict-label value, then by U (then the first slot): the
+        # policy whose value `lower` is.
         best_lower = lower_q.max(axis=1, keepdims=True)
-        score = np.where(lower_q >= best_lower, upper_q, -np.inf)
+        tied = lower_q >= best_lower
+        best_strict = np.where(tied, strict_q, -np.inf).max(axis=1, keepdims=True)
+        score = np.where(tied & (strict_q >= best_strict), upper_q, -np.inf)
         action = score.argmax(axis=1)
         return PolicyTable(t=g.level[nodes], x=g.x[nodes], q=g.q[nodes], beliefs=g.belief[nodes],
                            action=action)
@@ -439,6 +460,9 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         reach = search.reach(roots)
         frontier = np.flatnonzero((g.kind[: g.n] == FRONTIER) & (g.level[: g.n] < depth_cap))
         weight = reach[frontier] * (g.upper[frontier] - g.lower[frontier])
+        if not (weight > 0).any():
+            weight = search.reach(roots, every_action=True)[frontier] * (
+                g.upper[frontier] - g.lower[frontier])
         positive = weight > 0
         frontier, weight = frontier[positive], weight[positive]
         if frontier.size == 0:
@@ -465,6 +489,9 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
             0, g.x[roots], g.q[roots], g.cell[roots]).max()),
         "root_dfa_states": g.q[roots].tolist(),
         "threshold_alternates": int(g.alternates_of(None)[0].size),
+        # the returned policy's value with labels read strictly (this machine's labeller) from the
+        # root the vehicle is in: a lower bound of what `evaluate` measures
+        "lower_strict_labels": float(g.strict[roots[0]]),
         "nodes": int(g.n),
         "expanded_nodes": int(expanded),
         "open_frontier_nodes": int(open_nodes.sum()),

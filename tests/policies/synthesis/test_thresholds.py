@@ -46,6 +46,8 @@ def test_thresholds_at_multiples_of_one_seventh_bracket_the_optimum(pomdp, offse
     assert online.gap == 0.0
     assert online.lower >= result.lower - TOLERANCE
     assert online.lower <= result.upper + TOLERANCE
+    # with this machine's strict labels the policy is worth at least the reported strict value
+    assert online.lower >= result.stats["runs"][0]["lower_strict_labels"] - TOLERANCE
 
 
 def _reachable_belief(pomdp, rng: np.random.Generator, where: str) -> np.ndarray:
@@ -95,3 +97,4 @@ def test_threshold_on_a_reachable_belief(driver, seed, where, default_driver, nu
     assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE
     online = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
     assert online.lower >= result.lower - TOLERANCE
+    assert online.lower >= result.stats["runs"][0]["lower_strict_labels"] - TOLERANCE
