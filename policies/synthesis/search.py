@@ -592,25 +592,33 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 "end-component bound stopped by the time limit: 1 wherever acceptance is possible")
         value = np.minimum(bound.value, 1.0)
         upper = float(max(value[tables.start, q, 0] for q in q0))
-        # 1. the unbounded problem itself (open nodes valued by the bound) for a quarter of the time:
-        #    lowers upper where the bound is loose; its policy is worth its lower.
-        remaining = max(deadline - time.perf_counter(), 0.0)
-        lower, run_upper, table, stats = _bounded_search(
-            tables, belief_rule, None, tau, k, batch, started,
-            time.perf_counter() + 0.25 * remaining, value, abstraction)
-        stats["end_component_seconds"] = bound.seconds
-        upper = min(upper, run_upper)
-        runs = [stats]
-        # 2. bounded horizons (a policy accepting within H with probability L satisfies the unbounded
-        #    spec with probability >= L), frontier valued by the same bound (no rebuilds).
+        # Bounded horizons give L (a policy accepting within H junctions with probability L
+        # satisfies the unbounded spec with probability >= L); each uses the bounded abstraction of
+        # the automatic suffix length (capped by the unbounded bound when the cells are the same).
+        # After the first, the unbounded problem itself is searched for a quarter of the time left
+        # (open nodes valued by the bound): that lowers U where the bound is loose.
+        lower, table, runs = -1.0, None, []
         for depth in UNBOUNDED_HORIZONS:
-            if upper - lower <= tau or time.perf_counter() >= deadline:
+            if upper - lower <= tau or (runs and time.perf_counter() >= deadline):
                 break
+            k_run = bounded_suffix_length(tables, symbols.n_changing, suffix_length, depth)
+            shared = k_run == k
             run_lower, _, run_table, stats = _bounded_search(
-                tables, belief_rule, depth, 0.5 * tau, k, batch, started, deadline, value, abstraction)
+                tables, belief_rule, depth, 0.5 * tau, k_run, batch, started, deadline,
+                value if shared else None, abstraction if shared else None)
             runs.append(stats)
             if run_lower > lower:
                 lower, table = run_lower, run_table
+            if len(runs) == 1 and upper - lower > tau:
+                remaining = max(deadline - time.perf_counter(), 0.0)
+                run_lower, run_upper, run_table, stats = _bounded_search(
+                    tables, belief_rule, None, tau, k, batch, started,
+                    time.perf_counter() + 0.25 * remaining, value, abstraction)
+                stats["end_component_seconds"] = bound.seconds
+                runs.append(stats)
+                upper = min(upper, run_upper)
+                if run_lower > lower:
+                    lower, table = run_lower, run_table
         lower = max(lower, 0.0)
     policy = BeliefTablePolicy(table, pomdp.town, spec, lower=lower, upper=upper, horizon=horizon)
     stats = {
