@@ -574,7 +574,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         note = ("graph distance: acceptance is unreachable" if never else
                 f"graph distance: acceptance needs at least {shortest} junctions")
         runs = [{"horizon": horizon, "lower": 0.0, "upper": 0.0, "nodes": 0, "abstraction_root_upper": 0.0,
-                 "abstraction_bound": note}]
+                 "abstraction_bound": note, "threshold_alternates": 0, "lower_strict_labels": 0.0}]
         if horizon is None:
             note = "graph distance: acceptance is unreachable"
     elif horizon is not None:
