@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from trustroute.analysis.dataset import PLOTS_DIR
 from trustroute.networks.town import Town, split_road
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
@@ -104,7 +105,7 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
             running = group.groupby("index").size()
             enough = running.index[running >= max(3, 0.02 * running.iloc[0])]
             true = group.groupby("index")["trust_after"].mean().loc[enough]
-            reported = group[group["reported_trust"] >= 0].groupby("index")["reported_trust"].mean()
+            reported = group[group["reported_trust"].notna()].groupby("index")["reported_trust"].mean()
             reported = reported.loc[reported.index.isin(enough)]
             ax.plot(reported.index, reported.values, color=colour, label=f"{condition} reported")
             ax.plot(true.index, true.values, color=colour, ls="--", lw=1, label=f"{condition} true")
@@ -181,7 +182,7 @@ def write_plots(
     episodes: pd.DataFrame,
     belief_source: str,
 ) -> dict[str, Path]:
-    folder = Path(study_dir) / "plots"
+    folder = Path(study_dir) / PLOTS_DIR
     folder.mkdir(parents=True, exist_ok=True)
     return {
         "satisfaction": satisfaction_plot(cells, folder / "satisfaction.png", belief_source),

@@ -13,8 +13,7 @@ import html
 from dataclasses import dataclass
 from pathlib import Path
 
-import pandas as pd
-
+from trustroute.analysis.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE, read_roads
 from trustroute.analysis.plots import write_plots
 from trustroute.analysis.tables import StudyAnalysis, cell_rows, study_analysis, study_inputs
 
@@ -153,10 +152,7 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
     primary = analysis if analysis is not None else study_analysis(study_dir, "filter")
     secondary = study_analysis(study_dir, "reported" if primary.belief_source == "filter" else "filter")
     town, _, _ = study_inputs(primary.manifest)
-    roads = pd.read_parquet(
-        study_dir / "roads.parquet",
-        columns=["episode_id", "index", "directed_road", "trust_after", "reported_trust"],
-    )
+    roads = read_roads(study_dir, ["episode_id", "index", "directed_road", "trust_after", "reported_trust"])
     plots = write_plots(study_dir, town, primary.cells, roads, primary.episodes, primary.belief_source)
     sections = _sections(primary, secondary)
     title = f"trustroute study report: {primary.manifest.get('study')}"
@@ -187,7 +183,7 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
         f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
         f"<style>{style}</style></head><body>{''.join(body)}</body></html>"
     )
-    markdown_path, html_path = study_dir / "report.md", study_dir / "report.html"
+    markdown_path, html_path = study_dir / REPORT_MARKDOWN_FILE, study_dir / REPORT_HTML_FILE
     markdown_path.write_text("\n".join(md))
     html_path.write_text(page)
     from trustroute.analysis.tables import format_table

@@ -15,7 +15,6 @@ roads.parquet, manifest.json) and returns a `StudyAnalysis`:
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.dataset import read_episodes, read_manifest, read_roads
 from trustroute.analysis.satisfaction import BELIEF_SOURCES, episode_satisfaction
 from trustroute.analysis.statistics import bootstrap_ci, mcnemar_exact, wilcoxon_paired
 from trustroute.networks.errors import InputError
@@ -61,31 +61,17 @@ class StudyAnalysis:
 
 
 def _finite(value: float) -> float | None:
-    return None if value is None or (isinstance(value, float) and math.isnan(value)) else float(value)
+    # pd.NA: the mean of a nullable column with no values (e.g. final_trust of real participants)
+    if value is None or value is pd.NA or (isinstance(value, float) and math.isnan(value)):
+        return None
+    return float(value)
 
 
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    """(manifest, episodes, roads) of a consolidated study, read through trustroute.analysis.dataset."""
     study_dir = Path(study_dir)
-    manifest_path = study_dir / "manifest.json"
-    if not manifest_path.exists():
-        raise InputError(
-            str(study_dir),
-            "manifest.json",
-            "not a finished study directory (no manifest)",
-            "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)",
-        )
-    try:
-        manifest = json.loads(manifest_path.read_text())
-        episodes = pd.read_parquet(study_dir / "episodes.parquet")
-        roads = pd.read_parquet(study_dir / "roads.parquet")
-    except (OSError, ValueError) as exc:
-        raise InputError(
-            str(study_dir),
-            "dataset",
-            f"cannot read the consolidated dataset ({exc})",
-            "rerun `trustroute study` on this directory to rebuild it",
-        ) from None
-    return manifest, episodes, roads
+    manifest = read_manifest(study_dir)
+    return manifest, read_episodes(study_dir), read_roads(study_dir)
 
 
 def study_inputs(manifest: dict):
@@ -97,8 +83,18 @@ def study_inputs(manifest: dict):
     config = manifest["config"]
     town = load_town(config.get("town"))
     driver = load_driver_model(config.get("driver_model"))
-    specs = {Path(p).stem: load_spec(p, town) for p in config["specs"]}
+    specs = {Path(p).stem: load_spec(_spec_path(p), town) for p in config["specs"]}
     return town, driver, specs
+
+
+def _spec_path(path: str) -> Path:
+    """A manifest's spec path; a packaged spec when the recorded path is gone (a study directory
+    shipped with the package, or moved to another machine)."""
+    from trustroute.harness.study.config import PACKAGED_SPECS
+
+    recorded = Path(path)
+    packaged = PACKAGED_SPECS / recorded.name
+    return recorded if recorded.exists() or not packaged.exists() else packaged
 
 
 def _pair_conditions(conditions: list[str]) -> tuple[str, str] | None:

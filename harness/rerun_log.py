@@ -18,6 +18,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 TIMELINE = "sim_time"
 AUTO_COLOR = (255, 255, 255)
@@ -82,12 +83,13 @@ def write_recording(path: Path, net_path: Path, record, setup) -> Path:
     for row in record.roads.itertuples(index=False):
         entered = float(row.sim_time_in)
         rec.set_time(TIMELINE, duration=entered)
-        rec.log("episode/roads", rr.TextLog(f"{row.directed_road} ({row.incident or 'start'})"))
+        incident = "start" if row.index == 0 else row.incident
+        rec.log("episode/roads", rr.TextLog(f"{row.directed_road} ({incident})"))
         at = float(row.sim_time_out) if not math.isnan(row.sim_time_out) else entered
         rec.set_time(TIMELINE, duration=at if row.index > 0 else entered)
         belief = np.asarray(row.belief_after, dtype=float)
         rec.log("episode/trust/true", rr.Scalars(float(row.trust_after)))
-        if row.reported_trust >= 0:
+        if not pd.isna(row.reported_trust):
             rec.log("episode/trust/reported", rr.Scalars(float(row.reported_trust)))
         rec.log("episode/belief/mean", rr.Scalars(float(belief @ levels)))
         for level, p in zip(setup.driver_model.trust_levels, belief, strict=True):

@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from trustroute.analysis.dataset import STUDY_FILE
 from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.parts import finished_episodes, write_failure, write_part
@@ -29,8 +30,6 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.protocol import RoutingPolicy
-
-STUDY_FILE = "study.json"
 
 
 @dataclass(frozen=True)
@@ -158,12 +157,18 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
         driver = SyntheticDriver(
             context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
         )
+        extra = {}
+        if config.engine == "sumo" and config.background_vehicles:
+            from trustroute.harness.sumo_start import SumoConfig
+
+            extra["config"] = SumoConfig(background_vehicles=config.background_vehicles)
         record = engine_function(config.engine)(
             context.setups[task.spec],
             context.policies[(task.spec, task.condition)],
             driver,
             task.episode_id,
             task.seed,
+            **extra,
         )
         write_part(
             Path(study_dir),
