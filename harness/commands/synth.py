@@ -19,12 +19,14 @@ from trustroute.networks.errors import InputError
 def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None):
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.labelling import check_coefficient_length
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     town = load_town(town_path)
     driver = load_driver_model(driver_path)
     spec = load_spec(spec_path, town)
+    check_coefficient_length(spec, driver.n_trust, driver.source_path)
     return town, driver, spec, build_pomdp(town, driver)
 
 
@@ -76,10 +78,32 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
                           "seconds": result.seconds, "tau": tau, "horizon": horizon,
                           "belief_rule": belief_rule, "stats": result.stats},
                          {"policy": path, "policy_arrays": array_path(path)})
-    emit(as_json, payload, [
-        f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
-        f"{result.seconds:.1f} s)",
-        f"policy written to {path}"])
+    lines = [f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
+             f"{result.seconds:.1f} s)"]
+    alternates = sum(run.get("threshold_alternates", 0) for run in result.stats.get("runs", []))
+    if alternates:
+        strict = max(run.get("lower_strict_labels", 0.0) for run in result.stats["runs"])
+        lines.append(f"{alternates} outcomes sit on a belief threshold (within rounding): L reads them "
+                     f"the worse way, U the better; with this machine's labels the policy is worth at "
+                     f"least {strict:.6f} (spec check warns about such thresholds)")
+    if belief_rule == "paper":
+        # L and U are about the authors' belief MDP (their filter drives beliefs and labels); a
+        # study measures the real process: observations drawn from the Bayes posterior.
+        from trustroute.policies.evaluate import EPISODE_JUNCTION_CAP
+        from trustroute.policies.evaluate import evaluate as evaluate_policy
+
+        cap = horizon if horizon is not None else EPISODE_JUNCTION_CAP
+        real = evaluate_policy(pomdp, spec, result.policy, fallback_after=None, max_junctions=cap,
+                               belief_rule="paper")
+        payload["bounds_refer_to"] = "the authors' belief MDP (--belief-rule paper)"
+        payload["bayes_process_value"] = {"lower": real.lower, "upper": real.upper,
+                                          "max_junctions": cap}
+        lines.append("L and U refer to the authors' belief MDP (--belief-rule paper), not the real "
+                     "process")
+        lines.append(f"the policy's value under the real (Bayes) process within {cap} junctions: "
+                     f"[{real.lower:.6f}, {real.upper:.6f}]")
+    lines.append(f"policy written to {path}")
+    emit(as_json, payload, lines)
 
 
 @click.command("baseline")

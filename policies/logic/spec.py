@@ -2,7 +2,8 @@
 
 A spec file (e.g. specs/phi1.toml) has `name`, `start` (directed road "U-V", position 0),
 `formula` (policies/logic/formula.py grammar), a `[states]` table (atom -> list of directed roads) and
-`[beliefs.NAME]` tables with `coeffs` (one per trust level, 7) and `offset`: a belief atom is true
+`[beliefs.NAME]` tables with `coeffs` (one per trust level of the driver model; the default model
+has 7, and the labeller checks the length against the model in use) and `offset`: a belief atom is true
 iff `offset - coeffs·b < 0` (strict; docs/model.md, "scLDTL"; every key: docs/formats/spec.md), and a `[trust_states]` table of
 trust-state atoms `NAME = { roads = [...], trust = [6, 7] }`: true at a position iff the road is
 one of `roads` (any road when `roads` is absent) and the human's hidden trust is one of the levels
@@ -34,7 +35,7 @@ from trustroute.policies.logic.formula import (
     parse_formula,
 )
 
-N_TRUST_LEVELS = 7  # the Muir scale 1..7: belief vectors have this length
+N_TRUST_LEVELS = 7  # the Muir scale 1..7 of the default driver model (any number >= 2 is accepted)
 TOP_LEVEL_KEYS = ("name", "start", "formula", "states", "beliefs", "trust_states")
 
 
@@ -235,10 +236,10 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
         if not (isinstance(coeffs, list) and all(_number(c) for c in coeffs)):
             raise fail(label, coeffs_place, f"belief atom '{atom}': coeffs must be a list of finite "
                        "numbers", "write coeffs = [1, 0, 0, 0, 0, 0, 0]")
-        if len(coeffs) != N_TRUST_LEVELS:
+        if len(coeffs) < 2:
             raise fail(label, coeffs_place, f"belief atom '{atom}': coeffs has {len(coeffs)} entries, "
-                       f"expected {N_TRUST_LEVELS} (one per trust level 1..{N_TRUST_LEVELS})",
-                       f"give exactly {N_TRUST_LEVELS} coefficients")
+                       "expected one per trust level of the driver model (at least 2)",
+                       f"give one coefficient per trust level, e.g. {N_TRUST_LEVELS} for the default model")
         if not _number(offset):
             raise fail(label, header + (r"^\s*offset\s*=",), f"belief atom '{atom}': offset must be "
                        "a finite number", "write offset = 0.5")

@@ -19,7 +19,7 @@ import numpy as np
 
 from trustroute.networks.errors import InputError
 from trustroute.policies.logic.dfa import DFA, build_dfa
-from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.labelling import Labeller, check_coefficient_length
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import TrustPOMDP
 
@@ -62,6 +62,7 @@ def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
                          "evaluate with policies.evaluate_joint or bound with policies.joint_search "
                          "(docs/trust_states.md)")
     town = pomdp.town
+    check_coefficient_length(spec, pomdp.n_trust, pomdp.driver.source_path)
     dfa = build_dfa(spec)
     labeller = Labeller(spec, dfa, town)
     atoms = tuple(dfa.atoms)
