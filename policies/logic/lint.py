@@ -284,8 +284,10 @@ def threshold_warnings(spec: Spec, town: Town, driver: DriverModel) -> list[Lint
     return warnings
 
 
-def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None) -> list[LintWarning]:
-    """Every warning that applies to `spec` (and to `town` when given)."""
+def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None,
+         driver: DriverModel | None = None) -> list[LintWarning]:
+    """Every warning that applies to `spec` (and to `town` when given, with `driver` or the
+    packaged driver model for the threshold check)."""
     dfa = dfa if dfa is not None else build_dfa(spec)
     no_effect = no_effect_warnings(spec, dfa)
     warnings = (belief_warnings(spec) + no_effect

@@ -4,7 +4,8 @@ A spec file (e.g. specs/phi1.toml) has `name`, `start` (directed road "U-V", pos
 `formula` (policies/logic/formula.py grammar), a `[states]` table (atom -> list of directed roads) and
 `[beliefs.NAME]` tables with `coeffs` (one per trust level of the driver model; the default model
 has 7, and the labeller checks the length against the model in use) and `offset`: a belief atom is true
-iff `offset - coeffs·b < 0` (strict; docs/model.md, "scLDTL"; every key: docs/formats/spec.md), and a `[trust_states]` table of
+iff `offset - coeffs·b < 0` (strict; docs/model.md, "scLDTL"; every key: docs/formats/spec.md), and a
+`[trust_states]` table of
 trust-state atoms `NAME = { roads = [...], trust = [6, 7] }`: true at a position iff the road is
 one of `roads` (any road when `roads` is absent) and the human's hidden trust is one of the levels
 `trust` (docs/trust_states.md). Every error is an InputError naming the file, line and column.
