@@ -2,7 +2,7 @@
 
 Only what a real study could observe is used: per road the incident, the takeover h, the AV's
 performance e and the reported trust (when reported); the true trust columns of the logs are
-never read. The model (DESIGN.md, "The model") is a hidden Markov model over trust θ_t:
+never read. The model (docs/model.md, "The model") is a hidden Markov model over trust θ_t:
 θ_0 ~ π; on road t, h_t ~ P(h | θ_{t-1}, inc_t), e_t ~ P(e | θ_{t-1}, inc_t),
 θ_t ~ T[inc_t][h_t][e_t](θ_{t-1}, ·); the report r_t is θ_t with probability a, else one level
 up or down (equal chance, clipped at the ends: the driver model's `report_matrix`).

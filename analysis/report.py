@@ -30,7 +30,8 @@ NOTES = [
     "Pr_max of the paper); the study measures the policy followed by the 20-junction fallback, whose "
     "exact value is the 'exact [L, U]' column.",
     "The paper's lowtrust clause `(!lowtrust) U ...` constrains nothing as written (1 - b(1) < 0 is "
-    "never true on the simplex, and a U (F b) = F b): see DESIGN.md; the strict spec variants differ.",
+    "never true on the simplex, and a U (F b) = F b): see docs/model.md, 'scLDTL'; the strict spec "
+    "variants differ.",
     "The paper ran 21 people in CARLA; ours are synthetic drivers from the driver model, so agreement "
     "in direction, not in the third decimal, is what to look for.",
 ]

@@ -1,7 +1,7 @@
 """Spec satisfaction of logged episodes, re-evaluated from the logs with a chosen belief source.
 
 The trace of an episode is its logged roads (row 0 = the start road, position 0) labelled by a
-belief per position. Two belief sources (DESIGN.md, "The study"):
+belief per position. Two belief sources (docs/study.md):
 
 - "filter": the AV's online Bayes filter, the `belief_after` column (what the vehicle believed;
   the episode itself ended on this source, so it reproduces the logged `satisfied`);

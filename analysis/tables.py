@@ -222,7 +222,7 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
 
 
 def paper_comparison(analysis: StudyAnalysis) -> list[dict]:
-    """The paper's headline figures beside this study's (DESIGN.md, "Headline figures")."""
+    """The paper's headline figures beside this study's (docs/study.md, "Headline figures of the paper")."""
     episodes, source = analysis.episodes, analysis.belief_source
     names = list(dict.fromkeys(episodes["spec"])) if len(episodes) else []
 

@@ -8,7 +8,7 @@ prioritised pedestrian crossing over each road with a pedestrian incident, at bo
 (the person of a `U-V` incident crosses at U, ahead of the ego as it turns into `U-V`); explicit
 connections to every non-U-turn successor (U-turns only at dead ends, `--no-turnarounds`);
 narrow lanes and small junction radii so that driven lengths (edge + internal lanes of the
-connection taken) stay within 5 % of the model's Euclidean lengths (DESIGN.md, "Road lengths").
+connection taken) stay within 5 % of the model's Euclidean lengths (docs/model.md, "Road lengths").
 One vehicle lane per direction keeps lane choice out of routing: the route can be extended one road ahead late
 on the current road, after its incident has been observed.
 

@@ -2,8 +2,8 @@
 
 A town file is JSON with `junctions` (name -> [x, y] in metres), `roads` (list of
 undirected [U, V] pairs, each a two-way road) and `incidents` (one entry per
-directed road "U-V": obstacle, pedestrian, truck or none). A state of the model
-is a directed road "U-V": the vehicle has just arrived at V from U.
+directed road "U-V": obstacle, pedestrian, truck or none); every key: docs/formats/town.md.
+A state of the model is a directed road "U-V": the vehicle has just arrived at V from U.
 """
 
 from __future__ import annotations

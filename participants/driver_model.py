@@ -11,6 +11,8 @@ Schema (JSON, as the packaged default `data/driver_model.json`):
   always succeeds (the default model).
 - `initial_belief` (optional, uniform when absent), `source` (provenance text).
 
+Every key and its check: docs/formats/driver_model.md.
+
 Index conventions used by every array here and in `policies/`:
 h = 0 standstill, 1 takeover; e = 0 succ, 1 fail.
 

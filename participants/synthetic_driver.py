@@ -5,8 +5,8 @@ model engine. Its trust is hidden from the AV; it decides takeovers from its cur
 (the driver model's takeover probability), moves its trust by the model's trust dynamics
 T[inc][h][e](θ, θ'), and reports its trust with a configurable accuracy. In the model engine
 it also draws the AV's performance from the model's failure probability.
-The report noise model is the driver model's (participants/driver_model.py). Every draw goes
-through the Generator passed in.
+The report noise model is the driver model's (participants/driver_model.py); see docs/model.md,
+"The model". Every draw goes through the Generator passed in.
 """
 
 from __future__ import annotations

@@ -87,10 +87,11 @@ class Evaluation:
         return out
 
 
-def _decide(policy: RoutingPolicy, context: DecisionContext, town: Town, road: int, level: int,
-            max_junctions: int, fallback_level: int | None, successor_index: dict) -> tuple[bool, bool, int]:
-    """(finished here, the fallback first drives here, next road index or -1), by the episode rules;
-    road is the index of context.road."""
+def decide_node(policy: RoutingPolicy, context: DecisionContext, town: Town, road: int, level: int,
+                max_junctions: int, fallback_level: int | None,
+                successor_index: dict) -> tuple[bool, bool, int]:
+    """(finished here, the fallback first drives here, next road index or -1) for one tree node, by
+    the episode rules; road is the index of context.road."""
     decision = decide(policy, context, town, max_junctions)
     if decision.end is not None:
         return decision.end == "destination", False, -1
@@ -171,7 +172,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
             i0 = keep[first[r]]
             context = DecisionContext(route=routes[rid], dfa_state=int(q[i0]), belief=belief_av[i0])
             if policy.route_determined(context):
-                finished[members], fired[members], chosen[members] = _decide(
+                finished[members], fired[members], chosen[members] = decide_node(
                     policy, context, town, int(road[i0]), level, max_junctions, fallback_level,
                     successor_index)
                 continue
@@ -182,7 +183,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                 decision = decisions.get(key)
                 if decision is None:
                     context = DecisionContext(route=routes[rid], dfa_state=key[0], belief=belief_av[i])
-                    decision = _decide(policy, context, town, int(road[i]), level, max_junctions,
+                    decision = decide_node(policy, context, town, int(road[i]), level, max_junctions,
                                        fallback_level, successor_index)
                     decisions[key] = decision
                 finished[k], fired[k], chosen[k] = decision

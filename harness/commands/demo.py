@@ -15,6 +15,7 @@ from pathlib import Path
 import click
 
 from trustroute.harness.commands.options import WORKERS, bounded_int
+from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 
 DEFAULT_OUT = Path("out") / "demo"
 DEMO_STUDY = {
@@ -58,14 +59,18 @@ def record_episode(config, study_dir: Path, episode_id: str) -> Path:
     type=click.Path(),
     default=str(DEFAULT_OUT),
     show_default=True,
-    help="Study directory (a rerun resumes).",
+    help="Study DIRECTORY (a rerun resumes).",
 )
 @click.option("--workers", type=WORKERS, default=None, help="Local worker processes (default: CPU count).")
 @click.option("--engine", type=click.Choice(["sumo", "model"]), default="sumo", show_default=True)
 @click.option("--participants", type=bounded_int(1, 100_000), default=21, show_default=True)
+@json_option
+@quiet_option
 @click.pass_context
-def demo(ctx: click.Context, out: str, workers: int | None, engine: str, participants: int) -> None:
+def demo(ctx: click.Context, out: str, workers: int | None, engine: str, participants: int, as_json: bool,
+         quiet: bool) -> None:
     """Run the paper-size study (21 participants) on the defaults and show where the results are."""
+    from trustroute.harness.commands.study import dataset_paths, report_paths
     from trustroute.harness.study.config import study_config_from_dict
     from trustroute.harness.study.runner import run_and_consolidate
 
@@ -76,31 +81,39 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
     )
     study_dir = Path(out)
     workers = workers if workers is not None else (os.cpu_count() or 1)
-    click.echo(
-        f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}"
-    )
-    run, _ = run_and_consolidate(config, study_dir, workers, None, echo=click.echo)
+    silent = quiet or as_json
+    say = (lambda line: None) if silent else click.echo
+    say(f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}")
+    run, manifest = run_and_consolidate(config, study_dir, workers, None, progress=not silent, echo=say)
     if run.failed:
         click.echo(f"error: {len(run.failed)} episodes failed (reasons in {run.study_dir / 'failures'}; "
                    f"rerun the demo to retry them): {', '.join(run.failed[:10])}", err=True)
         ctx.exit(1)
     from trustroute.analysis.report import write_report
+    from trustroute.analysis.tables import study_analysis
 
-    paths = write_report(run.study_dir)
-    click.echo("")
-    click.echo(paths.table_text)
-    click.echo("")
-    from trustroute.analysis.dataset import EPISODES_FILE, ROADS_FILE
-
-    click.echo(f"results: {run.study_dir / EPISODES_FILE} (episodes), {run.study_dir / ROADS_FILE} (roads)")
-    click.echo(f"report:  {paths.markdown}  and  {paths.html}")
+    analysis = study_analysis(run.study_dir)
+    written = write_report(run.study_dir, analysis=analysis)
+    paths = {**dataset_paths(run.study_dir, manifest), **report_paths(written)}
+    lines = [
+        "",
+        written.table_text,
+        "",
+        f"results: {paths['episodes']} (episodes), {paths['roads']} (roads)",
+        f"report:  {written.markdown}  and  {written.html}",
+    ]
+    payload = {"study_dir": str(run.study_dir), "engine": engine, "failed": run.failed,
+               "analysis": analysis.to_dict()}
     if engine == "sumo":
         episode_id = f"p{0:05d}-phi1-aware"
         try:
             rrd = record_episode(config, run.study_dir, episode_id)
-            click.echo(f"episode recording: {rrd}  (open with: {_rerun_command()} {rrd})")
+            paths["rrd"] = rrd
+            lines.append(f"episode recording: {rrd}  (open with: {_rerun_command()} {rrd})")
         except Exception as exc:  # the study is done; a failed recording must not hide it
-            click.echo(f"episode recording failed: {type(exc).__name__}: {exc}")
+            payload["recording_error"] = f"{type(exc).__name__}: {exc}"
+            lines.append(f"episode recording failed: {payload['recording_error']}")
+    emit(as_json, with_paths(payload, paths), lines)
 
 
 def _rerun_command() -> str:

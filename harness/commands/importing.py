@@ -12,6 +12,8 @@ from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.output import json_option, quiet_option, with_paths
+
 
 @click.group("import")
 def import_group() -> None:
@@ -20,9 +22,9 @@ def import_group() -> None:
 
 @import_group.command("carla-logs")
 @click.argument("source", metavar="DIR", type=click.Path())
-@click.option("--out", "out", type=click.Path(), required=True, help="Study directory to write.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
-@click.option("--json", "as_json", is_flag=True, help="Print the import summary as one JSON object.")
+@click.option("--out", "out", type=click.Path(), required=True, help="Study DIRECTORY to write.")
+@quiet_option
+@json_option
 def carla_logs(source: str, out: str, quiet: bool, as_json: bool) -> None:
     """Import the authors' CARLA logs under DIR into the study directory --out."""
     from trustroute.analysis.carla_import import import_carla_logs
@@ -38,7 +40,9 @@ def carla_logs(source: str, out: str, quiet: bool, as_json: bool) -> None:
         "missing_sessions": info["missing_sessions"],
     }
     if as_json:
-        click.echo(json.dumps(summary))
+        from trustroute.harness.commands.study import dataset_paths
+
+        click.echo(json.dumps(with_paths(summary, dataset_paths(Path(out), manifest))))
         return
     click.echo(
         f"imported {summary['episodes']} episodes of {summary['participants']} participants into {out}; "

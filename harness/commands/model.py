@@ -7,6 +7,7 @@ import json
 import click
 import numpy as np
 
+from trustroute.harness.commands.output import json_option
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.model.trust_pomdp import build_pomdp
@@ -42,7 +43,7 @@ def model_summary(town_path: str | None, driver_path: str | None) -> dict:
 @click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
 @click.option("--driver", "driver_path", type=click.Path(), default=None,
               help="Driver model file (default model).")
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@json_option
 def model(town_path: str | None, driver_path: str | None, as_json: bool) -> None:
     """Summarise the trust POMDP of a town and a driver model."""
     summary = model_summary(town_path, driver_path)

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.output import json_option, with_paths
+
 
 @click.group("net")
 def net() -> None:
@@ -16,9 +18,9 @@ def net() -> None:
 @net.command("build")
 @click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
 @click.option("--out", "out_dir", type=click.Path(), default=None,
-              help="Net cache directory (default: $XDG_CACHE_HOME/trustroute/nets, XDG_CACHE_HOME "
-              "defaulting to ~/.cache).")
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+              help="DIRECTORY of the net cache (default: $XDG_CACHE_HOME/trustroute/nets, "
+              "XDG_CACHE_HOME defaulting to ~/.cache).")
+@json_option
 def build(town_path: str | None, out_dir: str | None, as_json: bool) -> None:
     """Build the town's .net.xml with netconvert, cached by the town's content hash."""
     from trustroute.networks.sumo_net import build_net
@@ -29,7 +31,7 @@ def build(town_path: str | None, out_dir: str | None, as_json: bool) -> None:
         check_output_dir(out_dir, "--out", "net cache")
     result = build_net(load_town(town_path), Path(out_dir) if out_dir else None)
     if as_json:
-        click.echo(json.dumps(result.to_dict()))
+        click.echo(json.dumps(with_paths(result.to_dict(), {"net": result.path})))
         return
     click.echo(str(result.path))
     click.echo(f"{result.edges} edges, {result.junctions} junctions, {result.connections} connections, "

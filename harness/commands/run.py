@@ -8,10 +8,11 @@ from pathlib import Path
 import click
 
 from trustroute.harness.commands.options import SEED
+from trustroute.harness.commands.output import json_option, with_paths
 from trustroute.networks.errors import InputError
 
 
-def _write_logs(out_dir: Path, record) -> list[Path]:
+def _write_logs(out_dir: Path, record) -> dict[str, Path]:
     """Each log file written atomically (a full disk leaves the old file or none, never half)."""
     from trustroute.analysis.dataset import (
         INCIDENTS_FILE,
@@ -26,28 +27,29 @@ def _write_logs(out_dir: Path, record) -> list[Path]:
     )
     from trustroute.output_files import atomic_write_text
 
-    written = []
-    for frame, file_name, schema in ((record.roads, ROADS_FILE, ROADS_SCHEMA),
-                                     (record.kinematics, KINEMATICS_FILE, KINEMATICS_SCHEMA),
-                                     (record.incidents, INCIDENTS_FILE, INCIDENTS_SCHEMA)):
-        written.append(write_table(table_from_frame(frame, schema), out_dir / file_name))
-    summary = out_dir / SUMMARY_FILE
-    atomic_write_text(summary, json.dumps(record.summary, indent=1) + "\n", "episode summary",
-                      "pass a writable directory with --out")
-    written.append(summary)
+    written = {}
+    for name, frame, file_name, schema in (
+            ("roads", record.roads, ROADS_FILE, ROADS_SCHEMA),
+            ("kinematics", record.kinematics, KINEMATICS_FILE, KINEMATICS_SCHEMA),
+            ("incidents", record.incidents, INCIDENTS_FILE, INCIDENTS_SCHEMA)):
+        written[name] = write_table(table_from_frame(frame, schema), out_dir / file_name)
+    written["summary"] = out_dir / SUMMARY_FILE
+    atomic_write_text(written["summary"], json.dumps(record.summary, indent=1) + "\n",
+                      "episode summary", "pass a writable directory with --out")
     return written
 
 
 @click.command("run")
-@click.option("--spec", "spec_path", required=True, type=click.Path(),
-              help="Spec file (e.g. specs/phi1.toml).")
+@click.argument("spec_argument", metavar="SPEC", required=False, type=click.Path())
+@click.option("--spec", "spec_option", type=click.Path(), default=None, hidden=True,
+              help="Deprecated spelling of the SPEC argument.")
 @click.option("--policy", "policy_name", default="free", show_default=True,
               help="'aware', 'free' or a policy file.")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="SUMO seed and driver seed.")
-@click.option("--rrd", "rrd_path", type=click.Path(), default=None, help="Write a Rerun recording here.")
+@click.option("--rrd", "rrd_path", type=click.Path(), default=None, help="Rerun recording FILE to write.")
 @click.option("--out", "out_dir", type=click.Path(), default=None,
-              help="Write roads/kinematics/incidents Parquet and summary.json here.")
-@click.option("--json", "as_json", is_flag=True, help="Print the episode summary as one JSON object.")
+              help="DIRECTORY to write roads/kinematics/incidents Parquet and summary.json into.")
+@json_option
 @click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
 @click.option("--driver", "driver_path", type=click.Path(), default=None,
               help="Driver model file (default model).")
@@ -55,10 +57,11 @@ def _write_logs(out_dir: Path, record) -> list[Path]:
               help="SUMO net to use (default: the town's cached net, built if missing).")
 @click.option("--initial-trust", type=int, default=None, help="Driver's initial trust (default: drawn).")
 @click.option("--cache-dir", type=click.Path(), default=None, help="Where 'aware' policies are cached.")
-def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_dir: str | None,
-        as_json: bool, town_path: str | None, driver_path: str | None, net_path: str | None,
-        initial_trust: int | None, cache_dir: str | None) -> None:
-    """Run one episode of SPEC in SUMO with POLICY and a synthetic driver."""
+def run(spec_argument: str | None, spec_option: str | None, policy_name: str, seed: int,
+        rrd_path: str | None, out_dir: str | None, as_json: bool, town_path: str | None,
+        driver_path: str | None, net_path: str | None, initial_trust: int | None,
+        cache_dir: str | None) -> None:
+    """Run one episode of SPEC (a spec file) in SUMO with POLICY and a synthetic driver."""
     import numpy as np
 
     from trustroute.harness.episode import run_episode
@@ -67,9 +70,15 @@ def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_d
     from trustroute.output_files import check_output_dir, check_output_file
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.participants.synthetic_driver import SyntheticDriver
-    from trustroute.policies.logic.spec import check_trust_levels, load_spec
+    from trustroute.policies.logic.labelling import check_coefficient_length
+    from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.routing.resolve import resolve_policy
 
+    if spec_argument is not None and spec_option is not None:
+        raise click.UsageError("give the spec once: as the SPEC argument (--spec is its old spelling)")
+    spec_path = spec_argument if spec_argument is not None else spec_option
+    if spec_path is None:
+        raise click.UsageError("missing argument SPEC (a spec file, e.g. specs/phi1.toml)")
     if out_dir is not None:
         check_output_dir(out_dir, "--out", "log directory")
     if rrd_path is not None:
@@ -84,7 +93,7 @@ def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_d
     town = load_town(town_path)
     driver_model = load_driver_model(driver_path)
     spec = load_spec(spec_path, town)
-    check_trust_levels(spec, driver_model.n_trust, driver_model.source_path)
+    check_coefficient_length(spec, driver_model.n_trust, driver_model.source_path)
     if initial_trust is not None and initial_trust not in driver_model.trust_levels:
         raise InputError("--initial-trust", "", f"{initial_trust} is not a trust level of the model",
                          f"pass one of {list(driver_model.trust_levels)}")
@@ -95,16 +104,18 @@ def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_d
     record = run_episode(setup, policy, driver, episode_id, seed,
                          rrd_path=Path(rrd_path) if rrd_path else None,
                          net_path=Path(net_path) if net_path else None)
-    written = _write_logs(Path(out_dir), record) if out_dir else []
+    written = _write_logs(Path(out_dir), record) if out_dir else {}
+    if rrd_path:
+        written["rrd"] = Path(rrd_path)
     summary = dict(record.summary)
     summary["route"] = record.roads["directed_road"].tolist()
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(json.dumps(with_paths(summary, written)))
         return
     click.echo(f"{episode_id}: {summary['end_reason']} after {summary['junctions']} junctions, "
                f"satisfied={summary['satisfied']}, takeovers={summary['takeovers']}, final trust "
                f"{summary['final_trust']}, sim {summary['sim_seconds']:.1f} s, wall "
                f"{summary['wall_seconds']:.2f} s")
     click.echo("route: " + " ".join(summary["route"]))
-    for path in written + ([Path(rrd_path)] if rrd_path else []):
+    for path in written.values():
         click.echo(f"wrote {path}")

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.output import json_option, with_paths
 from trustroute.networks.errors import InputError
 
 
@@ -45,6 +46,7 @@ def spec_report(spec_path: str, town_path: str | None) -> tuple[dict, str]:
         "atoms": list(dfa.atoms),
         "state_atoms": sorted(a for a in spec.state_atoms if a in dfa.atoms),
         "belief_atoms": sorted(a for a in spec.belief_atoms if a in dfa.atoms),
+        "trust_atoms": sorted(a for a in spec.trust_atoms if a in dfa.atoms),
         "dfa_states": dfa.n_states,
         "accepting_states": int(dfa.accepting.sum()),
         "rejecting_states": int(dfa.rejecting.sum()),
@@ -62,8 +64,9 @@ def spec() -> None:
 @spec.command("check")
 @click.argument("spec_path", metavar="SPEC")
 @click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-@click.option("--dot", "dot_path", type=click.Path(), default=None, help="Write the DFA as Graphviz dot.")
+@json_option
+@click.option("--dot", "dot_path", type=click.Path(), default=None,
+              help="FILE to write the DFA into, as Graphviz dot.")
 def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | None) -> None:
     """Parse SPEC, print its DFA size and the linter's warnings."""
     from trustroute.output_files import atomic_write_text, check_output_file
@@ -74,7 +77,7 @@ def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | 
     if dot_path is not None:
         atomic_write_text(Path(dot_path), dot, "dot file", "pass a writable path to --dot")
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(json.dumps(with_paths(summary, {"dot": dot_path})))
         return
     click.echo(f"{summary['name']} ({summary['file']}): start {summary['start']}, "
                f"formula {summary['formula']}")

@@ -16,6 +16,7 @@ from pathlib import Path
 import click
 
 from trustroute.harness.commands.options import WORKERS, bounded_int
+from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 
 DEFAULT_STUDIES_DIR = Path("studies")
 CHECK_REPLICATES = 50  # simulated drivers per real episode in `fit --check`
@@ -30,6 +31,19 @@ def study_directory(config, out: str | None) -> Path:
     return DEFAULT_STUDIES_DIR / config.name
 
 
+def dataset_paths(study_dir: Path, manifest: dict) -> dict[str, Path]:
+    """The consolidated dataset's files (manifest "files") and the manifest, by name."""
+    from trustroute.analysis.dataset import MANIFEST_FILE
+
+    files = {name: study_dir / file for name, file in manifest.get("files", {}).items()}
+    return {**files, "manifest": study_dir / MANIFEST_FILE}
+
+
+def report_paths(paths) -> dict[str, Path]:
+    """The files of analysis.report.write_report, by name."""
+    return {"report_markdown": paths.markdown, "report_html": paths.html}
+
+
 @click.command("study")
 @click.argument("config_path", metavar="CONFIG", type=click.Path())
 @click.option(
@@ -37,7 +51,7 @@ def study_directory(config, out: str | None) -> Path:
     "out",
     type=click.Path(),
     default=None,
-    help="Study directory (default: the config's output, else studies/<name>).",
+    help="Study DIRECTORY (default: the config's output, else studies/<name>).",
 )
 @click.option("--workers", type=WORKERS, default=None, help="Local worker processes (default: CPU count).")
 @click.option(
@@ -53,6 +67,8 @@ def study_directory(config, out: str | None) -> Path:
               help="Write the report even when some episodes failed (default: only a complete study).")
 @click.option("--attempts", type=bounded_int(1, 10), default=2, show_default=True,
               help="Runs of a failing episode at most (the first and its retries).")
+@json_option
+@quiet_option
 @click.pass_context
 def study(
     ctx: click.Context,
@@ -64,8 +80,10 @@ def study(
     no_report: bool,
     report_anyway: bool,
     attempts: int,
+    as_json: bool,
+    quiet: bool,
 ) -> None:
-    """Run (or resume) the simulated within-subject study described by CONFIG.
+    """Run (or resume) the simulated within-subject study described by CONFIG (a TOML file).
 
     Exit code 1 when episodes failed (they are named; a rerun retries them), 2 for bad input."""
     from trustroute.harness.study.config import load_study_config
@@ -75,29 +93,41 @@ def study(
     study_dir = study_directory(config, out)
     from trustroute.harness.study.runner import run_and_consolidate
 
-    run, _ = run_and_consolidate(config, study_dir, workers, scheduler, echo=click.echo, attempts=attempts)
+    silent = quiet or as_json
+    run, manifest = run_and_consolidate(config, study_dir, workers, scheduler, progress=not silent,
+                                        echo=(lambda line: None) if silent else click.echo,
+                                        attempts=attempts)
     from trustroute.analysis.dataset import EPISODES_FILE, FAILURES_DIR, ROADS_FILE
 
-    click.echo(f"dataset: {run.study_dir / EPISODES_FILE}, {run.study_dir / ROADS_FILE}")
+    paths = dataset_paths(run.study_dir, manifest)
+    lines = [f"dataset: {run.study_dir / EPISODES_FILE}, {run.study_dir / ROADS_FILE}"]
     if run.failed:
+        # On stderr, so --json keeps exactly one JSON object on stdout.
         click.echo(
             f"error: {len(run.failed)} episodes failed (reasons in {run.study_dir / FAILURES_DIR}; a rerun "
             f"retries them): {', '.join(run.failed[:10])}{' ...' if len(run.failed) > 10 else ''}",
             err=True,
         )
+    payload = {"study_dir": str(run.study_dir), "planned": run.planned, "skipped": run.skipped,
+               "ran": run.ran, "retried": run.retried, "failed": run.failed, "backend": run.backend,
+               "seconds": run.seconds}
     if not no_report and (not run.failed or report_anyway):
         from trustroute.analysis.report import write_report
+        from trustroute.analysis.tables import study_analysis
 
-        paths = write_report(run.study_dir)
-        click.echo(paths.table_text)
-        click.echo(f"report: {paths.markdown} and {paths.html}")
+        analysis = study_analysis(run.study_dir)
+        written = write_report(run.study_dir, analysis=analysis)
+        paths.update(report_paths(written))
+        payload["analysis"] = analysis.to_dict()
+        lines += [written.table_text, f"report: {written.markdown} and {written.html}"]
+    emit(as_json, with_paths(payload, paths), lines)
     if run.failed:
         ctx.exit(1)
 
 
 @click.command("analyze")
 @click.argument("study_dir", metavar="DIR", type=click.Path())
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@json_option
 @click.option(
     "--belief-source",
     type=click.Choice(["filter", "reported"]),
@@ -105,9 +135,14 @@ def study(
     show_default=True,
     help="Beliefs the spec is evaluated on: the AV's filter, or induced from reported trust.",
 )
-@click.option("--report/--no-report", default=True, help="Also (re)write the report and plots.")
-def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> None:
-    """Per spec and condition: n, satisfaction rate with CI, mean trust, paired tests."""
+@click.option(
+    "--report/--no-report",
+    default=None,
+    help="(Re)write report.md, report.html and plots/ in DIR (default: yes, but no with --json).",
+)
+def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool | None) -> None:
+    """Per spec and condition of the study directory DIR: n, satisfaction rate with CI, mean trust,
+    paired tests."""
     from trustroute.analysis.tables import study_analysis
 
     analysis = study_analysis(Path(study_dir), belief_source=belief_source)
@@ -117,18 +152,20 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
 
         real = real_study_analysis(Path(study_dir))
     paths = None
-    if report:
+    real_paths: dict[str, Path] = {}
+    write = (not as_json) if report is None else report
+    if write:
         from trustroute.analysis.report import write_report
 
         paths = write_report(Path(study_dir), analysis=analysis)
         if real is not None:
-            write_real_study_report(real, Path(study_dir))
+            written = write_real_study_report(real, Path(study_dir))
+            real_paths = {"real_study_json": written, "real_study_text": written.with_suffix(".txt")}
     if as_json:
         payload = analysis.to_dict()
         if real is not None:
             payload["real_study"] = real.to_dict()
-        if paths is not None:
-            payload["report"] = {"markdown": str(paths.markdown), "html": str(paths.html)}
+        payload = with_paths(payload, {**report_paths(paths), **real_paths} if paths is not None else {})
         click.echo(json.dumps(payload, default=str))
         return
     from trustroute.analysis.tables import format_table
@@ -151,7 +188,7 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
     type=click.Path(),
     default="driver.json",
     show_default=True,
-    help="Driver model file to write.",
+    help="Driver model FILE to write.",
 )
 @click.option(
     "--method",
@@ -178,8 +215,8 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
     help="Posterior-predictive check: simulate the packaged and the fitted model on the study's "
     "roads and compare with its logs (writes <out>.check.json and <out>.check.png).",
 )
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@json_option
+@quiet_option
 def fit(
     study_dir: str,
     out: str,
@@ -198,7 +235,8 @@ def fit(
     check_output_file(out, "--out", "driver model file")
     result = fit_study(Path(study_dir), method=method, iterations=iterations)
     path = result.write(Path(out))
-    payload = {"driver_model": str(path), **result.summary()}
+    payload = result.summary()
+    paths: dict[str, Path] = {"driver_model": path}
     if bootstrap:
         import numpy as np
         from tqdm import tqdm
@@ -218,7 +256,8 @@ def fit(
                 np.random.default_rng(seed),
                 progress=bar.update,
             )
-        Path(path).with_suffix(".bootstrap.json").write_text(json.dumps(payload["bootstrap"], indent=1))
+        paths["bootstrap"] = Path(path).with_suffix(".bootstrap.json")
+        paths["bootstrap"].write_text(json.dumps(payload["bootstrap"], indent=1))
     if check:
         import numpy as np
 
@@ -239,15 +278,16 @@ def fit(
         }
         outcome = posterior_check(roads, models, CHECK_REPLICATES, np.random.default_rng(seed))
         stem = Path(path).with_suffix("")
+        paths["check_json"] = write_check(outcome, stem.with_suffix(".check.json"))
+        paths["check_plot"] = plot_check(outcome, stem.with_suffix(".check.png"))
         payload["check"] = {
-            "json": str(write_check(outcome, stem.with_suffix(".check.json"))),
-            "plot": str(plot_check(outcome, stem.with_suffix(".check.png"))),
             "distance": {name: m["distance"] for name, m in outcome["models"].items()},
             # the packaged setup's aware and free policies driven by packaged vs fitted drivers
             "aware_vs_free": aware_vs_free(
                 {name: model for name, (model, _) in models.items()}, CHECK_EPISODES, seed
             ),
         }
+    payload = with_paths(payload, paths)
     if as_json:
         click.echo(json.dumps(payload, default=str))
         return
@@ -266,7 +306,7 @@ def fit(
                 f"{row['satisfaction_rate']:.4f}, mean trust {row['mean_trust']:.3f} "
                 f"({row['episodes']} episodes)"
             )
-        click.echo(f"check: {payload['check']['json']} and {payload['check']['plot']}")
+        click.echo(f"check: {paths['check_json']} and {paths['check_plot']}")
     click.echo(
         f"fitted by {result.method} on {result.episodes} episodes ({result.transitions} roads driven)"
         f"{f', report accuracy {result.report_accuracy:.3f}' if result.report_accuracy is not None else ''}"

@@ -8,13 +8,12 @@ evaluate  the exact satisfaction probability and expected final trust of any pol
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 
 import click
 
 from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
+from trustroute.harness.commands.output import emit, json_option, with_paths
 from trustroute.networks.errors import InputError
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
@@ -23,13 +22,14 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None):
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import check_trust_levels, load_spec
+    from trustroute.policies.logic.labelling import check_coefficient_length
+    from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     town = load_town(town_path)
     driver = load_driver_model(driver_path)
     spec = load_spec(spec_path, town)
-    check_trust_levels(spec, driver.n_trust, driver.source_path)
+    check_coefficient_length(spec, driver.n_trust, driver.source_path)
     return town, driver, spec, build_pomdp(town, driver)
 
 
@@ -37,29 +37,10 @@ def _finite(value: float) -> float | None:
     return None if value is None or (isinstance(value, float) and math.isnan(value)) else value
 
 
-def _jsonable(value: object) -> object:
-    """numpy scalars and arrays (e.g. in synthesis stats) as plain JSON values."""
-    tolist = getattr(value, "tolist", None)
-    if callable(tolist):
-        return tolist()
-    if isinstance(value, Path | set | frozenset | tuple):
-        return str(value) if isinstance(value, Path) else list(value)
-    return str(value)
-
-
-def _emit(as_json: bool, payload: dict, lines: list[str]) -> None:
-    if as_json:
-        click.echo(json.dumps(payload, default=_jsonable))
-    else:
-        for line in lines:
-            click.echo(line)
-
-
 town_option = click.option("--town", "town_path", type=click.Path(), default=None,
                            help="Town file (default: the packaged town).")
 driver_option = click.option("--driver", "driver_path", type=click.Path(), default=None,
                              help="Driver model file (default: the packaged model).")
-json_option = click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]), default="bayes",
                            show_default=True,
                            help="AV belief filter: exact Bayes, or the authors' released update.")
@@ -76,7 +57,7 @@ rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]
               show_default=True, help="Seconds.")
 @rule_option
 @click.option("--out", "out_path", type=click.Path(), default="policy.json", show_default=True,
-              help="Policy file to write.")
+              help="Policy FILE to write (its arrays go beside it, same name with suffix .npz).")
 @json_option
 def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: float,
           horizon: int | None, time_limit: float, belief_rule: str, out_path: str,
@@ -97,13 +78,38 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
                         belief_rule=belief_rule)
     path = str(save_policy(result, out_path, town, driver, spec))
-    payload = {"spec": spec.name, "lower": result.lower, "upper": result.upper, "gap": result.gap,
-               "seconds": result.seconds, "tau": tau, "horizon": horizon, "belief_rule": belief_rule,
-               "policy": path, "stats": result.stats}
-    _emit(as_json, payload, [
-        f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
-        f"{result.seconds:.1f} s)",
-        f"policy written to {path}"])
+    from trustroute.policies.routing.files import array_path
+
+    payload = with_paths({"spec": spec.name, "lower": result.lower, "upper": result.upper, "gap": result.gap,
+                          "seconds": result.seconds, "tau": tau, "horizon": horizon,
+                          "belief_rule": belief_rule, "stats": result.stats},
+                         {"policy": path, "policy_arrays": array_path(path)})
+    lines = [f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
+             f"{result.seconds:.1f} s)"]
+    alternates = sum(run.get("threshold_alternates", 0) for run in result.stats.get("runs", []))
+    if alternates:
+        strict = max(run.get("lower_strict_labels", 0.0) for run in result.stats["runs"])
+        lines.append(f"{alternates} outcomes sit on a belief threshold (within rounding): L reads them "
+                     f"the worse way, U the better; with this machine's labels the policy is worth at "
+                     f"least {strict:.6f} (spec check warns about such thresholds)")
+    if belief_rule == "paper":
+        # L and U are about the authors' belief MDP (their filter drives beliefs and labels); a
+        # study measures the real process: observations drawn from the Bayes posterior.
+        from trustroute.policies.evaluate import evaluate as evaluate_policy
+        from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
+
+        cap = horizon if horizon is not None else DEFAULT_JUNCTION_CAP
+        real = evaluate_policy(pomdp, spec, result.policy, fallback_after=None, max_junctions=cap,
+                               belief_rule="paper")
+        payload["bounds_refer_to"] = "the authors' belief MDP (--belief-rule paper)"
+        payload["bayes_process_value"] = {"lower": real.lower, "upper": real.upper,
+                                          "max_junctions": cap}
+        lines.append("L and U refer to the authors' belief MDP (--belief-rule paper), not the real "
+                     "process")
+        lines.append(f"the policy's value under the real (Bayes) process within {cap} junctions: "
+                     f"[{real.lower:.6f}, {real.upper:.6f}]")
+    lines.append(f"policy written to {path}")
+    emit(as_json, payload, lines)
 
 
 @click.command("baseline")
@@ -126,7 +132,7 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
                "junctions": len(route) - 1, "satisfaction_probability": value.satisfaction_probability,
                "lower": value.lower, "upper": value.upper,
                "expected_final_trust": _finite(value.expected_final_trust), "belief_rule": belief_rule}
-    _emit(as_json, payload, [
+    emit(as_json, payload, [
         f"{spec.name} trust-free route ({len(route) - 1} junctions, {payload['length_m']:.0f} m): "
         + " ".join(route),
         f"P(satisfied) = {value.satisfaction_probability:.6f}, E[final trust] = "
@@ -177,7 +183,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     payload["spec"] = spec.name
     payload["expected_final_trust"] = _finite(value.expected_final_trust)
     payload["expected_junctions"] = _finite(value.expected_junctions)
-    _emit(as_json, payload, [
+    emit(as_json, payload, [
         f"{spec.name} / {value.policy}: P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], "
         f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
         f"{value.expected_junctions:.2f}, P(fallback fired) = {value.fallback_probability:.4f}",

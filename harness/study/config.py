@@ -18,6 +18,8 @@ seeded background traffic, vehicles kept on the net; default 0 = none, docs/scen
 variation of the drivers (participants.population.PopulationConfig; omitted: every driver is the
 nominal model, reporting trust with accuracy 0.8).
 
+Every key, its default and its check: docs/formats/study_config.md.
+
 Relative paths resolve against the config file's folder, then the current directory; spec names
 also resolve against the packaged specs (`phi1`, `specs/phi1.toml`). Bad input raises InputError
 naming the file, the key and the fix.
@@ -133,6 +135,13 @@ class StudyConfig:
 
     def with_overrides(self, **changes: object) -> StudyConfig:
         return replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+
+def packaged_spec_path(name: str) -> Path | None:
+    """The packaged spec called `name` ("phi1" or "phi1.toml"), or None when there is none."""
+    stem = Path(name).name
+    candidate = PACKAGED_SPECS / (stem if stem.endswith(".toml") else f"{stem}.toml")
+    return candidate if candidate.is_file() else None
 
 
 def condition_label(condition: str) -> str:

@@ -68,13 +68,14 @@ def study_context(config: StudyConfig) -> StudyContext:
     every setting and the [population] table included, share one context)."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import check_trust_levels, load_spec
+    from trustroute.policies.logic.labelling import check_coefficient_length
+    from trustroute.policies.logic.spec import load_spec
 
     town = load_town(config.town)
     nominal = load_driver_model(config.driver_model)
     specs = {Path(path).stem: load_spec(path, town) for path in config.specs}
     for spec in specs.values():  # a spec's belief atoms weigh one coefficient per trust level
-        check_trust_levels(spec, nominal.n_trust, nominal.source_path)
+        check_coefficient_length(spec, nominal.n_trust, nominal.source_path)
     setups = {
         name: EpisodeSetup(
             town=town,

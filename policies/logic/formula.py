@@ -1,6 +1,6 @@
 """scLDTL formulas: the abstract syntax tree, its parser and printer, and a canonical form.
 
-Grammar (DESIGN.md, "scLDTL"), lowest precedence first:
+Grammar (docs/formats/spec.md, "Formula grammar"), lowest precedence first:
 
     formula := or
     or      := and ('|' and)*
@@ -468,7 +468,8 @@ class _Parser:
                 defined = ", ".join(sorted(self.known_atoms)) or "none"
                 raise self.error(token.offset, f"unknown atom '{token.text}': expected one of the "
                                  f"atoms defined in the spec ({defined})",
-                                 f"define '{token.text}' under [states] or [beliefs.{token.text}]")
+                                 f"define '{token.text}' under [states], [beliefs.{token.text}] "
+                                 "or [trust_states]")
             return Literal(token.text)
         if token.kind == "(":
             inner = self.parse_or()

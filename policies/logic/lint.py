@@ -12,19 +12,32 @@ Checks (each warning has a stable `code`):
   are all reported by `atom-no-effect`, nor inside a reported subformula.
 - `unused-atom`: defined in the file but not used by the formula.
 - `unsatisfiable`: the DFA's initial state cannot reach acceptance.
-With a town:
+- `precedence`: '&' or '|' and 'U' side by side in one parenthesised group, e.g. `a & b U c`. The
+  parser reads U tighter than & and | (`a & (b U c)`; policies/logic/formula.py); the warning
+  states that reading and asks for parentheses.
+With a town (and a driver model: the packaged one unless given):
+- `threshold-hit`: a belief atom's threshold lies within the rounding margin
+  (labelling.Labeller.belief_margins) of c·b for a belief the vehicle really reaches: the prior,
+  or the posterior after up to THRESHOLD_DEPTH observations (e.g. a multiple of 1/n under a
+  uniform prior, which no `none` road moves). Synthesis then treats the label as either value,
+  which widens [L, U]; moving the offset off the hit avoids that.
 - `state-unreachable`: a state atom none of whose roads can be reached from the start.
 - `town-unsatisfiable`: no route satisfies even the state-only projection (every belief literal
   true): no accepting (road, q) is reachable in the town × projected-DFA product.
+Trust-state atoms (docs/trust_states.md):
+- `trust-every-level`: the atom names every trust level, so it tests the road only (a state atom).
+- `trust-unreachable` (with a town): none of the atom's roads can be reached from the start.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from trustroute.networks.town import Town
+from trustroute.participants.driver_model import DriverModel, load_driver_model
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA, build_dfa, dfa_from_formula
 from trustroute.policies.logic.formula import (
@@ -42,7 +55,9 @@ from trustroute.policies.logic.formula import (
     format_formula,
     walk,
 )
-from trustroute.policies.logic.spec import Spec, state_only_projection
+from trustroute.policies.logic.spec import N_TRUST_LEVELS, Spec, state_only_projection
+
+THRESHOLD_DEPTH = 3
 
 
 @dataclass(frozen=True)
@@ -194,12 +209,91 @@ def town_satisfiable(spec: Spec, town: Town) -> bool:
     return False
 
 
-def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None) -> list[LintWarning]:
-    """Every warning that applies to `spec` (and to `town` when given)."""
+def trust_warnings(spec: Spec, town: Town | None = None) -> list[LintWarning]:
+    warnings = []
+    used = set(spec.formula_atoms)
+    reachable = town.reachable_states(spec.start) if town is not None else None
+    for name, atom in sorted(spec.trust_atoms.items()):
+        if len(atom.trust) == N_TRUST_LEVELS:
+            warnings.append(LintWarning(
+                "trust-every-level", f"trust-state atom '{name}' names every trust level: it tests the "
+                "road only (write it under [states])", name))
+        if reachable is not None and atom.roads is not None and name in used and not atom.roads & reachable:
+            warnings.append(LintWarning(
+                "trust-unreachable", f"trust-state atom '{name}': none of its roads can be reached from "
+                f"the start {spec.start}", name))
+    return warnings
+
+
+def precedence_warnings(spec: Spec) -> list[LintWarning]:
+    """'&'/'|' mixed with 'U' at one parenthesis depth of the formula text."""
+    operators: list[set[str]] = [set()]
+    mixed = False
+    for token in re.findall(r"[()&|]|\bU\b", spec.formula_text):
+        if token == "(":
+            operators.append(set())
+        elif token == ")":
+            group = operators.pop() if len(operators) > 1 else operators[0]
+            mixed |= "U" in group and bool(group & {"&", "|"})
+        else:
+            operators[-1].add(token)
+    mixed |= any("U" in group and bool(group & {"&", "|"}) for group in operators)
+    if not mixed:
+        return []
+    return [LintWarning(
+        "precedence", f"formula '{spec.formula_text}' mixes '&' or '|' with 'U' without parentheses; "
+        "it is read with U binding tighter than & and | (a & b U c is a & (b U c)), as "
+        f"'{format_formula(spec.formula)}': add parentheses to say which you mean")]
+
+
+def threshold_warnings(spec: Spec, town: Town, driver: DriverModel) -> list[LintWarning]:
+    """Belief atoms whose threshold a reachable belief hits within the rounding margin."""
+    if not spec.belief_atoms or any(len(a.coeffs) != driver.n_trust for a in spec.belief_atoms.values()):
+        return []
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+
+    pomdp = build_pomdp(town, driver)
+    compiled = compile_spec(spec, town)
+    dfa, labeller = compiled.dfa, compiled.labeller
+    symbols = [(i, h, e) for i in range(len(driver.incident_types)) for h in (0, 1)
+               for e in ((0, 1) if driver.depends_on_performance else (0,))]
+    layer = np.asarray(driver.initial_belief, dtype=float)[None, :]
+    reached = [layer]
+    for _ in range(THRESHOLD_DEPTH):
+        grown = []
+        for i, h, e in symbols:
+            posterior, probability = pomdp.belief_update(layer, i, h, e)
+            grown.append(posterior[probability > 0])
+        layer = np.unique(np.concatenate(grown), axis=0)
+        reached.append(layer)
+    beliefs = np.concatenate(reached)
+    _, either = labeller.belief_margins(beliefs)
+    names = [dfa.atoms[c] for c in labeller.belief_columns]
+    warnings = []
+    for j, name in enumerate(names):
+        hits = np.flatnonzero(either[:, j])
+        if hits.size == 0:
+            continue
+        atom = spec.belief_atoms[name]
+        value = float(beliefs[hits[0]] @ np.asarray(atom.coeffs))
+        warnings.append(LintWarning(
+            "threshold-hit", f"belief atom '{name}': the threshold {atom.offset!r} is hit exactly (within "
+            f"rounding) by c·b = {value!r} at {hits.size} belief(s) the vehicle reaches within "
+            f"{THRESHOLD_DEPTH} observations (e.g. the prior or after 'none' roads); the label there "
+            "depends on rounding, so synthesis counts it as either value: move the offset off the hit", name))
+    return warnings
+
+
+def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None,
+         driver: DriverModel | None = None) -> list[LintWarning]:
+    """Every warning that applies to `spec` (and to `town` when given, with `driver` or the
+    packaged driver model for the threshold check)."""
     dfa = dfa if dfa is not None else build_dfa(spec)
     no_effect = no_effect_warnings(spec, dfa)
     warnings = (belief_warnings(spec) + no_effect
-                + subformula_warnings(spec, dfa, {w.atom for w in no_effect}) + unused_warnings(spec))
+                + subformula_warnings(spec, dfa, {w.atom for w in no_effect}) + unused_warnings(spec)
+                + trust_warnings(spec, town)
+                + precedence_warnings(spec))
     if dfa.rejecting[dfa.initial]:
         warnings.append(LintWarning("unsatisfiable", "no trace satisfies the formula (the DFA's "
                                     "initial state cannot reach acceptance)"))
@@ -209,4 +303,5 @@ def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None) -> list[L
             warnings.append(LintWarning(
                 "town-unsatisfiable", f"no route from {spec.start} satisfies the spec on this town, "
                 "even with every belief atom true"))
+        warnings += threshold_warnings(spec, town, driver if driver is not None else load_driver_model())
     return warnings

@@ -2,9 +2,13 @@
 
 A spec file (e.g. specs/phi1.toml) has `name`, `start` (directed road "U-V", position 0),
 `formula` (policies/logic/formula.py grammar), a `[states]` table (atom -> list of directed roads) and
-`[beliefs.NAME]` tables with `coeffs` (one per trust level, 7) and `offset`: a belief atom is true
-iff `offset - coeffs·b < 0` (strict; DESIGN.md, "scLDTL"). Every error is an InputError naming
-the file, line and column.
+`[beliefs.NAME]` tables with `coeffs` (one per trust level of the driver model; the default model
+has 7, and the labeller checks the length against the model in use) and `offset`: a belief atom is true
+iff `offset - coeffs·b < 0` (strict; docs/model.md, "scLDTL"; every key: docs/formats/spec.md), and a
+`[trust_states]` table of
+trust-state atoms `NAME = { roads = [...], trust = [6, 7] }`: true at a position iff the road is
+one of `roads` (any road when `roads` is absent) and the human's hidden trust is one of the levels
+`trust` (docs/trust_states.md). Every error is an InputError naming the file, line and column.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ import hashlib
 import json
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from trustroute.networks.errors import InputError
@@ -22,6 +26,7 @@ from trustroute.networks.town import Town
 from trustroute.networks.validation import parse_toml, read_text, require_keys
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
+    FALSE,
     KEYWORDS,
     TRUE,
     Formula,
@@ -32,8 +37,8 @@ from trustroute.policies.logic.formula import (
     parse_formula,
 )
 
-N_TRUST_LEVELS = 7  # the Muir scale 1..7: belief vectors have this length
-TOP_LEVEL_KEYS = ("name", "start", "formula", "states", "beliefs")
+N_TRUST_LEVELS = 7  # the Muir scale 1..7 of the default driver model (any number >= 2 is accepted)
+TOP_LEVEL_KEYS = ("name", "start", "formula", "states", "beliefs", "trust_states")
 MAX_SPEC_NAME = 64
 # Names become file names (policy cache entries): no path separators, NUL or leading dot.
 SPEC_NAME = re.compile(rf"[A-Za-z0-9_][A-Za-z0-9_.+-]{{0,{MAX_SPEC_NAME - 1}}}")
@@ -53,6 +58,17 @@ class BeliefAtom:
     offset: float
 
 
+@dataclass(frozen=True)
+class TrustStateAtom:
+    """True at (x, θ) iff θ is in `trust` (levels 1..7) and, when `roads` is given, x is in it."""
+
+    trust: frozenset[int]
+    roads: frozenset[str] | None = None
+
+    def holds_on_road(self, road: str) -> bool:
+        return self.roads is None or road in self.roads
+
+
 @dataclass(frozen=True, eq=False)
 class Spec:
     name: str
@@ -62,18 +78,25 @@ class Spec:
     state_atoms: dict[str, frozenset[str]]
     belief_atoms: dict[str, BeliefAtom]
     source_path: str = ""
+    trust_atoms: dict[str, TrustStateAtom] = field(default_factory=dict)
 
     @functools.cached_property
     def content_hash(self) -> str:
-        """SHA-256 of the meaning (start, parsed formula, atom definitions), not name or formatting."""
+        """SHA-256 of the meaning (start, parsed formula, atom definitions), not name or formatting.
+        Trust-state atoms enter only when there are some, so older specs keep their hashes."""
+        meaning: dict = {
+            "start": self.start,
+            "formula": format_formula(self.formula),
+            "states": {k: sorted(v) for k, v in sorted(self.state_atoms.items())},
+            "beliefs": {k: {"coeffs": [float(c) for c in v.coeffs], "offset": float(v.offset)}
+                        for k, v in sorted(self.belief_atoms.items())},
+        }
+        if self.trust_atoms:
+            meaning["trust_states"] = {
+                k: {"trust": sorted(v.trust), "roads": None if v.roads is None else sorted(v.roads)}
+                for k, v in sorted(self.trust_atoms.items())}
         canonical = json.dumps(
-            {
-                "start": self.start,
-                "formula": format_formula(self.formula),
-                "states": {k: sorted(v) for k, v in sorted(self.state_atoms.items())},
-                "beliefs": {k: {"coeffs": [float(c) for c in v.coeffs], "offset": float(v.offset)}
-                            for k, v in sorted(self.belief_atoms.items())},
-            },
+            meaning,
             sort_keys=True,
             separators=(",", ":"),
         )
@@ -81,8 +104,14 @@ class Spec:
 
     @property
     def atoms(self) -> tuple[str, ...]:
-        """Every defined atom: state atoms sorted, then belief atoms sorted."""
-        return tuple(sorted(self.state_atoms)) + tuple(sorted(self.belief_atoms))
+        """Every defined atom: state atoms sorted, then belief atoms sorted, then trust-state atoms."""
+        return (tuple(sorted(self.state_atoms)) + tuple(sorted(self.belief_atoms))
+                + tuple(sorted(self.trust_atoms)))
+
+    @property
+    def uses_trust_atoms(self) -> bool:
+        """True iff the formula tests the hidden trust (then the DFA state is partly hidden)."""
+        return any(atom in self.trust_atoms for atom in self.formula_atoms)
 
     @property
     def formula_atoms(self) -> tuple[str, ...]:
@@ -238,18 +267,21 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
         if not (isinstance(coeffs, list) and all(_number(c) for c in coeffs)):
             raise fail(label, coeffs_place, f"belief atom '{atom}': coeffs must be a list of finite "
                        "numbers", "write coeffs = [1, 0, 0, 0, 0, 0, 0]")
-        if len(coeffs) != N_TRUST_LEVELS:
+        if len(coeffs) < 2:
             raise fail(label, coeffs_place, f"belief atom '{atom}': coeffs has {len(coeffs)} entries, "
-                       f"expected {N_TRUST_LEVELS} (one per trust level 1..{N_TRUST_LEVELS})",
-                       f"give exactly {N_TRUST_LEVELS} coefficients")
+                       "expected one per trust level of the driver model (at least 2)",
+                       f"give one coefficient per trust level, e.g. {N_TRUST_LEVELS} for the default model")
         if not _number(offset):
             raise fail(label, header + (r"^\s*offset\s*=",), f"belief atom '{atom}': offset must be "
                        "a finite number", "write offset = 0.5")
         belief_atoms[atom] = BeliefAtom(tuple(float(c) for c in coeffs), float(offset))
 
+    trust_atoms = _trust_state_atoms(data.get("trust_states", {}), text, source, town,
+                                     set(state_atoms) | set(belief_atoms), check_atom_name)
     line, column = _formula_position(text)
     try:
-        formula = parse_formula(formula_text, set(state_atoms) | set(belief_atoms), source, line, column)
+        formula = parse_formula(formula_text, set(state_atoms) | set(belief_atoms) | set(trust_atoms),
+                                source, line, column)
     except RecursionError:
         raise fail("formula", (r"^\s*formula\s*=",), "the formula is nested too deeply to parse",
                    "simplify the formula") from None
@@ -260,7 +292,61 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
         raise fail("start", (r"^\s*start\s*=",), f"start '{start}' is not a directed road \"U-V\"",
                    'write start = "E-A"')
     return Spec(name=name, start=start, formula_text=formula_text, formula=formula,
-                state_atoms=state_atoms, belief_atoms=belief_atoms, source_path=source)
+                state_atoms=state_atoms, belief_atoms=belief_atoms, source_path=source,
+                trust_atoms=trust_atoms)
+
+
+def _trust_state_atoms(raw: object, text: str, source: str, town: Town | None, taken: set[str],
+                       check_atom_name) -> dict[str, TrustStateAtom]:
+    """The `[trust_states]` table: NAME = { roads = [...] (optional), trust = [levels] }."""
+
+    def fail(label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
+        return InputError(source, _place(text, label, *needles), problem, fix)
+
+    example = "write [trust_states] then trusting = { roads = [\"K-L\"], trust = [6, 7] }"
+    if not isinstance(raw, dict):
+        raise fail("trust_states", (r"^\s*trust_states\s*=",),
+                   "'trust_states' must be a table of atom -> { roads, trust }", example)
+    atoms: dict[str, TrustStateAtom] = {}
+    for atom in sorted(raw):
+        entry = raw[atom]
+        check_atom_name(atom, "trust_states")
+        label = f"trust_states.{atom}"
+        needles = (r"^\s*\[trust_states", rf"^\s*{re.escape(atom)}\s*=")
+        if atom in taken:
+            raise fail(label, needles, f"atom '{atom}' is defined twice (also under [states] or "
+                       "[beliefs])", "rename one of them")
+        if not isinstance(entry, dict):
+            raise fail(label, needles, f"trust-state atom '{atom}' must be a table", example)
+        for key in entry:
+            if key not in ("roads", "trust"):
+                raise fail(label, needles, f"unknown key '{key}' in trust-state atom '{atom}'",
+                           "use only roads (optional) and trust")
+        if "trust" not in entry:
+            raise fail(label, needles, f"trust-state atom '{atom}' is missing 'trust'",
+                       f"add trust = [levels 1..{N_TRUST_LEVELS}], e.g. trust = [6, 7]")
+        levels = entry["trust"]
+        if not (isinstance(levels, list) and levels
+                and all(isinstance(v, int) and not isinstance(v, bool) for v in levels)
+                and all(1 <= v <= N_TRUST_LEVELS for v in levels)):
+            raise fail(label, needles, f"trust-state atom '{atom}': trust must be a non-empty list of "
+                       f"trust levels (integers 1..{N_TRUST_LEVELS})", "write trust = [6, 7]")
+        roads = entry.get("roads")
+        if roads is not None:
+            if not (isinstance(roads, list) and all(isinstance(r, str) for r in roads)):
+                raise fail(label, needles, f"trust-state atom '{atom}': roads must be a list of "
+                           "directed roads", 'write roads = ["U-V", ...] or leave it out for any road')
+            for road in roads:
+                if "-" not in road:
+                    raise fail(label, needles, f"'{road}' is not a directed road \"U-V\"",
+                               "write roads as \"U-V\"")
+                if town is not None and road not in town.states:
+                    raise fail(label, needles, f"trust-state atom '{atom}': '{road}' is not a directed "
+                               f"road of the town ({town.source_path or 'given town'})",
+                               "use directed roads 'U-V' of the town (trustroute model lists them)")
+        atoms[atom] = TrustStateAtom(trust=frozenset(levels),
+                                     roads=None if roads is None else frozenset(roads))
+    return atoms
 
 
 def load_spec(path: str | Path, town: Town | None = None) -> Spec:
@@ -270,24 +356,29 @@ def load_spec(path: str | Path, town: Town | None = None) -> Spec:
     return spec_from_text(text, str(path), town)
 
 
-def check_trust_levels(spec: Spec, n_trust: int, driver_source: str) -> None:
-    """A spec's belief atoms weigh one coefficient per trust level of the driver model."""
-    for atom, belief in sorted(spec.belief_atoms.items()):
-        if len(belief.coeffs) != n_trust:
-            raise InputError(spec.source_path or spec.name, f"beliefs.{atom}",
-                             f"belief atom '{atom}' has {len(belief.coeffs)} coefficients but the driver "
-                             f"model {driver_source} has {n_trust} trust levels",
-                             f"give {n_trust} coefficients, or use a driver model with "
-                             f"{len(belief.coeffs)} trust levels")
-
-
 def state_only_projection(spec: Spec) -> Spec:
-    """The spec with every belief literal (positive or negated) replaced by true."""
+    """The spec with every belief literal (positive or negated) replaced by true, and every
+    trust-state literal by its most permissive reading on the road alone: a positive literal by
+    its roads (true when it has none), a negated one by true unless it names every trust level
+    (then by the negation of its roads). The projection holds wherever some trust and some
+    belief make the spec's literal hold, so a route satisfying the spec satisfies it."""
+    state_atoms = dict(spec.state_atoms)
 
     def replace(literal: Literal) -> Formula:
-        return TRUE if literal.atom in spec.belief_atoms else literal
+        if literal.atom in spec.belief_atoms:
+            return TRUE
+        trust = spec.trust_atoms.get(literal.atom)
+        if trust is None:
+            return literal
+        every_level = len(trust.trust) == N_TRUST_LEVELS
+        if literal.positive or every_level:
+            if trust.roads is None:
+                return TRUE if literal.positive else FALSE
+            state_atoms[literal.atom] = trust.roads
+            return literal
+        return TRUE
 
     formula = map_literals(spec.formula, replace)
     return Spec(name=f"{spec.name} (state-only)", start=spec.start, formula_text=format_formula(formula),
-                formula=formula, state_atoms=dict(spec.state_atoms), belief_atoms={},
+                formula=formula, state_atoms=state_atoms, belief_atoms={},
                 source_path=spec.source_path)

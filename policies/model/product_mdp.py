@@ -3,7 +3,8 @@
 A product state is (x, q, b): directed road x, DFA state q after reading position (x, b), AV
 belief b. Choosing the next junction moves to road x'; the symbol o seen on x' updates the belief
 to b' = f_o(b) and the DFA reads position (x', b'): q' = δ(q, L(x', b')). Positions and labels
-follow DESIGN.md, "scLDTL"; the DFA is the scLDTL helper's (policies/logic/dfa.py).
+follow docs/model.md, "Positions of a trace" and "The product"; the DFA is the scLDTL helper's
+(policies/logic/dfa.py).
 
 `next_q[q, x', bits]` tabulates δ for every road and every valuation of the belief atoms
 (bit j of `bits` = value of `belief_atoms[j]`), so abstract solvers can branch on label
@@ -16,9 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.networks.errors import InputError
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA
-from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.labelling import Labeller, check_coefficient_length
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import TrustPOMDP
 
@@ -55,7 +57,13 @@ class ProductTables:
 
 
 def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
+    if spec.uses_trust_atoms:
+        raise InputError(spec.source_path or spec.name, "formula",
+                         "the belief-MDP product cannot test the hidden trust (trust-state atoms)",
+                         "evaluate with policies.evaluate_joint or bound with policies.joint_search "
+                         "(docs/trust_states.md)")
     town = pomdp.town
+    check_coefficient_length(spec, pomdp.n_trust, pomdp.driver.source_path)
     compiled = compile_spec(spec, town)
     dfa, labeller = compiled.dfa, compiled.labeller
     atoms = tuple(dfa.atoms)

@@ -2,7 +2,7 @@
 
 States are (x, θ): x a directed road of the town (observed), θ the human's trust (hidden).
 An action at x is the next junction. After driving road x' the vehicle observes
-o = (incident of x', human action h, AV performance e). See ../shared/DESIGN.md, "The model".
+o = (incident of x', human action h, AV performance e). See docs/model.md, "The model".
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ class TrustPOMDP:
                       rule: BeliefRule = "bayes") -> tuple[np.ndarray, np.ndarray]:
         """Bayes filter, vectorised over rows: returns (posteriors, observation probabilities).
 
-        b'(θ') ∝ Σθ b(θ) P(h|θ,inc) P(e|θ,inc) T[inc][h][e](θ,θ')   (DESIGN.md, "Belief").
+        b'(θ') ∝ Σθ b(θ) P(h|θ,inc) P(e|θ,inc) T[inc][h][e](θ,θ')   (docs/model.md, "Belief").
         rule="paper" is the authors' released update b' ∝ b·T[inc][h] (no likelihood weighting);
         the returned probabilities are the Bayes ones in both cases.
         An observation of probability 0 gives a zero row of probability 0 (never NaN).

@@ -1,6 +1,6 @@
 """The plain trust POMDP as pomdp-py objects, so that pomdp-py's planners (POUCT) can run on it.
 
-Owns the pomdp-py view of `TrustPOMDP` (see ../shared/DESIGN.md, "The model"): states
+Owns the pomdp-py view of `TrustPOMDP` (see docs/model.md, "The model"): states
 (road, trust), actions (next junction), observations (incident, h, e), the transition,
 observation, reward and policy models, beliefs over trust as a histogram or particles, and
 `build_problem`, which assembles a pomdp_py.POMDP (agent + environment).

@@ -46,18 +46,46 @@ class PolicyTable:
         return int(self.t.size)
 
 
-def _group(keys: np.ndarray, beliefs: np.ndarray) -> dict[tuple[int, ...], tuple[cKDTree, np.ndarray]]:
-    out: dict[tuple[int, ...], tuple[cKDTree, np.ndarray]] = {}
-    if keys.shape[0] == 0:
-        return out
-    unique, inverse = np.unique(keys, axis=0, return_inverse=True)
-    inverse = inverse.ravel()
-    order = np.argsort(inverse, kind="stable")
-    bounds = np.searchsorted(inverse[order], np.arange(unique.shape[0] + 1))
-    for g in range(unique.shape[0]):
-        rows = order[bounds[g]:bounds[g + 1]]
-        out[tuple(int(v) for v in unique[g])] = (cKDTree(beliefs[rows]), rows)
-    return out
+BRUTE_FORCE_PAIRS = 256   # queries x stored rows below which nearest rows are found by a scan
+
+
+@dataclass(frozen=True, eq=False)
+class _Groups:
+    """Rows grouped by an integer key; per group its rows and (when it has several) a k-d tree."""
+
+    rows: dict[int, np.ndarray]
+    trees: dict[int, cKDTree]
+    beliefs: np.ndarray
+
+    def nearest(self, key: int, beliefs: np.ndarray) -> np.ndarray | None:
+        """Row index of the nearest stored belief for each of `beliefs` [m, n] (None: no group)."""
+        rows = self.rows.get(key)
+        if rows is None:
+            return None
+        if rows.size == 1:
+            return np.repeat(rows, beliefs.shape[0])
+        if rows.size * beliefs.shape[0] <= BRUTE_FORCE_PAIRS:
+            # Small groups: a direct distance scan beats the tree's per-query overhead.
+            stored = self.beliefs[rows]
+            distance = ((beliefs[:, None, :] - stored[None, :, :]) ** 2).sum(axis=2)
+            return rows[distance.argmin(axis=1)]
+        _, nearest = self.trees[key].query(beliefs)
+        return rows[np.asarray(nearest)]
+
+
+def _group(keys: np.ndarray, beliefs: np.ndarray) -> _Groups:
+    rows: dict[int, np.ndarray] = {}
+    trees: dict[int, cKDTree] = {}
+    if keys.size:
+        unique, inverse = np.unique(keys, return_inverse=True)
+        order = np.argsort(inverse, kind="stable")
+        bounds = np.searchsorted(inverse[order], np.arange(unique.size + 1))
+        for g, key in enumerate(unique.tolist()):
+            members = order[bounds[g]:bounds[g + 1]]
+            rows[key] = members
+            if members.size > 1:
+                trees[key] = cKDTree(beliefs[members])
+    return _Groups(rows=rows, trees=trees, beliefs=beliefs)
 
 
 class BeliefTablePolicy(RoutingPolicy):
@@ -72,31 +100,43 @@ class BeliefTablePolicy(RoutingPolicy):
         self.spec = spec
         self.name = name
         self.task = state_only_task(town, spec)
-        self._exact = _group(np.stack([table.t, table.x, table.q], axis=1), table.beliefs)
-        self._any_t = _group(np.stack([table.x, table.q], axis=1), table.beliefs)
+        # Keys as single integers (road-major, then DFA state, then junctions) so that a lookup
+        # is a dict access, not a row-wise unique.
+        self._n_x = len(town.states)
+        self._n_q = int(table.q.max()) + 1 if table.rows else 1
+        self._exact = _group(self._key_tq(table.t, table.x, table.q), table.beliefs)
+        self._any_t = _group(self._key_q(table.x, table.q), table.beliefs)
+
+    def _key_q(self, x: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return x * self._n_q + q
+
+    def _key_tq(self, t: np.ndarray, x: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return (t * self._n_x + x) * self._n_q + q
 
     def action_slots(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
         """Vectorised rule 1-2: action slot per row, -1 where no stored row matches (rule 3)."""
-        t, x, q = (np.asarray(a, dtype=np.int64) for a in (t, x, q))
+        t, x, q = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q))
         beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
         out = np.full(t.size, -1, dtype=np.int64)
-        if t.size == 0:
+        if t.size == 0 or not self.table.rows:
             return out
-        for keys, groups in ((np.stack([t, x, q], axis=1), self._exact),
-                             (np.stack([x, q], axis=1), self._any_t)):
-            todo = np.flatnonzero(out < 0)
+        known_q = q < self._n_q             # a DFA state never stored has no row anywhere
+        for keys, groups in ((self._key_tq(t, x, q), self._exact), (self._key_q(x, q), self._any_t)):
+            todo = np.flatnonzero((out < 0) & known_q)
             if todo.size == 0:
                 break
-            unique, inverse = np.unique(keys[todo], axis=0, return_inverse=True)
-            inverse = inverse.ravel()
-            for g in range(unique.shape[0]):
-                entry = groups.get(tuple(int(v) for v in unique[g]))
-                if entry is None:
-                    continue
-                tree, rows = entry
+            if todo.size == 1:
+                i = int(todo[0])
+                rows = groups.nearest(int(keys[i]), beliefs[i:i + 1])
+                if rows is not None:
+                    out[i] = self.table.action[rows[0]]
+                continue
+            unique, inverse = np.unique(keys[todo], return_inverse=True)
+            for g, key in enumerate(unique.tolist()):
                 members = todo[inverse == g]
-                _, nearest = tree.query(beliefs[members])
-                out[members] = self.table.action[rows[np.asarray(nearest)]]
+                rows = groups.nearest(key, beliefs[members])
+                if rows is not None:
+                    out[members] = self.table.action[rows]
         return out
 
     def certified_bounds(self) -> tuple[float, float] | None:

@@ -2,7 +2,7 @@
 
 A trust-aware policy may loop to build trust. After `after` junctions without the spec
 accepted, the vehicle switches to the shortest route completing the remaining state-only
-task (DESIGN.md, "The study's 20-junction rule"); the projected DFA state is recomputed
+task (docs/model.md, "Episodes"); the projected DFA state is recomputed
 from the roads driven, so the wrapper needs nothing but the DecisionContext.
 
 Episode ends a policy can declare: `policy.finished(context)` is True when the policy has

@@ -5,6 +5,7 @@ town, driver model and spec, horizon, belief rule, bounds, the acting rule in wo
 and SHA-256 of the array file) and `path` with suffix `.npz` (the decision table of
 policies.table_policy: t, x, q, beliefs, action). `load_policy(path, town, driver, spec)` checks
 the format and all three hashes and raises InputError naming the file and the fix on a mismatch.
+Every key: docs/formats/policy_file.md.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The trust-free baseline: the shortest route completing a spec's state-only task.
 
 Owns the state-only task of a spec on a town (the product town × DFA of the spec's
-state-only projection, every belief literal replaced by true; DESIGN.md, "Synthesis"),
+state-only projection, every belief literal replaced by true; docs/model.md, "scLDTL"),
 its distance-to-completion table, the baseline route and the trust-free policy ("free").
 
 The table is computed once by a backward Dijkstra over the product: for each directed road x

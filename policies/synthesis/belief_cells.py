@@ -4,7 +4,10 @@ An observation symbol o = (incident, h, e) has a likelihood vector L_o[θ] = P(h
 an update matrix W_o: the filter is the linear-fractional map f_o(b) = b W_o / (b W_o 1)
 (Bayes: W_o = diag(L_o) T[inc][h][e]; the authors' "paper" rule: W_o = T[inc][h][e], with the
 probability of o still b·L_o). Symbols with W_o = c·I (the default model's 'none' incident)
-leave the belief unchanged and are not counted as belief-changing.
+leave the belief unchanged in exact arithmetic and are not counted as belief-changing for the
+cells; the belief itself is always advanced by the one filter, `TrustPOMDP.belief_update`, which
+the vehicle, exact evaluation and the model engine use too (in float64 an identity symbol still
+renormalises, so skipping it would certify a belief process the vehicle never runs).
 
 Suffix cells: a cell is a word w of at most k belief-changing symbols and stands for the polytope
 P_w = f_w(simplex) = conv{f_w(e_i)}. A belief whose history of belief-changing symbols ends in w
@@ -22,8 +25,11 @@ import numpy as np
 
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 
-IDENTITY_TOLERANCE = 1e-12
-LABEL_TOLERANCE = 1e-12     # a vertex this close to an atom's hyperplane counts as either side
+# A vertex of a cell this close to an atom's hyperplane counts as either side. The vertices are
+# float images of the simplex corners through up to k filter steps; each step is within γ_{3n}
+# relative (policies/logic/labelling.py), about 2e-15 for n = 7, so 1e-12 leaves a factor of ~50
+# for k <= 8 steps even if every step's error were amplified tenfold (docs/synthesis.md).
+LABEL_TOLERANCE = 1e-12
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,6 +42,8 @@ class ObservationSymbols:
     (-1 for identity symbols).
     """
 
+    pomdp: TrustPOMDP
+    rule: BeliefRule
     incident: np.ndarray
     human_action: np.ndarray
     performance: np.ndarray
@@ -74,10 +82,9 @@ def observation_symbols(pomdp: TrustPOMDP, rule: BeliefRule = "bayes") -> Observ
                 else:
                     update = np.asarray(driver.trust_transition[i, h, e], dtype=float)
                 c = update[0, 0]
-                identity = bool(np.allclose(update, c * np.eye(update.shape[0]), rtol=0,
-                                            atol=IDENTITY_TOLERANCE)
-                                and np.allclose(likelihood, likelihood[0], rtol=0, atol=IDENTITY_TOLERANCE)
-                                and c > 0)
+                # Exactly c·I (no tolerance): only then is f_o the identity in exact arithmetic.
+                identity = bool(np.array_equal(update, c * np.eye(update.shape[0]))
+                                and np.all(likelihood == likelihood[0]) and c > 0)
                 by_incident[i].append(len(rows))
                 rows.append((i, h, e))
                 likelihoods.append(likelihood)
@@ -88,25 +95,18 @@ def observation_symbols(pomdp: TrustPOMDP, rule: BeliefRule = "bayes") -> Observ
     changing_id[~identity_array] = np.arange(int((~identity_array).sum()))
     parts = np.array(rows, dtype=np.int64).reshape(-1, 3)
     return ObservationSymbols(
-        incident=parts[:, 0], human_action=parts[:, 1], performance=parts[:, 2],
+        pomdp=pomdp, rule=rule, incident=parts[:, 0], human_action=parts[:, 1], performance=parts[:, 2],
         likelihood=np.array(likelihoods), update=np.array(updates), identity=identity_array,
         by_incident=tuple(tuple(s) for s in by_incident), changing_id=changing_id)
 
 
 def apply_symbol(beliefs: np.ndarray, symbols: ObservationSymbols, symbol: np.ndarray | int
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """(f_o(b), P(o | b)) for each row; identity symbols return b itself (bit for bit)."""
+    """(f_o(b), P(o | b)) for each row, by the one filter `TrustPOMDP.belief_update` (no shortcuts)."""
     beliefs = np.atleast_2d(beliefs)
     symbol = np.broadcast_to(np.asarray(symbol), (beliefs.shape[0],))
-    probability = np.einsum("nk,nk->n", beliefs, symbols.likelihood[symbol])
-    unnormalised = np.einsum("nk,nkl->nl", beliefs, symbols.update[symbol])
-    total = unnormalised.sum(axis=1, keepdims=True)
-    posterior = np.divide(unnormalised, total, out=np.zeros_like(unnormalised), where=total > 0)
-    same = symbols.identity[symbol]
-    if same.any():
-        posterior[same] = beliefs[same]
-        probability[same] = symbols.likelihood[symbol[same], 0]
-    return posterior, probability
+    return symbols.pomdp.belief_update(beliefs, symbols.incident[symbol], symbols.human_action[symbol],
+                                       symbols.performance[symbol], rule=symbols.rule)
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,6 +164,11 @@ def suffix_cells(symbols: ObservationSymbols, k: int) -> SuffixCells:
                 new = (word + (o,))[-k:] if k > 0 else ()
                 next_cell[c, o] = index[new]
     return SuffixCells(k=k, words=tuple(words), vertices=np.array(vertices), next_cell=next_cell)
+
+
+def vertex_mask(cells: SuffixCells) -> np.ndarray:
+    """bool [n_cells, n_trust]: which corner images exist (nonzero rows)."""
+    return cells.vertices.sum(axis=-1) > 0
 
 
 def image_label_status(cells: SuffixCells, symbols: ObservationSymbols, coeffs: np.ndarray,

@@ -1,6 +1,6 @@
 """Sound upper bounds on the product value from the suffix abstraction of belief space.
 
-The abstract state is (x, q, cell). Abstract Bellman operator (DESIGN.md, "Synthesis"):
+The abstract state is (x, q, cell). Abstract Bellman operator (docs/model.md, "What L and U mean"):
 
     Ū(x, q, c) = max_a max_{v vertex of P_c} Σ_o P(o | v) max_{q' ∈ Q'} Ū(x', q', next_cell(c, o))
 
@@ -15,7 +15,8 @@ monotonicity), but the iteration converges to the greatest fixed point, which en
 never accept can hold above the least one. `unbounded_upper` starts from 0 on states that cannot
 reach acceptance at all (can_accept, a graph analysis) and from 1 elsewhere, and returns the last
 iterate: sound, exact where acceptance is unreachable, possibly loose on end components from which
-acceptance is reachable but not forced (the stats say so). No end-component collapsing is done.
+acceptance is reachable but not forced. Synthesis uses policies/synthesis/end_components.py
+instead, which collapses end components and converges to the least fixed point.
 """
 
 from __future__ import annotations
@@ -48,8 +49,10 @@ def build_abstraction(tables: ProductTables, symbols: ObservationSymbols, cells:
     return Abstraction(tables=tables, symbols=symbols, cells=cells, possible_bits=possible)
 
 
-def abstract_backup(abstraction: Abstraction, value_next: np.ndarray) -> np.ndarray:
-    """One application of T̄ to value_next [n_x, n_q, n_cells]; terminal DFA states fixed."""
+def abstract_backup(abstraction: Abstraction, value_next: np.ndarray,
+                    deadline: float | None = None) -> np.ndarray | None:
+    """One application of T̄ to value_next [n_x, n_q, n_cells]; terminal DFA states fixed.
+    None if `deadline` passes before it is complete."""
     tables, symbols, cells = abstraction.tables, abstraction.symbols, abstraction.cells
     n_x, n_q, n_c = value_next.shape
     live = np.flatnonzero(~(tables.accepting | tables.rejecting))
@@ -59,6 +62,8 @@ def abstract_backup(abstraction: Abstraction, value_next: np.ndarray) -> np.ndar
         return out
     road_incident = tables.pomdp.road_incident
     for x in range(n_x):
+        if deadline is not None and x % 16 == 0 and time.perf_counter() > deadline:
+            return None
         best = np.zeros((live.size, n_c))
         for x2 in tables.successors[x]:
             if x2 < 0:
@@ -80,14 +85,26 @@ def abstract_backup(abstraction: Abstraction, value_next: np.ndarray) -> np.ndar
     return out
 
 
-def bounded_upper(abstraction: Abstraction, horizon: int) -> np.ndarray:
-    """Ū_t for t = 0..H as [H+1, n_x, n_q, n_cells] (Ū_t bounds P(accept within H - t more junctions))."""
+def bounded_upper(abstraction: Abstraction, horizon: int, deadline: float | None = None,
+                  cap: np.ndarray | None = None) -> np.ndarray:
+    """Ū_t for t = 0..H as [H+1, n_x, n_q, n_cells] (Ū_t bounds P(accept within H - t more junctions)).
+
+    cap: a sound bound valid at every t (e.g. the unbounded one), applied elementwise. If the
+    deadline passes, the levels not yet computed get `cap` (or 1 where the DFA state is not
+    rejecting): still sound, only looser.
+    """
     tables = abstraction.tables
     shape = (tables.n_x, tables.n_q, abstraction.cells.n_cells)
+    if cap is None:
+        cap = np.broadcast_to(~tables.rejecting[None, :, None], shape).astype(float)
     values = np.zeros((horizon + 1,) + shape)
     values[horizon] = np.broadcast_to(tables.accepting[None, :, None], shape)
     for t in range(horizon - 1, -1, -1):
-        values[t] = abstract_backup(abstraction, values[t + 1])
+        backed = abstract_backup(abstraction, values[t + 1], deadline)
+        if backed is None:
+            values[: t + 1] = cap
+            break
+        values[t] = np.minimum(backed, cap)
     return values
 
 
@@ -120,6 +137,36 @@ def can_accept(tables: ProductTables) -> np.ndarray:
         if (grown == reached).all():
             return reached
         reached = grown
+
+
+def acceptance_distance(tables: ProductTables) -> np.ndarray:
+    """int [n_x, n_q]: fewest junctions from (x, q) to an accepting DFA state in the road × DFA
+    graph with every belief-label value allowed (a breadth-first search backwards from acceptance;
+    a large sentinel where acceptance is unreachable). A lower bound on the junctions any policy
+    needs, so a node with distance > the junctions left is worth exactly 0."""
+    n_x, n_q = tables.n_x, tables.n_q
+    unreachable = np.iinfo(np.int64).max // 4
+    distance = np.full((n_x, n_q), unreachable, dtype=np.int64)
+    distance[:, tables.accepting] = 0
+    live = ~(tables.accepting | tables.rejecting)
+    # edges (x, q) -> (x2, next_q[q, x2, bits]) for every bits; reversed per layer.
+    src_x = np.repeat(np.arange(n_x), tables.successors.shape[1])
+    dst_x = tables.successors.ravel()
+    ok = dst_x >= 0
+    src_x, dst_x = src_x[ok], dst_x[ok]
+    q2 = tables.next_q[:, dst_x, :].transpose(1, 0, 2)          # [edges, n_q, bits]
+    level = 0
+    frontier = distance == 0
+    while frontier.any():
+        level += 1
+        # (x, q) gets `level` if some successor (x2, q2) is on the frontier
+        reached = frontier[dst_x[:, None, None], q2].any(axis=2)   # [edges, n_q]
+        hit = np.zeros((n_x, n_q), dtype=bool)
+        np.logical_or.at(hit, src_x, reached)
+        new = hit & live & (distance == unreachable)
+        distance[new] = level
+        frontier = new
+    return distance
 
 
 def unbounded_upper(abstraction: Abstraction, time_limit: float, tolerance: float = 1e-6,

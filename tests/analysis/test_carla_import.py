@@ -264,9 +264,11 @@ def test_committed_study_is_analysed_with_every_file_accounted_for(tmp_path, cap
 
     study = tmp_path / "study"
     shutil.copytree(STUDY, study)
-    code, out, err = run_cli(capsys, "analyze", str(study), "--json")
+    code, out, err = run_cli(capsys, "analyze", str(study), "--json", "--report")
     assert code == 0, err
-    real = json.loads(out)["real_study"]
+    payload = json.loads(out)
+    real = payload["real_study"]
+    assert payload["paths"]["real_study_json"] == str(study / "real_study.json")
     assert len(real["participants"]) == 21
     assert len(real["per_episode"]) == 77
     statuses = {e["status"] for e in real["excluded_files"]}

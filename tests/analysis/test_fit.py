@@ -109,6 +109,6 @@ def test_fit_cli_writes_a_valid_driver_model(model_study, tmp_path, capsys):
         main(["fit", str(model_study), "--out", str(out), "--json", "--iterations", "30"])
     payload = json.loads(capsys.readouterr().out)
     assert info.value.code == 0
-    assert payload["method"] == "em" and payload["driver_model"] == str(out)
+    assert payload["method"] == "em" and payload["paths"] == {"driver_model": str(out)}
     model = load_driver_model(out)
     assert model.n_trust == 7 and "fitted by trustroute fit" in model.provenance

@@ -11,9 +11,11 @@ from tests.cli import run_cli
 
 @pytest.mark.slow
 def test_analyze_json_and_self_contained_report(model_study, capsys):
-    code, out, err = run_cli(capsys, "analyze", str(model_study), "--json")
+    code, out, err = run_cli(capsys, "analyze", str(model_study), "--json", "--report")
     assert code == 0, err
     payload = json.loads(out)
+    assert payload["paths"] == {"report_markdown": str(model_study / "report.md"),
+                                "report_html": str(model_study / "report.html")}
     cells = {(c["spec"], c["condition"]): c for c in payload["cells"]}
     assert set(cells) == {(s, c) for s in ("phi1", "phi2") for c in ("aware", "free")}
     for cell in cells.values():

@@ -31,7 +31,7 @@ def _main(args: list[str], capsys) -> tuple[int, str]:
 def test_json_summary_and_logs(net, tmp_path):
     out = tmp_path / "out"
     rrd = tmp_path / "e.rrd"
-    result = CliRunner().invoke(cli, ["run", "--spec", PHI1, "--policy", "free", "--seed", "4", "--json",
+    result = CliRunner().invoke(cli, ["run", PHI1, "--policy", "free", "--seed", "4", "--json",
                                       "--net", net, "--out", str(out), "--rrd", str(rrd)])
     assert result.exit_code == 0, result.output
     summary = json.loads(result.output)
@@ -47,10 +47,25 @@ def test_json_summary_and_logs(net, tmp_path):
     assert isinstance(roads.loc[1, "belief_after"][0], float)
     assert json.loads((out / "summary.json").read_text())["end_reason"] == summary["end_reason"]
     assert rrd.stat().st_size > 1000
+    logs = {name: str(out / f"{name}.parquet") for name in ("roads", "kinematics", "incidents")}
+    assert summary["paths"] == {**logs, "summary": str(out / "summary.json"), "rrd": str(rrd)}
+
+
+def test_spec_option_is_the_old_spelling_of_the_argument(net):
+    old = CliRunner().invoke(cli, ["run", "--spec", PHI1, "--seed", "9", "--json", "--net", net])
+    new = CliRunner().invoke(cli, ["run", PHI1, "--seed", "9", "--json", "--net", net])
+    assert old.exit_code == new.exit_code == 0
+    first, second = json.loads(old.output), json.loads(new.output)
+    first.pop("wall_seconds")
+    second.pop("wall_seconds")
+    assert first == second and first["paths"] == {}
+    both = CliRunner().invoke(cli, ["run", PHI1, "--spec", PHI1, "--net", net])
+    neither = CliRunner().invoke(cli, ["run", "--net", net])
+    assert both.exit_code == neither.exit_code == 2 and "SPEC" in neither.output
 
 
 def test_same_seed_same_output(net):
-    runs = [CliRunner().invoke(cli, ["run", "--spec", PHI1, "--seed", "9", "--json", "--net", net])
+    runs = [CliRunner().invoke(cli, ["run", PHI1, "--seed", "9", "--json", "--net", net])
             for _ in range(2)]
     first, second = (json.loads(r.output) for r in runs)
     first.pop("wall_seconds")
@@ -69,7 +84,7 @@ def _one_line_error(outcome: tuple[int, str], needle: str) -> None:
 def test_unreadable_net_exit_2(tmp_path, capsys):
     bad = tmp_path / "bad.net.xml"
     bad.write_text("<net><edge id=")
-    _one_line_error(_main(["run", "--spec", PHI1, "--net", str(bad)], capsys), "not a readable SUMO net")
+    _one_line_error(_main(["run", PHI1, "--net", str(bad)], capsys), "not a readable SUMO net")
 
 
 def test_missing_sumo_binary_exit_2(net, capsys, monkeypatch):
@@ -81,14 +96,14 @@ def test_missing_sumo_binary_exit_2(net, capsys, monkeypatch):
     monkeypatch.setenv("PATH", "")
     sumo_start.sumo_binary.cache_clear()
     try:
-        _one_line_error(_main(["run", "--spec", PHI1, "--net", net], capsys),
+        _one_line_error(_main(["run", PHI1, "--net", net], capsys),
                         "SUMO binary 'sumo' was not found")
     finally:
         sumo_start.sumo_binary.cache_clear()
 
 
 def test_unknown_policy_exit_2(net, tmp_path, capsys):
-    _one_line_error(_main(["run", "--spec", PHI1, "--net", net, "--policy", str(tmp_path / "nope.json")],
+    _one_line_error(_main(["run", PHI1, "--net", net, "--policy", str(tmp_path / "nope.json")],
                           capsys), "nope.json")
 
 
@@ -97,4 +112,4 @@ def test_policy_file_for_another_spec_exit_2(net, tmp_path, capsys):
     code, stderr = _main(["synth", str(SPECS / "phi2.toml"), "--horizon", "3", "--tau", "0.5",
                           "--time-limit", "20", "--out", str(policy)], capsys)
     assert code == 0 and policy.is_file(), stderr
-    _one_line_error(_main(["run", "--spec", PHI1, "--net", net, "--policy", str(policy)], capsys), "phi2")
+    _one_line_error(_main(["run", PHI1, "--net", net, "--policy", str(policy)], capsys), "phi2")

@@ -3,7 +3,7 @@
 Two references that share no code with the progression construction:
 - `first_good_prefix`: the informative good-prefix semantics on finite traces, computed backwards
   over positions (dynamic programming on the formula), vectorised over traces. It gives the first
-  position t at which the prefix determines satisfaction (DESIGN.md, "scLDTL").
+  position t at which the prefix determines satisfaction (docs/model.md, "scLDTL").
 - `lasso_satisfies`: LTL satisfaction on ultimately periodic words u v^omega by least fixpoints.
 """
 

@@ -162,3 +162,28 @@ def test_town_satisfiability_ignores_belief_atoms(town):
     assert town_satisfiable(load_spec("specs/phi1_strict.toml", town), town)
     text = Path("specs/phi1_strict.toml").read_text().replace('v3 = ["K-L", "E-L", "H-L"]', 'v3 = ["E-A"]')
     assert town_satisfiable(spec_from_text(text, town=town), town)   # E-A is reachable again later
+
+
+@pytest.mark.parametrize(("formula", "mixed"), [
+    ("v1 & v2 U v3", True), ("v2 U v3 | v1", True), ("(v1 & v2) U v3", False),
+    ("v1 & (v2 U v3)", False), ("F (v1 & F v2)", False), ("(!v1) U (v2 & F v3)", False),
+    ("F (v1 & v2 U v3)", True),
+])
+def test_precedence_warning_when_and_or_meet_until_without_parentheses(town, formula, mixed):
+    states = {"v1": ["B-G"], "v2": ["I-J"], "v3": ["K-L"]}
+    warnings = lint(spec_from_text(spec_text(formula, states), "<t>", town))
+    found = [w for w in warnings if w.code == "precedence"]
+    assert bool(found) == mixed
+    if mixed:
+        assert "U binding tighter than & and |" in found[0].message
+
+
+def test_threshold_hit_by_a_reachable_belief(town):
+    """Under the uniform prior c·b = k/7 at the prior and after every `none` road."""
+    states = {"v1": ["B-G"]}
+    low = [1, 1, 0, 0, 0, 0, 0]
+    on = spec_from_text(spec_text("(!low) U v1", states, {"low": (low, 2 / 7)}), "<t>", town)
+    off = spec_from_text(spec_text("(!low) U v1", states, {"low": (low, 0.3)}), "<t>", town)
+    hit = [w for w in lint(on, town) if w.code == "threshold-hit"]
+    assert len(hit) == 1 and hit[0].atom == "low" and "0.2857142857142857" in hit[0].message
+    assert not [w for w in lint(off, town) if w.code == "threshold-hit"]

@@ -100,8 +100,10 @@ def test_cli_synth_then_evaluate_and_mismatch_exit_code(capsys, tmp_path):
                            "--json")
     assert code == 0
     payload = json.loads(out)
-    assert {"lower", "upper", "gap", "seconds", "policy"} <= set(payload)
-    assert payload["lower"] <= payload["upper"] and payload["policy"] == str(out_path)
+    assert {"lower", "upper", "gap", "seconds", "paths"} <= set(payload)
+    assert payload["lower"] <= payload["upper"] and payload["paths"] == {
+        "policy": str(out_path), "policy_arrays": str(out_path.with_suffix(".npz"))}
+    assert out_path.is_file() and out_path.with_suffix(".npz").is_file()
     code, out, _ = run_cli(capsys, "evaluate", "specs/phi1.toml", str(out_path), "--no-fallback",
                            "--max-junctions", "8", "--json")
     assert code == 0

@@ -1,0 +1,47 @@
+"""What every command prints: the --json and --quiet options, and one JSON convention.
+
+A command that prints results takes `--json`: it then prints exactly one JSON object on stdout and
+nothing else. The files a command wrote are listed under one key, `"paths"`, as name -> path
+(e.g. {"policy": ..., "rrd": ...}), the same key in every command. A command with progress output
+takes `--quiet` (no progress bars, no chatter; `--json` implies it).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+
+import click
+
+PATHS_KEY = "paths"
+
+json_option = click.option("--json", "as_json", is_flag=True,
+                           help="Print one JSON object (written files under \"paths\").")
+quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bars or chatter.")
+
+
+def jsonable(value: object) -> object:
+    """numpy scalars and arrays, paths and sets as plain JSON values."""
+    tolist = getattr(value, "tolist", None)
+    if callable(tolist):
+        return tolist()
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, set | frozenset | tuple):
+        return list(value)
+    return str(value)
+
+
+def with_paths(payload: Mapping, paths: Mapping[str, object]) -> dict:
+    """`payload` plus the written files under "paths" (None entries left out)."""
+    return {**payload, PATHS_KEY: {name: str(path) for name, path in paths.items() if path is not None}}
+
+
+def emit(as_json: bool, payload: Mapping, lines: list[str]) -> None:
+    """One JSON object (--json) or the human-readable lines."""
+    if as_json:
+        click.echo(json.dumps(payload, default=jsonable))
+    else:
+        for line in lines:
+            click.echo(line)

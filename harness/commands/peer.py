@@ -1,0 +1,77 @@
+"""`trustroute peer storm SPEC`: Storm's bounds beside ours on the same product POMDP.
+
+For specs whose atoms are all roads and trust-state atoms (docs/trust_states.md). Storm runs
+belief unfolding (lower bound, at most --time-limit seconds of exploration) and belief
+discretisation (upper bound, at --resolution) on the exported product; ours is the search over
+joint beliefs of policies/joint_search.py (exact for --horizon H; for the unbounded objective
+to --depth junctions with relaxation bounds at the leaves). Needs the optional `[peer]` extra.
+"""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+
+def storm_comparison(spec_path: str, town_path: str | None, driver_path: str | None,
+                     horizon: int | None, time_limit: float, resolution: int, depth: int,
+                     max_nodes: int) -> dict:
+    """Both sides' bounds and seconds, JSON-ready."""
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.joint_search import joint_bounds
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+    from trustroute.policies.peer.product_pomdp import check_exportable, explicit_product
+    from trustroute.policies.peer.storm import require_storm, run_storm
+
+    require_storm("trustroute peer storm")
+    town = load_town(town_path)
+    spec = load_spec(spec_path, town)
+    check_exportable(spec)
+    pomdp = build_pomdp(town, load_driver_model(driver_path))
+    product = explicit_product(pomdp, spec, horizon)
+    storm = run_storm(product, time_limit=time_limit, resolution=resolution)
+    ours = joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
+    return {"spec": spec.name, "file": spec.source_path, "horizon": horizon,
+            "product_states": product.n_states, "storm": storm.to_dict(), "ours": ours.to_dict(),
+            "overlap": bool(max(storm.lower, ours.lower) <= min(storm.upper, ours.upper) + 1e-9)}
+
+
+@click.group("peer")
+def peer() -> None:
+    """Independent solvers beside ours."""
+
+
+@peer.command("storm")
+@click.argument("spec_path", metavar="SPEC")
+@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
+@click.option("--driver", "driver_path", type=click.Path(), default=None,
+              help="Driver model file (default: the packaged model).")
+@click.option("--horizon", type=click.IntRange(min=0), default=None,
+              help="Accepted within H junctions (a step counter in the product; default: unbounded).")
+@click.option("--time-limit", type=click.FloatRange(min=1), default=30.0, show_default=True,
+              help="Seconds of Storm's belief unfolding (lower bound).")
+@click.option("--resolution", type=click.IntRange(min=1), default=2, show_default=True,
+              help="Storm's discretisation resolution (upper bound).")
+@click.option("--depth", type=click.IntRange(min=0), default=10, show_default=True,
+              help="Our search depth for the unbounded objective (the horizon when given).")
+@click.option("--max-nodes", type=click.IntRange(min=1), default=200_000, show_default=True,
+              help="Our belief nodes per level; beyond, the least likely are bounded, not expanded.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def storm(spec_path: str, town_path: str | None, driver_path: str | None, horizon: int | None,
+          time_limit: float, resolution: int, depth: int, max_nodes: int, as_json: bool) -> None:
+    """Storm's [lower, upper] and time beside ours, for SPEC."""
+    result = storm_comparison(spec_path, town_path, driver_path, horizon, time_limit, resolution,
+                              depth, max_nodes)
+    if as_json:
+        click.echo(json.dumps(result))
+        return
+    s, o = result["storm"], result["ours"]
+    objective = f"within {horizon} junctions" if horizon is not None else "unbounded"
+    click.echo(f"{result['spec']} ({objective}), product POMDP with {result['product_states']} states")
+    click.echo(f"  storm  [{s['lower']:.6f}, {s['upper']:.6f}]  gap {s['gap']:.2e}  "
+               f"{s['build_seconds'] + s['lower_seconds'] + s['upper_seconds']:.1f} s")
+    click.echo(f"  ours   [{o['lower']:.6f}, {o['upper']:.6f}]  gap {o['gap']:.2e}  {o['seconds']:.1f} s")
+    click.echo(f"  overlap: {'yes' if result['overlap'] else 'NO'}")

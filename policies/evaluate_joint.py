@@ -1,0 +1,187 @@
+"""Exact evaluation of a routing policy for specs that test the hidden trust (docs/trust_states.md).
+
+The same tree unfolding as policies/evaluate.py (one level per junction, one node per history of
+observations, decisions asked once per distinct (route, DFA state told, AV belief)), with the
+exact joint belief J(θ, q) of policies/model/joint_belief.py at every node instead of one DFA
+state. The spec is satisfied on a branch with probability J(accepting) when the branch ends;
+accepting states are absorbing, so that mass only grows along a branch and is counted once, at
+its end. A branch ends when its live mass (q neither accepting nor rejecting) is 0 (settled),
+when the policy declares it finished, at the junction cap, or when it is pruned; the live mass
+of a finished or capped branch is unsatisfied, that of a pruned branch unknown (the width of
+[lower, upper]).
+
+The AV does not know q: the policy is told the most probable DFA state (the exact one when the
+spec has no trust-state atoms). Specs without trust-state atoms are evaluated by
+policies/evaluate.py itself, so their results are exactly today's.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from trustroute.policies.evaluate import (
+    DEFAULT_MAX_NODES,
+    DEFAULT_PRUNE_BELOW,
+    Evaluation,
+    decide_node,
+    evaluate,
+)
+from trustroute.policies.logic.compiled import compile_spec
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.joint_belief import joint_filter
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER, FallbackPolicy, with_fallback
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
+
+
+def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
+                   fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
+                   max_junctions: int = DEFAULT_JUNCTION_CAP,
+                   belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
+                   max_nodes: int = DEFAULT_MAX_NODES, force_joint: bool = False) -> Evaluation:
+    """Certified P(spec satisfied) of `policy`, for any mix of road, belief and trust-state atoms.
+
+    Arguments as policies.evaluate.evaluate. `force_joint` runs the joint unfolding even when the
+    spec has no trust-state atoms (tests compare it with evaluate there)."""
+    if not spec.uses_trust_atoms and not force_joint:
+        return evaluate(pomdp, spec, policy, fallback_after, max_junctions, belief_rule, prune_below,
+                        max_nodes)
+    started = time.perf_counter()
+    town, driver = pomdp.town, pomdp.driver
+    if fallback_after is not None and not isinstance(policy, FallbackPolicy):
+        policy = with_fallback(policy, town, spec, after=fallback_after)
+    fallback_level = policy.after if isinstance(policy, FallbackPolicy) else None
+    compiled = compile_spec(spec, town)
+    filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
+    levels = np.asarray(driver.trust_levels, dtype=float)
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
+    successor_index = {(x, j): town.state_index(town.successor(road, j))
+                       for x, road in enumerate(town.states) for j in town.actions(road)}
+
+    start = town.state_index(spec.start)
+    routes: list[tuple[str, ...]] = [(spec.start,)]
+    route_id = np.zeros(1, dtype=np.int64)
+    road = np.array([start], dtype=np.int64)
+    belief_av = np.asarray(pomdp.initial_belief, dtype=float)[None, :].copy()
+    posterior = belief_av.copy()
+    joint = filter_.initial(start, belief_av[0])
+    probability = np.ones(1)
+
+    mass = {"accepted": 0.0, "rejected": 0.0, "destination": 0.0, "cap": 0.0, "pruned": 0.0,
+            "settled": 0.0}
+    trust_sum = 0.0
+    junction_sum = 0.0
+    ended_mass = 0.0
+    fallback_mass = 0.0
+    nodes = 1
+    max_frontier = 1
+
+    def end(mask: np.ndarray, reason: str, level: int) -> None:
+        """Branches ending here: accepted and rejected mass by J, the live rest by `reason`."""
+        nonlocal trust_sum, junction_sum, ended_mass
+        p = probability[mask]
+        accepted, rejected, live = filter_.masses(joint[mask])
+        mass["accepted"] += float(p @ accepted)
+        mass["rejected"] += float(p @ rejected)
+        mass[reason] += float(p @ live)
+        if reason != "pruned":
+            ended_mass += float(p.sum())
+            trust_sum += float(p @ (posterior[mask] @ levels))
+            junction_sum += float(p.sum()) * level
+
+    for level in range(max_junctions + 1):
+        _, _, live = filter_.masses(joint)
+        settled = live <= 0
+        end(settled, "settled", level)
+        alive = ~settled
+        tiny = alive & (probability < prune_below)
+        end(tiny, "pruned", level)
+        alive &= ~tiny
+        if not alive.any():
+            break
+        keep = np.flatnonzero(alive)
+        told_q = filter_.likeliest_q(joint[keep])
+
+        finished = np.zeros(keep.size, dtype=bool)
+        fired = np.zeros(keep.size, dtype=bool)
+        chosen = np.full(keep.size, -1, dtype=np.int64)
+        decisions: dict[tuple[int, int, bytes], tuple[bool, bool, int]] = {}
+        for k, i in enumerate(keep.tolist()):
+            key = (int(route_id[i]), int(told_q[k]), belief_av[i].tobytes())
+            decision = decisions.get(key)
+            if decision is None:
+                context = DecisionContext(route=routes[key[0]], dfa_state=key[1], belief=belief_av[i])
+                decision = decide_node(policy, context, town, int(road[i]), level, max_junctions,
+                                       fallback_level, successor_index)
+                decisions[key] = decision
+            finished[k], fired[k], chosen[k] = decision
+        finished_mask = np.zeros(probability.size, dtype=bool)
+        finished_mask[keep[finished]] = True
+        end(finished_mask, "destination", level)
+        if level == max_junctions:
+            capped = np.zeros(probability.size, dtype=bool)
+            capped[keep[~finished]] = True
+            end(capped, "cap", level)
+            break
+        fallback_mass += float(probability[keep[fired]].sum())
+        keep, chosen = keep[~finished], chosen[~finished]
+        if keep.size == 0:
+            break
+
+        pair = route_id[keep] * len(town.states) + chosen
+        unique_pairs, pair_inverse = np.unique(pair, return_inverse=True)
+        pair_ids = np.arange(len(routes), len(routes) + unique_pairs.size)
+        for rid, x2 in zip((unique_pairs // len(town.states)).tolist(),
+                           (unique_pairs % len(town.states)).tolist(), strict=True):
+            routes.append(routes[rid] + (town.states[x2],))
+        new_route_ids = pair_ids[pair_inverse]
+
+        incident = pomdp.road_incident[chosen]
+        parts = []
+        for h, e in outcomes:
+            new_posterior, p_obs = pomdp.belief_update(posterior[keep], incident, h, e, rule="bayes")
+            if belief_rule == "bayes":
+                new_av = new_posterior
+            else:
+                new_av, _ = pomdp.belief_update(belief_av[keep], incident, h, e, rule=belief_rule)
+            possible = p_obs > 0
+            new_joint = filter_.update(joint[keep][possible], new_posterior[possible], new_av[possible],
+                                       chosen[possible], incident[possible], h, e, p_obs[possible])
+            parts.append((new_route_ids[possible], chosen[possible], new_av[possible],
+                          new_posterior[possible], new_joint,
+                          probability[keep][possible] * p_obs[possible]))
+        route_id, road, belief_av, posterior, joint, probability = (
+            np.concatenate([part[j] for part in parts]) for j in range(6))
+        if probability.size > max_nodes:
+            order = np.argsort(probability)
+            dropped = np.zeros(probability.size, dtype=bool)
+            dropped[order[: probability.size - max_nodes]] = True
+            end(dropped, "pruned", level + 1)
+            kept = ~dropped
+            route_id, road, belief_av, posterior, joint, probability = (
+                a[kept] for a in (route_id, road, belief_av, posterior, joint, probability))
+        nodes += probability.size
+        max_frontier = max(max_frontier, probability.size)
+
+    pruned = mass["pruned"]
+    return Evaluation(
+        policy=policy.name,
+        lower=mass["accepted"],
+        upper=min(1.0, mass["accepted"] + pruned),
+        expected_final_trust=trust_sum / ended_mass if ended_mass > 0 else float("nan"),
+        final_trust_lower=trust_sum + (1.0 - ended_mass) * float(levels.min()),
+        final_trust_upper=trust_sum + (1.0 - ended_mass) * float(levels.max()),
+        expected_junctions=junction_sum / ended_mass if ended_mass > 0 else float("nan"),
+        fallback_probability=fallback_mass,
+        end_mass=mass,
+        nodes=nodes,
+        max_frontier=max_frontier,
+        seconds=time.perf_counter() - started,
+        belief_rule=belief_rule,
+        fallback_after=fallback_level,
+        max_junctions=max_junctions,
+    )
+

@@ -1,0 +1,287 @@
+"""Bounds on Pr_max for specs with trust-state atoms, by search over joint beliefs (docs/trust_states.md).
+
+V(J) = max over policies of P(accepted), J the joint belief over (θ, q) of
+policies/model/joint_belief.py (with the road and, under a non-Bayes rule, the AV's belief).
+The search unfolds the belief tree level by level to `depth` junctions, every action and every
+observation, merging nodes whose (road, J, beliefs) are bit for bit equal (the optimal value
+and decision depend on nothing else), then backs values up:
+
+    V(node) = max over next junctions of Σ_o P(o | node) V(child_o).
+
+Leaves: a settled node (no live mass) is worth J(accepting) exactly; a node at the depth or cut
+off (probability below `prune_below`, or beyond `max_nodes` per level) is worth at least
+J(accepting) — or, when no label reads the belief, the exact value of an open-loop continuation
+that ignores observations and follows the relaxation's best move (to the horizon, or 30
+junctions for the unbounded objective) — and at most J(accepting) + Σ_{live θ, q} J(θ, q) R(x, θ, q),
+where R is the value of the relaxation that observes θ and q and may choose the value of every
+belief atom — an upper bound on any policy's value from that state (`relaxed_values`). Lower
+and upper are backed up separately; the lower one is the value of the policy taking the lower arg-max, so
+lower <= Pr_max <= upper. With `horizon` = depth the objective is "accepted within H junctions"
+and the result is exact (lower = upper) unless nodes were cut. R is computed by backward
+induction (bounded) or by value iteration from above (unbounded), each iterate plus a margin of
+1e-12 so that floating-point rounding cannot take it below the true value; the root's upper
+value gets the same allowance.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from trustroute.policies.logic.compiled import compile_spec
+from trustroute.policies.logic.dfa import DFA
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.joint_belief import joint_filter
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+
+RELAXATION_MARGIN = 1e-12
+RELAXATION_TOLERANCE = 1e-10
+MAX_RELAXATION_ITERATIONS = 100_000
+
+
+@dataclass(frozen=True)
+class JointBounds:
+    lower: float
+    upper: float
+    depth: int
+    horizon: int | None
+    nodes: int
+    cut_nodes: int
+    seconds: float
+    belief_rule: str
+
+    @property
+    def gap(self) -> float:
+        return self.upper - self.lower
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["gap"] = self.gap
+        return out
+
+
+def _relaxed_next_q(pomdp: TrustPOMDP, spec: Spec, dfa: DFA, labeller: Labeller) -> np.ndarray:
+    """int [n_q, n_x, n_trust, 2**m]: δ(q, L(x', θ', bits)) with the m belief atoms set by bits."""
+    n_x, n_t, n_q = pomdp.n_states, pomdp.n_trust, int(dfa.n_states)
+    m = int(labeller.belief_columns.size)
+    q, x, t, bits = (a.ravel() for a in np.meshgrid(np.arange(n_q), np.arange(n_x), np.arange(n_t),
+                                                     np.arange(2 ** m), indexing="ij"))
+    valuations = labeller.valuations(x, np.zeros((x.size, n_t)), t if labeller.reads_trust else None)
+    for j, column in enumerate(labeller.belief_columns.tolist()):
+        valuations[:, column] = (bits >> j) & 1
+    return np.asarray(dfa.step_many(q, valuations), dtype=np.int64).reshape(n_q, n_x, n_t, 2 ** m)
+
+
+def relaxed_values(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) -> np.ndarray:
+    """R [n_x, n_trust, n_q] (unbounded), or [horizon + 1, n_x, n_trust, n_q] with R[k] for k
+    junctions left: upper bounds on P(accepted) from (x, θ, q) for any policy."""
+    compiled = compile_spec(spec, pomdp.town)
+    dfa, labeller = compiled.dfa, compiled.labeller
+    next_q = _relaxed_next_q(pomdp, spec, dfa, labeller)
+    n_x, n_t, n_q = pomdp.n_states, pomdp.n_trust, int(dfa.n_states)
+    accepting = np.asarray(dfa.accepting, dtype=bool)
+    rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
+    # P(θ' | θ, inc) summed over the observations: the relaxation sees θ, so (h, e) do not matter.
+    move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, pomdp.driver.trust_transition)
+    successors = pomdp.successor_table
+    valid = successors >= 0
+    x2 = np.where(valid, successors, 0)                           # [n_x, slots]
+    incident = pomdp.road_incident[x2]
+
+    def backup(values: np.ndarray) -> np.ndarray:
+        # best[q, x', θ'] = max over belief bits of values[x', θ', δ(q, L(x', θ', bits))]
+        best = values[np.arange(n_x)[None, :, None, None], np.arange(n_t)[None, None, :, None],
+                      next_q].max(axis=3)
+        # per (x, slot, θ, q): Σ_θ' move[inc(x2)][θ, θ'] best[q, x2, θ']
+        expected = np.einsum("astu,asqu->astq", move[incident], best.transpose(1, 0, 2)[x2])
+        expected = np.where(valid[:, :, None, None], expected, -np.inf).max(axis=1)
+        out = np.minimum(1.0, expected + RELAXATION_MARGIN)
+        out[:, :, accepting] = 1.0
+        out[:, :, rejecting] = 0.0
+        return out
+
+    if horizon is not None:
+        table = np.zeros((horizon + 1, n_x, n_t, n_q))
+        table[0, :, :, accepting] = 1.0
+        for k in range(1, horizon + 1):
+            table[k] = backup(table[k - 1])
+        return table
+    values = np.ones((n_x, n_t, n_q))
+    values[:, :, rejecting] = 0.0
+    for _ in range(MAX_RELAXATION_ITERATIONS):
+        new = backup(values)
+        change = float(np.max(values - new)) if new.size else 0.0
+        values = new
+        if change <= RELAXATION_TOLERANCE:
+            break
+    return values
+
+
+OPEN_LOOP_STEPS = 30          # junctions of the open-loop continuation at unbounded leaves
+OPEN_LOOP_CHUNK = 20_000      # nodes per vectorised batch of the open-loop continuation
+
+
+def _open_loop_accepted(pomdp: TrustPOMDP, next_q: np.ndarray, move: np.ndarray, guide,
+                        x: np.ndarray, joint: np.ndarray, steps: int,
+                        accepting: np.ndarray) -> np.ndarray:
+    """P(accepted within `steps` more junctions) of the policy that ignores observations and moves,
+    at each step, to the successor with the largest relaxed value `guide(k)` (k junctions left
+    after the move). The labels must not depend on the belief (then the observations can be
+    summed out). Exact for that policy, so a lower bound on the optimum from each node."""
+    n, n_t, n_q = joint.shape
+    rows = np.arange(n)[:, None]
+    thetas = np.arange(n_t)[None, :]
+    successors = pomdp.successor_table
+    for k in range(steps):
+        table = guide(steps - k - 1)
+        best_score = np.full(n, -np.inf)
+        best_joint = joint
+        best_x = x
+        for slot in range(successors.shape[1]):
+            x2 = successors[x, slot]
+            valid = x2 >= 0
+            if not valid.any():
+                continue
+            x2 = np.where(valid, x2, 0)
+            predicted = np.einsum("ntq,ntu->nuq", joint, move[pomdp.road_incident[x2]])
+            moved = np.zeros_like(predicted)
+            for q in range(n_q):
+                moved[rows, thetas, next_q[q][x2]] += predicted[:, :, q]
+            score = np.where(valid, np.einsum("ntq,ntq->n", moved, table[x2]), -np.inf)
+            better = score > best_score
+            best_score = np.where(better, score, best_score)
+            best_joint = np.where(better[:, None, None], moved, best_joint)
+            best_x = np.where(better, x2, best_x)
+        joint, x = best_joint, best_x
+    return joint[:, :, accepting].sum(axis=(1, 2))
+
+
+def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
+                 belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
+                 max_nodes: int = 200_000) -> JointBounds:
+    """[lower, upper] on max over policies of P(accepted) (within `horizon` junctions when given;
+    then depth = horizon)."""
+    started = time.perf_counter()
+    if horizon is not None:
+        depth = horizon
+    town, driver = pomdp.town, pomdp.driver
+    compiled = compile_spec(spec, town)
+    dfa, labeller = compiled.dfa, compiled.labeller
+    filter_ = joint_filter(pomdp, dfa, labeller)
+    relaxed = relaxed_values(pomdp, spec, horizon)
+    accepting = np.asarray(dfa.accepting, dtype=bool)
+    rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
+    live_q = ~(accepting | rejecting)
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
+    slots = pomdp.successor_table.shape[1]
+
+    # Where the labels do not read the belief, cut nodes and unbounded leaves get the value of an
+    # open-loop continuation as their lower bound instead of their accepted mass alone.
+    relaxed_q = _relaxed_next_q(pomdp, spec, dfa, labeller)
+    open_loop = bool(np.all(relaxed_q == relaxed_q[..., :1]))
+    move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, driver.trust_transition)
+
+    def guide(k: int) -> np.ndarray:
+        return relaxed[min(k, horizon)] if horizon is not None else relaxed
+
+    def open_loop_lower(x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        steps = left if horizon is not None else OPEN_LOOP_STEPS
+        out = np.empty(x.size)
+        for begin in range(0, x.size, OPEN_LOOP_CHUNK):
+            part = slice(begin, begin + OPEN_LOOP_CHUNK)
+            out[part] = _open_loop_accepted(pomdp, relaxed_q[..., 0], move, guide, x[part],
+                                            joint[part], steps, accepting)
+        return out
+
+    def leaf_bounds(x: np.ndarray, joint: np.ndarray, left: int) -> tuple[np.ndarray, np.ndarray]:
+        table = relaxed[left] if horizon is not None else relaxed
+        accepted = joint[:, :, accepting].sum(axis=(1, 2))
+        optimistic = np.einsum("ntq,ntq->n", joint * live_q, table[x])
+        return accepted, np.minimum(1.0, accepted + optimistic)
+
+    start = town.state_index(spec.start)
+    b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
+    levels = [dict(x=np.array([start]), joint=filter_.initial(start, b0[0]), posterior=b0.copy(),
+                   belief=b0.copy(), mass=np.ones(1))]
+    edges = []          # per level: (parent, slot, child, p_obs) for the children of that level
+    expandable = []     # per level: bool per node
+    cut_total = 0
+    for level in range(depth + 1):
+        nodes = levels[-1]
+        _, _, live = filter_.masses(nodes["joint"])
+        grow = (live > 0) & (nodes["mass"] >= prune_below) & (level < depth)
+        if "frozen" in nodes:
+            grow &= ~nodes["frozen"]
+        cut_total += int(((live > 0) & ~grow & (level < depth)).sum())
+        expandable.append(grow)
+        if level == depth or not grow.any():
+            break
+        parents = np.flatnonzero(grow)
+        child_parts = []
+        for slot in range(slots):
+            x2 = pomdp.successor_table[nodes["x"][parents], slot]
+            has = x2 >= 0
+            p_idx, x2 = parents[has], x2[has]
+            incident = pomdp.road_incident[x2]
+            for h, e in outcomes:
+                posterior, p_obs = pomdp.belief_update(nodes["posterior"][p_idx], incident, h, e)
+                belief = posterior if belief_rule == "bayes" else pomdp.belief_update(
+                    nodes["belief"][p_idx], incident, h, e, rule=belief_rule)[0]
+                ok = p_obs > 0
+                joint = filter_.update(nodes["joint"][p_idx][ok], posterior[ok], belief[ok], x2[ok],
+                                       incident[ok], h, e, p_obs[ok])
+                child_parts.append((p_idx[ok], np.full(int(ok.sum()), slot), x2[ok], joint, posterior[ok],
+                                    belief[ok], p_obs[ok], nodes["mass"][p_idx][ok] * p_obs[ok]))
+        parent, slot_of, x2, joint, posterior, belief, p_obs, mass = (
+            np.concatenate([c[j] for c in child_parts]) for j in range(8))
+        # Merge children with bit-identical (road, J, posterior, AV belief).
+        rows = np.concatenate([x2[:, None].astype(float), joint.reshape(len(x2), -1), posterior, belief],
+                              axis=1)
+        rows = np.ascontiguousarray(rows)
+        keys = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
+        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        merged_mass = np.bincount(inverse, weights=mass)
+        child = dict(x=x2[first], joint=joint[first], posterior=posterior[first], belief=belief[first],
+                     mass=merged_mass)
+        if first.size > max_nodes:      # keep the likeliest nodes; the others become cut leaves
+            order = np.argsort(-merged_mass, kind="stable")
+            keep_child = np.zeros(first.size, dtype=bool)
+            keep_child[order[:max_nodes]] = True
+            child["frozen"] = ~keep_child
+        levels.append(child)
+        edges.append((parent, slot_of, inverse, p_obs))
+
+    # Backward: leaves by their bounds, expanded nodes by the best action's expectation.
+    n_levels = len(levels)
+    lower = upper = None
+    for level in range(n_levels - 1, -1, -1):
+        nodes = levels[level]
+        left = depth - level
+        low, high = leaf_bounds(nodes["x"], nodes["joint"], left)
+        leaf = ~expandable[level] if level < len(expandable) else np.ones(low.size, dtype=bool)
+        leaf &= filter_.masses(nodes["joint"])[2] > 0
+        if open_loop and leaf.any() and (horizon is None or left > 0):
+            low[leaf] = np.maximum(low[leaf], open_loop_lower(nodes["x"][leaf], nodes["joint"][leaf], left))
+        if level < n_levels - 1:
+            parent, slot_of, child, p_obs = edges[level]
+            grow = expandable[level]
+            n = nodes["x"].size
+            sum_low = np.zeros((n, slots))
+            sum_high = np.zeros((n, slots))
+            np.add.at(sum_low, (parent, slot_of), p_obs * lower[child])
+            np.add.at(sum_high, (parent, slot_of), p_obs * upper[child])
+            has = np.zeros((n, slots), dtype=bool)
+            has[parent, slot_of] = True
+            best_low = np.where(has, sum_low, -np.inf).max(axis=1)
+            best_high = np.where(has, sum_high, -np.inf).max(axis=1)
+            low = np.where(grow, best_low, low)
+            high = np.where(grow, np.minimum(1.0, best_high), high)
+        lower, upper = low, high
+    # The backed-up upper value is a float sum of products: allow for its rounding.
+    return JointBounds(lower=float(lower[0]), upper=min(1.0, float(upper[0]) + RELAXATION_MARGIN),
+                       depth=depth, horizon=horizon,
+                       nodes=int(sum(lv["x"].size for lv in levels)), cut_nodes=cut_total,
+                       seconds=time.perf_counter() - started, belief_rule=belief_rule)

@@ -1,0 +1,98 @@
+"""The exact belief over (θ, q) when a spec tests the hidden trust (docs/trust_states.md).
+
+Once a formula has trust-state atoms, the DFA state q after a position depends on the hidden
+trust path, so it is hidden too. The exact filter keeps the joint law J(θ, q) of the current
+trust and DFA state given the observations. After driving road x' and seeing o = (inc, h, e),
+
+    J'(θ', q') ∝ Σ_{θ, q} J(θ, q) P(h | θ, inc) P(e | θ, inc) T[inc][h][e](θ, θ') [q' = δ(q, L(x', θ', b'))]
+
+where b' is the AV's belief after the observation (belief atoms read it; under the default
+Bayes rule it is the θ-marginal of J'). The normaliser is the observation probability of
+policies/model/trust_pomdp.py, and the θ-marginal of J' is that module's posterior: it is taken
+from there (so beliefs are bit for bit today's), and J' carries the q part. Without trust-state
+atoms q is a function of the observations: J' is the posterior times the indicator of the one
+DFA state, computed exactly so (no sums over q at all).
+
+Arrays are vectorised over rows n: J [n, n_trust, n_q].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.policies.logic.dfa import DFA
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.model.trust_pomdp import TrustPOMDP
+
+
+@dataclass(frozen=True, eq=False)
+class JointFilter:
+    """The (θ, q) filter of one spec on one trust POMDP."""
+
+    pomdp: TrustPOMDP
+    dfa: DFA
+    labeller: Labeller
+
+    @property
+    def n_q(self) -> int:
+        return int(self.dfa.n_states)
+
+    def initial(self, start: int, belief: np.ndarray) -> np.ndarray:
+        """J [1, n_trust, n_q] at position 0: θ0 ~ `belief`, q0 = δ(initial, L(start, b0, θ0))."""
+        n_t = self.pomdp.n_trust
+        belief = np.asarray(belief, dtype=float)
+        thetas = np.arange(n_t)
+        q0 = self.labeller.step(np.full(n_t, self.dfa.initial), np.full(n_t, start),
+                                np.broadcast_to(belief, (n_t, n_t)),
+                                thetas if self.labeller.reads_trust else None)
+        joint = np.zeros((1, n_t, self.n_q))
+        joint[0, thetas, q0] = belief
+        return joint
+
+    def update(self, joint: np.ndarray, posterior: np.ndarray, belief_av: np.ndarray,
+               road: np.ndarray, incident: np.ndarray, human_action: int, performance: int,
+               probability: np.ndarray) -> np.ndarray:
+        """J' for each row: `posterior` [n, n_trust] and `probability` [n] are the θ filter's output
+        for this observation (TrustPOMDP.belief_update), `belief_av` the AV's new belief, `road`
+        the road x' just driven. Rows of probability 0 give zero rows."""
+        n, n_t, n_q = joint.shape
+        if not self.labeller.reads_trust:
+            # q is the same on every trust path: move its one DFA state, keep the posterior.
+            q = np.argmax(joint.sum(axis=1), axis=1)
+            q2 = self.labeller.step(q, road, belief_av)
+            out = np.zeros_like(joint)
+            out[np.arange(n), :, q2] = posterior
+            return out
+        matrices = self.pomdp.weighted_transition[incident, human_action, performance]  # [n, θ, θ']
+        predicted = np.einsum("ntq,ntu->nuq", joint, matrices)
+        np.divide(predicted, probability[:, None, None], out=predicted,
+                  where=probability[:, None, None] > 0)
+        predicted[probability <= 0] = 0.0
+        rows, thetas, qs = np.nonzero(predicted > 0)
+        q2 = self.labeller.step(qs, road[rows], belief_av[rows], thetas)
+        flat = (rows * n_t + thetas) * n_q + q2
+        out = np.bincount(flat, weights=predicted[rows, thetas, qs], minlength=n * n_t * n_q)
+        return out.astype(float, copy=False).reshape(n, n_t, n_q)   # (bincount of nothing is int)
+
+    def q_marginal(self, joint: np.ndarray) -> np.ndarray:
+        return joint.sum(axis=1)
+
+    def likeliest_q(self, joint: np.ndarray) -> np.ndarray:
+        """The DFA state a policy is told: the most probable one (lowest index on ties); the
+        exact state when the spec has no trust-state atoms."""
+        return np.argmax(self.q_marginal(joint), axis=1)
+
+    def masses(self, joint: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(accepted, rejected, live) probability of each row."""
+        marginal = self.q_marginal(joint)
+        accepting = np.asarray(self.dfa.accepting, dtype=bool)
+        rejecting = np.asarray(self.dfa.rejecting, dtype=bool) & ~accepting
+        live = ~(accepting | rejecting)
+        return marginal[:, accepting].sum(axis=1), marginal[:, rejecting].sum(axis=1), \
+            marginal[:, live].sum(axis=1)
+
+
+def joint_filter(pomdp: TrustPOMDP, dfa: DFA, labeller: Labeller) -> JointFilter:
+    return JointFilter(pomdp=pomdp, dfa=dfa, labeller=labeller)

@@ -1,0 +1,193 @@
+"""The product POMDP of the trust model and a spec's DFA, explicit, as Storm's DRN (docs/trust_states.md).
+
+For specs whose atoms are all state predicates over X × Θ (road atoms and trust-state atoms; no
+belief atoms) the problem "maximise P(spec accepted)" is plain POMDP reachability. A state is
+
+    (started, x, θ, q, h, e[, k])
+
+x the road (observed), θ the trust level index (hidden), q the DFA state after reading the
+current position (hidden: it depends on θ), (h, e) the human action and AV performance seen on
+the road just driven (observed, so the belief over θ can be updated), k the junctions driven
+(observed; only for the bounded objective, which stops at k = H). An extra first step
+(`begin`, from started = false) draws θ0 from the initial belief and reads position 0. Choosing
+action slot a at x drives to x' = successor(x, a); with incident i of x',
+
+    P(h, e, θ' | θ) = P(h | θ, i) P(e | θ, i) T[i][h][e](θ, θ'),   q' = δ(q, L(x', θ')),
+
+the same equations as the exact filter (policies/model/trust_pomdp.py). The label "goal" holds
+at accepting q; accepting states are absorbing in the DFA, so "F goal" is the spec's
+satisfaction (within H junctions with the step counter). The states are enumerated in numpy
+over the grid (x, θ, q, last (h, e)[, k]) and restricted to those reachable from `begin`;
+Storm reads the DRN text (its explicit format). Probabilities are printed with `repr`, which
+round-trips every double exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import breadth_first_order
+
+from trustroute.networks.errors import InputError
+from trustroute.policies.logic.compiled import compile_spec
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import TrustPOMDP
+
+GOAL_LABEL = "goal"
+PROPERTY = f'Pmax=? [F "{GOAL_LABEL}"]'
+
+
+def check_exportable(spec: Spec) -> None:
+    """InputError unless every atom the spec's minimal DFA tests is a road or trust-state atom
+    (a belief atom no state tests, like lowtrust in the paper's φ1, does not matter)."""
+    dfa = build_dfa(spec)
+    tested = {atom for q in range(dfa.n_states) for atom in dfa.tested_atoms(q)}
+    belief = [a for a in spec.formula_atoms if a in spec.belief_atoms and a in tested]
+    if belief:
+        raise InputError(spec.source_path or spec.name, "formula",
+                         f"belief atoms ({', '.join(belief)}) cannot be exported to a POMDP model: "
+                         "the AV's belief is not a state of it",
+                         "use road atoms and [trust_states] atoms only (docs/trust_states.md)")
+
+
+@dataclass(frozen=True, eq=False)
+class ExplicitProduct:
+    """State 0 is `begin`. Choices are numbered in state order; choice c belongs to
+    choice_state[c] and is labelled choice_label[c]; transition j goes from choice
+    transition_choice[j] to transition_target[j] with probability transition_probability[j]."""
+
+    horizon: int | None
+    observation: np.ndarray          # int [n_states]
+    goal: np.ndarray                 # bool [n_states]
+    choice_state: np.ndarray
+    choice_label: tuple[str, ...]
+    transition_choice: np.ndarray
+    transition_target: np.ndarray
+    transition_probability: np.ndarray
+    query: str = PROPERTY
+
+    @property
+    def n_states(self) -> int:
+        return int(self.observation.size)
+
+    def to_drn(self) -> str:
+        order = np.argsort(self.transition_choice, kind="stable")
+        targets, probabilities = self.transition_target[order], self.transition_probability[order]
+        bounds = np.searchsorted(self.transition_choice[order], np.arange(self.choice_state.size + 1))
+        first_choice = np.searchsorted(self.choice_state, np.arange(self.n_states + 1))
+        lines = ["// the product POMDP of trustroute (docs/trust_states.md)", "@type: POMDP",
+                 "@parameters", "", "@reward_models", "", "@nr_states", str(self.n_states),
+                 "@nr_choices", str(self.choice_state.size), "@model"]
+        for s in range(self.n_states):
+            labels = (" init" if s == 0 else "") + (f" {GOAL_LABEL}" if self.goal[s] else "")
+            lines.append(f"state {s} {{{int(self.observation[s])}}}{labels}")
+            for c in range(first_choice[s], first_choice[s + 1]):
+                lines.append(f"\taction {self.choice_label[c]}")
+                lines.extend(f"\t\t{int(t)} : {float(p)!r}" for t, p in
+                             zip(targets[bounds[c]:bounds[c + 1]], probabilities[bounds[c]:bounds[c + 1]],
+                                 strict=True))
+        return "\n".join(lines) + "\n"
+
+
+def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) -> ExplicitProduct:
+    check_exportable(spec)
+    if horizon is not None and horizon < 0:
+        raise ValueError(f"horizon must be >= 0, got {horizon}")
+    town, driver = pomdp.town, pomdp.driver
+    compiled = compile_spec(spec, town)
+    dfa, labeller = compiled.dfa, compiled.labeller
+    n_x, n_t, n_q = pomdp.n_states, pomdp.n_trust, int(dfa.n_states)
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
+    n_o, n_k = len(outcomes), (horizon + 1 if horizon is not None else 1)
+    qs, xs, ts = np.meshgrid(np.arange(n_q), np.arange(n_x), np.arange(n_t), indexing="ij")
+    next_q = np.asarray(labeller.step(qs.ravel(), xs.ravel(), np.zeros((qs.size, n_t)), ts.ravel()),
+                        dtype=np.int64).reshape(n_q, n_x, n_t)
+    shape = (n_x, n_t, n_q, n_o, n_k)
+    n_grid = int(np.prod(shape))
+
+    def index(x, t, q, o, k):
+        return 1 + np.ravel_multi_index((x, t, q, o, k), shape)
+
+    # The begin state: θ0 ~ initial belief, position 0 read with it.
+    start = town.state_index(spec.start)
+    b0 = np.asarray(pomdp.initial_belief, dtype=float)
+    t0 = np.flatnonzero(b0 > 0)
+    q0 = next_q[dfa.initial, start, t0]
+    choice_state = [np.zeros(1, dtype=np.int64)]
+    choice_label: list[np.ndarray] = [np.array(["begin"])]
+    tr_choice = [np.zeros(t0.size, dtype=np.int64)]
+    tr_target = [index(np.full(t0.size, start), t0, q0, np.zeros(t0.size, dtype=np.int64),
+                       np.zeros(t0.size, dtype=np.int64))]
+    tr_prob = [b0[t0]]
+
+    # Every grid state: x, t, q, o, k.
+    grid = np.arange(n_grid)
+    gx, gt, gq, go, gk = np.unravel_index(grid, shape)
+    moving = gk < n_k - 1 if horizon is not None else np.ones(n_grid, dtype=bool)
+    p_branch = (pomdp.observation_likelihood[:, [h for h, _ in outcomes], [e for _, e in outcomes], :]
+                [..., None] * driver.trust_transition[:, [h for h, _ in outcomes],
+                                                      [e for _, e in outcomes]])  # [inc, o, θ, θ']
+    next_choice = 1
+    slots = pomdp.successor_table.shape[1]
+    per_state_choices = np.zeros(n_grid, dtype=np.int64)
+    choice_blocks = []
+    for slot in range(slots):
+        x2 = pomdp.successor_table[gx, slot]
+        has = moving & (x2 >= 0)
+        per_state_choices += has
+        choice_blocks.append((slot, has, x2))
+    # Choices are numbered state by state (slots in order), as DRN lists them.
+    stopping = ~moving
+    n_choices_grid = per_state_choices + stopping
+    first = 1 + np.concatenate([[0], np.cumsum(n_choices_grid)[:-1]])
+    offset = np.zeros(n_grid, dtype=np.int64)
+    labels_grid = np.empty(int(n_choices_grid.sum()), dtype=object)
+    for slot, has, x2 in choice_blocks:
+        states = np.flatnonzero(has)
+        choice = first[states] + offset[states]
+        offset[states] += 1
+        labels_grid[choice - 1] = f"go{slot}"
+        inc2 = pomdp.road_incident[x2[states]]
+        probs = p_branch[inc2, :, gt[states], :]                    # [m, o, θ']
+        m, o2, t2 = np.nonzero(probs > 0)
+        tr_choice.append(choice[m])
+        tr_target.append(index(x2[states][m], t2, next_q[gq[states][m], x2[states][m], t2], o2,
+                               np.minimum(gk[states][m] + (horizon is not None), n_k - 1)))
+        tr_prob.append(probs[m, o2, t2])
+    stop_states = np.flatnonzero(stopping)
+    if stop_states.size:
+        choice = first[stop_states] + offset[stop_states]
+        labels_grid[choice - 1] = "stop"
+        tr_choice.append(choice)
+        tr_target.append(1 + stop_states)
+        tr_prob.append(np.ones(stop_states.size))
+    next_choice += labels_grid.size
+    choice_state.append(np.repeat(1 + grid, n_choices_grid))
+    choice_label.append(labels_grid)
+    c_state = np.concatenate(choice_state)
+    c_label = np.concatenate(choice_label)
+    t_choice, t_target, t_prob = (np.concatenate(a) for a in (tr_choice, tr_target, tr_prob))
+
+    # Restrict to the states reachable from begin, renumbered in state order.
+    n_all = 1 + n_grid
+    graph = csr_matrix((np.ones(t_choice.size), (c_state[t_choice], t_target)), shape=(n_all, n_all))
+    reached = np.zeros(n_all, dtype=bool)
+    reached[breadth_first_order(graph, 0, return_predecessors=False)] = True
+    new_id = np.cumsum(reached) - 1
+    keep_choice = reached[c_state]
+    new_choice = np.cumsum(keep_choice) - 1
+    keep_tr = keep_choice[t_choice]
+    observation_key = np.zeros((n_all, 3), dtype=np.int64)          # (started, x, o, k) -> id
+    observation_key[1:] = np.stack([1 + gx, go, gk], axis=1)
+    observation_key[0] = (0, 0, 0)
+    _, observation = np.unique(observation_key[reached], axis=0, return_inverse=True)
+    goal = np.zeros(n_all, dtype=bool)
+    goal[1:] = np.asarray(dfa.accepting, dtype=bool)[gq]
+    return ExplicitProduct(
+        horizon=horizon, observation=observation.ravel().astype(np.int64), goal=goal[reached],
+        choice_state=new_id[c_state[keep_choice]], choice_label=tuple(c_label[keep_choice].tolist()),
+        transition_choice=new_choice[t_choice[keep_tr]], transition_target=new_id[t_target[keep_tr]],
+        transition_probability=t_prob[keep_tr])

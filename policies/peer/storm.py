@@ -1,0 +1,102 @@
+"""Storm's POMDP belief exploration on the exported product (stormpy, the optional `[peer]` extra).
+
+Two sound one-sided results for Pmax=? [F "goal"]: belief-MDP unfolding gives a lower bound
+(the value of a policy Storm found, cut off at a time or size limit), belief discretisation
+(Freudenthal triangulation at a resolution) an upper bound. With a step counter in the model
+both are for the bounded objective. Storm computes in double precision with its default
+(iterative, ε = 1e-6 relative) solvers, so its numbers are sound up to that solver precision,
+not certified in our sense; they are an independent check, reported as Storm gives them.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from trustroute.networks.errors import InputError
+from trustroute.policies.peer.product_pomdp import ExplicitProduct
+
+INSTALL_HINT = "install the optional peer extra: pip install 'trustroute[peer]' (stormpy==2.0.0)"
+
+
+def storm_available() -> bool:
+    return importlib.util.find_spec("stormpy") is not None
+
+
+def require_storm(source: str = "stormpy") -> None:
+    """InputError with the install hint when stormpy is absent."""
+    if not storm_available():
+        raise InputError(source, "", "Storm (stormpy) is not installed", INSTALL_HINT)
+
+
+@dataclass(frozen=True)
+class StormResult:
+    lower: float
+    upper: float
+    lower_seconds: float
+    upper_seconds: float
+    build_seconds: float
+    lower_complete: bool
+    upper_complete: bool
+    states: int
+    choices: int
+    observations: int
+    lower_beliefs: int
+    upper_beliefs: int
+    resolution: int
+    time_limit: float
+
+    @property
+    def gap(self) -> float:
+        return self.upper - self.lower
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["gap"] = self.gap
+        return out
+
+
+def build_storm_model(product: ExplicitProduct):
+    """(POMDP, property, build seconds): the product written as DRN and read by Storm."""
+    require_storm()
+    import stormpy
+    from stormpy.io import DirectEncodingParserOptions
+
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="trustroute-storm-") as folder:
+        path = Path(folder) / "product.drn"
+        path.write_text(product.to_drn())
+        options = DirectEncodingParserOptions()
+        options.build_choice_labeling = True     # Storm's POMDP checks match actions by label
+        model = stormpy.build_model_from_drn(str(path), options=options)
+    properties = stormpy.parse_properties(product.query)
+    return model, properties[0], time.perf_counter() - started
+
+
+def run_storm(product: ExplicitProduct, time_limit: float = 10.0, resolution: int = 2) -> StormResult:
+    """Storm's lower (unfolding, at most `time_limit` seconds of exploration) and upper
+    (discretisation at `resolution`, which Storm cannot stop early) bounds."""
+    model, prop, build_seconds = build_storm_model(product)
+    import stormpy.pomdp as storm_pomdp
+
+    seconds = max(1, int(round(time_limit)))
+    started = time.perf_counter()
+    lower = storm_pomdp.verify_with_belief_unfolding(model, prop, max_exploration_time=seconds)
+    lower_seconds = time.perf_counter() - started
+
+    # Storm's discretisation takes no time or size limit: its cost is set by the resolution.
+    started = time.perf_counter()
+    upper = storm_pomdp.verify_with_belief_discretization(model, prop, resolution=resolution)
+    upper_seconds = time.perf_counter() - started
+    return StormResult(
+        lower=float(lower.value), upper=float(upper.value), lower_seconds=lower_seconds,
+        upper_seconds=upper_seconds, build_seconds=build_seconds,
+        lower_complete=bool(lower.completed_exploration),
+        upper_complete=bool(upper.completed_exploration), states=int(model.nr_states),
+        choices=int(model.nr_choices), observations=int(model.nr_observations),
+        lower_beliefs=int(lower.statistics.explored_beliefs or 0),
+        upper_beliefs=int(upper.statistics.explored_beliefs or 0), resolution=resolution,
+        time_limit=float(seconds))

@@ -1,0 +1,70 @@
+"""One CLI convention: SPEC positional, --out FILE or DIRECTORY, --json with "paths", --quiet."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.cli import run_cli
+
+RESULT_COMMANDS = [("net", "build"), ("spec", "check"), ("model",), ("synth",), ("baseline",),
+                   ("evaluate",), ("run",), ("study",), ("analyze",), ("fit",), ("demo",),
+                   ("import", "carla-logs")]
+OUT_IS = {("synth",): "FILE", ("fit",): "FILE", ("run",): "DIRECTORY", ("study",): "DIRECTORY",
+          ("demo",): "DIRECTORY", ("net", "build"): "DIRECTORY", ("import", "carla-logs"): "DIRECTORY"}
+
+
+@pytest.mark.parametrize("command", RESULT_COMMANDS, ids=" ".join)
+def test_every_result_command_has_json_and_says_what_out_is(command, capsys):
+    code, text, _ = run_cli(capsys, *command, "--help")
+    assert code == 0
+    assert "--json" in text and '"paths"' in text
+    if command in OUT_IS:
+        out_help = text[text.index("\n  --out "):].split("\n  -")[1]
+        assert OUT_IS[command] in out_help, out_help
+
+
+@pytest.mark.parametrize("command", [("synth",), ("baseline",), ("evaluate",), ("run",), ("spec", "check")],
+                         ids=" ".join)
+def test_spec_is_the_first_argument(command, capsys):
+    code, text, _ = run_cli(capsys, *command, "--help")
+    assert code == 0 and f"Usage: trustroute {' '.join(command)} [OPTIONS] SPEC" in text
+    assert "--spec" not in text   # run's old --spec spelling is hidden
+
+
+def _config(tmp_path) -> str:
+    path = tmp_path / "tiny.toml"
+    path.write_text('[study]\nparticipants = 2\nseed = 3\nengine = "model"\nspecs = ["phi1"]\n'
+                    f'conditions = ["free"]\npolicy_cache = "{tmp_path / "cache"}"\n')
+    return str(path)
+
+
+@pytest.mark.slow
+def test_study_json_quiet_and_analyze_writes_nothing_without_report(tmp_path, capsys):
+    out = tmp_path / "study"
+    code, text, err = run_cli(capsys, "study", _config(tmp_path), "--out", str(out), "--json", "--no-report")
+    assert code == 0, err
+    payload = json.loads(text)   # the whole of stdout is one JSON object
+    assert payload["planned"] == 2 and payload["failed"] == []
+    assert payload["paths"] == {"episodes": str(out / "episodes.parquet"),
+                                "roads": str(out / "roads.parquet"), "manifest": str(out / "manifest.json")}
+    assert all((out / name).is_file() for name in ("episodes.parquet", "roads.parquet", "manifest.json"))
+
+    code, text, _ = run_cli(capsys, "study", _config(tmp_path), "--out", str(out), "--quiet", "--no-report")
+    dataset_line = f"dataset: {out / 'episodes.parquet'}, {out / 'roads.parquet'}"
+    assert code == 0 and text.splitlines() == [dataset_line]
+
+    code, text, _ = run_cli(capsys, "analyze", str(out), "--json")
+    assert code == 0 and json.loads(text)["paths"] == {}
+    assert not (out / "report.md").exists() and not (out / "plots").exists()
+    code, text, _ = run_cli(capsys, "analyze", str(out), "--json", "--report")
+    paths = json.loads(text)["paths"]
+    assert paths == {"report_markdown": str(out / "report.md"), "report_html": str(out / "report.html")}
+    assert (out / "report.md").is_file() and (out / "report.html").is_file()
+
+    code, text, _ = run_cli(capsys, "study", _config(tmp_path), "--out", str(out), "--json")
+    payload = json.loads(text)
+    assert payload["skipped"] == 2 and payload["ran"] == 0
+    assert payload["analysis"]["cells"][0]["n"] == 2
+    assert set(payload["paths"]) == {"episodes", "roads", "manifest", "report_markdown", "report_html"}

@@ -1,0 +1,110 @@
+"""Exact evaluation with the joint (θ, q) belief against brute force, Monte Carlo and today's evaluate."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tests.policies.test_evaluate import RandomStationaryPolicy
+from tests.policies.trust_paths import policy_value
+from tests.policies.trust_specs import random_problem
+from trustroute.policies.evaluate import evaluate
+from trustroute.policies.evaluate_joint import evaluate_joint
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.routing.protocol import DecisionContext
+
+
+@pytest.mark.slow
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(["trust", "belief", "mixed"]),
+       cap=st.integers(2, 4))
+def test_exact_value_equals_brute_force_over_trust_paths(driver, seed, kind, cap):
+    rng = np.random.default_rng(seed)
+    pomdp, spec = random_problem(rng, driver, kind)
+    for policy in (RandomStationaryPolicy(pomdp.town, rng), trust_free_policy(pomdp.town, spec)):
+        exact = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=cap,
+                               force_joint=True)
+        reference = policy_value(pomdp, spec, policy, cap)
+        assert exact.gap == 0.0
+        assert exact.lower == pytest.approx(reference, abs=1e-10)
+        assert sum(exact.end_mass.values()) == pytest.approx(1.0, abs=1e-10)
+
+
+def simulate_hidden_trust(pomdp, spec, policy, episodes, rng, max_junctions):
+    """Monte Carlo with the true trust path drawn from the driver model; the DFA reads it."""
+    town, driver = pomdp.town, pomdp.driver
+    dfa = build_dfa(spec)
+    labeller = Labeller(spec, dfa, town)
+    satisfied = np.zeros(episodes, dtype=bool)
+    for n in range(episodes):
+        theta = int(rng.choice(driver.n_trust, p=driver.initial_belief))
+        belief = np.array(driver.initial_belief, dtype=float)
+        route = [spec.start]
+        q = int(labeller.step(np.array([dfa.initial]), np.array([town.state_index(spec.start)]),
+                              belief[None], np.array([theta]))[0])
+        for level in range(max_junctions + 1):
+            if dfa.accepting[q] or dfa.rejecting[q]:
+                break
+            context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
+            if policy.finished(context) or level == max_junctions:
+                break
+            road = town.successor(route[-1], policy.next_junction(context))
+            inc = driver.incident_index(town.incident(road))
+            h = int(rng.random() < driver.takeover_probability[inc, theta])
+            e = int(rng.random() < driver.failure_probability[inc, theta])
+            theta = int(rng.choice(driver.n_trust, p=driver.trust_transition[inc, h, e, theta]))
+            belief = pomdp.belief_update(belief, inc, h, e)[0][0]
+            route.append(road)
+            q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None],
+                                  np.array([theta]))[0])
+        satisfied[n] = bool(dfa.accepting[q])
+    return satisfied
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("policy_kind", ["free", "random"])
+def test_exact_value_agrees_with_monte_carlo_of_the_hidden_trust(pomdp, policy_kind):
+    """φ1 with the trust atom θ >= 6 at v3; the policies never read the DFA state, so the
+    simulation needs no joint filter of its own."""
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    rng = np.random.default_rng(20261201)
+    policy = (trust_free_policy(pomdp.town, spec) if policy_kind == "free"
+              else RandomStationaryPolicy(pomdp.town, np.random.default_rng(9)))
+    exact = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=12)
+    satisfied = simulate_hidden_trust(pomdp, spec, policy, 4000, rng, 12)
+    p = exact.satisfaction_probability
+    se = max(np.sqrt(p * (1 - p) / satisfied.size), 1.0 / satisfied.size)
+    assert abs(satisfied.mean() - p) <= 4 * se + exact.gap, (satisfied.mean(), p, se)
+
+
+@pytest.mark.parametrize("name", ["phi1", "phi2_strict"])
+def test_without_trust_atoms_the_joint_unfolding_gives_todays_evaluation(pomdp, name):
+    spec = load_spec(f"specs/{name}.toml", pomdp.town)
+    for policy in (trust_free_policy(pomdp.town, spec),
+                   RandomStationaryPolicy(pomdp.town, np.random.default_rng(6))):
+        today = evaluate(pomdp, spec, policy, fallback_after=3, max_junctions=10)
+        joint = evaluate_joint(pomdp, spec, policy, fallback_after=3, max_junctions=10, force_joint=True)
+        assert joint.lower == today.lower and joint.upper == today.upper
+        assert joint.expected_final_trust == pytest.approx(today.expected_final_trust, abs=1e-12)
+        assert joint.expected_junctions == pytest.approx(today.expected_junctions, abs=1e-12)
+        for reason, value in today.end_mass.items():
+            assert joint.end_mass[reason] == pytest.approx(value, abs=1e-15)
+        dispatched = evaluate_joint(pomdp, spec, policy, fallback_after=3, max_junctions=10)
+        assert {k: v for k, v in dispatched.to_dict().items() if k != "seconds"} == \
+            {k: v for k, v in today.to_dict().items() if k != "seconds"}
+
+
+def test_belief_and_true_trust_readings_of_phi1_differ(pomdp):
+    """The worked example of docs/trust_states.md: the trust-free route, φ1 read on the belief
+    (hightrust: P(θ >= 6) > 0.5) and on the true trust (θ >= 6)."""
+    belief = load_spec("specs/phi1.toml", pomdp.town)
+    trust = load_spec("specs/phi1_trust.toml", pomdp.town)
+    on_belief = evaluate(pomdp, belief, trust_free_policy(pomdp.town, belief))
+    on_trust = evaluate_joint(pomdp, trust, trust_free_policy(pomdp.town, trust))
+    assert on_belief.gap == 0.0 and on_trust.gap == 0.0
+    assert abs(on_belief.lower - on_trust.lower) > 0.05

@@ -1,0 +1,52 @@
+"""The README's "Python API" script runs as written (in a temporary directory and cache)."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def api_script() -> str:
+    text = README.read_text()
+    section = text[text.index("## Python API"):]
+    section = section[: section.index("\n## ", 1)]
+    blocks = re.findall(r"```python\n(.*?)```", section, re.S)
+    assert len(blocks) == 1, "the Python API section has exactly one script"
+    return blocks[0]
+
+
+def test_api_names_are_cheap_to_reach():
+    code = ("import sys, trustroute\n"
+            "names = ['load_town', 'load_driver_model', 'load_spec', 'synthesize', 'evaluate',"
+            " 'run_episode', 'run_study', 'analyze']\n"
+            "assert all(callable(getattr(trustroute, n)) and getattr(trustroute, n).__doc__ for n in names)\n"
+            "heavy = [m for m in ('numpy', 'pandas', 'click', 'libsumo', 'gymnasium') if m in sys.modules]\n"
+            "assert not heavy, heavy\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.slow
+def test_readme_api_script_runs(tmp_path):
+    script = tmp_path / "api_script.py"
+    script.write_text(api_script())
+    env = {**os.environ, "HOME": str(tmp_path / "home"), "XDG_CACHE_HOME": str(tmp_path / "home" / ".cache")}
+    done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    bounds = re.fullmatch(r"(\S+) <= Pr_max\(12 junctions\) <= (\S+)", lines[0])
+    assert bounds and 0 < float(bounds.group(1)) <= float(bounds.group(2)) <= 1
+    assert re.fullmatch(r"P\(satisfied\): aware \S+, free \S+", lines[1])
+    assert re.fullmatch(r"SUMO episode: (accepted|rejected|destination|cap) after \d+ junctions", lines[2])
+    cells = [line.split() for line in lines[3:]]
+    assert [(c[0], c[1]) for c in cells] == [("phi1", "aware"), ("phi1", "free")]
+    assert all(c[2].endswith("/4") for c in cells)
+    assert (tmp_path / "studies" / "api-demo" / "episodes.parquet").is_file()
+    assert not (tmp_path / "studies" / "api-demo" / "report.md").exists()  # analyze wrote nothing
