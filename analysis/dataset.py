@@ -46,6 +46,10 @@ PART_FOLDERS: tuple[str, ...] = (PARTS_DIR, KINEMATICS_DIR, INCIDENTS_DIR, FAILU
 # Keys of a part's Parquet schema metadata (JSON values).
 PART_SUMMARY_KEY = b"trustroute.summary"
 PART_TASK_KEY = b"trustroute.task"
+PART_FORMAT_KEY = b"trustroute.dataset"
+# Bump when a table's columns or their meaning change: parts of another format are not resumed
+# (they are moved to damaged/ and their episodes re-run), so a study never mixes two formats.
+DATASET_FORMAT = "2"   # 2: missing values are nulls (1 used -1 and "")
 
 
 def part_path(study_dir: Path, episode_id: str) -> Path:

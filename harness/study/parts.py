@@ -28,10 +28,12 @@ import pyarrow.parquet as pq
 
 from trustroute.analysis.dataset import (
     DAMAGED_DIR,
+    DATASET_FORMAT,
     FAILURES_DIR,
     INCIDENTS_SCHEMA,
     KINEMATICS_SCHEMA,
     PART_FOLDERS,
+    PART_FORMAT_KEY,
     PART_SUMMARY_KEY,
     PART_TASK_KEY,
     ROADS_SCHEMA,
@@ -97,6 +99,7 @@ def write_part(
     metadata = {
         PART_SUMMARY_KEY: json.dumps({k: _plain(v) for k, v in summary.items()}).encode(),
         PART_TASK_KEY: json.dumps(asdict(task)).encode(),
+        PART_FORMAT_KEY: DATASET_FORMAT.encode(),
     }
     table = table.replace_schema_metadata(metadata)
     path = part_path(study_dir, task.episode_id)
@@ -114,8 +117,11 @@ def read_part_table(path: Path) -> tuple[dict, dict, pa.Table]:
         metadata = table.schema.metadata or {}
         summary = json.loads(metadata[PART_SUMMARY_KEY])
         task = json.loads(metadata[PART_TASK_KEY])
+        written_format = metadata.get(PART_FORMAT_KEY, b"1").decode()
     except Exception as exc:  # any failure to read is a damaged part
         raise PartError(f"{path}: {type(exc).__name__}: {exc}") from None
+    if written_format != DATASET_FORMAT:
+        raise PartError(f"{path}: dataset format {written_format}, this trustroute writes {DATASET_FORMAT}")
     try:
         table = check_table(table.replace_schema_metadata(None), ROADS_SCHEMA, str(path))
     except SchemaError as exc:

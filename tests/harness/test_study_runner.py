@@ -236,3 +236,23 @@ policy_cache = "{tmp_path / 'cache'}"
     assert entry["synthesized_lower"] == pytest.approx(document["lower"])
     # Within 6 junctions phi1 is worth what its shortest completion is worth (0.87), far below H = 20's ~1.
     assert entry["synthesized_upper"] < 0.95
+
+
+def test_parts_of_another_dataset_format_are_rerun_not_mixed(tmp_path):
+    import pyarrow.parquet as pq
+
+    from trustroute.analysis.dataset import PART_FORMAT_KEY
+
+    config = load_study_config(_config_file(tmp_path, participants=2))
+    study = tmp_path / "study"
+    _run(config, study)
+    reference = tmp_path / "reference"
+    _run(config, reference)
+    old = part_path(study, plan_episodes(config)[0].episode_id)
+    table = pq.read_table(old)
+    metadata = {k: v for k, v in table.schema.metadata.items() if k != PART_FORMAT_KEY}
+    pq.write_table(table.replace_schema_metadata(metadata), old)  # as the format-1 writer left it
+    run, _ = _run(config, study)
+    assert run.damaged == [old.stem] and run.ran == 1
+    assert (study / "damaged" / old.name).exists()  # kept aside, not deleted
+    _assert_same(study, reference)
