@@ -73,12 +73,18 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
         driver = SyntheticDriver(
             context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
         )
+        extra = {}
+        if config.engine == "sumo" and config.background_vehicles:
+            from trustroute.harness.sumo_start import SumoConfig
+
+            extra["config"] = SumoConfig(background_vehicles=config.background_vehicles)
         record = engine_function(config.engine)(
             context.setups[task.spec],
             context.policies[(task.spec, task.condition)],
             driver,
             task.episode_id,
             task.seed,
+            **extra,
         )
         write_part(
             Path(study_dir),
