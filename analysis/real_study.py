@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from trustroute.analysis.carla_import import read_real_table
+from trustroute.analysis.real_tables import read_real_table
 from trustroute.analysis.satisfaction import episode_satisfaction
 
 BELIEF_SOURCES: tuple[str, ...] = ("logged", "reported", "bayes")
