@@ -38,10 +38,13 @@ PLOTS_DIR = "plots"
 # Per-episode files while a study runs (one file per episode id in each folder).
 PARTS_DIR = "parts"                  # <episode_id>.zip: every table of the episode + checksum
 FAILURES_DIR = "failures"            # <episode_id>.json: every attempt's error of a failed episode
-DAMAGED_DIR = "damaged"              # parts found damaged or foreign, moved aside
+DAMAGED_DIR = "damaged"              # parts found damaged, foreign or of another format, moved aside
 PART_FOLDERS: tuple[str, ...] = (PARTS_DIR, FAILURES_DIR)
 PART_SUFFIX = ".zip"                 # the part format: harness/study/parts.py
 MAX_TABLE_BYTES = 8 * 1024**3  # a table is read whole; a larger file is not one of ours
+# Bump when a table's columns or their meaning change: parts of another format are not resumed
+# (they are moved to damaged/ and their episodes re-run), so a study never mixes two formats.
+DATASET_FORMAT = "2"   # 2: missing values are nulls (1 used -1 and "")
 
 
 def part_path(study_dir: Path, episode_id: str) -> Path:

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from trustroute.analysis.carla_import import read_real_table
+from trustroute.analysis.real_tables import read_real_table
 from trustroute.analysis.satisfaction import LOGGED_BELIEF_SOURCES, satisfaction_by_source
 
 AUTHORS_SATISFIED_FRACTION = 0.99  # statistic_test_point_based.py: precetage >= 0.99

@@ -7,8 +7,9 @@ Layout of a study directory while it runs (names: trustroute.analysis.dataset, d
 
 A part is a zip archive (stored, not compressed; fixed entry dates, so the same episode gives the
 same bytes) of
-    part.json           format, version, episode id, the planned task, the episode summary, and
-                        per table its row count and SHA-256
+    part.json           format, version, the dataset format (analysis/dataset.py DATASET_FORMAT),
+                        episode id, the planned task, the episode summary, and per table its row
+                        count and SHA-256
     roads.arrows        the roads table        (Arrow IPC stream, trustroute.analysis.dataset schemas)
     kinematics.arrows   the kinematics table   (empty in the model engine)
     incidents.arrows    the incidents table    (empty in the model engine)
@@ -41,6 +42,7 @@ import pyarrow.compute as pc
 
 from trustroute.analysis.dataset import (
     DAMAGED_DIR,
+    DATASET_FORMAT,
     FAILURES_DIR,
     INCIDENTS_SCHEMA,
     KINEMATICS_SCHEMA,
@@ -108,6 +110,7 @@ def encode_part(task: EpisodeTask, summary: dict, tables: dict[str, pa.Table]) -
     meta = {
         "format": PART_FORMAT,
         "version": PART_VERSION,
+        "dataset": DATASET_FORMAT,
         "episode_id": task.episode_id,
         "task": asdict(task),
         "summary": {k: _plain(v) for k, v in summary.items()},
@@ -190,6 +193,9 @@ def read_part(path: Path) -> Part:
         raise PartError(f"{path}: unreadable part.json ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != PART_FORMAT or meta.get("version") != PART_VERSION:
         raise PartError(f"{path}: not a part of format {PART_FORMAT} version {PART_VERSION}")
+    if meta.get("dataset") != DATASET_FORMAT:
+        raise PartError(f"{path}: dataset format {meta.get('dataset')!r}, this trustroute writes "
+                        f"{DATASET_FORMAT!r} (the episode is re-run, so a study never mixes two formats)")
     episode = meta.get("episode_id")
     task, summary = meta.get("task"), meta.get("summary")
     if not (isinstance(task, dict) and isinstance(summary, dict)):

@@ -236,3 +236,26 @@ policy_cache = "{tmp_path / 'cache'}"
     assert entry["synthesized_lower"] == pytest.approx(document["lower"])
     # Within 6 junctions phi1 is worth what its shortest completion is worth (0.87), far below H = 20's ~1.
     assert entry["synthesized_upper"] < 0.95
+
+
+def test_parts_of_another_dataset_format_are_rerun_not_mixed(tmp_path, monkeypatch):
+    from trustroute.harness.study import parts as part_files
+    from trustroute.harness.study.plan import EpisodeTask
+
+    config = load_study_config(_config_file(tmp_path, participants=2))
+    study = tmp_path / "study"
+    _run(config, study)
+    reference = tmp_path / "reference"
+    _run(config, reference)
+    old = part_path(study, plan_episodes(config)[0].episode_id)
+    part = part_files.read_part(old)
+    # A whole part (checksums intact) as a writer of dataset format 1 left it.
+    with monkeypatch.context() as patch:
+        patch.setattr(part_files, "DATASET_FORMAT", "1")
+        old.write_bytes(part_files.encode_part(EpisodeTask(**part.task), part.summary, part.tables))
+    with pytest.raises(part_files.PartError, match="dataset format '1'"):
+        part_files.read_part(old)
+    run, _ = _run(config, study)
+    assert run.damaged == [old.stem] and run.ran == 1
+    assert (study / "damaged" / old.name).exists()  # kept aside, not deleted
+    _assert_same(study, reference)
