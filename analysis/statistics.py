@@ -176,8 +176,9 @@ def wilcoxon_paired(first: np.ndarray, second: np.ndarray) -> Wilcoxon:
     nonzero = int(np.count_nonzero(difference))
     median = float(np.median(difference)) if difference.size else math.nan
     if nonzero == 0:
-        return Wilcoxon(pairs=int(a.size), nonzero=0, statistic=math.nan, p_value=1.0,
-                        median_difference=median)
+        return Wilcoxon(
+            pairs=int(a.size), nonzero=0, statistic=math.nan, p_value=1.0, median_difference=median
+        )
     result = stats.wilcoxon(a, b, zero_method="wilcox", alternative="two-sided")
     return Wilcoxon(
         pairs=int(a.size),
@@ -188,16 +189,24 @@ def wilcoxon_paired(first: np.ndarray, second: np.ndarray) -> Wilcoxon:
     )
 
 
-def _bootstrap_mean(data: np.ndarray, rng: np.random.Generator, resamples: int, level: float,
-                    method: str) -> tuple[float, float]:
+def _bootstrap_mean(
+    data: np.ndarray, rng: np.random.Generator, resamples: int, level: float, method: str
+) -> tuple[float, float]:
     if data.size == 0:
         return math.nan, math.nan
     if data.size == 1 or np.all(data == data[0]):
         return float(data[0]), float(data[0])  # no spread: every resample has the same mean
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", stats.DegenerateDataWarning)
-        result = stats.bootstrap((data,), np.mean, n_resamples=resamples, confidence_level=level,
-                                 method=method, rng=rng, batch=max(1, 2_000_000 // data.size))
+        result = stats.bootstrap(
+            (data,),
+            np.mean,
+            n_resamples=resamples,
+            confidence_level=level,
+            method=method,
+            rng=rng,
+            batch=max(1, 2_000_000 // data.size),
+        )
     low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
     if math.isnan(low) or math.isnan(high):  # BCa undefined (e.g. all but one value equal)
         return _bootstrap_mean(data, rng, resamples, level, "percentile")
@@ -217,8 +226,13 @@ def bootstrap_ci(
     return _bootstrap_mean(data[~np.isnan(data)], rng, resamples, level, "percentile")
 
 
-def mean_difference(first: np.ndarray, second: np.ndarray, rng: np.random.Generator,
-                    resamples: int = DEFAULT_RESAMPLES, level: float = DEFAULT_LEVEL) -> Estimate:
+def mean_difference(
+    first: np.ndarray,
+    second: np.ndarray,
+    rng: np.random.Generator,
+    resamples: int = DEFAULT_RESAMPLES,
+    level: float = DEFAULT_LEVEL,
+) -> Estimate:
     """Mean of first - second over pairs (NaN pairs dropped), BCa bootstrap interval over pairs."""
     a, b = _drop_nan_pairs(first, second)
     difference = a - b
@@ -255,8 +269,13 @@ def _design(treated: np.ndarray, strata: np.ndarray | None) -> np.ndarray:
     return np.column_stack(columns)
 
 
-def conditional_logit(outcome: np.ndarray, treated: np.ndarray, participant: np.ndarray,
-                      strata: np.ndarray | None = None, level: float = DEFAULT_LEVEL) -> ModelEffect:
+def conditional_logit(
+    outcome: np.ndarray,
+    treated: np.ndarray,
+    participant: np.ndarray,
+    strata: np.ndarray | None = None,
+    level: float = DEFAULT_LEVEL,
+) -> ModelEffect:
     """Conditional logistic regression of a binary outcome on `treated` (+ stratum dummies, e.g. the
     spec), one group per participant (statsmodels ConditionalLogit). Returns the treatment's odds ratio.
 
@@ -282,12 +301,18 @@ def conditional_logit(outcome: np.ndarray, treated: np.ndarray, participant: np.
     if not (math.isfinite(beta) and math.isfinite(se)) or se > 50:
         return _replace(base, note="separated: the odds ratio is unbounded on these data")
     z = stats.norm.ppf(0.5 + level / 2)
-    return _replace(base, estimate=math.exp(beta), low=math.exp(beta - z * se), high=math.exp(beta + z * se),
-                    p_value=p)
+    return _replace(
+        base, estimate=math.exp(beta), low=math.exp(beta - z * se), high=math.exp(beta + z * se), p_value=p
+    )
 
 
-def mixed_trust_model(value: np.ndarray, treated: np.ndarray, participant: np.ndarray,
-                      strata: np.ndarray | None = None, level: float = DEFAULT_LEVEL) -> ModelEffect:
+def mixed_trust_model(
+    value: np.ndarray,
+    treated: np.ndarray,
+    participant: np.ndarray,
+    strata: np.ndarray | None = None,
+    level: float = DEFAULT_LEVEL,
+) -> ModelEffect:
     """Linear mixed model value ~ treated (+ stratum dummies) with a random intercept per
     participant (statsmodels MixedLM, REML). Returns the treatment's difference in means."""
     from statsmodels.regression.mixed_linear_model import MixedLM
@@ -295,8 +320,12 @@ def mixed_trust_model(value: np.ndarray, treated: np.ndarray, participant: np.nd
     y = np.asarray(value, dtype=float)
     keep = ~np.isnan(y)
     groups = np.asarray(participant)[keep]
-    base = ModelEffect("mixed model (random intercept)", "condition", groups=len(np.unique(groups)),
-                       observations=int(keep.sum()))
+    base = ModelEffect(
+        "mixed model (random intercept)",
+        "condition",
+        groups=len(np.unique(groups)),
+        observations=int(keep.sum()),
+    )
     if keep.sum() < 4 or len(np.unique(groups)) < 2:
         return _replace(base, note="too few observations")
     kept_strata = None if strata is None else np.asarray(strata)[keep]
