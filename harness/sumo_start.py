@@ -23,6 +23,7 @@ class SumoConfig:
 
     step_length: float = 0.5        # seconds: large steps keep episodes fast, 0.5 s keeps yielding sane
     max_sim_seconds: float = 7200.0  # a stuck ego is a bug: the runner stops with an error here
+    gui: bool = False               # run in sumo-gui through TraCI (needs a display) instead of libsumo
 
 
 @lru_cache(maxsize=1)
@@ -57,6 +58,31 @@ def _libsumo():
     return libsumo
 
 
+class _TraciWithConstants:
+    """traci with its constants as attributes, like libsumo (the episode code uses `sumo.VAR_...`)."""
+
+    def __init__(self) -> None:
+        import traci
+
+        self._traci = traci
+
+    def __getattr__(self, name: str):
+        try:
+            return getattr(self._traci, name)
+        except AttributeError:
+            return getattr(self._traci.constants, name)
+
+
+def check_display() -> None:
+    """sumo-gui needs an X display: a one-line error when there is none."""
+    import os
+
+    if not os.environ.get("DISPLAY"):
+        raise InputError("--gui", "", "no display (DISPLAY is not set), so sumo-gui cannot open a window",
+                         "run on a machine with a display, under xvfb-run, or drop --gui and open the "
+                         "--rrd recording in the Rerun web viewer")
+
+
 @contextlib.contextmanager
 def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[object]:
     """Start libsumo on `net_path`, yield the libsumo module, always close it.
@@ -67,7 +93,13 @@ def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[obje
     if not Path(net_path).is_file():
         raise InputError(str(net_path), "", "the SUMO net file does not exist",
                          "run `trustroute net build` or pass an existing .net.xml")
-    sumo = _libsumo()
+    if config.gui:
+        check_display()
+        # sumo-gui starts running at once and closes at the end; same options as the libsumo run.
+        command = [find_binary("sumo-gui"), *command[1:], "--start", "true", "--quit-on-end", "true"]
+        sumo = _TraciWithConstants()
+    else:
+        sumo = _libsumo()
     try:
         sumo.start(command)
     except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError types
