@@ -24,6 +24,7 @@ class SumoConfig:
     step_length: float = 0.5        # seconds: large steps keep episodes fast, 0.5 s keeps yielding sane
     max_sim_seconds: float = 7200.0  # a stuck ego is a bug: the runner stops with an error here
     gui: bool = False               # run in sumo-gui through TraCI (needs a display) instead of libsumo
+    output_dir: str | None = None   # also write SUMO's own FCD and route outputs here (harness/sumo_files.py)
 
 
 @lru_cache(maxsize=1)
@@ -49,6 +50,21 @@ def sumo_command(net_path: Path, seed: int, config: SumoConfig) -> list[str]:
         "--no-warnings", "true",
         "--duration-log.disable", "true",
         "--verbose", "false",
+        *native_output_options(config),
+    ]
+
+
+def native_output_options(config: SumoConfig) -> list[str]:
+    """SUMO's FCD (every vehicle and person per step) and vehroute outputs, when output_dir is set."""
+    if config.output_dir is None:
+        return []
+    folder = Path(config.output_dir)
+    return [
+        "--fcd-output", str(folder / "fcd.xml"),
+        "--vehroute-output", str(folder / "routes.rou.xml"),
+        "--vehroute-output.last-route", "true",        # the ego's route as finally extended
+        "--vehroute-output.write-unfinished", "true",  # vehicles still driving when the episode ends
+        "--vehroute-output.exit-times", "true",
     ]
 
 
