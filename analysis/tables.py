@@ -652,14 +652,14 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                 "unit": p["unit"],
                 "n": p["pairs"],
                 "only A / only B sat.": [
-                    f"{_num(a)} / {_num(b)}" if _num(a) != "-" else "-"
-                    for a, b in zip(
-                        p.get("only_a_satisfied", [None] * len(p)),
-                        p.get("only_b_satisfied", [None] * len(p)),
-                        strict=True,
-                    )
-                ],
-                "risk difference [95% CI]": [
+                f"{int(a)} / {int(b)}" if _num(a) != "-" else "-"
+                for a, b in zip(
+                    p.get("only_a_satisfied", [None] * len(p)),
+                    p.get("only_b_satisfied", [None] * len(p)),
+                    strict=True,
+                )
+            ],
+            "risk difference [95% CI]": [
                     f"{_num(v)} {_interval(lo, hi)}"
                     for v, lo, hi in zip(p["risk_difference"], p["rd_low"], p["rd_high"], strict=True)
                 ],

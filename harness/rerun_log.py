@@ -46,8 +46,8 @@ PLAN_COLOR = (60, 200, 255)
 START_COLOR = (80, 220, 120)
 WAYPOINT_COLORS = ((255, 215, 0), (255, 120, 200), (170, 120, 255), (0, 200, 200), (255, 160, 60))
 INCIDENT_COLORS = {"pedestrian": (255, 140, 0), "obstacle": (255, 200, 0), "truck": (120, 120, 255)}
-EGO_LENGTH = 36.0  # metres drawn (the car is 5 m): visible on a 1.4 km map
-EGO_WIDTH = 16.0
+EGO_LENGTH = 44.0  # metres drawn (the car is 5 m): visible on a 1.4 km map
+EGO_WIDTH = 20.0
 TRAIL_SECONDS = 30.0
 TRAIL_POINTS = 15
 TRAIL_EVERY = 2.0  # seconds of sim time between trail updates (the box moves every step)
@@ -151,19 +151,27 @@ def episode_blueprint():
     """The default layout: a large map, the trust and belief plots, states, belief bars, events."""
     import rerun.blueprint as rrb
 
+    # The plots and the state lanes show the whole episode, with the time cursor moving across it.
+    whole = rrb.VisibleTimeRange(
+        TIMELINE, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+    )
     map_view = rrb.Spatial2DView(origin="world", name="map", background=(25, 25, 30))
     trust_view = rrb.TimeSeriesView(
         origin="trust",
         name="trust (1-7): true, reported, belief mean",
         axis_y=rrb.ScalarAxis(range=(1.0, 7.0)),
+        time_ranges=whole,
     )
     belief_view = rrb.TimeSeriesView(
         origin="belief",
         name="belief: P(trust>=6), spec predicates, thresholds",
         contents=["+ belief/**", "- belief/distribution"],
         axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
+        time_ranges=whole,
     )
-    states_view = rrb.StateTimelineView(origin="state", name="control (takeovers), road, DFA state")
+    states_view = rrb.StateTimelineView(
+        origin="state", name="control (takeovers), road, DFA state", time_ranges=whole
+    )
     bars = rrb.BarChartView(origin="belief/distribution", name="belief over trust 1..7")
     events = rrb.TextLogView(origin="events", name="events")
     return rrb.Blueprint(
@@ -178,7 +186,7 @@ def episode_blueprint():
             ),
             column_shares=[3, 2],
         ),
-        rrb.TimePanel(state="expanded"),
+        rrb.TimePanel(state="collapsed", timeline=TIMELINE),
         collapse_panels=True,
     )
 
@@ -362,7 +370,7 @@ def _log_series(rec, roads: pd.DataFrame, setup) -> None:
     belief = np.array([np.asarray(b, dtype=float) for b in roads["belief_after"]])
     high = levels >= HIGH_TRUST
     series = {
-        "trust/true": (roads["trust_after"].to_numpy(dtype=float), "true trust", (255, 255, 255)),
+        "trust/true": (roads["trust_after"].to_numpy(dtype=float), "true trust", (40, 40, 40)),
         "trust/belief_mean": (belief @ levels, "belief mean", (60, 200, 255)),
         "belief/p_trust_ge_6": (belief[:, high].sum(axis=1), "P(trust >= 6)", (255, 215, 0)),
     }
