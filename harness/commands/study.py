@@ -137,7 +137,7 @@ def fit(study_dir: str, out: str, method: str, iterations: int, as_json: bool) -
     """Estimate trust dynamics and the takeover model from a study's logs; write a driver model."""
     from trustroute.analysis.fit import fit_study
 
-    result = fit_study(Path(study_dir), method=method, iterations=iterations)
+    result = fit_study(Path(study_dir), method=method, iterations=iterations, progress=not as_json)
     path = result.write(Path(out))
     payload = {"driver_model": str(path), **result.summary()}
     if as_json:

@@ -90,18 +90,19 @@ def aware_horizon(config: StudyConfig) -> int:
 
 
 def resolve_condition_policy(
-    condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig
+    condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig, progress: bool = False
 ) -> RoutingPolicy:
     """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
     from trustroute.policies.routing.resolve import resolve_policy
 
     return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
-                          config.belief_rule)
+                          config.belief_rule, progress)
 
 
 @functools.lru_cache(maxsize=4)
-def study_context(config: StudyConfig) -> StudyContext:
-    """The study's shared context, built once per process (cached by the config)."""
+def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
+    """The study's shared context, built once per process (cached by the config). progress: bars while
+    policies are synthesized (the main process; workers find them in the policy cache)."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.policies.logic.spec import load_spec
@@ -122,7 +123,7 @@ def study_context(config: StudyConfig) -> StudyContext:
         for name, spec in specs.items()
     }
     policies = {
-        (name, label): resolve_condition_policy(condition, town, nominal, spec, config)
+        (name, label): resolve_condition_policy(condition, town, nominal, spec, config, progress)
         for name, spec in specs.items()
         for condition, label in zip(config.conditions, config.condition_names, strict=True)
     }
@@ -338,7 +339,7 @@ def run_study(
     config_hash = config.content_hash
     check_study_dir(study_dir, config, config_hash)
     engine_function(config.engine)  # fail fast, once, if the engine is missing
-    context = study_context(config)  # resolves (and synthesizes) policies once, before any worker
+    context = study_context(config, progress)  # resolves (and synthesizes) policies once, before any worker
     del context
     tasks = plan_episodes(config)
     check_record_ids(config, tasks)
@@ -437,5 +438,6 @@ def run_and_consolidate(
             "damaged": run.damaged,
             "retried": run.retried,
         },
+        progress=progress,
     )
     return run, manifest

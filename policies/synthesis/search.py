@@ -28,6 +28,7 @@ than UNBOUNDED_DEPTH, valued by that bound).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -293,7 +294,9 @@ def automatic_suffix_length(n_changing: int) -> int:
 
 def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int | None, tau: float,
                     suffix_length: int, batch: int, started: float, deadline: float,
-                    unbounded_value: np.ndarray | None = None) -> tuple[float, float, PolicyTable, dict]:
+                    unbounded_value: np.ndarray | None = None,
+                    on_iteration: Callable[[float, float], None] | None = None,
+                    ) -> tuple[float, float, PolicyTable, dict]:
     """One AO*-style search; returns (lower, upper, table, stats).
 
     horizon H: P(accepted within H junctions). None: the unbounded problem, nodes deeper than
@@ -321,6 +324,8 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         expanded += chosen.size
         search.backup()
         iterations += 1
+        if on_iteration is not None:
+            on_iteration(float(g.lower[root]), float(g.upper[root]))
     search.backup()
     lower, upper = float(g.lower[root]), float(g.upper[root])
     table = search.policy_table()
@@ -358,7 +363,8 @@ def _unbounded_upper(tables: ProductTables, belief_rule: BeliefRule, suffix_leng
 def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
                horizon: int | None = None, belief_rule: BeliefRule = "bayes",
                suffix_length: int | None = None,
-               batch: int = DEFAULT_BATCH) -> SynthesisResult:
+               batch: int = DEFAULT_BATCH,
+               on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
     """Maximal probability of satisfying `spec` from (spec.start, initial belief), with a policy.
 
     horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter and the
@@ -369,7 +375,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     Unbounded: lower is the best P(accepted within H junctions) of bounded searches with growing H
     (UNBOUNDED_HORIZONS): a policy accepting within H with probability L satisfies the unbounded spec
     with probability >= L. upper is the unbounded abstraction's bound, tightened by a search of the
-    unbounded problem when a gap remains.
+    unbounded problem when a gap remains. on_iteration(lower, upper): called after every expansion
+    round with the current search's root bounds (progress bars).
     """
     if tau <= 0:
         raise ValueError("tau must be positive")
@@ -384,7 +391,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         suffix_length = automatic_suffix_length(observation_symbols(pomdp, belief_rule).n_changing)
     if horizon is not None:
         lower, upper, table, stats = _bounded_search(tables, belief_rule, horizon, tau, suffix_length,
-                                                     batch, started, deadline)
+                                                     batch, started, deadline, on_iteration=on_iteration)
         runs = [stats]
     else:
         bound, note = _unbounded_upper(tables, belief_rule, suffix_length, 0.2 * time_limit)
@@ -394,7 +401,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             if runs and time.perf_counter() >= deadline:
                 break
             run_lower, _, run_table, stats = _bounded_search(
-                tables, belief_rule, depth, 0.5 * tau, suffix_length, batch, started, deadline)
+                tables, belief_rule, depth, 0.5 * tau, suffix_length, batch, started, deadline,
+                on_iteration=on_iteration)
             runs.append(stats)
             if run_lower > lower:
                 lower, table = run_lower, run_table
@@ -406,7 +414,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 remaining = deadline - time.perf_counter()
                 run_lower, run_upper, run_table, stats = _bounded_search(
                     tables, belief_rule, None, tau, suffix_length, batch, started,
-                    time.perf_counter() + 0.5 * max(remaining, 0.0), bound)
+                    time.perf_counter() + 0.5 * max(remaining, 0.0), bound, on_iteration)
                 runs.append(stats)
                 upper = min(upper, run_upper)
                 if run_lower > lower:
