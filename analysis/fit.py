@@ -62,7 +62,6 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observat
     row = np.repeat(np.arange(n), lengths)
     col = np.arange(len(roads)) - np.repeat(starts, lengths)
     incident_of = {name: i for i, name in enumerate(model.incident_types)}
-    incident_of[""] = 0
     unknown = set(roads["incident"].unique()) - set(incident_of)
     if unknown:
         raise InputError(
@@ -73,7 +72,7 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observat
         )
     level_of = np.full(max(model.trust_levels) + 2, -1, dtype=np.int64)
     level_of[list(model.trust_levels)] = np.arange(model.n_trust)
-    reported = roads["reported_trust"].to_numpy()
+    reported = roads["reported_trust"].to_numpy(dtype=np.int64, na_value=-1)  # -1 here: no report
     reported = np.where(reported >= 0, level_of[np.clip(reported, 0, level_of.size - 1)], -1)
     shape = (n, width)
     incident = np.zeros(shape, dtype=np.int64)
@@ -82,7 +81,7 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observat
     report = np.full(shape, -1, dtype=np.int64)
     present = np.zeros(shape, dtype=bool)
     incident[row, col] = roads["incident"].map(incident_of).to_numpy()
-    takeover[row, col] = roads["takeover"].to_numpy().astype(np.int64)
+    takeover[row, col] = roads["takeover"].fillna(False).to_numpy(dtype=np.int64)  # null: the start road
     performance[row, col] = (roads["performance"].to_numpy() == "fail").astype(np.int64)
     report[row, col] = reported
     present[row, col] = True

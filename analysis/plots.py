@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.dataset import PLOTS_DIR
 from trustroute.networks.town import Town, split_road
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
@@ -319,7 +320,7 @@ def write_plots(
     study_dir: Path, town: Town, analysis, roads: pd.DataFrame, specs_by_name: dict
 ) -> dict[str, Path]:
     """Every plot of the report into `<study_dir>/plots/`, by name."""
-    folder = Path(study_dir) / "plots"
+    folder = Path(study_dir) / PLOTS_DIR
     folder.mkdir(parents=True, exist_ok=True)
     episodes = analysis.episodes
     plots = {

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from trustroute.analysis.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE, read_roads
 from trustroute.analysis.plots import write_plots
 from trustroute.analysis.tables import (
     TABLE_TITLES,
@@ -127,10 +128,7 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
     primary = analysis if analysis is not None else study_analysis(study_dir, "filter")
     secondary = study_analysis(study_dir, "reported" if primary.belief_source == "filter" else "filter")
     town, _, specs = study_inputs(primary.manifest)
-    roads = pd.read_parquet(
-        study_dir / "roads.parquet",
-        columns=["episode_id", "index", "directed_road", "trust_after", "reported_trust"],
-    )
+    roads = read_roads(study_dir, ["episode_id", "index", "directed_road", "trust_after", "reported_trust"])
     plots = write_plots(study_dir, town, primary, roads, specs)
     failures = primary.manifest.get("failed_episodes", [])
     context = {
@@ -151,7 +149,7 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
         "notes": NOTES,
     }
     environment = _environment()
-    markdown_path, html_path = study_dir / "report.md", study_dir / "report.html"
+    markdown_path, html_path = study_dir / REPORT_MARKDOWN_FILE, study_dir / REPORT_HTML_FILE
     markdown_path.write_text(environment.get_template("report.md.j2").render(**context))
     html_path.write_text(environment.get_template("report.html.j2").render(**context))
     return ReportPaths(markdown=markdown_path, html=html_path, plots=plots, table_text=format_table(primary))

@@ -37,7 +37,7 @@ def _padded(
     if np.isnan(x_flat.astype(float)).any():
         raise ValueError("the logs name roads that are not in the town the spec is evaluated on")
     belief_flat = np.stack(roads["belief_after"].to_numpy()) if len(roads) else np.zeros((0, n_trust))
-    report_flat = roads["reported_trust"].to_numpy()
+    report_flat = roads["reported_trust"].to_numpy(dtype=np.int64, na_value=-1)  # -1 here: no report
     row = np.repeat(np.arange(n), lengths)
     col = np.arange(len(roads)) - np.repeat(starts, lengths)
     states = np.zeros((n, horizon), dtype=np.int64)

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.dataset import read_episodes, read_manifest, read_roads
 from trustroute.analysis.satisfaction import BELIEF_SOURCES, episode_satisfaction
 from trustroute.analysis.statistics import (
     bootstrap_ci,
@@ -110,27 +111,10 @@ def _finite(value: object) -> float | None:
 
 
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    """(manifest, episodes, roads) of a consolidated study, read through trustroute.analysis.dataset."""
     study_dir = Path(study_dir)
-    manifest_path = study_dir / "manifest.json"
-    if not manifest_path.exists():
-        raise InputError(
-            str(study_dir),
-            "manifest.json",
-            "not a finished study directory (no manifest)",
-            "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)",
-        )
-    try:
-        manifest = json.loads(manifest_path.read_text())
-        episodes = pd.read_parquet(study_dir / "episodes.parquet")
-        roads = pd.read_parquet(study_dir / "roads.parquet")
-    except (OSError, ValueError) as exc:
-        raise InputError(
-            str(study_dir),
-            "dataset",
-            f"cannot read the consolidated dataset ({exc})",
-            "rerun `trustroute study` on this directory to rebuild it",
-        ) from None
-    return manifest, episodes, roads
+    manifest = read_manifest(study_dir)
+    return manifest, read_episodes(study_dir), read_roads(study_dir)
 
 
 def study_inputs(manifest: dict):

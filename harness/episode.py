@@ -24,6 +24,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.dataset import (
+    INCIDENTS_SCHEMA,
+    KINEMATICS_SCHEMA,
+    frame_from_table,
+    table_from_columns,
+)
 from trustroute.harness import incidents as incident_kinds
 from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.incidents import EgoState, Incident, Scene
@@ -32,7 +38,7 @@ from trustroute.harness.sumo_start import SumoConfig, sumo_session
 from trustroute.harness.takeover import AUTOPILOT, apply_style, hand_back, take_over
 from trustroute.networks.errors import InputError
 from trustroute.networks.sumo_net import build_net, net_counts
-from trustroute.networks.town import split_road
+from trustroute.networks.town import NO_INCIDENT, split_road
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 log = logging.getLogger(__name__)
@@ -45,14 +51,8 @@ START_BEFORE_COMMIT = 40.0  # the ego is inserted this far before the start road
 INSERT_TIMEOUT = 30.0       # seconds of sim time for the ego to appear
 LEADER_HORIZON = 100.0      # metres: how far ahead the subscription looks for a leader
 
-KINEMATIC_COLUMNS = ("episode_id", "time", "x", "y", "speed", "lane", "mode")
-INCIDENT_COLUMNS = ("episode_id", "index", "directed_road", "incident", "sumo_ids", "injected_time",
-                    "in_view_time", "x", "y", "passed_time", "removed_time", "takeover", "takeover_start",
-                    "takeover_end", "performance", "min_ttc", "max_deceleration", "collided")
-
-
 def _empty_incidents() -> pd.DataFrame:
-    return pd.DataFrame(columns=list(INCIDENT_COLUMNS))
+    return frame_from_table(INCIDENTS_SCHEMA.empty_table())
 
 
 @dataclass(frozen=True, eq=False)
@@ -209,7 +209,7 @@ class _Episode:
         performance = run.monitor.result()
         trust_before = self.driver.trust
         trust_after = self.driver.move_trust(run.kind, run.took_over, performance)
-        reported = self.driver.report_trust() if self.tracker.should_report() else -1
+        reported = self.driver.report_trust() if self.tracker.should_report() else None
         self.tracker.record_road(run.road, run.kind, run.took_over, performance, trust_before,
                                  trust_after, reported, run.time_in, now)
 
@@ -251,7 +251,7 @@ class _Episode:
             sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION, sumo.VAR_SPEED,
             sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID, sumo.VAR_LEADER)
         self.min_gap = sumo.vehicle.getMinGap(EGO_ID)
-        current = _RoadRun(index=0, road=start, kind="")
+        current = _RoadRun(index=0, road=start, kind=NO_INCIDENT)
         self.runs.append(current)
         upcoming: _RoadRun | None = None
         kin = self.kinematics
@@ -321,7 +321,8 @@ class _Episode:
             "index": np.array([run.index for run in runs], dtype=np.int64),
             "directed_road": [run.road for run in runs],
             "incident": [run.kind for run in runs],
-            "sumo_ids": [",".join(run.incident.sumo_ids) if run.incident is not None else "" for run in runs],
+            "sumo_ids": [",".join(run.incident.sumo_ids) if run.incident is not None else None
+                         for run in runs],
         }
         for name in ("injected_time", "in_view_time", "x", "y", "passed_time", "removed_time"):
             columns[name] = np.array([getattr(run, name) for run in runs], dtype=np.float64)
@@ -333,7 +334,7 @@ class _Episode:
         columns["max_deceleration"] = np.array([run.monitor.max_deceleration for run in runs],
                                                dtype=np.float64)
         columns["collided"] = np.array([run.monitor.collided for run in runs], dtype=bool)
-        return pd.DataFrame({name: columns[name] for name in INCIDENT_COLUMNS})
+        return frame_from_table(table_from_columns(columns, INCIDENTS_SCHEMA))
 
     def kinematics_frame(self) -> pd.DataFrame:
         kin = self.kinematics
@@ -342,7 +343,7 @@ class _Episode:
             columns[name] = np.asarray(kin[name], dtype=np.float64)
         columns["lane"] = kin["lane"]
         columns["mode"] = kin["mode"]
-        return pd.DataFrame(columns)
+        return frame_from_table(table_from_columns(columns, KINEMATICS_SCHEMA))
 
 
 def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: str, seed: int,

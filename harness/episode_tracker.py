@@ -11,19 +11,20 @@ so the two can never disagree on the logic. The semantics are those of
 - after driving a road the AV observes (incident, takeover, performance), applies its belief
   filter (setup.belief_rule) and steps the DFA on (road, new belief).
 
-Row 0 of the roads table is the start road: no observation (incident "", performance "",
-reported_trust -1), trust_before = trust_after = the initial true trust.
+Row 0 of the roads table is the start road: incident "none" and no observation (takeover,
+performance and reported_trust null), trust_before = trust_after = the initial true trust. The
+table's schema is `trustroute.analysis.dataset.ROADS_SCHEMA` (docs/dataset.md).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-from trustroute.networks.town import Town
+from trustroute.analysis.dataset import ROADS_SCHEMA, frame_from_table, table_from_columns
+from trustroute.networks.town import NO_INCIDENT, Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.dfa import DFA, build_dfa
 from trustroute.policies.logic.labelling import Labeller
@@ -37,16 +38,7 @@ from trustroute.policies.routing.fallback import (
 )
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
-ROAD_COLUMNS: tuple[str, ...] = (
-    "episode_id", "index", "directed_road", "action", "incident", "takeover", "performance",
-    "trust_before", "trust_after", "reported_trust", "belief_before", "belief_after", "dfa_state",
-    "fallback", "sim_time_in", "sim_time_out",
-)
-END_REASONS: tuple[str, ...] = ("accepted", "destination", "rejected", "cap")
 PERFORMANCE_INDEX = {"succ": 0, "fail": 1}
-_ROAD_DTYPES = {"index": np.int64, "takeover": np.bool_, "trust_before": np.int64, "trust_after": np.int64,
-                "reported_trust": np.int64, "dfa_state": np.int64, "fallback": np.bool_,
-                "sim_time_in": np.float64, "sim_time_out": np.float64}
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,12 +115,12 @@ class EpisodeTracker:
         self.fallback_junction: int | None = None   # junctions driven when the fallback first drove
         self._chosen: str | None = None            # next junction chosen at the current road
         self._rows: list[dict] = [{
-            "episode_id": self.episode_id, "index": 0, "directed_road": start, "action": "",
-            "incident": "", "takeover": False, "performance": "",
+            "episode_id": self.episode_id, "index": 0, "directed_road": start, "action": None,
+            "incident": NO_INCIDENT, "takeover": None, "performance": None,
             "trust_before": int(initial_trust), "trust_after": int(initial_trust),
-            "reported_trust": -1, "belief_before": self.belief.tolist(),
+            "reported_trust": None, "belief_before": self.belief.tolist(),
             "belief_after": self.belief.tolist(), "dfa_state": self.dfa_state, "fallback": False,
-            "sim_time_in": float(sim_time), "sim_time_out": math.nan,
+            "sim_time_in": float(sim_time), "sim_time_out": None,
         }]
         self._check_dfa_end()
 
@@ -190,10 +182,12 @@ class EpisodeTracker:
         return self.setup.town.successor(self.road, self._chosen)
 
     def record_road(self, road: str, incident: str, takeover: bool, performance: str,
-                    trust_before: int, trust_after: int, reported_trust: int,
+                    trust_before: int, trust_after: int, reported_trust: int | None,
                     sim_time_in: float, sim_time_out: float) -> None:
         """Append the row of a driven road, apply the belief filter on (incident, takeover,
-        performance), step the DFA, and set end_reason when the DFA accepts or rejects."""
+        performance), step the DFA, and set end_reason when the DFA accepts or rejects.
+        reported_trust is None when the driver gave no report on this road; NaN sim times are
+        stored as nulls (the model engine has no simulator clock)."""
         if self.end_reason is not None:
             raise ValueError(f"episode {self.episode_id} is over ({self.end_reason}); no more roads")
         expected = self.expected_road()
@@ -219,9 +213,10 @@ class EpisodeTracker:
         self._rows[-1]["sim_time_out"] = float(sim_time_in)
         self._rows.append({
             "episode_id": self.episode_id, "index": len(self._rows), "directed_road": road,
-            "action": "", "incident": incident, "takeover": bool(takeover), "performance": performance,
+            "action": None, "incident": incident, "takeover": bool(takeover), "performance": performance,
             "trust_before": int(trust_before), "trust_after": int(trust_after),
-            "reported_trust": int(reported_trust), "belief_before": before.tolist(),
+            "reported_trust": None if reported_trust is None else int(reported_trust),
+            "belief_before": before.tolist(),
             "belief_after": after.tolist(), "dfa_state": self.dfa_state, "fallback": False,
             "sim_time_in": float(sim_time_in), "sim_time_out": float(sim_time_out),
         })
@@ -232,15 +227,11 @@ class EpisodeTracker:
         return len(self._rows) % self.setup.report_every == 0
 
     def roads_frame(self) -> pd.DataFrame:
-        """The roads table of the contract, one row per position."""
-        # Built column by column with explicit dtypes: much cheaper than DataFrame(rows).astype(...).
+        """The roads table of the dataset (ROADS_SCHEMA), one row per position."""
         rows = self._rows
-        columns: dict[str, object] = {}
-        for name in ROAD_COLUMNS:
-            values = [row[name] for row in rows]
-            dtype = _ROAD_DTYPES.get(name)
-            columns[name] = np.asarray(values, dtype=dtype) if dtype is not None else values
-        return pd.DataFrame(columns)
+        table = table_from_columns({name: [row[name] for row in rows] for name in ROADS_SCHEMA.names},
+                                   ROADS_SCHEMA)
+        return frame_from_table(table)
 
     def summary(self, wall_seconds: float, sim_seconds: float) -> dict:
         """The episode summary dict; mean_trust is the mean true trust over all positions."""
@@ -249,7 +240,7 @@ class EpisodeTracker:
             "episode_id": self.episode_id,
             "satisfied": self.end_reason == "accepted",
             "junctions": self.junctions,
-            "takeovers": int(sum(row["takeover"] for row in self._rows)),
+            "takeovers": int(sum(bool(row["takeover"]) for row in self._rows)),
             "final_trust": int(trust[-1]),
             "mean_trust": float(np.mean(trust)),
             "end_reason": self.end_reason if self.end_reason is not None else "",

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.dataset import KINEMATICS_SCHEMA, frame_from_table
 from trustroute.harness.episode import EpisodeRecord
 from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker, _model
 from trustroute.participants.driver_model import DriverModel
@@ -35,22 +36,11 @@ from trustroute.policies.routing.fallback import (
 )
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
-KINEMATICS_COLUMNS: tuple[str, ...] = ("episode_id", "time", "x", "y", "speed", "lane", "mode")
 END_CODES: tuple[str, ...] = ("", "accepted", "rejected", "destination", "cap")
 
 
 def empty_kinematics() -> pd.DataFrame:
-    return pd.DataFrame(
-        {
-            "episode_id": pd.Series(dtype="str"),
-            "time": pd.Series(dtype="float64"),
-            "x": pd.Series(dtype="float64"),
-            "y": pd.Series(dtype="float64"),
-            "speed": pd.Series(dtype="float64"),
-            "lane": pd.Series(dtype="str"),
-            "mode": pd.Series(dtype="str"),
-        }
-    )
+    return frame_from_table(KINEMATICS_SCHEMA.empty_table())
 
 
 def run_model_episode(
@@ -69,7 +59,7 @@ def run_model_episode(
         took_over = driver.decides_takeover(incident)
         performance = driver.performance(incident)
         after = driver.move_trust(incident, took_over, performance)
-        reported = driver.report_trust() if tracker.should_report() else -1
+        reported = driver.report_trust() if tracker.should_report() else None
         tracker.record_road(
             road, incident, took_over, performance, before, after, reported, math.nan, math.nan
         )

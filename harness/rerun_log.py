@@ -144,7 +144,7 @@ def trail_strips(x: np.ndarray, y: np.ndarray, time: np.ndarray) -> tuple[np.nda
 
 
 def _valid_report(value: object) -> bool:
-    return value is not None and not (isinstance(value, float) and math.isnan(value)) and int(value) >= 1
+    return not pd.isna(value) and int(value) >= 1
 
 
 def episode_blueprint():
@@ -313,7 +313,7 @@ def _log_plan(rec, net, roads: pd.DataFrame, town) -> None:
 
     for row in roads.itertuples(index=False):
         decided = float(row.sim_time_out)
-        if not row.action or math.isnan(decided):
+        if pd.isna(row.action) or not row.action or math.isnan(decided):
             continue
         following = town.successor(row.directed_road, row.action)
         rec.set_time(TIMELINE, duration=decided)
@@ -386,7 +386,7 @@ def _log_series(rec, roads: pd.DataFrame, setup) -> None:
     for entity, (values, label, colour) in series.items():
         rec.log(entity, rr.SeriesLines(names=label, colors=colour, widths=2.0), static=True)
         rec.send_columns(entity, indexes=[column], columns=rr.Scalars.columns(scalars=values))
-    reported = pd.to_numeric(roads["reported_trust"], errors="coerce").to_numpy(dtype=float)
+    reported = pd.to_numeric(roads["reported_trust"], errors="coerce").astype("float64").to_numpy()
     given = ~np.isnan(reported) & (reported >= 1)
     rec.log(
         "trust/reported",
@@ -424,7 +424,7 @@ def episode_events(record) -> list[tuple[float, str, str]]:
     events: list[tuple[float, str, str]] = []
     previous_state = None
     for row, observed in zip(roads.itertuples(index=False), times, strict=True):
-        what = f" ({row.incident})" if row.incident else ""
+        what = f" ({row.incident})" if row.index > 0 and not pd.isna(row.incident) else " (start)"
         events.append(
             (float(row.sim_time_in), "INFO", f"road {row.index} entered: {row.directed_road}{what}")
         )
@@ -442,7 +442,7 @@ def episode_events(record) -> list[tuple[float, str, str]]:
     for row in incidents.itertuples(index=False):
         if not math.isnan(row.in_view_time):
             events.append((float(row.in_view_time), "INFO", f"{row.incident} in view on road {row.index}"))
-        if row.takeover and not math.isnan(row.takeover_start):
+        if bool(row.takeover) and not math.isnan(row.takeover_start):
             events.append(
                 (float(row.takeover_start), "WARN", f"takeover on road {row.index} ({row.incident})")
             )

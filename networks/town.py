@@ -19,7 +19,8 @@ from pathlib import Path
 from trustroute.networks.errors import InputError
 
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town.json"
-INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", "none")
+NO_INCIDENT = "none"  # a road without an incident (and the start road of an episode)
+INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", NO_INCIDENT)
 
 
 def road_name(from_junction: str, to_junction: str) -> str:

@@ -74,9 +74,9 @@ def demo(out: str, workers: int | None, engine: str, participants: int) -> None:
     click.echo("")
     click.echo(paths.table_text)
     click.echo("")
-    click.echo(
-        f"results: {run.study_dir / 'episodes.parquet'} (episodes), {run.study_dir / 'roads.parquet'} (roads)"
-    )
+    from trustroute.analysis.dataset import EPISODES_FILE, ROADS_FILE
+
+    click.echo(f"results: {run.study_dir / EPISODES_FILE} (episodes), {run.study_dir / ROADS_FILE} (roads)")
     click.echo(f"report:  {paths.markdown}  and  {paths.html}")
     if engine == "sumo":
         episode_id = f"p{0:05d}-phi1-aware"

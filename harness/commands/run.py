@@ -16,12 +16,24 @@ def _write_logs(out_dir: Path, record) -> list[Path]:
     except OSError as exc:
         raise InputError(str(out_dir), "", f"cannot create the output directory ({exc.strerror})",
                          "pass a writable directory with --out") from None
+    from trustroute.analysis.dataset import (
+        INCIDENTS_FILE,
+        INCIDENTS_SCHEMA,
+        KINEMATICS_FILE,
+        KINEMATICS_SCHEMA,
+        ROADS_FILE,
+        ROADS_SCHEMA,
+        SUMMARY_FILE,
+        table_from_frame,
+        write_table,
+    )
+
     written = []
-    for name in ("roads", "kinematics", "incidents"):
-        path = out_dir / f"{name}.parquet"
-        getattr(record, name).to_parquet(path, index=False)
-        written.append(path)
-    summary = out_dir / "summary.json"
+    for frame, file_name, schema in ((record.roads, ROADS_FILE, ROADS_SCHEMA),
+                                     (record.kinematics, KINEMATICS_FILE, KINEMATICS_SCHEMA),
+                                     (record.incidents, INCIDENTS_FILE, INCIDENTS_SCHEMA)):
+        written.append(write_table(table_from_frame(frame, schema), out_dir / file_name))
+    summary = out_dir / SUMMARY_FILE
     summary.write_text(json.dumps(record.summary, indent=1) + "\n")
     written.append(summary)
     return written

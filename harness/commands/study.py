@@ -65,10 +65,12 @@ def study(
     from trustroute.harness.study.runner import run_and_consolidate
 
     run, _ = run_and_consolidate(config, study_dir, workers, scheduler, echo=click.echo)
-    click.echo(f"dataset: {run.study_dir / 'episodes.parquet'}, {run.study_dir / 'roads.parquet'}")
+    from trustroute.analysis.dataset import EPISODES_FILE, FAILURES_DIR, ROADS_FILE
+
+    click.echo(f"dataset: {run.study_dir / EPISODES_FILE}, {run.study_dir / ROADS_FILE}")
     if run.failed:
         click.echo(
-            f"failed episodes (see {run.study_dir / 'failures'}): {', '.join(run.failed[:5])}"
+            f"failed episodes (see {run.study_dir / FAILURES_DIR}): {', '.join(run.failed[:5])}"
             f"{' ...' if len(run.failed) > 5 else ''}"
         )
     if not no_report:

@@ -1,6 +1,7 @@
 """The consolidated dataset of a study and its manifest.
 
-From the per-episode parts, in plan order (participant, position), whatever order they finished:
+From the per-episode parts, in plan order (participant, position), whatever order they finished
+(file names, schemas and manifest keys: trustroute.analysis.dataset, docs/dataset.md):
     episodes.parquet    one row per finished episode: the plan (participant, position, spec,
                         condition, seed) and the episode summary, plus reported-trust statistics
     roads.parquet       every episode's roads table, concatenated
@@ -22,20 +23,29 @@ from importlib import metadata
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
-import pyarrow.parquet as pq
+import pyarrow.compute as pc
 
-from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.parts import (
+from trustroute.analysis.dataset import (
+    EPISODES_FILE,
+    EPISODES_SCHEMA,
+    INCIDENTS_FILE,
+    INCIDENTS_SCHEMA,
+    KINEMATICS_FILE,
     KINEMATICS_SCHEMA,
+    MANIFEST_FILE,
+    MANIFEST_KEYS,
+    ROADS_FILE,
     ROADS_SCHEMA,
-    incidents_path,
-    kinematics_path,
+    incidents_part_path,
+    kinematics_part_path,
     part_path,
-    read_failures,
-    read_part_table,
+    read_table,
+    table_from_columns,
+    write_table,
 )
+from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.parts import read_failures, read_part_table
 from trustroute.harness.study.plan import EpisodeTask
 
 PACKAGES: tuple[str, ...] = (
@@ -54,7 +64,6 @@ PACKAGES: tuple[str, ...] = (
     "pomdp-py",
 )
 REPO_ROOT = Path(__file__).resolve().parents[2]
-MANIFEST_FILE = "manifest.json"
 
 
 def package_versions() -> dict[str, str]:
@@ -88,9 +97,10 @@ def git_revision() -> str:
     return head + ("+dirty" if dirty else "")
 
 
-def _reported(reports: np.ndarray) -> tuple[float, int]:
-    reports = reports[reports >= 0]
-    return (float(reports.mean()) if reports.size else float("nan")), int(reports.size)
+def _reported(reports: pa.ChunkedArray) -> tuple[float | None, int]:
+    """(mean of the reports given, how many); None when there was none (a null in the table)."""
+    count = len(reports) - reports.null_count
+    return (pc.mean(reports).as_py() if count else None), count
 
 
 def consolidate(
@@ -106,14 +116,14 @@ def consolidate(
     from tqdm import tqdm
 
     study_dir = Path(study_dir)
-    episode_rows, roads_tables, kinematics_tables, incident_frames = [], [], [], []
+    episode_rows, roads_tables, kinematics_tables, incident_tables = [], [], [], []
     for task in tqdm(tasks, desc="consolidating", unit="episode", disable=None if progress else True,
                      leave=False, dynamic_ncols=True):
         path = part_path(study_dir, task.episode_id)
         if not path.exists():
             continue
         summary, _, table = read_part_table(path)
-        mean_reported, reports = _reported(table.column("reported_trust").to_numpy())
+        mean_reported, reports = _reported(table.column("reported_trust"))
         episode_rows.append(
             {
                 "episode_id": task.episode_id,
@@ -128,22 +138,24 @@ def consolidate(
             }
         )
         roads_tables.append(table)
-        kin = kinematics_path(study_dir, task.episode_id)
+        kin = kinematics_part_path(study_dir, task.episode_id)
         if kin.exists():
-            kinematics_tables.append(pq.read_table(kin))
-        incidents = incidents_path(study_dir, task.episode_id)
+            kinematics_tables.append(read_table(kin, KINEMATICS_SCHEMA))
+        incidents = incidents_part_path(study_dir, task.episode_id)
         if incidents.exists():
-            incident_frames.append(pd.read_parquet(incidents))
-    episodes = pd.DataFrame(episode_rows)
-    episodes.to_parquet(study_dir / "episodes.parquet", index=False)
+            incident_tables.append(read_table(incidents, INCIDENTS_SCHEMA))
+    episodes = table_from_columns(
+        {name: [row[name] for row in episode_rows] for name in EPISODES_SCHEMA.names}, EPISODES_SCHEMA
+    )
+    write_table(episodes, study_dir / EPISODES_FILE)
     roads = pa.concat_tables(roads_tables) if roads_tables else ROADS_SCHEMA.empty_table()
-    pq.write_table(roads, study_dir / "roads.parquet")
+    write_table(roads, study_dir / ROADS_FILE)
     if kinematics_tables:
-        pq.write_table(pa.concat_tables(kinematics_tables), study_dir / "kinematics.parquet")
+        write_table(pa.concat_tables(kinematics_tables), study_dir / KINEMATICS_FILE)
     elif config.engine == "sumo":
-        pq.write_table(KINEMATICS_SCHEMA.empty_table(), study_dir / "kinematics.parquet")
-    if incident_frames:
-        pd.concat(incident_frames, ignore_index=True).to_parquet(study_dir / "incidents.parquet", index=False)
+        write_table(KINEMATICS_SCHEMA.empty_table(), study_dir / KINEMATICS_FILE)
+    if incident_tables:
+        write_table(pa.concat_tables(incident_tables), study_dir / INCIDENTS_FILE)
     failures = read_failures(study_dir)
     manifest = {
         "study": config.name,
@@ -168,14 +180,16 @@ def consolidate(
             "condition index)); drivers of a [population]: spawn_key=(2,)",
         },
         "files": {
-            "episodes": "episodes.parquet",
-            "roads": "roads.parquet",
-            **({"kinematics": "kinematics.parquet"} if config.engine == "sumo" else {}),
-            **({"incidents": "incidents.parquet"} if incident_frames else {}),
+            "episodes": EPISODES_FILE,
+            "roads": ROADS_FILE,
+            **({"kinematics": KINEMATICS_FILE} if config.engine == "sumo" else {}),
+            **({"incidents": INCIDENTS_FILE} if incident_tables else {}),
         },
         "expected": expected or {},
         "run": run_info or {},
     }
+    if tuple(manifest) != MANIFEST_KEYS:  # the dataset's definition and this writer must agree
+        raise RuntimeError(f"manifest keys {tuple(manifest)} differ from the dataset's {MANIFEST_KEYS}")
     (study_dir / MANIFEST_FILE).write_text(json.dumps(manifest, indent=1, default=_jsonable))
     return manifest
 
@@ -186,8 +200,3 @@ def _jsonable(value: object) -> object:
     if isinstance(value, np.ndarray):
         return value.tolist()
     return str(value)
-
-
-def load_manifest(study_dir: Path) -> dict:
-    path = Path(study_dir) / MANIFEST_FILE
-    return json.loads(path.read_text()) if path.exists() else {}

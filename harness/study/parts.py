@@ -1,6 +1,7 @@
 """One Parquet part per episode, written atomically; what a rerun may skip; failure records.
 
-Layout of a study directory (all written here):
+Layout of a study directory (all written here; names and schemas: trustroute.analysis.dataset,
+docs/dataset.md):
     parts/<episode_id>.parquet        the episode's roads table; its schema metadata holds the
                                       episode summary and the planned task (JSON)
     kinematics/<episode_id>.parquet   SUMO only, written before the roads part
@@ -25,63 +26,30 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
+from trustroute.analysis.dataset import (
+    DAMAGED_DIR,
+    FAILURES_DIR,
+    INCIDENTS_SCHEMA,
+    KINEMATICS_SCHEMA,
+    PART_FOLDERS,
+    PART_SUMMARY_KEY,
+    PART_TASK_KEY,
+    ROADS_SCHEMA,
+    SchemaError,
+    check_table,
+    failure_path,
+    incidents_part_path,
+    kinematics_part_path,
+    part_path,
+    table_from_frame,
+)
 from trustroute.harness.study.plan import EpisodeTask
 
-SUMMARY_KEY = b"trustroute.summary"
-TASK_KEY = b"trustroute.task"
 TEMP_PREFIX = ".tmp-"
-
-ROADS_SCHEMA = pa.schema(
-    [
-        ("episode_id", pa.string()),
-        ("index", pa.int64()),
-        ("directed_road", pa.string()),
-        ("action", pa.string()),
-        ("incident", pa.string()),
-        ("takeover", pa.bool_()),
-        ("performance", pa.string()),
-        ("trust_before", pa.int64()),
-        ("trust_after", pa.int64()),
-        ("reported_trust", pa.int64()),
-        ("belief_before", pa.list_(pa.float64())),
-        ("belief_after", pa.list_(pa.float64())),
-        ("dfa_state", pa.int64()),
-        ("fallback", pa.bool_()),
-        ("sim_time_in", pa.float64()),
-        ("sim_time_out", pa.float64()),
-    ]
-)
-KINEMATICS_SCHEMA = pa.schema(
-    [
-        ("episode_id", pa.string()),
-        ("time", pa.float64()),
-        ("x", pa.float64()),
-        ("y", pa.float64()),
-        ("speed", pa.float64()),
-        ("lane", pa.string()),
-        ("mode", pa.string()),
-    ]
-)
 
 
 class PartError(Exception):
     """A part file that cannot be trusted (truncated, damaged, inconsistent)."""
-
-
-def part_path(study_dir: Path, episode_id: str) -> Path:
-    return Path(study_dir) / "parts" / f"{episode_id}.parquet"
-
-
-def kinematics_path(study_dir: Path, episode_id: str) -> Path:
-    return Path(study_dir) / "kinematics" / f"{episode_id}.parquet"
-
-
-def incidents_path(study_dir: Path, episode_id: str) -> Path:
-    return Path(study_dir) / "incidents" / f"{episode_id}.parquet"
-
-
-def failure_path(study_dir: Path, episode_id: str) -> Path:
-    return Path(study_dir) / "failures" / f"{episode_id}.json"
 
 
 def _atomic_write_table(table: pa.Table, path: Path) -> None:
@@ -120,18 +88,15 @@ def write_part(
 ) -> Path:
     """Write an episode's kinematics and incidents (SUMO) and then its roads part, each atomically."""
     if incidents is not None and len(incidents):
-        _atomic_write_table(
-            pa.Table.from_pandas(incidents, preserve_index=False), incidents_path(study_dir, task.episode_id)
-        )
+        _atomic_write_table(table_from_frame(incidents, INCIDENTS_SCHEMA),
+                            incidents_part_path(study_dir, task.episode_id))
     if kinematics is not None and len(kinematics):
-        kin = pa.Table.from_pandas(
-            kinematics[list(KINEMATICS_SCHEMA.names)], schema=KINEMATICS_SCHEMA, preserve_index=False
-        )
-        _atomic_write_table(kin, kinematics_path(study_dir, task.episode_id))
-    table = pa.Table.from_pandas(roads[list(ROADS_SCHEMA.names)], schema=ROADS_SCHEMA, preserve_index=False)
+        _atomic_write_table(table_from_frame(kinematics, KINEMATICS_SCHEMA),
+                            kinematics_part_path(study_dir, task.episode_id))
+    table = table_from_frame(roads, ROADS_SCHEMA)
     metadata = {
-        SUMMARY_KEY: json.dumps({k: _plain(v) for k, v in summary.items()}).encode(),
-        TASK_KEY: json.dumps(asdict(task)).encode(),
+        PART_SUMMARY_KEY: json.dumps({k: _plain(v) for k, v in summary.items()}).encode(),
+        PART_TASK_KEY: json.dumps(asdict(task)).encode(),
     }
     table = table.replace_schema_metadata(metadata)
     path = part_path(study_dir, task.episode_id)
@@ -147,13 +112,14 @@ def read_part_table(path: Path) -> tuple[dict, dict, pa.Table]:
     try:
         table = pq.read_table(path, page_checksum_verification=True)
         metadata = table.schema.metadata or {}
-        summary = json.loads(metadata[SUMMARY_KEY])
-        task = json.loads(metadata[TASK_KEY])
+        summary = json.loads(metadata[PART_SUMMARY_KEY])
+        task = json.loads(metadata[PART_TASK_KEY])
     except Exception as exc:  # any failure to read is a damaged part
         raise PartError(f"{path}: {type(exc).__name__}: {exc}") from None
-    table = table.replace_schema_metadata(None)
-    if table.schema != ROADS_SCHEMA:
-        raise PartError(f"{path}: unexpected columns")
+    try:
+        table = check_table(table.replace_schema_metadata(None), ROADS_SCHEMA, str(path))
+    except SchemaError as exc:
+        raise PartError(str(exc)) from None
     episode = task.get("episode_id")
     if summary.get("episode_id") != episode or Path(path).stem != episode:
         raise PartError(f"{path}: belongs to episode {episode!r}")
@@ -163,12 +129,6 @@ def read_part_table(path: Path) -> tuple[dict, dict, pa.Table]:
     return summary, task, table
 
 
-def read_part(path: Path) -> tuple[dict, dict, pd.DataFrame]:
-    """(summary, task, roads) of a part; PartError when it is damaged or inconsistent."""
-    summary, task, table = read_part_table(path)
-    return summary, task, table.to_pandas()
-
-
 def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[str], list[str]]:
     """(episode ids with a valid part, episode ids whose part was damaged and has been removed).
 
@@ -176,7 +136,7 @@ def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[st
     from the plan (another config wrote it) counts as damaged.
     """
     study_dir = Path(study_dir)
-    for folder in ("parts", "kinematics", "incidents", "failures"):
+    for folder in PART_FOLDERS:
         for temp in (study_dir / folder).glob(f"{TEMP_PREFIX}*"):
             temp.unlink(missing_ok=True)
     done: set[str] = set()
@@ -191,7 +151,7 @@ def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[st
                 raise PartError(f"{path}: written for a different plan")
         except PartError:
             damaged.append(task.episode_id)
-            quarantine = study_dir / "damaged" / path.name
+            quarantine = study_dir / DAMAGED_DIR / path.name
             quarantine.parent.mkdir(parents=True, exist_ok=True)
             os.replace(path, quarantine)
             continue
@@ -211,7 +171,7 @@ def write_failure(study_dir: Path, task: EpisodeTask, error: str, traceback_text
 
 
 def read_failures(study_dir: Path) -> list[dict]:
-    folder = Path(study_dir) / "failures"
+    folder = Path(study_dir) / FAILURES_DIR
     out = []
     for path in sorted(folder.glob("*.json")) if folder.is_dir() else []:
         try:

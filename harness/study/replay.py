@@ -10,7 +10,6 @@ is an InputError (one line, exit 2) naming the first road and column that differ
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -48,23 +47,10 @@ class Replay:
 
 def study_config_from_manifest(study_dir: Path) -> tuple[StudyConfig, dict]:
     """The StudyConfig a study was run with (from manifest.json), and the manifest."""
+    from trustroute.analysis.dataset import read_manifest
+
     path = Path(study_dir) / MANIFEST_FILE
-    try:
-        manifest = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(
-            str(study_dir),
-            MANIFEST_FILE,
-            "not a finished study directory (no manifest)",
-            "run `trustroute study CONFIG --out DIR` first",
-        ) from None
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputError(
-            str(path),
-            "",
-            f"cannot read the manifest ({exc})",
-            "rerun `trustroute study` on this directory to rebuild it",
-        ) from None
+    manifest = read_manifest(Path(study_dir))
     data = dict(manifest.get("config") or {})
     known = {f.name for f in fields(StudyConfig)}
     unknown = sorted(set(data) - known)
@@ -126,25 +112,27 @@ def check_same_code(manifest: dict, config: StudyConfig, study_dir: Path) -> Non
 
 
 def logged_roads(study_dir: Path, episode_id: str) -> pd.DataFrame:
-    roads = pd.read_parquet(Path(study_dir) / "roads.parquet", filters=[("episode_id", "==", episode_id)])
-    return roads.sort_values("index").reset_index(drop=True)
+    from trustroute.analysis.dataset import read_roads
+
+    roads = read_roads(Path(study_dir))
+    return roads[roads["episode_id"] == episode_id].sort_values("index").reset_index(drop=True)
+
+
+def _missing(value: object) -> bool:
+    """Null, NaN, and the -1 that older studies wrote for "no report", all mean missing."""
+    if value is None or value is pd.NA:
+        return True
+    if isinstance(value, (float, np.floating)):
+        return math.isnan(value)
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and value == -1
 
 
 def _equal(a: object, b: object) -> bool:
-    """Equal values, with null, NaN and the old -1 "no report" all meaning missing."""
-
-    def missing(v: object) -> bool:
-        return (
-            v is None
-            or (isinstance(v, float) and math.isnan(v))
-            or (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v == -1)
-        )
-
-    if missing(a) or missing(b):
-        return missing(a) and missing(b)
+    if _missing(a) or _missing(b):
+        return _missing(a) and _missing(b)
     if isinstance(a, (float, np.floating)) or isinstance(b, (float, np.floating)):
         return float(a) == float(b)
-    return a == b
+    return bool(a == b)
 
 
 def compare_roads(logged: pd.DataFrame, replayed: pd.DataFrame) -> str | None:

@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from trustroute.analysis.dataset import STUDY_FILE
 from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.parts import finished_episodes, write_failure, write_part
@@ -29,8 +30,6 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.protocol import RoutingPolicy
-
-STUDY_FILE = "study.json"
 
 
 @dataclass(frozen=True)

@@ -7,9 +7,10 @@ import pandas as pd
 import pytest
 
 from tests.harness.helpers import SPECS
+from trustroute.analysis.dataset import KINEMATICS_SCHEMA, ROADS_SCHEMA
 from trustroute.harness import sumo_start
-from trustroute.harness.episode import KINEMATIC_COLUMNS, run_episode
-from trustroute.harness.episode_tracker import ROAD_COLUMNS, EpisodeSetup
+from trustroute.harness.episode import run_episode
+from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.networks.errors import InputError
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import town_from_dict
@@ -51,7 +52,8 @@ def test_free_phi1_follows_the_baseline_route(setup, net_path, seed):
     route = baseline_route(setup.town, setup.spec)
     assert record.roads["directed_road"].tolist() == route
     assert _roads_driven(record.kinematics) == route
-    assert record.roads["action"].tolist() == [r.split("-")[1] for r in route[1:]] + [""]
+    assert record.roads["action"].iloc[:-1].tolist() == [r.split("-")[1] for r in route[1:]]
+    assert pd.isna(record.roads["action"].iloc[-1])
     summary = record.summary
     assert summary["junctions"] == len(route) - 1
     assert summary["end_reason"] in ("accepted", "destination")
@@ -62,8 +64,8 @@ def test_free_phi1_follows_the_baseline_route(setup, net_path, seed):
 
 def test_log_schema(setup, net_path):
     record = _episode(setup, net_path, 5)
-    assert tuple(record.roads.columns) == ROAD_COLUMNS
-    assert tuple(record.kinematics.columns) == KINEMATIC_COLUMNS
+    assert tuple(record.roads.columns) == tuple(ROADS_SCHEMA.names)
+    assert tuple(record.kinematics.columns) == tuple(KINEMATICS_SCHEMA.names)
     roads = record.roads
     assert (roads["sim_time_in"].diff().iloc[1:] > 0).all()
     assert (roads["sim_time_out"] >= roads["sim_time_in"]).all()

@@ -5,10 +5,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from tests.harness.helpers import SPECS, FixedRoute
-from trustroute.harness.episode_tracker import ROAD_COLUMNS, EpisodeSetup, EpisodeTracker
+from trustroute.analysis.dataset import ROADS_SCHEMA
+from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.evaluate import evaluate
 from trustroute.policies.logic.dfa import build_dfa
@@ -49,7 +51,7 @@ def model_episode(setup, policy, driver, episode_id="e"):
         performance = driver.performance(incident)
         before = driver.trust
         after = driver.move_trust(incident, took_over, performance)
-        reported = driver.report_trust() if tracker.should_report() else -1
+        reported = driver.report_trust() if tracker.should_report() else None
         tracker.record_road(road, incident, took_over, performance, before, after, reported, t, t + 1)
         t += 1
     return tracker
@@ -70,18 +72,19 @@ def test_belief_and_dfa_follow_the_filter_step_by_step(town, driver, pomdp, phi1
         road = town.successor(tracker.road, junction)
         incident = town.incident(road)
         took_over = took_over and incident != "none"   # no takeover without an incident (probability 0)
-        tracker.record_road(road, incident, took_over, performance, 3, 3, -1, 0.0, 1.0)
+        tracker.record_road(road, incident, took_over, performance, 3, 3, None, 0.0, 1.0)
         belief, _ = pomdp.belief_update(belief, driver.incident_index(incident), int(took_over), 0)
         belief = belief[0]
         q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None])[0])
         np.testing.assert_allclose(tracker.belief, belief, atol=1e-12)
         assert tracker.dfa_state == q
     frame = tracker.roads_frame()
-    assert tuple(frame.columns) == ROAD_COLUMNS
+    assert tuple(frame.columns) == tuple(ROADS_SCHEMA.names)
     assert list(frame["index"]) == list(range(len(observations) + 1))
-    assert frame.loc[0, "incident"] == "" and frame.loc[0, "reported_trust"] == -1
+    assert frame.loc[0, "incident"] == "none" and frame["reported_trust"].isna().all()
+    assert frame.loc[0, ["takeover", "performance"]].isna().all()
     np.testing.assert_allclose(frame.iloc[-1]["belief_after"], belief)
-    assert all(frame["action"].iloc[:-1] != "") and frame["action"].iloc[-1] == ""
+    assert frame["action"].iloc[:-1].notna().all() and pd.isna(frame["action"].iloc[-1])
 
 
 def test_free_policy_drives_the_baseline_route(town, driver, phi1):
@@ -132,7 +135,7 @@ def test_cap_and_fallback(town, driver, phi1):
     standstill = SyntheticDriver(driver, np.random.default_rng(1), initial_trust=4)
     while (junction := capped.next_junction()) is not None:
         road = town.successor(capped.road, junction)
-        capped.record_road(road, town.incident(road), False, "succ", standstill.trust, standstill.trust, -1,
+        capped.record_road(road, town.incident(road), False, "succ", standstill.trust, standstill.trust, None,
                            0.0, 0.0)
     assert capped.end_reason == "cap" and capped.junctions == 5
     assert not capped.fallback_fired
@@ -150,16 +153,16 @@ def test_report_every(town, driver, phi1):
     tracker = model_episode(setup, trust_free_policy(town, phi1),
                             SyntheticDriver(driver, np.random.default_rng(3), initial_trust=7))
     reported = tracker.roads_frame()["reported_trust"].tolist()
-    assert all((r >= 1) == (i % 2 == 0 and i > 0) for i, r in enumerate(reported))
+    assert all((not pd.isna(r) and r >= 1) == (i % 2 == 0 and i > 0) for i, r in enumerate(reported))
 
 
 def test_illegal_and_out_of_order_roads_are_refused(town, driver, phi1):
     setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1)
     tracker = EpisodeTracker(setup, trust_free_policy(town, phi1), "e", initial_trust=4)
     with pytest.raises(ValueError, match="before next_junction"):
-        tracker.record_road("A-F", "none", False, "succ", 4, 4, -1, 0.0, 0.0)
+        tracker.record_road("A-F", "none", False, "succ", 4, 4, None, 0.0, 0.0)
     tracker.next_junction()
     with pytest.raises(ValueError, match="policy chose"):
-        tracker.record_road("A-B", "pedestrian", False, "succ", 4, 4, -1, 0.0, 0.0)
+        tracker.record_road("A-B", "pedestrian", False, "succ", 4, 4, None, 0.0, 0.0)
     with pytest.raises(ValueError, match="performance"):
-        tracker.record_road(tracker.expected_road(), "none", False, "ok", 4, 4, -1, 0.0, 0.0)
+        tracker.record_road(tracker.expected_road(), "none", False, "ok", 4, 4, None, 0.0, 0.0)

@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import json
 
-import pandas as pd
 import pytest
 from click.testing import CliRunner
 
 from tests.harness.helpers import SPECS
+from trustroute.analysis.dataset import KINEMATICS_SCHEMA, ROADS_SCHEMA, read_kinematics, read_roads
 from trustroute.harness.cli import cli, main
-from trustroute.harness.episode import KINEMATIC_COLUMNS
-from trustroute.harness.episode_tracker import ROAD_COLUMNS
 from trustroute.networks.sumo_net import build_net
 
 PHI1 = str(SPECS / "phi1.toml")
@@ -41,9 +39,10 @@ def test_json_summary_and_logs(net, tmp_path):
                 "wall_seconds"):
         assert key in summary
     assert summary["route"][0] == "E-A" and summary["junctions"] == len(summary["route"]) - 1
-    roads = pd.read_parquet(out / "roads.parquet")
-    kinematics = pd.read_parquet(out / "kinematics.parquet")
-    assert tuple(roads.columns) == ROAD_COLUMNS and tuple(kinematics.columns) == KINEMATIC_COLUMNS
+    roads = read_roads(out)  # checks the schema
+    kinematics = read_kinematics(out)
+    assert tuple(roads.columns) == tuple(ROADS_SCHEMA.names)
+    assert tuple(kinematics.columns) == tuple(KINEMATICS_SCHEMA.names)
     assert roads["directed_road"].tolist() == summary["route"]
     assert isinstance(roads.loc[1, "belief_after"][0], float)
     assert json.loads((out / "summary.json").read_text())["end_reason"] == summary["end_reason"]

@@ -1,0 +1,284 @@
+"""The study dataset, defined once: file names, Arrow schemas of its four tables, manifest keys.
+
+The harness writes through this module (harness/study/parts.py, harness/study/manifest.py,
+`trustroute run --out`) and analysis reads through it (one reader per table, each checking the
+schema). Every column and file is documented in docs/dataset.md; change both together.
+
+Missing values are nulls (never -1, "" or a NaN standing for "none"): a report not given, the
+action after the last road, the performance of the start road, sim times of the model engine.
+The start road (row 0 of an episode's roads) has incident `none` and no observation.
+
+In pandas (`frame_from_table`), nullable integer columns are `Int64` and nullable booleans are
+`boolean` (so a null stays a null); nullable floats are float64 with NaN; strings are pandas'
+string dtype with missing values for nulls.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from trustroute.networks.errors import InputError
+
+# -- files of a study directory ------------------------------------------------------------------
+STUDY_FILE = "study.json"            # the config hash and config of the study in this directory
+MANIFEST_FILE = "manifest.json"
+EPISODES_FILE = "episodes.parquet"
+ROADS_FILE = "roads.parquet"
+KINEMATICS_FILE = "kinematics.parquet"  # SUMO engine only
+INCIDENTS_FILE = "incidents.parquet"    # SUMO engine only, when some road had an incident or takeover
+SUMMARY_FILE = "summary.json"        # `trustroute run --out DIR`: the episode summary
+REPORT_MARKDOWN_FILE = "report.md"
+REPORT_HTML_FILE = "report.html"
+PLOTS_DIR = "plots"
+# Per-episode files while a study runs (one file per episode id in each folder).
+PARTS_DIR = "parts"                  # <episode_id>.parquet: the roads table, the commit mark
+KINEMATICS_DIR = "kinematics"
+INCIDENTS_DIR = "incidents"
+FAILURES_DIR = "failures"            # <episode_id>.json: the last error of a failed episode
+DAMAGED_DIR = "damaged"              # parts found damaged on resume, moved aside
+PART_FOLDERS: tuple[str, ...] = (PARTS_DIR, KINEMATICS_DIR, INCIDENTS_DIR, FAILURES_DIR)
+
+# Keys of a part's Parquet schema metadata (JSON values).
+PART_SUMMARY_KEY = b"trustroute.summary"
+PART_TASK_KEY = b"trustroute.task"
+
+
+def part_path(study_dir: Path, episode_id: str) -> Path:
+    return Path(study_dir) / PARTS_DIR / f"{episode_id}.parquet"
+
+
+def kinematics_part_path(study_dir: Path, episode_id: str) -> Path:
+    return Path(study_dir) / KINEMATICS_DIR / f"{episode_id}.parquet"
+
+
+def incidents_part_path(study_dir: Path, episode_id: str) -> Path:
+    return Path(study_dir) / INCIDENTS_DIR / f"{episode_id}.parquet"
+
+
+def failure_path(study_dir: Path, episode_id: str) -> Path:
+    return Path(study_dir) / FAILURES_DIR / f"{episode_id}.json"
+
+
+# -- schemas ----------------------------------------------------------------------------------------
+def _field(name: str, kind: pa.DataType, nullable: bool = False) -> pa.Field:
+    return pa.field(name, kind, nullable=nullable)
+
+
+BELIEF = pa.list_(pa.float64())
+
+ROADS_SCHEMA = pa.schema([
+    _field("episode_id", pa.string()),
+    _field("index", pa.int64()),                      # position in the episode; 0 = the start road
+    _field("directed_road", pa.string()),
+    _field("action", pa.string(), nullable=True),     # junction chosen here; null on the last road
+    _field("incident", pa.string()),                  # "none" on the start road
+    _field("takeover", pa.bool_(), nullable=True),    # null on the start road (no observation)
+    _field("performance", pa.string(), nullable=True),  # "succ"/"fail"; null on the start road
+    _field("trust_before", pa.int64(), nullable=True),  # true trust; null when unknown (real logs)
+    _field("trust_after", pa.int64(), nullable=True),
+    _field("reported_trust", pa.int64(), nullable=True),  # null: no report on this road
+    _field("belief_before", BELIEF),
+    _field("belief_after", BELIEF),
+    _field("dfa_state", pa.int64()),
+    _field("fallback", pa.bool_()),
+    _field("sim_time_in", pa.float64(), nullable=True),   # null in the model engine
+    _field("sim_time_out", pa.float64(), nullable=True),  # null on the last road and in the model engine
+])
+
+KINEMATICS_SCHEMA = pa.schema([
+    _field("episode_id", pa.string()),
+    _field("time", pa.float64()),
+    _field("x", pa.float64()),
+    _field("y", pa.float64()),
+    _field("speed", pa.float64()),
+    _field("lane", pa.string()),
+    _field("mode", pa.string()),
+])
+
+INCIDENTS_SCHEMA = pa.schema([
+    _field("episode_id", pa.string()),
+    _field("index", pa.int64()),
+    _field("directed_road", pa.string()),
+    _field("incident", pa.string()),
+    _field("sumo_ids", pa.string(), nullable=True),        # comma-separated; null: no SUMO objects
+    _field("injected_time", pa.float64(), nullable=True),
+    _field("in_view_time", pa.float64(), nullable=True),
+    _field("x", pa.float64(), nullable=True),
+    _field("y", pa.float64(), nullable=True),
+    _field("passed_time", pa.float64(), nullable=True),
+    _field("removed_time", pa.float64(), nullable=True),
+    _field("takeover", pa.bool_()),
+    _field("takeover_start", pa.float64(), nullable=True),
+    _field("takeover_end", pa.float64(), nullable=True),
+    _field("performance", pa.string()),
+    _field("min_ttc", pa.float64()),                        # inf: never within the TTC threshold
+    _field("max_deceleration", pa.float64()),
+    _field("collided", pa.bool_()),
+])
+
+# The plan's columns, then the episode summary's (harness/episode_tracker.py), then report stats.
+PLAN_COLUMNS: tuple[str, ...] = ("episode_id", "participant", "position", "spec", "condition", "seed")
+SUMMARY_COLUMNS: tuple[str, ...] = (
+    "satisfied", "junctions", "takeovers", "final_trust", "mean_trust", "end_reason",
+    "fallback_fired", "sim_seconds", "wall_seconds",
+)
+EPISODES_SCHEMA = pa.schema([
+    _field("episode_id", pa.string()),
+    _field("participant", pa.int64()),
+    _field("position", pa.int64()),
+    _field("spec", pa.string()),
+    _field("condition", pa.string()),
+    _field("seed", pa.int64()),
+    _field("satisfied", pa.bool_()),
+    _field("junctions", pa.int64()),
+    _field("takeovers", pa.int64()),
+    _field("final_trust", pa.int64(), nullable=True),       # null when the true trust is unknown
+    _field("mean_trust", pa.float64(), nullable=True),
+    _field("end_reason", pa.string()),
+    _field("fallback_fired", pa.bool_()),
+    _field("sim_seconds", pa.float64(), nullable=True),     # null in the model engine
+    _field("wall_seconds", pa.float64()),
+    _field("mean_reported_trust", pa.float64(), nullable=True),  # null: no report in the episode
+    _field("reports", pa.int64()),
+])
+END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
+
+# Top-level keys of manifest.json (harness/study/manifest.py writes them; docs/dataset.md).
+MANIFEST_KEYS: tuple[str, ...] = (
+    "study", "config_path", "config", "config_hash", "engine", "created_utc", "git_revision",
+    "packages", "command", "planned_episodes", "finished_episodes", "failed_episodes", "seeds",
+    "files", "expected", "run",
+)
+
+TABLES: dict[str, tuple[str, pa.Schema]] = {
+    "episodes": (EPISODES_FILE, EPISODES_SCHEMA),
+    "roads": (ROADS_FILE, ROADS_SCHEMA),
+    "kinematics": (KINEMATICS_FILE, KINEMATICS_SCHEMA),
+    "incidents": (INCIDENTS_FILE, INCIDENTS_SCHEMA),
+}
+
+
+class SchemaError(ValueError):
+    """A table whose columns, types or nulls differ from its schema."""
+
+
+# -- conversions ---------------------------------------------------------------------------------
+def table_from_frame(frame: pd.DataFrame, schema: pa.Schema) -> pa.Table:
+    """`frame` as an Arrow table of `schema` (columns in schema order, NaN and None as nulls)."""
+    missing = [name for name in schema.names if name not in frame.columns]
+    if missing:
+        raise SchemaError(f"missing column(s) {', '.join(missing)}")
+    try:
+        table = pa.Table.from_pandas(frame[list(schema.names)], schema=schema, preserve_index=False)
+    except (pa.ArrowException, ValueError, TypeError) as exc:
+        raise SchemaError(str(exc)) from None
+    return check_table(table.replace_schema_metadata(None), schema)
+
+
+def table_from_columns(columns: dict[str, list | object], schema: pa.Schema) -> pa.Table:
+    """Python lists (None for nulls) or numpy arrays per column as an Arrow table of `schema`."""
+    try:
+        arrays = [pa.array(columns[f.name], type=f.type, from_pandas=True) for f in schema]
+    except KeyError as exc:
+        raise SchemaError(f"missing column {exc.args[0]}") from None
+    return check_table(pa.Table.from_arrays(arrays, schema=schema), schema)
+
+
+def check_table(table: pa.Table, schema: pa.Schema, source: str = "table") -> pa.Table:
+    """`table` itself when its columns, types and nulls match `schema`; else SchemaError."""
+    names = table.schema.names
+    if names != schema.names:
+        raise SchemaError(f"{source}: columns {names} differ from the schema's {schema.names}")
+    for f in schema:
+        column = table.column(f.name)
+        if column.type != f.type:
+            raise SchemaError(f"{source}: column {f.name!r} is {column.type}, expected {f.type}")
+        if not f.nullable and column.null_count:
+            raise SchemaError(f"{source}: column {f.name!r} has {column.null_count} null(s)")
+    return table.cast(schema) if table.schema != schema else table
+
+
+def frame_from_table(table: pa.Table) -> pd.DataFrame:
+    """A dataset table in pandas, keeping nulls of integer and boolean columns (Int64, boolean)."""
+    frame = table.to_pandas()
+    for f in table.schema:
+        if f.nullable and pa.types.is_integer(f.type):
+            frame[f.name] = frame[f.name].astype("Int64")
+        elif f.nullable and pa.types.is_boolean(f.type):
+            frame[f.name] = frame[f.name].astype("boolean")
+    return frame
+
+
+def write_table(table: pa.Table, path: Path) -> Path:
+    """Write a dataset table (already checked) as Parquet with page checksums."""
+    pq.write_table(table, path, write_page_checksum=True)
+    return Path(path)
+
+
+# -- readers ---------------------------------------------------------------------------------------
+def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None) -> pa.Table:
+    """A dataset table file checked against its schema; InputError naming the file when it is
+    missing, unreadable or of another schema."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(str(path), "", "no such dataset file",
+                         "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
+    try:
+        table = pq.read_table(path, page_checksum_verification=True).replace_schema_metadata(None)
+        check_table(table, schema, path.name)
+    except (OSError, pa.ArrowException, SchemaError) as exc:
+        raise InputError(str(path), "schema" if isinstance(exc, SchemaError) else "",
+                         f"cannot read the dataset table ({exc})",
+                         "rerun `trustroute study` on this directory to rebuild it") from None
+    return table.select(columns) if columns is not None else table
+
+
+def _read(study_dir: Path, name: str, columns: list[str] | None) -> pd.DataFrame:
+    file_name, schema = TABLES[name]
+    return frame_from_table(read_table(Path(study_dir) / file_name, schema, columns))
+
+
+def read_episodes(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """episodes.parquet of a consolidated study, checked against EPISODES_SCHEMA."""
+    return _read(study_dir, "episodes", columns)
+
+
+def read_roads(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """roads.parquet of a consolidated study (or of `trustroute run --out`), checked against ROADS_SCHEMA."""
+    return _read(study_dir, "roads", columns)
+
+
+def read_kinematics(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """kinematics.parquet (SUMO engine), checked against KINEMATICS_SCHEMA."""
+    return _read(study_dir, "kinematics", columns)
+
+
+def read_incidents(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """incidents.parquet (SUMO engine), checked against INCIDENTS_SCHEMA; an empty table when the
+    study had no incident objects and no takeovers (the file is then not written)."""
+    if not (Path(study_dir) / INCIDENTS_FILE).exists() and (Path(study_dir) / MANIFEST_FILE).exists():
+        return frame_from_table(INCIDENTS_SCHEMA.empty_table().select(columns or INCIDENTS_SCHEMA.names))
+    return _read(study_dir, "incidents", columns)
+
+
+def read_manifest(study_dir: Path) -> dict:
+    """manifest.json of a consolidated study, with every key of MANIFEST_KEYS."""
+    path = Path(study_dir) / MANIFEST_FILE
+    if not path.exists():
+        raise InputError(str(study_dir), MANIFEST_FILE, "not a finished study directory (no manifest)",
+                         "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(str(path), "", f"cannot read the manifest ({exc})",
+                         "rerun `trustroute study` on this directory to rebuild it") from None
+    missing = [key for key in MANIFEST_KEYS if key not in manifest] if isinstance(manifest, dict) else ["all"]
+    if missing:
+        raise InputError(str(path), missing[0], "missing manifest key",
+                         "rerun `trustroute study` on this directory to rebuild it")
+    return manifest
