@@ -61,7 +61,11 @@ def _write_logs(out_dir: Path, record) -> list[Path]:
 def run(spec_path: str, policy_name: str, seed: int, rrd_path: str | None, out_dir: str | None,
         as_json: bool, town_path: str | None, driver_path: str | None, net_path: str | None,
         initial_trust: int | None, cache_dir: str | None, sumo_dir: str | None) -> None:
-    """Run one episode of SPEC in SUMO with POLICY and a synthetic driver."""
+    """Run one episode of SPEC in SUMO with POLICY and a synthetic driver.
+
+    To re-run an episode of a study exactly (its participant's drawn model and initial trust), use
+    `trustroute replay STUDY_DIR EPISODE_ID`.
+    """
     import numpy as np
 
     from trustroute.harness.episode import run_episode

@@ -205,6 +205,11 @@ def replay_episode(
     record = run_planned_episode(config, task, rrd_path=rrd_path, sumo_config=sumo_config)
     difference = compare_roads(logged, record.roads)
     if difference is not None:
+        from trustroute.harness.study.manifest import git_revision
+
+        made, now = manifest.get("git_revision", "unknown"), git_revision()
+        if made != now:
+            difference += f" (the study was made at git {made}, this is {now})"
         raise InputError(
             str(study_dir),
             episode_id,
