@@ -94,12 +94,19 @@ def test_replay_of_a_study_made_with_other_code_fails(sumo_study, tmp_path, caps
 @pytest.mark.slow
 def test_replay_that_differs_from_the_log_fails(sumo_study, tmp_path, capsys):
     study = _copy(sumo_study, tmp_path)
-    roads = pd.read_parquet(study / "roads.parquet")
-    row = roads.index[(roads["episode_id"] == "p00000-phi2-free") & (roads["index"] == 2)][0]
-    roads.loc[row, "trust_after"] = (
-        8 - roads.loc[row, "trust_after"] if roads.loc[row, "trust_after"] != 4 else 5
+    from trustroute.analysis.dataset import (
+        ROADS_FILE,
+        ROADS_SCHEMA,
+        read_roads,
+        table_from_frame,
+        write_table,
     )
-    roads.to_parquet(study / "roads.parquet", index=False)
+
+    roads = read_roads(study)
+    row = roads.index[(roads["episode_id"] == "p00000-phi2-free") & (roads["index"] == 2)][0]
+    logged = int(roads.loc[row, "trust_after"])
+    roads.loc[row, "trust_after"] = logged + 1 if logged < 7 else logged - 1
+    write_table(table_from_frame(roads, ROADS_SCHEMA), study / ROADS_FILE)
     code, _, err = run_cli(capsys, "replay", str(study), "p00000-phi2-free", "--no-rrd")
     assert code == 2 and "does not reproduce the log: road 2 trust_after" in err
 
