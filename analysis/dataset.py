@@ -119,6 +119,12 @@ INCIDENTS_SCHEMA = pa.schema([
     _field("min_ttc", pa.float64()),                        # inf: never within the TTC threshold
     _field("max_deceleration", pa.float64()),
     _field("collided", pa.bool_()),
+    # Performance measures and the scene's draws (docs/scenes.md; harness/performance.py).
+    _field("min_head_on_ttc", pa.float64()),                # inf: no oncoming vehicle that close
+    _field("min_pedestrian_distance", pa.float64()),        # inf: no person on the crossing near the ego
+    _field("time_lost", pa.float64()),                      # s against free driving, on autopilot
+    _field("failed_measures", pa.string(), nullable=True),  # comma-separated; null: succ
+    _field("scene", pa.string(), nullable=True),            # the drawn scene; null: no SUMO objects
 ])
 
 # The plan's columns, then the episode summary's (harness/episode_tracker.py), then report stats.

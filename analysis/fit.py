@@ -33,6 +33,11 @@ from trustroute.participants.driver_model import PERFORMANCES, DriverModel, driv
 
 MIN_ROW_WEIGHT = 5.0  # expected visits below which a T row keeps its starting value
 EM_TOLERANCE = 1e-7  # stop when the mean log-likelihood per road improves less than this
+# Takeover probabilities are MAP estimates under a Beta prior of this many pseudo-visits, centred
+# on the incident's pooled rate (takeovers + 1) / (visits + 2): a trust level the data hardly
+# visits gets its incident's rate, not 0 or 1 (unregularised EM gave 5e-123), and a probability
+# is never exactly 0 or 1 unless the incident is never taken over at all (a structural zero).
+TAKEOVER_PRIOR_VISITS = 2.0
 
 
 @dataclass(frozen=True)
@@ -238,6 +243,14 @@ def _fit_accuracy(report_counts: np.ndarray, k: int) -> float:
     return float(fine[int(np.argmax([score(a) for a in fine]))])
 
 
+def regularised_takeover(taken: np.ndarray, visits: np.ndarray, previous: np.ndarray) -> np.ndarray:
+    """MAP takeover probabilities [I, k] (see TAKEOVER_PRIOR_VISITS); structural zeros stay zero."""
+    pooled = (taken.sum(axis=1, keepdims=True) + 1.0) / (visits.sum(axis=1, keepdims=True) + 2.0)
+    out = (taken + TAKEOVER_PRIOR_VISITS * pooled) / (visits + TAKEOVER_PRIOR_VISITS)
+    out[previous == 0] = 0.0  # an incident never taken over: no takeover model to fit
+    return out
+
+
 def maximisation(stats: Statistics, previous: Parameters, fixed_accuracy: float | None) -> Parameters:
     k = previous.initial.size
     transition = previous.transition.copy()
@@ -245,9 +258,8 @@ def maximisation(stats: Statistics, previous: Parameters, fixed_accuracy: float 
     enough = totals >= MIN_ROW_WEIGHT
     transition[enough] = stats.transition[enough] / totals[enough][:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
-        takeover = np.where(stats.visits > 0, stats.takeover_num / stats.visits, previous.takeover)
         failure = np.where(stats.visits > 0, stats.failure_num / stats.visits, previous.failure)
-    takeover[previous.takeover == 0] = 0.0  # structural zeros (never taken over) stay zero
+    takeover = regularised_takeover(stats.takeover_num, stats.visits, previous.takeover)
     failure[previous.failure == 0] = 0.0
     accuracy = fixed_accuracy if fixed_accuracy is not None else _fit_accuracy(stats.report, k)
     initial = stats.initial / stats.initial.sum()
@@ -269,6 +281,8 @@ class FitResult:
     report_accuracy: float | None
     source: str = ""
     history: list[float] = field(default_factory=list)
+    converged: bool = True  # EM: stopped by EM_TOLERANCE, not by the iteration cap
+    takeover_weight: np.ndarray | None = None  # [I, k] expected visits behind each takeover probability
 
     @property
     def performance_dependent(self) -> bool:
@@ -311,6 +325,7 @@ class FitResult:
 
     def write(self, path: Path) -> Path:
         self.model()  # validates
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
         Path(path).write_text(json.dumps(self.model_dict(), indent=1))
         return Path(path)
 
@@ -334,7 +349,21 @@ class FitResult:
             "loglik": self.loglik,
             "report_accuracy": self.report_accuracy,
             "rows_kept_at_start_value": len(self.sparse_rows()),
+            "converged": self.converged,
+            "unidentified_rows": self.sparse_rows(),
+            "unidentified_takeover": self.sparse_takeover(),
         }
+
+    def sparse_takeover(self) -> list[str]:
+        """Takeover probabilities resting on fewer than MIN_ROW_WEIGHT expected visits (their value
+        is mostly the prior: the incident's pooled rate)."""
+        if self.takeover_weight is None:
+            return []
+        return [
+            f"{self.template.incident_types[i]}/trust {self.template.trust_levels[theta]}"
+            for i, theta in zip(*np.nonzero(self.takeover_weight < MIN_ROW_WEIGHT), strict=True)
+            if self.parameters.takeover[i].any()
+        ]
 
 
 def _rows(matrix: np.ndarray) -> list[list[float]]:
@@ -361,6 +390,7 @@ def fit_em(
         params.accuracy = fixed_accuracy
     history: list[float] = []
     stats = expectation(obs, params)
+    converged = False
     from tqdm import tqdm
 
     with tqdm(total=iterations, desc="fitting (EM)", unit="iteration", disable=None if progress else True,
@@ -372,6 +402,7 @@ def fit_em(
             bar.update(1)
             bar.set_postfix_str(f"loglik {stats.loglik:.1f}", refresh=False)
             if len(history) > 1 and (history[-1] - history[-2]) < EM_TOLERANCE * max(1, obs.steps):
+                converged = True
                 break
     return FitResult(
         method="em",
@@ -384,6 +415,8 @@ def fit_em(
         row_weight=stats.transition.sum(axis=-1),
         report_accuracy=params.accuracy,
         history=history,
+        converged=converged,
+        takeover_weight=stats.visits,
     )
 
 
@@ -413,8 +446,8 @@ def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
     totals = counts.sum(axis=-1)
     enough = totals >= MIN_ROW_WEIGHT
     params.transition[enough] = counts[enough] / totals[enough][:, None]
+    params.takeover = regularised_takeover(take, visits, params.takeover)
     with np.errstate(invalid="ignore", divide="ignore"):
-        params.takeover = np.where(visits > 0, take / visits, params.takeover)
         params.failure = np.where(visits > 0, fail / visits, params.failure)
     params.accuracy = 1.0
     # θ_0 is never reported: fit π alone by EM with the counted model held fixed.
@@ -431,6 +464,7 @@ def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
         loglik=stats.loglik,
         row_weight=totals,
         report_accuracy=1.0,
+        takeover_weight=visits,
     )
 
 
@@ -467,3 +501,58 @@ def fit_study(
     result = fit_roads(roads, template, method, iterations, progress)
     result.source = str(study_dir)
     return result
+
+
+def bootstrap_fit(
+    roads: pd.DataFrame,
+    episodes: pd.DataFrame,
+    template: DriverModel,
+    method: str,
+    iterations: int,
+    resamples: int,
+    rng: np.random.Generator,
+    progress=None,
+) -> dict:
+    """Uncertainty by resampling participants with replacement (all their episodes together) and
+    refitting: 2.5/97.5 percentiles of every takeover probability and of every trust row's expected
+    change E[θ' - θ] (standstill/takeover, AV success), and how many refits converged."""
+    by_participant = {p: list(g["episode_id"]) for p, g in episodes.groupby("participant")}
+    participants = sorted(by_participant)
+    grouped = {e: g for e, g in roads.groupby("episode_id")}
+    levels = np.asarray(template.trust_levels, dtype=float)
+    takeovers, changes, converged = [], [], 0
+    for _ in range(resamples):
+        drawn = rng.choice(len(participants), size=len(participants), replace=True)
+        parts = []
+        for copy, index in enumerate(drawn):
+            for episode_id in by_participant[participants[index]]:
+                parts.append(grouped[episode_id].assign(episode_id=f"{episode_id}#{copy}"))
+        result = fit_roads(pd.concat(parts, ignore_index=True), template, method, iterations)
+        converged += bool(result.converged)
+        takeovers.append(result.parameters.takeover)
+        changes.append(result.parameters.transition[:, :, 0] @ levels - levels)  # [I, 2, k]
+        if progress is not None:
+            progress()
+    takeover = np.stack(takeovers)
+    change = np.stack(changes)
+    names = template.incident_types
+    return {
+        "resamples": resamples,
+        "unit": "participant",
+        "converged": converged,
+        "takeover_probability": {
+            name: {
+                "low": np.percentile(takeover[:, i], 2.5, axis=0).tolist(),
+                "high": np.percentile(takeover[:, i], 97.5, axis=0).tolist(),
+            }
+            for i, name in enumerate(names)
+        },
+        "expected_trust_change": {
+            f"{name}/{action}": {
+                "low": np.percentile(change[:, i, h], 2.5, axis=0).tolist(),
+                "high": np.percentile(change[:, i, h], 97.5, axis=0).tolist(),
+            }
+            for i, name in enumerate(names)
+            for h, action in enumerate(("standstill", "takeover"))
+        },
+    }

@@ -104,7 +104,8 @@ class StudyAnalysis:
 
 
 def _finite(value: object) -> float | None:
-    if value is None:
+    # pd.NA: the mean of a nullable column with no values (e.g. final_trust of real participants)
+    if value is None or value is pd.NA:
         return None
     value = float(value)
     return None if math.isnan(value) else value
@@ -126,8 +127,18 @@ def study_inputs(manifest: dict):
     config = manifest["config"]
     town = load_town(config.get("town"))
     driver = load_driver_model(config.get("driver_model"))
-    specs = {Path(p).stem: load_spec(p, town) for p in config["specs"]}
+    specs = {Path(p).stem: load_spec(_spec_path(p), town) for p in config["specs"]}
     return town, driver, specs
+
+
+def _spec_path(path: str) -> Path:
+    """A manifest's spec path; a packaged spec when the recorded path is gone (a study directory
+    shipped with the package, or moved to another machine)."""
+    from trustroute.harness.study.config import PACKAGED_SPECS
+
+    recorded = Path(path)
+    packaged = PACKAGED_SPECS / recorded.name
+    return recorded if recorded.exists() or not packaged.exists() else packaged
 
 
 def _pair_conditions(conditions: list[str]) -> tuple[str, str] | None:

@@ -1,8 +1,11 @@
 """One SUMO episode (phi1, trust-free policy, driver, incidents) vs a bare libsumo loop on the same route.
 
 The bare loop starts SUMO with the same command line, inserts the ego with the whole baseline route
-and steps until it arrives: no policy, driver, incidents or logging. Both are measured in the same
-run; the ratio is episode / bare. Also: memory growth over 200 episodes in one process.
+and steps until it arrives: no policy, driver, incidents or logging. The episode includes handing
+its logs back as Arrow tables (EpisodeRecord.tables), the form a study writes. Both are measured in the same
+run; the ratio is episode / bare. Also: memory growth over 200 episodes in one process, and the
+measured failure rate, takeover rate and time lost per incident kind over 200 episodes on a route
+through every kind (RATE_ROUTE).
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ import os
 import time
 
 import numpy as np
+import pandas as pd
 
 from benchmarks.timing import best_seconds
 from trustroute.harness.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
@@ -24,6 +28,22 @@ from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 
 SEED = 3
+RATE_ROUTE = ("E-A", "A-B", "B-C", "C-J", "J-K")   # start, pedestrian, none, obstacle, truck
+
+
+class _FixedRoute:
+    """Drives RATE_ROUTE, then declares itself finished."""
+
+    name = "fixed"
+
+    def __init__(self, route) -> None:
+        self.route = tuple(route)
+
+    def finished(self, context) -> bool:
+        return len(context.route) >= len(self.route)
+
+    def next_junction(self, context) -> str:
+        return self.route[len(context.route)].split("-")[1]
 
 
 def _bare_loop(net, route: list[str], config: SumoConfig) -> float:
@@ -60,7 +80,9 @@ def run() -> list[dict]:
 
     def episode(seed: int = SEED):
         driver = SyntheticDriver(driver_model, np.random.default_rng(seed))
-        return run_episode(setup, policy, driver, f"bench{seed}", seed, net_path=net, config=config)
+        record = run_episode(setup, policy, driver, f"bench{seed}", seed, net_path=net, config=config)
+        record.tables()   # the logs in the form a study writes them (Arrow), part of the cost
+        return record
 
     episode()
     _bare_loop(net, route, config)   # warm both paths
@@ -80,6 +102,23 @@ def run() -> list[dict]:
         episode(1000 + seed)
     many_seconds = time.perf_counter() - started
     growth = _rss_mb() - before
+    # Failure rates on a route through every incident kind (the phi1 route has no obstacle).
+    scenes = EpisodeSetup(town=town, driver_model=driver_model, spec=spec, fallback_after=None)
+    incidents = []
+    for seed in range(200):
+        driver = SyntheticDriver(driver_model, np.random.default_rng(2000 + seed))
+        incidents.append(run_episode(scenes, _FixedRoute(RATE_ROUTE), driver, f"rates{seed}", 2000 + seed,
+                                     net_path=net, config=config).incidents)
+    rows = pd.concat(incidents, ignore_index=True)
+    rates = []
+    for kind, group in rows.groupby("incident"):
+        auto = group[~group["takeover"]]   # performance is measured on autopilot only
+        failed = float((auto["performance"] == "fail").mean()) if len(auto) else float("nan")
+        rates.append({"name": f"episode_failure_rate.{kind}", "value": failed, "unit": "fraction",
+                      "roads_on_autopilot": int(len(auto)),
+                      "takeover_rate": float(group["takeover"].mean()),
+                      "mean_time_lost": float(group["time_lost"].mean()), "episodes": 200,
+                      "route": "-".join(RATE_ROUTE)})
     return [
         {"name": "episode_phi1_wall", "value": episode_seconds, "unit": "s", "baseline": bare_seconds,
          "ratio": episode_seconds / bare_seconds, "sim_seconds": record.summary["sim_seconds"],
@@ -90,4 +129,45 @@ def run() -> list[dict]:
         {"name": "episode_phi1_bare_libsumo", "value": bare_seconds, "unit": "s"},
         {"name": "episodes_200_wall", "value": many_seconds, "unit": "s"},
         {"name": "episodes_200_rss_growth", "value": growth, "unit": "MB"},
+        *rates,
+        study_against_bare(),
     ]
+
+
+def _bare_route(args) -> float:
+    """One bare loop (process-pool worker): (net path, route) -> sim seconds."""
+    net, route = args
+    return _bare_loop(net, list(route), SumoConfig())
+
+
+def study_against_bare(participants: int = 21, workers: int = 2) -> dict:
+    """A SUMO study (free condition, phi1 and phi2, `workers` processes, parts written and
+    consolidated) against bare libsumo loops driving the very routes its episodes drove, on the
+    same number of processes; the ratio is study wall / bare wall (throughput ratio)."""
+    import tempfile
+    from concurrent.futures import ProcessPoolExecutor
+    from pathlib import Path
+
+    from trustroute.analysis.dataset import read_roads
+    from trustroute.harness.study.config import study_config_from_dict
+    from trustroute.harness.study.runner import run_and_consolidate
+
+    net = build_net(load_town()).path
+    config = study_config_from_dict({"study": {
+        "name": "bench-study-vs-bare", "participants": participants, "seed": 1, "engine": "sumo",
+        "specs": ["phi1", "phi2"], "conditions": ["free"]}}, "bench_episode", Path.cwd())
+    with tempfile.TemporaryDirectory(prefix="trustroute-bench-") as folder:
+        started = time.perf_counter()
+        run, _ = run_and_consolidate(config, Path(folder) / "study", workers, None, progress=False,
+                                     echo=lambda *_: None)
+        study_seconds = time.perf_counter() - started
+        roads = read_roads(Path(folder) / "study")
+    routes = [tuple(group.sort_values("index")["directed_road"]) for _, group in roads.groupby("episode_id")]
+    started = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        list(pool.map(_bare_route, [(net, route) for route in routes]))
+    bare_seconds = time.perf_counter() - started
+    return {"name": "study_sumo_vs_bare_libsumo", "value": study_seconds, "unit": "s",
+            "baseline": bare_seconds, "ratio": study_seconds / bare_seconds, "episodes": len(routes),
+            "workers": workers, "failed": len(run.failed), "target_ratio": 2.0,
+            "what": "free condition only (no synthesis); bare = the same routes, same process count"}

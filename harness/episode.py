@@ -9,7 +9,10 @@ incident is injected at that moment so its SUMO objects are in place when the eg
 the incident comes into view the synthetic driver decides takeover from its current trust; a
 takeover switches the ego to manual control until that road's commit point, before the next
 junction. Per step the runner reads one subscription of the ego; everything else runs only
-while an incident is live.
+while an incident is live. The scenes' random draws (pedestrian timing, obstacle position,
+oncoming traffic, background traffic) come from one generator seeded by the episode's seed
+(`scene_rng`), separate from the driver's, so they never shift the driver's draws
+(docs/scenes.md).
 """
 
 from __future__ import annotations
@@ -23,21 +26,25 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
 from trustroute.analysis.dataset import (
     INCIDENTS_SCHEMA,
     KINEMATICS_SCHEMA,
+    ROADS_SCHEMA,
     frame_from_table,
     table_from_columns,
+    table_from_frame,
 )
 from trustroute.harness import incidents as incident_kinds
+from trustroute.harness.background import BackgroundTraffic
 from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.incidents import EgoState, Incident, Scene
-from trustroute.harness.performance import PerformanceMonitor
+from trustroute.harness.performance import PerformanceMonitor, limits_for
 from trustroute.harness.sumo_start import SumoConfig, sumo_session
 from trustroute.harness.takeover import AUTOPILOT, apply_style, hand_back, take_over
 from trustroute.networks.errors import InputError
-from trustroute.networks.sumo_net import build_net, net_counts
+from trustroute.networks.sumo_net import ROAD_SPEED, build_net, net_counts
 from trustroute.networks.town import NO_INCIDENT, split_road
 from trustroute.policies.routing.protocol import RoutingPolicy
 
@@ -47,23 +54,66 @@ EGO_ID = "ego"
 EGO_TYPE = "trustroute_ego"
 COMMIT_DISTANCE = 30.0      # metres before a road's end: decide the next junction here
 VIEW_DISTANCE = 80.0        # metres: an incident object this close to the ego is in view
+MAX_CLOSING = 30.0          # m/s: no incident object and the ego close in on each other faster
 START_BEFORE_COMMIT = 40.0  # the ego is inserted this far before the start road's commit point
 INSERT_TIMEOUT = 30.0       # seconds of sim time for the ego to appear
 LEADER_HORIZON = 100.0      # metres: how far ahead the subscription looks for a leader
+JUNCTION_LENGTH = 8.0       # metres: a typical internal lane, for timing scenes from the commit point
+SCENE_STREAM = 0x5CE7E      # the scene generator's stream: SeedSequence([seed, SCENE_STREAM])
 
-def _empty_incidents() -> pd.DataFrame:
-    return frame_from_table(INCIDENTS_SCHEMA.empty_table())
+def scene_rng(seed: int) -> np.random.Generator:
+    """The episode's scene generator (every draw of the incidents and background traffic)."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), SCENE_STREAM]))
 
 
-@dataclass(frozen=True, eq=False)
+_SCHEMAS = {"roads": ROADS_SCHEMA, "kinematics": KINEMATICS_SCHEMA, "incidents": INCIDENTS_SCHEMA}
+
+
 class EpisodeRecord:
     """The logs of one episode (the caller writes them to Parquet). `incidents` (SUMO engine only):
-    one row per road with an incident or a takeover, with the SUMO ids of its objects."""
+    one row per road with an incident or a takeover, with the SUMO ids of its objects.
 
-    summary: dict
-    roads: pd.DataFrame
-    kinematics: pd.DataFrame
-    incidents: pd.DataFrame = field(default_factory=_empty_incidents)
+    Each table is given as an Arrow table of its dataset schema (trustroute.analysis.dataset), or
+    as a DataFrame; `roads`, `kinematics` and `incidents` are DataFrames built on first use, and
+    `tables()` hands the logs back as Arrow tables without going through pandas when they were
+    given as Arrow (the SUMO engine's case: the cheap path for writers, a study writes Arrow).
+    """
+
+    def __init__(self, summary: dict, roads, kinematics, incidents=None) -> None:
+        self.summary = summary
+        self._sources = {"roads": roads, "kinematics": kinematics,
+                         "incidents": incidents if incidents is not None else INCIDENTS_SCHEMA.empty_table()}
+        self._frames: dict[str, pd.DataFrame] = {}
+
+    def _frame(self, name: str) -> pd.DataFrame:
+        frame = self._frames.get(name)
+        if frame is None:
+            source = self._sources[name]
+            frame = source if isinstance(source, pd.DataFrame) else frame_from_table(source)
+            self._frames[name] = frame
+        return frame
+
+    @property
+    def roads(self) -> pd.DataFrame:
+        return self._frame("roads")
+
+    @property
+    def kinematics(self) -> pd.DataFrame:
+        return self._frame("kinematics")
+
+    @property
+    def incidents(self) -> pd.DataFrame:
+        return self._frame("incidents")
+
+    def tables(self) -> dict[str, pa.Table]:
+        """{"roads", "kinematics", "incidents"} as Arrow tables."""
+        out = {}
+        for name, source in self._sources.items():
+            if isinstance(source, pa.Table):
+                out[name] = source
+            else:
+                out[name] = table_from_frame(source, _SCHEMAS[name])
+        return out
 
 
 @dataclass
@@ -86,6 +136,7 @@ class _RoadRun:
     takeover_start: float = math.nan
     takeover_end: float = math.nan
     committed: bool = False
+    next_view_check: float = -math.inf
     monitor: PerformanceMonitor = field(default_factory=PerformanceMonitor)
 
 
@@ -118,7 +169,7 @@ _READABLE: set[tuple[str, float]] = set()
 def _check_readable(net_path: Path) -> None:
     """Parse a net passed in once per (path, mtime): a clear one-line error before SUMO prints its own."""
     try:
-        key = (str(net_path.resolve()), net_path.stat().st_mtime)
+        key = (str(net_path), net_path.stat().st_mtime)
     except OSError:
         raise InputError(str(net_path), "", "the SUMO net file does not exist",
                          "run `trustroute net build` or pass an existing .net.xml") from None
@@ -131,8 +182,11 @@ class _Episode:
     """One run of the loop; SUMO calls stay in here and in the incident/takeover modules."""
 
     def __init__(self, sumo, setup: EpisodeSetup, tracker: EpisodeTracker, driver, config: SumoConfig,
-                 observer: Callable | None) -> None:
+                 observer: Callable | None, rng: np.random.Generator,
+                 scene_overrides: dict[str, dict] | None = None) -> None:
         self.sumo = sumo
+        self.rng = rng
+        self.scene_overrides = scene_overrides or {}
         self.setup = setup
         self.tracker = tracker
         self.driver = driver
@@ -157,11 +211,18 @@ class _Episode:
             self.mode = take_over(self.sumo, EGO_ID)
             run.takeover_start = now
 
-    def inject(self, run: _RoadRun, now: float) -> None:
+    def new_run(self, index: int, road: str) -> _RoadRun:
+        kind = self.setup.town.incident(road) if index > 0 else NO_INCIDENT
+        limits = limits_for(self.config.performance_limits, kind or "none")
+        return _RoadRun(index=index, road=road, kind=kind,
+                        monitor=PerformanceMonitor(ttc_horizon=limits.min_ttc))
+
+    def inject(self, run: _RoadRun, now: float, ego_distance: float) -> None:
         u, v = split_road(run.road)
         reverse = f"{v}-{u}" if f"{v}-{u}" in self.setup.town.incidents else None
         scene = Scene(road=run.road, reverse_road=reverse, road_length=self.length(run.road),
-                      prefix=f"inc{run.index}", ego_id=EGO_ID, time=now)
+                      prefix=f"inc{run.index}", ego_id=EGO_ID, time=now, ego_distance=ego_distance,
+                      rng=self.rng, overrides=self.scene_overrides.get(run.kind, {}), road_speed=ROAD_SPEED)
         run.incident = incident_kinds.inject(run.kind, self.sumo, scene)
         run.injected_time = now
         if run.incident is not None:
@@ -187,15 +248,21 @@ class _Episode:
                 self.decide(run, ego.time)   # nothing to see: the driver decides on entering the road
             return
         incident.step(self.sumo, ego)
-        if not run.decided:
+        if not run.decided and ego.time >= run.next_view_check:
             where = incident.position(self.sumo)
-            if where is not None and math.dist(where, (ego.x, ego.y)) <= VIEW_DISTANCE:
-                run.in_view_time = ego.time
-                run.x, run.y = where
-                self.decide(run, ego.time)
+            if where is not None:
+                distance = math.dist(where, (ego.x, ego.y))
+                if distance <= VIEW_DISTANCE:
+                    run.in_view_time = ego.time
+                    run.x, run.y = where
+                    self.decide(run, ego.time)
+                else:
+                    # The gap closes at most MAX_CLOSING m/s: no need to look again before then.
+                    run.next_view_check = ego.time + (distance - VIEW_DISTANCE) / MAX_CLOSING
+        # The objects stay after the ego has passed (an obstacle never leaves by itself); they are
+        # taken out when the road's observation closes.
         if math.isnan(run.passed_time) and incident.is_passed(self.sumo, ego):
             run.passed_time = ego.time
-            self.remove_incident(run, ego.time)
 
     # -- the road's end -------------------------------------------------------
     def close_road(self, run: _RoadRun, now: float) -> None:
@@ -206,14 +273,17 @@ class _Episode:
             self.mode = hand_back(self.sumo, EGO_ID)
             run.takeover_end = now
         self.remove_incident(run, now)
-        performance = run.monitor.result()
+        performance = run.monitor.result(self.limits(run))
         trust_before = self.driver.trust
         trust_after = self.driver.move_trust(run.kind, run.took_over, performance)
         reported = self.driver.report_trust() if self.tracker.should_report() else None
         self.tracker.record_road(run.road, run.kind, run.took_over, performance, trust_before,
                                  trust_after, reported, run.time_in, now)
 
-    def commit(self, run: _RoadRun, now: float) -> _RoadRun | None:
+    def limits(self, run: _RoadRun):
+        return limits_for(self.config.performance_limits, run.kind or "none")
+
+    def commit(self, run: _RoadRun, now: float, position: float) -> _RoadRun | None:
         """At the commit point of `run`: close it, choose the next road, extend the route."""
         run.committed = True
         if run.index > 0:
@@ -227,8 +297,8 @@ class _Episode:
             return None
         nxt = self.setup.town.successor(run.road, junction)
         self.sumo.vehicle.setRoute(EGO_ID, [run.road, nxt])
-        upcoming = _RoadRun(index=run.index + 1, road=nxt, kind=self.setup.town.incident(nxt))
-        self.inject(upcoming, now)
+        upcoming = self.new_run(run.index + 1, nxt)
+        self.inject(upcoming, now, self.length(run.road) - position + JUNCTION_LENGTH)
         self.runs.append(upcoming)
         return upcoming
 
@@ -238,6 +308,10 @@ class _Episode:
         start = self.setup.spec.start
         _define_ego_type(sumo)
         incident_kinds.define_types(sumo)
+        background = BackgroundTraffic(self.config.background_vehicles, self.rng,
+                                       tuple(self.setup.town.states))
+        background.start(sumo)
+        background_step = background.step if self.config.background_vehicles > 0 else None
         sumo.route.add("ego_route", [start])
         depart = max(0.0, self.length(start) - COMMIT_DISTANCE - START_BEFORE_COMMIT)
         sumo.vehicle.add(EGO_ID, "ego_route", typeID=EGO_TYPE, depart="now", departLane="best",
@@ -246,12 +320,13 @@ class _Episode:
         # One subscription carries everything the loop reads each step, the leader included.
         sumo.vehicle.subscribe(EGO_ID, [sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION,
                                         sumo.VAR_SPEED, sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID,
-                                        sumo.VAR_LEADER], 0.0, 1e9, {sumo.VAR_LEADER: LEADER_HORIZON})
-        road_id, position_id, xy_id, speed_id, accel_id, lane_id, leader_id = (
+                                        sumo.VAR_LEADER, sumo.VAR_ANGLE], 0.0, 1e9,
+                               {sumo.VAR_LEADER: LEADER_HORIZON})
+        road_id, position_id, xy_id, speed_id, accel_id, lane_id, leader_id, angle_id = (
             sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION, sumo.VAR_SPEED,
-            sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID, sumo.VAR_LEADER)
+            sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID, sumo.VAR_LEADER, sumo.VAR_ANGLE)
         self.min_gap = sumo.vehicle.getMinGap(EGO_ID)
-        current = _RoadRun(index=0, road=start, kind=NO_INCIDENT)
+        current = self.new_run(0, start)
         self.runs.append(current)
         upcoming: _RoadRun | None = None
         kin = self.kinematics
@@ -284,28 +359,36 @@ class _Episode:
                 current, upcoming = upcoming, None
                 current.time_in = now
                 commit_at = self.length(road) - COMMIT_DISTANCE
+            lane = result[lane_id]
             open_run = upcoming if upcoming is not None else current
+            if background_step is not None:
+                background_step(sumo)
             if open_run.index > 0:
+                ego = None
                 if self.needs_watching(open_run):
-                    self.watch(open_run, EgoState(now, road, position, x, y, speed))
+                    ego = EgoState(now, road, position, x, y, speed, lane, result[angle_id])
+                    self.watch(open_run, ego)
                 if self.mode == auto:
                     collided = (colliding_number() > 0
                                 and EGO_ID in sumo.simulation.getCollidingVehiclesIDList())
                     open_run.monitor.observe(sumo, speed, result[accel_id], collided, result[leader_id],
-                                             self.min_gap)
+                                             self.min_gap, ROAD_SPEED, step)
+                    if ego is not None and open_run.incident is not None:
+                        open_run.incident.measure(sumo, ego, open_run.monitor)
             finished = False
             if not current.committed and road == current.road and position + speed * step >= commit_at:
-                upcoming = self.commit(current, now)
+                upcoming = self.commit(current, now, position)
                 finished = upcoming is None
             # Logged after this step's decisions, so `mode` is the control the ego drives on with.
             append_time(now)
             append_x(x)
             append_y(y)
             append_speed(speed)
-            append_lane(result[lane_id])
+            append_lane(lane)
             append_mode(self.mode)
             if self.observer is not None:
-                self.observer(sumo, EgoState(now, road, position, x, y, speed), self.mode, open_run.road)
+                self.observer(sumo, EgoState(now, road, position, x, y, speed, lane, result[angle_id]),
+                              self.mode, open_run.road)
             if finished:
                 break
             if now > self.config.max_sim_seconds:
@@ -313,7 +396,7 @@ class _Episode:
                                    f"{self.config.max_sim_seconds:.0f} s of sim time on {road}")
         return now
 
-    def incidents_frame(self) -> pd.DataFrame:
+    def incidents_table(self) -> pa.Table:
         """One row per road with an incident object or a takeover (row 0, the start road, never)."""
         runs = [run for run in self.runs if run.index > 0 and (run.incident is not None or run.took_over)]
         columns = {
@@ -329,32 +412,41 @@ class _Episode:
         columns["takeover"] = np.array([run.took_over for run in runs], dtype=bool)
         columns["takeover_start"] = np.array([run.takeover_start for run in runs], dtype=np.float64)
         columns["takeover_end"] = np.array([run.takeover_end for run in runs], dtype=np.float64)
-        columns["performance"] = [run.monitor.result() for run in runs]
+        columns["performance"] = [run.monitor.result(self.limits(run)) for run in runs]
         columns["min_ttc"] = np.array([run.monitor.min_ttc for run in runs], dtype=np.float64)
         columns["max_deceleration"] = np.array([run.monitor.max_deceleration for run in runs],
                                                dtype=np.float64)
         columns["collided"] = np.array([run.monitor.collided for run in runs], dtype=bool)
-        return frame_from_table(table_from_columns(columns, INCIDENTS_SCHEMA))
+        columns["min_head_on_ttc"] = np.array([run.monitor.min_head_on_ttc for run in runs], dtype=np.float64)
+        columns["min_pedestrian_distance"] = np.array([run.monitor.min_pedestrian_distance for run in runs],
+                                                      dtype=np.float64)
+        columns["time_lost"] = np.array([run.monitor.time_lost for run in runs], dtype=np.float64)
+        columns["failed_measures"] = [",".join(run.monitor.failed_measures(self.limits(run))) or None
+                                      for run in runs]
+        columns["scene"] = [run.incident.details() if run.incident is not None else None for run in runs]
+        return table_from_columns(columns, INCIDENTS_SCHEMA)
 
-    def kinematics_frame(self) -> pd.DataFrame:
+    def kinematics_table(self) -> pa.Table:
         kin = self.kinematics
         columns: dict[str, object] = {"episode_id": [self.tracker.episode_id] * len(kin["time"])}
         for name in ("time", "x", "y", "speed"):
             columns[name] = np.asarray(kin[name], dtype=np.float64)
         columns["lane"] = kin["lane"]
         columns["mode"] = kin["mode"]
-        return frame_from_table(table_from_columns(columns, KINEMATICS_SCHEMA))
+        return table_from_columns(columns, KINEMATICS_SCHEMA)
 
 
 def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: str, seed: int,
                 rrd_path: Path | None = None, *, net_path: Path | None = None,
-                config: SumoConfig | None = None, observer: Callable | None = None) -> EpisodeRecord:
+                config: SumoConfig | None = None, observer: Callable | None = None,
+                scene_overrides: dict[str, dict] | None = None) -> EpisodeRecord:
     """Run one episode in SUMO and return its logs.
 
     driver: a participants.synthetic_driver.SyntheticDriver (decides_takeover, move_trust, report_trust,
     trust). seed: SUMO's seed (the driver carries its own Generator). net_path: the town's net
     (default: build_net(setup.town), cached). observer(sumo, ego, mode, road): called every step
-    (tests use it to read SUMO state). rrd_path: also write a Rerun recording.
+    (tests use it to read SUMO state). rrd_path: also write a Rerun recording. scene_overrides:
+    {incident kind: {draw name: value}} fixes scene draws (e.g. {"pedestrian": {"timing": "late"}}).
     """
     started = time.perf_counter()
     config = config if config is not None else SumoConfig()
@@ -366,12 +458,12 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
     tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=0.0)
     with sumo_session(net, seed, config) as sumo:
         _check_net_matches(sumo, setup, net)
-        episode = _Episode(sumo, setup, tracker, driver, config, observer)
+        episode = _Episode(sumo, setup, tracker, driver, config, observer, scene_rng(seed), scene_overrides)
         sim_seconds = episode.run()
     record = EpisodeRecord(summary=tracker.summary(wall_seconds=time.perf_counter() - started,
                                                    sim_seconds=sim_seconds),
-                           roads=tracker.roads_frame(), kinematics=episode.kinematics_frame(),
-                           incidents=episode.incidents_frame())
+                           roads=tracker.roads_table(), kinematics=episode.kinematics_table(),
+                           incidents=episode.incidents_table())
     if rrd_path is not None:
         from trustroute.harness.rerun_log import write_recording
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
 from trustroute.analysis.dataset import ROADS_SCHEMA, frame_from_table, table_from_columns
 from trustroute.networks.town import NO_INCIDENT, Town
@@ -226,12 +227,15 @@ class EpisodeTracker:
         """Whether the driver reports trust on the road about to be recorded (every report_every)."""
         return len(self._rows) % self.setup.report_every == 0
 
+    def roads_table(self) -> pa.Table:
+        """The roads table of the dataset (ROADS_SCHEMA) as Arrow, one row per position."""
+        rows = self._rows
+        return table_from_columns({name: [row[name] for row in rows] for name in ROADS_SCHEMA.names},
+                                  ROADS_SCHEMA)
+
     def roads_frame(self) -> pd.DataFrame:
         """The roads table of the dataset (ROADS_SCHEMA), one row per position."""
-        rows = self._rows
-        table = table_from_columns({name: [row[name] for row in rows] for name in ROADS_SCHEMA.names},
-                                   ROADS_SCHEMA)
-        return frame_from_table(table)
+        return frame_from_table(self.roads_table())
 
     def summary(self, wall_seconds: float, sim_seconds: float) -> dict:
         """The episode summary dict; mean_trust is the mean true trust over all positions."""

@@ -8,21 +8,28 @@ hundreds of episodes can run one after another in a process. Nothing happens at 
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
+from trustroute.harness.performance import DEFAULT_LIMITS, PerformanceLimits
 from trustroute.networks.errors import InputError
 from trustroute.networks.sumo_net import find_binary
 
 
 @dataclass(frozen=True)
 class SumoConfig:
-    """Simulation settings of an episode."""
+    """Simulation settings of an episode.
+
+    performance_limits: where `succ` ends, per incident kind (harness/performance.py).
+    background_vehicles: seeded background traffic, vehicles kept on the net (0: none).
+    """
 
     step_length: float = 0.5        # seconds: large steps keep episodes fast, 0.5 s keeps yielding sane
     max_sim_seconds: float = 7200.0  # a stuck ego is a bug: the runner stops with an error here
+    performance_limits: Mapping[str, PerformanceLimits] = field(default_factory=lambda: dict(DEFAULT_LIMITS))
+    background_vehicles: int = 0
     gui: bool = False               # run in sumo-gui through TraCI (needs a display) instead of libsumo
     output_dir: str | None = None   # also write SUMO's own FCD and route outputs here (harness/sumo_files.py)
 

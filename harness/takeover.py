@@ -1,9 +1,12 @@
 """Takeover actuation: switch the ego between autopilot and manual (human) control in SUMO.
 
 Manual control is the human's own driving style applied to the ego vehicle: its speed factor
-(humans here drive a little slower than the AV), headway tau, comfortable deceleration and
-lane-change behaviour (no speed-gain changes), shown in red. `hand_back` restores the autopilot
-values. Both keep SUMO's safe speed mode (31), so neither mode ever drives through a pedestrian.
+(a driver who has just taken control drives below the limit, 0.85), headway tau (1.8 s, in the
+1.5-2 s range of human car following, against the AV's 1 s), comfortable deceleration (3 m/s²,
+gentler than the AV's 4.5) and lane-change behaviour (no speed-gain changes; SUMO's overtaking
+of a blocking obstacle through the oncoming lane stays possible), shown in red. The reasons are
+in docs/scenes.md ("Manual driving"); they are modelling choices, not fitted values.
+`hand_back` restores the autopilot values. Both keep SUMO's safe speed mode (31).
 """
 
 from __future__ import annotations

@@ -1,13 +1,15 @@
 """The SUMO network of a town: plain XML -> netconvert -> `.net.xml`, cached by content hash.
 
 Recipe (one place: `plain_xml` and `netconvert_command`): one edge per directed road with id
-"U-V", one vehicle lane at 13.89 m/s (lane 1) beside a sidewalk (lane 0) on every edge; a
+"U-V", one vehicle lane at 13.89 m/s (lane 1) beside a sidewalk (lane 0) on every edge; the
+vehicle lanes of U-V and V-U are declared opposite-direction neighbours (`<neigh>` in the plain
+edge file), so SUMO lets a vehicle overtake through the oncoming lane (docs/scenes.md); a
 prioritised pedestrian crossing over each road with a pedestrian incident, at both of its ends
 (the person of a `U-V` incident crosses at U, ahead of the ego as it turns into `U-V`); explicit
 connections to every non-U-turn successor (U-turns only at dead ends, `--no-turnarounds`);
 narrow lanes and small junction radii so that driven lengths (edge + internal lanes of the
 connection taken) stay within 5 % of the model's Euclidean lengths (DESIGN.md, "Road lengths").
-One vehicle lane keeps lane choice out of routing: the route can be extended one road ahead late
+One vehicle lane per direction keeps lane choice out of routing: the route can be extended one road ahead late
 on the current road, after its incident has been observed.
 
 The net is written atomically (temp file + rename) to `<cache>/<town hash>-<recipe>.net.xml`; a
@@ -30,7 +32,7 @@ from xml.sax.saxutils import quoteattr
 from trustroute.networks.errors import InputError
 from trustroute.networks.town import Town, road_name
 
-NET_RECIPE = "r1"                      # bump when the recipe below changes: invalidates caches
+NET_RECIPE = "r2"                      # bump when the recipe below changes: invalidates caches
 DEFAULT_NET_CACHE = Path.home() / ".cache" / "trustroute" / "nets"
 ROAD_SPEED = 13.89                     # m/s (50 km/h)
 LANE_WIDTH = 3.0
@@ -81,6 +83,11 @@ def lane_count(town: Town, directed_road: str) -> int:
     return VEHICLE_LANES
 
 
+def opposite_lane(town: Town, directed_road: str) -> str:
+    """The SUMO lane id of a road's leftmost vehicle lane (the one its opposite direction neighbours)."""
+    return f"{directed_road}_{lane_count(town, directed_road)}"
+
+
 def plain_xml(town: Town) -> dict[str, str]:
     """The plain-XML inputs of netconvert: {"nod": ..., "edg": ..., "con": ...}."""
     walk = {frozenset(pair) for pair in pedestrian_roads(town)}
@@ -91,9 +98,14 @@ def plain_xml(town: Town) -> dict[str, str]:
     edges = ["<edges>"]
     for road in town.states:
         u, v = road.split("-")
+        reverse = road_name(v, u)
         edges.append(f"  <edge id={quoteattr(road)} from={quoteattr(u)} to={quoteattr(v)} priority=\"1\" "
                      f"numLanes=\"{lane_count(town, road)}\" speed=\"{ROAD_SPEED}\" "
-                     f"width=\"{LANE_WIDTH}\" sidewalkWidth=\"{SIDEWALK_WIDTH}\" spreadType=\"right\"/>")
+                     f"width=\"{LANE_WIDTH}\" sidewalkWidth=\"{SIDEWALK_WIDTH}\" spreadType=\"right\">")
+        if reverse in town.states:
+            # The leftmost vehicle lane of the opposite direction: overtaking through it is allowed.
+            edges.append(f"    <neigh lane={quoteattr(opposite_lane(town, reverse))}/>")
+        edges.append("  </edge>")
     edges.append("</edges>")
     connections = ["<connections>"]
     for road in town.states:

@@ -21,10 +21,15 @@ def _draw_index(probabilities: np.ndarray, rng: np.random.Generator) -> int:
     return min(int(np.searchsorted(cdf, rng.random() * cdf[-1], side="right")), cdf.size - 1)
 
 
+# The synthetic driver's report accuracy unless a study says otherwise (a project choice,
+# participants/data/PROVENANCE.md).
+DEFAULT_REPORT_ACCURACY = 0.8
+
 class SyntheticDriver:
     """A participant-episode: hidden true trust `trust` (a level of model.trust_levels)."""
 
-    def __init__(self, model: DriverModel, rng: np.random.Generator, report_accuracy: float = 0.8,
+    def __init__(self, model: DriverModel, rng: np.random.Generator,
+                 report_accuracy: float = DEFAULT_REPORT_ACCURACY,
                  initial_trust: int | None = None) -> None:
         if not 0.0 <= report_accuracy <= 1.0:
             raise ValueError(f"report_accuracy {report_accuracy!r} is not a probability in [0, 1]")

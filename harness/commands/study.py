@@ -17,6 +17,8 @@ import click
 from trustroute.networks.errors import InputError
 
 DEFAULT_STUDIES_DIR = Path("studies")
+CHECK_REPLICATES = 50  # simulated drivers per real episode in `fit --check`
+CHECK_EPISODES = 20_000  # model-engine episodes per spec, condition and driver model in `fit --check`
 
 
 def study_directory(config, out: str | None) -> Path:
@@ -97,13 +99,22 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
     from trustroute.analysis.tables import study_analysis
 
     analysis = study_analysis(Path(study_dir), belief_source=belief_source)
+    real = None
+    if analysis.manifest.get("engine") == "carla-logs":
+        from trustroute.analysis.real_study import real_study_analysis, write_real_study_report
+
+        real = real_study_analysis(Path(study_dir))
     paths = None
     if report:
         from trustroute.analysis.report import write_report
 
         paths = write_report(Path(study_dir), analysis=analysis)
+        if real is not None:
+            write_real_study_report(real, Path(study_dir))
     if as_json:
         payload = analysis.to_dict()
+        if real is not None:
+            payload["real_study"] = real.to_dict()
         if paths is not None:
             payload["report"] = {"markdown": str(paths.markdown), "html": str(paths.html)}
         click.echo(json.dumps(payload, default=str))
@@ -111,6 +122,11 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
     from trustroute.analysis.tables import format_table
 
     click.echo(format_table(analysis))
+    if real is not None:
+        from trustroute.analysis.real_study import format_real_study
+
+        click.echo("")
+        click.echo(format_real_study(real))
     if paths is not None:
         click.echo(f"report: {paths.markdown} and {paths.html}")
 
@@ -134,20 +150,121 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool) -> 
     "auto: counts when the study's report accuracy is 1 and trust is reported every road.",
 )
 @click.option("--iterations", type=int, default=200, show_default=True, help="EM iterations at most.")
+@click.option(
+    "--bootstrap",
+    type=int,
+    default=0,
+    show_default=True,
+    help="Resamples of participants for percentile intervals (0: none).",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the bootstrap and the check.")
+@click.option(
+    "--check",
+    is_flag=True,
+    help="Posterior-predictive check: simulate the packaged and the fitted model on the study's "
+    "roads and compare with its logs (writes <out>.check.json and <out>.check.png).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def fit(study_dir: str, out: str, method: str, iterations: int, as_json: bool) -> None:
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def fit(
+    study_dir: str,
+    out: str,
+    method: str,
+    iterations: int,
+    bootstrap: int,
+    seed: int,
+    check: bool,
+    as_json: bool,
+    quiet: bool,
+) -> None:
     """Estimate trust dynamics and the takeover model from a study's logs; write a driver model."""
-    from trustroute.analysis.fit import fit_study
+    from trustroute.analysis.fit import bootstrap_fit, fit_study
 
-    result = fit_study(Path(study_dir), method=method, iterations=iterations, progress=not as_json)
+    if bootstrap < 0:
+        raise InputError("--bootstrap", "", f"must be >= 0, got {bootstrap}", "pass e.g. --bootstrap 200")
+    result = fit_study(Path(study_dir), method=method, iterations=iterations,
+                       progress=not (quiet or as_json))
     path = result.write(Path(out))
     payload = {"driver_model": str(path), **result.summary()}
+    if bootstrap:
+        import numpy as np
+        from tqdm import tqdm
+
+        from trustroute.analysis.tables import load_study, study_inputs
+
+        manifest, episodes, roads = load_study(Path(study_dir))
+        _, template, _ = study_inputs(manifest)
+        with tqdm(total=bootstrap, desc="bootstrap", disable=quiet or as_json) as bar:
+            payload["bootstrap"] = bootstrap_fit(
+                roads,
+                episodes,
+                template,
+                result.method,
+                iterations,
+                bootstrap,
+                np.random.default_rng(seed),
+                progress=bar.update,
+            )
+        Path(path).with_suffix(".bootstrap.json").write_text(json.dumps(payload["bootstrap"], indent=1))
+    if check:
+        import numpy as np
+
+        from trustroute.analysis.posterior_check import (
+            aware_vs_free,
+            plot_check,
+            posterior_check,
+            write_check,
+        )
+        from trustroute.analysis.tables import load_study, study_inputs
+        from trustroute.participants.synthetic_driver import DEFAULT_REPORT_ACCURACY
+
+        manifest, _, roads = load_study(Path(study_dir))
+        _, template, _ = study_inputs(manifest)
+        models = {
+            "packaged": (template, DEFAULT_REPORT_ACCURACY),
+            "fitted": (result.model(), float(result.report_accuracy or 1.0)),
+        }
+        outcome = posterior_check(roads, models, CHECK_REPLICATES, np.random.default_rng(seed))
+        stem = Path(path).with_suffix("")
+        payload["check"] = {
+            "json": str(write_check(outcome, stem.with_suffix(".check.json"))),
+            "plot": str(plot_check(outcome, stem.with_suffix(".check.png"))),
+            "distance": {name: m["distance"] for name, m in outcome["models"].items()},
+            # the packaged setup's aware and free policies driven by packaged vs fitted drivers
+            "aware_vs_free": aware_vs_free(
+                {name: model for name, (model, _) in models.items()}, CHECK_EPISODES, seed
+            ),
+        }
     if as_json:
         click.echo(json.dumps(payload, default=str))
         return
+    if check:
+        for name, distance in payload["check"]["distance"].items():
+            takeover = ", ".join(f"{k} {v:.3f}" for k, v in distance["takeover_rate_abs_difference"].items())
+            click.echo(
+                f"check {name}: takeover rate |diff| {takeover}; "
+                f"TV trust change {distance['trust_change_tv']:.3f}, "
+                f"final trust {distance['final_trust_tv']:.3f}, changes per episode "
+                f"{distance['changes_per_episode_tv']:.3f}"
+            )
+        for row in payload["check"]["aware_vs_free"]:
+            click.echo(
+                f"{row['spec']} {row['condition']} with {row['drivers']} drivers: satisfaction "
+                f"{row['satisfaction_rate']:.4f}, mean trust {row['mean_trust']:.3f} "
+                f"({row['episodes']} episodes)"
+            )
+        click.echo(f"check: {payload['check']['json']} and {payload['check']['plot']}")
     click.echo(
         f"fitted by {result.method} on {result.episodes} episodes ({result.transitions} roads driven)"
         f"{f', report accuracy {result.report_accuracy:.3f}' if result.report_accuracy is not None else ''}"
         f"{f', EM {result.iterations} iterations' if result.method == 'em' else ''}"
     )
     click.echo(f"driver model written to {path}")
+    if result.method == "em" and not result.converged:
+        click.echo(f"warning: EM stopped at the iteration cap ({iterations}) before converging", err=True)
+    for label, rows in (
+        ("transition rows", result.sparse_rows()),
+        ("takeover probabilities", result.sparse_takeover()),
+    ):
+        if rows:
+            click.echo(f"unidentified {label} (too little data, kept at the prior/start): {len(rows)}")

@@ -1,13 +1,15 @@
 """Incidents as SUMO events, one module per kind behind one interface (base.Incident).
 
-`inject(kind, sumo, scene)` creates the SUMO objects of an incident on the road of `scene`;
-"none" creates nothing (returns None). The runner asks each live incident when it is in view,
-steps it, and removes it once the ego has passed it or leaves its road.
+`inject(kind, sumo, scene)` creates the SUMO objects of an incident on the road of `scene`
+(or schedules them: a late pedestrian, an oncoming truck that enters later); "none" creates
+nothing (returns None). The runner asks each live incident when it is in view, steps it, lets
+it add its measures to the road's performance, and removes it when the ego leaves its road.
+The scenes are described, with their distributions, in docs/scenes.md.
 """
 
 from __future__ import annotations
 
-from trustroute.harness.incidents import obstacle, pedestrian, truck
+from trustroute.harness.incidents import obstacle, oncoming, pedestrian, truck
 from trustroute.harness.incidents.base import EgoState, Incident, Scene
 
 INJECTORS = {
@@ -22,6 +24,7 @@ __all__ = ["EgoState", "Incident", "Scene", "INJECTORS", "inject", "define_types
 def define_types(sumo) -> None:
     """Vehicle and person types the incident kinds use (once per simulation)."""
     obstacle.define_type(sumo)
+    oncoming.define_type(sumo)
     truck.define_type(sumo)
 
 

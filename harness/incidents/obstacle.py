@@ -1,30 +1,48 @@
-"""Obstacle incident (construction): a stopped vehicle closing the ego's lane mid-road.
+"""Obstacle incident (construction): a broken-down vehicle parked in the ego's lane for good.
 
-The road has one vehicle lane, so the ego must stop and wait behind it; once the ego has waited
-`CLEAR_AFTER` seconds close behind, the lane is cleared (the vehicle is removed) and the ego drives
-on. The obstacle stands at `POSITION_FRACTION` of the road.
+The obstacle (a broken-down car, or with probability `P_BICYCLE` a broken bicycle) stands at a
+drawn fraction of the road (`POSITION_RANGE`) with a stop that never ends: it does not leave by
+itself. The ego passes it with SUMO's own opposite-direction overtaking (the net declares the
+two directions neighbours, networks/sumo_net.py): it pulls into the oncoming lane when the gap
+allows and waits behind the obstacle otherwise. With probability `P_ONCOMING` an oncoming
+vehicle (a truck) is timed to pass the obstacle `ONCOMING_OFFSET` seconds (drawn) after the ego
+would reach it at free speed, so the overtake has to wait for it. Draws: docs/scenes.md.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from trustroute.harness.incidents.base import EgoState, Scene, remove_vehicle, vehicle_position
+from trustroute.harness.incidents.base import (
+    EgoState,
+    Scene,
+    park_vehicle,
+    remove_vehicle,
+    vehicle_position,
+)
+from trustroute.harness.incidents.oncoming import OncomingVehicle, schedule_oncoming
 
 KIND = "obstacle"
 TYPE_ID = "trustroute_obstacle"
-POSITION_FRACTION = 0.4
-CLEAR_AFTER = 4.0             # seconds the ego waits, stopped behind the obstacle
-WAITING_GAP = 30.0            # metres: "close behind"
-STOPPED_SPEED = 0.1
+BICYCLE_TYPE_ID = "trustroute_broken_bicycle"
+POSITION_RANGE = (0.35, 0.55)   # fraction of the road where the obstacle stands (uniform)
+P_BICYCLE = 0.3
+P_ONCOMING = 0.5
+ONCOMING_OFFSET = (-4.0, 6.0)   # s, uniform: when the oncoming vehicle passes the obstacle,
+                                # relative to the ego's free-speed arrival there
 
 
 def define_type(sumo) -> None:
     sumo.vehicletype.copy("DEFAULT_VEHTYPE", TYPE_ID)
     sumo.vehicletype.setVehicleClass(TYPE_ID, "passenger")
-    sumo.vehicletype.setLength(TYPE_ID, 6.0)
+    sumo.vehicletype.setLength(TYPE_ID, 4.5)
     sumo.vehicletype.setColor(TYPE_ID, (255, 200, 0, 255))
-    sumo.vehicletype.setShapeClass(TYPE_ID, "truck")
+    sumo.vehicletype.copy("DEFAULT_VEHTYPE", BICYCLE_TYPE_ID)
+    sumo.vehicletype.setVehicleClass(BICYCLE_TYPE_ID, "passenger")   # may stand in a car lane
+    sumo.vehicletype.setShapeClass(BICYCLE_TYPE_ID, "bicycle")
+    sumo.vehicletype.setLength(BICYCLE_TYPE_ID, 1.8)
+    sumo.vehicletype.setWidth(BICYCLE_TYPE_ID, 0.65)
+    sumo.vehicletype.setColor(BICYCLE_TYPE_ID, (255, 200, 0, 255))
 
 
 @dataclass
@@ -32,45 +50,54 @@ class ObstacleIncident:
     road: str
     vehicle_id: str
     position_on_road: float
+    bicycle: bool
+    oncoming: OncomingVehicle | None = None
     kind: str = KIND
     sumo_ids: tuple[str, ...] = field(init=False)
-    waited: float = 0.0
-    cleared_at: float | None = None
-    _last_time: float | None = None
 
     def __post_init__(self) -> None:
-        self.sumo_ids = (self.vehicle_id,)
+        self.sumo_ids = (self.vehicle_id,) + ((self.oncoming.vehicle_id,) if self.oncoming else ())
 
     def position(self, sumo) -> tuple[float, float] | None:
         return vehicle_position(sumo, self.vehicle_id)
 
     def step(self, sumo, ego: EgoState) -> None:
-        dt = 0.0 if self._last_time is None else ego.time - self._last_time
-        self._last_time = ego.time
-        if self.cleared_at is not None or ego.road != self.road:
-            return
-        behind = 0.0 < self.position_on_road - ego.lane_position < WAITING_GAP
-        if behind and ego.speed < STOPPED_SPEED:
-            self.waited += dt
-            if self.waited >= CLEAR_AFTER:
-                self.remove(sumo)
-                self.cleared_at = ego.time
+        if self.oncoming is not None:
+            self.oncoming.step(sumo, ego)
+
+    def measure(self, sumo, ego: EgoState, monitor) -> None:
+        if self.oncoming is not None:
+            self.oncoming.measure(sumo, ego, monitor)
 
     def is_passed(self, sumo, ego: EgoState) -> bool:
-        return ego.road == self.road and ego.lane_position > self.position_on_road
+        # Past it on its own road, or on the oncoming lane beside and beyond it.
+        if ego.road == self.road:
+            return ego.lane_position > self.position_on_road
+        return False
 
     def remove(self, sumo) -> None:
         remove_vehicle(sumo, self.vehicle_id)
+        if self.oncoming is not None:
+            self.oncoming.remove(sumo)
+
+    def details(self) -> str:
+        text = f"object={'bicycle' if self.bicycle else 'car'} position={self.position_on_road:.1f}"
+        return text + (f" {self.oncoming.details()}" if self.oncoming else " oncoming=none")
 
 
 def inject(sumo, scene: Scene) -> ObstacleIncident:
     vehicle_id = f"{scene.prefix}.obstacle"
-    route_id = f"{scene.prefix}.obstacle_route"
-    position = POSITION_FRACTION * scene.road_length
-    sumo.route.add(route_id, [scene.road])
-    sumo.vehicle.add(vehicle_id, route_id, typeID=TYPE_ID, depart="now", departLane="best",
-                     departPos=f"{position:.2f}", departSpeed="0")
-    sumo.vehicle.setSpeedMode(vehicle_id, 0)
-    sumo.vehicle.setSpeed(vehicle_id, 0.0)
-    sumo.vehicle.setLaneChangeMode(vehicle_id, 0)
-    return ObstacleIncident(road=scene.road, vehicle_id=vehicle_id, position_on_road=position)
+    fraction = scene.draw("position_fraction", lambda rng: rng.uniform(*POSITION_RANGE))
+    bicycle = bool(scene.draw("bicycle", lambda rng: rng.random() < P_BICYCLE))
+    with_oncoming = bool(scene.draw("oncoming", lambda rng: rng.random() < P_ONCOMING))
+    offset = float(scene.draw("oncoming_offset", lambda rng: rng.uniform(*ONCOMING_OFFSET)))
+    position = fraction * scene.road_length
+    park_vehicle(sumo, vehicle_id, f"{scene.prefix}.obstacle_route", scene.road, position,
+                 BICYCLE_TYPE_ID if bicycle else TYPE_ID)
+    oncoming = None
+    if with_oncoming and scene.reverse_road is not None:
+        eta = (scene.ego_distance + position) / scene.road_speed
+        oncoming = schedule_oncoming(sumo, scene, meet_at=position, meet_in=eta + offset,
+                                     vehicle_id=f"{scene.prefix}.oncoming")
+    return ObstacleIncident(road=scene.road, vehicle_id=vehicle_id, position_on_road=position,
+                            bicycle=bicycle, oncoming=oncoming)

@@ -1,68 +1,90 @@
-"""Truck incident: a slow heavy vehicle ahead of the ego on its road (one lane: no overtaking).
+"""Truck incident: an oncoming truck in the neighbouring lane, timed to meet the ego on its road.
 
-The truck is inserted a short way into the road when the ego commits to it, drives at
-`TRUCK_SPEED` and leaves the simulation at the end of the road; the ego catches up and follows.
+The truck drives the opposite directed road at `oncoming.TRUCK_SPEED` and is scheduled to pass
+the ego at a drawn fraction of the road (`MEET_RANGE`), assuming the ego drives at free speed.
+With probability `P_PARKED` a car is parked in the truck's own lane shortly before that point
+(`PARKED_BEFORE_MEETING`, drawn): the truck then overtakes it through the ego's lane, with
+SUMO's own opposite-direction overtaking and gap acceptance, and the ego has to react to a
+truck in its lane. The incident is passed once the two have met. Draws: docs/scenes.md.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from trustroute.harness.incidents.base import (
     EgoState,
     Scene,
+    park_vehicle,
     remove_vehicle,
     vehicle_position,
-    vehicle_present,
 )
+from trustroute.harness.incidents.oncoming import OncomingVehicle, schedule_oncoming
 
 KIND = "truck"
-TYPE_ID = "trustroute_truck"
-TRUCK_SPEED = 6.0       # m/s, against 13.89 on the road
-START_POSITION = 30.0   # metres into the road
+PARKED_TYPE_ID = "trustroute_parked_car"
+MEET_RANGE = (0.3, 0.7)               # fraction of the ego's road where they are timed to meet
+P_PARKED = 0.15
+PARKED_BEFORE_MEETING = (0.0, 80.0)   # metres before the meeting point, along the truck's way
 
 
 def define_type(sumo) -> None:
-    sumo.vehicletype.copy("DEFAULT_VEHTYPE", TYPE_ID)
-    sumo.vehicletype.setVehicleClass(TYPE_ID, "truck")
-    sumo.vehicletype.setShapeClass(TYPE_ID, "truck")
-    sumo.vehicletype.setLength(TYPE_ID, 12.0)
-    sumo.vehicletype.setMaxSpeed(TYPE_ID, TRUCK_SPEED)
-    sumo.vehicletype.setAccel(TYPE_ID, 1.0)
-    sumo.vehicletype.setImperfection(TYPE_ID, 0.0)
-    sumo.vehicletype.setColor(TYPE_ID, (120, 120, 255, 255))
+    sumo.vehicletype.copy("DEFAULT_VEHTYPE", PARKED_TYPE_ID)
+    sumo.vehicletype.setLength(PARKED_TYPE_ID, 4.5)
+    sumo.vehicletype.setColor(PARKED_TYPE_ID, (160, 160, 160, 255))
 
 
 @dataclass
 class TruckIncident:
     road: str
-    vehicle_id: str
+    oncoming: OncomingVehicle
+    parked_id: str | None = None
     kind: str = KIND
     sumo_ids: tuple[str, ...] = field(init=False)
 
     def __post_init__(self) -> None:
-        self.sumo_ids = (self.vehicle_id,)
+        self.sumo_ids = (self.oncoming.vehicle_id,) + ((self.parked_id,) if self.parked_id else ())
+
+    @property
+    def vehicle_id(self) -> str:
+        return self.oncoming.vehicle_id
 
     def position(self, sumo) -> tuple[float, float] | None:
-        return vehicle_position(sumo, self.vehicle_id)
+        return vehicle_position(sumo, self.oncoming.vehicle_id) if self.oncoming.inserted else None
 
     def step(self, sumo, ego: EgoState) -> None:
-        return None
+        self.oncoming.step(sumo, ego)
+
+    def measure(self, sumo, ego: EgoState, monitor) -> None:
+        self.oncoming.measure(sumo, ego, monitor)
 
     def is_passed(self, sumo, ego: EgoState) -> bool:
-        # Passed once the truck has left the ego's road (it drives off at the road's end).
-        return ego.road == self.road and not vehicle_present(sumo, self.vehicle_id)
+        return not math.isnan(self.oncoming.met_time)   # they have met
 
     def remove(self, sumo) -> None:
-        remove_vehicle(sumo, self.vehicle_id)
+        self.oncoming.remove(sumo)
+        if self.parked_id is not None:
+            remove_vehicle(sumo, self.parked_id)
+
+    def details(self) -> str:
+        return f"{self.oncoming.details()} parked={'yes' if self.parked_id else 'no'}"
 
 
 def inject(sumo, scene: Scene) -> TruckIncident:
-    vehicle_id = f"{scene.prefix}.truck"
-    route_id = f"{scene.prefix}.truck_route"
-    position = min(START_POSITION, 0.25 * scene.road_length)
-    sumo.route.add(route_id, [scene.road])
-    sumo.vehicle.add(vehicle_id, route_id, typeID=TYPE_ID, depart="now", departLane="best",
-                     departPos=f"{position:.2f}", departSpeed="max")
-    sumo.vehicle.setLaneChangeMode(vehicle_id, 0)
-    return TruckIncident(road=scene.road, vehicle_id=vehicle_id)
+    if scene.reverse_road is None:
+        raise ValueError(f"truck incident on {scene.road}: the road has no opposite direction")
+    fraction = float(scene.draw("meet_fraction", lambda rng: rng.uniform(*MEET_RANGE)))
+    parked = bool(scene.draw("parked", lambda rng: rng.random() < P_PARKED))
+    before = float(scene.draw("parked_before_meeting", lambda rng: rng.uniform(*PARKED_BEFORE_MEETING)))
+    meet_at = fraction * scene.road_length
+    eta = (scene.ego_distance + meet_at) / scene.road_speed
+    parked_id = None
+    if parked:
+        parked_id = f"{scene.prefix}.parked"
+        on_reverse = sumo.lane.getLength(f"{scene.reverse_road}_1") - meet_at - before
+        park_vehicle(sumo, parked_id, f"{parked_id}_route", scene.reverse_road, max(on_reverse, 5.0),
+                     PARKED_TYPE_ID)
+    oncoming = schedule_oncoming(sumo, scene, meet_at=meet_at, meet_in=eta,
+                                 vehicle_id=f"{scene.prefix}.truck")
+    return TruckIncident(road=scene.road, oncoming=oncoming, parked_id=parked_id)

@@ -12,10 +12,11 @@ Minimal form (every other key is optional)::
 Optional `[study]` keys: `name`, `town`, `driver_model`, `horizon` (synthesis horizon of "aware"
 policies, junctions; default 20), `fallback_after` (20; `false` disables the 20-junction rule),
 `junction_cap` (60), `report_every` (1), `belief_rule` ("bayes" or "paper"), `output` (study directory),
-`policy_cache` (where synthesized policies are cached), `record` (episode ids, e.g.
-`["p00000-phi1-aware"]`, written as Rerun recordings to `<study dir>/recordings/<id>.rrd` while the
-study runs; SUMO engine only; not part of the content hash, since it does not change the dataset).
-Optional `[population]` table: individual
+`policy_cache` (where synthesized policies are cached), `background_vehicles` (SUMO engine:
+seeded background traffic, vehicles kept on the net; default 0 = none, docs/scenes.md), `record`
+(episode ids, e.g. `["p00000-phi1-aware"]`, written as Rerun recordings to
+`<study dir>/recordings/<id>.rrd` while the study runs; SUMO engine only; not part of the content
+hash, since it does not change the dataset). Optional `[population]` table: individual
 variation of the drivers (participants.population.PopulationConfig; omitted: every driver is the
 nominal model, reporting trust with accuracy 0.8).
 
@@ -55,6 +56,7 @@ STUDY_KEYS: tuple[str, ...] = (
     "belief_rule",
     "output",
     "policy_cache",
+    "background_vehicles",
     "record",
 )
 DEFAULT_REPORT_ACCURACY = 0.8
@@ -80,6 +82,7 @@ class StudyConfig:
     belief_rule: str = "bayes"
     output: str | None = None
     policy_cache: str | None = None   # None: the resolver's default cache
+    background_vehicles: int = 0      # SUMO engine: seeded background traffic (docs/scenes.md)
     record: tuple[str, ...] = ()      # episode ids recorded to Rerun during the run
     population: dict | None = field(default=None, compare=False, hash=False)
 
@@ -294,6 +297,13 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
             fix="write fallback_after = 20, or false to disable the rule",
         )
     junction_cap = _integer(study, "junction_cap", source, 1, default=60)
+    background_vehicles = _integer(
+        study, "background_vehicles", source, 0, default=0,
+        fix="write background_vehicles = 20 (vehicles kept on the net), or 0 / omit it for none",
+    )
+    if background_vehicles > 200:
+        raise InputError(source, "study.background_vehicles", f"{background_vehicles} vehicles is more than "
+                         "the town's roads hold (at most 200)", "write a number from 0 to 200")
     report_every = _integer(study, "report_every", source, 1, default=1)
     belief_rule = study.get("belief_rule", "bayes")
     if belief_rule not in BELIEF_RULES:
@@ -344,6 +354,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         belief_rule=belief_rule,
         output=output,
         policy_cache=policy_cache,
+        background_vehicles=background_vehicles,
         record=record,
         population=_population(data.get("population"), source),
     )

@@ -17,7 +17,7 @@ import json
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from trustroute.analysis.dataset import STUDY_FILE
@@ -171,6 +171,10 @@ def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path |
     )
     options = {}
     if config.engine == "sumo":
+        from trustroute.harness.sumo_start import SumoConfig
+
+        sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
+                              background_vehicles=config.background_vehicles)
         options = {"rrd_path": rrd_path, "config": sumo_config}
     return engine_function(config.engine)(
         context.setups[task.spec],

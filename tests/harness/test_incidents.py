@@ -10,7 +10,6 @@ import pytest
 from tests.harness.helpers import INCIDENT_ROUTE, SPECS, FixedRoute, ForcedTakeover
 from trustroute.harness.episode import EGO_ID, run_episode
 from trustroute.harness.episode_tracker import EpisodeSetup
-from trustroute.harness.incidents import obstacle
 from trustroute.networks.sumo_net import build_net
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
@@ -30,7 +29,8 @@ class Recorder:
             "persons": {p: (sumo.person.getRoadID(p), tuple(sumo.person.getPosition(p)))
                         for p in sumo.person.getIDList()},
             "vehicles": {v: (sumo.vehicle.getLaneID(v), sumo.vehicle.getLanePosition(v),
-                             sumo.vehicle.getSpeed(v)) for v in sumo.vehicle.getIDList() if v != EGO_ID},
+                             sumo.vehicle.getSpeed(v), tuple(sumo.vehicle.getPosition(v)))
+                         for v in sumo.vehicle.getIDList() if v != EGO_ID},
             "collisions": [(c.collider, c.victim) for c in sumo.simulation.getCollisions()],
         })
 
@@ -88,26 +88,43 @@ def test_pedestrian_crosses_and_the_ego_yields(episode):
     assert first_on_road > on_crossing[-1]["time"] - 1.0
 
 
-def test_obstacle_blocks_the_lane(episode):
+def test_obstacle_stays_and_the_ego_overtakes_through_the_oncoming_lane(episode):
     record, steps = episode
-    vehicle = _incident(record, "obstacle").sumo_ids
+    row = _incident(record, "obstacle")
+    vehicle = row.sumo_ids.split(",")[0]
     present = [s for s in steps if vehicle in s["vehicles"]]
-    lane, position, speed = present[-1]["vehicles"][vehicle]
+    lane, position, speed, _ = present[-1]["vehicles"][vehicle]
     assert lane == "C-J_1" and speed == 0.0
-    assert all(s["vehicles"][vehicle][1] == pytest.approx(position) for s in present)   # it never moves
-    blocked = [s for s in present if s["lane"] == lane and s["pos"] < position and s["speed"] < 0.1]
-    assert len(blocked) * 0.5 >= obstacle.CLEAR_AFTER - 0.5, "the ego did not wait behind the obstacle"
-    assert all(s["pos"] < position for s in present if s["road"] == "C-J")   # never through it
-    after = [s for s in steps if s["road"] == "C-J" and s["pos"] > position]
-    assert after and vehicle not in after[0]["vehicles"]
+    assert all(abs(s["vehicles"][vehicle][1] - position) < 0.2 for s in present)   # it never moves
+    # while passing, the ego drives in the oncoming lane (J-C, the opposite road), beside the obstacle
+    passing = [s for s in steps if s["lane"] == "J-C_1" and row.injected_time < s["time"] < row.removed_time]
+    assert passing, "the ego never used the oncoming lane"
+    # never through it: the ego's body [front - 5 m, front] never overlaps the obstacle in its lane
+    assert not any(s["pos"] > position - 1.8 and s["pos"] - 5.0 < position
+                   for s in present if s["lane"] == "C-J_1")
+    after = [s for s in steps if s["lane"] == "C-J_1" and s["pos"] > position]
+    assert after, "the ego never got past the obstacle"
+    # the obstacle is still there after the ego has passed it: it does not leave by itself
+    assert vehicle in after[0]["vehicles"] and after[0]["time"] >= row.passed_time
+    assert row.passed_time < row.removed_time
 
 
-def test_truck_is_ahead(episode):
+def test_truck_comes_towards_the_ego_in_the_neighbouring_lane(episode):
     record, steps = episode
-    truck = _incident(record, "truck").sumo_ids
-    following = [s for s in steps if s["leader"] == truck and s["road"] == "J-K"]
-    assert len(following) >= 10
-    assert all(s["vehicles"][truck][1] > s["pos"] for s in following)
-    assert max(s["vehicles"][truck][2] for s in following) <= 6.0 + 1e-6
-    # the ego ends up at the truck's pace
-    assert min(s["speed"] for s in following[len(following) // 2:]) < 7.0
+    row = _incident(record, "truck")
+    truck = row.sumo_ids.split(",")[0]
+    seen = [s for s in steps if truck in s["vehicles"]]
+    assert len(seen) >= 10
+    assert all(s["vehicles"][truck][0] == "K-J_1" for s in seen)   # the opposite direction of J-K
+    assert max(s["vehicles"][truck][2] for s in seen) <= 11.0 + 1e-6
+    # it comes towards the ego: the distance shrinks until they meet, at the logged time and place
+    met = float(row.scene.split("met_time=")[1].split()[0])
+    before = [s for s in seen if s["time"] < met and s["road"] == "J-K"]
+    gaps = [math.dist(s["xy"], _vehicle_xy(s, truck)) for s in before]
+    assert len(gaps) >= 3 and gaps == sorted(gaps, reverse=True)
+    at_meeting = next(s for s in steps if s["time"] == met)
+    assert at_meeting["road"] == "J-K" and math.dist(at_meeting["xy"], _vehicle_xy(at_meeting, truck)) < 20.0
+
+
+def _vehicle_xy(step, vehicle):
+    return step["vehicles"][vehicle][3]

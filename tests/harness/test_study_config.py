@@ -125,3 +125,15 @@ def test_example_configs_load(monkeypatch):
     for path in examples:
         load_study_config(path)
     assert os.path.basename(str(examples[0])).endswith(".toml")
+
+
+def test_background_vehicles_key():
+    from trustroute.harness.study.config import study_config_from_dict
+    from trustroute.networks.errors import InputError
+
+    base = {"participants": 2, "seed": 1, "specs": ["phi1"], "conditions": ["free"]}
+    assert study_config_from_dict({"study": base}).background_vehicles == 0
+    assert study_config_from_dict({"study": {**base, "background_vehicles": 12}}).background_vehicles == 12
+    for bad in (-1, "many", 1000, True):
+        with pytest.raises(InputError, match="background_vehicles"):
+            study_config_from_dict({"study": {**base, "background_vehicles": bad}})

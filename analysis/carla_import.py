@@ -1,0 +1,601 @@
+"""Import the authors' CARLA study logs (trust_level_record CSVs) into a study directory.
+
+One CSV per (driver, trial, condition) has one row per CARLA tick: the displayed trust level
+(1-7), the location as "(x, y, road_id, lane_id)" of the lane-centre waypoint, whether the
+autopilot was on, and the belief the AV logged. This module
+
+- names every file (driver, trial, if_baseline) and classifies it: study episode, warm-up
+  (trial 3), pilot (driver 0 / pilot_study), or the authors' sample copies;
+- cuts each episode into directed roads the way their simulator did: a road ends at the first
+  tick within 15 m of the arrival point of its state (state_location.csv), and the next road is
+  the successor state whose arrival point the vehicle reaches next;
+- per road records the takeover (any tick with the autopilot off), the trust displayed on
+  arrival, the number of trust changes, the AV's logged belief, and the exact Bayes filter of
+  the packaged driver model run on the observed incidents and takeovers;
+- writes the dataset's episodes.parquet, roads.parquet, kinematics.parquet (positions, thinned)
+  and manifest.json through trustroute.analysis.dataset, and beside them real_episodes.parquet,
+  real_roads.parquet and ticks.parquet (lossless run-length encoding of trust and autopilot).
+
+The format is documented in docs/real_study.md. Bad input raises InputError (one line, exit 2).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+
+from trustroute.analysis import dataset
+from trustroute.analysis.carla_tables import ARRIVAL_RADIUS_M, CarlaTables, load_carla_tables
+from trustroute.networks.errors import InputError
+
+# --sync runs CARLA with settings.fixed_delta_seconds = 0.05 (the driver script's game_loop)
+TICK_SECONDS = 0.05
+# The real-study tables beside the dataset's (docs/real_study.md, "The study directory").
+REAL_EPISODES_FILE = "real_episodes.parquet"
+REAL_ROADS_FILE = "real_roads.parquet"
+TICKS_FILE = "ticks.parquet"
+REAL_EPISODES_SCHEMA = pa.schema(
+    [
+        pa.field("episode_id", pa.string(), nullable=False),
+        pa.field("trial", pa.int64(), nullable=False),
+        pa.field("source_file", pa.string(), nullable=False),
+        pa.field("ticks", pa.int64(), nullable=False),
+        pa.field("manual_ticks", pa.int64(), nullable=False),
+        pa.field("trust_changes", pa.int64(), nullable=False),
+        pa.field("final_reported_trust", pa.int64(), nullable=False),
+        pa.field("log_end", pa.string(), nullable=False),
+    ]
+)
+REAL_ROADS_SCHEMA = pa.schema(
+    [
+        pa.field("episode_id", pa.string(), nullable=False),
+        pa.field("index", pa.int64(), nullable=False),
+        pa.field("authors_state", pa.string(), nullable=False),
+        pa.field("logged_belief", pa.list_(pa.float64()), nullable=False),
+        pa.field("arrived", pa.bool_(), nullable=False),
+        pa.field("tick_first", pa.int64(), nullable=False),
+        pa.field("tick_last", pa.int64(), nullable=False),
+        pa.field("ticks", pa.int64(), nullable=False),
+        pa.field("manual_ticks", pa.int64(), nullable=False),
+        pa.field("trust_changes", pa.int64(), nullable=False),
+    ]
+)
+TICKS_SCHEMA = pa.schema(
+    [
+        pa.field("episode_id", pa.string(), nullable=False),
+        pa.field("tick_first", pa.int64(), nullable=False),
+        pa.field("tick_last", pa.int64(), nullable=False),
+        pa.field("rows", pa.int64(), nullable=False),
+        pa.field("road_index", pa.int64(), nullable=False),
+        pa.field("carla_road", pa.int64(), nullable=False),
+        pa.field("trust", pa.int64(), nullable=False),
+        pa.field("autopilot", pa.bool_(), nullable=False),
+    ]
+)
+REAL_TABLES = {
+    "real_episodes": (REAL_EPISODES_FILE, REAL_EPISODES_SCHEMA),
+    "real_roads": (REAL_ROADS_FILE, REAL_ROADS_SCHEMA),
+    "ticks": (TICKS_FILE, TICKS_SCHEMA),
+}
+LOG_COLUMNS = ("trust_level", "location", "if_autopilot", "trust_belief")
+LOG_NAME = re.compile(
+    r"trust_level_record_driver_(?P<driver>\d+)_trial_(?P<trial>\d+)_if_baseline_(?P<baseline>[01])"
+    r"(?P<tag>.*)\.csv$"
+)
+# A tick farther than this from every Town01 spawn point is on no road of the study. Spawn points
+# line every road of Town01; the largest distance of any logged tick in the released logs is
+# reported by the importer (manifest "max_distance_to_spawn_point_m") and is far below this.
+OFF_ROAD_M = 60.0
+KINEMATICS_EVERY = 25  # ticks between kept positions in kinematics.parquet (ticks.parquet is lossless)
+# The session order of the README: warm-up, trial 1 aware, trial 1 baseline, trial 2 aware, trial 2 baseline.
+SESSION_ORDER = {(3, 0): 0, (1, 0): 1, (1, 1): 2, (2, 0): 3, (2, 1): 4}
+EXPECTED_FILES = tuple(SESSION_ORDER)
+CONDITIONS = {0: "aware", 1: "free"}
+
+
+@dataclass(frozen=True)
+class LogFile:
+    path: Path
+    relative: str
+    driver: int
+    trial: int
+    baseline: int
+    role: str  # "study", "warmup", "pilot", "sample"
+
+    @property
+    def episode_id(self) -> str:
+        return f"d{self.driver:02d}-t{self.trial}-{CONDITIONS[self.baseline]}"
+
+
+def classify(path: Path, root: Path) -> LogFile | None:
+    match = LOG_NAME.search(path.name)
+    if match is None:
+        return None
+    relative = str(path.relative_to(root)) if path.is_relative_to(root) else path.name
+    driver, trial, baseline = int(match["driver"]), int(match["trial"]), int(match["baseline"])
+    tag = match["tag"]
+    lowered = relative.lower()
+    if "sample" in tag or "sample_data" in lowered:
+        role = "sample"
+    elif "pilot" in lowered or driver == 0 or "warmup" in tag:
+        role = "pilot"  # driver 0 is the experimenters' test id (README: --driver_id 0)
+    elif trial == 3:
+        role = "warmup"
+    else:
+        role = "study"
+    if trial not in (1, 2, 3):
+        raise InputError(
+            relative,
+            "file name",
+            f"unknown trial {trial} (the study ran trials 1, 2 and 3)",
+            "remove the file or rename it to trial_1, trial_2 or trial_3",
+        )
+    return LogFile(path, relative, driver, trial, baseline, role)
+
+
+def read_log(path: Path, relative: str) -> pd.DataFrame:
+    """The tick table: trust, x, y, carla_road, carla_lane, autopilot, belief [n, 7]."""
+    try:
+        raw = pd.read_csv(path)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise InputError(
+            relative, "", f"cannot read the CSV ({exc})", "pass the authors' CSV unchanged"
+        ) from None
+    missing = [c for c in LOG_COLUMNS if c not in raw.columns]
+    if missing:
+        raise InputError(
+            relative,
+            "header",
+            f"missing column(s) {', '.join(missing)}",
+            f"a trust_level_record file has columns {', '.join(LOG_COLUMNS)}",
+        )
+    if raw.empty:
+        raise InputError(relative, "rows", "no ticks", "pass a non-empty log")
+    tick = raw[raw.columns[0]].to_numpy() if raw.columns[0].startswith("Unnamed") else np.arange(len(raw))
+    try:
+        location = raw["location"].str.strip("()").str.split(",", expand=True).astype(float).to_numpy()
+        belief = raw["trust_belief"].str.strip("()").str.split(",", expand=True).astype(float).to_numpy()
+    except (ValueError, AttributeError) as exc:
+        raise InputError(
+            relative,
+            "location/trust_belief",
+            f"not a tuple of numbers ({exc})",
+            'location is "(x, y, road_id, lane_id)", trust_belief a 7-tuple',
+        ) from None
+    if location.shape[1] != 4 or belief.shape[1] != 7:
+        raise InputError(
+            relative,
+            "location/trust_belief",
+            "wrong tuple length",
+            'location is "(x, y, road_id, lane_id)", trust_belief a 7-tuple',
+        )
+    trust = pd.to_numeric(raw["trust_level"], errors="coerce").to_numpy()
+    if np.isnan(trust).any() or ((trust < 1) | (trust > 7)).any():
+        row = int(np.flatnonzero(np.isnan(trust) | (trust < 1) | (trust > 7))[0])
+        raise InputError(
+            relative, f"row {row}", "trust_level is not a level 1..7", "pass the authors' CSV unchanged"
+        )
+    autopilot = raw["if_autopilot"].astype(str).str.strip().map({"True": True, "False": False})
+    if autopilot.isna().any():
+        row = int(np.flatnonzero(autopilot.isna().to_numpy())[0])
+        raise InputError(
+            relative, f"row {row}", "if_autopilot is not True/False", "pass the authors' CSV unchanged"
+        )
+    return pd.DataFrame(
+        {
+            "tick": tick.astype(np.int64),
+            "trust": trust.astype(np.int64),
+            "x": location[:, 0],
+            "y": location[:, 1],
+            "carla_road": location[:, 2].astype(np.int64),
+            "carla_lane": location[:, 3].astype(np.int64),
+            "autopilot": autopilot.to_numpy(dtype=bool),
+        }
+    ).assign(belief=list(belief))
+
+
+@dataclass(frozen=True)
+class RoadCut:
+    state: str  # the authors' state name, e.g. "F1"
+    first: int  # first tick row of the road
+    last: int  # last tick row (the arrival tick, or the log's last row if not arrived)
+    arrived: bool
+
+
+def cut_roads(xy: np.ndarray, trial: int, tables: CarlaTables, relative: str = "") -> list[RoadCut]:
+    """The simulator's road sequence: a road ends at the first tick within ARRIVAL_RADIUS_M of its
+    state's arrival point; the next road is the successor state reached first afterwards."""
+    info = tables.trials[trial]
+    state, first = info["start"], 0
+    cuts: list[RoadCut] = []
+    while True:
+        target = np.asarray(tables.arrival_point[state])
+        within = np.flatnonzero(np.hypot(*(xy[first:] - target).T) <= ARRIVAL_RADIUS_M)
+        if within.size == 0:
+            cuts.append(RoadCut(state, first, len(xy) - 1, False))
+            return cuts
+        arrival = first + int(within[0])
+        cuts.append(RoadCut(state, first, arrival, True))
+        candidates = tables.successors(state)
+        if tables.road_of_state[state].split("-")[1] == info["goal"]:
+            candidates = [*candidates, state]  # the policy's stay-at-goal action (a3)
+        best: tuple[int, str] | None = None
+        for candidate in candidates:
+            point = np.asarray(tables.arrival_point[candidate])
+            # the candidate is reached after leaving the current arrival zone
+            rest = xy[arrival + 1 :]
+            gone = np.flatnonzero(np.hypot(*(rest - target).T) > ARRIVAL_RADIUS_M)
+            start = int(gone[0]) if gone.size else len(rest)
+            hit = np.flatnonzero(np.hypot(*(rest[start:] - point).T) <= ARRIVAL_RADIUS_M)
+            if hit.size and (best is None or start + int(hit[0]) < best[0]):
+                best = (start + int(hit[0]), candidate)
+        if best is None:
+            # the log ends on the next road before its arrival: which road is it? The nearest
+            # successor arrival point to the last tick.
+            if arrival + 1 >= len(xy):
+                return cuts
+            last = xy[-1]
+            nearest = min(
+                candidates, key=lambda s: float(np.hypot(*(last - np.asarray(tables.arrival_point[s]))))
+            )
+            cuts.append(RoadCut(nearest, arrival + 1, len(xy) - 1, False))
+            return cuts
+        state, first = best[1], arrival + 1
+
+
+def check_on_road(ticks: pd.DataFrame, tables: CarlaTables, relative: str) -> float:
+    xy = ticks[["x", "y"]].to_numpy()
+    d = np.sqrt(((xy[:, None, :] - tables.spawn_points[None, :, :]) ** 2).sum(-1)).min(axis=1)
+    worst = int(np.argmax(d))
+    if d[worst] > OFF_ROAD_M:
+        raise InputError(
+            relative,
+            f"row {worst}",
+            f"location ({xy[worst, 0]:.1f}, {xy[worst, 1]:.1f}) maps to no road of Town01 "
+            f"({d[worst]:.0f} m from the nearest spawn point, limit {OFF_ROAD_M:.0f} m)",
+            "pass an unmodified log of the authors' Town01 study",
+        )
+    return float(d[worst])
+
+
+def episode_tables(
+    log: LogFile, ticks: pd.DataFrame, tables: CarlaTables, driver_model, town
+) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    """(episode row, roads frame, run-length ticks frame) of one log."""
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+
+    cuts = cut_roads(ticks[["x", "y"]].to_numpy(), log.trial, tables, log.relative)
+    pomdp = build_pomdp(town, driver_model)
+    trust = ticks["trust"].to_numpy()
+    auto = ticks["autopilot"].to_numpy()
+    beliefs = np.stack(ticks["belief"].to_numpy())
+    belief = np.asarray(driver_model.initial_belief, dtype=float)
+    rows, road_of_tick = [], np.zeros(len(ticks), dtype=np.int64)
+    for i, cut in enumerate(cuts):
+        road = tables.road_of_state[cut.state]
+        span = slice(cut.first, cut.last + 1)
+        road_of_tick[span] = i
+        takeover = bool((~auto[span]).any()) if i > 0 else False
+        incident = tables.incidents[road] if i > 0 else "none"
+        before = belief.copy()
+        if i > 0:
+            posterior, _ = pomdp.belief_update(before, driver_model.incident_index(incident), int(takeover))
+            belief = posterior[0] if posterior[0].sum() > 0 else before
+        segment = trust[span]
+        rows.append(
+            {
+                "episode_id": log.episode_id,
+                "index": i,
+                "directed_road": road,
+                "action": None,
+                "incident": incident,
+                "takeover": takeover if i > 0 else None,  # the start road has no observation
+                "performance": "succ" if i > 0 else None,  # their model has no AV performance
+                "trust_before": None,
+                "trust_after": None,  # hidden trust: unknown for real participants
+                "reported_trust": int(trust[cut.last]),
+                "belief_before": before.tolist(),
+                "belief_after": belief.tolist(),
+                "dfa_state": -1,  # not run at import; analysis evaluates the specs
+                "fallback": False,
+                "sim_time_in": float(ticks["tick"].iloc[cut.first]) * TICK_SECONDS,
+                "sim_time_out": float(ticks["tick"].iloc[cut.last]) * TICK_SECONDS,
+                "tick_first": int(ticks["tick"].iloc[cut.first]),
+                "tick_last": int(ticks["tick"].iloc[cut.last]),
+                # real-study columns (docs/real_study.md)
+                "authors_state": cut.state,
+                # the middle tick: the logged belief changes a tick after the simulator's arrival
+                # test, whose position (the vehicle's) differs slightly from the logged waypoint
+                "logged_belief": beliefs[(cut.first + cut.last) // 2].tolist(),
+                "arrived": cut.arrived,
+                "ticks": int(cut.last - cut.first + 1),
+                "manual_ticks": int((~auto[span]).sum()),
+                "trust_changes": int((segment[1:] != segment[:-1]).sum())
+                + int(i > 0 and trust[cut.first] != trust[cut.first - 1]),
+            }
+        )
+    for i in range(len(rows) - 1):
+        rows[i]["action"] = rows[i + 1]["directed_road"].split("-")[1]
+    roads = pd.DataFrame(rows)
+    for column in ("takeover",):
+        roads[column] = roads[column].astype("boolean")
+    for column in ("trust_before", "trust_after"):
+        roads[column] = roads[column].astype("Int64")
+    carla_road = ticks["carla_road"].to_numpy()
+    change = (
+        np.flatnonzero(
+            (trust[1:] != trust[:-1])
+            | (auto[1:] != auto[:-1])
+            | (road_of_tick[1:] != road_of_tick[:-1])
+            | (carla_road[1:] != carla_road[:-1])
+        )
+        + 1
+    )
+    starts = np.concatenate([[0], change])
+    ends = np.concatenate([change - 1, [len(ticks) - 1]])
+    runs = pd.DataFrame(
+        {
+            "episode_id": log.episode_id,
+            "tick_first": ticks["tick"].to_numpy()[starts],
+            "tick_last": ticks["tick"].to_numpy()[ends],
+            "rows": ends - starts + 1,  # log rows in the run (a row per tick in the authors' logs)
+            "road_index": road_of_tick[starts],
+            "carla_road": carla_road[starts],
+            "trust": trust[starts],
+            "autopilot": auto[starts],
+        }
+    )
+    driven = roads.iloc[1:]
+    goal = tables.trials[log.trial]["goal"]
+    reached_goal = bool((roads["arrived"] & roads["directed_road"].str.endswith(f"-{goal}")).any())
+    episode = {
+        "episode_id": log.episode_id,
+        "participant": log.driver,
+        "position": SESSION_ORDER[(log.trial, log.baseline)],
+        "spec": tables.trials[log.trial]["spec"],
+        "condition": CONDITIONS[log.baseline],
+        "seed": -1,  # a real participant: no seed
+        "trial": log.trial,
+        "source_file": log.relative,
+        "junctions": int(len(roads) - 1),
+        "takeovers": int(driven["takeover"].sum()),
+        "final_trust": None,  # hidden trust: unknown (the displayed trust is final_reported_trust)
+        "final_reported_trust": int(trust[-1]),
+        "mean_trust": None,
+        "fallback_fired": bool(log.baseline == 0 and len(roads) - 1 > 20),
+        # the car reached the goal junction on some road (their run ends there, or loops on)
+        "end_reason": "destination" if reached_goal else "cap",
+        "log_end": "arrived" if bool(roads["arrived"].iloc[-1]) else "log ended on the road",
+        "sim_seconds": float(ticks["tick"].iloc[-1] - ticks["tick"].iloc[0]) * TICK_SECONDS,
+        "wall_seconds": 0.0,  # not run by trustroute
+        "ticks": int(len(ticks)),
+        "manual_ticks": int((~auto).sum()),
+        "mean_reported_trust": float(driven["reported_trust"].mean()) if len(driven) else float("nan"),
+        "reports": int(len(driven)),
+        "trust_changes": int((trust[1:] != trust[:-1]).sum()),
+    }
+    return episode, roads, runs
+
+
+def discover(source: Path) -> list[LogFile]:
+    source = Path(source)
+    if not source.exists():
+        raise InputError(
+            str(source),
+            "",
+            "no such directory",
+            "pass a checkout of the authors' repository or a folder of their CSVs",
+        )
+    paths = sorted(source.rglob("*.csv")) if source.is_dir() else [source]
+    # statistic_test/ holds copies of the same files; they are read as subsets, not episodes
+    logs = [c for p in paths if "statistic_test" not in p.parts and (c := classify(p, source)) is not None]
+    if not logs:
+        raise InputError(
+            str(source),
+            "",
+            "no trust_level_record_driver_*_trial_*_if_baseline_*.csv files",
+            "pass a checkout of shuyang-dong/trust_aware_hrc_carla_sim or a folder of its logs",
+        )
+    return logs
+
+
+def authors_subsets(source: Path) -> dict[str, list[str]]:
+    """The file lists of statistic_test/ (the subsets the authors' scripts read), by folder."""
+    root = Path(source) / "statistic_test"
+    out = {}
+    if root.is_dir():
+        for folder in sorted(p for p in root.rglob("*") if p.is_dir()):
+            names = sorted(p.name for p in folder.glob("*.csv"))
+            if names:
+                out[str(folder.relative_to(root))] = names
+    return out
+
+
+def import_carla_logs(
+    source: Path, out: Path, echo=None, listed_absent: list[str] | None = None, progress: bool = False
+) -> dict:
+    """Convert the logs under `source` into the study directory `out`; return the manifest.
+
+    `listed_absent`: files the source's index lists but whose content is absent (the git tree of
+    the authors' repository lists 14 CSVs whose blobs were never stored); recorded as absent."""
+    from trustroute.harness.study.config import PACKAGED_SPECS
+    from trustroute.harness.study.manifest import git_revision, package_versions
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+
+    source, out = Path(source), Path(out)
+    tables = load_carla_tables()
+    town, driver_model = load_town(None), load_driver_model(None)
+    logs = discover(source)
+    seen: dict[str, LogFile] = {}
+    inventory, episode_rows, road_frames, run_frames, kin_frames = [], [], [], [], []
+    worst_distance = 0.0
+    from tqdm import tqdm
+
+    # disable=None: tqdm shows the bar only on a terminal, so an error stays one line in logs
+    iterator = tqdm(logs, desc="import", unit="log", disable=None if progress else True)
+    for log in iterator:
+        entry = {
+            "file": log.relative,
+            "driver": log.driver,
+            "trial": log.trial,
+            "condition": CONDITIONS[log.baseline],
+            "role": log.role,
+        }
+        ticks = read_log(log.path, log.relative)
+        worst_distance = max(worst_distance, check_on_road(ticks, tables, log.relative))
+        if log.role != "study":
+            entry["status"] = {
+                "warmup": "warm-up trial, not analysed",
+                "pilot": "pilot/test driver, excluded",
+                "sample": "authors' sample copy, excluded",
+            }[log.role]
+            inventory.append(entry)
+            continue
+        if log.episode_id in seen:
+            raise InputError(
+                log.relative,
+                "file name",
+                f"a second log of {log.episode_id} (first: {seen[log.episode_id].relative})",
+                "keep one log per driver, trial and condition",
+            )
+        seen[log.episode_id] = log
+        episode, roads, runs = episode_tables(log, ticks, tables, driver_model, town)
+        entry.update(
+            {
+                "status": "imported",
+                "episode_id": log.episode_id,
+                "roads": int(len(roads)),
+                "end_reason": episode["end_reason"],
+            }
+        )
+        inventory.append(entry)
+        episode_rows.append(episode)
+        road_frames.append(roads)
+        run_frames.append(runs)
+        kept = ticks.iloc[::KINEMATICS_EVERY]
+        seconds = kept["tick"].to_numpy(dtype=float) * TICK_SECONDS
+        step = np.hypot(np.diff(kept["x"].to_numpy()), np.diff(kept["y"].to_numpy()))
+        speed = np.concatenate([[0.0], step / np.maximum(np.diff(seconds), TICK_SECONDS)])
+        kin_frames.append(
+            pd.DataFrame(
+                {
+                    "episode_id": log.episode_id,
+                    "time": seconds,
+                    "x": kept["x"].to_numpy(),
+                    "y": kept["y"].to_numpy(),
+                    "speed": speed,  # of the logged waypoint, over the kept ticks
+                    "lane": (
+                        kept["carla_road"].astype(str) + ":" + kept["carla_lane"].astype(str)
+                    ).to_numpy(),
+                    "mode": np.where(kept["autopilot"].to_numpy(), "autopilot", "manual"),
+                }
+            )
+        )
+        if echo is not None:
+            echo(f"  {log.relative}: {len(roads)} roads, {episode['end_reason']}")
+    for name in listed_absent or []:
+        inventory.append({"file": name, "status": "listed but absent (no content in the source)"})
+    drivers = sorted({log.driver for log in logs if log.role in ("study", "warmup")})
+    missing = []
+    for d in drivers:
+        have = {
+            (log.trial, log.baseline) for log in logs if log.driver == d and log.role in ("study", "warmup")
+        }
+        missing += [f"driver {d} trial {t} {CONDITIONS[b]}" for t, b in EXPECTED_FILES if (t, b) not in have]
+    episodes = pd.DataFrame(episode_rows).sort_values(["participant", "position"], kind="stable")
+    order = list(episodes["episode_id"])
+    roads = pd.concat(road_frames, ignore_index=True)
+    roads = roads.iloc[
+        np.argsort(roads["episode_id"].map({e: i for i, e in enumerate(order)}).to_numpy(), kind="stable")
+    ]
+    episodes["satisfied"] = _logged_satisfaction(episodes, roads, town, driver_model)
+    out.mkdir(parents=True, exist_ok=True)
+    write_checked(episodes, dataset.EPISODES_SCHEMA, out / dataset.EPISODES_FILE)
+    write_checked(roads, dataset.ROADS_SCHEMA, out / dataset.ROADS_FILE)
+    write_checked(episodes, REAL_EPISODES_SCHEMA, out / REAL_EPISODES_FILE)
+    write_checked(roads, REAL_ROADS_SCHEMA, out / REAL_ROADS_FILE)
+    write_checked(pd.concat(run_frames, ignore_index=True), TICKS_SCHEMA, out / TICKS_FILE)
+    write_checked(
+        pd.concat(kin_frames, ignore_index=True), dataset.KINEMATICS_SCHEMA, out / dataset.KINEMATICS_FILE
+    )
+    command = ["trustroute", "import", "carla-logs", str(source), "--out", str(out)]
+    manifest = {
+        "study": "carla-real-study",
+        "config_path": None,
+        "config_hash": None,
+        "command": command,
+        "planned_episodes": int(len(episodes)),
+        "finished_episodes": int(len(episodes)),
+        "seeds": {},
+        "run": {"importer": "trustroute.analysis.carla_import", "tick_seconds": TICK_SECONDS},
+        "engine": "carla-logs",
+        "config": {
+            "name": "carla-real-study",
+            "town": None,
+            "driver_model": None,
+            "specs": [str(PACKAGED_SPECS / "phi1.toml"), str(PACKAGED_SPECS / "phi2.toml")],
+            "conditions": ["aware", "free"],
+            "report_every": 1,
+        },
+        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "git_revision": git_revision(),
+        "packages": package_versions(),
+        "source": str(source),
+        "files": {
+            "episodes": dataset.EPISODES_FILE,
+            "roads": dataset.ROADS_FILE,
+            "kinematics": dataset.KINEMATICS_FILE,
+            "real_episodes": REAL_EPISODES_FILE,
+            "real_roads": REAL_ROADS_FILE,
+            "ticks": TICKS_FILE,
+        },
+        "failed_episodes": [],
+        "expected": {},
+        "real_study": {
+            "attribution": "Logs of the CARLA study of Yu, Dong, Sheng, Feng, Kwiatkowska (ICRA 2024), "
+            "released in shuyang-dong/trust_aware_hrc_carla_sim under the MIT licence, "
+            "Copyright (c) 2025 Shuyang Dong.",
+            "participants": sorted(int(p) for p in episodes["participant"].unique()),
+            "inventory": inventory,
+            "missing_sessions": missing,
+            "authors_subsets": authors_subsets(source),
+            "arrival_radius_m": ARRIVAL_RADIUS_M,
+            "max_distance_to_spawn_point_m": round(worst_distance, 2),
+            "kinematics_every_ticks": KINEMATICS_EVERY,
+        },
+    }
+    (out / "manifest.json").write_text(json.dumps(manifest, indent=1, default=str))
+    return manifest
+
+
+def _logged_satisfaction(episodes: pd.DataFrame, roads: pd.DataFrame, town, driver_model) -> np.ndarray:
+    """The episode's `satisfied`: its spec on the belief the AV logged (what the AV saw)."""
+    from trustroute.analysis.real_study import satisfaction_by_source
+    from trustroute.harness.study.config import PACKAGED_SPECS
+    from trustroute.policies.logic.spec import load_spec
+
+    specs = {name: load_spec(PACKAGED_SPECS / f"{name}.toml", town) for name in ("phi1", "phi2")}
+    sat = satisfaction_by_source(episodes, roads, specs, town, driver_model.trust_levels)
+    return sat["satisfied_logged"].fillna(False).to_numpy(dtype=bool)
+
+
+def write_checked(frame: pd.DataFrame, schema: pa.Schema, path: Path) -> None:
+    """`frame`'s columns of `schema`, checked (trustroute.analysis.dataset) and written atomically."""
+    table = dataset.table_from_frame(frame.reset_index(drop=True), schema)
+    temporary = path.with_name(f".tmp-{path.name}")
+    dataset.write_table(table, temporary)
+    temporary.replace(path)
+
+
+def read_real_table(study_dir: Path, name: str) -> pd.DataFrame:
+    """real_episodes, real_roads or ticks of an imported study, checked against its schema."""
+    file_name, schema = REAL_TABLES[name]
+    return dataset.frame_from_table(dataset.read_table(Path(study_dir) / file_name, schema))

@@ -1,0 +1,277 @@
+"""Posterior-predictive check: how far simulated drivers are from the real participants.
+
+Drivers of a model are simulated on the real episodes' own roads (the routes the participants
+were driven, so route choice is held fixed and only the driver differs): θ_0 ~ π; on each road
+t >= 1 the takeover h_t ~ P(h | θ_{t-1}, incident), θ_t ~ T[incident][h_t](θ_{t-1}, ·), and the
+report on arrival is θ_t with the model's report accuracy, else one level up or down (clipped),
+as participants.synthetic_driver reports. Statistics compared with the real logs:
+
+- takeover rate per incident type (per road driven); distance: |simulated - real| per incident;
+- the distribution of the change of reported trust per road (r_t - r_{t-1}); total variation;
+- the distribution of the final reported trust; total variation;
+- roads with a changed report per episode (the real display changes by button presses; the
+  simulated report is re-drawn each road); total variation.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from trustroute.participants.driver_model import DriverModel
+
+CHANGE_VALUES = np.arange(-6, 7)
+
+
+@dataclass(frozen=True)
+class Statistics:
+    takeover_rate: dict[str, float]
+    trust_change: np.ndarray  # probabilities over CHANGE_VALUES
+    final_trust: np.ndarray  # probabilities over levels 1..7
+    changes_per_episode: np.ndarray  # probabilities over 0..max_roads
+
+    def to_dict(self) -> dict:
+        return {
+            "takeover_rate": self.takeover_rate,
+            "trust_change": dict(
+                zip(CHANGE_VALUES.tolist(), self.trust_change.round(6).tolist(), strict=True)
+            ),
+            "final_trust": self.final_trust.round(6).tolist(),
+            "changes_per_episode": self.changes_per_episode.round(6).tolist(),
+        }
+
+
+def _histogram(values: np.ndarray, support: np.ndarray) -> np.ndarray:
+    counts = np.array([(values == v).sum() for v in support], dtype=float)
+    return counts / counts.sum() if counts.sum() else counts
+
+
+def statistics(
+    incident: np.ndarray,
+    takeover: np.ndarray,
+    report: np.ndarray,
+    mask: np.ndarray,
+    incident_types: tuple[str, ...],
+    max_roads: int,
+) -> Statistics:
+    """incident/takeover [n, S] (roads 1..S), report [n, S+1] (column 0: the start road), mask [n, S]."""
+    rates = {}
+    for i, name in enumerate(incident_types):
+        on = mask & (incident == i)
+        if on.any():
+            rates[name] = float(takeover[on].mean())
+    change = (report[:, 1:] - report[:, :-1])[mask]
+    lengths = mask.sum(axis=1)
+    final = report[np.arange(report.shape[0]), lengths]
+    changed = ((report[:, 1:] != report[:, :-1]) & mask).sum(axis=1)
+    return Statistics(
+        takeover_rate=rates,
+        trust_change=_histogram(change, CHANGE_VALUES),
+        final_trust=_histogram(final, np.arange(1, 8)),
+        changes_per_episode=_histogram(changed, np.arange(max_roads + 1)),
+    )
+
+
+def real_arrays(roads: pd.DataFrame, model: DriverModel) -> tuple[np.ndarray, ...]:
+    """(incident index, takeover, reported trust, mask) padded per episode from a roads table."""
+    roads = roads.sort_values(["episode_id", "index"], kind="stable")
+    groups = [g for _, g in roads.groupby("episode_id", sort=True)]
+    steps = max(len(g) for g in groups) - 1
+    n = len(groups)
+    incident = np.zeros((n, steps), dtype=np.int64)
+    takeover = np.zeros((n, steps), dtype=bool)
+    report = np.zeros((n, steps + 1), dtype=np.int64)
+    mask = np.zeros((n, steps), dtype=bool)
+    for row, g in enumerate(groups):
+        k = len(g) - 1
+        incident[row, :k] = [model.incident_index(x) for x in g["incident"].iloc[1:]]
+        takeover[row, :k] = g["takeover"].iloc[1:].fillna(False).to_numpy(dtype=bool)
+        reports = g["reported_trust"].to_numpy(dtype=np.int64, na_value=4)
+        report[row, : k + 1] = reports
+        report[row, k + 1 :] = reports[-1]
+        mask[row, :k] = True
+    return incident, takeover, report, mask
+
+
+def simulate(
+    model: DriverModel,
+    incident: np.ndarray,
+    mask: np.ndarray,
+    accuracy: float,
+    replicates: int,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Simulated (takeover [n*R, S], report [n*R, S+1]) of `model` on the given roads."""
+    incident = np.repeat(incident, replicates, axis=0)
+    mask = np.repeat(mask, replicates, axis=0)
+    n, steps = incident.shape
+    k = model.n_trust
+    levels = np.asarray(model.trust_levels)
+    theta = rng.choice(k, size=n, p=np.asarray(model.initial_belief) / np.sum(model.initial_belief))
+    takeover = np.zeros((n, steps), dtype=bool)
+    report = np.zeros((n, steps + 1), dtype=np.int64)
+
+    def noisy(index: np.ndarray) -> np.ndarray:
+        exact = rng.random(index.size) < accuracy
+        step = np.where(rng.random(index.size) < 0.5, -1, 1)
+        return levels[np.where(exact, index, np.clip(index + step, 0, k - 1))]
+
+    report[:, 0] = noisy(theta)
+    for t in range(steps):
+        inc = incident[:, t]
+        p_take = model.takeover_probability[inc, theta]
+        h = rng.random(n) < p_take
+        rows = model.trust_transition[inc, h.astype(np.int64), 0, theta]  # [n, k]
+        cumulative = rows.cumsum(axis=1)
+        draw = rng.random(n)[:, None]
+        nxt = np.minimum((draw > cumulative).sum(axis=1), k - 1)
+        live = mask[:, t]
+        theta = np.where(live, nxt, theta)
+        takeover[:, t] = h & live
+        report[:, t + 1] = np.where(live, noisy(theta), report[:, t])
+    return takeover, report
+
+
+def total_variation(p: np.ndarray, q: np.ndarray) -> float:
+    size = max(p.size, q.size)
+    return 0.5 * float(np.abs(np.pad(p, (0, size - p.size)) - np.pad(q, (0, size - q.size))).sum())
+
+
+def distances(sim: Statistics, real: Statistics) -> dict:
+    return {
+        "takeover_rate_abs_difference": {
+            name: abs(sim.takeover_rate.get(name, 0.0) - rate) for name, rate in real.takeover_rate.items()
+        },
+        "trust_change_tv": total_variation(sim.trust_change, real.trust_change),
+        "final_trust_tv": total_variation(sim.final_trust, real.final_trust),
+        "changes_per_episode_tv": total_variation(sim.changes_per_episode, real.changes_per_episode),
+    }
+
+
+def posterior_check(
+    roads: pd.DataFrame,
+    models: dict[str, tuple[DriverModel, float]],
+    replicates: int,
+    rng: np.random.Generator,
+) -> dict:
+    """Real statistics, and per model (name -> (model, report accuracy)) its simulated statistics
+    and distances to the real ones."""
+    template = next(iter(models.values()))[0]
+    incident, takeover, report, mask = real_arrays(roads, template)
+    max_roads = int(mask.sum(axis=1).max())
+    real = statistics(incident, takeover, report, mask, template.incident_types, max_roads)
+    out = {
+        "replicates": replicates,
+        "episodes": int(mask.shape[0]),
+        "roads": int(mask.sum()),
+        "real": real.to_dict(),
+        "models": {},
+    }
+    stats = {"real": real}
+    for name, (model, accuracy) in models.items():
+        sim_take, sim_report = simulate(model, incident, mask, accuracy, replicates, rng)
+        sim = statistics(
+            np.repeat(incident, replicates, axis=0),
+            sim_take,
+            sim_report,
+            np.repeat(mask, replicates, axis=0),
+            model.incident_types,
+            max_roads,
+        )
+        stats[name] = sim
+        out["models"][name] = {
+            "report_accuracy": accuracy,
+            "statistics": sim.to_dict(),
+            "distance": distances(sim, real),
+        }
+    out["_stats"] = stats
+    return out
+
+
+def plot_check(check: dict, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    stats: dict[str, Statistics] = check["_stats"]
+    fig, axes = plt.subplots(1, 4, figsize=(18, 4))
+    names = list(stats)
+    width = 0.8 / len(names)
+    incidents = list(stats["real"].takeover_rate)
+    for j, name in enumerate(names):
+        s = stats[name]
+        axes[0].bar(
+            np.arange(len(incidents)) + j * width,
+            [s.takeover_rate.get(i, 0) for i in incidents],
+            width,
+            label=name,
+        )
+        axes[1].bar(CHANGE_VALUES + j * width, s.trust_change, width, label=name)
+        axes[2].bar(np.arange(1, 8) + j * width, s.final_trust, width, label=name)
+        axes[3].bar(
+            np.arange(s.changes_per_episode.size) + j * width, s.changes_per_episode, width, label=name
+        )
+    axes[0].set_xticks(np.arange(len(incidents)) + 0.4 - width / 2, incidents)
+    titles = (
+        "takeover rate per incident",
+        "reported trust change per road",
+        "final reported trust",
+        "roads with a changed report per episode",
+    )
+    for ax, title in zip(axes, titles, strict=True):
+        ax.set_title(title)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)
+
+
+def write_check(check: dict, path: Path) -> Path:
+    payload = {k: v for k, v in check.items() if not k.startswith("_")}
+    Path(path).write_text(json.dumps(payload, indent=1))
+    return Path(path)
+
+
+def aware_vs_free(
+    drivers: dict[str, DriverModel], count: int, seed: int, policy_cache: Path | None = None
+) -> list[dict]:
+    """The packaged setup's synthesized "aware" policy and the trust-free one (AV filter: the
+    packaged model) driven by each named driver model in the model engine: per spec, condition and
+    driver, the satisfaction rate (on the AV's belief), the mean true trust and takeovers."""
+    from trustroute.harness.episode_tracker import EpisodeSetup
+    from trustroute.harness.model_engine import simulate_batch
+    from trustroute.harness.study.config import PACKAGED_SPECS
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.routing.resolve import resolve_policy
+
+    town, nominal = load_town(None), load_driver_model(None)
+    rows = []
+    for spec_name in ("phi1", "phi2"):
+        spec = load_spec(PACKAGED_SPECS / f"{spec_name}.toml", town)
+        setup = EpisodeSetup(town=town, driver_model=nominal, spec=spec)
+        for condition in ("aware", "free"):
+            policy = resolve_policy(condition, town, nominal, spec, policy_cache)
+            for name, driver in drivers.items():
+                rng = np.random.default_rng([seed, len(rows)])
+                batch = simulate_batch(setup, policy, count, rng, drivers=[driver])
+                frame = batch.frame()
+                rows.append(
+                    {
+                        "spec": spec_name,
+                        "condition": condition,
+                        "drivers": name,
+                        "episodes": count,
+                        "satisfaction_rate": float(np.mean(frame["satisfied"])),
+                        "mean_trust": float(np.mean(frame["mean_trust"])),
+                        "takeovers_per_episode": float(np.mean(frame["takeovers"])),
+                    }
+                )
+    return rows

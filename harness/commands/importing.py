@@ -1,0 +1,47 @@
+"""`trustroute import`: convert logs of real studies into study directories.
+
+import carla-logs DIR --out STUDY_DIR   the CARLA study of Yu et al. (ICRA 2024): DIR is a checkout
+                                        of shuyang-dong/trust_aware_hrc_carla_sim or a folder of
+                                        its trust_level_record CSVs (docs/real_study.md)
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+
+@click.group("import")
+def import_group() -> None:
+    """Convert logs of real studies into study directories that `trustroute analyze` reads."""
+
+
+@import_group.command("carla-logs")
+@click.argument("source", metavar="DIR", type=click.Path())
+@click.option("--out", "out", type=click.Path(), required=True, help="Study directory to write.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--json", "as_json", is_flag=True, help="Print the import summary as one JSON object.")
+def carla_logs(source: str, out: str, quiet: bool, as_json: bool) -> None:
+    """Import the authors' CARLA logs under DIR into the study directory --out."""
+    from trustroute.analysis.carla_import import import_carla_logs
+
+    manifest = import_carla_logs(Path(source), Path(out), progress=not (quiet or as_json))
+    info = manifest["real_study"]
+    imported = [e for e in info["inventory"] if e.get("status") == "imported"]
+    summary = {
+        "study_dir": str(out),
+        "participants": len(info["participants"]),
+        "episodes": len(imported),
+        "excluded_files": len(info["inventory"]) - len(imported),
+        "missing_sessions": info["missing_sessions"],
+    }
+    if as_json:
+        click.echo(json.dumps(summary))
+        return
+    click.echo(
+        f"imported {summary['episodes']} episodes of {summary['participants']} participants into {out}; "
+        f"{summary['excluded_files']} files excluded (warm-up, pilot, sample); "
+        f"missing sessions: {', '.join(summary['missing_sessions']) or 'none'}"
+    )

@@ -1,0 +1,279 @@
+"""The CARLA log importer on the committed raw sample of the authors' logs (real format, thinned):
+road sequences against the authors' route tables, their logged belief replayed road by road, the
+authors' statistics rules against literal re-runs of their loops, and malformed inputs."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.cli import run_cli
+from trustroute.analysis.carla_import import import_carla_logs, read_real_table
+from trustroute.analysis.carla_tables import load_carla_tables
+from trustroute.analysis.dataset import read_episodes, read_roads
+from trustroute.analysis.real_study import (
+    authors_belief_replay,
+    authors_point_rule,
+    authors_segment_rule,
+    with_real_columns,
+)
+from trustroute.participants.driver_model import load_driver_model
+
+RAW = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "raw"
+SAMPLE = "trust_level_record_driver_4_trial_1_if_baseline_0.csv"
+
+
+@pytest.fixture(scope="module")
+def imported(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("carla") / "study"
+    import_carla_logs(RAW, out)
+    return out
+
+
+def _tables(study: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    episodes, roads = with_real_columns(study, read_episodes(study), read_roads(study))
+    return episodes, roads
+
+
+def _roads(study: Path) -> pd.DataFrame:
+    return _tables(study)[1]
+
+
+def _episodes(study: Path) -> pd.DataFrame:
+    return _tables(study)[0]
+
+
+def test_free_episodes_drive_the_authors_preset_baseline_routes(imported):
+    tables = load_carla_tables()
+    roads, episodes = _roads(imported), _episodes(imported)
+    checked = 0
+    for episode in episodes[episodes["condition"] == "free"].itertuples():
+        states = list(roads[roads["episode_id"] == episode.episode_id].sort_values("index")["authors_state"])
+        preset = [tables.trials[episode.trial]["start"], *tables.baseline_routes[episode.trial]]
+        if episode.episode_id == "d03-t2-free":
+            # this participant's car left the preset route at B (B-G instead of B-C) and came
+            # back to it at A; every road is still a legal move of the town
+            assert states[:4] == preset[:4] and states[-5:] == preset[-5:]
+        else:
+            assert states == preset
+            checked += 1
+    assert checked == 2
+
+
+def test_every_road_sequence_is_a_walk_of_the_authors_state_graph(imported):
+    tables = load_carla_tables()
+    roads = _roads(imported)
+    for _, group in roads.groupby("episode_id"):
+        states = list(group.sort_values("index")["authors_state"])
+        for a, b in zip(states, states[1:], strict=False):
+            assert b in tables.successors(a) or a == b
+
+
+def test_aware_routes_end_as_the_authors_shortest_route_tables_say_when_the_goal_is_near(imported):
+    # the last road of a finished aware episode enters the trial's goal junction
+    tables = load_carla_tables()
+    roads, episodes = _roads(imported), _episodes(imported)
+    for episode in episodes[episodes["condition"] == "aware"].itertuples():
+        last = roads[roads["episode_id"] == episode.episode_id].sort_values("index").iloc[-1]
+        assert last["directed_road"].endswith(tables.trials[episode.trial]["goal"])
+        assert tables.shortest_routes[episode.trial][last["authors_state"]] == []
+
+
+def test_replaying_the_authors_belief_update_reproduces_the_logged_belief_road_by_road(imported):
+    tables, driver = load_carla_tables(), load_driver_model(None)
+    roads, episodes = _roads(imported), _episodes(imported)
+    compared = 0
+    for episode in episodes[episodes["condition"] == "aware"].itertuples():
+        group = roads[roads["episode_id"] == episode.episode_id].sort_values("index")
+        replay = authors_belief_replay(group, episode.trial, tables, driver)
+        logged = np.stack(group["logged_belief"].to_numpy())
+        np.testing.assert_allclose(replay, logged, atol=1e-12)
+        compared += len(group)
+    assert compared >= 15
+    # and the replay is not vacuous: the logged belief moves away from uniform
+    assert np.abs(logged - 1 / 7).max() > 0.1
+
+
+def test_takeovers_and_reports_come_from_the_ticks(imported):
+    raw = pd.read_csv(RAW / SAMPLE, index_col=0)
+    roads = _roads(imported)
+    group = roads[roads["episode_id"] == "d04-t1-aware"].sort_values("index")
+    manual = raw.index[raw["if_autopilot"].astype(str) == "False"].to_numpy()
+    for row in group.itertuples():
+        if row.index == 0:
+            assert pd.isna(row.takeover)  # the start road has no observation
+        else:
+            assert row.takeover == bool(((manual >= row.tick_first) & (manual <= row.tick_last)).any())
+        assert row.reported_trust == raw.loc[int(row.tick_last), "trust_level"]
+
+
+def _authors_point_loop(frame: pd.DataFrame) -> tuple[bool, float, float]:
+    """statistic_test_point_based.py's loop, literally, on one file."""
+    num = num_total = num_satisfy = 0
+    trust = 0
+    for k in range(frame.shape[0]):
+        if str(frame.iloc[k, 3]) == "True":
+            num_total += 1
+            trust += frame.iloc[k, 1]
+            if frame.iloc[k, 1] >= 2:
+                num_satisfy += 1
+        else:
+            num += 1
+    return num_satisfy / num_total >= 0.99, trust / num_total, num / (num + num_total)
+
+
+def _authors_segment_loop(frame: pd.DataFrame) -> float:
+    """statistic_test_segment_based.py's average segment trust, literally, on one file."""
+    road_last = [int(frame.iloc[1, 2].split(",")[-2].strip())]
+    totals, sums = [1], [frame.iloc[1, 1]]
+    for k in range(2, frame.shape[0]):
+        if str(frame.iloc[k, 3]) == "True":
+            road = int(frame.iloc[k, 2].split(",")[-2].strip())
+            if road_last[-1] == road:
+                totals[-1] += 1
+                sums[-1] += frame.iloc[k, 1]
+            else:
+                road_last.append(road)
+                totals.append(1)
+                sums.append(frame.iloc[k, 1])
+    closed = [s / t for s, t in zip(sums[:-1], totals[:-1], strict=True)]
+    return sum(closed) / len(closed)
+
+
+def test_authors_rules_match_literal_runs_of_their_loops(imported):
+    ticks = read_real_table(imported, "ticks")
+    point = authors_point_rule(ticks).set_index("episode_id")
+    segment = authors_segment_rule(ticks).set_index("episode_id")
+    episodes = _episodes(imported).set_index("episode_id")
+    for episode_id, row in episodes.iterrows():
+        frame = pd.read_csv(RAW / Path(row["source_file"]).name)
+        satisfied, average, takeover = _authors_point_loop(frame)
+        assert bool(point.loc[episode_id, "authors_satisfied"]) == satisfied
+        assert point.loc[episode_id, "authors_average_trust"] == pytest.approx(average, abs=1e-12)
+        assert point.loc[episode_id, "authors_takeover_probability"] == pytest.approx(takeover, abs=1e-12)
+        assert segment.loc[episode_id, "authors_segment_trust"] == pytest.approx(
+            _authors_segment_loop(frame), abs=1e-12
+        )
+
+
+def test_warm_up_and_missing_sessions_are_recorded_not_dropped(imported):
+    import json
+
+    manifest = json.loads((imported / "manifest.json").read_text())
+    inventory = manifest["real_study"]["inventory"]
+    warmups = [e for e in inventory if e["role"] == "warmup"]
+    assert [e["file"] for e in warmups] == ["trust_level_record_driver_4_trial_3_if_baseline_0.csv"]
+    assert "driver 4 trial 2 aware" in manifest["real_study"]["missing_sessions"]
+
+
+def test_analyze_reads_the_imported_study(imported, capsys):
+    import json
+
+    code, out, err = run_cli(capsys, "analyze", str(imported), "--json", "--no-report")
+    assert code == 0, err
+    payload = json.loads(out)
+    per = {row["episode_id"]: row for row in payload["real_study"]["per_episode"]}
+    assert set(per) == set(_episodes(imported)["episode_id"])
+    assert all(isinstance(row["satisfied_bayes"], bool) for row in per.values())
+    assert {m["figure"] for m in payload["real_study"]["paper_matches"]} >= {
+        "satisfaction rate (aware)",
+        "mean trust (free)",
+    }
+
+
+# -- malformed inputs: one line, exit 2 ---------------------------------------------------
+def _bad_copy(tmp_path: Path, name: str, edit) -> Path:
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    frame = pd.read_csv(RAW / SAMPLE, index_col=0)
+    edit(frame).to_csv(folder / name)
+    return folder
+
+
+def _one_line_error(capsys, folder: Path, tmp_path: Path) -> str:
+    code, out, err = run_cli(capsys, "import", "carla-logs", str(folder), "--out", str(tmp_path / "out"))
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "out" / "manifest.json").exists()
+    return err
+
+
+def test_missing_column_is_one_line(tmp_path, capsys):
+    folder = _bad_copy(tmp_path, SAMPLE, lambda f: f.drop(columns=["if_autopilot"]))
+    assert "if_autopilot" in _one_line_error(capsys, folder, tmp_path)
+
+
+def test_unknown_trial_is_one_line(tmp_path, capsys):
+    folder = _bad_copy(tmp_path, SAMPLE.replace("trial_1", "trial_7"), lambda f: f)
+    assert "unknown trial 7" in _one_line_error(capsys, folder, tmp_path)
+
+
+def test_location_off_every_road_is_one_line(tmp_path, capsys):
+    def move(frame: pd.DataFrame) -> pd.DataFrame:
+        frame.iloc[40, frame.columns.get_loc("location")] = "(900.0, -700.0, 3, 1)"
+        return frame
+
+    folder = _bad_copy(tmp_path, SAMPLE, move)
+    err = _one_line_error(capsys, folder, tmp_path)
+    assert "maps to no road" in err and "row 40" in err
+
+
+def test_not_a_log_folder_is_one_line(tmp_path, capsys):
+    (tmp_path / "logs").mkdir()
+    err = _one_line_error(capsys, tmp_path / "logs", tmp_path)
+    assert "no trust_level_record" in err
+
+
+def test_sample_files_are_unchanged_copies_of_the_authors_format():
+    frame = pd.read_csv(RAW / SAMPLE)
+    assert list(frame.columns) == ["Unnamed: 0", "trust_level", "location", "if_autopilot", "trust_belief"]
+
+
+# -- the committed conversion of the whole release ----------------------------------------
+STUDY = RAW.parent / "study"
+
+
+def test_committed_study_replays_the_logged_belief_on_every_aware_road():
+    tables, driver = load_carla_tables(), load_driver_model(None)
+    roads, episodes = _roads(STUDY), _episodes(STUDY)
+    aware = episodes[episodes["condition"] == "aware"]
+    assert len(aware) == 35  # 21 trial-1 runs and the 14 trial-2 runs whose files exist
+    for episode in aware.itertuples():
+        group = roads[roads["episode_id"] == episode.episode_id].sort_values("index")
+        replay = authors_belief_replay(group, episode.trial, tables, driver)
+        np.testing.assert_allclose(replay, np.stack(group["logged_belief"].to_numpy()), atol=1e-12)
+
+
+def test_committed_study_free_runs_follow_the_preset_routes_except_two_recorded_detours():
+    tables = load_carla_tables()
+    roads, episodes = _roads(STUDY), _episodes(STUDY)
+    detours = []
+    for episode in episodes[episodes["condition"] == "free"].itertuples():
+        states = list(roads[roads["episode_id"] == episode.episode_id].sort_values("index")["authors_state"])
+        if states != [tables.trials[episode.trial]["start"], *tables.baseline_routes[episode.trial]]:
+            detours.append(episode.episode_id)
+    assert detours == ["d03-t2-free", "d06-t1-free"]  # docs/real_study.md, "Mapping decisions"
+
+
+def test_committed_study_is_analysed_with_every_file_accounted_for(tmp_path, capsys):
+    import json
+
+    study = tmp_path / "study"
+    shutil.copytree(STUDY, study)
+    code, out, err = run_cli(capsys, "analyze", str(study), "--json")
+    assert code == 0, err
+    real = json.loads(out)["real_study"]
+    assert len(real["participants"]) == 21
+    assert len(real["per_episode"]) == 77
+    statuses = {e["status"] for e in real["excluded_files"]}
+    assert any("warm-up" in s for s in statuses) and any("pilot" in s for s in statuses)
+    assert len(real["missing_sessions"]) == 10
+    assert (study / "real_study.json").exists()
+    assert "Real CARLA study" in (study / "report.md").read_text()
+    tests = real["authors_paired_tests"]
+    assert {t["quantity"] for t in tests} >= {"average trust (autopilot ticks)", "LDTL satisfied (0/1)"}
+    assert all(t["pairs"] in (20, 21) for t in tests)
