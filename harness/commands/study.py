@@ -217,7 +217,8 @@ def fit(
 
     if bootstrap < 0:
         raise InputError("--bootstrap", "", f"must be >= 0, got {bootstrap}", "pass e.g. --bootstrap 200")
-    result = fit_study(Path(study_dir), method=method, iterations=iterations)
+    result = fit_study(Path(study_dir), method=method, iterations=iterations,
+                       progress=not (quiet or as_json))
     path = result.write(Path(out))
     payload = result.summary()
     paths: dict[str, Path] = {"driver_model": path}

@@ -69,8 +69,11 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
 
     if time_limit <= 0:
         raise InputError("--time-limit", "", f"must be positive, got {time_limit}", "pass e.g. 60")
-    result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                        belief_rule=belief_rule)
+    from trustroute.policies.routing.resolve import synthesis_progress
+
+    with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
+        result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
+                            belief_rule=belief_rule, on_iteration=on_iteration)
     path = str(save_policy(result, out_path, town, driver, spec))
     from trustroute.policies.routing.files import array_path
 

@@ -17,7 +17,7 @@ import json
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from trustroute.analysis.dataset import STUDY_FILE
@@ -89,18 +89,19 @@ def aware_horizon(config: StudyConfig) -> int:
 
 
 def resolve_condition_policy(
-    condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig
+    condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig, progress: bool = False
 ) -> RoutingPolicy:
     """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
     from trustroute.policies.routing.resolve import resolve_policy
 
     return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
-                          config.belief_rule)
+                          config.belief_rule, progress)
 
 
 @functools.lru_cache(maxsize=4)
-def study_context(config: StudyConfig) -> StudyContext:
-    """The study's shared context, built once per process (cached by the config)."""
+def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
+    """The study's shared context, built once per process (cached by the config). progress: bars while
+    policies are synthesized (the main process; workers find them in the policy cache)."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.policies.logic.spec import load_spec
@@ -121,7 +122,7 @@ def study_context(config: StudyConfig) -> StudyContext:
         for name, spec in specs.items()
     }
     policies = {
-        (name, label): resolve_condition_policy(condition, town, nominal, spec, config)
+        (name, label): resolve_condition_policy(condition, town, nominal, spec, config, progress)
         for name, spec in specs.items()
         for condition, label in zip(config.conditions, config.condition_names, strict=True)
     }
@@ -147,29 +148,50 @@ def engine_function(engine: str) -> Callable:
     return run_episode
 
 
+RECORDINGS_DIR = "recordings"
+
+
+def recording_path(study_dir: Path, episode_id: str) -> Path:
+    """Where a study keeps the Rerun recording of an episode named in its config's `record`."""
+    return Path(study_dir) / RECORDINGS_DIR / f"{episode_id}.rrd"
+
+
+def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path | None = None,
+                        sumo_config=None):
+    """Run the planned episode `task` exactly as the study runs it: the participant's driver model
+    (population draw), the driver's Generator from the task's seed sequence (so the same initial trust
+    and every later draw), SUMO's seed, the cell's setup and policy. Returns the EpisodeRecord.
+
+    rrd_path and sumo_config (e.g. sumo-gui) apply to the SUMO engine only."""
+    from trustroute.participants.synthetic_driver import SyntheticDriver
+
+    context = study_context(config)
+    driver = SyntheticDriver(
+        context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
+    )
+    options = {}
+    if config.engine == "sumo":
+        from trustroute.harness.sumo_start import SumoConfig
+
+        sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
+                              background_vehicles=config.background_vehicles)
+        options = {"rrd_path": rrd_path, "config": sumo_config}
+    return engine_function(config.engine)(
+        context.setups[task.spec],
+        context.policies[(task.spec, task.condition)],
+        driver,
+        task.episode_id,
+        task.seed,
+        **options,
+    )
+
+
 def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeOutcome:
     """Run one episode and write its part. Never raises: errors come back in the outcome."""
     started = time.perf_counter()
     try:
-        from trustroute.participants.synthetic_driver import SyntheticDriver
-
-        context = study_context(config)
-        driver = SyntheticDriver(
-            context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
-        )
-        extra = {}
-        if config.engine == "sumo" and config.background_vehicles:
-            from trustroute.harness.sumo_start import SumoConfig
-
-            extra["config"] = SumoConfig(background_vehicles=config.background_vehicles)
-        record = engine_function(config.engine)(
-            context.setups[task.spec],
-            context.policies[(task.spec, task.condition)],
-            driver,
-            task.episode_id,
-            task.seed,
-            **extra,
-        )
+        rrd = recording_path(Path(study_dir), task.episode_id) if task.episode_id in config.record else None
+        record = run_planned_episode(config, task, rrd_path=rrd)
         write_part(
             Path(study_dir),
             task,
@@ -187,6 +209,21 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
             time.perf_counter() - started,
         )
     return EpisodeOutcome(task.episode_id, True, wall_seconds=time.perf_counter() - started)
+
+
+def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
+    """The config's `record` names planned episodes of a SUMO study, or InputError."""
+    if not config.record:
+        return
+    if config.engine != "sumo":
+        raise InputError(config.source_path, "study.record", "recordings need the SUMO engine",
+                         'set engine = "sumo" or remove record')
+    planned = {t.episode_id for t in tasks}
+    unknown = [e for e in config.record if e not in planned]
+    if unknown:
+        raise InputError(config.source_path, "study.record",
+                         f"{unknown[0]!r} is not an episode of this study",
+                         f"use ids like {tasks[0].episode_id!r} (p<participant>-<spec>-<condition>)")
 
 
 # -- backends: each yields outcomes as they complete -------------------------------------------
@@ -305,9 +342,10 @@ def run_study(
     config_hash = config.content_hash
     check_study_dir(study_dir, config, config_hash)
     engine_function(config.engine)  # fail fast, once, if the engine is missing
-    context = study_context(config)  # resolves (and synthesizes) policies once, before any worker
+    context = study_context(config, progress)  # resolves (and synthesizes) policies once, before any worker
     del context
     tasks = plan_episodes(config)
+    check_record_ids(config, tasks)
     done, damaged = finished_episodes(study_dir, tasks)
     todo = [t for t in tasks if t.episode_id not in done]
     function = functools.partial(run_task, config, str(study_dir))
@@ -403,5 +441,6 @@ def run_and_consolidate(
             "damaged": run.damaged,
             "retried": run.retried,
         },
+        progress=progress,
     )
     return run, manifest

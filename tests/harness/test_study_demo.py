@@ -15,7 +15,9 @@ def test_demo_model_engine_small_and_resumable(tmp_path, capsys):
     )
     assert code == 0, err
     assert "12 episodes planned: 0 already done" in text
-    assert "0.85 vs 0.775" in text and "report:" in text
+    # 3 participants are not the paper's study: a note instead of the paper's table.
+    assert "not comparable" in text and "3 participants" in text and "0.85 vs 0.775" not in text
+    assert "report:" in text
     assert (out / "report.html").exists() and (out / "manifest.json").exists()
     code, text, _ = run_cli(
         capsys, "demo", "--engine", "model", "--participants", "3", "--out", str(out), "--workers", "1"
