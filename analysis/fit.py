@@ -376,6 +376,7 @@ def fit_em(
     iterations: int = 200,
     fixed_accuracy: float | None = None,
     start: Parameters | None = None,
+    progress: bool = False,
 ) -> FitResult:
     params = (
         start
@@ -387,13 +388,19 @@ def fit_em(
     history: list[float] = []
     stats = expectation(obs, params)
     converged = False
-    for _ in range(iterations):
-        params = maximisation(stats, params, fixed_accuracy)
-        stats = expectation(obs, params)
-        history.append(stats.loglik)
-        if len(history) > 1 and (history[-1] - history[-2]) < EM_TOLERANCE * max(1, obs.steps):
-            converged = True
-            break
+    from tqdm import tqdm
+
+    with tqdm(total=iterations, desc="fitting (EM)", unit="iteration", disable=None if progress else True,
+              leave=False, dynamic_ncols=True) as bar:
+        for _ in range(iterations):
+            params = maximisation(stats, params, fixed_accuracy)
+            stats = expectation(obs, params)
+            history.append(stats.loglik)
+            bar.update(1)
+            bar.set_postfix_str(f"loglik {stats.loglik:.1f}", refresh=False)
+            if len(history) > 1 and (history[-1] - history[-2]) < EM_TOLERANCE * max(1, obs.steps):
+                converged = True
+                break
     return FitResult(
         method="em",
         template=template,
@@ -459,7 +466,8 @@ def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
 
 
 def fit_roads(
-    roads: pd.DataFrame, template: DriverModel, method: str = "em", iterations: int = 200
+    roads: pd.DataFrame, template: DriverModel, method: str = "em", iterations: int = 200,
+    progress: bool = False,
 ) -> FitResult:
     obs = observations_from_roads(roads, template)
     if obs.steps == 0:
@@ -469,11 +477,13 @@ def fit_roads(
     if method == "counts":
         return fit_counts(obs, template)
     if method == "em":
-        return fit_em(obs, template, iterations)
+        return fit_em(obs, template, iterations, progress=progress)
     raise ValueError(f"unknown fitting method {method!r}")
 
 
-def fit_study(study_dir: Path, method: str = "auto", iterations: int = 200) -> FitResult:
+def fit_study(
+    study_dir: Path, method: str = "auto", iterations: int = 200, progress: bool = False
+) -> FitResult:
     """Fit a driver model to the consolidated logs of a study directory."""
     from trustroute.analysis.tables import load_study, study_inputs
 
@@ -485,7 +495,7 @@ def fit_study(study_dir: Path, method: str = "auto", iterations: int = 200) -> F
     if method == "auto":
         accuracy = (config.get("population") or {}).get("report_accuracy", DEFAULT_REPORT_ACCURACY)
         method = "counts" if accuracy == 1 and config.get("report_every", 1) == 1 else "em"
-    result = fit_roads(roads, template, method, iterations)
+    result = fit_roads(roads, template, method, iterations, progress)
     result.source = str(study_dir)
     return result
 

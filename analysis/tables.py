@@ -1,20 +1,33 @@
-"""Per-study tables: satisfaction and trust per spec and condition, paired tests, the paper beside us.
+"""Per-study tables (pandas DataFrames), shared by `trustroute analyze`, the report and real-study figures.
 
 `study_analysis(study_dir, belief_source)` reads a consolidated study directory (episodes.parquet,
-roads.parquet, manifest.json) and returns a `StudyAnalysis`:
+roads.parquet, manifest.json) and returns a `StudyAnalysis` whose tables are:
 
-- one cell per (spec, condition): n, satisfied, satisfaction_rate with a bootstrap CI on the
-  chosen belief source (and the rate on the other source beside it), mean_trust = the mean over
-  episodes of the episode's mean *reported* trust (what the paper's participants gave) with a
-  bootstrap CI, the mean true trust and final trust, junctions, takeovers, fallback rate, and
-  the policy's exact value (policies.evaluate, nominal driver) and synthesized [lower, upper];
-- per spec, a paired comparison of the first two conditions ("aware" vs "free" when present) over
-  participants: exact McNemar on satisfaction, Wilcoxon signed-rank on mean reported trust;
-- the paper's figures beside ours.
+- `cells`: per (spec, condition): n, satisfied, the satisfaction rate with its exact
+  (Clopper–Pearson) and Wilson 95 % intervals on the chosen belief source (and the rate on the
+  other source), mean reported trust with a bootstrap CI, mean true and final trust, junctions,
+  takeovers, fallback rate, the policy's exact value and its synthesized [lower, upper];
+- `paired`: per spec, the first two conditions ("aware" vs "free") over participants: the 2x2
+  counts, exact McNemar p, the risk difference (Newcombe interval), the conditional odds ratio
+  (exact interval), the mean difference in reported trust (BCa bootstrap over participants),
+  Wilcoxon p. The "all specs" row is per participant, not per pair: each participant's number of
+  specs satisfied under A minus under B, and their trust difference averaged over specs, so 21
+  participants count as 21, never as 42 pairs;
+- `repeated`: models over every episode with one group per participant: conditional logistic
+  regression of satisfaction on the condition with spec fixed effects, and a mixed model of mean
+  reported trust with a random intercept per participant (statsmodels);
+- `takeovers`: per incident type and condition, roads met, takeovers, rate with exact interval;
+- `order`: per position in the Latin square: satisfaction (exact interval) and mean trust, with
+  Cochran's Q (satisfaction) and Friedman (trust) across positions within participants;
+  `carryover`: per condition and the condition driven just before (same spec or not);
+- `per_participant`: one row per participant and spec, the outcomes under each condition;
+- `paper`: the paper's figures beside ours, only when the study is comparable (the paper's town,
+  its φ1 and φ2, 21 participants); otherwise `paper_note` says why not.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +37,19 @@ import pandas as pd
 
 from trustroute.analysis.dataset import read_episodes, read_manifest, read_roads
 from trustroute.analysis.satisfaction import BELIEF_SOURCES, episode_satisfaction
-from trustroute.analysis.statistics import bootstrap_ci, mcnemar_exact, wilcoxon_paired
+from trustroute.analysis.statistics import (
+    bootstrap_ci,
+    conditional_logit,
+    conditional_odds_ratio,
+    format_p,
+    mcnemar_exact,
+    mean_difference,
+    mixed_trust_model,
+    paired_risk_difference,
+    paired_table,
+    rate_interval,
+    wilcoxon_paired,
+)
 from trustroute.networks.errors import InputError
 
 PAPER = {
@@ -32,8 +57,10 @@ PAPER = {
     "satisfaction_rate": {"aware": 0.85, "free": 0.775},
     "mean_trust": {"aware": 4.6018, "free": 4.3933},
     "pr_max": {"phi1": 0.8357, "phi2": 0.7288},
+    "participants": 21,
 }
 ANALYSIS_SEED = 20240513  # bootstrap resampling: fixed, so an analysis is reproducible
+ALL_SPECS = "all specs"
 
 
 @dataclass
@@ -41,30 +68,47 @@ class StudyAnalysis:
     study_dir: Path
     belief_source: str
     manifest: dict
-    cells: list[dict]
-    paired: list[dict]
-    paper: list[dict]
+    cells: pd.DataFrame
+    paired: pd.DataFrame
+    repeated: pd.DataFrame
+    takeovers: pd.DataFrame
+    order: pd.DataFrame
+    order_tests: dict
+    carryover: pd.DataFrame
+    per_participant: pd.DataFrame
+    paper: pd.DataFrame
+    paper_note: str
     satisfaction: pd.DataFrame = field(repr=False)  # per episode, both sources
     episodes: pd.DataFrame = field(repr=False)
 
     def to_dict(self) -> dict:
+        def records(frame: pd.DataFrame) -> list[dict]:
+            return json.loads(frame.to_json(orient="records"))
+
         return {
             "study_dir": str(self.study_dir),
             "study": self.manifest.get("study"),
             "engine": self.manifest.get("engine"),
             "belief_source": self.belief_source,
-            "cells": self.cells,
-            "paired": self.paired,
-            "paper_comparison": self.paper,
+            "cells": records(self.cells),
+            "paired": records(self.paired),
+            "repeated_measures": records(self.repeated),
+            "takeovers": records(self.takeovers),
+            "order": records(self.order),
+            "order_tests": self.order_tests,
+            "carryover": records(self.carryover),
+            "paper_comparison": records(self.paper),
+            "paper_note": self.paper_note,
             "failed_episodes": len(self.manifest.get("failed_episodes", [])),
         }
 
 
-def _finite(value: float) -> float | None:
+def _finite(value: object) -> float | None:
     # pd.NA: the mean of a nullable column with no values (e.g. final_trust of real participants)
-    if value is None or value is pd.NA or (isinstance(value, float) and math.isnan(value)):
+    if value is None or value is pd.NA:
         return None
-    return float(value)
+    value = float(value)
+    return None if math.isnan(value) else value
 
 
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
@@ -103,6 +147,323 @@ def _pair_conditions(conditions: list[str]) -> tuple[str, str] | None:
     return (conditions[0], conditions[1]) if len(conditions) >= 2 else None
 
 
+def _reported(values: pd.Series) -> pd.Series:
+    """Reported trust as floats with NaN where none was given (null or the older -1)."""
+    numeric = pd.to_numeric(values, errors="coerce").astype(float)
+    return numeric.where(numeric >= 1)
+
+
+# -- the tables -------------------------------------------------------------------------------------
+
+
+def cell_table(
+    episodes: pd.DataFrame,
+    spec_order,
+    condition_order,
+    belief_source: str,
+    expected: dict,
+    rng: np.random.Generator,
+    resamples: int,
+) -> pd.DataFrame:
+    other = [s for s in BELIEF_SOURCES if s != belief_source][0]
+    rows = []
+    for spec in spec_order:
+        for condition in condition_order:
+            group = episodes[(episodes["spec"] == spec) & (episodes["condition"] == condition)]
+            n = len(group)
+            k = int(group[f"satisfied_{belief_source}"].sum())
+            low, high = rate_interval(k, n)
+            wilson_low, wilson_high = rate_interval(k, n, method="wilson")
+            trust = group["mean_reported_trust"].to_numpy(dtype=float)
+            trust_low, trust_high = bootstrap_ci(trust, rng, resamples)
+            exp = expected.get(spec, {}).get(condition, {})
+            rows.append(
+                {
+                    "spec": spec,
+                    "condition": condition,
+                    "n": n,
+                    "satisfied": k,
+                    "satisfaction_rate": k / n if n else None,
+                    "ci_low": _finite(low),
+                    "ci_high": _finite(high),
+                    "wilson_low": _finite(wilson_low),
+                    "wilson_high": _finite(wilson_high),
+                    f"satisfaction_rate_{other}": _finite(group[f"satisfied_{other}"].mean()) if n else None,
+                    "logged_satisfaction_rate": _finite(group["satisfied"].mean()) if n else None,
+                    "mean_trust": _finite(np.nanmean(trust)) if np.isfinite(trust).any() else None,
+                    "trust_ci_low": _finite(trust_low),
+                    "trust_ci_high": _finite(trust_high),
+                    "mean_true_trust": _finite(group["mean_trust"].mean()) if n else None,
+                    "mean_final_trust": _finite(group["final_trust"].mean()) if n else None,
+                    "mean_junctions": _finite(group["junctions"].mean()) if n else None,
+                    "takeovers_per_episode": _finite(group["takeovers"].mean()) if n else None,
+                    "fallback_rate": _finite(group["fallback_fired"].mean()) if n else None,
+                    "exact_lower": exp.get("exact_lower"),
+                    "exact_upper": exp.get("exact_upper"),
+                    "exact_final_trust": exp.get("expected_final_trust"),
+                    "synthesized_lower": exp.get("synthesized_lower"),
+                    "synthesized_upper": exp.get("synthesized_upper"),
+                    "synthesized_horizon": exp.get("synthesized_horizon"),
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def per_participant_table(episodes: pd.DataFrame, column: str, pair: tuple[str, str]) -> pd.DataFrame:
+    """One row per (participant, spec): satisfied and mean reported trust under each condition."""
+    subset = episodes[episodes["condition"].isin(pair)]
+    wide = subset.pivot_table(
+        index=["participant", "spec"],
+        columns="condition",
+        values=[column, "mean_reported_trust"],
+        aggfunc="first",
+    )
+    out = pd.DataFrame(index=wide.index)
+    for condition in pair:
+        out[f"satisfied_{condition}"] = wide.get((column, condition))
+        out[f"trust_{condition}"] = wide.get(("mean_reported_trust", condition))
+    return out.reset_index()
+
+
+def paired_table_rows(
+    wide: pd.DataFrame, pair: tuple[str, str], spec_order, rng: np.random.Generator, resamples: int
+) -> pd.DataFrame:
+    a, b = pair
+    rows = []
+    for spec in spec_order:
+        group = wide[wide["spec"] == spec].dropna(subset=[f"satisfied_{a}", f"satisfied_{b}"])
+        if group.empty:
+            continue
+        first, second = group[f"satisfied_{a}"].astype(bool), group[f"satisfied_{b}"].astype(bool)
+        table = paired_table(first, second)
+        mc = mcnemar_exact(first, second)
+        rd = paired_risk_difference(table)
+        odds = conditional_odds_ratio(table)
+        trust = mean_difference(group[f"trust_{a}"], group[f"trust_{b}"], rng, resamples)
+        wx = wilcoxon_paired(group[f"trust_{a}"], group[f"trust_{b}"])
+        rows.append(
+            {
+                "spec": spec,
+                "condition_a": a,
+                "condition_b": b,
+                "unit": "participant",
+                "pairs": table.pairs,
+                "both_satisfied": table.both,
+                "only_a_satisfied": table.only_first,
+                "only_b_satisfied": table.only_second,
+                "neither_satisfied": table.neither,
+                "mcnemar_p": mc.p_value,
+                "risk_difference": _finite(rd.value),
+                "rd_low": _finite(rd.low),
+                "rd_high": _finite(rd.high),
+                "odds_ratio": _finite(odds.value),
+                "or_low": _finite(odds.low),
+                "or_high": _finite(odds.high),
+                "trust_difference": _finite(trust.value),
+                "trust_diff_low": _finite(trust.low),
+                "trust_diff_high": _finite(trust.high),
+                "wilcoxon_pairs": wx.pairs,
+                "wilcoxon_p": wx.p_value,
+                "median_trust_difference": _finite(wx.median_difference),
+            }
+        )
+    # Across specs, one value per participant (their repeated measures are not independent pairs).
+    both = wide.dropna(subset=[f"satisfied_{a}", f"satisfied_{b}"])
+    if both["spec"].nunique() > 1:
+        person = (
+            both.assign(
+                sat_diff=both[f"satisfied_{a}"].astype(float) - both[f"satisfied_{b}"].astype(float),
+                trust_diff=both[f"trust_{a}"] - both[f"trust_{b}"],
+            )
+            .groupby("participant")[["sat_diff", "trust_diff"]]
+            .mean()
+        )
+        sat = wilcoxon_paired(person["sat_diff"].to_numpy(), np.zeros(len(person)))
+        trust = mean_difference(person["trust_diff"].to_numpy(), np.zeros(len(person)), rng, resamples)
+        sat_mean = mean_difference(person["sat_diff"].to_numpy(), np.zeros(len(person)), rng, resamples)
+        wx = wilcoxon_paired(person["trust_diff"].to_numpy(), np.zeros(len(person)))
+        rows.append(
+            {
+                "spec": ALL_SPECS,
+                "condition_a": a,
+                "condition_b": b,
+                "unit": "participant (mean over specs)",
+                "pairs": int(len(person)),
+                "mcnemar_p": None,
+                "sign_test_p": sat.p_value,
+                "risk_difference": _finite(sat_mean.value),
+                "rd_low": _finite(sat_mean.low),
+                "rd_high": _finite(sat_mean.high),
+                "trust_difference": _finite(trust.value),
+                "trust_diff_low": _finite(trust.low),
+                "trust_diff_high": _finite(trust.high),
+                "wilcoxon_pairs": wx.pairs,
+                "wilcoxon_p": wx.p_value,
+                "median_trust_difference": _finite(wx.median_difference),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def repeated_measures_table(episodes: pd.DataFrame, column: str, pair: tuple[str, str]) -> pd.DataFrame:
+    a, b = pair
+    subset = episodes[episodes["condition"].isin(pair)]
+    treated = (subset["condition"] == a).to_numpy(dtype=float)
+    participant = subset["participant"].to_numpy()
+    spec = subset["spec"].to_numpy()
+    strata = spec if len(set(spec)) > 1 else None
+    rows = []
+    for outcome, effect in (
+        (
+            "satisfied (odds ratio)",
+            conditional_logit(subset[column].to_numpy(dtype=float), treated, participant, strata),
+        ),
+        (
+            "mean reported trust (difference)",
+            mixed_trust_model(
+                subset["mean_reported_trust"].to_numpy(dtype=float), treated, participant, strata
+            ),
+        ),
+    ):
+        rows.append(
+            {
+                "outcome": outcome,
+                "model": effect.model,
+                "effect_of": f"{a} vs {b}",
+                "estimate": _finite(effect.estimate),
+                "low": _finite(effect.low),
+                "high": _finite(effect.high),
+                "p_value": _finite(effect.p_value),
+                "participants": effect.groups,
+                "episodes": effect.observations,
+                "note": effect.note,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def takeover_table(roads: pd.DataFrame, episodes: pd.DataFrame, condition_order) -> pd.DataFrame:
+    merged = roads[roads["index"] > 0][["episode_id", "incident", "takeover"]].merge(
+        episodes[["episode_id", "condition"]], on="episode_id"
+    )
+    merged = merged[merged["incident"].fillna("").astype(str) != ""]
+    rows = []
+    for (incident, condition), group in merged.groupby(["incident", "condition"], sort=True):
+        n, k = len(group), int(group["takeover"].sum())
+        low, high = rate_interval(k, n)
+        rows.append(
+            {
+                "incident": incident,
+                "condition": condition,
+                "roads": n,
+                "takeovers": k,
+                "rate": k / n,
+                "ci_low": low,
+                "ci_high": high,
+            }
+        )
+    table = pd.DataFrame(
+        rows, columns=["incident", "condition", "roads", "takeovers", "rate", "ci_low", "ci_high"]
+    )
+    if len(table):
+        order = {c: i for i, c in enumerate(condition_order)}
+        table = table.sort_values(
+            ["incident", "condition"], key=lambda s: s.map(order) if s.name == "condition" else s
+        ).reset_index(drop=True)
+    return table
+
+
+def order_tables(episodes: pd.DataFrame, column: str) -> tuple[pd.DataFrame, dict, pd.DataFrame]:
+    """Position effects (per Latin-square position) and carry-over (by the previous condition)."""
+    from scipy import stats
+    from statsmodels.stats.contingency_tables import cochrans_q
+
+    rows = []
+    for position, group in episodes.groupby("position", sort=True):
+        n, k = len(group), int(group[column].sum())
+        low, high = rate_interval(k, n)
+        rows.append(
+            {
+                "position": int(position) + 1,
+                "n": n,
+                "satisfied": k,
+                "satisfaction_rate": k / n,
+                "ci_low": low,
+                "ci_high": high,
+                "mean_trust": _finite(np.nanmean(group["mean_reported_trust"].to_numpy(dtype=float)))
+                if group["mean_reported_trust"].notna().any()
+                else None,
+            }
+        )
+    order = pd.DataFrame(rows)
+    tests: dict = {"cochran_q_p": None, "friedman_p": None, "participants": 0}
+    positions = episodes["position"].nunique()
+    complete = episodes.groupby("participant").filter(lambda g: g["position"].nunique() == positions)
+    if positions >= 2 and complete["participant"].nunique() >= 2:
+        sat = complete.pivot_table(index="participant", columns="position", values=column, aggfunc="first")
+        trust = complete.pivot_table(
+            index="participant", columns="position", values="mean_reported_trust", aggfunc="first"
+        ).dropna()
+        tests["participants"] = int(len(sat))
+        if sat.to_numpy().std() > 0:
+            tests["cochran_q_p"] = float(cochrans_q(sat.to_numpy(dtype=int)).pvalue)
+        if positions >= 3 and len(trust) >= 2 and trust.to_numpy().std() > 0:
+            tests["friedman_p"] = float(stats.friedmanchisquare(*trust.to_numpy().T).pvalue)
+    ordered = episodes.sort_values(["participant", "position"])
+    previous = ordered.groupby("participant")["condition"].shift(1).fillna("none (first)")
+    carry = ordered.assign(previous=previous)
+    rows = []
+    for (condition, before), group in carry.groupby(["condition", "previous"], sort=True):
+        n, k = len(group), int(group[column].sum())
+        low, high = rate_interval(k, n)
+        rows.append(
+            {
+                "condition": condition,
+                "previous_condition": before,
+                "n": n,
+                "satisfaction_rate": k / n,
+                "ci_low": low,
+                "ci_high": high,
+                "mean_trust": _finite(group["mean_reported_trust"].mean()),
+            }
+        )
+    return order, tests, pd.DataFrame(rows)
+
+
+def is_paper_comparable(manifest: dict, episodes: pd.DataFrame) -> tuple[bool, str]:
+    """The paper's table applies to the paper's town, its φ1 and φ2 and 21 participants only."""
+    from trustroute.harness.study.config import PACKAGED_SPECS
+    from trustroute.networks.town import load_town
+    from trustroute.policies.logic.spec import load_spec
+
+    config = manifest.get("config", {})
+    reasons = []
+    participants = config.get("participants")
+    if participants != PAPER["participants"]:
+        reasons.append(f"{participants} participants, the paper had {PAPER['participants']}")
+    default_town = load_town(None)
+    town = load_town(config.get("town")) if config.get("town") else default_town
+    if town.content_hash != default_town.content_hash:
+        reasons.append("another town")
+    for name in ("phi1", "phi2"):
+        ours = [p for p in config.get("specs", []) if Path(p).stem == name]
+        if (
+            not ours
+            or load_spec(ours[0], town).content_hash
+            != load_spec(PACKAGED_SPECS / f"{name}.toml", town).content_hash
+        ):
+            reasons.append(f"not the paper's {name}")
+    if not {"aware", "free"} <= set(episodes["condition"]):
+        reasons.append("not the aware and free conditions")
+    if reasons:
+        return False, (
+            "The paper's figures are not shown: this study is not comparable to it ("
+            + "; ".join(reasons)
+            + ")."
+        )
+    return True, ""
+
+
 def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: int = 10_000) -> StudyAnalysis:
     if belief_source not in BELIEF_SOURCES:
         raise InputError(
@@ -123,7 +484,8 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
     episodes = episodes.merge(
         satisfaction[["episode_id", "satisfied_filter", "satisfied_reported"]], on="episode_id", how="left"
     )
-    other = [s for s in BELIEF_SOURCES if s != belief_source][0]
+    if "mean_reported_trust" in episodes:
+        episodes["mean_reported_trust"] = pd.to_numeric(episodes["mean_reported_trust"], errors="coerce")
     expected = manifest.get("expected", {})
     rng = np.random.default_rng(ANALYSIS_SEED)
     spec_order = [Path(p).stem for p in manifest["config"]["specs"]]
@@ -132,114 +494,61 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
         c if c in ("aware", "free") else Path(c).stem for c in manifest["config"]["conditions"]
     ]
     condition_order = [c for c in config_conditions if c in condition_order] or condition_order
+    column = f"satisfied_{belief_source}"
 
-    cells = []
-    for spec in spec_order:
-        for condition in condition_order:
-            group = episodes[(episodes["spec"] == spec) & (episodes["condition"] == condition)]
-            sat = group[f"satisfied_{belief_source}"].to_numpy(dtype=float)
-            trust = group["mean_reported_trust"].to_numpy(dtype=float)
-            low, high = bootstrap_ci(sat, rng, resamples)
-            trust_low, trust_high = bootstrap_ci(trust, rng, resamples)
-            exp = expected.get(spec, {}).get(condition, {})
-            cells.append(
-                {
-                    "spec": spec,
-                    "condition": condition,
-                    "n": int(len(group)),
-                    "satisfied": int(sat.sum()),
-                    "satisfaction_rate": _finite(sat.mean()) if len(group) else None,
-                    "ci_low": _finite(low),
-                    "ci_high": _finite(high),
-                    f"satisfaction_rate_{other}": _finite(group[f"satisfied_{other}"].mean())
-                    if len(group)
-                    else None,
-                    "logged_satisfaction_rate": _finite(group["satisfied"].mean()) if len(group) else None,
-                    "mean_trust": _finite(np.nanmean(trust)) if np.isfinite(trust).any() else None,
-                    "trust_ci_low": _finite(trust_low),
-                    "trust_ci_high": _finite(trust_high),
-                    "mean_true_trust": _finite(group["mean_trust"].mean()) if len(group) else None,
-                    "mean_final_trust": _finite(group["final_trust"].mean()) if len(group) else None,
-                    "mean_junctions": _finite(group["junctions"].mean()) if len(group) else None,
-                    "takeovers_per_episode": _finite(group["takeovers"].mean()) if len(group) else None,
-                    "fallback_rate": _finite(group["fallback_fired"].mean()) if len(group) else None,
-                    "exact_lower": exp.get("exact_lower"),
-                    "exact_upper": exp.get("exact_upper"),
-                    "exact_final_trust": exp.get("expected_final_trust"),
-                    "synthesized_lower": exp.get("synthesized_lower"),
-                    "synthesized_upper": exp.get("synthesized_upper"),
-                    "synthesized_horizon": exp.get("synthesized_horizon"),
-                }
-            )
-
-    paired = []
+    cells = cell_table(episodes, spec_order, condition_order, belief_source, expected, rng, resamples)
     pair = _pair_conditions(condition_order)
-    if pair is not None:
-        a, b = pair
-        for spec in [*spec_order, "all"]:
-            subset = episodes if spec == "all" else episodes[episodes["spec"] == spec]
-            wide = subset.pivot_table(
-                index=["participant", "spec"],
-                columns="condition",
-                values=[f"satisfied_{belief_source}", "mean_reported_trust"],
-                aggfunc="first",
-            )
-            column = f"satisfied_{belief_source}"
-            if (column, a) not in wide or (column, b) not in wide:
-                continue
-            both = wide[[(column, a), (column, b)]].dropna()
-            mc = mcnemar_exact(both[(column, a)].astype(bool), both[(column, b)].astype(bool))
-            trust_a = wide[("mean_reported_trust", a)].to_numpy(dtype=float)
-            trust_b = wide[("mean_reported_trust", b)].to_numpy(dtype=float)
-            wx = wilcoxon_paired(trust_a, trust_b)
-            paired.append(
-                {
-                    "spec": spec,
-                    "condition_a": a,
-                    "condition_b": b,
-                    "pairs": mc.pairs,
-                    "only_a_satisfied": mc.only_first,
-                    "only_b_satisfied": mc.only_second,
-                    "mcnemar_p": mc.p_value,
-                    "wilcoxon_pairs": wx.pairs,
-                    "wilcoxon_statistic": _finite(wx.statistic),
-                    "wilcoxon_p": wx.p_value,
-                    "median_trust_difference": _finite(wx.median_difference),
-                }
-            )
+    empty = pd.DataFrame()
+    if pair is not None and len(episodes):
+        wide = per_participant_table(episodes, column, pair)
+        paired = paired_table_rows(wide, pair, spec_order, rng, resamples)
+        repeated = repeated_measures_table(episodes, column, pair)
+    else:
+        wide, paired, repeated = empty, empty, empty
+    takeovers = takeover_table(roads, episodes, condition_order)
+    if len(episodes):
+        order, order_tests, carryover = order_tables(episodes, column)
+    else:
+        order, order_tests, carryover = empty, {}, empty
     analysis = StudyAnalysis(
         study_dir=Path(study_dir),
         belief_source=belief_source,
         manifest=manifest,
         cells=cells,
         paired=paired,
-        paper=[],
+        repeated=repeated,
+        takeovers=takeovers,
+        order=order,
+        order_tests=order_tests,
+        carryover=carryover,
+        per_participant=wide,
+        paper=pd.DataFrame(columns=["figure", "paper", "ours"]),
+        paper_note="",
         satisfaction=satisfaction,
         episodes=episodes,
     )
-    analysis.paper = paper_comparison(analysis)
+    comparable, note = is_paper_comparable(manifest, episodes)
+    if comparable:
+        analysis.paper = pd.DataFrame(paper_comparison(analysis), columns=["figure", "paper", "ours"])
+    analysis.paper_note = note
     return analysis
 
 
 def paper_comparison(analysis: StudyAnalysis) -> list[dict]:
     """The paper's headline figures beside this study's (docs/study.md, "Headline figures of the paper")."""
     episodes, source = analysis.episodes, analysis.belief_source
-    names = list(dict.fromkeys(episodes["spec"])) if len(episodes) else []
-
-    def ours_for(paper_spec: str) -> str | None:
-        """This study's spec for the paper's: the same name, else a variant ("phi1_strict")."""
-        for name in names:
-            if name == paper_spec:
-                return name
-        return next((name for name in names if name.startswith(f"{paper_spec}_")), None)
-
     rows = []
-    for paper_spec, (k, n) in PAPER["satisfied_aware"].items():
-        spec = ours_for(paper_spec)
+    for spec, (k, n) in PAPER["satisfied_aware"].items():
         group = episodes[(episodes["spec"] == spec) & (episodes["condition"] == "aware")]
-        ours = f"{int(group[f'satisfied_{source}'].sum())}/{len(group)}" if len(group) else "not run"
-        label = paper_spec if spec in (None, paper_spec) else f"{paper_spec} (ours: {spec})"
-        rows.append({"figure": f"participants satisfying {label} (aware)", "paper": f"{k}/{n}", "ours": ours})
+        ours = int(group[f"satisfied_{source}"].sum())
+        low, high = rate_interval(ours, len(group))
+        rows.append(
+            {
+                "figure": f"participants satisfying {spec} (aware)",
+                "paper": f"{k}/{n}",
+                "ours": f"{ours}/{len(group)} (exact 95% CI [{low:.3f}, {high:.3f}])",
+            }
+        )
 
     def by_condition(column: str, digits: int) -> str:
         values = []
@@ -262,118 +571,198 @@ def paper_comparison(analysis: StudyAnalysis) -> list[dict]:
             "ours": by_condition("mean_reported_trust", 4),
         }
     )
-    cells = {(c["spec"], c["condition"]): c for c in analysis.cells}
-    for paper_spec, value in PAPER["pr_max"].items():
-        spec = ours_for(paper_spec)
-        cell = cells.get((spec, "aware"), {})
-        lower, upper = cell.get("synthesized_lower"), cell.get("synthesized_upper")
-        ours = f"[{lower:.4f}, {upper:.4f}]" if lower is not None and upper is not None else "not available"
-        label = paper_spec if spec in (None, paper_spec) else f"{paper_spec} (ours: {spec})"
-        horizon = cell.get("synthesized_horizon")
-        within = f", ours within H={horizon} junctions" if horizon else ""
-        rows.append({"figure": f"Pr_max({label}), synthesized{within}", "paper": f"{value}", "ours": ours})
+    cells = analysis.cells.set_index(["spec", "condition"]) if len(analysis.cells) else None
+    for spec, value in PAPER["pr_max"].items():
+        ours = "not available"
+        within = ""
+        if cells is not None and (spec, "aware") in cells.index:
+            cell = cells.loc[(spec, "aware")]
+            lower, upper = cell["synthesized_lower"], cell["synthesized_upper"]
+            if lower is not None and upper is not None and not pd.isna(lower) and not pd.isna(upper):
+                ours = f"[{lower:.4f}, {upper:.4f}]"
+            if cell["synthesized_horizon"] is not None and not pd.isna(cell["synthesized_horizon"]):
+                within = f", ours within H={int(cell['synthesized_horizon'])} junctions"
+        rows.append({"figure": f"Pr_max({spec}), synthesized{within}", "paper": f"{value}", "ours": ours})
     return rows
 
 
-def _fmt(value: object, digits: int = 3) -> str:
-    if value is None:
+# -- display ----------------------------------------------------------------------------------------
+
+
+def _num(value: object, digits: int = 3) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)) or value is pd.NA:
         return "-"
-    if isinstance(value, float):
-        return f"{value:.{digits}f}"
+    if isinstance(value, (float, np.floating)):
+        return "inf" if math.isinf(value) else f"{value:.{digits}f}"
     return str(value)
 
 
-def cell_rows(analysis: StudyAnalysis) -> tuple[list[str], list[list[str]]]:
-    """Header and rows of the main table (for the terminal and the report)."""
+def _interval(low: object, high: object, digits: int = 3) -> str:
+    if _num(low) == "-" or _num(high) == "-":
+        return "-"
+    return f"[{_num(low, digits)}, {_num(high, digits)}]"
+
+
+def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
+    """The tables as shown (formatted strings, p-values in scientific notation), by name."""
     other = [s for s in BELIEF_SOURCES if s != analysis.belief_source][0]
-    header = [
-        "spec",
-        "condition",
-        "n",
-        "satisfied",
-        "rate",
-        "95% CI",
-        f"rate ({other})",
-        "exact [L, U]",
-        "synthesized [L, U]",
-        "mean trust (reported)",
-        "trust 95% CI",
-        "mean true trust",
-        "junctions",
-        "fallback",
-    ]
-    rows = []
-    for c in analysis.cells:
-        exact = f"[{c['exact_lower']:.3f}, {c['exact_upper']:.3f}]" if c["exact_lower"] is not None else "-"
-        synth = (
-            f"[{c['synthesized_lower']:.3f}, {c['synthesized_upper']:.3f}]"
-            if c["synthesized_lower"] is not None
-            else "-"
+    tables: dict[str, pd.DataFrame] = {}
+    c = analysis.cells
+    if len(c):
+        tables["cells"] = pd.DataFrame(
+            {
+                "spec": c["spec"],
+                "condition": c["condition"],
+                "n": c["n"],
+                "satisfied": c["satisfied"],
+                "rate": c["satisfaction_rate"].map(_num),
+                "exact 95% CI": [_interval(a, b) for a, b in zip(c["ci_low"], c["ci_high"], strict=True)],
+                "Wilson 95% CI": [
+                    _interval(a, b) for a, b in zip(c["wilson_low"], c["wilson_high"], strict=True)
+                ],
+                f"rate ({other})": c[f"satisfaction_rate_{other}"].map(_num),
+                "exact value [L, U]": [
+                    _interval(a, b) for a, b in zip(c["exact_lower"], c["exact_upper"], strict=True)
+                ],
+                "synthesized [L, U]": [
+                    _interval(a, b)
+                    for a, b in zip(c["synthesized_lower"], c["synthesized_upper"], strict=True)
+                ],
+                "mean trust (reported)": c["mean_trust"].map(_num),
+                "trust 95% CI": [
+                    _interval(a, b, 2) for a, b in zip(c["trust_ci_low"], c["trust_ci_high"], strict=True)
+                ],
+                "mean true trust": c["mean_true_trust"].map(_num),
+                "takeovers / episode": c["takeovers_per_episode"].map(lambda v: _num(v, 2)),
+                "junctions": c["mean_junctions"].map(lambda v: _num(v, 1)),
+                "fallback": c["fallback_rate"].map(lambda v: _num(v, 2)),
+            }
         )
-        rows.append(
-            [
-                c["spec"],
-                c["condition"],
-                str(c["n"]),
-                str(c["satisfied"]),
-                _fmt(c["satisfaction_rate"]),
-                f"[{_fmt(c['ci_low'])}, {_fmt(c['ci_high'])}]",
-                _fmt(c[f"satisfaction_rate_{other}"]),
-                exact,
-                synth,
-                _fmt(c["mean_trust"], 3),
-                f"[{_fmt(c['trust_ci_low'], 2)}, {_fmt(c['trust_ci_high'], 2)}]",
-                _fmt(c["mean_true_trust"], 3),
-                _fmt(c["mean_junctions"], 1),
-                _fmt(c["fallback_rate"], 2),
-            ]
+    p = analysis.paired
+    if len(p):
+        tables["paired"] = pd.DataFrame(
+            {
+                "spec": p["spec"],
+                "pair": p["condition_a"] + " vs " + p["condition_b"],
+                "unit": p["unit"],
+                "n": p["pairs"],
+                "only A / only B sat.": [
+                f"{int(a)} / {int(b)}" if _num(a) != "-" else "-"
+                for a, b in zip(
+                    p.get("only_a_satisfied", [None] * len(p)),
+                    p.get("only_b_satisfied", [None] * len(p)),
+                    strict=True,
+                )
+            ],
+            "risk difference [95% CI]": [
+                    f"{_num(v)} {_interval(lo, hi)}"
+                    for v, lo, hi in zip(p["risk_difference"], p["rd_low"], p["rd_high"], strict=True)
+                ],
+                "conditional OR [exact CI]": [
+                    f"{_num(v, 2)} {_interval(lo, hi, 2)}" if _num(v) != "-" else "-"
+                    for v, lo, hi in zip(
+                        p.get("odds_ratio", [None] * len(p)),
+                        p.get("or_low", [None] * len(p)),
+                        p.get("or_high", [None] * len(p)),
+                        strict=True,
+                    )
+                ],
+                "McNemar exact p": [format_p(_finite(v)) for v in p["mcnemar_p"]],
+                "trust difference [BCa CI]": [
+                    f"{_num(v)} {_interval(lo, hi)}"
+                    for v, lo, hi in zip(
+                        p["trust_difference"], p["trust_diff_low"], p["trust_diff_high"], strict=True
+                    )
+                ],
+                "Wilcoxon p (trust)": [format_p(_finite(v)) for v in p["wilcoxon_p"]],
+            }
         )
-    return header, rows
+    r = analysis.repeated
+    if len(r):
+        tables["repeated"] = pd.DataFrame(
+            {
+                "outcome": r["outcome"],
+                "model": r["model"],
+                "effect of": r["effect_of"],
+                "estimate [95% CI]": [
+                    f"{_num(v)} {_interval(lo, hi)}" if _num(v) != "-" else "-"
+                    for v, lo, hi in zip(r["estimate"], r["low"], r["high"], strict=True)
+                ],
+                "p": [format_p(_finite(v)) for v in r["p_value"]],
+                "participants": r["participants"],
+                "episodes": r["episodes"],
+                "note": r["note"],
+            }
+        )
+    t = analysis.takeovers
+    if len(t):
+        tables["takeovers"] = pd.DataFrame(
+            {
+                "incident": t["incident"],
+                "condition": t["condition"],
+                "roads": t["roads"],
+                "takeovers": t["takeovers"],
+                "rate": t["rate"].map(_num),
+                "exact 95% CI": [_interval(a, b) for a, b in zip(t["ci_low"], t["ci_high"], strict=True)],
+            }
+        )
+    o = analysis.order
+    if len(o):
+        tables["order"] = pd.DataFrame(
+            {
+                "position": o["position"],
+                "n": o["n"],
+                "rate": o["satisfaction_rate"].map(_num),
+                "exact 95% CI": [_interval(a, b) for a, b in zip(o["ci_low"], o["ci_high"], strict=True)],
+                "mean trust (reported)": o["mean_trust"].map(_num),
+            }
+        )
+    k = analysis.carryover
+    if len(k):
+        tables["carryover"] = pd.DataFrame(
+            {
+                "condition": k["condition"],
+                "driven after": k["previous_condition"],
+                "n": k["n"],
+                "rate": k["satisfaction_rate"].map(_num),
+                "exact 95% CI": [_interval(a, b) for a, b in zip(k["ci_low"], k["ci_high"], strict=True)],
+                "mean trust (reported)": k["mean_trust"].map(_num),
+            }
+        )
+    if len(analysis.paper):
+        tables["paper"] = analysis.paper
+    return tables
+
+
+TABLE_TITLES = {
+    "cells": "Satisfaction and trust per spec and condition",
+    "paired": "Paired effects over participants",
+    "repeated": "Repeated-measures models (one group per participant, both specs)",
+    "takeovers": "Takeover rate per incident type and condition",
+    "order": "Order effects: by position in the Latin square",
+    "carryover": "Carry-over: by the condition driven just before",
+    "paper": "The paper beside this study",
+}
 
 
 def format_table(analysis: StudyAnalysis) -> str:
     """Plain-text tables for the terminal."""
-    header, rows = cell_rows(analysis)
     lines = [
         f"study {analysis.manifest.get('study')} ({analysis.manifest.get('engine')} engine); "
         f"satisfaction on beliefs from: {analysis.belief_source}"
     ]
-    lines += _aligned(header, rows)
-    if analysis.paired:
-        lines.append("")
-        lines += _aligned(
-            [
-                "spec",
-                "pair",
-                "pairs",
-                "only A sat.",
-                "only B sat.",
-                "McNemar p",
-                "Wilcoxon p",
-                "median trust diff",
-            ],
-            [
-                [
-                    p["spec"],
-                    f"{p['condition_a']} vs {p['condition_b']}",
-                    str(p["pairs"]),
-                    str(p["only_a_satisfied"]),
-                    str(p["only_b_satisfied"]),
-                    f"{p['mcnemar_p']:.4f}",
-                    f"{p['wilcoxon_p']:.4f}",
-                    _fmt(p["median_trust_difference"], 3),
-                ]
-                for p in analysis.paired
-            ],
-        )
-    lines.append("")
-    lines += _aligned(
-        ["figure", "paper", "ours"], [[r["figure"], r["paper"], r["ours"]] for r in analysis.paper]
-    )
+    for name, table in display_tables(analysis).items():
+        lines += ["", TABLE_TITLES[name], table.to_string(index=False)]
+    if analysis.order_tests:
+        lines.append(order_test_line(analysis.order_tests))
+    if analysis.paper_note:
+        lines += ["", analysis.paper_note]
     return "\n".join(lines)
 
 
-def _aligned(header: list[str], rows: list[list[str]]) -> list[str]:
-    widths = [max(len(str(x)) for x in column) for column in zip(header, *rows, strict=True)]
-    fmt = "  ".join(f"{{:<{w}}}" for w in widths)
-    return [fmt.format(*header), fmt.format(*("-" * w for w in widths))] + [fmt.format(*r) for r in rows]
+def order_test_line(tests: dict) -> str:
+    return (
+        f"Across positions within {tests.get('participants', 0)} participants: Cochran's Q p = "
+        f"{format_p(tests.get('cochran_q_p'))} (satisfaction), Friedman p = "
+        f"{format_p(tests.get('friedman_p'))} (reported trust)."
+    )

@@ -22,6 +22,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "baseline": ("trustroute.harness.commands.synth", "baseline", "The trust-free shortest baseline route."),
     "evaluate": ("trustroute.harness.commands.synth", "evaluate", "Exact satisfaction probability."),
     "run": ("trustroute.harness.commands.run", "run", "Run one episode in SUMO."),
+    "replay": ("trustroute.harness.commands.replay", "replay",
+               "Re-run one study episode exactly, check it, and record it for Rerun."),
     "study": ("trustroute.harness.commands.study", "study", "Run a simulated within-subject study."),
     "analyze": ("trustroute.harness.commands.study", "analyze", "Analyse a study directory."),
     "fit": ("trustroute.harness.commands.study", "fit", "Fit a driver model to a study's logs."),

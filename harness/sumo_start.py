@@ -30,6 +30,8 @@ class SumoConfig:
     max_sim_seconds: float = 7200.0  # a stuck ego is a bug: the runner stops with an error here
     performance_limits: Mapping[str, PerformanceLimits] = field(default_factory=lambda: dict(DEFAULT_LIMITS))
     background_vehicles: int = 0
+    gui: bool = False               # run in sumo-gui through TraCI (needs a display) instead of libsumo
+    output_dir: str | None = None   # also write SUMO's own FCD and route outputs here (harness/sumo_files.py)
 
 
 @lru_cache(maxsize=1)
@@ -55,6 +57,21 @@ def sumo_command(net_path: Path, seed: int, config: SumoConfig) -> list[str]:
         "--no-warnings", "true",
         "--duration-log.disable", "true",
         "--verbose", "false",
+        *native_output_options(config),
+    ]
+
+
+def native_output_options(config: SumoConfig) -> list[str]:
+    """SUMO's FCD (every vehicle and person per step) and vehroute outputs, when output_dir is set."""
+    if config.output_dir is None:
+        return []
+    folder = Path(config.output_dir)
+    return [
+        "--fcd-output", str(folder / "fcd.xml"),
+        "--vehroute-output", str(folder / "routes.rou.xml"),
+        "--vehroute-output.last-route", "true",        # the ego's route as finally extended
+        "--vehroute-output.write-unfinished", "true",  # vehicles still driving when the episode ends
+        "--vehroute-output.exit-times", "true",
     ]
 
 
@@ -62,6 +79,31 @@ def _libsumo():
     import libsumo
 
     return libsumo
+
+
+class _TraciWithConstants:
+    """traci with its constants as attributes, like libsumo (the episode code uses `sumo.VAR_...`)."""
+
+    def __init__(self) -> None:
+        import traci
+
+        self._traci = traci
+
+    def __getattr__(self, name: str):
+        try:
+            return getattr(self._traci, name)
+        except AttributeError:
+            return getattr(self._traci.constants, name)
+
+
+def check_display() -> None:
+    """sumo-gui needs an X display: a one-line error when there is none."""
+    import os
+
+    if not os.environ.get("DISPLAY"):
+        raise InputError("--gui", "", "no display (DISPLAY is not set), so sumo-gui cannot open a window",
+                         "run on a machine with a display, under xvfb-run, or drop --gui and open the "
+                         "--rrd recording in the Rerun web viewer")
 
 
 @contextlib.contextmanager
@@ -74,7 +116,13 @@ def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[obje
     if not Path(net_path).is_file():
         raise InputError(str(net_path), "", "the SUMO net file does not exist",
                          "run `trustroute net build` or pass an existing .net.xml")
-    sumo = _libsumo()
+    if config.gui:
+        check_display()
+        # sumo-gui starts running at once and closes at the end; same options as the libsumo run.
+        command = [find_binary("sumo-gui"), *command[1:], "--start", "true", "--quit-on-end", "true"]
+        sumo = _TraciWithConstants()
+    else:
+        sumo = _libsumo()
     try:
         sumo.start(command)
     except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError types

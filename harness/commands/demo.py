@@ -29,26 +29,13 @@ DEMO_STUDY = {
 
 def record_episode(config, study_dir: Path, episode_id: str) -> Path:
     """Replay one planned episode in SUMO with its seeds and write `<study>/<episode_id>.rrd`."""
-    from trustroute.harness.episode import run_episode
-    from trustroute.harness.study.context import study_context
     from trustroute.harness.study.plan import plan_episodes
-    from trustroute.participants.synthetic_driver import SyntheticDriver
+    from trustroute.harness.study.runner import run_planned_episode
 
     task = next(t for t in plan_episodes(config) if t.episode_id == episode_id)
-    context = study_context(config)
-    driver = SyntheticDriver(
-        context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
-    )
     path = Path(study_dir) / f"{episode_id}.rrd"
     if not path.exists():
-        run_episode(
-            context.setups[task.spec],
-            context.policies[(task.spec, task.condition)],
-            driver,
-            task.episode_id,
-            task.seed,
-            rrd_path=path,
-        )
+        run_planned_episode(config, task, rrd_path=path)
     return path
 
 

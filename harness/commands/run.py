@@ -57,15 +57,30 @@ def _write_logs(out_dir: Path, record) -> dict[str, Path]:
               help="SUMO net to use (default: the town's cached net, built if missing).")
 @click.option("--initial-trust", type=int, default=None, help="Driver's initial trust (default: drawn).")
 @click.option("--cache-dir", type=click.Path(), default=None, help="Where 'aware' policies are cached.")
+@click.option("--sumo-files", "sumo_dir", type=click.Path(), default=None,
+              help="DIRECTORY to write episode.sumocfg, the net, SUMO's route and FCD outputs into "
+                   "(open with sumo-gui).")
 def run(spec_argument: str | None, spec_option: str | None, policy_name: str, seed: int,
         rrd_path: str | None, out_dir: str | None, as_json: bool, town_path: str | None,
         driver_path: str | None, net_path: str | None, initial_trust: int | None,
-        cache_dir: str | None) -> None:
-    """Run one episode of SPEC (a spec file) in SUMO with POLICY and a synthetic driver."""
+        cache_dir: str | None, sumo_dir: str | None) -> None:
+    """Run one episode of SPEC (a spec file) in SUMO with POLICY and a synthetic driver.
+
+    To re-run an episode of a study exactly (its participant's drawn model and initial trust), use
+    `trustroute replay STUDY_DIR EPISODE_ID`.
+    """
     import numpy as np
 
     from trustroute.harness.episode import run_episode
     from trustroute.harness.episode_tracker import EpisodeSetup
+    from trustroute.harness.sumo_files import (
+        VehicleTypeCollector,
+        finish_route_file,
+        prepare_directory,
+        write_sumocfg,
+    )
+    from trustroute.harness.sumo_start import SumoConfig
+    from trustroute.networks.sumo_net import build_net
     from trustroute.networks.town import load_town
     from trustroute.output_files import check_output_dir, check_output_file
     from trustroute.participants.driver_model import load_driver_model
@@ -101,12 +116,22 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
     setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
     driver = SyntheticDriver(driver_model, np.random.default_rng(seed), initial_trust=initial_trust)
     episode_id = f"{spec.name}-{policy.name}-s{seed}"
+    sumo_config = SumoConfig()
+    if sumo_dir is not None:
+        sumo_config = SumoConfig(output_dir=str(prepare_directory(Path(sumo_dir)).resolve()))
+    net = Path(net_path) if net_path else build_net(town).path
+    types = VehicleTypeCollector() if sumo_dir is not None else None
     record = run_episode(setup, policy, driver, episode_id, seed,
-                         rrd_path=Path(rrd_path) if rrd_path else None,
-                         net_path=Path(net_path) if net_path else None)
+                         rrd_path=Path(rrd_path) if rrd_path else None, net_path=net, config=sumo_config,
+                         observer=types)
     written = _write_logs(Path(out_dir), record) if out_dir else {}
     if rrd_path:
         written["rrd"] = Path(rrd_path)
+    if sumo_dir is not None:
+        finish_route_file(Path(sumo_dir), types.types)
+        written["sumocfg"] = write_sumocfg(Path(sumo_dir), net, seed, sumo_config)
+        written["routes"] = Path(sumo_dir) / "routes.rou.xml"
+        written["fcd"] = Path(sumo_dir) / "fcd.xml"
     summary = dict(record.summary)
     summary["route"] = record.roads["directed_road"].tolist()
     if as_json:

@@ -233,7 +233,8 @@ def fit(
     from trustroute.output_files import check_output_file
 
     check_output_file(out, "--out", "driver model file")
-    result = fit_study(Path(study_dir), method=method, iterations=iterations)
+    result = fit_study(Path(study_dir), method=method, iterations=iterations,
+                       progress=not (quiet or as_json))
     path = result.write(Path(out))
     payload = result.summary()
     paths: dict[str, Path] = {"driver_model": path}

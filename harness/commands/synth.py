@@ -73,10 +73,12 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     check_output_file(out_path, "--out", "policy file")
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from trustroute.policies.routing.files import save_policy
+    from trustroute.policies.routing.resolve import synthesis_progress
     from trustroute.policies.synthesis.search import synthesize
 
-    result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                        belief_rule=belief_rule)
+    with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
+        result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
+                            belief_rule=belief_rule, on_iteration=on_iteration)
     path = str(save_policy(result, out_path, town, driver, spec))
     from trustroute.policies.routing.files import array_path
 

@@ -13,8 +13,10 @@ Optional `[study]` keys: `name`, `town`, `driver_model`, `horizon` (synthesis ho
 policies, junctions; default 20), `fallback_after` (20; `false` disables the 20-junction rule),
 `junction_cap` (60), `report_every` (1), `belief_rule` ("bayes" or "paper"), `output` (study directory),
 `policy_cache` (where synthesized policies are cached), `background_vehicles` (SUMO engine:
-seeded background traffic, vehicles kept on the net; default 0 = none, docs/scenes.md). Optional
-`[population]` table: individual
+seeded background traffic, vehicles kept on the net; default 0 = none, docs/scenes.md), `record`
+(episode ids, e.g. `["p00000-phi1-aware"]`, written as Rerun recordings to
+`<study dir>/recordings/<id>.rrd` while the study runs; SUMO engine only; not part of the content
+hash, since it does not change the dataset). Optional `[population]` table: individual
 variation of the drivers (participants.population.PopulationConfig; omitted: every driver is the
 nominal model, reporting trust with accuracy 0.8).
 
@@ -61,6 +63,7 @@ STUDY_KEYS: tuple[str, ...] = (
     "output",
     "policy_cache",
     "background_vehicles",
+    "record",
 )
 # Upper limits checked before any work starts: a typo such as participants = 2**63 - 1 must be an
 # error, not a plan that grows until memory runs out.
@@ -96,6 +99,7 @@ class StudyConfig:
     output: str | None = None
     policy_cache: str | None = None   # None: the resolver's default cache
     background_vehicles: int = 0      # SUMO engine: seeded background traffic (docs/scenes.md)
+    record: tuple[str, ...] = ()      # episode ids recorded to Rerun during the run
     population: dict | None = None   # compared by value; hashed through its canonical JSON (__hash__)
 
     def __hash__(self) -> int:
@@ -126,7 +130,8 @@ class StudyConfig:
         """SHA-256 of what determines the dataset: every setting (not the file's formatting or its
         location, nor the output directory) plus the content of the spec, town, model and policy
         files it names."""
-        settings = {k: v for k, v in asdict(self).items() if k not in ("source_path", "output", "name")}
+        settings = {k: v for k, v in asdict(self).items()
+                    if k not in ("source_path", "output", "name", "record")}
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():
@@ -361,6 +366,8 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
                 'write policy_cache = "cache/policies" or omit it',
             )
         policy_cache = str((base / study["policy_cache"]).resolve())
+    record = tuple(_string_list(study, "record", source, 'write record = ["p00000-phi1-aware"]')
+                   if "record" in study else ())
     return StudyConfig(
         source_path=source,
         name=name,
@@ -379,6 +386,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         output=output,
         policy_cache=policy_cache,
         background_vehicles=background_vehicles,
+        record=record,
         population=_population(data.get("population"), source),
     )
 

@@ -53,19 +53,20 @@ def aware_horizon(config: StudyConfig) -> int:
 
 
 def resolve_condition_policy(
-    condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig
+    condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig, progress: bool = False
 ) -> RoutingPolicy:
     """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
     from trustroute.policies.routing.resolve import resolve_policy
 
     return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
-                          config.belief_rule)
+                          config.belief_rule, progress=progress)
 
 
 @functools.lru_cache(maxsize=4)
-def study_context(config: StudyConfig) -> StudyContext:
+def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
     """The study's shared context, built once per process (cached by the config: equal configs,
-    every setting and the [population] table included, share one context)."""
+    every setting and the [population] table included, share one context). progress: bars while
+    policies are synthesized (the main process; workers find them in the policy cache)."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.policies.logic.labelling import check_coefficient_length
@@ -89,7 +90,7 @@ def study_context(config: StudyConfig) -> StudyContext:
         for name, spec in specs.items()
     }
     policies = {
-        (name, label): resolve_condition_policy(condition, town, nominal, spec, config)
+        (name, label): resolve_condition_policy(condition, town, nominal, spec, config, progress)
         for name, spec in specs.items()
         for condition, label in zip(config.conditions, config.condition_names, strict=True)
     }

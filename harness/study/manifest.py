@@ -112,13 +112,17 @@ def consolidate(
     config_hash: str,
     expected: dict | None = None,
     run_info: dict | None = None,
+    progress: bool = False,
 ) -> dict:
     """Write episodes/roads/kinematics Parquet files and manifest.json; return the manifest.
     Raises DamagedParts (after moving them aside) when a part fails verification."""
+    from tqdm import tqdm
+
     study_dir = Path(study_dir)
     episode_rows, roads_tables, kinematics_tables, incident_tables = [], [], [], []
     damaged: list[str] = []
-    for task in tasks:
+    for task in tqdm(tasks, desc="consolidating", unit="episode", disable=None if progress else True,
+                     leave=False, dynamic_ncols=True):
         path = part_path(study_dir, task.episode_id)
         if not path.exists():
             continue

@@ -25,7 +25,7 @@ import json
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from trustroute.analysis.dataset import LOCK_FILE, STUDY_FILE
@@ -76,29 +76,50 @@ def engine_function(engine: str) -> Callable:
     return run_episode
 
 
+RECORDINGS_DIR = "recordings"
+
+
+def recording_path(study_dir: Path, episode_id: str) -> Path:
+    """Where a study keeps the Rerun recording of an episode named in its config's `record`."""
+    return Path(study_dir) / RECORDINGS_DIR / f"{episode_id}.rrd"
+
+
+def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path | None = None,
+                        sumo_config=None):
+    """Run the planned episode `task` exactly as the study runs it: the participant's driver model
+    (population draw), the driver's Generator from the task's seed sequence (so the same initial trust
+    and every later draw), SUMO's seed, the cell's setup and policy. Returns the EpisodeRecord.
+
+    rrd_path and sumo_config (e.g. sumo-gui) apply to the SUMO engine only."""
+    from trustroute.participants.synthetic_driver import SyntheticDriver
+
+    context = study_context(config)
+    driver = SyntheticDriver(
+        context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
+    )
+    options = {}
+    if config.engine == "sumo":
+        from trustroute.harness.sumo_start import SumoConfig
+
+        sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
+                              background_vehicles=config.background_vehicles)
+        options = {"rrd_path": rrd_path, "config": sumo_config}
+    return engine_function(config.engine)(
+        context.setups[task.spec],
+        context.policies[(task.spec, task.condition)],
+        driver,
+        task.episode_id,
+        task.seed,
+        **options,
+    )
+
+
 def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeOutcome:
     """Run one episode and write its part. Never raises: errors come back in the outcome."""
     started = time.perf_counter()
     try:
-        from trustroute.participants.synthetic_driver import SyntheticDriver
-
-        context = study_context(config)
-        driver = SyntheticDriver(
-            context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
-        )
-        extra = {}
-        if config.engine == "sumo" and config.background_vehicles:
-            from trustroute.harness.sumo_start import SumoConfig
-
-            extra["config"] = SumoConfig(background_vehicles=config.background_vehicles)
-        record = engine_function(config.engine)(
-            context.setups[task.spec],
-            context.policies[(task.spec, task.condition)],
-            driver,
-            task.episode_id,
-            task.seed,
-            **extra,
-        )
+        rrd = recording_path(Path(study_dir), task.episode_id) if task.episode_id in config.record else None
+        record = run_planned_episode(config, task, rrd_path=rrd)
         write_part_tables(Path(study_dir), task, record.summary, record.tables())
     except Exception as exc:  # one bad episode must never stop the study
         return EpisodeOutcome(
@@ -109,6 +130,21 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
             time.perf_counter() - started,
         )
     return EpisodeOutcome(task.episode_id, True, wall_seconds=time.perf_counter() - started)
+
+
+def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
+    """The config's `record` names planned episodes of a SUMO study, or InputError."""
+    if not config.record:
+        return
+    if config.engine != "sumo":
+        raise InputError(config.source_path, "study.record", "recordings need the SUMO engine",
+                         'set engine = "sumo" or remove record')
+    planned = {t.episode_id for t in tasks}
+    unknown = [e for e in config.record if e not in planned]
+    if unknown:
+        raise InputError(config.source_path, "study.record",
+                         f"{unknown[0]!r} is not an episode of this study",
+                         f"use ids like {tasks[0].episode_id!r} (p<participant>-<spec>-<condition>)")
 
 
 # -- backends: each yields outcomes as they complete -------------------------------------------
@@ -220,7 +256,7 @@ def study_lock(study_dir: Path) -> Iterator[None]:
 
 
 def validate_study(config: StudyConfig, scheduler: str | None = None,
-                   attempts: int = DEFAULT_ATTEMPTS) -> None:
+                   attempts: int = DEFAULT_ATTEMPTS, progress: bool = False) -> None:
     """Every input of the study, checked before anything is written: the engine, the town, driver
     model, specs, policies and population (building the context, synthesizing missing "aware"
     policies into the policy cache), the retry bound and the scheduler address."""
@@ -230,7 +266,7 @@ def validate_study(config: StudyConfig, scheduler: str | None = None,
     if scheduler is not None and scheduler != "local":
         check_scheduler_address(scheduler)
     engine_function(config.engine)  # fail fast, once, if the engine is missing
-    study_context(config)  # every input file, and the policies, once, before any worker
+    study_context(config, progress)  # every input file, and the policies, once, before any worker
     plan_episodes(config)
 
 
@@ -260,7 +296,7 @@ def run_study(
     "local" for a local Dask cluster of `workers` workers (threads in this process when
     dask_processes is False, which tests use). on_outcome: called after every episode.
     attempts: runs of a failing episode at most (the first and its retries)."""
-    validate_study(config, scheduler, attempts)
+    validate_study(config, scheduler, attempts, progress)
     study_dir = Path(study_dir).resolve()
     with study_lock(study_dir):
         return _run_locked(config, study_dir, workers, scheduler, progress, on_outcome, dask_processes,
@@ -283,6 +319,7 @@ def _run_locked(
     config_hash = config.content_hash
     check_study_dir(study_dir, config, config_hash)
     tasks = plan_episodes(config)
+    check_record_ids(config, tasks)
     done, damaged = finished_episodes(study_dir, tasks)
     todo = [t for t in tasks if t.episode_id not in done]
     function = functools.partial(run_task, config, str(study_dir))
@@ -359,20 +396,21 @@ def run_and_consolidate(
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line. The study
     directory stays locked until the manifest is written."""
-    validate_study(config, scheduler, attempts)
+    validate_study(config, scheduler, attempts, progress)
     study_dir = Path(study_dir).resolve()
     with study_lock(study_dir):
         for _ in range(CONSOLIDATION_ROUNDS):
             run = _run_locked(config, study_dir, workers, scheduler, progress, None, dask_processes, attempts)
             try:
-                return run, _consolidate_run(config, run, echo)
+                return run, _consolidate_run(config, run, echo, progress)
             except DamagedParts as exc:  # damaged between the run and consolidation: moved aside
                 echo(f"notice: consolidation found {exc}; running them again")
     raise InputError(str(study_dir), "parts", "parts fail verification as soon as they are written",
                      "check the disk holding the study directory")
 
 
-def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], object]) -> dict:
+def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], object],
+                     progress: bool = False) -> dict:
     echo(
         f"{run.planned} episodes planned: {run.skipped} already done, {run.ran - run.retried} run"
         f"{f', {run.retried} retried' if run.retried else ''}, {len(run.failed)} failed"
@@ -393,4 +431,5 @@ def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], o
             "damaged": run.damaged,
             "retried": run.retried,
         },
+        progress=progress,
     )

@@ -73,10 +73,11 @@ def _stderr(message: str) -> None:
 
 def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path | None,
                  horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes",
-                 notice: Callable[[str], object] = _stderr) -> RoutingPolicy:
-    """The cached "aware" policy, synthesized when missing or damaged. Entries are written atomically
-    (policies.routing.files), filled under a lock (two processes never synthesize one entry at once,
-    and the second reads what the first wrote) and verified on every read."""
+                 notice: Callable[[str], object] = _stderr, progress: bool = False) -> RoutingPolicy:
+    """The cached "aware" policy, synthesized when missing or damaged (progress: a bar while
+    synthesizing). Entries are written atomically (policies.routing.files), filled under a lock
+    (two processes never synthesize one entry at once, and the second reads what the first wrote)
+    and verified on every read."""
     from trustroute.output_files import file_lock
 
     path = aware_cache_path(town, driver, spec, cache_dir, horizon, belief_rule)
@@ -89,25 +90,40 @@ def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | P
         policy = _cached_policy(path, town, driver, spec, notice)  # filled while we waited?
         if policy is not None:
             return policy
-        result = synthesize(build_pomdp(town, driver), spec, tau=AWARE_TAU, time_limit=AWARE_TIME_LIMIT,
-                            horizon=horizon, belief_rule=belief_rule)
+        with synthesis_progress(f"synthesizing aware for {spec.name}", progress) as on_iteration:
+            result = synthesize(build_pomdp(town, driver), spec, tau=AWARE_TAU, time_limit=AWARE_TIME_LIMIT,
+                                horizon=horizon, belief_rule=belief_rule, on_iteration=on_iteration)
         save_policy(result, path, town, driver, spec)
     return result.policy
 
 
 def resolve_policy(name_or_path: str, town: Town, driver: DriverModel, spec: Spec,
                    cache_dir: str | Path | None = None, horizon: int | None = AWARE_HORIZON,
-                   belief_rule: BeliefRule = "bayes") -> RoutingPolicy:
+                   belief_rule: BeliefRule = "bayes", progress: bool = False) -> RoutingPolicy:
     """"free", "aware" or the path of a policy file, as a RoutingPolicy for this town/model/spec.
 
     horizon: the junction horizon "aware" is synthesized for (default 20; None: unbounded).
-    belief_rule: the AV filter "aware" is synthesized for.
+    belief_rule: the AV filter "aware" is synthesized for. progress: a progress bar while synthesizing.
     """
     if name_or_path == "free":
         return trust_free_policy(town, spec)
     if name_or_path == "aware":
-        return aware_policy(town, driver, spec, cache_dir, horizon, belief_rule)
+        return aware_policy(town, driver, spec, cache_dir, horizon, belief_rule, progress=progress)
     if not Path(name_or_path).exists():  # anything that exists goes to the guarded reader
         raise InputError(name_or_path, "", "not a policy file and not 'free' or 'aware'",
                          "pass 'free', 'aware' or the path of a policy file written by trustroute synth")
     return load_policy(name_or_path, town, driver, spec)
+
+
+@contextlib.contextmanager
+def synthesis_progress(description: str, enabled: bool):
+    """A tqdm bar of synthesis rounds with the current bounds; yields the `on_iteration` callback."""
+    from tqdm import tqdm
+
+    with tqdm(desc=description, unit="round", disable=None if enabled else True, leave=False,
+              dynamic_ncols=True) as bar:
+        def on_iteration(lower: float, upper: float) -> None:
+            bar.update(1)
+            bar.set_postfix_str(f"L={lower:.4f} U={upper:.4f}", refresh=False)
+
+        yield on_iteration

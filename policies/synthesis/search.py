@@ -34,6 +34,7 @@ than the road x DFA graph distance to acceptance are answered without search (L 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -439,7 +440,8 @@ def automatic_suffix_length(n_changing: int) -> int:
 
 def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int | None, tau: float,
                     suffix_length: int, batch: int, started: float, deadline: float,
-                    unbounded_value: np.ndarray | None = None, abstraction: Abstraction | None = None
+                    unbounded_value: np.ndarray | None = None, abstraction: Abstraction | None = None,
+                    on_iteration: Callable[[float, float], None] | None = None,
                     ) -> tuple[float, float, PolicyTable, dict]:
     """One AO*-style search; returns (lower, upper, table, stats).
 
@@ -476,6 +478,8 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         expanded += chosen.size
         search.backup()
         iterations += 1
+        if on_iteration is not None:
+            on_iteration(*root_bounds())
     search.backup()
     lower, upper = root_bounds()
     table = search.policy_table()
@@ -532,7 +536,8 @@ def unbounded_suffix_length(tables: ProductTables, n_changing: int, automatic: i
 def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
                horizon: int | None = None, belief_rule: BeliefRule = "bayes",
                suffix_length: int | None = None,
-               batch: int = DEFAULT_BATCH) -> SynthesisResult:
+               batch: int = DEFAULT_BATCH,
+               on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
     """Maximal probability of satisfying `spec` from (spec.start, initial belief), with a policy.
 
     horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter and the
@@ -543,7 +548,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     Unbounded: lower is the best P(accepted within H junctions) of bounded searches with growing H
     (UNBOUNDED_HORIZONS): a policy accepting within H with probability L satisfies the unbounded spec
     with probability >= L. upper is the unbounded abstraction's bound, tightened by a search of the
-    unbounded problem when a gap remains.
+    unbounded problem when a gap remains. on_iteration(lower, upper): called after every expansion
+    round with the current search's root bounds (progress bars).
     """
     if tau <= 0:
         raise ValueError("tau must be positive")
@@ -580,7 +586,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             note = "graph distance: acceptance is unreachable"
     elif horizon is not None:
         lower, upper, table, stats = _bounded_search(tables, belief_rule, horizon, tau, suffix_length,
-                                                     batch, started, deadline)
+                                                     batch, started, deadline, on_iteration=on_iteration)
         runs = [stats]
     else:
         symbols = observation_symbols(pomdp, belief_rule)
@@ -606,7 +612,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             shared = k_run == k
             run_lower, _, run_table, stats = _bounded_search(
                 tables, belief_rule, depth, 0.5 * tau, k_run, batch, started, deadline,
-                value if shared else None, abstraction if shared else None)
+                value if shared else None, abstraction if shared else None, on_iteration=on_iteration)
             runs.append(stats)
             if run_lower > lower:
                 lower, table = run_lower, run_table
@@ -614,7 +620,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 remaining = max(deadline - time.perf_counter(), 0.0)
                 run_lower, run_upper, run_table, stats = _bounded_search(
                     tables, belief_rule, None, tau, k, batch, started,
-                    time.perf_counter() + 0.25 * remaining, value, abstraction)
+                    time.perf_counter() + 0.25 * remaining, value, abstraction, on_iteration=on_iteration)
                 stats["end_component_seconds"] = bound.seconds
                 runs.append(stats)
                 upper = min(upper, run_upper)

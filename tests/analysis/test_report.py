@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+import re
 
+import pandas as pd
 import pytest
 
 from tests.cli import run_cli
+from trustroute.analysis.statistics import rate_interval
 
 
 @pytest.mark.slow
@@ -20,38 +23,66 @@ def test_analyze_json_and_self_contained_report(model_study, capsys):
     assert set(cells) == {(s, c) for s in ("phi1", "phi2") for c in ("aware", "free")}
     for cell in cells.values():
         assert cell["n"] == 12
-        assert cell["ci_low"] <= cell["satisfaction_rate"] <= cell["ci_high"]
+        assert (cell["ci_low"], cell["ci_high"]) == pytest.approx(rate_interval(cell["satisfied"], 12))
+        assert (cell["wilson_low"], cell["wilson_high"]) == pytest.approx(
+            rate_interval(cell["satisfied"], 12, method="wilson"))
         assert 1 <= cell["mean_trust"] <= 7
         assert cell["satisfaction_rate"] == pytest.approx(cell["satisfied"] / cell["n"])
         assert cell["satisfaction_rate"] == pytest.approx(cell["logged_satisfaction_rate"])  # filter source
         assert cell["exact_lower"] is not None
     assert cells[("phi1", "aware")]["synthesized_lower"] is not None
     paired = {p["spec"]: p for p in payload["paired"]}
-    assert set(paired) == {"phi1", "phi2", "all"}
-    for p in paired.values():
-        assert 0 <= p["mcnemar_p"] <= 1 and 0 <= p["wilcoxon_p"] <= 1
-    assert paired["all"]["pairs"] == 24
-    figures = {r["figure"]: r for r in payload["paper_comparison"]}
-    assert figures["satisfaction aware vs free"]["paper"] == "0.85 vs 0.775"
-    assert figures["participants satisfying phi1 (aware)"]["paper"] == "18/21"
+    assert set(paired) == {"phi1", "phi2", "all specs"}
+    for spec in ("phi1", "phi2"):
+        p = paired[spec]
+        assert p["pairs"] == 12 and 0 <= p["mcnemar_p"] <= 1 and 0 <= p["wilcoxon_p"] <= 1
+        assert p["risk_difference"] == pytest.approx((p["only_a_satisfied"] - p["only_b_satisfied"]) / 12)
+        assert p["rd_low"] <= p["risk_difference"] <= p["rd_high"]
+        assert p["trust_diff_low"] <= p["trust_difference"] <= p["trust_diff_high"]
+    # Both specs together: 12 participants, never 24 independent pairs.
+    assert paired["all specs"]["pairs"] == 12 and paired["all specs"]["unit"].startswith("participant")
+    models = {r["outcome"]: r for r in payload["repeated_measures"]}
+    assert len(models) == 2 and all(r["participants"] <= 12 and r["episodes"] == 48 for r in models.values())
+    episodes = pd.read_parquet(model_study / "episodes.parquet")
+    roads = pd.read_parquet(model_study / "roads.parquet")
+    met = roads[(roads["index"] > 0) & (roads["incident"].fillna("") != "")]
+    takeovers = payload["takeovers"]
+    assert sum(t["roads"] for t in takeovers) == len(met)
+    assert sum(t["takeovers"] for t in takeovers) == int(met["takeover"].sum())
+    for t in takeovers:
+        assert (t["ci_low"], t["ci_high"]) == pytest.approx(rate_interval(t["takeovers"], t["roads"]))
+    assert [o["position"] for o in payload["order"]] == [1, 2, 3, 4]
+    assert all(o["n"] == 12 for o in payload["order"])
+    assert sum(c["n"] for c in payload["carryover"]) == len(episodes)
+    # 12 synthetic participants are not the paper's study: no paper table, a note instead.
+    assert payload["paper_comparison"] == []
+    assert "not comparable" in payload["paper_note"] and "12 participants" in payload["paper_note"]
 
     html = (model_study / "report.html").read_text()
-    assert html.count("data:image/png;base64,") == 3
+    assert html.count("data:image/png;base64,") == 5
     assert "http://" not in html and "https://" not in html and "<script" not in html
     markdown = (model_study / "report.md").read_text()
-    for needle in (
-        "beliefs: filter",
-        "beliefs: reported",
-        "0.85 vs 0.775",
-        "4.6018 vs 4.3933",
-        "18/21",
-        "17/21",
-        "synthesized [L, U]",
-        "McNemar",
-    ):
-        assert needle in markdown
-    for name in ("satisfaction", "trust", "routes"):
+    for needle in ("beliefs: filter", "beliefs: reported", "exact 95% CI", "Wilson 95% CI", "risk difference",
+                   "conditional OR", "conditional logit", "mixed model", "Takeover rate per incident type",
+                   "Latin square", "Carry-over", "not comparable", "synthesized [L, U]", "McNemar"):
+        assert needle in markdown, needle
+    assert re.search(r"\d\.\d\de[-+]\d\d", markdown) and "0.0000" not in markdown
+    for name in ("satisfaction", "trust", "routes", "takeovers", "participants"):
         assert (model_study / "plots" / f"{name}.png").stat().st_size > 1000
+
+
+def test_paper_table_only_for_a_comparable_study():
+    from trustroute.analysis.tables import is_paper_comparable
+    from trustroute.harness.study.config import PACKAGED_SPECS
+
+    episodes = pd.DataFrame({"condition": ["aware", "free"]})
+    specs = [str(PACKAGED_SPECS / "phi1.toml"), str(PACKAGED_SPECS / "phi2.toml")]
+    assert is_paper_comparable({"config": {"participants": 21, "specs": specs, "town": None}}, episodes)[0]
+    ok, note = is_paper_comparable({"config": {"participants": 1000, "specs": specs}}, episodes)
+    assert not ok and "1000 participants" in note
+    strict = [str(PACKAGED_SPECS / "phi1_strict.toml"), specs[1]]
+    ok, note = is_paper_comparable({"config": {"participants": 21, "specs": strict}}, episodes)
+    assert not ok and "phi1" in note
 
 
 @pytest.mark.slow

@@ -84,3 +84,121 @@ def test_bootstrap_edge_cases():
     big = np.random.default_rng(0).random(100_000)
     low, high = bootstrap_ci(big, np.random.default_rng(0), 200)
     assert low < big.mean() < high and high - low < 0.01
+
+
+# -- intervals, effect sizes, repeated-measures models ---------------------------------------------
+
+from scipy import stats  # noqa: E402
+
+from trustroute.analysis.statistics import (  # noqa: E402
+    PairedTable,
+    conditional_logit,
+    conditional_odds_ratio,
+    format_p,
+    mean_difference,
+    mixed_trust_model,
+    paired_risk_difference,
+    paired_table,
+    rate_interval,
+)
+
+
+def test_all_of_21_exact_interval():
+    low, high = rate_interval(21, 21)
+    assert round(low, 3) == 0.839 and high == 1.0
+    low, high = rate_interval(0, 21)
+    assert low == 0.0 and round(high, 3) == 0.161
+
+
+@pytest.mark.parametrize("method", ["exact", "wilson"])
+def test_rate_interval_matches_binomtest_on_random_inputs(method):
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        n = int(rng.integers(1, 300))
+        k = int(rng.integers(0, n + 1))
+        level = float(rng.choice([0.8, 0.9, 0.95, 0.99]))
+        expected = stats.binomtest(k, n).proportion_ci(confidence_level=level, method=method)
+        assert rate_interval(k, n, level, method) == pytest.approx((expected.low, expected.high), abs=1e-12)
+
+
+def test_exact_interval_against_beta_quantiles():
+    # Clopper–Pearson from its definition: Beta quantiles (an independent computation).
+    for k, n in [(0, 5), (3, 10), (18, 21), (17, 21), (50, 50)]:
+        low = 0.0 if k == 0 else stats.beta.ppf(0.025, k, n - k + 1)
+        high = 1.0 if k == n else stats.beta.ppf(0.975, k + 1, n - k)
+        assert rate_interval(k, n) == pytest.approx((low, high), abs=1e-7)
+
+
+def test_rate_interval_bad_input():
+    assert all(math.isnan(v) for v in rate_interval(0, 0))
+    with pytest.raises(ValueError):
+        rate_interval(5, 3)
+    with pytest.raises(ValueError):
+        rate_interval(1, 3, method="wald")
+
+
+def test_format_p_is_scientific():
+    assert format_p(3.05e-7) == "3.05e-07"
+    assert format_p(1.0) == "1.00e+00"
+    assert format_p(None) == "-"
+
+
+def test_risk_difference_covers_by_monte_carlo():
+    rng = np.random.default_rng(3)
+    # paired outcomes: a shared participant effect makes them correlated
+    hits, trials, truth = 0, 300, 0.0
+    for _ in range(trials):
+        frailty = rng.random(21)
+        a, b = rng.random(21) < 0.5 + 0.3 * (frailty - 0.5), rng.random(21) < 0.5 + 0.3 * (frailty - 0.5)
+        estimate = paired_risk_difference(paired_table(a, b))
+        assert estimate.low <= estimate.value <= estimate.high
+        hits += estimate.low <= truth <= estimate.high
+    assert 0.9 <= hits / trials <= 1.0
+
+
+def test_risk_difference_and_odds_ratio_from_counts():
+    table = PairedTable(both=10, only_first=6, only_second=1, neither=4)
+    rd = paired_risk_difference(table)
+    assert rd.value == pytest.approx(5 / 21)
+    assert -1 <= rd.low < rd.value < rd.high <= 1
+    odds = conditional_odds_ratio(table)
+    assert odds.value == 6.0
+    p_low, p_high = rate_interval(6, 7)
+    assert (odds.low, odds.high) == pytest.approx((p_low / (1 - p_low), p_high / (1 - p_high)))
+    assert conditional_odds_ratio(PairedTable(5, 3, 0, 2)).high == math.inf
+    assert math.isnan(conditional_odds_ratio(PairedTable(5, 0, 0, 2)).value)
+
+
+def test_mean_difference_bootstrap_is_seeded_and_covers():
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(4.6, 1, 21), rng.normal(4.4, 1, 21)
+    one = mean_difference(x, y, np.random.default_rng(5), 2000)
+    assert one == mean_difference(x, y, np.random.default_rng(5), 2000)
+    assert one.value == pytest.approx(float(np.mean(x - y)))
+    assert one.low < one.value < one.high
+    same = mean_difference(np.ones(5), np.ones(5), rng)
+    assert (same.value, same.low, same.high) == (0.0, 0.0, 0.0)
+
+
+def test_conditional_logit_recovers_an_effect_and_respects_participants():
+    rng = np.random.default_rng(11)
+    participants = np.repeat(np.arange(300), 4)
+    treated = np.tile([1, 0, 1, 0], 300)
+    spec = np.tile([0, 0, 1, 1], 300)
+    person = rng.normal(0, 1.0, 300)[participants]
+    logit = -0.2 + 1.0 * treated + person
+    outcome = rng.random(participants.size) < 1 / (1 + np.exp(-logit))
+    effect = conditional_logit(outcome, treated, participants, spec)
+    assert effect.low < math.e < effect.high
+    assert effect.p_value < 1e-3 and effect.groups <= 300
+    none = conditional_logit(np.ones(8), np.tile([1, 0], 4), np.repeat(np.arange(4), 2))
+    assert math.isnan(none.estimate) and "no participant" in none.note
+
+
+def test_mixed_model_recovers_a_difference():
+    rng = np.random.default_rng(12)
+    participants = np.repeat(np.arange(60), 4)
+    treated = np.tile([1, 0, 1, 0], 60)
+    value = 4.4 + 0.3 * treated + rng.normal(0, 1, 60)[participants] + rng.normal(0, 0.3, 240)
+    effect = mixed_trust_model(value, treated, participants, np.tile([0, 0, 1, 1], 60))
+    assert effect.low < 0.3 < effect.high and effect.p_value < 1e-3

@@ -5,7 +5,6 @@ from __future__ import annotations
 import pytest
 
 from tests.cli import run_cli
-from trustroute.analysis.dataset import read_episodes
 
 
 @pytest.mark.slow
@@ -15,17 +14,10 @@ def test_demo_model_engine_small_and_resumable(tmp_path, capsys):
         capsys, "demo", "--engine", "model", "--participants", "3", "--out", str(out), "--workers", "1"
     )
     assert code == 0, err
-    assert "12 episodes planned: 0 already done" in text and "report:" in text
-    # The comparison rows show this study's figures, computed here from the logged dataset
-    # (the analysis re-evaluates satisfaction from the roads; the logged flag must agree).
-    episodes = read_episodes(out)
-    rates = episodes.groupby("condition")["satisfied"].mean()
-    row = next(line for line in text.splitlines() if line.startswith("satisfaction aware vs free"))
-    assert row.rstrip().endswith(f"{rates['aware']:.3f} vs {rates['free']:.3f}"), row
-    for spec in ("phi1", "phi2"):
-        aware = episodes[(episodes["spec"] == spec) & (episodes["condition"] == "aware")]
-        row = next(line for line in text.splitlines() if line.startswith(f"participants satisfying {spec}"))
-        assert row.rstrip().endswith(f"{int(aware['satisfied'].sum())}/{len(aware)}"), row
+    assert "12 episodes planned: 0 already done" in text
+    # 3 participants are not the paper's study: a note instead of the paper's table.
+    assert "not comparable" in text and "3 participants" in text and "0.85 vs 0.775" not in text
+    assert "report:" in text
     assert (out / "report.html").exists() and (out / "manifest.json").exists()
     code, text, _ = run_cli(
         capsys, "demo", "--engine", "model", "--participants", "3", "--out", str(out), "--workers", "1"

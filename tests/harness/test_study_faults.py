@@ -137,11 +137,11 @@ def test_consolidation_verifies_every_part_again(tmp_path, monkeypatch):
     real_consolidate = runner_module._consolidate_run
     calls = []
 
-    def damage_then_consolidate(config, run, echo):
+    def damage_then_consolidate(config, run, echo, progress=False):
         if not calls:  # damage a part between the run and its consolidation, once
             _flip_bit_in_entry(part_path(study, tasks[1].episode_id), "roads.arrows")
         calls.append(run)
-        return real_consolidate(config, run, echo)
+        return real_consolidate(config, run, echo, progress)
 
     monkeypatch.setattr(runner_module, "_consolidate_run", damage_then_consolidate)
     _run(config, study)

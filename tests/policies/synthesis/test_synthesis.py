@@ -129,3 +129,13 @@ def test_unbounded_upper_closes_on_unavoidable_risk(pomdp):
     assert exact_optimum(pomdp, spec, 8) <= result.upper + EXACT_TOLERANCE
     value = evaluate(pomdp, spec, result.policy, fallback_after=None)
     assert result.lower - EXACT_TOLERANCE <= value.lower <= result.upper + EXACT_TOLERANCE
+
+
+def test_progress_callback_sees_the_search_bounds(pomdp):
+    """on_iteration (the progress bars' feed) gets every round's root bounds, bracketing the result."""
+    spec = load_spec("specs/phi1.toml", pomdp.town)
+    seen: list[tuple[float, float]] = []
+    result = synthesize(pomdp, spec, tau=1e-9, horizon=8, on_iteration=lambda lo, up: seen.append((lo, up)))
+    assert seen and all(lo <= up + EXACT_TOLERANCE for lo, up in seen)
+    assert seen[-1] == pytest.approx((result.lower, result.upper), abs=EXACT_TOLERANCE)
+    assert result.lower == synthesize(pomdp, spec, tau=1e-9, horizon=8).lower  # the callback changes nothing

@@ -1,0 +1,58 @@
+"""`trustroute replay`: re-run one episode of a finished study exactly, check it, record it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+
+@click.command("replay")
+@click.argument("study_dir", metavar="STUDY_DIR", type=click.Path())
+@click.argument("episode_id", metavar="EPISODE_ID")
+@click.option(
+    "--rrd",
+    "rrd_path",
+    type=click.Path(),
+    default=None,
+    help="Write the Rerun recording here (default: STUDY_DIR/recordings/EPISODE_ID.rrd).",
+)
+@click.option("--no-rrd", is_flag=True, help="Only check the replay; write no recording.")
+@click.option("--gui", is_flag=True, help="Show the episode in sumo-gui (needs a display).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def replay(
+    study_dir: str, episode_id: str, rrd_path: str | None, no_rrd: bool, gui: bool, as_json: bool
+) -> None:
+    """Re-run EPISODE_ID of STUDY_DIR from its seeds and population draws; fail if it differs."""
+    from trustroute.harness.study.replay import replay_episode, study_config_from_manifest
+    from trustroute.harness.study.runner import recording_path
+
+    config, _ = study_config_from_manifest(Path(study_dir))
+    rrd = None
+    if not no_rrd and config.engine == "sumo":
+        rrd = Path(rrd_path) if rrd_path else recording_path(Path(study_dir), episode_id)
+    result = replay_episode(Path(study_dir), episode_id, rrd_path=rrd, gui=gui)
+    roads = result.record.roads
+    payload = {
+        "episode_id": episode_id,
+        "reproduced": True,
+        "roads": len(roads),
+        "route": roads["directed_road"].tolist(),
+        "trust": roads["trust_after"].tolist(),
+        "rrd": str(rrd) if rrd else None,
+        "rrd_bytes": rrd.stat().st_size if rrd else None,
+    }
+    if as_json:
+        click.echo(json.dumps(payload))
+        return
+    click.echo(
+        f"{episode_id}: replay reproduces the log ({len(roads)} roads, trust "
+        f"{' '.join(str(t) for t in payload['trust'])})"
+    )
+    click.echo("route: " + " ".join(payload["route"]))
+    if rrd:
+        click.echo(
+            f"wrote {rrd} ({payload['rrd_bytes'] / 1000:.0f} kB); open it with `rerun {rrd}`, or on a "
+            f"machine without a display: `rerun --web-viewer {rrd}` and browse to the printed address"
+        )

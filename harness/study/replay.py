@@ -1,0 +1,219 @@
+"""Replaying one episode of a finished study: the same config, seeds and population draws, checked.
+
+`replay_episode(study_dir, episode_id)` rebuilds the study's config from its manifest, refuses a
+study whose inputs or code differ from what is installed now (the config's content hash, the
+versions of trustroute and of the packages the episodes depend on), re-runs the planned episode
+through the same function the study runner uses (runner.run_planned_episode), and compares the
+replayed roads and trust with the logged ones, column by column (REPLAY_COLUMNS). Any difference
+is an InputError (one line, exit 2) naming the first road and column that differ.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.manifest import MANIFEST_FILE, package_versions
+from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+from trustroute.networks.errors import InputError
+
+# What must match exactly between the logged and the replayed episode.
+REPLAY_COLUMNS: tuple[str, ...] = (
+    "directed_road",
+    "incident",
+    "takeover",
+    "trust_before",
+    "trust_after",
+    "reported_trust",
+    "dfa_state",
+)
+# Packages whose version changes what an episode does: a different one means different code.
+EPISODE_PACKAGES: tuple[str, ...] = ("trustroute", "numpy", "scipy", "eclipse-sumo", "libsumo", "sumolib")
+
+
+@dataclass(frozen=True, eq=False)
+class Replay:
+    task: EpisodeTask
+    config: StudyConfig
+    record: object  # the replayed EpisodeRecord
+    logged_roads: pd.DataFrame
+    rrd_path: Path | None
+
+
+def study_config_from_manifest(study_dir: Path) -> tuple[StudyConfig, dict]:
+    """The StudyConfig a study was run with (from manifest.json), and the manifest."""
+    from trustroute.analysis.dataset import read_manifest
+
+    path = Path(study_dir) / MANIFEST_FILE
+    manifest = read_manifest(Path(study_dir))
+    data = dict(manifest.get("config") or {})
+    known = {f.name for f in fields(StudyConfig)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise InputError(
+            str(path),
+            f"config.{unknown[0]}",
+            f"the study was made by a different trustroute (unknown config key {unknown[0]!r})",
+            "replay it with the trustroute that made it",
+        )
+    for key in ("specs", "conditions", "record"):
+        if key in data and data[key] is not None:
+            data[key] = tuple(data[key])
+    try:
+        config = StudyConfig(**data)
+    except TypeError as exc:
+        raise InputError(
+            str(path),
+            "config",
+            f"the study's config cannot be rebuilt ({exc})",
+            "replay it with the trustroute that made it",
+        ) from None
+    return config, manifest
+
+
+def check_same_code(manifest: dict, config: StudyConfig, study_dir: Path) -> None:
+    """The installed code and the study's inputs are those the study was made with, or InputError."""
+    logged = manifest.get("packages", {})
+    installed = package_versions()
+    for name in EPISODE_PACKAGES:
+        if name in logged and logged[name] != installed.get(name):
+            raise InputError(
+                str(Path(study_dir) / MANIFEST_FILE),
+                f"packages.{name}",
+                f"the study was made with {name} {logged[name]}, this is {installed.get(name)}, "
+                "so a replay cannot reproduce it",
+                f"install {name}=={logged[name]} to replay it",
+            )
+    for path in (
+        *config.specs,
+        config.town,
+        config.driver_model,
+        *(c for c in config.conditions if c not in ("aware", "free")),
+    ):
+        if path and not Path(path).is_file():
+            raise InputError(
+                str(study_dir),
+                "config",
+                f"the study's input {path} no longer exists",
+                "replay it where the study was made",
+            )
+    if manifest.get("config_hash") != config.content_hash:
+        raise InputError(
+            str(Path(study_dir) / MANIFEST_FILE),
+            "config_hash",
+            "the study's spec, town, driver model or policy files changed since it was run",
+            "restore them (see the manifest's config) or rerun the study",
+        )
+
+
+def logged_roads(study_dir: Path, episode_id: str) -> pd.DataFrame:
+    from trustroute.analysis.dataset import read_roads
+
+    roads = read_roads(Path(study_dir))
+    return roads[roads["episode_id"] == episode_id].sort_values("index").reset_index(drop=True)
+
+
+def _missing(value: object) -> bool:
+    """Null, NaN, and the -1 that older studies wrote for "no report", all mean missing."""
+    if value is None or value is pd.NA:
+        return True
+    if isinstance(value, (float, np.floating)):
+        return math.isnan(value)
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and value == -1
+
+
+def _equal(a: object, b: object) -> bool:
+    if _missing(a) or _missing(b):
+        return _missing(a) and _missing(b)
+    if isinstance(a, (float, np.floating)) or isinstance(b, (float, np.floating)):
+        return float(a) == float(b)
+    return bool(a == b)
+
+
+def compare_roads(logged: pd.DataFrame, replayed: pd.DataFrame) -> str | None:
+    """The first difference between two roads tables on REPLAY_COLUMNS, or None when they agree."""
+    if len(logged) != len(replayed):
+        route_a, route_b = list(logged["directed_road"]), list(replayed["directed_road"])
+        first = next(
+            (i for i, (a, b) in enumerate(zip(route_a, route_b, strict=False)) if a != b),
+            min(len(route_a), len(route_b)),
+        )
+        return (
+            f"the replay drove {len(replayed)} roads, the log has {len(logged)} "
+            f"(first difference at road {first})"
+        )
+    for column in REPLAY_COLUMNS:
+        for i, (a, b) in enumerate(zip(logged[column].tolist(), replayed[column].tolist(), strict=True)):
+            if not _equal(a, b):
+                return f"road {i} {column}: logged {a!r}, replayed {b!r}"
+    for i, (a, b) in enumerate(zip(logged["belief_after"], replayed["belief_after"], strict=True)):
+        if not np.allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float), rtol=0, atol=1e-12):
+            return f"road {i} belief_after differs"
+    return None
+
+
+def find_task(config: StudyConfig, episode_id: str, study_dir: Path) -> EpisodeTask:
+    tasks = plan_episodes(config)
+    for task in tasks:
+        if task.episode_id == episode_id:
+            return task
+    raise InputError(
+        str(study_dir),
+        "EPISODE_ID",
+        f"{episode_id!r} is not an episode of this study",
+        f"pass one of its ids, e.g. {tasks[0].episode_id!r} (see episodes.parquet)",
+    )
+
+
+def replay_episode(
+    study_dir: Path, episode_id: str, rrd_path: Path | None = None, gui: bool = False, check_code: bool = True
+) -> Replay:
+    """Re-run `episode_id` of the study in `study_dir`; InputError if it differs from the log."""
+    from trustroute.harness.study.runner import run_planned_episode
+
+    study_dir = Path(study_dir)
+    config, manifest = study_config_from_manifest(study_dir)
+    if check_code:
+        check_same_code(manifest, config, study_dir)
+    task = find_task(config, episode_id, study_dir)
+    logged = logged_roads(study_dir, episode_id)
+    if logged.empty:
+        raise InputError(
+            str(study_dir),
+            episode_id,
+            "the episode has no logged roads (it failed or never ran)",
+            "pick a finished episode (see episodes.parquet)",
+        )
+    if (rrd_path is not None or gui) and config.engine != "sumo":
+        raise InputError(
+            "--rrd" if rrd_path is not None else "--gui",
+            "",
+            f"the study ran the {config.engine} engine, which has no SUMO scene to record or show",
+            'replay without --rrd/--gui, or rerun the study with engine = "sumo"',
+        )
+    sumo_config = None
+    if gui:
+        from trustroute.harness.sumo_start import SumoConfig, check_display
+
+        check_display()
+        sumo_config = SumoConfig(gui=True)
+    record = run_planned_episode(config, task, rrd_path=rrd_path, sumo_config=sumo_config)
+    difference = compare_roads(logged, record.roads)
+    if difference is not None:
+        from trustroute.harness.study.manifest import git_revision
+
+        made, now = manifest.get("git_revision", "unknown"), git_revision()
+        if made != now:
+            difference += f" (the study was made at git {made}, this is {now})"
+        raise InputError(
+            str(study_dir),
+            episode_id,
+            f"the replay does not reproduce the log: {difference}",
+            "replay with the code and packages the study was made with (see its manifest)",
+        )
+    return Replay(task=task, config=config, record=record, logged_roads=logged, rrd_path=rrd_path)

@@ -1,0 +1,125 @@
+"""`trustroute replay`: a finished SUMO study's episodes replay exactly; other code or logs fail loudly."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.cli import run_cli
+
+
+@pytest.fixture(scope="module")
+def sumo_study(tmp_path_factory):
+    from trustroute.harness.study.config import load_study_config
+    from trustroute.harness.study.runner import run_and_consolidate
+
+    root = tmp_path_factory.mktemp("replay")
+    cache = tmp_path_factory.mktemp("policies")
+    config_path = root / "study.toml"
+    config_path.write_text(f"""[study]
+name = "replay-fixture"
+participants = 2
+seed = 9
+engine = "sumo"
+specs = ["phi1", "phi2"]
+conditions = ["aware", "free"]
+policy_cache = "{cache}"
+record = ["p00001-phi1-free"]
+[population]
+concentration = 40.0
+takeover_spread = 0.5
+""")
+    config = load_study_config(config_path)
+    run_and_consolidate(config, root / "out", 1, None, progress=False, echo=lambda *_: None)
+    return root / "out"
+
+
+def _copy(study, tmp_path):
+    target = tmp_path / "copy"
+    shutil.copytree(study, target)
+    return target
+
+
+@pytest.mark.slow
+def test_replay_of_a_random_episode_reproduces_roads_and_trust(sumo_study, tmp_path, capsys):
+    episodes = pd.read_parquet(sumo_study / "episodes.parquet")
+    episode_id = str(np.random.default_rng(13).choice(episodes["episode_id"].to_numpy()))
+    rrd = tmp_path / "replay.rrd"
+    code, out, err = run_cli(capsys, "replay", str(sumo_study), episode_id, "--rrd", str(rrd), "--json")
+    assert code == 0, err
+    payload = json.loads(out)
+    logged = pd.read_parquet(sumo_study / "roads.parquet")
+    logged = logged[logged["episode_id"] == episode_id].sort_values("index")
+    assert payload["route"] == logged["directed_road"].tolist()
+    assert payload["trust"] == logged["trust_after"].tolist()
+    assert rrd.stat().st_size == payload["rrd_bytes"] > 10_000
+
+
+@pytest.mark.slow
+def test_every_episode_of_the_study_replays_exactly(sumo_study):
+    from trustroute.harness.study.replay import replay_episode
+
+    episodes = pd.read_parquet(sumo_study / "episodes.parquet")
+    assert len(episodes) == 8
+    for episode_id in episodes["episode_id"]:
+        replay = replay_episode(sumo_study, episode_id)  # raises InputError on any difference
+        assert replay.record.roads["trust_after"].tolist() == replay.logged_roads["trust_after"].tolist()
+
+
+@pytest.mark.slow
+def test_config_named_episode_was_recorded_during_the_run(sumo_study):
+    import rerun as rr
+
+    path = sumo_study / "recordings" / "p00001-phi1-free.rrd"
+    paths = {c.entity_path for c in rr.chunk.RrdReader(path).stream().to_chunks()}
+    assert "/world/ego/box" in paths and "/events" in paths
+    assert sorted(p.name for p in (sumo_study / "recordings").iterdir()) == ["p00001-phi1-free.rrd"]
+
+
+@pytest.mark.slow
+def test_replay_of_a_study_made_with_other_code_fails(sumo_study, tmp_path, capsys):
+    study = _copy(sumo_study, tmp_path)
+    manifest = json.loads((study / "manifest.json").read_text())
+    manifest["packages"]["trustroute"] = "0.0.1"
+    (study / "manifest.json").write_text(json.dumps(manifest))
+    code, out, err = run_cli(capsys, "replay", str(study), "p00000-phi1-aware", "--no-rrd")
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and "made with trustroute 0.0.1" in err and "Traceback" not in err
+
+
+@pytest.mark.slow
+def test_replay_that_differs_from_the_log_fails(sumo_study, tmp_path, capsys):
+    study = _copy(sumo_study, tmp_path)
+    from trustroute.analysis.dataset import (
+        ROADS_FILE,
+        ROADS_SCHEMA,
+        read_roads,
+        table_from_frame,
+        write_table,
+    )
+
+    roads = read_roads(study)
+    row = roads.index[(roads["episode_id"] == "p00000-phi2-free") & (roads["index"] == 2)][0]
+    logged = int(roads.loc[row, "trust_after"])
+    roads.loc[row, "trust_after"] = logged + 1 if logged < 7 else logged - 1
+    write_table(table_from_frame(roads, ROADS_SCHEMA), study / ROADS_FILE)
+    code, _, err = run_cli(capsys, "replay", str(study), "p00000-phi2-free", "--no-rrd")
+    assert code == 2 and "does not reproduce the log: road 2 trust_after" in err
+
+
+def test_replay_bad_input(tmp_path, capsys, monkeypatch):
+    code, _, err = run_cli(capsys, "replay", str(tmp_path), "p00000-phi1-aware")
+    assert code == 2 and "not a finished study directory" in err
+
+
+@pytest.mark.slow
+def test_replay_unknown_episode_and_gui_without_display(sumo_study, capsys, monkeypatch):
+    code, _, err = run_cli(capsys, "replay", str(sumo_study), "p00042-phi1-aware")
+    assert code == 2 and "not an episode of this study" in err
+    monkeypatch.delenv("DISPLAY", raising=False)
+    code, _, err = run_cli(capsys, "replay", str(sumo_study), "p00000-phi1-aware", "--gui", "--no-rrd")
+    assert code == 2 and "no display" in err and err.count("\n") == 1
