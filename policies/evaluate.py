@@ -236,8 +236,9 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     trust_point = trust_sum / ended if ended > 0 else float("nan")
     return Evaluation(
         policy=policy.name,
-        lower=mass["accepted"],
-        upper=min(1.0, mass["accepted"] + pruned),
+        # Summed path masses can round past 1; a probability cannot, and upper >= lower must hold.
+        lower=min(mass["accepted"], 1.0),
+        upper=min(1.0, min(mass["accepted"], 1.0) + pruned),
         expected_final_trust=trust_point,
         final_trust_lower=trust_sum + pruned * float(levels.min()),
         final_trust_upper=trust_sum + pruned * float(levels.max()),

@@ -169,8 +169,9 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     pruned = mass["pruned"]
     return Evaluation(
         policy=policy.name,
-        lower=mass["accepted"],
-        upper=min(1.0, mass["accepted"] + pruned),
+        # Summed path masses can round past 1; a probability cannot, and upper >= lower must hold.
+        lower=min(mass["accepted"], 1.0),
+        upper=min(1.0, min(mass["accepted"], 1.0) + pruned),
         expected_final_trust=trust_sum / ended_mass if ended_mass > 0 else float("nan"),
         final_trust_lower=trust_sum + (1.0 - ended_mass) * float(levels.min()),
         final_trust_upper=trust_sum + (1.0 - ended_mass) * float(levels.max()),
