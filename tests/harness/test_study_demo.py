@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from tests.cli import run_cli
+from trustroute.analysis.dataset import read_episodes
 
 
 @pytest.mark.slow
@@ -18,6 +19,18 @@ def test_demo_model_engine_small_and_resumable(tmp_path, capsys):
     # 3 participants are not the paper's study: a note instead of the paper's table.
     assert "not comparable" in text and "3 participants" in text and "0.85 vs 0.775" not in text
     assert "report:" in text
+    # The cells table shows this study's figures, computed here from the logged dataset (the
+    # analysis re-evaluates satisfaction from the roads; the logged flag must agree).
+    episodes = read_episodes(out)
+    shown: dict[tuple[str, str], list[str]] = {}
+    for line in text.splitlines():
+        words = line.split()
+        if len(words) >= 5 and words[0] in ("phi1", "phi2"):
+            shown.setdefault((words[0], words[1]), words[2:5])  # the first table is the cells'
+    for (spec, condition), group in episodes.groupby(["spec", "condition"]):
+        n, satisfied, rate = shown[(spec, condition)]
+        assert (int(n), int(satisfied)) == (len(group), int(group["satisfied"].sum())), (spec, condition)
+        assert rate == f"{group['satisfied'].mean():.3f}", (spec, condition)
     assert (out / "report.html").exists() and (out / "manifest.json").exists()
     code, text, _ = run_cli(
         capsys, "demo", "--engine", "model", "--participants", "3", "--out", str(out), "--workers", "1"
