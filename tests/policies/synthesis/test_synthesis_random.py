@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tests.policies.test_evaluate_random_models import random_driver
-from trustroute.networks.town import INCIDENT_TYPES, town_from_dict
+from trustroute.networks.town import INCIDENT_TYPES, MIN_ROAD_LENGTH, town_from_dict
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.synthesis.exact_search import exact_optimum
@@ -24,10 +24,20 @@ FORMULAS = ("F (a & F (b & high))", "(!high) U a", "F (a & high)", "(!high) U (a
 TOLERANCE = 1e-9
 
 
+def random_junctions(rng: np.random.Generator, names: list[str]) -> dict[str, list[float]]:
+    """Junction positions uniform in a 500 m square. A town's roads are at least MIN_ROAD_LENGTH
+    long, so the positions are redrawn (rarely) while two junctions nearly coincide."""
+    n = len(names)
+    points = rng.uniform(0, 500, size=(n, 2))
+    while (np.linalg.norm(points[:, None] - points[None], axis=-1) + np.eye(n) * 1e9).min() < MIN_ROAD_LENGTH:
+        points = rng.uniform(0, 500, size=(n, 2))
+    return {name: [float(v) for v in point] for name, point in zip(names, points, strict=True)}
+
+
 def random_town(rng: np.random.Generator):
     n = int(rng.integers(4, 6))
     names = [chr(ord("A") + i) for i in range(n)]
-    junctions = {name: [float(v) for v in rng.uniform(0, 500, size=2)] for name in names}
+    junctions = random_junctions(rng, names)
     roads = {tuple(sorted((names[i], names[int(rng.integers(i))]))) for i in range(1, n)}  # a tree
     for _ in range(int(rng.integers(1, n))):
         u, v = rng.choice(n, size=2, replace=False)

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.policies.synthesis.test_synthesis_random import random_junctions
 from tests.policies.test_evaluate_random_models import random_driver
 from trustroute.networks.town import INCIDENT_TYPES, town_from_dict
 from trustroute.policies.logic.spec import spec_from_text
@@ -31,7 +32,7 @@ def deterministic_town(rng: np.random.Generator):
     """A random connected town of 4-5 junctions; every draw in a fixed order (no set iteration)."""
     n = int(rng.integers(4, 6))
     names = [chr(ord("A") + i) for i in range(n)]
-    junctions = {name: [float(v) for v in rng.uniform(0, 500, size=2)] for name in names}
+    junctions = random_junctions(rng, names)
     roads = {tuple(sorted((names[i], names[int(rng.integers(i))]))) for i in range(1, n)}
     for _ in range(int(rng.integers(1, n))):
         u, v = rng.choice(n, size=2, replace=False)
