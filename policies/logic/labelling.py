@@ -48,7 +48,7 @@ def check_coefficient_length(spec: Spec, n_trust: int, driver_source: str = "") 
         if len(atom.coeffs) != n_trust:
             raise InputError(spec.source_path or spec.name, f"beliefs.{name}.coeffs",
                              f"belief atom '{name}' has {len(atom.coeffs)} coefficients but the driver "
-                             f"model{' ' + driver_source if driver_source else ''} defines {n_trust} "
+                             f"model{f' ({driver_source})' if driver_source else ''} defines {n_trust} "
                              "trust levels",
                              f"give exactly {n_trust} coefficients, one per trust level")
 
