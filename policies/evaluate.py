@@ -87,6 +87,28 @@ class Evaluation:
         return out
 
 
+
+def extend_routes(routes: list[tuple[str, ...]], route_id: np.ndarray, chosen: np.ndarray,
+                  states: tuple[str, ...] | list[str]) -> np.ndarray:
+    """Append one route per distinct (old route, next road) to `routes`; the new ids, per node."""
+    n_states = len(states)
+    pair = route_id * n_states + chosen
+    unique_pairs, pair_inverse = np.unique(pair, return_inverse=True)
+    pair_ids = np.arange(len(routes), len(routes) + unique_pairs.size)
+    for rid, x2 in zip((unique_pairs // n_states).tolist(), (unique_pairs % n_states).tolist(),
+                       strict=True):
+        routes.append(routes[rid] + (states[x2],))
+    return pair_ids[pair_inverse]
+
+
+def accepted_bounds(accepted: float, pruned: float) -> tuple[float, float]:
+    """[lower, upper] of P(accepted) from the accepted and pruned masses.
+
+    Summed path masses can round past 1; a probability cannot, and upper >= lower must hold.
+    """
+    lower = min(accepted, 1.0)
+    return lower, min(1.0, lower + pruned)
+
 def decide_node(policy: RoutingPolicy, context: DecisionContext, town: Town, road: int, level: int,
                 max_junctions: int, fallback_level: int | None,
                 successor_index: dict) -> tuple[bool, bool, int]:
@@ -123,7 +145,6 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                        for x, road in enumerate(town.states) for j in town.actions(road)}
 
     start = town.state_index(spec.start)
-    town_size = len(town.states)
     routes: list[tuple[str, ...]] = [(spec.start,)]
     route_id = np.zeros(1, dtype=np.int64)
     road = np.array([start], dtype=np.int64)
@@ -196,14 +217,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
         if keep.size == 0:
             break
 
-        # New routes: one per distinct (old route, next road).
-        pair = route_id[keep] * town_size + chosen
-        unique_pairs, pair_inverse = np.unique(pair, return_inverse=True)
-        pair_ids = np.arange(len(routes), len(routes) + unique_pairs.size)
-        for rid, x2 in zip((unique_pairs // town_size).tolist(), (unique_pairs % town_size).tolist(),
-                           strict=True):
-            routes.append(routes[rid] + (town.states[x2],))
-        new_route_ids = pair_ids[pair_inverse]
+        new_route_ids = extend_routes(routes, route_id[keep], chosen, town.states)
 
         # Branch on the observation (h, e) at the new road.
         incident = pomdp.road_incident[chosen]
@@ -234,11 +248,11 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     ended = 1.0 - mass["pruned"]
     pruned = mass["pruned"]
     trust_point = trust_sum / ended if ended > 0 else float("nan")
+    lower, upper = accepted_bounds(mass["accepted"], pruned)
     return Evaluation(
         policy=policy.name,
-        # Summed path masses can round past 1; a probability cannot, and upper >= lower must hold.
-        lower=min(mass["accepted"], 1.0),
-        upper=min(1.0, min(mass["accepted"], 1.0) + pruned),
+        lower=lower,
+        upper=upper,
         expected_final_trust=trust_point,
         final_trust_lower=trust_sum + pruned * float(levels.min()),
         final_trust_upper=trust_sum + pruned * float(levels.max()),

@@ -25,8 +25,10 @@ from trustroute.policies.evaluate import (
     DEFAULT_MAX_NODES,
     DEFAULT_PRUNE_BELOW,
     Evaluation,
+    accepted_bounds,
     decide_node,
     evaluate,
+    extend_routes,
 )
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
@@ -131,13 +133,7 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
         if keep.size == 0:
             break
 
-        pair = route_id[keep] * len(town.states) + chosen
-        unique_pairs, pair_inverse = np.unique(pair, return_inverse=True)
-        pair_ids = np.arange(len(routes), len(routes) + unique_pairs.size)
-        for rid, x2 in zip((unique_pairs // len(town.states)).tolist(),
-                           (unique_pairs % len(town.states)).tolist(), strict=True):
-            routes.append(routes[rid] + (town.states[x2],))
-        new_route_ids = pair_ids[pair_inverse]
+        new_route_ids = extend_routes(routes, route_id[keep], chosen, town.states)
 
         incident = pomdp.road_incident[chosen]
         parts = []
@@ -167,11 +163,11 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
         max_frontier = max(max_frontier, probability.size)
 
     pruned = mass["pruned"]
+    lower, upper = accepted_bounds(mass["accepted"], pruned)
     return Evaluation(
         policy=policy.name,
-        # Summed path masses can round past 1; a probability cannot, and upper >= lower must hold.
-        lower=min(mass["accepted"], 1.0),
-        upper=min(1.0, min(mass["accepted"], 1.0) + pruned),
+        lower=lower,
+        upper=upper,
         expected_final_trust=trust_sum / ended_mass if ended_mass > 0 else float("nan"),
         final_trust_lower=trust_sum + (1.0 - ended_mass) * float(levels.min()),
         final_trust_upper=trust_sum + (1.0 - ended_mass) * float(levels.max()),
