@@ -222,7 +222,8 @@ class _Episode:
         reverse = f"{v}-{u}" if f"{v}-{u}" in self.setup.town.incidents else None
         scene = Scene(road=run.road, reverse_road=reverse, road_length=self.length(run.road),
                       prefix=f"inc{run.index}", ego_id=EGO_ID, time=now, ego_distance=ego_distance,
-                      rng=self.rng, overrides=self.scene_overrides.get(run.kind, {}), road_speed=ROAD_SPEED)
+                      rng=self.rng, overrides=self.scene_overrides.get(run.kind, {}), road_speed=ROAD_SPEED,
+                      step_length=self.config.step_length)
         run.incident = incident_kinds.inject(run.kind, self.sumo, scene)
         run.injected_time = now
         if run.incident is not None:
@@ -366,7 +367,7 @@ class _Episode:
             if open_run.index > 0:
                 ego = None
                 if self.needs_watching(open_run):
-                    ego = EgoState(now, road, position, x, y, speed, lane, result[angle_id])
+                    ego = EgoState(now, road, position, x, y, speed, lane, result[angle_id], result[accel_id])
                     self.watch(open_run, ego)
                 if self.mode == auto:
                     collided = (colliding_number() > 0
@@ -387,8 +388,8 @@ class _Episode:
             append_lane(lane)
             append_mode(self.mode)
             if self.observer is not None:
-                self.observer(sumo, EgoState(now, road, position, x, y, speed, lane, result[angle_id]),
-                              self.mode, open_run.road)
+                self.observer(sumo, EgoState(now, road, position, x, y, speed, lane, result[angle_id],
+                                             result[accel_id]), self.mode, open_run.road)
             if finished:
                 break
             if now > self.config.max_sim_seconds:

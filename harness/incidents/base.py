@@ -34,6 +34,7 @@ class EgoState(NamedTuple):
     speed: float
     lane: str = ""     # lane id; while overtaking it is the opposite road's lane
     angle: float = 0.0  # heading, degrees clockwise from north (SUMO's convention)
+    acceleration: float = 0.0   # m/s² in the last step (negative: braking)
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,7 @@ class Scene:
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     overrides: dict = field(default_factory=dict)
     road_speed: float = 13.89
+    step_length: float = 0.5   # seconds per simulation step
 
     def draw(self, name: str, sample):
         """A scene parameter: the override if given, else `sample(rng)` (always drawn, so the

@@ -6,12 +6,19 @@ The person waits on the sidewalk of W-V just before V; as the ego turns into V-W
 ahead of it. The timing is drawn from the episode's scene generator (docs/scenes.md):
 - "early" (`P_EARLY`): the person is there when the incident is injected and steps onto the
   crossing within a second or two, well before the ego arrives; the ego yields.
-- "late" (`P_LATE`): the person runs onto the crossing and is in the ego's lane (inserted on
-  the crossing, `LATE_BEFORE_LANE` metres before the ego's path) when the ego is only
-  `LATE_MARGIN` metres (drawn) beyond the distance it needs to stop with an emergency brake
-  (`EMERGENCY_DECEL`, after one `REACTION` step); the smaller the margin, the harder the ego
-  brakes and the closer it comes.
+- "late" (`P_LATE`): the person runs onto the crossing (inserted on it, `LATE_BEFORE_LANE`
+  metres before the ego's path) when the ego needs a drawn deceleration
+  (`LATE_DECELERATION`) to stop before the crossing, and never so late that it would need
+  more than `SAFE_NEED` when the AV sees the person (one step later).
 - "none" (the rest): the person stands at the kerb and never crosses.
+
+The AV perceives the person (`PedestrianIncident.guard`, from SUMO's person state): SUMO's
+junction model yields to a person on a crossing only with its comfortable deceleration and
+ignores one it cannot stop for that way, so while the person is on the crossing in or walking
+into the ego's path, the AV brakes to stop `STOP_BEFORE_PATH` metres before the path itself:
+gently (the deceleration needed) when that is within the ego's comfortable deceleration,
+otherwise with automatic emergency braking (`EMERGENCY_DECEL`, held until the path is clear).
+An emergency brake is above the 5 m/s² deceleration limit: a measured `fail`, without a collision.
 """
 
 from __future__ import annotations
@@ -21,15 +28,21 @@ import math
 from dataclasses import dataclass, field
 
 from trustroute.harness.incidents.base import EgoState, Scene
+from trustroute.harness.takeover import SAFE_SPEED_MODE
 
 KIND = "pedestrian"
 TIMINGS = ("early", "late", "none")
 P_EARLY = 0.75
-P_LATE = 0.10                 # P(none) = 1 - P_EARLY - P_LATE
+P_LATE = 0.06                 # P(none) = 1 - P_EARLY - P_LATE
 EARLY_START = (0.0, 2.0)      # metres before the kerb where an early person starts (uniform)
-LATE_MARGIN = (3.0, 12.0)     # metres beyond the emergency stopping distance (uniform)
+LATE_DECELERATION = (1.0, 6.0)  # m/s²: what the ego needs to stop when a late person steps out (uniform)
+SAFE_NEED = 8.5               # m/s²: a late person never appears when the ego would need more than this
 EMERGENCY_DECEL = 9.0         # m/s²: SUMO's default emergency deceleration of a passenger car
-REACTION = 0.5                # s: one simulation step before the ego reacts
+EMERGENCY_SPEED_MODE = 27     # SUMO speed mode 31 without "regard maximum deceleration"
+STOP_BEFORE_PATH = 2.5        # metres: the AV stops this far before the ego's path on the crossing
+                              # (half of netconvert's 4 m crossing width and 0.5 m)
+PATH_HALF_WIDTH = 2.0         # metres along the crossing either side of the ego's lane centre: in its path
+LOOKOUT = 4.0                 # metres: a person walking towards the ego's path this close enters it
 LATE_BEFORE_LANE = 0.5        # metres: where on the crossing a late person appears, before the ego's path
 START_BEFORE_JUNCTION = 1.0   # metres before the end of the opposite sidewalk: the kerb
 ARRIVAL_POSITION = 6.0        # metres along the incident road's sidewalk
@@ -46,14 +59,26 @@ class PedestrianIncident:
     reverse_road: str
     person_id: str
     timing: str
-    margin: float
+    late_deceleration: float
     kerb: float                    # lane position of the kerb on the opposite sidewalk
     crossing_xy: tuple[float, float]
     crossing: CrossingPath
+    ego_id: str = "ego"
+    ego_accel: float = 2.6         # m/s²: the ego's maximum acceleration (read from SUMO)
+    road_speed: float = 13.89
+    step_length: float = 0.5         # s: the simulation step
+    comfortable_decel: float = 4.5   # m/s²: the ego's own braking when the person appears (read from SUMO)
     kind: str = KIND
     sumo_ids: tuple[str, ...] = field(init=False)
     inserted: bool = False
     stepped_out: float = math.nan  # sim time the person stepped out (late) or was placed (early)
+    braking: bool = False          # the AV controls the ego's speed to stop for the person
+    emergency: bool = False        # ... with its emergency deceleration
+    restore_decel: float = math.nan
+    emergency_time: float = math.nan   # sim time the ego's emergency braking was armed
+    cleared: bool = False
+    seen_needing: float = math.nan     # m/s² the ego needed to stop when the AV first saw the person
+    last_offset: float = math.inf      # the person's last distance along the crossing to the ego's path
 
     def __post_init__(self) -> None:
         self.sumo_ids = (self.person_id,)
@@ -87,13 +112,83 @@ class PedestrianIncident:
         self.inserted = True
         self.stepped_out = time
 
+    def stop_distance(self, ego: EgoState) -> float:
+        """Metres from the ego's front to where the AV stops for a person on the crossing."""
+        return math.dist((ego.x, ego.y), self.crossing_xy) - STOP_BEFORE_PATH
+
+    def needed_deceleration(self, speed: float, gap: float) -> float:
+        return speed * speed / (2 * gap) if gap > 0 else math.inf
+
+    def steps_out_now(self, ego: EgoState) -> bool:
+        """Step out in this step when the ego already needs the drawn deceleration to stop, or
+        when waiting one more step could leave it, at its maximum acceleration, needing more
+        than SAFE_NEED when the AV sees the person (so the emergency brake always stops it)."""
+        gap = self.stop_distance(ego)
+        if self.needed_deceleration(ego.speed, gap) >= self.late_deceleration:
+            return True
+        top = max(ego.speed, self.road_speed)    # the autopilot does not drive above the limit
+        v1 = min(ego.speed + self.ego_accel * self.step_length, top)
+        v2 = min(v1 + self.ego_accel * self.step_length, top)
+        return self.needed_deceleration(v2, gap - (v1 + v2) * self.step_length) > SAFE_NEED
+
     def step(self, sumo, ego: EgoState) -> None:
-        if self.inserted or self.timing != "late":
+        if not self.inserted:
+            if self.timing != "late":
+                return
+            # The person appears on the crossing in the next step and the AV sees them then, so
+            # the step out is timed on the ego's state one step on: when the deceleration it
+            # then needs to stop before the crossing is closest to the drawn one.
+            if self.steps_out_now(ego):
+                self.insert_on_crossing(sumo, ego.time)
             return
-        distance = math.dist((ego.x, ego.y), self.crossing_xy)
-        stopping = ego.speed * ego.speed / (2 * EMERGENCY_DECEL) + ego.speed * REACTION
-        if distance <= stopping + self.margin:
-            self.insert_on_crossing(sumo, ego.time)
+        if self.timing != "none" and not self.cleared:
+            self.guard(sumo, ego)
+
+    def guard(self, sumo, ego: EgoState) -> None:
+        """The AV's perception of the person (SUMO's junction model does not brake harder than
+        the comfortable deceleration for a person, and ignores one it cannot stop for that way):
+        while the person is on the crossing in or about to enter the ego's path and the ego is
+        still before the crossing, the AV brakes to stop at the crossing, up to its emergency
+        deceleration, and holds until the person has left its path."""
+        gap = self.stop_distance(ego)
+        passed = ego.road == self.road and ego.lane_position > 0.0
+        if passed or gap > MEASURE_NEAR:
+            if passed:
+                self.release(sumo)
+                self.cleared = True
+            return
+        try:
+            where = sumo.person.getRoadID(self.person_id)
+            along = sumo.person.getLanePosition(self.person_id)
+        except sumo.TraCIException:
+            self.release(sumo)
+            return
+        offset = abs(along - self.crossing.conflict_position) if where == self.crossing.edge else math.inf
+        approaching = offset < self.last_offset
+        self.last_offset = offset
+        in_path = offset <= PATH_HALF_WIDTH or (approaching and offset <= LOOKOUT)
+        if not in_path:
+            self.release(sumo)
+            return
+        speed = ego.speed
+        needed = self.needed_deceleration(speed, gap)
+        if math.isnan(self.seen_needing):
+            self.seen_needing = needed
+        if not self.emergency and needed > self.comfortable_decel:
+            # Automatic emergency braking: full braking once triggered, held until the path is clear.
+            self.emergency = True
+            self.emergency_time = ego.time
+            sumo.vehicle.setSpeedMode(self.ego_id, EMERGENCY_SPEED_MODE)
+        decel = EMERGENCY_DECEL if self.emergency else needed
+        self.braking = True
+        sumo.vehicle.setSpeed(self.ego_id, max(0.0, speed - decel * self.step_length))
+
+    def release(self, sumo) -> None:
+        if self.braking:
+            sumo.vehicle.setSpeed(self.ego_id, -1.0)
+            if self.emergency:
+                sumo.vehicle.setSpeedMode(self.ego_id, SAFE_SPEED_MODE)
+            self.braking = self.emergency = False
 
     def measure(self, sumo, ego: EgoState, monitor) -> None:
         if not self.inserted or self.timing == "none":
@@ -118,7 +213,9 @@ class PedestrianIncident:
                 sumo.person.remove(self.person_id)
 
     def details(self) -> str:
-        return f"timing={self.timing} margin={self.margin:.2f} stepped_out={self.stepped_out:.1f}"
+        return (f"timing={self.timing} late_deceleration={self.late_deceleration:.2f} "
+                f"stepped_out={self.stepped_out:.1f} seen_needing={self.seen_needing:.2f} "
+                f"emergency_brake={self.emergency_time:.1f}")
 
 
 @dataclass(frozen=True)
@@ -128,6 +225,7 @@ class CrossingPath:
 
     edge: str                        # the crossing's edge id, e.g. ":A_c0"
     conflict: tuple[float, float]    # where the ego's lane centre meets the crossing
+    conflict_position: float         # the same point as a position along the crossing
     start: float                     # position on the crossing where a late person appears
     walk: tuple[str, ...]            # crossing, walking area, sidewalk
     arrival: float
@@ -158,7 +256,8 @@ def crossing_path(sumo, road: str) -> CrossingPath:
     sidewalk_edge = sidewalk.rsplit("_", 1)[0]
     ends_here = sidewalk_edge.split("-")[1] == junction
     arrival = max(0.0, sumo.lane.getLength(sidewalk) - 2.0) if ends_here else 2.0
-    return CrossingPath(edge=edge, conflict=point, start=max(0.0, t * length - LATE_BEFORE_LANE),
+    return CrossingPath(edge=edge, conflict=point, conflict_position=t * length,
+                        start=max(0.0, t * length - LATE_BEFORE_LANE),
                         walk=(edge, walking_area.rsplit("_", 1)[0], sidewalk_edge), arrival=arrival)
 
 
@@ -170,14 +269,18 @@ def inject(sumo, scene: Scene) -> PedestrianIncident:
     timing = scene.overrides.get("timing", drawn)
     if timing not in TIMINGS:
         raise ValueError(f"pedestrian timing {timing!r} is not one of {', '.join(TIMINGS)}")
-    margin = float(scene.draw("late_margin", lambda rng: rng.uniform(*LATE_MARGIN)))
+    late_deceleration = float(scene.draw("late_deceleration", lambda rng: rng.uniform(*LATE_DECELERATION)))
     before_kerb = float(scene.draw("early_start", lambda rng: rng.uniform(*EARLY_START)))
     kerb = max(0.0, sumo.lane.getLength(f"{scene.reverse_road}_0") - START_BEFORE_JUNCTION)
     crossing = crossing_path(sumo, scene.road)
     incident = PedestrianIncident(road=scene.road, reverse_road=scene.reverse_road,
                                   person_id=f"{scene.prefix}.pedestrian", timing=timing,
-                                  margin=margin if timing == "late" else math.nan, kerb=kerb,
-                                  crossing_xy=crossing.conflict, crossing=crossing)
+                                  late_deceleration=late_deceleration if timing == "late" else math.nan,
+                                  kerb=kerb,
+                                  crossing_xy=crossing.conflict, crossing=crossing, ego_id=scene.ego_id,
+                                  ego_accel=sumo.vehicle.getAccel(scene.ego_id), road_speed=scene.road_speed,
+                                  comfortable_decel=sumo.vehicle.getDecel(scene.ego_id),
+                                  step_length=scene.step_length)
     if timing == "early":
         incident.insert(sumo, scene.time, before_kerb, crosses=True)
     elif timing == "none":

@@ -180,18 +180,36 @@ def test_background_traffic_is_seeded(setup, net):
 
 
 def test_a_forced_late_pedestrian_is_a_measured_fail(setup, net):
-    """A person who is on the crossing in the ego's lane when the ego is just at its emergency
-    stopping distance: SUMO's ego does not stop in time, and the measures say `fail`. With the
-    default margins (docs/scenes.md) the same person is yielded to."""
-    late = _run(setup, net, 3, {"pedestrian": {"timing": "late", "late_margin": 0.0}})
+    """A person who steps out when the ego needs more than its comfortable deceleration to stop:
+    the AV's emergency brake stops it without a collision, and the hard braking is a measured
+    `fail`. The same person stepping out when a gentle stop suffices is yielded to: `succ`.
+    (The draw was a margin in metres before the AV could brake for a person; it is now the
+    deceleration the ego needs, docs/scenes.md.)"""
+    late = _run(setup, net, 3, {"pedestrian": {"timing": "late", "late_deceleration": 6.0}})
     row = late.incidents[late.incidents["incident"] == "pedestrian"].iloc[0]
-    assert row.scene.startswith("timing=late margin=0.00")
-    assert row.performance == "fail" and isinstance(row.failed_measures, str)
-    assert row.min_pedestrian_distance < 2.0
+    assert row.scene.startswith("timing=late late_deceleration=6.00")
+    assert row.performance == "fail" and "deceleration" in row.failed_measures
+    assert not row.collided and row.max_deceleration > 5.0
     assert late.roads.set_index("directed_road").loc["A-B", "performance"] == "fail"
-    yielded = _run(setup, net, 3, {"pedestrian": {"timing": "late", "late_margin": 6.0}})
+    yielded = _run(setup, net, 3, {"pedestrian": {"timing": "late", "late_deceleration": 1.5}})
     row = yielded.incidents[yielded.incidents["incident"] == "pedestrian"].iloc[0]
-    assert row.performance == "succ" and not row.collided and row.min_pedestrian_distance > 2.0
+    assert row.performance == "succ" and not row.collided and row.max_deceleration <= 5.0
+    assert row.min_pedestrian_distance > 2.0
+
+
+@pytest.mark.slow
+def test_late_pedestrians_are_never_hit_under_autopilot(setup, net):
+    """Every pedestrian forced late, with the drawn deceleration of each seed (docs/scenes.md):
+    the emergency brake stops the ego before the person every time, and some of the late step
+    outs need it (a measured `fail`) while others are gentle stops."""
+    rows = []
+    for seed in range(30):
+        record = _run(setup, net, seed, {"pedestrian": {"timing": "late"}})
+        rows.append(record.incidents[record.incidents["incident"] == "pedestrian"].iloc[0])
+    assert not any(row.collided for row in rows)
+    assert all(row.min_pedestrian_distance > 1.0 for row in rows)
+    verdicts = {row.performance for row in rows}
+    assert verdicts == {"succ", "fail"}
 
 
 def test_skipped_reads_change_nothing(setup, net, monkeypatch):
