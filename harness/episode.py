@@ -194,7 +194,7 @@ class _Episode:
         self.observer = observer
         self.mode = AUTOPILOT.name
         self.runs: list[_RoadRun] = []
-        self.kinematics: dict[str, list] = {k: [] for k in ("time", "x", "y", "speed", "lane", "mode")}
+        self.steps: list[tuple] = []   # (time, x, y, speed, lane, mode) per step: the kinematics table
         self.lengths: dict[str, float] = {}
         self.min_gap = 2.5
 
@@ -234,12 +234,6 @@ class _Episode:
         if run.incident is not None and math.isnan(run.removed_time):
             run.incident.remove(self.sumo)
             run.removed_time = now
-
-    def needs_watching(self, run: _RoadRun) -> bool:
-        """Whether the road's incident or the driver still has something to do this step."""
-        if run.incident is not None:
-            return math.isnan(run.removed_time)
-        return not run.decided
 
     def watch(self, run: _RoadRun, ego: EgoState) -> None:
         """Per-step work for the open road's incident and the driver (only while there is some)."""
@@ -330,17 +324,19 @@ class _Episode:
         current = self.new_run(0, start)
         self.runs.append(current)
         upcoming: _RoadRun | None = None
-        kin = self.kinematics
         step = self.config.step_length
+        max_sim_seconds = self.config.max_sim_seconds
         now = 0.0
-        # Hot loop: local names, one subscription read, Python work only where something happens.
+        # Hot loop: local names, one subscription read, one append, Python work only where
+        # something happens (an incident still live, a driver still to decide).
         simulation_step = sumo.simulationStep
         get_time = sumo.simulation.getTime
         get_results = sumo.vehicle.getSubscriptionResults
         colliding_number = sumo.simulation.getCollidingVehiclesNumber
         auto = AUTOPILOT.name
-        append_time, append_x, append_y = kin["time"].append, kin["x"].append, kin["y"].append
-        append_speed, append_lane, append_mode = kin["speed"].append, kin["lane"].append, kin["mode"].append
+        log_step = self.steps.append
+        observer = self.observer
+        min_gap = self.min_gap
         commit_at = self.length(start) - COMMIT_DISTANCE
         while True:
             simulation_step()
@@ -366,35 +362,32 @@ class _Episode:
                 background_step(sumo)
             if open_run.index > 0:
                 ego = None
-                if self.needs_watching(open_run):
+                incident = open_run.incident
+                # Watched while the incident is live, or (no incident) until the driver has decided.
+                if (not open_run.decided if incident is None else math.isnan(open_run.removed_time)):
                     ego = EgoState(now, road, position, x, y, speed, lane, result[angle_id], result[accel_id])
                     self.watch(open_run, ego)
                 if self.mode == auto:
                     collided = (colliding_number() > 0
                                 and EGO_ID in sumo.simulation.getCollidingVehiclesIDList())
                     open_run.monitor.observe(sumo, speed, result[accel_id], collided, result[leader_id],
-                                             self.min_gap, ROAD_SPEED, step)
-                    if ego is not None and open_run.incident is not None:
-                        open_run.incident.measure(sumo, ego, open_run.monitor)
+                                             min_gap, ROAD_SPEED, step)
+                    if ego is not None and incident is not None:
+                        incident.measure(sumo, ego, open_run.monitor)
             finished = False
             if not current.committed and road == current.road and position + speed * step >= commit_at:
                 upcoming = self.commit(current, now, position)
                 finished = upcoming is None
             # Logged after this step's decisions, so `mode` is the control the ego drives on with.
-            append_time(now)
-            append_x(x)
-            append_y(y)
-            append_speed(speed)
-            append_lane(lane)
-            append_mode(self.mode)
-            if self.observer is not None:
-                self.observer(sumo, EgoState(now, road, position, x, y, speed, lane, result[angle_id],
-                                             result[accel_id]), self.mode, open_run.road)
+            log_step((now, x, y, speed, lane, self.mode))
+            if observer is not None:
+                observer(sumo, EgoState(now, road, position, x, y, speed, lane, result[angle_id],
+                                        result[accel_id]), self.mode, open_run.road)
             if finished:
                 break
-            if now > self.config.max_sim_seconds:
+            if now > max_sim_seconds:
                 raise RuntimeError(f"episode {self.tracker.episode_id} still running after "
-                                   f"{self.config.max_sim_seconds:.0f} s of sim time on {road}")
+                                   f"{max_sim_seconds:.0f} s of sim time on {road}")
         return now
 
     def incidents_table(self) -> pa.Table:
@@ -428,12 +421,13 @@ class _Episode:
         return table_from_columns(columns, INCIDENTS_SCHEMA)
 
     def kinematics_table(self) -> pa.Table:
-        kin = self.kinematics
-        columns: dict[str, object] = {"episode_id": [self.tracker.episode_id] * len(kin["time"])}
-        for name in ("time", "x", "y", "speed"):
-            columns[name] = np.asarray(kin[name], dtype=np.float64)
-        columns["lane"] = kin["lane"]
-        columns["mode"] = kin["mode"]
+        times, xs, ys, speeds, lanes, modes = zip(*self.steps, strict=True) if self.steps else ((),) * 6
+        columns: dict[str, object] = {
+            "episode_id": [self.tracker.episode_id] * len(times),
+            "time": np.array(times, dtype=np.float64), "x": np.array(xs, dtype=np.float64),
+            "y": np.array(ys, dtype=np.float64), "speed": np.array(speeds, dtype=np.float64),
+            "lane": list(lanes), "mode": list(modes),
+        }
         return table_from_columns(columns, KINEMATICS_SCHEMA)
 
 

@@ -32,6 +32,7 @@ TRUCK_SPEED = 11.0     # m/s (40 km/h): a loaded truck on a 50 km/h town road
 TRUCK_LENGTH = 12.0
 MAX_CLOSING = 30.0     # m/s: above the ego's 13.89 plus the truck's 11 (both at most at their limits)
 WATCH_HORIZON = 3.0    # s: above every head-on TTC limit (harness/performance.py)
+GONE_BEHIND = 60.0     # metres behind the ego after the meeting: the vehicle leaves the simulation
 
 
 def define_type(sumo) -> None:
@@ -78,7 +79,10 @@ class OncomingVehicle:
             if ego.time >= self.insert_time:
                 self.insert(sumo)
             return
-        if self._gone or not math.isnan(self.met_time) or ego.time < self._next_meeting_check:
+        if self._gone or ego.time < self._next_meeting_check:
+            return
+        if not math.isnan(self.met_time):
+            self._leave_when_behind(sumo, ego)
             return
         where = vehicle_position(sumo, self.vehicle_id)
         if where is None:
@@ -90,6 +94,21 @@ class OncomingVehicle:
         # Met: the ego is no longer ahead of the truck along the truck's heading.
         if (ego.x - x) * math.sin(angle) + (ego.y - y) * math.cos(angle) <= 0:
             self.met_time, self.met_x, self.met_y = ego.time, x, y
+
+    def _leave_when_behind(self, sumo, ego: EgoState) -> None:
+        """After the meeting the vehicle drives away behind the ego, where nothing the ego does
+        depends on it: it leaves the simulation once `GONE_BEHIND` metres away (SUMO then has one
+        vehicle less to step)."""
+        where = vehicle_position(sumo, self.vehicle_id)
+        if where is None:
+            self._gone = True
+            return
+        gap = math.dist(where, (ego.x, ego.y))
+        if gap >= GONE_BEHIND:
+            remove_vehicle(sumo, self.vehicle_id)
+            self._gone = True
+        else:
+            self._next_meeting_check = ego.time + (GONE_BEHIND - gap) / MAX_CLOSING
 
     def measure(self, sumo, ego: EgoState, monitor) -> None:
         """The head-on TTC of this step, when it can be below WATCH_HORIZON."""

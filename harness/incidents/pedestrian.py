@@ -77,6 +77,7 @@ class PedestrianIncident:
     restore_decel: float = math.nan
     emergency_time: float = math.nan   # sim time the ego's emergency braking was armed
     cleared: bool = False
+    left: bool = False                 # taken out of the simulation
     seen_needing: float = math.nan     # m/s² the ego needed to stop when the AV first saw the person
     last_offset: float = math.inf      # the person's last distance along the crossing to the ego's path
 
@@ -135,14 +136,16 @@ class PedestrianIncident:
         if not self.inserted:
             if self.timing != "late":
                 return
-            # The person appears on the crossing in the next step and the AV sees them then, so
-            # the step out is timed on the ego's state one step on: when the deceleration it
-            # then needs to stop before the crossing is closest to the drawn one.
+            # The person appears on the crossing in the next step, and the AV sees them then.
             if self.steps_out_now(ego):
                 self.insert_on_crossing(sumo, ego.time)
             return
         if self.timing != "none" and not self.cleared:
             self.guard(sumo, ego)
+        if not self.left and self.is_passed(sumo, ego):
+            # Behind the ego the person can no longer meet it: they leave the simulation (SUMO
+            # then has no person to step), the runner's `remove` at the road's end is a no-op.
+            self.remove(sumo)
 
     def guard(self, sumo, ego: EgoState) -> None:
         """The AV's perception of the person (SUMO's junction model does not brake harder than
@@ -208,7 +211,8 @@ class PedestrianIncident:
 
     def remove(self, sumo) -> None:
         # Also reaches an object still waiting for insertion; one already gone raises, and that is fine.
-        if self.inserted:
+        if self.inserted and not self.left:
+            self.left = True
             with contextlib.suppress(sumo.TraCIException):
                 sumo.person.remove(self.person_id)
 
