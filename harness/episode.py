@@ -32,6 +32,7 @@ from trustroute.analysis.dataset import (
     INCIDENTS_SCHEMA,
     KINEMATICS_SCHEMA,
     ROADS_SCHEMA,
+    check_table,
     frame_from_table,
     table_from_columns,
     table_from_frame,
@@ -57,8 +58,9 @@ VIEW_DISTANCE = 80.0        # metres: an incident object this close to the ego i
 MAX_CLOSING = 30.0          # m/s: no incident object and the ego close in on each other faster
 START_BEFORE_COMMIT = 40.0  # the ego is inserted this far before the start road's commit point
 INSERT_TIMEOUT = 30.0       # seconds of sim time for the ego to appear
-LEADER_HORIZON = 100.0      # metres: how far ahead the subscription looks for a leader
+MAX_LEADER_HORIZON = 1000.0  # metres: the most the subscription looks ahead for a leader
 JUNCTION_LENGTH = 8.0       # metres: a typical internal lane, for timing scenes from the commit point
+STEP_FIELDS = ("time", "x", "y", "speed", "lane", "mode")   # what the loop logs per step, in order
 SCENE_STREAM = 0x5CE7E      # the scene generator's stream: SeedSequence([seed, SCENE_STREAM])
 
 def scene_rng(seed: int) -> np.random.Generator:
@@ -140,6 +142,15 @@ class _RoadRun:
     monitor: PerformanceMonitor = field(default_factory=PerformanceMonitor)
 
 
+def leader_horizon(config: SumoConfig) -> float:
+    """How far ahead the ego's subscription looks for a leader: a leader TTC below a limit needs a
+    bumper gap below speed × limit (the closing speed is at most the ego's), and the ego drives at
+    most ROAD_SPEED, so a leader farther than the largest limit × ROAD_SPEED cannot matter (SUMO
+    then searches fewer lanes each step)."""
+    largest = max((limits.min_ttc for limits in config.performance_limits.values()), default=0.0)
+    return min(largest * ROAD_SPEED + 1.0, MAX_LEADER_HORIZON)
+
+
 def _define_ego_type(sumo) -> None:
     sumo.vehicletype.copy("DEFAULT_VEHTYPE", EGO_TYPE)
     sumo.vehicletype.setImperfection(EGO_TYPE, 0.0)   # the AV drives without driver noise
@@ -149,9 +160,9 @@ def _define_ego_type(sumo) -> None:
 _MATCHING_NETS: set[tuple[str, float, str]] = set()
 
 
-def _check_net_matches(sumo, setup: EpisodeSetup, net_path: Path) -> None:
+def _check_net_matches(sumo, setup: EpisodeSetup, net_path: Path, net_key: tuple[str, float]) -> None:
     """The net has an edge for every road of the town (checked once per net and town per process)."""
-    key = (str(net_path), net_path.stat().st_mtime, setup.town.content_hash)
+    key = (*net_key, setup.town.content_hash)
     if key in _MATCHING_NETS:
         return
     edges = set(sumo.edge.getIDList())
@@ -166,13 +177,17 @@ def _check_net_matches(sumo, setup: EpisodeSetup, net_path: Path) -> None:
 _READABLE: set[tuple[str, float]] = set()
 
 
-def _check_readable(net_path: Path) -> None:
-    """Parse a net passed in once per (path, mtime): a clear one-line error before SUMO prints its own."""
+def _net_key(net_path: Path) -> tuple[str, float]:
+    """(path, mtime) of a net: what the once-per-process checks are keyed on (one stat per episode)."""
     try:
-        key = (str(net_path), net_path.stat().st_mtime)
+        return str(net_path), net_path.stat().st_mtime
     except OSError:
         raise InputError(str(net_path), "", "the SUMO net file does not exist",
                          "run `trustroute net build` or pass an existing .net.xml") from None
+
+
+def _check_readable(net_path: Path, key: tuple[str, float]) -> None:
+    """Parse a net passed in once per (path, mtime): a clear one-line error before SUMO prints its own."""
     if key not in _READABLE:
         net_counts(net_path)
         _READABLE.add(key)
@@ -194,7 +209,7 @@ class _Episode:
         self.observer = observer
         self.mode = AUTOPILOT.name
         self.runs: list[_RoadRun] = []
-        self.steps: list[tuple] = []   # (time, x, y, speed, lane, mode) per step: the kinematics table
+        self.steps: list[tuple] = []   # one STEP_FIELDS tuple per step: the kinematics table
         self.lengths: dict[str, float] = {}
         self.min_gap = 2.5
 
@@ -316,7 +331,7 @@ class _Episode:
         sumo.vehicle.subscribe(EGO_ID, [sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION,
                                         sumo.VAR_SPEED, sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID,
                                         sumo.VAR_LEADER, sumo.VAR_ANGLE], 0.0, 1e9,
-                               {sumo.VAR_LEADER: LEADER_HORIZON})
+                               {sumo.VAR_LEADER: leader_horizon(self.config)})
         road_id, position_id, xy_id, speed_id, accel_id, lane_id, leader_id, angle_id = (
             sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION, sumo.VAR_SPEED,
             sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID, sumo.VAR_LEADER, sumo.VAR_ANGLE)
@@ -421,14 +436,11 @@ class _Episode:
         return table_from_columns(columns, INCIDENTS_SCHEMA)
 
     def kinematics_table(self) -> pa.Table:
-        times, xs, ys, speeds, lanes, modes = zip(*self.steps, strict=True) if self.steps else ((),) * 6
-        columns: dict[str, object] = {
-            "episode_id": [self.tracker.episode_id] * len(times),
-            "time": np.array(times, dtype=np.float64), "x": np.array(xs, dtype=np.float64),
-            "y": np.array(ys, dtype=np.float64), "speed": np.array(speeds, dtype=np.float64),
-            "lane": list(lanes), "mode": list(modes),
-        }
-        return table_from_columns(columns, KINEMATICS_SCHEMA)
+        columns = dict(zip(STEP_FIELDS, zip(*self.steps, strict=True) if self.steps else ((),) * 6,
+                           strict=True))
+        columns["episode_id"] = [self.tracker.episode_id] * len(self.steps)
+        arrays = [pa.array(columns[f.name], type=f.type) for f in KINEMATICS_SCHEMA]
+        return check_table(pa.Table.from_arrays(arrays, schema=KINEMATICS_SCHEMA), KINEMATICS_SCHEMA)
 
 
 def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: str, seed: int,
@@ -449,10 +461,12 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
         net = build_net(setup.town).path
     else:
         net = Path(net_path)
-        _check_readable(net)
+    net_key = _net_key(net)
+    if net_path is not None:
+        _check_readable(net, net_key)
     tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=0.0)
     with sumo_session(net, seed, config) as sumo:
-        _check_net_matches(sumo, setup, net)
+        _check_net_matches(sumo, setup, net, net_key)
         episode = _Episode(sumo, setup, tracker, driver, config, observer, scene_rng(seed), scene_overrides)
         sim_seconds = episode.run()
     record = EpisodeRecord(summary=tracker.summary(wall_seconds=time.perf_counter() - started,

@@ -17,7 +17,7 @@ table's schema is `trustroute.analysis.dataset.ROADS_SCHEMA` (docs/dataset.md).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -60,6 +60,20 @@ class EpisodeModel:
 
     pomdp: TrustPOMDP
     compiled: CompiledSpec
+    # Memoised filter and DFA steps, shared by the episodes of a process. Episodes start from one
+    # initial belief and meet few distinct observation sequences, so most steps repeat; a hit
+    # returns the very floats the computation gave (the same seed still gives the same logs).
+    updates: dict = field(default_factory=dict, repr=False)
+
+
+MAX_MEMO = 200_000   # entries per memo before it is cleared (bounded memory in long studies)
+
+
+def _memo_put(memo: dict, key, value):
+    if len(memo) >= MAX_MEMO:
+        memo.clear()
+    memo[key] = value
+    return value
 
 
 _MODELS: dict[tuple[str, str, str], EpisodeModel] = {}
@@ -93,6 +107,7 @@ class EpisodeTracker:
         self.episode_id = str(episode_id)
         model = episode_model(setup)
         self._pomdp, self._compiled = model.pomdp, model.compiled
+        self._memo = model.updates
         self.dfa = model.compiled.dfa
         self.policy = episode_policy(policy, setup.town, setup.spec, setup.fallback_after)
         start = setup.spec.start
@@ -169,15 +184,25 @@ class EpisodeTracker:
             raise ValueError(f"performance must be 'succ' or 'fail', got {performance!r}")
         incident_index = self.setup.driver_model.incident_index(incident)
         before = self.belief
-        posterior, _ = self._pomdp.belief_update(before, incident_index, int(bool(takeover)),
-                                                 PERFORMANCE_INDEX[performance],
-                                                 rule=self.setup.belief_rule)
-        after = posterior[0]
-        if not after.sum() > 0:
-            # An observation the AV's model deems impossible: keep the prior rather than a zero vector.
-            after = before.copy()
+        key = ("belief", before.tobytes(), incident_index, bool(takeover), performance,
+               self.setup.belief_rule)
+        after = self._memo.get(key)
+        if after is None:
+            posterior, _ = self._pomdp.belief_update(before, incident_index, int(bool(takeover)),
+                                                     PERFORMANCE_INDEX[performance],
+                                                     rule=self.setup.belief_rule)
+            after = posterior[0]
+            if not after.sum() > 0:
+                # An observation the AV's model deems impossible: keep the prior rather than a zero vector.
+                after = before.copy()
+            after.setflags(write=False)
+            _memo_put(self._memo, key, after)
         self.belief = after
-        self.dfa_state = self._compiled.step_road(self.dfa_state, road, after)
+        key = ("dfa", self.dfa_state, road, after.tobytes())
+        state = self._memo.get(key)
+        if state is None:
+            state = _memo_put(self._memo, key, self._compiled.step_road(self.dfa_state, road, after))
+        self.dfa_state = state
         self.route.append(road)
         self._chosen = None
         self._rows[-1]["sim_time_out"] = float(sim_time_in)

@@ -235,9 +235,23 @@ class CrossingPath:
     arrival: float
 
 
+_CROSSINGS: dict[tuple, CrossingPath] = {}
+
+
 def crossing_path(sumo, road: str) -> CrossingPath:
-    """The crossing over `road` at its start junction (networks/sumo_net.py puts one there)."""
-    lane_start = sumo.lane.getShape(f"{road}_1")[0]
+    """The crossing over `road` at its start junction (networks/sumo_net.py puts one there).
+    Static geometry: looked up once per road and lane shape in a process."""
+    shape = tuple(sumo.lane.getShape(f"{road}_1"))
+    key = (road, shape)
+    cached = _CROSSINGS.get(key)
+    if cached is None:
+        if len(_CROSSINGS) > 4096:
+            _CROSSINGS.clear()
+        cached = _CROSSINGS[key] = _find_crossing(sumo, road, shape[0])
+    return cached
+
+
+def _find_crossing(sumo, road: str, lane_start: tuple[float, float]) -> CrossingPath:
     junction = road.split("-")[0]
     best = None
     for edge in sumo.junction.getOutgoingEdges(junction):
