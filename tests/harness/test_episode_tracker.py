@@ -88,6 +88,39 @@ def test_belief_and_dfa_follow_the_filter_step_by_step(town, driver, pomdp, phi1
     assert frame["action"].iloc[:-1].notna().all() and pd.isna(frame["action"].iloc[-1])
 
 
+def test_memoised_steps_give_the_computed_floats(town, driver, pomdp, phi1):
+    """Trackers over observation sequences that share their start but differ in takeover and
+    performance, run after each other so later ones take steps from the memo: every belief is
+    bit-identical to the direct filter's and every DFA state to the labeller's. A memo key that
+    ignored the takeover or the performance would hand the second sequence the first one's belief."""
+    from trustroute.harness.episode_tracker import episode_model
+
+    setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1)
+    episode_model(setup).updates.clear()
+    dfa = build_dfa(phi1)
+    labeller = Labeller(phi1, dfa, town)
+    # The same route; up to its first incident the priors agree, then the sequences differ in one
+    # of takeover and performance only.
+    sequences = [[(True, "succ")] * 5, [(False, "succ")] * 5, [(True, "fail")] * 5]
+    for observations in sequences + sequences:
+        tracker = EpisodeTracker(setup, trust_free_policy(town, phi1), "e", initial_trust=3)
+        belief = np.asarray(driver.initial_belief, dtype=float)
+        q = int(labeller.step(np.array([dfa.initial]), np.array([town.state_index(phi1.start)]),
+                              belief[None])[0])
+        for took_over, performance in observations:
+            road = town.successor(tracker.road, tracker.next_junction())
+            incident = town.incident(road)
+            took_over = took_over and incident != "none"
+            tracker.record_road(road, incident, took_over, performance, 3, 3, None, 0.0, 1.0)
+            posterior, _ = pomdp.belief_update(belief, driver.incident_index(incident), int(took_over),
+                                               {"succ": 0, "fail": 1}[performance])
+            belief = posterior[0] if posterior[0].sum() > 0 else belief
+            q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None])[0])
+            assert tracker.belief.tobytes() == belief.tobytes()
+            assert tracker.dfa_state == q
+    assert len(episode_model(setup).updates) > 0
+
+
 def test_free_policy_drives_the_baseline_route(town, driver, phi1):
     setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1)
     always_trusting = SyntheticDriver(driver, np.random.default_rng(0), initial_trust=7)

@@ -278,3 +278,17 @@ def test_a_seeded_study_measures_failures_and_the_example_driver_reacts(tmp_path
         else:
             assert same, episode_id
     assert differ >= 1
+
+
+def test_the_leader_subscription_reaches_every_ttc_limit():
+    """A leader TTC below a limit needs a gap below ROAD_SPEED × limit: the subscription's
+    look-ahead covers the largest limit configured (and grows with it)."""
+    from trustroute.harness.episode import leader_horizon
+    from trustroute.harness.sumo_start import SumoConfig
+    from trustroute.networks.sumo_net import ROAD_SPEED
+
+    default = SumoConfig()
+    largest = max(limits.min_ttc for limits in default.performance_limits.values())
+    assert leader_horizon(default) >= largest * ROAD_SPEED
+    wide = SumoConfig(performance_limits={"none": PerformanceLimits(min_ttc=4.0)})
+    assert leader_horizon(wide) >= 4.0 * ROAD_SPEED > leader_horizon(default)
