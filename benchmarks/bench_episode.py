@@ -126,7 +126,8 @@ def run() -> list[dict]:
         {"name": "episodes_200_wall", "value": many_seconds, "unit": "s"},
         {"name": "episodes_200_rss_growth", "value": growth, "unit": "MB"},
         *rates,
-        study_against_bare(),
+        study_against_bare(21),
+        study_against_bare(105),
     ]
 
 
@@ -202,7 +203,7 @@ def study_against_bare(participants: int = 21, workers: int = 2) -> dict:
     with ProcessPoolExecutor(max_workers=workers) as pool:
         list(pool.map(_bare_route, [(net, route) for route in routes]))
     bare_seconds = time.perf_counter() - started
-    return {"name": "study_sumo_vs_bare_libsumo", "value": study_seconds, "unit": "s",
+    return {"name": f"study_sumo_vs_bare_libsumo.{len(routes)}_episodes", "value": study_seconds, "unit": "s",
             "baseline": bare_seconds, "ratio": study_seconds / bare_seconds, "episodes": len(routes),
             "workers": workers, "failed": len(run.failed), "target_ratio": 2.0,
             "what": "free condition only (no synthesis); bare = the same routes, same process count"}
