@@ -327,13 +327,14 @@ class _Episode:
         sumo.vehicle.add(EGO_ID, "ego_route", typeID=EGO_TYPE, depart="now", departLane="best",
                          departPos=f"{depart:.2f}", departSpeed="max")
         apply_style(sumo, EGO_ID, AUTOPILOT)
-        # One subscription carries everything the loop reads each step, the leader included.
-        sumo.vehicle.subscribe(EGO_ID, [sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION,
+        # One subscription carries everything the loop reads each step, the leader included (the
+        # road is the lane's edge, "A-B" of "A-B_1", ":A_5" of ":A_5_0": one variable less).
+        sumo.vehicle.subscribe(EGO_ID, [sumo.VAR_LANEPOSITION, sumo.VAR_POSITION,
                                         sumo.VAR_SPEED, sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID,
                                         sumo.VAR_LEADER, sumo.VAR_ANGLE], 0.0, 1e9,
                                {sumo.VAR_LEADER: leader_horizon(self.config)})
-        road_id, position_id, xy_id, speed_id, accel_id, lane_id, leader_id, angle_id = (
-            sumo.VAR_ROAD_ID, sumo.VAR_LANEPOSITION, sumo.VAR_POSITION, sumo.VAR_SPEED,
+        position_id, xy_id, speed_id, accel_id, lane_id, leader_id, angle_id = (
+            sumo.VAR_LANEPOSITION, sumo.VAR_POSITION, sumo.VAR_SPEED,
             sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID, sumo.VAR_LEADER, sumo.VAR_ANGLE)
         self.min_gap = sumo.vehicle.getMinGap(EGO_ID)
         current = self.new_run(0, start)
@@ -363,7 +364,8 @@ class _Episode:
                 continue
             if math.isnan(current.time_in):
                 current.time_in = now
-            road = result[road_id]
+            lane = result[lane_id]
+            road = lane[:lane.rindex("_")]
             position = result[position_id]
             speed = result[speed_id]
             x, y = result[xy_id]
@@ -371,7 +373,6 @@ class _Episode:
                 current, upcoming = upcoming, None
                 current.time_in = now
                 commit_at = self.length(road) - COMMIT_DISTANCE
-            lane = result[lane_id]
             open_run = upcoming if upcoming is not None else current
             if background_step is not None:
                 background_step(sumo)
