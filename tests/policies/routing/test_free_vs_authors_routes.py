@@ -97,6 +97,11 @@ def test_shortest_routes_on_the_default_town_tie_the_authors_preset_routes(spec_
     fewest = min(len(r) for r in candidates)
     assert len(preset) == len(ours) == fewest
 
+    # Town01's A-E and H-L run along the outer streets, longer than the town's straight roads
+    # (docs/real_study.md); neither route drives them after the start, so the comparison stands.
+    outer = {"A-E", "E-A", "H-L", "L-H"}
+    assert not outer & set(preset[1:]) and not outer & set(ours[1:])
+
     # In metres the preset is at most a few per cent longer than ours (never shorter).
     assert town.route_length(preset) >= town.route_length(ours) - 1e-9
     assert town.route_length(preset) / town.route_length(ours) <= LENGTH_RATIO_AT_MOST[spec_name]
