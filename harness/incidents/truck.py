@@ -27,9 +27,10 @@ PARKED_TYPE_ID = "trustroute_parked_car"
 MEET_RANGE = (0.3, 0.7)               # fraction of the ego's road where they are timed to meet
 P_PARKED = 0.15
 PARKED_BEFORE_MEETING = (0.0, 80.0)   # metres before the meeting point, along the truck's way
-# Shorter than this, the truck's lane has no room to pass a parked car before it meets the ego
-# (Town01's 50-70 m roads): the scene is the plain oncoming truck.
-PARKED_MIN_LANE = 100.0
+# Shorter than this, the truck's lane has no room to pass a parked car before it meets the ego:
+# the scene is the plain oncoming truck. On Town01 the truck and the ego still stopped head-on for
+# good on the 128 m K-L with a 100 m minimum; of its truck roads only H-L/L-H (319 m) pass 200 m.
+PARKED_MIN_LANE = 200.0
 
 
 def define_type(sumo) -> None:
