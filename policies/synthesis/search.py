@@ -54,6 +54,7 @@ from trustroute.policies.synthesis.upper_bound import (
 
 CELL_BUDGET = 5000          # automatic suffix length: the longest k with n_symbols**k <= this
 DEFAULT_BATCH = 4096
+MIN_BATCH = 64
 UNBOUNDED_HORIZONS = (20, 30, 40, 60, 80, 120, 160)
 UNBOUNDED_DEPTH = 60        # the unbounded search leaves nodes this deep open (<= evaluate's cap)
 UNBOUNDED_STATE_BUDGET = 20_000
@@ -189,6 +190,26 @@ class _Graph:
         return ids, new
 
 
+@dataclass(frozen=True, eq=False)
+class _Level:
+    """The expanded nodes of one level with their (fixed) children, for the backups.
+
+    nodes [m]; child [m, actions, outcomes] (0 where absent, masked by has_child); prob; legal
+    [m, actions]; alternates as (row, slot, outcome, child) with row an index into nodes."""
+
+    count: int
+    alternate_chunks: int
+    nodes: np.ndarray
+    child: np.ndarray
+    has_child: np.ndarray
+    prob: np.ndarray
+    legal: np.ndarray
+    alt_row: np.ndarray
+    alt_slot: np.ndarray
+    alt_outcome: np.ndarray
+    alt_child: np.ndarray
+
+
 class _Search:
     def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int | None, suffix_length: int,
                  started: float, deadline: float, unbounded_value: np.ndarray | None = None,
@@ -218,6 +239,45 @@ class _Search:
             for j, o in enumerate(members):
                 self.slot_of_symbol[o] = j
         self.graph = _Graph(pomdp.n_trust, tables.successors.shape[1], n_outcomes)
+        self.levels: dict[int, _Level] = {}
+
+    def level_arrays(self, level: int) -> _Level:
+        """The cached _Level of `level`, rebuilt when nodes or alternates were added there."""
+        g = self.graph
+        members = g.expanded_by_level[level]
+        chunks = len(g.alternates.get(level, ()))
+        cached = self.levels.get(level)
+        if cached is not None and cached.count == len(members) and cached.alternate_chunks == chunks:
+            return cached
+        nodes = np.array(members, dtype=np.int64)
+        child = g.child[nodes]
+        parent, slot, outcome, alt_child = g.alternates_of(level)
+        row = np.zeros(0, dtype=np.int64)
+        if parent.size:
+            order = np.argsort(nodes, kind="stable")
+            where = np.minimum(np.searchsorted(nodes[order], parent), nodes.size - 1)
+            hit = nodes[order][where] == parent
+            row, slot, outcome, alt_child = order[where[hit]], slot[hit], outcome[hit], alt_child[hit]
+        else:
+            slot = outcome = alt_child = row
+        cached = _Level(count=len(members), alternate_chunks=chunks, nodes=nodes,
+                        child=np.maximum(child, 0), has_child=child >= 0, prob=g.prob[nodes],
+                        legal=self.tables.successors[g.x[nodes]] >= 0, alt_row=row, alt_slot=slot,
+                        alt_outcome=outcome, alt_child=alt_child)
+        self.levels[level] = cached
+        return cached
+
+    @staticmethod
+    def level_values(lv: _Level, values: np.ndarray, pessimistic: bool | None) -> np.ndarray:
+        """action_values on a cached level: Σ_o p(o) value(child) per action, -1 where illegal."""
+        child_value = np.where(lv.has_child, values[lv.child], 0.0)
+        if pessimistic is not None and lv.alt_row.size:
+            combine = np.minimum.at if pessimistic else np.maximum.at
+            combine(child_value, (lv.alt_row, lv.alt_slot, lv.alt_outcome), values[lv.alt_child])
+        q = lv.prob[:, :, 0] * child_value[:, :, 0]
+        for o in range(1, child_value.shape[2]):
+            q += lv.prob[:, :, o] * child_value[:, :, o]
+        return np.where(lv.legal, q, -1.0)
 
     def frontier_upper(self, level: int, x: np.ndarray, q: np.ndarray, cell: np.ndarray) -> np.ndarray:
         return self.bound[min(level, len(self.bound) - 1)][x, q, cell]
@@ -363,16 +423,15 @@ class _Search:
     def backup(self) -> None:
         g = self.graph
         for level in range(len(g.expanded_by_level) - 1, -1, -1):
-            members = g.expanded_by_level[level]
-            if not members:
+            if not g.expanded_by_level[level]:
                 continue
-            nodes = np.array(members, dtype=np.int64)
-            g.upper[nodes] = np.minimum(
-                g.upper[nodes], self.action_values(nodes, g.upper, False, level).max(axis=1))
-            lower_q = self.action_values(nodes, g.lower, True, level)
+            lv = self.level_arrays(level)
+            nodes = lv.nodes
+            g.upper[nodes] = np.minimum(g.upper[nodes], self.level_values(lv, g.upper, False).max(axis=1))
+            lower_q = self.level_values(lv, g.lower, True)
             g.lower[nodes] = np.maximum(g.lower[nodes], lower_q.max(axis=1))
             # strict value of the policy's own choice (best L, ties by strict value)
-            strict_q = self.action_values(nodes, g.strict, None, level)
+            strict_q = self.level_values(lv, g.strict, None)
             tied = lower_q >= lower_q.max(axis=1, keepdims=True)
             g.strict[nodes] = np.where(tied, strict_q, -1.0).max(axis=1)
 
@@ -387,28 +446,20 @@ class _Search:
         for level, members in enumerate(g.expanded_by_level):
             if not members:
                 continue
-            nodes = np.array(members, dtype=np.int64)
-            nodes = nodes[reach[nodes] > 0]
-            if nodes.size == 0:
+            lv = self.level_arrays(level)
+            mass_here = reach[lv.nodes]
+            if not (mass_here > 0).any():
                 continue
-            values = self.action_values(nodes, g.upper, False, level)
             if every_action:
-                chosen = values >= 0                                   # [nodes, actions]
+                chosen = lv.legal
             else:
+                values = self.level_values(lv, g.upper, False)
                 chosen = np.zeros(values.shape, dtype=bool)
-                chosen[np.arange(nodes.size), values.argmax(axis=1)] = True
-            mass = reach[nodes, None, None] * g.prob[nodes] * chosen[:, :, None]
-            child = g.child[nodes]
-            ok = child >= 0
-            np.add.at(reach, child[ok], mass[ok])
-            parent, slot, outcome, alt_child = g.alternates_of(level)
-            if parent.size:
-                position = dict(zip(nodes.tolist(), range(nodes.size), strict=True))
-                for p, a, o, c in zip(parent.tolist(), slot.tolist(), outcome.tolist(),
-                                      alt_child.tolist(), strict=True):
-                    i = position.get(p)
-                    if i is not None:
-                        reach[c] += mass[i, a, o]
+                chosen[np.arange(lv.nodes.size), values.argmax(axis=1)] = True
+            mass = mass_here[:, None, None] * lv.prob * (chosen[:, :, None] & lv.has_child)
+            np.add.at(reach, lv.child[lv.has_child], mass[lv.has_child])
+            if lv.alt_row.size:
+                np.add.at(reach, lv.alt_child, mass[lv.alt_row, lv.alt_slot, lv.alt_outcome])
         return np.minimum(reach, 1.0)
 
     def policy_table(self) -> PolicyTable:
@@ -473,7 +524,7 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         order = np.argsort(-weight, kind="stable")
         covered = np.cumsum(weight[order])
         count = int(np.searchsorted(covered, 0.5 * covered[-1])) + 1
-        chosen = frontier[order[: max(1, min(count, batch))]]
+        chosen = frontier[order[: max(min(MIN_BATCH, frontier.size), min(count, batch))]]
         search.expand(chosen)
         expanded += chosen.size
         search.backup()
