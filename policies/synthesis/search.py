@@ -43,6 +43,7 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.product_mdp import ProductTables, build_product
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
+from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols, suffix_cells
 from trustroute.policies.synthesis.end_components import unbounded_bound
 from trustroute.policies.synthesis.upper_bound import (
@@ -62,7 +63,10 @@ UNBOUNDED_BOUND_SHARE = 0.3  # share of the time limit the end-component bound m
 BOUNDED_ENTRY_BUDGET = 20_000_000   # floats of the bounded abstraction (160 MB)
 FINISH_SHARE = 0.04          # share of the time limit kept for finishing after the last check
 
-FRONTIER, EXPANDED, ACCEPTED, ZERO = 0, 1, 2, 3
+# FRONTIER: open, L = 0 (the policy drives the trust-free completion there, worth >= 0).
+# FREE: expanded along the trust-free completion's move only; L is that move's exact value, U the
+# abstraction's bound (the other moves are unexplored). EXPANDED: every move; a policy row.
+FRONTIER, EXPANDED, ACCEPTED, ZERO, FREE = 0, 1, 2, 3, 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,18 +100,22 @@ class _Graph:
         self.level = np.zeros(capacity, dtype=np.int64)
         self.x = np.zeros(capacity, dtype=np.int64)
         self.q = np.zeros(capacity, dtype=np.int64)
+        self.p = np.zeros(capacity, dtype=np.int64)      # state of the state-only task (free route)
         self.cell = np.zeros(capacity, dtype=np.int64)
         self.belief = np.zeros((capacity, n_trust))
-        self.upper = np.zeros(capacity)
-        self.lower = np.zeros(capacity)
+        # U, L and the strict value as rows of one array, so that a backup gathers all three at once
+        self.values = np.zeros((3, capacity))
+        self.upper, self.lower = self.values[0], self.values[1]
         # value of the L-greedy choice with every label read strictly, as this machine's labeller
         # does (no alternates): the tie-breaker among actions of equal L, and a reported figure.
-        self.strict = np.zeros(capacity)
+        self.strict = self.values[2]
         self.kind = np.zeros(capacity, dtype=np.int8)
         self.child = np.full((capacity, n_actions, n_outcomes), -1, dtype=np.int64)
         self.prob = np.zeros((capacity, n_actions, n_outcomes))
-        self.memo: list[dict[tuple[int, int, bytes], int]] = []
+        self.memo: list[dict[tuple[int, int, int, bytes], int]] = []
         self.expanded_by_level: list[list[int]] = []
+        self.free_by_level: list[dict[int, None]] = []    # FREE nodes per level (insertion order)
+        self.free_version: list[int] = []
         # Labels at thresholds: an outcome whose belief is within the rounding margin of a belief
         # atom's hyperplane has one child per DFA state it could lead to. child/prob hold the one
         # the strict label reads; the others are "alternates" (parent, slot, outcome, child),
@@ -144,11 +152,15 @@ class _Graph:
         if needed <= capacity:
             return
         new = max(needed, 2 * capacity)
-        for name in ("level", "x", "q", "cell", "upper", "lower", "strict", "kind"):
+        for name in ("level", "x", "q", "p", "cell", "kind"):
             old = getattr(self, name)
             grown = np.zeros(new, dtype=old.dtype)
             grown[:capacity] = old
             setattr(self, name, grown)
+        values = np.zeros((3, new))
+        values[:, :capacity] = self.values
+        self.values = values
+        self.upper, self.lower, self.strict = values[0], values[1], values[2]
         belief = np.zeros((new, self.belief.shape[1]))
         belief[:capacity] = self.belief
         self.belief = belief
@@ -159,30 +171,36 @@ class _Graph:
         prob[:capacity] = self.prob
         self.prob = prob
 
-    def add(self, level: int, x: np.ndarray, q: np.ndarray, cell: np.ndarray, belief: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray]:
-        """Ids of the nodes (level, x, q, belief), creating missing ones; and a mask of new ones."""
-        while len(self.memo) <= level:
+    def add(self, level: int | np.ndarray, x: np.ndarray, q: np.ndarray, p: np.ndarray,
+            cell: np.ndarray, belief: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ids of the nodes (level, x, q, p, belief), creating missing ones; and a mask of new ones."""
+        level = np.broadcast_to(np.asarray(level, dtype=np.int64), x.shape)
+        deepest = int(level.max()) if level.size else 0
+        while len(self.memo) <= deepest:
             self.memo.append({})
             self.expanded_by_level.append([])
-        memo = self.memo[level]
+            self.free_by_level.append({})
+            self.free_version.append(0)
+        memos = self.memo
         ids = np.empty(x.size, dtype=np.int64)
         new = np.zeros(x.size, dtype=bool)
         start = self.n
         self._grow(self.n + x.size)
-        for i, key in enumerate(zip(x.tolist(), q.tolist(), (row.tobytes() for row in belief),
-                                    strict=True)):
-            node = memo.get(key)
+        for i, (lv, *key) in enumerate(zip(level.tolist(), x.tolist(), q.tolist(), p.tolist(),
+                                           (row.tobytes() for row in belief), strict=True)):
+            memo = memos[lv]
+            node = memo.get(tuple(key))
             if node is None:
                 node = self.n
-                memo[key] = node
+                memo[tuple(key)] = node
                 self.n += 1
                 new[i] = True
             ids[i] = node
         created = ids[new]
-        self.level[created] = level
+        self.level[created] = level[new]
         self.x[created] = x[new]
         self.q[created] = q[new]
+        self.p[created] = p[new]
         self.cell[created] = cell[new]
         self.belief[created] = belief[new]
         self.kind[created] = FRONTIER
@@ -229,17 +247,29 @@ class _Search:
             self.bound = bounded_upper(abstraction, horizon, deadline, unbounded_value)
             self.bound_note = "exact backward induction on the abstraction"
         else:
-            self.bound = [unbounded_value]
+            self.bound = np.asarray(unbounded_value)[None]
             self.bound_note = ("the unbounded abstraction's least fixed point from above, end "
                                "components collapsed (policies/synthesis/end_components.py)")
         self.abstraction_seconds = time.perf_counter() - started
         n_outcomes = max(len(s) for s in self.symbols.by_incident)
+        # symbol ids per incident, padded with -1
+        self.symbols_of_incident = np.full((len(self.symbols.by_incident), n_outcomes), -1, dtype=np.int64)
+        for i, members in enumerate(self.symbols.by_incident):
+            self.symbols_of_incident[i, : len(members)] = members
         self.slot_of_symbol = np.zeros(self.symbols.n_symbols, dtype=np.int64)
         for members in self.symbols.by_incident:
             for j, o in enumerate(members):
                 self.slot_of_symbol[o] = j
         self.graph = _Graph(pomdp.n_trust, tables.successors.shape[1], n_outcomes)
         self.levels: dict[int, _Level] = {}
+        self.moves: dict[int, list[tuple[_Level, np.ndarray, np.ndarray]]] = {}
+        self.free_levels: dict[int, tuple[int, _Level]] = {}
+        # The trust-free completion (policies/routing/free.py) as the returned policy drives it
+        # wherever it has no row: its move at (road, state-only task state), the first move when
+        # that task is complete or impossible (BeliefTablePolicy's exact-belief rule).
+        self.task = state_only_task(pomdp.town, tables.spec)
+        self.free_slot = np.where(self.task.next_slot >= 0, self.task.next_slot, 0)   # [n_x, n_p]
+        self.next_p = np.asarray(self.task.next_state, dtype=np.int64)               # [n_p, n_x]
 
     def level_arrays(self, level: int) -> _Level:
         """The cached _Level of `level`, rebuilt when nodes or alternates were added there."""
@@ -249,7 +279,27 @@ class _Search:
         cached = self.levels.get(level)
         if cached is not None and cached.count == len(members) and cached.alternate_chunks == chunks:
             return cached
-        nodes = np.array(members, dtype=np.int64)
+        cached = self._level(level, np.array(members, dtype=np.int64), chunks, len(members))
+        self.levels[level] = cached
+        return cached
+
+    def free_level_arrays(self, level: int) -> _Level:
+        """The FREE nodes of `level` as a _Level whose only legal move is the free one."""
+        g = self.graph
+        version = (g.free_version[level], len(g.alternates.get(level, ())))
+        cached = self.free_levels.get(level)
+        if cached is not None and cached[0] == version:
+            return cached[1]
+        nodes = np.fromiter(g.free_by_level[level], dtype=np.int64)
+        lv = self._level(level, nodes, version[1], nodes.size)
+        only = np.zeros_like(lv.legal)
+        only[np.arange(nodes.size), self.free_slot[g.x[nodes], g.p[nodes]]] = True
+        lv = _Level(**{**lv.__dict__, "legal": lv.legal & only})
+        self.free_levels[level] = (version, lv)
+        return lv
+
+    def _level(self, level: int, nodes: np.ndarray, chunks: int, count: int) -> _Level:
+        g = self.graph
         child = g.child[nodes]
         parent, slot, outcome, alt_child = g.alternates_of(level)
         row = np.zeros(0, dtype=np.int64)
@@ -260,12 +310,24 @@ class _Search:
             row, slot, outcome, alt_child = order[where[hit]], slot[hit], outcome[hit], alt_child[hit]
         else:
             slot = outcome = alt_child = row
-        cached = _Level(count=len(members), alternate_chunks=chunks, nodes=nodes,
-                        child=np.maximum(child, 0), has_child=child >= 0, prob=g.prob[nodes],
-                        legal=self.tables.successors[g.x[nodes]] >= 0, alt_row=row, alt_slot=slot,
-                        alt_outcome=outcome, alt_child=alt_child)
-        self.levels[level] = cached
-        return cached
+        return _Level(count=count, alternate_chunks=chunks, nodes=nodes,
+                      child=np.maximum(child, 0), has_child=child >= 0, prob=g.prob[nodes],
+                      legal=self.tables.successors[g.x[nodes]] >= 0, alt_row=row, alt_slot=slot,
+                      alt_outcome=outcome, alt_child=alt_child)
+
+    @staticmethod
+    def level_values3(lv: _Level, values: np.ndarray) -> np.ndarray:
+        """level_values for U (optimistic), L (pessimistic) and the strict value at once:
+        [3, nodes, moves] from values [3, n]."""
+        child_value = np.where(lv.has_child[None], values[:, lv.child], 0.0)
+        if lv.alt_row.size:
+            index = (lv.alt_row, lv.alt_slot, lv.alt_outcome)
+            np.maximum.at(child_value[0], index, values[0, lv.alt_child])
+            np.minimum.at(child_value[1], index, values[1, lv.alt_child])
+        q = lv.prob[None, :, :, 0] * child_value[:, :, :, 0]
+        for o in range(1, child_value.shape[3]):
+            q += lv.prob[None, :, :, o] * child_value[:, :, :, o]
+        return np.where(lv.legal[None], q, -1.0)
 
     @staticmethod
     def level_values(lv: _Level, values: np.ndarray, pessimistic: bool | None) -> np.ndarray:
@@ -279,12 +341,14 @@ class _Search:
             q += lv.prob[:, :, o] * child_value[:, :, o]
         return np.where(lv.legal, q, -1.0)
 
-    def frontier_upper(self, level: int, x: np.ndarray, q: np.ndarray, cell: np.ndarray) -> np.ndarray:
-        return self.bound[min(level, len(self.bound) - 1)][x, q, cell]
+    def frontier_upper(self, level: int | np.ndarray, x: np.ndarray, q: np.ndarray, cell: np.ndarray
+                       ) -> np.ndarray:
+        return self.bound[np.minimum(level, self.bound.shape[0] - 1), x, q, cell]
 
-    def classify(self, ids: np.ndarray, level: int) -> None:
+    def classify(self, ids: np.ndarray) -> None:
         """Initialise new nodes: terminal values, or the frontier's abstract bound."""
         g, tables = self.graph, self.tables
+        level = g.level[ids]
         q = g.q[ids]
         accepted = tables.accepting[q]
         g.kind[ids[accepted]] = ACCEPTED
@@ -292,6 +356,7 @@ class _Search:
         rest = ids[~accepted]
         if rest.size == 0:
             return
+        level = level[~accepted]
         upper = np.minimum(1.0, self.frontier_upper(level, g.x[rest], g.q[rest], g.cell[rest]))
         dead = tables.rejecting[g.q[rest]] | (upper <= 0.0)
         if self.horizon is not None:
@@ -347,52 +412,62 @@ class _Search:
         x0 = np.array([tables.start])
         strict, _, other = self.possible_q(np.array([tables.dfa.initial]), x0, b0)
         qs = np.concatenate([strict, other])
-        ids, _ = self.graph.add(0, np.repeat(x0, qs.size), qs, np.zeros(qs.size, dtype=np.int64),
-                                np.repeat(b0, qs.size, axis=0))
-        self.classify(ids, 0)
+        ids, _ = self.graph.add(0, np.repeat(x0, qs.size), qs,
+                                np.full(qs.size, self.task.initial_state, dtype=np.int64),
+                                np.zeros(qs.size, dtype=np.int64), np.repeat(b0, qs.size, axis=0))
+        self.classify(ids)
         return ids
 
-    def expand(self, nodes: np.ndarray) -> None:
+    def expand(self, nodes: np.ndarray, free_only: bool = False) -> None:
+        """Expand `nodes` (FRONTIER or FREE, any levels) along every move (EXPANDED), or along
+        the trust-free completion's move only (free_only: FRONTIER -> FREE)."""
         g, tables, symbols = self.graph, self.tables, self.symbols
-        by_level: dict[int, list[int]] = {}
-        for node, level in zip(nodes.tolist(), g.level[nodes].tolist(), strict=True):
-            by_level.setdefault(level, []).append(node)
-        for level, members in sorted(by_level.items()):
-            parents = np.array(members, dtype=np.int64)
-            rows_parent, rows_slot, rows_symbol, rows_x2 = [], [], [], []
-            for a in range(tables.successors.shape[1]):
-                x2 = tables.successors[g.x[parents], a]
-                valid = x2 >= 0
-                incident = tables.pomdp.road_incident[np.where(valid, x2, 0)]
-                for o in range(symbols.n_symbols):
-                    hit = valid & (incident == symbols.incident[o])
-                    if hit.any():
-                        rows_parent.append(parents[hit])
-                        rows_slot.append(np.full(int(hit.sum()), a))
-                        rows_symbol.append(np.full(int(hit.sum()), o))
-                        rows_x2.append(x2[hit])
-            parent = np.concatenate(rows_parent)
-            slot = np.concatenate(rows_slot)
-            symbol = np.concatenate(rows_symbol)
-            x2 = np.concatenate(rows_x2)
-            belief, probability = apply_symbol(g.belief[parent], symbols, symbol)
-            keep = probability > 0
-            parent, slot, symbol, x2, belief, probability = (
-                a[keep] for a in (parent, slot, symbol, x2, belief, probability))
-            q2, alt_rows, alt_q = self.possible_q(g.q[parent], x2, belief)
-            cell2 = self.cells.next_cell[g.cell[parent], symbol]
-            ids, new = g.add(level + 1, x2, q2, cell2, belief)
-            outcome = self.slot_of_symbol[symbol]
-            g.child[parent, slot, outcome] = ids
-            g.prob[parent, slot, outcome] = probability
-            self.classify(ids[new], level + 1)
-            if alt_rows.size:
-                alt_ids, alt_new = g.add(level + 1, x2[alt_rows], alt_q, cell2[alt_rows],
-                                         belief[alt_rows])
-                self.classify(alt_ids[alt_new], level + 1)
-                g.add_alternates(level, parent[alt_rows], slot[alt_rows], outcome[alt_rows], alt_ids)
-            g.kind[parents] = EXPANDED
-            g.expanded_by_level[level].extend(members)
+        nodes = np.asarray(nodes, dtype=np.int64)
+        if nodes.size == 0:
+            return
+        n_actions = tables.successors.shape[1]
+        x2_all = tables.successors[g.x[nodes]]                                   # [m, actions]
+        valid = x2_all >= 0
+        if free_only:
+            valid &= np.arange(n_actions)[None, :] == self.free_slot[g.x[nodes], g.p[nodes]][:, None]
+        incident = tables.pomdp.road_incident[np.maximum(x2_all, 0)]
+        symbol_all = self.symbols_of_incident[incident]                           # [m, actions, s]
+        row, slot, j = np.nonzero(valid[:, :, None] & (symbol_all >= 0))
+        parent, symbol, x2 = nodes[row], symbol_all[row, slot, j], x2_all[row, slot]
+        belief, probability = apply_symbol(g.belief[parent], symbols, symbol)
+        keep = probability > 0
+        parent, slot, symbol, x2, belief, probability = (
+            a[keep] for a in (parent, slot, symbol, x2, belief, probability))
+        level2 = g.level[parent] + 1
+        q2, alt_rows, alt_q = self.possible_q(g.q[parent], x2, belief)
+        cell2 = self.cells.next_cell[g.cell[parent], symbol]
+        p2 = self.next_p[g.p[parent], x2]
+        ids, new = g.add(level2, x2, q2, p2, cell2, belief)
+        outcome = self.slot_of_symbol[symbol]
+        g.child[parent, slot, outcome] = ids
+        g.prob[parent, slot, outcome] = probability
+        self.classify(ids[new])
+        if alt_rows.size:
+            alt_ids, alt_new = g.add(level2[alt_rows], x2[alt_rows], alt_q, p2[alt_rows],
+                                     cell2[alt_rows], belief[alt_rows])
+            self.classify(alt_ids[alt_new])
+            alt_level = g.level[parent[alt_rows]]
+            for level in np.unique(alt_level).tolist():
+                here = alt_rows[alt_level == level]
+                g.add_alternates(level, parent[here], slot[here], outcome[here],
+                                 alt_ids[alt_level == level])
+        levels = g.level[nodes]
+        for level in np.unique(levels).tolist():
+            members = nodes[levels == level].tolist()
+            free_here = g.free_by_level[level]
+            if free_only:
+                free_here.update(dict.fromkeys(members))
+            else:
+                for n in members:
+                    free_here.pop(n, None)
+                g.expanded_by_level[level].extend(members)
+            g.free_version[level] += 1
+        g.kind[nodes] = FREE if free_only else EXPANDED
 
     def action_values(self, nodes: np.ndarray, values: np.ndarray, pessimistic: bool | None,
                       level: int | None = None) -> np.ndarray:
@@ -421,45 +496,94 @@ class _Search:
         return np.where(legal, q, -1.0)
 
     def backup(self) -> None:
+        """Bellman backups from the deepest level up. At each level the FREE nodes first (L and the
+        strict value are their one move's; U stays the abstraction's, the other moves being
+        unexplored), then the EXPANDED ones (U: min(U, max over moves); L: max over moves).
+        The move values and the policy's moves are kept (self.moves) for the reach computations
+        until the next expansion."""
         g = self.graph
+        self.moves = {}
         for level in range(len(g.expanded_by_level) - 1, -1, -1):
-            if not g.expanded_by_level[level]:
-                continue
-            lv = self.level_arrays(level)
-            nodes = lv.nodes
-            g.upper[nodes] = np.minimum(g.upper[nodes], self.level_values(lv, g.upper, False).max(axis=1))
-            lower_q = self.level_values(lv, g.lower, True)
-            g.lower[nodes] = np.maximum(g.lower[nodes], lower_q.max(axis=1))
-            # strict value of the policy's own choice (best L, ties by strict value)
-            strict_q = self.level_values(lv, g.strict, None)
-            tied = lower_q >= lower_q.max(axis=1, keepdims=True)
-            g.strict[nodes] = np.where(tied, strict_q, -1.0).max(axis=1)
+            parts = []
+            if g.free_by_level[level]:
+                lv = self.free_level_arrays(level)
+                q3 = self.level_values3(lv, g.values)
+                g.lower[lv.nodes] = np.maximum(g.lower[lv.nodes], q3[1].max(axis=1))
+                g.strict[lv.nodes] = q3[2].max(axis=1)
+                parts.append((lv, q3))
+            if g.expanded_by_level[level]:
+                lv = self.level_arrays(level)
+                nodes = lv.nodes
+                q3 = self.level_values3(lv, g.values)
+                g.upper[nodes] = np.minimum(g.upper[nodes], q3[0].max(axis=1))
+                g.lower[nodes] = np.maximum(g.lower[nodes], q3[1].max(axis=1))
+                # strict value of the policy's own choice (best L, ties by strict value)
+                tied = q3[1] >= q3[1].max(axis=1, keepdims=True)
+                g.strict[nodes] = np.where(tied, q3[2], -1.0).max(axis=1)
+                parts.append((lv, q3))
+            self.moves[level] = [(lv, q3[0].argmax(axis=1), policy_choice(q3[1], q3[2], q3[0]))
+                                 for lv, q3 in parts]
+
+    def close_completions(self, roots: np.ndarray, depth_cap: int, deadline: float) -> bool:
+        """Free-expand FRONTIER nodes reached by the returned policy, or by the trust-free route
+        from the root, until there are none (True) or the deadline passes (False). Then L is the
+        policy's exact value (every node it reaches without a row is valued by the completion it
+        drives there), and L at the root is at least the trust-free route's value (along that
+        route's tree every node is closed, and an EXPANDED node's L is at least its free move's)."""
+        g = self.graph
+        while True:
+            reach = self.reach_lower(roots) + self.reach_lower(roots, trust_free=True)
+            todo = np.flatnonzero((g.kind[: g.n] == FRONTIER) & (g.level[: g.n] < depth_cap)
+                                  & (reach > 0))
+            if todo.size == 0:
+                return True
+            if time.perf_counter() >= deadline:
+                return False
+            self.expand(todo, free_only=True)
+            self.backup()
+
+    def reach_lower(self, roots: np.ndarray, trust_free: bool = False) -> np.ndarray:
+        """Probability of reaching each node under the returned policy (its move at EXPANDED
+        nodes, the free move at FREE ones; alternates each get their full probability), from the
+        moves of the last backup. trust_free: under the trust-free completion everywhere instead."""
+        g = self.graph
+        reach = np.zeros(g.n)
+        reach[roots] = 1.0
+        for level in sorted(self.moves):
+            for lv, _, move in self.moves[level]:
+                self._push(reach, lv, self.free_slot[g.x[lv.nodes], g.p[lv.nodes]] if trust_free else move)
+        return np.minimum(reach, 1.0)
+
+    @staticmethod
+    def _push(reach: np.ndarray, lv: _Level, move: np.ndarray | None) -> None:
+        """Add the reach mass of lv's nodes to their children along `move` (None: every move)."""
+        mass_here = reach[lv.nodes]
+        if not (mass_here > 0).any():
+            return
+        if move is None:
+            chosen = lv.legal
+        else:
+            chosen = np.zeros(lv.legal.shape, dtype=bool)
+            chosen[np.arange(lv.nodes.size), move] = True
+            chosen &= lv.legal
+        mass = mass_here[:, None, None] * lv.prob * (chosen[:, :, None] & lv.has_child)
+        np.add.at(reach, lv.child[lv.has_child], mass[lv.has_child])
+        if lv.alt_row.size:
+            np.add.at(reach, lv.alt_child, mass[lv.alt_row, lv.alt_slot, lv.alt_outcome])
 
     def reach(self, roots: np.ndarray, every_action: bool = False) -> np.ndarray:
         """Probability of reaching each node under the upper-greedy policy (alternates of an
         outcome each get its full probability: either may be the one that happens). every_action:
         every action carries the node's full mass instead (used once the upper-greedy frontier is
-        closed while the gap is not, as at thresholds where L takes the worse alternate)."""
+        closed while the gap is not, as at thresholds where L takes the worse alternate). Only
+        EXPANDED nodes pass mass on; from the moves of the last backup."""
         g = self.graph
         reach = np.zeros(g.n)
         reach[roots] = 1.0
-        for level, members in enumerate(g.expanded_by_level):
-            if not members:
-                continue
-            lv = self.level_arrays(level)
-            mass_here = reach[lv.nodes]
-            if not (mass_here > 0).any():
-                continue
-            if every_action:
-                chosen = lv.legal
-            else:
-                values = self.level_values(lv, g.upper, False)
-                chosen = np.zeros(values.shape, dtype=bool)
-                chosen[np.arange(lv.nodes.size), values.argmax(axis=1)] = True
-            mass = mass_here[:, None, None] * lv.prob * (chosen[:, :, None] & lv.has_child)
-            np.add.at(reach, lv.child[lv.has_child], mass[lv.has_child])
-            if lv.alt_row.size:
-                np.add.at(reach, lv.alt_child, mass[lv.alt_row, lv.alt_slot, lv.alt_outcome])
+        for level in sorted(self.moves):
+            for lv, upper_move, _ in self.moves[level]:
+                if lv is self.levels.get(level):
+                    self._push(reach, lv, None if every_action else upper_move)
         return np.minimum(reach, 1.0)
 
     def policy_table(self) -> PolicyTable:
@@ -468,15 +592,29 @@ class _Search:
         lower_q = self.action_values(nodes, g.lower, True)
         strict_q = self.action_values(nodes, g.strict, None)
         upper_q = self.action_values(nodes, g.upper, False)
-        # argmax of L, ties broken by the strict-label value, then by U (then the first slot): the
-        # policy whose value `lower` is.
-        best_lower = lower_q.max(axis=1, keepdims=True)
-        tied = lower_q >= best_lower
-        best_strict = np.where(tied, strict_q, -np.inf).max(axis=1, keepdims=True)
-        score = np.where(tied & (strict_q >= best_strict), upper_q, -np.inf)
-        action = score.argmax(axis=1)
+        action = policy_choice(lower_q, strict_q, upper_q)
         return PolicyTable(t=g.level[nodes], x=g.x[nodes], q=g.q[nodes], beliefs=g.belief[nodes],
-                           action=action)
+                           action=action, projected=g.p[nodes])
+
+
+def policy_choice(lower_q: np.ndarray, strict_q: np.ndarray, upper_q: np.ndarray) -> np.ndarray:
+    """The returned policy's move per node from its move values [nodes, moves]: argmax of L, ties
+    broken by the strict-label value, then by U, then the first slot (the policy whose value
+    `lower` is)."""
+    best_lower = lower_q.max(axis=1, keepdims=True)
+    tied = lower_q >= best_lower
+    best_strict = np.where(tied, strict_q, -np.inf).max(axis=1, keepdims=True)
+    score = np.where(tied & (strict_q >= best_strict), upper_q, -np.inf)
+    return score.argmax(axis=1)
+
+
+def _heaviest(nodes: np.ndarray, weight: np.ndarray, batch: int) -> np.ndarray:
+    """The heaviest nodes carrying half the total weight: at least MIN_BATCH (when there are
+    that many), at most `batch`."""
+    order = np.argsort(-weight, kind="stable")
+    covered = np.cumsum(weight[order])
+    count = int(np.searchsorted(covered, 0.5 * covered[-1])) + 1
+    return nodes[order[: max(min(MIN_BATCH, nodes.size), min(count, batch))]]
 
 
 def automatic_suffix_length(n_changing: int) -> int:
@@ -511,8 +649,12 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
     iterations = 0
     expanded = 0
     while np.subtract(*root_bounds()[::-1]) > tau and time.perf_counter() < deadline:
+        # Full expansion: open nodes (FRONTIER or FREE) carrying most of the root's gap under the
+        # upper-greedy policy.
         reach = search.reach(roots)
-        frontier = np.flatnonzero((g.kind[: g.n] == FRONTIER) & (g.level[: g.n] < depth_cap))
+        reach_policy = search.reach_lower(roots)
+        shallow = g.level[: g.n] < depth_cap
+        frontier = np.flatnonzero(((g.kind[: g.n] == FRONTIER) | (g.kind[: g.n] == FREE)) & shallow)
         weight = reach[frontier] * (g.upper[frontier] - g.lower[frontier])
         if not (weight > 0).any():
             weight = search.reach(roots, every_action=True)[frontier] * (
@@ -521,17 +663,26 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         frontier, weight = frontier[positive], weight[positive]
         if frontier.size == 0:
             break
-        order = np.argsort(-weight, kind="stable")
-        covered = np.cumsum(weight[order])
-        count = int(np.searchsorted(covered, 0.5 * covered[-1])) + 1
-        chosen = frontier[order[: max(min(MIN_BATCH, frontier.size), min(count, batch))]]
+        chosen = _heaviest(frontier, weight, batch)
         search.expand(chosen)
         expanded += chosen.size
+        # Free expansion: FRONTIER nodes the returned policy reaches (it drives the trust-free
+        # completion there) with the most probability times what they could still be worth.
+        known = reach_policy.size            # nodes that existed before this round's expansion
+        open_nodes = np.flatnonzero((g.kind[:known] == FRONTIER) & (g.level[:known] < depth_cap))
+        free_weight = reach_policy[open_nodes] * g.upper[open_nodes]
+        positive = free_weight > 0
+        if positive.any():
+            search.expand(_heaviest(open_nodes[positive], free_weight[positive], batch), free_only=True)
         search.backup()
         iterations += 1
         if on_iteration is not None:
             on_iteration(*root_bounds())
     search.backup()
+    # Close the returned policy's trust-free completions: every open node it reaches is expanded
+    # along the free move, so that L is the policy's exact value (unless the deadline comes first;
+    # then L is still a lower bound of it). stats["completion_closed"] says which.
+    closed = search.close_completions(roots, depth_cap, deadline)
     lower, upper = root_bounds()
     table = search.policy_table()
     open_nodes = g.kind[: g.n] == FRONTIER
@@ -548,6 +699,7 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         # the returned policy's value with labels read strictly (this machine's labeller) from the
         # root the vehicle is in: a lower bound of what `evaluate` measures
         "lower_strict_labels": float(g.strict[roots[0]]),
+        "completion_closed": closed,
         "nodes": int(g.n),
         "expanded_nodes": int(expanded),
         "open_frontier_nodes": int(open_nodes.sum()),
@@ -627,12 +779,14 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     never = shortest > tables.n_x * tables.n_q      # unreachable in the road x DFA graph
     if never or (horizon is not None and shortest > horizon):
         # Answered by graph distance alone: no route accepts within H junctions, whatever the labels.
-        table = PolicyTable(t=[], x=[], q=[], beliefs=np.zeros((0, pomdp.n_trust)), action=[])
+        table = PolicyTable(t=[], x=[], q=[], beliefs=np.zeros((0, pomdp.n_trust)), action=[],
+                            projected=[])
         lower = upper = 0.0
         note = ("graph distance: acceptance is unreachable" if never else
                 f"graph distance: acceptance needs at least {shortest} junctions")
         runs = [{"horizon": horizon, "lower": 0.0, "upper": 0.0, "nodes": 0, "abstraction_root_upper": 0.0,
-                 "abstraction_bound": note, "threshold_alternates": 0, "lower_strict_labels": 0.0}]
+                 "abstraction_bound": note, "threshold_alternates": 0, "lower_strict_labels": 0.0,
+                 "root_dfa_states": sorted(q0), "completion_closed": True}]
         if horizon is None:
             note = "graph distance: acceptance is unreachable"
     elif horizon is not None:
