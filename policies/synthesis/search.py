@@ -56,6 +56,9 @@ from trustroute.policies.synthesis.upper_bound import (
 CELL_BUDGET = 5000          # automatic suffix length: the longest k with n_symbols**k <= this
 DEFAULT_BATCH = 4096
 MIN_BATCH = 64
+LOOKAHEAD = 3      # further expansion steps per round along the upper-greedy moves
+FULL_SHARE = 0.5   # share of the gap-weighted frontier fully expanded per round
+FREE_SHARE = 1.0   # share of the policy's open mass free-expanded per round (1: all of it)
 UNBOUNDED_HORIZONS = (20, 30, 40, 60, 80, 120, 160)
 UNBOUNDED_DEPTH = 60        # the unbounded search leaves nodes this deep open (<= evaluate's cap)
 UNBOUNDED_STATE_BUDGET = 20_000
@@ -537,10 +540,42 @@ class _Search:
                                   & (reach > 0))
             if todo.size == 0:
                 return True
-            if time.perf_counter() >= deadline:
-                return False
-            self.expand(todo, free_only=True)
+            # Down the free moves without backups in between (the policy's move at a FREE node is
+            # the free one whatever the values); then one backup, after which the policy's moves
+            # at EXPANDED nodes may have changed, so reach is computed again.
+            while todo.size:
+                if time.perf_counter() >= deadline:
+                    self.backup()
+                    return False
+                self.expand(todo, free_only=True)
+                kids = g.child[todo].ravel()
+                kids = np.unique(kids[kids >= 0])
+                todo = kids[(g.kind[kids] == FRONTIER) & (g.level[kids] < depth_cap)]
             self.backup()
+
+    def greedy_children(self, nodes: np.ndarray, mass: np.ndarray, depth_cap: int
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Open (FRONTIER or FREE) children of EXPANDED `nodes` along their upper-greedy move by
+        their children's current U, with the reach mass they get from `mass` (summed over
+        parents), shallower than depth_cap and with a positive gap."""
+        g = self.graph
+        child = g.child[nodes]
+        has = child >= 0
+        child_upper = np.where(has, g.upper[np.maximum(child, 0)], 0.0)
+        q_upper = (g.prob[nodes] * child_upper).sum(axis=2)
+        q_upper = np.where(self.tables.successors[g.x[nodes]] >= 0, q_upper, -1.0)
+        move = q_upper.argmax(axis=1)
+        rows = np.arange(nodes.size)
+        kids, kid_prob, kid_has = child[rows, move], g.prob[nodes][rows, move], has[rows, move]
+        kid_mass = mass[:, None] * kid_prob
+        kids, kid_mass = kids[kid_has], kid_mass[kid_has]
+        open_kid = (((g.kind[kids] == FRONTIER) | (g.kind[kids] == FREE)) & (g.level[kids] < depth_cap)
+                    & (g.upper[kids] > g.lower[kids]))
+        kids, kid_mass = kids[open_kid], kid_mass[open_kid]
+        if kids.size == 0:
+            return kids, kid_mass
+        unique, inverse = np.unique(kids, return_inverse=True)
+        return unique, np.bincount(inverse, weights=kid_mass, minlength=unique.size)
 
     def reach_lower(self, roots: np.ndarray, trust_free: bool = False) -> np.ndarray:
         """Probability of reaching each node under the returned policy (its move at EXPANDED
@@ -608,12 +643,12 @@ def policy_choice(lower_q: np.ndarray, strict_q: np.ndarray, upper_q: np.ndarray
     return score.argmax(axis=1)
 
 
-def _heaviest(nodes: np.ndarray, weight: np.ndarray, batch: int) -> np.ndarray:
-    """The heaviest nodes carrying half the total weight: at least MIN_BATCH (when there are
+def _heaviest(nodes: np.ndarray, weight: np.ndarray, batch: int, share: float = 0.5) -> np.ndarray:
+    """The heaviest nodes carrying `share` of the total weight: at least MIN_BATCH (when there are
     that many), at most `batch`."""
     order = np.argsort(-weight, kind="stable")
     covered = np.cumsum(weight[order])
-    count = int(np.searchsorted(covered, 0.5 * covered[-1])) + 1
+    count = int(np.searchsorted(covered, share * covered[-1])) + 1
     return nodes[order[: max(min(MIN_BATCH, nodes.size), min(count, batch))]]
 
 
@@ -663,9 +698,22 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         frontier, weight = frontier[positive], weight[positive]
         if frontier.size == 0:
             break
-        chosen = _heaviest(frontier, weight, batch)
+        chosen = _heaviest(frontier, weight, batch, FULL_SHARE)
         search.expand(chosen)
         expanded += chosen.size
+        # Look ahead: the new children the upper-greedy move of the just-expanded nodes reaches,
+        # heaviest first, without a full backup in between (fewer rounds on deep optimal policies).
+        chosen_reach = reach[chosen]
+        for _ in range(LOOKAHEAD):
+            chosen, chosen_reach = search.greedy_children(chosen, chosen_reach, depth_cap)
+            if chosen.size == 0:
+                break
+            keep = _heaviest(chosen, chosen_reach * (g.upper[chosen] - g.lower[chosen]), batch,
+                             FULL_SHARE)
+            chosen_reach = chosen_reach[np.isin(chosen, keep)]
+            chosen = chosen[np.isin(chosen, keep)]
+            search.expand(chosen)
+            expanded += chosen.size
         # Free expansion: FRONTIER nodes the returned policy reaches (it drives the trust-free
         # completion there) with the most probability times what they could still be worth.
         known = reach_policy.size            # nodes that existed before this round's expansion
@@ -673,7 +721,11 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         free_weight = reach_policy[open_nodes] * g.upper[open_nodes]
         positive = free_weight > 0
         if positive.any():
-            search.expand(_heaviest(open_nodes[positive], free_weight[positive], batch), free_only=True)
+            if FREE_SHARE >= 1.0:
+                search.expand(open_nodes[positive], free_only=True)
+            else:
+                search.expand(_heaviest(open_nodes[positive], free_weight[positive], batch, FREE_SHARE),
+                              free_only=True)
         search.backup()
         iterations += 1
         if on_iteration is not None:
