@@ -82,7 +82,9 @@ def _child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str 
         spec = spec_from_text(grid_spec_text(rows, columns, waypoints), "<grid spec>", town)
     result = synthesize(build_pomdp(town, driver), spec, tau=TAU, time_limit=TIME_LIMIT, horizon=horizon)
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb}
+    last = result.stats["runs"][-1]
+    return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb,
+            "nodes": last.get("nodes", 0), "completion_closed": last.get("completion_closed")}
 
 
 def _run_child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str | None = None) -> dict:

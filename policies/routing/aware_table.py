@@ -3,7 +3,7 @@
 Rows are the product nodes the synthesis expanded: t (junctions driven), road x, DFA state q,
 belief b, the action slot (index into town.actions(road)) chosen there and, in tables written by
 the current synthesis, p: the state of the spec's state-only task (policies/routing/free.py) after
-the roads driven. Two acting rules (docs/synthesis.md, "Acting rule"):
+the roads driven. Two acting rules (docs/synthesis.md, "Open nodes and the acting rule"):
 
 Exact-belief rule (tables with p): at a context (t, x, q, p, b), the row with the same
 (t, x, q, p) whose belief is within EXACT_BELIEF_DISTANCE of b; if there is none, the move of the

@@ -4,19 +4,25 @@ mean").
 Method (bounded heuristic search over the product belief MDP, with a sound abstraction at the frontier):
 
 * The exact product belief MDP is unfolded from (start, initial belief, q_0) as an AND-OR graph:
-  one node per distinct (junctions t, road x, DFA state q, belief bytes) — identical beliefs at the
-  same depth are merged, never approximated. A node's children are, per next junction, the
-  observation symbols with their exact probabilities and exact Bayes (or "paper") posteriors.
-* Every node carries [L, U]. Unexpanded nodes: L = 0, U = the suffix abstraction's bound at the
-  node's cell (policies/synthesis/upper_bound.py; the cell is the node's last k belief-changing symbols,
-  which it knows exactly). Terminal nodes are exact: accepted 1, rejected 0, horizon reached 0.
-  Expanded nodes: U = min(U, max_a Σ_o p U_child) and L = max_a Σ_o p L_child.
-* Refinement (AO*/HSVI style): expand, in batches, the frontier nodes carrying the most of the root's
-  gap — reach probability under the upper-greedy policy times (U - L) — until U - L <= tau at the
-  root, the frontier is exhausted, or the time limit.
-* The returned policy takes at every expanded node the action maximising L (ties: U); lower is the
-  value of exactly that policy with every unexpanded node counted as failure, so the policy's true
-  value is at least `lower`. It is a policies.routing.aware_table.BeliefTablePolicy (acts on any belief).
+  one node per distinct (junctions t, road x, DFA state q, state-only task state p, belief bytes) —
+  identical beliefs at the same depth are merged, never approximated. A node's children are, per
+  next junction, the observation symbols with their exact probabilities and exact Bayes (or
+  "paper") posteriors.
+* Every node carries [L, U]. FRONTIER (unexpanded) nodes: L = 0, U = the suffix abstraction's bound
+  at the node's cell (policies/synthesis/upper_bound.py; the cell is the node's last k
+  belief-changing symbols, which it knows exactly). FREE nodes (expanded along the trust-free
+  completion's move only): L = that move's value, U = the bound. Terminal nodes are exact: accepted
+  1, rejected 0, horizon reached 0. EXPANDED nodes: U = min(U, max_a Σ_o p U_child) and
+  L = max_a Σ_o p L_child.
+* Refinement (AO*/HSVI style): per round, expand the open nodes carrying the most of the root's
+  gap — reach probability under the upper-greedy policy times (U - L) — and look ahead along their
+  upper-greedy moves; free-expand the FRONTIER nodes the returned policy reaches; until
+  U - L <= tau at the root, the frontier is exhausted, or the time limit.
+* The returned policy takes at every EXPANDED node the action maximising L (ties: strict value,
+  then U) and drives the trust-free completion everywhere else (the exact-belief acting rule of
+  policies.routing.aware_table.BeliefTablePolicy). After the last round the completions it reaches
+  are closed, so `lower` is the exact value of that policy and at least the trust-free route's
+  (docs/synthesis.md, "Open nodes and the acting rule").
 
 Horizon H: at most H junctions (the study measures "policy, then fallback after 20", so H = 20 is
 the natural companion). Unbounded (horizon=None): upper is the abstraction's least fixed point with
@@ -56,6 +62,7 @@ from trustroute.policies.synthesis.upper_bound import (
 CELL_BUDGET = 5000          # automatic suffix length: the longest k with n_symbols**k <= this
 DEFAULT_BATCH = 4096
 MIN_BATCH = 64
+NODE_BUDGET = 600_000   # search nodes (about 0.7 kB each with the memo): the search stops there
 LOOKAHEAD = 3      # further expansion steps per round along the upper-greedy moves
 FULL_SHARE = 0.5   # share of the gap-weighted frontier fully expanded per round
 FREE_SHARE = 1.0   # share of the policy's open mass free-expanded per round (1: all of it)
@@ -529,7 +536,8 @@ class _Search:
 
     def close_completions(self, roots: np.ndarray, depth_cap: int, deadline: float) -> bool:
         """Free-expand FRONTIER nodes reached by the returned policy, or by the trust-free route
-        from the root, until there are none (True) or the deadline passes (False). Then L is the
+        from the root, until there are none (True) or the deadline or NODE_BUDGET comes first
+        (False: L is then a lower bound of the policy's value). Then L is the
         policy's exact value (every node it reaches without a row is valued by the completion it
         drives there), and L at the root is at least the trust-free route's value (along that
         route's tree every node is closed, and an EXPANDED node's L is at least its free move's)."""
@@ -544,7 +552,7 @@ class _Search:
             # the free one whatever the values); then one backup, after which the policy's moves
             # at EXPANDED nodes may have changed, so reach is computed again.
             while todo.size:
-                if time.perf_counter() >= deadline:
+                if time.perf_counter() >= deadline or g.n >= NODE_BUDGET:
                     self.backup()
                     return False
                 self.expand(todo, free_only=True)
@@ -683,7 +691,8 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
     depth_cap = horizon if horizon is not None else UNBOUNDED_DEPTH
     iterations = 0
     expanded = 0
-    while np.subtract(*root_bounds()[::-1]) > tau and time.perf_counter() < deadline:
+    while (np.subtract(*root_bounds()[::-1]) > tau and time.perf_counter() < deadline
+           and g.n < NODE_BUDGET):
         # Full expansion: open nodes (FRONTIER or FREE) carrying most of the root's gap under the
         # upper-greedy policy.
         reach = search.reach(roots)
@@ -720,7 +729,7 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         open_nodes = np.flatnonzero((g.kind[:known] == FRONTIER) & (g.level[:known] < depth_cap))
         free_weight = reach_policy[open_nodes] * g.upper[open_nodes]
         positive = free_weight > 0
-        if positive.any():
+        if positive.any() and g.n < NODE_BUDGET:
             if FREE_SHARE >= 1.0:
                 search.expand(open_nodes[positive], free_only=True)
             else:

@@ -146,3 +146,20 @@ def test_progress_callback_sees_the_search_bounds(pomdp):
     assert seen and all(lo <= up + EXACT_TOLERANCE for lo, up in seen)
     assert seen[-1] == pytest.approx((result.lower, result.upper), abs=EXACT_TOLERANCE)
     assert result.lower == synthesize(pomdp, spec, tau=1e-9, horizon=8).lower  # the callback changes nothing
+
+
+@pytest.mark.slow
+def test_node_budget_stops_the_search_soundly(pomdp, monkeypatch):
+    """With a small node budget the search stops early; L stays a lower bound of the returned
+    policy's value (its completions may be left open) and U an upper bound of the optimum."""
+    from trustroute.policies.synthesis import search
+
+    spec = load_spec("specs/phi1.toml", pomdp.town)
+    horizon = 8
+    monkeypatch.setattr(search, "NODE_BUDGET", 300)
+    result = synthesize(pomdp, spec, tau=1e-9, horizon=horizon)
+    run = result.stats["runs"][0]
+    assert run["nodes"] >= 300 and not result.stats["converged"]
+    value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+    assert result.lower <= value.lower + EXACT_TOLERANCE
+    assert exact_optimum(pomdp, spec, horizon) <= result.upper + EXACT_TOLERANCE
