@@ -123,7 +123,7 @@ def decide_node(policy: RoutingPolicy, context: DecisionContext, town: Town, roa
 def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
              fallback_after: int | None = DEFAULT_FALLBACK_AFTER, max_junctions: int = DEFAULT_JUNCTION_CAP,
              belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
-             max_nodes: int = DEFAULT_MAX_NODES) -> Evaluation:
+             max_nodes: int = DEFAULT_MAX_NODES, truth: TrustPOMDP | None = None) -> Evaluation:
     """Exact (or tightly certified) satisfaction probability of `policy` for `spec`.
 
     fallback_after: wrap the policy with the study's rule after that many junctions
@@ -133,14 +133,21 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     probabilities and the final trust always use the true (Bayes) posterior.
     prune_below / max_nodes: branches below this probability, or beyond this frontier size
     (smallest first), are not followed; their mass widens [lower, upper].
+    truth: the driver the episodes are driven with, when it is not the AV's model (a driver type,
+    another population, docs/driver_types.md "Exact values per type"): observations are drawn
+    from its exact posterior (starting from its initial belief) while the AV's belief, which drives
+    decisions and labels, runs `pomdp`'s filter; an observation the AV deems impossible leaves the
+    AV's belief unchanged, as in the episode tracker. The final trust is the truth's.
     """
     started = time.perf_counter()
     town, driver = pomdp.town, pomdp.driver
     policy = episode_policy(policy, town, spec, fallback_after)
     fallback_level = policy.after if isinstance(policy, FallbackPolicy) else None
     compiled = compile_spec(spec, town)
-    levels = np.asarray(driver.trust_levels, dtype=float)
-    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
+    truth_pomdp = pomdp if truth is None else truth
+    levels = np.asarray(truth_pomdp.driver.trust_levels, dtype=float)
+    performance = driver.depends_on_performance or truth_pomdp.driver.depends_on_performance
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if performance else (0,))]
     successor_index = {(x, j): town.state_index(town.successor(road, j))
                        for x, road in enumerate(town.states) for j in town.actions(road)}
 
@@ -149,7 +156,8 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     route_id = np.zeros(1, dtype=np.int64)
     road = np.array([start], dtype=np.int64)
     belief_av = np.asarray(pomdp.initial_belief, dtype=float)[None, :].copy()
-    posterior = belief_av.copy()
+    posterior = (belief_av.copy() if truth is None
+                 else np.asarray(truth.initial_belief, dtype=float)[None, :].copy())
     probability = np.ones(1)
     q = compiled.initial_states(belief_av)
 
@@ -221,13 +229,18 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
 
         # Branch on the observation (h, e) at the new road.
         incident = pomdp.road_incident[chosen]
+        true_incident = truth_pomdp.road_incident[chosen]
         parts = []
         for h, e in outcomes:
-            new_posterior, p_obs = pomdp.belief_update(posterior[keep], incident, h, e, rule="bayes")
-            if belief_rule == "bayes":
+            new_posterior, p_obs = truth_pomdp.belief_update(posterior[keep], true_incident, h, e,
+                                                             rule="bayes")
+            if belief_rule == "bayes" and truth is None:
                 new_av = new_posterior
             else:
                 new_av, _ = pomdp.belief_update(belief_av[keep], incident, h, e, rule=belief_rule)
+                if truth is not None:
+                    impossible = ~(new_av.sum(axis=1) > 0)
+                    new_av[impossible] = belief_av[keep][impossible]
             possible = p_obs > 0
             parts.append((new_route_ids[possible], chosen[possible], q[keep][possible],
                           new_av[possible], new_posterior[possible],

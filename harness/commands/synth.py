@@ -58,10 +58,15 @@ rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]
 @rule_option
 @click.option("--out", "out_path", type=click.Path(), default="policy.json", show_default=True,
               help="Policy FILE to write (its arrays go beside it, same name with suffix .npz).")
+@click.option("--population", "population_path", type=click.Path(), default=None,
+              help="Driver-population FILE: synthesize for its mixture of driver types "
+                   "(docs/driver_types.md); instead of --driver.")
+@click.option("--objective", type=click.Choice(["bayes", "robust"]), default="bayes", show_default=True,
+              help="With --population: the prior-weighted value (bayes) or the worst type's (robust).")
 @json_option
 def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: float,
           horizon: int | None, time_limit: float, belief_rule: str, out_path: str,
-          as_json: bool) -> None:
+          population_path: str | None, objective: str, as_json: bool) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
     if tau <= 0:
         raise InputError("--tau", "", f"tau must be positive, got {tau}", "pass e.g. --tau 1e-3")
@@ -71,6 +76,15 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     from trustroute.output_files import check_output_file
 
     check_output_file(out_path, "--out", "policy file")
+    if population_path is not None:
+        if driver_path is not None:
+            raise click.UsageError("give --driver or --population, not both (a population's types are "
+                                   "full driver models)")
+        _synth_population(spec_path, town_path, population_path, objective, tau, horizon, time_limit,
+                          belief_rule, out_path, as_json)
+        return
+    if objective != "bayes":
+        raise click.UsageError("--objective robust needs --population FILE (the types to be robust over)")
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from trustroute.policies.routing.files import save_policy
     from trustroute.policies.routing.resolve import synthesis_progress
@@ -110,6 +124,62 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
                      "process")
         lines.append(f"the policy's value under the real (Bayes) process within {cap} junctions: "
                      f"[{real.lower:.6f}, {real.upper:.6f}]")
+    lines.append(f"policy written to {path}")
+    emit(as_json, payload, lines)
+
+
+def _synth_population(spec_path: str, town_path: str | None, population_path: str, objective: str,
+                      tau: float, horizon: int | None, time_limit: float, belief_rule: str,
+                      out_path: str, as_json: bool) -> None:
+    """`synth --population`: the Bayes or robust objective over a population's driver types."""
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_population import load_driver_population
+    from trustroute.policies.logic.labelling import check_coefficient_length
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.routing.files import array_path, save_policy
+    from trustroute.policies.routing.resolve import synthesis_progress
+    from trustroute.policies.synthesis.population import (
+        document_entries,
+        policy_name,
+        summary,
+        synthesize_population,
+    )
+
+    town = load_town(town_path)
+    population = load_driver_population(population_path)
+    spec = load_spec(spec_path, town)
+    base = population.types[0].model
+    check_coefficient_length(spec, base.n_trust, population_path)
+    with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
+                            not as_json) as on_iteration:
+        found = synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
+                                      horizon=horizon, belief_rule=belief_rule,
+                                      population_source=population_path, on_iteration=on_iteration)
+    result = found.result
+    path = str(save_policy(result, out_path, town, found.pomdp.driver, found.spec,
+                           population=document_entries(found), name=policy_name(found)))
+    population_summary = summary(found)
+    population_summary.update({"file": population_path, "content_hash": population.content_hash})
+    payload = with_paths({"spec": spec.name, "lower": found.lower, "upper": found.upper, "gap": found.gap,
+                          "seconds": found.seconds, "tau": tau, "horizon": horizon,
+                          "belief_rule": belief_rule, "population": population_summary,
+                          "stats": result.stats},
+                         {"policy": path, "policy_arrays": array_path(path)})
+    what = "P(satisfied), prior-weighted" if objective == "bayes" else "worst type's P(satisfied)"
+    lines = [f"{spec.name} ({population.n_types} driver types, objective {objective}): "
+             f"{found.lower:.6f} <= max {what} <= {found.upper:.6f} (gap {found.gap:.2e}, "
+             f"{found.seconds:.1f} s)"]
+    lines.append("returned policy per type (exact, true driver of that type): " + "; ".join(
+        f"{v.name} (weight {v.weight:g}) [{v.lower:.6f}, {v.upper:.6f}]" for v in found.type_values))
+    mixture = found.mixture_value
+    lines.append(f"returned policy under the type prior: [{mixture[0]:.6f}, {mixture[1]:.6f}]; worst type "
+                 f"{found.worst_type_value:.6f}; AV type prior {', '.join(f'{p:g}' for p in found.prior)}")
+    if objective == "robust":
+        worst_bayes = min(v.lower for v in found.bayes_type_values)
+        lines.append(f"Bayes-optimal synthesis beside it: {found.bayes_lower:.6f} <= prior-weighted <= "
+                     f"{found.bayes_upper:.6f}, its worst type {worst_bayes:.6f}; robust value certified "
+                     f">= {found.lower:.6f} (best of {len(found.candidates)} candidate priors), <= "
+                     f"{found.upper:.6f}")
     lines.append(f"policy written to {path}")
     emit(as_json, payload, lines)
 

@@ -11,6 +11,12 @@ DecisionContext (documented, and the same on every belief, visited or not):
 
 Beliefs the synthesis visited are stored exactly, so on them the policy takes exactly the
 decision whose value the synthesis certified.
+
+`reweight` (a policy made for a driver population with another type prior λ than the
+population's weights w, docs/driver_types.md "The robust objective"): the belief the policy is given
+(the type-aware filter under w) is first turned into the belief under λ, b_λ ∝ b_w · r with
+r = λ_k / w_k on type k's block (exact: the likelihood of the observations given the type does not
+depend on the prior). Without it nothing changes.
 """
 
 from __future__ import annotations
@@ -93,8 +99,9 @@ class BeliefTablePolicy(RoutingPolicy):
 
     def __init__(self, table: PolicyTable, town: Town, spec: Spec, name: str = "aware",
                  lower: float | None = None, upper: float | None = None,
-                 horizon: int | None = None) -> None:
+                 horizon: int | None = None, reweight: np.ndarray | None = None) -> None:
         self.table = table
+        self.reweight = None if reweight is None else np.asarray(reweight, dtype=float)
         self.lower, self.upper, self.horizon = lower, upper, horizon   # as certified by synthesis
         self.town = town
         self.spec = spec
@@ -117,6 +124,10 @@ class BeliefTablePolicy(RoutingPolicy):
         """Vectorised rule 1-2: action slot per row, -1 where no stored row matches (rule 3)."""
         t, x, q = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q))
         beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        if self.reweight is not None:
+            weighted = beliefs * self.reweight
+            total = weighted.sum(axis=1, keepdims=True)
+            beliefs = np.where(total > 0, weighted / np.where(total > 0, total, 1.0), beliefs)
         out = np.full(t.size, -1, dtype=np.int64)
         if t.size == 0 or not self.table.rows:
             return out
