@@ -84,6 +84,7 @@ class PopulationSynthesis:
     bayes_type_values: tuple[TypeValue, ...]
     candidates: list[dict] = field(default_factory=list)
     type_upper: tuple[float, ...] = ()  # U_k (robust objective)
+    bayes_policy: RoutingPolicy | None = None   # the Bayes synthesis' policy (robust objective)
 
     @property
     def gap(self) -> float:
@@ -220,7 +221,8 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
         objective="robust", population=population, result=result, pomdp=pomdp, spec=lifted_spec,
         prior=tuple(float(p) for p in best_prior), type_values=best_values, lower=lower,
         upper=upper, seconds=seconds, bayes_lower=bayes.lower, bayes_upper=bayes.upper,
-        bayes_type_values=bayes_values, candidates=candidates, type_upper=tuple(type_upper))
+        bayes_type_values=bayes_values, candidates=candidates, type_upper=tuple(type_upper),
+        bayes_policy=bayes.policy)
 
 
 def policy_name(synthesis: PopulationSynthesis) -> str:
