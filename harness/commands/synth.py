@@ -211,11 +211,18 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
         f"{value.expected_final_trust:.4f}"])
 
 
+population_option = click.option(
+    "--population", "population_path", type=click.Path(), default=None,
+    help="Driver-population FILE (instead of --driver): the AV filters with its type-aware model and "
+         "the drivers are its mixture; POLICY may then be 'robust' or 'bayes' (docs/driver_types.md).")
+
+
 @click.command("evaluate")
 @click.argument("spec_path", metavar="SPEC")
 @click.argument("policy_name", metavar="POLICY")
 @town_option
 @driver_option
+@population_option
 @click.option("--fallback-after", type=JUNCTIONS, default=DEFAULT_FALLBACK_AFTER, show_default=True,
               help="Switch to the shortest completion after this many junctions.")
 @click.option("--no-fallback", is_flag=True, help="Evaluate the policy without the fallback rule.")
@@ -227,8 +234,8 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
               "XDG_CACHE_HOME defaulting to ~/.cache).")
 @json_option
 def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_path: str | None,
-             fallback_after: int, no_fallback: bool, max_junctions: int | None, belief_rule: str,
-             cache_dir: str | None, as_json: bool) -> None:
+             population_path: str | None, fallback_after: int, no_fallback: bool,
+             max_junctions: int | None, belief_rule: str, cache_dir: str | None, as_json: bool) -> None:
     """Exact probability that POLICY ("free", "aware" or a file) satisfies SPEC, and final trust.
 
     "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached.
@@ -245,11 +252,20 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
         from trustroute.output_files import check_output_dir
 
         check_output_dir(cache_dir, "--cache-dir", "policy cache")
+    after = None if no_fallback else fallback_after
+    if population_path is not None:
+        if driver_path is not None:
+            raise click.UsageError("give --driver or --population, not both")
+        _evaluate_population(spec_path, policy_name, town_path, population_path, after, cap, belief_rule,
+                             cache_dir, as_json)
+        return
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from trustroute.policies.routing.resolve import resolve_policy
 
+    if policy_name in ("robust", "bayes"):
+        raise click.UsageError(f"POLICY '{policy_name}' needs --population FILE (the driver types)")
     policy = resolve_policy(policy_name, town, driver, spec, cache_dir)
-    value = evaluate_policy(pomdp, spec, policy, fallback_after=None if no_fallback else fallback_after,
+    value = evaluate_policy(pomdp, spec, policy, fallback_after=after,
                             max_junctions=cap, belief_rule=belief_rule)
     payload = value.to_dict()
     payload["spec"] = spec.name
@@ -260,3 +276,69 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
         f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
         f"{value.expected_junctions:.2f}, P(fallback fired) = {value.fallback_probability:.4f}",
         "episode ends: " + ", ".join(f"{k} {v:.4f}" for k, v in value.end_mass.items())])
+
+
+def load_population_routing(spec_path: str, town_path: str | None, population_path: str,
+                            policy_name: str, cache_dir: str | None, progress: bool = False):
+    """(town, population, spec, policy, lifted model, lifted spec) for routing with a driver
+    population: POLICY "free", "robust"/"bayes" (synthesized and cached) or a policy file made for
+    this population and spec (another one: InputError, one line, exit 2)."""
+    from pathlib import Path
+
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_population import load_driver_population
+    from trustroute.policies.logic.labelling import check_coefficient_length
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.model.driver_types import lift_population, lift_spec
+    from trustroute.policies.routing.files import load_population_policy
+    from trustroute.policies.routing.free import trust_free_policy
+    from trustroute.policies.routing.resolve import population_policy
+
+    town = load_town(town_path)
+    population = load_driver_population(population_path)
+    spec = load_spec(spec_path, town)
+    check_coefficient_length(spec, population.types[0].model.n_trust, population_path)
+    if policy_name in ("robust", "bayes"):
+        policy, model, lifted_spec = population_policy(town, population, spec, policy_name, cache_dir,
+                                                       population_source=population_path,
+                                                       progress=progress)
+    elif policy_name == "free":
+        model, lifted_spec = lift_population(population), lift_spec(spec, population, population_path)
+        policy = trust_free_policy(town, lifted_spec)
+    elif policy_name == "aware":
+        raise click.UsageError("with --population, POLICY is 'free', 'robust', 'bayes' or a policy file")
+    else:
+        if not Path(policy_name).exists():
+            raise InputError(policy_name, "", "not a policy file and not 'free', 'robust' or 'bayes'",
+                             "pass a policy file written by trustroute synth --population")
+        policy, model, lifted_spec = load_population_policy(policy_name, town, population, spec,
+                                                            population_path)
+    return town, population, spec, policy, model, lifted_spec
+
+
+def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None, population_path: str,
+                         fallback_after: int | None, cap: int, belief_rule: str, cache_dir: str | None,
+                         as_json: bool) -> None:
+    """`evaluate --population`: exact value over the mixture and per type."""
+    from trustroute.policies.evaluate import evaluate as evaluate_policy
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+    from trustroute.policies.synthesis.population import per_type_values
+
+    town, population, spec, policy, model, lifted_spec = load_population_routing(
+        spec_path, town_path, population_path, policy_name, cache_dir, progress=not as_json)
+    pomdp = build_pomdp(town, model)
+    value = evaluate_policy(pomdp, lifted_spec, policy, fallback_after=fallback_after, max_junctions=cap,
+                            belief_rule=belief_rule)
+    types = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule, fallback_after)
+    payload = value.to_dict()
+    payload["spec"] = spec.name
+    payload["expected_final_trust"] = _finite(value.expected_final_trust)
+    payload["expected_junctions"] = _finite(value.expected_junctions)
+    payload["population"] = {"file": population_path, "content_hash": population.content_hash,
+                             "type_values": [t.to_dict() for t in types]}
+    emit(as_json, payload, [
+        f"{spec.name} / {value.policy} over the population's {population.n_types} driver types: "
+        f"P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], E[final trust] = "
+        f"{value.expected_final_trust:.4f}",
+        "per type: " + "; ".join(f"{t.name} (weight {t.weight:g}) [{t.lower:.6f}, {t.upper:.6f}]"
+                                 for t in types)])

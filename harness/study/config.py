@@ -16,7 +16,10 @@ policies, junctions; default 20), `fallback_after` (20; `false` disables the 20-
 seeded background traffic, vehicles kept on the net; default 0 = none, docs/scenes.md), `record`
 (episode ids, e.g. `["p00000-phi1-aware"]`, written as Rerun recordings to
 `<study dir>/recordings/<id>.rrd` while the study runs; SUMO engine only; not part of the content
-hash, since it does not change the dataset). Optional `[population]` table: individual
+hash, since it does not change the dataset), `robust_population` (the driver-population file the
+"robust" condition's policy is synthesized for, docs/driver_types.md; required with that
+condition) and `robust_objective` ("robust", the worst type's value, or "bayes", the prior-weighted
+one; default "robust"). Optional `[population]` table: individual
 variation of the drivers (participants.population.PopulationConfig; omitted: every driver is the
 nominal model, reporting trust with accuracy 0.8).
 
@@ -44,7 +47,8 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
 PACKAGED_SPECS = Path(policies.__file__).resolve().parent / "specs"
 ENGINES: tuple[str, ...] = ("sumo", "model")
-NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free")
+NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
+ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
 BELIEF_RULES: tuple[str, ...] = ("bayes", "paper")
 STUDY_KEYS: tuple[str, ...] = (
     "participants",
@@ -64,6 +68,8 @@ STUDY_KEYS: tuple[str, ...] = (
     "policy_cache",
     "background_vehicles",
     "record",
+    "robust_population",
+    "robust_objective",
 )
 # Upper limits checked before any work starts: a typo such as participants = 2**63 - 1 must be an
 # error, not a plan that grows until memory runs out.
@@ -101,6 +107,8 @@ class StudyConfig:
     background_vehicles: int = 0      # SUMO engine: seeded background traffic (docs/scenes.md)
     record: tuple[str, ...] = ()      # episode ids recorded to Rerun during the run
     population: dict | None = None   # compared by value; hashed through its canonical JSON (__hash__)
+    robust_population: str | None = None   # the "robust" condition's population file (absolute)
+    robust_objective: str = "robust"       # its objective: "robust" (worst type) or "bayes"
 
     def __hash__(self) -> int:
         # Every field, [population] included: configs that differ only there must never share a
@@ -110,7 +118,7 @@ class StudyConfig:
 
     @property
     def condition_names(self) -> tuple[str, ...]:
-        """Short labels: "aware", "free", or a policy file's stem."""
+        """Short labels: "aware", "free", "robust", or a policy file's stem."""
         return tuple(condition_label(c) for c in self.conditions)
 
     @property
@@ -132,10 +140,17 @@ class StudyConfig:
         files it names."""
         settings = {k: v for k, v in asdict(self).items()
                     if k not in ("source_path", "output", "name", "record")}
+        if settings["robust_population"] is None:
+            # a study without the robust condition keeps its earlier hash
+            del settings["robust_population"], settings["robust_objective"]
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():
                 digest.update(Path(path).read_bytes())
+        if self.robust_population is not None:
+            from trustroute.participants.driver_population import load_driver_population
+
+            digest.update(load_driver_population(self.robust_population).content_hash.encode())
         return digest.hexdigest()
 
     def with_overrides(self, **changes: object) -> StudyConfig:
@@ -289,7 +304,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
                         source,
                         "study.conditions",
                         "policy file",
-                        'use "aware", "free" or the path of a policy file written by trustroute synth',
+                        'use "aware", "free", "robust" or a policy file written by trustroute synth',
                     )
                 )
             )
@@ -368,6 +383,22 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         policy_cache = str((base / study["policy_cache"]).resolve())
     record = tuple(_string_list(study, "record", source, 'write record = ["p00000-phi1-aware"]')
                    if "record" in study else ())
+    robust_population = optional_file(
+        "robust_population", "driver-population file",
+        "give the driver-population file the robust policy is made for (docs/driver_types.md)")
+    if robust_population is not None:
+        from trustroute.participants.driver_population import load_driver_population
+
+        load_driver_population(robust_population)  # raises InputError naming the file and the place
+    if "robust" in conditions and robust_population is None:
+        raise InputError(source, "study.robust_population", "the 'robust' condition needs the driver "
+                         "population its policy is made for",
+                         'add robust_population = "types.json" to [study] (docs/driver_types.md)')
+    robust_objective = study.get("robust_objective", "robust")
+    if robust_objective not in ROBUST_OBJECTIVES:
+        raise InputError(source, "study.robust_objective",
+                         f"unknown objective {str(robust_objective)[:40]!r}",
+                         "use 'robust' (the worst type's value) or 'bayes' (the prior-weighted value)")
     return StudyConfig(
         source_path=source,
         name=name,
@@ -388,6 +419,8 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         background_vehicles=background_vehicles,
         record=record,
         population=_population(data.get("population"), source),
+        robust_population=robust_population,
+        robust_objective=robust_objective,
     )
 
 
