@@ -52,7 +52,7 @@ SPECS = ("phi1", "phi2")
 HORIZON = 20
 TAU = 1e-3
 TIME_LIMIT = 30.0          # per synthesis run
-GRID_POINTS = 6            # candidate priors of the robust objective (K = 3: multiples of 1/2)
+GRID_POINTS = 3            # candidate priors of the robust objective (K = 3: the vertices)
 REAL_POPULATION = EXAMPLE_POPULATION_PATH.parent / "driver_population_real.json"
 SPEC_DIR = Path(__file__).resolve().parents[1] / "policies" / "specs"
 

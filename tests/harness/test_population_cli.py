@@ -83,3 +83,16 @@ def test_routing_with_a_policy_made_for_another_population_is_exit_2(tmp_path, c
                            str(EXAMPLE_POPULATION_PATH), "--json", "--max-junctions", "3")
     assert code == 0
     assert len(json.loads(out)["population"]["type_values"]) == 3
+
+
+@pytest.mark.slow
+def test_run_draws_the_driver_type_and_filters_with_the_type_aware_model(tmp_path, capsys):
+    code, out, err = run_cli(capsys, "run", SPEC, "--population", str(EXAMPLE_POPULATION_PATH),
+                             "--policy", "free", "--seed", "4", "--json", "--out", str(tmp_path / "logs"))
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["driver_type"] in ("builder", "flat", "wary")
+    import pandas as pd
+
+    roads = pd.read_parquet(tmp_path / "logs" / "roads.parquet")
+    assert all(len(b) == 7 for b in roads["belief_after"])   # the trust marginal is logged
