@@ -65,9 +65,9 @@ def check_prior(prior: np.ndarray, population: DriverPopulation, where: str = "p
 
 def lift_population(population: DriverPopulation, prior: np.ndarray | None = None) -> DriverModel:
     """The driver model of the type-aware POMDP with type prior `prior` (default: the weights).
-    One type with its own prior: the type's model itself."""
+    One type: the type's model itself."""
     weights = population.weights if prior is None else check_prior(prior, population)
-    if population.n_types == 1 and prior is None:
+    if population.n_types == 1:
         return population.types[0].model
     models = population.models
     first = models[0]
