@@ -132,3 +132,16 @@ def test_bad_type_belief_atoms(town, entry, problem):
             f'[type_beliefs]\n{entry}\n')
     with pytest.raises(InputError, match=problem.replace("[", r"\[").replace(")", r"\)")):
         spec_from_text(text, "t.toml", town)
+
+
+def test_lint_reads_type_belief_atoms_with_and_without_a_population(town):
+    from trustroute.policies.logic.lint import lint
+
+    population = load_driver_population(EXAMPLE_POPULATION_PATH)
+    text = ('name = "t"\nstart = "E-A"\nformula = "F (v1 & nontruster)"\n[states]\nv1 = ["B-G"]\n'
+            '[type_beliefs]\nnontruster = { types = ["flat"], above = 0.7 }\n')
+    spec = spec_from_text(text, "t.toml", town)
+    assert "type-belief-unchecked" in {w.code for w in lint(spec, town)}
+    lifted = lint(lift_spec(spec, population), town, driver=lift_population(population))
+    assert "type-belief-unchecked" not in {w.code for w in lifted}
+    assert "unused-atom" not in {w.code for w in lifted}
