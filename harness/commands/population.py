@@ -76,7 +76,7 @@ def sample(n_types: int, seed: int, out: str, driver_path: str | None, config_pa
                   f"{settings.takeover_spread:g}")
     result = sample_driver_population(nominal, n_types, settings, np.random.default_rng(seed), provenance)
     path = write_driver_population(result, Path(out))
-    summary = population_summary(result)
+    summary = {**population_summary(result), "source": str(path)}
     emit(as_json, with_paths(summary, {"population": path}),
          [*summary_lines(summary), f"driver population written to {path}"])
 

@@ -223,6 +223,9 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool | No
               help="With --types auto: the largest K tried.")
 @click.option("--restarts", type=bounded_int(1, 1_000), default=5, show_default=True,
               help="With --types: seeded EM restarts per K.")
+@click.option("--shared-dynamics", is_flag=True,
+              help="With --types: the types share the trust-transition rows and differ in initial "
+              "trust and takeover (and failure) probabilities.")
 @json_option
 @quiet_option
 def fit(
@@ -236,6 +239,7 @@ def fit(
     types: str | None,
     max_types: int,
     restarts: int,
+    shared_dynamics: bool,
     as_json: bool,
     quiet: bool,
 ) -> None:
@@ -248,7 +252,7 @@ def fit(
             raise click.UsageError("--types fits by EM; it takes neither --check nor --method counts")
         check_output_file(out, "--out", "driver-population file")
         fit_types(Path(study_dir), Path(out), types, max_types, restarts, iterations, bootstrap, seed,
-                  as_json, quiet)
+                  shared_dynamics, as_json, quiet)
         return
     check_output_file(out, "--out", "driver model file")
     result = fit_study(Path(study_dir), method=method, iterations=iterations,
@@ -357,7 +361,7 @@ def _type_count(types: str) -> int | None:
 
 
 def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: int, iterations: int,
-              bootstrap: int, seed: int, as_json: bool, quiet: bool) -> None:
+              bootstrap: int, seed: int, shared_dynamics: bool, as_json: bool, quiet: bool) -> None:
     """`trustroute fit --types`: the mixture, its BIC table and bootstrap, a driver-population file."""
     import time
 
@@ -381,24 +385,28 @@ def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: 
         with tqdm(total=min(max_types, len(participants)), desc="fitting K = 1..", unit="K",
                   disable=quiet or as_json) as bar:
             selection = select_types(obs, owner, participants, template, max_types, rng, restarts,
-                                     iterations, progress=bar.update)
+                                     iterations, progress=bar.update, shared_dynamics=shared_dynamics)
     else:
         from trustroute.analysis.fit_mixture import TypeSelection
 
-        fits = [fit_mixture(obs, owner, participants, template, fixed, rng, restarts, iterations)]
+        fits = [fit_mixture(obs, owner, participants, template, fixed, rng, restarts, iterations,
+                            shared_dynamics)]
         selection = TypeSelection(fits=[None] * (fixed - 1) + fits, chosen=fixed)
     best = selection.best
     command = "trustroute fit " + " ".join(
         [str(study_dir), "--types", types, *(["--max-types", str(max_types)] if fixed is None else []),
          "--restarts", str(restarts), "--iterations", str(iterations), "--seed", str(seed),
+         *(["--shared-dynamics"] if shared_dynamics else []),
          *(["--bootstrap", str(bootstrap)] if bootstrap else [])])
     provenance = (f"fitted by `{command}` ({time.strftime('%Y-%m-%d', time.gmtime())}) on "
                   f"{len(participants)} participants, {obs.episodes} episodes, {obs.steps} roads: "
-                  f"EM over a mixture of {best.n_types} driver models, "
+                  f"EM over a mixture of {best.n_types} driver models"
+                  f"{' sharing their trust dynamics' if shared_dynamics else ''}, "
                   f"{'chosen by BIC (n = participants)' if fixed is None else 'K given'}; "
                   f"shared report accuracy {best.report_accuracy:.4f}")
     path = write_driver_population(mixture_population(best, str(study_dir), provenance), out)
-    payload: dict = {"types": best.n_types, "criterion": "BIC (n = participants)" if fixed is None else "given",
+    criterion = "BIC (n = participants)" if fixed is None else "given"
+    payload: dict = {"types": best.n_types, "criterion": criterion,
                      "fit": best.summary(), "provenance": provenance,
                      "responsibilities": {str(p): dict(zip(best.type_names(), row.tolist(), strict=True))
                                           for p, row in zip(best.participants, best.responsibilities,
@@ -409,7 +417,7 @@ def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: 
         with tqdm(total=bootstrap, desc="bootstrap", disable=quiet or as_json) as bar:
             payload["bootstrap"] = bootstrap_type_count(
                 roads, episodes, template, selection, max_types, bootstrap, rng, restarts, iterations,
-                progress=bar.update, choose=fixed is None)
+                progress=bar.update, choose=fixed is None, shared_dynamics=shared_dynamics)
     details = out.with_suffix(".fit.json")
     atomic_write_text(details, json.dumps(payload, indent=1, default=str), "fit details",
                       "pass a writable path with --out")
