@@ -147,7 +147,8 @@ EPISODES_SCHEMA = pa.schema([
     _field("wall_seconds", pa.float64()),
     _field("mean_reported_trust", pa.float64(), nullable=True),  # null: no report in the episode
     _field("reports", pa.int64()),
-    # The participant's true driver type ([drivers] population, docs/types.md); null without one.
+    # The participant's true driver type ([drivers] population, docs/driver_type_studies.md); null
+    # without one.
     _field("driver_type", pa.string(), nullable=True),
 ])
 # Nullable columns appended to a schema after studies were written without them: a file that ends

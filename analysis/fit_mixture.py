@@ -3,7 +3,7 @@
 Each participant belongs to one latent type; all of a participant's episodes share it. Type k is a
 full driver model (the hidden Markov model of analysis/fit.py: initial trust, takeover and failure
 probabilities, trust-transition rows), all types share the report accuracy (the report noise is a
-property of the display and the question, docs/types.md). EM alternates:
+property of the display and the question, docs/driver_type_studies.md). EM alternates:
 
 - E-step: per type, the forward pass of analysis/fit.py's `expectation` gives every episode's
   log-likelihood; a participant's is the sum over their episodes; responsibilities
@@ -15,7 +15,8 @@ property of the display and the question, docs/types.md). EM alternates:
 
 With one type this is exactly `trustroute fit --method em` (tests/analysis/test_fit_mixture.py).
 EM stops when the log-likelihood improves by less than EM_TOLERANCE per road (`converged`), else at
-the iteration cap (reported). Several restarts from seeded random responsibilities; the best
+the iteration cap (reported). Several restarts from seeded random partitions of the
+participants, and one from the best K-1 fit with its largest type split in two; the best
 log-likelihood among converged restarts wins. The number of types is chosen by BIC with the
 number of participants (the independent units) as the sample size; `bootstrap_type_count`
 resamples participants for the chosen K's frequency and the weights' intervals.
@@ -170,10 +171,12 @@ def _pooled_dynamics(stats: list) -> list:
 
 
 def _run_em(obs: Observations, owner: np.ndarray, n_participants: int, template: DriverModel,
-            responsibilities: np.ndarray, iterations: int, shared_dynamics: bool = False) -> MixtureFit:
+            responsibilities: np.ndarray, iterations: int, shared_dynamics: bool = False,
+            start: list[Parameters] | None = None) -> MixtureFit:
     n_inc, k_trust = len(template.incident_types), template.n_trust
     n_types = responsibilities.shape[1]
-    params = [starting_parameters(n_inc, k_trust, obs) for _ in range(n_types)]
+    params = ([copy_parameters(p) for p in start] if start is not None
+              else [starting_parameters(n_inc, k_trust, obs) for _ in range(n_types)])
     weights = responsibilities.mean(axis=0)
     history: list[float] = []
     converged = False
@@ -238,6 +241,23 @@ def _ordered(fit: MixtureFit) -> MixtureFit:
     return fit
 
 
+def copy_parameters(p: Parameters) -> Parameters:
+    return Parameters(initial=p.initial.copy(), takeover=p.takeover.copy(), failure=p.failure.copy(),
+                      transition=p.transition.copy(), accuracy=p.accuracy)
+
+
+def split_start(previous: MixtureFit, rng: np.random.Generator) -> tuple[np.ndarray, list[Parameters]]:
+    """A K+1 start from a K-type fit: the largest type's participants split at random between it
+    and a copy of it (so EM starts at the K-type optimum and can only move away from it to gain)."""
+    largest = int(np.argmax(previous.weights))
+    r = np.concatenate([previous.responsibilities, np.zeros((len(previous.participants), 1))], axis=1)
+    moved = rng.random(len(previous.participants)) < 0.5
+    r[moved, -1] = r[moved, largest]
+    r[moved, largest] = 0.0
+    params = [c.parameters for c in previous.components]
+    return r, [*params, params[largest]]
+
+
 def fit_mixture(
     obs: Observations,
     owner: np.ndarray,
@@ -248,8 +268,10 @@ def fit_mixture(
     restarts: int = DEFAULT_RESTARTS,
     iterations: int = 500,
     shared_dynamics: bool = False,
+    previous: MixtureFit | None = None,
 ) -> MixtureFit:
-    """The best of `restarts` EM runs (one for a single type: there is nothing to restart).
+    """The best of `restarts` EM runs (one for a single type: there is nothing to restart), plus
+    one run split from `previous` (a fit with one type fewer) when given.
     `shared_dynamics`: the types share the trust-transition rows (fitted on all participants) and
     differ in initial trust, takeover and failure probabilities."""
     if n_types < 1:
@@ -266,6 +288,10 @@ def fit_mixture(
         start = START_HARDNESS * hard + (1 - START_HARDNESS) * rng.dirichlet(np.ones(n_types),
                                                                              size=n_participants)
         runs.append(_run_em(obs, owner, n_participants, template, start, iterations, shared_dynamics))
+    if previous is not None and previous.n_types == n_types - 1:
+        responsibilities, params = split_start(previous, rng)
+        runs.append(_run_em(obs, owner, n_participants, template, responsibilities, iterations,
+                            shared_dynamics, start=params))
     converged = [r for r in runs if r.converged]
     best = max(converged or runs, key=lambda r: r.loglik)
     best.participants = list(participants)
@@ -308,11 +334,12 @@ def select_types(obs: Observations, owner: np.ndarray, participants: list, templ
                  max_types: int, rng: np.random.Generator, restarts: int = DEFAULT_RESTARTS,
                  iterations: int = 500, progress: Callable[[], None] | None = None,
                  shared_dynamics: bool = False) -> TypeSelection:
-    """Fit K = 1..max_types; choose the K with the lowest BIC."""
+    """Fit K = 1..max_types (each K also from a split of the best K-1 fit); choose the K with the
+    lowest BIC."""
     fits = []
     for k in range(1, min(max_types, len(participants)) + 1):
         fits.append(fit_mixture(obs, owner, participants, template, k, rng, restarts, iterations,
-                                shared_dynamics))
+                                shared_dynamics, previous=fits[-1] if fits else None))
         if progress is not None:
             progress()
     chosen = 1 + int(np.argmin([f.bic for f in fits]))

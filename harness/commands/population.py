@@ -1,4 +1,4 @@
-"""`trustroute population`: driver-population files (docs/types.md).
+"""`trustroute population`: driver-population files (docs/driver_type_studies.md).
 
 sample   K driver types sampled around a nominal driver model with `[population]` settings
          (participants/sampled_types.py), written as a driver-population file

@@ -5,7 +5,7 @@ study    run (or resume) a simulated within-subject study from a TOML config, co
          it names them and exits 1, and writes the report only with --report-anyway
 analyze  the per spec and condition table of a study directory (--json: one JSON object)
 fit      estimate a driver model (trust dynamics, takeover model) from a study's logs; with
-         --types, a mixture of driver types (a driver-population file, docs/types.md)
+         --types, a mixture of driver types (a driver-population file, docs/driver_type_studies.md)
 """
 
 from __future__ import annotations

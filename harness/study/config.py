@@ -19,7 +19,7 @@ seeded background traffic, vehicles kept on the net; default 0 = none, docs/scen
 hash, since it does not change the dataset). Optional `[population]` table: individual
 variation of the drivers (participants.population.PopulationConfig; omitted: every driver is the
 nominal model, reporting trust with accuracy 0.8). Optional `[drivers]` table: `population`, a
-driver-population file (docs/types.md) from which each participant's true type is drawn; the
+driver-population file (docs/driver_type_studies.md) from which each participant's true type is drawn; the
 participant's model is that type's model (varied around it by `[population]` when given).
 
 Every key, its default and its check: docs/formats/study_config.md.
@@ -243,7 +243,8 @@ def _driver_population(table: object, base: Path, source: str) -> str | None:
         raise InputError(source, f"drivers.{unknown[0]}", f"unknown key '{unknown[0]}'",
                          f"use only {', '.join(DRIVERS_KEYS)}")
     value = table.get("population")
-    fix = "give the path of a driver-population file (docs/types.md), e.g. population = \"types.json\""
+    fix = ("give the path of a driver-population file (docs/driver_type_studies.md), "
+           "e.g. population = \"types.json\"")
     if not isinstance(value, str) or not value:
         raise InputError(source, "drivers.population", f"expected a file path, got {value!r}", fix)
     path = _resolve_path(value, base, source, "drivers.population", "driver-population file", fix)
