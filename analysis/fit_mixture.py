@@ -139,7 +139,7 @@ def free_parameters(components: list[FitResult], n_trust: int, shared_dynamics: 
     """Estimated parameters: per type π (k-1), every non-structural takeover and failure entry,
     k-1 per transition row with enough data (rows below MIN_ROW_WEIGHT stay at the start value and
     are not estimated; shared rows counted once); K-1 weights; the shared report accuracy."""
-    total = len(components) - 1 + 1
+    total = (len(components) - 1) + 1  # K-1 weights, the shared report accuracy
     for index, c in enumerate(components):
         p = c.parameters
         total += n_trust - 1
@@ -301,15 +301,15 @@ def fit_mixture(
 
 @dataclass
 class TypeSelection:
-    """Mixtures for K = 1..max_types and the K chosen by BIC (n = participants)."""
+    """Mixtures for K = 1..max_types and the K chosen by BIC (n = participants), or the one fit of
+    a K given."""
 
     fits: list[MixtureFit]
     chosen: int
-    bootstrap: dict | None = None
 
     @property
     def best(self) -> MixtureFit:
-        return self.fits[self.chosen - 1]
+        return next(f for f in self.fits if f.n_types == self.chosen)
 
     def table(self) -> list[dict]:
         lowest = min(f.bic for f in self.fits)

@@ -391,7 +391,7 @@ def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: 
 
         fits = [fit_mixture(obs, owner, participants, template, fixed, rng, restarts, iterations,
                             shared_dynamics)]
-        selection = TypeSelection(fits=[None] * (fixed - 1) + fits, chosen=fixed)
+        selection = TypeSelection(fits=fits, chosen=fixed)
     best = selection.best
     command = "trustroute fit " + " ".join(
         [str(study_dir), "--types", types, *(["--max-types", str(max_types)] if fixed is None else []),

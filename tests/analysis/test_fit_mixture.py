@@ -193,3 +193,17 @@ def test_committed_real_population_is_reproduced_by_the_one_type_fit():
         np.testing.assert_allclose(model.takeover_probability, refit.takeover_probability, atol=1e-12)
         np.testing.assert_allclose(model.trust_transition, refit.trust_transition, atol=1e-12)
         np.testing.assert_allclose(model.initial_belief, refit.initial_belief, atol=1e-12)
+
+
+def test_fit_a_given_number_of_types(model_study, tmp_path, capsys):
+    out = tmp_path / "two.json"
+    with pytest.raises(SystemExit) as exit_info:
+        main(["fit", str(model_study), "--types", "2", "--restarts", "1", "--iterations", "30",
+              "--bootstrap", "1", "--seed", "1", "--out", str(out), "--json"])
+    assert exit_info.value.code == 0
+    payload = json.loads(capsys.readouterr().out)
+    population = load_driver_population(out)
+    assert population.n_types == payload["types"] == 2 and "bic_table" not in payload
+    assert population.weights.sum() == pytest.approx(1.0, abs=1e-9)
+    assert set(payload["bootstrap"]["weights"]) == set(population.names)
+    assert payload["fit"]["iterations"] <= 30
