@@ -21,7 +21,9 @@ hash, since it does not change the dataset), `robust_population` (the driver-pop
 condition) and `robust_objective` ("robust", the worst type's value, or "bayes", the prior-weighted
 one; default "robust"). Optional `[population]` table: individual
 variation of the drivers (participants.population.PopulationConfig; omitted: every driver is the
-nominal model, reporting trust with accuracy 0.8).
+nominal model, reporting trust with accuracy 0.8). Optional `[drivers]` table: `population`, a
+driver-population file (docs/driver_type_studies.md) from which each participant's true type is drawn; the
+participant's model is that type's model (varied around it by `[population]` when given).
 
 Every key, its default and its check: docs/formats/study_config.md.
 
@@ -49,6 +51,8 @@ PACKAGED_SPECS = Path(policies.__file__).resolve().parent / "specs"
 ENGINES: tuple[str, ...] = ("sumo", "model")
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
+TABLES: tuple[str, ...] = ("study", "population", "drivers")
+DRIVERS_KEYS: tuple[str, ...] = ("population",)
 BELIEF_RULES: tuple[str, ...] = ("bayes", "paper")
 STUDY_KEYS: tuple[str, ...] = (
     "participants",
@@ -109,6 +113,7 @@ class StudyConfig:
     population: dict | None = None   # compared by value; hashed through its canonical JSON (__hash__)
     robust_population: str | None = None   # the "robust" condition's population file (absolute)
     robust_objective: str = "robust"       # its objective: "robust" (worst type) or "bayes"
+    driver_population: str | None = None  # [drivers] population: absolute path of the population file
 
     def __hash__(self) -> int:
         # Every field, [population] included: configs that differ only there must never share a
@@ -143,6 +148,8 @@ class StudyConfig:
         if settings["robust_population"] is None:
             # a study without the robust condition keeps its earlier hash
             del settings["robust_population"], settings["robust_objective"]
+        if settings["driver_population"] is None:
+            del settings["driver_population"]  # a study without [drivers] keeps its earlier hash
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():
@@ -151,6 +158,11 @@ class StudyConfig:
             from trustroute.participants.driver_population import load_driver_population
 
             digest.update(load_driver_population(self.robust_population).content_hash.encode())
+        if self.driver_population is not None:
+            # the population's content hash covers the model files its types name
+            from trustroute.participants.driver_population import load_driver_population
+
+            digest.update(load_driver_population(self.driver_population).content_hash.encode())
         return digest.hexdigest()
 
     def with_overrides(self, **changes: object) -> StudyConfig:
@@ -235,18 +247,40 @@ def _population(table: object, source: str) -> dict | None:
     return dict(table)
 
 
+def _driver_population(table: object, base: Path, source: str) -> str | None:
+    """The [drivers] table: the driver-population file, resolved and read (InputError if bad)."""
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise InputError(source, "drivers", "expected a table", 'write [drivers] population = "FILE"')
+    unknown = sorted(set(table) - set(DRIVERS_KEYS))
+    if unknown:
+        raise InputError(source, f"drivers.{unknown[0]}", f"unknown key '{unknown[0]}'",
+                         f"use only {', '.join(DRIVERS_KEYS)}")
+    value = table.get("population")
+    fix = ("give the path of a driver-population file (docs/driver_type_studies.md), "
+           "e.g. population = \"types.json\"")
+    if not isinstance(value, str) or not value:
+        raise InputError(source, "drivers.population", f"expected a file path, got {value!r}", fix)
+    path = _resolve_path(value, base, source, "drivers.population", "driver-population file", fix)
+    from trustroute.participants.driver_population import load_driver_population
+
+    load_driver_population(path)  # raises InputError naming the file and the place
+    return str(path)
+
+
 def study_config_from_dict(data: object, source: str = "<study>", base: Path | None = None) -> StudyConfig:
     """Validate a parsed study document; relative paths resolve against `base`, then the cwd."""
     base = base if base is not None else Path.cwd()
     if not isinstance(data, dict):
         raise InputError(source, "top level", "expected a TOML table", "start with a [study] table")
-    unknown_tables = sorted(set(data) - {"study", "population"})
+    unknown_tables = sorted(set(data) - set(TABLES))
     if unknown_tables:
         raise InputError(
             source,
             unknown_tables[0],
             f"unknown table or key '{unknown_tables[0]}'",
-            "use only [study] and [population]",
+            f"use only {', '.join(f'[{t}]' for t in TABLES)}",
         )
     study = data.get("study")
     if not isinstance(study, dict):
@@ -421,6 +455,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         population=_population(data.get("population"), source),
         robust_population=robust_population,
         robust_objective=robust_objective,
+        driver_population=_driver_population(data.get("drivers"), base, source),
     )
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.plan import participant_models
+from trustroute.harness.study.plan import participant_models, participant_types
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
@@ -32,6 +32,7 @@ class StudyContext:
     setups: dict[str, EpisodeSetup]
     policies: dict[tuple[str, str], RoutingPolicy]  # (spec name, condition label) -> policy
     participants: list[DriverModel] | None  # per-participant driver models; None: all nominal
+    participant_types: list[str] | None = None  # per-participant true type ([drivers] population)
     # (spec name, condition label) -> setup, where a condition's AV filters with another model than
     # the nominal one ("robust": the type-aware model of its population, docs/driver_types.md)
     condition_setups: dict[tuple[str, str], EpisodeSetup] = field(default_factory=dict)
@@ -129,4 +130,5 @@ def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
         policies=policies,
         participants=participant_models(config, nominal),
         condition_setups=condition_setups,
+        participant_types=participant_types(config),
     )
