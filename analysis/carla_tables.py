@@ -179,15 +179,30 @@ def write_carla_tables(checkout: Path, path: Path | None = None) -> Path:
     return path
 
 
-def town01_town_dict(tables: CarlaTables, base: dict) -> dict:
-    """A town file (networks/town.py schema) with the roads and incidents of `base` and the junction
-    coordinates of Town01: the mean of the arrival points of the three roads entering each junction,
-    y negated (CARLA's frame is left-handed; the town's plane is right-handed)."""
+TOWN01_SOURCE = (
+    "Town01 geometry of the CARLA study of Yu et al., ICRA 2024 (12 junctions A-L, 18 two-way roads): "
+    "junction coordinates are the mean of the three arrival points of the roads entering the junction "
+    "(state_route_info/state_location.csv with spawn_point_list.csv of "
+    "shuyang-dong/trust_aware_hrc_carla_sim, MIT), in metres, CARLA y negated (CARLA's frame is "
+    "left-handed); roads are the directed roads of state_location.csv, incidents those of "
+    "policy/policy_retrieve_trial1.py. Built by trustroute.analysis.carla_tables.town01_town_dict; "
+    "networks/data/PROVENANCE.md, docs/real_study.md."
+)
+
+
+def town01_town_dict(tables: CarlaTables) -> dict:
+    """The town file (networks/town.py schema) of Town01, from the authors' tables alone: the roads of
+    their state table, the incidents of their policy script, and junction coordinates that are the
+    mean of the arrival points of the three roads entering each junction, y negated (CARLA's frame
+    is left-handed; the town's plane is right-handed). The packaged default town is this output."""
     points: dict[str, list[tuple[float, float]]] = {}
     for state, road in tables.road_of_state.items():
         points.setdefault(road.split("-")[1], []).append(tables.arrival_point[state])
     centres = {j: np.mean(np.asarray(p), axis=0) for j, p in sorted(points.items())}
+    roads = sorted({tuple(sorted(road.split("-"))) for road in tables.road_of_state.values()})
     return {
-        **base,
         "junctions": {j: [round(float(c[0]), 2), round(float(-c[1]), 2)] for j, c in centres.items()},
+        "roads": [list(r) for r in roads],
+        "incidents": dict(sorted(tables.incidents.items())),
+        "source": TOWN01_SOURCE,
     }

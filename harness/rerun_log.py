@@ -46,8 +46,9 @@ PLAN_COLOR = (60, 200, 255)
 START_COLOR = (80, 220, 120)
 WAYPOINT_COLORS = ((255, 215, 0), (255, 120, 200), (170, 120, 255), (0, 200, 200), (255, 160, 60))
 INCIDENT_COLORS = {"pedestrian": (255, 140, 0), "obstacle": (255, 200, 0), "truck": (120, 120, 255)}
-EGO_LENGTH = 44.0  # metres drawn (the car is 5 m): visible on a 1.4 km map
-EGO_WIDTH = 20.0
+# Metres drawn (the car is 5 m): visible on the 400 m Town01 map, shorter than its 49 m shortest road.
+EGO_LENGTH = 12.0
+EGO_WIDTH = 5.5
 TRAIL_SECONDS = 30.0
 TRAIL_POINTS = 15
 TRAIL_EVERY = 2.0  # seconds of sim time between trail updates (the box moves every step)

@@ -20,13 +20,17 @@ from trustroute.harness.incidents.base import (
     remove_vehicle,
     vehicle_position,
 )
-from trustroute.harness.incidents.oncoming import OncomingVehicle, schedule_oncoming
+from trustroute.harness.incidents.oncoming import TRUCK_SPEED, OncomingVehicle, schedule_oncoming
 
 KIND = "truck"
 PARKED_TYPE_ID = "trustroute_parked_car"
 MEET_RANGE = (0.3, 0.7)               # fraction of the ego's road where they are timed to meet
 P_PARKED = 0.15
 PARKED_BEFORE_MEETING = (0.0, 80.0)   # metres before the meeting point, along the truck's way
+# Shorter than this, the truck's lane has no room to pass a parked car before it meets the ego:
+# the scene is the plain oncoming truck. On Town01 the truck and the ego still stopped head-on for
+# good on the 128 m K-L with a 100 m minimum; of its truck roads only H-L/L-H (319 m) pass 200 m.
+PARKED_MIN_LANE = 200.0
 
 
 def define_type(sumo) -> None:
@@ -79,10 +83,17 @@ def inject(sumo, scene: Scene) -> TruckIncident:
     before = float(scene.draw("parked_before_meeting", lambda rng: rng.uniform(*PARKED_BEFORE_MEETING)))
     meet_at = fraction * scene.road_length
     eta = (scene.ego_distance + meet_at) / scene.road_speed
+    # The truck pulls out round the parked car when it reaches it, `before` metres ahead of the
+    # meeting point; the ego is then before * road_speed / TRUCK_SPEED metres short of that point.
+    # Unless the ego is already on the road there, SUMO's gap acceptance cannot see it, the truck
+    # commits to the ego's lane, and on a short road (Town01's are 50-250 m) the two stop head-on
+    # for good. So the parked car stands no further back than keeps the ego on the road.
+    before = min(before, meet_at * TRUCK_SPEED / scene.road_speed)
     parked_id = None
-    if parked:
+    reverse_length = sumo.lane.getLength(f"{scene.reverse_road}_1")
+    if parked and reverse_length >= PARKED_MIN_LANE:
         parked_id = f"{scene.prefix}.parked"
-        on_reverse = sumo.lane.getLength(f"{scene.reverse_road}_1") - meet_at - before
+        on_reverse = reverse_length - meet_at - before
         park_vehicle(sumo, parked_id, f"{parked_id}_route", scene.reverse_road, max(on_reverse, 5.0),
                      PARKED_TYPE_ID)
     oncoming = schedule_oncoming(sumo, scene, meet_at=meet_at, meet_in=eta,

@@ -11,6 +11,7 @@ from tests.harness.helpers import INCIDENT_ROUTE, SPECS, FixedRoute, ForcedTakeo
 from trustroute.harness.episode import EGO_ID, run_episode
 from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.networks.sumo_net import build_net
+from trustroute.networks.town import PENTAGON_TOWN_PATH, load_town
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
 
@@ -33,6 +34,14 @@ class Recorder:
                          for v in sumo.vehicle.getIDList() if v != EGO_ID},
             "collisions": [(c.collider, c.victim) for c in sumo.simulation.getCollisions()],
         })
+
+
+@pytest.fixture(scope="module")
+def town():
+    # Staged on the long-road layout (the pentagon): on the Town01 default town's 50-70 m roads of
+    # INCIDENT_ROUTE the ego is on the pedestrian's and the truck's roads for too few steps to see
+    # the person cross or the truck come towards it as staged (docs/scenes.md).
+    return load_town(PENTAGON_TOWN_PATH)
 
 
 @pytest.fixture(scope="module", params=["auto", "manual"])

@@ -10,6 +10,7 @@ from trustroute.harness.episode import EGO_ID, run_episode
 from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.takeover import AUTOPILOT, MANUAL
 from trustroute.networks.sumo_net import build_net
+from trustroute.networks.town import PENTAGON_TOWN_PATH, load_town
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
 
@@ -28,6 +29,13 @@ def _run(town, driver, net, kinds):
     record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), synthetic, "t", seed=0, net_path=net,
                          observer=observe)
     return record, steps
+
+
+@pytest.fixture(scope="module")
+def town():
+    # Staged on the long-road layout (the pentagon): on the Town01 default town's 50-70 m roads of
+    # INCIDENT_ROUTE the driver drives manually for one or two steps, too few to compare speeds.
+    return load_town(PENTAGON_TOWN_PATH)
 
 
 @pytest.fixture(scope="module")

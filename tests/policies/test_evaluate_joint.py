@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -89,7 +91,10 @@ def test_without_trust_atoms_the_joint_unfolding_gives_todays_evaluation(pomdp, 
                    RandomStationaryPolicy(pomdp.town, np.random.default_rng(6))):
         today = evaluate(pomdp, spec, policy, fallback_after=3, max_junctions=10)
         joint = evaluate_joint(pomdp, spec, policy, fallback_after=3, max_junctions=10, force_joint=True)
-        assert joint.lower == today.lower and joint.upper == today.upper
+        # The two sum the same terms in different orders: equal up to rounding (on the Town01 default
+        # town phi2_strict's free policy differs by one ulp; on the earlier pentagon they were equal).
+        assert abs(joint.lower - today.lower) <= 2 * math.ulp(today.lower)
+        assert abs(joint.upper - today.upper) <= 2 * math.ulp(today.upper)
         assert joint.expected_final_trust == pytest.approx(today.expected_final_trust, abs=1e-12)
         assert joint.expected_junctions == pytest.approx(today.expected_junctions, abs=1e-12)
         for reason, value in today.end_mass.items():

@@ -10,7 +10,7 @@ import pytest
 
 from tests.cli import run_cli
 from trustroute.networks.errors import InputError
-from trustroute.networks.town import town_from_dict
+from trustroute.networks.town import DEFAULT_TOWN_PATH, town_from_dict
 from trustroute.policies.evaluate import evaluate
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.files import array_path, load_policy, save_policy
@@ -49,7 +49,7 @@ def test_another_town_driver_or_spec_is_a_clear_error(pomdp, town, driver, phi1_
     path = save_policy(result, tmp_path / "phi1.json", town, driver, spec)
     other_spec = load_spec("specs/phi2.toml", town)
     other_driver = replace(driver, initial_belief=np.r_[0.4, np.full(6, 0.1)])
-    data = json.loads(open("networks/data/town.json").read())
+    data = json.loads(DEFAULT_TOWN_PATH.read_text())
     data["incidents"]["A-F"] = "truck"
     other_town = town_from_dict(data, "<edited town>")
     for args, word in (((town, driver, other_spec), "spec"), ((town, other_driver, spec), "driver"),
