@@ -149,6 +149,16 @@ class BeliefTablePolicy(RoutingPolicy):
     def _key_tq(self, t: np.ndarray, x: np.ndarray, q: np.ndarray) -> np.ndarray:
         return (t * self._n_x + x) * self._n_q + q
 
+    def _policy_beliefs(self, beliefs: np.ndarray) -> np.ndarray:
+        """The beliefs the table is looked up with: reweighted to the policy's type prior when it
+        has one (module docstring)."""
+        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        if self.reweight is None:
+            return beliefs
+        weighted = beliefs * self.reweight
+        total = weighted.sum(axis=1, keepdims=True)
+        return np.where(total > 0, weighted / np.where(total > 0, total, 1.0), beliefs)
+
     def _key_tqp(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, p: np.ndarray) -> np.ndarray:
         return self._key_tq(t, x, q) * self._n_p + p
 
@@ -156,7 +166,7 @@ class BeliefTablePolicy(RoutingPolicy):
                            beliefs: np.ndarray) -> np.ndarray:
         """The exact-belief rule, vectorised: the slot per context (never -1)."""
         t, x, q, p = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q, projected))
-        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        beliefs = self._policy_beliefs(beliefs)
         out = self._free_slot[x, p].copy()
         if t.size == 0 or not self.table.rows:
             return out
@@ -176,18 +186,13 @@ class BeliefTablePolicy(RoutingPolicy):
         """Vectorised decisions: the action slot per context. Exact-belief tables need `projected`
         (the state-only task state per context) and never return -1; nearest-belief tables
         apply rules 1-2 and return -1 where no stored row matches (rule 3)."""
-        if self.reweight is not None:
-            beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
-            weighted = beliefs * self.reweight
-            total = weighted.sum(axis=1, keepdims=True)
-            beliefs = np.where(total > 0, weighted / np.where(total > 0, total, 1.0), beliefs)
         if self.table.exact:
             if projected is None:
                 raise ValueError("this policy's exact-belief rule needs the state-only task state "
                                  "(projected) of each context")
             return self.exact_action_slots(t, x, q, projected, beliefs)
         t, x, q = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q))
-        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        beliefs = self._policy_beliefs(beliefs)
         out = np.full(t.size, -1, dtype=np.int64)
         if t.size == 0 or not self.table.rows:
             return out
