@@ -147,7 +147,13 @@ EPISODES_SCHEMA = pa.schema([
     _field("wall_seconds", pa.float64()),
     _field("mean_reported_trust", pa.float64(), nullable=True),  # null: no report in the episode
     _field("reports", pa.int64()),
+    # The participant's true driver type ([drivers] population, docs/driver_type_studies.md); null
+    # without one.
+    _field("driver_type", pa.string(), nullable=True),
 ])
+# Nullable columns appended to a schema after studies were written without them: a file that ends
+# before them reads with the columns all null (so earlier studies still read).
+ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type",)}
 END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
 
 # Top-level keys of manifest.json (harness/study/manifest.py writes them; docs/dataset.md).
@@ -228,9 +234,22 @@ def write_table(table: pa.Table, path: Path) -> Path:
 
 
 # -- readers ---------------------------------------------------------------------------------------
-def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None) -> pa.Table:
+def with_added_columns(table: pa.Table, schema: pa.Schema, added: tuple[str, ...]) -> pa.Table:
+    """`table` with the trailing `added` columns of `schema` it lacks appended as nulls."""
+    names = table.schema.names
+    missing = [name for name in schema.names if name not in names]
+    earlier = schema.names[:len(names)] == names and missing == list(added[len(added) - len(missing):])
+    if not missing or not earlier:
+        return table  # not an earlier form of this schema: check_table reports it
+    for name in missing:
+        table = table.append_column(schema.field(name), pa.nulls(table.num_rows, schema.field(name).type))
+    return table
+
+
+def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None,
+               added: tuple[str, ...] = ()) -> pa.Table:
     """A dataset table file checked against its schema; InputError naming the file when it is
-    missing, unreadable or of another schema."""
+    missing, unreadable or of another schema. Columns of `added` missing at the end read as nulls."""
     from trustroute.networks.validation import read_input_bytes
 
     path = Path(path)
@@ -242,7 +261,7 @@ def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None) 
                             fix="rerun `trustroute study` on this directory to rebuild it")
     try:
         table = pq.read_table(pa.BufferReader(data), page_checksum_verification=True)
-        table = table.replace_schema_metadata(None)
+        table = with_added_columns(table.replace_schema_metadata(None), schema, added)
         check_table(table, schema, path.name)
     except (OSError, pa.ArrowException, SchemaError) as exc:
         raise InputError(str(path), "schema" if isinstance(exc, SchemaError) else "",
@@ -253,7 +272,8 @@ def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None) 
 
 def _read(study_dir: Path, name: str, columns: list[str] | None) -> pd.DataFrame:
     file_name, schema = TABLES[name]
-    return frame_from_table(read_table(Path(study_dir) / file_name, schema, columns))
+    return frame_from_table(read_table(Path(study_dir) / file_name, schema, columns,
+                                       ADDED_COLUMNS.get(name, ())))
 
 
 def read_episodes(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:

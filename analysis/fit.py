@@ -55,6 +55,7 @@ class Observations:
     performance: np.ndarray  # int [n, S]
     report: np.ndarray  # int [n, S+1] trust index reported after step t (column 0: at the start), -1 none
     mask: np.ndarray  # bool [n, S] step exists
+    episode_ids: tuple[str, ...] = ()  # the episode of each row, in row order (sorted ids)
 
     @property
     def episodes(self) -> int:
@@ -103,6 +104,7 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observat
         performance=performance[:, 1:],
         report=report,
         mask=present[:, 1:],
+        episode_ids=tuple(str(e) for e in ids),
     )
 
 
@@ -146,11 +148,17 @@ class Statistics:
     visits: np.ndarray  # [I, k] expected trust-before counts per incident
     transition: np.ndarray  # [I, 2, 2, k, k] expected transition counts
     report: np.ndarray  # [k, k] expected (θ, r) counts
+    episode_loglik: np.ndarray | None = None  # [n] log-likelihood of each episode
 
 
-def expectation(obs: Observations, p: Parameters) -> Statistics:
-    """Forward-backward over every episode at once (scaled), expected sufficient statistics."""
+def expectation(obs: Observations, p: Parameters, weights: np.ndarray | None = None) -> Statistics:
+    """Forward-backward over every episode at once (scaled), expected sufficient statistics.
+
+    `weights` [n] (default 1) scale each episode's contribution to the statistics: a mixture's
+    responsibility of this model for the episode's participant (analysis/fit_mixture.py). The
+    log-likelihoods (total and per episode) are unweighted."""
     n, steps = obs.mask.shape
+    weight = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
     k = p.initial.size
     R = report_matrix(p.accuracy, k)
     inc, h, e, mask = obs.incident, obs.takeover, obs.performance, obs.mask
@@ -193,7 +201,7 @@ def expectation(obs: Observations, p: Parameters) -> Statistics:
     for t in range(steps - 1, -1, -1):
         M = matrices[t]
         xi = alpha[:, t, :, None] * M * beta[:, None, :] / scale[:, t + 1, None, None]
-        xi *= mask[:, t, None, None]
+        xi *= (mask[:, t] * weight)[:, None, None]
         g = (inc[:, t] * 2 + h[:, t]) * 2 + e[:, t]
         onehot = np.zeros((n, groups))
         onehot[np.arange(n), g] = mask[:, t]
@@ -211,20 +219,23 @@ def expectation(obs: Observations, p: Parameters) -> Statistics:
         beta = np.einsum("nij,nj->ni", M, beta) / scale[:, t + 1, None]
     gamma0 = alpha[:, 0] * beta
     gamma0 /= gamma0.sum(axis=1, keepdims=True)
+    gamma0 *= weight[:, None]
     has0 = obs.report[:, 0] >= 0
     np.add.at(report_counts.T, obs.report[has0, 0], gamma0[has0])
+    episode_loglik = np.log(scale).sum(axis=1)
     return Statistics(
-        loglik=float(np.log(scale).sum()),
+        loglik=float(episode_loglik.sum()),
         initial=gamma0.sum(axis=0),
         takeover_num=take_num,
         failure_num=fail_num,
         visits=visits,
         transition=stats_transition,
         report=report_counts,
+        episode_loglik=episode_loglik,
     )
 
 
-def _fit_accuracy(report_counts: np.ndarray, k: int) -> float:
+def fit_accuracy(report_counts: np.ndarray, k: int) -> float:
     """argmax_a Σ counts log R_a (grid then a local refinement; concave in a on [0, 1])."""
 
     def score(a: float) -> float:
@@ -257,7 +268,7 @@ def maximisation(stats: Statistics, previous: Parameters, fixed_accuracy: float 
         failure = np.where(stats.visits > 0, stats.failure_num / stats.visits, previous.failure)
     takeover = regularised_takeover(stats.takeover_num, stats.visits, previous.takeover)
     failure[previous.failure == 0] = 0.0
-    accuracy = fixed_accuracy if fixed_accuracy is not None else _fit_accuracy(stats.report, k)
+    accuracy = fixed_accuracy if fixed_accuracy is not None else fit_accuracy(stats.report, k)
     initial = stats.initial / stats.initial.sum()
     return Parameters(
         initial=initial, takeover=takeover, failure=failure, transition=transition, accuracy=accuracy

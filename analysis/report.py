@@ -49,6 +49,10 @@ NOTES = [
     "The paper's lowtrust clause `(!lowtrust) U ...` constrains nothing as written (1 - b(1) < 0 is "
     "never true on the simplex, and a U (F b) = F b): see docs/model.md, 'scLDTL'; the strict spec "
     "variants differ.",
+    "Per true driver type (studies with a [drivers] population): each participant's type is drawn "
+    "from the population's weights and logged; the per-type tables split the cells and the paired "
+    "statistics (every pair of conditions) by it, 'all' being every participant. A type with few "
+    "participants has wide intervals; the exact [L, U] above stays that of the nominal model.",
     "The paper ran 21 people in CARLA; ours are synthetic drivers from the driver model, so agreement "
     "in direction, not in the third decimal, is what to look for.",
 ]

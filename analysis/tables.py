@@ -21,12 +21,17 @@ roads.parquet, manifest.json) and returns a `StudyAnalysis` whose tables are:
   Cochran's Q (satisfaction) and Friedman (trust) across positions within participants;
   `carryover`: per condition and the condition driven just before (same spec or not);
 - `per_participant`: one row per participant and spec, the outcomes under each condition;
+- `per_type` and `per_type_paired` (studies with a `[drivers] population`, whose episodes carry the
+  participant's true `driver_type`): the cells' satisfaction and trust, and the paired statistics
+  for every pair of conditions present (free, aware, robust, policy files), per true type and over
+  all participants ("all");
 - `paper`: the paper's figures beside ours, only when the study is comparable (the paper's town,
   its φ1 and φ2, 21 participants); otherwise `paper_note` says why not.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from dataclasses import dataclass, field
@@ -61,6 +66,7 @@ PAPER = {
 }
 ANALYSIS_SEED = 20240513  # bootstrap resampling: fixed, so an analysis is reproducible
 ALL_SPECS = "all specs"
+ALL_TYPES = "all"
 
 
 @dataclass
@@ -80,6 +86,8 @@ class StudyAnalysis:
     paper_note: str
     satisfaction: pd.DataFrame = field(repr=False)  # per episode, both sources
     episodes: pd.DataFrame = field(repr=False)
+    per_type: pd.DataFrame = field(default_factory=pd.DataFrame)
+    per_type_paired: pd.DataFrame = field(default_factory=pd.DataFrame)
 
     def to_dict(self) -> dict:
         def records(frame: pd.DataFrame) -> list[dict]:
@@ -99,6 +107,8 @@ class StudyAnalysis:
             "carryover": records(self.carryover),
             "paper_comparison": records(self.paper),
             "paper_note": self.paper_note,
+            "per_type": records(self.per_type),
+            "per_type_paired": records(self.per_type_paired),
             "failed_episodes": len(self.manifest.get("failed_episodes", [])),
         }
 
@@ -303,6 +313,43 @@ def paired_table_rows(
             }
         )
     return pd.DataFrame(rows)
+
+
+PER_TYPE_CELL_COLUMNS = (
+    "spec", "condition", "n", "satisfied", "satisfaction_rate", "ci_low", "ci_high", "mean_trust",
+    "trust_ci_low", "trust_ci_high", "mean_true_trust", "takeovers_per_episode",
+)
+
+
+def per_type_tables(
+    episodes: pd.DataFrame, spec_order, condition_order, belief_source: str, rng: np.random.Generator,
+    resamples: int,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Per true driver type and over all participants: the cells (satisfaction with exact CI, mean
+    reported trust with bootstrap CI, mean true trust) and the paired statistics of every pair of
+    conditions (in config order). Empty without a `driver_type` in the episodes."""
+    if "driver_type" not in episodes or not episodes["driver_type"].notna().any():
+        return pd.DataFrame(), pd.DataFrame()
+    names = sorted(episodes["driver_type"].dropna().unique())
+    groups = [(name, episodes[episodes["driver_type"] == name]) for name in names]
+    groups.append((ALL_TYPES, episodes))
+    column = f"satisfied_{belief_source}"
+    cells, paired = [], []
+    for name, group in groups:
+        table = cell_table(group, spec_order, condition_order, belief_source, {}, rng, resamples)
+        cells.append(table[list(PER_TYPE_CELL_COLUMNS)].assign(
+            driver_type=name, participants=group["participant"].nunique()))
+        for pair in itertools.combinations(condition_order, 2):
+            rows = paired_table_rows(per_participant_table(group, column, pair), pair, spec_order, rng,
+                                     resamples)
+            if len(rows):
+                paired.append(rows.assign(driver_type=name))
+    cell_frame = pd.concat(cells, ignore_index=True)
+    cell_frame = cell_frame[["driver_type", "participants", *PER_TYPE_CELL_COLUMNS]]
+    if not paired:
+        return cell_frame, pd.DataFrame()
+    paired_frame = pd.concat(paired, ignore_index=True)
+    return cell_frame, paired_frame[["driver_type", *[c for c in paired_frame.columns if c != "driver_type"]]]
 
 
 def repeated_measures_table(episodes: pd.DataFrame, column: str, pair: tuple[str, str]) -> pd.DataFrame:
@@ -510,6 +557,8 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
         order, order_tests, carryover = order_tables(episodes, column)
     else:
         order, order_tests, carryover = empty, {}, empty
+    per_type, per_type_paired = per_type_tables(episodes, spec_order, condition_order, belief_source,
+                                                rng, resamples)
     analysis = StudyAnalysis(
         study_dir=Path(study_dir),
         belief_source=belief_source,
@@ -526,6 +575,8 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
         paper_note="",
         satisfaction=satisfaction,
         episodes=episodes,
+        per_type=per_type,
+        per_type_paired=per_type_paired,
     )
     comparable, note = is_paper_comparable(manifest, episodes)
     if comparable:
@@ -618,6 +669,36 @@ def _estimates(frame: pd.DataFrame, value: str, low: str, high: str, digits: int
     ]
 
 
+def paired_display(p: pd.DataFrame) -> pd.DataFrame:
+    """Paired statistics as shown (one row per spec and pair; a driver type first when given)."""
+    shown = pd.DataFrame(
+        {
+            "spec": p["spec"],
+            "pair": p["condition_a"] + " vs " + p["condition_b"],
+            "unit": p["unit"],
+            "n": p["pairs"],
+            "only A / only B sat.": [
+                f"{int(a)} / {int(b)}" if _num(a) != "-" else "-"
+                for a, b in zip(
+                    p.get("only_a_satisfied", [None] * len(p)),
+                    p.get("only_b_satisfied", [None] * len(p)),
+                    strict=True,
+                )
+            ],
+            "risk difference [95% CI]": _estimates(p, "risk_difference", "rd_low", "rd_high"),
+            "conditional OR [exact CI]": _estimates(p, "odds_ratio", "or_low", "or_high", 2),
+            "McNemar exact p": [format_p(_finite(v)) for v in p["mcnemar_p"]],
+            "trust difference [BCa CI]": _estimates(
+                p, "trust_difference", "trust_diff_low", "trust_diff_high"
+            ),
+            "Wilcoxon p (trust)": [format_p(_finite(v)) for v in p["wilcoxon_p"]],
+        }
+    )
+    if "driver_type" in p:
+        shown.insert(0, "driver type", p["driver_type"].to_numpy())
+    return shown
+
+
 def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
     """The tables as shown (formatted strings, p-values in scientific notation), by name."""
     other = [s for s in BELIEF_SOURCES if s != analysis.belief_source][0]
@@ -644,31 +725,8 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                 "fallback": c["fallback_rate"].map(lambda v: _num(v, 2)),
             }
         )
-    p = analysis.paired
-    if len(p):
-        tables["paired"] = pd.DataFrame(
-            {
-                "spec": p["spec"],
-                "pair": p["condition_a"] + " vs " + p["condition_b"],
-                "unit": p["unit"],
-                "n": p["pairs"],
-                "only A / only B sat.": [
-                f"{int(a)} / {int(b)}" if _num(a) != "-" else "-"
-                for a, b in zip(
-                    p.get("only_a_satisfied", [None] * len(p)),
-                    p.get("only_b_satisfied", [None] * len(p)),
-                    strict=True,
-                )
-            ],
-            "risk difference [95% CI]": _estimates(p, "risk_difference", "rd_low", "rd_high"),
-                "conditional OR [exact CI]": _estimates(p, "odds_ratio", "or_low", "or_high", 2),
-                "McNemar exact p": [format_p(_finite(v)) for v in p["mcnemar_p"]],
-                "trust difference [BCa CI]": _estimates(
-                    p, "trust_difference", "trust_diff_low", "trust_diff_high"
-                ),
-                "Wilcoxon p (trust)": [format_p(_finite(v)) for v in p["wilcoxon_p"]],
-            }
-        )
+    if len(analysis.paired):
+        tables["paired"] = paired_display(analysis.paired)
     r = analysis.repeated
     if len(r):
         tables["repeated"] = pd.DataFrame(
@@ -718,6 +776,26 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                 "mean trust (reported)": k["mean_trust"].map(_num),
             }
         )
+    c = analysis.per_type
+    if len(c):
+        tables["per_type"] = pd.DataFrame(
+            {
+                "driver type": c["driver_type"],
+                "participants": c["participants"],
+                "spec": c["spec"],
+                "condition": c["condition"],
+                "n": c["n"],
+                "satisfied": c["satisfied"],
+                "rate": c["satisfaction_rate"].map(_num),
+                "exact 95% CI": _intervals(c, "ci_low", "ci_high"),
+                "mean trust (reported)": c["mean_trust"].map(_num),
+                "trust 95% CI": _intervals(c, "trust_ci_low", "trust_ci_high", 2),
+                "mean true trust": c["mean_true_trust"].map(_num),
+                "takeovers / episode": c["takeovers_per_episode"].map(lambda v: _num(v, 2)),
+            }
+        )
+    if len(analysis.per_type_paired):
+        tables["per_type_paired"] = paired_display(analysis.per_type_paired)
     if len(analysis.paper):
         tables["paper"] = analysis.paper
     return tables
@@ -730,6 +808,8 @@ TABLE_TITLES = {
     "takeovers": "Takeover rate per incident type and condition",
     "order": "Order effects: by position in the Latin square",
     "carryover": "Carry-over: by the condition driven just before",
+    "per_type": "Satisfaction and trust per true driver type",
+    "per_type_paired": "Paired effects per true driver type (every pair of conditions)",
     "paper": "The paper beside this study",
 }
 

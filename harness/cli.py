@@ -27,6 +27,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "study": ("trustroute.harness.commands.study", "study", "Run a simulated within-subject study."),
     "analyze": ("trustroute.harness.commands.study", "analyze", "Analyse a study directory."),
     "fit": ("trustroute.harness.commands.study", "fit", "Fit a driver model to a study's logs."),
+    "population": ("trustroute.harness.commands.population", "population",
+                   "Sample and inspect driver populations (driver types)."),
     "import": ("trustroute.harness.commands.importing", "import_group", "Import logs of real studies."),
     "demo": ("trustroute.harness.commands.demo", "demo", "Run the paper-size study (21 drivers) and report."),
     "model": ("trustroute.harness.commands.model", "model", "Summarise the trust POMDP of a town and model."),

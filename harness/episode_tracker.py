@@ -10,6 +10,10 @@ moves) are policies/routing/episode_rules.py's, the same the exact evaluation us
 - after driving a road the AV observes (incident, takeover, performance), applies its belief
   filter (setup.belief_rule) and steps the DFA on (road, new belief).
 
+With a driver population (docs/driver_types.md) the AV's model is the type-aware one: its belief
+is over (type, trust); the roads table logs its trust marginal (so belief atoms of the analysis
+read it as before) and `type_belief` gives the type marginal.
+
 Row 0 of the roads table is the start road: incident "none" and no observation (takeover,
 performance and reported_trust null), trust_before = trust_after = the initial true trust. The
 table's schema is `trustroute.analysis.dataset.ROADS_SCHEMA` (docs/dataset.md).
@@ -28,6 +32,7 @@ from trustroute.networks.town import NO_INCIDENT, Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.driver_types import trust_marginal, type_belief
 from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp
 from trustroute.policies.routing.episode_rules import (
     DEFAULT_JUNCTION_CAP,
@@ -122,12 +127,21 @@ class EpisodeTracker:
             "episode_id": self.episode_id, "index": 0, "directed_road": start, "action": None,
             "incident": NO_INCIDENT, "takeover": None, "performance": None,
             "trust_before": int(initial_trust), "trust_after": int(initial_trust),
-            "reported_trust": None, "belief_before": self.belief.tolist(),
-            "belief_after": self.belief.tolist(), "dfa_state": self.dfa_state, "fallback": False,
+            "reported_trust": None, "belief_before": self._logged(self.belief),
+            "belief_after": self._logged(self.belief), "dfa_state": self.dfa_state, "fallback": False,
             "sim_time_in": float(sim_time), "sim_time_out": None,
         }]
 
     # -- internals -----------------------------------------------------------
+    def _logged(self, belief: np.ndarray) -> list[float]:
+        """The belief as the roads table logs it: over trust (the trust marginal of a type-aware
+        belief; the belief itself otherwise)."""
+        return trust_marginal(self.setup.driver_model, belief).tolist()
+
+    def type_belief(self) -> np.ndarray:
+        """The AV's current belief over the driver's type (one entry for a single driver model)."""
+        return type_belief(self.setup.driver_model, self.belief)
+
     def _context(self) -> DecisionContext:
         return DecisionContext(route=tuple(self.route), dfa_state=self.dfa_state, belief=self.belief.copy())
 
@@ -211,8 +225,8 @@ class EpisodeTracker:
             "action": None, "incident": incident, "takeover": bool(takeover), "performance": performance,
             "trust_before": int(trust_before), "trust_after": int(trust_after),
             "reported_trust": None if reported_trust is None else int(reported_trust),
-            "belief_before": before.tolist(),
-            "belief_after": after.tolist(), "dfa_state": self.dfa_state, "fallback": False,
+            "belief_before": self._logged(before),
+            "belief_after": self._logged(after), "dfa_state": self.dfa_state, "fallback": False,
             "sim_time_in": float(sim_time_in), "sim_time_out": float(sim_time_out),
         })
         self.end_reason = dfa_verdict(self._compiled, self.dfa_state)

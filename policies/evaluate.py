@@ -70,6 +70,7 @@ class Evaluation:
     belief_rule: str
     fallback_after: int | None
     max_junctions: int
+    reference_accepted: float | None = None   # mass the reference reading accepts (`reference`)
 
     @property
     def gap(self) -> float:
@@ -82,6 +83,8 @@ class Evaluation:
 
     def to_dict(self) -> dict:
         out = asdict(self)
+        if self.reference_accepted is None:
+            del out["reference_accepted"]
         out["gap"] = self.gap
         out["satisfaction_probability"] = self.satisfaction_probability
         return out
@@ -123,7 +126,8 @@ def decide_node(policy: RoutingPolicy, context: DecisionContext, town: Town, roa
 def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
              fallback_after: int | None = DEFAULT_FALLBACK_AFTER, max_junctions: int = DEFAULT_JUNCTION_CAP,
              belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
-             max_nodes: int = DEFAULT_MAX_NODES) -> Evaluation:
+             max_nodes: int = DEFAULT_MAX_NODES, truth: TrustPOMDP | None = None,
+             reference: tuple[TrustPOMDP, Spec] | None = None) -> Evaluation:
     """Exact (or tightly certified) satisfaction probability of `policy` for `spec`.
 
     fallback_after: wrap the policy with the study's rule after that many junctions
@@ -133,14 +137,25 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     probabilities and the final trust always use the true (Bayes) posterior.
     prune_below / max_nodes: branches below this probability, or beyond this frontier size
     (smallest first), are not followed; their mass widens [lower, upper].
+    truth: the driver the episodes are driven with, when it is not the AV's model (a driver type,
+    another population, docs/driver_types.md "Exact values per type"): observations are drawn
+    from its exact posterior (starting from its initial belief) while the AV's belief, which drives
+    decisions and labels, runs `pomdp`'s filter; an observation the AV deems impossible leaves the
+    AV's belief unchanged, as in the episode tracker. The final trust is the truth's.
+    reference (pomdp_ref, spec_ref): also read the spec with another belief, the Bayes filter of
+    pomdp_ref on the same observations (e.g. the posterior under the true population), without
+    changing what the vehicle does: `reference_accepted` is the mass of episodes that this
+    reading accepts by the time the vehicle's episode ends (docs/driver_types.md, "Limits").
     """
     started = time.perf_counter()
     town, driver = pomdp.town, pomdp.driver
     policy = episode_policy(policy, town, spec, fallback_after)
     fallback_level = policy.after if isinstance(policy, FallbackPolicy) else None
     compiled = compile_spec(spec, town)
-    levels = np.asarray(driver.trust_levels, dtype=float)
-    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
+    truth_pomdp = pomdp if truth is None else truth
+    levels = np.asarray(truth_pomdp.driver.trust_levels, dtype=float)
+    performance = driver.depends_on_performance or truth_pomdp.driver.depends_on_performance
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if performance else (0,))]
     successor_index = {(x, j): town.state_index(town.successor(road, j))
                        for x, road in enumerate(town.states) for j in town.actions(road)}
 
@@ -149,9 +164,17 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     route_id = np.zeros(1, dtype=np.int64)
     road = np.array([start], dtype=np.int64)
     belief_av = np.asarray(pomdp.initial_belief, dtype=float)[None, :].copy()
-    posterior = belief_av.copy()
+    posterior = (belief_av.copy() if truth is None
+                 else np.asarray(truth.initial_belief, dtype=float)[None, :].copy())
     probability = np.ones(1)
     q = compiled.initial_states(belief_av)
+    if reference is not None:
+        ref_pomdp, ref_compiled = reference[0], compile_spec(reference[1], town)
+        ref_belief = np.asarray(ref_pomdp.initial_belief, dtype=float)[None, :].copy()
+        q_ref = ref_compiled.initial_states(ref_belief)
+    else:
+        ref_belief, q_ref = np.zeros((1, 0)), np.zeros(1, dtype=np.int64)
+    ref_mass = 0.0
 
     mass = {"accepted": 0.0, "rejected": 0.0, "destination": 0.0, "cap": 0.0, "pruned": 0.0}
     trust_sum = 0.0          # Σ P(end node) E[θ | node] over ended (non-pruned) nodes
@@ -161,8 +184,10 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     max_frontier = 1
 
     def end(mask: np.ndarray, reason: str, level: int) -> None:
-        nonlocal trust_sum, junction_sum
+        nonlocal trust_sum, junction_sum, ref_mass
         p = probability[mask]
+        if reference is not None:
+            ref_mass += float(p[ref_compiled.accepting[q_ref[mask]]].sum())
         mass[reason] += float(p.sum())
         trust_sum += float(p @ (posterior[mask] @ levels))
         junction_sum += float(p.sum()) * level
@@ -221,27 +246,40 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
 
         # Branch on the observation (h, e) at the new road.
         incident = pomdp.road_incident[chosen]
+        true_incident = truth_pomdp.road_incident[chosen]
         parts = []
         for h, e in outcomes:
-            new_posterior, p_obs = pomdp.belief_update(posterior[keep], incident, h, e, rule="bayes")
-            if belief_rule == "bayes":
+            new_posterior, p_obs = truth_pomdp.belief_update(posterior[keep], true_incident, h, e,
+                                                             rule="bayes")
+            if belief_rule == "bayes" and truth is None:
                 new_av = new_posterior
             else:
                 new_av, _ = pomdp.belief_update(belief_av[keep], incident, h, e, rule=belief_rule)
+                if truth is not None:
+                    impossible = ~(new_av.sum(axis=1) > 0)
+                    new_av[impossible] = belief_av[keep][impossible]
             possible = p_obs > 0
+            new_ref = ref_belief[keep]
+            if reference is not None:
+                new_ref, _ = ref_pomdp.belief_update(new_ref, ref_pomdp.road_incident[chosen], h, e)
+                stuck = ~(new_ref.sum(axis=1) > 0)
+                new_ref[stuck] = ref_belief[keep][stuck]
             parts.append((new_route_ids[possible], chosen[possible], q[keep][possible],
                           new_av[possible], new_posterior[possible],
-                          probability[keep][possible] * p_obs[possible]))
-        route_id, road, q_before, belief_av, posterior, probability = (
-            np.concatenate([part[j] for part in parts]) for j in range(6))
+                          probability[keep][possible] * p_obs[possible], q_ref[keep][possible],
+                          new_ref[possible]))
+        route_id, road, q_before, belief_av, posterior, probability, q_ref, ref_belief = (
+            np.concatenate([part[j] for part in parts]) for j in range(8))
         q = compiled.step(q_before, road, belief_av)
+        if reference is not None:
+            q_ref = ref_compiled.step(q_ref, road, ref_belief)
         if probability.size > max_nodes:
             order = np.argsort(probability)
             dropped = order[: probability.size - max_nodes]
             mass["pruned"] += float(probability[dropped].sum())
             kept = np.sort(order[probability.size - max_nodes:])
-            route_id, road, q, belief_av, posterior, probability = (
-                a[kept] for a in (route_id, road, q, belief_av, posterior, probability))
+            route_id, road, q, belief_av, posterior, probability, q_ref, ref_belief = (
+                a[kept] for a in (route_id, road, q, belief_av, posterior, probability, q_ref, ref_belief))
         nodes += probability.size
         max_frontier = max(max_frontier, probability.size)
 
@@ -265,4 +303,5 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
         belief_rule=belief_rule,
         fallback_after=fallback_level,
         max_junctions=max_junctions,
+        reference_accepted=None if reference is None else min(ref_mass, 1.0),
     )

@@ -56,6 +56,10 @@ def _write_logs(out_dir: Path, record) -> dict[str, Path]:
 @click.option("--net", "net_path", type=click.Path(), default=None,
               help="SUMO net to use (default: the town's cached net, built if missing).")
 @click.option("--initial-trust", type=int, default=None, help="Driver's initial trust (default: drawn).")
+@click.option("--population", "population_path", type=click.Path(), default=None,
+              help="Driver-population FILE (instead of --driver): the driver's type is drawn from it "
+                   "(seeded), the AV filters with its type-aware model; POLICY 'free', 'robust', "
+                   "'bayes' or a population policy file (docs/driver_types.md).")
 @click.option("--cache-dir", type=click.Path(), default=None, help="Where 'aware' policies are cached.")
 @click.option("--sumo-files", "sumo_dir", type=click.Path(), default=None,
               help="DIRECTORY to write episode.sumocfg, the net, SUMO's route and FCD outputs into "
@@ -63,7 +67,7 @@ def _write_logs(out_dir: Path, record) -> dict[str, Path]:
 def run(spec_argument: str | None, spec_option: str | None, policy_name: str, seed: int,
         rrd_path: str | None, out_dir: str | None, as_json: bool, town_path: str | None,
         driver_path: str | None, net_path: str | None, initial_trust: int | None,
-        cache_dir: str | None, sumo_dir: str | None) -> None:
+        population_path: str | None, cache_dir: str | None, sumo_dir: str | None) -> None:
     """Run one episode of SPEC (a spec file) in SUMO with POLICY and a synthetic driver.
 
     To re-run an episode of a study exactly (its participant's drawn model and initial trust), use
@@ -105,16 +109,29 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
 
         read_input_bytes(net_path, "SUMO net", max_bytes=1 << 30, fix="pass a .net.xml written by "
                          "`trustroute net build`")
-    town = load_town(town_path)
-    driver_model = load_driver_model(driver_path)
-    spec = load_spec(spec_path, town)
-    check_coefficient_length(spec, driver_model.n_trust, driver_model.source_path)
+    rng = np.random.default_rng(seed)
+    driver_type = None
+    if population_path is not None:
+        from trustroute.harness.commands.synth import load_population_routing
+
+        if driver_path is not None:
+            raise click.UsageError("give --driver or --population, not both")
+        town, population, spec, policy, av_model, av_spec = load_population_routing(
+            spec_path, town_path, population_path, policy_name, cache_dir)
+        k = int(rng.choice(population.n_types, p=population.weights))
+        driver_type, driver_model = population.names[k], population.types[k].model
+        setup = EpisodeSetup(town=town, driver_model=av_model, spec=av_spec)
+    else:
+        town = load_town(town_path)
+        driver_model = load_driver_model(driver_path)
+        spec = load_spec(spec_path, town)
+        check_coefficient_length(spec, driver_model.n_trust, driver_model.source_path)
+        policy = resolve_policy(policy_name, town, driver_model, spec, cache_dir)
+        setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
     if initial_trust is not None and initial_trust not in driver_model.trust_levels:
         raise InputError("--initial-trust", "", f"{initial_trust} is not a trust level of the model",
                          f"pass one of {list(driver_model.trust_levels)}")
-    policy = resolve_policy(policy_name, town, driver_model, spec, cache_dir)
-    setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
-    driver = SyntheticDriver(driver_model, np.random.default_rng(seed), initial_trust=initial_trust)
+    driver = SyntheticDriver(driver_model, rng, initial_trust=initial_trust)
     episode_id = f"{spec.name}-{policy.name}-s{seed}"
     sumo_config = SumoConfig()
     if sumo_dir is not None:
@@ -134,6 +151,8 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
         written["fcd"] = Path(sumo_dir) / "fcd.xml"
     summary = dict(record.summary)
     summary["route"] = record.roads["directed_road"].tolist()
+    if driver_type is not None:
+        summary["driver_type"] = driver_type
     if as_json:
         click.echo(json.dumps(with_paths(summary, written)))
         return
@@ -142,5 +161,7 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
                f"{summary['final_trust']}, sim {summary['sim_seconds']:.1f} s, wall "
                f"{summary['wall_seconds']:.2f} s")
     click.echo("route: " + " ".join(summary["route"]))
+    if driver_type is not None:
+        click.echo(f"driver type (drawn from the population): {driver_type}")
     for path in written.values():
         click.echo(f"wrote {path}")

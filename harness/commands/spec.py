@@ -16,8 +16,11 @@ from trustroute.harness.commands.output import json_option, with_paths
 from trustroute.networks.errors import InputError
 
 
-def spec_report(spec_path: str, town_path: str | None) -> tuple[dict, str]:
-    """(the JSON-ready summary of a spec check, the DFA as dot text)."""
+def spec_report(spec_path: str, town_path: str | None, population_path: str | None = None
+                ) -> tuple[dict, str]:
+    """(the JSON-ready summary of a spec check, the DFA as dot text). population_path: check the
+    spec against a driver population (type-belief atoms, the threshold check on its type-aware
+    filter; docs/driver_types.md)."""
     from trustroute.networks.town import load_town
     from trustroute.policies.logic.dfa import DFATooLarge, dfa_from_formula
     from trustroute.policies.logic.lint import lint
@@ -35,7 +38,17 @@ def spec_report(spec_path: str, town_path: str | None) -> tuple[dict, str]:
         raise InputError(spec.source_path, "formula", "the formula is nested too deeply to translate",
                          "simplify the formula") from None
     seconds = time.perf_counter() - started
-    warnings = lint(spec, town, dfa)
+    if population_path is not None:
+        from trustroute.participants.driver_population import load_driver_population
+        from trustroute.policies.logic.labelling import check_coefficient_length
+        from trustroute.policies.model.driver_types import lift_population, lift_spec
+
+        population = load_driver_population(population_path)
+        check_coefficient_length(spec, population.types[0].model.n_trust, population_path)
+        lifted = lift_spec(spec, population, population_path)   # a type it lacks: one line, exit 2
+        warnings = lint(lifted, town, dfa, lift_population(population))
+    else:
+        warnings = lint(spec, town, dfa)
     summary = {
         "name": spec.name,
         "file": spec.source_path,
@@ -47,6 +60,7 @@ def spec_report(spec_path: str, town_path: str | None) -> tuple[dict, str]:
         "state_atoms": sorted(a for a in spec.state_atoms if a in dfa.atoms),
         "belief_atoms": sorted(a for a in spec.belief_atoms if a in dfa.atoms),
         "trust_atoms": sorted(a for a in spec.trust_atoms if a in dfa.atoms),
+        "type_belief_atoms": sorted(a for a in spec.type_atoms if a in dfa.atoms),
         "dfa_states": dfa.n_states,
         "accepting_states": int(dfa.accepting.sum()),
         "rejecting_states": int(dfa.rejecting.sum()),
@@ -67,13 +81,16 @@ def spec() -> None:
 @json_option
 @click.option("--dot", "dot_path", type=click.Path(), default=None,
               help="FILE to write the DFA into, as Graphviz dot.")
-def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | None) -> None:
+@click.option("--population", "population_path", type=click.Path(), default=None,
+              help="Driver-population FILE to check type-belief atoms against (docs/driver_types.md).")
+def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | None,
+          population_path: str | None) -> None:
     """Parse SPEC, print its DFA size and the linter's warnings."""
     from trustroute.output_files import atomic_write_text, check_output_file
 
     if dot_path is not None:
         check_output_file(dot_path, "--dot", "dot file")
-    summary, dot = spec_report(spec_path, town_path)
+    summary, dot = spec_report(spec_path, town_path, population_path)
     if dot_path is not None:
         atomic_write_text(Path(dot_path), dot, "dot file", "pass a writable path to --dot")
     if as_json:

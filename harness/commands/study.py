@@ -4,7 +4,8 @@ study    run (or resume) a simulated within-subject study from a TOML config, co
          dataset, then analyse it (tables, plots, report) unless --no-report; when episodes failed
          it names them and exits 1, and writes the report only with --report-anyway
 analyze  the per spec and condition table of a study directory (--json: one JSON object)
-fit      estimate a driver model (trust dynamics, takeover model) from a study's logs
+fit      estimate a driver model (trust dynamics, takeover model) from a study's logs; with
+         --types, a mixture of driver types (a driver-population file, docs/driver_type_studies.md)
 """
 
 from __future__ import annotations
@@ -215,6 +216,16 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool | No
     help="Posterior-predictive check: simulate the packaged and the fitted model on the study's "
     "roads and compare with its logs (writes <out>.check.json and <out>.check.png).",
 )
+@click.option("--types", "types", default=None, metavar="K|auto",
+              help="Fit a mixture of K driver types (or choose K by BIC with 'auto') and write a "
+              "driver-population file.")
+@click.option("--max-types", type=bounded_int(1, 20), default=4, show_default=True,
+              help="With --types auto: the largest K tried.")
+@click.option("--restarts", type=bounded_int(1, 1_000), default=5, show_default=True,
+              help="With --types: seeded EM restarts per K.")
+@click.option("--shared-dynamics", is_flag=True,
+              help="With --types: the types share the trust-transition rows and differ in initial "
+              "trust and takeover (and failure) probabilities.")
 @json_option
 @quiet_option
 def fit(
@@ -225,6 +236,10 @@ def fit(
     bootstrap: int,
     seed: int,
     check: bool,
+    types: str | None,
+    max_types: int,
+    restarts: int,
+    shared_dynamics: bool,
     as_json: bool,
     quiet: bool,
 ) -> None:
@@ -232,6 +247,13 @@ def fit(
     from trustroute.analysis.fit import bootstrap_fit, fit_study
     from trustroute.output_files import check_output_file
 
+    if types is not None:
+        if check or method == "counts":
+            raise click.UsageError("--types fits by EM; it takes neither --check nor --method counts")
+        check_output_file(out, "--out", "driver-population file")
+        fit_types(Path(study_dir), Path(out), types, max_types, restarts, iterations, bootstrap, seed,
+                  shared_dynamics, as_json, quiet)
+        return
     check_output_file(out, "--out", "driver model file")
     result = fit_study(Path(study_dir), method=method, iterations=iterations,
                        progress=not (quiet or as_json))
@@ -322,3 +344,103 @@ def fit(
     ):
         if rows:
             click.echo(f"unidentified {label} (too little data, kept at the prior/start): {len(rows)}")
+
+
+def _type_count(types: str) -> int | None:
+    """--types: an integer K >= 1, or None for 'auto'."""
+    if types == "auto":
+        return None
+    try:
+        value = int(types)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 20:
+        raise click.BadParameter(f"{types!r} is neither 'auto' nor an integer from 1 to 20",
+                                 param_hint="--types")
+    return value
+
+
+def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: int, iterations: int,
+              bootstrap: int, seed: int, shared_dynamics: bool, as_json: bool, quiet: bool) -> None:
+    """`trustroute fit --types`: the mixture, its BIC table and bootstrap, a driver-population file."""
+    import time
+
+    import numpy as np
+    from tqdm import tqdm
+
+    from trustroute.analysis.fit_mixture import (
+        bootstrap_type_count,
+        fit_mixture,
+        mixture_population,
+        select_types,
+        study_observations,
+    )
+    from trustroute.output_files import atomic_write_text
+    from trustroute.participants.driver_population import write_driver_population
+
+    fixed = _type_count(types)
+    rng = np.random.default_rng(seed)
+    obs, owner, participants, template, roads, episodes = study_observations(study_dir)
+    if fixed is None:
+        with tqdm(total=min(max_types, len(participants)), desc="fitting K = 1..", unit="K",
+                  disable=quiet or as_json) as bar:
+            selection = select_types(obs, owner, participants, template, max_types, rng, restarts,
+                                     iterations, progress=bar.update, shared_dynamics=shared_dynamics)
+    else:
+        from trustroute.analysis.fit_mixture import TypeSelection
+
+        fits = [fit_mixture(obs, owner, participants, template, fixed, rng, restarts, iterations,
+                            shared_dynamics)]
+        selection = TypeSelection(fits=fits, chosen=fixed)
+    best = selection.best
+    command = "trustroute fit " + " ".join(
+        [str(study_dir), "--types", types, *(["--max-types", str(max_types)] if fixed is None else []),
+         "--restarts", str(restarts), "--iterations", str(iterations), "--seed", str(seed),
+         *(["--shared-dynamics"] if shared_dynamics else []),
+         *(["--bootstrap", str(bootstrap)] if bootstrap else [])])
+    provenance = (f"fitted by `{command}` ({time.strftime('%Y-%m-%d', time.gmtime())}) on "
+                  f"{len(participants)} participants, {obs.episodes} episodes, {obs.steps} roads: "
+                  f"EM over a mixture of {best.n_types} driver models"
+                  f"{' sharing their trust dynamics' if shared_dynamics else ''}, "
+                  f"{'chosen by BIC (n = participants)' if fixed is None else 'K given'}; "
+                  f"shared report accuracy {best.report_accuracy:.4f}")
+    path = write_driver_population(mixture_population(best, str(study_dir), provenance), out)
+    criterion = "BIC (n = participants)" if fixed is None else "given"
+    payload: dict = {"types": best.n_types, "criterion": criterion,
+                     "fit": best.summary(), "provenance": provenance,
+                     "responsibilities": {str(p): dict(zip(best.type_names(), row.tolist(), strict=True))
+                                          for p, row in zip(best.participants, best.responsibilities,
+                                                            strict=True)}}
+    if fixed is None:
+        payload["bic_table"] = selection.table()
+    if bootstrap:
+        with tqdm(total=bootstrap, desc="bootstrap", disable=quiet or as_json) as bar:
+            payload["bootstrap"] = bootstrap_type_count(
+                roads, episodes, template, selection, max_types, bootstrap, rng, restarts, iterations,
+                progress=bar.update, choose=fixed is None, shared_dynamics=shared_dynamics)
+    details = out.with_suffix(".fit.json")
+    atomic_write_text(details, json.dumps(payload, indent=1, default=str), "fit details",
+                      "pass a writable path with --out")
+    payload = with_paths(payload, {"population": path, "fit_details": details})
+    if as_json:
+        click.echo(json.dumps(payload, default=str))
+        return
+    if fixed is None:
+        click.echo("K  loglik      params  BIC(n=participants)  dBIC    BIC(n=roads)  converged")
+        for row in payload["bic_table"]:
+            click.echo(f"{row['types']:<2} {row['loglik']:<11.2f} {row['free_parameters']:<7} "
+                       f"{row['bic']:<20.2f} {row['delta_bic']:<7.2f} {row['bic_roads']:<13.2f} "
+                       f"{row['restarts_converged']}")
+    weights = ", ".join(f"{k} {v:.3f}" for k, v in best.summary()["weights"].items())
+    click.echo(f"{best.n_types} type(s) ({payload['criterion']}): weights {weights}; EM "
+               f"{best.iterations} iterations, {'converged' if best.converged else 'NOT converged'}")
+    if bootstrap:
+        b = payload["bootstrap"]
+        if "chosen_types_frequency" in b:
+            click.echo(f"bootstrap ({b['resamples']} resamples of participants): K chosen "
+                       + ", ".join(f"{k}: {v}" for k, v in b["chosen_types_frequency"].items()))
+        for name, w in b.get("weights", {}).items():
+            click.echo(f"  {name} weight 95% percentile interval [{w['low']:.3f}, {w['high']:.3f}]")
+    click.echo(f"driver population written to {path} (details: {details})")
+    if not best.converged:
+        click.echo(f"warning: EM stopped at the iteration cap ({iterations}) before converging", err=True)

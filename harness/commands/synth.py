@@ -58,10 +58,15 @@ rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]
 @rule_option
 @click.option("--out", "out_path", type=click.Path(), default="policy.json", show_default=True,
               help="Policy FILE to write (its arrays go beside it, same name with suffix .npz).")
+@click.option("--population", "population_path", type=click.Path(), default=None,
+              help="Driver-population FILE: synthesize for its mixture of driver types "
+                   "(docs/driver_types.md); instead of --driver.")
+@click.option("--objective", type=click.Choice(["bayes", "robust"]), default="bayes", show_default=True,
+              help="With --population: the prior-weighted value (bayes) or the worst type's (robust).")
 @json_option
 def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: float,
           horizon: int | None, time_limit: float, belief_rule: str, out_path: str,
-          as_json: bool) -> None:
+          population_path: str | None, objective: str, as_json: bool) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
     if tau <= 0:
         raise InputError("--tau", "", f"tau must be positive, got {tau}", "pass e.g. --tau 1e-3")
@@ -71,6 +76,15 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     from trustroute.output_files import check_output_file
 
     check_output_file(out_path, "--out", "policy file")
+    if population_path is not None:
+        if driver_path is not None:
+            raise click.UsageError("give --driver or --population, not both (a population's types are "
+                                   "full driver models)")
+        _synth_population(spec_path, town_path, population_path, objective, tau, horizon, time_limit,
+                          belief_rule, out_path, as_json)
+        return
+    if objective != "bayes":
+        raise click.UsageError("--objective robust needs --population FILE (the types to be robust over)")
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from trustroute.policies.routing.files import save_policy
     from trustroute.policies.routing.resolve import synthesis_progress
@@ -114,6 +128,62 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     emit(as_json, payload, lines)
 
 
+def _synth_population(spec_path: str, town_path: str | None, population_path: str, objective: str,
+                      tau: float, horizon: int | None, time_limit: float, belief_rule: str,
+                      out_path: str, as_json: bool) -> None:
+    """`synth --population`: the Bayes or robust objective over a population's driver types."""
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_population import load_driver_population
+    from trustroute.policies.logic.labelling import check_coefficient_length
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.routing.files import array_path, save_policy
+    from trustroute.policies.routing.resolve import synthesis_progress
+    from trustroute.policies.synthesis.population import (
+        document_entries,
+        policy_name,
+        summary,
+        synthesize_population,
+    )
+
+    town = load_town(town_path)
+    population = load_driver_population(population_path)
+    spec = load_spec(spec_path, town)
+    base = population.types[0].model
+    check_coefficient_length(spec, base.n_trust, population_path)
+    with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
+                            not as_json) as on_iteration:
+        found = synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
+                                      horizon=horizon, belief_rule=belief_rule,
+                                      population_source=population_path, on_iteration=on_iteration)
+    result = found.result
+    path = str(save_policy(result, out_path, town, found.pomdp.driver, found.spec,
+                           population=document_entries(found), name=policy_name(found)))
+    population_summary = summary(found)
+    population_summary.update({"file": population_path, "content_hash": population.content_hash})
+    payload = with_paths({"spec": spec.name, "lower": found.lower, "upper": found.upper, "gap": found.gap,
+                          "seconds": found.seconds, "tau": tau, "horizon": horizon,
+                          "belief_rule": belief_rule, "population": population_summary,
+                          "stats": result.stats},
+                         {"policy": path, "policy_arrays": array_path(path)})
+    what = "P(satisfied), prior-weighted" if objective == "bayes" else "worst type's P(satisfied)"
+    lines = [f"{spec.name} ({population.n_types} driver types, objective {objective}): "
+             f"{found.lower:.6f} <= max {what} <= {found.upper:.6f} (gap {found.gap:.2e}, "
+             f"{found.seconds:.1f} s)"]
+    lines.append("returned policy per type (exact, true driver of that type): " + "; ".join(
+        f"{v.name} (weight {v.weight:g}) [{v.lower:.6f}, {v.upper:.6f}]" for v in found.type_values))
+    mixture = found.mixture_value
+    lines.append(f"returned policy under the type prior: [{mixture[0]:.6f}, {mixture[1]:.6f}]; worst type "
+                 f"{found.worst_type_value:.6f}; AV type prior {', '.join(f'{p:g}' for p in found.prior)}")
+    if objective == "robust":
+        worst_bayes = min(v.lower for v in found.bayes_type_values)
+        lines.append(f"Bayes-optimal synthesis beside it: {found.bayes_lower:.6f} <= prior-weighted <= "
+                     f"{found.bayes_upper:.6f}, its worst type {worst_bayes:.6f}; robust value certified "
+                     f">= {found.lower:.6f} (best of {len(found.candidates)} candidate priors), <= "
+                     f"{found.upper:.6f}")
+    lines.append(f"policy written to {path}")
+    emit(as_json, payload, lines)
+
+
 @click.command("baseline")
 @click.argument("spec_path", metavar="SPEC")
 @town_option
@@ -141,11 +211,18 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
         f"{value.expected_final_trust:.4f}"])
 
 
+population_option = click.option(
+    "--population", "population_path", type=click.Path(), default=None,
+    help="Driver-population FILE (instead of --driver): the AV filters with its type-aware model and "
+         "the drivers are its mixture; POLICY may then be 'robust' or 'bayes' (docs/driver_types.md).")
+
+
 @click.command("evaluate")
 @click.argument("spec_path", metavar="SPEC")
 @click.argument("policy_name", metavar="POLICY")
 @town_option
 @driver_option
+@population_option
 @click.option("--fallback-after", type=JUNCTIONS, default=DEFAULT_FALLBACK_AFTER, show_default=True,
               help="Switch to the shortest completion after this many junctions.")
 @click.option("--no-fallback", is_flag=True, help="Evaluate the policy without the fallback rule.")
@@ -157,8 +234,8 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
               "XDG_CACHE_HOME defaulting to ~/.cache).")
 @json_option
 def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_path: str | None,
-             fallback_after: int, no_fallback: bool, max_junctions: int | None, belief_rule: str,
-             cache_dir: str | None, as_json: bool) -> None:
+             population_path: str | None, fallback_after: int, no_fallback: bool,
+             max_junctions: int | None, belief_rule: str, cache_dir: str | None, as_json: bool) -> None:
     """Exact probability that POLICY ("free", "aware" or a file) satisfies SPEC, and final trust.
 
     "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached.
@@ -175,11 +252,20 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
         from trustroute.output_files import check_output_dir
 
         check_output_dir(cache_dir, "--cache-dir", "policy cache")
+    after = None if no_fallback else fallback_after
+    if population_path is not None:
+        if driver_path is not None:
+            raise click.UsageError("give --driver or --population, not both")
+        _evaluate_population(spec_path, policy_name, town_path, population_path, after, cap, belief_rule,
+                             cache_dir, as_json)
+        return
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from trustroute.policies.routing.resolve import resolve_policy
 
+    if policy_name in ("robust", "bayes"):
+        raise click.UsageError(f"POLICY '{policy_name}' needs --population FILE (the driver types)")
     policy = resolve_policy(policy_name, town, driver, spec, cache_dir)
-    value = evaluate_policy(pomdp, spec, policy, fallback_after=None if no_fallback else fallback_after,
+    value = evaluate_policy(pomdp, spec, policy, fallback_after=after,
                             max_junctions=cap, belief_rule=belief_rule)
     payload = value.to_dict()
     payload["spec"] = spec.name
@@ -190,3 +276,69 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
         f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
         f"{value.expected_junctions:.2f}, P(fallback fired) = {value.fallback_probability:.4f}",
         "episode ends: " + ", ".join(f"{k} {v:.4f}" for k, v in value.end_mass.items())])
+
+
+def load_population_routing(spec_path: str, town_path: str | None, population_path: str,
+                            policy_name: str, cache_dir: str | None, progress: bool = False):
+    """(town, population, spec, policy, lifted model, lifted spec) for routing with a driver
+    population: POLICY "free", "robust"/"bayes" (synthesized and cached) or a policy file made for
+    this population and spec (another one: InputError, one line, exit 2)."""
+    from pathlib import Path
+
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_population import load_driver_population
+    from trustroute.policies.logic.labelling import check_coefficient_length
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.model.driver_types import lift_population, lift_spec
+    from trustroute.policies.routing.files import load_population_policy
+    from trustroute.policies.routing.free import trust_free_policy
+    from trustroute.policies.routing.resolve import population_policy
+
+    town = load_town(town_path)
+    population = load_driver_population(population_path)
+    spec = load_spec(spec_path, town)
+    check_coefficient_length(spec, population.types[0].model.n_trust, population_path)
+    if policy_name in ("robust", "bayes"):
+        policy, model, lifted_spec = population_policy(town, population, spec, policy_name, cache_dir,
+                                                       population_source=population_path,
+                                                       progress=progress)
+    elif policy_name == "free":
+        model, lifted_spec = lift_population(population), lift_spec(spec, population, population_path)
+        policy = trust_free_policy(town, lifted_spec)
+    elif policy_name == "aware":
+        raise click.UsageError("with --population, POLICY is 'free', 'robust', 'bayes' or a policy file")
+    else:
+        if not Path(policy_name).exists():
+            raise InputError(policy_name, "", "not a policy file and not 'free', 'robust' or 'bayes'",
+                             "pass a policy file written by trustroute synth --population")
+        policy, model, lifted_spec = load_population_policy(policy_name, town, population, spec,
+                                                            population_path)
+    return town, population, spec, policy, model, lifted_spec
+
+
+def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None, population_path: str,
+                         fallback_after: int | None, cap: int, belief_rule: str, cache_dir: str | None,
+                         as_json: bool) -> None:
+    """`evaluate --population`: exact value over the mixture and per type."""
+    from trustroute.policies.evaluate import evaluate as evaluate_policy
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+    from trustroute.policies.synthesis.population import per_type_values
+
+    town, population, spec, policy, model, lifted_spec = load_population_routing(
+        spec_path, town_path, population_path, policy_name, cache_dir, progress=not as_json)
+    pomdp = build_pomdp(town, model)
+    value = evaluate_policy(pomdp, lifted_spec, policy, fallback_after=fallback_after, max_junctions=cap,
+                            belief_rule=belief_rule)
+    types = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule, fallback_after)
+    payload = value.to_dict()
+    payload["spec"] = spec.name
+    payload["expected_final_trust"] = _finite(value.expected_final_trust)
+    payload["expected_junctions"] = _finite(value.expected_junctions)
+    payload["population"] = {"file": population_path, "content_hash": population.content_hash,
+                             "type_values": [t.to_dict() for t in types]}
+    emit(as_json, payload, [
+        f"{spec.name} / {value.policy} over the population's {population.n_types} driver types: "
+        f"P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], E[final trust] = "
+        f"{value.expected_final_trust:.4f}",
+        "per type: " + "; ".join(f"{t.name} (weight {t.weight:g}) [{t.lower:.6f}, {t.upper:.6f}]"
+                                 for t in types)])

@@ -7,5 +7,6 @@ parts         one atomic Parquet part per episode; resume, corruption check, fai
 runner        local process pool or Dask, through one code path
 manifest      the consolidated dataset and its manifest (hashes, versions, seeds, git revision)
 expected      exact values and synthesized bounds of the study's policies (beside the simulated rates)
-examples/     example study configs (paper.toml, paper_strict.toml, population_model.toml)
+examples/     example study configs (paper.toml, paper_strict.toml, population_model.toml,
+              held_out_types.toml)
 """

@@ -16,9 +16,14 @@ policies, junctions; default 20), `fallback_after` (20; `false` disables the 20-
 seeded background traffic, vehicles kept on the net; default 0 = none, docs/scenes.md), `record`
 (episode ids, e.g. `["p00000-phi1-aware"]`, written as Rerun recordings to
 `<study dir>/recordings/<id>.rrd` while the study runs; SUMO engine only; not part of the content
-hash, since it does not change the dataset). Optional `[population]` table: individual
+hash, since it does not change the dataset), `robust_population` (the driver-population file the
+"robust" condition's policy is synthesized for, docs/driver_types.md; required with that
+condition) and `robust_objective` ("robust", the worst type's value, or "bayes", the prior-weighted
+one; default "robust"). Optional `[population]` table: individual
 variation of the drivers (participants.population.PopulationConfig; omitted: every driver is the
-nominal model, reporting trust with accuracy 0.8).
+nominal model, reporting trust with accuracy 0.8). Optional `[drivers]` table: `population`, a
+driver-population file (docs/driver_type_studies.md) from which each participant's true type is drawn; the
+participant's model is that type's model (varied around it by `[population]` when given).
 
 Every key, its default and its check: docs/formats/study_config.md.
 
@@ -44,7 +49,10 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
 PACKAGED_SPECS = Path(policies.__file__).resolve().parent / "specs"
 ENGINES: tuple[str, ...] = ("sumo", "model")
-NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free")
+NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
+ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
+TABLES: tuple[str, ...] = ("study", "population", "drivers")
+DRIVERS_KEYS: tuple[str, ...] = ("population",)
 BELIEF_RULES: tuple[str, ...] = ("bayes", "paper")
 STUDY_KEYS: tuple[str, ...] = (
     "participants",
@@ -64,6 +72,8 @@ STUDY_KEYS: tuple[str, ...] = (
     "policy_cache",
     "background_vehicles",
     "record",
+    "robust_population",
+    "robust_objective",
 )
 # Upper limits checked before any work starts: a typo such as participants = 2**63 - 1 must be an
 # error, not a plan that grows until memory runs out.
@@ -101,6 +111,9 @@ class StudyConfig:
     background_vehicles: int = 0      # SUMO engine: seeded background traffic (docs/scenes.md)
     record: tuple[str, ...] = ()      # episode ids recorded to Rerun during the run
     population: dict | None = None   # compared by value; hashed through its canonical JSON (__hash__)
+    robust_population: str | None = None   # the "robust" condition's population file (absolute)
+    robust_objective: str = "robust"       # its objective: "robust" (worst type) or "bayes"
+    driver_population: str | None = None  # [drivers] population: absolute path of the population file
 
     def __hash__(self) -> int:
         # Every field, [population] included: configs that differ only there must never share a
@@ -110,7 +123,7 @@ class StudyConfig:
 
     @property
     def condition_names(self) -> tuple[str, ...]:
-        """Short labels: "aware", "free", or a policy file's stem."""
+        """Short labels: "aware", "free", "robust", or a policy file's stem."""
         return tuple(condition_label(c) for c in self.conditions)
 
     @property
@@ -132,10 +145,24 @@ class StudyConfig:
         files it names."""
         settings = {k: v for k, v in asdict(self).items()
                     if k not in ("source_path", "output", "name", "record")}
+        if settings["robust_population"] is None:
+            # a study without the robust condition keeps its earlier hash
+            del settings["robust_population"], settings["robust_objective"]
+        if settings["driver_population"] is None:
+            del settings["driver_population"]  # a study without [drivers] keeps its earlier hash
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():
                 digest.update(Path(path).read_bytes())
+        if self.robust_population is not None:
+            from trustroute.participants.driver_population import load_driver_population
+
+            digest.update(load_driver_population(self.robust_population).content_hash.encode())
+        if self.driver_population is not None:
+            # the population's content hash covers the model files its types name
+            from trustroute.participants.driver_population import load_driver_population
+
+            digest.update(load_driver_population(self.driver_population).content_hash.encode())
         return digest.hexdigest()
 
     def with_overrides(self, **changes: object) -> StudyConfig:
@@ -220,18 +247,40 @@ def _population(table: object, source: str) -> dict | None:
     return dict(table)
 
 
+def _driver_population(table: object, base: Path, source: str) -> str | None:
+    """The [drivers] table: the driver-population file, resolved and read (InputError if bad)."""
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise InputError(source, "drivers", "expected a table", 'write [drivers] population = "FILE"')
+    unknown = sorted(set(table) - set(DRIVERS_KEYS))
+    if unknown:
+        raise InputError(source, f"drivers.{unknown[0]}", f"unknown key '{unknown[0]}'",
+                         f"use only {', '.join(DRIVERS_KEYS)}")
+    value = table.get("population")
+    fix = ("give the path of a driver-population file (docs/driver_type_studies.md), "
+           "e.g. population = \"types.json\"")
+    if not isinstance(value, str) or not value:
+        raise InputError(source, "drivers.population", f"expected a file path, got {value!r}", fix)
+    path = _resolve_path(value, base, source, "drivers.population", "driver-population file", fix)
+    from trustroute.participants.driver_population import load_driver_population
+
+    load_driver_population(path)  # raises InputError naming the file and the place
+    return str(path)
+
+
 def study_config_from_dict(data: object, source: str = "<study>", base: Path | None = None) -> StudyConfig:
     """Validate a parsed study document; relative paths resolve against `base`, then the cwd."""
     base = base if base is not None else Path.cwd()
     if not isinstance(data, dict):
         raise InputError(source, "top level", "expected a TOML table", "start with a [study] table")
-    unknown_tables = sorted(set(data) - {"study", "population"})
+    unknown_tables = sorted(set(data) - set(TABLES))
     if unknown_tables:
         raise InputError(
             source,
             unknown_tables[0],
             f"unknown table or key '{unknown_tables[0]}'",
-            "use only [study] and [population]",
+            f"use only {', '.join(f'[{t}]' for t in TABLES)}",
         )
     study = data.get("study")
     if not isinstance(study, dict):
@@ -289,7 +338,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
                         source,
                         "study.conditions",
                         "policy file",
-                        'use "aware", "free" or the path of a policy file written by trustroute synth',
+                        'use "aware", "free", "robust" or a policy file written by trustroute synth',
                     )
                 )
             )
@@ -368,6 +417,22 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         policy_cache = str((base / study["policy_cache"]).resolve())
     record = tuple(_string_list(study, "record", source, 'write record = ["p00000-phi1-aware"]')
                    if "record" in study else ())
+    robust_population = optional_file(
+        "robust_population", "driver-population file",
+        "give the driver-population file the robust policy is made for (docs/driver_types.md)")
+    if robust_population is not None:
+        from trustroute.participants.driver_population import load_driver_population
+
+        load_driver_population(robust_population)  # raises InputError naming the file and the place
+    if "robust" in conditions and robust_population is None:
+        raise InputError(source, "study.robust_population", "the 'robust' condition needs the driver "
+                         "population its policy is made for",
+                         'add robust_population = "types.json" to [study] (docs/driver_types.md)')
+    robust_objective = study.get("robust_objective", "robust")
+    if robust_objective not in ROBUST_OBJECTIVES:
+        raise InputError(source, "study.robust_objective",
+                         f"unknown objective {str(robust_objective)[:40]!r}",
+                         "use 'robust' (the worst type's value) or 'bayes' (the prior-weighted value)")
     return StudyConfig(
         source_path=source,
         name=name,
@@ -388,6 +453,9 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         background_vehicles=background_vehicles,
         record=record,
         population=_population(data.get("population"), source),
+        robust_population=robust_population,
+        robust_objective=robust_objective,
+        driver_population=_driver_population(data.get("drivers"), base, source),
     )
 
 

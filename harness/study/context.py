@@ -9,12 +9,12 @@ expected values (harness/study/expected.py) and the demo read it from here.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.plan import participant_models
+from trustroute.harness.study.plan import participant_models, participant_types
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
@@ -32,9 +32,17 @@ class StudyContext:
     setups: dict[str, EpisodeSetup]
     policies: dict[tuple[str, str], RoutingPolicy]  # (spec name, condition label) -> policy
     participants: list[DriverModel] | None  # per-participant driver models; None: all nominal
+    participant_types: list[str] | None = None  # per-participant true type ([drivers] population)
+    # (spec name, condition label) -> setup, where a condition's AV filters with another model than
+    # the nominal one ("robust": the type-aware model of its population, docs/driver_types.md)
+    condition_setups: dict[tuple[str, str], EpisodeSetup] = field(default_factory=dict)
 
     def driver_model(self, participant: int) -> DriverModel:
         return self.nominal if self.participants is None else self.participants[participant]
+
+    def setup(self, spec_name: str, condition: str) -> EpisodeSetup:
+        """The episode setup of a (spec, condition) cell."""
+        return self.condition_setups.get((spec_name, condition), self.setups[spec_name])
 
 
 def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: StudyConfig) -> Path:
@@ -60,6 +68,18 @@ def resolve_condition_policy(
 
     return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
                           config.belief_rule, progress=progress)
+
+
+def robust_condition_policy(town: Town, spec: Spec, config: StudyConfig, progress: bool = False):
+    """The "robust" condition: the policy of `config.robust_objective` for `config.robust_population`
+    (synthesized and cached if missing), with the type-aware model and lifted spec its AV uses."""
+    from trustroute.participants.driver_population import load_driver_population
+    from trustroute.policies.routing.resolve import population_policy
+
+    population = load_driver_population(config.robust_population)
+    return population_policy(town, population, spec, config.robust_objective, config.policy_cache,
+                             aware_horizon(config), config.belief_rule,
+                             population_source=config.robust_population, progress=progress)
 
 
 @functools.lru_cache(maxsize=4)
@@ -89,11 +109,18 @@ def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
         )
         for name, spec in specs.items()
     }
-    policies = {
-        (name, label): resolve_condition_policy(condition, town, nominal, spec, config, progress)
-        for name, spec in specs.items()
-        for condition, label in zip(config.conditions, config.condition_names, strict=True)
-    }
+    policies = {}
+    condition_setups = {}
+    for name, spec in specs.items():
+        for condition, label in zip(config.conditions, config.condition_names, strict=True):
+            if condition == "robust":
+                policy, model, lifted_spec = robust_condition_policy(town, spec, config, progress)
+                condition_setups[(name, label)] = replace(setups[name], driver_model=model,
+                                                          spec=lifted_spec)
+                policies[(name, label)] = policy
+            else:
+                policies[(name, label)] = resolve_condition_policy(condition, town, nominal, spec,
+                                                                   config, progress)
     return StudyContext(
         config=config,
         town=town,
@@ -102,4 +129,6 @@ def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
         setups=setups,
         policies=policies,
         participants=participant_models(config, nominal),
+        condition_setups=condition_setups,
+        participant_types=participant_types(config),
     )

@@ -29,13 +29,18 @@ def expected_values(config: StudyConfig) -> dict:
     out: dict = {}
     for (spec_name, condition), policy in context.policies.items():
         started = time.perf_counter()
+        setup = context.setup(spec_name, condition)
+        # a condition whose AV filters with another model ("robust": the type-aware one) is
+        # evaluated on its own filter with the nominal driver as the truth
+        own = setup.driver_model is not context.nominal
         value = evaluate(
-            pomdp,
-            context.specs[spec_name],
+            build_pomdp(context.town, setup.driver_model) if own else pomdp,
+            setup.spec,
             policy,
             fallback_after=config.fallback_after,
             max_junctions=config.junction_cap,
             belief_rule=config.belief_rule,
+            truth=pomdp if own else None,
         )
         entry = {
             "exact_lower": value.lower,

@@ -118,7 +118,10 @@ def consolidate(
     Raises DamagedParts (after moving them aside) when a part fails verification."""
     from tqdm import tqdm
 
+    from trustroute.harness.study.plan import participant_types
+
     study_dir = Path(study_dir)
+    types = participant_types(config)
     episode_rows, roads_tables, kinematics_tables, incident_tables = [], [], [], []
     damaged: list[str] = []
     for task in tqdm(tasks, desc="consolidating", unit="episode", disable=None if progress else True,
@@ -145,6 +148,7 @@ def consolidate(
                 **{k: v for k, v in summary.items() if k != "episode_id"},
                 "mean_reported_trust": mean_reported,
                 "reports": reports,
+                "driver_type": None if types is None else types[task.participant],
             }
         )
         roads_tables.append(table)
@@ -188,7 +192,8 @@ def consolidate(
             "study": config.seed,
             "episodes": {t.episode_id: t.seed for t in tasks},
             "derivation": "numpy SeedSequence(study seed, spawn_key=(1, participant, spec index, "
-            "condition index)); drivers of a [population]: spawn_key=(2,)",
+            "condition index)); drivers of a [population]: spawn_key=(2,); true types of a [drivers] "
+            "population: spawn_key=(3, participant)",
         },
         "files": {
             "episodes": EPISODES_FILE,

@@ -7,6 +7,10 @@ from the study seed and fixed keys, never from the order in which episodes run o
 
 - participant p's driver model: `sample_population` with SeedSequence(seed, spawn_key=(2,)),
   all participants at once (nominal for every participant when there is no [population]);
+- with a `[drivers] population`, participant p's true type: one uniform draw of
+  SeedSequence(seed, spawn_key=(3, p)) against the types' cumulative weights (so p's type does not
+  depend on the number of participants); p's model is its type's model, or with a [population]
+  one draw of `sample_individual` around it from the spawn_key=(2,) stream, participants in order;
 - episode (p, spec s, condition c): SeedSequence(seed, spawn_key=(1, p, s, c)); its first
   32-bit word seeds the simulator (SUMO), the sequence itself seeds the driver's Generator.
 """
@@ -23,6 +27,7 @@ from trustroute.participants.driver_model import DriverModel
 
 EPISODE_KEY = 1
 POPULATION_KEY = 2
+TYPE_KEY = 3
 
 
 @dataclass(frozen=True)
@@ -81,12 +86,61 @@ def plan_episodes(config: StudyConfig) -> list[EpisodeTask]:
     return tasks
 
 
+def participant_type_indices(config: StudyConfig, weights: np.ndarray) -> np.ndarray:
+    """Each participant's type index, drawn from `weights` (see the module docstring)."""
+    cumulative = np.cumsum(np.asarray(weights, dtype=float))
+    cumulative /= cumulative[-1]
+    draws = [
+        np.random.default_rng(np.random.SeedSequence(config.seed, spawn_key=(TYPE_KEY, p))).random()
+        for p in range(config.participants)
+    ]
+    return np.minimum(np.searchsorted(cumulative, draws, side="right"), len(cumulative) - 1)
+
+
+def participant_types(config: StudyConfig) -> list[str] | None:
+    """The participants' true type names, or None when the study has no [drivers] population."""
+    if config.driver_population is None:
+        return None
+    from trustroute.participants.driver_population import load_driver_population
+
+    population = load_driver_population(config.driver_population)
+    names = population.names
+    return [names[int(i)] for i in participant_type_indices(config, population.weights)]
+
+
+def _check_type_model(model: DriverModel, nominal: DriverModel, config: StudyConfig, name: str) -> None:
+    from trustroute.networks.errors import InputError
+
+    if (tuple(model.trust_levels) != tuple(nominal.trust_levels)
+            or tuple(model.incident_types) != tuple(nominal.incident_types)):
+        raise InputError(
+            config.driver_population or config.source_path, f"types.{name}",
+            f"trust levels {list(model.trust_levels)} / incidents {list(model.incident_types)} differ "
+            f"from the AV's driver model ({list(nominal.trust_levels)} / {list(nominal.incident_types)})",
+            "give every type the trust levels and incident types of the study's driver model")
+
+
 def participant_models(config: StudyConfig, nominal: DriverModel) -> list[DriverModel] | None:
     """The participants' driver models, or None when every driver is the nominal model."""
-    if config.population is None:
+    if config.population is None and config.driver_population is None:
         return None
-    from trustroute.participants.population import population_config_from_dict, sample_population
+    from trustroute.participants.population import (
+        population_config_from_dict,
+        sample_individual,
+        sample_population,
+    )
 
-    population = population_config_from_dict(config.population, config.source_path, nominal.n_trust)
+    spread = population_config_from_dict(config.population, config.source_path, nominal.n_trust)
     rng = np.random.default_rng(np.random.SeedSequence(config.seed, spawn_key=(POPULATION_KEY,)))
-    return sample_population(nominal, config.participants, population, rng)
+    if config.driver_population is None:
+        return sample_population(nominal, config.participants, spread, rng)
+    from trustroute.participants.driver_population import load_driver_population
+
+    population = load_driver_population(config.driver_population)
+    for driver_type in population.types:
+        _check_type_model(driver_type.model, nominal, config, driver_type.name)
+    indices = participant_type_indices(config, population.weights)
+    bases = [population.types[int(i)].model for i in indices]
+    if config.population is None:
+        return bases
+    return [sample_individual(base, spread, rng, label=f"individual {p}") for p, base in enumerate(bases)]

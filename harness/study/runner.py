@@ -105,7 +105,7 @@ def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path |
                               background_vehicles=config.background_vehicles)
         options = {"rrd_path": rrd_path, "config": sumo_config}
     return engine_function(config.engine)(
-        context.setups[task.spec],
+        context.setup(task.spec, task.condition),
         context.policies[(task.spec, task.condition)],
         driver,
         task.episode_id,

@@ -96,6 +96,10 @@ class Labeller:
                 trust_roads.append(np.isin(np.arange(len(town.states)),
                                            [road_index[r] for r in roads]))
                 trust_levels.append([level in definition.trust for level in range(1, N_TRUST_LEVELS + 1)])
+            elif atom in spec.type_atoms:
+                raise InputError(spec.source_path or spec.name, f"type_beliefs.{atom}",
+                                 f"type-belief atom '{atom}' needs a driver population of types",
+                                 "pass --population FILE (docs/driver_types.md)")
             else:
                 raise ValueError(f"DFA atom {atom!r} is not defined in spec {spec.name!r}")
         self.state_columns = np.array(state_columns, dtype=np.int64)

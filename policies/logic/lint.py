@@ -24,6 +24,11 @@ With a town (and a driver model: the packaged one unless given):
 - `state-unreachable`: a state atom none of whose roads can be reached from the start.
 - `town-unsatisfiable`: no route satisfies even the state-only projection (every belief literal
   true): no accepting (road, q) is reachable in the town × projected-DFA product.
+Type-belief atoms (docs/driver_types.md): lint a spec with them against a driver population
+(`trustroute spec check SPEC --population FILE`: the spec lifted to the population's type-aware
+model, so a type it does not have is an error and the threshold check reads the joint filter);
+without one:
+- `type-belief-unchecked`: the atom's types are not checked (no population given).
 Trust-state atoms (docs/trust_states.md):
 - `trust-every-level`: the atom names every trust level, so it tests the road only (a state atom).
 - `trust-unreachable` (with a town): none of the atom's roads can be reached from the start.
@@ -248,7 +253,8 @@ def precedence_warnings(spec: Spec) -> list[LintWarning]:
 
 def threshold_warnings(spec: Spec, town: Town, driver: DriverModel) -> list[LintWarning]:
     """Belief atoms whose threshold a reachable belief hits within the rounding margin."""
-    if not spec.belief_atoms or any(len(a.coeffs) != driver.n_trust for a in spec.belief_atoms.values()):
+    if (not spec.belief_atoms or spec.type_atoms
+            or any(len(a.coeffs) != driver.n_trust for a in spec.belief_atoms.values())):
         return []
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
@@ -294,6 +300,11 @@ def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None,
                 + subformula_warnings(spec, dfa, {w.atom for w in no_effect}) + unused_warnings(spec)
                 + trust_warnings(spec, town)
                 + precedence_warnings(spec))
+    for name in sorted(spec.type_atoms):
+        warnings.append(LintWarning(
+            "type-belief-unchecked", f"type-belief atom '{name}' names driver types "
+            f"{list(spec.type_atoms[name].types)}; check them against a driver population with "
+            "--population FILE", name))
     if dfa.rejecting[dfa.initial]:
         warnings.append(LintWarning("unsatisfiable", "no trace satisfies the formula (the DFA's "
                                     "initial state cannot reach acceptance)"))

@@ -8,7 +8,10 @@ iff `offset - coeffs·b < 0` (strict; docs/model.md, "scLDTL"; every key: docs/f
 `[trust_states]` table of
 trust-state atoms `NAME = { roads = [...], trust = [6, 7] }`: true at a position iff the road is
 one of `roads` (any road when `roads` is absent) and the human's hidden trust is one of the levels
-`trust` (docs/trust_states.md). Every error is an InputError naming the file, line and column.
+`trust` (docs/trust_states.md), and a `[type_beliefs]` table of type-belief atoms
+`NAME = { types = ["flat"], above = 0.7 }`: true iff the AV's belief that the driver is of one of
+`types` exceeds `above` (strict; the types of a driver population, docs/driver_types.md). Every
+error is an InputError naming the file, line and column.
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ from trustroute.policies.logic.formula import (
 )
 
 N_TRUST_LEVELS = 7  # the Muir scale 1..7 of the default driver model (any number >= 2 is accepted)
-TOP_LEVEL_KEYS = ("name", "start", "formula", "states", "beliefs", "trust_states")
+TOP_LEVEL_KEYS = ("name", "start", "formula", "states", "beliefs", "trust_states", "type_beliefs")
 MAX_SPEC_NAME = 64
 # Names become file names (policy cache entries): no path separators, NUL or leading dot.
 SPEC_NAME = re.compile(rf"[A-Za-z0-9_][A-Za-z0-9_.+-]{{0,{MAX_SPEC_NAME - 1}}}")
@@ -69,6 +72,15 @@ class TrustStateAtom:
         return self.roads is None or road in self.roads
 
 
+@dataclass(frozen=True)
+class TypeBeliefAtom:
+    """True iff the AV's belief that the driver's type is one of `types` exceeds `above` (strict):
+    a belief atom on the type marginal (docs/driver_types.md, "Type-belief atoms")."""
+
+    types: tuple[str, ...]
+    above: float
+
+
 @dataclass(frozen=True, eq=False)
 class Spec:
     name: str
@@ -79,6 +91,7 @@ class Spec:
     belief_atoms: dict[str, BeliefAtom]
     source_path: str = ""
     trust_atoms: dict[str, TrustStateAtom] = field(default_factory=dict)
+    type_atoms: dict[str, TypeBeliefAtom] = field(default_factory=dict)
 
     @functools.cached_property
     def content_hash(self) -> str:
@@ -95,6 +108,9 @@ class Spec:
             meaning["trust_states"] = {
                 k: {"trust": sorted(v.trust), "roads": None if v.roads is None else sorted(v.roads)}
                 for k, v in sorted(self.trust_atoms.items())}
+        if self.type_atoms:
+            meaning["type_beliefs"] = {k: {"types": sorted(v.types), "above": float(v.above)}
+                                       for k, v in sorted(self.type_atoms.items())}
         canonical = json.dumps(
             meaning,
             sort_keys=True,
@@ -104,9 +120,10 @@ class Spec:
 
     @property
     def atoms(self) -> tuple[str, ...]:
-        """Every defined atom: state atoms sorted, then belief atoms sorted, then trust-state atoms."""
+        """Every defined atom: state atoms sorted, then belief atoms sorted, then trust-state atoms,
+        then type-belief atoms."""
         return (tuple(sorted(self.state_atoms)) + tuple(sorted(self.belief_atoms))
-                + tuple(sorted(self.trust_atoms)))
+                + tuple(sorted(self.trust_atoms)) + tuple(sorted(self.type_atoms)))
 
     @property
     def uses_trust_atoms(self) -> bool:
@@ -278,10 +295,13 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
 
     trust_atoms = _trust_state_atoms(data.get("trust_states", {}), text, source, town,
                                      set(state_atoms) | set(belief_atoms), check_atom_name)
+    type_atoms = _type_belief_atoms(data.get("type_beliefs", {}), text, source,
+                                    set(state_atoms) | set(belief_atoms) | set(trust_atoms),
+                                    check_atom_name)
     line, column = _formula_position(text)
     try:
-        formula = parse_formula(formula_text, set(state_atoms) | set(belief_atoms) | set(trust_atoms),
-                                source, line, column)
+        formula = parse_formula(formula_text, set(state_atoms) | set(belief_atoms) | set(trust_atoms)
+                                | set(type_atoms), source, line, column)
     except RecursionError:
         raise fail("formula", (r"^\s*formula\s*=",), "the formula is nested too deeply to parse",
                    "simplify the formula") from None
@@ -293,7 +313,49 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
                    'write start = "E-A"')
     return Spec(name=name, start=start, formula_text=formula_text, formula=formula,
                 state_atoms=state_atoms, belief_atoms=belief_atoms, source_path=source,
-                trust_atoms=trust_atoms)
+                trust_atoms=trust_atoms, type_atoms=type_atoms)
+
+
+def _type_belief_atoms(raw: object, text: str, source: str, taken: set[str],
+                       check_atom_name) -> dict[str, TypeBeliefAtom]:
+    """The `[type_beliefs]` table: NAME = { types = ["flat", ...], above = 0.7 }."""
+
+    def fail(label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
+        return InputError(source, _place(text, label, *needles), problem, fix)
+
+    example = 'write [type_beliefs] then nontruster = { types = ["flat"], above = 0.7 }'
+    if not isinstance(raw, dict):
+        raise fail("type_beliefs", (r"^\s*type_beliefs\s*=",),
+                   "'type_beliefs' must be a table of atom -> { types, above }", example)
+    atoms: dict[str, TypeBeliefAtom] = {}
+    for atom in sorted(raw):
+        entry = raw[atom]
+        check_atom_name(atom, "type_beliefs")
+        label = f"type_beliefs.{atom}"
+        needles = (r"^\s*\[type_beliefs", rf"^\s*{re.escape(atom)}\s*=")
+        if atom in taken:
+            raise fail(label, needles, f"atom '{atom}' is defined twice (also under [states], "
+                       "[beliefs] or [trust_states])", "rename one of them")
+        if not isinstance(entry, dict):
+            raise fail(label, needles, f"type-belief atom '{atom}' must be a table", example)
+        for key in entry:
+            if key not in ("types", "above"):
+                raise fail(label, needles, f"unknown key '{key}' in type-belief atom '{atom}'",
+                           "use only types and above")
+        for key in ("types", "above"):
+            if key not in entry:
+                raise fail(label, needles, f"type-belief atom '{atom}' is missing '{key}'", example)
+        types = entry["types"]
+        if not (isinstance(types, list) and types and all(isinstance(t, str) and t for t in types)
+                and len(set(types)) == len(types)):
+            raise fail(label, needles, f"type-belief atom '{atom}': types must be a non-empty list of "
+                       "distinct type names", 'write types = ["flat"]')
+        above = entry["above"]
+        if not (_number(above) and 0 <= above < 1):
+            raise fail(label, needles, f"type-belief atom '{atom}': above must be a number in [0, 1)",
+                       "write above = 0.7 (the atom is true iff P(type in types) > above)")
+        atoms[atom] = TypeBeliefAtom(types=tuple(types), above=float(above))
+    return atoms
 
 
 def _trust_state_atoms(raw: object, text: str, source: str, town: Town | None, taken: set[str],
@@ -357,7 +419,8 @@ def load_spec(path: str | Path, town: Town | None = None) -> Spec:
 
 
 def state_only_projection(spec: Spec) -> Spec:
-    """The spec with every belief literal (positive or negated) replaced by true, and every
+    """The spec with every belief and type-belief literal (positive or negated) replaced by true,
+    and every
     trust-state literal by its most permissive reading on the road alone: a positive literal by
     its roads (true when it has none), a negated one by true unless it names every trust level
     (then by the negation of its roads). The projection holds wherever some trust and some
@@ -365,7 +428,7 @@ def state_only_projection(spec: Spec) -> Spec:
     state_atoms = dict(spec.state_atoms)
 
     def replace(literal: Literal) -> Formula:
-        if literal.atom in spec.belief_atoms:
+        if literal.atom in spec.belief_atoms or literal.atom in spec.type_atoms:
             return TRUE
         trust = spec.trust_atoms.get(literal.atom)
         if trust is None:

@@ -16,6 +16,12 @@ Nearest-belief rule (tables without p):
 2. if there is none, among rows with the same (x, q) at any t, the nearest belief;
 3. if there is none, drive the trust-free shortest completion of the state-only task, or the
    first legal move when that task is complete or impossible.
+
+`reweight` (a policy made for a driver population with another type prior λ than the
+population's weights w, docs/driver_types.md "The robust objective"): the belief the policy is given
+(the type-aware filter under w) is first turned into the belief under λ, b_λ ∝ b_w · r with
+r = λ_k / w_k on type k's block (exact: the likelihood of the observations given the type does not
+depend on the prior). Without it nothing changes.
 """
 
 from __future__ import annotations
@@ -116,8 +122,9 @@ class BeliefTablePolicy(RoutingPolicy):
 
     def __init__(self, table: PolicyTable, town: Town, spec: Spec, name: str = "aware",
                  lower: float | None = None, upper: float | None = None,
-                 horizon: int | None = None) -> None:
+                 horizon: int | None = None, reweight: np.ndarray | None = None) -> None:
         self.table = table
+        self.reweight = None if reweight is None else np.asarray(reweight, dtype=float)
         self.lower, self.upper, self.horizon = lower, upper, horizon   # as certified by synthesis
         self.town = town
         self.spec = spec
@@ -142,6 +149,16 @@ class BeliefTablePolicy(RoutingPolicy):
     def _key_tq(self, t: np.ndarray, x: np.ndarray, q: np.ndarray) -> np.ndarray:
         return (t * self._n_x + x) * self._n_q + q
 
+    def _policy_beliefs(self, beliefs: np.ndarray) -> np.ndarray:
+        """The beliefs the table is looked up with: reweighted to the policy's type prior when it
+        has one (module docstring)."""
+        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        if self.reweight is None:
+            return beliefs
+        weighted = beliefs * self.reweight
+        total = weighted.sum(axis=1, keepdims=True)
+        return np.where(total > 0, weighted / np.where(total > 0, total, 1.0), beliefs)
+
     def _key_tqp(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, p: np.ndarray) -> np.ndarray:
         return self._key_tq(t, x, q) * self._n_p + p
 
@@ -149,7 +166,7 @@ class BeliefTablePolicy(RoutingPolicy):
                            beliefs: np.ndarray) -> np.ndarray:
         """The exact-belief rule, vectorised: the slot per context (never -1)."""
         t, x, q, p = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q, projected))
-        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        beliefs = self._policy_beliefs(beliefs)
         out = self._free_slot[x, p].copy()
         if t.size == 0 or not self.table.rows:
             return out
@@ -175,7 +192,7 @@ class BeliefTablePolicy(RoutingPolicy):
                                  "(projected) of each context")
             return self.exact_action_slots(t, x, q, projected, beliefs)
         t, x, q = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q))
-        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        beliefs = self._policy_beliefs(beliefs)
         out = np.full(t.size, -1, dtype=np.int64)
         if t.size == 0 or not self.table.rows:
             return out

@@ -37,9 +37,13 @@ ACTING_RULE = ("action of the stored row with the same (junctions driven, road, 
 
 
 ARRAY_NAMES = ("t", "x", "q", "projected", "beliefs", "action")
+# A policy synthesized for a driver population of several types also records these
+# (docs/formats/policy_file.md, "Population policies"); one type writes today's file.
+POPULATION_KEYS = ("population_hash", "population_types", "population_weights", "belief_prior",
+                   "objective", "objective_lower", "objective_upper", "type_values")
 DOCUMENT_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "spec_hash", "horizon",
                  "belief_rule", "lower", "upper", "gap", "seconds", "rows", "acting_rule", "arrays",
-                 "arrays_sha256")
+                 "arrays_sha256") + POPULATION_KEYS
 RESYNTH = "re-run trustroute synth to write both files again"
 
 
@@ -47,8 +51,11 @@ def array_path(path: str | Path) -> Path:
     return Path(path).with_suffix(".npz")
 
 
-def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec: Spec) -> Path:
-    """Write the policy of a SynthesisResult to `path` (+ `.npz`); returns the JSON path."""
+def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec: Spec,
+                population: dict | None = None, name: str = "aware") -> Path:
+    """Write the policy of a SynthesisResult to `path` (+ `.npz`); returns the JSON path.
+    population: the POPULATION_KEYS entries of a policy made for several driver types (driver and
+    spec are then the lifted ones, policies/model/driver_types.py)."""
     from trustroute.output_files import atomic_write_bytes, atomic_write_text
 
     path = Path(path)
@@ -65,7 +72,7 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
     document = {
         "format": FORMAT,
         "version": VERSION,
-        "name": "aware",
+        "name": name,
         "spec": spec.name,
         "town_hash": town.content_hash,
         "driver_hash": driver.content_hash,
@@ -81,6 +88,8 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
         "arrays": arrays.name,
         "arrays_sha256": hashlib.sha256(array_bytes).hexdigest(),
     }
+    if population is not None:
+        document.update({key: population[key] for key in POPULATION_KEYS})
     atomic_write_text(path, json.dumps(document, indent=1) + "\n", "policy file",
                       "pass a writable --out path")
     return path
@@ -183,6 +192,16 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
     path = Path(path)
     where = str(path)
     document = read_policy_document(path)
+    made_for_population = document.get("population_hash")
+    if made_for_population is not None and getattr(driver, "population_hash", None) != made_for_population:
+        raise InputError(where, "population_hash", "policy was synthesized for a driver population "
+                         f"(hash {str(made_for_population)[:12]}...) that is not the one given",
+                         "pass the driver population it was made for (--population), or re-run "
+                         "trustroute synth --population for this one")
+    if made_for_population is None and getattr(driver, "population_hash", ""):
+        raise InputError(where, "population_hash", "policy was synthesized for a single driver model, "
+                         "not for a driver population", "pass the driver model it was made for "
+                         "(--driver), or re-run trustroute synth --population")
     made_for = {"town": "", "driver model": "", "spec": f" {document.get('spec')!r}"}
     for key, what, value, option, name in (
             ("town_hash", "town", town.content_hash, "--town", ""),
@@ -197,4 +216,45 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
     table = read_policy_table(path.parent / document["arrays"], document, town, driver, spec)
     return BeliefTablePolicy(table, town, spec, name=str(document.get("name", "aware")),
                              lower=document.get("lower"), upper=document.get("upper"),
-                             horizon=document.get("horizon"))
+                             horizon=document.get("horizon"),
+                             reweight=prior_reweight(document, driver.n_trust, where))
+
+
+def prior_reweight(document: dict, n_hidden: int, where: str = "policy file") -> np.ndarray | None:
+    """The belief reweighting r = λ_k / w_k (per hidden index) of a population policy whose type
+    prior λ differs from the population's weights w; None otherwise (policies/routing/aware_table.py)."""
+    prior, weights = document.get("belief_prior"), document.get("population_weights")
+    if prior is None or weights is None:
+        return None
+    try:
+        prior_array = np.asarray(prior, dtype=float)
+        weight_array = np.asarray(weights, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(where, "belief_prior", "expected lists of numbers", RESYNTH) from None
+    if (prior_array.shape != weight_array.shape or prior_array.ndim != 1 or not prior_array.size
+            or n_hidden % prior_array.size or not np.all(np.isfinite(prior_array))
+            or (prior_array < 0).any() or not (weight_array > 0).all()):
+        raise InputError(where, "belief_prior", "expected one nonnegative prior weight per type", RESYNTH)
+    if np.array_equal(prior_array, weight_array):
+        return None
+    return np.repeat(prior_array / weight_array, n_hidden // prior_array.size)
+
+
+def load_population_policy(path: str | Path, town: Town, population, spec: Spec,
+                           population_source: str = ""):
+    """A policy file for routing with driver population `population` (a DriverPopulation):
+    (policy, the lifted driver model its AV filters with, the lifted spec). The lifted model uses
+    the type prior the file records. A file made for another population or spec, or for a single
+    driver model while the population has several types: InputError (one line, exit 2)."""
+    from trustroute.policies.model.driver_types import lift_population, lift_spec
+
+    document = read_policy_document(path)
+    lifted_spec = lift_spec(spec, population, population_source)
+    if document.get("population_hash") not in (None, population.content_hash):
+        raise InputError(str(path), "population_hash", "policy was synthesized for another driver "
+                         f"population (hash {str(document['population_hash'])[:12]}...; the population "
+                         f"{population_source or population.source_path} has "
+                         f"{population.content_hash[:12]}...)",
+                         "pass the population it was made for, or re-run trustroute synth --population")
+    model = lift_population(population)
+    return load_policy(path, town, model, lifted_spec), model, lifted_spec

@@ -127,3 +127,78 @@ def synthesis_progress(description: str, enabled: bool):
             bar.set_postfix_str(f"L={lower:.4f} U={upper:.4f}", refresh=False)
 
         yield on_iteration
+
+
+POPULATION_TIME_LIMIT = 60.0     # per synthesis run of a population policy
+POPULATION_GRID_POINTS = 6       # candidate type priors of the robust objective
+
+
+def population_cache_path(town: Town, population, spec: Spec, objective: str,
+                          cache_dir: str | Path | None, horizon: int | None = AWARE_HORIZON,
+                          belief_rule: BeliefRule = "bayes") -> Path:
+    """Cache entry of the population policy ("robust" or "bayes" objective) for these inputs: the
+    key covers the population's content hash instead of one driver model's."""
+    key = hashlib.sha256("|".join((town.content_hash, population.content_hash, spec.content_hash,
+                                   objective, f"H={horizon}", f"tau={AWARE_TAU}", belief_rule,
+                                   f"grid={POPULATION_GRID_POINTS}",
+                                   f"synthesis={SYNTHESIS_VERSION}")).encode())
+    folder = Path(cache_dir) if cache_dir else cache_dir_of(POLICIES)
+    label = re.sub(r"[^A-Za-z0-9_.+-]", "_", spec.name)[:48].lstrip(".") or "spec"
+    return folder / f"{objective}-{label}-{key.hexdigest()[:16]}.json"
+
+
+def population_policy(town: Town, population, spec: Spec, objective: str = "robust",
+                      cache_dir: str | Path | None = None, horizon: int | None = AWARE_HORIZON,
+                      belief_rule: BeliefRule = "bayes", population_source: str = "",
+                      notice: Callable[[str], object] = _stderr, progress: bool = False):
+    """The cached policy of `objective` for driver population `population` (a DriverPopulation),
+    synthesized when missing or damaged (policies/synthesis/population.py): (policy, the lifted
+    driver model its AV filters with, the lifted spec). One type: the "aware" policy of that
+    type's model, as today."""
+    from trustroute.output_files import file_lock
+    from trustroute.policies.model.driver_types import lift_population, lift_spec
+    from trustroute.policies.routing.files import load_population_policy
+    from trustroute.policies.synthesis.population import (
+        document_entries,
+        policy_name,
+        synthesize_population,
+    )
+
+    lifted_spec = lift_spec(spec, population, population_source)
+    if population.n_types == 1:
+        model = lift_population(population)
+        return (aware_policy(town, model, lifted_spec, cache_dir, horizon, belief_rule, notice, progress),
+                model, lifted_spec)
+    path = population_cache_path(town, population, spec, objective, cache_dir, horizon, belief_rule)
+
+    def cached():
+        if not path.exists() and not array_path(path).exists():
+            return None
+        try:
+            return load_population_policy(path, town, population, spec, population_source)
+        except InputError as exc:
+            notice(f"notice: discarding the damaged policy cache entry {path.name} ({exc.problem}); "
+                   "synthesizing it again")
+            for stale in (path, array_path(path)):
+                with contextlib.suppress(FileNotFoundError):
+                    stale.unlink()
+            return None
+
+    if path.is_file():
+        found = cached()
+        if found is not None:
+            return found
+    with file_lock(path.with_name(path.name + ".lock"), "policy cache entry", wait=True,
+                   fix="pass a writable --cache-dir"):
+        found = cached()
+        if found is not None:
+            return found
+        with synthesis_progress(f"synthesizing {objective} for {spec.name}", progress) as on_iteration:
+            made = synthesize_population(town, population, spec, objective, tau=AWARE_TAU,
+                                         time_limit=POPULATION_TIME_LIMIT, horizon=horizon,
+                                         belief_rule=belief_rule, population_source=population_source,
+                                         grid_points=POPULATION_GRID_POINTS, on_iteration=on_iteration)
+        save_policy(made.result, path, town, made.pomdp.driver, made.spec,
+                    population=document_entries(made), name=policy_name(made))
+        # read back: a fresh entry and a cached one give the same policy object
+        return load_population_policy(path, town, population, spec, population_source)

@@ -1,0 +1,125 @@
+"""`trustroute population`: driver-population files (docs/driver_type_studies.md).
+
+sample   K driver types sampled around a nominal driver model with `[population]` settings
+         (participants/sampled_types.py), written as a driver-population file
+show     the types of a driver-population file, their weights and what sets them apart
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import click
+import numpy as np
+
+from trustroute.harness.commands.options import SEED, FiniteFloat, bounded_int
+from trustroute.harness.commands.output import emit, json_option, with_paths
+
+
+@click.group("population")
+def population() -> None:
+    """Sample, fit (`trustroute fit --types`) and inspect driver populations."""
+
+
+def _population_settings(config_path: str | None, concentration: float | None, spread: float | None,
+                         n_trust: int):
+    from trustroute.networks.validation import parse_toml, read_text
+    from trustroute.participants.population import population_config_from_dict
+
+    table: dict = {}
+    source = "--config"
+    if config_path is not None:
+        source = str(config_path)
+        data = parse_toml(read_text(config_path, source, "the [population] settings",
+                                    "pass a TOML file with a [population] table (e.g. a study config)"),
+                          source, "population settings")
+        table = dict(data.get("population") or {})
+    if concentration is not None:
+        table["concentration"] = concentration
+    if spread is not None:
+        table["takeover_spread"] = spread
+    return population_config_from_dict(table, source, n_trust)
+
+
+@population.command("sample")
+@click.option("--types", "n_types", type=bounded_int(1, 1_000), required=True, help="Number of types K.")
+@click.option("--seed", type=SEED, required=True, help="Seed of the draws.")
+@click.option("--out", type=click.Path(), required=True, help="Driver-population FILE to write.")
+@click.option("--driver", "driver_path", type=click.Path(), default=None,
+              help="Nominal driver model file (default: the packaged model).")
+@click.option("--config", "config_path", type=click.Path(), default=None,
+              help="TOML file whose [population] table gives the spread (e.g. a study config).")
+@click.option("--concentration", type=FiniteFloat(0.0, open_minimum=True), default=None,
+              help="Dirichlet concentration of the rows around the nominal ones (overrides --config).")
+@click.option("--takeover-spread", "spread", type=FiniteFloat(0.0), default=None,
+              help="sd of each type's logit shift of its takeover probabilities (overrides --config).")
+@json_option
+def sample(n_types: int, seed: int, out: str, driver_path: str | None, config_path: str | None,
+           concentration: float | None, spread: float | None, as_json: bool) -> None:
+    """Sample K driver types around a nominal model; equal weights."""
+    from trustroute.networks.errors import InputError
+    from trustroute.output_files import check_output_file
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.participants.driver_population import write_driver_population
+    from trustroute.participants.sampled_types import sample_driver_population
+
+    check_output_file(out, "--out", "driver-population file")
+    nominal = load_driver_model(driver_path)
+    settings = _population_settings(config_path, concentration, spread, nominal.n_trust)
+    if math.isinf(settings.concentration) and settings.takeover_spread == 0:
+        raise InputError(config_path or "--concentration", "population",
+                         "these settings give every type the nominal model",
+                         "give a finite --concentration or a --takeover-spread > 0")
+    provenance = (f"trustroute population sample --types {n_types} --seed {seed} around "
+                  f"{nominal.source_path}: concentration {settings.concentration:g}, takeover_spread "
+                  f"{settings.takeover_spread:g}")
+    result = sample_driver_population(nominal, n_types, settings, np.random.default_rng(seed), provenance)
+    path = write_driver_population(result, Path(out))
+    summary = {**population_summary(result), "source": str(path)}
+    emit(as_json, with_paths(summary, {"population": path}),
+         [*summary_lines(summary), f"driver population written to {path}"])
+
+
+@population.command("show")
+@click.argument("path", metavar="FILE", type=click.Path())
+@json_option
+def show(path: str, as_json: bool) -> None:
+    """Print the types of a driver-population file and their weights."""
+    from trustroute.participants.driver_population import load_driver_population
+
+    summary = population_summary(load_driver_population(path))
+    emit(as_json, summary, summary_lines(summary))
+
+
+def population_summary(pop) -> dict:
+    """Per type: weight, mean initial trust, mean takeover probability per incident, and the
+    expected trust change per road without a takeover (averaged over trust levels)."""
+    types = []
+    for t in pop.types:
+        model = t.model
+        levels = np.asarray(model.trust_levels, dtype=float)
+        change = model.trust_transition[:, 0, 0] @ levels - levels  # [I, k]: standstill, AV success
+        types.append({
+            "name": t.name,
+            "weight": float(t.weight),
+            "initial_mean_trust": float(model.initial_belief @ levels),
+            "takeover_probability_mean": {inc: float(model.takeover_probability[i].mean())
+                                          for i, inc in enumerate(model.incident_types)},
+            "expected_trust_change": {inc: float(change[i].mean())
+                                      for i, inc in enumerate(model.incident_types)},
+            "model_hash": model.content_hash[:12],
+        })
+    return {"source": str(pop.source_path), "provenance": pop.provenance, "types": types,
+            "content_hash": pop.content_hash}
+
+
+def summary_lines(summary: dict) -> list[str]:
+    lines = [f"{len(summary['types'])} driver types ({summary['source'] or 'not written yet'}): "
+             f"{summary['provenance']}"]
+    for t in summary["types"]:
+        takeover = ", ".join(f"{k} {v:.2f}" for k, v in t["takeover_probability_mean"].items())
+        change = ", ".join(f"{k} {v:+.2f}" for k, v in t["expected_trust_change"].items())
+        lines.append(f"  {t['name']}: weight {t['weight']:.3f}, initial mean trust "
+                     f"{t['initial_mean_trust']:.2f}; mean takeover {takeover}; trust change/road {change}")
+    return lines

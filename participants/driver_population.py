@@ -1,0 +1,203 @@
+"""Driver-population files: a finite mixture of driver types, each a full driver model, with
+prior weights; validation, loading, writing.
+
+Schema (JSON; every key and its check: docs/formats/driver_population.md):
+- `format`: "trustroute-driver-population", `version`: 1
+- `source` (optional): provenance text
+- `types`: a non-empty list of `{"name": ..., "weight": ..., "model": {driver model}}` or
+  `{"name": ..., "weight": ..., "model_file": "path relative to this file"}`; the driver model is
+  the document `participants/driver_model.py` reads (docs/formats/driver_model.md).
+
+Every type shares the trust levels and incident types of the first; weights are > 0 and sum to 1
+within `WEIGHT_TOLERANCE`; names are unique. A population of one type of weight 1 is today's
+single driver model (`single_type_population`).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from trustroute.networks.errors import InputError
+from trustroute.networks.validation import check_keys, parse_json, read_text, require_keys, require_object
+from trustroute.output_files import atomic_write_text
+from trustroute.participants.driver_model import DriverModel, driver_model_from_dict, load_driver_model
+
+POPULATION_FORMAT = "trustroute-driver-population"
+POPULATION_VERSION = 1
+POPULATION_KEYS: tuple[str, ...] = ("format", "version", "source", "types")
+TYPE_KEYS: tuple[str, ...] = ("name", "weight", "model", "model_file")
+WEIGHT_TOLERANCE = 1e-9
+MAX_TYPES = 64
+TYPE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]{0,63}")
+EXAMPLE_POPULATION_PATH = Path(__file__).parent / "data" / "driver_population_three_types.json"
+
+
+@dataclass(frozen=True)
+class DriverType:
+    """One type of the mixture: its name, prior weight and driver model."""
+
+    name: str
+    weight: float
+    model: DriverModel
+
+
+@dataclass(frozen=True)
+class DriverPopulation:
+    """A validated finite mixture of driver types (weights > 0, summing to 1)."""
+
+    types: tuple[DriverType, ...]
+    source_path: str = ""
+    provenance: str = ""
+
+    @property
+    def n_types(self) -> int:
+        return len(self.types)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(t.name for t in self.types)
+
+    @property
+    def weights(self) -> np.ndarray:
+        array = np.array([t.weight for t in self.types], dtype=float)
+        array.setflags(write=False)
+        return array
+
+    @property
+    def models(self) -> tuple[DriverModel, ...]:
+        return tuple(t.model for t in self.types)
+
+    def type_index(self, name: str) -> int:
+        return self.names.index(name)
+
+    @functools.cached_property
+    def content_hash(self) -> str:
+        """SHA-256 of the names, the weights (as little-endian float64) and each model's hash."""
+        digest = hashlib.sha256()
+        digest.update(json.dumps([POPULATION_FORMAT, POPULATION_VERSION, list(self.names)]).encode())
+        digest.update(np.ascontiguousarray(self.weights, dtype="<f8").tobytes())
+        for t in self.types:
+            digest.update(t.model.content_hash.encode())
+        return digest.hexdigest()
+
+    def to_dict(self) -> dict:
+        """The file form, every model inline."""
+        return {
+            "format": POPULATION_FORMAT,
+            "version": POPULATION_VERSION,
+            "source": self.provenance,
+            "types": [{"name": t.name, "weight": float(t.weight), "model": t.model.to_dict()}
+                      for t in self.types],
+        }
+
+
+def _type_entry(entry: object, index: int, path: str, base: Path | None) -> tuple[str, float, DriverModel]:
+    place = f"types[{index}]"
+    if not isinstance(entry, dict):
+        raise InputError(path, place, "expected an object with name, weight and model or model_file",
+                         "write e.g. {\"name\": \"builder\", \"weight\": 0.4, \"model_file\": \"b.json\"}")
+    check_keys(entry, TYPE_KEYS, path, place, "driver population")
+    for key in ("name", "weight"):
+        if key not in entry:
+            raise InputError(path, f"{place}.{key}", f"missing key '{key}'",
+                             "give every type a name and a prior weight")
+    name = entry["name"]
+    if not (isinstance(name, str) and TYPE_NAME.fullmatch(name)):
+        raise InputError(path, f"{place}.name", f"{str(name)[:60]!r} is not a type name",
+                         "use letters, digits, '_' or '-' (at most 64, starting with a letter or '_')")
+    weight = entry["weight"]
+    if not (isinstance(weight, int | float) and not isinstance(weight, bool)
+            and math.isfinite(weight) and weight > 0):
+        raise InputError(path, f"{place}.weight", f"{weight!r} is not a positive number",
+                         "give a prior weight > 0 (the weights sum to 1)")
+    has_model, has_file = "model" in entry, "model_file" in entry
+    if has_model == has_file:
+        raise InputError(path, place, "give exactly one of 'model' and 'model_file'",
+                         "inline the driver model or name its file relative to this one")
+    if has_model:
+        model = driver_model_from_dict(entry["model"], f"{path} ({place}.model)")
+    else:
+        file = entry["model_file"]
+        if not (isinstance(file, str) and file and "\x00" not in file):
+            raise InputError(path, f"{place}.model_file", "expected a file path",
+                             "name the driver model file relative to this population file")
+        model_path = (base / file) if base is not None and not Path(file).is_absolute() else Path(file)
+        model = load_driver_model(model_path)
+    return name, float(weight), model
+
+
+def driver_population_from_dict(data: object, path: str = "<driver population>") -> DriverPopulation:
+    """Validate a parsed driver-population document, or raise InputError. A `model_file` is read
+    relative to the folder of `path` (when `path` names a file)."""
+    data = require_object(data, path, "start from participants/data/driver_population_three_types.json")
+    check_keys(data, POPULATION_KEYS, path, "", "driver population")
+    require_keys(data, ("format", "version", "types"), path,
+                 lambda key: f"add '{key}' as in participants/data/driver_population_three_types.json")
+    if data["format"] != POPULATION_FORMAT:
+        raise InputError(path, "format", f"{str(data['format'])[:60]!r} is not a driver-population file",
+                         f"write \"format\": \"{POPULATION_FORMAT}\"")
+    version = data["version"]
+    if version != POPULATION_VERSION or isinstance(version, bool):
+        raise InputError(path, "version", f"version {str(version)[:20]} is not supported",
+                         f"write \"version\": {POPULATION_VERSION}")
+    entries = data["types"]
+    if not (isinstance(entries, list) and 0 < len(entries) <= MAX_TYPES):
+        raise InputError(path, "types", f"expected a list of 1 to {MAX_TYPES} driver types",
+                         "list the types as {\"name\", \"weight\", \"model\"} objects")
+    source = data.get("source", "")
+    if not isinstance(source, str):
+        raise InputError(path, "source", "expected text", "write the provenance as a string")
+    candidate = Path(path)
+    base = candidate.parent if candidate.is_file() else None
+    types: list[DriverType] = []
+    for index, entry in enumerate(entries):
+        name, weight, model = _type_entry(entry, index, path, base)
+        if name in (t.name for t in types):
+            raise InputError(path, f"types[{index}].name", f"type name '{name}' appears twice",
+                             "give every type its own name")
+        first = types[0].model if types else model
+        if model.trust_levels != first.trust_levels:
+            raise InputError(path, f"types[{index}]", f"type '{name}' has trust levels "
+                             f"{list(model.trust_levels)}, not {list(first.trust_levels)} as type "
+                             f"'{types[0].name}'", "every type must use the same trust scale")
+        if model.incident_types != first.incident_types:
+            raise InputError(path, f"types[{index}]", f"type '{name}' covers incidents "
+                             f"{list(model.incident_types)}, not {list(first.incident_types)} as type "
+                             f"'{types[0].name}'", "every type must list the same incident types in the "
+                             "same order")
+        types.append(DriverType(name=name, weight=weight, model=model))
+    total = math.fsum(t.weight for t in types)
+    if abs(total - 1.0) > WEIGHT_TOLERANCE:
+        raise InputError(path, "types", f"the weights sum to {total:.12g}, not 1 "
+                         f"(tolerance {WEIGHT_TOLERANCE:g})", "renormalise the prior weights")
+    return DriverPopulation(types=tuple(types), source_path=path, provenance=source)
+
+
+def load_driver_population(path: str | Path) -> DriverPopulation:
+    """Load and validate a driver-population file through the guarded reader."""
+    shown = str(path)
+    text = read_text(path, shown, "the driver population", "pass an existing driver-population file "
+                     "with --population (e.g. participants/data/driver_population_three_types.json)")
+    return driver_population_from_dict(parse_json(text, shown, "driver population"), shown)
+
+
+def write_driver_population(population: DriverPopulation, path: str | Path) -> Path:
+    """Write `population` (every model inline) atomically; returns the path."""
+    text = json.dumps(population.to_dict(), indent=2) + "\n"
+    return atomic_write_text(path, text, "driver population")
+
+
+def single_type_population(model: DriverModel, name: str = "nominal") -> DriverPopulation:
+    """The population of one type of weight 1: today's single driver model."""
+    if not TYPE_NAME.fullmatch(name):
+        raise ValueError(f"{name!r} is not a type name")
+    return DriverPopulation(types=(DriverType(name=name, weight=1.0, model=model),),
+                            source_path=model.source_path, provenance=model.provenance)

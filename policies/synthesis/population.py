@@ -1,0 +1,271 @@
+"""Synthesis over a driver population: the Bayes objective and the robust (worst-type) objective,
+with per-type values and what is certified (docs/driver_types.md, "Synthesis over a population").
+
+The AV's belief, which the spec's belief labels read, is always the type-aware filter under the
+population's weights w (policies/model/driver_types.py): the spec means the same for every policy.
+
+Bayes: synthesize on the type-aware POMDP with initial belief w ⊗ b0. Its L and U are
+synthesize's: L is the value of the returned policy under the type prior (unexpanded nodes
+counted as failure), U a sound bound of the population optimum max_π Σ_k w_k V_k(π). Per-type
+values V_k are exact evaluations (policies/evaluate.py) of the returned policy with the driver of
+type k (truth = type k's model, the AV filtering on the lifted model) for the same horizon and no
+fallback, as synthesis scores it; Σ_k w_k V_k >= L.
+
+Robust: maximise min_k V_k. Candidates are the Bayes policy and the policies synthesized as if
+the type prior were λ, for λ on a simplex grid; such a policy runs on the w-filter with its
+beliefs reweighted to λ (exact; policies/routing/aware_table.py), a function of the observations
+like any policy, and each V_k is evaluated exactly with the true type k. The candidate with the
+best worst type is returned. Certified: `lower` = min_k V_k(returned policy), exact (the lower
+ends of the certified evaluations); `upper` = min(U_bayes, min_k U_k), U_k a bound of type k's
+own optimum max_π V_k(π) (a synthesis on type k's model alone, of the spec's state-only
+projection when the spec reads beliefs, since the AV's belief is not type k's own), because
+max_π min_k V_k <= min_k max_π V_k and <= max_π Σ_k w_k V_k. The gap says how far the grid search
+may be from the robust optimum.
+
+One type: the Bayes objective is `synthesize` on the type's own model and spec, bit for bit.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from trustroute.networks.town import Town
+from trustroute.participants.driver_population import DriverPopulation
+from trustroute.policies.evaluate import Evaluation, evaluate
+from trustroute.policies.logic.spec import Spec, state_only_projection
+from trustroute.policies.model.driver_types import lift_population, lift_spec
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
+from trustroute.policies.routing.aware_table import BeliefTablePolicy
+from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
+from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.synthesis.search import SynthesisResult, synthesize
+
+Objective = Literal["bayes", "robust"]
+OBJECTIVES: tuple[str, ...] = ("bayes", "robust")
+MAX_GRID_CANDIDATES = 16
+
+
+@dataclass(frozen=True)
+class TypeValue:
+    """Certified value [lower, upper] of a policy when the driver is of one type."""
+
+    name: str
+    weight: float
+    lower: float
+    upper: float
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "weight": self.weight, "lower": self.lower, "upper": self.upper}
+
+
+@dataclass(frozen=True, eq=False)
+class PopulationSynthesis:
+    """The returned policy (`result.policy`, acting on the lifted belief from `prior` ⊗ b0) and its
+    certified objective `lower <= optimum <= upper`."""
+
+    objective: str
+    population: DriverPopulation
+    result: SynthesisResult
+    pomdp: TrustPOMDP                 # the type-aware POMDP the policy's AV filters on
+    spec: Spec                        # the lifted spec
+    prior: tuple[float, ...]          # λ: the AV's type prior of the returned policy
+    type_values: tuple[TypeValue, ...]
+    lower: float
+    upper: float
+    seconds: float
+    bayes_lower: float                # the Bayes-optimal synthesis' L and U, beside the robust value
+    bayes_upper: float
+    bayes_type_values: tuple[TypeValue, ...]
+    candidates: list[dict] = field(default_factory=list)
+    type_upper: tuple[float, ...] = ()  # U_k (robust objective)
+    bayes_policy: RoutingPolicy | None = None   # the Bayes synthesis' policy (robust objective)
+
+    @property
+    def gap(self) -> float:
+        return self.upper - self.lower
+
+    @property
+    def mixture_value(self) -> tuple[float, float]:
+        """Σ_k w_k V_k of the returned policy: [lower, upper]."""
+        w = self.population.weights
+        return (float(w @ [v.lower for v in self.type_values]),
+                float(w @ [v.upper for v in self.type_values]))
+
+    @property
+    def worst_type_value(self) -> float:
+        return min(v.lower for v in self.type_values)
+
+
+def evaluation_cap(horizon: int | None) -> int:
+    """The junction cap per-type values are evaluated with: synthesis' horizon (unbounded: the
+    episode cap, so the values are lower bounds of the unbounded ones)."""
+    return DEFAULT_JUNCTION_CAP if horizon is None else horizon
+
+
+def per_type_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, population: DriverPopulation,
+                    max_junctions: int, belief_rule: BeliefRule = "bayes",
+                    fallback_after: int | None = None) -> tuple[TypeValue, ...]:
+    """Exact value of `policy` (its AV filtering on `pomdp`) for each type of `population` as the
+    true driver."""
+    out = []
+    for t in population.types:
+        truth = build_pomdp(pomdp.town, t.model)
+        value: Evaluation = evaluate(pomdp, spec, policy, fallback_after=fallback_after,
+                                     max_junctions=max_junctions, belief_rule=belief_rule, truth=truth)
+        out.append(TypeValue(t.name, float(t.weight), value.lower, value.upper))
+    return tuple(out)
+
+
+def simplex_grid(k: int, max_points: int = MAX_GRID_CANDIDATES) -> list[np.ndarray]:
+    """Points of the probability simplex in K dimensions with coordinates multiples of 1/m, for
+    the largest m giving at most `max_points` points (at least the vertices)."""
+    m = 1
+    while _count(k, m + 1) <= max_points:
+        m += 1
+    points = []
+    for combo in itertools.product(range(m + 1), repeat=k):
+        if sum(combo) == m:
+            points.append(np.array(combo, dtype=float) / m)
+    return points
+
+
+def _count(k: int, m: int) -> int:
+    from math import comb
+
+    return comb(m + k - 1, k - 1)
+
+
+def reweighting(population: DriverPopulation, prior: np.ndarray) -> np.ndarray:
+    """r per hidden index: λ_k / w_k on type k's block (policies/routing/aware_table.py)."""
+    n = population.types[0].model.n_trust
+    return np.repeat(np.asarray(prior, dtype=float) / population.weights, n)
+
+
+def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
+                          objective: Objective = "bayes", tau: float = 1e-3, time_limit: float = 60.0,
+                          horizon: int | None = None, belief_rule: BeliefRule = "bayes",
+                          population_source: str = "", grid_points: int = MAX_GRID_CANDIDATES,
+                          on_iteration: Callable[[float, float], None] | None = None,
+                          ) -> PopulationSynthesis:
+    """Synthesize for `population` under `objective` (module docstring). time_limit applies to each
+    synthesis run (the robust objective runs one per candidate prior and one per type)."""
+    if objective not in OBJECTIVES:
+        raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
+    started = time.perf_counter()
+    lifted_spec = lift_spec(spec, population, population_source)
+    cap = evaluation_cap(horizon)
+    # The AV's filter and the spec's belief labels: the type-aware model under the population's
+    # weights. Candidates of the robust objective are synthesized under other priors λ but run on
+    # this filter, their beliefs reweighted to λ (so the spec means the same for every candidate).
+    pomdp = build_pomdp(town, lift_population(population))
+    bayes = synthesize(pomdp, lifted_spec, tau=tau, time_limit=time_limit, horizon=horizon,
+                       belief_rule=belief_rule, on_iteration=on_iteration)
+    bayes_values = per_type_values(pomdp, lifted_spec, bayes.policy, population, cap, belief_rule)
+    weights = population.weights
+    if objective == "bayes":
+        return PopulationSynthesis(
+            objective="bayes", population=population, result=bayes, pomdp=pomdp, spec=lifted_spec,
+            prior=tuple(float(w) for w in weights), type_values=bayes_values, lower=bayes.lower,
+            upper=bayes.upper, seconds=time.perf_counter() - started, bayes_lower=bayes.lower,
+            bayes_upper=bayes.upper, bayes_type_values=bayes_values)
+
+    def worst(values: tuple[TypeValue, ...]) -> float:
+        return min(v.lower for v in values)
+
+    best_policy, best_values, best_prior, best_stats = bayes.policy, bayes_values, weights, bayes.stats
+    candidates = [{"prior": weights.tolist(), "worst_type_lower": worst(bayes_values),
+                   "type_lower": [v.lower for v in bayes_values]}]
+    if population.n_types > 1:
+        for prior in simplex_grid(population.n_types, grid_points):
+            if np.allclose(prior, weights, rtol=0, atol=1e-12):
+                continue
+            made = synthesize(build_pomdp(town, lift_population(population, prior)), lifted_spec, tau=tau,
+                              time_limit=time_limit, horizon=horizon, belief_rule=belief_rule,
+                              on_iteration=on_iteration)
+            policy = BeliefTablePolicy(made.policy.table, town, lifted_spec, name="robust",
+                                       horizon=horizon, reweight=reweighting(population, prior))
+            values = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule)
+            candidates.append({"prior": prior.tolist(), "worst_type_lower": worst(values),
+                               "type_lower": [v.lower for v in values]})
+            if worst(values) > worst(best_values):
+                best_policy, best_values, best_prior, best_stats = policy, values, prior, made.stats
+    # U_k: type k's own optimum; the state-only projection when labels read the AV's belief.
+    own_spec = spec if not (spec.belief_atoms or spec.type_atoms) else state_only_projection(spec)
+    type_upper = []
+    for t in population.types:
+        own = synthesize(build_pomdp(town, t.model), own_spec, tau=tau, time_limit=time_limit,
+                         horizon=horizon, belief_rule="bayes")
+        type_upper.append(own.upper)
+    upper = min(bayes.upper, min(type_upper))
+    lower = worst(best_values)
+    if lower > upper + 1e-9:
+        raise RuntimeError(f"robust value {lower!r} above its bound {upper!r}: a soundness bug")
+    upper = max(upper, lower)   # equal up to rounding
+    # The returned policy's file bounds keep their meaning L <= Pr_max <= U under the type prior: L
+    # its exact prior-weighted value (the lower ends), U the Bayes synthesis' bound.
+    mixture = float(weights @ [v.lower for v in best_values])
+    policy = BeliefTablePolicy(best_policy.table, town, lifted_spec, name="robust",
+                               lower=min(mixture, bayes.upper), upper=bayes.upper, horizon=horizon,
+                               reweight=best_policy.reweight)
+    seconds = time.perf_counter() - started
+    result = SynthesisResult(policy=policy, lower=min(mixture, bayes.upper), upper=bayes.upper,
+                             seconds=seconds, stats={**best_stats, "objective": "robust"},
+                             horizon=horizon, belief_rule=belief_rule)
+    return PopulationSynthesis(
+        objective="robust", population=population, result=result, pomdp=pomdp, spec=lifted_spec,
+        prior=tuple(float(p) for p in best_prior), type_values=best_values, lower=lower,
+        upper=upper, seconds=seconds, bayes_lower=bayes.lower, bayes_upper=bayes.upper,
+        bayes_type_values=bayes_values, candidates=candidates, type_upper=tuple(type_upper),
+        bayes_policy=bayes.policy)
+
+
+def policy_name(synthesis: PopulationSynthesis) -> str:
+    """The name a policy file records: today's "aware" for one type, else the objective's."""
+    return "aware" if synthesis.population.n_types == 1 else synthesis.objective
+
+
+def document_entries(synthesis: PopulationSynthesis) -> dict | None:
+    """The policy file's population keys (policies/routing/files.py POPULATION_KEYS); None for one
+    type (the file is then today's)."""
+    if synthesis.population.n_types == 1:
+        return None
+    return {
+        "population_hash": synthesis.population.content_hash,
+        "population_types": list(synthesis.population.names),
+        "population_weights": synthesis.population.weights.tolist(),
+        "belief_prior": list(synthesis.prior),
+        "objective": synthesis.objective,
+        "objective_lower": synthesis.lower,
+        "objective_upper": synthesis.upper,
+        "type_values": [v.to_dict() for v in synthesis.type_values],
+    }
+
+
+def summary(synthesis: PopulationSynthesis) -> dict:
+    """JSON-ready summary: the objective's bounds, per-type values, the Bayes values beside."""
+    mixture = synthesis.mixture_value
+    out = {
+        "objective": synthesis.objective,
+        "types": list(synthesis.population.names),
+        "weights": synthesis.population.weights.tolist(),
+        "belief_prior": list(synthesis.prior),
+        "objective_lower": synthesis.lower,
+        "objective_upper": synthesis.upper,
+        "type_values": [v.to_dict() for v in synthesis.type_values],
+        "mixture_value": {"lower": mixture[0], "upper": mixture[1]},
+        "worst_type_value": synthesis.worst_type_value,
+        "bayes": {"lower": synthesis.bayes_lower, "upper": synthesis.bayes_upper,
+                  "type_values": [v.to_dict() for v in synthesis.bayes_type_values],
+                  "worst_type_value": min(v.lower for v in synthesis.bayes_type_values)},
+        "seconds": synthesis.seconds,
+    }
+    if synthesis.objective == "robust":
+        out["type_upper"] = list(synthesis.type_upper)
+        out["candidates"] = synthesis.candidates
+    return out

@@ -1,0 +1,184 @@
+"""Driver-population files: round trip, identity, the packaged example, and one error per violation."""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from trustroute.networks.errors import InputError
+from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH, load_driver_model
+from trustroute.participants.driver_population import (
+    EXAMPLE_POPULATION_PATH,
+    driver_population_from_dict,
+    load_driver_population,
+    single_type_population,
+    write_driver_population,
+)
+
+
+def example() -> dict:
+    return json.loads(EXAMPLE_POPULATION_PATH.read_text())
+
+
+def test_example_has_three_distinct_types_summing_to_one():
+    population = load_driver_population(EXAMPLE_POPULATION_PATH)
+    assert population.names == ("builder", "flat", "wary")
+    assert population.weights.sum() == pytest.approx(1.0, abs=1e-12)
+    hashes = {t.model.content_hash for t in population.types}
+    assert len(hashes) == 3
+    flat = population.types[1].model
+    # "flat": identity transitions, so trust never moves off its start
+    assert np.array_equal(flat.trust_transition, np.broadcast_to(np.eye(7), flat.trust_transition.shape))
+    with pytest.raises(ValueError):
+        population.weights[0] = 0.5
+
+
+def test_write_then_load_round_trips_and_keeps_the_hash(tmp_path):
+    population = load_driver_population(EXAMPLE_POPULATION_PATH)
+    path = write_driver_population(population, tmp_path / "pop.json")
+    again = load_driver_population(path)
+    assert again.content_hash == population.content_hash
+    assert again.names == population.names
+    assert not list(tmp_path.glob(".tmp-*"))
+
+
+def test_hash_changes_with_weights_and_names():
+    base = driver_population_from_dict(example(), "a")
+    other = example()
+    other["types"][0]["weight"], other["types"][1]["weight"] = 0.3, 0.4
+    assert driver_population_from_dict(other, "b").content_hash != base.content_hash
+    renamed = example()
+    renamed["types"][0]["name"] = "builds"
+    assert driver_population_from_dict(renamed, "c").content_hash != base.content_hash
+
+
+def test_model_file_is_read_relative_to_the_population_file(tmp_path):
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "nominal.json").write_text(DEFAULT_DRIVER_MODEL_PATH.read_text())
+    doc = {"format": "trustroute-driver-population", "version": 1,
+           "types": [{"name": "nominal", "weight": 1.0, "model_file": "models/nominal.json"}]}
+    (tmp_path / "pop.json").write_text(json.dumps(doc))
+    population = load_driver_population(tmp_path / "pop.json")
+    assert population.types[0].model.content_hash == load_driver_model().content_hash
+
+
+def test_single_type_population_is_its_model():
+    model = load_driver_model()
+    population = single_type_population(model)
+    assert population.n_types == 1 and population.names == ("nominal",)
+    assert population.types[0].model is model and population.weights.tolist() == [1.0]
+
+
+def _drop_format(d):
+    del d["format"]
+
+
+def _wrong_format(d):
+    d["format"] = "trustroute-driver-model"
+
+
+def _bad_version(d):
+    d["version"] = 2
+
+
+def _no_types(d):
+    d["types"] = []
+
+
+def _unknown_key(d):
+    d["weights"] = [1]
+
+
+def _type_unknown_key(d):
+    d["types"][1]["prior"] = 0.3
+
+
+def _duplicate_name(d):
+    d["types"][2]["name"] = "builder"
+
+
+def _bad_name(d):
+    d["types"][0]["name"] = "has space"
+
+
+def _zero_weight(d):
+    d["types"][0]["weight"] = 0.0
+    d["types"][1]["weight"] = 0.7
+
+
+def _weights_not_one(d):
+    d["types"][0]["weight"] = 0.41
+
+
+def _both_model_and_file(d):
+    d["types"][0]["model_file"] = "x.json"
+
+
+def _neither_model_nor_file(d):
+    del d["types"][0]["model"]
+
+
+def _missing_model_file(d):
+    del d["types"][0]["model"]
+    d["types"][0]["model_file"] = "does-not-exist.json"
+
+
+def _other_trust_levels(d):
+    model = d["types"][1]["model"]
+    model["trust_levels"] = [1, 2, 3, 4, 5, 6, 8]
+
+
+def _other_incidents(d):
+    model = d["types"][2]["model"]
+    model["incident_types"] = ["pedestrian", "obstacle", "truck", "none"]
+
+
+def _bad_model(d):
+    d["types"][2]["model"]["takeover_probability"]["truck"] = [0.5] * 6
+
+
+CASES = [
+    (_drop_format, "format", "missing key"),
+    (_wrong_format, "format", "not a driver-population file"),
+    (_bad_version, "version", "not supported"),
+    (_no_types, "types", "expected a list of 1 to"),
+    (_unknown_key, "weights", "unknown key"),
+    (_type_unknown_key, "types[1].prior", "unknown key"),
+    (_duplicate_name, "types[2].name", "appears twice"),
+    (_bad_name, "types[0].name", "is not a type name"),
+    (_zero_weight, "types[0].weight", "not a positive number"),
+    (_weights_not_one, "types", "the weights sum to"),
+    (_both_model_and_file, "types[0]", "exactly one of"),
+    (_neither_model_nor_file, "types[0]", "exactly one of"),
+    (_missing_model_file, "does-not-exist.json", "cannot read"),
+    (_other_trust_levels, "types[1]", "trust levels"),
+    (_other_incidents, "types[2]", "covers incidents"),
+    (_bad_model, "takeover_probability.truck", "expected 7 numbers"),
+]
+
+
+@pytest.mark.parametrize("mutate, place, problem", CASES, ids=[c[0].__name__ for c in CASES])
+def test_bad_population_file_is_one_input_error(tmp_path, mutate, place, problem):
+    doc = copy.deepcopy(example())
+    mutate(doc)
+    path = tmp_path / "pop.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError) as info:
+        load_driver_population(path)
+    message = info.value.one_line()
+    assert "\n" not in message
+    assert place in message and problem in message, message
+    assert "(fix: " in message
+
+
+def test_not_json_and_not_an_object(tmp_path):
+    path = tmp_path / "pop.json"
+    path.write_text("{ nope")
+    with pytest.raises(InputError, match="not valid JSON"):
+        load_driver_population(path)
+    path.write_text("[1, 2]")
+    with pytest.raises(InputError, match="top level"):
+        load_driver_population(path)
