@@ -3,8 +3,9 @@
 `save_policy(result, path, town, driver, spec)` writes `path` (JSON: format, content hashes of
 town, driver model and spec, horizon, belief rule, bounds, the acting rule in words, and the name
 and SHA-256 of the array file) and `path` with suffix `.npz` (the decision table of
-policies.table_policy: t, x, q, beliefs, action). `load_policy(path, town, driver, spec)` checks
-the format and all three hashes and raises InputError naming the file and the fix on a mismatch.
+policies/routing/aware_table.py: t, x, q, projected, beliefs, action).
+`load_policy(path, town, driver, spec)` checks the format and all three hashes and raises
+InputError naming the file and the fix on a mismatch.
 Every key: docs/formats/policy_file.md.
 """
 
@@ -25,15 +26,17 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
+from trustroute.policies.routing.free import state_only_task
 
 FORMAT = "trustroute-policy"
-VERSION = 1
-ACTING_RULE = ("action of the stored row with the same (junctions driven, road, DFA state) whose belief "
-               "is nearest (Euclidean); else the nearest row with the same (road, DFA state) at any "
-               "junction count; else the trust-free shortest completion of the state-only task")
+VERSION = 2
+ACTING_RULE = ("action of the stored row with the same (junctions driven, road, DFA state, state-only "
+               "task state) whose belief is within 1e-12 of the AV's (the synthesis visited it); "
+               "else the move of the trust-free shortest completion of the state-only task (the "
+               "first legal move when that task is complete or impossible)")
 
 
-ARRAY_NAMES = ("t", "x", "q", "beliefs", "action")
+ARRAY_NAMES = ("t", "x", "q", "projected", "beliefs", "action")
 DOCUMENT_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "spec_hash", "horizon",
                  "belief_rule", "lower", "upper", "gap", "seconds", "rows", "acting_rule", "arrays",
                  "arrays_sha256")
@@ -52,7 +55,10 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
     table: PolicyTable = result.policy.table
     arrays = array_path(path)
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs, action=table.action)
+    if not table.exact:
+        raise ValueError("only tables with the state-only task state (exact-belief rule) are written")
+    np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, projected=table.projected,
+                        beliefs=table.beliefs, action=table.action)
     array_bytes = buffer.getvalue()
     # The arrays first, the JSON (which names their hash) last: the JSON is the commit mark.
     atomic_write_bytes(arrays, array_bytes, "policy array file", "pass a writable --out path")
@@ -134,7 +140,7 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         raise InputError(where, "", f"not a readable .npz array file ({type(exc).__name__})",
                          RESYNTH) from None
     rows = arrays_read["t"].shape[0] if arrays_read["t"].ndim == 1 else -1
-    for name in ("t", "x", "q", "action"):
+    for name in ("t", "x", "q", "projected", "action"):
         array = arrays_read[name]
         if array.ndim != 1 or array.shape[0] != rows or array.dtype.kind not in "iu":
             raise InputError(where, name, f"array '{name}' is not {max(rows, 0)} integers "
@@ -147,13 +153,17 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         raise InputError(where, "", f"{rows} rows but the policy file records {document.get('rows')}",
                          RESYNTH)
     n_x = len(town.states)
-    t, x, q, action = (arrays_read[name].astype(np.int64) for name in ("t", "x", "q", "action"))
+    t, x, q, projected, action = (arrays_read[name].astype(np.int64)
+                                  for name in ("t", "x", "q", "projected", "action"))
     n_q = build_dfa(spec).n_states
+    n_p = state_only_task(town, spec).dfa.n_states
     slots = np.array([len(town.actions(state)) for state in town.states], dtype=np.int64)
     problems = [
         ("t", (t < 0).any(), "negative junction counts"),
         ("x", ((x < 0) | (x >= n_x)).any(), f"roads outside 0..{n_x - 1}"),
         ("q", ((q < 0) | (q >= n_q)).any(), f"DFA states outside 0..{n_q - 1}"),
+        ("projected", ((projected < 0) | (projected >= n_p)).any(),
+         f"state-only task states outside 0..{n_p - 1}"),
     ]
     for name, bad, what in problems:
         if bad:
@@ -165,7 +175,7 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     if (not np.isfinite(beliefs).all() or (beliefs < 0).any() or (beliefs > 1).any()
             or (np.abs(beliefs.sum(axis=1) - 1) > 1e-6).any()):
         raise InputError(where, "beliefs", "beliefs are not probability vectors", RESYNTH)
-    return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action)
+    return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action, projected=projected)
 
 
 def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -> BeliefTablePolicy:
