@@ -25,6 +25,7 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
+from trustroute.policies.routing.joint_table import JointPolicyTable, JointTablePolicy
 
 FORMAT = "trustroute-policy"
 VERSION = 1
@@ -37,6 +38,13 @@ ARRAY_NAMES = ("t", "x", "q", "beliefs", "action")
 DOCUMENT_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "spec_hash", "horizon",
                  "belief_rule", "lower", "upper", "gap", "seconds", "rows", "acting_rule", "arrays",
                  "arrays_sha256")
+# Policies of specs with trust-state atoms act on the joint belief (policies/routing/joint_table.py):
+# their files have these keys and the array "joint" [rows, n_trust, n_q] besides.
+JOINT_KIND = "joint-belief"
+JOINT_KEYS = ("kind", "guide_horizon")
+JOINT_ACTING_RULE = ("action of the stored row with the same (junctions driven, road) whose (joint "
+                     "belief, belief) is within 1e-9 (Euclidean); else the successor with the largest "
+                     "relaxed action value at the joint belief (policies/joint_search.py RelaxedGuide)")
 RESYNTH = "re-run trustroute synth to write both files again"
 
 
@@ -50,9 +58,15 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
 
     path = Path(path)
     table: PolicyTable = result.policy.table
+    joint = isinstance(result.policy, JointTablePolicy)
     arrays = array_path(path)
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs, action=table.action)
+    if joint:
+        np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs,
+                            action=table.action, joint=table.joint)
+    else:
+        np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs,
+                            action=table.action)
     array_bytes = buffer.getvalue()
     # The arrays first, the JSON (which names their hash) last: the JSON is the commit mark.
     atomic_write_bytes(arrays, array_bytes, "policy array file", "pass a writable --out path")
@@ -75,6 +89,10 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
         "arrays": arrays.name,
         "arrays_sha256": hashlib.sha256(array_bytes).hexdigest(),
     }
+    if joint:
+        document["acting_rule"] = JOINT_ACTING_RULE
+        document["kind"] = JOINT_KIND
+        document["guide_horizon"] = result.policy.guide_horizon
     atomic_write_text(path, json.dumps(document, indent=1) + "\n", "policy file",
                       "pass a writable --out path")
     return path
@@ -94,7 +112,16 @@ def read_policy_document(path: str | Path) -> dict:
     if document.get("version") != VERSION:
         raise InputError(where, "version", f"policy file version {document.get('version')!r}, this "
                          f"trustroute reads version {VERSION}", "re-run trustroute synth")
-    check_keys(document, DOCUMENT_KEYS, where, "", "policy file")
+    joint = "kind" in document
+    if joint and document["kind"] != JOINT_KIND:
+        raise InputError(where, "kind", f"unknown policy kind {str(document['kind'])[:30]!r} "
+                         f"(only {JOINT_KIND!r})", RESYNTH)
+    check_keys(document, DOCUMENT_KEYS + (JOINT_KEYS if joint else ()), where, "", "policy file")
+    guide = document.get("guide_horizon")
+    if joint and not (guide is None or (isinstance(guide, int) and not isinstance(guide, bool)
+                                        and 0 <= guide <= 10_000)):
+        raise InputError(where, "guide_horizon", f"guide horizon {str(guide)[:30]} is not a junction "
+                         "count or null", RESYNTH)
     for key in ("lower", "upper"):
         value = document.get(key)
         if value is not None and not (isinstance(value, int | float) and not isinstance(value, bool)
@@ -106,7 +133,7 @@ def read_policy_document(path: str | Path) -> dict:
 
 
 def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverModel,
-                      spec: Spec) -> PolicyTable:
+                      spec: Spec) -> PolicyTable | JointPolicyTable:
     """The decision table of a policy file, verified: the hash its JSON records, a readable .npz
     without pickles, the five arrays with consistent shapes and integer types, and every entry in
     range for this town, driver model and spec (InputError otherwise)."""
@@ -123,10 +150,11 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         raise InputError(where, "", "array file does not match its policy file (hash differs)", RESYNTH)
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as archive:
-            missing = [name for name in ARRAY_NAMES if name not in archive.files]
+            names = ARRAY_NAMES + (("joint",) if "kind" in document else ())
+            missing = [name for name in names if name not in archive.files]
             if missing:
                 raise InputError(where, missing[0], f"array '{missing[0]}' is missing", RESYNTH)
-            arrays_read = {name: archive[name] for name in ARRAY_NAMES}
+            arrays_read = {name: archive[name] for name in names}
     except InputError:
         raise
     except (OSError, ValueError, EOFError, KeyError, NotImplementedError, zipfile.BadZipFile,
@@ -165,10 +193,20 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     if (not np.isfinite(beliefs).all() or (beliefs < 0).any() or (beliefs > 1).any()
             or (np.abs(beliefs.sum(axis=1) - 1) > 1e-6).any()):
         raise InputError(where, "beliefs", "beliefs are not probability vectors", RESYNTH)
-    return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action)
+    if "joint" not in arrays_read:
+        return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action)
+    joint = arrays_read["joint"]
+    if joint.shape != (rows, driver.n_trust, n_q) or joint.dtype.kind != "f":
+        raise InputError(where, "joint", f"joint beliefs have shape {joint.shape}, expected ({rows}, "
+                         f"{driver.n_trust}, {n_q}) for this driver model and spec", RESYNTH)
+    if (not np.isfinite(joint).all() or (joint < 0).any()
+            or (np.abs(joint.sum(axis=(1, 2)) - 1) > 1e-6).any()):
+        raise InputError(where, "joint", "joint beliefs are not probability tables", RESYNTH)
+    return JointPolicyTable(t=t, x=x, q=q, beliefs=beliefs, joint=joint, action=action)
 
 
-def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -> BeliefTablePolicy:
+def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec
+                ) -> BeliefTablePolicy | JointTablePolicy:
     """Load a policy file made for exactly this town, driver model and spec."""
     path = Path(path)
     where = str(path)
@@ -185,6 +223,12 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
                              f"re-run trustroute synth for this {what}, or pass the {what} it was "
                              f"made for ({option})")
     table = read_policy_table(path.parent / document["arrays"], document, town, driver, spec)
+    if isinstance(table, JointPolicyTable):
+        from trustroute.policies.model.trust_pomdp import build_pomdp
+
+        return JointTablePolicy(table, build_pomdp(town, driver), spec, document.get("guide_horizon"),
+                                name=str(document.get("name", "aware")), lower=document.get("lower"),
+                                upper=document.get("upper"), horizon=document.get("horizon"))
     return BeliefTablePolicy(table, town, spec, name=str(document.get("name", "aware")),
                              lower=document.get("lower"), upper=document.get("upper"),
                              horizon=document.get("horizon"))
