@@ -187,14 +187,16 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
 
 def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: int,
                          belief_rule: BeliefRule = "bayes",
-                         max_nodes: int = DEFAULT_MAX_NODES) -> tuple[float, float]:
+                         max_nodes: int = DEFAULT_MAX_NODES,
+                         deadline: float | None = None) -> tuple[float, float]:
     """Certified [lower, upper] of P(accepted within `max_junctions`) for a policy whose decision
     at a node is a function of (junctions driven, road, joint belief, AV belief) alone, asked in
     batches: `policy.action_slots(t, x, joint, beliefs)` (routing.joint_table.JointTablePolicy),
     without the fallback. Histories that reach bit-identical (road, J, posterior, AV belief) at the
     same level are merged (their decisions and futures are the same), so this is the unfolding of
     `evaluate_joint` on far fewer nodes; beyond `max_nodes` per level the least likely nodes are
-    dropped, their live mass unknown."""
+    dropped, their live mass unknown; past `deadline` (time.perf_counter()) the unfolding stops and
+    the live mass of every open node is unknown."""
     town, driver = pomdp.town, pomdp.driver
     compiled = compile_spec(spec, town)
     filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
@@ -206,6 +208,11 @@ def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: i
     accepted_total, unknown = 0.0, 0.0
     for level in range(max_junctions + 1):
         accepted, _, live = filter_.masses(joint)
+        out_of_time = deadline is not None and level > 0 and time.perf_counter() > deadline
+        if out_of_time:
+            accepted_total += float(mass @ accepted)
+            unknown += float(mass @ live)
+            break
         ending = (live <= 0) | (level == max_junctions)
         accepted_total += float(mass[ending] @ accepted[ending])
         go = ~ending

@@ -1,22 +1,25 @@
 """Synthesis for specs with trust-state atoms: a policy on the joint belief, with L <= Pr_max <= U.
 
-`synthesize` (policies/synthesis/search.py) hands specs whose formula tests the hidden trust here
+`synthesize_spec` (policies/synthesize_spec.py) hands specs whose formula tests the hidden trust here
 (docs/trust_states.md, "Synthesis with trust-state atoms"). The method:
 
 * Search. `joint_search` unfolds the belief tree over (road, J(θ, q)) to depth D, every action and
   observation, merging bit-identical nodes and keeping at most N nodes per level (the likeliest;
   the others are cut leaves valued by the open-loop continuation below and the θ,q-observing
-  relaxation above). Bounded horizon H: D = H. Unbounded: the policy comes from bounded searches
-  (H = UNBOUNDED_POLICY_HORIZONS), the upper bound from unbounded searches of growing depth.
-  N grows by NODE_GROWTH per round until upper - lower <= tau or the next round would not fit the
-  time left (each round is predicted to take NODE_GROWTH times the last).
+  relaxation above). Bounded horizon H: D = H. Unbounded: the upper bound comes from unbounded
+  searches (depths UNBOUNDED_DEPTHS, leaves valued by the relaxation's unbounded values), the
+  policy from bounded searches with H in UNBOUNDED_POLICY_HORIZONS.
 * The policy (policies/routing/joint_table.py) takes the search's lower-greedy action at every
   expanded node (matched on (t, x, J, b)) and the relaxation's greedy action elsewhere.
-* L is the returned policy's own value: the exact evaluation on joint beliefs
-  (policies/evaluate_joint.py) within H junctions (unbounded: within the episode cap, a lower bound
-  of the unbounded value), its certified lower end when branches are pruned. U is the smallest
-  search upper bound (each is sound for Pr_max; unbounded: for the unbounded objective, which is at
-  least every bounded one). So L <= value(policy) <= Pr_max <= U.
+* L is the returned policy's own value within its search horizon H, computed by the merged exact
+  unfolding `evaluate_joint_table` (policies/evaluate_joint.py; tests check it against
+  `evaluate_joint` and brute force), its certified lower end when the least likely nodes are
+  dropped. A policy accepting within H junctions with probability L satisfies the spec (bounded
+  by any H' >= H, or unbounded) with probability >= L. U is the smallest search upper bound (each
+  sound for Pr_max). So L <= value(policy) <= Pr_max <= U.
+* Rounds: N starts at FIRST_NODES and grows by NODE_GROWTH while upper - lower > tau, some node
+  was cut, and the next round (predicted NODE_GROWTH times the last) fits the time left; the
+  first round always runs, so a very small time limit can be exceeded by one round.
 """
 
 from __future__ import annotations
@@ -33,12 +36,13 @@ from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.joint_table import JointPolicyTable, JointTablePolicy
+from trustroute.policies.synthesis.search import SynthesisResult
 
 FIRST_NODES = 500                  # nodes per level of the first round
 NODE_GROWTH = 4                    # nodes per level grow by this factor per round
 MAX_NODES = 512_000
 UNBOUNDED_POLICY_HORIZONS = (20, 30)
-EVALUATION_NODES = 200_000         # frontier cap of the policy's evaluation (pruned mass: unknown)
+EVALUATION_NODES = 50_000          # frontier cap of the policy's evaluation (pruned mass: unknown)
 UNBOUNDED_DEPTHS = (10, 20)        # depths of the unbounded searches (upper bound)
 UPPER_SHARE = 0.25                 # unbounded: share of the time limit for the upper bound
 
@@ -64,13 +68,13 @@ def _table(decisions: JointDecisions) -> JointPolicyTable:
                             joint=decisions.joint, action=decisions.action)
 
 
-def _grow(run: Callable[[int], tuple], stop: Callable[[tuple], bool], deadline: float) -> None:
+def _grow(run: Callable[[int, float], tuple], stop: Callable[[tuple], bool], deadline: float) -> None:
     """run(nodes) with nodes per level growing from FIRST_NODES until stop(result) or the next
     round (predicted NODE_GROWTH times the last) would pass the deadline; the first always runs."""
     nodes = FIRST_NODES
     while nodes <= MAX_NODES:
         began = time.perf_counter()
-        result = run(nodes)
+        result = run(nodes, deadline)
         if stop(result):
             return
         if NODE_GROWTH * (time.perf_counter() - began) > deadline - time.perf_counter():
@@ -80,10 +84,8 @@ def _grow(run: Callable[[int], tuple], stop: Callable[[tuple], bool], deadline: 
 
 def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
                      horizon: int | None = None, belief_rule: BeliefRule = "bayes",
-                     on_iteration: Callable[[float, float], None] | None = None):
+                     on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
     """A JointTablePolicy for `spec` and certified lower <= Pr_max <= upper (a SynthesisResult)."""
-    from trustroute.policies.synthesis.search import SynthesisResult
-
     started = time.perf_counter()
     compile_spec(spec, pomdp.town)       # bad specs fail before any search
     log: list[dict] = []
@@ -98,7 +100,7 @@ def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limi
         # Upper bound of the unbounded objective: unbounded searches, leaves valued by the relaxation.
         upper_deadline = started + UPPER_SHARE * time_limit
         for depth in UNBOUNDED_DEPTHS:
-            def run_upper(nodes: int, depth: int = depth) -> JointBounds:
+            def run_upper(nodes: int, deadline: float, depth: int = depth) -> JointBounds:
                 nonlocal upper
                 bounds, _ = joint_search(pomdp, spec, depth, None, belief_rule, max_nodes=nodes)
                 upper = min(upper, bounds.upper)
@@ -112,7 +114,7 @@ def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limi
     for k, policy_horizon in enumerate(horizons):
         share = (deadline - time.perf_counter()) / (len(horizons) - k)
 
-        def run_policy(nodes: int, policy_horizon: int = policy_horizon) -> bool:
+        def run_policy(nodes: int, deadline: float, policy_horizon: int = policy_horizon) -> bool:
             # A policy for H junctions, valued exactly within H (a lower bound for any longer H
             # and for the unbounded objective).
             nonlocal upper
@@ -123,7 +125,8 @@ def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limi
             policy = JointTablePolicy(_table(decisions), pomdp, spec, guide_horizon=policy_horizon,
                                       horizon=horizon)
             value_lower, value_upper = evaluate_joint_table(pomdp, spec, policy, policy_horizon,
-                                                            belief_rule, EVALUATION_NODES)
+                                                            belief_rule, EVALUATION_NODES,
+                                                            deadline=deadline)
             value = PolicyValue(value_lower, value_upper)
             log.append({"search": f"H={policy_horizon}", "max_nodes": nodes, **bounds.to_dict(),
                         "policy_lower": value.lower, "policy_upper": value.upper})

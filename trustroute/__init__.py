@@ -102,7 +102,7 @@ def synthesize(spec: Spec | PathLike, town: Town | None = None, driver: DriverMo
     """
     from trustroute.policies.model.trust_pomdp import build_pomdp
     from trustroute.policies.routing.files import save_policy
-    from trustroute.policies.synthesis.search import synthesize as search
+    from trustroute.policies.synthesize_spec import synthesize_spec as search
 
     town, driver, spec = _problem(spec, town, driver)
     result = search(build_pomdp(town, driver), spec, tau=tau, time_limit=time_limit, horizon=horizon,

@@ -74,7 +74,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from trustroute.policies.routing.files import save_policy
     from trustroute.policies.routing.resolve import synthesis_progress
-    from trustroute.policies.synthesis.search import synthesize
+    from trustroute.policies.synthesize_spec import synthesize_spec as synthesize
 
     with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
         result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,

@@ -56,7 +56,8 @@ class JointPolicyTable:
 
     def points(self) -> np.ndarray:
         """[rows, n_trust * n_q + n_trust]: the (J, b) each row is matched on."""
-        return np.concatenate([self.joint.reshape(self.rows, -1), self.beliefs], axis=1)
+        return np.concatenate([self.joint.reshape(self.rows, int(np.prod(self.joint.shape[1:]))),
+                               self.beliefs], axis=1)
 
 
 class JointTablePolicy(RoutingPolicy):

@@ -557,12 +557,6 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         raise ValueError("horizon must be >= 0")
     if belief_rule not in ("bayes", "paper"):
         raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
-    if spec.uses_trust_atoms:
-        # The DFA state is hidden: search over joint (trust, DFA state) beliefs (docs/trust_states.md).
-        from trustroute.policies.joint_synthesis import synthesize_joint
-
-        return synthesize_joint(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                                belief_rule=belief_rule, on_iteration=on_iteration)
     started = time.perf_counter()
     # The last few per cent are kept for the work after the deadline check (final backup, the
     # policy table, the stats), so that the whole call ends within the limit.
