@@ -60,6 +60,11 @@ def _field(name: str, kind: pa.DataType, nullable: bool = False) -> pa.Field:
     return pa.field(name, kind, nullable=nullable)
 
 
+def required_schema(**columns: pa.DataType) -> pa.Schema:
+    """A schema of non-nullable columns, in the order given (for tables beside the dataset's)."""
+    return pa.schema([_field(name, kind) for name, kind in columns.items()])
+
+
 BELIEF = pa.list_(pa.float64())
 
 ROADS_SCHEMA = pa.schema([

@@ -331,34 +331,17 @@ def figure_table(
                     {c: int(len(part[c])) for c in part},
                     kind="count",
                 )
-        add(
-            "mean trust",
-            "authors' average: per file over autopilot ticks, then over files",
-            {c: _mean(by[c]["authors_average_trust"]) for c in by},
-            n,
-            kind="trust",
+        per_episode_trust = (
+            ("authors' average: per file over autopilot ticks, then over files",
+             "authors_average_trust"),
+            ("authors' segment average: per CARLA road segment, then per file, then over files",
+             "authors_segment_trust"),
+            ("authors' intersection average: trust entering each CARLA road segment",
+             "authors_intersection_trust"),
+            ("trust on arrival at each road, per episode, then over episodes", "mean_reported_trust"),
         )
-        add(
-            "mean trust",
-            "authors' segment average: per CARLA road segment, then per file, then over files",
-            {c: _mean(by[c]["authors_segment_trust"]) for c in by},
-            n,
-            kind="trust",
-        )
-        add(
-            "mean trust",
-            "authors' intersection average: trust entering each CARLA road segment",
-            {c: _mean(by[c]["authors_intersection_trust"]) for c in by},
-            n,
-            kind="trust",
-        )
-        add(
-            "mean trust",
-            "trust on arrival at each road, per episode, then over episodes",
-            {c: _mean(by[c]["mean_reported_trust"]) for c in by},
-            n,
-            kind="trust",
-        )
+        for reading, column in per_episode_trust:
+            add("mean trust", reading, {c: _mean(by[c][column]) for c in by}, n, kind="trust")
         add(
             "mean trust",
             "trust on arrival, pooled over every road of the subset",

@@ -17,43 +17,37 @@ from trustroute.analysis import dataset
 REAL_EPISODES_FILE = "real_episodes.parquet"
 REAL_ROADS_FILE = "real_roads.parquet"
 TICKS_FILE = "ticks.parquet"
-REAL_EPISODES_SCHEMA = pa.schema(
-    [
-        pa.field("episode_id", pa.string(), nullable=False),
-        pa.field("trial", pa.int64(), nullable=False),
-        pa.field("source_file", pa.string(), nullable=False),
-        pa.field("ticks", pa.int64(), nullable=False),
-        pa.field("manual_ticks", pa.int64(), nullable=False),
-        pa.field("trust_changes", pa.int64(), nullable=False),
-        pa.field("final_reported_trust", pa.int64(), nullable=False),
-        pa.field("log_end", pa.string(), nullable=False),
-    ]
+REAL_EPISODES_SCHEMA = dataset.required_schema(
+    episode_id=pa.string(),
+    trial=pa.int64(),
+    source_file=pa.string(),
+    ticks=pa.int64(),
+    manual_ticks=pa.int64(),
+    trust_changes=pa.int64(),
+    final_reported_trust=pa.int64(),
+    log_end=pa.string(),
 )
-REAL_ROADS_SCHEMA = pa.schema(
-    [
-        pa.field("episode_id", pa.string(), nullable=False),
-        pa.field("index", pa.int64(), nullable=False),
-        pa.field("authors_state", pa.string(), nullable=False),
-        pa.field("logged_belief", pa.list_(pa.float64()), nullable=False),
-        pa.field("arrived", pa.bool_(), nullable=False),
-        pa.field("tick_first", pa.int64(), nullable=False),
-        pa.field("tick_last", pa.int64(), nullable=False),
-        pa.field("ticks", pa.int64(), nullable=False),
-        pa.field("manual_ticks", pa.int64(), nullable=False),
-        pa.field("trust_changes", pa.int64(), nullable=False),
-    ]
+REAL_ROADS_SCHEMA = dataset.required_schema(
+    episode_id=pa.string(),
+    index=pa.int64(),
+    authors_state=pa.string(),
+    logged_belief=dataset.BELIEF,
+    arrived=pa.bool_(),
+    tick_first=pa.int64(),
+    tick_last=pa.int64(),
+    ticks=pa.int64(),
+    manual_ticks=pa.int64(),
+    trust_changes=pa.int64(),
 )
-TICKS_SCHEMA = pa.schema(
-    [
-        pa.field("episode_id", pa.string(), nullable=False),
-        pa.field("tick_first", pa.int64(), nullable=False),
-        pa.field("tick_last", pa.int64(), nullable=False),
-        pa.field("rows", pa.int64(), nullable=False),
-        pa.field("road_index", pa.int64(), nullable=False),
-        pa.field("carla_road", pa.int64(), nullable=False),
-        pa.field("trust", pa.int64(), nullable=False),
-        pa.field("autopilot", pa.bool_(), nullable=False),
-    ]
+TICKS_SCHEMA = dataset.required_schema(
+    episode_id=pa.string(),
+    tick_first=pa.int64(),
+    tick_last=pa.int64(),
+    rows=pa.int64(),
+    road_index=pa.int64(),
+    carla_road=pa.int64(),
+    trust=pa.int64(),
+    autopilot=pa.bool_(),
 )
 REAL_TABLES = {
     "real_episodes": (REAL_EPISODES_FILE, REAL_EPISODES_SCHEMA),

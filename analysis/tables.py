@@ -449,7 +449,7 @@ def is_paper_comparable(manifest: dict, episodes: pd.DataFrame) -> tuple[bool, s
         ours = [p for p in config.get("specs", []) if Path(p).stem == name]
         if (
             not ours
-            or load_spec(ours[0], town).content_hash
+            or load_spec(_spec_path(ours[0]), town).content_hash
             != load_spec(PACKAGED_SPECS / f"{name}.toml", town).content_hash
         ):
             reasons.append(f"not the paper's {name}")
@@ -603,6 +603,21 @@ def _interval(low: object, high: object, digits: int = 3) -> str:
     return f"[{_num(low, digits)}, {_num(high, digits)}]"
 
 
+def _intervals(frame: pd.DataFrame, low: str, high: str, digits: int = 3) -> list[str]:
+    """The column pair (low, high) of a table as formatted intervals."""
+    return [_interval(a, b, digits) for a, b in zip(frame[low], frame[high], strict=True)]
+
+
+def _estimates(frame: pd.DataFrame, value: str, low: str, high: str, digits: int = 3) -> list[str]:
+    """'estimate [low, high]' per row; '-' where the estimate is missing (or the column absent)."""
+    missing = [None] * len(frame)
+    return [
+        f"{_num(v, digits)} {_interval(lo, hi, digits)}" if _num(v) != "-" else "-"
+        for v, lo, hi in zip(frame.get(value, missing), frame.get(low, missing),
+                             frame.get(high, missing), strict=True)
+    ]
+
+
 def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
     """The tables as shown (formatted strings, p-values in scientific notation), by name."""
     other = [s for s in BELIEF_SOURCES if s != analysis.belief_source][0]
@@ -616,22 +631,13 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                 "n": c["n"],
                 "satisfied": c["satisfied"],
                 "rate": c["satisfaction_rate"].map(_num),
-                "exact 95% CI": [_interval(a, b) for a, b in zip(c["ci_low"], c["ci_high"], strict=True)],
-                "Wilson 95% CI": [
-                    _interval(a, b) for a, b in zip(c["wilson_low"], c["wilson_high"], strict=True)
-                ],
+                "exact 95% CI": _intervals(c, "ci_low", "ci_high"),
+                "Wilson 95% CI": _intervals(c, "wilson_low", "wilson_high"),
                 f"rate ({other})": c[f"satisfaction_rate_{other}"].map(_num),
-                "exact value [L, U]": [
-                    _interval(a, b) for a, b in zip(c["exact_lower"], c["exact_upper"], strict=True)
-                ],
-                "synthesized [L, U]": [
-                    _interval(a, b)
-                    for a, b in zip(c["synthesized_lower"], c["synthesized_upper"], strict=True)
-                ],
+                "exact value [L, U]": _intervals(c, "exact_lower", "exact_upper"),
+                "synthesized [L, U]": _intervals(c, "synthesized_lower", "synthesized_upper"),
                 "mean trust (reported)": c["mean_trust"].map(_num),
-                "trust 95% CI": [
-                    _interval(a, b, 2) for a, b in zip(c["trust_ci_low"], c["trust_ci_high"], strict=True)
-                ],
+                "trust 95% CI": _intervals(c, "trust_ci_low", "trust_ci_high", 2),
                 "mean true trust": c["mean_true_trust"].map(_num),
                 "takeovers / episode": c["takeovers_per_episode"].map(lambda v: _num(v, 2)),
                 "junctions": c["mean_junctions"].map(lambda v: _num(v, 1)),
@@ -654,26 +660,12 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                     strict=True,
                 )
             ],
-            "risk difference [95% CI]": [
-                    f"{_num(v)} {_interval(lo, hi)}"
-                    for v, lo, hi in zip(p["risk_difference"], p["rd_low"], p["rd_high"], strict=True)
-                ],
-                "conditional OR [exact CI]": [
-                    f"{_num(v, 2)} {_interval(lo, hi, 2)}" if _num(v) != "-" else "-"
-                    for v, lo, hi in zip(
-                        p.get("odds_ratio", [None] * len(p)),
-                        p.get("or_low", [None] * len(p)),
-                        p.get("or_high", [None] * len(p)),
-                        strict=True,
-                    )
-                ],
+            "risk difference [95% CI]": _estimates(p, "risk_difference", "rd_low", "rd_high"),
+                "conditional OR [exact CI]": _estimates(p, "odds_ratio", "or_low", "or_high", 2),
                 "McNemar exact p": [format_p(_finite(v)) for v in p["mcnemar_p"]],
-                "trust difference [BCa CI]": [
-                    f"{_num(v)} {_interval(lo, hi)}"
-                    for v, lo, hi in zip(
-                        p["trust_difference"], p["trust_diff_low"], p["trust_diff_high"], strict=True
-                    )
-                ],
+                "trust difference [BCa CI]": _estimates(
+                    p, "trust_difference", "trust_diff_low", "trust_diff_high"
+                ),
                 "Wilcoxon p (trust)": [format_p(_finite(v)) for v in p["wilcoxon_p"]],
             }
         )
@@ -684,10 +676,7 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                 "outcome": r["outcome"],
                 "model": r["model"],
                 "effect of": r["effect_of"],
-                "estimate [95% CI]": [
-                    f"{_num(v)} {_interval(lo, hi)}" if _num(v) != "-" else "-"
-                    for v, lo, hi in zip(r["estimate"], r["low"], r["high"], strict=True)
-                ],
+                "estimate [95% CI]": _estimates(r, "estimate", "low", "high"),
                 "p": [format_p(_finite(v)) for v in r["p_value"]],
                 "participants": r["participants"],
                 "episodes": r["episodes"],
@@ -703,7 +692,7 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                 "roads": t["roads"],
                 "takeovers": t["takeovers"],
                 "rate": t["rate"].map(_num),
-                "exact 95% CI": [_interval(a, b) for a, b in zip(t["ci_low"], t["ci_high"], strict=True)],
+                "exact 95% CI": _intervals(t, "ci_low", "ci_high"),
             }
         )
     o = analysis.order
@@ -713,7 +702,7 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                 "position": o["position"],
                 "n": o["n"],
                 "rate": o["satisfaction_rate"].map(_num),
-                "exact 95% CI": [_interval(a, b) for a, b in zip(o["ci_low"], o["ci_high"], strict=True)],
+                "exact 95% CI": _intervals(o, "ci_low", "ci_high"),
                 "mean trust (reported)": o["mean_trust"].map(_num),
             }
         )
@@ -725,7 +714,7 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                 "driven after": k["previous_condition"],
                 "n": k["n"],
                 "rate": k["satisfaction_rate"].map(_num),
-                "exact 95% CI": [_interval(a, b) for a, b in zip(k["ci_low"], k["ci_high"], strict=True)],
+                "exact 95% CI": _intervals(k, "ci_low", "ci_high"),
                 "mean trust (reported)": k["mean_trust"].map(_num),
             }
         )

@@ -8,9 +8,9 @@ street, the sets spread over the grid; incidents are drawn with a seeded generat
 paper's town, phi1 and phi2 at H = 20 (target: within 1 s).
 The table is printed to stderr; the rows are the benchmark's JSON lines.
 
-SCALING_QUICK=1 runs a reduced table (junctions 12/50/200 with 3 waypoints at H = 20, and the
-waypoint sweep at 50 junctions, H = 20). The machine is shared: seconds are wall-clock under
-whatever load there is; compare rows within one run.
+SCALING_QUICK=1 runs a reduced table: the 200-junction targets (5 waypoint sets, H = 20, 40,
+unbounded) and short sweeps over junctions, horizon and waypoints. The machine is shared: seconds
+are wall-clock under whatever load there is; compare rows within one run.
 Run: `.venv/bin/python -m benchmarks bench_synthesis_scaling`.
 """
 
@@ -82,7 +82,9 @@ def _child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str 
         spec = spec_from_text(grid_spec_text(rows, columns, waypoints), "<grid spec>", town)
     result = synthesize(build_pomdp(town, driver), spec, tau=TAU, time_limit=TIME_LIMIT, horizon=horizon)
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb}
+    last = result.stats["runs"][-1]
+    return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb,
+            "nodes": last.get("nodes", 0), "completion_closed": last.get("completion_closed")}
 
 
 def _run_child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str | None = None) -> dict:
@@ -96,7 +98,10 @@ def _run_child(junctions: int, waypoints: int, horizon: int | None, paper_spec: 
 
 def _configurations() -> list[tuple[int, int, int | None]]:
     if os.environ.get("SCALING_QUICK"):
-        return ([(j, 3, 20) for j in (12, 50, 200)] + [(50, w, 20) for w in (5, 8)])
+        # the issue's targets (200 junctions, 5 waypoint sets, H 20/40/unbounded) and one sweep each
+        # over junctions, horizon and waypoints
+        return ([(12, 3, 10), (12, 3, 20), (50, 3, 20), (50, 3, 40), (50, 5, 20), (50, 8, 20)]
+                + [(200, 5, h) for h in (20, 40, None)])
     return [(j, w, h) for j in GRIDS for w in WAYPOINTS for h in HORIZONS]
 
 

@@ -1,16 +1,21 @@
 """The synthesized ("aware") routing policy: a table of decisions over (junctions, road, DFA state, belief).
 
 Rows are the product nodes the synthesis expanded: t (junctions driven), road x, DFA state q,
-belief b and the action slot (index into town.actions(road)) chosen there. The rule for any
-DecisionContext (documented, and the same on every belief, visited or not):
+belief b, the action slot (index into town.actions(road)) chosen there and, in tables written by
+the current synthesis, p: the state of the spec's state-only task (policies/routing/free.py) after
+the roads driven. Two acting rules (docs/synthesis.md, "Open nodes and the acting rule"):
 
+Exact-belief rule (tables with p): at a context (t, x, q, p, b), the row with the same
+(t, x, q, p) whose belief is within EXACT_BELIEF_DISTANCE of b; if there is none, the move of the
+trust-free shortest completion from (x, p), or the first legal move when that task is complete
+or impossible. The synthesis values every node without a row by exactly this completion, so the
+policy's value is the synthesised L (docs/synthesis.md).
+
+Nearest-belief rule (tables without p):
 1. among rows with the same (t, x, q), take the row whose belief is nearest (Euclidean);
 2. if there is none, among rows with the same (x, q) at any t, the nearest belief;
-3. if there is none, drive the trust-free shortest completion of the state-only task
-   (policies.baseline), or the first legal move when that task is complete or impossible.
-
-Beliefs the synthesis visited are stored exactly, so on them the policy takes exactly the
-decision whose value the synthesis certified.
+3. if there is none, drive the trust-free shortest completion of the state-only task, or the
+   first legal move when that task is complete or impossible.
 """
 
 from __future__ import annotations
@@ -35,11 +40,19 @@ class PolicyTable:
     q: np.ndarray
     beliefs: np.ndarray
     action: np.ndarray
+    projected: np.ndarray | None = None    # state-only task state p per row (exact-belief rule)
 
     def __post_init__(self) -> None:
         for name in ("t", "x", "q", "action"):
             object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=np.int64))
         object.__setattr__(self, "beliefs", np.asarray(self.beliefs, dtype=float))
+        if self.projected is not None:
+            object.__setattr__(self, "projected", np.asarray(self.projected, dtype=np.int64))
+
+    @property
+    def exact(self) -> bool:
+        """True: the exact-belief acting rule applies (the table records p)."""
+        return self.projected is not None
 
     @property
     def rows(self) -> int:
@@ -47,6 +60,11 @@ class PolicyTable:
 
 
 BRUTE_FORCE_PAIRS = 256   # queries x stored rows below which nearest rows are found by a scan
+# A belief this close (Euclidean) to a stored row's is that row's: the vehicle runs the same filter
+# as the synthesis (docs/synthesis.md, "One filter"), so a visited belief matches to the last bit;
+# the slack only absorbs a summation order that differs between batch shapes (a few ulps), far
+# below the distance between distinct beliefs of one (t, road, DFA state).
+EXACT_BELIEF_DISTANCE = 1e-12
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,18 +77,23 @@ class _Groups:
 
     def nearest(self, key: int, beliefs: np.ndarray) -> np.ndarray | None:
         """Row index of the nearest stored belief for each of `beliefs` [m, n] (None: no group)."""
+        found = self.nearest_with_distance(key, beliefs)
+        return None if found is None else found[0]
+
+    def nearest_with_distance(self, key: int, beliefs: np.ndarray
+                              ) -> tuple[np.ndarray, np.ndarray] | None:
+        """(row index, Euclidean distance) of the nearest stored belief for each of `beliefs`."""
         rows = self.rows.get(key)
         if rows is None:
             return None
-        if rows.size == 1:
-            return np.repeat(rows, beliefs.shape[0])
-        if rows.size * beliefs.shape[0] <= BRUTE_FORCE_PAIRS:
+        if rows.size * beliefs.shape[0] <= BRUTE_FORCE_PAIRS or rows.size == 1:
             # Small groups: a direct distance scan beats the tree's per-query overhead.
             stored = self.beliefs[rows]
             distance = ((beliefs[:, None, :] - stored[None, :, :]) ** 2).sum(axis=2)
-            return rows[distance.argmin(axis=1)]
-        _, nearest = self.trees[key].query(beliefs)
-        return rows[np.asarray(nearest)]
+            best = distance.argmin(axis=1)
+            return rows[best], np.sqrt(distance[np.arange(beliefs.shape[0]), best])
+        distance, nearest = self.trees[key].query(beliefs)
+        return rows[np.asarray(nearest)], np.asarray(distance)
 
 
 def _group(keys: np.ndarray, beliefs: np.ndarray) -> _Groups:
@@ -104,8 +127,14 @@ class BeliefTablePolicy(RoutingPolicy):
         # is a dict access, not a row-wise unique.
         self._n_x = len(town.states)
         self._n_q = int(table.q.max()) + 1 if table.rows else 1
-        self._exact = _group(self._key_tq(table.t, table.x, table.q), table.beliefs)
-        self._any_t = _group(self._key_q(table.x, table.q), table.beliefs)
+        self._n_p = int(self.task.dfa.n_states)
+        # the trust-free completion's move per (road, task state); the first move where it has none
+        self._free_slot = np.where(self.task.next_slot >= 0, self.task.next_slot, 0)
+        if table.exact:
+            self._exact = _group(self._key_tqp(table.t, table.x, table.q, table.projected), table.beliefs)
+        else:
+            self._exact = _group(self._key_tq(table.t, table.x, table.q), table.beliefs)
+            self._any_t = _group(self._key_q(table.x, table.q), table.beliefs)
 
     def _key_q(self, x: np.ndarray, q: np.ndarray) -> np.ndarray:
         return x * self._n_q + q
@@ -113,8 +142,38 @@ class BeliefTablePolicy(RoutingPolicy):
     def _key_tq(self, t: np.ndarray, x: np.ndarray, q: np.ndarray) -> np.ndarray:
         return (t * self._n_x + x) * self._n_q + q
 
-    def action_slots(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
-        """Vectorised rule 1-2: action slot per row, -1 where no stored row matches (rule 3)."""
+    def _key_tqp(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+        return self._key_tq(t, x, q) * self._n_p + p
+
+    def exact_action_slots(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, projected: np.ndarray,
+                           beliefs: np.ndarray) -> np.ndarray:
+        """The exact-belief rule, vectorised: the slot per context (never -1)."""
+        t, x, q, p = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q, projected))
+        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        out = self._free_slot[x, p].copy()
+        if t.size == 0 or not self.table.rows:
+            return out
+        keys = self._key_tqp(t, x, q, p)
+        unique, inverse = np.unique(keys, return_inverse=True)
+        for g, key in enumerate(unique.tolist()):
+            members = np.flatnonzero(inverse == g)
+            found = self._exact.nearest_with_distance(key, beliefs[members])
+            if found is not None:
+                rows, distance = found
+                hit = distance <= EXACT_BELIEF_DISTANCE
+                out[members[hit]] = self.table.action[rows[hit]]
+        return out
+
+    def action_slots(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, beliefs: np.ndarray,
+                     projected: np.ndarray | None = None) -> np.ndarray:
+        """Vectorised decisions: the action slot per context. Exact-belief tables need `projected`
+        (the state-only task state per context) and never return -1; nearest-belief tables
+        apply rules 1-2 and return -1 where no stored row matches (rule 3)."""
+        if self.table.exact:
+            if projected is None:
+                raise ValueError("this policy's exact-belief rule needs the state-only task state "
+                                 "(projected) of each context")
+            return self.exact_action_slots(t, x, q, projected, beliefs)
         t, x, q = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q))
         beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
         out = np.full(t.size, -1, dtype=np.int64)
@@ -147,6 +206,12 @@ class BeliefTablePolicy(RoutingPolicy):
     def next_junction(self, context: DecisionContext) -> str:
         road = context.road
         x = self.town.state_index(road)
+        if self.table.exact:
+            p = self.task.projected_state(context.route)
+            slot = int(self.exact_action_slots(np.array([context.junctions_driven]), np.array([x]),
+                                               np.array([context.dfa_state]), np.array([p]),
+                                               context.belief)[0])
+            return self.town.actions(road)[slot]
         slot = int(self.action_slots(np.array([context.junctions_driven]), np.array([x]),
                                      np.array([context.dfa_state]), context.belief)[0])
         actions = self.town.actions(road)

@@ -3,8 +3,9 @@
 `save_policy(result, path, town, driver, spec)` writes `path` (JSON: format, content hashes of
 town, driver model and spec, horizon, belief rule, bounds, the acting rule in words, and the name
 and SHA-256 of the array file) and `path` with suffix `.npz` (the decision table of
-policies.table_policy: t, x, q, beliefs, action). `load_policy(path, town, driver, spec)` checks
-the format and all three hashes and raises InputError naming the file and the fix on a mismatch.
+policies/routing/aware_table.py: t, x, q, projected, beliefs, action).
+`load_policy(path, town, driver, spec)` checks the format and all three hashes and raises
+InputError naming the file and the fix on a mismatch.
 Every key: docs/formats/policy_file.md.
 """
 
@@ -25,23 +26,27 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
+from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.routing.joint_table import JointPolicyTable, JointTablePolicy
 
 FORMAT = "trustroute-policy"
-VERSION = 1
-ACTING_RULE = ("action of the stored row with the same (junctions driven, road, DFA state) whose belief "
-               "is nearest (Euclidean); else the nearest row with the same (road, DFA state) at any "
-               "junction count; else the trust-free shortest completion of the state-only task")
+VERSION = 2
+ACTING_RULE = ("action of the stored row with the same (junctions driven, road, DFA state, state-only "
+               "task state) whose belief is within 1e-12 of the AV's (the synthesis visited it); "
+               "else the move of the trust-free shortest completion of the state-only task (the "
+               "first legal move when that task is complete or impossible)")
 
 
-ARRAY_NAMES = ("t", "x", "q", "beliefs", "action")
+ARRAY_NAMES = ("t", "x", "q", "projected", "beliefs", "action")
 DOCUMENT_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "spec_hash", "horizon",
                  "belief_rule", "lower", "upper", "gap", "seconds", "rows", "acting_rule", "arrays",
                  "arrays_sha256")
 # Policies of specs with trust-state atoms act on the joint belief (policies/routing/joint_table.py):
-# their files have these keys and the array "joint" [rows, n_trust, n_q] besides.
+# their files have these keys besides, and the arrays JOINT_ARRAY_NAMES (no state-only task state:
+# their rule does not read it; "joint" [rows, n_trust, n_q] instead).
 JOINT_KIND = "joint-belief"
 JOINT_KEYS = ("kind", "guide_horizon")
+JOINT_ARRAY_NAMES = ("t", "x", "q", "beliefs", "action", "joint")
 JOINT_ACTING_RULE = ("action of the stored row with the same (junctions driven, road) whose (joint "
                      "belief, belief) is within 1e-9 (Euclidean); else the successor with the largest "
                      "relaxed action value at the joint belief (policies/joint_search.py RelaxedGuide)")
@@ -65,8 +70,10 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
         np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs,
                             action=table.action, joint=table.joint)
     else:
-        np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs,
-                            action=table.action)
+        if not table.exact:
+            raise ValueError("only tables with the state-only task state (exact-belief rule) are written")
+        np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, projected=table.projected,
+                            beliefs=table.beliefs, action=table.action)
     array_bytes = buffer.getvalue()
     # The arrays first, the JSON (which names their hash) last: the JSON is the commit mark.
     atomic_write_bytes(arrays, array_bytes, "policy array file", "pass a writable --out path")
@@ -150,7 +157,7 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         raise InputError(where, "", "array file does not match its policy file (hash differs)", RESYNTH)
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as archive:
-            names = ARRAY_NAMES + (("joint",) if "kind" in document else ())
+            names = JOINT_ARRAY_NAMES if "kind" in document else ARRAY_NAMES
             missing = [name for name in names if name not in archive.files]
             if missing:
                 raise InputError(where, missing[0], f"array '{missing[0]}' is missing", RESYNTH)
@@ -162,7 +169,9 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         raise InputError(where, "", f"not a readable .npz array file ({type(exc).__name__})",
                          RESYNTH) from None
     rows = arrays_read["t"].shape[0] if arrays_read["t"].ndim == 1 else -1
-    for name in ("t", "x", "q", "action"):
+    joint = "joint" in arrays_read
+    integers = ("t", "x", "q", "action") if joint else ("t", "x", "q", "projected", "action")
+    for name in integers:
         array = arrays_read[name]
         if array.ndim != 1 or array.shape[0] != rows or array.dtype.kind not in "iu":
             raise InputError(where, name, f"array '{name}' is not {max(rows, 0)} integers "
@@ -176,13 +185,18 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
                          RESYNTH)
     n_x = len(town.states)
     t, x, q, action = (arrays_read[name].astype(np.int64) for name in ("t", "x", "q", "action"))
+    projected = None if joint else arrays_read["projected"].astype(np.int64)
     n_q = build_dfa(spec).n_states
+    n_p = state_only_task(town, spec).dfa.n_states
     slots = np.array([len(town.actions(state)) for state in town.states], dtype=np.int64)
     problems = [
         ("t", (t < 0).any(), "negative junction counts"),
         ("x", ((x < 0) | (x >= n_x)).any(), f"roads outside 0..{n_x - 1}"),
         ("q", ((q < 0) | (q >= n_q)).any(), f"DFA states outside 0..{n_q - 1}"),
     ]
+    if projected is not None:
+        problems.append(("projected", ((projected < 0) | (projected >= n_p)).any(),
+                         f"state-only task states outside 0..{n_p - 1}"))
     for name, bad, what in problems:
         if bad:
             raise InputError(where, name, f"decision table has {what}", RESYNTH)
@@ -193,16 +207,16 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     if (not np.isfinite(beliefs).all() or (beliefs < 0).any() or (beliefs > 1).any()
             or (np.abs(beliefs.sum(axis=1) - 1) > 1e-6).any()):
         raise InputError(where, "beliefs", "beliefs are not probability vectors", RESYNTH)
-    if "joint" not in arrays_read:
-        return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action)
-    joint = arrays_read["joint"]
-    if joint.shape != (rows, driver.n_trust, n_q) or joint.dtype.kind != "f":
-        raise InputError(where, "joint", f"joint beliefs have shape {joint.shape}, expected ({rows}, "
+    if not joint:
+        return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action, projected=projected)
+    table = arrays_read["joint"]
+    if table.shape != (rows, driver.n_trust, n_q) or table.dtype.kind != "f":
+        raise InputError(where, "joint", f"joint beliefs have shape {table.shape}, expected ({rows}, "
                          f"{driver.n_trust}, {n_q}) for this driver model and spec", RESYNTH)
-    if (not np.isfinite(joint).all() or (joint < 0).any()
-            or (np.abs(joint.sum(axis=(1, 2)) - 1) > 1e-6).any()):
+    if (not np.isfinite(table).all() or (table < 0).any()
+            or (np.abs(table.sum(axis=(1, 2)) - 1) > 1e-6).any()):
         raise InputError(where, "joint", "joint beliefs are not probability tables", RESYNTH)
-    return JointPolicyTable(t=t, x=x, q=q, beliefs=beliefs, joint=joint, action=action)
+    return JointPolicyTable(t=t, x=x, q=q, beliefs=beliefs, joint=table, action=action)
 
 
 def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec

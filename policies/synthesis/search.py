@@ -4,19 +4,25 @@ mean").
 Method (bounded heuristic search over the product belief MDP, with a sound abstraction at the frontier):
 
 * The exact product belief MDP is unfolded from (start, initial belief, q_0) as an AND-OR graph:
-  one node per distinct (junctions t, road x, DFA state q, belief bytes) — identical beliefs at the
-  same depth are merged, never approximated. A node's children are, per next junction, the
-  observation symbols with their exact probabilities and exact Bayes (or "paper") posteriors.
-* Every node carries [L, U]. Unexpanded nodes: L = 0, U = the suffix abstraction's bound at the
-  node's cell (policies/synthesis/upper_bound.py; the cell is the node's last k belief-changing symbols,
-  which it knows exactly). Terminal nodes are exact: accepted 1, rejected 0, horizon reached 0.
-  Expanded nodes: U = min(U, max_a Σ_o p U_child) and L = max_a Σ_o p L_child.
-* Refinement (AO*/HSVI style): expand, in batches, the frontier nodes carrying the most of the root's
-  gap — reach probability under the upper-greedy policy times (U - L) — until U - L <= tau at the
-  root, the frontier is exhausted, or the time limit.
-* The returned policy takes at every expanded node the action maximising L (ties: U); lower is the
-  value of exactly that policy with every unexpanded node counted as failure, so the policy's true
-  value is at least `lower`. It is a policies.routing.aware_table.BeliefTablePolicy (acts on any belief).
+  one node per distinct (junctions t, road x, DFA state q, state-only task state p, belief bytes) —
+  identical beliefs at the same depth are merged, never approximated. A node's children are, per
+  next junction, the observation symbols with their exact probabilities and exact Bayes (or
+  "paper") posteriors.
+* Every node carries [L, U]. FRONTIER (unexpanded) nodes: L = 0, U = the suffix abstraction's bound
+  at the node's cell (policies/synthesis/upper_bound.py; the cell is the node's last k
+  belief-changing symbols, which it knows exactly). FREE nodes (expanded along the trust-free
+  completion's move only): L = that move's value, U = the bound. Terminal nodes are exact: accepted
+  1, rejected 0, horizon reached 0. EXPANDED nodes: U = min(U, max_a Σ_o p U_child) and
+  L = max_a Σ_o p L_child.
+* Refinement (AO*/HSVI style): per round, expand the open nodes carrying the most of the root's
+  gap — reach probability under the upper-greedy policy times (U - L) — and look ahead along their
+  upper-greedy moves; free-expand the FRONTIER nodes the returned policy reaches; until
+  U - L <= tau at the root, the frontier is exhausted, or the time limit.
+* The returned policy takes at every EXPANDED node the action maximising L (ties: strict value,
+  then U) and drives the trust-free completion everywhere else (the exact-belief acting rule of
+  policies.routing.aware_table.BeliefTablePolicy). After the last round the completions it reaches
+  are closed, so `lower` is the exact value of that policy and at least the trust-free route's
+  (docs/synthesis.md, "Open nodes and the acting rule").
 
 Horizon H: at most H junctions (the study measures "policy, then fallback after 20", so H = 20 is
 the natural companion). Unbounded (horizon=None): upper is the abstraction's least fixed point with
@@ -43,6 +49,7 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.product_mdp import ProductTables, build_product
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
+from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols, suffix_cells
 from trustroute.policies.synthesis.end_components import unbounded_bound
 from trustroute.policies.synthesis.upper_bound import (
@@ -54,6 +61,11 @@ from trustroute.policies.synthesis.upper_bound import (
 
 CELL_BUDGET = 5000          # automatic suffix length: the longest k with n_symbols**k <= this
 DEFAULT_BATCH = 4096
+MIN_BATCH = 64
+NODE_BUDGET = 600_000   # search nodes (about 0.7 kB each with the memo): the search stops there
+LOOKAHEAD = 3      # further expansion steps per round along the upper-greedy moves
+FULL_SHARE = 0.5   # share of the gap-weighted frontier fully expanded per round
+FREE_SHARE = 1.0   # share of the policy's open mass free-expanded per round (1: all of it)
 UNBOUNDED_HORIZONS = (20, 30, 40, 60, 80, 120, 160)
 UNBOUNDED_DEPTH = 60        # the unbounded search leaves nodes this deep open (<= evaluate's cap)
 UNBOUNDED_STATE_BUDGET = 20_000
@@ -61,7 +73,10 @@ UNBOUNDED_BOUND_SHARE = 0.3  # share of the time limit the end-component bound m
 BOUNDED_ENTRY_BUDGET = 20_000_000   # floats of the bounded abstraction (160 MB)
 FINISH_SHARE = 0.04          # share of the time limit kept for finishing after the last check
 
-FRONTIER, EXPANDED, ACCEPTED, ZERO = 0, 1, 2, 3
+# FRONTIER: open, L = 0 (the policy drives the trust-free completion there, worth >= 0).
+# FREE: expanded along the trust-free completion's move only; L is that move's exact value, U the
+# abstraction's bound (the other moves are unexplored). EXPANDED: every move; a policy row.
+FRONTIER, EXPANDED, ACCEPTED, ZERO, FREE = 0, 1, 2, 3, 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,18 +110,22 @@ class _Graph:
         self.level = np.zeros(capacity, dtype=np.int64)
         self.x = np.zeros(capacity, dtype=np.int64)
         self.q = np.zeros(capacity, dtype=np.int64)
+        self.p = np.zeros(capacity, dtype=np.int64)      # state of the state-only task (free route)
         self.cell = np.zeros(capacity, dtype=np.int64)
         self.belief = np.zeros((capacity, n_trust))
-        self.upper = np.zeros(capacity)
-        self.lower = np.zeros(capacity)
+        # U, L and the strict value as rows of one array, so that a backup gathers all three at once
+        self.values = np.zeros((3, capacity))
+        self.upper, self.lower = self.values[0], self.values[1]
         # value of the L-greedy choice with every label read strictly, as this machine's labeller
         # does (no alternates): the tie-breaker among actions of equal L, and a reported figure.
-        self.strict = np.zeros(capacity)
+        self.strict = self.values[2]
         self.kind = np.zeros(capacity, dtype=np.int8)
         self.child = np.full((capacity, n_actions, n_outcomes), -1, dtype=np.int64)
         self.prob = np.zeros((capacity, n_actions, n_outcomes))
-        self.memo: list[dict[tuple[int, int, bytes], int]] = []
+        self.memo: list[dict[tuple[int, int, int, bytes], int]] = []
         self.expanded_by_level: list[list[int]] = []
+        self.free_by_level: list[dict[int, None]] = []    # FREE nodes per level (insertion order)
+        self.free_version: list[int] = []
         # Labels at thresholds: an outcome whose belief is within the rounding margin of a belief
         # atom's hyperplane has one child per DFA state it could lead to. child/prob hold the one
         # the strict label reads; the others are "alternates" (parent, slot, outcome, child),
@@ -143,11 +162,15 @@ class _Graph:
         if needed <= capacity:
             return
         new = max(needed, 2 * capacity)
-        for name in ("level", "x", "q", "cell", "upper", "lower", "strict", "kind"):
+        for name in ("level", "x", "q", "p", "cell", "kind"):
             old = getattr(self, name)
             grown = np.zeros(new, dtype=old.dtype)
             grown[:capacity] = old
             setattr(self, name, grown)
+        values = np.zeros((3, new))
+        values[:, :capacity] = self.values
+        self.values = values
+        self.upper, self.lower, self.strict = values[0], values[1], values[2]
         belief = np.zeros((new, self.belief.shape[1]))
         belief[:capacity] = self.belief
         self.belief = belief
@@ -158,35 +181,61 @@ class _Graph:
         prob[:capacity] = self.prob
         self.prob = prob
 
-    def add(self, level: int, x: np.ndarray, q: np.ndarray, cell: np.ndarray, belief: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray]:
-        """Ids of the nodes (level, x, q, belief), creating missing ones; and a mask of new ones."""
-        while len(self.memo) <= level:
+    def add(self, level: int | np.ndarray, x: np.ndarray, q: np.ndarray, p: np.ndarray,
+            cell: np.ndarray, belief: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ids of the nodes (level, x, q, p, belief), creating missing ones; and a mask of new ones."""
+        level = np.broadcast_to(np.asarray(level, dtype=np.int64), x.shape)
+        deepest = int(level.max()) if level.size else 0
+        while len(self.memo) <= deepest:
             self.memo.append({})
             self.expanded_by_level.append([])
-        memo = self.memo[level]
+            self.free_by_level.append({})
+            self.free_version.append(0)
+        memos = self.memo
         ids = np.empty(x.size, dtype=np.int64)
         new = np.zeros(x.size, dtype=bool)
         start = self.n
         self._grow(self.n + x.size)
-        for i, key in enumerate(zip(x.tolist(), q.tolist(), (row.tobytes() for row in belief),
-                                    strict=True)):
-            node = memo.get(key)
+        for i, (lv, *key) in enumerate(zip(level.tolist(), x.tolist(), q.tolist(), p.tolist(),
+                                           (row.tobytes() for row in belief), strict=True)):
+            memo = memos[lv]
+            node = memo.get(tuple(key))
             if node is None:
                 node = self.n
-                memo[key] = node
+                memo[tuple(key)] = node
                 self.n += 1
                 new[i] = True
             ids[i] = node
         created = ids[new]
-        self.level[created] = level
+        self.level[created] = level[new]
         self.x[created] = x[new]
         self.q[created] = q[new]
+        self.p[created] = p[new]
         self.cell[created] = cell[new]
         self.belief[created] = belief[new]
         self.kind[created] = FRONTIER
         assert self.n == start + created.size
         return ids, new
+
+
+@dataclass(frozen=True, eq=False)
+class _Level:
+    """The expanded nodes of one level with their (fixed) children, for the backups.
+
+    nodes [m]; child [m, actions, outcomes] (0 where absent, masked by has_child); prob; legal
+    [m, actions]; alternates as (row, slot, outcome, child) with row an index into nodes."""
+
+    count: int
+    alternate_chunks: int
+    nodes: np.ndarray
+    child: np.ndarray
+    has_child: np.ndarray
+    prob: np.ndarray
+    legal: np.ndarray
+    alt_row: np.ndarray
+    alt_slot: np.ndarray
+    alt_outcome: np.ndarray
+    alt_child: np.ndarray
 
 
 class _Search:
@@ -208,23 +257,108 @@ class _Search:
             self.bound = bounded_upper(abstraction, horizon, deadline, unbounded_value)
             self.bound_note = "exact backward induction on the abstraction"
         else:
-            self.bound = [unbounded_value]
+            self.bound = np.asarray(unbounded_value)[None]
             self.bound_note = ("the unbounded abstraction's least fixed point from above, end "
                                "components collapsed (policies/synthesis/end_components.py)")
         self.abstraction_seconds = time.perf_counter() - started
         n_outcomes = max(len(s) for s in self.symbols.by_incident)
+        # symbol ids per incident, padded with -1
+        self.symbols_of_incident = np.full((len(self.symbols.by_incident), n_outcomes), -1, dtype=np.int64)
+        for i, members in enumerate(self.symbols.by_incident):
+            self.symbols_of_incident[i, : len(members)] = members
         self.slot_of_symbol = np.zeros(self.symbols.n_symbols, dtype=np.int64)
         for members in self.symbols.by_incident:
             for j, o in enumerate(members):
                 self.slot_of_symbol[o] = j
         self.graph = _Graph(pomdp.n_trust, tables.successors.shape[1], n_outcomes)
+        self.levels: dict[int, _Level] = {}
+        self.moves: dict[int, list[tuple[_Level, np.ndarray, np.ndarray]]] = {}
+        self.free_levels: dict[int, tuple[int, _Level]] = {}
+        # The trust-free completion (policies/routing/free.py) as the returned policy drives it
+        # wherever it has no row: its move at (road, state-only task state), the first move when
+        # that task is complete or impossible (BeliefTablePolicy's exact-belief rule).
+        self.task = state_only_task(pomdp.town, tables.spec)
+        self.free_slot = np.where(self.task.next_slot >= 0, self.task.next_slot, 0)   # [n_x, n_p]
+        self.next_p = np.asarray(self.task.next_state, dtype=np.int64)               # [n_p, n_x]
 
-    def frontier_upper(self, level: int, x: np.ndarray, q: np.ndarray, cell: np.ndarray) -> np.ndarray:
-        return self.bound[min(level, len(self.bound) - 1)][x, q, cell]
+    def level_arrays(self, level: int) -> _Level:
+        """The cached _Level of `level`, rebuilt when nodes or alternates were added there."""
+        g = self.graph
+        members = g.expanded_by_level[level]
+        chunks = len(g.alternates.get(level, ()))
+        cached = self.levels.get(level)
+        if cached is not None and cached.count == len(members) and cached.alternate_chunks == chunks:
+            return cached
+        cached = self._level(level, np.array(members, dtype=np.int64), chunks, len(members))
+        self.levels[level] = cached
+        return cached
 
-    def classify(self, ids: np.ndarray, level: int) -> None:
+    def free_level_arrays(self, level: int) -> _Level:
+        """The FREE nodes of `level` as a _Level whose only legal move is the free one."""
+        g = self.graph
+        version = (g.free_version[level], len(g.alternates.get(level, ())))
+        cached = self.free_levels.get(level)
+        if cached is not None and cached[0] == version:
+            return cached[1]
+        nodes = np.fromiter(g.free_by_level[level], dtype=np.int64)
+        lv = self._level(level, nodes, version[1], nodes.size)
+        only = np.zeros_like(lv.legal)
+        only[np.arange(nodes.size), self.free_slot[g.x[nodes], g.p[nodes]]] = True
+        lv = _Level(**{**lv.__dict__, "legal": lv.legal & only})
+        self.free_levels[level] = (version, lv)
+        return lv
+
+    def _level(self, level: int, nodes: np.ndarray, chunks: int, count: int) -> _Level:
+        g = self.graph
+        child = g.child[nodes]
+        parent, slot, outcome, alt_child = g.alternates_of(level)
+        row = np.zeros(0, dtype=np.int64)
+        if parent.size:
+            order = np.argsort(nodes, kind="stable")
+            where = np.minimum(np.searchsorted(nodes[order], parent), nodes.size - 1)
+            hit = nodes[order][where] == parent
+            row, slot, outcome, alt_child = order[where[hit]], slot[hit], outcome[hit], alt_child[hit]
+        else:
+            slot = outcome = alt_child = row
+        return _Level(count=count, alternate_chunks=chunks, nodes=nodes,
+                      child=np.maximum(child, 0), has_child=child >= 0, prob=g.prob[nodes],
+                      legal=self.tables.successors[g.x[nodes]] >= 0, alt_row=row, alt_slot=slot,
+                      alt_outcome=outcome, alt_child=alt_child)
+
+    @staticmethod
+    def level_values3(lv: _Level, values: np.ndarray) -> np.ndarray:
+        """level_values for U (optimistic), L (pessimistic) and the strict value at once:
+        [3, nodes, moves] from values [3, n]."""
+        child_value = np.where(lv.has_child[None], values[:, lv.child], 0.0)
+        if lv.alt_row.size:
+            index = (lv.alt_row, lv.alt_slot, lv.alt_outcome)
+            np.maximum.at(child_value[0], index, values[0, lv.alt_child])
+            np.minimum.at(child_value[1], index, values[1, lv.alt_child])
+        q = lv.prob[None, :, :, 0] * child_value[:, :, :, 0]
+        for o in range(1, child_value.shape[3]):
+            q += lv.prob[None, :, :, o] * child_value[:, :, :, o]
+        return np.where(lv.legal[None], q, -1.0)
+
+    @staticmethod
+    def level_values(lv: _Level, values: np.ndarray, pessimistic: bool | None) -> np.ndarray:
+        """action_values on a cached level: Σ_o p(o) value(child) per action, -1 where illegal."""
+        child_value = np.where(lv.has_child, values[lv.child], 0.0)
+        if pessimistic is not None and lv.alt_row.size:
+            combine = np.minimum.at if pessimistic else np.maximum.at
+            combine(child_value, (lv.alt_row, lv.alt_slot, lv.alt_outcome), values[lv.alt_child])
+        q = lv.prob[:, :, 0] * child_value[:, :, 0]
+        for o in range(1, child_value.shape[2]):
+            q += lv.prob[:, :, o] * child_value[:, :, o]
+        return np.where(lv.legal, q, -1.0)
+
+    def frontier_upper(self, level: int | np.ndarray, x: np.ndarray, q: np.ndarray, cell: np.ndarray
+                       ) -> np.ndarray:
+        return self.bound[np.minimum(level, self.bound.shape[0] - 1), x, q, cell]
+
+    def classify(self, ids: np.ndarray) -> None:
         """Initialise new nodes: terminal values, or the frontier's abstract bound."""
         g, tables = self.graph, self.tables
+        level = g.level[ids]
         q = g.q[ids]
         accepted = tables.accepting[q]
         g.kind[ids[accepted]] = ACCEPTED
@@ -232,6 +366,7 @@ class _Search:
         rest = ids[~accepted]
         if rest.size == 0:
             return
+        level = level[~accepted]
         upper = np.minimum(1.0, self.frontier_upper(level, g.x[rest], g.q[rest], g.cell[rest]))
         dead = tables.rejecting[g.q[rest]] | (upper <= 0.0)
         if self.horizon is not None:
@@ -287,52 +422,62 @@ class _Search:
         x0 = np.array([tables.start])
         strict, _, other = self.possible_q(np.array([tables.dfa.initial]), x0, b0)
         qs = np.concatenate([strict, other])
-        ids, _ = self.graph.add(0, np.repeat(x0, qs.size), qs, np.zeros(qs.size, dtype=np.int64),
-                                np.repeat(b0, qs.size, axis=0))
-        self.classify(ids, 0)
+        ids, _ = self.graph.add(0, np.repeat(x0, qs.size), qs,
+                                np.full(qs.size, self.task.initial_state, dtype=np.int64),
+                                np.zeros(qs.size, dtype=np.int64), np.repeat(b0, qs.size, axis=0))
+        self.classify(ids)
         return ids
 
-    def expand(self, nodes: np.ndarray) -> None:
+    def expand(self, nodes: np.ndarray, free_only: bool = False) -> None:
+        """Expand `nodes` (FRONTIER or FREE, any levels) along every move (EXPANDED), or along
+        the trust-free completion's move only (free_only: FRONTIER -> FREE)."""
         g, tables, symbols = self.graph, self.tables, self.symbols
-        by_level: dict[int, list[int]] = {}
-        for node, level in zip(nodes.tolist(), g.level[nodes].tolist(), strict=True):
-            by_level.setdefault(level, []).append(node)
-        for level, members in sorted(by_level.items()):
-            parents = np.array(members, dtype=np.int64)
-            rows_parent, rows_slot, rows_symbol, rows_x2 = [], [], [], []
-            for a in range(tables.successors.shape[1]):
-                x2 = tables.successors[g.x[parents], a]
-                valid = x2 >= 0
-                incident = tables.pomdp.road_incident[np.where(valid, x2, 0)]
-                for o in range(symbols.n_symbols):
-                    hit = valid & (incident == symbols.incident[o])
-                    if hit.any():
-                        rows_parent.append(parents[hit])
-                        rows_slot.append(np.full(int(hit.sum()), a))
-                        rows_symbol.append(np.full(int(hit.sum()), o))
-                        rows_x2.append(x2[hit])
-            parent = np.concatenate(rows_parent)
-            slot = np.concatenate(rows_slot)
-            symbol = np.concatenate(rows_symbol)
-            x2 = np.concatenate(rows_x2)
-            belief, probability = apply_symbol(g.belief[parent], symbols, symbol)
-            keep = probability > 0
-            parent, slot, symbol, x2, belief, probability = (
-                a[keep] for a in (parent, slot, symbol, x2, belief, probability))
-            q2, alt_rows, alt_q = self.possible_q(g.q[parent], x2, belief)
-            cell2 = self.cells.next_cell[g.cell[parent], symbol]
-            ids, new = g.add(level + 1, x2, q2, cell2, belief)
-            outcome = self.slot_of_symbol[symbol]
-            g.child[parent, slot, outcome] = ids
-            g.prob[parent, slot, outcome] = probability
-            self.classify(ids[new], level + 1)
-            if alt_rows.size:
-                alt_ids, alt_new = g.add(level + 1, x2[alt_rows], alt_q, cell2[alt_rows],
-                                         belief[alt_rows])
-                self.classify(alt_ids[alt_new], level + 1)
-                g.add_alternates(level, parent[alt_rows], slot[alt_rows], outcome[alt_rows], alt_ids)
-            g.kind[parents] = EXPANDED
-            g.expanded_by_level[level].extend(members)
+        nodes = np.asarray(nodes, dtype=np.int64)
+        if nodes.size == 0:
+            return
+        n_actions = tables.successors.shape[1]
+        x2_all = tables.successors[g.x[nodes]]                                   # [m, actions]
+        valid = x2_all >= 0
+        if free_only:
+            valid &= np.arange(n_actions)[None, :] == self.free_slot[g.x[nodes], g.p[nodes]][:, None]
+        incident = tables.pomdp.road_incident[np.maximum(x2_all, 0)]
+        symbol_all = self.symbols_of_incident[incident]                           # [m, actions, s]
+        row, slot, j = np.nonzero(valid[:, :, None] & (symbol_all >= 0))
+        parent, symbol, x2 = nodes[row], symbol_all[row, slot, j], x2_all[row, slot]
+        belief, probability = apply_symbol(g.belief[parent], symbols, symbol)
+        keep = probability > 0
+        parent, slot, symbol, x2, belief, probability = (
+            a[keep] for a in (parent, slot, symbol, x2, belief, probability))
+        level2 = g.level[parent] + 1
+        q2, alt_rows, alt_q = self.possible_q(g.q[parent], x2, belief)
+        cell2 = self.cells.next_cell[g.cell[parent], symbol]
+        p2 = self.next_p[g.p[parent], x2]
+        ids, new = g.add(level2, x2, q2, p2, cell2, belief)
+        outcome = self.slot_of_symbol[symbol]
+        g.child[parent, slot, outcome] = ids
+        g.prob[parent, slot, outcome] = probability
+        self.classify(ids[new])
+        if alt_rows.size:
+            alt_ids, alt_new = g.add(level2[alt_rows], x2[alt_rows], alt_q, p2[alt_rows],
+                                     cell2[alt_rows], belief[alt_rows])
+            self.classify(alt_ids[alt_new])
+            alt_level = g.level[parent[alt_rows]]
+            for level in np.unique(alt_level).tolist():
+                here = alt_rows[alt_level == level]
+                g.add_alternates(level, parent[here], slot[here], outcome[here],
+                                 alt_ids[alt_level == level])
+        levels = g.level[nodes]
+        for level in np.unique(levels).tolist():
+            members = nodes[levels == level].tolist()
+            free_here = g.free_by_level[level]
+            if free_only:
+                free_here.update(dict.fromkeys(members))
+            else:
+                for n in members:
+                    free_here.pop(n, None)
+                g.expanded_by_level[level].extend(members)
+            g.free_version[level] += 1
+        g.kind[nodes] = FREE if free_only else EXPANDED
 
     def action_values(self, nodes: np.ndarray, values: np.ndarray, pessimistic: bool | None,
                       level: int | None = None) -> np.ndarray:
@@ -361,54 +506,127 @@ class _Search:
         return np.where(legal, q, -1.0)
 
     def backup(self) -> None:
+        """Bellman backups from the deepest level up. At each level the FREE nodes first (L and the
+        strict value are their one move's; U stays the abstraction's, the other moves being
+        unexplored), then the EXPANDED ones (U: min(U, max over moves); L: max over moves).
+        The move values and the policy's moves are kept (self.moves) for the reach computations
+        until the next expansion."""
         g = self.graph
+        self.moves = {}
         for level in range(len(g.expanded_by_level) - 1, -1, -1):
-            members = g.expanded_by_level[level]
-            if not members:
-                continue
-            nodes = np.array(members, dtype=np.int64)
-            g.upper[nodes] = np.minimum(
-                g.upper[nodes], self.action_values(nodes, g.upper, False, level).max(axis=1))
-            lower_q = self.action_values(nodes, g.lower, True, level)
-            g.lower[nodes] = np.maximum(g.lower[nodes], lower_q.max(axis=1))
-            # strict value of the policy's own choice (best L, ties by strict value)
-            strict_q = self.action_values(nodes, g.strict, None, level)
-            tied = lower_q >= lower_q.max(axis=1, keepdims=True)
-            g.strict[nodes] = np.where(tied, strict_q, -1.0).max(axis=1)
+            parts = []
+            if g.free_by_level[level]:
+                lv = self.free_level_arrays(level)
+                q3 = self.level_values3(lv, g.values)
+                g.lower[lv.nodes] = np.maximum(g.lower[lv.nodes], q3[1].max(axis=1))
+                g.strict[lv.nodes] = q3[2].max(axis=1)
+                parts.append((lv, q3))
+            if g.expanded_by_level[level]:
+                lv = self.level_arrays(level)
+                nodes = lv.nodes
+                q3 = self.level_values3(lv, g.values)
+                g.upper[nodes] = np.minimum(g.upper[nodes], q3[0].max(axis=1))
+                g.lower[nodes] = np.maximum(g.lower[nodes], q3[1].max(axis=1))
+                # strict value of the policy's own choice (best L, ties by strict value)
+                tied = q3[1] >= q3[1].max(axis=1, keepdims=True)
+                g.strict[nodes] = np.where(tied, q3[2], -1.0).max(axis=1)
+                parts.append((lv, q3))
+            self.moves[level] = [(lv, q3[0].argmax(axis=1), policy_choice(q3[1], q3[2], q3[0]))
+                                 for lv, q3 in parts]
+
+    def close_completions(self, roots: np.ndarray, depth_cap: int, deadline: float) -> bool:
+        """Free-expand FRONTIER nodes reached by the returned policy, or by the trust-free route
+        from the root, until there are none (True) or the deadline or NODE_BUDGET comes first
+        (False: L is then a lower bound of the policy's value). Then L is the
+        policy's exact value (every node it reaches without a row is valued by the completion it
+        drives there), and L at the root is at least the trust-free route's value (along that
+        route's tree every node is closed, and an EXPANDED node's L is at least its free move's)."""
+        g = self.graph
+        while True:
+            reach = self.reach_lower(roots) + self.reach_lower(roots, trust_free=True)
+            todo = np.flatnonzero((g.kind[: g.n] == FRONTIER) & (g.level[: g.n] < depth_cap)
+                                  & (reach > 0))
+            if todo.size == 0:
+                return True
+            # Down the free moves without backups in between (the policy's move at a FREE node is
+            # the free one whatever the values); then one backup, after which the policy's moves
+            # at EXPANDED nodes may have changed, so reach is computed again.
+            while todo.size:
+                if time.perf_counter() >= deadline or g.n >= NODE_BUDGET:
+                    self.backup()
+                    return False
+                self.expand(todo, free_only=True)
+                kids = g.child[todo].ravel()
+                kids = np.unique(kids[kids >= 0])
+                todo = kids[(g.kind[kids] == FRONTIER) & (g.level[kids] < depth_cap)]
+            self.backup()
+
+    def greedy_children(self, nodes: np.ndarray, mass: np.ndarray, depth_cap: int
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Open (FRONTIER or FREE) children of EXPANDED `nodes` along their upper-greedy move by
+        their children's current U, with the reach mass they get from `mass` (summed over
+        parents), shallower than depth_cap and with a positive gap."""
+        g = self.graph
+        child = g.child[nodes]
+        has = child >= 0
+        child_upper = np.where(has, g.upper[np.maximum(child, 0)], 0.0)
+        q_upper = (g.prob[nodes] * child_upper).sum(axis=2)
+        q_upper = np.where(self.tables.successors[g.x[nodes]] >= 0, q_upper, -1.0)
+        move = q_upper.argmax(axis=1)
+        rows = np.arange(nodes.size)
+        kids, kid_prob, kid_has = child[rows, move], g.prob[nodes][rows, move], has[rows, move]
+        kid_mass = mass[:, None] * kid_prob
+        kids, kid_mass = kids[kid_has], kid_mass[kid_has]
+        open_kid = (((g.kind[kids] == FRONTIER) | (g.kind[kids] == FREE)) & (g.level[kids] < depth_cap)
+                    & (g.upper[kids] > g.lower[kids]))
+        kids, kid_mass = kids[open_kid], kid_mass[open_kid]
+        if kids.size == 0:
+            return kids, kid_mass
+        unique, inverse = np.unique(kids, return_inverse=True)
+        return unique, np.bincount(inverse, weights=kid_mass, minlength=unique.size)
+
+    def reach_lower(self, roots: np.ndarray, trust_free: bool = False) -> np.ndarray:
+        """Probability of reaching each node under the returned policy (its move at EXPANDED
+        nodes, the free move at FREE ones; alternates each get their full probability), from the
+        moves of the last backup. trust_free: under the trust-free completion everywhere instead."""
+        g = self.graph
+        reach = np.zeros(g.n)
+        reach[roots] = 1.0
+        for level in sorted(self.moves):
+            for lv, _, move in self.moves[level]:
+                self._push(reach, lv, self.free_slot[g.x[lv.nodes], g.p[lv.nodes]] if trust_free else move)
+        return np.minimum(reach, 1.0)
+
+    @staticmethod
+    def _push(reach: np.ndarray, lv: _Level, move: np.ndarray | None) -> None:
+        """Add the reach mass of lv's nodes to their children along `move` (None: every move)."""
+        mass_here = reach[lv.nodes]
+        if not (mass_here > 0).any():
+            return
+        if move is None:
+            chosen = lv.legal
+        else:
+            chosen = np.zeros(lv.legal.shape, dtype=bool)
+            chosen[np.arange(lv.nodes.size), move] = True
+            chosen &= lv.legal
+        mass = mass_here[:, None, None] * lv.prob * (chosen[:, :, None] & lv.has_child)
+        np.add.at(reach, lv.child[lv.has_child], mass[lv.has_child])
+        if lv.alt_row.size:
+            np.add.at(reach, lv.alt_child, mass[lv.alt_row, lv.alt_slot, lv.alt_outcome])
 
     def reach(self, roots: np.ndarray, every_action: bool = False) -> np.ndarray:
         """Probability of reaching each node under the upper-greedy policy (alternates of an
         outcome each get its full probability: either may be the one that happens). every_action:
         every action carries the node's full mass instead (used once the upper-greedy frontier is
-        closed while the gap is not, as at thresholds where L takes the worse alternate)."""
+        closed while the gap is not, as at thresholds where L takes the worse alternate). Only
+        EXPANDED nodes pass mass on; from the moves of the last backup."""
         g = self.graph
         reach = np.zeros(g.n)
         reach[roots] = 1.0
-        for level, members in enumerate(g.expanded_by_level):
-            if not members:
-                continue
-            nodes = np.array(members, dtype=np.int64)
-            nodes = nodes[reach[nodes] > 0]
-            if nodes.size == 0:
-                continue
-            values = self.action_values(nodes, g.upper, False, level)
-            if every_action:
-                chosen = values >= 0                                   # [nodes, actions]
-            else:
-                chosen = np.zeros(values.shape, dtype=bool)
-                chosen[np.arange(nodes.size), values.argmax(axis=1)] = True
-            mass = reach[nodes, None, None] * g.prob[nodes] * chosen[:, :, None]
-            child = g.child[nodes]
-            ok = child >= 0
-            np.add.at(reach, child[ok], mass[ok])
-            parent, slot, outcome, alt_child = g.alternates_of(level)
-            if parent.size:
-                position = dict(zip(nodes.tolist(), range(nodes.size), strict=True))
-                for p, a, o, c in zip(parent.tolist(), slot.tolist(), outcome.tolist(),
-                                      alt_child.tolist(), strict=True):
-                    i = position.get(p)
-                    if i is not None:
-                        reach[c] += mass[i, a, o]
+        for level in sorted(self.moves):
+            for lv, upper_move, _ in self.moves[level]:
+                if lv is self.levels.get(level):
+                    self._push(reach, lv, None if every_action else upper_move)
         return np.minimum(reach, 1.0)
 
     def policy_table(self) -> PolicyTable:
@@ -417,15 +635,29 @@ class _Search:
         lower_q = self.action_values(nodes, g.lower, True)
         strict_q = self.action_values(nodes, g.strict, None)
         upper_q = self.action_values(nodes, g.upper, False)
-        # argmax of L, ties broken by the strict-label value, then by U (then the first slot): the
-        # policy whose value `lower` is.
-        best_lower = lower_q.max(axis=1, keepdims=True)
-        tied = lower_q >= best_lower
-        best_strict = np.where(tied, strict_q, -np.inf).max(axis=1, keepdims=True)
-        score = np.where(tied & (strict_q >= best_strict), upper_q, -np.inf)
-        action = score.argmax(axis=1)
+        action = policy_choice(lower_q, strict_q, upper_q)
         return PolicyTable(t=g.level[nodes], x=g.x[nodes], q=g.q[nodes], beliefs=g.belief[nodes],
-                           action=action)
+                           action=action, projected=g.p[nodes])
+
+
+def policy_choice(lower_q: np.ndarray, strict_q: np.ndarray, upper_q: np.ndarray) -> np.ndarray:
+    """The returned policy's move per node from its move values [nodes, moves]: argmax of L, ties
+    broken by the strict-label value, then by U, then the first slot (the policy whose value
+    `lower` is)."""
+    best_lower = lower_q.max(axis=1, keepdims=True)
+    tied = lower_q >= best_lower
+    best_strict = np.where(tied, strict_q, -np.inf).max(axis=1, keepdims=True)
+    score = np.where(tied & (strict_q >= best_strict), upper_q, -np.inf)
+    return score.argmax(axis=1)
+
+
+def _heaviest(nodes: np.ndarray, weight: np.ndarray, batch: int, share: float = 0.5) -> np.ndarray:
+    """The heaviest nodes carrying `share` of the total weight: at least MIN_BATCH (when there are
+    that many), at most `batch`."""
+    order = np.argsort(-weight, kind="stable")
+    covered = np.cumsum(weight[order])
+    count = int(np.searchsorted(covered, share * covered[-1])) + 1
+    return nodes[order[: max(min(MIN_BATCH, nodes.size), min(count, batch))]]
 
 
 def automatic_suffix_length(n_changing: int) -> int:
@@ -459,9 +691,14 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
     depth_cap = horizon if horizon is not None else UNBOUNDED_DEPTH
     iterations = 0
     expanded = 0
-    while np.subtract(*root_bounds()[::-1]) > tau and time.perf_counter() < deadline:
+    while (np.subtract(*root_bounds()[::-1]) > tau and time.perf_counter() < deadline
+           and g.n < NODE_BUDGET):
+        # Full expansion: open nodes (FRONTIER or FREE) carrying most of the root's gap under the
+        # upper-greedy policy.
         reach = search.reach(roots)
-        frontier = np.flatnonzero((g.kind[: g.n] == FRONTIER) & (g.level[: g.n] < depth_cap))
+        reach_policy = search.reach_lower(roots)
+        shallow = g.level[: g.n] < depth_cap
+        frontier = np.flatnonzero(((g.kind[: g.n] == FRONTIER) | (g.kind[: g.n] == FREE)) & shallow)
         weight = reach[frontier] * (g.upper[frontier] - g.lower[frontier])
         if not (weight > 0).any():
             weight = search.reach(roots, every_action=True)[frontier] * (
@@ -470,17 +707,43 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         frontier, weight = frontier[positive], weight[positive]
         if frontier.size == 0:
             break
-        order = np.argsort(-weight, kind="stable")
-        covered = np.cumsum(weight[order])
-        count = int(np.searchsorted(covered, 0.5 * covered[-1])) + 1
-        chosen = frontier[order[: max(1, min(count, batch))]]
+        chosen = _heaviest(frontier, weight, batch, FULL_SHARE)
         search.expand(chosen)
         expanded += chosen.size
+        # Look ahead: the new children the upper-greedy move of the just-expanded nodes reaches,
+        # heaviest first, without a full backup in between (fewer rounds on deep optimal policies).
+        chosen_reach = reach[chosen]
+        for _ in range(LOOKAHEAD):
+            chosen, chosen_reach = search.greedy_children(chosen, chosen_reach, depth_cap)
+            if chosen.size == 0:
+                break
+            keep = _heaviest(chosen, chosen_reach * (g.upper[chosen] - g.lower[chosen]), batch,
+                             FULL_SHARE)
+            chosen_reach = chosen_reach[np.isin(chosen, keep)]
+            chosen = chosen[np.isin(chosen, keep)]
+            search.expand(chosen)
+            expanded += chosen.size
+        # Free expansion: FRONTIER nodes the returned policy reaches (it drives the trust-free
+        # completion there) with the most probability times what they could still be worth.
+        known = reach_policy.size            # nodes that existed before this round's expansion
+        open_nodes = np.flatnonzero((g.kind[:known] == FRONTIER) & (g.level[:known] < depth_cap))
+        free_weight = reach_policy[open_nodes] * g.upper[open_nodes]
+        positive = free_weight > 0
+        if positive.any() and g.n < NODE_BUDGET:
+            if FREE_SHARE >= 1.0:
+                search.expand(open_nodes[positive], free_only=True)
+            else:
+                search.expand(_heaviest(open_nodes[positive], free_weight[positive], batch, FREE_SHARE),
+                              free_only=True)
         search.backup()
         iterations += 1
         if on_iteration is not None:
             on_iteration(*root_bounds())
     search.backup()
+    # Close the returned policy's trust-free completions: every open node it reaches is expanded
+    # along the free move, so that L is the policy's exact value (unless the deadline comes first;
+    # then L is still a lower bound of it). stats["completion_closed"] says which.
+    closed = search.close_completions(roots, depth_cap, deadline)
     lower, upper = root_bounds()
     table = search.policy_table()
     open_nodes = g.kind[: g.n] == FRONTIER
@@ -497,6 +760,7 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         # the returned policy's value with labels read strictly (this machine's labeller) from the
         # root the vehicle is in: a lower bound of what `evaluate` measures
         "lower_strict_labels": float(g.strict[roots[0]]),
+        "completion_closed": closed,
         "nodes": int(g.n),
         "expanded_nodes": int(expanded),
         "open_frontier_nodes": int(open_nodes.sum()),
@@ -576,12 +840,14 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     never = shortest > tables.n_x * tables.n_q      # unreachable in the road x DFA graph
     if never or (horizon is not None and shortest > horizon):
         # Answered by graph distance alone: no route accepts within H junctions, whatever the labels.
-        table = PolicyTable(t=[], x=[], q=[], beliefs=np.zeros((0, pomdp.n_trust)), action=[])
+        table = PolicyTable(t=[], x=[], q=[], beliefs=np.zeros((0, pomdp.n_trust)), action=[],
+                            projected=[])
         lower = upper = 0.0
         note = ("graph distance: acceptance is unreachable" if never else
                 f"graph distance: acceptance needs at least {shortest} junctions")
         runs = [{"horizon": horizon, "lower": 0.0, "upper": 0.0, "nodes": 0, "abstraction_root_upper": 0.0,
-                 "abstraction_bound": note, "threshold_alternates": 0, "lower_strict_labels": 0.0}]
+                 "abstraction_bound": note, "threshold_alternates": 0, "lower_strict_labels": 0.0,
+                 "root_dfa_states": sorted(q0), "completion_closed": True}]
         if horizon is None:
             note = "graph distance: acceptance is unreachable"
     elif horizon is not None:

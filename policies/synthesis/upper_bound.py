@@ -29,6 +29,8 @@ import numpy as np
 from trustroute.policies.model.product_mdp import ProductTables
 from trustroute.policies.synthesis.belief_cells import ObservationSymbols, SuffixCells, image_label_status
 
+BACKUP_CHUNK_ENTRIES = 4_000_000   # floats of one chunk of the vectorised backup (32 MB)
+
 
 @dataclass(frozen=True, eq=False)
 class Abstraction:
@@ -36,6 +38,7 @@ class Abstraction:
     symbols: ObservationSymbols
     cells: SuffixCells
     possible_bits: np.ndarray     # bool [n_cells, n_symbols, 2**n_atoms]
+    vertex_likelihood: np.ndarray  # [n_symbols, n_trust (vertex), n_cells]: P(o | vertex v of cell c)
 
 
 def build_abstraction(tables: ProductTables, symbols: ObservationSymbols, cells: SuffixCells
@@ -46,13 +49,21 @@ def build_abstraction(tables: ProductTables, symbols: ObservationSymbols, cells:
         status = image_label_status(cells, symbols, tables.belief_coeffs[j], tables.belief_offsets[j])
         bit = (np.arange(2 ** m) >> j) & 1                                # [β]
         possible &= (status[:, :, None] == 2) | (status[:, :, None] == bit[None, None, :])
-    return Abstraction(tables=tables, symbols=symbols, cells=cells, possible_bits=possible)
+    vertex_likelihood = np.ascontiguousarray(
+        np.einsum("cvk,ok->ovc", cells.vertices, symbols.likelihood))
+    return Abstraction(tables=tables, symbols=symbols, cells=cells, possible_bits=possible,
+                       vertex_likelihood=vertex_likelihood)
 
 
 def abstract_backup(abstraction: Abstraction, value_next: np.ndarray,
                     deadline: float | None = None) -> np.ndarray | None:
     """One application of T̄ to value_next [n_x, n_q, n_cells]; terminal DFA states fixed.
-    None if `deadline` passes before it is complete."""
+    None if `deadline` passes before it is complete.
+
+    The value of moving to road x2 does not depend on the road x it is entered from, so it is
+    computed once per destination road (in chunks of roads sharing an incident, vectorised over
+    DFA states and cells) and each road then takes the max over its successors.
+    """
     tables, symbols, cells = abstraction.tables, abstraction.symbols, abstraction.cells
     n_x, n_q, n_c = value_next.shape
     live = np.flatnonzero(~(tables.accepting | tables.rejecting))
@@ -60,28 +71,36 @@ def abstract_backup(abstraction: Abstraction, value_next: np.ndarray,
     out[:, tables.accepting, :] = 1.0
     if live.size == 0:
         return out
+    n_vertices = cells.vertices.shape[1]
+    n_bits = abstraction.possible_bits.shape[2]
+    entered = np.zeros((n_x, live.size, n_c))          # value of entering road x2, per (q, cell)
+    chunk = max(1, BACKUP_CHUNK_ENTRIES // max(1, live.size * n_c * n_vertices))
     road_incident = tables.pomdp.road_incident
-    for x in range(n_x):
-        if deadline is not None and x % 16 == 0 and time.perf_counter() > deadline:
-            return None
-        best = np.zeros((live.size, n_c))
-        for x2 in tables.successors[x]:
-            if x2 < 0:
-                continue
-            weighted = np.zeros((live.size, n_c, symbols.likelihood.shape[1]))
-            for o in symbols.by_incident[int(road_incident[x2])]:
+    for incident, members in enumerate(symbols.by_incident):
+        roads = np.flatnonzero(road_incident == incident)
+        for start in range(0, roads.size, chunk):
+            if deadline is not None and time.perf_counter() > deadline:
+                return None
+            x2 = roads[start:start + chunk]
+            # Σ_o P(o | v) value_o per vertex v of each cell, then the max over the vertices
+            # (vertex axis first: a max over a short last axis is several times slower)
+            per_vertex = np.zeros((n_vertices, x2.size, live.size, n_c))
+            for o in members:
                 c2 = cells.next_cell[:, o]
-                branch = np.zeros((live.size, n_c))
-                for bits in range(abstraction.possible_bits.shape[2]):
-                    q2 = tables.next_q[live, x2, bits]                    # [n_live]
-                    candidate = value_next[x2][q2[:, None], c2[None, :]]
-                    allowed = abstraction.possible_bits[:, o, bits][None, :]
-                    branch = np.where(allowed, np.maximum(branch, candidate), branch)
-                weighted += branch[:, :, None] * symbols.likelihood[o][None, None, :]
-            # max over the cell's vertices of Σ_o P(o|v) value_o
-            action_value = np.einsum("cvk,qck->qcv", cells.vertices, weighted).max(axis=2)
-            best = np.maximum(best, action_value)
-        out[x, live, :] = np.minimum(best, 1.0)
+                branch = np.zeros((x2.size, live.size, n_c))
+                for bits in range(n_bits):
+                    allowed = abstraction.possible_bits[:, o, bits]
+                    if not allowed.any():
+                        continue
+                    q2 = tables.next_q[live[:, None], x2[None, :], bits].T      # [roads, n_live]
+                    candidate = value_next[x2[:, None], q2][:, :, c2]          # [roads, n_live, c]
+                    np.maximum(branch, np.where(allowed[None, None, :], candidate, 0.0), out=branch)
+                per_vertex += abstraction.vertex_likelihood[o][:, None, None, :] * branch[None]
+            entered[x2] = per_vertex.max(axis=0)
+    successors = tables.successors
+    legal = successors >= 0
+    best = np.where(legal[:, :, None, None], entered[np.maximum(successors, 0)], 0.0).max(axis=1)
+    out[:, live, :] = np.minimum(best, 1.0)
     return out
 
 

@@ -46,8 +46,8 @@ def test_without_trust_atoms_the_cli_writes_the_plain_synthesis_file_byte_for_by
         assert sorted(archive.namelist()) == sorted(f"{a}.npy" for a in ARRAY_NAMES)
     table = plain.policy.table
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs,
-                        action=table.action)
+    np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, projected=table.projected,
+                        beliefs=table.beliefs, action=table.action)
     assert buffer.getvalue() == data
 
 

@@ -15,8 +15,10 @@ from hypothesis import strategies as st
 
 from tests.policies.test_evaluate_random_models import random_driver
 from trustroute.networks.town import INCIDENT_TYPES, MIN_ROAD_LENGTH, town_from_dict
+from trustroute.policies.evaluate import evaluate
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.synthesis.exact_search import exact_optimum
 from trustroute.policies.synthesis.search import synthesize
 
@@ -87,3 +89,26 @@ def test_bounds_bracket_brute_force_on_random_problems(driver, seed, horizon, be
     unbounded = synthesize(pomdp, spec, belief_rule=belief_rule, time_limit=1.0, suffix_length=2)
     assert unbounded.upper >= optimum - TOLERANCE
     assert unbounded.lower <= unbounded.upper + TOLERANCE
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_returned_policy_is_worth_exactly_lower_on_random_problems(driver, seed):
+    """Early stops (tau 0.2) leave open nodes; the policy drives the trust-free completion there,
+    which the search valued exactly: `evaluate` of the policy equals L and is >= the trust-free
+    route's value."""
+    rng = np.random.default_rng(1000 + seed)
+    town = random_town(rng)
+    pomdp = build_pomdp(town, random_driver(rng, driver.incident_types))
+    spec = random_spec(rng, town, pomdp.initial_belief)
+    horizon = int(rng.integers(4, 8))
+    free = evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None, max_junctions=horizon)
+    for tau in (0.2, 1e-6):
+        result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20)
+        value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+        run = result.stats["runs"][0]
+        strict = run["lower_strict_labels"]
+        assert value.lower == pytest.approx(strict, abs=TOLERANCE), (value.lower, strict, result.lower)
+        if run["threshold_alternates"] == 0 and len(run["root_dfa_states"]) == 1:
+            # no label within the rounding margin: L is the strict value, at least the free route's
+            assert value.lower == pytest.approx(result.lower, abs=TOLERANCE)
+            assert result.lower >= free.lower - TOLERANCE
