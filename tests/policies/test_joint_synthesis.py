@@ -83,7 +83,7 @@ def test_monte_carlo_of_the_returned_policy_with_hidden_trust_agrees_with_lower(
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec, junction_cap=horizon,
                          fallback_after=None)
     rng = np.random.default_rng(20261201)
-    episodes = 1500
+    episodes = 600
     satisfied = np.zeros(episodes, dtype=bool)
     for n in range(episodes):
         synthetic = SyntheticDriver(driver, np.random.default_rng(rng.integers(2**63)))
