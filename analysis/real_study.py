@@ -24,7 +24,11 @@ import numpy as np
 import pandas as pd
 
 from trustroute.analysis.real_tables import read_real_table
-from trustroute.analysis.satisfaction import LOGGED_BELIEF_SOURCES, satisfaction_by_source
+from trustroute.analysis.satisfaction import (
+    LOGGED_BELIEF_SOURCES,
+    REPORTED_TRUST_LABEL,
+    satisfaction_by_source,
+)
 
 AUTHORS_SATISFIED_FRACTION = 0.99  # statistic_test_point_based.py: precetage >= 0.99
 AUTHORS_LOW_TRUST = 2  # ... data.iloc[k, 1] >= 2 counts as satisfying
@@ -255,14 +259,18 @@ def real_study_analysis(study_dir: Path) -> RealStudyAnalysis:
     )
     subset = _subset_drivers(manifest)
     per["in_authors_subset"] = per["participant"].isin(subset) if subset is not None else False
-    figures = figure_table(per, roads, ticks, subset)
+    trust_label = (f" (trust-state atoms: {REPORTED_TRUST_LABEL})"
+                   if any(spec.uses_trust_atoms for spec in specs.values()) else "")
+    figures = figure_table(per, roads, ticks, subset, trust_label)
     return RealStudyAnalysis(per, figures, paper_matches(figures), manifest, authors_paired_tests(per))
 
 
 def figure_table(
-    per: pd.DataFrame, roads: pd.DataFrame, ticks: pd.DataFrame, subset: set[int] | None
+    per: pd.DataFrame, roads: pd.DataFrame, ticks: pd.DataFrame, subset: set[int] | None,
+    trust_label: str = "",
 ) -> list[dict]:
-    """Every reading of every figure: (figure, reading, subset, aware value, free value, n)."""
+    """Every reading of every figure: (figure, reading, subset, aware value, free value, n);
+    trust_label is appended to the spec readings (the reported trust standing in for θ)."""
     subsets = {"all participants": per}
     if subset is not None:
         subsets["authors' statistic_test drivers"] = per[per["in_authors_subset"]]
@@ -308,7 +316,7 @@ def figure_table(
             reading = (
                 "authors' point rule (>=99% of autopilot ticks with trust >= 2)"
                 if source == "authors"
-                else f"phi1/phi2 on {source} beliefs"
+                else f"phi1/phi2 on {source} beliefs{trust_label}"
             )
             add("satisfaction rate", reading, {c: _mean(by[c][column]) for c in by}, n)
             for spec in ("phi1", "phi2"):

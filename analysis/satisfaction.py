@@ -11,6 +11,12 @@ belief per position. Two belief sources (docs/study.md):
   With the paper's hightrust atom P(θ ≥ 6) > 0.5 this means "the last report was 6 or 7".
 
 Evaluation goes through policies.trace.evaluate_traces (one vectorised DFA run for all episodes).
+
+Specs with trust-state atoms also read the trust at each position (docs/trust_states.md, "Logged
+traces"): in simulated studies the true trust, logged as `trust_after` (TRUST_SOURCES "true"); on
+real logs, where the true trust is never known, the reported trust stands in for θ ("reported":
+the last report at or before the position, the first report before it), and results say so
+(REPORTED_TRUST_LABEL).
 """
 
 from __future__ import annotations
@@ -25,6 +31,48 @@ from trustroute.policies.logic.trace import evaluate_traces
 BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported")
 # Real study logs (analysis/real_study.py): the belief the AV logged, induced from reports, or Bayes.
 LOGGED_BELIEF_SOURCES: tuple[str, ...] = ("logged", "reported", "bayes")
+# What trust-state atoms read: the true trust (simulation) or the reported trust as θ (real logs).
+TRUST_SOURCES: tuple[str, ...] = ("true", "reported")
+REPORTED_TRUST_LABEL = "reported trust as θ"
+
+
+def trust_indices(roads: pd.DataFrame, lengths: np.ndarray, reports: np.ndarray, levels: tuple[int, ...],
+                  source: str) -> np.ndarray:
+    """int [n, T]: the trust level index each position's trust-state atoms read (roads sorted and
+    padded as by _padded)."""
+    n, horizon = reports.shape
+    lookup = {level: i for i, level in enumerate(levels)}
+    if source == "true":
+        roads = roads.sort_values(["episode_id", "index"], kind="stable")
+        flat = roads["trust_after"].to_numpy(dtype=np.int64, na_value=-1)
+        unknown = sorted({int(v) for v in flat} - set(lookup))
+        if unknown:
+            raise ValueError(f"trust_after {unknown[0]} is not a trust level of the model {levels} "
+                             "(trust-state atoms need the true trust of a simulated study)")
+        row = np.repeat(np.arange(n), lengths)
+        col = np.concatenate([np.arange(k) for k in lengths]) if n else np.zeros(0, dtype=np.int64)
+        out = np.zeros((n, horizon), dtype=np.int64)
+        out[row, col] = [lookup[int(v)] for v in flat]
+        return out
+    if source != "reported":
+        raise ValueError(f"unknown trust source {source!r}; use one of {TRUST_SOURCES}")
+    out = np.full((n, horizon), -1, dtype=np.int64)
+    last = np.full(n, -1, dtype=np.int64)
+    for t in range(horizon):
+        reported = reports[:, t] >= 0
+        if reported.any():
+            values = reports[reported, t]
+            bad = sorted({int(v) for v in values} - set(lookup))
+            if bad:
+                raise ValueError(f"reported trust {bad[0]} is not a trust level of the model {levels}")
+            last[reported] = [lookup[int(v)] for v in values]
+        out[:, t] = last
+    first = np.where(out >= 0, out, np.iinfo(np.int64).max).min(axis=1)
+    never = first == np.iinfo(np.int64).max
+    if never.any():
+        raise ValueError(f"{int(never.sum())} episodes have no trust report: the reported trust "
+                         "cannot stand in for θ there")
+    return np.where(out >= 0, out, first[:, None])
 
 
 def _padded(
@@ -75,9 +123,11 @@ def episode_satisfaction(
     town: Town,
     trust_levels: tuple[int, ...],
     source: str = "filter",
+    trust_source: str = "true",
 ) -> pd.DataFrame:
     """Per episode: `episode_id`, `satisfied` and `first_accepting` (position, -1 if never) of the
-    spec the episode was driven for (episodes["spec"]), on beliefs from `source`."""
+    spec the episode was driven for (episodes["spec"]), on beliefs from `source`; trust-state atoms
+    read the trust from `trust_source` (TRUST_SOURCES)."""
     if source not in BELIEF_SOURCES:
         raise ValueError(f"unknown belief source {source!r}; use one of {BELIEF_SOURCES}")
     frames = []
@@ -89,7 +139,9 @@ def episode_satisfaction(
             continue
         if source == "reported":
             beliefs = reported_beliefs(beliefs, reports, trust_levels)
-        result = evaluate_traces(spec, town, states, beliefs, lengths)
+        trust = (trust_indices(spec_roads, lengths, reports, trust_levels, trust_source)
+                 if spec.uses_trust_atoms else None)
+        result = evaluate_traces(spec, town, states, beliefs, lengths, trust=trust)
         frames.append(
             pd.DataFrame(
                 {"episode_id": ids, "satisfied": result.satisfied, "first_accepting": result.first_accepting}
@@ -111,7 +163,8 @@ def episode_satisfaction(
 def satisfaction_by_source(
     episodes: pd.DataFrame, roads: pd.DataFrame, specs: dict, town, trust_levels
 ) -> pd.DataFrame:
-    """Per episode (with a spec): satisfied_logged, satisfied_reported, satisfied_bayes."""
+    """Per episode (with a spec): satisfied_logged, satisfied_reported, satisfied_bayes. Real logs:
+    trust-state atoms read the reported trust as θ (REPORTED_TRUST_LABEL)."""
     out = episodes[["episode_id"]].copy()
     analysed = episodes[episodes["spec"].isin(list(specs))]
     for source in LOGGED_BELIEF_SOURCES:
@@ -119,7 +172,8 @@ def satisfaction_by_source(
         if source == "logged":
             variant = roads.assign(belief_after=roads["logged_belief"])
         result = episode_satisfaction(
-            variant, analysed, specs, town, trust_levels, "reported" if source == "reported" else "filter"
+            variant, analysed, specs, town, trust_levels, "reported" if source == "reported" else "filter",
+            trust_source="reported",
         )
         mapped = dict(zip(result["episode_id"], result["satisfied"], strict=True))
         out[f"satisfied_{source}"] = out["episode_id"].map(mapped).astype("boolean")

@@ -33,6 +33,7 @@ from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.driver_types import trust_marginal, type_belief
+from trustroute.policies.model.joint_belief import joint_filter
 from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp
 from trustroute.policies.routing.episode_rules import (
     DEFAULT_JUNCTION_CAP,
@@ -118,8 +119,20 @@ class EpisodeTracker:
         start = setup.spec.start
         self.route: list[str] = [start]
         self.belief: np.ndarray = np.asarray(self._pomdp.initial_belief, dtype=float).copy()
-        self.dfa_state: int = self._compiled.initial_state(self.belief)
-        self.end_reason: str | None = dfa_verdict(self._compiled, self.dfa_state)
+        # Specs with trust-state atoms: the AV tracks the joint belief J(θ, q) (its DFA state is
+        # the most probable under J) and the episode ends when J has no live mass; the true DFA
+        # state, read on the driver's true trust, decides whether the episode satisfied the spec.
+        self.joint: np.ndarray | None = None
+        self.true_dfa_state: int | None = None
+        if setup.spec.uses_trust_atoms:
+            self._filter = joint_filter(self._pomdp, self.dfa, self._compiled.labeller)
+            self.joint = self._filter.initial(self._compiled.start, self.belief)[0]
+            self._posterior = self.belief.copy()        # the exact (Bayes) θ filter J moves with
+            self.dfa_state: int = int(self._filter.likeliest_q(self.joint[None])[0])
+            self.true_dfa_state = self._true_step(self.dfa.initial, self._compiled.start, int(initial_trust))
+        else:
+            self.dfa_state = self._compiled.initial_state(self.belief)
+        self.end_reason: str | None = self._verdict()
         self.fallback_fired = False
         self.fallback_junction: int | None = None   # junctions driven when the fallback first drove
         self._chosen: str | None = None            # next junction chosen at the current road
@@ -143,7 +156,32 @@ class EpisodeTracker:
         return type_belief(self.setup.driver_model, self.belief)
 
     def _context(self) -> DecisionContext:
-        return DecisionContext(route=tuple(self.route), dfa_state=self.dfa_state, belief=self.belief.copy())
+        return DecisionContext(route=tuple(self.route), dfa_state=self.dfa_state, belief=self.belief.copy(),
+                               joint=None if self.joint is None else self.joint.copy())
+
+    def _true_step(self, q: int, x: int, trust_level: int) -> int:
+        """The DFA state after position (x, true trust level, the AV's belief) from q."""
+        theta = self.setup.driver_model.trust_levels.index(int(trust_level))
+        return int(self._compiled.labeller.step(np.array([q]), np.array([x]), self.belief[None],
+                                                np.array([theta]))[0])
+
+    def _verdict(self) -> str | None:
+        """rules 1-2 of the episode: on the DFA state, or (trust-state atoms) once J has no live
+        mass, "accepted"/"rejected" by the true DFA state."""
+        if self.joint is None:
+            return dfa_verdict(self._compiled, self.dfa_state)
+        _, _, live = self._filter.masses(self.joint[None])
+        if live[0] > 0:
+            return None
+        return "accepted" if self._compiled.accepting[self.true_dfa_state] else "rejected"
+
+    @property
+    def satisfied(self) -> bool:
+        """The spec holds on this episode's trace (with trust-state atoms: read on the true trust,
+        also when the AV could not tell and the episode ended at the destination or the cap)."""
+        if self.true_dfa_state is not None:
+            return bool(self._compiled.accepting[self.true_dfa_state])
+        return self.end_reason == "accepted"
 
     # -- the episode's API ---------------------------------------------------
     @property
@@ -198,12 +236,12 @@ class EpisodeTracker:
             raise ValueError(f"performance must be 'succ' or 'fail', got {performance!r}")
         incident_index = self.setup.driver_model.incident_index(incident)
         before = self.belief
+        h, e = int(bool(takeover)), PERFORMANCE_INDEX[performance]
         key = ("belief", before.tobytes(), incident_index, bool(takeover), performance,
                self.setup.belief_rule)
         after = self._memo.get(key)
         if after is None:
-            posterior, _ = self._pomdp.belief_update(before, incident_index, int(bool(takeover)),
-                                                     PERFORMANCE_INDEX[performance],
+            posterior, _ = self._pomdp.belief_update(before, incident_index, h, e,
                                                      rule=self.setup.belief_rule)
             after = posterior[0]
             if not after.sum() > 0:
@@ -212,11 +250,14 @@ class EpisodeTracker:
             after.setflags(write=False)
             _memo_put(self._memo, key, after)
         self.belief = after
-        key = ("dfa", self.dfa_state, road, after.tobytes())
-        state = self._memo.get(key)
-        if state is None:
-            state = _memo_put(self._memo, key, self._compiled.step_road(self.dfa_state, road, after))
-        self.dfa_state = state
+        if self.joint is None:
+            key = ("dfa", self.dfa_state, road, after.tobytes())
+            state = self._memo.get(key)
+            if state is None:
+                state = _memo_put(self._memo, key, self._compiled.step_road(self.dfa_state, road, after))
+            self.dfa_state = state
+        else:
+            self._step_joint(road, incident_index, h, e, int(trust_after))
         self.route.append(road)
         self._chosen = None
         self._rows[-1]["sim_time_out"] = float(sim_time_in)
@@ -229,7 +270,22 @@ class EpisodeTracker:
             "belief_after": self._logged(after), "dfa_state": self.dfa_state, "fallback": False,
             "sim_time_in": float(sim_time_in), "sim_time_out": float(sim_time_out),
         })
-        self.end_reason = dfa_verdict(self._compiled, self.dfa_state)
+        self.end_reason = self._verdict()
+
+    def _step_joint(self, road: str, incident: int, h: int, e: int, trust_after: int) -> None:
+        """J after driving `road` and observing (incident, h, e); the told and the true DFA state."""
+        x = np.array([self.setup.town.state_index(road)])
+        inc = np.array([incident])
+        # The exact (Bayes) θ filter's posterior and the observation's probability, as the exact
+        # evaluation computes them (the AV's belief is this posterior under the Bayes rule).
+        posterior, probability = self._pomdp.belief_update(self._posterior[None], inc, h, e, rule="bayes")
+        if probability[0] > 0:
+            self._posterior = posterior[0]
+            self.joint = self._filter.update(self.joint[None], posterior, self.belief[None], x, inc, h, e,
+                                             probability)[0]
+        # else: an observation the AV's model deems impossible: J stays (as the belief does).
+        self.dfa_state = int(self._filter.likeliest_q(self.joint[None])[0])
+        self.true_dfa_state = self._true_step(self.true_dfa_state, int(x[0]), trust_after)
 
     def should_report(self) -> bool:
         """Whether the driver reports trust on the road about to be recorded (every report_every)."""
@@ -250,7 +306,7 @@ class EpisodeTracker:
         trust = [row["trust_after"] for row in self._rows]
         return {
             "episode_id": self.episode_id,
-            "satisfied": self.end_reason == "accepted",
+            "satisfied": self.satisfied,
             "junctions": self.junctions,
             "takeovers": int(sum(bool(row["takeover"]) for row in self._rows)),
             "final_trust": int(trust[-1]),

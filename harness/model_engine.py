@@ -119,8 +119,12 @@ def simulate_batch(
     drivers: the true driver models (default: the AV's nominal model); episode i is driven by
     drivers[driver_index[i]] (default: all by drivers[0]). Initial trust is drawn from each
     driver's initial distribution, as SyntheticDriver does. The episode rules are the tracker's
-    (policies/routing/episode_rules.py).
+    (policies/routing/episode_rules.py). Specs with trust-state atoms need the joint belief of
+    the episode tracker: run them through `run_model_episode`.
     """
+    if setup.spec.uses_trust_atoms:
+        raise ValueError(f"spec {setup.spec.name!r} has trust-state atoms: the batch path does not "
+                         "track the joint belief; run its episodes with run_model_episode")
     started = time.perf_counter()
     town = setup.town
     model = episode_model(setup)

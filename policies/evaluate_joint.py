@@ -110,12 +110,13 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
         finished = np.zeros(keep.size, dtype=bool)
         fired = np.zeros(keep.size, dtype=bool)
         chosen = np.full(keep.size, -1, dtype=np.int64)
-        decisions: dict[tuple[int, int, bytes], tuple[bool, bool, int]] = {}
+        decisions: dict[tuple[int, int, bytes, bytes], tuple[bool, bool, int]] = {}
         for k, i in enumerate(keep.tolist()):
-            key = (int(route_id[i]), int(told_q[k]), belief_av[i].tobytes())
+            key = (int(route_id[i]), int(told_q[k]), belief_av[i].tobytes(), joint[i].tobytes())
             decision = decisions.get(key)
             if decision is None:
-                context = DecisionContext(route=routes[key[0]], dfa_state=key[1], belief=belief_av[i])
+                context = DecisionContext(route=routes[key[0]], dfa_state=key[1], belief=belief_av[i],
+                                          joint=joint[i])
                 decision = decide_node(policy, context, town, int(road[i]), level, max_junctions,
                                        fallback_level, successor_index)
                 decisions[key] = decision
@@ -182,3 +183,67 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
         max_junctions=max_junctions,
     )
 
+
+
+def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: int,
+                         belief_rule: BeliefRule = "bayes",
+                         max_nodes: int = DEFAULT_MAX_NODES,
+                         deadline: float | None = None) -> tuple[float, float]:
+    """Certified [lower, upper] of P(accepted within `max_junctions`) for a policy whose decision
+    at a node is a function of (junctions driven, road, joint belief, AV belief) alone, asked in
+    batches: `policy.action_slots(t, x, joint, beliefs)` (routing.joint_table.JointTablePolicy),
+    without the fallback. Histories that reach bit-identical (road, J, posterior, AV belief) at the
+    same level are merged (their decisions and futures are the same), so this is the unfolding of
+    `evaluate_joint` on far fewer nodes; beyond `max_nodes` per level the least likely nodes are
+    dropped, their live mass unknown; past `deadline` (time.perf_counter()) the unfolding stops and
+    the live mass of every open node is unknown."""
+    town, driver = pomdp.town, pomdp.driver
+    compiled = compile_spec(spec, town)
+    filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
+    start = town.state_index(spec.start)
+    b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
+    x, joint, posterior, belief, mass = (np.array([start]), filter_.initial(start, b0[0]), b0.copy(),
+                                         b0.copy(), np.ones(1))
+    accepted_total, unknown = 0.0, 0.0
+    for level in range(max_junctions + 1):
+        accepted, _, live = filter_.masses(joint)
+        out_of_time = deadline is not None and level > 0 and time.perf_counter() > deadline
+        if out_of_time:
+            accepted_total += float(mass @ accepted)
+            unknown += float(mass @ live)
+            break
+        ending = (live <= 0) | (level == max_junctions)
+        accepted_total += float(mass[ending] @ accepted[ending])
+        go = ~ending
+        if go.sum() > max_nodes:
+            order = np.argsort(-np.where(go, mass, -np.inf), kind="stable")
+            dropped = np.zeros(mass.size, dtype=bool)
+            dropped[order[max_nodes:]] = True
+            dropped &= go
+            accepted_total += float(mass[dropped] @ accepted[dropped])
+            unknown += float(mass[dropped] @ live[dropped])
+            go &= ~dropped
+        if not go.any():
+            break
+        x, joint, posterior, belief, mass = (a[go] for a in (x, joint, posterior, belief, mass))
+        slots = policy.action_slots(level, x, joint, belief)
+        x2 = pomdp.successor_table[x, slots]
+        incident = pomdp.road_incident[x2]
+        parts = []
+        for h, e in outcomes:
+            new_posterior, p_obs = pomdp.belief_update(posterior, incident, h, e)
+            new_belief = new_posterior if belief_rule == "bayes" else pomdp.belief_update(
+                belief, incident, h, e, rule=belief_rule)[0]
+            ok = p_obs > 0
+            new_joint = filter_.update(joint[ok], new_posterior[ok], new_belief[ok], x2[ok], incident[ok],
+                                       h, e, p_obs[ok])
+            parts.append((x2[ok], new_joint, new_posterior[ok], new_belief[ok], mass[ok] * p_obs[ok]))
+        x, joint, posterior, belief, mass = (np.concatenate([p[j] for p in parts]) for j in range(5))
+        rows = np.ascontiguousarray(np.concatenate(
+            [x[:, None].astype(float), joint.reshape(x.size, -1), posterior, belief], axis=1))
+        keys = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
+        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        mass = np.bincount(inverse, weights=mass)
+        x, joint, posterior, belief = x[first], joint[first], posterior[first], belief[first]
+    return accepted_bounds(accepted_total, unknown)

@@ -159,11 +159,32 @@ def _open_loop_accepted(pomdp: TrustPOMDP, next_q: np.ndarray, move: np.ndarray,
     return joint[:, :, accepting].sum(axis=(1, 2))
 
 
+@dataclass(frozen=True, eq=False)
+class JointDecisions:
+    """The search's lower-greedy decision at each expanded node: t (junctions driven), road x,
+    joint belief J [rows, n_trust, n_q], AV belief [rows, n_trust] and the action slot (index into
+    the successors of x) whose backed-up lower value is the largest (ties: the larger upper, then
+    the first slot)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    joint: np.ndarray
+    beliefs: np.ndarray
+    action: np.ndarray
+
+
 def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
                  belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
                  max_nodes: int = 200_000) -> JointBounds:
     """[lower, upper] on max over policies of P(accepted) (within `horizon` junctions when given;
     then depth = horizon)."""
+    return joint_search(pomdp, spec, depth, horizon, belief_rule, prune_below, max_nodes)[0]
+
+
+def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
+                 belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
+                 max_nodes: int = 200_000) -> tuple[JointBounds, JointDecisions]:
+    """joint_bounds, and the lower-greedy decisions at the expanded nodes (JointDecisions)."""
     started = time.perf_counter()
     if horizon is not None:
         depth = horizon
@@ -257,6 +278,7 @@ def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     # Backward: leaves by their bounds, expanded nodes by the best action's expectation.
     n_levels = len(levels)
     lower = upper = None
+    decided: list[tuple[int, np.ndarray, np.ndarray]] = []     # (level, nodes, slot)
     for level in range(n_levels - 1, -1, -1):
         nodes = levels[level]
         left = depth - level
@@ -277,11 +299,74 @@ def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
             has[parent, slot_of] = True
             best_low = np.where(has, sum_low, -np.inf).max(axis=1)
             best_high = np.where(has, sum_high, -np.inf).max(axis=1)
+            tied = has & (sum_low >= best_low[:, None])
+            slot = np.where(tied, sum_high, -np.inf).argmax(axis=1)
+            decided.append((level, np.flatnonzero(grow), slot[grow]))
             low = np.where(grow, best_low, low)
             high = np.where(grow, np.minimum(1.0, best_high), high)
         lower, upper = low, high
+    decided.sort(key=lambda item: item[0])
+    n_t, n_q = pomdp.n_trust, filter_.n_q
+    parts = [(np.full(nodes.size, level, dtype=np.int64), levels[level]["x"][nodes],
+              levels[level]["joint"][nodes], levels[level]["belief"][nodes], slot)
+             for level, nodes, slot in decided]
+    empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, n_t, n_q)),
+             np.zeros((0, n_t)), np.zeros(0, dtype=np.int64))
+    decisions = JointDecisions(*(np.concatenate([p[j] for p in parts]) if parts else empty[j]
+                                 for j in range(5)))
     # The backed-up upper value is a float sum of products: allow for its rounding.
-    return JointBounds(lower=float(lower[0]), upper=min(1.0, float(upper[0]) + RELAXATION_MARGIN),
-                       depth=depth, horizon=horizon,
-                       nodes=int(sum(lv["x"].size for lv in levels)), cut_nodes=cut_total,
-                       seconds=time.perf_counter() - started, belief_rule=belief_rule)
+    bounds = JointBounds(lower=float(lower[0]), upper=min(1.0, float(upper[0]) + RELAXATION_MARGIN),
+                         depth=depth, horizon=horizon,
+                         nodes=int(sum(lv["x"].size for lv in levels)), cut_nodes=cut_total,
+                         seconds=time.perf_counter() - started, belief_rule=belief_rule)
+    return bounds, decisions
+
+
+@dataclass(frozen=True, eq=False)
+class RelaxedGuide:
+    """The relaxation's action values at a joint belief: for each successor slot of road x,
+    Σ_{θ, q} J(θ, q) Σ_θ' P(θ' | θ, inc(x')) max_bits R(x', θ', δ(q, L(x', θ', bits))), with R
+    the relaxation's values for k junctions left after the move (horizon G: R[min(k, G)]; None:
+    the unbounded values). The acting rule of joint policies off their stored nodes
+    (policies/routing/joint_table.py)."""
+
+    pomdp: TrustPOMDP
+    best: np.ndarray            # [G + 1 or 1, n_q, n_x, n_trust]
+    move: np.ndarray            # [n_incidents, n_trust, n_trust]
+    horizon: int | None
+
+    def action_values(self, x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        """float [n, slots]: the values of the successor slots of roads x [n] at joint beliefs
+        [n, n_trust, n_q] (-inf where a road has no such slot)."""
+        k = 0 if self.horizon is None else min(max(left, 0), self.horizon)
+        x = np.asarray(x, dtype=np.int64)
+        successors = self.pomdp.successor_table[x]                     # [n, slots]
+        out = np.full(successors.shape, -np.inf)
+        best = self.best[k]                                             # [q, x, θ']
+        for slot in range(successors.shape[1]):
+            x2 = successors[:, slot]
+            has = x2 >= 0
+            if not has.any():
+                continue
+            rows, x2 = np.flatnonzero(has), x2[has]
+            after = np.einsum("ntu,qnu->ntq", self.move[self.pomdp.road_incident[x2]], best[:, x2, :])
+            out[rows, slot] = np.einsum("ntq,ntq->n", joint[rows], after)
+        return out
+
+    def greedy(self, x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        """int [n]: the slot of the largest action value (the first on ties)."""
+        return np.argmax(self.action_values(x, joint, left), axis=1)
+
+
+def relaxed_guide(pomdp: TrustPOMDP, spec: Spec, horizon: int | None) -> RelaxedGuide:
+    """The RelaxedGuide of `spec` for junction horizon `horizon` (None: unbounded)."""
+    compiled = compile_spec(spec, pomdp.town)
+    next_q = _relaxed_next_q(pomdp, spec, compiled.dfa, compiled.labeller)    # [q, x, θ, bits]
+    values = relaxed_values(pomdp, spec, horizon)
+    tables = values[None] if horizon is None else values                      # [K, x, θ, q]
+    n_x, n_t = pomdp.n_states, pomdp.n_trust
+    xs = np.arange(n_x)[None, :, None, None]
+    ts = np.arange(n_t)[None, None, :, None]
+    best = np.stack([table[xs, ts, next_q].max(axis=3) for table in tables])  # [K, q, x, θ]
+    move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, pomdp.driver.trust_transition)
+    return RelaxedGuide(pomdp=pomdp, best=best, move=move, horizon=horizon)

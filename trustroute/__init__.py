@@ -102,7 +102,7 @@ def synthesize(spec: Spec | PathLike, town: Town | None = None, driver: DriverMo
     """
     from trustroute.policies.model.trust_pomdp import build_pomdp
     from trustroute.policies.routing.files import save_policy
-    from trustroute.policies.synthesis.search import synthesize as search
+    from trustroute.policies.synthesize_spec import synthesize_spec as search
 
     town, driver, spec = _problem(spec, town, driver)
     result = search(build_pomdp(town, driver), spec, tau=tau, time_limit=time_limit, horizon=horizon,
@@ -137,7 +137,7 @@ def evaluate(spec: Spec | PathLike, policy: object = "free", town: Town | None =
     fallback_after: the study's rule, the shortest completion after that many junctions (None:
     the policy as given). max_junctions: the episode cap (docs/model.md, "Episodes").
     """
-    from trustroute.policies.evaluate import evaluate as exact
+    from trustroute.policies.evaluate_joint import evaluate_joint as exact
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     town, driver, spec = _problem(spec, town, driver)

@@ -88,7 +88,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from trustroute.policies.routing.files import save_policy
     from trustroute.policies.routing.resolve import synthesis_progress
-    from trustroute.policies.synthesis.search import synthesize
+    from trustroute.policies.synthesize_spec import synthesize_spec as synthesize
 
     with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
         result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
@@ -111,7 +111,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     if belief_rule == "paper":
         # L and U are about the authors' belief MDP (their filter drives beliefs and labels); a
         # study measures the real process: observations drawn from the Bayes posterior.
-        from trustroute.policies.evaluate import evaluate as evaluate_policy
+        from trustroute.policies.evaluate_joint import evaluate_joint as evaluate_policy
         from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 
         cap = horizon if horizon is not None else DEFAULT_JUNCTION_CAP
@@ -240,7 +240,8 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
 
     "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached.
     """
-    from trustroute.policies.evaluate import evaluate as evaluate_policy
+    # Specs without trust-state atoms go on to policies.evaluate (the same results bit for bit).
+    from trustroute.policies.evaluate_joint import evaluate_joint as evaluate_policy
 
     if fallback_after < 0:
         raise InputError("--fallback-after", "", f"must be >= 0, got {fallback_after}",

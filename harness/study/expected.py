@@ -20,7 +20,7 @@ from trustroute.policies.routing.protocol import RoutingPolicy
 def expected_values(config: StudyConfig) -> dict:
     """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluate),
     and the synthesized bounds when the policy carries them."""
-    from trustroute.policies.evaluate import evaluate
+    from trustroute.policies.evaluate_joint import evaluate_joint as evaluate
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     context = study_context(config)

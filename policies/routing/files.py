@@ -27,6 +27,7 @@ from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
 from trustroute.policies.routing.free import state_only_task
+from trustroute.policies.routing.joint_table import JointPolicyTable, JointTablePolicy
 
 FORMAT = "trustroute-policy"
 VERSION = 2
@@ -44,6 +45,15 @@ POPULATION_KEYS = ("population_hash", "population_types", "population_weights", 
 DOCUMENT_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "spec_hash", "horizon",
                  "belief_rule", "lower", "upper", "gap", "seconds", "rows", "acting_rule", "arrays",
                  "arrays_sha256") + POPULATION_KEYS
+# Policies of specs with trust-state atoms act on the joint belief (policies/routing/joint_table.py):
+# their files have these keys besides, and the arrays JOINT_ARRAY_NAMES (no state-only task state:
+# their rule does not read it; "joint" [rows, n_trust, n_q] instead).
+JOINT_KIND = "joint-belief"
+JOINT_KEYS = ("kind", "guide_horizon")
+JOINT_ARRAY_NAMES = ("t", "x", "q", "beliefs", "action", "joint")
+JOINT_ACTING_RULE = ("action of the stored row with the same (junctions driven, road) whose (joint "
+                     "belief, belief) is within 1e-9 (Euclidean); else the successor with the largest "
+                     "relaxed action value at the joint belief (policies/joint_search.py RelaxedGuide)")
 RESYNTH = "re-run trustroute synth to write both files again"
 
 
@@ -60,12 +70,17 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
 
     path = Path(path)
     table: PolicyTable = result.policy.table
+    joint = isinstance(result.policy, JointTablePolicy)
     arrays = array_path(path)
     buffer = io.BytesIO()
-    if not table.exact:
-        raise ValueError("only tables with the state-only task state (exact-belief rule) are written")
-    np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, projected=table.projected,
-                        beliefs=table.beliefs, action=table.action)
+    if joint:
+        np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs,
+                            action=table.action, joint=table.joint)
+    else:
+        if not table.exact:
+            raise ValueError("only tables with the state-only task state (exact-belief rule) are written")
+        np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, projected=table.projected,
+                            beliefs=table.beliefs, action=table.action)
     array_bytes = buffer.getvalue()
     # The arrays first, the JSON (which names their hash) last: the JSON is the commit mark.
     atomic_write_bytes(arrays, array_bytes, "policy array file", "pass a writable --out path")
@@ -90,6 +105,10 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
     }
     if population is not None:
         document.update({key: population[key] for key in POPULATION_KEYS})
+    if joint:
+        document["acting_rule"] = JOINT_ACTING_RULE
+        document["kind"] = JOINT_KIND
+        document["guide_horizon"] = result.policy.guide_horizon
     atomic_write_text(path, json.dumps(document, indent=1) + "\n", "policy file",
                       "pass a writable --out path")
     return path
@@ -109,7 +128,16 @@ def read_policy_document(path: str | Path) -> dict:
     if document.get("version") != VERSION:
         raise InputError(where, "version", f"policy file version {document.get('version')!r}, this "
                          f"trustroute reads version {VERSION}", "re-run trustroute synth")
-    check_keys(document, DOCUMENT_KEYS, where, "", "policy file")
+    joint = "kind" in document
+    if joint and document["kind"] != JOINT_KIND:
+        raise InputError(where, "kind", f"unknown policy kind {str(document['kind'])[:30]!r} "
+                         f"(only {JOINT_KIND!r})", RESYNTH)
+    check_keys(document, DOCUMENT_KEYS + (JOINT_KEYS if joint else ()), where, "", "policy file")
+    guide = document.get("guide_horizon")
+    if joint and not (guide is None or (isinstance(guide, int) and not isinstance(guide, bool)
+                                        and 0 <= guide <= 10_000)):
+        raise InputError(where, "guide_horizon", f"guide horizon {str(guide)[:30]} is not a junction "
+                         "count or null", RESYNTH)
     for key in ("lower", "upper"):
         value = document.get(key)
         if value is not None and not (isinstance(value, int | float) and not isinstance(value, bool)
@@ -121,7 +149,7 @@ def read_policy_document(path: str | Path) -> dict:
 
 
 def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverModel,
-                      spec: Spec) -> PolicyTable:
+                      spec: Spec) -> PolicyTable | JointPolicyTable:
     """The decision table of a policy file, verified: the hash its JSON records, a readable .npz
     without pickles, the five arrays with consistent shapes and integer types, and every entry in
     range for this town, driver model and spec (InputError otherwise)."""
@@ -138,10 +166,11 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         raise InputError(where, "", "array file does not match its policy file (hash differs)", RESYNTH)
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as archive:
-            missing = [name for name in ARRAY_NAMES if name not in archive.files]
+            names = JOINT_ARRAY_NAMES if "kind" in document else ARRAY_NAMES
+            missing = [name for name in names if name not in archive.files]
             if missing:
                 raise InputError(where, missing[0], f"array '{missing[0]}' is missing", RESYNTH)
-            arrays_read = {name: archive[name] for name in ARRAY_NAMES}
+            arrays_read = {name: archive[name] for name in names}
     except InputError:
         raise
     except (OSError, ValueError, EOFError, KeyError, NotImplementedError, zipfile.BadZipFile,
@@ -149,7 +178,9 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         raise InputError(where, "", f"not a readable .npz array file ({type(exc).__name__})",
                          RESYNTH) from None
     rows = arrays_read["t"].shape[0] if arrays_read["t"].ndim == 1 else -1
-    for name in ("t", "x", "q", "projected", "action"):
+    joint = "joint" in arrays_read
+    integers = ("t", "x", "q", "action") if joint else ("t", "x", "q", "projected", "action")
+    for name in integers:
         array = arrays_read[name]
         if array.ndim != 1 or array.shape[0] != rows or array.dtype.kind not in "iu":
             raise InputError(where, name, f"array '{name}' is not {max(rows, 0)} integers "
@@ -162,8 +193,8 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         raise InputError(where, "", f"{rows} rows but the policy file records {document.get('rows')}",
                          RESYNTH)
     n_x = len(town.states)
-    t, x, q, projected, action = (arrays_read[name].astype(np.int64)
-                                  for name in ("t", "x", "q", "projected", "action"))
+    t, x, q, action = (arrays_read[name].astype(np.int64) for name in ("t", "x", "q", "action"))
+    projected = None if joint else arrays_read["projected"].astype(np.int64)
     n_q = build_dfa(spec).n_states
     n_p = state_only_task(town, spec).dfa.n_states
     slots = np.array([len(town.actions(state)) for state in town.states], dtype=np.int64)
@@ -171,9 +202,10 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         ("t", (t < 0).any(), "negative junction counts"),
         ("x", ((x < 0) | (x >= n_x)).any(), f"roads outside 0..{n_x - 1}"),
         ("q", ((q < 0) | (q >= n_q)).any(), f"DFA states outside 0..{n_q - 1}"),
-        ("projected", ((projected < 0) | (projected >= n_p)).any(),
-         f"state-only task states outside 0..{n_p - 1}"),
     ]
+    if projected is not None:
+        problems.append(("projected", ((projected < 0) | (projected >= n_p)).any(),
+                         f"state-only task states outside 0..{n_p - 1}"))
     for name, bad, what in problems:
         if bad:
             raise InputError(where, name, f"decision table has {what}", RESYNTH)
@@ -184,10 +216,20 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     if (not np.isfinite(beliefs).all() or (beliefs < 0).any() or (beliefs > 1).any()
             or (np.abs(beliefs.sum(axis=1) - 1) > 1e-6).any()):
         raise InputError(where, "beliefs", "beliefs are not probability vectors", RESYNTH)
-    return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action, projected=projected)
+    if not joint:
+        return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action, projected=projected)
+    table = arrays_read["joint"]
+    if table.shape != (rows, driver.n_trust, n_q) or table.dtype.kind != "f":
+        raise InputError(where, "joint", f"joint beliefs have shape {table.shape}, expected ({rows}, "
+                         f"{driver.n_trust}, {n_q}) for this driver model and spec", RESYNTH)
+    if (not np.isfinite(table).all() or (table < 0).any()
+            or (np.abs(table.sum(axis=(1, 2)) - 1) > 1e-6).any()):
+        raise InputError(where, "joint", "joint beliefs are not probability tables", RESYNTH)
+    return JointPolicyTable(t=t, x=x, q=q, beliefs=beliefs, joint=table, action=action)
 
 
-def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -> BeliefTablePolicy:
+def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec
+                ) -> BeliefTablePolicy | JointTablePolicy:
     """Load a policy file made for exactly this town, driver model and spec."""
     path = Path(path)
     where = str(path)
@@ -214,6 +256,12 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
                              f"re-run trustroute synth for this {what}, or pass the {what} it was "
                              f"made for ({option})")
     table = read_policy_table(path.parent / document["arrays"], document, town, driver, spec)
+    if isinstance(table, JointPolicyTable):
+        from trustroute.policies.model.trust_pomdp import build_pomdp
+
+        return JointTablePolicy(table, build_pomdp(town, driver), spec, document.get("guide_horizon"),
+                                name=str(document.get("name", "aware")), lower=document.get("lower"),
+                                upper=document.get("upper"), horizon=document.get("horizon"))
     return BeliefTablePolicy(table, town, spec, name=str(document.get("name", "aware")),
                              lower=document.get("lower"), upper=document.get("upper"),
                              horizon=document.get("horizon"),

@@ -23,11 +23,15 @@ class DecisionContext:
     route: directed roads driven so far, the start road first and the current road last.
     dfa_state: state of the spec's DFA after reading the current position.
     belief: the AV's belief over trust levels at the current position (sums to 1).
+    joint: for specs with trust-state atoms, the AV's joint belief J [n_trust, n_dfa_states] over
+    (trust, DFA state) (policies/model/joint_belief.py; dfa_state is then its most probable
+    state); None otherwise.
     """
 
     route: tuple[str, ...]
     dfa_state: int
     belief: np.ndarray
+    joint: np.ndarray | None = None
 
     @property
     def road(self) -> str:

@@ -28,8 +28,8 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.routing.files import array_path, load_policy, save_policy
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
-from trustroute.policies.synthesis.search import synthesize
 from trustroute.policies.synthesis.version import SYNTHESIS_VERSION
+from trustroute.policies.synthesize_spec import synthesize_spec as synthesize
 
 AWARE_HORIZON = DEFAULT_FALLBACK_AFTER   # synthesize for the junctions before the fallback takes over
 AWARE_TAU = 1e-3

@@ -4,7 +4,8 @@ Every history of observations is enumerated depth first, and at every history ev
 θ0, θ1, ... separately (no merging of paths: that merging is what the joint filter does), each
 with its probability P(θ path, observations) and its own DFA run on its own labels. The AV's
 belief is the normalised sum of path probabilities by current trust (the definition of the
-posterior), the DFA state a policy is told the likeliest one over paths. Labels are computed
+posterior), the DFA state a policy is told the likeliest one over paths, and the joint belief
+J(θ, q) the normalised path probabilities. Labels are computed
 here from the spec's definitions, not by policies/logic/labelling.py. Exponential: small towns,
 a few junctions.
 """
@@ -77,6 +78,12 @@ class _Paths:
     def told_q(self, weight, q) -> int:
         return int(np.argmax(np.bincount(q, weights=weight, minlength=self.dfa.n_states)))
 
+    def joint(self, theta, weight, q) -> np.ndarray:
+        """J(θ, q): the normalised path probabilities by (current trust, DFA state)."""
+        n_q = self.dfa.n_states
+        table = np.bincount(theta * n_q + q, weights=weight, minlength=self.n_t * n_q)
+        return (table / table.sum()).reshape(self.n_t, n_q)
+
 
 def policy_value(pomdp, spec, policy, max_junctions: int) -> float:
     """P(spec satisfied) of `policy` (no fallback wrapper is added), episodes ending where the
@@ -86,7 +93,8 @@ def policy_value(pomdp, spec, policy, max_junctions: int) -> float:
     def visit(route, theta, weight, q, belief) -> float:
         if paths.settled(q):
             return paths.accepted(weight, q)
-        context = DecisionContext(route=tuple(route), dfa_state=paths.told_q(weight, q), belief=belief)
+        context = DecisionContext(route=tuple(route), dfa_state=paths.told_q(weight, q), belief=belief,
+                                  joint=paths.joint(theta, weight, q))
         if policy.finished(context) or len(route) - 1 == max_junctions:
             return paths.accepted(weight, q)
         road = paths.town.successor(route[-1], policy.next_junction(context))
