@@ -42,9 +42,11 @@ ARRAY_NAMES = ("t", "x", "q", "projected", "beliefs", "action")
 # (docs/formats/policy_file.md, "Population policies"); one type writes today's file.
 POPULATION_KEYS = ("population_hash", "population_types", "population_weights", "belief_prior",
                    "objective", "objective_lower", "objective_upper", "type_values")
-DOCUMENT_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "spec_hash", "horizon",
-                 "belief_rule", "lower", "upper", "gap", "seconds", "rows", "acting_rule", "arrays",
-                 "arrays_sha256") + POPULATION_KEYS
+# Every policy file has PLAIN_KEYS; a population policy has POPULATION_KEYS besides.
+PLAIN_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "spec_hash", "horizon",
+              "belief_rule", "lower", "upper", "gap", "seconds", "rows", "acting_rule", "arrays",
+              "arrays_sha256")
+DOCUMENT_KEYS = PLAIN_KEYS + POPULATION_KEYS
 # Policies of specs with trust-state atoms act on the joint belief (policies/routing/joint_table.py):
 # their files have these keys besides, and the arrays JOINT_ARRAY_NAMES (no state-only task state:
 # their rule does not read it; "joint" [rows, n_trust, n_q] instead).
