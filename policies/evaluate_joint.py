@@ -43,14 +43,21 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                    fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
                    max_junctions: int = DEFAULT_JUNCTION_CAP,
                    belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
-                   max_nodes: int = DEFAULT_MAX_NODES, force_joint: bool = False) -> Evaluation:
+                   max_nodes: int = DEFAULT_MAX_NODES, force_joint: bool = False,
+                   truth: TrustPOMDP | None = None,
+                   reference: tuple[TrustPOMDP, Spec] | None = None) -> Evaluation:
     """Certified P(spec satisfied) of `policy`, for any mix of road, belief and trust-state atoms.
 
     Arguments as policies.evaluate.evaluate. `force_joint` runs the joint unfolding even when the
-    spec has no trust-state atoms (tests compare it with evaluate there)."""
+    spec has no trust-state atoms (tests compare it with evaluate there). A true driver other than
+    the AV's model (`truth`) or a second reading (`reference`) is evaluated for specs without
+    trust-state atoms only."""
     if not spec.uses_trust_atoms and not force_joint:
         return evaluate(pomdp, spec, policy, fallback_after, max_junctions, belief_rule, prune_below,
-                        max_nodes)
+                        max_nodes, truth=truth, reference=reference)
+    if truth is not None or reference is not None:
+        raise ValueError("a separate true driver or reference reading is not evaluated for specs with "
+                         "trust-state atoms")
     started = time.perf_counter()
     town, driver = pomdp.town, pomdp.driver
     if fallback_after is not None and not isinstance(policy, FallbackPolicy):
