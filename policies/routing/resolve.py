@@ -51,13 +51,14 @@ def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str
     return folder / f"aware-{label}-{key.hexdigest()[:16]}.json"
 
 
-def _cached_policy(path: Path, town: Town, driver: DriverModel, spec: Spec,
+def _cached_policy(path: Path, load: Callable[[Path], RoutingPolicy],
                    notice: Callable[[str], object]) -> RoutingPolicy | None:
-    """The cache entry at `path` if it verifies; a damaged entry is discarded (with a notice)."""
+    """The cache entry at `path`, read by `load`, if it verifies; a damaged entry is discarded
+    (with a notice)."""
     if not path.exists() and not array_path(path).exists():
         return None
     try:
-        return load_policy(path, town, driver, spec)
+        return load(path)
     except InputError as exc:
         notice(f"notice: discarding the damaged policy cache entry {path.name} ({exc.problem}); "
                "synthesizing it again")
@@ -81,13 +82,17 @@ def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | P
     from trustroute.output_files import file_lock
 
     path = aware_cache_path(town, driver, spec, cache_dir, horizon, belief_rule)
+
+    def load(entry: Path) -> RoutingPolicy:
+        return load_policy(entry, town, driver, spec)
+
     if path.is_file():
-        policy = _cached_policy(path, town, driver, spec, notice)
+        policy = _cached_policy(path, load, notice)
         if policy is not None:
             return policy
     with file_lock(path.with_name(path.name + ".lock"), "policy cache entry", wait=True,
                    fix="pass a writable --cache-dir"):
-        policy = _cached_policy(path, town, driver, spec, notice)  # filled while we waited?
+        policy = _cached_policy(path, load, notice)  # filled while we waited?
         if policy is not None:
             return policy
         with synthesis_progress(f"synthesizing aware for {spec.name}", progress) as on_iteration:
@@ -172,17 +177,8 @@ def population_policy(town: Town, population, spec: Spec, objective: str = "robu
     path = population_cache_path(town, population, spec, objective, cache_dir, horizon, belief_rule)
 
     def cached():
-        if not path.exists() and not array_path(path).exists():
-            return None
-        try:
-            return load_population_policy(path, town, population, spec, population_source)
-        except InputError as exc:
-            notice(f"notice: discarding the damaged policy cache entry {path.name} ({exc.problem}); "
-                   "synthesizing it again")
-            for stale in (path, array_path(path)):
-                with contextlib.suppress(FileNotFoundError):
-                    stale.unlink()
-            return None
+        return _cached_policy(
+            path, lambda p: load_population_policy(p, town, population, spec, population_source), notice)
 
     if path.is_file():
         found = cached()
