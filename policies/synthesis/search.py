@@ -51,6 +51,7 @@ from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
 from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols, suffix_cells
+from trustroute.policies.synthesis.completion_value import FreeRoute, completion_bounds
 from trustroute.policies.synthesis.end_components import unbounded_bound
 from trustroute.policies.synthesis.upper_bound import (
     Abstraction,
@@ -72,6 +73,7 @@ UNBOUNDED_STATE_BUDGET = 20_000
 UNBOUNDED_BOUND_SHARE = 0.3  # share of the time limit the end-component bound may take
 BOUNDED_ENTRY_BUDGET = 20_000_000   # floats of the bounded abstraction (160 MB)
 FINISH_SHARE = 0.04          # share of the time limit kept for finishing after the last check
+COMPLETION_CHUNK = 64        # start nodes per batched cluster propagation (memory: ~25 MB each)
 
 # FRONTIER: open, L = 0 (the policy drives the trust-free completion there, worth >= 0).
 # FREE: expanded along the trust-free completion's move only; L is that move's exact value, U the
@@ -120,6 +122,12 @@ class _Graph:
         # does (no alternates): the tie-breaker among actions of equal L, and a reported figure.
         self.strict = self.values[2]
         self.kind = np.zeros(capacity, dtype=np.int8)
+        # Bounds on the trust-free completion's value from the node (completion_value.py): its
+        # lower bound is the L of a FRONTIER node; its upper bound decides where the policy may
+        # leave the free move (_Search.choose). free_upper starts at the abstraction's bound.
+        self.free_upper = np.zeros(capacity)
+        self.free_lower = np.zeros(capacity)
+        self.completed = np.zeros(capacity, dtype=bool)
         self.child = np.full((capacity, n_actions, n_outcomes), -1, dtype=np.int64)
         self.prob = np.zeros((capacity, n_actions, n_outcomes))
         self.memo: list[dict[tuple[int, int, int, bytes], int]] = []
@@ -162,7 +170,7 @@ class _Graph:
         if needed <= capacity:
             return
         new = max(needed, 2 * capacity)
-        for name in ("level", "x", "q", "p", "cell", "kind"):
+        for name in ("level", "x", "q", "p", "cell", "kind", "free_upper", "free_lower", "completed"):
             old = getattr(self, name)
             grown = np.zeros(new, dtype=old.dtype)
             grown[:capacity] = old
@@ -214,6 +222,8 @@ class _Graph:
         self.cell[created] = cell[new]
         self.belief[created] = belief[new]
         self.kind[created] = FRONTIER
+        self.completed[created] = False
+        self.free_lower[created] = 0.0
         assert self.n == start + created.size
         return ids, new
 
@@ -280,6 +290,16 @@ class _Search:
         self.task = state_only_task(pomdp.town, tables.spec)
         self.free_slot = np.where(self.task.next_slot >= 0, self.task.next_slot, 0)   # [n_x, n_p]
         self.next_p = np.asarray(self.task.next_state, dtype=np.int64)               # [n_p, n_x]
+        self.depth_cap = horizon if horizon is not None else UNBOUNDED_DEPTH
+        # Bayes rule: open nodes are valued by cluster bounds on the free completion's value
+        # (completion_value.py) instead of trees along the free moves (FREE nodes, kept for the
+        # authors' rule, whose observation mass is not linear in a hidden-state vector).
+        self.completion = rule == "bayes"
+        self.route = FreeRoute.build(tables, self.free_slot, self.next_p)
+        self.touched = np.zeros((self.depth_cap + 2, tables.n_x, self.next_p.shape[0]), dtype=bool)
+        self.completion_seconds = 0.0
+        self.binding: list[int] = []
+        self.completion_clusters = 0
 
     def level_arrays(self, level: int) -> _Level:
         """The cached _Level of `level`, rebuilt when nodes or alternates were added there."""
@@ -363,6 +383,8 @@ class _Search:
         accepted = tables.accepting[q]
         g.kind[ids[accepted]] = ACCEPTED
         g.upper[ids[accepted]] = g.lower[ids[accepted]] = g.strict[ids[accepted]] = 1.0
+        g.free_upper[ids[accepted]] = 1.0
+        g.completed[ids[accepted]] = True
         rest = ids[~accepted]
         if rest.size == 0:
             return
@@ -376,8 +398,11 @@ class _Search:
         g.upper[rest[dead]] = 0.0
         g.lower[rest[dead]] = 0.0
         g.strict[rest[dead]] = 0.0
+        g.free_upper[rest[dead]] = 0.0
+        g.completed[rest[dead]] = True
         live = rest[~dead]
         g.upper[live] = upper[~dead]
+        g.free_upper[live] = upper[~dead]
         g.lower[live] = 0.0
         g.strict[live] = 0.0
 
@@ -513,26 +538,100 @@ class _Search:
         until the next expansion."""
         g = self.graph
         self.moves = {}
+        self.binding = []
+        self.touched = self.free_touched()
         for level in range(len(g.expanded_by_level) - 1, -1, -1):
-            parts = []
+            moves = []
             if g.free_by_level[level]:
                 lv = self.free_level_arrays(level)
                 q3 = self.level_values3(lv, g.values)
                 g.lower[lv.nodes] = np.maximum(g.lower[lv.nodes], q3[1].max(axis=1))
                 g.strict[lv.nodes] = q3[2].max(axis=1)
-                parts.append((lv, q3))
+                moves.append((lv, q3[0].argmax(axis=1), policy_choice(q3[1], q3[2], q3[0])))
             if g.expanded_by_level[level]:
                 lv = self.level_arrays(level)
                 nodes = lv.nodes
                 q3 = self.level_values3(lv, g.values)
                 g.upper[nodes] = np.minimum(g.upper[nodes], q3[0].max(axis=1))
-                g.lower[nodes] = np.maximum(g.lower[nodes], q3[1].max(axis=1))
-                # strict value of the policy's own choice (best L, ties by strict value)
-                tied = q3[1] >= q3[1].max(axis=1, keepdims=True)
-                g.strict[nodes] = np.where(tied, q3[2], -1.0).max(axis=1)
-                parts.append((lv, q3))
-            self.moves[level] = [(lv, q3[0].argmax(axis=1), policy_choice(q3[1], q3[2], q3[0]))
-                                 for lv, q3 in parts]
+                # L and the strict value of the policy's own move (assigned: the move may be held
+                # to the free one, see choose)
+                move, lower_q, strict_q = self.choose(nodes, q3[1], q3[2], q3[0])
+                rows = np.arange(nodes.size)
+                g.lower[nodes] = lower_q[rows, move]
+                g.strict[nodes] = strict_q[rows, move]
+                moves.append((lv, q3[0].argmax(axis=1), move))
+            self.moves[level] = moves
+
+    def choose(self, nodes: np.ndarray, lower_q: np.ndarray, strict_q: np.ndarray, upper_q: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The returned policy's move at EXPANDED `nodes`, with the move values it is judged by.
+
+        The free move's L is raised to the node's completion bound (free_lower): the policy's
+        value from the node along the free move is at least the free completion's, because of the
+        rule below. Rule (the completion bounds are sound only with it): at a node that the free
+        completion from a node valued by its completion bound can reach (`touched`), the policy
+        leaves the free move only for a move whose L is at least the free completion's upper
+        bound there. Then, by induction over the junctions left, the policy's value at every such
+        node is at least the free completion's (docs/synthesis.md, "Open nodes and the acting
+        rule"). Among the allowed moves: policy_choice (best L, ties by strict value, then U)."""
+        g = self.graph
+        rows = np.arange(nodes.size)
+        free = self.free_slot[g.x[nodes], g.p[nodes]]
+        lower_q, strict_q = lower_q.copy(), strict_q.copy()
+        lower_q[rows, free] = np.maximum(lower_q[rows, free], g.free_lower[nodes])
+        strict_q[rows, free] = np.maximum(strict_q[rows, free], g.free_lower[nodes])
+        held = self.touched[g.level[nodes], g.x[nodes], g.p[nodes]]
+        allowed = ~held[:, None] | (lower_q >= g.free_upper[nodes][:, None])
+        allowed[rows, free] = True
+        move = policy_choice(np.where(allowed, lower_q, -2.0), strict_q, upper_q)
+        if self.completion:
+            # held rows whose completion bounds are not computed yet and where the rule changes the
+            # move: bounding the free completion there may free the better move (search loop)
+            binding = ~g.completed[nodes] & (move != policy_choice(lower_q, strict_q, upper_q))
+            self.binding.extend(nodes[binding].tolist())
+        return move, lower_q, strict_q
+
+    def free_touched(self) -> np.ndarray:
+        """bool [level, x, p]: keys the free completion can reach, one junction or more after a
+        node whose L uses its completion bound (free_lower > 0); belief and DFA state ignored
+        (a superset)."""
+        g = self.graph
+        touched = np.zeros_like(self.touched)
+        if not self.completion:
+            return touched
+        source = np.flatnonzero(g.completed[: g.n] & (g.free_lower[: g.n] > 0))
+        start = np.zeros_like(touched)
+        start[g.level[source], g.x[source], g.p[source]] = True
+        road, task = self.route.next_road, self.route.next_task
+        carried = np.zeros(touched.shape[1:], dtype=bool)
+        for level in range(touched.shape[0] - 1):
+            carried = carried | start[level]
+            nxt = np.zeros_like(carried)
+            nxt[road[carried], task[carried]] = True
+            touched[level + 1] = nxt
+            carried = nxt
+        return touched
+
+    def complete(self, nodes: np.ndarray, deadline: float) -> None:
+        """Cluster bounds on the free completion's value from `nodes` (completion_value.py):
+        free_lower (a FRONTIER node's L and strict value) and free_upper. Stops at the deadline."""
+        g = self.graph
+        nodes = nodes[~g.completed[nodes]]
+        started = time.perf_counter()
+        for begin in range(0, nodes.size, COMPLETION_CHUNK):
+            if time.perf_counter() >= deadline:
+                break
+            chunk = nodes[begin:begin + COMPLETION_CHUNK]
+            bounds = completion_bounds(self.tables, self.symbols, self.route, g.x[chunk], g.q[chunk],
+                                       g.p[chunk], g.belief[chunk], self.depth_cap - g.level[chunk])
+            g.free_lower[chunk] = bounds.lower
+            g.free_upper[chunk] = np.minimum(g.free_upper[chunk], bounds.upper)
+            g.completed[chunk] = True
+            frontier = chunk[g.kind[chunk] == FRONTIER]
+            g.lower[frontier] = np.maximum(g.lower[frontier], g.free_lower[frontier])
+            g.strict[frontier] = np.maximum(g.strict[frontier], g.free_lower[frontier])
+            self.completion_clusters = max(self.completion_clusters, bounds.clusters)
+        self.completion_seconds += time.perf_counter() - started
 
     def close_completions(self, roots: np.ndarray, depth_cap: int, deadline: float) -> bool:
         """Free-expand FRONTIER nodes reached by the returned policy, or by the trust-free route
@@ -559,6 +658,22 @@ class _Search:
                 kids = g.child[todo].ravel()
                 kids = np.unique(kids[kids >= 0])
                 todo = kids[(g.kind[kids] == FRONTIER) & (g.level[kids] < depth_cap)]
+            self.backup()
+
+    def close_bounds(self, roots: np.ndarray, depth_cap: int, deadline: float) -> bool:
+        """Give every FRONTIER node the returned policy reaches its completion bound, until there
+        are none left (True) or the deadline (False; those keep L = 0, still sound)."""
+        g = self.graph
+        while True:
+            reach = self.reach_lower(roots)
+            todo = np.flatnonzero((g.kind[: g.n] == FRONTIER) & ~g.completed[: g.n]
+                                  & (g.level[: g.n] < depth_cap) & (reach > 0))
+            todo = np.concatenate([todo, np.array(self.binding, dtype=np.int64)])
+            if todo.size == 0:
+                return True
+            if time.perf_counter() >= deadline:
+                return False
+            self.complete(todo[np.argsort(-reach[todo], kind="stable")], deadline)
             self.backup()
 
     def greedy_children(self, nodes: np.ndarray, mass: np.ndarray, depth_cap: int
@@ -635,7 +750,7 @@ class _Search:
         lower_q = self.action_values(nodes, g.lower, True)
         strict_q = self.action_values(nodes, g.strict, None)
         upper_q = self.action_values(nodes, g.upper, False)
-        action = policy_choice(lower_q, strict_q, upper_q)
+        action, _, _ = self.choose(nodes, lower_q, strict_q, upper_q)
         return PolicyTable(t=g.level[nodes], x=g.x[nodes], q=g.q[nodes], beliefs=g.belief[nodes],
                            action=action, projected=g.p[nodes])
 
@@ -729,13 +844,20 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         open_nodes = np.flatnonzero((g.kind[:known] == FRONTIER) & (g.level[:known] < depth_cap))
         free_weight = reach_policy[open_nodes] * g.upper[open_nodes]
         positive = free_weight > 0
-        if positive.any() and g.n < NODE_BUDGET:
+        if search.completion:
+            # value them by the cluster bounds on the free completion (heaviest first)
+            todo = open_nodes[positive]
+            search.complete(todo[np.argsort(-free_weight[positive], kind="stable")], deadline)
+        elif positive.any() and g.n < NODE_BUDGET:
             if FREE_SHARE >= 1.0:
                 search.expand(open_nodes[positive], free_only=True)
             else:
                 search.expand(_heaviest(open_nodes[positive], free_weight[positive], batch, FREE_SHARE),
                               free_only=True)
         search.backup()
+        if search.binding:
+            search.complete(np.array(search.binding, dtype=np.int64), deadline)
+            search.backup()
         iterations += 1
         if on_iteration is not None:
             on_iteration(*root_bounds())
@@ -743,7 +865,8 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
     # Close the returned policy's trust-free completions: every open node it reaches is expanded
     # along the free move, so that L is the policy's exact value (unless the deadline comes first;
     # then L is still a lower bound of it). stats["completion_closed"] says which.
-    closed = search.close_completions(roots, depth_cap, deadline)
+    closed = (search.close_bounds(roots, depth_cap, deadline) if search.completion
+              else search.close_completions(roots, depth_cap, deadline))
     lower, upper = root_bounds()
     table = search.policy_table()
     open_nodes = g.kind[: g.n] == FRONTIER
@@ -761,6 +884,8 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         # root the vehicle is in: a lower bound of what `evaluate` measures
         "lower_strict_labels": float(g.strict[roots[0]]),
         "completion_closed": closed,
+        "completion_seconds": search.completion_seconds,
+        "completion_clusters": search.completion_clusters,
         "nodes": int(g.n),
         "expanded_nodes": int(expanded),
         "open_frontier_nodes": int(open_nodes.sum()),
