@@ -74,6 +74,7 @@ UNBOUNDED_BOUND_SHARE = 0.3  # share of the time limit the end-component bound m
 BOUNDED_ENTRY_BUDGET = 20_000_000   # floats of the bounded abstraction (160 MB)
 FINISH_SHARE = 0.04          # share of the time limit kept for finishing after the last check
 COMPLETION_CHUNK = 64        # start nodes per batched cluster propagation (memory: ~25 MB each)
+COMPLETION_TAIL = 0.05       # open nodes left unbounded (L = 0) carry at most this share of tau
 
 # FRONTIER: open, L = 0 (the policy drives the trust-free completion there, worth >= 0).
 # FREE: expanded along the trust-free completion's move only; L is that move's exact value, U the
@@ -660,20 +661,22 @@ class _Search:
                 todo = kids[(g.kind[kids] == FRONTIER) & (g.level[kids] < depth_cap)]
             self.backup()
 
-    def close_bounds(self, roots: np.ndarray, depth_cap: int, deadline: float) -> bool:
-        """Give every FRONTIER node the returned policy reaches its completion bound, until there
-        are none left (True) or the deadline (False; those keep L = 0, still sound)."""
+    def close_bounds(self, roots: np.ndarray, depth_cap: int, deadline: float, tail: float) -> bool:
+        """Give the FRONTIER nodes the returned policy reaches their completion bounds, heaviest
+        first, until those left carry at most `tail` of reach times U (True) or the deadline
+        comes (False). Nodes left keep L = 0, which is sound."""
         g = self.graph
         while True:
             reach = self.reach_lower(roots)
             todo = np.flatnonzero((g.kind[: g.n] == FRONTIER) & ~g.completed[: g.n]
                                   & (g.level[: g.n] < depth_cap) & (reach > 0))
+            todo = _heaviest_prefix(todo, reach[todo] * g.upper[todo], tail)
             todo = np.concatenate([todo, np.array(self.binding, dtype=np.int64)])
             if todo.size == 0:
                 return True
             if time.perf_counter() >= deadline:
                 return False
-            self.complete(todo[np.argsort(-reach[todo], kind="stable")], deadline)
+            self.complete(todo, deadline)
             self.backup()
 
     def greedy_children(self, nodes: np.ndarray, mass: np.ndarray, depth_cap: int
@@ -775,6 +778,13 @@ def _heaviest(nodes: np.ndarray, weight: np.ndarray, batch: int, share: float = 
     return nodes[order[: max(min(MIN_BATCH, nodes.size), min(count, batch))]]
 
 
+def _heaviest_prefix(nodes: np.ndarray, weight: np.ndarray, tail: float) -> np.ndarray:
+    """`nodes` by decreasing weight, without the lightest ones whose weights sum to at most `tail`."""
+    order = np.argsort(-weight, kind="stable")
+    left = np.cumsum(weight[order][::-1])[::-1]          # weight from each position on
+    return nodes[order[left > tail]]
+
+
 def automatic_suffix_length(n_changing: int) -> int:
     """Longest suffix k with at most CELL_BUDGET words of exactly k belief-changing symbols."""
     if n_changing <= 1:
@@ -845,9 +855,10 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         free_weight = reach_policy[open_nodes] * g.upper[open_nodes]
         positive = free_weight > 0
         if search.completion:
-            # value them by the cluster bounds on the free completion (heaviest first)
-            todo = open_nodes[positive]
-            search.complete(todo[np.argsort(-free_weight[positive], kind="stable")], deadline)
+            # value them by the cluster bounds on the free completion, heaviest first, leaving a
+            # light tail at L = 0
+            search.complete(_heaviest_prefix(open_nodes[positive], free_weight[positive],
+                                             COMPLETION_TAIL * tau), deadline)
         elif positive.any() and g.n < NODE_BUDGET:
             if FREE_SHARE >= 1.0:
                 search.expand(open_nodes[positive], free_only=True)
@@ -865,7 +876,7 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
     # Close the returned policy's trust-free completions: every open node it reaches is expanded
     # along the free move, so that L is the policy's exact value (unless the deadline comes first;
     # then L is still a lower bound of it). stats["completion_closed"] says which.
-    closed = (search.close_bounds(roots, depth_cap, deadline) if search.completion
+    closed = (search.close_bounds(roots, depth_cap, deadline, COMPLETION_TAIL * tau) if search.completion
               else search.close_completions(roots, depth_cap, deadline))
     lower, upper = root_bounds()
     table = search.policy_table()
