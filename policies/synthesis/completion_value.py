@@ -11,26 +11,30 @@ This module propagates probability mass over *clusters* of beliefs instead:
   policies/synthesis/belief_cells.py), and the belief after the sequence is α_k / Σ α_k. A
   cluster carries the sum of the α of its member sequences, so the probability of every event that
   is a union of clusters is exact, whatever was merged.
-* Beliefs are enclosed. A cluster also carries a lower corner l: every member's belief lies in
-  S(l) = {b in the simplex : b >= l}, a simplex with the n vertices l + (1 - Σ l) e_i. The filter
-  step f_o(b) = b W_o / (b W_o 1) maps the hull of points into the hull of their images (vertices
-  with P(o | v) = 0 drop out), so the componentwise minimum of the vertex images is a lower corner
-  of the next cluster; merged clusters take the componentwise minimum of their corners.
+* Beliefs are enclosed. A cluster carries n vertex beliefs whose hull contains every member's
+  belief. The filter step f_o(b) = b W_o / (b W_o 1) maps the hull of points onto the hull of their
+  images (vertices with P(o | v) = 0 drop out), so the vertex images enclose the next beliefs with
+  no loss. A merged cluster is enclosed by the simplex {b >= l} (vertices l + (1 - Σ l) e_i), l the
+  componentwise minimum of the members' vertices lowered by CORNER_MARGIN.
 * Labels are pessimistic where a cluster straddles a belief atom's hyperplane. When the atom values
-  possible on S(l) (widened by the labeller's rounding margin) lead to different DFA states, the
-  cluster's mass counts as failure for the lower bound and as success for the upper bound.
-* Clusters are merged on (start node, DFA state, a grid cell of resolution δ of the belief); a start
-  node with more than CLUSTER_CAP clusters has its δ multiplied by 4. Clusters lighter than
-  MASS_FLOOR are dropped (failure for the lower bound, success for the upper bound).
+  possible on the hull of its vertices (widened by the labeller's rounding margin) lead to
+  different DFA states, the cluster's mass counts as failure for the lower bound and as success
+  for the upper bound.
+* Clusters are merged on (start node, road, task state, DFA state, a grid cell of side δ of the
+  vertices' mean); a start node with more than CLUSTER_CAP clusters has its δ doubled until it has
+  at most that many. Clusters lighter than MASS_FLOOR are dropped (failure for the lower bound,
+  success for the upper bound). The move may depend on the DFA state (FreeRoute is indexed by
+  (x, q, p)); the trust-free completion's does not.
 
-So lower <= V_free <= upper for the exact-arithmetic Bayes process. Floating point: the corners are
-lowered by CORNER_MARGIN at every step and the straddle test widened by the same, which covers the
-one-step rounding of the filter (γ_{3n} relative, about 2e-15 for n = 7; labelling.py) with a
-factor of several hundred; as for the suffix cells (belief_cells.LABEL_TOLERANCE) this covers the
-accumulated error over a route by an argued margin, not a proof. The probabilities of a k-step
-sequence under the vehicle's float filter and under α differ by at most a relative (1 + γ)^k, with
-γ = γ_{4n+2}; the returned bounds are widened by that factor. Only for the Bayes rule (under the
-authors' update the observation probabilities are not linear in a hidden-state vector).
+So lower <= V_free <= upper for the exact-arithmetic Bayes process. Floating point: the vertices
+are float images of float vertices, as the suffix cells' are (belief_cells.py), and the straddle
+test is widened by CORNER_MARGIN besides the labeller's rounding margin; that covers the one-step
+rounding of the filter (γ_{3n} relative, about 2e-15 for n = 7; labelling.py) by a factor of several
+hundred, and, as for the suffix cells (belief_cells.LABEL_TOLERANCE), the accumulated error over a
+route by an argued margin, not a proof. The probabilities of a k-step sequence under the vehicle's
+float filter and under α differ by at most a relative (1 + γ)^k, with γ = γ_{4n+2}; the returned
+bounds are widened by that factor (and by the rounding of the sums). Only for the Bayes rule (under
+the authors' update the observation probabilities are not linear in a hidden-state vector).
 """
 
 from __future__ import annotations
@@ -65,17 +69,23 @@ class CompletionBounds:
 
 @dataclass(frozen=True, eq=False)
 class FreeRoute:
-    """The trust-free completion's move as arrays: next road and next task state per (x, p)."""
+    """A completion's move as arrays: next road and next task state per (x, q, p).
 
-    next_road: np.ndarray     # [n_x, n_p]
-    next_task: np.ndarray     # [n_x, n_p]
+    The move may depend on the DFA state q (which follows the labels) but not on the belief."""
+
+    next_road: np.ndarray     # [n_x, n_q, n_p]
+    next_task: np.ndarray     # [n_x, n_q, n_p]
 
     @staticmethod
-    def build(tables: ProductTables, free_slot: np.ndarray, next_p: np.ndarray) -> FreeRoute:
-        n_x = tables.n_x
-        road = tables.successors[np.arange(n_x)[:, None], free_slot]
-        road = np.where(road >= 0, road, tables.successors[:, :1])
-        return FreeRoute(next_road=road, next_task=next_p[np.arange(next_p.shape[0])[None, :], road])
+    def build(tables: ProductTables, slot: np.ndarray, next_p: np.ndarray) -> FreeRoute:
+        """slot [n_x, n_p] (the trust-free completion, the same for every q) or [n_x, n_q, n_p]."""
+        n_x, n_q = tables.n_x, tables.n_q
+        if slot.ndim == 2:
+            slot = np.broadcast_to(slot[:, None, :], (n_x, n_q, slot.shape[1]))
+        road = tables.successors[np.arange(n_x)[:, None, None], slot]
+        road = np.where(road >= 0, road, tables.successors[:, :1, None])
+        task = next_p[np.arange(next_p.shape[0])[None, None, :], road]
+        return FreeRoute(next_road=road, next_task=task)
 
 
 def _outcome_table(symbols: ObservationSymbols) -> np.ndarray:
@@ -97,8 +107,6 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
     p = np.asarray(p, dtype=np.int64).copy()
     steps = np.asarray(steps, dtype=np.int64).copy()
     steps0 = steps.copy()
-    if x.size >= 2 ** 20 or tables.n_q >= 2 ** 12:
-        raise ValueError("at most 2**20 start nodes and 2**12 DFA states per call (merge key)")
     n_start = x.size
     n = symbols.likelihood.shape[1]
     outcomes = _outcome_table(symbols)
@@ -109,23 +117,21 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
     coeffs, offsets = tables.belief_coeffs, tables.belief_offsets       # [m, n], [m]
     m = offsets.size
     margin = label_margin_factor(n) * np.abs(coeffs).sum(axis=1) + CORNER_MARGIN  # [m]
-    c_min, c_max = coeffs.min(axis=1, initial=0.0), coeffs.max(axis=1, initial=0.0)
     bit_values = (np.arange(2 ** m)[:, None] >> np.arange(m)[None, :]) & 1      # [bits, m]
 
     q = np.asarray(q, dtype=np.int64)
     owner = np.arange(n_start)
     state = q.copy()
     alpha = np.asarray(belief, dtype=float).copy()
-    corner = np.maximum(alpha - CORNER_MARGIN, 0.0)
+    corner = np.repeat(alpha[:, None, :], n, axis=1)      # vertices of the enclosure [r, n, n]
     done = tables.accepting[state]
     accepted[done] = 1.0
     keep = ~done & ~tables.rejecting[state] & (steps > 0)
-    owner, state, alpha, corner = owner[keep], state[keep], alpha[keep], corner[keep]
+    owner, state, alpha, corner, x, p = (a[keep] for a in (owner, state, alpha, corner, x, p))
     most = owner.size
     while owner.size:
-        road = route.next_road[x, p]                     # per start
-        task = route.next_task[x, p]
-        x2 = road[owner]
+        x2 = route.next_road[x, state, p]                # per cluster: x, p and q
+        p2 = route.next_task[x, state, p]
         incident = incident_of[x2]
         parts = []
         for j in range(outcomes.shape[1]):
@@ -133,26 +139,28 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
             ok = symbol >= 0
             if not ok.any():
                 continue
-            w = symbols.update[symbol[ok]]                               # [r, n, n]
-            a2 = np.einsum("rk,rkl->rl", alpha[ok], w)
+            rows = np.flatnonzero(ok)
+            a2 = np.empty((rows.size, n))
+            image = np.empty((rows.size, n, n))
+            for o in np.unique(symbol[rows]).tolist():   # one matrix product per symbol
+                here = symbol[rows] == o
+                a2[here] = alpha[rows[here]] @ symbols.update[o]
+                image[here] = corner[rows[here]] @ symbols.update[o]
             mass = a2.sum(axis=1)
-            lo = corner[ok]
-            spread = np.maximum(1.0 - lo.sum(axis=1), 0.0)
-            # images of the vertices lo + spread e_i: lo W + spread W_i
-            image = np.einsum("rk,rkl->rl", lo, w)[:, None, :] + spread[:, None, None] * w
+            # the hull of the vertex images contains the image of the hull (vertices with
+            # P(o | v) = 0 drop out: they are replaced by a valid one of the same cluster)
             total = image.sum(axis=2)
             valid = total > 0
             normalised = np.divide(image, total[:, :, None], out=np.zeros_like(image),
                                    where=valid[:, :, None])
-            lo2 = np.where(valid[:, :, None], normalised, np.inf).min(axis=1)
-            lo2 = np.where(np.isfinite(lo2), np.maximum(lo2 - CORNER_MARGIN, 0.0), 0.0)
-            spread2 = np.maximum(1.0 - lo2.sum(axis=1), 0.0)
-            o_owner, o_state, o_road = owner[ok], state[ok], x2[ok]
+            some = valid.argmax(axis=1)
+            lo2 = np.where(valid[:, :, None], normalised,
+                           normalised[np.arange(some.size), some][:, None, :])
+            o_owner, o_state, o_road, o_task = owner[ok], state[ok], x2[ok], p2[ok]
             # DFA successors over the atom values possible on S(lo2)
             if m:
-                base = lo2 @ coeffs.T                                     # [r, m]
-                low = base + spread2[:, None] * c_min[None, :]
-                high = base + spread2[:, None] * c_max[None, :]
+                at_vertices = lo2 @ coeffs.T                              # [r, v, m]
+                low, high = at_vertices.min(axis=1), at_vertices.max(axis=1)
                 can_true = high > offsets[None, :] - margin[None, :]
                 can_false = low <= offsets[None, :] + margin[None, :]
                 fits = np.where(bit_values[None, :, :] == 1, can_true[:, None, :],
@@ -172,15 +180,15 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
             hit = settled & tables.accepting[q2]
             np.add.at(accepted, o_owner[hit], mass[hit])
             go_on = settled & ~tables.accepting[q2] & ~tables.rejecting[q2]
-            parts.append((o_owner[go_on], q2[go_on], a2[go_on], lo2[go_on]))
-        x, p, steps = road, task, steps - 1
-        owner = np.concatenate([part[0] for part in parts])
-        state = np.concatenate([part[1] for part in parts])
-        alpha = np.concatenate([part[2] for part in parts])
-        corner = np.concatenate([part[3] for part in parts])
+            parts.append((o_owner[go_on], q2[go_on], a2[go_on], lo2[go_on], o_road[go_on],
+                          o_task[go_on]))
+        steps = steps - 1
+        owner, state, alpha, corner, x, p = (np.concatenate([part[k] for part in parts])
+                                             for k in range(6))
         live = steps[owner] > 0
-        owner, state, alpha, corner = owner[live], state[live], alpha[live], corner[live]
-        owner, state, alpha, corner = _merge(owner, state, alpha, corner, resolution)
+        owner, state, alpha, corner, x, p = (a[live] for a in (owner, state, alpha, corner, x, p))
+        owner, state, alpha, corner, x, p = _merge(owner, state, alpha, corner, x, p, resolution,
+                                                   tables.n_x, tables.n_q)
         most = max(most, owner.size)
     # Rounding: each start's sequences have at most steps0 factors of (1 + γ_{4n+2}) between the
     # vehicle's float probabilities and α; the sums add at most `most` terms per step and outcome.
@@ -191,30 +199,44 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
     return CompletionBounds(lower=lower, upper=upper, straddle=straddle, clusters=int(most))
 
 
-def _merge(owner: np.ndarray, state: np.ndarray, alpha: np.ndarray, corner: np.ndarray,
-           resolution: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Merge clusters in the same (owner, DFA state, grid cell); coarsen owners over CLUSTER_CAP.
+def _merge(owner: np.ndarray, state: np.ndarray, alpha: np.ndarray, vertices: np.ndarray,
+           x: np.ndarray, p: np.ndarray, resolution: np.ndarray, n_x: int, n_q: int
+           ) -> tuple[np.ndarray, ...]:
+    """Merge clusters in the same (owner, road, task state, DFA state, grid cell of the vertices'
+    mean); coarsen owners over CLUSTER_CAP. A merged cluster's enclosure is the simplex
+    {b >= l} with l the componentwise minimum of every member vertex, lowered by CORNER_MARGIN;
+    a cluster alone in its cell keeps its vertices.
 
-    The key is (owner: 20 bits, DFA state: 12 bits, a 32-bit hash of the cell): a hash collision
-    merges two cells of the same owner and DFA state, which is as sound as any merge (only looser)."""
-    n = corner.shape[1]
-    multipliers = (np.arange(1, n + 2, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)) | np.uint64(1)
-    while owner.size:
-        spread = np.maximum(1.0 - corner.sum(axis=1), 0.0)
-        centre = corner + spread[:, None] / n
+    (owner, x, p, q) is packed exactly into one integer; the cell is a 64-bit hash: a collision
+    merges two cells of the same (owner, x, p, q), which is as sound as any merge (only looser)."""
+    n = vertices.shape[2]
+    if owner.size == 0:
+        return owner, state, alpha, vertices, x, p
+    multipliers = (np.arange(1, n + 1, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)) | np.uint64(1)
+    n_p = int(p.max(initial=0)) + 1
+    place = ((owner * n_x + x) * n_p + p) * n_q + state
+    centre = vertices.mean(axis=1)
+    while True:     # the finest grid per owner (doubling δ) with at most CLUSTER_CAP cells
         cell = np.floor(centre / resolution[owner][:, None]).astype(np.int64).astype(np.uint64)
-        mixed = (cell * multipliers[None, :n]).sum(axis=1)
-        key = ((owner.astype(np.uint64) << np.uint64(44)) | (state.astype(np.uint64) << np.uint64(32))
-               | (mixed >> np.uint64(32)))
-        order = np.argsort(key)
-        key = key[order]
-        starts = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
-        owner, state = owner[order][starts], state[order][starts]
-        alpha = np.add.reduceat(alpha[order], starts, axis=0)
-        corner = np.minimum.reduceat(corner[order], starts, axis=0)
-        counts = np.bincount(owner, minlength=resolution.size)
+        mixed = (cell * multipliers[None, :]).sum(axis=1)
+        order = np.lexsort((mixed, place))
+        a, b = place[order], mixed[order]
+        first = np.concatenate([[True], (a[1:] != a[:-1]) | (b[1:] != b[:-1])])
+        counts = np.bincount(owner[order][first], minlength=resolution.size)
         crowded = counts > CLUSTER_CAP
         if not crowded.any():
             break
-        resolution[crowded] *= 4.0
-    return owner, state, alpha, corner
+        resolution[crowded] *= 2.0
+    starts = np.flatnonzero(first)
+    size = np.diff(np.append(starts, order.size))
+    pick = order[starts]
+    merged = vertices[pick]
+    several = size > 1
+    if several.any():
+        corner = np.minimum.reduceat(vertices[order].min(axis=1), starts, axis=0)[several]
+        corner = np.maximum(corner - CORNER_MARGIN, 0.0)
+        spread = np.maximum(1.0 - corner.sum(axis=1), 0.0)
+        merged[several] = corner[:, None, :] + spread[:, None, None] * np.eye(n)[None]
+    alpha = np.add.reduceat(alpha[order], starts, axis=0)
+    owner, state, x, p, vertices = owner[pick], state[pick], x[pick], p[pick], merged
+    return owner, state, alpha, vertices, x, p

@@ -608,7 +608,8 @@ class _Search:
         for level in range(touched.shape[0] - 1):
             carried = carried | start[level]
             nxt = np.zeros_like(carried)
-            nxt[road[carried], task[carried]] = True
+            xs, ps = np.nonzero(carried)
+            nxt[road[xs, :, ps].ravel(), task[xs, :, ps].ravel()] = True     # every DFA state
             touched[level + 1] = nxt
             carried = nxt
         return touched
