@@ -8,21 +8,27 @@ Method (bounded heuristic search over the product belief MDP, with a sound abstr
   identical beliefs at the same depth are merged, never approximated. A node's children are, per
   next junction, the observation symbols with their exact probabilities and exact Bayes (or
   "paper") posteriors.
-* Every node carries [L, U]. FRONTIER (unexpanded) nodes: L = 0, U = the suffix abstraction's bound
-  at the node's cell (policies/synthesis/upper_bound.py; the cell is the node's last k
-  belief-changing symbols, which it knows exactly). FREE nodes (expanded along the trust-free
-  completion's move only): L = that move's value, U = the bound. Terminal nodes are exact: accepted
+* Every node carries [L, U]. FRONTIER (unexpanded) nodes: U = the suffix abstraction's bound at the
+  node's cell (policies/synthesis/upper_bound.py; the cell is the node's last k belief-changing
+  symbols, which it knows exactly); L = a lower bound of the trust-free completion's value from
+  the node (Bayes rule: cluster bounds, policies/synthesis/completion_value.py; 0 until computed).
+  FREE nodes (authors' rule only; expanded along the trust-free completion's move only): L = that
+  move's value, U = the bound. Terminal nodes are exact: accepted
   1, rejected 0, horizon reached 0. EXPANDED nodes: U = min(U, max_a Σ_o p U_child) and
   L = max_a Σ_o p L_child.
 * Refinement (AO*/HSVI style): per round, expand the open nodes carrying the most of the root's
   gap — reach probability under the upper-greedy policy times (U - L) — and look ahead along their
-  upper-greedy moves; free-expand the FRONTIER nodes the returned policy reaches; until
+  upper-greedy moves; bound (Bayes) or free-expand (authors' rule) the FRONTIER nodes the
+  returned policy reaches; until
   U - L <= tau at the root, the frontier is exhausted, or the time limit.
-* The returned policy takes at every EXPANDED node the action maximising L (ties: strict value,
-  then U) and drives the trust-free completion everywhere else (the exact-belief acting rule of
+* The returned policy takes at every EXPANDED node the action maximising L among those the hold
+  rule allows (ties: strict value, then U) and drives the trust-free completion everywhere else (the exact-belief acting rule of
   policies.routing.aware_table.BeliefTablePolicy). After the last round the completions it reaches
-  are closed, so `lower` is the exact value of that policy and at least the trust-free route's
-  (docs/synthesis.md, "Open nodes and the acting rule").
+  are bounded (Bayes) or closed (authors' rule), so `lower` is a lower bound of that policy's value
+  (its exact value under the authors' rule). Where a completion bound is used, rows its route can
+  reach may leave the free move only for a move worth at least the completion's upper bound (the
+  hold rule, `_Search.choose`), which keeps the bound sound (docs/synthesis.md, "Open nodes and
+  the acting rule").
 
 Horizon H: at most H junctions (the study measures "policy, then fallback after 20", so H = 20 is
 the natural companion). Unbounded (horizon=None): upper is the abstraction's least fixed point with
@@ -84,7 +90,7 @@ FRONTIER, EXPANDED, ACCEPTED, ZERO, FREE = 0, 1, 2, 3, 4
 
 @dataclass(frozen=True, eq=False)
 class SynthesisResult:
-    """lower <= Pr_max <= upper; lower is the value of `policy` (a certified lower bound of it).
+    """lower <= Pr_max <= upper; lower is a certified lower bound of the value of `policy`.
 
     horizon: the junction horizon solved for (None: unbounded); stats: how the bounds were obtained
     (per bounded run: nodes, expanded nodes, open frontier, the abstraction's root bound).
@@ -874,9 +880,10 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         if on_iteration is not None:
             on_iteration(*root_bounds())
     search.backup()
-    # Close the returned policy's trust-free completions: every open node it reaches is expanded
-    # along the free move, so that L is the policy's exact value (unless the deadline comes first;
-    # then L is still a lower bound of it). stats["completion_closed"] says which.
+    # Close the returned policy's trust-free completions: every open node it reaches is bounded
+    # (Bayes; up to a light tail) or expanded along the free move (authors' rule: then L is the
+    # policy's exact value). Unless the deadline comes first; L is a lower bound of the policy's
+    # value either way. stats["completion_closed"] says which.
     closed = (search.close_bounds(roots, depth_cap, deadline, COMPLETION_TAIL * tau) if search.completion
               else search.close_completions(roots, depth_cap, deadline))
     lower, upper = root_bounds()
@@ -943,8 +950,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
 
     horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter and the
     belief MDP's dynamics ("bayes", or the authors' "paper" update with observation probabilities
-    b·P(o|θ) of that belief). Returns lower <= Pr_max <= upper with lower the value of the returned
-    policy; stops when upper - lower <= tau or after about time_limit seconds.
+    b·P(o|θ) of that belief). Returns lower <= Pr_max <= upper with lower a lower bound of the value of
+    the returned policy; stops when upper - lower <= tau or after about time_limit seconds.
 
     Unbounded: lower is the best P(accepted within H junctions) of bounded searches with growing H
     (UNBOUNDED_HORIZONS): a policy accepting within H with probability L satisfies the unbounded spec
