@@ -19,16 +19,16 @@ Method (bounded heuristic search over the product belief MDP, with a sound abstr
 * Refinement (AO*/HSVI style): per round, expand the open nodes carrying the most of the root's
   gap — reach probability under the upper-greedy policy times (U - L) — and look ahead along their
   upper-greedy moves; bound (Bayes) or free-expand (authors' rule) the FRONTIER nodes the
-  returned policy reaches; until
-  U - L <= tau at the root, the frontier is exhausted, or the time limit.
+  returned policy reaches; until U - L <= tau at the root, the frontier is exhausted, or the time
+  limit.
 * The returned policy takes at every EXPANDED node the action maximising L among those the hold
-  rule allows (ties: strict value, then U) and drives the trust-free completion everywhere else (the exact-belief acting rule of
-  policies.routing.aware_table.BeliefTablePolicy). After the last round the completions it reaches
-  are bounded (Bayes) or closed (authors' rule), so `lower` is a lower bound of that policy's value
-  (its exact value under the authors' rule). Where a completion bound is used, rows its route can
-  reach may leave the free move only for a move worth at least the completion's upper bound (the
-  hold rule, `_Search.choose`), which keeps the bound sound (docs/synthesis.md, "Open nodes and
-  the acting rule").
+  rule allows (ties: strict value, then U) and drives the trust-free completion everywhere else
+  (the exact-belief acting rule of policies.routing.aware_table.BeliefTablePolicy). After the
+  last round the completions it reaches are bounded (Bayes) or closed (authors' rule), so `lower`
+  is a lower bound of that policy's value (its exact value under the authors' rule). Where a
+  completion bound is used, rows its route can reach may leave the free move only for a move
+  worth at least the completion's upper bound (the hold rule, `_Search.choose`), which keeps the
+  bound sound (docs/synthesis.md, "Open nodes and the acting rule").
 
 Horizon H: at most H junctions (the study measures "policy, then fallback after 20", so H = 20 is
 the natural companion). Unbounded (horizon=None): upper is the abstraction's least fixed point with
