@@ -368,7 +368,7 @@ class _Search:
 
     @staticmethod
     def level_values(lv: _Level, values: np.ndarray, pessimistic: bool | None) -> np.ndarray:
-        """action_values on a cached level: Σ_o p(o) value(child) per action, -1 where illegal."""
+        """Move values on a cached level: Σ_o p(o) value(child) per action, -1 where illegal."""
         child_value = np.where(lv.has_child, values[lv.child], 0.0)
         if pessimistic is not None and lv.alt_row.size:
             combine = np.minimum.at if pessimistic else np.maximum.at
@@ -510,32 +510,6 @@ class _Search:
                 g.expanded_by_level[level].extend(members)
             g.free_version[level] += 1
         g.kind[nodes] = FREE if free_only else EXPANDED
-
-    def action_values(self, nodes: np.ndarray, values: np.ndarray, pessimistic: bool | None,
-                      level: int | None = None) -> np.ndarray:
-        """Σ_o p(o) value(child) per legal action (-1 for illegal slots), for expanded `nodes`.
-
-        An outcome with alternates (a label within the rounding margin) takes the minimum of its
-        children's values when `pessimistic` (L), the maximum otherwise (U). `level`: all nodes
-        are at this level (only that level's alternates are looked at). pessimistic None: the
-        strict children only (alternates ignored)."""
-        g = self.graph
-        child = g.child[nodes]
-        child_value = np.where(child >= 0, values[np.maximum(child, 0)], 0.0)
-        parent, slot, outcome, alt_child = g.alternates_of(level if pessimistic is not None else -1)
-        if parent.size:
-            order = np.argsort(nodes, kind="stable")
-            sorted_nodes = nodes[order]
-            where = np.searchsorted(sorted_nodes, parent)
-            where = np.minimum(where, sorted_nodes.size - 1)
-            hit = sorted_nodes[where] == parent
-            if hit.any():
-                index = (order[where[hit]], slot[hit], outcome[hit])
-                combine = np.minimum.at if pessimistic else np.maximum.at
-                combine(child_value, index, values[alt_child[hit]])
-        q = (g.prob[nodes] * child_value).sum(axis=2)
-        legal = self.tables.successors[g.x[nodes]] >= 0
-        return np.where(legal, q, -1.0)
 
     def backup(self) -> None:
         """Bellman backups from the deepest level up. At each level the FREE nodes first (L and the
@@ -755,12 +729,15 @@ class _Search:
         return np.minimum(reach, 1.0)
 
     def policy_table(self) -> PolicyTable:
+        """The EXPANDED nodes' moves as the last backup chose them (the moves L was computed
+        with: recomputing the move values could differ in the last bit and flip a tie or the hold
+        rule's comparison)."""
         g = self.graph
-        nodes = np.flatnonzero(g.kind[: g.n] == EXPANDED)
-        lower_q = self.action_values(nodes, g.lower, True)
-        strict_q = self.action_values(nodes, g.strict, None)
-        upper_q = self.action_values(nodes, g.upper, False)
-        action, _, _ = self.choose(nodes, lower_q, strict_q, upper_q)
+        parts = [(lv.nodes, move) for level in sorted(self.moves) for lv, _, move in self.moves[level]
+                 if lv is self.levels.get(level)]
+        nodes = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
+        action = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
+        assert nodes.size == int((g.kind[: g.n] == EXPANDED).sum())
         return PolicyTable(t=g.level[nodes], x=g.x[nodes], q=g.q[nodes], beliefs=g.belief[nodes],
                            action=action, projected=g.p[nodes])
 
