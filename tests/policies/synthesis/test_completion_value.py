@@ -34,7 +34,7 @@ def exact_free_value(tables, symbols, route, x, q, p, belief, steps) -> float:
         return 1.0
     if tables.rejecting[q] or steps == 0:
         return 0.0
-    x2, p2 = int(route.next_road[x, p]), int(route.next_task[x, p])
+    x2, p2 = int(route.next_road[x, q, p]), int(route.next_task[x, q, p])
     total = 0.0
     for symbol in symbols.by_incident[int(tables.pomdp.road_incident[x2])]:
         posterior, probability = apply_symbol(belief[None], symbols, symbol)
@@ -127,3 +127,37 @@ def test_policy_is_worth_l_with_coarse_completion_bounds(pomdp, name, monkeypatc
     assert result.lower <= value.lower + TOLERANCE
     optimum = exact_optimum(pomdp, spec, horizon)
     assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE
+
+
+def test_hold_rule_keeps_touched_rows_on_the_free_move(pomdp):
+    """At a touched row the policy leaves the free move only for a move whose L reaches the row's
+    free_upper; untouched rows take the best L."""
+    import time
+
+    from trustroute.policies.synthesis.search import _Search, policy_choice
+
+    spec = load_spec("specs/phi1.toml", pomdp.town)
+    tables = build_product(pomdp, spec)
+    now = time.perf_counter()
+    search = _Search(tables, "bayes", 8, 1, now, now + 60.0)
+    roots = search.roots()
+    search.expand(roots)
+    kids = search.graph.child[roots].ravel()
+    search.expand(np.unique(kids[kids >= 0]))
+    search.backup()
+    g, lv = search.graph, search.level_arrays(0)
+    q3 = search.level_values3(lv, g.values)
+    free = search.free_slot[g.x[lv.nodes], g.p[lv.nodes]]
+    best = policy_choice(q3[1], q3[2], q3[0])
+    assert (best != free).any(), "the case needs a row whose best move is not the free one"
+    g.free_lower[lv.nodes] = 0.0
+    search.touched[:] = False
+    move, _, _ = search.choose(lv.nodes, q3[1], q3[2], q3[0])
+    assert np.array_equal(move, best)
+    search.touched[0, g.x[lv.nodes], g.p[lv.nodes]] = True
+    g.free_upper[lv.nodes] = q3[1].max(axis=1) + 0.01
+    move, _, _ = search.choose(lv.nodes, q3[1], q3[2], q3[0])
+    assert np.array_equal(move, free)
+    g.free_upper[lv.nodes] = q3[1].max(axis=1)
+    move, _, _ = search.choose(lv.nodes, q3[1], q3[2], q3[0])
+    assert np.array_equal(move, best)
