@@ -45,11 +45,11 @@ def test_phi1_at_horizon_six_is_the_trust_free_route(pomdp):
 
 
 @pytest.mark.parametrize("name", ["phi1", "phi2", "phi1_strict", "phi2_strict"])
-def test_lower_is_the_value_of_the_returned_policy(pomdp, name):
+def test_lower_is_a_lower_bound_of_the_returned_policy(pomdp, name):
     """policies.evaluate (independent tree unfolding through the RoutingPolicy interface) gives the
-    returned policy exactly `lower` within H junctions (the search values every node without a row
-    by the trust-free completion the policy drives there), which is at least the trust-free
-    route's value; also for a coarse run that stops with many open nodes."""
+    returned policy at least `lower` and at most `upper` within H junctions (open nodes are valued by
+    a lower bound of the trust-free completion the policy drives there); here L also beats the
+    trust-free route's value; also for a coarse run that stops with many open nodes."""
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     horizon = 12
     free = evaluate(pomdp, spec, trust_free_policy(pomdp.town, spec), fallback_after=None,
@@ -60,7 +60,7 @@ def test_lower_is_the_value_of_the_returned_policy(pomdp, name):
         assert value.gap == 0.0
         assert result.gap <= tau
         assert result.stats["runs"][0]["completion_closed"]
-        assert value.lower == pytest.approx(result.lower, abs=EXACT_TOLERANCE)
+        assert result.lower - EXACT_TOLERANCE <= value.lower <= result.upper + EXACT_TOLERANCE
         assert result.lower >= free.lower - EXACT_TOLERANCE
 
 

@@ -92,10 +92,11 @@ def test_bounds_bracket_brute_force_on_random_problems(driver, seed, horizon, be
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_returned_policy_is_worth_exactly_lower_on_random_problems(driver, seed):
+def test_returned_policy_is_worth_at_least_lower_on_random_problems(driver, seed):
     """Early stops (tau 0.2) leave open nodes; the policy drives the trust-free completion there,
-    which the search valued exactly: `evaluate` of the policy equals L and is >= the trust-free
-    route's value."""
+    which the search valued by a lower bound: `evaluate` of the policy is at least L and at least
+    its strict-label value, and at most U; once converged L is within tau of the trust-free route's
+    value or above it."""
     rng = np.random.default_rng(1000 + seed)
     town = random_town(rng)
     pomdp = build_pomdp(town, random_driver(rng, driver.incident_types))
@@ -105,10 +106,9 @@ def test_returned_policy_is_worth_exactly_lower_on_random_problems(driver, seed)
     for tau in (0.2, 1e-6):
         result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20)
         value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
-        run = result.stats["runs"][0]
-        strict = run["lower_strict_labels"]
-        assert value.lower == pytest.approx(strict, abs=TOLERANCE), (value.lower, strict, result.lower)
-        if run["threshold_alternates"] == 0 and len(run["root_dfa_states"]) == 1:
-            # no label within the rounding margin: L is the strict value, at least the free route's
-            assert value.lower == pytest.approx(result.lower, abs=TOLERANCE)
-            assert result.lower >= free.lower - TOLERANCE
+        strict = result.stats["runs"][0]["lower_strict_labels"]
+        assert value.lower >= strict - TOLERANCE, (value.lower, strict, result.lower)
+        assert result.lower - TOLERANCE <= value.lower <= result.upper + TOLERANCE
+        if result.gap <= tau:
+            # converged: L >= Pr_max - tau >= the trust-free route's value - tau
+            assert result.lower >= free.lower - tau - TOLERANCE
