@@ -5,11 +5,11 @@ The AV's belief, which the spec's belief labels read, is always the type-aware f
 population's weights w (policies/model/driver_types.py): the spec means the same for every policy.
 
 Bayes: synthesize on the type-aware POMDP with initial belief w ⊗ b0. Its L and U are
-synthesize's: L is the value of the returned policy under the type prior (unexpanded nodes
-counted as failure), U a sound bound of the population optimum max_π Σ_k w_k V_k(π). Per-type
-values V_k are exact evaluations (policies/evaluate.py) of the returned policy with the driver of
-type k (truth = type k's model, the AV filtering on the lifted model) for the same horizon and no
-fallback, as synthesis scores it; Σ_k w_k V_k >= L.
+synthesize's: L is a lower bound of the returned policy's value under the type prior (unexpanded
+nodes valued by a lower bound of the trust-free completion), U a sound bound of the population
+optimum max_π Σ_k w_k V_k(π). Per-type values V_k are exact evaluations (policies/evaluate.py)
+of the returned policy with the driver of type k (truth = type k's model, the AV filtering on the
+lifted model) for the same horizon and no fallback, as synthesis scores it; Σ_k w_k V_k >= L.
 
 Robust: maximise min_k V_k. Candidates are the Bayes policy and the policies synthesized as if
 the type prior were λ, for λ on a simplex grid; such a policy runs on the w-filter with its
