@@ -556,15 +556,10 @@ class _Search:
         node is at least the free completion's (docs/synthesis.md, "Open nodes and the acting
         rule"). Among the allowed moves: policy_choice (best L, ties by strict value, then U)."""
         g = self.graph
-        rows = np.arange(nodes.size)
         free = self.free_slot[g.x[nodes], g.p[nodes]]
-        lower_q, strict_q = lower_q.copy(), strict_q.copy()
-        lower_q[rows, free] = np.maximum(lower_q[rows, free], g.free_lower[nodes])
-        strict_q[rows, free] = np.maximum(strict_q[rows, free], g.free_lower[nodes])
         held = self.touched[g.level[nodes], g.x[nodes], g.p[nodes]]
-        allowed = ~held[:, None] | (lower_q >= g.free_upper[nodes][:, None])
-        allowed[rows, free] = True
-        move = policy_choice(np.where(allowed, lower_q, -2.0), strict_q, upper_q)
+        move, lower_q, strict_q = held_choice(lower_q, strict_q, upper_q, free, held,
+                                              g.free_lower[nodes], g.free_upper[nodes])
         if self.completion:
             # held rows whose completion bounds are not computed yet and where the rule changes the
             # move: bounding the free completion there may free the better move (search loop)
@@ -740,6 +735,21 @@ class _Search:
         assert nodes.size == int((g.kind[: g.n] == EXPANDED).sum())
         return PolicyTable(t=g.level[nodes], x=g.x[nodes], q=g.q[nodes], beliefs=g.belief[nodes],
                            action=action, projected=g.p[nodes])
+
+
+def held_choice(lower_q: np.ndarray, strict_q: np.ndarray, upper_q: np.ndarray, free: np.ndarray,
+                held: np.ndarray, free_lower: np.ndarray, free_upper: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The hold rule (_Search.choose) on move values [nodes, moves]: (move, lower_q, strict_q) with
+    the free move's values raised to free_lower; a `held` node leaves its `free` move only for a move
+    whose L is at least free_upper; among the allowed moves, policy_choice."""
+    rows = np.arange(lower_q.shape[0])
+    lower_q, strict_q = lower_q.copy(), strict_q.copy()
+    lower_q[rows, free] = np.maximum(lower_q[rows, free], free_lower)
+    strict_q[rows, free] = np.maximum(strict_q[rows, free], free_lower)
+    allowed = ~held[:, None] | (lower_q >= free_upper[:, None])
+    allowed[rows, free] = True
+    return policy_choice(np.where(allowed, lower_q, -2.0), strict_q, upper_q), lower_q, strict_q
 
 
 def policy_choice(lower_q: np.ndarray, strict_q: np.ndarray, upper_q: np.ndarray) -> np.ndarray:

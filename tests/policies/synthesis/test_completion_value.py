@@ -23,7 +23,7 @@ from trustroute.policies.synthesis import completion_value
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols
 from trustroute.policies.synthesis.completion_value import FreeRoute, completion_bounds
 from trustroute.policies.synthesis.exact_search import exact_optimum
-from trustroute.policies.synthesis.search import synthesize
+from trustroute.policies.synthesis.search import held_choice, policy_choice, synthesize
 
 HORIZON = 8
 TOLERANCE = 1e-12
@@ -129,35 +129,23 @@ def test_policy_is_worth_l_with_coarse_completion_bounds(pomdp, name, monkeypatc
     assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE
 
 
-def test_hold_rule_keeps_touched_rows_on_the_free_move(pomdp):
-    """At a touched row the policy leaves the free move only for a move whose L reaches the row's
-    free_upper; untouched rows take the best L."""
-    import time
-
-    from trustroute.policies.synthesis.search import _Search, policy_choice
-
-    spec = load_spec("specs/phi1.toml", pomdp.town)
-    tables = build_product(pomdp, spec)
-    now = time.perf_counter()
-    search = _Search(tables, "bayes", 8, 1, now, now + 60.0)
-    roots = search.roots()
-    search.expand(roots)
-    kids = search.graph.child[roots].ravel()
-    search.expand(np.unique(kids[kids >= 0]))
-    search.backup()
-    g, lv = search.graph, search.level_arrays(0)
-    q3 = search.level_values3(lv, g.values)
-    free = search.free_slot[g.x[lv.nodes], g.p[lv.nodes]]
-    best = policy_choice(q3[1], q3[2], q3[0])
-    assert (best != free).any(), "the case needs a row whose best move is not the free one"
-    g.free_lower[lv.nodes] = 0.0
-    search.touched[:] = False
-    move, _, _ = search.choose(lv.nodes, q3[1], q3[2], q3[0])
+def test_hold_rule_keeps_held_rows_on_the_free_move():
+    """A held row leaves the free move only for a move whose L reaches its free_upper; other rows
+    take the best L; the free move's L is raised to free_lower."""
+    rng = np.random.default_rng(7)
+    lower_q = rng.uniform(0, 1, size=(50, 3))
+    strict_q, upper_q = lower_q.copy(), lower_q + 0.1
+    free = rng.integers(0, 3, size=50)
+    best = policy_choice(lower_q, strict_q, upper_q)
+    assert (best != free).any()
+    none = np.zeros(50, dtype=bool)
+    move, _, _ = held_choice(lower_q, strict_q, upper_q, free, none, np.zeros(50), np.ones(50))
     assert np.array_equal(move, best)
-    search.touched[0, g.x[lv.nodes], g.p[lv.nodes]] = True
-    g.free_upper[lv.nodes] = q3[1].max(axis=1) + 0.01
-    move, _, _ = search.choose(lv.nodes, q3[1], q3[2], q3[0])
+    every = np.ones(50, dtype=bool)
+    best_lower = lower_q.max(axis=1)
+    move, _, _ = held_choice(lower_q, strict_q, upper_q, free, every, np.zeros(50), best_lower + 0.01)
     assert np.array_equal(move, free)
-    g.free_upper[lv.nodes] = q3[1].max(axis=1)
-    move, _, _ = search.choose(lv.nodes, q3[1], q3[2], q3[0])
+    move, _, _ = held_choice(lower_q, strict_q, upper_q, free, every, np.zeros(50), best_lower)
     assert np.array_equal(move, best)
+    move, raised, _ = held_choice(lower_q, strict_q, upper_q, free, none, np.full(50, 2.0), np.ones(50))
+    assert np.array_equal(move, free) and np.all(raised[np.arange(50), free] == 2.0)
