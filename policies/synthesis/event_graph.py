@@ -23,6 +23,11 @@ completion's own macro move (follow its junctions until the first event road), w
 policy drives wherever it has no row: a separate slot unless it has the same target and length as
 a shortest move (then both reach the same product node). Where no road can be quiet the moves are
 the town's junctions in their own order, so the search is the plain one.
+
+`chains_only`: pass through only the quiet roads with a single junction. Then the moves of a road
+are its junctions, each followed down the chain of such roads (never more moves than junctions,
+and no dominance argument needed); the full event graph can have many more moves per context
+than junctions where quiet roads branch (every event road around a quiet region is a target).
 """
 
 from __future__ import annotations
@@ -70,11 +75,16 @@ def quiet_incidents(symbols: ObservationSymbols) -> np.ndarray:
 class EventGraph:
     """Macro moves per product context (x, q, p), computed on first use and cached."""
 
-    def __init__(self, tables: ProductTables, symbols: ObservationSymbols, task: StateOnlyTask) -> None:
+    def __init__(self, tables: ProductTables, symbols: ObservationSymbols, task: StateOnlyTask,
+                 chains_only: bool = False) -> None:
         self.tables, self.task = tables, task
         successors = tables.successors
         self.successors = successors
         quiet_road = quiet_incidents(symbols)[np.asarray(tables.pomdp.road_incident)]      # [n_x]
+        if chains_only:
+            # Only quiet roads without a choice (one junction) are passed through: a macro move is
+            # then a junction followed down its chain, so there are no more moves than junctions.
+            quiet_road &= (successors >= 0).sum(axis=1) == 1
         # q_moves[q, x]: some letter of road x moves q; p_moves[p, x]: the task state moves on x
         q_moves = (tables.next_q != np.arange(tables.n_q)[:, None, None]).any(axis=2)
         next_p = np.asarray(task.next_state, dtype=np.int64)

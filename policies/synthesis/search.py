@@ -76,6 +76,7 @@ FINISH_SHARE = 0.04          # share of the time limit kept for finishing after 
 # Most macro moves per context for which the event graph is used: node arrays hold one slot per
 # move, so a town whose quiet roads connect many event roads is searched junction by junction.
 MAX_MACRO_WIDTH = 16
+COMPRESS_MODES = ("off", "chains", "full")
 
 # FRONTIER: open, L = 0 (the policy drives the trust-free completion there, worth >= 0).
 # FREE: expanded along the trust-free completion's move only; L is that move's exact value, U the
@@ -251,7 +252,7 @@ class _Level:
 class _Search:
     def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int | None, suffix_length: int,
                  started: float, deadline: float, unbounded_value: np.ndarray | None = None,
-                 abstraction: Abstraction | None = None, compress: bool = True) -> None:
+                 abstraction: Abstraction | None = None, compress: str = "chains") -> None:
         self.tables, self.rule, self.horizon = tables, rule, horizon
         self.started = started
         pomdp = tables.pomdp
@@ -291,8 +292,10 @@ class _Search:
         self.events: EventGraph | None = None
         self.macro_width: int | None = None
         self.row_conflicts = 0
-        if compress:
-            events = EventGraph(tables, self.symbols, self.task)
+        if compress not in COMPRESS_MODES:
+            raise ValueError(f"unknown compression {compress!r}; use one of {', '.join(COMPRESS_MODES)}")
+        if compress != "off":
+            events = EventGraph(tables, self.symbols, self.task, chains_only=compress == "chains")
             if events.compresses and events.width <= MAX_MACRO_WIDTH:
                 self.events = events
             self.macro_width = events.width
@@ -693,6 +696,7 @@ class _Search:
         best: dict[tuple, tuple[float, int, int]] = {}     # context -> (L, -rank, slot) of the winner
         slots: dict[tuple, set[int]] = {}                  # context -> slots its candidates take
         has_row: set[tuple] = set()                        # contexts a policy row passes
+        single = (self.tables.successors >= 0).sum(axis=1) == 1
 
         def offer(node: int, route: tuple, candidate_value: float, rank: int) -> None:
             t0, q, p = int(g.level[node]), int(g.q[node]), int(g.p[node])
@@ -700,6 +704,8 @@ class _Search:
             for i, (road, slot) in enumerate(route):
                 if self.horizon is not None and t0 + i >= self.horizon:
                     break
+                if single[road]:        # one junction: no choice, no row needed
+                    continue
                 key = (t0 + i, road, q, p, belief)
                 here = rank if rank == 2 or i == 0 else 1
                 score = (candidate_value, -here, slot)
@@ -759,7 +765,7 @@ def automatic_suffix_length(n_changing: int) -> int:
 def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int | None, tau: float,
                     suffix_length: int, batch: int, started: float, deadline: float,
                     unbounded_value: np.ndarray | None = None, abstraction: Abstraction | None = None,
-                    on_iteration: Callable[[float, float], None] | None = None, compress: bool = True,
+                    on_iteration: Callable[[float, float], None] | None = None, compress: str = "chains",
                     ) -> tuple[float, float, PolicyTable, dict]:
     """One AO*-style search; returns (lower, upper, table, stats).
 
@@ -893,7 +899,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                suffix_length: int | None = None,
                batch: int = DEFAULT_BATCH,
                on_iteration: Callable[[float, float], None] | None = None,
-               compress: bool = True) -> SynthesisResult:
+               compress: str = "chains") -> SynthesisResult:
     """Maximal probability of satisfying `spec` from (spec.start, initial belief), with a policy.
 
     horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter and the
@@ -905,9 +911,10 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     (UNBOUNDED_HORIZONS): a policy accepting within H with probability L satisfies the unbounded spec
     with probability >= L. upper is the unbounded abstraction's bound, tightened by a search of the
     unbounded problem when a gap remains. on_iteration(lower, upper): called after every expansion
-    round with the current search's root bounds (progress bars). compress: search the event graph's
-    macro moves (policies/synthesis/event_graph.py) where it has quiet roads; False: junction by
-    junction (the same bounds at convergence; docs/synthesis.md, "The event graph").
+    round with the current search's root bounds (progress bars). compress: "chains" passes through
+    quiet roads without a choice, "full" searches the event graph's macro moves
+    (policies/synthesis/event_graph.py), "off" goes junction by junction; the same bounds at
+    convergence (docs/synthesis.md, "The event graph").
     """
     if tau <= 0:
         raise ValueError("tau must be positive")

@@ -38,9 +38,10 @@ def quiet_town(rng: np.random.Generator):
     return dataclasses.replace(town, incidents=incidents)
 
 
-def _event_graph(pomdp, spec) -> EventGraph:
+def _event_graph(pomdp, spec, mode: str = "full") -> EventGraph:
     tables = build_product(pomdp, spec)
-    return EventGraph(tables, observation_symbols(pomdp), state_only_task(pomdp.town, spec))
+    return EventGraph(tables, observation_symbols(pomdp), state_only_task(pomdp.town, spec),
+                      chains_only=mode == "chains")
 
 
 def _shortest_quiet_lengths(events: EventGraph, x: int, q: int, p: int) -> dict[int, int]:
@@ -64,13 +65,14 @@ def _shortest_quiet_lengths(events: EventGraph, x: int, q: int, p: int) -> dict[
     return best
 
 
+@pytest.mark.parametrize("mode", ["full", "chains"])
 @pytest.mark.parametrize("seed", range(8))
-def test_macro_moves_are_the_shortest_quiet_paths(driver, seed):
+def test_macro_moves_are_the_shortest_quiet_paths(driver, seed, mode):
     rng = np.random.default_rng(500 + seed)
     town = quiet_town(rng)
     pomdp = build_pomdp(town, driver)
     spec = random_spec(rng, town, pomdp.initial_belief)
-    events = _event_graph(pomdp, spec)
+    events = _event_graph(pomdp, spec, mode)
     tables = build_product(pomdp, spec)
     task = state_only_task(town, spec)
     live = np.flatnonzero(~(tables.accepting | tables.rejecting)).tolist()   # the searched states
@@ -97,16 +99,18 @@ def test_macro_moves_are_the_shortest_quiet_paths(driver, seed):
                     assert slot == events.free_slot[road, p]
 
 
-def _compare(pomdp, spec, horizon: int) -> bool:
-    """Compressed and plain search agree, bracket the optimum, and the policy is worth L. False:
-    the horizon was answered by graph distance (no search)."""
-    plain = synthesize(pomdp, spec, tau=TOLERANCE, horizon=horizon, time_limit=60, compress=False)
-    packed = synthesize(pomdp, spec, tau=TOLERANCE, horizon=horizon, time_limit=60)
+def _compare(pomdp, spec, horizon: int, mode: str) -> bool | None:
+    """Compressed and plain search agree, bracket the optimum, and the policy is worth L. Returns
+    whether the search was compressed (None: answered by graph distance, no search)."""
+    plain = synthesize(pomdp, spec, tau=TOLERANCE, horizon=horizon, time_limit=60, compress="off")
+    packed = synthesize(pomdp, spec, tau=TOLERANCE, horizon=horizon, time_limit=60, compress=mode)
     run = packed.stats["runs"][0]
     if not run["nodes"]:
         assert plain.upper == packed.upper == 0.0
+        return None
+    if run["compressed"] is False:      # nothing to pass through: exactly the plain search
+        assert (packed.lower, packed.upper) == (plain.lower, plain.upper)
         return False
-    assert run["compressed"] is True
     assert packed.lower == pytest.approx(plain.lower, abs=TOLERANCE)
     assert packed.upper == pytest.approx(plain.upper, abs=TOLERANCE)
     optimum = exact_optimum(pomdp, spec, horizon)
@@ -119,30 +123,31 @@ def _compare(pomdp, spec, horizon: int) -> bool:
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("mode", ["full", "chains"])
 @pytest.mark.parametrize("seed", range(10))
-def test_compressed_search_equals_plain_search_on_random_towns(driver, seed):
+def test_compressed_search_equals_plain_search_on_random_towns(driver, seed, mode):
     rng = np.random.default_rng(700 + seed)
     town = quiet_town(rng)
     pomdp = build_pomdp(town, driver)
     # `(!high) U ...` makes every road an event while it waits (a true `high` rejects): drawn
-    # again until some road is quiet, so that compression removes something
     # again until some road is quiet, so that compression removes something, and acceptance is
     # possible within 6 junctions (else the graph distance answers without a search)
     for _ in range(40):
         spec = random_spec(rng, town, pomdp.initial_belief)
         tables = build_product(pomdp, spec)
-        if (_event_graph(pomdp, spec).compresses
+        if (_event_graph(pomdp, spec, mode).compresses
                 and acceptance_distance(tables)[tables.start, tables.initial_q] <= 6):
             break
-    assert _event_graph(pomdp, spec).compresses
-    assert _compare(pomdp, spec, int(rng.integers(6, 8)))
+    assert _event_graph(pomdp, spec, mode).compresses
+    assert _compare(pomdp, spec, int(rng.integers(6, 8)), mode) is True
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("mode", ["full", "chains"])
 @pytest.mark.parametrize("name", ["phi1", "phi2", "phi1_strict", "phi2_strict"])
-def test_compressed_search_equals_plain_search_on_the_paper_town(pomdp, name):
+def test_compressed_search_equals_plain_search_on_the_paper_town(pomdp, name, mode):
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
-    assert _compare(pomdp, spec, 8)
+    assert _compare(pomdp, spec, 8, mode) is not None
 
 
 def test_no_quiet_road_gives_the_plain_search(driver):
@@ -154,15 +159,16 @@ def test_no_quiet_road_gives_the_plain_search(driver):
         town = dataclasses.replace(town, incidents={road: "truck" for road in town.states})
         pomdp = build_pomdp(town, driver)
         spec = random_spec(rng, town, pomdp.initial_belief)
-        assert not _event_graph(pomdp, spec).compresses
+        assert not _event_graph(pomdp, spec, "full").compresses
         runs = [synthesize(pomdp, spec, tau=1e-3, horizon=6, time_limit=60, compress=c)
-                for c in (False, True)]
-        assert runs[0].lower == runs[1].lower and runs[0].upper == runs[1].upper
-        assert runs[0].stats["runs"][0]["nodes"] == runs[1].stats["runs"][0]["nodes"]
-        if runs[1].stats["runs"][0]["nodes"]:          # searched (not answered by graph distance)
+                for c in ("off", "chains", "full")]
+        for run in runs[1:]:
+            assert run.lower == runs[0].lower and run.upper == runs[0].upper
+            assert run.stats["runs"][0]["nodes"] == runs[0].stats["runs"][0]["nodes"]
+            assert run.policy.table.rows == runs[0].policy.table.rows
+        if runs[0].stats["runs"][0]["nodes"]:          # searched (not answered by graph distance)
             searched += 1
-            assert runs[1].stats["runs"][0]["compressed"] is False
-            assert runs[0].policy.table.rows == runs[1].policy.table.rows
+            assert all(run.stats["runs"][0]["compressed"] is False for run in runs[1:])
     assert searched >= 3
 
 
