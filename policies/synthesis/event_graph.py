@@ -81,6 +81,7 @@ class EventGraph:
         successors = tables.successors
         self.successors = successors
         quiet_road = quiet_incidents(symbols)[np.asarray(tables.pomdp.road_incident)]      # [n_x]
+        self.chains_only = chains_only
         if chains_only:
             # Only quiet roads without a choice (one junction) are passed through: a macro move is
             # then a junction followed down its chain, so there are no more moves than junctions.
@@ -107,8 +108,9 @@ class EventGraph:
 
     def _width_bound(self) -> int:
         """Most macro moves of any context: per road, the roads reachable through roads that are
-        quiet for some (q, p), counting those that are events for some (q, p); plus the free move."""
-        if not self.compresses:
+        quiet for some (q, p), counting those that are events for some (q, p); plus the free move.
+        Chains only: one move per junction."""
+        if not self.compresses or self.chains_only:
             return int(self.successors.shape[1])
         widest = 1
         for x in range(self.successors.shape[0]):
@@ -143,6 +145,14 @@ class EventGraph:
     def _build(self, x: int, q: int, p: int) -> MacroMoves:
         event = self.event_roads(q, p)
         successors = self.successors
+        if self.chains_only:
+            # one move per junction, down its chain (the free move is the free junction's)
+            chains = [self._walk(x, slot, event, lambda road: 0)
+                      for slot in range(int((successors[x] >= 0).sum()))]
+            return MacroMoves(target=np.array([e for e, _ in chains], dtype=np.int64),
+                              length=np.array([len(route) for _, route in chains], dtype=np.int64),
+                              path=tuple(route for _, route in chains),
+                              free=int(self.free_slot[x, p]))
         # Breadth-first over quiet roads from x, successors in slot order: each road is reached
         # first by a shortest path (in junctions), recorded by its predecessor and slot.
         parent: dict[int, tuple[int, int]] = {}
@@ -190,10 +200,14 @@ class EventGraph:
     def _free_path(self, x: int, p: int, event: np.ndarray) -> tuple[int, tuple[tuple[int, int], ...]]:
         """(target, path) of the trust-free completion from (x, p) to its first event road; target
         -1 when it circles quiet roads forever (p does not move on quiet roads, so its moves repeat)."""
+        return self._walk(x, int(self.free_slot[x, p]), event, lambda road: int(self.free_slot[road, p]))
+
+    def _walk(self, x: int, first: int, event: np.ndarray, slot_at) -> tuple[int, tuple[tuple[int, int], ...]]:
+        """(target, path) of the walk from x taking junction `first`, then slot_at(road) on each
+        quiet road, to the first event road; target -1 when it circles quiet roads forever."""
         steps = []
-        road, seen = x, set()
+        road, seen, slot = x, set(), first
         while True:
-            slot = int(self.free_slot[road, p])
             steps.append((road, slot))
             nxt = int(self.successors[road, slot])
             if event[nxt]:
@@ -202,6 +216,7 @@ class EventGraph:
                 return -1, tuple(steps)
             seen.add(nxt)
             road = nxt
+            slot = slot_at(road)
 
     def table(self, x: np.ndarray, q: np.ndarray, p: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
