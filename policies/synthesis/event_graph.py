@@ -33,6 +33,7 @@ than junctions where quiet roads branch (every event road around a quiet region 
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -101,6 +102,12 @@ class EventGraph:
         self.compresses = bool(self.maybe_quiet.any())
         self._cache: dict[tuple[int, int, int], MacroMoves] = {}
         self.width = self._width_bound()
+        # table(): per context (x, q, p) a row of the padded move arrays, built on first use
+        self._row = np.full((tables.n_x, tables.n_q, next_p.shape[0]), -1, dtype=np.int64)
+        self._target = np.zeros((0, self.width), dtype=np.int64)
+        self._length = np.zeros((0, self.width), dtype=np.int64)
+        self._legal = np.zeros((0, self.width), dtype=bool)
+        self._free = np.zeros(0, dtype=np.int64)
 
     def event_roads(self, q: int, p: int) -> np.ndarray:
         """bool [n_x]: the event roads of DFA state q and task state p (module docstring)."""
@@ -202,7 +209,8 @@ class EventGraph:
         -1 when it circles quiet roads forever (p does not move on quiet roads, so its moves repeat)."""
         return self._walk(x, int(self.free_slot[x, p]), event, lambda road: int(self.free_slot[road, p]))
 
-    def _walk(self, x: int, first: int, event: np.ndarray, slot_at) -> tuple[int, tuple[tuple[int, int], ...]]:
+    def _walk(self, x: int, first: int, event: np.ndarray, slot_at: Callable[[int], int]
+              ) -> tuple[int, tuple[tuple[int, int], ...]]:
         """(target, path) of the walk from x taking junction `first`, then slot_at(road) on each
         quiet road, to the first event road; target -1 when it circles quiet roads forever."""
         steps = []
@@ -222,19 +230,23 @@ class EventGraph:
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(target, length, legal) [m, width] and free [m] for contexts (x, q, p). Unused slots are
         not legal; a legal slot with target -1 is a move that never reaches an event road."""
-        m = x.size
-        target = np.full((m, self.width), -1, dtype=np.int64)
-        length = np.zeros((m, self.width), dtype=np.int64)
-        legal = np.zeros((m, self.width), dtype=bool)
-        free = np.zeros(m, dtype=np.int64)
-        keys = np.stack([x, q, p], axis=1)
-        unique, inverse = np.unique(keys, axis=0, return_inverse=True)
-        inverse = inverse.ravel()
-        for k, (xi, qi, pi) in enumerate(unique.tolist()):
-            moves = self.moves(xi, qi, pi)
-            rows = inverse == k
-            target[rows, : moves.count] = moves.target
-            length[rows, : moves.count] = moves.length
-            legal[rows, : moves.count] = True
-            free[rows] = moves.free
-        return target, length, legal, free
+        row = self._row[x, q, p]
+        missing = row < 0
+        if missing.any():
+            contexts = np.unique(np.stack([x[missing], q[missing], p[missing]], axis=1), axis=0)
+            built = [self.moves(xi, qi, pi) for xi, qi, pi in contexts.tolist()]
+            target = np.full((len(built), self.width), -1, dtype=np.int64)
+            length = np.zeros((len(built), self.width), dtype=np.int64)
+            legal = np.zeros((len(built), self.width), dtype=bool)
+            for k, moves in enumerate(built):
+                target[k, : moves.count] = moves.target
+                length[k, : moves.count] = moves.length
+                legal[k, : moves.count] = True
+            first = self._free.size
+            self._row[contexts[:, 0], contexts[:, 1], contexts[:, 2]] = first + np.arange(len(built))
+            self._target = np.concatenate([self._target, target])
+            self._length = np.concatenate([self._length, length])
+            self._legal = np.concatenate([self._legal, legal])
+            self._free = np.concatenate([self._free, [moves.free for moves in built]])
+            row = self._row[x, q, p]
+        return self._target[row], self._length[row], self._legal[row], self._free[row]

@@ -678,8 +678,10 @@ class _Search:
         strict_q = self.action_values(nodes, g.strict, None)
         upper_q = self.action_values(nodes, g.upper, False)
         action = policy_choice(lower_q, strict_q, upper_q)
-        if self.events is not None:
+        if self.events is not None and not self.events.chains_only:
             return self.junction_table(nodes, action, lower_q[np.arange(nodes.size), action])
+        # plain, or chains: a move is a junction slot, and the roads down a chain have one
+        # junction each (no row needed), so the rows are the expanded nodes' own
         return PolicyTable(t=g.level[nodes], x=g.x[nodes], q=g.q[nodes], beliefs=g.belief[nodes],
                            action=action, projected=g.p[nodes])
 
