@@ -30,6 +30,7 @@ P_BICYCLE = 0.3
 P_ONCOMING = 0.5
 ONCOMING_OFFSET = (-4.0, 6.0)   # s, uniform: when the oncoming vehicle passes the obstacle,
                                 # relative to the ego's free-speed arrival there
+P_UNSEEN = 0.2                  # the oncoming vehicle turns in unseen at the road's far end
 
 
 def define_type(sumo) -> None:
@@ -91,6 +92,7 @@ def inject(sumo, scene: Scene) -> ObstacleIncident:
     bicycle = bool(scene.draw("bicycle", lambda rng: rng.random() < P_BICYCLE))
     with_oncoming = bool(scene.draw("oncoming", lambda rng: rng.random() < P_ONCOMING))
     offset = float(scene.draw("oncoming_offset", lambda rng: rng.uniform(*ONCOMING_OFFSET)))
+    unseen = bool(scene.draw("unseen", lambda rng: rng.random() < P_UNSEEN))
     position = fraction * scene.road_length
     park_vehicle(sumo, vehicle_id, f"{scene.prefix}.obstacle_route", scene.road, position,
                  BICYCLE_TYPE_ID if bicycle else TYPE_ID)
@@ -98,6 +100,6 @@ def inject(sumo, scene: Scene) -> ObstacleIncident:
     if with_oncoming and scene.reverse_road is not None:
         eta = (scene.ego_distance + position) / scene.road_speed
         oncoming = schedule_oncoming(sumo, scene, meet_at=position, meet_in=eta + offset,
-                                     vehicle_id=f"{scene.prefix}.oncoming")
+                                     vehicle_id=f"{scene.prefix}.oncoming", from_upstream=not unseen)
     return ObstacleIncident(road=scene.road, vehicle_id=vehicle_id, position_on_road=position,
                             bicycle=bicycle, oncoming=oncoming)

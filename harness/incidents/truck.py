@@ -81,7 +81,9 @@ def inject(sumo, scene: Scene) -> TruckIncident:
     fraction = float(scene.draw("meet_fraction", lambda rng: rng.uniform(*MEET_RANGE)))
     parked = bool(scene.draw("parked", lambda rng: rng.random() < P_PARKED))
     before = float(scene.draw("parked_before_meeting", lambda rng: rng.uniform(*PARKED_BEFORE_MEETING)))
-    meet_at = fraction * scene.road_length
+    # On the stretch watched before the ego's commit point: on Town01's 50-70 m roads a meeting
+    # beyond it would come after the truck has left the simulation with the road's observation.
+    meet_at = fraction * scene.watched
     eta = (scene.ego_distance + meet_at) / scene.road_speed
     # The truck pulls out round the parked car when it reaches it, `before` metres ahead of the
     # meeting point; the ego is then before * road_speed / TRUCK_SPEED metres short of that point.
