@@ -5,11 +5,12 @@ reaches the point `meet_at` metres into the ego's road `meet_in` seconds from no
 needs more road than the opposite road has (most meetings on Town01's 50-130 m roads), the
 truck starts on a road leading into it (`upstream_road`) and turns in, so it is already in the
 simulation, where SUMO's overtaking checks can see it, when the ego decides whether to pull
-out. (Popping it into existence at the road's far end while the ego is already in the
-oncoming lane made head-on near misses the rule rather than the exception.) Only when no road
-leads in, or that one is too short too, does it enter later at the first road's start. `OncomingVehicle` records where and when the two actually
-passed each other in SUMO (`met_time`, `met_x`, `met_y`) and feeds the head-on TTC to the
-road's PerformanceMonitor.
+out; if that road is too short too, it enters at that road's start later. With
+`from_upstream=False` (the obstacle scene's rare "unseen" truck) it instead enters at the
+opposite road's start later, at the time that keeps the meeting: a truck turning in from a
+side road that nobody could see, possibly while the ego is already in the oncoming lane.
+`OncomingVehicle` records where and when the two actually passed each other in SUMO
+(`met_time`, `met_x`, `met_y`) and feeds the head-on TTC to the road's PerformanceMonitor.
 
 Both checks read the truck from SUMO only when they can matter: the gap between the two
 fronts shrinks by at most `MAX_CLOSING` m/s, so while it is large the next read is scheduled
