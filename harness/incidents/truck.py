@@ -25,7 +25,7 @@ from trustroute.harness.incidents.oncoming import TRUCK_SPEED, OncomingVehicle, 
 KIND = "truck"
 PARKED_TYPE_ID = "trustroute_parked_car"
 MEET_RANGE = (0.3, 0.7)               # fraction of the ego's road where they are timed to meet
-P_PARKED = 0.15
+P_PARKED = 0.3
 PARKED_BEFORE_MEETING = (0.0, 80.0)   # metres before the meeting point, along the truck's way
 # Shorter than this, the truck's lane has no room to pass a parked car before it meets the ego:
 # the scene is the plain oncoming truck. On Town01 the truck and the ego still stopped head-on for
