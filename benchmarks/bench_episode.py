@@ -257,11 +257,13 @@ def _rates_table(rates: list[dict]) -> str:
 
 
 if __name__ == "__main__":
-    # `python -m benchmarks.bench_episode [EPISODES]`: the per-kind rates alone, as a table.
+    # `python -m benchmarks.bench_episode [EPISODES [TOWN_JSON]]`: the per-kind rates alone, as a
+    # table, on the default town or the given one.
     import sys
 
-    _town = load_town()
+    _town = load_town(sys.argv[2] if len(sys.argv) > 2 else None)
     _spec = load_spec(os.path.join(os.path.dirname(__file__), "..", "policies", "specs", "phi1.toml"), _town)
     _setup = EpisodeSetup(town=_town, driver_model=load_driver_model(), spec=_spec)
+    print("route:", " ".join(route_through_every_kind(_town, _spec.start)))
     print(_rates_table(incident_rates(_setup, build_net(_town).path, SumoConfig(),
                                       int(sys.argv[1]) if len(sys.argv) > 1 else 200)))

@@ -6,7 +6,10 @@ itself. The ego passes it with SUMO's own opposite-direction overtaking (the net
 two directions neighbours, networks/sumo_net.py): it pulls into the oncoming lane when the gap
 allows and waits behind the obstacle otherwise. With probability `P_ONCOMING` an oncoming
 vehicle (a truck) is timed to pass the obstacle `ONCOMING_OFFSET` seconds (drawn) after the ego
-would reach it at free speed, so the overtake has to wait for it. Draws: docs/scenes.md.
+would reach it at free speed, so the overtake has to wait for it; with probability `P_UNSEEN`
+it turns in unseen at the road's far end (`oncoming.schedule_oncoming`), the scene's rare
+hazard: a truck that appears while the ego may already be in the oncoming lane.
+Draws: docs/scenes.md.
 """
 
 from __future__ import annotations
@@ -53,6 +56,7 @@ class ObstacleIncident:
     position_on_road: float
     bicycle: bool
     oncoming: OncomingVehicle | None = None
+    unseen: bool = False           # the oncoming vehicle turns in at the road's far end, unseen
     kind: str = KIND
     sumo_ids: tuple[str, ...] = field(init=False)
 
@@ -83,7 +87,9 @@ class ObstacleIncident:
 
     def details(self) -> str:
         text = f"object={'bicycle' if self.bicycle else 'car'} position={self.position_on_road:.1f}"
-        return text + (f" {self.oncoming.details()}" if self.oncoming else " oncoming=none")
+        if self.oncoming is None:
+            return text + " oncoming=none"
+        return text + f" {self.oncoming.details()} unseen={'yes' if self.unseen else 'no'}"
 
 
 def inject(sumo, scene: Scene) -> ObstacleIncident:
@@ -102,4 +108,4 @@ def inject(sumo, scene: Scene) -> ObstacleIncident:
         oncoming = schedule_oncoming(sumo, scene, meet_at=position, meet_in=eta + offset,
                                      vehicle_id=f"{scene.prefix}.oncoming", from_upstream=not unseen)
     return ObstacleIncident(road=scene.road, vehicle_id=vehicle_id, position_on_road=position,
-                            bicycle=bicycle, oncoming=oncoming)
+                            bicycle=bicycle, oncoming=oncoming, unseen=unseen and oncoming is not None)

@@ -326,3 +326,21 @@ def test_the_leader_subscription_reaches_every_ttc_limit():
     assert leader_horizon(default) >= largest * ROAD_SPEED
     wide = SumoConfig(performance_limits={"none": PerformanceLimits(min_ttc=4.0)})
     assert leader_horizon(wide) >= 4.0 * ROAD_SPEED > leader_horizon(default)
+
+
+def test_an_oncoming_truck_comes_from_the_road_leading_in_unless_unseen(setup, net):
+    """A truck timed to meet the obstacle later than the opposite road alone allows starts on the
+    road leading into it (in SUMO from the injection on, where SUMO's overtaking checks see it);
+    drawn `unseen`, it enters at the opposite road's start only later (docs/scenes.md)."""
+    entered = {}
+    for unseen in (False, True):
+        overrides = {"obstacle": {"oncoming": True, "oncoming_offset": 6.0, "bicycle": False, "unseen": unseen}}
+        record, steps = _ego_steps(setup, net, 3, overrides)
+        row = _obstacle_row(record)
+        came_from = row.scene.split("from=")[1].split()[0]
+        first = next(s for s in steps if "inc3.oncoming" in s["objects"])
+        entered[unseen] = (came_from, first["time"] - row.injected_time, first["objects"]["inc3.oncoming"][0])
+    seen_from, seen_after, seen_lane = entered[False]
+    assert seen_from not in ("C-J", "J-C") and seen_lane == f"{seen_from}_1" and seen_after <= 1.0
+    unseen_from, unseen_after, unseen_lane = entered[True]
+    assert unseen_from == "J-C" and unseen_lane == "J-C_1" and unseen_after > 2.0
