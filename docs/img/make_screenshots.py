@@ -70,7 +70,8 @@ def main() -> int:
                     # centred between the ego and the truck, so that both are in view (about 80 m
                     # across at this zoom on Town01's net)
                     truck = incident.oncoming.vehicle_id
-                    tx, ty = traci.vehicle.getPosition(truck) if truck in traci.vehicle.getIDList() else (x, y)
+                    present = truck in traci.vehicle.getIDList()
+                    tx, ty = traci.vehicle.getPosition(truck) if present else (x, y)
                     traci.gui.setOffset(view, (x + tx) / 2, (y + ty) / 2)
                     traci.gui.setZoom(view, 700)
                     traci.gui.screenshot(view, str(path))

@@ -334,7 +334,8 @@ def test_an_oncoming_truck_comes_from_the_road_leading_in_unless_unseen(setup, n
     drawn `unseen`, it enters at the opposite road's start only later (docs/scenes.md)."""
     entered = {}
     for unseen in (False, True):
-        overrides = {"obstacle": {"oncoming": True, "oncoming_offset": 6.0, "bicycle": False, "unseen": unseen}}
+        overrides = {"obstacle": {"oncoming": True, "oncoming_offset": 6.0, "bicycle": False,
+                                  "unseen": unseen}}
         record, steps = _ego_steps(setup, net, 3, overrides)
         row = _obstacle_row(record)
         came_from = row.scene.split("from=")[1].split()[0]
