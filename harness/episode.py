@@ -46,6 +46,7 @@ from trustroute.harness.sumo_start import SumoConfig, sumo_session
 from trustroute.harness.takeover import AUTOPILOT, apply_style, hand_back, take_over
 from trustroute.networks.errors import InputError
 from trustroute.networks.sumo_net import ROAD_SPEED, build_net, net_counts
+from trustroute.networks.sumo_net import net_path as town_net_path
 from trustroute.networks.town import NO_INCIDENT, split_road
 from trustroute.policies.routing.protocol import RoutingPolicy
 
@@ -175,6 +176,23 @@ def _check_net_matches(sumo, setup: EpisodeSetup, net_path: Path, net_key: tuple
 
 
 _READABLE: set[tuple[str, float]] = set()
+_VERIFIED_NETS: set[tuple[str, str, int]] = set()
+
+
+def _town_net(town) -> Path:
+    """`build_net(town).path`, verified once per process and version of the cached file (its
+    path and mtime): build_net parses the whole net to verify it, which in a study cost about
+    5 ms of every episode. A replaced or deleted file is verified (or rebuilt) again."""
+    target = town_net_path(town)
+    try:
+        key = (town.content_hash, str(target), target.stat().st_mtime_ns)
+    except OSError:
+        key = None
+    if key in _VERIFIED_NETS:
+        return target
+    path = build_net(town).path
+    _VERIFIED_NETS.add((town.content_hash, str(path), path.stat().st_mtime_ns))
+    return path
 
 
 def _net_key(net_path: Path) -> tuple[str, float]:
@@ -457,7 +475,7 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
     started = time.perf_counter()
     config = config if config is not None else SumoConfig()
     if net_path is None:
-        net = build_net(setup.town).path
+        net = _town_net(setup.town)
     else:
         net = Path(net_path)
     net_key = _net_key(net)
