@@ -195,7 +195,7 @@ def _bare_routes(net, routes: list[tuple[str, ...]], workers: int) -> float:
 
     started = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        list(pool.map(_bare_route, [(net, route) for route in routes], chunksize=8))
+        list(pool.map(_bare_route, [(net, route) for route in routes]))
     return time.perf_counter() - started
 
 
