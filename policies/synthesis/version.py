@@ -6,4 +6,4 @@ policies/routing/resolve.py) can change a synthesized policy or its bounds: cach
 by older code are then no longer found and are synthesized again.
 """
 
-SYNTHESIS_VERSION = "2"
+SYNTHESIS_VERSION = "3"
