@@ -16,7 +16,7 @@ import time
 import numpy as np
 import pandas as pd
 
-from benchmarks.timing import best_seconds
+from benchmarks.timing import paired_ratio
 from trustroute.harness.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
 from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.incidents import truck
@@ -30,6 +30,7 @@ from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 SEED = 3
+PAIRS = 41   # (episode, bare) pairs of the ratio
 KINDS = ("pedestrian", "obstacle", "truck")
 
 
@@ -96,12 +97,6 @@ def _bare_loop(net, route: list[str], config: SumoConfig) -> float:
                 return sumo.simulation.getTime()
 
 
-def _cpu_seconds(function) -> float:
-    started = time.process_time()
-    function()
-    return time.process_time() - started
-
-
 def _rss_mb() -> float:
     with open("/proc/self/statm") as handle:
         return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
@@ -125,14 +120,9 @@ def run() -> list[dict]:
 
     episode()
     _bare_loop(net, route, config)   # warm both paths
-    # Interleaved, best of each: the machine is shared and its load drifts. CPU time of this
-    # process too (libsumo runs in it): less disturbed by other processes than wall time.
-    episode_seconds = bare_seconds = episode_cpu = bare_cpu = float("inf")
-    for _ in range(15):
-        episode_seconds = min(episode_seconds, best_seconds(episode, repeats=1))
-        episode_cpu = min(episode_cpu, _cpu_seconds(episode))
-        bare_seconds = min(bare_seconds, best_seconds(lambda: _bare_loop(net, route, config), repeats=1))
-        bare_cpu = min(bare_cpu, _cpu_seconds(lambda: _bare_loop(net, route, config)))
+    # Interleaved pairs, median of the per-pair ratios, in wall and in CPU time of this process
+    # (libsumo runs in it; CPU time is less disturbed by the other processes of a shared machine).
+    paired = paired_ratio(episode, lambda: _bare_loop(net, route, config), pairs=PAIRS)
     record = episode()
     bare_sim = _bare_loop(net, route, config)
 
@@ -146,15 +136,16 @@ def run() -> list[dict]:
     growth = _rss_mb() - before
     rates = incident_rates(setup, net, config)
     return [
-        {"name": "episode_phi1_wall", "value": episode_seconds, "unit": "s", "baseline": bare_seconds,
-         "ratio": episode_seconds / bare_seconds, "target_ratio": 1.5,
-         "cpu_ratio": episode_cpu / bare_cpu, "episode_cpu": episode_cpu, "bare_cpu": bare_cpu,
+        {"name": "episode_phi1_wall", "value": paired["target_wall_median"], "unit": "s",
+         "baseline": paired["baseline_wall_median"], "ratio": paired["wall_ratio_median"],
+         "target_ratio": 1.5, "cpu_ratio": paired["cpu_ratio_median"],
+         "ratio_what": f"median of {PAIRS} interleaved (episode, bare) pairs, wall and CPU time",
+         **{key: value for key, value in paired.items() if not key.endswith("ratio_median")},
          "sim_seconds": record.summary["sim_seconds"],
          "bare_sim_seconds": bare_sim, "step_length": config.step_length,
          # the incidents make the episode longer in sim time (waiting, following a truck)
-         "ratio_per_sim_second": (episode_seconds / record.summary["sim_seconds"])
-         / (bare_seconds / bare_sim)},
-        {"name": "episode_phi1_bare_libsumo", "value": bare_seconds, "unit": "s"},
+         "ratio_per_sim_second": paired["wall_ratio_median"] * bare_sim / record.summary["sim_seconds"]},
+        {"name": "episode_phi1_bare_libsumo", "value": paired["baseline_wall_median"], "unit": "s"},
         {"name": "episodes_200_wall", "value": many_seconds, "unit": "s"},
         {"name": "episodes_200_rss_growth", "value": growth, "unit": "MB"},
         *rates,
@@ -210,37 +201,51 @@ def _bare_route(args) -> float:
     return _bare_loop(net, list(route), SumoConfig())
 
 
-def study_against_bare(participants: int = 21, workers: int = 2) -> dict:
-    """A SUMO study (free condition, phi1 and phi2, `workers` processes, parts written and
-    consolidated) against bare libsumo loops driving the very routes its episodes drove, on the
-    same number of processes; the ratio is study wall / bare wall (throughput ratio)."""
-    import tempfile
+def _bare_routes(net, routes: list[tuple[str, ...]], workers: int) -> float:
+    """Wall seconds of bare loops driving `routes` on `workers` processes."""
     from concurrent.futures import ProcessPoolExecutor
+
+    started = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        list(pool.map(_bare_route, [(net, route) for route in routes]))
+    return time.perf_counter() - started
+
+
+def study_against_bare(participants: int = 21, workers: int = 2,
+                       conditions: tuple[str, ...] = ("free",)) -> dict:
+    """A SUMO study (`conditions`, phi1 and phi2, `workers` processes, parts written and
+    consolidated) against bare libsumo loops driving the very routes its episodes drove, on the
+    same number of processes; the ratio is study wall / bare wall (throughput ratio), with the
+    load average before the study, after it and after the bare loops beside it."""
+    import tempfile
     from pathlib import Path
 
     from trustroute.analysis.dataset import read_roads
     from trustroute.harness.study.config import study_config_from_dict
-    from trustroute.harness.study.runner import run_and_consolidate
+    from trustroute.harness.study.runner import run_and_consolidate, validate_study
 
     net = build_net(load_town()).path
     config = study_config_from_dict({"study": {
         "name": "bench-study-vs-bare", "participants": participants, "seed": 1, "engine": "sumo",
-        "specs": ["phi1", "phi2"], "conditions": ["free"]}}, "bench_episode", Path.cwd())
+        "specs": ["phi1", "phi2"], "conditions": list(conditions)}}, "bench_episode", Path.cwd())
+    validate_study(config)   # synthesizes a missing "aware" policy into the cache before the clock starts
+    load = [os.getloadavg()[0]]
     with tempfile.TemporaryDirectory(prefix="trustroute-bench-") as folder:
         started = time.perf_counter()
         run, _ = run_and_consolidate(config, Path(folder) / "study", workers, None, progress=False,
                                      echo=lambda *_: None)
         study_seconds = time.perf_counter() - started
         roads = read_roads(Path(folder) / "study")
+    load.append(os.getloadavg()[0])
     routes = [tuple(group.sort_values("index")["directed_road"]) for _, group in roads.groupby("episode_id")]
-    started = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        list(pool.map(_bare_route, [(net, route) for route in routes]))
-    bare_seconds = time.perf_counter() - started
+    bare_seconds = _bare_routes(net, routes, workers)
+    load.append(os.getloadavg()[0])
     return {"name": f"study_sumo_vs_bare_libsumo.{len(routes)}_episodes", "value": study_seconds, "unit": "s",
             "baseline": bare_seconds, "ratio": study_seconds / bare_seconds, "episodes": len(routes),
+            "load_average_1min": load,
             "workers": workers, "failed": len(run.failed), "target_ratio": 2.0,
-            "what": "free condition only (no synthesis); bare = the same routes, same process count"}
+            "what": f"conditions {', '.join(conditions)}, policies synthesized before the clock; bare = "
+                    "the same routes, same process count"}
 
 
 def _rates_table(rates: list[dict]) -> str:

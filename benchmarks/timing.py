@@ -1,7 +1,15 @@
-"""Small timing helpers shared by the benchmarks (best of several repeats: the machine is noisy)."""
+"""Small timing helpers shared by the benchmarks (the machine is noisy and shared).
+
+`best_seconds`: best of several repeats. `paired_ratio`: a target against its baseline measured
+in pairs, interleaved, in wall and CPU time, reported as the median of the per-pair ratios (load
+that drifts during the run hits both members of a pair alike, and one disturbed pair moves a
+median by one rank only), with the load average beside it.
+"""
 
 from __future__ import annotations
 
+import os
+import statistics
 import time
 from collections.abc import Callable
 
@@ -13,3 +21,46 @@ def best_seconds(function: Callable[[], object], repeats: int = 5) -> float:
         function()
         best = min(best, time.perf_counter() - start)
     return best
+
+
+def _timed(function: Callable[[], object]) -> tuple[float, float]:
+    """(wall, CPU) seconds of one call; CPU time is this process's (libsumo runs in it)."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    function()
+    return time.perf_counter() - wall, time.process_time() - cpu
+
+
+def _quartiles(values: list[float]) -> list[float]:
+    low, _, high = statistics.quantiles(values, n=4, method="inclusive")
+    return [low, high]
+
+
+def paired_ratio(target: Callable[[], object], baseline: Callable[[], object], pairs: int = 31) -> dict:
+    """Time `target` and `baseline` in `pairs` interleaved pairs (the order alternating within a pair,
+    so neither always runs on a warmer cache); ratios are target / baseline.
+
+    Returns medians and the minimum of each, the median and quartiles of the per-pair ratios in
+    wall and in CPU time, and the 1-minute load average before and after."""
+    load_before = os.getloadavg()[0]
+    target_wall, target_cpu, base_wall, base_cpu = [], [], [], []
+    for i in range(pairs):
+        if i % 2:
+            b, t = _timed(baseline), _timed(target)
+        else:
+            t, b = _timed(target), _timed(baseline)
+        target_wall.append(t[0])
+        target_cpu.append(t[1])
+        base_wall.append(b[0])
+        base_cpu.append(b[1])
+    wall_ratios = [t / b for t, b in zip(target_wall, base_wall, strict=True)]
+    cpu_ratios = [t / b for t, b in zip(target_cpu, base_cpu, strict=True) if b > 0]
+    return {
+        "pairs": pairs,
+        "wall_ratio_median": statistics.median(wall_ratios), "wall_ratio_quartiles": _quartiles(wall_ratios),
+        "cpu_ratio_median": statistics.median(cpu_ratios), "cpu_ratio_quartiles": _quartiles(cpu_ratios),
+        "target_wall_median": statistics.median(target_wall), "target_wall_min": min(target_wall),
+        "baseline_wall_median": statistics.median(base_wall), "baseline_wall_min": min(base_wall),
+        "target_cpu_median": statistics.median(target_cpu), "target_cpu_min": min(target_cpu),
+        "baseline_cpu_median": statistics.median(base_cpu), "baseline_cpu_min": min(base_cpu),
+        "load_average_1min": [load_before, os.getloadavg()[0]],
+    }

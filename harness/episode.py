@@ -32,10 +32,10 @@ from trustroute.analysis.dataset import (
     INCIDENTS_SCHEMA,
     KINEMATICS_SCHEMA,
     ROADS_SCHEMA,
-    check_table,
     frame_from_table,
     table_from_columns,
     table_from_frame,
+    table_from_rows,
 )
 from trustroute.harness import incidents as incident_kinds
 from trustroute.harness.background import BackgroundTraffic
@@ -46,6 +46,7 @@ from trustroute.harness.sumo_start import SumoConfig, sumo_session
 from trustroute.harness.takeover import AUTOPILOT, apply_style, hand_back, take_over
 from trustroute.networks.errors import InputError
 from trustroute.networks.sumo_net import ROAD_SPEED, build_net, net_counts
+from trustroute.networks.sumo_net import net_path as town_net_path
 from trustroute.networks.town import NO_INCIDENT, split_road
 from trustroute.policies.routing.protocol import RoutingPolicy
 
@@ -175,6 +176,23 @@ def _check_net_matches(sumo, setup: EpisodeSetup, net_path: Path, net_key: tuple
 
 
 _READABLE: set[tuple[str, float]] = set()
+_VERIFIED_NETS: set[tuple[str, str, int]] = set()
+
+
+def _town_net(town) -> Path:
+    """`build_net(town).path`, verified once per process and version of the cached file (its
+    path and mtime): build_net parses the whole net to verify it, which in a study cost about
+    5 ms of every episode. A replaced or deleted file is verified (or rebuilt) again."""
+    target = town_net_path(town)
+    try:
+        key = (town.content_hash, str(target), target.stat().st_mtime_ns)
+    except OSError:
+        key = None
+    if key in _VERIFIED_NETS:
+        return target
+    path = build_net(town).path
+    _VERIFIED_NETS.add((town.content_hash, str(path), path.stat().st_mtime_ns))
+    return path
 
 
 def _net_key(net_path: Path) -> tuple[str, float]:
@@ -212,6 +230,7 @@ class _Episode:
         self.steps: list[tuple] = []   # one STEP_FIELDS tuple per step: the kinematics table
         self.lengths: dict[str, float] = {}
         self.min_gap = 2.5
+        self.defined_types: set = set()   # incident type definers run in this simulation
 
     def length(self, road: str) -> float:
         if road not in self.lengths:
@@ -240,7 +259,7 @@ class _Episode:
                       rng=self.rng, overrides=self.scene_overrides.get(run.kind, {}), road_speed=ROAD_SPEED,
                       step_length=self.config.step_length,
                       observed_length=self.length(run.road) - COMMIT_DISTANCE)
-        run.incident = incident_kinds.inject(run.kind, self.sumo, scene)
+        run.incident = incident_kinds.inject(run.kind, self.sumo, scene, self.defined_types)
         run.injected_time = now
         if run.incident is not None:
             log.debug("%s: %s incident on %s as %s", self.tracker.episode_id, run.kind, run.road,
@@ -318,7 +337,6 @@ class _Episode:
         sumo = self.sumo
         start = self.setup.spec.start
         _define_ego_type(sumo)
-        incident_kinds.define_types(sumo)
         background = BackgroundTraffic(self.config.background_vehicles, self.rng,
                                        tuple(self.setup.town.states))
         background.start(sumo)
@@ -346,7 +364,9 @@ class _Episode:
         now = 0.0
         # Hot loop: local names, one subscription read, one append, Python work only where
         # something happens (an incident still live, a driver still to decide).
-        simulation_step = sumo.simulationStep
+        # libsumo's own step (its simulationStep wrapper adds a step-listener pass the episode
+        # does not use); traci (sumo-gui) has only simulationStep.
+        simulation_step = getattr(sumo, "_libsumo_step", None) or sumo.simulationStep
         get_time = sumo.simulation.getTime
         get_results = sumo.vehicle.getSubscriptionResults
         colliding_number = sumo.simulation.getCollidingVehiclesNumber
@@ -409,40 +429,36 @@ class _Episode:
 
     def incidents_table(self) -> pa.Table:
         """One row per road with an incident object or a takeover (row 0, the start road, never)."""
-        runs = [run for run in self.runs if run.index > 0 and (run.incident is not None or run.took_over)]
-        columns = {
-            "episode_id": [self.tracker.episode_id] * len(runs),
-            "index": np.array([run.index for run in runs], dtype=np.int64),
-            "directed_road": [run.road for run in runs],
-            "incident": [run.kind for run in runs],
-            "sumo_ids": [",".join(run.incident.sumo_ids) if run.incident is not None else None
-                         for run in runs],
-        }
-        for name in ("injected_time", "in_view_time", "x", "y", "passed_time", "removed_time"):
-            columns[name] = np.array([getattr(run, name) for run in runs], dtype=np.float64)
-        columns["takeover"] = np.array([run.took_over for run in runs], dtype=bool)
-        columns["takeover_start"] = np.array([run.takeover_start for run in runs], dtype=np.float64)
-        columns["takeover_end"] = np.array([run.takeover_end for run in runs], dtype=np.float64)
-        columns["performance"] = [run.monitor.result(self.limits(run)) for run in runs]
-        columns["min_ttc"] = np.array([run.monitor.min_ttc for run in runs], dtype=np.float64)
-        columns["max_deceleration"] = np.array([run.monitor.max_deceleration for run in runs],
-                                               dtype=np.float64)
-        columns["collided"] = np.array([run.monitor.collided for run in runs], dtype=bool)
-        columns["min_head_on_ttc"] = np.array([run.monitor.min_head_on_ttc for run in runs], dtype=np.float64)
-        columns["min_pedestrian_distance"] = np.array([run.monitor.min_pedestrian_distance for run in runs],
-                                                      dtype=np.float64)
-        columns["time_lost"] = np.array([run.monitor.time_lost for run in runs], dtype=np.float64)
-        columns["failed_measures"] = [",".join(run.monitor.failed_measures(self.limits(run))) or None
-                                      for run in runs]
-        columns["scene"] = [run.incident.details() if run.incident is not None else None for run in runs]
-        return table_from_columns(columns, INCIDENTS_SCHEMA)
+        rows = []
+        for run in self.runs:
+            if run.index == 0 or (run.incident is None and not run.took_over):
+                continue
+            monitor, incident = run.monitor, run.incident
+            failed = monitor.failed_measures(self.limits(run))
+            rows.append({
+                "episode_id": self.tracker.episode_id, "index": run.index, "directed_road": run.road,
+                "incident": run.kind,
+                "sumo_ids": ",".join(incident.sumo_ids) if incident is not None else None,
+                # NaN is a null in these (the times and places of what never happened)
+                "injected_time": run.injected_time, "in_view_time": run.in_view_time, "x": run.x, "y": run.y,
+                "passed_time": run.passed_time, "removed_time": run.removed_time,
+                "takeover": run.took_over, "takeover_start": run.takeover_start,
+                "takeover_end": run.takeover_end,
+                "performance": "fail" if failed else "succ",   # PerformanceMonitor.result's verdict
+                "min_ttc": monitor.min_ttc, "max_deceleration": monitor.max_deceleration,
+                "collided": monitor.collided, "min_head_on_ttc": monitor.min_head_on_ttc,
+                "min_pedestrian_distance": monitor.min_pedestrian_distance, "time_lost": monitor.time_lost,
+                "failed_measures": ",".join(failed) or None,
+                "scene": incident.details() if incident is not None else None,
+            })
+        return table_from_rows(rows, INCIDENTS_SCHEMA)
 
     def kinematics_table(self) -> pa.Table:
-        columns = dict(zip(STEP_FIELDS, zip(*self.steps, strict=True) if self.steps else ((),) * 6,
+        steps = self.steps
+        columns = dict(zip(STEP_FIELDS, zip(*steps, strict=True) if steps else ((),) * len(STEP_FIELDS),
                            strict=True))
-        columns["episode_id"] = [self.tracker.episode_id] * len(self.steps)
-        arrays = [pa.array(columns[f.name], type=f.type) for f in KINEMATICS_SCHEMA]
-        return check_table(pa.Table.from_arrays(arrays, schema=KINEMATICS_SCHEMA), KINEMATICS_SCHEMA)
+        columns["episode_id"] = [self.tracker.episode_id] * len(steps)
+        return table_from_columns(columns, KINEMATICS_SCHEMA, nan_as_null=False)
 
 
 def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: str, seed: int,
@@ -460,7 +476,7 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
     started = time.perf_counter()
     config = config if config is not None else SumoConfig()
     if net_path is None:
-        net = build_net(setup.town).path
+        net = _town_net(setup.town)
     else:
         net = Path(net_path)
     net_key = _net_key(net)

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from trustroute.analysis.dataset import ROADS_SCHEMA, frame_from_table, table_from_columns
+from trustroute.analysis.dataset import ROADS_SCHEMA, frame_from_table, table_from_rows
 from trustroute.networks.town import NO_INCIDENT, Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
@@ -119,6 +119,11 @@ class EpisodeTracker:
         start = setup.spec.start
         self.route: list[str] = [start]
         self.belief: np.ndarray = np.asarray(self._pomdp.initial_belief, dtype=float).copy()
+        self.belief.setflags(write=False)   # shared with the policies' contexts (and the memo's beliefs)
+        # The belief's bytes (the memo keys) and the form the roads table logs, kept beside it: a
+        # memo hit then needs no numpy call (cheap while SUMO's stepping keeps the caches cold).
+        self._belief_bytes = self.belief.tobytes()
+        self._belief_logged = self._logged(self.belief)
         # Specs with trust-state atoms: the AV tracks the joint belief J(θ, q) (its DFA state is
         # the most probable under J) and the episode ends when J has no live mass; the true DFA
         # state, read on the driver's true trust, decides whether the episode satisfied the spec.
@@ -131,7 +136,11 @@ class EpisodeTracker:
             self.dfa_state: int = int(self._filter.likeliest_q(self.joint[None])[0])
             self.true_dfa_state = self._true_step(self.dfa.initial, self._compiled.start, int(initial_trust))
         else:
-            self.dfa_state = self._compiled.initial_state(self.belief)
+            key = ("initial", self._belief_bytes)
+            state = self._memo.get(key)
+            if state is None:
+                state = _memo_put(self._memo, key, self._compiled.initial_state(self.belief))
+            self.dfa_state = state
         self.end_reason: str | None = self._verdict()
         self.fallback_fired = False
         self.fallback_junction: int | None = None   # junctions driven when the fallback first drove
@@ -140,23 +149,25 @@ class EpisodeTracker:
             "episode_id": self.episode_id, "index": 0, "directed_road": start, "action": None,
             "incident": NO_INCIDENT, "takeover": None, "performance": None,
             "trust_before": int(initial_trust), "trust_after": int(initial_trust),
-            "reported_trust": None, "belief_before": self._logged(self.belief),
-            "belief_after": self._logged(self.belief), "dfa_state": self.dfa_state, "fallback": False,
+            "reported_trust": None, "belief_before": self._belief_logged,
+            "belief_after": self._belief_logged, "dfa_state": self.dfa_state, "fallback": False,
             "sim_time_in": float(sim_time), "sim_time_out": None,
         }]
 
     # -- internals -----------------------------------------------------------
-    def _logged(self, belief: np.ndarray) -> list[float]:
+    def _logged(self, belief: np.ndarray) -> tuple[float, ...]:
         """The belief as the roads table logs it: over trust (the trust marginal of a type-aware
-        belief; the belief itself otherwise)."""
-        return trust_marginal(self.setup.driver_model, belief).tolist()
+        belief; the belief itself otherwise). A tuple: rows and the memo share it."""
+        return tuple(trust_marginal(self.setup.driver_model, belief).tolist())
 
     def type_belief(self) -> np.ndarray:
         """The AV's current belief over the driver's type (one entry for a single driver model)."""
         return type_belief(self.setup.driver_model, self.belief)
 
     def _context(self) -> DecisionContext:
-        return DecisionContext(route=tuple(self.route), dfa_state=self.dfa_state, belief=self.belief.copy(),
+        # The belief is read-only (never changed in place: a road gives a new array), so the
+        # context can hold it without a copy.
+        return DecisionContext(route=tuple(self.route), dfa_state=self.dfa_state, belief=self.belief,
                                joint=None if self.joint is None else self.joint.copy())
 
     def _true_step(self, q: int, x: int, trust_level: int) -> int:
@@ -235,12 +246,12 @@ class EpisodeTracker:
         if performance not in PERFORMANCE_INDEX:
             raise ValueError(f"performance must be 'succ' or 'fail', got {performance!r}")
         incident_index = self.setup.driver_model.incident_index(incident)
-        before = self.belief
+        before, before_logged = self.belief, self._belief_logged
         h, e = int(bool(takeover)), PERFORMANCE_INDEX[performance]
-        key = ("belief", before.tobytes(), incident_index, bool(takeover), performance,
+        key = ("belief", self._belief_bytes, incident_index, bool(takeover), performance,
                self.setup.belief_rule)
-        after = self._memo.get(key)
-        if after is None:
+        entry = self._memo.get(key)
+        if entry is None:
             posterior, _ = self._pomdp.belief_update(before, incident_index, h, e,
                                                      rule=self.setup.belief_rule)
             after = posterior[0]
@@ -248,10 +259,11 @@ class EpisodeTracker:
                 # An observation the AV's model deems impossible: keep the prior rather than a zero vector.
                 after = before.copy()
             after.setflags(write=False)
-            _memo_put(self._memo, key, after)
+            entry = _memo_put(self._memo, key, (after, after.tobytes(), self._logged(after)))
+        after, self._belief_bytes, self._belief_logged = entry
         self.belief = after
         if self.joint is None:
-            key = ("dfa", self.dfa_state, road, after.tobytes())
+            key = ("dfa", self.dfa_state, road, self._belief_bytes)
             state = self._memo.get(key)
             if state is None:
                 state = _memo_put(self._memo, key, self._compiled.step_road(self.dfa_state, road, after))
@@ -266,8 +278,8 @@ class EpisodeTracker:
             "action": None, "incident": incident, "takeover": bool(takeover), "performance": performance,
             "trust_before": int(trust_before), "trust_after": int(trust_after),
             "reported_trust": None if reported_trust is None else int(reported_trust),
-            "belief_before": self._logged(before),
-            "belief_after": self._logged(after), "dfa_state": self.dfa_state, "fallback": False,
+            "belief_before": before_logged,
+            "belief_after": self._belief_logged, "dfa_state": self.dfa_state, "fallback": False,
             "sim_time_in": float(sim_time_in), "sim_time_out": float(sim_time_out),
         })
         self.end_reason = self._verdict()
@@ -293,9 +305,7 @@ class EpisodeTracker:
 
     def roads_table(self) -> pa.Table:
         """The roads table of the dataset (ROADS_SCHEMA) as Arrow, one row per position."""
-        rows = self._rows
-        return table_from_columns({name: [row[name] for row in rows] for name in ROADS_SCHEMA.names},
-                                  ROADS_SCHEMA)
+        return table_from_rows(self._rows, ROADS_SCHEMA)
 
     def roads_frame(self) -> pd.DataFrame:
         """The roads table of the dataset (ROADS_SCHEMA), one row per position."""
@@ -310,7 +320,8 @@ class EpisodeTracker:
             "junctions": self.junctions,
             "takeovers": int(sum(bool(row["takeover"]) for row in self._rows)),
             "final_trust": int(trust[-1]),
-            "mean_trust": float(np.mean(trust)),
+            # sum / n of small integers is exact before the one division: the float np.mean gives
+            "mean_trust": sum(trust) / len(trust),
             "end_reason": self.end_reason if self.end_reason is not None else "",
             "fallback_fired": self.fallback_fired,
             "sim_seconds": float(sim_seconds),

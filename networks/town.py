@@ -85,11 +85,27 @@ class Town:
         return hashlib.sha256(canonical.encode()).hexdigest()
 
     # -- states and actions -------------------------------------------------
+    # Episodes ask for indices and moves at every junction: both are tables built once per town.
+    @functools.cached_property
+    def _state_indices(self) -> dict[str, int]:
+        return {road: i for i, road in enumerate(self.states)}
+
+    @functools.cached_property
+    def _actions(self) -> dict[str, tuple[str, ...]]:
+        return {road: self._moves(road) for road in self.states}
+
     def state_index(self, directed_road: str) -> int:
-        return self.states.index(directed_road)
+        index = self._state_indices.get(directed_road)
+        if index is None:
+            raise ValueError(f"{directed_road!r} is not a directed road of the town")
+        return index
 
     def actions(self, directed_road: str) -> tuple[str, ...]:
         """Next junctions from state U-V: neighbours of V except U, unless V is a dead end."""
+        moves = self._actions.get(directed_road)
+        return moves if moves is not None else self._moves(directed_road)
+
+    def _moves(self, directed_road: str) -> tuple[str, ...]:
         came_from, at = split_road(directed_road)
         options = tuple(w for w in self.neighbours[at] if w != came_from)
         return options if options else (came_from,)

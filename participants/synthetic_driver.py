@@ -11,6 +11,8 @@ The report noise model is the driver model's (participants/driver_model.py); see
 
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 
 from trustroute.participants.driver_model import (
@@ -23,8 +25,28 @@ from trustroute.participants.driver_model import (
 
 def _draw_index(probabilities: np.ndarray, rng: np.random.Generator) -> int:
     """One draw from a discrete distribution (inverse CDF; robust to rows summing to 1 ± 1e-9)."""
-    cdf = np.cumsum(probabilities)
-    return min(int(np.searchsorted(cdf, rng.random() * cdf[-1], side="right")), cdf.size - 1)
+    return _draw_from_cdf(np.cumsum(probabilities).tolist(), rng)
+
+
+def _draw_from_cdf(cdf: list[float], rng: np.random.Generator) -> int:
+    """`_draw_index` on a cumulative row as floats: bisect_right is searchsorted(side="right") on
+    the same doubles, so the index is the same."""
+    return min(bisect.bisect_right(cdf, rng.random() * cdf[-1]), len(cdf) - 1)
+
+
+_TRANSITION_CDFS: dict[int, tuple[DriverModel, list]] = {}
+
+
+def _transition_cdfs(model: DriverModel) -> list:
+    """The cumulative rows of the model's trust transition T[inc][h][e](θ, ·) as nested lists,
+    built once per model (np.cumsum along the last axis adds in the order it does on one row)."""
+    entry = _TRANSITION_CDFS.get(id(model))
+    if entry is None or entry[0] is not model:
+        if len(_TRANSITION_CDFS) > 64:
+            _TRANSITION_CDFS.clear()
+        entry = (model, np.cumsum(np.asarray(model.trust_transition, dtype=float), axis=-1).tolist())
+        _TRANSITION_CDFS[id(model)] = entry
+    return entry[1]
 
 
 
@@ -80,9 +102,9 @@ class SyntheticDriver:
         """θ' ~ T[inc][h][e](θ, ·); returns the new trust level."""
         if performance not in PERFORMANCES:
             raise ValueError(f"performance {performance!r} is not one of {PERFORMANCES}")
-        row = self.model.trust_transition[self._incident(incident), int(bool(took_over)),
-                                          PERFORMANCES.index(performance), self._theta]
-        self._theta = _draw_index(row, self.rng)
+        cdf = _transition_cdfs(self.model)[self._incident(incident)][int(bool(took_over))][
+            PERFORMANCES.index(performance)][self._theta]
+        self._theta = _draw_from_cdf(cdf, self.rng)
         return self.trust
 
     def report_trust(self) -> int:

@@ -125,12 +125,13 @@ class Spec:
         return (tuple(sorted(self.state_atoms)) + tuple(sorted(self.belief_atoms))
                 + tuple(sorted(self.trust_atoms)) + tuple(sorted(self.type_atoms)))
 
-    @property
+    # Cached like content_hash (the spec is frozen): every episode asks, and each answer walks the formula.
+    @functools.cached_property
     def uses_trust_atoms(self) -> bool:
         """True iff the formula tests the hidden trust (then the DFA state is partly hidden)."""
         return any(atom in self.trust_atoms for atom in self.formula_atoms)
 
-    @property
+    @functools.cached_property
     def formula_atoms(self) -> tuple[str, ...]:
         """Atoms the formula uses, in order of first occurrence."""
         return atoms_in_order(self.formula)

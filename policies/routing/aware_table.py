@@ -220,14 +220,23 @@ class BeliefTablePolicy(RoutingPolicy):
             return None
         return float(self.lower), float(self.upper)
 
+    def _exact_slot(self, t: int, x: int, q: int, p: int, belief: np.ndarray) -> int:
+        """`exact_action_slots` of one context (an episode's decision): one dict access and one
+        nearest-row search, without the grouping of a batch (the same rows, so the same slot)."""
+        slot = int(self._free_slot[x, p])
+        if not self.table.rows:
+            return slot
+        found = self._exact.nearest_with_distance(self._key_tqp(t, x, q, p), self._policy_beliefs(belief))
+        if found is not None and found[1][0] <= EXACT_BELIEF_DISTANCE:
+            slot = int(self.table.action[found[0][0]])
+        return slot
+
     def next_junction(self, context: DecisionContext) -> str:
         road = context.road
         x = self.town.state_index(road)
         if self.table.exact:
             p = self.task.projected_state(context.route)
-            slot = int(self.exact_action_slots(np.array([context.junctions_driven]), np.array([x]),
-                                               np.array([context.dfa_state]), np.array([p]),
-                                               context.belief)[0])
+            slot = self._exact_slot(context.junctions_driven, x, int(context.dfa_state), p, context.belief)
             return self.town.actions(road)[slot]
         slot = int(self.action_slots(np.array([context.junctions_driven]), np.array([x]),
                                      np.array([context.dfa_state]), context.belief)[0])

@@ -52,6 +52,8 @@ class StateOnlyTask:
     road_index: dict[str, int]
 
     route_cache: OrderedDict = field(default_factory=OrderedDict, repr=False)
+    # next_junction per (road, q): episodes ask it at every junction (at most roads × states entries)
+    junction_cache: dict = field(default_factory=dict, repr=False)
 
     def projected_state(self, route: Sequence[str]) -> int:
         """Projected DFA state after reading every road of `route` (route[0] = position 0)."""
@@ -70,8 +72,13 @@ class StateOnlyTask:
 
     def next_junction(self, road: str, q: int) -> str | None:
         """First junction of the shortest completion from (road, q); None if complete or impossible."""
+        key = (road, q)
+        if key in self.junction_cache:
+            return self.junction_cache[key]
         slot = int(self.next_slot[self.road_index[road], q])
-        return None if slot < 0 else self.town.actions(road)[slot]
+        junction = None if slot < 0 else self.town.actions(road)[slot]
+        self.junction_cache[key] = junction
+        return junction
 
     def completion(self, road: str, q: int) -> list[str] | None:
         """Shortest completion from product state (road, q): roads from `road` (included) on."""

@@ -69,3 +69,42 @@ def test_manifest_without_a_key_is_refused(tmp_path, model_study):
     (tmp_path / dataset.MANIFEST_FILE).write_text(json.dumps(manifest))
     with pytest.raises(InputError, match="seeds: missing manifest key"):
         dataset.read_manifest(tmp_path)
+
+
+def test_rows_and_columns_give_the_same_table():
+    """table_from_rows (one struct conversion) and table_from_columns agree, NaN and None are nulls
+    in both, and a null in a non-null field is a SchemaError in both."""
+    schema = dataset.INCIDENTS_SCHEMA
+    nan = float("nan")
+    base = {name: None for name in schema.names}
+    base.update(episode_id="e1", index=1, directed_road="A-B", incident="truck", takeover=False,
+                performance="succ", min_ttc=float("inf"), max_deceleration=2.5, collided=False,
+                min_head_on_ttc=1.75, min_pedestrian_distance=float("inf"), time_lost=0.5,
+                injected_time=3.0, x=nan, y=nan)
+    rows = [base, {**base, "index": 2, "takeover": True, "takeover_start": 7.5, "in_view_time": nan}]
+    by_rows = dataset.table_from_rows(rows, schema)
+    by_columns = dataset.table_from_columns({name: [row[name] for row in rows] for name in schema.names},
+                                            schema)
+    assert by_rows.schema.equals(schema) and by_rows.equals(by_columns)
+    assert by_rows.column("x").null_count == 2 and by_rows.column("takeover_start").to_pylist() == [None, 7.5]
+    for build in (dataset.table_from_rows, lambda r, s: dataset.table_from_columns(
+            {name: [row[name] for row in r] for name in s.names}, s)):
+        with pytest.raises(dataset.SchemaError, match="time_lost"):
+            build([{**base, "time_lost": nan}], schema)
+        with pytest.raises(dataset.SchemaError, match="episode_id"):
+            build([{**base, "episode_id": None}], schema)
+
+
+def test_check_table_fast_path_still_finds_nulls_and_casts():
+    """A table of the schema itself is returned as it is unless a non-null field has nulls; one whose
+    nullability differs is cast (the slow path), as before."""
+    schema = dataset.KINEMATICS_SCHEMA
+    columns = {"episode_id": ["e"], "time": [0.5], "x": [1.0], "y": [2.0], "speed": [3.0], "lane": ["A-B_1"],
+               "mode": ["auto"]}
+    table = dataset.table_from_columns(columns, schema)
+    assert dataset.check_table(table, schema) is table
+    loose = pa.table({name: pa.array(values) for name, values in columns.items()})
+    assert dataset.check_table(loose, schema).schema.equals(schema)
+    holed = pa.Table.from_arrays([pa.array([None], pa.string()), *table.columns[1:]], schema=schema)
+    with pytest.raises(dataset.SchemaError, match="episode_id"):
+        dataset.check_table(holed, schema)

@@ -105,3 +105,17 @@ def test_shortest_route_start_is_target_and_unreachable(town):
     assert town.shortest_route("E-A", {"E-A"}) == ["E-A"]
     assert town.shortest_route("E-A", set()) is None
     assert town.reachable_states("E-A") == set(town.states)
+
+
+def test_cached_moves_and_indices_match_their_definition(town):
+    """Town.actions and Town.state_index (tables built once per town) agree with the definition:
+    neighbours of V except U (U itself at a dead end), and the position in the sorted states."""
+    from trustroute.networks.town import split_road
+
+    for i, road in enumerate(town.states):
+        came_from, at = split_road(road)
+        expected = tuple(w for w in town.neighbours[at] if w != came_from) or (came_from,)
+        assert town.actions(road) == expected
+        assert town.state_index(road) == i
+    with pytest.raises(ValueError, match="Z-Y"):
+        town.state_index("Z-Y")

@@ -163,3 +163,20 @@ def test_bad_arguments(driver):
         person.decides_takeover("cow")
     with pytest.raises(ValueError, match="performance"):
         person.move_trust("truck", False, "great")
+
+
+def test_trust_moves_draw_as_the_inverse_cdf_of_the_row():
+    """move_trust (cumulative rows cached per model, bisect) draws the very index the direct
+    inverse CDF of the transition row gives with the same generator state."""
+    model = random_model(np.random.default_rng(11), 7, performance_dependent=True, sparse=False)
+    driver = SyntheticDriver(model, np.random.default_rng(5), initial_trust=model.trust_levels[2])
+    mirror = np.random.default_rng(5)
+    theta = 2
+    for step in range(400):
+        incident = model.incident_types[step % len(model.incident_types)]
+        took_over, performance = bool(step % 3 == 0), ("succ", "fail")[step % 2]
+        e = ("succ", "fail").index(performance)
+        row = model.trust_transition[model.incident_index(incident), int(took_over), e, theta]
+        cdf = np.cumsum(row)
+        theta = min(int(np.searchsorted(cdf, mirror.random() * cdf[-1], side="right")), cdf.size - 1)
+        assert driver.move_trust(incident, took_over, performance) == model.trust_levels[theta]
