@@ -85,6 +85,13 @@ COMPLETION_TAIL = 0.05       # open nodes left unbounded (L = 0) carry at most t
 # Most macro moves per context for which the event graph is used: node arrays hold one slot per
 # move, so a town whose quiet roads connect many event roads is searched junction by junction.
 MAX_MACRO_WIDTH = 16
+# How open nodes are valued: "exact" trees along the free moves (L is the returned policy's exact
+# value; the trees grow exponentially with the incident roads left on long routes), "bounds"
+# (cluster bounds on the completion, completion_value.py; L a lower bound of the policy's value),
+# "auto": exact where the trust-free route's own observation tree within the horizon has at most
+# AUTO_TREE_LEAVES leaves (completion_tree_leaves), bounds otherwise.
+COMPLETION_MODES = ("auto", "exact", "bounds")
+AUTO_TREE_LEAVES = NODE_BUDGET // 4
 COMPRESS_MODES = ("off", "chains", "full")
 
 # FRONTIER: open, L = 0 (the policy drives the trust-free completion there, worth >= 0).
@@ -270,7 +277,8 @@ class _Level:
 class _Search:
     def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int | None, suffix_length: int,
                  started: float, deadline: float, unbounded_value: np.ndarray | None = None,
-                 abstraction: Abstraction | None = None, compress: str = "chains") -> None:
+                 abstraction: Abstraction | None = None, compress: str = "chains",
+                 completion: str = "auto") -> None:
         self.tables, self.rule, self.horizon = tables, rule, horizon
         self.started = started
         pomdp = tables.pomdp
@@ -327,7 +335,11 @@ class _Search:
         # (completion_value.py) instead of trees along the free moves (FREE nodes, kept for the
         # authors' rule, whose observation mass is not linear in a hidden-state vector).
         # (not with the event graph's full mode: its junction rows along macro paths are not held)
-        self.completion = rule == "bayes" and (self.events is None or self.events.chains_only)
+        self.bounds_allowed = rule == "bayes" and (self.events is None or self.events.chains_only)
+        # "auto": exact trees (L is then the policy's exact value) where they fit the node budget
+        self.tree_leaves = completion_tree_leaves(tables, self.symbols, self.task, self.depth_cap)
+        self.completion = self.bounds_allowed and (
+            completion == "bounds" or (completion == "auto" and self.tree_leaves > AUTO_TREE_LEAVES))
         self.route = FreeRoute.build(tables, self.free_slot, self.next_p)
         self.touched = np.zeros((self.depth_cap + 2, tables.n_x, self.next_p.shape[0]), dtype=bool)
         self.completion_seconds = 0.0
@@ -834,6 +846,19 @@ class _Search:
         return PolicyTable(t=out_t, x=out_x, q=out_q, beliefs=beliefs, action=out_a, projected=out_p)
 
 
+def completion_tree_leaves(tables: ProductTables, symbols, task, depth_cap: int) -> float:
+    """Leaves of the trust-free route's observation tree within `depth_cap` junctions: the product
+    of the observation symbols of the incidents on its roads after the start (identity symbols
+    count once). Exact completion trees from the search's open nodes are of this order."""
+    route = task.completion(tables.spec.start, task.initial_state) or [tables.spec.start]
+    town, pomdp = tables.pomdp.town, tables.pomdp
+    leaves = 1.0
+    for road in route[1: depth_cap + 1]:
+        members = symbols.by_incident[int(pomdp.road_incident[town.state_index(road)])]
+        leaves *= max(1, sum(1 for o in members if not symbols.identity[o]))
+    return leaves
+
+
 def held_choice(lower_q: np.ndarray, strict_q: np.ndarray, upper_q: np.ndarray, free: np.ndarray,
                 held: np.ndarray, free_lower: np.ndarray, free_upper: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -890,14 +915,14 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
                     suffix_length: int, batch: int, started: float, deadline: float,
                     unbounded_value: np.ndarray | None = None, abstraction: Abstraction | None = None,
                     on_iteration: Callable[[float, float], None] | None = None, compress: str = "chains",
-                    ) -> tuple[float, float, PolicyTable, dict]:
+                    completion: str = "auto") -> tuple[float, float, PolicyTable, dict]:
     """One AO*-style search; returns (lower, upper, table, stats).
 
     horizon H: P(accepted within H junctions). None: the unbounded problem, nodes deeper than
     UNBOUNDED_DEPTH left open with the unbounded abstraction's bound `unbounded_value`.
     """
     search = _Search(tables, belief_rule, horizon, suffix_length, started, deadline, unbounded_value,
-                     abstraction, compress)
+                     abstraction, compress, completion)
     g = search.graph
     roots = search.roots()
 
@@ -987,6 +1012,10 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         # root the vehicle is in: a lower bound of what `evaluate` measures
         "lower_strict_labels": float(g.strict[roots[0]]),
         "completion_closed": closed,
+        # open nodes valued by cluster bounds (then L is a lower bound of the policy's value) or
+        # by exact trees (then, closed, L is its exact value)
+        "completion_bounds": bool(search.completion),
+        "free_tree_leaves": search.tree_leaves,
         "completion_seconds": search.completion_seconds,
         "completion_clusters": search.completion_clusters,
         # the event graph's macro moves (None: not asked for), their widest context, and contexts
@@ -1035,7 +1064,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                suffix_length: int | None = None,
                batch: int = DEFAULT_BATCH,
                on_iteration: Callable[[float, float], None] | None = None,
-               compress: str = "chains") -> SynthesisResult:
+               compress: str = "chains", completion: str = "auto") -> SynthesisResult:
     """Maximal probability of satisfying `spec` from (spec.start, initial belief), with a policy.
 
     horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter and the
@@ -1050,7 +1079,9 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     round with the current search's root bounds (progress bars). compress: "chains" passes through
     quiet roads without a choice, "full" searches the event graph's macro moves
     (policies/synthesis/event_graph.py), "off" goes junction by junction; the same bounds at
-    convergence (docs/synthesis.md, "The event graph").
+    convergence (docs/synthesis.md, "The event graph"). completion: how open nodes are valued
+    (COMPLETION_MODES; "auto": exact trees, so that lower is the policy's exact value, until the
+    search graph is large, then cluster bounds; docs/synthesis.md, "Open nodes and the acting rule").
     """
     if tau <= 0:
         raise ValueError("tau must be positive")
@@ -1058,6 +1089,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         raise ValueError("horizon must be >= 0")
     if belief_rule not in ("bayes", "paper"):
         raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
+    if completion not in COMPLETION_MODES:
+        raise ValueError(f"unknown completion {completion!r}; use one of {', '.join(COMPLETION_MODES)}")
     started = time.perf_counter()
     # The last few per cent are kept for the work after the deadline check (final backup, the
     # policy table, the stats), so that the whole call ends within the limit.
@@ -1084,13 +1117,14 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 f"graph distance: acceptance needs at least {shortest} junctions")
         runs = [{"horizon": horizon, "lower": 0.0, "upper": 0.0, "nodes": 0, "abstraction_root_upper": 0.0,
                  "abstraction_bound": note, "threshold_alternates": 0, "lower_strict_labels": 0.0,
-                 "root_dfa_states": sorted(q0), "completion_closed": True}]
+                 "root_dfa_states": sorted(q0), "completion_closed": True,
+                 "completion_bounds": False}]
         if horizon is None:
             note = "graph distance: acceptance is unreachable"
     elif horizon is not None:
         lower, upper, table, stats = _bounded_search(tables, belief_rule, horizon, tau, suffix_length,
                                                      batch, started, deadline, on_iteration=on_iteration,
-                                                     compress=compress)
+                                                     compress=compress, completion=completion)
         runs = [stats]
     else:
         symbols = observation_symbols(pomdp, belief_rule)
@@ -1117,7 +1151,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             run_lower, _, run_table, stats = _bounded_search(
                 tables, belief_rule, depth, 0.5 * tau, k_run, batch, started, deadline,
                 value if shared else None, abstraction if shared else None, on_iteration=on_iteration,
-                compress=compress)
+                compress=compress, completion=completion)
             runs.append(stats)
             if run_lower > lower:
                 lower, table = run_lower, run_table
@@ -1126,7 +1160,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 run_lower, run_upper, run_table, stats = _bounded_search(
                     tables, belief_rule, None, tau, k, batch, started,
                     time.perf_counter() + 0.25 * remaining, value, abstraction, on_iteration=on_iteration,
-                    compress=compress)
+                    compress=compress, completion=completion)
                 stats["end_component_seconds"] = bound.seconds
                 runs.append(stats)
                 upper = min(upper, run_upper)

@@ -120,7 +120,7 @@ def test_policy_is_worth_l_with_coarse_completion_bounds(pomdp, name, monkeypatc
     monkeypatch.setattr(completion_value, "CLUSTER_CAP", 3)
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     horizon = 9
-    result = synthesize(pomdp, spec, tau=0.05, horizon=horizon)
+    result = synthesize(pomdp, spec, tau=0.05, horizon=horizon, completion="bounds")
     value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
     assert value.gap == 0.0
     assert result.lower > 0.1

@@ -44,23 +44,30 @@ def test_phi1_at_horizon_six_is_the_trust_free_route(pomdp):
     assert baseline_route(pomdp.town, spec) == ["E-A", "A-F", "F-G", "G-I", "I-J", "J-K", "K-L"]
 
 
+@pytest.mark.parametrize("completion", ["auto", "bounds"])
 @pytest.mark.parametrize("name", ["phi1", "phi2", "phi1_strict", "phi2_strict"])
-def test_lower_is_a_lower_bound_of_the_returned_policy(pomdp, name):
+def test_lower_is_the_value_of_the_returned_policy(pomdp, name, completion):
     """policies.evaluate (independent tree unfolding through the RoutingPolicy interface) gives the
-    returned policy at least `lower` and at most `upper` within H junctions (open nodes are valued by
-    a lower bound of the trust-free completion the policy drives there); here L also beats the
-    trust-free route's value; also for a coarse run that stops with many open nodes."""
+    returned policy exactly `lower` within H junctions when open nodes are valued by exact trees
+    along the trust-free completion the policy drives there (the default on a town this size), and
+    at least `lower` (at most `upper`) with the cluster bounds; L is at least the trust-free
+    route's value; also for a coarse run that stops with many open nodes."""
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     horizon = 12
     free = evaluate(pomdp, spec, trust_free_policy(pomdp.town, spec), fallback_after=None,
                     max_junctions=horizon)
     for tau in (1e-3, 0.05):
-        result = synthesize(pomdp, spec, tau=tau, horizon=horizon)
+        result = synthesize(pomdp, spec, tau=tau, horizon=horizon, completion=completion)
         value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+        run = result.stats["runs"][0]
         assert value.gap == 0.0
         assert result.gap <= tau
-        assert result.stats["runs"][0]["completion_closed"]
-        assert result.lower - EXACT_TOLERANCE <= value.lower <= result.upper + EXACT_TOLERANCE
+        assert run["completion_closed"]
+        assert run["completion_bounds"] == (completion == "bounds")
+        if completion == "auto":
+            assert value.lower == pytest.approx(result.lower, abs=EXACT_TOLERANCE)
+        else:
+            assert result.lower - EXACT_TOLERANCE <= value.lower <= result.upper + EXACT_TOLERANCE
         assert result.lower >= free.lower - EXACT_TOLERANCE
 
 

@@ -92,11 +92,10 @@ def test_bounds_bracket_brute_force_on_random_problems(driver, seed, horizon, be
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_returned_policy_is_worth_at_least_lower_on_random_problems(driver, seed):
+def test_returned_policy_is_worth_exactly_lower_on_random_problems(driver, seed):
     """Early stops (tau 0.2) leave open nodes; the policy drives the trust-free completion there,
-    which the search valued by a lower bound: `evaluate` of the policy is at least L and at least
-    its strict-label value, and at most U; once converged L is within tau of the trust-free route's
-    value or above it."""
+    which the search valued exactly (exact trees, the default on small towns): `evaluate` of the
+    policy equals L and is >= the trust-free route's value."""
     rng = np.random.default_rng(1000 + seed)
     town = random_town(rng)
     pomdp = build_pomdp(town, random_driver(rng, driver.incident_types))
@@ -105,6 +104,30 @@ def test_returned_policy_is_worth_at_least_lower_on_random_problems(driver, seed
     free = evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None, max_junctions=horizon)
     for tau in (0.2, 1e-6):
         result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20)
+        value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+        run = result.stats["runs"][0]
+        assert not run["completion_bounds"]
+        strict = run["lower_strict_labels"]
+        assert value.lower == pytest.approx(strict, abs=TOLERANCE), (value.lower, strict, result.lower)
+        if run["threshold_alternates"] == 0 and len(run["root_dfa_states"]) == 1:
+            # no label within the rounding margin: L is the strict value, at least the free route's
+            assert value.lower == pytest.approx(result.lower, abs=TOLERANCE)
+            assert result.lower >= free.lower - TOLERANCE
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_returned_policy_is_worth_at_least_lower_with_completion_bounds(driver, seed):
+    """The same problems with open nodes valued by the cluster bounds on the completion
+    (completion="bounds"): `evaluate` of the policy is at least L and at least its strict-label
+    value, and at most U; once converged L is within tau of the trust-free route's value or above."""
+    rng = np.random.default_rng(1000 + seed)
+    town = random_town(rng)
+    pomdp = build_pomdp(town, random_driver(rng, driver.incident_types))
+    spec = random_spec(rng, town, pomdp.initial_belief)
+    horizon = int(rng.integers(4, 8))
+    free = evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None, max_junctions=horizon)
+    for tau in (0.2, 1e-6):
+        result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20, completion="bounds")
         value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
         strict = result.stats["runs"][0]["lower_strict_labels"]
         assert value.lower >= strict - TOLERANCE, (value.lower, strict, result.lower)
