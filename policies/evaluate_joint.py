@@ -45,13 +45,16 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                    belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
                    max_nodes: int = DEFAULT_MAX_NODES, force_joint: bool = False,
                    truth: TrustPOMDP | None = None,
-                   reference: tuple[TrustPOMDP, Spec] | None = None) -> Evaluation:
+                   reference: tuple[TrustPOMDP, Spec] | None = None,
+                   merge: bool = True) -> Evaluation:
     """Certified P(spec satisfied) of `policy`, for any mix of road, belief and trust-state atoms.
 
     Arguments as policies.evaluate.evaluate. `force_joint` runs the joint unfolding even when the
     spec has no trust-state atoms (tests compare it with evaluate there). A true driver other than
     the AV's model (`truth`) or a second reading (`reference`) is evaluated for specs without
-    trust-state atoms only."""
+    trust-state atoms only. `merge` (default) merges, level by level, the histories that reach the
+    same road and beliefs on routes the policy reads alike (`RoutingPolicy.route_memory`): the same
+    value as the tree unfolding (`merge=False`, which tests compare), on far fewer nodes."""
     if not spec.uses_trust_atoms and not force_joint:
         return evaluate(pomdp, spec, policy, fallback_after, max_junctions, belief_rule, prune_below,
                         max_nodes, truth=truth, reference=reference)
@@ -78,6 +81,7 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     posterior = belief_av.copy()
     joint = filter_.initial(start, belief_av[0])
     probability = np.ones(1)
+    memory_ids: dict = {}
 
     mass = {"accepted": 0.0, "rejected": 0.0, "destination": 0.0, "cap": 0.0, "pruned": 0.0,
             "settled": 0.0}
@@ -159,6 +163,16 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                           probability[keep][possible] * p_obs[possible]))
         route_id, road, belief_av, posterior, joint, probability = (
             np.concatenate([part[j] for part in parts]) for j in range(6))
+        if merge:
+            # Histories at the same (road, J, posterior, AV belief) whose routes the policy reads
+            # alike (route_memory) are driven alike from here on: one node, their masses summed.
+            memory_id = np.array([memory_ids.setdefault(policy.route_memory(routes[r]), len(memory_ids))
+                                  for r in route_id.tolist()], dtype=float)
+            first, inverse = distinct_nodes(road, joint, posterior,
+                                            np.concatenate([belief_av, memory_id[:, None]], axis=1))
+            probability = np.bincount(inverse, weights=probability)
+            route_id, road, belief_av, posterior, joint = (
+                a[first] for a in (route_id, road, belief_av, posterior, joint))
         if probability.size > max_nodes:
             order = np.argsort(probability)
             dropped = np.zeros(probability.size, dtype=bool)

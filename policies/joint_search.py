@@ -26,10 +26,11 @@ value gets the same allowance.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.policies.bracket import Bracket
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.labelling import Labeller
@@ -43,7 +44,7 @@ MAX_RELAXATION_ITERATIONS = 100_000
 
 
 @dataclass(frozen=True)
-class JointBounds:
+class JointBounds(Bracket):
     lower: float
     upper: float
     depth: int
@@ -52,15 +53,6 @@ class JointBounds:
     cut_nodes: int
     seconds: float
     belief_rule: str
-
-    @property
-    def gap(self) -> float:
-        return self.upper - self.lower
-
-    def to_dict(self) -> dict:
-        out = asdict(self)
-        out["gap"] = self.gap
-        return out
 
 
 def _relaxed_next_q(pomdp: TrustPOMDP, spec: Spec, dfa: DFA, labeller: Labeller) -> np.ndarray:

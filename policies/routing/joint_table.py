@@ -132,6 +132,10 @@ class JointTablePolicy(RoutingPolicy):
             slots[rest] = self.guide.policy_slots(t, x[rest], joint[rest])
         return slots
 
+    def route_memory(self, route: tuple[str, ...]) -> tuple:
+        """Nothing: the decision is a function of (junctions driven, road, J, AV belief)."""
+        return ()
+
     def certified_bounds(self) -> tuple[float, float] | None:
         if self.lower is None or self.upper is None:
             return None

@@ -50,6 +50,7 @@ from trustroute.policies.model.product_mdp import ProductTables, build_product
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
 from trustroute.policies.routing.free import state_only_task
+from trustroute.policies.synthesis.arguments import check_synthesis_arguments
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols, suffix_cells
 from trustroute.policies.synthesis.end_components import unbounded_bound
 from trustroute.policies.synthesis.upper_bound import (
@@ -815,12 +816,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     unbounded problem when a gap remains. on_iteration(lower, upper): called after every expansion
     round with the current search's root bounds (progress bars).
     """
-    if tau <= 0:
-        raise ValueError("tau must be positive")
-    if horizon is not None and horizon < 0:
-        raise ValueError("horizon must be >= 0")
-    if belief_rule not in ("bayes", "paper"):
-        raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
+    check_synthesis_arguments(tau, horizon, belief_rule)
     started = time.perf_counter()
     # The last few per cent are kept for the work after the deadline check (final backup, the
     # policy table, the stats), so that the whole call ends within the limit.
