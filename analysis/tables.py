@@ -699,6 +699,20 @@ def paired_display(p: pd.DataFrame) -> pd.DataFrame:
     return shown
 
 
+def _outcome_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
+    """Satisfied count, rate and exact interval, as every per-cell display table shows them."""
+    return {"satisfied": cells["satisfied"], "rate": cells["satisfaction_rate"].map(_num),
+            "exact 95% CI": _intervals(cells, "ci_low", "ci_high")}
+
+
+def _trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
+    """Reported and true trust and takeovers, as every per-cell display table shows them."""
+    return {"mean trust (reported)": cells["mean_trust"].map(_num),
+            "trust 95% CI": _intervals(cells, "trust_ci_low", "trust_ci_high", 2),
+            "mean true trust": cells["mean_true_trust"].map(_num),
+            "takeovers / episode": cells["takeovers_per_episode"].map(lambda v: _num(v, 2))}
+
+
 def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
     """The tables as shown (formatted strings, p-values in scientific notation), by name."""
     other = [s for s in BELIEF_SOURCES if s != analysis.belief_source][0]
@@ -710,17 +724,12 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                 "spec": c["spec"],
                 "condition": c["condition"],
                 "n": c["n"],
-                "satisfied": c["satisfied"],
-                "rate": c["satisfaction_rate"].map(_num),
-                "exact 95% CI": _intervals(c, "ci_low", "ci_high"),
+                **_outcome_columns(c),
                 "Wilson 95% CI": _intervals(c, "wilson_low", "wilson_high"),
                 f"rate ({other})": c[f"satisfaction_rate_{other}"].map(_num),
                 "exact value [L, U]": _intervals(c, "exact_lower", "exact_upper"),
                 "synthesized [L, U]": _intervals(c, "synthesized_lower", "synthesized_upper"),
-                "mean trust (reported)": c["mean_trust"].map(_num),
-                "trust 95% CI": _intervals(c, "trust_ci_low", "trust_ci_high", 2),
-                "mean true trust": c["mean_true_trust"].map(_num),
-                "takeovers / episode": c["takeovers_per_episode"].map(lambda v: _num(v, 2)),
+                **_trust_columns(c),
                 "junctions": c["mean_junctions"].map(lambda v: _num(v, 1)),
                 "fallback": c["fallback_rate"].map(lambda v: _num(v, 2)),
             }
@@ -785,13 +794,8 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
                 "spec": c["spec"],
                 "condition": c["condition"],
                 "n": c["n"],
-                "satisfied": c["satisfied"],
-                "rate": c["satisfaction_rate"].map(_num),
-                "exact 95% CI": _intervals(c, "ci_low", "ci_high"),
-                "mean trust (reported)": c["mean_trust"].map(_num),
-                "trust 95% CI": _intervals(c, "trust_ci_low", "trust_ci_high", 2),
-                "mean true trust": c["mean_true_trust"].map(_num),
-                "takeovers / episode": c["takeovers_per_episode"].map(lambda v: _num(v, 2)),
+                **_outcome_columns(c),
+                **_trust_columns(c),
             }
         )
     if len(analysis.per_type_paired):

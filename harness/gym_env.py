@@ -34,7 +34,7 @@ from trustroute.participants.driver_model import DriverModel, load_driver_model
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.spec import Spec, load_spec
-from trustroute.policies.routing.protocol import DecisionContext
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 ENV_ID = "trustroute/TrustRouting-v0"
 ENGINES: tuple[str, ...] = ("model", "sumo")
@@ -48,7 +48,7 @@ class EpisodeAborted(Exception):
 _ABORT = object()
 
 
-class AgentPolicy:
+class AgentPolicy(RoutingPolicy):
     """A RoutingPolicy whose decisions come from the agent, through two queues.
 
     next_junction hands the context to the environment and blocks until `step` answers with a
@@ -68,15 +68,6 @@ class AgentPolicy:
         if answer is _ABORT:
             raise EpisodeAborted
         return answer
-
-    def finished(self, context: DecisionContext) -> bool:
-        return False
-
-    def route_determined(self, context: DecisionContext) -> bool:
-        return False
-
-    def fallback_active(self, context: DecisionContext) -> bool:
-        return False
 
 
 def _episode_thread(run: Callable, policy: AgentPolicy, to_agent: queue.Queue) -> None:

@@ -316,43 +316,53 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
                 trust_atoms=trust_atoms, type_atoms=type_atoms)
 
 
+def _atom_entries(raw: object, table: str, noun: str, keys: tuple[str, ...], required: tuple[str, ...],
+                  example: str, text: str, source: str, taken: set[str], check_atom_name):
+    """The checks every atom table shares (`[type_beliefs]`, `[trust_states]`): a table of atom ->
+    inline table, names unique across kinds, only `keys`, every key of `required` present. Yields
+    (atom, entry, fail) in name order; `fail(problem, fix)` places an error at the atom's line."""
+    if not isinstance(raw, dict):
+        raise InputError(source, _place(text, table, rf"^\s*{table}\s*="),
+                         f"'{table}' must be a table of atom -> {{ {', '.join(keys)} }}", example)
+    for atom in sorted(raw):
+        entry = raw[atom]
+        check_atom_name(atom, table)
+        place = _place(text, f"{table}.{atom}", rf"^\s*\[{table}", rf"^\s*{re.escape(atom)}\s*=")
+
+        def fail(problem: str, fix: str, place: str = place) -> InputError:
+            return InputError(source, place, problem, fix)
+
+        if atom in taken:
+            raise fail(f"atom '{atom}' is defined twice (also under another atom table)",
+                       "rename one of them")
+        if not isinstance(entry, dict):
+            raise fail(f"{noun} atom '{atom}' must be a table", example)
+        for key in entry:
+            if key not in keys:
+                raise fail(f"unknown key '{key}' in {noun} atom '{atom}'",
+                           f"use only {' and '.join(keys)}")
+        for key in required:
+            if key not in entry:
+                raise fail(f"{noun} atom '{atom}' is missing '{key}'", example)
+        yield atom, entry, fail
+
+
 def _type_belief_atoms(raw: object, text: str, source: str, taken: set[str],
                        check_atom_name) -> dict[str, TypeBeliefAtom]:
     """The `[type_beliefs]` table: NAME = { types = ["flat", ...], above = 0.7 }."""
-
-    def fail(label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
-        return InputError(source, _place(text, label, *needles), problem, fix)
-
     example = 'write [type_beliefs] then nontruster = { types = ["flat"], above = 0.7 }'
-    if not isinstance(raw, dict):
-        raise fail("type_beliefs", (r"^\s*type_beliefs\s*=",),
-                   "'type_beliefs' must be a table of atom -> { types, above }", example)
     atoms: dict[str, TypeBeliefAtom] = {}
-    for atom in sorted(raw):
-        entry = raw[atom]
-        check_atom_name(atom, "type_beliefs")
-        label = f"type_beliefs.{atom}"
-        needles = (r"^\s*\[type_beliefs", rf"^\s*{re.escape(atom)}\s*=")
-        if atom in taken:
-            raise fail(label, needles, f"atom '{atom}' is defined twice (also under [states], "
-                       "[beliefs] or [trust_states])", "rename one of them")
-        if not isinstance(entry, dict):
-            raise fail(label, needles, f"type-belief atom '{atom}' must be a table", example)
-        for key in entry:
-            if key not in ("types", "above"):
-                raise fail(label, needles, f"unknown key '{key}' in type-belief atom '{atom}'",
-                           "use only types and above")
-        for key in ("types", "above"):
-            if key not in entry:
-                raise fail(label, needles, f"type-belief atom '{atom}' is missing '{key}'", example)
+    for atom, entry, fail in _atom_entries(raw, "type_beliefs", "type-belief", ("types", "above"),
+                                           ("types", "above"), example, text, source, taken,
+                                           check_atom_name):
         types = entry["types"]
         if not (isinstance(types, list) and types and all(isinstance(t, str) and t for t in types)
                 and len(set(types)) == len(types)):
-            raise fail(label, needles, f"type-belief atom '{atom}': types must be a non-empty list of "
-                       "distinct type names", 'write types = ["flat"]')
+            raise fail(f"type-belief atom '{atom}': types must be a non-empty list of distinct type names",
+                       'write types = ["flat"]')
         above = entry["above"]
         if not (_number(above) and 0 <= above < 1):
-            raise fail(label, needles, f"type-belief atom '{atom}': above must be a number in [0, 1)",
+            raise fail(f"type-belief atom '{atom}': above must be a number in [0, 1)",
                        "write above = 0.7 (the atom is true iff P(type in types) > above)")
         atoms[atom] = TypeBeliefAtom(types=tuple(types), above=float(above))
     return atoms
@@ -361,49 +371,26 @@ def _type_belief_atoms(raw: object, text: str, source: str, taken: set[str],
 def _trust_state_atoms(raw: object, text: str, source: str, town: Town | None, taken: set[str],
                        check_atom_name) -> dict[str, TrustStateAtom]:
     """The `[trust_states]` table: NAME = { roads = [...] (optional), trust = [levels] }."""
-
-    def fail(label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
-        return InputError(source, _place(text, label, *needles), problem, fix)
-
     example = "write [trust_states] then trusting = { roads = [\"K-L\"], trust = [6, 7] }"
-    if not isinstance(raw, dict):
-        raise fail("trust_states", (r"^\s*trust_states\s*=",),
-                   "'trust_states' must be a table of atom -> { roads, trust }", example)
     atoms: dict[str, TrustStateAtom] = {}
-    for atom in sorted(raw):
-        entry = raw[atom]
-        check_atom_name(atom, "trust_states")
-        label = f"trust_states.{atom}"
-        needles = (r"^\s*\[trust_states", rf"^\s*{re.escape(atom)}\s*=")
-        if atom in taken:
-            raise fail(label, needles, f"atom '{atom}' is defined twice (also under [states] or "
-                       "[beliefs])", "rename one of them")
-        if not isinstance(entry, dict):
-            raise fail(label, needles, f"trust-state atom '{atom}' must be a table", example)
-        for key in entry:
-            if key not in ("roads", "trust"):
-                raise fail(label, needles, f"unknown key '{key}' in trust-state atom '{atom}'",
-                           "use only roads (optional) and trust")
-        if "trust" not in entry:
-            raise fail(label, needles, f"trust-state atom '{atom}' is missing 'trust'",
-                       f"add trust = [levels 1..{N_TRUST_LEVELS}], e.g. trust = [6, 7]")
+    for atom, entry, fail in _atom_entries(raw, "trust_states", "trust-state", ("roads", "trust"),
+                                           ("trust",), example, text, source, taken, check_atom_name):
         levels = entry["trust"]
         if not (isinstance(levels, list) and levels
                 and all(isinstance(v, int) and not isinstance(v, bool) for v in levels)
                 and all(1 <= v <= N_TRUST_LEVELS for v in levels)):
-            raise fail(label, needles, f"trust-state atom '{atom}': trust must be a non-empty list of "
+            raise fail(f"trust-state atom '{atom}': trust must be a non-empty list of "
                        f"trust levels (integers 1..{N_TRUST_LEVELS})", "write trust = [6, 7]")
         roads = entry.get("roads")
         if roads is not None:
             if not (isinstance(roads, list) and all(isinstance(r, str) for r in roads)):
-                raise fail(label, needles, f"trust-state atom '{atom}': roads must be a list of "
-                           "directed roads", 'write roads = ["U-V", ...] or leave it out for any road')
+                raise fail(f"trust-state atom '{atom}': roads must be a list of directed roads",
+                           'write roads = ["U-V", ...] or leave it out for any road')
             for road in roads:
                 if "-" not in road:
-                    raise fail(label, needles, f"'{road}' is not a directed road \"U-V\"",
-                               "write roads as \"U-V\"")
+                    raise fail(f"'{road}' is not a directed road \"U-V\"", "write roads as \"U-V\"")
                 if town is not None and road not in town.states:
-                    raise fail(label, needles, f"trust-state atom '{atom}': '{road}' is not a directed "
+                    raise fail(f"trust-state atom '{atom}': '{road}' is not a directed "
                                f"road of the town ({town.source_path or 'given town'})",
                                "use directed roads 'U-V' of the town (trustroute model lists them)")
         atoms[atom] = TrustStateAtom(trust=frozenset(levels),
