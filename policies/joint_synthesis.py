@@ -10,7 +10,10 @@
   searches (depths UNBOUNDED_DEPTHS, leaves valued by the relaxation's unbounded values), the
   policy from bounded searches with H in UNBOUNDED_POLICY_HORIZONS.
 * The policy (policies/routing/joint_table.py) takes the search's lower-greedy action at every
-  expanded node (matched on (t, x, J, b)) and the relaxation's greedy action elsewhere.
+  expanded node (matched on (t, x, J, b)) and the relaxation's greedy action elsewhere. The
+  search expands the GUIDED_FACTOR × N nodes of a level ranked after its N expanded ones with
+  that very greedy action (joint_search's guided nodes), so the lower bound it backs up, and the
+  decisions it takes by it, are that policy's value but at the nodes beyond both caps.
 * L is the returned policy's own value within its search horizon H, computed by the merged exact
   unfolding `evaluate_joint_table` (policies/evaluate_joint.py; tests check it against
   `evaluate_joint` and brute force), its certified lower end when the least likely nodes are
