@@ -76,7 +76,9 @@ class _Candidate:
     horizon: int
 
 
-def _table(decisions: JointDecisions) -> JointPolicyTable:
+def decision_table(decisions: JointDecisions) -> JointPolicyTable:
+    """The rows of a JointTablePolicy from the search's decisions (the DFA state told: the most
+    probable under J)."""
     told = np.argmax(decisions.joint.sum(axis=1), axis=1) if decisions.joint.size else \
         np.zeros(0, dtype=np.int64)
     return JointPolicyTable(t=decisions.t, x=decisions.x, q=told, beliefs=decisions.beliefs,
@@ -148,7 +150,7 @@ def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limi
                                              deadline=search_deadline)
             if horizon is not None:
                 upper = min(upper, bounds.upper)
-            policy = JointTablePolicy(_table(decisions), pomdp, spec, guide_horizon=policy_horizon,
+            policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=policy_horizon,
                                       horizon=horizon, guide=guide)
             value_lower, value_upper = evaluate_joint_table(pomdp, spec, policy, policy_horizon,
                                                             belief_rule, EVALUATION_NODES,
