@@ -19,6 +19,7 @@ import pandas as pd
 from benchmarks.timing import best_seconds
 from trustroute.harness.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
 from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.harness.incidents import truck
 from trustroute.harness.sumo_start import SumoConfig, sumo_session
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import load_town
@@ -32,10 +33,21 @@ SEED = 3
 KINDS = ("pedestrian", "obstacle", "truck")
 
 
+def full_scene(town, road: str) -> bool:
+    """Every variant of the road's scene can happen there: a truck road's opposite lane has room
+    for the truck to overtake a parked car (truck.PARKED_MIN_LANE; the town's length, within the
+    net's 5 % of the SUMO lane's), the only way an oncoming truck enters the ego's lane."""
+    if town.incident(road) != "truck":
+        return True
+    u, v = road.split("-")
+    return town.length(f"{v}-{u}") >= truck.PARKED_MIN_LANE
+
+
 def route_through_every_kind(town, start: str) -> tuple[str, ...]:
     """The fewest roads from `start` (breadth first over directed roads and kinds met, ties by the
-    town's order of moves) that meet every incident kind: the route the rates are measured on,
-    whatever the town."""
+    town's order of moves) that meet every incident kind on a road where its whole scene can
+    happen (`full_scene`; kinds on other roads are measured too): the route the rates are
+    measured on, whatever the town."""
     from collections import deque
 
     queue = deque([((start,), frozenset())])
@@ -45,7 +57,7 @@ def route_through_every_kind(town, start: str) -> tuple[str, ...]:
         if met >= set(KINDS):
             return route
         for nxt in town.successors(route[-1]):
-            kinds = met | ({town.incident(nxt)} & set(KINDS))
+            kinds = met | ({town.incident(nxt)} & set(KINDS) if full_scene(town, nxt) else set())
             if (nxt, kinds) not in seen:
                 seen.add((nxt, kinds))
                 queue.append((route + (nxt,), kinds))
@@ -245,11 +257,13 @@ def _rates_table(rates: list[dict]) -> str:
 
 
 if __name__ == "__main__":
-    # `python -m benchmarks.bench_episode [EPISODES]`: the per-kind rates alone, as a table.
+    # `python -m benchmarks.bench_episode [EPISODES [TOWN_JSON]]`: the per-kind rates alone, as a
+    # table, on the default town or the given one.
     import sys
 
-    _town = load_town()
+    _town = load_town(sys.argv[2] if len(sys.argv) > 2 else None)
     _spec = load_spec(os.path.join(os.path.dirname(__file__), "..", "policies", "specs", "phi1.toml"), _town)
     _setup = EpisodeSetup(town=_town, driver_model=load_driver_model(), spec=_spec)
+    print("route:", " ".join(route_through_every_kind(_town, _spec.start)))
     print(_rates_table(incident_rates(_setup, build_net(_town).path, SumoConfig(),
                                       int(sys.argv[1]) if len(sys.argv) > 1 else 200)))

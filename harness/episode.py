@@ -238,7 +238,8 @@ class _Episode:
         scene = Scene(road=run.road, reverse_road=reverse, road_length=self.length(run.road),
                       prefix=f"inc{run.index}", ego_id=EGO_ID, time=now, ego_distance=ego_distance,
                       rng=self.rng, overrides=self.scene_overrides.get(run.kind, {}), road_speed=ROAD_SPEED,
-                      step_length=self.config.step_length)
+                      step_length=self.config.step_length,
+                      observed_length=self.length(run.road) - COMMIT_DISTANCE)
         run.incident = incident_kinds.inject(run.kind, self.sumo, scene)
         run.injected_time = now
         if run.incident is not None:

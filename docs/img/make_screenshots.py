@@ -40,20 +40,23 @@ def main() -> int:
         traci.vehicletype.setImperfection("ego", 0.0)
         incidents.define_types(traci)
         traci.route.add("ego_route", ["B-C", "C-J", "J-K"])
-        traci.vehicle.add("ego", "ego_route", typeID="ego", departPos=str(traci.lane.getLength("B-C_1") - 70),
-                          departSpeed="max")
+        # 70 m before C (Town01's B-C is shorter: from its start)
+        depart = max(0.0, traci.lane.getLength("B-C_1") - 70)
+        traci.vehicle.add("ego", "ego_route", typeID="ego", departPos=f"{depart:.2f}", departSpeed="max")
         apply_style(traci, "ego", AUTOPILOT)
         traci.simulationStep()
         scene = Scene(road="C-J", reverse_road="J-C", road_length=traci.lane.getLength("C-J_1"),
                       prefix="shot", ego_id="ego", time=traci.simulation.getTime(), ego_distance=78.0,
                       rng=np.random.default_rng(0),
                       overrides={"oncoming": True, "oncoming_offset": 1.0, "bicycle": False,
-                                 "position_fraction": 0.4})
+                                 "position_fraction": 0.4, "unseen": False})
         incident = obstacle.inject(traci, scene)
         view = "View #0"
         shots = {"waiting": None, "overtaking": None}
         for _ in range(400):
             traci.simulationStep()
+            if "ego" not in traci.vehicle.getIDList():
+                break   # arrived before both views were taken: the scene did not play as staged
             lane, speed = traci.vehicle.getLaneID("ego"), traci.vehicle.getSpeed("ego")
             x, y = traci.vehicle.getPosition("ego")
             if shots["waiting"] is None and lane == "C-J_1" and speed < 2.0:
@@ -64,8 +67,13 @@ def main() -> int:
                     shots["overtaking"] = OUT / "obstacle_overtake_in_oncoming_lane.png"
             for name, path in shots.items():
                 if path is not None and not path.exists() and not str(path).endswith(".done"):
-                    traci.gui.setOffset(view, x, y)
-                    traci.gui.setZoom(view, 2200)
+                    # centred between the ego and the truck, so that both are in view (about 80 m
+                    # across at this zoom on Town01's net)
+                    truck = incident.oncoming.vehicle_id
+                    present = truck in traci.vehicle.getIDList()
+                    tx, ty = traci.vehicle.getPosition(truck) if present else (x, y)
+                    traci.gui.setOffset(view, (x + tx) / 2, (y + ty) / 2)
+                    traci.gui.setZoom(view, 700)
                     traci.gui.screenshot(view, str(path))
                     traci.simulationStep()   # the screenshot is written at the end of the next step
                     shots[name] = Path(str(path) + ".done")

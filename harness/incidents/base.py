@@ -58,6 +58,13 @@ class Scene:
     overrides: dict = field(default_factory=dict)
     road_speed: float = 13.89
     step_length: float = 0.5   # seconds per simulation step
+    observed_length: float | None = None   # metres of the road watched before the incident is
+                                           # removed (the ego's commit point); None: all of it
+
+    @property
+    def watched(self) -> float:
+        """Metres into the road until which the incident is in the simulation."""
+        return self.road_length if self.observed_length is None else max(0.0, self.observed_length)
 
     def draw(self, name: str, sample):
         """A scene parameter: the override if given, else `sample(rng)` (always drawn, so the

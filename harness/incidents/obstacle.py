@@ -6,7 +6,10 @@ itself. The ego passes it with SUMO's own opposite-direction overtaking (the net
 two directions neighbours, networks/sumo_net.py): it pulls into the oncoming lane when the gap
 allows and waits behind the obstacle otherwise. With probability `P_ONCOMING` an oncoming
 vehicle (a truck) is timed to pass the obstacle `ONCOMING_OFFSET` seconds (drawn) after the ego
-would reach it at free speed, so the overtake has to wait for it. Draws: docs/scenes.md.
+would reach it at free speed, so the overtake has to wait for it; with probability `P_UNSEEN`
+it turns in unseen at the road's far end (`oncoming.schedule_oncoming`), the scene's rare
+hazard: a truck that appears while the ego may already be in the oncoming lane.
+Draws: docs/scenes.md.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ P_BICYCLE = 0.3
 P_ONCOMING = 0.5
 ONCOMING_OFFSET = (-4.0, 6.0)   # s, uniform: when the oncoming vehicle passes the obstacle,
                                 # relative to the ego's free-speed arrival there
+P_UNSEEN = 0.2                  # the oncoming vehicle turns in unseen at the road's far end
 
 
 def define_type(sumo) -> None:
@@ -52,6 +56,7 @@ class ObstacleIncident:
     position_on_road: float
     bicycle: bool
     oncoming: OncomingVehicle | None = None
+    unseen: bool = False           # the oncoming vehicle turns in at the road's far end, unseen
     kind: str = KIND
     sumo_ids: tuple[str, ...] = field(init=False)
 
@@ -82,7 +87,9 @@ class ObstacleIncident:
 
     def details(self) -> str:
         text = f"object={'bicycle' if self.bicycle else 'car'} position={self.position_on_road:.1f}"
-        return text + (f" {self.oncoming.details()}" if self.oncoming else " oncoming=none")
+        if self.oncoming is None:
+            return text + " oncoming=none"
+        return text + f" {self.oncoming.details()} unseen={'yes' if self.unseen else 'no'}"
 
 
 def inject(sumo, scene: Scene) -> ObstacleIncident:
@@ -91,6 +98,7 @@ def inject(sumo, scene: Scene) -> ObstacleIncident:
     bicycle = bool(scene.draw("bicycle", lambda rng: rng.random() < P_BICYCLE))
     with_oncoming = bool(scene.draw("oncoming", lambda rng: rng.random() < P_ONCOMING))
     offset = float(scene.draw("oncoming_offset", lambda rng: rng.uniform(*ONCOMING_OFFSET)))
+    unseen = bool(scene.draw("unseen", lambda rng: rng.random() < P_UNSEEN))
     position = fraction * scene.road_length
     park_vehicle(sumo, vehicle_id, f"{scene.prefix}.obstacle_route", scene.road, position,
                  BICYCLE_TYPE_ID if bicycle else TYPE_ID)
@@ -98,6 +106,6 @@ def inject(sumo, scene: Scene) -> ObstacleIncident:
     if with_oncoming and scene.reverse_road is not None:
         eta = (scene.ego_distance + position) / scene.road_speed
         oncoming = schedule_oncoming(sumo, scene, meet_at=position, meet_in=eta + offset,
-                                     vehicle_id=f"{scene.prefix}.oncoming")
+                                     vehicle_id=f"{scene.prefix}.oncoming", from_upstream=not unseen)
     return ObstacleIncident(road=scene.road, vehicle_id=vehicle_id, position_on_road=position,
-                            bicycle=bicycle, oncoming=oncoming)
+                            bicycle=bicycle, oncoming=oncoming, unseen=unseen and oncoming is not None)

@@ -2,10 +2,15 @@
 
 `schedule_oncoming` places a truck on the opposite directed road so that, at its speed, it
 reaches the point `meet_at` metres into the ego's road `meet_in` seconds from now. When that
-needs more road than the opposite road has, the truck enters at the road's far end later, at
-the time that keeps the meeting. `OncomingVehicle` records where and when the two actually
-passed each other in SUMO (`met_time`, `met_x`, `met_y`) and feeds the head-on TTC to the
-road's PerformanceMonitor.
+needs more road than the opposite road has (most meetings on Town01's 50-130 m roads), the
+truck starts on a road leading into it (`upstream_road`) and turns in, so it is already in the
+simulation, where SUMO's overtaking checks can see it, when the ego decides whether to pull
+out; if that road is too short too, it enters at that road's start later. With
+`from_upstream=False` (the obstacle scene's rare "unseen" truck) it instead enters at the
+opposite road's start later, at the time that keeps the meeting: a truck turning in from a
+side road that nobody could see, possibly while the ego is already in the oncoming lane.
+`OncomingVehicle` records where and when the two actually passed each other in SUMO
+(`met_time`, `met_x`, `met_y`) and feeds the head-on TTC to the road's PerformanceMonitor.
 
 Both checks read the truck from SUMO only when they can matter: the gap between the two
 fronts shrinks by at most `MAX_CLOSING` m/s, so while it is large the next read is scheduled
@@ -57,11 +62,13 @@ class OncomingVehicle:
     insert_time: float      # sim time it enters (now, or later at the road's far end)
     meet_at: float          # metres into the ego's road
     meet_in: float          # seconds after injection, as scheduled
+    road_before: str = ""   # the road leading into `road` it starts on ("" when it starts on `road`)
     inserted: bool = False
     met_time: float = math.nan
     met_x: float = math.nan
     met_y: float = math.nan
     _gone: bool = False
+    _on_road: bool = False
     _next_meeting_check: float = -math.inf
     _next_ttc_check: float = -math.inf
 
@@ -90,6 +97,11 @@ class OncomingVehicle:
             return
         x, y = where
         self._next_meeting_check = self._quiet_until(ego.time, math.dist((x, y), (ego.x, ego.y)))
+        if self.road_before and not self._on_road:
+            # Still on the road leading in or turning: its heading says nothing about the meeting.
+            if sumo.vehicle.getRoadID(self.vehicle_id) != self.road:
+                return
+            self._on_road = True
         angle = math.radians(sumo.vehicle.getAngle(self.vehicle_id))
         # Met: the ego is no longer ahead of the truck along the truck's heading.
         if (ego.x - x) * math.sin(angle) + (ego.y - y) * math.cos(angle) <= 0:
@@ -128,22 +140,54 @@ class OncomingVehicle:
 
     def details(self) -> str:
         return (f"oncoming={self.vehicle_id} meet_at={self.meet_at:.1f} meet_in={self.meet_in:.1f} "
-                f"met_time={self.met_time:.1f}")
+                f"met_time={self.met_time:.1f} from={self.road_before or self.road}")
+
+
+TURNS = {"s": 0, "r": 1, "l": 1, "R": 2, "L": 2}   # SUMO link directions, straightest first (no U-turn)
+
+
+def upstream_road(sumo, scene: Scene) -> str | None:
+    """The road that leads into scene.reverse_road at the junction where the ego's road ends, other
+    than the ego's own road, without a U-turn: the straightest, then the longest, then by id.
+    Where an oncoming truck comes from."""
+    junction = scene.road.split("-")[1]
+    roads = []
+    for edge in sumo.junction.getIncomingEdges(junction):
+        if edge.startswith(":") or edge == scene.road:
+            continue
+        lane = f"{edge}_1"
+        for link in sumo.lane.getLinks(lane):
+            if link[0].rsplit("_", 1)[0] == scene.reverse_road and link[6] in TURNS:
+                roads.append((TURNS[link[6]], -sumo.lane.getLength(lane), edge))
+    return min(roads)[2] if roads else None
 
 
 def schedule_oncoming(sumo, scene: Scene, meet_at: float, meet_in: float, vehicle_id: str,
-                      speed: float = TRUCK_SPEED) -> OncomingVehicle:
-    """A truck on scene.reverse_road timed to pass `meet_at` (ego's road coordinates) in `meet_in` s."""
+                      speed: float = TRUCK_SPEED, from_upstream: bool = True) -> OncomingVehicle:
+    """A truck on scene.reverse_road timed to pass `meet_at` (ego's road coordinates) in `meet_in` s,
+    starting on the road leading into it when the reverse road alone is too short for that
+    (unless `from_upstream` is False: then it turns in unseen, entering at the road's start later)."""
     road = scene.reverse_road
     reverse_length = sumo.lane.getLength(f"{road}_1")
     meeting_on_reverse = max(0.0, reverse_length - meet_at)
     depart = meeting_on_reverse - speed * max(meet_in, 0.0)
+    roads = [road]
+    before = upstream_road(sumo, scene) if depart < 0 and from_upstream else None
+    if before is not None:
+        # The junction's internal lane adds its length to the way; the turn's slowing is not
+        # modelled (met_time records when the two really passed each other).
+        before_length = sumo.lane.getLength(f"{before}_1")
+        via = sumo.lane.getLinks(f"{before}_1")
+        inside = next((sumo.lane.getLength(link[4]) for link in via
+                       if link[0].rsplit("_", 1)[0] == road and link[4]), 0.0)
+        depart += before_length + inside
+        roads = [before, road]
     delay = 0.0 if depart >= 0 else -depart / speed
     route_id = f"{vehicle_id}_route"
-    sumo.route.add(route_id, [road])
+    sumo.route.add(route_id, roads)
     vehicle = OncomingVehicle(vehicle_id=vehicle_id, route_id=route_id, road=road,
                               depart_position=max(depart, 0.0), insert_time=scene.time + delay,
-                              meet_at=meet_at, meet_in=meet_in)
+                              meet_at=meet_at, meet_in=meet_in, road_before=roads[0] if before else "")
     if delay == 0.0:
         vehicle.insert(sumo)
     return vehicle

@@ -33,7 +33,7 @@ from trustroute.harness.takeover import SAFE_SPEED_MODE
 KIND = "pedestrian"
 TIMINGS = ("early", "late", "none")
 P_EARLY = 0.75
-P_LATE = 0.06                 # P(none) = 1 - P_EARLY - P_LATE
+P_LATE = 0.03                 # P(none) = 1 - P_EARLY - P_LATE (docs/scenes.md: why 0.03)
 EARLY_START = (0.0, 2.0)      # metres before the kerb where an early person starts (uniform)
 LATE_DECELERATION = (1.0, 6.0)  # m/s²: what the ego needs to stop when a late person steps out (uniform)
 SAFE_NEED = 8.5               # m/s²: a late person never appears when the ego would need more than this
@@ -50,7 +50,8 @@ WALKING_SPEED = 1.2           # m/s
 LATE_WALKING_SPEED = 1.6      # m/s: someone who steps out late is in a hurry
 WAIT_SECONDS = 600.0          # a person who does not cross stands this long (the road ends first)
 MEASURE_NEAR = 40.0           # metres from the crossing: the person's distance is read only this near
-PASSED_AFTER = 25.0           # metres into the road: the crossing is behind the ego
+PASSED_AFTER = 25.0           # metres into the road: the crossing is behind the ego (at most half
+                              # the watched stretch: Town01's A-B is watched for 15 m)
 
 
 @dataclass
@@ -80,6 +81,7 @@ class PedestrianIncident:
     left: bool = False                 # taken out of the simulation
     seen_needing: float = math.nan     # m/s² the ego needed to stop when the AV first saw the person
     last_offset: float = math.inf      # the person's last distance along the crossing to the ego's path
+    passed_after: float = PASSED_AFTER  # metres into the road: past the crossing
 
     def __post_init__(self) -> None:
         self.sumo_ids = (self.person_id,)
@@ -207,7 +209,7 @@ class PedestrianIncident:
             monitor.pedestrian_distance(math.dist((ego.x, ego.y), sumo.person.getPosition(self.person_id)))
 
     def is_passed(self, sumo, ego: EgoState) -> bool:
-        return ego.road == self.road and ego.lane_position > PASSED_AFTER
+        return ego.road == self.road and ego.lane_position > self.passed_after
 
     def remove(self, sumo) -> None:
         # Also reaches an object still waiting for insertion; one already gone raises, and that is fine.
@@ -298,7 +300,8 @@ def inject(sumo, scene: Scene) -> PedestrianIncident:
                                   crossing_xy=crossing.conflict, crossing=crossing, ego_id=scene.ego_id,
                                   ego_accel=sumo.vehicle.getAccel(scene.ego_id), road_speed=scene.road_speed,
                                   comfortable_decel=sumo.vehicle.getDecel(scene.ego_id),
-                                  step_length=scene.step_length)
+                                  step_length=scene.step_length,
+                                  passed_after=min(PASSED_AFTER, 0.5 * scene.watched))
     if timing == "early":
         incident.insert(sumo, scene.time, before_kerb, crosses=True)
     elif timing == "none":

@@ -1,7 +1,8 @@
 """Truck incident: an oncoming truck in the neighbouring lane, timed to meet the ego on its road.
 
 The truck drives the opposite directed road at `oncoming.TRUCK_SPEED` and is scheduled to pass
-the ego at a drawn fraction of the road (`MEET_RANGE`), assuming the ego drives at free speed.
+the ego at a drawn fraction of the stretch watched before the ego's commit point
+(`MEET_RANGE` of `Scene.watched`), assuming the ego drives at free speed.
 With probability `P_PARKED` a car is parked in the truck's own lane shortly before that point
 (`PARKED_BEFORE_MEETING`, drawn): the truck then overtakes it through the ego's lane, with
 SUMO's own opposite-direction overtaking and gap acceptance, and the ego has to react to a
@@ -24,12 +25,14 @@ from trustroute.harness.incidents.oncoming import TRUCK_SPEED, OncomingVehicle, 
 
 KIND = "truck"
 PARKED_TYPE_ID = "trustroute_parked_car"
-MEET_RANGE = (0.3, 0.7)               # fraction of the ego's road where they are timed to meet
-P_PARKED = 0.15
+MEET_RANGE = (0.3, 0.7)               # fraction of the watched stretch where they are timed to meet
+P_PARKED = 0.3                        # a parked car on a 300 m town road is common (docs/scenes.md)
 PARKED_BEFORE_MEETING = (0.0, 80.0)   # metres before the meeting point, along the truck's way
 # Shorter than this, the truck's lane has no room to pass a parked car before it meets the ego:
 # the scene is the plain oncoming truck. On Town01 the truck and the ego still stopped head-on for
-# good on the 128 m K-L with a 100 m minimum; of its truck roads only H-L/L-H (319 m) pass 200 m.
+# good on the 128 m K-L with a 100 m minimum, and with a 40 m minimum they collided or stopped for
+# good on the 66 m C-D when the ego turned in from J-C, out of the truck's sight; of Town01's truck
+# roads only H-L/L-H (319 m) pass 200 m.
 PARKED_MIN_LANE = 200.0
 
 
@@ -81,7 +84,9 @@ def inject(sumo, scene: Scene) -> TruckIncident:
     fraction = float(scene.draw("meet_fraction", lambda rng: rng.uniform(*MEET_RANGE)))
     parked = bool(scene.draw("parked", lambda rng: rng.random() < P_PARKED))
     before = float(scene.draw("parked_before_meeting", lambda rng: rng.uniform(*PARKED_BEFORE_MEETING)))
-    meet_at = fraction * scene.road_length
+    # On the stretch watched before the ego's commit point: on Town01's 50-70 m roads a meeting
+    # beyond it would come after the truck has left the simulation with the road's observation.
+    meet_at = fraction * scene.watched
     eta = (scene.ego_distance + meet_at) / scene.road_speed
     # The truck pulls out round the parked car when it reaches it, `before` metres ahead of the
     # meeting point; the ego is then before * road_speed / TRUCK_SPEED metres short of that point.

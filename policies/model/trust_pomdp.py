@@ -29,6 +29,9 @@ class TrustPOMDP:
     action_junctions: tuple[tuple[str, ...], ...] = field(init=False)
     observation_likelihood: np.ndarray = field(init=False)  # [n_inc, 2(h), 2(e), n_trust]
     weighted_transition: np.ndarray = field(init=False)     # [n_inc, 2, 2, n_trust, n_trust]
+    # observations whose probability is the same for every trust level (then exactly that constant)
+    uniform_likelihood: np.ndarray = field(init=False)      # bool [n_inc, 2, 2]
+    _preserving: dict = field(init=False, repr=False)       # rule -> bool [n_inc, 2, 2]
 
     def __post_init__(self) -> None:
         town, driver = self.town, self.driver
@@ -46,10 +49,16 @@ class TrustPOMDP:
         p_e = np.stack([1 - failure, failure], axis=1)            # [n_inc, e, θ]
         likelihood = p_h[:, :, None, :] * p_e[:, None, :, :]      # [n_inc, h, e, θ]
         weighted = likelihood[..., :, None] * driver.trust_transition
+        uniform = (likelihood == likelihood[..., :1]).all(axis=-1)
+        preserving = {rule: _scaled_identity(matrices) for rule, matrices in
+                      (("bayes", weighted), ("paper", driver.trust_transition))}
+        for array in preserving.values():
+            array.setflags(write=False)
         for name, value in (("road_incident", road_incident), ("successor_table", successors),
                             ("action_junctions", actions),
                             ("observation_likelihood", likelihood),
-                            ("weighted_transition", weighted)):
+                            ("weighted_transition", weighted), ("uniform_likelihood", uniform),
+                            ("_preserving", preserving)):
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -66,13 +75,31 @@ class TrustPOMDP:
     def initial_belief(self) -> np.ndarray:
         return self.driver.initial_belief
 
+    def preserves_belief(self, rule: BeliefRule = "bayes") -> np.ndarray:
+        """bool [n_inc, 2(h), 2(e)]: the update matrix of `rule` is c·I (c > 0), so the posterior
+        is the belief itself (Bayes: T = I and a likelihood equal for every trust level)."""
+        if rule not in self._preserving:
+            raise ValueError(f"unknown belief rule {rule!r}; use 'bayes' or 'paper'")
+        return self._preserving[rule]
+
     def observation_probability(self, beliefs: np.ndarray, incident: np.ndarray | int,
                                 human_action: np.ndarray | int,
                                 performance: np.ndarray | int = 0) -> np.ndarray:
-        """P(h, e | b, inc) = Σθ b(θ) P(h | θ, inc) P(e | θ, inc), for each row of `beliefs`."""
+        """P(h, e | b, inc) = Σθ b(θ) P(h | θ, inc) P(e | θ, inc), for each row of `beliefs`.
+
+        An observation whose likelihood is the same constant c for every trust level has probability
+        exactly c (its value for every belief in exact arithmetic; Σθ b(θ) c of a float belief can
+        be c·(1 - 2e-16)), so a road where nothing can happen costs no probability mass."""
         beliefs = np.atleast_2d(beliefs)
         likelihood = self.observation_likelihood[incident, human_action, performance]
-        return np.einsum("nk,nk->n", beliefs, np.broadcast_to(likelihood, beliefs.shape))
+        probability = np.einsum("nk,nk->n", beliefs, np.broadcast_to(likelihood, beliefs.shape))
+        uniform = np.broadcast_to(self.uniform_likelihood[incident, human_action, performance],
+                                  probability.shape)
+        if uniform.any():
+            constant = np.broadcast_to(likelihood, beliefs.shape)[:, 0]
+            # a zero belief row (a history of probability 0) keeps probability 0
+            probability = np.where(uniform & beliefs.any(axis=1), constant, probability)
+        return probability
 
     def belief_update(self, beliefs: np.ndarray, incident: np.ndarray | int,
                       human_action: np.ndarray | int, performance: np.ndarray | int = 0,
@@ -83,6 +110,11 @@ class TrustPOMDP:
         rule="paper" is the authors' released update b' ∝ b·T[inc][h] (no likelihood weighting);
         the returned probabilities are the Bayes ones in both cases.
         An observation of probability 0 gives a zero row of probability 0 (never NaN).
+        An observation whose update is c·I (`preserves_belief`, e.g. the default model's `none`)
+        returns the belief unchanged, bit for bit: renormalising would move it by an ulp or so
+        (the uniform prior sums to 1 - 2e-16), and repeated renormalisation does not settle
+        (it can cycle), so the belief would drift along roads where nothing happens
+        (docs/synthesis.md, "One filter").
         """
         beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
         n = beliefs.shape[0]
@@ -100,10 +132,23 @@ class TrustPOMDP:
         total = unnormalised.sum(axis=1, keepdims=True)
         posterior = np.divide(unnormalised, total, out=np.zeros_like(unnormalised),
                               where=total > 0)
+        keep = np.broadcast_to(self.preserves_belief(rule)[incident, human_action, performance], (n,))
+        if keep.any():
+            posterior[keep] = beliefs[keep]
         return posterior, probability
 
     def next_state(self, state: int, action_slot: int) -> int:
         return int(self.successor_table[state, action_slot])
+
+
+def _scaled_identity(matrices: np.ndarray) -> np.ndarray:
+    """bool [...]: each trailing square matrix is exactly c·I with c > 0 (no tolerance: only then
+    is the update the identity in exact arithmetic)."""
+    n = matrices.shape[-1]
+    diagonal = np.diagonal(matrices, axis1=-2, axis2=-1)
+    off_diagonal = matrices * (1.0 - np.eye(n))
+    return ((diagonal == diagonal[..., :1]).all(axis=-1) & (diagonal[..., 0] > 0)
+            & (off_diagonal == 0).all(axis=(-2, -1)))
 
 
 def build_pomdp(town: Town, driver: DriverModel) -> TrustPOMDP:

@@ -3,11 +3,11 @@
 An observation symbol o = (incident, h, e) has a likelihood vector L_o[θ] = P(h, e | θ, inc) and
 an update matrix W_o: the filter is the linear-fractional map f_o(b) = b W_o / (b W_o 1)
 (Bayes: W_o = diag(L_o) T[inc][h][e]; the authors' "paper" rule: W_o = T[inc][h][e], with the
-probability of o still b·L_o). Symbols with W_o = c·I (the default model's 'none' incident)
-leave the belief unchanged in exact arithmetic and are not counted as belief-changing for the
+probability of o still b·L_o). Symbols with W_o = c·I and a uniform likelihood (the default
+model's 'none' incident) leave the belief unchanged and are not counted as belief-changing for the
 cells; the belief itself is always advanced by the one filter, `TrustPOMDP.belief_update`, which
-the vehicle, exact evaluation and the model engine use too (in float64 an identity symbol still
-renormalises, so skipping it would certify a belief process the vehicle never runs).
+the vehicle, exact evaluation and the model engine use too (it returns the belief bit for bit for
+such symbols, so every user holds the same float64 belief).
 
 Suffix cells: a cell is a word w of at most k belief-changing symbols and stands for the polytope
 P_w = f_w(simplex) = conv{f_w(e_i)}. A belief whose history of belief-changing symbols ends in w
@@ -81,10 +81,9 @@ def observation_symbols(pomdp: TrustPOMDP, rule: BeliefRule = "bayes") -> Observ
                     update = np.asarray(pomdp.weighted_transition[i, h, e], dtype=float)
                 else:
                     update = np.asarray(driver.trust_transition[i, h, e], dtype=float)
-                c = update[0, 0]
-                # Exactly c·I (no tolerance): only then is f_o the identity in exact arithmetic.
-                identity = bool(np.array_equal(update, c * np.eye(update.shape[0]))
-                                and np.all(likelihood == likelihood[0]) and c > 0)
+                # The filter returns the belief unchanged (exactly c·I) and the probability is the
+                # same for every belief (a uniform likelihood).
+                identity = bool(pomdp.preserves_belief(rule)[i, h, e] and pomdp.uniform_likelihood[i, h, e])
                 by_incident[i].append(len(rows))
                 rows.append((i, h, e))
                 likelihoods.append(likelihood)

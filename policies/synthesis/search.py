@@ -53,6 +53,7 @@ from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.synthesis.arguments import check_synthesis_arguments
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols, suffix_cells
 from trustroute.policies.synthesis.end_components import unbounded_bound
+from trustroute.policies.synthesis.event_graph import EventGraph
 from trustroute.policies.synthesis.upper_bound import (
     Abstraction,
     acceptance_distance,
@@ -73,6 +74,10 @@ UNBOUNDED_STATE_BUDGET = 20_000
 UNBOUNDED_BOUND_SHARE = 0.3  # share of the time limit the end-component bound may take
 BOUNDED_ENTRY_BUDGET = 20_000_000   # floats of the bounded abstraction (160 MB)
 FINISH_SHARE = 0.04          # share of the time limit kept for finishing after the last check
+# Most macro moves per context for which the event graph is used: node arrays hold one slot per
+# move, so a town whose quiet roads connect many event roads is searched junction by junction.
+MAX_MACRO_WIDTH = 16
+COMPRESS_MODES = ("off", "chains", "full")
 
 # FRONTIER: open, L = 0 (the policy drives the trust-free completion there, worth >= 0).
 # FREE: expanded along the trust-free completion's move only; L is that move's exact value, U the
@@ -121,6 +126,9 @@ class _Graph:
         # does (no alternates): the tie-breaker among actions of equal L, and a reported figure.
         self.strict = self.values[2]
         self.kind = np.zeros(capacity, dtype=np.int8)
+        # per expanded node: which move slots exist, and the trust-free completion's slot
+        self.legal = np.zeros((capacity, n_actions), dtype=bool)
+        self.free_move = np.zeros(capacity, dtype=np.int64)
         self.child = np.full((capacity, n_actions, n_outcomes), -1, dtype=np.int64)
         self.prob = np.zeros((capacity, n_actions, n_outcomes))
         self.memo: list[dict[tuple[int, int, int, bytes], int]] = []
@@ -163,7 +171,7 @@ class _Graph:
         if needed <= capacity:
             return
         new = max(needed, 2 * capacity)
-        for name in ("level", "x", "q", "p", "cell", "kind"):
+        for name in ("level", "x", "q", "p", "cell", "kind", "free_move"):
             old = getattr(self, name)
             grown = np.zeros(new, dtype=old.dtype)
             grown[:capacity] = old
@@ -178,6 +186,9 @@ class _Graph:
         child = np.full((new, self.n_actions, self.n_outcomes), -1, dtype=np.int64)
         child[:capacity] = self.child
         self.child = child
+        legal = np.zeros((new, self.n_actions), dtype=bool)
+        legal[:capacity] = self.legal
+        self.legal = legal
         prob = np.zeros((new, self.n_actions, self.n_outcomes))
         prob[:capacity] = self.prob
         self.prob = prob
@@ -242,7 +253,7 @@ class _Level:
 class _Search:
     def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int | None, suffix_length: int,
                  started: float, deadline: float, unbounded_value: np.ndarray | None = None,
-                 abstraction: Abstraction | None = None) -> None:
+                 abstraction: Abstraction | None = None, compress: str = "chains") -> None:
         self.tables, self.rule, self.horizon = tables, rule, horizon
         self.started = started
         pomdp = tables.pomdp
@@ -271,16 +282,41 @@ class _Search:
         for members in self.symbols.by_incident:
             for j, o in enumerate(members):
                 self.slot_of_symbol[o] = j
-        self.graph = _Graph(pomdp.n_trust, tables.successors.shape[1], n_outcomes)
-        self.levels: dict[int, _Level] = {}
-        self.moves: dict[int, list[tuple[_Level, np.ndarray, np.ndarray]]] = {}
-        self.free_levels: dict[int, tuple[int, _Level]] = {}
         # The trust-free completion (policies/routing/free.py) as the returned policy drives it
         # wherever it has no row: its move at (road, state-only task state), the first move when
         # that task is complete or impossible (BeliefTablePolicy's exact-belief rule).
         self.task = state_only_task(pomdp.town, tables.spec)
         self.free_slot = np.where(self.task.next_slot >= 0, self.task.next_slot, 0)   # [n_x, n_p]
         self.next_p = np.asarray(self.task.next_state, dtype=np.int64)               # [n_p, n_x]
+        # Moves: macro moves of the event graph (policies/synthesis/event_graph.py) when some road
+        # is quiet and the widest context has at most MAX_MACRO_WIDTH of them; else the junctions.
+        self.events: EventGraph | None = None
+        self.macro_width: int | None = None
+        self.row_conflicts = 0
+        if compress not in COMPRESS_MODES:
+            raise ValueError(f"unknown compression {compress!r}; use one of {', '.join(COMPRESS_MODES)}")
+        if compress != "off":
+            events = EventGraph(tables, self.symbols, self.task, chains_only=compress == "chains")
+            if events.compresses and events.width <= MAX_MACRO_WIDTH:
+                self.events = events
+            self.macro_width = events.width
+        n_actions = self.events.width if self.events is not None else tables.successors.shape[1]
+        self.graph = _Graph(pomdp.n_trust, n_actions, n_outcomes)
+        self.levels: dict[int, _Level] = {}
+        self.moves: dict[int, list[tuple[_Level, np.ndarray, np.ndarray]]] = {}
+        self.free_levels: dict[int, tuple[int, _Level]] = {}
+
+    def move_table(self, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(target road, junctions, legal) [m, slots] and the free slot [m] of `nodes`' moves.
+
+        Plain: the town's junctions (one junction each). Compressed: the event graph's macro moves;
+        a legal slot with target -1 never reaches an event road (worth 0)."""
+        g = self.graph
+        if self.events is not None:
+            return self.events.table(g.x[nodes], g.q[nodes], g.p[nodes])
+        target = self.tables.successors[g.x[nodes]]
+        legal = target >= 0
+        return target, legal.astype(np.int64), legal, self.free_slot[g.x[nodes], g.p[nodes]]
 
     def level_arrays(self, level: int) -> _Level:
         """The cached _Level of `level`, rebuilt when nodes or alternates were added there."""
@@ -304,7 +340,7 @@ class _Search:
         nodes = np.fromiter(g.free_by_level[level], dtype=np.int64)
         lv = self._level(level, nodes, version[1], nodes.size)
         only = np.zeros_like(lv.legal)
-        only[np.arange(nodes.size), self.free_slot[g.x[nodes], g.p[nodes]]] = True
+        only[np.arange(nodes.size), g.free_move[nodes]] = True
         lv = _Level(**{**lv.__dict__, "legal": lv.legal & only})
         self.free_levels[level] = (version, lv)
         return lv
@@ -323,7 +359,7 @@ class _Search:
             slot = outcome = alt_child = row
         return _Level(count=count, alternate_chunks=chunks, nodes=nodes,
                       child=np.maximum(child, 0), has_child=child >= 0, prob=g.prob[nodes],
-                      legal=self.tables.successors[g.x[nodes]] >= 0, alt_row=row, alt_slot=slot,
+                      legal=g.legal[nodes], alt_row=row, alt_slot=slot,
                       alt_outcome=outcome, alt_child=alt_child)
 
     @staticmethod
@@ -436,20 +472,27 @@ class _Search:
         nodes = np.asarray(nodes, dtype=np.int64)
         if nodes.size == 0:
             return
-        n_actions = tables.successors.shape[1]
-        x2_all = tables.successors[g.x[nodes]]                                   # [m, actions]
-        valid = x2_all >= 0
+        x2_all, length_all, legal, free_move = self.move_table(nodes)        # [m, slots]
+        g.legal[nodes] = legal
+        g.free_move[nodes] = free_move
+        valid = legal & (x2_all >= 0)
+        if self.horizon is not None:
+            # a move longer than the junctions left ends at the horizon: no child, worth 0
+            valid &= g.level[nodes][:, None] + length_all <= self.horizon
         if free_only:
-            valid &= np.arange(n_actions)[None, :] == self.free_slot[g.x[nodes], g.p[nodes]][:, None]
+            valid &= np.arange(x2_all.shape[1])[None, :] == free_move[:, None]
         incident = tables.pomdp.road_incident[np.maximum(x2_all, 0)]
         symbol_all = self.symbols_of_incident[incident]                           # [m, actions, s]
         row, slot, j = np.nonzero(valid[:, :, None] & (symbol_all >= 0))
         parent, symbol, x2 = nodes[row], symbol_all[row, slot, j], x2_all[row, slot]
+        length = length_all[row, slot]
+        # The quiet roads before a macro move's target leave the belief as it is and have
+        # probability exactly 1 (event_graph.py): only the target's observation counts.
         belief, probability = apply_symbol(g.belief[parent], symbols, symbol)
         keep = probability > 0
-        parent, slot, symbol, x2, belief, probability = (
-            a[keep] for a in (parent, slot, symbol, x2, belief, probability))
-        level2 = g.level[parent] + 1
+        parent, slot, symbol, x2, belief, probability, length = (
+            a[keep] for a in (parent, slot, symbol, x2, belief, probability, length))
+        level2 = g.level[parent] + length
         q2, alt_rows, alt_q = self.possible_q(g.q[parent], x2, belief)
         cell2 = self.cells.next_cell[g.cell[parent], symbol]
         p2 = self.next_p[g.p[parent], x2]
@@ -503,8 +546,7 @@ class _Search:
                 combine = np.minimum.at if pessimistic else np.maximum.at
                 combine(child_value, index, values[alt_child[hit]])
         q = (g.prob[nodes] * child_value).sum(axis=2)
-        legal = self.tables.successors[g.x[nodes]] >= 0
-        return np.where(legal, q, -1.0)
+        return np.where(g.legal[nodes], q, -1.0)
 
     def backup(self) -> None:
         """Bellman backups from the deepest level up. At each level the FREE nodes first (L and the
@@ -572,7 +614,7 @@ class _Search:
         has = child >= 0
         child_upper = np.where(has, g.upper[np.maximum(child, 0)], 0.0)
         q_upper = (g.prob[nodes] * child_upper).sum(axis=2)
-        q_upper = np.where(self.tables.successors[g.x[nodes]] >= 0, q_upper, -1.0)
+        q_upper = np.where(g.legal[nodes], q_upper, -1.0)
         move = q_upper.argmax(axis=1)
         rows = np.arange(nodes.size)
         kids, kid_prob, kid_has = child[rows, move], g.prob[nodes][rows, move], has[rows, move]
@@ -595,7 +637,7 @@ class _Search:
         reach[roots] = 1.0
         for level in sorted(self.moves):
             for lv, _, move in self.moves[level]:
-                self._push(reach, lv, self.free_slot[g.x[lv.nodes], g.p[lv.nodes]] if trust_free else move)
+                self._push(reach, lv, g.free_move[lv.nodes] if trust_free else move)
         return np.minimum(reach, 1.0)
 
     @staticmethod
@@ -637,8 +679,60 @@ class _Search:
         strict_q = self.action_values(nodes, g.strict, None)
         upper_q = self.action_values(nodes, g.upper, False)
         action = policy_choice(lower_q, strict_q, upper_q)
+        if self.events is not None and not self.events.chains_only:
+            return self.junction_table(nodes, action, lower_q[np.arange(nodes.size), action])
+        # plain, or chains: a move is a junction slot, and the roads down a chain have one
+        # junction each (no row needed), so the rows are the expanded nodes' own
         return PolicyTable(t=g.level[nodes], x=g.x[nodes], q=g.q[nodes], beliefs=g.belief[nodes],
                            action=action, projected=g.p[nodes])
+
+    def junction_table(self, nodes: np.ndarray, action: np.ndarray, value: np.ndarray) -> PolicyTable:
+        """The policy's rows junction by junction from its macro moves (docs/synthesis.md, "The
+        event graph"): a row per road of the chosen move's path, at the junction count the vehicle
+        is there, with the node's q, p and belief (none of them moves on quiet roads).
+
+        Paths of different nodes can cross at the same context (t, road, q, p, belief); a context
+        then takes the candidate with the largest L (a node's own row, then passing paths, then the
+        trust-free completion of a FREE node passing there). Every candidate's L is a lower bound
+        of following it, so the policy is worth at least L (stats "row_conflicts": how often)."""
+        g, events = self.graph, self.events
+        best: dict[tuple, tuple[float, int, int]] = {}     # context -> (L, -rank, slot) of the winner
+        slots: dict[tuple, set[int]] = {}                  # context -> slots its candidates take
+        has_row: set[tuple] = set()                        # contexts a policy row passes
+        single = (self.tables.successors >= 0).sum(axis=1) == 1
+
+        def offer(node: int, route: tuple, candidate_value: float, rank: int) -> None:
+            t0, q, p = int(g.level[node]), int(g.q[node]), int(g.p[node])
+            belief = g.belief[node].tobytes()
+            for i, (road, slot) in enumerate(route):
+                if self.horizon is not None and t0 + i >= self.horizon:
+                    break
+                if single[road]:        # one junction: no choice, no row needed
+                    continue
+                key = (t0 + i, road, q, p, belief)
+                here = rank if rank == 2 or i == 0 else 1
+                score = (candidate_value, -here, slot)
+                slots.setdefault(key, set()).add(slot)
+                if here < 2:
+                    has_row.add(key)
+                if key not in best or score[:2] > best[key][:2]:
+                    best[key] = score
+
+        for node, a, v in zip(nodes.tolist(), action.tolist(), value.tolist(), strict=True):
+            moves = events.moves(int(g.x[node]), int(g.q[node]), int(g.p[node]))
+            offer(node, moves.path[a], v, 0)
+        for node in np.flatnonzero(g.kind[: g.n] == FREE).tolist():
+            moves = events.moves(int(g.x[node]), int(g.q[node]), int(g.p[node]))
+            offer(node, moves.path[moves.free], float(g.lower[node]), 2)
+        self.row_conflicts = sum(1 for taken in slots.values() if len(taken) > 1)
+        # A context only free completions pass needs no row (the policy drives them there anyway;
+        # they all take the free slot of (road, p)).
+        keys = [key for key in best if key in has_row]
+        beliefs = (np.array([np.frombuffer(key[4], dtype=float) for key in keys]) if keys
+                   else np.zeros((0, g.belief.shape[1])))
+        out_t, out_x, out_q, out_p = ([key[j] for key in keys] for j in range(4))
+        out_a = [best[key][2] for key in keys]
+        return PolicyTable(t=out_t, x=out_x, q=out_q, beliefs=beliefs, action=out_a, projected=out_p)
 
 
 def policy_choice(lower_q: np.ndarray, strict_q: np.ndarray, upper_q: np.ndarray) -> np.ndarray:
@@ -674,7 +768,7 @@ def automatic_suffix_length(n_changing: int) -> int:
 def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int | None, tau: float,
                     suffix_length: int, batch: int, started: float, deadline: float,
                     unbounded_value: np.ndarray | None = None, abstraction: Abstraction | None = None,
-                    on_iteration: Callable[[float, float], None] | None = None,
+                    on_iteration: Callable[[float, float], None] | None = None, compress: str = "chains",
                     ) -> tuple[float, float, PolicyTable, dict]:
     """One AO*-style search; returns (lower, upper, table, stats).
 
@@ -682,7 +776,7 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
     UNBOUNDED_DEPTH left open with the unbounded abstraction's bound `unbounded_value`.
     """
     search = _Search(tables, belief_rule, horizon, suffix_length, started, deadline, unbounded_value,
-                     abstraction)
+                     abstraction, compress)
     g = search.graph
     roots = search.roots()
 
@@ -762,6 +856,11 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
         # root the vehicle is in: a lower bound of what `evaluate` measures
         "lower_strict_labels": float(g.strict[roots[0]]),
         "completion_closed": closed,
+        # the event graph's macro moves (None: not asked for), their widest context, and contexts
+        # where the paths of two rows crossed (then L is a lower bound of the policy's value)
+        "compressed": None if search.macro_width is None else search.events is not None,
+        "macro_width": search.macro_width,
+        "row_conflicts": search.row_conflicts,
         "nodes": int(g.n),
         "expanded_nodes": int(expanded),
         "open_frontier_nodes": int(open_nodes.sum()),
@@ -802,7 +901,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                horizon: int | None = None, belief_rule: BeliefRule = "bayes",
                suffix_length: int | None = None,
                batch: int = DEFAULT_BATCH,
-               on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
+               on_iteration: Callable[[float, float], None] | None = None,
+               compress: str = "chains") -> SynthesisResult:
     """Maximal probability of satisfying `spec` from (spec.start, initial belief), with a policy.
 
     horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter and the
@@ -814,7 +914,10 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     (UNBOUNDED_HORIZONS): a policy accepting within H with probability L satisfies the unbounded spec
     with probability >= L. upper is the unbounded abstraction's bound, tightened by a search of the
     unbounded problem when a gap remains. on_iteration(lower, upper): called after every expansion
-    round with the current search's root bounds (progress bars).
+    round with the current search's root bounds (progress bars). compress: "chains" passes through
+    quiet roads without a choice, "full" searches the event graph's macro moves
+    (policies/synthesis/event_graph.py), "off" goes junction by junction; the same bounds at
+    convergence (docs/synthesis.md, "The event graph").
     """
     check_synthesis_arguments(tau, horizon, belief_rule)
     started = time.perf_counter()
@@ -848,7 +951,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             note = "graph distance: acceptance is unreachable"
     elif horizon is not None:
         lower, upper, table, stats = _bounded_search(tables, belief_rule, horizon, tau, suffix_length,
-                                                     batch, started, deadline, on_iteration=on_iteration)
+                                                     batch, started, deadline, on_iteration=on_iteration,
+                                                     compress=compress)
         runs = [stats]
     else:
         symbols = observation_symbols(pomdp, belief_rule)
@@ -874,7 +978,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             shared = k_run == k
             run_lower, _, run_table, stats = _bounded_search(
                 tables, belief_rule, depth, 0.5 * tau, k_run, batch, started, deadline,
-                value if shared else None, abstraction if shared else None, on_iteration=on_iteration)
+                value if shared else None, abstraction if shared else None, on_iteration=on_iteration,
+                compress=compress)
             runs.append(stats)
             if run_lower > lower:
                 lower, table = run_lower, run_table
@@ -882,7 +987,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 remaining = max(deadline - time.perf_counter(), 0.0)
                 run_lower, run_upper, run_table, stats = _bounded_search(
                     tables, belief_rule, None, tau, k, batch, started,
-                    time.perf_counter() + 0.25 * remaining, value, abstraction, on_iteration=on_iteration)
+                    time.perf_counter() + 0.25 * remaining, value, abstraction, on_iteration=on_iteration,
+                    compress=compress)
                 stats["end_component_seconds"] = bound.seconds
                 runs.append(stats)
                 upper = min(upper, run_upper)

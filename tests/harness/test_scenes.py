@@ -5,6 +5,7 @@ them (docs/scenes.md)."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from trustroute.harness.episode import EGO_ID, run_episode
 from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.performance import PerformanceLimits, PerformanceMonitor
 from trustroute.networks.sumo_net import build_net
-from trustroute.networks.town import PENTAGON_TOWN_PATH, load_town
+from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
@@ -26,11 +27,9 @@ PERFORMANCE_MODEL = Path(participants.__file__).parent / "data" / "driver_model_
 
 @pytest.fixture(scope="module")
 def town():
-    # The scenes' mechanics are tested on the long-road layout their draws were calibrated on (the
-    # pentagon, 240-820 m roads): on the Town01 default town's 50-70 m roads of INCIDENT_ROUTE the
-    # forced-late pedestrian is yielded to (succ), the oncoming truck and the obstacle overtaking
-    # do not meet as these tests stage them (docs/scenes.md). The demo and study tests run Town01.
-    return load_town(PENTAGON_TOWN_PATH)
+    # The default town (Town01): INCIDENT_ROUTE has the pedestrian on A-B, the obstacle on the
+    # 236 m C-J (room to stage a wait and an overtake) and the truck on J-K.
+    return load_town()
 
 
 @pytest.fixture(scope="module")
@@ -44,11 +43,23 @@ def setup(town, driver):
                         fallback_after=None)
 
 
-def _run(setup, net, seed, overrides=None, observer=None, model=None, takeovers=()):
+# A-B entered from the start road F-A, where the ego is still accelerating: a late person there
+# steps out when a gentle stop suffices. Entered from E-A at free speed (INCIDENT_ROUTE), the person
+# can appear no earlier than the incident's injection, when the ego already needs about 4.6 m/s²
+# to stop: every late step-out there is an emergency brake (docs/scenes.md).
+LATE_ROUTE = ("F-A", "A-B", "B-C")
+
+
+@pytest.fixture(scope="module")
+def late_setup(setup):
+    return replace(setup, spec=replace(setup.spec, start=LATE_ROUTE[0]))
+
+
+def _run(setup, net, seed, overrides=None, observer=None, model=None, takeovers=(), route=INCIDENT_ROUTE):
     model = model if model is not None else setup.driver_model
     synthetic = ForcedTakeover(SyntheticDriver(model, np.random.default_rng(seed), initial_trust=4),
                                takeovers)
-    return run_episode(setup, FixedRoute(INCIDENT_ROUTE), synthetic, f"s{seed}", seed=seed, net_path=net,
+    return run_episode(setup, FixedRoute(route), synthetic, f"s{seed}", seed=seed, net_path=net,
                        observer=observer, scene_overrides=overrides)
 
 
@@ -85,8 +96,10 @@ def test_an_oncoming_truck_makes_the_ego_wait_before_overtaking(setup, net):
         return next(s for s in steps if s["lane"] == "J-C_1")
 
     def slowest_before_overtaking(steps):
+        # From the obstacle's injection until the ego is first in the oncoming lane (on Town01 SUMO
+        # may pull out before C-J itself, already in the junction from B-C).
         start = first_opposite(steps)["time"]
-        return min(s["speed"] for s in steps if s["lane"] == "C-J_1" and start - 15 < s["time"] < start)
+        return min(s["speed"] for s in steps if row.injected_time <= s["time"] < start)
 
     # alone, the ego pulls out without stopping; with the truck timed to meet it, it (nearly) stops behind the
     # obstacle and pulls out only once the truck has passed it
@@ -118,10 +131,14 @@ def test_every_incident_is_in_sumo_where_and_when_the_log_says(setup, net):
         # on its road: lanes of the incident road or of its opposite direction (persons: no lane)
         lane = at_view["objects"][main_id][0]
         u, v = row.directed_road.split("-")
-        assert lane == "" or lane.rsplit("_", 1)[0] in (row.directed_road, f"{v}-{u}")
+        # an oncoming truck may still be on the road it comes from (`from=` in the scene)
+        came_from = row.scene.split("from=")[1].split()[0] if "from=" in row.scene else None
+        assert lane == "" or lane.rsplit("_", 1)[0] in (row.directed_road, f"{v}-{u}", came_from)
         assert row.passed_time <= row.removed_time
+    # J-K's opposite lane is shorter than truck.PARKED_MIN_LANE: the parked car is not placed even when
+    # drawn (the truck could not pass it before the meeting), so the truck is the only object
     truck = record.incidents[record.incidents["incident"] == "truck"].iloc[0]
-    assert "parked=yes" in truck.scene and truck.sumo_ids.count(",") == 1
+    assert "parked=no" in truck.scene and truck.sumo_ids.count(",") == 0
 
 
 SEEDS = range(40)
@@ -189,7 +206,7 @@ def test_background_traffic_is_seeded(setup, net):
     assert max(runs[0][1]) == 6 and min(runs[0][1][5:]) >= 4
 
 
-def test_a_forced_late_pedestrian_is_a_measured_fail(setup, net):
+def test_a_forced_late_pedestrian_is_a_measured_fail(setup, late_setup, net):
     """A person who steps out when the ego needs more than its comfortable deceleration to stop:
     the AV's emergency brake stops it without a collision, and the hard braking is a measured
     `fail`. The same person stepping out when a gentle stop suffices is yielded to: `succ`.
@@ -201,25 +218,29 @@ def test_a_forced_late_pedestrian_is_a_measured_fail(setup, net):
     assert row.performance == "fail" and "deceleration" in row.failed_measures
     assert not row.collided and row.max_deceleration > 5.0
     assert late.roads.set_index("directed_road").loc["A-B", "performance"] == "fail"
-    yielded = _run(setup, net, 3, {"pedestrian": {"timing": "late", "late_deceleration": 1.5}})
+    yielded = _run(late_setup, net, 3, {"pedestrian": {"timing": "late", "late_deceleration": 1.5}},
+                   route=LATE_ROUTE)
     row = yielded.incidents[yielded.incidents["incident"] == "pedestrian"].iloc[0]
     assert row.performance == "succ" and not row.collided and row.max_deceleration <= 5.0
     assert row.min_pedestrian_distance > 2.0
 
 
 @pytest.mark.slow
-def test_late_pedestrians_are_never_hit_under_autopilot(setup, net):
+def test_late_pedestrians_are_never_hit_under_autopilot(setup, late_setup, net):
     """Every pedestrian forced late, with the drawn deceleration of each seed (docs/scenes.md):
-    the emergency brake stops the ego before the person every time, and some of the late step
-    outs need it (a measured `fail`) while others are gentle stops."""
-    rows = []
-    for seed in range(30):
-        record = _run(setup, net, seed, {"pedestrian": {"timing": "late"}})
-        rows.append(record.incidents[record.incidents["incident"] == "pedestrian"].iloc[0])
-    assert not any(row.collided for row in rows)
-    assert all(row.min_pedestrian_distance > 1.0 for row in rows)
-    verdicts = {row.performance for row in rows}
-    assert verdicts == {"succ", "fail"}
+    the emergency brake stops the ego before the person every time. Entered at free speed
+    (INCIDENT_ROUTE) every late step-out needs it (a measured `fail`); entered from the start road
+    (LATE_ROUTE) they are gentle stops (`succ`)."""
+    verdicts = {}
+    for route, where in ((INCIDENT_ROUTE, setup), (LATE_ROUTE, late_setup)):
+        rows = []
+        for seed in range(15):
+            record = _run(where, net, seed, {"pedestrian": {"timing": "late"}}, route=route)
+            rows.append(record.incidents[record.incidents["incident"] == "pedestrian"].iloc[0])
+        assert not any(row.collided for row in rows)
+        assert all(row.min_pedestrian_distance > 1.0 for row in rows)
+        verdicts[route] = {row.performance for row in rows}
+    assert verdicts == {INCIDENT_ROUTE: {"fail"}, LATE_ROUTE: {"succ"}}
 
 
 def test_skipped_reads_change_nothing(setup, net, monkeypatch):
@@ -241,18 +262,19 @@ def test_skipped_reads_change_nothing(setup, net, monkeypatch):
         assert a.incidents["in_view_time"].notna().all()
 
 
+# The benchmark's route through every kind on Town01: E-A, A-B pedestrian, B-C, C-D truck, D-E obstacle.
 OBSTACLE_RUN = '''name = "obstacle_run"
-start = "B-C"
+start = "E-A"
 formula = "F v1"
 
 [states]
-v1 = ["J-K"]
+v1 = ["D-E"]
 '''
 
 
 @pytest.mark.slow
 def test_a_seeded_study_measures_failures_and_the_example_driver_reacts(tmp_path):
-    """Two seeded SUMO studies through the study runner (B-C, C-J obstacle, J-K truck), one with
+    """Two seeded SUMO studies through the study runner (OBSTACLE_RUN on Town01), one with
     the default driver model and one with the example model whose trust drops after `fail`:
     SUMO measures the same failures in both (the scenes do not depend on the driver model), at
     least one; trust trajectories are the same where nothing failed and differ somewhere else."""
@@ -266,10 +288,9 @@ def test_a_seeded_study_measures_failures_and_the_example_driver_reacts(tmp_path
     (tmp_path / "obstacle_run.toml").write_text(OBSTACLE_RUN)
     roads = {}
     for label, model in (("default", None), ("example", str(PERFORMANCE_MODEL))):
-        # On the pentagon, as the module's other scene tests: on Town01's short B-C, C-J, J-K the
-        # 16 participants meet no failure, so there is nothing for the example driver to react to.
-        study = {"name": label, "participants": 16, "seed": 1, "engine": "sumo",
-                 "town": str(PENTAGON_TOWN_PATH),
+        # On the default town. About 3 % of these episodes fail (docs/scenes.md): 100 participants
+        # expect about 3 failures (none with probability about 5 %; the seed is fixed).
+        study = {"name": label, "participants": 100, "seed": 1, "engine": "sumo",
                  "specs": [str(tmp_path / "obstacle_run.toml")], "conditions": ["free"]}
         if model:
             study["driver_model"] = model
@@ -305,3 +326,22 @@ def test_the_leader_subscription_reaches_every_ttc_limit():
     assert leader_horizon(default) >= largest * ROAD_SPEED
     wide = SumoConfig(performance_limits={"none": PerformanceLimits(min_ttc=4.0)})
     assert leader_horizon(wide) >= 4.0 * ROAD_SPEED > leader_horizon(default)
+
+
+def test_an_oncoming_truck_comes_from_the_road_leading_in_unless_unseen(setup, net):
+    """A truck timed to meet the obstacle later than the opposite road alone allows starts on the
+    road leading into it (in SUMO from the injection on, where SUMO's overtaking checks see it);
+    drawn `unseen`, it enters at the opposite road's start only later (docs/scenes.md)."""
+    entered = {}
+    for unseen in (False, True):
+        overrides = {"obstacle": {"oncoming": True, "oncoming_offset": 6.0, "bicycle": False,
+                                  "unseen": unseen}}
+        record, steps = _ego_steps(setup, net, 3, overrides)
+        row = _obstacle_row(record)
+        came_from = row.scene.split("from=")[1].split()[0]
+        first = next(s for s in steps if "inc3.oncoming" in s["objects"])
+        entered[unseen] = (came_from, first["time"] - row.injected_time, first["objects"]["inc3.oncoming"][0])
+    seen_from, seen_after, seen_lane = entered[False]
+    assert seen_from not in ("C-J", "J-C") and seen_lane == f"{seen_from}_1" and seen_after <= 1.0
+    unseen_from, unseen_after, unseen_lane = entered[True]
+    assert unseen_from == "J-C" and unseen_lane == "J-C_1" and unseen_after > 2.0
