@@ -32,7 +32,7 @@ from trustroute.policies.evaluate import (
 )
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.model.joint_belief import joint_filter
+from trustroute.policies.model.joint_belief import distinct_nodes, joint_filter
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER, FallbackPolicy, with_fallback
@@ -45,13 +45,16 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                    belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
                    max_nodes: int = DEFAULT_MAX_NODES, force_joint: bool = False,
                    truth: TrustPOMDP | None = None,
-                   reference: tuple[TrustPOMDP, Spec] | None = None) -> Evaluation:
+                   reference: tuple[TrustPOMDP, Spec] | None = None,
+                   merge: bool = True) -> Evaluation:
     """Certified P(spec satisfied) of `policy`, for any mix of road, belief and trust-state atoms.
 
     Arguments as policies.evaluate.evaluate. `force_joint` runs the joint unfolding even when the
     spec has no trust-state atoms (tests compare it with evaluate there). A true driver other than
     the AV's model (`truth`) or a second reading (`reference`) is evaluated for specs without
-    trust-state atoms only."""
+    trust-state atoms only. `merge` (default) merges, level by level, the histories that reach the
+    same road and beliefs on routes the policy reads alike (`RoutingPolicy.route_memory`): the same
+    value as the tree unfolding (`merge=False`, which tests compare), on far fewer nodes."""
     if not spec.uses_trust_atoms and not force_joint:
         return evaluate(pomdp, spec, policy, fallback_after, max_junctions, belief_rule, prune_below,
                         max_nodes, truth=truth, reference=reference)
@@ -78,6 +81,7 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     posterior = belief_av.copy()
     joint = filter_.initial(start, belief_av[0])
     probability = np.ones(1)
+    memory_ids: dict = {}
 
     mass = {"accepted": 0.0, "rejected": 0.0, "destination": 0.0, "cap": 0.0, "pruned": 0.0,
             "settled": 0.0}
@@ -159,6 +163,16 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                           probability[keep][possible] * p_obs[possible]))
         route_id, road, belief_av, posterior, joint, probability = (
             np.concatenate([part[j] for part in parts]) for j in range(6))
+        if merge:
+            # Histories at the same (road, J, posterior, AV belief) whose routes the policy reads
+            # alike (route_memory) are driven alike from here on: one node, their masses summed.
+            memory_id = np.array([memory_ids.setdefault(policy.route_memory(routes[r]), len(memory_ids))
+                                  for r in route_id.tolist()], dtype=float)
+            first, inverse = distinct_nodes(road, joint, posterior,
+                                            np.concatenate([belief_av, memory_id[:, None]], axis=1))
+            probability = np.bincount(inverse, weights=probability)
+            route_id, road, belief_av, posterior, joint = (
+                a[first] for a in (route_id, road, belief_av, posterior, joint))
         if probability.size > max_nodes:
             order = np.argsort(probability)
             dropped = np.zeros(probability.size, dtype=bool)
@@ -192,6 +206,9 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
 
 
 
+TABLE_CHUNK = 5_000     # nodes moved per batch in evaluate_joint_table (the deadline is checked between)
+
+
 def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: int,
                          belief_rule: BeliefRule = "bayes",
                          max_nodes: int = DEFAULT_MAX_NODES,
@@ -202,8 +219,9 @@ def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: i
     without the fallback. Histories that reach bit-identical (road, J, posterior, AV belief) at the
     same level are merged (their decisions and futures are the same), so this is the unfolding of
     `evaluate_joint` on far fewer nodes; beyond `max_nodes` per level the least likely nodes are
-    dropped, their live mass unknown; past `deadline` (time.perf_counter()) the unfolding stops and
-    the live mass of every open node is unknown."""
+    dropped, their live mass unknown; by `deadline` (time.perf_counter()) the unfolding stops (a
+    batch of TABLE_CHUNK nodes or a level's merge is not begun when, at the last one's pace, it
+    would end past it) and the live mass of every open node is unknown."""
     town, driver = pomdp.town, pomdp.driver
     compiled = compile_spec(spec, town)
     filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
@@ -213,6 +231,7 @@ def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: i
     x, joint, posterior, belief, mass = (np.array([start]), filter_.initial(start, b0[0]), b0.copy(),
                                          b0.copy(), np.ones(1))
     accepted_total, unknown = 0.0, 0.0
+    batch_seconds = merge_rate = 0.0       # the last batch's duration, the last merge's per row
     for level in range(max_junctions + 1):
         accepted, _, live = filter_.masses(joint)
         out_of_time = deadline is not None and level > 0 and time.perf_counter() > deadline
@@ -234,23 +253,46 @@ def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: i
         if not go.any():
             break
         x, joint, posterior, belief, mass = (a[go] for a in (x, joint, posterior, belief, mass))
-        slots = policy.action_slots(level, x, joint, belief)
-        x2 = pomdp.successor_table[x, slots]
-        incident = pomdp.road_incident[x2]
         parts = []
-        for h, e in outcomes:
-            new_posterior, p_obs = pomdp.belief_update(posterior, incident, h, e)
-            new_belief = new_posterior if belief_rule == "bayes" else pomdp.belief_update(
-                belief, incident, h, e, rule=belief_rule)[0]
-            ok = p_obs > 0
-            new_joint = filter_.update(joint[ok], new_posterior[ok], new_belief[ok], x2[ok], incident[ok],
-                                       h, e, p_obs[ok])
-            parts.append((x2[ok], new_joint, new_posterior[ok], new_belief[ok], mass[ok] * p_obs[ok]))
+        late = False
+        for begin in range(0, x.size, TABLE_CHUNK):
+            # A batch is not begun when the last one's duration would take it past the deadline.
+            began = time.perf_counter()
+            late = deadline is not None and began + batch_seconds > deadline
+            if late:
+                # Out of time within the level: the nodes not moved yet keep their accepted
+                # mass; their live mass is unknown.
+                rest_accepted, _, rest_live = filter_.masses(joint[begin:])
+                accepted_total += float(mass[begin:] @ rest_accepted)
+                unknown += float(mass[begin:] @ rest_live)
+                break
+            part = slice(begin, begin + TABLE_CHUNK)
+            slots = policy.action_slots(level, x[part], joint[part], belief[part])
+            x2 = pomdp.successor_table[x[part], slots]
+            incident = pomdp.road_incident[x2]
+            for h, e in outcomes:
+                new_posterior, p_obs = pomdp.belief_update(posterior[part], incident, h, e)
+                new_belief = new_posterior if belief_rule == "bayes" else pomdp.belief_update(
+                    belief[part], incident, h, e, rule=belief_rule)[0]
+                ok = p_obs > 0
+                new_joint = filter_.update(joint[part][ok], new_posterior[ok], new_belief[ok], x2[ok],
+                                           incident[ok], h, e, p_obs[ok])
+                parts.append((x2[ok], new_joint, new_posterior[ok], new_belief[ok],
+                              mass[part][ok] * p_obs[ok]))
+            batch_seconds = time.perf_counter() - began
+        if not parts:
+            break
         x, joint, posterior, belief, mass = (np.concatenate([p[j] for p in parts]) for j in range(5))
-        rows = np.ascontiguousarray(np.concatenate(
-            [x[:, None].astype(float), joint.reshape(x.size, -1), posterior, belief], axis=1))
-        keys = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
-        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        # Nor is the merge, when it would at the last merge's seconds per row.
+        if late or (deadline is not None and time.perf_counter() + merge_rate * x.size > deadline):
+            # The children of the nodes moved: their accepted mass counts, their live mass is unknown.
+            accepted, _, live = filter_.masses(joint)
+            accepted_total += float(mass @ accepted)
+            unknown += float(mass @ live)
+            break
+        began = time.perf_counter()
+        first, inverse = distinct_nodes(x, joint, posterior, belief)
         mass = np.bincount(inverse, weights=mass)
         x, joint, posterior, belief = x[first], joint[first], posterior[first], belief[first]
+        merge_rate = (time.perf_counter() - began) / inverse.size
     return accepted_bounds(accepted_total, unknown)

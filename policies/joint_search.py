@@ -26,15 +26,16 @@ value gets the same allowance.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.policies.bracket import Bracket
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.model.joint_belief import joint_filter
+from trustroute.policies.model.joint_belief import distinct_nodes, joint_filter
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 
 RELAXATION_MARGIN = 1e-12
@@ -43,7 +44,7 @@ MAX_RELAXATION_ITERATIONS = 100_000
 
 
 @dataclass(frozen=True)
-class JointBounds:
+class JointBounds(Bracket):
     lower: float
     upper: float
     depth: int
@@ -52,15 +53,6 @@ class JointBounds:
     cut_nodes: int
     seconds: float
     belief_rule: str
-
-    @property
-    def gap(self) -> float:
-        return self.upper - self.lower
-
-    def to_dict(self) -> dict:
-        out = asdict(self)
-        out["gap"] = self.gap
-        return out
 
 
 def _relaxed_next_q(pomdp: TrustPOMDP, spec: Spec, dfa: DFA, labeller: Labeller) -> np.ndarray:
@@ -121,7 +113,8 @@ def relaxed_values(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) ->
 
 
 OPEN_LOOP_STEPS = 30          # junctions of the open-loop continuation at unbounded leaves
-OPEN_LOOP_CHUNK = 20_000      # nodes per vectorised batch of the open-loop continuation
+OPEN_LOOP_CHUNK = 4_000       # nodes per vectorised batch of the open-loop continuation
+EXPAND_SHARE = 0.5            # with a deadline: share of the time for the forward pass
 
 
 def _open_loop_accepted(pomdp: TrustPOMDP, next_q: np.ndarray, move: np.ndarray, guide,
@@ -183,8 +176,24 @@ def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
 
 def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
                  belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
-                 max_nodes: int = 200_000) -> tuple[JointBounds, JointDecisions]:
-    """joint_bounds, and the lower-greedy decisions at the expanded nodes (JointDecisions)."""
+                 max_nodes: int = 200_000, guide: RelaxedGuide | None = None,
+                 guided_nodes: int = 0,
+                 deadline: float | None = None) -> tuple[JointBounds, JointDecisions]:
+    """joint_bounds, and the lower-greedy decisions at the expanded nodes (JointDecisions).
+
+    With a `guide` (the acting rule of the joint policy off its stored rows), the nodes ranked
+    just below the `max_nodes` likeliest of a level (up to `guided_nodes` more) are expanded
+    with the guide's action only, and their lower value is that action's backed-up value: the
+    lower bound is then the value of exactly the policy JointTablePolicy builds from the
+    decisions (stored action at fully expanded nodes, the guide's elsewhere), short of the
+    nodes beyond both caps, which are worth their accepted mass (at most that policy's value
+    there). Without a guide, cut nodes are leaves valued by the open-loop continuation.
+
+    With a `deadline` (time.perf_counter()) the search returns by it, up to one level's or one
+    chunk's work: past EXPAND_SHARE of the time left, checked before each level is expanded, the
+    open nodes of that level become leaves worth their accepted mass (lower) and the relaxation
+    (upper); past the deadline, the leaves not yet valued by the open-loop continuation keep
+    their accepted mass. The bounds stay sound either way."""
     started = time.perf_counter()
     if horizon is not None:
         depth = horizon
@@ -200,20 +209,24 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     slots = pomdp.successor_table.shape[1]
 
     # Where the labels do not read the belief, cut nodes and unbounded leaves get the value of an
-    # open-loop continuation as their lower bound instead of their accepted mass alone.
+    # open-loop continuation as their lower bound instead of their accepted mass alone; not with
+    # a guide, whose lower bound is the value of what the policy does (the guide, not open loop).
     relaxed_q = _relaxed_next_q(pomdp, spec, dfa, labeller)
     open_loop = bool(np.all(relaxed_q == relaxed_q[..., :1]))
     move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, driver.trust_transition)
 
-    def guide(k: int) -> np.ndarray:
+    def relaxed_at(k: int) -> np.ndarray:
         return relaxed[min(k, horizon)] if horizon is not None else relaxed
 
     def open_loop_lower(x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        """The open-loop continuation's value; 0 (no claim) for the chunks past the deadline."""
         steps = left if horizon is not None else OPEN_LOOP_STEPS
-        out = np.empty(x.size)
+        out = np.zeros(x.size)
         for begin in range(0, x.size, OPEN_LOOP_CHUNK):
+            if deadline is not None and time.perf_counter() > deadline:
+                break
             part = slice(begin, begin + OPEN_LOOP_CHUNK)
-            out[part] = _open_loop_accepted(pomdp, relaxed_q[..., 0], move, guide, x[part],
+            out[part] = _open_loop_accepted(pomdp, relaxed_q[..., 0], move, relaxed_at, x[part],
                                             joint[part], steps, accepting)
         return out
 
@@ -228,23 +241,35 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     levels = [dict(x=np.array([start]), joint=filter_.initial(start, b0[0]), posterior=b0.copy(),
                    belief=b0.copy(), mass=np.ones(1))]
     edges = []          # per level: (parent, slot, child, p_obs) for the children of that level
-    expandable = []     # per level: bool per node
+    expandable = []     # per level: bool per node, expanded with every action
+    guided_slot = []    # per level: the guide's action slot per node expanded with it alone, else -1
     cut_total = 0
+    stopped = False     # the expansion's time is up: no further level is expanded
+    # The forward pass gets EXPAND_SHARE of the time, the backward pass (open-loop values) the rest.
+    expand_until = None if deadline is None else started + EXPAND_SHARE * (deadline - started)
     for level in range(depth + 1):
         nodes = levels[-1]
         _, _, live = filter_.masses(nodes["joint"])
-        grow = (live > 0) & (nodes["mass"] >= prune_below) & (level < depth)
-        if "frozen" in nodes:
-            grow &= ~nodes["frozen"]
-        cut_total += int(((live > 0) & ~grow & (level < depth)).sum())
+        open_ = (live > 0) & (nodes["mass"] >= prune_below) & (level < depth)
+        if expand_until is not None and time.perf_counter() > expand_until:
+            stopped = True
+            grow = np.zeros_like(open_)
+        else:
+            grow = open_ & ~nodes["frozen"] if "frozen" in nodes else open_
+        follow = np.full(grow.size, -1, dtype=np.int64)
+        if "guided" in nodes and not stopped:
+            along = open_ & nodes["guided"]
+            follow[along] = guide.policy_slots(level, nodes["x"][along], nodes["joint"][along])
+        cut_total += int((open_ & ~grow).sum())
         expandable.append(grow)
-        if level == depth or not grow.any():
+        guided_slot.append(follow)
+        if level == depth or not (grow | (follow >= 0)).any():
             break
-        parents = np.flatnonzero(grow)
+        parents = np.flatnonzero(grow | (follow >= 0))
         child_parts = []
         for slot in range(slots):
             x2 = pomdp.successor_table[nodes["x"][parents], slot]
-            has = x2 >= 0
+            has = (x2 >= 0) & ((follow[parents] < 0) | (follow[parents] == slot))
             p_idx, x2 = parents[has], x2[has]
             incident = pomdp.road_incident[x2]
             for h, e in outcomes:
@@ -259,19 +284,17 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         parent, slot_of, x2, joint, posterior, belief, p_obs, mass = (
             np.concatenate([c[j] for c in child_parts]) for j in range(8))
         # Merge children with bit-identical (road, J, posterior, AV belief).
-        rows = np.concatenate([x2[:, None].astype(float), joint.reshape(len(x2), -1), posterior, belief],
-                              axis=1)
-        rows = np.ascontiguousarray(rows)
-        keys = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
-        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        first, inverse = distinct_nodes(x2, joint, posterior, belief)
         merged_mass = np.bincount(inverse, weights=mass)
         child = dict(x=x2[first], joint=joint[first], posterior=posterior[first], belief=belief[first],
                      mass=merged_mass)
-        if first.size > max_nodes:      # keep the likeliest nodes; the others become cut leaves
+        if first.size > max_nodes:      # keep the likeliest nodes; the others are cut
             order = np.argsort(-merged_mass, kind="stable")
-            keep_child = np.zeros(first.size, dtype=bool)
-            keep_child[order[:max_nodes]] = True
-            child["frozen"] = ~keep_child
+            rank = np.empty(first.size, dtype=np.int64)
+            rank[order] = np.arange(first.size)
+            child["frozen"] = rank >= max_nodes
+            if guide is not None:       # the next ones follow the guide, the rest are leaves
+                child["guided"] = child["frozen"] & (rank < max_nodes + guided_nodes)
         levels.append(child)
         edges.append((parent, slot_of, inverse, p_obs))
 
@@ -283,7 +306,10 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         nodes = levels[level]
         left = depth - level
         low, high = leaf_bounds(nodes["x"], nodes["joint"], left)
-        leaf = ~expandable[level] if level < len(expandable) else np.ones(low.size, dtype=bool)
+        if level < len(expandable):
+            leaf = ~expandable[level] & (guided_slot[level] < 0)
+        else:
+            leaf = np.ones(low.size, dtype=bool)
         leaf &= filter_.masses(nodes["joint"])[2] > 0
         if open_loop and leaf.any() and (horizon is None or left > 0):
             low[leaf] = np.maximum(low[leaf], open_loop_lower(nodes["x"][leaf], nodes["joint"][leaf], left))
@@ -302,6 +328,11 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
             tied = has & (sum_low >= best_low[:, None])
             slot = np.where(tied, sum_high, -np.inf).argmax(axis=1)
             decided.append((level, np.flatnonzero(grow), slot[grow]))
+            # Nodes that follow the guide: worth what its action gives (lower); the relaxation
+            # stays their upper bound (the optimum may act otherwise).
+            follow = guided_slot[level]
+            along = np.flatnonzero(follow >= 0)
+            low[along] = sum_low[along, follow[along]]
             low = np.where(grow, best_low, low)
             high = np.where(grow, np.minimum(1.0, best_high), high)
         lower, upper = low, high
@@ -356,6 +387,14 @@ class RelaxedGuide:
     def greedy(self, x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
         """int [n]: the slot of the largest action value (the first on ties)."""
         return np.argmax(self.action_values(x, joint, left), axis=1)
+
+    def policy_slots(self, t: int, x: np.ndarray, joint: np.ndarray) -> np.ndarray:
+        """int [n]: the greedy slot at t junctions driven, k = horizon - t - 1 junctions left
+        after the move (the full horizon once t reaches it). The joint policy's rule off its
+        stored rows; the search expands its guided nodes with the very same call."""
+        horizon = self.horizon
+        left = horizon - t - 1 if horizon is not None and t < horizon else (horizon or 0)
+        return self.greedy(x, joint, left)
 
 
 def relaxed_guide(pomdp: TrustPOMDP, spec: Spec, horizon: int | None) -> RelaxedGuide:

@@ -12,6 +12,7 @@ from collections.abc import Callable
 
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+from trustroute.policies.synthesis.arguments import check_synthesis_arguments
 from trustroute.policies.synthesis.search import SynthesisResult, synthesize
 
 
@@ -20,12 +21,7 @@ def synthesize_spec(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit
                     on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
     """lower <= Pr_max(spec) <= upper and a policy whose value is at least lower (see `synthesize`)."""
     if spec.uses_trust_atoms:
-        if tau <= 0:
-            raise ValueError("tau must be positive")
-        if horizon is not None and horizon < 0:
-            raise ValueError("horizon must be >= 0")
-        if belief_rule not in ("bayes", "paper"):
-            raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
+        check_synthesis_arguments(tau, horizon, belief_rule)
         from trustroute.policies.joint_synthesis import synthesize_joint
 
         return synthesize_joint(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,

@@ -94,5 +94,36 @@ class JointFilter:
             marginal[:, live].sum(axis=1)
 
 
+def _hash_multipliers(width: int) -> np.ndarray:
+    """Fixed odd 64-bit multipliers, one per column (the same on every call and machine)."""
+    return np.random.default_rng(20261201).integers(0, 2**63, size=width, dtype=np.uint64) * 2 + 1
+
+
+def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(first, inverse) for the bit-identical rows of a float matrix [n, width]: first[k] is the
+    first row of the k-th distinct row, inverse[i] the distinct row of row i. The rows are
+    grouped by a 64-bit hash of their bits (sorting n integers instead of n byte strings) and the
+    grouping is then checked bit for bit; should two different rows share a hash, the rows' bytes
+    are sorted instead. Groups are numbered in hash order."""
+    rows = np.ascontiguousarray(rows, dtype=float)
+    if rows.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    bits = rows.view(np.uint64)
+    hashes = (bits * _hash_multipliers(rows.shape[1])[None, :]).sum(axis=1, dtype=np.uint64)
+    _, first, inverse = np.unique(hashes, return_index=True, return_inverse=True)
+    if not np.array_equal(bits, bits[first[inverse]]):
+        keys = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
+        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    return first, inverse.ravel()
+
+
+def distinct_nodes(x: np.ndarray, joint: np.ndarray, posterior: np.ndarray,
+                   belief: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """distinct_rows of belief-tree nodes by (road, J, posterior, AV belief): nodes equal in all
+    four have the same decisions and futures, so the searches and evaluations merge them."""
+    return distinct_rows(np.concatenate([np.asarray(x)[:, None].astype(float),
+                                         joint.reshape(len(x), -1), posterior, belief], axis=1))
+
+
 def joint_filter(pomdp: TrustPOMDP, dfa: DFA, labeller: Labeller) -> JointFilter:
     return JointFilter(pomdp=pomdp, dfa=dfa, labeller=labeller)

@@ -13,10 +13,11 @@ from __future__ import annotations
 import importlib.util
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.networks.errors import InputError
+from trustroute.policies.bracket import Bracket
 from trustroute.policies.peer.product_pomdp import ExplicitProduct
 
 INSTALL_HINT = "install the optional peer extra: pip install 'trustroute[peer]' (stormpy==2.0.0)"
@@ -33,7 +34,7 @@ def require_storm(source: str = "stormpy") -> None:
 
 
 @dataclass(frozen=True)
-class StormResult:
+class StormResult(Bracket):
     lower: float
     upper: float
     lower_seconds: float
@@ -48,15 +49,6 @@ class StormResult:
     upper_beliefs: int
     resolution: int
     time_limit: float
-
-    @property
-    def gap(self) -> float:
-        return self.upper - self.lower
-
-    def to_dict(self) -> dict:
-        out = asdict(self)
-        out["gap"] = self.gap
-        return out
 
 
 def build_storm_model(product: ExplicitProduct):

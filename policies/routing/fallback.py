@@ -13,6 +13,8 @@ episode's rules is in policies/routing/episode_rules.py.
 
 from __future__ import annotations
 
+from collections.abc import Hashable
+
 from trustroute.networks.town import Town
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA
@@ -46,6 +48,11 @@ class FallbackPolicy(RoutingPolicy):
         if context.junctions_driven >= self.after:
             return True
         return bool(self.inner.route_determined(context))
+
+    def route_memory(self, route: tuple[str, ...]) -> Hashable:
+        """The inner policy's memory and the state-only task's projected state (all the fallback
+        reads of the route)."""
+        return self.inner.route_memory(route), self.task.projected_state(route)
 
     def finished(self, context: DecisionContext) -> bool:
         if self.fallback_active(context):

@@ -65,7 +65,7 @@ class JointTablePolicy(RoutingPolicy):
 
     def __init__(self, table: JointPolicyTable, pomdp: TrustPOMDP, spec: Spec, guide_horizon: int | None,
                  name: str = "aware", lower: float | None = None, upper: float | None = None,
-                 horizon: int | None = None) -> None:
+                 horizon: int | None = None, guide: RelaxedGuide | None = None) -> None:
         self.table = table
         self.lower, self.upper, self.horizon = lower, upper, horizon   # as certified by synthesis
         self.pomdp = pomdp
@@ -73,7 +73,9 @@ class JointTablePolicy(RoutingPolicy):
         self.spec = spec
         self.name = name
         self.guide_horizon = guide_horizon
-        self._guide: RelaxedGuide | None = None
+        if guide is not None and guide.horizon != guide_horizon:
+            raise ValueError(f"guide of horizon {guide.horizon}, policy of guide horizon {guide_horizon}")
+        self._guide: RelaxedGuide | None = guide      # None: built from the spec on first use
         self._points = table.points()
         n_x = len(self.town.states)
         keys = table.t * n_x + table.x
@@ -127,10 +129,12 @@ class JointTablePolicy(RoutingPolicy):
         slots = self.stored_actions(t, x, joint, beliefs)
         rest = np.flatnonzero(slots < 0)
         if rest.size:
-            horizon = self.guide_horizon
-            left = horizon - t - 1 if horizon is not None and t < horizon else (horizon or 0)
-            slots[rest] = self.guide.greedy(x[rest], joint[rest], left)
+            slots[rest] = self.guide.policy_slots(t, x[rest], joint[rest])
         return slots
+
+    def route_memory(self, route: tuple[str, ...]) -> tuple:
+        """Nothing: the decision is a function of (junctions driven, road, J, AV belief)."""
+        return ()
 
     def certified_bounds(self) -> tuple[float, float] | None:
         if self.lower is None or self.upper is None:

@@ -10,6 +10,7 @@ around the policy (when it ends, the fallback) are in policies/routing/episode_r
 
 from __future__ import annotations
 
+from collections.abc import Hashable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -58,6 +59,11 @@ class RoutingPolicy(Protocol):
     - `fallback_active(context)`: the 20-junction fallback, not the policy, drives here;
       default no (only the fallback wrapper says yes).
     - `certified_bounds()`: the (lower, upper) synthesis certified for this policy, or None.
+    - `route_memory(route)`: what of the roads driven this policy's decisions (`next_junction`,
+      `finished`, `fallback_active`) read, now and later, besides the current road, the junctions
+      driven, the DFA state told and the beliefs; two histories equal in all of these are driven
+      alike from here on, so evaluators may merge them (policies/evaluate_joint.py). Default: the
+      whole route (histories on different routes never merge).
     """
 
     name: str
@@ -75,3 +81,6 @@ class RoutingPolicy(Protocol):
 
     def certified_bounds(self) -> tuple[float, float] | None:
         return None
+
+    def route_memory(self, route: tuple[str, ...]) -> Hashable:
+        return route

@@ -28,7 +28,7 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.routing.files import array_path, load_policy, save_policy
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
-from trustroute.policies.synthesis.version import SYNTHESIS_VERSION
+from trustroute.policies.synthesis.version import JOINT_SYNTHESIS_VERSION, SYNTHESIS_VERSION
 from trustroute.policies.synthesize_spec import synthesize_spec as synthesize
 
 AWARE_HORIZON = DEFAULT_FALLBACK_AFTER   # synthesize for the junctions before the fallback takes over
@@ -36,14 +36,21 @@ AWARE_TAU = 1e-3
 AWARE_TIME_LIMIT = 120.0
 
 
+def _code_version(spec: Spec) -> str:
+    """The synthesis code's part of a cache key: SYNTHESIS_VERSION, and for specs with trust-state
+    atoms (synthesized by policies/joint_synthesis.py) also JOINT_SYNTHESIS_VERSION."""
+    joint = f"+joint={JOINT_SYNTHESIS_VERSION}" if spec.uses_trust_atoms else ""
+    return f"synthesis={SYNTHESIS_VERSION}{joint}"
+
+
 def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path | None,
                      horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes") -> Path:
     """Cache entry of the "aware" policy for these inputs (horizon None: unbounded; cache_dir None:
     the policies folder of the cache root, trustroute.networks.cache). The key covers the inputs'
-    contents, the settings and the synthesis code's version (SYNTHESIS_VERSION)."""
+    contents, the settings and the synthesis code's version (`_code_version`)."""
     key = hashlib.sha256("|".join((town.content_hash, driver.content_hash, spec.content_hash,
                                    f"H={horizon}", f"tau={AWARE_TAU}", belief_rule,
-                                   f"synthesis={SYNTHESIS_VERSION}")).encode())
+                                   _code_version(spec))).encode())
     folder = Path(cache_dir) if cache_dir else cache_dir_of(POLICIES)
     # The spec name is only a readable label here (the key identifies the entry): keep it to
     # file-name characters so no name can point outside the cache.
@@ -146,7 +153,7 @@ def population_cache_path(town: Town, population, spec: Spec, objective: str,
     key = hashlib.sha256("|".join((town.content_hash, population.content_hash, spec.content_hash,
                                    objective, f"H={horizon}", f"tau={AWARE_TAU}", belief_rule,
                                    f"grid={POPULATION_GRID_POINTS}",
-                                   f"synthesis={SYNTHESIS_VERSION}")).encode())
+                                   _code_version(spec))).encode())
     folder = Path(cache_dir) if cache_dir else cache_dir_of(POLICIES)
     label = re.sub(r"[^A-Za-z0-9_.+-]", "_", spec.name)[:48].lstrip(".") or "spec"
     return folder / f"{objective}-{label}-{key.hexdigest()[:16]}.json"

@@ -56,6 +56,7 @@ from trustroute.policies.model.product_mdp import ProductTables, build_product
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
 from trustroute.policies.routing.free import state_only_task
+from trustroute.policies.synthesis.arguments import check_synthesis_arguments
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols, suffix_cells
 from trustroute.policies.synthesis.completion_value import FreeRoute, completion_bounds
 from trustroute.policies.synthesis.end_components import unbounded_bound
@@ -1083,12 +1084,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     (COMPLETION_MODES; "auto": exact trees, so that lower is the policy's exact value, until the
     search graph is large, then cluster bounds; docs/synthesis.md, "Open nodes and the acting rule").
     """
-    if tau <= 0:
-        raise ValueError("tau must be positive")
-    if horizon is not None and horizon < 0:
-        raise ValueError("horizon must be >= 0")
-    if belief_rule not in ("bayes", "paper"):
-        raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
+    check_synthesis_arguments(tau, horizon, belief_rule)
     if completion not in COMPLETION_MODES:
         raise ValueError(f"unknown completion {completion!r}; use one of {', '.join(COMPLETION_MODES)}")
     started = time.perf_counter()

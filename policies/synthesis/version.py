@@ -7,3 +7,9 @@ by older code are then no longer found and are synthesized again.
 """
 
 SYNTHESIS_VERSION = "3"
+
+# The same for the synthesis of specs with trust-state atoms (policies/joint_synthesis.py,
+# joint_search.py, evaluate_joint.py's evaluate_joint_table, model/joint_belief.py,
+# routing/joint_table.py): part of the key of those specs' cached policies only, so a change
+# there rebuilds them and leaves every other cached policy valid.
+JOINT_SYNTHESIS_VERSION = "2"

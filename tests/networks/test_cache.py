@@ -43,6 +43,16 @@ def test_policy_key_changes_with_the_synthesis_version(monkeypatch, town, driver
     assert after != before and after.parent == before.parent
 
 
+def test_the_joint_synthesis_version_keys_the_policies_of_trust_state_specs_only(monkeypatch, town,
+                                                                                 driver):
+    joint = load_spec("specs/phi1_trust.toml", town)
+    plain = load_spec("specs/phi1.toml", town)
+    before = [resolve.aware_cache_path(town, driver, spec, None) for spec in (joint, plain)]
+    monkeypatch.setattr(resolve, "JOINT_SYNTHESIS_VERSION", version.JOINT_SYNTHESIS_VERSION + "-next")
+    after = [resolve.aware_cache_path(town, driver, spec, None) for spec in (joint, plain)]
+    assert after[0] != before[0] and after[1] == before[1]
+
+
 def test_content_hashes_are_computed_once(town, driver):
     spec = load_spec("specs/phi1.toml", town)
     for thing in (town, driver, spec):

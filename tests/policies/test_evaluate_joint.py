@@ -19,6 +19,7 @@ from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import DecisionContext
+from trustroute.policies.synthesize_spec import synthesize_spec
 
 
 @pytest.mark.slow
@@ -35,6 +36,24 @@ def test_exact_value_equals_brute_force_over_trust_paths(driver, seed, kind, cap
         assert exact.gap == 0.0
         assert exact.lower == pytest.approx(reference, abs=1e-10)
         assert sum(exact.end_mass.values()) == pytest.approx(1.0, abs=1e-10)
+
+
+def test_merged_unfolding_equals_the_tree_unfolding(pomdp):
+    """Merging equal (road, J, beliefs, route memory) nodes changes no number of the evaluation:
+    the synthesized joint policy with the fallback (its memory: the projected state) and the
+    trust-free route (its memory: the whole route), on φ1 with the trust atom."""
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    synthesized = synthesize_spec(pomdp, spec, horizon=6, time_limit=20).policy
+    for policy, fallback_after in ((synthesized, 4), (trust_free_policy(pomdp.town, spec), None)):
+        merged, tree = (evaluate_joint(pomdp, spec, policy, fallback_after=fallback_after,
+                                       max_junctions=12, merge=merge) for merge in (True, False))
+        assert tree.gap == 0.0 and merged.gap == 0.0
+        for name in ("lower", "upper", "expected_final_trust", "expected_junctions",
+                     "fallback_probability"):
+            assert getattr(merged, name) == pytest.approx(getattr(tree, name), abs=1e-12), name
+        for reason, value in tree.end_mass.items():
+            assert merged.end_mass[reason] == pytest.approx(value, abs=1e-12), reason
+    assert merged.nodes <= tree.nodes
 
 
 def simulate_hidden_trust(pomdp, spec, policy, episodes, rng, max_junctions):

@@ -9,8 +9,11 @@ from hypothesis import strategies as st
 
 from tests.policies.trust_paths import optimum
 from tests.policies.trust_specs import random_problem
-from trustroute.policies.joint_search import joint_bounds, relaxed_values
+from trustroute.policies.evaluate_joint import evaluate_joint_table
+from trustroute.policies.joint_search import joint_bounds, joint_search, relaxed_guide, relaxed_values
+from trustroute.policies.joint_synthesis import decision_table
 from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.joint_table import JointTablePolicy
 from trustroute.policies.synthesis.exact_search import exact_optimum
 
 TOLERANCE = 1e-9
@@ -54,3 +57,22 @@ def test_a_search_cut_to_few_nodes_still_brackets_the_exact_value(pomdp):
     assert cut.cut_nodes > 0 and exact.cut_nodes == 0
     assert cut.lower - TOLERANCE <= exact.lower <= cut.upper + TOLERANCE
     assert cut.nodes < exact.nodes / 10
+
+
+def test_with_a_guide_the_cut_search_lower_bound_is_the_value_of_the_policy_it_returns(pomdp):
+    """Nodes below the expanded ones follow the policy's own rule off its rows (the guide), so
+    with room for all of them the search's lower bound is exactly the returned policy's value."""
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    horizon = 10
+    guide = relaxed_guide(pomdp, spec, horizon)
+    bounds, decisions = joint_search(pomdp, spec, horizon, horizon, max_nodes=20, guide=guide,
+                                     guided_nodes=10**7)
+    assert bounds.cut_nodes > 0
+    policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=horizon, horizon=horizon)
+    value = evaluate_joint_table(pomdp, spec, policy, horizon)
+    assert value[0] == value[1]
+    assert bounds.lower == pytest.approx(value[0], abs=1e-12)
+    # Without the guide the open-loop continuation the search credits is not what the policy does.
+    open_loop, decisions = joint_search(pomdp, spec, horizon, horizon, max_nodes=20)
+    policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=horizon, horizon=horizon)
+    assert abs(open_loop.lower - evaluate_joint_table(pomdp, spec, policy, horizon)[0]) > 1e-9

@@ -13,6 +13,7 @@ from trustroute.harness.episode_tracker import EpisodeSetup
 from trustroute.harness.model_engine import run_model_episode
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.evaluate_joint import evaluate_joint, evaluate_joint_table
+from trustroute.policies.joint_search import joint_bounds
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.joint_table import JointTablePolicy
 from trustroute.policies.synthesize_spec import synthesize_spec
@@ -71,6 +72,18 @@ def test_merged_evaluation_equals_the_tree_unfolding_of_evaluate_joint(pomdp):
         assert merged[0] == pytest.approx(tree.lower, abs=1e-12)
     assert result.lower == pytest.approx(evaluate_joint(pomdp, spec, result.policy, fallback_after=None,
                                                         max_junctions=8).lower, abs=1e-12)
+
+
+def test_a_time_limit_shorter_than_the_first_round_stops_it_with_sound_bounds(pomdp):
+    """The deadline is checked before the first level is expanded: a limit that has passed by then
+    leaves the root a leaf (one node), and the bounds still bracket the exact optimum."""
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    exact = joint_bounds(pomdp, spec, depth=0, horizon=8)
+    assert exact.cut_nodes == 0 and exact.nodes > 1000
+    result = synthesize_spec(pomdp, spec, horizon=8, time_limit=1e-6)
+    assert [run["nodes"] for run in result.stats["runs"]] == [1]
+    assert result.lower - TOLERANCE <= exact.lower <= result.upper + TOLERANCE
+    assert result.upper < 1.0
 
 
 @pytest.mark.slow

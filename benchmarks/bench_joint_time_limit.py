@@ -1,0 +1,32 @@
+"""How closely the synthesis of specs with trust-state atoms keeps to its time limit.
+
+φ1 with the trust atom θ >= 6 on the paper's town and on the 5 × 5 grid of bench_storm, H = 20,
+τ so small that the rounds never stop by convergence: each run ends by its time limit, with limits
+shorter and longer than one round. Reports the wall time and its ratio to the limit (the target:
+at most 1.02) beside the bounds returned.
+"""
+
+from __future__ import annotations
+
+import time
+
+from benchmarks.bench_storm import HORIZON, _problem
+
+RUNS = (("paper", 0.5), ("paper", 2.0), ("paper", 4.0), ("grid25", 4.0))
+TAU = 1e-12
+
+
+def run() -> list[dict]:
+    from trustroute.policies.synthesize_spec import synthesize_spec
+
+    results = []
+    for town_kind, limit in RUNS:
+        pomdp, spec = _problem(town_kind)
+        started = time.perf_counter()
+        result = synthesize_spec(pomdp, spec, tau=TAU, time_limit=limit, horizon=HORIZON)
+        seconds = time.perf_counter() - started
+        results.append({"name": f"joint_time_limit_{town_kind}_{limit:g}s", "time_limit": limit,
+                        "seconds": seconds, "ratio_to_limit": seconds / limit,
+                        "rounds": len(result.stats["runs"]), "lower": result.lower,
+                        "upper": result.upper})
+    return results
