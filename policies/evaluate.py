@@ -71,6 +71,7 @@ class Evaluation:
     fallback_after: int | None
     max_junctions: int
     reference_accepted: float | None = None   # mass the reference reading accepts (`reference`)
+    pruning: dict | None = None   # the joint unfolding's limits and what each cut (evaluate_joint)
 
     @property
     def gap(self) -> float:
@@ -83,8 +84,9 @@ class Evaluation:
 
     def to_dict(self) -> dict:
         out = asdict(self)
-        if self.reference_accepted is None:
-            del out["reference_accepted"]
+        for optional in ("reference_accepted", "pruning"):
+            if out[optional] is None:
+                del out[optional]
         out["gap"] = self.gap
         out["satisfaction_probability"] = self.satisfaction_probability
         return out

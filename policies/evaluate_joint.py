@@ -38,15 +38,22 @@ from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER, FallbackPolicy, with_fallback
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
+# Defaults for specs with trust-state atoms (docs/trust_states.md, "Bounded evaluation"): the
+# unfolding keeps the JOINT_MAX_NODES likeliest nodes of each level, which bounds its cost by
+# about cap x 4 x JOINT_MAX_NODES node updates (the default cap in a few seconds on phi1_trust);
+# histories below JOINT_PRUNE_BELOW are dropped as in policies.evaluate.
+JOINT_MAX_NODES = 5_000
+JOINT_PRUNE_BELOW = DEFAULT_PRUNE_BELOW
+
 
 def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                    fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
                    max_junctions: int = DEFAULT_JUNCTION_CAP,
-                   belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
-                   max_nodes: int = DEFAULT_MAX_NODES, force_joint: bool = False,
+                   belief_rule: BeliefRule = "bayes", prune_below: float | None = None,
+                   max_nodes: int | None = None, force_joint: bool = False,
                    truth: TrustPOMDP | None = None,
                    reference: tuple[TrustPOMDP, Spec] | None = None,
-                   merge: bool = True) -> Evaluation:
+                   merge: bool = True, time_limit: float | None = None) -> Evaluation:
     """Certified P(spec satisfied) of `policy`, for any mix of road, belief and trust-state atoms.
 
     Arguments as policies.evaluate.evaluate. `force_joint` runs the joint unfolding even when the
@@ -54,20 +61,44 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     the AV's model (`truth`) or a second reading (`reference`) is evaluated for specs without
     trust-state atoms only. `merge` (default) merges, level by level, the histories that reach the
     same road and beliefs on routes the policy reads alike (`RoutingPolicy.route_memory`): the same
-    value as the tree unfolding (`merge=False`, which tests compare), on far fewer nodes."""
+    value as the tree unfolding (`merge=False`, which tests compare), on far fewer nodes.
+
+    Pruning (the unfolding is exponential in the cap: distinct histories almost never reach equal
+    beliefs): a branch whose live mass is below `prune_below`, a node beyond the `max_nodes` of
+    its level with the most live mass,
+    and every branch still open `time_limit` seconds after the start are not followed; their
+    accepted mass counts, their live mass is unknown (end_mass["pruned"] = upper - lower). The
+    defaults are policies.evaluate's for specs without trust-state atoms (which go there unchanged)
+    and JOINT_PRUNE_BELOW, JOINT_MAX_NODES (no time limit) otherwise; `pruning` reports them and
+    what they cut."""
     if not spec.uses_trust_atoms and not force_joint:
-        return evaluate(pomdp, spec, policy, fallback_after, max_junctions, belief_rule, prune_below,
-                        max_nodes, truth=truth, reference=reference)
+        if time_limit is not None:
+            raise ValueError("a time limit applies to specs with trust-state atoms only")
+        return evaluate(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,
+                        DEFAULT_PRUNE_BELOW if prune_below is None else prune_below,
+                        DEFAULT_MAX_NODES if max_nodes is None else max_nodes,
+                        truth=truth, reference=reference)
     if truth is not None or reference is not None:
         raise ValueError("a separate true driver or reference reading is not evaluated for specs with "
                          "trust-state atoms")
     started = time.perf_counter()
+    prune_below = JOINT_PRUNE_BELOW if prune_below is None else prune_below
+    max_nodes = JOINT_MAX_NODES if max_nodes is None else max_nodes
+    deadline = None if time_limit is None else started + time_limit
+    cut = {"below_threshold": 0.0, "beyond_budget": 0.0, "past_deadline": 0.0}
+    cut_nodes = {"below_threshold": 0, "beyond_budget": 0, "past_deadline": 0}
+    first_cut_level: int | None = None
     town, driver = pomdp.town, pomdp.driver
     if fallback_after is not None and not isinstance(policy, FallbackPolicy):
         policy = with_fallback(policy, town, spec, after=fallback_after)
     fallback_level = policy.after if isinstance(policy, FallbackPolicy) else None
+    # A policy that decides batches of nodes at once (JointTablePolicy.prefetch) is given each
+    # level's nodes in one call before the episode rules ask it node by node.
+    batched = getattr(policy.inner if isinstance(policy, FallbackPolicy) else policy, "prefetch", None)
+    batched = None if batched is None else batched.__self__
     compiled = compile_spec(spec, town)
     filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
+    accepting = np.asarray(compiled.dfa.accepting, dtype=bool)
     levels = np.asarray(driver.trust_levels, dtype=float)
     outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
     successor_index = {(x, j): town.state_index(town.successor(road, j))
@@ -92,14 +123,19 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     nodes = 1
     max_frontier = 1
 
-    def end(mask: np.ndarray, reason: str, level: int) -> None:
-        """Branches ending here: accepted and rejected mass by J, the live rest by `reason`."""
-        nonlocal trust_sum, junction_sum, ended_mass
+    def end(mask: np.ndarray, reason: str, level: int, why: str = "") -> None:
+        """Branches ending here: accepted and rejected mass by J, the live rest by `reason` (for
+        "pruned", `why` names the cut)."""
+        nonlocal trust_sum, junction_sum, ended_mass, first_cut_level
         p = probability[mask]
         accepted, rejected, live = filter_.masses(joint[mask])
         mass["accepted"] += float(p @ accepted)
         mass["rejected"] += float(p @ rejected)
         mass[reason] += float(p @ live)
+        if reason == "pruned" and p.size:
+            cut[why] += float(p @ live)
+            cut_nodes[why] += int(p.size)
+            first_cut_level = level if first_cut_level is None else first_cut_level
         if reason != "pruned":
             ended_mass += float(p.sum())
             trust_sum += float(p @ (posterior[mask] @ levels))
@@ -110,27 +146,49 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
         settled = live <= 0
         end(settled, "settled", level)
         alive = ~settled
-        tiny = alive & (probability < prune_below)
-        end(tiny, "pruned", level)
+        if deadline is not None and level > 0 and time.perf_counter() > deadline:
+            end(alive, "pruned", level, "past_deadline")
+            break
+        # What pruning a node costs is its live mass (its accepted mass is counted anyway).
+        tiny = alive & (probability * live < prune_below)
+        end(tiny, "pruned", level, "below_threshold")
         alive &= ~tiny
         if not alive.any():
             break
         keep = np.flatnonzero(alive)
         told_q = filter_.likeliest_q(joint[keep])
+        told_accepting = accepting[told_q]
+        if batched is not None:
+            batched.prefetch(level, road[keep], joint[keep], belief_av[keep])
 
         finished = np.zeros(keep.size, dtype=bool)
         fired = np.zeros(keep.size, dtype=bool)
         chosen = np.full(keep.size, -1, dtype=np.int64)
         decisions: dict[tuple[int, int, bytes, bytes], tuple[bool, bool, int]] = {}
+        # A policy whose decision on a route is the same for every belief and non-accepting DFA
+        # state (route_determined: the fallback phase, the trust-free route) is asked once per
+        # route told a non-accepting state (an accepting one may switch the fallback off); None
+        # marks routes it is not so on.
+        by_route: dict[int, tuple[bool, bool, int] | None] = {}
         for k, i in enumerate(keep.tolist()):
-            key = (int(route_id[i]), int(told_q[k]), belief_av[i].tobytes(), joint[i].tobytes())
-            decision = decisions.get(key)
+            rid = int(route_id[i])
+            decision = None if told_accepting[k] else by_route.get(rid, ())
+            if decision == ():
+                context = DecisionContext(route=routes[rid], dfa_state=int(told_q[k]),
+                                          belief=belief_av[i], joint=joint[i])
+                decision = (decide_node(policy, context, town, int(road[i]), level, max_junctions,
+                                        fallback_level, successor_index)
+                            if policy.route_determined(context) else None)
+                by_route[rid] = decision
             if decision is None:
-                context = DecisionContext(route=routes[key[0]], dfa_state=key[1], belief=belief_av[i],
-                                          joint=joint[i])
-                decision = decide_node(policy, context, town, int(road[i]), level, max_junctions,
-                                       fallback_level, successor_index)
-                decisions[key] = decision
+                key = (rid, int(told_q[k]), belief_av[i].tobytes(), joint[i].tobytes())
+                decision = decisions.get(key)
+                if decision is None:
+                    context = DecisionContext(route=routes[key[0]], dfa_state=key[1],
+                                              belief=belief_av[i], joint=joint[i])
+                    decision = decide_node(policy, context, town, int(road[i]), level, max_junctions,
+                                           fallback_level, successor_index)
+                    decisions[key] = decision
             finished[k], fired[k], chosen[k] = decision
         finished_mask = np.zeros(probability.size, dtype=bool)
         finished_mask[keep[finished]] = True
@@ -174,16 +232,19 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
             route_id, road, belief_av, posterior, joint = (
                 a[first] for a in (route_id, road, belief_av, posterior, joint))
         if probability.size > max_nodes:
-            order = np.argsort(probability)
+            # Least live mass first: the width pruning adds is the live mass it drops.
+            order = np.argsort(probability * filter_.masses(joint)[2], kind="stable")
             dropped = np.zeros(probability.size, dtype=bool)
             dropped[order[: probability.size - max_nodes]] = True
-            end(dropped, "pruned", level + 1)
+            end(dropped, "pruned", level + 1, "beyond_budget")
             kept = ~dropped
             route_id, road, belief_av, posterior, joint, probability = (
                 a[kept] for a in (route_id, road, belief_av, posterior, joint, probability))
         nodes += probability.size
         max_frontier = max(max_frontier, probability.size)
 
+    if batched is not None:
+        batched.forget_prefetched()
     pruned = mass["pruned"]
     lower, upper = accepted_bounds(mass["accepted"], pruned)
     return Evaluation(
@@ -202,8 +263,9 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
         belief_rule=belief_rule,
         fallback_after=fallback_level,
         max_junctions=max_junctions,
+        pruning={"prune_below": prune_below, "max_nodes": max_nodes, "time_limit": time_limit,
+                 "pruned_mass": cut, "pruned_nodes": cut_nodes, "first_pruned_level": first_cut_level},
     )
-
 
 
 TABLE_CHUNK = 5_000     # nodes moved per batch in evaluate_joint_table (the deadline is checked between)

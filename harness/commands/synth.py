@@ -232,13 +232,22 @@ population_option = click.option(
 @click.option("--cache-dir", type=click.Path(), default=None,
               help="Where 'aware' policies are cached (default: $XDG_CACHE_HOME/trustroute/policies, "
               "XDG_CACHE_HOME defaulting to ~/.cache).")
+@click.option("--max-nodes", type=click.IntRange(min=1), default=None,
+              help="Follow at most this many (the likeliest) histories per junction; the rest widen "
+                   "[lower, upper] (default: 5,000 for specs with trust-state atoms, 2,000,000 "
+                   "otherwise).")
+@click.option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), default=None,
+              help="Seconds, for specs with trust-state atoms: histories still open then widen "
+                   "[lower, upper] (default: none).")
 @json_option
 def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_path: str | None,
              population_path: str | None, fallback_after: int, no_fallback: bool,
-             max_junctions: int | None, belief_rule: str, cache_dir: str | None, as_json: bool) -> None:
-    """Exact probability that POLICY ("free", "aware" or a file) satisfies SPEC, and final trust.
+             max_junctions: int | None, belief_rule: str, cache_dir: str | None,
+             max_nodes: int | None, time_limit: float | None, as_json: bool) -> None:
+    """Certified probability that POLICY ("free", "aware" or a file) satisfies SPEC, and final trust.
 
-    "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached.
+    "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached. The result
+    is exact (lower = upper) unless histories were pruned; their live mass is the width.
     """
     # Specs without trust-state atoms go on to policies.evaluate (the same results bit for bit).
     from trustroute.policies.evaluate_joint import evaluate_joint as evaluate_policy
@@ -257,6 +266,8 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     if population_path is not None:
         if driver_path is not None:
             raise click.UsageError("give --driver or --population, not both")
+        if max_nodes is not None or time_limit is not None:
+            raise click.UsageError("--max-nodes and --time-limit are not used with --population")
         _evaluate_population(spec_path, policy_name, town_path, population_path, after, cap, belief_rule,
                              cache_dir, as_json)
         return
@@ -266,17 +277,37 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     if policy_name in ("robust", "bayes"):
         raise click.UsageError(f"POLICY '{policy_name}' needs --population FILE (the driver types)")
     policy = resolve_policy(policy_name, town, driver, spec, cache_dir)
-    value = evaluate_policy(pomdp, spec, policy, fallback_after=after,
-                            max_junctions=cap, belief_rule=belief_rule)
+    if time_limit is not None and not spec.uses_trust_atoms:
+        raise click.UsageError("--time-limit applies to specs with trust-state atoms only (the others "
+                               "are evaluated exactly in full)")
+    value = evaluate_policy(pomdp, spec, policy, fallback_after=after, max_junctions=cap,
+                            belief_rule=belief_rule, max_nodes=max_nodes, time_limit=time_limit)
     payload = value.to_dict()
     payload["spec"] = spec.name
     payload["expected_final_trust"] = _finite(value.expected_final_trust)
     payload["expected_junctions"] = _finite(value.expected_junctions)
-    emit(as_json, payload, [
+    lines = [
         f"{spec.name} / {value.policy}: P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], "
         f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
         f"{value.expected_junctions:.2f}, P(fallback fired) = {value.fallback_probability:.4f}",
-        "episode ends: " + ", ".join(f"{k} {v:.4f}" for k, v in value.end_mass.items())])
+        "episode ends: " + ", ".join(f"{k} {v:.4f}" for k, v in value.end_mass.items())]
+    if value.pruning is not None:
+        lines.append(_pruning_line(value))
+    emit(as_json, payload, lines)
+
+
+def _pruning_line(value) -> str:
+    """What the joint unfolding's limits cut: the width of [lower, upper] and its sources."""
+    pruning = value.pruning
+    if not any(pruning["pruned_nodes"].values()):
+        return f"exact: no history pruned (at most {pruning['max_nodes']:,} per junction)"
+    parts = {"below_threshold": f"below {pruning['prune_below']:g}",
+             "beyond_budget": f"beyond {pruning['max_nodes']:,} per junction",
+             "past_deadline": f"open after {pruning['time_limit']} s"}
+    cuts = ", ".join(f"{pruning['pruned_nodes'][k]:,} {label} (mass {pruning['pruned_mass'][k]:.2e})"
+                     for k, label in parts.items() if pruning["pruned_nodes"][k])
+    return (f"bracket width {value.gap:.2e} = live mass of the pruned histories, from junction "
+            f"{pruning['first_pruned_level']}: {cuts}")
 
 
 def load_population_routing(spec_path: str, town_path: str | None, population_path: str,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -9,6 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.cli import run_cli
 from tests.policies.test_evaluate import RandomStationaryPolicy
 from tests.policies.trust_paths import policy_value
 from tests.policies.trust_specs import random_problem
@@ -132,3 +134,95 @@ def test_belief_and_true_trust_readings_of_phi1_differ(pomdp):
     on_trust = evaluate_joint(pomdp, trust, trust_free_policy(pomdp.town, trust))
     assert on_belief.gap == 0.0 and on_trust.gap == 0.0
     assert abs(on_belief.lower - on_trust.lower) > 0.05
+
+
+def _assert_bracket(pruned, exact_value):
+    """[lower, upper] holds the exact value and its width is the pruned live mass, which is the
+    sum of what each cut dropped."""
+    assert pruned.lower <= exact_value + 1e-12 and exact_value <= pruned.upper + 1e-12
+    assert pruned.gap == pytest.approx(pruned.end_mass["pruned"], abs=1e-12)
+    assert sum(pruned.pruning["pruned_mass"].values()) == pytest.approx(pruned.end_mass["pruned"],
+                                                                        abs=1e-12)
+    assert sum(pruned.end_mass.values()) == pytest.approx(1.0, abs=1e-10)
+
+
+@pytest.mark.parametrize("seed", [3, 17, 101])
+@pytest.mark.parametrize("kind", ["trust", "mixed"])
+def test_pruned_bracket_holds_the_brute_force_value(driver, seed, kind):
+    """A node budget of 2 per level and a live-mass threshold cut most of the tree; the bracket
+    still holds the value brute force over trust paths computes, and pruning off is exact."""
+    rng = np.random.default_rng(seed)
+    pomdp, spec = random_problem(rng, driver, kind)
+    policy = RandomStationaryPolicy(pomdp.town, rng)
+    reference = policy_value(pomdp, spec, policy, 4)
+    off = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=4, force_joint=True,
+                         prune_below=0.0, max_nodes=10**9)
+    assert off.gap == 0.0 and off.lower == pytest.approx(reference, abs=1e-10)
+    assert not any(off.pruning["pruned_nodes"].values())
+    for prune_below, max_nodes in ((0.0, 2), (0.05, 10**9), (0.02, 3)):
+        pruned = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=4,
+                                force_joint=True, prune_below=prune_below, max_nodes=max_nodes)
+        _assert_bracket(pruned, reference)
+
+
+@pytest.fixture(scope="module")
+def phi1_trust_policy(pomdp):
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    return spec, synthesize_spec(pomdp, spec, horizon=6, time_limit=20).policy
+
+
+def test_pruning_the_joint_policy_brackets_its_exact_value(pomdp, phi1_trust_policy):
+    """φ1 with the trust atom, the synthesized joint policy with the fallback, 12 junctions: the
+    tree unfolding with pruning off is exact; each cut (budget, threshold, deadline) gives a
+    bracket around it whose width is the pruned mass, and the cuts actually cut."""
+    spec, policy = phi1_trust_policy
+    exact = evaluate_joint(pomdp, spec, policy, fallback_after=4, max_junctions=12, merge=False,
+                           prune_below=0.0, max_nodes=10**9)
+    assert exact.gap == 0.0
+    cuts = {"beyond_budget": {"max_nodes": 20}, "below_threshold": {"prune_below": 1e-4},
+            "past_deadline": {"time_limit": 1e-9}}
+    for cut, options in cuts.items():
+        pruned = evaluate_joint(pomdp, spec, policy, fallback_after=4, max_junctions=12, **options)
+        _assert_bracket(pruned, exact.lower)
+        assert pruned.gap > 1e-6 and pruned.pruning["pruned_nodes"][cut] > 0, cut
+        assert pruned.pruning["pruned_mass"][cut] == pytest.approx(pruned.gap, abs=1e-12), cut
+    # The default limits cut nothing here: the same value as the exact tree.
+    default = evaluate_joint(pomdp, spec, policy, fallback_after=4, max_junctions=12)
+    assert default.gap == 0.0 and default.lower == pytest.approx(exact.lower, abs=1e-12)
+
+
+def test_prefetched_decisions_are_the_node_by_node_decisions(pomdp):
+    """The joint policy decides each level's nodes in one batch (prefetch); without it every node
+    asks on its own: the same evaluation, number for number (a policy of horizon 12 on 14
+    junctions without the fallback, where its decisions differ between nodes of a level)."""
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    policy = synthesize_spec(pomdp, spec, horizon=12, time_limit=20).policy
+    batched = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=14)
+    policy.prefetch = None           # hides the batch path from evaluate_joint (instance attribute)
+    try:
+        alone = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=14)
+    finally:
+        del policy.prefetch
+    for name in ("lower", "upper", "expected_final_trust", "nodes"):
+        assert getattr(batched, name) == getattr(alone, name), name
+    assert batched.end_mass == alone.end_mass
+
+
+@pytest.mark.slow
+def test_the_cli_brackets_phi1_trust_at_the_default_cap(capsys, tmp_path):
+    """`trustroute evaluate specs/phi1_trust.toml aware` at the default cap (60) returns a certified
+    bracket whose width is the pruned mass; the 20-junction value, exact there, is below it."""
+    code, out, _ = run_cli(capsys, "evaluate", "specs/phi1_trust.toml", "aware", "--cache-dir",
+                           str(tmp_path), "--json")
+    assert code == 0
+    value = json.loads(out)
+    assert value["max_junctions"] == 60
+    assert 0.0 <= value["lower"] <= value["upper"] <= 1.0
+    assert value["upper"] - value["lower"] == pytest.approx(value["end_mass"]["pruned"], abs=1e-12)
+    assert value["pruning"]["max_nodes"] > 0
+    code, out, _ = run_cli(capsys, "evaluate", "specs/phi1_trust.toml", "aware", "--cache-dir",
+                           str(tmp_path), "--max-junctions", "20", "--max-nodes", "1000000", "--json")
+    at_20 = json.loads(out)
+    assert code == 0 and at_20["gap"] < 1e-9
+    # More junctions can only add accepted mass (the fallback at 20 is the same in both runs).
+    assert at_20["lower"] <= value["upper"] + 1e-12
