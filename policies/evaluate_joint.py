@@ -224,8 +224,9 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
         if merge:
             # Histories at the same (road, J, posterior, AV belief) whose routes the policy reads
             # alike (route_memory) are driven alike from here on: one node, their masses summed.
+            unique_routes, route_inverse = np.unique(route_id, return_inverse=True)
             memory_id = np.array([memory_ids.setdefault(policy.route_memory(routes[r]), len(memory_ids))
-                                  for r in route_id.tolist()], dtype=float)
+                                  for r in unique_routes.tolist()], dtype=float)[route_inverse]
             first, inverse = distinct_nodes(road, joint, posterior,
                                             np.concatenate([belief_av, memory_id[:, None]], axis=1))
             probability = np.bincount(inverse, weights=probability)
