@@ -62,15 +62,13 @@ def grid_spec_text(rows: int, columns: int, waypoints: int) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str | None) -> dict:
-    """Runs in the subprocess: one synthesis, its numbers and the process's peak RSS."""
-    import resource
-
+def grid_or_paper_problem(junctions: int, waypoints: int, paper_spec: str | None):
+    """(pomdp, spec): the paper's town with specs/<paper_spec>.toml, or the grid town of `junctions`
+    junctions (GRIDS) with `waypoints` waypoint sets."""
     from trustroute.networks.town import load_town, town_from_dict
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.policies.logic.spec import load_spec, spec_from_text
     from trustroute.policies.model.trust_pomdp import build_pomdp
-    from trustroute.policies.synthesis.search import synthesize
 
     driver = load_driver_model()
     if paper_spec is not None:
@@ -80,20 +78,36 @@ def _child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str 
         rows, columns = GRIDS[junctions]
         town = town_from_dict(grid_town_dict(rows, columns, seed=junctions), "<grid town>")
         spec = spec_from_text(grid_spec_text(rows, columns, waypoints), "<grid spec>", town)
-    result = synthesize(build_pomdp(town, driver), spec, tau=TAU, time_limit=TIME_LIMIT, horizon=horizon)
+    return build_pomdp(town, driver), spec
+
+
+def _child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str | None) -> dict:
+    """Runs in the subprocess: one synthesis, its numbers and the process's peak RSS."""
+    import resource
+
+    from trustroute.policies.synthesis.search import synthesize
+
+    pomdp, spec = grid_or_paper_problem(junctions, waypoints, paper_spec)
+    result = synthesize(pomdp, spec, tau=TAU, time_limit=TIME_LIMIT, horizon=horizon)
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     last = result.stats["runs"][-1]
     return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb,
             "nodes": last.get("nodes", 0), "completion_closed": last.get("completion_closed")}
 
 
-def _run_child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str | None = None) -> dict:
-    arguments = json.dumps([junctions, waypoints, horizon, paper_spec])
-    done = subprocess.run([sys.executable, "-m", "benchmarks.bench_synthesis_scaling", arguments],
-                          capture_output=True, text=True, timeout=TIME_LIMIT * 5)
+def run_json_subprocess(module: str, arguments: list, timeout: float) -> dict:
+    """`python -m module ARGUMENTS_JSON` in a fresh process (its own peak RSS, no warm caches); the
+    dict its last stdout line holds, or {"error": its last stderr line}."""
+    done = subprocess.run([sys.executable, "-m", module, json.dumps(arguments)],
+                          capture_output=True, text=True, timeout=timeout)
     if done.returncode != 0:
         return {"error": done.stderr.strip().splitlines()[-1] if done.stderr.strip() else "failed"}
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _run_child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str | None = None) -> dict:
+    return run_json_subprocess("benchmarks.bench_synthesis_scaling",
+                               [junctions, waypoints, horizon, paper_spec], TIME_LIMIT * 5)
 
 
 def _configurations() -> list[tuple[int, int, int | None]]:

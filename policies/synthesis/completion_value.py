@@ -39,6 +39,7 @@ the authors' update the observation probabilities are not linear in a hidden-sta
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,14 +58,16 @@ MASS_FLOOR = 1e-13                # clusters lighter than this are dropped (boun
 class CompletionBounds:
     """lower[i] <= value of the trust-free completion from start i <= upper[i].
 
-    straddle[i]: mass dropped at clusters straddling a threshold or too light (upper - lower before
-    the rounding widening); clusters: largest number of clusters held at once.
+    straddle[i]: mass dropped at clusters straddling a threshold or too light, or still in flight
+    when the deadline stopped the propagation (upper - lower before the rounding widening);
+    clusters: largest number of clusters held at once; interrupted: stopped by the deadline.
     """
 
     lower: np.ndarray
     upper: np.ndarray
     straddle: np.ndarray
     clusters: int
+    interrupted: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,9 +101,13 @@ def _outcome_table(symbols: ObservationSymbols) -> np.ndarray:
 
 def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route: FreeRoute,
                       x: np.ndarray, q: np.ndarray, p: np.ndarray, belief: np.ndarray,
-                      steps: np.ndarray) -> CompletionBounds:
+                      steps: np.ndarray, deadline: float | None = None) -> CompletionBounds:
     """Bounds on P(the DFA accepts within `steps` junctions | trust-free completion from (x, q, p, b)),
-    for each start i; DFA state q is the state after reading the current road."""
+    for each start i; DFA state q is the state after reading the current road.
+
+    deadline (time.perf_counter() seconds): the propagation stops there, junction step by junction
+    step; the mass still in flight then counts to the upper bound only (`interrupted` is True), so
+    both bounds stay sound, only looser."""
     if symbols.rule != "bayes":
         raise ValueError("cluster bounds need the Bayes rule (observation mass linear in α)")
     x = np.asarray(x, dtype=np.int64).copy()
@@ -129,7 +136,13 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
     keep = ~done & ~tables.rejecting[state] & (steps > 0)
     owner, state, alpha, corner, x, p = (a[keep] for a in (owner, state, alpha, corner, x, p))
     most = owner.size
+    interrupted = False
     while owner.size:
+        if deadline is not None and time.perf_counter() >= deadline:
+            # the sequences still followed may yet accept: all their mass to the upper bound
+            np.add.at(straddle, owner, alpha.sum(axis=1))
+            interrupted = True
+            break
         x2 = route.next_road[x, state, p]                # per cluster: x, p and q
         p2 = route.next_task[x, state, p]
         incident = incident_of[x2]
@@ -196,7 +209,8 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
     widen = np.array([gamma(int(k)) for k in np.maximum(rounds, 1)])
     lower = np.maximum(accepted * (1.0 - widen), 0.0)
     upper = np.minimum((accepted + straddle) * (1.0 + widen), 1.0)
-    return CompletionBounds(lower=lower, upper=upper, straddle=straddle, clusters=int(most))
+    return CompletionBounds(lower=lower, upper=upper, straddle=straddle, clusters=int(most),
+                            interrupted=interrupted)
 
 
 def _merge(owner: np.ndarray, state: np.ndarray, alpha: np.ndarray, vertices: np.ndarray,

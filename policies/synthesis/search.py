@@ -658,7 +658,10 @@ class _Search:
                 break
             chunk = nodes[begin:begin + COMPLETION_CHUNK]
             bounds = completion_bounds(self.tables, self.symbols, self.route, g.x[chunk], g.q[chunk],
-                                       g.p[chunk], g.belief[chunk], self.depth_cap - g.level[chunk])
+                                       g.p[chunk], g.belief[chunk], self.depth_cap - g.level[chunk],
+                                       deadline)
+            # (stopped by the deadline, the chunk's bounds are sound but loose; they are kept, as
+            # the node is marked completed, since nothing runs after the deadline to redo them)
             g.free_lower[chunk] = bounds.lower
             g.free_upper[chunk] = np.minimum(g.free_upper[chunk], bounds.upper)
             g.completed[chunk] = True

@@ -58,7 +58,7 @@ def _problem(driver, seed):
     return tables, observation_symbols(pomdp), route, task
 
 
-def _bounds_and_exact(driver, seed):
+def _bounds_and_exact(driver, seed, deadline=None):
     tables, symbols, route, task = _problem(driver, seed)
     belief = np.asarray(tables.pomdp.initial_belief, dtype=float)
     roads = np.arange(tables.n_x)
@@ -66,7 +66,7 @@ def _bounds_and_exact(driver, seed):
     p = np.full(roads.size, task.initial_state)
     steps = np.full(roads.size, HORIZON)
     bounds = completion_bounds(tables, symbols, route, roads, q, p, np.repeat(belief[None], roads.size, 0),
-                               steps)
+                               steps, deadline)
     exact = np.array([exact_free_value(tables, symbols, route, int(x), int(q[0]), int(p[0]), belief,
                                        HORIZON) for x in roads])
     return bounds, exact
@@ -88,6 +88,36 @@ def test_coarse_merging_stays_sound(driver, seed, monkeypatch):
     bounds, exact = _bounds_and_exact(driver, seed)
     assert np.all(bounds.lower <= exact + TOLERANCE), (bounds.lower, exact)
     assert np.all(exact <= bounds.upper + TOLERANCE), (exact, bounds.upper)
+
+
+class _SteppedClock:
+    """perf_counter that advances one second per call: a deadline of k stops the propagation
+    before its (k + 1)-th junction step."""
+
+    def __init__(self) -> None:
+        self.now = -1.0
+
+    def perf_counter(self) -> float:
+        self.now += 1.0
+        return self.now
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("steps_before_deadline", [0, 1, 3])
+def test_bounds_stopped_by_the_deadline_stay_sound(driver, seed, steps_before_deadline, monkeypatch):
+    monkeypatch.setattr(completion_value, "time", _SteppedClock())
+    bounds, exact = _bounds_and_exact(driver, seed, deadline=float(steps_before_deadline))
+    assert np.all(bounds.lower <= exact + TOLERANCE), (bounds.lower, exact)
+    assert np.all(exact <= bounds.upper + TOLERANCE), (exact, bounds.upper)
+
+
+def test_bounds_stopped_by_the_deadline_are_looser(driver, monkeypatch):
+    """Stopped after one junction step, the mass in flight widens the bounds (the soundness test
+    above is not vacuous); with no deadline they are nearly exact."""
+    monkeypatch.setattr(completion_value, "time", _SteppedClock())
+    stopped = [_bounds_and_exact(driver, seed, deadline=1.0)[0] for seed in range(6)]
+    assert sum(b.interrupted for b in stopped) >= 3
+    assert max(float(np.max(b.straddle)) for b in stopped) > 0.01
 
 
 def test_coarse_merging_loosens_where_labels_matter(driver, monkeypatch):

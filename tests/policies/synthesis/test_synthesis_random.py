@@ -91,17 +91,23 @@ def test_bounds_bracket_brute_force_on_random_problems(driver, seed, horizon, be
     assert unbounded.lower <= unbounded.upper + TOLERANCE
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_returned_policy_is_worth_exactly_lower_on_random_problems(driver, seed):
-    """Early stops (tau 0.2) leave open nodes; the policy drives the trust-free completion there,
-    which the search valued exactly (exact trees, the default on small towns): `evaluate` of the
-    policy equals L and is >= the trust-free route's value."""
+def _early_stop_problem(driver, seed: int):
+    """(pomdp, spec, horizon, the trust-free route's exact value) of one seeded random problem."""
     rng = np.random.default_rng(1000 + seed)
     town = random_town(rng)
     pomdp = build_pomdp(town, random_driver(rng, driver.incident_types))
     spec = random_spec(rng, town, pomdp.initial_belief)
     horizon = int(rng.integers(4, 8))
     free = evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None, max_junctions=horizon)
+    return pomdp, spec, horizon, free
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_returned_policy_is_worth_exactly_lower_on_random_problems(driver, seed):
+    """Early stops (tau 0.2) leave open nodes; the policy drives the trust-free completion there,
+    which the search valued exactly (exact trees, the default on small towns): `evaluate` of the
+    policy equals L and is >= the trust-free route's value."""
+    pomdp, spec, horizon, free = _early_stop_problem(driver, seed)
     for tau in (0.2, 1e-6):
         result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20)
         value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
@@ -120,12 +126,7 @@ def test_returned_policy_is_worth_at_least_lower_with_completion_bounds(driver, 
     """The same problems with open nodes valued by the cluster bounds on the completion
     (completion="bounds"): `evaluate` of the policy is at least L and at least its strict-label
     value, and at most U; once converged L is within tau of the trust-free route's value or above."""
-    rng = np.random.default_rng(1000 + seed)
-    town = random_town(rng)
-    pomdp = build_pomdp(town, random_driver(rng, driver.incident_types))
-    spec = random_spec(rng, town, pomdp.initial_belief)
-    horizon = int(rng.integers(4, 8))
-    free = evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None, max_junctions=horizon)
+    pomdp, spec, horizon, free = _early_stop_problem(driver, seed)
     for tau in (0.2, 1e-6):
         result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20, completion="bounds")
         value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
