@@ -55,9 +55,14 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.product_mdp import ProductTables, build_product
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
-from trustroute.policies.routing.free import state_only_task
+from trustroute.policies.routing.free import StateOnlyTask, state_only_task
 from trustroute.policies.synthesis.arguments import check_synthesis_arguments
-from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols, suffix_cells
+from trustroute.policies.synthesis.belief_cells import (
+    ObservationSymbols,
+    apply_symbol,
+    observation_symbols,
+    suffix_cells,
+)
 from trustroute.policies.synthesis.completion_value import FreeRoute, completion_bounds
 from trustroute.policies.synthesis.end_components import unbounded_bound
 from trustroute.policies.synthesis.event_graph import EventGraph
@@ -850,7 +855,8 @@ class _Search:
         return PolicyTable(t=out_t, x=out_x, q=out_q, beliefs=beliefs, action=out_a, projected=out_p)
 
 
-def completion_tree_leaves(tables: ProductTables, symbols, task, depth_cap: int) -> float:
+def completion_tree_leaves(tables: ProductTables, symbols: ObservationSymbols, task: StateOnlyTask,
+                           depth_cap: int) -> float:
     """Leaves of the trust-free route's observation tree within `depth_cap` junctions: the product
     of the observation symbols of the incidents on its roads after the start (identity symbols
     count once). Exact completion trees from the search's open nodes are of this order."""
