@@ -187,8 +187,8 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
                 q2 = tables.next_q[o_state, o_road, 0]
                 ambiguous = np.zeros(q2.size, dtype=bool)
             light = mass < MASS_FLOOR
-            np.add.at(straddle, o_owner[ambiguous | (light & ~tables.rejecting[q2])],
-                      mass[ambiguous | (light & ~tables.rejecting[q2])])
+            unsettled = ambiguous | (light & ~tables.rejecting[q2])   # may yet accept: upper only
+            np.add.at(straddle, o_owner[unsettled], mass[unsettled])
             settled = ~ambiguous & ~light
             hit = settled & tables.accepting[q2]
             np.add.at(accepted, o_owner[hit], mass[hit])

@@ -341,10 +341,10 @@ class _Search:
         # (completion_value.py) instead of trees along the free moves (FREE nodes, kept for the
         # authors' rule, whose observation mass is not linear in a hidden-state vector).
         # (not with the event graph's full mode: its junction rows along macro paths are not held)
-        self.bounds_allowed = rule == "bayes" and (self.events is None or self.events.chains_only)
+        bounds_allowed = rule == "bayes" and (self.events is None or self.events.chains_only)
         # "auto": exact trees (L is then the policy's exact value) where they fit the node budget
         self.tree_leaves = completion_tree_leaves(tables, self.symbols, self.task, self.depth_cap)
-        self.completion = self.bounds_allowed and (
+        self.completion = bounds_allowed and (
             completion == "bounds" or (completion == "auto" and self.tree_leaves > AUTO_TREE_LEAVES))
         self.route = FreeRoute.build(tables, self.free_slot, self.next_p)
         self.touched = np.zeros((self.depth_cap + 2, tables.n_x, self.next_p.shape[0]), dtype=bool)
@@ -634,10 +634,10 @@ class _Search:
         """bool [level, x, p]: keys the free completion can reach, one junction or more after a
         node whose L uses its completion bound (free_lower > 0); belief and DFA state ignored
         (a superset)."""
+        if not self.completion:
+            return self.touched          # all False: nothing is valued by a completion bound
         g = self.graph
         touched = np.zeros_like(self.touched)
-        if not self.completion:
-            return touched
         source = np.flatnonzero(g.completed[: g.n] & (g.free_lower[: g.n] > 0))
         start = np.zeros_like(touched)
         start[g.level[source], g.x[source], g.p[source]] = True
@@ -1000,9 +1000,9 @@ def _bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int
             on_iteration(*root_bounds())
     search.backup()
     # Close the returned policy's trust-free completions: every open node it reaches is bounded
-    # (Bayes; up to a light tail) or expanded along the free move (authors' rule: then L is the
-    # policy's exact value). Unless the deadline comes first; L is a lower bound of the policy's
-    # value either way. stats["completion_closed"] says which.
+    # (completion bounds; up to a light tail) or expanded along the free move (exact completion:
+    # then L is the policy's exact value). Unless the deadline comes first; L is a lower bound of
+    # the policy's value either way. stats["completion_closed"] says which.
     closed = (search.close_bounds(roots, depth_cap, deadline, COMPLETION_TAIL * tau) if search.completion
               else search.close_completions(roots, depth_cap, deadline))
     lower, upper = root_bounds()
@@ -1090,8 +1090,9 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     quiet roads without a choice, "full" searches the event graph's macro moves
     (policies/synthesis/event_graph.py), "off" goes junction by junction; the same bounds at
     convergence (docs/synthesis.md, "The event graph"). completion: how open nodes are valued
-    (COMPLETION_MODES; "auto": exact trees, so that lower is the policy's exact value, until the
-    search graph is large, then cluster bounds; docs/synthesis.md, "Open nodes and the acting rule").
+    (COMPLETION_MODES; "auto": exact trees, so that lower is the policy's exact value, where the
+    trust-free route's observation tree fits AUTO_TREE_LEAVES, cluster bounds otherwise;
+    docs/synthesis.md, "Open nodes and the acting rule").
     """
     check_synthesis_arguments(tau, horizon, belief_rule)
     if completion not in COMPLETION_MODES:
