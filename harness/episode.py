@@ -41,7 +41,7 @@ from trustroute.harness import incidents as incident_kinds
 from trustroute.harness.background import BackgroundTraffic
 from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.incidents import EgoState, Incident, Scene
-from trustroute.harness.performance import PerformanceMonitor, limits_for
+from trustroute.harness.performance import PerformanceMonitor, limits_for, verdict
 from trustroute.harness.sumo_start import SumoConfig, sumo_session
 from trustroute.harness.takeover import AUTOPILOT, apply_style, hand_back, take_over
 from trustroute.networks.errors import InputError
@@ -444,7 +444,7 @@ class _Episode:
                 "passed_time": run.passed_time, "removed_time": run.removed_time,
                 "takeover": run.took_over, "takeover_start": run.takeover_start,
                 "takeover_end": run.takeover_end,
-                "performance": "fail" if failed else "succ",   # PerformanceMonitor.result's verdict
+                "performance": verdict(failed),
                 "min_ttc": monitor.min_ttc, "max_deceleration": monitor.max_deceleration,
                 "collided": monitor.collided, "min_head_on_ttc": monitor.min_head_on_ttc,
                 "min_pedestrian_distance": monitor.min_pedestrian_distance, "time_lost": monitor.time_lost,

@@ -114,4 +114,9 @@ class PerformanceMonitor:
         return failed
 
     def result(self, limits: PerformanceLimits | None = None) -> str:
-        return "fail" if self.failed_measures(limits or PerformanceLimits()) else "succ"
+        return verdict(self.failed_measures(limits or PerformanceLimits()))
+
+
+def verdict(failed_measures: list[str]) -> str:
+    """The performance e from the measures that crossed their limits: fail if any did."""
+    return "fail" if failed_measures else "succ"
