@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,7 +43,7 @@ from trustroute.harness.background import BackgroundTraffic
 from trustroute.harness.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.incidents import EgoState, Incident, Scene
 from trustroute.harness.performance import PerformanceMonitor, limits_for, verdict
-from trustroute.harness.sumo_start import SumoConfig, sumo_session
+from trustroute.harness.sumo_start import SumoConfig, hot_calls, sumo_session
 from trustroute.harness.takeover import AUTOPILOT, apply_style, hand_back, take_over
 from trustroute.networks.errors import InputError
 from trustroute.networks.sumo_net import ROAD_SPEED, build_net, net_counts
@@ -117,6 +118,28 @@ class EpisodeRecord:
             else:
                 out[name] = table_from_frame(source, _SCHEMAS[name])
         return out
+
+
+class _StepLog:
+    """The per-step log (STEP_FIELDS) as columns while the loop runs: time, x, y and speed in one
+    float64 array, lane and mode in lists. The kinematics table is then a few buffer copies, not a
+    conversion of one Python object per cell."""
+
+    def __init__(self) -> None:
+        self.floats = array("d")          # time, x, y, speed of every step, in that order
+        self.lanes: list[str] = []
+        self.modes: list[str] = []
+
+    def __len__(self) -> int:
+        return len(self.lanes)
+
+    def table(self, episode_id: str) -> pa.Table:
+        floats = np.frombuffer(self.floats, dtype=np.float64).reshape(-1, 4).T
+        rows = len(self.lanes)
+        columns = {"episode_id": pa.array([episode_id], pa.string()).take(np.zeros(rows, dtype=np.int64)),
+                   **{name: pa.array(floats[i]) for i, name in enumerate(STEP_FIELDS[:4])},
+                   "lane": self.lanes, "mode": self.modes}
+        return table_from_columns(columns, KINEMATICS_SCHEMA, nan_as_null=False)
 
 
 @dataclass
@@ -227,7 +250,7 @@ class _Episode:
         self.observer = observer
         self.mode = AUTOPILOT.name
         self.runs: list[_RoadRun] = []
-        self.steps: list[tuple] = []   # one STEP_FIELDS tuple per step: the kinematics table
+        self.steps = _StepLog()         # the kinematics table, one row per step
         self.lengths: dict[str, float] = {}
         self.min_gap = 2.5
         self.defined_types: set = set()   # incident type definers run in this simulation
@@ -364,14 +387,13 @@ class _Episode:
         now = 0.0
         # Hot loop: local names, one subscription read, one append, Python work only where
         # something happens (an incident still live, a driver still to decide).
-        # libsumo's own step (its simulationStep wrapper adds a step-listener pass the episode
-        # does not use); traci (sumo-gui) has only simulationStep.
-        simulation_step = getattr(sumo, "_libsumo_step", None) or sumo.simulationStep
-        get_time = sumo.simulation.getTime
-        get_results = sumo.vehicle.getSubscriptionResults
-        colliding_number = sumo.simulation.getCollidingVehiclesNumber
+        calls = hot_calls(sumo)
+        simulation_step, get_time = calls.step, calls.time
+        get_results, colliding_number = calls.subscription_results, calls.colliding_number
+        lane_roads: dict[str, str] = {}   # "A-B_1" -> "A-B", ":A_5_0" -> ":A_5"
         auto = AUTOPILOT.name
-        log_step = self.steps.append
+        log_floats, log_lane, log_mode = (self.steps.floats.extend, self.steps.lanes.append,
+                                          self.steps.modes.append)
         observer = self.observer
         min_gap = self.min_gap
         commit_at = self.length(start) - COMMIT_DISTANCE
@@ -386,7 +408,9 @@ class _Episode:
             if math.isnan(current.time_in):
                 current.time_in = now
             lane = result[lane_id]
-            road = lane[:lane.rindex("_")]
+            road = lane_roads.get(lane)
+            if road is None:
+                road = lane_roads[lane] = lane[:lane.rindex("_")]
             position = result[position_id]
             speed = result[speed_id]
             x, y = result[xy_id]
@@ -416,7 +440,9 @@ class _Episode:
                 upcoming = self.commit(current, now, position)
                 finished = upcoming is None
             # Logged after this step's decisions, so `mode` is the control the ego drives on with.
-            log_step((now, x, y, speed, lane, self.mode))
+            log_floats((now, x, y, speed))
+            log_lane(lane)
+            log_mode(self.mode)
             if observer is not None:
                 observer(sumo, EgoState(now, road, position, x, y, speed, lane, result[angle_id],
                                         result[accel_id]), self.mode, open_run.road)
@@ -454,11 +480,7 @@ class _Episode:
         return table_from_rows(rows, INCIDENTS_SCHEMA)
 
     def kinematics_table(self) -> pa.Table:
-        steps = self.steps
-        columns = dict(zip(STEP_FIELDS, zip(*steps, strict=True) if steps else ((),) * len(STEP_FIELDS),
-                           strict=True))
-        columns["episode_id"] = [self.tracker.episode_id] * len(steps)
-        return table_from_columns(columns, KINEMATICS_SCHEMA, nan_as_null=False)
+        return self.steps.table(self.tracker.episode_id)
 
 
 def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: str, seed: int,
@@ -483,9 +505,10 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
     if net_path is not None:
         _check_readable(net, net_key)
     tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=0.0)
+    rng = scene_rng(seed)
     with sumo_session(net, seed, config) as sumo:
         _check_net_matches(sumo, setup, net, net_key)
-        episode = _Episode(sumo, setup, tracker, driver, config, observer, scene_rng(seed), scene_overrides)
+        episode = _Episode(sumo, setup, tracker, driver, config, observer, rng, scene_overrides)
         sim_seconds = episode.run()
     record = EpisodeRecord(summary=tracker.summary(wall_seconds=time.perf_counter() - started,
                                                    sim_seconds=sim_seconds),

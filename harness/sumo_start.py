@@ -8,7 +8,7 @@ hundreds of episodes can run one after another in a process. Nothing happens at 
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -104,6 +104,30 @@ def check_display() -> None:
         raise InputError("--gui", "", "no display (DISPLAY is not set), so sumo-gui cannot open a window",
                          "run on a machine with a display, under xvfb-run, or drop --gui and open the "
                          "--rrd recording in the Rerun web viewer")
+
+
+@dataclass(frozen=True)
+class HotCalls:
+    """The four calls an episode makes every step, bound once per episode."""
+
+    step: Callable[[], object]
+    time: Callable[[], float]
+    subscription_results: Callable[[str], dict]
+    colliding_number: Callable[[], int]
+
+
+def hot_calls(sumo) -> HotCalls:
+    """The per-step calls as libsumo's native functions: its Python wrappers (a staticmethod per
+    call, and simulationStep's step-listener pass, which episodes do not use) cost a Python frame
+    each, about 500 per episode. With TraCI (sumo-gui) or a traced libsumo, the public API."""
+    native = getattr(getattr(sumo, "libsumo", None), "_libsumo", None)
+    # libsumo.start(traceFile=...) wraps its step for tracing: then keep the public calls.
+    traced = getattr(getattr(sumo, "_libsumo_step", None), "__qualname__", "") != "simulation.step"
+    if native is None or traced:
+        return HotCalls(sumo.simulationStep, sumo.simulation.getTime, sumo.vehicle.getSubscriptionResults,
+                        sumo.simulation.getCollidingVehiclesNumber)
+    return HotCalls(native.simulation_step, native.simulation_getTime, native.vehicle_getSubscriptionResults,
+                    native.simulation_getCollidingVehiclesNumber)
 
 
 @contextlib.contextmanager
