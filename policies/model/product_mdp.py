@@ -67,7 +67,7 @@ def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
     compiled = compile_spec(spec, town)
     dfa, labeller = compiled.dfa, compiled.labeller
     belief_names, next_q = compiled.label_table()
-    n_x, n_q, m = len(town.states), int(dfa.n_states), len(belief_names)
+    m = len(belief_names)
     coeffs = np.array([spec.belief_atoms[a].coeffs for a in belief_names], dtype=float).reshape(
         m, pomdp.n_trust)
     offsets = np.array([spec.belief_atoms[a].offset for a in belief_names], dtype=float)
