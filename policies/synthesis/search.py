@@ -22,8 +22,11 @@ Method (bounded heuristic search over the product belief MDP, with a sound abstr
   returned policy reaches; until U - L <= tau at the root, the frontier is exhausted, or the time
   limit.
 * The returned policy takes at every EXPANDED node the action maximising L among those the hold
-  rule allows (ties: strict value, then U) and drives the trust-free completion everywhere else
-  (the exact-belief acting rule of policies.routing.aware_table.BeliefTablePolicy). After the
+  rule allows (ties: strict value, then U) and drives the free completion everywhere else
+  (the exact-belief acting rule of policies.routing.aware_table.BeliefTablePolicy): the trust-free
+  completion of the state-only task, then the shortest route back to what the DFA still needs,
+  every label allowed (policies/routing/free.py, `free_completion`; "the trust-free completion"
+  below). After the
   last round the completions it reaches are bounded (Bayes) or closed (authors' rule), so `lower`
   is a lower bound of that policy's value (its exact value under the authors' rule). Where a
   completion bound is used, rows its route can reach may leave the free move only for a move
@@ -849,7 +852,7 @@ class _Search:
             offer(node, moves.path[moves.free], float(g.lower[node]), 2)
         self.row_conflicts = sum(1 for taken in slots.values() if len(taken) > 1)
         # A context only free completions pass needs no row (the policy drives them there anyway;
-        # they all take the free slot of (road, p)).
+        # they all take the free completion's slot of (road, q, p)).
         keys = [key for key in best if key in has_row]
         beliefs = (np.array([np.frombuffer(key[4], dtype=float) for key in keys]) if keys
                    else np.zeros((0, g.belief.shape[1])))
