@@ -38,7 +38,7 @@ class StateOnlyCompletion(RoutingPolicy):
         return junction if junction is not None else self.town.actions(context.road)[0]
 
 
-def _no_rows(pomdp, spec) -> BeliefTablePolicy:
+def policy_without_rows(pomdp, spec) -> BeliefTablePolicy:
     table = PolicyTable(t=[], x=[], q=[], beliefs=np.zeros((0, pomdp.n_trust)), action=[], projected=[])
     return BeliefTablePolicy(table, pomdp.town, spec)
 
@@ -84,7 +84,8 @@ def test_the_completion_alone_is_worth_more_than_the_state_only_one(pomdp, name)
     rule"). (Not more on every town: the return route ignores trust, and the first legal move may
     by chance drive a loop that builds more of it.)"""
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
-    new = evaluate(pomdp, spec, _no_rows(pomdp, spec), fallback_after=None, max_junctions=HORIZON)
+    new = evaluate(pomdp, spec, policy_without_rows(pomdp, spec), fallback_after=None,
+                   max_junctions=HORIZON)
     old = evaluate(pomdp, spec, StateOnlyCompletion(pomdp.town, spec), fallback_after=None,
                    max_junctions=HORIZON)
     assert new.gap == 0.0 and old.gap == 0.0

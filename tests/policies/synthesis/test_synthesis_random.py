@@ -155,12 +155,13 @@ def test_open_nodes_are_valued_by_the_completion_that_returns(driver):
     with the cluster bounds; and with exact trees and no threshold alternates L >= the completion
     alone's value (a policy without rows). Some of these problems do need the return (the completion alone is
     worth more than the state-only one), so the check is not vacuous."""
-    from tests.policies.routing.test_free_completion import StateOnlyCompletion, _no_rows
+    from tests.policies.routing.test_free_completion import StateOnlyCompletion, policy_without_rows
 
     returns = 0
     for seed in range(10):
         pomdp, spec, horizon = _return_problem(driver, seed)
-        alone = evaluate(pomdp, spec, _no_rows(pomdp, spec), fallback_after=None, max_junctions=horizon)
+        alone = evaluate(pomdp, spec, policy_without_rows(pomdp, spec), fallback_after=None,
+                         max_junctions=horizon)
         old = evaluate(pomdp, spec, StateOnlyCompletion(pomdp.town, spec), fallback_after=None,
                        max_junctions=horizon)
         returns += alone.lower > old.lower + 1e-6
