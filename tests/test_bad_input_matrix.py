@@ -414,7 +414,7 @@ def _policy_object_array(good: Path, folder: Path) -> Path:
 
 POLICY_CASES = [
     ("non_utf8_json", _policy_json_text(lambda t: t.replace('"aware"', '"aw\xe9re"'))),
-    ("huge_integer", _policy_json_text(lambda t: t.replace('"version": 2', '"version": ' + "2" * 5000))),
+    ("huge_integer", _policy_json_text(lambda t: t.replace('"version": 3', '"version": ' + "3" * 5000))),
     ("deeply_nested", _policy_json_text(lambda t: t.replace('"name": "aware"', '"name": ' + nested(50000)))),
     ("duplicate_key", _policy_json_text(lambda t: t.replace("{", '{"name": "x", ', 1))),
     ("unknown_key", policy_case(document={"horizn": 4})),

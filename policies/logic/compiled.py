@@ -8,7 +8,7 @@ Cached by the spec's and the town's content hashes, so episodes share the arrays
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -32,6 +32,7 @@ class CompiledSpec:
     accepting: np.ndarray   # bool [n_states]
     rejecting: np.ndarray   # bool [n_states]: can no longer accept
     start: int              # index of the spec's start road in town.states
+    _label_table: tuple | None = field(default=None, repr=False)
 
     def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
         """int64 [n]: DFA states after reading positions (x[i], beliefs[i]) from states q[i]."""
@@ -53,6 +54,33 @@ class CompiledSpec:
         """The DFA state after reading one position (road, belief) from state q."""
         x = self.town.state_index(road)
         return int(self.step(np.array([q]), np.array([x]), np.asarray(belief, dtype=float)[None, :])[0])
+
+    def label_table(self) -> tuple[tuple[str, ...], np.ndarray]:
+        """(belief atom names, next_q [n_q, n_x, 2**m]): the DFA step on every road for every
+        valuation of the m belief atoms of the DFA (bit j of the last index = belief_atoms[j]);
+        state atoms read from the road. Computed once per compiled spec."""
+        cached = self._label_table
+        if cached is None:
+            dfa, spec, town = self.dfa, self.spec, self.town
+            atoms = tuple(dfa.atoms)
+            names = tuple(a for a in atoms if a in spec.belief_atoms)
+            n_x, n_q, m = len(town.states), int(dfa.n_states), len(names)
+            q_grid, x_grid, bits_grid = np.meshgrid(np.arange(n_q), np.arange(n_x), np.arange(2 ** m),
+                                                    indexing="ij")
+            valuations = np.zeros((q_grid.size, len(atoms)), dtype=bool)
+            roads = np.array(town.states)[x_grid.ravel()]
+            for j, atom in enumerate(atoms):
+                if atom in spec.belief_atoms:
+                    valuations[:, j] = (bits_grid.ravel() >> names.index(atom)) & 1
+                else:
+                    members = spec.state_atoms.get(atom, frozenset())
+                    valuations[:, j] = np.isin(roads, list(members))
+            next_q = np.asarray(dfa.step_many(q_grid.ravel(), valuations), dtype=np.int64).reshape(
+                n_q, n_x, 2 ** m)
+            next_q.setflags(write=False)
+            cached = (names, next_q)
+            object.__setattr__(self, "_label_table", cached)
+        return cached
 
 
 _COMPILED: dict[tuple[str, str], CompiledSpec] = {}

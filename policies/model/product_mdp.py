@@ -66,26 +66,11 @@ def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
     check_coefficient_length(spec, pomdp.n_trust, pomdp.driver.source_path)
     compiled = compile_spec(spec, town)
     dfa, labeller = compiled.dfa, compiled.labeller
-    atoms = tuple(dfa.atoms)
-    belief_names = tuple(a for a in atoms if a in spec.belief_atoms)
-    n_x, n_q, m = len(town.states), int(dfa.n_states), len(belief_names)
+    belief_names, next_q = compiled.label_table()
+    m = len(belief_names)
     coeffs = np.array([spec.belief_atoms[a].coeffs for a in belief_names], dtype=float).reshape(
         m, pomdp.n_trust)
     offsets = np.array([spec.belief_atoms[a].offset for a in belief_names], dtype=float)
-    # Valuations for every (q, x, bits): state atoms from the road, belief atoms from the bits.
-    q_grid, x_grid, bits_grid = np.meshgrid(np.arange(n_q), np.arange(n_x), np.arange(2 ** m),
-                                            indexing="ij")
-    valuations = np.zeros((q_grid.size, len(atoms)), dtype=bool)
-    roads = np.array(town.states)[x_grid.ravel()]
-    for j, atom in enumerate(atoms):
-        if atom in spec.belief_atoms:
-            bit = belief_names.index(atom)
-            valuations[:, j] = (bits_grid.ravel() >> bit) & 1
-        else:
-            members = spec.state_atoms.get(atom, frozenset())
-            valuations[:, j] = np.isin(roads, list(members))
-    next_q = np.asarray(dfa.step_many(q_grid.ravel(), valuations), dtype=np.int64).reshape(
-        n_q, n_x, 2 ** m)
     start = town.state_index(spec.start)
     initial_q = compiled.initial_state(pomdp.initial_belief)
     accepting = np.asarray(dfa.accepting, dtype=bool)

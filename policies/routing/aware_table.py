@@ -7,9 +7,11 @@ the roads driven. Two acting rules (docs/synthesis.md, "Open nodes and the actin
 
 Exact-belief rule (tables with p): at a context (t, x, q, p, b), the row with the same
 (t, x, q, p) whose belief is within EXACT_BELIEF_DISTANCE of b; if there is none, the move of the
-trust-free shortest completion from (x, p), or the first legal move when that task is complete
-or impossible. The synthesis values every node without a row by exactly this completion, so the
-policy's value is the synthesised L (docs/synthesis.md).
+free completion at (x, q, p) (policies/routing/free.py, `free_completion`): the trust-free
+shortest completion of the state-only task while it is not complete, after it the shortest route
+back to what the DFA still needs, every label allowed (so a waypoint reached with too little trust
+is visited again). The synthesis values every node without a row by exactly this completion, so
+the policy's value is the synthesised L (docs/synthesis.md, "Open nodes and the acting rule").
 
 Nearest-belief rule (tables without p):
 1. among rows with the same (t, x, q), take the row whose belief is nearest (Euclidean);
@@ -33,7 +35,7 @@ from scipy.spatial import cKDTree
 
 from trustroute.networks.town import Town
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.routing.free import state_only_task
+from trustroute.policies.routing.free import free_completion, state_only_task
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 
@@ -135,8 +137,9 @@ class BeliefTablePolicy(RoutingPolicy):
         self._n_x = len(town.states)
         self._n_q = int(table.q.max()) + 1 if table.rows else 1
         self._n_p = int(self.task.dfa.n_states)
-        # the trust-free completion's move per (road, task state); the first move where it has none
-        self._free_slot = np.where(self.task.next_slot >= 0, self.task.next_slot, 0)
+        # the free completion's move per (road, DFA state, task state): the exact-belief rule's
+        # fallback (module docstring)
+        self._free_slot = free_completion(town, spec).slot
         if table.exact:
             self._exact = _group(self._key_tqp(table.t, table.x, table.q, table.projected), table.beliefs)
         else:
@@ -167,7 +170,7 @@ class BeliefTablePolicy(RoutingPolicy):
         """The exact-belief rule, vectorised: the slot per context (never -1)."""
         t, x, q, p = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q, projected))
         beliefs = self._policy_beliefs(beliefs)
-        out = self._free_slot[x, p].copy()
+        out = self._free_slot[x, q, p].copy()
         if t.size == 0 or not self.table.rows:
             return out
         keys = self._key_tqp(t, x, q, p)
@@ -223,7 +226,7 @@ class BeliefTablePolicy(RoutingPolicy):
     def _exact_slot(self, t: int, x: int, q: int, p: int, belief: np.ndarray) -> int:
         """`exact_action_slots` of one context (an episode's decision): one dict access and one
         nearest-row search, without the grouping of a batch (the same rows, so the same slot)."""
-        slot = int(self._free_slot[x, p])
+        slot = int(self._free_slot[x, q, p])
         if not self.table.rows:
             return slot
         found = self._exact.nearest_with_distance(self._key_tqp(t, x, q, p), self._policy_beliefs(belief))

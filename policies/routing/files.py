@@ -30,11 +30,19 @@ from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.routing.joint_table import JointPolicyTable, JointTablePolicy
 
 FORMAT = "trustroute-policy"
-VERSION = 2
+# Version 3: where a policy has no row it drives the free completion of (road, DFA state, task
+# state), which after the state-only task returns to what the DFA still needs; version 2 files
+# were synthesized for the state-only completion (then the first legal move) and are refused:
+# their certified L is not the value of the version-3 rule. Joint-belief files (their rule does
+# not use the completion) are read from version 2 on.
+VERSION = 3
+JOINT_VERSIONS = (2, 3)
 ACTING_RULE = ("action of the stored row with the same (junctions driven, road, DFA state, state-only "
                "task state) whose belief is within 1e-12 of the AV's (the synthesis visited it); "
-               "else the move of the trust-free shortest completion of the state-only task (the "
-               "first legal move when that task is complete or impossible)")
+               "else the move of the free completion: the trust-free shortest completion of the "
+               "state-only task while it is not complete, then the shortest route back to what the "
+               "DFA still needs, every label allowed (the first legal move where acceptance is "
+               "unreachable)")
 
 
 ARRAY_NAMES = ("t", "x", "q", "projected", "beliefs", "action")
@@ -127,10 +135,14 @@ def read_policy_document(path: str | Path) -> dict:
     if not isinstance(document, dict) or document.get("format") != FORMAT:
         raise InputError(where, "format", f"not a trustroute policy file (format {FORMAT!r} expected)",
                          "pass a file written by trustroute synth --out")
-    if document.get("version") != VERSION:
-        raise InputError(where, "version", f"policy file version {document.get('version')!r}, this "
-                         f"trustroute reads version {VERSION}", "re-run trustroute synth")
     joint = "kind" in document
+    version = document.get("version")
+    if not (version == VERSION or (joint and version in JOINT_VERSIONS)) or isinstance(version, bool):
+        older = ("; version 2 policies drive the state-only completion where they have no row, which "
+                 "their bounds were certified for, not this trustroute's acting rule"
+                 if version == 2 else "")
+        raise InputError(where, "version", f"policy file version {str(version)[:30]}, this "
+                         f"trustroute reads version {VERSION}{older}", "re-run trustroute synth")
     if joint and document["kind"] != JOINT_KIND:
         raise InputError(where, "kind", f"unknown policy kind {str(document['kind'])[:30]!r} "
                          f"(only {JOINT_KIND!r})", RESYNTH)

@@ -10,6 +10,13 @@ and projected DFA state q (the state after reading the position on x), the short
 that starts such a shortest completion. Ties are broken by fewer roads, then by the order of
 `town.actions`, so following the table from any product state is itself a shortest completion:
 the baseline route and every re-plan from a point on it agree.
+
+`free_completion(town, spec)` is the completion a synthesized policy drives wherever it has no row
+(policies/routing/aware_table.py) and by which the synthesis values its open nodes: the trust-free
+shortest completion while the state-only task is not complete, and after it (a waypoint reached
+with too little trust leaves the spec's DFA waiting) the shortest route, in junctions, back to
+what the DFA still needs, every label allowed (docs/synthesis.md, "Open nodes and the acting
+rule"). The baseline policy "free" and the study's fallback keep the state-only completion.
 """
 
 from __future__ import annotations
@@ -163,6 +170,7 @@ def build_state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
 
 
 _TASKS: dict[tuple[str, str], StateOnlyTask] = {}
+_COMPLETIONS: dict[tuple[str, str], FreeCompletion] = {}
 
 
 def state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
@@ -175,6 +183,96 @@ def state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
                              "use a road 'U-V' of the town the spec is checked against")
         _TASKS[key] = build_state_only_task(town, spec)
     return _TASKS[key]
+
+
+def label_free_distance(successors: np.ndarray, next_q: np.ndarray, accepting: np.ndarray,
+                        rejecting: np.ndarray) -> np.ndarray:
+    """int [n_x, n_q]: fewest junctions from (x, q) to an accepting DFA state in the road × DFA
+    graph with every belief-label value allowed (a breadth-first search backwards from acceptance;
+    UNREACHABLE where acceptance cannot be reached). successors [n_x, slots] (road or -1);
+    next_q [n_q, n_x, 2**m] (CompiledSpec.label_table); accepting, rejecting bool [n_q]."""
+    n_x, n_q = successors.shape[0], next_q.shape[0]
+    distance = np.full((n_x, n_q), UNREACHABLE, dtype=np.int64)
+    distance[:, accepting] = 0
+    live = ~(accepting | rejecting)
+    # edges (x, q) -> (x2, next_q[q, x2, bits]) for every bits; reversed per layer.
+    src_x = np.repeat(np.arange(n_x), successors.shape[1])
+    dst_x = successors.ravel()
+    ok = dst_x >= 0
+    src_x, dst_x = src_x[ok], dst_x[ok]
+    q2 = next_q[:, dst_x, :].transpose(1, 0, 2)          # [edges, n_q, bits]
+    level = 0
+    frontier = distance == 0
+    while frontier.any():
+        level += 1
+        # (x, q) gets `level` if some successor (x2, q2) is on the frontier
+        reached = frontier[dst_x[:, None, None], q2].any(axis=2)   # [edges, n_q]
+        hit = np.zeros((n_x, n_q), dtype=bool)
+        np.logical_or.at(hit, src_x, reached)
+        new = hit & live & (distance == UNREACHABLE)
+        distance[new] = level
+        frontier = new
+    return distance
+
+
+UNREACHABLE = np.iinfo(np.int64).max // 4
+
+
+@dataclass(frozen=True, eq=False)
+class FreeCompletion:
+    """The free completion's move per product context (x, q, p): road, spec DFA state, state-only
+    task state (module docstring).
+
+    slot[x, q, p]: index into town.actions(road x), always a legal move. While the state-only task
+    is not complete (task.next_slot[x, p] >= 0) it is the task's move, the same for every q; after
+    it (or where it cannot be completed) the first move of a shortest route to acceptance in the
+    road × DFA graph with every label allowed (fewest junctions, `distance`; ties: slot order);
+    the first legal move where acceptance is unreachable. `returns[x, q]` is that second move.
+    """
+
+    task: StateOnlyTask
+    slot: np.ndarray        # [n_x, n_q, n_p]
+    returns: np.ndarray     # [n_x, n_q]
+    distance: np.ndarray    # [n_x, n_q] junctions to acceptance, every label allowed
+
+    def junction(self, road: str, q: int, p: int) -> str:
+        """The completion's next junction at (road, DFA state q, task state p)."""
+        x = self.task.road_index[road]
+        return self.task.town.actions(road)[int(self.slot[x, q, p])]
+
+
+def build_free_completion(town: Town, spec: Spec) -> FreeCompletion:
+    """The free completion of `spec` on `town` (FreeCompletion)."""
+    task = state_only_task(town, spec)
+    compiled = compile_spec(spec, town)
+    _, next_q = compiled.label_table()
+    accepting = np.asarray(compiled.accepting, dtype=bool)
+    rejecting = np.asarray(compiled.rejecting, dtype=bool) & ~accepting
+    n_x = len(town.states)
+    width = max(len(town.actions(road)) for road in town.states)
+    successors = np.full((n_x, width), -1, dtype=np.int64)
+    for x, road in enumerate(town.states):
+        for slot, nxt in enumerate(town.successors(road)):
+            successors[x, slot] = town.state_index(nxt)
+    distance = label_free_distance(successors, next_q, accepting, rejecting)
+    # distance after entering x2 from q, with the most favourable label there: [n_q, n_x]
+    entered = distance[np.arange(n_x)[None, :, None], next_q].min(axis=2)
+    cost = np.where(successors[:, None, :] >= 0,
+                    entered[:, np.maximum(successors, 0)].transpose(1, 0, 2), UNREACHABLE)  # [x, q, s]
+    returns = np.where(cost.min(axis=2) < UNREACHABLE, cost.argmin(axis=2), 0).astype(np.int64)
+    task_slot = task.next_slot                                                    # [n_x, n_p]
+    slot = np.where(task_slot[:, None, :] >= 0, task_slot[:, None, :], returns[:, :, None])
+    for array in (slot, returns, distance):
+        array.setflags(write=False)
+    return FreeCompletion(task=task, slot=slot, returns=returns, distance=distance)
+
+
+def free_completion(town: Town, spec: Spec) -> FreeCompletion:
+    """`build_free_completion`, cached by the town's and the spec's content hashes."""
+    key = (town.content_hash, spec.content_hash)
+    if key not in _COMPLETIONS:
+        _COMPLETIONS[key] = build_free_completion(town, spec)
+    return _COMPLETIONS[key]
 
 
 def completion_route(town: Town, spec: Spec, route: Sequence[str]) -> list[str] | None:

@@ -1,8 +1,10 @@
 """Bounds on the value of the trust-free completion from a node, without the observation tree.
 
-The trust-free completion (policies/routing/free.py) drives a road sequence fixed by (road x,
-state-only task state p) alone, so from a node (x, q, p, b) with `steps` junctions left its value
-is a forward computation along one road sequence. The exact computation is a tree over observation
+The free completion (policies/routing/free.py, `free_completion`: the trust-free completion of the
+state-only task, then the shortest route back to what the DFA still needs) drives a road fixed by
+(road x, DFA state q, state-only task state p), never by the belief, so from a node (x, q, p, b)
+with `steps` junctions left its value is a forward computation along road sequences that branch
+only where the DFA state does. The exact computation is a tree over observation
 sequences (beliefs after different sequences rarely coincide): exponential in the incident roads.
 This module propagates probability mass over *clusters* of beliefs instead:
 
@@ -24,7 +26,7 @@ This module propagates probability mass over *clusters* of beliefs instead:
   vertices' mean); a start node with more than CLUSTER_CAP clusters has its δ doubled until it has
   at most that many. Clusters lighter than MASS_FLOOR are dropped (failure for the lower bound,
   success for the upper bound). The move may depend on the DFA state (FreeRoute is indexed by
-  (x, q, p)); the trust-free completion's does not.
+  (x, q, p)): each cluster has one DFA state, so it takes one move.
 
 So lower <= V_free <= upper for the exact-arithmetic Bayes process. Floating point: the vertices
 are float images of float vertices, as the suffix cells' are (belief_cells.py), and the straddle

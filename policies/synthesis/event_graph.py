@@ -77,7 +77,7 @@ class EventGraph:
     """Macro moves per product context (x, q, p), computed on first use and cached."""
 
     def __init__(self, tables: ProductTables, symbols: ObservationSymbols, task: StateOnlyTask,
-                 chains_only: bool = False) -> None:
+                 chains_only: bool = False, free_slot: np.ndarray | None = None) -> None:
         self.tables, self.task = tables, task
         successors = tables.successors
         self.successors = successors
@@ -92,8 +92,12 @@ class EventGraph:
         next_p = np.asarray(task.next_state, dtype=np.int64)
         p_moves = next_p != np.arange(next_p.shape[0])[:, None]
         self.quiet_road, self.q_moves, self.p_moves = quiet_road, q_moves, p_moves
-        # the trust-free completion's move per (road, task state); the first move where it has none
-        self.free_slot = np.where(task.next_slot >= 0, task.next_slot, 0)
+        # the free completion's move per (road, DFA state, task state) (routing/free.py,
+        # FreeCompletion.slot; default: the state-only task's, the first move where it has none)
+        if free_slot is None:
+            free_slot = np.broadcast_to(np.where(task.next_slot >= 0, task.next_slot, 0)[:, None, :],
+                                        (tables.n_x, tables.n_q, task.next_slot.shape[1]))
+        self.free_slot = free_slot
         live = ~(tables.accepting | tables.rejecting)
         # roads quiet for some live DFA state and some task state, and roads that are events for some
         self.maybe_quiet = quiet_road & (~q_moves[live]).any(axis=0) & (~p_moves).any(axis=0)
@@ -159,7 +163,7 @@ class EventGraph:
             return MacroMoves(target=np.array([e for e, _ in chains], dtype=np.int64),
                               length=np.array([len(route) for _, route in chains], dtype=np.int64),
                               path=tuple(route for _, route in chains),
-                              free=int(self.free_slot[x, p]))
+                              free=int(self.free_slot[x, q, p]))
         # Breadth-first over quiet roads from x, successors in slot order: each road is reached
         # first by a shortest path (in junctions), recorded by its predecessor and slot.
         parent: dict[int, tuple[int, int]] = {}
@@ -181,7 +185,7 @@ class EventGraph:
         ranked = sorted(range(len(order)), key=lambda i: (paths[i][0][1], len(paths[i]), order[i]))
         target = [order[i] for i in ranked]
         path = [paths[i] for i in ranked]
-        free_target, free_path = self._free_path(x, p, event)
+        free_target, free_path = self._free_path(x, q, p, event)
         free = next((a for a, (e, route) in enumerate(zip(target, path, strict=True))
                      if e == free_target and len(route) == len(free_path)), -1)
         if free < 0:
@@ -204,10 +208,13 @@ class EventGraph:
             road = before
         return tuple(reversed(steps))
 
-    def _free_path(self, x: int, p: int, event: np.ndarray) -> tuple[int, tuple[tuple[int, int], ...]]:
-        """(target, path) of the trust-free completion from (x, p) to its first event road; target
-        -1 when it circles quiet roads forever (p does not move on quiet roads, so its moves repeat)."""
-        return self._walk(x, int(self.free_slot[x, p]), event, lambda road: int(self.free_slot[road, p]))
+    def _free_path(self, x: int, q: int, p: int, event: np.ndarray
+                   ) -> tuple[int, tuple[tuple[int, int], ...]]:
+        """(target, path) of the free completion from (x, q, p) to its first event road; target -1
+        when it circles quiet roads forever (neither q nor p moves on quiet roads, so its moves
+        repeat)."""
+        return self._walk(x, int(self.free_slot[x, q, p]), event,
+                          lambda road: int(self.free_slot[road, q, p]))
 
     def _walk(self, x: int, first: int, event: np.ndarray, slot_at: Callable[[int], int]
               ) -> tuple[int, tuple[tuple[int, int], ...]]:

@@ -22,8 +22,11 @@ Method (bounded heuristic search over the product belief MDP, with a sound abstr
   returned policy reaches; until U - L <= tau at the root, the frontier is exhausted, or the time
   limit.
 * The returned policy takes at every EXPANDED node the action maximising L among those the hold
-  rule allows (ties: strict value, then U) and drives the trust-free completion everywhere else
-  (the exact-belief acting rule of policies.routing.aware_table.BeliefTablePolicy). After the
+  rule allows (ties: strict value, then U) and drives the free completion everywhere else
+  (the exact-belief acting rule of policies.routing.aware_table.BeliefTablePolicy): the trust-free
+  completion of the state-only task, then the shortest route back to what the DFA still needs,
+  every label allowed (policies/routing/free.py, `free_completion`; "the trust-free completion"
+  below). After the
   last round the completions it reaches are bounded (Bayes) or closed (authors' rule), so `lower`
   is a lower bound of that policy's value (its exact value under the authors' rule). Where a
   completion bound is used, rows its route can reach may leave the free move only for a move
@@ -55,7 +58,7 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.product_mdp import ProductTables, build_product
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
-from trustroute.policies.routing.free import StateOnlyTask, state_only_task
+from trustroute.policies.routing.free import StateOnlyTask, free_completion, state_only_task
 from trustroute.policies.synthesis.arguments import check_synthesis_arguments
 from trustroute.policies.synthesis.belief_cells import (
     ObservationSymbols,
@@ -313,11 +316,13 @@ class _Search:
         for members in self.symbols.by_incident:
             for j, o in enumerate(members):
                 self.slot_of_symbol[o] = j
-        # The trust-free completion (policies/routing/free.py) as the returned policy drives it
-        # wherever it has no row: its move at (road, state-only task state), the first move when
-        # that task is complete or impossible (BeliefTablePolicy's exact-belief rule).
+        # The free completion (policies/routing/free.py) as the returned policy drives it wherever
+        # it has no row: its move at (road, DFA state, state-only task state), the state-only task's
+        # while that is not complete, then the shortest route back to what the DFA still needs,
+        # every label allowed (BeliefTablePolicy's exact-belief rule).
         self.task = state_only_task(pomdp.town, tables.spec)
-        self.free_slot = np.where(self.task.next_slot >= 0, self.task.next_slot, 0)   # [n_x, n_p]
+        self.free_completion = free_completion(pomdp.town, tables.spec)
+        self.free_slot = self.free_completion.slot                                    # [n_x, n_q, n_p]
         self.next_p = np.asarray(self.task.next_state, dtype=np.int64)               # [n_p, n_x]
         # Moves: macro moves of the event graph (policies/synthesis/event_graph.py) when some road
         # is quiet and the widest context has at most MAX_MACRO_WIDTH of them; else the junctions.
@@ -327,7 +332,8 @@ class _Search:
         if compress not in COMPRESS_MODES:
             raise ValueError(f"unknown compression {compress!r}; use one of {', '.join(COMPRESS_MODES)}")
         if compress != "off":
-            events = EventGraph(tables, self.symbols, self.task, chains_only=compress == "chains")
+            events = EventGraph(tables, self.symbols, self.task, chains_only=compress == "chains",
+                                free_slot=self.free_slot)
             if events.compresses and events.width <= MAX_MACRO_WIDTH:
                 self.events = events
             self.macro_width = events.width
@@ -362,7 +368,7 @@ class _Search:
             return self.events.table(g.x[nodes], g.q[nodes], g.p[nodes])
         target = self.tables.successors[g.x[nodes]]
         legal = target >= 0
-        return target, legal.astype(np.int64), legal, self.free_slot[g.x[nodes], g.p[nodes]]
+        return target, legal.astype(np.int64), legal, self.free_slot[g.x[nodes], g.q[nodes], g.p[nodes]]
 
     def level_arrays(self, level: int) -> _Level:
         """The cached _Level of `level`, rebuilt when nodes or alternates were added there."""
@@ -846,7 +852,7 @@ class _Search:
             offer(node, moves.path[moves.free], float(g.lower[node]), 2)
         self.row_conflicts = sum(1 for taken in slots.values() if len(taken) > 1)
         # A context only free completions pass needs no row (the policy drives them there anyway;
-        # they all take the free slot of (road, p)).
+        # they all take the free completion's slot of (road, q, p)).
         keys = [key for key in best if key in has_row]
         beliefs = (np.array([np.frombuffer(key[4], dtype=float) for key in keys]) if keys
                    else np.zeros((0, g.belief.shape[1])))

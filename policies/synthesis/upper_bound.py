@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.policies.model.product_mdp import ProductTables
+from trustroute.policies.routing.free import label_free_distance
 from trustroute.policies.synthesis.belief_cells import ObservationSymbols, SuffixCells, image_label_status
 
 BACKUP_CHUNK_ENTRIES = 4_000_000   # floats of one chunk of the vectorised backup (32 MB)
@@ -163,29 +164,7 @@ def acceptance_distance(tables: ProductTables) -> np.ndarray:
     graph with every belief-label value allowed (a breadth-first search backwards from acceptance;
     a large sentinel where acceptance is unreachable). A lower bound on the junctions any policy
     needs, so a node with distance > the junctions left is worth exactly 0."""
-    n_x, n_q = tables.n_x, tables.n_q
-    unreachable = np.iinfo(np.int64).max // 4
-    distance = np.full((n_x, n_q), unreachable, dtype=np.int64)
-    distance[:, tables.accepting] = 0
-    live = ~(tables.accepting | tables.rejecting)
-    # edges (x, q) -> (x2, next_q[q, x2, bits]) for every bits; reversed per layer.
-    src_x = np.repeat(np.arange(n_x), tables.successors.shape[1])
-    dst_x = tables.successors.ravel()
-    ok = dst_x >= 0
-    src_x, dst_x = src_x[ok], dst_x[ok]
-    q2 = tables.next_q[:, dst_x, :].transpose(1, 0, 2)          # [edges, n_q, bits]
-    level = 0
-    frontier = distance == 0
-    while frontier.any():
-        level += 1
-        # (x, q) gets `level` if some successor (x2, q2) is on the frontier
-        reached = frontier[dst_x[:, None, None], q2].any(axis=2)   # [edges, n_q]
-        hit = np.zeros((n_x, n_q), dtype=bool)
-        np.logical_or.at(hit, src_x, reached)
-        new = hit & live & (distance == unreachable)
-        distance[new] = level
-        frontier = new
-    return distance
+    return label_free_distance(tables.successors, tables.next_q, tables.accepting, tables.rejecting)
 
 
 def unbounded_upper(abstraction: Abstraction, time_limit: float, tolerance: float = 1e-6,

@@ -13,7 +13,7 @@ from trustroute.networks.errors import InputError
 from trustroute.networks.town import DEFAULT_TOWN_PATH, town_from_dict
 from trustroute.policies.evaluate import evaluate
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.routing.files import array_path, load_policy, save_policy
+from trustroute.policies.routing.files import array_path, load_policy, read_policy_document, save_policy
 from trustroute.policies.routing.protocol import DecisionContext
 from trustroute.policies.routing.resolve import aware_cache_path, resolve_policy
 from trustroute.policies.synthesis.search import synthesize
@@ -76,6 +76,28 @@ def test_damaged_files_are_input_errors(town, driver, phi1_result, tmp_path):
     (tmp_path / "other.json").write_text('{"format": "something else"}')
     with pytest.raises(InputError, match="not a trustroute policy file"):
         load_policy(tmp_path / "other.json", town, driver, spec)
+
+
+def test_version_2_files_are_refused_with_the_reason(town, driver, phi1_result, tmp_path):
+    """Version 2 policies were certified for the state-only completion at rows they lack; this
+    acting rule drives the free completion there, so they are refused (one line, the fix named).
+    Joint-belief files, whose rule does not use the completion, are still read from version 2 on."""
+    spec, result = phi1_result
+    path = save_policy(result, tmp_path / "p.json", town, driver, spec)
+    document = json.loads(path.read_text())
+    assert document["version"] == 3 and "back to what the DFA still needs" in document["acting_rule"]
+    path.write_text(json.dumps({**document, "version": 2}))
+    with pytest.raises(InputError) as error:
+        load_policy(path, town, driver, spec)
+    message = error.value.one_line()
+    assert "version 2" in message and "state-only completion" in message
+    assert "re-run trustroute synth" in message
+    joint = {**document, "version": 2, "kind": "joint-belief", "guide_horizon": 8}
+    path.write_text(json.dumps(joint))
+    assert read_policy_document(path)["version"] == 2
+    path.write_text(json.dumps({**joint, "version": 1}))
+    with pytest.raises(InputError, match="version 1"):
+        read_policy_document(path)
 
 
 def test_resolve_free_aware_and_files(pomdp, town, driver, phi1_result, tmp_path, monkeypatch):

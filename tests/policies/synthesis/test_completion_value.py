@@ -18,7 +18,7 @@ from trustroute.policies.evaluate import evaluate
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.product_mdp import build_product
 from trustroute.policies.model.trust_pomdp import build_pomdp
-from trustroute.policies.routing.free import state_only_task
+from trustroute.policies.routing.free import free_completion, state_only_task
 from trustroute.policies.synthesis import completion_value
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols
 from trustroute.policies.synthesis.completion_value import FreeRoute, completion_bounds
@@ -53,8 +53,9 @@ def _problem(driver, seed):
     spec = random_spec(rng, town, np.asarray(pomdp.initial_belief))
     tables = build_product(pomdp, spec)
     task = state_only_task(town, spec)
-    free_slot = np.where(task.next_slot >= 0, task.next_slot, 0)
-    route = FreeRoute.build(tables, free_slot, np.asarray(task.next_state, dtype=np.int64))
+    # the free completion the synthesis values open nodes by (moves per (x, q, p))
+    route = FreeRoute.build(tables, free_completion(town, spec).slot,
+                            np.asarray(task.next_state, dtype=np.int64))
     return tables, observation_symbols(pomdp), route, task
 
 

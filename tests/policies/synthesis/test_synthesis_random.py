@@ -136,3 +136,46 @@ def test_returned_policy_is_worth_at_least_lower_with_completion_bounds(driver, 
         if result.gap <= tau:
             # converged: L >= Pr_max - tau >= the trust-free route's value - tau
             assert result.lower >= free.lower - tau - TOLERANCE
+
+
+def _return_problem(driver, seed: int):
+    """A seeded random problem with a longer horizon (7-10 junctions): room to come back to a
+    waypoint reached with too little trust, which only the free completion does."""
+    rng = np.random.default_rng(2000 + seed)
+    town = random_town(rng)
+    pomdp = build_pomdp(town, random_driver(rng, driver.incident_types))
+    spec = random_spec(rng, town, pomdp.initial_belief)
+    return pomdp, spec, int(rng.integers(7, 11))
+
+
+def test_open_nodes_are_valued_by_the_completion_that_returns(driver):
+    """Open nodes are valued by the free completion (state-only task, then back to what the DFA
+    still needs) and the policy drives it where it has no row: early stops (tau 0.2) on seeded
+    random problems give `evaluate` of the policy = L with exact trees (auto) and L <= value <= U
+    with the cluster bounds; and with exact trees and no threshold alternates L >= the completion
+    alone's value (a policy without rows). Some of these problems do need the return (the completion alone is
+    worth more than the state-only one), so the check is not vacuous."""
+    from tests.policies.routing.test_free_completion import StateOnlyCompletion, policy_without_rows
+
+    returns = 0
+    for seed in range(10):
+        pomdp, spec, horizon = _return_problem(driver, seed)
+        alone = evaluate(pomdp, spec, policy_without_rows(pomdp, spec), fallback_after=None,
+                         max_junctions=horizon)
+        old = evaluate(pomdp, spec, StateOnlyCompletion(pomdp.town, spec), fallback_after=None,
+                       max_junctions=horizon)
+        returns += alone.lower > old.lower + 1e-6
+        for completion in ("auto", "bounds"):
+            result = synthesize(pomdp, spec, tau=0.2, horizon=horizon, time_limit=20, completion=completion)
+            value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+            run = result.stats["runs"][0]
+            exact_labels = run.get("threshold_alternates", 0) == 0 and len(run["root_dfa_states"]) == 1
+            if completion == "auto" and run["nodes"]:
+                assert not run["completion_bounds"] and run["completion_closed"]
+                assert value.lower == pytest.approx(run["lower_strict_labels"], abs=TOLERANCE)
+                if exact_labels:
+                    assert value.lower == pytest.approx(result.lower, abs=TOLERANCE), (seed, value.lower)
+            assert result.lower - TOLERANCE <= value.lower <= result.upper + TOLERANCE, (seed, completion)
+            if completion == "auto" and exact_labels and run["completion_closed"]:
+                assert result.lower >= alone.lower - TOLERANCE, (seed, alone.lower, result.lower)
+    assert returns >= 2
