@@ -8,7 +8,7 @@ expected values (harness/study/expected.py) and the demo read it from here.
 
 from __future__ import annotations
 
-import functools
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -82,11 +82,26 @@ def robust_condition_policy(town: Town, spec: Spec, config: StudyConfig, progres
                              population_source=config.robust_population, progress=progress)
 
 
-@functools.lru_cache(maxsize=4)
+_CONTEXTS: OrderedDict[StudyConfig, StudyContext] = OrderedDict()
+MAX_CONTEXTS = 4
+
+
 def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
-    """The study's shared context, built once per process (cached by the config: equal configs,
-    every setting and the [population] table included, share one context). progress: bars while
-    policies are synthesized (the main process; workers find them in the policy cache)."""
+    """The study's shared context, built once per process and cached by the config alone (equal
+    configs, every setting and the [population] table included, share one context; `progress`
+    only shows bars while policies are synthesized, in the main process). Workers forked after
+    `validate_study` inherit the main process's context, so they load no policy again; the
+    consolidation's expected values reuse it too."""
+    context = _CONTEXTS.get(config)
+    if context is None:
+        context = _build_study_context(config, progress)
+        _CONTEXTS[config] = context
+        while len(_CONTEXTS) > MAX_CONTEXTS:
+            _CONTEXTS.popitem(last=False)
+    return context
+
+
+def _build_study_context(config: StudyConfig, progress: bool) -> StudyContext:
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.policies.logic.labelling import check_coefficient_length
