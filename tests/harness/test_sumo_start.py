@@ -4,8 +4,9 @@ is untraced, the public API for TraCI (sumo-gui) and for a traced libsumo."""
 from __future__ import annotations
 
 import libsumo
+import traci
 
-from trustroute.harness.sumo_start import _TraciWithConstants, hot_calls
+from trustroute.harness.sumo_start import hot_calls
 
 
 def test_untraced_libsumo_gives_its_native_functions():
@@ -28,7 +29,6 @@ def test_a_traced_libsumo_keeps_the_public_calls(monkeypatch):
 
 
 def test_traci_keeps_the_public_calls():
-    traci = _TraciWithConstants()
-    calls = hot_calls(traci)
+    calls = hot_calls(traci)   # sumo-gui runs through TraCI (sumo_start wraps the module)
     assert calls.step == traci.simulationStep
     assert calls.time == traci.simulation.getTime
