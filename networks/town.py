@@ -18,6 +18,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from trustroute.networks.errors import InputError
 from trustroute.networks.validation import check_keys, parse_json, read_text, require_keys, require_object
 
@@ -93,6 +95,18 @@ class Town:
     @functools.cached_property
     def _actions(self) -> dict[str, tuple[str, ...]]:
         return {road: self._moves(road) for road in self.states}
+
+    @functools.cached_property
+    def successor_table(self) -> np.ndarray:
+        """int64 [n_states, widest move count], read-only: per state (in `states` order) the state
+        index of each move's road, in the order of `actions`, padded with -1. The road graph as
+        the trust POMDP and the free completion index it."""
+        rows = [[self.state_index(nxt) for nxt in self.successors(road)] for road in self.states]
+        table = np.full((len(rows), max(map(len, rows))), -1, dtype=np.int64)
+        for x, row in enumerate(rows):
+            table[x, :len(row)] = row
+        table.setflags(write=False)
+        return table
 
     def state_index(self, directed_road: str) -> int:
         index = self._state_indices.get(directed_road)

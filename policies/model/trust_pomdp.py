@@ -38,11 +38,7 @@ class TrustPOMDP:
         check_covers_town(driver, set(town.incidents.values()), town.source_path)
         road_incident = np.array([driver.incident_index(town.incident(s)) for s in town.states])
         actions = tuple(town.actions(s) for s in town.states)
-        width = max(len(a) for a in actions)
-        successors = np.full((len(town.states), width), -1, dtype=np.int64)
-        for i, state in enumerate(town.states):
-            for k, junction in enumerate(actions[i]):
-                successors[i, k] = town.state_index(town.successor(state, junction))
+        successors = town.successor_table
         takeover = driver.takeover_probability                    # [n_inc, θ]
         failure = driver.failure_probability
         p_h = np.stack([1 - takeover, takeover], axis=1)          # [n_inc, h, θ]

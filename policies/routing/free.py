@@ -218,6 +218,7 @@ def label_free_distance(successors: np.ndarray, next_q: np.ndarray, accepting: n
 UNREACHABLE = np.iinfo(np.int64).max // 4
 
 
+
 @dataclass(frozen=True, eq=False)
 class FreeCompletion:
     """The free completion's move per product context (x, q, p): road, spec DFA state, state-only
@@ -249,11 +250,7 @@ def build_free_completion(town: Town, spec: Spec) -> FreeCompletion:
     accepting = np.asarray(compiled.accepting, dtype=bool)
     rejecting = np.asarray(compiled.rejecting, dtype=bool) & ~accepting
     n_x = len(town.states)
-    width = max(len(town.actions(road)) for road in town.states)
-    successors = np.full((n_x, width), -1, dtype=np.int64)
-    for x, road in enumerate(town.states):
-        for slot, nxt in enumerate(town.successors(road)):
-            successors[x, slot] = town.state_index(nxt)
+    successors = town.successor_table
     distance = label_free_distance(successors, next_q, accepting, rejecting)
     # distance after entering x2 from q, with the most favourable label there: [n_q, n_x]
     entered = distance[np.arange(n_x)[None, :, None], next_q].min(axis=2)
