@@ -130,9 +130,6 @@ class _StepLog:
         self.lanes: list[str] = []
         self.modes: list[str] = []
 
-    def __len__(self) -> int:
-        return len(self.lanes)
-
     def table(self, episode_id: str) -> pa.Table:
         floats = np.frombuffer(self.floats, dtype=np.float64).reshape(-1, 4).T
         rows = len(self.lanes)
@@ -385,7 +382,7 @@ class _Episode:
         step = self.config.step_length
         max_sim_seconds = self.config.max_sim_seconds
         now = 0.0
-        # Hot loop: local names, one subscription read, one append, Python work only where
+        # Hot loop: local names, one subscription read, three appends, Python work only where
         # something happens (an incident still live, a driver still to decide).
         calls = hot_calls(sumo)
         simulation_step, get_time = calls.step, calls.time

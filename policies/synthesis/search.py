@@ -321,8 +321,7 @@ class _Search:
         # while that is not complete, then the shortest route back to what the DFA still needs,
         # every label allowed (BeliefTablePolicy's exact-belief rule).
         self.task = state_only_task(pomdp.town, tables.spec)
-        self.free_completion = free_completion(pomdp.town, tables.spec)
-        self.free_slot = self.free_completion.slot                                    # [n_x, n_q, n_p]
+        self.free_slot = free_completion(pomdp.town, tables.spec).slot               # [n_x, n_q, n_p]
         self.next_p = np.asarray(self.task.next_state, dtype=np.int64)               # [n_p, n_x]
         # Moves: macro moves of the event graph (policies/synthesis/event_graph.py) when some road
         # is quiet and the widest context has at most MAX_MACRO_WIDTH of them; else the junctions.
