@@ -13,24 +13,32 @@ This module propagates probability mass over *clusters* of beliefs instead:
   policies/synthesis/belief_cells.py), and the belief after the sequence is α_k / Σ α_k. A
   cluster carries the sum of the α of its member sequences, so the probability of every event that
   is a union of clusters is exact, whatever was merged.
-* Beliefs are enclosed. A cluster carries n vertex beliefs whose hull contains every member's
-  belief. The filter step f_o(b) = b W_o / (b W_o 1) maps the hull of points onto the hull of their
-  images (vertices with P(o | v) = 0 drop out), so the vertex images enclose the next beliefs with
-  no loss. A merged cluster is enclosed by the simplex {b >= l} (vertices l + (1 - Σ l) e_i), l the
-  componentwise minimum of the members' vertices lowered by CORNER_MARGIN.
+* Beliefs are enclosed. A cluster carries a box [lo, hi] whose intersection with the simplex,
+  B = {b : lo <= b <= hi, Σ b = 1}, contains every member's belief (a cluster that never merged has
+  lo = hi = its belief). The filter step f_o(b) = b W_o / (b W_o 1) is linear-fractional, so each
+  coordinate of f_o over B attains its extremes at a vertex of B, and at the vertex a greedy fill
+  reaches: R_j(b) = (b·a)/(b·d) (a = W_o[:, j], d = W_o 1) has its maximum λ* where
+  max_B (a - λ* d)·b = 0, and a linear function is maximised over B by filling 1 - Σ lo into the
+  coordinates in decreasing order of (a - λ* d)_i, each up to hi_i - lo_i. That order changes
+  only where two lines a_i - λ d_i cross, so the orders of every λ interval (`fill_orders`, fixed
+  per symbol and coordinate) contain the optimal one: the next box is the exact range of f_o over
+  B per coordinate (the minimum with the reversed orders), widened by CORNER_MARGIN. Merging takes
+  the box hull (componentwise min of lo, max of hi), widened the same way. The range of an atom's
+  affine function over B is a greedy fill too (`linear_range`).
 * Labels are pessimistic where a cluster straddles a belief atom's hyperplane. When the atom values
-  possible on the hull of its vertices (widened by the labeller's rounding margin) lead to
+  possible on B (widened by the labeller's rounding margin) lead to
   different DFA states, the cluster's mass counts as failure for the lower bound and as success
   for the upper bound.
 * Clusters are merged on (start node, road, task state, DFA state, a grid cell of side δ of the
-  vertices' mean); a start node with more than CLUSTER_CAP clusters has its δ doubled until it has
+  box's centre); a start node with more than CLUSTER_CAP clusters has its δ doubled until it has
   at most that many. Clusters lighter than MASS_FLOOR are dropped (failure for the lower bound,
   success for the upper bound). The move may depend on the DFA state (FreeRoute is indexed by
   (x, q, p)): each cluster has one DFA state, so it takes one move.
 
-So lower <= V_free <= upper for the exact-arithmetic Bayes process. Floating point: the vertices
-are float images of float vertices, as the suffix cells' are (belief_cells.py), and the straddle
-test is widened by CORNER_MARGIN besides the labeller's rounding margin; that covers the one-step
+So lower <= V_free <= upper for the exact-arithmetic Bayes process. Floating point: the boxes are
+float images of float boxes, as the suffix cells' vertices are (belief_cells.py): each image and
+each merge is widened by CORNER_MARGIN, and the straddle test by CORNER_MARGIN besides the
+labeller's rounding margin; that covers the one-step
 rounding of the filter (γ_{3n} relative, about 2e-15 for n = 7; labelling.py) by a factor of several
 hundred, and, as for the suffix cells (belief_cells.LABEL_TOLERANCE), the accumulated error over a
 route by an argued margin, not a proof. The probabilities of a k-step sequence under the vehicle's
@@ -43,6 +51,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -50,9 +59,10 @@ from trustroute.policies.logic.labelling import gamma, label_margin_factor
 from trustroute.policies.model.product_mdp import ProductTables
 from trustroute.policies.synthesis.belief_cells import LABEL_TOLERANCE, ObservationSymbols
 
-CORNER_MARGIN = LABEL_TOLERANCE   # subtracted from every lower corner at every step
-CLUSTER_CAP = 256                 # clusters per start node after a step's merge
+CORNER_MARGIN = LABEL_TOLERANCE   # every box image and merge is widened by this
+CLUSTER_CAP = 64                  # clusters per start node after a step's merge
 INITIAL_RESOLUTION = 2.0 ** -16   # δ of the merge grid before any coarsening
+DINKELBACH_STEPS = 6               # iterations before the exhaustive greedy vertices
 MASS_FLOOR = 1e-13                # clusters lighter than this are dropped (bounded by the cap)
 
 
@@ -91,6 +101,133 @@ class FreeRoute:
         road = np.where(road >= 0, road, tables.successors[:, :1, None])
         task = next_p[np.arange(next_p.shape[0])[None, None, :], road]
         return FreeRoute(next_road=road, next_task=task)
+
+
+def fill_orders(a: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """int [k, n]: the orders of decreasing a_i - λ d_i over every λ (one per interval between the
+    crossings of the lines, at the crossings, just beside them, and at both ends): the greedy fill
+    in one of them maximises (a - λ d)·b over a box-simplex for every λ. The crossings are float
+    quotients, so the orders just beside each one are taken too; extra orders only cost time (every
+    greedy vertex is a point of the box), a missing one would cost soundness."""
+    n = a.size
+    crossings = [(a[i] - a[k]) / (d[i] - d[k]) for i in range(n) for k in range(i + 1, n) if d[i] != d[k]]
+    points = np.sort(np.array(crossings + [0.0]))
+    nudge = 1e-9 * np.maximum(np.abs(points), 1.0)
+    tests = np.concatenate([points, points - nudge, points + nudge, (points[1:] + points[:-1]) / 2,
+                            [points[0] - 1.0, points[-1] + 1.0]])
+    orders = {tuple(np.argsort(-(a - lam * d), kind="stable").tolist()) for lam in tests}
+    return np.array(sorted(orders), dtype=np.int64)
+
+
+@lru_cache(maxsize=8)
+def symbol_fill_orders(symbols: ObservationSymbols) -> tuple[tuple[np.ndarray, ...], ...]:
+    """fill_orders of every symbol's every coordinate: [o][j] -> [k, n] (the minimum's orders are
+    these reversed)."""
+    out = []
+    for o in range(symbols.n_symbols):
+        update = symbols.update[o]
+        out.append(tuple(fill_orders(update[:, j], update.sum(axis=1)) for j in range(update.shape[1])))
+    return tuple(out)
+
+
+def greedy_vertices(lo: np.ndarray, hi: np.ndarray, orders: np.ndarray) -> np.ndarray:
+    """[r, k, n]: for each box (lo, hi [r, n]) and order [k, n], the point of {lo <= b <= hi, Σb = 1}
+    that fills 1 - Σ lo into the coordinates in that order, each up to hi - lo."""
+    room = (hi - lo)[:, orders]                                       # [r, k, n], in fill order
+    rest = np.maximum(1.0 - lo.sum(axis=1), 0.0)[:, None, None]
+    added = np.clip(rest - (np.cumsum(room, axis=2) - room), 0.0, room)
+    back = np.broadcast_to(np.argsort(orders, axis=1)[None], added.shape)
+    return lo[:, None, :] + np.take_along_axis(added, back, axis=2)
+
+
+def linear_range(lo: np.ndarray, hi: np.ndarray, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) of coeffs·b over each box-simplex {lo <= b <= hi, Σb = 1}: the greedy fills in
+    increasing and decreasing coefficient order."""
+    order = np.argsort(-coeffs, kind="stable")
+    ends = greedy_vertices(lo, hi, np.stack([order, order[::-1]])) @ coeffs      # [r, 2]
+    return ends[:, 1], ends[:, 0]
+
+
+def _ordered_fill(lo: np.ndarray, hi: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """[r, J, n]: the greedy fill of each box (lo, hi [r, n]) in a per-row order [r, J, n]."""
+    room = np.take_along_axis(np.broadcast_to((hi - lo)[:, None, :], order.shape), order, axis=2)
+    rest = np.maximum(1.0 - lo.sum(axis=1), 0.0)[:, None, None]
+    added = np.clip(rest - (np.cumsum(room, axis=2) - room), 0.0, room)
+    filled = np.empty_like(added)
+    np.put_along_axis(filled, order, added, axis=2)
+    return lo[:, None, :] + filled
+
+
+def _fractional_extremes(lo: np.ndarray, hi: np.ndarray, update: np.ndarray, likelihood: np.ndarray,
+                         start: np.ndarray, sign: float) -> tuple[np.ndarray, np.ndarray]:
+    """Dinkelbach's iteration for the maximum (sign 1) or minimum (sign -1) of every coordinate
+    R_j(b) = (b·W[:, j]) / (b·d) over each box-simplex, from the guesses `start` [r, n]: the greedy
+    vertex of the current λ gives the next λ = R_j(vertex); once a vertex repeats, λ is the extreme
+    (max_B (a - λ d)·b = 0 at it). Returns (value, settled) [r, n]; rows not settled within
+    DINKELBACH_STEPS, or whose vertex has P(o | v) = 0, are left to the caller."""
+    value = start.copy()
+    previous = None
+    settled = np.zeros(value.shape, dtype=bool)
+    for _ in range(DINKELBACH_STEPS):
+        score = sign * (update.T[None, :, :] - value[:, :, None] * likelihood[None, None, :])   # [r, J, n]
+        vertex = _ordered_fill(lo, hi, np.argsort(-score, axis=2, kind="stable"))
+        denominator = vertex @ likelihood                                                  # [r, J]
+        numerator = np.einsum("rjn,nj->rj", vertex, update)
+        valid = denominator > 0
+        ratio = numerator / np.where(valid, denominator, 1.0)
+        if previous is not None:
+            settled = valid & (vertex == previous).all(axis=2)
+        value = np.where(valid, ratio, value)
+        if settled.all():
+            break
+        previous = vertex
+    return value, settled
+
+
+def box_image(lo: np.ndarray, hi: np.ndarray, symbols: ObservationSymbols, o: int
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """A box enclosing f_o(B) for each box-simplex B = {lo <= b <= hi, Σb = 1} (rows): per coordinate
+    the extremes of the linear-fractional map (Dinkelbach's iteration from the centre's image, or
+    where that does not settle, every greedy vertex of `fill_orders`), widened by CORNER_MARGIN.
+    Boxes that are points (lo = hi) map to the point's image. Where a candidate vertex has
+    P(o | v) = 0 the coordinate falls back to the range of T_o[i, j] over the trust levels the box
+    allows (f_o(b)_j is a weighted mean of those), which is sound but looser."""
+    update = symbols.update[o]
+    likelihood = update.sum(axis=1)
+    point = (hi == lo).all(axis=1)
+    image = lo[point] @ update
+    total = image.sum(axis=1, keepdims=True)
+    out_lo = np.empty_like(lo)
+    out_hi = np.empty_like(hi)
+    out_lo[point] = out_hi[point] = np.divide(image, total, out=np.zeros_like(image), where=total > 0)
+    boxes = np.flatnonzero(~point)
+    if boxes.size == 0:
+        return out_lo, out_hi
+    blo, bhi = lo[boxes], hi[boxes]
+    transition = np.divide(update, likelihood[:, None], out=np.zeros_like(update),
+                           where=likelihood[:, None] > 0)
+    allowed = (bhi > 0) & (likelihood > 0)[None, :]                      # [r, n]
+    mean_lo = np.where(allowed[:, :, None], transition[None], np.inf).min(axis=1)      # [r, n]
+    mean_hi = np.where(allowed[:, :, None], transition[None], -np.inf).max(axis=1)
+    centre = 0.5 * (blo + bhi) @ update
+    centre /= np.maximum(centre.sum(axis=1, keepdims=True), np.finfo(float).tiny)
+    high, high_settled = _fractional_extremes(blo, bhi, update, likelihood, centre, 1.0)
+    low, low_settled = _fractional_extremes(blo, bhi, update, likelihood, centre, -1.0)
+    rows, columns = np.nonzero(~(high_settled & low_settled))
+    for j in np.unique(columns).tolist():
+        which = rows[columns == j]
+        orders = symbol_fill_orders(symbols)[o][j]
+        tops = greedy_vertices(blo[which], bhi[which], orders)
+        bottoms = greedy_vertices(blo[which], bhi[which], orders[:, ::-1])
+        top_den, bottom_den = tops @ likelihood, bottoms @ likelihood
+        valid = (top_den > 0).all(axis=1) & (bottom_den > 0).all(axis=1)
+        top = ((tops @ update[:, j]) / np.where(top_den > 0, top_den, 1.0)).max(axis=1)
+        bottom = ((bottoms @ update[:, j]) / np.where(bottom_den > 0, bottom_den, 1.0)).min(axis=1)
+        high[which, j] = np.where(valid, top, np.inf)
+        low[which, j] = np.where(valid, bottom, -np.inf)
+    out_lo[boxes] = np.maximum(np.maximum(low, mean_lo) - CORNER_MARGIN, 0.0)
+    out_hi[boxes] = np.minimum(np.minimum(high, mean_hi) + CORNER_MARGIN, 1.0)
+    return out_lo, out_hi
 
 
 def _outcome_table(symbols: ObservationSymbols) -> np.ndarray:
@@ -132,11 +269,12 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
     owner = np.arange(n_start)
     state = q.copy()
     alpha = np.asarray(belief, dtype=float).copy()
-    corner = np.repeat(alpha[:, None, :], n, axis=1)      # vertices of the enclosure [r, n, n]
+    lo = alpha.copy()                                    # the enclosing box [r, n]: lo, hi
+    hi = alpha.copy()
     done = tables.accepting[state]
     accepted[done] = 1.0
     keep = ~done & ~tables.rejecting[state] & (steps > 0)
-    owner, state, alpha, corner, x, p = (a[keep] for a in (owner, state, alpha, corner, x, p))
+    owner, state, alpha, lo, hi, x, p = (a[keep] for a in (owner, state, alpha, lo, hi, x, p))
     most = owner.size
     interrupted = False
     while owner.size:
@@ -156,26 +294,19 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
                 continue
             rows = np.flatnonzero(ok)
             a2 = np.empty((rows.size, n))
-            image = np.empty((rows.size, n, n))
+            lo2 = np.empty((rows.size, n))
+            hi2 = np.empty((rows.size, n))
             for o in np.unique(symbol[rows]).tolist():   # one matrix product per symbol
                 here = symbol[rows] == o
                 a2[here] = alpha[rows[here]] @ symbols.update[o]
-                image[here] = corner[rows[here]] @ symbols.update[o]
+                lo2[here], hi2[here] = box_image(lo[rows[here]], hi[rows[here]], symbols, o)
             mass = a2.sum(axis=1)
-            # the hull of the vertex images contains the image of the hull (vertices with
-            # P(o | v) = 0 drop out: they are replaced by a valid one of the same cluster)
-            total = image.sum(axis=2)
-            valid = total > 0
-            normalised = np.divide(image, total[:, :, None], out=np.zeros_like(image),
-                                   where=valid[:, :, None])
-            some = valid.argmax(axis=1)
-            lo2 = np.where(valid[:, :, None], normalised,
-                           normalised[np.arange(some.size), some][:, None, :])
             o_owner, o_state, o_road, o_task = owner[ok], state[ok], x2[ok], p2[ok]
-            # DFA successors over the atom values possible on S(lo2)
+            # DFA successors over the atom values possible on the box
             if m:
-                at_vertices = lo2 @ coeffs.T                              # [r, v, m]
-                low, high = at_vertices.min(axis=1), at_vertices.max(axis=1)
+                ranges = [linear_range(lo2, hi2, coeffs[k]) for k in range(m)]
+                low = np.stack([r[0] for r in ranges], axis=1)                 # [r, m]
+                high = np.stack([r[1] for r in ranges], axis=1)
                 can_true = high > offsets[None, :] - margin[None, :]
                 can_false = low <= offsets[None, :] + margin[None, :]
                 fits = np.where(bit_values[None, :, :] == 1, can_true[:, None, :],
@@ -195,14 +326,14 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
             hit = settled & tables.accepting[q2]
             np.add.at(accepted, o_owner[hit], mass[hit])
             go_on = settled & ~tables.accepting[q2] & ~tables.rejecting[q2]
-            parts.append((o_owner[go_on], q2[go_on], a2[go_on], lo2[go_on], o_road[go_on],
+            parts.append((o_owner[go_on], q2[go_on], a2[go_on], lo2[go_on], hi2[go_on], o_road[go_on],
                           o_task[go_on]))
         steps = steps - 1
-        owner, state, alpha, corner, x, p = (np.concatenate([part[k] for part in parts])
-                                             for k in range(6))
+        owner, state, alpha, lo, hi, x, p = (np.concatenate([part[k] for part in parts])
+                                             for k in range(7))
         live = steps[owner] > 0
-        owner, state, alpha, corner, x, p = (a[live] for a in (owner, state, alpha, corner, x, p))
-        owner, state, alpha, corner, x, p = _merge(owner, state, alpha, corner, x, p, resolution,
+        owner, state, alpha, lo, hi, x, p = (a[live] for a in (owner, state, alpha, lo, hi, x, p))
+        owner, state, alpha, lo, hi, x, p = _merge(owner, state, alpha, lo, hi, x, p, resolution,
                                                    tables.n_x, tables.n_q)
         most = max(most, owner.size)
     # Rounding: each start's sequences have at most steps0 factors of (1 + γ_{4n+2}) between the
@@ -215,23 +346,22 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
                             interrupted=interrupted)
 
 
-def _merge(owner: np.ndarray, state: np.ndarray, alpha: np.ndarray, vertices: np.ndarray,
+def _merge(owner: np.ndarray, state: np.ndarray, alpha: np.ndarray, lo: np.ndarray, hi: np.ndarray,
            x: np.ndarray, p: np.ndarray, resolution: np.ndarray, n_x: int, n_q: int
            ) -> tuple[np.ndarray, ...]:
-    """Merge clusters in the same (owner, road, task state, DFA state, grid cell of the vertices'
-    mean); coarsen owners over CLUSTER_CAP. A merged cluster's enclosure is the simplex
-    {b >= l} with l the componentwise minimum of every member vertex, lowered by CORNER_MARGIN;
-    a cluster alone in its cell keeps its vertices.
+    """Merge clusters in the same (owner, road, task state, DFA state, grid cell of the box's
+    centre); coarsen owners over CLUSTER_CAP. A merged cluster's box is the hull of its members'
+    boxes widened by CORNER_MARGIN; a cluster alone in its cell keeps its box.
 
     (owner, x, p, q) is packed exactly into one integer; the cell is a 64-bit hash: a collision
     merges two cells of the same (owner, x, p, q), which is as sound as any merge (only looser)."""
-    n = vertices.shape[2]
+    n = lo.shape[1]
     if owner.size == 0:
-        return owner, state, alpha, vertices, x, p
+        return owner, state, alpha, lo, hi, x, p
     multipliers = (np.arange(1, n + 1, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)) | np.uint64(1)
     n_p = int(p.max(initial=0)) + 1
     place = ((owner * n_x + x) * n_p + p) * n_q + state
-    centre = vertices.mean(axis=1)
+    centre = 0.5 * (lo + hi)
     while True:     # the finest grid per owner (doubling δ) with at most CLUSTER_CAP cells
         cell = np.floor(centre / resolution[owner][:, None]).astype(np.int64).astype(np.uint64)
         mixed = (cell * multipliers[None, :]).sum(axis=1)
@@ -246,13 +376,12 @@ def _merge(owner: np.ndarray, state: np.ndarray, alpha: np.ndarray, vertices: np
     starts = np.flatnonzero(first)
     size = np.diff(np.append(starts, order.size))
     pick = order[starts]
-    merged = vertices[pick]
+    merged_lo, merged_hi = lo[pick], hi[pick]
     several = size > 1
     if several.any():
-        corner = np.minimum.reduceat(vertices[order].min(axis=1), starts, axis=0)[several]
-        corner = np.maximum(corner - CORNER_MARGIN, 0.0)
-        spread = np.maximum(1.0 - corner.sum(axis=1), 0.0)
-        merged[several] = corner[:, None, :] + spread[:, None, None] * np.eye(n)[None]
+        merged_lo[several] = np.maximum(
+            np.minimum.reduceat(lo[order], starts, axis=0)[several] - CORNER_MARGIN, 0.0)
+        merged_hi[several] = np.minimum(
+            np.maximum.reduceat(hi[order], starts, axis=0)[several] + CORNER_MARGIN, 1.0)
     alpha = np.add.reduceat(alpha[order], starts, axis=0)
-    owner, state, x, p, vertices = owner[pick], state[pick], x[pick], p[pick], merged
-    return owner, state, alpha, vertices, x, p
+    return owner[pick], state[pick], alpha, merged_lo, merged_hi, x[pick], p[pick]
