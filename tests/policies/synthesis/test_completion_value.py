@@ -74,12 +74,16 @@ def _bounds_and_exact(driver, seed, deadline=None):
 
 
 @pytest.mark.parametrize("seed", range(8))
-def test_default_bounds_bracket_and_nearly_equal_the_exact_tree(driver, seed):
+def test_default_bounds_bracket_and_nearly_equal_the_exact_tree(driver, seed, monkeypatch):
     bounds, exact = _bounds_and_exact(driver, seed)
     assert np.all(bounds.lower <= exact + TOLERANCE)
     assert np.all(exact <= bounds.upper + TOLERANCE)
-    # few enough sequences that only equal beliefs merge: the bounds are the exact value
+    # with room for every cluster (a few hundred sequences here; the default cap, 64, can be
+    # exceeded), only equal beliefs merge on the default grid: the bounds are the exact value
+    monkeypatch.setattr(completion_value, "CLUSTER_CAP", 4096)
+    bounds, exact = _bounds_and_exact(driver, seed)
     assert np.max(bounds.upper - bounds.lower) <= 1e-9
+    assert np.all(bounds.lower <= exact + TOLERANCE) and np.all(exact <= bounds.upper + TOLERANCE)
 
 
 @pytest.mark.parametrize("seed", range(12))
