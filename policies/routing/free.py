@@ -218,7 +218,6 @@ def label_free_distance(successors: np.ndarray, next_q: np.ndarray, accepting: n
 UNREACHABLE = np.iinfo(np.int64).max // 4
 
 
-
 @dataclass(frozen=True, eq=False)
 class FreeCompletion:
     """The free completion's move per product context (x, q, p): road, spec DFA state, state-only

@@ -21,8 +21,10 @@ This module propagates probability mass over *clusters* of beliefs instead:
   max_B (a - λ* d)·b = 0, and a linear function is maximised over B by filling 1 - Σ lo into the
   coordinates in decreasing order of (a - λ* d)_i, each up to hi_i - lo_i. That order changes
   only where two lines a_i - λ d_i cross, so the orders of every λ interval (`fill_orders`, fixed
-  per symbol and coordinate) contain the optimal one: the next box is the exact range of f_o over
-  B per coordinate (the minimum with the reversed orders), widened by CORNER_MARGIN. Merging takes
+  per symbol and coordinate) contain the optimal one. Dinkelbach's iteration (λ <- R_j of the
+  greedy vertex of λ, until a vertex repeats) finds it in a few fills; where it does not settle,
+  every such order is tried. So the next box is the exact range of f_o over B per coordinate
+  (the minimum with the reversed orders), widened by CORNER_MARGIN. Merging takes
   the box hull (componentwise min of lo, max of hi), widened the same way. The range of an atom's
   affine function over B is a greedy fill too (`linear_range`).
 * Labels are pessimistic where a cluster straddles a belief atom's hyperplane. When the atom values
@@ -131,13 +133,10 @@ def symbol_fill_orders(symbols: ObservationSymbols) -> tuple[tuple[np.ndarray, .
 
 
 def greedy_vertices(lo: np.ndarray, hi: np.ndarray, orders: np.ndarray) -> np.ndarray:
-    """[r, k, n]: for each box (lo, hi [r, n]) and order [k, n], the point of {lo <= b <= hi, Σb = 1}
-    that fills 1 - Σ lo into the coordinates in that order, each up to hi - lo."""
-    room = (hi - lo)[:, orders]                                       # [r, k, n], in fill order
-    rest = np.maximum(1.0 - lo.sum(axis=1), 0.0)[:, None, None]
-    added = np.clip(rest - (np.cumsum(room, axis=2) - room), 0.0, room)
-    back = np.broadcast_to(np.argsort(orders, axis=1)[None], added.shape)
-    return lo[:, None, :] + np.take_along_axis(added, back, axis=2)
+    """[r, k, n]: for each box (lo, hi [r, n]) and order [k, n] shared by every box, the point of
+    {lo <= b <= hi, Σb = 1} that fills 1 - Σ lo into the coordinates in that order, each up to
+    hi - lo."""
+    return _ordered_fill(lo, hi, np.broadcast_to(orders[None], (lo.shape[0],) + orders.shape))
 
 
 def linear_range(lo: np.ndarray, hi: np.ndarray, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -149,7 +148,7 @@ def linear_range(lo: np.ndarray, hi: np.ndarray, coeffs: np.ndarray) -> tuple[np
 
 
 def _ordered_fill(lo: np.ndarray, hi: np.ndarray, order: np.ndarray) -> np.ndarray:
-    """[r, J, n]: the greedy fill of each box (lo, hi [r, n]) in a per-row order [r, J, n]."""
+    """[r, J, n]: the greedy fill of each box (lo, hi [r, n]) in each of its orders [r, J, n]."""
     room = np.take_along_axis(np.broadcast_to((hi - lo)[:, None, :], order.shape), order, axis=2)
     rest = np.maximum(1.0 - lo.sum(axis=1), 0.0)[:, None, None]
     added = np.clip(rest - (np.cumsum(room, axis=2) - room), 0.0, room)

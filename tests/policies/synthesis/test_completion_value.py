@@ -297,10 +297,10 @@ def test_bounds_on_a_long_route_are_tight_and_bracket_monte_carlo(driver):
     q = np.full(count, tables.initial_q)
     p = np.full(count, task.initial_state)
     accepted = tables.accepting[q].copy()
+    width = max(len(members) for members in symbols.by_incident)
     for _ in range(horizon):
         going = ~accepted & ~tables.rejecting[q]
         x2, p2 = route.next_road[x, q, p], route.next_task[x, q, p]
-        width = max(len(members) for members in symbols.by_incident)
         choices = np.array([list(symbols.by_incident[i]) + [-1] * (width - len(symbols.by_incident[i]))
                             for i in pomdp.road_incident[x2]])
         probability = np.where(choices >= 0, np.einsum("rn,rkn->rk", beliefs,
