@@ -26,6 +26,7 @@ import trustroute.policies as policies
 from tests.cli import run_cli
 from trustroute.networks.town import DEFAULT_TOWN_PATH
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
+from trustroute.policies.routing.files import VERSION as POLICY_VERSION
 
 SPECS = Path(policies.__file__).parent / "specs"
 PHI1 = SPECS / "phi1.toml"
@@ -414,7 +415,8 @@ def _policy_object_array(good: Path, folder: Path) -> Path:
 
 POLICY_CASES = [
     ("non_utf8_json", _policy_json_text(lambda t: t.replace('"aware"', '"aw\xe9re"'))),
-    ("huge_integer", _policy_json_text(lambda t: t.replace('"version": 3', '"version": ' + "3" * 5000))),
+    ("huge_integer", _policy_json_text(lambda t: t.replace(f'"version": {POLICY_VERSION}',
+                                                           '"version": ' + "3" * 5000))),
     ("deeply_nested", _policy_json_text(lambda t: t.replace('"name": "aware"', '"name": ' + nested(50000)))),
     ("duplicate_key", _policy_json_text(lambda t: t.replace("{", '{"name": "x", ', 1))),
     ("unknown_key", policy_case(document={"horizn": 4})),

@@ -102,6 +102,10 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
                          {"policy": path, "policy_arrays": array_path(path)})
     lines = [f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
              f"{result.seconds:.1f} s)"]
+    boxes = getattr(result.policy.table, "boxes", None)
+    if boxes is not None and boxes.rows:
+        lines.append(f"a cluster policy: {boxes.rows} box rows, beliefs enclosed in boxes "
+                     "(docs/synthesis.md, \"Cluster policies\")")
     alternates = sum(run.get("threshold_alternates", 0) for run in result.stats.get("runs", []))
     if alternates:
         strict = max(run.get("lower_strict_labels", 0.0) for run in result.stats["runs"])

@@ -6,7 +6,9 @@ the current synthesis, p: the state of the spec's state-only task (policies/rout
 the roads driven. Two acting rules (docs/synthesis.md, "Open nodes and the acting rule"):
 
 Exact-belief rule (tables with p): at a context (t, x, q, p, b), the row with the same
-(t, x, q, p) whose belief is within EXACT_BELIEF_DISTANCE of b; if there is none, the move of the
+(t, x, q, p) whose belief is within EXACT_BELIEF_DISTANCE of b; if there is none, among the box
+rows of (t, x, q) (a cluster policy's, docs/synthesis.md "Cluster policies") whose box holds b,
+the one of the largest certified value; if there is none, the move of the
 free completion at (x, q, p) (policies/routing/free.py, `free_completion`): the trust-free
 shortest completion of the state-only task while it is not complete, after it the shortest route
 back to what the DFA still needs, every label allowed (so a waypoint reached with too little trust
@@ -40,8 +42,40 @@ from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 
 @dataclass(frozen=True, eq=False)
+class BoxRows:
+    """Box rows (policies/synthesis/cluster_policy.py): at (t, x, q), a belief inside [lo, hi] may
+    take `action`, worth at least `value` from every belief of the box; among the boxes holding a
+    belief the one of the largest value acts."""
+
+    t: np.ndarray
+    x: np.ndarray
+    q: np.ndarray
+    lo: np.ndarray        # [rows, n_trust]
+    hi: np.ndarray
+    value: np.ndarray
+    action: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("t", "x", "q", "action"):
+            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=np.int64))
+        for name in ("lo", "hi", "value"):
+            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=float))
+
+    @property
+    def rows(self) -> int:
+        return int(self.t.size)
+
+    @staticmethod
+    def empty(n_trust: int) -> BoxRows:
+        none = np.zeros(0, dtype=np.int64)
+        return BoxRows(t=none, x=none, q=none, lo=np.zeros((0, n_trust)), hi=np.zeros((0, n_trust)),
+                       value=np.zeros(0), action=none)
+
+
+@dataclass(frozen=True, eq=False)
 class PolicyTable:
-    """Decision rows; all arrays have one entry per row (beliefs: [rows, n_trust])."""
+    """Decision rows; all arrays have one entry per row (beliefs: [rows, n_trust]). boxes: the box
+    rows of a cluster policy (exact-belief tables only; None: none)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -49,6 +83,7 @@ class PolicyTable:
     beliefs: np.ndarray
     action: np.ndarray
     projected: np.ndarray | None = None    # state-only task state p per row (exact-belief rule)
+    boxes: BoxRows | None = None
 
     def __post_init__(self) -> None:
         for name in ("t", "x", "q", "action"):
@@ -56,6 +91,8 @@ class PolicyTable:
         object.__setattr__(self, "beliefs", np.asarray(self.beliefs, dtype=float))
         if self.projected is not None:
             object.__setattr__(self, "projected", np.asarray(self.projected, dtype=np.int64))
+        if self.boxes is not None and self.projected is None:
+            raise ValueError("box rows need the exact-belief rule (a table with projected)")
 
     @property
     def exact(self) -> bool:
@@ -119,6 +156,28 @@ def _group(keys: np.ndarray, beliefs: np.ndarray) -> _Groups:
     return _Groups(rows=rows, trees=trees, beliefs=beliefs)
 
 
+@dataclass(frozen=True, eq=False)
+class _BoxIndex:
+    """Box rows sorted by their (t, x, q) key, for the lookup of the boxes holding a belief."""
+
+    keys: np.ndarray      # sorted keys, one per row
+    rows: BoxRows         # in key order
+
+    def slots(self, keys: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
+        """Per context: the action of the box of the largest value at its key holding its belief
+        (-1: none holds it)."""
+        out = np.full(keys.size, -1, dtype=np.int64)
+        first = np.searchsorted(self.keys, keys, side="left")
+        last = np.searchsorted(self.keys, keys, side="right")
+        for i in np.flatnonzero(last > first).tolist():
+            lo, hi = self.rows.lo[first[i]:last[i]], self.rows.hi[first[i]:last[i]]
+            inside = ((lo <= beliefs[i]) & (beliefs[i] <= hi)).all(axis=1)
+            if inside.any():
+                value = np.where(inside, self.rows.value[first[i]:last[i]], -np.inf)
+                out[i] = self.rows.action[first[i] + int(value.argmax())]
+        return out
+
+
 class BeliefTablePolicy(RoutingPolicy):
     """RoutingPolicy "aware": nearest stored belief at the same (junctions, road, DFA state)."""
 
@@ -135,13 +194,22 @@ class BeliefTablePolicy(RoutingPolicy):
         # Keys as single integers (road-major, then DFA state, then junctions) so that a lookup
         # is a dict access, not a row-wise unique.
         self._n_x = len(town.states)
-        self._n_q = int(table.q.max()) + 1 if table.rows else 1
+        self._n_q = max(int(table.q.max()) + 1 if table.rows else 1,
+                        int(table.boxes.q.max()) + 1 if table.boxes is not None and table.boxes.rows else 1)
         self._n_p = int(self.task.dfa.n_states)
         # the free completion's move per (road, DFA state, task state): the exact-belief rule's
         # fallback (module docstring)
         self._free_slot = free_completion(town, spec).slot
+        self._boxes = None
         if table.exact:
             self._exact = _group(self._key_tqp(table.t, table.x, table.q, table.projected), table.beliefs)
+            boxes = table.boxes
+            if boxes is not None and boxes.rows:
+                keys = self._key_tq(boxes.t, boxes.x, boxes.q)
+                order = np.argsort(keys, kind="stable")
+                self._boxes = _BoxIndex(keys=keys[order], rows=BoxRows(
+                    t=boxes.t[order], x=boxes.x[order], q=boxes.q[order], lo=boxes.lo[order],
+                    hi=boxes.hi[order], value=boxes.value[order], action=boxes.action[order]))
         else:
             self._exact = _group(self._key_tq(table.t, table.x, table.q), table.beliefs)
             self._any_t = _group(self._key_q(table.x, table.q), table.beliefs)
@@ -171,17 +239,24 @@ class BeliefTablePolicy(RoutingPolicy):
         t, x, q, p = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q, projected))
         beliefs = self._policy_beliefs(beliefs)
         out = self._free_slot[x, q, p].copy()
-        if t.size == 0 or not self.table.rows:
+        if t.size == 0:
             return out
-        keys = self._key_tqp(t, x, q, p)
-        unique, inverse = np.unique(keys, return_inverse=True)
-        for g, key in enumerate(unique.tolist()):
-            members = np.flatnonzero(inverse == g)
-            found = self._exact.nearest_with_distance(key, beliefs[members])
-            if found is not None:
-                rows, distance = found
-                hit = distance <= EXACT_BELIEF_DISTANCE
-                out[members[hit]] = self.table.action[rows[hit]]
+        exact = np.zeros(t.size, dtype=bool)
+        if self.table.rows:
+            keys = self._key_tqp(t, x, q, p)
+            unique, inverse = np.unique(keys, return_inverse=True)
+            for g, key in enumerate(unique.tolist()):
+                members = np.flatnonzero(inverse == g)
+                found = self._exact.nearest_with_distance(key, beliefs[members])
+                if found is not None:
+                    rows, distance = found
+                    hit = distance <= EXACT_BELIEF_DISTANCE
+                    out[members[hit]] = self.table.action[rows[hit]]
+                    exact[members[hit]] = True
+        if self._boxes is not None:
+            todo = np.flatnonzero(~exact & (q < self._n_q))
+            boxed = self._boxes.slots(self._key_tq(t[todo], x[todo], q[todo]), beliefs[todo])
+            out[todo[boxed >= 0]] = boxed[boxed >= 0]
         return out
 
     def action_slots(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, beliefs: np.ndarray,
@@ -227,11 +302,16 @@ class BeliefTablePolicy(RoutingPolicy):
         """`exact_action_slots` of one context (an episode's decision): one dict access and one
         nearest-row search, without the grouping of a batch (the same rows, so the same slot)."""
         slot = int(self._free_slot[x, q, p])
-        if not self.table.rows:
-            return slot
-        found = self._exact.nearest_with_distance(self._key_tqp(t, x, q, p), self._policy_beliefs(belief))
-        if found is not None and found[1][0] <= EXACT_BELIEF_DISTANCE:
-            slot = int(self.table.action[found[0][0]])
+        beliefs = self._policy_beliefs(belief)
+        if self.table.rows:
+            found = self._exact.nearest_with_distance(self._key_tqp(t, x, q, p), beliefs)
+            if found is not None and found[1][0] <= EXACT_BELIEF_DISTANCE:
+                return int(self.table.action[found[0][0]])
+        if self._boxes is not None and q < self._n_q:
+            boxed = int(self._boxes.slots(self._key_tq(np.array([t]), np.array([x]), np.array([q])),
+                                          beliefs)[0])
+            if boxed >= 0:
+                return boxed
         return slot
 
     def next_junction(self, context: DecisionContext) -> str:

@@ -3,7 +3,8 @@
 `save_policy(result, path, town, driver, spec)` writes `path` (JSON: format, content hashes of
 town, driver model and spec, horizon, belief rule, bounds, the acting rule in words, and the name
 and SHA-256 of the array file) and `path` with suffix `.npz` (the decision table of
-policies/routing/aware_table.py: t, x, q, projected, beliefs, action).
+policies/routing/aware_table.py: t, x, q, projected, beliefs, action, and the box rows of a cluster
+policy: box_t, box_x, box_q, box_lo, box_hi, box_value, box_action).
 `load_policy(path, town, driver, spec)` checks the format and all three hashes and raises
 InputError naming the file and the fix on a mismatch.
 Every key: docs/formats/policy_file.md.
@@ -25,7 +26,7 @@ from trustroute.networks.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
+from trustroute.policies.routing.aware_table import BeliefTablePolicy, BoxRows, PolicyTable
 from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.routing.joint_table import JointPolicyTable, JointTablePolicy
 
@@ -35,10 +36,15 @@ FORMAT = "trustroute-policy"
 # were synthesized for the state-only completion (then the first legal move) and are refused:
 # their certified L is not the value of the version-3 rule. Joint-belief files (their rule does
 # not use the completion) are read from version 2 on.
-VERSION = 3
-JOINT_VERSIONS = (2, 3)
+# Version 4 adds the box rows of cluster policies (box_* arrays, possibly empty); a version 3 file
+# is read as a table without box rows, which the version 4 rule treats exactly as version 3 did.
+VERSION = 4
+PLAIN_VERSIONS = (3, 4)
+JOINT_VERSIONS = (2, 3, 4)
 ACTING_RULE = ("action of the stored row with the same (junctions driven, road, DFA state, state-only "
                "task state) whose belief is within 1e-12 of the AV's (the synthesis visited it); "
+               "else, among the box rows of the same (junctions driven, road, DFA state) whose box "
+               "holds the AV's belief, the action of the one of the largest value; "
                "else the move of the free completion: the trust-free shortest completion of the "
                "state-only task while it is not complete, then the shortest route back to what the "
                "DFA still needs, every label allowed (the first legal move where acceptance is "
@@ -46,14 +52,15 @@ ACTING_RULE = ("action of the stored row with the same (junctions driven, road, 
 
 
 ARRAY_NAMES = ("t", "x", "q", "projected", "beliefs", "action")
+BOX_ARRAY_NAMES = ("box_t", "box_x", "box_q", "box_lo", "box_hi", "box_value", "box_action")
 # A policy synthesized for a driver population of several types also records these
 # (docs/formats/policy_file.md, "Population policies"); one type writes today's file.
 POPULATION_KEYS = ("population_hash", "population_types", "population_weights", "belief_prior",
                    "objective", "objective_lower", "objective_upper", "type_values")
 # Every policy file has PLAIN_KEYS; a population policy has POPULATION_KEYS besides.
 PLAIN_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "spec_hash", "horizon",
-              "belief_rule", "lower", "upper", "gap", "seconds", "rows", "acting_rule", "arrays",
-              "arrays_sha256")
+              "belief_rule", "lower", "upper", "gap", "seconds", "rows", "box_rows", "acting_rule",
+              "arrays", "arrays_sha256")
 DOCUMENT_KEYS = PLAIN_KEYS + POPULATION_KEYS
 # Policies of specs with trust-state atoms act on the joint belief (policies/routing/joint_table.py):
 # their files have these keys besides, and the arrays JOINT_ARRAY_NAMES (no state-only task state:
@@ -89,8 +96,11 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
     else:
         if not table.exact:
             raise ValueError("only tables with the state-only task state (exact-belief rule) are written")
+        boxes = table.boxes if table.boxes is not None else BoxRows.empty(table.beliefs.shape[1])
         np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, projected=table.projected,
-                            beliefs=table.beliefs, action=table.action)
+                            beliefs=table.beliefs, action=table.action, box_t=boxes.t, box_x=boxes.x,
+                            box_q=boxes.q, box_lo=boxes.lo, box_hi=boxes.hi, box_value=boxes.value,
+                            box_action=boxes.action)
     array_bytes = buffer.getvalue()
     # The arrays first, the JSON (which names their hash) last: the JSON is the commit mark.
     atomic_write_bytes(arrays, array_bytes, "policy array file", "pass a writable --out path")
@@ -109,6 +119,7 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
         "gap": result.gap,
         "seconds": result.seconds,
         "rows": table.rows,
+        "box_rows": 0 if joint or table.boxes is None else table.boxes.rows,
         "acting_rule": ACTING_RULE,
         "arrays": arrays.name,
         "arrays_sha256": hashlib.sha256(array_bytes).hexdigest(),
@@ -137,7 +148,8 @@ def read_policy_document(path: str | Path) -> dict:
                          "pass a file written by trustroute synth --out")
     joint = "kind" in document
     version = document.get("version")
-    if not (version == VERSION or (joint and version in JOINT_VERSIONS)) or isinstance(version, bool):
+    if (not (version in PLAIN_VERSIONS or (joint and version in JOINT_VERSIONS))
+            or isinstance(version, bool)):
         older = ("; version 2 policies drive the state-only completion where they have no row, which "
                  "their bounds were certified for, not this trustroute's acting rule"
                  if version == 2 else "")
@@ -181,6 +193,8 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as archive:
             names = JOINT_ARRAY_NAMES if "kind" in document else ARRAY_NAMES
+            if "kind" not in document and document.get("version", VERSION) >= 4:
+                names = names + BOX_ARRAY_NAMES
             missing = [name for name in names if name not in archive.files]
             if missing:
                 raise InputError(where, missing[0], f"array '{missing[0]}' is missing", RESYNTH)
@@ -231,7 +245,9 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
             or (np.abs(beliefs.sum(axis=1) - 1) > 1e-6).any()):
         raise InputError(where, "beliefs", "beliefs are not probability vectors", RESYNTH)
     if not joint:
-        return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action, projected=projected)
+        boxes = _box_rows(arrays_read, where, document, driver.n_trust, n_x, n_q, slots)
+        return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action, projected=projected,
+                           boxes=boxes)
     table = arrays_read["joint"]
     if table.shape != (rows, driver.n_trust, n_q) or table.dtype.kind != "f":
         raise InputError(where, "joint", f"joint beliefs have shape {table.shape}, expected ({rows}, "
@@ -240,6 +256,49 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
             or (np.abs(table.sum(axis=(1, 2)) - 1) > 1e-6).any()):
         raise InputError(where, "joint", "joint beliefs are not probability tables", RESYNTH)
     return JointPolicyTable(t=t, x=x, q=q, beliefs=beliefs, joint=table, action=action)
+
+
+def _box_rows(arrays: dict, where: str, document: dict, n_trust: int, n_x: int, n_q: int,
+              slots: np.ndarray) -> BoxRows | None:
+    """The box rows of a version-4 table, verified like the exact rows (None: a version-3 file)."""
+    if "box_t" not in arrays:
+        return None
+    rows = arrays["box_t"].shape[0] if arrays["box_t"].ndim == 1 else -1
+    for name in ("box_t", "box_x", "box_q", "box_action"):
+        array = arrays[name]
+        if array.ndim != 1 or array.shape[0] != rows or array.dtype.kind not in "iu":
+            raise InputError(where, name, f"array '{name}' is not {max(rows, 0)} integers "
+                             f"(shape {array.shape}, type {array.dtype})", RESYNTH)
+    for name in ("box_lo", "box_hi"):
+        if arrays[name].shape != (rows, n_trust) or arrays[name].dtype.kind != "f":
+            raise InputError(where, name, f"{name} has shape {arrays[name].shape}, expected "
+                             f"({rows}, {n_trust}) for this driver model", RESYNTH)
+    value = arrays["box_value"]
+    if value.shape != (rows,) or value.dtype.kind != "f":
+        raise InputError(where, "box_value", f"box_value has shape {value.shape}, expected ({rows},)",
+                         RESYNTH)
+    if rows != document.get("box_rows"):
+        raise InputError(where, "box_rows", f"{rows} box rows but the policy file records "
+                         f"{document.get('box_rows')}", RESYNTH)
+    t, x, q, action = (arrays[name].astype(np.int64) for name in ("box_t", "box_x", "box_q", "box_action"))
+    lo, hi = arrays["box_lo"], arrays["box_hi"]
+    problems = [
+        ("box_t", (t < 0).any(), "negative junction counts"),
+        ("box_x", ((x < 0) | (x >= n_x)).any(), f"roads outside 0..{n_x - 1}"),
+        ("box_q", ((q < 0) | (q >= n_q)).any(), f"DFA states outside 0..{n_q - 1}"),
+        ("box_lo", not (np.isfinite(lo).all() and np.isfinite(hi).all()) or (lo < 0).any()
+         or (hi > 1).any() or (lo > hi).any(), "boxes that are not within [0, 1] with lo <= hi"),
+        ("box_value", not np.isfinite(value).all() or (value < 0).any() or (value > 1).any(),
+         "values that are not probabilities"),
+    ]
+    for name, bad, what in problems:
+        if bad:
+            raise InputError(where, name, f"box rows have {what}", RESYNTH)
+    if ((action < 0) | (action >= slots[x])).any():
+        row = int(np.flatnonzero((action < 0) | (action >= slots[x]))[0])
+        raise InputError(where, "box_action", f"box row {row}: action {int(action[row])} is not one of "
+                         f"the {int(slots[x[row]])} moves from its road", RESYNTH)
+    return BoxRows(t=t, x=x, q=q, lo=lo, hi=hi, value=value, action=action)
 
 
 def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec

@@ -136,7 +136,7 @@ def greedy_vertices(lo: np.ndarray, hi: np.ndarray, orders: np.ndarray) -> np.nd
     """[r, k, n]: for each box (lo, hi [r, n]) and order [k, n] shared by every box, the point of
     {lo <= b <= hi, Σb = 1} that fills 1 - Σ lo into the coordinates in that order, each up to
     hi - lo."""
-    return _ordered_fill(lo, hi, np.broadcast_to(orders[None], (lo.shape[0],) + orders.shape))
+    return ordered_fill(lo, hi, np.broadcast_to(orders[None], (lo.shape[0],) + orders.shape))
 
 
 def linear_range(lo: np.ndarray, hi: np.ndarray, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -147,7 +147,7 @@ def linear_range(lo: np.ndarray, hi: np.ndarray, coeffs: np.ndarray) -> tuple[np
     return ends[:, 1], ends[:, 0]
 
 
-def _ordered_fill(lo: np.ndarray, hi: np.ndarray, order: np.ndarray) -> np.ndarray:
+def ordered_fill(lo: np.ndarray, hi: np.ndarray, order: np.ndarray) -> np.ndarray:
     """[r, J, n]: the greedy fill of each box (lo, hi [r, n]) in each of its orders [r, J, n]."""
     room = np.take_along_axis(np.broadcast_to((hi - lo)[:, None, :], order.shape), order, axis=2)
     rest = np.maximum(1.0 - lo.sum(axis=1), 0.0)[:, None, None]
@@ -165,21 +165,24 @@ def _fractional_extremes(lo: np.ndarray, hi: np.ndarray, update: np.ndarray, lik
     (max_B (a - λ d)·b = 0 at it). Returns (value, settled) [r, n]; rows not settled within
     DINKELBACH_STEPS, or whose vertex has P(o | v) = 0, are left to the caller."""
     value = start.copy()
-    previous = None
     settled = np.zeros(value.shape, dtype=bool)
+    rows = np.arange(value.shape[0])          # rows still iterating (settled rows keep their vertex)
+    previous = None
     for _ in range(DINKELBACH_STEPS):
-        score = sign * (update.T[None, :, :] - value[:, :, None] * likelihood[None, None, :])   # [r, J, n]
-        vertex = _ordered_fill(lo, hi, np.argsort(-score, axis=2, kind="stable"))
+        score = sign * (update.T[None, :, :] - value[rows][:, :, None] * likelihood[None, None, :])
+        vertex = ordered_fill(lo[rows], hi[rows], np.argsort(-score, axis=2, kind="stable"))
         denominator = vertex @ likelihood                                                  # [r, J]
         numerator = np.einsum("rjn,nj->rj", vertex, update)
         valid = denominator > 0
         ratio = numerator / np.where(valid, denominator, 1.0)
-        if previous is not None:
-            settled = valid & (vertex == previous).all(axis=2)
-        value = np.where(valid, ratio, value)
-        if settled.all():
+        done = (valid & (vertex == previous).all(axis=2)) if previous is not None else np.zeros_like(valid)
+        value[rows] = np.where(valid, ratio, value[rows])
+        settled[rows] = done
+        # a row is dropped once all its coordinates settled: iterating further repeats the vertex
+        going = ~done.all(axis=1)
+        if not going.any():
             break
-        previous = vertex
+        rows, previous = rows[going], vertex[going]
     return value, settled
 
 
@@ -229,7 +232,7 @@ def box_image(lo: np.ndarray, hi: np.ndarray, symbols: ObservationSymbols, o: in
     return out_lo, out_hi
 
 
-def _outcome_table(symbols: ObservationSymbols) -> np.ndarray:
+def outcome_table(symbols: ObservationSymbols) -> np.ndarray:
     width = max(len(s) for s in symbols.by_incident)
     table = np.full((len(symbols.by_incident), width), -1, dtype=np.int64)
     for i, members in enumerate(symbols.by_incident):
@@ -254,7 +257,7 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
     steps0 = steps.copy()
     n_start = x.size
     n = symbols.likelihood.shape[1]
-    outcomes = _outcome_table(symbols)
+    outcomes = outcome_table(symbols)
     incident_of = tables.pomdp.road_incident
     accepted = np.zeros(n_start)
     straddle = np.zeros(n_start)

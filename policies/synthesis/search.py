@@ -66,6 +66,7 @@ from trustroute.policies.synthesis.belief_cells import (
     observation_symbols,
     suffix_cells,
 )
+from trustroute.policies.synthesis.cluster_policy import ClusterSolution, best_cluster_solution
 from trustroute.policies.synthesis.completion_value import FreeRoute, completion_bounds
 from trustroute.policies.synthesis.end_components import unbounded_bound
 from trustroute.policies.synthesis.event_graph import EventGraph
@@ -102,6 +103,14 @@ MAX_MACRO_WIDTH = 16
 COMPLETION_MODES = ("auto", "exact", "bounds")
 AUTO_TREE_LEAVES = NODE_BUDGET // 4
 COMPRESS_MODES = ("off", "chains", "full")
+# Cluster policies (cluster_policy.py) before the search: "auto" where open nodes would get cluster
+# bounds (the Bayes rule on problems whose free route's observation tree exceeds AUTO_TREE_LEAVES),
+# "on" always under the Bayes rule, "off" never.
+CLUSTER_MODES = ("auto", "on", "off")
+CLUSTER_SHARE = 0.75          # share of the time limit the cluster policies may take
+# unbounded: cluster policies for these junction counts beyond the shortest acceptance, in turn
+UNBOUNDED_CLUSTER_SLACK = (10, 20, 30, 45)
+UNBOUNDED_CLUSTER_CAPS = (16, 64)
 
 # FRONTIER: open, L = 0 (the policy drives the trust-free completion there, worth >= 0).
 # FREE: expanded along the trust-free completion's move only; L is that move's exact value, U the
@@ -1074,12 +1083,41 @@ def unbounded_suffix_length(tables: ProductTables, n_changing: int, automatic: i
     return k
 
 
+def _use_clusters(tables: ProductTables, symbols: ObservationSymbols, horizon: int | None,
+                  completion: str, clusters: str) -> bool:
+    """CLUSTER_MODES: whether cluster policies run before the search."""
+    if clusters == "off" or symbols.rule != "bayes":
+        return False
+    if clusters == "on":
+        return True
+    depth = horizon if horizon is not None else UNBOUNDED_DEPTH
+    return completion == "auto" and completion_tree_leaves(
+        tables, symbols, state_only_task(tables.pomdp.town, tables.spec), depth) > AUTO_TREE_LEAVES
+
+
+def _cluster_table(solution: ClusterSolution, n_trust: int) -> PolicyTable:
+    """A policy table of box rows only (the exact-belief rule then reads the boxes)."""
+    return PolicyTable(t=[], x=[], q=[], beliefs=np.zeros((0, n_trust)), action=[], projected=[],
+                       boxes=solution.rows)
+
+
+def _cluster_run(solution: ClusterSolution, upper: float, horizon: int, tried: list) -> dict:
+    """The stats line of a cluster policy (keys shared with the search's runs)."""
+    return {"horizon": horizon, "method": "cluster policy", "lower": solution.lower, "upper": upper,
+            "nodes": 0, "cluster_cap": solution.cap, "clusters": solution.clusters,
+            "policy_rows": solution.rows.rows, "cluster_runs": tried, "threshold_alternates": 0,
+            # labels read the worse way wherever a box straddles, so L holds under any reading
+            "lower_strict_labels": solution.lower, "completion_closed": True,
+            "completion_bounds": False}
+
+
 def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
                horizon: int | None = None, belief_rule: BeliefRule = "bayes",
                suffix_length: int | None = None,
                batch: int = DEFAULT_BATCH,
                on_iteration: Callable[[float, float], None] | None = None,
-               compress: str = "chains", completion: str = "auto") -> SynthesisResult:
+               compress: str = "chains", completion: str = "auto", clusters: str = "auto"
+               ) -> SynthesisResult:
     """Maximal probability of satisfying `spec` from (spec.start, initial belief), with a policy.
 
     horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter and the
@@ -1097,11 +1135,15 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     convergence (docs/synthesis.md, "The event graph"). completion: how open nodes are valued
     (COMPLETION_MODES; "auto": exact trees, so that lower is the policy's exact value, where the
     trust-free route's observation tree fits AUTO_TREE_LEAVES, cluster bounds otherwise;
-    docs/synthesis.md, "Open nodes and the acting rule").
+    docs/synthesis.md, "Open nodes and the acting rule"). clusters: whether cluster policies
+    (policies/synthesis/cluster_policy.py) are solved before the search (CLUSTER_MODES); the better
+    certified L of the two is returned, and the smaller U.
     """
     check_synthesis_arguments(tau, horizon, belief_rule)
     if completion not in COMPLETION_MODES:
         raise ValueError(f"unknown completion {completion!r}; use one of {', '.join(COMPLETION_MODES)}")
+    if clusters not in CLUSTER_MODES:
+        raise ValueError(f"unknown clusters {clusters!r}; use one of {', '.join(CLUSTER_MODES)}")
     started = time.perf_counter()
     # The last few per cent are kept for the work after the deadline check (final backup, the
     # policy table, the stats), so that the whole call ends within the limit.
@@ -1133,10 +1175,27 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         if horizon is None:
             note = "graph distance: acceptance is unreachable"
     elif horizon is not None:
-        lower, upper, table, stats = _bounded_search(tables, belief_rule, horizon, tau, suffix_length,
-                                                     batch, started, deadline, on_iteration=on_iteration,
-                                                     compress=compress, completion=completion)
-        runs = [stats]
+        symbols = observation_symbols(pomdp, belief_rule)
+        cluster, cluster_upper, runs = None, 1.0, []
+        if _use_clusters(tables, symbols, horizon, completion, clusters):
+            cluster, cluster_upper, tried = best_cluster_solution(
+                tables, symbols, sorted(q0), horizon, tau,
+                min(deadline, started + CLUSTER_SHARE * time_limit))
+            if cluster is not None:
+                runs.append(_cluster_run(cluster, cluster_upper, horizon, tried))
+                if on_iteration is not None:
+                    on_iteration(cluster.lower, cluster_upper)
+        if cluster is not None and cluster_upper - cluster.lower <= tau:
+            lower, upper, table = cluster.lower, cluster_upper, _cluster_table(cluster, pomdp.n_trust)
+        else:
+            lower, upper, table, stats = _bounded_search(tables, belief_rule, horizon, tau, suffix_length,
+                                                         batch, started, deadline, on_iteration=on_iteration,
+                                                         compress=compress, completion=completion)
+            runs.append(stats)
+            if cluster is not None:
+                upper = min(upper, cluster_upper)
+                if cluster.lower > lower:
+                    lower, table = cluster.lower, _cluster_table(cluster, pomdp.n_trust)
     else:
         symbols = observation_symbols(pomdp, belief_rule)
         k = unbounded_suffix_length(tables, symbols.n_changing, suffix_length)
@@ -1154,6 +1213,24 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         # After the first, the unbounded problem itself is searched for a quarter of the time left
         # (open nodes valued by the bound): that lowers U where the bound is loose.
         lower, table, runs = -1.0, None, []
+        if _use_clusters(tables, symbols, None, completion, clusters):
+            # cluster policies of growing horizons for L (accepting within H junctions)
+            cluster_deadline = min(deadline, started + CLUSTER_SHARE * time_limit)
+            for slack in UNBOUNDED_CLUSTER_SLACK:
+                if upper - lower <= tau or time.perf_counter() >= cluster_deadline:
+                    break
+                depth = shortest + slack
+                cluster, _, tried = best_cluster_solution(tables, symbols, sorted(q0), depth, tau,
+                                                          cluster_deadline, UNBOUNDED_CLUSTER_CAPS,
+                                                          enough=upper - tau)
+                if cluster is None:
+                    break
+                runs.append(_cluster_run(cluster, upper, depth, tried))
+                if on_iteration is not None:
+                    on_iteration(cluster.lower, upper)
+                if cluster.lower > lower:
+                    lower, table = cluster.lower, _cluster_table(cluster, pomdp.n_trust)
+        searched_unbounded = False
         for depth in UNBOUNDED_HORIZONS:
             if upper - lower <= tau or (runs and time.perf_counter() >= deadline):
                 break
@@ -1166,7 +1243,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             runs.append(stats)
             if run_lower > lower:
                 lower, table = run_lower, run_table
-            if len(runs) == 1 and upper - lower > tau:
+            if not searched_unbounded and upper - lower > tau:
+                searched_unbounded = True
                 remaining = max(deadline - time.perf_counter(), 0.0)
                 run_lower, run_upper, run_table, stats = _bounded_search(
                     tables, belief_rule, None, tau, k, batch, started,

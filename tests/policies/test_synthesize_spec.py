@@ -12,7 +12,14 @@ import pytest
 
 from tests.cli import run_cli
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.routing.files import ARRAY_NAMES, PLAIN_KEYS, array_path, save_policy
+from trustroute.policies.routing.aware_table import BoxRows
+from trustroute.policies.routing.files import (
+    ARRAY_NAMES,
+    BOX_ARRAY_NAMES,
+    PLAIN_KEYS,
+    array_path,
+    save_policy,
+)
 from trustroute.policies.synthesis.search import synthesize
 
 
@@ -43,11 +50,15 @@ def test_without_trust_atoms_the_cli_writes_the_plain_synthesis_file_byte_for_by
     assert set(json.loads((tmp_path / "cli.json").read_text())) == set(PLAIN_KEYS)
     data = array_path(tmp_path / "cli.json").read_bytes()
     with zipfile.ZipFile(io.BytesIO(data)) as archive:
-        assert sorted(archive.namelist()) == sorted(f"{a}.npy" for a in ARRAY_NAMES)
+        assert sorted(archive.namelist()) == sorted(f"{a}.npy" for a in ARRAY_NAMES + BOX_ARRAY_NAMES)
     table = plain.policy.table
+    assert table.boxes is None          # the search's policy: no box rows, empty box arrays
+    boxes = BoxRows.empty(table.beliefs.shape[1])
     buffer = io.BytesIO()
     np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, projected=table.projected,
-                        beliefs=table.beliefs, action=table.action)
+                        beliefs=table.beliefs, action=table.action, box_t=boxes.t, box_x=boxes.x,
+                        box_q=boxes.q, box_lo=boxes.lo, box_hi=boxes.hi, box_value=boxes.value,
+                        box_action=boxes.action)
     assert buffer.getvalue() == data
 
 

@@ -85,7 +85,7 @@ def test_version_2_files_are_refused_with_the_reason(town, driver, phi1_result, 
     spec, result = phi1_result
     path = save_policy(result, tmp_path / "p.json", town, driver, spec)
     document = json.loads(path.read_text())
-    assert document["version"] == 3 and "back to what the DFA still needs" in document["acting_rule"]
+    assert document["version"] == 4 and "back to what the DFA still needs" in document["acting_rule"]
     path.write_text(json.dumps({**document, "version": 2}))
     with pytest.raises(InputError) as error:
         load_policy(path, town, driver, spec)
@@ -98,6 +98,67 @@ def test_version_2_files_are_refused_with_the_reason(town, driver, phi1_result, 
     path.write_text(json.dumps({**joint, "version": 1}))
     with pytest.raises(InputError, match="version 1"):
         read_policy_document(path)
+
+
+def _rewrite_arrays(path, document: dict, arrays: dict) -> None:
+    """Replace a policy file's .npz by `arrays` and record its hash in the document."""
+    import hashlib
+    import io
+
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **arrays)
+    array_path(path).write_bytes(buffer.getvalue())
+    path.write_text(json.dumps({**document, "arrays_sha256": hashlib.sha256(buffer.getvalue()).hexdigest()}))
+
+
+def test_cluster_policy_round_trip_and_damaged_boxes(pomdp, town, driver, tmp_path):
+    """A cluster policy (box rows only) survives the file: the same boxes, the same decisions on
+    random contexts, and `evaluate` of the loaded policy at least its L; damaged box arrays are one
+    line naming the array."""
+    spec = load_spec("specs/phi1.toml", town)
+    result = synthesize(pomdp, spec, horizon=8, tau=0.05, clusters="on")
+    boxes = result.policy.table.boxes
+    assert boxes is not None and boxes.rows > 0 and result.policy.table.rows == 0
+    path = save_policy(result, tmp_path / "c.json", town, driver, spec)
+    document = json.loads(path.read_text())
+    assert document["box_rows"] == boxes.rows
+    loaded = load_policy(path, town, driver, spec)
+    for name in ("t", "x", "q", "lo", "hi", "value", "action"):
+        assert np.array_equal(getattr(loaded.table.boxes, name), getattr(boxes, name))
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        row = int(rng.integers(boxes.rows))
+        belief = boxes.lo[row] + rng.random() * (boxes.hi[row] - boxes.lo[row])
+        context = DecisionContext(route=(spec.start,) * int(boxes.t[row]) + (town.states[boxes.x[row]],),
+                                  dfa_state=int(boxes.q[row]), belief=belief)
+        assert loaded.next_junction(context) == result.policy.next_junction(context)
+    value = evaluate(pomdp, spec, loaded, fallback_after=None, max_junctions=8)
+    assert value.lower >= result.lower - 1e-9
+    with np.load(array_path(path)) as archive:
+        arrays = {name: archive[name] for name in archive.files}
+    flipped = {**arrays, "box_lo": arrays["box_hi"] + 0.5}
+    _rewrite_arrays(path, document, flipped)
+    with pytest.raises(InputError) as error:
+        load_policy(path, town, driver, spec)
+    assert "box_lo" in error.value.one_line() and "re-run trustroute synth" in error.value.one_line()
+    _rewrite_arrays(path, document, {k: v for k, v in arrays.items() if k != "box_value"})
+    with pytest.raises(InputError, match="box_value"):
+        load_policy(path, town, driver, spec)
+
+
+def test_version_3_files_are_read_without_box_rows(pomdp, town, driver, phi1_result, tmp_path):
+    """A version 3 file (no box arrays) loads as a table without box rows and acts as before."""
+    spec, result = phi1_result
+    path = save_policy(result, tmp_path / "v3.json", town, driver, spec)
+    document = json.loads(path.read_text())
+    with np.load(array_path(path)) as archive:
+        arrays = {name: archive[name] for name in archive.files if not name.startswith("box_")}
+    old = {key: value for key, value in document.items() if key != "box_rows"}
+    _rewrite_arrays(path, {**old, "version": 3}, arrays)
+    loaded = load_policy(path, town, driver, spec)
+    assert loaded.table.boxes is None
+    value = evaluate(pomdp, spec, loaded, fallback_after=None, max_junctions=8)
+    assert value.lower == pytest.approx(result.lower, abs=1e-12)
 
 
 def test_resolve_free_aware_and_files(pomdp, town, driver, phi1_result, tmp_path, monkeypatch):
