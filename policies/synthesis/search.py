@@ -40,6 +40,12 @@ unbounded problem itself (open nodes, including those deeper than UNBOUNDED_DEPT
 bound); lower is the best of that search and bounded searches with growing H (their policies are
 policies for the unbounded problem too, worth at least their bounded value).
 
+Cluster policies (Bayes rule; policies/synthesis/cluster_policy.py, docs/synthesis.md "Cluster
+policies"): the whole product solved with beliefs enclosed in boxes, a policy of box rows with its
+own certified [L, U]. `synthesize` runs them before the search on large problems and after an
+unconverged search elsewhere (CLUSTER_MODES), and returns the better L with its policy and the
+smaller U.
+
 Labels at thresholds: a belief within the rounding margin of a belief atom's hyperplane
 (labelling.Labeller.belief_margins) gives one child per DFA state it could lead to; L takes the
 minimum over them and U the maximum (docs/synthesis.md, "Labels at thresholds"). Horizons shorter
@@ -103,11 +109,13 @@ MAX_MACRO_WIDTH = 16
 COMPLETION_MODES = ("auto", "exact", "bounds")
 AUTO_TREE_LEAVES = NODE_BUDGET // 4
 COMPRESS_MODES = ("off", "chains", "full")
-# Cluster policies (cluster_policy.py) before the search: "auto" where open nodes would get cluster
-# bounds (the Bayes rule on problems whose free route's observation tree exceeds AUTO_TREE_LEAVES),
-# "on" always under the Bayes rule, "off" never.
+# Cluster policies (cluster_policy.py) under the Bayes rule: "auto" before the search where open
+# nodes would get cluster bounds (the free route's observation tree exceeds AUTO_TREE_LEAVES), and
+# after it elsewhere when the search ends with a gap above tau (it then has SEARCH_SHARE of the
+# time); "on" always before the search; "off" never.
 CLUSTER_MODES = ("auto", "on", "off")
-CLUSTER_SHARE = 0.75          # share of the time limit the cluster policies may take
+CLUSTER_SHARE = 0.75          # share of the time limit the cluster policies may take before the search
+SEARCH_SHARE = 0.5            # share of the time limit of a search that cluster policies may follow
 # unbounded: cluster policies for these junction counts beyond the shortest acceptance, in turn
 UNBOUNDED_CLUSTER_SLACK = (10, 20, 30, 45)
 UNBOUNDED_CLUSTER_CAPS = (16, 64)
@@ -1083,16 +1091,18 @@ def unbounded_suffix_length(tables: ProductTables, n_changing: int, automatic: i
     return k
 
 
-def _use_clusters(tables: ProductTables, symbols: ObservationSymbols, horizon: int | None,
-                  completion: str, clusters: str) -> bool:
-    """CLUSTER_MODES: whether cluster policies run before the search."""
+def _cluster_order(tables: ProductTables, symbols: ObservationSymbols, horizon: int | None,
+                   completion: str, clusters: str) -> str:
+    """CLUSTER_MODES: "first" (cluster policies before the search), "after" (after a search that
+    ends with a gap above tau) or "never"."""
     if clusters == "off" or symbols.rule != "bayes":
-        return False
+        return "never"
     if clusters == "on":
-        return True
+        return "first"
     depth = horizon if horizon is not None else UNBOUNDED_DEPTH
-    return completion == "auto" and completion_tree_leaves(
+    large = completion == "auto" and completion_tree_leaves(
         tables, symbols, state_only_task(tables.pomdp.town, tables.spec), depth) > AUTO_TREE_LEAVES
+    return "first" if large else "after"
 
 
 def _cluster_table(solution: ClusterSolution, n_trust: int) -> PolicyTable:
@@ -1176,22 +1186,33 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             note = "graph distance: acceptance is unreachable"
     elif horizon is not None:
         symbols = observation_symbols(pomdp, belief_rule)
-        cluster, cluster_upper, runs = None, 1.0, []
-        if _use_clusters(tables, symbols, horizon, completion, clusters):
-            cluster, cluster_upper, tried = best_cluster_solution(
-                tables, symbols, sorted(q0), horizon, tau,
-                min(deadline, started + CLUSTER_SHARE * time_limit))
-            if cluster is not None:
-                runs.append(_cluster_run(cluster, cluster_upper, horizon, tried))
+        order = _cluster_order(tables, symbols, horizon, completion, clusters)
+        runs: list[dict] = []
+
+        def cluster_round(until: float) -> tuple[ClusterSolution | None, float]:
+            found, found_upper, tried = best_cluster_solution(tables, symbols, sorted(q0), horizon, tau,
+                                                              until)
+            if found is not None:
+                runs.append(_cluster_run(found, found_upper, horizon, tried))
                 if on_iteration is not None:
-                    on_iteration(cluster.lower, cluster_upper)
+                    on_iteration(found.lower, found_upper)
+            return found, found_upper
+
+        cluster, cluster_upper = None, 1.0
+        if order == "first":
+            cluster, cluster_upper = cluster_round(min(deadline, started + CLUSTER_SHARE * time_limit))
         if cluster is not None and cluster_upper - cluster.lower <= tau:
             lower, upper, table = cluster.lower, cluster_upper, _cluster_table(cluster, pomdp.n_trust)
         else:
+            search_deadline = (min(deadline, started + SEARCH_SHARE * time_limit) if order == "after"
+                               else deadline)
             lower, upper, table, stats = _bounded_search(tables, belief_rule, horizon, tau, suffix_length,
-                                                         batch, started, deadline, on_iteration=on_iteration,
-                                                         compress=compress, completion=completion)
+                                                         batch, started, search_deadline,
+                                                         on_iteration=on_iteration, compress=compress,
+                                                         completion=completion)
             runs.append(stats)
+            if order == "after" and upper - lower > tau and time.perf_counter() < deadline:
+                cluster, cluster_upper = cluster_round(deadline)
             if cluster is not None:
                 upper = min(upper, cluster_upper)
                 if cluster.lower > lower:
@@ -1213,31 +1234,40 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         # After the first, the unbounded problem itself is searched for a quarter of the time left
         # (open nodes valued by the bound): that lowers U where the bound is loose.
         lower, table, runs = -1.0, None, []
-        if _use_clusters(tables, symbols, None, completion, clusters):
-            # cluster policies of growing horizons for L (accepting within H junctions)
-            cluster_deadline = min(deadline, started + CLUSTER_SHARE * time_limit)
+        order = _cluster_order(tables, symbols, None, completion, clusters)
+
+        def cluster_phase(lower: float, until: float) -> ClusterSolution | None:
+            """Cluster policies of growing horizons for L (accepting within H junctions); the one
+            of the largest L above `lower`, if any."""
+            best = None
             for slack in UNBOUNDED_CLUSTER_SLACK:
-                if upper - lower <= tau or time.perf_counter() >= cluster_deadline:
+                if upper - lower <= tau or time.perf_counter() >= until:
                     break
                 depth = shortest + slack
-                cluster, _, tried = best_cluster_solution(tables, symbols, sorted(q0), depth, tau,
-                                                          cluster_deadline, UNBOUNDED_CLUSTER_CAPS,
-                                                          enough=upper - tau)
-                if cluster is None:
+                found, _, tried = best_cluster_solution(tables, symbols, sorted(q0), depth, tau, until,
+                                                        UNBOUNDED_CLUSTER_CAPS, enough=upper - tau)
+                if found is None:
                     break
-                runs.append(_cluster_run(cluster, upper, depth, tried))
+                runs.append(_cluster_run(found, upper, depth, tried))
                 if on_iteration is not None:
-                    on_iteration(cluster.lower, upper)
-                if cluster.lower > lower:
-                    lower, table = cluster.lower, _cluster_table(cluster, pomdp.n_trust)
+                    on_iteration(found.lower, upper)
+                if found.lower > lower:
+                    best, lower = found, found.lower
+            return best
+
+        if order == "first":
+            found = cluster_phase(lower, min(deadline, started + CLUSTER_SHARE * time_limit))
+            if found is not None:
+                lower, table = found.lower, _cluster_table(found, pomdp.n_trust)
+        search_deadline = min(deadline, started + SEARCH_SHARE * time_limit) if order == "after" else deadline
         searched_unbounded = False
         for depth in UNBOUNDED_HORIZONS:
-            if upper - lower <= tau or (runs and time.perf_counter() >= deadline):
+            if upper - lower <= tau or (runs and time.perf_counter() >= search_deadline):
                 break
             k_run = bounded_suffix_length(tables, symbols.n_changing, suffix_length, depth)
             shared = k_run == k
             run_lower, _, run_table, stats = _bounded_search(
-                tables, belief_rule, depth, 0.5 * tau, k_run, batch, started, deadline,
+                tables, belief_rule, depth, 0.5 * tau, k_run, batch, started, search_deadline,
                 value if shared else None, abstraction if shared else None, on_iteration=on_iteration,
                 compress=compress, completion=completion)
             runs.append(stats)
@@ -1245,7 +1275,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 lower, table = run_lower, run_table
             if not searched_unbounded and upper - lower > tau:
                 searched_unbounded = True
-                remaining = max(deadline - time.perf_counter(), 0.0)
+                remaining = max(search_deadline - time.perf_counter(), 0.0)
                 run_lower, run_upper, run_table, stats = _bounded_search(
                     tables, belief_rule, None, tau, k, batch, started,
                     time.perf_counter() + 0.25 * remaining, value, abstraction, on_iteration=on_iteration,
@@ -1255,6 +1285,10 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 upper = min(upper, run_upper)
                 if run_lower > lower:
                     lower, table = run_lower, run_table
+        if order == "after" and upper - lower > tau and time.perf_counter() < deadline:
+            found = cluster_phase(lower, deadline)
+            if found is not None:
+                lower, table = found.lower, _cluster_table(found, pomdp.n_trust)
         lower = max(lower, 0.0)
     policy = BeliefTablePolicy(table, pomdp.town, spec, lower=lower, upper=upper, horizon=horizon)
     stats = {

@@ -173,9 +173,17 @@ def test_node_budget_stops_the_search_soundly(pomdp, monkeypatch):
     spec = load_spec("specs/phi1.toml", pomdp.town)
     horizon = 8
     monkeypatch.setattr(search, "NODE_BUDGET", 300)
-    result = synthesize(pomdp, spec, tau=1e-9, horizon=horizon)
+    optimum = exact_optimum(pomdp, spec, horizon)
+    # the search alone (clusters "off"); by default cluster policies follow an unconverged search
+    result = synthesize(pomdp, spec, tau=1e-9, horizon=horizon, clusters="off")
     run = result.stats["runs"][0]
     assert run["nodes"] >= 300 and not result.stats["converged"]
     value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
     assert result.lower <= value.lower + EXACT_TOLERANCE
-    assert exact_optimum(pomdp, spec, horizon) <= result.upper + EXACT_TOLERANCE
+    assert optimum <= result.upper + EXACT_TOLERANCE
+    after = synthesize(pomdp, spec, tau=1e-9, horizon=horizon)
+    assert [r.get("method", "search") for r in after.stats["runs"]] == ["search", "cluster policy"]
+    assert after.lower >= result.lower and after.upper <= result.upper
+    assert after.lower - EXACT_TOLERANCE <= optimum <= after.upper + EXACT_TOLERANCE
+    value = evaluate(pomdp, spec, after.policy, fallback_after=None, max_junctions=horizon)
+    assert after.lower <= value.lower + EXACT_TOLERANCE
