@@ -167,14 +167,18 @@ class _BoxIndex:
         """Per context: the action of the box of the largest value at its key holding its belief
         (-1: none holds it)."""
         out = np.full(keys.size, -1, dtype=np.int64)
-        first = np.searchsorted(self.keys, keys, side="left")
-        last = np.searchsorted(self.keys, keys, side="right")
-        for i in np.flatnonzero(last > first).tolist():
-            lo, hi = self.rows.lo[first[i]:last[i]], self.rows.hi[first[i]:last[i]]
-            inside = ((lo <= beliefs[i]) & (beliefs[i] <= hi)).all(axis=1)
-            if inside.any():
-                value = np.where(inside, self.rows.value[first[i]:last[i]], -np.inf)
-                out[i] = self.rows.action[first[i] + int(value.argmax())]
+        unique, inverse = np.unique(keys, return_inverse=True)
+        first = np.searchsorted(self.keys, unique, side="left")
+        last = np.searchsorted(self.keys, unique, side="right")
+        for g in np.flatnonzero(last > first).tolist():
+            members = np.flatnonzero(inverse == g)
+            lo, hi = self.rows.lo[first[g]:last[g]], self.rows.hi[first[g]:last[g]]      # [k, n]
+            held = beliefs[members]                                                       # [m, n]
+            inside = ((lo[None] <= held[:, None]) & (held[:, None] <= hi[None])).all(axis=2)   # [m, k]
+            value = np.where(inside, self.rows.value[first[g]:last[g]][None, :], -np.inf)
+            best = value.argmax(axis=1)
+            found = inside[np.arange(members.size), best]
+            out[members[found]] = self.rows.action[first[g] + best[found]]
         return out
 
 

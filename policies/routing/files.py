@@ -220,32 +220,18 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     if rows != document.get("rows"):
         raise InputError(where, "", f"{rows} rows but the policy file records {document.get('rows')}",
                          RESYNTH)
-    n_x = len(town.states)
     t, x, q, action = (arrays_read[name].astype(np.int64) for name in ("t", "x", "q", "action"))
     projected = None if joint else arrays_read["projected"].astype(np.int64)
     n_q = build_dfa(spec).n_states
     n_p = state_only_task(town, spec).dfa.n_states
-    slots = np.array([len(town.actions(state)) for state in town.states], dtype=np.int64)
-    problems = [
-        ("t", (t < 0).any(), "negative junction counts"),
-        ("x", ((x < 0) | (x >= n_x)).any(), f"roads outside 0..{n_x - 1}"),
-        ("q", ((q < 0) | (q >= n_q)).any(), f"DFA states outside 0..{n_q - 1}"),
-    ]
-    if projected is not None:
-        problems.append(("projected", ((projected < 0) | (projected >= n_p)).any(),
-                         f"state-only task states outside 0..{n_p - 1}"))
-    for name, bad, what in problems:
-        if bad:
-            raise InputError(where, name, f"decision table has {what}", RESYNTH)
-    if ((action < 0) | (action >= slots[x])).any():
-        row = int(np.flatnonzero((action < 0) | (action >= slots[x]))[0])
-        raise InputError(where, "action", f"row {row}: action {int(action[row])} is not one of the "
-                         f"{int(slots[x[row]])} moves from road {town.states[x[row]]}", RESYNTH)
+    extra = [] if projected is None else [("projected", ((projected < 0) | (projected >= n_p)).any(),
+                                           f"state-only task states outside 0..{n_p - 1}")]
+    _check_decisions(where, "", "decision table", t, x, q, action, town, n_q, extra)
     if (not np.isfinite(beliefs).all() or (beliefs < 0).any() or (beliefs > 1).any()
             or (np.abs(beliefs.sum(axis=1) - 1) > 1e-6).any()):
         raise InputError(where, "beliefs", "beliefs are not probability vectors", RESYNTH)
     if not joint:
-        boxes = _box_rows(arrays_read, where, document, driver.n_trust, n_x, n_q, slots)
+        boxes = _box_rows(arrays_read, where, document, driver.n_trust, town, n_q)
         return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action, projected=projected,
                            boxes=boxes)
     table = arrays_read["joint"]
@@ -258,8 +244,8 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     return JointPolicyTable(t=t, x=x, q=q, beliefs=beliefs, joint=table, action=action)
 
 
-def _box_rows(arrays: dict, where: str, document: dict, n_trust: int, n_x: int, n_q: int,
-              slots: np.ndarray) -> BoxRows | None:
+def _box_rows(arrays: dict, where: str, document: dict, n_trust: int, town: Town, n_q: int
+              ) -> BoxRows | None:
     """The box rows of a version-4 table, verified like the exact rows (None: a version-3 file)."""
     if "box_t" not in arrays:
         return None
@@ -282,23 +268,35 @@ def _box_rows(arrays: dict, where: str, document: dict, n_trust: int, n_x: int, 
                          f"{document.get('box_rows')}", RESYNTH)
     t, x, q, action = (arrays[name].astype(np.int64) for name in ("box_t", "box_x", "box_q", "box_action"))
     lo, hi = arrays["box_lo"], arrays["box_hi"]
-    problems = [
-        ("box_t", (t < 0).any(), "negative junction counts"),
-        ("box_x", ((x < 0) | (x >= n_x)).any(), f"roads outside 0..{n_x - 1}"),
-        ("box_q", ((q < 0) | (q >= n_q)).any(), f"DFA states outside 0..{n_q - 1}"),
+    extra = [
         ("box_lo", not (np.isfinite(lo).all() and np.isfinite(hi).all()) or (lo < 0).any()
          or (hi > 1).any() or (lo > hi).any(), "boxes that are not within [0, 1] with lo <= hi"),
         ("box_value", not np.isfinite(value).all() or (value < 0).any() or (value > 1).any(),
          "values that are not probabilities"),
     ]
+    _check_decisions(where, "box_", "box rows", t, x, q, action, town, n_q, extra)
+    return BoxRows(t=t, x=x, q=q, lo=lo, hi=hi, value=value, action=action)
+
+
+def _check_decisions(where: str, prefix: str, what_rows: str, t: np.ndarray, x: np.ndarray, q: np.ndarray,
+                     action: np.ndarray, town: Town, n_q: int, extra: list) -> None:
+    """InputError at the first array (named with `prefix`) whose entries are out of range for this
+    town and spec: junction counts, roads, DFA states, the `extra` (name, bad, what) checks, moves."""
+    n_x = len(town.states)
+    slots = np.array([len(town.actions(state)) for state in town.states], dtype=np.int64)
+    problems = [
+        (f"{prefix}t", (t < 0).any(), "negative junction counts"),
+        (f"{prefix}x", ((x < 0) | (x >= n_x)).any(), f"roads outside 0..{n_x - 1}"),
+        (f"{prefix}q", ((q < 0) | (q >= n_q)).any(), f"DFA states outside 0..{n_q - 1}"),
+    ] + extra
     for name, bad, what in problems:
         if bad:
-            raise InputError(where, name, f"box rows have {what}", RESYNTH)
+            raise InputError(where, name, f"{what_rows} has {what}", RESYNTH)
     if ((action < 0) | (action >= slots[x])).any():
         row = int(np.flatnonzero((action < 0) | (action >= slots[x]))[0])
-        raise InputError(where, "box_action", f"box row {row}: action {int(action[row])} is not one of "
-                         f"the {int(slots[x[row]])} moves from its road", RESYNTH)
-    return BoxRows(t=t, x=x, q=q, lo=lo, hi=hi, value=value, action=action)
+        raise InputError(where, f"{prefix}action", f"{what_rows}, row {row}: action {int(action[row])} is "
+                         f"not one of the {int(slots[x[row]])} moves from road {town.states[x[row]]}",
+                         RESYNTH)
 
 
 def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec

@@ -118,7 +118,7 @@ CLUSTER_SHARE = 0.75          # share of the time limit the cluster policies may
 SEARCH_SHARE = 0.5            # share of the time limit of a search that cluster policies may follow
 # unbounded: cluster policies for these junction counts beyond the shortest acceptance, in turn
 UNBOUNDED_CLUSTER_SLACK = (10, 20, 30, 45)
-UNBOUNDED_CLUSTER_CAPS = (16, 64)
+UNBOUNDED_CLUSTER_CAPS = (16, 64, 256)
 
 # FRONTIER: open, L = 0 (the policy drives the trust-free completion there, worth >= 0).
 # FREE: expanded along the trust-free completion's move only; L is that move's exact value, U the
@@ -1237,22 +1237,26 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         order = _cluster_order(tables, symbols, None, completion, clusters)
 
         def cluster_phase(lower: float, until: float) -> ClusterSolution | None:
-            """Cluster policies of growing horizons for L (accepting within H junctions); the one
-            of the largest L above `lower`, if any."""
-            best = None
-            for slack in UNBOUNDED_CLUSTER_SLACK:
+            """Cluster policies for L (accepting within H junctions): growing horizons with the
+            first cap (more junctions to come back to a waypoint usually lift L most), then larger
+            caps at the best horizon; the one of the largest L above `lower`, if any."""
+            best, best_depth = None, None
+            rounds = [(shortest + slack, UNBOUNDED_CLUSTER_CAPS[:1]) for slack in UNBOUNDED_CLUSTER_SLACK]
+            while rounds:
+                depth, caps = rounds.pop(0)
                 if upper - lower <= tau or time.perf_counter() >= until:
                     break
-                depth = shortest + slack
                 found, _, tried = best_cluster_solution(tables, symbols, sorted(q0), depth, tau, until,
-                                                        UNBOUNDED_CLUSTER_CAPS, enough=upper - tau)
+                                                        caps, enough=upper - tau)
                 if found is None:
                     break
                 runs.append(_cluster_run(found, upper, depth, tried))
                 if on_iteration is not None:
                     on_iteration(found.lower, upper)
                 if found.lower > lower:
-                    best, lower = found, found.lower
+                    best, best_depth, lower = found, depth, found.lower
+                if not rounds and best is not None and len(caps) == 1:
+                    rounds.append((best_depth, UNBOUNDED_CLUSTER_CAPS))
             return best
 
         if order == "first":
