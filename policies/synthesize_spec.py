@@ -18,8 +18,10 @@ from trustroute.policies.synthesis.search import SynthesisResult, synthesize
 
 def synthesize_spec(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
                     horizon: int | None = None, belief_rule: BeliefRule = "bayes",
-                    on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
-    """lower <= Pr_max(spec) <= upper and a policy whose value is at least lower (see `synthesize`)."""
+                    on_iteration: Callable[[float, float], None] | None = None,
+                    clusters: str = "auto") -> SynthesisResult:
+    """lower <= Pr_max(spec) <= upper and a policy whose value is at least lower (see `synthesize`;
+    `clusters` applies to specs without trust-state atoms, docs/synthesis.md "Cluster policies")."""
     if spec.uses_trust_atoms:
         check_synthesis_arguments(tau, horizon, belief_rule)
         from trustroute.policies.joint_synthesis import synthesize_joint
@@ -27,4 +29,4 @@ def synthesize_spec(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit
         return synthesize_joint(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
                                 belief_rule=belief_rule, on_iteration=on_iteration)
     return synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                      belief_rule=belief_rule, on_iteration=on_iteration)
+                      belief_rule=belief_rule, on_iteration=on_iteration, clusters=clusters)

@@ -58,6 +58,10 @@ rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]
 @rule_option
 @click.option("--out", "out_path", type=click.Path(), default="policy.json", show_default=True,
               help="Policy FILE to write (its arrays go beside it, same name with suffix .npz).")
+@click.option("--clusters", type=click.Choice(["auto", "on", "off"]), default="auto", show_default=True,
+              help="Cluster policies (Bayes rule; docs/synthesis.md, \"Cluster policies\"): before the "
+                   "search on large problems and after an unconverged one (auto), always first (on), "
+                   "never (off).")
 @click.option("--population", "population_path", type=click.Path(), default=None,
               help="Driver-population FILE: synthesize for its mixture of driver types "
                    "(docs/driver_types.md); instead of --driver.")
@@ -65,7 +69,7 @@ rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]
               help="With --population: the prior-weighted value (bayes) or the worst type's (robust).")
 @json_option
 def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: float,
-          horizon: int | None, time_limit: float, belief_rule: str, out_path: str,
+          horizon: int | None, time_limit: float, belief_rule: str, out_path: str, clusters: str,
           population_path: str | None, objective: str, as_json: bool) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
     if tau <= 0:
@@ -80,6 +84,9 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
         if driver_path is not None:
             raise click.UsageError("give --driver or --population, not both (a population's types are "
                                    "full driver models)")
+        if clusters != "auto":
+            raise click.UsageError("--clusters applies to a single driver model (--driver), not to "
+                                   "--population")
         _synth_population(spec_path, town_path, population_path, objective, tau, horizon, time_limit,
                           belief_rule, out_path, as_json)
         return
@@ -92,7 +99,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
 
     with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
         result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                            belief_rule=belief_rule, on_iteration=on_iteration)
+                            belief_rule=belief_rule, on_iteration=on_iteration, clusters=clusters)
     path = str(save_policy(result, out_path, town, driver, spec))
     from trustroute.policies.routing.files import array_path
 

@@ -127,14 +127,13 @@ def _merge(node: np.ndarray, features: np.ndarray, cap: int) -> tuple[np.ndarray
     return cluster, order
 
 
-def _label_options(tables: ProductTables, q: np.ndarray, road: np.ndarray, lo: np.ndarray,
-                   hi: np.ndarray) -> np.ndarray:
-    """bool [r, 2**m]: label valuations possible on each box (rounding margin included); q, road
-    index next_q for the successor of each valuation."""
+def _label_options(tables: ProductTables, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """bool [r, 2**m]: the belief-label valuations possible on each box (the labeller's rounding
+    margin included); bit j of a valuation is belief atom j (ProductTables.next_q's last axis)."""
     coeffs, offsets = tables.belief_coeffs, tables.belief_offsets
     m = offsets.size
     if m == 0:
-        return np.ones((q.size, 1), dtype=bool)
+        return np.ones((lo.shape[0], 1), dtype=bool)
     n = lo.shape[1]
     margin = label_margin_factor(n) * np.abs(coeffs).sum(axis=1) + CORNER_MARGIN
     ranges = [linear_range(lo, hi, coeffs[k]) for k in range(m)]
@@ -199,7 +198,7 @@ def _forward(tables: ProductTables, symbols: ObservationSymbols, roots_q: list[i
             if edges.size == 0:
                 continue
             lo2, hi2 = _images(lo, hi, edge_cluster[edges], edge_symbols[edges, j], symbols)
-            fits = _label_options(tables, q[edge_cluster[edges]], next_road[edges], lo2, hi2)
+            fits = _label_options(tables, lo2, hi2)
             for bits in range(fits.shape[1]):
                 pick = np.flatnonzero(fits[:, bits])
                 q2 = tables.next_q[q[edge_cluster[edges[pick]]], next_road[edges[pick]], bits]

@@ -196,3 +196,20 @@ def test_cli_synth_then_evaluate_and_mismatch_exit_code(capsys, tmp_path):
     assert err.startswith("error: ") and len(err.strip().splitlines()) == 1 and "another spec" in err
     code, _, err = run_cli(capsys, "synth", "specs/phi1.toml", "--tau", "0", "--out", str(out_path))
     assert code == 2 and "tau" in err
+
+
+def test_cli_synth_clusters_on_writes_a_cluster_policy_that_evaluates_to_at_least_lower(capsys, tmp_path):
+    out_path = tmp_path / "clusters.json"
+    code, out, _ = run_cli(capsys, "synth", "specs/phi1.toml", "--horizon", "8", "--tau", "0.05",
+                           "--clusters", "on", "--out", str(out_path))
+    assert code == 0 and "a cluster policy:" in out and "box rows" in out
+    assert json.loads(out_path.read_text())["box_rows"] > 0
+    code, out, _ = run_cli(capsys, "synth", "specs/phi1.toml", "--horizon", "8", "--tau", "0.05",
+                           "--clusters", "on", "--out", str(out_path), "--json")
+    lower = json.loads(out)["lower"]
+    code, out, _ = run_cli(capsys, "evaluate", "specs/phi1.toml", str(out_path), "--no-fallback",
+                           "--max-junctions", "8", "--json")
+    assert code == 0 and json.loads(out)["lower"] >= lower - 1e-9
+    code, _, err = run_cli(capsys, "synth", "specs/phi1.toml", "--clusters", "sometimes",
+                           "--out", str(out_path))
+    assert code == 2 and "--clusters" in err
