@@ -65,6 +65,11 @@ class BoxRows:
     def rows(self) -> int:
         return int(self.t.size)
 
+    def take(self, index: np.ndarray) -> BoxRows:
+        """The rows at `index`, in that order."""
+        return BoxRows(t=self.t[index], x=self.x[index], q=self.q[index], lo=self.lo[index],
+                       hi=self.hi[index], value=self.value[index], action=self.action[index])
+
     @staticmethod
     def empty(n_trust: int) -> BoxRows:
         none = np.zeros(0, dtype=np.int64)
@@ -211,9 +216,7 @@ class BeliefTablePolicy(RoutingPolicy):
             if boxes is not None and boxes.rows:
                 keys = self._key_tq(boxes.t, boxes.x, boxes.q)
                 order = np.argsort(keys, kind="stable")
-                self._boxes = _BoxIndex(keys=keys[order], rows=BoxRows(
-                    t=boxes.t[order], x=boxes.x[order], q=boxes.q[order], lo=boxes.lo[order],
-                    hi=boxes.hi[order], value=boxes.value[order], action=boxes.action[order]))
+                self._boxes = _BoxIndex(keys=keys[order], rows=boxes.take(order))
         else:
             self._exact = _group(self._key_tq(table.t, table.x, table.q), table.beliefs)
             self._any_t = _group(self._key_q(table.x, table.q), table.beliefs)

@@ -208,11 +208,7 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     rows = arrays_read["t"].shape[0] if arrays_read["t"].ndim == 1 else -1
     joint = "joint" in arrays_read
     integers = ("t", "x", "q", "action") if joint else ("t", "x", "q", "projected", "action")
-    for name in integers:
-        array = arrays_read[name]
-        if array.ndim != 1 or array.shape[0] != rows or array.dtype.kind not in "iu":
-            raise InputError(where, name, f"array '{name}' is not {max(rows, 0)} integers "
-                             f"(shape {array.shape}, type {array.dtype})", RESYNTH)
+    _check_integers(arrays_read, integers, rows, where)
     beliefs = arrays_read["beliefs"]
     if beliefs.shape != (rows, driver.n_trust) or beliefs.dtype.kind != "f":
         raise InputError(where, "beliefs", f"beliefs have shape {beliefs.shape}, expected ({rows}, "
@@ -250,11 +246,7 @@ def _box_rows(arrays: dict, where: str, document: dict, n_trust: int, town: Town
     if "box_t" not in arrays:
         return None
     rows = arrays["box_t"].shape[0] if arrays["box_t"].ndim == 1 else -1
-    for name in ("box_t", "box_x", "box_q", "box_action"):
-        array = arrays[name]
-        if array.ndim != 1 or array.shape[0] != rows or array.dtype.kind not in "iu":
-            raise InputError(where, name, f"array '{name}' is not {max(rows, 0)} integers "
-                             f"(shape {array.shape}, type {array.dtype})", RESYNTH)
+    _check_integers(arrays, ("box_t", "box_x", "box_q", "box_action"), rows, where)
     for name in ("box_lo", "box_hi"):
         if arrays[name].shape != (rows, n_trust) or arrays[name].dtype.kind != "f":
             raise InputError(where, name, f"{name} has shape {arrays[name].shape}, expected "
@@ -276,6 +268,15 @@ def _box_rows(arrays: dict, where: str, document: dict, n_trust: int, town: Town
     ]
     _check_decisions(where, "box_", "box rows", t, x, q, action, town, n_q, extra)
     return BoxRows(t=t, x=x, q=q, lo=lo, hi=hi, value=value, action=action)
+
+
+def _check_integers(arrays: dict, names: tuple[str, ...], rows: int, where: str) -> None:
+    """InputError at the first of `names` that is not a 1-d integer array of `rows` entries."""
+    for name in names:
+        array = arrays[name]
+        if array.ndim != 1 or array.shape[0] != rows or array.dtype.kind not in "iu":
+            raise InputError(where, name, f"array '{name}' is not {max(rows, 0)} integers "
+                             f"(shape {array.shape}, type {array.dtype})", RESYNTH)
 
 
 def _check_decisions(where: str, prefix: str, what_rows: str, t: np.ndarray, x: np.ndarray, q: np.ndarray,

@@ -348,6 +348,27 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
                             interrupted=interrupted)
 
 
+def grid_merge(place: np.ndarray, group: np.ndarray, features: np.ndarray, resolution: np.ndarray,
+               cap: int) -> tuple[np.ndarray, np.ndarray]:
+    """The merge grid: items in the same `place` and the same cell of side resolution[group] of
+    their `features` merge, δ doubled (in place, in `resolution`) for every group with more than
+    `cap` cells until none has. Returns (order: the items sorted by place and cell, first: True
+    where a cell begins in that order). The cell is a 64-bit hash of its coordinates: a collision
+    merges two cells of one place, which is as sound as any merge (only looser)."""
+    multipliers = (np.arange(1, features.shape[1] + 1, dtype=np.uint64)
+                   * np.uint64(0x9E3779B97F4A7C15)) | np.uint64(1)
+    while True:
+        cell = np.floor(features / resolution[group][:, None]).astype(np.int64).astype(np.uint64)
+        mixed = (cell * multipliers[None, :]).sum(axis=1)
+        order = np.lexsort((mixed, place))
+        a, b = place[order], mixed[order]
+        first = np.concatenate([[True], (a[1:] != a[:-1]) | (b[1:] != b[:-1])])
+        crowded = np.bincount(group[order][first], minlength=resolution.size) > cap
+        if not crowded.any():
+            return order, first
+        resolution[crowded] *= 2.0
+
+
 def _merge(owner: np.ndarray, state: np.ndarray, alpha: np.ndarray, lo: np.ndarray, hi: np.ndarray,
            x: np.ndarray, p: np.ndarray, resolution: np.ndarray, n_x: int, n_q: int
            ) -> tuple[np.ndarray, ...]:
@@ -355,26 +376,12 @@ def _merge(owner: np.ndarray, state: np.ndarray, alpha: np.ndarray, lo: np.ndarr
     centre); coarsen owners over CLUSTER_CAP. A merged cluster's box is the hull of its members'
     boxes widened by CORNER_MARGIN; a cluster alone in its cell keeps its box.
 
-    (owner, x, p, q) is packed exactly into one integer; the cell is a 64-bit hash: a collision
-    merges two cells of the same (owner, x, p, q), which is as sound as any merge (only looser)."""
-    n = lo.shape[1]
+    (owner, x, p, q) is packed exactly into one integer, the place of `grid_merge`."""
     if owner.size == 0:
         return owner, state, alpha, lo, hi, x, p
-    multipliers = (np.arange(1, n + 1, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)) | np.uint64(1)
     n_p = int(p.max(initial=0)) + 1
     place = ((owner * n_x + x) * n_p + p) * n_q + state
-    centre = 0.5 * (lo + hi)
-    while True:     # the finest grid per owner (doubling δ) with at most CLUSTER_CAP cells
-        cell = np.floor(centre / resolution[owner][:, None]).astype(np.int64).astype(np.uint64)
-        mixed = (cell * multipliers[None, :]).sum(axis=1)
-        order = np.lexsort((mixed, place))
-        a, b = place[order], mixed[order]
-        first = np.concatenate([[True], (a[1:] != a[:-1]) | (b[1:] != b[:-1])])
-        counts = np.bincount(owner[order][first], minlength=resolution.size)
-        crowded = counts > CLUSTER_CAP
-        if not crowded.any():
-            break
-        resolution[crowded] *= 2.0
+    order, first = grid_merge(place, owner, 0.5 * (lo + hi), resolution, CLUSTER_CAP)
     starts = np.flatnonzero(first)
     size = np.diff(np.append(starts, order.size))
     pick = order[starts]
