@@ -115,7 +115,9 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
                      "(docs/synthesis.md, \"Cluster policies\")")
     alternates = sum(run.get("threshold_alternates", 0) for run in result.stats.get("runs", []))
     if alternates:
-        strict = max(run.get("lower_strict_labels", 0.0) for run in result.stats["runs"])
+        # the returned policy's (a run's policy may not be the one returned)
+        strict = result.stats.get("lower_strict_labels",
+                                  max(run.get("lower_strict_labels", 0.0) for run in result.stats["runs"]))
         lines.append(f"{alternates} outcomes sit on a belief threshold (within rounding): L reads them "
                      f"the worse way, U the better; with this machine's labels the policy is worth at "
                      f"least {strict:.6f} (spec check warns about such thresholds)")

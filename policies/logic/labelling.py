@@ -18,6 +18,12 @@ label then takes c·b̂ (forward error γ_n Σ|c_i b̂_i|). So whenever
 every implementation of that filter step and of that dot product, in any summation order (batch
 or single row, einsum or BLAS), and exact arithmetic on the same previous belief, read the same
 label. Inside the margin the label is "either" (`belief_margins`): synthesis branches both ways.
+
+This machine's strict reading inside the margin is made the same for every caller: c·b is summed
+in trust-level order, elementwise over the batch (`atom_values`). A BLAS product `beliefs @ coeffs`
+may sum a row in another order depending on how many rows are in the batch, so the search (which
+labels its children in batches) and `evaluate` read a belief that sits exactly on a threshold
+differently, and the strict-label value the search reports was not the one `evaluate` measured.
 """
 
 from __future__ import annotations
@@ -35,6 +41,16 @@ UNIT_ROUNDOFF = 2.0 ** -53
 def gamma(k: int) -> float:
     """Higham's γ_k = k u / (1 - k u): the bound on |θ_k| for k roundings in float64."""
     return k * UNIT_ROUNDOFF / (1.0 - k * UNIT_ROUNDOFF)
+
+
+def atom_values(beliefs: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
+    """[n, m]: c_j·b for beliefs [n, n_trust] and coeffs [n_trust, m], summed in trust-level
+    order for every row whatever the batch size (module docstring), so a label read at a belief is
+    the same bit for bit in a batch of any shape."""
+    value = beliefs[:, :1] * coeffs[:1, :]
+    for level in range(1, coeffs.shape[0]):
+        value = value + beliefs[:, level:level + 1] * coeffs[level:level + 1, :]
+    return value
 
 
 def label_margin_factor(n_trust: int) -> float:
@@ -134,7 +150,7 @@ class Labeller:
         if self.belief_columns.size:
             beliefs = np.asarray(beliefs)
             self._check_width(beliefs)
-            out[:, self.belief_columns] = beliefs @ self.coeffs > self.offsets
+            out[:, self.belief_columns] = atom_values(np.atleast_2d(beliefs), self.coeffs) > self.offsets
         if self.trust_columns.size:
             if trust is None:
                 raise ValueError(f"spec {self.spec.name!r} has trust-state atoms: the trust level "
@@ -160,6 +176,6 @@ class Labeller:
             empty = np.zeros((beliefs.shape[0], 0), dtype=bool)
             return empty, empty
         self._check_width(beliefs)
-        value = beliefs @ self.coeffs
+        value = atom_values(beliefs, self.coeffs)
         margin = label_margin_factor(beliefs.shape[1]) * (np.abs(beliefs) @ np.abs(self.coeffs))
         return value > self.offsets, np.abs(value - self.offsets) <= margin

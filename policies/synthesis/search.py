@@ -1175,7 +1175,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         # Answered by graph distance alone: no route accepts within H junctions, whatever the labels.
         table = PolicyTable(t=[], x=[], q=[], beliefs=np.zeros((0, pomdp.n_trust)), action=[],
                             projected=[])
-        lower = upper = 0.0
+        lower = upper = strict = 0.0
         note = ("graph distance: acceptance is unreachable" if never else
                 f"graph distance: acceptance needs at least {shortest} junctions")
         runs = [{"horizon": horizon, "lower": 0.0, "upper": 0.0, "nodes": 0, "abstraction_root_upper": 0.0,
@@ -1203,6 +1203,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
             cluster, cluster_upper = cluster_round(min(deadline, started + CLUSTER_SHARE * time_limit))
         if cluster is not None and cluster_upper - cluster.lower <= tau:
             lower, upper, table = cluster.lower, cluster_upper, _cluster_table(cluster, pomdp.n_trust)
+            strict = cluster.lower
         else:
             search_deadline = (min(deadline, started + SEARCH_SHARE * time_limit) if order == "after"
                                else deadline)
@@ -1211,12 +1212,14 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                                                          on_iteration=on_iteration, compress=compress,
                                                          completion=completion)
             runs.append(stats)
+            strict = stats["lower_strict_labels"]
             if order == "after" and upper - lower > tau and time.perf_counter() < deadline:
                 cluster, cluster_upper = cluster_round(deadline)
             if cluster is not None:
                 upper = min(upper, cluster_upper)
                 if cluster.lower > lower:
                     lower, table = cluster.lower, _cluster_table(cluster, pomdp.n_trust)
+                    strict = cluster.lower
     else:
         symbols = observation_symbols(pomdp, belief_rule)
         k = unbounded_suffix_length(tables, symbols.n_changing, suffix_length)
@@ -1233,7 +1236,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         # the automatic suffix length (capped by the unbounded bound when the cells are the same).
         # After the first, the unbounded problem itself is searched for a quarter of the time left
         # (open nodes valued by the bound): that lowers U where the bound is loose.
-        lower, table, runs = -1.0, None, []
+        lower, table, strict, runs = -1.0, None, 0.0, []
         order = _cluster_order(tables, symbols, None, completion, clusters)
 
         def cluster_phase(lower: float, until: float) -> ClusterSolution | None:
@@ -1262,7 +1265,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         if order == "first":
             found = cluster_phase(lower, min(deadline, started + CLUSTER_SHARE * time_limit))
             if found is not None:
-                lower, table = found.lower, _cluster_table(found, pomdp.n_trust)
+                lower, table, strict = found.lower, _cluster_table(found, pomdp.n_trust), found.lower
         search_deadline = min(deadline, started + SEARCH_SHARE * time_limit) if order == "after" else deadline
         searched_unbounded = False
         for depth in UNBOUNDED_HORIZONS:
@@ -1276,7 +1279,7 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 compress=compress, completion=completion)
             runs.append(stats)
             if run_lower > lower:
-                lower, table = run_lower, run_table
+                lower, table, strict = run_lower, run_table, stats["lower_strict_labels"]
             if not searched_unbounded and upper - lower > tau:
                 searched_unbounded = True
                 remaining = max(search_deadline - time.perf_counter(), 0.0)
@@ -1288,11 +1291,11 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
                 runs.append(stats)
                 upper = min(upper, run_upper)
                 if run_lower > lower:
-                    lower, table = run_lower, run_table
+                    lower, table, strict = run_lower, run_table, stats["lower_strict_labels"]
         if order == "after" and upper - lower > tau and time.perf_counter() < deadline:
             found = cluster_phase(lower, deadline)
             if found is not None:
-                lower, table = found.lower, _cluster_table(found, pomdp.n_trust)
+                lower, table, strict = found.lower, _cluster_table(found, pomdp.n_trust), found.lower
         lower = max(lower, 0.0)
     policy = BeliefTablePolicy(table, pomdp.town, spec, lower=lower, upper=upper, horizon=horizon)
     stats = {
@@ -1302,6 +1305,9 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
         "tau": tau,
         "runs": runs,
         "policy_rows": table.rows,
+        # the returned policy's value with labels read strictly (this machine's labeller): a lower
+        # bound of what `evaluate` measures (runs[i]["lower_strict_labels"] is run i's policy's)
+        "lower_strict_labels": max(strict, lower),
     }
     if horizon is None:
         stats["unbounded_upper"] = note

@@ -6,7 +6,7 @@ policies/routing/resolve.py) can change a synthesized policy or its bounds: cach
 by older code are then no longer found and are synthesized again.
 """
 
-SYNTHESIS_VERSION = "7"
+SYNTHESIS_VERSION = "8"
 
 # The same for the synthesis of specs with trust-state atoms (policies/joint_synthesis.py,
 # joint_search.py, evaluate_joint.py's evaluate_joint_table, model/joint_belief.py,
