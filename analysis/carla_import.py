@@ -13,7 +13,7 @@ autopilot was on, and the belief the AV logged. This module
   arrival, the number of trust changes, the AV's logged belief, and the exact Bayes filter of
   the packaged driver model run on the observed incidents and takeovers;
 - writes the dataset's episodes.parquet, roads.parquet, kinematics.parquet (positions, thinned)
-  and manifest.json through trustroute.analysis.dataset, and beside them real_episodes.parquet,
+  and manifest.json through trustroute.core.dataset, and beside them real_episodes.parquet,
   real_roads.parquet and ticks.parquet (lossless run-length encoding of trust and autopilot).
 
 The format is documented in docs/real_study.md. Bad input raises InputError (one line, exit 2).
@@ -31,7 +31,6 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from trustroute.analysis import dataset
 from trustroute.analysis.carla_tables import ARRIVAL_RADIUS_M, CarlaTables, load_carla_tables
 from trustroute.analysis.real_tables import (
     REAL_EPISODES_FILE,
@@ -41,7 +40,8 @@ from trustroute.analysis.real_tables import (
     TICKS_FILE,
     TICKS_SCHEMA,
 )
-from trustroute.networks.errors import InputError
+from trustroute.core import dataset
+from trustroute.core.errors import InputError
 
 # --sync runs CARLA with settings.fixed_delta_seconds = 0.05 (the driver script's game_loop)
 TICK_SECONDS = 0.05
@@ -387,7 +387,7 @@ def import_carla_logs(
 
     `listed_absent`: files the source's index lists but whose content is absent (the git tree of
     the authors' repository lists 14 CSVs whose blobs were never stored); recorded as absent."""
-    from trustroute.harness.study.config import PACKAGED_SPECS
+    from trustroute.core.packaged import PACKAGED_SPECS
     from trustroute.harness.study.manifest import git_revision, package_versions
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
@@ -541,7 +541,7 @@ def import_carla_logs(
 def _logged_satisfaction(episodes: pd.DataFrame, roads: pd.DataFrame, town, driver_model) -> np.ndarray:
     """The episode's `satisfied`: its spec on the belief the AV logged (what the AV saw)."""
     from trustroute.analysis.satisfaction import satisfaction_by_source
-    from trustroute.harness.study.config import PACKAGED_SPECS
+    from trustroute.core.packaged import PACKAGED_SPECS
     from trustroute.policies.logic.spec import load_spec
 
     specs = {name: load_spec(PACKAGED_SPECS / f"{name}.toml", town) for name in ("phi1", "phi2")}
@@ -550,7 +550,7 @@ def _logged_satisfaction(episodes: pd.DataFrame, roads: pd.DataFrame, town, driv
 
 
 def write_checked(frame: pd.DataFrame, schema: pa.Schema, path: Path) -> None:
-    """`frame`'s columns of `schema`, checked (trustroute.analysis.dataset) and written atomically."""
+    """`frame`'s columns of `schema`, checked (trustroute.core.dataset) and written atomically."""
     table = dataset.table_from_frame(frame.reset_index(drop=True), schema)
     temporary = path.with_name(f".tmp-{path.name}")
     dataset.write_table(table, temporary)

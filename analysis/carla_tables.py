@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 
 TABLES_PATH = Path(__file__).parent / "data" / "real_study" / "town01.json"
 # Their incident names -> the project's (networks/town.py INCIDENT_TYPES).

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import (
     DEFAULT_REPORT_ACCURACY,
     PERFORMANCES,
@@ -331,7 +331,7 @@ class FitResult:
         return driver_model_from_dict(self.model_dict(), "fitted model")
 
     def write(self, path: Path) -> Path:
-        from trustroute.output_files import atomic_write_text
+        from trustroute.core.output_files import atomic_write_text
 
         self.model()  # validates
         return atomic_write_text(Path(path), json.dumps(self.model_dict(), indent=1), "driver model file",

@@ -45,7 +45,7 @@ from trustroute.analysis.fit import (
     observations_from_roads,
     starting_parameters,
 )
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DriverModel
 
 DEFAULT_RESTARTS = 5

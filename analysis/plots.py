@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from trustroute.analysis.dataset import PLOTS_DIR
+from trustroute.core.dataset import PLOTS_DIR
 from trustroute.networks.town import Town, split_road
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")

@@ -244,13 +244,13 @@ def aware_vs_free(
     """The packaged setup's synthesized "aware" policy and the trust-free one (AV filter: the
     packaged model) driven by each named driver model in the model engine: per spec, condition and
     driver, the satisfaction rate (on the AV's belief), the mean true trust and takeovers."""
-    from trustroute.harness.episode_tracker import EpisodeSetup
-    from trustroute.harness.model_engine import simulate_batch
-    from trustroute.harness.study.config import PACKAGED_SPECS
+    from trustroute.core.packaged import PACKAGED_SPECS
+    from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+    from trustroute.harness.simulation.model_engine import simulate_batch
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.routing.resolve import resolve_policy
+    from trustroute.policies.resolve import resolve_policy
 
     town, nominal = load_town(None), load_driver_model(None)
     rows = []

@@ -470,7 +470,7 @@ def _append_to_report(study_dir: Path, text: str) -> None:
     """The real-study section at the end of report.md and report.html (written just before)."""
     import html
 
-    from trustroute.analysis.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE
+    from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE
 
     heading = "Real CARLA study: the paper's figures recomputed from the released logs"
     markdown = Path(study_dir) / REPORT_MARKDOWN_FILE

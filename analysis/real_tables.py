@@ -12,7 +12,7 @@ from pathlib import Path
 import pandas as pd
 import pyarrow as pa
 
-from trustroute.analysis import dataset
+from trustroute.core import dataset
 
 REAL_EPISODES_FILE = "real_episodes.parquet"
 REAL_ROADS_FILE = "real_roads.parquet"

@@ -15,7 +15,6 @@ from pathlib import Path
 
 import pandas as pd
 
-from trustroute.analysis.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE, read_roads
 from trustroute.analysis.plots import write_plots
 from trustroute.analysis.tables import (
     TABLE_TITLES,
@@ -26,6 +25,7 @@ from trustroute.analysis.tables import (
     study_analysis,
     study_inputs,
 )
+from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE, read_roads
 
 NOTES = [
     "Satisfaction is re-evaluated from the logged roads with the spec's DFA (policies.trace). "
@@ -40,8 +40,9 @@ NOTES = [
     "specs never count as independent pairs.",
     "mean trust = mean over episodes of the episode's mean reported trust (as the paper's participants "
     "reported); mean true trust = the synthetic driver's hidden trust averaged over positions.",
-    "exact [L, U] = policies.evaluate of the same policy with the study's fallback rule, for the nominal "
-    "driver model: with a [population] the simulated drivers differ from it, so the rates may differ.",
+    "exact [L, U] = the exact evaluation (policies/evaluation) of the same policy with the study's "
+    "fallback rule, for the nominal driver model: with a [population] the simulated drivers differ "
+    "from it, so the rates may differ.",
     "synthesized [L, U] = the bounds synthesis certified for the policy's own objective (for 'aware': "
     "the probability of acceptance within its synthesis horizon H, 20 by default, not the unbounded "
     "Pr_max of the paper); the study measures the policy followed by the 20-junction fallback, whose "

@@ -40,7 +40,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from trustroute.analysis.dataset import read_episodes, read_manifest, read_roads
 from trustroute.analysis.satisfaction import BELIEF_SOURCES, episode_satisfaction
 from trustroute.analysis.statistics import (
     bootstrap_ci,
@@ -55,7 +54,8 @@ from trustroute.analysis.statistics import (
     rate_interval,
     wilcoxon_paired,
 )
-from trustroute.networks.errors import InputError
+from trustroute.core.dataset import read_episodes, read_manifest, read_roads
+from trustroute.core.errors import InputError
 
 PAPER = {
     "satisfied_aware": {"phi1": (18, 21), "phi2": (17, 21)},
@@ -122,7 +122,7 @@ def _finite(value: object) -> float | None:
 
 
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
-    """(manifest, episodes, roads) of a consolidated study, read through trustroute.analysis.dataset."""
+    """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset."""
     study_dir = Path(study_dir)
     manifest = read_manifest(study_dir)
     return manifest, read_episodes(study_dir), read_roads(study_dir)
@@ -144,7 +144,7 @@ def study_inputs(manifest: dict):
 def _spec_path(path: str) -> Path:
     """A manifest's spec path; a packaged spec when the recorded path is gone (a study directory
     shipped with the package, or moved to another machine)."""
-    from trustroute.harness.study.config import PACKAGED_SPECS
+    from trustroute.core.packaged import PACKAGED_SPECS
 
     recorded = Path(path)
     packaged = PACKAGED_SPECS / recorded.name
@@ -479,7 +479,7 @@ def order_tables(episodes: pd.DataFrame, column: str) -> tuple[pd.DataFrame, dic
 
 def is_paper_comparable(manifest: dict, episodes: pd.DataFrame) -> tuple[bool, str]:
     """The paper's table applies to the paper's town, its φ1 and φ2 and 21 participants only."""
-    from trustroute.harness.study.config import PACKAGED_SPECS
+    from trustroute.core.packaged import PACKAGED_SPECS
     from trustroute.networks.town import load_town
     from trustroute.policies.logic.spec import load_spec
 

@@ -17,10 +17,10 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.timing import paired_ratio
-from trustroute.harness.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
-from trustroute.harness.episode_tracker import EpisodeSetup
-from trustroute.harness.incidents import truck
-from trustroute.harness.sumo_start import SumoConfig, sumo_session
+from trustroute.harness.simulation.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.incidents import truck
+from trustroute.harness.simulation.sumo_start import SumoConfig, sumo_session
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
@@ -220,7 +220,7 @@ def study_against_bare(participants: int = 21, workers: int = 2,
     import tempfile
     from pathlib import Path
 
-    from trustroute.analysis.dataset import read_roads
+    from trustroute.core.dataset import read_roads
     from trustroute.harness.study.config import study_config_from_dict
     from trustroute.harness.study.runner import run_and_consolidate, validate_study
 

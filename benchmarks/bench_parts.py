@@ -21,7 +21,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from trustroute.analysis.dataset import INCIDENTS_SCHEMA, KINEMATICS_SCHEMA, ROADS_SCHEMA, table_from_frame
+from trustroute.core.dataset import INCIDENTS_SCHEMA, KINEMATICS_SCHEMA, ROADS_SCHEMA, table_from_frame
 from trustroute.harness.study.parts import read_part, sync_parts, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask
 

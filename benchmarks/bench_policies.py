@@ -13,7 +13,7 @@ import numpy as np
 from benchmarks.timing import best_seconds
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.pomdp_py.pouct import monte_carlo
@@ -60,7 +60,7 @@ def run() -> list[dict]:
     spec = load_spec("specs/phi1.toml", town)
     deep = _FixedRandomPolicy(town, np.random.default_rng(2))
     tree = evaluate(pomdp, spec, deep, fallback_after=28)
-    results.append({"name": "trustroute.policies.evaluate.deep_tree_nodes_per_second",
+    results.append({"name": "trustroute.policies.evaluation.plain.deep_tree_nodes_per_second",
                     "value": tree.nodes / tree.seconds, "unit": "nodes/s", "nodes": tree.nodes,
                     "max_frontier": tree.max_frontier, "seconds": tree.seconds, "gap": tree.gap})
     return results

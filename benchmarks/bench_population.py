@@ -10,7 +10,7 @@ participants/data/driver_population_real.json exists. Columns, for φ1 and φ2 a
   model of the mixture);
 - robust: the worst-type objective over the mixture (grid of candidate type priors).
 Each entry is P(accepted within 20 junctions) (no fallback, as synthesis scores it), exact
-(policies/evaluate.py with the true driver of each type, certified [lower, upper]; the lower end
+(policies/evaluation/plain.py with the true driver of each type, certified [lower, upper]; the lower end
 is printed), per type and prior-weighted over the row's population. Belief atoms read each
 vehicle's own filter (the spec's meaning), so a vehicle whose model is wrong about the driver can
 count `hightrust` as reached while the driver's trust did not move. So each entry also has the
@@ -44,9 +44,9 @@ from trustroute.participants.driver_population import (
     single_type_population,
 )
 from trustroute.participants.population import PopulationConfig, sample_population
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.belief.driver_types import lift_population, lift_spec
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.model.driver_types import lift_population, lift_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.synthesis.population import synthesize_population
@@ -61,7 +61,7 @@ ROWS = ("nominal", "three_types", "real")   # which rows to measure (a run can b
 RUN_TIMING = True
 GRID_POINTS = 3            # candidate priors of the robust objective (K = 3: the vertices)
 REAL_POPULATION = EXAMPLE_POPULATION_PATH.parent / "driver_population_real.json"
-SPEC_DIR = Path(__file__).resolve().parents[1] / "policies" / "specs"
+SPEC_DIR = Path(__file__).resolve().parents[1] / "trustroute" / "core" / "specs"
 
 
 def row_values(av_pomdp, av_spec, policy, population: DriverPopulation, spec) -> dict:

@@ -2,8 +2,8 @@
 then the same task shape on grid towns of 25 and 50 junctions (incidents drawn with a fixed seed).
 
 Bounded objective with a step counter (H = 20 junctions, as in docs/trust_states.md). Ours is the
-synthesis `trustroute synth` runs (policies/joint_synthesis.py): its lower bound is the exact value
-of the policy it returns, its upper bound the search's. Each side
+synthesis `trustroute synth` runs (policies/trust_state_synthesis/synthesis.py): its lower
+bound is the exact value of the policy it returns, its upper bound the search's. Each side
 runs in its own spawned process so that its peak resident memory (ru_maxrss, which includes
 Storm's C++ heap) is its own. Reports both bounds, both times, the memory, and ratios ours/Storm
 measured in this run. Skipped (one line saying so) when the optional `[peer]` extra is absent.

@@ -20,14 +20,14 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.bench_episode import study_against_bare
-from trustroute.harness.episode_tracker import EpisodeSetup
-from trustroute.harness.model_engine import run_model_episode, simulate_batch
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.model_engine import run_model_episode, simulate_batch
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.resolve import resolve_policy
 from trustroute.policies.routing.free import trust_free_policy
-from trustroute.policies.routing.resolve import resolve_policy
 
 BATCH_EPISODES = 100_000
 SINGLE_EPISODES = 500

@@ -24,9 +24,9 @@ from scipy.spatial import cKDTree
 
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.belief.product_mdp import build_product
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.model.product_mdp import build_product
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.pomdp_py.pouct import monte_carlo, pouct_policy
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER

@@ -12,7 +12,7 @@ import sys
 
 import click
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 
 # name -> (module, attribute, one-line help)
 COMMANDS: dict[str, tuple[str, str, str]] = {
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> None:
     except OSError as exc:
         # The last net under every command: an I/O failure no command foresaw (a disk that filled
         # up, a folder that became read-only) is still one line, not a traceback.
-        from trustroute.output_files import os_error_text
+        from trustroute.core.output_files import os_error_text
 
         where = exc.filename if exc.filename is not None else "trustroute"
         error = InputError(str(where), "", os_error_text(exc), "free disk space or fix the permissions, "

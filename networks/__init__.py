@@ -5,7 +5,7 @@ road lengths, shortest paths, and the SUMO network build (netconvert, cached by
 content hash). Must not know about trust.
 """
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.networks.town import DEFAULT_TOWN_PATH, INCIDENT_TYPES, Town, load_town
 
 __all__ = ["DEFAULT_TOWN_PATH", "INCIDENT_TYPES", "InputError", "Town", "load_town"]

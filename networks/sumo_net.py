@@ -32,9 +32,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from trustroute.networks.cache import NETS
-from trustroute.networks.cache import cache_dir as default_cache_dir
-from trustroute.networks.errors import InputError
+from trustroute.core.cache import NETS
+from trustroute.core.cache import cache_dir as default_cache_dir
+from trustroute.core.errors import InputError
 from trustroute.networks.town import Town, road_name
 
 NET_RECIPE = "r2"                      # bump when the recipe below changes: invalidates caches
@@ -211,7 +211,7 @@ def build_net(town: Town, cache_dir: Path | None = None,
     """The SUMO net of `town`, built with netconvert or taken from the cache. The entry is verified
     on every read, built under a lock (two processes never build one entry at once) and written
     atomically (fsync, then rename)."""
-    from trustroute.output_files import file_lock
+    from trustroute.core.output_files import file_lock
 
     started = time.perf_counter()
     target = net_path(town, cache_dir)

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from trustroute.networks.errors import InputError
-from trustroute.networks.validation import check_keys, parse_json, read_text, require_keys, require_object
+from trustroute.core.errors import InputError
+from trustroute.core.validation import check_keys, parse_json, read_text, require_keys, require_object
 
 # The paper's town with the geometry of CARLA Town01, where the authors ran their study
 # (networks/data/PROVENANCE.md). The earlier invented layout of the same roads and incidents stays
@@ -284,7 +284,7 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
 
 def load_town(path: str | Path | None = None) -> Town:
     """Load and validate a town file (the packaged default when `path` is None), read through the
-    guarded reader (trustroute.networks.validation)."""
+    guarded reader (trustroute.core.validation)."""
     file_path = Path(path) if path is not None else DEFAULT_TOWN_PATH
     shown = str(path) if path is not None else "default town"
     text = read_text(file_path, shown, "the town file", "pass an existing town file with --town")

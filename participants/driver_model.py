@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from trustroute.networks.errors import InputError
-from trustroute.networks.validation import check_keys, parse_json, read_text, require_keys, require_object
+from trustroute.core.errors import InputError
+from trustroute.core.validation import check_keys, parse_json, read_text, require_keys, require_object
 
 DEFAULT_DRIVER_MODEL_PATH = Path(__file__).parent / "data" / "driver_model.json"
 HUMAN_ACTIONS: tuple[str, ...] = ("standstill", "takeover")
@@ -283,7 +283,7 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
 
 def load_driver_model(path: str | Path | None = None) -> DriverModel:
     """Load and validate a driver model file (the packaged default when `path` is None), read
-    through the guarded reader (trustroute.networks.validation)."""
+    through the guarded reader (trustroute.core.validation)."""
     file_path = Path(path) if path is not None else DEFAULT_DRIVER_MODEL_PATH
     shown = str(path) if path is not None else "default driver model"
     text = read_text(file_path, shown, "the driver model", "pass an existing driver model file with --driver")

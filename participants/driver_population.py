@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from trustroute.networks.errors import InputError
-from trustroute.networks.validation import check_keys, parse_json, read_text, require_keys, require_object
-from trustroute.output_files import atomic_write_text
+from trustroute.core.errors import InputError
+from trustroute.core.output_files import atomic_write_text
+from trustroute.core.validation import check_keys, parse_json, read_text, require_keys, require_object
 from trustroute.participants.driver_model import DriverModel, driver_model_from_dict, load_driver_model
 
 POPULATION_FORMAT = "trustroute-driver-population"

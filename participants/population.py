@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, ROW_TOLERANCE, DriverModel
 
 

@@ -1,7 +1,7 @@
 """Synthesis for any spec: the one entry point callers use (docs/trust_states.md).
 
-Specs whose formula tests the hidden trust go to policies/joint_synthesis.py (search over joint
-(trust, DFA state) beliefs); every other spec goes to policies/synthesis/search.py unchanged, so
+Specs whose formula tests the hidden trust go to policies/trust_state_synthesis/synthesis.py (search over
+joint (trust, DFA state) beliefs); every other spec goes to policies/synthesis/search.py unchanged, so
 its bounds and policy file are exactly those of `search.synthesize`
 (tests/policies/test_synthesize_spec.py compares them byte for byte).
 """
@@ -24,7 +24,7 @@ def synthesize_spec(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit
     `clusters` applies to specs without trust-state atoms, docs/synthesis.md "Cluster policies")."""
     if spec.uses_trust_atoms:
         check_synthesis_arguments(tau, horizon, belief_rule)
-        from trustroute.policies.joint_synthesis import synthesize_joint
+        from trustroute.policies.trust_state_synthesis.synthesis import synthesize_joint
 
         return synthesize_joint(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
                                 belief_rule=belief_rule, on_iteration=on_iteration)

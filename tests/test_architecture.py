@@ -115,3 +115,70 @@ def test_no_module_imports_another_modules_private_names():
         and name.startswith("_") and not name.startswith("__")
     ]
     assert offending == []
+
+
+# The layers of docs/internals.md, lowest first: a module may import its own layer and the ones
+# below, never one above. The longest matching prefix names a module's layer.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("trustroute.core",),
+    ("trustroute.networks",),
+    ("trustroute.participants",),
+    ("trustroute.policies", "trustroute.policies.bracket", "trustroute.policies.model"),
+    ("trustroute.policies.logic",),
+    ("trustroute.policies.belief",),
+    ("trustroute.policies.routing",),
+    ("trustroute.policies.evaluation",),
+    ("trustroute.policies.synthesis",),
+    ("trustroute.policies.trust_state_synthesis",),
+    ("trustroute.policies.synthesize_spec", "trustroute.policies.resolve", "trustroute.policies.peer",
+     "trustroute.policies.pomdp_py"),
+    ("trustroute.harness", "trustroute.harness.simulation"),
+    ("trustroute.harness.study",),
+    ("trustroute.analysis",),
+    ("trustroute",),
+    ("trustroute.harness.cli", "trustroute.harness.commands", "trustroute.__main__"),
+)
+
+
+def layer_of(module: str) -> int:
+    """The index in LAYERS of the longest prefix of `module` (a package name or a module in it)."""
+    best, best_length = -1, -1
+    for rank, prefixes in enumerate(LAYERS):
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best_length:
+                best, best_length = rank, len(prefix)
+    return best
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[str]:
+    return sorted(f"{module} (layer {layer_of(module)}) imports {target} (layer {layer_of(target)})"
+                  for module, targets in graph.items() for target in targets
+                  if layer_of(target) > layer_of(module))
+
+
+def test_every_module_has_a_layer():
+    assert [m for m in package_modules() if layer_of(m) < 0] == []
+
+
+def test_imports_only_point_down():
+    assert upward_imports(import_graph()) == []
+
+
+def test_an_upward_import_is_caught():
+    graph = import_graph()
+    graph["trustroute.networks.town"] |= {"trustroute.harness.study.runner"}
+    graph["trustroute.policies.routing.free"] |= {"trustroute.policies.synthesis.search"}
+    found = upward_imports(graph)
+    assert any(line.startswith("trustroute.networks.town ") for line in found)
+    assert any(line.startswith("trustroute.policies.routing.free ") for line in found)
+
+
+def test_the_public_api_does_not_import_the_cli():
+    graph = import_graph()
+    reached, todo = set(), ["trustroute"]
+    while todo:
+        module = todo.pop()
+        if module not in reached:
+            reached.add(module)
+            todo += sorted(graph.get(module, ()))
+    assert sorted(m for m in reached if layer_of(m) == len(LAYERS) - 1) == []

@@ -22,13 +22,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import trustroute.policies as policies
 from tests.cli import run_cli
+from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.networks.town import DEFAULT_TOWN_PATH
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
 from trustroute.policies.routing.files import VERSION as POLICY_VERSION
 
-SPECS = Path(policies.__file__).parent / "specs"
+SPECS = PACKAGED_SPECS
 PHI1 = SPECS / "phi1.toml"
 CASE_SECONDS = 20
 BIG = 20 * 1024 * 1024  # over the 16 MiB cap of text inputs (a sparse file: cheap to make)

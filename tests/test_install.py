@@ -22,6 +22,6 @@ def test_wheel_has_one_top_level_package(tmp_path):
     top = {name.split("/")[0] for name in names}
     assert top == {"trustroute", f"{wheel.name.split('-')[0]}-{wheel.name.split('-')[1]}.dist-info"}
     # The subpackages and their data ship inside the one namespace.
-    for path in ("trustroute/harness/gym_env.py", "trustroute/networks/data/town01_carla.json",
-                 "trustroute/participants/data/driver_model.json", "trustroute/policies/specs/phi1.toml"):
+    for path in ("trustroute/harness/simulation/gym_env.py", "trustroute/networks/data/town01_carla.json",
+                 "trustroute/participants/data/driver_model.json", "trustroute/core/specs/phi1.toml"):
         assert path in names

@@ -25,12 +25,12 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from trustroute.analysis.tables import StudyAnalysis
-    from trustroute.harness.episode import EpisodeRecord
+    from trustroute.harness.simulation.episode import EpisodeRecord
     from trustroute.harness.study.config import StudyConfig
     from trustroute.harness.study.runner import StudyRun
     from trustroute.networks.town import Town
     from trustroute.participants.driver_model import DriverModel
-    from trustroute.policies.evaluate import Evaluation
+    from trustroute.policies.evaluation.plain import Evaluation
     from trustroute.policies.logic.spec import Spec
     from trustroute.policies.routing.protocol import RoutingPolicy
     from trustroute.policies.synthesis.search import SynthesisResult
@@ -71,7 +71,7 @@ def load_spec(spec: PathLike, town: Town | None = None) -> Spec:
     `spec` is a file path or the name of a packaged spec ("phi1", "phi2", "phi1_strict",
     "phi2_strict"); an existing file of that name wins.
     """
-    from trustroute.harness.study.config import packaged_spec_path
+    from trustroute.core.packaged import packaged_spec_path
     from trustroute.policies.logic.spec import load_spec as load
 
     path = Path(spec)
@@ -115,7 +115,7 @@ def synthesize(spec: Spec | PathLike, town: Town | None = None, driver: DriverMo
 def _policy(policy: object, town: Town, driver: DriverModel, spec: Spec,
             cache_dir: PathLike | None) -> RoutingPolicy:
     """A RoutingPolicy from "free", "aware", a policy file path, a SynthesisResult or a policy."""
-    from trustroute.policies.routing.resolve import resolve_policy
+    from trustroute.policies.resolve import resolve_policy
     from trustroute.policies.synthesis.search import SynthesisResult
 
     if isinstance(policy, str | Path):
@@ -137,7 +137,7 @@ def evaluate(spec: Spec | PathLike, policy: object = "free", town: Town | None =
     fallback_after: the study's rule, the shortest completion after that many junctions (None:
     the policy as given). max_junctions: the episode cap (docs/model.md, "Episodes").
     """
-    from trustroute.policies.evaluate_joint import evaluate_joint as exact
+    from trustroute.policies.evaluation.trust_state import evaluate_joint as exact
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     town, driver, spec = _problem(spec, town, driver)
@@ -161,8 +161,8 @@ def run_episode(spec: Spec | PathLike, policy: object = "free", town: Town | Non
     """
     import numpy as np
 
-    from trustroute.harness.episode_tracker import EpisodeSetup
-    from trustroute.networks.errors import InputError
+    from trustroute.core.errors import InputError
+    from trustroute.harness.simulation.episode_tracker import EpisodeSetup
     from trustroute.participants.synthetic_driver import SyntheticDriver
 
     if engine not in ("sumo", "model"):
@@ -178,10 +178,10 @@ def run_episode(spec: Spec | PathLike, policy: object = "free", town: Town | Non
     synthetic = SyntheticDriver(driver, np.random.default_rng(seed), initial_trust=initial_trust)
     episode_id = f"{spec.name}-{routing.name}-s{seed}"
     if engine == "model":
-        from trustroute.harness.model_engine import run_model_episode
+        from trustroute.harness.simulation.model_engine import run_model_episode
 
         return run_model_episode(setup, routing, synthetic, episode_id, seed)
-    from trustroute.harness.episode import run_episode as run_sumo
+    from trustroute.harness.simulation.episode import run_episode as run_sumo
 
     return run_sumo(setup, routing, synthetic, episode_id, seed, rrd_path=Path(rrd) if rrd else None)
 
@@ -198,8 +198,12 @@ def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None
     engine ("sumo" or "model"). scheduler: a Dask scheduler address or "local". Returns the run;
     `run.study_dir` holds the dataset (docs/dataset.md) that `analyze` reads.
     """
-    from trustroute.harness.commands.study import study_directory
-    from trustroute.harness.study.config import StudyConfig, load_study_config, study_config_from_dict
+    from trustroute.harness.study.config import (
+        StudyConfig,
+        load_study_config,
+        study_config_from_dict,
+        study_directory,
+    )
     from trustroute.harness.study.runner import run_and_consolidate
 
     if isinstance(config, dict):

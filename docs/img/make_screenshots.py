@@ -17,10 +17,10 @@ import numpy as np
 import sumolib
 import traci
 
-from trustroute.harness import incidents
-from trustroute.harness.incidents import Scene, obstacle
-from trustroute.harness.sumo_start import SumoConfig, sumo_command
-from trustroute.harness.takeover import AUTOPILOT, apply_style
+from trustroute.harness.simulation import incidents
+from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style
+from trustroute.harness.simulation.incidents import Scene, obstacle
+from trustroute.harness.simulation.sumo_start import SumoConfig, sumo_command
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import load_town
 

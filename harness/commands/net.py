@@ -23,9 +23,9 @@ def net() -> None:
 @json_option
 def build(town_path: str | None, out_dir: str | None, as_json: bool) -> None:
     """Build the town's .net.xml with netconvert, cached by the town's content hash."""
+    from trustroute.core.output_files import check_output_dir
     from trustroute.networks.sumo_net import build_net
     from trustroute.networks.town import load_town
-    from trustroute.output_files import check_output_dir
 
     if out_dir is not None:
         check_output_dir(out_dir, "--out", "net cache")

@@ -3,7 +3,7 @@
 For specs whose atoms are all roads and trust-state atoms (docs/trust_states.md). Storm runs
 belief unfolding (lower bound, at most --time-limit seconds of exploration) and belief
 discretisation (upper bound, at --resolution) on the exported product; ours is the search over
-joint beliefs of policies/joint_search.py (exact for --horizon H; for the unbounded objective
+joint beliefs of policies/trust_state_synthesis/search.py (exact for --horizon H; for the unbounded objective
 to --depth junctions with relaxation bounds at the leaves). Needs the optional `[peer]` extra.
 """
 
@@ -20,11 +20,11 @@ def storm_comparison(spec_path: str, town_path: str | None, driver_path: str | N
     """Both sides' bounds and seconds, JSON-ready."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.joint_search import joint_bounds
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.model.trust_pomdp import build_pomdp
     from trustroute.policies.peer.product_pomdp import check_exportable, explicit_product
     from trustroute.policies.peer.storm import require_storm, run_storm
+    from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
     require_storm("trustroute peer storm")
     town = load_town(town_path)

@@ -24,7 +24,7 @@ def population() -> None:
 
 def _population_settings(config_path: str | None, concentration: float | None, spread: float | None,
                          n_trust: int):
-    from trustroute.networks.validation import parse_toml, read_text
+    from trustroute.core.validation import parse_toml, read_text
     from trustroute.participants.population import population_config_from_dict
 
     table: dict = {}
@@ -58,8 +58,8 @@ def _population_settings(config_path: str | None, concentration: float | None, s
 def sample(n_types: int, seed: int, out: str, driver_path: str | None, config_path: str | None,
            concentration: float | None, spread: float | None, as_json: bool) -> None:
     """Sample K driver types around a nominal model; equal weights."""
-    from trustroute.networks.errors import InputError
-    from trustroute.output_files import check_output_file
+    from trustroute.core.errors import InputError
+    from trustroute.core.output_files import check_output_file
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.participants.driver_population import write_driver_population
     from trustroute.participants.sampled_types import sample_driver_population

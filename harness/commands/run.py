@@ -7,14 +7,14 @@ from pathlib import Path
 
 import click
 
+from trustroute.core.errors import InputError
 from trustroute.harness.commands.options import SEED
 from trustroute.harness.commands.output import json_option, with_paths
-from trustroute.networks.errors import InputError
 
 
 def _write_logs(out_dir: Path, record) -> dict[str, Path]:
     """Each log file written atomically (a full disk leaves the old file or none, never half)."""
-    from trustroute.analysis.dataset import (
+    from trustroute.core.dataset import (
         INCIDENTS_FILE,
         INCIDENTS_SCHEMA,
         KINEMATICS_FILE,
@@ -25,7 +25,7 @@ def _write_logs(out_dir: Path, record) -> dict[str, Path]:
         table_from_frame,
         write_table,
     )
-    from trustroute.output_files import atomic_write_text
+    from trustroute.core.output_files import atomic_write_text
 
     written = {}
     for name, frame, file_name, schema in (
@@ -75,23 +75,23 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
     """
     import numpy as np
 
-    from trustroute.harness.episode import run_episode
-    from trustroute.harness.episode_tracker import EpisodeSetup
-    from trustroute.harness.sumo_files import (
+    from trustroute.core.output_files import check_output_dir, check_output_file
+    from trustroute.harness.simulation.episode import run_episode
+    from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+    from trustroute.harness.simulation.sumo_files import (
         VehicleTypeCollector,
         finish_route_file,
         prepare_directory,
         write_sumocfg,
     )
-    from trustroute.harness.sumo_start import SumoConfig
+    from trustroute.harness.simulation.sumo_start import SumoConfig
     from trustroute.networks.sumo_net import build_net
     from trustroute.networks.town import load_town
-    from trustroute.output_files import check_output_dir, check_output_file
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.participants.synthetic_driver import SyntheticDriver
     from trustroute.policies.logic.labelling import check_coefficient_length
     from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.routing.resolve import resolve_policy
+    from trustroute.policies.resolve import resolve_policy
 
     if spec_argument is not None and spec_option is not None:
         raise click.UsageError("give the spec once: as the SPEC argument (--spec is its old spelling)")
@@ -105,7 +105,7 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
     if cache_dir is not None:
         check_output_dir(cache_dir, "--cache-dir", "policy cache")
     if net_path is not None:
-        from trustroute.networks.validation import read_input_bytes
+        from trustroute.core.validation import read_input_bytes
 
         read_input_bytes(net_path, "SUMO net", max_bytes=1 << 30, fix="pass a .net.xml written by "
                          "`trustroute net build`")

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import click
 
+from trustroute.core.errors import InputError
 from trustroute.harness.commands.output import json_option, with_paths
-from trustroute.networks.errors import InputError
 
 
 def spec_report(spec_path: str, town_path: str | None, population_path: str | None = None
@@ -40,8 +40,8 @@ def spec_report(spec_path: str, town_path: str | None, population_path: str | No
     seconds = time.perf_counter() - started
     if population_path is not None:
         from trustroute.participants.driver_population import load_driver_population
+        from trustroute.policies.belief.driver_types import lift_population, lift_spec
         from trustroute.policies.logic.labelling import check_coefficient_length
-        from trustroute.policies.model.driver_types import lift_population, lift_spec
 
         population = load_driver_population(population_path)
         check_coefficient_length(spec, population.types[0].model.n_trust, population_path)
@@ -86,7 +86,7 @@ def spec() -> None:
 def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | None,
           population_path: str | None) -> None:
     """Parse SPEC, print its DFA size and the linter's warnings."""
-    from trustroute.output_files import atomic_write_text, check_output_file
+    from trustroute.core.output_files import atomic_write_text, check_output_file
 
     if dot_path is not None:
         check_output_file(dot_path, "--dot", "dot file")

@@ -18,23 +18,15 @@ import click
 
 from trustroute.harness.commands.options import WORKERS, bounded_int
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
+from trustroute.harness.study.config import study_directory
 
-DEFAULT_STUDIES_DIR = Path("studies")
 CHECK_REPLICATES = 50  # simulated drivers per real episode in `fit --check`
 CHECK_EPISODES = 20_000  # model-engine episodes per spec, condition and driver model in `fit --check`
 
 
-def study_directory(config, out: str | None) -> Path:
-    if out is not None:
-        return Path(out)
-    if config.output is not None:
-        return Path(config.output)
-    return DEFAULT_STUDIES_DIR / config.name
-
-
 def dataset_paths(study_dir: Path, manifest: dict) -> dict[str, Path]:
     """The consolidated dataset's files (manifest "files") and the manifest, by name."""
-    from trustroute.analysis.dataset import MANIFEST_FILE
+    from trustroute.core.dataset import MANIFEST_FILE
 
     files = {name: study_dir / file for name, file in manifest.get("files", {}).items()}
     return {**files, "manifest": study_dir / MANIFEST_FILE}
@@ -98,7 +90,7 @@ def study(
     run, manifest = run_and_consolidate(config, study_dir, workers, scheduler, progress=not silent,
                                         echo=(lambda line: None) if silent else click.echo,
                                         attempts=attempts)
-    from trustroute.analysis.dataset import EPISODES_FILE, FAILURES_DIR, ROADS_FILE
+    from trustroute.core.dataset import EPISODES_FILE, FAILURES_DIR, ROADS_FILE
 
     paths = dataset_paths(run.study_dir, manifest)
     lines = [f"dataset: {run.study_dir / EPISODES_FILE}, {run.study_dir / ROADS_FILE}"]
@@ -245,7 +237,7 @@ def fit(
 ) -> None:
     """Estimate trust dynamics and the takeover model from a study's logs; write a driver model."""
     from trustroute.analysis.fit import bootstrap_fit, fit_study
-    from trustroute.output_files import check_output_file
+    from trustroute.core.output_files import check_output_file
 
     if types is not None:
         if check or method == "counts":
@@ -375,7 +367,7 @@ def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: 
         select_types,
         study_observations,
     )
-    from trustroute.output_files import atomic_write_text
+    from trustroute.core.output_files import atomic_write_text
     from trustroute.participants.driver_population import write_driver_population
 
     fixed = _type_count(types)

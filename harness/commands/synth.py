@@ -12,9 +12,9 @@ import math
 
 import click
 
+from trustroute.core.errors import InputError
 from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
 from trustroute.harness.commands.output import emit, json_option, with_paths
-from trustroute.networks.errors import InputError
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
@@ -77,7 +77,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     if horizon is not None and horizon < 1:
         raise InputError("--horizon", "", f"horizon must be at least 1, got {horizon}",
                          "pass a positive number of junctions or omit --horizon")
-    from trustroute.output_files import check_output_file
+    from trustroute.core.output_files import check_output_file
 
     check_output_file(out_path, "--out", "policy file")
     if population_path is not None:
@@ -93,8 +93,8 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     if objective != "bayes":
         raise click.UsageError("--objective robust needs --population FILE (the types to be robust over)")
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
+    from trustroute.policies.resolve import synthesis_progress
     from trustroute.policies.routing.files import save_policy
-    from trustroute.policies.routing.resolve import synthesis_progress
     from trustroute.policies.synthesize_spec import synthesize_spec as synthesize
 
     with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
@@ -124,7 +124,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     if belief_rule == "paper":
         # L and U are about the authors' belief MDP (their filter drives beliefs and labels); a
         # study measures the real process: observations drawn from the Bayes posterior.
-        from trustroute.policies.evaluate_joint import evaluate_joint as evaluate_policy
+        from trustroute.policies.evaluation.trust_state import evaluate_joint as evaluate_policy
         from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 
         cap = horizon if horizon is not None else DEFAULT_JUNCTION_CAP
@@ -149,8 +149,8 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
     from trustroute.participants.driver_population import load_driver_population
     from trustroute.policies.logic.labelling import check_coefficient_length
     from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.resolve import synthesis_progress
     from trustroute.policies.routing.files import array_path, save_policy
-    from trustroute.policies.routing.resolve import synthesis_progress
     from trustroute.policies.synthesis.population import (
         document_entries,
         policy_name,
@@ -206,7 +206,7 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
 def baseline(spec_path: str, town_path: str | None, driver_path: str | None, belief_rule: str,
              as_json: bool) -> None:
     """The trust-free baseline for SPEC: shortest route completing its state-only task."""
-    from trustroute.policies.evaluate import evaluate as evaluate_policy
+    from trustroute.policies.evaluation.plain import evaluate as evaluate_policy
     from trustroute.policies.routing.free import baseline_route, trust_free_policy
 
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
@@ -262,8 +262,8 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached. The result
     is exact (lower = upper) unless histories were pruned; their live mass is the width.
     """
-    # Specs without trust-state atoms go on to policies.evaluate (the same results bit for bit).
-    from trustroute.policies.evaluate_joint import evaluate_joint as evaluate_policy
+    # Specs without trust-state atoms go on to policies.evaluation.plain (the same results bit for bit).
+    from trustroute.policies.evaluation.trust_state import evaluate_joint as evaluate_policy
 
     if fallback_after < 0:
         raise InputError("--fallback-after", "", f"must be >= 0, got {fallback_after}",
@@ -272,7 +272,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     if cap < 0:
         raise InputError("--max-junctions", "", f"must be >= 0, got {cap}", "pass e.g. 60")
     if cache_dir is not None:
-        from trustroute.output_files import check_output_dir
+        from trustroute.core.output_files import check_output_dir
 
         check_output_dir(cache_dir, "--cache-dir", "policy cache")
     after = None if no_fallback else fallback_after
@@ -285,7 +285,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
                              cache_dir, as_json)
         return
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
-    from trustroute.policies.routing.resolve import resolve_policy
+    from trustroute.policies.resolve import resolve_policy
 
     if policy_name in ("robust", "bayes"):
         raise click.UsageError(f"POLICY '{policy_name}' needs --population FILE (the driver types)")
@@ -332,12 +332,12 @@ def load_population_routing(spec_path: str, town_path: str | None, population_pa
 
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_population import load_driver_population
+    from trustroute.policies.belief.driver_types import lift_population, lift_spec
     from trustroute.policies.logic.labelling import check_coefficient_length
     from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.model.driver_types import lift_population, lift_spec
+    from trustroute.policies.resolve import population_policy
     from trustroute.policies.routing.files import load_population_policy
     from trustroute.policies.routing.free import trust_free_policy
-    from trustroute.policies.routing.resolve import population_policy
 
     town = load_town(town_path)
     population = load_driver_population(population_path)
@@ -365,7 +365,7 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
                          fallback_after: int | None, cap: int, belief_rule: str, cache_dir: str | None,
                          as_json: bool) -> None:
     """`evaluate --population`: exact value over the mixture and per type."""
-    from trustroute.policies.evaluate import evaluate as evaluate_policy
+    from trustroute.policies.evaluation.plain import evaluate as evaluate_policy
     from trustroute.policies.model.trust_pomdp import build_pomdp
     from trustroute.policies.synthesis.population import per_type_values
 

@@ -40,14 +40,14 @@ import json
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
-import trustroute.policies as policies
-from trustroute.networks.errors import InputError
-from trustroute.networks.validation import parse_toml, read_text
+from trustroute.core.errors import InputError
+from trustroute.core.packaged import PACKAGED_SPECS, packaged_spec_names
+from trustroute.core.validation import parse_toml, read_text
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
-PACKAGED_SPECS = Path(policies.__file__).resolve().parent / "specs"
+DEFAULT_STUDIES_DIR = Path("studies")
 ENGINES: tuple[str, ...] = ("sumo", "model")
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
@@ -169,13 +169,6 @@ class StudyConfig:
         return replace(self, **{k: v for k, v in changes.items() if v is not None})
 
 
-def packaged_spec_path(name: str) -> Path | None:
-    """The packaged spec called `name` ("phi1" or "phi1.toml"), or None when there is none."""
-    stem = Path(name).name
-    candidate = PACKAGED_SPECS / (stem if stem.endswith(".toml") else f"{stem}.toml")
-    return candidate if candidate.is_file() else None
-
-
 def condition_label(condition: str) -> str:
     return condition if condition in NAMED_CONDITIONS else Path(condition).stem
 
@@ -199,7 +192,7 @@ def _resolve_spec(value: str, base: Path, source: str, key: str) -> Path:
     for candidate in candidates:
         if candidate.is_file():
             return candidate.resolve()
-    packaged = sorted(p.stem for p in PACKAGED_SPECS.glob("*.toml")) if PACKAGED_SPECS.is_dir() else []
+    packaged = packaged_spec_names()
     shipped = f" or a packaged spec ({', '.join(packaged)})" if packaged else ""
     raise InputError(
         source,
@@ -466,3 +459,12 @@ def load_study_config(path: str | Path) -> StudyConfig:
                      "pass an existing TOML file (see harness/study/examples/)")
     data = parse_toml(text, shown, "study config")
     return study_config_from_dict(data, shown, Path(path).resolve().parent)
+
+
+def study_directory(config: StudyConfig, out: str | None) -> Path:
+    """Where a study is written: `out`, else the config's output, else studies/<name>."""
+    if out is not None:
+        return Path(out)
+    if config.output is not None:
+        return Path(config.output)
+    return DEFAULT_STUDIES_DIR / config.name

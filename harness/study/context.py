@@ -12,7 +12,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from trustroute.harness.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import participant_models, participant_types
 from trustroute.networks.town import Town
@@ -47,7 +47,7 @@ class StudyContext:
 
 def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: StudyConfig) -> Path:
     """Where the "aware" policy of this study is cached (the resolver's entry for its horizon and filter)."""
-    from trustroute.policies.routing.resolve import aware_cache_path
+    from trustroute.policies.resolve import aware_cache_path
 
     return aware_cache_path(town, driver, spec, config.policy_cache, aware_horizon(config),
                             config.belief_rule)
@@ -55,7 +55,7 @@ def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: Study
 
 def aware_horizon(config: StudyConfig) -> int:
     """The synthesis horizon of "aware": the config's, else the resolver's default (20 junctions)."""
-    from trustroute.policies.routing.resolve import AWARE_HORIZON
+    from trustroute.policies.resolve import AWARE_HORIZON
 
     return AWARE_HORIZON if config.horizon is None else config.horizon
 
@@ -64,7 +64,7 @@ def resolve_condition_policy(
     condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig, progress: bool = False
 ) -> RoutingPolicy:
     """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
-    from trustroute.policies.routing.resolve import resolve_policy
+    from trustroute.policies.resolve import resolve_policy
 
     return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
                           config.belief_rule, progress=progress)
@@ -74,7 +74,7 @@ def robust_condition_policy(town: Town, spec: Spec, config: StudyConfig, progres
     """The "robust" condition: the policy of `config.robust_objective` for `config.robust_population`
     (synthesized and cached if missing), with the type-aware model and lifted spec its AV uses."""
     from trustroute.participants.driver_population import load_driver_population
-    from trustroute.policies.routing.resolve import population_policy
+    from trustroute.policies.resolve import population_policy
 
     population = load_driver_population(config.robust_population)
     return population_policy(town, population, spec, config.robust_objective, config.policy_cache,

@@ -1,7 +1,7 @@
 """What a study's simulated rates are compared with: exact values and synthesized bounds.
 
 For every (spec, condition) policy of a study: its exact satisfaction probability with the study's
-fallback rule and junction cap (policies.evaluate, for the nominal driver model: no sampling) and
+fallback rule and junction cap (policies.evaluation.plain, for the nominal driver model: no sampling) and
 the [lower, upper] that synthesis certified for it (read from its policy file), stored in the
 manifest by the runner and shown beside the simulated rates by the analysis.
 """
@@ -11,16 +11,16 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext, aware_policy_path, study_context
-from trustroute.networks.errors import InputError
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 
 def expected_values(config: StudyConfig) -> dict:
-    """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluate),
+    """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluation.plain),
     and the synthesized bounds when the policy carries them."""
-    from trustroute.policies.evaluate_joint import evaluate_joint as evaluate
+    from trustroute.policies.evaluation.trust_state import evaluate_joint as evaluate
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     context = study_context(config)

@@ -1,13 +1,13 @@
 """The consolidated dataset of a study and its manifest.
 
 From the per-episode parts, in plan order (participant, position), whatever order they finished
-(file names, schemas and manifest keys: trustroute.analysis.dataset, docs/dataset.md):
+(file names, schemas and manifest keys: trustroute.core.dataset, docs/dataset.md):
     episodes.parquet    one row per finished episode: the plan (participant, position, spec,
                         condition, seed) and the episode summary, plus reported-trust statistics
     roads.parquet       every episode's roads table, concatenated
     kinematics.parquet  SUMO only
     manifest.json       config and its hash, package versions, git revision, per-episode seeds,
-                        counts, failures, the exact values of the policies (policies.evaluate)
+                        counts, failures, the exact values of the policies (policies.evaluation.plain)
 Only `wall_seconds` differs between two runs of the same config; everything else is a function of
 the config (tests/harness/test_study_runner.py checks this across kills, resumes and backends).
 
@@ -32,7 +32,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from trustroute.analysis.dataset import (
+from trustroute.core.dataset import (
     EPISODES_FILE,
     EPISODES_SCHEMA,
     INCIDENTS_FILE,
@@ -206,7 +206,7 @@ def consolidate(
     }
     if tuple(manifest) != MANIFEST_KEYS:  # the dataset's definition and this writer must agree
         raise RuntimeError(f"manifest keys {tuple(manifest)} differ from the dataset's {MANIFEST_KEYS}")
-    from trustroute.output_files import atomic_write_text
+    from trustroute.core.output_files import atomic_write_text
 
     atomic_write_text(study_dir / MANIFEST_FILE, json.dumps(manifest, indent=1, default=_jsonable),
                       "study manifest", "free disk space or pass a writable --out, then rerun")

@@ -1,16 +1,16 @@
 """One part file per episode holding every table of it, with a checksum; resume checks; failures.
 
-Layout of a study directory while it runs (names: trustroute.analysis.dataset, docs/dataset.md):
+Layout of a study directory while it runs (names: trustroute.core.dataset, docs/dataset.md):
     parts/<episode_id>.zip      the episode's part: every table of the episode and its checksum
     failures/<episode_id>.json  every attempt's error of an episode that failed (cleared on success)
     damaged/<episode_id>.zip    parts found damaged, missing a table or foreign, moved aside
 
 A part is a zip archive (stored, not compressed; fixed entry dates, so the same episode gives the
 same bytes) of
-    part.json           format, version, the dataset format (analysis/dataset.py DATASET_FORMAT),
+    part.json           format, version, the dataset format (trustroute/core/dataset.py DATASET_FORMAT),
                         episode id, the planned task, the episode summary, and per table its row
                         count and SHA-256
-    roads.arrows        the roads table        (Arrow IPC stream, trustroute.analysis.dataset schemas)
+    roads.arrows        the roads table        (Arrow IPC stream, trustroute.core.dataset schemas)
     kinematics.arrows   the kinematics table   (empty in the model engine)
     incidents.arrows    the incidents table    (empty in the model engine)
     checksum.sha256     SHA-256 over part.json and every table's bytes, in that order
@@ -40,7 +40,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from trustroute.analysis.dataset import (
+from trustroute.core.dataset import (
     DAMAGED_DIR,
     DATASET_FORMAT,
     FAILURES_DIR,
@@ -54,9 +54,9 @@ from trustroute.analysis.dataset import (
     part_path,
     table_from_frame,
 )
+from trustroute.core.errors import InputError
+from trustroute.core.output_files import TEMP_PREFIX, atomic_write_bytes, atomic_write_text
 from trustroute.harness.study.plan import EpisodeTask
-from trustroute.networks.errors import InputError
-from trustroute.output_files import TEMP_PREFIX, atomic_write_bytes, atomic_write_text
 
 PART_FORMAT = "trustroute-part"
 PART_VERSION = 1
@@ -164,7 +164,7 @@ def write_part_tables(study_dir: Path, task: EpisodeTask, summary: dict, tables:
 
 def read_part(path: Path) -> Part:
     """A part, verified in full (module docstring); PartError naming what is wrong otherwise."""
-    from trustroute.networks.validation import read_input_bytes
+    from trustroute.core.validation import read_input_bytes
 
     path = Path(path)
     try:

@@ -109,7 +109,7 @@ def participant_types(config: StudyConfig) -> list[str] | None:
 
 
 def _check_type_model(model: DriverModel, nominal: DriverModel, config: StudyConfig, name: str) -> None:
-    from trustroute.networks.errors import InputError
+    from trustroute.core.errors import InputError
 
     if (tuple(model.trust_levels) != tuple(nominal.trust_levels)
             or tuple(model.incident_types) != tuple(nominal.incident_types)):

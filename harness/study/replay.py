@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.manifest import MANIFEST_FILE, package_versions
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
-from trustroute.networks.errors import InputError
 
 # What must match exactly between the logged and the replayed episode.
 REPLAY_COLUMNS: tuple[str, ...] = (
@@ -47,7 +47,7 @@ class Replay:
 
 def study_config_from_manifest(study_dir: Path) -> tuple[StudyConfig, dict]:
     """The StudyConfig a study was run with (from manifest.json), and the manifest."""
-    from trustroute.analysis.dataset import read_manifest
+    from trustroute.core.dataset import read_manifest
 
     path = Path(study_dir) / MANIFEST_FILE
     manifest = read_manifest(Path(study_dir))
@@ -112,7 +112,7 @@ def check_same_code(manifest: dict, config: StudyConfig, study_dir: Path) -> Non
 
 
 def logged_roads(study_dir: Path, episode_id: str) -> pd.DataFrame:
-    from trustroute.analysis.dataset import read_roads
+    from trustroute.core.dataset import read_roads
 
     roads = read_roads(Path(study_dir))
     return roads[roads["episode_id"] == episode_id].sort_values("index").reset_index(drop=True)
@@ -198,7 +198,7 @@ def replay_episode(
         )
     sumo_config = None
     if gui:
-        from trustroute.harness.sumo_start import SumoConfig, check_display
+        from trustroute.harness.simulation.sumo_start import SumoConfig, check_display
 
         check_display()
         sumo_config = SumoConfig(gui=True)

@@ -28,14 +28,14 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from trustroute.analysis.dataset import LOCK_FILE, STUDY_FILE
+from trustroute.core.dataset import LOCK_FILE, STUDY_FILE
+from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.expected import expected_values
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import finished_episodes, sync_parts, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
-from trustroute.networks.errors import InputError
 
 DEFAULT_ATTEMPTS = 2
 CONSOLIDATION_ROUNDS = 3
@@ -68,10 +68,10 @@ class StudyRun:
 def engine_function(engine: str) -> Callable:
     """The episode function of an engine (run_episode for SUMO, run_model_episode for the model)."""
     if engine == "model":
-        from trustroute.harness.model_engine import run_model_episode
+        from trustroute.harness.simulation.model_engine import run_model_episode
 
         return run_model_episode
-    from trustroute.harness.episode import run_episode
+    from trustroute.harness.simulation.episode import run_episode
 
     return run_episode
 
@@ -99,7 +99,7 @@ def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path |
     )
     options = {}
     if config.engine == "sumo":
-        from trustroute.harness.sumo_start import SumoConfig
+        from trustroute.harness.simulation.sumo_start import SumoConfig
 
         sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
                               background_vehicles=config.background_vehicles)
@@ -221,7 +221,7 @@ def backend_name(workers: int, scheduler: str | None) -> str:
 def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:
     """Check that the study directory holds this study (resume) and not another; mark it as this
     study's (the directory exists: `study_lock` made it)."""
-    from trustroute.output_files import atomic_write_text
+    from trustroute.core.output_files import atomic_write_text
 
     marker = study_dir / STUDY_FILE
     if marker.exists():
@@ -247,7 +247,7 @@ def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> N
 def study_lock(study_dir: Path) -> Iterator[None]:
     """Create the study directory (checked writable first) and hold its lock, or InputError naming
     the run that holds it."""
-    from trustroute.output_files import check_output_dir, file_lock
+    from trustroute.core.output_files import check_output_dir, file_lock
 
     check_output_dir(study_dir, "--out", "study directory")
     with file_lock(Path(study_dir) / LOCK_FILE, "study directory", wait=False,

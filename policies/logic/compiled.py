@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.policies.logic.dfa import DFA, build_dfa
 from trustroute.policies.logic.labelling import Labeller

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.policies.logic.formula import (
     TRUE,
     And,

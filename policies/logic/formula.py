@@ -26,7 +26,7 @@ import re
 from collections.abc import Callable, Collection, Iterable, Iterator
 from dataclasses import dataclass, field
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 
 KEYWORDS = frozenset({"true", "false", "X", "F", "U", "G"})
 ATOM_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")

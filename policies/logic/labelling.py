@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.spec import N_TRUST_LEVELS, Spec

@@ -24,9 +24,9 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
+from trustroute.core.validation import parse_toml, read_text, require_keys
 from trustroute.networks.town import Town
-from trustroute.networks.validation import parse_toml, read_text, require_keys
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
     FALSE,
@@ -400,7 +400,7 @@ def _trust_state_atoms(raw: object, text: str, source: str, town: Town | None, t
 
 
 def load_spec(path: str | Path, town: Town | None = None) -> Spec:
-    """Load and validate a spec file (through the guarded reader, networks/validation.py); with
+    """Load and validate a spec file (through the guarded reader, trustroute/core/validation.py); with
     `town`, also check its roads against the town."""
     text = read_text(path, str(path), "the spec file", "pass an existing .toml file, e.g. specs/phi1.toml")
     return spec_from_text(text, str(path), town)

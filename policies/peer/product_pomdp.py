@@ -30,7 +30,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.spec import Spec

@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.policies.bracket import Bracket
 from trustroute.policies.peer.product_pomdp import ExplicitProduct
 

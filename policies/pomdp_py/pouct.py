@@ -265,7 +265,7 @@ def monte_carlo(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, episodes: 
                 belief_rule: BeliefRule = "bayes") -> MonteCarloResult:
     """Run `policy` (with the study's fallback unless None) in the trust model `episodes` times.
 
-    The episode rules are policies/routing/episode_rules.py's, as in policies.evaluate.
+    The episode rules are policies/routing/episode_rules.py's, as in policies.evaluation.plain.
     """
     started = time.perf_counter()
     town, driver = pomdp.town, pomdp.driver

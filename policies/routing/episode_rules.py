@@ -9,7 +9,7 @@ At every position of an episode, in this order:
    decision records whether the fallback (not the policy) drove.
 
 The episode tracker (both engines), the model engine's batch path, the exact evaluation
-(policies/evaluate.py) and POUCT's Monte Carlo (policies/pomdp_py/pouct.py) all use these
+(policies/evaluation/plain.py) and POUCT's Monte Carlo (policies/pomdp_py/pouct.py) all use these
 functions, so they cannot disagree on when an episode ends.
 """
 

@@ -22,13 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, BoxRows, PolicyTable
 from trustroute.policies.routing.free import state_only_task
-from trustroute.policies.routing.joint_table import JointPolicyTable, JointTablePolicy
+from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 
 FORMAT = "trustroute-policy"
 # Version 3: where a policy has no row it drives the free completion of (road, DFA state, task
@@ -62,7 +62,7 @@ PLAIN_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "
               "belief_rule", "lower", "upper", "gap", "seconds", "rows", "box_rows", "acting_rule",
               "arrays", "arrays_sha256")
 DOCUMENT_KEYS = PLAIN_KEYS + POPULATION_KEYS
-# Policies of specs with trust-state atoms act on the joint belief (policies/routing/joint_table.py):
+# Policies of specs with trust-state atoms act on the joint belief (policies/routing/trust_state_table.py):
 # their files have these keys besides, and the arrays JOINT_ARRAY_NAMES (no state-only task state:
 # their rule does not read it; "joint" [rows, n_trust, n_q] instead).
 JOINT_KIND = "joint-belief"
@@ -70,7 +70,7 @@ JOINT_KEYS = ("kind", "guide_horizon")
 JOINT_ARRAY_NAMES = ("t", "x", "q", "beliefs", "action", "joint")
 JOINT_ACTING_RULE = ("action of the stored row with the same (junctions driven, road) whose (joint "
                      "belief, belief) is within 1e-9 (Euclidean); else the successor with the largest "
-                     "relaxed action value at the joint belief (policies/joint_search.py RelaxedGuide)")
+                     "relaxed action value at the joint belief (policies/belief/trust_state_relaxation.py)")
 RESYNTH = "re-run trustroute synth to write both files again"
 
 
@@ -82,8 +82,8 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
                 population: dict | None = None, name: str = "aware") -> Path:
     """Write the policy of a SynthesisResult to `path` (+ `.npz`); returns the JSON path.
     population: the POPULATION_KEYS entries of a policy made for several driver types (driver and
-    spec are then the lifted ones, policies/model/driver_types.py)."""
-    from trustroute.output_files import atomic_write_bytes, atomic_write_text
+    spec are then the lifted ones, policies/belief/driver_types.py)."""
+    from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
 
     path = Path(path)
     table: PolicyTable = result.policy.table
@@ -137,7 +137,7 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
 
 def read_policy_document(path: str | Path) -> dict:
     """The JSON part of a policy file, checked for format (InputError otherwise)."""
-    from trustroute.networks.validation import check_keys, read_json
+    from trustroute.core.validation import check_keys, read_json
 
     path = Path(path)
     where = str(path)
@@ -179,7 +179,7 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     """The decision table of a policy file, verified: the hash its JSON records, a readable .npz
     without pickles, the five arrays with consistent shapes and integer types, and every entry in
     range for this town, driver model and spec (InputError otherwise)."""
-    from trustroute.networks.validation import MAX_ARRAY_BYTES, read_input_bytes
+    from trustroute.core.validation import MAX_ARRAY_BYTES, read_input_bytes
     from trustroute.policies.logic.dfa import build_dfa
 
     where = str(arrays)
@@ -366,7 +366,7 @@ def load_population_policy(path: str | Path, town: Town, population, spec: Spec,
     (policy, the lifted driver model its AV filters with, the lifted spec). The lifted model uses
     the type prior the file records. A file made for another population or spec, or for a single
     driver model while the population has several types: InputError (one line, exit 2)."""
-    from trustroute.policies.model.driver_types import lift_population, lift_spec
+    from trustroute.policies.belief.driver_types import lift_population, lift_spec
 
     document = read_policy_document(path)
     lifted_spec = lift_spec(spec, population, population_source)

@@ -25,7 +25,7 @@ class DecisionContext:
     dfa_state: state of the spec's DFA after reading the current position.
     belief: the AV's belief over trust levels at the current position (sums to 1).
     joint: for specs with trust-state atoms, the AV's joint belief J [n_trust, n_dfa_states] over
-    (trust, DFA state) (policies/model/joint_belief.py; dfa_state is then its most probable
+    (trust, DFA state) (policies/belief/trust_state_filter.py; dfa_state is then its most probable
     state); None otherwise.
     """
 
@@ -62,7 +62,7 @@ class RoutingPolicy(Protocol):
     - `route_memory(route)`: what of the roads driven this policy's decisions (`next_junction`,
       `finished`, `fallback_active`) read, now and later, besides the current road, the junctions
       driven, the DFA state told and the beliefs; two histories equal in all of these are driven
-      alike from here on, so evaluators may merge them (policies/evaluate_joint.py). Default: the
+      alike from here on, so evaluators may merge them (policies/evaluation/trust_state.py). Default: the
       whole route (histories on different routes never merge).
     """
 

@@ -37,8 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.logic.labelling import label_margin_factor
-from trustroute.policies.model.product_mdp import ProductTables
 from trustroute.policies.routing.aware_table import BoxRows
 from trustroute.policies.synthesis.belief_cells import ObservationSymbols
 from trustroute.policies.synthesis.completion_value import (

@@ -57,8 +57,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.logic.labelling import gamma, label_margin_factor
-from trustroute.policies.model.product_mdp import ProductTables
 from trustroute.policies.synthesis.belief_cells import LABEL_TOLERANCE, ObservationSymbols
 
 CORNER_MARGIN = LABEL_TOLERANCE   # every box image and merge is widened by this

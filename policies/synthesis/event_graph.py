@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trustroute.policies.model.product_mdp import ProductTables
+from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.routing.free import StateOnlyTask
 from trustroute.policies.synthesis.belief_cells import ObservationSymbols
 

@@ -2,12 +2,12 @@
 with per-type values and what is certified (docs/driver_types.md, "Synthesis over a population").
 
 The AV's belief, which the spec's belief labels read, is always the type-aware filter under the
-population's weights w (policies/model/driver_types.py): the spec means the same for every policy.
+population's weights w (policies/belief/driver_types.py): the spec means the same for every policy.
 
 Bayes: synthesize on the type-aware POMDP with initial belief w ⊗ b0. Its L and U are
 synthesize's: L is a lower bound of the returned policy's value under the type prior (unexpanded
 nodes valued by a lower bound of the trust-free completion), U a sound bound of the population
-optimum max_π Σ_k w_k V_k(π). Per-type values V_k are exact evaluations (policies/evaluate.py)
+optimum max_π Σ_k w_k V_k(π). Per-type values V_k are exact evaluations (policies/evaluation/plain.py)
 of the returned policy with the driver of type k (truth = type k's model, the AV filtering on the
 lifted model) for the same horizon and no fallback, as synthesis scores it; Σ_k w_k V_k >= L.
 
@@ -37,9 +37,9 @@ import numpy as np
 
 from trustroute.networks.town import Town
 from trustroute.participants.driver_population import DriverPopulation
-from trustroute.policies.evaluate import Evaluation, evaluate
+from trustroute.policies.belief.driver_types import lift_population, lift_spec
+from trustroute.policies.evaluation.plain import Evaluation, evaluate
 from trustroute.policies.logic.spec import Spec, state_only_projection
-from trustroute.policies.model.driver_types import lift_population, lift_spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
 from trustroute.policies.routing.aware_table import BeliefTablePolicy
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP

@@ -60,8 +60,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from trustroute.policies.belief.product_mdp import ProductTables, build_product
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.model.product_mdp import ProductTables, build_product
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
 from trustroute.policies.routing.free import StateOnlyTask, free_completion, state_only_task

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trustroute.policies.model.product_mdp import ProductTables
+from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.routing.free import label_free_distance
 from trustroute.policies.synthesis.belief_cells import ObservationSymbols, SuffixCells, image_label_status
 

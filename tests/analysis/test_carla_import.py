@@ -14,7 +14,6 @@ import pytest
 from tests.cli import run_cli
 from trustroute.analysis.carla_import import import_carla_logs
 from trustroute.analysis.carla_tables import load_carla_tables
-from trustroute.analysis.dataset import read_episodes, read_roads
 from trustroute.analysis.real_study import (
     authors_belief_replay,
     authors_point_rule,
@@ -22,6 +21,7 @@ from trustroute.analysis.real_study import (
     with_real_columns,
 )
 from trustroute.analysis.real_tables import read_real_table
+from trustroute.core.dataset import read_episodes, read_roads
 from trustroute.participants.driver_model import load_driver_model
 
 RAW = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "raw"

@@ -19,8 +19,8 @@ import pytest
 
 from trustroute.analysis.fit import fit_roads, observations_from_roads, starting_parameters
 from trustroute.harness.cli import main
-from trustroute.harness.episode_tracker import EpisodeSetup
-from trustroute.harness.model_engine import run_model_episode
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.model_engine import run_model_episode
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
@@ -96,7 +96,7 @@ def test_counts_recover_rows_from_exact_reports(town, driver):
 def test_counts_refuse_missing_reports(town, driver):
     roads = _logs(town, driver, 5, 0.8, seed=1)
     roads.loc[roads["index"] == 2, "reported_trust"] = -1
-    from trustroute.networks.errors import InputError
+    from trustroute.core.errors import InputError
 
     with pytest.raises(InputError, match="no trust report"):
         fit_roads(roads, driver, "counts")

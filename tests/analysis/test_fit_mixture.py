@@ -31,8 +31,8 @@ from trustroute.analysis.fit_mixture import (
     study_observations,
 )
 from trustroute.harness.cli import main
-from trustroute.harness.episode_tracker import EpisodeSetup
-from trustroute.harness.model_engine import run_model_episode
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.model_engine import run_model_episode
 from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec

@@ -8,9 +8,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from trustroute.analysis import dataset
 from trustroute.analysis.tables import study_analysis
-from trustroute.networks.errors import InputError
+from trustroute.core import dataset
+from trustroute.core.errors import InputError
 
 REAL_STUDY = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "study"
 

@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 
 from trustroute.analysis.satisfaction import episode_satisfaction
-from trustroute.harness.episode_tracker import EpisodeSetup
-from trustroute.harness.model_engine import run_model_episode
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.model_engine import run_model_episode
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import trust_free_policy

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
-import trustroute.policies as policies
+from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.policies.routing.protocol import RoutingPolicy
 
-SPECS = Path(policies.__file__).parent / "specs"
+SPECS = PACKAGED_SPECS
 # Start E-A, then a pedestrian road, a plain road, an obstacle road and a truck road.
 INCIDENT_ROUTE = ("E-A", "A-B", "B-C", "C-J", "J-K")
 

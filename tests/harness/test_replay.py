@@ -94,7 +94,7 @@ def test_replay_of_a_study_made_with_other_code_fails(sumo_study, tmp_path, caps
 @pytest.mark.slow
 def test_replay_that_differs_from_the_log_fails(sumo_study, tmp_path, capsys):
     study = _copy(sumo_study, tmp_path)
-    from trustroute.analysis.dataset import (
+    from trustroute.core.dataset import (
         ROADS_FILE,
         ROADS_SCHEMA,
         read_roads,

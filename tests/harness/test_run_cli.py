@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from tests.harness.helpers import SPECS
-from trustroute.analysis.dataset import KINEMATICS_SCHEMA, ROADS_SCHEMA, read_kinematics, read_roads
+from trustroute.core.dataset import KINEMATICS_SCHEMA, ROADS_SCHEMA, read_kinematics, read_roads
 from trustroute.harness.cli import cli, main
 from trustroute.networks.sumo_net import build_net
 
@@ -90,7 +90,7 @@ def test_unreadable_net_exit_2(tmp_path, capsys):
 def test_missing_sumo_binary_exit_2(net, capsys, monkeypatch):
     import sumolib
 
-    from trustroute.harness import sumo_start
+    from trustroute.harness.simulation import sumo_start
 
     monkeypatch.setattr(sumolib, "checkBinary", lambda name, bindir=None: "no-such-" + name)
     monkeypatch.setenv("PATH", "")

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from trustroute.core.errors import InputError
 from trustroute.harness.cli import main
 from trustroute.harness.study.config import load_study_config
-from trustroute.networks.errors import InputError
 
 REPO = Path(__file__).resolve().parents[2]
 MINIMAL = """[study]
@@ -128,8 +128,8 @@ def test_example_configs_load(monkeypatch):
 
 
 def test_background_vehicles_key():
+    from trustroute.core.errors import InputError
     from trustroute.harness.study.config import study_config_from_dict
-    from trustroute.networks.errors import InputError
 
     base = {"participants": 2, "seed": 1, "specs": ["phi1"], "conditions": ["free"]}
     assert study_config_from_dict({"study": base}).background_vehicles == 0

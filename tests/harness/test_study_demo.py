@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from tests.cli import run_cli
-from trustroute.analysis.dataset import read_episodes
+from trustroute.core.dataset import read_episodes
 
 
 @pytest.mark.slow

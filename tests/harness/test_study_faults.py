@@ -21,7 +21,7 @@ import pandas as pd
 import pytest
 
 from tests.cli import run_cli
-from trustroute.analysis.dataset import (
+from trustroute.core.dataset import (
     DAMAGED_DIR,
     INCIDENTS_FILE,
     KINEMATICS_FILE,
@@ -156,10 +156,10 @@ def test_consolidation_verifies_every_part_again(tmp_path, monkeypatch):
 @pytest.mark.parametrize("damage", ["zero_byte_json", "truncated_npz", "zero_byte_npz", "garbage_json"])
 def test_damaged_cached_policy_is_rebuilt_with_a_notice(damage, town, driver, tmp_path):
     from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.resolve import aware_cache_path, aware_policy
     from trustroute.policies.routing.files import array_path, load_policy
-    from trustroute.policies.routing.resolve import aware_cache_path, aware_policy
 
-    spec = load_spec(REPO / "policies" / "specs" / "phi1.toml", town)
+    spec = load_spec(REPO / "trustroute" / "core" / "specs" / "phi1.toml", town)
     cache = tmp_path / "cache"
     notices: list[str] = []
     first = aware_policy(town, driver, spec, cache, horizon=6, notice=notices.append)
@@ -191,9 +191,9 @@ def test_two_processes_filling_one_cache_entry_are_safe(tmp_path):
         "from trustroute.networks.town import load_town\n"
         "from trustroute.participants.driver_model import load_driver_model\n"
         "from trustroute.policies.logic.spec import load_spec\n"
-        "from trustroute.policies.routing.resolve import aware_policy\n"
+        "from trustroute.policies.resolve import aware_policy\n"
         "town = load_town(); driver = load_driver_model()\n"
-        f"spec = load_spec({str(REPO / 'policies' / 'specs' / 'phi1.toml')!r}, town)\n"
+        f"spec = load_spec({str(REPO / 'trustroute' / 'core' / 'specs' / 'phi1.toml')!r}, town)\n"
         f"policy = aware_policy(town, driver, spec, {str(cache)!r}, horizon=8)\n"
         "print(policy.table.rows)\n"
     )
@@ -329,7 +329,7 @@ def test_workers_die_with_their_parent_and_a_second_run_is_refused(kill, tmp_pat
 
 def test_a_study_failing_validation_writes_nothing_and_runs_once_fixed(tmp_path, capsys):
     bad_spec = tmp_path / "mine.toml"
-    phi1 = (REPO / "policies" / "specs" / "phi1.toml").read_text()
+    phi1 = (REPO / "trustroute" / "core" / "specs" / "phi1.toml").read_text()
     bad_spec.write_text(phi1.replace("offset = 0.5", "offset = nan"))
     config_path = _config(tmp_path, 2)
     config_path.write_text(config_path.read_text().replace('specs = ["phi1"]', 'specs = ["mine.toml"]'))
@@ -377,9 +377,9 @@ def _no_temp_files(root: Path) -> bool:
 
 def test_full_disk_gives_one_line_and_no_partial_files(tiny_mount, tmp_path, capsys):
     _fill(tiny_mount)
-    for args in (["synth", str(REPO / "policies/specs/phi1.toml"), "--horizon", "4", "--out",
+    for args in (["synth", str(REPO / "trustroute/core/specs/phi1.toml"), "--horizon", "4", "--out",
                   str(tiny_mount / "p.json")],
-                 ["spec", "check", str(REPO / "policies/specs/phi1.toml"), "--dot",
+                 ["spec", "check", str(REPO / "trustroute/core/specs/phi1.toml"), "--dot",
                   str(tiny_mount / "d.dot")]):
         code, _, err = run_cli(capsys, *args)
         assert code == 2 and len(err.strip().splitlines()) == 1 and "no space left" in err, err
@@ -398,7 +398,7 @@ def test_full_disk_gives_one_line_and_no_partial_files(tiny_mount, tmp_path, cap
 
 def test_read_only_output_gives_one_line_and_writes_nothing(tiny_mount, tmp_path, capsys):
     subprocess.run(["mount", "-o", "remount,ro", str(tiny_mount)], check=True)
-    spec = str(REPO / "policies/specs/phi1.toml")
+    spec = str(REPO / "trustroute/core/specs/phi1.toml")
     commands = [
         ["synth", spec, "--horizon", "4", "--out", str(tiny_mount / "p.json")],
         ["spec", "check", spec, "--dot", str(tiny_mount / "d.dot")],
@@ -418,8 +418,8 @@ def test_enospc_during_an_atomic_write_leaves_the_old_file_and_no_temp(tmp_path,
     """The write path itself, without a mount: the disk fills up half-way through a write."""
     import errno
 
-    import trustroute.output_files as output_files
-    from trustroute.networks.errors import InputError
+    import trustroute.core.output_files as output_files
+    from trustroute.core.errors import InputError
 
     target = tmp_path / "table.bin"
     target.write_bytes(b"old contents")

@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from trustroute.core.errors import InputError
 from trustroute.harness.study.config import load_study_config
 from trustroute.harness.study.runner import run_and_consolidate
-from trustroute.networks.errors import InputError
 from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH
-from trustroute.policies.model.driver_types import TypeLiftedModel
+from trustroute.policies.belief.driver_types import TypeLiftedModel
 
 
 def config_file(tmp_path, conditions: str, extra: str = "") -> object:

@@ -18,12 +18,12 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from trustroute.analysis.dataset import part_path
+from trustroute.core.dataset import part_path
+from trustroute.core.errors import InputError
 from trustroute.harness.study import runner as runner_module
 from trustroute.harness.study.config import load_study_config
 from trustroute.harness.study.plan import plan_episodes
 from trustroute.harness.study.runner import run_and_consolidate, run_study
-from trustroute.networks.errors import InputError
 
 REPO = Path(__file__).resolve().parents[2]
 PYTHON = sys.executable

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trustroute.analysis.dataset import read_episodes
 from trustroute.analysis.tables import ALL_TYPES, study_analysis
+from trustroute.core.dataset import read_episodes
 from trustroute.harness.cli import main
 from trustroute.harness.study.config import load_study_config
 from trustroute.harness.study.plan import participant_type_indices, participant_types

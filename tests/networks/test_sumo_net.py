@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import sumolib
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.networks.sumo_net import build_net, net_counts
 from trustroute.networks.town import PENTAGON_TOWN_PATH, load_town, split_road
 

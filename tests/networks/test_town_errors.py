@@ -8,7 +8,7 @@ import json
 import pytest
 
 from tests.cli import run_cli
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from tests.cli import run_cli
 from tests.networks.test_town_errors import assert_one_line_error
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import (
     DEFAULT_DRIVER_MODEL_PATH,
     driver_model_from_dict,

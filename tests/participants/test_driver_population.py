@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH, load_driver_model
 from trustroute.participants.driver_population import (
     EXAMPLE_POPULATION_PATH,

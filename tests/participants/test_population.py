@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tests.policies.model.test_trust_pomdp import random_model
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import driver_model_from_dict
 from trustroute.participants.population import (
     PopulationConfig,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.synthesis.test_synthesis_random import random_town
-from tests.policies.test_evaluate_random_models import random_driver
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
 

@@ -279,7 +279,7 @@ def test_progression_terminates_on_nested_temporal_operators(text):
 
 
 def test_too_large_formula_is_an_input_error(monkeypatch):
-    from trustroute.networks.errors import InputError
+    from trustroute.core.errors import InputError
     from trustroute.policies.logic.spec import spec_from_text
 
     text = " & ".join(f"F a{i}" for i in range(8))

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.policies.logic.formula import (
     FALSE,
     TRUE,

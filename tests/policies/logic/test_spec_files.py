@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.policies.logic.formula import Eventually, Literal, canonical, format_formula, parse_formula
 from trustroute.policies.logic.spec import BeliefAtom, load_spec, spec_from_text, state_only_projection
 
@@ -50,7 +50,7 @@ def test_strict_variants(town, name, paper):
 
 
 def test_packaged_spec_directory_is_the_specs_symlink():
-    assert Path("specs").resolve() == (Path("policies") / "specs").resolve()
+    assert Path("specs").resolve() == (Path("trustroute") / "core" / "specs").resolve()
     assert sorted(p.stem for p in Path("specs").glob("*.toml")) == [
         "phi1", "phi1_strict", "phi1_trust", "phi2", "phi2_strict"]
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tests.policies.trust_specs import random_problem
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.peer.product_pomdp import explicit_product

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from tests.policies.trust_specs import random_problem
-from trustroute.policies.joint_search import joint_bounds
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.peer.product_pomdp import explicit_product
+from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
 pytest.importorskip("stormpy", reason="Storm tests need the optional extra: pip install -e '.[peer]'")
 

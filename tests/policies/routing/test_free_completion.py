@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tests.policies.synthesis.test_synthesis_random import random_spec, random_town
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from tests.cli import run_cli
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.networks.town import DEFAULT_TOWN_PATH, town_from_dict
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.resolve import aware_cache_path, resolve_policy
 from trustroute.policies.routing.files import array_path, load_policy, read_policy_document, save_policy
 from trustroute.policies.routing.protocol import DecisionContext
-from trustroute.policies.routing.resolve import aware_cache_path, resolve_policy
 from trustroute.policies.synthesis.search import synthesize
 
 
@@ -167,7 +167,7 @@ def test_resolve_free_aware_and_files(pomdp, town, driver, phi1_result, tmp_path
     # A cached "aware" entry is loaded, not recomputed: plant one and make synthesis fail.
     save_policy(result, aware_cache_path(town, driver, spec, tmp_path), town, driver, spec)
     monkeypatch.setattr(
-        "trustroute.policies.routing.resolve.synthesize", lambda *a, **k: pytest.fail("re-synthesized")
+        "trustroute.policies.resolve.synthesize", lambda *a, **k: pytest.fail("re-synthesized")
     )
     aware = resolve_policy("aware", town, driver, spec, tmp_path)
     assert aware.table.rows == result.policy.table.rows

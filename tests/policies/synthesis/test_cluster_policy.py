@@ -14,10 +14,10 @@ import time
 import numpy as np
 import pytest
 
+from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.synthesis.test_synthesis_random import random_spec, random_town
-from tests.policies.test_evaluate_random_models import random_driver
-from trustroute.policies.evaluate import evaluate
-from trustroute.policies.model.product_mdp import build_product
+from trustroute.policies.belief.product_mdp import build_product
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, BoxRows, PolicyTable
 from trustroute.policies.synthesis.belief_cells import observation_symbols
@@ -86,8 +86,8 @@ def test_thresholds_on_reachable_beliefs(town, driver, offset):
     and the policy is worth at least L with this machine's labels."""
     from trustroute.policies.logic.spec import load_spec, spec_from_text
 
-    base = load_spec("policies/specs/phi1_strict.toml", town)
-    text = open("policies/specs/phi1_strict.toml").read()
+    base = load_spec("trustroute/core/specs/phi1_strict.toml", town)
+    text = open("trustroute/core/specs/phi1_strict.toml").read()
     low = base.belief_atoms["lowtrust"]
     text = text.replace(repr(low.offset), repr(offset)) if repr(low.offset) in text else text
     spec = spec_from_text(text, "<threshold spec>", town)
@@ -129,7 +129,7 @@ def test_the_largest_value_among_holding_boxes_acts(town, driver):
     in neither drives the free completion."""
     from trustroute.policies.logic.spec import load_spec
 
-    spec = load_spec("policies/specs/phi1.toml", town)
+    spec = load_spec("trustroute/core/specs/phi1.toml", town)
     pomdp = build_pomdp(town, driver)
     tables = build_product(pomdp, spec)
     x = tables.start

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from tests.policies.synthesis.test_synthesis_random import random_spec, random_town
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.belief.product_mdp import build_product
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.model.product_mdp import build_product
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import free_completion, state_only_task
 from trustroute.policies.synthesis import completion_value

@@ -16,9 +16,9 @@ import pytest
 
 from tests.policies.synthesis.test_synthesis_random import random_spec, random_town
 from trustroute.networks.town import INCIDENT_TYPES, NO_INCIDENT
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.belief.product_mdp import build_product
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.model.product_mdp import build_product
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import free_completion, state_only_task
 from trustroute.policies.synthesis.belief_cells import observation_symbols

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.exact_search import exact_optimum

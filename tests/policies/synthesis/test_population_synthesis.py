@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.synthesis.test_synthesis_random import random_town
-from tests.policies.test_evaluate_random_models import random_driver
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_population import DriverPopulation, DriverType
 from trustroute.participants.synthetic_driver import SyntheticDriver

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tests.policies.routing.test_free_completion import policy_without_rows
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec, spec_from_text
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import DecisionContext
@@ -48,7 +48,7 @@ def test_phi1_at_horizon_six_is_the_trust_free_route(pomdp):
 @pytest.mark.parametrize("completion", ["auto", "bounds"])
 @pytest.mark.parametrize("name", ["phi1", "phi2", "phi1_strict", "phi2_strict"])
 def test_lower_is_the_value_of_the_returned_policy(pomdp, name, completion):
-    """policies.evaluate (independent tree unfolding through the RoutingPolicy interface) gives the
+    """policies.evaluation.plain (independent tree unfolding through the RoutingPolicy interface) gives the
     returned policy exactly `lower` within H junctions when open nodes are valued by exact trees
     along the trust-free completion the policy drives there (the default on a town this size), and
     at least `lower` (at most `upper`) with the cluster bounds; L is at least the trust-free

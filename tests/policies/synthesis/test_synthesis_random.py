@@ -13,9 +13,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tests.policies.test_evaluate_random_models import random_driver
+from tests.policies.evaluation.test_random_models import random_driver
 from trustroute.networks.town import INCIDENT_TYPES, MIN_ROAD_LENGTH, town_from_dict
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import trust_free_policy

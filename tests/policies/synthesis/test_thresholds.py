@@ -16,9 +16,9 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
+from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.synthesis.test_synthesis_random import random_town
-from tests.policies.test_evaluate_random_models import random_driver
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.labelling import atom_values
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp

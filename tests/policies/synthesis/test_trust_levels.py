@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from tests.cli import run_cli
-from trustroute.networks.errors import InputError
+from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DriverModel
-from trustroute.policies.evaluate import evaluate
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.synthesis.exact_search import exact_optimum

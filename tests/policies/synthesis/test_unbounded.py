@@ -13,8 +13,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.synthesis.test_synthesis_random import random_junctions
-from tests.policies.test_evaluate_random_models import random_driver
 from trustroute.networks.town import INCIDENT_TYPES, town_from_dict
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp

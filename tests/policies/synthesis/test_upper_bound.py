@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from trustroute.policies.belief.product_mdp import build_product
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.model.product_mdp import build_product
 from trustroute.policies.synthesis.belief_cells import observation_symbols, suffix_cells
 from trustroute.policies.synthesis.upper_bound import Abstraction, abstract_backup, build_abstraction
 

@@ -1,0 +1,139 @@
+"""Digests of the results a refactoring must leave unchanged, bit for bit.
+
+`python -m benchmarks.result_digest OUT.json` runs, through the `trustroute` command only (so it
+reads any version of the package the same way):
+- synthesis of phi1, phi2 and their strict variants at H = 20 and unbounded, the trust-state
+  spec at H = 10 and the three-type robust policy at H = 10: bounds and a hash of the policy
+  file without its wall time;
+- the exact evaluation of each of those policies;
+- a seeded model-engine study and a seeded SUMO study (21 participants, phi1/phi2 x aware/free):
+  a hash of every table (rows sorted, wall-time columns left out).
+Two digests are compared with `python -m benchmarks.result_digest A.json B.json`; `--only PREFIX`
+(repeatable) runs only the entries whose names start with a prefix (e.g. `--only phi1_H20 --only
+study_model`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+REPO = Path(__file__).resolve().parents[1]
+CLI = [sys.executable, "-m", "trustroute"]
+POPULATION = REPO / "participants" / "data" / "driver_population_three_types.json"
+TIMED = ("seconds", "wall", "elapsed", "created", "timestamp", "started", "finished", "duration")
+
+SYNTHESES = [
+    ("phi1_H20", ["specs/phi1.toml", "--horizon", "20"]),
+    ("phi2_H20", ["specs/phi2.toml", "--horizon", "20"]),
+    ("phi1_strict_H20", ["specs/phi1_strict.toml", "--horizon", "20"]),
+    ("phi2_strict_H20", ["specs/phi2_strict.toml", "--horizon", "20"]),
+    ("phi1_unbounded", ["specs/phi1.toml"]),
+    ("phi2_unbounded", ["specs/phi2.toml"]),
+    ("phi1_strict_unbounded", ["specs/phi1_strict.toml"]),
+    ("phi2_strict_unbounded", ["specs/phi2_strict.toml"]),
+    ("phi1_trust_H10", ["specs/phi1_trust.toml", "--horizon", "10"]),
+    ("phi1_strict_robust_H10", ["specs/phi1_strict.toml", "--horizon", "10", "--population",
+                                str(POPULATION), "--objective", "robust", "--time-limit", "60"]),
+]
+
+
+def _run(args: list[str], cwd: Path) -> dict:
+    done = subprocess.run([*CLI, *args, "--json"], cwd=cwd, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONHASHSEED": "0"})
+    if done.returncode not in (0, 1):
+        raise SystemExit(f"{' '.join(args)}: exit {done.returncode}: {done.stderr.strip()[-2000:]}")
+    return json.loads(done.stdout)
+
+
+def _untimed(value):
+    if isinstance(value, dict):
+        return {k: _untimed(v) for k, v in value.items() if not any(t in k for t in TIMED)}
+    if isinstance(value, list):
+        return [_untimed(v) for v in value]
+    return value
+
+
+def _digest(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()[:16]
+
+
+def _policy_digest(path: Path) -> str:
+    document = _untimed(json.loads(path.read_text()))
+    arrays = np.load(path.with_suffix(".npz"))
+    parts = [json.dumps(document, sort_keys=True).encode()]
+    for name in sorted(arrays.files):
+        array = arrays[name]
+        parts += [name.encode(), str(array.dtype).encode(), str(array.shape).encode(), array.tobytes()]
+    return _digest(b"".join(parts))
+
+
+def _table_digest(path: Path) -> str:
+    frame = pd.read_parquet(path)
+    frame = frame[[c for c in frame.columns if not any(t in c for t in TIMED)]]
+    frame = frame.reindex(sorted(frame.columns), axis=1)
+    header, *rows = frame.to_csv(index=False).splitlines()
+    return _digest("\n".join([header, *sorted(rows)]).encode())
+
+
+def digest(work: Path, only: list[str]) -> dict:
+    results: dict = {}
+
+    def wanted(name: str) -> bool:
+        return not only or any(name.startswith(prefix) for prefix in only)
+
+    for name, args in SYNTHESES:
+        if not wanted(name):
+            continue
+        out = work / f"{name}.json"
+        answer = _run(["synth", *args, "--out", str(out)], REPO)
+        population = ["--population", str(POPULATION)] if "--population" in args else []
+        evaluation = _run(["evaluate", args[0], str(out), *population], REPO)
+        results[name] = {
+            "lower": answer["lower"], "upper": answer["upper"], "policy": _policy_digest(out),
+            "evaluate": _untimed({k: v for k, v in evaluation.items() if k != "paths"}),
+        }
+        print(name, answer["lower"], answer["upper"], results[name]["policy"], file=sys.stderr)
+    for engine in ("model", "sumo"):
+        if not wanted(f"study_{engine}"):
+            continue
+        config = work / f"{engine}.toml"
+        config.write_text(
+            "[study]\nparticipants = 21\nseed = 1\n"
+            f'engine = "{engine}"\nspecs = ["phi1", "phi2"]\nconditions = ["aware", "free"]\n'
+        )
+        study_dir = work / f"study_{engine}"
+        _run(["study", str(config), "--out", str(study_dir), "--workers", "2", "--quiet"], REPO)
+        results[f"study_{engine}"] = {
+            str(p.relative_to(study_dir)): _table_digest(p) for p in sorted(study_dir.rglob("*.parquet"))
+            if not p.parent.name.startswith("part")
+        }
+        print(engine, results[f"study_{engine}"], file=sys.stderr)
+    return results
+
+
+def main(argv: list[str]) -> None:
+    only = [argv[i + 1] for i, word in enumerate(argv) if word == "--only"]
+    argv = [word for i, word in enumerate(argv) if word != "--only" and (i == 0 or argv[i - 1] != "--only")]
+    if len(argv) == 2:
+        a, b = (json.loads(Path(p).read_text()) for p in argv)
+        keys = sorted((set(a) & set(b)) if only == ["common"] else (set(a) | set(b)))
+        differing = [k for k in keys if a.get(k) != b.get(k)]
+        print("identical" if not differing else f"differ: {differing}")
+        raise SystemExit(1 if differing else 0)
+    with tempfile.TemporaryDirectory() as tmp:
+        os.environ["XDG_CACHE_HOME"] = str(Path(tmp) / "cache")
+        results = digest(Path(tmp), only)
+    Path(argv[0]).write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,518 @@
+"""The SUMO engine: one study episode of the ego AV on libsumo.
+
+The ego is inserted on the spec's start road. On each road, `COMMIT_DISTANCE` metres before its
+end (before the ego must commit to the next junction), the runner closes the road's observation
+(incident, takeover, performance measured from SUMO), lets the driver's trust move and report,
+hands it to the EpisodeTracker (belief filter, DFA, end of episode), asks the tracker for the
+next junction and extends the ego's route one road ahead (vehicle.setRoute). The next road's
+incident is injected at that moment so its SUMO objects are in place when the ego arrives; when
+the incident comes into view the synthetic driver decides takeover from its current trust; a
+takeover switches the ego to manual control until that road's commit point, before the next
+junction. Per step the runner reads one subscription of the ego; everything else runs only
+while an incident is live. The scenes' random draws (pedestrian timing, obstacle position,
+oncoming traffic, background traffic) come from one generator seeded by the episode's seed
+(`scene_rng`), separate from the driver's, so they never shift the driver's draws
+(docs/scenes.md).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from array import array
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+
+from trustroute.core.dataset import (
+    INCIDENTS_SCHEMA,
+    KINEMATICS_SCHEMA,
+    ROADS_SCHEMA,
+    frame_from_table,
+    table_from_columns,
+    table_from_frame,
+    table_from_rows,
+)
+from trustroute.core.errors import InputError
+from trustroute.harness.simulation import incidents as incident_kinds
+from trustroute.harness.simulation.background import BackgroundTraffic
+from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style, hand_back, take_over
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
+from trustroute.harness.simulation.incidents import EgoState, Incident, Scene
+from trustroute.harness.simulation.performance import PerformanceMonitor, limits_for, verdict
+from trustroute.harness.simulation.sumo_start import SumoConfig, hot_calls, sumo_session
+from trustroute.networks.sumo_net import ROAD_SPEED, build_net, net_counts
+from trustroute.networks.sumo_net import net_path as town_net_path
+from trustroute.networks.town import NO_INCIDENT, split_road
+from trustroute.policies.routing.protocol import RoutingPolicy
+
+log = logging.getLogger(__name__)
+
+EGO_ID = "ego"
+EGO_TYPE = "trustroute_ego"
+COMMIT_DISTANCE = 30.0      # metres before a road's end: decide the next junction here
+VIEW_DISTANCE = 80.0        # metres: an incident object this close to the ego is in view
+MAX_CLOSING = 30.0          # m/s: no incident object and the ego close in on each other faster
+START_BEFORE_COMMIT = 40.0  # the ego is inserted this far before the start road's commit point
+INSERT_TIMEOUT = 30.0       # seconds of sim time for the ego to appear
+MAX_LEADER_HORIZON = 1000.0  # metres: the most the subscription looks ahead for a leader
+JUNCTION_LENGTH = 8.0       # metres: a typical internal lane, for timing scenes from the commit point
+STEP_FIELDS = ("time", "x", "y", "speed", "lane", "mode")   # what the loop logs per step, in order
+SCENE_STREAM = 0x5CE7E      # the scene generator's stream: SeedSequence([seed, SCENE_STREAM])
+
+def scene_rng(seed: int) -> np.random.Generator:
+    """The episode's scene generator (every draw of the incidents and background traffic)."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), SCENE_STREAM]))
+
+
+_SCHEMAS = {"roads": ROADS_SCHEMA, "kinematics": KINEMATICS_SCHEMA, "incidents": INCIDENTS_SCHEMA}
+
+
+class EpisodeRecord:
+    """The logs of one episode (the caller writes them to Parquet). `incidents` (SUMO engine only):
+    one row per road with an incident or a takeover, with the SUMO ids of its objects.
+
+    Each table is given as an Arrow table of its dataset schema (trustroute.core.dataset), or
+    as a DataFrame; `roads`, `kinematics` and `incidents` are DataFrames built on first use, and
+    `tables()` hands the logs back as Arrow tables without going through pandas when they were
+    given as Arrow (the SUMO engine's case: the cheap path for writers, a study writes Arrow).
+    """
+
+    def __init__(self, summary: dict, roads, kinematics, incidents=None) -> None:
+        self.summary = summary
+        self._sources = {"roads": roads, "kinematics": kinematics,
+                         "incidents": incidents if incidents is not None else INCIDENTS_SCHEMA.empty_table()}
+        self._frames: dict[str, pd.DataFrame] = {}
+
+    def _frame(self, name: str) -> pd.DataFrame:
+        frame = self._frames.get(name)
+        if frame is None:
+            source = self._sources[name]
+            frame = source if isinstance(source, pd.DataFrame) else frame_from_table(source)
+            self._frames[name] = frame
+        return frame
+
+    @property
+    def roads(self) -> pd.DataFrame:
+        return self._frame("roads")
+
+    @property
+    def kinematics(self) -> pd.DataFrame:
+        return self._frame("kinematics")
+
+    @property
+    def incidents(self) -> pd.DataFrame:
+        return self._frame("incidents")
+
+    def tables(self) -> dict[str, pa.Table]:
+        """{"roads", "kinematics", "incidents"} as Arrow tables."""
+        out = {}
+        for name, source in self._sources.items():
+            if isinstance(source, pa.Table):
+                out[name] = source
+            else:
+                out[name] = table_from_frame(source, _SCHEMAS[name])
+        return out
+
+
+class _StepLog:
+    """The per-step log (STEP_FIELDS) as columns while the loop runs: time, x, y and speed in one
+    float64 array, lane and mode in lists. The kinematics table is then a few buffer copies, not a
+    conversion of one Python object per cell."""
+
+    def __init__(self) -> None:
+        self.floats = array("d")          # time, x, y, speed of every step, in that order
+        self.lanes: list[str] = []
+        self.modes: list[str] = []
+
+    def table(self, episode_id: str) -> pa.Table:
+        floats = np.frombuffer(self.floats, dtype=np.float64).reshape(-1, 4).T
+        rows = len(self.lanes)
+        columns = {"episode_id": pa.array([episode_id], pa.string()).take(np.zeros(rows, dtype=np.int64)),
+                   **{name: pa.array(floats[i]) for i, name in enumerate(STEP_FIELDS[:4])},
+                   "lane": self.lanes, "mode": self.modes}
+        return table_from_columns(columns, KINEMATICS_SCHEMA, nan_as_null=False)
+
+
+@dataclass
+class _RoadRun:
+    """What happens on one road of the episode (mutable while the ego drives it)."""
+
+    index: int
+    road: str
+    kind: str
+    incident: Incident | None = None
+    injected_time: float = math.nan
+    time_in: float = math.nan
+    in_view_time: float = math.nan
+    x: float = math.nan           # where the incident object was when it came into view
+    y: float = math.nan
+    passed_time: float = math.nan
+    removed_time: float = math.nan
+    decided: bool = False
+    took_over: bool = False
+    takeover_start: float = math.nan
+    takeover_end: float = math.nan
+    committed: bool = False
+    next_view_check: float = -math.inf
+    monitor: PerformanceMonitor = field(default_factory=PerformanceMonitor)
+
+
+def leader_horizon(config: SumoConfig) -> float:
+    """How far ahead the ego's subscription looks for a leader: a leader TTC below a limit needs a
+    bumper gap below speed × limit (the closing speed is at most the ego's), and the ego drives at
+    most ROAD_SPEED, so a leader farther than the largest limit × ROAD_SPEED cannot matter (SUMO
+    then searches fewer lanes each step)."""
+    largest = max((limits.min_ttc for limits in config.performance_limits.values()), default=0.0)
+    return min(largest * ROAD_SPEED + 1.0, MAX_LEADER_HORIZON)
+
+
+def _define_ego_type(sumo) -> None:
+    sumo.vehicletype.copy("DEFAULT_VEHTYPE", EGO_TYPE)
+    sumo.vehicletype.setImperfection(EGO_TYPE, 0.0)   # the AV drives without driver noise
+    sumo.vehicletype.setSpeedDeviation(EGO_TYPE, 0.0)
+
+
+_MATCHING_NETS: set[tuple[str, float, str]] = set()
+
+
+def _check_net_matches(sumo, setup: EpisodeSetup, net_path: Path, net_key: tuple[str, float]) -> None:
+    """The net has an edge for every road of the town (checked once per net and town per process)."""
+    key = (*net_key, setup.town.content_hash)
+    if key in _MATCHING_NETS:
+        return
+    edges = set(sumo.edge.getIDList())
+    missing = sorted(set(setup.town.states) - edges)
+    if missing:
+        raise InputError(str(net_path), "", f"the net has no edge for road(s) {', '.join(missing[:4])} of "
+                         f"town {setup.town.source_path or 'town'}",
+                         "build the net of this town with `trustroute net build --town FILE`")
+    _MATCHING_NETS.add(key)
+
+
+_READABLE: set[tuple[str, float]] = set()
+_VERIFIED_NETS: set[tuple[str, str, int]] = set()
+
+
+def _town_net(town) -> Path:
+    """`build_net(town).path`, verified once per process and version of the cached file (its
+    path and mtime): build_net parses the whole net to verify it, which in a study cost about
+    5 ms of every episode. A replaced or deleted file is verified (or rebuilt) again."""
+    target = town_net_path(town)
+    try:
+        key = (town.content_hash, str(target), target.stat().st_mtime_ns)
+    except OSError:
+        key = None
+    if key in _VERIFIED_NETS:
+        return target
+    path = build_net(town).path
+    _VERIFIED_NETS.add((town.content_hash, str(path), path.stat().st_mtime_ns))
+    return path
+
+
+def _net_key(net_path: Path) -> tuple[str, float]:
+    """(path, mtime) of a net: what the once-per-process checks are keyed on (one stat per episode)."""
+    try:
+        return str(net_path), net_path.stat().st_mtime
+    except OSError:
+        raise InputError(str(net_path), "", "the SUMO net file does not exist",
+                         "run `trustroute net build` or pass an existing .net.xml") from None
+
+
+def _check_readable(net_path: Path, key: tuple[str, float]) -> None:
+    """Parse a net passed in once per (path, mtime): a clear one-line error before SUMO prints its own."""
+    if key not in _READABLE:
+        net_counts(net_path)
+        _READABLE.add(key)
+
+
+class _Episode:
+    """One run of the loop; SUMO calls stay in here and in the incident/takeover modules."""
+
+    def __init__(self, sumo, setup: EpisodeSetup, tracker: EpisodeTracker, driver, config: SumoConfig,
+                 observer: Callable | None, rng: np.random.Generator,
+                 scene_overrides: dict[str, dict] | None = None) -> None:
+        self.sumo = sumo
+        self.rng = rng
+        self.scene_overrides = scene_overrides or {}
+        self.setup = setup
+        self.tracker = tracker
+        self.driver = driver
+        self.config = config
+        self.observer = observer
+        self.mode = AUTOPILOT.name
+        self.runs: list[_RoadRun] = []
+        self.steps = _StepLog()         # the kinematics table, one row per step
+        self.lengths: dict[str, float] = {}
+        self.min_gap = 2.5
+        self.defined_types: set = set()   # incident type definers run in this simulation
+
+    def length(self, road: str) -> float:
+        if road not in self.lengths:
+            self.lengths[road] = self.sumo.lane.getLength(f"{road}_1")
+        return self.lengths[road]
+
+    # -- driver and incidents -------------------------------------------------
+    def decide(self, run: _RoadRun, now: float) -> None:
+        run.decided = True
+        run.took_over = bool(self.driver.decides_takeover(run.kind))
+        if run.took_over:
+            self.mode = take_over(self.sumo, EGO_ID)
+            run.takeover_start = now
+
+    def new_run(self, index: int, road: str) -> _RoadRun:
+        kind = self.setup.town.incident(road) if index > 0 else NO_INCIDENT
+        limits = limits_for(self.config.performance_limits, kind or "none")
+        return _RoadRun(index=index, road=road, kind=kind,
+                        monitor=PerformanceMonitor(ttc_horizon=limits.min_ttc))
+
+    def inject(self, run: _RoadRun, now: float, ego_distance: float) -> None:
+        u, v = split_road(run.road)
+        reverse = f"{v}-{u}" if f"{v}-{u}" in self.setup.town.incidents else None
+        scene = Scene(road=run.road, reverse_road=reverse, road_length=self.length(run.road),
+                      prefix=f"inc{run.index}", ego_id=EGO_ID, time=now, ego_distance=ego_distance,
+                      rng=self.rng, overrides=self.scene_overrides.get(run.kind, {}), road_speed=ROAD_SPEED,
+                      step_length=self.config.step_length,
+                      observed_length=self.length(run.road) - COMMIT_DISTANCE)
+        run.incident = incident_kinds.inject(run.kind, self.sumo, scene, self.defined_types)
+        run.injected_time = now
+        if run.incident is not None:
+            log.debug("%s: %s incident on %s as %s", self.tracker.episode_id, run.kind, run.road,
+                      ",".join(run.incident.sumo_ids))
+
+    def remove_incident(self, run: _RoadRun, now: float) -> None:
+        if run.incident is not None and math.isnan(run.removed_time):
+            run.incident.remove(self.sumo)
+            run.removed_time = now
+
+    def watch(self, run: _RoadRun, ego: EgoState) -> None:
+        """Per-step work for the open road's incident and the driver (only while there is some)."""
+        incident = run.incident
+        if incident is None:
+            if ego.road == run.road:
+                self.decide(run, ego.time)   # nothing to see: the driver decides on entering the road
+            return
+        incident.step(self.sumo, ego)
+        if not run.decided and ego.time >= run.next_view_check:
+            where = incident.position(self.sumo)
+            if where is not None:
+                distance = math.dist(where, (ego.x, ego.y))
+                if distance <= VIEW_DISTANCE:
+                    run.in_view_time = ego.time
+                    run.x, run.y = where
+                    self.decide(run, ego.time)
+                else:
+                    # The gap closes at most MAX_CLOSING m/s: no need to look again before then.
+                    run.next_view_check = ego.time + (distance - VIEW_DISTANCE) / MAX_CLOSING
+        # The objects stay after the ego has passed (an obstacle never leaves by itself); they are
+        # taken out when the road's observation closes.
+        if math.isnan(run.passed_time) and incident.is_passed(self.sumo, ego):
+            run.passed_time = ego.time
+
+    # -- the road's end -------------------------------------------------------
+    def close_road(self, run: _RoadRun, now: float) -> None:
+        """The observation of `run` is complete: hand back, trust moves, the tracker records it."""
+        if not run.decided:
+            self.decide(run, now)   # the incident never came into view: decide now, as the model does
+        if self.mode != AUTOPILOT.name:
+            self.mode = hand_back(self.sumo, EGO_ID)
+            run.takeover_end = now
+        self.remove_incident(run, now)
+        performance = run.monitor.result(self.limits(run))
+        trust_before = self.driver.trust
+        trust_after = self.driver.move_trust(run.kind, run.took_over, performance)
+        reported = self.driver.report_trust() if self.tracker.should_report() else None
+        self.tracker.record_road(run.road, run.kind, run.took_over, performance, trust_before,
+                                 trust_after, reported, run.time_in, now)
+
+    def limits(self, run: _RoadRun):
+        return limits_for(self.config.performance_limits, run.kind or "none")
+
+    def commit(self, run: _RoadRun, now: float, position: float) -> _RoadRun | None:
+        """At the commit point of `run`: close it, choose the next road, extend the route."""
+        run.committed = True
+        if run.index > 0:
+            self.close_road(run, now)
+        had_fallback = self.tracker.fallback_fired
+        junction = self.tracker.next_junction()
+        if self.tracker.fallback_fired and not had_fallback:
+            log.info("%s: 20-junction fallback fired at junction %d on %s", self.tracker.episode_id,
+                     self.tracker.junctions, run.road)
+        if junction is None:
+            return None
+        nxt = self.setup.town.successor(run.road, junction)
+        self.sumo.vehicle.setRoute(EGO_ID, [run.road, nxt])
+        upcoming = self.new_run(run.index + 1, nxt)
+        self.inject(upcoming, now, self.length(run.road) - position + JUNCTION_LENGTH)
+        self.runs.append(upcoming)
+        return upcoming
+
+    # -- the loop -------------------------------------------------------------
+    def run(self) -> float:
+        sumo = self.sumo
+        start = self.setup.spec.start
+        _define_ego_type(sumo)
+        background = BackgroundTraffic(self.config.background_vehicles, self.rng,
+                                       tuple(self.setup.town.states))
+        background.start(sumo)
+        background_step = background.step if self.config.background_vehicles > 0 else None
+        sumo.route.add("ego_route", [start])
+        depart = max(0.0, self.length(start) - COMMIT_DISTANCE - START_BEFORE_COMMIT)
+        sumo.vehicle.add(EGO_ID, "ego_route", typeID=EGO_TYPE, depart="now", departLane="best",
+                         departPos=f"{depart:.2f}", departSpeed="max")
+        apply_style(sumo, EGO_ID, AUTOPILOT)
+        # One subscription carries everything the loop reads each step, the leader included (the
+        # road is the lane's edge, "A-B" of "A-B_1", ":A_5" of ":A_5_0": one variable less).
+        sumo.vehicle.subscribe(EGO_ID, [sumo.VAR_LANEPOSITION, sumo.VAR_POSITION,
+                                        sumo.VAR_SPEED, sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID,
+                                        sumo.VAR_LEADER, sumo.VAR_ANGLE], 0.0, 1e9,
+                               {sumo.VAR_LEADER: leader_horizon(self.config)})
+        position_id, xy_id, speed_id, accel_id, lane_id, leader_id, angle_id = (
+            sumo.VAR_LANEPOSITION, sumo.VAR_POSITION, sumo.VAR_SPEED,
+            sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID, sumo.VAR_LEADER, sumo.VAR_ANGLE)
+        self.min_gap = sumo.vehicle.getMinGap(EGO_ID)
+        current = self.new_run(0, start)
+        self.runs.append(current)
+        upcoming: _RoadRun | None = None
+        step = self.config.step_length
+        max_sim_seconds = self.config.max_sim_seconds
+        now = 0.0
+        # Hot loop: local names, one subscription read, three appends, Python work only where
+        # something happens (an incident still live, a driver still to decide).
+        calls = hot_calls(sumo)
+        simulation_step, get_time = calls.step, calls.time
+        get_results, colliding_number = calls.subscription_results, calls.colliding_number
+        lane_roads: dict[str, str] = {}   # "A-B_1" -> "A-B", ":A_5_0" -> ":A_5"
+        auto = AUTOPILOT.name
+        log_floats, log_lane, log_mode = (self.steps.floats.extend, self.steps.lanes.append,
+                                          self.steps.modes.append)
+        observer = self.observer
+        min_gap = self.min_gap
+        commit_at = self.length(start) - COMMIT_DISTANCE
+        while True:
+            simulation_step()
+            now = get_time()
+            result = get_results(EGO_ID)
+            if not result:
+                if now > INSERT_TIMEOUT:
+                    raise RuntimeError(f"the ego could not be inserted on {start} within {INSERT_TIMEOUT} s")
+                continue
+            if math.isnan(current.time_in):
+                current.time_in = now
+            lane = result[lane_id]
+            road = lane_roads.get(lane)
+            if road is None:
+                road = lane_roads[lane] = lane[:lane.rindex("_")]
+            position = result[position_id]
+            speed = result[speed_id]
+            x, y = result[xy_id]
+            if upcoming is not None and road == upcoming.road:
+                current, upcoming = upcoming, None
+                current.time_in = now
+                commit_at = self.length(road) - COMMIT_DISTANCE
+            open_run = upcoming if upcoming is not None else current
+            if background_step is not None:
+                background_step(sumo)
+            if open_run.index > 0:
+                ego = None
+                incident = open_run.incident
+                # Watched while the incident is live, or (no incident) until the driver has decided.
+                if (not open_run.decided if incident is None else math.isnan(open_run.removed_time)):
+                    ego = EgoState(now, road, position, x, y, speed, lane, result[angle_id], result[accel_id])
+                    self.watch(open_run, ego)
+                if self.mode == auto:
+                    collided = (colliding_number() > 0
+                                and EGO_ID in sumo.simulation.getCollidingVehiclesIDList())
+                    open_run.monitor.observe(sumo, speed, result[accel_id], collided, result[leader_id],
+                                             min_gap, ROAD_SPEED, step)
+                    if ego is not None and incident is not None:
+                        incident.measure(sumo, ego, open_run.monitor)
+            finished = False
+            if not current.committed and road == current.road and position + speed * step >= commit_at:
+                upcoming = self.commit(current, now, position)
+                finished = upcoming is None
+            # Logged after this step's decisions, so `mode` is the control the ego drives on with.
+            log_floats((now, x, y, speed))
+            log_lane(lane)
+            log_mode(self.mode)
+            if observer is not None:
+                observer(sumo, EgoState(now, road, position, x, y, speed, lane, result[angle_id],
+                                        result[accel_id]), self.mode, open_run.road)
+            if finished:
+                break
+            if now > max_sim_seconds:
+                raise RuntimeError(f"episode {self.tracker.episode_id} still running after "
+                                   f"{max_sim_seconds:.0f} s of sim time on {road}")
+        return now
+
+    def incidents_table(self) -> pa.Table:
+        """One row per road with an incident object or a takeover (row 0, the start road, never)."""
+        rows = []
+        for run in self.runs:
+            if run.index == 0 or (run.incident is None and not run.took_over):
+                continue
+            monitor, incident = run.monitor, run.incident
+            failed = monitor.failed_measures(self.limits(run))
+            rows.append({
+                "episode_id": self.tracker.episode_id, "index": run.index, "directed_road": run.road,
+                "incident": run.kind,
+                "sumo_ids": ",".join(incident.sumo_ids) if incident is not None else None,
+                # NaN is a null in these (the times and places of what never happened)
+                "injected_time": run.injected_time, "in_view_time": run.in_view_time, "x": run.x, "y": run.y,
+                "passed_time": run.passed_time, "removed_time": run.removed_time,
+                "takeover": run.took_over, "takeover_start": run.takeover_start,
+                "takeover_end": run.takeover_end,
+                "performance": verdict(failed),
+                "min_ttc": monitor.min_ttc, "max_deceleration": monitor.max_deceleration,
+                "collided": monitor.collided, "min_head_on_ttc": monitor.min_head_on_ttc,
+                "min_pedestrian_distance": monitor.min_pedestrian_distance, "time_lost": monitor.time_lost,
+                "failed_measures": ",".join(failed) or None,
+                "scene": incident.details() if incident is not None else None,
+            })
+        return table_from_rows(rows, INCIDENTS_SCHEMA)
+
+    def kinematics_table(self) -> pa.Table:
+        return self.steps.table(self.tracker.episode_id)
+
+
+def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: str, seed: int,
+                rrd_path: Path | None = None, *, net_path: Path | None = None,
+                config: SumoConfig | None = None, observer: Callable | None = None,
+                scene_overrides: dict[str, dict] | None = None) -> EpisodeRecord:
+    """Run one episode in SUMO and return its logs.
+
+    driver: a participants.synthetic_driver.SyntheticDriver (decides_takeover, move_trust, report_trust,
+    trust). seed: SUMO's seed (the driver carries its own Generator). net_path: the town's net
+    (default: build_net(setup.town), cached). observer(sumo, ego, mode, road): called every step
+    (tests use it to read SUMO state). rrd_path: also write a Rerun recording. scene_overrides:
+    {incident kind: {draw name: value}} fixes scene draws (e.g. {"pedestrian": {"timing": "late"}}).
+    """
+    started = time.perf_counter()
+    config = config if config is not None else SumoConfig()
+    if net_path is None:
+        net = _town_net(setup.town)
+    else:
+        net = Path(net_path)
+    net_key = _net_key(net)
+    if net_path is not None:
+        _check_readable(net, net_key)
+    tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=0.0)
+    rng = scene_rng(seed)
+    with sumo_session(net, seed, config) as sumo:
+        _check_net_matches(sumo, setup, net, net_key)
+        episode = _Episode(sumo, setup, tracker, driver, config, observer, rng, scene_overrides)
+        sim_seconds = episode.run()
+    record = EpisodeRecord(summary=tracker.summary(wall_seconds=time.perf_counter() - started,
+                                                   sim_seconds=sim_seconds),
+                           roads=tracker.roads_table(), kinematics=episode.kinematics_table(),
+                           incidents=episode.incidents_table())
+    if rrd_path is not None:
+        from trustroute.harness.simulation.rerun_log import write_recording
+
+        write_recording(Path(rrd_path), net, record, setup)
+    return record

@@ -1,0 +1,330 @@
+"""The AV's side of one episode, pure Python (no SUMO): route, belief, DFA state, end, logs.
+
+Shared by the SUMO engine (harness/simulation/episode.py) and the model engine
+(harness/simulation/model_engine.py) so the two can never disagree on the logic. The rules
+(when an episode ends, the fallback, legal moves) are policies/routing/episode_rules.py's, the
+same the exact evaluation uses:
+
+- position 0 is (spec.start, initial belief); q_0 = the compiled spec's initial state;
+- at every position the rules end the episode ("accepted", "rejected", "destination", "cap")
+  or ask the policy (with the fallback) for the next junction;
+- after driving a road the AV observes (incident, takeover, performance), applies its belief
+  filter (setup.belief_rule) and steps the DFA on (road, new belief).
+
+With a driver population (docs/driver_types.md) the AV's model is the type-aware one: its belief
+is over (type, trust); the roads table logs its trust marginal (so belief atoms of the analysis
+read it as before) and `type_belief` gives the type marginal.
+
+Row 0 of the roads table is the start road: incident "none" and no observation (takeover,
+performance and reported_trust null), trust_before = trust_after = the initial true trust. The
+table's schema is `trustroute.core.dataset.ROADS_SCHEMA` (docs/dataset.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+
+from trustroute.core.dataset import ROADS_SCHEMA, frame_from_table, table_from_rows
+from trustroute.networks.town import NO_INCIDENT, Town
+from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.belief.driver_types import trust_marginal, type_belief
+from trustroute.policies.belief.trust_state_filter import joint_filter
+from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp
+from trustroute.policies.routing.episode_rules import (
+    DEFAULT_JUNCTION_CAP,
+    decide,
+    dfa_verdict,
+    episode_policy,
+)
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
+
+PERFORMANCE_INDEX = {"succ": 0, "fail": 1}
+
+
+@dataclass(frozen=True, eq=False)
+class EpisodeSetup:
+    """Everything an episode needs besides the policy, the driver and the seed."""
+
+    town: Town
+    driver_model: DriverModel      # the nominal model the AV's belief filter uses
+    spec: Spec
+    junction_cap: int = DEFAULT_JUNCTION_CAP
+    fallback_after: int | None = DEFAULT_FALLBACK_AFTER
+    report_every: int = 1          # the driver reports trust every N roads
+    belief_rule: str = "bayes"
+
+
+@dataclass(frozen=True, eq=False)
+class EpisodeModel:
+    """The arrays an episode reads: the AV's trust POMDP and the spec compiled on the town."""
+
+    pomdp: TrustPOMDP
+    compiled: CompiledSpec
+    # Memoised filter and DFA steps, shared by the episodes of a process. Episodes start from one
+    # initial belief and meet few distinct observation sequences, so most steps repeat; a hit
+    # returns the very floats the computation gave (the same seed still gives the same logs).
+    updates: dict = field(default_factory=dict, repr=False)
+
+
+MAX_MEMO = 200_000   # entries per memo before it is cleared (bounded memory in long studies)
+
+
+def _memo_put(memo: dict, key, value):
+    if len(memo) >= MAX_MEMO:
+        memo.clear()
+    memo[key] = value
+    return value
+
+
+_MODELS: dict[tuple[str, str, str], EpisodeModel] = {}
+
+
+def episode_model(setup: EpisodeSetup) -> EpisodeModel:
+    """Built once per (town, driver, spec) content: hundreds of episodes share the arrays."""
+    key = (setup.town.content_hash, setup.driver_model.content_hash, setup.spec.content_hash)
+    model = _MODELS.get(key)
+    if model is None:
+        model = EpisodeModel(pomdp=build_pomdp(setup.town, setup.driver_model),
+                             compiled=compile_spec(setup.spec, setup.town))
+        if len(_MODELS) > 32:
+            _MODELS.clear()
+        _MODELS[key] = model
+    return model
+
+
+class EpisodeTracker:
+    """Route, online Bayes belief, DFA state and the roads table of one episode."""
+
+    def __init__(self, setup: EpisodeSetup, policy: RoutingPolicy, episode_id: str,
+                 initial_trust: int, sim_time: float = 0.0) -> None:
+        if setup.junction_cap < 0:
+            raise ValueError(f"junction_cap must be >= 0, got {setup.junction_cap}")
+        if setup.report_every < 1:
+            raise ValueError(f"report_every must be >= 1, got {setup.report_every}")
+        if setup.belief_rule not in ("bayes", "paper"):
+            raise ValueError(f"unknown belief rule {setup.belief_rule!r}; use 'bayes' or 'paper'")
+        self.setup = setup
+        self.episode_id = str(episode_id)
+        model = episode_model(setup)
+        self._pomdp, self._compiled = model.pomdp, model.compiled
+        self._memo = model.updates
+        self.dfa = model.compiled.dfa
+        self.policy = episode_policy(policy, setup.town, setup.spec, setup.fallback_after)
+        start = setup.spec.start
+        self.route: list[str] = [start]
+        self.belief: np.ndarray = np.asarray(self._pomdp.initial_belief, dtype=float).copy()
+        self.belief.setflags(write=False)   # shared with the policies' contexts (and the memo's beliefs)
+        # The belief's bytes (the memo keys) and the form the roads table logs, kept beside it: a
+        # memo hit then needs no numpy call (cheap while SUMO's stepping keeps the caches cold).
+        self._belief_bytes = self.belief.tobytes()
+        self._belief_logged = self._logged(self.belief)
+        # Specs with trust-state atoms: the AV tracks the joint belief J(θ, q) (its DFA state is
+        # the most probable under J) and the episode ends when J has no live mass; the true DFA
+        # state, read on the driver's true trust, decides whether the episode satisfied the spec.
+        self.joint: np.ndarray | None = None
+        self.true_dfa_state: int | None = None
+        if setup.spec.uses_trust_atoms:
+            self._filter = joint_filter(self._pomdp, self.dfa, self._compiled.labeller)
+            self.joint = self._filter.initial(self._compiled.start, self.belief)[0]
+            self._posterior = self.belief.copy()        # the exact (Bayes) θ filter J moves with
+            self.dfa_state: int = int(self._filter.likeliest_q(self.joint[None])[0])
+            self.true_dfa_state = self._true_step(self.dfa.initial, self._compiled.start, int(initial_trust))
+        else:
+            key = ("initial", self._belief_bytes)
+            state = self._memo.get(key)
+            if state is None:
+                state = _memo_put(self._memo, key, self._compiled.initial_state(self.belief))
+            self.dfa_state = state
+        self.end_reason: str | None = self._verdict()
+        self.fallback_fired = False
+        self.fallback_junction: int | None = None   # junctions driven when the fallback first drove
+        self._chosen: str | None = None            # next junction chosen at the current road
+        self._rows: list[dict] = [{
+            "episode_id": self.episode_id, "index": 0, "directed_road": start, "action": None,
+            "incident": NO_INCIDENT, "takeover": None, "performance": None,
+            "trust_before": int(initial_trust), "trust_after": int(initial_trust),
+            "reported_trust": None, "belief_before": self._belief_logged,
+            "belief_after": self._belief_logged, "dfa_state": self.dfa_state, "fallback": False,
+            "sim_time_in": float(sim_time), "sim_time_out": None,
+        }]
+
+    # -- internals -----------------------------------------------------------
+    def _logged(self, belief: np.ndarray) -> tuple[float, ...]:
+        """The belief as the roads table logs it: over trust (the trust marginal of a type-aware
+        belief; the belief itself otherwise). A tuple: rows and the memo share it."""
+        return tuple(trust_marginal(self.setup.driver_model, belief).tolist())
+
+    def type_belief(self) -> np.ndarray:
+        """The AV's current belief over the driver's type (one entry for a single driver model)."""
+        return type_belief(self.setup.driver_model, self.belief)
+
+    def _context(self) -> DecisionContext:
+        # The belief is read-only (never changed in place: a road gives a new array), so the
+        # context can hold it without a copy.
+        return DecisionContext(route=tuple(self.route), dfa_state=self.dfa_state, belief=self.belief,
+                               joint=None if self.joint is None else self.joint.copy())
+
+    def _true_step(self, q: int, x: int, trust_level: int) -> int:
+        """The DFA state after position (x, true trust level, the AV's belief) from q."""
+        theta = self.setup.driver_model.trust_levels.index(int(trust_level))
+        return int(self._compiled.labeller.step(np.array([q]), np.array([x]), self.belief[None],
+                                                np.array([theta]))[0])
+
+    def _verdict(self) -> str | None:
+        """rules 1-2 of the episode: on the DFA state, or (trust-state atoms) once J has no live
+        mass, "accepted"/"rejected" by the true DFA state."""
+        if self.joint is None:
+            return dfa_verdict(self._compiled, self.dfa_state)
+        _, _, live = self._filter.masses(self.joint[None])
+        if live[0] > 0:
+            return None
+        return "accepted" if self._compiled.accepting[self.true_dfa_state] else "rejected"
+
+    @property
+    def satisfied(self) -> bool:
+        """The spec holds on this episode's trace (with trust-state atoms: read on the true trust,
+        also when the AV could not tell and the episode ended at the destination or the cap)."""
+        if self.true_dfa_state is not None:
+            return bool(self._compiled.accepting[self.true_dfa_state])
+        return self.end_reason == "accepted"
+
+    # -- the episode's API ---------------------------------------------------
+    @property
+    def junctions(self) -> int:
+        return len(self.route) - 1
+
+    @property
+    def road(self) -> str:
+        return self.route[-1]
+
+    def next_junction(self) -> str | None:
+        """The policy's choice at the current road (with the 20-junction fallback); None when the
+        episode is over (end_reason set). Asking twice at the same road gives the same answer."""
+        if self.end_reason is not None:
+            return None
+        if self._chosen is not None:
+            return self._chosen
+        decision = decide(self.policy, self._context(), self.setup.town, self.setup.junction_cap)
+        if decision.end is not None:
+            self.end_reason = decision.end
+            return None
+        junction, fired = decision.junction, decision.fallback
+        if fired and not self.fallback_fired:
+            self.fallback_fired = True
+            self.fallback_junction = self.junctions
+        self._rows[-1]["action"] = junction
+        self._rows[-1]["fallback"] = bool(fired)
+        self._chosen = junction
+        return junction
+
+    def expected_road(self) -> str | None:
+        """The road the vehicle drives next (after next_junction), or None."""
+        if self._chosen is None:
+            return None
+        return self.setup.town.successor(self.road, self._chosen)
+
+    def record_road(self, road: str, incident: str, takeover: bool, performance: str,
+                    trust_before: int, trust_after: int, reported_trust: int | None,
+                    sim_time_in: float, sim_time_out: float) -> None:
+        """Append the row of a driven road, apply the belief filter on (incident, takeover,
+        performance), step the DFA, and set end_reason when the DFA accepts or rejects.
+        reported_trust is None when the driver gave no report on this road; NaN sim times are
+        stored as nulls (the model engine has no simulator clock)."""
+        if self.end_reason is not None:
+            raise ValueError(f"episode {self.episode_id} is over ({self.end_reason}); no more roads")
+        expected = self.expected_road()
+        if expected is None:
+            raise ValueError("record_road before next_junction: the policy has not chosen a road")
+        if road != expected:
+            raise ValueError(f"drove {road!r} but the policy chose {expected!r}")
+        if performance not in PERFORMANCE_INDEX:
+            raise ValueError(f"performance must be 'succ' or 'fail', got {performance!r}")
+        incident_index = self.setup.driver_model.incident_index(incident)
+        before, before_logged = self.belief, self._belief_logged
+        h, e = int(bool(takeover)), PERFORMANCE_INDEX[performance]
+        key = ("belief", self._belief_bytes, incident_index, bool(takeover), performance,
+               self.setup.belief_rule)
+        entry = self._memo.get(key)
+        if entry is None:
+            posterior, _ = self._pomdp.belief_update(before, incident_index, h, e,
+                                                     rule=self.setup.belief_rule)
+            after = posterior[0]
+            if not after.sum() > 0:
+                # An observation the AV's model deems impossible: keep the prior rather than a zero vector.
+                after = before.copy()
+            after.setflags(write=False)
+            entry = _memo_put(self._memo, key, (after, after.tobytes(), self._logged(after)))
+        after, self._belief_bytes, self._belief_logged = entry
+        self.belief = after
+        if self.joint is None:
+            key = ("dfa", self.dfa_state, road, self._belief_bytes)
+            state = self._memo.get(key)
+            if state is None:
+                state = _memo_put(self._memo, key, self._compiled.step_road(self.dfa_state, road, after))
+            self.dfa_state = state
+        else:
+            self._step_joint(road, incident_index, h, e, int(trust_after))
+        self.route.append(road)
+        self._chosen = None
+        self._rows[-1]["sim_time_out"] = float(sim_time_in)
+        self._rows.append({
+            "episode_id": self.episode_id, "index": len(self._rows), "directed_road": road,
+            "action": None, "incident": incident, "takeover": bool(takeover), "performance": performance,
+            "trust_before": int(trust_before), "trust_after": int(trust_after),
+            "reported_trust": None if reported_trust is None else int(reported_trust),
+            "belief_before": before_logged,
+            "belief_after": self._belief_logged, "dfa_state": self.dfa_state, "fallback": False,
+            "sim_time_in": float(sim_time_in), "sim_time_out": float(sim_time_out),
+        })
+        self.end_reason = self._verdict()
+
+    def _step_joint(self, road: str, incident: int, h: int, e: int, trust_after: int) -> None:
+        """J after driving `road` and observing (incident, h, e); the told and the true DFA state."""
+        x = np.array([self.setup.town.state_index(road)])
+        inc = np.array([incident])
+        # The exact (Bayes) θ filter's posterior and the observation's probability, as the exact
+        # evaluation computes them (the AV's belief is this posterior under the Bayes rule).
+        posterior, probability = self._pomdp.belief_update(self._posterior[None], inc, h, e, rule="bayes")
+        if probability[0] > 0:
+            self._posterior = posterior[0]
+            self.joint = self._filter.update(self.joint[None], posterior, self.belief[None], x, inc, h, e,
+                                             probability)[0]
+        # else: an observation the AV's model deems impossible: J stays (as the belief does).
+        self.dfa_state = int(self._filter.likeliest_q(self.joint[None])[0])
+        self.true_dfa_state = self._true_step(self.true_dfa_state, int(x[0]), trust_after)
+
+    def should_report(self) -> bool:
+        """Whether the driver reports trust on the road about to be recorded (every report_every)."""
+        return len(self._rows) % self.setup.report_every == 0
+
+    def roads_table(self) -> pa.Table:
+        """The roads table of the dataset (ROADS_SCHEMA) as Arrow, one row per position."""
+        return table_from_rows(self._rows, ROADS_SCHEMA)
+
+    def roads_frame(self) -> pd.DataFrame:
+        """The roads table of the dataset (ROADS_SCHEMA), one row per position."""
+        return frame_from_table(self.roads_table())
+
+    def summary(self, wall_seconds: float, sim_seconds: float) -> dict:
+        """The episode summary dict; mean_trust is the mean true trust over all positions."""
+        trust = [row["trust_after"] for row in self._rows]
+        return {
+            "episode_id": self.episode_id,
+            "satisfied": self.satisfied,
+            "junctions": self.junctions,
+            "takeovers": int(sum(bool(row["takeover"]) for row in self._rows)),
+            "final_trust": int(trust[-1]),
+            # sum / n of small integers is exact before the one division: the float np.mean gives
+            "mean_trust": sum(trust) / len(trust),
+            "end_reason": self.end_reason if self.end_reason is not None else "",
+            "fallback_fired": self.fallback_fired,
+            "sim_seconds": float(sim_seconds),
+            "wall_seconds": float(wall_seconds),
+        }

@@ -1,0 +1,260 @@
+"""The gymnasium environment `trustroute/TrustRouting-v0`: the agent routes the AV junction by junction.
+
+Importing this module registers the id (as sumo-rl does for its environments); without the import,
+`gymnasium.make("trustroute.harness.simulation.gym_env:trustroute/TrustRouting-v0")` imports it itself.
+docs/gym_env.md documents the spaces, the reward and the ends.
+
+The environment does not re-implement an episode. It runs the project's own episode functions,
+`harness.simulation.model_engine.run_model_episode` (engine "model": the trust POMDP, no SUMO) or
+`harness.simulation.episode.run_episode` (engine "sumo": libsumo), in a worker thread with a routing policy
+whose every decision is handed to the agent: `step(action)` passes the junction over and waits for
+the next decision or the end of the episode. So the tracker's rules (belief filter, DFA, accept,
+reject, junction cap) and the synthetic driver's draws are exactly those of studies; the study's
+20-junction fallback is off (the agent decides every junction). Only one thread runs at a time:
+the agent waits while the episode runs and the other way round. Every draw (the driver's initial
+trust, takeovers, trust moves, reports, and the SUMO seed) comes from the `np_random` Generator
+that `reset(seed=...)` seeds.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from collections.abc import Callable
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+from trustroute.core.packaged import packaged_spec_path
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.networks.town import Town, load_town
+from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DriverModel, load_driver_model
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.spec import Spec, load_spec
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
+
+ENV_ID = "trustroute/TrustRouting-v0"
+ENGINES: tuple[str, ...] = ("model", "sumo")
+DEFAULT_JUNCTION_CAP = EpisodeSetup.junction_cap
+
+
+class EpisodeAborted(Exception):
+    """Raised inside the episode thread when the environment is reset or closed mid-episode."""
+
+
+_ABORT = object()
+
+
+class AgentPolicy(RoutingPolicy):
+    """A RoutingPolicy whose decisions come from the agent, through two queues.
+
+    next_junction hands the context to the environment and blocks until `step` answers with a
+    junction (or the environment aborts the episode). It never ends an episode itself, and its
+    decision depends on more than the route, so evaluation-style batching never applies.
+    """
+
+    name = "agent"
+
+    def __init__(self, to_agent: queue.Queue, to_episode: queue.Queue) -> None:
+        self._to_agent = to_agent
+        self._to_episode = to_episode
+
+    def next_junction(self, context: DecisionContext) -> str:
+        self._to_agent.put(("decide", context))
+        answer = self._to_episode.get()
+        if answer is _ABORT:
+            raise EpisodeAborted
+        return answer
+
+
+def _episode_thread(run: Callable, policy: AgentPolicy, to_agent: queue.Queue) -> None:
+    try:
+        to_agent.put(("end", run(policy)))
+    except EpisodeAborted:
+        to_agent.put(("aborted", None))
+    except BaseException as exc:  # handed to the agent's thread, which raises it
+        to_agent.put(("error", exc))
+
+
+def _as_town(town: Town | str | Path | None) -> Town:
+    return town if isinstance(town, Town) else load_town(town)
+
+
+def _as_driver(driver: DriverModel | str | Path | None) -> DriverModel:
+    return driver if isinstance(driver, DriverModel) else load_driver_model(driver)
+
+
+def _as_spec(spec: Spec | str | Path, town: Town) -> Spec:
+    if isinstance(spec, Spec):
+        return spec
+    path = Path(spec)
+    return load_spec(path if path.is_file() else packaged_spec_path(str(spec)) or path, town)
+
+
+class TrustRoutingEnv(gymnasium.Env):
+    """Route the AV through a town so that an scLDTL spec is satisfied; reward 1 on acceptance.
+
+    spec: a Spec, a spec file or a packaged spec name ("phi1"). town, driver: objects, files, or
+    None for the packaged ones (the driver model is both the AV's filter model and the synthetic
+    driver's). engine: "model" (fast, no SUMO) or "sumo" (libsumo). junction_cap: the episode is
+    truncated after this many junctions. belief_rule: the AV's filter ("bayes" or "paper").
+    report_accuracy: the synthetic driver's trust-report accuracy (reports are logged only).
+
+    Observation (Dict): "road" (index into town.states), "dfa_state" (the spec's DFA state after
+    the current position), "belief" (the AV's belief over trust levels), "junctions" (driven so
+    far). Action: Discrete(max out-degree); action a at a road with k legal next junctions
+    (town.actions(road), sorted) drives to junction a mod k, so every action is legal;
+    info["action_mask"] marks the k legal ones (for `action_space.sample(mask=...)`).
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, spec: Spec | str | Path = "phi1", town: Town | str | Path | None = None,
+                 driver: DriverModel | str | Path | None = None, engine: str = "model",
+                 junction_cap: int = DEFAULT_JUNCTION_CAP, belief_rule: str = "bayes",
+                 report_accuracy: float = DEFAULT_REPORT_ACCURACY, net_path: str | Path | None = None,
+                 render_mode: str | None = None) -> None:
+        if engine not in ENGINES:
+            raise ValueError(f"unknown engine {engine!r}; use one of {', '.join(ENGINES)}")
+        if junction_cap < 1:
+            raise ValueError(f"junction_cap must be >= 1, got {junction_cap}")
+        if render_mode is not None:
+            raise ValueError("TrustRouting has no render modes "
+                             "(record a SUMO episode with trustroute run --rrd)")
+        self.town = _as_town(town)
+        self.driver_model = _as_driver(driver)
+        self.scldtl_spec = _as_spec(spec, self.town)
+        self.engine = engine
+        self.report_accuracy = float(report_accuracy)
+        self.net_path = Path(net_path) if net_path is not None else None
+        self.setup = EpisodeSetup(town=self.town, driver_model=self.driver_model, spec=self.scldtl_spec,
+                                  junction_cap=int(junction_cap), fallback_after=None,
+                                  belief_rule=belief_rule)
+        self._legal = {road: self.town.actions(road) for road in self.town.states}
+        self._width = max(len(actions) for actions in self._legal.values())
+        self.action_space = spaces.Discrete(self._width)
+        self.observation_space = spaces.Dict({
+            "road": spaces.Discrete(len(self.town.states)),
+            "dfa_state": spaces.Discrete(int(build_dfa(self.scldtl_spec).n_states)),
+            "belief": spaces.Box(0.0, 1.0, shape=(self.driver_model.n_trust,), dtype=np.float64),
+            "junctions": spaces.Discrete(self.setup.junction_cap + 1),
+        })
+        self.render_mode = None
+        self.last_record = None      # the EpisodeRecord of the last finished episode
+        self._episodes = 0
+        self._thread: threading.Thread | None = None
+        self._to_agent: queue.Queue = queue.Queue()
+        self._to_episode: queue.Queue = queue.Queue()
+        self._road = ""
+
+    # -- the episode thread -------------------------------------------------------------------
+    def _runner(self, driver: SyntheticDriver, episode_id: str, sumo_seed: int) -> Callable:
+        setup = self.setup
+        if self.engine == "model":
+            from trustroute.harness.simulation.model_engine import run_model_episode
+
+            return lambda policy: run_model_episode(setup, policy, driver, episode_id, sumo_seed)
+        from trustroute.harness.simulation.episode import run_episode
+
+        net_path = self.net_path
+        return lambda policy: run_episode(setup, policy, driver, episode_id, sumo_seed, net_path=net_path)
+
+    def _abort(self) -> None:
+        """End a running episode (its SUMO session closes) and wait for its thread."""
+        if self._thread is None:
+            return
+        if self._thread.is_alive():
+            self._to_episode.put(_ABORT)
+            while self._to_agent.get()[0] not in ("aborted", "end", "error"):
+                pass
+        self._thread.join()
+        self._thread = None
+
+    def _receive(self) -> tuple[str, object]:
+        kind, payload = self._to_agent.get()
+        if kind == "error":
+            self._thread.join()
+            self._thread = None
+            raise payload
+        return kind, payload
+
+    # -- observations ---------------------------------------------------------------------------
+    def _observation(self, road: str, dfa_state: int, belief: np.ndarray, junctions: int) -> dict:
+        self._road = road
+        return {
+            "road": int(self.town.state_index(road)),
+            "dfa_state": int(dfa_state),
+            "belief": np.array(belief, dtype=np.float64),
+            "junctions": int(junctions),
+        }
+
+    def _info(self) -> dict:
+        legal = self._legal[self._road]
+        mask = np.zeros(self._width, dtype=np.int8)
+        mask[: len(legal)] = 1
+        return {"action_mask": mask, "road_name": self._road, "legal_junctions": tuple(legal)}
+
+    def _decision(self, context: DecisionContext) -> dict:
+        return self._observation(context.road, context.dfa_state, context.belief, context.junctions_driven)
+
+    def _final(self, record) -> tuple[dict, float, bool, bool, dict]:
+        self._thread.join()
+        self._thread = None
+        self.last_record = record
+        last = record.roads.iloc[-1]
+        summary = dict(record.summary)
+        observation = self._observation(str(last["directed_road"]), int(last["dfa_state"]),
+                                        np.asarray(last["belief_after"], dtype=np.float64),
+                                        int(summary["junctions"]))
+        reason = summary["end_reason"]
+        info = {**self._info(), "end_reason": reason, "summary": summary}
+        terminated = reason in ("accepted", "rejected")
+        return observation, float(reason == "accepted"), terminated, reason == "cap", info
+
+    # -- the gymnasium API ----------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        super().reset(seed=seed)
+        self._abort()
+        rng = self.np_random
+        sumo_seed = int(rng.integers(0, 2**31 - 1))
+        driver = SyntheticDriver(self.driver_model, rng, report_accuracy=self.report_accuracy)
+        self._episodes += 1
+        episode_id = f"gym-{self.scldtl_spec.name}-{self._episodes:06d}"
+        policy = AgentPolicy(self._to_agent, self._to_episode)
+        self._thread = threading.Thread(target=_episode_thread, name=episode_id, daemon=True,
+                                        args=(self._runner(driver, episode_id, sumo_seed), policy,
+                                              self._to_agent))
+        self._thread.start()
+        kind, payload = self._receive()
+        if kind != "decide":
+            self._thread.join()
+            self._thread = None
+            raise ValueError(f"spec {self.scldtl_spec.name!r} is decided on its start road "
+                             f"({payload.summary['end_reason']}): there is no junction to choose")
+        return self._decision(payload), self._info()
+
+    def step(self, action: int) -> tuple[dict, float, bool, bool, dict]:
+        if self._thread is None:
+            raise RuntimeError("the episode is over (or never started): call reset()")
+        legal = self._legal[self._road]
+        self._to_episode.put(legal[int(action) % len(legal)])
+        kind, payload = self._receive()
+        if kind == "decide":
+            return self._decision(payload), 0.0, False, False, self._info()
+        return self._final(payload)
+
+    def close(self) -> None:
+        self._abort()
+        super().close()
+
+
+def register() -> None:
+    """Register ENV_ID with gymnasium (idempotent)."""
+    if ENV_ID not in gymnasium.registry:
+        gymnasium.register(id=ENV_ID, entry_point=f"{__name__}:TrustRoutingEnv")
+
+
+register()

@@ -1,0 +1,53 @@
+"""Incidents as SUMO events, one module per kind behind one interface (base.Incident).
+
+`inject(kind, sumo, scene)` creates the SUMO objects of an incident on the road of `scene`
+(or schedules them: a late pedestrian, an oncoming truck that enters later); "none" creates
+nothing (returns None). The runner asks each live incident when it is in view, steps it, lets
+it add its measures to the road's performance, and removes it when the ego leaves its road.
+The scenes are described, with their distributions, in docs/scenes.md.
+"""
+
+from __future__ import annotations
+
+from trustroute.harness.simulation.incidents import obstacle, oncoming, pedestrian, truck
+from trustroute.harness.simulation.incidents.base import EgoState, Incident, Scene
+
+INJECTORS = {
+    "pedestrian": pedestrian.inject,
+    "obstacle": obstacle.inject,
+    "truck": truck.inject,
+}
+
+__all__ = ["EgoState", "Incident", "Scene", "INJECTORS", "inject", "define_types"]
+
+
+# The SUMO types each kind's objects use (the pedestrian walks as SUMO's default person type).
+TYPE_DEFINERS = {
+    "pedestrian": (),
+    "obstacle": (obstacle.define_type, oncoming.define_type),
+    "truck": (oncoming.define_type, truck.define_type),
+}
+
+
+def define_types(sumo) -> None:
+    """Every vehicle type the incident kinds use (once per simulation)."""
+    obstacle.define_type(sumo)
+    oncoming.define_type(sumo)
+    truck.define_type(sumo)
+
+
+def inject(kind: str, sumo, scene: Scene, defined: set | None = None) -> Incident | None:
+    """The incident of `kind` on scene.road. defined: the type definers already run in this
+    simulation; the kind's missing types are defined first and added to it (an episode defines
+    only the types of the kinds it meets, about 20 TraCI calls less on a route without them).
+    None: the caller has run define_types."""
+    if kind == "none":
+        return None
+    if kind not in INJECTORS:
+        raise ValueError(f"unknown incident kind {kind!r}; known: {', '.join(sorted(INJECTORS))}, none")
+    if defined is not None:
+        for definer in TYPE_DEFINERS[kind]:
+            if definer not in defined:
+                definer(sumo)
+                defined.add(definer)
+    return INJECTORS[kind](sumo, scene)

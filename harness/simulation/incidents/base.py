@@ -1,0 +1,159 @@
+"""The one interface every incident kind implements, and the scene an incident is injected into.
+
+An incident belongs to a directed road. `inject` is called when the ego commits to that road
+(the route is extended one road ahead), so the SUMO objects are in place (or timed to arrive)
+when the ego enters it; `step` runs every simulation step while the incident is live and may
+insert objects whose timing depends on the ego (a late pedestrian, an oncoming truck);
+`measure` feeds the road's PerformanceMonitor with what only the incident knows (head-on gaps,
+the distance to a person on the crossing); `is_passed` says when the ego is past it; `remove`
+takes every SUMO object out (idempotent). Kinds live one per module (pedestrian.py,
+obstacle.py, truck.py) and are chosen by name in `harness.simulation.incidents.inject`. Every random draw
+of a scene comes from `Scene.rng`, the episode's seeded scene generator (docs/scenes.md).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple, Protocol
+
+import numpy as np
+
+NOT_ON_THE_NET = 1e8   # metres: beyond any town; SUMO's invalid position is about -1.07e9
+
+
+class EgoState(NamedTuple):
+    """The ego as the runner read it this step (one subscription); a NamedTuple: built every step."""
+
+    time: float
+    road: str          # edge id; internal junction edges start with ':'
+    lane_position: float
+    x: float
+    y: float
+    speed: float
+    lane: str = ""     # lane id; while overtaking it is the opposite road's lane
+    angle: float = 0.0  # heading, degrees clockwise from north (SUMO's convention)
+    acceleration: float = 0.0   # m/s² in the last step (negative: braking)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Where an incident is injected: its road, the road's length, and unique id prefix.
+
+    ego_distance: metres the ego still has to drive to the start of `road` when the incident is
+    injected (its commit point on the previous road plus the junction); incidents time their
+    objects with it. rng: the episode's scene generator; overrides: fixed values for a scene's
+    draws (tests, screenshots), keyed by the draw's name in the kind's module.
+    """
+
+    road: str
+    reverse_road: str | None   # the opposite directed road (pedestrians walk from its sidewalk)
+    road_length: float
+    prefix: str                # unique per episode and road, e.g. "inc3"
+    ego_id: str
+    time: float
+    ego_distance: float = 40.0
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    overrides: dict = field(default_factory=dict)
+    road_speed: float = 13.89
+    step_length: float = 0.5   # seconds per simulation step
+    observed_length: float | None = None   # metres of the road watched before the incident is
+                                           # removed (the ego's commit point); None: all of it
+
+    @property
+    def watched(self) -> float:
+        """Metres into the road until which the incident is in the simulation."""
+        return self.road_length if self.observed_length is None else max(0.0, self.observed_length)
+
+    def draw(self, name: str, sample):
+        """A scene parameter: the override if given, else `sample(rng)` (always drawn, so the
+        generator's stream does not depend on which values are overridden)."""
+        value = sample(self.rng)
+        return self.overrides.get(name, value)
+
+
+class Incident(Protocol):
+    kind: str
+    road: str
+    sumo_ids: tuple[str, ...]
+
+    def position(self, sumo) -> tuple[float, float] | None:
+        """Where the incident object is now (None when it is gone or not yet in the simulation)."""
+
+    def step(self, sumo, ego: EgoState) -> None:
+        """Per-step behaviour (e.g. a pedestrian stepping onto the crossing late)."""
+
+    def measure(self, sumo, ego: EgoState, monitor) -> None:
+        """Add this step's incident-specific measures to the road's PerformanceMonitor."""
+
+    def is_passed(self, sumo, ego: EgoState) -> bool:
+        """True once the ego is past the incident."""
+
+    def remove(self, sumo) -> None:
+        """Take every SUMO object of the incident out of the simulation (safe to call twice)."""
+
+    def details(self) -> str:
+        """The scene's drawn parameters, as `key=value` pairs for the incidents table."""
+
+
+# The vehicle-backed kinds (obstacle, truck) share these.
+
+def vehicle_present(sumo, vehicle_id: str) -> bool:
+    # getRoadID raises for a vehicle not (or no longer) in the simulation: one call, no ID list.
+    try:
+        sumo.vehicle.getRoadID(vehicle_id)
+    except sumo.TraCIException:
+        return False
+    return True
+
+
+def vehicle_position(sumo, vehicle_id: str) -> tuple[float, float] | None:
+    """Where the incident's vehicle is, or None when it is not in the simulation."""
+    try:
+        x, y = sumo.vehicle.getPosition(vehicle_id)
+    except sumo.TraCIException:
+        return None
+    # A vehicle added this step but not yet inserted reports SUMO's invalid position.
+    return None if abs(x) > NOT_ON_THE_NET or abs(y) > NOT_ON_THE_NET else (x, y)
+
+
+def remove_vehicle(sumo, vehicle_id: str) -> None:
+    """Take the vehicle out; also reaches one still waiting for insertion, and one already gone
+    raises inside SUMO, which is fine (removal is idempotent)."""
+    with contextlib.suppress(sumo.TraCIException):
+        sumo.vehicle.remove(vehicle_id)
+
+
+def park_vehicle(sumo, vehicle_id: str, route_id: str, road: str, position: float, type_id: str) -> None:
+    """A vehicle parked in the road's driving lane for good: a stop that never ends, whose range
+    already holds the vehicle's front, so it never moves and never leaves by itself. (A stop
+    rather than a speed held at 0: SUMO's drivers treat a stopped vehicle as one to overtake.)"""
+    sumo.route.add(route_id, [road])
+    sumo.vehicle.add(vehicle_id, route_id, typeID=type_id, depart="now", departLane="1",
+                     departPos=f"{position:.2f}", departSpeed="0")
+    sumo.vehicle.setStop(vehicle_id, road, pos=position + 0.05, laneIndex=1, duration=1e9,
+                         startPos=position - 1.0)
+    sumo.vehicle.setLaneChangeMode(vehicle_id, 0)
+
+
+def head_on_ttc(sumo, ego: EgoState, vehicle_id: str) -> float:
+    """Time to a head-on collision with `vehicle_id` when both are in one lane driving towards
+    each other (one of them overtaking through the oncoming lane); inf otherwise or when gone."""
+    try:
+        lane = sumo.vehicle.getLaneID(vehicle_id)
+    except sumo.TraCIException:
+        return math.inf
+    if lane != ego.lane:
+        return math.inf
+    x, y = sumo.vehicle.getPosition(vehicle_id)
+    angle = math.radians(sumo.vehicle.getAngle(vehicle_id))
+    ego_angle = math.radians(ego.angle)
+    # Towards each other: opposite headings, and the vehicle's heading points at the ego.
+    opposite = math.cos(angle - ego_angle) < 0
+    towards = (ego.x - x) * math.sin(angle) + (ego.y - y) * math.cos(angle)
+    if not opposite or towards <= 0:
+        return math.inf
+    closing = ego.speed + sumo.vehicle.getSpeed(vehicle_id)
+    gap = math.dist((x, y), (ego.x, ego.y))   # front to front: both fronts face each other
+    return gap / closing if closing > 0 else math.inf

@@ -1,0 +1,193 @@
+"""An oncoming vehicle timed to meet the ego: used by the truck and the obstacle scenes.
+
+`schedule_oncoming` places a truck on the opposite directed road so that, at its speed, it
+reaches the point `meet_at` metres into the ego's road `meet_in` seconds from now. When that
+needs more road than the opposite road has (most meetings on Town01's 50-130 m roads), the
+truck starts on a road leading into it (`upstream_road`) and turns in, so it is already in the
+simulation, where SUMO's overtaking checks can see it, when the ego decides whether to pull
+out; if that road is too short too, it enters at that road's start later. With
+`from_upstream=False` (the obstacle scene's rare "unseen" truck) it instead enters at the
+opposite road's start later, at the time that keeps the meeting: a truck turning in from a
+side road that nobody could see, possibly while the ego is already in the oncoming lane.
+`OncomingVehicle` records where and when the two actually passed each other in SUMO
+(`met_time`, `met_x`, `met_y`) and feeds the head-on TTC to the road's PerformanceMonitor.
+
+Both checks read the truck from SUMO only when they can matter: the gap between the two
+fronts shrinks by at most `MAX_CLOSING` m/s, so while it is large the next read is scheduled
+for when it could first come within `WATCH_HORIZON` seconds of a meeting (an exact bound,
+not a sampling: the head-on TTC below the horizon and the meeting time are unchanged).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from trustroute.harness.simulation.incidents.base import (
+    EgoState,
+    Scene,
+    head_on_ttc,
+    remove_vehicle,
+    vehicle_position,
+    vehicle_present,
+)
+
+TYPE_ID = "trustroute_truck"
+TRUCK_SPEED = 11.0     # m/s (40 km/h): a loaded truck on a 50 km/h town road
+TRUCK_LENGTH = 12.0
+MAX_CLOSING = 30.0     # m/s: above the ego's 13.89 plus the truck's 11 (both at most at their limits)
+WATCH_HORIZON = 3.0    # s: above every head-on TTC limit (harness/simulation/performance.py)
+GONE_BEHIND = 60.0     # metres behind the ego after the meeting: the vehicle leaves the simulation
+
+
+def define_type(sumo) -> None:
+    sumo.vehicletype.copy("DEFAULT_VEHTYPE", TYPE_ID)
+    sumo.vehicletype.setVehicleClass(TYPE_ID, "truck")
+    sumo.vehicletype.setShapeClass(TYPE_ID, "truck")
+    sumo.vehicletype.setLength(TYPE_ID, TRUCK_LENGTH)
+    sumo.vehicletype.setWidth(TYPE_ID, 2.5)
+    sumo.vehicletype.setMaxSpeed(TYPE_ID, TRUCK_SPEED)
+    sumo.vehicletype.setAccel(TYPE_ID, 1.0)
+    sumo.vehicletype.setImperfection(TYPE_ID, 0.0)
+    sumo.vehicletype.setSpeedDeviation(TYPE_ID, 0.0)
+    sumo.vehicletype.setColor(TYPE_ID, (120, 120, 255, 255))
+
+
+@dataclass
+class OncomingVehicle:
+    vehicle_id: str
+    route_id: str
+    road: str               # the opposite road it drives
+    depart_position: float
+    insert_time: float      # sim time it enters (now, or later at the road's far end)
+    meet_at: float          # metres into the ego's road
+    meet_in: float          # seconds after injection, as scheduled
+    road_before: str = ""   # the road leading into `road` it starts on ("" when it starts on `road`)
+    inserted: bool = False
+    met_time: float = math.nan
+    met_x: float = math.nan
+    met_y: float = math.nan
+    _gone: bool = False
+    _on_road: bool = False
+    _next_meeting_check: float = -math.inf
+    _next_ttc_check: float = -math.inf
+
+    def insert(self, sumo) -> None:
+        sumo.vehicle.add(self.vehicle_id, self.route_id, typeID=TYPE_ID, depart="now", departLane="1",
+                         departPos=f"{self.depart_position:.2f}", departSpeed="max")
+        self.inserted = True
+
+    def _quiet_until(self, now: float, gap: float) -> float:
+        """The earliest time the gap could come within WATCH_HORIZON seconds of closing."""
+        return now + max(0.0, gap - MAX_CLOSING * WATCH_HORIZON) / MAX_CLOSING
+
+    def step(self, sumo, ego: EgoState) -> None:
+        if not self.inserted:
+            if ego.time >= self.insert_time:
+                self.insert(sumo)
+            return
+        if self._gone or ego.time < self._next_meeting_check:
+            return
+        if not math.isnan(self.met_time):
+            self._leave_when_behind(sumo, ego)
+            return
+        where = vehicle_position(sumo, self.vehicle_id)
+        if where is None:
+            self._gone = self._gone or not vehicle_present(sumo, self.vehicle_id)
+            return
+        x, y = where
+        self._next_meeting_check = self._quiet_until(ego.time, math.dist((x, y), (ego.x, ego.y)))
+        if self.road_before and not self._on_road:
+            # Still on the road leading in or turning: its heading says nothing about the meeting.
+            if sumo.vehicle.getRoadID(self.vehicle_id) != self.road:
+                return
+            self._on_road = True
+        angle = math.radians(sumo.vehicle.getAngle(self.vehicle_id))
+        # Met: the ego is no longer ahead of the truck along the truck's heading.
+        if (ego.x - x) * math.sin(angle) + (ego.y - y) * math.cos(angle) <= 0:
+            self.met_time, self.met_x, self.met_y = ego.time, x, y
+
+    def _leave_when_behind(self, sumo, ego: EgoState) -> None:
+        """After the meeting the vehicle drives away behind the ego, where nothing the ego does
+        depends on it: it leaves the simulation once `GONE_BEHIND` metres away (SUMO then has one
+        vehicle less to step)."""
+        where = vehicle_position(sumo, self.vehicle_id)
+        if where is None:
+            self._gone = True
+            return
+        gap = math.dist(where, (ego.x, ego.y))
+        if gap >= GONE_BEHIND:
+            remove_vehicle(sumo, self.vehicle_id)
+            self._gone = True
+        else:
+            self._next_meeting_check = ego.time + (GONE_BEHIND - gap) / MAX_CLOSING
+
+    def measure(self, sumo, ego: EgoState, monitor) -> None:
+        """The head-on TTC of this step, when it can be below WATCH_HORIZON."""
+        if not self.inserted or self._gone or ego.time < self._next_ttc_check:
+            return
+        where = vehicle_position(sumo, self.vehicle_id)
+        if where is None:
+            return
+        x, y = where
+        self._next_ttc_check = self._quiet_until(ego.time, math.dist((x, y), (ego.x, ego.y)))
+        ttc = head_on_ttc(sumo, ego, self.vehicle_id)
+        if ttc < WATCH_HORIZON:
+            monitor.head_on(ttc)
+
+    def remove(self, sumo) -> None:
+        remove_vehicle(sumo, self.vehicle_id)
+
+    def details(self) -> str:
+        return (f"oncoming={self.vehicle_id} meet_at={self.meet_at:.1f} meet_in={self.meet_in:.1f} "
+                f"met_time={self.met_time:.1f} from={self.road_before or self.road}")
+
+
+TURNS = {"s": 0, "r": 1, "l": 1, "R": 2, "L": 2}   # SUMO link directions, straightest first (no U-turn)
+
+
+def upstream_road(sumo, scene: Scene) -> str | None:
+    """The road that leads into scene.reverse_road at the junction where the ego's road ends, other
+    than the ego's own road, without a U-turn: the straightest, then the longest, then by id.
+    Where an oncoming truck comes from."""
+    junction = scene.road.split("-")[1]
+    roads = []
+    for edge in sumo.junction.getIncomingEdges(junction):
+        if edge.startswith(":") or edge == scene.road:
+            continue
+        lane = f"{edge}_1"
+        for link in sumo.lane.getLinks(lane):
+            if link[0].rsplit("_", 1)[0] == scene.reverse_road and link[6] in TURNS:
+                roads.append((TURNS[link[6]], -sumo.lane.getLength(lane), edge))
+    return min(roads)[2] if roads else None
+
+
+def schedule_oncoming(sumo, scene: Scene, meet_at: float, meet_in: float, vehicle_id: str,
+                      speed: float = TRUCK_SPEED, from_upstream: bool = True) -> OncomingVehicle:
+    """A truck on scene.reverse_road timed to pass `meet_at` (ego's road coordinates) in `meet_in` s,
+    starting on the road leading into it when the reverse road alone is too short for that
+    (unless `from_upstream` is False: then it turns in unseen, entering at the road's start later)."""
+    road = scene.reverse_road
+    reverse_length = sumo.lane.getLength(f"{road}_1")
+    meeting_on_reverse = max(0.0, reverse_length - meet_at)
+    depart = meeting_on_reverse - speed * max(meet_in, 0.0)
+    roads = [road]
+    before = upstream_road(sumo, scene) if depart < 0 and from_upstream else None
+    if before is not None:
+        # The junction's internal lane adds its length to the way; the turn's slowing is not
+        # modelled (met_time records when the two really passed each other).
+        before_length = sumo.lane.getLength(f"{before}_1")
+        via = sumo.lane.getLinks(f"{before}_1")
+        inside = next((sumo.lane.getLength(link[4]) for link in via
+                       if link[0].rsplit("_", 1)[0] == road and link[4]), 0.0)
+        depart += before_length + inside
+        roads = [before, road]
+    delay = 0.0 if depart >= 0 else -depart / speed
+    route_id = f"{vehicle_id}_route"
+    sumo.route.add(route_id, roads)
+    vehicle = OncomingVehicle(vehicle_id=vehicle_id, route_id=route_id, road=road,
+                              depart_position=max(depart, 0.0), insert_time=scene.time + delay,
+                              meet_at=meet_at, meet_in=meet_in, road_before=roads[0] if before else "")
+    if delay == 0.0:
+        vehicle.insert(sumo)
+    return vehicle

@@ -1,0 +1,469 @@
+"""Rerun recording of one episode (`--rrd PATH`), written from the episode's logs after the run.
+
+It reads only these columns of the episode's logs, so scene and harness changes elsewhere leave it
+working: roads (index, directed_road, action, incident, takeover, trust_after, reported_trust,
+belief_after, dfa_state, sim_time_in, sim_time_out), kinematics (time, x, y, mode), incidents
+(index, incident, injected_time, in_view_time, x, y, removed_time, takeover_start, takeover_end),
+summary (episode_id, end_reason, sim_seconds). Reported trust may be -1 or null where none was given.
+
+Timeline "sim_time" (a duration, seconds of SUMO time). Entities:
+- world/lanes, world/junctions                static: every lane of the net; junction names
+- world/start, world/waypoints/<atom>         static: the spec's start road and each state atom's
+                                              roads, drawn wide and labelled (v1, v2, ...)
+- world/incident_roads                        static: where the town places each incident kind
+- world/incidents/<i>_<kind>                  a labelled box from injection until removal
+- world/ego/box                               oriented box (heading from successive positions), one
+                                              row per SUMO step via send_columns; red when manual
+- world/ego/trail                             the last TRAIL_SECONDS of positions, every TRAIL_EVERY s
+- world/ego/plan                              the road being driven and the next road the policy
+                                              committed to, from each decision on
+- trust/true, trust/reported, trust/belief_mean   scalars (1-7) at each road's observation
+- belief/p_trust_ge_6, belief/<atom>, belief/<atom>_threshold   the belief predicates of the spec
+                                              (coeffs · b) and their thresholds (probability)
+- belief/distribution                         bar chart of the whole belief b(1..7)
+- state/control (autopilot/manual: takeover intervals as coloured bands), state/road, state/dfa
+- events                                      text log: road entered, incident in view, takeover,
+                                              hand-back, trust reported, DFA state change, end
+
+A default blueprint (`episode_blueprint`) goes into the same file: the map on the left, the trust and
+belief plots, the state timeline, the belief bars and the event log on the right.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from trustroute.harness.simulation.driving_style import MANUAL
+
+TIMELINE = "sim_time"
+AUTO_COLOR = (240, 240, 240)
+MANUAL_COLOR = (230, 40, 40)
+PLAN_COLOR = (60, 200, 255)
+START_COLOR = (80, 220, 120)
+WAYPOINT_COLORS = ((255, 215, 0), (255, 120, 200), (170, 120, 255), (0, 200, 200), (255, 160, 60))
+INCIDENT_COLORS = {"pedestrian": (255, 140, 0), "obstacle": (255, 200, 0), "truck": (120, 120, 255)}
+# Metres drawn (the car is 5 m): visible on the 400 m Town01 map, shorter than its 49 m shortest road.
+EGO_LENGTH = 12.0
+EGO_WIDTH = 5.5
+TRAIL_SECONDS = 30.0
+TRAIL_POINTS = 15
+TRAIL_EVERY = 2.0  # seconds of sim time between trail updates (the box moves every step)
+HIGH_TRUST = 6  # the level of the P(trust >= 6) line (the paper's "hightrust")
+ENTITIES = (
+    "world/lanes",
+    "world/junctions",
+    "world/start",
+    "world/incident_roads",
+    "world/ego/box",
+    "world/ego/trail",
+    "world/ego/plan",
+    "trust/true",
+    "trust/reported",
+    "trust/belief_mean",
+    "belief/p_trust_ge_6",
+    "belief/distribution",
+    "state/control",
+    "state/road",
+    "state/dfa",
+    "events",
+)
+
+
+def _net(net_path: Path):
+    import sumolib
+
+    return sumolib.net.readNet(str(net_path), withInternal=True, withPedestrianConnections=True)
+
+
+def lane_strips(net) -> list[np.ndarray]:
+    """Shapes of the net's vehicle lanes, sidewalks and crossings (internal lanes left out)."""
+    strips = []
+    for edge in net.getEdges(withInternal=True):
+        if edge.getFunction() in ("internal", "walkingarea"):
+            continue
+        for lane in edge.getLanes():
+            strips.append(np.asarray(lane.getShape(), dtype=np.float32))
+    return strips
+
+
+def road_shape(net, road: str) -> np.ndarray:
+    """The centre line of a road's vehicle lane (the last lane: sidewalks come first)."""
+    lanes = net.getEdge(road).getLanes()
+    return np.asarray(lanes[-1].getShape(), dtype=np.float32)
+
+
+def _midpoint(shape: np.ndarray) -> np.ndarray:
+    steps = np.linalg.norm(np.diff(shape, axis=0), axis=1)
+    along = np.concatenate([[0.0], np.cumsum(steps)])
+    half = along[-1] / 2
+    return np.array([np.interp(half, along, shape[:, 0]), np.interp(half, along, shape[:, 1])])
+
+
+def headings(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Heading (radians) at each step from the displacement since the last move (held while stopped)."""
+    dx, dy = np.diff(x, prepend=x[:1]), np.diff(y, prepend=y[:1])
+    moving = np.hypot(dx, dy) > 1e-3
+    angle = np.arctan2(dy, dx)
+    if not moving.any():
+        return np.zeros_like(x)
+    # Carry the last moving heading forward (and the first one back to the start).
+    index = np.where(moving, np.arange(x.size), 0)
+    np.maximum.accumulate(index, out=index)
+    first = int(np.argmax(moving))
+    index[:first] = first
+    return angle[index]
+
+
+def box_corners(x: np.ndarray, y: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """[steps, 5, 2] closed outlines of the ego's box, nose forward."""
+    local = np.array([[0.5, 0.5], [0.5, -0.5], [-0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]]) * [
+        EGO_LENGTH,
+        EGO_WIDTH,
+    ]
+    local = np.vstack([local[:1], [[0.75 * EGO_LENGTH, 0.0]], local[1:]])  # a pointed nose shows heading
+    cos, sin = np.cos(heading)[:, None], np.sin(heading)[:, None]
+    px = x[:, None] + cos * local[None, :, 0] - sin * local[None, :, 1]
+    py = y[:, None] + sin * local[None, :, 0] + cos * local[None, :, 1]
+    return np.stack([px, py], axis=-1).astype(np.float32)
+
+
+def trail_strips(x: np.ndarray, y: np.ndarray, time: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per step, the positions of the last TRAIL_SECONDS sampled at TRAIL_POINTS: (points, lengths)."""
+    step = float(np.median(np.diff(time))) if time.size > 1 else 1.0
+    stride = max(1, int(round(TRAIL_SECONDS / TRAIL_POINTS / step)))
+    offsets = np.arange(TRAIL_POINTS)[::-1] * stride  # oldest first
+    index = np.arange(x.size)[:, None] - offsets[None, :]
+    valid = index >= 0
+    index = np.clip(index, 0, None)
+    lengths = valid.sum(axis=1)
+    points = np.stack([x[index][valid], y[index][valid]], axis=-1).astype(np.float32)
+    return points, lengths
+
+
+def _valid_report(value: object) -> bool:
+    return not pd.isna(value) and int(value) >= 1
+
+
+def episode_blueprint():
+    """The default layout: a large map, the trust and belief plots, states, belief bars, events."""
+    import rerun.blueprint as rrb
+
+    # The plots and the state lanes show the whole episode, with the time cursor moving across it.
+    whole = rrb.VisibleTimeRange(
+        TIMELINE, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+    )
+    map_view = rrb.Spatial2DView(origin="world", name="map", background=(25, 25, 30))
+    trust_view = rrb.TimeSeriesView(
+        origin="trust",
+        name="trust (1-7): true, reported, belief mean",
+        axis_y=rrb.ScalarAxis(range=(1.0, 7.0)),
+        time_ranges=whole,
+    )
+    belief_view = rrb.TimeSeriesView(
+        origin="belief",
+        name="belief: P(trust>=6), spec predicates, thresholds",
+        contents=["+ belief/**", "- belief/distribution"],
+        axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
+        time_ranges=whole,
+    )
+    states_view = rrb.StateTimelineView(
+        origin="state", name="control (takeovers), road, DFA state", time_ranges=whole
+    )
+    bars = rrb.BarChartView(origin="belief/distribution", name="belief over trust 1..7")
+    events = rrb.TextLogView(origin="events", name="events")
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            map_view,
+            rrb.Vertical(
+                trust_view,
+                belief_view,
+                states_view,
+                rrb.Horizontal(bars, events, column_shares=[1, 2]),
+                row_shares=[3, 3, 2, 3],
+            ),
+            column_shares=[3, 2],
+        ),
+        rrb.TimePanel(state="collapsed", timeline=TIMELINE),
+        collapse_panels=True,
+    )
+
+
+def write_recording(path: Path, net_path: Path, record, setup) -> Path:
+    """Write `record` (an EpisodeRecord of the SUMO engine) as a Rerun .rrd at `path`, with its blueprint."""
+    import rerun as rr
+
+    episode_id = str(record.summary["episode_id"])
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream("trustroute", recording_id=f"trustroute-{episode_id}")
+    rec.save(str(path), default_blueprint=episode_blueprint())
+    net = _net(Path(net_path))
+    _log_map(rec, net, setup)
+    _log_ego(rec, record.kinematics)
+    _log_plan(rec, net, record.roads, setup.town)
+    _log_incidents(rec, record.incidents)
+    _log_series(rec, record.roads, setup)
+    _log_events(rec, record)
+    rec.flush()
+    rec.disconnect()
+    return path
+
+
+def _log_map(rec, net, setup) -> None:
+    import rerun as rr
+
+    town, spec = setup.town, setup.spec
+    rec.log("world/lanes", rr.LineStrips2D(lane_strips(net), colors=(90, 90, 90), radii=0.8), static=True)
+    names = sorted(town.junctions)
+    rec.log(
+        "world/junctions",
+        rr.Points2D(
+            np.array([town.junctions[n] for n in names]),
+            labels=names,
+            radii=9.0,
+            colors=(200, 200, 200),
+            show_labels=True,
+        ),
+        static=True,
+    )
+    start = road_shape(net, spec.start)
+    rec.log(
+        "world/start",
+        rr.LineStrips2D(
+            [start], radii=6.0, colors=START_COLOR, labels=[f"start {spec.start}"], show_labels=True
+        ),
+        static=True,
+    )
+    for i, (atom, roads) in enumerate(sorted(spec.state_atoms.items())):
+        shapes = [road_shape(net, road) for road in sorted(roads)]
+        colour = WAYPOINT_COLORS[i % len(WAYPOINT_COLORS)]
+        rec.log(f"world/waypoints/{atom}", rr.LineStrips2D(shapes, radii=5.0, colors=colour), static=True)
+        rec.log(
+            f"world/waypoints/{atom}/label",
+            rr.Points2D(
+                np.array([_midpoint(s) for s in shapes]),
+                radii=2.0,
+                colors=colour,
+                labels=[f"{atom} ({road})" for road in sorted(roads)],
+                show_labels=True,
+            ),
+            static=True,
+        )
+    incident_roads = sorted(town.incidents.items())
+    if incident_roads:
+        rec.log(
+            "world/incident_roads",
+            rr.Points2D(
+                np.array([_midpoint(road_shape(net, road)) for road, _ in incident_roads]),
+                radii=5.0,
+                colors=[INCIDENT_COLORS.get(k, (200, 200, 200)) for _, k in incident_roads],
+                labels=[kind for _, kind in incident_roads],
+                show_labels=False,
+            ),
+            static=True,
+        )
+
+
+def _log_ego(rec, kinematics: pd.DataFrame) -> None:
+    import rerun as rr
+
+    time = kinematics["time"].to_numpy(dtype=float)
+    if time.size == 0:
+        return
+    x, y = kinematics["x"].to_numpy(dtype=float), kinematics["y"].to_numpy(dtype=float)
+    manual = kinematics["mode"].to_numpy() == MANUAL.name
+    times = rr.TimeColumn(TIMELINE, duration=time)
+    corners = box_corners(x, y, headings(x, y))
+    colours = np.where(manual[:, None], np.array(MANUAL_COLOR), np.array(AUTO_COLOR)).astype(np.uint8)
+    rec.send_columns(
+        "world/ego/box",
+        indexes=[times],
+        columns=[
+            *rr.LineStrips2D.columns(strips=list(corners)),
+            *rr.LineStrips2D.columns(colors=colours, radii=np.full(time.size, 1.5, dtype=np.float32)),
+        ],
+    )
+    points, lengths = trail_strips(x, y, time)
+    trails = np.split(points, np.cumsum(lengths)[:-1])
+    step = float(np.median(np.diff(time))) if time.size > 1 else 1.0
+    every = np.arange(0, time.size, max(1, int(round(TRAIL_EVERY / step))))
+    every = np.union1d(every, [time.size - 1])
+    rec.send_columns(
+        "world/ego/trail",
+        indexes=[rr.TimeColumn(TIMELINE, duration=time[every])],
+        columns=rr.LineStrips2D.columns(strips=[trails[i] for i in every]),
+    )
+    rec.log(
+        "world/ego/trail", rr.LineStrips2D.from_fields(colors=(255, 255, 255, 150), radii=2.0), static=True
+    )
+    # Control mode as a state lane: its autopilot/manual bands are the takeover intervals.
+    change = np.flatnonzero(np.concatenate([[True], manual[1:] != manual[:-1]]))
+    rec.send_columns(
+        "state/control",
+        indexes=[rr.TimeColumn(TIMELINE, duration=time[change])],
+        columns=rr.StateChange.columns(state=np.where(manual[change], "manual", "autopilot")),
+    )
+
+
+def _log_plan(rec, net, roads: pd.DataFrame, town) -> None:
+    import rerun as rr
+
+    for row in roads.itertuples(index=False):
+        decided = float(row.sim_time_out)
+        if pd.isna(row.action) or not row.action or math.isnan(decided):
+            continue
+        following = town.successor(row.directed_road, row.action)
+        rec.set_time(TIMELINE, duration=decided)
+        rec.log(
+            "world/ego/plan",
+            rr.LineStrips2D(
+                [road_shape(net, row.directed_road), road_shape(net, following)],
+                radii=3.5,
+                colors=PLAN_COLOR,
+                labels=["", f"next: {following}"],
+                show_labels=True,
+            ),
+        )
+
+
+def _log_incidents(rec, incidents: pd.DataFrame) -> None:
+    import rerun as rr
+
+    for row in incidents.itertuples(index=False):
+        if math.isnan(row.x) or math.isnan(row.injected_time):
+            continue
+        entity = f"world/incidents/{row.index}_{row.incident}"
+        rec.set_time(TIMELINE, duration=float(row.injected_time))
+        rec.log(
+            entity,
+            rr.Boxes2D(
+                centers=[[row.x, row.y]],
+                half_sizes=[[14.0, 14.0]],
+                radii=2.0,
+                labels=[row.incident],
+                show_labels=True,
+                colors=INCIDENT_COLORS.get(row.incident, (200, 200, 200)),
+            ),
+        )
+        if not math.isnan(row.removed_time):
+            rec.set_time(TIMELINE, duration=float(row.removed_time))
+            rec.log(entity, rr.Clear(recursive=False))
+
+
+def _observation_times(roads: pd.DataFrame) -> np.ndarray:
+    """When each road's observation is recorded: the start road at entry, the others at their end."""
+    times = roads["sim_time_out"].to_numpy(dtype=float).copy()
+    entered = roads["sim_time_in"].to_numpy(dtype=float)
+    times[roads["index"].to_numpy() == 0] = entered[roads["index"].to_numpy() == 0]
+    return np.where(np.isnan(times), entered, times)
+
+
+def _log_series(rec, roads: pd.DataFrame, setup) -> None:
+    import rerun as rr
+
+    times = _observation_times(roads)
+    column = rr.TimeColumn(TIMELINE, duration=times)
+    levels = np.asarray(setup.driver_model.trust_levels, dtype=float)
+    belief = np.array([np.asarray(b, dtype=float) for b in roads["belief_after"]])
+    high = levels >= HIGH_TRUST
+    series = {
+        "trust/true": (roads["trust_after"].to_numpy(dtype=float), "true trust", (40, 40, 40)),
+        "trust/belief_mean": (belief @ levels, "belief mean", (60, 200, 255)),
+        "belief/p_trust_ge_6": (belief[:, high].sum(axis=1), "P(trust >= 6)", (255, 215, 0)),
+    }
+    for i, (name, atom) in enumerate(sorted(setup.spec.belief_atoms.items())):
+        coeffs = np.asarray(atom.coeffs, dtype=float)
+        colour = WAYPOINT_COLORS[(i + 1) % len(WAYPOINT_COLORS)]
+        series[f"belief/{name}"] = (belief @ coeffs, f"{name}: coeffs . b", colour)
+        series[f"belief/{name}_threshold"] = (
+            np.full(len(times), float(atom.offset)),
+            f"{name} threshold (> {atom.offset:g})",
+            (150, 150, 150),
+        )
+    for entity, (values, label, colour) in series.items():
+        rec.log(entity, rr.SeriesLines(names=label, colors=colour, widths=2.0), static=True)
+        rec.send_columns(entity, indexes=[column], columns=rr.Scalars.columns(scalars=values))
+    reported = pd.to_numeric(roads["reported_trust"], errors="coerce").astype("float64").to_numpy()
+    given = ~np.isnan(reported) & (reported >= 1)
+    rec.log(
+        "trust/reported",
+        rr.SeriesPoints(names="reported trust", colors=(255, 120, 200), marker_sizes=4.0),
+        static=True,
+    )
+    if given.any():
+        rec.send_columns(
+            "trust/reported",
+            indexes=[rr.TimeColumn(TIMELINE, duration=times[given])],
+            columns=rr.Scalars.columns(scalars=reported[given]),
+        )
+    for t, b in zip(times, belief, strict=True):
+        rec.set_time(TIMELINE, duration=float(t))
+        rec.log("belief/distribution", rr.BarChart(b))
+    entered = roads["sim_time_in"].to_numpy(dtype=float)
+    rec.send_columns(
+        "state/road",
+        indexes=[rr.TimeColumn(TIMELINE, duration=entered)],
+        columns=rr.StateChange.columns(state=roads["directed_road"].astype(str).to_numpy()),
+    )
+    dfa = roads["dfa_state"].to_numpy()
+    change = np.flatnonzero(np.concatenate([[True], dfa[1:] != dfa[:-1]]))
+    rec.send_columns(
+        "state/dfa",
+        indexes=[rr.TimeColumn(TIMELINE, duration=times[change])],
+        columns=rr.StateChange.columns(state=[f"q{int(q)}" for q in dfa[change]]),
+    )
+
+
+def episode_events(record) -> list[tuple[float, str, str]]:
+    """(sim time, level, text) of everything worth a line in the event log, in time order."""
+    roads, incidents = record.roads, record.incidents
+    times = _observation_times(roads)
+    events: list[tuple[float, str, str]] = []
+    previous_state = None
+    for row, observed in zip(roads.itertuples(index=False), times, strict=True):
+        what = f" ({row.incident})" if row.index > 0 and not pd.isna(row.incident) else " (start)"
+        events.append(
+            (float(row.sim_time_in), "INFO", f"road {row.index} entered: {row.directed_road}{what}")
+        )
+        if _valid_report(row.reported_trust):
+            events.append(
+                (
+                    float(observed),
+                    "DEBUG",
+                    f"trust reported: {int(row.reported_trust)} (true {int(row.trust_after)})",
+                )
+            )
+        if previous_state is not None and int(row.dfa_state) != previous_state:
+            events.append((float(observed), "INFO", f"DFA state q{previous_state} -> q{int(row.dfa_state)}"))
+        previous_state = int(row.dfa_state)
+    for row in incidents.itertuples(index=False):
+        if not math.isnan(row.in_view_time):
+            events.append((float(row.in_view_time), "INFO", f"{row.incident} in view on road {row.index}"))
+        if bool(row.takeover) and not math.isnan(row.takeover_start):
+            events.append(
+                (float(row.takeover_start), "WARN", f"takeover on road {row.index} ({row.incident})")
+            )
+            if not math.isnan(row.takeover_end):
+                events.append(
+                    (float(row.takeover_end), "INFO", f"hand-back to the autopilot on road {row.index}")
+                )
+    reason = record.summary.get("end_reason") or "unknown"
+    level = "INFO" if reason == "accepted" else "WARN"
+    text = "spec accepted" if reason == "accepted" else f"episode ends: {reason}"
+    events.append((float(record.summary.get("sim_seconds", times[-1] if len(times) else 0.0)), level, text))
+    return sorted(events, key=lambda e: e[0])
+
+
+def _log_events(rec, record) -> None:
+    import rerun as rr
+
+    events = episode_events(record)
+    rec.send_columns(
+        "events",
+        indexes=[rr.TimeColumn(TIMELINE, duration=[e[0] for e in events])],
+        columns=rr.TextLog.columns(text=[e[2] for e in events], level=[e[1] for e in events]),
+    )

@@ -1,0 +1,162 @@
+"""Starting and closing SUMO: the one place that builds the command line (every option in one list).
+
+libsumo runs one simulation per process; `sumo_session` starts it and always closes it, so
+hundreds of episodes can run one after another in a process. Nothing happens at import time
+(libsumo itself is imported when a simulation starts).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+from trustroute.core.errors import InputError
+from trustroute.harness.simulation.performance import DEFAULT_LIMITS, PerformanceLimits
+from trustroute.networks.sumo_net import find_binary
+
+
+@dataclass(frozen=True)
+class SumoConfig:
+    """Simulation settings of an episode.
+
+    performance_limits: where `succ` ends, per incident kind (harness/simulation/performance.py).
+    background_vehicles: seeded background traffic, vehicles kept on the net (0: none).
+    """
+
+    step_length: float = 0.5        # seconds: large steps keep episodes fast, 0.5 s keeps yielding sane
+    max_sim_seconds: float = 7200.0  # a stuck ego is a bug: the runner stops with an error here
+    performance_limits: Mapping[str, PerformanceLimits] = field(default_factory=lambda: dict(DEFAULT_LIMITS))
+    background_vehicles: int = 0
+    gui: bool = False               # run in sumo-gui through TraCI (needs a display) instead of libsumo
+    output_dir: str | None = None   # also write SUMO's own FCD and route outputs here (sumo_files.py)
+
+
+@lru_cache(maxsize=1)
+def sumo_binary() -> str:
+    """The sumo binary of the eclipse-sumo wheel (libsumo needs its installation, not the process)."""
+    return find_binary("sumo")
+
+
+def sumo_command(net_path: Path, seed: int, config: SumoConfig) -> list[str]:
+    """The whole SUMO command line of an episode."""
+    return [
+        sumo_binary(),
+        "--net-file", str(net_path),
+        "--seed", str(int(seed)),
+        "--step-length", f"{config.step_length:g}",
+        "--time-to-teleport", "-1",             # never teleport: a stuck ego must show up as stuck
+        "--collision.action", "warn",           # collisions are logged and measured, never fatal
+        "--collision.check-junctions", "true",  # pedestrians on crossings are inside junctions
+        "--collision.mingap-factor", "0",       # a collision is a real overlap, not a minGap breach
+        "--pedestrian.model", "striping",
+        "--default.action-step-length", f"{config.step_length:g}",
+        "--no-step-log", "true",
+        "--no-warnings", "true",
+        "--duration-log.disable", "true",
+        "--verbose", "false",
+        *native_output_options(config),
+    ]
+
+
+def native_output_options(config: SumoConfig) -> list[str]:
+    """SUMO's FCD (every vehicle and person per step) and vehroute outputs, when output_dir is set."""
+    if config.output_dir is None:
+        return []
+    folder = Path(config.output_dir)
+    return [
+        "--fcd-output", str(folder / "fcd.xml"),
+        "--vehroute-output", str(folder / "routes.rou.xml"),
+        "--vehroute-output.last-route", "true",        # the ego's route as finally extended
+        "--vehroute-output.write-unfinished", "true",  # vehicles still driving when the episode ends
+        "--vehroute-output.exit-times", "true",
+    ]
+
+
+def _libsumo():
+    import libsumo
+
+    return libsumo
+
+
+class _TraciWithConstants:
+    """traci with its constants as attributes, like libsumo (the episode code uses `sumo.VAR_...`)."""
+
+    def __init__(self) -> None:
+        import traci
+
+        self._traci = traci
+
+    def __getattr__(self, name: str):
+        try:
+            return getattr(self._traci, name)
+        except AttributeError:
+            return getattr(self._traci.constants, name)
+
+
+def check_display() -> None:
+    """sumo-gui needs an X display: a one-line error when there is none."""
+    import os
+
+    if not os.environ.get("DISPLAY"):
+        raise InputError("--gui", "", "no display (DISPLAY is not set), so sumo-gui cannot open a window",
+                         "run on a machine with a display, under xvfb-run, or drop --gui and open the "
+                         "--rrd recording in the Rerun web viewer")
+
+
+@dataclass(frozen=True)
+class HotCalls:
+    """The four calls an episode makes every step, bound once per episode."""
+
+    step: Callable[[], object]
+    time: Callable[[], float]
+    subscription_results: Callable[[str], dict]
+    colliding_number: Callable[[], int]
+
+
+def hot_calls(sumo) -> HotCalls:
+    """The per-step calls as libsumo's native functions: its Python wrappers (a staticmethod per
+    call, and simulationStep's step-listener pass, which episodes do not use) cost a Python frame
+    each, about 500 per episode. With TraCI (sumo-gui) or a traced libsumo, the public API."""
+    native = getattr(getattr(sumo, "libsumo", None), "_libsumo", None)
+    # libsumo.start(traceFile=...) wraps its step for tracing: then keep the public calls.
+    traced = getattr(getattr(sumo, "_libsumo_step", None), "__qualname__", "") != "simulation.step"
+    if native is None or traced:
+        return HotCalls(sumo.simulationStep, sumo.simulation.getTime, sumo.vehicle.getSubscriptionResults,
+                        sumo.simulation.getCollidingVehiclesNumber)
+    return HotCalls(native.simulation_step, native.simulation_getTime, native.vehicle_getSubscriptionResults,
+                    native.simulation_getCollidingVehiclesNumber)
+
+
+@contextlib.contextmanager
+def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[object]:
+    """Start libsumo on `net_path`, yield the libsumo module, always close it.
+
+    An unreadable net or an unusable SUMO installation is an InputError (one line, exit 2).
+    """
+    command = sumo_command(net_path, seed, config)
+    if not Path(net_path).is_file():
+        raise InputError(str(net_path), "", "the SUMO net file does not exist",
+                         "run `trustroute net build` or pass an existing .net.xml")
+    if config.gui:
+        check_display()
+        # sumo-gui starts running at once and closes at the end; same options as the libsumo run.
+        command = [find_binary("sumo-gui"), *command[1:], "--start", "true", "--quit-on-end", "true"]
+        sumo = _TraciWithConstants()
+    else:
+        sumo = _libsumo()
+    try:
+        sumo.start(command)
+    except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError types
+        with contextlib.suppress(Exception):
+            sumo.close()
+        message = str(exc).strip().splitlines()
+        raise InputError(str(net_path), "", "SUMO cannot load the net"
+                         + (f" ({message[-1]})" if message else ""),
+                         "rebuild it with `trustroute net build` (delete the cached file)") from None
+    try:
+        yield sumo
+    finally:
+        sumo.close()

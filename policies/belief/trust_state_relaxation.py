@@ -1,0 +1,142 @@
+"""The trust-state relaxation: an upper bound on any policy's value from (road, θ, q).
+
+R(x, θ, q) is the value of a relaxation that observes θ and q and may choose the value of every
+belief atom; it bounds the value of any policy from above (docs/trust_states.md). It is computed
+by backward induction (bounded) or by value iteration from above (unbounded), each iterate plus
+a margin of 1e-12 so that floating-point rounding cannot take it below the true value.
+`RelaxedGuide` turns it into action values at a joint belief: the trust-state search expands its
+guided nodes with it and the trust-state table acts with it off its stored rows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.policies.logic.compiled import compile_spec
+from trustroute.policies.logic.dfa import DFA
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import TrustPOMDP
+
+RELAXATION_MARGIN = 1e-12
+RELAXATION_TOLERANCE = 1e-10
+MAX_RELAXATION_ITERATIONS = 100_000
+
+
+
+def relaxed_next_q(pomdp: TrustPOMDP, spec: Spec, dfa: DFA, labeller: Labeller) -> np.ndarray:
+    """int [n_q, n_x, n_trust, 2**m]: δ(q, L(x', θ', bits)) with the m belief atoms set by bits."""
+    n_x, n_t, n_q = pomdp.n_states, pomdp.n_trust, int(dfa.n_states)
+    m = int(labeller.belief_columns.size)
+    q, x, t, bits = (a.ravel() for a in np.meshgrid(np.arange(n_q), np.arange(n_x), np.arange(n_t),
+                                                     np.arange(2 ** m), indexing="ij"))
+    valuations = labeller.valuations(x, np.zeros((x.size, n_t)), t if labeller.reads_trust else None)
+    for j, column in enumerate(labeller.belief_columns.tolist()):
+        valuations[:, column] = (bits >> j) & 1
+    return np.asarray(dfa.step_many(q, valuations), dtype=np.int64).reshape(n_q, n_x, n_t, 2 ** m)
+
+
+def relaxed_values(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) -> np.ndarray:
+    """R [n_x, n_trust, n_q] (unbounded), or [horizon + 1, n_x, n_trust, n_q] with R[k] for k
+    junctions left: upper bounds on P(accepted) from (x, θ, q) for any policy."""
+    compiled = compile_spec(spec, pomdp.town)
+    dfa, labeller = compiled.dfa, compiled.labeller
+    next_q = relaxed_next_q(pomdp, spec, dfa, labeller)
+    n_x, n_t, n_q = pomdp.n_states, pomdp.n_trust, int(dfa.n_states)
+    accepting = np.asarray(dfa.accepting, dtype=bool)
+    rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
+    # P(θ' | θ, inc) summed over the observations: the relaxation sees θ, so (h, e) do not matter.
+    move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, pomdp.driver.trust_transition)
+    successors = pomdp.successor_table
+    valid = successors >= 0
+    x2 = np.where(valid, successors, 0)                           # [n_x, slots]
+    incident = pomdp.road_incident[x2]
+
+    def backup(values: np.ndarray) -> np.ndarray:
+        # best[q, x', θ'] = max over belief bits of values[x', θ', δ(q, L(x', θ', bits))]
+        best = values[np.arange(n_x)[None, :, None, None], np.arange(n_t)[None, None, :, None],
+                      next_q].max(axis=3)
+        # per (x, slot, θ, q): Σ_θ' move[inc(x2)][θ, θ'] best[q, x2, θ']
+        expected = np.einsum("astu,asqu->astq", move[incident], best.transpose(1, 0, 2)[x2])
+        expected = np.where(valid[:, :, None, None], expected, -np.inf).max(axis=1)
+        out = np.minimum(1.0, expected + RELAXATION_MARGIN)
+        out[:, :, accepting] = 1.0
+        out[:, :, rejecting] = 0.0
+        return out
+
+    if horizon is not None:
+        table = np.zeros((horizon + 1, n_x, n_t, n_q))
+        table[0, :, :, accepting] = 1.0
+        for k in range(1, horizon + 1):
+            table[k] = backup(table[k - 1])
+        return table
+    values = np.ones((n_x, n_t, n_q))
+    values[:, :, rejecting] = 0.0
+    for _ in range(MAX_RELAXATION_ITERATIONS):
+        new = backup(values)
+        change = float(np.max(values - new)) if new.size else 0.0
+        values = new
+        if change <= RELAXATION_TOLERANCE:
+            break
+    return values
+
+
+
+@dataclass(frozen=True, eq=False)
+class RelaxedGuide:
+    """The relaxation's action values at a joint belief: for each successor slot of road x,
+    Σ_{θ, q} J(θ, q) Σ_θ' P(θ' | θ, inc(x')) max_bits R(x', θ', δ(q, L(x', θ', bits))), with R
+    the relaxation's values for k junctions left after the move (horizon G: R[min(k, G)]; None:
+    the unbounded values). The acting rule of joint policies off their stored nodes
+    (policies/routing/trust_state_table.py)."""
+
+    pomdp: TrustPOMDP
+    best: np.ndarray            # [G + 1 or 1, n_q, n_x, n_trust]
+    move: np.ndarray            # [n_incidents, n_trust, n_trust]
+    horizon: int | None
+
+    def action_values(self, x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        """float [n, slots]: the values of the successor slots of roads x [n] at joint beliefs
+        [n, n_trust, n_q] (-inf where a road has no such slot)."""
+        k = 0 if self.horizon is None else min(max(left, 0), self.horizon)
+        x = np.asarray(x, dtype=np.int64)
+        successors = self.pomdp.successor_table[x]                     # [n, slots]
+        out = np.full(successors.shape, -np.inf)
+        best = self.best[k]                                             # [q, x, θ']
+        for slot in range(successors.shape[1]):
+            x2 = successors[:, slot]
+            has = x2 >= 0
+            if not has.any():
+                continue
+            rows, x2 = np.flatnonzero(has), x2[has]
+            after = np.einsum("ntu,qnu->ntq", self.move[self.pomdp.road_incident[x2]], best[:, x2, :])
+            out[rows, slot] = np.einsum("ntq,ntq->n", joint[rows], after)
+        return out
+
+    def greedy(self, x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        """int [n]: the slot of the largest action value (the first on ties)."""
+        return np.argmax(self.action_values(x, joint, left), axis=1)
+
+    def policy_slots(self, t: int, x: np.ndarray, joint: np.ndarray) -> np.ndarray:
+        """int [n]: the greedy slot at t junctions driven, k = horizon - t - 1 junctions left
+        after the move (the full horizon once t reaches it). The joint policy's rule off its
+        stored rows; the search expands its guided nodes with the very same call."""
+        horizon = self.horizon
+        left = horizon - t - 1 if horizon is not None and t < horizon else (horizon or 0)
+        return self.greedy(x, joint, left)
+
+
+def relaxed_guide(pomdp: TrustPOMDP, spec: Spec, horizon: int | None) -> RelaxedGuide:
+    """The RelaxedGuide of `spec` for junction horizon `horizon` (None: unbounded)."""
+    compiled = compile_spec(spec, pomdp.town)
+    next_q = relaxed_next_q(pomdp, spec, compiled.dfa, compiled.labeller)    # [q, x, θ, bits]
+    values = relaxed_values(pomdp, spec, horizon)
+    tables = values[None] if horizon is None else values                      # [K, x, θ, q]
+    n_x, n_t = pomdp.n_states, pomdp.n_trust
+    xs = np.arange(n_x)[None, :, None, None]
+    ts = np.arange(n_t)[None, None, :, None]
+    best = np.stack([table[xs, ts, next_q].max(axis=3) for table in tables])  # [K, q, x, θ]
+    move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, pomdp.driver.trust_transition)
+    return RelaxedGuide(pomdp=pomdp, best=best, move=move, horizon=horizon)

@@ -1,0 +1,207 @@
+"""Policy names to policies: "free", "aware" (synthesized once, then cached) or a policy file.
+
+"aware" is `synthesize(pomdp, spec, horizon=AWARE_HORIZON, tau=AWARE_TAU)` with the Bayes filter:
+H = 20 junctions because the study measures "policy, then the shortest completion after 20
+junctions" (policies.fallback), so maximising P(accepted within 20) is the objective the study
+actually scores. It is cached in `cache_dir` under a key made of the content hashes of town,
+driver model and spec, these settings and the synthesis code's version
+(policies/synthesis/version.py); a cache entry is a policy file like any other.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from trustroute.core.cache import POLICIES
+from trustroute.core.cache import cache_dir as cache_dir_of
+from trustroute.core.errors import InputError
+from trustroute.networks.town import Town
+from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import BeliefRule, build_pomdp
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
+from trustroute.policies.routing.files import array_path, load_policy, save_policy
+from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.synthesis.version import JOINT_SYNTHESIS_VERSION, SYNTHESIS_VERSION
+from trustroute.policies.synthesize_spec import synthesize_spec as synthesize
+
+AWARE_HORIZON = DEFAULT_FALLBACK_AFTER   # synthesize for the junctions before the fallback takes over
+AWARE_TAU = 1e-3
+AWARE_TIME_LIMIT = 120.0
+
+
+def _code_version(spec: Spec) -> str:
+    """The synthesis code's part of a cache key: SYNTHESIS_VERSION, and for specs with trust-state
+    atoms (synthesized by policies/trust_state_synthesis/synthesis.py) also JOINT_SYNTHESIS_VERSION."""
+    joint = f"+joint={JOINT_SYNTHESIS_VERSION}" if spec.uses_trust_atoms else ""
+    return f"synthesis={SYNTHESIS_VERSION}{joint}"
+
+
+def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path | None,
+                     horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes") -> Path:
+    """Cache entry of the "aware" policy for these inputs (horizon None: unbounded; cache_dir None:
+    the policies folder of the cache root, trustroute.core.cache). The key covers the inputs'
+    contents, the settings and the synthesis code's version (`_code_version`)."""
+    key = hashlib.sha256("|".join((town.content_hash, driver.content_hash, spec.content_hash,
+                                   f"H={horizon}", f"tau={AWARE_TAU}", belief_rule,
+                                   _code_version(spec))).encode())
+    folder = Path(cache_dir) if cache_dir else cache_dir_of(POLICIES)
+    # The spec name is only a readable label here (the key identifies the entry): keep it to
+    # file-name characters so no name can point outside the cache.
+    label = re.sub(r"[^A-Za-z0-9_.+-]", "_", spec.name)[:48].lstrip(".") or "spec"
+    return folder / f"aware-{label}-{key.hexdigest()[:16]}.json"
+
+
+def _cached_policy(path: Path, load: Callable[[Path], RoutingPolicy],
+                   notice: Callable[[str], object]) -> RoutingPolicy | None:
+    """The cache entry at `path`, read by `load`, if it verifies; a damaged entry is discarded
+    (with a notice)."""
+    if not path.exists() and not array_path(path).exists():
+        return None
+    try:
+        return load(path)
+    except InputError as exc:
+        notice(f"notice: discarding the damaged policy cache entry {path.name} ({exc.problem}); "
+               "synthesizing it again")
+        for stale in (path, array_path(path)):
+            with contextlib.suppress(FileNotFoundError):
+                stale.unlink()
+        return None
+
+
+def _stderr(message: str) -> None:
+    print(message, file=sys.stderr)
+
+
+def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | Path | None,
+                 horizon: int | None = AWARE_HORIZON, belief_rule: BeliefRule = "bayes",
+                 notice: Callable[[str], object] = _stderr, progress: bool = False) -> RoutingPolicy:
+    """The cached "aware" policy, synthesized when missing or damaged (progress: a bar while
+    synthesizing). Entries are written atomically (policies.routing.files), filled under a lock
+    (two processes never synthesize one entry at once, and the second reads what the first wrote)
+    and verified on every read."""
+    from trustroute.core.output_files import file_lock
+
+    path = aware_cache_path(town, driver, spec, cache_dir, horizon, belief_rule)
+
+    def load(entry: Path) -> RoutingPolicy:
+        return load_policy(entry, town, driver, spec)
+
+    if path.is_file():
+        policy = _cached_policy(path, load, notice)
+        if policy is not None:
+            return policy
+    with file_lock(path.with_name(path.name + ".lock"), "policy cache entry", wait=True,
+                   fix="pass a writable --cache-dir"):
+        policy = _cached_policy(path, load, notice)  # filled while we waited?
+        if policy is not None:
+            return policy
+        with synthesis_progress(f"synthesizing aware for {spec.name}", progress) as on_iteration:
+            result = synthesize(build_pomdp(town, driver), spec, tau=AWARE_TAU, time_limit=AWARE_TIME_LIMIT,
+                                horizon=horizon, belief_rule=belief_rule, on_iteration=on_iteration)
+        save_policy(result, path, town, driver, spec)
+    return result.policy
+
+
+def resolve_policy(name_or_path: str, town: Town, driver: DriverModel, spec: Spec,
+                   cache_dir: str | Path | None = None, horizon: int | None = AWARE_HORIZON,
+                   belief_rule: BeliefRule = "bayes", progress: bool = False) -> RoutingPolicy:
+    """"free", "aware" or the path of a policy file, as a RoutingPolicy for this town/model/spec.
+
+    horizon: the junction horizon "aware" is synthesized for (default 20; None: unbounded).
+    belief_rule: the AV filter "aware" is synthesized for. progress: a progress bar while synthesizing.
+    """
+    if name_or_path == "free":
+        return trust_free_policy(town, spec)
+    if name_or_path == "aware":
+        return aware_policy(town, driver, spec, cache_dir, horizon, belief_rule, progress=progress)
+    if not Path(name_or_path).exists():  # anything that exists goes to the guarded reader
+        raise InputError(name_or_path, "", "not a policy file and not 'free' or 'aware'",
+                         "pass 'free', 'aware' or the path of a policy file written by trustroute synth")
+    return load_policy(name_or_path, town, driver, spec)
+
+
+@contextlib.contextmanager
+def synthesis_progress(description: str, enabled: bool):
+    """A tqdm bar of synthesis rounds with the current bounds; yields the `on_iteration` callback."""
+    from tqdm import tqdm
+
+    with tqdm(desc=description, unit="round", disable=None if enabled else True, leave=False,
+              dynamic_ncols=True) as bar:
+        def on_iteration(lower: float, upper: float) -> None:
+            bar.update(1)
+            bar.set_postfix_str(f"L={lower:.4f} U={upper:.4f}", refresh=False)
+
+        yield on_iteration
+
+
+POPULATION_TIME_LIMIT = 60.0     # per synthesis run of a population policy
+POPULATION_GRID_POINTS = 6       # candidate type priors of the robust objective
+
+
+def population_cache_path(town: Town, population, spec: Spec, objective: str,
+                          cache_dir: str | Path | None, horizon: int | None = AWARE_HORIZON,
+                          belief_rule: BeliefRule = "bayes") -> Path:
+    """Cache entry of the population policy ("robust" or "bayes" objective) for these inputs: the
+    key covers the population's content hash instead of one driver model's."""
+    key = hashlib.sha256("|".join((town.content_hash, population.content_hash, spec.content_hash,
+                                   objective, f"H={horizon}", f"tau={AWARE_TAU}", belief_rule,
+                                   f"grid={POPULATION_GRID_POINTS}",
+                                   _code_version(spec))).encode())
+    folder = Path(cache_dir) if cache_dir else cache_dir_of(POLICIES)
+    label = re.sub(r"[^A-Za-z0-9_.+-]", "_", spec.name)[:48].lstrip(".") or "spec"
+    return folder / f"{objective}-{label}-{key.hexdigest()[:16]}.json"
+
+
+def population_policy(town: Town, population, spec: Spec, objective: str = "robust",
+                      cache_dir: str | Path | None = None, horizon: int | None = AWARE_HORIZON,
+                      belief_rule: BeliefRule = "bayes", population_source: str = "",
+                      notice: Callable[[str], object] = _stderr, progress: bool = False):
+    """The cached policy of `objective` for driver population `population` (a DriverPopulation),
+    synthesized when missing or damaged (policies/synthesis/population.py): (policy, the lifted
+    driver model its AV filters with, the lifted spec). One type: the "aware" policy of that
+    type's model, as today."""
+    from trustroute.core.output_files import file_lock
+    from trustroute.policies.belief.driver_types import lift_population, lift_spec
+    from trustroute.policies.routing.files import load_population_policy
+    from trustroute.policies.synthesis.population import (
+        document_entries,
+        policy_name,
+        synthesize_population,
+    )
+
+    lifted_spec = lift_spec(spec, population, population_source)
+    if population.n_types == 1:
+        model = lift_population(population)
+        return (aware_policy(town, model, lifted_spec, cache_dir, horizon, belief_rule, notice, progress),
+                model, lifted_spec)
+    path = population_cache_path(town, population, spec, objective, cache_dir, horizon, belief_rule)
+
+    def cached():
+        return _cached_policy(
+            path, lambda p: load_population_policy(p, town, population, spec, population_source), notice)
+
+    if path.is_file():
+        found = cached()
+        if found is not None:
+            return found
+    with file_lock(path.with_name(path.name + ".lock"), "policy cache entry", wait=True,
+                   fix="pass a writable --cache-dir"):
+        found = cached()
+        if found is not None:
+            return found
+        with synthesis_progress(f"synthesizing {objective} for {spec.name}", progress) as on_iteration:
+            made = synthesize_population(town, population, spec, objective, tau=AWARE_TAU,
+                                         time_limit=POPULATION_TIME_LIMIT, horizon=horizon,
+                                         belief_rule=belief_rule, population_source=population_source,
+                                         grid_points=POPULATION_GRID_POINTS, on_iteration=on_iteration)
+        save_policy(made.result, path, town, made.pomdp.driver, made.spec,
+                    population=document_entries(made), name=policy_name(made))
+        # read back: a fresh entry and a cached one give the same policy object
+        return load_population_policy(path, town, population, spec, population_source)

@@ -1,0 +1,1 @@
+"""policies/trust_state_synthesis."""

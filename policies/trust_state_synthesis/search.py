@@ -1,0 +1,297 @@
+"""Bounds on Pr_max for specs with trust-state atoms, by search over joint beliefs (docs/trust_states.md).
+
+V(J) = max over policies of P(accepted), J the joint belief over (θ, q) of
+policies/belief/trust_state_filter.py (with the road and, under a non-Bayes rule, the AV's belief).
+The search unfolds the belief tree level by level to `depth` junctions, every action and every
+observation, merging nodes whose (road, J, beliefs) are bit for bit equal (the optimal value
+and decision depend on nothing else), then backs values up:
+
+    V(node) = max over next junctions of Σ_o P(o | node) V(child_o).
+
+Leaves: a settled node (no live mass) is worth J(accepting) exactly; a node at the depth or cut
+off (probability below `prune_below`, or beyond `max_nodes` per level) is worth at least
+J(accepting) — or, when no label reads the belief, the exact value of an open-loop continuation
+that ignores observations and follows the relaxation's best move (to the horizon, or 30
+junctions for the unbounded objective) — and at most J(accepting) + Σ_{live θ, q} J(θ, q) R(x, θ, q),
+where R is the value of the relaxation that observes θ and q and may choose the value of every
+belief atom — an upper bound on any policy's value from that state (`relaxed_values`). Lower
+and upper are backed up separately; the lower one is the value of the policy taking the lower arg-max, so
+lower <= Pr_max <= upper. With `horizon` = depth the objective is "accepted within H junctions"
+and the result is exact (lower = upper) unless nodes were cut. R is computed by backward
+induction (bounded) or by value iteration from above (unbounded), each iterate plus a margin of
+1e-12 so that floating-point rounding cannot take it below the true value; the root's upper
+value gets the same allowance.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.policies.belief.trust_state_filter import distinct_nodes, joint_filter
+from trustroute.policies.belief.trust_state_relaxation import (
+    RELAXATION_MARGIN,
+    RelaxedGuide,
+    relaxed_next_q,
+    relaxed_values,
+)
+from trustroute.policies.bracket import Bracket
+from trustroute.policies.logic.compiled import compile_spec
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+
+
+@dataclass(frozen=True)
+class JointBounds(Bracket):
+    lower: float
+    upper: float
+    depth: int
+    horizon: int | None
+    nodes: int
+    cut_nodes: int
+    seconds: float
+    belief_rule: str
+
+
+OPEN_LOOP_STEPS = 30          # junctions of the open-loop continuation at unbounded leaves
+OPEN_LOOP_CHUNK = 4_000       # nodes per vectorised batch of the open-loop continuation
+EXPAND_SHARE = 0.5            # with a deadline: share of the time for the forward pass
+
+
+def _open_loop_accepted(pomdp: TrustPOMDP, next_q: np.ndarray, move: np.ndarray, guide,
+                        x: np.ndarray, joint: np.ndarray, steps: int,
+                        accepting: np.ndarray) -> np.ndarray:
+    """P(accepted within `steps` more junctions) of the policy that ignores observations and moves,
+    at each step, to the successor with the largest relaxed value `guide(k)` (k junctions left
+    after the move). The labels must not depend on the belief (then the observations can be
+    summed out). Exact for that policy, so a lower bound on the optimum from each node."""
+    n, n_t, n_q = joint.shape
+    rows = np.arange(n)[:, None]
+    thetas = np.arange(n_t)[None, :]
+    successors = pomdp.successor_table
+    for k in range(steps):
+        table = guide(steps - k - 1)
+        best_score = np.full(n, -np.inf)
+        best_joint = joint
+        best_x = x
+        for slot in range(successors.shape[1]):
+            x2 = successors[x, slot]
+            valid = x2 >= 0
+            if not valid.any():
+                continue
+            x2 = np.where(valid, x2, 0)
+            predicted = np.einsum("ntq,ntu->nuq", joint, move[pomdp.road_incident[x2]])
+            moved = np.zeros_like(predicted)
+            for q in range(n_q):
+                moved[rows, thetas, next_q[q][x2]] += predicted[:, :, q]
+            score = np.where(valid, np.einsum("ntq,ntq->n", moved, table[x2]), -np.inf)
+            better = score > best_score
+            best_score = np.where(better, score, best_score)
+            best_joint = np.where(better[:, None, None], moved, best_joint)
+            best_x = np.where(better, x2, best_x)
+        joint, x = best_joint, best_x
+    return joint[:, :, accepting].sum(axis=(1, 2))
+
+
+@dataclass(frozen=True, eq=False)
+class JointDecisions:
+    """The search's lower-greedy decision at each expanded node: t (junctions driven), road x,
+    joint belief J [rows, n_trust, n_q], AV belief [rows, n_trust] and the action slot (index into
+    the successors of x) whose backed-up lower value is the largest (ties: the larger upper, then
+    the first slot)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    joint: np.ndarray
+    beliefs: np.ndarray
+    action: np.ndarray
+
+
+def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
+                 belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
+                 max_nodes: int = 200_000) -> JointBounds:
+    """[lower, upper] on max over policies of P(accepted) (within `horizon` junctions when given;
+    then depth = horizon)."""
+    return joint_search(pomdp, spec, depth, horizon, belief_rule, prune_below, max_nodes)[0]
+
+
+def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
+                 belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
+                 max_nodes: int = 200_000, guide: RelaxedGuide | None = None,
+                 guided_nodes: int = 0,
+                 deadline: float | None = None) -> tuple[JointBounds, JointDecisions]:
+    """joint_bounds, and the lower-greedy decisions at the expanded nodes (JointDecisions).
+
+    With a `guide` (the acting rule of the joint policy off its stored rows), the nodes ranked
+    just below the `max_nodes` likeliest of a level (up to `guided_nodes` more) are expanded
+    with the guide's action only, and their lower value is that action's backed-up value: the
+    lower bound is then the value of exactly the policy JointTablePolicy builds from the
+    decisions (stored action at fully expanded nodes, the guide's elsewhere), short of the
+    nodes beyond both caps, which are worth their accepted mass (at most that policy's value
+    there). Without a guide, cut nodes are leaves valued by the open-loop continuation.
+
+    With a `deadline` (time.perf_counter()) the search returns by it, up to one level's or one
+    chunk's work: past EXPAND_SHARE of the time left, checked before each level is expanded, the
+    open nodes of that level become leaves worth their accepted mass (lower) and the relaxation
+    (upper); past the deadline, the leaves not yet valued by the open-loop continuation keep
+    their accepted mass. The bounds stay sound either way."""
+    started = time.perf_counter()
+    if horizon is not None:
+        depth = horizon
+    town, driver = pomdp.town, pomdp.driver
+    compiled = compile_spec(spec, town)
+    dfa, labeller = compiled.dfa, compiled.labeller
+    filter_ = joint_filter(pomdp, dfa, labeller)
+    relaxed = relaxed_values(pomdp, spec, horizon)
+    accepting = np.asarray(dfa.accepting, dtype=bool)
+    rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
+    live_q = ~(accepting | rejecting)
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
+    slots = pomdp.successor_table.shape[1]
+
+    # Where the labels do not read the belief, cut nodes and unbounded leaves get the value of an
+    # open-loop continuation as their lower bound instead of their accepted mass alone; not with
+    # a guide, whose lower bound is the value of what the policy does (the guide, not open loop).
+    relaxed_q = relaxed_next_q(pomdp, spec, dfa, labeller)
+    open_loop = bool(np.all(relaxed_q == relaxed_q[..., :1]))
+    move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, driver.trust_transition)
+
+    def relaxed_at(k: int) -> np.ndarray:
+        return relaxed[min(k, horizon)] if horizon is not None else relaxed
+
+    def open_loop_lower(x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        """The open-loop continuation's value; 0 (no claim) for the chunks past the deadline."""
+        steps = left if horizon is not None else OPEN_LOOP_STEPS
+        out = np.zeros(x.size)
+        for begin in range(0, x.size, OPEN_LOOP_CHUNK):
+            if deadline is not None and time.perf_counter() > deadline:
+                break
+            part = slice(begin, begin + OPEN_LOOP_CHUNK)
+            out[part] = _open_loop_accepted(pomdp, relaxed_q[..., 0], move, relaxed_at, x[part],
+                                            joint[part], steps, accepting)
+        return out
+
+    def leaf_bounds(x: np.ndarray, joint: np.ndarray, left: int) -> tuple[np.ndarray, np.ndarray]:
+        table = relaxed[left] if horizon is not None else relaxed
+        accepted = joint[:, :, accepting].sum(axis=(1, 2))
+        optimistic = np.einsum("ntq,ntq->n", joint * live_q, table[x])
+        return accepted, np.minimum(1.0, accepted + optimistic)
+
+    start = town.state_index(spec.start)
+    b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
+    levels = [dict(x=np.array([start]), joint=filter_.initial(start, b0[0]), posterior=b0.copy(),
+                   belief=b0.copy(), mass=np.ones(1))]
+    edges = []          # per level: (parent, slot, child, p_obs) for the children of that level
+    expandable = []     # per level: bool per node, expanded with every action
+    guided_slot = []    # per level: the guide's action slot per node expanded with it alone, else -1
+    cut_total = 0
+    stopped = False     # the expansion's time is up: no further level is expanded
+    # The forward pass gets EXPAND_SHARE of the time, the backward pass (open-loop values) the rest.
+    expand_until = None if deadline is None else started + EXPAND_SHARE * (deadline - started)
+    for level in range(depth + 1):
+        nodes = levels[-1]
+        _, _, live = filter_.masses(nodes["joint"])
+        open_ = (live > 0) & (nodes["mass"] >= prune_below) & (level < depth)
+        if expand_until is not None and time.perf_counter() > expand_until:
+            stopped = True
+            grow = np.zeros_like(open_)
+        else:
+            grow = open_ & ~nodes["frozen"] if "frozen" in nodes else open_
+        follow = np.full(grow.size, -1, dtype=np.int64)
+        if "guided" in nodes and not stopped:
+            along = open_ & nodes["guided"]
+            follow[along] = guide.policy_slots(level, nodes["x"][along], nodes["joint"][along])
+        cut_total += int((open_ & ~grow).sum())
+        expandable.append(grow)
+        guided_slot.append(follow)
+        if level == depth or not (grow | (follow >= 0)).any():
+            break
+        parents = np.flatnonzero(grow | (follow >= 0))
+        child_parts = []
+        for slot in range(slots):
+            x2 = pomdp.successor_table[nodes["x"][parents], slot]
+            has = (x2 >= 0) & ((follow[parents] < 0) | (follow[parents] == slot))
+            p_idx, x2 = parents[has], x2[has]
+            incident = pomdp.road_incident[x2]
+            for h, e in outcomes:
+                posterior, p_obs = pomdp.belief_update(nodes["posterior"][p_idx], incident, h, e)
+                belief = posterior if belief_rule == "bayes" else pomdp.belief_update(
+                    nodes["belief"][p_idx], incident, h, e, rule=belief_rule)[0]
+                ok = p_obs > 0
+                joint = filter_.update(nodes["joint"][p_idx][ok], posterior[ok], belief[ok], x2[ok],
+                                       incident[ok], h, e, p_obs[ok])
+                child_parts.append((p_idx[ok], np.full(int(ok.sum()), slot), x2[ok], joint, posterior[ok],
+                                    belief[ok], p_obs[ok], nodes["mass"][p_idx][ok] * p_obs[ok]))
+        parent, slot_of, x2, joint, posterior, belief, p_obs, mass = (
+            np.concatenate([c[j] for c in child_parts]) for j in range(8))
+        # Merge children with bit-identical (road, J, posterior, AV belief).
+        first, inverse = distinct_nodes(x2, joint, posterior, belief)
+        merged_mass = np.bincount(inverse, weights=mass)
+        child = dict(x=x2[first], joint=joint[first], posterior=posterior[first], belief=belief[first],
+                     mass=merged_mass)
+        if first.size > max_nodes:      # keep the likeliest nodes; the others are cut
+            order = np.argsort(-merged_mass, kind="stable")
+            rank = np.empty(first.size, dtype=np.int64)
+            rank[order] = np.arange(first.size)
+            child["frozen"] = rank >= max_nodes
+            if guide is not None:       # the next ones follow the guide, the rest are leaves
+                child["guided"] = child["frozen"] & (rank < max_nodes + guided_nodes)
+        levels.append(child)
+        edges.append((parent, slot_of, inverse, p_obs))
+
+    # Backward: leaves by their bounds, expanded nodes by the best action's expectation.
+    n_levels = len(levels)
+    lower = upper = None
+    decided: list[tuple[int, np.ndarray, np.ndarray]] = []     # (level, nodes, slot)
+    for level in range(n_levels - 1, -1, -1):
+        nodes = levels[level]
+        left = depth - level
+        low, high = leaf_bounds(nodes["x"], nodes["joint"], left)
+        if level < len(expandable):
+            leaf = ~expandable[level] & (guided_slot[level] < 0)
+        else:
+            leaf = np.ones(low.size, dtype=bool)
+        leaf &= filter_.masses(nodes["joint"])[2] > 0
+        if open_loop and leaf.any() and (horizon is None or left > 0):
+            low[leaf] = np.maximum(low[leaf], open_loop_lower(nodes["x"][leaf], nodes["joint"][leaf], left))
+        if level < n_levels - 1:
+            parent, slot_of, child, p_obs = edges[level]
+            grow = expandable[level]
+            n = nodes["x"].size
+            sum_low = np.zeros((n, slots))
+            sum_high = np.zeros((n, slots))
+            np.add.at(sum_low, (parent, slot_of), p_obs * lower[child])
+            np.add.at(sum_high, (parent, slot_of), p_obs * upper[child])
+            has = np.zeros((n, slots), dtype=bool)
+            has[parent, slot_of] = True
+            best_low = np.where(has, sum_low, -np.inf).max(axis=1)
+            best_high = np.where(has, sum_high, -np.inf).max(axis=1)
+            tied = has & (sum_low >= best_low[:, None])
+            slot = np.where(tied, sum_high, -np.inf).argmax(axis=1)
+            decided.append((level, np.flatnonzero(grow), slot[grow]))
+            # Nodes that follow the guide: worth what its action gives (lower); the relaxation
+            # stays their upper bound (the optimum may act otherwise).
+            follow = guided_slot[level]
+            along = np.flatnonzero(follow >= 0)
+            low[along] = sum_low[along, follow[along]]
+            low = np.where(grow, best_low, low)
+            high = np.where(grow, np.minimum(1.0, best_high), high)
+        lower, upper = low, high
+    decided.sort(key=lambda item: item[0])
+    n_t, n_q = pomdp.n_trust, filter_.n_q
+    parts = [(np.full(nodes.size, level, dtype=np.int64), levels[level]["x"][nodes],
+              levels[level]["joint"][nodes], levels[level]["belief"][nodes], slot)
+             for level, nodes, slot in decided]
+    empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, n_t, n_q)),
+             np.zeros((0, n_t)), np.zeros(0, dtype=np.int64))
+    decisions = JointDecisions(*(np.concatenate([p[j] for p in parts]) if parts else empty[j]
+                                 for j in range(5)))
+    # The backed-up upper value is a float sum of products: allow for its rounding.
+    bounds = JointBounds(lower=float(lower[0]), upper=min(1.0, float(upper[0]) + RELAXATION_MARGIN),
+                         depth=depth, horizon=horizon,
+                         nodes=int(sum(lv["x"].size for lv in levels)), cut_nodes=cut_total,
+                         seconds=time.perf_counter() - started, belief_rule=belief_rule)
+    return bounds, decisions
+

@@ -1,0 +1,181 @@
+"""Synthesis for specs with trust-state atoms: a policy on the joint belief, with L <= Pr_max <= U.
+
+`synthesize_spec` (policies/synthesize_spec.py) hands specs whose formula tests the hidden trust here
+(docs/trust_states.md, "Synthesis with trust-state atoms"). The method:
+
+* Search. `joint_search` unfolds the belief tree over (road, J(θ, q)) to depth D, every action and
+  observation, merging bit-identical nodes and keeping at most N nodes per level (the likeliest;
+  the others are cut leaves valued by the open-loop continuation below and the θ,q-observing
+  relaxation above). Bounded horizon H: D = H. Unbounded: the upper bound comes from unbounded
+  searches (depths UNBOUNDED_DEPTHS, leaves valued by the relaxation's unbounded values), the
+  policy from bounded searches with H in UNBOUNDED_POLICY_HORIZONS.
+* The policy (policies/routing/trust_state_table.py) takes the search's lower-greedy action at every
+  expanded node (matched on (t, x, J, b)) and the relaxation's greedy action elsewhere. The
+  search expands the GUIDED_FACTOR × N nodes of a level ranked after its N expanded ones with
+  that very greedy action (joint_search's guided nodes), so the lower bound it backs up, and the
+  decisions it takes by it, are that policy's value but at the nodes beyond both caps.
+* L is the returned policy's own value within its search horizon H, computed by the merged exact
+  unfolding `evaluate_joint_table` (policies/evaluation/trust_state.py; tests check it against
+  `evaluate_joint` and brute force), its certified lower end when the least likely nodes are
+  dropped. A policy accepting within H junctions with probability L satisfies the spec (bounded
+  by any H' >= H, or unbounded) with probability >= L. U is the smallest search upper bound (each
+  sound for Pr_max). So L <= value(policy) <= Pr_max <= U.
+* Rounds: N starts at FIRST_NODES and grows by NODE_GROWTH while upper - lower > tau, some node
+  was cut, and the next round (predicted NODE_GROWTH times the last) fits the time left. Each
+  search and evaluation checks the deadline level by level (a search expands for joint_search.EXPAND_SHARE of
+  its time and values leaves in the rest; an evaluation does not begin a batch or a merge it
+  predicts would end late), so even the first round keeps to the time limit; what is cut short
+  leaves sound bounds (unexpanded nodes are leaves, unevaluated mass is unknown).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.policies.belief.trust_state_relaxation import RelaxedGuide, relaxed_guide
+from trustroute.policies.evaluation.trust_state import evaluate_joint_table
+from trustroute.policies.logic.compiled import compile_spec
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
+from trustroute.policies.synthesis.search import SynthesisResult
+from trustroute.policies.trust_state_synthesis.search import JointBounds, JointDecisions, joint_search
+
+FIRST_NODES = 500                  # nodes per level of the first round
+NODE_GROWTH = 4                    # nodes per level grow by this factor per round
+MAX_NODES = 512_000
+GUIDED_FACTOR = 4                  # nodes per level that follow the guide, per fully expanded node
+UNBOUNDED_POLICY_HORIZONS = (20, 30)
+EVALUATION_NODES = 50_000          # frontier cap of the policy's evaluation (pruned mass: unknown)
+UNBOUNDED_DEPTHS = (10, 20)        # depths of the unbounded searches (upper bound)
+UPPER_SHARE = 0.25                 # unbounded: share of the time limit for the upper bound
+FINISH_RESERVE = 0.01             # share of the time limit kept for what follows the last check
+SEARCH_SHARE = 0.6                 # share of a round's time left for its search (the rest: evaluation)
+
+
+@dataclass(frozen=True)
+class PolicyValue:
+    lower: float
+    upper: float
+
+
+@dataclass(frozen=True, eq=False)
+class _Candidate:
+    policy: JointTablePolicy
+    value: PolicyValue
+    bounds: JointBounds
+    horizon: int
+
+
+def decision_table(decisions: JointDecisions) -> JointPolicyTable:
+    """The rows of a JointTablePolicy from the search's decisions (the DFA state told: the most
+    probable under J)."""
+    told = np.argmax(decisions.joint.sum(axis=1), axis=1) if decisions.joint.size else \
+        np.zeros(0, dtype=np.int64)
+    return JointPolicyTable(t=decisions.t, x=decisions.x, q=told, beliefs=decisions.beliefs,
+                            joint=decisions.joint, action=decisions.action)
+
+
+def _grow(run: Callable[[int, float], tuple], stop: Callable[[tuple], bool], deadline: float) -> None:
+    """run(nodes, deadline) with nodes per level growing from FIRST_NODES until stop(result) or
+    the next round (predicted NODE_GROWTH times the last) would pass the deadline. The first
+    round always starts; `run` itself stops at the deadline (the searches and the evaluation
+    check it level by level), so even the first round keeps to it."""
+    nodes = FIRST_NODES
+    while nodes <= MAX_NODES:
+        began = time.perf_counter()
+        result = run(nodes, deadline)
+        if stop(result):
+            return
+        if NODE_GROWTH * (time.perf_counter() - began) > deadline - time.perf_counter():
+            return
+        nodes *= NODE_GROWTH
+
+
+def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
+                     horizon: int | None = None, belief_rule: BeliefRule = "bayes",
+                     on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
+    """A JointTablePolicy for `spec` and certified lower <= Pr_max <= upper (a SynthesisResult)."""
+    started = time.perf_counter()
+    compile_spec(spec, pomdp.town)       # bad specs fail before any search
+    log: list[dict] = []
+    upper = 1.0
+    best: list[_Candidate] = []
+
+    def report() -> None:
+        if on_iteration is not None:
+            on_iteration(best[0].value.lower if best else 0.0, upper)
+
+    if horizon is None:
+        # Upper bound of the unbounded objective: unbounded searches, leaves valued by the relaxation.
+        upper_deadline = started + UPPER_SHARE * time_limit
+        for depth in UNBOUNDED_DEPTHS:
+            def run_upper(nodes: int, deadline: float, depth: int = depth) -> JointBounds:
+                nonlocal upper
+                bounds, _ = joint_search(pomdp, spec, depth, None, belief_rule, max_nodes=nodes,
+                                         deadline=deadline)
+                upper = min(upper, bounds.upper)
+                log.append({"search": f"unbounded depth {depth}", "max_nodes": nodes, **bounds.to_dict()})
+                report()
+                return bounds
+
+            _grow(run_upper, lambda bounds: bounds.cut_nodes == 0, upper_deadline)
+    horizons = (horizon,) if horizon is not None else UNBOUNDED_POLICY_HORIZONS
+    guides: dict[int, RelaxedGuide] = {}
+    # Every search and evaluation checks its deadline as it goes (and does not begin a batch it
+    # predicts would end past it), so the whole synthesis keeps to the time limit.
+    deadline = started + (1.0 - FINISH_RESERVE) * time_limit
+    for k, policy_horizon in enumerate(horizons):
+        share = (deadline - time.perf_counter()) / (len(horizons) - k)
+
+        def run_policy(nodes: int, deadline: float, policy_horizon: int = policy_horizon) -> bool:
+            # A policy for H junctions, valued exactly within H (a lower bound for any longer H
+            # and for the unbounded objective).
+            nonlocal upper
+            guide = guides.get(policy_horizon) or guides.setdefault(
+                policy_horizon, relaxed_guide(pomdp, spec, policy_horizon))
+            search_deadline = time.perf_counter() + SEARCH_SHARE * (deadline - time.perf_counter())
+            bounds, decisions = joint_search(pomdp, spec, policy_horizon, policy_horizon, belief_rule,
+                                             max_nodes=nodes, guide=guide,
+                                             guided_nodes=GUIDED_FACTOR * nodes,
+                                             deadline=search_deadline)
+            if horizon is not None:
+                upper = min(upper, bounds.upper)
+            policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=policy_horizon,
+                                      horizon=horizon, guide=guide)
+            value_lower, value_upper = evaluate_joint_table(pomdp, spec, policy, policy_horizon,
+                                                            belief_rule, EVALUATION_NODES,
+                                                            deadline=deadline)
+            value = PolicyValue(value_lower, value_upper)
+            log.append({"search": f"H={policy_horizon}", "max_nodes": nodes, **bounds.to_dict(),
+                        "policy_lower": value.lower, "policy_upper": value.upper})
+            if not best or value.lower > best[0].value.lower:
+                best[:] = [_Candidate(policy, value, bounds, policy_horizon)]
+            report()
+            return upper - best[0].value.lower <= tau or bounds.cut_nodes == 0
+
+        _grow(run_policy, lambda done: done, time.perf_counter() + share)
+        if upper - best[0].value.lower <= tau:
+            break
+    chosen = best[0]
+    policy, value, table = chosen.policy, chosen.value, chosen.policy.table
+    lower = value.lower
+    policy.lower, policy.upper = lower, upper
+    stats = {
+        "method": "search over joint (trust, DFA state) beliefs (policies/trust_state_synthesis)",
+        "belief_rule": belief_rule,
+        "converged": bool(upper - lower <= tau),
+        "tau": tau,
+        "runs": log,
+        "policy_rows": table.rows,
+        "policy_search_horizon": chosen.horizon,
+        "search_lower": chosen.bounds.lower,
+        "policy_value": {"lower": value.lower, "upper": value.upper, "max_junctions": chosen.horizon},
+    }
+    return SynthesisResult(policy=policy, lower=lower, upper=upper,
+                           seconds=time.perf_counter() - started, stats=stats, horizon=horizon,
+                           belief_rule=belief_rule)

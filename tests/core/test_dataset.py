@@ -1,0 +1,110 @@
+"""The dataset definition: schemas are enforced on write and on read, missing values are nulls."""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from trustroute.core import dataset
+from trustroute.core.errors import InputError
+
+
+def test_consolidated_study_matches_every_schema(model_study):
+    for name, (file_name, schema) in dataset.TABLES.items():
+        path = model_study / file_name
+        if not path.exists():
+            assert name in ("kinematics", "incidents")  # SUMO only
+            continue
+        table = pq.read_table(path)
+        dataset.check_table(table.replace_schema_metadata(None), schema, file_name)
+    manifest = dataset.read_manifest(model_study)
+    assert tuple(manifest) == dataset.MANIFEST_KEYS
+    assert manifest["files"] == {"episodes": dataset.EPISODES_FILE, "roads": dataset.ROADS_FILE}
+
+
+def test_missing_values_are_nulls(model_study):
+    roads = dataset.read_roads(model_study)
+    start = roads[roads["index"] == 0]
+    assert (start["incident"] == "none").all()
+    assert start["takeover"].isna().all() and start["performance"].isna().all()
+    assert start["reported_trust"].isna().all()
+    assert roads["reported_trust"].dtype == "Int64" and roads["takeover"].dtype == "boolean"
+    last = roads.groupby("episode_id")["index"].transform("max") == roads["index"]
+    assert roads.loc[last, "action"].isna().all() and roads.loc[~last, "action"].notna().all()
+    assert (roads["reported_trust"].dropna() >= 1).all()  # never -1 for "no report"
+    assert roads["sim_time_in"].isna().all()  # the model engine has no simulator clock
+    episodes = dataset.read_episodes(model_study)
+    assert episodes["sim_seconds"].isna().all()
+    assert tuple(episodes.columns) == tuple(dataset.EPISODES_SCHEMA.names)
+
+
+def test_reader_rejects_another_schema(tmp_path, model_study):
+    roads = pq.read_table(model_study / dataset.ROADS_FILE)
+    pq.write_table(roads.drop_columns(["dfa_state"]), tmp_path / dataset.ROADS_FILE)
+    with pytest.raises(InputError, match="roads.parquet: schema: .*columns"):
+        dataset.read_roads(tmp_path)
+    retyped = roads.set_column(roads.schema.get_field_index("index"), "index",
+                               roads.column("index").cast(pa.float64()))
+    pq.write_table(retyped, tmp_path / dataset.ROADS_FILE)
+    with pytest.raises(InputError, match="'index' is double, expected int64"):
+        dataset.read_roads(tmp_path)
+    with pytest.raises(InputError, match="no such dataset file"):
+        dataset.read_episodes(tmp_path)
+
+
+def test_nulls_are_refused_where_the_schema_forbids_them():
+    frame = pd.DataFrame({"episode_id": ["e"], "time": [None], "x": [0.0], "y": [0.0], "speed": [1.0],
+                          "lane": ["l"], "mode": ["auto"]})
+    with pytest.raises(dataset.SchemaError, match="time"):
+        dataset.table_from_frame(frame, dataset.KINEMATICS_SCHEMA)
+
+
+def test_manifest_without_a_key_is_refused(tmp_path, model_study):
+    manifest = json.loads((model_study / dataset.MANIFEST_FILE).read_text())
+    del manifest["seeds"]
+    (tmp_path / dataset.MANIFEST_FILE).write_text(json.dumps(manifest))
+    with pytest.raises(InputError, match="seeds: missing manifest key"):
+        dataset.read_manifest(tmp_path)
+
+
+def test_rows_and_columns_give_the_same_table():
+    """table_from_rows (one struct conversion) and table_from_columns agree, NaN and None are nulls
+    in both, and a null in a non-null field is a SchemaError in both."""
+    schema = dataset.INCIDENTS_SCHEMA
+    nan = float("nan")
+    base = {name: None for name in schema.names}
+    base.update(episode_id="e1", index=1, directed_road="A-B", incident="truck", takeover=False,
+                performance="succ", min_ttc=float("inf"), max_deceleration=2.5, collided=False,
+                min_head_on_ttc=1.75, min_pedestrian_distance=float("inf"), time_lost=0.5,
+                injected_time=3.0, x=nan, y=nan)
+    rows = [base, {**base, "index": 2, "takeover": True, "takeover_start": 7.5, "in_view_time": nan}]
+    by_rows = dataset.table_from_rows(rows, schema)
+    by_columns = dataset.table_from_columns({name: [row[name] for row in rows] for name in schema.names},
+                                            schema)
+    assert by_rows.schema.equals(schema) and by_rows.equals(by_columns)
+    assert by_rows.column("x").null_count == 2 and by_rows.column("takeover_start").to_pylist() == [None, 7.5]
+    for build in (dataset.table_from_rows, lambda r, s: dataset.table_from_columns(
+            {name: [row[name] for row in r] for name in s.names}, s)):
+        with pytest.raises(dataset.SchemaError, match="time_lost"):
+            build([{**base, "time_lost": nan}], schema)
+        with pytest.raises(dataset.SchemaError, match="episode_id"):
+            build([{**base, "episode_id": None}], schema)
+
+
+def test_check_table_fast_path_still_finds_nulls_and_casts():
+    """A table of the schema itself is returned as it is unless a non-null field has nulls; one whose
+    nullability differs is cast (the slow path), as before."""
+    schema = dataset.KINEMATICS_SCHEMA
+    columns = {"episode_id": ["e"], "time": [0.5], "x": [1.0], "y": [2.0], "speed": [3.0], "lane": ["A-B_1"],
+               "mode": ["auto"]}
+    table = dataset.table_from_columns(columns, schema)
+    assert dataset.check_table(table, schema) is table
+    loose = pa.table({name: pa.array(values) for name, values in columns.items()})
+    assert dataset.check_table(loose, schema).schema.equals(schema)
+    holed = pa.Table.from_arrays([pa.array([None], pa.string()), *table.columns[1:]], schema=schema)
+    with pytest.raises(dataset.SchemaError, match="episode_id"):
+        dataset.check_table(holed, schema)

@@ -1,0 +1,36 @@
+"""The guarded reader accepts what real files contain (the bad-input matrix covers what it refuses)."""
+
+from __future__ import annotations
+
+import pytest
+
+from trustroute.core.errors import InputError
+from trustroute.core.validation import MAX_DEPTH, check_keys, parse_json, parse_toml, read_input_text
+
+
+def test_ordinary_values_pass():
+    data = parse_json('{"a": [1.5, -2, 1e300, 123456789012345678], "b": "ü\\u00e9"}', "x", "file")
+    assert data == {"a": [1.5, -2, 1e300, 123456789012345678], "b": "üé"}
+    assert parse_toml('a = inf\nb = "[[[[ not nesting"  # [[[\nc = 0xff_ff\n[t]\nd = 1979-05-27', "x",
+                      "file")["a"] == float("inf")
+
+
+def test_nesting_limit_is_exact():
+    assert parse_json("[" * MAX_DEPTH + "]" * MAX_DEPTH, "x", "file") == parse_json(
+        "[" * MAX_DEPTH + "]" * MAX_DEPTH, "x", "file")
+    with pytest.raises(InputError, match="nested 65 levels"):
+        parse_json("[" * (MAX_DEPTH + 1) + "]" * (MAX_DEPTH + 1), "x", "file")
+    brackets_in_strings = '{"s": "' + "[" * 1000 + '"}'
+    assert parse_json(brackets_in_strings, "x", "file")["s"] == "[" * 1000
+
+
+def test_utf8_text_reads_back(tmp_path):
+    path = tmp_path / "f.json"
+    path.write_text("{}", encoding="utf-8")
+    assert read_input_text(path, "file") == "{}"
+
+
+def test_unknown_key_names_the_key_and_the_allowed_ones():
+    with pytest.raises(InputError) as error:
+        check_keys({"junctions": 1, "junctoins": 2}, ("junctions", "roads"), "town.json", "", "town file")
+    assert error.value.place == "junctoins" and "junctions, roads" in error.value.fix

@@ -1,0 +1,212 @@
+"""The SUMO engine: route following, determinism, logs, bad input, flat memory over many episodes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.harness.helpers import SPECS
+from trustroute.core.dataset import KINEMATICS_SCHEMA, ROADS_SCHEMA
+from trustroute.core.errors import InputError
+from trustroute.harness.simulation import sumo_start
+from trustroute.harness.simulation.episode import run_episode
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.networks.sumo_net import build_net
+from trustroute.networks.town import town_from_dict
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import baseline_route, trust_free_policy
+from trustroute.policies.routing.protocol import RoutingPolicy
+
+
+@pytest.fixture(scope="module")
+def net_path(town, tmp_path_factory):
+    return build_net(town, cache_dir=tmp_path_factory.mktemp("nets")).path
+
+
+@pytest.fixture(scope="module")
+def phi1(town):
+    return load_spec(SPECS / "phi1.toml", town)
+
+
+@pytest.fixture(scope="module")
+def setup(town, driver, phi1):
+    return EpisodeSetup(town=town, driver_model=driver, spec=phi1)
+
+
+def _episode(setup, net_path, seed, trust=None, episode_id="e"):
+    driver = SyntheticDriver(setup.driver_model, np.random.default_rng(seed), initial_trust=trust)
+    return run_episode(setup, trust_free_policy(setup.town, setup.spec), driver, episode_id, seed,
+                       net_path=net_path)
+
+
+def _roads_driven(kinematics: pd.DataFrame) -> list[str]:
+    """The sequence of (non-internal) edges the ego was on, from SUMO's own lane ids."""
+    edges = [lane.rsplit("_", 1)[0] for lane in kinematics["lane"] if not lane.startswith(":")]
+    return [e for i, e in enumerate(edges) if i == 0 or e != edges[i - 1]]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_free_phi1_follows_the_baseline_route(setup, net_path, seed):
+    record = _episode(setup, net_path, seed)
+    route = baseline_route(setup.town, setup.spec)
+    assert record.roads["directed_road"].tolist() == route
+    assert _roads_driven(record.kinematics) == route
+    assert record.roads["action"].iloc[:-1].tolist() == [r.split("-")[1] for r in route[1:]]
+    assert pd.isna(record.roads["action"].iloc[-1])
+    summary = record.summary
+    assert summary["junctions"] == len(route) - 1
+    assert summary["end_reason"] in ("accepted", "destination")
+    assert summary["satisfied"] == (summary["end_reason"] == "accepted")
+    assert summary["takeovers"] == int(record.roads["takeover"].sum())
+    assert summary["final_trust"] == record.roads["trust_after"].iloc[-1]
+
+
+def test_log_schema(setup, net_path):
+    record = _episode(setup, net_path, 5)
+    assert tuple(record.roads.columns) == tuple(ROADS_SCHEMA.names)
+    assert tuple(record.kinematics.columns) == tuple(KINEMATICS_SCHEMA.names)
+    roads = record.roads
+    assert (roads["sim_time_in"].diff().iloc[1:] > 0).all()
+    assert (roads["sim_time_out"] >= roads["sim_time_in"]).all()
+    # trust chains from road to road; the performance column is measured on every driven road
+    assert (roads["trust_before"].iloc[1:].to_numpy() == roads["trust_after"].iloc[:-1].to_numpy()).all()
+    assert set(roads["performance"].iloc[1:]) <= {"succ", "fail"}
+    kin = record.kinematics
+    assert set(kin["mode"]) <= {"auto", "manual"}
+    assert kin["time"].is_monotonic_increasing and kin["speed"].between(0, 14.5).all()
+    assert record.summary["sim_seconds"] == pytest.approx(kin["time"].iloc[-1])
+    for frame in (record.roads, record.kinematics, record.incidents):
+        assert (frame["episode_id"] == "e").all()
+
+
+def test_same_seed_same_logs(setup, net_path):
+    first, second = _episode(setup, net_path, 7), _episode(setup, net_path, 7)
+    pd.testing.assert_frame_equal(first.roads, second.roads)
+    pd.testing.assert_frame_equal(first.kinematics, second.kinematics)
+    pd.testing.assert_frame_equal(first.incidents, second.incidents)
+    strip = ("wall_seconds",)
+    assert {k: v for k, v in first.summary.items() if k not in strip} == {
+        k: v for k, v in second.summary.items() if k not in strip}
+    other = _episode(setup, net_path, 8)
+    assert not (other.roads["trust_after"].tolist() == first.roads["trust_after"].tolist()
+                and other.roads["takeover"].tolist() == first.roads["takeover"].tolist()
+                and other.kinematics.equals(first.kinematics))
+
+
+class LoopPolicy(RoutingPolicy):
+    """Circles F-G-I-H-F (never finished): the 20-junction rule has to end the loop."""
+
+    name = "loop"
+    ring = {"F": "G", "G": "I", "I": "H", "H": "F"}
+
+    def next_junction(self, context):
+        return self.ring.get(context.road.split("-")[1], "F")
+
+
+def test_fallback_fires_and_is_logged(town, driver, phi1, net_path, caplog):
+    setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1, fallback_after=4)
+    synthetic = SyntheticDriver(driver, np.random.default_rng(0), initial_trust=6)
+    with caplog.at_level("INFO", logger="trustroute.harness.simulation.episode"):
+        record = run_episode(setup, LoopPolicy(), synthetic, "fb", 0, net_path=net_path)
+    roads = record.roads
+    assert record.summary["fallback_fired"]
+    assert roads["fallback"].tolist().index(True) == 4 and not roads["fallback"].iloc[:4].any()
+    assert any("fallback fired at junction 4" in m for m in caplog.messages)
+    assert roads["directed_road"].tolist()[:5] == ["E-A", "A-F", "F-G", "G-I", "I-H"]
+    assert record.summary["end_reason"] in ("accepted", "destination")
+    assert _roads_driven(record.kinematics) == roads["directed_road"].tolist()
+
+
+def test_unreadable_net(setup, tmp_path):
+    bad = tmp_path / "bad.net.xml"
+    bad.write_text("<net><edge")
+    with pytest.raises(InputError, match="not a readable SUMO net"):
+        _episode(setup, bad, 0)
+    with pytest.raises(InputError, match="does not exist"):
+        _episode(setup, tmp_path / "missing.net.xml", 0)
+
+
+def test_net_of_another_town(setup, town, tmp_path):
+    data = {"junctions": {"P": [0, 0], "Q": [300, 0], "R": [0, 300]},
+            "roads": [["P", "Q"], ["Q", "R"], ["R", "P"]],
+            "incidents": {r: "none" for r in ("P-Q", "Q-P", "Q-R", "R-Q", "R-P", "P-R")}}
+    other = build_net(town_from_dict(data, "other.json"), cache_dir=tmp_path).path
+    with pytest.raises(InputError, match="has no edge for road"):
+        _episode(setup, other, 0)
+
+
+def test_missing_sumo_binary(setup, net_path, monkeypatch):
+    import sumolib
+
+    monkeypatch.setattr(sumolib, "checkBinary", lambda name, bindir=None: "sumo-not-installed")
+    monkeypatch.setenv("PATH", "")
+    sumo_start.sumo_binary.cache_clear()
+    try:
+        with pytest.raises(InputError, match="SUMO binary 'sumo' was not found"):
+            _episode(setup, net_path, 0)
+    finally:
+        sumo_start.sumo_binary.cache_clear()
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/statm") as handle:
+        pages = int(handle.read().split()[1])
+    import os
+
+    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+@pytest.mark.slow
+def test_two_hundred_episodes_keep_memory_flat(setup, net_path):
+    for seed in range(20):   # warm-up: caches, allocator pools
+        _episode(setup, net_path, seed)
+    before = _rss_mb()
+    for seed in range(200):
+        record = _episode(setup, net_path, 1000 + seed)
+        assert record.summary["end_reason"] in ("accepted", "destination")
+    growth = _rss_mb() - before
+    assert growth < 25.0, f"RSS grew by {growth:.1f} MB over 200 episodes"
+
+
+@pytest.mark.slow
+def test_sumo_episodes_match_the_exact_evaluation(setup, net_path, pomdp):
+    """End to end: satisfaction and final trust of SUMO episodes vs the exact tree evaluation."""
+    from trustroute.policies.evaluation.plain import evaluate
+
+    exact = evaluate(pomdp, setup.spec, trust_free_policy(setup.town, setup.spec), fallback_after=20)
+    n = 300
+    records = [_episode(setup, net_path, 5000 + seed) for seed in range(n)]
+    satisfied = np.mean([r.summary["satisfied"] for r in records])
+    final_trust = np.mean([r.summary["final_trust"] for r in records])
+    p = exact.satisfaction_probability
+    assert abs(satisfied - p) < 4 * np.sqrt(p * (1 - p) / n)
+    assert abs(final_trust - exact.expected_final_trust) < 0.2
+
+
+def test_the_town_net_is_verified_once_per_file_version(town, tmp_path, monkeypatch):
+    """Without a net path an episode takes the town's cached net: verified (build_net) the first
+    time in a process and again whenever the file changed or is gone, not at every episode."""
+    import os
+    from types import SimpleNamespace
+
+    from trustroute.harness.simulation import episode
+
+    net = tmp_path / "town.net.xml"
+    builds = []
+
+    def fake_build(town_):
+        builds.append(town_)
+        net.write_text("<net/>")
+        return SimpleNamespace(path=net)
+
+    monkeypatch.setattr(episode, "town_net_path", lambda town_: net)
+    monkeypatch.setattr(episode, "build_net", fake_build)
+    monkeypatch.setattr(episode, "_VERIFIED_NETS", set())
+    assert episode._town_net(town) == net and len(builds) == 1   # absent: built
+    assert episode._town_net(town) == net and len(builds) == 1   # unchanged: no second check
+    os.utime(net, ns=(0, net.stat().st_mtime_ns + 10**9))
+    assert episode._town_net(town) == net and len(builds) == 2   # replaced: verified again
+    net.unlink()
+    assert episode._town_net(town) == net and len(builds) == 3   # deleted: rebuilt

@@ -1,0 +1,157 @@
+"""The gymnasium environment: the API checker on both engines, and a random agent against exact values."""
+
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from trustroute.harness.simulation.gym_env import ENV_ID, TrustRoutingEnv
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.labelling import Labeller
+
+
+def random_agent_end_probabilities(env: TrustRoutingEnv) -> dict[str, float]:
+    """Exact P(accepted), P(rejected), P(cap) of the uniformly random agent (over the legal junctions).
+
+    Computed here, independently of the environment's episode loop, by pushing probability mass
+    forward through the belief MDP of the product: nodes (road, DFA state, belief) are merged when
+    equal, each legal junction has probability 1/k, each observation h its probability
+    Σθ b(θ) P(h | θ, incident) under the Bayes belief (the exact posterior of the driver's trust).
+    """
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+
+    town, spec, cap = env.town, env.scldtl_spec, env.setup.junction_cap
+    pomdp = build_pomdp(town, env.driver_model)
+    dfa = build_dfa(spec)
+    labeller = Labeller(spec, dfa, town)
+    accepting, rejecting = np.asarray(dfa.accepting, bool), np.asarray(dfa.rejecting, bool)
+    successors = np.asarray(pomdp.successor_table)
+    degree = (successors >= 0).sum(axis=1)
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if env.driver_model.depends_on_performance else (0,))]
+    road = np.array([town.state_index(spec.start)])
+    belief = np.asarray(pomdp.initial_belief, float)[None, :]
+    q = np.asarray(labeller.step(np.array([dfa.initial]), road, belief), dtype=np.int64)
+    p = np.ones(1)
+    mass = {"accepted": 0.0, "rejected": 0.0, "cap": 0.0}
+    for level in range(cap + 1):
+        acc, rej = accepting[q], rejecting[q] & ~accepting[q]
+        mass["accepted"] += p[acc].sum()
+        mass["rejected"] += p[rej].sum()
+        live = ~(acc | rej)
+        road, q, belief, p = road[live], q[live], belief[live], p[live]
+        if level == cap:
+            mass["cap"] += p.sum()
+            break
+        parts = []
+        for slot in range(successors.shape[1]):
+            has = successors[road, slot] >= 0
+            x2 = successors[road[has], slot]
+            for h, e in outcomes:
+                post, p_obs = pomdp.belief_update(belief[has], pomdp.road_incident[x2], h, e)
+                ok = p_obs > 0
+                q2 = np.asarray(labeller.step(q[has][ok], x2[ok], post[ok]), dtype=np.int64)
+                parts.append((x2[ok], q2, post[ok], p[has][ok] / degree[road[has]][ok] * p_obs[ok]))
+        road, q, belief, p = (np.concatenate([part[i] for part in parts]) for i in range(4))
+        keys = np.concatenate([road[:, None].astype(float), q[:, None].astype(float), belief], axis=1)
+        unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+        p = np.bincount(inverse.ravel(), weights=p, minlength=len(unique))
+        road, q, belief = unique[:, 0].astype(np.int64), unique[:, 1].astype(np.int64), unique[:, 2:]
+    return mass
+
+
+def test_registered_id_makes_the_environment():
+    env = gymnasium.make(ENV_ID, spec="phi1", engine="model")
+    assert isinstance(env.unwrapped, TrustRoutingEnv)
+    observation, info = env.reset(seed=0)
+    assert observation in env.observation_space
+    assert info["action_mask"].sum() == len(info["legal_junctions"])
+    env.close()
+
+
+def test_check_env_model_engine():
+    env = gymnasium.make(ENV_ID, spec="phi1", engine="model")
+    check_env(env.unwrapped)
+    env.close()
+
+
+@pytest.mark.slow
+def test_check_env_sumo_engine():
+    env = gymnasium.make(ENV_ID, spec="phi1", engine="sumo")
+    check_env(env.unwrapped)
+    observation, info = env.reset(seed=5)
+    for _ in range(3):   # a few SUMO roads, then reset mid-episode (the SUMO session must close)
+        observation, reward, terminated, truncated, info = env.step(0)
+        assert observation in env.observation_space and not truncated
+        if terminated:
+            break
+    env.reset(seed=6)
+    env.close()
+
+
+def test_seeded_resets_repeat_and_differ():
+    env = TrustRoutingEnv("phi1", engine="model", junction_cap=12)
+
+    def rollout(seed: int) -> list:
+        observation, info = env.reset(seed=seed)
+        steps = [observation["belief"].tolist()]
+        done = False
+        while not done:
+            observation, reward, terminated, truncated, info = env.step(1)
+            steps.append((observation["road"], observation["dfa_state"], observation["belief"].tolist(),
+                          reward))
+            done = terminated or truncated
+        return steps + [info["end_reason"]]
+
+    assert rollout(7) == rollout(7)
+    assert any(rollout(7) != rollout(s) for s in (8, 9, 10))
+    env.close()
+
+
+def test_ends_rewards_and_masks_follow_the_tracker():
+    env = TrustRoutingEnv("phi1", engine="model", junction_cap=6)
+    rng = np.random.default_rng(3)
+    seen = set()
+    for seed in range(40):
+        observation, info = env.reset(seed=seed)
+        done, steps = False, 0
+        while not done:
+            observation, reward, terminated, truncated, info = env.step(int(rng.integers(0, 5)))
+            steps += 1
+            done = terminated or truncated
+            assert reward == (1.0 if terminated and info.get("end_reason") == "accepted" else 0.0)
+        assert observation["junctions"] == steps == env.last_record.summary["junctions"]
+        assert truncated == (info["end_reason"] == "cap") == (steps == 6 and not terminated)
+        roads = env.last_record.roads   # the tracker's log: each action is the next road's end junction
+        assert list(roads["action"].iloc[:-1]) == [r.split("-")[1] for r in roads["directed_road"].iloc[1:]]
+        seen.add(info["end_reason"])
+    assert seen == {"accepted", "cap"}
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(0)
+    env.close()
+
+
+@pytest.mark.slow
+def test_random_agent_matches_exact_probabilities():
+    # phi1_strict within 10 junctions: all three ends have sizeable mass (about 0.07, 0.30, 0.63).
+    env = TrustRoutingEnv("phi1_strict", engine="model", junction_cap=10)
+    exact = random_agent_end_probabilities(env)
+    assert abs(sum(exact.values()) - 1) < 1e-9
+    assert all(0.05 < p < 0.95 for p in exact.values())   # no end is (almost) sure: the test has teeth
+    episodes = 2000
+    counts = dict.fromkeys(exact, 0)
+    env.action_space.seed(11)
+    for i in range(episodes):
+        observation, info = env.reset(seed=1000 + i)
+        done = False
+        while not done:
+            action = env.action_space.sample(mask=info["action_mask"])
+            observation, reward, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+        counts[info["end_reason"]] += 1
+    for reason, p in exact.items():
+        estimate = counts[reason] / episodes
+        se = max(np.sqrt(p * (1 - p) / episodes), 1e-12)
+        assert abs(estimate - p) <= 4 * se, (reason, estimate, p, se)
+    env.close()

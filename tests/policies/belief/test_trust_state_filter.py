@@ -1,0 +1,74 @@
+"""The joint (θ, q) filter: today's filter bit for bit without trust atoms; a law over (θ, q) with them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from trustroute.policies.belief.trust_state_filter import joint_filter
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import load_spec
+
+
+def run(pomdp, spec, route, takeovers):
+    town = pomdp.town
+    dfa = build_dfa(spec)
+    labeller = Labeller(spec, dfa, town)
+    filter_ = joint_filter(pomdp, dfa, labeller)
+    start = town.state_index(route[0])
+    belief = np.asarray(pomdp.initial_belief, dtype=float)[None]
+    joint = filter_.initial(start, belief[0])
+    q = labeller.step(np.array([dfa.initial]), np.array([start]), belief,
+                      np.array([0]) if labeller.reads_trust else None)
+    history = [(joint, belief, q)]
+    for road, h in zip(route[1:], takeovers, strict=True):
+        x = np.array([town.state_index(road)])
+        incident = pomdp.road_incident[x]
+        posterior, p = pomdp.belief_update(belief, incident, h, 0)
+        joint = filter_.update(joint, posterior, posterior, x, incident, h, 0, p)
+        belief = posterior
+        if not labeller.reads_trust:
+            q = labeller.step(q, x, belief)
+        history.append((joint, belief, q))
+    return filter_, history
+
+
+ROUTE = ["E-A", "A-B", "B-G", "G-I", "I-J", "J-K", "K-L", "L-H"]
+
+
+def takeovers(town):
+    """A takeover on every other road with an incident (none has no takeovers)."""
+    incidents = [town.incident(road) != "none" for road in ROUTE[1:]]
+    return [int(has and i % 2 == 0) for i, has in enumerate(incidents)]
+
+
+def test_without_trust_atoms_the_joint_is_todays_belief_times_the_dfa_state(pomdp):
+    spec = load_spec("specs/phi1.toml", pomdp.town)
+    _, history = run(pomdp, spec, ROUTE, takeovers(pomdp.town))
+    for joint, belief, q in history:
+        assert np.array_equal(joint[0, :, int(q[0])], belief[0])       # bit for bit
+        assert np.count_nonzero(joint.sum(axis=1)) == 1
+
+
+def test_with_trust_atoms_the_joint_is_a_law_whose_marginal_is_the_belief(pomdp):
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    filter_, history = run(pomdp, spec, ROUTE, takeovers(pomdp.town))
+    for joint, belief, _ in history:
+        assert joint.dtype == np.float64 and abs(joint.sum() - 1.0) < 1e-12
+        assert np.allclose(joint.sum(axis=2), belief, atol=1e-12)
+    accepted, _, live = filter_.masses(history[-2][0])     # at K-L (v3), after v1 and v2
+    # Accepted exactly when the trust at v3 is 6 or 7: the belief's mass there.
+    assert abs(accepted[0] - history[-2][1][0, 5:].sum()) < 1e-12
+    assert 0 < accepted[0] < 1 and abs(accepted[0] + live[0] - 1) < 1e-12
+    # Accepting is absorbing, so P(accepted) is a martingale: averaged over the next observation
+    # it stays, although each observation moves it.
+    joint, belief, _ = history[-2]
+    x = np.array([pomdp.town.state_index("L-H")])   # a truck: takeovers are possible
+    incident = pomdp.road_incident[x]
+    total, moved = 0.0, []
+    for h in (0, 1):
+        posterior, p = pomdp.belief_update(belief, incident, h, 0)
+        after = filter_.masses(filter_.update(joint, posterior, posterior, x, incident, h, 0, p))[0][0]
+        total += float(p[0]) * after
+        moved.append(after)
+    assert abs(total - accepted[0]) < 1e-12 and min(abs(m - accepted[0]) for m in moved) > 1e-3

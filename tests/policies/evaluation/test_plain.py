@@ -1,0 +1,207 @@
+"""Exact policy evaluation against an independent Monte Carlo simulation of the trust model.
+
+The simulation samples the hidden trust path θ0, θ1, ... from the driver model, the takeovers
+and the AV's failures from θ, and runs the AV's belief filter on what it observes; it shares
+no code with the belief-tree unfolding in policies/evaluation/plain.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.fallback import FallbackPolicy, with_fallback
+from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
+
+RANDOM_POLICY_SEED = {"phi1": 9, "phi2": 6}
+
+
+class RandomStationaryPolicy(RoutingPolicy):
+    """A fixed random map (road, E[θ] >= 4.5) -> next junction, drawn from `rng`."""
+
+    name = "random"
+
+    def __init__(self, town, rng):
+        self.town = town
+        self.table = {
+            (road, high): town.actions(road)[int(rng.integers(len(town.actions(road))))]
+            for road in town.states for high in (False, True)
+        }
+
+    def next_junction(self, context):
+        high = bool(context.belief @ np.arange(1, 8) >= 4.5)
+        return self.table[(context.road, high)]
+
+
+def simulate(pomdp, spec, policy, episodes, rng, max_junctions, belief_rule="bayes"):
+    """Monte Carlo: returns (satisfied bool[episodes], final true trust int[episodes])."""
+    town, driver = pomdp.town, pomdp.driver
+    dfa = build_dfa(spec)
+    labeller = Labeller(spec, dfa, town)
+    satisfied = np.zeros(episodes, dtype=bool)
+    final_trust = np.zeros(episodes)
+    n_trust = driver.n_trust
+    for n in range(episodes):
+        theta = int(rng.choice(n_trust, p=driver.initial_belief))
+        belief = np.array(driver.initial_belief, dtype=float)
+        route = [spec.start]
+        q = int(labeller.step(np.array([dfa.initial]), np.array([town.state_index(spec.start)]),
+                              belief[None])[0])
+        for level in range(max_junctions + 1):
+            if dfa.accepting[q]:
+                satisfied[n] = True
+                break
+            if dfa.rejecting[q]:
+                break
+            context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
+            if policy.finished(context) or level == max_junctions:
+                break
+            road = town.successor(route[-1], policy.next_junction(context))
+            inc = driver.incident_index(town.incident(road))
+            h = int(rng.random() < driver.takeover_probability[inc, theta])
+            e = int(rng.random() < driver.failure_probability[inc, theta])
+            theta = int(rng.choice(n_trust, p=driver.trust_transition[inc, h, e, theta]))
+            belief = pomdp.belief_update(belief, inc, h, e, rule=belief_rule)[0][0]
+            route.append(road)
+            q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None])[0])
+        final_trust[n] = driver.trust_levels[theta]
+    return satisfied, final_trust
+
+
+def assert_agrees(evaluation, satisfied, final_trust):
+    n = satisfied.size
+    p = evaluation.satisfaction_probability
+    se = max(np.sqrt(p * (1 - p) / n), 1.0 / n)
+    assert abs(satisfied.mean() - p) <= 4 * se + evaluation.gap, (satisfied.mean(), p, se)
+    se_trust = final_trust.std(ddof=1) / np.sqrt(n)
+    assert abs(final_trust.mean() - evaluation.expected_final_trust) <= 4 * se_trust + 1e-9
+
+
+@pytest.mark.parametrize("name", ["phi1", "phi2"])
+@pytest.mark.parametrize("belief_rule", ["bayes", "paper"])
+def test_baseline_value_agrees_with_monte_carlo(pomdp, name, belief_rule):
+    spec = load_spec(f"specs/{name}.toml", pomdp.town)
+    policy = trust_free_policy(pomdp.town, spec)
+    evaluation = evaluate(pomdp, spec, policy, belief_rule=belief_rule)
+    assert evaluation.gap == 0.0
+    assert evaluation.end_mass["accepted"] + evaluation.end_mass["destination"] == pytest.approx(1.0)
+    satisfied, trust = simulate(pomdp, spec, policy, 3000, np.random.default_rng(11), 60, belief_rule)
+    assert_agrees(evaluation, satisfied, trust)
+
+
+@pytest.mark.parametrize("name", ["phi1", "phi2"])
+@pytest.mark.parametrize("after", [None, 6])
+def test_random_stationary_policy_agrees_with_monte_carlo(pomdp, name, after):
+    spec = load_spec(f"specs/{name}.toml", pomdp.town)
+    # Seeds chosen so that, without the fallback, the policy satisfies the spec sometimes but not always.
+    policy = RandomStationaryPolicy(pomdp.town, np.random.default_rng(RANDOM_POLICY_SEED[name]))
+    cap = 14
+    evaluation = evaluate(pomdp, spec, policy, fallback_after=after, max_junctions=cap)
+    simulated = policy if after is None else with_fallback(policy, pomdp.town, spec, after=after)
+    satisfied, trust = simulate(pomdp, spec, simulated, 3000, np.random.default_rng(17), cap)
+    assert_agrees(evaluation, satisfied, trust)
+    masses = evaluation.end_mass
+    assert sum(masses.values()) == pytest.approx(1.0)
+    if after is None:
+        assert 0.05 < evaluation.lower < 0.95
+        assert masses["destination"] == 0.0
+        assert evaluation.fallback_probability == 0.0
+
+
+def test_pruning_gives_an_interval_around_the_exact_value(pomdp):
+    spec = load_spec("specs/phi2.toml", pomdp.town)
+    policy = RandomStationaryPolicy(pomdp.town, np.random.default_rng(RANDOM_POLICY_SEED["phi2"]))
+    exact = evaluate(pomdp, spec, policy, fallback_after=5, max_junctions=14)
+    assert exact.gap == 0.0
+    for kwargs in ({"prune_below": 1e-2}, {"max_nodes": 10}):
+        rough = evaluate(pomdp, spec, policy, fallback_after=5, max_junctions=14, **kwargs)
+        assert rough.end_mass["pruned"] > 0
+        assert rough.lower <= exact.lower + 1e-12 <= rough.upper + 2e-12
+        assert rough.final_trust_lower <= exact.expected_final_trust + 1e-9
+        assert exact.expected_final_trust <= rough.final_trust_upper + 1e-9
+
+
+def test_spec_accepted_at_the_start_is_worth_one_and_wrapping_is_not_repeated(pomdp):
+    spec = load_spec("specs/phi1.toml", pomdp.town)
+    policy = with_fallback(trust_free_policy(pomdp.town, spec), pomdp.town, spec, after=3)
+    evaluation = evaluate(pomdp, spec, policy, fallback_after=20)
+    assert isinstance(policy, FallbackPolicy)
+    assert evaluation.fallback_after == 3
+    assert evaluation.policy == "free+fallback3"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "belief_rule"), [("phi1", "bayes"), ("phi1", "paper"), ("phi2", "paper")])
+def test_baseline_value_agrees_with_large_monte_carlo(pomdp, name, belief_rule):
+    """Under the paper's filter the AV's belief is not the posterior: 20000 episodes resolve the
+    ~0.01 difference that using the AV's belief for observation probabilities would make."""
+    spec = load_spec(f"specs/{name}.toml", pomdp.town)
+    policy = trust_free_policy(pomdp.town, spec)
+    evaluation = evaluate(pomdp, spec, policy, belief_rule=belief_rule)
+    satisfied, trust = simulate(pomdp, spec, policy, 20000, np.random.default_rng(23), 60, belief_rule)
+    assert_agrees(evaluation, satisfied, trust)
+
+
+def recursive_value(pomdp, spec, policy, max_junctions, belief_rule):
+    """Plain recursion over every observation sequence (scalar code): (P(satisfied), E[final trust])."""
+    town, driver = pomdp.town, pomdp.driver
+    dfa = build_dfa(spec)
+    labeller = Labeller(spec, dfa, town)
+    levels = np.asarray(driver.trust_levels, dtype=float)
+    n_trust = driver.n_trust
+
+    def label(q, road, belief):
+        return int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None])[0])
+
+    def visit(route, q, belief, posterior):
+        if dfa.accepting[q]:
+            return 1.0, float(posterior @ levels)
+        context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
+        if dfa.rejecting[q] or policy.finished(context) or len(route) - 1 == max_junctions:
+            return 0.0, float(posterior @ levels)
+        road = town.successor(route[-1], policy.next_junction(context))
+        inc = driver.incident_index(town.incident(road))
+        sat = trust = 0.0
+        for h in (0, 1):
+            for e in (0, 1):
+                # P(h, e, θ' | history) = Σθ posterior(θ) P(h|θ) P(e|θ) T(θ, θ')
+                joint = np.zeros(n_trust)
+                for theta in range(n_trust):
+                    p_h = driver.takeover_probability[inc, theta]
+                    p_e = driver.failure_probability[inc, theta]
+                    weight = posterior[theta] * (p_h if h else 1 - p_h) * (p_e if e else 1 - p_e)
+                    joint += weight * driver.trust_transition[inc, h, e, theta]
+                p_obs = joint.sum()
+                if p_obs <= 0:
+                    continue
+                if belief_rule == "bayes":
+                    new_belief = joint / p_obs
+                else:
+                    raw = belief @ driver.trust_transition[inc, h, e]
+                    new_belief = raw / raw.sum()
+                s, t = visit(route + [road], label(q, road, new_belief), new_belief, joint / p_obs)
+                sat += p_obs * s
+                trust += p_obs * t
+        return sat, trust
+
+    belief = np.asarray(driver.initial_belief, dtype=float)
+    return visit([spec.start], label(dfa.initial, spec.start, belief), belief, belief)
+
+
+@pytest.mark.parametrize("name", ["phi1", "phi2"])
+@pytest.mark.parametrize("belief_rule", ["bayes", "paper"])
+def test_evaluate_equals_plain_recursion(pomdp, name, belief_rule):
+    spec = load_spec(f"specs/{name}.toml", pomdp.town)
+    inner = RandomStationaryPolicy(pomdp.town, np.random.default_rng(RANDOM_POLICY_SEED[name]))
+    policy = with_fallback(inner, pomdp.town, spec, after=6)
+    evaluation = evaluate(pomdp, spec, policy, max_junctions=13, belief_rule=belief_rule)
+    satisfied, final_trust = recursive_value(pomdp, spec, policy, 13, belief_rule)
+    assert evaluation.gap == 0.0
+    assert 0.05 < satisfied < 0.95 and evaluation.end_mass["destination"] > 0.01
+    assert evaluation.lower == pytest.approx(satisfied, abs=1e-12)
+    assert evaluation.expected_final_trust == pytest.approx(final_trust, abs=1e-9)

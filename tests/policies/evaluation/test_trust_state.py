@@ -1,0 +1,228 @@
+"""Exact evaluation with the joint (θ, q) belief against brute force, Monte Carlo and today's evaluate."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tests.cli import run_cli
+from tests.policies.evaluation.test_plain import RandomStationaryPolicy
+from tests.policies.trust_paths import policy_value
+from tests.policies.trust_specs import random_problem
+from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.trust_state import evaluate_joint
+from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.labelling import Labeller
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.routing.protocol import DecisionContext
+from trustroute.policies.synthesize_spec import synthesize_spec
+
+
+@pytest.mark.slow
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(["trust", "belief", "mixed"]),
+       cap=st.integers(2, 4))
+def test_exact_value_equals_brute_force_over_trust_paths(driver, seed, kind, cap):
+    rng = np.random.default_rng(seed)
+    pomdp, spec = random_problem(rng, driver, kind)
+    for policy in (RandomStationaryPolicy(pomdp.town, rng), trust_free_policy(pomdp.town, spec)):
+        exact = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=cap,
+                               force_joint=True)
+        reference = policy_value(pomdp, spec, policy, cap)
+        assert exact.gap == 0.0
+        assert exact.lower == pytest.approx(reference, abs=1e-10)
+        assert sum(exact.end_mass.values()) == pytest.approx(1.0, abs=1e-10)
+
+
+def test_merged_unfolding_equals_the_tree_unfolding(pomdp):
+    """Merging equal (road, J, beliefs, route memory) nodes changes no number of the evaluation:
+    the synthesized joint policy with the fallback (its memory: the projected state) and the
+    trust-free route (its memory: the whole route), on φ1 with the trust atom."""
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    synthesized = synthesize_spec(pomdp, spec, horizon=6, time_limit=20).policy
+    for policy, fallback_after in ((synthesized, 4), (trust_free_policy(pomdp.town, spec), None)):
+        merged, tree = (evaluate_joint(pomdp, spec, policy, fallback_after=fallback_after,
+                                       max_junctions=12, merge=merge) for merge in (True, False))
+        assert tree.gap == 0.0 and merged.gap == 0.0
+        for name in ("lower", "upper", "expected_final_trust", "expected_junctions",
+                     "fallback_probability"):
+            assert getattr(merged, name) == pytest.approx(getattr(tree, name), abs=1e-12), name
+        for reason, value in tree.end_mass.items():
+            assert merged.end_mass[reason] == pytest.approx(value, abs=1e-12), reason
+    assert merged.nodes <= tree.nodes
+
+
+def simulate_hidden_trust(pomdp, spec, policy, episodes, rng, max_junctions):
+    """Monte Carlo with the true trust path drawn from the driver model; the DFA reads it."""
+    town, driver = pomdp.town, pomdp.driver
+    dfa = build_dfa(spec)
+    labeller = Labeller(spec, dfa, town)
+    satisfied = np.zeros(episodes, dtype=bool)
+    for n in range(episodes):
+        theta = int(rng.choice(driver.n_trust, p=driver.initial_belief))
+        belief = np.array(driver.initial_belief, dtype=float)
+        route = [spec.start]
+        q = int(labeller.step(np.array([dfa.initial]), np.array([town.state_index(spec.start)]),
+                              belief[None], np.array([theta]))[0])
+        for level in range(max_junctions + 1):
+            if dfa.accepting[q] or dfa.rejecting[q]:
+                break
+            context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
+            if policy.finished(context) or level == max_junctions:
+                break
+            road = town.successor(route[-1], policy.next_junction(context))
+            inc = driver.incident_index(town.incident(road))
+            h = int(rng.random() < driver.takeover_probability[inc, theta])
+            e = int(rng.random() < driver.failure_probability[inc, theta])
+            theta = int(rng.choice(driver.n_trust, p=driver.trust_transition[inc, h, e, theta]))
+            belief = pomdp.belief_update(belief, inc, h, e)[0][0]
+            route.append(road)
+            q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None],
+                                  np.array([theta]))[0])
+        satisfied[n] = bool(dfa.accepting[q])
+    return satisfied
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("policy_kind", ["free", "random"])
+def test_exact_value_agrees_with_monte_carlo_of_the_hidden_trust(pomdp, policy_kind):
+    """φ1 with the trust atom θ >= 6 at v3; the policies never read the DFA state, so the
+    simulation needs no joint filter of its own."""
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    rng = np.random.default_rng(20261201)
+    policy = (trust_free_policy(pomdp.town, spec) if policy_kind == "free"
+              else RandomStationaryPolicy(pomdp.town, np.random.default_rng(9)))
+    exact = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=12)
+    satisfied = simulate_hidden_trust(pomdp, spec, policy, 4000, rng, 12)
+    p = exact.satisfaction_probability
+    se = max(np.sqrt(p * (1 - p) / satisfied.size), 1.0 / satisfied.size)
+    assert abs(satisfied.mean() - p) <= 4 * se + exact.gap, (satisfied.mean(), p, se)
+
+
+@pytest.mark.parametrize("name", ["phi1", "phi2_strict"])
+def test_without_trust_atoms_the_joint_unfolding_gives_todays_evaluation(pomdp, name):
+    spec = load_spec(f"specs/{name}.toml", pomdp.town)
+    for policy in (trust_free_policy(pomdp.town, spec),
+                   RandomStationaryPolicy(pomdp.town, np.random.default_rng(6))):
+        today = evaluate(pomdp, spec, policy, fallback_after=3, max_junctions=10)
+        joint = evaluate_joint(pomdp, spec, policy, fallback_after=3, max_junctions=10, force_joint=True)
+        # The two sum the same terms in different orders: equal up to rounding (on the Town01 default
+        # town phi2_strict's free policy differs by one ulp; on the earlier pentagon they were equal).
+        assert abs(joint.lower - today.lower) <= 2 * math.ulp(today.lower)
+        assert abs(joint.upper - today.upper) <= 2 * math.ulp(today.upper)
+        assert joint.expected_final_trust == pytest.approx(today.expected_final_trust, abs=1e-12)
+        assert joint.expected_junctions == pytest.approx(today.expected_junctions, abs=1e-12)
+        for reason, value in today.end_mass.items():
+            assert joint.end_mass[reason] == pytest.approx(value, abs=1e-15)
+        dispatched = evaluate_joint(pomdp, spec, policy, fallback_after=3, max_junctions=10)
+        assert {k: v for k, v in dispatched.to_dict().items() if k != "seconds"} == \
+            {k: v for k, v in today.to_dict().items() if k != "seconds"}
+
+
+def test_belief_and_true_trust_readings_of_phi1_differ(pomdp):
+    """The worked example of docs/trust_states.md: the trust-free route, φ1 read on the belief
+    (hightrust: P(θ >= 6) > 0.5) and on the true trust (θ >= 6)."""
+    belief = load_spec("specs/phi1.toml", pomdp.town)
+    trust = load_spec("specs/phi1_trust.toml", pomdp.town)
+    on_belief = evaluate(pomdp, belief, trust_free_policy(pomdp.town, belief))
+    on_trust = evaluate_joint(pomdp, trust, trust_free_policy(pomdp.town, trust))
+    assert on_belief.gap == 0.0 and on_trust.gap == 0.0
+    assert abs(on_belief.lower - on_trust.lower) > 0.05
+
+
+def _assert_bracket(pruned, exact_value):
+    """[lower, upper] holds the exact value and its width is the pruned live mass, which is the
+    sum of what each cut dropped."""
+    assert pruned.lower <= exact_value + 1e-12 and exact_value <= pruned.upper + 1e-12
+    assert pruned.gap == pytest.approx(pruned.end_mass["pruned"], abs=1e-12)
+    assert sum(pruned.pruning["pruned_mass"].values()) == pytest.approx(pruned.end_mass["pruned"],
+                                                                        abs=1e-12)
+    assert sum(pruned.end_mass.values()) == pytest.approx(1.0, abs=1e-10)
+
+
+@pytest.mark.parametrize("seed", [3, 17, 101])
+@pytest.mark.parametrize("kind", ["trust", "mixed"])
+def test_pruned_bracket_holds_the_brute_force_value(driver, seed, kind):
+    """A node budget of 2 per level and a live-mass threshold cut most of the tree; the bracket
+    still holds the value brute force over trust paths computes, and pruning off is exact."""
+    rng = np.random.default_rng(seed)
+    pomdp, spec = random_problem(rng, driver, kind)
+    policy = RandomStationaryPolicy(pomdp.town, rng)
+    reference = policy_value(pomdp, spec, policy, 4)
+    off = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=4, force_joint=True,
+                         prune_below=0.0, max_nodes=10**9)
+    assert off.gap == 0.0 and off.lower == pytest.approx(reference, abs=1e-10)
+    assert not any(off.pruning["pruned_nodes"].values())
+    for prune_below, max_nodes in ((0.0, 2), (0.05, 10**9), (0.02, 3)):
+        pruned = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=4,
+                                force_joint=True, prune_below=prune_below, max_nodes=max_nodes)
+        _assert_bracket(pruned, reference)
+
+
+@pytest.fixture(scope="module")
+def phi1_trust_policy(pomdp):
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    return spec, synthesize_spec(pomdp, spec, horizon=6, time_limit=20).policy
+
+
+def test_pruning_the_joint_policy_brackets_its_exact_value(pomdp, phi1_trust_policy):
+    """φ1 with the trust atom, the synthesized joint policy with the fallback, 12 junctions: the
+    tree unfolding with pruning off is exact; each cut (budget, threshold, deadline) gives a
+    bracket around it whose width is the pruned mass, and the cuts actually cut."""
+    spec, policy = phi1_trust_policy
+    exact = evaluate_joint(pomdp, spec, policy, fallback_after=4, max_junctions=12, merge=False,
+                           prune_below=0.0, max_nodes=10**9)
+    assert exact.gap == 0.0
+    cuts = {"beyond_budget": {"max_nodes": 20}, "below_threshold": {"prune_below": 1e-4},
+            "past_deadline": {"time_limit": 1e-9}}
+    for cut, options in cuts.items():
+        pruned = evaluate_joint(pomdp, spec, policy, fallback_after=4, max_junctions=12, **options)
+        _assert_bracket(pruned, exact.lower)
+        assert pruned.gap > 1e-6 and pruned.pruning["pruned_nodes"][cut] > 0, cut
+        assert pruned.pruning["pruned_mass"][cut] == pytest.approx(pruned.gap, abs=1e-12), cut
+    # The default limits cut nothing here: the same value as the exact tree.
+    default = evaluate_joint(pomdp, spec, policy, fallback_after=4, max_junctions=12)
+    assert default.gap == 0.0 and default.lower == pytest.approx(exact.lower, abs=1e-12)
+
+
+def test_prefetched_decisions_are_the_node_by_node_decisions(pomdp):
+    """The joint policy decides each level's nodes in one batch (prefetch); without it every node
+    asks on its own: the same evaluation, number for number (a policy of horizon 12 on 14
+    junctions without the fallback, where its decisions differ between nodes of a level)."""
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    policy = synthesize_spec(pomdp, spec, horizon=12, time_limit=20).policy
+    batched = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=14)
+    policy.prefetch = None           # hides the batch path from evaluate_joint (instance attribute)
+    try:
+        alone = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=14)
+    finally:
+        del policy.prefetch
+    for name in ("lower", "upper", "expected_final_trust", "nodes"):
+        assert getattr(batched, name) == getattr(alone, name), name
+    assert batched.end_mass == alone.end_mass
+
+
+@pytest.mark.slow
+def test_the_cli_brackets_phi1_trust_at_the_default_cap(capsys, tmp_path):
+    """`trustroute evaluate specs/phi1_trust.toml aware` at the default cap (60) returns a certified
+    bracket whose width is the pruned mass; the 20-junction value, exact there, is below it."""
+    code, out, _ = run_cli(capsys, "evaluate", "specs/phi1_trust.toml", "aware", "--cache-dir",
+                           str(tmp_path), "--json")
+    assert code == 0
+    value = json.loads(out)
+    assert value["max_junctions"] == 60
+    assert 0.0 <= value["lower"] <= value["upper"] <= 1.0
+    assert value["upper"] - value["lower"] == pytest.approx(value["end_mass"]["pruned"], abs=1e-12)
+    assert value["pruning"]["max_nodes"] > 0
+    code, out, _ = run_cli(capsys, "evaluate", "specs/phi1_trust.toml", "aware", "--cache-dir",
+                           str(tmp_path), "--max-junctions", "20", "--max-nodes", "1000000", "--json")
+    at_20 = json.loads(out)
+    assert code == 0 and at_20["gap"] < 1e-9
+    # More junctions can only add accepted mass (the fallback at 20 is the same in both runs).
+    assert at_20["lower"] <= value["upper"] + 1e-12

@@ -1,0 +1,107 @@
+"""Synthesis for specs with trust-state atoms against brute force, exact evaluation and Monte Carlo."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tests.policies.trust_paths import optimum, policy_value
+from tests.policies.trust_specs import random_problem
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.model_engine import run_model_episode
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.evaluation.trust_state import evaluate_joint, evaluate_joint_table
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.trust_state_table import JointTablePolicy
+from trustroute.policies.synthesize_spec import synthesize_spec
+from trustroute.policies.trust_state_synthesis.search import joint_bounds
+
+TOLERANCE = 1e-9
+
+
+@pytest.mark.slow
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(["trust", "belief", "mixed"]),
+       horizon=st.integers(1, 3))
+def test_bounds_bracket_the_brute_force_optimum_and_lower_is_the_policys_value(driver, seed, kind,
+                                                                               horizon):
+    rng = np.random.default_rng(seed)
+    pomdp, spec = random_problem(rng, driver, kind)
+    reference = optimum(pomdp, spec, horizon)
+    result = synthesize_spec(pomdp, spec, horizon=horizon, time_limit=20)
+    assert result.lower - TOLERANCE <= reference <= result.upper + TOLERANCE
+    # The returned policy's value by brute force over trust paths (its joint belief computed
+    # there from the paths, not by the filter): L is exactly that value (joint), at most it (plain).
+    value = policy_value(pomdp, spec, result.policy, horizon)
+    if spec.uses_trust_atoms:
+        assert isinstance(result.policy, JointTablePolicy)
+        assert value == pytest.approx(result.lower, abs=TOLERANCE)
+    else:
+        assert value >= result.lower - TOLERANCE
+    assert value <= reference + TOLERANCE
+
+
+@pytest.mark.slow
+def test_unbounded_bounds_bracket_the_bounded_optimum_and_lower_is_the_policys_value(driver):
+    pomdp, spec = random_problem(np.random.default_rng(5), driver, "trust")
+    reference = optimum(pomdp, spec, 3)
+    unbounded = synthesize_spec(pomdp, spec, horizon=None, time_limit=10)
+    # Pr_max of the unbounded objective is at least the bounded optimum.
+    assert unbounded.upper >= reference - TOLERANCE
+    assert 0 < unbounded.lower <= unbounded.upper + TOLERANCE
+    cap = unbounded.stats["policy_search_horizon"]
+    # L is a certified lower end of the policy's value within its horizon (cut by the time
+    # limit here): the pruned tree unfolding brackets the same value, so the brackets overlap.
+    exact = evaluate_joint(pomdp, spec, unbounded.policy, fallback_after=None, max_junctions=cap,
+                           max_nodes=2_000)
+    value = unbounded.stats["policy_value"]
+    assert value["lower"] == unbounded.lower
+    assert max(value["lower"], exact.lower) <= min(value["upper"], exact.upper) + TOLERANCE
+
+
+def test_merged_evaluation_equals_the_tree_unfolding_of_evaluate_joint(pomdp):
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    result = synthesize_spec(pomdp, spec, horizon=8, time_limit=20)
+    assert result.gap <= 1e-3
+    for cap in (8, 12):
+        tree = evaluate_joint(pomdp, spec, result.policy, fallback_after=None, max_junctions=cap)
+        merged = evaluate_joint_table(pomdp, spec, result.policy, cap)
+        assert tree.gap == 0.0 and merged[0] == merged[1]
+        assert merged[0] == pytest.approx(tree.lower, abs=1e-12)
+    assert result.lower == pytest.approx(evaluate_joint(pomdp, spec, result.policy, fallback_after=None,
+                                                        max_junctions=8).lower, abs=1e-12)
+
+
+def test_a_time_limit_shorter_than_the_first_round_stops_it_with_sound_bounds(pomdp):
+    """The deadline is checked before the first level is expanded: a limit that has passed by then
+    leaves the root a leaf (one node), and the bounds still bracket the exact optimum."""
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    exact = joint_bounds(pomdp, spec, depth=0, horizon=8)
+    assert exact.cut_nodes == 0 and exact.nodes > 1000
+    result = synthesize_spec(pomdp, spec, horizon=8, time_limit=1e-6)
+    assert [run["nodes"] for run in result.stats["runs"]] == [1]
+    assert result.lower - TOLERANCE <= exact.lower <= result.upper + TOLERANCE
+    assert result.upper < 1.0
+
+
+@pytest.mark.slow
+def test_monte_carlo_of_the_returned_policy_with_hidden_trust_agrees_with_lower(town, driver, pomdp):
+    """Episodes through the episode tracker (the joint belief tracked online, the driver's trust
+    hidden from the AV, satisfaction read on the true trust) agree with L within 4 SE."""
+    spec = load_spec("specs/phi1_trust.toml", town)
+    horizon = 10
+    result = synthesize_spec(pomdp, spec, horizon=horizon, time_limit=20)
+    setup = EpisodeSetup(town=town, driver_model=driver, spec=spec, junction_cap=horizon,
+                         fallback_after=None)
+    rng = np.random.default_rng(20261201)
+    episodes = 600
+    satisfied = np.zeros(episodes, dtype=bool)
+    for n in range(episodes):
+        synthetic = SyntheticDriver(driver, np.random.default_rng(rng.integers(2**63)))
+        record = run_model_episode(setup, result.policy, synthetic, f"e{n}", n)
+        satisfied[n] = record.summary["satisfied"]
+    p = result.lower
+    se = max(np.sqrt(p * (1 - p) / episodes), 1.0 / episodes)
+    assert abs(satisfied.mean() - p) <= 4 * se + result.gap, (satisfied.mean(), p, se)

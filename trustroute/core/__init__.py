@@ -1,0 +1,1 @@
+"""trustroute/core."""

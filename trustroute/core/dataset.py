@@ -1,0 +1,362 @@
+"""The study dataset, defined once: file names, Arrow schemas of its four tables, manifest keys.
+
+The harness writes through this module (harness/study/parts.py, harness/study/manifest.py,
+`trustroute run --out`) and analysis reads through it (one reader per table, each checking the
+schema). Every column and file is documented in docs/dataset.md; change both together.
+
+Missing values are nulls (never -1, "" or a NaN standing for "none"): a report not given, the
+action after the last road, the performance of the start road, sim times of the model engine.
+The start road (row 0 of an episode's roads) has incident `none` and no observation.
+
+In pandas (`frame_from_table`), nullable integer columns are `Int64` and nullable booleans are
+`boolean` (so a null stays a null); nullable floats are float64 with NaN; strings are pandas'
+string dtype with missing values for nulls.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from trustroute.core.errors import InputError
+
+# -- files of a study directory ------------------------------------------------------------------
+STUDY_FILE = "study.json"            # the config hash and config of the study in this directory
+LOCK_FILE = "study.lock"             # held (fcntl.flock) by the run using the directory; names it
+MANIFEST_FILE = "manifest.json"
+EPISODES_FILE = "episodes.parquet"
+ROADS_FILE = "roads.parquet"
+KINEMATICS_FILE = "kinematics.parquet"  # SUMO engine only
+INCIDENTS_FILE = "incidents.parquet"    # SUMO engine only, when some road had an incident or takeover
+SUMMARY_FILE = "summary.json"        # `trustroute run --out DIR`: the episode summary
+REPORT_MARKDOWN_FILE = "report.md"
+REPORT_HTML_FILE = "report.html"
+PLOTS_DIR = "plots"
+# Per-episode files while a study runs (one file per episode id in each folder).
+PARTS_DIR = "parts"                  # <episode_id>.zip: every table of the episode + checksum
+FAILURES_DIR = "failures"            # <episode_id>.json: every attempt's error of a failed episode
+DAMAGED_DIR = "damaged"              # parts found damaged, foreign or of another format, moved aside
+PART_FOLDERS: tuple[str, ...] = (PARTS_DIR, FAILURES_DIR)
+PART_SUFFIX = ".zip"                 # the part format: harness/study/parts.py
+MAX_TABLE_BYTES = 8 * 1024**3  # a table is read whole; a larger file is not one of ours
+# Bump when a table's columns or their meaning change: parts of another format are not resumed
+# (they are moved to damaged/ and their episodes re-run), so a study never mixes two formats.
+DATASET_FORMAT = "2"   # 2: missing values are nulls (1 used -1 and "")
+
+
+def part_path(study_dir: Path, episode_id: str) -> Path:
+    return Path(study_dir) / PARTS_DIR / f"{episode_id}{PART_SUFFIX}"
+
+
+def failure_path(study_dir: Path, episode_id: str) -> Path:
+    return Path(study_dir) / FAILURES_DIR / f"{episode_id}.json"
+
+
+# -- schemas ----------------------------------------------------------------------------------------
+def _field(name: str, kind: pa.DataType, nullable: bool = False) -> pa.Field:
+    return pa.field(name, kind, nullable=nullable)
+
+
+def required_schema(**columns: pa.DataType) -> pa.Schema:
+    """A schema of non-nullable columns, in the order given (for tables beside the dataset's)."""
+    return pa.schema([_field(name, kind) for name, kind in columns.items()])
+
+
+BELIEF = pa.list_(pa.float64())
+
+ROADS_SCHEMA = pa.schema([
+    _field("episode_id", pa.string()),
+    _field("index", pa.int64()),                      # position in the episode; 0 = the start road
+    _field("directed_road", pa.string()),
+    _field("action", pa.string(), nullable=True),     # junction chosen here; null on the last road
+    _field("incident", pa.string()),                  # "none" on the start road
+    _field("takeover", pa.bool_(), nullable=True),    # null on the start road (no observation)
+    _field("performance", pa.string(), nullable=True),  # "succ"/"fail"; null on the start road
+    _field("trust_before", pa.int64(), nullable=True),  # true trust; null when unknown (real logs)
+    _field("trust_after", pa.int64(), nullable=True),
+    _field("reported_trust", pa.int64(), nullable=True),  # null: no report on this road
+    _field("belief_before", BELIEF),
+    _field("belief_after", BELIEF),
+    _field("dfa_state", pa.int64()),
+    _field("fallback", pa.bool_()),
+    _field("sim_time_in", pa.float64(), nullable=True),   # null in the model engine
+    _field("sim_time_out", pa.float64(), nullable=True),  # null on the last road and in the model engine
+])
+
+KINEMATICS_SCHEMA = pa.schema([
+    _field("episode_id", pa.string()),
+    _field("time", pa.float64()),
+    _field("x", pa.float64()),
+    _field("y", pa.float64()),
+    _field("speed", pa.float64()),
+    _field("lane", pa.string()),
+    _field("mode", pa.string()),
+])
+
+INCIDENTS_SCHEMA = pa.schema([
+    _field("episode_id", pa.string()),
+    _field("index", pa.int64()),
+    _field("directed_road", pa.string()),
+    _field("incident", pa.string()),
+    _field("sumo_ids", pa.string(), nullable=True),        # comma-separated; null: no SUMO objects
+    _field("injected_time", pa.float64(), nullable=True),
+    _field("in_view_time", pa.float64(), nullable=True),
+    _field("x", pa.float64(), nullable=True),
+    _field("y", pa.float64(), nullable=True),
+    _field("passed_time", pa.float64(), nullable=True),
+    _field("removed_time", pa.float64(), nullable=True),
+    _field("takeover", pa.bool_()),
+    _field("takeover_start", pa.float64(), nullable=True),
+    _field("takeover_end", pa.float64(), nullable=True),
+    _field("performance", pa.string()),
+    _field("min_ttc", pa.float64()),                        # inf: never within the TTC threshold
+    _field("max_deceleration", pa.float64()),
+    _field("collided", pa.bool_()),
+    # Performance measures and the scene's draws (docs/scenes.md; harness/simulation/performance.py).
+    _field("min_head_on_ttc", pa.float64()),                # inf: no oncoming vehicle that close
+    _field("min_pedestrian_distance", pa.float64()),        # inf: no person on the crossing near the ego
+    _field("time_lost", pa.float64()),                      # s against free driving, on autopilot
+    _field("failed_measures", pa.string(), nullable=True),  # comma-separated; null: succ
+    _field("scene", pa.string(), nullable=True),            # the drawn scene; null: no SUMO objects
+])
+
+# The plan's columns, then the episode summary's (harness/simulation/episode_tracker.py), then report stats.
+PLAN_COLUMNS: tuple[str, ...] = ("episode_id", "participant", "position", "spec", "condition", "seed")
+SUMMARY_COLUMNS: tuple[str, ...] = (
+    "satisfied", "junctions", "takeovers", "final_trust", "mean_trust", "end_reason",
+    "fallback_fired", "sim_seconds", "wall_seconds",
+)
+EPISODES_SCHEMA = pa.schema([
+    _field("episode_id", pa.string()),
+    _field("participant", pa.int64()),
+    _field("position", pa.int64()),
+    _field("spec", pa.string()),
+    _field("condition", pa.string()),
+    _field("seed", pa.int64()),
+    _field("satisfied", pa.bool_()),
+    _field("junctions", pa.int64()),
+    _field("takeovers", pa.int64()),
+    _field("final_trust", pa.int64(), nullable=True),       # null when the true trust is unknown
+    _field("mean_trust", pa.float64(), nullable=True),
+    _field("end_reason", pa.string()),
+    _field("fallback_fired", pa.bool_()),
+    _field("sim_seconds", pa.float64(), nullable=True),     # null in the model engine
+    _field("wall_seconds", pa.float64()),
+    _field("mean_reported_trust", pa.float64(), nullable=True),  # null: no report in the episode
+    _field("reports", pa.int64()),
+    # The participant's true driver type ([drivers] population, docs/driver_type_studies.md); null
+    # without one.
+    _field("driver_type", pa.string(), nullable=True),
+])
+# Nullable columns appended to a schema after studies were written without them: a file that ends
+# before them reads with the columns all null (so earlier studies still read).
+ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type",)}
+END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
+
+# Top-level keys of manifest.json (harness/study/manifest.py writes them; docs/dataset.md).
+MANIFEST_KEYS: tuple[str, ...] = (
+    "study", "config_path", "config", "config_hash", "engine", "created_utc", "git_revision",
+    "packages", "command", "planned_episodes", "finished_episodes", "failed_episodes", "seeds",
+    "files", "expected", "run",
+)
+
+TABLES: dict[str, tuple[str, pa.Schema]] = {
+    "episodes": (EPISODES_FILE, EPISODES_SCHEMA),
+    "roads": (ROADS_FILE, ROADS_SCHEMA),
+    "kinematics": (KINEMATICS_FILE, KINEMATICS_SCHEMA),
+    "incidents": (INCIDENTS_FILE, INCIDENTS_SCHEMA),
+}
+
+
+class SchemaError(ValueError):
+    """A table whose columns, types or nulls differ from its schema."""
+
+
+# -- conversions ---------------------------------------------------------------------------------
+def table_from_frame(frame: pd.DataFrame, schema: pa.Schema) -> pa.Table:
+    """`frame` as an Arrow table of `schema` (columns in schema order, NaN and None as nulls)."""
+    missing = [name for name in schema.names if name not in frame.columns]
+    if missing:
+        raise SchemaError(f"missing column(s) {', '.join(missing)}")
+    try:
+        table = pa.Table.from_pandas(frame[list(schema.names)], schema=schema, preserve_index=False)
+    except (pa.ArrowException, ValueError, TypeError) as exc:
+        raise SchemaError(str(exc)) from None
+    return check_table(table.replace_schema_metadata(None), schema)
+
+
+def table_from_columns(columns: dict[str, list | object], schema: pa.Schema,
+                       nan_as_null: bool = True) -> pa.Table:
+    """Python lists (None for nulls) or numpy arrays per column as an Arrow table of `schema`; NaN
+    is a null too unless `nan_as_null` is False. Each column is converted to its field's type, so
+    only the nulls of the non-null fields are left to check (the episode loggers build three
+    tables per episode through here)."""
+    try:
+        arrays = [pa.array(columns[f.name], type=f.type, from_pandas=nan_as_null) for f in schema]
+    except KeyError as exc:
+        raise SchemaError(f"missing column {exc.args[0]}") from None
+    except (pa.ArrowException, TypeError, ValueError) as exc:
+        raise SchemaError(str(exc)) from None
+    return _check_required(pa.Table.from_arrays(arrays, schema=schema), schema, "table")
+
+
+def table_from_rows(rows: list[dict], schema: pa.Schema) -> pa.Table:
+    """Rows as dicts keyed by the schema's names (None or NaN for nulls; a key a row lacks is a
+    null too) as an Arrow table of `schema`: one conversion through the schema's struct type
+    instead of one per column, the cheap form for the few rows an episode logs per road."""
+    try:
+        table = pa.Table.from_struct_array(pa.array(rows, type=_layout(schema)[1], from_pandas=True))
+    except (pa.ArrowException, TypeError, ValueError) as exc:
+        raise SchemaError(str(exc)) from None
+    return _check_required(table, schema, "table")
+
+
+def _check_required(table: pa.Table, schema: pa.Schema, source: str) -> pa.Table:
+    for i in _required_columns(schema):
+        column = table.column(i)
+        if column.null_count:
+            raise SchemaError(f"{source}: column {schema.names[i]!r} has {column.null_count} null(s)")
+    return table
+
+
+_LAYOUTS: dict[int, tuple[pa.Schema, pa.StructType, tuple[int, ...]]] = {}
+
+
+def _layout(schema: pa.Schema) -> tuple[pa.Schema, pa.StructType, tuple[int, ...]]:
+    """(schema, its struct type, indices of its non-null fields), memoised per schema object
+    (the dataset's schemas are module constants)."""
+    entry = _LAYOUTS.get(id(schema))
+    if entry is None or entry[0] is not schema:
+        entry = (schema, pa.struct(list(schema)), tuple(i for i, f in enumerate(schema) if not f.nullable))
+        _LAYOUTS[id(schema)] = entry
+    return entry
+
+
+def _required_columns(schema: pa.Schema) -> tuple[int, ...]:
+    """Indices of the non-null fields of `schema`."""
+    return _layout(schema)[2]
+
+
+def check_table(table: pa.Table, schema: pa.Schema, source: str = "table") -> pa.Table:
+    """`table` itself when its columns, types and nulls match `schema`; else SchemaError."""
+    if table.schema.equals(schema):
+        # Names, types and nullability are the schema's: only the nulls of non-null fields to check.
+        return _check_required(table, schema, source)
+    names = table.schema.names
+    if names != schema.names:
+        raise SchemaError(f"{source}: columns {names} differ from the schema's {schema.names}")
+    for f in schema:
+        column = table.column(f.name)
+        if column.type != f.type:
+            raise SchemaError(f"{source}: column {f.name!r} is {column.type}, expected {f.type}")
+        if not f.nullable and column.null_count:
+            raise SchemaError(f"{source}: column {f.name!r} has {column.null_count} null(s)")
+    return table.cast(schema)
+
+
+def frame_from_table(table: pa.Table) -> pd.DataFrame:
+    """A dataset table in pandas, keeping nulls of integer and boolean columns (Int64, boolean)."""
+    frame = table.to_pandas()
+    for f in table.schema:
+        if f.nullable and pa.types.is_integer(f.type):
+            frame[f.name] = frame[f.name].astype("Int64")
+        elif f.nullable and pa.types.is_boolean(f.type):
+            frame[f.name] = frame[f.name].astype("boolean")
+    return frame
+
+
+def write_table(table: pa.Table, path: Path) -> Path:
+    """Write a dataset table (already checked) as Parquet with page checksums, atomically (a full
+    disk or a kill leaves the previous file or none, never part of one; trustroute.core.output_files)."""
+    from trustroute.core.output_files import atomic_write_bytes
+
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink, write_page_checksum=True)
+    return atomic_write_bytes(Path(path), sink.getvalue().to_pybytes(), f"dataset table {Path(path).name}",
+                              "free disk space or pass a writable --out, then rerun")
+
+
+# -- readers ---------------------------------------------------------------------------------------
+def with_added_columns(table: pa.Table, schema: pa.Schema, added: tuple[str, ...]) -> pa.Table:
+    """`table` with the trailing `added` columns of `schema` it lacks appended as nulls."""
+    names = table.schema.names
+    missing = [name for name in schema.names if name not in names]
+    earlier = schema.names[:len(names)] == names and missing == list(added[len(added) - len(missing):])
+    if not missing or not earlier:
+        return table  # not an earlier form of this schema: check_table reports it
+    for name in missing:
+        table = table.append_column(schema.field(name), pa.nulls(table.num_rows, schema.field(name).type))
+    return table
+
+
+def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None,
+               added: tuple[str, ...] = ()) -> pa.Table:
+    """A dataset table file checked against its schema; InputError naming the file when it is
+    missing, unreadable or of another schema. Columns of `added` missing at the end read as nulls."""
+    from trustroute.core.validation import read_input_bytes
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError(str(path), "", "no such dataset file",
+                         "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
+    # Through the guarded reader: a FIFO or a device in place of a table must not block.
+    data = read_input_bytes(path, "dataset table", MAX_TABLE_BYTES,
+                            fix="rerun `trustroute study` on this directory to rebuild it")
+    try:
+        table = pq.read_table(pa.BufferReader(data), page_checksum_verification=True)
+        table = with_added_columns(table.replace_schema_metadata(None), schema, added)
+        check_table(table, schema, path.name)
+    except (OSError, pa.ArrowException, SchemaError) as exc:
+        raise InputError(str(path), "schema" if isinstance(exc, SchemaError) else "",
+                         f"cannot read the dataset table ({exc})",
+                         "rerun `trustroute study` on this directory to rebuild it") from None
+    return table.select(columns) if columns is not None else table
+
+
+def _read(study_dir: Path, name: str, columns: list[str] | None) -> pd.DataFrame:
+    file_name, schema = TABLES[name]
+    return frame_from_table(read_table(Path(study_dir) / file_name, schema, columns,
+                                       ADDED_COLUMNS.get(name, ())))
+
+
+def read_episodes(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """episodes.parquet of a consolidated study, checked against EPISODES_SCHEMA."""
+    return _read(study_dir, "episodes", columns)
+
+
+def read_roads(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """roads.parquet of a consolidated study (or of `trustroute run --out`), checked against ROADS_SCHEMA."""
+    return _read(study_dir, "roads", columns)
+
+
+def read_kinematics(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """kinematics.parquet (SUMO engine), checked against KINEMATICS_SCHEMA."""
+    return _read(study_dir, "kinematics", columns)
+
+
+def read_incidents(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """incidents.parquet (SUMO engine), checked against INCIDENTS_SCHEMA; an empty table when the
+    study had no incident objects and no takeovers (the file is then not written)."""
+    if not (Path(study_dir) / INCIDENTS_FILE).exists() and (Path(study_dir) / MANIFEST_FILE).exists():
+        return frame_from_table(INCIDENTS_SCHEMA.empty_table().select(columns or INCIDENTS_SCHEMA.names))
+    return _read(study_dir, "incidents", columns)
+
+
+def read_manifest(study_dir: Path) -> dict:
+    """manifest.json of a consolidated study, with every key of MANIFEST_KEYS."""
+    path = Path(study_dir) / MANIFEST_FILE
+    if not path.exists():
+        raise InputError(str(study_dir), MANIFEST_FILE, "not a finished study directory (no manifest)",
+                         "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
+    from trustroute.core.validation import read_json
+
+    manifest = read_json(path, "study manifest",
+                         fix="rerun `trustroute study` on this directory to rebuild it")
+    missing = [key for key in MANIFEST_KEYS if key not in manifest] if isinstance(manifest, dict) else ["all"]
+    if missing:
+        raise InputError(str(path), missing[0], "missing manifest key",
+                         "rerun `trustroute study` on this directory to rebuild it")
+    return manifest

@@ -1,0 +1,191 @@
+"""Writing output files safely: atomic replacement, checks before work starts, locks.
+
+- `atomic_write_bytes` / `atomic_write_text`: a temporary file in the target's folder, fsync,
+  `os.replace`, then fsync of the folder, so a reader (or a rerun after a crash, a full disk or a
+  kill) sees the old file or the whole new one, never a partial one; on failure the temporary
+  file is removed and the error is an InputError (one line, exit 2) naming the path and the cause.
+- `check_output_file` / `check_output_dir`: run before any work starts, so a command given an
+  unwritable `--out` fails at once instead of after minutes of computation.
+- `file_lock`: an advisory `fcntl.flock` lock on a lock file (study directories, cache entries
+  being filled); the lock file records its holder (pid, host, start time) for the error message.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import json
+import os
+import socket
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+from trustroute.core.errors import InputError
+
+TEMP_PREFIX = ".tmp-"
+
+
+def os_error_text(exc: OSError) -> str:
+    """Short cause of an OSError, with the common ones spelt out."""
+    if exc.errno == errno.ENOSPC:
+        return "no space left on the device"
+    if exc.errno == errno.EROFS:
+        return "read-only file system"
+    if exc.errno in (errno.EACCES, errno.EPERM):
+        return "permission denied"
+    if exc.errno == errno.EISDIR:
+        return "is a directory"
+    return exc.strerror or type(exc).__name__
+
+
+def write_error(path: str | Path, what: str, exc: OSError, fix: str = "") -> InputError:
+    return InputError(str(path), "", f"cannot write the {what} ({os_error_text(exc)})",
+                      fix or "free disk space or pass a writable location")
+
+
+def temp_path(path: Path) -> Path:
+    return path.with_name(f"{TEMP_PREFIX}{path.name}.{os.getpid()}")
+
+
+def fsync_directory(directory: Path) -> None:
+    try:
+        descriptor = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(descriptor)
+    except OSError:
+        pass  # some file systems cannot fsync a directory; the rename is still atomic
+    finally:
+        os.close(descriptor)
+
+
+def atomic_write_bytes(path: str | Path, data: bytes, what: str, fix: str = "", sync: bool = True) -> Path:
+    """Replace `path` by `data` atomically (InputError on any OS failure; no temporary file left)."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(str(path), "", f"the {what} path is a directory", fix or "pass a file path")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise write_error(path.parent, f"folder of the {what}", exc, fix) from None
+    temp = temp_path(path)
+    try:
+        with open(temp, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            if sync:
+                os.fsync(handle.fileno())
+        os.replace(temp, path)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            temp.unlink()
+        raise write_error(path, what, exc, fix) from None
+    if sync:
+        fsync_directory(path.parent)
+    return path
+
+
+def atomic_write_text(path: str | Path, text: str, what: str, fix: str = "", sync: bool = True) -> Path:
+    return atomic_write_bytes(path, text.encode("utf-8"), what, fix, sync)
+
+
+def _writable_folder(folder: Path) -> Path:
+    """The nearest existing ancestor of `folder` (what mkdir would create under)."""
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    return folder
+
+
+def check_output_file(path: str | Path, option: str, what: str) -> Path:
+    """Before work starts: `path` can be written as a file (not a directory, folder writable)."""
+    path = Path(path)
+    if "\x00" in str(path):
+        raise InputError(option, "", f"the {what} path contains a NUL byte", "pass an ordinary path")
+    if path.is_dir():
+        raise InputError(str(path), option, f"the {what} path is a directory",
+                         f"pass a file path to {option}, e.g. {path / 'out'}")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise InputError(str(path), option, f"the {what} exists and is not writable",
+                         f"pass a writable path to {option}")
+    folder = _writable_folder(path.parent)
+    if not folder.is_dir():
+        raise InputError(str(path), option, f"{folder} is not a directory",
+                         f"pass a path under a directory to {option}")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(str(path), option, f"cannot write in {folder} (permission denied or read-only)",
+                         f"pass a writable path to {option}")
+    if _read_only(folder):
+        raise InputError(str(path), option, f"{folder} is on a read-only file system",
+                         f"pass a writable path to {option}")
+    return path
+
+
+def check_output_dir(path: str | Path, option: str, what: str) -> Path:
+    """Before work starts: `path` is (or can be created as) a writable directory."""
+    path = Path(path)
+    if "\x00" in str(path):
+        raise InputError(option, "", f"the {what} path contains a NUL byte", "pass an ordinary path")
+    if path.exists() and not path.is_dir():
+        raise InputError(str(path), option, f"the {what} exists and is not a directory",
+                         f"pass a directory to {option}")
+    folder = _writable_folder(path)
+    if not folder.is_dir():
+        raise InputError(str(path), option, f"{folder} is not a directory", f"pass a directory to {option}")
+    if not os.access(folder, os.W_OK | os.X_OK) or _read_only(folder):
+        raise InputError(str(path), option, f"cannot write in {folder} (permission denied or read-only)",
+                         f"pass a writable directory to {option}")
+    return path
+
+
+def _read_only(folder: Path) -> bool:
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
+# -- locks ----------------------------------------------------------------------------------------
+
+
+def holder_record() -> dict:
+    return {"pid": os.getpid(), "host": socket.gethostname(),
+            "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+
+
+def describe_holder(lock_path: Path) -> str:
+    try:
+        holder = json.loads(lock_path.read_text() or "{}")
+    except (OSError, ValueError):
+        holder = {}
+    if not isinstance(holder, dict) or "pid" not in holder:
+        return "another process"
+    return f"pid {holder.get('pid')} on {holder.get('host')}, started {holder.get('started_utc')}"
+
+
+@contextlib.contextmanager
+def file_lock(lock_path: str | Path, what: str, wait: bool, fix: str = "") -> Iterator[None]:
+    """Hold an exclusive flock on `lock_path` (created if missing). wait=False: InputError naming
+    the holder when another process holds it; wait=True: block until it is free. The lock goes
+    with the process (a killed holder never leaves a stale lock)."""
+    lock_path = Path(lock_path)
+    try:
+        lock_path.parent.mkdir(parents=True, exist_ok=True)
+        descriptor = os.open(lock_path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o644)
+    except OSError as exc:
+        raise write_error(lock_path, f"lock file of the {what}", exc, fix) from None
+    try:
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError:
+            raise InputError(str(lock_path.parent), "",
+                             f"the {what} is in use by {describe_holder(lock_path)}",
+                             fix or "wait for that run to finish, or stop it") from None
+        with contextlib.suppress(OSError):
+            os.ftruncate(descriptor, 0)
+            os.pwrite(descriptor, json.dumps(holder_record()).encode(), 0)
+        yield
+    finally:
+        os.close(descriptor)  # releases the lock

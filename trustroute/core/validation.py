@@ -1,0 +1,286 @@
+"""Input validation every loader uses: the guarded reader of input files, limited JSON and TOML
+parsing, the strict key policy, required objects and keys (docs/input_files.md).
+
+Every input file kind (town JSON, driver model JSON, spec TOML, study config TOML, policy JSON and
+its .npz, a study's Parquet logs) is read through here, so every kind gets the same checks before
+any parser sees a byte:
+
+- the path is a regular file (not a FIFO, a device or a directory): opened non-blocking and
+  checked with fstat, so a FIFO can never block the reader;
+- its size is at most a cap (per kind; `MAX_TEXT_BYTES` for JSON/TOML);
+- text is strict UTF-8 (the error names the line and column of the first bad byte);
+- JSON is parsed with limits: nesting depth at most `MAX_DEPTH`, integer literals of at most
+  `MAX_INT_DIGITS` digits, finite floats only (no NaN/Infinity, no 1e400), and no duplicate
+  keys in an object;
+- TOML is pre-checked for nesting depth and integer size (tomllib itself recurses without a
+  limit and converts integers of any length); nan is rejected (inf is left to the keys that
+  allow it).
+
+Every failure is an InputError (trustroute/core/errors.py) naming the file, the place and the fix, so a
+bad input is one line on stderr and exit code 2 whatever kind of file it is.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import stat
+import tomllib
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import numpy as np
+
+from trustroute.core.errors import InputError
+
+MAX_TEXT_BYTES = 16 * 1024 * 1024  # towns, driver models, specs, configs, policy documents
+MAX_ARRAY_BYTES = 512 * 1024 * 1024  # policy .npz decision tables
+MAX_DEPTH = 64  # nesting of JSON/TOML arrays and tables
+MAX_INT_DIGITS = 18  # |n| < 10**18 < 2**63: every integer fits an int64
+MAX_TOML_KEY_PARTS = MAX_DEPTH  # dotted keys a.b.c... nest tables too
+
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
+_TOML_STRINGS = re.compile(
+    r'"""(?:[^\\]|\\.)*?"""|\'\'\'.*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'', re.DOTALL
+)
+_TOML_COMMENT = re.compile(r"#[^\n]*")
+_TOML_INTEGER = re.compile(rf"(?<![\w.])[+-]?(?:0[xob])?[0-9a-fA-F_]{{{MAX_INT_DIGITS + 1},}}(?![\w.])")
+
+
+def read_input_bytes(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix: str = "",
+                     shown: str | None = None) -> bytes:
+    """The bytes of a regular file of at most `max_bytes`, or InputError (never blocks on a FIFO).
+    `shown` names the file in errors (default: the path)."""
+    shown = str(path) if shown is None else shown
+    fix = fix or f"pass an existing {what}"
+    if "\x00" in shown:
+        raise InputError(repr(shown), "", f"the {what} path contains a NUL byte", fix)
+    try:
+        descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        raise InputError(shown, "", f"cannot read the {what} ({exc.strerror})", fix) from None
+    try:
+        info = os.fstat(descriptor)
+        if not stat.S_ISREG(info.st_mode):
+            kind = ("a directory" if stat.S_ISDIR(info.st_mode) else "a FIFO" if stat.S_ISFIFO(info.st_mode)
+                    else "not a regular file")
+            raise InputError(shown, "", f"the {what} is {kind}", fix)
+        if info.st_size > max_bytes:
+            raise InputError(shown, "", f"the {what} is {info.st_size} bytes, more than the "
+                             f"{max_bytes}-byte limit", f"pass a real {what} (this one is far too large)")
+        chunks = []
+        remaining = max_bytes + 1  # a file that grows while we read is still capped
+        while remaining > 0:
+            chunk = os.read(descriptor, min(remaining, 1 << 20))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            remaining -= len(chunk)
+    except OSError as exc:
+        raise InputError(shown, "", f"cannot read the {what} ({exc.strerror})", fix) from None
+    finally:
+        os.close(descriptor)
+    data = b"".join(chunks)
+    if len(data) > max_bytes:
+        raise InputError(shown, "", f"the {what} is larger than the {max_bytes}-byte limit",
+                         f"pass a real {what}")
+    return data
+
+
+def decode_utf8(data: bytes, source: str, what: str) -> str:
+    """Strict UTF-8 text, or InputError naming the line and column of the first bad byte."""
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        before = data[: exc.start]
+        line = before.count(b"\n") + 1
+        column = exc.start - (before.rfind(b"\n") + 1) + 1
+        raise InputError(source, f"line {line} column {column}", f"the {what} is not UTF-8 text "
+                         f"(byte 0x{data[exc.start]:02x})", "save the file as UTF-8") from None
+
+
+def read_input_text(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix: str = "",
+                    shown: str | None = None) -> str:
+    shown = str(path) if shown is None else shown
+    return decode_utf8(read_input_bytes(path, what, max_bytes, fix, shown), shown, what)
+
+
+def read_text(path: str | Path, shown: str, what: str, fix: str) -> str:
+    """The text of an input file through the guarded reader; `what` as in "the town file"."""
+    noun = what[4:] if what.startswith("the ") else what
+    return read_input_text(path, noun, fix=fix, shown=shown)
+
+
+# -- JSON -----------------------------------------------------------------------------------------
+
+
+def _line_column(text: str, offset: int) -> str:
+    line = text.count("\n", 0, offset) + 1
+    return f"line {line} column {offset - (text.rfind(chr(10), 0, offset) + 1) + 1}"
+
+
+def _max_bracket_depth(text: str, openers: str, closers: str) -> tuple[int, int]:
+    """(deepest nesting, offset where it is first reached) of brackets in text with strings removed."""
+    codes = np.frombuffer(text.encode("utf-32-le"), dtype=np.uint32)
+    step = np.zeros(codes.shape, dtype=np.int32)
+    for char in openers:
+        step[codes == ord(char)] = 1
+    for char in closers:
+        step[codes == ord(char)] = -1
+    if not step.any():
+        return 0, 0
+    depth = np.cumsum(step)
+    deepest = int(depth.max())
+    return deepest, int(np.argmax(depth))
+
+
+def _blank(match: re.Match) -> str:
+    # Keep offsets (and newlines) so positions in the stripped text are positions in the file.
+    return "".join("\n" if c == "\n" else " " for c in match.group())
+
+
+def parse_json(text: str, source: str, what: str = "file") -> object:
+    """JSON with depth, number-size and duplicate-key limits, or InputError."""
+    stripped = _JSON_STRING.sub(_blank, text)
+    deepest, offset = _max_bracket_depth(stripped, "[{", "]}")
+    if deepest > MAX_DEPTH:
+        raise InputError(source, _line_column(text, offset), f"nested {deepest} levels deep (the limit "
+                         f"is {MAX_DEPTH})", f"a {what} needs only a few levels; fix the file")
+
+    def integer(literal: str) -> int:
+        if len(literal.lstrip("-")) > MAX_INT_DIGITS:
+            raise _NumberError(f"integer literal of {len(literal.lstrip('-'))} digits (the limit is "
+                               f"{MAX_INT_DIGITS})")
+        return int(literal)
+
+    def real(literal: str) -> float:
+        value = float(literal)
+        if not math.isfinite(value):
+            raise _NumberError(f"number {literal[:24]} is out of the floating-point range")
+        return value
+
+    def constant(name: str) -> float:
+        raise _NumberError(f"{name} is not a number JSON allows")
+
+    def no_duplicates(pairs: list[tuple[str, object]]) -> dict:
+        out: dict = {}
+        for key, value in pairs:
+            if key in out:
+                raise _NumberError(f"duplicate key {key[:40]!r} in one object")
+            out[key] = value
+        return out
+
+    try:
+        return json.loads(text, parse_int=integer, parse_float=real, parse_constant=constant,
+                          object_pairs_hook=no_duplicates)
+    except json.JSONDecodeError as exc:
+        raise InputError(source, f"line {exc.lineno} column {exc.colno}", f"not valid JSON ({exc.msg})",
+                         "fix the JSON syntax") from None
+    except _NumberError as exc:
+        raise InputError(source, "", str(exc), f"fix the {what}: numbers must be ordinary finite "
+                         "values and every key appears once") from None
+    except (RecursionError, ValueError, MemoryError) as exc:
+        raise InputError(source, "", f"cannot parse the {what} ({type(exc).__name__})",
+                         "fix the JSON") from None
+
+
+class _NumberError(ValueError):
+    """Raised inside the JSON/TOML hooks; becomes an InputError."""
+
+
+def read_json(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix: str = "") -> object:
+    """Read and parse a JSON input file with every guard; `what` names it in errors."""
+    shown = str(path)
+    return parse_json(read_input_text(path, what, max_bytes, fix), shown, what)
+
+
+# -- TOML -----------------------------------------------------------------------------------------
+
+
+def parse_toml(text: str, source: str, what: str = "file") -> dict:
+    """TOML with depth, integer-size and finiteness limits, or InputError."""
+    stripped = _TOML_STRINGS.sub(_blank, text)
+    stripped = _TOML_COMMENT.sub(_blank, stripped)
+    deepest, offset = _max_bracket_depth(stripped, "[{", "]}")
+    if deepest > MAX_DEPTH:
+        raise InputError(source, _line_column(text, offset), f"nested {deepest} levels deep (the limit "
+                         f"is {MAX_DEPTH})", f"a {what} needs only a few levels; fix the file")
+    for big in _TOML_INTEGER.finditer(stripped):
+        if sum(c.isdigit() for c in big.group()) <= MAX_INT_DIGITS:
+            continue
+        raise InputError(source, _line_column(text, big.start()), f"integer literal of "
+                             f"{sum(c.isdigit() for c in big.group())} digits (the limit is "
+                             f"{MAX_INT_DIGITS})", f"fix the {what}: write an ordinary number")
+
+    def real(literal: str) -> float:
+        # TOML's inf stays allowed (e.g. a population's concentration = inf); keys that need a
+        # finite value check it. nan is never a meaningful setting.
+        value = float(literal)
+        if math.isnan(value):
+            raise _NumberError(f"{literal[:24]} is not a number")
+        return value
+
+    try:
+        data = tomllib.loads(text, parse_float=real)
+    except tomllib.TOMLDecodeError as exc:
+        where = re.search(r"\(at line (\d+), column (\d+)\)", str(exc))
+        place = f"line {where.group(1)} column {where.group(2)}" if where else ""
+        message = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(exc))
+        raise InputError(source, place, f"not valid TOML ({message})", "fix the TOML syntax") from None
+    except _NumberError as exc:
+        raise InputError(source, "", str(exc), f"fix the {what}: numbers must be finite") from None
+    except (RecursionError, ValueError, MemoryError) as exc:
+        raise InputError(source, "", f"cannot parse the {what} ({type(exc).__name__})",
+                         "fix the TOML") from None
+    _check_depth(data, source, what)
+    return data
+
+
+def _check_depth(data: object, source: str, what: str) -> None:
+    """Iterative depth and integer-range check of parsed data (dotted keys nest without brackets)."""
+    stack: list[tuple[object, int]] = [(data, 0)]
+    while stack:
+        value, depth = stack.pop()
+        if depth > MAX_DEPTH:
+            raise InputError(source, "", f"nested more than {MAX_DEPTH} levels deep",
+                             f"a {what} needs only a few levels; fix the file")
+        if isinstance(value, dict):
+            stack.extend((v, depth + 1) for v in value.values())
+        elif isinstance(value, list):
+            stack.extend((v, depth + 1) for v in value)
+        elif isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**MAX_INT_DIGITS:
+            raise InputError(source, "", f"integer {value} is out of range",
+                             f"fix the {what}: write an ordinary number")
+
+
+def read_toml(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix: str = "") -> dict:
+    """Read and parse a TOML input file with every guard; `what` names it in errors."""
+    return parse_toml(read_input_text(path, what, max_bytes, fix), str(path), what)
+
+
+# -- documented key policy --------------------------------------------------------------------------
+
+
+def check_keys(data: dict, allowed: tuple[str, ...], source: str, place: str, what: str) -> None:
+    """Strict key policy (docs/input_files.md): a key the format does not define is an error."""
+    unknown = sorted(str(k) for k in data if k not in allowed)
+    if unknown:
+        where = f"{place}.{unknown[0]}" if place else unknown[0]
+        raise InputError(source, where, f"unknown key {unknown[0][:60]!r} in the {what}",
+                         f"use only {', '.join(allowed)} (a misspelt key would be ignored otherwise)")
+
+
+def require_object(data: object, shown: str, fix: str) -> dict:
+    """`data` itself when it is a JSON object (a dict); InputError at "top level" otherwise."""
+    if not isinstance(data, dict):
+        raise InputError(shown, "top level", "expected a JSON object", fix)
+    return data
+
+
+def require_keys(data: dict, keys: Iterable[str], shown: str, fix: Callable[[str], str]) -> None:
+    """InputError "missing key 'k'" at the first of `keys` absent from `data`; fix(k) says how."""
+    for key in keys:
+        if key not in data:
+            raise InputError(shown, key, f"missing key '{key}'", fix(key))
