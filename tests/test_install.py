@@ -15,8 +15,8 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.mark.slow
 def test_wheel_has_one_top_level_package(tmp_path):
     # No build isolation: nothing is downloaded; the dev extra pins the setuptools that builds it.
-    command = [sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "--no-build-isolation", "--quiet",
-               "--wheel-dir", str(tmp_path)]
+    command = [sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "--no-build-isolation",
+               "--quiet", "--wheel-dir", str(tmp_path)]
     built = subprocess.run(command, check=True, capture_output=True, text=True)
     # A quiet install: the data folders are declared as package data, so setuptools has nothing to say.
     assert "BuildBackendWarning" not in built.stderr + built.stdout
