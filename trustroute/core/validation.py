@@ -263,11 +263,16 @@ def read_toml(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix:
 # -- documented key policy --------------------------------------------------------------------------
 
 
-def check_keys(data: dict, allowed: tuple[str, ...], source: str, place: str, what: str) -> None:
-    """Strict key policy (docs/input_files.md): a key the format does not define is an error."""
+def check_keys(data: dict, allowed: tuple[str, ...], source: str, place: str | Callable[[str], str],
+               what: str) -> None:
+    """Strict key policy (docs/input_files.md): a key the format does not define is an error.
+    `place` is the table's dotted place ("" at the top) or a function placing a key."""
     unknown = sorted(str(k) for k in data if k not in allowed)
     if unknown:
-        where = f"{place}.{unknown[0]}" if place else unknown[0]
+        if callable(place):
+            where = place(unknown[0])
+        else:
+            where = f"{place}.{unknown[0]}" if place else unknown[0]
         raise InputError(source, where, f"unknown key {unknown[0][:60]!r} in the {what}",
                          f"use only {', '.join(allowed)} (a misspelt key would be ignored otherwise)")
 
