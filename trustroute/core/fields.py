@@ -47,10 +47,12 @@ Message = str | Callable[[Seen], str]
 
 
 class Rejection(NamedTuple):
-    """A kind's own account of a bad value; `fix` only when the failure has a fix of its own."""
+    """A kind's own account of a bad value: `fix` when the failure has a fix of its own (it comes
+    before the field's), `hint` a fix to fall back on when the field gives none."""
 
     problem: str
     fix: str | None = None
+    hint: str = ""
 
 
 def say(message: Message | None, seen: Seen) -> str | None:
@@ -179,7 +181,8 @@ class OneOf(Anything):
     def reject(self, value: object) -> Rejection | None:
         if any(type(value) is type(choice) and value == choice for choice in self.choices):
             return None
-        return Rejection(f"unknown {self.noun} {value!r}", f"use one of {', '.join(map(str, self.choices))}")
+        return Rejection(f"unknown {self.noun} {value!r}",
+                         hint=f"use one of {', '.join(map(str, self.choices))}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -275,7 +278,7 @@ def check_value(value: object, kind: Anything, source: str, place: str, problem:
         fix_text = say(fix or kind.fix, seen) or ""
         if given is not None:
             raise InputError(source, place, say(given, seen), fix_text)
-        raise InputError(source, place, rejection.problem, rejection.fix or fix_text)
+        raise InputError(source, place, rejection.problem, rejection.fix or fix_text or rejection.hint)
     if isinstance(kind, Table) and kind.values is not None:
         for key, entry in value.items():
             check_value(entry, kind.values, source, f"{place}.{key}",
