@@ -34,6 +34,7 @@ import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.core.fields import (
+    EMPTY,
     PROBABILITY,
     Anything,
     Field,
@@ -178,10 +179,10 @@ FIELDS: tuple[Field, ...] = (
           missing_fix="add 'takeover_probability' as in the default model"),
     Field(key="trust_transition", kind=Table(), required=True, problem=_BY_INCIDENT, fix=_BY_INCIDENT_FIX,
           missing_fix="add 'trust_transition' as in the default model"),
-    Field(key="failure_probability", kind=Table(), default={}, problem=_BY_INCIDENT, fix=_BY_INCIDENT_FIX),
+    Field(key="failure_probability", kind=Table(), default=EMPTY, problem=_BY_INCIDENT, fix=_BY_INCIDENT_FIX),
     # one probability per trust level, summing to 1 (_initial_belief)
     Field(key="initial_belief", kind=Anything(), default=UNIFORM_BELIEF),
-    Field(key="trust_free_takeover_probability", kind=Table(values=PROBABILITY), default={},
+    Field(key="trust_free_takeover_probability", kind=Table(values=PROBABILITY), default=EMPTY,
           problem="expected an object", fix="write {incident: probability}"),
     Field(key="source", kind=Anything(), default=""),  # provenance, kept as text
 )

@@ -26,9 +26,10 @@ from pathlib import Path
 
 from trustroute.core.errors import InputError
 from trustroute.core.fields import (
-    Anything,
+    EMPTY,
     Field,
     Integer,
+    Kind,
     ListOf,
     Number,
     Table,
@@ -201,20 +202,20 @@ FIELDS: tuple[Field, ...] = (
     _string("name"),
     _string("start"),
     _string("formula"),
-    Field(key="states", kind=Table(), default={}, problem="'states' must be a table of atom -> roads",
+    Field(key="states", kind=Table(), default=EMPTY, problem="'states' must be a table of atom -> roads",
           fix='write [states] then v1 = ["B-G", "F-G"]'),
-    Field(key="beliefs", kind=Table(), default={}, problem="'beliefs' must be a table of tables",
+    Field(key="beliefs", kind=Table(), default=EMPTY, problem="'beliefs' must be a table of tables",
           fix="write [beliefs.NAME] with coeffs = [...] and offset = ..."),
-    Field(key="trust_states", kind=Table(), default={},
+    Field(key="trust_states", kind=Table(), default=EMPTY,
           problem="'trust_states' must be a table of atom -> { roads, trust }", fix=TRUST_STATE_EXAMPLE),
-    Field(key="type_beliefs", kind=Table(), default={},
+    Field(key="type_beliefs", kind=Table(), default=EMPTY,
           problem="'type_beliefs' must be a table of atom -> { types, above }", fix=TYPE_BELIEF_EXAMPLE),
 )
 TOP_LEVEL_KEYS: tuple[str, ...] = keys(FIELDS)
 STATE_ROADS = ListOf(item=Text(nonempty=False), max_items=MAX_STATE_ROADS)
 
 
-def _belief_key(key: str, kind: Anything, problem: str, fix: str) -> Field:
+def _belief_key(key: str, kind: Kind, problem: str, fix: str) -> Field:
     return Field(key=key, kind=kind, required=True, fix=fix,
                  problem=lambda seen: f"belief atom '{seen.owner}': {problem}",
                  missing=lambda seen: f"belief atom '{seen.owner}' is missing '{key}'",
@@ -228,7 +229,7 @@ BELIEF_FIELDS: tuple[Field, ...] = (
 )
 
 
-def _inline_key(noun: str, key: str, kind: Anything, problem: str, fix: str, example: str,
+def _inline_key(noun: str, key: str, kind: Kind, problem: str, fix: str, example: str,
                 required: bool = True) -> Field:
     return Field(key=key, kind=kind, required=required, fix=fix,
                  problem=lambda seen: f"{noun} atom '{seen.owner}': {problem}",

@@ -25,12 +25,13 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import NamedTuple
 
 from trustroute.core.errors import InputError
-from trustroute.core.validation import check_keys
+from trustroute.core.validation import Place, check_keys, key_place
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,7 @@ class Seen:
 
 
 Message = str | Callable[[Seen], str]
+EMPTY: Mapping[str, object] = MappingProxyType({})  # the default of an optional table (never mutated)
 
 
 class Rejection(NamedTuple):
@@ -79,19 +81,24 @@ def holds_bool(value: object) -> bool:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Anything:
-    """Any value (checked by a rule of the loader, or kept as it is)."""
+class Kind:
+    """What a value must be; `reject` gives None for a good value, else the kind's account of it."""
 
     problem: Message | None = None
     fix: Message | None = None
-    plural = "values"
+    plural = "values"  # the kind's values, in a list's message ("a list of integers")
 
     def reject(self, value: object) -> Rejection | None:
         return None
 
 
 @dataclass(frozen=True, kw_only=True)
-class Integer(Anything):
+class Anything(Kind):
+    """Any value (checked by a rule of the loader, or kept as it is)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Integer(Kind):
     """An int (not a bool) in [minimum, maximum]; `false_allowed`: `false` too (a rule it turns off)."""
 
     minimum: int = -(2**63)
@@ -109,7 +116,7 @@ class Integer(Anything):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Number(Anything):
+class Number(Kind):
     """An int or float (not a bool), finite unless `finite` is False, within the bounds (`open_below`
     / `open_above`: the bound itself excluded)."""
 
@@ -143,7 +150,7 @@ PROBABILITY = Number(minimum=0.0, maximum=1.0,
 
 
 @dataclass(frozen=True, kw_only=True)
-class Text(Anything):
+class Text(Kind):
     """A string: non-empty unless `nonempty` is False, at most `max_length` characters, matching
     `pattern` in full when given."""
 
@@ -162,7 +169,7 @@ class Text(Anything):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Flag(Anything):
+class Flag(Kind):
     """`true` or `false`."""
 
     plural = "booleans"
@@ -172,7 +179,7 @@ class Flag(Anything):
 
 
 @dataclass(frozen=True, kw_only=True)
-class OneOf(Anything):
+class OneOf(Kind):
     """One of `choices` (of the same type: `true` is not 1); `noun` names a value in messages."""
 
     choices: tuple[object, ...] = ()
@@ -186,11 +193,11 @@ class OneOf(Anything):
 
 
 @dataclass(frozen=True, kw_only=True)
-class ListOf(Anything):
+class ListOf(Kind):
     """A list of `min_items` to `max_items` items of kind `item`, checked as one value (its message
     names the whole list); `distinct`: no item twice; `increasing`: each item above the last."""
 
-    item: Anything = Anything()
+    item: Kind = Anything()
     min_items: int = 0
     max_items: int | None = None
     distinct: bool = False
@@ -218,12 +225,12 @@ def _repeats(items: list) -> bool:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Table(Anything):
+class Table(Kind):
     """An object (JSON) or table (TOML); non-empty when `nonempty`. With `values`, every entry's
     value is checked against that kind at `place.key`."""
 
     nonempty: bool = False
-    values: Anything | None = None
+    values: Kind | None = None
     plural = "tables"
 
     def reject(self, value: object) -> Rejection | None:
@@ -242,7 +249,7 @@ class Field:
     absent: default "missing key 'k'" and `fix`)."""
 
     key: str
-    kind: Anything
+    kind: Kind
     required: bool = False
     default: object = None
     fix: Message = ""
@@ -256,18 +263,7 @@ def keys(fields: Sequence[Field]) -> tuple[str, ...]:
     return tuple(field.key for field in fields)
 
 
-Place = str | Callable[[str], str]
-
-
-def place_of(place: Place, key: str) -> str:
-    """Where `key` of a table is: `place` is the table's own dotted place ("" at the top) or a
-    function of the key (a spec places keys by line and column)."""
-    if callable(place):
-        return place(key)
-    return f"{place}.{key}" if place else key
-
-
-def check_value(value: object, kind: Anything, source: str, place: str, problem: Message | None = None,
+def check_value(value: object, kind: Kind, source: str, place: str, problem: Message | None = None,
                 fix: Message | None = None, seen: Seen | None = None) -> object:
     """`value` itself when `kind` accepts it (a table's entries checked too); InputError otherwise.
     `problem`/`fix` replace the kind's messages (as a field's do)."""
@@ -296,7 +292,7 @@ def check_fields(data: dict, fields: Sequence[Field], source: str, what: str, pl
     for field in fields:
         if field.required and field.key not in data:
             seen = Seen(field.key, None, owner)
-            raise InputError(source, place_of(place, field.key),
+            raise InputError(source, key_place(place, field.key),
                              say(field.missing, seen) or f"missing key '{field.key}'",
                              say(field.missing_fix or field.fix, seen) or "")
     values: dict[str, object] = {}
@@ -305,6 +301,6 @@ def check_fields(data: dict, fields: Sequence[Field], source: str, what: str, pl
             values[field.key] = field.default
             continue
         value = data[field.key]
-        values[field.key] = check_value(value, field.kind, source, place_of(place, field.key), field.problem,
+        values[field.key] = check_value(value, field.kind, source, key_place(place, field.key), field.problem,
                                         field.fix, Seen(field.key, value, owner))
     return values
