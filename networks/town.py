@@ -36,7 +36,7 @@ from trustroute.core.fields import (
 from trustroute.core.validation import parse_json, read_text, require_object
 
 # The paper's town with the geometry of CARLA Town01, where the authors ran their study
-# (networks/data/PROVENANCE.md). The earlier invented layout of the same roads and incidents stays
+# (networks/data/PROVENANCE.md). An invented layout of the same roads and incidents is kept
 # as pentagon.json, so the figures measured on it (docs/real_study.md) can be re-run.
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town01_carla.json"
 PENTAGON_TOWN_PATH = Path(__file__).parent / "data" / "pentagon.json"

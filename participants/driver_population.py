@@ -9,8 +9,8 @@ Schema (JSON; every key and its check: docs/formats/driver_population.md):
   the document `participants/driver_model.py` reads (docs/formats/driver_model.md).
 
 Every type shares the trust levels and incident types of the first; weights are > 0 and sum to 1
-within `WEIGHT_TOLERANCE`; names are unique. A population of one type of weight 1 is today's
-single driver model (`single_type_population`).
+within `WEIGHT_TOLERANCE`; names are unique. A population of one type of weight 1 is a single
+driver model (`single_type_population`).
 """
 
 from __future__ import annotations
@@ -204,7 +204,7 @@ def write_driver_population(population: DriverPopulation, path: str | Path) -> P
 
 
 def single_type_population(model: DriverModel, name: str = "nominal") -> DriverPopulation:
-    """The population of one type of weight 1: today's single driver model."""
+    """The population of one type of weight 1: a single driver model."""
     if not TYPE_NAME.fullmatch(name):
         raise ValueError(f"{name!r} is not a type name")
     return DriverPopulation(types=(DriverType(name=name, weight=1.0, model=model),),
