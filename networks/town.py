@@ -21,16 +21,27 @@ from pathlib import Path
 import numpy as np
 
 from trustroute.core.errors import InputError
-from trustroute.core.validation import check_keys, parse_json, read_text, require_keys, require_object
+from trustroute.core.fields import (
+    Anything,
+    Field,
+    ListOf,
+    Number,
+    OneOf,
+    Table,
+    Text,
+    check_fields,
+    check_value,
+    keys,
+)
+from trustroute.core.validation import parse_json, read_text, require_object
 
 # The paper's town with the geometry of CARLA Town01, where the authors ran their study
-# (networks/data/PROVENANCE.md). The earlier invented layout of the same roads and incidents stays
+# (networks/data/PROVENANCE.md). An invented layout of the same roads and incidents is kept
 # as pentagon.json, so the figures measured on it (docs/real_study.md) can be re-run.
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town01_carla.json"
 PENTAGON_TOWN_PATH = Path(__file__).parent / "data" / "pentagon.json"
 NO_INCIDENT = "none"  # a road without an incident (and the start road of an episode)
 INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", NO_INCIDENT)
-TOWN_KEYS: tuple[str, ...] = ("junctions", "roads", "incidents", "source")
 # SUMO works in metres with float coordinates: a town beyond 1000 km, or a road shorter than a car,
 # passes the schema but breaks netconvert or makes every length degenerate.
 MAX_COORDINATE = 1.0e6
@@ -184,90 +195,94 @@ class Town:
 
 
 # -- loading and validation -------------------------------------------------
+# Every key of a town file (docs/formats/town.md); the rules below check what a table cannot.
 
-def _fail(path: str, place: str, problem: str, fix: str) -> InputError:
-    return InputError(path, place, problem, fix)
+FIELDS: tuple[Field, ...] = (
+    Field(key="junctions", kind=Table(nonempty=True), required=True,
+          problem="expected a non-empty object of name -> [x, y]",
+          fix="list each junction as \"A\": [x, y] in metres",
+          missing_fix="add a 'junctions' entry as in the default town (trustroute net build --help)"),
+    Field(key="roads", kind=ListOf(min_items=1), required=True,
+          problem="expected a non-empty list of [U, V] pairs",
+          fix="list each two-way road once as [\"A\", \"B\"]",
+          missing_fix="add a 'roads' entry as in the default town (trustroute net build --help)"),
+    Field(key="incidents", kind=Table(values=OneOf(choices=INCIDENT_TYPES, noun="incident type")),
+          required=True,
+          problem="expected an object of \"U-V\" -> incident type", fix="write one entry per directed road",
+          missing_fix="add a 'incidents' entry as in the default town (trustroute net build --help)"),
+    Field(key="source", kind=Anything(), default=""),  # provenance, kept as text
+)
+TOWN_KEYS: tuple[str, ...] = keys(FIELDS)
+JUNCTION = Text(max_length=MAX_JUNCTION_NAME, pattern=JUNCTION_NAME)
+COORDINATES = ListOf(item=Number(), min_items=2, max_items=2)
+NEAR_ORIGIN = ListOf(item=Number(minimum=-MAX_COORDINATE, maximum=MAX_COORDINATE))
+ROAD = ListOf(item=Text(nonempty=False), min_items=2, max_items=2)
 
 
-def town_from_dict(data: object, path: str = "<town>") -> Town:
-    """Validate a parsed town document and build a Town, or raise InputError."""
-    data = require_object(data, path, "write {\"junctions\": ..., \"roads\": ..., \"incidents\": ...}")
-    check_keys(data, TOWN_KEYS, path, "", "town file")
-    require_keys(data, ("junctions", "roads", "incidents"), path,
-                 lambda key: f"add a '{key}' entry as in the default town (trustroute net build --help)")
-    raw_junctions = data["junctions"]
-    if not isinstance(raw_junctions, dict) or not raw_junctions:
-        raise _fail(path, "junctions", "expected a non-empty object of name -> [x, y]",
-                    "list each junction as \"A\": [x, y] in metres")
+def _junctions(raw: dict, path: str) -> dict[str, tuple[float, float]]:
+    """Names of letters, digits and '_'; coordinates two finite numbers within MAX_COORDINATE."""
     junctions: dict[str, tuple[float, float]] = {}
-    for name, xy in raw_junctions.items():
-        if (not isinstance(name, str) or not name or len(name) > MAX_JUNCTION_NAME
-                or not JUNCTION_NAME.fullmatch(name)):
-            raise _fail(path, f"junctions.{name}", "junction names must be 1-"
-                        f"{MAX_JUNCTION_NAME} letters, digits or '_' and contain no '-' (it joins road "
-                        "names)",
-                        "rename the junction")
-        ok = (isinstance(xy, list) and len(xy) == 2
-              and all(isinstance(c, int | float) and not isinstance(c, bool)
-                      and math.isfinite(c) for c in xy))
-        if not ok:
-            raise _fail(path, f"junctions.{name}", f"coordinates {str(xy)[:60]} are not two finite numbers",
-                        "write [x, y] in metres, e.g. [0, 700]")
-        if max(abs(xy[0]), abs(xy[1])) > MAX_COORDINATE:
-            raise _fail(path, f"junctions.{name}", f"coordinates {xy!r} lie more than "
-                        f"{MAX_COORDINATE:g} m from the origin", "give coordinates in metres of one town")
+    for name, xy in raw.items():
+        place = f"junctions.{name}"
+        check_value(name, JUNCTION, path, place, f"junction names must be 1-{MAX_JUNCTION_NAME} letters, "
+                    "digits or '_' and contain no '-' (it joins road names)", "rename the junction")
+        check_value(xy, COORDINATES, path, place, f"coordinates {str(xy)[:60]} are not two finite numbers",
+                    "write [x, y] in metres, e.g. [0, 700]")
+        check_value(xy, NEAR_ORIGIN, path, place, f"coordinates {xy!r} lie more than {MAX_COORDINATE:g} m "
+                    "from the origin", "give coordinates in metres of one town")
         junctions[name] = (float(xy[0]), float(xy[1]))
+    return junctions
 
-    raw_roads = data["roads"]
-    if not isinstance(raw_roads, list) or not raw_roads:
-        raise _fail(path, "roads", "expected a non-empty list of [U, V] pairs",
-                    "list each two-way road once as [\"A\", \"B\"]")
+
+def _road(road: object, place: str, junctions: dict[str, tuple[float, float]], path: str) -> tuple[str, str]:
+    """One [U, V] pair: two known, different junctions at least MIN_ROAD_LENGTH apart."""
+    check_value(road, ROAD, path, place, f"{road!r} is not a pair of junction names",
+                "write the road as [\"U\", \"V\"]")
+    u, v = road
+    for j in (u, v):
+        if j not in junctions:
+            raise InputError(path, place, f"road {u}-{v} names unknown junction '{j}'",
+                             f"add '{j}' to junctions or fix the road")
+    if u == v:
+        raise InputError(path, place, f"road {u}-{v} is a self-loop", "remove it; roads join two "
+                         "different junctions")
+    if math.dist(junctions[u], junctions[v]) < MIN_ROAD_LENGTH:
+        raise InputError(path, place, f"road {u}-{v} is {math.dist(junctions[u], junctions[v]):.3g} m long "
+                         f"(junctions {u} and {v} almost coincide)", f"place the junctions at least "
+                         f"{MIN_ROAD_LENGTH:g} m apart")
+    return u, v
+
+
+def _roads(raw: list, junctions: dict[str, tuple[float, float]], path: str) -> tuple[tuple[str, str], ...]:
+    """Every road valid and listed once ([A, B] and [B, A] are the same two-way road)."""
     roads: list[tuple[str, str]] = []
     seen: set[frozenset[str]] = set()
-    for i, road in enumerate(raw_roads):
-        place = f"roads[{i}]"
-        if not (isinstance(road, list) and len(road) == 2 and all(isinstance(j, str) for j in road)):
-            raise _fail(path, place, f"{road!r} is not a pair of junction names",
-                        "write the road as [\"U\", \"V\"]")
-        u, v = road
-        for j in (u, v):
-            if j not in junctions:
-                raise _fail(path, place, f"road {u}-{v} names unknown junction '{j}'",
-                            f"add '{j}' to junctions or fix the road")
-        if u == v:
-            raise _fail(path, place, f"road {u}-{v} is a self-loop", "remove it; roads join two "
-                        "different junctions")
-        if math.dist(junctions[u], junctions[v]) < MIN_ROAD_LENGTH:
-            raise _fail(path, place, f"road {u}-{v} is {math.dist(junctions[u], junctions[v]):.3g} m long "
-                        f"(junctions {u} and {v} almost coincide)", f"place the junctions at least "
-                        f"{MIN_ROAD_LENGTH:g} m apart")
+    for i, road in enumerate(raw):
+        u, v = _road(road, f"roads[{i}]", junctions, path)
         if frozenset((u, v)) in seen:
-            raise _fail(path, place, f"road {u}-{v} is listed twice (roads are two-way)",
-                        "list each road once")
+            raise InputError(path, f"roads[{i}]", f"road {u}-{v} is listed twice (roads are two-way)",
+                             "list each road once")
         seen.add(frozenset((u, v)))
         roads.append((u, v))
+    return tuple(roads)
 
-    raw_incidents = data["incidents"]
-    if not isinstance(raw_incidents, dict):
-        raise _fail(path, "incidents", "expected an object of \"U-V\" -> incident type",
-                    "write one entry per directed road")
+
+def _check_incidents(incidents: dict, roads: tuple[tuple[str, str], ...], path: str) -> None:
+    """Exactly one entry per directed road of the town."""
     directed = {road_name(a, b) for u, v in roads for a, b in ((u, v), (v, u))}
     for key in sorted(directed):
-        if key not in raw_incidents:
-            raise _fail(path, f"incidents.{key}", f"missing incident entry for directed road {key}",
-                        f"add \"{key}\": one of {', '.join(INCIDENT_TYPES)}")
-    for key, kind in raw_incidents.items():
+        if key not in incidents:
+            raise InputError(path, f"incidents.{key}", f"missing incident entry for directed road {key}",
+                             f"add \"{key}\": one of {', '.join(INCIDENT_TYPES)}")
+    for key in incidents:
         if key not in directed:
-            raise _fail(path, f"incidents.{key}", f"'{key}' is not a directed road of this town",
-                        "remove the entry or add the road")
-        if kind not in INCIDENT_TYPES:
-            raise _fail(path, f"incidents.{key}", f"unknown incident type {kind!r}",
-                        f"use one of {', '.join(INCIDENT_TYPES)}")
+            raise InputError(path, f"incidents.{key}", f"'{key}' is not a directed road of this town",
+                             "remove the entry or add the road")
 
-    town = Town(junctions=junctions, roads=tuple(roads), incidents=dict(raw_incidents),
-                source_path=path, provenance=str(data.get("source", "")))
-    # connectivity over the undirected road graph
-    first = next(iter(junctions))
+
+def _check_connected(town: Town, path: str) -> None:
+    """Every junction reachable from the first over the undirected road graph."""
+    first = next(iter(town.junctions))
     reached = {first}
     stack = [first]
     while stack:
@@ -275,10 +290,22 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
             if w not in reached:
                 reached.add(w)
                 stack.append(w)
-    if len(reached) != len(junctions):
-        missing = sorted(set(junctions) - reached)
-        raise _fail(path, "roads", f"the town is disconnected: {', '.join(missing)} cannot be "
-                    f"reached from {first}", "add roads joining every junction")
+    if len(reached) != len(town.junctions):
+        missing = sorted(set(town.junctions) - reached)
+        raise InputError(path, "roads", f"the town is disconnected: {', '.join(missing)} cannot be "
+                         f"reached from {first}", "add roads joining every junction")
+
+
+def town_from_dict(data: object, path: str = "<town>") -> Town:
+    """Validate a parsed town document and build a Town, or raise InputError."""
+    data = require_object(data, path, "write {\"junctions\": ..., \"roads\": ..., \"incidents\": ...}")
+    values = check_fields(data, FIELDS, path, "town file")
+    junctions = _junctions(values["junctions"], path)
+    roads = _roads(values["roads"], junctions, path)
+    _check_incidents(values["incidents"], roads, path)
+    town = Town(junctions=junctions, roads=roads, incidents=dict(values["incidents"]),
+                source_path=path, provenance=str(values["source"]))
+    _check_connected(town, path)
     return town
 
 

@@ -33,7 +33,20 @@ from pathlib import Path
 import numpy as np
 
 from trustroute.core.errors import InputError
-from trustroute.core.validation import check_keys, parse_json, read_text, require_keys, require_object
+from trustroute.core.fields import (
+    EMPTY,
+    PROBABILITY,
+    Anything,
+    Field,
+    Integer,
+    ListOf,
+    Table,
+    Text,
+    check_fields,
+    holds_bool,
+    keys,
+)
+from trustroute.core.validation import check_keys, parse_json, read_text, require_object
 
 DEFAULT_DRIVER_MODEL_PATH = Path(__file__).parent / "data" / "driver_model.json"
 HUMAN_ACTIONS: tuple[str, ...] = ("standstill", "takeover")
@@ -59,9 +72,6 @@ def draw_report(theta: int, accuracy: float, k: int, rng: np.random.Generator) -
     step = -1 if rng.random() < 0.5 else 1
     return min(max(theta + step, 0), k - 1)
 
-DRIVER_MODEL_KEYS: tuple[str, ...] = ("trust_levels", "incident_types", "takeover_probability",
-                                      "trust_transition", "failure_probability", "initial_belief",
-                                      "trust_free_takeover_probability", "source")
 MAX_TRUST_LEVELS = 100  # the model is dense in |Θ|^2 per incident; real scales have 5-11 levels
 MAX_INCIDENT_TYPES = 64
 MAX_NAME = 64
@@ -146,12 +156,58 @@ class DriverModel:
         return out
 
 
-def _probabilities(value: object, length: int, path: str, place: str) -> np.ndarray:
+# -- loading and validation -------------------------------------------------
+# Every key of a driver model file (docs/formats/driver_model.md); the rules below check what a table
+# cannot (entries per incident type, array shapes, rows summing to 1).
+
+UNIFORM_BELIEF = object()  # initial_belief absent: the uniform distribution over the trust levels
+_BY_INCIDENT = "expected an object keyed by incident type"
+_BY_INCIDENT_FIX = "write {\"obstacle\": ..., ...}"
+FIELDS: tuple[Field, ...] = (
+    Field(key="trust_levels", required=True,
+          kind=ListOf(item=Integer(), min_items=2, max_items=MAX_TRUST_LEVELS, increasing=True),
+          problem=lambda seen: (f"{str(seen.value)[:60]} is not an increasing list of 2 to "
+                                f"{MAX_TRUST_LEVELS} integers"),
+          fix="write e.g. [1, 2, 3, 4, 5, 6, 7]", missing_fix="add 'trust_levels' as in the default model"),
+    Field(key="incident_types", required=True,
+          kind=ListOf(item=Text(max_length=MAX_NAME), min_items=1, max_items=MAX_INCIDENT_TYPES,
+                      distinct=True),
+          problem="expected a list of distinct incident names",
+          fix="write e.g. [\"obstacle\", \"pedestrian\", \"truck\", \"none\"]",
+          missing_fix="add 'incident_types' as in the default model"),
+    Field(key="takeover_probability", kind=Table(), required=True, problem=_BY_INCIDENT, fix=_BY_INCIDENT_FIX,
+          missing_fix="add 'takeover_probability' as in the default model"),
+    Field(key="trust_transition", kind=Table(), required=True, problem=_BY_INCIDENT, fix=_BY_INCIDENT_FIX,
+          missing_fix="add 'trust_transition' as in the default model"),
+    Field(key="failure_probability", kind=Table(), default=EMPTY, problem=_BY_INCIDENT, fix=_BY_INCIDENT_FIX),
+    # one probability per trust level, summing to 1 (_initial_belief)
+    Field(key="initial_belief", kind=Anything(), default=UNIFORM_BELIEF),
+    Field(key="trust_free_takeover_probability", kind=Table(values=PROBABILITY), default=EMPTY,
+          problem="expected an object", fix="write {incident: probability}"),
+    Field(key="source", kind=Anything(), default=""),  # provenance, kept as text
+)
+DRIVER_MODEL_KEYS: tuple[str, ...] = keys(FIELDS)
+INCIDENT_TABLES: tuple[str, ...] = ("takeover_probability", "trust_transition", "failure_probability")
+# trust_transition.<incident>.<action> may be split by the AV's performance
+PERFORMANCE_FIELDS: tuple[Field, ...] = tuple(
+    Field(key=perf, kind=Anything(), required=True, missing=f"missing '{perf}' matrix",
+          fix="give both 'succ' and 'fail' matrices") for perf in PERFORMANCES)
+
+
+def _numbers(value: object, path: str, place: str, expected: str, fix: str) -> np.ndarray:
+    """A float array of the (nested) list `value`; `true`/`false` are not numbers."""
+    if holds_bool(value):
+        raise InputError(path, place, f"{expected}, not true or false",
+                         "write the number 1 or 0 (true and false are not numbers)")
     try:
-        array = np.asarray(value, dtype=float)
+        return np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise InputError(path, place, f"expected {length} numbers", "write a list of "
-                         f"{length} probabilities") from None
+        raise InputError(path, place, expected, fix) from None
+
+
+def _probabilities(value: object, length: int, path: str, place: str) -> np.ndarray:
+    array = _numbers(value, path, place, f"expected {length} numbers",
+                     f"write a list of {length} probabilities")
     if array.shape != (length,):
         raise InputError(path, place, f"expected {length} numbers, got shape {array.shape}",
                          f"give one probability per trust level ({length})")
@@ -162,11 +218,8 @@ def _probabilities(value: object, length: int, path: str, place: str) -> np.ndar
 
 
 def _stochastic_matrix(value: object, n: int, path: str, place: str) -> np.ndarray:
-    try:
-        matrix = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(path, place, "expected a matrix of numbers",
-                         f"write a {n}x{n} row-stochastic matrix") from None
+    matrix = _numbers(value, path, place, "expected a matrix of numbers",
+                      f"write a {n}x{n} row-stochastic matrix")
     if matrix.shape != (n, n):
         raise InputError(path, place, f"expected a {n}x{n} matrix, got shape {matrix.shape}",
                          "give one row per trust level before and one column per level after")
@@ -182,102 +235,86 @@ def _stochastic_matrix(value: object, n: int, path: str, place: str) -> np.ndarr
     return matrix
 
 
-def driver_model_from_dict(data: object, path: str = "<driver model>") -> DriverModel:
-    """Validate a parsed driver-model document, or raise InputError."""
-    data = require_object(data, path, "start from the default model (participants/data/driver_model.json)")
-    check_keys(data, DRIVER_MODEL_KEYS, path, "", "driver model")
-    require_keys(data, ("trust_levels", "incident_types", "takeover_probability", "trust_transition"), path,
-                 lambda key: f"add '{key}' as in the default model")
-    levels = data["trust_levels"]
-    if not (isinstance(levels, list) and len(levels) >= 2
-            and all(isinstance(t, int) and not isinstance(t, bool) for t in levels)
-            and len(levels) <= MAX_TRUST_LEVELS and levels == sorted(set(levels))):
-        raise InputError(path, "trust_levels", f"{str(levels)[:60]} is not an increasing list of 2 to "
-                         f"{MAX_TRUST_LEVELS} integers", "write e.g. [1, 2, 3, 4, 5, 6, 7]")
-    n = len(levels)
-    incidents = data["incident_types"]
-    if not (isinstance(incidents, list) and incidents and len(incidents) <= MAX_INCIDENT_TYPES
-            and all(isinstance(i, str) and 0 < len(i) <= MAX_NAME for i in incidents)
-            and len(set(incidents)) == len(incidents)):
-        raise InputError(path, "incident_types", "expected a list of distinct incident names",
-                         "write e.g. [\"obstacle\", \"pedestrian\", \"truck\", \"none\"]")
-    takeover_table = data["takeover_probability"]
-    transition_table = data["trust_transition"]
-    failure_table = data.get("failure_probability", {})
-    for key, table in (("takeover_probability", takeover_table),
-                       ("trust_transition", transition_table),
-                       ("failure_probability", failure_table)):
-        if not isinstance(table, dict):
-            raise InputError(path, key, "expected an object keyed by incident type",
-                             "write {\"obstacle\": ..., ...}")
-        extra = sorted(set(table) - set(incidents))
+def _check_incident_keys(values: dict, incidents: list[str], path: str) -> None:
+    """The tables keyed by incident type name only incident types of the model."""
+    for key in INCIDENT_TABLES:
+        extra = sorted(set(values[key]) - set(incidents))
         if extra:
             raise InputError(path, f"{key}.{extra[0]}", f"'{extra[0]}' is not in incident_types",
                              "add it to incident_types or remove the entry")
 
+
+def _action_matrices(entry: object, n: int, path: str, place: str) -> np.ndarray:
+    """[e, θ, θ'] for one human action: a plain matrix (both performances) or {"succ", "fail"}."""
+    if not isinstance(entry, dict):
+        matrix = _stochastic_matrix(entry, n, path, place)
+        return np.stack([matrix, matrix])
+    matrices = check_fields(entry, PERFORMANCE_FIELDS, path, "driver model", place)
+    return np.stack([_stochastic_matrix(matrices[perf], n, path, f"{place}.{perf}") for perf in PERFORMANCES])
+
+
+def _transitions(rows: object, incident: str, n: int, path: str) -> np.ndarray:
+    """[h, e, θ, θ'] of one incident type: both human actions' matrices present and stochastic."""
+    place = f"trust_transition.{incident}"
+    if not isinstance(rows, dict):
+        raise InputError(path, place, f"missing trust transition for '{incident}'",
+                         "add {\"takeover\": M, \"standstill\": M}")
+    check_keys(rows, HUMAN_ACTIONS, path, place, "driver model")
+    for action in HUMAN_ACTIONS:
+        if action not in rows:
+            raise InputError(path, f"{place}.{action}", f"missing '{action}' matrix",
+                             f"add a {n}x{n} row-stochastic matrix")
+    return np.stack([_action_matrices(rows[action], n, path, f"{place}.{action}")
+                     for action in HUMAN_ACTIONS])
+
+
+def _incident_arrays(values: dict, incidents: list[str], n: int,
+                     path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(takeover [i, θ], failure [i, θ], transition [i, h, e, θ, θ']) over the incident types."""
     takeover = np.zeros((len(incidents), n))
     failure = np.zeros((len(incidents), n))
     transition = np.zeros((len(incidents), 2, 2, n, n))
+    takeover_table, failure_table = values["takeover_probability"], values["failure_probability"]
     for i, incident in enumerate(incidents):
         if incident not in takeover_table:
             raise InputError(path, f"takeover_probability.{incident}",
                              f"missing takeover probabilities for '{incident}'",
                              f"add {n} probabilities, one per trust level")
-        takeover[i] = _probabilities(takeover_table[incident], n, path,
-                                     f"takeover_probability.{incident}")
+        takeover[i] = _probabilities(takeover_table[incident], n, path, f"takeover_probability.{incident}")
         if incident in failure_table:
-            failure[i] = _probabilities(failure_table[incident], n, path,
-                                        f"failure_probability.{incident}")
-        rows = transition_table.get(incident)
-        if not isinstance(rows, dict):
-            raise InputError(path, f"trust_transition.{incident}",
-                             f"missing trust transition for '{incident}'",
-                             "add {\"takeover\": M, \"standstill\": M}")
-        check_keys(rows, HUMAN_ACTIONS, path, f"trust_transition.{incident}", "driver model")
-        for h, action in enumerate(HUMAN_ACTIONS):
-            place = f"trust_transition.{incident}.{action}"
-            if action not in rows:
-                raise InputError(path, place, f"missing '{action}' matrix",
-                                 f"add a {n}x{n} row-stochastic matrix")
-            entry = rows[action]
-            if isinstance(entry, dict):
-                check_keys(entry, PERFORMANCES, path, place, "driver model")
-                for e, perf in enumerate(PERFORMANCES):
-                    if perf not in entry:
-                        raise InputError(path, f"{place}.{perf}", f"missing '{perf}' matrix",
-                                         "give both 'succ' and 'fail' matrices")
-                    transition[i, h, e] = _stochastic_matrix(entry[perf], n, path,
-                                                             f"{place}.{perf}")
-            else:
-                matrix = _stochastic_matrix(entry, n, path, place)
-                transition[i, h, 0] = matrix
-                transition[i, h, 1] = matrix
+            failure[i] = _probabilities(failure_table[incident], n, path, f"failure_probability.{incident}")
+        transition[i] = _transitions(values["trust_transition"].get(incident), incident, n, path)
+    return takeover, failure, transition
 
-    if "initial_belief" in data:
-        initial = _probabilities(data["initial_belief"], n, path, "initial_belief")
-        if abs(initial.sum() - 1) > ROW_TOLERANCE:
-            raise InputError(path, "initial_belief", f"sums to {initial.sum():.12g}, not 1",
-                             "renormalise the initial belief")
-    else:
-        initial = np.full(n, 1.0 / n)
-    free = data.get("trust_free_takeover_probability", {})
-    if not isinstance(free, dict):
-        raise InputError(path, "trust_free_takeover_probability", "expected an object",
-                         "write {incident: probability}")
-    for key, value in free.items():
-        if not (isinstance(value, int | float) and not isinstance(value, bool) and 0 <= value <= 1):
-            raise InputError(path, f"trust_free_takeover_probability.{key}",
-                             f"{value!r} is not a probability in [0, 1]", "give a number in [0, 1]")
+
+def _initial_belief(value: object, n: int, path: str) -> np.ndarray:
+    if value is UNIFORM_BELIEF:
+        return np.full(n, 1.0 / n)
+    initial = _probabilities(value, n, path, "initial_belief")
+    if abs(initial.sum() - 1) > ROW_TOLERANCE:
+        raise InputError(path, "initial_belief", f"sums to {initial.sum():.12g}, not 1",
+                         "renormalise the initial belief")
+    return initial
+
+
+def driver_model_from_dict(data: object, path: str = "<driver model>") -> DriverModel:
+    """Validate a parsed driver-model document, or raise InputError."""
+    data = require_object(data, path, "start from the default model (participants/data/driver_model.json)")
+    values = check_fields(data, FIELDS, path, "driver model")
+    levels, incidents = values["trust_levels"], values["incident_types"]
+    _check_incident_keys(values, incidents, path)
+    takeover, failure, transition = _incident_arrays(values, incidents, len(levels), path)
+    free = values["trust_free_takeover_probability"]
     return DriverModel(
         trust_levels=tuple(levels),
         incident_types=tuple(incidents),
         takeover_probability=takeover,
         failure_probability=failure,
         trust_transition=transition,
-        initial_belief=initial,
+        initial_belief=_initial_belief(values["initial_belief"], len(levels), path),
         trust_free_takeover_probability={str(k): float(v) for k, v in free.items()},
         source_path=path,
-        provenance=str(data.get("source", "")),
+        provenance=str(values["source"]),
     )
 
 

@@ -9,8 +9,8 @@ Schema (JSON; every key and its check: docs/formats/driver_population.md):
   the document `participants/driver_model.py` reads (docs/formats/driver_model.md).
 
 Every type shares the trust levels and incident types of the first; weights are > 0 and sum to 1
-within `WEIGHT_TOLERANCE`; names are unique. A population of one type of weight 1 is today's
-single driver model (`single_type_population`).
+within `WEIGHT_TOLERANCE`; names are unique. A population of one type of weight 1 is a single
+driver model (`single_type_population`).
 """
 
 from __future__ import annotations
@@ -26,14 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from trustroute.core.errors import InputError
+from trustroute.core.fields import Anything, Field, ListOf, Number, OneOf, Text, check_fields, keys
 from trustroute.core.output_files import atomic_write_text
-from trustroute.core.validation import check_keys, parse_json, read_text, require_keys, require_object
+from trustroute.core.validation import parse_json, read_text, require_object
 from trustroute.participants.driver_model import DriverModel, driver_model_from_dict, load_driver_model
 
 POPULATION_FORMAT = "trustroute-driver-population"
 POPULATION_VERSION = 1
-POPULATION_KEYS: tuple[str, ...] = ("format", "version", "source", "types")
-TYPE_KEYS: tuple[str, ...] = ("name", "weight", "model", "model_file")
 WEIGHT_TOLERANCE = 1e-9
 MAX_TYPES = 64
 TYPE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]{0,63}")
@@ -99,86 +98,95 @@ class DriverPopulation:
         }
 
 
+# -- loading and validation -------------------------------------------------
+# Every key of a driver-population file and of one of its types (docs/formats/driver_population.md).
+
+FIELDS: tuple[Field, ...] = (
+    Field(key="format", kind=OneOf(choices=(POPULATION_FORMAT,)), required=True,
+          problem=lambda seen: f"{str(seen.value)[:60]!r} is not a driver-population file",
+          fix=f"write \"format\": \"{POPULATION_FORMAT}\"",
+          missing_fix="add 'format' as in participants/data/driver_population_three_types.json"),
+    Field(key="version", kind=OneOf(choices=(POPULATION_VERSION,)), required=True,
+          problem=lambda seen: f"version {str(seen.value)[:20]} is not supported",
+          fix=f"write \"version\": {POPULATION_VERSION}",
+          missing_fix="add 'version' as in participants/data/driver_population_three_types.json"),
+    Field(key="source", kind=Text(nonempty=False), default="", problem="expected text",
+          fix="write the provenance as a string"),
+    Field(key="types", kind=ListOf(min_items=1, max_items=MAX_TYPES), required=True,
+          problem=f"expected a list of 1 to {MAX_TYPES} driver types",
+          fix="list the types as {\"name\", \"weight\", \"model\"} objects",
+          missing_fix="add 'types' as in participants/data/driver_population_three_types.json"),
+)
+POPULATION_KEYS: tuple[str, ...] = keys(FIELDS)
+_NAME_AND_WEIGHT = "give every type a name and a prior weight"
+TYPE_FIELDS: tuple[Field, ...] = (
+    Field(key="name", kind=Text(pattern=TYPE_NAME), required=True,
+          problem=lambda seen: f"{str(seen.value)[:60]!r} is not a type name",
+          fix="use letters, digits, '_' or '-' (at most 64, starting with a letter or '_')",
+          missing_fix=_NAME_AND_WEIGHT),
+    Field(key="weight", kind=Number(minimum=0.0, open_below=True), required=True,
+          problem=lambda seen: f"{seen.value!r} is not a positive number",
+          fix="give a prior weight > 0 (the weights sum to 1)", missing_fix=_NAME_AND_WEIGHT),
+    Field(key="model", kind=Anything()),  # a driver model document (participants/driver_model.py)
+    Field(key="model_file", kind=Text(pattern=re.compile(r"[^\x00]+")), problem="expected a file path",
+          fix="name the driver model file relative to this population file"),
+)
+TYPE_KEYS: tuple[str, ...] = keys(TYPE_FIELDS)
+
+
 def _type_entry(entry: object, index: int, path: str, base: Path | None) -> tuple[str, float, DriverModel]:
     place = f"types[{index}]"
     if not isinstance(entry, dict):
         raise InputError(path, place, "expected an object with name, weight and model or model_file",
                          "write e.g. {\"name\": \"builder\", \"weight\": 0.4, \"model_file\": \"b.json\"}")
-    check_keys(entry, TYPE_KEYS, path, place, "driver population")
-    for key in ("name", "weight"):
-        if key not in entry:
-            raise InputError(path, f"{place}.{key}", f"missing key '{key}'",
-                             "give every type a name and a prior weight")
-    name = entry["name"]
-    if not (isinstance(name, str) and TYPE_NAME.fullmatch(name)):
-        raise InputError(path, f"{place}.name", f"{str(name)[:60]!r} is not a type name",
-                         "use letters, digits, '_' or '-' (at most 64, starting with a letter or '_')")
-    weight = entry["weight"]
-    if not (isinstance(weight, int | float) and not isinstance(weight, bool)
-            and math.isfinite(weight) and weight > 0):
-        raise InputError(path, f"{place}.weight", f"{weight!r} is not a positive number",
-                         "give a prior weight > 0 (the weights sum to 1)")
-    has_model, has_file = "model" in entry, "model_file" in entry
-    if has_model == has_file:
+    values = check_fields(entry, TYPE_FIELDS, path, "driver population", place)
+    if (values["model"] is None) == (values["model_file"] is None):
         raise InputError(path, place, "give exactly one of 'model' and 'model_file'",
                          "inline the driver model or name its file relative to this one")
-    if has_model:
-        model = driver_model_from_dict(entry["model"], f"{path} ({place}.model)")
+    if values["model"] is not None:
+        model = driver_model_from_dict(values["model"], f"{path} ({place}.model)")
     else:
-        file = entry["model_file"]
-        if not (isinstance(file, str) and file and "\x00" not in file):
-            raise InputError(path, f"{place}.model_file", "expected a file path",
-                             "name the driver model file relative to this population file")
+        file = values["model_file"]
         model_path = (base / file) if base is not None and not Path(file).is_absolute() else Path(file)
         model = load_driver_model(model_path)
-    return name, float(weight), model
+    return values["name"], float(values["weight"]), model
+
+
+def _check_alike(types: list[DriverType], index: int, path: str) -> None:
+    """Type `index` (the last of `types`) has its own name and the first type's trust scale and
+    incident types."""
+    new, first = types[-1], types[0]
+    if new.name in (t.name for t in types[:-1]):
+        raise InputError(path, f"types[{index}].name", f"type name '{new.name}' appears twice",
+                         "give every type its own name")
+    if new.model.trust_levels != first.model.trust_levels:
+        raise InputError(path, f"types[{index}]", f"type '{new.name}' has trust levels "
+                         f"{list(new.model.trust_levels)}, not {list(first.model.trust_levels)} as type "
+                         f"'{first.name}'", "every type must use the same trust scale")
+    if new.model.incident_types != first.model.incident_types:
+        raise InputError(path, f"types[{index}]", f"type '{new.name}' covers incidents "
+                         f"{list(new.model.incident_types)}, not {list(first.model.incident_types)} as type "
+                         f"'{first.name}'", "every type must list the same incident types in the "
+                         "same order")
 
 
 def driver_population_from_dict(data: object, path: str = "<driver population>") -> DriverPopulation:
     """Validate a parsed driver-population document, or raise InputError. A `model_file` is read
     relative to the folder of `path` (when `path` names a file)."""
     data = require_object(data, path, "start from participants/data/driver_population_three_types.json")
-    check_keys(data, POPULATION_KEYS, path, "", "driver population")
-    require_keys(data, ("format", "version", "types"), path,
-                 lambda key: f"add '{key}' as in participants/data/driver_population_three_types.json")
-    if data["format"] != POPULATION_FORMAT:
-        raise InputError(path, "format", f"{str(data['format'])[:60]!r} is not a driver-population file",
-                         f"write \"format\": \"{POPULATION_FORMAT}\"")
-    version = data["version"]
-    if version != POPULATION_VERSION or isinstance(version, bool):
-        raise InputError(path, "version", f"version {str(version)[:20]} is not supported",
-                         f"write \"version\": {POPULATION_VERSION}")
-    entries = data["types"]
-    if not (isinstance(entries, list) and 0 < len(entries) <= MAX_TYPES):
-        raise InputError(path, "types", f"expected a list of 1 to {MAX_TYPES} driver types",
-                         "list the types as {\"name\", \"weight\", \"model\"} objects")
-    source = data.get("source", "")
-    if not isinstance(source, str):
-        raise InputError(path, "source", "expected text", "write the provenance as a string")
+    values = check_fields(data, FIELDS, path, "driver population")
     candidate = Path(path)
     base = candidate.parent if candidate.is_file() else None
     types: list[DriverType] = []
-    for index, entry in enumerate(entries):
+    for index, entry in enumerate(values["types"]):
         name, weight, model = _type_entry(entry, index, path, base)
-        if name in (t.name for t in types):
-            raise InputError(path, f"types[{index}].name", f"type name '{name}' appears twice",
-                             "give every type its own name")
-        first = types[0].model if types else model
-        if model.trust_levels != first.trust_levels:
-            raise InputError(path, f"types[{index}]", f"type '{name}' has trust levels "
-                             f"{list(model.trust_levels)}, not {list(first.trust_levels)} as type "
-                             f"'{types[0].name}'", "every type must use the same trust scale")
-        if model.incident_types != first.incident_types:
-            raise InputError(path, f"types[{index}]", f"type '{name}' covers incidents "
-                             f"{list(model.incident_types)}, not {list(first.incident_types)} as type "
-                             f"'{types[0].name}'", "every type must list the same incident types in the "
-                             "same order")
         types.append(DriverType(name=name, weight=weight, model=model))
+        _check_alike(types, index, path)
     total = math.fsum(t.weight for t in types)
     if abs(total - 1.0) > WEIGHT_TOLERANCE:
         raise InputError(path, "types", f"the weights sum to {total:.12g}, not 1 "
                          f"(tolerance {WEIGHT_TOLERANCE:g})", "renormalise the prior weights")
-    return DriverPopulation(types=tuple(types), source_path=path, provenance=source)
+    return DriverPopulation(types=tuple(types), source_path=path, provenance=values["source"])
 
 
 def load_driver_population(path: str | Path) -> DriverPopulation:
@@ -196,7 +204,7 @@ def write_driver_population(population: DriverPopulation, path: str | Path) -> P
 
 
 def single_type_population(model: DriverModel, name: str = "nominal") -> DriverPopulation:
-    """The population of one type of weight 1: today's single driver model."""
+    """The population of one type of weight 1: a single driver model."""
     if not TYPE_NAME.fullmatch(name):
         raise ValueError(f"{name!r} is not a type name")
     return DriverPopulation(types=(DriverType(name=name, weight=1.0, model=model),),

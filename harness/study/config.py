@@ -41,6 +41,7 @@ from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 from trustroute.core.errors import InputError
+from trustroute.core.fields import Field, Integer, ListOf, OneOf, Seen, Table, Text, check_fields, keys
 from trustroute.core.packaged import PACKAGED_SPECS, packaged_spec_names
 from trustroute.core.validation import parse_toml, read_text
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY
@@ -51,41 +52,7 @@ DEFAULT_STUDIES_DIR = Path("studies")
 ENGINES: tuple[str, ...] = ("sumo", "model")
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
-TABLES: tuple[str, ...] = ("study", "population", "drivers")
-DRIVERS_KEYS: tuple[str, ...] = ("population",)
 BELIEF_RULES: tuple[str, ...] = ("bayes", "paper")
-STUDY_KEYS: tuple[str, ...] = (
-    "participants",
-    "seed",
-    "engine",
-    "specs",
-    "conditions",
-    "name",
-    "town",
-    "driver_model",
-    "horizon",
-    "fallback_after",
-    "junction_cap",
-    "report_every",
-    "belief_rule",
-    "output",
-    "policy_cache",
-    "background_vehicles",
-    "record",
-    "robust_population",
-    "robust_objective",
-)
-# Upper limits checked before any work starts: a typo such as participants = 2**63 - 1 must be an
-# error, not a plan that grows until memory runs out.
-MAXIMUM: dict[str, int] = {
-    "participants": 100_000,
-    "seed": 2**63 - 1,
-    "horizon": 1_000,
-    "fallback_after": 10_000,
-    "junction_cap": 10_000,
-    "report_every": 10_000,
-    "background_vehicles": 10_000,  # the tighter limit (what the roads hold) is checked below
-}
 
 
 @dataclass(frozen=True)
@@ -146,10 +113,10 @@ class StudyConfig:
         settings = {k: v for k, v in asdict(self).items()
                     if k not in ("source_path", "output", "name", "record")}
         if settings["robust_population"] is None:
-            # a study without the robust condition keeps its earlier hash
+            # a study without the robust condition hashes as one from before that condition existed
             del settings["robust_population"], settings["robust_objective"]
         if settings["driver_population"] is None:
-            del settings["driver_population"]  # a study without [drivers] keeps its earlier hash
+            del settings["driver_population"]  # a study without [drivers] hashes as before the table
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():
@@ -202,34 +169,6 @@ def _resolve_spec(value: str, base: Path, source: str, key: str) -> Path:
     )
 
 
-def _integer(
-    study: dict, key: str, source: str, minimum: int, default: int | None = None, fix: str = ""
-) -> int | None:
-    if key not in study:
-        return default
-    value = study[key]
-    maximum = MAXIMUM[key]
-    if isinstance(value, bool) or not isinstance(value, int) or not minimum <= value <= maximum:
-        raise InputError(
-            source,
-            f"study.{key}",
-            f"expected an integer from {minimum} to {maximum}, got {str(value)[:40]}",
-            fix or f"write e.g. {key} = {max(minimum, 1)}",
-        )
-    return value
-
-
-def _string_list(study: dict, key: str, source: str, fix: str) -> list[str]:
-    if key not in study:
-        raise InputError(source, f"study.{key}", f"missing key '{key}'", fix)
-    value = study[key]
-    if not (isinstance(value, list) and value and all(isinstance(v, str) and v for v in value)):
-        raise InputError(source, f"study.{key}", f"expected a non-empty list of strings, got {value!r}", fix)
-    if len(set(value)) != len(value):
-        raise InputError(source, f"study.{key}", "lists the same entry twice", "list each entry once")
-    return value
-
-
 def _population(table: object, source: str) -> dict | None:
     """The raw [population] table, validated by participants.population."""
     if table is None:
@@ -240,179 +179,138 @@ def _population(table: object, source: str) -> dict | None:
     return dict(table)
 
 
-def _driver_population(table: object, base: Path, source: str) -> str | None:
+# -- the field tables ---------------------------------------------------------------------------------
+# Every key of a study config (docs/formats/study_config.md); the rules below check what a table cannot
+# (files resolve and load, spec and condition labels distinct, the robust condition's population).
+
+FIELDS: tuple[Field, ...] = (
+    Field(key="study", kind=Table(), required=True, problem="missing [study] table",
+          missing="missing [study] table",
+          fix="add [study] with participants, seed, engine, specs and conditions"),
+    # checked in full by participants.population (population_config_from_dict)
+    Field(key="population", kind=Table(), problem="expected a table", fix="write a [population] table"),
+    Field(key="drivers", kind=Table(), problem="expected a table", fix='write [drivers] population = "FILE"'),
+)
+TABLES: tuple[str, ...] = keys(FIELDS)
+_ENTRIES = ListOf(item=Text(), min_items=1, distinct=True)
+_FILE = Text()
+MAX_BACKGROUND_VEHICLES = 200  # what the town's roads hold
+
+
+def _file_path(seen: Seen) -> str:
+    return f"expected a file path, got {seen.value!r}"
+
+
+FILE_FIX: dict[str, str] = {
+    "town": "give an existing town file or omit town (the default)",
+    "driver_model": "give an existing driver model file or omit driver_model (the default)",
+    "robust_population": ("give the driver-population file the robust policy is made for "
+                          "(docs/driver_types.md)"),
+}
+STUDY_FIELDS: tuple[Field, ...] = (
+    Field(key="participants", kind=Integer(minimum=1, maximum=100_000), required=True,
+          fix="write the number of participants, e.g. participants = 21",
+          missing_fix="add participants = 21"),
+    Field(key="seed", kind=Integer(minimum=0, maximum=2**63 - 1), required=True,
+          fix="write a non-negative integer, e.g. seed = 1", missing_fix="add seed = 1"),
+    Field(key="engine", kind=OneOf(choices=ENGINES, noun="engine"), default="sumo",
+          fix=f"use one of {', '.join(repr(e) for e in ENGINES)}"),
+    Field(key="specs", kind=_ENTRIES, required=True,
+          fix='write specs = ["specs/phi1.toml", "specs/phi2.toml"]'),
+    Field(key="conditions", kind=_ENTRIES, required=True, fix='write conditions = ["aware", "free"]'),
+    Field(key="name", kind=Text(), fix='write name = "paper"'),  # default: the config file's stem
+    Field(key="town", kind=_FILE, problem=_file_path, fix=FILE_FIX["town"]),
+    Field(key="driver_model", kind=_FILE, problem=_file_path, fix=FILE_FIX["driver_model"]),
+    Field(key="horizon", kind=Integer(minimum=1, maximum=1_000),
+          fix=f"write a positive number of junctions or omit horizon ({DEFAULT_FALLBACK_AFTER})"),
+    Field(key="fallback_after", kind=Integer(minimum=0, maximum=10_000, false_allowed=True),
+          default=DEFAULT_FALLBACK_AFTER,
+          fix=f"write fallback_after = {DEFAULT_FALLBACK_AFTER}, or false to disable the rule"),
+    Field(key="junction_cap", kind=Integer(minimum=1, maximum=10_000), default=DEFAULT_JUNCTION_CAP,
+          fix="write e.g. junction_cap = 1"),
+    Field(key="report_every", kind=Integer(minimum=1, maximum=10_000), default=1,
+          fix="write e.g. report_every = 1"),
+    Field(key="belief_rule", kind=OneOf(choices=BELIEF_RULES, noun="belief rule"), default="bayes",
+          fix="use 'bayes' or 'paper'"),
+    Field(key="output", kind=Text(), problem=lambda seen: f"expected a directory path, got {seen.value!r}",
+          fix='write output = "out/paper"'),
+    Field(key="policy_cache", kind=Text(), problem="expected a directory path",
+          fix='write policy_cache = "cache/policies" or omit it'),
+    # the tighter limit, what the town's roads hold, is the rule _check_background_vehicles
+    Field(key="background_vehicles", kind=Integer(minimum=0, maximum=10_000), default=0,
+          fix="write background_vehicles = 20 (vehicles kept on the net), or 0 / omit it for none"),
+    Field(key="record", kind=_ENTRIES, default=(), fix='write record = ["p00000-phi1-aware"]'),
+    Field(key="robust_population", kind=_FILE, problem=_file_path, fix=FILE_FIX["robust_population"]),
+    Field(key="robust_objective", kind=OneOf(choices=ROBUST_OBJECTIVES), default="robust",
+          problem=lambda seen: f"unknown objective {str(seen.value)[:40]!r}",
+          fix="use 'robust' (the worst type's value) or 'bayes' (the prior-weighted value)"),
+)
+STUDY_KEYS: tuple[str, ...] = keys(STUDY_FIELDS)
+DRIVERS_FIX = ("give the path of a driver-population file (docs/driver_type_studies.md), "
+               "e.g. population = \"types.json\"")
+DRIVERS_FIELDS: tuple[Field, ...] = (
+    Field(key="population", kind=_FILE, required=True, problem=_file_path, fix=DRIVERS_FIX),
+)
+DRIVERS_KEYS: tuple[str, ...] = keys(DRIVERS_FIELDS)
+
+
+# -- rules ----------------------------------------------------------------------------------------------
+
+
+def _driver_population(table: dict | None, base: Path, source: str) -> str | None:
     """The [drivers] table: the driver-population file, resolved and read (InputError if bad)."""
     if table is None:
         return None
-    if not isinstance(table, dict):
-        raise InputError(source, "drivers", "expected a table", 'write [drivers] population = "FILE"')
-    unknown = sorted(set(table) - set(DRIVERS_KEYS))
-    if unknown:
-        raise InputError(source, f"drivers.{unknown[0]}", f"unknown key '{unknown[0]}'",
-                         f"use only {', '.join(DRIVERS_KEYS)}")
-    value = table.get("population")
-    fix = ("give the path of a driver-population file (docs/driver_type_studies.md), "
-           "e.g. population = \"types.json\"")
-    if not isinstance(value, str) or not value:
-        raise InputError(source, "drivers.population", f"expected a file path, got {value!r}", fix)
-    path = _resolve_path(value, base, source, "drivers.population", "driver-population file", fix)
+    value = check_fields(table, DRIVERS_FIELDS, source, "study config", "drivers")["population"]
+    path = _resolve_path(value, base, source, "drivers.population", "driver-population file", DRIVERS_FIX)
     from trustroute.participants.driver_population import load_driver_population
 
     load_driver_population(path)  # raises InputError naming the file and the place
     return str(path)
 
 
-def study_config_from_dict(data: object, source: str = "<study>", base: Path | None = None) -> StudyConfig:
-    """Validate a parsed study document; relative paths resolve against `base`, then the cwd."""
-    base = base if base is not None else Path.cwd()
-    if not isinstance(data, dict):
-        raise InputError(source, "top level", "expected a TOML table", "start with a [study] table")
-    unknown_tables = sorted(set(data) - set(TABLES))
-    if unknown_tables:
-        raise InputError(
-            source,
-            unknown_tables[0],
-            f"unknown table or key '{unknown_tables[0]}'",
-            f"use only {', '.join(f'[{t}]' for t in TABLES)}",
-        )
-    study = data.get("study")
-    if not isinstance(study, dict):
-        raise InputError(
-            source,
-            "study",
-            "missing [study] table",
-            "add [study] with participants, seed, engine, specs and conditions",
-        )
-    unknown = sorted(set(study) - set(STUDY_KEYS))
-    if unknown:
-        raise InputError(
-            source, f"study.{unknown[0]}", f"unknown key '{unknown[0]}'", f"use only {', '.join(STUDY_KEYS)}"
-        )
-    for key in ("participants", "seed"):
-        if key not in study:
-            raise InputError(
-                source,
-                f"study.{key}",
-                f"missing key '{key}'",
-                f"add {key} = 21" if key == "participants" else "add seed = 1",
-            )
-    participants = _integer(
-        study, "participants", source, 1, fix="write the number of participants, e.g. participants = 21"
-    )
-    seed = _integer(study, "seed", source, 0, fix="write a non-negative integer, e.g. seed = 1")
-    engine = study.get("engine", "sumo")
-    if engine not in ENGINES:
-        raise InputError(
-            source,
-            "study.engine",
-            f"unknown engine {engine!r}",
-            f"use one of {', '.join(repr(e) for e in ENGINES)}",
-        )
-    spec_values = _string_list(study, "specs", source, 'write specs = ["specs/phi1.toml", "specs/phi2.toml"]')
-    specs = tuple(str(_resolve_spec(v, base, source, "study.specs")) for v in spec_values)
+def _specs(values: list[str], base: Path, source: str) -> tuple[str, ...]:
+    """Every spec found; file names (stems) distinct, since they label the tables."""
+    specs = tuple(str(_resolve_spec(v, base, source, "study.specs")) for v in values)
     if len({Path(s).stem for s in specs}) != len(specs):
-        raise InputError(
-            source,
-            "study.specs",
-            "two specs share a file name",
-            "give every spec file a distinct name (the name labels the tables)",
-        )
-    condition_values = _string_list(study, "conditions", source, 'write conditions = ["aware", "free"]')
-    conditions = []
-    for value in condition_values:
-        if value in NAMED_CONDITIONS:
-            conditions.append(value)
-        else:
-            conditions.append(
-                str(
-                    _resolve_path(
-                        value,
-                        base,
-                        source,
-                        "study.conditions",
-                        "policy file",
-                        'use "aware", "free", "robust" or a policy file written by trustroute synth',
-                    )
-                )
-            )
+        raise InputError(source, "study.specs", "two specs share a file name",
+                         "give every spec file a distinct name (the name labels the tables)")
+    return specs
+
+
+def _conditions(values: list[str], base: Path, source: str) -> tuple[str, ...]:
+    """Named conditions, or policy files found; labels distinct."""
+    fix = 'use "aware", "free", "robust" or a policy file written by trustroute synth'
+    conditions = tuple(value if value in NAMED_CONDITIONS else
+                       str(_resolve_path(value, base, source, "study.conditions", "policy file", fix))
+                       for value in values)
     if len({condition_label(c) for c in conditions}) != len(conditions):
-        raise InputError(
-            source, "study.conditions", "two conditions share a name", "give policy files distinct names"
-        )
+        raise InputError(source, "study.conditions", "two conditions share a name",
+                         "give policy files distinct names")
+    return conditions
 
-    def optional_file(key: str, what: str, fix: str) -> str | None:
-        if key not in study:
-            return None
-        if not isinstance(study[key], str) or not study[key]:
-            raise InputError(source, f"study.{key}", f"expected a file path, got {study[key]!r}", fix)
-        return str(_resolve_path(study[key], base, source, f"study.{key}", what, fix))
 
-    town = optional_file("town", "town file", "give an existing town file or omit town (the default)")
-    driver_model = optional_file(
-        "driver_model",
-        "driver model file",
-        "give an existing driver model file or omit driver_model (the default)",
-    )
-    horizon = _integer(
-        study, "horizon", source, 1,
-        fix=f"write a positive number of junctions or omit horizon ({DEFAULT_FALLBACK_AFTER})",
-    )
-    fallback_value = study.get("fallback_after", DEFAULT_FALLBACK_AFTER)
-    if fallback_value is False:
-        fallback_after = None
-    else:
-        fallback_after = _integer(
-            study,
-            "fallback_after",
-            source,
-            0,
-            default=DEFAULT_FALLBACK_AFTER,
-            fix=f"write fallback_after = {DEFAULT_FALLBACK_AFTER}, or false to disable the rule",
-        )
-    junction_cap = _integer(study, "junction_cap", source, 1, default=DEFAULT_JUNCTION_CAP)
-    background_vehicles = _integer(
-        study, "background_vehicles", source, 0, default=0,
-        fix="write background_vehicles = 20 (vehicles kept on the net), or 0 / omit it for none",
-    )
-    if background_vehicles > 200:
-        raise InputError(source, "study.background_vehicles", f"{background_vehicles} vehicles is more than "
-                         "the town's roads hold (at most 200)", "write a number from 0 to 200")
-    report_every = _integer(study, "report_every", source, 1, default=1)
-    belief_rule = study.get("belief_rule", "bayes")
-    if belief_rule not in BELIEF_RULES:
-        raise InputError(
-            source, "study.belief_rule", f"unknown belief rule {belief_rule!r}", "use 'bayes' or 'paper'"
-        )
-    name = study.get("name", Path(source).stem if source.endswith(".toml") else "study")
-    if not isinstance(name, str) or not name:
-        raise InputError(
-            source, "study.name", f"expected a non-empty string, got {name!r}", 'write name = "paper"'
-        )
-    output = None
-    if "output" in study:
-        if not isinstance(study["output"], str) or not study["output"]:
-            raise InputError(
-                source,
-                "study.output",
-                f"expected a directory path, got {study['output']!r}",
-                'write output = "out/paper"',
-            )
-        output = str((base / study["output"]).resolve())
-    policy_cache = None
-    if "policy_cache" in study:
-        if not isinstance(study["policy_cache"], str) or not study["policy_cache"]:
-            raise InputError(
-                source,
-                "study.policy_cache",
-                "expected a directory path",
-                'write policy_cache = "cache/policies" or omit it',
-            )
-        policy_cache = str((base / study["policy_cache"]).resolve())
-    record = tuple(_string_list(study, "record", source, 'write record = ["p00000-phi1-aware"]')
-                   if "record" in study else ())
-    robust_population = optional_file(
-        "robust_population", "driver-population file",
-        "give the driver-population file the robust policy is made for (docs/driver_types.md)")
+def _optional_file(study: dict, key: str, what: str, base: Path, source: str) -> str | None:
+    """The file `study[key]` names, resolved; None when the key is absent."""
+    if study[key] is None:
+        return None
+    return str(_resolve_path(study[key], base, source, f"study.{key}", what, FILE_FIX[key]))
+
+
+def _directory(value: str | None, base: Path) -> str | None:
+    return None if value is None else str((base / value).resolve())
+
+
+def _check_background_vehicles(count: int, source: str) -> None:
+    if count > MAX_BACKGROUND_VEHICLES:
+        raise InputError(source, "study.background_vehicles", f"{count} vehicles is more than the town's "
+                         f"roads hold (at most {MAX_BACKGROUND_VEHICLES})",
+                         f"write a number from 0 to {MAX_BACKGROUND_VEHICLES}")
+
+
+def _robust_population(study: dict, conditions: tuple[str, ...], base: Path, source: str) -> str | None:
+    """The "robust" condition's population file: required with that condition, read and validated."""
+    robust_population = _optional_file(study, "robust_population", "driver-population file", base, source)
     if robust_population is not None:
         from trustroute.participants.driver_population import load_driver_population
 
@@ -421,34 +319,43 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         raise InputError(source, "study.robust_population", "the 'robust' condition needs the driver "
                          "population its policy is made for",
                          'add robust_population = "types.json" to [study] (docs/driver_types.md)')
-    robust_objective = study.get("robust_objective", "robust")
-    if robust_objective not in ROBUST_OBJECTIVES:
-        raise InputError(source, "study.robust_objective",
-                         f"unknown objective {str(robust_objective)[:40]!r}",
-                         "use 'robust' (the worst type's value) or 'bayes' (the prior-weighted value)")
+    return robust_population
+
+
+def study_config_from_dict(data: object, source: str = "<study>", base: Path | None = None) -> StudyConfig:
+    """Validate a parsed study document; relative paths resolve against `base`, then the cwd."""
+    base = base if base is not None else Path.cwd()
+    if not isinstance(data, dict):
+        raise InputError(source, "top level", "expected a TOML table", "start with a [study] table")
+    tables = check_fields(data, FIELDS, source, "study config")
+    study = check_fields(tables["study"], STUDY_FIELDS, source, "study config", "study")
+    specs = _specs(study["specs"], base, source)
+    conditions = _conditions(study["conditions"], base, source)
+    _check_background_vehicles(study["background_vehicles"], source)
+    default_name = Path(source).stem if source.endswith(".toml") else "study"
     return StudyConfig(
         source_path=source,
-        name=name,
-        participants=participants,
-        seed=seed,
-        engine=engine,
+        name=study["name"] if study["name"] is not None else default_name,
+        participants=study["participants"],
+        seed=study["seed"],
+        engine=study["engine"],
         specs=specs,
-        conditions=tuple(conditions),
-        town=town,
-        driver_model=driver_model,
-        horizon=horizon,
-        fallback_after=fallback_after,
-        junction_cap=junction_cap,
-        report_every=report_every,
-        belief_rule=belief_rule,
-        output=output,
-        policy_cache=policy_cache,
-        background_vehicles=background_vehicles,
-        record=record,
-        population=_population(data.get("population"), source),
-        robust_population=robust_population,
-        robust_objective=robust_objective,
-        driver_population=_driver_population(data.get("drivers"), base, source),
+        conditions=conditions,
+        town=_optional_file(study, "town", "town file", base, source),
+        driver_model=_optional_file(study, "driver_model", "driver model file", base, source),
+        horizon=study["horizon"],
+        fallback_after=None if study["fallback_after"] is False else study["fallback_after"],
+        junction_cap=study["junction_cap"],
+        report_every=study["report_every"],
+        belief_rule=study["belief_rule"],
+        output=_directory(study["output"], base),
+        policy_cache=_directory(study["policy_cache"], base),
+        background_vehicles=study["background_vehicles"],
+        record=tuple(study["record"]),
+        population=_population(tables["population"], source),
+        robust_population=_robust_population(study, conditions, base, source),
+        robust_objective=study["robust_objective"],
+        driver_population=_driver_population(tables["drivers"], base, source),
     )
 
 

@@ -19,13 +19,26 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-import math
 import re
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from trustroute.core.errors import InputError
-from trustroute.core.validation import parse_toml, read_text, require_keys
+from trustroute.core.fields import (
+    EMPTY,
+    Field,
+    Integer,
+    Kind,
+    ListOf,
+    Number,
+    Table,
+    Text,
+    check_fields,
+    check_value,
+    keys,
+)
+from trustroute.core.validation import parse_toml, read_text
 from trustroute.networks.town import Town
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
@@ -41,7 +54,6 @@ from trustroute.policies.logic.formula import (
 )
 
 N_TRUST_LEVELS = 7  # the Muir scale 1..7 of the default driver model (any number >= 2 is accepted)
-TOP_LEVEL_KEYS = ("name", "start", "formula", "states", "beliefs", "trust_states", "type_beliefs")
 MAX_SPEC_NAME = 64
 # Names become file names (policy cache entries): no path separators, NUL or leading dot.
 SPEC_NAME = re.compile(rf"[A-Za-z0-9_][A-Za-z0-9_.+-]{{0,{MAX_SPEC_NAME - 1}}}")
@@ -173,9 +185,98 @@ def _formula_position(text: str) -> tuple[int, int]:
 
 
 # -- loading --------------------------------------------------------------------------------------
+# Every key of a spec file and of its atoms (docs/formats/spec.md); the rules below check what a
+# table cannot (name and formula limits, roads of the town, atom names unique across tables).
 
-def _number(value: object) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+TRUST_STATE_EXAMPLE = "write [trust_states] then trusting = { roads = [\"K-L\"], trust = [6, 7] }"
+TYPE_BELIEF_EXAMPLE = 'write [type_beliefs] then nontruster = { types = ["flat"], above = 0.7 }'
+
+
+def _string(key: str) -> Field:
+    return Field(key=key, kind=Text(nonempty=False), required=True, problem=f"'{key}' must be a string",
+                 fix=f'write {key} = "..."', missing_fix=f'add {key} = "..." at the top of the file (see '
+                 'specs/phi1.toml)')
+
+
+FIELDS: tuple[Field, ...] = (
+    _string("name"),
+    _string("start"),
+    _string("formula"),
+    Field(key="states", kind=Table(), default=EMPTY, problem="'states' must be a table of atom -> roads",
+          fix='write [states] then v1 = ["B-G", "F-G"]'),
+    Field(key="beliefs", kind=Table(), default=EMPTY, problem="'beliefs' must be a table of tables",
+          fix="write [beliefs.NAME] with coeffs = [...] and offset = ..."),
+    Field(key="trust_states", kind=Table(), default=EMPTY,
+          problem="'trust_states' must be a table of atom -> { roads, trust }", fix=TRUST_STATE_EXAMPLE),
+    Field(key="type_beliefs", kind=Table(), default=EMPTY,
+          problem="'type_beliefs' must be a table of atom -> { types, above }", fix=TYPE_BELIEF_EXAMPLE),
+)
+TOP_LEVEL_KEYS: tuple[str, ...] = keys(FIELDS)
+STATE_ROADS = ListOf(item=Text(nonempty=False), max_items=MAX_STATE_ROADS)
+
+
+def _belief_key(key: str, kind: Kind, problem: str, fix: str) -> Field:
+    return Field(key=key, kind=kind, required=True, fix=fix,
+                 problem=lambda seen: f"belief atom '{seen.owner}': {problem}",
+                 missing=lambda seen: f"belief atom '{seen.owner}' is missing '{key}'",
+                 missing_fix=lambda seen: f"add {key} = ... under [beliefs.{seen.owner}]")
+
+
+BELIEF_FIELDS: tuple[Field, ...] = (
+    _belief_key("coeffs", ListOf(item=Number()), "coeffs must be a list of finite numbers",
+                "write coeffs = [1, 0, 0, 0, 0, 0, 0]"),
+    _belief_key("offset", Number(), "offset must be a finite number", "write offset = 0.5"),
+)
+
+
+def _inline_key(noun: str, key: str, kind: Kind, problem: str, fix: str, example: str,
+                required: bool = True) -> Field:
+    return Field(key=key, kind=kind, required=required, fix=fix,
+                 problem=lambda seen: f"{noun} atom '{seen.owner}': {problem}",
+                 missing=lambda seen: f"{noun} atom '{seen.owner}' is missing '{key}'", missing_fix=example)
+
+
+TRUST_STATE_FIELDS: tuple[Field, ...] = (
+    _inline_key("trust-state", "roads", ListOf(item=Text(nonempty=False)),
+                "roads must be a list of directed roads",
+                'write roads = ["U-V", ...] or leave it out for any road', TRUST_STATE_EXAMPLE,
+                required=False),
+    _inline_key("trust-state", "trust", ListOf(item=Integer(minimum=1, maximum=N_TRUST_LEVELS), min_items=1),
+                f"trust must be a non-empty list of trust levels (integers 1..{N_TRUST_LEVELS})",
+                "write trust = [6, 7]", TRUST_STATE_EXAMPLE),
+)
+TYPE_BELIEF_FIELDS: tuple[Field, ...] = (
+    _inline_key("type-belief", "types", ListOf(item=Text(), min_items=1, distinct=True),
+                "types must be a non-empty list of distinct type names", 'write types = ["flat"]',
+                TYPE_BELIEF_EXAMPLE),
+    _inline_key("type-belief", "above", Number(minimum=0.0, maximum=1.0, open_above=True),
+                "above must be a number in [0, 1)",
+                "write above = 0.7 (the atom is true iff P(type in types) > above)", TYPE_BELIEF_EXAMPLE),
+)
+
+
+@dataclass(frozen=True)
+class _SpecSource:
+    """A spec's text and the name it is shown by: errors placed at a line and column."""
+
+    text: str
+    source: str
+
+    def place(self, label: str, *needles: str) -> str:
+        return _place(self.text, label, *needles)
+
+    def error(self, label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
+        return InputError(self.source, self.place(label, *needles), problem, fix)
+
+    def key_place(self, key: str) -> str:
+        """Where a top-level key (or table) is written."""
+        return self.place(key, rf"^\s*\[?{re.escape(key)}\b")
+
+    def check_atom_name(self, atom: str, table: str) -> None:
+        if not ATOM_PATTERN.fullmatch(atom) or atom in KEYWORDS:
+            raise self.error(f"{table}.{atom}", (re.escape(atom),), f"'{atom}' is not a valid atom name",
+                             "use letters, digits and '_' (not starting with a digit), and not "
+                             + ", ".join(sorted(KEYWORDS)))
 
 
 def _paren_depth(text: str) -> int:
@@ -189,214 +290,167 @@ def _paren_depth(text: str) -> int:
     return deepest
 
 
-def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) -> Spec:
-    """Parse and validate a spec's TOML text; with `town`, check its roads exist there."""
-    data = parse_toml(text, source, "spec file")
-
-    def fail(label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
-        return InputError(source, _place(text, label, *needles), problem, fix)
-
-    for key in data:
-        if key not in TOP_LEVEL_KEYS:
-            raise fail(key, (rf"^\s*\[?{re.escape(key)}\b",), f"unknown key '{key}'",
-                       f"use only {', '.join(TOP_LEVEL_KEYS)}")
-    require_keys(data, ("name", "start", "formula"), source,
-                 lambda key: f"add {key} = \"...\" at the top of the file (see specs/phi1.toml)")
-    for key in ("name", "start", "formula"):
-        if not isinstance(data[key], str):
-            raise fail(key, (rf"^\s*{key}\s*=",), f"'{key}' must be a string", f'write {key} = "..."')
-    name, start, formula_text = data["name"], data["start"], data["formula"]
+def _check_name(name: str, spec: _SpecSource) -> None:
+    """Non-blank, and safe as a file name (it names cache entries)."""
+    needles = (r"^\s*name\s*=",)
     if not name.strip():
-        raise fail("name", (r"^\s*name\s*=",), "'name' is empty", 'write name = "phi1"')
+        raise spec.error("name", needles, "'name' is empty", 'write name = "phi1"')
     if not SPEC_NAME.fullmatch(name):
-        raise fail("name", (r"^\s*name\s*=",), f"spec name {name[:40]!r}{'...' if len(name) > 40 else ''} "
-                   f"is not 1-{MAX_SPEC_NAME} letters, digits, '_', '.' or '-' (it names cache files)",
-                   'write e.g. name = "phi1"')
+        raise spec.error("name", needles, f"spec name {name[:40]!r}{'...' if len(name) > 40 else ''} "
+                         f"is not 1-{MAX_SPEC_NAME} letters, digits, '_', '.' or '-' (it names cache files)",
+                         'write e.g. name = "phi1"')
+
+
+def _check_formula_size(formula_text: str, spec: _SpecSource) -> None:
+    """Short and shallow enough for the recursive parser and DFA construction."""
+    needles = (r"^\s*formula\s*=",)
     if len(formula_text) > MAX_FORMULA_CHARS:
-        raise fail("formula", (r"^\s*formula\s*=",), f"the formula has {len(formula_text)} characters "
-                   f"(the limit is {MAX_FORMULA_CHARS})", "split the task or simplify the formula")
+        raise spec.error("formula", needles, f"the formula has {len(formula_text)} characters "
+                         f"(the limit is {MAX_FORMULA_CHARS})", "split the task or simplify the formula")
     nesting = _paren_depth(formula_text)
     if nesting > MAX_FORMULA_NESTING:
-        raise fail("formula", (r"^\s*formula\s*=",), f"the formula nests parentheses {nesting} deep "
-                   f"(the limit is {MAX_FORMULA_NESTING})", "simplify the formula")
+        raise spec.error("formula", needles, f"the formula nests parentheses {nesting} deep "
+                         f"(the limit is {MAX_FORMULA_NESTING})", "simplify the formula")
 
-    raw_states = data.get("states", {})
-    raw_beliefs = data.get("beliefs", {})
-    if not isinstance(raw_states, dict):
-        raise fail("states", (r"^\s*states\s*=",), "'states' must be a table of atom -> roads",
-                   'write [states] then v1 = ["B-G", "F-G"]')
-    if not isinstance(raw_beliefs, dict):
-        raise fail("beliefs", (r"^\s*beliefs\s*=",), "'beliefs' must be a table of tables",
-                   "write [beliefs.NAME] with coeffs = [...] and offset = ...")
 
-    if len(raw_states) + len(raw_beliefs) > MAX_ATOMS:
-        raise InputError(source, "states", f"{len(raw_states) + len(raw_beliefs)} atoms (the limit is "
-                         f"{MAX_ATOMS})", "define fewer atoms")
+def _check_roads(roads: list[str], owner: str, place: Callable[[str], str], source: str,
+                 town: Town | None) -> None:
+    """Every road a directed road "U-V" (of `town` when given); `owner` names the atom."""
+    for road in roads:
+        if "-" not in road:
+            raise InputError(source, place(road), f"'{road}' is not a directed road \"U-V\"",
+                             "write roads as \"U-V\"")
+        if town is not None and road not in town.states:
+            raise InputError(source, place(road), f"{owner}: '{road}' is not a directed road of the town "
+                             f"({town.source_path or 'given town'})",
+                             "use directed roads 'U-V' of the town (trustroute model lists them)")
 
-    def check_atom_name(atom: str, table: str) -> None:
-        if not ATOM_PATTERN.fullmatch(atom) or atom in KEYWORDS:
-            raise fail(f"{table}.{atom}", (re.escape(atom),), f"'{atom}' is not a valid atom name",
-                       "use letters, digits and '_' (not starting with a digit), and not "
-                       + ", ".join(sorted(KEYWORDS)))
 
-    state_atoms: dict[str, frozenset[str]] = {}
-    for atom in sorted(raw_states):
-        roads = raw_states[atom]
-        check_atom_name(atom, "states")
+def _state_atoms(raw: dict, spec: _SpecSource, town: Town | None) -> dict[str, frozenset[str]]:
+    """The `[states]` table: atom -> list of directed roads."""
+    atoms: dict[str, frozenset[str]] = {}
+    for atom in sorted(raw):
+        spec.check_atom_name(atom, "states")
         label = f"states.{atom}"
         needles = (r"^\s*\[states\]", rf"^\s*{re.escape(atom)}\s*=")
-        if not (isinstance(roads, list) and len(roads) <= MAX_STATE_ROADS
-                and all(isinstance(r, str) for r in roads)):
-            raise fail(label, needles, f"state atom '{atom}' must be a list of directed roads",
-                       f'write {atom} = ["U-V", ...]')
-        for road in roads:
-            if "-" not in road:
-                raise fail(label, needles + (re.escape(f'"{road}"'),),
-                           f"'{road}' is not a directed road \"U-V\"", "write roads as \"U-V\"")
-            if town is not None and road not in town.states:
-                raise fail(label, needles + (re.escape(f'"{road}"'),),
-                           f"state atom '{atom}': '{road}' is not a directed road of the town "
-                           f"({town.source_path or 'given town'})",
-                           "use directed roads 'U-V' of the town (trustroute model lists them)")
-        state_atoms[atom] = frozenset(roads)
+        roads = check_value(raw[atom], STATE_ROADS, spec.source, spec.place(label, *needles),
+                            f"state atom '{atom}' must be a list of directed roads",
+                            f'write {atom} = ["U-V", ...]')
+        _check_roads(roads, f"state atom '{atom}'", lambda road, n=needles, a=label: spec.place(
+            a, *n, re.escape(f'"{road}"')), spec.source, town)
+        atoms[atom] = frozenset(roads)
+    return atoms
 
-    belief_atoms: dict[str, BeliefAtom] = {}
-    for atom in sorted(raw_beliefs):
-        table = raw_beliefs[atom]
-        check_atom_name(atom, "beliefs")
-        label = f"beliefs.{atom}"
-        header = (rf"^\s*\[beliefs\.{re.escape(atom)}\]",)
-        if atom in state_atoms:
-            raise fail(label, header, f"atom '{atom}' is defined both under [states] and [beliefs]",
-                       "rename one of them")
-        if not isinstance(table, dict):
-            raise fail(label, header, f"belief atom '{atom}' must be a table",
-                       f"write [beliefs.{atom}] with coeffs = [...] and offset = ...")
-        for key in table:
-            if key not in ("coeffs", "offset"):
-                raise fail(label, header + (rf"^\s*{re.escape(key)}\s*=",),
-                           f"unknown key '{key}' in belief atom '{atom}'", "use only coeffs and offset")
-        for key in ("coeffs", "offset"):
-            if key not in table:
-                raise fail(label, header, f"belief atom '{atom}' is missing '{key}'",
-                           f"add {key} = ... under [beliefs.{atom}]")
-        coeffs, offset = table["coeffs"], table["offset"]
-        coeffs_place = header + (r"^\s*coeffs\s*=",)
-        if not (isinstance(coeffs, list) and all(_number(c) for c in coeffs)):
-            raise fail(label, coeffs_place, f"belief atom '{atom}': coeffs must be a list of finite "
-                       "numbers", "write coeffs = [1, 0, 0, 0, 0, 0, 0]")
+
+def _belief_atoms(raw: dict, spec: _SpecSource, taken: set[str]) -> dict[str, BeliefAtom]:
+    """The `[beliefs.NAME]` tables: coeffs (one per trust level, at least 2) and offset."""
+    atoms: dict[str, BeliefAtom] = {}
+    for atom in sorted(raw):
+        spec.check_atom_name(atom, "beliefs")
+        label, header = f"beliefs.{atom}", (rf"^\s*\[beliefs\.{re.escape(atom)}\]",)
+        entry = raw[atom]
+        if atom in taken:
+            raise spec.error(label, header, f"atom '{atom}' is defined both under [states] and [beliefs]",
+                             "rename one of them")
+        if not isinstance(entry, dict):
+            raise spec.error(label, header, f"belief atom '{atom}' must be a table",
+                             f"write [beliefs.{atom}] with coeffs = [...] and offset = ...")
+
+        def place(key: str, label: str = label, header: tuple[str, ...] = header, entry: dict = entry) -> str:
+            return spec.place(label, *header, *((rf"^\s*{re.escape(key)}\s*=",) if key in entry else ()))
+
+        values = check_fields(entry, BELIEF_FIELDS, spec.source, f"belief atom '{atom}'", place, owner=atom)
+        coeffs = values["coeffs"]
         if len(coeffs) < 2:
-            raise fail(label, coeffs_place, f"belief atom '{atom}': coeffs has {len(coeffs)} entries, "
-                       "expected one per trust level of the driver model (at least 2)",
-                       f"give one coefficient per trust level, e.g. {N_TRUST_LEVELS} for the default model")
-        if not _number(offset):
-            raise fail(label, header + (r"^\s*offset\s*=",), f"belief atom '{atom}': offset must be "
-                       "a finite number", "write offset = 0.5")
-        belief_atoms[atom] = BeliefAtom(tuple(float(c) for c in coeffs), float(offset))
+            raise InputError(spec.source, place("coeffs"), f"belief atom '{atom}': coeffs has {len(coeffs)} "
+                             "entries, expected one per trust level of the driver model (at least 2)",
+                             f"give one coefficient per trust level, e.g. {N_TRUST_LEVELS} for the default "
+                             "model")
+        atoms[atom] = BeliefAtom(tuple(float(c) for c in coeffs), float(values["offset"]))
+    return atoms
 
-    trust_atoms = _trust_state_atoms(data.get("trust_states", {}), text, source, town,
-                                     set(state_atoms) | set(belief_atoms), check_atom_name)
-    type_atoms = _type_belief_atoms(data.get("type_beliefs", {}), text, source,
-                                    set(state_atoms) | set(belief_atoms) | set(trust_atoms),
-                                    check_atom_name)
-    line, column = _formula_position(text)
+
+def _inline_atoms(raw: dict, table: str, noun: str, fields: tuple[Field, ...], example: str,
+                  spec: _SpecSource, taken: set[str]) -> Iterator[tuple[str, dict, str]]:
+    """The atom tables of inline tables (`[trust_states]`, `[type_beliefs]`): names unique across
+    every atom table, each entry checked against `fields`. Yields (atom, values, place) in name
+    order; `place` is the atom's line."""
+    for atom in sorted(raw):
+        spec.check_atom_name(atom, table)
+        place = spec.place(f"{table}.{atom}", rf"^\s*\[{table}", rf"^\s*{re.escape(atom)}\s*=")
+        if atom in taken:
+            raise InputError(spec.source, place, f"atom '{atom}' is defined twice (also under another atom "
+                             "table)", "rename one of them")
+        if not isinstance(raw[atom], dict):
+            raise InputError(spec.source, place, f"{noun} atom '{atom}' must be a table", example)
+        values = check_fields(raw[atom], fields, spec.source, f"{noun} atom '{atom}'",
+                              lambda key, place=place: place, owner=atom)
+        yield atom, values, place
+
+
+def _trust_state_atoms(raw: dict, spec: _SpecSource, town: Town | None,
+                       taken: set[str]) -> dict[str, TrustStateAtom]:
+    """The `[trust_states]` table: NAME = { roads = [...] (optional), trust = [levels] }."""
+    atoms: dict[str, TrustStateAtom] = {}
+    for atom, values, place in _inline_atoms(raw, "trust_states", "trust-state", TRUST_STATE_FIELDS,
+                                             TRUST_STATE_EXAMPLE, spec, taken):
+        roads = values["roads"]
+        if roads is not None:
+            _check_roads(roads, f"trust-state atom '{atom}'", lambda road, place=place: place, spec.source,
+                         town)
+        atoms[atom] = TrustStateAtom(trust=frozenset(values["trust"]),
+                                     roads=None if roads is None else frozenset(roads))
+    return atoms
+
+
+def _type_belief_atoms(raw: dict, spec: _SpecSource, taken: set[str]) -> dict[str, TypeBeliefAtom]:
+    """The `[type_beliefs]` table: NAME = { types = ["flat", ...], above = 0.7 }."""
+    return {atom: TypeBeliefAtom(types=tuple(values["types"]), above=float(values["above"]))
+            for atom, values, _ in _inline_atoms(raw, "type_beliefs", "type-belief", TYPE_BELIEF_FIELDS,
+                                                 TYPE_BELIEF_EXAMPLE, spec, taken)}
+
+
+def _formula(formula_text: str, atoms: set[str], spec: _SpecSource) -> Formula:
+    line, column = _formula_position(spec.text)
     try:
-        formula = parse_formula(formula_text, set(state_atoms) | set(belief_atoms) | set(trust_atoms)
-                                | set(type_atoms), source, line, column)
+        return parse_formula(formula_text, atoms, spec.source, line, column)
     except RecursionError:
-        raise fail("formula", (r"^\s*formula\s*=",), "the formula is nested too deeply to parse",
-                   "simplify the formula") from None
+        raise spec.error("formula", (r"^\s*formula\s*=",), "the formula is nested too deeply to parse",
+                         "simplify the formula") from None
+
+
+def _check_start(start: str, spec: _SpecSource, town: Town | None) -> None:
+    needles = (r"^\s*start\s*=",)
     if town is not None and start not in town.states:
-        raise fail("start", (r"^\s*start\s*=",), f"start road '{start}' is not a directed road of the "
-                   f"town ({town.source_path or 'given town'})", "use a directed road 'U-V' of the town")
+        raise spec.error("start", needles, f"start road '{start}' is not a directed road of the "
+                         f"town ({town.source_path or 'given town'})",
+                         "use a directed road 'U-V' of the town")
     if "-" not in start:
-        raise fail("start", (r"^\s*start\s*=",), f"start '{start}' is not a directed road \"U-V\"",
-                   'write start = "E-A"')
+        raise spec.error("start", needles, f"start '{start}' is not a directed road \"U-V\"",
+                         'write start = "E-A"')
+
+
+def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) -> Spec:
+    """Parse and validate a spec's TOML text; with `town`, check its roads exist there."""
+    spec = _SpecSource(text, source)
+    values = check_fields(parse_toml(text, source, "spec file"), FIELDS, source, "spec file", spec.key_place)
+    name, start, formula_text = values["name"], values["start"], values["formula"]
+    _check_name(name, spec)
+    _check_formula_size(formula_text, spec)
+    count = len(values["states"]) + len(values["beliefs"])
+    if count > MAX_ATOMS:
+        raise InputError(source, "states", f"{count} atoms (the limit is {MAX_ATOMS})", "define fewer atoms")
+    state_atoms = _state_atoms(values["states"], spec, town)
+    belief_atoms = _belief_atoms(values["beliefs"], spec, set(state_atoms))
+    trust_atoms = _trust_state_atoms(values["trust_states"], spec, town, set(state_atoms) | set(belief_atoms))
+    type_atoms = _type_belief_atoms(values["type_beliefs"], spec,
+                                    set(state_atoms) | set(belief_atoms) | set(trust_atoms))
+    every_atom = set(state_atoms) | set(belief_atoms) | set(trust_atoms) | set(type_atoms)
+    formula = _formula(formula_text, every_atom, spec)
+    _check_start(start, spec, town)
     return Spec(name=name, start=start, formula_text=formula_text, formula=formula,
                 state_atoms=state_atoms, belief_atoms=belief_atoms, source_path=source,
                 trust_atoms=trust_atoms, type_atoms=type_atoms)
-
-
-def _atom_entries(raw: object, table: str, noun: str, keys: tuple[str, ...], required: tuple[str, ...],
-                  example: str, text: str, source: str, taken: set[str], check_atom_name):
-    """The checks every atom table shares (`[type_beliefs]`, `[trust_states]`): a table of atom ->
-    inline table, names unique across kinds, only `keys`, every key of `required` present. Yields
-    (atom, entry, fail) in name order; `fail(problem, fix)` places an error at the atom's line."""
-    if not isinstance(raw, dict):
-        raise InputError(source, _place(text, table, rf"^\s*{table}\s*="),
-                         f"'{table}' must be a table of atom -> {{ {', '.join(keys)} }}", example)
-    for atom in sorted(raw):
-        entry = raw[atom]
-        check_atom_name(atom, table)
-        place = _place(text, f"{table}.{atom}", rf"^\s*\[{table}", rf"^\s*{re.escape(atom)}\s*=")
-
-        def fail(problem: str, fix: str, place: str = place) -> InputError:
-            return InputError(source, place, problem, fix)
-
-        if atom in taken:
-            raise fail(f"atom '{atom}' is defined twice (also under another atom table)",
-                       "rename one of them")
-        if not isinstance(entry, dict):
-            raise fail(f"{noun} atom '{atom}' must be a table", example)
-        for key in entry:
-            if key not in keys:
-                raise fail(f"unknown key '{key}' in {noun} atom '{atom}'",
-                           f"use only {' and '.join(keys)}")
-        for key in required:
-            if key not in entry:
-                raise fail(f"{noun} atom '{atom}' is missing '{key}'", example)
-        yield atom, entry, fail
-
-
-def _type_belief_atoms(raw: object, text: str, source: str, taken: set[str],
-                       check_atom_name) -> dict[str, TypeBeliefAtom]:
-    """The `[type_beliefs]` table: NAME = { types = ["flat", ...], above = 0.7 }."""
-    example = 'write [type_beliefs] then nontruster = { types = ["flat"], above = 0.7 }'
-    atoms: dict[str, TypeBeliefAtom] = {}
-    for atom, entry, fail in _atom_entries(raw, "type_beliefs", "type-belief", ("types", "above"),
-                                           ("types", "above"), example, text, source, taken,
-                                           check_atom_name):
-        types = entry["types"]
-        if not (isinstance(types, list) and types and all(isinstance(t, str) and t for t in types)
-                and len(set(types)) == len(types)):
-            raise fail(f"type-belief atom '{atom}': types must be a non-empty list of distinct type names",
-                       'write types = ["flat"]')
-        above = entry["above"]
-        if not (_number(above) and 0 <= above < 1):
-            raise fail(f"type-belief atom '{atom}': above must be a number in [0, 1)",
-                       "write above = 0.7 (the atom is true iff P(type in types) > above)")
-        atoms[atom] = TypeBeliefAtom(types=tuple(types), above=float(above))
-    return atoms
-
-
-def _trust_state_atoms(raw: object, text: str, source: str, town: Town | None, taken: set[str],
-                       check_atom_name) -> dict[str, TrustStateAtom]:
-    """The `[trust_states]` table: NAME = { roads = [...] (optional), trust = [levels] }."""
-    example = "write [trust_states] then trusting = { roads = [\"K-L\"], trust = [6, 7] }"
-    atoms: dict[str, TrustStateAtom] = {}
-    for atom, entry, fail in _atom_entries(raw, "trust_states", "trust-state", ("roads", "trust"),
-                                           ("trust",), example, text, source, taken, check_atom_name):
-        levels = entry["trust"]
-        if not (isinstance(levels, list) and levels
-                and all(isinstance(v, int) and not isinstance(v, bool) for v in levels)
-                and all(1 <= v <= N_TRUST_LEVELS for v in levels)):
-            raise fail(f"trust-state atom '{atom}': trust must be a non-empty list of "
-                       f"trust levels (integers 1..{N_TRUST_LEVELS})", "write trust = [6, 7]")
-        roads = entry.get("roads")
-        if roads is not None:
-            if not (isinstance(roads, list) and all(isinstance(r, str) for r in roads)):
-                raise fail(f"trust-state atom '{atom}': roads must be a list of directed roads",
-                           'write roads = ["U-V", ...] or leave it out for any road')
-            for road in roads:
-                if "-" not in road:
-                    raise fail(f"'{road}' is not a directed road \"U-V\"", "write roads as \"U-V\"")
-                if town is not None and road not in town.states:
-                    raise fail(f"trust-state atom '{atom}': '{road}' is not a directed "
-                               f"road of the town ({town.source_path or 'given town'})",
-                               "use directed roads 'U-V' of the town (trustroute model lists them)")
-        atoms[atom] = TrustStateAtom(trust=frozenset(levels),
-                                     roads=None if roads is None else frozenset(roads))
-    return atoms
 
 
 def load_spec(path: str | Path, town: Town | None = None) -> Spec:

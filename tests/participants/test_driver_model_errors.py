@@ -158,3 +158,63 @@ def test_performance_dependent_model_round_trips(tmp_path):
     assert model.trust_transition[i, 0, 1].tolist() == shifted
     again = driver_model_from_dict(json.loads(json.dumps(model.to_dict())), "<again>")
     assert again.content_hash == model.content_hash
+
+
+def true_in_takeover(m: dict) -> None:
+    m["takeover_probability"]["truck"][0] = True
+
+
+def false_in_failure(m: dict) -> None:
+    m["failure_probability"] = {"obstacle": [False] * 7}
+
+
+def true_in_initial_belief(m: dict) -> None:
+    m["initial_belief"] = [True, 0, 0, 0, 0, 0, 0]
+
+
+def true_in_matrix(m: dict) -> None:
+    matrix = m["trust_transition"]["obstacle"]["takeover"]
+    matrix[0] = [True] + [False] * 6
+
+
+def true_in_performance_matrix(m: dict) -> None:
+    matrix = [[1.0 if i == j else 0.0 for j in range(7)] for i in range(7)]
+    flagged = [row[:] for row in matrix]
+    flagged[6][6] = True
+    m["trust_transition"]["none"]["standstill"] = {"succ": matrix, "fail": flagged}
+
+
+# JSON true/false would pass as 1/0 through a float conversion (bool is an int in Python); every
+# one is refused where a number is expected, each at its place.
+BOOL_CASES = [
+    (true_in_takeover, "takeover_probability.truck", "expected 7 numbers, not true or false"),
+    (false_in_failure, "failure_probability.obstacle", "expected 7 numbers, not true or false"),
+    (true_in_initial_belief, "initial_belief", "expected 7 numbers, not true or false"),
+    (true_in_matrix, "trust_transition.obstacle.takeover", "expected a matrix of numbers, not true or false"),
+    (true_in_performance_matrix, "trust_transition.none.standstill.fail", "not true or false"),
+]
+
+
+@pytest.mark.parametrize("mutate, place, problem", BOOL_CASES, ids=[c[0].__name__ for c in BOOL_CASES])
+def test_true_or_false_is_not_a_probability(tmp_path, capsys, mutate, place, problem):
+    data = copy.deepcopy(default_model())
+    mutate(data)
+    with pytest.raises(InputError) as error:
+        driver_model_from_dict(data, "<test>")
+    assert error.value.place == place
+    assert problem in error.value.problem
+    assert "true and false are not numbers" in error.value.fix
+    path = tmp_path / "driver.json"
+    path.write_text(json.dumps(data))
+    code, out, err = run_cli(capsys, "model", "--driver", str(path))
+    assert_one_line_error(code, err, str(path), place, problem)
+    assert out == ""
+
+
+def test_numbers_equal_to_the_refused_booleans_are_accepted():
+    data = default_model()
+    data["initial_belief"] = [1, 0, 0, 0, 0, 0, 0]
+    data["failure_probability"] = {"obstacle": [0, 0, 0, 0, 0, 0, 1]}
+    model = driver_model_from_dict(data, "<test>")
+    assert model.initial_belief.tolist() == [1.0, 0, 0, 0, 0, 0, 0]
+    assert model.failure_probability[model.incident_index("obstacle"), 6] == 1.0

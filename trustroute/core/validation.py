@@ -1,5 +1,6 @@
 """Input validation every loader uses: the guarded reader of input files, limited JSON and TOML
-parsing, the strict key policy, required objects and keys (docs/input_files.md).
+parsing, the strict key policy, required objects (docs/input_files.md); the field tables that
+check each format's keys and values are trustroute/core/fields.py.
 
 Every input file kind (town JSON, driver model JSON, spec TOML, study config TOML, policy JSON and
 its .npz, a study's Parquet logs) is read through here, so every kind gets the same checks before
@@ -28,7 +29,7 @@ import os
 import re
 import stat
 import tomllib
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -263,11 +264,22 @@ def read_toml(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix:
 # -- documented key policy --------------------------------------------------------------------------
 
 
-def check_keys(data: dict, allowed: tuple[str, ...], source: str, place: str, what: str) -> None:
+Place = str | Callable[[str], str]
+
+
+def key_place(place: Place, key: str) -> str:
+    """Where `key` of a table is: `place` is the table's own dotted place ("" at the top of a file)
+    or a function of the key (a spec places keys by line and column)."""
+    if callable(place):
+        return place(key)
+    return f"{place}.{key}" if place else key
+
+
+def check_keys(data: dict, allowed: tuple[str, ...], source: str, place: Place, what: str) -> None:
     """Strict key policy (docs/input_files.md): a key the format does not define is an error."""
     unknown = sorted(str(k) for k in data if k not in allowed)
     if unknown:
-        where = f"{place}.{unknown[0]}" if place else unknown[0]
+        where = key_place(place, unknown[0])
         raise InputError(source, where, f"unknown key {unknown[0][:60]!r} in the {what}",
                          f"use only {', '.join(allowed)} (a misspelt key would be ignored otherwise)")
 
@@ -277,10 +289,3 @@ def require_object(data: object, shown: str, fix: str) -> dict:
     if not isinstance(data, dict):
         raise InputError(shown, "top level", "expected a JSON object", fix)
     return data
-
-
-def require_keys(data: dict, keys: Iterable[str], shown: str, fix: Callable[[str], str]) -> None:
-    """InputError "missing key 'k'" at the first of `keys` absent from `data`; fix(k) says how."""
-    for key in keys:
-        if key not in data:
-            raise InputError(shown, key, f"missing key '{key}'", fix(key))

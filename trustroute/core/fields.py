@@ -1,0 +1,306 @@
+"""Field tables: the declarative schema of every input format, and the one validator that walks a
+parsed document against one.
+
+A field table is a tuple of `Field`s, one per accepted key: its kind (`Integer`, `Number`, `Text`,
+`Flag`, `OneOf`, `ListOf`, `Table`, `Anything`; `PROBABILITY` for a number in [0, 1]), whether it
+is required or else its default, the range the kind allows, and the fix a bad value's message
+names. `check_fields` checks a parsed table against it: unknown keys first (the strict key policy,
+`check_keys`), then the missing required keys in table order, then every present value in table
+order; it returns every key's value with the defaults filled in. `check_value` checks one value
+against a kind (the loaders' per-entry checks use it). Every failure is the one-line
+`InputError(file, place, problem, fix)`.
+
+Messages: a kind states its own problem ("expected an integer from 1 to 1000, got 0"); a field (or
+a kind instance used as the values of a table) may give its own `problem` and `fix`, either text
+or a function of what was seen (`Seen`: key, value and the owning entry, e.g. an atom's name).
+
+A rule a table cannot express (a road names two junctions of the same file, rows sum to 1, a path
+resolves to a file) stays a small named check beside its loader's table. `keys(FIELDS)` is the
+set of accepted keys of a format, what its docs table (docs/formats/) lists.
+
+bool is an int subclass in Python: no number kind accepts `true` or `false`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import NamedTuple
+
+from trustroute.core.errors import InputError
+from trustroute.core.validation import Place, check_keys, key_place
+
+
+@dataclass(frozen=True)
+class Seen:
+    """What a message is about: the key, the value found there, and the entry owning the table
+    (an atom's name; "" at the top of a file)."""
+
+    key: str
+    value: object
+    owner: str = ""
+
+
+Message = str | Callable[[Seen], str]
+EMPTY: Mapping[str, object] = MappingProxyType({})  # the default of an optional table (never mutated)
+
+
+class Rejection(NamedTuple):
+    """A kind's own account of a bad value: `fix` when the failure has a fix of its own (it comes
+    before the field's), `hint` a fix to fall back on when the field gives none."""
+
+    problem: str
+    fix: str | None = None
+    hint: str = ""
+
+
+def say(message: Message | None, seen: Seen) -> str | None:
+    """The text of a message (a function of what was seen, or fixed text)."""
+    return message(seen) if callable(message) else message
+
+
+def is_number(value: object) -> bool:
+    """A finite int or float, not a bool."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    return isinstance(value, int) or math.isfinite(value)
+
+
+def holds_bool(value: object) -> bool:
+    """True if `value` is a bool or a (nested) list holding one: a number array must not."""
+    if isinstance(value, bool):
+        return True
+    return isinstance(value, list) and any(holds_bool(item) for item in value)
+
+
+# -- kinds ------------------------------------------------------------------------------------------
+# Every kind may carry its own `problem`/`fix` (used where the kind checks the entries of a table).
+
+
+@dataclass(frozen=True, kw_only=True)
+class Kind:
+    """What a value must be; `reject` gives None for a good value, else the kind's account of it."""
+
+    problem: Message | None = None
+    fix: Message | None = None
+    plural = "values"  # the kind's values, in a list's message ("a list of integers")
+
+    def reject(self, value: object) -> Rejection | None:
+        return None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Anything(Kind):
+    """Any value (checked by a rule of the loader, or kept as it is)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Integer(Kind):
+    """An int (not a bool) in [minimum, maximum]; `false_allowed`: `false` too (a rule it turns off)."""
+
+    minimum: int = -(2**63)
+    maximum: int = 2**63 - 1
+    false_allowed: bool = False
+    plural = "integers"
+
+    def reject(self, value: object) -> Rejection | None:
+        if self.false_allowed and value is False:
+            return None
+        if isinstance(value, bool) or not isinstance(value, int) or not self.minimum <= value <= self.maximum:
+            return Rejection(f"expected an integer from {self.minimum} to {self.maximum}, "
+                             f"got {str(value)[:40]}")
+        return None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Number(Kind):
+    """An int or float (not a bool), finite unless `finite` is False, within the bounds (`open_below`
+    / `open_above`: the bound itself excluded)."""
+
+    minimum: float = -math.inf
+    maximum: float = math.inf
+    open_below: bool = False
+    open_above: bool = False
+    finite: bool = True
+    plural = "numbers"
+
+    def reject(self, value: object) -> Rejection | None:
+        if not self._accepts(value):
+            return Rejection(f"{value!r} is not a number in {self.interval()}")
+        return None
+
+    def _accepts(self, value: object) -> bool:
+        if not (is_number(value) or (not self.finite and isinstance(value, float) and not math.isnan(value))):
+            return False
+        below = value > self.minimum if self.open_below else value >= self.minimum
+        above = value < self.maximum if self.open_above else value <= self.maximum
+        return below and above
+
+    def interval(self) -> str:
+        return (f"{'(' if self.open_below else '['}{self.minimum:g}, "
+                f"{self.maximum:g}{')' if self.open_above else ']'}")
+
+
+PROBABILITY = Number(minimum=0.0, maximum=1.0,
+                     problem=lambda seen: f"{seen.value!r} is not a probability in [0, 1]",
+                     fix="give a number in [0, 1]")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Text(Kind):
+    """A string: non-empty unless `nonempty` is False, at most `max_length` characters, matching
+    `pattern` in full when given."""
+
+    nonempty: bool = True
+    max_length: int | None = None
+    pattern: re.Pattern[str] | None = None
+    plural = "strings"
+
+    def reject(self, value: object) -> Rejection | None:
+        ok = (isinstance(value, str) and (value or not self.nonempty)
+              and (self.max_length is None or len(value) <= self.max_length)
+              and (self.pattern is None or self.pattern.fullmatch(value) is not None))
+        if not ok:
+            return Rejection(f"expected a {'non-empty ' if self.nonempty else ''}string, got {value!r}")
+        return None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Flag(Kind):
+    """`true` or `false`."""
+
+    plural = "booleans"
+
+    def reject(self, value: object) -> Rejection | None:
+        return None if isinstance(value, bool) else Rejection(f"expected true or false, got {value!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class OneOf(Kind):
+    """One of `choices` (of the same type: `true` is not 1); `noun` names a value in messages."""
+
+    choices: tuple[object, ...] = ()
+    noun: str = "value"
+
+    def reject(self, value: object) -> Rejection | None:
+        if any(type(value) is type(choice) and value == choice for choice in self.choices):
+            return None
+        return Rejection(f"unknown {self.noun} {value!r}",
+                         hint=f"use one of {', '.join(map(str, self.choices))}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ListOf(Kind):
+    """A list of `min_items` to `max_items` items of kind `item`, checked as one value (its message
+    names the whole list); `distinct`: no item twice; `increasing`: each item above the last."""
+
+    item: Kind = Anything()
+    min_items: int = 0
+    max_items: int | None = None
+    distinct: bool = False
+    increasing: bool = False
+    plural = "lists"
+
+    def reject(self, value: object) -> Rejection | None:
+        shaped = (isinstance(value, list) and self.min_items <= len(value)
+                  and (self.max_items is None or len(value) <= self.max_items)
+                  and not any(self.item.reject(entry) for entry in value))
+        if not shaped or (self.increasing and any(a >= b for a, b in zip(value, value[1:], strict=False))):
+            size = "non-empty " if self.min_items == 1 and self.max_items is None else ""
+            order = "increasing " if self.increasing else ""
+            return Rejection(f"expected a {size}{order}list of {self.item.plural}, got {value!r}")
+        if self.distinct and _repeats(value):
+            return Rejection("lists the same entry twice", "list each entry once")
+        return None
+
+
+def _repeats(items: list) -> bool:
+    try:
+        return len(set(items)) != len(items)
+    except TypeError:  # unhashable items
+        return any(a == b for i, a in enumerate(items) for b in items[i + 1:])
+
+
+@dataclass(frozen=True, kw_only=True)
+class Table(Kind):
+    """An object (JSON) or table (TOML); non-empty when `nonempty`. With `values`, every entry's
+    value is checked against that kind at `place.key`."""
+
+    nonempty: bool = False
+    values: Kind | None = None
+    plural = "tables"
+
+    def reject(self, value: object) -> Rejection | None:
+        if not isinstance(value, dict) or (self.nonempty and not value):
+            return Rejection(f"expected a {'non-empty ' if self.nonempty else ''}table")
+        return None
+
+
+# -- fields and the validator -------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class Field:
+    """One accepted key of a table: its kind, required or its default, and its messages (`problem`
+    replaces the kind's account of a bad value; `missing`/`missing_fix` when a required key is
+    absent: default "missing key 'k'" and `fix`)."""
+
+    key: str
+    kind: Kind
+    required: bool = False
+    default: object = None
+    fix: Message = ""
+    problem: Message | None = None
+    missing: Message | None = None
+    missing_fix: Message | None = None
+
+
+def keys(fields: Sequence[Field]) -> tuple[str, ...]:
+    """The keys a field table accepts, in table order."""
+    return tuple(field.key for field in fields)
+
+
+def check_value(value: object, kind: Kind, source: str, place: str, problem: Message | None = None,
+                fix: Message | None = None, seen: Seen | None = None) -> object:
+    """`value` itself when `kind` accepts it (a table's entries checked too); InputError otherwise.
+    `problem`/`fix` replace the kind's messages (as a field's do)."""
+    rejection = kind.reject(value)
+    if rejection is not None:
+        seen = seen if seen is not None else Seen("", value)
+        given = problem if problem is not None else kind.problem
+        fix_text = say(fix or kind.fix, seen) or ""
+        if given is not None:
+            raise InputError(source, place, say(given, seen), fix_text)
+        raise InputError(source, place, rejection.problem, rejection.fix or fix_text or rejection.hint)
+    if isinstance(kind, Table) and kind.values is not None:
+        for key, entry in value.items():
+            check_value(entry, kind.values, source, f"{place}.{key}",
+                        seen=Seen(str(key), entry, seen.owner if seen else ""))
+    return value
+
+
+def check_fields(data: dict, fields: Sequence[Field], source: str, what: str, place: Place = "",
+                 owner: str = "") -> dict[str, object]:
+    """Check the parsed table `data` against `fields`: no unknown key (`what` names the table in
+    that message), every required key present, every value of its kind. Returns every field's
+    value by key, the default where the key is absent. `owner` names the entry the table belongs
+    to in messages (`Seen.owner`)."""
+    check_keys(data, keys(fields), source, place, what)
+    for field in fields:
+        if field.required and field.key not in data:
+            seen = Seen(field.key, None, owner)
+            raise InputError(source, key_place(place, field.key),
+                             say(field.missing, seen) or f"missing key '{field.key}'",
+                             say(field.missing_fix or field.fix, seen) or "")
+    values: dict[str, object] = {}
+    for field in fields:
+        if field.key not in data:
+            values[field.key] = field.default
+            continue
+        value = data[field.key]
+        values[field.key] = check_value(value, field.kind, source, key_place(place, field.key), field.problem,
+                                        field.fix, Seen(field.key, value, owner))
+    return values
