@@ -25,7 +25,7 @@ import pandas as pd
 
 from trustroute.analysis import paper_figures
 from trustroute.analysis.carla_study.log_schema import read_real_table
-from trustroute.analysis.formatting import aligned_columns, number_text
+from trustroute.analysis.formatting import MISSING, aligned_columns, finite_or_none, number_text
 from trustroute.analysis.satisfaction import (
     LOGGED_BELIEF_SOURCES,
     REPORTED_TRUST_LABEL,
@@ -169,8 +169,8 @@ def authors_paired_tests(per: pd.DataFrame) -> list[dict]:
                     "subset": name,
                     "quantity": label,
                     "pairs": int(len(a)),
-                    "t_statistic": None if np.isnan(t) else t,
-                    "p_value": None if np.isnan(p_value) else p_value,
+                    "t_statistic": finite_or_none(t),
+                    "p_value": finite_or_none(p_value),
                 }
             )
     return rows
@@ -427,8 +427,8 @@ def format_real_study(analysis: RealStudyAnalysis) -> str:
         lines.append(f"paper {m['figure']} = {m['paper']}: {found}")
     lines.append("")
     for test in analysis.paired_tests:
-        t = "-" if test["t_statistic"] is None else f"{test['t_statistic']:.4f}"
-        p = "-" if test["p_value"] is None else f"{test['p_value']:.4g}"
+        t = number_text(test["t_statistic"], 4)
+        p = MISSING if test["p_value"] is None else f"{test['p_value']:.4g}"
         lines.append(
             f"authors' paired t-test, {test['subset']}: {test['quantity']}: t = {t}, p = {p} "
             f"({test['pairs']} pairs)"
