@@ -29,7 +29,8 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.logic.trace import evaluate_traces
 
 BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported")
-# Real study logs (analysis/real_study.py): the belief the AV logged, induced from reports, or Bayes.
+# Real study logs (analysis/carla_study/analysis.py): the belief the AV logged, induced from reports,
+# or Bayes.
 LOGGED_BELIEF_SOURCES: tuple[str, ...] = ("logged", "reported", "bayes")
 # What trust-state atoms read: the true trust (simulation) or the reported trust as θ (real logs).
 TRUST_SOURCES: tuple[str, ...] = ("true", "reported")

@@ -20,8 +20,7 @@ Paired values (a participant's trust under A and under B):
 Repeated measures across specs (statsmodels): `conditional_logit` fits satisfaction on the
 condition with spec fixed effects and one stratum per participant (the participant effect is
 conditioned away, so four episodes of one person never count as four people); `mixed_trust_model`
-fits mean trust with a random intercept per participant. `format_p` prints p-values in scientific
-notation.
+fits mean trust with a random intercept per participant.
 """
 
 from __future__ import annotations
@@ -36,13 +35,6 @@ from scipy import stats
 DEFAULT_RESAMPLES = 10_000
 DEFAULT_LEVEL = 0.95
 RATE_METHODS = ("exact", "wilson")
-
-
-def format_p(p: float | None) -> str:
-    """A p-value in scientific notation with three significant digits ("3.05e-07"); "-" if missing."""
-    if p is None or (isinstance(p, float) and math.isnan(p)):
-        return "-"
-    return f"{p:.2e}"
 
 
 # -- rates ---------------------------------------------------------------------------------------

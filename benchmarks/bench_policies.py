@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.timing import best_seconds
+from trustroute.analysis import paper_figures
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.evaluation.plain import evaluate
@@ -21,7 +22,7 @@ from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 SPECS = ("phi1", "phi2")
-PAPER_TRUST_FREE_RATE = 0.775
+PAPER_TRUST_FREE_RATE = paper_figures.SATISFACTION_RATE["free"]
 MC_EPISODES = 2000
 
 

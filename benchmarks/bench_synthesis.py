@@ -22,6 +22,7 @@ import itertools
 import numpy as np
 from scipy.spatial import cKDTree
 
+from trustroute.analysis import paper_figures
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.belief.product_mdp import build_product
@@ -36,7 +37,7 @@ from trustroute.policies.synthesis.search import synthesize
 SPECS = ("phi1", "phi2", "phi1_strict", "phi2_strict")
 RULES = ("bayes", "paper")
 HORIZONS = (6, 7, 8, 10, 12, 20, None)
-PAPER_PR_MAX = {"phi1": 0.8357, "phi2": 0.7288}
+PAPER_PR_MAX = paper_figures.PR_MAX
 TAU = 1e-3
 TIME_LIMIT = 60.0
 POUCT_EPISODES = 30

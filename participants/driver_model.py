@@ -19,7 +19,7 @@ h = 0 standstill, 1 takeover; e = 0 succ, 1 fail.
 Also owns the trust-report noise model (`report_matrix`, `draw_report`): a driver reports its true
 trust with probability `accuracy`, else one level up or down (equal chance), clipped at the ends
 (so at the lowest and highest level a wrong report can still equal the truth). The synthetic
-driver draws reports with it and analysis/fit.py fits it.
+driver draws reports with it and analysis/fitting/driver_model.py fits it.
 """
 
 from __future__ import annotations

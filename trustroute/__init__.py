@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from trustroute.analysis.tables import StudyAnalysis
+    from trustroute.analysis.study.analysis import StudyAnalysis
     from trustroute.harness.simulation.episode import EpisodeRecord
     from trustroute.harness.study.config import StudyConfig
     from trustroute.harness.study.runner import StudyRun
@@ -227,11 +227,11 @@ def analyze(study_dir: PathLike, *, belief_source: str = "filter", report: bool 
     from the reported trust ("reported"). report: also write report.md, report.html and the plots
     into the study directory (otherwise nothing is written).
     """
-    from trustroute.analysis.tables import study_analysis
+    from trustroute.analysis.study.analysis import study_analysis
 
     analysis = study_analysis(Path(study_dir), belief_source=belief_source)
     if report:
-        from trustroute.analysis.report import write_report
+        from trustroute.analysis.study.report import write_report
 
         write_report(Path(study_dir), analysis=analysis)
     return analysis

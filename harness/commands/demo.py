@@ -76,8 +76,8 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
         click.echo(f"error: {len(run.failed)} episodes failed (reasons in {run.study_dir / 'failures'}; "
                    f"rerun the demo to retry them): {', '.join(run.failed[:10])}", err=True)
         ctx.exit(1)
-    from trustroute.analysis.report import write_report
-    from trustroute.analysis.tables import study_analysis
+    from trustroute.analysis.study.analysis import study_analysis
+    from trustroute.analysis.study.report import write_report
 
     analysis = study_analysis(run.study_dir)
     written = write_report(run.study_dir, analysis=analysis)

@@ -27,7 +27,7 @@ def import_group() -> None:
 @json_option
 def carla_logs(source: str, out: str, quiet: bool, as_json: bool) -> None:
     """Import the authors' CARLA logs under DIR into the study directory --out."""
-    from trustroute.analysis.carla_import import import_carla_logs
+    from trustroute.analysis.carla_study.log_import import import_carla_logs
 
     manifest = import_carla_logs(Path(source), Path(out), progress=not (quiet or as_json))
     info = manifest["real_study"]

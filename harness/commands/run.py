@@ -39,6 +39,34 @@ def _write_logs(out_dir: Path, record) -> dict[str, Path]:
     return written
 
 
+def _spec_path(spec_argument: str | None, spec_option: str | None) -> str:
+    """The spec file, given once: as the SPEC argument or by its old spelling --spec."""
+    if spec_argument is not None and spec_option is not None:
+        raise click.UsageError("give the spec once: as the SPEC argument (--spec is its old spelling)")
+    spec_path = spec_argument if spec_argument is not None else spec_option
+    if spec_path is None:
+        raise click.UsageError("missing argument SPEC (a spec file, e.g. specs/phi1.toml)")
+    return spec_path
+
+
+def _check_paths(out_dir: str | None, rrd_path: str | None, cache_dir: str | None,
+                 net_path: str | None) -> None:
+    """Every output is writable and the given net readable, before SUMO starts."""
+    from trustroute.core.output_files import check_output_dir, check_output_file
+
+    if out_dir is not None:
+        check_output_dir(out_dir, "--out", "log directory")
+    if rrd_path is not None:
+        check_output_file(rrd_path, "--rrd", "Rerun recording")
+    if cache_dir is not None:
+        check_output_dir(cache_dir, "--cache-dir", "policy cache")
+    if net_path is not None:
+        from trustroute.core.validation import read_input_bytes
+
+        read_input_bytes(net_path, "SUMO net", max_bytes=1 << 30, fix="pass a .net.xml written by "
+                         "`trustroute net build`")
+
+
 @click.command("run")
 @click.argument("spec_argument", metavar="SPEC", required=False, type=click.Path())
 @click.option("--spec", "spec_option", type=click.Path(), default=None, hidden=True,
@@ -75,7 +103,6 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
     """
     import numpy as np
 
-    from trustroute.core.output_files import check_output_dir, check_output_file
     from trustroute.harness.simulation.episode import run_episode
     from trustroute.harness.simulation.episode_tracker import EpisodeSetup
     from trustroute.harness.simulation.sumo_files import (
@@ -93,22 +120,8 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.resolve import resolve_policy
 
-    if spec_argument is not None and spec_option is not None:
-        raise click.UsageError("give the spec once: as the SPEC argument (--spec is its old spelling)")
-    spec_path = spec_argument if spec_argument is not None else spec_option
-    if spec_path is None:
-        raise click.UsageError("missing argument SPEC (a spec file, e.g. specs/phi1.toml)")
-    if out_dir is not None:
-        check_output_dir(out_dir, "--out", "log directory")
-    if rrd_path is not None:
-        check_output_file(rrd_path, "--rrd", "Rerun recording")
-    if cache_dir is not None:
-        check_output_dir(cache_dir, "--cache-dir", "policy cache")
-    if net_path is not None:
-        from trustroute.core.validation import read_input_bytes
-
-        read_input_bytes(net_path, "SUMO net", max_bytes=1 << 30, fix="pass a .net.xml written by "
-                         "`trustroute net build`")
+    spec_path = _spec_path(spec_argument, spec_option)
+    _check_paths(out_dir, rrd_path, cache_dir, net_path)
     rng = np.random.default_rng(seed)
     driver_type = None
     if population_path is not None:

@@ -1,16 +1,10 @@
-"""`trustroute study`, `trustroute analyze`, `trustroute fit`: run, analyse and learn from studies.
-
-study    run (or resume) a simulated within-subject study from a TOML config, consolidate the
-         dataset, then analyse it (tables, plots, report) unless --no-report; when episodes failed
-         it names them and exits 1, and writes the report only with --report-anyway
-analyze  the per spec and condition table of a study directory (--json: one JSON object)
-fit      estimate a driver model (trust dynamics, takeover model) from a study's logs; with
-         --types, a mixture of driver types (a driver-population file, docs/driver_type_studies.md)
+"""`trustroute study`: run (or resume) a simulated within-subject study from a TOML config,
+consolidate the dataset, then analyse it (tables, plots, report) unless --no-report; when episodes
+failed it names them and exits 1, and writes the report only with --report-anyway.
 """
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -19,9 +13,6 @@ import click
 from trustroute.harness.commands.options import WORKERS, bounded_int
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 from trustroute.harness.study.config import study_directory
-
-CHECK_REPLICATES = 50  # simulated drivers per real episode in `fit --check`
-CHECK_EPISODES = 20_000  # model-engine episodes per spec, condition and driver model in `fit --check`
 
 
 def dataset_paths(study_dir: Path, manifest: dict) -> dict[str, Path]:
@@ -33,7 +24,7 @@ def dataset_paths(study_dir: Path, manifest: dict) -> dict[str, Path]:
 
 
 def report_paths(paths) -> dict[str, Path]:
-    """The files of analysis.report.write_report, by name."""
+    """The files of analysis.study.report.write_report, by name."""
     return {"report_markdown": paths.markdown, "report_html": paths.html}
 
 
@@ -105,8 +96,8 @@ def study(
                "ran": run.ran, "retried": run.retried, "failed": run.failed, "backend": run.backend,
                "seconds": run.seconds}
     if not no_report and (not run.failed or report_anyway):
-        from trustroute.analysis.report import write_report
-        from trustroute.analysis.tables import study_analysis
+        from trustroute.analysis.study.analysis import study_analysis
+        from trustroute.analysis.study.report import write_report
 
         analysis = study_analysis(run.study_dir)
         written = write_report(run.study_dir, analysis=analysis)
@@ -116,323 +107,3 @@ def study(
     emit(as_json, with_paths(payload, paths), lines)
     if run.failed:
         ctx.exit(1)
-
-
-@click.command("analyze")
-@click.argument("study_dir", metavar="DIR", type=click.Path())
-@json_option
-@click.option(
-    "--belief-source",
-    type=click.Choice(["filter", "reported"]),
-    default="filter",
-    show_default=True,
-    help="Beliefs the spec is evaluated on: the AV's filter, or induced from reported trust.",
-)
-@click.option(
-    "--report/--no-report",
-    default=None,
-    help="(Re)write report.md, report.html and plots/ in DIR (default: yes, but no with --json).",
-)
-def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool | None) -> None:
-    """Per spec and condition of the study directory DIR: n, satisfaction rate with CI, mean trust,
-    paired tests."""
-    from trustroute.analysis.tables import study_analysis
-
-    analysis = study_analysis(Path(study_dir), belief_source=belief_source)
-    real = None
-    if analysis.manifest.get("engine") == "carla-logs":
-        from trustroute.analysis.real_study import real_study_analysis, write_real_study_report
-
-        real = real_study_analysis(Path(study_dir))
-    paths = None
-    real_paths: dict[str, Path] = {}
-    write = (not as_json) if report is None else report
-    if write:
-        from trustroute.analysis.report import write_report
-
-        paths = write_report(Path(study_dir), analysis=analysis)
-        if real is not None:
-            written = write_real_study_report(real, Path(study_dir))
-            real_paths = {"real_study_json": written, "real_study_text": written.with_suffix(".txt")}
-    if as_json:
-        payload = analysis.to_dict()
-        if real is not None:
-            payload["real_study"] = real.to_dict()
-        payload = with_paths(payload, {**report_paths(paths), **real_paths} if paths is not None else {})
-        click.echo(json.dumps(payload, default=str))
-        return
-    from trustroute.analysis.tables import format_table
-
-    click.echo(format_table(analysis))
-    if real is not None:
-        from trustroute.analysis.real_study import format_real_study
-
-        click.echo("")
-        click.echo(format_real_study(real))
-    if paths is not None:
-        click.echo(f"report: {paths.markdown} and {paths.html}")
-
-
-@click.command("fit")
-@click.argument("study_dir", metavar="DIR", type=click.Path())
-@click.option(
-    "--out",
-    "out",
-    type=click.Path(),
-    default="driver.json",
-    show_default=True,
-    help="Driver model FILE to write.",
-)
-@click.option(
-    "--method",
-    type=click.Choice(["auto", "counts", "em"]),
-    default="auto",
-    show_default=True,
-    help="counts: reports are exact trust; em: reports are noisy (EM over hidden trust); "
-    "auto: counts when the study's report accuracy is 1 and trust is reported every road.",
-)
-@click.option("--iterations", type=bounded_int(1, 100_000), default=200, show_default=True,
-              help="EM iterations at most.")
-@click.option(
-    "--bootstrap",
-    type=bounded_int(0, 100_000),
-    default=0,
-    show_default=True,
-    help="Resamples of participants for percentile intervals (0: none).",
-)
-@click.option("--seed", type=bounded_int(0, 2**63 - 1), default=0, show_default=True,
-              help="Seed of the bootstrap and the check.")
-@click.option(
-    "--check",
-    is_flag=True,
-    help="Posterior-predictive check: simulate the packaged and the fitted model on the study's "
-    "roads and compare with its logs (writes <out>.check.json and <out>.check.png).",
-)
-@click.option("--types", "types", default=None, metavar="K|auto",
-              help="Fit a mixture of K driver types (or choose K by BIC with 'auto') and write a "
-              "driver-population file.")
-@click.option("--max-types", type=bounded_int(1, 20), default=4, show_default=True,
-              help="With --types auto: the largest K tried.")
-@click.option("--restarts", type=bounded_int(1, 1_000), default=5, show_default=True,
-              help="With --types: seeded EM restarts per K.")
-@click.option("--shared-dynamics", is_flag=True,
-              help="With --types: the types share the trust-transition rows and differ in initial "
-              "trust and takeover (and failure) probabilities.")
-@json_option
-@quiet_option
-def fit(
-    study_dir: str,
-    out: str,
-    method: str,
-    iterations: int,
-    bootstrap: int,
-    seed: int,
-    check: bool,
-    types: str | None,
-    max_types: int,
-    restarts: int,
-    shared_dynamics: bool,
-    as_json: bool,
-    quiet: bool,
-) -> None:
-    """Estimate trust dynamics and the takeover model from a study's logs; write a driver model."""
-    from trustroute.analysis.fit import bootstrap_fit, fit_study
-    from trustroute.core.output_files import check_output_file
-
-    if types is not None:
-        if check or method == "counts":
-            raise click.UsageError("--types fits by EM; it takes neither --check nor --method counts")
-        check_output_file(out, "--out", "driver-population file")
-        fit_types(Path(study_dir), Path(out), types, max_types, restarts, iterations, bootstrap, seed,
-                  shared_dynamics, as_json, quiet)
-        return
-    check_output_file(out, "--out", "driver model file")
-    result = fit_study(Path(study_dir), method=method, iterations=iterations,
-                       progress=not (quiet or as_json))
-    path = result.write(Path(out))
-    payload = result.summary()
-    paths: dict[str, Path] = {"driver_model": path}
-    if bootstrap:
-        import numpy as np
-        from tqdm import tqdm
-
-        from trustroute.analysis.tables import load_study, study_inputs
-
-        manifest, episodes, roads = load_study(Path(study_dir))
-        _, template, _ = study_inputs(manifest)
-        with tqdm(total=bootstrap, desc="bootstrap", disable=quiet or as_json) as bar:
-            payload["bootstrap"] = bootstrap_fit(
-                roads,
-                episodes,
-                template,
-                result.method,
-                iterations,
-                bootstrap,
-                np.random.default_rng(seed),
-                progress=bar.update,
-            )
-        paths["bootstrap"] = Path(path).with_suffix(".bootstrap.json")
-        paths["bootstrap"].write_text(json.dumps(payload["bootstrap"], indent=1))
-    if check:
-        import numpy as np
-
-        from trustroute.analysis.posterior_check import (
-            aware_vs_free,
-            plot_check,
-            posterior_check,
-            write_check,
-        )
-        from trustroute.analysis.tables import load_study, study_inputs
-        from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY
-
-        manifest, _, roads = load_study(Path(study_dir))
-        _, template, _ = study_inputs(manifest)
-        models = {
-            "packaged": (template, DEFAULT_REPORT_ACCURACY),
-            "fitted": (result.model(), float(result.report_accuracy or 1.0)),
-        }
-        outcome = posterior_check(roads, models, CHECK_REPLICATES, np.random.default_rng(seed))
-        stem = Path(path).with_suffix("")
-        paths["check_json"] = write_check(outcome, stem.with_suffix(".check.json"))
-        paths["check_plot"] = plot_check(outcome, stem.with_suffix(".check.png"))
-        payload["check"] = {
-            "distance": {name: m["distance"] for name, m in outcome["models"].items()},
-            # the packaged setup's aware and free policies driven by packaged vs fitted drivers
-            "aware_vs_free": aware_vs_free(
-                {name: model for name, (model, _) in models.items()}, CHECK_EPISODES, seed
-            ),
-        }
-    payload = with_paths(payload, paths)
-    if as_json:
-        click.echo(json.dumps(payload, default=str))
-        return
-    if check:
-        for name, distance in payload["check"]["distance"].items():
-            takeover = ", ".join(f"{k} {v:.3f}" for k, v in distance["takeover_rate_abs_difference"].items())
-            click.echo(
-                f"check {name}: takeover rate |diff| {takeover}; "
-                f"TV trust change {distance['trust_change_tv']:.3f}, "
-                f"final trust {distance['final_trust_tv']:.3f}, changes per episode "
-                f"{distance['changes_per_episode_tv']:.3f}"
-            )
-        for row in payload["check"]["aware_vs_free"]:
-            click.echo(
-                f"{row['spec']} {row['condition']} with {row['drivers']} drivers: satisfaction "
-                f"{row['satisfaction_rate']:.4f}, mean trust {row['mean_trust']:.3f} "
-                f"({row['episodes']} episodes)"
-            )
-        click.echo(f"check: {paths['check_json']} and {paths['check_plot']}")
-    click.echo(
-        f"fitted by {result.method} on {result.episodes} episodes ({result.transitions} roads driven)"
-        f"{f', report accuracy {result.report_accuracy:.3f}' if result.report_accuracy is not None else ''}"
-        f"{f', EM {result.iterations} iterations' if result.method == 'em' else ''}"
-    )
-    click.echo(f"driver model written to {path}")
-    if result.method == "em" and not result.converged:
-        click.echo(f"warning: EM stopped at the iteration cap ({iterations}) before converging", err=True)
-    for label, rows in (
-        ("transition rows", result.sparse_rows()),
-        ("takeover probabilities", result.sparse_takeover()),
-    ):
-        if rows:
-            click.echo(f"unidentified {label} (too little data, kept at the prior/start): {len(rows)}")
-
-
-def _type_count(types: str) -> int | None:
-    """--types: an integer K >= 1, or None for 'auto'."""
-    if types == "auto":
-        return None
-    try:
-        value = int(types)
-    except ValueError:
-        value = 0
-    if not 1 <= value <= 20:
-        raise click.BadParameter(f"{types!r} is neither 'auto' nor an integer from 1 to 20",
-                                 param_hint="--types")
-    return value
-
-
-def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: int, iterations: int,
-              bootstrap: int, seed: int, shared_dynamics: bool, as_json: bool, quiet: bool) -> None:
-    """`trustroute fit --types`: the mixture, its BIC table and bootstrap, a driver-population file."""
-    import time
-
-    import numpy as np
-    from tqdm import tqdm
-
-    from trustroute.analysis.fit_mixture import (
-        bootstrap_type_count,
-        fit_mixture,
-        mixture_population,
-        select_types,
-        study_observations,
-    )
-    from trustroute.core.output_files import atomic_write_text
-    from trustroute.participants.driver_population import write_driver_population
-
-    fixed = _type_count(types)
-    rng = np.random.default_rng(seed)
-    obs, owner, participants, template, roads, episodes = study_observations(study_dir)
-    if fixed is None:
-        with tqdm(total=min(max_types, len(participants)), desc="fitting K = 1..", unit="K",
-                  disable=quiet or as_json) as bar:
-            selection = select_types(obs, owner, participants, template, max_types, rng, restarts,
-                                     iterations, progress=bar.update, shared_dynamics=shared_dynamics)
-    else:
-        from trustroute.analysis.fit_mixture import TypeSelection
-
-        fits = [fit_mixture(obs, owner, participants, template, fixed, rng, restarts, iterations,
-                            shared_dynamics)]
-        selection = TypeSelection(fits=fits, chosen=fixed)
-    best = selection.best
-    command = "trustroute fit " + " ".join(
-        [str(study_dir), "--types", types, *(["--max-types", str(max_types)] if fixed is None else []),
-         "--restarts", str(restarts), "--iterations", str(iterations), "--seed", str(seed),
-         *(["--shared-dynamics"] if shared_dynamics else []),
-         *(["--bootstrap", str(bootstrap)] if bootstrap else [])])
-    provenance = (f"fitted by `{command}` ({time.strftime('%Y-%m-%d', time.gmtime())}) on "
-                  f"{len(participants)} participants, {obs.episodes} episodes, {obs.steps} roads: "
-                  f"EM over a mixture of {best.n_types} driver models"
-                  f"{' sharing their trust dynamics' if shared_dynamics else ''}, "
-                  f"{'chosen by BIC (n = participants)' if fixed is None else 'K given'}; "
-                  f"shared report accuracy {best.report_accuracy:.4f}")
-    path = write_driver_population(mixture_population(best, str(study_dir), provenance), out)
-    criterion = "BIC (n = participants)" if fixed is None else "given"
-    payload: dict = {"types": best.n_types, "criterion": criterion,
-                     "fit": best.summary(), "provenance": provenance,
-                     "responsibilities": {str(p): dict(zip(best.type_names(), row.tolist(), strict=True))
-                                          for p, row in zip(best.participants, best.responsibilities,
-                                                            strict=True)}}
-    if fixed is None:
-        payload["bic_table"] = selection.table()
-    if bootstrap:
-        with tqdm(total=bootstrap, desc="bootstrap", disable=quiet or as_json) as bar:
-            payload["bootstrap"] = bootstrap_type_count(
-                roads, episodes, template, selection, max_types, bootstrap, rng, restarts, iterations,
-                progress=bar.update, choose=fixed is None, shared_dynamics=shared_dynamics)
-    details = out.with_suffix(".fit.json")
-    atomic_write_text(details, json.dumps(payload, indent=1, default=str), "fit details",
-                      "pass a writable path with --out")
-    payload = with_paths(payload, {"population": path, "fit_details": details})
-    if as_json:
-        click.echo(json.dumps(payload, default=str))
-        return
-    if fixed is None:
-        click.echo("K  loglik      params  BIC(n=participants)  dBIC    BIC(n=roads)  converged")
-        for row in payload["bic_table"]:
-            click.echo(f"{row['types']:<2} {row['loglik']:<11.2f} {row['free_parameters']:<7} "
-                       f"{row['bic']:<20.2f} {row['delta_bic']:<7.2f} {row['bic_roads']:<13.2f} "
-                       f"{row['restarts_converged']}")
-    weights = ", ".join(f"{k} {v:.3f}" for k, v in best.summary()["weights"].items())
-    click.echo(f"{best.n_types} type(s) ({payload['criterion']}): weights {weights}; EM "
-               f"{best.iterations} iterations, {'converged' if best.converged else 'NOT converged'}")
-    if bootstrap:
-        b = payload["bootstrap"]
-        if "chosen_types_frequency" in b:
-            click.echo(f"bootstrap ({b['resamples']} resamples of participants): K chosen "
-                       + ", ".join(f"{k}: {v}" for k, v in b["chosen_types_frequency"].items()))
-        for name, w in b.get("weights", {}).items():
-            click.echo(f"  {name} weight 95% percentile interval [{w['low']:.3f}, {w['high']:.3f}]")
-    click.echo(f"driver population written to {path} (details: {details})")
-    if not best.converged:
-        click.echo(f"warning: EM stopped at the iteration cap ({iterations}) before converging", err=True)

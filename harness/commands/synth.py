@@ -8,10 +8,9 @@ evaluate  the exact satisfaction probability and expected final trust of any pol
 
 from __future__ import annotations
 
-import math
-
 import click
 
+from trustroute.analysis.formatting import finite_or_none
 from trustroute.core.errors import InputError
 from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
 from trustroute.harness.commands.output import emit, json_option, with_paths
@@ -31,10 +30,6 @@ def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None
     spec = load_spec(spec_path, town)
     check_coefficient_length(spec, driver.n_trust, driver.source_path)
     return town, driver, spec, build_pomdp(town, driver)
-
-
-def _finite(value: float) -> float | None:
-    return None if value is None or (isinstance(value, float) and math.isnan(value)) else value
 
 
 town_option = click.option("--town", "town_path", type=click.Path(), default=None,
@@ -216,7 +211,7 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
     payload = {"spec": spec.name, "route": route, "length_m": town.route_length(route),
                "junctions": len(route) - 1, "satisfaction_probability": value.satisfaction_probability,
                "lower": value.lower, "upper": value.upper,
-               "expected_final_trust": _finite(value.expected_final_trust), "belief_rule": belief_rule}
+               "expected_final_trust": finite_or_none(value.expected_final_trust), "belief_rule": belief_rule}
     emit(as_json, payload, [
         f"{spec.name} trust-free route ({len(route) - 1} junctions, {payload['length_m']:.0f} m): "
         + " ".join(route),
@@ -297,8 +292,8 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
                             belief_rule=belief_rule, max_nodes=max_nodes, time_limit=time_limit)
     payload = value.to_dict()
     payload["spec"] = spec.name
-    payload["expected_final_trust"] = _finite(value.expected_final_trust)
-    payload["expected_junctions"] = _finite(value.expected_junctions)
+    payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)
+    payload["expected_junctions"] = finite_or_none(value.expected_junctions)
     lines = [
         f"{spec.name} / {value.policy}: P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], "
         f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
@@ -377,8 +372,8 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
     types = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule, fallback_after)
     payload = value.to_dict()
     payload["spec"] = spec.name
-    payload["expected_final_trust"] = _finite(value.expected_final_trust)
-    payload["expected_junctions"] = _finite(value.expected_junctions)
+    payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)
+    payload["expected_junctions"] = finite_or_none(value.expected_junctions)
     payload["population"] = {"file": population_path, "content_hash": population.content_hash,
                              "type_values": [t.to_dict() for t in types]}
     emit(as_json, payload, [

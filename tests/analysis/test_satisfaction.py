@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from trustroute.analysis.satisfaction import episode_satisfaction, reported_beliefs
-from trustroute.analysis.tables import load_study, study_inputs
+from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import baseline_route
 

@@ -94,7 +94,6 @@ from trustroute.analysis.statistics import (  # noqa: E402
     PairedTable,
     conditional_logit,
     conditional_odds_ratio,
-    format_p,
     mean_difference,
     mixed_trust_model,
     paired_risk_difference,
@@ -135,12 +134,6 @@ def test_rate_interval_bad_input():
         rate_interval(5, 3)
     with pytest.raises(ValueError):
         rate_interval(1, 3, method="wald")
-
-
-def test_format_p_is_scientific():
-    assert format_p(3.05e-7) == "3.05e-07"
-    assert format_p(1.0) == "1.00e+00"
-    assert format_p(None) == "-"
 
 
 def test_risk_difference_covers_by_monte_carlo():

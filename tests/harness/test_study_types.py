@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trustroute.analysis.tables import ALL_TYPES, study_analysis
+from trustroute.analysis.study.analysis import study_analysis
+from trustroute.analysis.study.per_type import ALL_TYPES
 from trustroute.core.dataset import read_episodes
 from trustroute.harness.cli import main
 from trustroute.harness.study.config import load_study_config

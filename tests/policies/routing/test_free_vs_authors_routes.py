@@ -14,7 +14,7 @@ import itertools
 
 import pytest
 
-from trustroute.analysis.carla_tables import load_carla_tables
+from trustroute.analysis.carla_study.town01 import load_carla_tables
 from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import baseline_route

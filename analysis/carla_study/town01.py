@@ -20,7 +20,7 @@ import pandas as pd
 
 from trustroute.core.errors import InputError
 
-TABLES_PATH = Path(__file__).parent / "data" / "real_study" / "town01.json"
+TABLES_PATH = Path(__file__).resolve().parents[1] / "data" / "real_study" / "town01.json"
 # Their incident names -> the project's (networks/town.py INCIDENT_TYPES).
 INCIDENT_NAMES = {"construction": "obstacle", "pedestrian": "pedestrian", "truck": "truck", "empty": "none"}
 # Trial -> (start state, goal junction, project spec); from the driver script's World.__init__
@@ -185,7 +185,7 @@ TOWN01_SOURCE = (
     "(state_route_info/state_location.csv with spawn_point_list.csv of "
     "shuyang-dong/trust_aware_hrc_carla_sim, MIT), in metres, CARLA y negated (CARLA's frame is "
     "left-handed); roads are the directed roads of state_location.csv, incidents those of "
-    "policy/policy_retrieve_trial1.py. Built by trustroute.analysis.carla_tables.town01_town_dict; "
+    "policy/policy_retrieve_trial1.py. Built by trustroute.analysis.carla_study.town01.town01_town_dict; "
     "networks/data/PROVENANCE.md, docs/real_study.md."
 )
 

@@ -23,7 +23,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from trustroute.analysis.real_tables import read_real_table
+from trustroute.analysis import paper_figures
+from trustroute.analysis.carla_study.log_schema import read_real_table
+from trustroute.analysis.formatting import MISSING, aligned_columns, finite_or_none, number_text
 from trustroute.analysis.satisfaction import (
     LOGGED_BELIEF_SOURCES,
     REPORTED_TRUST_LABEL,
@@ -32,15 +34,6 @@ from trustroute.analysis.satisfaction import (
 
 AUTHORS_SATISFIED_FRACTION = 0.99  # statistic_test_point_based.py: precetage >= 0.99
 AUTHORS_LOW_TRUST = 2  # ... data.iloc[k, 1] >= 2 counts as satisfying
-# The paper's figures (Yu et al., ICRA 2024), quoted to be compared with, never asserted.
-PAPER_FIGURES = {
-    "phi1 satisfied (aware)": "18/21",
-    "phi2 satisfied (aware)": "17/21",
-    "satisfaction rate aware": 0.85,
-    "satisfaction rate free": 0.775,
-    "mean trust aware": 4.6018,
-    "mean trust free": 4.3933,
-}
 
 
 def authors_point_rule(ticks: pd.DataFrame) -> pd.DataFrame:
@@ -176,8 +169,8 @@ def authors_paired_tests(per: pd.DataFrame) -> list[dict]:
                     "subset": name,
                     "quantity": label,
                     "pairs": int(len(a)),
-                    "t_statistic": None if np.isnan(t) else t,
-                    "p_value": None if np.isnan(p_value) else p_value,
+                    "t_statistic": finite_or_none(t),
+                    "p_value": finite_or_none(p_value),
                 }
             )
     return rows
@@ -244,7 +237,7 @@ def with_real_columns(
 
 
 def real_study_analysis(study_dir: Path) -> RealStudyAnalysis:
-    from trustroute.analysis.tables import load_study, study_inputs
+    from trustroute.analysis.study_directory import load_study, study_inputs
 
     study_dir = Path(study_dir)
     manifest, episodes, roads = load_study(study_dir)
@@ -380,16 +373,16 @@ def paper_matches(figures: list[dict]) -> list[dict]:
     """Which computed readings equal each paper figure at the paper's printed precision."""
     out = []
     targets = [
-        ("phi1 satisfied (count)", "aware", PAPER_FIGURES["phi1 satisfied (aware)"], None),
-        ("phi2 satisfied (count)", "aware", PAPER_FIGURES["phi2 satisfied (aware)"], None),
-        ("satisfaction rate", "aware", PAPER_FIGURES["satisfaction rate aware"], 3),
-        ("satisfaction rate", "free", PAPER_FIGURES["satisfaction rate free"], 3),
-        ("mean trust", "aware", PAPER_FIGURES["mean trust aware"], 4),
-        ("mean trust", "free", PAPER_FIGURES["mean trust free"], 4),
+        ("phi1 satisfied (count)", "aware", paper_figures.count_text("phi1"), None),
+        ("phi2 satisfied (count)", "aware", paper_figures.count_text("phi2"), None),
+        ("satisfaction rate", "aware", paper_figures.SATISFACTION_RATE["aware"], 3),
+        ("satisfaction rate", "free", paper_figures.SATISFACTION_RATE["free"], 3),
+        ("mean trust", "aware", paper_figures.MEAN_TRUST["aware"], 4),
+        ("mean trust", "free", paper_figures.MEAN_TRUST["free"], 4),
     ]
     targets += [
-        ("phi1 satisfied (count)", "free", PAPER_FIGURES["phi1 satisfied (aware)"], None),
-        ("phi2 satisfied (count)", "free", PAPER_FIGURES["phi2 satisfied (aware)"], None),
+        ("phi1 satisfied (count)", "free", paper_figures.count_text("phi1"), None),
+        ("phi2 satisfied (count)", "free", paper_figures.count_text("phi2"), None),
     ]
     for figure, condition, paper, digits in targets:
         hits = []
@@ -408,10 +401,6 @@ def paper_matches(figures: list[dict]) -> list[dict]:
     return out
 
 
-def _shown(value: object) -> str:
-    return "-" if value is None else value if isinstance(value, str) else f"{value:.4f}"
-
-
 def format_real_study(analysis: RealStudyAnalysis) -> str:
     lines = ["Real CARLA study (paper's figures are the paper's, quoted for comparison)", ""]
     header = ["figure", "reading", "subset", "aware", "free", "n (aware/free)"]
@@ -422,26 +411,24 @@ def format_real_study(analysis: RealStudyAnalysis) -> str:
                 r["figure"],
                 r["reading"],
                 r["subset"],
-                _shown(r["aware"]),
-                _shown(r["free"]),
+                number_text(r["aware"], 4),
+                number_text(r["free"], 4),
                 f"{r['n_aware']}/{r['n_free']}",
             ]
         )
-    widths = [max(len(str(x)) for x in col) for col in zip(header, *rows, strict=True)]
-    pattern = "  ".join(f"{{:<{w}}}" for w in widths)
-    lines += [pattern.format(*header), pattern.format(*("-" * w for w in widths))]
-    lines += [pattern.format(*row) for row in rows]
+    lines += aligned_columns(header, rows)
     lines.append("")
     for m in analysis.matches:
         found = (
-            "; ".join(f"{h['reading']} / {h['subset']} = {_shown(h['value'])}" for h in m["reproduced_by"])
+            "; ".join(f"{h['reading']} / {h['subset']} = {number_text(h['value'], 4)}"
+                      for h in m["reproduced_by"])
             or "no reading reproduces it"
         )
         lines.append(f"paper {m['figure']} = {m['paper']}: {found}")
     lines.append("")
     for test in analysis.paired_tests:
-        t = "-" if test["t_statistic"] is None else f"{test['t_statistic']:.4f}"
-        p = "-" if test["p_value"] is None else f"{test['p_value']:.4g}"
+        t = number_text(test["t_statistic"], 4)
+        p = MISSING if test["p_value"] is None else f"{test['p_value']:.4g}"
         lines.append(
             f"authors' paired t-test, {test['subset']}: {test['quantity']}: t = {t}, p = {p} "
             f"({test['pairs']} pairs)"

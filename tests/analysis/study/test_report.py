@@ -72,7 +72,7 @@ def test_analyze_json_and_self_contained_report(model_study, capsys):
 
 
 def test_paper_table_only_for_a_comparable_study():
-    from trustroute.analysis.tables import is_paper_comparable
+    from trustroute.analysis.study.paper_comparison import is_paper_comparable
     from trustroute.core.packaged import PACKAGED_SPECS
 
     episodes = pd.DataFrame({"condition": ["aware", "free"]})

@@ -8,11 +8,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from trustroute.analysis.tables import study_analysis
+from trustroute.analysis.study.analysis import study_analysis
 from trustroute.core import dataset
 from trustroute.core.errors import InputError
 
-REAL_STUDY = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "study"
+REAL_STUDY = Path(__file__).resolve().parents[3] / "analysis" / "data" / "real_study" / "study"
 
 
 def test_a_study_without_drivers_has_no_per_type_tables(model_study):

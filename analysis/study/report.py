@@ -1,7 +1,7 @@
 """The study report: report.md and one self-contained report.html (plots inlined as base64 PNG).
 
 Both are rendered by Jinja2 from the same data (templates/report.md.j2, templates/report.html.j2):
-what was run (config, engine, seeds, hashes, versions), the tables of analysis.tables (pandas
+what was run (config, engine, seeds, hashes, versions), the tables of analysis/study (pandas
 DataFrames) on the filter beliefs and on beliefs induced from reported trust, the per-participant,
 order and takeover tables, the paper's figures beside ours when the study is comparable (else a note
 saying why not), the plots, failures, and notes on reading the numbers.
@@ -15,16 +15,11 @@ from pathlib import Path
 
 import pandas as pd
 
-from trustroute.analysis.plots import write_plots
-from trustroute.analysis.tables import (
-    TABLE_TITLES,
-    StudyAnalysis,
-    display_tables,
-    format_table,
-    order_test_line,
-    study_analysis,
-    study_inputs,
-)
+from trustroute.analysis.formatting import markdown_table
+from trustroute.analysis.study.analysis import StudyAnalysis, study_analysis
+from trustroute.analysis.study.display import TABLE_TITLES, display_tables, format_table, order_test_line
+from trustroute.analysis.study.plots import write_plots
+from trustroute.analysis.study_directory import study_inputs
 from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE, read_roads
 
 NOTES = [
@@ -64,7 +59,8 @@ PLOT_TITLES = {
     "takeovers": "Takeovers per incident type",
     "routes": "Routes driven",
 }
-TEMPLATES = Path(__file__).resolve().parent / "templates"
+# The templates ship with the analysis package (pyproject package-data), beside this subpackage.
+TEMPLATES = Path(__file__).resolve().parents[1] / "templates"
 
 
 @dataclass(frozen=True)
@@ -73,18 +69,6 @@ class ReportPaths:
     html: Path
     plots: dict
     table_text: str
-
-
-def markdown_table(frame: pd.DataFrame) -> str:
-    """A pandas table as a GitHub-flavoured Markdown table (pipes in cells escaped)."""
-
-    def cell(value: object) -> str:
-        return str(value).replace("|", "\\|").replace("\n", " ")
-
-    header = "| " + " | ".join(cell(c) for c in frame.columns) + " |"
-    rule = "|" + "---|" * len(frame.columns)
-    body = ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(index=False)]
-    return "\n".join([header, rule, *body])
 
 
 def _environment():

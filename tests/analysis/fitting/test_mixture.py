@@ -23,8 +23,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from trustroute.analysis.fit import fit_em, observations_from_roads
-from trustroute.analysis.fit_mixture import (
+from trustroute.analysis.fitting.driver_model import fit_em, observations_from_roads
+from trustroute.analysis.fitting.mixture import (
     fit_mixture,
     participant_index,
     select_types,
@@ -178,16 +178,16 @@ def test_fit_types_rejects_a_bad_count(model_study, tmp_path, capsys, types):
 def test_committed_real_population_is_reproduced_by_the_one_type_fit():
     from pathlib import Path
 
-    from trustroute.analysis.fit import fit_study
+    from trustroute.analysis.fitting.driver_model import fit_study
 
-    data = Path(__file__).resolve().parents[2] / "participants" / "data"
+    data = Path(__file__).resolve().parents[3] / "participants" / "data"
     population = load_driver_population(data / "driver_population_real.json")
     details = json.loads((data / "driver_population_real.fit.json").read_text())
     table = details["bic_table"]
     assert population.n_types == details["types"] == min(table, key=lambda r: r["bic"])["types"]
     assert details["bootstrap"]["resamples"] == sum(details["bootstrap"]["chosen_types_frequency"].values())
     if population.n_types == 1:  # then it is `trustroute fit` on the same logs
-        study = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "study"
+        study = Path(__file__).resolve().parents[3] / "analysis" / "data" / "real_study" / "study"
         refit = fit_study(study, method="em").model()
         model = population.types[0].model
         np.testing.assert_allclose(model.takeover_probability, refit.takeover_probability, atol=1e-12)

@@ -1,7 +1,7 @@
 """The real-study tables beside the dataset's: file names, Arrow schemas and their reader.
 
-Written by the CARLA-log importer (analysis/carla_import.py) and read by the real-study analysis
-(analysis/real_study.py); its own module so that the two do not import each other
+Written by the CARLA-log importer (analysis/carla_study/log_import.py) and read by the real-study
+analysis (analysis/carla_study/analysis.py); its own module so that the two do not import each other
 (docs/real_study.md, "The study directory").
 """
 

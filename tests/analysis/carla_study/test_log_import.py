@@ -12,19 +12,19 @@ import pandas as pd
 import pytest
 
 from tests.cli import run_cli
-from trustroute.analysis.carla_import import import_carla_logs
-from trustroute.analysis.carla_tables import load_carla_tables
-from trustroute.analysis.real_study import (
+from trustroute.analysis.carla_study.analysis import (
     authors_belief_replay,
     authors_point_rule,
     authors_segment_rule,
     with_real_columns,
 )
-from trustroute.analysis.real_tables import read_real_table
+from trustroute.analysis.carla_study.log_import import import_carla_logs
+from trustroute.analysis.carla_study.log_schema import read_real_table
+from trustroute.analysis.carla_study.town01 import load_carla_tables
 from trustroute.core.dataset import read_episodes, read_roads
 from trustroute.participants.driver_model import load_driver_model
 
-RAW = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "raw"
+RAW = Path(__file__).resolve().parents[3] / "analysis" / "data" / "real_study" / "raw"
 SAMPLE = "trust_level_record_driver_4_trial_1_if_baseline_0.csv"
 
 

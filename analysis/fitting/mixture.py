@@ -1,19 +1,20 @@
 """Fitting a finite mixture of driver models to a study's logs: driver types by EM over participants.
 
 Each participant belongs to one latent type; all of a participant's episodes share it. Type k is a
-full driver model (the hidden Markov model of analysis/fit.py: initial trust, takeover and failure
-probabilities, trust-transition rows), all types share the report accuracy (the report noise is a
-property of the display and the question, docs/driver_type_studies.md). EM alternates:
+full driver model (the hidden Markov model of analysis/fitting/driver_model.py: initial trust,
+takeover and failure probabilities, trust-transition rows), all types share the report accuracy
+(the report noise is a property of the display and the question, docs/driver_type_studies.md).
+EM alternates:
 
-- E-step: per type, the forward pass of analysis/fit.py's `expectation` gives every episode's
+- E-step: per type, the forward pass of driver_model.py's `expectation` gives every episode's
   log-likelihood; a participant's is the sum over their episodes; responsibilities
   r[p, k] ∝ w_k · exp(loglik[p, k]);
-- M-step: analysis/fit.py's `expectation` with every episode weighted by its participant's
+- M-step: driver_model.py's `expectation` with every episode weighted by its participant's
   responsibility gives each type's expected statistics, and its `maximisation` turns them into
   the type's model with the same regularisation as `trustroute fit` (MIN_ROW_WEIGHT, the takeover
   prior); w_k is the mean responsibility; the shared accuracy is fitted on the pooled report counts.
 
-With one type this is exactly `trustroute fit --method em` (tests/analysis/test_fit_mixture.py).
+With one type this is exactly `trustroute fit --method em` (tests/analysis/fitting/test_mixture.py).
 EM stops when the log-likelihood improves by less than EM_TOLERANCE per road (`converged`), else at
 the iteration cap (reported). Several restarts from seeded random partitions of the
 participants, and one from the best K-1 fit with its largest type split in two; the best
@@ -33,7 +34,7 @@ import pandas as pd
 from scipy.optimize import linear_sum_assignment
 from scipy.special import logsumexp
 
-from trustroute.analysis.fit import (
+from trustroute.analysis.fitting.driver_model import (
     EM_TOLERANCE,
     MIN_ROW_WEIGHT,
     FitResult,
@@ -60,7 +61,7 @@ class MixtureFit:
 
     n_types: int
     weights: np.ndarray  # [K] prior weights, sum 1
-    components: list[FitResult]  # per type: the driver model as analysis/fit.py's FitResult
+    components: list[FitResult]  # per type: the driver model as driver_model.py's FitResult
     responsibilities: np.ndarray  # [P, K] posterior type probabilities per participant
     participants: list  # participant ids, in the rows of `responsibilities`
     loglik: float
@@ -439,7 +440,7 @@ def study_observations(study_dir) -> tuple[Observations, np.ndarray, list, Drive
     """(observations, participant row per episode, participant ids, template, roads, episodes)."""
     from pathlib import Path
 
-    from trustroute.analysis.tables import load_study, study_inputs
+    from trustroute.analysis.study_directory import load_study, study_inputs
 
     manifest, episodes, roads = load_study(Path(study_dir))
     _, template, _ = study_inputs(manifest)

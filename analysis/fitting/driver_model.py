@@ -16,7 +16,7 @@ up or down (equal chance, clipped at the ends: the driver model's `report_matrix
 - method "auto": "counts" when the study's config says reports are exact and on every road
   (report accuracy 1, report_every 1), else "em".
 
-Recovery on synthetic data: tests/analysis/test_fit.py (stated tolerances there).
+Recovery on synthetic data: tests/analysis/fitting/test_driver_model.py (stated tolerances there).
 """
 
 from __future__ import annotations
@@ -155,7 +155,7 @@ def expectation(obs: Observations, p: Parameters, weights: np.ndarray | None = N
     """Forward-backward over every episode at once (scaled), expected sufficient statistics.
 
     `weights` [n] (default 1) scale each episode's contribution to the statistics: a mixture's
-    responsibility of this model for the episode's participant (analysis/fit_mixture.py). The
+    responsibility of this model for the episode's participant (analysis/fitting/mixture.py). The
     log-likelihoods (total and per episode) are unweighted."""
     n, steps = obs.mask.shape
     weight = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
@@ -496,7 +496,7 @@ def fit_study(
     study_dir: Path, method: str = "auto", iterations: int = 200, progress: bool = False
 ) -> FitResult:
     """Fit a driver model to the consolidated logs of a study directory."""
-    from trustroute.analysis.tables import load_study, study_inputs
+    from trustroute.analysis.study_directory import load_study, study_inputs
 
     if iterations < 1:
         raise InputError("--iterations", "", f"must be >= 1, got {iterations}", "pass e.g. --iterations 200")

@@ -12,12 +12,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from trustroute.analysis.fit import bootstrap_fit, fit_roads, regularised_takeover
-from trustroute.analysis.posterior_check import posterior_check, real_arrays, simulate
+from trustroute.analysis.fitting.driver_model import bootstrap_fit, fit_roads, regularised_takeover
+from trustroute.analysis.fitting.posterior_check import posterior_check, real_arrays, simulate
 from trustroute.core.dataset import read_episodes, read_roads
 from trustroute.participants.driver_model import driver_model_from_dict, load_driver_model
 
-STUDY = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "study"
+STUDY = Path(__file__).resolve().parents[3] / "analysis" / "data" / "real_study" / "study"
 
 
 @pytest.fixture(scope="module")

@@ -31,8 +31,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from trustroute.analysis.carla_tables import ARRIVAL_RADIUS_M, CarlaTables, load_carla_tables
-from trustroute.analysis.real_tables import (
+from trustroute.analysis.carla_study.log_schema import (
     REAL_EPISODES_FILE,
     REAL_EPISODES_SCHEMA,
     REAL_ROADS_FILE,
@@ -40,6 +39,7 @@ from trustroute.analysis.real_tables import (
     TICKS_FILE,
     TICKS_SCHEMA,
 )
+from trustroute.analysis.carla_study.town01 import ARRIVAL_RADIUS_M, CarlaTables, load_carla_tables
 from trustroute.core import dataset
 from trustroute.core.errors import InputError
 
@@ -497,7 +497,7 @@ def import_carla_logs(
         "planned_episodes": int(len(episodes)),
         "finished_episodes": int(len(episodes)),
         "seeds": {},
-        "run": {"importer": "trustroute.analysis.carla_import", "tick_seconds": TICK_SECONDS},
+        "run": {"importer": __name__, "tick_seconds": TICK_SECONDS},
         "engine": "carla-logs",
         "config": {
             "name": "carla-real-study",

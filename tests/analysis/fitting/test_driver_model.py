@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from trustroute.analysis.fit import fit_roads, observations_from_roads, starting_parameters
+from trustroute.analysis.fitting.driver_model import fit_roads, observations_from_roads, starting_parameters
 from trustroute.harness.cli import main
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.model_engine import run_model_episode

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 
-from trustroute.analysis.carla_tables import load_carla_tables, town01_town_dict
+from trustroute.analysis.carla_study.town01 import load_carla_tables, town01_town_dict
 from trustroute.networks.town import DEFAULT_TOWN_PATH, PENTAGON_TOWN_PATH, load_town
 
 

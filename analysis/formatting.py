@@ -1,0 +1,95 @@
+"""Display formatting of analysis results, shared by the terminal tables, the report and the CLI.
+
+Missing values (None, NaN, pd.NA) read "-" everywhere; numbers get a fixed number of decimals,
+intervals read "[low, high]", p-values are in scientific notation, and tables are rendered as
+GitHub-flavoured Markdown or as aligned plain-text columns.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+MISSING = "-"
+
+
+def is_pandas_na(value: object) -> bool:
+    """Whether `value` is pd.NA; pandas is not imported for it (the CLI formats values of commands
+    that never load pandas, and none of those can hold pd.NA)."""
+    pandas = sys.modules.get("pandas")
+    return pandas is not None and value is pandas.NA
+
+
+def finite_or_none(value: object) -> float | None:
+    """A float, or None for a missing value (None, NaN, or pd.NA: e.g. the mean of a nullable
+    column with no values, such as final_trust of real participants)."""
+    if value is None or is_pandas_na(value):
+        return None
+    value = float(value)
+    return None if math.isnan(value) else value
+
+
+def number_text(value: object, digits: int = 3) -> str:
+    """A float with `digits` decimals ("inf" when infinite), another value as str, "-" if missing."""
+    if value is None or (isinstance(value, float) and math.isnan(value)) or is_pandas_na(value):
+        return MISSING
+    if isinstance(value, (float, np.floating)):
+        return "inf" if math.isinf(value) else f"{value:.{digits}f}"
+    return str(value)
+
+
+def interval_text(low: object, high: object, digits: int = 3) -> str:
+    """"[low, high]", or "-" when either end is missing."""
+    if number_text(low) == MISSING or number_text(high) == MISSING:
+        return MISSING
+    return f"[{number_text(low, digits)}, {number_text(high, digits)}]"
+
+
+def interval_column(frame: pd.DataFrame, low: str, high: str, digits: int = 3) -> list[str]:
+    """The column pair (low, high) of a table as formatted intervals."""
+    return [interval_text(a, b, digits) for a, b in zip(frame[low], frame[high], strict=True)]
+
+
+def estimate_column(frame: pd.DataFrame, value: str, low: str, high: str, digits: int = 3) -> list[str]:
+    """'estimate [low, high]' per row; '-' where the estimate is missing (or the column absent)."""
+    missing = [None] * len(frame)
+    return [
+        f"{number_text(v, digits)} {interval_text(lo, hi, digits)}" if number_text(v) != MISSING else MISSING
+        for v, lo, hi in zip(frame.get(value, missing), frame.get(low, missing),
+                             frame.get(high, missing), strict=True)
+    ]
+
+
+def format_p(p: float | None) -> str:
+    """A p-value in scientific notation with three significant digits ("3.05e-07"); "-" if missing."""
+    if p is None or (isinstance(p, float) and math.isnan(p)):
+        return MISSING
+    return f"{p:.2e}"
+
+
+def markdown_table(frame: pd.DataFrame) -> str:
+    """A pandas table as a GitHub-flavoured Markdown table (pipes in cells escaped)."""
+
+    def cell(value: object) -> str:
+        return str(value).replace("|", "\\|").replace("\n", " ")
+
+    header = "| " + " | ".join(cell(c) for c in frame.columns) + " |"
+    rule = "|" + "---|" * len(frame.columns)
+    body = ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(index=False)]
+    return "\n".join([header, rule, *body])
+
+
+def aligned_columns(header: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
+    """Plain-text lines of a table: left-aligned columns two spaces apart, a dashed rule under the
+    header."""
+    widths = [max(len(str(x)) for x in col) for col in zip(header, *rows, strict=True)]
+    pattern = "  ".join(f"{{:<{w}}}" for w in widths)
+    return [pattern.format(*header), pattern.format(*("-" * w for w in widths)),
+            *(pattern.format(*row) for row in rows)]

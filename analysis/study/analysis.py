@@ -1,0 +1,178 @@
+"""The analysis of one study directory, shared by `trustroute analyze`, the report and fitting.
+
+`study_analysis(study_dir, belief_source)` reads a consolidated study directory (episodes.parquet,
+roads.parquet, manifest.json), evaluates the specs on the logs, and returns a `StudyAnalysis` whose
+tables (pandas DataFrames, built by the modules beside this one: cells, paired, order, per_type,
+paper_comparison; shown by display) are:
+
+- `cells`: per (spec, condition): n, satisfied, the satisfaction rate with its exact
+  (Clopper–Pearson) and Wilson 95 % intervals on the chosen belief source (and the rate on the
+  other source), mean reported trust with a bootstrap CI, mean true and final trust, junctions,
+  takeovers, fallback rate, the policy's exact value and its synthesized [lower, upper];
+- `paired`: per spec, the first two conditions ("aware" vs "free") over participants: the 2x2
+  counts, exact McNemar p, the risk difference (Newcombe interval), the conditional odds ratio
+  (exact interval), the mean difference in reported trust (BCa bootstrap over participants),
+  Wilcoxon p. The "all specs" row is per participant, not per pair: each participant's number of
+  specs satisfied under A minus under B, and their trust difference averaged over specs, so 21
+  participants count as 21, never as 42 pairs;
+- `repeated`: models over every episode with one group per participant: conditional logistic
+  regression of satisfaction on the condition with spec fixed effects, and a mixed model of mean
+  reported trust with a random intercept per participant (statsmodels);
+- `takeovers`: per incident type and condition, roads met, takeovers, rate with exact interval;
+- `order`: per position in the Latin square: satisfaction (exact interval) and mean trust, with
+  Cochran's Q (satisfaction) and Friedman (trust) across positions within participants;
+  `carryover`: per condition and the condition driven just before (same spec or not);
+- `per_participant`: one row per participant and spec, the outcomes under each condition;
+- `per_type` and `per_type_paired` (studies with a `[drivers] population`, whose episodes carry the
+  participant's true `driver_type`): the cells' satisfaction and trust, and the paired statistics
+  for every pair of conditions present (free, aware, robust, policy files), per true type and over
+  all participants ("all");
+- `paper`: the paper's figures beside ours, only when the study is comparable (the paper's town,
+  its φ1 and φ2, 21 participants); otherwise `paper_note` says why not.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from trustroute.analysis.satisfaction import BELIEF_SOURCES, episode_satisfaction
+from trustroute.analysis.study.cells import cell_table, takeover_table
+from trustroute.analysis.study.order import order_tables
+from trustroute.analysis.study.paired import paired_table_rows, per_participant_table, repeated_measures_table
+from trustroute.analysis.study.paper_comparison import is_paper_comparable, paper_comparison
+from trustroute.analysis.study.per_type import per_type_tables
+from trustroute.analysis.study_directory import load_study, study_inputs
+from trustroute.core.errors import InputError
+
+ANALYSIS_SEED = 20240513  # bootstrap resampling: fixed, so an analysis is reproducible
+
+
+@dataclass
+class StudyAnalysis:
+    study_dir: Path
+    belief_source: str
+    manifest: dict
+    cells: pd.DataFrame
+    paired: pd.DataFrame
+    repeated: pd.DataFrame
+    takeovers: pd.DataFrame
+    order: pd.DataFrame
+    order_tests: dict
+    carryover: pd.DataFrame
+    per_participant: pd.DataFrame
+    paper: pd.DataFrame
+    paper_note: str
+    satisfaction: pd.DataFrame = field(repr=False)  # per episode, both sources
+    episodes: pd.DataFrame = field(repr=False)
+    per_type: pd.DataFrame = field(default_factory=pd.DataFrame)
+    per_type_paired: pd.DataFrame = field(default_factory=pd.DataFrame)
+
+    def to_dict(self) -> dict:
+        def records(frame: pd.DataFrame) -> list[dict]:
+            return json.loads(frame.to_json(orient="records"))
+
+        return {
+            "study_dir": str(self.study_dir),
+            "study": self.manifest.get("study"),
+            "engine": self.manifest.get("engine"),
+            "belief_source": self.belief_source,
+            "cells": records(self.cells),
+            "paired": records(self.paired),
+            "repeated_measures": records(self.repeated),
+            "takeovers": records(self.takeovers),
+            "order": records(self.order),
+            "order_tests": self.order_tests,
+            "carryover": records(self.carryover),
+            "paper_comparison": records(self.paper),
+            "paper_note": self.paper_note,
+            "per_type": records(self.per_type),
+            "per_type_paired": records(self.per_type_paired),
+            "failed_episodes": len(self.manifest.get("failed_episodes", [])),
+        }
+
+
+def _pair_conditions(conditions: list[str]) -> tuple[str, str] | None:
+    if "aware" in conditions and "free" in conditions:
+        return "aware", "free"
+    return (conditions[0], conditions[1]) if len(conditions) >= 2 else None
+
+
+
+def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: int = 10_000) -> StudyAnalysis:
+    if belief_source not in BELIEF_SOURCES:
+        raise InputError(
+            "--belief-source",
+            "",
+            f"unknown belief source {belief_source!r}",
+            f"use one of {', '.join(BELIEF_SOURCES)}",
+        )
+    manifest, episodes, roads = load_study(study_dir)
+    town, driver, specs = study_inputs(manifest)
+    satisfaction = episodes[["episode_id", "participant", "spec", "condition"]].copy()
+    for source in BELIEF_SOURCES:
+        result = episode_satisfaction(roads, episodes, specs, town, driver.trust_levels, source)
+        mapped = dict(zip(result["episode_id"], result["satisfied"], strict=True))
+        satisfaction[f"satisfied_{source}"] = (
+            satisfaction["episode_id"].map(mapped).fillna(False).astype(bool)
+        )
+    episodes = episodes.merge(
+        satisfaction[["episode_id", "satisfied_filter", "satisfied_reported"]], on="episode_id", how="left"
+    )
+    if "mean_reported_trust" in episodes:
+        episodes["mean_reported_trust"] = pd.to_numeric(episodes["mean_reported_trust"], errors="coerce")
+    expected = manifest.get("expected", {})
+    rng = np.random.default_rng(ANALYSIS_SEED)
+    spec_order = [Path(p).stem for p in manifest["config"]["specs"]]
+    condition_order = list(dict.fromkeys(episodes["condition"])) if len(episodes) else []
+    config_conditions = [
+        c if c in ("aware", "free") else Path(c).stem for c in manifest["config"]["conditions"]
+    ]
+    condition_order = [c for c in config_conditions if c in condition_order] or condition_order
+    column = f"satisfied_{belief_source}"
+
+    cells = cell_table(episodes, spec_order, condition_order, belief_source, expected, rng, resamples)
+    pair = _pair_conditions(condition_order)
+    empty = pd.DataFrame()
+    if pair is not None and len(episodes):
+        wide = per_participant_table(episodes, column, pair)
+        paired = paired_table_rows(wide, pair, spec_order, rng, resamples)
+        repeated = repeated_measures_table(episodes, column, pair)
+    else:
+        wide, paired, repeated = empty, empty, empty
+    takeovers = takeover_table(roads, episodes, condition_order)
+    if len(episodes):
+        order, order_tests, carryover = order_tables(episodes, column)
+    else:
+        order, order_tests, carryover = empty, {}, empty
+    per_type, per_type_paired = per_type_tables(episodes, spec_order, condition_order, belief_source,
+                                                rng, resamples)
+    analysis = StudyAnalysis(
+        study_dir=Path(study_dir),
+        belief_source=belief_source,
+        manifest=manifest,
+        cells=cells,
+        paired=paired,
+        repeated=repeated,
+        takeovers=takeovers,
+        order=order,
+        order_tests=order_tests,
+        carryover=carryover,
+        per_participant=wide,
+        paper=pd.DataFrame(columns=["figure", "paper", "ours"]),
+        paper_note="",
+        satisfaction=satisfaction,
+        episodes=episodes,
+        per_type=per_type,
+        per_type_paired=per_type_paired,
+    )
+    comparable, note = is_paper_comparable(manifest, episodes)
+    if comparable:
+        analysis.paper = pd.DataFrame(paper_comparison(episodes, cells, belief_source),
+                                      columns=["figure", "paper", "ours"])
+    analysis.paper_note = note
+    return analysis

@@ -1,0 +1,68 @@
+"""Order effects of the Latin square: satisfaction and reported trust per position (Cochran's Q and
+Friedman across positions within participants), and carry-over by the condition driven just before.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from trustroute.analysis.formatting import finite_or_none
+from trustroute.analysis.statistics import rate_interval
+
+
+def order_tables(episodes: pd.DataFrame, column: str) -> tuple[pd.DataFrame, dict, pd.DataFrame]:
+    """Position effects (per Latin-square position) and carry-over (by the previous condition)."""
+    from scipy import stats
+    from statsmodels.stats.contingency_tables import cochrans_q
+
+    rows = []
+    for position, group in episodes.groupby("position", sort=True):
+        n, k = len(group), int(group[column].sum())
+        low, high = rate_interval(k, n)
+        rows.append(
+            {
+                "position": int(position) + 1,
+                "n": n,
+                "satisfied": k,
+                "satisfaction_rate": k / n,
+                "ci_low": low,
+                "ci_high": high,
+                "mean_trust": finite_or_none(np.nanmean(group["mean_reported_trust"].to_numpy(dtype=float)))
+                if group["mean_reported_trust"].notna().any()
+                else None,
+            }
+        )
+    order = pd.DataFrame(rows)
+    tests: dict = {"cochran_q_p": None, "friedman_p": None, "participants": 0}
+    positions = episodes["position"].nunique()
+    complete = episodes.groupby("participant").filter(lambda g: g["position"].nunique() == positions)
+    if positions >= 2 and complete["participant"].nunique() >= 2:
+        sat = complete.pivot_table(index="participant", columns="position", values=column, aggfunc="first")
+        trust = complete.pivot_table(
+            index="participant", columns="position", values="mean_reported_trust", aggfunc="first"
+        ).dropna()
+        tests["participants"] = int(len(sat))
+        if sat.to_numpy().std() > 0:
+            tests["cochran_q_p"] = float(cochrans_q(sat.to_numpy(dtype=int)).pvalue)
+        if positions >= 3 and len(trust) >= 2 and trust.to_numpy().std() > 0:
+            tests["friedman_p"] = float(stats.friedmanchisquare(*trust.to_numpy().T).pvalue)
+    ordered = episodes.sort_values(["participant", "position"])
+    previous = ordered.groupby("participant")["condition"].shift(1).fillna("none (first)")
+    carry = ordered.assign(previous=previous)
+    rows = []
+    for (condition, before), group in carry.groupby(["condition", "previous"], sort=True):
+        n, k = len(group), int(group[column].sum())
+        low, high = rate_interval(k, n)
+        rows.append(
+            {
+                "condition": condition,
+                "previous_condition": before,
+                "n": n,
+                "satisfaction_rate": k / n,
+                "ci_low": low,
+                "ci_high": high,
+                "mean_trust": finite_or_none(group["mean_reported_trust"].mean()),
+            }
+        )
+    return order, tests, pd.DataFrame(rows)

@@ -1,0 +1,157 @@
+"""Paired effects over participants, between two conditions: the per-participant table, the paired
+statistics per spec (2x2 counts, exact McNemar, Newcombe risk difference, conditional odds ratio,
+BCa trust difference, Wilcoxon) with an "all specs" row that is per participant, and the
+repeated-measures models (conditional logit, mixed trust model) with one group per participant.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from trustroute.analysis.formatting import finite_or_none
+from trustroute.analysis.statistics import (
+    conditional_logit,
+    conditional_odds_ratio,
+    mcnemar_exact,
+    mean_difference,
+    mixed_trust_model,
+    paired_risk_difference,
+    paired_table,
+    wilcoxon_paired,
+)
+
+ALL_SPECS = "all specs"
+
+
+def per_participant_table(episodes: pd.DataFrame, column: str, pair: tuple[str, str]) -> pd.DataFrame:
+    """One row per (participant, spec): satisfied and mean reported trust under each condition."""
+    subset = episodes[episodes["condition"].isin(pair)]
+    wide = subset.pivot_table(
+        index=["participant", "spec"],
+        columns="condition",
+        values=[column, "mean_reported_trust"],
+        aggfunc="first",
+    )
+    out = pd.DataFrame(index=wide.index)
+    for condition in pair:
+        out[f"satisfied_{condition}"] = wide.get((column, condition))
+        out[f"trust_{condition}"] = wide.get(("mean_reported_trust", condition))
+    return out.reset_index()
+
+
+def paired_table_rows(
+    wide: pd.DataFrame, pair: tuple[str, str], spec_order, rng: np.random.Generator, resamples: int
+) -> pd.DataFrame:
+    a, b = pair
+    rows = []
+    for spec in spec_order:
+        group = wide[wide["spec"] == spec].dropna(subset=[f"satisfied_{a}", f"satisfied_{b}"])
+        if group.empty:
+            continue
+        first, second = group[f"satisfied_{a}"].astype(bool), group[f"satisfied_{b}"].astype(bool)
+        table = paired_table(first, second)
+        mc = mcnemar_exact(first, second)
+        rd = paired_risk_difference(table)
+        odds = conditional_odds_ratio(table)
+        trust = mean_difference(group[f"trust_{a}"], group[f"trust_{b}"], rng, resamples)
+        wx = wilcoxon_paired(group[f"trust_{a}"], group[f"trust_{b}"])
+        rows.append(
+            {
+                "spec": spec,
+                "condition_a": a,
+                "condition_b": b,
+                "unit": "participant",
+                "pairs": table.pairs,
+                "both_satisfied": table.both,
+                "only_a_satisfied": table.only_first,
+                "only_b_satisfied": table.only_second,
+                "neither_satisfied": table.neither,
+                "mcnemar_p": mc.p_value,
+                "risk_difference": finite_or_none(rd.value),
+                "rd_low": finite_or_none(rd.low),
+                "rd_high": finite_or_none(rd.high),
+                "odds_ratio": finite_or_none(odds.value),
+                "or_low": finite_or_none(odds.low),
+                "or_high": finite_or_none(odds.high),
+                "trust_difference": finite_or_none(trust.value),
+                "trust_diff_low": finite_or_none(trust.low),
+                "trust_diff_high": finite_or_none(trust.high),
+                "wilcoxon_pairs": wx.pairs,
+                "wilcoxon_p": wx.p_value,
+                "median_trust_difference": finite_or_none(wx.median_difference),
+            }
+        )
+    # Across specs, one value per participant (their repeated measures are not independent pairs).
+    both = wide.dropna(subset=[f"satisfied_{a}", f"satisfied_{b}"])
+    if both["spec"].nunique() > 1:
+        person = (
+            both.assign(
+                sat_diff=both[f"satisfied_{a}"].astype(float) - both[f"satisfied_{b}"].astype(float),
+                trust_diff=both[f"trust_{a}"] - both[f"trust_{b}"],
+            )
+            .groupby("participant")[["sat_diff", "trust_diff"]]
+            .mean()
+        )
+        sat = wilcoxon_paired(person["sat_diff"].to_numpy(), np.zeros(len(person)))
+        trust = mean_difference(person["trust_diff"].to_numpy(), np.zeros(len(person)), rng, resamples)
+        sat_mean = mean_difference(person["sat_diff"].to_numpy(), np.zeros(len(person)), rng, resamples)
+        wx = wilcoxon_paired(person["trust_diff"].to_numpy(), np.zeros(len(person)))
+        rows.append(
+            {
+                "spec": ALL_SPECS,
+                "condition_a": a,
+                "condition_b": b,
+                "unit": "participant (mean over specs)",
+                "pairs": int(len(person)),
+                "mcnemar_p": None,
+                "sign_test_p": sat.p_value,
+                "risk_difference": finite_or_none(sat_mean.value),
+                "rd_low": finite_or_none(sat_mean.low),
+                "rd_high": finite_or_none(sat_mean.high),
+                "trust_difference": finite_or_none(trust.value),
+                "trust_diff_low": finite_or_none(trust.low),
+                "trust_diff_high": finite_or_none(trust.high),
+                "wilcoxon_pairs": wx.pairs,
+                "wilcoxon_p": wx.p_value,
+                "median_trust_difference": finite_or_none(wx.median_difference),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def repeated_measures_table(episodes: pd.DataFrame, column: str, pair: tuple[str, str]) -> pd.DataFrame:
+    a, b = pair
+    subset = episodes[episodes["condition"].isin(pair)]
+    treated = (subset["condition"] == a).to_numpy(dtype=float)
+    participant = subset["participant"].to_numpy()
+    spec = subset["spec"].to_numpy()
+    strata = spec if len(set(spec)) > 1 else None
+    rows = []
+    for outcome, effect in (
+        (
+            "satisfied (odds ratio)",
+            conditional_logit(subset[column].to_numpy(dtype=float), treated, participant, strata),
+        ),
+        (
+            "mean reported trust (difference)",
+            mixed_trust_model(
+                subset["mean_reported_trust"].to_numpy(dtype=float), treated, participant, strata
+            ),
+        ),
+    ):
+        rows.append(
+            {
+                "outcome": outcome,
+                "model": effect.model,
+                "effect_of": f"{a} vs {b}",
+                "estimate": finite_or_none(effect.estimate),
+                "low": finite_or_none(effect.low),
+                "high": finite_or_none(effect.high),
+                "p_value": finite_or_none(effect.p_value),
+                "participants": effect.groups,
+                "episodes": effect.observations,
+                "note": effect.note,
+            }
+        )
+    return pd.DataFrame(rows)

@@ -1,0 +1,44 @@
+"""Reading a consolidated study directory: its manifest, episodes and roads (through
+trustroute.core.dataset), and the town, driver model and specs its config names.
+
+Every analysis of a study starts here: the study tables, the real-study analysis, and fitting
+driver models to the logs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from trustroute.core.dataset import read_episodes, read_manifest, read_roads
+
+
+def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset."""
+    study_dir = Path(study_dir)
+    manifest = read_manifest(study_dir)
+    return manifest, read_episodes(study_dir), read_roads(study_dir)
+
+
+def study_inputs(manifest: dict):
+    """(town, nominal driver model, {spec name: Spec}) named by the study's config."""
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.spec import load_spec
+
+    config = manifest["config"]
+    town = load_town(config.get("town"))
+    driver = load_driver_model(config.get("driver_model"))
+    specs = {Path(p).stem: load_spec(spec_path(p), town) for p in config["specs"]}
+    return town, driver, specs
+
+
+def spec_path(path: str) -> Path:
+    """A manifest's spec path; a packaged spec when the recorded path is gone (a study directory
+    shipped with the package, or moved to another machine)."""
+    from trustroute.core.packaged import PACKAGED_SPECS
+
+    recorded = Path(path)
+    packaged = PACKAGED_SPECS / recorded.name
+    return recorded if recorded.exists() or not packaged.exists() else packaged

@@ -1,0 +1,69 @@
+"""`trustroute analyze`: the tables of a study directory (per spec and condition, paired effects,
+order effects, per driver type, the paper beside it), printed or as one JSON object (--json), and
+the report rewritten; an imported real study adds its own analysis.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from trustroute.harness.commands.output import json_option, with_paths
+from trustroute.harness.commands.study import report_paths
+
+
+@click.command("analyze")
+@click.argument("study_dir", metavar="DIR", type=click.Path())
+@json_option
+@click.option(
+    "--belief-source",
+    type=click.Choice(["filter", "reported"]),
+    default="filter",
+    show_default=True,
+    help="Beliefs the spec is evaluated on: the AV's filter, or induced from reported trust.",
+)
+@click.option(
+    "--report/--no-report",
+    default=None,
+    help="(Re)write report.md, report.html and plots/ in DIR (default: yes, but no with --json).",
+)
+def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool | None) -> None:
+    """Per spec and condition of the study directory DIR: n, satisfaction rate with CI, mean trust,
+    paired tests."""
+    from trustroute.analysis.study.analysis import study_analysis
+
+    analysis = study_analysis(Path(study_dir), belief_source=belief_source)
+    real = None
+    if analysis.manifest.get("engine") == "carla-logs":
+        from trustroute.analysis.carla_study.analysis import real_study_analysis, write_real_study_report
+
+        real = real_study_analysis(Path(study_dir))
+    paths = None
+    real_paths: dict[str, Path] = {}
+    write = (not as_json) if report is None else report
+    if write:
+        from trustroute.analysis.study.report import write_report
+
+        paths = write_report(Path(study_dir), analysis=analysis)
+        if real is not None:
+            written = write_real_study_report(real, Path(study_dir))
+            real_paths = {"real_study_json": written, "real_study_text": written.with_suffix(".txt")}
+    if as_json:
+        payload = analysis.to_dict()
+        if real is not None:
+            payload["real_study"] = real.to_dict()
+        payload = with_paths(payload, {**report_paths(paths), **real_paths} if paths is not None else {})
+        click.echo(json.dumps(payload, default=str))
+        return
+    from trustroute.analysis.study.display import format_table
+
+    click.echo(format_table(analysis))
+    if real is not None:
+        from trustroute.analysis.carla_study.analysis import format_real_study
+
+        click.echo("")
+        click.echo(format_real_study(real))
+    if paths is not None:
+        click.echo(f"report: {paths.markdown} and {paths.html}")

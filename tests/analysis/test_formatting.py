@@ -1,0 +1,52 @@
+"""Display formatting shared by the study tables, the real-study text and the CLI."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from trustroute.analysis.formatting import (
+    aligned_columns,
+    estimate_column,
+    finite_or_none,
+    format_p,
+    interval_column,
+    interval_text,
+    markdown_table,
+    number_text,
+)
+
+
+def test_format_p_is_scientific():
+    assert format_p(3.05e-7) == "3.05e-07"
+    assert format_p(1.0) == "1.00e+00"
+    assert format_p(None) == "-"
+    assert format_p(math.nan) == "-"
+
+
+def test_missing_values_are_none_or_a_dash():
+    for missing in (None, math.nan, pd.NA, np.float64("nan")):
+        assert finite_or_none(missing) is None
+        assert number_text(missing) == "-"
+    assert finite_or_none(np.float64(0.25)) == 0.25 and type(finite_or_none(np.int64(3))) is float
+
+
+def test_numbers_and_intervals():
+    assert number_text(0.12345) == "0.123" and number_text(np.float32(0.5), 2) == "0.50"
+    assert number_text(math.inf) == "inf" and number_text(7) == "7" and number_text("18/21") == "18/21"
+    assert interval_text(0.1, 0.25) == "[0.100, 0.250]"
+    assert interval_text(None, 0.25) == "-" and interval_text(0.1, math.nan) == "-"
+    frame = pd.DataFrame({"v": [0.5, None], "lo": [0.25, 0.1], "hi": [0.75, 0.2]})
+    assert interval_column(frame, "lo", "hi", 2) == ["[0.25, 0.75]", "[0.10, 0.20]"]
+    assert estimate_column(frame, "v", "lo", "hi") == ["0.500 [0.250, 0.750]", "-"]
+    assert estimate_column(frame, "absent", "lo", "hi") == ["-", "-"]
+
+
+def test_tables_as_markdown_and_aligned_text():
+    frame = pd.DataFrame({"a|b": ["x|y", "two\nlines"], "n": [1, 22]})
+    assert markdown_table(frame).splitlines() == [
+        "| a\\|b | n |", "|---|---|", "| x\\|y | 1 |", "| two lines | 22 |"]
+    assert aligned_columns(["name", "n"], [["ab", "1"], ["a", "333"]]) == [
+        "name  n  ", "----  ---", "ab    1  ", "a     333"]
