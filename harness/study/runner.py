@@ -27,6 +27,7 @@ import traceback
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from trustroute.core.dataset import LOCK_FILE, STUDY_FILE
 from trustroute.core.errors import InputError
@@ -36,6 +37,12 @@ from trustroute.harness.study.expected import expected_values
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import finished_episodes, sync_parts, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
+
+    from trustroute.harness.simulation.episode import EpisodeRecord
+    from trustroute.harness.simulation.sumo_start import SumoConfig
 
 DEFAULT_ATTEMPTS = 2
 CONSOLIDATION_ROUNDS = 3
@@ -85,7 +92,7 @@ def recording_path(study_dir: Path, episode_id: str) -> Path:
 
 
 def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path | None = None,
-                        sumo_config=None):
+                        sumo_config: SumoConfig | None = None) -> EpisodeRecord:
     """Run the planned episode `task` exactly as the study runs it: the participant's driver model
     (population draw), the driver's Generator from the task's seed sequence (so the same initial trust
     and every later draw), SUMO's seed, the cell's setup and policy. Returns the EpisodeRecord.
@@ -370,7 +377,7 @@ def _run_locked(
     )
 
 
-def _progress_bar(total: int, initial: int, enabled: bool):
+def _progress_bar(total: int, initial: int, enabled: bool) -> tqdm:
     from tqdm import tqdm
 
     return tqdm(
