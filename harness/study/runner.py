@@ -157,12 +157,16 @@ def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
 # -- backends: each yields outcomes as they complete -------------------------------------------
 
 
-def _serial(function: Callable, tasks: list) -> Iterator:
+EpisodeFunction = Callable[[EpisodeTask], EpisodeOutcome]   # run_task with the config and directory bound
+
+
+def _serial(function: EpisodeFunction, tasks: list[EpisodeTask]) -> Iterator[EpisodeOutcome]:
     for task in tasks:
         yield function(task)
 
 
-def _process_pool(function: Callable, tasks: list, workers: int) -> Iterator:
+def _process_pool(function: EpisodeFunction, tasks: list[EpisodeTask],
+                  workers: int) -> Iterator[EpisodeOutcome]:
     from trustroute.harness.study.workers import process_pool
 
     def died(task: EpisodeTask, reason: str) -> EpisodeOutcome:
@@ -171,7 +175,8 @@ def _process_pool(function: Callable, tasks: list, workers: int) -> Iterator:
     return process_pool(function, tasks, workers, died)
 
 
-def _dask(function: Callable, tasks: list, scheduler: str, workers: int, processes: bool) -> Iterator:
+def _dask(function: EpisodeFunction, tasks: list[EpisodeTask], scheduler: str, workers: int,
+          processes: bool) -> Iterator[EpisodeOutcome]:
     from distributed import Client, LocalCluster, as_completed
 
     cluster = None
@@ -205,8 +210,9 @@ def _dask(function: Callable, tasks: list, scheduler: str, workers: int, process
 
 
 def _outcomes(
-    function: Callable, tasks: list, workers: int, scheduler: str | None, dask_processes: bool = True
-) -> Iterator:
+    function: EpisodeFunction, tasks: list[EpisodeTask], workers: int, scheduler: str | None,
+    dask_processes: bool = True,
+) -> Iterator[EpisodeOutcome]:
     if not tasks:
         return iter(())
     if scheduler is not None:
