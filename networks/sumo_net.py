@@ -78,7 +78,7 @@ def find_binary(name: str) -> str:
 
 def pedestrian_roads(town: Town) -> list[tuple[str, str]]:
     """Undirected roads (sorted pairs) with a pedestrian incident in either direction."""
-    return sorted({tuple(sorted((u, v))) for u, v in town.roads
+    return sorted({(u, v) if u <= v else (v, u) for u, v in town.roads
                    if "pedestrian" in (town.incident(road_name(u, v)), town.incident(road_name(v, u)))})
 
 

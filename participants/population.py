@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TypedDict, TypeGuard
 
 import numpy as np
 
@@ -129,8 +130,17 @@ def sample_population(nominal: DriverModel, count: int, config: PopulationConfig
 _KEYS = ("concentration", "takeover_spread", "initial_trust", "report_accuracy")
 
 
-def _number(value: object) -> bool:
+def _number(value: object) -> TypeGuard[int | float]:
     return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+class _PopulationValues(TypedDict, total=False):
+    """The PopulationConfig fields a [population] table gives."""
+
+    concentration: float
+    takeover_spread: float
+    report_accuracy: float
+    initial_trust: tuple[float, ...]
 
 
 def population_config_from_dict(data: Mapping[str, object] | None, source: str,
@@ -148,7 +158,7 @@ def population_config_from_dict(data: Mapping[str, object] | None, source: str,
     if unknown:
         raise InputError(source, f"population.{unknown[0]}", f"unknown key '{unknown[0]}'",
                          f"use only {', '.join(_KEYS)}")
-    values: dict[str, object] = {}
+    values: _PopulationValues = {}
     if "concentration" in data:
         c = data["concentration"]
         if not (_number(c) and c > 0):

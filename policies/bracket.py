@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import Field, asdict
+from typing import Any, ClassVar
 
 
 class Bracket:
@@ -10,12 +11,13 @@ class Bracket:
 
     lower: float
     upper: float
+    __dataclass_fields__: ClassVar[dict[str, Field[Any]]]   # set on each dataclass that mixes it in
 
     @property
     def gap(self) -> float:
         return self.upper - self.lower
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
         out["gap"] = self.gap
         return out

@@ -14,8 +14,9 @@ import contextlib
 import hashlib
 import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeGuard, TypeVar
 
 from trustroute.core.cache import POLICIES
 from trustroute.core.cache import cache_dir as cache_dir_of
@@ -30,6 +31,12 @@ from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.version import JOINT_SYNTHESIS_VERSION, SYNTHESIS_VERSION
 from trustroute.policies.synthesize_spec import synthesize_spec as synthesize
+
+if TYPE_CHECKING:
+    from trustroute.participants.driver_population import DriverPopulation
+    from trustroute.policies.synthesis.population import Objective
+
+Loaded = TypeVar("Loaded")
 
 AWARE_HORIZON = DEFAULT_FALLBACK_AFTER   # synthesize for the junctions before the fallback takes over
 AWARE_TAU = 1e-3
@@ -58,8 +65,8 @@ def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str
     return folder / f"aware-{label}-{key.hexdigest()[:16]}.json"
 
 
-def _cached_policy(path: Path, load: Callable[[Path], RoutingPolicy],
-                   notice: Callable[[str], object]) -> RoutingPolicy | None:
+def _cached_policy(path: Path, load: Callable[[Path], Loaded],
+                   notice: Callable[[str], object]) -> Loaded | None:
     """The cache entry at `path`, read by `load`, if it verifies; a damaged entry is discarded
     (with a notice)."""
     if not path.exists() and not array_path(path).exists():
@@ -128,7 +135,7 @@ def resolve_policy(name_or_path: str, town: Town, driver: DriverModel, spec: Spe
 
 
 @contextlib.contextmanager
-def synthesis_progress(description: str, enabled: bool):
+def synthesis_progress(description: str, enabled: bool) -> Iterator[Callable[[float, float], None]]:
     """A tqdm bar of synthesis rounds with the current bounds; yields the `on_iteration` callback."""
     from tqdm import tqdm
 
@@ -145,7 +152,7 @@ POPULATION_TIME_LIMIT = 60.0     # per synthesis run of a population policy
 POPULATION_GRID_POINTS = 6       # candidate type priors of the robust objective
 
 
-def population_cache_path(town: Town, population, spec: Spec, objective: str,
+def population_cache_path(town: Town, population: DriverPopulation, spec: Spec, objective: str,
                           cache_dir: str | Path | None, horizon: int | None = AWARE_HORIZON,
                           belief_rule: BeliefRule = "bayes") -> Path:
     """Cache entry of the population policy ("robust" or "bayes" objective) for these inputs: the
@@ -159,10 +166,18 @@ def population_cache_path(town: Town, population, spec: Spec, objective: str,
     return folder / f"{objective}-{label}-{key.hexdigest()[:16]}.json"
 
 
-def population_policy(town: Town, population, spec: Spec, objective: str = "robust",
+def is_objective(name: str) -> TypeGuard[Objective]:
+    """`name` is an objective of population synthesis ("bayes" or "robust")."""
+    from trustroute.policies.synthesis.population import OBJECTIVES
+
+    return name in OBJECTIVES
+
+
+def population_policy(town: Town, population: DriverPopulation, spec: Spec, objective: str = "robust",
                       cache_dir: str | Path | None = None, horizon: int | None = AWARE_HORIZON,
                       belief_rule: BeliefRule = "bayes", population_source: str = "",
-                      notice: Callable[[str], object] = _stderr, progress: bool = False):
+                      notice: Callable[[str], object] = _stderr,
+                      progress: bool = False) -> tuple[RoutingPolicy, DriverModel, Spec]:
     """The cached policy of `objective` for driver population `population` (a DriverPopulation),
     synthesized when missing or damaged (policies/synthesis/population.py): (policy, the lifted
     driver model its AV filters with, the lifted spec). One type: the "aware" policy of that
@@ -183,7 +198,7 @@ def population_policy(town: Town, population, spec: Spec, objective: str = "robu
                 model, lifted_spec)
     path = population_cache_path(town, population, spec, objective, cache_dir, horizon, belief_rule)
 
-    def cached():
+    def cached() -> tuple[RoutingPolicy, DriverModel, Spec] | None:
         return _cached_policy(
             path, lambda p: load_population_policy(p, town, population, spec, population_source), notice)
 
@@ -196,6 +211,8 @@ def population_policy(town: Town, population, spec: Spec, objective: str = "robu
         found = cached()
         if found is not None:
             return found
+        if not is_objective(objective):
+            raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
         with synthesis_progress(f"synthesizing {objective} for {spec.name}", progress) as on_iteration:
             made = synthesize_population(town, population, spec, objective, tau=AWARE_TAU,
                                          time_limit=POPULATION_TIME_LIMIT, horizon=horizon,

@@ -32,8 +32,12 @@ if TYPE_CHECKING:
     from trustroute.participants.driver_model import DriverModel
     from trustroute.policies.evaluation.plain import Evaluation
     from trustroute.policies.logic.spec import Spec
+    from trustroute.policies.model.trust_pomdp import BeliefRule
     from trustroute.policies.routing.protocol import RoutingPolicy
     from trustroute.policies.synthesis.search import SynthesisResult
+
+    # a policy argument: "free", "aware", a policy file, a SynthesisResult or any RoutingPolicy
+    PolicyLike = str | Path | SynthesisResult | RoutingPolicy
 
 __all__ = [
     "analyze",
@@ -80,7 +84,8 @@ def load_spec(spec: PathLike, town: Town | None = None) -> Spec:
     return load(path, town if town is not None else load_town())
 
 
-def _problem(spec: Spec | PathLike, town: Town | None, driver: DriverModel | None):
+def _problem(spec: Spec | PathLike, town: Town | None,
+             driver: DriverModel | None) -> tuple[Town, DriverModel, Spec]:
     """(town, driver model, spec) with the packaged defaults filled in."""
     from trustroute.policies.logic.spec import Spec
 
@@ -92,7 +97,7 @@ def _problem(spec: Spec | PathLike, town: Town | None, driver: DriverModel | Non
 
 def synthesize(spec: Spec | PathLike, town: Town | None = None, driver: DriverModel | None = None, *,
                horizon: int | None = None, tau: float = 1e-3, time_limit: float = 60.0,
-               belief_rule: str = "bayes", out: PathLike | None = None) -> SynthesisResult:
+               belief_rule: BeliefRule = "bayes", out: PathLike | None = None) -> SynthesisResult:
     """A trust-aware policy for `spec` with certified bounds `result.lower <= Pr_max <= result.upper`.
 
     horizon: at most this many junctions (None: unbounded). tau: stop when upper - lower <= tau.
@@ -112,7 +117,7 @@ def synthesize(spec: Spec | PathLike, town: Town | None = None, driver: DriverMo
     return result
 
 
-def _policy(policy: object, town: Town, driver: DriverModel, spec: Spec,
+def _policy(policy: PolicyLike, town: Town, driver: DriverModel, spec: Spec,
             cache_dir: PathLike | None) -> RoutingPolicy:
     """A RoutingPolicy from "free", "aware", a policy file path, a SynthesisResult or a policy."""
     from trustroute.policies.resolve import resolve_policy
@@ -125,9 +130,9 @@ def _policy(policy: object, town: Town, driver: DriverModel, spec: Spec,
     return policy
 
 
-def evaluate(spec: Spec | PathLike, policy: object = "free", town: Town | None = None,
+def evaluate(spec: Spec | PathLike, policy: PolicyLike = "free", town: Town | None = None,
              driver: DriverModel | None = None, *, fallback_after: int | None = 20,
-             max_junctions: int = 60, belief_rule: str = "bayes",
+             max_junctions: int = 60, belief_rule: BeliefRule = "bayes",
              cache_dir: PathLike | None = None) -> Evaluation:
     """The exact probability that `policy` satisfies `spec`, its expected final trust and how
     episodes end (no sampling; `value.lower`/`value.upper` certify it).
@@ -146,7 +151,7 @@ def evaluate(spec: Spec | PathLike, policy: object = "free", town: Town | None =
                  max_junctions=max_junctions, belief_rule=belief_rule)
 
 
-def run_episode(spec: Spec | PathLike, policy: object = "free", town: Town | None = None,
+def run_episode(spec: Spec | PathLike, policy: PolicyLike = "free", town: Town | None = None,
                 driver: DriverModel | None = None, *, seed: int = 0, engine: str = "sumo",
                 initial_trust: int | None = None, rrd: PathLike | None = None,
                 cache_dir: PathLike | None = None) -> EpisodeRecord:

@@ -13,11 +13,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from trustroute.harness.simulation.sumo_start import Sumo
+
 TYPE_ID = "trustroute_background"
 PREFIX = "bg"
 
 
-def define_type(sumo) -> None:
+def define_type(sumo: Sumo) -> None:
     sumo.vehicletype.copy("DEFAULT_VEHTYPE", TYPE_ID)
     sumo.vehicletype.setColor(TYPE_ID, (150, 200, 150, 255))
 
@@ -31,7 +33,7 @@ class BackgroundTraffic:
     inserted: int = 0
     live: set[str] = field(default_factory=set)
 
-    def start(self, sumo) -> None:
+    def start(self, sumo: Sumo) -> None:
         if self.count <= 0:
             return
         define_type(sumo)
@@ -40,7 +42,7 @@ class BackgroundTraffic:
         for _ in range(self.count):
             self._add(sumo, anywhere=True)
 
-    def _add(self, sumo, anywhere: bool) -> None:
+    def _add(self, sumo: Sumo, anywhere: bool) -> None:
         for _ in range(20):   # a random pair can be unroutable only in odd towns: draw again
             start, end = self.rng.choice(len(self.roads), size=2, replace=False)
             fraction = float(self.rng.uniform(0.1, 0.9)) if anywhere else 0.0
@@ -57,7 +59,7 @@ class BackgroundTraffic:
                          departPos=f"{position:.2f}", departSpeed="desired")
         self.live.add(vehicle_id)
 
-    def step(self, sumo) -> None:
+    def step(self, sumo: Sumo) -> None:
         """Replace arrived vehicles (called every step only when there is background traffic)."""
         if sumo.simulation.getArrivedNumber():
             for vehicle_id in sumo.simulation.getArrivedIDList():

@@ -22,6 +22,7 @@ import queue
 import threading
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 import gymnasium
 import numpy as np
@@ -36,6 +37,15 @@ from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.spec import Spec, load_spec
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
+if TYPE_CHECKING:
+    from trustroute.harness.simulation.episode import EpisodeRecord
+    from trustroute.policies.model.trust_pomdp import BeliefRule
+
+    # What the episode thread hands the agent's thread: a decision to make, or how the episode ended.
+    Decide = tuple[Literal["decide"], DecisionContext]
+    Ended = tuple[Literal["end"], EpisodeRecord]
+    EpisodeMessage = Decide | Ended | tuple[Literal["aborted"], None] | tuple[Literal["error"], BaseException]
+
 ENV_ID = "trustroute/TrustRouting-v0"
 ENGINES: tuple[str, ...] = ("model", "sumo")
 DEFAULT_JUNCTION_CAP = EpisodeSetup.junction_cap
@@ -45,7 +55,11 @@ class EpisodeAborted(Exception):
     """Raised inside the episode thread when the environment is reset or closed mid-episode."""
 
 
-_ABORT = object()
+class _Abort:
+    """The environment's answer, instead of a junction, that ends the episode thread's episode."""
+
+
+_ABORT = _Abort()
 
 
 class AgentPolicy(RoutingPolicy):
@@ -58,19 +72,20 @@ class AgentPolicy(RoutingPolicy):
 
     name = "agent"
 
-    def __init__(self, to_agent: queue.Queue, to_episode: queue.Queue) -> None:
+    def __init__(self, to_agent: queue.Queue[EpisodeMessage], to_episode: queue.Queue[str | _Abort]) -> None:
         self._to_agent = to_agent
         self._to_episode = to_episode
 
     def next_junction(self, context: DecisionContext) -> str:
         self._to_agent.put(("decide", context))
         answer = self._to_episode.get()
-        if answer is _ABORT:
+        if isinstance(answer, _Abort):
             raise EpisodeAborted
         return answer
 
 
-def _episode_thread(run: Callable, policy: AgentPolicy, to_agent: queue.Queue) -> None:
+def _episode_thread(run: Callable[[AgentPolicy], EpisodeRecord], policy: AgentPolicy,
+                    to_agent: queue.Queue[EpisodeMessage]) -> None:
     try:
         to_agent.put(("end", run(policy)))
     except EpisodeAborted:
@@ -114,7 +129,7 @@ class TrustRoutingEnv(gymnasium.Env):
 
     def __init__(self, spec: Spec | str | Path = "phi1", town: Town | str | Path | None = None,
                  driver: DriverModel | str | Path | None = None, engine: str = "model",
-                 junction_cap: int = DEFAULT_JUNCTION_CAP, belief_rule: str = "bayes",
+                 junction_cap: int = DEFAULT_JUNCTION_CAP, belief_rule: BeliefRule = "bayes",
                  report_accuracy: float = DEFAULT_REPORT_ACCURACY, net_path: str | Path | None = None,
                  render_mode: str | None = None) -> None:
         if engine not in ENGINES:
@@ -143,15 +158,16 @@ class TrustRoutingEnv(gymnasium.Env):
             "junctions": spaces.Discrete(self.setup.junction_cap + 1),
         })
         self.render_mode = None
-        self.last_record = None      # the EpisodeRecord of the last finished episode
+        self.last_record: EpisodeRecord | None = None      # of the last finished episode
         self._episodes = 0
         self._thread: threading.Thread | None = None
-        self._to_agent: queue.Queue = queue.Queue()
-        self._to_episode: queue.Queue = queue.Queue()
+        self._to_agent: queue.Queue[EpisodeMessage] = queue.Queue()
+        self._to_episode: queue.Queue[str | _Abort] = queue.Queue()
         self._road = ""
 
     # -- the episode thread -------------------------------------------------------------------
-    def _runner(self, driver: SyntheticDriver, episode_id: str, sumo_seed: int) -> Callable:
+    def _runner(self, driver: SyntheticDriver, episode_id: str,
+                sumo_seed: int) -> Callable[[AgentPolicy], EpisodeRecord]:
         setup = self.setup
         if self.engine == "model":
             from trustroute.harness.simulation.model_engine import run_model_episode
@@ -170,16 +186,22 @@ class TrustRoutingEnv(gymnasium.Env):
             self._to_episode.put(_ABORT)
             while self._to_agent.get()[0] not in ("aborted", "end", "error"):
                 pass
-        self._thread.join()
+        self._join_thread()
+
+    def _join_thread(self) -> None:
+        """Wait for the episode thread, which has ended or is ending."""
+        if self._thread is not None:
+            self._thread.join()
         self._thread = None
 
-    def _receive(self) -> tuple[str, object]:
-        kind, payload = self._to_agent.get()
-        if kind == "error":
-            self._thread.join()
-            self._thread = None
-            raise payload
-        return kind, payload
+    def _receive(self) -> Decide | Ended:
+        message = self._to_agent.get()
+        if message[0] == "error":
+            self._join_thread()
+            raise message[1]
+        if message[0] == "aborted":   # only `_abort` stops an episode, and it reads the answer itself
+            raise RuntimeError("the episode thread stopped without being asked to")
+        return message
 
     # -- observations ---------------------------------------------------------------------------
     def _observation(self, road: str, dfa_state: int, belief: np.ndarray, junctions: int) -> dict:
@@ -200,9 +222,8 @@ class TrustRoutingEnv(gymnasium.Env):
     def _decision(self, context: DecisionContext) -> dict:
         return self._observation(context.road, context.dfa_state, context.belief, context.junctions_driven)
 
-    def _final(self, record) -> tuple[dict, float, bool, bool, dict]:
-        self._thread.join()
-        self._thread = None
+    def _final(self, record: EpisodeRecord) -> tuple[dict, float, bool, bool, dict]:
+        self._join_thread()
         self.last_record = record
         last = record.roads.iloc[-1]
         summary = dict(record.summary)
@@ -228,23 +249,22 @@ class TrustRoutingEnv(gymnasium.Env):
                                         args=(self._runner(driver, episode_id, sumo_seed), policy,
                                               self._to_agent))
         self._thread.start()
-        kind, payload = self._receive()
-        if kind != "decide":
-            self._thread.join()
-            self._thread = None
+        message = self._receive()
+        if message[0] != "decide":
+            self._join_thread()
             raise ValueError(f"spec {self.scldtl_spec.name!r} is decided on its start road "
-                             f"({payload.summary['end_reason']}): there is no junction to choose")
-        return self._decision(payload), self._info()
+                             f"({message[1].summary['end_reason']}): there is no junction to choose")
+        return self._decision(message[1]), self._info()
 
     def step(self, action: int) -> tuple[dict, float, bool, bool, dict]:
         if self._thread is None:
             raise RuntimeError("the episode is over (or never started): call reset()")
         legal = self._legal[self._road]
         self._to_episode.put(legal[int(action) % len(legal)])
-        kind, payload = self._receive()
-        if kind == "decide":
-            return self._decision(payload), 0.0, False, False, self._info()
-        return self._final(payload)
+        message = self._receive()
+        if message[0] == "decide":
+            return self._decision(message[1]), 0.0, False, False, self._info()
+        return self._final(message[1])
 
     def close(self) -> None:
         self._abort()

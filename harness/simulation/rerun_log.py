@@ -32,12 +32,22 @@ belief plots, the state timeline, the belief bars and the event log on the right
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import pandas as pd
 
 from trustroute.harness.simulation.driving_style import MANUAL
+
+if TYPE_CHECKING:
+    import rerun as rr
+    import rerun.blueprint as rrb
+    from sumolib.net import Net
+
+    from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+    from trustroute.networks.town import Town
 
 TIMELINE = "sim_time"
 AUTO_COLOR = (240, 240, 240)
@@ -73,13 +83,29 @@ ENTITIES = (
 )
 
 
-def _net(net_path: Path):
+class EpisodeLogs(Protocol):
+    """What a recording reads of an episode's record (harness/simulation/episode.py, EpisodeRecord)."""
+
+    @property
+    def summary(self) -> Mapping[str, Any]: ...   # the summary row: values of several types
+
+    @property
+    def roads(self) -> pd.DataFrame: ...
+
+    @property
+    def kinematics(self) -> pd.DataFrame: ...
+
+    @property
+    def incidents(self) -> pd.DataFrame: ...
+
+
+def _net(net_path: Path) -> Net:
     import sumolib
 
     return sumolib.net.readNet(str(net_path), withInternal=True, withPedestrianConnections=True)
 
 
-def lane_strips(net) -> list[np.ndarray]:
+def lane_strips(net: Net) -> list[np.ndarray]:
     """Shapes of the net's vehicle lanes, sidewalks and crossings (internal lanes left out)."""
     strips = []
     for edge in net.getEdges(withInternal=True):
@@ -90,7 +116,7 @@ def lane_strips(net) -> list[np.ndarray]:
     return strips
 
 
-def road_shape(net, road: str) -> np.ndarray:
+def road_shape(net: Net, road: str) -> np.ndarray:
     """The centre line of a road's vehicle lane (the last lane: sidewalks come first)."""
     lanes = net.getEdge(road).getLanes()
     return np.asarray(lanes[-1].getShape(), dtype=np.float32)
@@ -144,11 +170,12 @@ def trail_strips(x: np.ndarray, y: np.ndarray, time: np.ndarray) -> tuple[np.nda
     return points, lengths
 
 
-def _valid_report(value: object) -> bool:
-    return not pd.isna(value) and int(value) >= 1
+def _valid_report(value: float | None) -> bool:
+    """A reported trust level was given (None, NaN and -1 mean none)."""
+    return value is not None and not pd.isna(value) and int(value) >= 1
 
 
-def episode_blueprint():
+def episode_blueprint() -> rrb.Blueprint:
     """The default layout: a large map, the trust and belief plots, states, belief bars, events."""
     import rerun.blueprint as rrb
 
@@ -192,7 +219,7 @@ def episode_blueprint():
     )
 
 
-def write_recording(path: Path, net_path: Path, record, setup) -> Path:
+def write_recording(path: Path, net_path: Path, record: EpisodeLogs, setup: EpisodeSetup) -> Path:
     """Write `record` (an EpisodeRecord of the SUMO engine) as a Rerun .rrd at `path`, with its blueprint."""
     import rerun as rr
 
@@ -213,7 +240,7 @@ def write_recording(path: Path, net_path: Path, record, setup) -> Path:
     return path
 
 
-def _log_map(rec, net, setup) -> None:
+def _log_map(rec: rr.RecordingStream, net: Net, setup: EpisodeSetup) -> None:
     import rerun as rr
 
     town, spec = setup.town, setup.spec
@@ -268,7 +295,7 @@ def _log_map(rec, net, setup) -> None:
         )
 
 
-def _log_ego(rec, kinematics: pd.DataFrame) -> None:
+def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame) -> None:
     import rerun as rr
 
     time = kinematics["time"].to_numpy(dtype=float)
@@ -309,7 +336,7 @@ def _log_ego(rec, kinematics: pd.DataFrame) -> None:
     )
 
 
-def _log_plan(rec, net, roads: pd.DataFrame, town) -> None:
+def _log_plan(rec: rr.RecordingStream, net: Net, roads: pd.DataFrame, town: Town) -> None:
     import rerun as rr
 
     for row in roads.itertuples(index=False):
@@ -330,7 +357,7 @@ def _log_plan(rec, net, roads: pd.DataFrame, town) -> None:
         )
 
 
-def _log_incidents(rec, incidents: pd.DataFrame) -> None:
+def _log_incidents(rec: rr.RecordingStream, incidents: pd.DataFrame) -> None:
     import rerun as rr
 
     for row in incidents.itertuples(index=False):
@@ -362,7 +389,7 @@ def _observation_times(roads: pd.DataFrame) -> np.ndarray:
     return np.where(np.isnan(times), entered, times)
 
 
-def _log_series(rec, roads: pd.DataFrame, setup) -> None:
+def _log_series(rec: rr.RecordingStream, roads: pd.DataFrame, setup: EpisodeSetup) -> None:
     import rerun as rr
 
     times = _observation_times(roads)
@@ -418,7 +445,7 @@ def _log_series(rec, roads: pd.DataFrame, setup) -> None:
     )
 
 
-def episode_events(record) -> list[tuple[float, str, str]]:
+def episode_events(record: EpisodeLogs) -> list[tuple[float, str, str]]:
     """(sim time, level, text) of everything worth a line in the event log, in time order."""
     roads, incidents = record.roads, record.incidents
     times = _observation_times(roads)
@@ -458,7 +485,7 @@ def episode_events(record) -> list[tuple[float, str, str]]:
     return sorted(events, key=lambda e: e[0])
 
 
-def _log_events(rec, record) -> None:
+def _log_events(rec: rr.RecordingStream, record: EpisodeLogs) -> None:
     import rerun as rr
 
     events = episode_events(record)

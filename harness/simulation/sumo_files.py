@@ -18,10 +18,14 @@ from __future__ import annotations
 
 import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 from xml.sax.saxutils import quoteattr
 
 from trustroute.core.errors import InputError
-from trustroute.harness.simulation.sumo_start import SumoConfig
+from trustroute.harness.simulation.sumo_start import Sumo, SumoConfig
+
+if TYPE_CHECKING:
+    from trustroute.harness.simulation.incidents.base import EgoState
 
 CONFIG_FILE = "episode.sumocfg"
 
@@ -75,7 +79,7 @@ class VehicleTypeCollector:
     def __init__(self) -> None:
         self.types: dict[str, dict[str, str]] = {}
 
-    def __call__(self, sumo, ego, mode, road) -> None:
+    def __call__(self, sumo: Sumo, ego: EgoState, mode: str, road: str) -> None:
         del ego, mode, road
         for type_id in sumo.vehicletype.getIDList():
             if type_id in self.types or type_id.startswith("DEFAULT_") or "@" in type_id:
@@ -109,10 +113,10 @@ def finish_route_file(directory: Path, types: dict[str, dict[str, str]]) -> Path
     movers = [element for element in root if "depart" in element.attrib]
     for element in movers:
         if "type" in element.attrib:
-            element.set("type", element.get("type").split("@")[0])
+            element.set("type", element.attrib["type"].split("@")[0])
         root.remove(element)
     # SUMO loads a route file in departure order (unfinished vehicles, like the ego, come last).
-    root.extend(sorted(movers, key=lambda e: float(e.get("depart"))))
+    root.extend(sorted(movers, key=lambda e: float(e.attrib["depart"])))
     for position, (type_id, attributes) in enumerate(sorted(types.items())):
         root.insert(position, ET.Element("vType", {"id": type_id, **attributes}))
     ET.indent(tree, "    ")

@@ -12,6 +12,7 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
+from typing import Any, Protocol
 
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.performance import DEFAULT_LIMITS, PerformanceLimits
@@ -32,6 +33,35 @@ class SumoConfig:
     background_vehicles: int = 0
     gui: bool = False               # run in sumo-gui through TraCI (needs a display) instead of libsumo
     output_dir: str | None = None   # also write SUMO's own FCD and route outputs here (sumo_files.py)
+
+
+class Sumo(Protocol):
+    """The SUMO API a simulation is driven through: the libsumo module, or traci with its constants
+    (`_TraciWithConstants`, sumo-gui). Neither ships type information, so each domain is Any; the
+    protocol names the domains and constants the harness uses."""
+
+    vehicle: Any
+    vehicletype: Any
+    person: Any
+    lane: Any
+    edge: Any
+    junction: Any
+    route: Any
+    simulation: Any
+    TraCIException: type[Exception]
+    VAR_LANEPOSITION: int
+    VAR_POSITION: int
+    VAR_SPEED: int
+    VAR_ACCELERATION: int
+    VAR_LANE_ID: int
+    VAR_LEADER: int
+    VAR_ANGLE: int
+
+    def start(self, cmd: list[str]) -> object: ...
+
+    def simulationStep(self, step: float = 0.0) -> object: ...
+
+    def close(self) -> None: ...
 
 
 @lru_cache(maxsize=1)
@@ -75,7 +105,7 @@ def native_output_options(config: SumoConfig) -> list[str]:
     ]
 
 
-def _libsumo():
+def _libsumo() -> Sumo:
     import libsumo
 
     return libsumo
@@ -89,7 +119,7 @@ class _TraciWithConstants:
 
         self._traci = traci
 
-    def __getattr__(self, name: str):
+    def __getattr__(self, name: str) -> Any:   # a traci attribute or constant: untyped
         try:
             return getattr(self._traci, name)
         except AttributeError:
@@ -116,7 +146,7 @@ class HotCalls:
     colliding_number: Callable[[], int]
 
 
-def hot_calls(sumo) -> HotCalls:
+def hot_calls(sumo: Sumo) -> HotCalls:
     """The per-step calls as libsumo's native functions: its Python wrappers (a staticmethod per
     call, and simulationStep's step-listener pass, which episodes do not use) cost a Python frame
     each, about 500 per episode. With TraCI (sumo-gui) or a traced libsumo, the public API."""
@@ -131,7 +161,7 @@ def hot_calls(sumo) -> HotCalls:
 
 
 @contextlib.contextmanager
-def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[object]:
+def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sumo]:
     """Start libsumo on `net_path`, yield the libsumo module, always close it.
 
     An unreadable net or an unusable SUMO installation is an InputError (one line, exit 2).
@@ -144,7 +174,7 @@ def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[obje
         check_display()
         # sumo-gui starts running at once and closes at the end; same options as the libsumo run.
         command = [find_binary("sumo-gui"), *command[1:], "--start", "true", "--quit-on-end", "true"]
-        sumo = _TraciWithConstants()
+        sumo: Sumo = _TraciWithConstants()
     else:
         sumo = _libsumo()
     try:

@@ -12,12 +12,14 @@ from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from trustroute.core.errors import InputError
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import participant_models, participant_types
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import BeliefRule, checked_belief_rule
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 
@@ -45,12 +47,17 @@ class StudyContext:
         return self.condition_setups.get((spec_name, condition), self.setups[spec_name])
 
 
+def belief_rule(config: StudyConfig) -> BeliefRule:
+    """The AV's filter of the study (a name `load_study_config` has checked)."""
+    return checked_belief_rule(config.belief_rule)
+
+
 def aware_policy_path(town: Town, driver: DriverModel, spec: Spec, config: StudyConfig) -> Path:
     """Where the "aware" policy of this study is cached (the resolver's entry for its horizon and filter)."""
     from trustroute.policies.resolve import aware_cache_path
 
     return aware_cache_path(town, driver, spec, config.policy_cache, aware_horizon(config),
-                            config.belief_rule)
+                            belief_rule(config))
 
 
 def aware_horizon(config: StudyConfig) -> int:
@@ -67,19 +74,25 @@ def resolve_condition_policy(
     from trustroute.policies.resolve import resolve_policy
 
     return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
-                          config.belief_rule, progress=progress)
+                          belief_rule(config), progress=progress)
 
 
-def robust_condition_policy(town: Town, spec: Spec, config: StudyConfig, progress: bool = False):
+def robust_condition_policy(town: Town, spec: Spec, config: StudyConfig,
+                            progress: bool = False) -> tuple[RoutingPolicy, DriverModel, Spec]:
     """The "robust" condition: the policy of `config.robust_objective` for `config.robust_population`
     (synthesized and cached if missing), with the type-aware model and lifted spec its AV uses."""
     from trustroute.participants.driver_population import load_driver_population
     from trustroute.policies.resolve import population_policy
 
-    population = load_driver_population(config.robust_population)
+    source = config.robust_population
+    if source is None:  # load_study_config refuses such a config
+        raise InputError(config.source_path, "study.robust_population", "the 'robust' condition needs the "
+                         "driver population its policy is made for",
+                         'add robust_population = "types.json" to [study] (docs/driver_types.md)')
+    population = load_driver_population(source)
     return population_policy(town, population, spec, config.robust_objective, config.policy_cache,
-                             aware_horizon(config), config.belief_rule,
-                             population_source=config.robust_population, progress=progress)
+                             aware_horizon(config), belief_rule(config),
+                             population_source=source, progress=progress)
 
 
 _CONTEXTS: OrderedDict[StudyConfig, StudyContext] = OrderedDict()
@@ -120,7 +133,7 @@ def _build_study_context(config: StudyConfig, progress: bool) -> StudyContext:
             junction_cap=config.junction_cap,
             fallback_after=config.fallback_after,
             report_every=config.report_every,
-            belief_rule=config.belief_rule,
+            belief_rule=belief_rule(config),
         )
         for name, spec in specs.items()
     }

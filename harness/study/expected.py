@@ -13,7 +13,7 @@ from pathlib import Path
 
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.context import StudyContext, aware_policy_path, study_context
+from trustroute.harness.study.context import StudyContext, aware_policy_path, belief_rule, study_context
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 
@@ -39,10 +39,10 @@ def expected_values(config: StudyConfig) -> dict:
             policy,
             fallback_after=config.fallback_after,
             max_junctions=config.junction_cap,
-            belief_rule=config.belief_rule,
+            belief_rule=belief_rule(config),
             truth=pomdp if own else None,
         )
-        entry = {
+        entry: dict[str, float | None] = {
             "exact_lower": value.lower,
             "exact_upper": value.upper,
             "expected_final_trust": value.expected_final_trust,

@@ -127,8 +127,12 @@ def _missing(value: object) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and value == -1
 
 
-def _equal(a: object, b: object) -> bool:
-    if _missing(a) or _missing(b):
+# A roads-table value as `tolist()` gives it (ints and bools are floats to the type checker).
+Cell = str | float | None
+
+
+def _equal(a: Cell, b: Cell) -> bool:
+    if _missing(a) or _missing(b) or a is None or b is None:   # None is missing
         return _missing(a) and _missing(b)
     if isinstance(a, (float, np.floating)) or isinstance(b, (float, np.floating)):
         return float(a) == float(b)

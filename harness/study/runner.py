@@ -27,6 +27,7 @@ import traceback
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from trustroute.core.dataset import LOCK_FILE, STUDY_FILE
 from trustroute.core.errors import InputError
@@ -36,6 +37,12 @@ from trustroute.harness.study.expected import expected_values
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import finished_episodes, sync_parts, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
+
+    from trustroute.harness.simulation.episode import EpisodeRecord
+    from trustroute.harness.simulation.sumo_start import SumoConfig
 
 DEFAULT_ATTEMPTS = 2
 CONSOLIDATION_ROUNDS = 3
@@ -85,7 +92,7 @@ def recording_path(study_dir: Path, episode_id: str) -> Path:
 
 
 def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path | None = None,
-                        sumo_config=None):
+                        sumo_config: SumoConfig | None = None) -> EpisodeRecord:
     """Run the planned episode `task` exactly as the study runs it: the participant's driver model
     (population draw), the driver's Generator from the task's seed sequence (so the same initial trust
     and every later draw), SUMO's seed, the cell's setup and policy. Returns the EpisodeRecord.
@@ -150,12 +157,16 @@ def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
 # -- backends: each yields outcomes as they complete -------------------------------------------
 
 
-def _serial(function: Callable, tasks: list) -> Iterator:
+EpisodeFunction = Callable[[EpisodeTask], EpisodeOutcome]   # run_task with the config and directory bound
+
+
+def _serial(function: EpisodeFunction, tasks: list[EpisodeTask]) -> Iterator[EpisodeOutcome]:
     for task in tasks:
         yield function(task)
 
 
-def _process_pool(function: Callable, tasks: list, workers: int) -> Iterator:
+def _process_pool(function: EpisodeFunction, tasks: list[EpisodeTask],
+                  workers: int) -> Iterator[EpisodeOutcome]:
     from trustroute.harness.study.workers import process_pool
 
     def died(task: EpisodeTask, reason: str) -> EpisodeOutcome:
@@ -164,7 +175,8 @@ def _process_pool(function: Callable, tasks: list, workers: int) -> Iterator:
     return process_pool(function, tasks, workers, died)
 
 
-def _dask(function: Callable, tasks: list, scheduler: str, workers: int, processes: bool) -> Iterator:
+def _dask(function: EpisodeFunction, tasks: list[EpisodeTask], scheduler: str, workers: int,
+          processes: bool) -> Iterator[EpisodeOutcome]:
     from distributed import Client, LocalCluster, as_completed
 
     cluster = None
@@ -198,8 +210,9 @@ def _dask(function: Callable, tasks: list, scheduler: str, workers: int, process
 
 
 def _outcomes(
-    function: Callable, tasks: list, workers: int, scheduler: str | None, dask_processes: bool = True
-) -> Iterator:
+    function: EpisodeFunction, tasks: list[EpisodeTask], workers: int, scheduler: str | None,
+    dask_processes: bool = True,
+) -> Iterator[EpisodeOutcome]:
     if not tasks:
         return iter(())
     if scheduler is not None:
@@ -370,7 +383,7 @@ def _run_locked(
     )
 
 
-def _progress_bar(total: int, initial: int, enabled: bool):
+def _progress_bar(total: int, initial: int, enabled: bool) -> tqdm:
     from tqdm import tqdm
 
     return tqdm(

@@ -26,10 +26,17 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
+from multiprocessing.connection import Connection
+from multiprocessing.context import DefaultContext
+from types import FrameType
+from typing import Any, Generic, TypeVar
 
 PR_SET_PDEATHSIG = 1
 PARENT_POLL_SECONDS = 0.5
 SHUTDOWN_SECONDS = 2.0
+
+Task = TypeVar("Task")
+Result = TypeVar("Result")
 
 
 class Terminated(KeyboardInterrupt):
@@ -43,7 +50,7 @@ def sigterm_raises() -> Iterator[None]:
         yield
         return
 
-    def handler(signum, frame):  # noqa: ARG001 - the signal API's signature
+    def handler(signum: int, frame: FrameType | None) -> None:  # noqa: ARG001 - the signal API's signature
         raise Terminated()
 
     previous = signal.signal(signal.SIGTERM, handler)
@@ -73,7 +80,7 @@ def die_with_parent(parent_pid: int) -> None:
         threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()
 
 
-def _worker_main(function: Callable, connection, parent_pid: int) -> None:
+def _worker_main(function: Callable[[Any], object], connection: Connection, parent_pid: int) -> None:
     die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
@@ -98,13 +105,13 @@ def describe_exit(exitcode: int | None) -> str:
     return f"exited with code {exitcode}"
 
 
-class _Worker:
-    def __init__(self, context, function: Callable) -> None:
+class _Worker(Generic[Task]):
+    def __init__(self, context: DefaultContext, function: Callable[[Task], object]) -> None:
         self.connection, child = context.Pipe()
         self.process = context.Process(target=_worker_main, args=(function, child, os.getpid()), daemon=True)
         self.process.start()
         child.close()
-        self.task = None
+        self.task: Task | None = None
 
     def stop(self) -> None:
         with contextlib.suppress(OSError, ValueError):
@@ -113,8 +120,8 @@ class _Worker:
 
 
 def process_pool(
-    function: Callable, tasks: list, workers: int, died: Callable[[object, str], object]
-) -> Iterator:
+    function: Callable[[Task], Result], tasks: list[Task], workers: int, died: Callable[[Task, str], Result]
+) -> Iterator[Result]:
     """Yield `function(task)` for every task, as they complete, on `workers` processes.
 
     A task whose worker died yields `died(task, reason)` instead (e.g. a failed outcome)."""
@@ -130,14 +137,16 @@ def process_pool(
                         worker.connection.send(worker.task)
                     except OSError:
                         pass  # it died idle; the wait below sees its pipe closed
-            busy = {w.connection: w for w in pool if w.task is not None}
-            for connection in multiprocessing.connection.wait(list(busy)):
-                worker = busy[connection]
+            # keyed by object: wait returns the connections it is given, typed as any waitable
+            busy: dict[object, tuple[_Worker[Task], Task]] = {
+                w.connection: (w, w.task) for w in pool if w.task is not None}
+            for connection in multiprocessing.connection.wait([w.connection for w, _ in busy.values()]):
+                worker, task = busy[connection]
                 try:
-                    result = connection.recv()
+                    result = worker.connection.recv()
                 except (EOFError, OSError):
                     worker.process.join(SHUTDOWN_SECONDS)
-                    task, worker.task = worker.task, None
+                    worker.task = None
                     pool[pool.index(worker)] = _Worker(context, function)
                     worker.connection.close()
                     yield died(task, f"worker process {describe_exit(worker.process.exitcode)}")
@@ -148,7 +157,7 @@ def process_pool(
         shutdown(pool)
 
 
-def shutdown(pool: list[_Worker]) -> None:
+def shutdown(pool: list[_Worker[Task]]) -> None:
     """Stop every worker: ask, then SIGTERM, then SIGKILL; never leaves one behind."""
     for worker in pool:
         worker.stop()

@@ -378,7 +378,7 @@ def _backward_closure(successors: list[set[int]], seed: np.ndarray, every: bool)
     for q, targets in enumerate(successors):
         for t in targets:
             predecessors[t].append(q)
-    work = list(np.flatnonzero(inside))
+    work: list[int] = np.flatnonzero(inside).tolist()
     while work:
         t = int(work.pop())
         for q in predecessors[t]:
@@ -410,9 +410,9 @@ def dfa_from_formula(formula: Formula, atoms: Sequence[str] | None = None, max_s
     valid = _backward_closure(successors, np.array([f == TRUE for f in builder.formulas]), every=True)
     roots = list(builder.roots)
     nodes = list(builder.nodes)
-    for q in np.flatnonzero(valid):
-        roots[q] = len(nodes)  # valid obligations are accepting and absorbing
-        nodes.append((-1, int(q), int(q)))
+    for valid_state in np.flatnonzero(valid):
+        roots[valid_state] = len(nodes)  # valid obligations are accepting and absorbing
+        nodes.append((-1, int(valid_state), int(valid_state)))
     block, pool, block_roots = _minimise(nodes, roots, valid)
 
     # Number the minimal states breadth-first from the initial state (deterministic ids).

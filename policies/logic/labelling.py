@@ -79,7 +79,8 @@ class Labeller:
         road_index = {road: i for i, road in enumerate(town.states)}
         state_columns, belief_columns, trust_columns = [], [], []
         trust_roads, trust_levels = [], []
-        membership, coeffs, offsets = [], [], []
+        membership, offsets = [], []
+        coeffs: list[tuple[float, ...]] = []
         for column, atom in enumerate(dfa.atoms):
             if atom in spec.state_atoms:
                 row = np.zeros(len(town.states), dtype=bool)

@@ -44,7 +44,7 @@ import numpy as np
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel, load_driver_model
 from trustroute.policies.logic.compiled import compile_spec
-from trustroute.policies.logic.dfa import DFA, build_dfa, dfa_from_formula
+from trustroute.policies.logic.dfa import DFA, Cube, build_dfa, dfa_from_formula
 from trustroute.policies.logic.formula import (
     FALSE,
     TRUE,
@@ -126,7 +126,7 @@ def equivalent(first: DFA, second: DFA) -> bool:
     return True
 
 
-def _consistent(first, second) -> bool:
+def _consistent(first: Cube, second: Cube) -> bool:
     values = dict(first)
     return all(values.get(atom, value) == value for atom, value in second)
 

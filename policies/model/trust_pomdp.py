@@ -8,7 +8,7 @@ o = (incident of x', human action h, AV performance e). See docs/model.md, "The 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -16,6 +16,15 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel, check_covers_town
 
 BeliefRule = Literal["bayes", "paper"]
+BELIEF_RULES: tuple[BeliefRule, ...] = get_args(BeliefRule)
+
+
+def checked_belief_rule(rule: str) -> BeliefRule:
+    """`rule` as a BeliefRule, for a name read from outside (a config, a command line);
+    ValueError when it names no rule."""
+    if rule not in BELIEF_RULES:
+        raise ValueError(f"unknown belief rule {rule!r}; use 'bayes' or 'paper'")
+    return rule
 
 
 @dataclass(frozen=True, eq=False)

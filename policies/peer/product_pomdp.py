@@ -108,7 +108,7 @@ def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) 
     shape = (n_x, n_t, n_q, n_o, n_k)
     n_grid = int(np.prod(shape))
 
-    def index(x, t, q, o, k):
+    def index(x: np.ndarray, t: np.ndarray, q: np.ndarray, o: np.ndarray, k: np.ndarray) -> np.ndarray:
         return 1 + np.ravel_multi_index((x, t, q, o, k), shape)
 
     # The begin state: θ0 ~ initial belief, position 0 read with it.

@@ -15,6 +15,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from trustroute.core.errors import InputError
 from trustroute.policies.bracket import Bracket
@@ -51,8 +52,9 @@ class StormResult(Bracket):
     time_limit: float
 
 
-def build_storm_model(product: ExplicitProduct):
-    """(POMDP, property, build seconds): the product written as DRN and read by Storm."""
+def build_storm_model(product: ExplicitProduct) -> tuple[Any, Any, float]:
+    """(POMDP, property, build seconds): the product written as DRN and read by Storm (stormpy's
+    objects carry no type information)."""
     require_storm()
     import stormpy
     from stormpy.io import DirectEncodingParserOptions

@@ -356,7 +356,7 @@ def read_manifest(study_dir: Path) -> dict:
     manifest = read_json(path, "study manifest",
                          fix="rerun `trustroute study` on this directory to rebuild it")
     missing = [key for key in MANIFEST_KEYS if key not in manifest] if isinstance(manifest, dict) else ["all"]
-    if missing:
+    if missing or not isinstance(manifest, dict):   # not a dict: missing is ["all"]
         raise InputError(str(path), missing[0], "missing manifest key",
                          "rerun `trustroute study` on this directory to rebuild it")
     return manifest

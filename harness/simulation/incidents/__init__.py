@@ -9,10 +9,15 @@ The scenes are described, with their distributions, in docs/scenes.md.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from trustroute.harness.simulation.incidents import obstacle, oncoming, pedestrian, truck
 from trustroute.harness.simulation.incidents.base import EgoState, Incident, Scene
+from trustroute.harness.simulation.sumo_start import Sumo
 
-INJECTORS = {
+TypeDefiner = Callable[[Sumo], None]
+
+INJECTORS: dict[str, Callable[[Sumo, Scene], Incident]] = {
     "pedestrian": pedestrian.inject,
     "obstacle": obstacle.inject,
     "truck": truck.inject,
@@ -22,21 +27,21 @@ __all__ = ["EgoState", "Incident", "Scene", "INJECTORS", "inject", "define_types
 
 
 # The SUMO types each kind's objects use (the pedestrian walks as SUMO's default person type).
-TYPE_DEFINERS = {
+TYPE_DEFINERS: dict[str, tuple[TypeDefiner, ...]] = {
     "pedestrian": (),
     "obstacle": (obstacle.define_type, oncoming.define_type),
     "truck": (oncoming.define_type, truck.define_type),
 }
 
 
-def define_types(sumo) -> None:
+def define_types(sumo: Sumo) -> None:
     """Every vehicle type the incident kinds use (once per simulation)."""
     obstacle.define_type(sumo)
     oncoming.define_type(sumo)
     truck.define_type(sumo)
 
 
-def inject(kind: str, sumo, scene: Scene, defined: set | None = None) -> Incident | None:
+def inject(kind: str, sumo: Sumo, scene: Scene, defined: set[TypeDefiner] | None = None) -> Incident | None:
     """The incident of `kind` on scene.road. defined: the type definers already run in this
     simulation; the kind's missing types are defined first and added to it (an episode defines
     only the types of the kinds it meets, about 20 TraCI calls less on a route without them).

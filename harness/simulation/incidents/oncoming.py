@@ -31,6 +31,8 @@ from trustroute.harness.simulation.incidents.base import (
     vehicle_position,
     vehicle_present,
 )
+from trustroute.harness.simulation.performance import PerformanceMonitor
+from trustroute.harness.simulation.sumo_start import Sumo
 
 TYPE_ID = "trustroute_truck"
 TRUCK_SPEED = 11.0     # m/s (40 km/h): a loaded truck on a 50 km/h town road
@@ -40,7 +42,7 @@ WATCH_HORIZON = 3.0    # s: above every head-on TTC limit (harness/simulation/pe
 GONE_BEHIND = 60.0     # metres behind the ego after the meeting: the vehicle leaves the simulation
 
 
-def define_type(sumo) -> None:
+def define_type(sumo: Sumo) -> None:
     sumo.vehicletype.copy("DEFAULT_VEHTYPE", TYPE_ID)
     sumo.vehicletype.setVehicleClass(TYPE_ID, "truck")
     sumo.vehicletype.setShapeClass(TYPE_ID, "truck")
@@ -72,7 +74,7 @@ class OncomingVehicle:
     _next_meeting_check: float = -math.inf
     _next_ttc_check: float = -math.inf
 
-    def insert(self, sumo) -> None:
+    def insert(self, sumo: Sumo) -> None:
         sumo.vehicle.add(self.vehicle_id, self.route_id, typeID=TYPE_ID, depart="now", departLane="1",
                          departPos=f"{self.depart_position:.2f}", departSpeed="max")
         self.inserted = True
@@ -81,7 +83,7 @@ class OncomingVehicle:
         """The earliest time the gap could come within WATCH_HORIZON seconds of closing."""
         return now + max(0.0, gap - MAX_CLOSING * WATCH_HORIZON) / MAX_CLOSING
 
-    def step(self, sumo, ego: EgoState) -> None:
+    def step(self, sumo: Sumo, ego: EgoState) -> None:
         if not self.inserted:
             if ego.time >= self.insert_time:
                 self.insert(sumo)
@@ -107,7 +109,7 @@ class OncomingVehicle:
         if (ego.x - x) * math.sin(angle) + (ego.y - y) * math.cos(angle) <= 0:
             self.met_time, self.met_x, self.met_y = ego.time, x, y
 
-    def _leave_when_behind(self, sumo, ego: EgoState) -> None:
+    def _leave_when_behind(self, sumo: Sumo, ego: EgoState) -> None:
         """After the meeting the vehicle drives away behind the ego, where nothing the ego does
         depends on it: it leaves the simulation once `GONE_BEHIND` metres away (SUMO then has one
         vehicle less to step)."""
@@ -122,7 +124,7 @@ class OncomingVehicle:
         else:
             self._next_meeting_check = ego.time + (GONE_BEHIND - gap) / MAX_CLOSING
 
-    def measure(self, sumo, ego: EgoState, monitor) -> None:
+    def measure(self, sumo: Sumo, ego: EgoState, monitor: PerformanceMonitor) -> None:
         """The head-on TTC of this step, when it can be below WATCH_HORIZON."""
         if not self.inserted or self._gone or ego.time < self._next_ttc_check:
             return
@@ -135,7 +137,7 @@ class OncomingVehicle:
         if ttc < WATCH_HORIZON:
             monitor.head_on(ttc)
 
-    def remove(self, sumo) -> None:
+    def remove(self, sumo: Sumo) -> None:
         remove_vehicle(sumo, self.vehicle_id)
 
     def details(self) -> str:
@@ -146,7 +148,7 @@ class OncomingVehicle:
 TURNS = {"s": 0, "r": 1, "l": 1, "R": 2, "L": 2}   # SUMO link directions, straightest first (no U-turn)
 
 
-def upstream_road(sumo, scene: Scene) -> str | None:
+def upstream_road(sumo: Sumo, scene: Scene) -> str | None:
     """The road that leads into scene.reverse_road at the junction where the ego's road ends, other
     than the ego's own road, without a U-turn: the straightest, then the longest, then by id.
     Where an oncoming truck comes from."""
@@ -162,12 +164,15 @@ def upstream_road(sumo, scene: Scene) -> str | None:
     return min(roads)[2] if roads else None
 
 
-def schedule_oncoming(sumo, scene: Scene, meet_at: float, meet_in: float, vehicle_id: str,
+def schedule_oncoming(sumo: Sumo, scene: Scene, meet_at: float, meet_in: float, vehicle_id: str,
                       speed: float = TRUCK_SPEED, from_upstream: bool = True) -> OncomingVehicle:
     """A truck on scene.reverse_road timed to pass `meet_at` (ego's road coordinates) in `meet_in` s,
     starting on the road leading into it when the reverse road alone is too short for that
-    (unless `from_upstream` is False: then it turns in unseen, entering at the road's start later)."""
+    (unless `from_upstream` is False: then it turns in unseen, entering at the road's start later).
+    The scene's road must have an opposite road (ValueError otherwise)."""
     road = scene.reverse_road
+    if road is None:
+        raise ValueError(f"oncoming vehicle on {scene.road}: the road has no opposite direction")
     reverse_length = sumo.lane.getLength(f"{road}_1")
     meeting_on_reverse = max(0.0, reverse_length - meet_at)
     depart = meeting_on_reverse - speed * max(meet_in, 0.0)
@@ -187,7 +192,7 @@ def schedule_oncoming(sumo, scene: Scene, meet_at: float, meet_in: float, vehicl
     sumo.route.add(route_id, roads)
     vehicle = OncomingVehicle(vehicle_id=vehicle_id, route_id=route_id, road=road,
                               depart_position=max(depart, 0.0), insert_time=scene.time + delay,
-                              meet_at=meet_at, meet_in=meet_in, road_before=roads[0] if before else "")
+                              meet_at=meet_at, meet_in=meet_in, road_before=before or "")
     if delay == 0.0:
         vehicle.insert(sumo)
     return vehicle
