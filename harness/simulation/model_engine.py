@@ -27,6 +27,7 @@ from trustroute.core.dataset import KINEMATICS_SCHEMA, frame_from_table
 from trustroute.harness.simulation.episode import EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker, episode_model
 from trustroute.participants.driver_model import DriverModel
+from trustroute.participants.driver_step import draw_initial_trust, draw_step, driver_tables
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.routing.episode_rules import (
     ACCEPTED,
@@ -100,12 +101,6 @@ class BatchResult:
         )
 
 
-def _draw_rows(cdf: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """One draw per row of a CDF matrix [n, k] (inverse CDF, robust to totals of 1 ± 1e-9)."""
-    u = rng.random(cdf.shape[0]) * cdf[:, -1]
-    return np.minimum((cdf <= u[:, None]).sum(axis=1), cdf.shape[1] - 1)
-
-
 def simulate_batch(
     setup: EpisodeSetup,
     policy: RoutingPolicy,
@@ -137,11 +132,7 @@ def simulate_batch(
     if index.shape != (count,):
         raise ValueError(f"driver_index must have {count} entries, got shape {index.shape}")
     nominal = setup.driver_model
-    incident_map = np.array([[d.incident_index(inc) for inc in nominal.incident_types] for d in drivers])
-    takeover = np.stack([d.takeover_probability for d in drivers])  # [k, inc, θ]
-    failure = np.stack([d.failure_probability for d in drivers])
-    transition_cdf = np.cumsum(np.stack([d.trust_transition for d in drivers]), axis=-1)
-    initial_cdf = np.cumsum(np.stack([d.initial_belief for d in drivers]), axis=-1)
+    tables = driver_tables(drivers, nominal.incident_types)   # indexed by the AV's incident list
     levels = np.asarray(nominal.trust_levels, dtype=float)
     successor_of = {
         (x, j): town.state_index(town.successor(road, j))
@@ -149,7 +140,7 @@ def simulate_batch(
         for j in town.actions(road)
     }
 
-    theta = _draw_rows(initial_cdf[index], rng)
+    theta = draw_initial_trust(tables, index, rng)
     start = town.state_index(setup.spec.start)
     road = np.full(count, start, dtype=np.int64)
     belief = np.tile(np.asarray(pomdp.initial_belief, dtype=float), (count, 1))
@@ -220,14 +211,10 @@ def simulate_batch(
                 routes.append(routes[rid] + (town.states[x],))
                 children[key] = child
             route_id[movers[m]] = child
-        # The driver: takeover from trust before the road, AV performance, trust moves.
-        k = index[movers]
+        # The driver's step (participants/driver_step.py): takeover from trust before the road,
+        # AV performance, trust moves.
         inc_av = pomdp.road_incident[x2]
-        inc = incident_map[k, inc_av]
-        th = theta[movers]
-        h = (rng.random(movers.size) < takeover[k, inc, th]).astype(np.int64)
-        e = (rng.random(movers.size) < failure[k, inc, th]).astype(np.int64)
-        new_theta = _draw_rows(transition_cdf[k, inc, h, e, th], rng)
+        h, e, new_theta = draw_step(tables, index[movers], inc_av, theta[movers], rng)
         theta[movers] = new_theta
         # The AV: Bayes filter on (incident, h, e), then the DFA on (road, new belief).
         posterior, _ = pomdp.belief_update(belief[movers], inc_av, h, e, rule=setup.belief_rule)

@@ -23,6 +23,12 @@ from dataclasses import dataclass
 import numpy as np
 import pomdp_py
 
+from trustroute.participants.driver_step import (
+    DriverTables,
+    draw_initial_trust,
+    draw_step,
+    model_tables,
+)
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
@@ -100,20 +106,15 @@ class ProductModel:
     task: StateOnlyTask
     compiled: CompiledSpec
     actions: tuple[tuple[RoadAction, ...], ...]   # per road index
-    transition_cdf: np.ndarray                     # [inc, h, e, θ, θ'] cumulative
+    driver: DriverTables                           # the true driver's tables (kind 0)
     belief_matrices: np.ndarray                    # [inc, h, e, θ, θ'] the AV filter's matrices
-    takeover: np.ndarray
-    failure: np.ndarray
 
     def step(self, state: ProductState, action: RoadAction, rng: np.random.Generator) -> ProductState:
         if state.over:
             return state
         road = action.road
         inc = int(self.pomdp.road_incident[road])
-        h = int(rng.random() < self.takeover[inc, state.theta])
-        e = int(rng.random() < self.failure[inc, state.theta])
-        cdf = self.transition_cdf[inc, h, e, state.theta]
-        theta = min(int(np.searchsorted(cdf, rng.random() * cdf[-1], side="right")), cdf.size - 1)
+        h, e, theta = draw_step(self.driver, 0, inc, state.theta, rng)
         unnormalised = state.belief @ self.belief_matrices[inc, h, e]
         total = unnormalised.sum()
         belief = unnormalised / total if total > 0 else unnormalised
@@ -140,9 +141,7 @@ def build_product_model(pomdp: TrustPOMDP, spec: Spec, belief_rule: BeliefRule =
         raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
     return ProductModel(
         pomdp=pomdp, spec=spec, task=state_only_task(town, spec), compiled=compiled,
-        actions=actions, transition_cdf=np.cumsum(driver.trust_transition, axis=-1),
-        belief_matrices=np.asarray(matrices), takeover=driver.takeover_probability,
-        failure=driver.failure_probability)
+        actions=actions, driver=model_tables(driver), belief_matrices=np.asarray(matrices))
 
 
 class _TransitionModel(pomdp_py.TransitionModel):
@@ -271,18 +270,14 @@ def monte_carlo(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, episodes: 
     town, driver = pomdp.town, pomdp.driver
     policy = episode_policy(policy, town, spec, fallback_after)
     compiled = compile_spec(spec, town)
-    transition_cdf = np.cumsum(driver.trust_transition, axis=-1)
-    initial_cdf = np.cumsum(driver.initial_belief)
+    tables = model_tables(driver)
     satisfied = np.zeros(episodes, dtype=bool)
     final_trust = np.zeros(episodes)
     decisions = 0
     decision_seconds = 0.0
 
-    def draw(cdf: np.ndarray) -> int:
-        return min(int(np.searchsorted(cdf, rng.random() * cdf[-1], side="right")), cdf.size - 1)
-
     for n in range(episodes):
-        theta = draw(initial_cdf)
+        theta = draw_initial_trust(tables, 0, rng)
         belief = np.array(driver.initial_belief, dtype=float)
         route = [spec.start]
         q = compiled.initial_state(belief)
@@ -300,9 +295,7 @@ def monte_carlo(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, episodes: 
             decisions += 1
             road = town.successor(route[-1], decision.junction)
             inc = driver.incident_index(town.incident(road))
-            h = int(rng.random() < driver.takeover_probability[inc, theta])
-            e = int(rng.random() < driver.failure_probability[inc, theta])
-            theta = draw(transition_cdf[inc, h, e, theta])
+            h, e, theta = draw_step(tables, 0, inc, theta, rng)
             belief = pomdp.belief_update(belief, inc, h, e, rule=belief_rule)[0][0]
             route.append(road)
             q = compiled.step_road(q, road, belief)
