@@ -9,10 +9,9 @@ of the state a simulation must track. Rewards: 1 on the transition into an accep
 0 otherwise; accepted and rejected states are absorbing. The rollout policy follows the
 trust-free shortest completion (a random rollout almost never visits three waypoints in order).
 Every random draw goes through the numpy Generator passed in (pomdp-py's UCB is deterministic).
-
-The models are built here directly on pomdp-py's framework classes: the foundation's adapter
-(policies/pomdp_py/adapter.py) models plain reachability of a road set, while this baseline must plan
-on the product with the spec's DFA, whose state is driven by the AV belief.
+The driver's draws in a simulated step and in the Monte Carlo are the synthetic driver's step
+(participants/driver_step.py: takeover, the AV's performance, trust move), the draws of the
+studies' driver and of the model engine.
 """
 
 from __future__ import annotations
