@@ -1,15 +1,15 @@
 """pomdp-py's POUCT on the trust POMDP × spec DFA product (reward 1 on acceptance), as a baseline.
 
 Owns `POUCTPolicy`, a RoutingPolicy that plans each decision online with pomdp-py's POUCT
-from the AV's current belief, and `monte_carlo`, which runs any policy in the trust model
-(true trust sampled from the driver model) and measures its satisfaction rate and its time
-per decision. The product state carried through the search is (road, true trust θ, spec DFA
+from the AV's current belief; its satisfaction rate and time per decision are measured with the
+model engine's `monte_carlo` (harness/simulation/model_engine.py), the sampled episodes every
+policy is run in. The product state carried through the search is (road, true trust θ, spec DFA
 state, projected DFA state, AV belief): the AV belief labels the belief atoms, so it is part
 of the state a simulation must track. Rewards: 1 on the transition into an accepting DFA state,
 0 otherwise; accepted and rejected states are absorbing. The rollout policy follows the
 trust-free shortest completion (a random rollout almost never visits three waypoints in order).
 Every random draw goes through the numpy Generator passed in (pomdp-py's UCB is deterministic).
-The driver's draws in a simulated step and in the Monte Carlo are the synthetic driver's step
+The driver's draws in a simulated step are the synthetic driver's step
 (participants/driver_step.py: takeover, the AV's performance, trust move), the draws of the
 studies' driver and of the model engine.
 """
@@ -22,22 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 import pomdp_py
 
-from trustroute.participants.driver_step import (
-    DriverTables,
-    draw_initial_trust,
-    draw_step,
-    model_tables,
-)
+from trustroute.participants.driver_step import DriverTables, draw_step, model_tables
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
-from trustroute.policies.routing.episode_rules import (
-    DEFAULT_JUNCTION_CAP,
-    decide,
-    dfa_verdict,
-    episode_policy,
-)
-from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
+from trustroute.policies.routing.episode_rules import dfa_verdict
 from trustroute.policies.routing.free import StateOnlyTask, state_only_task
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
@@ -243,66 +232,3 @@ def pouct_policy(pomdp: TrustPOMDP, spec: Spec, rng: np.random.Generator,
                  num_sims: int = DEFAULT_NUM_SIMS, max_depth: int = DEFAULT_MAX_DEPTH,
                  belief_rule: BeliefRule = "bayes") -> POUCTPolicy:
     return POUCTPolicy(build_product_model(pomdp, spec, belief_rule), rng, num_sims, max_depth)
-
-
-@dataclass(frozen=True)
-class MonteCarloResult:
-    policy: str
-    episodes: int
-    satisfaction: float
-    standard_error: float
-    mean_final_trust: float
-    decisions: int
-    seconds_per_decision: float
-    seconds: float
-
-
-def monte_carlo(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, episodes: int,
-                rng: np.random.Generator, fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
-                max_junctions: int = DEFAULT_JUNCTION_CAP,
-                belief_rule: BeliefRule = "bayes") -> MonteCarloResult:
-    """Run `policy` (with the study's fallback unless None) in the trust model `episodes` times.
-
-    The episode rules are policies/routing/episode_rules.py's, as in policies.evaluation.plain.
-    """
-    started = time.perf_counter()
-    town, driver = pomdp.town, pomdp.driver
-    policy = episode_policy(policy, town, spec, fallback_after)
-    compiled = compile_spec(spec, town)
-    tables = model_tables(driver)
-    satisfied = np.zeros(episodes, dtype=bool)
-    final_trust = np.zeros(episodes)
-    decisions = 0
-    decision_seconds = 0.0
-
-    for n in range(episodes):
-        theta = draw_initial_trust(tables, 0, rng)
-        belief = np.array(driver.initial_belief, dtype=float)
-        route = [spec.start]
-        q = compiled.initial_state(belief)
-        while True:
-            verdict = dfa_verdict(compiled, q)
-            if verdict is not None:
-                satisfied[n] = verdict == "accepted"
-                break
-            context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
-            tick = time.perf_counter()
-            decision = decide(policy, context, town, max_junctions)
-            if decision.end is not None:
-                break
-            decision_seconds += time.perf_counter() - tick
-            decisions += 1
-            road = town.successor(route[-1], decision.junction)
-            inc = driver.incident_index(town.incident(road))
-            h, e, theta = draw_step(tables, 0, inc, theta, rng)
-            belief = pomdp.belief_update(belief, inc, h, e, rule=belief_rule)[0][0]
-            route.append(road)
-            q = compiled.step_road(q, road, belief)
-        final_trust[n] = driver.trust_levels[theta]
-    rate = float(satisfied.mean()) if episodes else float("nan")
-    return MonteCarloResult(
-        policy=policy.name, episodes=episodes, satisfaction=rate,
-        standard_error=float(np.sqrt(rate * (1 - rate) / episodes)) if episodes else float("nan"),
-        mean_final_trust=float(final_trust.mean()) if episodes else float("nan"),
-        decisions=decisions, seconds_per_decision=decision_seconds / decisions if decisions else 0.0,
-        seconds=time.perf_counter() - started)

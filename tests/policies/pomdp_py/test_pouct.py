@@ -13,7 +13,7 @@ import pytest
 
 from tests.participants.test_synthetic_driver import chi_square_p
 from tests.policies.model.test_trust_pomdp import random_model
-from trustroute.policies.evaluation.plain import evaluate
+from trustroute.harness.simulation.model_engine import monte_carlo
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
@@ -22,11 +22,10 @@ from trustroute.policies.pomdp_py.pouct import (
     ProductState,
     RoadAction,
     build_product_model,
-    monte_carlo,
     pouct_policy,
 )
 from trustroute.policies.routing.episode_rules import dfa_verdict
-from trustroute.policies.routing.free import baseline_route, trust_free_policy
+from trustroute.policies.routing.free import baseline_route
 from trustroute.policies.routing.protocol import DecisionContext
 
 ALPHA = 1e-4
@@ -46,16 +45,6 @@ def dfa_state_along(town, spec, route, belief):
     for road in route:
         q = labeller.step(q, np.array([town.state_index(road)]), belief[None])
     return int(q[0])
-
-
-def test_monte_carlo_of_the_baseline_agrees_with_exact_evaluation(pomdp):
-    spec = load_spec("specs/phi1.toml", pomdp.town)
-    policy = trust_free_policy(pomdp.town, spec)
-    exact = evaluate(pomdp, spec, policy)
-    result = monte_carlo(pomdp, spec, policy, 3000, np.random.default_rng(4))
-    assert result.episodes == 3000
-    assert abs(result.satisfaction - exact.lower) <= 4 * result.standard_error
-    assert result.decisions == 3000 * (len(baseline_route(pomdp.town, spec)) - 1)
 
 
 def test_pouct_takes_the_accepting_move_when_one_exists(pomdp):
