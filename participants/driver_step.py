@@ -18,8 +18,8 @@ exactly as the single driver does. Inverse-CDF draws compare u · total with the
 which adds in the same order for every row of a stacked table as on the row alone.
 
 Users: `participants.synthetic_driver.SyntheticDriver` (one driver, both engines), the model
-engine's batch path, POUCT's search and Monte Carlo (policies/pomdp_py/pouct.py) and the
-posterior-predictive check (analysis/posterior_check.py).
+engine's batch path and Monte Carlo (harness/simulation/model_engine.py), POUCT's search step
+(policies/pomdp_py/pouct.py) and the posterior-predictive check (analysis/posterior_check.py).
 """
 
 from __future__ import annotations
@@ -51,10 +51,6 @@ class DriverTables:
     def __post_init__(self) -> None:
         for name in ("takeover", "failure", "transition_cdf", "initial_cdf"):
             getattr(self, name).setflags(write=False)
-
-    @property
-    def n_trust(self) -> int:
-        return int(self.initial_cdf.shape[-1])
 
 
 def driver_tables(models: Sequence[DriverModel],

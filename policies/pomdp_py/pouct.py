@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import pomdp_py
 
-from trustroute.participants.driver_step import DriverTables, draw_step, model_tables
+from trustroute.participants.driver_step import DriverTables, draw_rows, draw_step, model_tables
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
@@ -181,8 +181,7 @@ class _TrustBelief(pomdp_py.GenerativeDistribution):
         self.root, self.cdf, self.rng = root, np.cumsum(posterior), rng
 
     def random(self):
-        theta = min(int(np.searchsorted(self.cdf, self.rng.random() * self.cdf[-1], side="right")),
-                    self.cdf.size - 1)
+        theta = draw_rows(self.cdf, self.rng)
         r = self.root
         return ProductState(r.road, theta, r.q, r.q_projected, r.belief, r.observation, r.over)
 
