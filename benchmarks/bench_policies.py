@@ -12,12 +12,12 @@ import numpy as np
 
 from benchmarks.timing import best_seconds
 from trustroute.analysis import paper_figures
+from trustroute.harness.simulation.model_engine import monte_carlo
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
-from trustroute.policies.pomdp_py.pouct import monte_carlo
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 

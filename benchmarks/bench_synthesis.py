@@ -23,13 +23,14 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from trustroute.analysis import paper_figures
+from trustroute.harness.simulation.model_engine import monte_carlo
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.belief.product_mdp import build_product
 from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
-from trustroute.policies.pomdp_py.pouct import monte_carlo, pouct_policy
+from trustroute.policies.pomdp_py.pouct import pouct_policy
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols
 from trustroute.policies.synthesis.search import synthesize

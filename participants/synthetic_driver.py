@@ -5,13 +5,13 @@ model engine. Its trust is hidden from the AV; it decides takeovers from its cur
 (the driver model's takeover probability), moves its trust by the model's trust dynamics
 T[inc][h][e](θ, θ'), and reports its trust with a configurable accuracy. In the model engine
 it also draws the AV's performance from the model's failure probability.
-The report noise model is the driver model's (participants/driver_model.py); see docs/model.md,
-"The model". Every draw goes through the Generator passed in.
+Every draw is participants/driver_step.py's, on a single driver (the batch of one of the model
+engine's batch path, POUCT and the posterior check); the report noise model is the driver model's
+(participants/driver_model.py); see docs/model.md, "The model". Every draw goes through the
+Generator passed in.
 """
 
 from __future__ import annotations
-
-import bisect
 
 import numpy as np
 
@@ -19,35 +19,17 @@ from trustroute.participants.driver_model import (
     DEFAULT_REPORT_ACCURACY,
     PERFORMANCES,
     DriverModel,
-    draw_report,
+)
+from trustroute.participants.driver_step import (
+    draw_initial_trust,
+    draw_performances,
+    draw_reports,
+    draw_takeovers,
+    draw_trust,
+    model_tables,
 )
 
-
-def _draw_index(probabilities: np.ndarray, rng: np.random.Generator) -> int:
-    """One draw from a discrete distribution (inverse CDF; robust to rows summing to 1 ± 1e-9)."""
-    return _draw_from_cdf(np.cumsum(probabilities).tolist(), rng)
-
-
-def _draw_from_cdf(cdf: list[float], rng: np.random.Generator) -> int:
-    """`_draw_index` on a cumulative row as floats: bisect_right is searchsorted(side="right") on
-    the same doubles, so the index is the same."""
-    return min(bisect.bisect_right(cdf, rng.random() * cdf[-1]), len(cdf) - 1)
-
-
-_TRANSITION_CDFS: dict[int, tuple[DriverModel, list]] = {}
-
-
-def _transition_cdfs(model: DriverModel) -> list:
-    """The cumulative rows of the model's trust transition T[inc][h][e](θ, ·) as nested lists,
-    built once per model (np.cumsum along the last axis adds in the order it does on one row)."""
-    entry = _TRANSITION_CDFS.get(id(model))
-    if entry is None or entry[0] is not model:
-        if len(_TRANSITION_CDFS) > 64:
-            _TRANSITION_CDFS.clear()
-        entry = (model, np.cumsum(np.asarray(model.trust_transition, dtype=float), axis=-1).tolist())
-        _TRANSITION_CDFS[id(model)] = entry
-    return entry[1]
-
+KIND = 0   # the driver's model is kind 0 of its own tables
 
 
 class SyntheticDriver:
@@ -61,8 +43,9 @@ class SyntheticDriver:
         self.model = model
         self.rng = rng
         self.report_accuracy = float(report_accuracy)
+        self._tables = model_tables(model)
         if initial_trust is None:
-            self._theta = _draw_index(model.initial_belief, rng)
+            self._theta = int(draw_initial_trust(self._tables, KIND, rng))
         elif initial_trust in model.trust_levels:
             self._theta = model.trust_levels.index(initial_trust)
         else:
@@ -86,29 +69,23 @@ class SyntheticDriver:
 
     def decides_takeover(self, incident: str) -> bool:
         """h ~ P(takeover | θ, inc) at the current trust θ."""
-        p = self.model.takeover_probability[self._incident(incident), self._theta]
-        return bool(self.rng.random() < p)
+        return bool(draw_takeovers(self._tables, KIND, self._incident(incident), self._theta, self.rng))
 
     def performance(self, incident: str) -> str:
-        """The AV's performance e ~ P(fail | θ, inc) (model engine; SUMO observes it instead).
-
-        One uniform draw is taken even when the model cannot fail, so a model with and one
-        without failures consume the random stream alike.
-        """
-        p = self.model.failure_probability[self._incident(incident), self._theta]
-        return PERFORMANCES[int(self.rng.random() < p)]
+        """The AV's performance e ~ P(fail | θ, inc) (model engine; SUMO observes it instead)."""
+        e = draw_performances(self._tables, KIND, self._incident(incident), self._theta, self.rng)
+        return PERFORMANCES[e]
 
     def move_trust(self, incident: str, took_over: bool, performance: str = "succ") -> int:
         """θ' ~ T[inc][h][e](θ, ·); returns the new trust level."""
         if performance not in PERFORMANCES:
             raise ValueError(f"performance {performance!r} is not one of {PERFORMANCES}")
-        cdf = _transition_cdfs(self.model)[self._incident(incident)][int(bool(took_over))][
-            PERFORMANCES.index(performance)][self._theta]
-        self._theta = _draw_from_cdf(cdf, self.rng)
+        self._theta = int(draw_trust(self._tables, KIND, self._incident(incident), int(bool(took_over)),
+                                     PERFORMANCES.index(performance), self._theta, self.rng))
         return self.trust
 
     def report_trust(self) -> int:
         """A report of the current trust through the driver model's noise model (draw_report):
         the true level with probability report_accuracy, else one level off, clipped."""
-        reported = draw_report(self._theta, self.report_accuracy, self.model.n_trust, self.rng)
-        return self.model.trust_levels[reported]
+        return self.model.trust_levels[draw_reports(self._theta, self.report_accuracy,
+                                                    self.model.n_trust, self.rng)]

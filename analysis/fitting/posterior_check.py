@@ -1,10 +1,12 @@
 """Posterior-predictive check: how far simulated drivers are from the real participants.
 
 Drivers of a model are simulated on the real episodes' own roads (the routes the participants
-were driven, so route choice is held fixed and only the driver differs): θ_0 ~ π; on each road
-t >= 1 the takeover h_t ~ P(h | θ_{t-1}, incident), θ_t ~ T[incident][h_t](θ_{t-1}, ·), and the
-report on arrival is θ_t with the model's report accuracy, else one level up or down (clipped),
-as participants.synthetic_driver reports. Statistics compared with the real logs:
+were driven, so route choice is held fixed and only the driver differs) with the synthetic
+driver's step (participants/driver_step.py): θ_0 ~ π; on each road t >= 1 the takeover
+h_t ~ P(h | θ_{t-1}, incident), the AV's performance e_t ~ P(fail | θ_{t-1}, incident),
+θ_t ~ T[incident][h_t][e_t](θ_{t-1}, ·), and the report on arrival through the driver model's
+noise model with the model's report accuracy (`draw_report`: θ_t, else one level up or down,
+clipped), as the synthetic driver reports. Statistics compared with the real logs:
 
 - takeover rate per incident type (per road driven); distance: |simulated - real| per incident;
 - the distribution of the change of reported trust per road (r_t - r_{t-1}); total variation;
@@ -23,6 +25,12 @@ import numpy as np
 import pandas as pd
 
 from trustroute.participants.driver_model import DriverModel
+from trustroute.participants.driver_step import (
+    draw_initial_trust,
+    draw_reports,
+    draw_step,
+    driver_tables,
+)
 
 CHANGE_VALUES = np.arange(-6, 7)
 
@@ -97,6 +105,17 @@ def real_arrays(roads: pd.DataFrame, model: DriverModel) -> tuple[np.ndarray, ..
     return incident, takeover, report, mask
 
 
+@dataclass(frozen=True)
+class Simulated:
+    """Drivers simulated on given roads: takeover and performance (1 = fail) [n, S] (roads 1..S,
+    False past an episode's end), reported trust levels [n, S+1] (column 0: the start road; past
+    an episode's end the last report is repeated)."""
+
+    takeover: np.ndarray
+    failed: np.ndarray
+    report: np.ndarray
+
+
 def simulate(
     model: DriverModel,
     incident: np.ndarray,
@@ -104,36 +123,29 @@ def simulate(
     accuracy: float,
     replicates: int,
     rng: np.random.Generator,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Simulated (takeover [n*R, S], report [n*R, S+1]) of `model` on the given roads."""
+    incident_types: tuple[str, ...] | None = None,
+) -> Simulated:
+    """`replicates` drivers of `model` per row of the given roads (incident indices into
+    `incident_types`, default the model's own [n, S]; mask [n, S]), rows in order n*R."""
     incident = np.repeat(incident, replicates, axis=0)
     mask = np.repeat(mask, replicates, axis=0)
     n, steps = incident.shape
-    k = model.n_trust
+    tables = driver_tables([model], incident_types)
     levels = np.asarray(model.trust_levels)
-    theta = rng.choice(k, size=n, p=np.asarray(model.initial_belief) / np.sum(model.initial_belief))
+    kind = np.zeros(n, dtype=np.int64)
+    theta = draw_initial_trust(tables, kind, rng)
     takeover = np.zeros((n, steps), dtype=bool)
+    failed = np.zeros((n, steps), dtype=bool)
     report = np.zeros((n, steps + 1), dtype=np.int64)
-
-    def noisy(index: np.ndarray) -> np.ndarray:
-        exact = rng.random(index.size) < accuracy
-        step = np.where(rng.random(index.size) < 0.5, -1, 1)
-        return levels[np.where(exact, index, np.clip(index + step, 0, k - 1))]
-
-    report[:, 0] = noisy(theta)
+    report[:, 0] = levels[draw_reports(theta, accuracy, model.n_trust, rng)]
     for t in range(steps):
-        inc = incident[:, t]
-        p_take = model.takeover_probability[inc, theta]
-        h = rng.random(n) < p_take
-        rows = model.trust_transition[inc, h.astype(np.int64), 0, theta]  # [n, k]
-        cumulative = rows.cumsum(axis=1)
-        draw = rng.random(n)[:, None]
-        nxt = np.minimum((draw > cumulative).sum(axis=1), k - 1)
-        live = mask[:, t]
-        theta = np.where(live, nxt, theta)
-        takeover[:, t] = h & live
-        report[:, t + 1] = np.where(live, noisy(theta), report[:, t])
-    return takeover, report
+        live = np.flatnonzero(mask[:, t])
+        h, e, theta[live] = draw_step(tables, kind[live], incident[live, t], theta[live], rng)
+        takeover[live, t] = h.astype(bool)
+        failed[live, t] = e.astype(bool)
+        report[:, t + 1] = report[:, t]
+        report[live, t + 1] = levels[draw_reports(theta[live], accuracy, model.n_trust, rng)]
+    return Simulated(takeover=takeover, failed=failed, report=report)
 
 
 def total_variation(p: np.ndarray, q: np.ndarray) -> float:
@@ -173,11 +185,13 @@ def posterior_check(
     }
     stats = {"real": real}
     for name, (model, accuracy) in models.items():
-        sim_take, sim_report = simulate(model, incident, mask, accuracy, replicates, rng)
+        simulated = simulate(
+            model, incident, mask, accuracy, replicates, rng, template.incident_types
+        )
         sim = statistics(
             np.repeat(incident, replicates, axis=0),
-            sim_take,
-            sim_report,
+            simulated.takeover,
+            simulated.report,
             np.repeat(mask, replicates, axis=0),
             model.incident_types,
             max_roads,

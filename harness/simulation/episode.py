@@ -231,6 +231,12 @@ def _check_readable(net_path: Path, key: tuple[str, float]) -> None:
         _READABLE.add(key)
 
 
+def _check_insertion_time(now: float, start: str) -> None:
+    """The ego has not appeared yet at `now`: an error once INSERT_TIMEOUT has passed."""
+    if now > INSERT_TIMEOUT:
+        raise RuntimeError(f"the ego could not be inserted on {start} within {INSERT_TIMEOUT} s")
+
+
 class _Episode:
     """One run of the loop; SUMO calls stay in here and in the incident/takeover modules."""
 
@@ -353,14 +359,15 @@ class _Episode:
         return upcoming
 
     # -- the loop -------------------------------------------------------------
-    def run(self) -> float:
+    def insert_ego(self) -> Callable | None:
+        """Background traffic and the ego on the start road, subscribed; returns the background's
+        per-step call (None without background vehicles)."""
         sumo = self.sumo
         start = self.setup.spec.start
         _define_ego_type(sumo)
         background = BackgroundTraffic(self.config.background_vehicles, self.rng,
                                        tuple(self.setup.town.states))
         background.start(sumo)
-        background_step = background.step if self.config.background_vehicles > 0 else None
         sumo.route.add("ego_route", [start])
         depart = max(0.0, self.length(start) - COMMIT_DISTANCE - START_BEFORE_COMMIT)
         sumo.vehicle.add(EGO_ID, "ego_route", typeID=EGO_TYPE, depart="now", departLane="best",
@@ -372,6 +379,12 @@ class _Episode:
                                         sumo.VAR_SPEED, sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID,
                                         sumo.VAR_LEADER, sumo.VAR_ANGLE], 0.0, 1e9,
                                {sumo.VAR_LEADER: leader_horizon(self.config)})
+        return background.step if self.config.background_vehicles > 0 else None
+
+    def run(self) -> float:
+        sumo = self.sumo
+        start = self.setup.spec.start
+        background_step = self.insert_ego()
         position_id, xy_id, speed_id, accel_id, lane_id, leader_id, angle_id = (
             sumo.VAR_LANEPOSITION, sumo.VAR_POSITION, sumo.VAR_SPEED,
             sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID, sumo.VAR_LEADER, sumo.VAR_ANGLE)
@@ -399,8 +412,7 @@ class _Episode:
             now = get_time()
             result = get_results(EGO_ID)
             if not result:
-                if now > INSERT_TIMEOUT:
-                    raise RuntimeError(f"the ego could not be inserted on {start} within {INSERT_TIMEOUT} s")
+                _check_insertion_time(now, start)
                 continue
             if math.isnan(current.time_in):
                 current.time_in = now

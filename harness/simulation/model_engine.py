@@ -1,6 +1,7 @@
 """The model engine: episodes in the abstract trust POMDP, without SUMO, for fast what-ifs.
 
-Two paths with the same episode rules (policies/routing/episode_rules.py):
+Two paths with the same episode rules (policies/routing/episode_rules.py) and the same driver
+step (participants/driver_step.py: takeover, the AV's performance, trust move, in that order):
 
 - `run_model_episode(setup, policy, driver, episode_id, seed)`: one episode through the very
   `EpisodeTracker` the SUMO engine uses, with a `SyntheticDriver`; writes the full roads table
@@ -9,8 +10,14 @@ Two paths with the same episode rules (policies/routing/episode_rules.py):
   iteration per junction level), returning only the per-episode summaries. Policy decisions
   are asked once per distinct (route, DFA state, AV belief) per level, or once per route when
   the policy declares its decision route-determined (the trust-free policy, the fallback phase),
-  so it scales to the 100k-episodes-per-minute benchmark. tests/harness/simulation/test_model_engine.py
-  checks that both paths agree in distribution and with policies.evaluation.plain.
+  so it scales to the 100k-episodes-per-minute benchmark. On one episode it draws what the
+  per-episode path draws from the same seed when the driver gives no reports.
+- `monte_carlo(pomdp, spec, policy, episodes, rng)`: the batch path on one episode after the
+  other (a planner that draws while it plans, POUCT, gets one decision per episode and draws
+  between that episode's driver draws): satisfaction rate, its standard error, time per decision.
+
+tests/harness/simulation/test_model_engine.py checks that the paths agree draw for draw or in
+distribution, and with policies.evaluation.plain.
 """
 
 from __future__ import annotations
@@ -26,16 +33,23 @@ import pandas as pd
 from trustroute.core.dataset import KINEMATICS_SCHEMA, frame_from_table
 from trustroute.harness.simulation.episode import EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker, episode_model
+from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
+from trustroute.participants.driver_step import DriverTables, draw_initial_trust, draw_step, driver_tables
 from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import TrustPOMDP
 from trustroute.policies.routing.episode_rules import (
     ACCEPTED,
+    DEFAULT_JUNCTION_CAP,
     END_REASONS,
     REJECTED,
     decide,
     dfa_verdicts,
     episode_policy,
 )
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 END_CODES: tuple[str, ...] = ("", *END_REASONS)  # index 0: still running
@@ -85,6 +99,7 @@ class BatchResult:
     fallback_fired: np.ndarray
     policy_calls: int
     seconds: float
+    decision_seconds: float = 0.0   # of `seconds`, in the policy's decisions
 
     def frame(self) -> pd.DataFrame:
         return pd.DataFrame(
@@ -100,10 +115,34 @@ class BatchResult:
         )
 
 
-def _draw_rows(cdf: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """One draw per row of a CDF matrix [n, k] (inverse CDF, robust to totals of 1 ± 1e-9)."""
-    u = rng.random(cdf.shape[0]) * cdf[:, -1]
-    return np.minimum((cdf <= u[:, None]).sum(axis=1), cdf.shape[1] - 1)
+@dataclass(frozen=True, eq=False)
+class _Sampled:
+    """What sampled episodes of one (town, AV model, spec, policy, true drivers) read."""
+
+    town: Town
+    pomdp: TrustPOMDP
+    compiled: CompiledSpec
+    start: str
+    policy: RoutingPolicy             # wrapped with the episode's fallback
+    drivers: DriverTables             # the true drivers (kinds), on the AV's incident list
+    junction_cap: int
+    belief_rule: str
+    successor: dict[tuple[int, str], int]
+
+
+def _sampled(town: Town, pomdp: TrustPOMDP, compiled: CompiledSpec, spec: Spec, policy: RoutingPolicy,
+             drivers: Sequence[DriverModel], junction_cap: int, fallback_after: int | None,
+             belief_rule: str) -> _Sampled:
+    if spec.uses_trust_atoms:
+        raise ValueError(f"spec {spec.name!r} has trust-state atoms: the batch path does not "
+                         "track the joint belief; run its episodes with run_model_episode")
+    return _Sampled(
+        town=town, pomdp=pomdp, compiled=compiled, start=spec.start,
+        policy=episode_policy(policy, town, spec, fallback_after),
+        drivers=driver_tables(drivers, pomdp.driver.incident_types),
+        junction_cap=junction_cap, belief_rule=belief_rule,
+        successor={(x, j): town.state_index(town.successor(road, j))
+                   for x, road in enumerate(town.states) for j in town.actions(road)})
 
 
 def simulate_batch(
@@ -122,39 +161,74 @@ def simulate_batch(
     (policies/routing/episode_rules.py). Specs with trust-state atoms need the joint belief of
     the episode tracker: run them through `run_model_episode`.
     """
-    if setup.spec.uses_trust_atoms:
-        raise ValueError(f"spec {setup.spec.name!r} has trust-state atoms: the batch path does not "
-                         "track the joint belief; run its episodes with run_model_episode")
-    started = time.perf_counter()
-    town = setup.town
-    model = episode_model(setup)
-    pomdp, compiled = model.pomdp, model.compiled
-    policy = episode_policy(policy, town, setup.spec, setup.fallback_after)
-    drivers = list(drivers) if drivers is not None else [setup.driver_model]
     index = (
         np.zeros(count, dtype=np.int64) if driver_index is None else np.asarray(driver_index, dtype=np.int64)
     )
     if index.shape != (count,):
         raise ValueError(f"driver_index must have {count} entries, got shape {index.shape}")
-    nominal = setup.driver_model
-    incident_map = np.array([[d.incident_index(inc) for inc in nominal.incident_types] for d in drivers])
-    takeover = np.stack([d.takeover_probability for d in drivers])  # [k, inc, θ]
-    failure = np.stack([d.failure_probability for d in drivers])
-    transition_cdf = np.cumsum(np.stack([d.trust_transition for d in drivers]), axis=-1)
-    initial_cdf = np.cumsum(np.stack([d.initial_belief for d in drivers]), axis=-1)
-    levels = np.asarray(nominal.trust_levels, dtype=float)
-    successor_of = {
-        (x, j): town.state_index(town.successor(road, j))
-        for x, road in enumerate(town.states)
-        for j in town.actions(road)
-    }
+    model = episode_model(setup)
+    sampled = _sampled(setup.town, model.pomdp, model.compiled, setup.spec, policy,
+                       list(drivers) if drivers is not None else [setup.driver_model],
+                       setup.junction_cap, setup.fallback_after, setup.belief_rule)
+    return _unfold(sampled, index, rng)
 
-    theta = _draw_rows(initial_cdf[index], rng)
-    start = town.state_index(setup.spec.start)
-    road = np.full(count, start, dtype=np.int64)
+
+def _decisions(sampled: _Sampled, live: np.ndarray, route_id: np.ndarray, routes: list[tuple[str, ...]],
+               q: np.ndarray, belief: np.ndarray, road: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The policy's decisions for the live episodes, asked once per distinct (route, DFA state,
+    belief), or once per route when the policy declares its decision route-determined: (next road
+    or -1, finished at the destination, fallback drove, policy calls, seconds in the policy)."""
+    chosen = np.full(live.size, -1, dtype=np.int64)
+    finished = np.zeros(live.size, dtype=bool)
+    fired = np.zeros(live.size, dtype=bool)
+    calls, seconds = 0, 0.0
+    order = np.argsort(route_id[live], kind="stable")
+    ids, starts = np.unique(route_id[live][order], return_index=True)
+    bounds = np.append(starts, live.size)
+    for r, rid in enumerate(ids.tolist()):
+        members = order[bounds[r] : bounds[r + 1]]
+        first = live[members[0]]
+        context = DecisionContext(route=routes[rid], dfa_state=int(q[first]), belief=belief[first])
+        if sampled.policy.route_determined(context):
+            groups = [(members, context)]
+        else:
+            keyed: dict[tuple[int, bytes], list[int]] = {}
+            for m in members.tolist():
+                keyed.setdefault((int(q[live[m]]), belief[live[m]].tobytes()), []).append(m)
+            groups = [
+                (
+                    np.array(ms),
+                    DecisionContext(route=routes[rid], dfa_state=key[0], belief=belief[live[ms[0]]]),
+                )
+                for key, ms in keyed.items()
+            ]
+        for group, ctx in groups:
+            calls += 1
+            tick = time.perf_counter()
+            decision = decide(sampled.policy, ctx, sampled.town, sampled.junction_cap)
+            seconds += time.perf_counter() - tick
+            if decision.end is not None:
+                finished[group] = decision.end == "destination"
+                continue
+            chosen[group] = sampled.successor[(int(road[first]), decision.junction)]
+            fired[group] = decision.fallback
+    return chosen, finished, fired, calls, seconds
+
+
+def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> BatchResult:
+    """Episodes driven by drivers of kinds `index`, level by level: the verdicts, the policy's
+    decisions, the driver's step (participants/driver_step.py) for every episode that moves, the
+    AV's filter and DFA. Draws: initial trust of every episode, then per level the policy's (if it
+    draws) and the driver step's (takeover, performance, trust, each over the movers in order)."""
+    started = time.perf_counter()
+    pomdp, compiled, town = sampled.pomdp, sampled.compiled, sampled.town
+    count = index.size
+    levels = np.asarray(pomdp.driver.trust_levels, dtype=float)
+    theta = draw_initial_trust(sampled.drivers, index, rng)
+    road = np.full(count, town.state_index(sampled.start), dtype=np.int64)
     belief = np.tile(np.asarray(pomdp.initial_belief, dtype=float), (count, 1))
     q = compiled.initial_states(belief)
-    routes: list[tuple[str, ...]] = [(setup.spec.start,)]
+    routes: list[tuple[str, ...]] = [(sampled.start,)]
     children: dict[tuple[int, int], int] = {}
     route_id = np.zeros(count, dtype=np.int64)
     end = np.zeros(count, dtype=np.int64)  # index into END_CODES; 0 = running
@@ -162,9 +236,9 @@ def simulate_batch(
     takeovers = np.zeros(count, dtype=np.int64)
     trust_sum = levels[theta].copy()
     fired_any = np.zeros(count, dtype=bool)
-    policy_calls = 0
+    policy_calls, decision_seconds = 0, 0.0
 
-    for _level in range(setup.junction_cap + 1):
+    for _level in range(sampled.junction_cap + 1):
         running = end == 0
         verdict = dfa_verdicts(compiled, q)
         end[running & (verdict == ACCEPTED)] = END_CODES.index("accepted")
@@ -172,37 +246,9 @@ def simulate_batch(
         live = np.flatnonzero(end == 0)
         if live.size == 0:
             break
-        chosen = np.full(live.size, -1, dtype=np.int64)
-        finished = np.zeros(live.size, dtype=bool)
-        fired = np.zeros(live.size, dtype=bool)
-        order = np.argsort(route_id[live], kind="stable")
-        ids, starts = np.unique(route_id[live][order], return_index=True)
-        bounds = np.append(starts, live.size)
-        for r, rid in enumerate(ids.tolist()):
-            members = order[bounds[r] : bounds[r + 1]]
-            first = live[members[0]]
-            context = DecisionContext(route=routes[rid], dfa_state=int(q[first]), belief=belief[first])
-            if policy.route_determined(context):
-                groups = [(members, context)]
-            else:
-                keyed: dict[tuple[int, bytes], list[int]] = {}
-                for m in members.tolist():
-                    keyed.setdefault((int(q[live[m]]), belief[live[m]].tobytes()), []).append(m)
-                groups = [
-                    (
-                        np.array(ms),
-                        DecisionContext(route=routes[rid], dfa_state=key[0], belief=belief[live[ms[0]]]),
-                    )
-                    for key, ms in keyed.items()
-                ]
-            for group, ctx in groups:
-                policy_calls += 1
-                decision = decide(policy, ctx, town, setup.junction_cap)
-                if decision.end is not None:
-                    finished[group] = decision.end == "destination"
-                    continue
-                chosen[group] = successor_of[(int(road[first]), decision.junction)]
-                fired[group] = decision.fallback
+        chosen, finished, fired, calls, seconds = _decisions(sampled, live, route_id, routes, q, belief, road)
+        policy_calls += calls
+        decision_seconds += seconds
         end[live[finished]] = END_CODES.index("destination")
         capped = ~finished & (chosen < 0)
         end[live[capped]] = END_CODES.index("cap")
@@ -220,17 +266,13 @@ def simulate_batch(
                 routes.append(routes[rid] + (town.states[x],))
                 children[key] = child
             route_id[movers[m]] = child
-        # The driver: takeover from trust before the road, AV performance, trust moves.
-        k = index[movers]
+        # The driver's step (participants/driver_step.py): takeover from trust before the road,
+        # AV performance, trust moves.
         inc_av = pomdp.road_incident[x2]
-        inc = incident_map[k, inc_av]
-        th = theta[movers]
-        h = (rng.random(movers.size) < takeover[k, inc, th]).astype(np.int64)
-        e = (rng.random(movers.size) < failure[k, inc, th]).astype(np.int64)
-        new_theta = _draw_rows(transition_cdf[k, inc, h, e, th], rng)
+        h, e, new_theta = draw_step(sampled.drivers, index[movers], inc_av, theta[movers], rng)
         theta[movers] = new_theta
         # The AV: Bayes filter on (incident, h, e), then the DFA on (road, new belief).
-        posterior, _ = pomdp.belief_update(belief[movers], inc_av, h, e, rule=setup.belief_rule)
+        posterior, _ = pomdp.belief_update(belief[movers], inc_av, h, e, rule=sampled.belief_rule)
         impossible = ~(posterior.sum(axis=1) > 0)
         posterior[impossible] = belief[movers][impossible]
         belief[movers] = posterior
@@ -252,4 +294,44 @@ def simulate_batch(
         fallback_fired=fired_any,
         policy_calls=policy_calls,
         seconds=time.perf_counter() - started,
+        decision_seconds=decision_seconds,
     )
+
+
+@dataclass(frozen=True)
+class MonteCarloResult:
+    """`monte_carlo`'s estimate: satisfaction rate and its standard error, mean final true trust,
+    junctions driven (decisions) and the time in the policy per decision."""
+
+    policy: str
+    episodes: int
+    satisfaction: float
+    standard_error: float
+    mean_final_trust: float
+    decisions: int
+    seconds_per_decision: float
+    seconds: float
+
+
+def monte_carlo(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, episodes: int,
+                rng: np.random.Generator, fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
+                max_junctions: int = DEFAULT_JUNCTION_CAP,
+                belief_rule: str = "bayes") -> MonteCarloResult:
+    """Run `policy` (with the study's fallback unless None) in the trust model `episodes` times,
+    true trust drawn from `pomdp.driver`: the batch path on one episode after the other, so a
+    policy that draws from `rng` while it plans (POUCT) draws between its own episode's driver
+    draws, and no two episodes share a decision."""
+    started = time.perf_counter()
+    sampled = _sampled(pomdp.town, pomdp, compile_spec(spec, pomdp.town), spec, policy, [pomdp.driver],
+                       max_junctions, fallback_after, belief_rule)
+    runs = [_unfold(sampled, np.zeros(1, dtype=np.int64), rng) for _ in range(episodes)]
+    satisfied = np.array([bool(run.satisfied[0]) for run in runs])
+    decisions = int(sum(int(run.junctions[0]) for run in runs))
+    decision_seconds = sum(run.decision_seconds for run in runs)
+    rate = float(satisfied.mean()) if episodes else float("nan")
+    return MonteCarloResult(
+        policy=sampled.policy.name, episodes=episodes, satisfaction=rate,
+        standard_error=float(np.sqrt(rate * (1 - rate) / episodes)) if episodes else float("nan"),
+        mean_final_trust=float(np.mean([run.final_trust[0] for run in runs])) if episodes else float("nan"),
+        decisions=decisions, seconds_per_decision=decision_seconds / decisions if decisions else 0.0,
+        seconds=time.perf_counter() - started)

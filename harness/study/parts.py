@@ -162,11 +162,10 @@ def write_part_tables(study_dir: Path, task: EpisodeTask, summary: dict, tables:
     return path
 
 
-def read_part(path: Path) -> Part:
-    """A part, verified in full (module docstring); PartError naming what is wrong otherwise."""
+def _part_entries(path: Path) -> dict[str, bytes]:
+    """The part's zip entries, each CRC-checked, in the expected order, the checksum verified."""
     from trustroute.core.validation import read_input_bytes
 
-    path = Path(path)
     try:
         data = read_input_bytes(path, "episode part", MAX_PART_BYTES)
     except InputError as exc:
@@ -187,8 +186,13 @@ def read_part(path: Path) -> Part:
         checksum.update(entries[f"{name}.arrows"])
     if entries[CHECKSUM_ENTRY] != checksum.hexdigest().encode():
         raise PartError(f"{path}: checksum mismatch (the part was damaged after it was written)")
+    return entries
+
+
+def _part_meta(path: Path, blob: bytes) -> dict:
+    """part.json: of this format and dataset format, naming the file's episode throughout."""
     try:
-        meta = json.loads(entries[META_ENTRY])
+        meta = json.loads(blob)
     except ValueError as exc:
         raise PartError(f"{path}: unreadable part.json ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != PART_FORMAT or meta.get("version") != PART_VERSION:
@@ -202,22 +206,34 @@ def read_part(path: Path) -> Part:
         raise PartError(f"{path}: part.json lacks the task or the summary")
     if path.stem != episode or task.get("episode_id") != episode or summary.get("episode_id") != episode:
         raise PartError(f"{path}: belongs to episode {episode!r} (a foreign part)")
-    tables = {}
-    for name, schema in PART_TABLES.items():
-        blob = entries[f"{name}.arrows"]
-        recorded = (meta.get("tables") or {}).get(name) or {}
-        if recorded.get("sha256") != hashlib.sha256(blob).hexdigest():
-            raise PartError(f"{path}: table {name} does not match its SHA-256")
-        try:
-            table = check_table(pa.ipc.open_stream(blob).read_all(), schema, f"{path.name}:{name}")
-        except (pa.ArrowException, SchemaError, ValueError) as exc:
-            raise PartError(f"{path}: table {name}: {exc}") from None
-        if table.num_rows != recorded.get("rows"):
-            raise PartError(f"{path}: table {name} has {table.num_rows} rows, part.json says "
-                            f"{recorded.get('rows')}")
-        if table.num_rows and not pc.all(pc.equal(table.column("episode_id"), episode)).as_py():
-            raise PartError(f"{path}: table {name} holds rows of another episode")
-        tables[name] = table
+    return meta
+
+
+def _part_table(path: Path, name: str, blob: bytes, recorded: dict, episode: str) -> pa.Table:
+    """One table of a part: its recorded SHA-256 and row count, its schema, the part's episode."""
+    if recorded.get("sha256") != hashlib.sha256(blob).hexdigest():
+        raise PartError(f"{path}: table {name} does not match its SHA-256")
+    try:
+        table = check_table(pa.ipc.open_stream(blob).read_all(), PART_TABLES[name], f"{path.name}:{name}")
+    except (pa.ArrowException, SchemaError, ValueError) as exc:
+        raise PartError(f"{path}: table {name}: {exc}") from None
+    if table.num_rows != recorded.get("rows"):
+        raise PartError(f"{path}: table {name} has {table.num_rows} rows, part.json says "
+                        f"{recorded.get('rows')}")
+    if table.num_rows and not pc.all(pc.equal(table.column("episode_id"), episode)).as_py():
+        raise PartError(f"{path}: table {name} holds rows of another episode")
+    return table
+
+
+def read_part(path: Path) -> Part:
+    """A part, verified in full (module docstring); PartError naming what is wrong otherwise."""
+    path = Path(path)
+    entries = _part_entries(path)
+    meta = _part_meta(path, entries[META_ENTRY])
+    episode, task, summary = meta["episode_id"], meta["task"], meta["summary"]
+    tables = {name: _part_table(path, name, entries[f"{name}.arrows"],
+                                (meta.get("tables") or {}).get(name) or {}, episode)
+              for name in PART_TABLES}
     if tables["roads"].num_rows != int(summary.get("junctions", -1)) + 1:
         raise PartError(f"{path}: {tables['roads'].num_rows} roads for {summary.get('junctions')} junctions")
     return Part(episode_id=episode, task=task, summary=summary, tables=tables)

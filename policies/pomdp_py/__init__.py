@@ -1,1 +1,1 @@
-"""trustroute.policies.pomdp_py: the bridge to pomdp-py (an adapter of the trust POMDP and POUCT)."""
+"""trustroute.policies.pomdp_py: the bridge to pomdp-py (POUCT on the trust POMDP × spec DFA, a baseline)."""

@@ -1,18 +1,17 @@
 """pomdp-py's POUCT on the trust POMDP × spec DFA product (reward 1 on acceptance), as a baseline.
 
 Owns `POUCTPolicy`, a RoutingPolicy that plans each decision online with pomdp-py's POUCT
-from the AV's current belief, and `monte_carlo`, which runs any policy in the trust model
-(true trust sampled from the driver model) and measures its satisfaction rate and its time
-per decision. The product state carried through the search is (road, true trust θ, spec DFA
+from the AV's current belief; its satisfaction rate and time per decision are measured with the
+model engine's `monte_carlo` (harness/simulation/model_engine.py), the sampled episodes every
+policy is run in. The product state carried through the search is (road, true trust θ, spec DFA
 state, projected DFA state, AV belief): the AV belief labels the belief atoms, so it is part
 of the state a simulation must track. Rewards: 1 on the transition into an accepting DFA state,
 0 otherwise; accepted and rejected states are absorbing. The rollout policy follows the
 trust-free shortest completion (a random rollout almost never visits three waypoints in order).
 Every random draw goes through the numpy Generator passed in (pomdp-py's UCB is deterministic).
-
-The models are built here directly on pomdp-py's framework classes: the foundation's adapter
-(policies/pomdp_py/adapter.py) models plain reachability of a road set, while this baseline must plan
-on the product with the spec's DFA, whose state is driven by the AV belief.
+The driver's draws in a simulated step are the synthetic driver's step
+(participants/driver_step.py: takeover, the AV's performance, trust move), the draws of the
+studies' driver and of the model engine.
 """
 
 from __future__ import annotations
@@ -23,16 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 import pomdp_py
 
+from trustroute.participants.driver_step import DriverTables, draw_rows, draw_step, model_tables
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
-from trustroute.policies.routing.episode_rules import (
-    DEFAULT_JUNCTION_CAP,
-    decide,
-    dfa_verdict,
-    episode_policy,
-)
-from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
+from trustroute.policies.routing.episode_rules import dfa_verdict
 from trustroute.policies.routing.free import StateOnlyTask, state_only_task
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
@@ -100,20 +94,15 @@ class ProductModel:
     task: StateOnlyTask
     compiled: CompiledSpec
     actions: tuple[tuple[RoadAction, ...], ...]   # per road index
-    transition_cdf: np.ndarray                     # [inc, h, e, θ, θ'] cumulative
+    driver: DriverTables                           # the true driver's tables (kind 0)
     belief_matrices: np.ndarray                    # [inc, h, e, θ, θ'] the AV filter's matrices
-    takeover: np.ndarray
-    failure: np.ndarray
 
     def step(self, state: ProductState, action: RoadAction, rng: np.random.Generator) -> ProductState:
         if state.over:
             return state
         road = action.road
         inc = int(self.pomdp.road_incident[road])
-        h = int(rng.random() < self.takeover[inc, state.theta])
-        e = int(rng.random() < self.failure[inc, state.theta])
-        cdf = self.transition_cdf[inc, h, e, state.theta]
-        theta = min(int(np.searchsorted(cdf, rng.random() * cdf[-1], side="right")), cdf.size - 1)
+        h, e, theta = draw_step(self.driver, 0, inc, state.theta, rng)
         unnormalised = state.belief @ self.belief_matrices[inc, h, e]
         total = unnormalised.sum()
         belief = unnormalised / total if total > 0 else unnormalised
@@ -140,9 +129,7 @@ def build_product_model(pomdp: TrustPOMDP, spec: Spec, belief_rule: BeliefRule =
         raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
     return ProductModel(
         pomdp=pomdp, spec=spec, task=state_only_task(town, spec), compiled=compiled,
-        actions=actions, transition_cdf=np.cumsum(driver.trust_transition, axis=-1),
-        belief_matrices=np.asarray(matrices), takeover=driver.takeover_probability,
-        failure=driver.failure_probability)
+        actions=actions, driver=model_tables(driver), belief_matrices=np.asarray(matrices))
 
 
 class _TransitionModel(pomdp_py.TransitionModel):
@@ -194,8 +181,7 @@ class _TrustBelief(pomdp_py.GenerativeDistribution):
         self.root, self.cdf, self.rng = root, np.cumsum(posterior), rng
 
     def random(self):
-        theta = min(int(np.searchsorted(self.cdf, self.rng.random() * self.cdf[-1], side="right")),
-                    self.cdf.size - 1)
+        theta = draw_rows(self.cdf, self.rng)
         r = self.root
         return ProductState(r.road, theta, r.q, r.q_projected, r.belief, r.observation, r.over)
 
@@ -245,72 +231,3 @@ def pouct_policy(pomdp: TrustPOMDP, spec: Spec, rng: np.random.Generator,
                  num_sims: int = DEFAULT_NUM_SIMS, max_depth: int = DEFAULT_MAX_DEPTH,
                  belief_rule: BeliefRule = "bayes") -> POUCTPolicy:
     return POUCTPolicy(build_product_model(pomdp, spec, belief_rule), rng, num_sims, max_depth)
-
-
-@dataclass(frozen=True)
-class MonteCarloResult:
-    policy: str
-    episodes: int
-    satisfaction: float
-    standard_error: float
-    mean_final_trust: float
-    decisions: int
-    seconds_per_decision: float
-    seconds: float
-
-
-def monte_carlo(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, episodes: int,
-                rng: np.random.Generator, fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
-                max_junctions: int = DEFAULT_JUNCTION_CAP,
-                belief_rule: BeliefRule = "bayes") -> MonteCarloResult:
-    """Run `policy` (with the study's fallback unless None) in the trust model `episodes` times.
-
-    The episode rules are policies/routing/episode_rules.py's, as in policies.evaluation.plain.
-    """
-    started = time.perf_counter()
-    town, driver = pomdp.town, pomdp.driver
-    policy = episode_policy(policy, town, spec, fallback_after)
-    compiled = compile_spec(spec, town)
-    transition_cdf = np.cumsum(driver.trust_transition, axis=-1)
-    initial_cdf = np.cumsum(driver.initial_belief)
-    satisfied = np.zeros(episodes, dtype=bool)
-    final_trust = np.zeros(episodes)
-    decisions = 0
-    decision_seconds = 0.0
-
-    def draw(cdf: np.ndarray) -> int:
-        return min(int(np.searchsorted(cdf, rng.random() * cdf[-1], side="right")), cdf.size - 1)
-
-    for n in range(episodes):
-        theta = draw(initial_cdf)
-        belief = np.array(driver.initial_belief, dtype=float)
-        route = [spec.start]
-        q = compiled.initial_state(belief)
-        while True:
-            verdict = dfa_verdict(compiled, q)
-            if verdict is not None:
-                satisfied[n] = verdict == "accepted"
-                break
-            context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
-            tick = time.perf_counter()
-            decision = decide(policy, context, town, max_junctions)
-            if decision.end is not None:
-                break
-            decision_seconds += time.perf_counter() - tick
-            decisions += 1
-            road = town.successor(route[-1], decision.junction)
-            inc = driver.incident_index(town.incident(road))
-            h = int(rng.random() < driver.takeover_probability[inc, theta])
-            e = int(rng.random() < driver.failure_probability[inc, theta])
-            theta = draw(transition_cdf[inc, h, e, theta])
-            belief = pomdp.belief_update(belief, inc, h, e, rule=belief_rule)[0][0]
-            route.append(road)
-            q = compiled.step_road(q, road, belief)
-        final_trust[n] = driver.trust_levels[theta]
-    rate = float(satisfied.mean()) if episodes else float("nan")
-    return MonteCarloResult(
-        policy=policy.name, episodes=episodes, satisfaction=rate,
-        standard_error=float(np.sqrt(rate * (1 - rate) / episodes)) if episodes else float("nan"),
-        mean_final_trust=float(final_trust.mean()) if episodes else float("nan"),
-        decisions=decisions, seconds_per_decision=decision_seconds / decisions if decisions else 0.0,
-        seconds=time.perf_counter() - started)

@@ -8,9 +8,9 @@ At every position of an episode, in this order:
 5. otherwise the policy picks the next junction, which must be a legal move of the town; the
    decision records whether the fallback (not the policy) drove.
 
-The episode tracker (both engines), the model engine's batch path, the exact evaluation
-(policies/evaluation/plain.py) and POUCT's Monte Carlo (policies/pomdp_py/pouct.py) all use these
-functions, so they cannot disagree on when an episode ends.
+The episode tracker (both engines), the model engine's batch path and Monte Carlo and the exact
+evaluation (policies/evaluation/plain.py) all use these functions, so they cannot disagree on when
+an episode ends.
 """
 
 from __future__ import annotations

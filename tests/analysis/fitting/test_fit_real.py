@@ -28,7 +28,8 @@ def real_roads() -> pd.DataFrame:
 def simulated_roads(roads: pd.DataFrame, model, replicates: int, seed: int) -> pd.DataFrame:
     """Roads tables of `model`'s drivers on the real roads (exact reports: accuracy 1)."""
     incident, _, _, mask = real_arrays(roads, model)
-    take, report = simulate(model, incident, mask, 1.0, replicates, np.random.default_rng(seed))
+    simulated = simulate(model, incident, mask, 1.0, replicates, np.random.default_rng(seed))
+    take, failed, report = simulated.takeover, simulated.failed, simulated.report
     incident, mask = np.repeat(incident, replicates, axis=0), np.repeat(mask, replicates, axis=0)
     rows = []
     for e in range(mask.shape[0]):
@@ -50,7 +51,7 @@ def simulated_roads(roads: pd.DataFrame, model, replicates: int, seed: int) -> p
                     "index": t + 1,
                     "incident": model.incident_types[incident[e, t]],
                     "takeover": bool(take[e, t]),
-                    "performance": "succ",
+                    "performance": "fail" if failed[e, t] else "succ",
                     "reported_trust": int(report[e, t + 1]),
                 }
             )
@@ -103,7 +104,7 @@ def test_participant_bootstrap_is_seeded_and_ordered(real_roads):
 
 def test_check_puts_the_true_model_nearer_than_a_wrong_one(real_roads):
     driver = load_driver_model(None)
-    observed = simulated_roads(real_roads, driver, 20, seed=11)
+    observed = simulated_roads(real_roads, driver, 100, seed=11)
     wrong_dict = driver.to_dict()
     wrong_dict["takeover_probability"] = {
         k: [min(1.0, 2.5 * x) for x in v] for k, v in wrong_dict["takeover_probability"].items()
@@ -113,7 +114,8 @@ def test_check_puts_the_true_model_nearer_than_a_wrong_one(real_roads):
         observed, {"true": (driver, 1.0), "wrong": (wrong, 1.0)}, 10, np.random.default_rng(12)
     )
     true_d, wrong_d = check["models"]["true"]["distance"], check["models"]["wrong"]["distance"]
-    # stated tolerances: 1540 observed episodes, 10 replicates each
+    # stated tolerances: 7700 observed episodes, 10 replicates each; the rarest incident (obstacle,
+    # 18 real roads, 1800 observed) has a standard error of about 0.009 on its rate difference
     assert max(true_d["takeover_rate_abs_difference"].values()) < 0.03
     assert true_d["trust_change_tv"] < 0.05 and true_d["final_trust_tv"] < 0.06
     assert max(wrong_d["takeover_rate_abs_difference"].values()) > 3 * max(

@@ -15,12 +15,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from tests.policies.model.test_trust_pomdp import random_model
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
-from trustroute.harness.simulation.model_engine import run_model_episode, simulate_batch
+from trustroute.harness.simulation.model_engine import monte_carlo, run_model_episode, simulate_batch
+from trustroute.participants.driver_model import driver_model_from_dict
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 Z = 4.5
@@ -104,7 +107,6 @@ def test_per_episode_path_matches_exact_and_batch_for_looping_policy(town, drive
 def test_batch_with_a_population_of_drivers(town, driver):
     """Drivers who never take over and trust fully vs the nominal: the batch must use each
     episode's own driver model (a mix-up shows in the takeover counts)."""
-    from trustroute.participants.driver_model import driver_model_from_dict
 
     data = driver.to_dict()
     data["takeover_probability"] = {k: [0.0] * 7 for k in data["takeover_probability"]}
@@ -137,3 +139,69 @@ def test_model_episode_log_columns(town, driver):
     assert record.summary["junctions"] == len(roads) - 1
     # the driver's takeover is decided at the trust before the road; the AV's filter saw it
     assert (roads["reported_trust"].iloc[1:] >= 1).all() and pd.isna(roads["reported_trust"].iloc[0])
+
+
+SUMMARY_KEYS = ("satisfied", "junctions", "takeovers", "final_trust", "end_reason", "fallback_fired")
+
+
+def test_one_batch_episode_is_the_tracker_episode_draw_for_draw(town):
+    """Without trust reports (the batch path draws none) the batch path on one episode and the
+    per-episode path (tracker + synthetic driver) draw the same numbers from the same seed, so they
+    drive the same episode: one driver step, one set of episode rules."""
+    model = random_model(np.random.default_rng(12), 7, performance_dependent=True, sparse=False)
+    spec = load_spec("specs/phi1.toml", town)
+    setup = EpisodeSetup(town=town, driver_model=model, spec=spec, report_every=10_000)
+    for policy in (trust_free_policy(town, spec), LoopingPolicy(town)):
+        outcomes = set()
+        for seed in range(40):
+            record = run_model_episode(setup, policy, SyntheticDriver(model, np.random.default_rng(seed)),
+                                       "e", 0)
+            assert record.roads["reported_trust"].isna().all()
+            batch = simulate_batch(setup, policy, 1, np.random.default_rng(seed)).frame().iloc[0]
+            assert tuple(record.summary[k] for k in SUMMARY_KEYS) == tuple(batch[k] for k in SUMMARY_KEYS)
+            assert record.summary["mean_trust"] == pytest.approx(batch["mean_trust"], rel=1e-12)
+            outcomes.add(tuple(record.summary[k] for k in ("takeovers", "final_trust", "end_reason")))
+        assert len(outcomes) >= 5     # the episodes differ: the equality is not a constant
+
+
+def test_monte_carlo_is_the_batch_path_one_episode_at_a_time(town, pomdp):
+    spec = load_spec("specs/phi2.toml", town)
+    policy = LoopingPolicy(town)
+    setup = EpisodeSetup(town=town, driver_model=pomdp.driver, spec=spec)
+    result = monte_carlo(pomdp, spec, policy, 300, np.random.default_rng(6))
+    rng = np.random.default_rng(6)
+    runs = [simulate_batch(setup, policy, 1, rng) for _ in range(300)]
+    assert result.satisfaction == np.mean([run.satisfied[0] for run in runs])
+    assert result.mean_final_trust == np.mean([run.final_trust[0] for run in runs])
+    assert result.decisions == sum(int(run.junctions[0]) for run in runs)
+    assert result.policy == "looping+fallback20" and 0 < result.satisfaction < 1
+
+
+def test_monte_carlo_of_the_baseline_agrees_with_exact_evaluation(pomdp):
+    spec = load_spec("specs/phi1.toml", pomdp.town)
+    policy = trust_free_policy(pomdp.town, spec)
+    exact = evaluate(pomdp, spec, policy)
+    result = monte_carlo(pomdp, spec, policy, 3000, np.random.default_rng(4))
+    assert result.episodes == 3000
+    assert abs(result.satisfaction - exact.lower) <= 4 * result.standard_error
+    assert result.decisions == 3000 * (len(baseline_route(pomdp.town, spec)) - 1)
+
+
+def test_monte_carlo_drives_the_pomdps_driver(town):
+    """A driver whose AV always fails and who drops to the lowest trust on a failure ends every
+    episode there; the same driver with an AV that never fails does not: the Monte Carlo draws the
+    AV's performance from the model."""
+    model = random_model(np.random.default_rng(3), 7, performance_dependent=True, sparse=False)
+    data = model.to_dict()
+    for incident in data["trust_transition"]:
+        for action in data["trust_transition"][incident]:
+            data["trust_transition"][incident][action]["fail"] = [[1.0] + [0.0] * 6] * 7
+    data["failure_probability"] = {k: [1.0] * 7 for k in data["incident_types"]}
+    failing = build_pomdp(town, driver_model_from_dict(data, "failing"))
+    data["failure_probability"] = {k: [0.0] * 7 for k in data["incident_types"]}
+    never = build_pomdp(town, driver_model_from_dict(data, "never"))
+    spec = load_spec("specs/phi1.toml", town)
+    policy = trust_free_policy(town, spec)
+    low = monte_carlo(failing, spec, policy, 400, np.random.default_rng(1)).mean_final_trust
+    high = monte_carlo(never, spec, policy, 400, np.random.default_rng(1)).mean_final_trust
+    assert low == 1.0 and high > 2.5

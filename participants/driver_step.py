@@ -1,0 +1,147 @@
+"""The synthetic driver's step: the one definition of every draw of a simulated driver.
+
+Owns `DriverTables`, the probability tables a step draws from (for one or more driver models on
+one incident list), and the draws of a step, in the order a road is driven:
+
+1. `draw_takeovers`: h ~ P(takeover | θ, inc), from the trust before the road;
+2. `draw_performances`: the AV's performance e ~ P(fail | θ, inc) (the SUMO engine measures e
+   instead of drawing it);
+3. `draw_trust`: θ' ~ T[inc][h][e](θ, ·);
+4. `draw_reports`: the report of θ' through the driver model's noise model (`draw_report`).
+
+`draw_step` is 1-3 in that order; `draw_initial_trust` draws θ_0. Every function takes either one
+driver (integer indices) or arrays of drivers (kind, incident and trust indices broadcast
+together). A draw of n drivers takes n uniforms from the Generator in driver order
+(`rng.random(n)`), one driver takes one (`rng.random()`): the same stream, so a batch of one draws
+exactly as the single driver does. Inverse-CDF draws compare u · total with the cumulative row
+(robust to rows summing to 1 ± 1e-9); the cumulative rows are `np.cumsum` along the last axis,
+which adds in the same order for every row of a stacked table as on the row alone.
+
+Users: `participants.synthetic_driver.SyntheticDriver` (one driver, both engines), the model
+engine's batch path and Monte Carlo (harness/simulation/model_engine.py), POUCT's search step
+(policies/pomdp_py/pouct.py) and the posterior-predictive check (analysis/posterior_check.py).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.participants.driver_model import DriverModel, draw_report
+
+
+@dataclass(frozen=True, eq=False)
+class DriverTables:
+    """The tables of driver models (kinds) on one incident list; arrays are read-only.
+
+    takeover[k, i, θ]              = P(h = takeover | θ, incident i) of kind k
+    failure[k, i, θ]               = P(e = fail | θ, incident i)
+    transition_cdf[k, i, h, e, θ]  = the cumulative row of T[i][h][e](θ, ·)
+    initial_cdf[k]                 = the cumulative initial distribution of θ
+    """
+
+    incident_types: tuple[str, ...]
+    takeover: np.ndarray
+    failure: np.ndarray
+    transition_cdf: np.ndarray
+    initial_cdf: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("takeover", "failure", "transition_cdf", "initial_cdf"):
+            getattr(self, name).setflags(write=False)
+
+
+def driver_tables(models: Sequence[DriverModel],
+                  incident_types: Sequence[str] | None = None) -> DriverTables:
+    """The tables of `models` (kind k = models[k]) indexed by `incident_types` (default: the first
+    model's); every model must cover those incidents and have as many trust levels."""
+    models = list(models)
+    if not models:
+        raise ValueError("driver_tables needs at least one driver model")
+    incidents = tuple(incident_types) if incident_types is not None else models[0].incident_types
+    if any(m.n_trust != models[0].n_trust for m in models):
+        raise ValueError("the driver models have different numbers of trust levels")
+    for m in models:
+        missing = [i for i in incidents if i not in m.incident_types]
+        if missing:
+            raise ValueError(f"driver model {m.source_path} does not cover incident {missing[0]!r}")
+    rows = [[m.incident_index(i) for i in incidents] for m in models]
+    return DriverTables(
+        incident_types=incidents,
+        takeover=np.stack([m.takeover_probability[r] for m, r in zip(models, rows, strict=True)]),
+        failure=np.stack([m.failure_probability[r] for m, r in zip(models, rows, strict=True)]),
+        transition_cdf=np.cumsum(
+            np.stack([m.trust_transition[r] for m, r in zip(models, rows, strict=True)]), axis=-1),
+        initial_cdf=np.cumsum(np.stack([m.initial_belief for m in models]), axis=-1),
+    )
+
+
+_TABLES: dict[int, tuple[DriverModel, DriverTables]] = {}
+
+
+def model_tables(model: DriverModel) -> DriverTables:
+    """`driver_tables([model])` on the model's own incident list (kind 0), built once per model:
+    a study creates a driver per episode from a few models."""
+    entry = _TABLES.get(id(model))
+    if entry is None or entry[0] is not model:
+        if len(_TABLES) > 64:
+            _TABLES.clear()
+        entry = (model, driver_tables([model]))
+        _TABLES[id(model)] = entry
+    return entry[1]
+
+
+def _bernoulli(p, rng: np.random.Generator):
+    """1 with probability p, else 0, per driver (an int for one driver): u < p."""
+    if np.ndim(p) == 0:
+        return int(rng.random() < p)
+    return (rng.random(np.shape(p)) < p).astype(np.int64)
+
+
+def draw_rows(cdf: np.ndarray, rng: np.random.Generator):
+    """One index per cumulative row of `cdf` [..., k] (an int for one row): the number of entries
+    at most u · total, u uniform (inverse CDF, capped at k - 1)."""
+    last = cdf.shape[-1] - 1
+    if cdf.ndim == 1:
+        return min(int((cdf <= rng.random() * cdf[-1]).sum()), last)
+    u = rng.random(cdf.shape[:-1]) * cdf[..., -1]
+    return np.minimum((cdf <= u[..., None]).sum(axis=-1), last)
+
+
+def draw_initial_trust(tables: DriverTables, kind, rng: np.random.Generator):
+    """θ_0 ~ the initial distribution of each driver's kind."""
+    return draw_rows(tables.initial_cdf[kind], rng)
+
+
+def draw_takeovers(tables: DriverTables, kind, incident, theta, rng: np.random.Generator):
+    """h ~ P(takeover | θ, incident): 1 takeover, 0 standstill."""
+    return _bernoulli(tables.takeover[kind, incident, theta], rng)
+
+
+def draw_performances(tables: DriverTables, kind, incident, theta, rng: np.random.Generator):
+    """The AV's e ~ P(fail | θ, incident): 0 succ, 1 fail. One uniform per driver also where the
+    model cannot fail, so models with and without failures consume the stream alike."""
+    return _bernoulli(tables.failure[kind, incident, theta], rng)
+
+
+def draw_trust(tables: DriverTables, kind, incident, h, e, theta, rng: np.random.Generator):
+    """θ' ~ T[incident][h][e](θ, ·)."""
+    return draw_rows(tables.transition_cdf[kind, incident, h, e, theta], rng)
+
+
+def draw_step(tables: DriverTables, kind, incident, theta, rng: np.random.Generator):
+    """One road: (h, e, θ') drawn in that order (takeover and performance from the trust before)."""
+    h = draw_takeovers(tables, kind, incident, theta, rng)
+    e = draw_performances(tables, kind, incident, theta, rng)
+    return h, e, draw_trust(tables, kind, incident, h, e, theta, rng)
+
+
+def draw_reports(theta, accuracy: float, n_trust: int, rng: np.random.Generator):
+    """Reported trust indices of trust indices θ through the driver model's `draw_report`, driver by
+    driver in order (a report takes one or two uniforms, so the draws cannot be batched)."""
+    if np.ndim(theta) == 0:
+        return draw_report(int(theta), accuracy, n_trust, rng)
+    flat = [draw_report(t, accuracy, n_trust, rng) for t in np.asarray(theta).ravel().tolist()]
+    return np.array(flat, dtype=np.int64).reshape(np.shape(theta))

@@ -1,0 +1,50 @@
+"""The posterior-predictive check's simulator is the synthetic driver's step on given roads.
+
+One row with one replicate draws exactly what a synthetic driver of the same seed draws on those
+roads (initial trust, report, then per road takeover, the AV's performance, trust and report), so
+the check simulates the driver the studies run, the AV's performance included; many rows show the
+drawn performance at the model's failure rate.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+from tests.policies.model.test_trust_pomdp import random_model
+from trustroute.analysis.posterior_check import simulate
+from trustroute.participants.synthetic_driver import SyntheticDriver
+
+
+def test_one_row_is_a_synthetic_driver_on_those_roads():
+    model = random_model(np.random.default_rng(4), 7, performance_dependent=True, sparse=False)
+    names = ["truck", "obstacle", "pedestrian", "none", "truck", "pedestrian"]
+    incident = np.array([[model.incident_index(n) for n in names] + [0, 0]])
+    mask = np.array([[True] * len(names) + [False, False]])
+    for seed in range(10):
+        sim = simulate(model, incident, mask, 0.7, 1, np.random.default_rng(seed))
+        person = SyntheticDriver(model, np.random.default_rng(seed), report_accuracy=0.7)
+        reports, takeovers, failures = [person.report_trust()], [], []
+        for name in names:
+            took_over = person.decides_takeover(name)
+            performance = person.performance(name)
+            person.move_trust(name, took_over, performance)
+            takeovers.append(took_over)
+            failures.append(performance == "fail")
+            reports.append(person.report_trust())
+        assert sim.takeover[0].tolist() == takeovers + [False, False]
+        assert sim.failed[0].tolist() == failures + [False, False]
+        assert sim.report[0].tolist() == reports + [reports[-1]] * 2
+
+
+def test_the_avs_performance_is_drawn_from_the_model():
+    model = random_model(np.random.default_rng(8), 7, performance_dependent=True, sparse=False)
+    inc = model.incident_index("obstacle")
+    n = 4000
+    sim = simulate(model, np.full((1, 1), inc), np.ones((1, 1), dtype=bool), 1.0, n,
+                   np.random.default_rng(1))
+    # road 1's performance is drawn from θ_0 ~ π: P(fail) = Σ_θ π(θ) P(fail | θ, obstacle)
+    p = float(model.initial_belief @ model.failure_probability[inc])
+    fails = int(sim.failed.sum())
+    assert stats.binomtest(fails, n, p).pvalue > 1e-4
+    assert stats.binomtest(fails, n, min(p + 0.05, 1.0)).pvalue < 1e-4
