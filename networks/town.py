@@ -22,6 +22,17 @@ import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.core.validation import check_keys, parse_json, read_text, require_keys, require_object
+from trustroute.networks.road_geometry import (
+    EXTRA_TOWN_KEYS,
+    RoadExtras,
+    RoadGeometry,
+    SumoNetRef,
+    check_strongly_connected,
+    directed_pairs,
+    identity_extras,
+    parse_road_extras,
+    shaped_roads,
+)
 
 # The paper's town with the geometry of CARLA Town01, where the authors ran their study
 # (networks/data/PROVENANCE.md). The earlier invented layout of the same roads and incidents stays
@@ -30,7 +41,7 @@ DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town01_carla.json"
 PENTAGON_TOWN_PATH = Path(__file__).parent / "data" / "pentagon.json"
 NO_INCIDENT = "none"  # a road without an incident (and the start road of an episode)
 INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", NO_INCIDENT)
-TOWN_KEYS: tuple[str, ...] = ("junctions", "roads", "incidents", "source")
+TOWN_KEYS: tuple[str, ...] = ("junctions", "roads", "incidents", "source", *EXTRA_TOWN_KEYS)
 # SUMO works in metres with float coordinates: a town beyond 1000 km, or a road shorter than a car,
 # passes the schema but breaks netconvert or makes every length degenerate.
 MAX_COORDINATE = 1.0e6
@@ -50,25 +61,29 @@ def split_road(directed_road: str) -> tuple[str, str]:
 
 @dataclass(frozen=True)
 class Town:
-    """A validated town. `states` are the directed roads in a fixed sorted order."""
+    """A validated town. `states` are the directed roads in a fixed sorted order; `neighbours` the
+    junctions one road away in driving direction; `one_way` the (U, V) roads driven only from U to
+    V; `geometry` the real course of the directed roads that have one (networks/road_geometry.py)."""
 
     junctions: dict[str, tuple[float, float]]
     roads: tuple[tuple[str, str], ...]
     incidents: dict[str, str]
     source_path: str = ""
     provenance: str = ""
+    one_way: frozenset[tuple[str, str]] = frozenset()
+    geometry: dict[str, RoadGeometry] = field(default_factory=dict)
+    sumo_net: SumoNetRef | None = None
     states: tuple[str, ...] = field(init=False)
     neighbours: dict[str, tuple[str, ...]] = field(init=False)
 
     def __post_init__(self) -> None:
         neighbours: dict[str, list[str]] = {name: [] for name in self.junctions}
-        for u, v in self.roads:
+        for u, v in directed_pairs(self.roads, self.one_way):
             neighbours[u].append(v)
-            neighbours[v].append(u)
         object.__setattr__(
             self, "neighbours", {k: tuple(sorted(v)) for k, v in neighbours.items()}
         )
-        states = sorted(road_name(u, v) for a, b in self.roads for u, v in ((a, b), (b, a)))
+        states = sorted(road_name(u, v) for u, v in directed_pairs(self.roads, self.one_way))
         object.__setattr__(self, "states", tuple(states))
 
     # -- identity -----------------------------------------------------------
@@ -80,6 +95,7 @@ class Town:
                 "junctions": {k: list(v) for k, v in sorted(self.junctions.items())},
                 "roads": sorted(sorted(r) for r in self.roads),
                 "incidents": dict(sorted(self.incidents.items())),
+                **identity_extras(self.one_way, self.geometry, self.sumo_net),
             },
             sort_keys=True,
             separators=(",", ":"),
@@ -138,7 +154,11 @@ class Town:
 
     # -- geometry -----------------------------------------------------------
     def length(self, directed_road: str) -> float:
-        """Model road length: centre-to-centre Euclidean distance in metres."""
+        """Model road length in metres: the road's geometry when it has one, else the
+        centre-to-centre Euclidean distance."""
+        geometry = self.geometry.get(directed_road)
+        if geometry is not None:
+            return geometry.length
         u, v = split_road(directed_road)
         (x1, y1), (x2, y2) = self.junctions[u], self.junctions[v]
         return math.hypot(x2 - x1, y2 - y1)
@@ -224,6 +244,7 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
                     "list each two-way road once as [\"A\", \"B\"]")
     roads: list[tuple[str, str]] = []
     seen: set[frozenset[str]] = set()
+    shaped = shaped_roads(data)
     for i, road in enumerate(raw_roads):
         place = f"roads[{i}]"
         if not (isinstance(road, list) and len(road) == 2 and all(isinstance(j, str) for j in road)):
@@ -237,7 +258,9 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
         if u == v:
             raise _fail(path, place, f"road {u}-{v} is a self-loop", "remove it; roads join two "
                         "different junctions")
-        if math.dist(junctions[u], junctions[v]) < MIN_ROAD_LENGTH:
+        # A road with a geometry has its own length; its junctions may stand closer than a car.
+        if (not {road_name(u, v), road_name(v, u)} & shaped
+                and math.dist(junctions[u], junctions[v]) < MIN_ROAD_LENGTH):
             raise _fail(path, place, f"road {u}-{v} is {math.dist(junctions[u], junctions[v]):.3g} m long "
                         f"(junctions {u} and {v} almost coincide)", f"place the junctions at least "
                         f"{MIN_ROAD_LENGTH:g} m apart")
@@ -251,7 +274,8 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
     if not isinstance(raw_incidents, dict):
         raise _fail(path, "incidents", "expected an object of \"U-V\" -> incident type",
                     "write one entry per directed road")
-    directed = {road_name(a, b) for u, v in roads for a, b in ((u, v), (v, u))}
+    extras = parse_road_extras(data, path, roads)
+    directed = {road_name(a, b) for a, b in directed_pairs(roads, extras.one_way)}
     for key in sorted(directed):
         if key not in raw_incidents:
             raise _fail(path, f"incidents.{key}", f"missing incident entry for directed road {key}",
@@ -265,7 +289,7 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
                         f"use one of {', '.join(INCIDENT_TYPES)}")
 
     town = Town(junctions=junctions, roads=tuple(roads), incidents=dict(raw_incidents),
-                source_path=path, provenance=str(data.get("source", "")))
+                source_path=path, provenance=str(data.get("source", "")), **extras_fields(extras))
     # connectivity over the undirected road graph
     first = next(iter(junctions))
     reached = {first}
@@ -279,7 +303,14 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
         missing = sorted(set(junctions) - reached)
         raise _fail(path, "roads", f"the town is disconnected: {', '.join(missing)} cannot be "
                     f"reached from {first}", "add roads joining every junction")
+    if town.one_way:
+        check_strongly_connected(town.junctions, town.neighbours, path)
     return town
+
+
+def extras_fields(extras: RoadExtras) -> dict:
+    """The Town fields of the optional road keys (networks/road_geometry.py)."""
+    return {"one_way": extras.one_way, "geometry": dict(extras.geometry or {}), "sumo_net": extras.sumo_net}
 
 
 def load_town(path: str | Path | None = None) -> Town:
