@@ -26,7 +26,7 @@ NET_SUFFIXES: tuple[str, ...] = (".net.xml", ".net.xml.gz")
 OSM_OPTIONS: tuple[str, ...] = (
     "--opposites.guess", "--junctions.join", "--geometry.remove", "--roundabouts.guess",
     "--ramps.guess", "--tls.guess-signals", "--tls.discard-simple", "--tls.join",
-    "--output.street-names", "--no-step-log",
+    "--output.street-names",
 )
 GENERATED_HEADER = re.compile(rb"<!-- generated on .*?-->\s*", re.S)
 
@@ -64,9 +64,10 @@ def convert_osm(source: str | Path) -> bytes:
         result = subprocess.run(netconvert_osm_command(binary, source.resolve(), output), capture_output=True,
                                 text=True, check=False, env=environment)
         if result.returncode != 0 or not output.is_file():
-            errors = [line for line in (result.stderr or result.stdout).splitlines() if "Error" in line]
+            errors = [line.removeprefix("Error: ").strip()
+                      for line in (result.stderr or result.stdout).splitlines() if line.startswith("Error")]
             raise InputError(str(source), "", "netconvert rejected the OpenStreetMap file: "
-                             + (errors[0] if errors else f"exit {result.returncode}"),
+                             + ("; ".join(errors[:2]) if errors else f"exit {result.returncode}"),
                              "pass an OSM XML extract (e.g. exported from openstreetmap.org) that "
                              "contains streets")
         return GENERATED_HEADER.sub(b"", output.read_bytes(), count=1)

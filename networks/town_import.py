@@ -46,7 +46,7 @@ class TownImport:
     def summary(self) -> str:
         counts = self.to_dict()
         return (f"{counts['junctions']} junctions, {counts['roads']} directed roads "
-                f"({counts['two_way_roads']} two-way streets, {counts['one_way_roads']} one-way)")
+                f"(two-way: {counts['two_way_roads']}, one-way: {counts['one_way_roads']})")
 
 
 def default_net_path(town_path: Path) -> Path:
