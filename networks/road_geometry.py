@@ -186,9 +186,11 @@ def parse_road_extras(data: Mapping, path: str, roads: Iterable[tuple[str, str]]
 
 
 def check_strongly_connected(junctions: Iterable[str], out_neighbours: Mapping[str, Iterable[str]],
-                             path: str) -> None:
+                             one_way: frozenset[tuple[str, str]], path: str) -> None:
     """Every junction reaches every other along directed roads (a one-way road can cut a town that
-    is connected when its roads are taken both ways)."""
+    is connected when its roads are taken both ways; without one, connected is enough)."""
+    if not one_way:
+        return
     names = sorted(junctions)
     incoming: dict[str, list[str]] = {name: [] for name in names}
     for u in names:

@@ -1,8 +1,10 @@
 """Town files: schema, validation, directed-road states, actions, lengths, shortest paths.
 
 A town file is JSON with `junctions` (name -> [x, y] in metres), `roads` (list of
-undirected [U, V] pairs, each a two-way road) and `incidents` (one entry per
-directed road "U-V": obstacle, pedestrian, truck or none); every key: docs/formats/town.md.
+undirected [U, V] pairs, each a two-way road unless `one_way` says otherwise) and `incidents` (one
+entry per directed road "U-V": obstacle, pedestrian, truck or none); the optional keys of real
+roads (one-way roads, shapes and lengths, the source SUMO net) are read by
+networks/road_geometry.py; every key: docs/formats/town.md.
 A state of the model is a directed road "U-V": the vehicle has just arrived at V from U.
 """
 
@@ -290,7 +292,7 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
 
     town = Town(junctions=junctions, roads=tuple(roads), incidents=dict(raw_incidents),
                 source_path=path, provenance=str(data.get("source", "")), **extras_fields(extras))
-    # connectivity over the undirected road graph
+    # connectivity: every junction reached from the first along the roads (both ways unless one-way)
     first = next(iter(junctions))
     reached = {first}
     stack = [first]
@@ -303,8 +305,7 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
         missing = sorted(set(junctions) - reached)
         raise _fail(path, "roads", f"the town is disconnected: {', '.join(missing)} cannot be "
                     f"reached from {first}", "add roads joining every junction")
-    if town.one_way:
-        check_strongly_connected(town.junctions, town.neighbours, path)
+    check_strongly_connected(town.junctions, town.neighbours, town.one_way, path)
     return town
 
 
