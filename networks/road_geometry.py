@@ -124,12 +124,11 @@ def parse_one_way(data: Mapping, path: str, roads: Iterable[tuple[str, str]]) ->
 
 
 def parse_shape(raw: object, path: str, place: str) -> tuple[tuple[float, float], ...]:
-    ok = isinstance(raw, list) and len(raw) >= 2 and all(
-        isinstance(p, list) and len(p) == 2 and all(_is_number(c) for c in p) for p in raw)
-    if not ok:
+    if not (isinstance(raw, list) and len(raw) >= 2 and all(
+            isinstance(p, list) and len(p) == 2 and all(_is_number(c) for c in p) for p in raw)):
         raise InputError(path, place, "a shape must be a list of at least two [x, y] points of finite "
                          "numbers", "write the road's course as [[x, y], [x, y], ...] in metres")
-    return tuple((float(p[0]), float(p[1])) for p in raw)  # type: ignore[union-attr]
+    return tuple((float(p[0]), float(p[1])) for p in raw)
 
 
 def parse_geometry_entry(raw: object, path: str, place: str) -> RoadGeometry:

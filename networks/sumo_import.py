@@ -97,7 +97,9 @@ class DecisionGraph:
 
     def summary(self) -> str:
         parts = [f"{count} {what}" for what, count in self.dropped.items() if count]
-        return "dropped " + (", ".join(parts) if parts else "nothing")
+        added = (f"; {self.added_junctions} junctions without a choice kept to tell parallel roads apart"
+                 if self.added_junctions else "")
+        return "dropped " + (", ".join(parts) if parts else "nothing") + added
 
 
 def _finite_points(points: Iterable[Iterable[float]], path: str,

@@ -41,6 +41,8 @@ def import_command(source: str, out: str, incidents_path: str | None, incident_s
     if incidents_path is not None and incident_seed is not None:
         raise click.UsageError("pass --incidents or --incident-seed, not both")
     check_output_file(out, "--out", "town file")
+    if net_out is not None:
+        check_output_file(net_out, "--net-out", "SUMO net")
     rng = np.random.default_rng(incident_seed) if incident_seed is not None else None
     result = import_town(source, out, incidents_path=incidents_path, rng=rng, net_out=net_out,
                          incident_seed=incident_seed)

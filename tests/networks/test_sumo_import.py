@@ -108,6 +108,7 @@ def test_parallel_roads_keep_their_own_names(tmp_path):
     assert "q" not in sumolib_decision_junctions(net)
     assert set(graph.junction_ids) == {*"abcde", "q"} and graph.added_junctions == 1
     assert directed(graph) >= {"a-b", "a-q", "q-b", "b-q", "q-a"}
+    assert "1 junctions without a choice kept" in graph.summary()
     check_roads_follow_the_net(graph, net)
 
 
