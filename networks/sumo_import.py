@@ -217,7 +217,7 @@ def _walk(first: NetEdge, ends: set[str], out_edges: Mapping[str, list[NetEdge]]
 
 def _chains(edges: list[NetEdge], ends: set[str], out_edges: Mapping[str, list[NetEdge]],
             ) -> tuple[list[list[NetEdge]], set[str]]:
-    """Chains from every town junction and the junctions still to promote (a parallel single edge,
+    """Chains from every town junction and the junctions left to promote (a parallel single edge,
     with no junction in between to promote, is left out)."""
     by_pair: dict[tuple[str, str], list[list[NetEdge]]] = {}
     promote: set[str] = set()
