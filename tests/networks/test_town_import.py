@@ -53,6 +53,13 @@ def test_import_twice_gives_the_same_bytes(wheel, tmp_path, capsys):
                                "--incident-seed", "7", "--quiet")
         assert code == 0 and err == ""
     assert (tmp_path / "one.json").read_bytes() == (tmp_path / "two.json").read_bytes()
+    code, out, err = run_cli(capsys, "town", "import", str(wheel), "--out", str(tmp_path / "three.json"),
+                             "--incident-seed", "7", "--json")
+    assert code == 0 and err == ""
+    summary = json.loads(out)
+    assert summary["paths"] == {"town": str(tmp_path / "three.json"), "net": str(wheel)}
+    assert (summary["junctions"], summary["roads"], summary["one_way_roads"]) == (5, 15, 1)
+    assert summary["content_hash"] == load_town(tmp_path / "one.json").content_hash
 
 
 def test_spec_check_and_baseline_accept_a_spec_on_the_imported_town(wheel, tmp_path, capsys):
