@@ -78,8 +78,9 @@ def find_binary(name: str) -> str:
 
 def pedestrian_roads(town: Town) -> list[tuple[str, str]]:
     """Undirected roads (sorted pairs) with a pedestrian incident in either direction."""
+    incident = town.incidents.get  # a one-way road has one direction only
     return sorted({(u, v) if u <= v else (v, u) for u, v in town.roads
-                   if "pedestrian" in (town.incident(road_name(u, v)), town.incident(road_name(v, u)))})
+                   if "pedestrian" in (incident(road_name(u, v)), incident(road_name(v, u)))})
 
 
 def lane_count(town: Town, directed_road: str) -> int:

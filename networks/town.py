@@ -1,8 +1,10 @@
 """Town files: schema, validation, directed-road states, actions, lengths, shortest paths.
 
 A town file is JSON with `junctions` (name -> [x, y] in metres), `roads` (list of
-undirected [U, V] pairs, each a two-way road) and `incidents` (one entry per
-directed road "U-V": obstacle, pedestrian, truck or none); every key: docs/formats/town.md.
+undirected [U, V] pairs, each a two-way road unless `one_way` says otherwise) and `incidents` (one
+entry per directed road "U-V": obstacle, pedestrian, truck or none); the optional keys of real
+roads (one-way roads, shapes and lengths, the source SUMO net) are read by
+networks/road_geometry.py; every key: docs/formats/town.md.
 A state of the model is a directed road "U-V": the vehicle has just arrived at V from U.
 """
 
@@ -34,6 +36,17 @@ from trustroute.core.fields import (
     keys,
 )
 from trustroute.core.validation import parse_json, read_text, require_object
+from trustroute.networks.road_geometry import (
+    EXTRA_TOWN_KEYS,
+    RoadExtras,
+    RoadGeometry,
+    SumoNetRef,
+    check_strongly_connected,
+    directed_pairs,
+    identity_extras,
+    parse_road_extras,
+    shaped_roads,
+)
 
 # The paper's town with the geometry of CARLA Town01, where the authors ran their study
 # (networks/data/PROVENANCE.md). An invented layout of the same roads and incidents is kept
@@ -61,25 +74,29 @@ def split_road(directed_road: str) -> tuple[str, str]:
 
 @dataclass(frozen=True)
 class Town:
-    """A validated town. `states` are the directed roads in a fixed sorted order."""
+    """A validated town. `states` are the directed roads in a fixed sorted order; `neighbours` the
+    junctions one road away in driving direction; `one_way` the (U, V) roads driven only from U to
+    V; `geometry` the real course of the directed roads that have one (networks/road_geometry.py)."""
 
     junctions: dict[str, tuple[float, float]]
     roads: tuple[tuple[str, str], ...]
     incidents: dict[str, str]
     source_path: str = ""
     provenance: str = ""
+    one_way: frozenset[tuple[str, str]] = frozenset()
+    geometry: dict[str, RoadGeometry] = field(default_factory=dict)
+    sumo_net: SumoNetRef | None = None
     states: tuple[str, ...] = field(init=False)
     neighbours: dict[str, tuple[str, ...]] = field(init=False)
 
     def __post_init__(self) -> None:
         neighbours: dict[str, list[str]] = {name: [] for name in self.junctions}
-        for u, v in self.roads:
+        for u, v in directed_pairs(self.roads, self.one_way):
             neighbours[u].append(v)
-            neighbours[v].append(u)
         object.__setattr__(
             self, "neighbours", {k: tuple(sorted(v)) for k, v in neighbours.items()}
         )
-        states = sorted(road_name(u, v) for a, b in self.roads for u, v in ((a, b), (b, a)))
+        states = sorted(road_name(u, v) for u, v in directed_pairs(self.roads, self.one_way))
         object.__setattr__(self, "states", tuple(states))
 
     # -- identity -----------------------------------------------------------
@@ -91,6 +108,7 @@ class Town:
                 "junctions": {k: list(v) for k, v in sorted(self.junctions.items())},
                 "roads": sorted(sorted(r) for r in self.roads),
                 "incidents": dict(sorted(self.incidents.items())),
+                **identity_extras(self.one_way, self.geometry, self.sumo_net),
             },
             sort_keys=True,
             separators=(",", ":"),
@@ -149,7 +167,11 @@ class Town:
 
     # -- geometry -----------------------------------------------------------
     def length(self, directed_road: str) -> float:
-        """Model road length: centre-to-centre Euclidean distance in metres."""
+        """Model road length in metres: the road's geometry when it has one, else the
+        centre-to-centre Euclidean distance."""
+        geometry = self.geometry.get(directed_road)
+        if geometry is not None:
+            return geometry.length
         u, v = split_road(directed_road)
         (x1, y1), (x2, y2) = self.junctions[u], self.junctions[v]
         return math.hypot(x2 - x1, y2 - y1)
@@ -211,6 +233,8 @@ FIELDS: tuple[Field, ...] = (
           problem="expected an object of \"U-V\" -> incident type", fix="write one entry per directed road",
           missing_fix="add a 'incidents' entry as in the default town (trustroute net build --help)"),
     Field(key="source", kind=Anything(), default=""),  # provenance, kept as text
+    # one-way roads, road geometry and the source SUMO net: checked by networks/road_geometry.py
+    *(Field(key=key, kind=Anything(), default=None) for key in EXTRA_TOWN_KEYS),
 )
 TOWN_KEYS: tuple[str, ...] = keys(FIELDS)
 JUNCTION = Text(max_length=MAX_JUNCTION_NAME, pattern=JUNCTION_NAME)
@@ -234,8 +258,10 @@ def _junctions(raw: dict, path: str) -> dict[str, tuple[float, float]]:
     return junctions
 
 
-def _road(road: object, place: str, junctions: dict[str, tuple[float, float]], path: str) -> tuple[str, str]:
-    """One [U, V] pair: two known, different junctions at least MIN_ROAD_LENGTH apart."""
+def _road(road: object, place: str, junctions: dict[str, tuple[float, float]], path: str,
+          shaped: set[str]) -> tuple[str, str]:
+    """One [U, V] pair: two known, different junctions at least MIN_ROAD_LENGTH apart (a road with
+    a geometry has its own length: its junctions may stand closer than a car)."""
     check_value(road, ROAD, path, place, f"{road!r} is not a pair of junction names",
                 "write the road as [\"U\", \"V\"]")
     u, v = road
@@ -246,19 +272,21 @@ def _road(road: object, place: str, junctions: dict[str, tuple[float, float]], p
     if u == v:
         raise InputError(path, place, f"road {u}-{v} is a self-loop", "remove it; roads join two "
                          "different junctions")
-    if math.dist(junctions[u], junctions[v]) < MIN_ROAD_LENGTH:
+    if (not {road_name(u, v), road_name(v, u)} & shaped
+            and math.dist(junctions[u], junctions[v]) < MIN_ROAD_LENGTH):
         raise InputError(path, place, f"road {u}-{v} is {math.dist(junctions[u], junctions[v]):.3g} m long "
                          f"(junctions {u} and {v} almost coincide)", f"place the junctions at least "
                          f"{MIN_ROAD_LENGTH:g} m apart")
     return u, v
 
 
-def _roads(raw: list, junctions: dict[str, tuple[float, float]], path: str) -> tuple[tuple[str, str], ...]:
+def _roads(raw: list, junctions: dict[str, tuple[float, float]], path: str,
+           shaped: set[str]) -> tuple[tuple[str, str], ...]:
     """Every road valid and listed once ([A, B] and [B, A] are the same two-way road)."""
     roads: list[tuple[str, str]] = []
     seen: set[frozenset[str]] = set()
     for i, road in enumerate(raw):
-        u, v = _road(road, f"roads[{i}]", junctions, path)
+        u, v = _road(road, f"roads[{i}]", junctions, path, shaped)
         if frozenset((u, v)) in seen:
             raise InputError(path, f"roads[{i}]", f"road {u}-{v} is listed twice (roads are two-way)",
                              "list each road once")
@@ -267,9 +295,10 @@ def _roads(raw: list, junctions: dict[str, tuple[float, float]], path: str) -> t
     return tuple(roads)
 
 
-def _check_incidents(incidents: dict, roads: tuple[tuple[str, str], ...], path: str) -> None:
-    """Exactly one entry per directed road of the town."""
-    directed = {road_name(a, b) for u, v in roads for a, b in ((u, v), (v, u))}
+def _check_incidents(incidents: dict, roads: tuple[tuple[str, str], ...], one_way: frozenset[tuple[str, str]],
+                     path: str) -> None:
+    """Exactly one entry per directed road of the town (one direction only for one-way roads)."""
+    directed = {road_name(a, b) for a, b in directed_pairs(roads, one_way)}
     for key in sorted(directed):
         if key not in incidents:
             raise InputError(path, f"incidents.{key}", f"missing incident entry for directed road {key}",
@@ -281,7 +310,8 @@ def _check_incidents(incidents: dict, roads: tuple[tuple[str, str], ...], path: 
 
 
 def _check_connected(town: Town, path: str) -> None:
-    """Every junction reachable from the first over the undirected road graph."""
+    """Every junction reachable from the first along the roads (both ways unless one-way), and
+    every junction reachable from every other where roads are one-way."""
     first = next(iter(town.junctions))
     reached = {first}
     stack = [first]
@@ -294,6 +324,7 @@ def _check_connected(town: Town, path: str) -> None:
         missing = sorted(set(town.junctions) - reached)
         raise InputError(path, "roads", f"the town is disconnected: {', '.join(missing)} cannot be "
                          f"reached from {first}", "add roads joining every junction")
+    check_strongly_connected(town.junctions, town.neighbours, town.one_way, path)
 
 
 def town_from_dict(data: object, path: str = "<town>") -> Town:
@@ -301,12 +332,18 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
     data = require_object(data, path, "write {\"junctions\": ..., \"roads\": ..., \"incidents\": ...}")
     values = check_fields(data, FIELDS, path, "town file")
     junctions = _junctions(values["junctions"], path)
-    roads = _roads(values["roads"], junctions, path)
-    _check_incidents(values["incidents"], roads, path)
+    roads = _roads(values["roads"], junctions, path, shaped_roads(data))
+    extras = parse_road_extras(data, path, roads)
+    _check_incidents(values["incidents"], roads, extras.one_way, path)
     town = Town(junctions=junctions, roads=roads, incidents=dict(values["incidents"]),
-                source_path=path, provenance=str(values["source"]))
+                source_path=path, provenance=str(values["source"]), **extras_fields(extras))
     _check_connected(town, path)
     return town
+
+
+def extras_fields(extras: RoadExtras) -> dict:
+    """The Town fields of the optional road keys (networks/road_geometry.py)."""
+    return {"one_way": extras.one_way, "geometry": dict(extras.geometry or {}), "sumo_net": extras.sumo_net}
 
 
 def load_town(path: str | Path | None = None) -> Town:

@@ -139,7 +139,8 @@ def test_every_format_exposes_its_accepted_keys():
     from trustroute.participants import driver_model, driver_population
     from trustroute.policies.logic import spec
 
-    assert town.TOWN_KEYS == keys(town.FIELDS) == ("junctions", "roads", "incidents", "source")
+    assert town.TOWN_KEYS == keys(town.FIELDS) == ("junctions", "roads", "incidents", "source",
+                                                          "one_way", "geometry", "sumo_net")
     assert driver_model.DRIVER_MODEL_KEYS == keys(driver_model.FIELDS)
     assert "trust_free_takeover_probability" in driver_model.DRIVER_MODEL_KEYS
     assert driver_population.POPULATION_KEYS == ("format", "version", "source", "types")

@@ -1,0 +1,52 @@
+"""`trustroute town import SOURCE --out town.json`: a SUMO net or an OpenStreetMap extract as a town.
+
+Prints the town file written and its size; one line on stderr says what the import left out
+(--quiet and --json keep it off). The work is networks/town_import.py's.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
+
+
+@click.group("town")
+def town() -> None:
+    """Import real road networks as towns."""
+
+
+@town.command("import")
+@click.argument("source", type=click.Path())
+@click.option("--out", "out", type=click.Path(), required=True, help="The town file to write (JSON).")
+@click.option("--incidents", "incidents_path", type=click.Path(), default=None,
+              help="JSON FILE of incidents by road \"U-V\" or SUMO edge id (others: none).")
+@click.option("--incident-seed", type=click.IntRange(min=0), default=None,
+              help="Draw the incidents by the seeded rule of docs/formats/town.md.")
+@click.option("--net-out", type=click.Path(), default=None,
+              help="Where an OSM import writes its SUMO net (default: beside --out, NAME.net.xml).")
+@quiet_option
+@json_option
+def import_command(source: str, out: str, incidents_path: str | None, incident_seed: int | None,
+                   net_out: str | None, quiet: bool, as_json: bool) -> None:
+    """Import SOURCE (.net.xml, .net.xml.gz or .osm) as a town: its decision junctions, its roads
+    with their shapes and lengths, one-way streets kept one-way."""
+    import numpy as np
+
+    from trustroute.core.output_files import check_output_file
+    from trustroute.networks.town_import import import_town
+
+    if incidents_path is not None and incident_seed is not None:
+        raise click.UsageError("pass --incidents or --incident-seed, not both")
+    check_output_file(out, "--out", "town file")
+    if net_out is not None:
+        check_output_file(net_out, "--net-out", "SUMO net")
+    rng = np.random.default_rng(incident_seed) if incident_seed is not None else None
+    result = import_town(source, out, incidents_path=incidents_path, rng=rng, net_out=net_out,
+                         incident_seed=incident_seed)
+    if not (quiet or as_json):
+        click.echo(f"{Path(source).name}: {result.graph.summary()}", err=True)
+    emit(as_json, with_paths(result.to_dict(), {"town": result.town_path, "net": result.net_path}),
+         [str(result.town_path), result.summary()])
