@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from trustroute.policies.evaluation.plain import Evaluation
     from trustroute.policies.logic.spec import Spec
     from trustroute.policies.routing.protocol import RoutingPolicy
-    from trustroute.policies.synthesis.search import SynthesisResult
+    from trustroute.policies.synthesis.result import SynthesisResult
 
 __all__ = [
     "analyze",
@@ -116,7 +116,7 @@ def _policy(policy: object, town: Town, driver: DriverModel, spec: Spec,
             cache_dir: PathLike | None) -> RoutingPolicy:
     """A RoutingPolicy from "free", "aware", a policy file path, a SynthesisResult or a policy."""
     from trustroute.policies.resolve import resolve_policy
-    from trustroute.policies.synthesis.search import SynthesisResult
+    from trustroute.policies.synthesis.result import SynthesisResult
 
     if isinstance(policy, str | Path):
         return resolve_policy(str(policy), town, driver, spec, cache_dir)
