@@ -47,6 +47,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import TypeAlias
 
 import numpy as np
 
@@ -96,7 +97,7 @@ SEARCH_SHARE = 0.5            # share of the time limit of a search that cluster
 UNBOUNDED_CLUSTER_SLACK = (10, 20, 30, 45)
 UNBOUNDED_CLUSTER_CAPS = (16, 64, 256)
 
-BeliefSynthesis = SynthesisResult[BeliefTablePolicy, SynthesisStats]
+BeliefSynthesis: TypeAlias = SynthesisResult[BeliefTablePolicy, SynthesisStats]
 
 
 @dataclass(frozen=True, eq=False)

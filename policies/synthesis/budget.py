@@ -58,5 +58,5 @@ class TimeBudget:
         return time.perf_counter() - self.started
 
     def ending(self, deadline: float) -> TimeBudget:
-        """The same start and limit with an earlier (or later) deadline."""
+        """The same start and limit with another deadline."""
         return replace(self, deadline=deadline)

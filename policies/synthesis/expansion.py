@@ -125,7 +125,7 @@ class BeliefSearch:
         self.graph = BeliefGraph(pomdp.n_trust, n_actions, n_outcomes)
         self.levels: dict[int, ExpandedLevel] = {}
         self.moves: dict[int, list[tuple[ExpandedLevel, np.ndarray, np.ndarray]]] = {}
-        self.free_levels: dict[int, tuple[int, ExpandedLevel]] = {}
+        self.free_levels: dict[int, tuple[tuple[int, int], ExpandedLevel]] = {}
         self.depth_cap = horizon if horizon is not None else UNBOUNDED_DEPTH
         # Bayes rule: open nodes are valued by cluster bounds on the free completion's value
         # (completion_value.py) instead of trees along the free moves (FREE nodes, kept for the

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeAlias
 
 import numpy as np
 
@@ -101,7 +102,7 @@ class JointSynthesisStats:
             "max_junctions": self.policy_search_horizon}}
 
 
-JointSynthesis = SynthesisResult[JointTablePolicy, JointSynthesisStats]
+JointSynthesis: TypeAlias = SynthesisResult[JointTablePolicy, JointSynthesisStats]
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,7 +122,7 @@ def decision_table(decisions: JointDecisions) -> JointPolicyTable:
                             joint=decisions.joint, action=decisions.action)
 
 
-def _grow(run: Callable[[int, float], tuple], stop: Callable[[tuple], bool], deadline: float) -> None:
+def _grow(run: Callable[[int, float], Any], stop: Callable[[Any], bool], deadline: float) -> None:
     """run(nodes, deadline) with nodes per level growing from FIRST_NODES until stop(result) or
     the next round (predicted NODE_GROWTH times the last) would pass the deadline. The first
     round always starts; `run` itself stops at the deadline (the searches and the evaluation

@@ -84,6 +84,15 @@ def test_a_time_limit_shorter_than_the_first_round_stops_it_with_sound_bounds(po
     assert [run.bounds.nodes for run in result.stats.runs] == [1]
     assert result.lower - TOLERANCE <= exact.lower <= result.upper + TOLERANCE
     assert result.upper < 1.0
+    # the statistics' JSON ("stats" of trustroute synth --json)
+    stats = result.stats.to_dict()
+    assert list(stats) == ["method", "belief_rule", "converged", "tau", "runs", "policy_rows",
+                           "policy_search_horizon", "search_lower", "policy_value"]
+    assert list(stats["runs"][0]) == ["search", "max_nodes", *result.stats.runs[0].bounds.to_dict(),
+                                      "policy_lower", "policy_upper"]
+    assert stats["runs"][0]["nodes"] == 1
+    assert stats["policy_value"] == {"lower": result.lower, "upper": result.stats.policy_value.upper,
+                                     "max_junctions": 8}
 
 
 @pytest.mark.slow
