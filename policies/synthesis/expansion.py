@@ -417,7 +417,7 @@ class BeliefSearch:
                                               g.free_lower[nodes], g.free_upper[nodes])
         if self.completion:
             # held rows whose completion bounds are not computed yet and where the rule changes the
-            # move: bounding the free completion there may free the better move (search loop)
+            # move: bounding the free completion there may free the better move (refinement.py)
             binding = ~g.completed[nodes] & (move != policy_choice(lower_q, strict_q, upper_q))
             self.binding.extend(nodes[binding].tolist())
         return move, lower_q, strict_q
