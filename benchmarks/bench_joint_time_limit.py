@@ -34,6 +34,6 @@ def run() -> list[dict]:
         result = synthesize_spec(pomdp, spec, tau=TAU, time_limit=limit, horizon=HORIZON)
         seconds = time.perf_counter() - started
         results.append(time_limit_row(f"joint_time_limit_{town_kind}_{limit:g}s", limit, seconds,
-                                      rounds=len(result.stats["runs"]), lower=result.lower,
+                                      rounds=len(result.stats.runs), lower=result.lower,
                                       upper=result.upper))
     return results

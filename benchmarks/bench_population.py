@@ -49,8 +49,9 @@ from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.population import synthesize_population
-from trustroute.policies.synthesis.search import synthesize
+from trustroute.policies.synthesis.result import SearchRun
 
 SPECS = ("phi1", "phi2")
 HORIZON = 20
@@ -154,14 +155,15 @@ def timing(town, nominal, example: DriverPopulation) -> dict:
         seconds = time.perf_counter() - started
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
-        run0 = found.result.stats["runs"][0]
+        run0 = found.result.stats.runs[0]
+        search = run0 if isinstance(run0, SearchRun) else None
         out[str(k)] = {"seconds_total": seconds, "synthesis_seconds": found.result.seconds,
                        "peak_mib": peak / 2**20, "lower": found.lower, "upper": found.upper,
-                       "converged": found.result.stats["converged"], "nodes": run0.get("nodes"),
-                       "expanded_nodes": run0.get("expanded_nodes"),
-                       "abstraction_seconds": run0.get("abstraction_seconds"),
-                       "suffix_length": run0.get("suffix_length"),
-                       "abstract_cells": run0.get("abstract_cells")}
+                       "converged": found.result.stats.converged, "nodes": run0.nodes,
+                       "expanded_nodes": search and search.expanded_nodes,
+                       "abstraction_seconds": search and search.abstraction_seconds,
+                       "suffix_length": search and search.suffix_length,
+                       "abstract_cells": search and search.abstract_cells}
     base = out["1"]["synthesis_seconds"]
     for entry in out.values():
         entry["synthesis_seconds_ratio_to_1_type"] = entry["synthesis_seconds"] / base

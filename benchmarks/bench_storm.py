@@ -100,12 +100,12 @@ def _ours(queue, town_kind: str) -> None:
     pomdp, spec = _problem(town_kind)
     started = time.perf_counter()
     result = synthesize_spec(pomdp, spec, tau=OUR_TAU, time_limit=OUR_TIME_LIMIT, horizon=HORIZON)
-    last = result.stats["runs"][-1]
+    last = result.stats.runs[-1]
     queue.put({"lower": result.lower, "upper": result.upper,
                "lower_is": "the returned policy's exact value (trustroute synth)",
-               "search_lower": result.stats["search_lower"], "policy_rows": result.stats["policy_rows"],
-               "max_nodes_per_level": last["max_nodes"], "nodes": last["nodes"],
-               "cut_nodes": last["cut_nodes"], "seconds": time.perf_counter() - started,
+               "search_lower": result.stats.search_lower, "policy_rows": result.stats.policy_rows,
+               "max_nodes_per_level": last.max_nodes, "nodes": last.bounds.nodes,
+               "cut_nodes": last.bounds.cut_nodes, "seconds": time.perf_counter() - started,
                "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024})
 
 

@@ -33,7 +33,7 @@ from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.pomdp_py.pouct import pouct_policy
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols
-from trustroute.policies.synthesis.search import synthesize
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 
 SPECS = ("phi1", "phi2", "phi1_strict", "phi2_strict")
 RULES = ("bayes", "paper")
@@ -124,8 +124,8 @@ def run() -> list[dict]:
                 label = "unbounded" if horizon is None else f"H{horizon}"
                 row = {"name": f"synthesis.{name}.{rule}.{label}", "value": result.lower,
                        "unit": "probability", "lower": result.lower, "upper": result.upper,
-                       "gap": result.gap, "seconds": result.seconds, "converged": result.stats["converged"],
-                       "policy_rows": result.stats["policy_rows"],
+                       "gap": result.gap, "seconds": result.seconds, "converged": result.stats.converged,
+                       "policy_rows": result.stats.policy_rows,
                        "paper_pr_max": PAPER_PR_MAX.get(name)}
                 if horizon == DEFAULT_FALLBACK_AFTER:
                     # What the study measures: the policy, then the fallback after 20 junctions, with

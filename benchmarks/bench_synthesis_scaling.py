@@ -85,14 +85,14 @@ def _child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str 
     """Runs in the subprocess: one synthesis, its numbers and the process's peak RSS."""
     import resource
 
-    from trustroute.policies.synthesis.search import synthesize
+    from trustroute.policies.synthesis.belief_synthesis import synthesize
 
     pomdp, spec = grid_or_paper_problem(junctions, waypoints, paper_spec)
     result = synthesize(pomdp, spec, tau=TAU, time_limit=TIME_LIMIT, horizon=horizon)
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    last = result.stats["runs"][-1]
+    last = result.stats.runs[-1]
     return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb,
-            "nodes": last.get("nodes", 0), "completion_closed": last.get("completion_closed")}
+            "nodes": last.nodes, "completion_closed": last.completion_closed}
 
 
 def run_json_subprocess(module: str, arguments: list, timeout: float) -> dict:

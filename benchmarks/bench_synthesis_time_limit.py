@@ -1,4 +1,5 @@
-"""How closely the plain synthesis (`synthesize`, policies/synthesis/search.py) keeps to its time limit.
+"""How closely the plain synthesis (`synthesize`, policies/synthesis/belief_synthesis.py) keeps to its time
+limit.
 
 τ so small that no run stops by convergence, so each ends by its limit (or by the node budget, or
 by closing exactly): the paper's town with φ1 and φ2 at H = 20 and unbounded, grid towns of 50 and
@@ -30,14 +31,14 @@ LONG_PROBLEMS = ("grid 200",)     # the largest fixed costs; the whole bench tak
 
 def _child(junctions: int, paper_spec: str | None, horizon: int | None, limit: float) -> dict:
     """Runs in the subprocess: the problem is built before the clock starts."""
-    from trustroute.policies.synthesis.search import synthesize
+    from trustroute.policies.synthesis.belief_synthesis import synthesize
 
     pomdp, spec = grid_or_paper_problem(junctions, WAYPOINTS, paper_spec)
     wall, cpu = time.perf_counter(), time.process_time()
     result = synthesize(pomdp, spec, tau=TAU, time_limit=limit, horizon=horizon)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     return {"seconds": wall, "cpu_seconds": cpu, "lower": result.lower, "upper": result.upper,
-            "runs": len(result.stats["runs"]), "nodes": result.stats["runs"][-1].get("nodes", 0)}
+            "runs": len(result.stats.runs), "nodes": result.stats.runs[-1].nodes}
 
 
 def _configurations() -> list[tuple[str, int, str | None, int | None, float]]:

@@ -13,7 +13,8 @@ from collections.abc import Callable
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.synthesis.arguments import check_synthesis_arguments
-from trustroute.policies.synthesis.search import SynthesisResult, synthesize
+from trustroute.policies.synthesis.belief_synthesis import synthesize
+from trustroute.policies.synthesis.result import SynthesisResult
 
 
 def synthesize_spec(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,

@@ -167,7 +167,7 @@ def test_imports_only_point_down():
 def test_an_upward_import_is_caught():
     graph = import_graph()
     graph["trustroute.networks.town"] |= {"trustroute.harness.study.runner"}
-    graph["trustroute.policies.routing.free"] |= {"trustroute.policies.synthesis.search"}
+    graph["trustroute.policies.routing.free"] |= {"trustroute.policies.synthesis.belief_synthesis"}
     found = upward_imports(graph)
     assert any(line.startswith("trustroute.networks.town ") for line in found)
     assert any(line.startswith("trustroute.policies.routing.free ") for line in found)

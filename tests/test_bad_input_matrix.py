@@ -343,7 +343,7 @@ def good_policy(tmp_path_factory) -> Path:
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.model.trust_pomdp import build_pomdp
     from trustroute.policies.routing.files import save_policy
-    from trustroute.policies.synthesis.search import synthesize
+    from trustroute.policies.synthesis.belief_synthesis import synthesize
 
     town, driver = load_town(), load_driver_model()
     spec = load_spec(PHI1, town)

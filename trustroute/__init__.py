@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from trustroute.policies.logic.spec import Spec
     from trustroute.policies.model.trust_pomdp import BeliefRule
     from trustroute.policies.routing.protocol import RoutingPolicy
-    from trustroute.policies.synthesis.search import SynthesisResult
+    from trustroute.policies.synthesis.result import SynthesisResult
 
     # a policy argument: "free", "aware", a policy file, a SynthesisResult or any RoutingPolicy
     PolicyLike = str | Path | SynthesisResult | RoutingPolicy
@@ -121,7 +121,7 @@ def _policy(policy: PolicyLike, town: Town, driver: DriverModel, spec: Spec,
             cache_dir: PathLike | None) -> RoutingPolicy:
     """A RoutingPolicy from "free", "aware", a policy file path, a SynthesisResult or a policy."""
     from trustroute.policies.resolve import resolve_policy
-    from trustroute.policies.synthesis.search import SynthesisResult
+    from trustroute.policies.synthesis.result import SynthesisResult
 
     if isinstance(policy, str | Path):
         return resolve_policy(str(policy), town, driver, spec, cache_dir)

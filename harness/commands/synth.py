@@ -90,6 +90,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
     from trustroute.policies.resolve import synthesis_progress
     from trustroute.policies.routing.files import save_policy
+    from trustroute.policies.synthesis.result import SynthesisStats
     from trustroute.policies.synthesize_spec import synthesize_spec as synthesize
 
     with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
@@ -100,7 +101,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
 
     payload = with_paths({"spec": spec.name, "lower": result.lower, "upper": result.upper, "gap": result.gap,
                           "seconds": result.seconds, "tau": tau, "horizon": horizon,
-                          "belief_rule": belief_rule, "stats": result.stats},
+                          "belief_rule": belief_rule, "stats": result.stats.to_dict()},
                          {"policy": path, "policy_arrays": array_path(path)})
     lines = [f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
              f"{result.seconds:.1f} s)"]
@@ -108,11 +109,11 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     if boxes is not None and boxes.rows:
         lines.append(f"a cluster policy: {boxes.rows} box rows, beliefs enclosed in boxes "
                      "(docs/synthesis.md, \"Cluster policies\")")
-    alternates = sum(run.get("threshold_alternates", 0) for run in result.stats.get("runs", []))
+    # (only the belief-MDP search reads labels at thresholds both ways)
+    alternates = result.stats.threshold_alternates if isinstance(result.stats, SynthesisStats) else 0
     if alternates:
         # the returned policy's (a run's policy may not be the one returned)
-        strict = result.stats.get("lower_strict_labels",
-                                  max(run.get("lower_strict_labels", 0.0) for run in result.stats["runs"]))
+        strict = result.stats.lower_strict_labels
         lines.append(f"{alternates} outcomes sit on a belief threshold (within rounding): L reads them "
                      f"the worse way, U the better; with this machine's labels the policy is worth at "
                      f"least {strict:.6f} (spec check warns about such thresholds)")
@@ -171,7 +172,7 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
     payload = with_paths({"spec": spec.name, "lower": found.lower, "upper": found.upper, "gap": found.gap,
                           "seconds": found.seconds, "tau": tau, "horizon": horizon,
                           "belief_rule": belief_rule, "population": population_summary,
-                          "stats": result.stats},
+                          "stats": result.stats.to_dict()},
                          {"policy": path, "policy_arrays": array_path(path)})
     what = "P(satisfied), prior-weighted" if objective == "bayes" else "worst type's P(satisfied)"
     lines = [f"{spec.name} ({population.n_types} driver types, objective {objective}): "

@@ -1,4 +1,4 @@
-"""The argument checks every synthesis entry point shares (policies/synthesis/search.py,
+"""The argument checks every synthesis entry point shares (policies/synthesis/belief_synthesis.py,
 policies/synthesize_spec.py): one definition of what a valid tau, horizon and belief rule are."""
 
 from __future__ import annotations

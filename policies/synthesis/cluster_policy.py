@@ -41,6 +41,7 @@ from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.logic.labelling import label_margin_factor
 from trustroute.policies.routing.aware_table import BoxRows
 from trustroute.policies.synthesis.belief_cells import ObservationSymbols
+from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.completion_value import (
     CORNER_MARGIN,
     INITIAL_RESOLUTION,
@@ -50,6 +51,7 @@ from trustroute.policies.synthesis.completion_value import (
     ordered_fill,
     outcome_table,
 )
+from trustroute.policies.synthesis.result import ClusterAttempt
 from trustroute.policies.synthesis.upper_bound import acceptance_distance
 
 VALUE_MARGIN = 1e-12              # every level's lower values are lowered, upper raised, by this
@@ -169,14 +171,13 @@ def _forward(tables: ProductTables, symbols: ObservationSymbols, roots_q: list[i
     lo = np.broadcast_to(belief, (len(live), n)).copy()
     hi = lo.copy()
     levels: list[_Level] = []
-    started = time.perf_counter()
+    budget = TimeBudget.until(deadline)
     for t in range(horizon):
         if x.size == 0:
             break
-        now = time.perf_counter()
         # the backward pass and the rows take about 15 % of the forward pass's time (measured;
         # BACKWARD_SHARE leaves room for a slower machine)
-        if now + BACKWARD_SHARE * (now - started) >= deadline:
+        if not budget.fits(BACKWARD_SHARE * budget.elapsed()):
             return None
         slots = tables.successors[x]
         edge_cluster, edge_slot = np.nonzero(slots >= 0)
@@ -316,29 +317,30 @@ def solve_clusters(tables: ProductTables, symbols: ObservationSymbols, roots_q: 
 def best_cluster_solution(tables: ProductTables, symbols: ObservationSymbols, roots_q: list[int],
                           horizon: int, tau: float, deadline: float,
                           caps: tuple[int, ...] = CLUSTER_CAPS, enough: float | None = None
-                          ) -> tuple[ClusterSolution | None, float, list]:
+                          ) -> tuple[ClusterSolution | None, float, list[ClusterAttempt]]:
     """Cluster policies with growing caps while the gap exceeds tau (and L is below `enough`, when
     given: an unbounded problem's U - tau) and the next one is predicted (the last's time and
     clusters times the ratio of the caps) to end before the deadline within MEMORY_BUDGET.
-    Returns (the solution of the largest L, the smallest U of all, a stats line per cap)."""
+    Returns (the solution of the largest L, the smallest U of all, a record per cap tried)."""
     best: ClusterSolution | None = None
     upper = 1.0
-    tried = []
+    tried: list[ClusterAttempt] = []
+    budget = TimeBudget.until(deadline)
     for cap in caps:
         if best is not None:
             if upper - best.lower <= tau or (enough is not None and best.lower >= enough):
                 break
-            growth = cap / tried[-1]["cap"]
-            if (time.perf_counter() + growth * tried[-1]["seconds"] > deadline
-                    or growth * tried[-1]["clusters"] * BYTES_PER_CLUSTER > MEMORY_BUDGET):
+            growth = cap / tried[-1].cap
+            if (not budget.fits(growth * tried[-1].seconds)
+                    or growth * tried[-1].clusters * BYTES_PER_CLUSTER > MEMORY_BUDGET):
                 break
         solution = solve_clusters(tables, symbols, roots_q, horizon, cap, deadline)
         if solution is None:
-            tried.append({"cap": cap, "stopped": "deadline"})
+            tried.append(ClusterAttempt(cap=cap))
             break
-        tried.append({"cap": cap, "lower": solution.lower, "upper": solution.upper,
-                      "clusters": solution.clusters, "rows": solution.rows.rows,
-                      "seconds": solution.seconds})
+        tried.append(ClusterAttempt(cap=cap, lower=solution.lower, upper=solution.upper,
+                                    clusters=solution.clusters, rows=solution.rows.rows,
+                                    seconds=solution.seconds))
         upper = min(upper, solution.upper)
         if best is None or solution.lower > best.lower:
             best = solution

@@ -3,7 +3,7 @@
 V_t(x, q, b) = 1 if q accepts; 0 if q rejects or t = H; else
 max over next junctions of Σ_o P(o | b) V_{t+1}(x', δ(q, L(x', f_o(b))), f_o(b)),
 memoised on (t, x, q, belief bytes). No abstraction, no pruning: the reference the scalable
-solver (policies/synthesis/search.py) is tested against. Exponential in H; meant for H <= 12.
+solver (policies/synthesis/belief_synthesis.py) is tested against. Exponential in H; meant for H <= 12.
 It shares only the model arrays (TrustPOMDP) and the labeller with the solver.
 """
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 import itertools
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -44,7 +44,8 @@ from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_
 from trustroute.policies.routing.aware_table import BeliefTablePolicy
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.protocol import RoutingPolicy
-from trustroute.policies.synthesis.search import SynthesisResult, synthesize
+from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synthesize
+from trustroute.policies.synthesis.result import SynthesisResult
 
 Objective = Literal["bayes", "robust"]
 OBJECTIVES: tuple[str, ...] = ("bayes", "robust")
@@ -71,7 +72,7 @@ class PopulationSynthesis:
 
     objective: str
     population: DriverPopulation
-    result: SynthesisResult
+    result: BeliefSynthesis
     pomdp: TrustPOMDP                 # the type-aware POMDP the policy's AV filters on
     spec: Spec                        # the lifted spec
     prior: tuple[float, ...]          # λ: the AV's type prior of the returned policy
@@ -215,7 +216,7 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
                                reweight=best_policy.reweight)
     seconds = time.perf_counter() - started
     result = SynthesisResult(policy=policy, lower=min(mixture, bayes.upper), upper=bayes.upper,
-                             seconds=seconds, stats={**best_stats, "objective": "robust"},
+                             seconds=seconds, stats=replace(best_stats, objective="robust"),
                              horizon=horizon, belief_rule=belief_rule)
     return PopulationSynthesis(
         objective="robust", population=population, result=result, pomdp=pomdp, spec=lifted_spec,

@@ -17,6 +17,10 @@ reach acceptance at all (can_accept, a graph analysis) and from 1 elsewhere, and
 iterate: sound, exact where acceptance is unreachable, possibly loose on end components from which
 acceptance is reachable but not forced. Synthesis uses policies/synthesis/end_components.py
 instead, which collapses end components and converges to the least fixed point.
+
+The abstraction's size: cells are the last k belief-changing symbols, k chosen by
+automatic_suffix_length (CELL_BUDGET words) and capped by what the bounded abstraction
+(bounded_suffix_length) or the explicit unbounded MDP (unbounded_suffix_length) may hold.
 """
 
 from __future__ import annotations
@@ -29,8 +33,12 @@ import numpy as np
 from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.routing.free import label_free_distance
 from trustroute.policies.synthesis.belief_cells import ObservationSymbols, SuffixCells, image_label_status
+from trustroute.policies.synthesis.budget import TimeBudget
 
 BACKUP_CHUNK_ENTRIES = 4_000_000   # floats of one chunk of the vectorised backup (32 MB)
+CELL_BUDGET = 5000          # automatic suffix length: the longest k with n_symbols**k <= this
+BOUNDED_ENTRY_BUDGET = 20_000_000   # floats of the bounded abstraction (160 MB)
+UNBOUNDED_STATE_BUDGET = 20_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,13 +182,13 @@ def unbounded_upper(abstraction: Abstraction, time_limit: float, tolerance: floa
     States that cannot reach acceptance at all (can_accept) start at 0, which removes the
     greatest-fixed-point excess on end components from which acceptance is unreachable.
     """
-    started = time.perf_counter()
+    budget = TimeBudget.start(time_limit)
     tables = abstraction.tables
     shape = (tables.n_x, tables.n_q, abstraction.cells.n_cells)
     value = np.broadcast_to(can_accept(tables)[:, :, None], shape).astype(float)
     change = np.inf
     iterations = 0
-    while iterations < max_iterations and time.perf_counter() - started < time_limit:
+    while iterations < max_iterations and not budget.expired():
         new = np.minimum(value, abstract_backup(abstraction, value))
         change = float(np.abs(new - value).max())
         value = new
@@ -188,4 +196,38 @@ def unbounded_upper(abstraction: Abstraction, time_limit: float, tolerance: floa
         if change <= tolerance:
             break
     return UnboundedUpper(value=value, iterations=iterations, last_change=change,
-                          seconds=time.perf_counter() - started)
+                          seconds=budget.elapsed())
+
+
+def automatic_suffix_length(n_changing: int) -> int:
+    """Longest suffix k with at most CELL_BUDGET words of exactly k belief-changing symbols."""
+    if n_changing <= 1:
+        return 8
+    k = 1
+    while n_changing ** (k + 1) <= CELL_BUDGET and k < 8:
+        k += 1
+    return k
+
+
+def bounded_suffix_length(tables: ProductTables, n_changing: int, automatic: int, horizon: int) -> int:
+    """Longest k <= automatic whose bounded abstraction, (H + 1) * n_x * n_q * cells(k) floats,
+    fits BOUNDED_ENTRY_BUDGET."""
+    k = 0
+    while k < automatic:
+        cells = sum(n_changing ** j for j in range(k + 2))
+        if (horizon + 1) * tables.n_x * tables.n_q * cells > BOUNDED_ENTRY_BUDGET:
+            break
+        k += 1
+    return k
+
+
+def unbounded_suffix_length(tables: ProductTables, n_changing: int, automatic: int) -> int:
+    """Longest k <= automatic with n_x * n_q * cells(k) <= UNBOUNDED_STATE_BUDGET (the explicit MDP
+    of end_components.py has about (n_symbols + 1) times as many states)."""
+    k = 0
+    while k < automatic:
+        cells = sum(n_changing ** j for j in range(k + 2))
+        if tables.n_x * tables.n_q * cells > UNBOUNDED_STATE_BUDGET:
+            break
+        k += 1
+    return k

@@ -25,12 +25,12 @@ value gets the same allowance.
 
 from __future__ import annotations
 
-import time
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from trustroute.policies.belief.trust_state_filter import distinct_nodes, joint_filter
+from trustroute.policies.belief.trust_state_filter import JointFilter, distinct_nodes, joint_filter
 from trustroute.policies.belief.trust_state_relaxation import (
     RELAXATION_MARGIN,
     RelaxedGuide,
@@ -41,6 +41,7 @@ from trustroute.policies.bracket import Bracket
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+from trustroute.policies.synthesis.budget import TimeBudget
 
 
 @dataclass(frozen=True)
@@ -95,6 +96,20 @@ def _open_loop_accepted(pomdp: TrustPOMDP, next_q: np.ndarray, move: np.ndarray,
     return joint[:, :, accepting].sum(axis=(1, 2))
 
 
+def _open_loop_lower(pomdp: TrustPOMDP, next_q: np.ndarray, move: np.ndarray, guide, x: np.ndarray,
+                     joint: np.ndarray, steps: int, accepting: np.ndarray, budget: TimeBudget
+                     ) -> np.ndarray:
+    """_open_loop_accepted chunk by chunk; 0 (no claim) for the chunks past the deadline."""
+    out = np.zeros(x.size)
+    for begin in range(0, x.size, OPEN_LOOP_CHUNK):
+        if budget.expired():
+            break
+        part = slice(begin, begin + OPEN_LOOP_CHUNK)
+        out[part] = _open_loop_accepted(pomdp, next_q, move, guide, x[part], joint[part], steps,
+                                        accepting)
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class JointDecisions:
     """The search's lower-greedy decision at each expanded node: t (junctions driven), road x,
@@ -107,6 +122,57 @@ class JointDecisions:
     joint: np.ndarray
     beliefs: np.ndarray
     action: np.ndarray
+
+
+def _children(pomdp: TrustPOMDP, filter_: JointFilter, belief_rule: BeliefRule, nodes: dict,
+              parents: np.ndarray, follow: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The children of `parents` (indices into the level `nodes`) along every action, or the
+    guide's alone where `follow` names one, per observation of positive probability: (parent,
+    slot, road, J, posterior, AV belief, P(o), reach mass)."""
+    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if pomdp.driver.depends_on_performance else (0,))]
+    child_parts = []
+    for slot in range(pomdp.successor_table.shape[1]):
+        x2 = pomdp.successor_table[nodes["x"][parents], slot]
+        has = (x2 >= 0) & ((follow[parents] < 0) | (follow[parents] == slot))
+        p_idx, x2 = parents[has], x2[has]
+        incident = pomdp.road_incident[x2]
+        for h, e in outcomes:
+            posterior, p_obs = pomdp.belief_update(nodes["posterior"][p_idx], incident, h, e)
+            belief = posterior if belief_rule == "bayes" else pomdp.belief_update(
+                nodes["belief"][p_idx], incident, h, e, rule=belief_rule)[0]
+            ok = p_obs > 0
+            joint = filter_.update(nodes["joint"][p_idx][ok], posterior[ok], belief[ok], x2[ok],
+                                   incident[ok], h, e, p_obs[ok])
+            child_parts.append((p_idx[ok], np.full(int(ok.sum()), slot), x2[ok], joint, posterior[ok],
+                                belief[ok], p_obs[ok], nodes["mass"][p_idx][ok] * p_obs[ok]))
+    return tuple(np.concatenate([c[j] for c in child_parts]) for j in range(8))
+
+
+def _back_up(edges: tuple[np.ndarray, ...], grow: np.ndarray, follow: np.ndarray, slots: int,
+             lower: np.ndarray, upper: np.ndarray, low: np.ndarray, high: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One level's backup from its children's (lower, upper): the level's (low, high), leaf
+    bounds where nothing was expanded, and the lower-greedy slot per node (ties: the larger
+    upper, then the first slot)."""
+    parent, slot_of, child, p_obs = edges
+    n = low.size
+    sum_low = np.zeros((n, slots))
+    sum_high = np.zeros((n, slots))
+    np.add.at(sum_low, (parent, slot_of), p_obs * lower[child])
+    np.add.at(sum_high, (parent, slot_of), p_obs * upper[child])
+    has = np.zeros((n, slots), dtype=bool)
+    has[parent, slot_of] = True
+    best_low = np.where(has, sum_low, -np.inf).max(axis=1)
+    best_high = np.where(has, sum_high, -np.inf).max(axis=1)
+    tied = has & (sum_low >= best_low[:, None])
+    slot = np.where(tied, sum_high, -np.inf).argmax(axis=1)
+    # Nodes that follow the guide: worth what its action gives (lower); the relaxation
+    # stays their upper bound (the optimum may act otherwise).
+    along = np.flatnonzero(follow >= 0)
+    low[along] = sum_low[along, follow[along]]
+    low = np.where(grow, best_low, low)
+    high = np.where(grow, np.minimum(1.0, best_high), high)
+    return low, high, slot
 
 
 def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
@@ -137,7 +203,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     open nodes of that level become leaves worth their accepted mass (lower) and the relaxation
     (upper); past the deadline, the leaves not yet valued by the open-loop continuation keep
     their accepted mass. The bounds stay sound either way."""
-    started = time.perf_counter()
+    budget = TimeBudget.until(math.inf if deadline is None else deadline)
     if horizon is not None:
         depth = horizon
     town, driver = pomdp.town, pomdp.driver
@@ -148,7 +214,6 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     accepting = np.asarray(dfa.accepting, dtype=bool)
     rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
     live_q = ~(accepting | rejecting)
-    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
     slots = pomdp.successor_table.shape[1]
 
     # Where the labels do not read the belief, cut nodes and unbounded leaves get the value of an
@@ -162,16 +227,9 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         return relaxed[min(k, horizon)] if horizon is not None else relaxed
 
     def open_loop_lower(x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
-        """The open-loop continuation's value; 0 (no claim) for the chunks past the deadline."""
         steps = left if horizon is not None else OPEN_LOOP_STEPS
-        out = np.zeros(x.size)
-        for begin in range(0, x.size, OPEN_LOOP_CHUNK):
-            if deadline is not None and time.perf_counter() > deadline:
-                break
-            part = slice(begin, begin + OPEN_LOOP_CHUNK)
-            out[part] = _open_loop_accepted(pomdp, relaxed_q[..., 0], move, relaxed_at, x[part],
-                                            joint[part], steps, accepting)
-        return out
+        return _open_loop_lower(pomdp, relaxed_q[..., 0], move, relaxed_at, x, joint, steps, accepting,
+                                budget)
 
     def leaf_bounds(x: np.ndarray, joint: np.ndarray, left: int) -> tuple[np.ndarray, np.ndarray]:
         table = relaxed[left] if horizon is not None else relaxed
@@ -189,12 +247,12 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     cut_total = 0
     stopped = False     # the expansion's time is up: no further level is expanded
     # The forward pass gets EXPAND_SHARE of the time, the backward pass (open-loop values) the rest.
-    expand_until = None if deadline is None else started + EXPAND_SHARE * (deadline - started)
+    expand_until = budget.share(EXPAND_SHARE)
     for level in range(depth + 1):
         nodes = levels[-1]
         _, _, live = filter_.masses(nodes["joint"])
         open_ = (live > 0) & (nodes["mass"] >= prune_below) & (level < depth)
-        if expand_until is not None and time.perf_counter() > expand_until:
+        if budget.expired(expand_until):
             stopped = True
             grow = np.zeros_like(open_)
         else:
@@ -209,23 +267,8 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         if level == depth or not (grow | (follow >= 0)).any():
             break
         parents = np.flatnonzero(grow | (follow >= 0))
-        child_parts = []
-        for slot in range(slots):
-            x2 = pomdp.successor_table[nodes["x"][parents], slot]
-            has = (x2 >= 0) & ((follow[parents] < 0) | (follow[parents] == slot))
-            p_idx, x2 = parents[has], x2[has]
-            incident = pomdp.road_incident[x2]
-            for h, e in outcomes:
-                posterior, p_obs = pomdp.belief_update(nodes["posterior"][p_idx], incident, h, e)
-                belief = posterior if belief_rule == "bayes" else pomdp.belief_update(
-                    nodes["belief"][p_idx], incident, h, e, rule=belief_rule)[0]
-                ok = p_obs > 0
-                joint = filter_.update(nodes["joint"][p_idx][ok], posterior[ok], belief[ok], x2[ok],
-                                       incident[ok], h, e, p_obs[ok])
-                child_parts.append((p_idx[ok], np.full(int(ok.sum()), slot), x2[ok], joint, posterior[ok],
-                                    belief[ok], p_obs[ok], nodes["mass"][p_idx][ok] * p_obs[ok]))
-        parent, slot_of, x2, joint, posterior, belief, p_obs, mass = (
-            np.concatenate([c[j] for c in child_parts]) for j in range(8))
+        parent, slot_of, x2, joint, posterior, belief, p_obs, mass = _children(
+            pomdp, filter_, belief_rule, nodes, parents, follow)
         # Merge children with bit-identical (road, J, posterior, AV belief).
         first, inverse = distinct_nodes(x2, joint, posterior, belief)
         merged_mass = np.bincount(inverse, weights=mass)
@@ -249,35 +292,15 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         nodes = levels[level]
         left = depth - level
         low, high = leaf_bounds(nodes["x"], nodes["joint"], left)
-        if level < len(expandable):
-            leaf = ~expandable[level] & (guided_slot[level] < 0)
-        else:
-            leaf = np.ones(low.size, dtype=bool)
+        leaf = (~expandable[level] & (guided_slot[level] < 0) if level < len(expandable)
+                else np.ones(low.size, dtype=bool))
         leaf &= filter_.masses(nodes["joint"])[2] > 0
         if open_loop and leaf.any() and (horizon is None or left > 0):
             low[leaf] = np.maximum(low[leaf], open_loop_lower(nodes["x"][leaf], nodes["joint"][leaf], left))
         if level < n_levels - 1:
-            parent, slot_of, child, p_obs = edges[level]
-            grow = expandable[level]
-            n = nodes["x"].size
-            sum_low = np.zeros((n, slots))
-            sum_high = np.zeros((n, slots))
-            np.add.at(sum_low, (parent, slot_of), p_obs * lower[child])
-            np.add.at(sum_high, (parent, slot_of), p_obs * upper[child])
-            has = np.zeros((n, slots), dtype=bool)
-            has[parent, slot_of] = True
-            best_low = np.where(has, sum_low, -np.inf).max(axis=1)
-            best_high = np.where(has, sum_high, -np.inf).max(axis=1)
-            tied = has & (sum_low >= best_low[:, None])
-            slot = np.where(tied, sum_high, -np.inf).argmax(axis=1)
-            decided.append((level, np.flatnonzero(grow), slot[grow]))
-            # Nodes that follow the guide: worth what its action gives (lower); the relaxation
-            # stays their upper bound (the optimum may act otherwise).
-            follow = guided_slot[level]
-            along = np.flatnonzero(follow >= 0)
-            low[along] = sum_low[along, follow[along]]
-            low = np.where(grow, best_low, low)
-            high = np.where(grow, np.minimum(1.0, best_high), high)
+            low, high, slot = _back_up(edges[level], expandable[level], guided_slot[level], slots,
+                                       lower, upper, low, high)
+            decided.append((level, np.flatnonzero(expandable[level]), slot[expandable[level]]))
         lower, upper = low, high
     decided.sort(key=lambda item: item[0])
     n_t, n_q = pomdp.n_trust, filter_.n_q
@@ -292,6 +315,6 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     bounds = JointBounds(lower=float(lower[0]), upper=min(1.0, float(upper[0]) + RELAXATION_MARGIN),
                          depth=depth, horizon=horizon,
                          nodes=int(sum(lv["x"].size for lv in levels)), cut_nodes=cut_total,
-                         seconds=time.perf_counter() - started, belief_rule=belief_rule)
+                         seconds=budget.elapsed(), belief_rule=belief_rule)
     return bounds, decisions
 

@@ -30,9 +30,9 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeAlias
 
 import numpy as np
 
@@ -42,7 +42,8 @@ from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
-from trustroute.policies.synthesis.search import SynthesisResult
+from trustroute.policies.synthesis.budget import TimeBudget
+from trustroute.policies.synthesis.result import SynthesisResult, record_dict
 from trustroute.policies.trust_state_synthesis.search import JointBounds, JointDecisions, joint_search
 
 FIRST_NODES = 500                  # nodes per level of the first round
@@ -63,6 +64,47 @@ class PolicyValue:
     upper: float
 
 
+@dataclass(frozen=True, kw_only=True)
+class JointRun:
+    """One search round: which search (its depth or policy horizon), the nodes per level it
+    kept, its bounds, and (policy rounds) the certified value of the policy it gave."""
+
+    search: str
+    max_nodes: int
+    bounds: JointBounds
+    policy: PolicyValue | None = None
+
+    def to_dict(self) -> dict:
+        out = {"search": self.search, "max_nodes": self.max_nodes, **self.bounds.to_dict()}
+        if self.policy is not None:
+            out.update({"policy_lower": self.policy.lower, "policy_upper": self.policy.upper})
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class JointSynthesisStats:
+    """How a trust-state synthesis obtained its bounds: its rounds, the returned policy's search
+    horizon, that search's own lower bound, and the policy's certified value within it."""
+
+    method: str = "search over joint (trust, DFA state) beliefs (policies/trust_state_synthesis)"
+    belief_rule: str
+    converged: bool
+    tau: float
+    runs: tuple[JointRun, ...]
+    policy_rows: int
+    policy_search_horizon: int
+    search_lower: float
+    policy_value: PolicyValue
+
+    def to_dict(self) -> dict:
+        return {**record_dict(self), "policy_value": {
+            "lower": self.policy_value.lower, "upper": self.policy_value.upper,
+            "max_junctions": self.policy_search_horizon}}
+
+
+JointSynthesis: TypeAlias = SynthesisResult[JointTablePolicy, JointSynthesisStats]
+
+
 @dataclass(frozen=True, eq=False)
 class _Candidate:
     policy: JointTablePolicy
@@ -80,102 +122,119 @@ def decision_table(decisions: JointDecisions) -> JointPolicyTable:
                             joint=decisions.joint, action=decisions.action)
 
 
-def _grow(run: Callable[[int, float], tuple], stop: Callable[[tuple], bool], deadline: float) -> None:
+def _grow(run: Callable[[int, float], Any], stop: Callable[[Any], bool], deadline: float) -> None:
     """run(nodes, deadline) with nodes per level growing from FIRST_NODES until stop(result) or
     the next round (predicted NODE_GROWTH times the last) would pass the deadline. The first
     round always starts; `run` itself stops at the deadline (the searches and the evaluation
     check it level by level), so even the first round keeps to it."""
     nodes = FIRST_NODES
+    budget = TimeBudget.until(deadline)
     while nodes <= MAX_NODES:
-        began = time.perf_counter()
+        began = budget.elapsed()
         result = run(nodes, deadline)
         if stop(result):
             return
-        if NODE_GROWTH * (time.perf_counter() - began) > deadline - time.perf_counter():
+        if not budget.fits(NODE_GROWTH * (budget.elapsed() - began)):
             return
         nodes *= NODE_GROWTH
 
 
+@dataclass(frozen=True, eq=False)
+class _Joint:
+    """One synthesize_joint call's problem and settings, shared by its rounds."""
+
+    pomdp: TrustPOMDP
+    spec: Spec
+    horizon: int | None
+    belief_rule: BeliefRule
+    tau: float
+
+
+def _unbounded_upper(problem: _Joint, deadline: float, log: list[JointRun],
+                     report: Callable[[float], None]) -> float:
+    """Upper bound of the unbounded objective: unbounded searches (UNBOUNDED_DEPTHS), leaves
+    valued by the relaxation, with growing nodes per level until the deadline."""
+    upper = 1.0
+    for depth in UNBOUNDED_DEPTHS:
+        def run_upper(nodes: int, deadline: float, depth: int = depth) -> JointBounds:
+            nonlocal upper
+            bounds, _ = joint_search(problem.pomdp, problem.spec, depth, None, problem.belief_rule,
+                                     max_nodes=nodes, deadline=deadline)
+            upper = min(upper, bounds.upper)
+            log.append(JointRun(search=f"unbounded depth {depth}", max_nodes=nodes, bounds=bounds))
+            report(upper)
+            return bounds
+
+        _grow(run_upper, lambda bounds: bounds.cut_nodes == 0, deadline)
+    return upper
+
+
+def _policy_rounds(problem: _Joint, policy_horizon: int, until: float, upper: float,
+                   best: list[_Candidate], guides: dict[int, RelaxedGuide], log: list[JointRun],
+                   report: Callable[[float], None]) -> float:
+    """Policies for `policy_horizon` junctions with growing nodes per level until `until`, each
+    valued exactly within that horizon (a lower bound for any longer H and for the unbounded
+    objective); the best kept in `best`. Returns the upper bound (lowered by bounded searches)."""
+    pomdp, spec, horizon = problem.pomdp, problem.spec, problem.horizon
+
+    def run_policy(nodes: int, deadline: float) -> bool:
+        nonlocal upper
+        guide = guides.get(policy_horizon) or guides.setdefault(
+            policy_horizon, relaxed_guide(pomdp, spec, policy_horizon))
+        search_deadline = TimeBudget.until(deadline).share_of_rest(SEARCH_SHARE)
+        bounds, decisions = joint_search(pomdp, spec, policy_horizon, policy_horizon, problem.belief_rule,
+                                         max_nodes=nodes, guide=guide, guided_nodes=GUIDED_FACTOR * nodes,
+                                         deadline=search_deadline)
+        if horizon is not None:
+            upper = min(upper, bounds.upper)
+        policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=policy_horizon,
+                                  horizon=horizon, guide=guide)
+        value = PolicyValue(*evaluate_joint_table(pomdp, spec, policy, policy_horizon,
+                                                  problem.belief_rule, EVALUATION_NODES,
+                                                  deadline=deadline))
+        log.append(JointRun(search=f"H={policy_horizon}", max_nodes=nodes, bounds=bounds, policy=value))
+        if not best or value.lower > best[0].value.lower:
+            best[:] = [_Candidate(policy, value, bounds, policy_horizon)]
+        report(upper)
+        return upper - best[0].value.lower <= problem.tau or bounds.cut_nodes == 0
+
+    _grow(run_policy, lambda done: done, until)
+    return upper
+
+
 def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
                      horizon: int | None = None, belief_rule: BeliefRule = "bayes",
-                     on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
+                     on_iteration: Callable[[float, float], None] | None = None) -> JointSynthesis:
     """A JointTablePolicy for `spec` and certified lower <= Pr_max <= upper (a SynthesisResult)."""
-    started = time.perf_counter()
+    # Every search and evaluation checks its deadline as it goes (and does not begin a batch it
+    # predicts would end past it), so the whole synthesis keeps to the time limit.
+    budget = TimeBudget.start(time_limit, reserve=FINISH_RESERVE)
     compile_spec(spec, pomdp.town)       # bad specs fail before any search
-    log: list[dict] = []
-    upper = 1.0
+    problem = _Joint(pomdp, spec, horizon, belief_rule, tau)
+    log: list[JointRun] = []
     best: list[_Candidate] = []
 
-    def report() -> None:
+    def report(upper: float) -> None:
         if on_iteration is not None:
             on_iteration(best[0].value.lower if best else 0.0, upper)
 
+    upper = 1.0
     if horizon is None:
-        # Upper bound of the unbounded objective: unbounded searches, leaves valued by the relaxation.
-        upper_deadline = started + UPPER_SHARE * time_limit
-        for depth in UNBOUNDED_DEPTHS:
-            def run_upper(nodes: int, deadline: float, depth: int = depth) -> JointBounds:
-                nonlocal upper
-                bounds, _ = joint_search(pomdp, spec, depth, None, belief_rule, max_nodes=nodes,
-                                         deadline=deadline)
-                upper = min(upper, bounds.upper)
-                log.append({"search": f"unbounded depth {depth}", "max_nodes": nodes, **bounds.to_dict()})
-                report()
-                return bounds
-
-            _grow(run_upper, lambda bounds: bounds.cut_nodes == 0, upper_deadline)
+        upper = _unbounded_upper(problem, budget.share(UPPER_SHARE), log, report)
     horizons = (horizon,) if horizon is not None else UNBOUNDED_POLICY_HORIZONS
     guides: dict[int, RelaxedGuide] = {}
-    # Every search and evaluation checks its deadline as it goes (and does not begin a batch it
-    # predicts would end past it), so the whole synthesis keeps to the time limit.
-    deadline = started + (1.0 - FINISH_RESERVE) * time_limit
     for k, policy_horizon in enumerate(horizons):
-        share = (deadline - time.perf_counter()) / (len(horizons) - k)
-
-        def run_policy(nodes: int, deadline: float, policy_horizon: int = policy_horizon) -> bool:
-            # A policy for H junctions, valued exactly within H (a lower bound for any longer H
-            # and for the unbounded objective).
-            nonlocal upper
-            guide = guides.get(policy_horizon) or guides.setdefault(
-                policy_horizon, relaxed_guide(pomdp, spec, policy_horizon))
-            search_deadline = time.perf_counter() + SEARCH_SHARE * (deadline - time.perf_counter())
-            bounds, decisions = joint_search(pomdp, spec, policy_horizon, policy_horizon, belief_rule,
-                                             max_nodes=nodes, guide=guide,
-                                             guided_nodes=GUIDED_FACTOR * nodes,
-                                             deadline=search_deadline)
-            if horizon is not None:
-                upper = min(upper, bounds.upper)
-            policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=policy_horizon,
-                                      horizon=horizon, guide=guide)
-            value_lower, value_upper = evaluate_joint_table(pomdp, spec, policy, policy_horizon,
-                                                            belief_rule, EVALUATION_NODES,
-                                                            deadline=deadline)
-            value = PolicyValue(value_lower, value_upper)
-            log.append({"search": f"H={policy_horizon}", "max_nodes": nodes, **bounds.to_dict(),
-                        "policy_lower": value.lower, "policy_upper": value.upper})
-            if not best or value.lower > best[0].value.lower:
-                best[:] = [_Candidate(policy, value, bounds, policy_horizon)]
-            report()
-            return upper - best[0].value.lower <= tau or bounds.cut_nodes == 0
-
-        _grow(run_policy, lambda done: done, time.perf_counter() + share)
+        until = budget.share_of_rest(1.0 / (len(horizons) - k))
+        upper = _policy_rounds(problem, policy_horizon, until, upper, best, guides, log, report)
         if upper - best[0].value.lower <= tau:
             break
     chosen = best[0]
-    policy, value, table = chosen.policy, chosen.value, chosen.policy.table
+    policy, value = chosen.policy, chosen.value
     lower = value.lower
     policy.lower, policy.upper = lower, upper
-    stats = {
-        "method": "search over joint (trust, DFA state) beliefs (policies/trust_state_synthesis)",
-        "belief_rule": belief_rule,
-        "converged": bool(upper - lower <= tau),
-        "tau": tau,
-        "runs": log,
-        "policy_rows": table.rows,
-        "policy_search_horizon": chosen.horizon,
-        "search_lower": chosen.bounds.lower,
-        "policy_value": {"lower": value.lower, "upper": value.upper, "max_junctions": chosen.horizon},
-    }
-    return SynthesisResult(policy=policy, lower=lower, upper=upper,
-                           seconds=time.perf_counter() - started, stats=stats, horizon=horizon,
-                           belief_rule=belief_rule)
+    stats = JointSynthesisStats(
+        belief_rule=belief_rule, converged=bool(upper - lower <= tau), tau=tau, runs=tuple(log),
+        policy_rows=policy.table.rows, policy_search_horizon=chosen.horizon,
+        search_lower=chosen.bounds.lower, policy_value=value)
+    return SynthesisResult(policy=policy, lower=lower, upper=upper, seconds=budget.elapsed(),
+                           stats=stats, horizon=horizon, belief_rule=belief_rule)

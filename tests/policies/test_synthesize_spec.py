@@ -20,7 +20,7 @@ from trustroute.policies.routing.files import (
     array_path,
     save_policy,
 )
-from trustroute.policies.synthesis.search import synthesize
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 
 
 def _document(path) -> dict:

@@ -16,7 +16,7 @@ from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.resolve import aware_cache_path, resolve_policy
 from trustroute.policies.routing.files import array_path, load_policy, read_policy_document, save_policy
 from trustroute.policies.routing.protocol import DecisionContext
-from trustroute.policies.synthesis.search import synthesize
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 
 
 @pytest.fixture(scope="module")

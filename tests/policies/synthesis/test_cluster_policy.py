@@ -21,9 +21,10 @@ from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, BoxRows, PolicyTable
 from trustroute.policies.synthesis.belief_cells import observation_symbols
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.cluster_policy import best_cluster_solution, solve_clusters
 from trustroute.policies.synthesis.exact_search import exact_optimum
-from trustroute.policies.synthesis.search import synthesize
+from trustroute.policies.synthesis.result import ClusterRun, GraphDistanceRun
 
 TOLERANCE = 1e-9
 FAR = 1e9
@@ -115,9 +116,9 @@ def test_synthesize_with_clusters_on(driver, seed):
     optimum = exact_optimum(pomdp, spec, horizon)
     for tau in (1e-6, 0.3):
         result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20, clusters="on")
-        first = result.stats["runs"][0]
-        by_distance = str(first.get("abstraction_bound", "")).startswith("graph distance")
-        assert by_distance or first["method"] == "cluster policy"
+        first = result.stats.runs[0]
+        by_distance = isinstance(first, GraphDistanceRun)
+        assert by_distance or isinstance(first, ClusterRun)
         assert not by_distance or result.upper == 0.0
         assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE
         value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)

@@ -21,9 +21,10 @@ from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import free_completion, state_only_task
 from trustroute.policies.synthesis import completion_value
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.completion_value import FreeRoute, completion_bounds
 from trustroute.policies.synthesis.exact_search import exact_optimum
-from trustroute.policies.synthesis.search import held_choice, policy_choice, synthesize
+from trustroute.policies.synthesis.open_node_bounds import held_choice, policy_choice
 
 HORIZON = 8
 TOLERANCE = 1e-12

@@ -22,9 +22,9 @@ from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import free_completion, state_only_task
 from trustroute.policies.synthesis.belief_cells import observation_symbols
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.event_graph import EventGraph
 from trustroute.policies.synthesis.exact_search import exact_optimum
-from trustroute.policies.synthesis.search import synthesize
 from trustroute.policies.synthesis.upper_bound import acceptance_distance
 
 TOLERANCE = 1e-12
@@ -111,11 +111,11 @@ def _compare(pomdp, spec, horizon: int, mode: str) -> bool | None:
     whether the search was compressed (None: answered by graph distance, no search)."""
     plain = synthesize(pomdp, spec, tau=TOLERANCE, horizon=horizon, time_limit=60, compress="off")
     packed = synthesize(pomdp, spec, tau=TOLERANCE, horizon=horizon, time_limit=60, compress=mode)
-    run = packed.stats["runs"][0]
-    if not run["nodes"]:
+    run = packed.stats.runs[0]
+    if not run.nodes:
         assert plain.upper == packed.upper == 0.0
         return None
-    if run["compressed"] is False:      # nothing to pass through: exactly the plain search
+    if run.compressed is False:      # nothing to pass through: exactly the plain search
         assert (packed.lower, packed.upper) == (plain.lower, plain.upper)
         return False
     assert packed.lower == pytest.approx(plain.lower, abs=TOLERANCE)
@@ -124,7 +124,7 @@ def _compare(pomdp, spec, horizon: int, mode: str) -> bool | None:
     assert packed.lower - TOLERANCE <= optimum <= packed.upper + TOLERANCE
     online = evaluate(pomdp, spec, packed.policy, fallback_after=None, max_junctions=horizon)
     assert online.lower >= packed.lower - TOLERANCE
-    if run["row_conflicts"] == 0:
+    if run.row_conflicts == 0:
         assert online.lower == pytest.approx(packed.lower, abs=TOLERANCE)
     return True
 
@@ -171,11 +171,11 @@ def test_no_quiet_road_gives_the_plain_search(driver):
                 for c in ("off", "chains", "full")]
         for run in runs[1:]:
             assert run.lower == runs[0].lower and run.upper == runs[0].upper
-            assert run.stats["runs"][0]["nodes"] == runs[0].stats["runs"][0]["nodes"]
+            assert run.stats.runs[0].nodes == runs[0].stats.runs[0].nodes
             assert run.policy.table.rows == runs[0].policy.table.rows
-        if runs[0].stats["runs"][0]["nodes"]:          # searched (not answered by graph distance)
+        if runs[0].stats.runs[0].nodes:          # searched (not answered by graph distance)
             searched += 1
-            assert all(run.stats["runs"][0]["compressed"] is False for run in runs[1:])
+            assert all(run.stats.runs[0].compressed is False for run in runs[1:])
     assert searched >= 3
 
 

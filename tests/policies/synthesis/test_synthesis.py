@@ -12,8 +12,9 @@ from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import load_spec, spec_from_text
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import DecisionContext
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.exact_search import exact_optimum
-from trustroute.policies.synthesis.search import synthesize
+from trustroute.policies.synthesis.result import ClusterRun, SearchRun
 
 EXACT_TOLERANCE = 1e-9
 
@@ -66,14 +67,14 @@ def test_lower_is_the_value_of_the_returned_policy(pomdp, name, completion):
     for tau in (1e-3, 0.05):
         result = synthesize(pomdp, spec, tau=tau, horizon=horizon, completion=completion)
         value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
-        run = result.stats["runs"][0]
+        run = result.stats.runs[0]
         assert value.gap == 0.0
         assert result.gap <= tau
-        assert run["completion_closed"]
-        assert run["completion_bounds"] == (completion == "bounds")
+        assert run.completion_closed
+        assert run.completion_bounds == (completion == "bounds")
         if completion == "auto":
             assert value.lower == pytest.approx(result.lower, abs=EXACT_TOLERANCE)
-            if run["threshold_alternates"] == 0:
+            if run.threshold_alternates == 0:
                 assert result.lower >= alone.lower - EXACT_TOLERANCE
         else:
             assert result.lower - EXACT_TOLERANCE <= value.lower <= result.upper + EXACT_TOLERANCE
@@ -136,7 +137,7 @@ def test_unbounded_phi1_reaches_the_target_gap(pomdp):
     result = synthesize(pomdp, spec, tau=1e-3, time_limit=30)
     assert result.upper == pytest.approx(1.0)
     assert result.gap <= 1e-3
-    assert result.stats["converged"]
+    assert result.stats.converged
 
 
 def test_unbounded_upper_closes_on_unavoidable_risk(pomdp):
@@ -168,21 +169,21 @@ def test_progress_callback_sees_the_search_bounds(pomdp):
 def test_node_budget_stops_the_search_soundly(pomdp, monkeypatch):
     """With a small node budget the search stops early; L stays a lower bound of the returned
     policy's value (its completions may be left open) and U an upper bound of the optimum."""
-    from trustroute.policies.synthesis import search
+    from trustroute.policies.synthesis import refinement
 
     spec = load_spec("specs/phi1.toml", pomdp.town)
     horizon = 8
-    monkeypatch.setattr(search, "NODE_BUDGET", 300)
+    monkeypatch.setattr(refinement, "NODE_BUDGET", 300)
     optimum = exact_optimum(pomdp, spec, horizon)
     # the search alone (clusters "off"); by default cluster policies follow an unconverged search
     result = synthesize(pomdp, spec, tau=1e-9, horizon=horizon, clusters="off")
-    run = result.stats["runs"][0]
-    assert run["nodes"] >= 300 and not result.stats["converged"]
+    run = result.stats.runs[0]
+    assert run.nodes >= 300 and not result.stats.converged
     value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
     assert result.lower <= value.lower + EXACT_TOLERANCE
     assert optimum <= result.upper + EXACT_TOLERANCE
     after = synthesize(pomdp, spec, tau=1e-9, horizon=horizon)
-    assert [r.get("method", "search") for r in after.stats["runs"]] == ["search", "cluster policy"]
+    assert [type(r) for r in after.stats.runs] == [SearchRun, ClusterRun]
     assert after.lower >= result.lower and after.upper <= result.upper
     assert after.lower - EXACT_TOLERANCE <= optimum <= after.upper + EXACT_TOLERANCE
     value = evaluate(pomdp, spec, after.policy, fallback_after=None, max_junctions=horizon)

@@ -17,7 +17,7 @@ from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.routing.protocol import DecisionContext
-from trustroute.policies.synthesis.search import synthesize
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 
 EPISODES = 100_000
 HORIZON = 20

@@ -19,8 +19,8 @@ from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.exact_search import exact_optimum
-from trustroute.policies.synthesis.search import synthesize
 
 FORMULAS = ("F (a & F (b & high))", "(!high) U a", "F (a & high)", "(!high) U (a & X (F (b & high)))")
 TOLERANCE = 1e-9
@@ -86,7 +86,7 @@ def test_bounds_bracket_brute_force_on_random_problems(driver, seed, horizon, be
         result = synthesize(pomdp, spec, tau=tau, horizon=horizon, belief_rule=belief_rule, time_limit=20,
                             suffix_length=int(rng.integers(0, 3)))
         assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE, (result.lower, optimum)
-        assert result.stats["runs"][0]["abstraction_root_upper"] >= optimum - TOLERANCE
+        assert result.stats.runs[0].abstraction_root_upper >= optimum - TOLERANCE
     unbounded = synthesize(pomdp, spec, belief_rule=belief_rule, time_limit=1.0, suffix_length=2)
     assert unbounded.upper >= optimum - TOLERANCE
     assert unbounded.lower <= unbounded.upper + TOLERANCE
@@ -112,11 +112,11 @@ def test_returned_policy_is_worth_exactly_lower_on_random_problems(driver, seed)
     for tau in (0.2, 1e-6):
         result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20)
         value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
-        run = result.stats["runs"][0]
-        assert not run["completion_bounds"]
-        strict = run["lower_strict_labels"]
+        run = result.stats.runs[0]
+        assert not run.completion_bounds
+        strict = run.lower_strict_labels
         assert value.lower == pytest.approx(strict, abs=TOLERANCE), (value.lower, strict, result.lower)
-        if run["threshold_alternates"] == 0 and len(run["root_dfa_states"]) == 1:
+        if run.threshold_alternates == 0 and len(run.root_dfa_states) == 1:
             # no label within the rounding margin: L is the strict value, at least the free route's
             assert value.lower == pytest.approx(result.lower, abs=TOLERANCE)
             assert result.lower >= free.lower - TOLERANCE
@@ -131,7 +131,7 @@ def test_returned_policy_is_worth_at_least_lower_with_completion_bounds(driver, 
     for tau in (0.2, 1e-6):
         result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20, completion="bounds")
         value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
-        strict = result.stats["runs"][0]["lower_strict_labels"]
+        strict = result.stats.runs[0].lower_strict_labels
         assert value.lower >= strict - TOLERANCE, (value.lower, strict, result.lower)
         assert result.lower - TOLERANCE <= value.lower <= result.upper + TOLERANCE
         if result.gap <= tau:
@@ -169,14 +169,14 @@ def test_open_nodes_are_valued_by_the_completion_that_returns(driver):
         for completion in ("auto", "bounds"):
             result = synthesize(pomdp, spec, tau=0.2, horizon=horizon, time_limit=20, completion=completion)
             value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
-            run = result.stats["runs"][0]
-            exact_labels = run.get("threshold_alternates", 0) == 0 and len(run["root_dfa_states"]) == 1
-            if completion == "auto" and run["nodes"]:
-                assert not run["completion_bounds"] and run["completion_closed"]
-                assert value.lower == pytest.approx(run["lower_strict_labels"], abs=TOLERANCE)
+            run = result.stats.runs[0]
+            exact_labels = run.threshold_alternates == 0 and len(run.root_dfa_states) == 1
+            if completion == "auto" and run.nodes:
+                assert not run.completion_bounds and run.completion_closed
+                assert value.lower == pytest.approx(run.lower_strict_labels, abs=TOLERANCE)
                 if exact_labels:
                     assert value.lower == pytest.approx(result.lower, abs=TOLERANCE), (seed, value.lower)
             assert result.lower - TOLERANCE <= value.lower <= result.upper + TOLERANCE, (seed, completion)
-            if completion == "auto" and exact_labels and run["completion_closed"]:
+            if completion == "auto" and exact_labels and run.completion_closed:
                 assert result.lower >= alone.lower - TOLERANCE, (seed, alone.lower, result.lower)
     assert returns >= 2

@@ -22,8 +22,8 @@ from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.labelling import atom_values
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.exact_search import exact_optimum
-from trustroute.policies.synthesis.search import synthesize
 
 TOLERANCE = 1e-12
 
@@ -48,7 +48,7 @@ def test_thresholds_at_multiples_of_one_seventh_bracket_the_optimum(pomdp, offse
     assert online.lower >= result.lower - TOLERANCE
     assert online.lower <= result.upper + TOLERANCE
     # with this machine's strict labels the policy is worth at least the reported strict value
-    assert online.lower >= result.stats["lower_strict_labels"] - TOLERANCE
+    assert online.lower >= result.stats.lower_strict_labels - TOLERANCE
     _search_alone_is_worth_its_strict_value(pomdp, spec, horizon, tau=1e-3, time_limit=60)
 
 
@@ -58,7 +58,7 @@ def _search_alone_is_worth_its_strict_value(pomdp, spec, horizon: int, **options
     search = synthesize(pomdp, spec, horizon=horizon, clusters="off", **options)
     online = evaluate(pomdp, spec, search.policy, fallback_after=None, max_junctions=horizon)
     assert online.lower >= search.lower - TOLERANCE
-    assert online.lower >= search.stats["runs"][0]["lower_strict_labels"] - TOLERANCE
+    assert online.lower >= search.stats.runs[0].lower_strict_labels - TOLERANCE
 
 
 def _reachable_belief(pomdp, rng: np.random.Generator, where: str) -> np.ndarray:
@@ -111,5 +111,5 @@ def test_threshold_on_a_reachable_belief(driver, seed, where, default_driver, nu
     assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE
     online = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
     assert online.lower >= result.lower - TOLERANCE
-    assert online.lower >= result.stats["lower_strict_labels"] - TOLERANCE
+    assert online.lower >= result.stats.lower_strict_labels - TOLERANCE
     _search_alone_is_worth_its_strict_value(pomdp, spec, horizon, tau=1e-9, time_limit=20, suffix_length=1)

@@ -14,8 +14,8 @@ from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.exact_search import exact_optimum
-from trustroute.policies.synthesis.search import synthesize
 
 
 def five_level_driver(default: DriverModel) -> DriverModel:

@@ -18,7 +18,7 @@ from tests.policies.synthesis.test_synthesis_random import random_junctions
 from trustroute.networks.town import INCIDENT_TYPES, town_from_dict
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
-from trustroute.policies.synthesis.search import synthesize
+from trustroute.policies.synthesis.belief_synthesis import synthesize
 
 FORMULAS = ("(!high) U a", "(!high) U (a & F b)", "F (a & high)", "(!high) U (a & X (F (b & high)))")
 # Where the closure is asserted: after the until only state atoms remain. With a belief atom after

@@ -51,14 +51,14 @@ def test_unbounded_bounds_bracket_the_bounded_optimum_and_lower_is_the_policys_v
     # Pr_max of the unbounded objective is at least the bounded optimum.
     assert unbounded.upper >= reference - TOLERANCE
     assert 0 < unbounded.lower <= unbounded.upper + TOLERANCE
-    cap = unbounded.stats["policy_search_horizon"]
+    cap = unbounded.stats.policy_search_horizon
     # L is a certified lower end of the policy's value within its horizon (cut by the time
     # limit here): the pruned tree unfolding brackets the same value, so the brackets overlap.
     exact = evaluate_joint(pomdp, spec, unbounded.policy, fallback_after=None, max_junctions=cap,
                            max_nodes=2_000)
-    value = unbounded.stats["policy_value"]
-    assert value["lower"] == unbounded.lower
-    assert max(value["lower"], exact.lower) <= min(value["upper"], exact.upper) + TOLERANCE
+    value = unbounded.stats.policy_value
+    assert value.lower == unbounded.lower
+    assert max(value.lower, exact.lower) <= min(value.upper, exact.upper) + TOLERANCE
 
 
 def test_merged_evaluation_equals_the_tree_unfolding_of_evaluate_joint(pomdp):
@@ -81,9 +81,18 @@ def test_a_time_limit_shorter_than_the_first_round_stops_it_with_sound_bounds(po
     exact = joint_bounds(pomdp, spec, depth=0, horizon=8)
     assert exact.cut_nodes == 0 and exact.nodes > 1000
     result = synthesize_spec(pomdp, spec, horizon=8, time_limit=1e-6)
-    assert [run["nodes"] for run in result.stats["runs"]] == [1]
+    assert [run.bounds.nodes for run in result.stats.runs] == [1]
     assert result.lower - TOLERANCE <= exact.lower <= result.upper + TOLERANCE
     assert result.upper < 1.0
+    # the statistics' JSON ("stats" of trustroute synth --json)
+    stats = result.stats.to_dict()
+    assert list(stats) == ["method", "belief_rule", "converged", "tau", "runs", "policy_rows",
+                           "policy_search_horizon", "search_lower", "policy_value"]
+    assert list(stats["runs"][0]) == ["search", "max_nodes", *result.stats.runs[0].bounds.to_dict(),
+                                      "policy_lower", "policy_upper"]
+    assert stats["runs"][0]["nodes"] == 1
+    assert stats["policy_value"] == {"lower": result.lower, "upper": result.stats.policy_value.upper,
+                                     "max_junctions": 8}
 
 
 @pytest.mark.slow

@@ -1,0 +1,174 @@
+"""The node store of the belief-MDP search: growable arrays of the unfolded product belief MDP.
+
+One node per distinct (junctions t, road x, DFA state q, state-only task state p, belief bytes):
+identical beliefs at the same depth are merged, never approximated. Per node: its kind (below),
+its bounds [L, U] and strict value, its completion bounds, and, once expanded, its move slots with
+their children and probabilities; per level, the alternates of outcomes at a label threshold.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# FRONTIER: open, L = 0 (the policy drives the trust-free completion there, worth >= 0).
+# FREE: expanded along the trust-free completion's move only; L is that move's exact value, U the
+# abstraction's bound (the other moves are unexplored). EXPANDED: every move; a policy row.
+FRONTIER, EXPANDED, ACCEPTED, ZERO, FREE = 0, 1, 2, 3, 4
+NODE_BUDGET = 600_000   # search nodes (about 0.7 kB each with the memo): the search stops there
+
+
+class BeliefGraph:
+    """Growable node arrays of the unfolded product belief MDP."""
+
+    def __init__(self, n_trust: int, n_actions: int, n_outcomes: int) -> None:
+        self.n = 0
+        self.n_actions, self.n_outcomes = n_actions, n_outcomes
+        capacity = 1024
+        self.level = np.zeros(capacity, dtype=np.int64)
+        self.x = np.zeros(capacity, dtype=np.int64)
+        self.q = np.zeros(capacity, dtype=np.int64)
+        self.p = np.zeros(capacity, dtype=np.int64)      # state of the state-only task (free route)
+        self.cell = np.zeros(capacity, dtype=np.int64)
+        self.belief = np.zeros((capacity, n_trust))
+        # U, L and the strict value as rows of one array, so that a backup gathers all three at once
+        self.values = np.zeros((3, capacity))
+        self.upper, self.lower = self.values[0], self.values[1]
+        # value of the L-greedy choice with every label read strictly, as this machine's labeller
+        # does (no alternates): the tie-breaker among actions of equal L, and a reported figure.
+        self.strict = self.values[2]
+        self.kind = np.zeros(capacity, dtype=np.int8)
+        # Bounds on the trust-free completion's value from the node (completion_value.py): its
+        # lower bound is the L of a FRONTIER node; its upper bound decides where the policy may
+        # leave the free move (BeliefSearch.choose, expansion.py). free_upper starts at the
+        # abstraction's bound.
+        self.free_upper = np.zeros(capacity)
+        self.free_lower = np.zeros(capacity)
+        self.completed = np.zeros(capacity, dtype=bool)
+        # per expanded node: which move slots exist, and the trust-free completion's slot
+        self.legal = np.zeros((capacity, n_actions), dtype=bool)
+        self.free_move = np.zeros(capacity, dtype=np.int64)
+        self.child = np.full((capacity, n_actions, n_outcomes), -1, dtype=np.int64)
+        self.prob = np.zeros((capacity, n_actions, n_outcomes))
+        self.memo: list[dict[tuple[int, int, int, bytes], int]] = []
+        self.expanded_by_level: list[list[int]] = []
+        self.free_by_level: list[dict[int, None]] = []    # FREE nodes per level (insertion order)
+        self.free_version: list[int] = []
+        # Labels at thresholds: an outcome whose belief is within the rounding margin of a belief
+        # atom's hyperplane has one child per DFA state it could lead to. child/prob hold the one
+        # the strict label reads; the others are "alternates" (parent, slot, outcome, child),
+        # grouped by the parent's level. L takes the minimum over them, U the maximum.
+        self.alternates: dict[int, list[np.ndarray]] = {}
+        self._alternates_joined: dict[int, tuple[np.ndarray, ...]] = {}
+
+    def add_alternates(self, level: int, parent: np.ndarray, slot: np.ndarray, outcome: np.ndarray,
+                       child: np.ndarray) -> None:
+        if parent.size == 0:
+            return
+        self.alternates.setdefault(level, []).append(np.stack([parent, slot, outcome, child]))
+        self._alternates_joined.pop(level, None)
+
+    def alternates_of(self, level: int | None) -> tuple[np.ndarray, ...]:
+        """(parent, slot, outcome, child) of the alternates of parents at `level` (None: all)."""
+        if level is None:
+            parts = [self.alternates_of(lv) for lv in sorted(self.alternates)]
+            if not parts:
+                return tuple(np.zeros(0, dtype=np.int64) for _ in range(4))
+            return tuple(np.concatenate([p[j] for p in parts]) for j in range(4))
+        joined = self._alternates_joined.get(level)
+        if joined is None:
+            chunks = self.alternates.get(level)
+            if not chunks:
+                return tuple(np.zeros(0, dtype=np.int64) for _ in range(4))
+            stacked = np.concatenate(chunks, axis=1)
+            joined = tuple(stacked[j] for j in range(4))
+            self._alternates_joined[level] = joined
+        return joined
+
+    def _grow(self, needed: int) -> None:
+        capacity = self.level.shape[0]
+        if needed <= capacity:
+            return
+        new = max(needed, 2 * capacity)
+        for name in ("level", "x", "q", "p", "cell", "kind", "free_move", "free_upper", "free_lower",
+                     "completed"):
+            old = getattr(self, name)
+            grown = np.zeros(new, dtype=old.dtype)
+            grown[:capacity] = old
+            setattr(self, name, grown)
+        values = np.zeros((3, new))
+        values[:, :capacity] = self.values
+        self.values = values
+        self.upper, self.lower, self.strict = values[0], values[1], values[2]
+        belief = np.zeros((new, self.belief.shape[1]))
+        belief[:capacity] = self.belief
+        self.belief = belief
+        child = np.full((new, self.n_actions, self.n_outcomes), -1, dtype=np.int64)
+        child[:capacity] = self.child
+        self.child = child
+        legal = np.zeros((new, self.n_actions), dtype=bool)
+        legal[:capacity] = self.legal
+        self.legal = legal
+        prob = np.zeros((new, self.n_actions, self.n_outcomes))
+        prob[:capacity] = self.prob
+        self.prob = prob
+
+    def add(self, level: int | np.ndarray, x: np.ndarray, q: np.ndarray, p: np.ndarray,
+            cell: np.ndarray, belief: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ids of the nodes (level, x, q, p, belief), creating missing ones; and a mask of new ones."""
+        level = np.broadcast_to(np.asarray(level, dtype=np.int64), x.shape)
+        deepest = int(level.max()) if level.size else 0
+        while len(self.memo) <= deepest:
+            self.memo.append({})
+            self.expanded_by_level.append([])
+            self.free_by_level.append({})
+            self.free_version.append(0)
+        memos = self.memo
+        ids = np.empty(x.size, dtype=np.int64)
+        new = np.zeros(x.size, dtype=bool)
+        start = self.n
+        self._grow(self.n + x.size)
+        for i, (lv, *key) in enumerate(zip(level.tolist(), x.tolist(), q.tolist(), p.tolist(),
+                                           (row.tobytes() for row in belief), strict=True)):
+            memo = memos[lv]
+            node = memo.get(tuple(key))
+            if node is None:
+                node = self.n
+                memo[tuple(key)] = node
+                self.n += 1
+                new[i] = True
+            ids[i] = node
+        created = ids[new]
+        self.level[created] = level[new]
+        self.x[created] = x[new]
+        self.q[created] = q[new]
+        self.p[created] = p[new]
+        self.cell[created] = cell[new]
+        self.belief[created] = belief[new]
+        self.kind[created] = FRONTIER
+        self.completed[created] = False
+        self.free_lower[created] = 0.0
+        assert self.n == start + created.size
+        return ids, new
+
+
+@dataclass(frozen=True, eq=False)
+class ExpandedLevel:
+    """The expanded nodes of one level with their (fixed) children, for the backups.
+
+    nodes [m]; child [m, actions, outcomes] (0 where absent, masked by has_child); prob; legal
+    [m, actions]; alternates as (row, slot, outcome, child) with row an index into nodes."""
+
+    count: int
+    alternate_chunks: int
+    nodes: np.ndarray
+    child: np.ndarray
+    has_child: np.ndarray
+    prob: np.ndarray
+    legal: np.ndarray
+    alt_row: np.ndarray
+    alt_slot: np.ndarray
+    alt_outcome: np.ndarray
+    alt_child: np.ndarray
+

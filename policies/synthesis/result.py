@@ -1,0 +1,206 @@
+"""What a synthesis returns: the policy with certified lower <= Pr_max <= upper (SynthesisResult),
+and typed statistics of how the bounds were obtained.
+
+The belief-MDP synthesis (belief_synthesis.py) reports SynthesisStats with one record per run:
+a search (SearchRun), a cluster policy (ClusterRun) or an answer by graph distance alone
+(GraphDistanceRun). `to_dict()` gives the JSON that `trustroute synth --json` prints under "stats".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any, Generic, Protocol, TypeVar
+
+PolicyT = TypeVar("PolicyT")
+
+
+class Statistics(Protocol):
+    """What every synthesis' statistics have: convergence, the policy's rows, and their JSON."""
+
+    converged: bool
+    policy_rows: int
+
+    def to_dict(self) -> dict: ...
+
+
+StatsT = TypeVar("StatsT", bound=Statistics)
+
+
+def _plain(value: Any) -> Any:
+    """`value` as JSON-ready data: records by their to_dict, tuples as lists."""
+    if hasattr(value, "to_dict"):
+        return value.to_dict()
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def record_dict(record: Any, optional: tuple[str, ...] = ()) -> dict:
+    """A dataclass record's fields in order as a dict; the `optional` ones only when not None."""
+    out = {}
+    for f in fields(record):
+        value = getattr(record, f.name)
+        if f.name in optional and value is None:
+            continue
+        out[f.name] = _plain(value)
+    return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class SearchRun:
+    """One AO*-style search of the product belief MDP (refinement.py): horizon None is the
+    unbounded problem (then end_component_seconds: the unbounded abstraction's bound's time)."""
+
+    horizon: int | None
+    suffix_length: int
+    abstract_cells: int
+    abstraction_seconds: float
+    abstraction_bound: str
+    abstraction_root_upper: float
+    root_dfa_states: tuple[int, ...]
+    threshold_alternates: int
+    # the run's policy's value with labels read strictly (this machine's labeller) from the
+    # root the vehicle is in: a lower bound of what `evaluate` measures
+    lower_strict_labels: float
+    completion_closed: bool
+    # open nodes valued by cluster bounds (then L is a lower bound of the policy's value) or
+    # by exact trees (then, closed, L is its exact value)
+    completion_bounds: bool
+    free_tree_leaves: float
+    completion_seconds: float
+    completion_clusters: int
+    # the event graph's macro moves (None: not asked for), their widest context, and contexts
+    # where the paths of two rows crossed (then L is a lower bound of the policy's value)
+    compressed: bool | None
+    macro_width: int | None
+    row_conflicts: int
+    nodes: int
+    expanded_nodes: int
+    open_frontier_nodes: int
+    open_frontier_mass_upper_policy: float
+    iterations: int
+    policy_rows: int
+    lower: float
+    upper: float
+    end_component_seconds: float | None = None
+
+    def to_dict(self) -> dict:
+        return record_dict(self, optional=("end_component_seconds",))
+
+
+@dataclass(frozen=True, kw_only=True)
+class ClusterAttempt:
+    """One cap tried by best_cluster_solution (cluster_policy.py); lower is None when the
+    deadline stopped it."""
+
+    cap: int
+    lower: float | None = None
+    upper: float | None = None
+    clusters: int | None = None
+    rows: int | None = None
+    seconds: float | None = None
+
+    def to_dict(self) -> dict:
+        if self.lower is None:
+            return {"cap": self.cap, "stopped": "deadline"}
+        return record_dict(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ClusterRun:
+    """A cluster policy (cluster_policy.py) with the caps tried; labels are read the worse way
+    wherever a box straddles a threshold, so L holds under any reading."""
+
+    horizon: int
+    method: str = "cluster policy"
+    lower: float
+    upper: float
+    nodes: int = 0
+    cluster_cap: int
+    clusters: int
+    policy_rows: int
+    cluster_runs: tuple[ClusterAttempt, ...]
+    threshold_alternates: int = 0
+    lower_strict_labels: float
+    completion_closed: bool = True
+    completion_bounds: bool = False
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class GraphDistanceRun:
+    """An answer without search: no route accepts within the horizon (L = U = 0)."""
+
+    horizon: int | None
+    lower: float = 0.0
+    upper: float = 0.0
+    nodes: int = 0
+    abstraction_root_upper: float = 0.0
+    abstraction_bound: str
+    threshold_alternates: int = 0
+    lower_strict_labels: float = 0.0
+    root_dfa_states: tuple[int, ...]
+    completion_closed: bool = True
+    completion_bounds: bool = False
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+
+Run = SearchRun | ClusterRun | GraphDistanceRun
+
+
+@dataclass(frozen=True, kw_only=True)
+class SynthesisStats:
+    """How a belief-MDP synthesis obtained its bounds. lower_strict_labels: the returned policy's
+    value with labels read strictly (this machine's labeller), a lower bound of what `evaluate`
+    measures (a run's lower_strict_labels is that run's policy's). Unbounded: unbounded_upper says
+    how U was obtained and lower_from_horizon which run's horizon gave L. objective: "robust" for
+    the robust population objective (population.py)."""
+
+    method: str = "AO*-style expansion of the product belief MDP with suffix-abstraction upper bounds"
+    belief_rule: str
+    converged: bool
+    tau: float
+    runs: tuple[Run, ...]
+    policy_rows: int
+    lower_strict_labels: float
+    unbounded_upper: str | None = None
+    lower_from_horizon: int | None = None
+    objective: str | None = None
+
+    @property
+    def threshold_alternates(self) -> int:
+        """Outcomes of all runs that sit on a belief threshold (within rounding)."""
+        return sum(run.threshold_alternates for run in self.runs)
+
+    def to_dict(self) -> dict:
+        out = record_dict(self, optional=("unbounded_upper", "lower_from_horizon", "objective"))
+        if self.unbounded_upper is not None:
+            # (kept when None: the unbounded search's own run has no horizon)
+            out["lower_from_horizon"] = self.lower_from_horizon
+        if self.objective is not None:
+            out["objective"] = out.pop("objective")          # last, after the unbounded keys
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class SynthesisResult(Generic[PolicyT, StatsT]):
+    """lower <= Pr_max <= upper; lower is a certified lower bound of the value of `policy`.
+
+    horizon: the junction horizon solved for (None: unbounded); stats: how the bounds were obtained.
+    """
+
+    policy: PolicyT
+    lower: float
+    upper: float
+    seconds: float
+    stats: StatsT
+    horizon: int | None = None
+    belief_rule: str = "bayes"
+
+    @property
+    def gap(self) -> float:
+        return self.upper - self.lower
