@@ -28,6 +28,7 @@ from trustroute.harness.simulation.episode import EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker, episode_model
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.belief.problem import dfa_is_hidden
 from trustroute.policies.routing.episode_rules import (
     ACCEPTED,
     END_REASONS,
@@ -122,7 +123,7 @@ def simulate_batch(
     (policies/routing/episode_rules.py). Specs with trust-state atoms need the joint belief of
     the episode tracker: run them through `run_model_episode`.
     """
-    if setup.spec.uses_trust_atoms:
+    if dfa_is_hidden(setup.driver_model, setup.spec):
         raise ValueError(f"spec {setup.spec.name!r} has trust-state atoms: the batch path does not "
                          "track the joint belief; run its episodes with run_model_episode")
     started = time.perf_counter()

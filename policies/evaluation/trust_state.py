@@ -11,8 +11,9 @@ of a finished or capped branch is unsatisfied, that of a pruned branch unknown (
 [lower, upper]).
 
 The AV does not know q: the policy is told the most probable DFA state (the exact one when the
-spec has no trust-state atoms). Specs without trust-state atoms are evaluated by
-policies/evaluation/plain.py itself, so their results are exactly today's.
+spec has no trust-state atoms). Problems whose DFA state is observed (policies/belief/problem.py:
+every case but TRUST_STATE) are evaluated by policies/evaluation/plain.py itself, so their results
+are exactly today's.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import time
 
 import numpy as np
 
+from trustroute.policies.belief.problem import dfa_is_hidden
 from trustroute.policies.belief.trust_state_filter import joint_filter
 from trustroute.policies.evaluation.ledgers import (
     DEFAULT_MAX_NODES,
@@ -79,7 +81,7 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     defaults are policies.evaluation.plain's for specs without trust-state atoms (which go there unchanged)
     and JOINT_PRUNE_BELOW, JOINT_MAX_NODES (no time limit) otherwise; `pruning` reports them and
     what they cut."""
-    if not spec.uses_trust_atoms and not force_joint:
+    if not force_joint and not dfa_is_hidden(pomdp.driver, spec):
         if time_limit is not None:
             raise ValueError("a time limit applies to specs with trust-state atoms only")
         return evaluate(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,

@@ -146,9 +146,8 @@ class EpisodeActor:
 
     def act(self, level: int, frontier: Frontier) -> Moves:
         state = frontier.state
-        joint = getattr(state, "joint", None)
-        if self.batched is not None and joint is not None:
-            self.batched.prefetch(level, frontier.road, joint, state.belief)
+        if self.batched is not None:       # given with joint-belief node states only
+            self.batched.prefetch(level, frontier.road, state.joint, state.belief)
         told = state.told()
         told_accepting = self.accepting[told]
         n = frontier.size
