@@ -369,16 +369,25 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
                          fallback_after: int | None, cap: int, belief_rule: str, cache_dir: str | None,
                          as_json: bool) -> None:
     """`evaluate --population`: exact value over the mixture and per type."""
+    from trustroute.policies.belief.problem import problem as routing_problem
     from trustroute.policies.evaluation.plain import evaluate as evaluate_policy
-    from trustroute.policies.model.trust_pomdp import build_pomdp
-    from trustroute.policies.synthesis.population import per_type_values
+    from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
+    from trustroute.policies.synthesis.population import TypeValue, per_type_values
 
     town, population, spec, policy, model, lifted_spec = load_population_routing(
         spec_path, town_path, population_path, policy_name, cache_dir, progress=not as_json)
-    pomdp = build_pomdp(town, model)
-    value = evaluate_policy(pomdp, lifted_spec, policy, fallback_after=fallback_after, max_junctions=cap,
-                            belief_rule=belief_rule)
-    types = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule, fallback_after)
+    found = routing_problem(town, population, spec, population_path)
+    pomdp = found.pomdp
+    if found.dfa_hidden:
+        # The DFA state is hidden: one unfolding over ((type, trust), q) gives every type's value.
+        value, bounds = evaluate_joint_by_type(pomdp, lifted_spec, policy, fallback_after=fallback_after,
+                                               max_junctions=cap, belief_rule=belief_rule)
+        types = tuple(TypeValue(t.name, float(t.weight), lower, upper)
+                      for t, (lower, upper) in zip(population.types, bounds, strict=True))
+    else:
+        value = evaluate_policy(pomdp, lifted_spec, policy, fallback_after=fallback_after,
+                                max_junctions=cap, belief_rule=belief_rule)
+        types = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule, fallback_after)
     payload = value.to_dict()
     payload["spec"] = spec.name
     payload["expected_final_trust"] = _finite(value.expected_final_trust)

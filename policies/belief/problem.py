@@ -6,16 +6,20 @@ tracking apply (docs/trust_states.md, docs/driver_types.md):
 - PLAIN: one driver model; the spec's DFA state is a function of the observations (observed DFA):
   belief-MDP synthesis (policies/synthesis), the observed node state of the exact evaluation, the
   episode's DFA stepped on (road, belief).
-- TRUST_STATE: one driver model and a formula that tests the hidden trust: the DFA state is hidden
-  and the AV tracks the joint law J(θ, q) (policies/belief/trust_state_filter.py): the trust-state
-  search (policies/trust_state_synthesis), the hidden node state, the joint filter in episodes.
-- DRIVER_TYPES: a population of several driver types: the AV's model is the type-aware one over
-  (type, trust) and the spec is lifted onto it (policies/belief/driver_types.py); its DFA state is
-  observed, so everything runs as PLAIN on the lifted model. Trust-state atoms with several types
-  are refused (`lift_spec`).
+- TRUST_STATE: a formula that tests the hidden trust: the DFA state is hidden and the AV tracks
+  the joint law J(θ, q) (policies/belief/trust_state_filter.py): the trust-state search
+  (policies/trust_state_synthesis), the hidden node state, the joint filter in episodes. With a
+  population of several types θ is the type-aware model's hidden (type, trust) index, so J is
+  over ((type, trust), q) and its blocks give every type's value
+  (policies/evaluation/trust_state.py, `evaluate_joint_by_type`); population policies are not
+  synthesized for it (the belief-MDP product refuses the spec).
+- DRIVER_TYPES: a population of several driver types and a spec without trust-state atoms: the
+  AV's model is the type-aware one over (type, trust) and the spec is lifted onto it
+  (policies/belief/driver_types.py); its DFA state is observed, so everything runs as PLAIN on
+  the lifted model.
 
-A population of one type is PLAIN on the type's own model and spec (bit for bit the single-model
-problem). Callers ask `case_of` or `Problem.case` rather than testing the spec or the model.
+A population of one type is the single-model problem of the type's own model and spec (bit for
+bit). Callers ask `case_of` or `Problem.case` rather than testing the spec or the model.
 """
 
 from __future__ import annotations

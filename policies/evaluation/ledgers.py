@@ -151,6 +151,34 @@ CUTS = ("below_threshold", "beyond_budget", "past_deadline")
 
 
 @dataclass(eq=False)
+class TypeMasses:
+    """Accepted and cut live mass of each driver type, for a hidden index that is (type, trust)
+    (policies/belief/driver_types.py): J's blocks, one per type, split what JointLedger adds up."""
+
+    n_types: int
+    accepting: np.ndarray                   # bool [n_q]
+    live: np.ndarray                        # bool [n_q]: neither accepting nor rejecting
+    accepted: np.ndarray = field(init=False)
+    unknown: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.accepted = np.zeros(self.n_types)
+        self.unknown = np.zeros(self.n_types)
+
+    def add(self, p: np.ndarray, joint: np.ndarray, cut: bool) -> None:
+        m, n_hidden, n_q = joint.shape
+        blocks = joint.reshape(m, self.n_types, n_hidden // self.n_types, n_q).sum(axis=2)   # [m, K, q]
+        self.accepted += p @ blocks[:, :, self.accepting].sum(axis=2)
+        if cut:
+            self.unknown += p @ blocks[:, :, self.live].sum(axis=2)
+
+    def bounds(self, weights: np.ndarray) -> list[tuple[float, float]]:
+        """[lower, upper] of P(accepted | type k) for each type of prior weight weights[k]."""
+        return [accepted_bounds(float(a / w), float(u / w)) if w > 0 else (float("nan"), float("nan"))
+                for a, u, w in zip(self.accepted, self.unknown, weights, strict=True)]
+
+
+@dataclass(eq=False)
 class JointLedger:
     """Accepted and rejected masses by J(θ, q); the live mass by end reason (unknown when cut)."""
 
@@ -167,6 +195,7 @@ class JointLedger:
     cut_nodes: dict = field(default_factory=lambda: dict.fromkeys(CUTS, 0))
     first_cut_level: int | None = None
     live: np.ndarray | None = None          # the level's live mass per node (settle -> prune)
+    types: TypeMasses | None = None          # the masses by driver type too (a population's)
 
     def end(self, frontier, rows, reason: str, level: int, why: str = "") -> None:
         """Nodes ending here: accepted and rejected mass by J, the live rest by `reason` (for
@@ -176,6 +205,8 @@ class JointLedger:
         self.mass["accepted"] += float(p @ accepted)
         self.mass["rejected"] += float(p @ rejected)
         self.mass[reason] += float(p @ live)
+        if self.types is not None:
+            self.types.add(p, frontier.state.joint[rows], reason == "pruned")
         if reason == "pruned" and p.size:
             self.cut_mass[why] += float(p @ live)
             self.cut_nodes[why] += int(p.size)

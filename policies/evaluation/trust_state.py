@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from trustroute.policies.belief.driver_types import n_types_of
 from trustroute.policies.belief.problem import dfa_is_hidden
 from trustroute.policies.belief.trust_state_filter import joint_filter
 from trustroute.policies.evaluation.ledgers import (
@@ -30,6 +31,7 @@ from trustroute.policies.evaluation.ledgers import (
     BoundLedger,
     Evaluation,
     JointLedger,
+    TypeMasses,
 )
 from trustroute.policies.evaluation.node_state import hidden_root
 from trustroute.policies.evaluation.plain import evaluate
@@ -91,6 +93,16 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     if truth is not None or reference is not None:
         raise ValueError("a separate true driver or reference reading is not evaluated for specs with "
                          "trust-state atoms")
+    return joint_unfolding(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,
+                           prune_below, max_nodes, merge, time_limit)[0]
+
+
+def joint_unfolding(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, fallback_after: int | None,
+                    max_junctions: int, belief_rule: BeliefRule, prune_below: float | None,
+                    max_nodes: int | None, merge: bool, time_limit: float | None,
+                    by_type: bool = False) -> tuple[Evaluation, TypeMasses | None]:
+    """The unfolding of `evaluate_joint` on the joint-belief node state; with `by_type`, also the
+    masses of each driver type of a type-aware model (its hidden index is (type, trust))."""
     started = time.perf_counter()
     prune_below = JOINT_PRUNE_BELOW if prune_below is None else prune_below
     max_nodes = JOINT_MAX_NODES if max_nodes is None else max_nodes
@@ -103,20 +115,43 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     compiled = compile_spec(spec, town)
     filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
     start = town.state_index(spec.start)
+    accepting = np.asarray(compiled.dfa.accepting, dtype=bool)
+    types = None
+    if by_type:
+        types = TypeMasses(n_types=n_types_of(pomdp.driver), accepting=accepting,
+                           live=~(accepting | np.asarray(compiled.dfa.rejecting, dtype=bool)))
     ledger = JointLedger(levels=np.asarray(pomdp.driver.trust_levels, dtype=float),
-                         prune_below=prune_below, max_nodes=max_nodes)
+                         prune_below=prune_below, max_nodes=max_nodes, types=types)
     actor = EpisodeActor(policy=policy, town=town, max_junctions=max_junctions,
-                         fallback_level=fallback_level,
-                         accepting=np.asarray(compiled.dfa.accepting, dtype=bool),
+                         fallback_level=fallback_level, accepting=accepting,
                          batched=None if batched is None else batched.__self__, routes=[(spec.start,)])
     limits = Limits(max_junctions=max_junctions, merge=merge,
                     deadline=None if time_limit is None else started + time_limit)
     counts = unfold(root(start, hidden_root(filter_, start, belief_rule)), actor, ledger, limits,
                     outcomes(pomdp.driver.depends_on_performance))
-    return ledger.evaluation(counts.nodes, counts.max_frontier, time_limit=time_limit,
-                             policy=policy.name, seconds=time.perf_counter() - started,
-                             belief_rule=belief_rule, fallback_after=fallback_level,
-                             max_junctions=max_junctions)
+    evaluation = ledger.evaluation(counts.nodes, counts.max_frontier, time_limit=time_limit,
+                                   policy=policy.name, seconds=time.perf_counter() - started,
+                                   belief_rule=belief_rule, fallback_after=fallback_level,
+                                   max_junctions=max_junctions)
+    return evaluation, types
+
+
+def evaluate_joint_by_type(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
+                           fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
+                           max_junctions: int = DEFAULT_JUNCTION_CAP, belief_rule: BeliefRule = "bayes",
+                           prune_below: float | None = None, max_nodes: int | None = None,
+                           merge: bool = True, time_limit: float | None = None
+                           ) -> tuple[Evaluation, list[tuple[float, float]]]:
+    """`evaluate_joint` on the joint belief over ((type, trust), DFA state) of a driver
+    population's type-aware model (policies/belief/driver_types.py) and lifted spec, which may test
+    the hidden trust: the value under the type prior, and [lower, upper] of P(satisfied | type k)
+    for each type, read off the same unfolding (J's block of type k holds P(type k, θ, q | history);
+    a cut node's live mass of type k widens type k's bracket only)."""
+    evaluation, types = joint_unfolding(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,
+                                        prune_below, max_nodes, merge, time_limit, by_type=True)
+    prior = np.asarray(pomdp.initial_belief, dtype=float)
+    weights = prior.reshape(types.n_types, -1).sum(axis=1)
+    return evaluation, types.bounds(weights)
 
 
 TABLE_CHUNK = 5_000     # nodes moved per batch in evaluate_joint_table (the deadline is checked between)
