@@ -1,19 +1,21 @@
 """Exact evaluation of a routing policy for specs that test the hidden trust (docs/trust_states.md).
 
-The same tree unfolding as policies/evaluation/plain.py (one level per junction, one node per history of
-observations, decisions asked once per distinct (route, DFA state told, AV belief)), with the
-exact joint belief J(θ, q) of policies/belief/trust_state_filter.py at every node instead of one DFA
-state. The spec is satisfied on a branch with probability J(accepting) when the branch ends;
-accepting states are absorbing, so that mass only grows along a branch and is counted once, at
-its end. A branch ends when its live mass (q neither accepting nor rejecting) is 0 (settled),
-when the policy declares it finished, at the junction cap, or when it is pruned; the live mass
-of a finished or capped branch is unsatisfied, that of a pruned branch unknown (the width of
+The one unfolding of policies/evaluation/unfolding.py (one level per junction, one node per history
+of observations, decisions asked once per distinct (route, DFA state told, AV belief)), with the
+hidden node state (policies/evaluation/node_state.py, `HiddenState`): the exact joint belief J(θ, q)
+of policies/belief/trust_state_filter.py at every node instead of one DFA state, and the JointLedger
+(policies/evaluation/ledgers.py). The spec is satisfied on a branch with probability J(accepting)
+when the branch ends; accepting states are absorbing, so that mass only grows along a branch and is
+counted once, at its end. A branch ends when its live mass (q neither accepting nor rejecting) is 0
+(settled), when the policy declares it finished, at the junction cap, or when it is pruned; the live
+mass of a finished or capped branch is unsatisfied, that of a pruned branch unknown (the width of
 [lower, upper]).
 
 The AV does not know q: the policy is told the most probable DFA state (the exact one when the
 spec has no trust-state atoms). Problems whose DFA state is observed (policies/belief/problem.py:
 every case but TRUST_STATE) are evaluated by policies/evaluation/plain.py itself, so their results
-are exactly today's.
+are exactly today's. A driver population's type-aware model makes θ the hidden (type, trust)
+index: `evaluate_joint_by_type` reads every type's value off the same unfolding.
 """
 
 from __future__ import annotations
