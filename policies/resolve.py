@@ -23,6 +23,7 @@ from trustroute.core.cache import cache_dir as cache_dir_of
 from trustroute.core.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.belief.problem import TRUST_STATE, case_of
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, build_pomdp
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
@@ -43,10 +44,11 @@ AWARE_TAU = 1e-3
 AWARE_TIME_LIMIT = 120.0
 
 
-def _code_version(spec: Spec) -> str:
-    """The synthesis code's part of a cache key: SYNTHESIS_VERSION, and for specs with trust-state
-    atoms (synthesized by policies/trust_state_synthesis/synthesis.py) also JOINT_SYNTHESIS_VERSION."""
-    joint = f"+joint={JOINT_SYNTHESIS_VERSION}" if spec.uses_trust_atoms else ""
+def _code_version(case: str) -> str:
+    """The synthesis code's part of a cache key: SYNTHESIS_VERSION, and for problems whose DFA state
+    is hidden (TRUST_STATE, synthesized by policies/trust_state_synthesis/synthesis.py) also
+    JOINT_SYNTHESIS_VERSION."""
+    joint = f"+joint={JOINT_SYNTHESIS_VERSION}" if case == TRUST_STATE else ""
     return f"synthesis={SYNTHESIS_VERSION}{joint}"
 
 
@@ -57,7 +59,7 @@ def aware_cache_path(town: Town, driver: DriverModel, spec: Spec, cache_dir: str
     contents, the settings and the synthesis code's version (`_code_version`)."""
     key = hashlib.sha256("|".join((town.content_hash, driver.content_hash, spec.content_hash,
                                    f"H={horizon}", f"tau={AWARE_TAU}", belief_rule,
-                                   _code_version(spec))).encode())
+                                   _code_version(case_of(driver, spec)))).encode())
     folder = Path(cache_dir) if cache_dir else cache_dir_of(POLICIES)
     # The spec name is only a readable label here (the key identifies the entry): keep it to
     # file-name characters so no name can point outside the cache.
@@ -156,11 +158,12 @@ def population_cache_path(town: Town, population: DriverPopulation, spec: Spec, 
                           cache_dir: str | Path | None, horizon: int | None = AWARE_HORIZON,
                           belief_rule: BeliefRule = "bayes") -> Path:
     """Cache entry of the population policy ("robust" or "bayes" objective) for these inputs: the
-    key covers the population's content hash instead of one driver model's."""
+    key covers the population's content hash instead of one driver model's. The code version is
+    that of one type's problem (several types with trust-state atoms are refused by lift_spec)."""
     key = hashlib.sha256("|".join((town.content_hash, population.content_hash, spec.content_hash,
                                    objective, f"H={horizon}", f"tau={AWARE_TAU}", belief_rule,
                                    f"grid={POPULATION_GRID_POINTS}",
-                                   _code_version(spec))).encode())
+                                   _code_version(case_of(population.types[0].model, spec)))).encode())
     folder = Path(cache_dir) if cache_dir else cache_dir_of(POLICIES)
     label = re.sub(r"[^A-Za-z0-9_.+-]", "_", spec.name)[:48].lstrip(".") or "spec"
     return folder / f"{objective}-{label}-{key.hexdigest()[:16]}.json"

@@ -19,17 +19,18 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
 
 def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None):
+    """The Problem (policies/belief/problem.py) of the files given: its case decided once."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.belief.problem import problem
     from trustroute.policies.logic.labelling import check_coefficient_length
     from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.model.trust_pomdp import build_pomdp
 
     town = load_town(town_path)
     driver = load_driver_model(driver_path)
     spec = load_spec(spec_path, town)
     check_coefficient_length(spec, driver.n_trust, driver.source_path)
-    return town, driver, spec, build_pomdp(town, driver)
+    return problem(town, driver, spec)
 
 
 town_option = click.option("--town", "town_path", type=click.Path(), default=None,
@@ -87,15 +88,16 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
         return
     if objective != "bayes":
         raise click.UsageError("--objective robust needs --population FILE (the types to be robust over)")
-    town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
+    problem = _load_problem(spec_path, town_path, driver_path)
+    town, driver, spec, pomdp = problem.town, problem.driver, problem.spec, problem.pomdp
     from trustroute.policies.resolve import synthesis_progress
     from trustroute.policies.routing.files import save_policy
     from trustroute.policies.synthesis.result import SynthesisStats
-    from trustroute.policies.synthesize_spec import synthesize_spec as synthesize
+    from trustroute.policies.synthesize_spec import synthesize_problem
 
     with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
-        result = synthesize(pomdp, spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                            belief_rule=belief_rule, on_iteration=on_iteration, clusters=clusters)
+        result = synthesize_problem(problem, tau=tau, time_limit=time_limit, horizon=horizon,
+                                    belief_rule=belief_rule, on_iteration=on_iteration, clusters=clusters)
     path = str(save_policy(result, out_path, town, driver, spec))
     from trustroute.policies.routing.files import array_path
 
@@ -205,7 +207,8 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
     from trustroute.policies.evaluation.plain import evaluate as evaluate_policy
     from trustroute.policies.routing.free import baseline_route, trust_free_policy
 
-    town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
+    problem = _load_problem(spec_path, town_path, driver_path)
+    town, spec, pomdp = problem.town, problem.spec, problem.pomdp
     route = baseline_route(town, spec)
     value = evaluate_policy(pomdp, spec, trust_free_policy(town, spec), fallback_after=None,
                             belief_rule=belief_rule)
@@ -280,13 +283,14 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
         _evaluate_population(spec_path, policy_name, town_path, population_path, after, cap, belief_rule,
                              cache_dir, as_json)
         return
-    town, driver, spec, pomdp = _load_problem(spec_path, town_path, driver_path)
+    problem = _load_problem(spec_path, town_path, driver_path)
+    town, driver, spec, pomdp = problem.town, problem.driver, problem.spec, problem.pomdp
     from trustroute.policies.resolve import resolve_policy
 
     if policy_name in ("robust", "bayes"):
         raise click.UsageError(f"POLICY '{policy_name}' needs --population FILE (the driver types)")
     policy = resolve_policy(policy_name, town, driver, spec, cache_dir)
-    if time_limit is not None and not spec.uses_trust_atoms:
+    if time_limit is not None and not problem.dfa_hidden:
         raise click.UsageError("--time-limit applies to specs with trust-state atoms only (the others "
                                "are evaluated exactly in full)")
     value = evaluate_policy(pomdp, spec, policy, fallback_after=after, max_junctions=cap,
@@ -361,16 +365,25 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
                          fallback_after: int | None, cap: int, belief_rule: str, cache_dir: str | None,
                          as_json: bool) -> None:
     """`evaluate --population`: exact value over the mixture and per type."""
+    from trustroute.policies.belief.problem import problem as routing_problem
     from trustroute.policies.evaluation.plain import evaluate as evaluate_policy
-    from trustroute.policies.model.trust_pomdp import build_pomdp
-    from trustroute.policies.synthesis.population import per_type_values
+    from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
+    from trustroute.policies.synthesis.population import TypeValue, per_type_values
 
     town, population, spec, policy, model, lifted_spec = load_population_routing(
         spec_path, town_path, population_path, policy_name, cache_dir, progress=not as_json)
-    pomdp = build_pomdp(town, model)
-    value = evaluate_policy(pomdp, lifted_spec, policy, fallback_after=fallback_after, max_junctions=cap,
-                            belief_rule=belief_rule)
-    types = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule, fallback_after)
+    found = routing_problem(town, population, spec, population_path)
+    pomdp = found.pomdp
+    if found.dfa_hidden:
+        # The DFA state is hidden: one unfolding over ((type, trust), q) gives every type's value.
+        value, bounds = evaluate_joint_by_type(pomdp, lifted_spec, policy, fallback_after=fallback_after,
+                                               max_junctions=cap, belief_rule=belief_rule)
+        types = tuple(TypeValue(t.name, float(t.weight), lower, upper)
+                      for t, (lower, upper) in zip(population.types, bounds, strict=True))
+    else:
+        value = evaluate_policy(pomdp, lifted_spec, policy, fallback_after=fallback_after,
+                                max_junctions=cap, belief_rule=belief_rule)
+        types = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule, fallback_after)
     payload = value.to_dict()
     payload["spec"] = spec.name
     payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)

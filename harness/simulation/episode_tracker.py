@@ -32,6 +32,7 @@ from trustroute.core.dataset import ROADS_SCHEMA, frame_from_table, table_from_r
 from trustroute.networks.town import NO_INCIDENT, Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.belief.driver_types import trust_marginal, type_belief
+from trustroute.policies.belief.problem import DRIVER_TYPES, PLAIN, TRUST_STATE, case_of
 from trustroute.policies.belief.trust_state_filter import joint_filter
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
@@ -125,23 +126,10 @@ class EpisodeTracker:
         # memo hit then needs no numpy call (cheap while SUMO's stepping keeps the caches cold).
         self._belief_bytes = self.belief.tobytes()
         self._belief_logged = self._logged(self.belief)
-        # Specs with trust-state atoms: the AV tracks the joint belief J(θ, q) (its DFA state is
-        # the most probable under J) and the episode ends when J has no live mass; the true DFA
-        # state, read on the driver's true trust, decides whether the episode satisfied the spec.
-        self.joint: np.ndarray | None = None
-        self.true_dfa_state: int | None = None
-        if setup.spec.uses_trust_atoms:
-            self._filter = joint_filter(self._pomdp, self.dfa, self._compiled.labeller)
-            self.joint = self._filter.initial(self._compiled.start, self.belief)[0]
-            self._posterior = self.belief.copy()        # the exact (Bayes) θ filter J moves with
-            self.dfa_state: int = int(self._filter.likeliest_q(self.joint[None])[0])
-            self.true_dfa_state = self._true_step(self.dfa.initial, self._compiled.start, int(initial_trust))
-        else:
-            key = ("initial", self._belief_bytes)
-            state = self._memo.get(key)
-            if state is None:
-                state = _memo_put(self._memo, key, self._compiled.initial_state(self.belief))
-            self.dfa_state = state
+        # How the AV follows the spec's DFA is the problem's case (policies/belief/problem.py): the
+        # state itself when it is observed, else the joint belief J(θ, q) (DFA_TRACKING).
+        self._dfa = DFA_TRACKING[case_of(setup.driver_model, setup.spec)](self, int(initial_trust))
+        self.dfa_state: int = self._dfa.told
         self.end_reason: str | None = self._verdict()
         self.fallback_fired = False
         self.fallback_junction: int | None = None   # junctions driven when the fallback first drove
@@ -169,31 +157,16 @@ class EpisodeTracker:
         # The belief is read-only (never changed in place: a road gives a new array), so the
         # context can hold it without a copy.
         return DecisionContext(route=tuple(self.route), dfa_state=self.dfa_state, belief=self.belief,
-                               joint=None if self.joint is None else self.joint.copy())
-
-    def _true_step(self, q: int, x: int, trust_level: int) -> int:
-        """The DFA state after position (x, true trust level, the AV's belief) from q."""
-        theta = self.setup.driver_model.trust_levels.index(int(trust_level))
-        return int(self._compiled.labeller.step(np.array([q]), np.array([x]), self.belief[None],
-                                                np.array([theta]))[0])
+                               joint=self._dfa.context_joint())
 
     def _verdict(self) -> str | None:
-        """rules 1-2 of the episode: on the DFA state, or (trust-state atoms) once J has no live
-        mass, "accepted"/"rejected" by the true DFA state."""
-        if self.joint is None:
-            return dfa_verdict(self._compiled, self.dfa_state)
-        _, _, live = self._filter.masses(self.joint[None])
-        if live[0] > 0:
-            return None
-        return "accepted" if self._compiled.accepting[self.true_dfa_state] else "rejected"
+        """rules 1-2 of the episode (the DFA tracking's verdict)."""
+        return self._dfa.verdict()
 
     @property
     def satisfied(self) -> bool:
-        """The spec holds on this episode's trace (with trust-state atoms: read on the true trust,
-        also when the AV could not tell and the episode ended at the destination or the cap)."""
-        if self.true_dfa_state is not None:
-            return bool(self._compiled.accepting[self.true_dfa_state])
-        return self.end_reason == "accepted"
+        """The spec holds on this episode's trace (the DFA tracking's reading)."""
+        return self._dfa.satisfied(self.end_reason)
 
     # -- the episode's API ---------------------------------------------------
     @property
@@ -263,14 +236,7 @@ class EpisodeTracker:
             entry = _memo_put(self._memo, key, (after, after.tobytes(), self._logged(after)))
         after, self._belief_bytes, self._belief_logged = entry
         self.belief = after
-        if self.joint is None:
-            key = ("dfa", self.dfa_state, road, self._belief_bytes)
-            state = self._memo.get(key)
-            if state is None:
-                state = _memo_put(self._memo, key, self._compiled.step_road(self.dfa_state, road, after))
-            self.dfa_state = state
-        else:
-            self._step_joint(road, incident_index, h, e, int(trust_after))
+        self.dfa_state = self._dfa.step(road, incident_index, h, e, int(trust_after))
         self.route.append(road)
         self._chosen = None
         self._rows[-1]["sim_time_out"] = float(sim_time_in)
@@ -284,21 +250,6 @@ class EpisodeTracker:
             "sim_time_in": float(sim_time_in), "sim_time_out": float(sim_time_out),
         })
         self.end_reason = self._verdict()
-
-    def _step_joint(self, road: str, incident: int, h: int, e: int, trust_after: int) -> None:
-        """J after driving `road` and observing (incident, h, e); the told and the true DFA state."""
-        x = np.array([self.setup.town.state_index(road)])
-        inc = np.array([incident])
-        # The exact (Bayes) θ filter's posterior and the observation's probability, as the exact
-        # evaluation computes them (the AV's belief is this posterior under the Bayes rule).
-        posterior, probability = self._pomdp.belief_update(self._posterior[None], inc, h, e, rule="bayes")
-        if probability[0] > 0:
-            self._posterior = posterior[0]
-            self.joint = self._filter.update(self.joint[None], posterior, self.belief[None], x, inc, h, e,
-                                             probability)[0]
-        # else: an observation the AV's model deems impossible: J stays (as the belief does).
-        self.dfa_state = int(self._filter.likeliest_q(self.joint[None])[0])
-        self.true_dfa_state = self._true_step(self.true_dfa_state, int(x[0]), trust_after)
 
     def should_report(self) -> bool:
         """Whether the driver reports trust on the road about to be recorded (every report_every)."""
@@ -328,3 +279,91 @@ class EpisodeTracker:
             "sim_seconds": float(sim_seconds),
             "wall_seconds": float(wall_seconds),
         }
+
+
+class ObservedDFA:
+    """The DFA state is a function of the observations (PLAIN, DRIVER_TYPES): stepped on
+    (road, AV belief), memoised across the process's episodes."""
+
+    def __init__(self, tracker: EpisodeTracker, initial_trust: int) -> None:
+        self.tracker = tracker
+        key = ("initial", tracker._belief_bytes)
+        state = tracker._memo.get(key)
+        if state is None:
+            state = _memo_put(tracker._memo, key, tracker._compiled.initial_state(tracker.belief))
+        self.told = state
+
+    def context_joint(self) -> None:
+        return None
+
+    def step(self, road: str, incident: int, h: int, e: int, trust_after: int) -> int:
+        tracker = self.tracker
+        key = ("dfa", self.told, road, tracker._belief_bytes)
+        state = tracker._memo.get(key)
+        if state is None:
+            state = _memo_put(tracker._memo, key,
+                              tracker._compiled.step_road(self.told, road, tracker.belief))
+        self.told = state
+        return state
+
+    def verdict(self) -> str | None:
+        return dfa_verdict(self.tracker._compiled, self.told)
+
+    def satisfied(self, end_reason: str | None) -> bool:
+        return end_reason == "accepted"
+
+
+class HiddenDFA:
+    """The formula tests the hidden trust (TRUST_STATE): the AV tracks the joint belief J(θ, q)
+    (its DFA state told is the most probable under J) and the episode ends when J has no live
+    mass; the true DFA state, read on the driver's true trust, decides whether the episode
+    satisfied the spec (also when the AV could not tell and it ended at the destination or the cap)."""
+
+    def __init__(self, tracker: EpisodeTracker, initial_trust: int) -> None:
+        self.tracker = tracker
+        compiled = tracker._compiled
+        self.filter = joint_filter(tracker._pomdp, compiled.dfa, compiled.labeller)
+        self.joint = self.filter.initial(compiled.start, tracker.belief)[0]
+        self.posterior = tracker.belief.copy()        # the exact (Bayes) θ filter J moves with
+        self.told = int(self.filter.likeliest_q(self.joint[None])[0])
+        self.true_state = self.true_step(compiled.dfa.initial, compiled.start, initial_trust)
+
+    def context_joint(self) -> np.ndarray:
+        return self.joint.copy()
+
+    def true_step(self, q: int, x: int, trust_level: int) -> int:
+        """The DFA state after position (x, true trust level, the AV's belief) from q."""
+        tracker = self.tracker
+        theta = tracker.setup.driver_model.trust_levels.index(int(trust_level))
+        return int(tracker._compiled.labeller.step(np.array([q]), np.array([x]), tracker.belief[None],
+                                                   np.array([theta]))[0])
+
+    def step(self, road: str, incident: int, h: int, e: int, trust_after: int) -> int:
+        """J after driving `road` and observing (incident, h, e); the told and the true DFA state."""
+        tracker = self.tracker
+        x = np.array([tracker.setup.town.state_index(road)])
+        inc = np.array([incident])
+        # The exact (Bayes) θ filter's posterior and the observation's probability, as the exact
+        # evaluation computes them (the AV's belief is this posterior under the Bayes rule).
+        posterior, probability = tracker._pomdp.belief_update(self.posterior[None], inc, h, e,
+                                                              rule="bayes")
+        if probability[0] > 0:
+            self.posterior = posterior[0]
+            self.joint = self.filter.update(self.joint[None], posterior, tracker.belief[None], x, inc,
+                                            h, e, probability)[0]
+        # else: an observation the AV's model deems impossible: J stays (as the belief does).
+        self.told = int(self.filter.likeliest_q(self.joint[None])[0])
+        self.true_state = self.true_step(self.true_state, int(x[0]), trust_after)
+        return self.told
+
+    def verdict(self) -> str | None:
+        _, _, live = self.filter.masses(self.joint[None])
+        if live[0] > 0:
+            return None
+        return "accepted" if self.tracker._compiled.accepting[self.true_state] else "rejected"
+
+    def satisfied(self, end_reason: str | None) -> bool:
+        return bool(self.tracker._compiled.accepting[self.true_state])
+
+
+DFA_TRACKING = {PLAIN: ObservedDFA, DRIVER_TYPES: ObservedDFA, TRUST_STATE: HiddenDFA}

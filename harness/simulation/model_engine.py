@@ -37,6 +37,7 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_step import DriverTables, draw_initial_trust, draw_step, driver_tables
 from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.belief.problem import dfa_is_hidden
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import TrustPOMDP
@@ -133,7 +134,7 @@ class _Sampled:
 def _sampled(town: Town, pomdp: TrustPOMDP, compiled: CompiledSpec, spec: Spec, policy: RoutingPolicy,
              drivers: Sequence[DriverModel], junction_cap: int, fallback_after: int | None,
              belief_rule: str) -> _Sampled:
-    if spec.uses_trust_atoms:
+    if dfa_is_hidden(pomdp.driver, spec):
         raise ValueError(f"spec {spec.name!r} has trust-state atoms: the batch path does not "
                          "track the joint belief; run its episodes with run_model_episode")
     return _Sampled(

@@ -53,6 +53,13 @@ def n_types_of(model: DriverModel) -> int:
     return model.n_types if isinstance(model, TypeLiftedModel) else 1
 
 
+def base_trust_index(model: DriverModel) -> np.ndarray:
+    """int [n_hidden]: the trust level index θ of each hidden index (k·n + θ -> θ for a lifted
+    model; the identity for one driver model), what trust-state atoms read."""
+    n_hidden = model.n_trust
+    return np.arange(n_hidden) % (n_hidden // n_types_of(model))
+
+
 def check_prior(prior: np.ndarray, population: DriverPopulation, where: str = "prior") -> np.ndarray:
     prior = np.asarray(prior, dtype=float)
     if (prior.shape != (population.n_types,) or not np.all(np.isfinite(prior)) or prior.min() < 0
@@ -123,9 +130,10 @@ def true_type_initial(model: DriverModel, population: DriverPopulation, type_ind
 
 def lift_spec(spec: Spec, population: DriverPopulation, population_source: str = "") -> Spec:
     """`spec` over the lifted model of `population`: belief atoms' coefficients tiled over the
-    types, type-belief atoms as belief atoms on their types' blocks. The spec itself when the
-    population has one type and the spec no type-belief atoms. A type the population does not
-    have, or trust-state atoms with several types: InputError naming both files."""
+    types, type-belief atoms as belief atoms on their types' blocks; trust-state atoms unchanged
+    (they read the trust level of the hidden (type, trust) index, `base_trust_index`). The spec
+    itself when the population has one type and the spec no type-belief atoms. A type the
+    population does not have: InputError naming both files."""
     source = population_source or population.source_path or "the driver population"
     for name, atom in sorted(spec.type_atoms.items()):
         for type_name in atom.types:
@@ -137,10 +145,6 @@ def lift_spec(spec: Spec, population: DriverPopulation, population_source: str =
                                  "is written for (--population)")
     if population.n_types == 1 and not spec.type_atoms:
         return spec
-    if population.n_types > 1 and spec.trust_atoms:
-        raise InputError(spec.source_path or spec.name, "trust_states",
-                         "trust-state atoms are not supported with a driver population of several "
-                         f"types ({source})", "use belief atoms, or a single driver model")
     k = population.n_types
     n = population.types[0].model.n_trust
     belief_atoms = {name: BeliefAtom(tuple(atom.coeffs) * k, atom.offset)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.core.errors import InputError
+from trustroute.policies.belief.problem import dfa_is_hidden
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.labelling import Labeller, check_coefficient_length
@@ -57,7 +58,7 @@ class ProductTables:
 
 
 def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
-    if spec.uses_trust_atoms:
+    if dfa_is_hidden(pomdp.driver, spec):
         raise InputError(spec.source_path or spec.name, "formula",
                          "the belief-MDP product cannot test the hidden trust (trust-state atoms)",
                          "evaluate with policies.evaluation.trust_state or bound with "

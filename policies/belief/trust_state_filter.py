@@ -18,10 +18,12 @@ Arrays are vectorised over rows n: J [n, n_trust, n_q].
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.policies.belief.driver_types import base_trust_index
 from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.model.trust_pomdp import TrustPOMDP
@@ -39,6 +41,12 @@ class JointFilter:
     def n_q(self) -> int:
         return int(self.dfa.n_states)
 
+    @functools.cached_property
+    def trust_index(self) -> np.ndarray:
+        """The trust level index trust-state atoms read at each hidden index (a driver
+        population's hidden index is (type, trust): policies/belief/driver_types.py)."""
+        return base_trust_index(self.pomdp.driver)
+
     def initial(self, start: int, belief: np.ndarray) -> np.ndarray:
         """J [1, n_trust, n_q] at position 0: θ0 ~ `belief`, q0 = δ(initial, L(start, b0, θ0))."""
         n_t = self.pomdp.n_trust
@@ -46,7 +54,7 @@ class JointFilter:
         thetas = np.arange(n_t)
         q0 = self.labeller.step(np.full(n_t, self.dfa.initial), np.full(n_t, start),
                                 np.broadcast_to(belief, (n_t, n_t)),
-                                thetas if self.labeller.reads_trust else None)
+                                self.trust_index[thetas] if self.labeller.reads_trust else None)
         joint = np.zeros((1, n_t, self.n_q))
         joint[0, thetas, q0] = belief
         return joint
@@ -71,7 +79,7 @@ class JointFilter:
                   where=probability[:, None, None] > 0)
         predicted[probability <= 0] = 0.0
         rows, thetas, qs = np.nonzero(predicted > 0)
-        q2 = self.labeller.step(qs, road[rows], belief_av[rows], thetas)
+        q2 = self.labeller.step(qs, road[rows], belief_av[rows], self.trust_index[thetas])
         flat = (rows * n_t + thetas) * n_q + q2
         out = np.bincount(flat, weights=predicted[rows, thetas, qs], minlength=n * n_t * n_q)
         return out.astype(float, copy=False).reshape(n, n_t, n_q)   # (bincount of nothing is int)

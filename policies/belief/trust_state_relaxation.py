@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.policies.belief.driver_types import base_trust_index
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.labelling import Labeller
@@ -32,7 +33,8 @@ def relaxed_next_q(pomdp: TrustPOMDP, spec: Spec, dfa: DFA, labeller: Labeller) 
     m = int(labeller.belief_columns.size)
     q, x, t, bits = (a.ravel() for a in np.meshgrid(np.arange(n_q), np.arange(n_x), np.arange(n_t),
                                                      np.arange(2 ** m), indexing="ij"))
-    valuations = labeller.valuations(x, np.zeros((x.size, n_t)), t if labeller.reads_trust else None)
+    valuations = labeller.valuations(x, np.zeros((x.size, n_t)),
+                                     base_trust_index(pomdp.driver)[t] if labeller.reads_trust else None)
     for j, column in enumerate(labeller.belief_columns.tolist()):
         valuations[:, column] = (bits >> j) & 1
     return np.asarray(dfa.step_many(q, valuations), dtype=np.int64).reshape(n_q, n_x, n_t, 2 ** m)

@@ -1,18 +1,21 @@
 """Exact evaluation of a routing policy for specs that test the hidden trust (docs/trust_states.md).
 
-The same tree unfolding as policies/evaluation/plain.py (one level per junction, one node per history of
-observations, decisions asked once per distinct (route, DFA state told, AV belief)), with the
-exact joint belief J(θ, q) of policies/belief/trust_state_filter.py at every node instead of one DFA
-state. The spec is satisfied on a branch with probability J(accepting) when the branch ends;
-accepting states are absorbing, so that mass only grows along a branch and is counted once, at
-its end. A branch ends when its live mass (q neither accepting nor rejecting) is 0 (settled),
-when the policy declares it finished, at the junction cap, or when it is pruned; the live mass
-of a finished or capped branch is unsatisfied, that of a pruned branch unknown (the width of
+The one unfolding of policies/evaluation/unfolding.py (one level per junction, one node per history
+of observations, decisions asked once per distinct (route, DFA state told, AV belief)), with the
+hidden node state (policies/evaluation/node_state.py, `HiddenState`): the exact joint belief J(θ, q)
+of policies/belief/trust_state_filter.py at every node instead of one DFA state, and the JointLedger
+(policies/evaluation/ledgers.py). The spec is satisfied on a branch with probability J(accepting)
+when the branch ends; accepting states are absorbing, so that mass only grows along a branch and is
+counted once, at its end. A branch ends when its live mass (q neither accepting nor rejecting) is 0
+(settled), when the policy declares it finished, at the junction cap, or when it is pruned; the live
+mass of a finished or capped branch is unsatisfied, that of a pruned branch unknown (the width of
 [lower, upper]).
 
 The AV does not know q: the policy is told the most probable DFA state (the exact one when the
-spec has no trust-state atoms). Specs without trust-state atoms are evaluated by
-policies/evaluation/plain.py itself, so their results are exactly today's.
+spec has no trust-state atoms). Problems whose DFA state is observed (policies/belief/problem.py:
+every case but TRUST_STATE) are evaluated by policies/evaluation/plain.py itself, so their results
+are exactly today's. A driver population's type-aware model makes θ the hidden (type, trust)
+index: `evaluate_joint_by_type` reads every type's value off the same unfolding.
 """
 
 from __future__ import annotations
@@ -21,22 +24,33 @@ import time
 
 import numpy as np
 
-from trustroute.policies.belief.trust_state_filter import distinct_nodes, joint_filter
-from trustroute.policies.evaluation.plain import (
+from trustroute.policies.belief.driver_types import n_types_of
+from trustroute.policies.belief.problem import dfa_is_hidden
+from trustroute.policies.belief.trust_state_filter import joint_filter
+from trustroute.policies.evaluation.ledgers import (
     DEFAULT_MAX_NODES,
     DEFAULT_PRUNE_BELOW,
+    BoundLedger,
     Evaluation,
-    accepted_bounds,
-    decide_node,
-    evaluate,
-    extend_routes,
+    JointLedger,
+    TypeMasses,
+)
+from trustroute.policies.evaluation.node_state import hidden_root
+from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.unfolding import (
+    EpisodeActor,
+    Limits,
+    SlotActor,
+    outcomes,
+    root,
+    unfold,
 )
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
-from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
-from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER, FallbackPolicy, with_fallback
-from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
+from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP, episode_policy
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER, FallbackPolicy
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 # Defaults for specs with trust-state atoms (docs/trust_states.md, "Bounded evaluation"): the
 # unfolding keeps the JOINT_MAX_NODES likeliest nodes of each level, which bounds its cost by
@@ -71,7 +85,7 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     defaults are policies.evaluation.plain's for specs without trust-state atoms (which go there unchanged)
     and JOINT_PRUNE_BELOW, JOINT_MAX_NODES (no time limit) otherwise; `pruning` reports them and
     what they cut."""
-    if not spec.uses_trust_atoms and not force_joint:
+    if not force_joint and not dfa_is_hidden(pomdp.driver, spec):
         if time_limit is not None:
             raise ValueError("a time limit applies to specs with trust-state atoms only")
         return evaluate(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,
@@ -81,192 +95,65 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     if truth is not None or reference is not None:
         raise ValueError("a separate true driver or reference reading is not evaluated for specs with "
                          "trust-state atoms")
+    return joint_unfolding(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,
+                           prune_below, max_nodes, merge, time_limit)[0]
+
+
+def joint_unfolding(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, fallback_after: int | None,
+                    max_junctions: int, belief_rule: BeliefRule, prune_below: float | None,
+                    max_nodes: int | None, merge: bool, time_limit: float | None,
+                    by_type: bool = False) -> tuple[Evaluation, TypeMasses | None]:
+    """The unfolding of `evaluate_joint` on the joint-belief node state; with `by_type`, also the
+    masses of each driver type of a type-aware model (its hidden index is (type, trust))."""
     started = time.perf_counter()
     prune_below = JOINT_PRUNE_BELOW if prune_below is None else prune_below
     max_nodes = JOINT_MAX_NODES if max_nodes is None else max_nodes
-    deadline = None if time_limit is None else started + time_limit
-    cut = {"below_threshold": 0.0, "beyond_budget": 0.0, "past_deadline": 0.0}
-    cut_nodes = {"below_threshold": 0, "beyond_budget": 0, "past_deadline": 0}
-    first_cut_level: int | None = None
-    town, driver = pomdp.town, pomdp.driver
-    if fallback_after is not None and not isinstance(policy, FallbackPolicy):
-        policy = with_fallback(policy, town, spec, after=fallback_after)
+    town = pomdp.town
+    policy = episode_policy(policy, town, spec, fallback_after)
     fallback_level = policy.after if isinstance(policy, FallbackPolicy) else None
     # A policy that decides batches of nodes at once (JointTablePolicy.prefetch) is given each
     # level's nodes in one call before the episode rules ask it node by node.
     batched = getattr(policy.inner if isinstance(policy, FallbackPolicy) else policy, "prefetch", None)
-    batched = None if batched is None else batched.__self__
     compiled = compile_spec(spec, town)
     filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
-    accepting = np.asarray(compiled.dfa.accepting, dtype=bool)
-    levels = np.asarray(driver.trust_levels, dtype=float)
-    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
-    successor_index = {(x, j): town.state_index(town.successor(road, j))
-                       for x, road in enumerate(town.states) for j in town.actions(road)}
-
     start = town.state_index(spec.start)
-    routes: list[tuple[str, ...]] = [(spec.start,)]
-    route_id = np.zeros(1, dtype=np.int64)
-    road = np.array([start], dtype=np.int64)
-    belief_av = np.asarray(pomdp.initial_belief, dtype=float)[None, :].copy()
-    posterior = belief_av.copy()
-    joint = filter_.initial(start, belief_av[0])
-    probability = np.ones(1)
-    memory_ids: dict = {}
+    accepting = np.asarray(compiled.dfa.accepting, dtype=bool)
+    types = None
+    if by_type:
+        types = TypeMasses(n_types=n_types_of(pomdp.driver), accepting=accepting,
+                           live=~(accepting | np.asarray(compiled.dfa.rejecting, dtype=bool)))
+    ledger = JointLedger(levels=np.asarray(pomdp.driver.trust_levels, dtype=float),
+                         prune_below=prune_below, max_nodes=max_nodes, types=types)
+    actor = EpisodeActor(policy=policy, town=town, max_junctions=max_junctions,
+                         fallback_level=fallback_level, accepting=accepting,
+                         batched=None if batched is None else batched.__self__, routes=[(spec.start,)])
+    limits = Limits(max_junctions=max_junctions, merge=merge,
+                    deadline=None if time_limit is None else started + time_limit)
+    counts = unfold(root(start, hidden_root(filter_, start, belief_rule)), actor, ledger, limits,
+                    outcomes(pomdp.driver.depends_on_performance))
+    evaluation = ledger.evaluation(counts.nodes, counts.max_frontier, time_limit=time_limit,
+                                   policy=policy.name, seconds=time.perf_counter() - started,
+                                   belief_rule=belief_rule, fallback_after=fallback_level,
+                                   max_junctions=max_junctions)
+    return evaluation, types
 
-    mass = {"accepted": 0.0, "rejected": 0.0, "destination": 0.0, "cap": 0.0, "pruned": 0.0,
-            "settled": 0.0}
-    trust_sum = 0.0
-    junction_sum = 0.0
-    ended_mass = 0.0
-    fallback_mass = 0.0
-    nodes = 1
-    max_frontier = 1
 
-    def end(mask: np.ndarray, reason: str, level: int, why: str = "") -> None:
-        """Branches ending here: accepted and rejected mass by J, the live rest by `reason` (for
-        "pruned", `why` names the cut)."""
-        nonlocal trust_sum, junction_sum, ended_mass, first_cut_level
-        p = probability[mask]
-        accepted, rejected, live = filter_.masses(joint[mask])
-        mass["accepted"] += float(p @ accepted)
-        mass["rejected"] += float(p @ rejected)
-        mass[reason] += float(p @ live)
-        if reason == "pruned" and p.size:
-            cut[why] += float(p @ live)
-            cut_nodes[why] += int(p.size)
-            first_cut_level = level if first_cut_level is None else first_cut_level
-        if reason != "pruned":
-            ended_mass += float(p.sum())
-            trust_sum += float(p @ (posterior[mask] @ levels))
-            junction_sum += float(p.sum()) * level
-
-    for level in range(max_junctions + 1):
-        _, _, live = filter_.masses(joint)
-        settled = live <= 0
-        end(settled, "settled", level)
-        alive = ~settled
-        if deadline is not None and level > 0 and time.perf_counter() > deadline:
-            end(alive, "pruned", level, "past_deadline")
-            break
-        # What pruning a node costs is its live mass (its accepted mass is counted anyway).
-        tiny = alive & (probability * live < prune_below)
-        end(tiny, "pruned", level, "below_threshold")
-        alive &= ~tiny
-        if not alive.any():
-            break
-        keep = np.flatnonzero(alive)
-        told_q = filter_.likeliest_q(joint[keep])
-        told_accepting = accepting[told_q]
-        if batched is not None:
-            batched.prefetch(level, road[keep], joint[keep], belief_av[keep])
-
-        finished = np.zeros(keep.size, dtype=bool)
-        fired = np.zeros(keep.size, dtype=bool)
-        chosen = np.full(keep.size, -1, dtype=np.int64)
-        decisions: dict[tuple[int, int, bytes, bytes], tuple[bool, bool, int]] = {}
-        # A policy whose decision on a route is the same for every belief and non-accepting DFA
-        # state (route_determined: the fallback phase, the trust-free route) is asked once per
-        # route told a non-accepting state (an accepting one may switch the fallback off); None
-        # marks routes it is not so on.
-        by_route: dict[int, tuple[bool, bool, int] | None] = {}
-        for k, i in enumerate(keep.tolist()):
-            rid = int(route_id[i])
-            decision = None if told_accepting[k] else by_route.get(rid, ())
-            if decision == ():
-                context = DecisionContext(route=routes[rid], dfa_state=int(told_q[k]),
-                                          belief=belief_av[i], joint=joint[i])
-                decision = (decide_node(policy, context, town, int(road[i]), level, max_junctions,
-                                        fallback_level, successor_index)
-                            if policy.route_determined(context) else None)
-                by_route[rid] = decision
-            if decision is None:
-                key = (rid, int(told_q[k]), belief_av[i].tobytes(), joint[i].tobytes())
-                decision = decisions.get(key)
-                if decision is None:
-                    context = DecisionContext(route=routes[key[0]], dfa_state=key[1],
-                                              belief=belief_av[i], joint=joint[i])
-                    decision = decide_node(policy, context, town, int(road[i]), level, max_junctions,
-                                           fallback_level, successor_index)
-                    decisions[key] = decision
-            finished[k], fired[k], chosen[k] = decision
-        finished_mask = np.zeros(probability.size, dtype=bool)
-        finished_mask[keep[finished]] = True
-        end(finished_mask, "destination", level)
-        if level == max_junctions:
-            capped = np.zeros(probability.size, dtype=bool)
-            capped[keep[~finished]] = True
-            end(capped, "cap", level)
-            break
-        fallback_mass += float(probability[keep[fired]].sum())
-        keep, chosen = keep[~finished], chosen[~finished]
-        if keep.size == 0:
-            break
-
-        new_route_ids = extend_routes(routes, route_id[keep], chosen, town.states)
-
-        incident = pomdp.road_incident[chosen]
-        parts = []
-        for h, e in outcomes:
-            new_posterior, p_obs = pomdp.belief_update(posterior[keep], incident, h, e, rule="bayes")
-            if belief_rule == "bayes":
-                new_av = new_posterior
-            else:
-                new_av, _ = pomdp.belief_update(belief_av[keep], incident, h, e, rule=belief_rule)
-            possible = p_obs > 0
-            new_joint = filter_.update(joint[keep][possible], new_posterior[possible], new_av[possible],
-                                       chosen[possible], incident[possible], h, e, p_obs[possible])
-            parts.append((new_route_ids[possible], chosen[possible], new_av[possible],
-                          new_posterior[possible], new_joint,
-                          probability[keep][possible] * p_obs[possible]))
-        route_id, road, belief_av, posterior, joint, probability = (
-            np.concatenate([part[j] for part in parts]) for j in range(6))
-        if merge:
-            # Histories at the same (road, J, posterior, AV belief) whose routes the policy reads
-            # alike (route_memory) are driven alike from here on: one node, their masses summed.
-            unique_routes, route_inverse = np.unique(route_id, return_inverse=True)
-            memory_id = np.array([memory_ids.setdefault(policy.route_memory(routes[r]), len(memory_ids))
-                                  for r in unique_routes.tolist()], dtype=float)[route_inverse]
-            first, inverse = distinct_nodes(road, joint, posterior,
-                                            np.concatenate([belief_av, memory_id[:, None]], axis=1))
-            probability = np.bincount(inverse, weights=probability)
-            route_id, road, belief_av, posterior, joint = (
-                a[first] for a in (route_id, road, belief_av, posterior, joint))
-        if probability.size > max_nodes:
-            # Least live mass first: the width pruning adds is the live mass it drops.
-            order = np.argsort(probability * filter_.masses(joint)[2], kind="stable")
-            dropped = np.zeros(probability.size, dtype=bool)
-            dropped[order[: probability.size - max_nodes]] = True
-            end(dropped, "pruned", level + 1, "beyond_budget")
-            kept = ~dropped
-            route_id, road, belief_av, posterior, joint, probability = (
-                a[kept] for a in (route_id, road, belief_av, posterior, joint, probability))
-        nodes += probability.size
-        max_frontier = max(max_frontier, probability.size)
-
-    if batched is not None:
-        batched.forget_prefetched()
-    pruned = mass["pruned"]
-    lower, upper = accepted_bounds(mass["accepted"], pruned)
-    return Evaluation(
-        policy=policy.name,
-        lower=lower,
-        upper=upper,
-        expected_final_trust=trust_sum / ended_mass if ended_mass > 0 else float("nan"),
-        final_trust_lower=trust_sum + (1.0 - ended_mass) * float(levels.min()),
-        final_trust_upper=trust_sum + (1.0 - ended_mass) * float(levels.max()),
-        expected_junctions=junction_sum / ended_mass if ended_mass > 0 else float("nan"),
-        fallback_probability=fallback_mass,
-        end_mass=mass,
-        nodes=nodes,
-        max_frontier=max_frontier,
-        seconds=time.perf_counter() - started,
-        belief_rule=belief_rule,
-        fallback_after=fallback_level,
-        max_junctions=max_junctions,
-        pruning={"prune_below": prune_below, "max_nodes": max_nodes, "time_limit": time_limit,
-                 "pruned_mass": cut, "pruned_nodes": cut_nodes, "first_pruned_level": first_cut_level},
-    )
+def evaluate_joint_by_type(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
+                           fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
+                           max_junctions: int = DEFAULT_JUNCTION_CAP, belief_rule: BeliefRule = "bayes",
+                           prune_below: float | None = None, max_nodes: int | None = None,
+                           merge: bool = True, time_limit: float | None = None
+                           ) -> tuple[Evaluation, list[tuple[float, float]]]:
+    """`evaluate_joint` on the joint belief over ((type, trust), DFA state) of a driver
+    population's type-aware model (policies/belief/driver_types.py) and lifted spec, which may test
+    the hidden trust: the value under the type prior, and [lower, upper] of P(satisfied | type k)
+    for each type, read off the same unfolding (J's block of type k holds P(type k, θ, q | history);
+    a cut node's live mass of type k widens type k's bracket only)."""
+    evaluation, types = joint_unfolding(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,
+                                        prune_below, max_nodes, merge, time_limit, by_type=True)
+    prior = np.asarray(pomdp.initial_belief, dtype=float)
+    weights = prior.reshape(types.n_types, -1).sum(axis=1)
+    return evaluation, types.bounds(weights)
 
 
 TABLE_CHUNK = 5_000     # nodes moved per batch in evaluate_joint_table (the deadline is checked between)
@@ -285,77 +172,14 @@ def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: i
     dropped, their live mass unknown; by `deadline` (time.perf_counter()) the unfolding stops (a
     batch of TABLE_CHUNK nodes or a level's merge is not begun when, at the last one's pace, it
     would end past it) and the live mass of every open node is unknown."""
-    town, driver = pomdp.town, pomdp.driver
+    town = pomdp.town
     compiled = compile_spec(spec, town)
     filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
-    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
     start = town.state_index(spec.start)
-    b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
-    x, joint, posterior, belief, mass = (np.array([start]), filter_.initial(start, b0[0]), b0.copy(),
-                                         b0.copy(), np.ones(1))
-    accepted_total, unknown = 0.0, 0.0
-    batch_seconds = merge_rate = 0.0       # the last batch's duration, the last merge's per row
-    for level in range(max_junctions + 1):
-        accepted, _, live = filter_.masses(joint)
-        out_of_time = deadline is not None and level > 0 and time.perf_counter() > deadline
-        if out_of_time:
-            accepted_total += float(mass @ accepted)
-            unknown += float(mass @ live)
-            break
-        ending = (live <= 0) | (level == max_junctions)
-        accepted_total += float(mass[ending] @ accepted[ending])
-        go = ~ending
-        if go.sum() > max_nodes:
-            order = np.argsort(-np.where(go, mass, -np.inf), kind="stable")
-            dropped = np.zeros(mass.size, dtype=bool)
-            dropped[order[max_nodes:]] = True
-            dropped &= go
-            accepted_total += float(mass[dropped] @ accepted[dropped])
-            unknown += float(mass[dropped] @ live[dropped])
-            go &= ~dropped
-        if not go.any():
-            break
-        x, joint, posterior, belief, mass = (a[go] for a in (x, joint, posterior, belief, mass))
-        parts = []
-        late = False
-        for begin in range(0, x.size, TABLE_CHUNK):
-            # A batch is not begun when the last one's duration would take it past the deadline.
-            began = time.perf_counter()
-            late = deadline is not None and began + batch_seconds > deadline
-            if late:
-                # Out of time within the level: the nodes not moved yet keep their accepted
-                # mass; their live mass is unknown.
-                rest_accepted, _, rest_live = filter_.masses(joint[begin:])
-                accepted_total += float(mass[begin:] @ rest_accepted)
-                unknown += float(mass[begin:] @ rest_live)
-                break
-            part = slice(begin, begin + TABLE_CHUNK)
-            slots = policy.action_slots(level, x[part], joint[part], belief[part])
-            x2 = pomdp.successor_table[x[part], slots]
-            incident = pomdp.road_incident[x2]
-            for h, e in outcomes:
-                new_posterior, p_obs = pomdp.belief_update(posterior[part], incident, h, e)
-                new_belief = new_posterior if belief_rule == "bayes" else pomdp.belief_update(
-                    belief[part], incident, h, e, rule=belief_rule)[0]
-                ok = p_obs > 0
-                new_joint = filter_.update(joint[part][ok], new_posterior[ok], new_belief[ok], x2[ok],
-                                           incident[ok], h, e, p_obs[ok])
-                parts.append((x2[ok], new_joint, new_posterior[ok], new_belief[ok],
-                              mass[part][ok] * p_obs[ok]))
-            batch_seconds = time.perf_counter() - began
-        if not parts:
-            break
-        x, joint, posterior, belief, mass = (np.concatenate([p[j] for p in parts]) for j in range(5))
-        # Nor is the merge, when it would at the last merge's seconds per row.
-        if late or (deadline is not None and time.perf_counter() + merge_rate * x.size > deadline):
-            # The children of the nodes moved: their accepted mass counts, their live mass is unknown.
-            accepted, _, live = filter_.masses(joint)
-            accepted_total += float(mass @ accepted)
-            unknown += float(mass @ live)
-            break
-        began = time.perf_counter()
-        first, inverse = distinct_nodes(x, joint, posterior, belief)
-        mass = np.bincount(inverse, weights=mass)
-        x, joint, posterior, belief = x[first], joint[first], posterior[first], belief[first]
-        merge_rate = (time.perf_counter() - began) / inverse.size
-    return accepted_bounds(accepted_total, unknown)
+    ledger = BoundLedger(max_junctions=max_junctions, max_nodes=max_nodes)
+    actor = SlotActor(slots=policy.action_slots, successor_table=pomdp.successor_table)
+    limits = Limits(max_junctions=max_junctions, deadline=deadline, chunk=TABLE_CHUNK, paced=True,
+                    merge=True)
+    unfold(root(start, hidden_root(filter_, start, belief_rule)), actor, ledger, limits,
+           outcomes(pomdp.driver.depends_on_performance))
+    return ledger.bounds()

@@ -1,25 +1,18 @@
 """The synthesized ("aware") routing policy: a table of decisions over (junctions, road, DFA state, belief).
 
 Rows are the product nodes the synthesis expanded: t (junctions driven), road x, DFA state q,
-belief b, the action slot (index into town.actions(road)) chosen there and, in tables written by
-the current synthesis, p: the state of the spec's state-only task (policies/routing/free.py) after
-the roads driven. Two acting rules (docs/synthesis.md, "Open nodes and the acting rule"):
-
-Exact-belief rule (tables with p): at a context (t, x, q, p, b), the row with the same
-(t, x, q, p) whose belief is within EXACT_BELIEF_DISTANCE of b; if there is none, among the box
-rows of (t, x, q) (a cluster policy's, docs/synthesis.md "Cluster policies") whose box holds b,
-the one of the largest certified value; if there is none, the move of the
-free completion at (x, q, p) (policies/routing/free.py, `free_completion`): the trust-free
-shortest completion of the state-only task while it is not complete, after it the shortest route
-back to what the DFA still needs, every label allowed (so a waypoint reached with too little trust
-is visited again). The synthesis values every node without a row by exactly this completion, so
+belief b, the action slot (index into town.actions(road)) chosen there and p, the state of the
+spec's state-only task (policies/routing/free.py) after the roads driven. The acting rule
+(docs/synthesis.md, "Open nodes and the acting rule"): at a context (t, x, q, p, b), the row with
+the same (t, x, q, p) whose belief is within EXACT_BELIEF_DISTANCE of b; if there is none, among
+the box rows of (t, x, q) (a cluster policy's, docs/synthesis.md "Cluster policies") whose box
+holds b, the one of the largest certified value; if there is none, the move of the free
+completion at (x, q, p) (policies/routing/free.py, `free_completion`): the trust-free shortest
+completion of the state-only task while it is not complete, after it the shortest route back to
+what the DFA still needs, every label allowed (so a waypoint reached with too little trust is
+visited again). The synthesis values every node without a row by exactly this completion, so
 the policy's value is the synthesised L (docs/synthesis.md, "Open nodes and the acting rule").
-
-Nearest-belief rule (tables without p):
-1. among rows with the same (t, x, q), take the row whose belief is nearest (Euclidean);
-2. if there is none, among rows with the same (x, q) at any t, the nearest belief;
-3. if there is none, drive the trust-free shortest completion of the state-only task, or the
-   first legal move when that task is complete or impossible.
+The table kinds and their files: policies/routing/decision_tables.py.
 
 `reweight` (a policy made for a driver population with another type prior λ than the
 population's weights w, docs/driver_types.md "The robust objective"): the belief the policy is given
@@ -79,30 +72,21 @@ class BoxRows:
 
 @dataclass(frozen=True, eq=False)
 class PolicyTable:
-    """Decision rows; all arrays have one entry per row (beliefs: [rows, n_trust]). boxes: the box
-    rows of a cluster policy (exact-belief tables only; None: none)."""
+    """Exact rows; all arrays have one entry per row (beliefs: [rows, n_trust]). boxes: the box
+    rows of a cluster policy (None: none)."""
 
     t: np.ndarray
     x: np.ndarray
     q: np.ndarray
     beliefs: np.ndarray
     action: np.ndarray
-    projected: np.ndarray | None = None    # state-only task state p per row (exact-belief rule)
+    projected: np.ndarray                  # state-only task state p per row
     boxes: BoxRows | None = None
 
     def __post_init__(self) -> None:
-        for name in ("t", "x", "q", "action"):
+        for name in ("t", "x", "q", "action", "projected"):
             object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=np.int64))
         object.__setattr__(self, "beliefs", np.asarray(self.beliefs, dtype=float))
-        if self.projected is not None:
-            object.__setattr__(self, "projected", np.asarray(self.projected, dtype=np.int64))
-        if self.boxes is not None and self.projected is None:
-            raise ValueError("box rows need the exact-belief rule (a table with projected)")
-
-    @property
-    def exact(self) -> bool:
-        """True: the exact-belief acting rule applies (the table records p)."""
-        return self.projected is not None
 
     @property
     def rows(self) -> int:
@@ -124,11 +108,6 @@ class _Groups:
     rows: dict[int, np.ndarray]
     trees: dict[int, cKDTree]
     beliefs: np.ndarray
-
-    def nearest(self, key: int, beliefs: np.ndarray) -> np.ndarray | None:
-        """Row index of the nearest stored belief for each of `beliefs` [m, n] (None: no group)."""
-        found = self.nearest_with_distance(key, beliefs)
-        return None if found is None else found[0]
 
     def nearest_with_distance(self, key: int, beliefs: np.ndarray
                               ) -> tuple[np.ndarray, np.ndarray] | None:
@@ -188,7 +167,7 @@ class _BoxIndex:
 
 
 class BeliefTablePolicy(RoutingPolicy):
-    """RoutingPolicy "aware": nearest stored belief at the same (junctions, road, DFA state)."""
+    """RoutingPolicy "aware": the exact-belief rule over a PolicyTable (module docstring)."""
 
     def __init__(self, table: PolicyTable, town: Town, spec: Spec, name: str = "aware",
                  lower: float | None = None, upper: float | None = None,
@@ -210,19 +189,12 @@ class BeliefTablePolicy(RoutingPolicy):
         # fallback (module docstring)
         self._free_slot = free_completion(town, spec).slot
         self._boxes = None
-        if table.exact:
-            self._exact = _group(self._key_tqp(table.t, table.x, table.q, table.projected), table.beliefs)
-            boxes = table.boxes
-            if boxes is not None and boxes.rows:
-                keys = self._key_tq(boxes.t, boxes.x, boxes.q)
-                order = np.argsort(keys, kind="stable")
-                self._boxes = _BoxIndex(keys=keys[order], rows=boxes.take(order))
-        else:
-            self._exact = _group(self._key_tq(table.t, table.x, table.q), table.beliefs)
-            self._any_t = _group(self._key_q(table.x, table.q), table.beliefs)
-
-    def _key_q(self, x: np.ndarray, q: np.ndarray) -> np.ndarray:
-        return x * self._n_q + q
+        self._exact = _group(self._key_tqp(table.t, table.x, table.q, table.projected), table.beliefs)
+        boxes = table.boxes
+        if boxes is not None and boxes.rows:
+            keys = self._key_tq(boxes.t, boxes.x, boxes.q)
+            order = np.argsort(keys, kind="stable")
+            self._boxes = _BoxIndex(keys=keys[order], rows=boxes.take(order))
 
     def _key_tq(self, t: np.ndarray, x: np.ndarray, q: np.ndarray) -> np.ndarray:
         return (t * self._n_x + x) * self._n_q + q
@@ -268,37 +240,12 @@ class BeliefTablePolicy(RoutingPolicy):
 
     def action_slots(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, beliefs: np.ndarray,
                      projected: np.ndarray | None = None) -> np.ndarray:
-        """Vectorised decisions: the action slot per context. Exact-belief tables need `projected`
-        (the state-only task state per context) and never return -1; nearest-belief tables
-        apply rules 1-2 and return -1 where no stored row matches (rule 3)."""
-        if self.table.exact:
-            if projected is None:
-                raise ValueError("this policy's exact-belief rule needs the state-only task state "
-                                 "(projected) of each context")
-            return self.exact_action_slots(t, x, q, projected, beliefs)
-        t, x, q = (np.atleast_1d(np.asarray(a, dtype=np.int64)) for a in (t, x, q))
-        beliefs = self._policy_beliefs(beliefs)
-        out = np.full(t.size, -1, dtype=np.int64)
-        if t.size == 0 or not self.table.rows:
-            return out
-        known_q = q < self._n_q             # a DFA state never stored has no row anywhere
-        for keys, groups in ((self._key_tq(t, x, q), self._exact), (self._key_q(x, q), self._any_t)):
-            todo = np.flatnonzero((out < 0) & known_q)
-            if todo.size == 0:
-                break
-            if todo.size == 1:
-                i = int(todo[0])
-                rows = groups.nearest(int(keys[i]), beliefs[i:i + 1])
-                if rows is not None:
-                    out[i] = self.table.action[rows[0]]
-                continue
-            unique, inverse = np.unique(keys[todo], return_inverse=True)
-            for g, key in enumerate(unique.tolist()):
-                members = todo[inverse == g]
-                rows = groups.nearest(key, beliefs[members])
-                if rows is not None:
-                    out[members] = self.table.action[rows]
-        return out
+        """Vectorised decisions: the action slot per context (never -1); `projected` is the
+        state-only task state per context, which the rule reads."""
+        if projected is None:
+            raise ValueError("this policy's exact-belief rule needs the state-only task state "
+                             "(projected) of each context")
+        return self.exact_action_slots(t, x, q, projected, beliefs)
 
     def certified_bounds(self) -> tuple[float, float] | None:
         if self.lower is None or self.upper is None:
@@ -324,14 +271,6 @@ class BeliefTablePolicy(RoutingPolicy):
     def next_junction(self, context: DecisionContext) -> str:
         road = context.road
         x = self.town.state_index(road)
-        if self.table.exact:
-            p = self.task.projected_state(context.route)
-            slot = self._exact_slot(context.junctions_driven, x, int(context.dfa_state), p, context.belief)
-            return self.town.actions(road)[slot]
-        slot = int(self.action_slots(np.array([context.junctions_driven]), np.array([x]),
-                                     np.array([context.dfa_state]), context.belief)[0])
-        actions = self.town.actions(road)
-        if 0 <= slot < len(actions):
-            return actions[slot]
-        junction = self.task.next_junction(road, self.task.projected_state(context.route))
-        return junction if junction is not None else actions[0]
+        p = self.task.projected_state(context.route)
+        slot = self._exact_slot(context.junctions_driven, x, int(context.dfa_state), p, context.belief)
+        return self.town.actions(road)[slot]

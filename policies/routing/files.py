@@ -2,9 +2,9 @@
 
 `save_policy(result, path, town, driver, spec)` writes `path` (JSON: format, content hashes of
 town, driver model and spec, horizon, belief rule, bounds, the acting rule in words, and the name
-and SHA-256 of the array file) and `path` with suffix `.npz` (the decision table of
-policies/routing/aware_table.py: t, x, q, projected, beliefs, action, and the box rows of a cluster
-policy: box_t, box_x, box_q, box_lo, box_hi, box_value, box_action).
+and SHA-256 of the array file) and `path` with suffix `.npz` (the decision table: its table kind's
+rows, policies/routing/decision_tables.py: exact rows and the box rows of a cluster policy, or
+the joint rows of a spec with trust-state atoms).
 `load_policy(path, town, driver, spec)` checks the format and all three hashes and raises
 InputError naming the file and the fix on a mismatch.
 Every key: docs/formats/policy_file.md.
@@ -26,33 +26,27 @@ from trustroute.core.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.routing.aware_table import BeliefTablePolicy, BoxRows, PolicyTable
-from trustroute.policies.routing.free import state_only_task
-from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
+from trustroute.policies.routing.decision_tables import (
+    BOX_ROWS,
+    EXACT_ROWS,
+    JOINT_ROWS,
+    JOINT_TABLE,
+    PLAIN_TABLE,
+    RESYNTH,
+    TABLE_KINDS,
+    PolicyOrigin,
+    ReadContext,
+    document_table_kind,
+    table_kind,
+)
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 FORMAT = "trustroute-policy"
-# Version 3: where a policy has no row it drives the free completion of (road, DFA state, task
-# state), which after the state-only task returns to what the DFA still needs; version 2 files
-# were synthesized for the state-only completion (then the first legal move) and are refused:
-# their certified L is not the value of the version-3 rule. Joint-belief files (their rule does
-# not use the completion) are read from version 2 on.
-# Version 4 adds the box rows of cluster policies (box_* arrays, possibly empty); a version 3 file
-# is read as a table without box rows, which the version 4 rule treats exactly as version 3 did.
+# The version written; the versions each table kind is read from: policies/routing/decision_tables.py.
 VERSION = 4
-PLAIN_VERSIONS = (3, 4)
-JOINT_VERSIONS = (2, 3, 4)
-ACTING_RULE = ("action of the stored row with the same (junctions driven, road, DFA state, state-only "
-               "task state) whose belief is within 1e-12 of the AV's (the synthesis visited it); "
-               "else, among the box rows of the same (junctions driven, road, DFA state) whose box "
-               "holds the AV's belief, the action of the one of the largest value; "
-               "else the move of the free completion: the trust-free shortest completion of the "
-               "state-only task while it is not complete, then the shortest route back to what the "
-               "DFA still needs, every label allowed (the first legal move where acceptance is "
-               "unreachable)")
 
-
-ARRAY_NAMES = ("t", "x", "q", "projected", "beliefs", "action")
-BOX_ARRAY_NAMES = ("box_t", "box_x", "box_q", "box_lo", "box_hi", "box_value", "box_action")
+ARRAY_NAMES = EXACT_ROWS.names
+BOX_ARRAY_NAMES = BOX_ROWS.names
 # A policy synthesized for a driver population of several types also records these
 # (docs/formats/policy_file.md, "Population policies"); one type writes today's file.
 POPULATION_KEYS = ("population_hash", "population_types", "population_weights", "belief_prior",
@@ -63,15 +57,10 @@ PLAIN_KEYS = ("format", "version", "name", "spec", "town_hash", "driver_hash", "
               "arrays", "arrays_sha256")
 DOCUMENT_KEYS = PLAIN_KEYS + POPULATION_KEYS
 # Policies of specs with trust-state atoms act on the joint belief (policies/routing/trust_state_table.py):
-# their files have these keys besides, and the arrays JOINT_ARRAY_NAMES (no state-only task state:
-# their rule does not read it; "joint" [rows, n_trust, n_q] instead).
-JOINT_KIND = "joint-belief"
-JOINT_KEYS = ("kind", "guide_horizon")
-JOINT_ARRAY_NAMES = ("t", "x", "q", "beliefs", "action", "joint")
-JOINT_ACTING_RULE = ("action of the stored row with the same (junctions driven, road) whose (joint "
-                     "belief, belief) is within 1e-9 (Euclidean); else the successor with the largest "
-                     "relaxed action value at the joint belief (policies/belief/trust_state_relaxation.py)")
-RESYNTH = "re-run trustroute synth to write both files again"
+# their files have the keys JOINT_KEYS besides, and the arrays JOINT_ARRAY_NAMES.
+JOINT_KIND = JOINT_TABLE.kind
+JOINT_KEYS = JOINT_TABLE.keys
+JOINT_ARRAY_NAMES = JOINT_ROWS.names
 
 
 def array_path(path: str | Path) -> Path:
@@ -86,21 +75,11 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
     from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
 
     path = Path(path)
-    table: PolicyTable = result.policy.table
-    joint = isinstance(result.policy, JointTablePolicy)
+    table = result.policy.table
+    kind = table_kind(table)
     arrays = array_path(path)
     buffer = io.BytesIO()
-    if joint:
-        np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, beliefs=table.beliefs,
-                            action=table.action, joint=table.joint)
-    else:
-        if not table.exact:
-            raise ValueError("only tables with the state-only task state (exact-belief rule) are written")
-        boxes = table.boxes if table.boxes is not None else BoxRows.empty(table.beliefs.shape[1])
-        np.savez_compressed(buffer, t=table.t, x=table.x, q=table.q, projected=table.projected,
-                            beliefs=table.beliefs, action=table.action, box_t=boxes.t, box_x=boxes.x,
-                            box_q=boxes.q, box_lo=boxes.lo, box_hi=boxes.hi, box_value=boxes.value,
-                            box_action=boxes.action)
+    np.savez_compressed(buffer, **kind.arrays(table))
     array_bytes = buffer.getvalue()
     # The arrays first, the JSON (which names their hash) last: the JSON is the commit mark.
     atomic_write_bytes(arrays, array_bytes, "policy array file", "pass a writable --out path")
@@ -119,17 +98,14 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
         "gap": result.gap,
         "seconds": result.seconds,
         "rows": table.rows,
-        "box_rows": 0 if joint or table.boxes is None else table.boxes.rows,
-        "acting_rule": ACTING_RULE,
+        "box_rows": 0 if kind is not PLAIN_TABLE or table.boxes is None else table.boxes.rows,
+        "acting_rule": kind.acting_rule,
         "arrays": arrays.name,
         "arrays_sha256": hashlib.sha256(array_bytes).hexdigest(),
     }
     if population is not None:
         document.update({key: population[key] for key in POPULATION_KEYS})
-    if joint:
-        document["acting_rule"] = JOINT_ACTING_RULE
-        document["kind"] = JOINT_KIND
-        document["guide_horizon"] = result.policy.guide_horizon
+    document.update(kind.document(result.policy))
     atomic_write_text(path, json.dumps(document, indent=1) + "\n", "policy file",
                       "pass a writable --out path")
     return path
@@ -146,24 +122,23 @@ def read_policy_document(path: str | Path) -> dict:
     if not isinstance(document, dict) or document.get("format") != FORMAT:
         raise InputError(where, "format", f"not a trustroute policy file (format {FORMAT!r} expected)",
                          "pass a file written by trustroute synth --out")
-    joint = "kind" in document
+    kind = document_table_kind(document)
     version = document.get("version")
-    if (not (version in PLAIN_VERSIONS or (joint and version in JOINT_VERSIONS))
-            or isinstance(version, bool)):
+    # A file naming a kind is read from the versions of any kind; one without, the plain versions.
+    readable = ({v for k in TABLE_KINDS for v in k.versions} if "kind" in document
+                else set(PLAIN_TABLE.versions))
+    if version not in readable or isinstance(version, bool):
         older = ("; version 2 policies drive the state-only completion where they have no row, which "
                  "their bounds were certified for, not this trustroute's acting rule"
                  if version == 2 else "")
         raise InputError(where, "version", f"policy file version {str(version)[:30]}, this "
                          f"trustroute reads version {VERSION}{older}", "re-run trustroute synth")
-    if joint and document["kind"] != JOINT_KIND:
+    if kind is None:
+        named = ", ".join(repr(k.kind) for k in TABLE_KINDS if k.kind is not None)
         raise InputError(where, "kind", f"unknown policy kind {str(document['kind'])[:30]!r} "
-                         f"(only {JOINT_KIND!r})", RESYNTH)
-    check_keys(document, DOCUMENT_KEYS + (JOINT_KEYS if joint else ()), where, "", "policy file")
-    guide = document.get("guide_horizon")
-    if joint and not (guide is None or (isinstance(guide, int) and not isinstance(guide, bool)
-                                        and 0 <= guide <= 10_000)):
-        raise InputError(where, "guide_horizon", f"guide horizon {str(guide)[:30]} is not a junction "
-                         "count or null", RESYNTH)
+                         f"(only {named})", RESYNTH)
+    check_keys(document, DOCUMENT_KEYS + kind.keys, where, "", "policy file")
+    kind.check(document, where)
     for key in ("lower", "upper"):
         value = document.get(key)
         if value is not None and not (isinstance(value, int | float) and not isinstance(value, bool)
@@ -174,11 +149,10 @@ def read_policy_document(path: str | Path) -> dict:
     return document
 
 
-def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverModel,
-                      spec: Spec) -> PolicyTable | JointPolicyTable:
+def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverModel, spec: Spec):
     """The decision table of a policy file, verified: the hash its JSON records, a readable .npz
-    without pickles, the five arrays with consistent shapes and integer types, and every entry in
-    range for this town, driver model and spec (InputError otherwise)."""
+    without pickles, the arrays of its table kind with consistent shapes and integer types, and
+    every entry in range for this town, driver model and spec (InputError otherwise)."""
     from trustroute.core.validation import MAX_ARRAY_BYTES, read_input_bytes
     from trustroute.policies.logic.dfa import build_dfa
 
@@ -190,11 +164,11 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
                             fix="keep the .npz next to the policy file, or re-run trustroute synth")
     if hashlib.sha256(data).hexdigest() != document.get("arrays_sha256"):
         raise InputError(where, "", "array file does not match its policy file (hash differs)", RESYNTH)
+    kind = document_table_kind(document)
+    version = document.get("version", VERSION)
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as archive:
-            names = JOINT_ARRAY_NAMES if "kind" in document else ARRAY_NAMES
-            if "kind" not in document and document.get("version", VERSION) >= 4:
-                names = names + BOX_ARRAY_NAMES
+            names = kind.block_names(version)
             missing = [name for name in names if name not in archive.files]
             if missing:
                 raise InputError(where, missing[0], f"array '{missing[0]}' is missing", RESYNTH)
@@ -205,103 +179,12 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
             zipfile.LargeZipFile, zlib.error) as exc:
         raise InputError(where, "", f"not a readable .npz array file ({type(exc).__name__})",
                          RESYNTH) from None
-    rows = arrays_read["t"].shape[0] if arrays_read["t"].ndim == 1 else -1
-    joint = "joint" in arrays_read
-    integers = ("t", "x", "q", "action") if joint else ("t", "x", "q", "projected", "action")
-    _check_integers(arrays_read, integers, rows, where)
-    beliefs = arrays_read["beliefs"]
-    if beliefs.shape != (rows, driver.n_trust) or beliefs.dtype.kind != "f":
-        raise InputError(where, "beliefs", f"beliefs have shape {beliefs.shape}, expected ({rows}, "
-                         f"{driver.n_trust}) for this driver model", RESYNTH)
-    if rows != document.get("rows"):
-        raise InputError(where, "", f"{rows} rows but the policy file records {document.get('rows')}",
-                         RESYNTH)
-    t, x, q, action = (arrays_read[name].astype(np.int64) for name in ("t", "x", "q", "action"))
-    projected = None if joint else arrays_read["projected"].astype(np.int64)
-    n_q = build_dfa(spec).n_states
-    n_p = state_only_task(town, spec).dfa.n_states
-    extra = [] if projected is None else [("projected", ((projected < 0) | (projected >= n_p)).any(),
-                                           f"state-only task states outside 0..{n_p - 1}")]
-    _check_decisions(where, "", "decision table", t, x, q, action, town, n_q, extra)
-    if (not np.isfinite(beliefs).all() or (beliefs < 0).any() or (beliefs > 1).any()
-            or (np.abs(beliefs.sum(axis=1) - 1) > 1e-6).any()):
-        raise InputError(where, "beliefs", "beliefs are not probability vectors", RESYNTH)
-    if not joint:
-        boxes = _box_rows(arrays_read, where, document, driver.n_trust, town, n_q)
-        return PolicyTable(t=t, x=x, q=q, beliefs=beliefs, action=action, projected=projected,
-                           boxes=boxes)
-    table = arrays_read["joint"]
-    if table.shape != (rows, driver.n_trust, n_q) or table.dtype.kind != "f":
-        raise InputError(where, "joint", f"joint beliefs have shape {table.shape}, expected ({rows}, "
-                         f"{driver.n_trust}, {n_q}) for this driver model and spec", RESYNTH)
-    if (not np.isfinite(table).all() or (table < 0).any()
-            or (np.abs(table.sum(axis=(1, 2)) - 1) > 1e-6).any()):
-        raise InputError(where, "joint", "joint beliefs are not probability tables", RESYNTH)
-    return JointPolicyTable(t=t, x=x, q=q, beliefs=beliefs, joint=table, action=action)
+    context = ReadContext(where=where, document=document, town=town, driver=driver, spec=spec,
+                         n_q=build_dfa(spec).n_states)
+    return kind.read(arrays_read, version, context)
 
 
-def _box_rows(arrays: dict, where: str, document: dict, n_trust: int, town: Town, n_q: int
-              ) -> BoxRows | None:
-    """The box rows of a version-4 table, verified like the exact rows (None: a version-3 file)."""
-    if "box_t" not in arrays:
-        return None
-    rows = arrays["box_t"].shape[0] if arrays["box_t"].ndim == 1 else -1
-    _check_integers(arrays, ("box_t", "box_x", "box_q", "box_action"), rows, where)
-    for name in ("box_lo", "box_hi"):
-        if arrays[name].shape != (rows, n_trust) or arrays[name].dtype.kind != "f":
-            raise InputError(where, name, f"{name} has shape {arrays[name].shape}, expected "
-                             f"({rows}, {n_trust}) for this driver model", RESYNTH)
-    value = arrays["box_value"]
-    if value.shape != (rows,) or value.dtype.kind != "f":
-        raise InputError(where, "box_value", f"box_value has shape {value.shape}, expected ({rows},)",
-                         RESYNTH)
-    if rows != document.get("box_rows"):
-        raise InputError(where, "box_rows", f"{rows} box rows but the policy file records "
-                         f"{document.get('box_rows')}", RESYNTH)
-    t, x, q, action = (arrays[name].astype(np.int64) for name in ("box_t", "box_x", "box_q", "box_action"))
-    lo, hi = arrays["box_lo"], arrays["box_hi"]
-    extra = [
-        ("box_lo", not (np.isfinite(lo).all() and np.isfinite(hi).all()) or (lo < 0).any()
-         or (hi > 1).any() or (lo > hi).any(), "boxes that are not within [0, 1] with lo <= hi"),
-        ("box_value", not np.isfinite(value).all() or (value < 0).any() or (value > 1).any(),
-         "values that are not probabilities"),
-    ]
-    _check_decisions(where, "box_", "box rows", t, x, q, action, town, n_q, extra)
-    return BoxRows(t=t, x=x, q=q, lo=lo, hi=hi, value=value, action=action)
-
-
-def _check_integers(arrays: dict, names: tuple[str, ...], rows: int, where: str) -> None:
-    """InputError at the first of `names` that is not a 1-d integer array of `rows` entries."""
-    for name in names:
-        array = arrays[name]
-        if array.ndim != 1 or array.shape[0] != rows or array.dtype.kind not in "iu":
-            raise InputError(where, name, f"array '{name}' is not {max(rows, 0)} integers "
-                             f"(shape {array.shape}, type {array.dtype})", RESYNTH)
-
-
-def _check_decisions(where: str, prefix: str, what_rows: str, t: np.ndarray, x: np.ndarray, q: np.ndarray,
-                     action: np.ndarray, town: Town, n_q: int, extra: list) -> None:
-    """InputError at the first array (named with `prefix`) whose entries are out of range for this
-    town and spec: junction counts, roads, DFA states, the `extra` (name, bad, what) checks, moves."""
-    n_x = len(town.states)
-    slots = np.array([len(town.actions(state)) for state in town.states], dtype=np.int64)
-    problems = [
-        (f"{prefix}t", (t < 0).any(), "negative junction counts"),
-        (f"{prefix}x", ((x < 0) | (x >= n_x)).any(), f"roads outside 0..{n_x - 1}"),
-        (f"{prefix}q", ((q < 0) | (q >= n_q)).any(), f"DFA states outside 0..{n_q - 1}"),
-    ] + extra
-    for name, bad, what in problems:
-        if bad:
-            raise InputError(where, name, f"{what_rows} has {what}", RESYNTH)
-    if ((action < 0) | (action >= slots[x])).any():
-        row = int(np.flatnonzero((action < 0) | (action >= slots[x]))[0])
-        raise InputError(where, f"{prefix}action", f"{what_rows}, row {row}: action {int(action[row])} is "
-                         f"not one of the {int(slots[x[row]])} moves from road {town.states[x[row]]}",
-                         RESYNTH)
-
-
-def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec
-                ) -> BeliefTablePolicy | JointTablePolicy:
+def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -> RoutingPolicy:
     """Load a policy file made for exactly this town, driver model and spec."""
     path = Path(path)
     where = str(path)
@@ -328,16 +211,9 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec
                              f"re-run trustroute synth for this {what}, or pass the {what} it was "
                              f"made for ({option})")
     table = read_policy_table(path.parent / document["arrays"], document, town, driver, spec)
-    if isinstance(table, JointPolicyTable):
-        from trustroute.policies.model.trust_pomdp import build_pomdp
-
-        return JointTablePolicy(table, build_pomdp(town, driver), spec, document.get("guide_horizon"),
-                                name=str(document.get("name", "aware")), lower=document.get("lower"),
-                                upper=document.get("upper"), horizon=document.get("horizon"))
-    return BeliefTablePolicy(table, town, spec, name=str(document.get("name", "aware")),
-                             lower=document.get("lower"), upper=document.get("upper"),
-                             horizon=document.get("horizon"),
-                             reweight=prior_reweight(document, driver.n_trust, where))
+    origin = PolicyOrigin(document=document, town=town, driver=driver, spec=spec,
+                          reweight=prior_reweight(document, driver.n_trust, where))
+    return document_table_kind(document).policy(table, origin)
 
 
 def prior_reweight(document: dict, n_hidden: int, where: str = "policy file") -> np.ndarray | None:

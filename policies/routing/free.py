@@ -107,24 +107,15 @@ def _uniform_beliefs(count: int) -> np.ndarray:
     return np.full((count, 7), 1.0 / 7.0)
 
 
-def build_state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
-    """Project `spec` onto its state atoms and compute shortest completions on `town`."""
-    projected = state_only_projection(spec)
-    compiled = compile_spec(projected, town)
-    dfa, labeller = compiled.dfa, compiled.labeller
-    n_x, n_q = len(town.states), int(dfa.n_states)
-    q_grid, x_grid = np.meshgrid(np.arange(n_q), np.arange(n_x), indexing="ij")
-    next_state = np.asarray(
-        labeller.step(q_grid.ravel(), x_grid.ravel(), _uniform_beliefs(n_q * n_x)), dtype=np.int64
-    ).reshape(n_q, n_x)
-
-    # Backward Dijkstra from every accepting product state, keys (metres, roads) lexicographic.
-    successors = [[town.state_index(s) for s in town.successors(r)] for r in town.states]
-    lengths = np.array([town.length(r) for r in town.states])
+def completion_distances(successors: list[list[int]], lengths: np.ndarray, next_state: np.ndarray,
+                         accepting: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(metres, roads) [n_x, n_q] of the shortest completion from each product state (x, q): a
+    backward Dijkstra from every accepting product state, keys (metres, roads) lexicographic."""
+    n_x, n_q = next_state.shape[1], next_state.shape[0]
     predecessors: list[list[tuple[int, int]]] = [[] for _ in range(n_x * n_q)]
     for x in range(n_x):
         for q in range(n_q):
-            if dfa.accepting[q]:
+            if accepting[q]:
                 continue  # absorbing targets: no need to leave them
             for x2 in successors[x]:
                 q2 = int(next_state[q, x2])
@@ -132,7 +123,7 @@ def build_state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
     distance = np.full((n_x, n_q), np.inf)
     hops = np.full((n_x, n_q), np.iinfo(np.int64).max, dtype=np.int64)
     queue: list[tuple[float, int, int, int]] = []
-    for q in np.flatnonzero(dfa.accepting):
+    for q in np.flatnonzero(accepting):
         for x in range(n_x):
             distance[x, q] = 0.0
             hops[x, q] = 0
@@ -147,11 +138,17 @@ def build_state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
             if key < (distance[x, q], hops[x, q]):
                 distance[x, q], hops[x, q] = key
                 heapq.heappush(queue, (key[0], key[1], x, q))
+    return distance, hops
 
+
+def completion_slots(successors: list[list[int]], lengths: np.ndarray, next_state: np.ndarray,
+                     accepting: np.ndarray, distance: np.ndarray, hops: np.ndarray) -> np.ndarray:
+    """int [n_x, n_q]: the action slot of the shortest completion's first move (-1: none)."""
+    n_x, n_q = distance.shape
     next_slot = np.full((n_x, n_q), -1, dtype=np.int64)
     for x in range(n_x):
         for q in range(n_q):
-            if dfa.accepting[q] or not np.isfinite(distance[x, q]):
+            if accepting[q] or not np.isfinite(distance[x, q]):
                 continue
             best = None
             for slot, x2 in enumerate(successors[x]):
@@ -161,6 +158,25 @@ def build_state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
                 if np.isfinite(key[0]) and (best is None or key < best[0]):
                     best = (key, slot)
             next_slot[x, q] = best[1]
+    return next_slot
+
+
+def build_state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
+    """Project `spec` onto its state atoms and compute shortest completions on `town`."""
+    projected = state_only_projection(spec)
+    compiled = compile_spec(projected, town)
+    dfa, labeller = compiled.dfa, compiled.labeller
+    n_x, n_q = len(town.states), int(dfa.n_states)
+    q_grid, x_grid = np.meshgrid(np.arange(n_q), np.arange(n_x), indexing="ij")
+    next_state = np.asarray(
+        labeller.step(q_grid.ravel(), x_grid.ravel(), _uniform_beliefs(n_q * n_x)), dtype=np.int64
+    ).reshape(n_q, n_x)
+
+    successors = [[town.state_index(s) for s in town.successors(r)] for r in town.states]
+    lengths = np.array([town.length(r) for r in town.states])
+    accepting = np.asarray(dfa.accepting, dtype=bool)
+    distance, hops = completion_distances(successors, lengths, next_state, accepting)
+    next_slot = completion_slots(successors, lengths, next_state, accepting, distance, hops)
     initial = int(next_state[int(dfa.initial), town.state_index(spec.start)])
     for array in (next_state, distance, hops, next_slot):
         array.setflags(write=False)

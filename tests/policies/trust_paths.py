@@ -89,20 +89,38 @@ def policy_value(pomdp, spec, policy, max_junctions: int) -> float:
     """P(spec satisfied) of `policy` (no fallback wrapper is added), episodes ending where the
     policy finishes or at `max_junctions`."""
     paths = _Paths(pomdp, spec)
+    return _policy_mass(paths, spec, policy, max_junctions,
+                        lambda theta, weight, q: paths.accepted(weight, q))
 
-    def visit(route, theta, weight, q, belief) -> float:
+
+def policy_value_by_type(pomdp, spec, policy, max_junctions: int, n_types: int) -> np.ndarray:
+    """P(spec satisfied, type k) [n_types] of `policy` for a type-aware model whose hidden index is
+    k·n + θ (policies/belief/driver_types.py), as `policy_value` (the AV's belief, told state and
+    joint belief over every path of every type; the accepted path mass split by its type)."""
+    paths = _Paths(pomdp, spec)
+    n = paths.n_t // n_types
+
+    def accepted(theta, weight, q) -> np.ndarray:
+        done = paths.dfa.accepting[q]
+        return np.bincount(theta[done] // n, weights=weight[done], minlength=n_types)
+
+    return _policy_mass(paths, spec, policy, max_junctions, accepted)
+
+
+def _policy_mass(paths: _Paths, spec, policy, max_junctions: int, accepted):
+    def visit(route, theta, weight, q, belief):
         if paths.settled(q):
-            return paths.accepted(weight, q)
+            return accepted(theta, weight, q)
         context = DecisionContext(route=tuple(route), dfa_state=paths.told_q(weight, q), belief=belief,
                                   joint=paths.joint(theta, weight, q))
         if policy.finished(context) or len(route) - 1 == max_junctions:
-            return paths.accepted(weight, q)
+            return accepted(theta, weight, q)
         road = paths.town.successor(route[-1], policy.next_junction(context))
         total = 0.0
         for h, e in paths.outcomes:
             nxt = paths.step(theta, weight, q, road, h, e)
             if nxt is not None:
-                total += visit(route + [road], *nxt)
+                total = total + visit(route + [road], *nxt)
         return total
 
     return visit([spec.start], *paths.start())

@@ -148,6 +148,31 @@ def test_monte_carlo_matches_exact_evaluation(town, driver, pomdp, phi1):
     assert abs(final_trust / n - exact.expected_final_trust) < 0.15
 
 
+def test_trust_state_spec_with_driver_types_matches_the_exact_per_type_values(town):
+    """A spec testing the hidden trust, a population of three types: the tracker follows
+    J((type, trust), q) and reads satisfaction on the driver's true trust; per type, the
+    frequency of satisfied episodes agrees with the exact per-type value of the lifted unfolding."""
+    from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
+    from trustroute.policies.belief.problem import TRUST_STATE, problem
+    from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
+
+    population = load_driver_population(EXAMPLE_POPULATION_PATH)
+    found = problem(town, population, load_spec(SPECS / "phi1_trust.toml", town))
+    assert found.case == TRUST_STATE
+    setup = EpisodeSetup(town=town, driver_model=found.driver, spec=found.spec, junction_cap=14,
+                         fallback_after=None)
+    policy = trust_free_policy(town, found.spec)
+    _, per_type = evaluate_joint_by_type(found.pomdp, found.spec, policy, fallback_after=None,
+                                         max_junctions=14)
+    rng = np.random.default_rng(2024)
+    n = 600
+    for kind, (lower, upper) in zip(population.types, per_type, strict=True):
+        assert upper - lower < 1e-9
+        satisfied = sum(model_episode(setup, policy, SyntheticDriver(kind.model, rng), f"e{i}").satisfied
+                        for i in range(n))
+        assert abs(satisfied / n - lower) < 4 * math.sqrt(max(lower * (1 - lower), 1e-4) / n) + 1e-9
+
+
 def test_rejected_end(town, driver, phi1_strict):
     setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1_strict)
     tracker = EpisodeTracker(setup, FixedRoute(("E-A", "A-B", "B-C", "C-D")), "e", initial_trust=1)

@@ -1,0 +1,223 @@
+"""What a node of the episode tree knows besides its road, route and probability: its node state.
+
+The unfolding (policies/evaluation/unfolding.py) is the same whether the spec's DFA state is
+observed or hidden; only the node state differs:
+
+- `ObservedState`: the DFA state q is a function of the observations (specs without trust-state
+  atoms). A node carries q, the AV's belief b (which drives decisions and belief labels) and the
+  true posterior over trust (equal to b under the default rule); optionally the posterior of a
+  true driver other than the AV's model and a second reading of the spec (`Observation.truth`,
+  `Observation.reference`, docs/driver_types.md).
+- `HiddenState`: the spec tests the hidden trust, so q is hidden too; a node carries the exact
+  joint law J(θ, q) of policies/belief/trust_state_filter.py besides the posterior and b.
+
+Every array is vectorised over the frontier's rows; every method keeps the row subsets and the
+order of operations of the loops it serves, so values are bit for bit those of each reading.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Protocol
+
+import numpy as np
+
+from trustroute.policies.belief.trust_state_filter import JointFilter
+from trustroute.policies.logic.compiled import CompiledSpec
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+
+
+class NodeState(Protocol):
+    """Per-node state aligned with a frontier's rows."""
+
+    posterior: np.ndarray   # [n, n_trust] exact law of θ given the history (final trust reads it)
+    belief: np.ndarray      # [n, n_trust] the AV's belief (decisions and belief labels read it)
+
+    def take(self, rows: np.ndarray | slice) -> NodeState: ...
+
+    def masses(self, rows: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(accepted, rejected, live) probability of each row (of `rows`)."""
+
+    def told(self) -> np.ndarray:
+        """The DFA state a policy is told at each row."""
+
+    def joint_row(self, row: int) -> np.ndarray | None:
+        """J(θ, q) of a row for the policy's context; None when q is observed."""
+
+    def key(self, row: int) -> bytes:
+        """Bytes equal for two rows of the same route iff a policy must decide them alike."""
+
+    def children(self, road: np.ndarray, human_action: int, performance: int
+                 ) -> tuple[np.ndarray, NodeState]:
+        """(P(observation) per row, node state of the rows where it is possible) after driving
+        `road` (one per row) and observing (h, e) there."""
+
+    def joined(self, parts: list[NodeState], road: np.ndarray) -> NodeState:
+        """The children of one level in one state (`parts` in order; `road` their roads)."""
+
+    def merge_columns(self) -> np.ndarray:
+        """[n, width] float columns: rows equal in these (and road, and the policy's route
+        memory) have equal futures."""
+
+
+@dataclass(frozen=True, eq=False)
+class Observation:
+    """How the observed-DFA nodes move: the AV's model and filter, the true driver, the spec read."""
+
+    pomdp: TrustPOMDP
+    compiled: CompiledSpec
+    belief_rule: BeliefRule
+    truth: TrustPOMDP | None = None
+    reference: tuple[TrustPOMDP, CompiledSpec] | None = None
+
+    @property
+    def true_pomdp(self) -> TrustPOMDP:
+        return self.pomdp if self.truth is None else self.truth
+
+
+@dataclass(frozen=True, eq=False)
+class ObservedState:
+    """Rows of (q, AV belief, true posterior) and the reference reading (q_ref, its belief)."""
+
+    model: Observation
+    q: np.ndarray
+    belief: np.ndarray
+    posterior: np.ndarray
+    q_ref: np.ndarray
+    ref_belief: np.ndarray
+
+    def take(self, rows: np.ndarray | slice) -> ObservedState:
+        return replace(self, q=self.q[rows], belief=self.belief[rows], posterior=self.posterior[rows],
+                       q_ref=self.q_ref[rows], ref_belief=self.ref_belief[rows])
+
+    def masses(self, rows: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        q = self.q if rows is None else self.q[rows]
+        accepted = self.model.compiled.accepting[q]
+        rejected = self.model.compiled.rejecting[q] & ~accepted
+        live = ~(accepted | rejected)
+        return accepted.astype(float), rejected.astype(float), live.astype(float)
+
+    def reference_accepting(self, rows: np.ndarray) -> np.ndarray | None:
+        """Per row of `rows`: does the reference reading accept there (None: no reference)."""
+        if self.model.reference is None:
+            return None
+        return self.model.reference[1].accepting[self.q_ref[rows]]
+
+    def told(self) -> np.ndarray:
+        return self.q
+
+    def joint_row(self, row: int) -> None:
+        return None
+
+    def key(self, row: int) -> bytes:
+        return np.int64(self.q[row]).tobytes() + self.belief[row].tobytes()
+
+    def children(self, road: np.ndarray, human_action: int, performance: int
+                 ) -> tuple[np.ndarray, ObservedState]:
+        model, h, e = self.model, human_action, performance
+        new_posterior, p_obs = model.true_pomdp.belief_update(
+            self.posterior, model.true_pomdp.road_incident[road], h, e, rule="bayes")
+        if model.belief_rule == "bayes" and model.truth is None:
+            new_av = new_posterior
+        else:
+            new_av, _ = model.pomdp.belief_update(self.belief, model.pomdp.road_incident[road], h, e,
+                                                  rule=model.belief_rule)
+            if model.truth is not None:
+                # An observation the AV deems impossible leaves its belief unchanged (as the tracker).
+                impossible = ~(new_av.sum(axis=1) > 0)
+                new_av[impossible] = self.belief[impossible]
+        new_ref = self.ref_belief
+        if model.reference is not None:
+            ref_pomdp = model.reference[0]
+            new_ref, _ = ref_pomdp.belief_update(new_ref, ref_pomdp.road_incident[road], h, e)
+            stuck = ~(new_ref.sum(axis=1) > 0)
+            new_ref[stuck] = self.ref_belief[stuck]
+        possible = p_obs > 0
+        return p_obs, replace(self, q=self.q[possible], belief=new_av[possible],
+                              posterior=new_posterior[possible], q_ref=self.q_ref[possible],
+                              ref_belief=new_ref[possible])
+
+    def joined(self, parts: list[ObservedState], road: np.ndarray) -> ObservedState:
+        """The parts' rows with the DFA (and the reference's) stepped on the position (road, b)."""
+        q_before, belief, posterior, q_ref, ref_belief = (
+            np.concatenate([getattr(part, name) for part in parts])
+            for name in ("q", "belief", "posterior", "q_ref", "ref_belief"))
+        q = self.model.compiled.step(q_before, road, belief)
+        if self.model.reference is not None:
+            q_ref = self.model.reference[1].step(q_ref, road, ref_belief)
+        return replace(self, q=q, belief=belief, posterior=posterior, q_ref=q_ref, ref_belief=ref_belief)
+
+    def merge_columns(self) -> np.ndarray:
+        return np.concatenate([self.q[:, None].astype(float), self.belief, self.posterior,
+                               self.q_ref[:, None].astype(float), self.ref_belief], axis=1)
+
+
+def observed_root(model: Observation) -> ObservedState:
+    """The root: the AV's initial belief and DFA state at position 0, the true driver's prior."""
+    belief = np.asarray(model.pomdp.initial_belief, dtype=float)[None, :].copy()
+    posterior = (belief.copy() if model.truth is None
+                 else np.asarray(model.truth.initial_belief, dtype=float)[None, :].copy())
+    if model.reference is not None:
+        ref_belief = np.asarray(model.reference[0].initial_belief, dtype=float)[None, :].copy()
+        q_ref = model.reference[1].initial_states(ref_belief)
+    else:
+        ref_belief, q_ref = np.zeros((1, 0)), np.zeros(1, dtype=np.int64)
+    return ObservedState(model=model, q=model.compiled.initial_states(belief), belief=belief,
+                         posterior=posterior, q_ref=q_ref, ref_belief=ref_belief)
+
+
+@dataclass(frozen=True, eq=False)
+class HiddenState:
+    """Rows of (J(θ, q), true posterior, AV belief) under one joint filter and belief rule."""
+
+    filter: JointFilter
+    belief_rule: BeliefRule
+    joint: np.ndarray
+    posterior: np.ndarray
+    belief: np.ndarray
+
+    def take(self, rows: np.ndarray | slice) -> HiddenState:
+        return replace(self, joint=self.joint[rows], posterior=self.posterior[rows],
+                       belief=self.belief[rows])
+
+    def masses(self, rows: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.filter.masses(self.joint if rows is None else self.joint[rows])
+
+    def told(self) -> np.ndarray:
+        return self.filter.likeliest_q(self.joint)
+
+    def joint_row(self, row: int) -> np.ndarray:
+        return self.joint[row]
+
+    def key(self, row: int) -> bytes:
+        return self.belief[row].tobytes() + self.joint[row].tobytes()
+
+    def children(self, road: np.ndarray, human_action: int, performance: int
+                 ) -> tuple[np.ndarray, HiddenState]:
+        pomdp, h, e = self.filter.pomdp, human_action, performance
+        incident = pomdp.road_incident[road]
+        new_posterior, p_obs = pomdp.belief_update(self.posterior, incident, h, e, rule="bayes")
+        new_av = (new_posterior if self.belief_rule == "bayes"
+                  else pomdp.belief_update(self.belief, incident, h, e, rule=self.belief_rule)[0])
+        possible = p_obs > 0
+        new_joint = self.filter.update(self.joint[possible], new_posterior[possible], new_av[possible],
+                                       road[possible], incident[possible], h, e, p_obs[possible])
+        return p_obs, replace(self, joint=new_joint, posterior=new_posterior[possible],
+                              belief=new_av[possible])
+
+    def joined(self, parts: list[HiddenState], road: np.ndarray) -> HiddenState:
+        return replace(self, **{name: np.concatenate([getattr(part, name) for part in parts])
+                                for name in ("joint", "posterior", "belief")})
+
+    def merge_columns(self) -> np.ndarray:
+        """Columns of belief/trust_state_filter.distinct_nodes after the road: J, posterior, b."""
+        return np.concatenate([self.joint.reshape(len(self.joint), -1), self.posterior, self.belief],
+                              axis=1)
+
+
+def hidden_root(joint_filter: JointFilter, start: int, belief_rule: BeliefRule) -> HiddenState:
+    """The root: θ0 ~ the AV's initial belief (the true posterior and b alike), q0 read at `start`."""
+    belief = np.asarray(joint_filter.pomdp.initial_belief, dtype=float)[None, :].copy()
+    return HiddenState(filter=joint_filter, belief_rule=belief_rule,
+                       joint=joint_filter.initial(start, belief[0]), posterior=belief.copy(),
+                       belief=belief.copy())

@@ -1,0 +1,374 @@
+"""The one unfolding of the episode tree, level by level, for every evaluation.
+
+One level per junction: a node is one history of observations (its road, its probability, its
+route and its node state: policies/evaluation/node_state.py). At every level, in this order:
+1. the ledger (policies/evaluation/ledgers.py) ends the nodes the DFA has decided (and, for a
+   bounded reading, every node at the cap), and past the deadline cuts every open node;
+2. it cuts the open nodes too unlikely to follow;
+3. the actor decides the rest: the episode rules around a routing policy (`EpisodeActor`:
+   destination, cap, fallback; one decision per distinct route and node state) or a policy that
+   picks the next road for a batch of nodes at once (`SlotActor`);
+4. every moved node branches on every observation (h, e) at its next road (the node state's
+   filter); `Limits.chunk` nodes at a time, and with `Limits.paced` a batch is not begun when, at
+   the last batch's pace, it would end past the deadline (the nodes not moved are cut);
+5. with `Limits.merge`, children at the same road and node state on routes the policy reads
+   alike (`RoutingPolicy.route_memory`) become one node, their masses summed;
+6. the ledger keeps at most its budget of nodes (the rest are cut).
+Cut mass is unknown: it is the width of [lower, upper].
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
+from typing import Protocol
+
+import numpy as np
+
+from trustroute.networks.town import Town
+from trustroute.policies.belief.trust_state_filter import distinct_rows
+from trustroute.policies.evaluation.node_state import NodeState
+from trustroute.policies.routing.episode_rules import decide
+from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
+
+
+@dataclass(frozen=True, eq=False)
+class Frontier:
+    """The open nodes of one level: road index, probability, route id and node state per row."""
+
+    road: np.ndarray
+    probability: np.ndarray
+    route_id: np.ndarray
+    state: NodeState
+
+    @property
+    def size(self) -> int:
+        return int(self.probability.size)
+
+    def take(self, rows: np.ndarray | slice) -> Frontier:
+        return Frontier(road=self.road[rows], probability=self.probability[rows],
+                        route_id=self.route_id[rows], state=self.state.take(rows))
+
+
+def root(start: int, state: NodeState) -> Frontier:
+    return Frontier(road=np.array([start], dtype=np.int64), probability=np.ones(1),
+                    route_id=np.zeros(1, dtype=np.int64), state=state)
+
+
+@dataclass(frozen=True)
+class Moves:
+    """An actor's decisions for a batch of nodes: finished here, the fallback drove, next road."""
+
+    finished: np.ndarray
+    fired: np.ndarray
+    next_road: np.ndarray
+
+
+class Actor(Protocol):
+    def act(self, level: int, frontier: Frontier) -> Moves: ...
+
+    def moved(self, route_id: np.ndarray, next_road: np.ndarray) -> np.ndarray:
+        """Route ids of the nodes after driving `next_road`."""
+
+    def memory(self, frontier: Frontier) -> np.ndarray | None:
+        """A column for merging: equal for routes the policy reads alike (None: no routes)."""
+
+    def done(self) -> None: ...
+
+
+class Ledger(Protocol):
+    fallback_mass: float
+
+    def settle(self, frontier: Frontier, level: int, out_of_time: bool) -> np.ndarray | None: ...
+
+    def prune(self, frontier: Frontier, alive: np.ndarray, level: int) -> np.ndarray: ...
+
+    def end(self, frontier: Frontier, rows, reason: str, level: int) -> None: ...
+
+    def cut(self, frontier: Frontier, rows, level: int, why: str) -> None: ...
+
+    def trim(self, frontier: Frontier, level: int) -> np.ndarray | None: ...
+
+
+def extend_routes(routes: list[tuple[str, ...]], route_id: np.ndarray, chosen: np.ndarray,
+                  states: tuple[str, ...] | list[str]) -> np.ndarray:
+    """Append one route per distinct (old route, next road) to `routes`; the new ids, per node."""
+    n_states = len(states)
+    pair = route_id * n_states + chosen
+    unique_pairs, pair_inverse = np.unique(pair, return_inverse=True)
+    pair_ids = np.arange(len(routes), len(routes) + unique_pairs.size)
+    for rid, x2 in zip((unique_pairs // n_states).tolist(), (unique_pairs % n_states).tolist(),
+                       strict=True):
+        routes.append(routes[rid] + (states[x2],))
+    return pair_ids[pair_inverse]
+
+
+@dataclass(eq=False)
+class EpisodeActor:
+    """A routing policy under the episode rules (policies/routing/episode_rules.py).
+
+    The policy is asked once per distinct (route, DFA state told, node key). A policy that says
+    its decision on a route is the same for every belief and non-accepting DFA state
+    (`route_determined`: the fallback phase, the trust-free route) is asked once per route for the
+    nodes told a non-accepting state (an accepting one may switch the fallback off). A policy that
+    decides batches of nodes at once (JointTablePolicy.prefetch) is given each level's nodes with
+    their joint beliefs in one call first."""
+
+    policy: RoutingPolicy
+    town: Town
+    max_junctions: int
+    fallback_level: int | None
+    accepting: np.ndarray                      # bool [n_q]: the told states that are accepting
+    batched: object | None = None
+    routes: list = field(default_factory=list)
+    memory_ids: dict = field(default_factory=dict)
+    successor_index: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        town = self.town
+        self.successor_index = {(x, j): town.state_index(town.successor(road, j))
+                                for x, road in enumerate(town.states) for j in town.actions(road)}
+
+    def decide_node(self, context: DecisionContext, road: int, level: int) -> tuple[bool, bool, int]:
+        """(finished here, the fallback first drives here, next road index or -1) by the episode rules;
+        road is the index of context.road."""
+        decision = decide(self.policy, context, self.town, self.max_junctions)
+        if decision.end is not None:
+            return decision.end == "destination", False, -1
+        return (False, self.fallback_level == level and decision.fallback,
+                self.successor_index[(road, decision.junction)])
+
+    def context(self, frontier: Frontier, told: np.ndarray, row: int) -> DecisionContext:
+        state = frontier.state
+        return DecisionContext(route=self.routes[int(frontier.route_id[row])], dfa_state=int(told[row]),
+                               belief=state.belief[row], joint=state.joint_row(row))
+
+    def act(self, level: int, frontier: Frontier) -> Moves:
+        state = frontier.state
+        if self.batched is not None:       # given with joint-belief node states only
+            self.batched.prefetch(level, frontier.road, state.joint, state.belief)
+        told = state.told()
+        told_accepting = self.accepting[told]
+        n = frontier.size
+        out = (np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64))
+        unique_routes, inverse = np.unique(frontier.route_id, return_inverse=True)
+        order = np.argsort(inverse, kind="stable")
+        bounds = np.searchsorted(inverse[order], np.arange(unique_routes.size + 1))
+        decisions: dict[tuple[int, int, bytes], tuple[bool, bool, int]] = {}
+        for r, rid in enumerate(unique_routes.tolist()):
+            members = order[bounds[r]:bounds[r + 1]]
+            rest = self.decide_route(level, frontier, told, members[~told_accepting[members]], out)
+            for k in (members if rest else members[told_accepting[members]]).tolist():
+                key = (rid, int(told[k]), state.key(k))
+                decision = decisions.get(key)
+                if decision is None:
+                    decision = self.decide_node(self.context(frontier, told, k), int(frontier.road[k]), level)
+                    decisions[key] = decision
+                out[0][k], out[1][k], out[2][k] = decision
+        return Moves(*out)
+
+    def decide_route(self, level: int, frontier: Frontier, told: np.ndarray, members: np.ndarray,
+                     out: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:
+        """Decide `members` (one route, told non-accepting states) at once if the policy's decision
+        there is the route's; whether they are still to be decided one by one."""
+        if members.size == 0:
+            return True
+        first = int(members[0])
+        context = self.context(frontier, told, first)
+        if not self.policy.route_determined(context):
+            return True
+        out[0][members], out[1][members], out[2][members] = self.decide_node(
+            context, int(frontier.road[first]), level)
+        return False
+
+    def moved(self, route_id: np.ndarray, next_road: np.ndarray) -> np.ndarray:
+        return extend_routes(self.routes, route_id, next_road, self.town.states)
+
+    def memory(self, frontier: Frontier) -> np.ndarray:
+        unique_routes, route_inverse = np.unique(frontier.route_id, return_inverse=True)
+        return np.array([self.memory_ids.setdefault(self.policy.route_memory(self.routes[r]),
+                                                    len(self.memory_ids))
+                         for r in unique_routes.tolist()], dtype=float)[route_inverse]
+
+    def done(self) -> None:
+        if self.batched is not None:
+            self.batched.forget_prefetched()
+
+
+@dataclass(frozen=True, eq=False)
+class SlotActor:
+    """A policy that picks the action slot of a batch of nodes from (junctions driven, road, joint
+    belief, AV belief) alone (`action_slots`, routing.trust_state_table.JointTablePolicy), without
+    episode rules: nodes never finish and the fallback never drives; routes are not kept."""
+
+    slots: Callable[[int, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+    successor_table: np.ndarray
+
+    def act(self, level: int, frontier: Frontier) -> Moves:
+        state = frontier.state
+        slots = self.slots(level, frontier.road, state.joint, state.belief)
+        n = frontier.size
+        return Moves(np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
+                     self.successor_table[frontier.road, slots])
+
+    def moved(self, route_id: np.ndarray, next_road: np.ndarray) -> np.ndarray:
+        return route_id
+
+    def memory(self, frontier: Frontier) -> None:
+        return None
+
+    def done(self) -> None:
+        return None
+
+
+@dataclass(frozen=True)
+class Limits:
+    """How far the unfolding goes: the junction cap, the deadline (time.perf_counter(); every node
+    still open at a level begun past it is cut), batches of `chunk` nodes (None: the level at once)
+    paced against the deadline, merging of equal children."""
+
+    max_junctions: int
+    deadline: float | None = None
+    chunk: int | None = None
+    paced: bool = False
+    merge: bool = False
+
+
+@dataclass(eq=False)
+class Pace:
+    """The last batch's duration and the last merge's seconds per row, to foresee a late one."""
+
+    deadline: float | None
+    batch_seconds: float = 0.0
+    merge_rate: float = 0.0
+
+    def batch_is_late(self, began: float) -> bool:
+        return self.deadline is not None and began + self.batch_seconds > self.deadline
+
+    def merge_is_late(self, rows: int) -> bool:
+        return self.deadline is not None and time.perf_counter() + self.merge_rate * rows > self.deadline
+
+
+@dataclass(frozen=True, eq=False)
+class Counts:
+    nodes: int
+    max_frontier: int
+
+
+OUTCOMES_WITH_PERFORMANCE = ((0, 0), (0, 1), (1, 0), (1, 1))
+OUTCOMES = ((0, 0), (1, 0))
+
+
+def outcomes(depends_on_performance: bool) -> tuple[tuple[int, int], ...]:
+    """The observations (h, e) at a road: e is observed only when the driver's trust reads it."""
+    return OUTCOMES_WITH_PERFORMANCE if depends_on_performance else OUTCOMES
+
+
+def branch(frontier: Frontier, next_road: np.ndarray, route_id: np.ndarray,
+           observations: tuple[tuple[int, int], ...]) -> list[Frontier]:
+    """The children of every node, observation by observation (the impossible ones left out)."""
+    children = []
+    for h, e in observations:
+        p_obs, state = frontier.state.children(next_road, h, e)
+        possible = p_obs > 0
+        children.append(Frontier(road=next_road[possible],
+                                 probability=frontier.probability[possible] * p_obs[possible],
+                                 route_id=route_id[possible], state=state))
+    return children
+
+
+def joined(parts: list[Frontier]) -> Frontier:
+    road = np.concatenate([part.road for part in parts])
+    return Frontier(road=road, probability=np.concatenate([part.probability for part in parts]),
+                    route_id=np.concatenate([part.route_id for part in parts]),
+                    state=parts[0].state.joined([part.state for part in parts], road))
+
+
+def merged(frontier: Frontier, memory: np.ndarray | None) -> Frontier:
+    """One node per distinct (road, node state, route memory), its mass the sum of theirs."""
+    columns = [frontier.road[:, None].astype(float), frontier.state.merge_columns()]
+    if memory is not None:
+        columns.append(memory[:, None])
+    first, inverse = distinct_rows(np.concatenate(columns, axis=1))
+    probability = np.bincount(inverse, weights=frontier.probability)
+    return replace(frontier.take(first), probability=probability)
+
+
+def chunks(size: int, chunk: int | None) -> Iterator[slice]:
+    step = size if chunk is None else chunk
+    for begin in range(0, size, max(step, 1)):
+        yield slice(begin, begin + step)
+
+
+def move(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits: Limits,
+         observations: tuple[tuple[int, int], ...]) -> list[Frontier] | None:
+    """Decide and branch one batch of open nodes; None when the episode tree ends here (the cap)."""
+    moves = actor.act(level, frontier)
+    ledger.end(frontier, moves.finished, "destination", level)
+    if level == limits.max_junctions:
+        ledger.end(frontier, ~moves.finished, "cap", level)
+        return None
+    ledger.fallback_mass += float(frontier.probability[moves.fired].sum())
+    going = ~moves.finished
+    if not going.any():
+        return None
+    frontier, next_road = frontier.take(going), moves.next_road[going]
+    return branch(frontier, next_road, actor.moved(frontier.route_id, next_road), observations)
+
+
+def advance(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits: Limits, pace: Pace,
+            observations: tuple[tuple[int, int], ...]) -> Frontier | None:
+    """The next level's frontier from the open nodes of this one (None: the unfolding stops)."""
+    parts: list[Frontier] = []
+    late = False
+    for rows in chunks(frontier.size, limits.chunk):
+        began = time.perf_counter()
+        late = limits.paced and pace.batch_is_late(began)
+        if late:
+            # Out of time within the level: the nodes not moved yet are cut.
+            ledger.cut(frontier, slice(rows.start, None), level, "past_deadline")
+            break
+        children = move(level, frontier.take(rows), actor, ledger, limits, observations)
+        if children is None:
+            return None
+        parts += children
+        pace.batch_seconds = time.perf_counter() - began
+    if not parts:
+        return None
+    children = joined(parts)
+    if limits.paced and (late or pace.merge_is_late(children.size)):
+        # The children of the nodes moved are cut.
+        ledger.cut(children, slice(None), level, "past_deadline")
+        return None
+    if limits.merge:
+        began = time.perf_counter()
+        rows = children.size
+        children = merged(children, actor.memory(children))
+        pace.merge_rate = (time.perf_counter() - began) / rows
+    return children
+
+
+def unfold(frontier: Frontier, actor: Actor, ledger: Ledger, limits: Limits,
+           observations: tuple[tuple[int, int], ...]) -> Counts:
+    """Run the unfolding from `frontier` (the root); the ledger holds the result."""
+    nodes = max_frontier = frontier.size
+    pace = Pace(limits.deadline)
+    for level in range(limits.max_junctions + 1):
+        out_of_time = limits.deadline is not None and level > 0 and time.perf_counter() > limits.deadline
+        alive = ledger.settle(frontier, level, out_of_time)
+        if alive is None:
+            break
+        alive = ledger.prune(frontier, alive, level)
+        if not alive.any():
+            break
+        following = advance(level, frontier.take(np.flatnonzero(alive)), actor, ledger, limits, pace,
+                            observations)
+        if following is None:
+            break
+        kept = ledger.trim(following, level)
+        frontier = following if kept is None else following.take(kept)
+        nodes += frontier.size
+        max_frontier = max(max_frontier, frontier.size)
+    actor.done()
+    return Counts(nodes=nodes, max_frontier=max_frontier)
