@@ -453,11 +453,28 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
                 trust_atoms=trust_atoms, type_atoms=type_atoms)
 
 
-def load_spec(path: str | Path, town: Town | None = None) -> Spec:
+def check_coefficient_length(spec: Spec, n_trust: int, driver_source: str = "") -> None:
+    """InputError (one line, exit 2) when a belief atom's coeffs do not have one entry per trust level."""
+    for name, atom in spec.belief_atoms.items():
+        if len(atom.coeffs) != n_trust:
+            raise InputError(spec.source_path or spec.name, f"beliefs.{name}.coeffs",
+                             f"belief atom '{name}' has {len(atom.coeffs)} coefficients but the driver "
+                             f"model{f' ({driver_source})' if driver_source else ''} defines {n_trust} "
+                             "trust levels",
+                             f"give exactly {n_trust} coefficients, one per trust level")
+
+
+def load_spec(path: str | Path, town: Town | None = None, n_trust: int | None = None,
+              driver_source: str = "") -> Spec:
     """Load and validate a spec file (through the guarded reader, trustroute/core/validation.py); with
-    `town`, also check its roads against the town."""
+    `town`, also check its roads against the town; with `n_trust`, the trust levels of the driver
+    model (or population, named by `driver_source`) it is used with, check every belief atom has one
+    coefficient per level. Every command that reads a spec with a driver model loads it here."""
     text = read_text(path, str(path), "the spec file", "pass an existing .toml file, e.g. specs/phi1.toml")
-    return spec_from_text(text, str(path), town)
+    spec = spec_from_text(text, str(path), town)
+    if n_trust is not None:
+        check_coefficient_length(spec, n_trust, driver_source)
+    return spec
 
 
 def state_only_projection(spec: Spec) -> Spec:
