@@ -54,6 +54,24 @@ def test_relative_paths_resolve_against_the_config_folder(tmp_path, monkeypatch)
     assert config.specs == (str((folder / "mine.toml").resolve()),)
 
 
+def test_default_output_is_in_the_config_folder_not_the_current_directory(tmp_path, monkeypatch):
+    """docs/formats/study_config.md: `output` (default studies/<name>) is relative to the config's folder."""
+    from trustroute.harness.study.config import study_config_from_dict, study_directory
+
+    folder, elsewhere = tmp_path / "cfg", tmp_path / "elsewhere"
+    folder.mkdir()
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    config = load_study_config(_write(folder, MINIMAL.replace("specs/phi1.toml", "phi1"), "mine.toml"))
+    assert study_directory(config, None) == (folder / "studies" / "mine").resolve()
+    assert study_directory(config, "out") == Path("out")   # --out: as given, from the current directory
+    named = load_study_config(_write(folder, MINIMAL.replace("specs/phi1.toml", "phi1") + 'name = "x"\n',
+                                     "n.toml"))
+    assert study_directory(named, None) == (folder / "studies" / "x").resolve()
+    data = {"study": {"participants": 2, "seed": 1, "specs": ["phi1"], "conditions": ["free"]}}
+    assert study_directory(study_config_from_dict(data), None) == (elsewhere / "studies" / "study").resolve()
+
+
 def test_optional_keys_and_population(tmp_path, monkeypatch):
     monkeypatch.chdir(REPO)
     text = (
