@@ -323,7 +323,8 @@ def _check_roads(roads: list[str], owner: str, place: Callable[[str], str], sour
         if town is not None and road not in town.states:
             raise InputError(source, place(road), f"{owner}: '{road}' is not a directed road of the town "
                              f"({town.source_path or 'given town'})",
-                             "use directed roads 'U-V' of the town (trustroute model lists them)")
+                             "use directed roads 'U-V' of the town, the keys of its \"incidents\" "
+                             f"(e.g. {', '.join(sorted(town.states)[:3])})")
 
 
 def _state_atoms(raw: dict, spec: _SpecSource, town: Town | None) -> dict[str, frozenset[str]]:
