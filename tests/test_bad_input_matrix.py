@@ -416,6 +416,7 @@ def _policy_object_array(good: Path, folder: Path) -> Path:
 
 
 POLICY_CASES = [
+    ("horizon_as_text", policy_case(document={"horizon": "twenty"})),
     ("non_utf8_json", _policy_json_text(lambda t: t.replace('"aware"', '"aw\xe9re"'))),
     ("huge_integer", _policy_json_text(lambda t: t.replace(f'"version": {POLICY_VERSION}',
                                                            '"version": ' + "3" * 5000))),

@@ -135,6 +135,14 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
     return path
 
 
+def _check_junction_count(value: object, key: str, where: str) -> None:
+    """A horizon of the header: a junction count from 0 to 10 000, or null (unbounded)."""
+    count = isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= 10_000
+    if not (value is None or count):
+        raise InputError(where, key, f"{key.replace('_', ' ')} {str(value)[:30]} is not a junction count or "
+                         "null", RESYNTH)
+
+
 def read_policy_document(path: str | Path) -> dict:
     """The JSON part of a policy file, checked for format (InputError otherwise)."""
     from trustroute.core.validation import check_keys, read_json
@@ -159,11 +167,8 @@ def read_policy_document(path: str | Path) -> dict:
         raise InputError(where, "kind", f"unknown policy kind {str(document['kind'])[:30]!r} "
                          f"(only {JOINT_KIND!r})", RESYNTH)
     check_keys(document, DOCUMENT_KEYS + (JOINT_KEYS if joint else ()), where, "", "policy file")
-    guide = document.get("guide_horizon")
-    if joint and not (guide is None or (isinstance(guide, int) and not isinstance(guide, bool)
-                                        and 0 <= guide <= 10_000)):
-        raise InputError(where, "guide_horizon", f"guide horizon {str(guide)[:30]} is not a junction "
-                         "count or null", RESYNTH)
+    for key in ("horizon", "guide_horizon") if joint else ("horizon",):
+        _check_junction_count(document.get(key), key, where)
     for key in ("lower", "upper"):
         value = document.get(key)
         if value is not None and not (isinstance(value, int | float) and not isinstance(value, bool)
