@@ -1,17 +1,16 @@
 """scLDTL spec files: TOML schema, validation (optionally against a town), identity, projection.
 
-A spec file (e.g. specs/phi1.toml) has `name`, `start` (directed road "U-V", position 0),
-`formula` (policies/logic/formula.py grammar), a `[states]` table (atom -> list of directed roads) and
+A spec file (e.g. specs/phi1.toml) has `name`, `start` (directed road "U-V", position 0), `formula`
+(policies/logic/formula.py grammar), a `[states]` table (atom -> list of directed roads) and
 `[beliefs.NAME]` tables with `coeffs` (one per trust level of the driver model; the default model
-has 7, and the labeller checks the length against the model in use) and `offset`: a belief atom is true
-iff `offset - coeffs·b < 0` (strict; docs/model.md, "scLDTL"; every key: docs/formats/spec.md), and a
-`[trust_states]` table of
-trust-state atoms `NAME = { roads = [...], trust = [6, 7] }`: true at a position iff the road is
-one of `roads` (any road when `roads` is absent) and the human's hidden trust is one of the levels
-`trust` (docs/trust_states.md), and a `[type_beliefs]` table of type-belief atoms
-`NAME = { types = ["flat"], above = 0.7 }`: true iff the AV's belief that the driver is of one of
-`types` exceeds `above` (strict; the types of a driver population, docs/driver_types.md). Every
-error is an InputError naming the file, line and column.
+has 7; `load_spec` given the model's trust levels, as every command calls it, checks the length) and
+`offset`: a belief atom is true iff `offset - coeffs·b < 0` (strict; docs/model.md, "scLDTL"; every
+key: docs/formats/spec.md), and a `[trust_states]` table of trust-state atoms `NAME = { roads =
+[...], trust = [6, 7] }`: true at a position iff the road is one of `roads` (any road when `roads`
+is absent) and the human's hidden trust is one of the levels `trust` (docs/trust_states.md), and a
+`[type_beliefs]` table of type-belief atoms `NAME = { types = ["flat"], above = 0.7 }`: true iff the
+AV's belief that the driver is of one of `types` exceeds `above` (strict; the types of a driver
+population, docs/driver_types.md). Every error is an InputError naming the file, line and column.
 """
 
 from __future__ import annotations
