@@ -126,7 +126,7 @@ def sample_population(nominal: DriverModel, count: int, config: PopulationConfig
 
 
 # -- the [population] table of a study file --------------------------------------------------
-# Every key of the table (docs/formats/study_config.md, "[population]"); the rules below check what
+# Every key of the table (docs/formats/study_config.md, "`[population]`"); the rules below check what
 # a table cannot (one entry per trust level, summing to 1).
 
 FIELDS: tuple[Field, ...] = (
