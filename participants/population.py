@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -171,7 +172,8 @@ def population_config_from_dict(data: Mapping[str, object] | None, source: str,
     if not isinstance(data, Mapping):
         raise InputError(source, "population", "expected a table", "write a [population] table")
     values = check_fields(dict(data), FIELDS, source, "[population] table", "population")
-    return PopulationConfig(concentration=float(values["concentration"]),
-                            takeover_spread=float(values["takeover_spread"]),
-                            initial_trust=_initial_trust(values["initial_trust"], source, n_trust),
-                            report_accuracy=float(values["report_accuracy"]))
+    number = {key: float(cast(float, values[key])) for key in ("concentration", "takeover_spread",
+                                                                "report_accuracy")}
+    initial_trust = _initial_trust(cast(list | None, values["initial_trust"]), source, n_trust)
+    return PopulationConfig(concentration=number["concentration"], takeover_spread=number["takeover_spread"],
+                            initial_trust=initial_trust, report_accuracy=number["report_accuracy"])

@@ -32,11 +32,11 @@ def spec_report(spec_path: str, town_path: str | None, population_path: str | No
     if population_path is not None and driver_path is not None:
         raise click.UsageError("give --driver or --population, not both")
     town = load_town(town_path)
-    population = load_driver_population(population_path) if population_path is not None else None
-    if population is None:
-        driver = load_driver_model(driver_path)
+    if population_path is None:
+        population, driver = None, load_driver_model(driver_path)
         spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
     else:
+        population = load_driver_population(population_path)
         spec = load_spec(spec_path, town, population.types[0].model.n_trust, population_path)
     started = time.perf_counter()
     try:
@@ -48,7 +48,7 @@ def spec_report(spec_path: str, town_path: str | None, population_path: str | No
         raise InputError(spec.source_path, "formula", "the formula is nested too deeply to translate",
                          "simplify the formula") from None
     seconds = time.perf_counter() - started
-    if population is not None:
+    if population_path is not None and population is not None:
         from trustroute.policies.belief.driver_types import lift_population, lift_spec
 
         lifted = lift_spec(spec, population, population_path)   # a type it lacks: one line, exit 2
