@@ -333,8 +333,8 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
     specs = _specs(study["specs"], base, source)
     conditions = _conditions(study["conditions"], base, source)
     _check_background_vehicles(study["background_vehicles"], source)
-    name = study["name"] if study["name"] is not None else (Path(source).stem if source.endswith(".toml")
-                                                             else "study")
+    default_name = Path(source).stem if source.endswith(".toml") else "study"
+    name = str(study["name"]) if study["name"] is not None else default_name
     return StudyConfig(
         source_path=source,
         name=name,
