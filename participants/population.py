@@ -23,7 +23,7 @@ from typing import cast
 import numpy as np
 
 from trustroute.core.errors import InputError
-from trustroute.core.fields import PROBABILITY, Field, ListOf, Number, check_fields, keys
+from trustroute.core.fields import PROBABILITY, Field, ListOf, Number, check_fields
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, ROW_TOLERANCE, DriverModel
 
 
@@ -143,7 +143,6 @@ FIELDS: tuple[Field, ...] = (
     Field(key="report_accuracy", kind=PROBABILITY, default=DEFAULT_REPORT_ACCURACY,
           problem=lambda seen: f"{seen.value!r} is not a probability", fix="give a number in [0, 1]"),
 )
-POPULATION_KEYS: tuple[str, ...] = keys(FIELDS)
 
 
 def _initial_trust(dist: list | None, source: str, n_trust: int | None) -> tuple[float, ...] | None:
