@@ -295,14 +295,24 @@ def _roads(raw: list, junctions: dict[str, tuple[float, float]], path: str,
     return tuple(roads)
 
 
+SHOWN_MISSING = 5  # directed roads named in the message when many lack an incident entry
+
+
 def _check_incidents(incidents: dict, roads: tuple[tuple[str, str], ...], one_way: frozenset[tuple[str, str]],
                      path: str) -> None:
     """Exactly one entry per directed road of the town (one direction only for one-way roads)."""
     directed = {road_name(a, b) for a, b in directed_pairs(roads, one_way)}
-    for key in sorted(directed):
-        if key not in incidents:
-            raise InputError(path, f"incidents.{key}", f"missing incident entry for directed road {key}",
-                             f"add \"{key}\": one of {', '.join(INCIDENT_TYPES)}")
+    missing = sorted(key for key in directed if key not in incidents)
+    if len(missing) == 1:
+        raise InputError(path, f"incidents.{missing[0]}",
+                         f"missing incident entry for directed road {missing[0]}",
+                         f"add \"{missing[0]}\": one of {', '.join(INCIDENT_TYPES)}")
+    if missing:
+        shown = ", ".join(missing[:SHOWN_MISSING])
+        more = f" and {len(missing) - SHOWN_MISSING} more" if len(missing) > SHOWN_MISSING else ""
+        raise InputError(path, f"incidents.{missing[0]}", f"missing incident entries for {len(missing)} "
+                         f"directed roads: {shown}{more}", "add one entry per direction of every road, "
+                         f"e.g. \"{missing[0]}\": one of {', '.join(INCIDENT_TYPES)}")
     for key in incidents:
         if key not in directed:
             raise InputError(path, f"incidents.{key}", f"'{key}' is not a directed road of this town",

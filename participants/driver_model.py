@@ -148,6 +148,8 @@ class DriverModel:
             "initial_belief": self.initial_belief.tolist(),
             "source": self.provenance,
         }
+        if not self.trust_free_takeover_probability:
+            del out["trust_free_takeover_probability"]   # an empty table is a table without its entries
         if self.depends_on_performance:
             out["failure_probability"] = {
                 inc: self.failure_probability[i].tolist()
@@ -187,7 +189,8 @@ FIELDS: tuple[Field, ...] = (
     Field(key="source", kind=Anything(), default=""),  # provenance, kept as text
 )
 DRIVER_MODEL_KEYS: tuple[str, ...] = keys(FIELDS)
-INCIDENT_TABLES: tuple[str, ...] = ("takeover_probability", "trust_transition", "failure_probability")
+INCIDENT_TABLES: tuple[str, ...] = ("takeover_probability", "trust_transition", "failure_probability",
+                                    "trust_free_takeover_probability")
 # trust_transition.<incident>.<action> may be split by the AV's performance
 PERFORMANCE_FIELDS: tuple[Field, ...] = tuple(
     Field(key=perf, kind=Anything(), required=True, missing=f"missing '{perf}' matrix",
@@ -242,6 +245,17 @@ def _check_incident_keys(values: dict, incidents: list[str], path: str) -> None:
         if extra:
             raise InputError(path, f"{key}.{extra[0]}", f"'{extra[0]}' is not in incident_types",
                              "add it to incident_types or remove the entry")
+
+
+def _check_trust_free_entries(values: dict, incidents: list[str], given: bool, path: str) -> None:
+    """The trust-free table, when given, has an entry for every incident type, as every table keyed
+    by incident type but the failure model must (a partial table is a mistake, not a choice)."""
+    table = values["trust_free_takeover_probability"]
+    missing = [incident for incident in incidents if incident not in table]
+    if given and missing:
+        raise InputError(path, f"trust_free_takeover_probability.{missing[0]}",
+                         f"missing trust-free takeover probability for '{missing[0]}'",
+                         "add one probability per incident type, or leave out the whole table")
 
 
 def _action_matrices(entry: object, n: int, path: str, place: str) -> np.ndarray:
@@ -303,6 +317,7 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
     values = check_fields(data, FIELDS, path, "driver model")
     levels, incidents = values["trust_levels"], values["incident_types"]
     _check_incident_keys(values, incidents, path)
+    _check_trust_free_entries(values, incidents, "trust_free_takeover_probability" in data, path)
     takeover, failure, transition = _incident_arrays(values, incidents, len(levels), path)
     free = values["trust_free_takeover_probability"]
     return DriverModel(

@@ -18,11 +18,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TypedDict, TypeGuard
+from typing import cast
 
 import numpy as np
 
 from trustroute.core.errors import InputError
+from trustroute.core.fields import PROBABILITY, Field, ListOf, Number, check_fields
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, ROW_TOLERANCE, DriverModel
 
 
@@ -126,21 +127,36 @@ def sample_population(nominal: DriverModel, count: int, config: PopulationConfig
 
 
 # -- the [population] table of a study file --------------------------------------------------
+# Every key of the table (docs/formats/study_config.md, "`[population]`"); the rules below check what
+# a table cannot (one entry per trust level, summing to 1).
 
-_KEYS = ("concentration", "takeover_spread", "initial_trust", "report_accuracy")
+FIELDS: tuple[Field, ...] = (
+    Field(key="concentration", kind=Number(minimum=0.0, open_below=True, finite=False), default=math.inf,
+          problem=lambda seen: f"{seen.value!r} is not a number > 0",
+          fix="give a positive concentration, or inf for the nominal model"),
+    Field(key="takeover_spread", kind=Number(minimum=0.0), default=0.0,
+          problem=lambda seen: f"{seen.value!r} is not a finite number >= 0",
+          fix="give the sd of the logit shift, 0 for none"),
+    Field(key="initial_trust", kind=ListOf(item=PROBABILITY, min_items=1),
+          problem=lambda seen: f"{seen.value!r} is not a list of probabilities",
+          fix="give one probability per trust level"),
+    Field(key="report_accuracy", kind=PROBABILITY, default=DEFAULT_REPORT_ACCURACY,
+          problem=lambda seen: f"{seen.value!r} is not a probability", fix="give a number in [0, 1]"),
+)
 
 
-def _number(value: object) -> TypeGuard[int | float]:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-class _PopulationValues(TypedDict, total=False):
-    """The PopulationConfig fields a [population] table gives."""
-
-    concentration: float
-    takeover_spread: float
-    report_accuracy: float
-    initial_trust: tuple[float, ...]
+def _initial_trust(dist: list | None, source: str, n_trust: int | None) -> tuple[float, ...] | None:
+    """One probability per trust level (when `n_trust` is known), summing to 1."""
+    if dist is None:
+        return None
+    if n_trust is not None and len(dist) != n_trust:
+        raise InputError(source, "population.initial_trust", f"has {len(dist)} entries, the "
+                         f"driver model has {n_trust} trust levels", "give one per trust level")
+    total = math.fsum(dist)
+    if abs(total - 1) > ROW_TOLERANCE:
+        raise InputError(source, "population.initial_trust", f"sums to {total:.12g}, not 1",
+                         "renormalise it")
+    return tuple(float(v) for v in dist)
 
 
 def population_config_from_dict(data: Mapping[str, object] | None, source: str,
@@ -154,41 +170,9 @@ def population_config_from_dict(data: Mapping[str, object] | None, source: str,
         return PopulationConfig()
     if not isinstance(data, Mapping):
         raise InputError(source, "population", "expected a table", "write a [population] table")
-    unknown = sorted(set(data) - set(_KEYS))
-    if unknown:
-        raise InputError(source, f"population.{unknown[0]}", f"unknown key '{unknown[0]}'",
-                         f"use only {', '.join(_KEYS)}")
-    values: _PopulationValues = {}
-    if "concentration" in data:
-        c = data["concentration"]
-        if not (_number(c) and c > 0):
-            raise InputError(source, "population.concentration", f"{c!r} is not a number > 0",
-                             "give a positive concentration, or inf for the nominal model")
-        values["concentration"] = float(c)
-    if "takeover_spread" in data:
-        s = data["takeover_spread"]
-        if not (_number(s) and math.isfinite(s) and s >= 0):
-            raise InputError(source, "population.takeover_spread", f"{s!r} is not a finite number >= 0",
-                             "give the sd of the logit shift, 0 for none")
-        values["takeover_spread"] = float(s)
-    if "report_accuracy" in data:
-        a = data["report_accuracy"]
-        if not (_number(a) and 0 <= a <= 1):
-            raise InputError(source, "population.report_accuracy", f"{a!r} is not a probability",
-                             "give a number in [0, 1]")
-        values["report_accuracy"] = float(a)
-    if "initial_trust" in data:
-        dist = data["initial_trust"]
-        if not (isinstance(dist, list) and dist and all(_number(v) and math.isfinite(v) and 0 <= v <= 1
-                                                        for v in dist)):
-            raise InputError(source, "population.initial_trust", f"{dist!r} is not a list of "
-                             "probabilities", "give one probability per trust level")
-        if n_trust is not None and len(dist) != n_trust:
-            raise InputError(source, "population.initial_trust", f"has {len(dist)} entries, the "
-                             f"driver model has {n_trust} trust levels", "give one per trust level")
-        total = math.fsum(dist)
-        if abs(total - 1) > ROW_TOLERANCE:
-            raise InputError(source, "population.initial_trust", f"sums to {total:.12g}, not 1",
-                             "renormalise it")
-        values["initial_trust"] = tuple(float(v) for v in dist)
-    return PopulationConfig(**values)
+    values = check_fields(dict(data), FIELDS, source, "[population] table", "population")
+    number = {key: float(cast(float, values[key])) for key in ("concentration", "takeover_spread",
+                                                                "report_accuracy")}
+    initial_trust = _initial_trust(cast(list | None, values["initial_trust"]), source, n_trust)
+    return PopulationConfig(concentration=number["concentration"], takeover_spread=number["takeover_spread"],
+                            initial_trust=initial_trust, report_accuracy=number["report_accuracy"])

@@ -3,8 +3,8 @@
 The problem's case (policies/belief/problem.py) chooses the method: a formula that tests the
 hidden trust (TRUST_STATE) goes to policies/trust_state_synthesis/synthesis.py (search over joint
 (trust, DFA state) beliefs); every other problem (PLAIN, and DRIVER_TYPES on the type-aware model)
-goes to policies/synthesis/search.py unchanged, so its bounds and policy file are exactly those of
-`search.synthesize` (tests/policies/test_synthesize_spec.py compares them byte for byte).
+goes to policies/synthesis/belief_synthesis.py unchanged, so its bounds and policy file are exactly those of
+`belief_synthesis.synthesize` (tests/policies/test_synthesize_spec.py compares them byte for byte).
 """
 
 from __future__ import annotations

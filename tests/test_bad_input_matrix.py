@@ -275,9 +275,11 @@ SPEC_CASES = [
     ("name_with_parent_dirs", spec_with('name = "phi1"', 'name = "../../../escaped"'), spec_cache_command),
     ("name_of_300_chars", spec_with('name = "phi1"', f'name = "{"p" * 300}"'), spec_cache_command),
     # Any number of trust levels is a valid spec; against the 7-level default driver model it is a
-    # mismatch (`spec check` has no driver model, so the check is where one is used).
+    # mismatch, which every command that reads the spec finds (the one spec loader).
     ("five_coefficients", spec_with("coeffs = [1, 0, 0, 0, 0, 0, 0]", "coeffs = [1, 0, 0, 0, 0]"),
      spec_cache_command),
+    ("five_coefficients_spec_check", spec_with("coeffs = [1, 0, 0, 0, 0, 0, 0]", "coeffs = [1, 0, 0, 0, 0]"),
+     spec_check_command),
 ]
 
 # -- study config ---------------------------------------------------------------------------------------
@@ -414,6 +416,7 @@ def _policy_object_array(good: Path, folder: Path) -> Path:
 
 
 POLICY_CASES = [
+    ("horizon_as_text", policy_case(document={"horizon": "twenty"})),
     ("non_utf8_json", _policy_json_text(lambda t: t.replace('"aware"', '"aw\xe9re"'))),
     ("huge_integer", _policy_json_text(lambda t: t.replace(f'"version": {POLICY_VERSION}',
                                                            '"version": ' + "3" * 5000))),

@@ -325,6 +325,8 @@ class FitResult:
             out["failure_probability"] = {
                 inc: p.failure[i].tolist() for i, inc in enumerate(model.incident_types)
             }
+        if not model.trust_free_takeover_probability:
+            del out["trust_free_takeover_probability"]   # an empty table is a table without its entries
         return out
 
     def model(self) -> DriverModel:

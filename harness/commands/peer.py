@@ -28,9 +28,10 @@ def storm_comparison(spec_path: str, town_path: str | None, driver_path: str | N
 
     require_storm("trustroute peer storm")
     town = load_town(town_path)
-    spec = load_spec(spec_path, town)
+    driver = load_driver_model(driver_path)
+    spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
     check_exportable(spec)
-    pomdp = build_pomdp(town, load_driver_model(driver_path))
+    pomdp = build_pomdp(town, driver)
     product = explicit_product(pomdp, spec, horizon)
     storm = run_storm(product, time_limit=time_limit, resolution=resolution)
     ours = joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)

@@ -7,6 +7,16 @@ from pathlib import Path
 
 import click
 
+VIEWER_PORT, DATA_PORT = 9090, 9876
+
+
+def viewer_hint(rrd: Path) -> str:
+    """How to open a recording: the viewer, or without a display a web viewer served on 127.0.0.1
+    only (the README's form: never every interface)."""
+    return (f"open it with `rerun {rrd}`, or on a machine without a display: `rerun --serve-web --bind "
+            f"127.0.0.1 --web-viewer-port {VIEWER_PORT} --port {DATA_PORT} {rrd}` and browse to "
+            f"http://127.0.0.1:{VIEWER_PORT}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{DATA_PORT}%2Fproxy")
+
 
 @click.command("replay")
 @click.argument("study_dir", metavar="STUDY_DIR", type=click.Path())
@@ -52,7 +62,4 @@ def replay(
     )
     click.echo("route: " + " ".join(payload["route"]))
     if rrd:
-        click.echo(
-            f"wrote {rrd} ({payload['rrd_bytes'] / 1000:.0f} kB); open it with `rerun {rrd}`, or on a "
-            f"machine without a display: `rerun --web-viewer {rrd}` and browse to the printed address"
-        )
+        click.echo(f"wrote {rrd} ({payload['rrd_bytes'] / 1000:.0f} kB); {viewer_hint(rrd)}")

@@ -116,7 +116,6 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.participants.synthetic_driver import SyntheticDriver
-    from trustroute.policies.logic.labelling import check_coefficient_length
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.resolve import resolve_policy
 
@@ -137,8 +136,7 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
     else:
         town = load_town(town_path)
         driver_model = load_driver_model(driver_path)
-        spec = load_spec(spec_path, town)
-        check_coefficient_length(spec, driver_model.n_trust, driver_model.source_path)
+        spec = load_spec(spec_path, town, driver_model.n_trust, driver_model.source_path)
         policy = resolve_policy(policy_name, town, driver_model, spec, cache_dir)
         setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
     if initial_trust is not None and initial_trust not in driver_model.trust_levels:

@@ -16,18 +16,28 @@ from trustroute.core.errors import InputError
 from trustroute.harness.commands.output import json_option, with_paths
 
 
-def spec_report(spec_path: str, town_path: str | None, population_path: str | None = None
-                ) -> tuple[dict, str]:
-    """(the JSON-ready summary of a spec check, the DFA as dot text). population_path: check the
-    spec against a driver population (type-belief atoms, the threshold check on its type-aware
-    filter; docs/driver_types.md)."""
+def spec_report(spec_path: str, town_path: str | None, population_path: str | None = None,
+                driver_path: str | None = None) -> tuple[dict, str]:
+    """(the JSON-ready summary of a spec check, the DFA as dot text). The spec is loaded as every
+    command loads it: against the town and the driver model (`driver_path`, default the packaged
+    model) or, with population_path, the driver population (type-belief atoms, the threshold check
+    on its type-aware filter; docs/driver_types.md)."""
     from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.participants.driver_population import load_driver_population
     from trustroute.policies.logic.dfa import DFATooLarge, dfa_from_formula
     from trustroute.policies.logic.lint import lint
     from trustroute.policies.logic.spec import load_spec
 
+    if population_path is not None and driver_path is not None:
+        raise click.UsageError("give --driver or --population, not both")
     town = load_town(town_path)
-    spec = load_spec(spec_path, town)
+    if population_path is None:
+        population, driver = None, load_driver_model(driver_path)
+        spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
+    else:
+        population = load_driver_population(population_path)
+        spec = load_spec(spec_path, town, population.types[0].model.n_trust, population_path)
     started = time.perf_counter()
     try:
         dfa = dfa_from_formula(spec.formula, spec.formula_atoms)
@@ -38,17 +48,13 @@ def spec_report(spec_path: str, town_path: str | None, population_path: str | No
         raise InputError(spec.source_path, "formula", "the formula is nested too deeply to translate",
                          "simplify the formula") from None
     seconds = time.perf_counter() - started
-    if population_path is not None:
-        from trustroute.participants.driver_population import load_driver_population
+    if population_path is not None and population is not None:
         from trustroute.policies.belief.driver_types import lift_population, lift_spec
-        from trustroute.policies.logic.labelling import check_coefficient_length
 
-        population = load_driver_population(population_path)
-        check_coefficient_length(spec, population.types[0].model.n_trust, population_path)
         lifted = lift_spec(spec, population, population_path)   # a type it lacks: one line, exit 2
         warnings = lint(lifted, town, dfa, lift_population(population))
     else:
-        warnings = lint(spec, town, dfa)
+        warnings = lint(spec, town, dfa, driver)
     summary = {
         "name": spec.name,
         "file": spec.source_path,
@@ -81,16 +87,18 @@ def spec() -> None:
 @json_option
 @click.option("--dot", "dot_path", type=click.Path(), default=None,
               help="FILE to write the DFA into, as Graphviz dot.")
+@click.option("--driver", "driver_path", type=click.Path(), default=None,
+              help="Driver model FILE the belief atoms' coefficients are checked against (default model).")
 @click.option("--population", "population_path", type=click.Path(), default=None,
               help="Driver-population FILE to check type-belief atoms against (docs/driver_types.md).")
 def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | None,
-          population_path: str | None) -> None:
+          driver_path: str | None, population_path: str | None) -> None:
     """Parse SPEC, print its DFA size and the linter's warnings."""
     from trustroute.core.output_files import atomic_write_text, check_output_file
 
     if dot_path is not None:
         check_output_file(dot_path, "--dot", "dot file")
-    summary, dot = spec_report(spec_path, town_path, population_path)
+    summary, dot = spec_report(spec_path, town_path, population_path, driver_path)
     if dot_path is not None:
         atomic_write_text(Path(dot_path), dot, "dot file", "pass a writable path to --dot")
     if as_json:

@@ -23,13 +23,11 @@ def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.policies.belief.problem import problem
-    from trustroute.policies.logic.labelling import check_coefficient_length
     from trustroute.policies.logic.spec import load_spec
 
     town = load_town(town_path)
     driver = load_driver_model(driver_path)
-    spec = load_spec(spec_path, town)
-    check_coefficient_length(spec, driver.n_trust, driver.source_path)
+    spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
     return problem(town, driver, spec)
 
 
@@ -145,7 +143,6 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
     """`synth --population`: the Bayes or robust objective over a population's driver types."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_population import load_driver_population
-    from trustroute.policies.logic.labelling import check_coefficient_length
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.resolve import synthesis_progress
     from trustroute.policies.routing.files import array_path, save_policy
@@ -158,9 +155,7 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
 
     town = load_town(town_path)
     population = load_driver_population(population_path)
-    spec = load_spec(spec_path, town)
-    base = population.types[0].model
-    check_coefficient_length(spec, base.n_trust, population_path)
+    spec = load_spec(spec_path, town, population.types[0].model.n_trust, population_path)
     with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
                             not as_json) as on_iteration:
         found = synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
@@ -333,7 +328,6 @@ def load_population_routing(spec_path: str, town_path: str | None, population_pa
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_population import load_driver_population
     from trustroute.policies.belief.driver_types import lift_population, lift_spec
-    from trustroute.policies.logic.labelling import check_coefficient_length
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.resolve import population_policy
     from trustroute.policies.routing.files import load_population_policy
@@ -341,8 +335,7 @@ def load_population_routing(spec_path: str, town_path: str | None, population_pa
 
     town = load_town(town_path)
     population = load_driver_population(population_path)
-    spec = load_spec(spec_path, town)
-    check_coefficient_length(spec, population.types[0].model.n_trust, population_path)
+    spec = load_spec(spec_path, town, population.types[0].model.n_trust, population_path)
     if policy_name in ("robust", "bayes"):
         policy, model, lifted_spec = population_policy(town, population, spec, policy_name, cache_dir,
                                                        population_source=population_path,

@@ -27,7 +27,8 @@ participant's model is that type's model (varied around it by `[population]` whe
 
 Every key, its default and its check: docs/formats/study_config.md.
 
-Relative paths resolve against the config file's folder, then the current directory; spec names
+Relative paths resolve against the config file's folder, then the current directory (`output`
+and `policy_cache`, and the default output `studies/<name>`, against the config's folder); spec names
 also resolve against the packaged specs (`phi1`, `specs/phi1.toml`). Bad input raises InputError
 naming the file, the key and the fix.
 """
@@ -333,9 +334,10 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
     conditions = _conditions(study["conditions"], base, source)
     _check_background_vehicles(study["background_vehicles"], source)
     default_name = Path(source).stem if source.endswith(".toml") else "study"
+    name = str(study["name"]) if study["name"] is not None else default_name
     return StudyConfig(
         source_path=source,
-        name=study["name"] if study["name"] is not None else default_name,
+        name=name,
         participants=study["participants"],
         seed=study["seed"],
         engine=study["engine"],
@@ -348,7 +350,8 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         junction_cap=study["junction_cap"],
         report_every=study["report_every"],
         belief_rule=study["belief_rule"],
-        output=_directory(study["output"], base),
+        output=_directory(study["output"] if study["output"] is not None else str(DEFAULT_STUDIES_DIR / name),
+                          base),
         policy_cache=_directory(study["policy_cache"], base),
         background_vehicles=study["background_vehicles"],
         record=tuple(study["record"]),
@@ -369,7 +372,8 @@ def load_study_config(path: str | Path) -> StudyConfig:
 
 
 def study_directory(config: StudyConfig, out: str | None) -> Path:
-    """Where a study is written: `out`, else the config's output, else studies/<name>."""
+    """Where a study is written: `out`, else the config's output (a loaded config's default is
+    studies/<name> in the config's folder), else studies/<name> in the current directory."""
     if out is not None:
         return Path(out)
     if config.output is not None:

@@ -117,14 +117,12 @@ def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
 def _build_study_context(config: StudyConfig, progress: bool) -> StudyContext:
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.labelling import check_coefficient_length
     from trustroute.policies.logic.spec import load_spec
 
     town = load_town(config.town)
     nominal = load_driver_model(config.driver_model)
-    specs = {Path(path).stem: load_spec(path, town) for path in config.specs}
-    for spec in specs.values():  # a spec's belief atoms weigh one coefficient per trust level
-        check_coefficient_length(spec, nominal.n_trust, nominal.source_path)
+    specs = {Path(path).stem: load_spec(path, town, nominal.n_trust, nominal.source_path)
+             for path in config.specs}
     setups = {
         name: EpisodeSetup(
             town=town,

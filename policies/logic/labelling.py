@@ -33,7 +33,7 @@ import numpy as np
 from trustroute.core.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.policies.logic.dfa import DFA
-from trustroute.policies.logic.spec import N_TRUST_LEVELS, Spec
+from trustroute.policies.logic.spec import N_TRUST_LEVELS, Spec, check_coefficient_length
 
 UNIT_ROUNDOFF = 2.0 ** -53
 
@@ -56,17 +56,6 @@ def atom_values(beliefs: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
 def label_margin_factor(n_trust: int) -> float:
     """γ_{4n+2}: filter step (3n roundings) plus dot product (n) plus two for the margin itself."""
     return gamma(4 * n_trust + 2)
-
-
-def check_coefficient_length(spec: Spec, n_trust: int, driver_source: str = "") -> None:
-    """InputError (one line, exit 2) when a belief atom's coeffs do not have one entry per trust level."""
-    for name, atom in spec.belief_atoms.items():
-        if len(atom.coeffs) != n_trust:
-            raise InputError(spec.source_path or spec.name, f"beliefs.{name}.coeffs",
-                             f"belief atom '{name}' has {len(atom.coeffs)} coefficients but the driver "
-                             f"model{f' ({driver_source})' if driver_source else ''} defines {n_trust} "
-                             "trust levels",
-                             f"give exactly {n_trust} coefficients, one per trust level")
 
 
 class Labeller:

@@ -1,17 +1,16 @@
 """scLDTL spec files: TOML schema, validation (optionally against a town), identity, projection.
 
-A spec file (e.g. specs/phi1.toml) has `name`, `start` (directed road "U-V", position 0),
-`formula` (policies/logic/formula.py grammar), a `[states]` table (atom -> list of directed roads) and
+A spec file (e.g. specs/phi1.toml) has `name`, `start` (directed road "U-V", position 0), `formula`
+(policies/logic/formula.py grammar), a `[states]` table (atom -> list of directed roads) and
 `[beliefs.NAME]` tables with `coeffs` (one per trust level of the driver model; the default model
-has 7, and the labeller checks the length against the model in use) and `offset`: a belief atom is true
-iff `offset - coeffs·b < 0` (strict; docs/model.md, "scLDTL"; every key: docs/formats/spec.md), and a
-`[trust_states]` table of
-trust-state atoms `NAME = { roads = [...], trust = [6, 7] }`: true at a position iff the road is
-one of `roads` (any road when `roads` is absent) and the human's hidden trust is one of the levels
-`trust` (docs/trust_states.md), and a `[type_beliefs]` table of type-belief atoms
-`NAME = { types = ["flat"], above = 0.7 }`: true iff the AV's belief that the driver is of one of
-`types` exceeds `above` (strict; the types of a driver population, docs/driver_types.md). Every
-error is an InputError naming the file, line and column.
+has 7; `load_spec` given the model's trust levels, as every command calls it, checks the length) and
+`offset`: a belief atom is true iff `offset - coeffs·b < 0` (strict; docs/model.md, "scLDTL"; every
+key: docs/formats/spec.md), and a `[trust_states]` table of trust-state atoms `NAME = { roads =
+[...], trust = [6, 7] }`: true at a position iff the road is one of `roads` (any road when `roads`
+is absent) and the human's hidden trust is one of the levels `trust` (docs/trust_states.md), and a
+`[type_beliefs]` table of type-belief atoms `NAME = { types = ["flat"], above = 0.7 }`: true iff the
+AV's belief that the driver is of one of `types` exceeds `above` (strict; the types of a driver
+population, docs/driver_types.md). Every error is an InputError naming the file, line and column.
 """
 
 from __future__ import annotations
@@ -323,7 +322,8 @@ def _check_roads(roads: list[str], owner: str, place: Callable[[str], str], sour
         if town is not None and road not in town.states:
             raise InputError(source, place(road), f"{owner}: '{road}' is not a directed road of the town "
                              f"({town.source_path or 'given town'})",
-                             "use directed roads 'U-V' of the town (trustroute model lists them)")
+                             "use directed roads 'U-V' of the town, the keys of its \"incidents\" "
+                             f"(e.g. {', '.join(sorted(town.states)[:3])})")
 
 
 def _state_atoms(raw: dict, spec: _SpecSource, town: Town | None) -> dict[str, frozenset[str]]:
@@ -453,11 +453,28 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
                 trust_atoms=trust_atoms, type_atoms=type_atoms)
 
 
-def load_spec(path: str | Path, town: Town | None = None) -> Spec:
+def check_coefficient_length(spec: Spec, n_trust: int, driver_source: str = "") -> None:
+    """InputError (one line, exit 2) when a belief atom's coeffs do not have one entry per trust level."""
+    for name, atom in spec.belief_atoms.items():
+        if len(atom.coeffs) != n_trust:
+            raise InputError(spec.source_path or spec.name, f"beliefs.{name}.coeffs",
+                             f"belief atom '{name}' has {len(atom.coeffs)} coefficients but the driver "
+                             f"model{f' ({driver_source})' if driver_source else ''} defines {n_trust} "
+                             "trust levels",
+                             f"give exactly {n_trust} coefficients, one per trust level")
+
+
+def load_spec(path: str | Path, town: Town | None = None, n_trust: int | None = None,
+              driver_source: str = "") -> Spec:
     """Load and validate a spec file (through the guarded reader, trustroute/core/validation.py); with
-    `town`, also check its roads against the town."""
+    `town`, also check its roads against the town; with `n_trust`, the trust levels of the driver
+    model (or population, named by `driver_source`) it is used with, check every belief atom has one
+    coefficient per level. Every command that reads a spec with a driver model loads it here."""
     text = read_text(path, str(path), "the spec file", "pass an existing .toml file, e.g. specs/phi1.toml")
-    return spec_from_text(text, str(path), town)
+    spec = spec_from_text(text, str(path), town)
+    if n_trust is not None:
+        check_coefficient_length(spec, n_trust, driver_source)
+    return spec
 
 
 def state_only_projection(spec: Spec) -> Spec:

@@ -270,12 +270,16 @@ def joint_policy(table: JointPolicyTable, origin: PolicyOrigin) -> JointTablePol
                             horizon=document.get("horizon"))
 
 
+def check_junction_count(value: object, key: str, where: str) -> None:
+    """A horizon of the header: a junction count from 0 to 10 000, or null (unbounded)."""
+    count = isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= 10_000
+    if not (value is None or count):
+        raise InputError(where, key, f"{key.replace('_', ' ')} {str(value)[:30]} is not a junction count or "
+                         "null", RESYNTH)
+
+
 def check_guide_horizon(document: dict, where: str) -> None:
-    guide = document.get("guide_horizon")
-    if not (guide is None or (isinstance(guide, int) and not isinstance(guide, bool)
-                              and 0 <= guide <= 10_000)):
-        raise InputError(where, "guide_horizon", f"guide horizon {str(guide)[:30]} is not a junction "
-                         "count or null", RESYNTH)
+    check_junction_count(document.get("guide_horizon"), "guide_horizon", where)
 
 
 # Version 3: where a plain policy has no row it drives the free completion of (road, DFA state,

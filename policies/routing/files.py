@@ -36,6 +36,7 @@ from trustroute.policies.routing.decision_tables import (
     TABLE_KINDS,
     PolicyOrigin,
     ReadContext,
+    check_junction_count,
     document_table_kind,
     table_kind,
 )
@@ -139,6 +140,7 @@ def read_policy_document(path: str | Path) -> dict:
                          f"(only {named})", RESYNTH)
     check_keys(document, DOCUMENT_KEYS + kind.keys, where, "", "policy file")
     kind.check(document, where)
+    check_junction_count(document.get("horizon"), "horizon", where)
     for key in ("lower", "upper"):
         value = document.get(key)
         if value is not None and not (isinstance(value, int | float) and not isinstance(value, bool)

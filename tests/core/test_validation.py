@@ -34,3 +34,18 @@ def test_unknown_key_names_the_key_and_the_allowed_ones():
     with pytest.raises(InputError) as error:
         check_keys({"junctions": 1, "junctoins": 2}, ("junctions", "roads"), "town.json", "", "town file")
     assert error.value.place == "junctoins" and "junctions, roads" in error.value.fix
+
+
+@pytest.mark.parametrize("value", [2**63 - 1, -(2**63), 10**18])
+def test_every_int64_is_an_integer_of_an_input(value):
+    """The documented range (docs/input_files.md) is the signed 64-bit one: 2**63 - 1 is a valid seed."""
+    assert parse_json(f'{{"n": {value}}}', "x", "file") == {"n": value}
+    assert parse_toml(f"n = {value}", "x", "file") == {"n": value}
+
+
+@pytest.mark.parametrize("value", [2**63, -(2**63) - 1, 10**19])
+def test_integers_beyond_int64_are_refused(value):
+    with pytest.raises(InputError, match="out of the 64-bit range|digits"):
+        parse_json(f'{{"n": {value}}}', "x", "file")
+    with pytest.raises(InputError, match="out of the 64-bit range|digits"):
+        parse_toml(f"n = {value}", "x", "file")

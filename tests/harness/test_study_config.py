@@ -54,6 +54,40 @@ def test_relative_paths_resolve_against_the_config_folder(tmp_path, monkeypatch)
     assert config.specs == (str((folder / "mine.toml").resolve()),)
 
 
+def test_default_output_is_in_the_config_folder_not_the_current_directory(tmp_path, monkeypatch):
+    """docs/formats/study_config.md: `output` (default studies/<name>) is relative to the config's folder."""
+    from trustroute.harness.study.config import study_config_from_dict, study_directory
+
+    folder, elsewhere = tmp_path / "cfg", tmp_path / "elsewhere"
+    folder.mkdir()
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    config = load_study_config(_write(folder, MINIMAL.replace("specs/phi1.toml", "phi1"), "mine.toml"))
+    assert study_directory(config, None) == (folder / "studies" / "mine").resolve()
+    assert study_directory(config, "out") == Path("out")   # --out: as given, from the current directory
+    named = load_study_config(_write(folder, MINIMAL.replace("specs/phi1.toml", "phi1") + 'name = "x"\n',
+                                     "n.toml"))
+    assert study_directory(named, None) == (folder / "studies" / "x").resolve()
+    data = {"study": {"participants": 2, "seed": 1, "specs": ["phi1"], "conditions": ["free"]}}
+    assert study_directory(study_config_from_dict(data), None) == (elsewhere / "studies" / "study").resolve()
+
+
+def test_the_largest_documented_seed_runs_a_study(tmp_path, capsys):
+    """seed: an integer >= 0 up to 2**63 - 1 (numpy SeedSequence takes it); one more is refused."""
+    from tests.cli import run_cli
+
+    text = MINIMAL.replace("specs/phi1.toml", "phi1").replace('"sumo"', '"model"').replace(
+        "participants = 21", "participants = 2").replace('["aware", "free"]', '["free"]')
+    config = load_study_config(_write(tmp_path, text.replace("seed = 1", f"seed = {2**63 - 1}")))
+    assert config.seed == 2**63 - 1
+    code, _, err = run_cli(capsys, "study", config.source_path, "--out", str(tmp_path / "out"), "--workers",
+                           "1", "--no-report", "--quiet")
+    assert code == 0, err
+    assert (tmp_path / "out" / "episodes.parquet").is_file()
+    with pytest.raises(InputError, match="out of the 64-bit range"):
+        load_study_config(_write(tmp_path, text.replace("seed = 1", f"seed = {2**63}"), "over.toml"))
+
+
 def test_optional_keys_and_population(tmp_path, monkeypatch):
     monkeypatch.chdir(REPO)
     text = (

@@ -136,3 +136,34 @@ def test_the_unmodified_default_passes(tmp_path, capsys):
     code, out, err = run_cli(capsys, "model", "--town", str(path))
     assert code == 0 and err == ""
     assert "12 junctions, 18 two-way roads, 36 states" in out
+
+
+def test_every_missing_incident_is_counted_in_one_line(tmp_path, capsys):
+    """A town listing incidents for one direction of each road only: 18 entries missing, the first
+    five named and the rest counted, in one line."""
+    data = default_town()
+    kept = {f"{u}-{v}" for u, v in data["roads"]}
+    missing = sorted(set(data["incidents"]) - kept)
+    data["incidents"] = {road: kind for road, kind in data["incidents"].items() if road in kept}
+    path = tmp_path / "town.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(InputError) as error:
+        load_town(path)
+    assert len(missing) == len(data["roads"]) == 18
+    assert error.value.place == f"incidents.{missing[0]}"
+    first_five = ", ".join(missing[:5])
+    assert error.value.problem == f"missing incident entries for 18 directed roads: {first_five} and 13 more"
+    code, out, err = run_cli(capsys, "model", "--town", str(path))
+    assert_one_line_error(code, err, str(path), "missing incident entries for 18 directed roads")
+    assert out == ""
+
+
+def test_a_few_missing_incidents_are_all_named(tmp_path):
+    data = default_town()
+    for road in ("C-J", "A-B", "J-C"):
+        del data["incidents"][road]
+    path = tmp_path / "town.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(InputError) as error:
+        load_town(path)
+    assert error.value.problem == "missing incident entries for 3 directed roads: A-B, C-J, J-C"

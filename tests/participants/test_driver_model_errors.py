@@ -80,6 +80,14 @@ def trust_free_not_a_number(m: dict) -> None:
     m["trust_free_takeover_probability"]["truck"] = "often"
 
 
+def missing_trust_free_incident(m: dict) -> None:
+    del m["trust_free_takeover_probability"]["pedestrian"]
+
+
+def extra_trust_free_incident(m: dict) -> None:
+    m["trust_free_takeover_probability"]["cow"] = 0.5
+
+
 # (mutation, the place the message must name, words of the specific problem)
 CASES = [
     (short_takeover_row, "takeover_probability.truck", "expected 7 numbers, got shape (6,)"),
@@ -96,6 +104,9 @@ CASES = [
     (initial_belief_not_summing, "initial_belief", "sums to 1.4"),
     (bad_trust_levels, "trust_levels", "not an increasing list"),
     (trust_free_not_a_number, "trust_free_takeover_probability.truck", "not a probability"),
+    (missing_trust_free_incident, "trust_free_takeover_probability.pedestrian",
+     "missing trust-free takeover probability for 'pedestrian'"),
+    (extra_trust_free_incident, "trust_free_takeover_probability.cow", "not in incident_types"),
 ]
 
 
@@ -144,6 +155,15 @@ def test_bad_json(tmp_path, capsys):
 def test_missing_file(tmp_path, capsys):
     code, _, err = run_cli(capsys, "model", "--driver", str(tmp_path / "absent.json"))
     assert_one_line_error(code, err, "absent.json", "cannot read the driver model")
+
+
+def test_trust_free_table_may_be_left_out_whole_and_round_trips_without_it():
+    data = default_model()
+    del data["trust_free_takeover_probability"]
+    model = driver_model_from_dict(data, "<test>")
+    assert model.trust_free_takeover_probability == {}
+    again = driver_model_from_dict(json.loads(json.dumps(model.to_dict())), "<again>")
+    assert again.content_hash == model.content_hash and again.trust_free_takeover_probability == {}
 
 
 def test_performance_dependent_model_round_trips(tmp_path):

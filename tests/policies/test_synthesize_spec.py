@@ -1,4 +1,4 @@
-"""The synthesis entry point: specs without trust-state atoms give exactly `search.synthesize`'s
+"""The synthesis entry point: specs without trust-state atoms give exactly `belief_synthesis.synthesize`'s
 bounds and policy files (byte for byte); specs with them give joint policies usable everywhere."""
 
 from __future__ import annotations

@@ -10,9 +10,9 @@ any parser sees a byte:
   checked with fstat, so a FIFO can never block the reader;
 - its size is at most a cap (per kind; `MAX_TEXT_BYTES` for JSON/TOML);
 - text is strict UTF-8 (the error names the line and column of the first bad byte);
-- JSON is parsed with limits: nesting depth at most `MAX_DEPTH`, integer literals of at most
-  `MAX_INT_DIGITS` digits, finite floats only (no NaN/Infinity, no 1e400), and no duplicate
-  keys in an object;
+- JSON is parsed with limits: nesting depth at most `MAX_DEPTH`, integers within the signed 64-bit
+  range (`INT64_MIN`..`INT64_MAX`; literals of at most `MAX_INT_DIGITS` digits), finite floats
+  only (no NaN/Infinity, no 1e400), and no duplicate keys in an object;
 - TOML is pre-checked for nesting depth and integer size (tomllib itself recurses without a
   limit and converts integers of any length); nan is rejected (inf is left to the keys that
   allow it).
@@ -39,7 +39,8 @@ from trustroute.core.errors import InputError
 MAX_TEXT_BYTES = 16 * 1024 * 1024  # towns, driver models, specs, configs, policy documents
 MAX_ARRAY_BYTES = 512 * 1024 * 1024  # policy .npz decision tables
 MAX_DEPTH = 64  # nesting of JSON/TOML arrays and tables
-MAX_INT_DIGITS = 18  # |n| < 10**18 < 2**63: every integer fits an int64
+INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1  # every integer of an input fits an int64
+MAX_INT_DIGITS = len(str(INT64_MAX))  # 19: a longer literal is out of range before it is parsed
 MAX_TOML_KEY_PARTS = MAX_DEPTH  # dotted keys a.b.c... nest tables too
 
 _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
@@ -154,7 +155,10 @@ def parse_json(text: str, source: str, what: str = "file") -> object:
         if len(literal.lstrip("-")) > MAX_INT_DIGITS:
             raise _NumberError(f"integer literal of {len(literal.lstrip('-'))} digits (the limit is "
                                f"{MAX_INT_DIGITS})")
-        return int(literal)
+        value = int(literal)
+        if not INT64_MIN <= value <= INT64_MAX:
+            raise _NumberError(f"integer {literal} is out of the 64-bit range")
+        return value
 
     def real(literal: str) -> float:
         value = float(literal)
@@ -251,8 +255,8 @@ def _check_depth(data: object, source: str, what: str) -> None:
             stack.extend((v, depth + 1) for v in value.values())
         elif isinstance(value, list):
             stack.extend((v, depth + 1) for v in value)
-        elif isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**MAX_INT_DIGITS:
-            raise InputError(source, "", f"integer {value} is out of range",
+        elif isinstance(value, int) and not isinstance(value, bool) and not INT64_MIN <= value <= INT64_MAX:
+            raise InputError(source, "", f"integer {str(value)[:40]} is out of the 64-bit range",
                              f"fix the {what}: write an ordinary number")
 
 

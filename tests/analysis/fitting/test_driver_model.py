@@ -112,3 +112,18 @@ def test_fit_cli_writes_a_valid_driver_model(model_study, tmp_path, capsys):
     assert payload["method"] == "em" and payload["paths"] == {"driver_model": str(out)}
     model = load_driver_model(out)
     assert model.n_trust == 7 and "fitted by trustroute fit" in model.provenance
+
+
+def test_a_fit_of_a_model_without_a_trust_free_table_reads_back(town, driver):
+    """A base model that leaves out the optional trust-free table gives a fitted file that loads
+    (an empty table would lack every incident's entry)."""
+    import dataclasses
+
+    from trustroute.participants.driver_model import driver_model_from_dict
+
+    base = dataclasses.replace(driver, trust_free_takeover_probability={})
+    result = fit_roads(_logs(town, base, 5, 1.0, seed=2), base, "counts")
+    document = result.model_dict()
+    assert "trust_free_takeover_probability" not in document
+    fitted = driver_model_from_dict(json.loads(json.dumps(document)), "<fitted>")
+    assert fitted.trust_levels == driver.trust_levels

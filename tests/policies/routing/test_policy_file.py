@@ -78,6 +78,21 @@ def test_damaged_files_are_input_errors(town, driver, phi1_result, tmp_path):
         load_policy(tmp_path / "other.json", town, driver, spec)
 
 
+@pytest.mark.parametrize("horizon", ["twenty", 20.0, True, -1, 10_001, [20]])
+def test_a_horizon_that_is_not_a_junction_count_is_refused(town, driver, phi1_result, tmp_path, horizon):
+    spec, result = phi1_result
+    path = save_policy(result, tmp_path / "p.json", town, driver, spec)
+    document = json.loads(path.read_text())
+    assert document["horizon"] == 8
+    for good in (0, 8, None):
+        path.write_text(json.dumps({**document, "horizon": good}))
+        assert read_policy_document(path)["horizon"] == good
+    path.write_text(json.dumps({**document, "horizon": horizon}))
+    with pytest.raises(InputError) as error:
+        load_policy(path, town, driver, spec)
+    assert error.value.place == "horizon" and "is not a junction count or null" in error.value.problem
+
+
 def test_version_2_files_are_refused_with_the_reason(town, driver, phi1_result, tmp_path):
     """Version 2 policies were certified for the state-only completion at rows they lack; this
     acting rule drives the free completion there, so they are refused (one line, the fix named).

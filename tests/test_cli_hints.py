@@ -1,0 +1,122 @@
+"""Hints name something that exists: every `trustroute COMMAND [SUBCOMMAND] [--option]` written in a
+message of the package is a command of the click CLI (harness/cli.py), its subcommand, and its
+option; the road hint names roads of the town; the Rerun hint serves on 127.0.0.1 only."""
+
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+import click
+import pytest
+
+from trustroute.core.errors import InputError
+from trustroute.harness.cli import COMMANDS, cli
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("trustroute", "networks", "participants", "policies", "harness", "analysis")
+HINT = re.compile(r"trustroute((?: [^\s`'\"(),;:]+)+)")
+# Words that follow "trustroute" in prose about the package itself ("the trustroute that made it",
+# "not a trustroute policy file"), never command names.
+PROSE = frozenset({"that", "writes", "reads", "policy", "or", "episode"})
+
+
+def _docstrings(tree: ast.AST) -> set[int]:
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            first = node.body[0] if node.body else None
+            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
+                found.add(id(first.value))
+    return found
+
+
+def message_hints() -> list[tuple[str, list[str]]]:
+    """(where, tokens after "trustroute") for every mention in a string of the package's code
+    (docstrings left out: they describe, they do not instruct)."""
+    hints = []
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            tree = ast.parse(path.read_text())
+            docstrings = _docstrings(tree)
+            for node in ast.walk(tree):
+                if (isinstance(node, ast.Constant) and isinstance(node.value, str)
+                        and id(node) not in docstrings):
+                    for match in HINT.finditer(node.value):
+                        tokens = [token.rstrip(".") for token in match.group(1).split()]
+                        hints.append((f"{path.relative_to(ROOT)}:{node.lineno}", tokens))
+    return hints
+
+
+HINTS = message_hints()
+
+
+def _options(command: click.Command) -> set[str]:
+    return {"--help"} | {name for param in command.params for name in (*param.opts, *param.secondary_opts)}
+
+
+def resolve(tokens: list[str]) -> str | None:
+    """None when the tokens name an existing command (and subcommand and options), else the problem."""
+    context = click.Context(cli)
+    command = cli.get_command(context, tokens[0])
+    if command is None:
+        return f"no command {tokens[0]!r}"
+    rest, path = tokens[1:], tokens[0]
+    if isinstance(command, click.Group) and rest and not rest[0].startswith("-") and rest[0].islower():
+        sub = command.get_command(context, rest[0])
+        if sub is None:
+            return f"no subcommand {rest[0]!r} of {tokens[0]!r}"
+        command, rest, path = sub, rest[1:], f"{path} {rest[0]}"
+    options = _options(command)
+    unknown = [token for token in rest if token.startswith("--") and token.split("=")[0] not in options]
+    return f"no option {unknown[0]} of {path}" if unknown else None
+
+
+def test_the_scan_finds_the_hints():
+    assert len(HINTS) >= 20
+    assert any(tokens[:2] == ["net", "build"] for _, tokens in HINTS)
+
+
+@pytest.mark.parametrize(("where", "tokens"), HINTS, ids=[where for where, _ in HINTS])
+def test_every_hinted_command_exists(where, tokens):
+    if tokens[0] in PROSE:
+        return
+    assert resolve(tokens) is None, f"{where}: 'trustroute {' '.join(tokens)}': {resolve(tokens)}"
+
+
+def test_prose_words_are_not_commands():
+    assert not PROSE & set(COMMANDS)
+
+
+def test_the_checker_catches_a_missing_command_subcommand_and_option():
+    assert resolve(["model", "--town"]) is None and resolve(["net", "build", "--town", "FILE"]) is None
+    assert resolve(["roads"]) == "no command 'roads'"
+    assert resolve(["net", "list"]) == "no subcommand 'list' of 'net'"
+    assert resolve(["synth", "--no-such-option"]) == "no option --no-such-option of synth"
+
+
+def test_a_road_not_in_the_town_is_answered_with_roads_of_the_town(tmp_path):
+    from trustroute.networks.town import load_town
+    from trustroute.policies.logic.spec import load_spec
+
+    town = load_town()
+    spec = tmp_path / "spec.toml"
+    spec.write_text('name = "s"\nstart = "E-A"\nformula = "F v"\n\n[states]\nv = ["E-Z"]\n')
+    with pytest.raises(InputError) as error:
+        load_spec(spec, town)
+    assert "is not a directed road of the town" in error.value.problem
+    named = set(re.findall(r"\b[A-Z]+-[A-Z]+\b", error.value.fix)) - {"U-V"}   # U-V: the form
+    assert named and named <= set(town.states)
+    assert "trustroute" not in error.value.fix
+
+
+def test_the_rerun_hint_serves_on_127_0_0_1_only():
+    from trustroute.harness.commands.replay import viewer_hint
+
+    hint = viewer_hint(Path("study/recordings/e.rrd"))
+    assert "--bind 127.0.0.1" in hint and "http://127.0.0.1:" in hint
+    assert not re.search(r"rerun --web-viewer\b", hint)
+    readme = (ROOT / "README.md").read_text()
+    served = re.search(r"rerun (--serve-web --bind 127\.0\.0\.1 [^\n]*) F\.rrd", readme)
+    assert served and f"rerun {served.group(1)} study/recordings/e.rrd" in hint
