@@ -108,6 +108,8 @@ def simulate(
     """Simulated (takeover [n*R, S], report [n*R, S+1]) of `model` on the given roads."""
     incident = np.repeat(incident, replicates, axis=0)
     mask = np.repeat(mask, replicates, axis=0)
+    n: int
+    steps: int
     n, steps = incident.shape
     k = model.n_trust
     levels = np.asarray(model.trust_levels)
@@ -164,12 +166,13 @@ def posterior_check(
     incident, takeover, report, mask = real_arrays(roads, template)
     max_roads = int(mask.sum(axis=1).max())
     real = statistics(incident, takeover, report, mask, template.incident_types, max_roads)
+    by_model: dict[str, dict] = {}
     out = {
         "replicates": replicates,
         "episodes": int(mask.shape[0]),
         "roads": int(mask.sum()),
         "real": real.to_dict(),
-        "models": {},
+        "models": by_model,
     }
     stats = {"real": real}
     for name, (model, accuracy) in models.items():
@@ -183,7 +186,7 @@ def posterior_check(
             max_roads,
         )
         stats[name] = sim
-        out["models"][name] = {
+        by_model[name] = {
             "report_accuracy": accuracy,
             "statistics": sim.to_dict(),
             "distance": distances(sim, real),
@@ -253,7 +256,7 @@ def aware_vs_free(
     from trustroute.policies.resolve import resolve_policy
 
     town, nominal = load_town(None), load_driver_model(None)
-    rows = []
+    rows: list[dict] = []
     for spec_name in ("phi1", "phi2"):
         spec = load_spec(PACKAGED_SPECS / f"{spec_name}.toml", town)
         setup = EpisodeSetup(town=town, driver_model=nominal, spec=spec)
