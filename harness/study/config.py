@@ -146,7 +146,7 @@ class StudyConfig:
         return digest.hexdigest()
 
     def with_overrides(self, *, engine: str | None = None) -> StudyConfig:
-        """A copy with each setting given (not None) replaced."""
+        """A copy, with `engine` replaced when given (not None)."""
         return replace(self) if engine is None else replace(self, engine=engine)
 
 
