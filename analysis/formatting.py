@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import sys
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, SupportsFloat
 
 import numpy as np
 
@@ -27,7 +27,7 @@ def is_pandas_na(value: object) -> bool:
     return pandas is not None and value is pandas.NA
 
 
-def finite_or_none(value: object) -> float | None:
+def finite_or_none(value: SupportsFloat | None) -> float | None:
     """A float, or None for a missing value (None, NaN, or pd.NA: e.g. the mean of a nullable
     column with no values, such as final_trust of real participants)."""
     if value is None or is_pandas_na(value):

@@ -280,7 +280,7 @@ def conditional_logit(
     informative = {g for g in np.unique(groups) if 0 < y[groups == g].sum() < (groups == g).sum()}
     base = ModelEffect("conditional logit", "condition", groups=len(informative), observations=int(y.size))
     if not informative:
-        return _replace(base, note="no participant had different outcomes between episodes")
+        return replace(base, note="no participant had different outcomes between episodes")
     exog = _design(treated, strata)
     try:
         with warnings.catch_warnings():
@@ -289,11 +289,11 @@ def conditional_logit(
         beta, se = float(result.params[0]), float(result.bse[0])
         p = float(result.pvalues[0])
     except (np.linalg.LinAlgError, ValueError) as exc:
-        return _replace(base, note=f"fit failed ({type(exc).__name__})")
+        return replace(base, note=f"fit failed ({type(exc).__name__})")
     if not (math.isfinite(beta) and math.isfinite(se)) or se > 50:
-        return _replace(base, note="separated: the odds ratio is unbounded on these data")
+        return replace(base, note="separated: the odds ratio is unbounded on these data")
     z = stats.norm.ppf(0.5 + level / 2)
-    return _replace(
+    return replace(
         base, estimate=math.exp(beta), low=math.exp(beta - z * se), high=math.exp(beta + z * se), p_value=p
     )
 
@@ -319,7 +319,7 @@ def mixed_trust_model(
         observations=int(keep.sum()),
     )
     if keep.sum() < 4 or len(np.unique(groups)) < 2:
-        return _replace(base, note="too few observations")
+        return replace(base, note="too few observations")
     kept_strata = None if strata is None else np.asarray(strata)[keep]
     exog = np.column_stack([np.ones(keep.sum()), _design(np.asarray(treated)[keep], kept_strata)])
     try:
@@ -328,12 +328,8 @@ def mixed_trust_model(
             result = MixedLM(y[keep], exog, groups=groups).fit(reml=True)
         beta, se, p = float(result.params[1]), float(result.bse[1]), float(result.pvalues[1])
     except (np.linalg.LinAlgError, ValueError) as exc:
-        return _replace(base, note=f"fit failed ({type(exc).__name__})")
+        return replace(base, note=f"fit failed ({type(exc).__name__})")
     if not (math.isfinite(beta) and math.isfinite(se)):
-        return _replace(base, note="the fit did not converge")
+        return replace(base, note="the fit did not converge")
     z = stats.norm.ppf(0.5 + level / 2)
-    return _replace(base, estimate=beta, low=beta - z * se, high=beta + z * se, p_value=p)
-
-
-def _replace(effect: ModelEffect, **changes: object) -> ModelEffect:
-    return replace(effect, **changes)
+    return replace(base, estimate=beta, low=beta - z * se, high=beta + z * se, p_value=p)

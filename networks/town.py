@@ -16,9 +16,10 @@ import heapq
 import json
 import math
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypedDict
 
 import numpy as np
 
@@ -33,6 +34,7 @@ from trustroute.core.fields import (
     Text,
     check_fields,
     check_value,
+    field_table,
     keys,
 )
 from trustroute.core.validation import parse_json, read_text, require_object
@@ -219,7 +221,17 @@ class Town:
 # -- loading and validation -------------------------------------------------
 # Every key of a town file (docs/formats/town.md); the rules below check what a table cannot.
 
-FIELDS: tuple[Field, ...] = (
+class TownValues(TypedDict):
+    """A town file's checked values (FIELDS)."""
+
+    junctions: dict[str, object]
+    roads: list[object]
+    incidents: dict[str, str]
+    source: object
+
+
+FIELDS = field_table(
+    TownValues,
     Field(key="junctions", kind=Table(nonempty=True), required=True,
           problem="expected a non-empty object of name -> [x, y]",
           fix="list each junction as \"A\": [x, y] in metres",
@@ -243,18 +255,19 @@ NEAR_ORIGIN = ListOf(item=Number(minimum=-MAX_COORDINATE, maximum=MAX_COORDINATE
 ROAD = ListOf(item=Text(nonempty=False), min_items=2, max_items=2)
 
 
-def _junctions(raw: dict, path: str) -> dict[str, tuple[float, float]]:
+def _junctions(raw: Mapping[str, object], path: str) -> dict[str, tuple[float, float]]:
     """Names of letters, digits and '_'; coordinates two finite numbers within MAX_COORDINATE."""
     junctions: dict[str, tuple[float, float]] = {}
     for name, xy in raw.items():
         place = f"junctions.{name}"
         check_value(name, JUNCTION, path, place, f"junction names must be 1-{MAX_JUNCTION_NAME} letters, "
                     "digits or '_' and contain no '-' (it joins road names)", "rename the junction")
-        check_value(xy, COORDINATES, path, place, f"coordinates {str(xy)[:60]} are not two finite numbers",
-                    "write [x, y] in metres, e.g. [0, 700]")
+        x, y = check_value(xy, COORDINATES, path, place,
+                           f"coordinates {str(xy)[:60]} are not two finite numbers",
+                           "write [x, y] in metres, e.g. [0, 700]")
         check_value(xy, NEAR_ORIGIN, path, place, f"coordinates {xy!r} lie more than {MAX_COORDINATE:g} m "
                     "from the origin", "give coordinates in metres of one town")
-        junctions[name] = (float(xy[0]), float(xy[1]))
+        junctions[name] = (float(x), float(y))
     return junctions
 
 
@@ -262,9 +275,8 @@ def _road(road: object, place: str, junctions: dict[str, tuple[float, float]], p
           shaped: set[str]) -> tuple[str, str]:
     """One [U, V] pair: two known, different junctions at least MIN_ROAD_LENGTH apart (a road with
     a geometry has its own length: its junctions may stand closer than a car)."""
-    check_value(road, ROAD, path, place, f"{road!r} is not a pair of junction names",
-                "write the road as [\"U\", \"V\"]")
-    u, v = road
+    u, v = check_value(road, ROAD, path, place, f"{road!r} is not a pair of junction names",
+                       "write the road as [\"U\", \"V\"]")
     for j in (u, v):
         if j not in junctions:
             raise InputError(path, place, f"road {u}-{v} names unknown junction '{j}'",
@@ -280,7 +292,7 @@ def _road(road: object, place: str, junctions: dict[str, tuple[float, float]], p
     return u, v
 
 
-def _roads(raw: list, junctions: dict[str, tuple[float, float]], path: str,
+def _roads(raw: list[object], junctions: dict[str, tuple[float, float]], path: str,
            shaped: set[str]) -> tuple[tuple[str, str], ...]:
     """Every road valid and listed once ([A, B] and [B, A] are the same two-way road)."""
     roads: list[tuple[str, str]] = []
@@ -298,8 +310,8 @@ def _roads(raw: list, junctions: dict[str, tuple[float, float]], path: str,
 SHOWN_MISSING = 5  # directed roads named in the message when many lack an incident entry
 
 
-def _check_incidents(incidents: dict, roads: tuple[tuple[str, str], ...], one_way: frozenset[tuple[str, str]],
-                     path: str) -> None:
+def _check_incidents(incidents: Mapping[str, str], roads: tuple[tuple[str, str], ...],
+                     one_way: frozenset[tuple[str, str]], path: str) -> None:
     """Exactly one entry per directed road of the town (one direction only for one-way roads)."""
     directed = {road_name(a, b) for a, b in directed_pairs(roads, one_way)}
     missing = sorted(key for key in directed if key not in incidents)

@@ -27,8 +27,10 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal, TypedDict
 
 import numpy as np
 
@@ -43,6 +45,7 @@ from trustroute.core.fields import (
     Table,
     Text,
     check_fields,
+    field_table,
     holds_bool,
     keys,
 )
@@ -50,7 +53,8 @@ from trustroute.core.validation import check_keys, parse_json, read_text, requir
 
 DEFAULT_DRIVER_MODEL_PATH = Path(__file__).parent / "data" / "driver_model.json"
 HUMAN_ACTIONS: tuple[str, ...] = ("standstill", "takeover")
-PERFORMANCES: tuple[str, ...] = ("succ", "fail")
+Performance = Literal["succ", "fail"]
+PERFORMANCES: tuple[Performance, ...] = ("succ", "fail")
 ROW_TOLERANCE = 1e-9
 DEFAULT_REPORT_ACCURACY = 0.8   # P(a trust report is the true level)
 
@@ -165,7 +169,32 @@ class DriverModel:
 UNIFORM_BELIEF = object()  # initial_belief absent: the uniform distribution over the trust levels
 _BY_INCIDENT = "expected an object keyed by incident type"
 _BY_INCIDENT_FIX = "write {\"obstacle\": ..., ...}"
-FIELDS: tuple[Field, ...] = (
+IncidentTable = Literal["takeover_probability", "trust_transition", "failure_probability",
+                        "trust_free_takeover_probability"]
+
+
+class DriverModelValues(TypedDict):
+    """A driver model file's checked values (FIELDS)."""
+
+    trust_levels: list[int]
+    incident_types: list[str]
+    takeover_probability: dict[str, object]
+    trust_transition: dict[str, object]
+    failure_probability: Mapping[str, object]
+    initial_belief: object
+    trust_free_takeover_probability: Mapping[str, float]
+    source: object
+
+
+class PerformanceMatrices(TypedDict):
+    """trust_transition.<incident>.<action> split by the AV's performance (PERFORMANCE_FIELDS)."""
+
+    succ: object
+    fail: object
+
+
+FIELDS = field_table(
+    DriverModelValues,
     Field(key="trust_levels", required=True,
           kind=ListOf(item=Integer(), min_items=2, max_items=MAX_TRUST_LEVELS, increasing=True),
           problem=lambda seen: (f"{str(seen.value)[:60]} is not an increasing list of 2 to "
@@ -189,12 +218,12 @@ FIELDS: tuple[Field, ...] = (
     Field(key="source", kind=Anything(), default=""),  # provenance, kept as text
 )
 DRIVER_MODEL_KEYS: tuple[str, ...] = keys(FIELDS)
-INCIDENT_TABLES: tuple[str, ...] = ("takeover_probability", "trust_transition", "failure_probability",
-                                    "trust_free_takeover_probability")
+INCIDENT_TABLES: tuple[IncidentTable, ...] = ("takeover_probability", "trust_transition",
+                                              "failure_probability", "trust_free_takeover_probability")
 # trust_transition.<incident>.<action> may be split by the AV's performance
-PERFORMANCE_FIELDS: tuple[Field, ...] = tuple(
+PERFORMANCE_FIELDS = field_table(PerformanceMatrices, *(
     Field(key=perf, kind=Anything(), required=True, missing=f"missing '{perf}' matrix",
-          fix="give both 'succ' and 'fail' matrices") for perf in PERFORMANCES)
+          fix="give both 'succ' and 'fail' matrices") for perf in PERFORMANCES))
 
 
 def _numbers(value: object, path: str, place: str, expected: str, fix: str) -> np.ndarray:
@@ -238,7 +267,7 @@ def _stochastic_matrix(value: object, n: int, path: str, place: str) -> np.ndarr
     return matrix
 
 
-def _check_incident_keys(values: dict, incidents: list[str], path: str) -> None:
+def _check_incident_keys(values: DriverModelValues, incidents: list[str], path: str) -> None:
     """The tables keyed by incident type name only incident types of the model."""
     for key in INCIDENT_TABLES:
         extra = sorted(set(values[key]) - set(incidents))
@@ -247,7 +276,8 @@ def _check_incident_keys(values: dict, incidents: list[str], path: str) -> None:
                              "add it to incident_types or remove the entry")
 
 
-def _check_trust_free_entries(values: dict, incidents: list[str], given: bool, path: str) -> None:
+def _check_trust_free_entries(values: DriverModelValues, incidents: list[str], given: bool,
+                              path: str) -> None:
     """The trust-free table, when given, has an entry for every incident type, as every table keyed
     by incident type but the failure model must (a partial table is a mistake, not a choice)."""
     table = values["trust_free_takeover_probability"]
@@ -282,7 +312,7 @@ def _transitions(rows: object, incident: str, n: int, path: str) -> np.ndarray:
                      for action in HUMAN_ACTIONS])
 
 
-def _incident_arrays(values: dict, incidents: list[str], n: int,
+def _incident_arrays(values: DriverModelValues, incidents: list[str], n: int,
                      path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(takeover [i, θ], failure [i, θ], transition [i, h, e, θ, θ']) over the incident types."""
     takeover = np.zeros((len(incidents), n))

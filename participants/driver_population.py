@@ -22,11 +22,22 @@ import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypedDict
 
 import numpy as np
 
 from trustroute.core.errors import InputError
-from trustroute.core.fields import Anything, Field, ListOf, Number, OneOf, Text, check_fields, keys
+from trustroute.core.fields import (
+    Anything,
+    Field,
+    ListOf,
+    Number,
+    OneOf,
+    Text,
+    check_fields,
+    field_table,
+    keys,
+)
 from trustroute.core.output_files import atomic_write_text
 from trustroute.core.validation import parse_json, read_text, require_object
 from trustroute.participants.driver_model import DriverModel, driver_model_from_dict, load_driver_model
@@ -101,7 +112,26 @@ class DriverPopulation:
 # -- loading and validation -------------------------------------------------
 # Every key of a driver-population file and of one of its types (docs/formats/driver_population.md).
 
-FIELDS: tuple[Field, ...] = (
+class PopulationValues(TypedDict):
+    """A driver-population file's checked values (FIELDS)."""
+
+    format: str
+    version: int
+    source: str
+    types: list[object]
+
+
+class TypeValues(TypedDict):
+    """One type entry's checked values (TYPE_FIELDS)."""
+
+    name: str
+    weight: float
+    model: object
+    model_file: str | None
+
+
+FIELDS = field_table(
+    PopulationValues,
     Field(key="format", kind=OneOf(choices=(POPULATION_FORMAT,)), required=True,
           problem=lambda seen: f"{str(seen.value)[:60]!r} is not a driver-population file",
           fix=f"write \"format\": \"{POPULATION_FORMAT}\"",
@@ -119,7 +149,8 @@ FIELDS: tuple[Field, ...] = (
 )
 POPULATION_KEYS: tuple[str, ...] = keys(FIELDS)
 _NAME_AND_WEIGHT = "give every type a name and a prior weight"
-TYPE_FIELDS: tuple[Field, ...] = (
+TYPE_FIELDS = field_table(
+    TypeValues,
     Field(key="name", kind=Text(pattern=TYPE_NAME), required=True,
           problem=lambda seen: f"{str(seen.value)[:60]!r} is not a type name",
           fix="use letters, digits, '_' or '-' (at most 64, starting with a letter or '_')",
@@ -140,13 +171,13 @@ def _type_entry(entry: object, index: int, path: str, base: Path | None) -> tupl
         raise InputError(path, place, "expected an object with name, weight and model or model_file",
                          "write e.g. {\"name\": \"builder\", \"weight\": 0.4, \"model_file\": \"b.json\"}")
     values = check_fields(entry, TYPE_FIELDS, path, "driver population", place)
-    if (values["model"] is None) == (values["model_file"] is None):
+    file = values["model_file"]
+    if (values["model"] is None) == (file is None):
         raise InputError(path, place, "give exactly one of 'model' and 'model_file'",
                          "inline the driver model or name its file relative to this one")
-    if values["model"] is not None:
+    if file is None:
         model = driver_model_from_dict(values["model"], f"{path} ({place}.model)")
     else:
-        file = values["model_file"]
         model_path = (base / file) if base is not None and not Path(file).is_absolute() else Path(file)
         model = load_driver_model(model_path)
     return values["name"], float(values["weight"]), model

@@ -18,12 +18,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import cast
+from typing import TypedDict
 
 import numpy as np
 
 from trustroute.core.errors import InputError
-from trustroute.core.fields import PROBABILITY, Field, ListOf, Number, check_fields
+from trustroute.core.fields import PROBABILITY, Field, ListOf, Number, check_fields, field_table
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, ROW_TOLERANCE, DriverModel
 
 
@@ -130,7 +130,17 @@ def sample_population(nominal: DriverModel, count: int, config: PopulationConfig
 # Every key of the table (docs/formats/study_config.md, "`[population]`"); the rules below check what
 # a table cannot (one entry per trust level, summing to 1).
 
-FIELDS: tuple[Field, ...] = (
+class PopulationTableValues(TypedDict):
+    """The checked values of a [population] table."""
+
+    concentration: float
+    takeover_spread: float
+    initial_trust: list[float] | None
+    report_accuracy: float
+
+
+FIELDS = field_table(
+    PopulationTableValues,
     Field(key="concentration", kind=Number(minimum=0.0, open_below=True, finite=False), default=math.inf,
           problem=lambda seen: f"{seen.value!r} is not a number > 0",
           fix="give a positive concentration, or inf for the nominal model"),
@@ -171,8 +181,7 @@ def population_config_from_dict(data: Mapping[str, object] | None, source: str,
     if not isinstance(data, Mapping):
         raise InputError(source, "population", "expected a table", "write a [population] table")
     values = check_fields(dict(data), FIELDS, source, "[population] table", "population")
-    number = {key: float(cast(float, values[key])) for key in ("concentration", "takeover_spread",
-                                                                "report_accuracy")}
-    initial_trust = _initial_trust(cast(list | None, values["initial_trust"]), source, n_trust)
-    return PopulationConfig(concentration=number["concentration"], takeover_spread=number["takeover_spread"],
-                            initial_trust=initial_trust, report_accuracy=number["report_accuracy"])
+    initial_trust = _initial_trust(values["initial_trust"], source, n_trust)
+    return PopulationConfig(concentration=float(values["concentration"]),
+                            takeover_spread=float(values["takeover_spread"]),
+                            initial_trust=initial_trust, report_accuracy=float(values["report_accuracy"]))

@@ -372,7 +372,7 @@ def _mean(series: pd.Series) -> float | None:
 def paper_matches(figures: list[dict]) -> list[dict]:
     """Which computed readings equal each paper figure at the paper's printed precision."""
     out = []
-    targets = [
+    targets: list[tuple[str, str, str | float, int | None]] = [
         ("phi1 satisfied (count)", "aware", paper_figures.count_text("phi1"), None),
         ("phi2 satisfied (count)", "aware", paper_figures.count_text("phi2"), None),
         ("satisfaction rate", "aware", paper_figures.SATISFACTION_RATE["aware"], 3),

@@ -187,7 +187,7 @@ def _run_em(obs: Observations, owner: np.ndarray, n_participants: int, template:
         stats = [expectation(obs, params[k], weights=r[owner, k]) for k in range(n_types)]
         if shared_dynamics:
             stats = _pooled_dynamics(stats)
-        accuracy = fit_accuracy(sum(s.report for s in stats), k_trust)
+        accuracy = fit_accuracy(sum((s.report for s in stats), np.zeros((k_trust, k_trust))), k_trust)
         params = [maximisation(stats[k], params[k], accuracy) for k in range(n_types)]
         weights = responsibilities.mean(axis=0)
         with np.errstate(divide="ignore"):
@@ -337,7 +337,7 @@ def select_types(obs: Observations, owner: np.ndarray, participants: list, templ
                  shared_dynamics: bool = False) -> TypeSelection:
     """Fit K = 1..max_types (each K also from a split of the best K-1 fit); choose the K with the
     lowest BIC."""
-    fits = []
+    fits: list[MixtureFit] = []
     for k in range(1, min(max_types, len(participants)) + 1):
         fits.append(fit_mixture(obs, owner, participants, template, k, rng, restarts, iterations,
                                 shared_dynamics, previous=fits[-1] if fits else None))

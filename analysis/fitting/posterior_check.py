@@ -129,6 +129,8 @@ def simulate(
     `incident_types`, default the model's own [n, S]; mask [n, S]), rows in order n*R."""
     incident = np.repeat(incident, replicates, axis=0)
     mask = np.repeat(mask, replicates, axis=0)
+    n: int
+    steps: int
     n, steps = incident.shape
     tables = driver_tables([model], incident_types)
     levels = np.asarray(model.trust_levels)
@@ -176,12 +178,13 @@ def posterior_check(
     incident, takeover, report, mask = real_arrays(roads, template)
     max_roads = int(mask.sum(axis=1).max())
     real = statistics(incident, takeover, report, mask, template.incident_types, max_roads)
+    by_model: dict[str, dict] = {}
     out = {
         "replicates": replicates,
         "episodes": int(mask.shape[0]),
         "roads": int(mask.sum()),
         "real": real.to_dict(),
-        "models": {},
+        "models": by_model,
     }
     stats = {"real": real}
     for name, (model, accuracy) in models.items():
@@ -197,7 +200,7 @@ def posterior_check(
             max_roads,
         )
         stats[name] = sim
-        out["models"][name] = {
+        by_model[name] = {
             "report_accuracy": accuracy,
             "statistics": sim.to_dict(),
             "distance": distances(sim, real),
@@ -267,7 +270,7 @@ def aware_vs_free(
     from trustroute.policies.resolve import resolve_policy
 
     town, nominal = load_town(None), load_driver_model(None)
-    rows = []
+    rows: list[dict] = []
     for spec_name in ("phi1", "phi2"):
         spec = load_spec(PACKAGED_SPECS / f"{spec_name}.toml", town)
         setup = EpisodeSetup(town=town, driver_model=nominal, spec=spec)

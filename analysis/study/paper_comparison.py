@@ -55,13 +55,13 @@ def paper_comparison(episodes: pd.DataFrame, cells: pd.DataFrame, belief_source:
     rows = []
     for spec in paper_figures.SATISFIED_AWARE:
         group = episodes[(episodes["spec"] == spec) & (episodes["condition"] == "aware")]
-        ours = int(group[f"satisfied_{source}"].sum())
-        low, high = rate_interval(ours, len(group))
+        satisfied = int(group[f"satisfied_{source}"].sum())
+        low, high = rate_interval(satisfied, len(group))
         rows.append(
             {
                 "figure": f"participants satisfying {spec} (aware)",
                 "paper": paper_figures.count_text(spec),
-                "ours": f"{ours}/{len(group)} (exact 95% CI [{low:.3f}, {high:.3f}])",
+                "ours": f"{satisfied}/{len(group)} (exact 95% CI [{low:.3f}, {high:.3f}])",
             }
         )
 

@@ -38,14 +38,28 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
+from typing import Literal, TypedDict
 
 from trustroute.core.errors import InputError
-from trustroute.core.fields import Field, Integer, ListOf, OneOf, Seen, Table, Text, check_fields, keys
+from trustroute.core.fields import (
+    Field,
+    Integer,
+    ListOf,
+    OneOf,
+    Seen,
+    Table,
+    Text,
+    check_fields,
+    field_table,
+    keys,
+)
 from trustroute.core.packaged import PACKAGED_SPECS, packaged_spec_names
 from trustroute.core.validation import parse_toml, read_text
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY
+from trustroute.policies.model.trust_pomdp import BELIEF_RULES, BeliefRule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
@@ -53,7 +67,6 @@ DEFAULT_STUDIES_DIR = Path("studies")
 ENGINES: tuple[str, ...] = ("sumo", "model")
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
-BELIEF_RULES: tuple[str, ...] = ("bayes", "paper")
 
 
 @dataclass(frozen=True)
@@ -73,7 +86,7 @@ class StudyConfig:
     fallback_after: int | None = DEFAULT_FALLBACK_AFTER
     junction_cap: int = DEFAULT_JUNCTION_CAP
     report_every: int = 1
-    belief_rule: str = "bayes"
+    belief_rule: BeliefRule = "bayes"
     output: str | None = None
     policy_cache: str | None = None   # None: the resolver's default cache
     background_vehicles: int = 0      # SUMO engine: seeded background traffic (docs/scenes.md)
@@ -133,8 +146,9 @@ class StudyConfig:
             digest.update(load_driver_population(self.driver_population).content_hash.encode())
         return digest.hexdigest()
 
-    def with_overrides(self, **changes: object) -> StudyConfig:
-        return replace(self, **{k: v for k, v in changes.items() if v is not None})
+    def with_overrides(self, *, engine: str | None = None) -> StudyConfig:
+        """A copy, with `engine` replaced when given (not None)."""
+        return replace(self) if engine is None else replace(self, engine=engine)
 
 
 def condition_label(condition: str) -> str:
@@ -170,7 +184,7 @@ def _resolve_spec(value: str, base: Path, source: str, key: str) -> Path:
     )
 
 
-def _population(table: object, source: str) -> dict | None:
+def _population(table: dict[str, object] | None, source: str) -> dict | None:
     """The raw [population] table, validated by participants.population."""
     if table is None:
         return None
@@ -184,7 +198,49 @@ def _population(table: object, source: str) -> dict | None:
 # Every key of a study config (docs/formats/study_config.md); the rules below check what a table cannot
 # (files resolve and load, spec and condition labels distinct, the robust condition's population).
 
-FIELDS: tuple[Field, ...] = (
+class StudyConfigValues(TypedDict):
+    """A study config's checked tables (FIELDS)."""
+
+    study: dict[str, object]
+    population: dict[str, object] | None
+    drivers: dict[str, object] | None
+
+
+FileKey = Literal["town", "driver_model", "robust_population"]  # the [study] keys naming a file (FILE_FIX)
+
+
+class StudyValues(TypedDict):
+    """The [study] table's checked values (STUDY_FIELDS)."""
+
+    participants: int
+    seed: int
+    engine: str
+    specs: list[str]
+    conditions: list[str]
+    name: str | None
+    town: str | None
+    driver_model: str | None
+    horizon: int | None
+    fallback_after: int  # or False: the rule disabled
+    junction_cap: int
+    report_every: int
+    belief_rule: BeliefRule
+    output: str | None
+    policy_cache: str | None
+    background_vehicles: int
+    record: Sequence[str]
+    robust_population: str | None
+    robust_objective: str
+
+
+class DriversValues(TypedDict):
+    """The [drivers] table's checked values (DRIVERS_FIELDS)."""
+
+    population: str
+
+
+FIELDS = field_table(
+    StudyConfigValues,
     Field(key="study", kind=Table(), required=True, problem="missing [study] table",
           missing="missing [study] table",
           fix="add [study] with participants, seed, engine, specs and conditions"),
@@ -202,13 +258,14 @@ def _file_path(seen: Seen) -> str:
     return f"expected a file path, got {seen.value!r}"
 
 
-FILE_FIX: dict[str, str] = {
+FILE_FIX: dict[FileKey, str] = {
     "town": "give an existing town file or omit town (the default)",
     "driver_model": "give an existing driver model file or omit driver_model (the default)",
     "robust_population": ("give the driver-population file the robust policy is made for "
                           "(docs/driver_types.md)"),
 }
-STUDY_FIELDS: tuple[Field, ...] = (
+STUDY_FIELDS = field_table(
+    StudyValues,
     Field(key="participants", kind=Integer(minimum=1, maximum=100_000), required=True,
           fix="write the number of participants, e.g. participants = 21",
           missing_fix="add participants = 21"),
@@ -249,7 +306,8 @@ STUDY_FIELDS: tuple[Field, ...] = (
 STUDY_KEYS: tuple[str, ...] = keys(STUDY_FIELDS)
 DRIVERS_FIX = ("give the path of a driver-population file (docs/driver_type_studies.md), "
                "e.g. population = \"types.json\"")
-DRIVERS_FIELDS: tuple[Field, ...] = (
+DRIVERS_FIELDS = field_table(
+    DriversValues,
     Field(key="population", kind=_FILE, required=True, problem=_file_path, fix=DRIVERS_FIX),
 )
 DRIVERS_KEYS: tuple[str, ...] = keys(DRIVERS_FIELDS)
@@ -258,7 +316,7 @@ DRIVERS_KEYS: tuple[str, ...] = keys(DRIVERS_FIELDS)
 # -- rules ----------------------------------------------------------------------------------------------
 
 
-def _driver_population(table: dict | None, base: Path, source: str) -> str | None:
+def _driver_population(table: dict[str, object] | None, base: Path, source: str) -> str | None:
     """The [drivers] table: the driver-population file, resolved and read (InputError if bad)."""
     if table is None:
         return None
@@ -291,11 +349,12 @@ def _conditions(values: list[str], base: Path, source: str) -> tuple[str, ...]:
     return conditions
 
 
-def _optional_file(study: dict, key: str, what: str, base: Path, source: str) -> str | None:
+def _optional_file(study: StudyValues, key: FileKey, what: str, base: Path, source: str) -> str | None:
     """The file `study[key]` names, resolved; None when the key is absent."""
-    if study[key] is None:
+    value = study[key]
+    if value is None:
         return None
-    return str(_resolve_path(study[key], base, source, f"study.{key}", what, FILE_FIX[key]))
+    return str(_resolve_path(value, base, source, f"study.{key}", what, FILE_FIX[key]))
 
 
 def _directory(value: str | None, base: Path) -> str | None:
@@ -309,7 +368,8 @@ def _check_background_vehicles(count: int, source: str) -> None:
                          f"write a number from 0 to {MAX_BACKGROUND_VEHICLES}")
 
 
-def _robust_population(study: dict, conditions: tuple[str, ...], base: Path, source: str) -> str | None:
+def _robust_population(study: StudyValues, conditions: tuple[str, ...], base: Path,
+                       source: str) -> str | None:
     """The "robust" condition's population file: required with that condition, read and validated."""
     robust_population = _optional_file(study, "robust_population", "driver-population file", base, source)
     if robust_population is not None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -21,6 +22,9 @@ from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.manifest import MANIFEST_FILE, package_versions
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+
+if TYPE_CHECKING:
+    from trustroute.harness.simulation.episode import EpisodeRecord
 
 # What must match exactly between the logged and the replayed episode.
 REPLAY_COLUMNS: tuple[str, ...] = (
@@ -40,7 +44,7 @@ EPISODE_PACKAGES: tuple[str, ...] = ("trustroute", "numpy", "scipy", "eclipse-su
 class Replay:
     task: EpisodeTask
     config: StudyConfig
-    record: object  # the replayed EpisodeRecord
+    record: EpisodeRecord  # the replayed episode
     logged_roads: pd.DataFrame
     rrd_path: Path | None
 

@@ -19,14 +19,16 @@ import functools
 import hashlib
 import json
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypedDict, TypeVar
 
 from trustroute.core.errors import InputError
 from trustroute.core.fields import (
     EMPTY,
     Field,
+    FieldTable,
     Integer,
     Kind,
     ListOf,
@@ -35,6 +37,7 @@ from trustroute.core.fields import (
     Text,
     check_fields,
     check_value,
+    field_table,
     keys,
 )
 from trustroute.core.validation import parse_toml, read_text
@@ -197,7 +200,44 @@ def _string(key: str) -> Field:
                  'specs/phi1.toml)')
 
 
-FIELDS: tuple[Field, ...] = (
+class SpecValues(TypedDict):
+    """A spec file's checked values (FIELDS)."""
+
+    name: str
+    start: str
+    formula: str
+    states: Mapping[str, object]
+    beliefs: Mapping[str, object]
+    trust_states: Mapping[str, object]
+    type_beliefs: Mapping[str, object]
+
+
+class BeliefAtomValues(TypedDict):
+    """A `[beliefs.NAME]` table's checked values (BELIEF_FIELDS)."""
+
+    coeffs: list[float]
+    offset: float
+
+
+class TrustStateAtomValues(TypedDict):
+    """A trust-state atom's checked values (TRUST_STATE_FIELDS)."""
+
+    roads: list[str] | None
+    trust: list[int]
+
+
+class TypeBeliefAtomValues(TypedDict):
+    """A type-belief atom's checked values (TYPE_BELIEF_FIELDS)."""
+
+    types: list[str]
+    above: float
+
+
+AtomValues = TypeVar("AtomValues")  # the checked values of one inline atom table
+
+
+FIELDS = field_table(
+    SpecValues,
     _string("name"),
     _string("start"),
     _string("formula"),
@@ -214,28 +254,30 @@ TOP_LEVEL_KEYS: tuple[str, ...] = keys(FIELDS)
 STATE_ROADS = ListOf(item=Text(nonempty=False), max_items=MAX_STATE_ROADS)
 
 
-def _belief_key(key: str, kind: Kind, problem: str, fix: str) -> Field:
+def _belief_key(key: str, kind: Kind[object], problem: str, fix: str) -> Field:
     return Field(key=key, kind=kind, required=True, fix=fix,
                  problem=lambda seen: f"belief atom '{seen.owner}': {problem}",
                  missing=lambda seen: f"belief atom '{seen.owner}' is missing '{key}'",
                  missing_fix=lambda seen: f"add {key} = ... under [beliefs.{seen.owner}]")
 
 
-BELIEF_FIELDS: tuple[Field, ...] = (
+BELIEF_FIELDS = field_table(
+    BeliefAtomValues,
     _belief_key("coeffs", ListOf(item=Number()), "coeffs must be a list of finite numbers",
                 "write coeffs = [1, 0, 0, 0, 0, 0, 0]"),
     _belief_key("offset", Number(), "offset must be a finite number", "write offset = 0.5"),
 )
 
 
-def _inline_key(noun: str, key: str, kind: Kind, problem: str, fix: str, example: str,
+def _inline_key(noun: str, key: str, kind: Kind[object], problem: str, fix: str, example: str,
                 required: bool = True) -> Field:
     return Field(key=key, kind=kind, required=required, fix=fix,
                  problem=lambda seen: f"{noun} atom '{seen.owner}': {problem}",
                  missing=lambda seen: f"{noun} atom '{seen.owner}' is missing '{key}'", missing_fix=example)
 
 
-TRUST_STATE_FIELDS: tuple[Field, ...] = (
+TRUST_STATE_FIELDS = field_table(
+    TrustStateAtomValues,
     _inline_key("trust-state", "roads", ListOf(item=Text(nonempty=False)),
                 "roads must be a list of directed roads",
                 'write roads = ["U-V", ...] or leave it out for any road', TRUST_STATE_EXAMPLE,
@@ -244,7 +286,8 @@ TRUST_STATE_FIELDS: tuple[Field, ...] = (
                 f"trust must be a non-empty list of trust levels (integers 1..{N_TRUST_LEVELS})",
                 "write trust = [6, 7]", TRUST_STATE_EXAMPLE),
 )
-TYPE_BELIEF_FIELDS: tuple[Field, ...] = (
+TYPE_BELIEF_FIELDS = field_table(
+    TypeBeliefAtomValues,
     _inline_key("type-belief", "types", ListOf(item=Text(), min_items=1, distinct=True),
                 "types must be a non-empty list of distinct type names", 'write types = ["flat"]',
                 TYPE_BELIEF_EXAMPLE),
@@ -326,7 +369,8 @@ def _check_roads(roads: list[str], owner: str, place: Callable[[str], str], sour
                              f"(e.g. {', '.join(sorted(town.states)[:3])})")
 
 
-def _state_atoms(raw: dict, spec: _SpecSource, town: Town | None) -> dict[str, frozenset[str]]:
+def _state_atoms(raw: Mapping[str, object], spec: _SpecSource,
+                 town: Town | None) -> dict[str, frozenset[str]]:
     """The `[states]` table: atom -> list of directed roads."""
     atoms: dict[str, frozenset[str]] = {}
     for atom in sorted(raw):
@@ -336,13 +380,16 @@ def _state_atoms(raw: dict, spec: _SpecSource, town: Town | None) -> dict[str, f
         roads = check_value(raw[atom], STATE_ROADS, spec.source, spec.place(label, *needles),
                             f"state atom '{atom}' must be a list of directed roads",
                             f'write {atom} = ["U-V", ...]')
-        _check_roads(roads, f"state atom '{atom}'", lambda road, n=needles, a=label: spec.place(
-            a, *n, re.escape(f'"{road}"')), spec.source, town)
+
+        def road_place(road: str, needles: tuple[str, ...] = needles, label: str = label) -> str:
+            return spec.place(label, *needles, re.escape(f'"{road}"'))
+
+        _check_roads(roads, f"state atom '{atom}'", road_place, spec.source, town)
         atoms[atom] = frozenset(roads)
     return atoms
 
 
-def _belief_atoms(raw: dict, spec: _SpecSource, taken: set[str]) -> dict[str, BeliefAtom]:
+def _belief_atoms(raw: Mapping[str, object], spec: _SpecSource, taken: set[str]) -> dict[str, BeliefAtom]:
     """The `[beliefs.NAME]` tables: coeffs (one per trust level, at least 2) and offset."""
     atoms: dict[str, BeliefAtom] = {}
     for atom in sorted(raw):
@@ -370,8 +417,8 @@ def _belief_atoms(raw: dict, spec: _SpecSource, taken: set[str]) -> dict[str, Be
     return atoms
 
 
-def _inline_atoms(raw: dict, table: str, noun: str, fields: tuple[Field, ...], example: str,
-                  spec: _SpecSource, taken: set[str]) -> Iterator[tuple[str, dict, str]]:
+def _inline_atoms(raw: Mapping[str, object], table: str, noun: str, fields: FieldTable[AtomValues],
+                  example: str, spec: _SpecSource, taken: set[str]) -> Iterator[tuple[str, AtomValues, str]]:
     """The atom tables of inline tables (`[trust_states]`, `[type_beliefs]`): names unique across
     every atom table, each entry checked against `fields`. Yields (atom, values, place) in name
     order; `place` is the atom's line."""
@@ -381,14 +428,18 @@ def _inline_atoms(raw: dict, table: str, noun: str, fields: tuple[Field, ...], e
         if atom in taken:
             raise InputError(spec.source, place, f"atom '{atom}' is defined twice (also under another atom "
                              "table)", "rename one of them")
-        if not isinstance(raw[atom], dict):
+        entry = raw[atom]
+        if not isinstance(entry, dict):
             raise InputError(spec.source, place, f"{noun} atom '{atom}' must be a table", example)
-        values = check_fields(raw[atom], fields, spec.source, f"{noun} atom '{atom}'",
-                              lambda key, place=place: place, owner=atom)
+
+        def atom_place(key: str, place: str = place) -> str:
+            return place
+
+        values = check_fields(entry, fields, spec.source, f"{noun} atom '{atom}'", atom_place, owner=atom)
         yield atom, values, place
 
 
-def _trust_state_atoms(raw: dict, spec: _SpecSource, town: Town | None,
+def _trust_state_atoms(raw: Mapping[str, object], spec: _SpecSource, town: Town | None,
                        taken: set[str]) -> dict[str, TrustStateAtom]:
     """The `[trust_states]` table: NAME = { roads = [...] (optional), trust = [levels] }."""
     atoms: dict[str, TrustStateAtom] = {}
@@ -396,14 +447,18 @@ def _trust_state_atoms(raw: dict, spec: _SpecSource, town: Town | None,
                                              TRUST_STATE_EXAMPLE, spec, taken):
         roads = values["roads"]
         if roads is not None:
-            _check_roads(roads, f"trust-state atom '{atom}'", lambda road, place=place: place, spec.source,
-                         town)
+
+            def atom_place(road: str, place: str = place) -> str:
+                return place
+
+            _check_roads(roads, f"trust-state atom '{atom}'", atom_place, spec.source, town)
         atoms[atom] = TrustStateAtom(trust=frozenset(values["trust"]),
                                      roads=None if roads is None else frozenset(roads))
     return atoms
 
 
-def _type_belief_atoms(raw: dict, spec: _SpecSource, taken: set[str]) -> dict[str, TypeBeliefAtom]:
+def _type_belief_atoms(raw: Mapping[str, object], spec: _SpecSource,
+                       taken: set[str]) -> dict[str, TypeBeliefAtom]:
     """The `[type_beliefs]` table: NAME = { types = ["flat", ...], above = 0.7 }."""
     return {atom: TypeBeliefAtom(types=tuple(values["types"]), above=float(values["above"]))
             for atom, values, _ in _inline_atoms(raw, "type_beliefs", "type-belief", TYPE_BELIEF_FIELDS,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+from typing import TypedDict
 
 import pytest
 
@@ -21,6 +22,7 @@ from trustroute.core.fields import (
     Text,
     check_fields,
     check_value,
+    field_table,
     holds_bool,
     is_number,
     keys,
@@ -131,6 +133,21 @@ def test_check_value_gives_its_own_messages():
                     "not two finite numbers", "write [x, y]")
     assert (info.value.place, info.value.problem, info.value.fix) == ("xy", "not two finite numbers",
                                                                      "write [x, y]")
+
+
+class CountValues(TypedDict):
+    count: int
+    mode: str
+
+
+def test_a_field_table_checks_into_its_typed_dict_of_values():
+    table = field_table(CountValues, *FIELDS[:2])
+    assert table == FIELDS[:2] and keys(table) == ("count", "mode")
+    assert check_fields({"count": 2}, table, "f.toml", "test table") == {"count": 2, "mode": "fast"}
+    with pytest.raises(TypeError, match="CountValues has keys"):
+        field_table(CountValues, *FIELDS)  # two fields the TypedDict does not name
+    with pytest.raises(TypeError, match="CountValues has keys"):
+        field_table(CountValues, FIELDS[0])  # a key of the TypedDict without its field
 
 
 def test_every_format_exposes_its_accepted_keys():

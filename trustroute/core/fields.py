@@ -10,6 +10,11 @@ order; it returns every key's value with the defaults filled in. `check_value` c
 against a kind (the loaders' per-entry checks use it). Every failure is the one-line
 `InputError(file, place, problem, fix)`.
 
+Types: a kind of `T` (`Kind[T]`: `Integer` is a `Kind[int]`, `ListOf(item=Text())` a
+`Kind[list[str]]`) makes `check_value` return a `T`. A format's table is made by
+`field_table(Values, *fields)`, `Values` a TypedDict with one key per field typed as its kind
+accepts; `check_fields` returns that TypedDict, so a loader reads typed values.
+
 Messages: a kind states its own problem ("expected an integer from 1 to 1000, got 0"); a field (or
 a kind instance used as the values of a table) may give its own `problem` and `fix`, either text
 or a function of what was seen (`Seen`: key, value and the owning entry, e.g. an atom's name).
@@ -28,7 +33,7 @@ import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import NamedTuple
+from typing import Any, Generic, NamedTuple, TypeGuard, TypeVar, cast, overload
 
 from trustroute.core.errors import InputError
 from trustroute.core.validation import Place, check_keys, key_place
@@ -45,6 +50,9 @@ class Seen:
 
 
 Message = str | Callable[[Seen], str]
+T = TypeVar("T")
+T_co = TypeVar("T_co", covariant=True)
+D = TypeVar("D")  # a format's checked values: a TypedDict with one key per field
 EMPTY: Mapping[str, object] = MappingProxyType({})  # the default of an optional table (never mutated)
 
 
@@ -57,12 +65,16 @@ class Rejection(NamedTuple):
     hint: str = ""
 
 
+@overload
+def say(message: Message, seen: Seen) -> str: ...
+@overload
+def say(message: Message | None, seen: Seen) -> str | None: ...
 def say(message: Message | None, seen: Seen) -> str | None:
     """The text of a message (a function of what was seen, or fixed text)."""
     return message(seen) if callable(message) else message
 
 
-def is_number(value: object) -> bool:
+def is_number(value: object) -> TypeGuard[int | float]:
     """A finite int or float, not a bool."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         return False
@@ -81,8 +93,9 @@ def holds_bool(value: object) -> bool:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Kind:
-    """What a value must be; `reject` gives None for a good value, else the kind's account of it."""
+class Kind(Generic[T_co]):
+    """What a value must be, a `T_co` when good; `reject` gives None for a good value, else the kind's
+    account of it."""
 
     problem: Message | None = None
     fix: Message | None = None
@@ -93,12 +106,12 @@ class Kind:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Anything(Kind):
+class Anything(Kind[object]):
     """Any value (checked by a rule of the loader, or kept as it is)."""
 
 
 @dataclass(frozen=True, kw_only=True)
-class Integer(Kind):
+class Integer(Kind[int]):
     """An int (not a bool) in [minimum, maximum]; `false_allowed`: `false` too (a rule it turns off)."""
 
     minimum: int = -(2**63)
@@ -116,7 +129,7 @@ class Integer(Kind):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Number(Kind):
+class Number(Kind[float]):
     """An int or float (not a bool), finite unless `finite` is False, within the bounds (`open_below`
     / `open_above`: the bound itself excluded)."""
 
@@ -150,7 +163,7 @@ PROBABILITY = Number(minimum=0.0, maximum=1.0,
 
 
 @dataclass(frozen=True, kw_only=True)
-class Text(Kind):
+class Text(Kind[str]):
     """A string: non-empty unless `nonempty` is False, at most `max_length` characters, matching
     `pattern` in full when given."""
 
@@ -169,7 +182,7 @@ class Text(Kind):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Flag(Kind):
+class Flag(Kind[bool]):
     """`true` or `false`."""
 
     plural = "booleans"
@@ -179,10 +192,10 @@ class Flag(Kind):
 
 
 @dataclass(frozen=True, kw_only=True)
-class OneOf(Kind):
+class OneOf(Kind[T_co]):
     """One of `choices` (of the same type: `true` is not 1); `noun` names a value in messages."""
 
-    choices: tuple[object, ...] = ()
+    choices: tuple[T_co, ...] = ()
     noun: str = "value"
 
     def reject(self, value: object) -> Rejection | None:
@@ -192,12 +205,17 @@ class OneOf(Kind):
                          hint=f"use one of {', '.join(map(str, self.choices))}")
 
 
+# A list's items when no kind is given: any value (the loader checks them one by one). Typed as a
+# kind of every item type, so that a list left unchecked item by item fits any list a loader reads.
+UNCHECKED_ITEMS: Kind[Any] = Anything()
+
+
 @dataclass(frozen=True, kw_only=True)
-class ListOf(Kind):
+class ListOf(Kind[list[T]]):
     """A list of `min_items` to `max_items` items of kind `item`, checked as one value (its message
     names the whole list); `distinct`: no item twice; `increasing`: each item above the last."""
 
-    item: Kind = Anything()
+    item: Kind[T] = UNCHECKED_ITEMS
     min_items: int = 0
     max_items: int | None = None
     distinct: bool = False
@@ -205,16 +223,19 @@ class ListOf(Kind):
     plural = "lists"
 
     def reject(self, value: object) -> Rejection | None:
-        shaped = (isinstance(value, list) and self.min_items <= len(value)
-                  and (self.max_items is None or len(value) <= self.max_items)
-                  and not any(self.item.reject(entry) for entry in value))
-        if not shaped or (self.increasing and any(a >= b for a, b in zip(value, value[1:], strict=False))):
+        if not (isinstance(value, list) and self._shaped(value)):
             size = "non-empty " if self.min_items == 1 and self.max_items is None else ""
             order = "increasing " if self.increasing else ""
             return Rejection(f"expected a {size}{order}list of {self.item.plural}, got {value!r}")
         if self.distinct and _repeats(value):
             return Rejection("lists the same entry twice", "list each entry once")
         return None
+
+    def _shaped(self, items: list) -> bool:
+        """The length in bounds, every item of kind `item` and, when `increasing`, in order."""
+        return (self.min_items <= len(items) and (self.max_items is None or len(items) <= self.max_items)
+                and not any(self.item.reject(entry) for entry in items)
+                and not (self.increasing and any(a >= b for a, b in zip(items, items[1:], strict=False))))
 
 
 def _repeats(items: list) -> bool:
@@ -225,12 +246,12 @@ def _repeats(items: list) -> bool:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Table(Kind):
+class Table(Kind[dict[str, object]]):
     """An object (JSON) or table (TOML); non-empty when `nonempty`. With `values`, every entry's
     value is checked against that kind at `place.key`."""
 
     nonempty: bool = False
-    values: Kind | None = None
+    values: Kind[object] | None = None
     plural = "tables"
 
     def reject(self, value: object) -> Rejection | None:
@@ -249,7 +270,7 @@ class Field:
     absent: default "missing key 'k'" and `fix`)."""
 
     key: str
-    kind: Kind
+    kind: Kind[object]
     required: bool = False
     default: object = None
     fix: Message = ""
@@ -263,8 +284,22 @@ def keys(fields: Sequence[Field]) -> tuple[str, ...]:
     return tuple(field.key for field in fields)
 
 
-def check_value(value: object, kind: Kind, source: str, place: str, problem: Message | None = None,
-                fix: Message | None = None, seen: Seen | None = None) -> object:
+class FieldTable(tuple[Field, ...], Generic[D]):
+    """A field table whose checked values are a `D`: a TypedDict with one key per field, typed as
+    the field's kind accepts (`| None` for an optional key without a default). Made by `field_table`."""
+
+
+def field_table(values: type[D], *fields: Field) -> FieldTable[D]:
+    """The table of `fields`, whose checked values `values` (a TypedDict) describes; TypeError when
+    the TypedDict's keys are not the fields' keys."""
+    if sorted(values.__annotations__) != sorted(keys(fields)):
+        raise TypeError(f"{values.__name__} has keys {sorted(values.__annotations__)}, "
+                        f"the fields {sorted(keys(fields))}")
+    return FieldTable(fields)
+
+
+def check_value(value: object, kind: Kind[T], source: str, place: str, problem: Message | None = None,
+                fix: Message | None = None, seen: Seen | None = None) -> T:
     """`value` itself when `kind` accepts it (a table's entries checked too); InputError otherwise.
     `problem`/`fix` replace the kind's messages (as a field's do)."""
     rejection = kind.reject(value)
@@ -275,19 +310,19 @@ def check_value(value: object, kind: Kind, source: str, place: str, problem: Mes
         if given is not None:
             raise InputError(source, place, say(given, seen), fix_text)
         raise InputError(source, place, rejection.problem, rejection.fix or fix_text or rejection.hint)
-    if isinstance(kind, Table) and kind.values is not None:
+    if isinstance(kind, Table) and kind.values is not None and isinstance(value, dict):
         for key, entry in value.items():
             check_value(entry, kind.values, source, f"{place}.{key}",
                         seen=Seen(str(key), entry, seen.owner if seen else ""))
-    return value
+    return cast(T, value)  # the kind accepted it: a T
 
 
-def check_fields(data: dict, fields: Sequence[Field], source: str, what: str, place: Place = "",
-                 owner: str = "") -> dict[str, object]:
+def check_fields(data: dict, fields: FieldTable[D], source: str, what: str, place: Place = "",
+                 owner: str = "") -> D:
     """Check the parsed table `data` against `fields`: no unknown key (`what` names the table in
     that message), every required key present, every value of its kind. Returns every field's
-    value by key, the default where the key is absent. `owner` names the entry the table belongs
-    to in messages (`Seen.owner`)."""
+    value by key (the table's TypedDict), the default where the key is absent. `owner` names the
+    entry the table belongs to in messages (`Seen.owner`)."""
     check_keys(data, keys(fields), source, place, what)
     for field in fields:
         if field.required and field.key not in data:
@@ -303,4 +338,4 @@ def check_fields(data: dict, fields: Sequence[Field], source: str, what: str, pl
         value = data[field.key]
         values[field.key] = check_value(value, field.kind, source, key_place(place, field.key), field.problem,
                                         field.fix, Seen(field.key, value, owner))
-    return values
+    return cast(D, values)  # every field's key, each value of its kind or the field's default: a D
