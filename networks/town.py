@@ -228,6 +228,9 @@ class TownValues(TypedDict):
     roads: list[object]
     incidents: dict[str, str]
     source: object
+    one_way: object     # checked by networks/road_geometry.py
+    geometry: object
+    sumo_net: object
 
 
 FIELDS = field_table(
