@@ -182,3 +182,13 @@ def test_the_public_api_does_not_import_the_cli():
             reached.add(module)
             todo += sorted(graph.get(module, ()))
     assert sorted(m for m in reached if layer_of(m) == len(LAYERS) - 1) == []
+
+
+MAX_MODULE_LINES = 600
+
+
+def test_every_module_stays_small():
+    """A module has one job: none of the package's modules runs past MAX_MODULE_LINES lines."""
+    long = {module: n for module, path in package_modules().items()
+            if (n := len(path.read_text().splitlines())) > MAX_MODULE_LINES}
+    assert long == {}
