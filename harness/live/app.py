@@ -1,0 +1,226 @@
+"""The live study's web application (FastAPI): HTTP API, participant websocket, links.
+
+Every route checks who is asking (harness/live/auth.py) before it reads anything:
+
+    GET  /login?token=T                experimenter: sets the HttpOnly cookie, then to /console
+    GET  /p/{token}                    a participant's link: sets their cookie, then to /station
+    GET  /api/me                       participant: their own progress and the consent text
+    POST /api/participants             experimenter: create the next participant -> link
+    GET  /api/participants             experimenter: every participant's progress
+    GET  /api/participants/{p}         experimenter, or participant p themself
+    POST /api/participants/{p}/control experimenter: pause, resume or abort p's episode
+    GET  /api/files                    experimenter: the study directory's files
+    GET  /api/download/{path}          experimenter: one file, inside the study directory only
+    WS   /ws                           participant: the protocol of harness/live/protocol.py
+
+Request bodies are capped (MAX_BODY_BYTES) and validated (protocol.py models); every refusal is
+a JSON error of the protocol's form with an HTTP status, and changes nothing. `serve` runs the application
+on uvicorn (websocket frames capped at the transport too).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+
+from fastapi import Depends, FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
+
+from trustroute.harness.live.auth import EXPERIMENTER_COOKIE, PARTICIPANT_COOKIE, presented_token
+from trustroute.harness.live.protocol import (
+    MAX_BODY_BYTES,
+    MAX_MESSAGE_BYTES,
+    EpisodeControl,
+    MessageError,
+    NewParticipant,
+    TokenBucket,
+    error_reply,
+    parse_client_message,
+)
+from trustroute.harness.live.server import LiveStudy
+from trustroute.harness.live.session import Session
+
+OUTBOX = 1024          # messages queued for one websocket; frames are dropped first
+FRAMES_UP_TO = OUTBOX // 2
+POLICY_VIOLATION = 1008  # websocket close code: no valid participant token
+
+
+def offer(queue: asyncio.Queue, message: dict) -> None:
+    """Queue a message for the socket; a frame is dropped when the socket is behind."""
+    if message.get("type") == "frame" and queue.qsize() >= FRAMES_UP_TO:
+        return
+    with contextlib.suppress(asyncio.QueueFull):
+        queue.put_nowait(message)
+
+
+def respond(session: Session, bucket: TokenBucket, data: str | bytes) -> list[dict]:
+    """The replies to one raw client message (an error reply for a refused one)."""
+    if not bucket.take():
+        return [error_reply("rate_limited", "too many messages; slow down")]
+    try:
+        return session.handle(parse_client_message(data))
+    except MessageError as exc:
+        return [exc.reply]
+
+
+def refused(status: int, code: str, detail: str) -> HTTPException:
+    return HTTPException(status, error_reply(code, detail) if code else {"type": "error", "detail": detail})
+
+
+def cookie_redirect(target: str, cookie: str, token: str) -> RedirectResponse:
+    response = RedirectResponse(target, status_code=303)
+    response.set_cookie(cookie, token, httponly=True, samesite="strict", path="/")
+    return response
+
+
+def live_app(study: LiveStudy) -> FastAPI:
+    """The application serving `study` (opened: credentials and directory lock held)."""
+    app = FastAPI(title="trustroute live", docs_url=None, redoc_url=None, openapi_url=None)
+    credentials = study.credentials
+
+    @app.middleware("http")
+    async def limit_body(request: Request, call_next):
+        if request.method in ("POST", "PUT", "PATCH"):
+            length = request.headers.get("content-length", "")
+            if not length.isdigit():
+                return JSONResponse({"type": "error", "detail": "a body needs a Content-Length"}, 411)
+            if int(length) > MAX_BODY_BYTES:
+                return JSONResponse(error_reply("oversized", f"bodies hold at most {MAX_BODY_BYTES} bytes"),
+                                    413)
+        return await call_next(request)
+
+    @app.exception_handler(RequestValidationError)
+    async def malformed(request: Request, exc: RequestValidationError):
+        first = exc.errors()[0] if exc.errors() else {}
+        where = ".".join(str(part) for part in first.get("loc", ()))
+        return JSONResponse(error_reply("malformed", f"{where}: {first.get('msg', 'invalid')}"), 422)
+
+    def experimenter(request: Request) -> None:
+        token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
+        if not credentials.is_experimenter(token):
+            raise refused(401 if token is None else 403, "", "the experimenter's token is needed")
+
+    def participant_token(request: Request) -> int:
+        found = credentials.participant_of(presented_token(request.headers, request.cookies,
+                                                           PARTICIPANT_COOKIE))
+        if found is None:
+            raise refused(403, "", "a participant link is needed")
+        return found
+
+    def session_of(participant: int) -> Session:
+        session = study.sessions.get(participant)
+        if session is None:
+            raise refused(404, "", f"no participant {participant}")
+        return session
+
+    @app.get("/login")
+    def login(token: str = "") -> RedirectResponse:
+        if not credentials.is_experimenter(token[:200] or None):
+            raise refused(403, "", "the experimenter's token is needed")
+        return cookie_redirect("/console", EXPERIMENTER_COOKIE, token)
+
+    @app.get("/p/{token}")
+    def participant_link(token: str) -> RedirectResponse:
+        if credentials.participant_of(token[:200]) is None:
+            raise refused(403, "", "not a participant link of this study")
+        return cookie_redirect("/station", PARTICIPANT_COOKIE, token)
+
+    @app.get("/api/me")
+    def me(participant: int = Depends(participant_token)) -> dict:
+        return {**session_of(participant).progress(), "consent": study.consent_text}
+
+    @app.post("/api/participants", dependencies=[Depends(experimenter)])
+    def create_participant(body: NewParticipant) -> dict:
+        try:
+            participant, token = study.create_participant(body.label)
+        except ValueError as exc:
+            raise refused(409, "out_of_order", str(exc)) from None
+        return {"participant": participant, "token": token, "link": f"/p/{token}"}
+
+    @app.get("/api/participants", dependencies=[Depends(experimenter)])
+    def participants() -> dict:
+        return {"participants": [s.progress() for _, s in sorted(study.sessions.items())]}
+
+    @app.get("/api/participants/{participant}")
+    def participant_progress(participant: int, request: Request) -> dict:
+        token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
+        if not credentials.is_experimenter(token) and participant_token(request) != participant:
+            raise refused(403, "", "a participant sees only their own session")
+        return session_of(participant).progress()
+
+    @app.post("/api/participants/{participant}/control", dependencies=[Depends(experimenter)])
+    def control(participant: int, body: EpisodeControl) -> dict:
+        try:
+            return session_of(participant).control(body.action)
+        except MessageError as exc:
+            raise HTTPException(409, exc.reply) from None
+
+    @app.get("/api/files", dependencies=[Depends(experimenter)])
+    def files() -> dict:
+        return {"files": study.files()}
+
+    @app.get("/api/download/{path:path}", dependencies=[Depends(experimenter)])
+    def download(path: str) -> FileResponse:
+        try:
+            target = study.download_path(path)
+        except ValueError as exc:
+            raise refused(404, "", str(exc)) from None
+        return FileResponse(target, filename=target.name)
+
+    @app.websocket("/ws")
+    async def station_socket(websocket: WebSocket) -> None:
+        participant = credentials.participant_of(
+            presented_token(websocket.headers, websocket.cookies, PARTICIPANT_COOKIE))
+        if participant is None:
+            await websocket.close(code=POLICY_VIOLATION)
+            return
+        session = study.sessions[participant]
+        await websocket.accept()
+        await converse(websocket, session, study.consent_text)
+
+    return app
+
+
+async def converse(websocket: WebSocket, session: Session, consent_text: str) -> None:
+    """One participant connection: replies and the episode's messages out, client messages in."""
+    queue: asyncio.Queue = asyncio.Queue(maxsize=OUTBOX)
+    loop = asyncio.get_running_loop()
+
+    def push(message: dict) -> None:   # called from the episode's reader thread
+        loop.call_soon_threadsafe(offer, queue, message)
+
+    async def send_all() -> None:
+        while True:
+            await websocket.send_json(await queue.get())
+
+    sender = asyncio.create_task(send_all())
+    bucket = TokenBucket()
+    offer(queue, {"type": "welcome", "participant": session.participant, "consent": consent_text})
+    offer(queue, session.progress())
+    session.attach(push)
+    try:
+        while True:
+            raw = await websocket.receive()
+            if raw["type"] == "websocket.disconnect":
+                break
+            data = raw["text"] if raw.get("text") is not None else (raw.get("bytes") or b"")
+            for reply in respond(session, bucket, data):
+                offer(queue, reply)
+    except WebSocketDisconnect:
+        pass
+    finally:
+        session.detach(push)
+        sender.cancel()
+
+
+def serve(study: LiveStudy, host: str, port: int, on_ready=None) -> None:
+    """Run the application on uvicorn until interrupted (the study must be open)."""
+    import uvicorn
+
+    config = uvicorn.Config(live_app(study), host=host, port=port, log_level="warning",
+                            ws_max_size=4 * MAX_MESSAGE_BYTES, lifespan="off")
+    server = uvicorn.Server(config)
+    if on_ready is not None:
+        on_ready()
+    server.run()

@@ -1,0 +1,209 @@
+"""One participant's session: the phase it is in, its trials, its running episode.
+
+Phases: "consent" (the consent text is shown) -> "ready" (a trial can start) -> "driving" <->
+"paused" -> "ready" ... -> "done" (every trial of the participant has a part). A client message
+that does not fit the phase (a takeover before consent, a hand-back on autopilot, a resume of the
+experimenter's pause) is refused with an `out_of_order` error and changes nothing.
+
+The trials are the participant's planned episodes in the study's order (harness/study/plan.py);
+a trial is done when its part exists, so an aborted, failed or interrupted episode is run again
+at the participant's next start, and a restarted server continues at the first trial without a
+part. State changes happen under one lock: client messages arrive on the server's event loop, the
+episode's messages on the session's reader thread.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Callable
+
+from trustroute.harness.live.protocol import (
+    Consent,
+    HandBack,
+    Message,
+    MessageError,
+    Ping,
+    Resume,
+    Start,
+    Takeover,
+    TrustReport,
+)
+from trustroute.harness.live.worker import start_episode_process
+from trustroute.harness.study.plan import EpisodeTask
+
+STOP_SECONDS = 5.0
+
+
+class Session:
+    """A participant's session (one per participant, whether or not a browser is connected)."""
+
+    def __init__(self, study, participant: int, tasks: list[EpisodeTask], label: str = "",
+                 consented: bool = False, client: str = "station") -> None:
+        self.study = study                  # harness/live/server.py LiveStudy
+        self.participant = participant
+        self.tasks = tasks
+        self.label = label
+        self.client = client
+        self.lock = threading.RLock()
+        self.phase = "ready" if consented else "consent"
+        self.pause_reason: str | None = None
+        self.task: EpisodeTask | None = None
+        self.mode = "auto"
+        self.road: str | None = None
+        self.reports = self.takeovers = 0
+        self.last_error: str | None = None
+        self.process = self.connection = None
+        self.push: Callable[[dict], None] | None = None
+        if consented and not self.pending():
+            self.phase = "done"
+
+    # -- what the console and the station read --------------------------------------------------
+    def pending(self) -> list[EpisodeTask]:
+        return [task for task in self.tasks if not self.study.is_done(task)]
+
+    def progress(self) -> dict:
+        with self.lock:
+            done = [task.episode_id for task in self.tasks if self.study.is_done(task)]
+            return {"type": "state", "participant": self.participant, "label": self.label,
+                    "phase": self.phase, "paused_by": self.pause_reason,
+                    "trial": len(done) + (1 if self.phase in ("driving", "paused") else 0),
+                    "trials": len(self.tasks), "episode_id": self.task.episode_id if self.task else None,
+                    "mode": self.mode, "road": self.road, "reports": self.reports,
+                    "takeovers": self.takeovers, "done": done, "last_error": self.last_error}
+
+    # -- the participant's messages -------------------------------------------------------------
+    def handle(self, message: Message) -> list[dict]:
+        """Apply a validated client message; its replies. MessageError when out of order."""
+        with self.lock:
+            if isinstance(message, Ping):
+                return [{"type": "pong"}]
+            if isinstance(message, Consent):
+                self.require("consent", message)
+                self.client = message.client
+                self.study.record_consent(self.participant, message.client)
+                self.phase = "ready" if self.pending() else "done"
+            elif isinstance(message, Start):
+                self.require("ready", message)
+                self.start(self.pending()[0], message.trust)
+            elif isinstance(message, (Takeover, HandBack)):
+                self.require("driving", message)
+                wanted = "auto" if isinstance(message, Takeover) else "manual"
+                if self.mode != wanted:
+                    raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
+                self.tell(message.model_dump())
+                return []
+            elif isinstance(message, TrustReport):
+                self.require("driving", message)
+                self.tell(message.model_dump())
+                self.reports += 1
+                return []
+            elif isinstance(message, Resume):
+                self.require("paused", message)
+                if self.pause_reason != "disconnect":
+                    raise MessageError("out_of_order", "the experimenter paused this episode")
+                self.resume()
+            return [self.progress()]
+
+    def require(self, phase: str, message: Message) -> None:
+        if self.phase != phase:
+            raise MessageError("out_of_order", f"{message.type} in phase {self.phase!r} (needs {phase!r})")
+
+    # -- the episode ----------------------------------------------------------------------------
+    def start(self, task: EpisodeTask, trust: int | None) -> None:
+        self.process, self.connection = start_episode_process(
+            self.study.config, self.study.study_dir, task, self.study.live_options(self.client), trust)
+        self.task, self.phase, self.mode, self.road, self.last_error = task, "driving", "auto", None, None
+        reader = threading.Thread(target=self.read_episode, args=(self.connection, self.process),
+                                  name=f"live-reader-{task.episode_id}", daemon=True)
+        reader.start()
+
+    def read_episode(self, connection, process) -> None:
+        """The reader thread: every message of the episode process, until its pipe closes."""
+        ended = False
+        while True:
+            try:
+                message = connection.recv()
+            except (EOFError, OSError):
+                break
+            ended |= message.get("type", "") in ("episode_end", "episode_aborted", "episode_failed")
+            self.on_episode_message(message)
+        process.join(STOP_SECONDS)
+        if not ended:
+            self.on_episode_message({"type": "episode_failed",
+                                     "error": f"the episode process ended (exit code {process.exitcode})"})
+
+    def on_episode_message(self, message: dict) -> None:
+        kind = message.get("type")
+        finished = kind in ("episode_end", "episode_aborted", "episode_failed")
+        with self.lock:
+            if kind == "mode":
+                self.mode = message["mode"]
+                self.takeovers += self.mode == "manual"
+            elif kind == "frame":
+                self.road = message["road"]
+            elif finished:
+                if kind == "episode_end":
+                    self.study.episode_finished(self.task)
+                else:
+                    self.last_error = message.get("error") or message.get("reason")
+                self.phase = "ready" if self.pending() else "done"
+                self.pause_reason, self.process, self.connection = None, None, None
+            push = self.push
+        if push is not None:
+            push({key: value for key, value in message.items() if key != "traceback"})
+            if finished:
+                push(self.progress())
+
+    def control(self, action: str) -> dict:
+        """The experimenter's pause, resume or abort of the running episode."""
+        with self.lock:
+            if action == "pause" and self.phase == "driving":
+                self.pause("experimenter")
+            elif action == "resume" and self.phase == "paused":
+                self.resume()
+            elif action == "abort" and self.phase in ("driving", "paused"):
+                self.tell({"type": "abort"})
+            else:
+                raise MessageError("out_of_order", f"{action} in phase {self.phase!r}")
+            return self.progress()
+
+    def tell(self, control: dict) -> None:
+        """Send a control to the running episode (MessageError when it has just ended)."""
+        try:
+            self.connection.send(control)
+        except (OSError, ValueError, AttributeError):
+            raise MessageError("out_of_order", "the episode has ended") from None
+
+    def pause(self, reason: str) -> None:
+        self.tell({"type": "pause"})
+        self.phase, self.pause_reason = "paused", reason
+
+    def resume(self) -> None:
+        self.tell({"type": "resume"})
+        self.phase, self.pause_reason = "driving", None
+
+    # -- the participant's connection -----------------------------------------------------------
+    def attach(self, push: Callable[[dict], None]) -> None:
+        with self.lock:
+            self.push = push
+
+    def detach(self, push: Callable[[dict], None]) -> None:
+        """The participant's connection closed: a running episode pauses until they resume."""
+        with self.lock:
+            if self.push is not push:
+                return
+            self.push = None
+            if self.phase == "driving":
+                with contextlib.suppress(MessageError):   # the episode ended meanwhile
+                    self.pause("disconnect")
+
+    def stop(self) -> None:
+        """Stop a running episode (the server is closing): no part is written for it."""
+        with self.lock:
+            process = self.process
+        if process is not None:
+            process.terminate()
+            process.join(STOP_SECONDS)
+            if process.is_alive():
+                process.kill()

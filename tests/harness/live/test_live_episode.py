@@ -1,0 +1,129 @@
+"""Live episodes against real SUMO: through a real uvicorn server and the websocket (the scripted
+participant), paused, resumed and aborted by the experimenter, and read by `trustroute analyze`."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+
+import httpx
+import pytest
+import uvicorn
+from fastapi.testclient import TestClient
+
+from trustroute.core.dataset import part_path, read_episodes, read_kinematics, read_manifest, read_roads
+from trustroute.harness.live.app import live_app
+from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
+from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.study.parts import read_part
+
+from .conftest import tiny_config
+
+pytestmark = pytest.mark.slow
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.fixture
+def served(live_study):
+    """(study, base URL) of the live study on a real uvicorn at 127.0.0.1 and a random port."""
+    port = free_port()
+    server = uvicorn.Server(uvicorn.Config(live_app(live_study), host="127.0.0.1", port=port,
+                                           log_level="warning", lifespan="off"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 30
+    while not server.started:
+        assert time.monotonic() < deadline, "uvicorn did not start"
+        time.sleep(0.02)
+    yield live_study, f"127.0.0.1:{port}"
+    server.should_exit = True
+    thread.join(10)
+
+
+def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_it(served, tmp_path):
+    study, address = served
+    headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+    created = httpx.post(f"http://{address}/api/participants", json={"label": "scripted"}, headers=headers)
+    token = created.json()["token"]
+    played = run_scripted(f"ws://{address}/ws", token, ScriptedParticipant(study.config, 0), timeout=120)
+    task = study.tasks_of(0)[0]
+    assert played.finished and [e["episode_id"] for e in played.episodes] == [task.episode_id]
+    assert [e for e in played.errors if e["code"] != "out_of_order"] == []
+    part = read_part(part_path(study.study_dir, task.episode_id))
+    assert part.summary["live"]["driver"] == "scripted"
+    sent = [event for event in part.summary["live"]["events"] if event["type"] == "trust"]
+    assert len(sent) >= 1 and all(1 <= event["value"] <= 7 for event in sent)
+    # the dataset is consolidated: the episode, its roads and every tick of its kinematics
+    manifest = read_manifest(study.study_dir)
+    assert manifest["engine"] == "live" and manifest["finished_episodes"] == 1
+    episodes, roads = read_episodes(study.study_dir), read_roads(study.study_dir)
+    assert list(episodes["episode_id"]) == [task.episode_id]
+    assert int(episodes["junctions"].iloc[0]) == len(roads) - 1 == played.episodes[0]["junctions"]
+    reported = roads["reported_trust"].dropna().astype(int).tolist()
+    assert reported and set(reported) <= {event["value"] for event in sent}
+    kinematics = read_kinematics(study.study_dir)
+    assert len(kinematics) > 50 and set(kinematics["mode"]) <= {"auto", "manual"}
+    progress = httpx.get(f"http://{address}/api/participants/0", headers=headers).json()
+    assert progress["phase"] == "done" and progress["done"] == [task.episode_id]
+    download = httpx.get(f"http://{address}/api/download/episodes.parquet", headers=headers)
+    assert download.status_code == 200
+    assert download.content == (study.study_dir / "episodes.parquet").read_bytes()
+
+    from click.testing import CliRunner
+
+    from trustroute.harness.cli import cli
+
+    result = CliRunner().invoke(cli, ["analyze", str(study.study_dir), "--json", "--no-report"])
+    assert result.exit_code == 0, result.output
+    analysis = json.loads(result.output)
+    assert analysis["engine"] == "live"
+    assert [(c["spec"], c["condition"], c["n"]) for c in analysis["cells"]] == [("phi1", "free", 1)]
+
+
+def receive_until(socket, wanted, limit: int = 5000) -> dict:
+    for _ in range(limit):
+        message = socket.receive_json()
+        if wanted(message):
+            return message
+    raise AssertionError("the awaited message never came")
+
+
+def test_disconnect_pauses_resume_continues_and_the_experimenter_aborts(tmp_path):
+    """At wall-clock pace the episode is still running while the test acts on it."""
+    config = tiny_config(tmp_path, participants=1)
+    study = LiveStudy(config, tmp_path / "study", ServerOptions(pace=1.0)).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+            token = client.post("/api/participants", json={}, headers=headers).json()["token"]
+            participant = {"Authorization": f"Bearer {token}"}
+            with client.websocket_connect("/ws", headers=participant) as station:
+                station.send_json({"type": "consent", "agree": True})
+                receive_until(station, lambda m: m.get("phase") == "ready")
+                station.send_json({"type": "start", "trust": 5})
+                receive_until(station, lambda m: m["type"] == "frame")
+                station.send_json({"type": "trust", "value": 6})
+            assert client.get("/api/participants/0", headers=headers).json()["paused_by"] == "disconnect"
+            with client.websocket_connect("/ws", headers=participant) as station:
+                receive_until(station, lambda m: m.get("phase") == "paused")
+                station.send_json({"type": "resume"})
+                receive_until(station, lambda m: m.get("phase") == "driving")
+                receive_until(station, lambda m: m["type"] == "frame")
+                paused = client.post("/api/participants/0/control", json={"action": "pause"}, headers=headers)
+                assert paused.json()["paused_by"] == "experimenter"
+                station.send_json({"type": "resume"})   # the experimenter's pause is not the participant's
+                assert receive_until(station, lambda m: m["type"] == "error")["code"] == "out_of_order"
+                client.post("/api/participants/0/control", json={"action": "abort"}, headers=headers)
+                assert receive_until(station, lambda m: m["type"] == "episode_aborted")
+                state = receive_until(station, lambda m: m["type"] == "state")
+                assert state["phase"] == "ready" and state["done"] == []
+        assert not part_path(study.study_dir, study.tasks_of(0)[0].episode_id).exists()
+    finally:
+        study.close()

@@ -1,0 +1,82 @@
+"""The remote driver in the study's episode code (in this process, on libsumo): a person's takeover
+reaches SUMO and the logs, and the tracker decides exactly as it does for the same observations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trustroute.harness.live.worker import EpisodeAborted, LiveOptions, RemoteDriver, live_summary
+from trustroute.harness.simulation.episode_tracker import EpisodeTracker
+from trustroute.harness.study.context import study_context
+from trustroute.harness.study.plan import plan_episodes
+from trustroute.harness.study.runner import run_planned_episode
+
+from .conftest import tiny_config
+
+pytestmark = pytest.mark.slow
+
+
+class Pipe:
+    """The worker's end of the pipe: controls queued in advance, messages sent kept."""
+
+    def __init__(self, controls=()) -> None:
+        self.controls, self.sent = list(controls), []
+
+    def send(self, message: dict) -> None:
+        self.sent.append(message)
+
+    def poll(self, timeout: float = 0.0) -> bool:
+        return bool(self.controls)
+
+    def recv(self) -> dict:
+        return self.controls.pop(0)
+
+
+def live_episode(tmp_path, controls):
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    pipe = Pipe(controls)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"))
+    record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
+    return config, task, driver, pipe, record
+
+
+def test_a_takeover_from_the_pipe_reaches_sumo_and_the_logs(tmp_path):
+    config, task, driver, pipe, record = live_episode(
+        tmp_path, [{"type": "takeover"}, {"type": "trust", "value": 3}])
+    roads = record.roads
+    assert bool(roads["takeover"].iloc[1]) is True       # the first road after the start
+    assert roads["reported_trust"].dropna().tolist() == [3]
+    assert int(roads["trust_before"].iloc[0]) == 5        # the trust stated at the start
+    assert "manual" in set(record.kinematics["mode"])
+    incidents = record.incidents
+    assert bool(incidents["takeover"].iloc[0]) and not np.isnan(incidents["takeover_start"].iloc[0])
+    kinds = [m["type"] for m in pipe.sent]
+    assert "frame" in kinds and kinds.count("road") == len(roads) - 1
+    assert [m["mode"] for m in pipe.sent if m["type"] == "mode"][:2] == ["manual", "auto"]
+    summary = live_summary(record.summary, driver)
+    assert summary["live"]["driver"] == "scripted" and len(summary["live"]["events"]) == 2
+
+
+def test_the_tracker_decides_as_for_the_same_observations_headless(tmp_path):
+    """Replaying the live episode's observations through the shared EpisodeTracker gives the very
+    junctions, beliefs and DFA states the live episode logged."""
+    config, task, driver, pipe, record = live_episode(tmp_path, [{"type": "takeover"}])
+    context = study_context(config)
+    cell = (task.spec, task.condition)
+    tracker = EpisodeTracker(context.setup(*cell), context.policies[cell], task.episode_id, initial_trust=5)
+    rows = record.roads.to_dict("records")
+    for row in rows[1:]:
+        tracker.next_junction()
+        tracker.record_road(row["directed_road"], row["incident"], bool(row["takeover"]), row["performance"],
+                            5, 5, None, row["sim_time_in"], row["sim_time_out"])
+    tracker.next_junction()
+    replayed = tracker.roads_frame()
+    for column in ("directed_road", "action", "belief_after", "dfa_state"):
+        assert [str(v) for v in replayed[column]] == [str(v) for v in record.roads[column]], column
+
+
+def test_an_abort_stops_the_episode(tmp_path):
+    with pytest.raises(EpisodeAborted):
+        live_episode(tmp_path, [{"type": "abort"}])
