@@ -4,6 +4,8 @@ Every route checks who is asking (harness/live/auth.py) before it reads anything
 
     GET  /login?token=T                experimenter: sets the HttpOnly cookie, then to /console
     GET  /p/{token}                    a participant's link: sets their cookie, then to /station
+    GET  /console, /station            the pages (experimenter; participant), plain HTML and JS
+    GET  /static/{name}                their script and style sheet
     GET  /api/me                       participant: their own progress and the consent text
     POST /api/participants             experimenter: create the next participant -> link
     GET  /api/participants             experimenter: every participant's progress
@@ -22,10 +24,12 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+from pathlib import Path
 
-from fastapi import Depends, FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
+from starlette.requests import HTTPConnection
 
 from trustroute.harness.live.auth import EXPERIMENTER_COOKIE, PARTICIPANT_COOKIE, presented_token
 from trustroute.harness.live.protocol import (
@@ -41,6 +45,14 @@ from trustroute.harness.live.protocol import (
 from trustroute.harness.live.server import LiveStudy
 from trustroute.harness.live.session import Session
 
+PAGES = Path(__file__).with_name("pages")
+STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js": "text/javascript"}
+# Every response: no framing, no sniffing, no referrer (a participant link carries a token), and
+# scripts, styles and sockets from this server only.
+SECURITY_HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
+                    "Referrer-Policy": "no-referrer", "Cache-Control": "no-store",
+                    "Content-Security-Policy": "default-src 'self'; connect-src 'self'; "
+                                               "img-src 'self' data:; frame-ancestors 'none'"}
 OUTBOX = 1024          # messages queued for one websocket; frames are dropped first
 FRAMES_UP_TO = OUTBOX // 2
 POLICY_VIOLATION = 1008  # websocket close code: no valid participant token
@@ -74,111 +86,157 @@ def cookie_redirect(target: str, cookie: str, token: str) -> RedirectResponse:
     return response
 
 
+router = APIRouter()
+
+
+def study_of(connection: HTTPConnection) -> LiveStudy:
+    return connection.app.state.study
+
+
+def experimenter(request: Request) -> None:
+    """Dependency: the request carries the experimenter's token (401 without a token, 403 with another)."""
+    token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
+    if not study_of(request).credentials.is_experimenter(token):
+        raise refused(401 if token is None else 403, "", "the experimenter's token is needed")
+
+
+def participant_token(request: Request) -> int:
+    """Dependency: the participant the request's token names (403 for any other token)."""
+    token = presented_token(request.headers, request.cookies, PARTICIPANT_COOKIE)
+    found = study_of(request).credentials.participant_of(token)
+    if found is None:
+        raise refused(403, "", "a participant link is needed")
+    return found
+
+
+def session_of(request: Request, participant: int) -> Session:
+    session = study_of(request).sessions.get(participant)
+    if session is None:
+        raise refused(404, "", f"no participant {participant}")
+    return session
+
+
+async def limit_body(request: Request, call_next):
+    """Bodies need a length within MAX_BODY_BYTES; every response gets the security headers."""
+    response = None
+    if request.method in ("POST", "PUT", "PATCH"):
+        length = request.headers.get("content-length", "")
+        if not length.isdigit():
+            response = JSONResponse({"type": "error", "detail": "a body needs a Content-Length"}, 411)
+        elif int(length) > MAX_BODY_BYTES:
+            limit = f"bodies hold at most {MAX_BODY_BYTES} bytes"
+            response = JSONResponse(error_reply("oversized", limit), 413)
+    if response is None:
+        response = await call_next(request)
+    response.headers.update(SECURITY_HEADERS)
+    return response
+
+
+async def malformed(request: Request, exc: RequestValidationError) -> JSONResponse:
+    first = exc.errors()[0] if exc.errors() else {}
+    where = ".".join(str(part) for part in first.get("loc", ()))
+    return JSONResponse(error_reply("malformed", f"{where}: {first.get('msg', 'invalid')}"), 422)
+
+
+@router.get("/login")
+def login(request: Request, token: str = "") -> RedirectResponse:
+    if not study_of(request).credentials.is_experimenter(token[:200] or None):
+        raise refused(403, "", "the experimenter's token is needed")
+    return cookie_redirect("/console", EXPERIMENTER_COOKIE, token)
+
+
+@router.get("/p/{token}")
+def participant_link(request: Request, token: str) -> RedirectResponse:
+    if study_of(request).credentials.participant_of(token[:200]) is None:
+        raise refused(403, "", "not a participant link of this study")
+    return cookie_redirect("/station", PARTICIPANT_COOKIE, token)
+
+
+@router.get("/console", dependencies=[Depends(experimenter)])
+def console() -> FileResponse:
+    return FileResponse(PAGES / "console.html", media_type="text/html")
+
+
+@router.get("/station", dependencies=[Depends(participant_token)])
+def station() -> FileResponse:
+    return FileResponse(PAGES / "station.html", media_type="text/html")
+
+
+@router.get("/static/{name}")
+def static(name: str) -> FileResponse:
+    if name not in STATIC:
+        raise refused(404, "", "no such file")
+    return FileResponse(PAGES / name, media_type=STATIC[name])
+
+
+@router.get("/api/me")
+def me(request: Request, participant: int = Depends(participant_token)) -> dict:
+    return {**session_of(request, participant).progress(), "consent": study_of(request).consent_text}
+
+
+@router.post("/api/participants", dependencies=[Depends(experimenter)])
+def create_participant(request: Request, body: NewParticipant) -> dict:
+    try:
+        participant, token = study_of(request).create_participant(body.label)
+    except ValueError as exc:
+        raise refused(409, "out_of_order", str(exc)) from None
+    return {"participant": participant, "token": token, "link": f"/p/{token}"}
+
+
+@router.get("/api/participants", dependencies=[Depends(experimenter)])
+def participants(request: Request) -> dict:
+    return {"participants": [s.progress() for _, s in sorted(study_of(request).sessions.items())]}
+
+
+@router.get("/api/participants/{participant}")
+def participant_progress(request: Request, participant: int) -> dict:
+    token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
+    if not study_of(request).credentials.is_experimenter(token) and participant_token(request) != participant:
+        raise refused(403, "", "a participant sees only their own session")
+    return session_of(request, participant).progress()
+
+
+@router.post("/api/participants/{participant}/control", dependencies=[Depends(experimenter)])
+def control(request: Request, participant: int, body: EpisodeControl) -> dict:
+    try:
+        return session_of(request, participant).control(body.action)
+    except MessageError as exc:
+        raise HTTPException(409, exc.reply) from None
+
+
+@router.get("/api/files", dependencies=[Depends(experimenter)])
+def files(request: Request) -> dict:
+    return {"files": study_of(request).files()}
+
+
+@router.get("/api/download/{path:path}", dependencies=[Depends(experimenter)])
+def download(request: Request, path: str) -> FileResponse:
+    try:
+        target = study_of(request).download_path(path)
+    except ValueError as exc:
+        raise refused(404, "", str(exc)) from None
+    return FileResponse(target, filename=target.name)
+
+
+@router.websocket("/ws")
+async def station_socket(websocket: WebSocket) -> None:
+    study = study_of(websocket)
+    participant = study.credentials.participant_of(
+        presented_token(websocket.headers, websocket.cookies, PARTICIPANT_COOKIE))
+    if participant is None:
+        await websocket.close(code=POLICY_VIOLATION)
+        return
+    await websocket.accept()
+    await converse(websocket, study.sessions[participant], study.consent_text)
+
+
 def live_app(study: LiveStudy) -> FastAPI:
     """The application serving `study` (opened: credentials and directory lock held)."""
     app = FastAPI(title="trustroute live", docs_url=None, redoc_url=None, openapi_url=None)
-    credentials = study.credentials
-
-    @app.middleware("http")
-    async def limit_body(request: Request, call_next):
-        if request.method in ("POST", "PUT", "PATCH"):
-            length = request.headers.get("content-length", "")
-            if not length.isdigit():
-                return JSONResponse({"type": "error", "detail": "a body needs a Content-Length"}, 411)
-            if int(length) > MAX_BODY_BYTES:
-                return JSONResponse(error_reply("oversized", f"bodies hold at most {MAX_BODY_BYTES} bytes"),
-                                    413)
-        return await call_next(request)
-
-    @app.exception_handler(RequestValidationError)
-    async def malformed(request: Request, exc: RequestValidationError):
-        first = exc.errors()[0] if exc.errors() else {}
-        where = ".".join(str(part) for part in first.get("loc", ()))
-        return JSONResponse(error_reply("malformed", f"{where}: {first.get('msg', 'invalid')}"), 422)
-
-    def experimenter(request: Request) -> None:
-        token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
-        if not credentials.is_experimenter(token):
-            raise refused(401 if token is None else 403, "", "the experimenter's token is needed")
-
-    def participant_token(request: Request) -> int:
-        found = credentials.participant_of(presented_token(request.headers, request.cookies,
-                                                           PARTICIPANT_COOKIE))
-        if found is None:
-            raise refused(403, "", "a participant link is needed")
-        return found
-
-    def session_of(participant: int) -> Session:
-        session = study.sessions.get(participant)
-        if session is None:
-            raise refused(404, "", f"no participant {participant}")
-        return session
-
-    @app.get("/login")
-    def login(token: str = "") -> RedirectResponse:
-        if not credentials.is_experimenter(token[:200] or None):
-            raise refused(403, "", "the experimenter's token is needed")
-        return cookie_redirect("/console", EXPERIMENTER_COOKIE, token)
-
-    @app.get("/p/{token}")
-    def participant_link(token: str) -> RedirectResponse:
-        if credentials.participant_of(token[:200]) is None:
-            raise refused(403, "", "not a participant link of this study")
-        return cookie_redirect("/station", PARTICIPANT_COOKIE, token)
-
-    @app.get("/api/me")
-    def me(participant: int = Depends(participant_token)) -> dict:
-        return {**session_of(participant).progress(), "consent": study.consent_text}
-
-    @app.post("/api/participants", dependencies=[Depends(experimenter)])
-    def create_participant(body: NewParticipant) -> dict:
-        try:
-            participant, token = study.create_participant(body.label)
-        except ValueError as exc:
-            raise refused(409, "out_of_order", str(exc)) from None
-        return {"participant": participant, "token": token, "link": f"/p/{token}"}
-
-    @app.get("/api/participants", dependencies=[Depends(experimenter)])
-    def participants() -> dict:
-        return {"participants": [s.progress() for _, s in sorted(study.sessions.items())]}
-
-    @app.get("/api/participants/{participant}")
-    def participant_progress(participant: int, request: Request) -> dict:
-        token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
-        if not credentials.is_experimenter(token) and participant_token(request) != participant:
-            raise refused(403, "", "a participant sees only their own session")
-        return session_of(participant).progress()
-
-    @app.post("/api/participants/{participant}/control", dependencies=[Depends(experimenter)])
-    def control(participant: int, body: EpisodeControl) -> dict:
-        try:
-            return session_of(participant).control(body.action)
-        except MessageError as exc:
-            raise HTTPException(409, exc.reply) from None
-
-    @app.get("/api/files", dependencies=[Depends(experimenter)])
-    def files() -> dict:
-        return {"files": study.files()}
-
-    @app.get("/api/download/{path:path}", dependencies=[Depends(experimenter)])
-    def download(path: str) -> FileResponse:
-        try:
-            target = study.download_path(path)
-        except ValueError as exc:
-            raise refused(404, "", str(exc)) from None
-        return FileResponse(target, filename=target.name)
-
-    @app.websocket("/ws")
-    async def station_socket(websocket: WebSocket) -> None:
-        participant = credentials.participant_of(
-            presented_token(websocket.headers, websocket.cookies, PARTICIPANT_COOKIE))
-        if participant is None:
-            await websocket.close(code=POLICY_VIOLATION)
-            return
-        session = study.sessions[participant]
-        await websocket.accept()
-        await converse(websocket, session, study.consent_text)
-
+    app.state.study = study
+    app.middleware("http")(limit_body)
+    app.add_exception_handler(RequestValidationError, malformed)
+    app.include_router(router)
     return app
 
 

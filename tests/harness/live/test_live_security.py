@@ -188,3 +188,24 @@ def test_a_config_of_another_engine_is_refused(tmp_path):
     config = tiny_config(tmp_path).with_overrides(engine="sumo")
     with pytest.raises(InputError, match="live"):
         LiveStudy(config, tmp_path / "study")
+
+
+def test_the_pages_need_their_token_and_carry_the_security_headers(client, live_study):
+    token = create(client, live_study)
+    assert client.get("/console").status_code == 401
+    assert client.get("/console", headers=bearer(token)).status_code == 403
+    assert client.get("/station").status_code == 403
+    assert client.get("/station", headers=bearer(secrets.token_urlsafe(32))).status_code == 403
+    console = client.get("/console", headers=bearer(live_study.experimenter_token))
+    station = client.get("/station", headers=bearer(token))
+    assert console.status_code == station.status_code == 200
+    assert "experimenter console" in console.text and "/static/station.js" in station.text
+    for name in ("live.css", "console.js", "station.js"):
+        assert client.get(f"/static/{name}").status_code == 200
+    for name in ("..%2Fserver.py", "app.py", "console.html"):
+        assert client.get(f"/static/{name}").status_code == 404
+    for response in (console, station, client.get("/api/participants")):
+        assert response.headers["x-frame-options"] == "DENY"
+        assert response.headers["referrer-policy"] == "no-referrer"
+        assert "default-src 'self'" in response.headers["content-security-policy"]
+        assert "unsafe-inline" not in response.headers["content-security-policy"]
