@@ -23,9 +23,12 @@ from trustroute.harness.commands.options import FiniteFloat, bounded_int
               help="Study DIRECTORY (default: the config's output, else studies/<name>).")
 @click.option("--pace", type=FiniteFloat(0.0, 10_000.0, open_minimum=True), default=1.0, show_default=True,
               help="Simulated seconds per wall-clock second (1: real time).")
+@click.option("--resume-within", type=FiniteFloat(0.0, 86_400.0, open_minimum=True), default=120.0,
+              show_default=True, help="Seconds a disconnected participant has to resume; after that the "
+              "episode is incomplete and runs again at the end of their plan.")
 @click.option("--consent", "consent_path", type=click.Path(), default=None,
               help="Text FILE shown to participants before they consent (default: a short generic text).")
-def live(config_path: str, host: str, port: int, out: str | None, pace: float,
+def live(config_path: str, host: str, port: int, out: str | None, pace: float, resume_within: float,
          consent_path: str | None) -> None:
     """Serve the study described by CONFIG (engine = "live") to participants in their browsers."""
     from trustroute.harness.live.app import serve
@@ -39,7 +42,8 @@ def live(config_path: str, host: str, port: int, out: str | None, pace: float,
 
         consent = read_text(consent_path, consent_path, "the consent text", "pass a readable UTF-8 text file")
     study_dir = Path(study_directory(config, out))
-    with LiveStudy(config, study_dir, ServerOptions(pace=pace), consent) as study:
+    options = ServerOptions(pace=pace, resume_within=resume_within)
+    with LiveStudy(config, study_dir, options, consent) as study:
         def announce() -> None:
             shown = host if ":" not in host else f"[{host}]"
             click.echo(f"live study {config.name}: {study.study_dir}")

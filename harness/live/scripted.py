@@ -76,7 +76,7 @@ class ScriptedParticipant:
         if state["phase"] == "done":
             self.finished = True
         elif state["phase"] == "ready":
-            task = next(t for t in self.tasks if t.episode_id not in state["done"])
+            task = next(t for t in self.tasks if t.episode_id == state["next_episode"])
             self.driver = self.new_driver(task)
             return [{"type": "start", "trust": int(self.driver.trust)}]
         return []

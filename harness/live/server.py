@@ -42,6 +42,7 @@ MAX_DOWNLOAD_PATH = 512
 class ServerOptions:
     pace: float = 1.0
     frame_rate: float = 25.0
+    resume_within: float = 120.0   # seconds a disconnected participant has to resume an episode
 
 
 class LiveStudy:

@@ -55,6 +55,7 @@ class Session:
         self.last_error: str | None = None
         self.process = self.connection = None
         self.push: Callable[[dict], None] | None = None
+        self.expiry: threading.Timer | None = None   # the deadline of a disconnect's pause
         if consented and not self.pending():
             self.phase = "done"
 
@@ -65,12 +66,14 @@ class Session:
     def progress(self) -> dict:
         with self.lock:
             done = [task.episode_id for task in self.tasks if self.study.is_done(task)]
+            pending = self.pending()
             return {"type": "state", "participant": self.participant, "label": self.label,
                     "phase": self.phase, "paused_by": self.pause_reason,
                     "trial": len(done) + (1 if self.phase in ("driving", "paused") else 0),
                     "trials": len(self.tasks), "episode_id": self.task.episode_id if self.task else None,
                     "mode": self.mode, "road": self.road, "reports": self.reports,
-                    "takeovers": self.takeovers, "done": done, "last_error": self.last_error}
+                    "takeovers": self.takeovers, "done": done, "last_error": self.last_error,
+                    "next_episode": pending[0].episode_id if pending else None}
 
     # -- the participant's messages -------------------------------------------------------------
     def handle(self, message: Message) -> list[dict]:
@@ -149,6 +152,9 @@ class Session:
                     self.last_error = message.get("error") or message.get("reason")
                 self.phase = "ready" if self.pending() else "done"
                 self.pause_reason, self.process, self.connection = None, None, None
+                if self.expiry is not None:
+                    self.expiry.cancel()
+                    self.expiry = None
             push = self.push
         if push is not None:
             push({key: value for key, value in message.items() if key != "traceback"})
@@ -163,7 +169,7 @@ class Session:
             elif action == "resume" and self.phase == "paused":
                 self.resume()
             elif action == "abort" and self.phase in ("driving", "paused"):
-                self.tell({"type": "abort"})
+                self.tell({"type": "abort", "reason": "aborted by the experimenter"})
             else:
                 raise MessageError("out_of_order", f"{action} in phase {self.phase!r}")
             return self.progress()
@@ -178,10 +184,30 @@ class Session:
     def pause(self, reason: str) -> None:
         self.tell({"type": "pause"})
         self.phase, self.pause_reason = "paused", reason
+        if reason == "disconnect":
+            self.expiry = threading.Timer(self.study.options.resume_within, self.expire, args=(self.task,))
+            self.expiry.daemon = True
+            self.expiry.start()
 
     def resume(self) -> None:
         self.tell({"type": "resume"})
         self.phase, self.pause_reason = "driving", None
+        if self.expiry is not None:
+            self.expiry.cancel()
+            self.expiry = None
+
+    def expire(self, task: EpisodeTask) -> None:
+        """The participant did not come back in time: the episode is incomplete (no part) and its
+        trial moves to the end of the participant's plan."""
+        with self.lock:
+            if self.phase != "paused" or self.pause_reason != "disconnect" or self.task is not task:
+                return
+            self.expiry = None
+            with contextlib.suppress(MessageError):
+                self.tell({"type": "abort", "reason": f"incomplete: no reconnection within "
+                                                      f"{self.study.options.resume_within:g} s"})
+            self.tasks.remove(task)
+            self.tasks.append(task)
 
     # -- the participant's connection -----------------------------------------------------------
     def attach(self, push: Callable[[dict], None]) -> None:

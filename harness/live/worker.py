@@ -104,7 +104,7 @@ class RemoteDriver:
             self.paused = False
             self.origin = (self.clock(), self.sim_now)
         elif kind == "abort":
-            raise EpisodeAborted("aborted by the experimenter")
+            raise EpisodeAborted(str(control.get("reason", "aborted")))
 
     def read_controls(self, timeout: float) -> None:
         while self.connection.poll(timeout):

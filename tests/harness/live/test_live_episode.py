@@ -127,3 +127,26 @@ def test_disconnect_pauses_resume_continues_and_the_experimenter_aborts(tmp_path
         assert not part_path(study.study_dir, study.tasks_of(0)[0].episode_id).exists()
     finally:
         study.close()
+
+
+def test_no_reconnection_in_time_makes_the_episode_incomplete(tmp_path):
+    config = tiny_config(tmp_path, participants=1)
+    study = LiveStudy(config, tmp_path / "study", ServerOptions(pace=1.0, resume_within=0.3)).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+            token = client.post("/api/participants", json={}, headers=headers).json()["token"]
+            with client.websocket_connect("/ws", headers={"Authorization": f"Bearer {token}"}) as station:
+                station.send_json({"type": "consent", "agree": True})
+                receive_until(station, lambda m: m.get("phase") == "ready")
+                station.send_json({"type": "start"})
+                receive_until(station, lambda m: m["type"] == "frame")
+            deadline = time.monotonic() + 30
+            while (progress := client.get("/api/participants/0", headers=headers).json())["phase"] != "ready":
+                assert time.monotonic() < deadline, progress
+                time.sleep(0.1)
+            assert progress["last_error"].startswith("incomplete") and progress["done"] == []
+            assert progress["next_episode"] == study.tasks_of(0)[0].episode_id   # to be run again
+        assert not part_path(study.study_dir, study.tasks_of(0)[0].episode_id).exists()
+    finally:
+        study.close()
