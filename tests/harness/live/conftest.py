@@ -12,14 +12,14 @@ name = "tiny-live"
 participants = {participants}
 seed = 1
 engine = "live"
-specs = ["phi1"]
+specs = {specs}
 conditions = ["free"]
 """
 
 
-def tiny_config(tmp_path, participants: int = 2):
+def tiny_config(tmp_path, participants: int = 2, specs: tuple[str, ...] = ("phi1",)):
     path = tmp_path / "live.toml"
-    path.write_text(TINY.format(participants=participants))
+    path.write_text(TINY.format(participants=participants, specs=list(specs)).replace("'", '"'))
     return load_study_config(path)
 
 
