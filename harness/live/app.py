@@ -77,7 +77,7 @@ def respond(session: Session, bucket: TokenBucket, data: str | bytes) -> list[di
 
 
 def refused(status: int, code: str, detail: str) -> HTTPException:
-    return HTTPException(status, error_reply(code, detail) if code else {"type": "error", "detail": detail})
+    return HTTPException(status, error_reply(code, detail))
 
 
 def cookie_redirect(target: str, cookie: str, token: str) -> RedirectResponse:
@@ -97,7 +97,7 @@ def experimenter(request: Request) -> None:
     """Dependency: the request carries the experimenter's token (401 without a token, 403 with another)."""
     token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
     if not study_of(request).credentials.is_experimenter(token):
-        raise refused(401 if token is None else 403, "", "the experimenter's token is needed")
+        raise refused(401 if token is None else 403, "forbidden", "the experimenter's token is needed")
 
 
 def participant_token(request: Request) -> int:
@@ -105,14 +105,14 @@ def participant_token(request: Request) -> int:
     token = presented_token(request.headers, request.cookies, PARTICIPANT_COOKIE)
     found = study_of(request).credentials.participant_of(token)
     if found is None:
-        raise refused(403, "", "a participant link is needed")
+        raise refused(403, "forbidden", "a participant link is needed")
     return found
 
 
 def session_of(request: Request, participant: int) -> Session:
     session = study_of(request).sessions.get(participant)
     if session is None:
-        raise refused(404, "", f"no participant {participant}")
+        raise refused(404, "not_found", f"no participant {participant}")
     return session
 
 
@@ -141,14 +141,14 @@ async def malformed(request: Request, exc: RequestValidationError) -> JSONRespon
 @router.get("/login")
 def login(request: Request, token: str = "") -> RedirectResponse:
     if not study_of(request).credentials.is_experimenter(token[:200] or None):
-        raise refused(403, "", "the experimenter's token is needed")
+        raise refused(403, "forbidden", "the experimenter's token is needed")
     return cookie_redirect("/console", EXPERIMENTER_COOKIE, token)
 
 
 @router.get("/p/{token}")
 def participant_link(request: Request, token: str) -> RedirectResponse:
     if study_of(request).credentials.participant_of(token[:200]) is None:
-        raise refused(403, "", "not a participant link of this study")
+        raise refused(403, "forbidden", "not a participant link of this study")
     return cookie_redirect("/station", PARTICIPANT_COOKIE, token)
 
 
@@ -165,7 +165,7 @@ def station() -> FileResponse:
 @router.get("/static/{name}")
 def static(name: str) -> FileResponse:
     if name not in STATIC:
-        raise refused(404, "", "no such file")
+        raise refused(404, "not_found", "no such file")
     return FileResponse(PAGES / name, media_type=STATIC[name])
 
 
@@ -192,7 +192,7 @@ def participants(request: Request) -> dict:
 def participant_progress(request: Request, participant: int) -> dict:
     token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
     if not study_of(request).credentials.is_experimenter(token) and participant_token(request) != participant:
-        raise refused(403, "", "a participant sees only their own session")
+        raise refused(403, "forbidden", "a participant sees only their own session")
     return session_of(request, participant).progress()
 
 
@@ -214,7 +214,7 @@ def download(request: Request, path: str) -> FileResponse:
     try:
         target = study_of(request).download_path(path)
     except ValueError as exc:
-        raise refused(404, "", str(exc)) from None
+        raise refused(404, "not_found", str(exc)) from None
     return FileResponse(target, filename=target.name)
 
 

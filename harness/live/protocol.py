@@ -86,7 +86,8 @@ class Acknowledged(Message):
 
 
 # -- errors and limits ---------------------------------------------------------------------------
-ERROR_CODES: tuple[str, ...] = ("oversized", "malformed", "rate_limited", "out_of_order")
+ERROR_CODES: tuple[str, ...] = ("oversized", "malformed", "rate_limited", "out_of_order", "forbidden",
+                                "not_found")
 
 
 def error_reply(code: str, detail: str) -> dict:
