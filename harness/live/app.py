@@ -7,6 +7,7 @@ Every route checks who is asking (harness/live/auth.py) before it reads anything
     GET  /console, /station            the pages (experimenter; participant), plain HTML and JS
     GET  /static/{name}                their script and style sheet
     GET  /api/me                       participant: their own progress and the consent text
+    GET  /api/net                      participant or experimenter: the net's lanes (the view)
     POST /api/participants             experimenter: create the next participant -> link
     GET  /api/participants             experimenter: every participant's progress
     GET  /api/participants/{p}         experimenter, or participant p themself
@@ -172,6 +173,15 @@ def static(name: str) -> FileResponse:
 @router.get("/api/me")
 def me(request: Request, participant: int = Depends(participant_token)) -> dict:
     return {**session_of(request, participant).progress(), "consent": study_of(request).consent_text}
+
+
+@router.get("/api/net")
+def net(request: Request) -> dict:
+    """The net's lanes: for the participants' stations and the experimenter."""
+    token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
+    if not study_of(request).credentials.is_experimenter(token):
+        participant_token(request)
+    return study_of(request).net_view()
 
 
 @router.post("/api/participants", dependencies=[Depends(experimenter)])

@@ -158,6 +158,14 @@ class LiveStudy:
                         {"backend": "live", "pace": self.options.pace, "finished_utc":
                          time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
 
+    def net_view(self) -> dict:
+        """The lanes of the study's town net (harness/live/view.py), for the station's view."""
+        from trustroute.harness.live.view import net_view
+        from trustroute.harness.study.context import study_context
+        from trustroute.networks.sumo_net import build_net
+
+        return net_view(str(build_net(study_context(self.config).town).path))
+
     # -- downloads ------------------------------------------------------------------------------
     def files(self) -> list[str]:
         """Every regular file of the study directory (relative paths), the lock excepted."""

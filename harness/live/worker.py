@@ -27,6 +27,9 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
+from trustroute.harness.live.view import surroundings
+from trustroute.harness.simulation.episode import EGO_ID
+
 PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
 
 
@@ -121,7 +124,8 @@ class RemoteDriver:
         if wall - self.last_frame >= 1.0 / self.options.frame_rate:
             self.last_frame = wall
             self.send({"type": "frame", "t": ego.time, "x": ego.x, "y": ego.y, "angle": ego.angle,
-                       "speed": ego.speed, "road": road, "lane": ego.lane, "mode": mode})
+                       "speed": ego.speed, "road": road, "lane": ego.lane, "mode": mode,
+                       **surroundings(sumo, EGO_ID, ego.x, ego.y)})
         self.read_controls(0.0)
         while True:   # wait for the wall clock (pace), and while paused
             wait = PIPE_POLL_SECONDS

@@ -1,6 +1,6 @@
-// The participant station: consent, then each trial; the mode indicator, a view of the ego's
-// path, the takeover / hand-back control (button or space) and trust reports 1-7 (buttons or
-// keys). It speaks the websocket protocol of docs/live_studies.md; the HttpOnly participant
+// The participant station: consent, then each trial; the mode indicator, a top-down view (the
+// net's lanes, the ego, traffic and the incidents' objects around it), the takeover / hand-back
+// control (button or space) and trust reports 1-7 (buttons or keys). It speaks the websocket protocol of docs/live_studies.md; the HttpOnly participant
 // cookie authenticates the socket.
 "use strict";
 
@@ -9,7 +9,6 @@ const steps = ["consent-step", "ready-step", "drive-step", "done-step"];
 let socket = null;
 let state = { phase: "consent" };
 let mode = "auto";
-const trail = [];
 
 function show(step) {
   for (const id of steps) $(id).classList.toggle("hidden", id !== step);
@@ -42,25 +41,52 @@ function setMode(next) {
   $("toggle").textContent = next === "manual" ? "Hand back (space)" : "Take over (space)";
 }
 
+const COLOURS = { traffic: "#1e5aa8", obstacle: "#e67e00", oncoming: "#7b1fa2", parked: "#7b1fa2",
+                  pedestrian: "#d81b60" };
+let lanes = [];
+
+async function loadNet() {
+  const response = await fetch("/api/net");
+  if (response.ok) lanes = (await response.json()).lanes;
+}
+
+function box(context, toCanvas, x, y, angle, length, width, colour, scale) {
+  const [u, v] = toCanvas(x, y);
+  context.save();
+  context.translate(u, v);
+  context.rotate((angle * Math.PI) / 180);   // SUMO's angle: degrees clockwise from north
+  context.fillStyle = colour;
+  context.fillRect((-width / 2) * scale, 0, width * scale, length * scale);   // the front at (x, y)
+  context.restore();
+}
+
 function draw(frame) {
-  trail.push([frame.x, frame.y]);
-  if (trail.length > 2000) trail.shift();
   const canvas = $("view");
   const context = canvas.getContext("2d");
-  const scale = 1.5;   // pixels per metre, the ego at the centre
-  const toCanvas = ([x, y]) => [canvas.width / 2 + (x - frame.x) * scale, canvas.height / 2 - (y - frame.y) * scale];
-  context.clearRect(0, 0, canvas.width, canvas.height);
-  context.strokeStyle = "#999";
-  context.lineWidth = 6;
-  context.beginPath();
-  trail.forEach((point, i) => { const [u, v] = toCanvas(point); if (i) context.lineTo(u, v); else context.moveTo(u, v); });
-  context.stroke();
-  context.save();
-  context.translate(canvas.width / 2, canvas.height / 2);
-  context.rotate((frame.angle * Math.PI) / 180);   // SUMO's angle: degrees clockwise from north
-  context.fillStyle = frame.mode === "manual" ? "#c62828" : "#2e7d32";
-  context.fillRect(-4, -8, 8, 16);
-  context.restore();
+  const scale = 2.5;   // pixels per metre, north up, the ego at the centre
+  const toCanvas = (x, y) => [canvas.width / 2 + (x - frame.x) * scale, canvas.height / 2 - (y - frame.y) * scale];
+  context.fillStyle = "#dfe8d8";
+  context.fillRect(0, 0, canvas.width, canvas.height);
+  context.lineCap = "round";
+  for (const lane of lanes) {
+    context.strokeStyle = lane.internal ? "#8c8c8c" : "#777";
+    context.lineWidth = lane.width * scale;
+    context.beginPath();
+    lane.shape.forEach(([x, y], i) => { const [u, v] = toCanvas(x, y); if (i) context.lineTo(u, v); else context.moveTo(u, v); });
+    context.stroke();
+  }
+  for (const [x, y, angle, kind] of frame.vehicles || []) {
+    const truck = kind === "oncoming" || kind === "parked";
+    box(context, toCanvas, x, y, angle, truck ? 10 : 4.5, truck ? 2.5 : 1.8, COLOURS[kind] || COLOURS.traffic, scale);
+  }
+  for (const [x, y, kind] of frame.persons || []) {
+    const [u, v] = toCanvas(x, y);
+    context.fillStyle = COLOURS[kind] || COLOURS.pedestrian;
+    context.beginPath();
+    context.arc(u, v, 0.6 * scale, 0, 2 * Math.PI);
+    context.fill();
+  }
+  box(context, toCanvas, frame.x, frame.y, frame.angle, 4.5, 1.8, frame.mode === "manual" ? "#c62828" : "#2e7d32", scale);
   $("speed").textContent = `${(frame.speed * 3.6).toFixed(0)} km/h`;
   $("road").textContent = `road ${frame.road}`;
 }
@@ -90,7 +116,7 @@ function onMessage(message) {
       $("incident").textContent = "";
       $("prompt").classList.remove("hidden");
       break;
-    case "episode_start": trail.length = 0; setMode("auto"); break;
+    case "episode_start": setMode("auto"); break;
     case "episode_end": $("status").textContent = "Trial complete."; break;
     case "episode_aborted": $("status").textContent = "The trial was stopped; it will be run again."; break;
     case "episode_failed": $("error").textContent = "The trial failed; it will be run again."; break;
@@ -124,4 +150,5 @@ document.addEventListener("keydown", (event) => {
   if (event.code === "Space") { event.preventDefault(); toggle(); }
   else if (/^[1-7]$/.test(event.key)) report(Number(event.key));
 });
+loadNet();
 connect();

@@ -209,3 +209,13 @@ def test_the_pages_need_their_token_and_carry_the_security_headers(client, live_
         assert response.headers["referrer-policy"] == "no-referrer"
         assert "default-src 'self'" in response.headers["content-security-policy"]
         assert "unsafe-inline" not in response.headers["content-security-policy"]
+
+
+def test_the_net_view_is_for_participants_and_the_experimenter(client, live_study):
+    token = create(client, live_study)
+    assert client.get("/api/net").status_code == 403
+    assert client.get("/api/net", headers=bearer(secrets.token_urlsafe(32))).status_code == 403
+    view = client.get("/api/net", headers=bearer(token)).json()
+    assert client.get("/api/net", headers=bearer(live_study.experimenter_token)).json() == view
+    roads = {lane["id"].rsplit("_", 1)[0] for lane in view["lanes"] if not lane["internal"]}
+    assert {"E-A", "A-B"} <= roads and all(len(lane["shape"]) >= 2 for lane in view["lanes"])

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from trustroute.harness.live.view import role
 from trustroute.harness.live.worker import EpisodeAborted, LiveOptions, RemoteDriver, live_summary
 from trustroute.harness.simulation.episode_tracker import EpisodeTracker
 from trustroute.harness.study.context import study_context
@@ -52,6 +53,8 @@ def test_a_takeover_from_the_pipe_reaches_sumo_and_the_logs(tmp_path):
     assert "manual" in set(record.kinematics["mode"])
     incidents = record.incidents
     assert bool(incidents["takeover"].iloc[0]) and not np.isnan(incidents["takeover_start"].iloc[0])
+    frames = [m for m in pipe.sent if m["type"] == "frame"]
+    assert frames and all(isinstance(f["vehicles"], list) and isinstance(f["persons"], list) for f in frames)
     kinds = [m["type"] for m in pipe.sent]
     assert "frame" in kinds and kinds.count("road") == len(roads) - 1
     assert [m["mode"] for m in pipe.sent if m["type"] == "mode"][:2] == ["manual", "auto"]
@@ -80,3 +83,8 @@ def test_the_tracker_decides_as_for_the_same_observations_headless(tmp_path):
 def test_an_abort_stops_the_episode(tmp_path):
     with pytest.raises(EpisodeAborted):
         live_episode(tmp_path, [{"type": "abort"}])
+
+
+def test_what_the_view_calls_each_object():
+    assert [role(i) for i in ("inc3.obstacle", "inc2.pedestrian", "inc4.oncoming", "bg7", "ego")] == [
+        "obstacle", "pedestrian", "oncoming", "traffic", "traffic"]
