@@ -56,7 +56,7 @@ class ScriptedParticipant:
                 return [{"type": "takeover"}]
         elif kind == "road" and self.driver is not None:
             self.driver.move_trust(message["incident"], message["takeover"], message["performance"])
-            if message["index"] % self.config.report_every == 0:
+            if message["prompt"]:
                 self.reports += 1
                 return [{"type": "trust", "value": int(self.driver.report_trust())}]
         elif kind == "episode_end":

@@ -145,7 +145,7 @@ class LiveStudy:
         return task.episode_id in self.done
 
     def live_options(self, client: str) -> LiveOptions:
-        return LiveOptions(self.options.pace, self.options.frame_rate, client)
+        return LiveOptions(self.options.pace, self.options.frame_rate, client, self.config.report_every)
 
     def episode_finished(self, task: EpisodeTask) -> None:
         """An episode wrote its part: count it done and consolidate the dataset."""

@@ -42,6 +42,7 @@ class LiveOptions:
     pace: float = 1.0            # sim seconds per wall second (1.0: real time; tests use >> 1)
     frame_rate: float = 25.0     # frames streamed per wall second at most
     client: str = "station"      # who drives: "station" (a person) or "scripted"
+    report_every: int = 1        # the study's report_every: roads whose end prompts for a report
 
 
 class RemoteDriver:
@@ -81,7 +82,8 @@ class RemoteDriver:
     def move_trust(self, incident: str, took_over: bool, performance: str = "succ") -> int:
         self.roads += 1
         self.send({"type": "road", "index": self.roads, "incident": incident, "takeover": bool(took_over),
-                   "performance": performance, "t": self.sim_now})
+                   "performance": performance, "t": self.sim_now,
+                   "prompt": self.roads % self.options.report_every == 0})
         return self._trust
 
     def report_trust(self) -> int | None:

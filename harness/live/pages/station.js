@@ -114,7 +114,7 @@ function onMessage(message) {
     case "incident": $("incident").textContent = `Ahead: ${message.kind}`; break;
     case "road":
       $("incident").textContent = "";
-      $("prompt").classList.remove("hidden");
+      if (message.prompt) $("prompt").classList.remove("hidden");
       break;
     case "episode_start": setMode("auto"); break;
     case "episode_end": $("status").textContent = "Trial complete."; break;

@@ -55,6 +55,7 @@ def test_a_takeover_from_the_pipe_reaches_sumo_and_the_logs(tmp_path):
     assert bool(incidents["takeover"].iloc[0]) and not np.isnan(incidents["takeover_start"].iloc[0])
     frames = [m for m in pipe.sent if m["type"] == "frame"]
     assert frames and all(isinstance(f["vehicles"], list) and isinstance(f["persons"], list) for f in frames)
+    assert all(m["prompt"] for m in pipe.sent if m["type"] == "road")   # report_every = 1
     kinds = [m["type"] for m in pipe.sent]
     assert "frame" in kinds and kinds.count("road") == len(roads) - 1
     assert [m["mode"] for m in pipe.sent if m["type"] == "mode"][:2] == ["manual", "auto"]
@@ -88,3 +89,18 @@ def test_an_abort_stops_the_episode(tmp_path):
 def test_what_the_view_calls_each_object():
     assert [role(i) for i in ("inc3.obstacle", "inc2.pedestrian", "inc4.oncoming", "bg7", "ego")] == [
         "obstacle", "pedestrian", "oncoming", "traffic", "traffic"]
+
+
+def test_road_events_prompt_every_report_every_roads_and_reports_wait_for_them():
+    pipe = Pipe()
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), None, LiveOptions(report_every=2))
+    assert driver.trust == 4                    # no trust stated: the middle level
+    driver.apply({"type": "trust", "value": 6})
+    assert driver.move_trust("none", False, "succ") == 6
+    driver.move_trust("truck", True, "fail")
+    assert [m["prompt"] for m in pipe.sent] == [False, True]
+    assert driver.report_trust() == 6 and driver.report_trust() is None   # each report is given once
+    driver.apply({"type": "takeover"})
+    assert driver.takeover_request(1.0) is True and driver.takeover_request(1.5) is None
+    driver.apply({"type": "hand_back"})
+    assert driver.takeover_request(2.0) is False
