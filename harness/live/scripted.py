@@ -59,6 +59,8 @@ class ScriptedParticipant:
             if message["prompt"]:
                 self.reports += 1
                 return [{"type": "trust", "value": int(self.driver.report_trust())}]
+        elif kind == "warning" and message["kind"] == "hand_back":
+            return [{"type": "hand_back"}]   # the rule of the study: hand back before the junction
         elif kind == "episode_end":
             self.episodes.append(message)
             self.driver = None

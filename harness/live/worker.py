@@ -16,6 +16,9 @@ driver. The driver protocol is the seam (harness/simulation/episode.py):
 
 The observer paces the simulation against the wall clock (`pace` sim seconds per wall second),
 reads the person's controls from the pipe, pauses while the server says so, and streams frames.
+It also keeps the rule of the paper's study, the person hands back before the next junction: a
+person still in control WARN_DISTANCE before the road's end is warned, and the ego brakes to wait
+short of the commit point until the hand-back (`hold_for_hand_back`).
 The part is written atomically by this process (harness/study/parts.py), its summary marked with
 who drove and every control the person sent.
 """
@@ -28,9 +31,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.harness.live.view import surroundings
-from trustroute.harness.simulation.episode import EGO_ID
+from trustroute.harness.simulation.driving_style import MANUAL
+from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID
 
 PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
+WARN_DISTANCE = 100.0      # metres before the road's end: a person in control is told to hand back
+HOLD_MARGIN = 5.0          # metres before the commit point where the ego waits for the hand-back
 
 
 class EpisodeAborted(Exception):
@@ -65,6 +71,9 @@ class RemoteDriver:
         self.sim_now = 0.0
         self.origin = (clock(), 0.0)       # (wall, sim) the pace is measured from
         self.last_frame = -float("inf")
+        self.warned: str | None = None     # the road whose hand-back warning was sent
+        self.holding = False               # the ego waits for the hand-back
+        self.lengths: dict[str, float] = {}
 
     # -- the driver protocol (harness/simulation/episode.py) ------------------------------------
     @property
@@ -129,6 +138,7 @@ class RemoteDriver:
                        "speed": ego.speed, "road": road, "lane": ego.lane, "mode": mode,
                        **surroundings(sumo, EGO_ID, ego.x, ego.y)})
         self.read_controls(0.0)
+        self.hold_for_hand_back(sumo, ego, mode, road)
         while True:   # wait for the wall clock (pace), and while paused
             wait = PIPE_POLL_SECONDS
             if not self.paused:
@@ -137,6 +147,27 @@ class RemoteDriver:
                     return
                 wait = min(wait, remaining)
             self.read_controls(wait)
+
+
+    def hold_for_hand_back(self, sumo, ego, mode: str, road: str) -> None:
+        """Warn a person still in control near the road's end; brake to wait short of the commit
+        point until they hand back; release the ego on the hand-back."""
+        if mode != MANUAL.name or ego.road != road:
+            if self.holding and mode != MANUAL.name:
+                sumo.vehicle.setSpeed(EGO_ID, -1.0)   # back to the autopilot's own speed
+                self.holding = False
+            return
+        if ego.lane not in self.lengths:
+            self.lengths[ego.lane] = sumo.lane.getLength(ego.lane)
+        remaining = self.lengths[ego.lane] - ego.lane_position
+        if remaining <= WARN_DISTANCE and self.warned != road:
+            self.warned = road
+            self.send({"type": "warning", "kind": "hand_back", "distance": round(remaining, 1),
+                       "t": ego.time})
+        braking = ego.speed * ego.speed / (2.0 * MANUAL.decel) + ego.speed
+        if not self.holding and remaining <= COMMIT_DISTANCE + HOLD_MARGIN + braking:
+            sumo.vehicle.setSpeed(EGO_ID, 0.0)
+            self.holding = True
 
 
 def live_summary(summary: dict, driver: RemoteDriver) -> dict:

@@ -112,6 +112,9 @@ function onMessage(message) {
     case "frame": draw(message); break;
     case "mode": setMode(message.mode); break;
     case "incident": $("incident").textContent = `Ahead: ${message.kind}`; break;
+    case "warning":
+      $("incident").textContent = "Hand back before the junction (space): the vehicle waits for you.";
+      break;
     case "road":
       $("incident").textContent = "";
       if (message.prompt) $("prompt").classList.remove("hidden");

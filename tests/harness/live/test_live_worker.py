@@ -21,11 +21,14 @@ pytestmark = pytest.mark.slow
 class Pipe:
     """The worker's end of the pipe: controls queued in advance, messages sent kept."""
 
-    def __init__(self, controls=()) -> None:
+    def __init__(self, controls=(), hand_back_when_warned: bool = True) -> None:
         self.controls, self.sent = list(controls), []
+        self.hand_back_when_warned = hand_back_when_warned
 
     def send(self, message: dict) -> None:
         self.sent.append(message)
+        if message["type"] == "warning" and self.hand_back_when_warned:
+            self.controls.append({"type": "hand_back"})
 
     def poll(self, timeout: float = 0.0) -> bool:
         return bool(self.controls)
@@ -60,7 +63,34 @@ def test_a_takeover_from_the_pipe_reaches_sumo_and_the_logs(tmp_path):
     assert "frame" in kinds and kinds.count("road") == len(roads) - 1
     assert [m["mode"] for m in pipe.sent if m["type"] == "mode"][:2] == ["manual", "auto"]
     summary = live_summary(record.summary, driver)
-    assert summary["live"]["driver"] == "scripted" and len(summary["live"]["events"]) == 2
+    assert summary["live"]["driver"] == "scripted"
+    assert [e["type"] for e in summary["live"]["events"]] == ["takeover", "trust", "hand_back"]
+    # warned before the junction, the person handed back before the road's observation closed
+    (warning,) = [m for m in pipe.sent if m["type"] == "warning"]
+    back = [m for m in pipe.sent if m["type"] == "mode"][1]
+    first_road = next(m for m in pipe.sent if m["type"] == "road")
+    assert warning["t"] <= back["t"] < first_road["t"]
+
+
+def test_without_a_hand_back_the_ego_waits_short_of_the_junction(tmp_path):
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([{"type": "takeover"}], hand_back_when_warned=False)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6))
+    waited = []
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        if driver.holding and ego.speed == 0.0:
+            waited.append(ego.time)
+            if len(waited) == 40:   # 20 s of simulated time standing: the person hands back now
+                pipe.controls.append({"type": "hand_back"})
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe)
+    assert len(waited) >= 40 and not driver.holding
+    incidents = record.incidents
+    assert incidents["takeover_end"].iloc[0] >= waited[39]   # handed back by the person, after waiting
+
 
 
 def test_the_tracker_decides_as_for_the_same_observations_headless(tmp_path):
