@@ -26,10 +26,12 @@ from trustroute.harness.commands.options import FiniteFloat, bounded_int
 @click.option("--resume-within", type=FiniteFloat(0.0, 86_400.0, open_minimum=True), default=120.0,
               show_default=True, help="Seconds a disconnected participant has to resume; after that the "
               "episode is incomplete and runs again at the end of their plan.")
+@click.option("--warm-up/--no-warm-up", default=True, show_default=True,
+              help="A warm-up drive before each participant's trials (not part of the dataset).")
 @click.option("--consent", "consent_path", type=click.Path(), default=None,
               help="Text FILE shown to participants before they consent (default: a short generic text).")
 def live(config_path: str, host: str, port: int, out: str | None, pace: float, resume_within: float,
-         consent_path: str | None) -> None:
+         warm_up: bool, consent_path: str | None) -> None:
     """Serve the study described by CONFIG (engine = "live") to participants in their browsers."""
     from trustroute.harness.live.app import serve
     from trustroute.harness.live.server import DEFAULT_CONSENT, LiveStudy, ServerOptions
@@ -42,7 +44,7 @@ def live(config_path: str, host: str, port: int, out: str | None, pace: float, r
 
         consent = read_text(consent_path, consent_path, "the consent text", "pass a readable UTF-8 text file")
     study_dir = Path(study_directory(config, out))
-    options = ServerOptions(pace=pace, resume_within=resume_within)
+    options = ServerOptions(pace=pace, resume_within=resume_within, warm_up=warm_up)
     with LiveStudy(config, study_dir, options, consent) as study:
         def announce() -> None:
             shown = host if ":" not in host else f"[{host}]"

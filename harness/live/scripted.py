@@ -35,8 +35,11 @@ class ScriptedParticipant:
     reports: int = 0
 
     def __post_init__(self) -> None:
-        self.tasks = sorted((t for t in plan_episodes(self.config) if t.participant == self.participant),
-                            key=lambda t: t.position)
+        from trustroute.harness.live.server import warm_up_task
+
+        trials = sorted((t for t in plan_episodes(self.config) if t.participant == self.participant),
+                        key=lambda t: t.position)
+        self.tasks = [warm_up_task(self.config, self.participant), *trials]
 
     def new_driver(self, task: EpisodeTask):
         from trustroute.harness.study.context import study_context

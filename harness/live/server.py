@@ -6,7 +6,9 @@ lock (`study_lock`: a second server, or a `trustroute study`, on the same direct
 with the holder named) and marks the directory as this config's (`check_study_dir`). The
 directory then holds, besides a study's files,
 
-    live/participants.json   each created participant: SHA-256 of their token, label, consent
+    live/participants.json   each created participant: SHA-256 of their token, label, consent,
+                             whether the warm-up drive is done
+    live/warmup/parts/       the warm-up drives' parts (not part of the dataset)
 
 and after every finished episode the dataset is consolidated (harness/study/manifest.py) so
 `trustroute analyze` reads the directory at any time. harness/live/app.py serves it.
@@ -18,7 +20,7 @@ import contextlib
 import json
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from trustroute.core.dataset import part_path
@@ -32,6 +34,8 @@ from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 
 LIVE_DIR = "live"
 PARTICIPANTS_FILE = "participants.json"
+WARM_UP_DIR = "warmup"
+WARM_UP_KEY = 4   # SeedSequence(study seed, spawn_key=(4, participant)): the warm-up's seeds
 DEFAULT_CONSENT = ("You are about to drive in a simulated study of an autonomous vehicle. You may take over "
                    "and hand back control, and report your trust in the vehicle from 1 to 7. You may stop "
                    "at any time.")
@@ -43,6 +47,19 @@ class ServerOptions:
     pace: float = 1.0
     frame_rate: float = 25.0
     resume_within: float = 120.0   # seconds a disconnected participant has to resume an episode
+    warm_up: bool = True           # a warm-up drive before the trials
+
+
+def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:
+    """The participant's warm-up drive: their first trial's spec and condition on seeds of its own
+    (so it is no trial's rerun); it is not part of the dataset."""
+    import numpy as np
+
+    first = min((t for t in plan_episodes(config) if t.participant == participant), key=lambda t: t.position)
+    sequence = np.random.SeedSequence(config.seed, spawn_key=(WARM_UP_KEY, participant))
+    return replace(first, episode_id=f"p{participant:05d}-warmup", position=-1,
+                   seed=int(sequence.generate_state(1)[0] & 0x7FFFFFFF),
+                   driver_entropy=(config.seed, WARM_UP_KEY, participant))
 
 
 class LiveStudy:
@@ -111,19 +128,28 @@ class LiveStudy:
         for key, record in (records.get("participants", {}) if isinstance(records, dict) else {}).items():
             participant = int(key)
             self.credentials.participants[participant] = str(record["digest"])
-            self.sessions[participant] = Session(self, participant, self.tasks_of(participant),
-                                                 str(record.get("label", "")), bool(record.get("consented")),
-                                                 str(record.get("client", "station")))
+            self.sessions[participant] = self.new_session(participant, str(record.get("label", "")),
+                                                          bool(record.get("consented")),
+                                                          str(record.get("client", "station")),
+                                                          bool(record.get("warmed_up")))
 
     def save_participants(self) -> None:
-        records = {str(p): {"digest": self.credentials.participants[p], "label": s.label,
-                            "consented": s.phase != "consent", "client": s.client}
-                   for p, s in sorted(self.sessions.items())}
-        atomic_write_text(self.registry_path(), json.dumps({"participants": records}, indent=1),
-                          "live participants", "free disk space")
+        with self.lock:
+            records = {str(p): {"digest": self.credentials.participants[p], "label": s.label,
+                                "consented": s.phase != "consent", "client": s.client,
+                                "warmed_up": s.warmed_up}
+                       for p, s in sorted(self.sessions.items())}
+            atomic_write_text(self.registry_path(), json.dumps({"participants": records}, indent=1),
+                              "live participants", "free disk space")
 
     def tasks_of(self, participant: int) -> list[EpisodeTask]:
         return sorted((t for t in self.tasks if t.participant == participant), key=lambda t: t.position)
+
+    def new_session(self, participant: int, label: str = "", consented: bool = False,
+                    client: str = "station", warmed_up: bool = False) -> Session:
+        warm_up = warm_up_task(self.config, participant) if self.options.warm_up else None
+        return Session(self, participant, self.tasks_of(participant), label, consented, client,
+                       warm_up=warm_up, warmed_up=warmed_up)
 
     def create_participant(self, label: str = "") -> tuple[int, str]:
         """(index, token) of the next participant of the plan; ValueError when all exist."""
@@ -132,13 +158,12 @@ class LiveStudy:
             if participant >= self.config.participants:
                 raise ValueError(f"the study plans {self.config.participants} participants; all are created")
             token = self.credentials.add_participant(participant)
-            self.sessions[participant] = Session(self, participant, self.tasks_of(participant), label)
+            self.sessions[participant] = self.new_session(participant, label)
             self.save_participants()
             return participant, token
 
-    def record_consent(self, participant: int, client: str) -> None:
-        with self.lock:
-            self.save_participants()
+    def warm_up_dir(self) -> Path:
+        return self.study_dir / LIVE_DIR / WARM_UP_DIR
 
     # -- episodes -------------------------------------------------------------------------------
     def is_done(self, task: EpisodeTask) -> bool:

@@ -39,10 +39,13 @@ class Session:
     """A participant's session (one per participant, whether or not a browser is connected)."""
 
     def __init__(self, study, participant: int, tasks: list[EpisodeTask], label: str = "",
-                 consented: bool = False, client: str = "station") -> None:
+                 consented: bool = False, client: str = "station", warm_up: EpisodeTask | None = None,
+                 warmed_up: bool = False) -> None:
         self.study = study                  # harness/live/server.py LiveStudy
         self.participant = participant
         self.tasks = tasks
+        self.warm_up = warm_up            # the warm-up drive before the trials (None: none)
+        self.warmed_up = warmed_up
         self.label = label
         self.client = client
         self.lock = threading.RLock()
@@ -61,7 +64,9 @@ class Session:
 
     # -- what the console and the station read --------------------------------------------------
     def pending(self) -> list[EpisodeTask]:
-        return [task for task in self.tasks if not self.study.is_done(task)]
+        """The drives still to do, in order: the warm-up first, then the trials without a part."""
+        warm_up = [self.warm_up] if self.warm_up is not None and not self.warmed_up else []
+        return warm_up + [task for task in self.tasks if not self.study.is_done(task)]
 
     def progress(self) -> dict:
         with self.lock:
@@ -69,7 +74,8 @@ class Session:
             pending = self.pending()
             return {"type": "state", "participant": self.participant, "label": self.label,
                     "phase": self.phase, "paused_by": self.pause_reason,
-                    "trial": len(done) + (1 if self.phase in ("driving", "paused") else 0),
+                    "trial": len(done) + (self.phase in ("driving", "paused") and not self.warming_up),
+                    "warm_up": None if self.warm_up is None else ("done" if self.warmed_up else "pending"),
                     "trials": len(self.tasks), "episode_id": self.task.episode_id if self.task else None,
                     "mode": self.mode, "road": self.road, "reports": self.reports,
                     "takeovers": self.takeovers, "done": done, "last_error": self.last_error,
@@ -84,7 +90,7 @@ class Session:
             if isinstance(message, Consent):
                 self.require("consent", message)
                 self.client = message.client
-                self.study.record_consent(self.participant, message.client)
+                self.study.save_participants()
                 self.phase = "ready" if self.pending() else "done"
             elif isinstance(message, Start):
                 self.require("ready", message)
@@ -113,9 +119,14 @@ class Session:
             raise MessageError("out_of_order", f"{message.type} in phase {self.phase!r} (needs {phase!r})")
 
     # -- the episode ----------------------------------------------------------------------------
+    @property
+    def warming_up(self) -> bool:
+        return self.task is not None and self.task is self.warm_up
+
     def start(self, task: EpisodeTask, trust: int | None) -> None:
+        target = self.study.warm_up_dir() if task is self.warm_up else self.study.study_dir
         self.process, self.connection = start_episode_process(
-            self.study.config, self.study.study_dir, task, self.study.live_options(self.client), trust)
+            self.study.config, target, task, self.study.live_options(self.client), trust)
         self.task, self.phase, self.mode, self.road, self.last_error = task, "driving", "auto", None, None
         reader = threading.Thread(target=self.read_episode, args=(self.connection, self.process),
                                   name=f"live-reader-{task.episode_id}", daemon=True)
@@ -146,7 +157,10 @@ class Session:
             elif kind == "frame":
                 self.road = message["road"]
             elif finished:
-                if kind == "episode_end":
+                if kind == "episode_end" and self.warming_up:
+                    self.warmed_up = True
+                    self.study.save_participants()
+                elif kind == "episode_end":
                     self.study.episode_finished(self.task)
                 else:
                     self.last_error = message.get("error") or message.get("reason")
@@ -206,8 +220,9 @@ class Session:
             with contextlib.suppress(MessageError):
                 self.tell({"type": "abort", "reason": f"incomplete: no reconnection within "
                                                       f"{self.study.options.resume_within:g} s"})
-            self.tasks.remove(task)
-            self.tasks.append(task)
+            if task in self.tasks:   # (a warm-up simply stays first)
+                self.tasks.remove(task)
+                self.tasks.append(task)
 
     # -- the participant's connection -----------------------------------------------------------
     def attach(self, push: Callable[[dict], None]) -> None:

@@ -16,7 +16,7 @@ from fastapi.testclient import TestClient
 from trustroute.core.dataset import part_path, read_episodes, read_kinematics, read_manifest, read_roads
 from trustroute.harness.live.app import live_app
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
-from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.live.server import LiveStudy, ServerOptions, warm_up_task
 from trustroute.harness.study.parts import read_part
 
 from .conftest import tiny_config
@@ -53,8 +53,12 @@ def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_i
     created = httpx.post(f"http://{address}/api/participants", json={"label": "scripted"}, headers=headers)
     token = created.json()["token"]
     played = run_scripted(f"ws://{address}/ws", token, ScriptedParticipant(study.config, 0), timeout=120)
-    task = study.tasks_of(0)[0]
-    assert played.finished and [e["episode_id"] for e in played.episodes] == [task.episode_id]
+    task, warm_up = study.tasks_of(0)[0], warm_up_task(study.config, 0)
+    assert played.finished
+    assert [e["episode_id"] for e in played.episodes] == [warm_up.episode_id, task.episode_id]
+    # the warm-up drive has its part beside the dataset, not in it
+    warm_up_part = read_part(part_path(study.warm_up_dir(), warm_up.episode_id))
+    assert warm_up_part.summary["live"]["driver"] == "scripted"
     assert [e for e in played.errors if e["code"] != "out_of_order"] == []
     part = read_part(part_path(study.study_dir, task.episode_id))
     assert part.summary["live"]["driver"] == "scripted"
@@ -65,13 +69,14 @@ def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_i
     assert manifest["engine"] == "live" and manifest["finished_episodes"] == 1
     episodes, roads = read_episodes(study.study_dir), read_roads(study.study_dir)
     assert list(episodes["episode_id"]) == [task.episode_id]
-    assert int(episodes["junctions"].iloc[0]) == len(roads) - 1 == played.episodes[0]["junctions"]
+    assert int(episodes["junctions"].iloc[0]) == len(roads) - 1 == played.episodes[1]["junctions"]
     reported = roads["reported_trust"].dropna().astype(int).tolist()
     assert reported and set(reported) <= {event["value"] for event in sent}
     kinematics = read_kinematics(study.study_dir)
     assert len(kinematics) > 50 and set(kinematics["mode"]) <= {"auto", "manual"}
     progress = httpx.get(f"http://{address}/api/participants/0", headers=headers).json()
     assert progress["phase"] == "done" and progress["done"] == [task.episode_id]
+    assert progress["warm_up"] == "done"
     download = httpx.get(f"http://{address}/api/download/episodes.parquet", headers=headers)
     assert download.status_code == 200
     assert download.content == (study.study_dir / "episodes.parquet").read_bytes()
@@ -146,7 +151,8 @@ def test_no_reconnection_in_time_makes_the_episode_incomplete(tmp_path):
                 assert time.monotonic() < deadline, progress
                 time.sleep(0.1)
             assert progress["last_error"].startswith("incomplete") and progress["done"] == []
-            assert progress["next_episode"] == study.tasks_of(0)[0].episode_id   # to be run again
+            assert progress["next_episode"] == warm_up_task(config, 0).episode_id   # to be run again
+            assert progress["warm_up"] == "pending"
         assert not part_path(study.study_dir, study.tasks_of(0)[0].episode_id).exists()
     finally:
         study.close()
