@@ -95,11 +95,13 @@ function onState(message) {
   state = message;
   $("status").textContent = message.phase === "paused"
     ? `Paused (${message.paused_by === "disconnect" ? "connection lost" : "by the experimenter"})`
-    : `Trial ${message.trial} of ${message.trials}`;
+    : message.warm_up === "pending" ? "Warm-up drive" : `Trial ${message.trial} of ${message.trials}`;
   $("resume").classList.toggle("hidden", !(message.phase === "paused" && message.paused_by === "disconnect"));
   if (message.phase === "consent") show("consent-step");
   else if (message.phase === "ready") {
-    $("trial-text").textContent = `Next: trial ${message.done.length + 1} of ${message.trials}.`;
+    $("trial-text").textContent = message.warm_up === "pending"
+      ? "Next: a warm-up drive, to get to know the vehicle."
+      : `Next: trial ${message.done.length + 1} of ${message.trials}.`;
     show("ready-step");
   } else if (message.phase === "driving" || message.phase === "paused") show("drive-step");
   else if (message.phase === "done") show("done-step");
