@@ -90,6 +90,10 @@ def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_i
     analysis = json.loads(result.output)
     assert analysis["engine"] == "live"
     assert [(c["spec"], c["condition"], c["n"]) for c in analysis["cells"]] == [("phi1", "free", 1)]
+    fit_path = tmp_path / "fit.json"
+    fitted = CliRunner().invoke(cli, ["fit", str(study.study_dir), "--out", str(fit_path), "--json"])
+    assert fitted.exit_code == 0, fitted.output
+    assert fit_path.is_file()
 
 
 def receive_until(socket, wanted, limit: int = 5000) -> dict:
