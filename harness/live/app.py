@@ -133,8 +133,9 @@ async def limit_body(request: Request, call_next):
     return response
 
 
-async def malformed(request: Request, exc: RequestValidationError) -> JSONResponse:
-    first = exc.errors()[0] if exc.errors() else {}
+async def malformed(request: Request, exc: Exception) -> JSONResponse:
+    errors = exc.errors() if isinstance(exc, RequestValidationError) else []
+    first = errors[0] if errors else {}
     where = ".".join(str(part) for part in first.get("loc", ()))
     return JSONResponse(error_reply("malformed", f"{where}: {first.get('msg', 'invalid')}"), 422)
 

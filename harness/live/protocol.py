@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictInt, TypeAdapter, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, TypeAdapter, ValidationError
 
 MAX_MESSAGE_BYTES = 4096       # a websocket message larger than this is refused unread
 MAX_BODY_BYTES = 16 * 1024     # an HTTP request body larger than this is refused (413)
@@ -27,7 +28,13 @@ class Message(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-class Consent(Message):
+class ClientMessage(Message):
+    """A message of the participant's websocket; `type` names it."""
+
+    type: str
+
+
+class Consent(ClientMessage):
     """The participant has read the consent text and agrees; `client` says who drives (a person
     at the station, or the scripted participant): the episodes' parts record it."""
 
@@ -36,33 +43,33 @@ class Consent(Message):
     client: Literal["station", "scripted"] = "station"
 
 
-class Start(Message):
+class Start(ClientMessage):
     """Start the next trial; `trust`: the participant's trust before it (1-7; default: the middle)."""
 
     type: Literal["start"]
     trust: Annotated[StrictInt, Field(ge=TRUST_LOW, le=TRUST_HIGH)] | None = None
 
 
-class Takeover(Message):
+class Takeover(ClientMessage):
     type: Literal["takeover"]
 
 
-class HandBack(Message):
+class HandBack(ClientMessage):
     type: Literal["hand_back"]
 
 
-class TrustReport(Message):
+class TrustReport(ClientMessage):
     type: Literal["trust"]
     value: Annotated[StrictInt, Field(ge=TRUST_LOW, le=TRUST_HIGH)]
 
 
-class Resume(Message):
+class Resume(ClientMessage):
     """Resume an episode paused by this participant's disconnect."""
 
     type: Literal["resume"]
 
 
-class Ping(Message):
+class Ping(ClientMessage):
     type: Literal["ping"]
 
 
@@ -79,10 +86,6 @@ class EpisodeControl(Message):
     """The experimenter's control of a participant's running episode."""
 
     action: Literal["pause", "resume", "abort"]
-
-
-class Acknowledged(Message):
-    ok: StrictBool = True
 
 
 # -- errors and limits ---------------------------------------------------------------------------
@@ -104,7 +107,7 @@ class MessageError(Exception):
         self.reply = error_reply(code, detail)
 
 
-def parse_client_message(raw: str | bytes) -> Message:
+def parse_client_message(raw: str | bytes) -> ClientMessage:
     """The validated message, or MessageError (oversized or malformed)."""
     size = len(raw.encode() if isinstance(raw, str) else raw)
     if size > MAX_MESSAGE_BYTES:
@@ -125,7 +128,7 @@ class TokenBucket:
 
     burst: float = BURST
     rate: float = RATE
-    clock: object = time.monotonic
+    clock: Callable[[], float] = time.monotonic
     tokens: float = field(default=-1.0)
     last: float = field(default=0.0)
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from typing import Any
 
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
@@ -26,7 +27,7 @@ class ScriptedParticipant:
     config: StudyConfig
     participant: int
     tasks: list[EpisodeTask] = field(default_factory=list)
-    driver: object = None
+    driver: Any = None   # the current trial's SyntheticDriver
     finished: bool = False
     acted_on: tuple = ()
     errors: list[dict] = field(default_factory=list)

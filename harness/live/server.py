@@ -76,8 +76,8 @@ class LiveStudy:
         self.options = options or ServerOptions()
         self.consent_text = consent_text
         self.tasks = plan_episodes(config)
-        self.credentials: Credentials | None = None
-        self.experimenter_token = ""
+        self.credentials: Credentials
+        self.credentials, self.experimenter_token = experimenter_credentials()
         self.sessions: dict[int, Session] = {}
         self.done: set[str] = set()
         self.lock = threading.RLock()
@@ -96,7 +96,6 @@ class LiveStudy:
             check_study_dir(self.study_dir, self.config, self.config.content_hash)
             self.done = finished_episodes(self.study_dir, self.tasks)[0]
             self.expected = expected_values(self.config)
-            self.credentials, self.experimenter_token = experimenter_credentials()
             self.load_participants()
         except BaseException:
             self._stack.close()

@@ -17,11 +17,12 @@ from __future__ import annotations
 import contextlib
 import threading
 from collections.abc import Callable
+from typing import Any
 
 from trustroute.harness.live.protocol import (
+    ClientMessage,
     Consent,
     HandBack,
-    Message,
     MessageError,
     Ping,
     Resume,
@@ -56,7 +57,8 @@ class Session:
         self.road: str | None = None
         self.reports = self.takeovers = 0
         self.last_error: str | None = None
-        self.process = self.connection = None
+        self.process: Any = None
+        self.connection: Any = None      # the episode process and our end of its pipe
         self.push: Callable[[dict], None] | None = None
         self.expiry: threading.Timer | None = None   # the deadline of a disconnect's pause
         if consented and not self.pending():
@@ -82,7 +84,7 @@ class Session:
                     "next_episode": pending[0].episode_id if pending else None}
 
     # -- the participant's messages -------------------------------------------------------------
-    def handle(self, message: Message) -> list[dict]:
+    def handle(self, message: ClientMessage) -> list[dict]:
         """Apply a validated client message; its replies. MessageError when out of order."""
         with self.lock:
             if isinstance(message, Ping):
@@ -114,7 +116,7 @@ class Session:
                 self.resume()
             return [self.progress()]
 
-    def require(self, phase: str, message: Message) -> None:
+    def require(self, phase: str, message: ClientMessage) -> None:
         if self.phase != phase:
             raise MessageError("out_of_order", f"{message.type} in phase {self.phase!r} (needs {phase!r})")
 
