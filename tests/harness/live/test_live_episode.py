@@ -160,3 +160,24 @@ def test_no_reconnection_in_time_makes_the_episode_incomplete(tmp_path):
         assert not part_path(study.study_dir, study.tasks_of(0)[0].episode_id).exists()
     finally:
         study.close()
+
+
+def test_participants_drive_at_once_each_in_their_own_session(served):
+    study, address = served
+    headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+    tokens = [httpx.post(f"http://{address}/api/participants", json={}, headers=headers).json()["token"]
+              for _ in range(2)]
+    players = [ScriptedParticipant(study.config, p) for p in range(2)]
+    threads = [threading.Thread(target=run_scripted, args=(f"ws://{address}/ws", token, player, 120))
+               for token, player in zip(tokens, players, strict=True)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(180)
+    for p, player in enumerate(players):
+        assert player.finished
+        assert [e["episode_id"] for e in player.episodes] == [warm_up_task(study.config, p).episode_id,
+                                                              study.tasks_of(p)[0].episode_id]
+    episodes = read_episodes(study.study_dir)
+    assert sorted(episodes["episode_id"]) == sorted(t.episode_id for t in study.tasks)
+    assert list(episodes["participant"]) == [0, 1]
