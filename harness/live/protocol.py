@@ -15,7 +15,16 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictInt, TypeAdapter, ValidationError
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictInt,
+    TypeAdapter,
+    ValidationError,
+    model_validator,
+)
 
 MAX_MESSAGE_BYTES = 4096       # a websocket message larger than this is refused unread
 MAX_BODY_BYTES = 16 * 1024     # an HTTP request body larger than this is refused (413)
@@ -36,11 +45,19 @@ class ClientMessage(Message):
 
 class Consent(ClientMessage):
     """The participant has read the consent text and agrees; `client` says who drives (a person
-    at the station, or the scripted participant): the episodes' parts record it."""
+    at the station, or the scripted participant): the episodes' parts record it. `lockstep`
+    (scripted only): every episode waits for the participant's answer at each decision."""
 
     type: Literal["consent"]
     agree: Literal[True]
     client: Literal["station", "scripted"] = "station"
+    lockstep: StrictBool = False
+
+    @model_validator(mode="after")
+    def lockstep_is_scripted(self) -> Consent:
+        if self.lockstep and self.client != "scripted":
+            raise ValueError("lockstep is for the scripted participant only")
+        return self
 
 
 class Start(ClientMessage):
@@ -58,6 +75,12 @@ class HandBack(ClientMessage):
     type: Literal["hand_back"]
 
 
+class Pass(ClientMessage):
+    """Lockstep: the answer "no takeover" to an `incident` event."""
+
+    type: Literal["pass"]
+
+
 class TrustReport(ClientMessage):
     type: Literal["trust"]
     value: Annotated[StrictInt, Field(ge=TRUST_LOW, le=TRUST_HIGH)]
@@ -73,8 +96,8 @@ class Ping(ClientMessage):
     type: Literal["ping"]
 
 
-CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | TrustReport | Resume | Ping,
-                                       Field(discriminator="type")])
+CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | Pass | TrustReport | Resume
+                                       | Ping, Field(discriminator="type")])
 
 
 # -- HTTP bodies ---------------------------------------------------------------------------------

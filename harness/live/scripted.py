@@ -26,6 +26,7 @@ class ScriptedParticipant:
 
     config: StudyConfig
     participant: int
+    lockstep: bool = False   # the episodes wait for every answer: they run as headless ones do
     tasks: list[EpisodeTask] = field(default_factory=list)
     driver: Any = None   # the current trial's SyntheticDriver
     finished: bool = False
@@ -58,6 +59,8 @@ class ScriptedParticipant:
             if self.driver.decides_takeover(message["kind"]):
                 self.takeovers += 1
                 return [{"type": "takeover"}]
+            if self.lockstep:
+                return [{"type": "pass"}]
         elif kind == "road" and self.driver is not None:
             self.driver.move_trust(message["incident"], message["takeover"], message["performance"])
             if message["prompt"]:
@@ -78,7 +81,7 @@ class ScriptedParticipant:
             return []
         self.acted_on = key
         if state["phase"] == "consent":
-            return [{"type": "consent", "agree": True, "client": "scripted"}]
+            return [{"type": "consent", "agree": True, "client": "scripted", "lockstep": self.lockstep}]
         if state["phase"] == "done":
             self.finished = True
         elif state["phase"] == "ready":

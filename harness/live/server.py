@@ -131,12 +131,13 @@ class LiveStudy:
                                                           bool(record.get("consented")),
                                                           str(record.get("client", "station")),
                                                           bool(record.get("warmed_up")))
+            self.sessions[participant].lockstep = bool(record.get("lockstep"))
 
     def save_participants(self) -> None:
         with self.lock:
             records = {str(p): {"digest": self.credentials.participants[p], "label": s.label,
                                 "consented": s.phase != "consent", "client": s.client,
-                                "warmed_up": s.warmed_up}
+                                "warmed_up": s.warmed_up, "lockstep": s.lockstep}
                        for p, s in sorted(self.sessions.items())}
             atomic_write_text(self.registry_path(), json.dumps({"participants": records}, indent=1),
                               "live participants", "free disk space")
@@ -168,8 +169,9 @@ class LiveStudy:
     def is_done(self, task: EpisodeTask) -> bool:
         return task.episode_id in self.done
 
-    def live_options(self, client: str) -> LiveOptions:
-        return LiveOptions(self.options.pace, self.options.frame_rate, client, self.config.report_every)
+    def live_options(self, client: str, lockstep: bool = False) -> LiveOptions:
+        return LiveOptions(self.options.pace, self.options.frame_rate, client, self.config.report_every,
+                           lockstep)
 
     def episode_finished(self, task: EpisodeTask) -> None:
         """An episode wrote its part: count it done and consolidate the dataset."""

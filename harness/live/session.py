@@ -24,6 +24,7 @@ from trustroute.harness.live.protocol import (
     Consent,
     HandBack,
     MessageError,
+    Pass,
     Ping,
     Resume,
     Start,
@@ -49,6 +50,7 @@ class Session:
         self.warmed_up = warmed_up
         self.label = label
         self.client = client
+        self.lockstep = False
         self.lock = threading.RLock()
         self.phase = "ready" if consented else "consent"
         self.pause_reason: str | None = None
@@ -91,7 +93,7 @@ class Session:
                 return [{"type": "pong"}]
             if isinstance(message, Consent):
                 self.require("consent", message)
-                self.client = message.client
+                self.client, self.lockstep = message.client, message.lockstep
                 self.study.save_participants()
                 self.phase = "ready" if self.pending() else "done"
             elif isinstance(message, Start):
@@ -102,6 +104,12 @@ class Session:
                 wanted = "auto" if isinstance(message, Takeover) else "manual"
                 if self.mode != wanted:
                     raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
+                self.tell(message.model_dump())
+                return []
+            elif isinstance(message, Pass):
+                self.require("driving", message)
+                if not self.lockstep:
+                    raise MessageError("out_of_order", "pass answers an incident in lockstep only")
                 self.tell(message.model_dump())
                 return []
             elif isinstance(message, TrustReport):
@@ -128,7 +136,7 @@ class Session:
     def start(self, task: EpisodeTask, trust: int | None) -> None:
         target = self.study.warm_up_dir() if task is self.warm_up else self.study.study_dir
         self.process, self.connection = start_episode_process(
-            self.study.config, target, task, self.study.live_options(self.client), trust)
+            self.study.config, target, task, self.study.live_options(self.client, self.lockstep), trust)
         self.task, self.phase, self.mode, self.road, self.last_error = task, "driving", "auto", None, None
         reader = threading.Thread(target=self.read_episode, args=(self.connection, self.process),
                                   name=f"live-reader-{task.episode_id}", daemon=True)

@@ -8,7 +8,9 @@ driver. The driver protocol is the seam (harness/simulation/episode.py):
 
 - `takeover_request(now)`, asked every step: the person's takeover (True) or hand-back (False);
 - `decides_takeover(kind)`, asked when an incident comes into view: False (a person's takeover
-  comes through takeover_request); the view event is sent to the participant;
+  comes through takeover_request); the view event is sent to the participant. In lockstep (the
+  scripted participant only) the episode waits for its answer, `takeover` or `pass`, and
+  `report_trust` for the report a prompt asks for: the episode then runs as a headless one does;
 - `move_trust(...)`, when a road's observation closes: the road's event (incident, takeover,
   performance) is sent; the trust it returns is the person's latest report (their stated trust:
   the roads table's trust columns; the policy never reads them);
@@ -49,6 +51,7 @@ class LiveOptions:
     frame_rate: float = 25.0     # frames streamed per wall second at most
     client: str = "station"      # who drives: "station" (a person) or "scripted"
     report_every: int = 1        # the study's report_every: roads whose end prompts for a report
+    lockstep: bool = False       # scripted only: the episode waits for its reply to every decision
 
 
 class RemoteDriver:
@@ -86,6 +89,8 @@ class RemoteDriver:
 
     def decides_takeover(self, incident: str) -> bool:
         self.send({"type": "incident", "kind": incident, "t": self.sim_now})
+        if self.options.lockstep:
+            return self.await_reply(("takeover", "pass"))["type"] == "takeover"
         return False
 
     def move_trust(self, incident: str, took_over: bool, performance: str = "succ") -> int:
@@ -96,6 +101,8 @@ class RemoteDriver:
         return self._trust
 
     def report_trust(self) -> int | None:
+        if self.options.lockstep and self._report is None:
+            self.apply(self.await_reply(("trust",)), logged=True)
         report, self._report = self._report, None
         return report
 
@@ -103,9 +110,20 @@ class RemoteDriver:
     def send(self, message: dict) -> None:
         self.connection.send(message)
 
-    def apply(self, control: dict) -> None:
+    def await_reply(self, wanted: tuple[str, ...]) -> dict:
+        """Lockstep: the participant's reply to the event just sent, the simulation standing still
+        meanwhile (other controls are applied as they come)."""
+        while True:
+            control = self.connection.recv()
+            if control.get("type") in wanted:
+                self.events.append({"t": self.sim_now, "wall": time.time(), **control})
+                return control
+            self.apply(control)
+
+    def apply(self, control: dict, logged: bool = False) -> None:
         kind = control.get("type")
-        self.events.append({"t": self.sim_now, "wall": time.time(), **control})
+        if not logged:
+            self.events.append({"t": self.sim_now, "wall": time.time(), **control})
         if kind == "takeover":
             self._request = True
         elif kind == "hand_back":
@@ -152,6 +170,8 @@ class RemoteDriver:
     def hold_for_hand_back(self, sumo, ego, mode: str, road: str) -> None:
         """Warn a person still in control near the road's end; brake to wait short of the commit
         point until they hand back; release the ego on the hand-back."""
+        if self.options.lockstep:
+            return   # as in simulated studies: the episode hands back at the commit point
         if mode != MANUAL.name or ego.road != road:
             if self.holding and mode != MANUAL.name:
                 sumo.vehicle.setSpeed(EGO_ID, -1.0)   # back to the autopilot's own speed

@@ -181,3 +181,39 @@ def test_participants_drive_at_once_each_in_their_own_session(served):
     episodes = read_episodes(study.study_dir)
     assert sorted(episodes["episode_id"]) == sorted(t.episode_id for t in study.tasks)
     assert list(episodes["participant"]) == [0, 1]
+
+
+def test_scripted_participants_in_lockstep_reproduce_the_headless_study(tmp_path):
+    """The live path runs the headless episode code: scripted participants answering every
+    decision (lockstep) give the very episodes `trustroute study` gives on the same config and
+    seeds, but for the trust columns (a live episode logs the stated trust, not a hidden one)."""
+    from trustroute.harness.study.runner import run_and_consolidate
+
+    config = tiny_config(tmp_path, participants=3, specs=("phi1", "phi2"))
+    run_and_consolidate(config.with_overrides(engine="sumo"), tmp_path / "headless", 1, None, progress=False,
+                        echo=lambda line: None)
+    study = LiveStudy(config, tmp_path / "live", ServerOptions(pace=1e4, warm_up=False)).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+            for p in range(config.participants):
+                token = client.post("/api/participants", json={}, headers=headers).json()["token"]
+                player = ScriptedParticipant(config, p, lockstep=True)
+                with client.websocket_connect("/ws", headers={"Authorization": f"Bearer {token}"}) as socket:
+                    while not player.finished:
+                        for reply in player.respond(socket.receive_json()):
+                            socket.send_json(reply)
+    finally:
+        study.close()
+    columns = ["satisfied", "junctions", "takeovers", "end_reason", "fallback_fired", "mean_reported_trust",
+               "reports", "sim_seconds"]
+    headless = read_episodes(tmp_path / "headless").set_index("episode_id")[columns].sort_index()
+    live = read_episodes(tmp_path / "live").set_index("episode_id")[columns].sort_index()
+    assert headless.equals(live)
+    assert headless["takeovers"].sum() > 0 and headless["reports"].sum() > 0   # the test has teeth
+    columns = ["episode_id", "index", "directed_road", "action", "incident", "takeover", "performance",
+               "reported_trust", "belief_after", "dfa_state"]
+    headless_roads, live_roads = read_roads(tmp_path / "headless"), read_roads(tmp_path / "live")
+    assert headless_roads[columns].astype(str).equals(live_roads[columns].astype(str))
+    headless_ticks, live_ticks = read_kinematics(tmp_path / "headless"), read_kinematics(tmp_path / "live")
+    assert headless_ticks.equals(live_ticks)
