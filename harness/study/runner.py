@@ -398,6 +398,10 @@ def run_and_consolidate(
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line. The study
     directory stays locked until the manifest is written."""
+    if config.engine == "live":
+        raise InputError(config.source_path, "study.engine",
+                         "a live study is driven by people, not simulated",
+                         "serve it with `trustroute live CONFIG`, or simulate it with --engine sumo")
     validate_study(config, scheduler, attempts, progress)
     study_dir = Path(study_dir).resolve()
     with study_lock(study_dir):

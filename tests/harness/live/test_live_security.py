@@ -121,7 +121,8 @@ def test_malformed_oversized_and_out_of_order_messages_get_errors_and_change_not
                  (json.dumps({"type": "ping", "pad": "x" * MAX_MESSAGE_BYTES}), "oversized"),
                  ('{"type": "takeover"}', "out_of_order"), ('{"type": "hand_back"}', "out_of_order"),
                  ('{"type": "start"}', "out_of_order"), ('{"type": "trust", "value": 4}', "out_of_order"),
-                 ('{"type": "resume"}', "out_of_order")]
+                 ('{"type": "resume"}', "out_of_order"), ('{"type": "pass"}', "out_of_order"),
+                 ('{"type": "consent", "agree": true, "lockstep": true}', "malformed")]
         for raw, code in cases:
             socket.send_text(raw)
             reply = socket.receive_json()
@@ -188,6 +189,14 @@ def test_a_config_of_another_engine_is_refused(tmp_path):
     config = tiny_config(tmp_path).with_overrides(engine="sumo")
     with pytest.raises(InputError, match="live"):
         LiveStudy(config, tmp_path / "study")
+
+
+def test_trustroute_study_refuses_a_live_config(tmp_path):
+    from trustroute.harness.study.runner import run_and_consolidate
+
+    with pytest.raises(InputError, match="trustroute live"):
+        run_and_consolidate(tiny_config(tmp_path), tmp_path / "study", 1, None, progress=False)
+    assert not (tmp_path / "study").exists()
 
 
 def test_the_pages_need_their_token_and_carry_the_security_headers(client, live_study):
