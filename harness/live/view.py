@@ -20,7 +20,8 @@ INCIDENT_PREFIX = "inc"
 
 @lru_cache(maxsize=4)
 def net_view(net_path: str) -> dict:
-    """{"lanes": [{"id", "width", "internal", "shape": [[x, y], ...]}], "bounds": [x0, y0, x1, y1]}."""
+    """{"lanes": [{"id", "width", "internal", "shape": [[x, y], ...]}], "junctions": {id: [x, y]},
+    "bounds": [x0, y0, x1, y1]} (junctions: the town's, the ends of its roads)."""
     import sumolib
 
     net = sumolib.net.readNet(str(Path(net_path)), withInternal=True, withPedestrianConnections=True)
@@ -30,8 +31,15 @@ def net_view(net_path: str) -> dict:
             lanes.append({"id": lane.getID(), "width": round(lane.getWidth(), 2),
                           "internal": edge.getFunction() != "",
                           "shape": [[round(x, 2), round(y, 2)] for x, y in lane.getShape()]})
+    junctions = {node.getID(): [round(c, 2) for c in node.getCoord()] for node in net.getNodes()
+                 if node.getType() != "internal"}
     (x0, y0), (x1, y1) = net.getBBoxXY()
-    return {"lanes": lanes, "bounds": [x0, y0, x1, y1]}
+    return {"lanes": lanes, "junctions": junctions, "bounds": [x0, y0, x1, y1]}
+
+
+def next_junction(road: str) -> str | None:
+    """The junction at the end of a town road ("A-B" -> "B"); None inside a junction."""
+    return None if road.startswith(":") or "-" not in road else road.rsplit("-", 1)[1]
 
 
 def role(sumo_id: str) -> str:

@@ -32,7 +32,7 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
-from trustroute.harness.live.view import surroundings
+from trustroute.harness.live.view import next_junction, surroundings
 from trustroute.harness.simulation.driving_style import MANUAL
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID
 
@@ -154,6 +154,7 @@ class RemoteDriver:
             self.last_frame = wall
             self.send({"type": "frame", "t": ego.time, "x": ego.x, "y": ego.y, "angle": ego.angle,
                        "speed": ego.speed, "road": road, "lane": ego.lane, "mode": mode,
+                       "junction": next_junction(road),
                        **surroundings(sumo, EGO_ID, ego.x, ego.y)})
         self.read_controls(0.0)
         self.hold_for_hand_back(sumo, ego, mode, road)

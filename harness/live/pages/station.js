@@ -44,10 +44,11 @@ function setMode(next) {
 const COLOURS = { traffic: "#1e5aa8", obstacle: "#e67e00", oncoming: "#7b1fa2", parked: "#7b1fa2",
                   pedestrian: "#d81b60" };
 let lanes = [];
+let junctions = {};
 
 async function loadNet() {
   const response = await fetch("/api/net");
-  if (response.ok) lanes = (await response.json()).lanes;
+  if (response.ok) ({ lanes, junctions } = await response.json());
 }
 
 function box(context, toCanvas, x, y, angle, length, width, colour, scale) {
@@ -73,6 +74,15 @@ function draw(frame) {
     context.lineWidth = lane.width * scale;
     context.beginPath();
     lane.shape.forEach(([x, y], i) => { const [u, v] = toCanvas(x, y); if (i) context.lineTo(u, v); else context.moveTo(u, v); });
+    context.stroke();
+  }
+  const next = junctions[frame.junction];
+  if (next) {   // the junction the ego drives to: the policy chooses the road after it
+    const [u, v] = toCanvas(next[0], next[1]);
+    context.strokeStyle = "#f9a825";
+    context.lineWidth = 3;
+    context.beginPath();
+    context.arc(u, v, 9 * scale, 0, 2 * Math.PI);
     context.stroke();
   }
   for (const [x, y, angle, kind] of frame.vehicles || []) {

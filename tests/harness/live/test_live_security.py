@@ -228,3 +228,4 @@ def test_the_net_view_is_for_participants_and_the_experimenter(client, live_stud
     assert client.get("/api/net", headers=bearer(live_study.experimenter_token)).json() == view
     roads = {lane["id"].rsplit("_", 1)[0] for lane in view["lanes"] if not lane["internal"]}
     assert {"E-A", "A-B"} <= roads and all(len(lane["shape"]) >= 2 for lane in view["lanes"])
+    assert {"A", "B", "E"} <= set(view["junctions"])

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trustroute.harness.live.view import role
+from trustroute.harness.live.view import next_junction, role
 from trustroute.harness.live.worker import EpisodeAborted, LiveOptions, RemoteDriver, live_summary
 from trustroute.harness.simulation.episode_tracker import EpisodeTracker
 from trustroute.harness.study.context import study_context
@@ -58,6 +58,7 @@ def test_a_takeover_from_the_pipe_reaches_sumo_and_the_logs(tmp_path):
     assert bool(incidents["takeover"].iloc[0]) and not np.isnan(incidents["takeover_start"].iloc[0])
     frames = [m for m in pipe.sent if m["type"] == "frame"]
     assert frames and all(isinstance(f["vehicles"], list) and isinstance(f["persons"], list) for f in frames)
+    assert {f["junction"] for f in frames} - {None} <= {road.split("-")[1] for road in roads["directed_road"]}
     assert all(m["prompt"] for m in pipe.sent if m["type"] == "road")   # report_every = 1
     kinds = [m["type"] for m in pipe.sent]
     assert "frame" in kinds and kinds.count("road") == len(roads) - 1
@@ -114,6 +115,10 @@ def test_the_tracker_decides_as_for_the_same_observations_headless(tmp_path):
 def test_an_abort_stops_the_episode(tmp_path):
     with pytest.raises(EpisodeAborted):
         live_episode(tmp_path, [{"type": "abort"}])
+
+
+def test_the_next_junction_is_the_end_of_the_road():
+    assert [next_junction(r) for r in ("A-B", "E-A", ":B_3", "")] == ["B", "A", None, None]
 
 
 def test_what_the_view_calls_each_object():
