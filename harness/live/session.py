@@ -94,8 +94,8 @@ class Session:
             if isinstance(message, Consent):
                 self.require("consent", message)
                 self.client, self.lockstep = message.client, message.lockstep
-                self.study.save_participants()
                 self.phase = "ready" if self.pending() else "done"
+                self.study.save_participants()   # the consent holds across restarts
             elif isinstance(message, Start):
                 self.require("ready", message)
                 self.start(self.pending()[0], message.trust)

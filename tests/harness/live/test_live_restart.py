@@ -111,6 +111,10 @@ def test_sigkill_mid_episode_then_restart_continues_at_the_interrupted_trial(tmp
 
     server, address, token = start_server(config.source_path, study_dir, pace=1000.0)
     try:
+        progress = httpx.get(f"http://{address}/api/participants/0",
+                             headers={"Authorization": f"Bearer {token}"}).json()
+        assert progress["phase"] == "ready" and progress["warm_up"] == "done"   # consent and warm-up hold
+        assert progress["done"] == [first.episode_id] and progress["next_episode"] == second.episode_id
         played = run_scripted(f"ws://{address}/ws", participant, ScriptedParticipant(config, 0), 120)
         assert [e["episode_id"] for e in played.episodes] == [second.episode_id]
     finally:
