@@ -58,13 +58,13 @@ class RemoteDriver:
     """The driver of a live episode: a person (or the scripted participant) across a pipe."""
 
     def __init__(self, connection, trust_levels: tuple[int, ...], initial_trust: int | None,
-                 options: LiveOptions, clock=time.monotonic, sleep=time.sleep) -> None:
+                 options: LiveOptions, clock=time.monotonic) -> None:
         self.connection = connection
         self.levels = tuple(int(level) for level in trust_levels)
         middle = self.levels[len(self.levels) // 2]
         self._trust = initial_trust if initial_trust in self.levels else middle
         self.options = options
-        self.clock, self.sleep = clock, sleep
+        self.clock = clock
         self._request: bool | None = None
         self._report: int | None = None
         self.roads = 0
