@@ -28,10 +28,12 @@ from trustroute.harness.commands.options import FiniteFloat, bounded_int
               "episode is incomplete and runs again at the end of their plan.")
 @click.option("--warm-up/--no-warm-up", default=True, show_default=True,
               help="A warm-up drive before each participant's trials (not part of the dataset).")
+@click.option("--secure-cookies", is_flag=True,
+              help="Mark the cookies Secure (the study is served over HTTPS, e.g. behind a TLS proxy).")
 @click.option("--consent", "consent_path", type=click.Path(), default=None,
               help="Text FILE shown to participants before they consent (default: a short generic text).")
 def live(config_path: str, host: str, port: int, out: str | None, pace: float, resume_within: float,
-         warm_up: bool, consent_path: str | None) -> None:
+         warm_up: bool, secure_cookies: bool, consent_path: str | None) -> None:
     """Serve the study described by CONFIG (engine = "live") to participants in their browsers."""
     from trustroute.harness.live.app import serve
     from trustroute.harness.live.server import DEFAULT_CONSENT, LiveStudy, ServerOptions
@@ -44,7 +46,8 @@ def live(config_path: str, host: str, port: int, out: str | None, pace: float, r
 
         consent = read_text(consent_path, consent_path, "the consent text", "pass a readable UTF-8 text file")
     study_dir = Path(study_directory(config, out))
-    options = ServerOptions(pace=pace, resume_within=resume_within, warm_up=warm_up)
+    options = ServerOptions(pace=pace, resume_within=resume_within, warm_up=warm_up,
+                            secure_cookies=secure_cookies)
     with LiveStudy(config, study_dir, options, consent) as study:
         def announce() -> None:
             shown = host if ":" not in host else f"[{host}]"

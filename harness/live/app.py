@@ -81,9 +81,12 @@ def refused(status: int, code: str, detail: str) -> HTTPException:
     return HTTPException(status, error_reply(code, detail))
 
 
-def cookie_redirect(target: str, cookie: str, token: str) -> RedirectResponse:
+def cookie_redirect(request: Request, target: str, cookie: str, token: str) -> RedirectResponse:
+    """Set the token's cookie (HttpOnly, SameSite=Strict; Secure when the study is served over
+    HTTPS, --secure-cookies) and send the browser on without the token in its address bar."""
     response = RedirectResponse(target, status_code=303)
-    response.set_cookie(cookie, token, httponly=True, samesite="strict", path="/")
+    response.set_cookie(cookie, token, httponly=True, samesite="strict", path="/",
+                        secure=study_of(request).options.secure_cookies)
     return response
 
 
@@ -144,14 +147,14 @@ async def malformed(request: Request, exc: Exception) -> JSONResponse:
 def login(request: Request, token: str = "") -> RedirectResponse:
     if not study_of(request).credentials.is_experimenter(token[:200] or None):
         raise refused(403, "forbidden", "the experimenter's token is needed")
-    return cookie_redirect("/console", EXPERIMENTER_COOKIE, token)
+    return cookie_redirect(request, "/console", EXPERIMENTER_COOKIE, token)
 
 
 @router.get("/p/{token}")
 def participant_link(request: Request, token: str) -> RedirectResponse:
     if study_of(request).credentials.participant_of(token[:200]) is None:
         raise refused(403, "forbidden", "not a participant link of this study")
-    return cookie_redirect("/station", PARTICIPANT_COOKIE, token)
+    return cookie_redirect(request, "/station", PARTICIPANT_COOKIE, token)
 
 
 @router.get("/console", dependencies=[Depends(experimenter)])

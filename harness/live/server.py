@@ -48,6 +48,7 @@ class ServerOptions:
     frame_rate: float = 25.0
     resume_within: float = 120.0   # seconds a disconnected participant has to resume an episode
     warm_up: bool = True           # a warm-up drive before the trials
+    secure_cookies: bool = False   # cookies only over HTTPS (behind a TLS proxy)
 
 
 def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:

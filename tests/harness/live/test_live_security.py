@@ -70,11 +70,21 @@ def test_links_set_httponly_cookies_that_authenticate(client, live_study):
     response = client.get(f"/p/{token}", follow_redirects=False)
     assert response.status_code == 303 and response.headers["location"] == "/station"
     cookie = response.headers["set-cookie"]
-    assert "HttpOnly" in cookie and "samesite=strict" in cookie.lower()
+    assert "HttpOnly" in cookie and "samesite=strict" in cookie.lower() and "secure" not in cookie.lower()
     assert client.get("/api/me").json()["participant"] == 0   # the cookie alone now authenticates
     login = client.get(f"/login?token={live_study.experimenter_token}", follow_redirects=False)
     assert login.status_code == 303 and "HttpOnly" in login.headers["set-cookie"]
     assert client.get("/api/participants").status_code == 200
+
+
+def test_secure_cookies_for_studies_served_over_https(tmp_path):
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions(secure_cookies=True)).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            response = client.get(f"/login?token={study.experimenter_token}", follow_redirects=False)
+            assert "secure" in response.headers["set-cookie"].lower()
+    finally:
+        study.close()
 
 
 def test_tokens_are_stored_only_as_digests(client, live_study):
