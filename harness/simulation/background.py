@@ -1,22 +1,67 @@
 """Optional background traffic: seeded vehicles driving random routes on the town's roads.
 
-`BackgroundTraffic(count, rng)` inserts `count` vehicles at the start of an episode, each on a
-random road at a random position with a random destination (routes from SUMO's router), and
-replaces every one that arrives, so the density stays `count`. Every draw comes from the
-generator passed in (the episode's scene generator), so the same seed gives the same traffic.
+On a town built by `trustroute net build`, `BackgroundTraffic(count, rng)` inserts `count` vehicles
+at the start of an episode, each on a random road at a random position with a random destination
+(routes from SUMO's router), and replaces every one that arrives, so the density stays `count`.
+Every draw comes from the generator passed in (the episode's scene generator), so the same seed
+gives the same traffic.
 Off by default (study key `background_vehicles`, docs/scenes.md).
+
+On an imported town's own net the traffic comes from route files SUMO loads with the net: the
+scenario's own (`trustroute run --routes FILE`, study key `routes`), or trips written by SUMO's
+`randomTrips.py` (`random_trips`): `count` passenger cars departing per minute, from and to
+random passenger edges, with a seed derived from the episode's seed (`trips_seed`), so the same
+episode seed gives the same traffic. SUMO routes each trip when it departs.
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from trustroute.core.errors import InputError
 from trustroute.harness.simulation.sumo_start import Sumo
 
 TYPE_ID = "trustroute_background"
 PREFIX = "bg"
+TRIPS_STREAM = 0xB6C7        # the trips' seed: SeedSequence([episode seed, TRIPS_STREAM])
+TRIPS_PER = 60.0             # seconds: `count` trips depart in every such interval
+TRIPS_END = 7200.0           # seconds of departures written (the longest an episode may run)
+
+
+def trips_seed(seed: int) -> int:
+    """randomTrips.py's seed for an episode seed (a stream of its own: it never shifts the scenes')."""
+    return int(np.random.SeedSequence([int(seed), TRIPS_STREAM]).generate_state(1)[0])
+
+
+def random_trips_script() -> Path:
+    """SUMO's randomTrips.py, from the eclipse-sumo wheel's tools."""
+    import sumo
+
+    return Path(sumo.SUMO_HOME) / "tools" / "randomTrips.py"
+
+
+def random_trips(net_file: Path, seed: int, count: int, folder: Path, end: float = TRIPS_END) -> Path:
+    """`folder/background.trips.xml`: `count` passenger trips per TRIPS_PER seconds on `net_file`
+    from randomTrips.py, seeded by `trips_seed(seed)`, checked for connectivity (--validate)."""
+    out = Path(folder) / "background.trips.xml"
+    command = [sys.executable, str(random_trips_script()), "-n", str(net_file), "-o", str(out),
+               "--seed", str(trips_seed(seed)), "-b", "0", "-e", f"{end:g}", "-p", f"{TRIPS_PER / count:g}",
+               "--vehicle-class", "passenger", "--edge-permission", "passenger", "--prefix", PREFIX,
+               "--trip-attributes", 'departLane="best" departSpeed="max"', "--validate"]
+    result = subprocess.run(command, capture_output=True, text=True, check=False,
+                            env={**os.environ, "SUMO_HOME": str(random_trips_script().parents[1])})
+    if result.returncode != 0 or not out.is_file():
+        message = (result.stderr or result.stdout).strip().splitlines()
+        raise InputError(str(net_file), "", "randomTrips.py could not write background trips"
+                         + (f" ({message[-1]})" if message else ""),
+                         "pass the scenario's own routes with --routes, or set background_vehicles = 0")
+    return out
 
 
 def define_type(sumo: Sumo) -> None:
