@@ -101,8 +101,9 @@ def _check_paths(out_dir: str | None, rrd_path: str | None, cache_dir: str | Non
 @click.option("--sumo-files", "sumo_dir", type=click.Path(), default=None,
               help="DIRECTORY to write episode.sumocfg, the net, SUMO's route and FCD outputs into "
                    "(open with sumo-gui).")
-@click.option("--routes", "routes_path", type=click.Path(), default=None,
-              help="SUMO route FILE of background traffic (an imported town: the scenario's own demand).")
+@click.option("--routes", "routes_paths", type=click.Path(), multiple=True,
+              help="SUMO route FILE of background traffic, e.g. an imported scenario's vehicle types and "
+                   "demand (repeat for several; types first).")
 @click.option("--background", "background_vehicles", type=click.IntRange(min=0, max=10_000), default=0,
               show_default=True, help="Seeded background traffic: vehicles kept on the net (an imported "
               "town: trips per minute from SUMO's randomTrips.py); docs/scenes.md.")
@@ -110,7 +111,7 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
         rrd_path: str | None, out_dir: str | None, as_json: bool, town_path: str | None,
         driver_path: str | None, net_path: str | None, initial_trust: int | None,
         population_path: str | None, cache_dir: str | None, sumo_dir: str | None,
-        routes_path: str | None, background_vehicles: int) -> None:
+        routes_paths: tuple[str, ...], background_vehicles: int) -> None:
     """Run one episode of SPEC (a spec file) in SUMO with POLICY and a synthetic driver.
 
     To re-run an episode of a study exactly (its participant's drawn model and initial trust), use
@@ -163,7 +164,7 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
     driver = SyntheticDriver(driver_model, rng, initial_trust=initial_trust)
     episode_id = f"{spec.name}-{policy.name}-s{seed}"
     sumo_config = SumoConfig(background_vehicles=background_vehicles,
-                             route_files=(routes_file(routes_path),) if routes_path else ())
+                             route_files=tuple(routes_file(path) for path in routes_paths))
     if sumo_dir is not None:
         sumo_config = replace(sumo_config, output_dir=str(prepare_directory(Path(sumo_dir)).resolve()))
     if net_path:

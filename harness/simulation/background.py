@@ -11,7 +11,9 @@ On an imported town's own net the traffic comes from route files SUMO loads with
 scenario's own (`trustroute run --routes FILE`, study key `routes`), or trips written by SUMO's
 `randomTrips.py` (`random_trips`): `count` passenger cars departing per minute, from and to
 random passenger edges, with a seed derived from the episode's seed (`trips_seed`), so the same
-episode seed gives the same traffic. SUMO routes each trip when it departs.
+episode seed gives the same traffic. SUMO routes each trip when it departs. A scenario's demand
+usually starts at its own time of day: `shifted_routes` moves every departure by one offset so the
+first one leaves when the episode starts (at 0 s).
 """
 
 from __future__ import annotations
@@ -32,6 +34,51 @@ PREFIX = "bg"
 TRIPS_STREAM = 0xB6C7        # the trips' seed: SeedSequence([episode seed, TRIPS_STREAM])
 TRIPS_PER = 60.0             # seconds: `count` trips depart in every such interval
 TRIPS_END = 7200.0           # seconds of departures written (the longest an episode may run)
+
+
+TIMED = (("vehicle", "depart"), ("trip", "depart"), ("person", "depart"), ("container", "depart"),
+         ("flow", "begin"), ("flow", "end"), ("personFlow", "begin"), ("personFlow", "end"))
+
+
+def _seconds(value: str | None) -> float | None:
+    try:
+        return float(value) if value is not None else None
+    except ValueError:   # "triggered", "now", a clock time: left as written
+        return None
+
+
+def shifted_routes(files: tuple[str, ...], folder: Path) -> tuple[str, ...]:
+    """The route files with every numeric departure moved by one offset, so the earliest is 0 s
+    (files without a departure, such as vehicle types, are passed through unchanged)."""
+    import gzip
+    import xml.etree.ElementTree as ET
+
+    trees = []
+    for name in files:
+        opener = gzip.open if name.endswith(".gz") else open
+        try:
+            with opener(name, "rb") as handle:
+                trees.append(ET.parse(handle))
+        except (OSError, ET.ParseError) as exc:
+            raise InputError(name, "", f"not a readable SUMO route file ({exc})",
+                             "pass a .rou.xml / .trips.xml (gzip allowed) written for this net") from None
+    times = [t for tree in trees for tag, key in TIMED[:5] for element in tree.iter(tag)
+             if (t := _seconds(element.get(key))) is not None]
+    offset = min(times, default=0.0)
+    out = []
+    for index, (name, tree) in enumerate(zip(files, trees, strict=True)):
+        if offset == 0.0 or not any(True for tag, _ in TIMED for _ in tree.iter(tag)):
+            out.append(name)
+            continue
+        for tag, key in TIMED:
+            for element in tree.iter(tag):
+                value = _seconds(element.get(key))
+                if value is not None:
+                    element.set(key, f"{value - offset:.3f}")
+        target = Path(folder) / f"routes{index}.rou.xml"
+        tree.write(target, encoding="UTF-8", xml_declaration=True)
+        out.append(str(target))
+    return tuple(out)
 
 
 def trips_seed(seed: int) -> int:
@@ -111,3 +158,15 @@ class BackgroundTraffic:
                 if vehicle_id in self.live:
                     self.live.discard(vehicle_id)
                     self._add(sumo, anywhere=False)
+
+
+def background_routes(config, imported: bool, net_file: Path, seed: int, folder: Path) -> tuple[str, ...]:
+    """The route files SUMO loads with the net: the given ones shifted to start with the episode, or
+    on an imported town without them, `config.background_vehicles` trips per minute from
+    randomTrips.py (SumoConfig `config`)."""
+    if config.route_files:
+        return shifted_routes(tuple(config.route_files), folder)
+    if imported and config.background_vehicles > 0:
+        return (str(random_trips(net_file, seed, config.background_vehicles, folder,
+                                 end=config.max_sim_seconds)),)
+    return ()

@@ -42,7 +42,7 @@ from trustroute.core.dataset import (
 )
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation import incidents as incident_kinds
-from trustroute.harness.simulation.background import BackgroundTraffic, random_trips
+from trustroute.harness.simulation.background import BackgroundTraffic, background_routes
 from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style, hand_back, take_over
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.simulation.incidents import EgoState, Incident, Scene
@@ -555,10 +555,10 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
     tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=0.0)
     rng = scene_rng(seed)
     with contextlib.ExitStack() as stack:
-        if real is not None and config.background_vehicles > 0 and not config.route_files:
-            folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="trustroute-trips-")))
-            trips = random_trips(net, seed, config.background_vehicles, folder, end=config.max_sim_seconds)
-            config = replace(config, route_files=(str(trips),))
+        if config.route_files or (real is not None and config.background_vehicles > 0):
+            folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="trustroute-routes-")))
+            routes = background_routes(config, real is not None, net, seed, folder)
+            config = replace(config, route_files=routes)
         sumo = stack.enter_context(sumo_session(net, seed, config))
         if real is None:
             _check_net_matches(sumo, setup, net, net_key)

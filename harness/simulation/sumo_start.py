@@ -192,6 +192,11 @@ def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sumo
         with contextlib.suppress(Exception):
             sumo.close()
         message = str(exc).strip().splitlines()
+        if config.route_files:
+            raise InputError(str(net_path), "", "SUMO cannot load the net with the route files "
+                             f"{', '.join(config.route_files)}" + (f" ({message[-1]})" if message else ""),
+                             "pass route files that define every vehicle type they use, types first"
+                             ) from None
         raise InputError(str(net_path), "", "SUMO cannot load the net"
                          + (f" ({message[-1]})" if message else ""),
                          "rebuild it with `trustroute net build` (delete the cached file)") from None

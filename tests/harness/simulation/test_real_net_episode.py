@@ -1,0 +1,186 @@
+"""Episodes on an imported town's own SUMO net: the ego drives exactly the roads' edge lists, the
+incidents stand on the edges of their road, the net's hash is checked, background traffic comes
+from randomTrips.py or the scenario's route files, and run, study, analyze and replay accept the
+town (the eclipse-sumo wheel's fokr_bs_demo net)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sumo
+
+from tests.cli import run_cli
+from trustroute.core.errors import InputError
+from trustroute.harness.simulation.background import trips_seed
+from trustroute.harness.simulation.episode import EGO_ID, run_episode
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.sumo_start import SumoConfig
+from trustroute.networks.real_net import road_edges, town_net_file
+from trustroute.networks.town import load_town
+from trustroute.networks.town_import import import_town
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.resolve import resolve_policy
+
+GAME = Path(sumo.SUMO_HOME) / "tools" / "game" / "fokr_bs_demo"
+NET = GAME / "fokr_bs.net.xml.gz"
+DEMAND = GAME / "15_16_veh.trips.xml.gz"
+TYPES = GAME / "vtypes_default.add.xml"
+INCIDENTS = {"71-83": "truck", "83-38": "obstacle", "38-10": "truck", "10-24": "truck",
+             "10-38": "obstacle", "83-71": "truck", "38-83": "pedestrian", "97-38": "obstacle"}
+SPEC = """name = "fokr"
+start = "4_begin-71"
+formula = "F (v1 & F v2)"
+
+[states]
+v1 = ["10-24"]
+v2 = ["83-71"]
+"""
+
+
+@pytest.fixture(scope="module")
+def city(tmp_path_factory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("city")
+    shutil.copyfile(NET, folder / NET.name)
+    (folder / "incidents.json").write_text(json.dumps(INCIDENTS))
+    import_town(folder / NET.name, folder / "town.json", incidents_path=str(folder / "incidents.json"))
+    (folder / "spec.toml").write_text(SPEC)
+    return {"folder": folder, "town": folder / "town.json", "spec": folder / "spec.toml",
+            "net": folder / NET.name}
+
+
+class Watcher:
+    """Per step: the ego's edges in the order driven, where each incident vehicle first stood, and
+    which background vehicles were on the net."""
+
+    def __init__(self) -> None:
+        self.edges: list[str] = []
+        self.objects: dict[str, tuple[str, tuple[str, ...]]] = {}
+        self.background: set[str] = set()
+
+    def __call__(self, sumo_module, ego, mode, road) -> None:
+        if not ego.road.startswith(":") and (not self.edges or self.edges[-1] != ego.road):
+            self.edges.append(ego.road)
+        for vehicle in sumo_module.vehicle.getIDList():
+            if vehicle.startswith("inc") and vehicle not in self.objects:
+                self.objects[vehicle] = (sumo_module.vehicle.getRoadID(vehicle),
+                                         tuple(sumo_module.vehicle.getRoute(vehicle)))
+            elif vehicle.startswith("bg") or vehicle[:1].isdigit():
+                self.background.add(vehicle)
+        assert sumo_module.vehicle.getRoute(EGO_ID)   # the ego is always on a route
+
+
+def episode(city, seed: int, config: SumoConfig | None = None):
+    town = load_town(city["town"])
+    model = load_driver_model(None)
+    spec = load_spec(str(city["spec"]), town)
+    policy = resolve_policy("free", town, model, spec, None)
+    watcher = Watcher()
+    driver = SyntheticDriver(model, np.random.default_rng(seed))
+    record = run_episode(EpisodeSetup(town=town, driver_model=model, spec=spec), policy, driver, f"e{seed}",
+                         seed, config=config, observer=watcher)
+    return town, record, watcher
+
+
+def test_the_ego_drives_the_concatenated_edge_lists(city):
+    town, record, watcher = episode(city, 2)
+    route = record.roads["directed_road"].tolist()
+    assert len(route) > 5
+    expected = [edge for road in route for edge in town.geometry[road].edges]
+    # The ego departs on the start road's last stretch: the driven edges are that suffix onward.
+    assert watcher.edges == expected[len(expected) - len(watcher.edges):]
+    assert len(watcher.edges) > len(expected) - len(town.geometry[route[0]].edges)
+
+
+def test_incidents_stand_on_the_edges_of_their_road(city):
+    town, record, watcher = episode(city, 3)
+    incidents = record.incidents.set_index("index")
+    placed = {kind: 0 for kind in ("obstacle", "truck")}
+    for vehicle, (edge, vehicle_route) in watcher.objects.items():
+        index = int(vehicle.split(".")[0].removeprefix("inc"))
+        road = incidents.loc[index, "directed_road"]
+        kind = vehicle.split(".")[1]
+        u, v = road.split("-")
+        if kind == "obstacle":
+            assert edge in town.geometry[road].edges
+        elif kind == "truck":
+            # it drives the road the other way (arriving there, maybe from a road leading in)
+            assert vehicle_route[-1] in town.geometry[f"{v}-{u}"].edges
+        placed[kind] = placed.get(kind, 0) + 1
+    assert placed["obstacle"] >= 1 and placed["truck"] >= 1
+    # A pedestrian has no crossing laid out on a real net: the road is driven without its object.
+    pedestrian = incidents[incidents["incident"] == "pedestrian"]
+    assert pedestrian["sumo_ids"].isna().all()
+
+
+def test_a_changed_net_is_one_line_naming_the_file(city, tmp_path, capsys):
+    folder = tmp_path / "changed"
+    folder.mkdir()
+    shutil.copyfile(city["net"], folder / NET.name)
+    shutil.copyfile(city["town"], folder / "town.json")
+    town = load_town(folder / "town.json")
+    assert town_net_file(town) == folder / NET.name
+    with (folder / NET.name).open("ab") as handle:
+        handle.write(b"\0")
+    with pytest.raises(InputError, match="has changed since the town was imported"):
+        town_net_file(town)
+    code, out, err = run_cli(capsys, "run", str(city["spec"]), "--town", str(folder / "town.json"))
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and str(folder / NET.name) in err and "re-import" in err
+
+
+def test_background_traffic_from_random_trips_is_seeded(city):
+    config = SumoConfig(background_vehicles=30)
+    _, first, seen = episode(city, 4, config)
+    _, again, seen_again = episode(city, 4, config)
+    assert len(seen.background) >= 5 and seen.background == seen_again.background
+    assert first.kinematics["x"].tolist() == again.kinematics["x"].tolist()
+    assert trips_seed(4) != trips_seed(5)
+
+
+def test_background_traffic_from_the_scenario_route_file(city, tmp_path, capsys):
+    code, out, err = run_cli(capsys, "run", str(city["spec"]), "--town", str(city["town"]), "--routes",
+                             str(DEMAND), "--seed", "1")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "veh_car" in err   # its types missing
+    code, out, err = run_cli(capsys, "run", str(city["spec"]), "--town", str(city["town"]), "--routes",
+                             str(TYPES), "--routes", str(DEMAND), "--seed", "1", "--json")
+    assert code == 0, err
+    assert json.loads(out)["end_reason"] == "accepted"
+    config = SumoConfig(route_files=(str(TYPES), str(DEMAND)))
+    _, _, seen = episode(city, 1, config)
+    assert len(seen.background) >= 5
+
+
+def test_road_edges_know_where_overtaking_is_possible(city):
+    town = load_town(city["town"])
+    roads = road_edges(town, town_net_file(town))
+    assert set(roads) == set(town.states)
+    for road, value in roads.items():
+        assert value.ids == town.geometry[road].edges
+        assert value.length == pytest.approx(town.length(road), abs=0.05)
+        # the source net has no opposite lanes (netconvert's --opposites.guess was not used)
+        assert not any(edge.overtake for edge in value.edges)
+
+
+@pytest.mark.slow
+def test_a_small_sumo_study_on_the_imported_town(city, tmp_path, capsys):
+    config = tmp_path / "study.toml"
+    config.write_text(f'[study]\nparticipants = 2\nseed = 5\nengine = "sumo"\n'
+                      f'specs = ["{city["spec"]}"]\nconditions = ["aware", "free"]\n'
+                      f'town = "{city["town"]}"\nhorizon = 10\nroutes = ["{TYPES}", "{DEMAND}"]\n')
+    out = tmp_path / "study"
+    code, text, err = run_cli(capsys, "study", str(config), "--out", str(out), "--json", "--no-report")
+    assert code == 0, err
+    payload = json.loads(text)
+    assert payload["planned"] == 4 and payload["failed"] == []
+    code, text, err = run_cli(capsys, "analyze", str(out), "--json")
+    assert code == 0, err
+    assert json.loads(text)["cells"]
+    code, text, err = run_cli(capsys, "replay", str(out), "p00001-spec-free", "--no-rrd", "--json")
+    assert code == 0, err
+    assert json.loads(text)["reproduced"] is True
