@@ -48,6 +48,7 @@ class EdgeLanes:
     reverse_lane: int             # index of the reverse edge's leftmost passenger lane (the one nearest)
     overtake: bool                # the reverse lane is the declared opposite-direction neighbour
     successors: frozenset[str] = frozenset()   # edges a connection of the net leads to
+    vias: tuple[tuple[str, str], ...] = ()      # (next edge, the internal edge leading to it)
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,16 @@ class RoadEdges:
     @property
     def ids(self) -> tuple[str, ...]:
         return tuple(edge.edge for edge in self.edges)
+
+    def inner_junctions(self) -> tuple[tuple[str, float], ...]:
+        """The internal edges between consecutive edges of the road (junctions passed without a
+        choice) and where along the road each starts (the end of the edge before it)."""
+        out = []
+        for edge, nxt, offset in zip(self.edges, self.edges[1:], self.offsets, strict=False):
+            via = dict(edge.vias).get(nxt.edge)
+            if via is not None:
+                out.append((via, offset + edge.length))
+        return tuple(out)
 
     @property
     def offsets(self) -> tuple[float, ...]:
@@ -124,7 +135,10 @@ def _edge_lanes(edge, other_way: list) -> EdgeLanes:
                      start_junction=start.getID(), end_junction=end.getID(),
                      reverse_edge=reverse.getID() if reverse is not None else None,
                      reverse_lane=reverse_lane, overtake=bool(declared),
-                     successors=frozenset(e.getID() for e in edge.getOutgoing()))
+                     successors=frozenset(e.getID() for e in edge.getOutgoing()),
+                     vias=tuple(sorted((e.getID(), via.rsplit("_", 1)[0])
+                                       for e, connections in edge.getOutgoing().items()
+                                       for via in [connections[0].getViaLaneID()] if via)))
 
 
 _ROADS: dict[tuple[str, str], dict[str, RoadEdges]] = {}

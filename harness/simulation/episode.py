@@ -165,7 +165,6 @@ class _RoadRun:
     committed: bool = False
     next_view_check: float = -math.inf
     monitor: PerformanceMonitor = field(default_factory=PerformanceMonitor)
-    entry: str = ""               # the SUMO edge the ego enters the road on
     offsets: dict[str, float] = field(default_factory=dict)   # edge -> where it starts along the road
 
 
@@ -285,7 +284,6 @@ class _Episode:
         real = self.real
         return _RoadRun(index=index, road=road, kind=kind,
                         monitor=PerformanceMonitor(ttc_horizon=limits.min_ttc),
-                        entry=road if real is None else real.first_edge(road),
                         offsets={road: 0.0} if real is None else real.offsets(road))
 
     def inject(self, run: _RoadRun, now: float, ego_distance: float) -> None:
@@ -455,7 +453,7 @@ class _Episode:
             position = result[position_id]
             speed = result[speed_id]
             x, y = result[xy_id]
-            if upcoming is not None and road == upcoming.entry:
+            if upcoming is not None and road in upcoming.offsets:   # on the next road
                 current, upcoming = upcoming, None
                 current.time_in = now
                 commit_at = self.length(current.road) - COMMIT_DISTANCE

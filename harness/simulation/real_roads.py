@@ -42,17 +42,18 @@ class RealRoads:
     def __init__(self, roads: dict[str, RoadEdges], commit_distance: float) -> None:
         self.roads = roads
         self.commit_distance = commit_distance
-        self._offsets = {road: dict(zip(value.ids, value.offsets, strict=True))
+        # The junctions inside a road count as part of it: a short edge between two of them can be
+        # passed within one step, so the ego may never be seen on it.
+        self._offsets = {road: {**dict(value.inner_junctions()),
+                                **dict(zip(value.ids, value.offsets, strict=True))}
                          for road, value in roads.items()}
 
     def length(self, road: str) -> float:
         return self.roads[road].length
 
-    def first_edge(self, road: str) -> str:
-        return self.roads[road].ids[0]
-
     def offsets(self, road: str) -> dict[str, float]:
-        """Edge id -> where the edge starts along the road."""
+        """Edge id (internal edges of the junctions inside the road included) -> where the edge
+        starts along the road."""
         return self._offsets[road]
 
     def edges(self) -> set[str]:

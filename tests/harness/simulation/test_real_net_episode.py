@@ -62,6 +62,7 @@ class Watcher:
         self.edges: list[str] = []
         self.objects: dict[str, tuple[str, tuple[str, ...]]] = {}
         self.background: set[str] = set()
+        self.route: tuple[str, ...] = ()
 
     def __call__(self, sumo_module, ego, mode, road) -> None:
         if not ego.road.startswith(":") and (not self.edges or self.edges[-1] != ego.road):
@@ -72,29 +73,59 @@ class Watcher:
                                          tuple(sumo_module.vehicle.getRoute(vehicle)))
             elif vehicle.startswith("bg") or vehicle[:1].isdigit():
                 self.background.add(vehicle)
-        assert sumo_module.vehicle.getRoute(EGO_ID)   # the ego is always on a route
+        self.route = tuple(sumo_module.vehicle.getRoute(EGO_ID))   # SUMO's route of the ego
 
 
 def episode(city, seed: int, config: SumoConfig | None = None):
     town = load_town(city["town"])
     model = load_driver_model(None)
     spec = load_spec(str(city["spec"]), town)
+    return town, *drive(town, spec, model, seed, config)
+
+
+def drive(town, spec, model, seed: int, config: SumoConfig | None = None):
     policy = resolve_policy("free", town, model, spec, None)
     watcher = Watcher()
     driver = SyntheticDriver(model, np.random.default_rng(seed))
     record = run_episode(EpisodeSetup(town=town, driver_model=model, spec=spec), policy, driver, f"e{seed}",
                          seed, config=config, observer=watcher)
-    return town, record, watcher
+    return record, watcher
+
+
+def check_route(town, record, watcher) -> None:
+    """SUMO's route of the ego is the roads' edge lists one after another (from the start road's
+    edge the ego departs on), and the ego was seen on those edges only, in that order."""
+    route = record.roads["directed_road"].tolist()
+    expected = [edge for road in route for edge in town.geometry[road].edges]
+    start_edges = town.geometry[route[0]].edges
+    assert len(watcher.route) > len(expected) - len(start_edges)
+    assert list(watcher.route) == expected[len(expected) - len(watcher.route):]
+    seen = iter(watcher.route)
+    assert all(edge in seen for edge in watcher.edges)   # a subsequence, in order
 
 
 def test_the_ego_drives_the_concatenated_edge_lists(city):
     town, record, watcher = episode(city, 2)
-    route = record.roads["directed_road"].tolist()
-    assert len(route) > 5
-    expected = [edge for road in route for edge in town.geometry[road].edges]
-    # The ego departs on the start road's last stretch: the driven edges are that suffix onward.
-    assert watcher.edges == expected[len(expected) - len(watcher.edges):]
-    assert len(watcher.edges) > len(expected) - len(town.geometry[route[0]].edges)
+    assert len(record.roads) > 5
+    check_route(town, record, watcher)
+
+
+@pytest.mark.slow
+def test_the_ego_drives_a_city_net_with_short_edges(tmp_path):
+    """The wheel's DRT net (OpenStreetMap, 98 town junctions): edges a few metres long between
+    junctions without a choice are passed within one step."""
+    net = Path(sumo.SUMO_HOME) / "tools" / "game" / "DRT" / "osm.net.xml"
+    town = import_town(net, tmp_path / "drt.json", rng=np.random.default_rng(1), incident_seed=1).town
+    start = town.states[0]
+    targets = sorted(town.reachable_states(start),
+                     key=lambda road: (-town.route_length(town.shortest_route(start, [road])), road))
+    (tmp_path / "spec.toml").write_text(f'name = "drt"\nstart = "{start}"\nformula = "F v1"\n\n'
+                                        f'[states]\nv1 = ["{targets[0]}"]\n')
+    town = load_town(tmp_path / "drt.json")
+    model = load_driver_model(None)
+    record, watcher = drive(town, load_spec(str(tmp_path / "spec.toml"), town), model, 1)
+    assert record.summary["end_reason"] == "accepted" and record.summary["junctions"] > 10
+    check_route(town, record, watcher)
 
 
 def test_incidents_stand_on_the_edges_of_their_road(city):
