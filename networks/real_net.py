@@ -109,11 +109,13 @@ def _mismatch(edge, other) -> float:
             + math.dist(edge.getFromNode().getCoord()[:2], other.getToNode().getCoord()[:2]))
 
 
-def _reverse_edge(edge, leftmost, other_way: list):
+def _reverse_edge(net, edge, leftmost, other_way: list):
     """The edge an oncoming vehicle drives beside `edge`, and whether it is the declared opposite."""
-    neigh = leftmost.getNeigh()
-    if neigh is not None and neigh.getEdge().allows(PASSENGER):
-        return neigh.getEdge(), True
+    neigh = leftmost.getNeigh()   # the neighbour lane's id, or None
+    if neigh is not None:
+        declared = net.getEdge(neigh.rsplit("_", 1)[0])
+        if declared.allows(PASSENGER):
+            return declared, True
     start, end = edge.getFromNode(), edge.getToNode()
     candidates = {e.getID(): e for e in [*other_way, *end.getOutgoing()]
                   if e.getFunction() == "" and _passenger_lanes(e)
@@ -124,11 +126,11 @@ def _reverse_edge(edge, leftmost, other_way: list):
     return None, False
 
 
-def _edge_lanes(edge, other_way: list) -> EdgeLanes:
+def _edge_lanes(net, edge, other_way: list) -> EdgeLanes:
     lanes = _passenger_lanes(edge)
     start, end = edge.getFromNode(), edge.getToNode()
     leftmost = lanes[-1] if lanes else edge.getLanes()[-1]
-    reverse, declared = _reverse_edge(edge, leftmost, other_way)
+    reverse, declared = _reverse_edge(net, edge, leftmost, other_way)
     reverse_lane = _passenger_lanes(reverse)[-1].getIndex() if reverse is not None else 0
     return EdgeLanes(edge=edge.getID(), length=float((lanes[0] if lanes else leftmost).getLength()),
                      driving_lane=(lanes[0] if lanes else leftmost).getIndex(), passenger_lanes=len(lanes),
@@ -170,7 +172,7 @@ def road_edges(town: Town, net_file: Path) -> dict[str, RoadEdges]:
                 raise InputError(town.source_path or "town", f"geometry.{road}.edges",
                                  f"the net {net_file} has no edge {edge_id}",
                                  "re-import the town with trustroute town import")
-            edges.append(_edge_lanes(net.getEdge(edge_id), reverse_edges))
+            edges.append(_edge_lanes(net, net.getEdge(edge_id), reverse_edges))
         out[road] = RoadEdges(road=road, edges=tuple(edges))
     _ROADS[key] = out
     return out

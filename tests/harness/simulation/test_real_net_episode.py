@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -14,12 +15,15 @@ import pytest
 import sumo
 
 from tests.cli import run_cli
+from tests.networks.sumo_nets import WHEEL_NODES, WHEEL_ROADS, build_plain_net
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.background import trips_seed
 from trustroute.harness.simulation.episode import EGO_ID, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.incidents.obstacle import BLOCKED_SECONDS
 from trustroute.harness.simulation.sumo_start import SumoConfig
 from trustroute.networks.real_net import road_edges, town_net_file
+from trustroute.networks.sumo_net import find_binary
 from trustroute.networks.town import load_town
 from trustroute.networks.town_import import import_town
 from trustroute.participants.driver_model import load_driver_model
@@ -215,3 +219,37 @@ def test_a_small_sumo_study_on_the_imported_town(city, tmp_path, capsys):
     code, text, err = run_cli(capsys, "replay", str(out), "p00001-spec-free", "--no-rrd", "--json")
     assert code == 0, err
     assert json.loads(text)["reproduced"] is True
+
+
+def wheel_town(folder: Path, opposites: bool):
+    """The importer tests' wheel net (every junction a decision point, 1 lane each way), with
+    netconvert's opposite lanes or without, an obstacle on every road from a corner to the centre."""
+    net = build_plain_net(folder, "wheel", WHEEL_NODES, WHEEL_ROADS)
+    if opposites:
+        subprocess.run([find_binary("netconvert"), "-s", str(net), "--opposites.guess", "true",
+                        "-o", str(net), "--no-warnings"], check=True, capture_output=True)
+    (folder / "incidents.json").write_text(json.dumps({f"{c}-e": "obstacle" for c in "abcd"}))
+    import_town(net, folder / "town.json", incidents_path=str(folder / "incidents.json"))
+    (folder / "spec.toml").write_text('name = "wheel"\nstart = "b-a"\nformula = "F v1"\n\n'
+                                      '[states]\nv1 = ["e-c"]\n')
+    town = load_town(folder / "town.json")
+    return town, load_spec(str(folder / "spec.toml"), town)
+
+
+@pytest.mark.parametrize("opposites", [True, False])
+def test_an_obstacle_is_overtaken_through_the_opposite_lane_only_where_the_net_has_one(tmp_path, opposites):
+    town, spec = wheel_town(tmp_path, opposites)
+    roads = road_edges(town, town_net_file(town))
+    assert all(edge.overtake is opposites for value in roads.values() for edge in value.edges)
+    record, _ = drive(town, spec, load_driver_model(None), 1)
+    assert record.roads["directed_road"].tolist()[1] == "a-e"
+    row = record.incidents.set_index("directed_road").loc["a-e"]
+    assert row["sumo_ids"].startswith("inc1.obstacle") and row["passed_time"] == row["passed_time"]
+    kinematics = record.kinematics
+    during = (kinematics["time"] >= row["injected_time"]) & (kinematics["time"] <= row["passed_time"])
+    on_road = kinematics[during]
+    in_opposite_lane = bool(on_road["lane"].str.startswith("e_a_").any())
+    assert in_opposite_lane is opposites
+    if not opposites:   # it waited behind the obstacle until the obstacle drove off
+        assert on_road["speed"].min() < 0.5
+        assert row["passed_time"] - row["injected_time"] > BLOCKED_SECONDS
