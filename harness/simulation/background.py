@@ -13,7 +13,10 @@ scenario's own (`trustroute run --routes FILE`, study key `routes`), or trips wr
 random passenger edges, with a seed derived from the episode's seed (`trips_seed`), so the same
 episode seed gives the same traffic. SUMO routes each trip when it departs. A scenario's demand
 usually starts at its own time of day: `shifted_routes` moves every departure by one offset so the
-first one leaves when the episode starts (at 0 s).
+first one leaves when the episode starts (at 0 s). The episode never teleports a vehicle (a stuck
+ego must show up as stuck), and a city's traffic without teleports can lock itself at a junction
+for good; `JamRelief` takes out a background vehicle that has stood for `STUCK_SECONDS`, as
+SUMO's own --time-to-teleport would, and leaves the ego and the incidents' vehicles alone.
 """
 
 from __future__ import annotations
@@ -79,6 +82,32 @@ def shifted_routes(files: tuple[str, ...], folder: Path) -> tuple[str, ...]:
         tree.write(target, encoding="UTF-8", xml_declaration=True)
         out.append(str(target))
     return tuple(out)
+
+
+STUCK_SECONDS = 120.0        # a background vehicle standing this long is taken out
+CHECK_EVERY = 10.0           # seconds of sim time between two looks for stuck vehicles
+
+
+@dataclass
+class JamRelief:
+    """The per-step call that takes stuck background vehicles out (route-file traffic only)."""
+
+    keep: str                          # the ego's id
+    keep_prefix: str = "inc"           # the incidents' vehicles
+    next_check: float = CHECK_EVERY
+    removed: int = 0
+
+    def step(self, sumo: Sumo) -> None:
+        now = sumo.simulation.getTime()
+        if now < self.next_check:
+            return
+        self.next_check = now + CHECK_EVERY
+        for vehicle_id in sumo.vehicle.getIDList():
+            if vehicle_id == self.keep or vehicle_id.startswith(self.keep_prefix):
+                continue
+            if sumo.vehicle.getWaitingTime(vehicle_id) >= STUCK_SECONDS:
+                sumo.vehicle.remove(vehicle_id)
+                self.removed += 1
 
 
 def trips_seed(seed: int) -> int:

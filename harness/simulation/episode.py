@@ -42,7 +42,7 @@ from trustroute.core.dataset import (
 )
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation import incidents as incident_kinds
-from trustroute.harness.simulation.background import BackgroundTraffic, background_routes
+from trustroute.harness.simulation.background import BackgroundTraffic, JamRelief, background_routes
 from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style, hand_back, take_over
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.simulation.incidents import EgoState, Incident, Scene
@@ -409,7 +409,12 @@ class _Episode:
                                         sumo.VAR_SPEED, sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID,
                                         sumo.VAR_LEADER, sumo.VAR_ANGLE], 0.0, 1e9,
                                {sumo.VAR_LEADER: leader_horizon(self.config)})
-        return background.step if background.count > 0 else None
+        if not self.config.route_files:
+            return background.step if background.count > 0 else None
+        relief = JamRelief(EGO_ID)
+        if background.count == 0:
+            return relief.step
+        return lambda sumo: (background.step(sumo), relief.step(sumo))
 
     def run(self) -> float:
         sumo = self.sumo

@@ -17,7 +17,7 @@ import sumo
 from tests.cli import run_cli
 from tests.networks.sumo_nets import WHEEL_NODES, WHEEL_ROADS, build_plain_net
 from trustroute.core.errors import InputError
-from trustroute.harness.simulation.background import trips_seed
+from trustroute.harness.simulation.background import CHECK_EVERY, STUCK_SECONDS, JamRelief, trips_seed
 from trustroute.harness.simulation.episode import EGO_ID, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.incidents.obstacle import BLOCKED_SECONDS
@@ -253,3 +253,29 @@ def test_an_obstacle_is_overtaken_through_the_opposite_lane_only_where_the_net_h
     if not opposites:   # it waited behind the obstacle until the obstacle drove off
         assert on_road["speed"].min() < 0.5
         assert row["passed_time"] - row["injected_time"] > BLOCKED_SECONDS
+
+
+def test_jam_relief_takes_out_stuck_background_vehicles_only():
+    class Fake:
+        def __init__(self) -> None:
+            self.now = 0.0
+            self.waiting = {"ego": 500.0, "inc3.obstacle": 500.0, "bg1": 130.0, "bg2": 30.0}
+            self.simulation = type("S", (), {"getTime": lambda _: self.now})()
+            self.vehicle = type("V", (), {"getIDList": lambda _: list(self.waiting),
+                                          "getWaitingTime": lambda _, v: self.waiting[v],
+                                          "remove": lambda _, v: self.waiting.pop(v)})()
+
+    fake = Fake()
+    relief = JamRelief("ego")
+    relief.step(fake)
+    assert set(fake.waiting) == {"ego", "inc3.obstacle", "bg1", "bg2"}   # not before the first look
+    fake.now = CHECK_EVERY
+    relief.step(fake)
+    assert set(fake.waiting) == {"ego", "inc3.obstacle", "bg2"} and relief.removed == 1
+    fake.waiting["bg2"] = STUCK_SECONDS
+    fake.now += CHECK_EVERY / 2
+    relief.step(fake)
+    assert "bg2" in fake.waiting   # the next look comes CHECK_EVERY seconds after the last
+    fake.now += CHECK_EVERY / 2
+    relief.step(fake)
+    assert set(fake.waiting) == {"ego", "inc3.obstacle"}
