@@ -49,6 +49,8 @@ class EdgeLanes:
     overtake: bool                # the reverse lane is the declared opposite-direction neighbour
     successors: frozenset[str] = frozenset()   # edges a connection of the net leads to
     vias: tuple[tuple[str, str], ...] = ()      # (next edge, the internal edge leading to it)
+    sidewalk: bool = False                      # its lane 0 is for pedestrians only
+    reverse_sidewalk: bool = False              # ... and the reverse edge's
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,11 @@ def town_net_file(town: Town) -> Path:
     return check_sumo_net(town.sumo_net, town.source_path or ".")
 
 
+def _is_sidewalk(edge) -> bool:
+    lane = edge.getLanes()[0]
+    return lane.allows("pedestrian") and not lane.allows(PASSENGER)
+
+
 def _passenger_lanes(edge) -> list:
     return [lane for lane in edge.getLanes() if lane.allows(PASSENGER)]
 
@@ -138,6 +145,8 @@ def _edge_lanes(net, edge, other_way: list) -> EdgeLanes:
                      reverse_edge=reverse.getID() if reverse is not None else None,
                      reverse_lane=reverse_lane, overtake=bool(declared),
                      successors=frozenset(e.getID() for e in edge.getOutgoing()),
+                     sidewalk=_is_sidewalk(edge),
+                     reverse_sidewalk=reverse is not None and _is_sidewalk(reverse),
                      vias=tuple(sorted((e.getID(), via.rsplit("_", 1)[0])
                                        for e, connections in edge.getOutgoing().items()
                                        for via in [connections[0].getViaLaneID()] if via)))

@@ -21,9 +21,9 @@ from dataclasses import dataclass, replace
 from trustroute.harness.simulation.incidents.base import Scene
 from trustroute.networks.real_net import EdgeLanes, RoadEdges
 
-# What an incident needs of its edge: a pedestrian a crossing and sidewalks as the nets of
-# `trustroute net build` lay them out, a truck an edge the other way.
-NEEDS_REVERSE = ("truck",)
+# What an incident needs of its edge: a truck an edge the other way, a pedestrian that and a
+# sidewalk on both (and a crossing at the edge's start, pedestrian.inject).
+NEEDS_REVERSE = ("truck", "pedestrian")
 
 
 @dataclass(frozen=True)
@@ -101,13 +101,16 @@ class RealRoads:
 
 def real_scene(real: RealRoads, road: str, kind: str, scene: Scene) -> Scene | None:
     """`scene` (given for the whole model road) moved onto the edge its incident is placed on, or
-    None when the incident cannot be placed on this net: a pedestrian (real nets have no crossing
-    laid out for the scene, docs/scenes.md), a truck on a road without an edge the other way."""
+    None when the incident cannot be placed on this net: a truck or a pedestrian on a road without
+    an edge the other way, a pedestrian without sidewalks (docs/scenes.md, "Real maps")."""
     place = real.incident_place(road)
     edge = place.edge
-    if kind == "pedestrian" or (kind in NEEDS_REVERSE and edge.reverse_edge is None):
+    if kind in NEEDS_REVERSE and edge.reverse_edge is None:
+        return None
+    if kind == "pedestrian" and not (edge.sidewalk and edge.reverse_sidewalk):
         return None
     return replace(scene, road=edge.edge, reverse_road=edge.reverse_edge, road_length=edge.length,
                    ego_distance=scene.ego_distance + place.offset, observed_length=place.watched,
                    lane=edge.driving_lane, lanes=edge.passenger_lanes, reverse_lane=edge.reverse_lane,
-                   overtake=edge.overtake, end_junction=edge.end_junction)
+                   overtake=edge.overtake, end_junction=edge.end_junction,
+                   start_junction=edge.start_junction)

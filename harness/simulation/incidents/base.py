@@ -62,13 +62,14 @@ class Scene:
                                            # removed (the ego's commit point); None: all of it
     # On an imported town's own net (harness/simulation/real_roads.py) `road` is one SUMO edge of
     # the model road: its driving lane, the reverse edge's nearest lane, whether SUMO may overtake
-    # through the opposite lane there, and the edge's end junction. The defaults are a net built
+    # through the opposite lane there, and the edge's end and start junctions. The defaults are a net built
     # by `trustroute net build`: lane 1 beside the sidewalk, opposite lanes declared, "U-V" ids.
     lane: int = 1
     lanes: int = 1             # lanes of the road's direction open to cars
     reverse_lane: int = 1
     overtake: bool = True
     end_junction: str | None = None
+    start_junction: str | None = None
 
     @property
     def ends_at(self) -> str:

@@ -87,12 +87,12 @@ def episode(city, seed: int, config: SumoConfig | None = None):
     return town, *drive(town, spec, model, seed, config)
 
 
-def drive(town, spec, model, seed: int, config: SumoConfig | None = None):
+def drive(town, spec, model, seed: int, config: SumoConfig | None = None, overrides: dict | None = None):
     policy = resolve_policy("free", town, model, spec, None)
     watcher = Watcher()
     driver = SyntheticDriver(model, np.random.default_rng(seed))
     record = run_episode(EpisodeSetup(town=town, driver_model=model, spec=spec), policy, driver, f"e{seed}",
-                         seed, config=config, observer=watcher)
+                         seed, config=config, observer=watcher, scene_overrides=overrides)
     return record, watcher
 
 
@@ -127,9 +127,16 @@ def test_the_ego_drives_a_city_net_with_short_edges(tmp_path):
                                         f'[states]\nv1 = ["{targets[0]}"]\n')
     town = load_town(tmp_path / "drt.json")
     model = load_driver_model(None)
-    record, watcher = drive(town, load_spec(str(tmp_path / "spec.toml"), town), model, 1)
+    record, watcher = drive(town, load_spec(str(tmp_path / "spec.toml"), town), model, 1,
+                            overrides={"pedestrian": {"timing": "late"}})
     assert record.summary["end_reason"] == "accepted" and record.summary["junctions"] > 10
     check_route(town, record, watcher)
+    # Its streets have sidewalks and crossings: a late pedestrian steps onto the crossing at the
+    # start of the incident's edge, in front of the ego, which stops for them.
+    persons = record.incidents[record.incidents["incident"] == "pedestrian"]
+    placed = persons[persons["sumo_ids"].notna()]
+    assert len(placed) >= 1
+    assert (placed["min_pedestrian_distance"] < 10).any()
 
 
 def test_incidents_stand_on_the_edges_of_their_road(city):
@@ -148,9 +155,11 @@ def test_incidents_stand_on_the_edges_of_their_road(city):
             assert vehicle_route[-1] in town.geometry[f"{v}-{u}"].edges
         placed[kind] = placed.get(kind, 0) + 1
     assert placed["obstacle"] >= 1 and placed["truck"] >= 1
-    # A pedestrian has no crossing laid out on a real net: the road is driven without its object.
+    # The pedestrian's road 38-83 starts at a junction without a crossing over it: the road is
+    # driven without the person.
+    assert "38-83" in record.roads["directed_road"].tolist()
     pedestrian = incidents[incidents["incident"] == "pedestrian"]
-    assert pedestrian["sumo_ids"].isna().all()
+    assert pedestrian["sumo_ids"].isna().all() and not any(".pedestrian" in v for v in watcher.objects)
 
 
 def test_a_changed_net_is_one_line_naming_the_file(city, tmp_path, capsys):
