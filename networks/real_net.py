@@ -14,6 +14,8 @@ on an edge uses:
   are often cut into edges at different places), when they lie within the edge's length;
 - whether a vehicle may *overtake through the opposite lane* there: only where that `<neigh>`
   exists, since SUMO overtakes through an oncoming lane only then;
+- whether it and its reverse edge have sidewalks (lane 0 for pedestrians only), where a
+  pedestrian scene can stand;
 - the edges its connections lead to: the town format has no turn restrictions, so a move the
   model allows may have no connection in the net (harness/simulation/real_roads.py then drives
   SUMO's shortest way round).

@@ -19,6 +19,8 @@ into the ego's path, the AV brakes to stop `STOP_BEFORE_PATH` metres before the 
 gently (the deceleration needed) when that is within the ego's comfortable deceleration,
 otherwise with automatic emergency braking (`EMERGENCY_DECEL`, held until the path is clear).
 An emergency brake is above the 5 m/s² deceleration limit: a measured `fail`, without a collision.
+On an imported town's own net the crossing is the net's own at the start of the incident's edge;
+where there is none the scene is not placed (`inject` returns None, docs/scenes.md "Real maps").
 """
 
 from __future__ import annotations
