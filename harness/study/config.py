@@ -13,7 +13,8 @@ Optional `[study]` keys: `name`, `town`, `driver_model`, `horizon` (synthesis ho
 policies, junctions; default 20), `fallback_after` (20; `false` disables the 20-junction rule),
 `junction_cap` (60), `report_every` (1), `belief_rule` ("bayes" or "paper"), `output` (study directory),
 `policy_cache` (where synthesized policies are cached), `background_vehicles` (SUMO engine:
-seeded background traffic, vehicles kept on the net; default 0 = none, docs/scenes.md), `routes`
+seeded background traffic, vehicles kept on the net, on an imported town trips per minute from
+randomTrips.py; default 0 = none, docs/scenes.md), `routes`
 (SUMO engine: SUMO route files of background traffic, e.g. the scenario's own demand), `record`
 (episode ids, e.g. `["p00000-phi1-aware"]`, written as Rerun recordings to
 `<study dir>/recordings/<id>.rrd` while the study runs; SUMO engine only; not part of the content
