@@ -200,17 +200,6 @@ def test_background_traffic_from_the_scenario_route_file(city, tmp_path, capsys)
     assert len(seen.background) >= 5
 
 
-def test_road_edges_know_where_overtaking_is_possible(city):
-    town = load_town(city["town"])
-    roads = road_edges(town, town_net_file(town))
-    assert set(roads) == set(town.states)
-    for road, value in roads.items():
-        assert value.ids == town.geometry[road].edges
-        assert value.length == pytest.approx(town.length(road), abs=0.05)
-        # the source net has no opposite lanes (netconvert's --opposites.guess was not used)
-        assert not any(edge.overtake for edge in value.edges)
-
-
 @pytest.mark.slow
 def test_a_small_sumo_study_on_the_imported_town(city, tmp_path, capsys):
     config = tmp_path / "study.toml"
