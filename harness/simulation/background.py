@@ -128,11 +128,13 @@ def random_trips(net_file: Path, seed: int, count: int, folder: Path, end: float
     --validate routes every trip with duarouter, about half a second more per episode): SUMO
     leaves out a trip it cannot route (sumo_start, --ignore-route-errors)."""
     out = Path(folder) / "background.trips.xml"
-    command = [sys.executable, str(random_trips_script()), "-n", str(net_file), "-o", str(out),
+    command = [sys.executable, str(random_trips_script()), "-n", str(Path(net_file).resolve()),
+               "-o", str(out.resolve()),
                "--seed", str(trips_seed(seed)), "-b", "0", "-e", f"{end:g}", "-p", f"{TRIPS_PER / count:g}",
                "--vehicle-class", "passenger", "--edge-permission", "passenger", "--prefix", PREFIX,
                "--trip-attributes", 'departLane="best" departSpeed="max"', "--no-validate"]
-    result = subprocess.run(command, capture_output=True, text=True, check=False,
+    # Run inside `folder`: randomTrips.py writes helper files into its working directory.
+    result = subprocess.run(command, capture_output=True, text=True, check=False, cwd=folder,
                             env={**os.environ, "SUMO_HOME": str(random_trips_script().parents[1])})
     if result.returncode != 0 or not out.is_file():
         message = (result.stderr or result.stdout).strip().splitlines()
