@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -37,6 +38,14 @@ def _write_logs(out_dir: Path, record) -> dict[str, Path]:
     atomic_write_text(written["summary"], json.dumps(record.summary, indent=1) + "\n",
                       "episode summary", "pass a writable directory with --out")
     return written
+
+
+def routes_file(path: str) -> str:
+    """A background route file, read once to fail early with one line (absolute: SUMO resolves it)."""
+    from trustroute.core.validation import read_input_bytes
+
+    read_input_bytes(path, "SUMO route file", max_bytes=1 << 30, fix="pass an existing .rou.xml file")
+    return str(Path(path).resolve())
 
 
 def _spec_path(spec_argument: str | None, spec_option: str | None) -> str:
@@ -92,10 +101,17 @@ def _check_paths(out_dir: str | None, rrd_path: str | None, cache_dir: str | Non
 @click.option("--sumo-files", "sumo_dir", type=click.Path(), default=None,
               help="DIRECTORY to write episode.sumocfg, the net, SUMO's route and FCD outputs into "
                    "(open with sumo-gui).")
+@click.option("--routes", "routes_paths", type=click.Path(), multiple=True,
+              help="SUMO route FILE of background traffic, e.g. an imported scenario's vehicle types and "
+                   "demand (repeat for several; types first).")
+@click.option("--background", "background_vehicles", type=click.IntRange(min=0, max=10_000), default=0,
+              show_default=True, help="Seeded background traffic: vehicles kept on the net (an imported "
+              "town: trips per minute from SUMO's randomTrips.py); docs/scenes.md.")
 def run(spec_argument: str | None, spec_option: str | None, policy_name: str, seed: int,
         rrd_path: str | None, out_dir: str | None, as_json: bool, town_path: str | None,
         driver_path: str | None, net_path: str | None, initial_trust: int | None,
-        population_path: str | None, cache_dir: str | None, sumo_dir: str | None) -> None:
+        population_path: str | None, cache_dir: str | None, sumo_dir: str | None,
+        routes_paths: tuple[str, ...], background_vehicles: int) -> None:
     """Run one episode of SPEC (a spec file) in SUMO with POLICY and a synthetic driver.
 
     To re-run an episode of a study exactly (its participant's drawn model and initial trust), use
@@ -112,6 +128,7 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
         write_sumocfg,
     )
     from trustroute.harness.simulation.sumo_start import SumoConfig
+    from trustroute.networks.real_net import is_imported, town_net_file
     from trustroute.networks.sumo_net import build_net
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
@@ -144,10 +161,16 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
                          f"pass one of {list(driver_model.trust_levels)}")
     driver = SyntheticDriver(driver_model, rng, initial_trust=initial_trust)
     episode_id = f"{spec.name}-{policy.name}-s{seed}"
-    sumo_config = SumoConfig()
+    sumo_config = SumoConfig(background_vehicles=background_vehicles,
+                             route_files=tuple(routes_file(path) for path in routes_paths))
     if sumo_dir is not None:
-        sumo_config = SumoConfig(output_dir=str(prepare_directory(Path(sumo_dir)).resolve()))
-    net = Path(net_path) if net_path else build_net(town).path
+        sumo_config = replace(sumo_config, output_dir=str(prepare_directory(Path(sumo_dir)).resolve()))
+    if net_path:
+        net = Path(net_path)
+    elif is_imported(town):
+        net = town_net_file(town)   # the town's own net, checked against its recorded hash
+    else:
+        net = build_net(town).path
     types = VehicleTypeCollector() if sumo_dir is not None else None
     record = run_episode(setup, policy, driver, episode_id, seed,
                          rrd_path=Path(rrd_path) if rrd_path else None, net_path=net, config=sumo_config,

@@ -17,12 +17,14 @@ oncoming traffic, background traffic) come from one generator seeded by the epis
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
+import tempfile
 import time
 from array import array
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,12 +42,14 @@ from trustroute.core.dataset import (
 )
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation import incidents as incident_kinds
-from trustroute.harness.simulation.background import BackgroundTraffic
+from trustroute.harness.simulation.background import BackgroundTraffic, JamRelief, background_routes
 from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style, hand_back, take_over
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.simulation.incidents import EgoState, Incident, Scene
 from trustroute.harness.simulation.performance import PerformanceMonitor, limits_for, verdict
+from trustroute.harness.simulation.real_roads import RealRoads, real_scene
 from trustroute.harness.simulation.sumo_start import SumoConfig, hot_calls, sumo_session
+from trustroute.networks.real_net import is_imported, road_edges, town_net_file
 from trustroute.networks.sumo_net import ROAD_SPEED, build_net, net_counts
 from trustroute.networks.sumo_net import net_path as town_net_path
 from trustroute.networks.town import NO_INCIDENT, split_road
@@ -161,6 +165,7 @@ class _RoadRun:
     committed: bool = False
     next_view_check: float = -math.inf
     monitor: PerformanceMonitor = field(default_factory=PerformanceMonitor)
+    offsets: dict[str, float] = field(default_factory=dict)   # edge -> where it starts along the road
 
 
 def leader_horizon(config: SumoConfig) -> float:
@@ -242,8 +247,9 @@ class _Episode:
 
     def __init__(self, sumo, setup: EpisodeSetup, tracker: EpisodeTracker, driver, config: SumoConfig,
                  observer: Callable | None, rng: np.random.Generator,
-                 scene_overrides: dict[str, dict] | None = None) -> None:
+                 scene_overrides: dict[str, dict] | None = None, real: RealRoads | None = None) -> None:
         self.sumo = sumo
+        self.real = real               # an imported town's roads as edges of its own net, else None
         self.rng = rng
         self.scene_overrides = scene_overrides or {}
         self.setup = setup
@@ -263,7 +269,8 @@ class _Episode:
 
     def length(self, road: str) -> float:
         if road not in self.lengths:
-            self.lengths[road] = self.sumo.lane.getLength(f"{road}_1")
+            self.lengths[road] = (self.sumo.lane.getLength(f"{road}_1") if self.real is None
+                                  else self.real.length(road))
         return self.lengths[road]
 
     # -- driver and incidents -------------------------------------------------
@@ -289,10 +296,22 @@ class _Episode:
     def new_run(self, index: int, road: str) -> _RoadRun:
         kind = self.setup.town.incident(road) if index > 0 else NO_INCIDENT
         limits = limits_for(self.config.performance_limits, kind or "none")
+        real = self.real
         return _RoadRun(index=index, road=road, kind=kind,
-                        monitor=PerformanceMonitor(ttc_horizon=limits.min_ttc))
+                        monitor=PerformanceMonitor(ttc_horizon=limits.min_ttc),
+                        offsets={road: 0.0} if real is None else real.offsets(road))
 
     def inject(self, run: _RoadRun, now: float, ego_distance: float) -> None:
+        if self.real is not None:
+            scene = real_scene(self.real, run.road, run.kind, Scene(
+                road=run.road, reverse_road=None, road_length=self.length(run.road), prefix=f"inc{run.index}",
+                ego_id=EGO_ID, time=now, ego_distance=ego_distance, rng=self.rng,
+                overrides=self.scene_overrides.get(run.kind, {}), road_speed=ROAD_SPEED,
+                step_length=self.config.step_length))
+            run.incident = (None if scene is None else
+                            incident_kinds.inject(run.kind, self.sumo, scene, self.defined_types))
+            run.injected_time = now
+            return
         u, v = split_road(run.road)
         reverse = f"{v}-{u}" if f"{v}-{u}" in self.setup.town.incidents else None
         scene = Scene(road=run.road, reverse_road=reverse, road_length=self.length(run.road),
@@ -315,7 +334,7 @@ class _Episode:
         """Per-step work for the open road's incident and the driver (only while there is some)."""
         incident = run.incident
         if incident is None:
-            if ego.road == run.road:
+            if ego.road in run.offsets:
                 self.decide(run, ego.time)   # nothing to see: the driver decides on entering the road
             return
         incident.step(self.sumo, ego)
@@ -374,7 +393,8 @@ class _Episode:
         return limits_for(self.config.performance_limits, run.kind or "none")
 
     def commit(self, run: _RoadRun, now: float, position: float) -> _RoadRun | None:
-        """At the commit point of `run`: close it, choose the next road, extend the route."""
+        """At the commit point of `run` (`position` metres into the road): close it, choose the next
+        road, extend the route."""
         run.committed = True
         if run.index > 0:
             self.close_road(run, now)
@@ -386,7 +406,13 @@ class _Episode:
         if junction is None:
             return None
         nxt = self.setup.town.successor(run.road, junction)
-        self.sumo.vehicle.setRoute(EGO_ID, [run.road, nxt])
+        if self.real is None:
+            self.sumo.vehicle.setRoute(EGO_ID, [run.road, nxt])
+        else:
+            detour = self.real.extend_route(self.sumo, EGO_ID, run.road, nxt)
+            if detour:
+                log.info("%s: the net has no turn from %s into %s: driving %s between",
+                         self.tracker.episode_id, run.road, nxt, " ".join(detour))
         upcoming = self.new_run(run.index + 1, nxt)
         self.inject(upcoming, now, self.length(run.road) - position + JUNCTION_LENGTH)
         self.runs.append(upcoming)
@@ -399,11 +425,15 @@ class _Episode:
         sumo = self.sumo
         start = self.setup.spec.start
         _define_ego_type(sumo)
-        background = BackgroundTraffic(self.config.background_vehicles, self.rng,
-                                       tuple(self.setup.town.states))
+        # On an imported town's net the background traffic comes from route files (sumo_start).
+        background = BackgroundTraffic(self.config.background_vehicles if self.real is None else 0,
+                                       self.rng, tuple(self.setup.town.states))
         background.start(sumo)
-        sumo.route.add("ego_route", [start])
         depart = max(0.0, self.length(start) - COMMIT_DISTANCE - START_BEFORE_COMMIT)
+        route = [start]
+        if self.real is not None:
+            route, depart = self.real.start(start, depart)
+        sumo.route.add("ego_route", route)
         sumo.vehicle.add(EGO_ID, "ego_route", typeID=EGO_TYPE, depart="now", departLane="best",
                          departPos=f"{depart:.2f}", departSpeed="max")
         apply_style(sumo, EGO_ID, AUTOPILOT)
@@ -413,7 +443,12 @@ class _Episode:
                                         sumo.VAR_SPEED, sumo.VAR_ACCELERATION, sumo.VAR_LANE_ID,
                                         sumo.VAR_LEADER, sumo.VAR_ANGLE], 0.0, 1e9,
                                {sumo.VAR_LEADER: leader_horizon(self.config)})
-        return background.step if self.config.background_vehicles > 0 else None
+        if not self.config.route_files:
+            return background.step if background.count > 0 else None
+        relief = JamRelief(EGO_ID)
+        if background.count == 0:
+            return relief.step
+        return lambda sumo: (background.step(sumo), relief.step(sumo))
 
     def run(self) -> float:
         sumo = self.sumo
@@ -457,10 +492,10 @@ class _Episode:
             position = result[position_id]
             speed = result[speed_id]
             x, y = result[xy_id]
-            if upcoming is not None and road == upcoming.road:
+            if upcoming is not None and road in upcoming.offsets:   # on the next road
                 current, upcoming = upcoming, None
                 current.time_in = now
-                commit_at = self.length(road) - COMMIT_DISTANCE
+                commit_at = self.length(current.road) - COMMIT_DISTANCE
             open_run = upcoming if upcoming is not None else current
             if background_step is not None:
                 background_step(sumo)
@@ -472,8 +507,9 @@ class _Episode:
                 if self.mode == auto:
                     self.measure(open_run, ego, speed, result[accel_id], result[leader_id], step)
             finished = False
-            if not current.committed and road == current.road and position + speed * step >= commit_at:
-                upcoming = self.commit(current, now, position)
+            along = current.offsets.get(road)   # where the ego's edge starts along the road
+            if not current.committed and along is not None and along + position + speed * step >= commit_at:
+                upcoming = self.commit(current, now, along + position)
                 finished = upcoming is None
             # Logged after this step's decisions, so `mode` is the control the ego drives on with.
             log_floats((now, x, y, speed))
@@ -535,18 +571,30 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
     """
     started = time.perf_counter()
     config = config if config is not None else SumoConfig()
-    if net_path is None:
+    real = None
+    if is_imported(setup.town):
+        # An imported town drives its own net, checked against the hash the town recorded.
+        own_net = town_net_file(setup.town)
+        net = own_net if net_path is None else Path(net_path)
+        real = RealRoads(road_edges(setup.town, net), COMMIT_DISTANCE)
+    elif net_path is None:
         net = _town_net(setup.town)
     else:
         net = Path(net_path)
     net_key = _net_key(net)
-    if net_path is not None:
+    if net_path is not None and real is None:
         _check_readable(net, net_key)
     tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=0.0)
     rng = scene_rng(seed)
-    with sumo_session(net, seed, config) as sumo:
-        _check_net_matches(sumo, setup, net, net_key)
-        episode = _Episode(sumo, setup, tracker, driver, config, observer, rng, scene_overrides)
+    with contextlib.ExitStack() as stack:
+        if config.route_files or (real is not None and config.background_vehicles > 0):
+            folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="trustroute-routes-")))
+            routes = background_routes(config, real is not None, net, seed, folder)
+            config = replace(config, route_files=routes)
+        sumo = stack.enter_context(sumo_session(net, seed, config))
+        if real is None:
+            _check_net_matches(sumo, setup, net, net_key)
+        episode = _Episode(sumo, setup, tracker, driver, config, observer, rng, scene_overrides, real)
         sim_seconds = episode.run()
     record = EpisodeRecord(summary=tracker.summary(wall_seconds=time.perf_counter() - started,
                                                    sim_seconds=sim_seconds),

@@ -1,7 +1,7 @@
 """SUMO-native files of an episode (`trustroute run --sumo-files DIR`), so sumo-gui and netedit open
 it without trustroute:
 
-    DIR/net.net.xml       the town's net (a copy)
+    DIR/net.net.xml       the town's net (a copy; net.net.xml.gz for a gzipped imported net)
     DIR/routes.rou.xml    SUMO's vehroute output of the episode: the ego's route as driven (last
                           route), the incident vehicles with their depart times, persons
     DIR/fcd.xml           SUMO's floating car data of the episode as it ran (every vehicle and person,
@@ -43,12 +43,13 @@ def prepare_directory(directory: Path) -> Path:
 def write_sumocfg(directory: Path, net_path: Path, seed: int, config: SumoConfig) -> Path:
     """Copy the net beside the outputs and write the .sumocfg that opens them."""
     directory = Path(directory)
-    shutil.copyfile(net_path, directory / "net.net.xml")
+    net_file = "net.net.xml.gz" if str(net_path).endswith(".gz") else "net.net.xml"
+    shutil.copyfile(net_path, directory / net_file)
     text = f"""<?xml version="1.0" encoding="UTF-8"?>
 <!-- One trustroute episode. Open with: sumo-gui -c {CONFIG_FILE} (fcd.xml is the episode as run). -->
 <configuration>
     <input>
-        <net-file value="net.net.xml"/>
+        <net-file value="{net_file}"/>
         <route-files value="routes.rou.xml"/>
     </input>
     <time>

@@ -33,6 +33,7 @@ class SumoConfig:
     background_vehicles: int = 0
     gui: bool = False               # run in sumo-gui through TraCI (needs a display) instead of libsumo
     output_dir: str | None = None   # also write SUMO's own FCD and route outputs here (sumo_files.py)
+    route_files: tuple[str, ...] = ()   # background traffic SUMO loads with the net (background.py)
 
 
 class Sumo(Protocol):
@@ -88,7 +89,15 @@ def sumo_command(net_path: Path, seed: int, config: SumoConfig) -> list[str]:
         "--duration-log.disable", "true",
         "--verbose", "false",
         *native_output_options(config),
+        *route_file_options(config),
     ]
+
+
+def route_file_options(config: SumoConfig) -> list[str]:
+    """The background traffic's route files; a trip SUMO cannot route is left out, not fatal."""
+    if not config.route_files:
+        return []
+    return ["--route-files", ",".join(config.route_files), "--ignore-route-errors", "true"]
 
 
 def native_output_options(config: SumoConfig) -> list[str]:
@@ -183,6 +192,11 @@ def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sumo
         with contextlib.suppress(Exception):
             sumo.close()
         message = str(exc).strip().splitlines()
+        if config.route_files:
+            raise InputError(str(net_path), "", "SUMO cannot load the net with the route files "
+                             f"{', '.join(config.route_files)}" + (f" ({message[-1]})" if message else ""),
+                             "pass route files that define every vehicle type they use, types first"
+                             ) from None
         raise InputError(str(net_path), "", "SUMO cannot load the net"
                          + (f" ({message[-1]})" if message else ""),
                          "rebuild it with `trustroute net build` (delete the cached file)") from None

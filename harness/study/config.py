@@ -13,7 +13,9 @@ Optional `[study]` keys: `name`, `town`, `driver_model`, `horizon` (synthesis ho
 policies, junctions; default 20), `fallback_after` (20; `false` disables the 20-junction rule),
 `junction_cap` (60), `report_every` (1), `belief_rule` ("bayes" or "paper"), `output` (study directory),
 `policy_cache` (where synthesized policies are cached), `background_vehicles` (SUMO engine:
-seeded background traffic, vehicles kept on the net; default 0 = none, docs/scenes.md), `record`
+seeded background traffic, vehicles kept on the net, on an imported town trips per minute from
+randomTrips.py; default 0 = none, docs/scenes.md), `routes`
+(SUMO engine: SUMO route files of background traffic, e.g. the scenario's own demand), `record`
 (episode ids, e.g. `["p00000-phi1-aware"]`, written as Rerun recordings to
 `<study dir>/recordings/<id>.rrd` while the study runs; SUMO engine only; not part of the content
 hash, since it does not change the dataset), `robust_population` (the driver-population file the
@@ -90,6 +92,7 @@ class StudyConfig:
     output: str | None = None
     policy_cache: str | None = None   # None: the resolver's default cache
     background_vehicles: int = 0      # SUMO engine: seeded background traffic (docs/scenes.md)
+    routes: tuple[str, ...] = ()      # SUMO engine: route files of background traffic (absolute)
     record: tuple[str, ...] = ()      # episode ids recorded to Rerun during the run
     population: dict | None = None   # compared by value; hashed through its canonical JSON (__hash__)
     robust_population: str | None = None   # the "robust" condition's population file (absolute)
@@ -131,6 +134,8 @@ class StudyConfig:
             del settings["robust_population"], settings["robust_objective"]
         if settings["driver_population"] is None:
             del settings["driver_population"]  # a study without [drivers] hashes as before the table
+        if not settings["routes"]:
+            del settings["routes"]  # a study without background routes hashes as before the key
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():
@@ -263,6 +268,7 @@ FILE_FIX: dict[FileKey, str] = {
     "driver_model": "give an existing driver model file or omit driver_model (the default)",
     "robust_population": ("give the driver-population file the robust policy is made for "
                           "(docs/driver_types.md)"),
+    "routes": "list existing SUMO route files of background traffic (vehicle types first) or omit routes",
 }
 STUDY_FIELDS = field_table(
     StudyValues,
@@ -297,6 +303,7 @@ STUDY_FIELDS = field_table(
     # the tighter limit, what the town's roads hold, is the rule _check_background_vehicles
     Field(key="background_vehicles", kind=Integer(minimum=0, maximum=10_000), default=0,
           fix="write background_vehicles = 20 (vehicles kept on the net), or 0 / omit it for none"),
+    Field(key="routes", kind=_ENTRIES, default=(), fix=FILE_FIX["routes"]),
     Field(key="record", kind=_ENTRIES, default=(), fix='write record = ["p00000-phi1-aware"]'),
     Field(key="robust_population", kind=_FILE, problem=_file_path, fix=FILE_FIX["robust_population"]),
     Field(key="robust_objective", kind=OneOf(choices=ROBUST_OBJECTIVES), default="robust",
@@ -414,6 +421,8 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
                           base),
         policy_cache=_directory(study["policy_cache"], base),
         background_vehicles=study["background_vehicles"],
+        routes=tuple(str(_resolve_path(value, base, source, "study.routes", "SUMO route file",
+                                       FILE_FIX["routes"])) for value in study["routes"]),
         record=tuple(study["record"]),
         population=_population(tables["population"], source),
         robust_population=_robust_population(study, conditions, base, source),

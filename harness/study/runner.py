@@ -112,7 +112,8 @@ def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path |
         from trustroute.harness.simulation.sumo_start import SumoConfig
 
         sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
-                              background_vehicles=config.background_vehicles)
+                              background_vehicles=config.background_vehicles,
+                              route_files=tuple(config.routes))
         options = {"rrd_path": rrd_path, "config": sumo_config, "observer": observer}
     return engine_function(config.engine)(
         context.setup(task.spec, task.condition),

@@ -60,6 +60,21 @@ class Scene:
     step_length: float = 0.5   # seconds per simulation step
     observed_length: float | None = None   # metres of the road watched before the incident is
                                            # removed (the ego's commit point); None: all of it
+    # On an imported town's own net (harness/simulation/real_roads.py) `road` is one SUMO edge of
+    # the model road: its driving lane, the reverse edge's nearest lane, whether SUMO may overtake
+    # through the opposite lane there, and the edge's end and start junctions. The defaults are a net built
+    # by `trustroute net build`: lane 1 beside the sidewalk, opposite lanes declared, "U-V" ids.
+    lane: int = 1
+    lanes: int = 1             # lanes of the road's direction open to cars
+    reverse_lane: int = 1
+    overtake: bool = True
+    end_junction: str | None = None
+    start_junction: str | None = None
+
+    @property
+    def ends_at(self) -> str:
+        """The junction where the scene's road ends."""
+        return self.end_junction if self.end_junction is not None else self.road.split("-")[1]
 
     @property
     def watched(self) -> float:
@@ -125,14 +140,16 @@ def remove_vehicle(sumo, vehicle_id: str) -> None:
         sumo.vehicle.remove(vehicle_id)
 
 
-def park_vehicle(sumo, vehicle_id: str, route_id: str, road: str, position: float, type_id: str) -> None:
-    """A vehicle parked in the road's driving lane for good: a stop that never ends, whose range
-    already holds the vehicle's front, so it never moves and never leaves by itself. (A stop
-    rather than a speed held at 0: SUMO's drivers treat a stopped vehicle as one to overtake.)"""
+def park_vehicle(sumo, vehicle_id: str, route_id: str, road: str, position: float, type_id: str,
+                 lane: int = 1, duration: float = 1e9) -> None:
+    """A vehicle parked in the road's driving lane `lane`: a stop whose range already holds the
+    vehicle's front, so it does not move before `duration` seconds (by default never, and it never
+    leaves by itself). (A stop rather than a speed held at 0: SUMO's drivers treat a stopped
+    vehicle as one to overtake.)"""
     sumo.route.add(route_id, [road])
-    sumo.vehicle.add(vehicle_id, route_id, typeID=type_id, depart="now", departLane="1",
+    sumo.vehicle.add(vehicle_id, route_id, typeID=type_id, depart="now", departLane=str(lane),
                      departPos=f"{position:.2f}", departSpeed="0")
-    sumo.vehicle.setStop(vehicle_id, road, pos=position + 0.05, laneIndex=1, duration=1e9,
+    sumo.vehicle.setStop(vehicle_id, road, pos=position + 0.05, laneIndex=lane, duration=duration,
                          startPos=position - 1.0)
     sumo.vehicle.setLaneChangeMode(vehicle_id, 0)
 

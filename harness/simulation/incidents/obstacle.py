@@ -9,7 +9,9 @@ vehicle (a truck) is timed to pass the obstacle `ONCOMING_OFFSET` seconds (drawn
 would reach it at free speed, so the overtake has to wait for it; with probability `P_UNSEEN`
 it turns in unseen at the road's far end (`oncoming.schedule_oncoming`), the scene's rare
 hazard: a truck that appears while the ego may already be in the oncoming lane.
-Draws: docs/scenes.md.
+On a real net without an opposite lane to overtake through and with a single lane (Scene.overtake,
+Scene.lanes) the obstacle stands for `BLOCKED_SECONDS` after the ego's free-speed arrival and then
+drives off: the ego waits behind it instead of overtaking. Draws: docs/scenes.md.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ P_ONCOMING = 0.5
 ONCOMING_OFFSET = (-4.0, 6.0)   # s, uniform: when the oncoming vehicle passes the obstacle,
                                 # relative to the ego's free-speed arrival there
 P_UNSEEN = 0.2                  # the oncoming vehicle turns in unseen at the road's far end
+BLOCKED_SECONDS = 20.0          # s: how long an obstacle nobody can pass blocks after the ego arrives
 
 
 def define_type(sumo) -> None:
@@ -100,8 +103,10 @@ def inject(sumo, scene: Scene) -> ObstacleIncident:
     offset = float(scene.draw("oncoming_offset", lambda rng: rng.uniform(*ONCOMING_OFFSET)))
     unseen = bool(scene.draw("unseen", lambda rng: rng.random() < P_UNSEEN))
     position = fraction * scene.road_length
+    passable = scene.overtake or scene.lanes > 1
+    duration = 1e9 if passable else (scene.ego_distance + position) / scene.road_speed + BLOCKED_SECONDS
     park_vehicle(sumo, vehicle_id, f"{scene.prefix}.obstacle_route", scene.road, position,
-                 BICYCLE_TYPE_ID if bicycle else TYPE_ID)
+                 BICYCLE_TYPE_ID if bicycle else TYPE_ID, lane=scene.lane, duration=duration)
     oncoming = None
     if with_oncoming and scene.reverse_road is not None:
         eta = (scene.ego_distance + position) / scene.road_speed

@@ -3,7 +3,7 @@
 `schedule_oncoming` places a truck on the opposite directed road so that, at its speed, it
 reaches the point `meet_at` metres into the ego's road `meet_in` seconds from now. When that
 needs more road than the opposite road has (most meetings on Town01's 50-130 m roads), the
-truck starts on a road leading into it (`upstream_road`) and turns in, so it is already in the
+truck starts on a road leading into it (`upstream_lane`) and turns in, so it is already in the
 simulation, where SUMO's overtaking checks can see it, when the ego decides whether to pull
 out; if that road is too short too, it enters at that road's start later. With
 `from_upstream=False` (the obstacle scene's rare "unseen" truck) it instead enters at the
@@ -65,6 +65,7 @@ class OncomingVehicle:
     meet_at: float          # metres into the ego's road
     meet_in: float          # seconds after injection, as scheduled
     road_before: str = ""   # the road leading into `road` it starts on ("" when it starts on `road`)
+    depart_lane: str = "1"  # SUMO's departLane: lane 1 of a built net, "best" on a real net
     inserted: bool = False
     met_time: float = math.nan
     met_x: float = math.nan
@@ -75,7 +76,8 @@ class OncomingVehicle:
     _next_ttc_check: float = -math.inf
 
     def insert(self, sumo: Sumo) -> None:
-        sumo.vehicle.add(self.vehicle_id, self.route_id, typeID=TYPE_ID, depart="now", departLane="1",
+        sumo.vehicle.add(self.vehicle_id, self.route_id, typeID=TYPE_ID, depart="now",
+                         departLane=self.depart_lane,
                          departPos=f"{self.depart_position:.2f}", departSpeed="max")
         self.inserted = True
 
@@ -148,20 +150,26 @@ class OncomingVehicle:
 TURNS = {"s": 0, "r": 1, "l": 1, "R": 2, "L": 2}   # SUMO link directions, straightest first (no U-turn)
 
 
-def upstream_road(sumo: Sumo, scene: Scene) -> str | None:
-    """The road that leads into scene.reverse_road at the junction where the ego's road ends, other
-    than the ego's own road, without a U-turn: the straightest, then the longest, then by id.
-    Where an oncoming truck comes from."""
-    junction = scene.road.split("-")[1]
+def _lanes(sumo: Sumo, scene: Scene, edge: str) -> list[str]:
+    """The lanes of `edge` a vehicle may come from: lane 1 of a built net, every lane of a real one."""
+    if scene.end_junction is None:
+        return [f"{edge}_1"]
+    return [f"{edge}_{i}" for i in range(sumo.edge.getLaneNumber(edge))]
+
+
+def upstream_lane(sumo: Sumo, scene: Scene) -> str | None:
+    """The lane of the road that leads into scene.reverse_road at the junction where the ego's road
+    ends, other than the ego's own road, without a U-turn: the straightest, then the longest, then
+    by id. Where an oncoming truck comes from."""
     roads = []
-    for edge in sumo.junction.getIncomingEdges(junction):
+    for edge in sumo.junction.getIncomingEdges(scene.ends_at):
         if edge.startswith(":") or edge == scene.road:
             continue
-        lane = f"{edge}_1"
-        for link in sumo.lane.getLinks(lane):
-            if link[0].rsplit("_", 1)[0] == scene.reverse_road and link[6] in TURNS:
-                roads.append((TURNS[link[6]], -sumo.lane.getLength(lane), edge))
-    return min(roads)[2] if roads else None
+        for lane in _lanes(sumo, scene, edge):
+            for link in sumo.lane.getLinks(lane):
+                if link[0].rsplit("_", 1)[0] == scene.reverse_road and link[6] in TURNS:
+                    roads.append((TURNS[link[6]], -sumo.lane.getLength(lane), edge, lane))
+    return min(roads)[3] if roads else None
 
 
 def schedule_oncoming(sumo: Sumo, scene: Scene, meet_at: float, meet_in: float, vehicle_id: str,
@@ -173,16 +181,17 @@ def schedule_oncoming(sumo: Sumo, scene: Scene, meet_at: float, meet_in: float, 
     road = scene.reverse_road
     if road is None:
         raise ValueError(f"oncoming vehicle on {scene.road}: the road has no opposite direction")
-    reverse_length = sumo.lane.getLength(f"{road}_1")
+    reverse_length = sumo.lane.getLength(f"{road}_{scene.reverse_lane}")
     meeting_on_reverse = max(0.0, reverse_length - meet_at)
     depart = meeting_on_reverse - speed * max(meet_in, 0.0)
     roads = [road]
-    before = upstream_road(sumo, scene) if depart < 0 and from_upstream else None
-    if before is not None:
+    before_lane = upstream_lane(sumo, scene) if depart < 0 and from_upstream else None
+    before = before_lane.rsplit("_", 1)[0] if before_lane is not None else None
+    if before_lane is not None:
         # The junction's internal lane adds its length to the way; the turn's slowing is not
         # modelled (met_time records when the two really passed each other).
-        before_length = sumo.lane.getLength(f"{before}_1")
-        via = sumo.lane.getLinks(f"{before}_1")
+        before_length = sumo.lane.getLength(before_lane)
+        via = sumo.lane.getLinks(before_lane)
         inside = next((sumo.lane.getLength(link[4]) for link in via
                        if link[0].rsplit("_", 1)[0] == road and link[4]), 0.0)
         depart += before_length + inside
@@ -192,7 +201,8 @@ def schedule_oncoming(sumo: Sumo, scene: Scene, meet_at: float, meet_in: float, 
     sumo.route.add(route_id, roads)
     vehicle = OncomingVehicle(vehicle_id=vehicle_id, route_id=route_id, road=road,
                               depart_position=max(depart, 0.0), insert_time=scene.time + delay,
-                              meet_at=meet_at, meet_in=meet_in, road_before=before or "")
+                              meet_at=meet_at, meet_in=meet_in, road_before=before or "",
+                              depart_lane="1" if scene.end_junction is None else "best")
     if delay == 0.0:
         vehicle.insert(sumo)
     return vehicle

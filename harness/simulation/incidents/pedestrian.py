@@ -19,6 +19,8 @@ into the ego's path, the AV brakes to stop `STOP_BEFORE_PATH` metres before the 
 gently (the deceleration needed) when that is within the ego's comfortable deceleration,
 otherwise with automatic emergency braking (`EMERGENCY_DECEL`, held until the path is clear).
 An emergency brake is above the 5 m/s² deceleration limit: a measured `fail`, without a collision.
+On an imported town's own net the crossing is the net's own at the start of the incident's edge;
+where there is none the scene is not placed (`inject` returns None, docs/scenes.md "Real maps").
 """
 
 from __future__ import annotations
@@ -240,21 +242,23 @@ class CrossingPath:
 _CROSSINGS: dict[tuple, CrossingPath] = {}
 
 
-def crossing_path(sumo, road: str) -> CrossingPath:
-    """The crossing over `road` at its start junction (networks/sumo_net.py puts one there).
-    Static geometry: looked up once per road and lane shape in a process."""
-    shape = tuple(sumo.lane.getShape(f"{road}_1"))
+def crossing_path(sumo, road: str, lane: int = 1, junction: str | None = None) -> CrossingPath:
+    """The crossing over `road` at its start junction (networks/sumo_net.py puts one there; on a
+    real net, `junction` names the edge's start junction and `lane` its driving lane). Static
+    geometry: looked up once per road and lane shape in a process. ValueError: no crossing."""
+    shape = tuple(sumo.lane.getShape(f"{road}_{lane}"))
     key = (road, shape)
     cached = _CROSSINGS.get(key)
     if cached is None:
         if len(_CROSSINGS) > 4096:
             _CROSSINGS.clear()
-        cached = _CROSSINGS[key] = _find_crossing(sumo, road, shape[0])
+        cached = _CROSSINGS[key] = _find_crossing(sumo, road, shape[0], junction)
     return cached
 
 
-def _find_crossing(sumo, road: str, lane_start: tuple[float, float]) -> CrossingPath:
-    junction = road.split("-")[0]
+def _find_crossing(sumo, road: str, lane_start: tuple[float, float], junction: str | None) -> CrossingPath:
+    real = junction is not None
+    junction = junction if junction is not None else road.split("-")[0]
     best = None
     for edge in sumo.junction.getOutgoingEdges(junction):
         if not edge.startswith(f":{junction}_c"):
@@ -274,14 +278,17 @@ def _find_crossing(sumo, road: str, lane_start: tuple[float, float]) -> Crossing
     walking_area = sumo.lane.getLinks(f"{edge}_0")[0][0]     # the crossing leads to one walking area
     sidewalk = next(link[0] for link in sumo.lane.getLinks(walking_area) if not link[0].startswith(":"))
     sidewalk_edge = sidewalk.rsplit("_", 1)[0]
-    ends_here = sidewalk_edge.split("-")[1] == junction
+    ends_at = sumo.edge.getToJunction(sidewalk_edge) if real else sidewalk_edge.split("-")[1]
+    ends_here = ends_at == junction
     arrival = max(0.0, sumo.lane.getLength(sidewalk) - 2.0) if ends_here else 2.0
     return CrossingPath(edge=edge, conflict=point, conflict_position=t * length,
                         start=max(0.0, t * length - LATE_BEFORE_LANE),
                         walk=(edge, walking_area.rsplit("_", 1)[0], sidewalk_edge), arrival=arrival)
 
 
-def inject(sumo, scene: Scene) -> PedestrianIncident:
+def inject(sumo, scene: Scene) -> PedestrianIncident | None:
+    """The scene on a built net; on a real net (Scene.end_junction set) None where the edge's start
+    junction has no crossing."""
     if scene.reverse_road is None:
         raise ValueError(f"pedestrian incident on {scene.road}: the road has no opposite direction")
     u = scene.rng.random()
@@ -292,7 +299,13 @@ def inject(sumo, scene: Scene) -> PedestrianIncident:
     late_deceleration = float(scene.draw("late_deceleration", lambda rng: rng.uniform(*LATE_DECELERATION)))
     before_kerb = float(scene.draw("early_start", lambda rng: rng.uniform(*EARLY_START)))
     kerb = max(0.0, sumo.lane.getLength(f"{scene.reverse_road}_0") - START_BEFORE_JUNCTION)
-    crossing = crossing_path(sumo, scene.road)
+    if scene.end_junction is None:
+        crossing = crossing_path(sumo, scene.road)
+    else:
+        try:
+            crossing = crossing_path(sumo, scene.road, scene.lane, scene.start_junction)
+        except (ValueError, StopIteration, IndexError):   # no crossing, or one not led to a sidewalk
+            return None
     incident = PedestrianIncident(road=scene.road, reverse_road=scene.reverse_road,
                                   person_id=f"{scene.prefix}.pedestrian", timing=timing,
                                   late_deceleration=late_deceleration if timing == "late" else math.nan,

@@ -6,7 +6,8 @@ the ego at a drawn fraction of the stretch watched before the ego's commit point
 With probability `P_PARKED` a car is parked in the truck's own lane shortly before that point
 (`PARKED_BEFORE_MEETING`, drawn): the truck then overtakes it through the ego's lane, with
 SUMO's own opposite-direction overtaking and gap acceptance, and the ego has to react to a
-truck in its lane. The incident is passed once the two have met. Draws: docs/scenes.md.
+truck in its lane (only where the net has opposite lanes, Scene.overtake: elsewhere no car is
+parked). The incident is passed once the two have met. Draws: docs/scenes.md.
 """
 
 from __future__ import annotations
@@ -95,12 +96,12 @@ def inject(sumo, scene: Scene) -> TruckIncident:
     # for good. So the parked car stands no further back than keeps the ego on the road.
     before = min(before, meet_at * TRUCK_SPEED / scene.road_speed)
     parked_id = None
-    reverse_length = sumo.lane.getLength(f"{scene.reverse_road}_1")
-    if parked and reverse_length >= PARKED_MIN_LANE:
+    reverse_length = sumo.lane.getLength(f"{scene.reverse_road}_{scene.reverse_lane}")
+    if parked and scene.overtake and reverse_length >= PARKED_MIN_LANE:
         parked_id = f"{scene.prefix}.parked"
         on_reverse = reverse_length - meet_at - before
         park_vehicle(sumo, parked_id, f"{parked_id}_route", scene.reverse_road, max(on_reverse, 5.0),
-                     PARKED_TYPE_ID)
+                     PARKED_TYPE_ID, lane=scene.reverse_lane)
     oncoming = schedule_oncoming(sumo, scene, meet_at=meet_at, meet_in=eta,
                                  vehicle_id=f"{scene.prefix}.truck")
     return TruckIncident(road=scene.road, oncoming=oncoming, parked_id=parked_id)
