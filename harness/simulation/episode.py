@@ -40,18 +40,17 @@ from trustroute.core.dataset import (
     table_from_frame,
     table_from_rows,
 )
-from trustroute.core.errors import InputError
 from trustroute.harness.simulation import incidents as incident_kinds
 from trustroute.harness.simulation.background import BackgroundTraffic, JamRelief, background_routes
 from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style, hand_back, take_over
+from trustroute.harness.simulation.episode_net import check_net_matches, check_readable, net_key, town_net
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.simulation.incidents import EgoState, Incident, Scene
 from trustroute.harness.simulation.performance import PerformanceMonitor, limits_for, verdict
 from trustroute.harness.simulation.real_roads import RealRoads, real_scene
 from trustroute.harness.simulation.sumo_start import SumoConfig, hot_calls, sumo_session
 from trustroute.networks.real_net import is_imported, road_edges, town_net_file
-from trustroute.networks.sumo_net import ROAD_SPEED, build_net, net_counts
-from trustroute.networks.sumo_net import net_path as town_net_path
+from trustroute.networks.sumo_net import ROAD_SPEED
 from trustroute.networks.town import NO_INCIDENT, split_road
 from trustroute.policies.routing.protocol import RoutingPolicy
 
@@ -181,59 +180,6 @@ def _define_ego_type(sumo) -> None:
     sumo.vehicletype.copy("DEFAULT_VEHTYPE", EGO_TYPE)
     sumo.vehicletype.setImperfection(EGO_TYPE, 0.0)   # the AV drives without driver noise
     sumo.vehicletype.setSpeedDeviation(EGO_TYPE, 0.0)
-
-
-_MATCHING_NETS: set[tuple[str, float, str]] = set()
-
-
-def _check_net_matches(sumo, setup: EpisodeSetup, net_path: Path, net_key: tuple[str, float]) -> None:
-    """The net has an edge for every road of the town (checked once per net and town per process)."""
-    key = (*net_key, setup.town.content_hash)
-    if key in _MATCHING_NETS:
-        return
-    edges = set(sumo.edge.getIDList())
-    missing = sorted(set(setup.town.states) - edges)
-    if missing:
-        raise InputError(str(net_path), "", f"the net has no edge for road(s) {', '.join(missing[:4])} of "
-                         f"town {setup.town.source_path or 'town'}",
-                         "build the net of this town with `trustroute net build --town FILE`")
-    _MATCHING_NETS.add(key)
-
-
-_READABLE: set[tuple[str, float]] = set()
-_VERIFIED_NETS: set[tuple[str, str, int]] = set()
-
-
-def _town_net(town) -> Path:
-    """`build_net(town).path`, verified once per process and version of the cached file (its
-    path and mtime): build_net parses the whole net to verify it, which in a study cost about
-    5 ms of every episode. A replaced or deleted file is verified (or rebuilt) again."""
-    target = town_net_path(town)
-    try:
-        key = (town.content_hash, str(target), target.stat().st_mtime_ns)
-    except OSError:
-        key = None
-    if key in _VERIFIED_NETS:
-        return target
-    path = build_net(town).path
-    _VERIFIED_NETS.add((town.content_hash, str(path), path.stat().st_mtime_ns))
-    return path
-
-
-def _net_key(net_path: Path) -> tuple[str, float]:
-    """(path, mtime) of a net: what the once-per-process checks are keyed on (one stat per episode)."""
-    try:
-        return str(net_path), net_path.stat().st_mtime
-    except OSError:
-        raise InputError(str(net_path), "", "the SUMO net file does not exist",
-                         "run `trustroute net build` or pass an existing .net.xml") from None
-
-
-def _check_readable(net_path: Path, key: tuple[str, float]) -> None:
-    """Parse a net passed in once per (path, mtime): a clear one-line error before SUMO prints its own."""
-    if key not in _READABLE:
-        net_counts(net_path)
-        _READABLE.add(key)
 
 
 def _check_insertion_time(now: float, start: str) -> None:
@@ -578,12 +524,12 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
         net = own_net if net_path is None else Path(net_path)
         real = RealRoads(road_edges(setup.town, net), COMMIT_DISTANCE)
     elif net_path is None:
-        net = _town_net(setup.town)
+        net = town_net(setup.town)
     else:
         net = Path(net_path)
-    net_key = _net_key(net)
+    key = net_key(net)
     if net_path is not None and real is None:
-        _check_readable(net, net_key)
+        check_readable(net, key)
     tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=0.0)
     rng = scene_rng(seed)
     with contextlib.ExitStack() as stack:
@@ -593,7 +539,7 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
             config = replace(config, route_files=routes)
         sumo = stack.enter_context(sumo_session(net, seed, config))
         if real is None:
-            _check_net_matches(sumo, setup, net, net_key)
+            check_net_matches(sumo, setup, net, key)
         episode = _Episode(sumo, setup, tracker, driver, config, observer, rng, scene_overrides, real)
         sim_seconds = episode.run()
     record = EpisodeRecord(summary=tracker.summary(wall_seconds=time.perf_counter() - started,

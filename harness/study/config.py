@@ -233,6 +233,7 @@ class StudyValues(TypedDict):
     output: str | None
     policy_cache: str | None
     background_vehicles: int
+    routes: Sequence[str]
     record: Sequence[str]
     robust_population: str | None
     robust_objective: str

@@ -191,7 +191,7 @@ def test_the_town_net_is_verified_once_per_file_version(town, tmp_path, monkeypa
     import os
     from types import SimpleNamespace
 
-    from trustroute.harness.simulation import episode
+    from trustroute.harness.simulation import episode_net
 
     net = tmp_path / "town.net.xml"
     builds = []
@@ -201,12 +201,12 @@ def test_the_town_net_is_verified_once_per_file_version(town, tmp_path, monkeypa
         net.write_text("<net/>")
         return SimpleNamespace(path=net)
 
-    monkeypatch.setattr(episode, "town_net_path", lambda town_: net)
-    monkeypatch.setattr(episode, "build_net", fake_build)
-    monkeypatch.setattr(episode, "_VERIFIED_NETS", set())
-    assert episode._town_net(town) == net and len(builds) == 1   # absent: built
-    assert episode._town_net(town) == net and len(builds) == 1   # unchanged: no second check
+    monkeypatch.setattr(episode_net, "town_net_path", lambda town_: net)
+    monkeypatch.setattr(episode_net, "build_net", fake_build)
+    monkeypatch.setattr(episode_net, "_VERIFIED_NETS", set())
+    assert episode_net.town_net(town) == net and len(builds) == 1   # absent: built
+    assert episode_net.town_net(town) == net and len(builds) == 1   # unchanged: no second check
     os.utime(net, ns=(0, net.stat().st_mtime_ns + 10**9))
-    assert episode._town_net(town) == net and len(builds) == 2   # replaced: verified again
+    assert episode_net.town_net(town) == net and len(builds) == 2   # replaced: verified again
     net.unlink()
-    assert episode._town_net(town) == net and len(builds) == 3   # deleted: rebuilt
+    assert episode_net.town_net(town) == net and len(builds) == 3   # deleted: rebuilt
