@@ -14,6 +14,7 @@ from trustroute.analysis.formatting import finite_or_none
 from trustroute.core.errors import InputError
 from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
 from trustroute.harness.commands.output import emit, json_option, with_paths
+from trustroute.policies.model.trust_pomdp import checked_belief_rule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
@@ -95,7 +96,8 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
 
     with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
         result = synthesize_problem(problem, tau=tau, time_limit=time_limit, horizon=horizon,
-                                    belief_rule=belief_rule, on_iteration=on_iteration, clusters=clusters)
+                                    belief_rule=checked_belief_rule(belief_rule), on_iteration=on_iteration,
+                                    clusters=clusters)
     path = str(save_policy(result, out_path, town, driver, spec))
     from trustroute.policies.routing.files import array_path
 
@@ -144,7 +146,7 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_population import load_driver_population
     from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.resolve import synthesis_progress
+    from trustroute.policies.resolve import is_objective, synthesis_progress
     from trustroute.policies.routing.files import array_path, save_policy
     from trustroute.policies.synthesis.population import (
         document_entries,
@@ -153,13 +155,15 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
         synthesize_population,
     )
 
+    if not is_objective(objective):
+        raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
     town = load_town(town_path)
     population = load_driver_population(population_path)
     spec = load_spec(spec_path, town, population.types[0].model.n_trust, population_path)
     with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
                             not as_json) as on_iteration:
         found = synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
-                                      horizon=horizon, belief_rule=belief_rule,
+                                      horizon=horizon, belief_rule=checked_belief_rule(belief_rule),
                                       population_source=population_path, on_iteration=on_iteration)
     result = found.result
     path = str(save_policy(result, out_path, town, found.pomdp.driver, found.spec,
@@ -206,7 +210,7 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
     town, spec, pomdp = problem.town, problem.spec, problem.pomdp
     route = baseline_route(town, spec)
     value = evaluate_policy(pomdp, spec, trust_free_policy(town, spec), fallback_after=None,
-                            belief_rule=belief_rule)
+                            belief_rule=checked_belief_rule(belief_rule))
     payload = {"spec": spec.name, "route": route, "length_m": town.route_length(route),
                "junctions": len(route) - 1, "satisfaction_probability": value.satisfaction_probability,
                "lower": value.lower, "upper": value.upper,
@@ -289,7 +293,8 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
         raise click.UsageError("--time-limit applies to specs with trust-state atoms only (the others "
                                "are evaluated exactly in full)")
     value = evaluate_policy(pomdp, spec, policy, fallback_after=after, max_junctions=cap,
-                            belief_rule=belief_rule, max_nodes=max_nodes, time_limit=time_limit)
+                            belief_rule=checked_belief_rule(belief_rule), max_nodes=max_nodes,
+                            time_limit=time_limit)
     payload = value.to_dict()
     payload["spec"] = spec.name
     payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)
@@ -363,6 +368,8 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
     from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
     from trustroute.policies.synthesis.population import TypeValue, per_type_values
 
+    rule = checked_belief_rule(belief_rule)
+
     town, population, spec, policy, model, lifted_spec = load_population_routing(
         spec_path, town_path, population_path, policy_name, cache_dir, progress=not as_json)
     found = routing_problem(town, population, spec, population_path)
@@ -370,13 +377,13 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
     if found.dfa_hidden:
         # The DFA state is hidden: one unfolding over ((type, trust), q) gives every type's value.
         value, bounds = evaluate_joint_by_type(pomdp, lifted_spec, policy, fallback_after=fallback_after,
-                                               max_junctions=cap, belief_rule=belief_rule)
+                                               max_junctions=cap, belief_rule=rule)
         types = tuple(TypeValue(t.name, float(t.weight), lower, upper)
                       for t, (lower, upper) in zip(population.types, bounds, strict=True))
     else:
         value = evaluate_policy(pomdp, lifted_spec, policy, fallback_after=fallback_after,
-                                max_junctions=cap, belief_rule=belief_rule)
-        types = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule, fallback_after)
+                                max_junctions=cap, belief_rule=rule)
+        types = per_type_values(pomdp, lifted_spec, policy, population, cap, rule, fallback_after)
     payload = value.to_dict()
     payload["spec"] = spec.name
     payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)

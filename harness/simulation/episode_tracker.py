@@ -22,7 +22,9 @@ table's schema is `trustroute.core.dataset.ROADS_SCHEMA` (docs/dataset.md).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 import pandas as pd
@@ -36,7 +38,7 @@ from trustroute.policies.belief.problem import DRIVER_TYPES, PLAIN, TRUST_STATE,
 from trustroute.policies.belief.trust_state_filter import joint_filter
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp
+from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp, checked_belief_rule
 from trustroute.policies.routing.episode_rules import (
     DEFAULT_JUNCTION_CAP,
     decide,
@@ -109,8 +111,7 @@ class EpisodeTracker:
             raise ValueError(f"junction_cap must be >= 0, got {setup.junction_cap}")
         if setup.report_every < 1:
             raise ValueError(f"report_every must be >= 1, got {setup.report_every}")
-        if setup.belief_rule not in ("bayes", "paper"):
-            raise ValueError(f"unknown belief rule {setup.belief_rule!r}; use 'bayes' or 'paper'")
+        self.belief_rule = checked_belief_rule(setup.belief_rule)
         self.setup = setup
         self.episode_id = str(episode_id)
         model = episode_model(setup)
@@ -128,7 +129,8 @@ class EpisodeTracker:
         self._belief_logged = self._logged(self.belief)
         # How the AV follows the spec's DFA is the problem's case (policies/belief/problem.py): the
         # state itself when it is observed, else the joint belief J(θ, q) (DFA_TRACKING).
-        self._dfa = DFA_TRACKING[case_of(setup.driver_model, setup.spec)](self, int(initial_trust))
+        tracking = DFA_TRACKING[case_of(setup.driver_model, setup.spec)]
+        self._dfa: DFATracking = tracking(self, int(initial_trust))
         self.dfa_state: int = self._dfa.told
         self.end_reason: str | None = self._verdict()
         self.fallback_fired = False
@@ -226,8 +228,7 @@ class EpisodeTracker:
                self.setup.belief_rule)
         entry = self._memo.get(key)
         if entry is None:
-            posterior, _ = self._pomdp.belief_update(before, incident_index, h, e,
-                                                     rule=self.setup.belief_rule)
+            posterior, _ = self._pomdp.belief_update(before, incident_index, h, e, rule=self.belief_rule)
             after = posterior[0]
             if not after.sum() > 0:
                 # An observation the AV's model deems impossible: keep the prior rather than a zero vector.
@@ -279,6 +280,21 @@ class EpisodeTracker:
             "sim_seconds": float(sim_seconds),
             "wall_seconds": float(wall_seconds),
         }
+
+
+class DFATracking(Protocol):
+    """How the AV follows the spec's DFA: the state it is told, its joint belief for the policy's
+    context, the episode's verdict and satisfaction, and a step after a driven road."""
+
+    told: int
+
+    def context_joint(self) -> np.ndarray | None: ...
+
+    def step(self, road: str, incident: int, h: int, e: int, trust_after: int) -> int: ...
+
+    def verdict(self) -> str | None: ...
+
+    def satisfied(self, end_reason: str | None) -> bool: ...
 
 
 class ObservedDFA:
@@ -366,4 +382,5 @@ class HiddenDFA:
         return bool(self.tracker._compiled.accepting[self.true_state])
 
 
-DFA_TRACKING = {PLAIN: ObservedDFA, DRIVER_TYPES: ObservedDFA, TRUST_STATE: HiddenDFA}
+DFA_TRACKING: dict[str, Callable[[EpisodeTracker, int], DFATracking]] = {
+    PLAIN: ObservedDFA, DRIVER_TYPES: ObservedDFA, TRUST_STATE: HiddenDFA}

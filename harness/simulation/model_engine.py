@@ -40,7 +40,7 @@ from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.belief.problem import dfa_is_hidden
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.model.trust_pomdp import TrustPOMDP
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, checked_belief_rule
 from trustroute.policies.routing.episode_rules import (
     ACCEPTED,
     DEFAULT_JUNCTION_CAP,
@@ -71,6 +71,7 @@ def run_model_episode(
     tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=math.nan)
     while tracker.next_junction() is not None:
         road = tracker.expected_road()
+        assert road is not None
         incident = town.incident(road)
         before = driver.trust
         took_over = driver.decides_takeover(incident)
@@ -127,13 +128,13 @@ class _Sampled:
     policy: RoutingPolicy             # wrapped with the episode's fallback
     drivers: DriverTables             # the true drivers (kinds), on the AV's incident list
     junction_cap: int
-    belief_rule: str
+    belief_rule: BeliefRule
     successor: dict[tuple[int, str], int]
 
 
 def _sampled(town: Town, pomdp: TrustPOMDP, compiled: CompiledSpec, spec: Spec, policy: RoutingPolicy,
              drivers: Sequence[DriverModel], junction_cap: int, fallback_after: int | None,
-             belief_rule: str) -> _Sampled:
+             belief_rule: BeliefRule) -> _Sampled:
     if dfa_is_hidden(pomdp.driver, spec):
         raise ValueError(f"spec {spec.name!r} has trust-state atoms: the batch path does not "
                          "track the joint belief; run its episodes with run_model_episode")
@@ -170,12 +171,13 @@ def simulate_batch(
     model = episode_model(setup)
     sampled = _sampled(setup.town, model.pomdp, model.compiled, setup.spec, policy,
                        list(drivers) if drivers is not None else [setup.driver_model],
-                       setup.junction_cap, setup.fallback_after, setup.belief_rule)
+                       setup.junction_cap, setup.fallback_after, checked_belief_rule(setup.belief_rule))
     return _unfold(sampled, index, rng)
 
 
 def _decisions(sampled: _Sampled, live: np.ndarray, route_id: np.ndarray, routes: list[tuple[str, ...]],
-               q: np.ndarray, belief: np.ndarray, road: np.ndarray) -> tuple[np.ndarray, ...]:
+               q: np.ndarray, belief: np.ndarray, road: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float]:
     """The policy's decisions for the live episodes, asked once per distinct (route, DFA state,
     belief), or once per route when the policy declares its decision route-determined: (next road
     or -1, finished at the destination, fallback drove, policy calls, seconds in the policy)."""
@@ -211,6 +213,9 @@ def _decisions(sampled: _Sampled, live: np.ndarray, route_id: np.ndarray, routes
             if decision.end is not None:
                 finished[group] = decision.end == "destination"
                 continue
+            if decision.junction is None:
+                raise KeyError(f"the episode rules neither ended the episode nor chose a junction at "
+                               f"road {int(road[first])}")
             chosen[group] = sampled.successor[(int(road[first]), decision.junction)]
             fired[group] = decision.fallback
     return chosen, finished, fired, calls, seconds
@@ -317,7 +322,7 @@ class MonteCarloResult:
 def monte_carlo(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, episodes: int,
                 rng: np.random.Generator, fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
                 max_junctions: int = DEFAULT_JUNCTION_CAP,
-                belief_rule: str = "bayes") -> MonteCarloResult:
+                belief_rule: BeliefRule = "bayes") -> MonteCarloResult:
     """Run `policy` (with the study's fallback unless None) in the trust model `episodes` times,
     true trust drawn from `pomdp.driver`: the batch path on one episode after the other, so a
     policy that draws from `rng` while it plans (POUCT) draws between its own episode's driver

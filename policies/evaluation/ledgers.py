@@ -276,7 +276,8 @@ class BoundLedger:
     accepted: float = 0.0
     unknown: float = 0.0
     fallback_mass: float = 0.0   # a policy without episode rules has no fallback: stays 0
-    live_masses: tuple | None = None     # the level's (accepted, rejected, live) (settle -> prune)
+    # the level's (accepted, rejected, live) (settle -> prune)
+    live_masses: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def end(self, frontier, rows, reason: str, level: int) -> None:
         accepted, _, _ = frontier.state.masses(rows)
@@ -304,6 +305,8 @@ class BoundLedger:
         if go.sum() <= self.max_nodes:
             return go
         mass = frontier.probability
+        if self.live_masses is None:
+            raise TypeError("prune reads the level's masses, which settle computes first")
         accepted, _, live = self.live_masses
         order = np.argsort(-np.where(go, mass, -np.inf), kind="stable")
         dropped = np.zeros(mass.size, dtype=bool)

@@ -18,7 +18,7 @@ order of operations of the loops it serves, so values are bit for bit those of e
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Protocol
+from typing import Protocol, Self
 
 import numpy as np
 
@@ -30,10 +30,15 @@ from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 class NodeState(Protocol):
     """Per-node state aligned with a frontier's rows."""
 
-    posterior: np.ndarray   # [n, n_trust] exact law of θ given the history (final trust reads it)
-    belief: np.ndarray      # [n, n_trust] the AV's belief (decisions and belief labels read it)
+    @property
+    def posterior(self) -> np.ndarray:
+        """[n, n_trust] exact law of θ given the history (final trust reads it)."""
 
-    def take(self, rows: np.ndarray | slice) -> NodeState: ...
+    @property
+    def belief(self) -> np.ndarray:
+        """[n, n_trust] the AV's belief (decisions and belief labels read it)."""
+
+    def take(self, rows: np.ndarray | slice) -> Self: ...
 
     def masses(self, rows: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(accepted, rejected, live) probability of each row (of `rows`)."""
@@ -48,11 +53,11 @@ class NodeState(Protocol):
         """Bytes equal for two rows of the same route iff a policy must decide them alike."""
 
     def children(self, road: np.ndarray, human_action: int, performance: int
-                 ) -> tuple[np.ndarray, NodeState]:
+                 ) -> tuple[np.ndarray, Self]:
         """(P(observation) per row, node state of the rows where it is possible) after driving
         `road` (one per row) and observing (h, e) there."""
 
-    def joined(self, parts: list[NodeState], road: np.ndarray) -> NodeState:
+    def joined(self, parts: list[Self], road: np.ndarray) -> Self:
         """The children of one level in one state (`parts` in order; `road` their roads)."""
 
     def merge_columns(self) -> np.ndarray:
@@ -206,8 +211,9 @@ class HiddenState:
                               belief=new_av[possible])
 
     def joined(self, parts: list[HiddenState], road: np.ndarray) -> HiddenState:
-        return replace(self, **{name: np.concatenate([getattr(part, name) for part in parts])
-                                for name in ("joint", "posterior", "belief")})
+        joint, posterior, belief = (np.concatenate([getattr(part, name) for part in parts])
+                                    for name in ("joint", "posterior", "belief"))
+        return replace(self, joint=joint, posterior=posterior, belief=belief)
 
     def merge_columns(self) -> np.ndarray:
         """Columns of belief/trust_state_filter.distinct_nodes after the road: J, posterior, b."""

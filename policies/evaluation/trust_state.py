@@ -151,6 +151,7 @@ def evaluate_joint_by_type(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     a cut node's live mass of type k widens type k's bracket only)."""
     evaluation, types = joint_unfolding(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,
                                         prune_below, max_nodes, merge, time_limit, by_type=True)
+    assert types is not None
     prior = np.asarray(pomdp.initial_belief, dtype=float)
     weights = prior.reshape(types.n_types, -1).sum(axis=1)
     return evaluation, types.bounds(weights)

@@ -28,7 +28,7 @@ import numpy as np
 
 from trustroute.networks.town import Town
 from trustroute.policies.belief.trust_state_filter import distinct_rows
-from trustroute.policies.evaluation.node_state import NodeState
+from trustroute.policies.evaluation.node_state import HiddenState, NodeState
 from trustroute.policies.routing.episode_rules import decide
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
@@ -51,6 +51,13 @@ class Frontier:
                         route_id=self.route_id[rows], state=self.state.take(rows))
 
 
+def joint_beliefs(state: NodeState) -> np.ndarray:
+    """J(θ, q) of every row; only a node state with a hidden DFA state has them."""
+    if not isinstance(state, HiddenState):
+        raise AttributeError(f"{type(state).__name__} has no joint beliefs (the DFA state is observed)")
+    return state.joint
+
+
 def root(start: int, state: NodeState) -> Frontier:
     return Frontier(road=np.array([start], dtype=np.int64), probability=np.ones(1),
                     route_id=np.zeros(1, dtype=np.int64), state=state)
@@ -63,6 +70,15 @@ class Moves:
     finished: np.ndarray
     fired: np.ndarray
     next_road: np.ndarray
+
+
+class BatchedPolicy(Protocol):
+    """A policy told each level's nodes with their joint beliefs at once before it is asked node
+    by node (routing.trust_state_table.JointTablePolicy)."""
+
+    def prefetch(self, t: int, x: np.ndarray, joint: np.ndarray, beliefs: np.ndarray) -> None: ...
+
+    def forget_prefetched(self) -> None: ...
 
 
 class Actor(Protocol):
@@ -120,7 +136,7 @@ class EpisodeActor:
     max_junctions: int
     fallback_level: int | None
     accepting: np.ndarray                      # bool [n_q]: the told states that are accepting
-    batched: object | None = None
+    batched: BatchedPolicy | None = None
     routes: list = field(default_factory=list)
     memory_ids: dict = field(default_factory=dict)
     successor_index: dict = field(default_factory=dict)
@@ -147,7 +163,7 @@ class EpisodeActor:
     def act(self, level: int, frontier: Frontier) -> Moves:
         state = frontier.state
         if self.batched is not None:       # given with joint-belief node states only
-            self.batched.prefetch(level, frontier.road, state.joint, state.belief)
+            self.batched.prefetch(level, frontier.road, joint_beliefs(state), state.belief)
         told = state.told()
         told_accepting = self.accepting[told]
         n = frontier.size
@@ -207,7 +223,7 @@ class SlotActor:
 
     def act(self, level: int, frontier: Frontier) -> Moves:
         state = frontier.state
-        slots = self.slots(level, frontier.road, state.joint, state.belief)
+        slots = self.slots(level, frontier.road, joint_beliefs(state), state.belief)
         n = frontier.size
         return Moves(np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
                      self.successor_table[frontier.road, slots])
@@ -329,10 +345,10 @@ def advance(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits
             # Out of time within the level: the nodes not moved yet are cut.
             ledger.cut(frontier, slice(rows.start, None), level, "past_deadline")
             break
-        children = move(level, frontier.take(rows), actor, ledger, limits, observations)
-        if children is None:
+        branched = move(level, frontier.take(rows), actor, ledger, limits, observations)
+        if branched is None:
             return None
-        parts += children
+        parts += branched
         pace.batch_seconds = time.perf_counter() - began
     if not parts:
         return None
@@ -343,9 +359,9 @@ def advance(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits
         return None
     if limits.merge:
         began = time.perf_counter()
-        rows = children.size
+        unmerged = children.size
         children = merged(children, actor.memory(children))
-        pace.merge_rate = (time.perf_counter() - began) / rows
+        pace.merge_rate = (time.perf_counter() - began) / unmerged
     return children
 
 

@@ -24,6 +24,7 @@ depend on the prior). Without it nothing changes.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeVar, cast
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -88,6 +89,14 @@ class PolicyTable:
             object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=np.int64))
         object.__setattr__(self, "beliefs", np.asarray(self.beliefs, dtype=float))
 
+    @classmethod
+    def empty(cls, n_trust: int, boxes: BoxRows | None = None) -> PolicyTable:
+        """A table without exact rows (with `boxes`: a cluster policy's)."""
+        return cls(t=np.zeros(0, dtype=np.int64), x=np.zeros(0, dtype=np.int64),
+                   q=np.zeros(0, dtype=np.int64), beliefs=np.zeros((0, n_trust)),
+                   action=np.zeros(0, dtype=np.int64), projected=np.zeros(0, dtype=np.int64),
+                   boxes=boxes)
+
     @property
     def rows(self) -> int:
         return int(self.t.size)
@@ -99,6 +108,9 @@ BRUTE_FORCE_PAIRS = 256   # queries x stored rows below which nearest rows are f
 # the slack only absorbs a summation order that differs between batch shapes (a few ulps), far
 # below the distance between distinct beliefs of one (t, road, DFA state).
 EXACT_BELIEF_DISTANCE = 1e-12
+
+# A context's key parts: one context (an episode's decision) or a batch of them.
+KeyPart = TypeVar("KeyPart", int, np.ndarray)
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,7 +170,8 @@ class _BoxIndex:
             members = np.flatnonzero(inverse == g)
             lo, hi = self.rows.lo[first[g]:last[g]], self.rows.hi[first[g]:last[g]]      # [k, n]
             held = beliefs[members]                                                       # [m, n]
-            inside = ((lo[None] <= held[:, None]) & (held[:, None] <= hi[None])).all(axis=2)   # [m, k]
+            # [m, k]; all over an axis of a 3-d array is an array (the stubs allow a scalar)
+            inside = cast(np.ndarray, ((lo[None] <= held[:, None]) & (held[:, None] <= hi[None])).all(axis=2))
             value = np.where(inside, self.rows.value[first[g]:last[g]][None, :], -np.inf)
             best = value.argmax(axis=1)
             found = inside[np.arange(members.size), best]
@@ -196,7 +209,7 @@ class BeliefTablePolicy(RoutingPolicy):
             order = np.argsort(keys, kind="stable")
             self._boxes = _BoxIndex(keys=keys[order], rows=boxes.take(order))
 
-    def _key_tq(self, t: np.ndarray, x: np.ndarray, q: np.ndarray) -> np.ndarray:
+    def _key_tq(self, t: KeyPart, x: KeyPart, q: KeyPart) -> KeyPart:
         return (t * self._n_x + x) * self._n_q + q
 
     def _policy_beliefs(self, beliefs: np.ndarray) -> np.ndarray:
@@ -209,7 +222,7 @@ class BeliefTablePolicy(RoutingPolicy):
         total = weighted.sum(axis=1, keepdims=True)
         return np.where(total > 0, weighted / np.where(total > 0, total, 1.0), beliefs)
 
-    def _key_tqp(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    def _key_tqp(self, t: KeyPart, x: KeyPart, q: KeyPart, p: KeyPart) -> KeyPart:
         return self._key_tq(t, x, q) * self._n_p + p
 
     def exact_action_slots(self, t: np.ndarray, x: np.ndarray, q: np.ndarray, projected: np.ndarray,

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -32,6 +33,9 @@ from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 
 RESYNTH = "re-run trustroute synth to write both files again"
+
+TableT = TypeVar("TableT")
+PolicyT = TypeVar("PolicyT", bound=RoutingPolicy)
 
 
 @dataclass(frozen=True, eq=False)
@@ -195,34 +199,34 @@ class PolicyOrigin:
 
 
 @dataclass(frozen=True, eq=False)
-class TableKind:
+class TableKind(Generic[TableT, PolicyT]):
     """A kind of decision table: its row kinds (with the first file version holding each), how a
     table splits into them and is joined back, the file versions it is read from, its acting rule
     in words, the document keys it adds, and the routing policy acting on it."""
 
     kind: str | None                         # the document's `kind` (None: no such key)
-    table_type: type
+    table_type: type[TableT]
     blocks: tuple[tuple[RowKind, int], ...]
     versions: tuple[int, ...]
     acting_rule: str
     keys: tuple[str, ...]
-    split: Callable[[object], tuple]
-    join: Callable[[tuple], object]
-    document: Callable[[RoutingPolicy], dict]
-    policy: Callable[[object, PolicyOrigin], RoutingPolicy]
+    split: Callable[[TableT], tuple]
+    join: Callable[[tuple], TableT]
+    document: Callable[[PolicyT], dict]
+    policy: Callable[[TableT, PolicyOrigin], PolicyT]
     check: Callable[[dict, str], None]
 
     def block_names(self, version: int) -> tuple[str, ...]:
         """The arrays a file of `version` holds."""
         return tuple(name for rows, since in self.blocks if version >= since for name in rows.names)
 
-    def arrays(self, table) -> dict[str, np.ndarray]:
+    def arrays(self, table: TableT) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {}
         for (rows_kind, _), rows in zip(self.blocks, self.split(table), strict=True):
             out.update(rows_kind.arrays(rows))
         return out
 
-    def read(self, arrays: dict, version: int, context: ReadContext):
+    def read(self, arrays: dict, version: int, context: ReadContext) -> TableT:
         """The table from a file's arrays, each block checked in order (a block a file of `version`
         does not hold is None)."""
         return self.join(tuple(rows_kind.read(arrays, context) if version >= since else None
@@ -288,20 +292,21 @@ def check_guide_horizon(document: dict, where: str) -> None:
 # adds the box rows (possibly empty); a version 3 file is read without them, which the version 4
 # rule treats exactly as version 3 did. Joint files (their rule does not use the completion) are
 # read from version 2 on.
-PLAIN_TABLE = TableKind(
+PLAIN_TABLE: TableKind[PolicyTable, BeliefTablePolicy] = TableKind(
     kind=None, table_type=PolicyTable, blocks=((EXACT_ROWS, 3), (BOX_ROWS, 4)), versions=(3, 4),
     acting_rule=PLAIN_ACTING_RULE, keys=(), split=plain_split, join=plain_join,
     document=lambda policy: {}, policy=plain_policy, check=lambda document, where: None)
-JOINT_TABLE = TableKind(
+JOINT_TABLE: TableKind[JointPolicyTable, JointTablePolicy] = TableKind(
     kind="joint-belief", table_type=JointPolicyTable, blocks=((JOINT_ROWS, 2),), versions=(2, 3, 4),
     acting_rule=JOINT_ACTING_RULE, keys=("kind", "guide_horizon"), split=lambda table: (table,),
     join=lambda blocks: blocks[0],
     document=lambda policy: {"kind": "joint-belief", "guide_horizon": policy.guide_horizon},
     policy=joint_policy, check=check_guide_horizon)
-TABLE_KINDS: tuple[TableKind, ...] = (PLAIN_TABLE, JOINT_TABLE)
+# The kinds differ in their table and policy types: a kind found at run time is read as any kind.
+TABLE_KINDS: tuple[TableKind[Any, Any], ...] = (PLAIN_TABLE, JOINT_TABLE)
 
 
-def table_kind(table) -> TableKind:
+def table_kind(table) -> TableKind[Any, Any]:
     """The kind of a decision table, by its type."""
     for kind in TABLE_KINDS:
         if type(table) is kind.table_type:
@@ -309,7 +314,7 @@ def table_kind(table) -> TableKind:
     raise ValueError(f"no policy file kind holds a {type(table).__name__}")
 
 
-def document_table_kind(document: dict) -> TableKind | None:
+def document_table_kind(document: dict) -> TableKind[Any, Any] | None:
     """The kind a policy document names (None: a `kind` no table kind has)."""
     for kind in TABLE_KINDS:
         if document.get("kind") == kind.kind and ("kind" in document) == (kind.kind is not None):

@@ -19,6 +19,7 @@ import math
 import zipfile
 import zlib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -36,6 +37,7 @@ from trustroute.policies.routing.decision_tables import (
     TABLE_KINDS,
     PolicyOrigin,
     ReadContext,
+    TableKind,
     check_junction_count,
     document_table_kind,
     table_kind,
@@ -80,7 +82,8 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
     kind = table_kind(table)
     arrays = array_path(path)
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, **kind.arrays(table))
+    # Numeric arrays only: readers refuse pickles.
+    np.savez_compressed(buffer, allow_pickle=False, **kind.arrays(table))
     array_bytes = buffer.getvalue()
     # The arrays first, the JSON (which names their hash) last: the JSON is the commit mark.
     atomic_write_bytes(arrays, array_bytes, "policy array file", "pass a writable --out path")
@@ -151,6 +154,15 @@ def read_policy_document(path: str | Path) -> dict:
     return document
 
 
+def checked_table_kind(document: dict) -> TableKind[Any, Any]:
+    """The table kind of a document that read_policy_document accepted (it names a known kind)."""
+    kind = document_table_kind(document)
+    if kind is None:
+        raise AttributeError(f"policy document of unknown kind {str(document.get('kind'))[:30]!r}; "
+                             "read it with read_policy_document")
+    return kind
+
+
 def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverModel, spec: Spec):
     """The decision table of a policy file, verified: the hash its JSON records, a readable .npz
     without pickles, the arrays of its table kind with consistent shapes and integer types, and
@@ -166,7 +178,7 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
                             fix="keep the .npz next to the policy file, or re-run trustroute synth")
     if hashlib.sha256(data).hexdigest() != document.get("arrays_sha256"):
         raise InputError(where, "", "array file does not match its policy file (hash differs)", RESYNTH)
-    kind = document_table_kind(document)
+    kind = checked_table_kind(document)
     version = document.get("version", VERSION)
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as archive:
@@ -197,7 +209,7 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
                          f"(hash {str(made_for_population)[:12]}...) that is not the one given",
                          "pass the driver population it was made for (--population), or re-run "
                          "trustroute synth --population for this one")
-    if made_for_population is None and getattr(driver, "population_hash", ""):
+    if made_for_population is None and bool(getattr(driver, "population_hash", "")):
         raise InputError(where, "population_hash", "policy was synthesized for a single driver model, "
                          "not for a driver population", "pass the driver model it was made for "
                          "(--driver), or re-run trustroute synth --population")
@@ -215,7 +227,7 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
     table = read_policy_table(path.parent / document["arrays"], document, town, driver, spec)
     origin = PolicyOrigin(document=document, town=town, driver=driver, spec=spec,
                           reweight=prior_reweight(document, driver.n_trust, where))
-    return document_table_kind(document).policy(table, origin)
+    return checked_table_kind(document).policy(table, origin)
 
 
 def prior_reweight(document: dict, n_hidden: int, where: str = "policy file") -> np.ndarray | None:

@@ -123,11 +123,11 @@ def completion_distances(successors: list[list[int]], lengths: np.ndarray, next_
     distance = np.full((n_x, n_q), np.inf)
     hops = np.full((n_x, n_q), np.iinfo(np.int64).max, dtype=np.int64)
     queue: list[tuple[float, int, int, int]] = []
-    for q in np.flatnonzero(accepting):
+    for accepted in np.flatnonzero(accepting):
         for x in range(n_x):
-            distance[x, q] = 0.0
-            hops[x, q] = 0
-            queue.append((0.0, 0, x, int(q)))
+            distance[x, accepted] = 0.0
+            hops[x, accepted] = 0
+            queue.append((0.0, 0, x, int(accepted)))
     heapq.heapify(queue)
     while queue:
         dist, hop, x2, q2 = heapq.heappop(queue)
@@ -157,6 +157,9 @@ def completion_slots(successors: list[list[int]], lengths: np.ndarray, next_stat
                 # Strictly fewer hops among equal distances guarantees the greedy walk terminates.
                 if np.isfinite(key[0]) and (best is None or key < best[0]):
                     best = (key, slot)
+            if best is None:
+                raise TypeError(f"no successor of road {x} completes the spec from DFA state {q} "
+                                "though its distance is finite")
             next_slot[x, q] = best[1]
     return next_slot
 

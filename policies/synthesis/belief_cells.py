@@ -140,8 +140,8 @@ def suffix_cells(symbols: ObservationSymbols, k: int) -> SuffixCells:
     n_trust = symbols.likelihood.shape[1]
     words: list[tuple[int, ...]] = [()]
     vertices = [np.eye(n_trust)]
-    index = {(): 0}
-    frontier = [()]
+    index: dict[tuple[int, ...], int] = {(): 0}
+    frontier: list[tuple[int, ...]] = [()]
     for _ in range(k):
         grown = []
         for word in frontier:

@@ -159,8 +159,7 @@ def _cluster_order(tables: ProductTables, symbols: ObservationSymbols, horizon: 
 
 def _cluster_table(solution: ClusterSolution, n_trust: int) -> PolicyTable:
     """A policy table of box rows only (the exact-belief rule then reads the boxes)."""
-    return PolicyTable(t=[], x=[], q=[], beliefs=np.zeros((0, n_trust)), action=[], projected=[],
-                       boxes=solution.rows)
+    return PolicyTable.empty(n_trust, boxes=solution.rows)
 
 
 def _cluster_run(solution: ClusterSolution, upper: float, horizon: int,
@@ -175,8 +174,7 @@ def _by_graph_distance(problem: _Problem, horizon: int | None, never: bool) -> _
     """No route accepts within H junctions, whatever the labels: L = U = 0 without search."""
     note = ("graph distance: acceptance is unreachable" if never else
             f"graph distance: acceptance needs at least {problem.shortest} junctions")
-    table = PolicyTable(t=[], x=[], q=[], beliefs=np.zeros((0, problem.tables.pomdp.n_trust)),
-                        action=[], projected=[])
+    table = PolicyTable.empty(problem.tables.pomdp.n_trust)
     run = GraphDistanceRun(horizon=horizon, abstraction_bound=note,
                            root_dfa_states=problem.roots_q)
     return _Answer(0.0, 0.0, table, 0.0, (run,),
@@ -228,8 +226,9 @@ def _unbounded_clusters(problem: _Problem, symbols: ObservationSymbols, upper: f
     first cap (more junctions to come back to a waypoint usually lift L most), then larger
     caps at the best horizon; the one of the largest L above `lower`, if any."""
     budget, tau = problem.budget, problem.tau
-    best, best_depth = None, None
-    rounds = [(problem.shortest + slack, UNBOUNDED_CLUSTER_CAPS[:1]) for slack in UNBOUNDED_CLUSTER_SLACK]
+    best: tuple[ClusterSolution, int] | None = None      # (solution, its depth)
+    rounds: list[tuple[int, tuple[int, ...]]] = [(problem.shortest + slack, UNBOUNDED_CLUSTER_CAPS[:1])
+                                                 for slack in UNBOUNDED_CLUSTER_SLACK]
     while rounds:
         depth, caps = rounds.pop(0)
         if upper - lower <= tau or budget.expired(until):
@@ -241,10 +240,10 @@ def _unbounded_clusters(problem: _Problem, symbols: ObservationSymbols, upper: f
         runs.append(_cluster_run(found, upper, depth, tried))
         problem.report(found.lower, upper)
         if found.lower > lower:
-            best, best_depth, lower = found, depth, found.lower
+            best, lower = (found, depth), found.lower
         if not rounds and best is not None and len(caps) == 1:
-            rounds.append((best_depth, UNBOUNDED_CLUSTER_CAPS))
-    return best
+            rounds.append((best[1], UNBOUNDED_CLUSTER_CAPS))
+    return None if best is None else best[0]
 
 
 @dataclass(frozen=True, eq=False)
@@ -396,6 +395,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     else:
         answer = _unbounded(problem)
     lower, upper, table = answer.lower, answer.upper, answer.table
+    if table is None:
+        raise AttributeError("the synthesis ended without a policy table")
     policy = BeliefTablePolicy(table, pomdp.town, spec, lower=lower, upper=upper, horizon=horizon)
     stats = SynthesisStats(
         belief_rule=belief_rule, converged=bool(upper - lower <= tau), tau=tau, runs=answer.runs,

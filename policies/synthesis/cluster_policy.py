@@ -323,16 +323,17 @@ def best_cluster_solution(tables: ProductTables, symbols: ObservationSymbols, ro
     clusters times the ratio of the caps) to end before the deadline within MEMORY_BUDGET.
     Returns (the solution of the largest L, the smallest U of all, a record per cap tried)."""
     best: ClusterSolution | None = None
+    previous: ClusterSolution | None = None       # the last cap's solution
     upper = 1.0
     tried: list[ClusterAttempt] = []
     budget = TimeBudget.until(deadline)
     for cap in caps:
-        if best is not None:
-            if upper - best.lower <= tau or (enough is not None and best.lower >= enough):
-                break
-            growth = cap / tried[-1].cap
-            if (not budget.fits(growth * tried[-1].seconds)
-                    or growth * tried[-1].clusters * BYTES_PER_CLUSTER > MEMORY_BUDGET):
+        if best is not None and (upper - best.lower <= tau or (enough is not None and best.lower >= enough)):
+            break
+        if previous is not None:
+            growth = cap / previous.cap
+            if (not budget.fits(growth * previous.seconds)
+                    or growth * previous.clusters * BYTES_PER_CLUSTER > MEMORY_BUDGET):
                 break
         solution = solve_clusters(tables, symbols, roots_q, horizon, cap, deadline)
         if solution is None:
@@ -344,4 +345,5 @@ def best_cluster_solution(tables: ProductTables, symbols: ObservationSymbols, ro
         upper = min(upper, solution.upper)
         if best is None or solution.lower > best.lower:
             best = solution
+        previous = solution
     return best, upper, tried

@@ -90,9 +90,10 @@ def abstract_mdp(abstraction: Abstraction, deadline: float) -> tuple[ChoiceMDP, 
                 continue
             outcomes = np.array(symbols.by_incident[int(road_incident[x2])], dtype=np.int64)
             # main choices (x, q, c, a, v): one per live q, cell, existing vertex
-            qq, cc, vv = np.meshgrid(live_q, np.arange(n_c), np.arange(mask.shape[1]), indexing="ij")
-            ok = mask[cc, vv]
-            qq, cc, vv = qq[ok], cc[ok], vv[ok]
+            grid_q, grid_c, grid_v = np.meshgrid(live_q, np.arange(n_c), np.arange(mask.shape[1]),
+                                                 indexing="ij")
+            ok = mask[grid_c, grid_v]
+            qq, cc, vv = grid_q[ok], grid_c[ok], grid_v[ok]
             ids = n_choices + np.arange(qq.size)
             n_choices += qq.size
             choice_state.append(main_index(x, qq, cc))
@@ -108,11 +109,11 @@ def abstract_mdp(abstraction: Abstraction, deadline: float) -> tuple[ChoiceMDP, 
             return None
         for o in symbols.by_incident[int(road_incident[x2])]:
             for bits in range(abstraction.possible_bits.shape[2]):
-                cc = np.flatnonzero(abstraction.possible_bits[:, o, bits])
-                if cc.size == 0:
+                possible_c = np.flatnonzero(abstraction.possible_bits[:, o, bits])
+                if possible_c.size == 0:
                     continue
-                qq, cg = np.meshgrid(live_q, cc, indexing="ij")
-                qq, cg = qq.ravel(), cg.ravel()
+                pair_q, pair_c = np.meshgrid(live_q, possible_c, indexing="ij")
+                qq, cg = pair_q.ravel(), pair_c.ravel()
                 q2 = tables.next_q[qq, x2, bits]
                 ids = n_choices + np.arange(qq.size)
                 n_choices += qq.size

@@ -15,6 +15,7 @@ import numpy as np
 
 from trustroute.policies.routing.aware_table import PolicyTable
 from trustroute.policies.synthesis.belief_graph import EXPANDED, FREE
+from trustroute.policies.synthesis.event_graph import EventGraph
 from trustroute.policies.synthesis.expansion import BeliefSearch
 
 
@@ -29,7 +30,7 @@ def policy_table(search: BeliefSearch) -> tuple[PolicyTable, int]:
     action = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
     assert nodes.size == int((g.kind[: g.n] == EXPANDED).sum())
     if search.events is not None and not search.events.chains_only:
-        return junction_table(search, nodes, action, g.lower[nodes])
+        return junction_table(search, search.events, nodes, action, g.lower[nodes])
     # plain, or chains: a move is a junction slot, and the roads down a chain have one
     # junction each (no row needed), so the rows are the expanded nodes' own
     return PolicyTable(t=g.level[nodes], x=g.x[nodes], q=g.q[nodes], beliefs=g.belief[nodes],
@@ -69,8 +70,8 @@ def _offer_path(search: BeliefSearch, contexts: _Contexts, single: np.ndarray, n
                        rank if rank == 2 or i == 0 else 1, slot)
 
 
-def junction_table(search: BeliefSearch, nodes: np.ndarray, action: np.ndarray, value: np.ndarray
-                   ) -> tuple[PolicyTable, int]:
+def junction_table(search: BeliefSearch, events: EventGraph, nodes: np.ndarray, action: np.ndarray,
+                   value: np.ndarray) -> tuple[PolicyTable, int]:
     """The policy's rows junction by junction from its macro moves (docs/synthesis.md, "The
     event graph"): a row per road of the chosen move's path, at the junction count the vehicle
     is there, with the node's q, p and belief (none of them moves on quiet roads).
@@ -80,7 +81,7 @@ def junction_table(search: BeliefSearch, nodes: np.ndarray, action: np.ndarray, 
     trust-free completion of a FREE node passing there). Every candidate's L is a lower bound
     of following it, so the policy is worth at least L. Also returns how many contexts had
     candidates of different slots (the run's row_conflicts)."""
-    g, events = search.graph, search.events
+    g = search.graph
     contexts = _Contexts()
     single = (search.tables.successors >= 0).sum(axis=1) == 1
     for node, a, v in zip(nodes.tolist(), action.tolist(), value.tolist(), strict=True):
@@ -95,7 +96,7 @@ def junction_table(search: BeliefSearch, nodes: np.ndarray, action: np.ndarray, 
     keys = [key for key in contexts.best if key in contexts.has_row]
     beliefs = (np.array([np.frombuffer(key[4], dtype=float) for key in keys]) if keys
                else np.zeros((0, g.belief.shape[1])))
-    out_t, out_x, out_q, out_p = ([key[j] for key in keys] for j in range(4))
-    out_a = [contexts.best[key][2] for key in keys]
+    out_t, out_x, out_q, out_p = (np.array([key[j] for key in keys], dtype=np.int64) for j in range(4))
+    out_a = np.array([contexts.best[key][2] for key in keys], dtype=np.int64)
     return PolicyTable(t=out_t, x=out_x, q=out_q, beliefs=beliefs, action=out_a,
                        projected=out_p), conflicts

@@ -17,8 +17,11 @@ PolicyT = TypeVar("PolicyT")
 class Statistics(Protocol):
     """What every synthesis' statistics have: convergence, the policy's rows, and their JSON."""
 
-    converged: bool
-    policy_rows: int
+    @property
+    def converged(self) -> bool: ...
+
+    @property
+    def policy_rows(self) -> int: ...
 
     def to_dict(self) -> dict: ...
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 
@@ -62,6 +63,17 @@ def build_abstraction(tables: ProductTables, symbols: ObservationSymbols, cells:
         np.einsum("cvk,ok->ovc", cells.vertices, symbols.likelihood))
     return Abstraction(tables=tables, symbols=symbols, cells=cells, possible_bits=possible,
                        vertex_likelihood=vertex_likelihood)
+
+
+@overload
+def abstract_backup(abstraction: Abstraction, value_next: np.ndarray, deadline: None = None) -> np.ndarray:
+    ...
+
+
+@overload
+def abstract_backup(abstraction: Abstraction, value_next: np.ndarray,
+                    deadline: float | None) -> np.ndarray | None:
+    ...
 
 
 def abstract_backup(abstraction: Abstraction, value_next: np.ndarray,

@@ -258,7 +258,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         else:
             grow = open_ & ~nodes["frozen"] if "frozen" in nodes else open_
         follow = np.full(grow.size, -1, dtype=np.int64)
-        if "guided" in nodes and not stopped:
+        if guide is not None and "guided" in nodes and not stopped:
             along = open_ & nodes["guided"]
             follow[along] = guide.policy_slots(level, nodes["x"][along], nodes["joint"][along])
         cut_total += int((open_ & ~grow).sum())
@@ -286,9 +286,9 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
 
     # Backward: leaves by their bounds, expanded nodes by the best action's expectation.
     n_levels = len(levels)
-    lower = upper = None
-    decided: list[tuple[int, np.ndarray, np.ndarray]] = []     # (level, nodes, slot)
-    for level in range(n_levels - 1, -1, -1):
+
+    def level_leaf_bounds(level: int) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) of a level's nodes with its leaves valued by their bounds."""
         nodes = levels[level]
         left = depth - level
         low, high = leaf_bounds(nodes["x"], nodes["joint"], left)
@@ -297,10 +297,15 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         leaf &= filter_.masses(nodes["joint"])[2] > 0
         if open_loop and leaf.any() and (horizon is None or left > 0):
             low[leaf] = np.maximum(low[leaf], open_loop_lower(nodes["x"][leaf], nodes["joint"][leaf], left))
-        if level < n_levels - 1:
-            low, high, slot = _back_up(edges[level], expandable[level], guided_slot[level], slots,
-                                       lower, upper, low, high)
-            decided.append((level, np.flatnonzero(expandable[level]), slot[expandable[level]]))
+        return low, high
+
+    lower, upper = level_leaf_bounds(n_levels - 1)
+    decided: list[tuple[int, np.ndarray, np.ndarray]] = []     # (level, nodes, slot)
+    for level in range(n_levels - 2, -1, -1):
+        low, high = level_leaf_bounds(level)
+        low, high, slot = _back_up(edges[level], expandable[level], guided_slot[level], slots,
+                                   lower, upper, low, high)
+        decided.append((level, np.flatnonzero(expandable[level]), slot[expandable[level]]))
         lower, upper = low, high
     decided.sort(key=lambda item: item[0])
     n_t, n_q = pomdp.n_trust, filter_.n_q
