@@ -28,7 +28,6 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from trustroute.core.packaged import packaged_spec_path
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.networks.town import Town, load_town
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DriverModel, load_driver_model
@@ -107,19 +106,17 @@ def _as_driver(driver: DriverModel | str | Path | None) -> DriverModel:
 
 
 def _as_spec(spec: Spec | str | Path, town: Town) -> Spec:
-    if isinstance(spec, Spec):
-        return spec
-    path = Path(spec)
-    return load_spec(path if path.is_file() else packaged_spec_path(str(spec)) or path, town)
+    return spec if isinstance(spec, Spec) else load_spec(spec, town)
 
 
 class TrustRoutingEnv(gymnasium.Env):
     """Route the AV through a town so that an scLDTL spec is satisfied; reward 1 on acceptance.
 
-    spec: a Spec, a spec file or a packaged spec name ("phi1"). town, driver: objects, files, or
-    None for the packaged ones (the driver model is both the AV's filter model and the synthetic
-    driver's). engine: "model" (fast, no SUMO) or "sumo" (libsumo). junction_cap: the episode is
-    truncated after this many junctions. belief_rule: the AV's filter ("bayes" or "paper").
+    spec: a Spec, a spec file or a packaged spec name ("phi1"). town, driver: objects, files,
+    packaged names ("pentagon", "driver_model_performance"), or None for the packaged defaults
+    (the driver model is both the AV's filter model and the synthetic driver's). engine: "model"
+    (fast, no SUMO) or "sumo" (libsumo). junction_cap: the episode is truncated after this many
+    junctions. belief_rule: the AV's filter ("bayes" or "paper").
     report_accuracy: the synthetic driver's trust-report accuracy (reports are logged only).
 
     Observation (Dict): "road" (index into town.states), "dfa_state" (the spec's DFA state after

@@ -38,6 +38,7 @@ from trustroute.core.fields import (
     check_value,
     keys,
 )
+from trustroute.core.packaged import SPECS
 from trustroute.core.validation import parse_toml, read_text
 from trustroute.networks.town import Town
 from trustroute.policies.logic.formula import (
@@ -454,9 +455,11 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
 
 
 def load_spec(path: str | Path, town: Town | None = None) -> Spec:
-    """Load and validate a spec file (through the guarded reader, trustroute/core/validation.py); with
-    `town`, also check its roads against the town."""
-    text = read_text(path, str(path), "the spec file", "pass an existing .toml file, e.g. specs/phi1.toml")
+    """Load and validate a spec file or a packaged spec by name (trustroute/core/packaged.py),
+    through the guarded reader (trustroute/core/validation.py); with `town`, also check its roads
+    against the town."""
+    path = SPECS.resolve(path)   # a file, or a packaged spec by name ("phi1")
+    text = read_text(path, str(path), "the spec file", SPECS.fix())
     return spec_from_text(text, str(path), town)
 
 
