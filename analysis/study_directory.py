@@ -1,5 +1,6 @@
 """Reading a consolidated study directory: its manifest, episodes and roads (through
-trustroute.core.dataset), and the town, driver model and specs its config names.
+trustroute.core.dataset), and the town, driver model and specs its config names (the directory's
+own copies, wherever it has been copied).
 
 Every analysis of a study starts here: the study tables, the real-study analysis, and fitting
 driver models to the logs.
@@ -15,9 +16,15 @@ from trustroute.core.dataset import read_episodes, read_manifest, read_roads
 
 
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
-    """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset."""
+    """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset;
+    the manifest's config names the study directory's own copies of its inputs (absolute paths
+    where the directory is now, harness/study/inputs.py), checked against their hashes."""
+    from trustroute.harness.study.inputs import relocated_config, verify_inputs
+
     study_dir = Path(study_dir)
     manifest = read_manifest(study_dir)
+    verify_inputs(manifest, study_dir)
+    manifest = {**manifest, "config": relocated_config(manifest.get("config") or {}, study_dir)}
     return manifest, read_episodes(study_dir), read_roads(study_dir)
 
 
