@@ -233,7 +233,7 @@ STUDY_FIELDS: tuple[Field, ...] = (
     Field(key="engine", kind=OneOf(choices=ENGINES, noun="engine"), default="sumo",
           fix=f"use one of {', '.join(repr(e) for e in ENGINES)}"),
     Field(key="specs", kind=_ENTRIES, required=True,
-          fix='write specs = ["specs/phi1.toml", "specs/phi2.toml"]'),
+          fix='write specs = ["phi1", "phi2"] (packaged specs) or spec file paths'),
     Field(key="conditions", kind=_ENTRIES, required=True, fix='write conditions = ["aware", "free"]'),
     Field(key="name", kind=Text(), fix='write name = "paper"'),  # default: the config file's stem
     Field(key="town", kind=_FILE, problem=_file_path, fix=FILE_FIX["town"]),

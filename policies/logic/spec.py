@@ -196,7 +196,7 @@ TYPE_BELIEF_EXAMPLE = 'write [type_beliefs] then nontruster = { types = ["flat"]
 def _string(key: str) -> Field:
     return Field(key=key, kind=Text(nonempty=False), required=True, problem=f"'{key}' must be a string",
                  fix=f'write {key} = "..."', missing_fix=f'add {key} = "..." at the top of the file (see '
-                 'specs/phi1.toml)')
+                 f'{SPECS.path("phi1") or "the packaged specs"})')
 
 
 FIELDS: tuple[Field, ...] = (

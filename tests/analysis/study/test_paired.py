@@ -41,3 +41,31 @@ def test_paired_display_names_the_reason_beside_an_unbounded_odds_ratio():
         if "inf" in text:
             assert "discordant pairs favour aware" in note
         assert "inf [" not in text  # the estimate itself is finite
+
+
+def test_the_report_shows_no_unbounded_odds_ratio_without_its_reason(model_study, capsys):
+    import json
+    import re
+
+    from tests.cli import run_cli
+
+    code, out, err = run_cli(capsys, "analyze", str(model_study), "--json", "--report")
+    assert code == 0, err
+    payload = json.loads(out)
+    for row in payload["paired"]:
+        for key in ("odds_ratio", "or_low", "or_high"):
+            value = row.get(key)
+            if value is not None and (value == math.inf or value == 0.0):
+                assert "discordant pairs favour" in row["or_note"], row
+        if row.get("odds_ratio") is not None:
+            assert math.isfinite(row["odds_ratio"])
+    for row in payload["repeated_measures"]:
+        if row["estimate"] is not None:
+            assert math.isfinite(row["estimate"]) and row["estimate"] < 1e6, row
+            if row["high"] == math.inf or row["low"] == 0.0:
+                assert "separation" in row["note"], row
+    for cell in payload["cells"]:   # probabilities and their intervals lie in [0, 1]
+        assert 0.0 <= cell["ci_low"] <= cell["satisfaction_rate"] <= cell["ci_high"] <= 1.0
+    html = (model_study / "report.html").read_text()
+    intervals = re.findall(r"\[(-?[\d.]+|inf), (-?[\d.]+|inf)\]", html)
+    assert intervals and all(float(v) < 1e6 for pair in intervals for v in pair if v != "inf")
