@@ -159,12 +159,15 @@ def median_unbiased_proportion(k: int, n: int) -> float:
     return 1.0 / (1.0 + math.exp(-midpoint))
 
 
+NO_DISCORDANCE = "no discordant pair (equal outcomes under both): no odds ratio is estimable"
+
+
 def exact_odds_ratio(b: int, c: int, level: float = DEFAULT_LEVEL) -> Estimate:
     """The odds ratio of matched pairs from the binomial of b among the b + c discordant pairs:
     the median-unbiased estimate with the exact interval of the Clopper–Pearson interval of
     b / (b + c); finite estimate even when b or c is 0 (where b / c is 0 or infinite)."""
     if b + c == 0:
-        return Estimate(math.nan, math.nan, math.nan, "no discordant pair")
+        return Estimate(math.nan, math.nan, math.nan, NO_DISCORDANCE)
     low, high = rate_interval(b, b + c, level, "exact")
     return Estimate(_odds(median_unbiased_proportion(b, b + c)), _odds(low), _odds(high))
 
@@ -184,13 +187,13 @@ def conditional_odds_ratio(
 ) -> Estimate:
     """b / c with the exact interval from the Clopper–Pearson interval of b / (b + c).
 
-    No discordant pair: (nan, nan, nan). When b or c is 0 (separation) b / c says nothing, so the
-    estimate is the median-unbiased one of `exact_odds_ratio`, with the reason in the note; the
-    interval is then unbounded on one side (upper bound inf, or lower bound 0). `sides` name the
-    first and the second sample in the note."""
+    No discordant pair: (nan, nan, nan) with the reason. When b or c is 0 (separation) b / c says
+    nothing, so the estimate is the median-unbiased one of `exact_odds_ratio`, with the reason in
+    the note; the interval is then unbounded on one side (upper bound inf, or lower bound 0).
+    `sides` name the first and the second sample in the note."""
     b, c = table.only_first, table.only_second
     if b + c == 0:
-        return Estimate(math.nan, math.nan, math.nan)
+        return Estimate(math.nan, math.nan, math.nan, NO_DISCORDANCE)
     low, high = rate_interval(b, b + c, level, "exact")
     if b == 0 or c == 0:
         exact = exact_odds_ratio(b, c, level)
@@ -442,15 +445,22 @@ def conditional_logit(
 
     y = np.asarray(outcome, dtype=float)
     groups = np.asarray(participant)
+    treated = np.asarray(treated, dtype=float)
+    observations = int(y.size)
+    keep, dropped = _constant_strata(y, strata)
+    if dropped:
+        y, groups, treated = y[keep], groups[keep], treated[keep]
+        strata = np.asarray(strata)[keep]
     informative = {g for g in np.unique(groups) if 0 < y[groups == g].sum() < (groups == g).sum()}
-    base = ModelEffect("conditional logit", "condition", groups=len(informative), observations=int(y.size))
+    base = ModelEffect("conditional logit", "condition", groups=len(informative), observations=observations,
+                       note=dropped)
     if not informative:
-        return _replace(base, note="no participant had different outcomes between episodes")
+        return _replace(base, note=_joined("no participant had different outcomes between episodes", dropped))
     exog = _design(treated, strata)
     found = separation(y, exog, groups)
     if found.kind != "none":
-        return _separated_effect(base, found, matched_discordance(y, treated, groups, strata), level,
-                                sides)
+        effect = _separated_effect(base, found, matched_discordance(y, treated, groups, strata), level, sides)
+        return _replace(effect, note=_joined(effect.note, dropped))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -458,13 +468,35 @@ def conditional_logit(
         beta, se = float(result.params[0]), float(result.bse[0])
         p = float(result.pvalues[0])
     except (np.linalg.LinAlgError, ValueError) as exc:
-        return _replace(base, note=f"fit failed ({type(exc).__name__})")
+        return _replace(base, note=_joined(f"fit failed ({type(exc).__name__})", dropped))
     if not (math.isfinite(beta) and math.isfinite(se)):
-        return _replace(base, note="the fit did not converge")
+        return _replace(base, note=_joined("the fit did not converge", dropped))
     z = stats.norm.ppf(0.5 + level / 2)
     return _replace(
         base, estimate=math.exp(beta), low=math.exp(beta - z * se), high=math.exp(beta + z * se), p_value=p
     )
+
+
+def _joined(*notes: str) -> str:
+    return "; ".join(n for n in notes if n)
+
+
+def _constant_strata(y: np.ndarray, strata: np.ndarray | None) -> tuple[np.ndarray, str]:
+    """Rows to keep, and a note naming the strata left out: a stratum (spec) whose outcomes are all
+    equal has an infinite effect (quasi-separation of its dummy) and, at that limit, tells nothing
+    about the condition, so the fit without it is the limit of the fit with it."""
+    keep = np.ones(y.size, dtype=bool)
+    if strata is None:
+        return keep, ""
+    levels = np.asarray(strata)
+    constant = [level for level in dict.fromkeys(levels.tolist())
+                if len(np.unique(y[levels == level])) == 1]
+    if not constant or len(constant) == len(set(levels.tolist())):
+        return keep, ""   # all constant: no participant differs, said by the caller
+    keep = ~np.isin(levels, constant)
+    return keep, "; ".join(
+        f"{level} left out (every episode {'satisfied' if y[levels == level][0] == 1 else 'unsatisfied'}:"
+        " no discordance, an infinite effect of its own)" for level in constant)
 
 
 def mixed_trust_model(

@@ -327,3 +327,26 @@ def test_conditional_logit_without_separation_matches_statsmodels():
     z = stats.norm.ppf(0.975)
     assert effect.high == pytest.approx(math.exp(fit.params[0] + z * fit.bse[0]))
     assert effect.p_value == pytest.approx(fit.pvalues[0])
+
+
+def test_a_stratum_without_discordance_is_left_out_with_its_reason():
+    from statsmodels.discrete.conditional_models import ConditionalLogit
+
+    # phi1: 5 pairs favour A, 2 favour B; phi2: every episode satisfied (its dummy is separated)
+    pattern = [[(1, 0), (1, 1)]] * 5 + [[(0, 1), (1, 1)]] * 2 + [[(0, 0), (1, 1)]] * 8
+    outcome, treated, participant, spec = _paired_design(pattern)
+    effect = conditional_logit(outcome, treated, participant, spec)
+    assert "1 left out (every episode satisfied" in effect.note and effect.observations == outcome.size
+    # the limit of the full fit: the fit on the stratum with discordance, which is b / c here
+    first = spec == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # statsmodels drops the participants without variance
+        alone = ConditionalLogit(outcome[first], treated[first][:, None],
+                                 groups=participant[first]).fit(disp=False)
+    assert effect.estimate == pytest.approx(math.exp(alone.params[0])) == pytest.approx(5 / 2, rel=1e-4)
+    assert effect.p_value == pytest.approx(alone.pvalues[0])
+
+
+def test_paired_odds_ratio_without_discordant_pairs_says_why():
+    odds = conditional_odds_ratio(PairedTable(8, 0, 0, 4))
+    assert math.isnan(odds.value) and "no discordant pair" in odds.note
