@@ -175,11 +175,8 @@ def exact_odds_ratio(b: int, c: int, level: float = DEFAULT_LEVEL) -> Estimate:
 def one_sided_reason(b: int, c: int, first: str = "A", second: str = "B") -> str:
     """Why a paired odds ratio is median-unbiased: every discordant pair favours one side."""
     side = first if c == 0 else second
-    return (
-        f"all {b + c} discordant pairs favour {side} (separation: b / c is "
-        f"{'infinite' if c == 0 else '0'}); median-unbiased estimate, exact interval unbounded "
-        f"{'above' if c == 0 else 'below'}"
-    )
+    return (f"all {b + c} discordant pairs favour {side} (b / c = {'inf' if c == 0 else '0'}): "
+            f"median-unbiased OR, exact CI open {'above' if c == 0 else 'below'}")
 
 
 def conditional_odds_ratio(
@@ -412,16 +409,15 @@ def _separated_effect(base: ModelEffect, found: Separation, discordance: tuple[i
     """The estimable effect on separated data: the exact conditional odds ratio of the matched pairs."""
     b, c, unmatched = discordance
     side = sides[0] if found.favours == "treated" else sides[1]
-    reason = (f"{found.kind} separation: every informative contrast favours {side} ({b} / {c} "
-              "discordant pairs), so the conditional logit's odds ratio is infinite")
+    kind = "complete separation" if found.kind == "complete" else "quasi-separation"
+    reason = f"{kind}, all {b + c} discordant pairs ({b} / {c}) favour {side}: the logit's OR is infinite"
     if unmatched or b + c == 0:
         return replace(base, note=f"{reason}; no exact estimate (episodes not in matched pairs)")
     exact = exact_odds_ratio(b, c, level)
     p = float(stats.binomtest(b, b + c, 0.5).pvalue)
     return replace(
         base, model=EXACT_MODEL, estimate=exact.value, low=exact.low, high=exact.high, p_value=p,
-        note=f"{reason}; shown: median-unbiased estimate and exact (Clopper-Pearson) interval "
-        f"from the binomial of the {b + c} discordant pairs, unbounded "
+        note=f"{reason}; shown: the matched pairs' exact median-unbiased OR, CI open "
         f"{'above' if c == 0 else 'below'}",
     )
 

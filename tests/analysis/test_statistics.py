@@ -312,7 +312,7 @@ def test_conditional_logit_on_separated_data_reports_the_exact_effect_and_why():
     assert math.isfinite(effect.estimate) and effect.high == math.inf
     assert effect.low == pytest.approx(exact_odds_ratio(6, 0).low) and effect.low > 1
     assert effect.p_value == pytest.approx(2 * 0.5**6)  # the exact two-sided binomial test
-    assert "separation" in effect.note and "favours aware" in effect.note and "6 / 0" in effect.note
+    assert "separation" in effect.note and "favour aware" in effect.note and "(6 / 0)" in effect.note
 
 
 def test_conditional_logit_without_separation_matches_statsmodels():
