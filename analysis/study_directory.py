@@ -18,7 +18,7 @@ from trustroute.core.dataset import read_episodes, read_manifest, read_roads
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset;
     the manifest's config names the study directory's own copies of its inputs (absolute paths
-    where the directory is now, harness/study/inputs.py), checked against their hashes."""
+    where the directory lies, harness/study/inputs.py), checked against their hashes."""
     from trustroute.harness.study.inputs import relocated_config, verify_inputs
 
     study_dir = Path(study_dir)

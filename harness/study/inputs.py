@@ -15,7 +15,7 @@ need not repeat exactly).
 The manifest's `config` names the copies by paths relative to the study directory, and its
 `inputs` lists each copy's path and SHA-256 with the file it was copied from (provenance, never
 read). `relocated_config` turns the manifest's config into absolute paths in the directory where
-the study is now; `verify_inputs` checks every copy against its recorded hash.
+the study lies; `verify_inputs` checks every copy against its recorded hash.
 """
 
 from __future__ import annotations
@@ -125,7 +125,7 @@ def store_inputs(study_dir: Path, config: StudyConfig) -> tuple[dict, dict]:
     for path in _cached_policies(config):
         store.file(path, policies)
     recorded["policy_cache"] = POLICIES_DIR
-    recorded["output"] = None   # wherever the directory is now
+    recorded["output"] = None   # the directory is wherever it is copied to
     if Path(config.source_path).is_file():
         recorded["source_path"] = store.file(config.source_path)
     return recorded, {"dir": INPUTS_DIR, "files": store.record}

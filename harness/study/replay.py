@@ -94,7 +94,7 @@ def check_same_code(manifest: dict, config: StudyConfig, study_dir: Path) -> Non
             )
     if manifest.get("inputs"):
         # the study carries its inputs (harness/study/inputs.py): they are checked by their hashes,
-        # wherever the directory now is (the config hash covers the paths it was run with)
+        # wherever the directory lies (the config hash covers the paths it was run with)
         from trustroute.harness.study.inputs import verify_inputs
 
         verify_inputs(manifest, study_dir)
