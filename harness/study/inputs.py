@@ -36,47 +36,44 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-class _Store:
-    """Copies files into `study_dir/inputs` and records them (relative path -> sha256, source)."""
+# What a study directory holds of its inputs: relative path -> {"sha256": ..., "source": ...}.
+Record = dict[str, dict[str, str]]
 
-    def __init__(self, study_dir: Path) -> None:
-        self.study_dir = study_dir
-        self.record: dict[str, dict[str, str]] = {}
 
-    def _keep(self, target: Path, source: str) -> str:
-        relative = target.relative_to(self.study_dir).as_posix()
-        self.record[relative] = {"sha256": _sha256(target), "source": source}
-        return relative
+def _write(study_dir: Path, record: Record, data: bytes, name: str, source: str,
+           folder: Path | None = None) -> str:
+    """Store `data` as `name` in `folder` (default: inputs/<its content hash>); its relative path."""
+    folder = folder or study_dir / INPUTS_DIR / hashlib.sha256(data).hexdigest()[:16]
+    target = folder / name
+    if not (target.is_file() and target.read_bytes() == data):
+        from trustroute.core.output_files import atomic_write_bytes
 
-    def _write(self, data: bytes, name: str, source: str, folder: Path | None = None) -> str:
-        folder = folder or self.study_dir / INPUTS_DIR / hashlib.sha256(data).hexdigest()[:16]
-        target = folder / name
-        if not (target.is_file() and target.read_bytes() == data):
-            from trustroute.core.output_files import atomic_write_bytes
+        folder.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(target, data, "study input copy", "free disk space in the study directory")
+    relative = target.relative_to(study_dir).as_posix()
+    record[relative] = {"sha256": hashlib.sha256(data).hexdigest(), "source": source}
+    return relative
 
-            folder.mkdir(parents=True, exist_ok=True)
-            atomic_write_bytes(target, data, "study input copy", "free disk space in the study directory")
-        return self._keep(target, source)
 
-    def file(self, path: str | Path, folder: Path | None = None) -> str:
-        """Store one file (and a policy file's decision table beside it); its relative path."""
-        path = Path(path)
-        data = path.read_bytes()
-        relative = self._write(data, path.name, str(path), folder)
-        table = path.with_suffix(".npz")
-        if path.suffix == ".json" and table.is_file():
-            self._write(table.read_bytes(), table.name, str(table), (self.study_dir / relative).parent)
-        return relative
+def _store_file(study_dir: Path, record: Record, path: str | Path, folder: Path | None = None) -> str:
+    """Store one file (and a policy file's decision table beside it); its relative path."""
+    path = Path(path)
+    relative = _write(study_dir, record, path.read_bytes(), path.name, str(path), folder)
+    table = path.with_suffix(".npz")
+    if path.suffix == ".json" and table.is_file():
+        _write(study_dir, record, table.read_bytes(), table.name, str(table), (study_dir / relative).parent)
+    return relative
 
-    def population(self, path: str) -> str:
-        """A population file, with its models inline when its types name model files."""
-        raw = json.loads(Path(path).read_text())
-        if not any(isinstance(t, dict) and "model_file" in t for t in raw.get("types", [])):
-            return self.file(path)
-        from trustroute.participants.driver_population import load_driver_population
 
-        text = json.dumps(load_driver_population(path).to_dict(), indent=2) + "\n"
-        return self._write(text.encode(), Path(path).name, path)
+def _store_population(study_dir: Path, record: Record, path: str) -> str:
+    """A population file, with its models inline when its types name model files."""
+    raw = json.loads(Path(path).read_text())
+    if not any(isinstance(t, dict) and "model_file" in t for t in raw.get("types", [])):
+        return _store_file(study_dir, record, path)
+    from trustroute.participants.driver_population import load_driver_population
+
+    text = json.dumps(load_driver_population(path).to_dict(), indent=2) + "\n"
+    return _write(study_dir, record, text.encode(), Path(path).name, path)
 
 
 def _cached_policies(config: StudyConfig) -> list[Path]:
@@ -112,23 +109,24 @@ def store_inputs(study_dir: Path, config: StudyConfig) -> tuple[dict, dict]:
     from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
 
     study_dir = Path(study_dir)
-    store = _Store(study_dir)
+    record: Record = {}
     recorded = json.loads(json.dumps(asdict(config), default=str))
-    recorded["specs"] = [store.file(p) for p in config.specs]
-    recorded["conditions"] = [c if c in NAMED_CONDITIONS else store.file(c) for c in config.conditions]
-    recorded["town"] = store.file(config.town or DEFAULT_TOWN_PATH)
-    recorded["driver_model"] = store.file(config.driver_model or DEFAULT_DRIVER_MODEL_PATH)
+    recorded["specs"] = [_store_file(study_dir, record, p) for p in config.specs]
+    recorded["conditions"] = [c if c in NAMED_CONDITIONS else _store_file(study_dir, record, c)
+                              for c in config.conditions]
+    recorded["town"] = _store_file(study_dir, record, config.town or DEFAULT_TOWN_PATH)
+    recorded["driver_model"] = _store_file(study_dir, record,
+                                           config.driver_model or DEFAULT_DRIVER_MODEL_PATH)
     for key in ("robust_population", "driver_population"):
         value = getattr(config, key)
-        recorded[key] = None if value is None else store.population(value)
-    policies = study_dir / POLICIES_DIR
+        recorded[key] = None if value is None else _store_population(study_dir, record, value)
     for path in _cached_policies(config):
-        store.file(path, policies)
+        _store_file(study_dir, record, path, study_dir / POLICIES_DIR)
     recorded["policy_cache"] = POLICIES_DIR
     recorded["output"] = None   # the directory is wherever it is copied to
     if Path(config.source_path).is_file():
-        recorded["source_path"] = store.file(config.source_path)
-    return recorded, {"dir": INPUTS_DIR, "files": store.record}
+        recorded["source_path"] = _store_file(study_dir, record, config.source_path)
+    return recorded, {"dir": INPUTS_DIR, "files": record}
 
 
 def relocated_config(config: dict, study_dir: Path) -> dict:
