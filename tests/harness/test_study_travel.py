@@ -125,3 +125,38 @@ def test_synth_without_out_writes_to_the_cache_and_says_where(tmp_path, fresh_ca
     assert written.is_file() and written.with_suffix(".npz").is_file()
     assert written.is_relative_to(fresh_cache / "trustroute" / "policies" / "synth")
     assert list(tmp_path.glob("policy*")) == []   # nothing in the working directory
+
+
+@pytest.mark.slow
+def test_a_copied_robust_study_with_a_population_replays_without_synthesis(tmp_path, fresh_cache, capsys):
+    from trustroute.harness.study.config import load_study_config
+    from trustroute.harness.study.runner import run_and_consolidate
+
+    made, cache = tmp_path / "made", tmp_path / "cache"
+    made.mkdir()
+    (made / "r.toml").write_text(f"""[study]
+participants = 2
+seed = 2
+engine = "model"
+specs = ["phi1_strict"]
+conditions = ["robust", "free"]
+robust_population = "driver_population_three_types"
+horizon = 4
+policy_cache = "{cache}"
+[drivers]
+population = "driver_population_three_types"
+""")
+    run_and_consolidate(load_study_config(made / "r.toml"), made / "out", 1, None, progress=False,
+                        echo=lambda *_: None)
+    study = tmp_path / "elsewhere"
+    shutil.copytree(made / "out", study)
+    shutil.rmtree(made)
+    shutil.rmtree(cache)
+    config = json.loads((study / "manifest.json").read_text())["config"]
+    assert all(config[key].startswith("inputs/") for key in ("robust_population", "driver_population"))
+    assert any(p.name.startswith("robust-phi1_strict-") for p in (study / "inputs" / "policies").iterdir())
+    code, _, err = run_cli(capsys, "analyze", str(study), "--json", "--no-report")
+    assert code == 0, err
+    code, out, err = run_cli(capsys, "replay", str(study), "p00000-phi1_strict-robust")
+    assert code == 0 and "reproduces the log" in out, err
+    assert not (fresh_cache / "trustroute" / "policies").exists()
