@@ -160,3 +160,14 @@ population = "driver_population_three_types"
     code, out, err = run_cli(capsys, "replay", str(study), "p00000-phi1_strict-robust")
     assert code == 0 and "reproduces the log" in out, err
     assert not (fresh_cache / "trustroute" / "policies").exists()
+
+
+def test_an_old_study_whose_town_is_gone_says_so_without_naming_an_option(tmp_path, fresh_cache, capsys):
+    study = _travelled_study(tmp_path / "made", "model")
+    manifest = json.loads((study / "manifest.json").read_text())
+    del manifest["inputs"]   # as written before studies stored their inputs: absolute paths
+    manifest["config"]["town"] = str(tmp_path / "gone" / "town.json")
+    (study / "manifest.json").write_text(json.dumps(manifest))
+    code, out, err = run_cli(capsys, "analyze", str(study))
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "is gone" in err and "--town" not in err
