@@ -47,6 +47,8 @@ GOOD = [
      "--concentration", "50", "--out", "types.json", "--json"],
     ["peer", "storm", "phi1_trust", "--town", "town01_carla", "--driver", "driver_model", "--horizon", "4",
      "--json"],
+    ["run", "phi1", "--town", "town01_carla", "--driver", "driver_model", "--policy", "free", "--json"],
+    ["run", "phi2", "--population", "driver_population_three_types", "--policy", "free", "--json"],
 ]
 
 
