@@ -1,5 +1,6 @@
 """Reading a consolidated study directory: its manifest, episodes and roads (through
-trustroute.core.dataset), and the town, driver model and specs its config names.
+trustroute.core.dataset), and the town, driver model and specs its config names (the directory's
+own copies, wherever it has been copied).
 
 Every analysis of a study starts here: the study tables, the real-study analysis, and fitting
 driver models to the logs.
@@ -12,12 +13,19 @@ from pathlib import Path
 import pandas as pd
 
 from trustroute.core.dataset import read_episodes, read_manifest, read_roads
+from trustroute.core.errors import InputError
 
 
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
-    """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset."""
+    """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset;
+    the manifest's config names the study directory's own copies of its inputs (absolute paths
+    where the directory lies, harness/study/inputs.py), checked against their hashes."""
+    from trustroute.harness.study.inputs import relocated_config, verify_inputs
+
     study_dir = Path(study_dir)
     manifest = read_manifest(study_dir)
+    verify_inputs(manifest, study_dir)
+    manifest = {**manifest, "config": relocated_config(manifest.get("config") or {}, study_dir)}
     return manifest, read_episodes(study_dir), read_roads(study_dir)
 
 
@@ -28,10 +36,21 @@ def study_inputs(manifest: dict):
     from trustroute.policies.logic.spec import load_spec
 
     config = manifest["config"]
-    town = load_town(config.get("town"))
-    driver = load_driver_model(config.get("driver_model"))
+    town = load_town(_recorded_input(config.get("town"), "town", manifest))
+    driver = load_driver_model(_recorded_input(config.get("driver_model"), "driver model", manifest))
     specs = {Path(p).stem: load_spec(spec_path(p), town) for p in config["specs"]}
     return town, driver, specs
+
+
+def _recorded_input(path: str | None, what: str, manifest: dict) -> str | None:
+    """A town or driver model path the config records; InputError when it is gone (a study made
+    before its inputs were stored in it, moved away from them): no option of a command can stand in."""
+    if path is not None and not Path(path).is_file():
+        raise InputError(str(manifest.get("study")), f"config.{what.replace(' ', '_')}",
+                         f"the study's {what} {path} is gone, and this study directory holds no copy of "
+                         "its inputs (it was made before studies stored them)",
+                         f"restore {path}, or analyse the study where it was made")
+    return path
 
 
 def spec_path(path: str) -> Path:

@@ -37,6 +37,7 @@ from trustroute.core.fields import (
     field_table,
     keys,
 )
+from trustroute.core.packaged import PackagedKind
 from trustroute.core.validation import parse_json, read_text, require_object
 from trustroute.networks.road_geometry import (
     EXTRA_TOWN_KEYS,
@@ -55,6 +56,7 @@ from trustroute.networks.road_geometry import (
 # as pentagon.json, so the figures measured on it (docs/real_study.md) can be re-run.
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town01_carla.json"
 PENTAGON_TOWN_PATH = Path(__file__).parent / "data" / "pentagon.json"
+TOWNS = PackagedKind("town", DEFAULT_TOWN_PATH.parent, ".json")   # the packaged towns by name
 NO_INCIDENT = "none"  # a road without an incident (and the start road of an episode)
 INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", NO_INCIDENT)
 # SUMO works in metres with float coordinates: a town beyond 1000 km, or a road shorter than a car,
@@ -372,9 +374,10 @@ def extras_fields(extras: RoadExtras) -> dict:
 
 
 def load_town(path: str | Path | None = None) -> Town:
-    """Load and validate a town file (the packaged default when `path` is None), read through the
-    guarded reader (trustroute.core.validation)."""
-    file_path = Path(path) if path is not None else DEFAULT_TOWN_PATH
-    shown = str(path) if path is not None else "default town"
-    text = read_text(file_path, shown, "the town file", "pass an existing town file with --town")
+    """Load and validate a town file or a packaged town by name (`TOWNS`: "town01_carla",
+    "pentagon"; the packaged default when `path` is None), read through the guarded reader
+    (trustroute.core.validation)."""
+    file_path = TOWNS.resolve(path) if path is not None else DEFAULT_TOWN_PATH
+    shown = "default town" if path is None else str(path if file_path == Path(path) else file_path)
+    text = read_text(file_path, shown, "the town file", TOWNS.fix("--town"))
     return town_from_dict(parse_json(text, shown, "town file"), shown)

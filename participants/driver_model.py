@@ -49,9 +49,12 @@ from trustroute.core.fields import (
     holds_bool,
     keys,
 )
+from trustroute.core.packaged import PackagedKind
 from trustroute.core.validation import check_keys, parse_json, read_text, require_object
 
 DEFAULT_DRIVER_MODEL_PATH = Path(__file__).parent / "data" / "driver_model.json"
+# the packaged driver models by name (participants/data/driver_model*.json)
+DRIVER_MODELS = PackagedKind("driver model", DEFAULT_DRIVER_MODEL_PATH.parent, ".json", "driver_model")
 HUMAN_ACTIONS: tuple[str, ...] = ("standstill", "takeover")
 Performance = Literal["succ", "fail"]
 PERFORMANCES: tuple[Performance, ...] = ("succ", "fail")
@@ -364,11 +367,12 @@ def driver_model_from_dict(data: object, path: str = "<driver model>") -> Driver
 
 
 def load_driver_model(path: str | Path | None = None) -> DriverModel:
-    """Load and validate a driver model file (the packaged default when `path` is None), read
+    """Load and validate a driver model file or a packaged model by name (`DRIVER_MODELS`:
+    "driver_model", "driver_model_performance"; the packaged default when `path` is None), read
     through the guarded reader (trustroute.core.validation)."""
-    file_path = Path(path) if path is not None else DEFAULT_DRIVER_MODEL_PATH
-    shown = str(path) if path is not None else "default driver model"
-    text = read_text(file_path, shown, "the driver model", "pass an existing driver model file with --driver")
+    file_path = DRIVER_MODELS.resolve(path) if path is not None else DEFAULT_DRIVER_MODEL_PATH
+    shown = "default driver model" if path is None else str(path if file_path == Path(path) else file_path)
+    text = read_text(file_path, shown, "the driver model", DRIVER_MODELS.fix("--driver"))
     return driver_model_from_dict(parse_json(text, shown, "driver model"), shown)
 
 

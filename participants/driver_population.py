@@ -39,6 +39,7 @@ from trustroute.core.fields import (
     keys,
 )
 from trustroute.core.output_files import atomic_write_text
+from trustroute.core.packaged import PackagedKind
 from trustroute.core.validation import parse_json, read_text, require_object
 from trustroute.participants.driver_model import DriverModel, driver_model_from_dict, load_driver_model
 
@@ -48,6 +49,8 @@ WEIGHT_TOLERANCE = 1e-9
 MAX_TYPES = 64
 TYPE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]{0,63}")
 EXAMPLE_POPULATION_PATH = Path(__file__).parent / "data" / "driver_population_three_types.json"
+# the packaged populations by name (participants/data/driver_population*.json)
+POPULATIONS = PackagedKind("driver population", EXAMPLE_POPULATION_PATH.parent, ".json", "driver_population")
 
 
 @dataclass(frozen=True)
@@ -221,10 +224,11 @@ def driver_population_from_dict(data: object, path: str = "<driver population>")
 
 
 def load_driver_population(path: str | Path) -> DriverPopulation:
-    """Load and validate a driver-population file through the guarded reader."""
-    shown = str(path)
-    text = read_text(path, shown, "the driver population", "pass an existing driver-population file "
-                     "with --population (e.g. participants/data/driver_population_three_types.json)")
+    """Load and validate a driver-population file or a packaged population by name (`POPULATIONS`:
+    "driver_population_three_types", "driver_population_real") through the guarded reader."""
+    file_path = POPULATIONS.resolve(path)
+    shown = str(path if file_path == Path(path) else file_path)
+    text = read_text(file_path, shown, "the driver population", POPULATIONS.fix("--population"))
     return driver_population_from_dict(parse_json(text, shown, "driver population"), shown)
 
 

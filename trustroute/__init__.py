@@ -73,15 +73,12 @@ def load_spec(spec: PathLike, town: Town | None = None) -> Spec:
     (default: the packaged town).
 
     `spec` is a file path or the name of a packaged spec ("phi1", "phi2", "phi1_strict",
-    "phi2_strict"); an existing file of that name wins.
+    "phi2_strict", "phi1_trust"); an existing file of that name wins (trustroute/core/packaged.py,
+    as for towns, driver models and populations).
     """
-    from trustroute.core.packaged import packaged_spec_path
     from trustroute.policies.logic.spec import load_spec as load
 
-    path = Path(spec)
-    if not path.is_file():
-        path = packaged_spec_path(str(spec)) or path
-    return load(path, town if town is not None else load_town())
+    return load(spec, town if town is not None else load_town())
 
 
 def _problem(spec: Spec | PathLike, town: Town | None,

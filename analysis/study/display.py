@@ -43,6 +43,9 @@ def paired_display(p: pd.DataFrame) -> pd.DataFrame:
             "Wilcoxon p (trust)": [format_p(finite_or_none(v)) for v in p["wilcoxon_p"]],
         }
     )
+    notes = p.get("or_note", pd.Series([""] * len(p), index=p.index)).fillna("")
+    if notes.astype(bool).any():  # an odds ratio shown is not b / c: say why beside it
+        shown["odds ratio note"] = notes.to_numpy()
     if "driver_type" in p:
         shown.insert(0, "driver type", p["driver_type"].to_numpy())
     return shown

@@ -53,7 +53,7 @@ def paired_table_rows(
         table = paired_table(first, second)
         mc = mcnemar_exact(first, second)
         rd = paired_risk_difference(table)
-        odds = conditional_odds_ratio(table)
+        odds = conditional_odds_ratio(table, sides=pair)
         trust = mean_difference(group[f"trust_{a}"], group[f"trust_{b}"], rng, resamples)
         wx = wilcoxon_paired(group[f"trust_{a}"], group[f"trust_{b}"])
         rows.append(
@@ -74,6 +74,7 @@ def paired_table_rows(
                 "odds_ratio": finite_or_none(odds.value),
                 "or_low": finite_or_none(odds.low),
                 "or_high": finite_or_none(odds.high),
+                "or_note": odds.note,
                 "trust_difference": finite_or_none(trust.value),
                 "trust_diff_low": finite_or_none(trust.low),
                 "trust_diff_high": finite_or_none(trust.high),
@@ -131,7 +132,8 @@ def repeated_measures_table(episodes: pd.DataFrame, column: str, pair: tuple[str
     for outcome, effect in (
         (
             "satisfied (odds ratio)",
-            conditional_logit(subset[column].to_numpy(dtype=float), treated, participant, strata),
+            conditional_logit(subset[column].to_numpy(dtype=float), treated, participant, strata,
+                              sides=pair),
         ),
         (
             "mean reported trust (difference)",

@@ -32,7 +32,9 @@ NOTES = [
     "BCa bootstrap over participants (scipy.stats.bootstrap). p-values are printed in scientific notation.",
     "The 'all specs' row is per participant (the mean over specs of each participant's difference), and "
     "the repeated-measures models use one group per participant, so a participant's episodes under both "
-    "specs never count as independent pairs.",
+    "specs never count as independent pairs. Separation is checked from the data before the "
+    "conditional logit is fitted; on separated data the row shows the exact conditional odds ratio of "
+    "the matched pairs and says why in its note.",
     "mean trust = mean over episodes of the episode's mean reported trust (as the paper's participants "
     "reported); mean true trust = the synthetic driver's hidden trust averaged over positions.",
     "exact [L, U] = the exact evaluation (policies/evaluation) of the same policy with the study's "

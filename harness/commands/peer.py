@@ -76,3 +76,5 @@ def storm(spec_path: str, town_path: str | None, driver_path: str | None, horizo
                f"{s['build_seconds'] + s['lower_seconds'] + s['upper_seconds']:.1f} s")
     click.echo(f"  ours   [{o['lower']:.6f}, {o['upper']:.6f}]  gap {o['gap']:.2e}  {o['seconds']:.1f} s")
     click.echo(f"  overlap: {'yes' if result['overlap'] else 'NO'}")
+    if s.get("note"):
+        click.echo(f"  note: {s['note']}")

@@ -39,9 +39,13 @@ def replay(
     from trustroute.harness.study.runner import recording_path
 
     config, _ = study_config_from_manifest(Path(study_dir))
-    rrd = None
-    if not no_rrd and config.engine == "sumo":
-        rrd = Path(rrd_path) if rrd_path else recording_path(Path(study_dir), episode_id)
+    rrd = Path(rrd_path) if rrd_path and not no_rrd else None   # model study: an error naming the engine
+    if not no_rrd and config.engine == "sumo" and rrd is None:
+        rrd = recording_path(Path(study_dir), episode_id)
+    # why no recording is written, when none is (an explicit --rrd on a model study is an error)
+    no_recording = ("--no-rrd" if no_rrd else
+                    f"the study ran the {config.engine} engine, which has no SUMO scene to record "
+                    '(run the study with engine = "sumo" for recordings)' if rrd is None else None)
     result = replay_episode(Path(study_dir), episode_id, rrd_path=rrd, gui=gui)
     roads = result.record.roads
     payload = {
@@ -52,6 +56,7 @@ def replay(
         "trust": roads["trust_after"].tolist(),
         "rrd": str(rrd) if rrd else None,
         "rrd_bytes": rrd.stat().st_size if rrd else None,
+        "no_recording": no_recording,
     }
     if as_json:
         click.echo(json.dumps(payload))
@@ -61,5 +66,7 @@ def replay(
         f"{' '.join(str(t) for t in payload['trust'])})"
     )
     click.echo("route: " + " ".join(payload["route"]))
+    if no_recording is not None and not no_rrd:
+        click.echo(f"no recording written: {no_recording}")
     if rrd:
         click.echo(f"wrote {rrd} ({payload['rrd_bytes'] / 1000:.0f} kB); {viewer_hint(rrd)}")

@@ -54,7 +54,7 @@ def _spec_path(spec_argument: str | None, spec_option: str | None) -> str:
         raise click.UsageError("give the spec once: as the SPEC argument (--spec is its old spelling)")
     spec_path = spec_argument if spec_argument is not None else spec_option
     if spec_path is None:
-        raise click.UsageError("missing argument SPEC (a spec file, e.g. specs/phi1.toml)")
+        raise click.UsageError("missing argument SPEC (a spec file or a packaged spec name, e.g. phi1)")
     return spec_path
 
 

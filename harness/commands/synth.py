@@ -41,6 +41,27 @@ rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]
                            help="AV belief filter: exact Bayes, or the authors' released update.")
 
 
+SYNTH_FOLDER = "synth"   # under the policy cache: what `synth` writes without --out
+
+
+def default_out_path(spec_name: str, *key: str) -> str:
+    """Where `synth` writes without --out: `<policy cache>/synth/<spec>-<16 hex>.json`, the hex a
+    SHA-256 of the inputs' content hashes and the settings, so another problem never overwrites it
+    (and nothing lands in the working directory)."""
+    import hashlib
+    import re
+
+    from trustroute.core.cache import POLICIES, cache_dir
+    from trustroute.core.output_files import check_output_file
+
+    label = re.sub(r"[^A-Za-z0-9_.+-]", "_", spec_name)[:48].lstrip(".") or "spec"
+    digest = hashlib.sha256("|".join(key).encode()).hexdigest()[:16]
+    path = cache_dir(POLICIES) / SYNTH_FOLDER / f"{label}-{digest}.json"
+    check_output_file(path, "--out", "policy file")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return str(path)
+
+
 @click.command("synth")
 @click.argument("spec_path", metavar="SPEC")
 @town_option
@@ -51,8 +72,9 @@ rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]
 @click.option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), default=60.0,
               show_default=True, help="Seconds.")
 @rule_option
-@click.option("--out", "out_path", type=click.Path(), default="policy.json", show_default=True,
-              help="Policy FILE to write (its arrays go beside it, same name with suffix .npz).")
+@click.option("--out", "out_path", type=click.Path(), default=None,
+              help="Policy FILE to write (its arrays go beside it, same name with suffix .npz); "
+                   "default: the policy cache's synth/ folder, printed.")
 @click.option("--clusters", type=click.Choice(["auto", "on", "off"]), default="auto", show_default=True,
               help="Cluster policies (Bayes rule; docs/synthesis.md, \"Cluster policies\"): before the "
                    "search on large problems and after an unconverged one (auto), always first (on), "
@@ -64,7 +86,7 @@ rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]
               help="With --population: the prior-weighted value (bayes) or the worst type's (robust).")
 @json_option
 def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: float,
-          horizon: int | None, time_limit: float, belief_rule: str, out_path: str, clusters: str,
+          horizon: int | None, time_limit: float, belief_rule: str, out_path: str | None, clusters: str,
           population_path: str | None, objective: str, as_json: bool) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
     if tau <= 0:
@@ -74,7 +96,8 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
                          "pass a positive number of junctions or omit --horizon")
     from trustroute.core.output_files import check_output_file
 
-    check_output_file(out_path, "--out", "policy file")
+    if out_path is not None:
+        check_output_file(out_path, "--out", "policy file")
     if population_path is not None:
         if driver_path is not None:
             raise click.UsageError("give --driver or --population, not both (a population's types are "
@@ -89,6 +112,9 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
         raise click.UsageError("--objective robust needs --population FILE (the types to be robust over)")
     problem = _load_problem(spec_path, town_path, driver_path)
     town, driver, spec, pomdp = problem.town, problem.driver, problem.spec, problem.pomdp
+    out_path = out_path or default_out_path(spec.name, town.content_hash, driver.content_hash,
+                                            spec.content_hash, f"H={horizon}", f"tau={tau}", belief_rule,
+                                            f"clusters={clusters}", f"time_limit={time_limit}")
     from trustroute.policies.resolve import synthesis_progress
     from trustroute.policies.routing.files import save_policy
     from trustroute.policies.synthesis.result import SynthesisStats
@@ -141,7 +167,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
 
 def _synth_population(spec_path: str, town_path: str | None, population_path: str, objective: str,
                       tau: float, horizon: int | None, time_limit: float, belief_rule: str,
-                      out_path: str, as_json: bool) -> None:
+                      out_path: str | None, as_json: bool) -> None:
     """`synth --population`: the Bayes or robust objective over a population's driver types."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_population import load_driver_population
@@ -160,6 +186,9 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
     town = load_town(town_path)
     population = load_driver_population(population_path)
     spec = load_spec(spec_path, town, population.types[0].model.n_trust, population_path)
+    out_path = out_path or default_out_path(spec.name, town.content_hash, population.content_hash,
+                                            spec.content_hash, objective, f"H={horizon}", f"tau={tau}",
+                                            belief_rule, f"time_limit={time_limit}")
     with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
                             not as_json) as on_iteration:
         found = synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,

@@ -28,7 +28,6 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from trustroute.core.packaged import packaged_spec_path
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.networks.town import Town, load_town
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DriverModel, load_driver_model
@@ -49,6 +48,10 @@ if TYPE_CHECKING:
 ENV_ID = "trustroute/TrustRouting-v0"
 ENGINES: tuple[str, ...] = ("model", "sumo")
 DEFAULT_JUNCTION_CAP = EpisodeSetup.junction_cap
+# Summary fields that are not a function of the seed and the actions (the episode counter in the id,
+# the wall time): kept out of info["summary"], so equal seeds and actions give equal info, and
+# given in `last_run` instead.
+RUN_FACTS = ("episode_id", "wall_seconds")
 
 
 class EpisodeAborted(Exception):
@@ -103,19 +106,17 @@ def _as_driver(driver: DriverModel | str | Path | None) -> DriverModel:
 
 
 def _as_spec(spec: Spec | str | Path, town: Town) -> Spec:
-    if isinstance(spec, Spec):
-        return spec
-    path = Path(spec)
-    return load_spec(path if path.is_file() else packaged_spec_path(str(spec)) or path, town)
+    return spec if isinstance(spec, Spec) else load_spec(spec, town)
 
 
 class TrustRoutingEnv(gymnasium.Env):
     """Route the AV through a town so that an scLDTL spec is satisfied; reward 1 on acceptance.
 
-    spec: a Spec, a spec file or a packaged spec name ("phi1"). town, driver: objects, files, or
-    None for the packaged ones (the driver model is both the AV's filter model and the synthetic
-    driver's). engine: "model" (fast, no SUMO) or "sumo" (libsumo). junction_cap: the episode is
-    truncated after this many junctions. belief_rule: the AV's filter ("bayes" or "paper").
+    spec: a Spec, a spec file or a packaged spec name ("phi1"). town, driver: objects, files,
+    packaged names ("pentagon", "driver_model_performance"), or None for the packaged defaults
+    (the driver model is both the AV's filter model and the synthetic driver's). engine: "model"
+    (fast, no SUMO) or "sumo" (libsumo). junction_cap: the episode is truncated after this many
+    junctions. belief_rule: the AV's filter ("bayes" or "paper").
     report_accuracy: the synthetic driver's trust-report accuracy (reports are logged only).
 
     Observation (Dict): "road" (index into town.states), "dfa_state" (the spec's DFA state after
@@ -123,6 +124,9 @@ class TrustRoutingEnv(gymnasium.Env):
     far). Action: Discrete(max out-degree); action a at a road with k legal next junctions
     (town.actions(road), sorted) drives to junction a mod k, so every action is legal;
     info["action_mask"] marks the k legal ones (for `action_space.sample(mask=...)`).
+
+    info is a function of the seed and the actions: the last step's info["summary"] leaves out the
+    episode id and wall time (RUN_FACTS), which `last_run` holds with the episode counter.
     """
 
     metadata = {"render_modes": []}
@@ -159,7 +163,8 @@ class TrustRoutingEnv(gymnasium.Env):
         })
         self.render_mode = None
         self.last_record: EpisodeRecord | None = None      # of the last finished episode
-        self._episodes = 0
+        self.last_run: dict = {}  # the last episode's facts that differ between identical runs
+        self.episodes = 0         # episodes started by reset()
         self._thread: threading.Thread | None = None
         self._to_agent: queue.Queue[EpisodeMessage] = queue.Queue()
         self._to_episode: queue.Queue[str | _Abort] = queue.Queue()
@@ -226,7 +231,11 @@ class TrustRoutingEnv(gymnasium.Env):
         self._join_thread()
         self.last_record = record
         last = record.roads.iloc[-1]
-        summary = dict(record.summary)
+        summary = {k: v for k, v in record.summary.items() if k not in RUN_FACTS}
+        if self.engine == "model":  # no simulated clock: sim_seconds is NaN, which equals nothing
+            summary.pop("sim_seconds", None)
+        self.last_run = {"episode": self.episodes,
+                         **{k: record.summary[k] for k in RUN_FACTS if k in record.summary}}
         observation = self._observation(str(last["directed_road"]), int(last["dfa_state"]),
                                         np.asarray(last["belief_after"], dtype=np.float64),
                                         int(summary["junctions"]))
@@ -242,8 +251,8 @@ class TrustRoutingEnv(gymnasium.Env):
         rng = self.np_random
         sumo_seed = int(rng.integers(0, 2**31 - 1))
         driver = SyntheticDriver(self.driver_model, rng, report_accuracy=self.report_accuracy)
-        self._episodes += 1
-        episode_id = f"gym-{self.scldtl_spec.name}-{self._episodes:06d}"
+        self.episodes += 1
+        episode_id = f"gym-{self.scldtl_spec.name}-{self.episodes:06d}"
         policy = AgentPolicy(self._to_agent, self._to_episode)
         self._thread = threading.Thread(target=_episode_thread, name=episode_id, daemon=True,
                                         args=(self._runner(driver, episode_id, sumo_seed), policy,

@@ -29,9 +29,9 @@ participant's model is that type's model (varied around it by `[population]` whe
 
 Every key, its default and its check: docs/formats/study_config.md.
 
-Relative paths resolve against the config file's folder, then the current directory (`output`
-and `policy_cache`, and the default output `studies/<name>`, against the config's folder); spec names
-also resolve against the packaged specs (`phi1`, `specs/phi1.toml`). Bad input raises InputError
+Relative paths resolve against the config file's folder, then the current directory, then the
+packaged files by name (trustroute/core/packaged.py: specs `phi1`, also `specs/phi1.toml`; towns
+`town01_carla`, `pentagon`; driver models and populations by file stem). Bad input raises InputError
 naming the file, the key and the fix.
 """
 
@@ -58,9 +58,9 @@ from trustroute.core.fields import (
     field_table,
     keys,
 )
-from trustroute.core.packaged import PACKAGED_SPECS, packaged_spec_names
+from trustroute.core.packaged import SPECS, PackagedKind
 from trustroute.core.validation import parse_toml, read_text
-from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY
+from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER_MODELS
 from trustroute.policies.model.trust_pomdp import BELIEF_RULES, BeliefRule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
@@ -160,33 +160,49 @@ def condition_label(condition: str) -> str:
     return condition if condition in NAMED_CONDITIONS else Path(condition).stem
 
 
-def _resolve_path(value: str, base: Path, source: str, key: str, what: str, fix: str) -> Path:
-    """Config folder first, then the current directory."""
+def _resolve_path(value: str, base: Path, source: str, key: str, what: str, fix: str,
+                  packaged: PackagedKind | None = None) -> Path:
+    """Config folder first, then the current directory, then a packaged file of that name."""
     candidates = [Path(value)] if Path(value).is_absolute() else [base / value, Path.cwd() / value]
     for candidate in candidates:
         if candidate.is_file():
             return candidate.resolve()
-    raise InputError(source, key, f"{what} {value!r} not found (looked in {base} and {Path.cwd()})", fix)
+    found = packaged.path(value) if packaged is not None else None
+    if found is not None:
+        return found.resolve()
+    names = f" or a packaged name ({', '.join(packaged.names())})" if packaged is not None else ""
+    raise InputError(source, key, f"{what} {value!r} not found (looked in {base} and {Path.cwd()})",
+                     fix + names)
 
 
 def _resolve_spec(value: str, base: Path, source: str, key: str) -> Path:
-    """A spec file: relative to the config, the current directory, or a packaged spec by name."""
+    """A spec file: relative to the config, the current directory, or a packaged spec by name
+    (a path's file name too: "specs/phi1.toml" is the packaged phi1 where that path is missing)."""
     candidates = [Path(value)] if Path(value).is_absolute() else [base / value, Path.cwd() / value]
-    name = Path(value).name
-    candidates.append(PACKAGED_SPECS / name)
-    if not name.endswith(".toml"):
-        candidates.append(PACKAGED_SPECS / f"{name}.toml")
     for candidate in candidates:
         if candidate.is_file():
             return candidate.resolve()
-    packaged = packaged_spec_names()
-    shipped = f" or a packaged spec ({', '.join(packaged)})" if packaged else ""
+    packaged = SPECS.path(Path(value).name)
+    if packaged is not None:
+        return packaged.resolve()
     raise InputError(
         source,
         key,
         f"spec {value!r} not found (looked in {base}, {Path.cwd()} and the packaged specs)",
-        f"give the path of an existing spec file{shipped}",
+        SPECS.fix(),
     )
+
+
+def _towns() -> PackagedKind:
+    from trustroute.networks.town import TOWNS
+
+    return TOWNS
+
+
+def _populations() -> PackagedKind:
+    from trustroute.participants.driver_population import POPULATIONS
+
+    return POPULATIONS
 
 
 def _population(table: dict[str, object] | None, source: str) -> dict | None:
@@ -281,7 +297,7 @@ STUDY_FIELDS = field_table(
     Field(key="engine", kind=OneOf(choices=ENGINES, noun="engine"), default="sumo",
           fix=f"use one of {', '.join(repr(e) for e in ENGINES)}"),
     Field(key="specs", kind=_ENTRIES, required=True,
-          fix='write specs = ["specs/phi1.toml", "specs/phi2.toml"]'),
+          fix='write specs = ["phi1", "phi2"] (packaged specs) or spec file paths'),
     Field(key="conditions", kind=_ENTRIES, required=True, fix='write conditions = ["aware", "free"]'),
     Field(key="name", kind=Text(), fix='write name = "paper"'),  # default: the config file's stem
     Field(key="town", kind=_FILE, problem=_file_path, fix=FILE_FIX["town"]),
@@ -329,7 +345,8 @@ def _driver_population(table: dict[str, object] | None, base: Path, source: str)
     if table is None:
         return None
     value = check_fields(table, DRIVERS_FIELDS, source, "study config", "drivers")["population"]
-    path = _resolve_path(value, base, source, "drivers.population", "driver-population file", DRIVERS_FIX)
+    path = _resolve_path(value, base, source, "drivers.population", "driver-population file", DRIVERS_FIX,
+                         _populations())
     from trustroute.participants.driver_population import load_driver_population
 
     load_driver_population(path)  # raises InputError naming the file and the place
@@ -357,12 +374,13 @@ def _conditions(values: list[str], base: Path, source: str) -> tuple[str, ...]:
     return conditions
 
 
-def _optional_file(study: StudyValues, key: FileKey, what: str, base: Path, source: str) -> str | None:
-    """The file `study[key]` names, resolved; None when the key is absent."""
+def _optional_file(study: StudyValues, key: FileKey, what: str, base: Path, source: str,
+                   packaged: PackagedKind | None = None) -> str | None:
+    """The file `study[key]` names (a path, or a name of `packaged`), resolved; None when absent."""
     value = study[key]
     if value is None:
         return None
-    return str(_resolve_path(value, base, source, f"study.{key}", what, FILE_FIX[key]))
+    return str(_resolve_path(value, base, source, f"study.{key}", what, FILE_FIX[key], packaged))
 
 
 def _directory(value: str | None, base: Path) -> str | None:
@@ -379,7 +397,8 @@ def _check_background_vehicles(count: int, source: str) -> None:
 def _robust_population(study: StudyValues, conditions: tuple[str, ...], base: Path,
                        source: str) -> str | None:
     """The "robust" condition's population file: required with that condition, read and validated."""
-    robust_population = _optional_file(study, "robust_population", "driver-population file", base, source)
+    robust_population = _optional_file(study, "robust_population", "driver-population file", base, source,
+                                       _populations())
     if robust_population is not None:
         from trustroute.participants.driver_population import load_driver_population
 
@@ -411,8 +430,8 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         engine=study["engine"],
         specs=specs,
         conditions=conditions,
-        town=_optional_file(study, "town", "town file", base, source),
-        driver_model=_optional_file(study, "driver_model", "driver model file", base, source),
+        town=_optional_file(study, "town", "town file", base, source, _towns()),
+        driver_model=_optional_file(study, "driver_model", "driver model file", base, source, DRIVER_MODELS),
         horizon=study["horizon"],
         fallback_after=None if study["fallback_after"] is False else study["fallback_after"],
         junction_cap=study["junction_cap"],

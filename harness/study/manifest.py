@@ -7,7 +7,9 @@ From the per-episode parts, in plan order (participant, position), whatever orde
     roads.parquet       every episode's roads table, concatenated
     kinematics.parquet  SUMO only
     manifest.json       config and its hash, package versions, git revision, per-episode seeds,
-                        counts, failures, the exact values of the policies (policies.evaluation.plain)
+                        counts, failures, the exact values of the policies (policies.evaluation.plain),
+                        and the study's own copies of its input files (harness/study/inputs.py:
+                        inputs/, by content hash; the config names them by relative paths)
 Only `wall_seconds` differs between two runs of the same config; everything else is a function of
 the config (tests/harness/test_study_runner.py checks this across kills, resumes and backends).
 
@@ -172,10 +174,13 @@ def consolidate(
     if incident_tables:
         write_table(pa.concat_tables(incident_tables), study_dir / INCIDENTS_FILE)
     failures = read_failures(study_dir)
+    from trustroute.harness.study.inputs import store_inputs
+
+    recorded_config, inputs = store_inputs(study_dir, config)
     manifest = {
         "study": config.name,
-        "config_path": config.source_path,
-        "config": json.loads(json.dumps(config.to_dict(), default=str)),
+        "config_path": recorded_config["source_path"],
+        "config": recorded_config,
         "config_hash": config_hash,
         "engine": config.engine,
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
@@ -203,6 +208,7 @@ def consolidate(
         },
         "expected": expected or {},
         "run": run_info or {},
+        "inputs": inputs,
     }
     if tuple(manifest) != MANIFEST_KEYS:  # the dataset's definition and this writer must agree
         raise RuntimeError(f"manifest keys {tuple(manifest)} differ from the dataset's {MANIFEST_KEYS}")

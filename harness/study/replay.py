@@ -1,8 +1,10 @@
 """Replaying one episode of a finished study: the same config, seeds and population draws, checked.
 
-`replay_episode(study_dir, episode_id)` rebuilds the study's config from its manifest, refuses a
-study whose inputs or code differ from what is installed now (the config's content hash, the
-versions of trustroute and of the packages the episodes depend on), re-runs the planned episode
+`replay_episode(study_dir, episode_id)` rebuilds the study's config from its manifest (its inputs
+are the study directory's own copies, harness/study/inputs.py, so a copied directory replays), refuses a
+study whose inputs or code differ from what is installed now (the stored inputs' hashes, or for a
+study made before they were stored the config's content hash; the versions of trustroute and of
+the packages the episodes depend on), re-runs the planned episode
 through the same function the study runner uses (runner.run_planned_episode), and compares the
 replayed roads and trust with the logged ones, column by column (REPLAY_COLUMNS). Any difference
 is an InputError (one line, exit 2) naming the first road and column that differ.
@@ -52,10 +54,11 @@ class Replay:
 def study_config_from_manifest(study_dir: Path) -> tuple[StudyConfig, dict]:
     """The StudyConfig a study was run with (from manifest.json), and the manifest."""
     from trustroute.core.dataset import read_manifest
+    from trustroute.harness.study.inputs import relocated_config
 
     path = Path(study_dir) / MANIFEST_FILE
     manifest = read_manifest(Path(study_dir))
-    data = dict(manifest.get("config") or {})
+    data = relocated_config(dict(manifest.get("config") or {}), Path(study_dir))
     known = {f.name for f in fields(StudyConfig)}
     unknown = sorted(set(data) - known)
     if unknown:
@@ -93,6 +96,13 @@ def check_same_code(manifest: dict, config: StudyConfig, study_dir: Path) -> Non
                 "so a replay cannot reproduce it",
                 f"install {name}=={logged[name]} to replay it",
             )
+    if manifest.get("inputs"):
+        # the study carries its inputs (harness/study/inputs.py): they are checked by their hashes,
+        # wherever the directory lies (the config hash covers the paths it was run with)
+        from trustroute.harness.study.inputs import verify_inputs
+
+        verify_inputs(manifest, study_dir)
+        return
     for path in (
         *config.specs,
         config.town,

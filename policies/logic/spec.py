@@ -40,6 +40,7 @@ from trustroute.core.fields import (
     field_table,
     keys,
 )
+from trustroute.core.packaged import SPECS
 from trustroute.core.validation import parse_toml, read_text
 from trustroute.networks.town import Town
 from trustroute.policies.logic.formula import (
@@ -197,7 +198,7 @@ TYPE_BELIEF_EXAMPLE = 'write [type_beliefs] then nontruster = { types = ["flat"]
 def _string(key: str) -> Field:
     return Field(key=key, kind=Text(nonempty=False), required=True, problem=f"'{key}' must be a string",
                  fix=f'write {key} = "..."', missing_fix=f'add {key} = "..." at the top of the file (see '
-                 'specs/phi1.toml)')
+                 f'{SPECS.path("phi1") or "the packaged specs"})')
 
 
 class SpecValues(TypedDict):
@@ -521,11 +522,12 @@ def check_coefficient_length(spec: Spec, n_trust: int, driver_source: str = "") 
 
 def load_spec(path: str | Path, town: Town | None = None, n_trust: int | None = None,
               driver_source: str = "") -> Spec:
-    """Load and validate a spec file (through the guarded reader, trustroute/core/validation.py); with
-    `town`, also check its roads against the town; with `n_trust`, the trust levels of the driver
-    model (or population, named by `driver_source`) it is used with, check every belief atom has one
-    coefficient per level. Every command that reads a spec with a driver model loads it here."""
-    text = read_text(path, str(path), "the spec file", "pass an existing .toml file, e.g. specs/phi1.toml")
+    """Load and validate a spec file or a packaged spec by name (trustroute/core/packaged.py), through
+    the guarded reader (trustroute/core/validation.py); with `town`, also check its roads against the
+    town; with `n_trust`, the trust levels of the driver model (or population, named by
+    `driver_source`) it is used with, check every belief atom has one coefficient per level. Every command that reads a spec with a driver model loads it here."""
+    path = SPECS.resolve(path)   # a file, or a packaged spec by name ("phi1")
+    text = read_text(path, str(path), "the spec file", SPECS.fix())
     spec = spec_from_text(text, str(path), town)
     if n_trust is not None:
         check_coefficient_length(spec, n_trust, driver_source)

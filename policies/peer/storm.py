@@ -6,6 +6,10 @@ Two sound one-sided results for Pmax=? [F "goal"]: belief-MDP unfolding gives a 
 both are for the bounded objective. Storm computes in double precision with its default
 (iterative, ε = 1e-6 relative) solvers, so its numbers are sound up to that solver precision,
 not certified in our sense; they are an independent check, reported as Storm gives them.
+
+A product in which no reachable state satisfies the spec (no satisfying route fits the horizon)
+has the value 0 exactly; Storm rejects a property whose label no state carries, so it is not run
+and the result says why (`note`). Any other error Storm raises on a product is an InputError.
 """
 
 from __future__ import annotations
@@ -50,6 +54,11 @@ class StormResult(Bracket):
     upper_beliefs: int
     resolution: int
     time_limit: float
+    note: str = ""   # why Storm was not run, when the answer needs no solver
+
+
+NO_GOAL_NOTE = ("no reachable state of the product satisfies the spec (no satisfying route fits the "
+                "horizon): the maximum probability is 0, and Storm was not run")
 
 
 def build_storm_model(product: ExplicitProduct) -> tuple[Any, Any, float]:
@@ -70,20 +79,45 @@ def build_storm_model(product: ExplicitProduct) -> tuple[Any, Any, float]:
     return model, properties[0], time.perf_counter() - started
 
 
+def _unreachable_goal(product: ExplicitProduct, time_limit: float, resolution: int) -> StormResult:
+    choices = int(product.choice_state.size)
+    observations = int(product.observation.max()) + 1 if product.n_states else 0
+    return StormResult(
+        lower=0.0, upper=0.0, lower_seconds=0.0, upper_seconds=0.0, build_seconds=0.0,
+        lower_complete=True, upper_complete=True, states=product.n_states, choices=choices,
+        observations=observations, lower_beliefs=0, upper_beliefs=0, resolution=resolution,
+        time_limit=float(time_limit), note=NO_GOAL_NOTE)
+
+
+def _storm_call(call: Any, *args: Any, **kwargs: Any) -> Any:
+    """Storm's answer, or an InputError with the first line of Storm's complaint."""
+    try:
+        return call(*args, **kwargs)
+    except RuntimeError as exc:
+        complaint = (str(exc).strip().splitlines() or ["(no message)"])[0]
+        raise InputError("trustroute peer storm", "", f"Storm cannot take this product: {complaint}",
+                         "check the spec, town and driver model; "
+                         "run `trustroute synth` for our bounds alone") from exc
+
+
 def run_storm(product: ExplicitProduct, time_limit: float = 10.0, resolution: int = 2) -> StormResult:
     """Storm's lower (unfolding, at most `time_limit` seconds of exploration) and upper
-    (discretisation at `resolution`, which Storm cannot stop early) bounds."""
-    model, prop, build_seconds = build_storm_model(product)
+    (discretisation at `resolution`, which Storm cannot stop early) bounds; [0, 0] with a note,
+    without Storm, when no reachable state satisfies the spec."""
+    if not product.goal.any():
+        return _unreachable_goal(product, max(1, int(round(time_limit))), resolution)
+    model, prop, build_seconds = _storm_call(build_storm_model, product)
     import stormpy.pomdp as storm_pomdp
 
     seconds = max(1, int(round(time_limit)))
     started = time.perf_counter()
-    lower = storm_pomdp.verify_with_belief_unfolding(model, prop, max_exploration_time=seconds)
+    lower = _storm_call(storm_pomdp.verify_with_belief_unfolding, model, prop,
+                        max_exploration_time=seconds)
     lower_seconds = time.perf_counter() - started
 
     # Storm's discretisation takes no time or size limit: its cost is set by the resolution.
     started = time.perf_counter()
-    upper = storm_pomdp.verify_with_belief_discretization(model, prop, resolution=resolution)
+    upper = _storm_call(storm_pomdp.verify_with_belief_discretization, model, prop, resolution=resolution)
     upper_seconds = time.perf_counter() - started
     return StormResult(
         lower=float(lower.value), upper=float(upper.value), lower_seconds=lower_seconds,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -195,3 +196,157 @@ def test_mixed_model_recovers_a_difference():
     value = 4.4 + 0.3 * treated + rng.normal(0, 1, 60)[participants] + rng.normal(0, 0.3, 240)
     effect = mixed_trust_model(value, treated, participants, np.tile([0, 0, 1, 1], 60))
     assert effect.low < 0.3 < effect.high and effect.p_value < 1e-3
+
+
+# -- separation: detected from the data, and what is estimable reported with its reason ----------
+
+from trustroute.analysis.statistics import (  # noqa: E402
+    EXACT_MODEL,
+    exact_odds_ratio,
+    median_unbiased_proportion,
+    separation,
+)
+
+
+def _binomial_tail_at_least(k: int, n: int, p: float) -> float:
+    """P(X >= k) for X ~ Binomial(n, p) by enumeration (independent of scipy)."""
+    return sum(math.comb(n, j) * p**j * (1 - p) ** (n - j) for j in range(k, n + 1))
+
+
+def _paired_design(pattern: list[tuple[int, int]], specs: int = 2):
+    """Episodes of participants who drive each spec under A (treated) and B: pattern[i] gives the
+    (A, B) outcomes of participant i, repeated for every spec unless a spec-specific list is given."""
+    outcome, treated, participant, spec = [], [], [], []
+    for person, cells in enumerate(pattern):
+        for s in range(specs):
+            a, b = cells[s] if isinstance(cells[0], tuple) else cells
+            outcome += [a, b]
+            treated += [1, 0]
+            participant += [person, person]
+            spec += [s, s]
+    return (np.array(outcome, float), np.array(treated, float), np.array(participant), np.array(spec))
+
+
+def _issue_like_data():
+    """21 participants x 2 specs; 6 participants differ, all of them in favour of the treated one."""
+    pattern = [[(1, 0), (1, 1)]] * 3 + [[(1, 1), (1, 0)]] * 3
+    pattern += [[(1, 1), (1, 1)]] * 10 + [[(0, 0), (0, 0)]] * 5
+    return _paired_design(pattern)
+
+
+def test_median_unbiased_proportion_by_enumeration():
+    for k, n in [(0, 6), (6, 6), (3, 10), (1, 7), (20, 21)]:
+        p = median_unbiased_proportion(k, n)
+        if k == n:
+            assert _binomial_tail_at_least(n, n, p) == pytest.approx(0.5)
+        elif k == 0:
+            assert 1 - _binomial_tail_at_least(1, n, p) == pytest.approx(0.5)
+        else:  # the log-odds midpoint of the two one-sided 50 % limits
+            low = stats.beta.ppf(0.5, k, n - k + 1)
+            high = stats.beta.ppf(0.5, k + 1, n - k)
+            assert _binomial_tail_at_least(k, n, low) == pytest.approx(0.5)
+            assert 1 - _binomial_tail_at_least(k + 1, n, high) == pytest.approx(0.5)
+            odds = math.sqrt(low / (1 - low) * high / (1 - high))
+            assert p / (1 - p) == pytest.approx(odds)
+
+
+def test_exact_odds_ratio_interval_by_enumeration():
+    for b, c in [(6, 0), (0, 4), (5, 2)]:
+        estimate = exact_odds_ratio(b, c)
+        n = b + c
+        if b > 0:  # lower limit: P(X >= b | p_low) = 0.025
+            p_low = estimate.low / (1 + estimate.low)
+            assert _binomial_tail_at_least(b, n, p_low) == pytest.approx(0.025, abs=1e-9)
+        else:
+            assert estimate.low == 0.0
+        if c > 0:  # upper limit: P(X <= b | p_high) = 0.025
+            p_high = estimate.high / (1 + estimate.high)
+            assert 1 - _binomial_tail_at_least(b + 1, n, p_high) == pytest.approx(0.025, abs=1e-9)
+        else:
+            assert estimate.high == math.inf
+        assert math.isfinite(estimate.value) and estimate.low <= estimate.value <= estimate.high
+
+
+def test_paired_odds_ratio_on_one_sided_pairs_is_median_unbiased_with_its_reason():
+    odds = conditional_odds_ratio(PairedTable(5, 3, 0, 2), sides=("aware", "free"))
+    assert math.isfinite(odds.value) and odds.value == pytest.approx(0.5 ** (1 / 3) / (1 - 0.5 ** (1 / 3)))
+    assert odds.high == math.inf and "all 3 discordant pairs favour aware" in odds.note
+    reverse = conditional_odds_ratio(PairedTable(5, 0, 2, 2), sides=("aware", "free"))
+    assert reverse.low == 0.0 and 0 < reverse.value < 1 and "favour free" in reverse.note
+    assert conditional_odds_ratio(PairedTable(10, 6, 1, 4)).note == ""
+
+
+def test_separation_detected_complete_quasi_and_none():
+    outcome, treated, participant, spec = _issue_like_data()
+    exog = np.column_stack([treated, spec])
+    assert separation(outcome, exog, participant).kind != "none"
+    assert separation(outcome, exog, participant).favours == "treated"
+    # complete: every participant succeeds under A and fails under B
+    outcome, treated, participant, _ = _paired_design([(1, 0)] * 5, specs=1)
+    assert separation(outcome, treated[:, None], participant).kind == "complete"
+    # quasi: a participant with two A episodes, one failed, ties with the failed B episode
+    outcome = np.array([1, 0, 0, 1, 0, 1, 0], float)
+    treated = np.array([1, 1, 0, 1, 0, 1, 0], float)
+    participant = np.array([0, 0, 0, 1, 1, 2, 2])
+    found = separation(outcome, treated[:, None], participant)
+    assert (found.kind, found.favours) == ("quasi", "treated")
+    # none: discordant pairs both ways
+    outcome, treated, participant, _ = _paired_design([(1, 0)] * 5 + [(0, 1)] * 2, specs=1)
+    assert separation(outcome, treated[:, None], participant).kind == "none"
+    # control side
+    outcome, treated, participant, _ = _paired_design([(0, 1)] * 4 + [(1, 1)] * 3, specs=1)
+    assert separation(outcome, treated[:, None], participant).favours == "control"
+
+
+def test_conditional_logit_on_separated_data_reports_the_exact_effect_and_why():
+    from statsmodels.discrete.conditional_models import ConditionalLogit
+
+    outcome, treated, participant, spec = _issue_like_data()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = ConditionalLogit(outcome, np.column_stack([treated, spec]), groups=participant).fit(disp=False)
+    assert fit.params[0] > 5  # statsmodels runs off towards an infinite odds ratio
+    effect = conditional_logit(outcome, treated, participant, spec, sides=("aware", "free"))
+    assert effect.model == EXACT_MODEL
+    assert effect.estimate == pytest.approx(exact_odds_ratio(6, 0).value)
+    assert math.isfinite(effect.estimate) and effect.high == math.inf
+    assert effect.low == pytest.approx(exact_odds_ratio(6, 0).low) and effect.low > 1
+    assert effect.p_value == pytest.approx(2 * 0.5**6)  # the exact two-sided binomial test
+    assert "separation" in effect.note and "favour aware" in effect.note and "(6 / 0)" in effect.note
+
+
+def test_conditional_logit_without_separation_matches_statsmodels():
+    from statsmodels.discrete.conditional_models import ConditionalLogit
+
+    pattern = [[(1, 0), (1, 1)]] * 4 + [[(0, 1), (1, 1)]] * 2 + [[(1, 1), (0, 0)]] * 6
+    outcome, treated, participant, spec = _paired_design(pattern)
+    effect = conditional_logit(outcome, treated, participant, spec)
+    fit = ConditionalLogit(outcome, np.column_stack([treated, spec]), groups=participant).fit(disp=False)
+    assert effect.model == "conditional logit" and effect.note == ""
+    assert effect.estimate == pytest.approx(math.exp(fit.params[0]))
+    z = stats.norm.ppf(0.975)
+    assert effect.high == pytest.approx(math.exp(fit.params[0] + z * fit.bse[0]))
+    assert effect.p_value == pytest.approx(fit.pvalues[0])
+
+
+def test_a_stratum_without_discordance_is_left_out_with_its_reason():
+    from statsmodels.discrete.conditional_models import ConditionalLogit
+
+    # phi1: 5 pairs favour A, 2 favour B; phi2: every episode satisfied (its dummy is separated)
+    pattern = [[(1, 0), (1, 1)]] * 5 + [[(0, 1), (1, 1)]] * 2 + [[(0, 0), (1, 1)]] * 8
+    outcome, treated, participant, spec = _paired_design(pattern)
+    effect = conditional_logit(outcome, treated, participant, spec)
+    assert "1 left out (every episode satisfied" in effect.note and effect.observations == outcome.size
+    # the limit of the full fit: the fit on the stratum with discordance, which is b / c here
+    first = spec == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # statsmodels drops the participants without variance
+        alone = ConditionalLogit(outcome[first], treated[first][:, None],
+                                 groups=participant[first]).fit(disp=False)
+    assert effect.estimate == pytest.approx(math.exp(alone.params[0])) == pytest.approx(5 / 2, rel=1e-4)
+    assert effect.p_value == pytest.approx(alone.pvalues[0])
+
+
+def test_paired_odds_ratio_without_discordant_pairs_says_why():
+    odds = conditional_odds_ratio(PairedTable(8, 0, 0, 4))
+    assert math.isnan(odds.value) and "no discordant pair" in odds.note

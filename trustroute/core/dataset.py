@@ -160,8 +160,10 @@ END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
 MANIFEST_KEYS: tuple[str, ...] = (
     "study", "config_path", "config", "config_hash", "engine", "created_utc", "git_revision",
     "packages", "command", "planned_episodes", "finished_episodes", "failed_episodes", "seeds",
-    "files", "expected", "run",
+    "files", "expected", "run", "inputs",
 )
+# Keys a manifest written before they existed lacks (its study stays readable).
+MANIFEST_OPTIONAL_KEYS: tuple[str, ...] = ("inputs",)
 
 TABLES: dict[str, tuple[str, pa.Schema]] = {
     "episodes": (EPISODES_FILE, EPISODES_SCHEMA),
@@ -355,7 +357,8 @@ def read_manifest(study_dir: Path) -> dict:
 
     manifest = read_json(path, "study manifest",
                          fix="rerun `trustroute study` on this directory to rebuild it")
-    missing = [key for key in MANIFEST_KEYS if key not in manifest] if isinstance(manifest, dict) else ["all"]
+    missing = ([key for key in MANIFEST_KEYS if key not in manifest and key not in MANIFEST_OPTIONAL_KEYS]
+               if isinstance(manifest, dict) else ["all"])
     if missing or not isinstance(manifest, dict):   # not a dict: missing is ["all"]
         raise InputError(str(path), missing[0], "missing manifest key",
                          "rerun `trustroute study` on this directory to rebuild it")

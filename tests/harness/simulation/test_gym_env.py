@@ -5,9 +5,10 @@ from __future__ import annotations
 import gymnasium
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
+from gymnasium.utils.env_checker import check_env, data_equivalence
 
-from trustroute.harness.simulation.gym_env import ENV_ID, TrustRoutingEnv
+from trustroute.core.packaged import packaged_spec_names
+from trustroute.harness.simulation.gym_env import ENV_ID, RUN_FACTS, TrustRoutingEnv
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 
@@ -87,6 +88,43 @@ def test_check_env_sumo_engine():
         if terminated:
             break
     env.reset(seed=6)
+    env.close()
+
+
+ENGINES = ["model", "sumo"]  # both engines run check_env in well under a second per spec
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("spec", packaged_spec_names())
+def test_check_env_every_packaged_spec(spec, engine):
+    env = TrustRoutingEnv(spec, engine=engine)
+    check_env(env)
+    env.close()
+
+
+def _run_to_the_end(env: TrustRoutingEnv, seed: int) -> dict:
+    env.reset(seed=seed)
+    done, step = False, 0
+    while not done:
+        _, _, terminated, truncated, info = env.step(step % 2)
+        done, step = terminated or truncated, step + 1
+    return info
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("spec", packaged_spec_names())
+def test_last_step_info_is_a_function_of_seed_and_actions(spec, engine):
+    env = TrustRoutingEnv(spec, engine=engine, junction_cap=6)
+    first = _run_to_the_end(env, 3)
+    first_run = env.unwrapped.last_run
+    second = _run_to_the_end(env, 3)
+    assert data_equivalence(first, second, exact=True)
+    assert not set(RUN_FACTS) & set(first["summary"])
+    # the run facts are kept beside: the counter, the episode id and the wall time
+    assert (first_run["episode"], env.unwrapped.last_run["episode"]) == (1, 2)
+    assert first_run["episode_id"] != env.unwrapped.last_run["episode_id"]
+    assert env.unwrapped.last_run["wall_seconds"] >= 0
+    assert ("sim_seconds" in first["summary"]) == (engine == "sumo")
     env.close()
 
 

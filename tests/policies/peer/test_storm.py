@@ -45,3 +45,33 @@ def test_storm_brackets_our_exact_bounded_value_on_random_small_towns(driver, se
     assert storm.lower - STORM_PRECISION <= ours.lower <= storm.upper + STORM_PRECISION
     assert_overlap(run_storm(explicit_product(pomdp, spec, None), time_limit=1),
                    joint_bounds(pomdp, spec, depth=3))
+
+
+def test_no_reachable_goal_is_the_value_0_with_its_reason(pomdp, monkeypatch):
+    import trustroute.policies.peer.storm as storm
+
+    def storm_must_not_run(*_args, **_kwargs):
+        raise AssertionError("Storm rejects a property whose label no state carries")
+
+    monkeypatch.setattr(storm, "build_storm_model", storm_must_not_run)
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    product = explicit_product(pomdp, spec, 5)   # no satisfying route within 5 junctions
+    assert not product.goal.any()
+    result = run_storm(product, time_limit=1)
+    assert (result.lower, result.upper) == (0.0, 0.0) and "no reachable state" in result.note
+    assert joint_bounds(pomdp, spec, depth=5, horizon=5).upper <= 1e-11   # ours agrees
+
+
+def test_a_storm_error_is_an_input_error(pomdp, monkeypatch):
+    import stormpy.pomdp
+
+    from trustroute.core.errors import InputError
+
+    def refuse(*_args, **_kwargs):
+        raise RuntimeError("InvalidPropertyException: something Storm cannot take\nmore lines")
+
+    monkeypatch.setattr(stormpy.pomdp, "verify_with_belief_unfolding", refuse)
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    with pytest.raises(InputError, match="something Storm cannot take") as error:
+        run_storm(explicit_product(pomdp, spec, 6), time_limit=1)
+    assert "\n" not in error.value.one_line()

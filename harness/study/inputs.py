@@ -1,0 +1,159 @@
+"""A study directory's own copy of its inputs, so it is analysed and replayed wherever it is copied.
+
+At consolidation `store_inputs` copies into the study directory every file the config names:
+specs, town and driver model (the packaged ones when the config names none), the populations
+(`robust_population`, `[drivers] population`), the policy files among the conditions, the config
+file itself, and the "aware" and "robust" policies the study took from the policy cache. Each file
+is stored by content hash, `inputs/<first 16 hex of its SHA-256>/<its own file name>`: the name is
+kept because a spec's or a policy file's stem labels the tables, and a policy file's decision
+table (`.npz`) lies beside it. A population whose types name model files is stored with every
+model inline (its content hash, which the study's identity uses, is the same). Cached policies go
+to `inputs/policies/` under their cache names, which are keys of their inputs' content hashes, so
+a replay finds them there instead of synthesizing them again (a synthesis cut by its time limit
+need not repeat exactly).
+
+The manifest's `config` names the copies by paths relative to the study directory, and its
+`inputs` lists each copy's path and SHA-256 with the file it was copied from (provenance, never
+read). `relocated_config` turns the manifest's config into absolute paths in the directory where
+the study lies; `verify_inputs` checks every copy against its recorded hash.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+from trustroute.core.errors import InputError
+from trustroute.harness.study.config import NAMED_CONDITIONS, StudyConfig
+
+INPUTS_DIR = "inputs"
+POLICIES_DIR = f"{INPUTS_DIR}/policies"
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+# What a study directory holds of its inputs: relative path -> {"sha256": ..., "source": ...}.
+Record = dict[str, dict[str, str]]
+
+
+def _write(study_dir: Path, record: Record, data: bytes, name: str, source: str,
+           folder: Path | None = None) -> str:
+    """Store `data` as `name` in `folder` (default: inputs/<its content hash>); its relative path."""
+    folder = folder or study_dir / INPUTS_DIR / hashlib.sha256(data).hexdigest()[:16]
+    target = folder / name
+    if not (target.is_file() and target.read_bytes() == data):
+        from trustroute.core.output_files import atomic_write_bytes
+
+        folder.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(target, data, "study input copy", "free disk space in the study directory")
+    relative = target.relative_to(study_dir).as_posix()
+    record[relative] = {"sha256": hashlib.sha256(data).hexdigest(), "source": source}
+    return relative
+
+
+def _store_file(study_dir: Path, record: Record, path: str | Path, folder: Path | None = None) -> str:
+    """Store one file (and a policy file's decision table beside it); its relative path."""
+    path = Path(path)
+    relative = _write(study_dir, record, path.read_bytes(), path.name, str(path), folder)
+    table = path.with_suffix(".npz")
+    if path.suffix == ".json" and table.is_file():
+        _write(study_dir, record, table.read_bytes(), table.name, str(table), (study_dir / relative).parent)
+    return relative
+
+
+def _store_population(study_dir: Path, record: Record, path: str) -> str:
+    """A population file, with its models inline when its types name model files."""
+    raw = json.loads(Path(path).read_text())
+    if not any(isinstance(t, dict) and "model_file" in t for t in raw.get("types", [])):
+        return _store_file(study_dir, record, path)
+    from trustroute.participants.driver_population import load_driver_population
+
+    text = json.dumps(load_driver_population(path).to_dict(), indent=2) + "\n"
+    return _write(study_dir, record, text.encode(), Path(path).name, path)
+
+
+def _cached_policies(config: StudyConfig) -> list[Path]:
+    """The policy-cache entries the study's "aware" and "robust" conditions were read from."""
+    from trustroute.harness.study.context import aware_horizon, aware_policy_path, belief_rule, study_context
+
+    context = study_context(config)
+    paths = []
+    for spec in context.specs.values():
+        if "aware" in config.conditions:
+            paths.append(aware_policy_path(context.town, context.nominal, spec, config))
+        if "robust" in config.conditions and config.robust_population is not None:
+            from trustroute.participants.driver_population import load_driver_population
+            from trustroute.policies.belief.driver_types import lift_population, lift_spec
+            from trustroute.policies.resolve import aware_cache_path, population_cache_path
+
+            population = load_driver_population(config.robust_population)
+            horizon, rule = aware_horizon(config), belief_rule(config)
+            if population.n_types == 1:
+                lifted = lift_spec(spec, population, config.robust_population)
+                paths.append(aware_cache_path(context.town, lift_population(population), lifted,
+                                              config.policy_cache, horizon, rule))
+            else:
+                paths.append(population_cache_path(context.town, population, spec, config.robust_objective,
+                                                   config.policy_cache, horizon, rule))
+    return [p for p in paths if p.is_file()]
+
+
+def store_inputs(study_dir: Path, config: StudyConfig) -> tuple[dict, dict]:
+    """Copy the study's inputs into `study_dir/inputs`; return (the config as the manifest records
+    it, every path relative to the study directory; the `inputs` record)."""
+    from trustroute.networks.town import DEFAULT_TOWN_PATH
+    from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
+
+    study_dir = Path(study_dir)
+    record: Record = {}
+    recorded = json.loads(json.dumps(asdict(config), default=str))
+    recorded["specs"] = [_store_file(study_dir, record, p) for p in config.specs]
+    recorded["conditions"] = [c if c in NAMED_CONDITIONS else _store_file(study_dir, record, c)
+                              for c in config.conditions]
+    recorded["town"] = _store_file(study_dir, record, config.town or DEFAULT_TOWN_PATH)
+    recorded["driver_model"] = _store_file(study_dir, record,
+                                           config.driver_model or DEFAULT_DRIVER_MODEL_PATH)
+    for key in ("robust_population", "driver_population"):
+        value = getattr(config, key)
+        recorded[key] = None if value is None else _store_population(study_dir, record, value)
+    for path in _cached_policies(config):
+        _store_file(study_dir, record, path, study_dir / POLICIES_DIR)
+    recorded["policy_cache"] = POLICIES_DIR
+    recorded["output"] = None   # the directory is wherever it is copied to
+    if Path(config.source_path).is_file():
+        recorded["source_path"] = _store_file(study_dir, record, config.source_path)
+    return recorded, {"dir": INPUTS_DIR, "files": record}
+
+
+def relocated_config(config: dict, study_dir: Path) -> dict:
+    """The manifest's config with its stored inputs' paths (relative, under inputs/) made absolute
+    in `study_dir`; other values, and the absolute paths of a study made before its inputs were
+    stored, stay as they are."""
+    study_dir = Path(study_dir).resolve()
+
+    def place(value: object) -> object:
+        if isinstance(value, str) and value.startswith(f"{INPUTS_DIR}/"):
+            return str(study_dir / value)
+        if isinstance(value, list):
+            return [place(v) for v in value]
+        return value
+
+    return {key: place(value) for key, value in config.items()}
+
+
+def verify_inputs(manifest: dict, study_dir: Path) -> None:
+    """Every stored input is present and has the hash the manifest records, or InputError."""
+    study_dir = Path(study_dir)
+    for relative, entry in sorted((manifest.get("inputs") or {}).get("files", {}).items()):
+        path = study_dir / relative
+        if not path.is_file():
+            raise InputError(str(study_dir), relative, "a stored input of the study is missing",
+                             "copy the whole study directory, inputs/ included")
+        if _sha256(path) != entry.get("sha256"):
+            raise InputError(str(study_dir), relative, "a stored input of the study changed since it was "
+                             "run (its SHA-256 differs from the manifest's)",
+                             "restore the study directory from its original copy")

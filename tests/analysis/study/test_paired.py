@@ -1,0 +1,71 @@
+"""The paired tables on separated data: every unbounded odds ratio is shown with its reason."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from trustroute.analysis.study.display import paired_display
+from trustroute.analysis.study.paired import paired_table_rows, per_participant_table, repeated_measures_table
+
+
+def _episodes() -> pd.DataFrame:
+    """21 participants x 2 specs x (aware, free); the 6 who differ all favour aware."""
+    pattern = [[(1, 0), (1, 1)]] * 3 + [[(1, 1), (1, 0)]] * 3
+    pattern += [[(1, 1), (1, 1)]] * 10 + [[(0, 0), (0, 0)]] * 5
+    rows = []
+    for person, cells in enumerate(pattern):
+        for spec, (aware, free) in zip(("phi1", "phi2"), cells, strict=True):
+            for condition, satisfied in (("aware", aware), ("free", free)):
+                rows.append({"participant": f"p{person:02d}", "spec": spec, "condition": condition,
+                             "satisfied": bool(satisfied), "mean_reported_trust": 4.0 + 0.1 * person})
+    return pd.DataFrame(rows)
+
+
+def test_repeated_measures_row_on_separated_data_is_exact_and_says_why():
+    row = repeated_measures_table(_episodes(), "satisfied", ("aware", "free")).iloc[0]
+    assert math.isfinite(row["estimate"]) and row["low"] > 1 and row["high"] == math.inf
+    assert row["estimate"] < 100 and 0 < row["p_value"] < 0.05
+    assert "separation" in row["note"] and "aware" in row["note"]
+
+
+def test_paired_display_names_the_reason_beside_an_unbounded_odds_ratio():
+    episodes = _episodes()
+    wide = per_participant_table(episodes, "satisfied", ("aware", "free"))
+    rows = paired_table_rows(wide, ("aware", "free"), ["phi1", "phi2"], np.random.default_rng(0), 200)
+    shown = paired_display(rows)
+    assert "odds ratio note" in shown
+    for text, note in zip(shown["conditional OR [exact CI]"], shown["odds ratio note"], strict=True):
+        if "inf" in text:
+            assert "discordant pairs favour aware" in note
+        assert "inf [" not in text  # the estimate itself is finite
+
+
+def test_the_report_shows_no_unbounded_odds_ratio_without_its_reason(model_study, capsys):
+    import json
+    import re
+
+    from tests.cli import run_cli
+
+    code, out, err = run_cli(capsys, "analyze", str(model_study), "--json", "--report")
+    assert code == 0, err
+    payload = json.loads(out)
+    for row in payload["paired"]:
+        for key in ("odds_ratio", "or_low", "or_high"):
+            value = row.get(key)
+            if value is not None and (value == math.inf or value == 0.0):
+                assert "discordant pairs favour" in row["or_note"], row
+        if row.get("odds_ratio") is not None:
+            assert math.isfinite(row["odds_ratio"])
+    for row in payload["repeated_measures"]:
+        if row["estimate"] is not None:
+            assert math.isfinite(row["estimate"]) and row["estimate"] < 1e6, row
+            if row["high"] == math.inf or row["low"] == 0.0:
+                assert "separation" in row["note"], row
+    for cell in payload["cells"]:   # probabilities and their intervals lie in [0, 1]
+        assert 0.0 <= cell["ci_low"] <= cell["satisfaction_rate"] <= cell["ci_high"] <= 1.0
+    html = (model_study / "report.html").read_text()
+    intervals = re.findall(r"\[(-?[\d.]+|inf), (-?[\d.]+|inf)\]", html)
+    assert intervals and all(float(v) < 1e6 for pair in intervals for v in pair if v != "inf")
