@@ -48,7 +48,7 @@ from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeT
 from trustroute.harness.simulation.incidents import EgoState, Incident, Scene
 from trustroute.harness.simulation.performance import PerformanceMonitor, limits_for, verdict
 from trustroute.harness.simulation.real_roads import RealRoads, real_scene
-from trustroute.harness.simulation.sumo_start import SumoConfig, hot_calls, sumo_session
+from trustroute.harness.simulation.sumo_start import Sumo, SumoConfig, hot_calls, sumo_session
 from trustroute.networks.real_net import is_imported, road_edges, town_net_file
 from trustroute.networks.sumo_net import ROAD_SPEED
 from trustroute.networks.town import NO_INCIDENT, split_road
@@ -394,7 +394,12 @@ class _Episode:
         relief = JamRelief(EGO_ID)
         if background.count == 0:
             return relief.step
-        return lambda sumo: (background.step(sumo), relief.step(sumo))
+
+        def both(sumo: Sumo) -> None:
+            background.step(sumo)
+            relief.step(sumo)
+
+        return both
 
     def run(self) -> float:
         sumo = self.sumo

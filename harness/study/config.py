@@ -280,7 +280,7 @@ def _file_path(seen: Seen) -> str:
     return f"expected a file path, got {seen.value!r}"
 
 
-FILE_FIX: dict[FileKey, str] = {
+FILE_FIX: dict[FileKey | Literal["routes"], str] = {
     "town": "give an existing town file or omit town (the default)",
     "driver_model": "give an existing driver model file or omit driver_model (the default)",
     "robust_population": ("give the driver-population file the robust policy is made for "

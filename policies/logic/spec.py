@@ -525,7 +525,8 @@ def load_spec(path: str | Path, town: Town | None = None, n_trust: int | None = 
     """Load and validate a spec file or a packaged spec by name (trustroute/core/packaged.py), through
     the guarded reader (trustroute/core/validation.py); with `town`, also check its roads against the
     town; with `n_trust`, the trust levels of the driver model (or population, named by
-    `driver_source`) it is used with, check every belief atom has one coefficient per level. Every command that reads a spec with a driver model loads it here."""
+    `driver_source`) it is used with, check every belief atom has one coefficient per level. Every
+    command that reads a spec with a driver model loads it here."""
     path = SPECS.resolve(path)   # a file, or a packaged spec by name ("phi1")
     text = read_text(path, str(path), "the spec file", SPECS.fix())
     spec = spec_from_text(text, str(path), town)

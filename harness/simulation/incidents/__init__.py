@@ -17,7 +17,7 @@ from trustroute.harness.simulation.sumo_start import Sumo
 
 TypeDefiner = Callable[[Sumo], None]
 
-INJECTORS: dict[str, Callable[[Sumo, Scene], Incident]] = {
+INJECTORS: dict[str, Callable[[Sumo, Scene], Incident | None]] = {
     "pedestrian": pedestrian.inject,
     "obstacle": obstacle.inject,
     "truck": truck.inject,

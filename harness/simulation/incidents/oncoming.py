@@ -185,9 +185,10 @@ def schedule_oncoming(sumo: Sumo, scene: Scene, meet_at: float, meet_in: float, 
     meeting_on_reverse = max(0.0, reverse_length - meet_at)
     depart = meeting_on_reverse - speed * max(meet_in, 0.0)
     roads = [road]
+    before = ""
     before_lane = upstream_lane(sumo, scene) if depart < 0 and from_upstream else None
-    before = before_lane.rsplit("_", 1)[0] if before_lane is not None else None
     if before_lane is not None:
+        before = before_lane.rsplit("_", 1)[0]
         # The junction's internal lane adds its length to the way; the turn's slowing is not
         # modelled (met_time records when the two really passed each other).
         before_length = sumo.lane.getLength(before_lane)
@@ -201,7 +202,7 @@ def schedule_oncoming(sumo: Sumo, scene: Scene, meet_at: float, meet_in: float, 
     sumo.route.add(route_id, roads)
     vehicle = OncomingVehicle(vehicle_id=vehicle_id, route_id=route_id, road=road,
                               depart_position=max(depart, 0.0), insert_time=scene.time + delay,
-                              meet_at=meet_at, meet_in=meet_in, road_before=before or "",
+                              meet_at=meet_at, meet_in=meet_in, road_before=before,
                               depart_lane="1" if scene.end_junction is None else "best")
     if delay == 0.0:
         vehicle.insert(sumo)
