@@ -1,7 +1,8 @@
 """A study directory's own copy of its inputs, so it is analysed and replayed wherever it is copied.
 
 At consolidation `store_inputs` copies into the study directory every file the config names:
-specs, town and driver model (the packaged ones when the config names none), the populations
+specs, town (with the SUMO net of an imported town, where the town expects it) and driver model
+(the packaged ones when the config names none), background route files, the populations
 (`robust_population`, `[drivers] population`), the policy files among the conditions, the config
 file itself, and the "aware" and "robust" policies the study took from the policy cache. Each file
 is stored by content hash, `inputs/<first 16 hex of its SHA-256>/<its own file name>`: the name is
@@ -65,6 +66,21 @@ def _store_file(study_dir: Path, record: Record, path: str | Path, folder: Path 
     return relative
 
 
+def _store_town(study_dir: Path, record: Record, path: str | Path) -> str:
+    """A town file, and the SUMO net an imported town drives where the town expects it (its
+    `sumo_net.file`, relative to the town's folder)."""
+    from trustroute.networks.town import load_town
+
+    relative = _store_file(study_dir, record, path)
+    town = load_town(path)
+    net = town.sumo_net
+    if net is not None and not Path(net.file).is_absolute():
+        source = Path(path).parent / net.file
+        folder = (study_dir / relative).parent / Path(net.file).parent
+        _write(study_dir, record, source.read_bytes(), source.name, str(source), folder)
+    return relative
+
+
 def _store_population(study_dir: Path, record: Record, path: str) -> str:
     """A population file, with its models inline when its types name model files."""
     raw = json.loads(Path(path).read_text())
@@ -114,7 +130,8 @@ def store_inputs(study_dir: Path, config: StudyConfig) -> tuple[dict, dict]:
     recorded["specs"] = [_store_file(study_dir, record, p) for p in config.specs]
     recorded["conditions"] = [c if c in NAMED_CONDITIONS else _store_file(study_dir, record, c)
                               for c in config.conditions]
-    recorded["town"] = _store_file(study_dir, record, config.town or DEFAULT_TOWN_PATH)
+    recorded["town"] = _store_town(study_dir, record, config.town or DEFAULT_TOWN_PATH)
+    recorded["routes"] = [_store_file(study_dir, record, p) for p in config.routes]
     recorded["driver_model"] = _store_file(study_dir, record,
                                            config.driver_model or DEFAULT_DRIVER_MODEL_PATH)
     for key in ("robust_population", "driver_population"):

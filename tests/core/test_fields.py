@@ -168,5 +168,5 @@ def test_every_format_exposes_its_accepted_keys():
     assert keys(spec.TRUST_STATE_FIELDS) == ("roads", "trust")
     assert keys(spec.TYPE_BELIEF_FIELDS) == ("types", "above")
     assert config.TABLES == ("study", "population", "drivers") and config.DRIVERS_KEYS == ("population",)
-    assert len(config.STUDY_KEYS) == 19 and config.STUDY_KEYS[:5] == ("participants", "seed", "engine",
+    assert len(config.STUDY_KEYS) == 20 and config.STUDY_KEYS[:5] == ("participants", "seed", "engine",
                                                                      "specs", "conditions")
