@@ -87,7 +87,8 @@ def waypoint_line(start: str, waypoints: list[dict]) -> str:
     """`start E-A -> v1 (3 roads): 2 junctions -> ...`."""
     parts = [f"start {start}"]
     for leg in waypoints:
-        apart = "unreachable" if leg["junctions"] is None else f"{leg['junctions']} junctions"
+        apart = "unreachable" if leg["junctions"] is None else (
+            f"{leg['junctions']} junction{'' if leg['junctions'] == 1 else 's'}")
         parts.append(f"{leg['to']} ({leg['roads']} roads): {apart}")
     return "waypoints, fewest junctions from the previous: " + " -> ".join(parts)
 
