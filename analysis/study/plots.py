@@ -7,19 +7,23 @@ paired_plot         per participant, mean reported trust under each condition jo
 trust_plot          mean reported and true trust against the road index, per spec and condition,
                     with a 95 % band of the mean of reported trust (normal approximation)
 route_plot          share of episodes driving each road on the town map (colour bar), with the
-                    spec's start road, its waypoint roads and the incident types marked
+                    spec's start road, its waypoint roads and the incident types marked; roads
+                    along their courses, offsets and markers scaled to the town (networks/town_map.py)
 takeover_plot       takeover rate per incident type and condition with exact 95 % intervals
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from trustroute.core.dataset import PLOTS_DIR
+from trustroute.networks.road_lookup import road_shape
 from trustroute.networks.town import Town, split_road
+from trustroute.networks.town_map import map_frame, names_every_junction, point_along
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
 INCIDENT_MARKERS = {"pedestrian": ("P", "#ff8c00"), "obstacle": ("s", "#c8a000"), "truck": ("^", "#5a5aff")}
@@ -168,18 +172,80 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
 
 
 def _road_xy(town: Town, road: str, fraction: float = 0.5, offset: float = 18.0) -> tuple[float, float]:
-    """A point `fraction` along a directed road, `offset` metres to its right (its driving side)."""
-    u, v = split_road(road)
-    (x1, y1), (x2, y2) = town.junctions[u], town.junctions[v]
-    dx, dy = x2 - x1, y2 - y1
-    length = max(np.hypot(dx, dy), 1e-9)
-    return x1 + fraction * dx + offset * dy / length, y1 + fraction * dy + offset * -dx / length
+    """A point `fraction` along a directed road's course, `offset` metres to its right (its
+    driving side)."""
+    return point_along(road_shape(town, road), fraction, offset)
+
+
+def _undirected_shape(town: Town, u: str, v: str) -> np.ndarray:
+    """The course of road u–v (its u-v direction, or v-u for a road one-way from v)."""
+    road = f"{u}-{v}" if f"{u}-{v}" in town.incidents else f"{v}-{u}"
+    return np.asarray(road_shape(town, road), dtype=float)
+
+
+@dataclass(frozen=True)
+class _MapStyle:
+    """Offsets in metres (multiples of the town's map unit) and marker areas in points², smaller in
+    a town with many roads so that a city stays readable."""
+
+    unit: float
+    shrink: float  # 1 on a town of up to 40 directed roads, less on larger ones
+    named: bool  # whether every junction's name is written
+
+    @classmethod
+    def of(cls, town: Town) -> _MapStyle:
+        return cls(unit=map_frame(town).unit, shrink=min(1.0, (40 / len(town.states)) ** 0.5),
+                   named=names_every_junction(town))
+
+    def size(self, points2: float) -> float:
+        return points2 * self.shrink
+
+
+def _draw_roads(ax, plt, town: Town, share: pd.Series, style: _MapStyle) -> None:
+    """Every road in light grey along its course, those driven coloured and widened by their share."""
+    for u, v in town.roads:
+        shape = _undirected_shape(town, u, v)
+        s = float(share.get("-".join(sorted((u, v))), 0.0))
+        ax.plot(shape[:, 0], shape[:, 1], color="lightgrey", lw=1, zorder=1)
+        if s > 0:
+            ax.plot(shape[:, 0], shape[:, 1], color=plt.cm.viridis(s), lw=1 + 7 * s * style.shrink, zorder=2,
+                    solid_capstyle="round", solid_joinstyle="round")
+
+
+def _draw_spec(ax, town: Town, definition, style: _MapStyle, first: bool) -> None:
+    """The spec's waypoint roads (stars beside them) and its start road (a dot, labelled)."""
+    for k, (atom, atom_roads) in enumerate(sorted(definition.state_atoms.items())):
+        points = np.array([_road_xy(town, r, 0.6, 4 * style.unit) for r in sorted(atom_roads)])
+        ax.scatter(points[:, 0], points[:, 1], marker="*", s=style.size(70), zorder=5, edgecolor="black",
+                   linewidth=0.4, color=WAYPOINT_COLOURS[k % len(WAYPOINT_COLOURS)],
+                   label=f"waypoint {atom}" if first else None)
+    sx, sy = _road_xy(town, definition.start, 0.5, 0.0)
+    ax.scatter([sx], [sy], marker="o", s=style.size(90), color="#2ca02c", edgecolor="black", zorder=6,
+               label="start" if first else None)
+    ax.annotate("start", (sx, sy), xytext=(4, 4), textcoords="offset points", fontsize=6)
+
+
+def _draw_incidents_and_junctions(ax, town: Town, style: _MapStyle, first: bool) -> None:
+    for kind, (marker, colour) in INCIDENT_MARKERS.items():
+        points = np.array([_road_xy(town, r, 0.35, 3 * style.unit) for r, k in town.incidents.items()
+                           if k == kind])
+        if len(points):
+            ax.scatter(points[:, 0], points[:, 1], marker=marker, s=style.size(18), color=colour, zorder=4,
+                       edgecolor="black", linewidth=0.3, label=kind if first else None)
+    names = sorted(town.junctions)
+    xy = np.array([town.junctions[n] for n in names])
+    ax.scatter(xy[:, 0], xy[:, 1], s=60 if style.named else style.size(12), color="white", edgecolor="black",
+               linewidth=0.8 if style.named else 0.4, zorder=3)
+    if style.named:
+        for name, (x, y) in zip(names, xy, strict=True):
+            ax.text(x, y, name, ha="center", va="center", fontsize=6, zorder=7)
 
 
 def route_plot(
     town: Town, roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, specs_by_name: dict | None = None
 ) -> Path:
-    """Line width and colour: the share of episodes that drove each road (either direction)."""
+    """Line width and colour: the share of episodes that drove each road (either direction), drawn
+    along the roads' courses (their geometry where the town has one) with y up, north at the top."""
     plt = _pyplot()
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
@@ -190,81 +256,32 @@ def route_plot(
         episodes[["episode_id", "spec", "condition"]], on="episode_id"
     )
     merged = merged[merged["index"] > 0]
+    frame = map_frame(town)
+    aspect = (frame.y_max - frame.y_min + 1.0) / (frame.x_max - frame.x_min + 1.0)
+    width = 3.6 if len(town.junctions) <= 40 else 6.0  # inches per panel
+    height = width * min(1.5, max(0.5, aspect))
     fig, axes = plt.subplots(
         len(specs) or 1,
         len(conditions) or 1,
-        figsize=(3.6 * max(1, len(conditions)) + 1.0, 3.6 * max(1, len(specs))),
+        figsize=(width * max(1, len(conditions)) + 1.0, height * max(1, len(specs))),
         squeeze=False,
     )
-    xy = town.junctions
+    style = _MapStyle.of(town)
     for i, spec in enumerate(specs):
         definition = (specs_by_name or {}).get(spec)
         for j, condition in enumerate(conditions):
             ax = axes[i][j]
+            first = i == 0 and j == 0
             group = merged[(merged["spec"] == spec) & (merged["condition"] == condition)]
             count = episodes[(episodes["spec"] == spec) & (episodes["condition"] == condition)].shape[0]
             undirected = group.assign(
                 road=group["directed_road"].map(lambda r: "-".join(sorted(split_road(r))))
             )
             share = undirected.drop_duplicates(["episode_id", "road"]).groupby("road").size() / max(1, count)
-            for u, v in town.roads:
-                s = float(share.get("-".join(sorted((u, v))), 0.0))
-                (x1, y1), (x2, y2) = xy[u], xy[v]
-                ax.plot([x1, x2], [y1, y2], color="lightgrey", lw=1, zorder=1)
-                if s > 0:
-                    ax.plot(
-                        [x1, x2],
-                        [y1, y2],
-                        color=plt.cm.viridis(s),
-                        lw=1 + 7 * s,
-                        zorder=2,
-                        solid_capstyle="round",
-                    )
+            _draw_roads(ax, plt, town, share, style)
             if definition is not None:
-                for k, (atom, atom_roads) in enumerate(sorted(definition.state_atoms.items())):
-                    points = np.array([_road_xy(town, r, 0.6, 22.0) for r in sorted(atom_roads)])
-                    ax.scatter(
-                        points[:, 0],
-                        points[:, 1],
-                        marker="*",
-                        s=70,
-                        zorder=5,
-                        edgecolor="black",
-                        linewidth=0.4,
-                        color=WAYPOINT_COLOURS[k % len(WAYPOINT_COLOURS)],
-                        label=f"waypoint {atom}" if i == 0 and j == 0 else None,
-                    )
-                sx, sy = _road_xy(town, definition.start, 0.5, 0.0)
-                ax.scatter(
-                    [sx],
-                    [sy],
-                    marker="o",
-                    s=90,
-                    color="#2ca02c",
-                    edgecolor="black",
-                    zorder=6,
-                    label="start" if i == 0 and j == 0 else None,
-                )
-                ax.annotate("start", (sx, sy), xytext=(4, 4), textcoords="offset points", fontsize=6)
-            for kind, (marker, colour) in INCIDENT_MARKERS.items():
-                points = np.array(
-                    [_road_xy(town, r, 0.35, 18.0) for r, k in town.incidents.items() if k == kind]
-                )
-                if len(points):
-                    ax.scatter(
-                        points[:, 0],
-                        points[:, 1],
-                        marker=marker,
-                        s=18,
-                        color=colour,
-                        zorder=4,
-                        edgecolor="black",
-                        linewidth=0.3,
-                        label=kind if i == 0 and j == 0 else None,
-                    )
-            for name, (x, y) in xy.items():
-                ax.scatter([x], [y], s=60, color="white", edgecolor="black", zorder=3)
-                ax.text(x, y, name, ha="center", va="center", fontsize=6, zorder=7)
+                _draw_spec(ax, town, definition, style, first)
+            _draw_incidents_and_junctions(ax, town, style, first)
             ax.set_title(f"{spec} / {condition} (n={count})", fontsize=9)
             ax.set_aspect("equal")
             ax.axis("off")

@@ -1,7 +1,9 @@
 """`trustroute spec check SPEC`: parse a spec, translate it to its DFA and lint it.
 
-Prints the DFA size and the warnings of policies/logic/lint.py (against the default town unless
---town is given); --json prints one object; --dot writes the DFA as Graphviz dot.
+Prints the DFA size, how many junctions apart the waypoint sets lie (the state atoms in the order
+the formula names them, from the start road) and the warnings of policies/logic/lint.py (against
+the default town unless --town is given); --json prints one object; --dot writes the DFA as
+Graphviz dot.
 """
 
 from __future__ import annotations
@@ -72,8 +74,29 @@ def spec_report(spec_path: str, town_path: str | None, population_path: str | No
         "rejecting_states": int(dfa.rejecting.sum()),
         "translation_seconds": seconds,
         "warnings": [{"code": w.code, "message": w.message, "atom": w.atom} for w in warnings],
+        "waypoints": waypoint_summary(spec, town),
     }
     return summary, dfa.to_dot(spec.name)
+
+
+def waypoint_summary(spec, town) -> list[dict]:
+    """The state atoms in the order the formula first names them, with their road counts and the
+    fewest junctions from the previous one (the start road first; networks/road_lookup.py)."""
+    from trustroute.networks.road_lookup import waypoint_legs
+
+    waypoints = [(atom, spec.state_atoms[atom]) for atom in spec.formula_atoms if atom in spec.state_atoms]
+    legs = waypoint_legs(town, spec.start, waypoints)
+    return [{**leg.to_dict(), "roads": len(roads)} for leg, (_, roads) in zip(legs, waypoints, strict=True)]
+
+
+def waypoint_line(start: str, waypoints: list[dict]) -> str:
+    """`start E-A -> v1 (3 roads): 2 junctions -> ...`."""
+    parts = [f"start {start}"]
+    for leg in waypoints:
+        apart = "unreachable" if leg["junctions"] is None else (
+            f"{leg['junctions']} junction{'' if leg['junctions'] == 1 else 's'}")
+        parts.append(f"{leg['to']} ({leg['roads']} roads): {apart}")
+    return "waypoints, fewest junctions from the previous: " + " -> ".join(parts)
 
 
 @click.group("spec")
@@ -110,6 +133,8 @@ def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | 
                f"{summary['rejecting_states']} rejecting) over {len(summary['atoms'])} atoms "
                f"({', '.join(summary['atoms'])}), "
                f"translated in {summary['translation_seconds'] * 1e3:.1f} ms")
+    if summary["waypoints"]:
+        click.echo(waypoint_line(summary["start"], summary["waypoints"]))
     if not summary["warnings"]:
         click.echo("no warnings")
     for warning in summary["warnings"]:

@@ -1,7 +1,9 @@
-"""`trustroute town import SOURCE --out town.json`: a SUMO net or an OpenStreetMap extract as a town.
+"""`trustroute town import SOURCE --out town.json`: a SUMO net or an OpenStreetMap extract as a town;
+`trustroute town roads TOWN [--near X Y] [--street NAME]`: a town's roads near a point or on a street.
 
-Prints the town file written and its size; one line on stderr says what the import left out
-(--quiet and --json keep it off). The work is networks/town_import.py's.
+import prints the town file written and its size; one line on stderr says what the import left out
+(--quiet and --json keep it off). The work is networks/town_import.py's and
+networks/road_lookup.py's.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from trustroute.harness.commands.output import emit, json_option, quiet_option, 
 
 @click.group("town")
 def town() -> None:
-    """Import real road networks as towns."""
+    """Import real road networks as towns, and find their roads."""
 
 
 @town.command("import")
@@ -50,3 +52,34 @@ def import_command(source: str, out: str, incidents_path: str | None, incident_s
         click.echo(f"{Path(source).name}: {result.graph.summary()}", err=True)
     emit(as_json, with_paths(result.to_dict(), {"town": result.town_path, "net": result.net_path}),
          [str(result.town_path), result.summary()])
+
+
+@town.command("roads")
+@click.argument("town_path", metavar="TOWN", type=click.Path())
+@click.option("--near", type=(float, float), default=None, metavar="X Y",
+              help="List the roads nearest this point (metres, the town's coordinates) first.")
+@click.option("--street", default=None, metavar="NAME", help="Only the roads on this street (case ignored).")
+@click.option("--limit", type=click.IntRange(min=1), default=None,
+              help="At most N roads (default: 10 with --near, else all).")
+@json_option
+def roads_command(town_path: str, near: tuple[float, float] | None, street: str | None, limit: int | None,
+                  as_json: bool) -> None:
+    """Print TOWN's directed roads with length, street and incident: those near a point, or on a
+    street. Spec files can name waypoint sets by junction or street (docs/formats/spec.md)."""
+    from trustroute.core.errors import InputError
+    from trustroute.networks.road_lookup import road_rows, street_names
+    from trustroute.networks.town import load_town
+
+    town = load_town(town_path)
+    if limit is None and near is not None:
+        limit = 10
+    rows = road_rows(town, near=near, street=street, limit=limit)
+    if street is not None and not rows:
+        known = street_names(town)
+        raise InputError(town_path, "--street", f"no road is on a street named '{street}'",
+                         f"use one of the town's {len(known)} street names (e.g. {', '.join(known[:3])})"
+                         if known else "this town's roads carry no street names (import a town from a net "
+                         "with names: trustroute town import)")
+    lines = [f"{row.road}  {row.length:.1f} m  {row.incident}  {row.street or '(no street name)'}"
+             + ("" if row.distance is None else f"  {row.distance:.1f} m away") for row in rows]
+    emit(as_json, {"town": town.source_path, "roads": [row.to_dict() for row in rows]}, lines)

@@ -6,11 +6,19 @@ belief_after, dfa_state, sim_time_in, sim_time_out), kinematics (time, x, y, mod
 (index, incident, injected_time, in_view_time, x, y, removed_time, takeover_start, takeover_end),
 summary (episode_id, end_reason, sim_seconds). Reported trust may be -1 or null where none was given.
 
-Timeline "sim_time" (a duration, seconds of SUMO time). Entities:
-- world/lanes, world/junctions                static: every lane of the net; junction names
+Timeline "sim_time" (a duration, seconds of SUMO time). Rerun's 2D views draw y downwards (image
+rows), while SUMO nets and town files have y upwards (north): every position under world/ is logged
+with y negated, so the map appears the right way up. Marker sizes and line widths are multiples of
+the town's map unit (networks/town_map.py), so Town01 and a city of hundreds of junctions are both
+readable; a town of more than 30 junctions shows names on hover only. A road is drawn along its
+course: the town's geometry where it has one, else the net's lane of the edge named after it.
+Entities:
+- world/lanes, world/roads, world/junctions   static: every lane of the net; the town's road shapes
+                                              (roads with a geometry); junction names
 - world/start, world/waypoints/<atom>         static: the spec's start road and each state atom's
                                               roads, drawn wide and labelled (v1, v2, ...)
-- world/incident_roads                        static: where the town places each incident kind
+- world/incident_roads                        static: where the town places each incident kind (a
+                                              marker beside the road, on its driving side)
 - world/incidents/<i>_<kind>                  a labelled box from injection until removal
 - world/ego/box                               oriented box (heading from successive positions), one
                                               row per SUMO step via send_columns; red when manual
@@ -40,6 +48,8 @@ import numpy as np
 import pandas as pd
 
 from trustroute.harness.simulation.driving_style import MANUAL
+from trustroute.networks.road_lookup import road_shape
+from trustroute.networks.town_map import MapFrame, map_frame, names_every_junction, point_along
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -56,15 +66,28 @@ PLAN_COLOR = (60, 200, 255)
 START_COLOR = (80, 220, 120)
 WAYPOINT_COLORS = ((255, 215, 0), (255, 120, 200), (170, 120, 255), (0, 200, 200), (255, 160, 60))
 INCIDENT_COLORS = {"pedestrian": (255, 140, 0), "obstacle": (255, 200, 0), "truck": (120, 120, 255)}
-# Metres drawn (the car is 5 m): visible on the 400 m Town01 map, shorter than its 49 m shortest road.
-EGO_LENGTH = 12.0
-EGO_WIDTH = 5.5
+# Sizes in map units (networks/town_map.py: 2.7 m on Town01, 16 m on a 2 km city): the ego box is
+# drawn larger than a car (5 m) so that it stays visible, and shorter than Town01's 49 m shortest road.
+EGO_LENGTH = 5.0
+EGO_WIDTH = 2.4
+LANE_RADIUS = 0.3
+ROAD_RADIUS = 0.5
+JUNCTION_RADIUS = 1.2  # 0.6 in a town whose junction names are hover text only
+START_RADIUS = 1.3
+WAYPOINT_RADIUS = 1.0
+MARKER_RADIUS = 1.0
+PLAN_RADIUS = 0.9
+TRAIL_RADIUS = 0.6
+OUTLINE_RADIUS = 0.4
+INCIDENT_HALF_SIZE = 4.0
+UP = np.array([1.0, -1.0])  # town and SUMO y point up, Rerun's 2D y points down
 TRAIL_SECONDS = 30.0
 TRAIL_POINTS = 15
 TRAIL_EVERY = 2.0  # seconds of sim time between trail updates (the box moves every step)
 HIGH_TRUST = 6  # the level of the P(trust >= 6) line (the paper's "hightrust")
 ENTITIES = (
     "world/lanes",
+    "world/roads",
     "world/junctions",
     "world/start",
     "world/incident_roads",
@@ -116,17 +139,24 @@ def lane_strips(net: Net) -> list[np.ndarray]:
     return strips
 
 
-def road_shape(net: Net, road: str) -> np.ndarray:
-    """The centre line of a road's vehicle lane (the last lane: sidewalks come first)."""
-    lanes = net.getEdge(road).getLanes()
-    return np.asarray(lanes[-1].getShape(), dtype=np.float32)
+def on_screen(points: np.ndarray | list) -> np.ndarray:
+    """Positions (x, y) with y negated (UP): a y-up map shown the right way up in a 2D view."""
+    return (np.asarray(points, dtype=np.float64).reshape(-1, 2) * UP).astype(np.float32)
+
+
+def road_course(net: Net, town: Town, road: str) -> np.ndarray:
+    """A directed road's course: the town's geometry where it has one (imported towns, Town01's
+    outer streets), else the centre line of the vehicle lane of the net's edge named after it (the
+    last lane: sidewalks come first), else the straight line between its junctions."""
+    if road in town.geometry:
+        return np.asarray(road_shape(town, road), dtype=np.float32)
+    if net.hasEdge(road):
+        return np.asarray(net.getEdge(road).getLanes()[-1].getShape(), dtype=np.float32)
+    return np.asarray(road_shape(town, road), dtype=np.float32)
 
 
 def _midpoint(shape: np.ndarray) -> np.ndarray:
-    steps = np.linalg.norm(np.diff(shape, axis=0), axis=1)
-    along = np.concatenate([[0.0], np.cumsum(steps)])
-    half = along[-1] / 2
-    return np.array([np.interp(half, along, shape[:, 0]), np.interp(half, along, shape[:, 1])])
+    return np.asarray(point_along(shape, 0.5), dtype=np.float32)
 
 
 def headings(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -144,13 +174,11 @@ def headings(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return angle[index]
 
 
-def box_corners(x: np.ndarray, y: np.ndarray, heading: np.ndarray) -> np.ndarray:
-    """[steps, 5, 2] closed outlines of the ego's box, nose forward."""
-    local = np.array([[0.5, 0.5], [0.5, -0.5], [-0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]]) * [
-        EGO_LENGTH,
-        EGO_WIDTH,
-    ]
-    local = np.vstack([local[:1], [[0.75 * EGO_LENGTH, 0.0]], local[1:]])  # a pointed nose shows heading
+def box_corners(x: np.ndarray, y: np.ndarray, heading: np.ndarray, unit: float = 3.0) -> np.ndarray:
+    """[steps, 6, 2] closed outlines of the ego's box, nose forward, EGO_LENGTH by EGO_WIDTH units."""
+    length, width = EGO_LENGTH * unit, EGO_WIDTH * unit
+    local = np.array([[0.5, 0.5], [0.5, -0.5], [-0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]]) * [length, width]
+    local = np.vstack([local[:1], [[0.75 * length, 0.0]], local[1:]])  # a pointed nose shows heading
     cos, sin = np.cos(heading)[:, None], np.sin(heading)[:, None]
     px = x[:, None] + cos * local[None, :, 0] - sin * local[None, :, 1]
     py = y[:, None] + sin * local[None, :, 0] + cos * local[None, :, 1]
@@ -175,15 +203,21 @@ def _valid_report(value: float | None) -> bool:
     return value is not None and not pd.isna(value) and int(value) >= 1
 
 
-def episode_blueprint() -> rrb.Blueprint:
-    """The default layout: a large map, the trust and belief plots, states, belief bars, events."""
+def episode_blueprint(frame: MapFrame | None = None) -> rrb.Blueprint:
+    """The default layout: a large map (framed on the whole town when `frame` is given), the trust
+    and belief plots, states, belief bars, events."""
     import rerun.blueprint as rrb
 
     # The plots and the state lanes show the whole episode, with the time cursor moving across it.
     whole = rrb.VisibleTimeRange(
         TIMELINE, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
     )
-    map_view = rrb.Spatial2DView(origin="world", name="map", background=(25, 25, 30))
+    bounds = None
+    if frame is not None:  # the town with a margin of a few units, y negated as everything on the map
+        margin = 4 * frame.unit
+        bounds = rrb.VisualBounds2D(x_range=(frame.x_min - margin, frame.x_max + margin),
+                                    y_range=(-frame.y_max - margin, -frame.y_min + margin))
+    map_view = rrb.Spatial2DView(origin="world", name="map", background=(25, 25, 30), visual_bounds=bounds)
     trust_view = rrb.TimeSeriesView(
         origin="trust",
         name="trust (1-7): true, reported, belief mean",
@@ -227,12 +261,14 @@ def write_recording(path: Path, net_path: Path, record: EpisodeLogs, setup: Epis
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     rec = rr.RecordingStream("trustroute", recording_id=f"trustroute-{episode_id}")
-    rec.save(str(path), default_blueprint=episode_blueprint())
+    frame = map_frame(setup.town)
+    unit = frame.unit
+    rec.save(str(path), default_blueprint=episode_blueprint(frame))
     net = _net(Path(net_path))
-    _log_map(rec, net, setup)
-    _log_ego(rec, record.kinematics)
-    _log_plan(rec, net, record.roads, setup.town)
-    _log_incidents(rec, record.incidents)
+    _log_map(rec, net, setup, unit)
+    _log_ego(rec, record.kinematics, unit)
+    _log_plan(rec, net, record.roads, setup.town, unit)
+    _log_incidents(rec, record.incidents, unit)
     _log_series(rec, record.roads, setup)
     _log_events(rec, record)
     rec.flush()
@@ -240,53 +276,64 @@ def write_recording(path: Path, net_path: Path, record: EpisodeLogs, setup: Epis
     return path
 
 
-def _log_map(rec: rr.RecordingStream, net: Net, setup: EpisodeSetup) -> None:
+def _log_map(rec: rr.RecordingStream, net: Net, setup: EpisodeSetup, unit: float) -> None:
     import rerun as rr
 
     town, spec = setup.town, setup.spec
-    rec.log("world/lanes", rr.LineStrips2D(lane_strips(net), colors=(90, 90, 90), radii=0.8), static=True)
+    rec.log("world/lanes", rr.LineStrips2D([on_screen(s) for s in lane_strips(net)], colors=(90, 90, 90),
+                                           radii=LANE_RADIUS * unit), static=True)
+    shaped = sorted(town.geometry)
+    rec.log("world/roads", rr.LineStrips2D([on_screen(road_course(net, town, r)) for r in shaped],
+                                           colors=(120, 120, 130), radii=ROAD_RADIUS * unit), static=True)
     names = sorted(town.junctions)
     rec.log(
         "world/junctions",
         rr.Points2D(
-            np.array([town.junctions[n] for n in names]),
+            on_screen([town.junctions[n] for n in names]),
             labels=names,
-            radii=9.0,
+            radii=JUNCTION_RADIUS * unit * (1.0 if names_every_junction(town) else 0.5),
             colors=(200, 200, 200),
-            show_labels=True,
+            show_labels=names_every_junction(town),
         ),
         static=True,
     )
-    start = road_shape(net, spec.start)
+    small = names_every_junction(town)  # a small town names roads on the map, a city on hover
     rec.log(
         "world/start",
-        rr.LineStrips2D(
-            [start], radii=6.0, colors=START_COLOR, labels=[f"start {spec.start}"], show_labels=True
-        ),
+        rr.LineStrips2D([on_screen(road_course(net, town, spec.start))], radii=START_RADIUS * unit,
+                        colors=START_COLOR, labels=[f"start {spec.start}" if small else "start"],
+                        show_labels=True),
         static=True,
     )
     for i, (atom, roads) in enumerate(sorted(spec.state_atoms.items())):
-        shapes = [road_shape(net, road) for road in sorted(roads)]
+        shapes = [road_course(net, town, road) for road in sorted(roads)]
         colour = WAYPOINT_COLORS[i % len(WAYPOINT_COLORS)]
-        rec.log(f"world/waypoints/{atom}", rr.LineStrips2D(shapes, radii=5.0, colors=colour), static=True)
+        rec.log(f"world/waypoints/{atom}", rr.LineStrips2D([on_screen(s) for s in shapes],
+                                                           radii=WAYPOINT_RADIUS * unit, colors=colour),
+                static=True)
         rec.log(
             f"world/waypoints/{atom}/label",
             rr.Points2D(
-                np.array([_midpoint(s) for s in shapes]),
-                radii=2.0,
+                on_screen([_midpoint(s) for s in shapes]),
+                radii=0.5 * WAYPOINT_RADIUS * unit,
                 colors=colour,
                 labels=[f"{atom} ({road})" for road in sorted(roads)],
-                show_labels=True,
+                show_labels=small,
             ),
             static=True,
         )
-    incident_roads = sorted(town.incidents.items())
+        if not small:  # one name per waypoint set, at its first road
+            rec.log(f"world/waypoints/{atom}/name",
+                    rr.Points2D(on_screen([_midpoint(shapes[0])]), radii=0.5 * WAYPOINT_RADIUS * unit,
+                                colors=colour, labels=[atom], show_labels=True), static=True)
+    incident_roads = sorted((road, kind) for road, kind in town.incidents.items() if kind in INCIDENT_COLORS)
     if incident_roads:
         rec.log(
             "world/incident_roads",
             rr.Points2D(
-                np.array([_midpoint(road_shape(net, road)) for road, _ in incident_roads]),
-                radii=5.0,
+                on_screen([point_along(road_course(net, town, road), 0.5, unit)
+                           for road, _ in incident_roads]),
+                radii=MARKER_RADIUS * unit,
                 colors=[INCIDENT_COLORS.get(k, (200, 200, 200)) for _, k in incident_roads],
                 labels=[kind for _, kind in incident_roads],
                 show_labels=False,
@@ -295,23 +342,24 @@ def _log_map(rec: rr.RecordingStream, net: Net, setup: EpisodeSetup) -> None:
         )
 
 
-def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame) -> None:
+def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame, unit: float) -> None:
     import rerun as rr
 
     time = kinematics["time"].to_numpy(dtype=float)
     if time.size == 0:
         return
-    x, y = kinematics["x"].to_numpy(dtype=float), kinematics["y"].to_numpy(dtype=float)
+    x, y = kinematics["x"].to_numpy(dtype=float), -kinematics["y"].to_numpy(dtype=float)  # on screen
     manual = kinematics["mode"].to_numpy() == MANUAL.name
     times = rr.TimeColumn(TIMELINE, duration=time)
-    corners = box_corners(x, y, headings(x, y))
+    corners = box_corners(x, y, headings(x, y), unit)
     colours = np.where(manual[:, None], np.array(MANUAL_COLOR), np.array(AUTO_COLOR)).astype(np.uint8)
     rec.send_columns(
         "world/ego/box",
         indexes=[times],
         columns=[
             *rr.LineStrips2D.columns(strips=list(corners)),
-            *rr.LineStrips2D.columns(colors=colours, radii=np.full(time.size, 1.5, dtype=np.float32)),
+            *rr.LineStrips2D.columns(colors=colours,
+                                     radii=np.full(time.size, OUTLINE_RADIUS * unit, dtype=np.float32)),
         ],
     )
     points, lengths = trail_strips(x, y, time)
@@ -325,7 +373,9 @@ def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame) -> None:
         columns=rr.LineStrips2D.columns(strips=[trails[i] for i in every]),
     )
     rec.log(
-        "world/ego/trail", rr.LineStrips2D.from_fields(colors=(255, 255, 255, 150), radii=2.0), static=True
+        "world/ego/trail",
+        rr.LineStrips2D.from_fields(colors=(255, 255, 255, 150), radii=TRAIL_RADIUS * unit),
+        static=True,
     )
     # Control mode as a state lane: its autopilot/manual bands are the takeover intervals.
     change = np.flatnonzero(np.concatenate([[True], manual[1:] != manual[:-1]]))
@@ -336,7 +386,7 @@ def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame) -> None:
     )
 
 
-def _log_plan(rec: rr.RecordingStream, net: Net, roads: pd.DataFrame, town: Town) -> None:
+def _log_plan(rec: rr.RecordingStream, net: Net, roads: pd.DataFrame, town: Town, unit: float) -> None:
     import rerun as rr
 
     for row in roads.itertuples(index=False):
@@ -348,16 +398,17 @@ def _log_plan(rec: rr.RecordingStream, net: Net, roads: pd.DataFrame, town: Town
         rec.log(
             "world/ego/plan",
             rr.LineStrips2D(
-                [road_shape(net, row.directed_road), road_shape(net, following)],
-                radii=3.5,
+                [on_screen(road_course(net, town, row.directed_road)),
+                 on_screen(road_course(net, town, following))],
+                radii=PLAN_RADIUS * unit,
                 colors=PLAN_COLOR,
-                labels=["", f"next: {following}"],
+                labels=["", f"next: {following}" if names_every_junction(town) else "next"],
                 show_labels=True,
             ),
         )
 
 
-def _log_incidents(rec: rr.RecordingStream, incidents: pd.DataFrame) -> None:
+def _log_incidents(rec: rr.RecordingStream, incidents: pd.DataFrame, unit: float) -> None:
     import rerun as rr
 
     for row in incidents.itertuples(index=False):
@@ -368,9 +419,9 @@ def _log_incidents(rec: rr.RecordingStream, incidents: pd.DataFrame) -> None:
         rec.log(
             entity,
             rr.Boxes2D(
-                centers=[[row.x, row.y]],
-                half_sizes=[[14.0, 14.0]],
-                radii=2.0,
+                centers=on_screen([row.x, row.y]),
+                half_sizes=[[INCIDENT_HALF_SIZE * unit] * 2],
+                radii=OUTLINE_RADIUS * unit,
                 labels=[row.incident],
                 show_labels=True,
                 colors=INCIDENT_COLORS.get(row.incident, (200, 200, 200)),

@@ -72,3 +72,18 @@ def test_spec_against_another_town(capsys, tmp_path):
 def test_missing_spec_file(capsys, tmp_path):
     code, _, err = run_cli(capsys, "spec", "check", str(tmp_path / "nope.toml"))
     assert code == 2 and "cannot read the spec file" in err
+
+
+def test_waypoint_distances_in_junctions(capsys, tmp_path):
+    code, out, _ = run_cli(capsys, "spec", "check", "specs/phi2_strict.toml")
+    assert code == 0
+    assert ("waypoints, fewest junctions from the previous: start L-H -> v4 (3 roads): 3 junctions -> "
+            "v5 (3 roads): 3 junctions -> v6 (3 roads): 2 junctions") in out
+    spec = tmp_path / "far.toml"
+    spec.write_text('name = "far"\nstart = "E-A"\nformula = "F (there & F back)"\n[states]\n'
+                    'there = {junction = "L"}\nback = ["L-E"]\n')
+    code, out, _ = run_cli(capsys, "spec", "check", str(spec), "--json")
+    assert code == 0
+    assert json.loads(out)["waypoints"] == [
+        {"from": "start", "to": "there", "junctions": 3, "roads": 3},  # no U-turn at A: A-F, F-H, H-L
+        {"from": "there", "to": "back", "junctions": 1, "roads": 1}]  # K-L (or H-L), then L-E

@@ -103,7 +103,8 @@ def test_ego_logged_at_every_sumo_step(recorded):
     kin = record.kinematics
     np.testing.assert_allclose(times, kin["time"].to_numpy())
     centres = np.array([np.mean(np.asarray(s[0])[[0, 2, 3, 4]], axis=0) for s in strips])
-    np.testing.assert_allclose(centres, kin[["x", "y"]].to_numpy(), atol=1e-2)
+    on_screen = kin[["x", "y"]].to_numpy() * [1, -1]  # Rerun's 2D y points down: the map is logged y-negated
+    np.testing.assert_allclose(centres, on_screen, atol=1e-2)
     _, colours = _column(entities["/world/ego/box"], "LineStrips2D:colors")
     manual = (kin["mode"] == "manual").to_numpy()
     assert manual.any() and not manual.all()
@@ -112,7 +113,7 @@ def test_ego_logged_at_every_sumo_step(recorded):
     trail_times, trails = _column(entities["/world/ego/trail"], "LineStrips2D:strips")
     assert len(kin) / 5 <= len(trails) <= len(kin) and trail_times[-1] == times[-1]
     last = np.asarray(trails[-1][0])[-1]
-    np.testing.assert_allclose(last, kin[["x", "y"]].to_numpy()[-1], atol=1e-2)
+    np.testing.assert_allclose(last, on_screen[-1], atol=1e-2)
 
 
 def test_takeover_intervals_and_states(recorded):
@@ -176,3 +177,38 @@ def test_recording_is_small(recorded):
     # A few kilobytes of map plus a few hundred bytes per SUMO step.
     # Measured: about 230 kB for this 210 s episode (420 steps), most of it per-chunk Arrow metadata.
     assert path.stat().st_size < 300_000 + 200 * len(record.kinematics)
+
+
+def test_the_map_is_the_right_way_up_and_scaled_to_the_town(recorded, town):
+    from trustroute.harness.simulation.rerun_log import JUNCTION_RADIUS
+    from trustroute.networks.town_map import map_frame
+
+    _, entities, *_ = recorded
+    batch = entities["/world/junctions"][0].to_record_batch()
+    names = batch.column("Points2D:labels")[0].as_py()
+    positions = np.asarray(batch.column("Points2D:positions")[0].as_py())
+    # Rerun's 2D y points down: A (north of E in the town file) must be drawn above E, at smaller y.
+    np.testing.assert_allclose(positions, [[town.junctions[n][0], -town.junctions[n][1]] for n in names],
+                               atol=1e-3)
+    assert positions[names.index("A")][1] < positions[names.index("E")][1]
+    radius = batch.column("Points2D:radii")[0].as_py()[0]
+    assert radius == pytest.approx(JUNCTION_RADIUS * map_frame(town).unit, rel=1e-6)
+    assert radius < 9.0  # smaller than the 9 m markers that hid Town01's 49 m roads' ends
+
+
+def test_a_road_is_drawn_along_the_towns_geometry_where_it_has_one(town, tmp_path):
+    import sumolib
+
+    from trustroute.harness.simulation.rerun_log import road_course
+    from trustroute.networks.sumo_net import build_net
+    from trustroute.networks.town import town_from_dict
+
+    net = sumolib.net.readNet(str(build_net(town, cache_dir=tmp_path).path))
+    lane = road_course(net, town, "B-C")  # no geometry entry: the net's lane
+    np.testing.assert_allclose(lane, net.getEdge("B-C").getLanes()[-1].getShape(), atol=1e-4)
+    bent = [[89.68, -4.9], [0.0, 0.0], [0.0, -328.0], [91.5, -324.06]]
+    data = {"junctions": {k: list(v) for k, v in town.junctions.items()},
+            "roads": [list(r) for r in town.roads], "incidents": dict(town.incidents),
+            "geometry": {"A-E": {"shape": bent}}}
+    shaped = town_from_dict(data, "shaped.json")
+    np.testing.assert_allclose(road_course(net, shaped, "A-E"), bent, atol=1e-4)

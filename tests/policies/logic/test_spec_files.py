@@ -159,3 +159,57 @@ def test_schema_errors(text, words):
 def test_missing_file_is_an_input_error(tmp_path):
     with pytest.raises(InputError, match="cannot read the spec file"):
         load_spec(tmp_path / "missing.toml")
+
+
+# -- waypoint sets named by junction or street -------------------------------------------------------
+
+def _by_junction(v1: str, v2: str, v3: str) -> str:
+    return PHI1_TEXT.replace('v1 = ["B-G", "F-G", "I-G"]', f'v1 = {{junction = "{v1}"}}').replace(
+        'v2 = ["I-J", "C-J", "K-J"]', f'v2 = {{junction = ["{v2}"]}}').replace(
+        'v3 = ["K-L", "E-L", "H-L"]', f'v3 = {{junction = "{v3}"}}')
+
+
+def test_waypoints_by_junction_mean_the_roads_into_it(town):
+    text = _by_junction("G", "J", "L")
+    assert text != PHI1_TEXT and "junction" in text
+    spec = spec_from_text(text, "by_junction.toml", town)
+    phi1 = load_spec("specs/phi1.toml", town)
+    assert spec.state_atoms == phi1.state_atoms
+    assert spec.content_hash == phi1.content_hash  # the identity is the meaning, not the notation
+    two = spec_from_text(text.replace('{junction = ["J"]}', '{junction = ["J", "K"]}'), "two.toml", town)
+    assert two.state_atoms["v2"] == {"I-J", "C-J", "K-J", "D-K", "J-K", "L-K"}
+
+
+def test_waypoints_by_street(town):
+    from trustroute.networks.town import town_from_dict
+
+    square = town_from_dict({
+        "junctions": {"B": [0, 0], "C": [100, 0], "D": [100, 100], "E": [0, 100]},
+        "roads": [["B", "C"], ["C", "D"], ["D", "E"], ["E", "B"]],
+        "incidents": {r: "none" for r in ["B-C", "C-B", "C-D", "D-C", "D-E", "E-D", "E-B", "B-E"]},
+        "geometry": {"C-D": {"shape": [[100, 0], [100, 100]], "street": "East Lane; High Street"},
+                     "E-D": {"shape": [[0, 100], [100, 100]], "street": "High Street"}}}, "square.json")
+    text = 'name = "s"\nstart = "B-C"\nformula = "F high"\n[states]\nhigh = {street = "high street"}\n'
+    assert spec_from_text(text, "s.toml", square).state_atoms == {"high": frozenset({"C-D", "E-D"})}
+    with pytest.raises(InputError, match="no road of the town .* is on a street named 'Low Road'"):
+        spec_from_text(text.replace("high street", "Low Road"), "s.toml", square)
+
+
+@pytest.mark.parametrize(("selector", "message"), [
+    ('{junction = "Z"}', "'Z' is not a junction of the town"),
+    ('{junction = "G", street = "x"}', "exactly one key, junction or street"),
+    ('{roads = ["B-G"]}', "exactly one key, junction or street"),
+    ("{junction = []}", "must be a name or a non-empty list of names"),
+    ("{junction = 3}", "must be a name or a non-empty list of names"),
+    ('{street = "Main Street"}', "no road of the town .* is on a street named 'Main Street'"),
+])
+def test_bad_selectors_name_the_atom_line_and_fix(town, selector, message):
+    text = PHI1_TEXT.replace('v1 = ["B-G", "F-G", "I-G"]', f"v1 = {selector}")
+    with pytest.raises(InputError, match=message) as info:
+        spec_from_text(text, "bad.toml", town)
+    assert "state atom 'v1'" in str(info.value) and "line 8" in str(info.value)
+
+
+def test_a_selector_needs_a_town():
+    with pytest.raises(InputError, match="names its roads by junction, which only a town can resolve"):
+        spec_from_text(_by_junction("G", "J", "L"), "by_junction.toml")
