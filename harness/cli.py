@@ -33,7 +33,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "import": ("trustroute.harness.commands.importing", "import_group", "Import logs of real studies."),
     "demo": ("trustroute.harness.commands.demo", "demo", "Run the paper-size study (21 drivers) and report."),
     "model": ("trustroute.harness.commands.model", "model", "Summarise the trust POMDP of a town and model."),
-    "peer": ("trustroute.harness.commands.peer", "peer", "Independent solvers (Storm) beside ours."),
+    "peer": ("trustroute.harness.commands.peer", "peer", "Independent solvers (Storm, PAYNT) beside ours."),
     "town": ("trustroute.harness.commands.town", "town", "Import SUMO nets and OpenStreetMap maps as towns."),
 }
 

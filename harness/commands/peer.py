@@ -4,7 +4,9 @@ For specs whose atoms are all roads and trust-state atoms (docs/trust_states.md)
 belief unfolding (lower bound, at most --time-limit seconds of exploration) and belief
 discretisation (upper bound, at --resolution) on the exported product; ours is the search over
 joint beliefs of policies/trust_state_synthesis/search.py (exact for --horizon H; for the unbounded objective
-to --depth junctions with relaxation bounds at the leaves). Needs the optional `[peer]` extra.
+to --depth junctions with relaxation bounds at the leaves). `trustroute peer paynt SPEC` runs
+PAYNT's finite-state controller synthesis on the same product: the value of the controller it
+finds is a lower bound of Pr_max (policies/peer/paynt.py). Needs the optional `[peer]` extra.
 """
 
 from __future__ import annotations
@@ -38,6 +40,32 @@ def storm_comparison(spec_path: str, town_path: str | None, driver_path: str | N
     return {"spec": spec.name, "file": spec.source_path, "horizon": horizon,
             "product_states": product.n_states, "storm": storm.to_dict(), "ours": ours.to_dict(),
             "overlap": bool(max(storm.lower, ours.lower) <= min(storm.upper, ours.upper) + 1e-9)}
+
+
+def paynt_comparison(spec_path: str, town_path: str | None, driver_path: str | None,
+                     horizon: int | None, time_limit: float, max_states: int, depth: int,
+                     max_nodes: int) -> dict:
+    """PAYNT's controller value beside our bounds, JSON-ready."""
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+    from trustroute.policies.peer.paynt import require_paynt, run_paynt
+    from trustroute.policies.peer.product_pomdp import check_exportable, explicit_product
+    from trustroute.policies.trust_state_synthesis.search import joint_bounds
+
+    require_paynt("trustroute peer paynt")
+    town = load_town(town_path)
+    driver = load_driver_model(driver_path)
+    spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
+    check_exportable(spec)
+    pomdp = build_pomdp(town, driver)
+    product = explicit_product(pomdp, spec, horizon)
+    paynt = run_paynt(product, time_limit=time_limit, max_states=max_states)
+    ours = joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
+    return {"spec": spec.name, "file": spec.source_path, "horizon": horizon,
+            "product_states": product.n_states, "paynt": paynt.to_dict(), "ours": ours.to_dict(),
+            "within_ours": bool(paynt.lower <= ours.upper + paynt.precision)}
 
 
 @click.group("peer")
@@ -78,3 +106,40 @@ def storm(spec_path: str, town_path: str | None, driver_path: str | None, horizo
     click.echo(f"  overlap: {'yes' if result['overlap'] else 'NO'}")
     if s.get("note"):
         click.echo(f"  note: {s['note']}")
+
+
+@peer.command("paynt")
+@click.argument("spec_path", metavar="SPEC")
+@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
+@click.option("--driver", "driver_path", type=click.Path(), default=None,
+              help="Driver model file (default: the packaged model).")
+@click.option("--horizon", type=click.IntRange(min=0), default=None,
+              help="Accepted within H junctions (a step counter in the product; default: unbounded).")
+@click.option("--time-limit", type=click.FloatRange(min=1), default=30.0, show_default=True,
+              help="Seconds of PAYNT's controller search.")
+@click.option("--max-states", type=click.IntRange(min=1), default=200_000, show_default=True,
+              help="Largest product POMDP handed to PAYNT; beyond, exit 2.")
+@click.option("--depth", type=click.IntRange(min=0), default=10, show_default=True,
+              help="Our search depth for the unbounded objective (the horizon when given).")
+@click.option("--max-nodes", type=click.IntRange(min=1), default=200_000, show_default=True,
+              help="Our belief nodes per level; beyond, the least likely are bounded, not expanded.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def paynt(spec_path: str, town_path: str | None, driver_path: str | None, horizon: int | None,
+          time_limit: float, max_states: int, depth: int, max_nodes: int, as_json: bool) -> None:
+    """PAYNT's finite-state controller value (a lower bound of Pr_max) beside ours, for SPEC."""
+    result = paynt_comparison(spec_path, town_path, driver_path, horizon, time_limit, max_states,
+                              depth, max_nodes)
+    if as_json:
+        click.echo(json.dumps(result))
+        return
+    p, o = result["paynt"], result["ours"]
+    objective = f"within {horizon} junctions" if horizon is not None else "unbounded"
+    click.echo(f"{result['spec']} ({objective}), product POMDP with {result['product_states']} states")
+    found = (f"{p['value']:.6f}" if p["found"] else "no controller found in time (lower bound 0)")
+    click.echo(f"  paynt  {found}  {p['seconds']:.1f} s, controllers up to "
+               f"{p['memory_nodes']} memory nodes per observation")
+    click.echo(f"  ours   [{o['lower']:.6f}, {o['upper']:.6f}]  gap {o['gap']:.2e}  {o['seconds']:.1f} s")
+    click.echo("  PAYNT's value is a LOWER bound of Pr_max: the value of one finite-state controller. "
+               "A controller with k memory nodes may be worth less than the best history-dependent "
+               "policy, so compare it with our L, not U.")
+    click.echo(f"  within our U: {'yes' if result['within_ours'] else 'NO'}")

@@ -1,6 +1,7 @@
-"""Independent solvers run beside ours: the product POMDP as a PRISM model, and Storm on it.
+"""Independent solvers run beside ours: the product POMDP as Storm's DRN, Storm and PAYNT on it.
 
 Owns the export of specs whose atoms are all state predicates over X × Θ (roads and hidden
-trust) and the call into Storm's belief exploration (stormpy, the optional `[peer]` extra).
-Must not be imported by the solvers it checks.
+trust), the call into Storm's belief exploration (stormpy) and into PAYNT's finite-state
+controller synthesis (paynt), both from the optional `[peer]` extra. Must not be imported by the
+solvers it checks.
 """

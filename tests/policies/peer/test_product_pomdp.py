@@ -12,23 +12,28 @@ from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.peer.product_pomdp import explicit_product
 
 
+def dfa_step(dfa, spec, driver, q, road, theta):
+    """The DFA's step on position `road` at trust index `theta`, atom by atom from the spec."""
+    valuation = {}
+    for atom in dfa.atoms:
+        if atom in spec.state_atoms:
+            valuation[atom] = road in spec.state_atoms[atom]
+        elif atom in spec.trust_atoms:
+            definition = spec.trust_atoms[atom]
+            valuation[atom] = ((definition.roads is None or road in definition.roads)
+                               and driver.trust_levels[theta] in definition.trust)
+        else:
+            valuation[atom] = False
+    return dfa.step(q, valuation)
+
+
 def reachable_count(pomdp, spec, horizon):
     """Breadth-first search over (x, θ, q, h, e, k) with the DFA stepped atom by atom."""
     town, driver = pomdp.town, pomdp.driver
     dfa = build_dfa(spec)
 
     def step(q, road, theta):
-        valuation = {}
-        for atom in dfa.atoms:
-            if atom in spec.state_atoms:
-                valuation[atom] = road in spec.state_atoms[atom]
-            elif atom in spec.trust_atoms:
-                definition = spec.trust_atoms[atom]
-                valuation[atom] = ((definition.roads is None or road in definition.roads)
-                                   and driver.trust_levels[theta] in definition.trust)
-            else:
-                valuation[atom] = False
-        return dfa.step(q, valuation)
+        return dfa_step(dfa, spec, driver, q, road, theta)
 
     outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
     frontier = {(spec.start, t, step(dfa.initial, spec.start, t), 0, 0, 0)
