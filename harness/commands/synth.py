@@ -146,21 +146,17 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.resolve import synthesis_progress
     from trustroute.policies.routing.files import array_path, save_policy
-    from trustroute.policies.synthesis.population import (
-        document_entries,
-        policy_name,
-        summary,
-        synthesize_population,
-    )
+    from trustroute.policies.synthesis.population import document_entries, policy_name, summary
+    from trustroute.policies.synthesize_spec import synthesize_for_population
 
     town = load_town(town_path)
     population = load_driver_population(population_path)
     spec = load_spec(spec_path, town, population.types[0].model.n_trust, population_path)
     with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
                             not as_json) as on_iteration:
-        found = synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
-                                      horizon=horizon, belief_rule=belief_rule,
-                                      population_source=population_path, on_iteration=on_iteration)
+        found = synthesize_for_population(town, population, spec, objective, tau=tau,
+                                          time_limit=time_limit, horizon=horizon, belief_rule=belief_rule,
+                                          population_source=population_path, on_iteration=on_iteration)
     result = found.result
     path = str(save_policy(result, out_path, town, found.pomdp.driver, found.spec,
                            population=document_entries(found), name=policy_name(found)))

@@ -72,7 +72,7 @@ class PopulationSynthesis:
 
     objective: str
     population: DriverPopulation
-    result: BeliefSynthesis
+    result: BeliefSynthesis | SynthesisResult   # a JointSynthesis for trust-state specs
     pomdp: TrustPOMDP                 # the type-aware POMDP the policy's AV filters on
     spec: Spec                        # the lifted spec
     prior: tuple[float, ...]          # λ: the AV's type prior of the returned policy
