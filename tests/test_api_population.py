@@ -22,4 +22,5 @@ def test_api_synthesizes_a_trust_state_spec_for_a_population(tmp_path):
     assert document["kind"] == "joint-belief" and document["objective"] == "bayes"
     assert document["lower"] == found.result.lower
     with pytest.raises(ValueError, match="not both"):
-        trustroute.synthesize("phi1", driver=trustroute.load_driver_model(), population=EXAMPLE_POPULATION_PATH)
+        trustroute.synthesize("phi1", driver=trustroute.load_driver_model(),
+                              population=EXAMPLE_POPULATION_PATH)
