@@ -75,3 +75,19 @@ def test_storm_overlaps_our_population_synthesis_on_the_lifted_product(driver, s
     single = run_storm(explicit_product(build_pomdp(town, population.types[0].model), spec, 3), time_limit=2)
     assert lifted.lower_complete and single.lower_complete
     assert lifted.lower == pytest.approx(single.lower, abs=STORM_PRECISION)
+
+
+@pytest.mark.slow
+def test_storm_agrees_with_our_population_value_on_phi1_trust_with_three_types(town):
+    from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
+    from trustroute.policies.belief.problem import problem
+    from trustroute.policies.synthesize_spec import synthesize_for_population
+
+    population = load_driver_population(EXAMPLE_POPULATION_PATH)
+    spec = load_spec("specs/phi1_trust.toml", town)
+    found = problem(town, population, spec)
+    storm = run_storm(explicit_product(found.pomdp, found.spec, 10), time_limit=60)
+    ours = synthesize_for_population(town, population, spec, "bayes", horizon=10, time_limit=30)
+    assert_overlap(storm, ours)
+    assert storm.lower_complete          # Storm's unfolding is exact: our certified value is its value
+    assert ours.lower == pytest.approx(storm.lower, rel=STORM_PRECISION)
