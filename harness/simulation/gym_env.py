@@ -166,6 +166,7 @@ class TrustRoutingEnv(gymnasium.Env):
         if self.population is not None:
             self.scldtl_spec = lift_spec(self.scldtl_spec, self.population)
         self.driver_type: str | None = None     # the type of the current episode's driver
+        self._belief_rule: BeliefRule = belief_rule
         self._belief = np.asarray(self.driver_model.initial_belief, dtype=np.float64)  # at the last decision
         self.engine = engine
         self.report_accuracy = float(report_accuracy)
@@ -261,7 +262,7 @@ class TrustRoutingEnv(gymnasium.Env):
         incident = self.driver_model.incident_index(str(last["incident"]))
         after = pomdp.belief_update(self._belief, incident, int(bool(last["takeover"])),
                                     PERFORMANCE_INDEX[str(last["performance"])],
-                                    rule=self.setup.belief_rule)[0][0]
+                                    rule=self._belief_rule)[0][0]
         return after if after.sum() > 0 else self._belief
 
     def _final(self, record: EpisodeRecord) -> tuple[dict, float, bool, bool, dict]:
