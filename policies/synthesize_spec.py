@@ -78,20 +78,20 @@ def synthesize_for_population(town: Town, population: DriverPopulation, spec: Sp
                               ) -> PopulationSynthesis:
     """Synthesis for driver population `population` under `objective` ("bayes": the prior-weighted
     value; "robust": the worst type's), by the case of the problem (module docstring).
-    grid_points: candidate type priors of the robust objective's belief-MDP search (default
+    grid_points: candidate type priors of the robust objective (default
     policies/synthesis/population.py's). time_limit applies to each synthesis run."""
     from trustroute.policies.synthesis.population import MAX_GRID_CANDIDATES, synthesize_population
 
     found = problem(town, population, spec, population_source)
+    points = MAX_GRID_CANDIDATES if grid_points is None else grid_points
     if found.case == TRUST_STATE:
         from trustroute.policies.trust_state_synthesis.population import synthesize_population_joint
 
         check_synthesis_arguments(tau, horizon, belief_rule)
         return synthesize_population_joint(found, objective, synthesize_spec, tau=tau, time_limit=time_limit,
-                                           horizon=horizon, belief_rule=belief_rule,
+                                           horizon=horizon, belief_rule=belief_rule, grid_points=points,
                                            on_iteration=on_iteration)
     return synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
                                  horizon=horizon, belief_rule=belief_rule,
-                                 population_source=population_source,
-                                 grid_points=MAX_GRID_CANDIDATES if grid_points is None else grid_points,
+                                 population_source=population_source, grid_points=points,
                                  on_iteration=on_iteration)

@@ -13,9 +13,9 @@ Table kinds (`TableKind`, `TABLE_KINDS`): which rows a table has, the file versi
 its acting rule in words, the document keys it adds and the routing policy that acts on it.
 `PLAIN_TABLE` (files without `kind`) holds exact rows and box rows; `JOINT_TABLE`
 (`kind = "joint-belief"`) holds joint rows, of one driver model or of a driver population's
-type-aware model (then with the population keys, and the population's weights as its type
-prior). `table_kind(table)` and `document_table_kind(document)` find a kind by the table's type or
-the document's `kind`.
+type-aware model (then with the population keys and the type prior its table was made for).
+`table_kind(table)` and `document_table_kind(document)` find a kind by the table's type or the
+document's `kind`.
 """
 
 from __future__ import annotations
@@ -194,7 +194,6 @@ class PolicyOrigin:
     driver: DriverModel
     spec: Spec
     reweight: np.ndarray | None
-    where: str = "policy file"       # the file, for messages
 
 
 @dataclass(frozen=True, eq=False)
@@ -264,20 +263,14 @@ def plain_policy(table: PolicyTable, origin: PolicyOrigin) -> BeliefTablePolicy:
 
 
 def joint_policy(table: JointPolicyTable, origin: PolicyOrigin) -> JointTablePolicy:
-    """The policy of joint rows. A population's joint table was made on the AV's own joint belief
-    under the population's weights (policies/trust_state_synthesis/population.py): a file recording
-    another type prior, which only belief tables reweight to, is refused."""
+    """The policy of joint rows (a population's: reweighted to the type prior its file records)."""
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     document = origin.document
-    if origin.reweight is not None:
-        raise InputError(origin.where, "belief_prior",
-                         "a joint-belief policy acts on the AV's joint belief under the population's "
-                         "weights, but this file records another type prior", RESYNTH)
     return JointTablePolicy(table, build_pomdp(origin.town, origin.driver), origin.spec,
                             document.get("guide_horizon"), name=str(document.get("name", "aware")),
                             lower=document.get("lower"), upper=document.get("upper"),
-                            horizon=document.get("horizon"))
+                            horizon=document.get("horizon"), reweight=origin.reweight)
 
 
 def check_junction_count(value: object, key: str, where: str) -> None:

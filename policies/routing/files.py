@@ -214,7 +214,7 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
                              f"made for ({option})")
     table = read_policy_table(path.parent / document["arrays"], document, town, driver, spec)
     origin = PolicyOrigin(document=document, town=town, driver=driver, spec=spec,
-                          reweight=prior_reweight(document, driver.n_trust, where), where=where)
+                          reweight=prior_reweight(document, driver.n_trust, where))
     return document_table_kind(document).policy(table, origin)
 
 

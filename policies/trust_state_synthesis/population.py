@@ -12,12 +12,19 @@ optimum max_π Σ_k w_k V_k(π). Per-type values V_k are read off one joint unfo
 policy (`evaluate_joint_by_type`: J's block of type k), with the horizon and no fallback, as the
 synthesis scores it.
 
-Robust: maximise min_k V_k. The candidate is the Bayes policy (a joint-belief policy has no
-reweighting to another type prior, so the prior grid of policies/synthesis/population.py is not
-searched). Certified as there: `lower` = min_k V_k of the returned policy (the lower ends of its
-per-type values), `upper` = min(U_bayes, min_k U_k) with U_k a sound bound of type k's own optimum
-(`synthesize_spec` on type k's model alone, of `belief_free_spec`: the spec without its belief
-literals when it reads beliefs, since the AV's belief is not type k's own posterior).
+Robust: maximise min_k V_k, as policies/synthesis/population.py does for the belief-MDP search.
+The candidates are the Bayes policy and, for every type prior λ of the simplex grid, the trust-state
+synthesis as if the prior were λ; such a policy runs on the AV's filter under the weights w with
+its joint belief and belief reweighted to λ (policies/routing/trust_state_table.py, exact: the
+likelihood of the observations given the type does not depend on the prior), a function of the
+observations like any policy, and its V_k are read off one joint unfolding on the w-model. The
+candidate with the best worst type is returned. Certified: `lower` = min_k V_k of the returned policy
+(the lower ends of its per-type values), `upper` = min(U_bayes, min_k U_k) with U_k a sound bound of
+type k's own optimum (`synthesize_spec` on type k's model alone, of `belief_free_spec`: the spec
+without its belief literals when it reads beliefs, since the AV's belief is not type k's own
+posterior). The spec's belief labels read the w-filter for every candidate, so a λ-policy's table
+rows (made on λ-beliefs) are matched where the two readings agree and the relaxation decides
+elsewhere; its value is evaluated exactly either way.
 """
 
 from __future__ import annotations
@@ -26,20 +33,31 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 
+import numpy as np
+
+from trustroute.policies.belief.driver_types import lift_population
 from trustroute.policies.belief.problem import Problem
 from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
 from trustroute.policies.logic.formula import TRUE, Formula, Literal, format_formula, map_literals
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
 from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.routing.trust_state_table import JointTablePolicy
 from trustroute.policies.synthesis.population import (
+    MAX_GRID_CANDIDATES,
     OBJECTIVES,
     PopulationSynthesis,
     TypeValue,
     evaluation_cap,
+    reweighting,
+    simplex_grid,
 )
 from trustroute.policies.synthesis.result import SynthesisResult
-from trustroute.policies.trust_state_synthesis.synthesis import EVALUATION_NODES, synthesize_joint
+from trustroute.policies.trust_state_synthesis.synthesis import (
+    EVALUATION_NODES,
+    JointSynthesis,
+    synthesize_joint,
+)
 
 
 def joint_type_values(problem: Problem, policy: RoutingPolicy, max_junctions: int,
@@ -86,14 +104,50 @@ def type_optimum_bounds(problem: Problem, tau: float, time_limit: float, horizon
                             horizon=horizon, belief_rule="bayes").upper for t in population.types)
 
 
+def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[TypeValue, ...],
+                      grid_points: int, tau: float, time_limit: float, horizon: int | None,
+                      belief_rule: BeliefRule, on_iteration: Callable[[float, float], None] | None
+                      ) -> tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray, list[dict]]:
+    """The candidate with the best worst type: the Bayes policy and, for every prior λ of the
+    simplex grid, the trust-state synthesis as if the type prior were λ, run on the AV's filter
+    (weights w) with J and b reweighted to λ. (policy, its per-type values, λ, every candidate's
+    record)."""
+    population = problem.population
+    assert population is not None
+    weights = population.weights
+    cap = evaluation_cap(horizon)
+
+    def record(prior: np.ndarray, found: tuple[TypeValue, ...]) -> dict:
+        return {"prior": prior.tolist(), "worst_type_lower": min(v.lower for v in found),
+                "type_lower": [v.lower for v in found]}
+
+    best: tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray] = (bayes.policy, values, weights)
+    candidates = [record(weights, values)]
+    for prior in simplex_grid(population.n_types, grid_points):
+        if np.allclose(prior, weights, rtol=0, atol=1e-12):
+            continue
+        made = synthesize_joint(build_pomdp(problem.town, lift_population(population, prior)), problem.spec,
+                                tau=tau, time_limit=time_limit, horizon=horizon, belief_rule=belief_rule,
+                                on_iteration=on_iteration)
+        policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
+                                  name="robust", horizon=horizon, guide=made.policy.guide,
+                                  reweight=reweighting(population, prior))
+        found = joint_type_values(problem, policy, cap, belief_rule)
+        candidates.append(record(prior, found))
+        if min(v.lower for v in found) > min(v.lower for v in best[1]):
+            best = (policy, found, prior)
+    return (*best, candidates)
+
+
 def synthesize_population_joint(problem: Problem, objective: str, synthesize: Callable[..., SynthesisResult],
                                 tau: float = 1e-3, time_limit: float = 60.0, horizon: int | None = None,
-                                belief_rule: BeliefRule = "bayes",
+                                belief_rule: BeliefRule = "bayes", grid_points: int = MAX_GRID_CANDIDATES,
                                 on_iteration: Callable[[float, float], None] | None = None
                                 ) -> PopulationSynthesis:
     """The population synthesis (module docstring) of a TRUST_STATE problem with a population.
     `synthesize`: the one synthesis entry (policies/synthesize_spec.py `synthesize_spec`), for the
-    per-type bounds of the robust objective. time_limit applies to each synthesis run."""
+    per-type bounds of the robust objective; grid_points: its candidate type priors. time_limit
+    applies to each synthesis run."""
     if objective not in OBJECTIVES:
         raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
     population = problem.population
@@ -110,13 +164,21 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
         bayes_upper=bayes.upper, bayes_type_values=values)
     if objective == "bayes":
         return found
+    policy, best_values, prior, candidates = robust_candidates(
+        problem, bayes, values, grid_points, tau, time_limit, horizon, belief_rule, on_iteration)
     type_upper = type_optimum_bounds(problem, tau, time_limit, horizon, synthesize)
-    lower = min(v.lower for v in values)
+    lower = min(v.lower for v in best_values)
     upper = min(bayes.upper, *type_upper)
     if lower > upper + 1e-9:
         raise RuntimeError(f"robust value {lower!r} above its bound {upper!r}: a soundness bug")
-    candidates = [{"prior": list(found.prior), "worst_type_lower": lower,
-                   "type_lower": [v.lower for v in values]}]
-    return replace(found, objective="robust", lower=lower, upper=max(upper, lower),
+    # The policy file's bounds keep their meaning L <= Pr_max <= U under the type prior: L the
+    # returned policy's prior-weighted value (the lower ends), U the Bayes synthesis' bound.
+    mixture = min(float(population.weights @ [v.lower for v in best_values]), bayes.upper)
+    policy.lower, policy.upper = mixture, bayes.upper
+    result = SynthesisResult(policy=policy, lower=mixture, upper=bayes.upper,
+                             seconds=time.perf_counter() - started, stats=bayes.stats, horizon=horizon,
+                             belief_rule=belief_rule)
+    return replace(found, objective="robust", result=result, prior=tuple(float(p) for p in prior),
+                   type_values=best_values, lower=lower, upper=max(upper, lower),
                    seconds=time.perf_counter() - started, candidates=candidates, type_upper=type_upper,
                    bayes_policy=bayes.policy)

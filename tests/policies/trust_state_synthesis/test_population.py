@@ -13,7 +13,6 @@ from hypothesis import strategies as st
 from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.trust_paths import optimum, policy_value_by_type, robust_optimum
 from tests.policies.trust_specs import random_problem
-from trustroute.core.errors import InputError
 from trustroute.participants.driver_population import DriverPopulation, DriverType
 from trustroute.policies.belief.problem import TRUST_STATE, problem
 from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
@@ -21,7 +20,7 @@ from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.files import load_population_policy, save_policy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
-from trustroute.policies.synthesis.population import document_entries, policy_name
+from trustroute.policies.synthesis.population import document_entries, policy_name, reweighting
 from trustroute.policies.synthesize_spec import synthesize_for_population
 from trustroute.policies.trust_state_synthesis.population import belief_free_spec
 
@@ -92,28 +91,46 @@ def test_belief_free_spec_keeps_road_and_trust_atoms_and_drops_belief_literals(t
     assert belief_free_spec(projected) is projected
 
 
-def test_population_joint_policy_file_round_trips(tmp_path, driver):
+@pytest.mark.slow
+@pytest.mark.parametrize("objective", ["bayes", "robust"])
+def test_population_joint_policy_file_round_trips(tmp_path, driver, objective):
     rng = np.random.default_rng(3)
     town, population, spec = random_population_problem(rng, driver, 3)
-    made = synthesize_for_population(town, population, spec, "bayes", horizon=3, time_limit=10)
+    made = synthesize_for_population(town, population, spec, objective, horizon=3, time_limit=10)
     path = save_policy(made.result, tmp_path / "policy.json", town, made.pomdp.driver, made.spec,
                        population=document_entries(made), name=policy_name(made))
     document = json.loads(path.read_text())
-    assert document["kind"] == "joint-belief" and document["objective"] == "bayes"
+    assert document["kind"] == "joint-belief" and document["objective"] == objective
     assert document["population_hash"] == population.content_hash
+    assert document["belief_prior"] == list(made.prior)
     loaded, model, lifted_spec = load_population_policy(path, town, population, spec)
     assert isinstance(loaded, JointTablePolicy)
     assert model.content_hash == made.pomdp.driver.content_hash
+    assert (loaded.reweight is None) == (made.result.policy.reweight is None)
+    if objective == "robust":   # here a grid prior beats the Bayes policy's worst type
+        assert loaded.reweight is not None and document["belief_prior"] != document["population_weights"]
+        assert made.lower > min(v.lower for v in made.bayes_type_values)
     _, again = evaluate_joint_by_type(made.pomdp, lifted_spec, loaded, fallback_after=None, max_junctions=3)
     _, first = evaluate_joint_by_type(made.pomdp, made.spec, made.result.policy, fallback_after=None,
                                       max_junctions=3)
-    assert again == first
-    # A joint-belief table acts on the AV's own joint belief: a file whose type prior is not the
-    # population's weights (which a belief table would reweight) is refused.
-    document["belief_prior"] = [1.0] + [0.0] * (population.n_types - 1)
-    path.write_text(json.dumps(document))
-    with pytest.raises(InputError, match="belief_prior"):
-        load_population_policy(path, town, population, spec)
+    assert again == first == [(v.lower, v.upper) for v in made.type_values]
+
+
+def test_reweighting_a_joint_policy_is_the_posterior_under_the_other_prior(driver):
+    rng = np.random.default_rng(4)
+    town, population, spec = random_population_problem(rng, driver, 2)
+    prior = np.array([0.9, 0.1])
+    other = problem(town, population, spec)
+    made = synthesize_for_population(town, population, spec, "bayes", horizon=2, time_limit=5)
+    policy = JointTablePolicy(made.result.policy.table, other.pomdp, other.spec,
+                              made.result.policy.guide_horizon, reweight=reweighting(population, prior))
+    joint = rng.dirichlet(np.ones(14 * 3)).reshape(1, 14, 3)
+    beliefs = joint.sum(axis=2)
+    weighted_joint, weighted = policy.reweighted(joint, beliefs)
+    r = np.repeat(prior / population.weights, 7)
+    assert np.allclose(weighted, beliefs * r / (beliefs * r).sum())
+    assert np.allclose(weighted_joint, joint * r[None, :, None] / (joint * r[None, :, None]).sum())
+    assert np.allclose(weighted_joint.sum(axis=2), weighted)
 
 
 def test_three_type_population_on_phi1_trust_routes_to_the_trust_state_search(town):
