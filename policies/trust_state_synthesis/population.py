@@ -175,9 +175,7 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     # returned policy's prior-weighted value (the lower ends), U the Bayes synthesis' bound.
     mixture = min(float(population.weights @ [v.lower for v in best_values]), bayes.upper)
     policy.lower, policy.upper = mixture, bayes.upper
-    result = SynthesisResult(policy=policy, lower=mixture, upper=bayes.upper,
-                             seconds=time.perf_counter() - started, stats=bayes.stats, horizon=horizon,
-                             belief_rule=belief_rule)
+    result = replace(bayes, policy=policy, lower=mixture, seconds=time.perf_counter() - started)
     return replace(found, objective="robust", result=result, prior=tuple(float(p) for p in prior),
                    type_values=best_values, lower=lower, upper=max(upper, lower),
                    seconds=time.perf_counter() - started, candidates=candidates, type_upper=type_upper,
