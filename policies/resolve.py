@@ -158,8 +158,8 @@ def population_cache_path(town: Town, population: DriverPopulation, spec: Spec, 
                           cache_dir: str | Path | None, horizon: int | None = AWARE_HORIZON,
                           belief_rule: BeliefRule = "bayes") -> Path:
     """Cache entry of the population policy ("robust" or "bayes" objective) for these inputs: the
-    key covers the population's content hash instead of one driver model's. The code version is
-    that of one type's problem (several types with trust-state atoms are refused by lift_spec)."""
+    key covers the population's content hash instead of one driver model's, and the code version
+    that of the problem's case (a trust-state spec: the trust-state search's version too)."""
     key = hashlib.sha256("|".join((town.content_hash, population.content_hash, spec.content_hash,
                                    objective, f"H={horizon}", f"tau={AWARE_TAU}", belief_rule,
                                    f"grid={POPULATION_GRID_POINTS}",
@@ -188,11 +188,8 @@ def population_policy(town: Town, population: DriverPopulation, spec: Spec, obje
     from trustroute.core.output_files import file_lock
     from trustroute.policies.belief.driver_types import lift_population, lift_spec
     from trustroute.policies.routing.files import load_population_policy
-    from trustroute.policies.synthesis.population import (
-        document_entries,
-        policy_name,
-        synthesize_population,
-    )
+    from trustroute.policies.synthesis.population import document_entries, policy_name
+    from trustroute.policies.synthesize_spec import synthesize_for_population
 
     lifted_spec = lift_spec(spec, population, population_source)
     if population.n_types == 1:
@@ -217,10 +214,10 @@ def population_policy(town: Town, population: DriverPopulation, spec: Spec, obje
         if not is_objective(objective):
             raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
         with synthesis_progress(f"synthesizing {objective} for {spec.name}", progress) as on_iteration:
-            made = synthesize_population(town, population, spec, objective, tau=AWARE_TAU,
-                                         time_limit=POPULATION_TIME_LIMIT, horizon=horizon,
-                                         belief_rule=belief_rule, population_source=population_source,
-                                         grid_points=POPULATION_GRID_POINTS, on_iteration=on_iteration)
+            made = synthesize_for_population(town, population, spec, objective, tau=AWARE_TAU,
+                                             time_limit=POPULATION_TIME_LIMIT, horizon=horizon,
+                                             belief_rule=belief_rule, population_source=population_source,
+                                             grid_points=POPULATION_GRID_POINTS, on_iteration=on_iteration)
         save_policy(made.result, path, town, made.pomdp.driver, made.spec,
                     population=document_entries(made), name=policy_name(made))
         # read back: a fresh entry and a cached one give the same policy object

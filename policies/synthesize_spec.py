@@ -5,18 +5,28 @@ hidden trust (TRUST_STATE) goes to policies/trust_state_synthesis/synthesis.py (
 (trust, DFA state) beliefs); every other problem (PLAIN, and DRIVER_TYPES on the type-aware model)
 goes to policies/synthesis/belief_synthesis.py unchanged, so its bounds and policy file are exactly those of
 `belief_synthesis.synthesize` (tests/policies/test_synthesize_spec.py compares them byte for byte).
+
+A driver population (`synthesize_for_population`, objectives "bayes" and "robust") goes by the same
+case of its problem: TRUST_STATE to policies/trust_state_synthesis/population.py (the trust-state
+search on the lifted model and spec), the others to policies/synthesis/population.py.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
-from trustroute.policies.belief.problem import DRIVER_TYPES, PLAIN, TRUST_STATE, Problem, problem_of
+from trustroute.networks.town import Town
+from trustroute.participants.driver_population import DriverPopulation
+from trustroute.policies.belief.problem import DRIVER_TYPES, PLAIN, TRUST_STATE, Problem, problem, problem_of
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.synthesis.arguments import check_synthesis_arguments
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.result import SynthesisResult
+
+if TYPE_CHECKING:
+    from trustroute.policies.synthesis.population import Objective, PopulationSynthesis
 
 
 def belief_search(problem: Problem, tau: float, time_limit: float, horizon: int | None,
@@ -57,3 +67,31 @@ def synthesize_spec(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit
     """`synthesize_problem` of the problem of `pomdp` and `spec`."""
     return synthesize_problem(problem_of(pomdp, spec), tau=tau, time_limit=time_limit, horizon=horizon,
                               belief_rule=belief_rule, on_iteration=on_iteration, clusters=clusters)
+
+
+def synthesize_for_population(town: Town, population: DriverPopulation, spec: Spec,
+                              objective: Objective = "bayes",
+                              tau: float = 1e-3, time_limit: float = 60.0, horizon: int | None = None,
+                              belief_rule: BeliefRule = "bayes", population_source: str = "",
+                              grid_points: int | None = None,
+                              on_iteration: Callable[[float, float], None] | None = None
+                              ) -> PopulationSynthesis:
+    """Synthesis for driver population `population` under `objective` ("bayes": the prior-weighted
+    value; "robust": the worst type's), by the case of the problem (module docstring).
+    grid_points: candidate type priors of the robust objective (default
+    policies/synthesis/population.py's). time_limit applies to each synthesis run."""
+    from trustroute.policies.synthesis.population import MAX_GRID_CANDIDATES, synthesize_population
+
+    found = problem(town, population, spec, population_source)
+    points = MAX_GRID_CANDIDATES if grid_points is None else grid_points
+    if found.case == TRUST_STATE:
+        from trustroute.policies.trust_state_synthesis.population import synthesize_population_joint
+
+        check_synthesis_arguments(tau, horizon, belief_rule)
+        return synthesize_population_joint(found, objective, synthesize_spec, tau=tau, time_limit=time_limit,
+                                           horizon=horizon, belief_rule=belief_rule, grid_points=points,
+                                           on_iteration=on_iteration)
+    return synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
+                                 horizon=horizon, belief_rule=belief_rule,
+                                 population_source=population_source, grid_points=points,
+                                 on_iteration=on_iteration)

@@ -30,10 +30,12 @@ if TYPE_CHECKING:
     from trustroute.harness.study.runner import StudyRun
     from trustroute.networks.town import Town
     from trustroute.participants.driver_model import DriverModel
+    from trustroute.participants.driver_population import DriverPopulation
     from trustroute.policies.evaluation.plain import Evaluation
     from trustroute.policies.logic.spec import Spec
     from trustroute.policies.model.trust_pomdp import BeliefRule
     from trustroute.policies.routing.protocol import RoutingPolicy
+    from trustroute.policies.synthesis.population import Objective, PopulationSynthesis
     from trustroute.policies.synthesis.result import SynthesisResult
 
     # a policy argument: "free", "aware", a policy file, a SynthesisResult or any RoutingPolicy
@@ -94,24 +96,61 @@ def _problem(spec: Spec | PathLike, town: Town | None,
 
 def synthesize(spec: Spec | PathLike, town: Town | None = None, driver: DriverModel | None = None, *,
                horizon: int | None = None, tau: float = 1e-3, time_limit: float = 60.0,
-               belief_rule: BeliefRule = "bayes", out: PathLike | None = None) -> SynthesisResult:
+               belief_rule: BeliefRule = "bayes", out: PathLike | None = None,
+               population: DriverPopulation | PathLike | None = None,
+               objective: Objective = "bayes") -> SynthesisResult | PopulationSynthesis:
     """A trust-aware policy for `spec` with certified bounds `result.lower <= Pr_max <= result.upper`.
 
     horizon: at most this many junctions (None: unbounded). tau: stop when upper - lower <= tau.
     time_limit: seconds (about). belief_rule: the AV's filter, exact "bayes" or the authors'
     "paper" update (docs/model.md). out: also write the policy file there
     (docs/formats/policy_file.md). `result.policy` is the policy; `result.lower` is its exact value.
+
+    population: a driver population (object or file; instead of `driver`): synthesis for its mixture
+    of driver types under `objective` ("bayes": the prior-weighted value, "robust": the worst
+    type's; docs/driver_types.md), for any spec, trust-state atoms included. It returns a
+    PopulationSynthesis: `lower <= optimum <= upper` of the objective, `type_values` the returned
+    policy's value per type, `result` its SynthesisResult (`result.policy` the policy).
     """
     from trustroute.policies.model.trust_pomdp import build_pomdp
     from trustroute.policies.routing.files import save_policy
     from trustroute.policies.synthesize_spec import synthesize_spec as search
 
+    if population is not None:
+        if driver is not None:
+            raise ValueError("give driver or population, not both")
+        return _synthesize_population(spec, town, population, objective, horizon=horizon, tau=tau,
+                                      time_limit=time_limit, belief_rule=belief_rule, out=out)
     town, driver, spec = _problem(spec, town, driver)
     result = search(build_pomdp(town, driver), spec, tau=tau, time_limit=time_limit, horizon=horizon,
                     belief_rule=belief_rule)
     if out is not None:
         save_policy(result, out, town, driver, spec)
     return result
+
+
+def _synthesize_population(spec: Spec | PathLike, town: Town | None, population: DriverPopulation | PathLike,
+                           objective: Objective, *, horizon: int | None, tau: float, time_limit: float,
+                           belief_rule: BeliefRule, out: PathLike | None) -> PopulationSynthesis:
+    """`synthesize` for a driver population (the one synthesis entry decides the method)."""
+    from trustroute.participants.driver_population import DriverPopulation, load_driver_population
+    from trustroute.policies.logic.spec import Spec
+    from trustroute.policies.routing.files import save_policy
+    from trustroute.policies.synthesis.population import document_entries, policy_name
+    from trustroute.policies.synthesize_spec import synthesize_for_population
+
+    town = town if town is not None else load_town()
+    if not isinstance(population, DriverPopulation):
+        population = load_driver_population(population)
+    if not isinstance(spec, Spec):
+        spec = load_spec(spec, town)
+    found = synthesize_for_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
+                                      horizon=horizon, belief_rule=belief_rule,
+                                      population_source=population.source_path)
+    if out is not None:
+        save_policy(found.result, out, town, found.pomdp.driver, found.spec,
+                    population=document_entries(found), name=policy_name(found))
+    return found
 
 
 def _policy(policy: PolicyLike, town: Town, driver: DriverModel, spec: Spec,

@@ -174,12 +174,8 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.resolve import is_objective, synthesis_progress
     from trustroute.policies.routing.files import array_path, save_policy
-    from trustroute.policies.synthesis.population import (
-        document_entries,
-        policy_name,
-        summary,
-        synthesize_population,
-    )
+    from trustroute.policies.synthesis.population import document_entries, policy_name, summary
+    from trustroute.policies.synthesize_spec import synthesize_for_population
 
     if not is_objective(objective):
         raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
@@ -191,9 +187,10 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
                                             belief_rule, f"time_limit={time_limit}")
     with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
                             not as_json) as on_iteration:
-        found = synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
-                                      horizon=horizon, belief_rule=checked_belief_rule(belief_rule),
-                                      population_source=population_path, on_iteration=on_iteration)
+        found = synthesize_for_population(town, population, spec, objective, tau=tau,
+                                          time_limit=time_limit, horizon=horizon,
+                                          belief_rule=checked_belief_rule(belief_rule),
+                                          population_source=population_path, on_iteration=on_iteration)
     result = found.result
     path = str(save_policy(result, out_path, town, found.pomdp.driver, found.spec,
                            population=document_entries(found), name=policy_name(found)))

@@ -31,12 +31,16 @@ from gymnasium import spaces
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.networks.town import Town, load_town
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DriverModel, load_driver_model
+from trustroute.participants.driver_population import DriverPopulation, load_driver_population
 from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.belief.driver_types import lift_population, lift_spec
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.spec import Spec, load_spec
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 if TYPE_CHECKING:
+    import pandas as pd
+
     from trustroute.harness.simulation.episode import EpisodeRecord
     from trustroute.policies.model.trust_pomdp import BeliefRule
 
@@ -105,6 +109,15 @@ def _as_driver(driver: DriverModel | str | Path | None) -> DriverModel:
     return driver if isinstance(driver, DriverModel) else load_driver_model(driver)
 
 
+def _as_population(population: DriverPopulation | str | Path | None,
+                   driver: DriverModel | str | Path | None) -> DriverPopulation | None:
+    if population is None:
+        return None
+    if driver is not None:
+        raise ValueError("give driver or population, not both")
+    return population if isinstance(population, DriverPopulation) else load_driver_population(population)
+
+
 def _as_spec(spec: Spec | str | Path, town: Town) -> Spec:
     return spec if isinstance(spec, Spec) else load_spec(spec, town)
 
@@ -118,6 +131,9 @@ class TrustRoutingEnv(gymnasium.Env):
     (fast, no SUMO) or "sumo" (libsumo). junction_cap: the episode is truncated after this many
     junctions. belief_rule: the AV's filter ("bayes" or "paper").
     report_accuracy: the synthetic driver's trust-report accuracy (reports are logged only).
+    population: a driver population (object or file; instead of driver): the AV's filter is its
+    type-aware model and the spec is lifted onto it; each episode's driver is of a type drawn from
+    the weights (`driver_type`).
 
     Observation (Dict): "road" (index into town.states), "dfa_state" (the spec's DFA state after
     the current position), "belief" (the AV's belief over trust levels), "junctions" (driven so
@@ -135,7 +151,8 @@ class TrustRoutingEnv(gymnasium.Env):
                  driver: DriverModel | str | Path | None = None, engine: str = "model",
                  junction_cap: int = DEFAULT_JUNCTION_CAP, belief_rule: BeliefRule = "bayes",
                  report_accuracy: float = DEFAULT_REPORT_ACCURACY, net_path: str | Path | None = None,
-                 render_mode: str | None = None) -> None:
+                 render_mode: str | None = None,
+                 population: DriverPopulation | str | Path | None = None) -> None:
         if engine not in ENGINES:
             raise ValueError(f"unknown engine {engine!r}; use one of {', '.join(ENGINES)}")
         if junction_cap < 1:
@@ -144,8 +161,17 @@ class TrustRoutingEnv(gymnasium.Env):
             raise ValueError("TrustRouting has no render modes "
                              "(record a SUMO episode with trustroute run --rrd)")
         self.town = _as_town(town)
-        self.driver_model = _as_driver(driver)
+        # With a driver population the AV filters with its type-aware model and reads the lifted
+        # spec (docs/driver_types.md); each episode's driver is of a type drawn from its weights.
+        self.population = _as_population(population, driver)
+        self.driver_model = (_as_driver(driver) if self.population is None
+                             else lift_population(self.population))
         self.scldtl_spec = _as_spec(spec, self.town)
+        if self.population is not None:
+            self.scldtl_spec = lift_spec(self.scldtl_spec, self.population)
+        self.driver_type: str | None = None     # the type of the current episode's driver
+        self._belief_rule: BeliefRule = belief_rule
+        self._belief = np.asarray(self.driver_model.initial_belief, dtype=np.float64)  # at the last decision
         self.engine = engine
         self.report_accuracy = float(report_accuracy)
         self.net_path = Path(net_path) if net_path is not None else None
@@ -225,7 +251,24 @@ class TrustRoutingEnv(gymnasium.Env):
         return {"action_mask": mask, "road_name": self._road, "legal_junctions": tuple(legal)}
 
     def _decision(self, context: DecisionContext) -> dict:
+        self._belief = np.asarray(context.belief, dtype=np.float64)
         return self._observation(context.road, context.dfa_state, context.belief, context.junctions_driven)
+
+    def _final_belief(self, last: pd.Series) -> np.ndarray:
+        """The AV's belief after the last road. The roads table logs a type-aware belief's trust
+        marginal only: with a population, the last decision's belief is filtered once more with
+        the last road's observation, as the tracker does."""
+        if self.population is None:
+            return np.asarray(last["belief_after"], dtype=np.float64)
+        from trustroute.harness.simulation.episode_tracker import PERFORMANCE_INDEX
+        from trustroute.policies.model.trust_pomdp import build_pomdp
+
+        pomdp = build_pomdp(self.town, self.driver_model)
+        incident = self.driver_model.incident_index(str(last["incident"]))
+        after = pomdp.belief_update(self._belief, incident, int(bool(last["takeover"])),
+                                    PERFORMANCE_INDEX[str(last["performance"])],
+                                    rule=self._belief_rule)[0][0]
+        return after if after.sum() > 0 else self._belief
 
     def _final(self, record: EpisodeRecord) -> tuple[dict, float, bool, bool, dict]:
         self._join_thread()
@@ -237,12 +280,13 @@ class TrustRoutingEnv(gymnasium.Env):
         self.last_run = {"episode": self.episodes,
                          **{k: record.summary[k] for k in RUN_FACTS if k in record.summary}}
         observation = self._observation(str(last["directed_road"]), int(last["dfa_state"]),
-                                        np.asarray(last["belief_after"], dtype=np.float64),
-                                        int(summary["junctions"]))
+                                        self._final_belief(last), int(summary["junctions"]))
         reason = summary["end_reason"]
         info = {**self._info(), "end_reason": reason, "summary": summary}
         terminated = reason in ("accepted", "rejected")
-        return observation, float(reason == "accepted"), terminated, reason == "cap", info
+        # The episode's own reading of the spec: the DFA's acceptance, and for a spec that tests
+        # the hidden trust the true DFA state's (an episode the AV cannot settle ends at the cap).
+        return observation, float(bool(summary["satisfied"])), terminated, reason == "cap", info
 
     # -- the gymnasium API ----------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
@@ -250,7 +294,11 @@ class TrustRoutingEnv(gymnasium.Env):
         self._abort()
         rng = self.np_random
         sumo_seed = int(rng.integers(0, 2**31 - 1))
-        driver = SyntheticDriver(self.driver_model, rng, report_accuracy=self.report_accuracy)
+        model = self.driver_model
+        if self.population is not None:
+            k = int(rng.choice(self.population.n_types, p=self.population.weights))
+            self.driver_type, model = self.population.names[k], self.population.types[k].model
+        driver = SyntheticDriver(model, rng, report_accuracy=self.report_accuracy)
         self.episodes += 1
         episode_id = f"gym-{self.scldtl_spec.name}-{self.episodes:06d}"
         policy = AgentPolicy(self._to_agent, self._to_episode)

@@ -20,6 +20,7 @@ from trustroute.policies.routing.protocol import RoutingPolicy
 def expected_values(config: StudyConfig) -> dict:
     """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluation.plain),
     and the synthesized bounds when the policy carries them."""
+    from trustroute.policies.belief.problem import dfa_is_hidden
     from trustroute.policies.evaluation.trust_state import evaluate_joint as evaluate
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
@@ -33,6 +34,12 @@ def expected_values(config: StudyConfig) -> dict:
         # a condition whose AV filters with another model ("robust": the type-aware one) is
         # evaluated on its own filter with the nominal driver as the truth
         own = setup.driver_model is not context.nominal
+        if own and dfa_is_hidden(setup.driver_model, setup.spec):
+            # The joint unfolding's J is the law of the AV model's own hidden state: a true driver
+            # other than that model is not evaluated for specs that test the hidden trust.
+            out.setdefault(spec_name, {})[condition] = not_evaluated(
+                policy, condition_path.get(condition), context, spec_name, config, started)
+            continue
         value = evaluate(
             build_pomdp(context.town, setup.driver_model) if own else pomdp,
             setup.spec,
@@ -55,6 +62,22 @@ def expected_values(config: StudyConfig) -> dict:
             entry["synthesized_horizon"] = bounds[2]
         out.setdefault(spec_name, {})[condition] = entry
     return out
+
+
+def not_evaluated(policy: RoutingPolicy, condition: str | None, context: StudyContext, spec_name: str,
+                  config: StudyConfig, started: float) -> dict:
+    """The entry of a policy whose exact value for the nominal driver is not computed (the exact
+    value: None), with the bounds synthesis certified for it under its own model."""
+    entry: dict[str, float | str | None] = {
+        "exact_lower": None, "exact_upper": None, "expected_final_trust": None, "fallback_probability": None,
+        "not_evaluated": "the spec tests the hidden trust and the policy's AV filters with another model "
+                         "than the nominal driver's",
+        "seconds": time.perf_counter() - started}
+    bounds = synthesized_bounds(policy, condition, context, spec_name, config)
+    if bounds is not None:
+        entry["synthesized_lower"], entry["synthesized_upper"] = bounds[0], bounds[1]
+        entry["synthesized_horizon"] = bounds[2]
+    return entry
 
 
 def synthesized_bounds(

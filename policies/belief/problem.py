@@ -11,8 +11,8 @@ tracking apply (docs/trust_states.md, docs/driver_types.md):
   (policies/trust_state_synthesis), the hidden node state, the joint filter in episodes. With a
   population of several types θ is the type-aware model's hidden (type, trust) index, so J is
   over ((type, trust), q) and its blocks give every type's value
-  (policies/evaluation/trust_state.py, `evaluate_joint_by_type`); population policies are not
-  synthesized for it (the belief-MDP product refuses the spec).
+  (policies/evaluation/trust_state.py, `evaluate_joint_by_type`); its population policies come
+  from the trust-state search on the lifted model (policies/trust_state_synthesis/population.py).
 - DRIVER_TYPES: a population of several driver types and a spec without trust-state atoms: the
   AV's model is the type-aware one over (type, trust) and the spec is lifted onto it
   (policies/belief/driver_types.py); its DFA state is observed, so everything runs as PLAIN on

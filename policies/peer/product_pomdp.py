@@ -31,6 +31,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order
 
 from trustroute.core.errors import InputError
+from trustroute.policies.belief.driver_types import base_trust_index
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.spec import Spec
@@ -103,7 +104,10 @@ def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) 
     outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
     n_o, n_k = len(outcomes), (horizon + 1 if horizon is not None else 1)
     qs, xs, ts = np.meshgrid(np.arange(n_q), np.arange(n_x), np.arange(n_t), indexing="ij")
-    next_q = np.asarray(labeller.step(qs.ravel(), xs.ravel(), np.zeros((qs.size, n_t)), ts.ravel()),
+    # θ is the hidden index: with a driver population's type-aware model, (type, trust), whose
+    # trust level the trust-state atoms read.
+    levels = base_trust_index(driver)[ts.ravel()]
+    next_q = np.asarray(labeller.step(qs.ravel(), xs.ravel(), np.zeros((qs.size, n_t)), levels),
                         dtype=np.int64).reshape(n_q, n_x, n_t)
     shape = (n_x, n_t, n_q, n_o, n_k)
     n_grid = int(np.prod(shape))

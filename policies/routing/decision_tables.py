@@ -12,8 +12,10 @@ Row kinds (`RowKind`), each with its arrays in a policy file's `.npz` and their 
 Table kinds (`TableKind`, `TABLE_KINDS`): which rows a table has, the file versions that hold it,
 its acting rule in words, the document keys it adds and the routing policy that acts on it.
 `PLAIN_TABLE` (files without `kind`) holds exact rows and box rows; `JOINT_TABLE`
-(`kind = "joint-belief"`) holds joint rows. `table_kind(table)` and `document_table_kind(document)`
-find a kind by the table's type or the document's `kind`.
+(`kind = "joint-belief"`) holds joint rows, of one driver model or of a driver population's
+type-aware model (then with the population keys and the type prior its table was made for).
+`table_kind(table)` and `document_table_kind(document)` find a kind by the table's type or the
+document's `kind`.
 """
 
 from __future__ import annotations
@@ -265,13 +267,14 @@ def plain_policy(table: PolicyTable, origin: PolicyOrigin) -> BeliefTablePolicy:
 
 
 def joint_policy(table: JointPolicyTable, origin: PolicyOrigin) -> JointTablePolicy:
+    """The policy of joint rows (a population's: reweighted to the type prior its file records)."""
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     document = origin.document
     return JointTablePolicy(table, build_pomdp(origin.town, origin.driver), origin.spec,
                             document.get("guide_horizon"), name=str(document.get("name", "aware")),
                             lower=document.get("lower"), upper=document.get("upper"),
-                            horizon=document.get("horizon"))
+                            horizon=document.get("horizon"), reweight=origin.reweight)
 
 
 def check_junction_count(value: object, key: str, where: str) -> None:

@@ -13,6 +13,12 @@ probable under J), the AV belief b, J, and the action slot chosen there. The rul
    (policies/belief/trust_state_relaxation.py, RelaxedGuide; k = guide_horizon - t - 1 junctions
    left, the full guide horizon once t reaches it).
 
+`reweight` (a policy made for a driver population under another type prior λ than the weights w
+of the AV's filter, policies/trust_state_synthesis/population.py): before both rules, J and b are
+reweighted by r = λ_k / w_k on type k's block of the hidden (type, trust) index and renormalised
+(a row with no mass left stays as it was), the posterior under prior λ of the same observations
+(docs/driver_types.md, "The robust objective").
+
 The policy's certified lower bound is its own exact value (policies/trust_state_synthesis/synthesis.py
 evaluates it), so the rule off the stored nodes needs no optimality claim.
 """
@@ -65,8 +71,10 @@ class JointTablePolicy(RoutingPolicy):
 
     def __init__(self, table: JointPolicyTable, pomdp: TrustPOMDP, spec: Spec, guide_horizon: int | None,
                  name: str = "aware", lower: float | None = None, upper: float | None = None,
-                 horizon: int | None = None, guide: RelaxedGuide | None = None) -> None:
+                 horizon: int | None = None, guide: RelaxedGuide | None = None,
+                 reweight: np.ndarray | None = None) -> None:
         self.table = table
+        self.reweight = None if reweight is None else np.asarray(reweight, dtype=float)
         self.lower, self.upper, self.horizon = lower, upper, horizon   # as certified by synthesis
         self.pomdp = pomdp
         self.town: Town = pomdp.town
@@ -127,11 +135,25 @@ class JointTablePolicy(RoutingPolicy):
         """The acting rule at n nodes of t junctions driven: int [n] action slots."""
         x = np.asarray(x, dtype=np.int64)
         joint = np.asarray(joint, dtype=float).reshape(x.size, self.pomdp.n_trust, -1)
+        if self.reweight is not None:
+            joint, beliefs = self.reweighted(joint, np.asarray(beliefs, dtype=float).reshape(x.size, -1))
         slots = self.stored_actions(t, x, joint, beliefs)
         rest = np.flatnonzero(slots < 0)
         if rest.size:
             slots[rest] = self.guide.policy_slots(t, x[rest], joint[rest])
         return slots
+
+    def reweighted(self, joint: np.ndarray, beliefs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """J [n, n_trust, n_q] and b [n, n_trust] under the policy's type prior (module docstring)."""
+        r = self.reweight
+        assert r is not None
+
+        def normalised(weighted: np.ndarray, original: np.ndarray) -> np.ndarray:
+            total = weighted.reshape(weighted.shape[0], -1).sum(axis=1)
+            total = total.reshape((-1,) + (1,) * (weighted.ndim - 1))
+            return np.where(total > 0, weighted / np.where(total > 0, total, 1.0), original)
+
+        return (normalised(joint * r[None, :, None], joint), normalised(beliefs * r[None, :], beliefs))
 
     def route_memory(self, route: tuple[str, ...]) -> tuple:
         """Nothing: the decision is a function of (junctions driven, road, J, AV belief)."""

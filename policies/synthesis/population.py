@@ -23,6 +23,8 @@ max_π min_k V_k <= min_k max_π V_k and <= max_π Σ_k w_k V_k. The gap says ho
 may be from the robust optimum.
 
 One type: the Bayes objective is `synthesize` on the type's own model and spec, bit for bit.
+Specs with trust-state atoms go to policies/trust_state_synthesis/population.py instead (the one
+synthesis entry, policies/synthesize_spec.py `synthesize_for_population`, decides by the case).
 """
 
 from __future__ import annotations
@@ -72,7 +74,7 @@ class PopulationSynthesis:
 
     objective: str
     population: DriverPopulation
-    result: BeliefSynthesis
+    result: BeliefSynthesis | SynthesisResult   # a JointSynthesis for trust-state specs
     pomdp: TrustPOMDP                 # the type-aware POMDP the policy's AV filters on
     spec: Spec                        # the lifted spec
     prior: tuple[float, ...]          # λ: the AV's type prior of the returned policy

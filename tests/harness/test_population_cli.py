@@ -96,3 +96,31 @@ def test_run_draws_the_driver_type_and_filters_with_the_type_aware_model(tmp_pat
 
     roads = pd.read_parquet(tmp_path / "logs" / "roads.parquet")
     assert all(len(b) == 7 for b in roads["belief_after"])   # the trust marginal is logged
+
+
+@pytest.mark.slow
+def test_trust_state_spec_with_three_types_synthesizes_and_evaluates(tmp_path, capsys):
+    out = tmp_path / "policy.json"
+    code, text, _ = run_cli(capsys, "synth", "specs/phi1_trust.toml", "--horizon", "10", "--json",
+                            "--out", str(out), "--population", str(EXAMPLE_POPULATION_PATH))
+    assert code == 0
+    made = json.loads(text)
+    assert made["stats"]["method"].startswith("search over joint")
+    assert 0 < made["lower"] <= made["upper"] <= made["lower"] + 1e-3
+    types = made["population"]["type_values"]
+    assert [t["name"] for t in types] == ["builder", "flat", "wary"]
+    weights = made["population"]["weights"]
+    assert sum(w * t["lower"] for w, t in zip(weights, types, strict=True)) >= made["lower"] - 1e-12
+    assert json.loads(out.read_text())["kind"] == "joint-belief"
+    code, text, _ = run_cli(capsys, "evaluate", "specs/phi1_trust.toml", str(out), "--population",
+                            str(EXAMPLE_POPULATION_PATH), "--no-fallback", "--max-junctions", "10", "--json")
+    assert code == 0
+    assert json.loads(text)["population"]["type_values"] == types
+    # the worst type: certified between the worst type's value and the bound of its own optimum
+    code, text, _ = run_cli(capsys, "synth", "specs/phi1_trust.toml", "--horizon", "10", "--json",
+                            "--out", str(tmp_path / "robust.json"), "--objective", "robust",
+                            "--population", str(EXAMPLE_POPULATION_PATH))
+    assert code == 0
+    robust = json.loads(text)
+    assert robust["lower"] == min(t["lower"] for t in robust["population"]["type_values"])
+    assert robust["lower"] <= robust["upper"] <= min(robust["population"]["type_upper"]) + 1e-12

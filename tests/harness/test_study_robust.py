@@ -72,3 +72,27 @@ def test_the_robust_population_enters_the_study_hash(tmp_path):
     with_key = load_study_config(config_file(tmp_path, '["free"]',
                                              f'robust_population = "{EXAMPLE_POPULATION_PATH}"'))
     assert with_key.content_hash != plain.content_hash
+
+
+@pytest.mark.slow
+def test_robust_condition_with_a_trust_state_spec_runs_on_the_joint_policy(tmp_path):
+    from pathlib import Path
+
+    from trustroute.harness.study.context import study_context
+    from trustroute.policies.routing.trust_state_table import JointTablePolicy
+
+    spec = Path("specs/phi1_trust.toml").resolve()
+    path = config_file(tmp_path, '["robust", "free"]', f'robust_population = "{EXAMPLE_POPULATION_PATH}"')
+    path.write_text(path.read_text().replace('specs = ["phi1"]', f'specs = ["{spec}"]'))
+    config = load_study_config(path)
+    context = study_context(config)
+    assert isinstance(context.policies[("phi1_trust", "robust")], JointTablePolicy)
+    run_and_consolidate(config, tmp_path / "out", 1, None, progress=False, echo=lambda *_: None)
+    manifest = json.loads((tmp_path / "out" / "manifest.json").read_text())
+    robust, free = manifest["expected"]["phi1_trust"]["robust"], manifest["expected"]["phi1_trust"]["free"]
+    # the joint unfolding evaluates the AV's own model only: the nominal driver's value is not given
+    assert robust["exact_lower"] is None and "hidden trust" in robust["not_evaluated"]
+    assert robust["synthesized_lower"] <= robust["synthesized_upper"]
+    assert free["exact_lower"] == free["exact_upper"]
+    episodes = pd.read_parquet(tmp_path / "out" / "episodes.parquet")
+    assert set(episodes["condition"]) == {"robust", "free"}

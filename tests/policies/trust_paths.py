@@ -145,3 +145,38 @@ def optimum(pomdp, spec, horizon: int) -> float:
         return best
 
     return visit([spec.start], *paths.start())
+
+
+def robust_optimum(pomdp, spec, horizon: int, weights: np.ndarray) -> float:
+    """max over deterministic history-dependent policies of min_k P(spec accepted within `horizon`
+    junctions | type k), for a type-aware model whose hidden index is k·n + θ with type prior
+    `weights`: at every history the set of per-type accepted-mass vectors the policies below it
+    reach (its Pareto front), a choice of one action per history combining its observations' sets."""
+    paths = _Paths(pomdp, spec)
+    n_types = len(weights)
+    n = paths.n_t // n_types
+
+    def front(vectors: np.ndarray) -> np.ndarray:
+        vectors = np.unique(np.round(vectors, 14), axis=0)
+        keep = [i for i, v in enumerate(vectors)
+                if not any((w >= v).all() and (w > v).any() for w in vectors)]
+        return vectors[keep]
+
+    def visit(route, theta, weight, q, belief) -> np.ndarray:
+        if paths.settled(q) or len(route) - 1 == horizon:
+            done = paths.dfa.accepting[q]
+            return np.bincount(theta[done] // n, weights=weight[done], minlength=n_types)[None, :]
+        reached = []
+        for junction in paths.town.actions(route[-1]):
+            road = paths.town.successor(route[-1], junction)
+            total = np.zeros((1, n_types))
+            for h, e in paths.outcomes:
+                nxt = paths.step(theta, weight, q, road, h, e)
+                if nxt is not None:
+                    child = visit(route + [road], *nxt)
+                    total = front((total[:, None, :] + child[None, :, :]).reshape(-1, n_types))
+            reached.append(total)
+        return front(np.concatenate(reached))
+
+    masses = visit([spec.start], *paths.start())
+    return float((masses / np.asarray(weights, dtype=float)).min(axis=1).max())

@@ -193,3 +193,56 @@ def test_random_agent_matches_exact_probabilities():
         se = max(np.sqrt(p * (1 - p) / episodes), 1e-12)
         assert abs(estimate - p) <= 4 * se, (reason, estimate, p, se)
     env.close()
+
+
+class FirstJunction:
+    """Always the first legal junction: the agent of the population test, as a routing policy."""
+
+    def __init__(self, town):
+        from trustroute.policies.routing.protocol import RoutingPolicy
+
+        class First(RoutingPolicy):
+            name = "first"
+
+            def next_junction(self, context):
+                return town.actions(context.road)[0]
+
+        self.policy = First()
+
+
+@pytest.mark.slow
+def test_population_with_a_trust_state_spec_matches_exact_per_type_values(driver):
+    from tests.policies.trust_state_synthesis.test_population import random_population_problem
+    from trustroute.policies.belief.driver_types import trust_marginal
+    from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+
+    town, population, spec = random_population_problem(np.random.default_rng(0), driver, 3, "trust")
+    env = TrustRoutingEnv(spec, town=town, population=population, junction_cap=6)
+    assert spec.uses_trust_atoms and env.observation_space["belief"].shape == (3 * 7,)
+    check_env(env, skip_render_check=True)
+    exact, per_type = evaluate_joint_by_type(build_pomdp(town, env.driver_model), env.scldtl_spec,
+                                             FirstJunction(town).policy, fallback_after=None, max_junctions=6)
+    assert exact.gap == 0 and 0.05 < exact.lower < 0.95    # the test has teeth
+    episodes = 1500
+    ends = {name: [] for name in population.names}
+    for i in range(episodes):
+        observation, info = env.reset(seed=2000 + i)
+        done = False
+        while not done:
+            observation, reward, terminated, truncated, info = env.step(0)
+            done = terminated or truncated
+        ends[env.driver_type].append(reward)
+        assert observation["belief"].shape == (21,)
+        last = env.unwrapped.last_record.roads.iloc[-1]
+        assert np.allclose(trust_marginal(env.driver_model, observation["belief"]), last["belief_after"],
+                           atol=1e-12)
+    rewards = [r for rs in ends.values() for r in rs]
+    se = np.sqrt(exact.lower * (1 - exact.lower) / episodes)
+    assert abs(np.mean(rewards) - exact.lower) <= 4 * se
+    for (name, got), (value, _), weight in zip(ends.items(), per_type, population.weights, strict=True):
+        assert abs(len(got) / episodes - weight) <= 4 * np.sqrt(weight * (1 - weight) / episodes), name
+        assert abs(np.mean(got) - value) <= 4 * max(np.sqrt(value * (1 - value) / len(got)), 1e-12), name
+    with pytest.raises(ValueError, match="not both"):
+        TrustRoutingEnv(spec, town=town, driver=driver, population=population)
+    env.close()

@@ -75,3 +75,49 @@ def test_a_storm_error_is_an_input_error(pomdp, monkeypatch):
     with pytest.raises(InputError, match="something Storm cannot take") as error:
         run_storm(explicit_product(pomdp, spec, 6), time_limit=1)
     assert "\n" not in error.value.one_line()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [21, 22, 23])
+def test_storm_overlaps_our_population_synthesis_on_the_lifted_product(driver, seed):
+    """A driver population's type-aware model is a POMDP with hidden (type, trust): Storm unfolds
+    its product with the trust-state atoms read on the trust level of that index."""
+    from tests.policies.trust_state_synthesis.test_population import random_population_problem
+    from trustroute.participants.driver_population import DriverPopulation, DriverType
+    from trustroute.policies.belief.problem import problem
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+    from trustroute.policies.synthesize_spec import synthesize_for_population
+
+    rng = np.random.default_rng(seed)
+    town, population, spec = random_population_problem(rng, driver, 2 + seed % 2)
+    found = problem(town, population, spec)
+    product = explicit_product(found.pomdp, found.spec, 3)
+    storm = run_storm(product, time_limit=2)
+    ours = synthesize_for_population(town, population, spec, "bayes", horizon=3, time_limit=10)
+    assert_overlap(storm, ours)
+    if storm.lower_complete:   # Storm's unfolding is exact: our certified value lies in it
+        assert storm.lower - STORM_PRECISION <= ours.lower <= storm.upper + STORM_PRECISION
+    # Two copies of one type: the lifted product's value is the single model's (trust-state atoms
+    # read the trust level of (type, trust), not the raw index).
+    same = DriverPopulation(types=(DriverType("one", 0.5, population.types[0].model),
+                                   DriverType("two", 0.5, population.types[0].model)))
+    lifted = run_storm(explicit_product(problem(town, same, spec).pomdp, spec, 3), time_limit=2)
+    single = run_storm(explicit_product(build_pomdp(town, population.types[0].model), spec, 3), time_limit=2)
+    assert lifted.lower_complete and single.lower_complete
+    assert lifted.lower == pytest.approx(single.lower, abs=STORM_PRECISION)
+
+
+@pytest.mark.slow
+def test_storm_agrees_with_our_population_value_on_phi1_trust_with_three_types(town):
+    from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
+    from trustroute.policies.belief.problem import problem
+    from trustroute.policies.synthesize_spec import synthesize_for_population
+
+    population = load_driver_population(EXAMPLE_POPULATION_PATH)
+    spec = load_spec("specs/phi1_trust.toml", town)
+    found = problem(town, population, spec)
+    storm = run_storm(explicit_product(found.pomdp, found.spec, 10), time_limit=60)
+    ours = synthesize_for_population(town, population, spec, "bayes", horizon=10, time_limit=30)
+    assert_overlap(storm, ours)
+    assert storm.lower_complete          # Storm's unfolding is exact: our certified value is its value
+    assert ours.lower == pytest.approx(storm.lower, rel=STORM_PRECISION)

@@ -1,0 +1,182 @@
+"""Synthesis over a driver population for specs that test the hidden trust (docs/driver_types.md,
+"Trust-state specs with a population").
+
+The type-aware model (policies/belief/driver_types.py) makes the hidden index (type, trust), and a
+trust-state atom reads the trust level of that index (`base_trust_index`), so the problem of a
+population and a trust-state spec is the trust-state problem of the lifted model and lifted spec:
+its joint belief J((type, trust), q) is the AV's exact posterior over type, trust and DFA state.
+
+Bayes: `synthesize_joint` on the lifted problem. Its L and U are the trust-state synthesis' own:
+L the returned policy's certified value under the type prior, U a sound bound of the population
+optimum max_π Σ_k w_k V_k(π). Per-type values V_k are read off one joint unfolding of the returned
+policy (`evaluate_joint_by_type`: J's block of type k), with the horizon and no fallback, as the
+synthesis scores it.
+
+Robust: maximise min_k V_k, as policies/synthesis/population.py does for the belief-MDP search.
+The candidates are the Bayes policy and, for every type prior λ of the simplex grid, the trust-state
+synthesis as if the prior were λ; such a policy runs on the AV's filter under the weights w with
+its joint belief and belief reweighted to λ (policies/routing/trust_state_table.py, exact: the
+likelihood of the observations given the type does not depend on the prior), a function of the
+observations like any policy, and its V_k are read off one joint unfolding on the w-model. The
+candidate with the best worst type is returned. Certified: `lower` = min_k V_k of the returned policy
+(the lower ends of its per-type values), `upper` = min(U_bayes, min_k U_k) with U_k a sound bound of
+type k's own optimum (`synthesize_spec` on type k's model alone, of `belief_free_spec`: the spec
+without its belief literals when it reads beliefs, since the AV's belief is not type k's own
+posterior). The spec's belief labels read the w-filter for every candidate, so a λ-policy's table
+rows (made on λ-beliefs) are matched where the two readings agree and the relaxation decides
+elsewhere; its value is evaluated exactly either way.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from trustroute.policies.belief.driver_types import lift_population
+from trustroute.policies.belief.problem import Problem
+from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
+from trustroute.policies.logic.formula import TRUE, Formula, Literal, format_formula, map_literals
+from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
+from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.routing.trust_state_table import JointTablePolicy
+from trustroute.policies.synthesis.population import (
+    MAX_GRID_CANDIDATES,
+    OBJECTIVES,
+    PopulationSynthesis,
+    TypeValue,
+    evaluation_cap,
+    reweighting,
+    simplex_grid,
+)
+from trustroute.policies.synthesis.result import SynthesisResult
+from trustroute.policies.trust_state_synthesis.synthesis import (
+    EVALUATION_NODES,
+    JointSynthesis,
+    synthesize_joint,
+)
+
+
+def joint_type_values(problem: Problem, policy: RoutingPolicy, max_junctions: int,
+                      belief_rule: BeliefRule = "bayes", fallback_after: int | None = None,
+                      pomdp: TrustPOMDP | None = None) -> tuple[TypeValue, ...]:
+    """Certified value of `policy` for each type of the problem's population as the true driver,
+    from one joint unfolding on the lifted model (`evaluate_joint_by_type`)."""
+    population = problem.population
+    if population is None:
+        raise ValueError("per-type values need a problem with a driver population")
+    _, bounds = evaluate_joint_by_type(pomdp or problem.pomdp, problem.spec, policy,
+                                       fallback_after=fallback_after, max_junctions=max_junctions,
+                                       belief_rule=belief_rule, max_nodes=EVALUATION_NODES)
+    return tuple(TypeValue(t.name, float(t.weight), lower, upper)
+                 for t, (lower, upper) in zip(population.types, bounds, strict=True))
+
+
+def belief_free_spec(spec: Spec) -> Spec:
+    """The spec whose optimum on type k's model alone bounds V_k(π) of every population policy π:
+    the spec itself, or, when its labels read the AV's belief (which is not type k's own posterior),
+    the spec with every belief and type-belief literal (positive or negated) replaced by true, its
+    road and trust-state atoms kept. The projection holds wherever some belief makes the spec's
+    literal hold, so a run satisfying the spec satisfies it."""
+    if not (spec.belief_atoms or spec.type_atoms):
+        return spec
+
+    def replace_belief(literal: Literal) -> Formula:
+        return TRUE if literal.atom in spec.belief_atoms or literal.atom in spec.type_atoms else literal
+
+    formula = map_literals(spec.formula, replace_belief)
+    return Spec(name=f"{spec.name} (belief-free)", start=spec.start, formula_text=format_formula(formula),
+                formula=formula, state_atoms=dict(spec.state_atoms), belief_atoms={},
+                source_path=spec.source_path, trust_atoms=dict(spec.trust_atoms))
+
+
+def type_optimum_bounds(problem: Problem, tau: float, time_limit: float, horizon: int | None,
+                        synthesize: Callable[..., SynthesisResult]) -> tuple[float, ...]:
+    """U_k for every type: a sound bound of max_π V_k(π), the synthesis (`synthesize`, the one
+    synthesis entry) on type k's model alone of `belief_free_spec` of the spec as given."""
+    population = problem.population
+    assert population is not None
+    own_spec = belief_free_spec(problem.given_spec)
+    return tuple(synthesize(build_pomdp(problem.town, t.model), own_spec, tau=tau, time_limit=time_limit,
+                            horizon=horizon, belief_rule="bayes").upper for t in population.types)
+
+
+def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[TypeValue, ...],
+                      grid_points: int, tau: float, time_limit: float, horizon: int | None,
+                      belief_rule: BeliefRule, on_iteration: Callable[[float, float], None] | None
+                      ) -> tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray, list[dict]]:
+    """The candidate with the best worst type: the Bayes policy and, for every prior λ of the
+    simplex grid, the trust-state synthesis as if the type prior were λ, run on the AV's filter
+    (weights w) with J and b reweighted to λ. (policy, its per-type values, λ, every candidate's
+    record)."""
+    population = problem.population
+    assert population is not None
+    weights = population.weights
+    cap = evaluation_cap(horizon)
+
+    def record(prior: np.ndarray, found: tuple[TypeValue, ...]) -> dict:
+        return {"prior": prior.tolist(), "worst_type_lower": min(v.lower for v in found),
+                "type_lower": [v.lower for v in found]}
+
+    best: tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray] = (bayes.policy, values, weights)
+    candidates = [record(weights, values)]
+    for prior in simplex_grid(population.n_types, grid_points):
+        if np.allclose(prior, weights, rtol=0, atol=1e-12):
+            continue
+        made = synthesize_joint(build_pomdp(problem.town, lift_population(population, prior)), problem.spec,
+                                tau=tau, time_limit=time_limit, horizon=horizon, belief_rule=belief_rule,
+                                on_iteration=on_iteration)
+        policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
+                                  name="robust", horizon=horizon, guide=made.policy.guide,
+                                  reweight=reweighting(population, prior))
+        found = joint_type_values(problem, policy, cap, belief_rule)
+        candidates.append(record(prior, found))
+        if min(v.lower for v in found) > min(v.lower for v in best[1]):
+            best = (policy, found, prior)
+    return (*best, candidates)
+
+
+def synthesize_population_joint(problem: Problem, objective: str, synthesize: Callable[..., SynthesisResult],
+                                tau: float = 1e-3, time_limit: float = 60.0, horizon: int | None = None,
+                                belief_rule: BeliefRule = "bayes", grid_points: int = MAX_GRID_CANDIDATES,
+                                on_iteration: Callable[[float, float], None] | None = None
+                                ) -> PopulationSynthesis:
+    """The population synthesis (module docstring) of a TRUST_STATE problem with a population.
+    `synthesize`: the one synthesis entry (policies/synthesize_spec.py `synthesize_spec`), for the
+    per-type bounds of the robust objective; grid_points: its candidate type priors. time_limit
+    applies to each synthesis run."""
+    if objective not in OBJECTIVES:
+        raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
+    population = problem.population
+    if population is None:
+        raise ValueError("population synthesis needs a problem with a driver population")
+    started = time.perf_counter()
+    bayes = synthesize_joint(problem.pomdp, problem.spec, tau=tau, time_limit=time_limit, horizon=horizon,
+                             belief_rule=belief_rule, on_iteration=on_iteration)
+    values = joint_type_values(problem, bayes.policy, evaluation_cap(horizon), belief_rule)
+    found = PopulationSynthesis(
+        objective="bayes", population=population, result=bayes, pomdp=problem.pomdp, spec=problem.spec,
+        prior=tuple(float(w) for w in population.weights), type_values=values, lower=bayes.lower,
+        upper=bayes.upper, seconds=time.perf_counter() - started, bayes_lower=bayes.lower,
+        bayes_upper=bayes.upper, bayes_type_values=values)
+    if objective == "bayes":
+        return found
+    policy, best_values, prior, candidates = robust_candidates(
+        problem, bayes, values, grid_points, tau, time_limit, horizon, belief_rule, on_iteration)
+    type_upper = type_optimum_bounds(problem, tau, time_limit, horizon, synthesize)
+    lower = min(v.lower for v in best_values)
+    upper = min(bayes.upper, *type_upper)
+    if lower > upper + 1e-9:
+        raise RuntimeError(f"robust value {lower!r} above its bound {upper!r}: a soundness bug")
+    # The policy file's bounds keep their meaning L <= Pr_max <= U under the type prior: L the
+    # returned policy's prior-weighted value (the lower ends), U the Bayes synthesis' bound.
+    mixture = min(float(population.weights @ [v.lower for v in best_values]), bayes.upper)
+    policy.lower, policy.upper = mixture, bayes.upper
+    result = replace(bayes, policy=policy, lower=mixture, seconds=time.perf_counter() - started)
+    return replace(found, objective="robust", result=result, prior=tuple(float(p) for p in prior),
+                   type_values=best_values, lower=lower, upper=max(upper, lower),
+                   seconds=time.perf_counter() - started, candidates=candidates, type_upper=type_upper,
+                   bayes_policy=bayes.policy)

@@ -1,0 +1,26 @@
+"""`trustroute.synthesize(..., population=...)`: a driver population's synthesis through the API,
+for a spec that tests the hidden trust."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import trustroute
+from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH
+
+
+@pytest.mark.slow
+def test_api_synthesizes_a_trust_state_spec_for_a_population(tmp_path):
+    out = tmp_path / "policy.json"
+    found = trustroute.synthesize("specs/phi1_trust.toml", horizon=10, population=EXAMPLE_POPULATION_PATH,
+                                  out=out)
+    assert 0 < found.lower <= found.upper
+    assert [v.name for v in found.type_values] == ["builder", "flat", "wary"]
+    document = json.loads(out.read_text())
+    assert document["kind"] == "joint-belief" and document["objective"] == "bayes"
+    assert document["lower"] == found.result.lower
+    with pytest.raises(ValueError, match="not both"):
+        trustroute.synthesize("phi1", driver=trustroute.load_driver_model(),
+                              population=EXAMPLE_POPULATION_PATH)
