@@ -424,11 +424,12 @@ def _state_atoms(raw: Mapping[str, object], spec: _SpecSource,
         spec.check_atom_name(atom, "states")
         label = f"states.{atom}"
         needles = (r"^\s*\[states\]", rf"^\s*{re.escape(atom)}\s*=")
-        if isinstance(raw[atom], dict):
-            atoms[atom] = frozenset(_selected_roads(raw[atom], atom, spec.place(label, *needles),
+        entry = raw[atom]
+        if isinstance(entry, dict):
+            atoms[atom] = frozenset(_selected_roads(entry, atom, spec.place(label, *needles),
                                                     spec.source, town))
             continue
-        roads = check_value(raw[atom], STATE_ROADS, spec.source, spec.place(label, *needles),
+        roads = check_value(entry, STATE_ROADS, spec.source, spec.place(label, *needles),
                             f"state atom '{atom}' must be a list of directed roads",
                             f'write {atom} = ["U-V", ...], or {{junction = "J"}} or {{street = "Name"}}')
 
