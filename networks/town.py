@@ -279,7 +279,8 @@ def _junctions(raw: Mapping[str, object], path: str) -> dict[str, tuple[float, f
 def _road(road: object, place: str, junctions: dict[str, tuple[float, float]], path: str,
           shaped: set[str]) -> tuple[str, str]:
     """One [U, V] pair: two known, different junctions at least MIN_ROAD_LENGTH apart (a road with
-    a geometry has its own length: its junctions may stand closer than a car)."""
+    a geometry has its own length: its junctions may stand closer than a car, not at one point,
+    where their coordinates would say nothing of where the road runs)."""
     u, v = check_value(road, ROAD, path, place, f"{road!r} is not a pair of junction names",
                        "write the road as [\"U\", \"V\"]")
     for j in (u, v):
@@ -289,8 +290,8 @@ def _road(road: object, place: str, junctions: dict[str, tuple[float, float]], p
     if u == v:
         raise InputError(path, place, f"road {u}-{v} is a self-loop", "remove it; roads join two "
                          "different junctions")
-    if (not {road_name(u, v), road_name(v, u)} & shaped
-            and math.dist(junctions[u], junctions[v]) < MIN_ROAD_LENGTH):
+    apart = math.dist(junctions[u], junctions[v])
+    if apart == 0 or (not {road_name(u, v), road_name(v, u)} & shaped and apart < MIN_ROAD_LENGTH):
         raise InputError(path, place, f"road {u}-{v} is {math.dist(junctions[u], junctions[v]):.3g} m long "
                          f"(junctions {u} and {v} almost coincide)", f"place the junctions at least "
                          f"{MIN_ROAD_LENGTH:g} m apart")

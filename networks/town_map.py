@@ -13,7 +13,8 @@ from trustroute.networks.road_lookup import road_shape
 from trustroute.networks.town import Town
 
 # A marker of one unit is a 1/UNITS_ACROSS part of the map's diagonal, within these bounds (metres):
-# on Town01 (about 400 m by 330 m) a unit is 3.4 m, on a 3 km city 20 m.
+# on Town01 (395 m by 329 m with its outer streets) a unit is 3.4 m, on the 1.9 km by 1.5 km DRT net
+# of the eclipse-sumo wheel 16 m.
 UNITS_ACROSS = 150.0
 MIN_UNIT = 1.0
 MAX_UNIT = 25.0

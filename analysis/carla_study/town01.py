@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from trustroute.core.errors import InputError
+from trustroute.networks.road_geometry import polyline_length
 
 TABLES_PATH = Path(__file__).resolve().parents[1] / "data" / "real_study" / "town01.json"
 # Their incident names -> the project's (networks/town.py INCIDENT_TYPES).
@@ -179,14 +180,71 @@ def write_carla_tables(checkout: Path, path: Path | None = None) -> Path:
     return path
 
 
+# -- road shapes and lengths ------------------------------------------------------------------
+# Town01's roads A-E and H-L run along its outer west and east streets: their arrival points (and
+# those of E-A, L-H) lie beyond both of their junctions, on the outer side, and Town01's spawn
+# points line the outer streets at x = 0 and x = 394 m (docs/real_study.md). The other roads are
+# straight streets between their junctions.
+OUTER_ROADS = {("A", "E"): "west", ("H", "L"): "east"}
+# Spawn points within this many metres of the town's outermost one on a side are the lanes of
+# that side's street (Town01's lanes are 3.5 m apart; its next street inward is 60 m away).
+STREET_BAND_M = 6.0
+
+
+def outer_streets(tables: CarlaTables) -> dict[str, float]:
+    """The centre lines of Town01's four outer streets, in CARLA's frame: x of the west and east
+    streets, y of the north and south ones (CARLA's y grows southwards). Each is the middle of the
+    spawn points within STREET_BAND_M of the outermost spawn point on that side (one per lane)."""
+    points = tables.spawn_points
+
+    def middle(values: np.ndarray, outermost: float) -> float:
+        band = values[np.abs(values - outermost) <= STREET_BAND_M]
+        return float((band.min() + band.max()) / 2)
+
+    xs, ys = points[:, 0], points[:, 1]
+    return {"west": middle(xs, xs.min()), "east": middle(xs, xs.max()),
+            "north": middle(ys, ys.min()), "south": middle(ys, ys.max())}
+
+
+def _outer_shape(u: tuple[float, float], v: tuple[float, float], side_x: float,
+                 streets: dict[str, float]) -> list[tuple[float, float]]:
+    """From junction u out along its east-west street to the outer street at x = side_x, along it
+    to v's east-west street and in to v (town frame: y is CARLA's y negated). Corners are drawn
+    sharp at the crossings of the streets' centre lines."""
+    def street_y(junction: tuple[float, float]) -> float:
+        carla_y = -junction[1]
+        nearer = min(("north", "south"), key=lambda name: abs(streets[name] - carla_y))
+        return -streets[nearer]
+
+    return [u, (side_x, street_y(u)), (side_x, street_y(v)), v]
+
+
+def town01_geometry(tables: CarlaTables, junctions: dict[str, list[float]]) -> dict[str, dict]:
+    """Shape and length of every directed road of Town01 (town frame, metres, 2 and 3 decimals):
+    the outer roads along the outer streets (OUTER_ROADS), the others straight between junctions."""
+    streets = outer_streets(tables)
+    geometry: dict[str, dict] = {}
+    for road in sorted(set(tables.road_of_state.values())):
+        u, v = road.split("-")
+        a = (float(junctions[u][0]), float(junctions[u][1]))
+        b = (float(junctions[v][0]), float(junctions[v][1]))
+        side = OUTER_ROADS.get((u, v)) or OUTER_ROADS.get((v, u))
+        shape = [a, b] if side is None else _outer_shape(a, b, streets[side], streets)
+        shape = [(round(float(x), 2), round(float(y), 2)) for x, y in shape]
+        geometry[road] = {"shape": [list(p) for p in shape], "length": round(polyline_length(shape), 3)}
+    return geometry
+
+
 TOWN01_SOURCE = (
     "Town01 geometry of the CARLA study of Yu et al., ICRA 2024 (12 junctions A-L, 18 two-way roads): "
     "junction coordinates are the mean of the three arrival points of the roads entering the junction "
     "(state_route_info/state_location.csv with spawn_point_list.csv of "
     "shuyang-dong/trust_aware_hrc_carla_sim, MIT), in metres, CARLA y negated (CARLA's frame is "
     "left-handed); roads are the directed roads of state_location.csv, incidents those of "
-    "policy/policy_retrieve_trial1.py. Built by trustroute.analysis.carla_study.town01.town01_town_dict; "
-    "networks/data/PROVENANCE.md, docs/real_study.md."
+    "policy/policy_retrieve_trial1.py; road shapes and lengths: A-E and H-L along the outer west and "
+    "east streets located by the spawn points, the other roads straight. Built by "
+    "trustroute.analysis.carla_study.town01.town01_town_dict; networks/data/PROVENANCE.md, "
+    "docs/real_study.md."
 )
 
 
@@ -194,15 +252,18 @@ def town01_town_dict(tables: CarlaTables) -> dict:
     """The town file (networks/town.py schema) of Town01, from the authors' tables alone: the roads of
     their state table, the incidents of their policy script, and junction coordinates that are the
     mean of the arrival points of the three roads entering each junction, y negated (CARLA's frame
-    is left-handed; the town's plane is right-handed). The packaged default town is this output."""
+    is left-handed; the town's plane is right-handed), and each road's shape and length
+    (`town01_geometry`). The packaged default town is this output."""
     points: dict[str, list[tuple[float, float]]] = {}
     for state, road in tables.road_of_state.items():
         points.setdefault(road.split("-")[1], []).append(tables.arrival_point[state])
     centres = {j: np.mean(np.asarray(p), axis=0) for j, p in sorted(points.items())}
     roads = sorted({tuple(sorted(road.split("-"))) for road in tables.road_of_state.values()})
+    junctions = {j: [round(float(c[0]), 2), round(float(-c[1]), 2)] for j, c in centres.items()}
     return {
-        "junctions": {j: [round(float(c[0]), 2), round(float(-c[1]), 2)] for j, c in centres.items()},
+        "junctions": junctions,
         "roads": [list(r) for r in roads],
         "incidents": dict(sorted(tables.incidents.items())),
+        "geometry": town01_geometry(tables, junctions),
         "source": TOWN01_SOURCE,
     }

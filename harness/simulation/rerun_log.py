@@ -66,7 +66,7 @@ PLAN_COLOR = (60, 200, 255)
 START_COLOR = (80, 220, 120)
 WAYPOINT_COLORS = ((255, 215, 0), (255, 120, 200), (170, 120, 255), (0, 200, 200), (255, 160, 60))
 INCIDENT_COLORS = {"pedestrian": (255, 140, 0), "obstacle": (255, 200, 0), "truck": (120, 120, 255)}
-# Sizes in map units (networks/town_map.py: 2.7 m on Town01, 16 m on a 2 km city): the ego box is
+# Sizes in map units (networks/town_map.py: 3.4 m on Town01, 16 m on a 2 km city): the ego box is
 # drawn larger than a car (5 m) so that it stays visible, and shorter than Town01's 49 m shortest road.
 EGO_LENGTH = 5.0
 EGO_WIDTH = 2.4

@@ -10,7 +10,7 @@ import pytest
 
 from trustroute.core.errors import InputError
 from trustroute.networks.road_geometry import SumoNetRef, check_sumo_net, file_sha256, polyline_length
-from trustroute.networks.town import load_town, town_from_dict
+from trustroute.networks.town import PENTAGON_TOWN_PATH, load_town, town_from_dict
 
 SQUARE = {
     "junctions": {"A": [0, 0], "B": [100, 0], "C": [100, 100], "D": [0, 100]},
@@ -32,11 +32,12 @@ def one_way_square() -> dict:
 
 
 def test_a_town_without_the_new_keys_keeps_its_hash():
-    default = load_town()
+    default, pentagon = load_town(), load_town(PENTAGON_TOWN_PATH)
     plain = town_from_dict(square())
     empty = town_from_dict(square(one_way=[], geometry={}))
     assert plain.content_hash == empty.content_hash
-    assert not default.one_way and not default.geometry and default.sumo_net is None
+    assert not pentagon.one_way and not pentagon.geometry and pentagon.sumo_net is None
+    assert not default.one_way and set(default.geometry) == set(default.states) and default.sumo_net is None
     assert all(set(default.neighbours[j]) == {w for u, w in
                (tuple(s.split("-")) for s in default.states) if u == j} for j in default.junctions)
 
@@ -122,3 +123,12 @@ def test_sumo_net_reference_and_hash(tmp_path):
         check_sumo_net(town.sumo_net, str(town_file))
     with pytest.raises(InputError, match="sumo_net"):
         town_from_dict(square(sumo_net={"file": "city.net.xml", "sha256": "abc"}))
+
+
+def test_a_shaped_road_may_join_close_junctions_but_not_one_point():
+    data = square(geometry={"A-B": {"shape": [[0, 0], [50, 40], [100, 0]]}})
+    data["junctions"]["B"] = [3.0, 0.0]  # 3 m from A: allowed, the road has its own course
+    assert town_from_dict(copy.deepcopy(data)).length("A-B") == pytest.approx(2 * math.hypot(50, 40))
+    data["junctions"]["B"] = list(data["junctions"]["A"])
+    with pytest.raises(InputError, match="road A-B is 0 m long"):
+        town_from_dict(data)

@@ -63,7 +63,11 @@ def _driven_against_euclidean(net, town) -> list[tuple[str, str, float, float]]:
         u, v = split_road(road)
         assert (edge.getFromNode().getID(), edge.getToNode().getID()) == (u, v)
         euclidean = math.dist(town.junctions[u], town.junctions[v])
-        assert town.length(road) == pytest.approx(euclidean)
+        if road in town.geometry and len(town.geometry[road].shape) > 2:
+            # Town01's outer streets: the model's length follows the street, the net's edge is straight
+            assert road in OUTER_ROADS and town.length(road) > euclidean + 100
+        else:
+            assert town.length(road) == pytest.approx(euclidean, abs=5e-4)  # the file keeps millimetres
         for successor, connections in edge.getOutgoing().items():
             if successor.getFunction():
                 continue  # walking areas
@@ -90,6 +94,9 @@ def test_driven_lengths_within_five_percent_on_long_roads(tmp_path_factory):
 # through the junction and drive longer (measured 62.8, 57.9 and 15.4 m).
 CORNER_CUT_M = 16.0
 DOUBLING_BACK = {("D-E", "E-A"): 65.0, ("H-L", "L-K"): 60.0, ("I-H", "H-L"): 17.0}
+# Town01's roads along the outer streets: the town's geometry gives their course and length, the net
+# built from the junctions draws a straight edge.
+OUTER_ROADS = ("A-E", "E-A", "H-L", "L-H")
 
 
 def test_driven_lengths_on_the_default_town(net, town):

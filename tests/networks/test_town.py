@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town, town_from_dict
+from trustroute.networks.town import DEFAULT_TOWN_PATH, PENTAGON_TOWN_PATH, load_town, town_from_dict
 
 
 def test_default_town_shape(town):
@@ -62,10 +62,21 @@ def test_states_sorted_and_indexed(town):
 
 
 def test_lengths_are_euclidean_and_symmetric(town):
+    pentagon = load_town(PENTAGON_TOWN_PATH)  # no geometry: centre-to-centre distances
+    assert not pentagon.geometry
+    for state in pentagon.states:
+        u, v = state.split("-")
+        (x1, y1), (x2, y2) = pentagon.junctions[u], pentagon.junctions[v]
+        assert pentagon.length(state) == math.hypot(x2 - x1, y2 - y1) > 0
+    # Town01's lengths are its geometry's: straight roads to the millimetre, the outer streets longer.
     for state in town.states:
         u, v = state.split("-")
         (x1, y1), (x2, y2) = town.junctions[u], town.junctions[v]
-        assert town.length(state) == math.hypot(x2 - x1, y2 - y1) > 0
+        assert town.length(state) == town.geometry[state].length
+        if len(town.geometry[state].shape) == 2:
+            assert town.length(state) == pytest.approx(math.hypot(x2 - x1, y2 - y1), abs=5e-4)
+        else:
+            assert town.length(state) > math.hypot(x2 - x1, y2 - y1) + 100
         assert town.length(state) == town.length(f"{v}-{u}")
     route = ["E-A", "A-B", "B-G"]
     assert town.route_length(route) == town.length("A-B") + town.length("B-G")

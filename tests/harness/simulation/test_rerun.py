@@ -203,12 +203,15 @@ def test_a_road_is_drawn_along_the_towns_geometry_where_it_has_one(town, tmp_pat
     from trustroute.networks.sumo_net import build_net
     from trustroute.networks.town import town_from_dict
 
-    net = sumolib.net.readNet(str(build_net(town, cache_dir=tmp_path).path))
-    lane = road_course(net, town, "B-C")  # no geometry entry: the net's lane
+    data = {"junctions": {k: list(v) for k, v in town.junctions.items()},
+            "roads": [list(r) for r in town.roads], "incidents": dict(town.incidents)}
+    plain = town_from_dict(data, "plain.json")  # Town01 without its geometry
+    net = sumolib.net.readNet(str(build_net(plain, cache_dir=tmp_path).path))
+    lane = road_course(net, plain, "B-C")  # no geometry entry: the net's lane
     np.testing.assert_allclose(lane, net.getEdge("B-C").getLanes()[-1].getShape(), atol=1e-4)
     bent = [[89.68, -4.9], [0.0, 0.0], [0.0, -328.0], [91.5, -324.06]]
-    data = {"junctions": {k: list(v) for k, v in town.junctions.items()},
-            "roads": [list(r) for r in town.roads], "incidents": dict(town.incidents),
-            "geometry": {"A-E": {"shape": bent}}}
-    shaped = town_from_dict(data, "shaped.json")
+    shaped = town_from_dict({**data, "geometry": {"A-E": {"shape": bent}}}, "shaped.json")
     np.testing.assert_allclose(road_course(net, shaped, "A-E"), bent, atol=1e-4)
+    # The default town's outer street, not the net's straight edge beside the inner street.
+    np.testing.assert_allclose(road_course(net, town, "A-E"), town.geometry["A-E"].shape, atol=1e-4)
+    assert road_course(net, town, "A-E")[:, 0].min() < 1.0 < 80.0 < net.getEdge("A-E").getShape()[0][0]
