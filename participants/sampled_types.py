@@ -2,7 +2,7 @@
 
 Each type is one draw of `participants.population.sample_individual` (Dirichlet rows, a logit shift
 of the takeover probabilities, a Dirichlet initial distribution, all around the nominal model), so
-a type differs from the nominal model exactly as one individual of today's populations does. The
+a type differs from the nominal model exactly as one individual of a sampled `[population]` does. The
 types get equal prior weights. Every draw goes through the Generator passed in: the same seed gives
 the same population file byte for byte.
 """

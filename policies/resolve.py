@@ -184,7 +184,7 @@ def population_policy(town: Town, population: DriverPopulation, spec: Spec, obje
     """The cached policy of `objective` for driver population `population` (a DriverPopulation),
     synthesized when missing or damaged (policies/synthesis/population.py): (policy, the lifted
     driver model its AV filters with, the lifted spec). One type: the "aware" policy of that
-    type's model, as today."""
+    type's model."""
     from trustroute.core.output_files import file_lock
     from trustroute.policies.belief.driver_types import lift_population, lift_spec
     from trustroute.policies.routing.files import load_population_policy

@@ -88,8 +88,8 @@ class LiveStudy:
     # -- opening and closing --------------------------------------------------------------------
     def open(self) -> LiveStudy:
         from trustroute.harness.study.expected import expected_values
-        from trustroute.harness.study.parts import finished_episodes
-        from trustroute.harness.study.runner import check_study_dir, study_lock, validate_study
+        from trustroute.harness.study.resume import check_study_dir, finished_episodes
+        from trustroute.harness.study.runner import study_lock, validate_study
 
         validate_study(self.config)
         self._stack.enter_context(study_lock(self.study_dir))

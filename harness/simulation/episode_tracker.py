@@ -13,7 +13,7 @@ same the exact evaluation uses:
 
 With a driver population (docs/driver_types.md) the AV's model is the type-aware one: its belief
 is over (type, trust); the roads table logs its trust marginal (so belief atoms of the analysis
-read it as before) and `type_belief` gives the type marginal.
+read it as for a single model) and `type_belief` gives the type marginal.
 
 Row 0 of the roads table is the start road: incident "none" and no observation (takeover,
 performance and reported_trust null), trust_before = trust_after = the initial true trust. The

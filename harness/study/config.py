@@ -130,12 +130,12 @@ class StudyConfig:
         settings = {k: v for k, v in asdict(self).items()
                     if k not in ("source_path", "output", "name", "record")}
         if settings["robust_population"] is None:
-            # a study without the robust condition hashes as one from before that condition existed
+            # a study without the robust condition hashes without its keys
             del settings["robust_population"], settings["robust_objective"]
         if settings["driver_population"] is None:
-            del settings["driver_population"]  # a study without [drivers] hashes as before the table
+            del settings["driver_population"]  # a study without [drivers] hashes without it
         if not settings["routes"]:
-            del settings["routes"]  # a study without background routes hashes as before the key
+            del settings["routes"]  # a study without background routes hashes without it
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():

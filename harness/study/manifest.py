@@ -49,8 +49,9 @@ from trustroute.core.dataset import (
     write_table,
 )
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.parts import PartError, quarantine_part, read_failures, read_part
+from trustroute.harness.study.parts import PartError, read_failures, read_part
 from trustroute.harness.study.plan import EpisodeTask
+from trustroute.harness.study.resume import quarantine_part
 
 PACKAGES: tuple[str, ...] = (
     "trustroute",

@@ -17,7 +17,7 @@ same bytes) of
 `read_part` verifies all of it (zip CRCs, the checksum, each table's SHA-256 and schema, the
 episode id of the file name, of part.json and of every row, the row count of the roads), so one
 flipped bit in any table, a truncated or a swapped-in part is a `PartError`, on resume
-(`finished_episodes`: the part is moved aside and the episode re-run) and again at consolidation.
+(resume.py `finished_episodes`: the part is moved aside and the episode re-run) and again at consolidation.
 
 A part is written to a temporary file beside it and renamed into place, so a killed run leaves a
 whole part or none. The study does not fsync every part: it syncs the file system once per batch
@@ -41,12 +41,10 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from trustroute.core.dataset import (
-    DAMAGED_DIR,
     DATASET_FORMAT,
     FAILURES_DIR,
     INCIDENTS_SCHEMA,
     KINEMATICS_SCHEMA,
-    PART_FOLDERS,
     ROADS_SCHEMA,
     SchemaError,
     check_table,
@@ -55,7 +53,7 @@ from trustroute.core.dataset import (
     table_from_frame,
 )
 from trustroute.core.errors import InputError
-from trustroute.core.output_files import TEMP_PREFIX, atomic_write_bytes, atomic_write_text
+from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
 from trustroute.harness.study.plan import EpisodeTask
 
 PART_FORMAT = "trustroute-part"
@@ -237,42 +235,6 @@ def read_part(path: Path) -> Part:
     if tables["roads"].num_rows != int(summary.get("junctions", -1)) + 1:
         raise PartError(f"{path}: {tables['roads'].num_rows} roads for {summary.get('junctions')} junctions")
     return Part(episode_id=episode, task=task, summary=summary, tables=tables)
-
-
-def quarantine_part(study_dir: Path, episode_id: str) -> None:
-    """Move a part that failed verification to damaged/ (kept for inspection, out of the way)."""
-    path = part_path(study_dir, episode_id)
-    target = Path(study_dir) / DAMAGED_DIR / path.name
-    target.parent.mkdir(parents=True, exist_ok=True)
-    os.replace(path, target)
-
-
-def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[str], list[str]]:
-    """(episode ids with a valid part, episode ids whose part was damaged and has been moved aside).
-
-    Also removes temporary files a killed run left behind. A part whose recorded task differs
-    from the plan (another config wrote it) counts as damaged.
-    """
-    study_dir = Path(study_dir)
-    for folder in PART_FOLDERS:
-        for temp in (study_dir / folder).glob(f"{TEMP_PREFIX}*"):
-            temp.unlink(missing_ok=True)
-    done: set[str] = set()
-    damaged: list[str] = []
-    for task in tasks:
-        path = part_path(study_dir, task.episode_id)
-        if not path.exists():
-            continue
-        try:
-            part = read_part(path)
-            if part.task != json.loads(json.dumps(asdict(task))):
-                raise PartError(f"{path}: written for a different plan")
-        except PartError:
-            damaged.append(task.episode_id)
-            quarantine_part(study_dir, task.episode_id)
-            continue
-        done.add(task.episode_id)
-    return done, damaged
 
 
 def sync_parts(study_dir: Path) -> None:

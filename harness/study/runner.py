@@ -21,22 +21,22 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import json
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from trustroute.core.dataset import LOCK_FILE, STUDY_FILE
+from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.expected import expected_values
 from trustroute.harness.study.manifest import DamagedParts, consolidate
-from trustroute.harness.study.parts import finished_episodes, sync_parts, write_failure, write_part_tables
+from trustroute.harness.study.parts import sync_parts, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+from trustroute.harness.study.resume import check_study_dir, finished_episodes
 
 if TYPE_CHECKING:
     from tqdm import tqdm
@@ -233,31 +233,6 @@ def backend_name(workers: int, scheduler: str | None) -> str:
 
 
 # -- the study ---------------------------------------------------------------------------------
-
-
-def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:
-    """Check that the study directory holds this study (resume) and not another; mark it as this
-    study's (the directory exists: `study_lock` made it)."""
-    from trustroute.core.output_files import atomic_write_text
-
-    marker = study_dir / STUDY_FILE
-    if marker.exists():
-        try:
-            recorded = json.loads(marker.read_text()).get("config_hash")
-        except (OSError, ValueError, AttributeError):
-            recorded = None
-        if recorded is not None and recorded != config_hash:
-            raise InputError(
-                str(study_dir),
-                STUDY_FILE,
-                "the directory holds a study with a different config (hash mismatch)",
-                "pass another --out, or delete the directory to start over",
-            )
-        if recorded == config_hash:
-            return
-    config_dict = asdict(config)
-    atomic_write_text(marker, json.dumps({"config_hash": config_hash, "config": config_dict}, indent=1,
-                                         default=str), "study marker", "pass a writable --out")
 
 
 @contextlib.contextmanager

@@ -10,7 +10,7 @@ model with K·n "trust" states (docs/driver_types.md, "The lifted model"):
 - trust levels: the base levels repeated K times, so Σ_i b_i level_i is the expected trust.
 
 The TrustPOMDP of the lifted model (policies/model/trust_pomdp.py) is then the type-aware POMDP,
-and its one Bayes filter is the exact joint filter over (type, trust), vectorised as before; every
+and its one Bayes filter is the exact filter over (type, trust), vectorised like any other; every
 consumer (synthesis, its bounds, exact evaluation, the episode tracker) runs on it unchanged.
 
 Belief atoms stay defined on the trust marginal: their coefficient vectors are tiled over the
@@ -19,8 +19,8 @@ coefficients 1 on the blocks of S and offset a. `lift_spec` rewrites a spec so (
 rounding margin γ_{4m+2} is taken with m = K·n, the lifted filter's length).
 
 With one type and the population's own prior, `lift_population` returns the type's model itself
-and `lift_spec` the spec itself (when it has no type-belief atoms): everything is today's, bit for
-bit.
+and `lift_spec` the spec itself (when it has no type-belief atoms): everything is the single model's,
+bit for bit.
 """
 
 from __future__ import annotations

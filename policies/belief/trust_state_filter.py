@@ -9,7 +9,7 @@ trust and DFA state given the observations. After driving road x' and seeing o =
 where b' is the AV's belief after the observation (belief atoms read it; under the default
 Bayes rule it is the θ-marginal of J'). The normaliser is the observation probability of
 policies/model/trust_pomdp.py, and the θ-marginal of J' is that module's posterior: it is taken
-from there (so beliefs are bit for bit today's), and J' carries the q part. Without trust-state
+from there (so beliefs are bit for bit the product filter's), and J' carries the q part. Without trust-state
 atoms q is a function of the observations: J' is the posterior times the indicator of the one
 DFA state, computed exactly so (no sums over q at all).
 

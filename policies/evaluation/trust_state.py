@@ -14,7 +14,7 @@ mass of a finished or capped branch is unsatisfied, that of a pruned branch unkn
 The AV does not know q: the policy is told the most probable DFA state (the exact one when the
 spec has no trust-state atoms). Problems whose DFA state is observed (policies/belief/problem.py:
 every case but TRUST_STATE) are evaluated by policies/evaluation/plain.py itself, so their results
-are exactly today's. A driver population's type-aware model makes θ the hidden (type, trust)
+are exactly plain.py's. A driver population's type-aware model makes θ the hidden (type, trust)
 index: `evaluate_joint_by_type` reads every type's value off the same unfolding.
 """
 

@@ -43,7 +43,6 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import SPECS
 from trustroute.core.validation import parse_toml, read_text
-from trustroute.networks.road_lookup import roads_into, roads_on_street
 from trustroute.networks.town import Town
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
@@ -57,6 +56,7 @@ from trustroute.policies.logic.formula import (
     map_literals,
     parse_formula,
 )
+from trustroute.policies.logic.road_selectors import selected_roads
 
 N_TRUST_LEVELS = 7  # the Muir scale 1..7 of the default driver model (any number >= 2 is accepted)
 MAX_SPEC_NAME = 64
@@ -255,8 +255,6 @@ FIELDS = field_table(
 )
 TOP_LEVEL_KEYS: tuple[str, ...] = keys(FIELDS)
 STATE_ROADS = ListOf(item=Text(nonempty=False), max_items=MAX_STATE_ROADS)
-STATE_SELECTOR_KEYS = ("junction", "street")
-SELECTOR_EXAMPLE = 'write v1 = {junction = "J12"} or v1 = {street = "Main Street"} (or a list of names)'
 
 
 def _belief_key(key: str, kind: Kind[object], problem: str, fix: str) -> Field:
@@ -374,47 +372,6 @@ def _check_roads(roads: list[str], owner: str, place: Callable[[str], str], sour
                              f"(e.g. {', '.join(sorted(town.states)[:3])})")
 
 
-def _selector_names(entry: dict, atom: str, place: str, source: str) -> tuple[str, list[str]]:
-    """(`junction` or `street`, the names it lists) of a road selector `{junction = "J12"}`."""
-    keys_given = sorted(entry)
-    if len(keys_given) != 1 or keys_given[0] not in STATE_SELECTOR_KEYS:
-        raise InputError(source, place, f"state atom '{atom}': a road selector has exactly one key, "
-                         f"junction or street (found {', '.join(keys_given) or 'none'})", SELECTOR_EXAMPLE)
-    key = keys_given[0]
-    value = entry[key]
-    names = [value] if isinstance(value, str) else value
-    if not (isinstance(names, list) and names and all(isinstance(n, str) and n.strip() for n in names)):
-        raise InputError(source, place, f"state atom '{atom}': {key} must be a name or a non-empty list "
-                         "of names", SELECTOR_EXAMPLE)
-    return key, names
-
-
-def _selected_roads(entry: dict, atom: str, place: str, source: str, town: Town | None) -> list[str]:
-    """The directed roads a selector names: every road into each junction, or every road one of
-    whose street names is each street (networks/road_lookup.py)."""
-    key, names = _selector_names(entry, atom, place, source)
-    if town is None:
-        raise InputError(source, place, f"state atom '{atom}' names its roads by {key}, which only a "
-                         "town can resolve", "check the spec against a town (--town FILE)")
-    town_name = town.source_path or "given town"
-    roads: set[str] = set()
-    for name in names:
-        if key == "junction":
-            if name not in town.junctions:
-                raise InputError(source, place, f"state atom '{atom}': '{name}' is not a junction of the "
-                                 f"town ({town_name})", "use a junction of the town (trustroute town roads "
-                                 "TOWN --near X Y lists the roads near a point)")
-            roads |= roads_into(town, name)
-        else:
-            found = roads_on_street(town, name)
-            if not found:
-                raise InputError(source, place, f"state atom '{atom}': no road of the town ({town_name}) "
-                                 f"is on a street named '{name}'", "use a street name the town's geometry "
-                                 "gives (trustroute town roads TOWN --street NAME)")
-            roads |= found
-    return sorted(roads)
-
-
 def _state_atoms(raw: Mapping[str, object], spec: _SpecSource,
                  town: Town | None) -> dict[str, frozenset[str]]:
     """The `[states]` table: atom -> list of directed roads, or a selector naming them by junction
@@ -426,7 +383,7 @@ def _state_atoms(raw: Mapping[str, object], spec: _SpecSource,
         needles = (r"^\s*\[states\]", rf"^\s*{re.escape(atom)}\s*=")
         entry = raw[atom]
         if isinstance(entry, dict):
-            atoms[atom] = frozenset(_selected_roads(entry, atom, spec.place(label, *needles),
+            atoms[atom] = frozenset(selected_roads(entry, atom, spec.place(label, *needles),
                                                     spec.source, town))
             continue
         roads = check_value(entry, STATE_ROADS, spec.source, spec.place(label, *needles),

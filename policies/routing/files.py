@@ -51,7 +51,7 @@ VERSION = 4
 ARRAY_NAMES = EXACT_ROWS.names
 BOX_ARRAY_NAMES = BOX_ROWS.names
 # A policy synthesized for a driver population of several types also records these
-# (docs/formats/policy_file.md, "Population policies"); one type writes today's file.
+# (docs/formats/policy_file.md, "Population policies"); one type writes the single-model file.
 POPULATION_KEYS = ("population_hash", "population_types", "population_weights", "belief_prior",
                    "objective", "objective_lower", "objective_upper", "type_values")
 # Every policy file has PLAIN_KEYS; a population policy has POPULATION_KEYS besides.

@@ -229,13 +229,13 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
 
 
 def policy_name(synthesis: PopulationSynthesis) -> str:
-    """The name a policy file records: today's "aware" for one type, else the objective's."""
+    """The name a policy file records: "aware" for one type (the single-model name), else the objective's."""
     return "aware" if synthesis.population.n_types == 1 else synthesis.objective
 
 
 def document_entries(synthesis: PopulationSynthesis) -> dict | None:
     """The policy file's population keys (policies/routing/files.py POPULATION_KEYS); None for one
-    type (the file is then today's)."""
+    type (the file is then the single-model one)."""
     if synthesis.population.n_types == 1:
         return None
     return {

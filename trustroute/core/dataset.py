@@ -152,7 +152,7 @@ EPISODES_SCHEMA = pa.schema([
     _field("driver_type", pa.string(), nullable=True),
 ])
 # Nullable columns appended to a schema after studies were written without them: a file that ends
-# before them reads with the columns all null (so earlier studies still read).
+# before them reads with the columns all null (so datasets written without those columns still read).
 ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type",)}
 END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
 

@@ -1,0 +1,80 @@
+"""Where a study is resumed: the study directory is checked to hold this study (and marked as
+its own), and the episodes that already have a valid part are found so a rerun skips them. A part
+that fails its checksum, or that another plan wrote, is moved to damaged/ and its episode runs
+again; temporary files a killed run left are removed. Used by `trustroute study` (runner.py),
+`trustroute live` and consolidation (manifest.py)."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict
+from pathlib import Path
+
+from trustroute.core.dataset import DAMAGED_DIR, PART_FOLDERS, STUDY_FILE
+from trustroute.core.errors import InputError
+from trustroute.core.output_files import TEMP_PREFIX
+from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.parts import PartError, part_path, read_part
+from trustroute.harness.study.plan import EpisodeTask
+
+
+def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:
+    """Check that the study directory holds this study (resume) and not another; mark it as this
+    study's (the directory exists: `study_lock` made it)."""
+    from trustroute.core.output_files import atomic_write_text
+
+    marker = study_dir / STUDY_FILE
+    if marker.exists():
+        try:
+            recorded = json.loads(marker.read_text()).get("config_hash")
+        except (OSError, ValueError, AttributeError):
+            recorded = None
+        if recorded is not None and recorded != config_hash:
+            raise InputError(
+                str(study_dir),
+                STUDY_FILE,
+                "the directory holds a study with a different config (hash mismatch)",
+                "pass another --out, or delete the directory to start over",
+            )
+        if recorded == config_hash:
+            return
+    config_dict = asdict(config)
+    atomic_write_text(marker, json.dumps({"config_hash": config_hash, "config": config_dict}, indent=1,
+                                         default=str), "study marker", "pass a writable --out")
+
+
+def quarantine_part(study_dir: Path, episode_id: str) -> None:
+    """Move a part that failed verification to damaged/ (kept for inspection, out of the way)."""
+    path = part_path(study_dir, episode_id)
+    target = Path(study_dir) / DAMAGED_DIR / path.name
+    target.parent.mkdir(parents=True, exist_ok=True)
+    os.replace(path, target)
+
+
+def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[str], list[str]]:
+    """(episode ids with a valid part, episode ids whose part was damaged and has been moved aside).
+
+    Also removes temporary files a killed run left behind. A part whose recorded task differs
+    from the plan (another config wrote it) counts as damaged.
+    """
+    study_dir = Path(study_dir)
+    for folder in PART_FOLDERS:
+        for temp in (study_dir / folder).glob(f"{TEMP_PREFIX}*"):
+            temp.unlink(missing_ok=True)
+    done: set[str] = set()
+    damaged: list[str] = []
+    for task in tasks:
+        path = part_path(study_dir, task.episode_id)
+        if not path.exists():
+            continue
+        try:
+            part = read_part(path)
+            if part.task != json.loads(json.dumps(asdict(task))):
+                raise PartError(f"{path}: written for a different plan")
+        except PartError:
+            damaged.append(task.episode_id)
+            quarantine_part(study_dir, task.episode_id)
+            continue
+        done.add(task.episode_id)
+    return done, damaged
