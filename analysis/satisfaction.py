@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from trustroute.networks.town import Town
+from trustroute.policies.belief.problem import reads_hidden_trust
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.logic.trace import evaluate_traces
 
@@ -141,7 +142,7 @@ def episode_satisfaction(
         if source == "reported":
             beliefs = reported_beliefs(beliefs, reports, trust_levels)
         trust = (trust_indices(spec_roads, lengths, reports, trust_levels, trust_source)
-                 if spec.uses_trust_atoms else None)
+                 if reads_hidden_trust(spec) else None)
         result = evaluate_traces(spec, town, states, beliefs, lengths, trust=trust)
         frames.append(
             pd.DataFrame(

@@ -31,6 +31,7 @@ from trustroute.analysis.satisfaction import (
     REPORTED_TRUST_LABEL,
     satisfaction_by_source,
 )
+from trustroute.policies.belief.problem import reads_hidden_trust
 
 AUTHORS_SATISFIED_FRACTION = 0.99  # statistic_test_point_based.py: precetage >= 0.99
 AUTHORS_LOW_TRUST = 2  # ... data.iloc[k, 1] >= 2 counts as satisfying
@@ -253,7 +254,7 @@ def real_study_analysis(study_dir: Path) -> RealStudyAnalysis:
     subset = _subset_drivers(manifest)
     per["in_authors_subset"] = per["participant"].isin(subset) if subset is not None else False
     trust_label = (f" (trust-state atoms: {REPORTED_TRUST_LABEL})"
-                   if any(spec.uses_trust_atoms for spec in specs.values()) else "")
+                   if any(reads_hidden_trust(spec) for spec in specs.values()) else "")
     figures = figure_table(per, roads, ticks, subset, trust_label)
     return RealStudyAnalysis(per, figures, paper_matches(figures), manifest, authors_paired_tests(per))
 

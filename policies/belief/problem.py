@@ -37,10 +37,16 @@ PLAIN, TRUST_STATE, DRIVER_TYPES = "plain", "trust-state", "driver-types"
 CASES: tuple[str, ...] = (PLAIN, TRUST_STATE, DRIVER_TYPES)
 
 
+def reads_hidden_trust(spec: Spec) -> bool:
+    """Whether the spec's labels read the human's hidden trust (trust-state atoms): the DFA state
+    is then hidden from the AV, and a logged trace needs its trust levels to be judged."""
+    return spec.uses_trust_atoms
+
+
 def case_of(driver: DriverModel, spec: Spec) -> str:
     """The case of the problem whose AV model is `driver` (the type-aware one for a population)
     and whose spec (as the AV reads it) is `spec`."""
-    if spec.uses_trust_atoms:
+    if reads_hidden_trust(spec):
         return TRUST_STATE
     return DRIVER_TYPES if n_types_of(driver) > 1 else PLAIN
 
