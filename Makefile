@@ -10,7 +10,9 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,peer]'
+	# The repository's trustroute/ folder is the package root by design; setuptools warns about a
+	# folder named like the package at every editable install, which says nothing here.
+	PYTHONWARNINGS="ignore:Editable installation" $(BIN)/python -m pip install --quiet -e '.[dev,peer]'
 	@touch $(STAMP)
 
 install: $(STAMP)
