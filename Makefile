@@ -7,11 +7,11 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test bench lint install clean
 
+# The repository's trustroute/ folder is the package root by design; setuptools warns about a
+# folder named like the package at every editable install, which says nothing here.
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	# The repository's trustroute/ folder is the package root by design; setuptools warns about a
-	# folder named like the package at every editable install, which says nothing here.
 	PYTHONWARNINGS="ignore:Editable installation" $(BIN)/python -m pip install --quiet -e '.[dev,peer]'
 	@touch $(STAMP)
 
