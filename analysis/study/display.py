@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import pandas as pd
 
+from trustroute.analysis.belief_sources import beside_source, source_label
 from trustroute.analysis.formatting import (
     MISSING,
     estimate_column,
@@ -14,7 +15,6 @@ from trustroute.analysis.formatting import (
     interval_column,
     number_text,
 )
-from trustroute.analysis.satisfaction import BELIEF_SOURCES
 from trustroute.analysis.study.analysis import StudyAnalysis
 
 
@@ -67,7 +67,7 @@ def _trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
 
 def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
     """The tables as shown (formatted strings, p-values in scientific notation), by name."""
-    other = [s for s in BELIEF_SOURCES if s != analysis.belief_source][0]
+    other = beside_source(analysis.belief_source)
     tables: dict[str, pd.DataFrame] = {}
     c = analysis.cells
     if len(c):
@@ -174,7 +174,7 @@ def format_table(analysis: StudyAnalysis) -> str:
     """Plain-text tables for the terminal."""
     lines = [
         f"study {analysis.manifest.get('study')} ({analysis.manifest.get('engine')} engine); "
-        f"satisfaction on beliefs from: {analysis.belief_source}"
+        f"satisfaction on beliefs from: {analysis.belief_source} ({source_label(analysis.belief_source)})"
     ]
     for name, table in display_tables(analysis).items():
         lines += ["", TABLE_TITLES[name], table.to_string(index=False)]

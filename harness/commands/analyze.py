@@ -19,17 +19,18 @@ from trustroute.harness.commands.study import report_paths
 @json_option
 @click.option(
     "--belief-source",
-    type=click.Choice(["filter", "reported"]),
-    default="filter",
-    show_default=True,
-    help="Beliefs the spec is evaluated on: the AV's filter, or induced from reported trust.",
+    type=click.Choice(["filter", "reported", "reference", "true"]),
+    default=None,
+    help="Beliefs the spec is evaluated on: each AV's own filter, induced from reported trust, one "
+    "reference filter for every condition, or each driver's true model (simulation). Default: a "
+    "source common to every condition (filter, or reference when the conditions' filters differ).",
 )
 @click.option(
     "--report/--no-report",
     default=None,
     help="(Re)write report.md, report.html and plots/ in DIR (default: yes, but no with --json).",
 )
-def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool | None) -> None:
+def analyze(study_dir: str, as_json: bool, belief_source: str | None, report: bool | None) -> None:
     """Per spec and condition of the study directory DIR: n, satisfaction rate with CI, mean trust,
     paired tests."""
     from trustroute.analysis.study.analysis import study_analysis
