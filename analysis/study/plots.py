@@ -178,14 +178,15 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
             notes.append(f"{condition}: {band_note(band)}")
             ax.plot(stats.index, stats["mean"], color=colour, label=f"{condition} reported (mean, 95% band)")
             ax.plot(true.index, true.values, color=colour, ls="--", lw=1, label=f"{condition} true")
-        ax.set_title(spec + "\n" + "; ".join(notes), fontsize=8)
+        ax.set_title("\n".join([spec, *notes]), fontsize=8)
         ax.set_xlabel("road index (junctions driven)")
         ax.set_ylim(1, 7)
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("mean trust (Muir 1-7)")
     _legend_outside(axes[0][-1])
     fig.suptitle(f"Trust along the episodes (means where >= {MIN_LINE_EPISODES} episodes and >= 2% of them "
-                 f"still run; bands where >= {MIN_BAND_EPISODES} report)", fontsize=9, y=1.04)
+                 f"still run; bands where >= {MIN_BAND_EPISODES} report)", fontsize=9,
+                 y=1.03 + 0.045 * episodes["condition"].nunique())  # above the panels' band notes
     return _save(fig, path, tight_box=True)
 
 
@@ -363,9 +364,10 @@ def takeover_plot(takeovers: pd.DataFrame, path: Path) -> Path:
             capsize=4,
             lw=1,
         )
-        ax.text(x, 0.02, f"{row.takeovers}/{row.roads}", ha="center", fontsize=6, rotation=90)
+        ax.text(x, row.ci_high + 0.02, f"{row.takeovers}/{row.roads}", ha="center", va="bottom", fontsize=6,
+                rotation=90)
     ax.set_xticks(range(len(incidents)), incidents)
-    ax.set_ylim(0, 1.05)
+    ax.set_ylim(0, 1.15)
     ax.set_ylabel("takeover rate")
     ax.set_title("Takeovers per incident met, exact 95% CI", fontsize=10)
     if conditions:
