@@ -9,11 +9,14 @@ import pandas as pd
 from trustroute.analysis.belief_sources import beside_source, source_label
 from trustroute.analysis.formatting import (
     MISSING,
+    TERMINAL_WIDTH,
     estimate_column,
     finite_or_none,
     format_p,
     interval_column,
     number_text,
+    terminal_table,
+    wrapped_text,
 )
 from trustroute.analysis.study.analysis import StudyAnalysis
 
@@ -170,18 +173,24 @@ TABLE_TITLES = {
 }
 
 
-def format_table(analysis: StudyAnalysis) -> str:
-    """Plain-text tables for the terminal."""
-    lines = [
+# columns that identify a row: repeated in every block of a table split to fit the terminal
+KEY_COLUMNS = ("driver type", "spec", "condition", "pair", "incident", "outcome")
+
+
+def format_table(analysis: StudyAnalysis, width: int | None = TERMINAL_WIDTH) -> str:
+    """Plain-text tables for the terminal, fitted to `width` columns (None: as wide as they are)."""
+    lines = wrapped_text(
         f"study {analysis.manifest.get('study')} ({analysis.manifest.get('engine')} engine); "
-        f"satisfaction on beliefs from: {analysis.belief_source} ({source_label(analysis.belief_source)})"
-    ]
+        f"satisfaction on beliefs from: {analysis.belief_source} ({source_label(analysis.belief_source)})",
+        width)
     for name, table in display_tables(analysis).items():
-        lines += ["", TABLE_TITLES[name], table.to_string(index=False)]
+        keys = next((i for i, c in enumerate(table.columns) if c not in KEY_COLUMNS), len(table.columns))
+        header = [str(c) for c in table.columns]
+        lines += ["", TABLE_TITLES[name], *terminal_table(header, table.values.tolist(), width, max(1, keys))]
     if analysis.order_tests:
-        lines.append(order_test_line(analysis.order_tests))
+        lines += wrapped_text(order_test_line(analysis.order_tests), width)
     if analysis.paper_note:
-        lines += ["", analysis.paper_note]
+        lines += ["", *wrapped_text(analysis.paper_note, width)]
     return "\n".join(lines)
 
 
