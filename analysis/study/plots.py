@@ -44,7 +44,7 @@ def _pyplot():
 
 PNG_DPI = 200
 MIN_BAND_EPISODES = 10  # fewer reports at an index: its 95 % band would be noise across the scale
-MIN_LINE_EPISODES = 3   # fewer episodes still running at an index: no mean drawn there
+MIN_LINE_EPISODES = 5   # fewer episodes still running at an index: no mean drawn there
 
 
 def vector_path(path: Path) -> Path:

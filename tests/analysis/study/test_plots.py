@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 from PIL import Image
 
-from trustroute.analysis.study.plots import MIN_BAND_EPISODES, PNG_DPI, trust_series, vector_path
+from trustroute.analysis.study.plots import MIN_BAND_EPISODES, MIN_LINE_EPISODES, PNG_DPI, trust_series, vector_path
 from trustroute.analysis.study.report import write_report
 
 
@@ -32,9 +32,9 @@ def _cell(episodes: int, reports_every: int = 1) -> pd.DataFrame:
 
 def test_trust_bands_rest_on_enough_episodes():
     true, stats, band = trust_series(_cell(3))
-    assert len(stats) == 6 and len(true) == 6 and band.empty  # means of 3 episodes, no band
-    true, stats, band = trust_series(_cell(2))
-    assert stats.empty and band.empty  # two episodes: nothing drawn
+    assert stats.empty and true.empty and band.empty  # 3 episodes: nothing drawn
+    true, stats, band = trust_series(_cell(MIN_LINE_EPISODES))
+    assert len(stats) == 6 and len(true) == 6 and band.empty  # means, but no band
     true, stats, band = trust_series(_cell(MIN_BAND_EPISODES + 2))
     assert len(band) == 6 and (band["count"] >= MIN_BAND_EPISODES).all()
     assert np.allclose((band["low"] + band["high"]) / 2, stats["mean"])
