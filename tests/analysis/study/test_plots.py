@@ -7,7 +7,13 @@ import numpy as np
 import pandas as pd
 from PIL import Image
 
-from trustroute.analysis.study.plots import MIN_BAND_EPISODES, MIN_LINE_EPISODES, PNG_DPI, trust_series, vector_path
+from trustroute.analysis.study.plots import (
+    MIN_BAND_EPISODES,
+    MIN_LINE_EPISODES,
+    PNG_DPI,
+    trust_series,
+    vector_path,
+)
 from trustroute.analysis.study.report import write_report
 
 
