@@ -156,19 +156,42 @@ MIN_RUN_SECONDS = 0.05  # a run's share never below this: a search needs a first
 @dataclass
 class RunSchedule:
     """The runs of one population synthesis under one TimeBudget: each run's time limit is an
-    equal share of the time left among the runs still to come."""
+    equal share of the time left among the runs still to come, after the work between runs (the
+    exact per-type evaluations, at their mean cost so far) is set aside for the gaps to come."""
 
     budget: TimeBudget
     runs: int
     done: int = 0
     on_phase: Callable[[str], None] | None = None
+    last_end: float | None = None
+    between: float = 0.0  # seconds spent between runs so far
+    gaps: int = 0
 
     def next_limit(self) -> float:
-        left = max(self.budget.deadline - time.perf_counter(), 0.0)
-        return max(left / max(self.runs - self.done, 1), MIN_RUN_SECONDS)
+        now = time.perf_counter()
+        if self.last_end is not None:
+            self.between += now - self.last_end
+            self.gaps += 1
+        remaining = max(self.runs - self.done, 1)
+        per_gap = self.between / self.gaps if self.gaps else 0.0
+        left = max(self.budget.deadline - now - per_gap * remaining, 0.0)
+        return max(left / remaining, MIN_RUN_SECONDS)
+
+    def affords(self, later_runs: int) -> bool:
+        """Whether one more run with its following work still fits before the deadline, with
+        `later_runs` runs after it that must run (the per-type bounds)."""
+        per_gap = self.between / self.gaps if self.gaps else 0.0
+        return self.budget.fits(per_gap + MIN_RUN_SECONDS * (1 + later_runs))
+
+    def skip(self, what: str) -> None:
+        """A run left out for want of time (a candidate prior)."""
+        self.runs -= 1
+        if self.on_phase is not None:
+            self.on_phase(f"[{self.budget.elapsed():.1f} s] {what}: skipped, the time limit is reached")
 
     def finished(self, what: str, lower: float, upper: float) -> None:
         self.done += 1
+        self.last_end = time.perf_counter()
         if self.on_phase is not None:
             self.on_phase(f"[{self.done}/{self.runs}, {self.budget.elapsed():.1f} s] {what}: "
                           f"[{lower:.6f}, {upper:.6f}]")
@@ -231,6 +254,9 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
     if population.n_types > 1:
         for prior in simplex_grid(population.n_types, grid_points):
             if np.allclose(prior, weights, rtol=0, atol=1e-12):
+                continue
+            if not schedule.affords(population.n_types):
+                schedule.skip(f"candidate prior {np.round(prior, 3).tolist()}")
                 continue
             made = synthesize(build_pomdp(town, lift_population(population, prior)), lifted_spec, tau=tau,
                               time_limit=schedule.next_limit(), horizon=horizon, belief_rule=belief_rule,

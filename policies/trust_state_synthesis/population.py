@@ -134,6 +134,9 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
     for prior in simplex_grid(population.n_types, grid_points):
         if np.allclose(prior, weights, rtol=0, atol=1e-12):
             continue
+        if not schedule.affords(population.n_types):
+            schedule.skip(f"candidate prior {np.round(prior, 3).tolist()}")
+            continue
         made = synthesize_joint(build_pomdp(problem.town, lift_population(population, prior)), problem.spec,
                                 tau=tau, time_limit=schedule.next_limit(), horizon=horizon,
                                 belief_rule=belief_rule, on_iteration=on_iteration)
