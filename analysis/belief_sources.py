@@ -1,6 +1,6 @@
 """The belief sources a study's conditions are compared on, and which one leads by default.
 
-Every source labels each logged position with a belief over trust (docs/study.md, "Belief sources"):
+Every source labels each logged position with a belief over trust (docs/study.md):
 
 - "filter": each AV's own online filter, the logged `belief_after` (what that vehicle believed;
   under the `robust` condition the type-aware filter, under `aware` and `free` the nominal one);
