@@ -119,7 +119,10 @@ def source_satisfaction(study_dir: Path, manifest: dict, episodes: pd.DataFrame,
     variants = {"filter": (roads, "filter"), "reported": (roads, "reported"),
                 "reference": (refiltered(roads, reference_model(manifest, driver), town), "filter")}
     if manifest.get("engine") != "carla-logs":
-        variants["true"] = (true_roads(study_dir, roads, episodes, driver, town), "filter")
+        try:
+            variants["true"] = (true_roads(study_dir, roads, episodes, driver, town), "filter")
+        except InputError:
+            pass  # a config this trustroute cannot rebuild: no "true" source (asking for it says so)
     for source, (variant, evaluated) in variants.items():
         result = episode_satisfaction(variant, episodes, specs, town, driver.trust_levels, evaluated)
         mapped = dict(zip(result["episode_id"], result["satisfied"], strict=True))
