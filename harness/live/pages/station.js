@@ -51,30 +51,45 @@ async function loadNet() {
   if (response.ok) ({ lanes, junctions } = await response.json());
 }
 
-function box(context, toCanvas, x, y, angle, length, width, colour, scale) {
+function box(context, toCanvas, x, y, angle, length, width, colour, scale, outline) {
   const [u, v] = toCanvas(x, y);
   context.save();
   context.translate(u, v);
   context.rotate((angle * Math.PI) / 180);   // SUMO's angle: degrees clockwise from north
   context.fillStyle = colour;
   context.fillRect((-width / 2) * scale, 0, width * scale, length * scale);   // the front at (x, y)
+  if (outline) {   // the ego: outlined, with its heading marked, so it stands out from traffic
+    context.strokeStyle = outline;
+    context.lineWidth = 2;
+    context.strokeRect((-width / 2) * scale, 0, width * scale, length * scale);
+    context.fillStyle = outline;
+    context.beginPath();
+    context.moveTo(0, -3 * scale);
+    context.lineTo((-width / 2) * scale, -0.5 * scale);
+    context.lineTo((width / 2) * scale, -0.5 * scale);
+    context.fill();
+  }
   context.restore();
 }
 
 function draw(frame) {
   const canvas = $("view");
   const context = canvas.getContext("2d");
-  const scale = 2.5;   // pixels per metre, north up, the ego at the centre
+  const scale = 3;   // pixels per metre, north up, the ego at the centre
   const toCanvas = (x, y) => [canvas.width / 2 + (x - frame.x) * scale, canvas.height / 2 - (y - frame.y) * scale];
   context.fillStyle = "#dfe8d8";
   context.fillRect(0, 0, canvas.width, canvas.height);
   context.lineCap = "round";
-  for (const lane of lanes) {
-    context.strokeStyle = lane.internal ? "#8c8c8c" : "#777";
-    context.lineWidth = lane.width * scale;
-    context.beginPath();
-    lane.shape.forEach(([x, y], i) => { const [u, v] = toCanvas(x, y); if (i) context.lineTo(u, v); else context.moveTo(u, v); });
-    context.stroke();
+  // two passes: a light band per lane, then the asphalt a little narrower, so that the lanes of a
+  // road stay apart by a thin marking
+  for (const [colour, inset] of [["#f4f4f4", 0], [null, 1.5]]) {
+    for (const lane of lanes) {
+      context.strokeStyle = colour || (lane.internal ? "#8c8c8c" : "#6f6f6f");
+      context.lineWidth = Math.max(lane.width * scale - inset, 1);
+      context.beginPath();
+      lane.shape.forEach(([x, y], i) => { const [u, v] = toCanvas(x, y); if (i) context.lineTo(u, v); else context.moveTo(u, v); });
+      context.stroke();
+    }
   }
   const next = junctions[frame.junction];
   if (next) {   // the junction the ego drives to: the policy chooses the road after it
@@ -96,7 +111,8 @@ function draw(frame) {
     context.arc(u, v, 0.6 * scale, 0, 2 * Math.PI);
     context.fill();
   }
-  box(context, toCanvas, frame.x, frame.y, frame.angle, 4.5, 1.8, frame.mode === "manual" ? "#c62828" : "#2e7d32", scale);
+  box(context, toCanvas, frame.x, frame.y, frame.angle, 4.5, 1.8, frame.mode === "manual" ? "#c62828" : "#2e7d32", scale,
+      "#ffffff");
   $("speed").textContent = `${(frame.speed * 3.6).toFixed(0)} km/h`;
   $("road").textContent = `road ${frame.road}`;
 }
