@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import time
 from pathlib import Path
 
 import pytest
@@ -36,6 +37,7 @@ conditions = ["aware", "free"]
 report_every = 1
 """
 TIMEOUT_MS = 180_000
+PASS_WAIT = 20.0   # wall seconds a pull-out may wait for the way past the obstacle to clear
 
 
 def chromium() -> str:
@@ -60,27 +62,59 @@ def create_participant(browser, address: str, token: str) -> str:
     return text[text.index("http"):].split()[0]
 
 
-def drive_trial(page, first: bool) -> None:
+def drive_trial(page, by_hand: bool) -> int:
+    """One drive from the ready step (trust 5 starts it): on the warm-up a trust report only; on
+    the trials every road by hand (see `drive_by_hand`). The manual passes of an obstacle."""
     from playwright.sync_api import expect
 
-    """One drive from the ready step: trust 5 starts it; on the first trial the participant takes
-    over, passes the obstacle by hand, reports trust, then hands back before the junction."""
     page.locator("#start-trust button", has_text="5").click()
     page.locator("#drive-step").wait_for(state="visible")
-    if first:
-        expect(page.locator("#speed")).to_contain_text("km/h")
-        page.keyboard.press("Space")
-        expect(page.locator("#mode")).to_have_text("MANUAL", timeout=TIMEOUT_MS)
-        page.keyboard.press("6")
-        expect(page.locator("#reported")).to_contain_text("6")
-        expect(page.locator("#incident")).to_contain_text("Hand back", timeout=TIMEOUT_MS)
-        SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
-        page.screenshot(path=str(SCREENSHOT), full_page=True)
-        page.keyboard.press("Space")
-        expect(page.locator("#mode")).to_have_text("AUTOPILOT", timeout=TIMEOUT_MS)
-    else:
-        page.keyboard.press("3")
+    expect(page.locator("#speed")).to_contain_text("km/h")
+    page.keyboard.press("6")
+    expect(page.locator("#reported")).to_contain_text("6")
+    passes = drive_by_hand(page) if by_hand else 0
     expect(page.locator("#ready-step:visible, #done-step:visible")).to_have_count(1, timeout=TIMEOUT_MS)
+    return passes
+
+
+def drive_by_hand(page) -> int:
+    """As a person would: take over as each road opens (space), press the accelerator once, and
+    when the station says an obstacle is ahead pull out (left arrow) and hand back once the ego
+    is back in its own lane after the oncoming one; otherwise hand back on the warning. The first
+    pass is photographed in the oncoming lane. Returns the passes made."""
+    passes, pulled_out, in_oncoming, taken_on = 0, None, False, None
+    deadline = time.monotonic() + TIMEOUT_MS / 1000
+    while not page.locator("#ready-step:visible, #done-step:visible").count():
+        assert time.monotonic() < deadline, ("the trial did not end", page.locator("body").inner_text(),
+                                              pulled_out, in_oncoming, taken_on)
+        mode, road = page.locator("#mode").inner_text(), page.locator("#road").inner_text()
+        hint, notice = page.locator("#hint").inner_text(), page.locator("#incident").inner_text()
+        if mode == "AUTOPILOT":
+            pulled_out, in_oncoming = None, False
+        if mode == "MANUAL" and pulled_out is not None and not in_oncoming \
+                and time.monotonic() - pulled_out > PASS_WAIT:
+            pulled_out = None   # no way past it on this road (the ego waits at the junction): hand back
+            page.keyboard.press("Space")
+        elif mode == "AUTOPILOT" and road and road.split(" (")[0] != taken_on:
+            page.keyboard.press("Space")
+            taken_on = road.split(" (")[0]   # at most one takeover per road
+            page.keyboard.down("ArrowUp")
+            page.keyboard.up("ArrowUp")
+        elif mode == "MANUAL" and pulled_out is None and "Obstacle ahead" in hint:
+            page.keyboard.press("ArrowLeft")
+            pulled_out = time.monotonic()
+        elif mode == "MANUAL" and pulled_out is not None and "(oncoming lane)" in road:
+            if not in_oncoming and passes == 0:
+                SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+                page.screenshot(path=str(SCREENSHOT), full_page=True)
+            in_oncoming = True
+        elif mode == "MANUAL" and pulled_out is not None and in_oncoming:
+            page.keyboard.press("Space")   # past the obstacle: hand back
+            passes, pulled_out, in_oncoming = passes + 1, None, False
+        elif mode == "MANUAL" and pulled_out is None and "Hand back" in notice:
+            page.keyboard.press("Space")
+        time.sleep(0.02)
+    return passes
 
 
 def test_a_whole_session_in_chromium_is_read_by_analyze_and_fit(tmp_path):
@@ -103,15 +137,15 @@ def test_a_whole_session_in_chromium_is_read_by_analyze_and_fit(tmp_path):
                 page.locator("#agree").click()
                 page.locator("#ready-step").wait_for(state="visible")
                 assert "warm-up" in page.locator("#trial-text").inner_text()
-                drive_trial(page, first=False)   # the warm-up
-                for trial in range(4):
-                    drive_trial(page, first=trial == 0)
+                drive_trial(page, by_hand=False)   # the warm-up
+                passes = sum(drive_trial(page, by_hand=True) for _ in range(4))
                 page.locator("#done-step").wait_for(state="visible")
             finally:
                 browser.close()
     finally:
         process.kill()
         process.wait()
+    assert passes >= 1, "no obstacle was passed by hand"
     check_the_study_directory(study_dir, tmp_path)
 
 
@@ -135,7 +169,15 @@ def check_the_study_directory(study_dir: Path, tmp_path: Path) -> None:
     assert incidents["takeover_start"].notna().any()
     events = [event for episode_id in episodes["episode_id"]
               for event in read_part(study_dir / "parts" / f"{episode_id}.zip").summary["live"]["events"]]
-    assert {"takeover", "hand_back", "trust"} <= {event["type"] for event in events}
+    assert {"takeover", "hand_back", "trust", "drive", "steer"} <= {event["type"] for event in events}
+    # the manual pass: ticks in the oncoming lane of an obstacle road, all of them the person's
+    incidents = incidents[incidents["incident"] == "obstacle"]
+    kinematics["edge"] = kinematics["lane"].str.rsplit("_", n=1).str[0]
+    oncoming = [kinematics[(kinematics["episode_id"] == row.episode_id) & (kinematics["edge"] == "-".join(
+        reversed(row.directed_road.split("-")))) & (kinematics["time"] >= row.injected_time)
+        & (kinematics["time"] <= row.removed_time)] for row in incidents.itertuples()]
+    passed = [ticks for ticks in oncoming if len(ticks)]
+    assert passed and any(set(ticks["mode"]) == {"manual"} for ticks in passed)
 
     result = CliRunner().invoke(cli, ["analyze", str(study_dir), "--json", "--no-report"])
     assert result.exit_code == 0, result.output
