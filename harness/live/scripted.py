@@ -16,6 +16,7 @@ the hand-back on the warning): the manual-driving path of the station, without a
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -122,7 +123,8 @@ class ScriptedParticipant:
         road = frame["road"]
         u, v = road.split("-", 1) if "-" in road else (road, road)
         edge = frame["lane"].rsplit("_", 1)[0]
-        obstacle = any(kind == "obstacle" for *_, kind in frame["vehicles"])
+        vehicles = frame["vehicles"]
+        obstacle = any(kind == "obstacle" and in_lane_ahead(frame, x, y) for x, y, _, kind in vehicles)
         if obstacle and not self.passing:
             self.passing = True
             if self.pull_out:
@@ -152,6 +154,15 @@ class ScriptedParticipant:
             self.driver, self.mode = self.new_driver(task), "auto"
             return [{"type": "start", "trust": int(self.driver.trust)}]
         return []
+
+
+def in_lane_ahead(frame: dict, x: float, y: float, reach: float = 80.0) -> bool:
+    """Whether (x, y) is within `reach` metres ahead of the ego in its lane (as the station sees
+    an obstacle ahead)."""
+    heading = math.radians(frame["angle"])   # SUMO's angle: clockwise from north
+    ahead = (x - frame["x"]) * math.sin(heading) + (y - frame["y"]) * math.cos(heading)
+    aside = (x - frame["x"]) * math.cos(heading) - (y - frame["y"]) * math.sin(heading)
+    return 0.0 < ahead < reach and abs(aside) < 4.0
 
 
 def run_scripted(url: str, token: str, participant: ScriptedParticipant, timeout: float = 600.0,
