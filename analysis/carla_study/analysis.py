@@ -25,14 +25,7 @@ import pandas as pd
 
 from trustroute.analysis import paper_figures
 from trustroute.analysis.carla_study.log_schema import read_real_table
-from trustroute.analysis.formatting import (
-    MISSING,
-    TERMINAL_WIDTH,
-    finite_or_none,
-    number_text,
-    terminal_table,
-    wrapped_text,
-)
+from trustroute.analysis.formatting import MISSING, aligned_columns, finite_or_none, number_text
 from trustroute.analysis.satisfaction import (
     LOGGED_BELIEF_SOURCES,
     REPORTED_TRUST_LABEL,
@@ -409,8 +402,7 @@ def paper_matches(figures: list[dict]) -> list[dict]:
     return out
 
 
-def format_real_study(analysis: RealStudyAnalysis, width: int | None = TERMINAL_WIDTH) -> str:
-    """The real study's figures for the terminal, fitted to `width` columns (None: as wide as they are)."""
+def format_real_study(analysis: RealStudyAnalysis) -> str:
     lines = ["Real CARLA study (paper's figures are the paper's, quoted for comparison)", ""]
     header = ["figure", "reading", "subset", "aware", "free", "n (aware/free)"]
     rows = []
@@ -425,7 +417,7 @@ def format_real_study(analysis: RealStudyAnalysis, width: int | None = TERMINAL_
                 f"{r['n_aware']}/{r['n_free']}",
             ]
         )
-    lines += terminal_table(header, rows, width, keys=1)
+    lines += aligned_columns(header, rows)
     lines.append("")
     for m in analysis.matches:
         found = (
@@ -450,13 +442,13 @@ def format_real_study(analysis: RealStudyAnalysis, width: int | None = TERMINAL_
     for e in excluded:
         by_status[e["status"]] = by_status.get(e["status"], 0) + 1
     lines.append("excluded files: " + (", ".join(f"{v} {k}" for k, v in by_status.items()) or "none"))
-    return "\n".join(part for line in lines for part in wrapped_text(line, width, indent="    "))
+    return "\n".join(lines)
 
 
 def write_real_study_report(analysis: RealStudyAnalysis, study_dir: Path) -> Path:
     path = Path(study_dir) / "real_study.json"
     path.write_text(json.dumps(analysis.to_dict(), indent=1, default=str))
-    text = format_real_study(analysis, width=None)
+    text = format_real_study(analysis)
     (Path(study_dir) / "real_study.txt").write_text(text + "\n")
     _append_to_report(Path(study_dir), text)
     return path

@@ -6,18 +6,15 @@ from __future__ import annotations
 
 import pandas as pd
 
-from trustroute.analysis.belief_sources import beside_source, source_label
 from trustroute.analysis.formatting import (
     MISSING,
-    TERMINAL_WIDTH,
     estimate_column,
     finite_or_none,
     format_p,
     interval_column,
     number_text,
-    terminal_table,
-    wrapped_text,
 )
+from trustroute.analysis.satisfaction import BELIEF_SOURCES
 from trustroute.analysis.study.analysis import StudyAnalysis
 
 
@@ -70,7 +67,7 @@ def _trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
 
 def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
     """The tables as shown (formatted strings, p-values in scientific notation), by name."""
-    other = beside_source(analysis.belief_source)
+    other = [s for s in BELIEF_SOURCES if s != analysis.belief_source][0]
     tables: dict[str, pd.DataFrame] = {}
     c = analysis.cells
     if len(c):
@@ -173,24 +170,18 @@ TABLE_TITLES = {
 }
 
 
-# columns that identify a row: repeated in every block of a table split to fit the terminal
-KEY_COLUMNS = ("driver type", "spec", "condition", "pair", "incident", "outcome")
-
-
-def format_table(analysis: StudyAnalysis, width: int | None = TERMINAL_WIDTH) -> str:
-    """Plain-text tables for the terminal, fitted to `width` columns (None: as wide as they are)."""
-    lines = wrapped_text(
+def format_table(analysis: StudyAnalysis) -> str:
+    """Plain-text tables for the terminal."""
+    lines = [
         f"study {analysis.manifest.get('study')} ({analysis.manifest.get('engine')} engine); "
-        f"satisfaction on beliefs from: {analysis.belief_source} ({source_label(analysis.belief_source)})",
-        width)
+        f"satisfaction on beliefs from: {analysis.belief_source}"
+    ]
     for name, table in display_tables(analysis).items():
-        keys = next((i for i, c in enumerate(table.columns) if c not in KEY_COLUMNS), len(table.columns))
-        header = [str(c) for c in table.columns]
-        lines += ["", TABLE_TITLES[name], *terminal_table(header, table.values.tolist(), width, max(1, keys))]
+        lines += ["", TABLE_TITLES[name], table.to_string(index=False)]
     if analysis.order_tests:
-        lines += wrapped_text(order_test_line(analysis.order_tests), width)
+        lines.append(order_test_line(analysis.order_tests))
     if analysis.paper_note:
-        lines += ["", *wrapped_text(analysis.paper_note, width)]
+        lines += ["", analysis.paper_note]
     return "\n".join(lines)
 
 
