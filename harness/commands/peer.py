@@ -68,27 +68,46 @@ def paynt_comparison(spec_path: str, town_path: str | None, driver_path: str | N
             "within_ours": bool(paynt.lower <= ours.upper + paynt.precision)}
 
 
+def problem_options(command):
+    """SPEC, --town, --driver and --horizon: the problem both a peer and ours are given."""
+    for option in reversed((
+        click.argument("spec_path", metavar="SPEC"),
+        click.option("--town", "town_path", type=click.Path(), default=None,
+                     help="Town file (default town)."),
+        click.option("--driver", "driver_path", type=click.Path(), default=None,
+                     help="Driver model file (default: the packaged model)."),
+        click.option("--horizon", type=click.IntRange(min=0), default=None,
+                     help="Accepted within H junctions (a step counter in the product; default: unbounded)."),
+    )):
+        command = option(command)
+    return command
+
+
+def our_options(command):
+    """--depth, --max-nodes and --json: our side of a comparison, and the output."""
+    for option in reversed((
+        click.option("--depth", type=click.IntRange(min=0), default=10, show_default=True,
+                     help="Our search depth for the unbounded objective (the horizon when given)."),
+        click.option("--max-nodes", type=click.IntRange(min=1), default=200_000, show_default=True,
+                     help="Our belief nodes per level; beyond, the least likely are bounded, not expanded."),
+        click.option("--json", "as_json", is_flag=True, help="Print one JSON object."),
+    )):
+        command = option(command)
+    return command
+
+
 @click.group("peer")
 def peer() -> None:
     """Independent solvers beside ours."""
 
 
 @peer.command("storm")
-@click.argument("spec_path", metavar="SPEC")
-@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
-@click.option("--driver", "driver_path", type=click.Path(), default=None,
-              help="Driver model file (default: the packaged model).")
-@click.option("--horizon", type=click.IntRange(min=0), default=None,
-              help="Accepted within H junctions (a step counter in the product; default: unbounded).")
+@problem_options
 @click.option("--time-limit", type=click.FloatRange(min=1), default=30.0, show_default=True,
               help="Seconds of Storm's belief unfolding (lower bound).")
 @click.option("--resolution", type=click.IntRange(min=1), default=2, show_default=True,
               help="Storm's discretisation resolution (upper bound).")
-@click.option("--depth", type=click.IntRange(min=0), default=10, show_default=True,
-              help="Our search depth for the unbounded objective (the horizon when given).")
-@click.option("--max-nodes", type=click.IntRange(min=1), default=200_000, show_default=True,
-              help="Our belief nodes per level; beyond, the least likely are bounded, not expanded.")
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@our_options
 def storm(spec_path: str, town_path: str | None, driver_path: str | None, horizon: int | None,
           time_limit: float, resolution: int, depth: int, max_nodes: int, as_json: bool) -> None:
     """Storm's [lower, upper] and time beside ours, for SPEC."""
@@ -109,21 +128,12 @@ def storm(spec_path: str, town_path: str | None, driver_path: str | None, horizo
 
 
 @peer.command("paynt")
-@click.argument("spec_path", metavar="SPEC")
-@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
-@click.option("--driver", "driver_path", type=click.Path(), default=None,
-              help="Driver model file (default: the packaged model).")
-@click.option("--horizon", type=click.IntRange(min=0), default=None,
-              help="Accepted within H junctions (a step counter in the product; default: unbounded).")
+@problem_options
 @click.option("--time-limit", type=click.FloatRange(min=1), default=30.0, show_default=True,
               help="Seconds of PAYNT's controller search.")
 @click.option("--max-states", type=click.IntRange(min=1), default=200_000, show_default=True,
               help="Largest product POMDP handed to PAYNT; beyond, exit 2.")
-@click.option("--depth", type=click.IntRange(min=0), default=10, show_default=True,
-              help="Our search depth for the unbounded objective (the horizon when given).")
-@click.option("--max-nodes", type=click.IntRange(min=1), default=200_000, show_default=True,
-              help="Our belief nodes per level; beyond, the least likely are bounded, not expanded.")
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@our_options
 def paynt(spec_path: str, town_path: str | None, driver_path: str | None, horizon: int | None,
           time_limit: float, max_states: int, depth: int, max_nodes: int, as_json: bool) -> None:
     """PAYNT's finite-state controller value (a lower bound of Pr_max) beside ours, for SPEC."""
