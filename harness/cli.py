@@ -25,6 +25,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "replay": ("trustroute.harness.commands.replay", "replay",
                "Re-run one study episode exactly, check it, and record it for Rerun."),
     "study": ("trustroute.harness.commands.study", "study", "Run a simulated within-subject study."),
+    "live": ("trustroute.harness.commands.live", "live", "Serve a study to people in their browsers."),
     "analyze": ("trustroute.harness.commands.analyze", "analyze", "Analyse a study directory."),
     "fit": ("trustroute.harness.commands.fit", "fit", "Fit a driver model to a study's logs."),
     "population": ("trustroute.harness.commands.population", "population",

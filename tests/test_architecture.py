@@ -133,7 +133,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("trustroute.policies.synthesize_spec", "trustroute.policies.resolve", "trustroute.policies.peer",
      "trustroute.policies.pomdp_py"),
     ("trustroute.harness", "trustroute.harness.simulation"),
-    ("trustroute.harness.study",),
+    ("trustroute.harness.study", "trustroute.harness.live"),
     ("trustroute.analysis",),
     ("trustroute",),
     ("trustroute.harness.cli", "trustroute.harness.commands", "trustroute.__main__"),

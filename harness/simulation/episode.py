@@ -209,6 +209,9 @@ class _Episode:
         self.lengths: dict[str, float] = {}
         self.min_gap = 2.5
         self.defined_types: set = set()   # incident type definers run in this simulation
+        # A remote person (harness/live) takes over and hands back when they choose: such a driver
+        # has takeover_request(now) -> True (take over), False (hand back) or None, asked every step.
+        self.person = getattr(driver, "takeover_request", None)
 
     def length(self, road: str) -> float:
         if road not in self.lengths:
@@ -223,6 +226,18 @@ class _Episode:
         if run.took_over:
             self.mode = take_over(self.sumo, EGO_ID)
             run.takeover_start = now
+
+    def person_control(self, run: _RoadRun, now: float, request: bool | None) -> None:
+        """A person's takeover or hand-back on the open road (the synthetic driver's decision
+        point then has nothing left to decide: the road counts as taken over)."""
+        if request is True and self.mode == AUTOPILOT.name:
+            run.decided = run.took_over = True
+            if math.isnan(run.takeover_start):
+                run.takeover_start = now
+            self.mode = take_over(self.sumo, EGO_ID)
+        elif request is False and self.mode != AUTOPILOT.name:
+            self.mode = hand_back(self.sumo, EGO_ID)
+            run.takeover_end = now
 
     def new_run(self, index: int, road: str) -> _RoadRun:
         kind = self.setup.town.incident(road) if index > 0 else NO_INCIDENT
@@ -300,6 +315,25 @@ class _Episode:
         reported = self.driver.report_trust() if self.tracker.should_report() else None
         self.tracker.record_road(run.road, run.kind, run.took_over, performance, trust_before,
                                  trust_after, reported, run.time_in, now)
+
+    def watch_open(self, run: _RoadRun, now: float, road: str, position: float, x: float, y: float,
+                   speed: float, lane: str, angle: float, accel: float) -> EgoState | None:
+        """`watch` the open road while there is something to watch (its incident is live, or, with
+        none, the driver has still to decide); the ego's state then, else None."""
+        if not run.decided if run.incident is None else math.isnan(run.removed_time):
+            ego = EgoState(now, road, position, x, y, speed, lane, angle, accel)
+            self.watch(run, ego)
+            return ego
+        return None
+
+    def measure(self, run: _RoadRun, ego: EgoState | None, speed: float, accel: float, leader,
+                step: float) -> None:
+        """One step of the AV's performance on the open road (called while it drives on autopilot)."""
+        collided = (self.colliding_number() > 0
+                    and EGO_ID in self.sumo.simulation.getCollidingVehiclesIDList())
+        run.monitor.observe(self.sumo, speed, accel, collided, leader, self.min_gap, ROAD_SPEED, step)
+        if ego is not None and run.incident is not None:
+            run.incident.measure(self.sumo, ego, run.monitor)
 
     def limits(self, run: _RoadRun):
         return limits_for(self.config.performance_limits, run.kind or "none")
@@ -385,13 +419,13 @@ class _Episode:
         # something happens (an incident still live, a driver still to decide).
         calls = hot_calls(sumo)
         simulation_step, get_time = calls.step, calls.time
-        get_results, colliding_number = calls.subscription_results, calls.colliding_number
+        get_results = calls.subscription_results
+        self.colliding_number = calls.colliding_number
         lane_roads: dict[str, str] = {}   # "A-B_1" -> "A-B", ":A_5_0" -> ":A_5"
         auto = AUTOPILOT.name
         log_floats, log_lane, log_mode = (self.steps.floats.extend, self.steps.lanes.append,
                                           self.steps.modes.append)
-        observer = self.observer
-        min_gap = self.min_gap
+        observer, person = self.observer, self.person
         commit_at = self.length(start) - COMMIT_DISTANCE
         while True:
             simulation_step()
@@ -417,19 +451,12 @@ class _Episode:
             if background_step is not None:
                 background_step(sumo)
             if open_run.index > 0:
-                ego = None
-                incident = open_run.incident
-                # Watched while the incident is live, or (no incident) until the driver has decided.
-                if (not open_run.decided if incident is None else math.isnan(open_run.removed_time)):
-                    ego = EgoState(now, road, position, x, y, speed, lane, result[angle_id], result[accel_id])
-                    self.watch(open_run, ego)
+                if person is not None:
+                    self.person_control(open_run, now, person(now))
+                ego = self.watch_open(open_run, now, road, position, x, y, speed, lane, result[angle_id],
+                                      result[accel_id])
                 if self.mode == auto:
-                    collided = (colliding_number() > 0
-                                and EGO_ID in sumo.simulation.getCollidingVehiclesIDList())
-                    open_run.monitor.observe(sumo, speed, result[accel_id], collided, result[leader_id],
-                                             min_gap, ROAD_SPEED, step)
-                    if ego is not None and incident is not None:
-                        incident.measure(sumo, ego, open_run.monitor)
+                    self.measure(open_run, ego, speed, result[accel_id], result[leader_id], step)
             finished = False
             along = current.offsets.get(road)   # where the ego's edge starts along the road
             if not current.committed and along is not None and along + position + speed * step >= commit_at:
@@ -486,8 +513,10 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
     """Run one episode in SUMO and return its logs.
 
     driver: a participants.synthetic_driver.SyntheticDriver (decides_takeover, move_trust, report_trust,
-    trust). seed: SUMO's seed (the driver carries its own Generator). net_path: the town's net
-    (default: build_net(setup.town), cached). observer(sumo, ego, mode, road): called every step
+    trust), or a person of a live study (harness/live/worker.py RemoteDriver), who also has
+    takeover_request(now): their takeover or hand-back, asked every step. seed: SUMO's seed (the
+    driver carries its own Generator). net_path: the town's net (default: build_net(setup.town),
+    cached). observer(sumo, ego, mode, road): called every step
     (tests use it to read SUMO state). rrd_path: also write a Rerun recording. scene_overrides:
     {incident kind: {draw name: value}} fixes scene draws (e.g. {"pedestrian": {"timing": "late"}}).
     """

@@ -66,7 +66,7 @@ from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
 DEFAULT_STUDIES_DIR = Path("studies")
-ENGINES: tuple[str, ...] = ("sumo", "model")
+ENGINES: tuple[str, ...] = ("sumo", "model", "live")  # "live": `trustroute live`, people in the loop
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
 

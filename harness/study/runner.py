@@ -92,26 +92,29 @@ def recording_path(study_dir: Path, episode_id: str) -> Path:
 
 
 def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path | None = None,
-                        sumo_config: SumoConfig | None = None) -> EpisodeRecord:
+                        sumo_config: SumoConfig | None = None, driver: object | None = None,
+                        observer: Callable | None = None) -> EpisodeRecord:
     """Run the planned episode `task` exactly as the study runs it: the participant's driver model
     (population draw), the driver's Generator from the task's seed sequence (so the same initial trust
     and every later draw), SUMO's seed, the cell's setup and policy. Returns the EpisodeRecord.
 
-    rrd_path and sumo_config (e.g. sumo-gui) apply to the SUMO engine only."""
+    rrd_path, sumo_config (e.g. sumo-gui) and observer apply to the SUMO engines only ("sumo", and
+    "live", where `driver` is the remote person of harness/live in place of the synthetic driver)."""
     from trustroute.participants.synthetic_driver import SyntheticDriver
 
     context = study_context(config)
-    driver = SyntheticDriver(
-        context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
-    )
+    if driver is None:
+        driver = SyntheticDriver(
+            context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
+        )
     options = {}
-    if config.engine == "sumo":
+    if config.engine in ("sumo", "live"):
         from trustroute.harness.simulation.sumo_start import SumoConfig
 
         sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
                               background_vehicles=config.background_vehicles,
                               route_files=tuple(config.routes))
-        options = {"rrd_path": rrd_path, "config": sumo_config}
+        options = {"rrd_path": rrd_path, "config": sumo_config, "observer": observer}
     return engine_function(config.engine)(
         context.setup(task.spec, task.condition),
         context.policies[(task.spec, task.condition)],
@@ -385,6 +388,10 @@ def run_and_consolidate(
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line. The study
     directory stays locked until the manifest is written."""
+    if config.engine == "live":
+        raise InputError(config.source_path, "study.engine",
+                         "a live study is driven by people, not simulated",
+                         "serve it with `trustroute live CONFIG`, or simulate it with --engine sumo")
     validate_study(config, scheduler, attempts, progress)
     study_dir = Path(study_dir).resolve()
     with study_lock(study_dir):

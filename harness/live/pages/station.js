@@ -1,0 +1,169 @@
+// The participant station: consent, then each trial; the mode indicator, a top-down view (the
+// net's lanes, the ego, traffic and the incidents' objects around it), the takeover / hand-back
+// control (button or space) and trust reports 1-7 (buttons or keys). It speaks the websocket protocol of docs/live_studies.md; the HttpOnly participant
+// cookie authenticates the socket.
+"use strict";
+
+const $ = (id) => document.getElementById(id);
+const steps = ["consent-step", "ready-step", "drive-step", "done-step"];
+let socket = null;
+let state = { phase: "consent" };
+let mode = "auto";
+
+function show(step) {
+  for (const id of steps) $(id).classList.toggle("hidden", id !== step);
+}
+
+function send(message) {
+  if (socket && socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify(message));
+}
+
+function trustButtons(container, onPick) {
+  for (let value = 1; value <= 7; value++) {
+    const button = document.createElement("button");
+    button.textContent = String(value);
+    button.addEventListener("click", () => onPick(value));
+    container.appendChild(button);
+  }
+}
+
+function report(value) {
+  send({ type: "trust", value });
+  $("reported").textContent = `You reported ${value}.`;
+  $("prompt").classList.add("hidden");
+}
+
+function setMode(next) {
+  mode = next;
+  const indicator = $("mode");
+  indicator.textContent = next === "manual" ? "MANUAL" : "AUTOPILOT";
+  indicator.className = next;
+  $("toggle").textContent = next === "manual" ? "Hand back (space)" : "Take over (space)";
+}
+
+const COLOURS = { traffic: "#1e5aa8", obstacle: "#e67e00", oncoming: "#7b1fa2", parked: "#7b1fa2",
+                  pedestrian: "#d81b60" };
+let lanes = [];
+let junctions = {};
+
+async function loadNet() {
+  const response = await fetch("/api/net");
+  if (response.ok) ({ lanes, junctions } = await response.json());
+}
+
+function box(context, toCanvas, x, y, angle, length, width, colour, scale) {
+  const [u, v] = toCanvas(x, y);
+  context.save();
+  context.translate(u, v);
+  context.rotate((angle * Math.PI) / 180);   // SUMO's angle: degrees clockwise from north
+  context.fillStyle = colour;
+  context.fillRect((-width / 2) * scale, 0, width * scale, length * scale);   // the front at (x, y)
+  context.restore();
+}
+
+function draw(frame) {
+  const canvas = $("view");
+  const context = canvas.getContext("2d");
+  const scale = 2.5;   // pixels per metre, north up, the ego at the centre
+  const toCanvas = (x, y) => [canvas.width / 2 + (x - frame.x) * scale, canvas.height / 2 - (y - frame.y) * scale];
+  context.fillStyle = "#dfe8d8";
+  context.fillRect(0, 0, canvas.width, canvas.height);
+  context.lineCap = "round";
+  for (const lane of lanes) {
+    context.strokeStyle = lane.internal ? "#8c8c8c" : "#777";
+    context.lineWidth = lane.width * scale;
+    context.beginPath();
+    lane.shape.forEach(([x, y], i) => { const [u, v] = toCanvas(x, y); if (i) context.lineTo(u, v); else context.moveTo(u, v); });
+    context.stroke();
+  }
+  const next = junctions[frame.junction];
+  if (next) {   // the junction the ego drives to: the policy chooses the road after it
+    const [u, v] = toCanvas(next[0], next[1]);
+    context.strokeStyle = "#f9a825";
+    context.lineWidth = 3;
+    context.beginPath();
+    context.arc(u, v, 9 * scale, 0, 2 * Math.PI);
+    context.stroke();
+  }
+  for (const [x, y, angle, kind] of frame.vehicles || []) {
+    const truck = kind === "oncoming" || kind === "parked";
+    box(context, toCanvas, x, y, angle, truck ? 10 : 4.5, truck ? 2.5 : 1.8, COLOURS[kind] || COLOURS.traffic, scale);
+  }
+  for (const [x, y, kind] of frame.persons || []) {
+    const [u, v] = toCanvas(x, y);
+    context.fillStyle = COLOURS[kind] || COLOURS.pedestrian;
+    context.beginPath();
+    context.arc(u, v, 0.6 * scale, 0, 2 * Math.PI);
+    context.fill();
+  }
+  box(context, toCanvas, frame.x, frame.y, frame.angle, 4.5, 1.8, frame.mode === "manual" ? "#c62828" : "#2e7d32", scale);
+  $("speed").textContent = `${(frame.speed * 3.6).toFixed(0)} km/h`;
+  $("road").textContent = `road ${frame.road}`;
+}
+
+function onState(message) {
+  state = message;
+  $("status").textContent = message.phase === "paused"
+    ? `Paused (${message.paused_by === "disconnect" ? "connection lost" : "by the experimenter"})`
+    : message.warm_up === "pending" ? "Warm-up drive" : `Trial ${message.trial} of ${message.trials}`;
+  $("resume").classList.toggle("hidden", !(message.phase === "paused" && message.paused_by === "disconnect"));
+  if (message.phase === "consent") show("consent-step");
+  else if (message.phase === "ready") {
+    $("trial-text").textContent = message.warm_up === "pending"
+      ? "Next: a warm-up drive, to get to know the vehicle."
+      : `Next: trial ${message.done.length + 1} of ${message.trials}.`;
+    show("ready-step");
+  } else if (message.phase === "driving" || message.phase === "paused") show("drive-step");
+  else if (message.phase === "done") show("done-step");
+}
+
+function onMessage(message) {
+  switch (message.type) {
+    case "welcome": $("consent-text").textContent = message.consent; break;
+    case "state": onState(message); break;
+    case "frame": draw(message); break;
+    case "mode": setMode(message.mode); break;
+    case "incident": $("incident").textContent = `Ahead: ${message.kind}`; break;
+    case "warning":
+      $("incident").textContent = "Hand back before the junction (space): the vehicle waits for you.";
+      break;
+    case "road":
+      $("incident").textContent = "";
+      if (message.prompt) $("prompt").classList.remove("hidden");
+      break;
+    case "episode_start": setMode("auto"); break;
+    case "episode_end": $("status").textContent = "Trial complete."; break;
+    case "episode_aborted": $("status").textContent = "The trial was stopped; it will be run again."; break;
+    case "episode_failed": $("error").textContent = "The trial failed; it will be run again."; break;
+    case "error": $("error").textContent = message.detail; break;
+    default: break;
+  }
+}
+
+function connect() {
+  const scheme = location.protocol === "https:" ? "wss" : "ws";
+  socket = new WebSocket(`${scheme}://${location.host}/ws`);
+  socket.addEventListener("message", (event) => onMessage(JSON.parse(event.data)));
+  socket.addEventListener("close", () => {
+    $("error").textContent = "Connection lost; reconnecting...";
+    setTimeout(connect, 1000);
+  });
+  socket.addEventListener("open", () => { $("error").textContent = ""; });
+}
+
+function toggle() {
+  if (state.phase === "driving") send({ type: mode === "manual" ? "hand_back" : "takeover" });
+}
+
+$("agree").addEventListener("click", () => send({ type: "consent", agree: true }));
+trustButtons($("start-trust"), (value) => send({ type: "start", trust: value }));
+trustButtons($("trust"), report);
+$("toggle").addEventListener("click", toggle);
+$("resume").addEventListener("click", () => send({ type: "resume" }));
+document.addEventListener("keydown", (event) => {
+  if (state.phase !== "driving") return;
+  if (event.code === "Space") { event.preventDefault(); toggle(); }
+  else if (/^[1-7]$/.test(event.key)) report(Number(event.key));
+});
+loadNet();
+connect();

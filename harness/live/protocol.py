@@ -1,0 +1,170 @@
+"""The live study's messages: every websocket and HTTP message as a schema, the size cap, the flood
+limit, and the error replies (docs/live_studies.md, "Protocol").
+
+A participant's websocket carries JSON text messages of at most MAX_MESSAGE_BYTES. Each is
+validated against CLIENT_MESSAGE (a union on `type`; unknown keys and wrong types are refused);
+a message that is oversized, malformed, arrives faster than the connection's token bucket allows,
+or does not fit the session's phase gets one `error` reply and changes nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Annotated, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictInt,
+    TypeAdapter,
+    ValidationError,
+    model_validator,
+)
+
+MAX_MESSAGE_BYTES = 4096       # a websocket message larger than this is refused unread
+MAX_BODY_BYTES = 16 * 1024     # an HTTP request body larger than this is refused (413)
+BURST = 20                     # messages a connection may send at once ...
+RATE = 10.0                    # ... and per second after that (token bucket)
+TRUST_LOW, TRUST_HIGH = 1, 7   # the trust scale of reports (the authors' 1-7)
+
+
+class Message(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ClientMessage(Message):
+    """A message of the participant's websocket; `type` names it."""
+
+    type: str
+
+
+class Consent(ClientMessage):
+    """The participant has read the consent text and agrees; `client` says who drives (a person
+    at the station, or the scripted participant): the episodes' parts record it. `lockstep`
+    (scripted only): every episode waits for the participant's answer at each decision."""
+
+    type: Literal["consent"]
+    agree: Literal[True]
+    client: Literal["station", "scripted"] = "station"
+    lockstep: StrictBool = False
+
+    @model_validator(mode="after")
+    def lockstep_is_scripted(self) -> Consent:
+        if self.lockstep and self.client != "scripted":
+            raise ValueError("lockstep is for the scripted participant only")
+        return self
+
+
+class Start(ClientMessage):
+    """Start the next trial; `trust`: the participant's trust before it (1-7; default: the middle)."""
+
+    type: Literal["start"]
+    trust: Annotated[StrictInt, Field(ge=TRUST_LOW, le=TRUST_HIGH)] | None = None
+
+
+class Takeover(ClientMessage):
+    type: Literal["takeover"]
+
+
+class HandBack(ClientMessage):
+    type: Literal["hand_back"]
+
+
+class Pass(ClientMessage):
+    """Lockstep: the answer "no takeover" to an `incident` event."""
+
+    type: Literal["pass"]
+
+
+class TrustReport(ClientMessage):
+    type: Literal["trust"]
+    value: Annotated[StrictInt, Field(ge=TRUST_LOW, le=TRUST_HIGH)]
+
+
+class Resume(ClientMessage):
+    """Resume an episode paused by this participant's disconnect."""
+
+    type: Literal["resume"]
+
+
+class Ping(ClientMessage):
+    type: Literal["ping"]
+
+
+CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | Pass | TrustReport | Resume
+                                       | Ping, Field(discriminator="type")])
+
+
+# -- HTTP bodies ---------------------------------------------------------------------------------
+class NewParticipant(Message):
+    label: Annotated[str, Field(max_length=100, pattern=r"^[\w .,:()-]*$")] = ""
+
+
+class EpisodeControl(Message):
+    """The experimenter's control of a participant's running episode."""
+
+    action: Literal["pause", "resume", "abort"]
+
+
+# -- errors and limits ---------------------------------------------------------------------------
+ERROR_CODES: tuple[str, ...] = ("oversized", "malformed", "rate_limited", "out_of_order", "forbidden",
+                                "not_found")
+
+
+def error_reply(code: str, detail: str) -> dict:
+    if code not in ERROR_CODES:
+        raise ValueError(f"unknown error code {code!r}")
+    return {"type": "error", "code": code, "detail": detail[:300]}
+
+
+class MessageError(Exception):
+    """A client message refused before it reached the session (its reply in `reply`)."""
+
+    def __init__(self, code: str, detail: str) -> None:
+        super().__init__(detail)
+        self.reply = error_reply(code, detail)
+
+
+def parse_client_message(raw: str | bytes) -> ClientMessage:
+    """The validated message, or MessageError (oversized or malformed)."""
+    size = len(raw.encode() if isinstance(raw, str) else raw)
+    if size > MAX_MESSAGE_BYTES:
+        raise MessageError("oversized", f"{size} bytes; a message holds at most {MAX_MESSAGE_BYTES}")
+    try:
+        return CLIENT_MESSAGE.validate_json(raw)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(part) for part in first.get("loc", ())) or "message"
+        raise MessageError("malformed", f"{where}: {first.get('msg', 'invalid')}") from None
+    except (ValueError, json.JSONDecodeError) as exc:
+        raise MessageError("malformed", f"not a JSON message ({exc})") from None
+
+
+@dataclass
+class TokenBucket:
+    """A flood limit per connection: `burst` messages at once, `rate` per second after that."""
+
+    burst: float = BURST
+    rate: float = RATE
+    clock: Callable[[], float] = time.monotonic
+    tokens: float = field(default=-1.0)
+    last: float = field(default=0.0)
+
+    def __post_init__(self) -> None:
+        self.tokens = float(self.burst)
+        self.last = self.clock()
+
+    def take(self) -> bool:
+        """Whether one more message is allowed now (it uses up one token if so)."""
+        now = self.clock()
+        self.tokens = min(float(self.burst), self.tokens + (now - self.last) * self.rate)
+        self.last = now
+        if self.tokens >= 1.0:
+            self.tokens -= 1.0
+            return True
+        return False

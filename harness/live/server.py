@@ -1,0 +1,222 @@
+"""The live study's directory and participants: the one object the web application serves.
+
+`LiveStudy.open()` does what `trustroute study` does before it writes anything (every input
+validated and the "aware" policies synthesized: `validate_study`), takes the study directory's
+lock (`study_lock`: a second server, or a `trustroute study`, on the same directory is refused
+with the holder named) and marks the directory as this config's (`check_study_dir`). The
+directory then holds, besides a study's files,
+
+    live/participants.json   each created participant: SHA-256 of their token, label, consent,
+                             whether the warm-up drive is done
+    live/warmup/parts/       the warm-up drives' parts (not part of the dataset)
+
+and after every finished episode the dataset is consolidated (harness/study/manifest.py) so
+`trustroute analyze` reads the directory at any time. harness/live/app.py serves it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import threading
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from trustroute.core.dataset import part_path
+from trustroute.core.errors import InputError
+from trustroute.core.output_files import atomic_write_text
+from trustroute.harness.live.auth import Credentials, experimenter_credentials
+from trustroute.harness.live.session import Session
+from trustroute.harness.live.worker import LiveOptions
+from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+
+LIVE_DIR = "live"
+PARTICIPANTS_FILE = "participants.json"
+WARM_UP_DIR = "warmup"
+WARM_UP_KEY = 4   # SeedSequence(study seed, spawn_key=(4, participant)): the warm-up's seeds
+DEFAULT_CONSENT = ("You are about to drive in a simulated study of an autonomous vehicle. You may take over "
+                   "and hand back control, and report your trust in the vehicle from 1 to 7. You may stop "
+                   "at any time.")
+MAX_DOWNLOAD_PATH = 512
+
+
+@dataclass(frozen=True)
+class ServerOptions:
+    pace: float = 1.0
+    frame_rate: float = 25.0
+    resume_within: float = 120.0   # seconds a disconnected participant has to resume an episode
+    warm_up: bool = True           # a warm-up drive before the trials
+    secure_cookies: bool = False   # cookies only over HTTPS (behind a TLS proxy)
+
+
+def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:
+    """The participant's warm-up drive: their first trial's spec and condition on seeds of its own
+    (so it is no trial's rerun); it is not part of the dataset."""
+    import numpy as np
+
+    first = min((t for t in plan_episodes(config) if t.participant == participant), key=lambda t: t.position)
+    sequence = np.random.SeedSequence(config.seed, spawn_key=(WARM_UP_KEY, participant))
+    return replace(first, episode_id=f"p{participant:05d}-warmup", position=-1,
+                   seed=int(sequence.generate_state(1)[0] & 0x7FFFFFFF),
+                   driver_entropy=(config.seed, WARM_UP_KEY, participant))
+
+
+class LiveStudy:
+    """A study served live: config, directory (locked while open), credentials, sessions."""
+
+    def __init__(self, config: StudyConfig, study_dir: Path, options: ServerOptions | None = None,
+                 consent_text: str = DEFAULT_CONSENT) -> None:
+        if config.engine != "live":
+            raise InputError(config.source_path, "study.engine",
+                             f"engine {config.engine!r} is not served live",
+                             'set engine = "live" (or run `trustroute study` for a simulated study)')
+        self.config = config
+        self.study_dir = Path(study_dir).resolve()
+        self.options = options or ServerOptions()
+        self.consent_text = consent_text
+        self.tasks = plan_episodes(config)
+        self.credentials: Credentials
+        self.credentials, self.experimenter_token = experimenter_credentials()
+        self.sessions: dict[int, Session] = {}
+        self.done: set[str] = set()
+        self.lock = threading.RLock()
+        self.expected: dict = {}
+        self._stack = contextlib.ExitStack()
+
+    # -- opening and closing --------------------------------------------------------------------
+    def open(self) -> LiveStudy:
+        from trustroute.harness.study.expected import expected_values
+        from trustroute.harness.study.resume import check_study_dir, finished_episodes
+        from trustroute.harness.study.runner import study_lock, validate_study
+
+        validate_study(self.config)
+        self._stack.enter_context(study_lock(self.study_dir))
+        try:
+            check_study_dir(self.study_dir, self.config, self.config.content_hash)
+            self.done = finished_episodes(self.study_dir, self.tasks)[0]
+            self.expected = expected_values(self.config)
+            self.load_participants()
+        except BaseException:
+            self._stack.close()
+            raise
+        return self
+
+    def close(self) -> None:
+        for session in list(self.sessions.values()):
+            session.stop()
+        self._stack.close()
+
+    def __enter__(self) -> LiveStudy:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- participants ---------------------------------------------------------------------------
+    def registry_path(self) -> Path:
+        return self.study_dir / LIVE_DIR / PARTICIPANTS_FILE
+
+    def load_participants(self) -> None:
+        from trustroute.core.validation import read_json
+
+        path = self.registry_path()
+        if not path.exists():
+            return
+        records = read_json(path, "live participants", fix="restore it, or delete the study directory")
+        for key, record in (records.get("participants", {}) if isinstance(records, dict) else {}).items():
+            participant = int(key)
+            self.credentials.participants[participant] = str(record["digest"])
+            self.sessions[participant] = self.new_session(participant, str(record.get("label", "")),
+                                                          bool(record.get("consented")),
+                                                          str(record.get("client", "station")),
+                                                          bool(record.get("warmed_up")))
+            self.sessions[participant].lockstep = bool(record.get("lockstep"))
+
+    def save_participants(self) -> None:
+        with self.lock:
+            records = {str(p): {"digest": self.credentials.participants[p], "label": s.label,
+                                "consented": s.phase != "consent", "client": s.client,
+                                "warmed_up": s.warmed_up, "lockstep": s.lockstep}
+                       for p, s in sorted(self.sessions.items())}
+            atomic_write_text(self.registry_path(), json.dumps({"participants": records}, indent=1),
+                              "live participants", "free disk space")
+
+    def tasks_of(self, participant: int) -> list[EpisodeTask]:
+        return sorted((t for t in self.tasks if t.participant == participant), key=lambda t: t.position)
+
+    def new_session(self, participant: int, label: str = "", consented: bool = False,
+                    client: str = "station", warmed_up: bool = False) -> Session:
+        warm_up = warm_up_task(self.config, participant) if self.options.warm_up else None
+        return Session(self, participant, self.tasks_of(participant), label, consented, client,
+                       warm_up=warm_up, warmed_up=warmed_up)
+
+    def create_participant(self, label: str = "") -> tuple[int, str]:
+        """(index, token) of the next participant of the plan; ValueError when all exist."""
+        with self.lock:
+            participant = len(self.sessions)
+            if participant >= self.config.participants:
+                raise ValueError(f"the study plans {self.config.participants} participants; all are created")
+            token = self.credentials.add_participant(participant)
+            self.sessions[participant] = self.new_session(participant, label)
+            self.save_participants()
+            return participant, token
+
+    def warm_up_dir(self) -> Path:
+        return self.study_dir / LIVE_DIR / WARM_UP_DIR
+
+    # -- episodes -------------------------------------------------------------------------------
+    def is_done(self, task: EpisodeTask) -> bool:
+        return task.episode_id in self.done
+
+    def live_options(self, client: str, lockstep: bool = False) -> LiveOptions:
+        return LiveOptions(self.options.pace, self.options.frame_rate, client, self.config.report_every,
+                           lockstep)
+
+    def episode_finished(self, task: EpisodeTask) -> None:
+        """An episode wrote its part: count it done and consolidate the dataset."""
+        from trustroute.harness.study.manifest import consolidate
+
+        with self.lock:
+            if part_path(self.study_dir, task.episode_id).exists():
+                self.done.add(task.episode_id)
+            consolidate(self.study_dir, self.config, self.tasks, self.config.content_hash, self.expected,
+                        {"backend": "live", "pace": self.options.pace, "finished_utc":
+                         time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
+
+    def net_view(self) -> dict:
+        """The lanes of the study's town net (harness/live/view.py), for the station's view."""
+        from trustroute.harness.live.view import net_view
+        from trustroute.harness.study.context import study_context
+        from trustroute.networks.sumo_net import build_net
+
+        return net_view(str(build_net(study_context(self.config).town).path))
+
+    # -- downloads ------------------------------------------------------------------------------
+    def files(self) -> list[str]:
+        """Every regular file of the study directory (relative paths), the lock excepted."""
+        from trustroute.core.dataset import LOCK_FILE
+
+        return sorted(str(path.relative_to(self.study_dir)) for path in self.study_dir.rglob("*")
+                      if path.is_file() and not path.is_symlink() and path.name != LOCK_FILE)
+
+    def download_path(self, relative: str) -> Path:
+        """The file `relative` names inside the study directory; ValueError for any path that
+        leaves it (.., an absolute path, a symlink anywhere on the way) or is not a regular file."""
+        root = self.study_dir
+        if not relative or len(relative) > MAX_DOWNLOAD_PATH or "\x00" in relative or "\\" in relative:
+            raise ValueError("not a file of the study directory")
+        parts = Path(relative).parts
+        if Path(relative).is_absolute() or any(part in ("..", ".") for part in parts):
+            raise ValueError("not a file of the study directory")
+        current = root
+        for part in parts:
+            current = current / part
+            if current.is_symlink():
+                raise ValueError("not a file of the study directory")
+        resolved = current.resolve()
+        if not resolved.is_relative_to(root) or not resolved.is_file():
+            raise ValueError("not a file of the study directory")
+        return resolved
+

@@ -1,0 +1,260 @@
+"""One participant's session: the phase it is in, its trials, its running episode.
+
+Phases: "consent" (the consent text is shown) -> "ready" (a trial can start) -> "driving" <->
+"paused" -> "ready" ... -> "done" (every trial of the participant has a part). A client message
+that does not fit the phase (a takeover before consent, a hand-back on autopilot, a resume of the
+experimenter's pause) is refused with an `out_of_order` error and changes nothing.
+
+The trials are the participant's planned episodes in the study's order (harness/study/plan.py);
+a trial is done when its part exists, so an aborted, failed or interrupted episode is run again
+at the participant's next start, and a restarted server continues at the first trial without a
+part. State changes happen under one lock: client messages arrive on the server's event loop, the
+episode's messages on the session's reader thread.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from trustroute.harness.live.protocol import (
+    ClientMessage,
+    Consent,
+    HandBack,
+    MessageError,
+    Pass,
+    Ping,
+    Resume,
+    Start,
+    Takeover,
+    TrustReport,
+)
+from trustroute.harness.live.worker import start_episode_process
+from trustroute.harness.study.plan import EpisodeTask
+
+STOP_SECONDS = 5.0
+
+
+class Session:
+    """A participant's session (one per participant, whether or not a browser is connected)."""
+
+    def __init__(self, study, participant: int, tasks: list[EpisodeTask], label: str = "",
+                 consented: bool = False, client: str = "station", warm_up: EpisodeTask | None = None,
+                 warmed_up: bool = False) -> None:
+        self.study = study                  # harness/live/server.py LiveStudy
+        self.participant = participant
+        self.tasks = tasks
+        self.warm_up = warm_up            # the warm-up drive before the trials (None: none)
+        self.warmed_up = warmed_up
+        self.label = label
+        self.client = client
+        self.lockstep = False
+        self.lock = threading.RLock()
+        self.phase = "ready" if consented else "consent"
+        self.pause_reason: str | None = None
+        self.task: EpisodeTask | None = None
+        self.mode = "auto"
+        self.road: str | None = None
+        self.reports = self.takeovers = 0
+        self.last_error: str | None = None
+        self.process: Any = None
+        self.connection: Any = None      # the episode process and our end of its pipe
+        self.push: Callable[[dict], None] | None = None
+        self.expiry: threading.Timer | None = None   # the deadline of a disconnect's pause
+        if consented and not self.pending():
+            self.phase = "done"
+
+    # -- what the console and the station read --------------------------------------------------
+    def pending(self) -> list[EpisodeTask]:
+        """The drives still to do, in order: the warm-up first, then the trials without a part."""
+        warm_up = [self.warm_up] if self.warm_up is not None and not self.warmed_up else []
+        return warm_up + [task for task in self.tasks if not self.study.is_done(task)]
+
+    def progress(self) -> dict:
+        with self.lock:
+            done = [task.episode_id for task in self.tasks if self.study.is_done(task)]
+            pending = self.pending()
+            return {"type": "state", "participant": self.participant, "label": self.label,
+                    "phase": self.phase, "paused_by": self.pause_reason,
+                    "trial": len(done) + (self.phase in ("driving", "paused") and not self.warming_up),
+                    "warm_up": None if self.warm_up is None else ("done" if self.warmed_up else "pending"),
+                    "trials": len(self.tasks), "episode_id": self.task.episode_id if self.task else None,
+                    "mode": self.mode, "road": self.road, "reports": self.reports,
+                    "takeovers": self.takeovers, "done": done, "last_error": self.last_error,
+                    "next_episode": pending[0].episode_id if pending else None}
+
+    # -- the participant's messages -------------------------------------------------------------
+    def handle(self, message: ClientMessage) -> list[dict]:
+        """Apply a validated client message; its replies. MessageError when out of order."""
+        with self.lock:
+            if isinstance(message, Ping):
+                return [{"type": "pong"}]
+            if isinstance(message, Consent):
+                self.require("consent", message)
+                self.client, self.lockstep = message.client, message.lockstep
+                self.phase = "ready" if self.pending() else "done"
+                self.study.save_participants()   # the consent holds across restarts
+            elif isinstance(message, Start):
+                self.require("ready", message)
+                self.start(self.pending()[0], message.trust)
+            elif isinstance(message, (Takeover, HandBack)):
+                self.require("driving", message)
+                wanted = "auto" if isinstance(message, Takeover) else "manual"
+                if self.mode != wanted:
+                    raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
+                self.tell(message.model_dump())
+                return []
+            elif isinstance(message, Pass):
+                self.require("driving", message)
+                if not self.lockstep:
+                    raise MessageError("out_of_order", "pass answers an incident in lockstep only")
+                self.tell(message.model_dump())
+                return []
+            elif isinstance(message, TrustReport):
+                self.require("driving", message)
+                self.tell(message.model_dump())
+                self.reports += 1
+                return []
+            elif isinstance(message, Resume):
+                self.require("paused", message)
+                if self.pause_reason != "disconnect":
+                    raise MessageError("out_of_order", "the experimenter paused this episode")
+                self.resume()
+            return [self.progress()]
+
+    def require(self, phase: str, message: ClientMessage) -> None:
+        if self.phase != phase:
+            raise MessageError("out_of_order", f"{message.type} in phase {self.phase!r} (needs {phase!r})")
+
+    # -- the episode ----------------------------------------------------------------------------
+    @property
+    def warming_up(self) -> bool:
+        return self.task is not None and self.task is self.warm_up
+
+    def start(self, task: EpisodeTask, trust: int | None) -> None:
+        target = self.study.warm_up_dir() if task is self.warm_up else self.study.study_dir
+        self.process, self.connection = start_episode_process(
+            self.study.config, target, task, self.study.live_options(self.client, self.lockstep), trust)
+        self.task, self.phase, self.mode, self.road, self.last_error = task, "driving", "auto", None, None
+        reader = threading.Thread(target=self.read_episode, args=(self.connection, self.process),
+                                  name=f"live-reader-{task.episode_id}", daemon=True)
+        reader.start()
+
+    def read_episode(self, connection, process) -> None:
+        """The reader thread: every message of the episode process, until its pipe closes."""
+        ended = False
+        while True:
+            try:
+                message = connection.recv()
+            except (EOFError, OSError):
+                break
+            ended |= message.get("type", "") in ("episode_end", "episode_aborted", "episode_failed")
+            self.on_episode_message(message)
+        process.join(STOP_SECONDS)
+        if not ended:
+            self.on_episode_message({"type": "episode_failed",
+                                     "error": f"the episode process ended (exit code {process.exitcode})"})
+
+    def on_episode_message(self, message: dict) -> None:
+        kind = message.get("type")
+        finished = kind in ("episode_end", "episode_aborted", "episode_failed")
+        with self.lock:
+            if kind == "mode":
+                self.mode = message["mode"]
+                self.takeovers += self.mode == "manual"
+            elif kind == "frame":
+                self.road = message["road"]
+            elif finished:
+                if kind == "episode_end" and self.warming_up:
+                    self.warmed_up = True
+                    self.study.save_participants()
+                elif kind == "episode_end":
+                    self.study.episode_finished(self.task)
+                else:
+                    self.last_error = message.get("error") or message.get("reason")
+                self.phase = "ready" if self.pending() else "done"
+                self.pause_reason, self.process, self.connection = None, None, None
+                if self.expiry is not None:
+                    self.expiry.cancel()
+                    self.expiry = None
+            push = self.push
+        if push is not None:
+            push({key: value for key, value in message.items() if key != "traceback"})
+            if finished:
+                push(self.progress())
+
+    def control(self, action: str) -> dict:
+        """The experimenter's pause, resume or abort of the running episode."""
+        with self.lock:
+            if action == "pause" and self.phase == "driving":
+                self.pause("experimenter")
+            elif action == "resume" and self.phase == "paused":
+                self.resume()
+            elif action == "abort" and self.phase in ("driving", "paused"):
+                self.tell({"type": "abort", "reason": "aborted by the experimenter"})
+            else:
+                raise MessageError("out_of_order", f"{action} in phase {self.phase!r}")
+            return self.progress()
+
+    def tell(self, control: dict) -> None:
+        """Send a control to the running episode (MessageError when it has just ended)."""
+        try:
+            self.connection.send(control)
+        except (OSError, ValueError, AttributeError):
+            raise MessageError("out_of_order", "the episode has ended") from None
+
+    def pause(self, reason: str) -> None:
+        self.tell({"type": "pause"})
+        self.phase, self.pause_reason = "paused", reason
+        if reason == "disconnect":
+            self.expiry = threading.Timer(self.study.options.resume_within, self.expire, args=(self.task,))
+            self.expiry.daemon = True
+            self.expiry.start()
+
+    def resume(self) -> None:
+        self.tell({"type": "resume"})
+        self.phase, self.pause_reason = "driving", None
+        if self.expiry is not None:
+            self.expiry.cancel()
+            self.expiry = None
+
+    def expire(self, task: EpisodeTask) -> None:
+        """The participant did not come back in time: the episode is incomplete (no part) and its
+        trial moves to the end of the participant's plan."""
+        with self.lock:
+            if self.phase != "paused" or self.pause_reason != "disconnect" or self.task is not task:
+                return
+            self.expiry = None
+            with contextlib.suppress(MessageError):
+                self.tell({"type": "abort", "reason": f"incomplete: no reconnection within "
+                                                      f"{self.study.options.resume_within:g} s"})
+            if task in self.tasks:   # (a warm-up simply stays first)
+                self.tasks.remove(task)
+                self.tasks.append(task)
+
+    # -- the participant's connection -----------------------------------------------------------
+    def attach(self, push: Callable[[dict], None]) -> None:
+        with self.lock:
+            self.push = push
+
+    def detach(self, push: Callable[[dict], None]) -> None:
+        """The participant's connection closed: a running episode pauses until they resume."""
+        with self.lock:
+            if self.push is not push:
+                return
+            self.push = None
+            if self.phase == "driving":
+                with contextlib.suppress(MessageError):   # the episode ended meanwhile
+                    self.pause("disconnect")
+
+    def stop(self) -> None:
+        """Stop a running episode (the server is closing): no part is written for it."""
+        with self.lock:
+            process = self.process
+        if process is not None:
+            process.terminate()
+            process.join(STOP_SECONDS)
+            if process.is_alive():
+                process.kill()

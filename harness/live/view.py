@@ -1,0 +1,68 @@
+"""What the participant station draws: the net's lanes once, and per frame what is around the ego.
+
+`net_view` reads the town's SUMO net (sumolib) into lane shapes in SUMO's coordinates, internal
+(junction) lanes and pedestrian crossings included, served once per connection (/api/net).
+`surroundings` reads, at frame time only, every other vehicle and person within VIEW_RADIUS of
+the ego from the running simulation: background traffic, and the incidents' SUMO objects (ids
+"inc<road index>.<role>": the obstacle, the oncoming vehicle, the parked truck, the pedestrian).
+Reading changes nothing in the simulation.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+from pathlib import Path
+
+VIEW_RADIUS = 150.0   # metres around the ego that a frame describes
+INCIDENT_PREFIX = "inc"
+
+
+@lru_cache(maxsize=4)
+def net_view(net_path: str) -> dict:
+    """{"lanes": [{"id", "width", "internal", "shape": [[x, y], ...]}], "junctions": {id: [x, y]},
+    "bounds": [x0, y0, x1, y1]} (junctions: the town's, the ends of its roads)."""
+    import sumolib
+
+    net = sumolib.net.readNet(str(Path(net_path)), withInternal=True, withPedestrianConnections=True)
+    lanes = []
+    for edge in net.getEdges(withInternal=True):
+        for lane in edge.getLanes():
+            lanes.append({"id": lane.getID(), "width": round(lane.getWidth(), 2),
+                          "internal": edge.getFunction() != "",
+                          "shape": [[round(x, 2), round(y, 2)] for x, y in lane.getShape()]})
+    junctions = {node.getID(): [round(c, 2) for c in node.getCoord()] for node in net.getNodes()
+                 if node.getType() != "internal"}
+    (x0, y0), (x1, y1) = net.getBBoxXY()
+    return {"lanes": lanes, "junctions": junctions, "bounds": [x0, y0, x1, y1]}
+
+
+def next_junction(road: str) -> str | None:
+    """The junction at the end of a town road ("A-B" -> "B"); None inside a junction."""
+    return None if road.startswith(":") or "-" not in road else road.rsplit("-", 1)[1]
+
+
+def role(sumo_id: str) -> str:
+    """What an object is to the participant: an incident object's role, or "traffic"."""
+    if sumo_id.startswith(INCIDENT_PREFIX) and "." in sumo_id:
+        return sumo_id.split(".", 1)[1]
+    return "traffic"
+
+
+def surroundings(sumo, ego_id: str, x: float, y: float) -> dict:
+    """{"vehicles": [[x, y, angle, kind]], "persons": [[x, y, kind]]} within VIEW_RADIUS of (x, y);
+    kind is an incident object's role ("obstacle", "oncoming", "parked", "pedestrian"), else
+    "traffic"."""
+    vehicles, persons = [], []
+    for vehicle in sumo.vehicle.getIDList():
+        if vehicle == ego_id:
+            continue
+        vx, vy = sumo.vehicle.getPosition(vehicle)
+        if math.hypot(vx - x, vy - y) <= VIEW_RADIUS:
+            angle = round(sumo.vehicle.getAngle(vehicle), 1)
+            vehicles.append([round(vx, 2), round(vy, 2), angle, role(vehicle)])
+    for person in sumo.person.getIDList():
+        px, py = sumo.person.getPosition(person)
+        if math.hypot(px - x, py - y) <= VIEW_RADIUS:
+            persons.append([round(px, 2), round(py, 2), role(person)])
+    return {"vehicles": vehicles, "persons": persons}

@@ -1,0 +1,240 @@
+"""One live episode in its own process: the study's episode code on SUMO, with a remote person.
+
+libsumo runs one simulation per process, so every live episode is a process of its own
+(`start_episode_process`, multiprocessing "spawn": nothing of the server's threads is inherited).
+It runs `run_planned_episode` (harness/study/runner.py) exactly as a headless study does (same
+setup, policy, SUMO config, seed, EpisodeTracker) with a `RemoteDriver` in place of the synthetic
+driver. The driver protocol is the seam (harness/simulation/episode.py):
+
+- `takeover_request(now)`, asked every step: the person's takeover (True) or hand-back (False);
+- `decides_takeover(kind)`, asked when an incident comes into view: False (a person's takeover
+  comes through takeover_request); the view event is sent to the participant. In lockstep (the
+  scripted participant only) the episode waits for its answer, `takeover` or `pass`, and
+  `report_trust` for the report a prompt asks for: the episode then runs as a headless one does;
+- `move_trust(...)`, when a road's observation closes: the road's event (incident, takeover,
+  performance) is sent; the trust it returns is the person's latest report (their stated trust:
+  the roads table's trust columns; the policy never reads them);
+- `report_trust()`: the latest report since the last road that asked for one, or None.
+
+The observer paces the simulation against the wall clock (`pace` sim seconds per wall second),
+reads the person's controls from the pipe, pauses while the server says so, and streams frames.
+It also keeps the rule of the paper's study, the person hands back before the next junction: a
+person still in control WARN_DISTANCE before the road's end is warned, and the ego brakes to wait
+short of the commit point until the hand-back (`hold_for_hand_back`).
+The part is written atomically by this process (harness/study/parts.py), its summary marked with
+who drove and every control the person sent.
+"""
+
+from __future__ import annotations
+
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+from trustroute.harness.live.view import next_junction, surroundings
+from trustroute.harness.simulation.driving_style import MANUAL
+from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID
+
+PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
+WARN_DISTANCE = 100.0      # metres before the road's end: a person in control is told to hand back
+HOLD_MARGIN = 5.0          # metres before the commit point where the ego waits for the hand-back
+
+
+class EpisodeAborted(Exception):
+    """The experimenter aborted the episode: no part is written."""
+
+
+@dataclass(frozen=True)
+class LiveOptions:
+    pace: float = 1.0            # sim seconds per wall second (1.0: real time; tests use >> 1)
+    frame_rate: float = 25.0     # frames streamed per wall second at most
+    client: str = "station"      # who drives: "station" (a person) or "scripted"
+    report_every: int = 1        # the study's report_every: roads whose end prompts for a report
+    lockstep: bool = False       # scripted only: the episode waits for its reply to every decision
+
+
+class RemoteDriver:
+    """The driver of a live episode: a person (or the scripted participant) across a pipe."""
+
+    def __init__(self, connection, trust_levels: tuple[int, ...], initial_trust: int | None,
+                 options: LiveOptions, clock=time.monotonic) -> None:
+        self.connection = connection
+        self.levels = tuple(int(level) for level in trust_levels)
+        middle = self.levels[len(self.levels) // 2]
+        self._trust = initial_trust if initial_trust in self.levels else middle
+        self.options = options
+        self.clock = clock
+        self._request: bool | None = None
+        self._report: int | None = None
+        self.roads = 0
+        self.events: list[dict] = []       # every control received: (sim time, wall time, what)
+        self.paused = False
+        self.mode = "auto"
+        self.sim_now = 0.0
+        self.origin = (clock(), 0.0)       # (wall, sim) the pace is measured from
+        self.last_frame = -float("inf")
+        self.warned: str | None = None     # the road whose hand-back warning was sent
+        self.holding = False               # the ego waits for the hand-back
+        self.lengths: dict[str, float] = {}
+
+    # -- the driver protocol (harness/simulation/episode.py) ------------------------------------
+    @property
+    def trust(self) -> int:
+        return self._trust
+
+    def takeover_request(self, now: float) -> bool | None:
+        request, self._request = self._request, None
+        return request
+
+    def decides_takeover(self, incident: str) -> bool:
+        self.send({"type": "incident", "kind": incident, "t": self.sim_now})
+        if self.options.lockstep:
+            return self.await_reply(("takeover", "pass"))["type"] == "takeover"
+        return False
+
+    def move_trust(self, incident: str, took_over: bool, performance: str = "succ") -> int:
+        self.roads += 1
+        self.send({"type": "road", "index": self.roads, "incident": incident, "takeover": bool(took_over),
+                   "performance": performance, "t": self.sim_now,
+                   "prompt": self.roads % self.options.report_every == 0})
+        return self._trust
+
+    def report_trust(self) -> int | None:
+        if self.options.lockstep and self._report is None:
+            self.apply(self.await_reply(("trust",)), logged=True)
+        report, self._report = self._report, None
+        return report
+
+    # -- controls from the server ---------------------------------------------------------------
+    def send(self, message: dict) -> None:
+        self.connection.send(message)
+
+    def await_reply(self, wanted: tuple[str, ...]) -> dict:
+        """Lockstep: the participant's reply to the event just sent, the simulation standing still
+        meanwhile (other controls are applied as they come)."""
+        while True:
+            control = self.connection.recv()
+            if control.get("type") in wanted:
+                self.events.append({"t": self.sim_now, "wall": time.time(), **control})
+                return control
+            self.apply(control)
+
+    def apply(self, control: dict, logged: bool = False) -> None:
+        kind = control.get("type")
+        if not logged:
+            self.events.append({"t": self.sim_now, "wall": time.time(), **control})
+        if kind == "takeover":
+            self._request = True
+        elif kind == "hand_back":
+            self._request = False
+        elif kind == "trust" and int(control["value"]) in self.levels:
+            self._trust = self._report = int(control["value"])
+        elif kind == "pause":
+            self.paused = True
+        elif kind == "resume":
+            self.paused = False
+            self.origin = (self.clock(), self.sim_now)
+        elif kind == "abort":
+            raise EpisodeAborted(str(control.get("reason", "aborted")))
+
+    def read_controls(self, timeout: float) -> None:
+        while self.connection.poll(timeout):
+            self.apply(self.connection.recv())
+            timeout = 0.0
+
+    def observe(self, sumo, ego, mode: str, road: str) -> None:
+        """Every step: the mode change and the frame out, controls in, the pace, a pause."""
+        self.sim_now = ego.time
+        if mode != self.mode:
+            self.mode = mode
+            self.send({"type": "mode", "mode": mode, "t": ego.time})
+        wall = self.clock()
+        if wall - self.last_frame >= 1.0 / self.options.frame_rate:
+            self.last_frame = wall
+            self.send({"type": "frame", "t": ego.time, "x": ego.x, "y": ego.y, "angle": ego.angle,
+                       "speed": ego.speed, "road": road, "lane": ego.lane, "mode": mode,
+                       "junction": next_junction(road),
+                       **surroundings(sumo, EGO_ID, ego.x, ego.y)})
+        self.read_controls(0.0)
+        self.hold_for_hand_back(sumo, ego, mode, road)
+        while True:   # wait for the wall clock (pace), and while paused
+            wait = PIPE_POLL_SECONDS
+            if not self.paused:
+                remaining = self.origin[0] + (ego.time - self.origin[1]) / self.options.pace - self.clock()
+                if remaining <= 0:
+                    return
+                wait = min(wait, remaining)
+            self.read_controls(wait)
+
+
+    def hold_for_hand_back(self, sumo, ego, mode: str, road: str) -> None:
+        """Warn a person still in control near the road's end; brake to wait short of the commit
+        point until they hand back; release the ego on the hand-back."""
+        if self.options.lockstep:
+            return   # as in simulated studies: the episode hands back at the commit point
+        if mode != MANUAL.name or ego.road != road:
+            if self.holding and mode != MANUAL.name:
+                sumo.vehicle.setSpeed(EGO_ID, -1.0)   # back to the autopilot's own speed
+                self.holding = False
+            return
+        if ego.lane not in self.lengths:
+            self.lengths[ego.lane] = sumo.lane.getLength(ego.lane)
+        remaining = self.lengths[ego.lane] - ego.lane_position
+        if remaining <= WARN_DISTANCE and self.warned != road:
+            self.warned = road
+            self.send({"type": "warning", "kind": "hand_back", "distance": round(remaining, 1),
+                       "t": ego.time})
+        braking = ego.speed * ego.speed / (2.0 * MANUAL.decel) + ego.speed
+        if not self.holding and remaining <= COMMIT_DISTANCE + HOLD_MARGIN + braking:
+            sumo.vehicle.setSpeed(EGO_ID, 0.0)
+            self.holding = True
+
+
+def live_summary(summary: dict, driver: RemoteDriver) -> dict:
+    """The episode summary with the live marks: who drove, and every control they sent."""
+    return {**summary, "live": {"driver": "person" if driver.options.client == "station" else "scripted",
+                                "pace": driver.options.pace, "events": driver.events}}
+
+
+def episode_worker(config, study_dir: str, task, connection, options: LiveOptions,
+                   initial_trust: int | None, server_pid: int) -> None:
+    """The worker process's main: run the episode, write its part, say how it ended."""
+    from trustroute.harness.study.context import study_context
+    from trustroute.harness.study.parts import write_part_tables
+    from trustroute.harness.study.runner import run_planned_episode
+    from trustroute.harness.study.workers import die_with_parent
+
+    die_with_parent(server_pid)   # a killed server leaves no episode running
+    try:
+        levels = study_context(config).driver_model(task.participant).trust_levels
+        driver = RemoteDriver(connection, levels, initial_trust, options)
+        connection.send({"type": "episode_start", "episode_id": task.episode_id, "trust": driver.trust})
+        record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
+        write_part_tables(Path(study_dir), task, live_summary(record.summary, driver), record.tables(),
+                          sync=True)
+        summary = record.summary
+        connection.send({"type": "episode_end", "episode_id": task.episode_id,
+                         "satisfied": bool(summary["satisfied"]), "end_reason": summary["end_reason"],
+                         "junctions": int(summary["junctions"]), "takeovers": int(summary["takeovers"])})
+    except EpisodeAborted as exc:
+        connection.send({"type": "episode_aborted", "episode_id": task.episode_id, "reason": str(exc)})
+    except Exception as exc:  # the server must learn why; the trial stays to be run again
+        connection.send({"type": "episode_failed", "episode_id": task.episode_id,
+                         "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()})
+    finally:
+        connection.close()
+
+
+def start_episode_process(config, study_dir: Path, task, options: LiveOptions, initial_trust: int | None):
+    """(process, parent end of its pipe) of a started episode worker."""
+    import multiprocessing
+    import os
+
+    context = multiprocessing.get_context("spawn")
+    parent, child = context.Pipe()
+    process = context.Process(target=episode_worker, name=f"live-{task.episode_id}", daemon=True,
+                              args=(config, str(study_dir), task, child, options, initial_trust, os.getpid()))
+    process.start()
+    child.close()
+    return process, parent

@@ -1,0 +1,126 @@
+"""A server killed (SIGKILL) in the middle of an episode loses no finished episode: its episode
+process dies with it, and a restarted server continues the participant at the interrupted trial
+without a duplicated row."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+from websockets.exceptions import ConnectionClosed
+
+from trustroute.core.dataset import part_path, read_episodes, read_roads
+from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
+from trustroute.harness.study.plan import plan_episodes
+
+from .conftest import tiny_config
+from .test_live_episode import free_port
+
+pytestmark = pytest.mark.slow
+
+
+def start_server(config_path: str, study_dir: Path, pace: float) -> tuple[subprocess.Popen, str, str]:
+    """(process, address, experimenter token) of `trustroute live` once it serves."""
+    port = free_port()
+    command = [sys.executable, "-m", "trustroute.harness.cli", "live", config_path, "--out", str(study_dir),
+               "--port", str(port), "--pace", str(pace)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    token = ""
+    for line in process.stdout:
+        if line.startswith("experimenter token: "):
+            token = line.split(": ", 1)[1].strip()
+            break
+    assert token, "the server printed no token"
+    address = f"127.0.0.1:{port}"
+    deadline = time.monotonic() + 60
+    while True:
+        try:
+            httpx.get(f"http://{address}/api/participants", timeout=2)
+            return process, address, token
+        except httpx.TransportError:
+            assert time.monotonic() < deadline and process.poll() is None, "the server did not start"
+            time.sleep(0.1)
+
+
+def children(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                found.append(int(entry.name))
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def play_until_the_server_dies(url: str, token: str, participant: ScriptedParticipant) -> None:
+    with pytest.raises((ConnectionClosed, OSError)):   # the connection breaks when the server is killed
+        run_scripted(url, token, participant, 120)
+
+
+def test_sigkill_mid_episode_then_restart_continues_at_the_interrupted_trial(tmp_path):
+    config = tiny_config(tmp_path, participants=1, specs=("phi1", "phi2"))
+    study_dir = tmp_path / "study"
+    first, second = sorted(plan_episodes(config), key=lambda t: t.position)
+    server, address, token = start_server(config.source_path, study_dir, pace=10.0)
+    try:
+        headers = {"Authorization": f"Bearer {token}"}
+        created = httpx.post(f"http://{address}/api/participants", json={}, headers=headers)
+        participant = created.json()["token"]
+        player = threading.Thread(target=play_until_the_server_dies, daemon=True,
+                                  args=(f"ws://{address}/ws", participant, ScriptedParticipant(config, 0)))
+        player.start()
+        deadline = time.monotonic() + 120
+        while True:
+            progress = httpx.get(f"http://{address}/api/participants/0", headers=headers).json()
+            if progress["done"] == [first.episode_id] and progress["phase"] == "driving":
+                break
+            assert time.monotonic() < deadline, progress
+            time.sleep(0.05)
+        workers = children(server.pid)
+        assert workers, "the episode runs in a process of its own"
+        server.send_signal(signal.SIGKILL)
+        server.wait(10)
+    finally:
+        if server.poll() is None:
+            server.kill()
+    deadline = time.monotonic() + 10
+    while any(alive(pid) for pid in workers):   # the episode process dies with its server
+        assert time.monotonic() < deadline, "an episode process outlived its server"
+        time.sleep(0.05)
+    player.join(30)
+    assert part_path(study_dir, first.episode_id).exists()
+    assert not part_path(study_dir, second.episode_id).exists()
+
+    server, address, token = start_server(config.source_path, study_dir, pace=1000.0)
+    try:
+        progress = httpx.get(f"http://{address}/api/participants/0",
+                             headers={"Authorization": f"Bearer {token}"}).json()
+        assert progress["phase"] == "ready" and progress["warm_up"] == "done"   # consent and warm-up hold
+        assert progress["done"] == [first.episode_id] and progress["next_episode"] == second.episode_id
+        played = run_scripted(f"ws://{address}/ws", participant, ScriptedParticipant(config, 0), 120)
+        assert [e["episode_id"] for e in played.episodes] == [second.episode_id]
+    finally:
+        os.kill(server.pid, signal.SIGTERM)
+        server.wait(30)
+    episodes, roads = read_episodes(study_dir), read_roads(study_dir)
+    assert sorted(episodes["episode_id"]) == sorted([first.episode_id, second.episode_id])
+    assert not roads.duplicated(["episode_id", "index"]).any()
+    assert len(roads) == int(episodes["junctions"].sum()) + len(episodes)

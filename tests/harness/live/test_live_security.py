@@ -1,0 +1,241 @@
+"""Who may do what on a live study, and what bad input does: nothing, but an error reply."""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+import time
+
+import pytest
+from fastapi.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
+
+from trustroute.core.errors import InputError
+from trustroute.harness.live.app import POLICY_VIOLATION, live_app
+from trustroute.harness.live.protocol import BURST, MAX_BODY_BYTES, MAX_MESSAGE_BYTES
+from trustroute.harness.live.server import LiveStudy, ServerOptions
+
+from .conftest import tiny_config
+
+
+def bearer(token: str) -> dict:
+    return {"Authorization": f"Bearer {token}"}
+
+
+@pytest.fixture
+def client(live_study):
+    with TestClient(live_app(live_study)) as test_client:
+        yield test_client
+
+
+def create(client, study, label: str = "") -> str:
+    headers = bearer(study.experimenter_token)
+    response = client.post("/api/participants", json={"label": label}, headers=headers)
+    assert response.status_code == 200, response.text
+    return response.json()["token"]
+
+
+def test_a_foreign_token_is_refused(client, live_study):
+    first, second = create(client, live_study, "one"), create(client, live_study, "two")
+    foreign = secrets.token_urlsafe(32)
+    assert client.get("/api/participants").status_code == 401
+    for token in (foreign, first):   # neither a stranger nor a participant reaches the console's API
+        headers = bearer(token)
+        assert client.get("/api/participants", headers=headers).status_code == 403
+        assert client.get("/api/files", headers=headers).status_code == 403
+        assert client.get("/api/download/study.json", headers=headers).status_code == 403
+        assert client.post("/api/participants", json={}, headers=headers).status_code == 403
+        assert client.post("/api/participants/0/control", json={"action": "pause"},
+                           headers=headers).status_code == 403
+    # a participant reads their own session only
+    assert client.get("/api/participants/0", headers=bearer(first)).status_code == 200
+    assert client.get("/api/participants/1", headers=bearer(first)).status_code == 403
+    assert client.get("/api/participants/0", headers=bearer(second)).status_code == 403
+    assert client.get("/api/me", headers=bearer(foreign)).status_code == 403
+    assert client.get("/api/me", headers=bearer(second)).json()["participant"] == 1
+    assert client.get(f"/p/{foreign}", follow_redirects=False).status_code == 403
+    assert client.get(f"/login?token={foreign}", follow_redirects=False).status_code == 403
+    with pytest.raises(WebSocketDisconnect) as closed:
+        with client.websocket_connect("/ws", headers=bearer(foreign)):
+            pass
+    assert closed.value.code == POLICY_VIOLATION
+    # the websocket acts on the session the token names
+    with client.websocket_connect("/ws", headers=bearer(second)) as socket:
+        assert socket.receive_json()["participant"] == 1
+
+
+def test_links_set_httponly_cookies_that_authenticate(client, live_study):
+    token = create(client, live_study)
+    response = client.get(f"/p/{token}", follow_redirects=False)
+    assert response.status_code == 303 and response.headers["location"] == "/station"
+    cookie = response.headers["set-cookie"]
+    assert "HttpOnly" in cookie and "samesite=strict" in cookie.lower() and "secure" not in cookie.lower()
+    assert client.get("/api/me").json()["participant"] == 0   # the cookie alone now authenticates
+    login = client.get(f"/login?token={live_study.experimenter_token}", follow_redirects=False)
+    assert login.status_code == 303 and "HttpOnly" in login.headers["set-cookie"]
+    assert client.get("/api/participants").status_code == 200
+
+
+def test_secure_cookies_for_studies_served_over_https(tmp_path):
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions(secure_cookies=True)).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            response = client.get(f"/login?token={study.experimenter_token}", follow_redirects=False)
+            assert "secure" in response.headers["set-cookie"].lower()
+    finally:
+        study.close()
+
+
+def test_tokens_are_stored_only_as_digests(client, live_study):
+    token = create(client, live_study)
+    registry = live_study.registry_path().read_text()
+    assert token not in registry and live_study.experimenter_token not in registry
+    assert len(token) >= 40
+
+
+def test_a_path_traversal_download_is_refused(client, live_study, tmp_path):
+    headers = bearer(live_study.experimenter_token)
+    ok = client.get("/api/download/study.json", headers=headers)
+    assert ok.status_code == 200 and ok.content == (live_study.study_dir / "study.json").read_bytes()
+    secret = tmp_path / "secret.txt"
+    secret.write_text("outside")
+    os.symlink(secret, live_study.study_dir / "leak.txt")                        # a symlink out
+    os.symlink(live_study.study_dir / "study.json", live_study.study_dir / "alias.json")  # and one within
+    for path in ("..%2Fsecret.txt", "%2e%2e/secret.txt", "parts/..%2F..%2Fsecret.txt", "%2Fetc%2Fpasswd",
+                 "leak.txt", "alias.json", "parts", "nothing.json", "study.json%00.txt"):
+        response = client.get(f"/api/download/{path}", headers=headers)
+        assert response.status_code == 404, path
+        assert b"outside" not in response.content
+    for relative in ("../secret.txt", "/etc/passwd", "leak.txt", "alias.json", "parts/../../x",
+                     "a\\..\\b", ""):
+        with pytest.raises(ValueError):
+            live_study.download_path(relative)
+    assert "leak.txt" not in client.get("/api/files", headers=headers).json()["files"]
+
+
+def state_of(client, study) -> dict:
+    return client.get("/api/participants", headers=bearer(study.experimenter_token)).json()
+
+
+def test_malformed_oversized_and_out_of_order_messages_get_errors_and_change_nothing(client, live_study):
+    token = create(client, live_study)
+    before, registry = state_of(client, live_study), live_study.registry_path().read_bytes()
+    with client.websocket_connect("/ws", headers=bearer(token)) as socket:
+        assert socket.receive_json()["type"] == "welcome"
+        assert socket.receive_json()["phase"] == "consent"
+        cases = [("not json", "malformed"), ('{"type": "trust", "value": 9}', "malformed"),
+                 ('{"type": "trust", "value": "5"}', "malformed"), ('{"type": "warp"}', "malformed"),
+                 ('{"type": "consent", "agree": true, "admin": true}', "malformed"),
+                 ('{"type": "consent", "agree": false}', "malformed"),
+                 (json.dumps({"type": "ping", "pad": "x" * MAX_MESSAGE_BYTES}), "oversized"),
+                 ('{"type": "takeover"}', "out_of_order"), ('{"type": "hand_back"}', "out_of_order"),
+                 ('{"type": "start"}', "out_of_order"), ('{"type": "trust", "value": 4}', "out_of_order"),
+                 ('{"type": "resume"}', "out_of_order"), ('{"type": "pass"}', "out_of_order"),
+                 ('{"type": "consent", "agree": true, "lockstep": true}', "malformed")]
+        for raw, code in cases:
+            socket.send_text(raw)
+            reply = socket.receive_json()
+            assert (reply["type"], reply["code"]) == ("error", code), raw
+        socket.send_bytes(b"\xff\xfe")
+        assert socket.receive_json()["code"] == "malformed"
+    assert state_of(client, live_study) == before
+    assert live_study.registry_path().read_bytes() == registry
+    assert not (live_study.study_dir / "parts").exists()
+
+
+def test_a_flood_is_rate_limited_and_changes_nothing(client, live_study):
+    token = create(client, live_study)
+    before = state_of(client, live_study)
+    with client.websocket_connect("/ws", headers=bearer(token)) as socket:
+        socket.receive_json(), socket.receive_json()
+        flood = 3 * BURST
+        for _ in range(flood):
+            socket.send_text('{"type": "takeover"}')
+        replies = [socket.receive_json() for _ in range(flood)]
+        codes = [reply.get("code") for reply in replies]
+        assert codes.count("rate_limited") >= flood - BURST - 5
+        assert set(codes) <= {"rate_limited", "out_of_order"}
+        time.sleep(0.5)   # the bucket refills: the connection is usable again
+        socket.send_text('{"type": "ping"}')
+        assert socket.receive_json() == {"type": "pong"}
+    assert state_of(client, live_study) == before
+
+
+def test_bad_http_bodies_get_errors_and_change_nothing(client, live_study):
+    headers = bearer(live_study.experimenter_token)
+    create(client, live_study)
+    before = state_of(client, live_study)
+    big = client.post("/api/participants", content=json.dumps({"label": "x" * MAX_BODY_BYTES}),
+                      headers={**headers, "content-type": "application/json"})
+    assert big.status_code == 413 and big.json()["code"] == "oversized"
+    for body in ("{", '{"label": 5}', '{"label": "a", "admin": true}', '{"label": "<script>"}'):
+        response = client.post("/api/participants", content=body,
+                               headers={**headers, "content-type": "application/json"})
+        assert response.status_code == 422 and response.json()["code"] == "malformed", body
+    assert client.post("/api/participants/0/control", json={"action": "explode"},
+                       headers=headers).status_code == 422
+    response = client.post("/api/participants/0/control", json={"action": "pause"}, headers=headers)
+    assert response.status_code == 409 and response.json()["detail"]["code"] == "out_of_order"
+    unknown = client.post("/api/participants/7/control", json={"action": "pause"}, headers=headers)
+    assert unknown.status_code == 404
+    assert state_of(client, live_study) == before
+
+
+def test_all_planned_participants_then_no_more(client, live_study):
+    create(client, live_study), create(client, live_study)
+    response = client.post("/api/participants", json={}, headers=bearer(live_study.experimenter_token))
+    assert response.status_code == 409
+    assert len(state_of(client, live_study)["participants"]) == 2
+
+
+def test_two_servers_on_one_study_directory_are_refused(live_study, tmp_path):
+    second = LiveStudy(live_study.config, live_study.study_dir, ServerOptions())
+    with pytest.raises(InputError, match="in use"):
+        second.open()
+
+
+def test_a_config_of_another_engine_is_refused(tmp_path):
+    config = tiny_config(tmp_path).with_overrides(engine="sumo")
+    with pytest.raises(InputError, match="live"):
+        LiveStudy(config, tmp_path / "study")
+
+
+def test_trustroute_study_refuses_a_live_config(tmp_path):
+    from trustroute.harness.study.runner import run_and_consolidate
+
+    with pytest.raises(InputError, match="trustroute live"):
+        run_and_consolidate(tiny_config(tmp_path), tmp_path / "study", 1, None, progress=False)
+    assert not (tmp_path / "study").exists()
+
+
+def test_the_pages_need_their_token_and_carry_the_security_headers(client, live_study):
+    token = create(client, live_study)
+    assert client.get("/console").status_code == 401
+    assert client.get("/console", headers=bearer(token)).status_code == 403
+    assert client.get("/station").status_code == 403
+    assert client.get("/station", headers=bearer(secrets.token_urlsafe(32))).status_code == 403
+    console = client.get("/console", headers=bearer(live_study.experimenter_token))
+    station = client.get("/station", headers=bearer(token))
+    assert console.status_code == station.status_code == 200
+    assert "experimenter console" in console.text and "/static/station.js" in station.text
+    for name in ("live.css", "console.js", "station.js"):
+        assert client.get(f"/static/{name}").status_code == 200
+    for name in ("..%2Fserver.py", "app.py", "console.html"):
+        assert client.get(f"/static/{name}").status_code == 404
+    for response in (console, station, client.get("/api/participants")):
+        assert response.headers["x-frame-options"] == "DENY"
+        assert response.headers["referrer-policy"] == "no-referrer"
+        assert "default-src 'self'" in response.headers["content-security-policy"]
+        assert "unsafe-inline" not in response.headers["content-security-policy"]
+
+
+def test_the_net_view_is_for_participants_and_the_experimenter(client, live_study):
+    token = create(client, live_study)
+    assert client.get("/api/net").status_code == 403
+    assert client.get("/api/net", headers=bearer(secrets.token_urlsafe(32))).status_code == 403
+    view = client.get("/api/net", headers=bearer(token)).json()
+    assert client.get("/api/net", headers=bearer(live_study.experimenter_token)).json() == view
+    roads = {lane["id"].rsplit("_", 1)[0] for lane in view["lanes"] if not lane["internal"]}
+    assert {"E-A", "A-B"} <= roads and all(len(lane["shape"]) >= 2 for lane in view["lanes"])
+    assert {"A", "B", "E"} <= set(view["junctions"])

@@ -1,0 +1,141 @@
+"""The remote driver in the study's episode code (in this process, on libsumo): a person's takeover
+reaches SUMO and the logs, and the tracker decides exactly as it does for the same observations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trustroute.harness.live.view import next_junction, role
+from trustroute.harness.live.worker import EpisodeAborted, LiveOptions, RemoteDriver, live_summary
+from trustroute.harness.simulation.episode_tracker import EpisodeTracker
+from trustroute.harness.study.context import study_context
+from trustroute.harness.study.plan import plan_episodes
+from trustroute.harness.study.runner import run_planned_episode
+
+from .conftest import tiny_config
+
+pytestmark = pytest.mark.slow
+
+
+class Pipe:
+    """The worker's end of the pipe: controls queued in advance, messages sent kept."""
+
+    def __init__(self, controls=(), hand_back_when_warned: bool = True) -> None:
+        self.controls, self.sent = list(controls), []
+        self.hand_back_when_warned = hand_back_when_warned
+
+    def send(self, message: dict) -> None:
+        self.sent.append(message)
+        if message["type"] == "warning" and self.hand_back_when_warned:
+            self.controls.append({"type": "hand_back"})
+
+    def poll(self, timeout: float = 0.0) -> bool:
+        return bool(self.controls)
+
+    def recv(self) -> dict:
+        return self.controls.pop(0)
+
+
+def live_episode(tmp_path, controls):
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    pipe = Pipe(controls)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"))
+    record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
+    return config, task, driver, pipe, record
+
+
+def test_a_takeover_from_the_pipe_reaches_sumo_and_the_logs(tmp_path):
+    config, task, driver, pipe, record = live_episode(
+        tmp_path, [{"type": "takeover"}, {"type": "trust", "value": 3}])
+    roads = record.roads
+    assert bool(roads["takeover"].iloc[1]) is True       # the first road after the start
+    assert roads["reported_trust"].dropna().tolist() == [3]
+    assert int(roads["trust_before"].iloc[0]) == 5        # the trust stated at the start
+    assert "manual" in set(record.kinematics["mode"])
+    incidents = record.incidents
+    assert bool(incidents["takeover"].iloc[0]) and not np.isnan(incidents["takeover_start"].iloc[0])
+    frames = [m for m in pipe.sent if m["type"] == "frame"]
+    assert frames and all(isinstance(f["vehicles"], list) and isinstance(f["persons"], list) for f in frames)
+    assert {f["junction"] for f in frames} - {None} <= {road.split("-")[1] for road in roads["directed_road"]}
+    assert all(m["prompt"] for m in pipe.sent if m["type"] == "road")   # report_every = 1
+    kinds = [m["type"] for m in pipe.sent]
+    assert "frame" in kinds and kinds.count("road") == len(roads) - 1
+    assert [m["mode"] for m in pipe.sent if m["type"] == "mode"][:2] == ["manual", "auto"]
+    summary = live_summary(record.summary, driver)
+    assert summary["live"]["driver"] == "scripted"
+    assert [e["type"] for e in summary["live"]["events"]] == ["takeover", "trust", "hand_back"]
+    # warned before the junction, the person handed back before the road's observation closed
+    (warning,) = [m for m in pipe.sent if m["type"] == "warning"]
+    back = [m for m in pipe.sent if m["type"] == "mode"][1]
+    first_road = next(m for m in pipe.sent if m["type"] == "road")
+    assert warning["t"] <= back["t"] < first_road["t"]
+
+
+def test_without_a_hand_back_the_ego_waits_short_of_the_junction(tmp_path):
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([{"type": "takeover"}], hand_back_when_warned=False)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6))
+    waited = []
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        if driver.holding and ego.speed == 0.0:
+            waited.append(ego.time)
+            if len(waited) == 40:   # 20 s of simulated time standing: the person hands back now
+                pipe.controls.append({"type": "hand_back"})
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe)
+    assert len(waited) >= 40 and not driver.holding
+    incidents = record.incidents
+    assert incidents["takeover_end"].iloc[0] >= waited[39]   # handed back by the person, after waiting
+
+
+
+def test_the_tracker_decides_as_for_the_same_observations_headless(tmp_path):
+    """Replaying the live episode's observations through the shared EpisodeTracker gives the very
+    junctions, beliefs and DFA states the live episode logged."""
+    config, task, driver, pipe, record = live_episode(tmp_path, [{"type": "takeover"}])
+    context = study_context(config)
+    cell = (task.spec, task.condition)
+    tracker = EpisodeTracker(context.setup(*cell), context.policies[cell], task.episode_id, initial_trust=5)
+    rows = record.roads.to_dict("records")
+    for row in rows[1:]:
+        tracker.next_junction()
+        tracker.record_road(row["directed_road"], row["incident"], bool(row["takeover"]), row["performance"],
+                            5, 5, None, row["sim_time_in"], row["sim_time_out"])
+    tracker.next_junction()
+    replayed = tracker.roads_frame()
+    for column in ("directed_road", "action", "belief_after", "dfa_state"):
+        assert [str(v) for v in replayed[column]] == [str(v) for v in record.roads[column]], column
+
+
+def test_an_abort_stops_the_episode(tmp_path):
+    with pytest.raises(EpisodeAborted):
+        live_episode(tmp_path, [{"type": "abort"}])
+
+
+def test_the_next_junction_is_the_end_of_the_road():
+    assert [next_junction(r) for r in ("A-B", "E-A", ":B_3", "")] == ["B", "A", None, None]
+
+
+def test_what_the_view_calls_each_object():
+    assert [role(i) for i in ("inc3.obstacle", "inc2.pedestrian", "inc4.oncoming", "bg7", "ego")] == [
+        "obstacle", "pedestrian", "oncoming", "traffic", "traffic"]
+
+
+def test_road_events_prompt_every_report_every_roads_and_reports_wait_for_them():
+    pipe = Pipe()
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), None, LiveOptions(report_every=2))
+    assert driver.trust == 4                    # no trust stated: the middle level
+    driver.apply({"type": "trust", "value": 6})
+    assert driver.move_trust("none", False, "succ") == 6
+    driver.move_trust("truck", True, "fail")
+    assert [m["prompt"] for m in pipe.sent] == [False, True]
+    assert driver.report_trust() == 6 and driver.report_trust() is None   # each report is given once
+    driver.apply({"type": "takeover"})
+    assert driver.takeover_request(1.0) is True and driver.takeover_request(1.5) is None
+    driver.apply({"type": "hand_back"})
+    assert driver.takeover_request(2.0) is False
