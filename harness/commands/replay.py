@@ -1,4 +1,5 @@
-"""`trustroute replay`: re-run one episode of a finished study exactly, check it, record it."""
+"""`trustroute replay`: re-run one episode of a finished study exactly, check it, record it; or
+re-draw a live study's episode from its log (harness/live/replay.py)."""
 
 from __future__ import annotations
 
@@ -34,11 +35,15 @@ def viewer_hint(rrd: Path) -> str:
 def replay(
     study_dir: str, episode_id: str, rrd_path: str | None, no_rrd: bool, gui: bool, as_json: bool
 ) -> None:
-    """Re-run EPISODE_ID of STUDY_DIR from its seeds and population draws; fail if it differs."""
+    """Re-run EPISODE_ID of STUDY_DIR from its seeds and population draws; fail if it differs.
+    A live study's episode is re-drawn from its log instead (a person is not re-simulated)."""
     from trustroute.harness.study.replay import replay_episode, study_config_from_manifest
     from trustroute.harness.study.runner import recording_path
 
     config, _ = study_config_from_manifest(Path(study_dir))
+    if config.engine == "live":
+        draw_live(Path(study_dir), episode_id, rrd_path, no_rrd, as_json)
+        return
     rrd = Path(rrd_path) if rrd_path and not no_rrd else None   # model study: an error naming the engine
     if not no_rrd and config.engine == "sumo" and rrd is None:
         rrd = recording_path(Path(study_dir), episode_id)
@@ -70,3 +75,27 @@ def replay(
         click.echo(f"no recording written: {no_recording}")
     if rrd:
         click.echo(f"wrote {rrd} ({payload['rrd_bytes'] / 1000:.0f} kB); {viewer_hint(rrd)}")
+
+
+def draw_live(study_dir: Path, episode_id: str, rrd_path: str | None, no_rrd: bool, as_json: bool) -> None:
+    """The recording of a live episode, drawn from its log."""
+    from trustroute.core.errors import InputError
+    from trustroute.harness.live.replay import draw_live_episode
+    from trustroute.harness.study.runner import recording_path
+
+    if no_rrd:
+        raise InputError("--no-rrd", "", "a live episode's replay is its recording, drawn from the log",
+                         "replay it without --no-rrd")
+    rrd = Path(rrd_path) if rrd_path else recording_path(study_dir, episode_id)
+    record = draw_live_episode(study_dir, episode_id, rrd)
+    roads = record.roads
+    payload = {"episode_id": episode_id, "reproduced": False, "drawn_from_log": True, "roads": len(roads),
+               "route": roads["directed_road"].tolist(), "ticks": len(record.kinematics), "rrd": str(rrd),
+               "rrd_bytes": rrd.stat().st_size}
+    if as_json:
+        click.echo(json.dumps(payload))
+        return
+    click.echo(f"{episode_id}: a live episode, drawn from its log ({len(roads)} roads, "
+               f"{payload['ticks']} ticks; a person is not re-simulated)")
+    click.echo("route: " + " ".join(payload["route"]))
+    click.echo(f"wrote {rrd} ({payload['rrd_bytes'] / 1000:.0f} kB); {viewer_hint(rrd)}")

@@ -75,6 +75,23 @@ class HandBack(ClientMessage):
     type: Literal["hand_back"]
 
 
+class Drive(ClientMessage):
+    """Manual driving, in control only: `accelerate` or `brake` while the key or button is held,
+    `release` when it is let go (the vehicle then holds the speed reached)."""
+
+    type: Literal["drive"]
+    pedal: Literal["accelerate", "brake", "release"]
+
+
+class Steer(ClientMessage):
+    """Manual driving, in control only: `oncoming` pulls out into the oncoming lane to pass an
+    obstacle (as soon as the gap allows; back in the own lane once past it), `own` stays in (or
+    returns to) the own lane."""
+
+    type: Literal["steer"]
+    lane: Literal["oncoming", "own"]
+
+
 class Pass(ClientMessage):
     """Lockstep: the answer "no takeover" to an `incident` event."""
 
@@ -96,8 +113,8 @@ class Ping(ClientMessage):
     type: Literal["ping"]
 
 
-CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | Pass | TrustReport | Resume
-                                       | Ping, Field(discriminator="type")])
+CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | Drive | Steer | Pass
+                                       | TrustReport | Resume | Ping, Field(discriminator="type")])
 
 
 # -- HTTP bodies ---------------------------------------------------------------------------------

@@ -6,13 +6,17 @@ incident comes into view, and after each road moves its trust on what it observe
 takeover, the AV's performance) and reports it every `report_every` roads, all with the planned
 episode's driver (the participant's model, the task's Generator: harness/study/runner.py's
 `run_planned_episode`). It drives the live path end to end without a person: the tests and the
-benchmark use it. `ScriptedParticipant.respond` is the logic (message in, replies out);
+benchmark use it. With `by_hand` it drives every road by hand instead (a takeover as each road opens, a
+brief press of the accelerator, a pull-out into the oncoming lane when an obstacle comes into view,
+the hand-back on the warning): the manual-driving path of the station, without a person.
+`ScriptedParticipant.respond` is the logic (message in, replies out);
 `run_scripted` connects it to a server.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +31,15 @@ class ScriptedParticipant:
     config: StudyConfig
     participant: int
     lockstep: bool = False   # the episodes wait for every answer: they run as headless ones do
+    by_hand: bool = False    # drive every road by hand (not with lockstep)
+    pull_out: bool = True    # by hand: pass an obstacle through the oncoming lane (else wait
+                             # behind it and hand back)
+    mode: str = "auto"
+    pedal: str = "release"
+    passing: bool = False            # by hand: pulled out to pass an obstacle
+    pass_lane: str | None = None     # the oncoming lane it was seen in
+    warned: bool = False
+    passes: int = 0                  # obstacles passed by hand
     tasks: list[EpisodeTask] = field(default_factory=list)
     driver: Any = None   # the current trial's SyntheticDriver
     finished: bool = False
@@ -55,6 +68,8 @@ class ScriptedParticipant:
         kind = message.get("type")
         if kind == "state":
             return self.on_state(message)
+        if self.by_hand and kind in ("road", "mode", "frame", "warning"):
+            return self.drive_by_hand(message)
         if kind == "incident" and self.driver is not None:
             if self.driver.decides_takeover(message["kind"]):
                 self.takeovers += 1
@@ -75,6 +90,56 @@ class ScriptedParticipant:
             self.errors.append(message)
         return []
 
+    def drive_by_hand(self, message: dict) -> list[dict]:
+        """Take over as each road opens; once in control, a brief press of the accelerator; an
+        obstacle in view: pull out, and hand back once past it (back in the own lane after the
+        oncoming one), or without `pull_out` hand back once stopped behind it; otherwise hand back
+        on the warning."""
+        kind = message["type"]
+        if kind == "mode":
+            self.mode = message["mode"]
+            if self.mode == "manual":
+                self.pedal = "accelerate"
+                return [{"type": "drive", "pedal": "accelerate"}]
+        elif kind == "road":
+            self.passing = self.warned = False
+            self.pass_lane = None
+            if self.mode == "auto":
+                self.takeovers += 1
+                return [{"type": "takeover"}]
+        elif kind == "warning":
+            self.warned = True
+            if not self.passing and self.mode == "manual":
+                return [{"type": "hand_back"}]
+        elif kind == "frame" and self.mode == "manual":
+            return self.manual_frame(message)
+        return []
+
+    def manual_frame(self, frame: dict) -> list[dict]:
+        replies = []
+        if self.pedal == "accelerate":
+            self.pedal = "release"
+            replies.append({"type": "drive", "pedal": "release"})
+        road = frame["road"]
+        u, v = road.split("-", 1) if "-" in road else (road, road)
+        edge = frame["lane"].rsplit("_", 1)[0]
+        vehicles = frame["vehicles"]
+        obstacle = any(kind == "obstacle" and in_lane_ahead(frame, x, y) for x, y, _, kind in vehicles)
+        if obstacle and not self.passing:
+            self.passing = True
+            if self.pull_out:
+                replies.append({"type": "steer", "lane": "oncoming"})
+        elif self.passing and not self.pull_out and frame["speed"] < 0.1:
+            self.passing = False   # it waits behind the obstacle: the autopilot is to pass it
+            replies.append({"type": "hand_back"})
+        elif self.passing and edge == f"{v}-{u}":
+            self.pass_lane = frame["lane"]   # in the oncoming lane
+        elif self.passing and self.pass_lane is not None and edge == road:
+            self.passing, self.pass_lane = False, None
+            self.passes += 1
+            replies.append({"type": "hand_back"})
+        return replies
+
     def on_state(self, state: dict) -> list[dict]:
         key = (state["phase"], tuple(state["done"]))
         if key == self.acted_on:   # the same state again (a reply to a report, say): nothing new
@@ -86,9 +151,18 @@ class ScriptedParticipant:
             self.finished = True
         elif state["phase"] == "ready":
             task = next(t for t in self.tasks if t.episode_id == state["next_episode"])
-            self.driver = self.new_driver(task)
+            self.driver, self.mode = self.new_driver(task), "auto"
             return [{"type": "start", "trust": int(self.driver.trust)}]
         return []
+
+
+def in_lane_ahead(frame: dict, x: float, y: float, reach: float = 80.0) -> bool:
+    """Whether (x, y) is within `reach` metres ahead of the ego in its lane (as the station sees
+    an obstacle ahead)."""
+    heading = math.radians(frame["angle"])   # SUMO's angle: clockwise from north
+    ahead = (x - frame["x"]) * math.sin(heading) + (y - frame["y"]) * math.cos(heading)
+    aside = (x - frame["x"]) * math.cos(heading) - (y - frame["y"]) * math.sin(heading)
+    return 0.0 < ahead < reach and abs(aside) < 4.0
 
 
 def run_scripted(url: str, token: str, participant: ScriptedParticipant, timeout: float = 600.0,

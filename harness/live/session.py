@@ -22,12 +22,14 @@ from typing import Any
 from trustroute.harness.live.protocol import (
     ClientMessage,
     Consent,
+    Drive,
     HandBack,
     MessageError,
     Pass,
     Ping,
     Resume,
     Start,
+    Steer,
     Takeover,
     TrustReport,
 )
@@ -103,6 +105,12 @@ class Session:
                 self.require("driving", message)
                 wanted = "auto" if isinstance(message, Takeover) else "manual"
                 if self.mode != wanted:
+                    raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
+                self.tell(message.model_dump())
+                return []
+            elif isinstance(message, (Drive, Steer)):
+                self.require("driving", message)
+                if self.mode != "manual":
                     raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
                 self.tell(message.model_dump())
                 return []

@@ -21,6 +21,9 @@ reads the person's controls from the pipe, pauses while the server says so, and 
 It also keeps the rule of the paper's study, the person hands back before the next junction: a
 person still in control WARN_DISTANCE before the road's end is warned, and the ego brakes to wait
 short of the commit point until the hand-back (`hold_for_hand_back`).
+In control, the person drives by hand (`drive_by_hand`): the pedals set the speed, and SUMO's
+overtaking through the oncoming lane waits for them to pull out (outside lockstep: in lockstep the
+episode runs as a headless one does).
 The part is written atomically by this process (harness/study/parts.py), its summary marked with
 who drove and every control the person sent.
 """
@@ -33,12 +36,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.harness.live.view import next_junction, surroundings
-from trustroute.harness.simulation.driving_style import MANUAL
+from trustroute.harness.simulation.driving_style import MANUAL, allow_oncoming_pass, set_speed
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID
 
 PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
 WARN_DISTANCE = 100.0      # metres before the road's end: a person in control is told to hand back
 HOLD_MARGIN = 5.0          # metres before the commit point where the ego waits for the hand-back
+PEDAL_ACCEL = 2.6          # m/s² while the accelerator is held (SUMO's tools/game/racing.py)
+PEDAL_DECEL = 4.5          # m/s² while the brake is held
 
 
 class EpisodeAborted(Exception):
@@ -77,6 +82,12 @@ class RemoteDriver:
         self.warned: str | None = None     # the road whose hand-back warning was sent
         self.holding = False               # the ego waits for the hand-back
         self.lengths: dict[str, float] = {}
+        self.by_hand = False               # the person's manual controls are in force
+        self.pedal = "release"             # accelerate, brake, or release
+        self.steer: str | None = None      # a pull-out ("oncoming") or pull-in ("own") to apply
+        self.speed_held = False            # the speed is the person's, not SUMO's car following
+        self.previous_time: float | None = None
+        self.hurry = False                 # a control to apply at once: the next step does not wait
 
     # -- the driver protocol (harness/simulation/episode.py) ------------------------------------
     @property
@@ -124,12 +135,14 @@ class RemoteDriver:
         kind = control.get("type")
         if not logged:
             self.events.append({"t": self.sim_now, "wall": time.time(), **control})
-        if kind == "takeover":
-            self._request = True
-        elif kind == "hand_back":
-            self._request = False
+        if kind in ("takeover", "hand_back"):
+            self._request, self.hurry = kind == "takeover", True
         elif kind == "trust" and int(control["value"]) in self.levels:
             self._trust = self._report = int(control["value"])
+        elif kind == "drive":
+            self.pedal = control["pedal"]
+        elif kind == "steer":
+            self.steer = control["lane"]
         elif kind == "pause":
             self.paused = True
         elif kind == "resume":
@@ -158,8 +171,12 @@ class RemoteDriver:
                        **surroundings(sumo, EGO_ID, ego.x, ego.y)})
         self.read_controls(0.0)
         self.hold_for_hand_back(sumo, ego, mode, road)
+        self.drive_by_hand(sumo, ego, mode)
         while True:   # wait for the wall clock (pace), and while paused
             wait = PIPE_POLL_SECONDS
+            if self.hurry and not self.paused:
+                self.hurry = False   # a takeover or hand-back: the next step (which applies it) now
+                return
             if not self.paused:
                 remaining = self.origin[0] + (ego.time - self.origin[1]) / self.options.pace - self.clock()
                 if remaining <= 0:
@@ -167,6 +184,31 @@ class RemoteDriver:
                 wait = min(wait, remaining)
             self.read_controls(wait)
 
+    def drive_by_hand(self, sumo, ego, mode: str) -> None:
+        """The person's pedals and pull-out while in control; SUMO's own driving back on the
+        hand-back."""
+        step = 0.0 if self.previous_time is None else ego.time - self.previous_time
+        self.previous_time = ego.time
+        if self.options.lockstep:
+            return
+        manual = mode == MANUAL.name
+        if manual != self.by_hand:
+            self.by_hand = manual
+            allow_oncoming_pass(sumo, EGO_ID, not manual)   # in control, the person decides the pass
+            if not manual and self.speed_held:
+                set_speed(sumo, EGO_ID, None)
+            self.pedal, self.steer, self.speed_held = "release", None, False
+        if not manual:
+            return
+        if self.steer is not None:
+            allow_oncoming_pass(sumo, EGO_ID, self.steer == "oncoming")
+            self.steer = None
+        if self.holding:
+            return   # waiting for the hand-back: the pedals do not move the ego on
+        if self.pedal != "release":   # the speed set last holds once the pedal is released
+            change = PEDAL_ACCEL * step if self.pedal == "accelerate" else -PEDAL_DECEL * step
+            set_speed(sumo, EGO_ID, ego.speed + change)
+            self.speed_held = True
 
     def hold_for_hand_back(self, sumo, ego, mode: str, road: str) -> None:
         """Warn a person still in control near the road's end; brake to wait short of the commit
@@ -174,9 +216,11 @@ class RemoteDriver:
         if self.options.lockstep:
             return   # as in simulated studies: the episode hands back at the commit point
         if mode != MANUAL.name or ego.road != road:
-            if self.holding and mode != MANUAL.name:
-                sumo.vehicle.setSpeed(EGO_ID, -1.0)   # back to the autopilot's own speed
-                self.holding = False
+            if mode != MANUAL.name:
+                self.warned = None   # a later takeover on this road is warned again
+                if self.holding:
+                    set_speed(sumo, EGO_ID, None)   # back to the autopilot's own speed
+                    self.holding = False
             return
         if ego.lane not in self.lengths:
             self.lengths[ego.lane] = sumo.lane.getLength(ego.lane)
@@ -187,7 +231,7 @@ class RemoteDriver:
                        "t": ego.time})
         braking = ego.speed * ego.speed / (2.0 * MANUAL.decel) + ego.speed
         if not self.holding and remaining <= COMMIT_DISTANCE + HOLD_MARGIN + braking:
-            sumo.vehicle.setSpeed(EGO_ID, 0.0)
+            set_speed(sumo, EGO_ID, 0.0)
             self.holding = True
 
 

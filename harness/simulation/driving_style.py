@@ -7,6 +7,11 @@ gentler than the AV's 4.5) and lane-change behaviour (no speed-gain changes; SUM
 of a blocking obstacle through the oncoming lane stays possible), shown in red. The reasons are
 in docs/scenes.md ("Manual driving"); they are modelling choices, not fitted values.
 `hand_back` restores the autopilot values. Both keep SUMO's safe speed mode (31).
+
+A person driving by hand (live studies) also sets the speed (`set_speed`: their pedals) and
+decides when to pass an obstacle through the oncoming lane (`allow_oncoming_pass`: SUMO's
+opposite-direction overtaking, off until they pull out; SUMO then pulls out when the gap allows
+and back in once past the obstacle).
 """
 
 from __future__ import annotations
@@ -51,3 +56,22 @@ def hand_back(sumo, vehicle_id: str) -> str:
     """Back to autopilot (before the next junction); returns the new mode name."""
     apply_style(sumo, vehicle_id, AUTOPILOT)
     return AUTOPILOT.name
+
+
+OPPOSITE_PASS_PARAMETER = "laneChangeModel.lcOpposite"   # SUMO's willingness to overtake through
+                                                          # the oncoming lane: 0 never, 1 its default
+
+
+def allow_oncoming_pass(sumo, vehicle_id: str, allowed: bool) -> None:
+    """Whether SUMO may take the vehicle through the oncoming lane to pass what blocks it."""
+    sumo.vehicle.setParameter(vehicle_id, OPPOSITE_PASS_PARAMETER, "1" if allowed else "0")
+
+
+def set_speed(sumo, vehicle_id: str, speed: float | None) -> None:
+    """Hold the vehicle at `speed` (m/s, at most the speed allowed on its lane; SUMO's safe speed
+    mode still applies), or give the speed back to SUMO's car following (None)."""
+    if speed is None:
+        sumo.vehicle.setSpeed(vehicle_id, -1.0)
+    else:
+        allowed = sumo.vehicle.getAllowedSpeed(vehicle_id)
+        sumo.vehicle.setSpeed(vehicle_id, min(max(float(speed), 0.0), allowed))

@@ -1,0 +1,191 @@
+"""A whole live session in a real browser: Debian's Chromium driven by Playwright against
+`trustroute live` (a subprocess) and real SUMO. The experimenter creates a participant on the
+console; the participant consents, drives the warm-up and the four trials (φ1/φ2 × aware/free)
+from the station, takes over, passes an obstacle by hand through the oncoming lane and reports
+trust; then `trustroute analyze` and `trustroute fit` read the study directory like any study.
+
+The test never skips: without Chromium it fails and says how to install it. No browser is ever
+downloaded (Playwright drives the system's Chromium)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+
+from trustroute.core.dataset import read_episodes, read_incidents, read_kinematics, read_roads
+from trustroute.harness.study.parts import read_part
+
+from .test_live_restart import start_server
+
+pytestmark = pytest.mark.slow
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+SCREENSHOT = Path(__file__).resolve().parents[3] / "docs" / "img" / "live-station.png"
+CONFIG = """[study]
+name = "browser-live"
+participants = 1
+seed = 3
+engine = "live"
+specs = ["phi1", "phi2"]
+conditions = ["aware", "free"]
+report_every = 1
+"""
+TIMEOUT_MS = 180_000
+PASS_WAIT = 20.0   # wall seconds a pull-out may wait for the way past the obstacle to clear
+
+
+def chromium() -> str:
+    if not (Path(CHROMIUM).is_file() or shutil.which("chromium")):
+        pytest.fail("Chromium is missing: install Debian's package (apt-get install -y chromium); "
+                    "the browser test never downloads a browser")
+    return CHROMIUM if Path(CHROMIUM).is_file() else str(shutil.which("chromium"))
+
+
+def create_participant(browser, address: str, token: str) -> str:
+    """The experimenter's console: log in with the token, create a participant, read its link."""
+    console = browser.new_context().new_page()
+    console.goto(f"http://{address}/login?token={token}")
+    assert console.url.endswith("/console")   # the token left the address bar
+    console.fill("#label", "browser")
+    console.click("#create")
+    link = console.locator("#created")
+    link.wait_for(state="visible")
+    text = link.inner_text()
+    console.locator("#participants tr").first.wait_for()
+    assert "browser" in console.locator("#participants").inner_text()
+    return text[text.index("http"):].split()[0]
+
+
+def drive_trial(page, by_hand: bool) -> int:
+    """One drive from the ready step (trust 5 starts it): on the warm-up a trust report only; on
+    the trials every road by hand (see `drive_by_hand`). The manual passes of an obstacle."""
+    from playwright.sync_api import expect
+
+    page.locator("#start-trust button", has_text="5").click()
+    page.locator("#drive-step").wait_for(state="visible")
+    expect(page.locator("#speed")).to_contain_text("km/h")
+    page.keyboard.press("6")
+    expect(page.locator("#reported")).to_contain_text("6")
+    passes = drive_by_hand(page) if by_hand else 0
+    expect(page.locator("#ready-step:visible, #done-step:visible")).to_have_count(1, timeout=TIMEOUT_MS)
+    return passes
+
+
+def drive_by_hand(page) -> int:
+    """As a person would: take over as each road opens (space), press the accelerator once, and
+    when the station says an obstacle is ahead pull out (left arrow) and hand back once the ego
+    is back in its own lane after the oncoming one; otherwise hand back on the warning. The first
+    pass is photographed in the oncoming lane. Returns the passes made."""
+    passes, pulled_out, in_oncoming, taken_on = 0, None, False, None
+    deadline = time.monotonic() + TIMEOUT_MS / 1000
+    while not page.locator("#ready-step:visible, #done-step:visible").count():
+        assert time.monotonic() < deadline, ("the trial did not end", page.locator("body").inner_text(),
+                                              pulled_out, in_oncoming, taken_on)
+        mode, road = page.locator("#mode").inner_text(), page.locator("#road").inner_text()
+        hint, notice = page.locator("#hint").inner_text(), page.locator("#incident").inner_text()
+        if mode == "AUTOPILOT":
+            pulled_out, in_oncoming = None, False
+        if mode == "MANUAL" and pulled_out is not None and not in_oncoming \
+                and time.monotonic() - pulled_out > PASS_WAIT:
+            pulled_out = None   # no way past it on this road (the ego waits at the junction): hand back
+            page.keyboard.press("Space")
+        elif mode == "AUTOPILOT" and road and road.split(" (")[0] != taken_on:
+            page.keyboard.press("Space")
+            taken_on = road.split(" (")[0]   # at most one takeover per road
+            page.keyboard.down("ArrowUp")
+            page.keyboard.up("ArrowUp")
+        elif mode == "MANUAL" and pulled_out is None and "Obstacle ahead" in hint:
+            page.keyboard.press("ArrowLeft")
+            pulled_out = time.monotonic()
+        elif mode == "MANUAL" and pulled_out is not None and "(oncoming lane)" in road:
+            if not in_oncoming and passes == 0:
+                SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+                page.screenshot(path=str(SCREENSHOT), full_page=True)
+            in_oncoming = True
+        elif mode == "MANUAL" and pulled_out is not None and in_oncoming:
+            page.keyboard.press("Space")   # past the obstacle: hand back
+            passes, pulled_out, in_oncoming = passes + 1, None, False
+        elif mode == "MANUAL" and pulled_out is None and "Hand back" in notice:
+            page.keyboard.press("Space")
+        time.sleep(0.02)
+    return passes
+
+
+def test_a_whole_session_in_chromium_is_read_by_analyze_and_fit(tmp_path):
+    from playwright.sync_api import sync_playwright
+
+    executable = chromium()
+    config_path = tmp_path / "browser.toml"
+    config_path.write_text(CONFIG)
+    study_dir = tmp_path / "study"
+    process, address, token = start_server(str(config_path), study_dir, pace=20.0)
+    try:
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
+            try:
+                link = create_participant(browser, address, token)
+                page = browser.new_context(viewport={"width": 760, "height": 900}).new_page()
+                page.set_default_timeout(60_000)
+                page.goto(link)
+                assert page.url.endswith("/station")
+                page.locator("#agree").click()
+                page.locator("#ready-step").wait_for(state="visible")
+                assert "warm-up" in page.locator("#trial-text").inner_text()
+                drive_trial(page, by_hand=False)   # the warm-up
+                passes = sum(drive_trial(page, by_hand=True) for _ in range(4))
+                page.locator("#done-step").wait_for(state="visible")
+            finally:
+                browser.close()
+    finally:
+        process.kill()
+        process.wait()
+    assert passes >= 1, "no obstacle was passed by hand"
+    check_the_study_directory(study_dir, tmp_path)
+
+
+def check_the_study_directory(study_dir: Path, tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from trustroute.harness.cli import cli
+
+    episodes = read_episodes(study_dir)
+    assert len(episodes) == 4 and list(episodes["participant"].unique()) == [0]
+    assert sorted(zip(episodes["spec"], episodes["condition"], strict=True)) == [
+        ("phi1", "aware"), ("phi1", "free"), ("phi2", "aware"), ("phi2", "free")]
+    assert episodes["satisfied"].notna().all()
+    assert int(episodes["takeovers"].sum()) >= 1
+    roads = read_roads(study_dir)
+    assert roads["takeover"].any()
+    assert set(roads["reported_trust"].dropna().astype(int)) >= {6}
+    kinematics = read_kinematics(study_dir)
+    assert "manual" in set(kinematics["mode"])
+    incidents = read_incidents(study_dir)
+    assert incidents["takeover_start"].notna().any()
+    events = [event for episode_id in episodes["episode_id"]
+              for event in read_part(study_dir / "parts" / f"{episode_id}.zip").summary["live"]["events"]]
+    assert {"takeover", "hand_back", "trust", "drive", "steer"} <= {event["type"] for event in events}
+    # the manual pass: ticks in the oncoming lane of an obstacle road, all of them the person's
+    incidents = incidents[incidents["incident"] == "obstacle"]
+    kinematics["edge"] = kinematics["lane"].str.rsplit("_", n=1).str[0]
+    oncoming = [kinematics[(kinematics["episode_id"] == row.episode_id) & (kinematics["edge"] == "-".join(
+        reversed(row.directed_road.split("-")))) & (kinematics["time"] >= row.injected_time)
+        & (kinematics["time"] <= row.removed_time)] for row in incidents.itertuples()]
+    passed = [ticks for ticks in oncoming if len(ticks)]
+    assert passed and any(set(ticks["mode"]) == {"manual"} for ticks in passed)
+
+    result = CliRunner().invoke(cli, ["analyze", str(study_dir), "--json", "--no-report"])
+    assert result.exit_code == 0, result.output
+    analysis = json.loads(result.output)
+    assert analysis["engine"] == "live"
+    assert sorted((c["spec"], c["condition"], c["n"]) for c in analysis["cells"]) == [
+        ("phi1", "aware", 1), ("phi1", "free", 1), ("phi2", "aware", 1), ("phi2", "free", 1)]
+    fit_path = tmp_path / "fit.json"
+    fitted = CliRunner().invoke(cli, ["fit", str(study_dir), "--out", str(fit_path), "--json"])
+    assert fitted.exit_code == 0, fitted.output
+    assert fit_path.is_file()
