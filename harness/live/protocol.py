@@ -178,10 +178,18 @@ class TokenBucket:
 
     def take(self) -> bool:
         """Whether one more message is allowed now (it uses up one token if so)."""
-        now = self.clock()
-        self.tokens = min(float(self.burst), self.tokens + (now - self.last) * self.rate)
-        self.last = now
+        self.refill()
         if self.tokens >= 1.0:
             self.tokens -= 1.0
             return True
         return False
+
+    def seconds_to_next(self) -> float:
+        """How long until `take` would allow one more message (0.0: now)."""
+        self.refill()
+        return max(0.0, (1.0 - self.tokens) / self.rate)
+
+    def refill(self) -> None:
+        now = self.clock()
+        self.tokens = min(float(self.burst), self.tokens + (now - self.last) * self.rate)
+        self.last = now

@@ -11,17 +11,40 @@ brief press of the accelerator, a pull-out into the oncoming lane when an obstac
 the hand-back on the warning): the manual-driving path of the station, without a person.
 `ScriptedParticipant.respond` is the logic (message in, replies out);
 `run_scripted` connects it to a server.
+
+It keeps within the server's flood limit as a well-behaved client does: `respond` waits before
+returning replies that would exceed a client-side token bucket kept well inside the server's
+(harness/live/protocol.py BURST, RATE). In lockstep this is what keeps it correct, not just
+polite: the episode waits for every answer, so an answer refused as a flood would stall it; a
+refusal in lockstep is therefore raised (`LockstepRefused`) rather than waited on.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from trustroute.harness.live.protocol import BURST, RATE, TokenBucket
+
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+
+
+# The client's own limit: half the server's burst and 80 % of its rate, so that messages sent
+# apart but read back to back by the server (a busy event loop) still fit the server's bucket.
+CLIENT_BURST = BURST // 2
+CLIENT_RATE = 0.8 * RATE
+
+
+class LockstepRefused(RuntimeError):
+    """The server refused an answer that a lockstep episode waits for."""
+
+
+def client_bucket() -> TokenBucket:
+    return TokenBucket(burst=CLIENT_BURST, rate=CLIENT_RATE)
 
 
 @dataclass
@@ -45,6 +68,8 @@ class ScriptedParticipant:
     finished: bool = False
     acted_on: tuple = ()
     errors: list[dict] = field(default_factory=list)
+    bucket: TokenBucket = field(default_factory=client_bucket)
+    sleep: Any = time.sleep
     episodes: list[dict] = field(default_factory=list)
     takeovers: int = 0
     reports: int = 0
@@ -64,7 +89,15 @@ class ScriptedParticipant:
         return SyntheticDriver(model, task.driver_rng(), report_accuracy=self.config.report_accuracy)
 
     def respond(self, message: dict) -> list[dict]:
-        """The replies to one server message."""
+        """The replies to one server message, returned no faster than the flood limit allows."""
+        replies = self.replies_to(message)
+        for _ in replies:
+            while (wait := self.bucket.seconds_to_next()) > 0.0:
+                self.sleep(wait)
+            self.bucket.take()
+        return replies
+
+    def replies_to(self, message: dict) -> list[dict]:
         kind = message.get("type")
         if kind == "state":
             return self.on_state(message)
@@ -88,6 +121,8 @@ class ScriptedParticipant:
             self.driver = None
         elif kind == "error":
             self.errors.append(message)
+            if self.lockstep and message.get("code") == "rate_limited":
+                raise LockstepRefused(f"the server refused a lockstep answer: {message}")
         return []
 
     def drive_by_hand(self, message: dict) -> list[dict]:

@@ -1,0 +1,58 @@
+"""The scripted participant keeps within the server's flood limit, and a refused lockstep answer
+fails at once instead of leaving the episode waiting."""
+
+from __future__ import annotations
+
+import pytest
+
+from trustroute.harness.live.protocol import TokenBucket, error_reply
+from trustroute.harness.live.scripted import (
+    CLIENT_BURST,
+    CLIENT_RATE,
+    LockstepRefused,
+    ScriptedParticipant,
+)
+
+from .conftest import tiny_config
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        assert seconds > 0.0
+        self.now += seconds
+
+
+def test_a_burst_of_answers_is_spread_so_the_server_refuses_none(tmp_path):
+    clock = FakeClock()
+    player = ScriptedParticipant(tiny_config(tmp_path), 0, lockstep=True,
+                                 bucket=TokenBucket(burst=CLIENT_BURST, rate=CLIENT_RATE, clock=clock),
+                                 sleep=clock.sleep)
+    server = TokenBucket(clock=clock)
+    answers = 0
+    for _ in range(200):   # every message at the same instant, as a fast episode sends them
+        for _reply in player.respond({"type": "warning", "kind": "hand_back", "distance": 90.0, "t": 1.0}):
+            assert server.take(), f"the server refused answer {answers + 1}"
+            answers += 1
+    assert answers == 200
+    assert clock.now == pytest.approx((200 - CLIENT_BURST) / CLIENT_RATE)   # it waited, and no longer
+
+
+def test_without_the_client_limit_the_same_burst_is_refused(tmp_path):
+    clock = FakeClock()
+    server = TokenBucket(clock=clock)
+    assert not all(server.take() for _ in range(200))   # what the pacing above prevents
+
+
+def test_a_refused_lockstep_answer_is_raised(tmp_path):
+    player = ScriptedParticipant(tiny_config(tmp_path), 0, lockstep=True)
+    with pytest.raises(LockstepRefused, match="rate_limited"):
+        player.respond(error_reply("rate_limited", "too many messages; slow down"))
+    relaxed = ScriptedParticipant(tiny_config(tmp_path), 0)
+    assert relaxed.respond(error_reply("rate_limited", "too many messages; slow down")) == []
+    assert relaxed.errors[0]["code"] == "rate_limited"
