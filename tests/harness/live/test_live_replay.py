@@ -13,6 +13,7 @@ from tests.cli import run_cli
 from trustroute.core.dataset import part_path, read_kinematics, read_roads
 from trustroute.harness.cli import cli
 from trustroute.harness.live.scripted import ScriptedParticipant
+from trustroute.harness.simulation.rerun_log import on_screen
 from trustroute.harness.study.plan import plan_episodes
 
 from .conftest import tiny_config
@@ -64,7 +65,7 @@ def test_replay_of_a_live_episode_draws_its_log_without_simulating(tmp_path, mon
     times, strips = column(entities["/world/ego/box"], "LineStrips2D:strips")
     np.testing.assert_allclose(times, ticks["time"].to_numpy())
     centres = np.array([np.mean(np.asarray(s[0])[[0, 2, 3, 4]], axis=0) for s in strips])
-    np.testing.assert_allclose(centres, ticks[["x", "y"]].to_numpy(), atol=1e-2)
+    np.testing.assert_allclose(centres, on_screen(ticks[["x", "y"]].to_numpy()), atol=1e-2)
     _, colours = column(entities["/world/ego/box"], "LineStrips2D:colors")
     manual = (ticks["mode"] == "manual").to_numpy()
     assert manual.any()   # the person's mode, tick by tick
