@@ -28,10 +28,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from trustroute.harness.live.protocol import BURST, RATE, TokenBucket
-
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
-
 
 # The client's own limit: half the server's burst and 80 % of its rate, so that messages sent
 # apart but read back to back by the server (a busy event loop) still fit the server's bucket.
@@ -99,6 +97,8 @@ class ScriptedParticipant:
 
     def replies_to(self, message: dict) -> list[dict]:
         kind = message.get("type")
+        if message.get("predicted"):
+            return []   # a frame between steps: it acts on the simulation's state only
         if kind == "state":
             return self.on_state(message)
         if self.by_hand and kind in ("road", "mode", "frame", "warning"):
@@ -159,7 +159,7 @@ class ScriptedParticipant:
         u, v = road.split("-", 1) if "-" in road else (road, road)
         edge = frame["lane"].rsplit("_", 1)[0]
         vehicles = frame["vehicles"]
-        obstacle = any(kind == "obstacle" and in_lane_ahead(frame, x, y) for x, y, _, kind in vehicles)
+        obstacle = any(kind == "obstacle" and in_lane_ahead(frame, x, y) for x, y, _, kind, *_ in vehicles)
         if obstacle and not self.passing:
             self.passing = True
             if self.pull_out:

@@ -5,7 +5,9 @@
 `surroundings` reads, at frame time only, every other vehicle and person within VIEW_RADIUS of
 the ego from the running simulation: background traffic, and the incidents' SUMO objects (ids
 "inc<road index>.<role>": the obstacle, the oncoming vehicle, the parked truck, the pedestrian).
-Reading changes nothing in the simulation.
+Reading changes nothing in the simulation. A SUMO step is 0.5 s of simulated time, so at wall-clock
+pace the steps alone give two frames a second; `dead_reckoned` fills the time between them (each
+vehicle moved on at its speed and heading), marked as predicted.
 """
 
 from __future__ import annotations
@@ -50,9 +52,9 @@ def role(sumo_id: str) -> str:
 
 
 def surroundings(sumo, ego_id: str, x: float, y: float) -> dict:
-    """{"vehicles": [[x, y, angle, kind]], "persons": [[x, y, kind]]} within VIEW_RADIUS of (x, y);
-    kind is an incident object's role ("obstacle", "oncoming", "parked", "pedestrian"), else
-    "traffic"."""
+    """{"vehicles": [[x, y, angle, kind, speed]], "persons": [[x, y, kind]]} within VIEW_RADIUS of
+    (x, y); kind is an incident object's role ("obstacle", "oncoming", "parked", "pedestrian"),
+    else "traffic"."""
     vehicles, persons = [], []
     for vehicle in sumo.vehicle.getIDList():
         if vehicle == ego_id:
@@ -60,9 +62,27 @@ def surroundings(sumo, ego_id: str, x: float, y: float) -> dict:
         vx, vy = sumo.vehicle.getPosition(vehicle)
         if math.hypot(vx - x, vy - y) <= VIEW_RADIUS:
             angle = round(sumo.vehicle.getAngle(vehicle), 1)
-            vehicles.append([round(vx, 2), round(vy, 2), angle, role(vehicle)])
+            speed = round(sumo.vehicle.getSpeed(vehicle), 2)
+            vehicles.append([round(vx, 2), round(vy, 2), angle, role(vehicle), speed])
     for person in sumo.person.getIDList():
         px, py = sumo.person.getPosition(person)
         if math.hypot(px - x, py - y) <= VIEW_RADIUS:
             persons.append([round(px, 2), round(py, 2), role(person)])
     return {"vehicles": vehicles, "persons": persons}
+
+
+def moved_on(x: float, y: float, angle: float, speed: float, seconds: float) -> tuple[float, float]:
+    """(x, y) after `seconds` at `speed` along SUMO's `angle` (degrees clockwise from north)."""
+    heading = math.radians(angle)
+    return x + speed * seconds * math.sin(heading), y + speed * seconds * math.cos(heading)
+
+
+def dead_reckoned(frame: dict, seconds: float) -> dict:
+    """A frame between two SUMO steps: the stepped `frame` moved on `seconds` of simulated time,
+    the ego and every vehicle along its heading at its speed (persons, at walking pace, stay).
+    It is marked `predicted`: only the stepped frames are the simulation's state."""
+    x, y = moved_on(frame["x"], frame["y"], frame["angle"], frame["speed"], seconds)
+    vehicles = [[*moved_on(vx, vy, angle, speed, seconds), angle, kind, speed]
+                for vx, vy, angle, kind, speed in frame["vehicles"]]
+    return {**frame, "t": frame["t"] + seconds, "x": round(x, 2), "y": round(y, 2),
+            "vehicles": [[round(v[0], 2), round(v[1], 2), *v[2:]] for v in vehicles], "predicted": True}

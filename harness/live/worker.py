@@ -35,7 +35,7 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
-from trustroute.harness.live.view import next_junction, surroundings
+from trustroute.harness.live.view import dead_reckoned, next_junction, surroundings
 from trustroute.harness.simulation.driving_style import MANUAL, allow_oncoming_pass, set_speed
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID
 
@@ -53,7 +53,7 @@ class EpisodeAborted(Exception):
 @dataclass(frozen=True)
 class LiveOptions:
     pace: float = 1.0            # sim seconds per wall second (1.0: real time; tests use >> 1)
-    frame_rate: float = 25.0     # frames streamed per wall second at most
+    frame_rate: float = 25.0     # frames streamed per wall second (between steps: dead-reckoned)
     client: str = "station"      # who drives: "station" (a person) or "scripted"
     report_every: int = 1        # the study's report_every: roads whose end prompts for a report
     lockstep: bool = False       # scripted only: the episode waits for its reply to every decision
@@ -87,6 +87,10 @@ class RemoteDriver:
         self.steer: str | None = None      # a pull-out ("oncoming") or pull-in ("own") to apply
         self.speed_held = False            # the speed is the person's, not SUMO's car following
         self.previous_time: float | None = None
+        self.step_seconds = 0.5            # simulated seconds between the last two steps
+        self.shown: dict | None = None     # the last stepped frame sent
+        self.held_at = 0.0                 # the simulated time shown when paused
+        self.predicted = False             # the last frame sent was dead-reckoned
         self.hurry = False                 # a control to apply at once: the next step does not wait
 
     # -- the driver protocol (harness/simulation/episode.py) ------------------------------------
@@ -144,10 +148,12 @@ class RemoteDriver:
         elif kind == "steer":
             self.steer = control["lane"]
         elif kind == "pause":
+            if not self.paused:   # the view stands where the wall clock had brought it
+                self.held_at = min(self.sim_now, self.paced_sim_time())
             self.paused = True
         elif kind == "resume":
             self.paused = False
-            self.origin = (self.clock(), self.sim_now)
+            self.origin = (self.clock(), self.held_at)
         elif kind == "abort":
             raise EpisodeAborted(str(control.get("reason", "aborted")))
 
@@ -157,32 +163,68 @@ class RemoteDriver:
             timeout = 0.0
 
     def observe(self, sumo, ego, mode: str, road: str) -> None:
-        """Every step: the mode change and the frame out, controls in, the pace, a pause."""
+        """Every step: the mode change out, controls in, the pace (frames between steps), a
+        pause, then the step's frame: shown when the wall clock reaches the step's time."""
         self.sim_now = ego.time
         if mode != self.mode:
             self.mode = mode
             self.send({"type": "mode", "mode": mode, "t": ego.time})
-        wall = self.clock()
-        if wall - self.last_frame >= 1.0 / self.options.frame_rate:
-            self.last_frame = wall
-            self.send({"type": "frame", "t": ego.time, "x": ego.x, "y": ego.y, "angle": ego.angle,
-                       "speed": ego.speed, "road": road, "lane": ego.lane, "mode": mode,
-                       "junction": next_junction(road),
-                       **surroundings(sumo, EGO_ID, ego.x, ego.y)})
+        if self.previous_time is not None and ego.time > self.previous_time:
+            self.step_seconds = ego.time - self.previous_time
         self.read_controls(0.0)
         self.hold_for_hand_back(sumo, ego, mode, road)
         self.drive_by_hand(sumo, ego, mode)
-        while True:   # wait for the wall clock (pace), and while paused
+        hurried = self.wait_for_the_wall_clock(ego.time)
+        wall = self.clock()
+        # a stepped frame always replaces predicted ones (they are only ever the time between
+        # steps), and shows the step before a takeover or hand-back is applied
+        if hurried or self.predicted or wall - self.last_frame >= self.frame_interval:
+            self.last_frame, self.predicted = wall, False
+            self.shown = {"type": "frame", "t": ego.time, "x": ego.x, "y": ego.y, "angle": ego.angle,
+                          "speed": ego.speed, "road": road, "lane": ego.lane, "mode": mode,
+                          "junction": next_junction(road),
+                          **surroundings(sumo, EGO_ID, ego.x, ego.y)}
+            self.send(self.shown)
+
+    def wait_for_the_wall_clock(self, step_time: float) -> bool:
+        """Until the wall clock reaches the step's time at the pace (and while paused), reading
+        controls; a takeover or hand-back ends the wait (the next step applies it): True then."""
+        while True:
             wait = PIPE_POLL_SECONDS
             if self.hurry and not self.paused:
-                self.hurry = False   # a takeover or hand-back: the next step (which applies it) now
-                return
+                self.hurry = False
+                return True
             if not self.paused:
-                remaining = self.origin[0] + (ego.time - self.origin[1]) / self.options.pace - self.clock()
+                remaining = self.origin[0] + (step_time - self.origin[1]) / self.options.pace - self.clock()
                 if remaining <= 0:
-                    return
-                wait = min(wait, remaining)
+                    return False
+                wait = min(wait, remaining, self.stream_between_steps(step_time))
             self.read_controls(wait)
+
+    def paced_sim_time(self) -> float:
+        """The simulated time the wall clock has reached at the pace."""
+        return self.origin[1] + (self.clock() - self.origin[0]) * self.options.pace
+
+    @property
+    def frame_interval(self) -> float:
+        return 1.0 / self.options.frame_rate
+
+    def stream_between_steps(self, step_time: float) -> float:
+        """While the wall clock runs from the previous step's time to this one's: the previous
+        step's frame dead-reckoned to the wall clock's simulated time whenever a frame is due.
+        Returns the wall seconds until the next is due."""
+        shown = self.shown
+        if shown is None or shown["t"] < step_time - self.step_seconds - 1e-9:
+            return PIPE_POLL_SECONDS   # no frame of the previous step to move on from
+        wall = self.clock()
+        due = self.last_frame + self.frame_interval - wall
+        if due > 0.0:
+            return due
+        seconds = min(self.paced_sim_time(), step_time) - shown["t"]
+        if seconds > 0.0:
+            self.last_frame, self.predicted = wall, True
+            self.send(dead_reckoned(shown, seconds))
+        return self.frame_interval
 
     def drive_by_hand(self, sumo, ego, mode: str) -> None:
         """The person's pedals and pull-out while in control; SUMO's own driving back on the
