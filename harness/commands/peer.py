@@ -16,27 +16,40 @@ import json
 import click
 
 
-def storm_comparison(spec_path: str, town_path: str | None, driver_path: str | None,
-                     horizon: int | None, time_limit: float, resolution: int, depth: int,
-                     max_nodes: int) -> dict:
-    """Both sides' bounds and seconds, JSON-ready."""
+def exported_problem(spec_path: str, town_path: str | None, driver_path: str | None,
+                     horizon: int | None) -> tuple:
+    """(spec, our POMDP, the explicit product a peer is given) for one comparison."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.model.trust_pomdp import build_pomdp
     from trustroute.policies.peer.product_pomdp import check_exportable, explicit_product
-    from trustroute.policies.peer.storm import require_storm, run_storm
-    from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
-    require_storm("trustroute peer storm")
     town = load_town(town_path)
     driver = load_driver_model(driver_path)
     spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
     check_exportable(spec)
     pomdp = build_pomdp(town, driver)
-    product = explicit_product(pomdp, spec, horizon)
+    return spec, pomdp, explicit_product(pomdp, spec, horizon)
+
+
+def our_bounds(pomdp, spec, horizon: int | None, depth: int, max_nodes: int):
+    """Our side of a comparison: the trust-state search's bounds on the same problem."""
+    from trustroute.policies.trust_state_synthesis.search import joint_bounds
+
+    return joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
+
+
+def storm_comparison(spec_path: str, town_path: str | None, driver_path: str | None,
+                     horizon: int | None, time_limit: float, resolution: int, depth: int,
+                     max_nodes: int) -> dict:
+    """Both sides' bounds and seconds, JSON-ready."""
+    from trustroute.policies.peer.storm import require_storm, run_storm
+
+    require_storm("trustroute peer storm")
+    spec, pomdp, product = exported_problem(spec_path, town_path, driver_path, horizon)
     storm = run_storm(product, time_limit=time_limit, resolution=resolution)
-    ours = joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
+    ours = our_bounds(pomdp, spec, horizon, depth, max_nodes)
     return {"spec": spec.name, "file": spec.source_path, "horizon": horizon,
             "product_states": product.n_states, "storm": storm.to_dict(), "ours": ours.to_dict(),
             "overlap": bool(max(storm.lower, ours.lower) <= min(storm.upper, ours.upper) + 1e-9)}
@@ -46,23 +59,12 @@ def paynt_comparison(spec_path: str, town_path: str | None, driver_path: str | N
                      horizon: int | None, time_limit: float, max_states: int, depth: int,
                      max_nodes: int) -> dict:
     """PAYNT's controller value beside our bounds, JSON-ready."""
-    from trustroute.networks.town import load_town
-    from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.model.trust_pomdp import build_pomdp
     from trustroute.policies.peer.paynt import require_paynt, run_paynt
-    from trustroute.policies.peer.product_pomdp import check_exportable, explicit_product
-    from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
     require_paynt("trustroute peer paynt")
-    town = load_town(town_path)
-    driver = load_driver_model(driver_path)
-    spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
-    check_exportable(spec)
-    pomdp = build_pomdp(town, driver)
-    product = explicit_product(pomdp, spec, horizon)
+    spec, pomdp, product = exported_problem(spec_path, town_path, driver_path, horizon)
     paynt = run_paynt(product, time_limit=time_limit, max_states=max_states)
-    ours = joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
+    ours = our_bounds(pomdp, spec, horizon, depth, max_nodes)
     return {"spec": spec.name, "file": spec.source_path, "horizon": horizon,
             "product_states": product.n_states, "paynt": paynt.to_dict(), "ours": ours.to_dict(),
             "within_ours": bool(paynt.lower <= ours.upper + paynt.precision)}
@@ -96,6 +98,19 @@ def our_options(command):
     return command
 
 
+def problem_line(result: dict) -> str:
+    """A comparison's first line of text: the spec, its objective and the product's size."""
+    horizon = result["horizon"]
+    objective = f"within {horizon} junctions" if horizon is not None else "unbounded"
+    return f"{result['spec']} ({objective}), product POMDP with {result['product_states']} states"
+
+
+def ours_line(ours: dict) -> str:
+    """Our bounds, gap and seconds, as one line of a comparison's text."""
+    return (f"  ours   [{ours['lower']:.6f}, {ours['upper']:.6f}]  gap {ours['gap']:.2e}  "
+            f"{ours['seconds']:.1f} s")
+
+
 @click.group("peer")
 def peer() -> None:
     """Independent solvers beside ours."""
@@ -117,11 +132,10 @@ def storm(spec_path: str, town_path: str | None, driver_path: str | None, horizo
         click.echo(json.dumps(result))
         return
     s, o = result["storm"], result["ours"]
-    objective = f"within {horizon} junctions" if horizon is not None else "unbounded"
-    click.echo(f"{result['spec']} ({objective}), product POMDP with {result['product_states']} states")
+    click.echo(problem_line(result))
     click.echo(f"  storm  [{s['lower']:.6f}, {s['upper']:.6f}]  gap {s['gap']:.2e}  "
                f"{s['build_seconds'] + s['lower_seconds'] + s['upper_seconds']:.1f} s")
-    click.echo(f"  ours   [{o['lower']:.6f}, {o['upper']:.6f}]  gap {o['gap']:.2e}  {o['seconds']:.1f} s")
+    click.echo(ours_line(o))
     click.echo(f"  overlap: {'yes' if result['overlap'] else 'NO'}")
     if s.get("note"):
         click.echo(f"  note: {s['note']}")
@@ -143,12 +157,11 @@ def paynt(spec_path: str, town_path: str | None, driver_path: str | None, horizo
         click.echo(json.dumps(result))
         return
     p, o = result["paynt"], result["ours"]
-    objective = f"within {horizon} junctions" if horizon is not None else "unbounded"
-    click.echo(f"{result['spec']} ({objective}), product POMDP with {result['product_states']} states")
+    click.echo(problem_line(result))
     found = (f"{p['value']:.6f}" if p["found"] else "no controller found in time (lower bound 0)")
     click.echo(f"  paynt  {found}  {p['seconds']:.1f} s, controllers up to "
                f"{p['memory_nodes']} memory nodes per observation")
-    click.echo(f"  ours   [{o['lower']:.6f}, {o['upper']:.6f}]  gap {o['gap']:.2e}  {o['seconds']:.1f} s")
+    click.echo(ours_line(o))
     click.echo("  PAYNT's value is a LOWER bound of Pr_max: the value of one finite-state controller. "
                "A controller with k memory nodes may be worth less than the best history-dependent "
                "policy, so compare it with our L, not U.")
