@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from tests.cli import refused_file
 from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH, load_driver_model
 from trustroute.participants.driver_population import (
@@ -164,11 +165,7 @@ CASES = [
 def test_bad_population_file_is_one_input_error(tmp_path, mutate, place, problem):
     doc = copy.deepcopy(example())
     mutate(doc)
-    path = tmp_path / "pop.json"
-    path.write_text(json.dumps(doc))
-    with pytest.raises(InputError) as info:
-        load_driver_population(path)
-    message = info.value.one_line()
+    message = refused_file(load_driver_population, doc, tmp_path / "pop.json").one_line()
     assert "\n" not in message
     assert place in message and problem in message, message
     assert "(fix: " in message
