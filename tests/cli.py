@@ -3,6 +3,7 @@ errors it prints for bad input files."""
 
 from __future__ import annotations
 
+import copy
 import json
 from collections.abc import Callable
 from pathlib import Path
@@ -52,3 +53,16 @@ def assert_file_refused(capsys: pytest.CaptureFixture, load: Callable[[Path], ob
     assert_one_line_error(code, err, str(path), place, problem)
     assert out == ""
     return error
+
+
+def mutation_cases(cases) -> list:
+    """(mutate, place, problem) cases of a bad input file as pytest parameters, each named by its
+    mutation."""
+    return [pytest.param(*case, id=case[0].__name__) for case in cases]
+
+
+def mutated(document: dict, mutate: Callable[[dict], None]) -> dict:
+    """A deep copy of a good input `document`, changed by `mutate`."""
+    out = copy.deepcopy(document)
+    mutate(out)
+    return out

@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
-import copy
 import json
 
 import pytest
 
-from tests.cli import assert_file_refused, assert_one_line_error, refused_file, run_cli
+from tests.cli import (
+    assert_file_refused,
+    assert_one_line_error,
+    mutated,
+    mutation_cases,
+    refused_file,
+    run_cli,
+)
 from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
 
 
@@ -84,11 +90,10 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("mutate, place, problem", CASES, ids=[c[0].__name__ for c in CASES])
+@pytest.mark.parametrize("mutate, place, problem", mutation_cases(CASES))
 def test_malformed_town_gives_its_error_and_exit_2(tmp_path, capsys, mutate, place, problem):
-    data = copy.deepcopy(default_town())
-    mutate(data)
-    assert_file_refused(capsys, load_town, "--town", data, tmp_path / "town.json", place, problem)
+    assert_file_refused(capsys, load_town, "--town", mutated(default_town(), mutate), tmp_path / "town.json",
+                        place, problem)
 
 
 def test_bad_json_names_line_and_column(tmp_path, capsys):

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import copy
 import json
 
 import pytest
 
-from tests.cli import assert_file_refused, assert_one_line_error, run_cli
+from tests.cli import assert_file_refused, assert_one_line_error, mutated, mutation_cases, run_cli
 from trustroute.participants.driver_model import (
     DEFAULT_DRIVER_MODEL_PATH,
     driver_model_from_dict,
@@ -108,12 +107,10 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("mutate, place, problem", CASES, ids=[c[0].__name__ for c in CASES])
+@pytest.mark.parametrize("mutate, place, problem", mutation_cases(CASES))
 def test_malformed_driver_model_gives_its_error_and_exit_2(tmp_path, capsys, mutate, place, problem):
-    data = copy.deepcopy(default_model())
-    mutate(data)
-    assert_file_refused(capsys, load_driver_model, "--driver", data, tmp_path / "driver.json", place,
-                        problem)
+    assert_file_refused(capsys, load_driver_model, "--driver", mutated(default_model(), mutate),
+                        tmp_path / "driver.json", place, problem)
 
 
 def test_row_within_tolerance_is_accepted():
@@ -206,12 +203,10 @@ BOOL_CASES = [
 ]
 
 
-@pytest.mark.parametrize("mutate, place, problem", BOOL_CASES, ids=[c[0].__name__ for c in BOOL_CASES])
+@pytest.mark.parametrize("mutate, place, problem", mutation_cases(BOOL_CASES))
 def test_true_or_false_is_not_a_probability(tmp_path, capsys, mutate, place, problem):
-    data = copy.deepcopy(default_model())
-    mutate(data)
-    error = assert_file_refused(capsys, load_driver_model, "--driver", data, tmp_path / "driver.json",
-                                place, problem)
+    error = assert_file_refused(capsys, load_driver_model, "--driver", mutated(default_model(), mutate),
+                                tmp_path / "driver.json", place, problem)
     assert "true and false are not numbers" in error.fix
 
 
