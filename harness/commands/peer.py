@@ -11,9 +11,9 @@ finds is a lower bound of Pr_max (policies/peer/paynt.py). Needs the optional `[
 
 from __future__ import annotations
 
-import json
-
 import click
+
+from trustroute.harness.commands.output import emit
 
 
 def exported_problem(spec_path: str, town_path: str | None, driver_path: str | None,
@@ -128,17 +128,18 @@ def storm(spec_path: str, town_path: str | None, driver_path: str | None, horizo
     """Storm's [lower, upper] and time beside ours, for SPEC."""
     result = storm_comparison(spec_path, town_path, driver_path, horizon, time_limit, resolution,
                               depth, max_nodes)
-    if as_json:
-        click.echo(json.dumps(result))
-        return
-    s, o = result["storm"], result["ours"]
-    click.echo(problem_line(result))
-    click.echo(f"  storm  [{s['lower']:.6f}, {s['upper']:.6f}]  gap {s['gap']:.2e}  "
-               f"{s['build_seconds'] + s['lower_seconds'] + s['upper_seconds']:.1f} s")
-    click.echo(ours_line(o))
-    click.echo(f"  overlap: {'yes' if result['overlap'] else 'NO'}")
-    if s.get("note"):
-        click.echo(f"  note: {s['note']}")
+    emit(as_json, result, [] if as_json else storm_lines(result))
+
+
+def storm_lines(result: dict) -> list[str]:
+    """Storm's comparison as text."""
+    s = result["storm"]
+    lines = [problem_line(result),
+             f"  storm  [{s['lower']:.6f}, {s['upper']:.6f}]  gap {s['gap']:.2e}  "
+             f"{s['build_seconds'] + s['lower_seconds'] + s['upper_seconds']:.1f} s",
+             ours_line(result["ours"]),
+             f"  overlap: {'yes' if result['overlap'] else 'NO'}"]
+    return lines + ([f"  note: {s['note']}"] if s.get("note") else [])
 
 
 @peer.command("paynt")
@@ -153,16 +154,18 @@ def paynt(spec_path: str, town_path: str | None, driver_path: str | None, horizo
     """PAYNT's finite-state controller value (a lower bound of Pr_max) beside ours, for SPEC."""
     result = paynt_comparison(spec_path, town_path, driver_path, horizon, time_limit, max_states,
                               depth, max_nodes)
-    if as_json:
-        click.echo(json.dumps(result))
-        return
-    p, o = result["paynt"], result["ours"]
-    click.echo(problem_line(result))
+    emit(as_json, result, [] if as_json else paynt_lines(result))
+
+
+def paynt_lines(result: dict) -> list[str]:
+    """PAYNT's comparison as text."""
+    p = result["paynt"]
     found = (f"{p['value']:.6f}" if p["found"] else "no controller found in time (lower bound 0)")
-    click.echo(f"  paynt  {found}  {p['seconds']:.1f} s, controllers up to "
-               f"{p['memory_nodes']} memory nodes per observation")
-    click.echo(ours_line(o))
-    click.echo("  PAYNT's value is a LOWER bound of Pr_max: the value of one finite-state controller. "
-               "A controller with k memory nodes may be worth less than the best history-dependent "
-               "policy, so compare it with our L, not U.")
-    click.echo(f"  within our U: {'yes' if result['within_ours'] else 'NO'}")
+    return [problem_line(result),
+            f"  paynt  {found}  {p['seconds']:.1f} s, controllers up to "
+            f"{p['memory_nodes']} memory nodes per observation",
+            ours_line(result["ours"]),
+            "  PAYNT's value is a LOWER bound of Pr_max: the value of one finite-state controller. "
+            "A controller with k memory nodes may be worth less than the best history-dependent "
+            "policy, so compare it with our L, not U.",
+            f"  within our U: {'yes' if result['within_ours'] else 'NO'}"]
