@@ -30,16 +30,14 @@ def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
 
 
 def study_inputs(manifest: dict):
-    """(town, nominal driver model, {spec name: Spec}) named by the study's config."""
-    from trustroute.networks.town import load_town
-    from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import load_spec
+    """(town, nominal driver model, {spec name: Spec}) named by the study's config, loaded as the
+    study loaded them (harness/study/context.py, `load_study_inputs`)."""
+    from trustroute.harness.study.context import load_study_inputs
 
     config = manifest["config"]
-    town = load_town(_recorded_input(config.get("town"), "town", manifest))
-    driver = load_driver_model(_recorded_input(config.get("driver_model"), "driver model", manifest))
-    specs = {Path(p).stem: load_spec(spec_path(p), town) for p in config["specs"]}
-    return town, driver, specs
+    return load_study_inputs(_recorded_input(config.get("town"), "town", manifest),
+                             _recorded_input(config.get("driver_model"), "driver model", manifest),
+                             [spec_path(p) for p in config["specs"]])
 
 
 def _recorded_input(path: str | None, what: str, manifest: dict) -> str | None:

@@ -1,9 +1,16 @@
-"""Run the `trustroute` command in-process, as the tests of every package do."""
+"""Run the `trustroute` command in-process, as the tests of every package do, and check the one-line
+errors it prints for bad input files."""
 
 from __future__ import annotations
 
+import copy
+import json
+from collections.abc import Callable
+from pathlib import Path
+
 import pytest
 
+from trustroute.core.errors import InputError
 from trustroute.harness.cli import main
 
 
@@ -13,3 +20,49 @@ def run_cli(capsys: pytest.CaptureFixture, *args: str) -> tuple[int, str, str]:
         main(list(args))
     captured = capsys.readouterr()
     return exit_info.value.code, captured.out, captured.err
+
+
+def assert_one_line_error(code: int, err: str, *fragments: str) -> None:
+    """Exit code 2 and one `error: ... (fix: ...)` line on stderr holding every fragment."""
+    assert code == 2
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("error: ")
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+    assert "(fix: " in lines[0]
+
+
+def refused_file(load: Callable[[Path], object], data: dict, path: Path) -> InputError:
+    """The InputError that `load` raises on `path` written with `data` as JSON."""
+    path.write_text(json.dumps(data))
+    with pytest.raises(InputError) as error:
+        load(path)
+    return error.value
+
+
+def assert_file_refused(capsys: pytest.CaptureFixture, load: Callable[[Path], object], option: str,
+                        data: dict, path: Path, place: str, problem: str) -> InputError:
+    """`load` refuses the file of `data` at `place` with `problem`, and `trustroute model OPTION FILE`
+    prints the same as one error line naming the file and exits 2 with nothing on stdout."""
+    error = refused_file(load, data, path)
+    assert error.place == place
+    assert problem in error.problem
+    code, out, err = run_cli(capsys, "model", option, str(path))
+    assert_one_line_error(code, err, str(path), place, problem)
+    assert out == ""
+    return error
+
+
+def mutation_cases(cases) -> list:
+    """(mutate, place, problem) cases of a bad input file as pytest parameters, each named by its
+    mutation."""
+    return [pytest.param(*case, id=case[0].__name__) for case in cases]
+
+
+def mutated(document: dict, mutate: Callable[[dict], None]) -> dict:
+    """A deep copy of a good input `document`, changed by `mutate`."""
+    out = copy.deepcopy(document)
+    mutate(out)
+    return out

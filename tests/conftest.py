@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.harness.helpers import run_study
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.model.trust_pomdp import build_pomdp
@@ -40,13 +41,9 @@ def pomdp(town, driver):
 def model_study(tmp_path_factory) -> Path:
     """A small finished model-engine study (aware vs free on φ1 and φ2), shared by the analysis and
     dataset tests."""
-    from trustroute.harness.study.config import load_study_config
-    from trustroute.harness.study.runner import run_and_consolidate
-
     root = tmp_path_factory.mktemp("study")
     cache = tmp_path_factory.mktemp("policies")
-    config_path = root / "study.toml"
-    config_path.write_text(f"""[study]
+    run_study(root / "study.toml", f"""[study]
 name = "analysis-fixture"
 participants = 12
 seed = 3
@@ -54,7 +51,5 @@ engine = "model"
 specs = ["phi1", "phi2"]
 conditions = ["aware", "free"]
 policy_cache = "{cache}"
-""")
-    config = load_study_config(config_path)
-    run_and_consolidate(config, root / "out", 1, None, progress=False, echo=lambda *_: None)
+""", root / "out")
     return root / "out"

@@ -175,7 +175,7 @@ def driver_command(path: Path, folder: Path) -> list[str]:
     return ["synth", str(PHI1), "--driver", str(path), "--horizon", "3", "--out", str(folder / "p.json")]
 
 
-def _five_levels(data: dict) -> None:
+def five_trust_levels(data: dict) -> None:
     """A consistent 5-level model (every table resized): the 7-coefficient spec must refuse it."""
     n = 5
     data["trust_levels"] = list(range(1, n + 1))
@@ -219,7 +219,7 @@ DRIVER_CASES = [
     ("duplicate_key", text("driver.json", DRIVER_TEXT.replace("{", '{"source": "x", ', 1))),
     ("unknown_key", driver_edit(with_key("takeover_probabilty", {}))),
     ("unknown_nested_key", driver_edit(_unknown_transition_key)),
-    ("five_trust_levels_vs_seven_level_spec", driver_edit(_five_levels)),
+    ("five_trust_levels_vs_seven_level_spec", driver_edit(five_trust_levels)),
     ("too_many_trust_levels", driver_edit(_levels(10_000))),
     ("row_not_stochastic", driver_edit(_row_not_stochastic)),
 ]

@@ -40,6 +40,19 @@ def per_participant_table(episodes: pd.DataFrame, column: str, pair: tuple[str, 
     return out.reset_index()
 
 
+def trust_difference_columns(trust, wx) -> dict:
+    """A paired row's trust columns: the mean difference with its interval, and Wilcoxon's test with
+    the median difference."""
+    return {
+        "trust_difference": finite_or_none(trust.value),
+        "trust_diff_low": finite_or_none(trust.low),
+        "trust_diff_high": finite_or_none(trust.high),
+        "wilcoxon_pairs": wx.pairs,
+        "wilcoxon_p": wx.p_value,
+        "median_trust_difference": finite_or_none(wx.median_difference),
+    }
+
+
 def paired_table_rows(
     wide: pd.DataFrame, pair: tuple[str, str], spec_order, rng: np.random.Generator, resamples: int
 ) -> pd.DataFrame:
@@ -75,12 +88,7 @@ def paired_table_rows(
                 "or_low": finite_or_none(odds.low),
                 "or_high": finite_or_none(odds.high),
                 "or_note": odds.note,
-                "trust_difference": finite_or_none(trust.value),
-                "trust_diff_low": finite_or_none(trust.low),
-                "trust_diff_high": finite_or_none(trust.high),
-                "wilcoxon_pairs": wx.pairs,
-                "wilcoxon_p": wx.p_value,
-                "median_trust_difference": finite_or_none(wx.median_difference),
+                **trust_difference_columns(trust, wx),
             }
         )
     # Across specs, one value per participant (their repeated measures are not independent pairs).
@@ -110,12 +118,7 @@ def paired_table_rows(
                 "risk_difference": finite_or_none(sat_mean.value),
                 "rd_low": finite_or_none(sat_mean.low),
                 "rd_high": finite_or_none(sat_mean.high),
-                "trust_difference": finite_or_none(trust.value),
-                "trust_diff_low": finite_or_none(trust.low),
-                "trust_diff_high": finite_or_none(trust.high),
-                "wilcoxon_pairs": wx.pairs,
-                "wilcoxon_p": wx.p_value,
-                "median_trust_difference": finite_or_none(wx.median_difference),
+                **trust_difference_columns(trust, wx),
             }
         )
     return pd.DataFrame(rows)

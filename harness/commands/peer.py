@@ -11,32 +11,45 @@ finds is a lower bound of Pr_max (policies/peer/paynt.py). Needs the optional `[
 
 from __future__ import annotations
 
-import json
-
 import click
+
+from trustroute.harness.commands.output import emit
+
+
+def exported_problem(spec_path: str, town_path: str | None, driver_path: str | None,
+                     horizon: int | None) -> tuple:
+    """(spec, our POMDP, the explicit product a peer is given) for one comparison."""
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+    from trustroute.policies.peer.product_pomdp import check_exportable, explicit_product
+
+    town = load_town(town_path)
+    driver = load_driver_model(driver_path)
+    spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
+    check_exportable(spec)
+    pomdp = build_pomdp(town, driver)
+    return spec, pomdp, explicit_product(pomdp, spec, horizon)
+
+
+def our_bounds(pomdp, spec, horizon: int | None, depth: int, max_nodes: int):
+    """Our side of a comparison: the trust-state search's bounds on the same problem."""
+    from trustroute.policies.trust_state_synthesis.search import joint_bounds
+
+    return joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
 
 
 def storm_comparison(spec_path: str, town_path: str | None, driver_path: str | None,
                      horizon: int | None, time_limit: float, resolution: int, depth: int,
                      max_nodes: int) -> dict:
     """Both sides' bounds and seconds, JSON-ready."""
-    from trustroute.networks.town import load_town
-    from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.model.trust_pomdp import build_pomdp
-    from trustroute.policies.peer.product_pomdp import check_exportable, explicit_product
     from trustroute.policies.peer.storm import require_storm, run_storm
-    from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
     require_storm("trustroute peer storm")
-    town = load_town(town_path)
-    driver = load_driver_model(driver_path)
-    spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
-    check_exportable(spec)
-    pomdp = build_pomdp(town, driver)
-    product = explicit_product(pomdp, spec, horizon)
+    spec, pomdp, product = exported_problem(spec_path, town_path, driver_path, horizon)
     storm = run_storm(product, time_limit=time_limit, resolution=resolution)
-    ours = joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
+    ours = our_bounds(pomdp, spec, horizon, depth, max_nodes)
     return {"spec": spec.name, "file": spec.source_path, "horizon": horizon,
             "product_states": product.n_states, "storm": storm.to_dict(), "ours": ours.to_dict(),
             "overlap": bool(max(storm.lower, ours.lower) <= min(storm.upper, ours.upper) + 1e-9)}
@@ -46,23 +59,12 @@ def paynt_comparison(spec_path: str, town_path: str | None, driver_path: str | N
                      horizon: int | None, time_limit: float, max_states: int, depth: int,
                      max_nodes: int) -> dict:
     """PAYNT's controller value beside our bounds, JSON-ready."""
-    from trustroute.networks.town import load_town
-    from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.model.trust_pomdp import build_pomdp
     from trustroute.policies.peer.paynt import require_paynt, run_paynt
-    from trustroute.policies.peer.product_pomdp import check_exportable, explicit_product
-    from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
     require_paynt("trustroute peer paynt")
-    town = load_town(town_path)
-    driver = load_driver_model(driver_path)
-    spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
-    check_exportable(spec)
-    pomdp = build_pomdp(town, driver)
-    product = explicit_product(pomdp, spec, horizon)
+    spec, pomdp, product = exported_problem(spec_path, town_path, driver_path, horizon)
     paynt = run_paynt(product, time_limit=time_limit, max_states=max_states)
-    ours = joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
+    ours = our_bounds(pomdp, spec, horizon, depth, max_nodes)
     return {"spec": spec.name, "file": spec.source_path, "horizon": horizon,
             "product_states": product.n_states, "paynt": paynt.to_dict(), "ours": ours.to_dict(),
             "within_ours": bool(paynt.lower <= ours.upper + paynt.precision)}
@@ -96,6 +98,19 @@ def our_options(command):
     return command
 
 
+def problem_line(result: dict) -> str:
+    """A comparison's first line of text: the spec, its objective and the product's size."""
+    horizon = result["horizon"]
+    objective = f"within {horizon} junctions" if horizon is not None else "unbounded"
+    return f"{result['spec']} ({objective}), product POMDP with {result['product_states']} states"
+
+
+def ours_line(ours: dict) -> str:
+    """Our bounds, gap and seconds, as one line of a comparison's text."""
+    return (f"  ours   [{ours['lower']:.6f}, {ours['upper']:.6f}]  gap {ours['gap']:.2e}  "
+            f"{ours['seconds']:.1f} s")
+
+
 @click.group("peer")
 def peer() -> None:
     """Independent solvers beside ours."""
@@ -113,18 +128,18 @@ def storm(spec_path: str, town_path: str | None, driver_path: str | None, horizo
     """Storm's [lower, upper] and time beside ours, for SPEC."""
     result = storm_comparison(spec_path, town_path, driver_path, horizon, time_limit, resolution,
                               depth, max_nodes)
-    if as_json:
-        click.echo(json.dumps(result))
-        return
-    s, o = result["storm"], result["ours"]
-    objective = f"within {horizon} junctions" if horizon is not None else "unbounded"
-    click.echo(f"{result['spec']} ({objective}), product POMDP with {result['product_states']} states")
-    click.echo(f"  storm  [{s['lower']:.6f}, {s['upper']:.6f}]  gap {s['gap']:.2e}  "
-               f"{s['build_seconds'] + s['lower_seconds'] + s['upper_seconds']:.1f} s")
-    click.echo(f"  ours   [{o['lower']:.6f}, {o['upper']:.6f}]  gap {o['gap']:.2e}  {o['seconds']:.1f} s")
-    click.echo(f"  overlap: {'yes' if result['overlap'] else 'NO'}")
-    if s.get("note"):
-        click.echo(f"  note: {s['note']}")
+    emit(as_json, result, [] if as_json else storm_lines(result))
+
+
+def storm_lines(result: dict) -> list[str]:
+    """Storm's comparison as text."""
+    s = result["storm"]
+    lines = [problem_line(result),
+             f"  storm  [{s['lower']:.6f}, {s['upper']:.6f}]  gap {s['gap']:.2e}  "
+             f"{s['build_seconds'] + s['lower_seconds'] + s['upper_seconds']:.1f} s",
+             ours_line(result["ours"]),
+             f"  overlap: {'yes' if result['overlap'] else 'NO'}"]
+    return lines + ([f"  note: {s['note']}"] if s.get("note") else [])
 
 
 @peer.command("paynt")
@@ -139,17 +154,18 @@ def paynt(spec_path: str, town_path: str | None, driver_path: str | None, horizo
     """PAYNT's finite-state controller value (a lower bound of Pr_max) beside ours, for SPEC."""
     result = paynt_comparison(spec_path, town_path, driver_path, horizon, time_limit, max_states,
                               depth, max_nodes)
-    if as_json:
-        click.echo(json.dumps(result))
-        return
-    p, o = result["paynt"], result["ours"]
-    objective = f"within {horizon} junctions" if horizon is not None else "unbounded"
-    click.echo(f"{result['spec']} ({objective}), product POMDP with {result['product_states']} states")
+    emit(as_json, result, [] if as_json else paynt_lines(result))
+
+
+def paynt_lines(result: dict) -> list[str]:
+    """PAYNT's comparison as text."""
+    p = result["paynt"]
     found = (f"{p['value']:.6f}" if p["found"] else "no controller found in time (lower bound 0)")
-    click.echo(f"  paynt  {found}  {p['seconds']:.1f} s, controllers up to "
-               f"{p['memory_nodes']} memory nodes per observation")
-    click.echo(f"  ours   [{o['lower']:.6f}, {o['upper']:.6f}]  gap {o['gap']:.2e}  {o['seconds']:.1f} s")
-    click.echo("  PAYNT's value is a LOWER bound of Pr_max: the value of one finite-state controller. "
-               "A controller with k memory nodes may be worth less than the best history-dependent "
-               "policy, so compare it with our L, not U.")
-    click.echo(f"  within our U: {'yes' if result['within_ours'] else 'NO'}")
+    return [problem_line(result),
+            f"  paynt  {found}  {p['seconds']:.1f} s, controllers up to "
+            f"{p['memory_nodes']} memory nodes per observation",
+            ours_line(result["ours"]),
+            "  PAYNT's value is a LOWER bound of Pr_max: the value of one finite-state controller. "
+            "A controller with k memory nodes may be worth less than the best history-dependent "
+            "policy, so compare it with our L, not U.",
+            f"  within our U: {'yes' if result['within_ours'] else 'NO'}"]

@@ -114,15 +114,24 @@ def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
     return context
 
 
-def _build_study_context(config: StudyConfig, progress: bool) -> StudyContext:
+def load_study_inputs(town_path: str | Path | None, driver_path: str | Path | None,
+                      spec_paths) -> tuple[Town, DriverModel, dict[str, Spec]]:
+    """(town, nominal driver model, {spec name: Spec}) of a study: every spec checked against the
+    town and the driver model's trust levels. The study's context and the analysis of a study
+    directory (analysis/study_directory.py) load them here."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.policies.logic.spec import load_spec
 
-    town = load_town(config.town)
-    nominal = load_driver_model(config.driver_model)
+    town = load_town(town_path)
+    nominal = load_driver_model(driver_path)
     specs = {Path(path).stem: load_spec(path, town, nominal.n_trust, nominal.source_path)
-             for path in config.specs}
+             for path in spec_paths}
+    return town, nominal, specs
+
+
+def _build_study_context(config: StudyConfig, progress: bool) -> StudyContext:
+    town, nominal, specs = load_study_inputs(config.town, config.driver_model, config.specs)
     setups = {
         name: EpisodeSetup(
             town=town,

@@ -35,6 +35,13 @@ from trustroute.policies.routing.free import free_completion, state_only_task
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 
+def store_row_arrays(rows, integers: tuple[str, ...], reals: tuple[str, ...]) -> None:
+    """Hold a frozen table's row fields as numpy arrays: `integers` as int64, `reals` as float."""
+    for names, dtype in ((integers, np.int64), (reals, float)):
+        for name in names:
+            object.__setattr__(rows, name, np.asarray(getattr(rows, name), dtype=dtype))
+
+
 @dataclass(frozen=True, eq=False)
 class BoxRows:
     """Box rows (policies/synthesis/cluster_policy.py): at (t, x, q), a belief inside [lo, hi] may
@@ -50,10 +57,7 @@ class BoxRows:
     action: np.ndarray
 
     def __post_init__(self) -> None:
-        for name in ("t", "x", "q", "action"):
-            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=np.int64))
-        for name in ("lo", "hi", "value"):
-            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=float))
+        store_row_arrays(self, integers=("t", "x", "q", "action"), reals=("lo", "hi", "value"))
 
     @property
     def rows(self) -> int:
@@ -85,9 +89,7 @@ class PolicyTable:
     boxes: BoxRows | None = None
 
     def __post_init__(self) -> None:
-        for name in ("t", "x", "q", "action", "projected"):
-            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=np.int64))
-        object.__setattr__(self, "beliefs", np.asarray(self.beliefs, dtype=float))
+        store_row_arrays(self, integers=("t", "x", "q", "action", "projected"), reals=("beliefs",))
 
     @classmethod
     def empty(cls, n_trust: int, boxes: BoxRows | None = None) -> PolicyTable:

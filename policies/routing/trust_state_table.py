@@ -34,6 +34,7 @@ from trustroute.networks.town import Town
 from trustroute.policies.belief.trust_state_relaxation import RelaxedGuide, relaxed_guide
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import TrustPOMDP
+from trustroute.policies.routing.aware_table import store_row_arrays
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 MATCH_TOLERANCE = 1e-9
@@ -51,10 +52,7 @@ class JointPolicyTable:
     action: np.ndarray
 
     def __post_init__(self) -> None:
-        for name in ("t", "x", "q", "action"):
-            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=np.int64))
-        object.__setattr__(self, "beliefs", np.asarray(self.beliefs, dtype=float))
-        object.__setattr__(self, "joint", np.asarray(self.joint, dtype=float))
+        store_row_arrays(self, integers=("t", "x", "q", "action"), reals=("beliefs", "joint"))
 
     @property
     def rows(self) -> int:

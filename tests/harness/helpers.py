@@ -1,6 +1,9 @@
-"""Shared test helpers for the harness tests: spec paths, a fixed-route policy, forced drivers."""
+"""Shared test helpers for the harness tests: spec paths, a fixed-route policy, forced drivers, and
+a finished study from a config text."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.policies.routing.protocol import RoutingPolicy
@@ -8,6 +11,18 @@ from trustroute.policies.routing.protocol import RoutingPolicy
 SPECS = PACKAGED_SPECS
 # Start E-A, then a pedestrian road, a plain road, an obstacle road and a truck road.
 INCIDENT_ROUTE = ("E-A", "A-B", "B-C", "C-J", "J-K")
+
+
+def run_study(config_path: Path, text: str, out: Path):
+    """Write the study config `text` to `config_path`, run and consolidate that study into `out` on
+    one local worker without output, and return its StudyConfig."""
+    from trustroute.harness.study.config import load_study_config
+    from trustroute.harness.study.runner import run_and_consolidate
+
+    config_path.write_text(text)
+    config = load_study_config(config_path)
+    run_and_consolidate(config, out, 1, None, progress=False, echo=lambda *_: None)
+    return config
 
 
 class FixedRoute(RoutingPolicy):

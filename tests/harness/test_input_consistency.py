@@ -7,10 +7,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from tests.cli import run_cli
+from tests.test_bad_input_matrix import five_trust_levels
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
 
@@ -48,13 +48,7 @@ def test_six_coefficients_are_rejected_by_spec_check_as_by_synth(tmp_path, capsy
 
 def _five_level_model(path: Path) -> Path:
     data = json.loads(DEFAULT_DRIVER_MODEL_PATH.read_text())
-    n = 5
-    data["trust_levels"] = list(range(1, n + 1))
-    data["initial_belief"] = [1 / n] * n
-    for incident in data["incident_types"]:
-        data["takeover_probability"][incident] = data["takeover_probability"][incident][:n]
-        for action in ("takeover", "standstill"):
-            data["trust_transition"][incident][action] = np.eye(n).tolist()
+    five_trust_levels(data)
     path.write_text(json.dumps(data))
     return path
 

@@ -10,8 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli import run_cli
-from tests.networks.test_town_errors import assert_one_line_error
+from tests.cli import assert_one_line_error, run_cli
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
 from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH
 

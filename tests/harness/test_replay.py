@@ -10,17 +10,14 @@ import pandas as pd
 import pytest
 
 from tests.cli import run_cli
+from tests.harness.helpers import run_study
 
 
 @pytest.fixture(scope="module")
 def sumo_study(tmp_path_factory):
-    from trustroute.harness.study.config import load_study_config
-    from trustroute.harness.study.runner import run_and_consolidate
-
     root = tmp_path_factory.mktemp("replay")
     cache = tmp_path_factory.mktemp("policies")
-    config_path = root / "study.toml"
-    config_path.write_text(f"""[study]
+    run_study(root / "study.toml", f"""[study]
 name = "replay-fixture"
 participants = 2
 seed = 9
@@ -32,9 +29,7 @@ record = ["p00001-phi1-free"]
 [population]
 concentration = 40.0
 takeover_spread = 0.5
-""")
-    config = load_study_config(config_path)
-    run_and_consolidate(config, root / "out", 1, None, progress=False, echo=lambda *_: None)
+""", root / "out")
     return root / "out"
 
 

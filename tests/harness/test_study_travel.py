@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from tests.cli import run_cli
+from tests.harness.helpers import run_study
 from trustroute.core.packaged import SPECS
 from trustroute.networks.town import DEFAULT_TOWN_PATH
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
@@ -18,16 +19,14 @@ from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
 
 def _travelled_study(root: Path, engine: str) -> Path:
     """Run a tiny study from temporary inputs, copy its directory, delete the originals."""
-    from trustroute.harness.study.config import load_study_config
-    from trustroute.harness.study.runner import run_and_consolidate
-
     inputs, cache = root / "inputs", root / "cache"
     inputs.mkdir(parents=True)
     for name in ("phi1", "phi2"):
         shutil.copy(SPECS.path(name), inputs / f"{name}.toml")
     shutil.copy(DEFAULT_TOWN_PATH, inputs / "mytown.json")
     shutil.copy(DEFAULT_DRIVER_MODEL_PATH, inputs / "mydriver.json")
-    (inputs / "study.toml").write_text(f"""[study]
+    original = root / "original"
+    run_study(inputs / "study.toml", f"""[study]
 participants = 2
 seed = 4
 engine = "{engine}"
@@ -37,10 +36,7 @@ town = "mytown.json"
 driver_model = "mydriver.json"
 policy_cache = "{cache}"
 horizon = 8
-""")
-    original = root / "original"
-    run_and_consolidate(load_study_config(inputs / "study.toml"), original, 1, None, progress=False,
-                        echo=lambda *_: None)
+""", original)
     travelled = root / "elsewhere" / "study"
     shutil.copytree(original, travelled)
     for folder in (inputs, cache, original):   # the temporary inputs, the policy cache, the original
@@ -129,12 +125,10 @@ def test_synth_without_out_writes_to_the_cache_and_says_where(tmp_path, fresh_ca
 
 @pytest.mark.slow
 def test_a_copied_robust_study_with_a_population_replays_without_synthesis(tmp_path, fresh_cache, capsys):
-    from trustroute.harness.study.config import load_study_config
-    from trustroute.harness.study.runner import run_and_consolidate
 
     made, cache = tmp_path / "made", tmp_path / "cache"
     made.mkdir()
-    (made / "r.toml").write_text(f"""[study]
+    run_study(made / "r.toml", f"""[study]
 participants = 2
 seed = 2
 engine = "model"
@@ -145,9 +139,7 @@ horizon = 4
 policy_cache = "{cache}"
 [drivers]
 population = "driver_population_three_types"
-""")
-    run_and_consolidate(load_study_config(made / "r.toml"), made / "out", 1, None, progress=False,
-                        echo=lambda *_: None)
+""", made / "out")
     study = tmp_path / "elsewhere"
     shutil.copytree(made / "out", study)
     shutil.rmtree(made)

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.harness.helpers import run_study
 from trustroute.analysis.study.analysis import study_analysis
 from trustroute.analysis.study.per_type import ALL_TYPES
 from trustroute.core.dataset import read_episodes
@@ -59,10 +60,7 @@ def test_true_types_follow_the_weights_and_are_stable_per_participant(tmp_path):
 @pytest.fixture(scope="module")
 def type_study(tmp_path_factory):
     root = tmp_path_factory.mktemp("type-study")
-    path = root / "study.toml"
-    path.write_text(_config_text(root / "cache"))
-    config = load_study_config(path)
-    run_and_consolidate(config, root / "out", 1, None, progress=False, echo=lambda *_: None)
+    config = run_study(root / "study.toml", _config_text(root / "cache"), root / "out")
     return config, root / "out"
 
 

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
-import copy
 import json
 
 import pytest
 
-from tests.cli import run_cli
-from trustroute.core.errors import InputError
+from tests.cli import (
+    assert_file_refused,
+    assert_one_line_error,
+    mutated,
+    mutation_cases,
+    refused_file,
+    run_cli,
+)
 from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
 
 
@@ -85,30 +90,10 @@ CASES = [
 ]
 
 
-def assert_one_line_error(code: int, err: str, *fragments: str) -> None:
-    assert code == 2
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("error: ")
-    for fragment in fragments:
-        assert fragment in lines[0], (fragment, lines[0])
-    assert "(fix: " in lines[0]
-
-
-@pytest.mark.parametrize("mutate, place, problem", CASES, ids=[c[0].__name__ for c in CASES])
+@pytest.mark.parametrize("mutate, place, problem", mutation_cases(CASES))
 def test_malformed_town_gives_its_error_and_exit_2(tmp_path, capsys, mutate, place, problem):
-    data = copy.deepcopy(default_town())
-    mutate(data)
-    path = tmp_path / "town.json"
-    path.write_text(json.dumps(data))
-    with pytest.raises(InputError) as error:
-        load_town(path)
-    assert error.value.place == place
-    assert problem in error.value.problem
-    code, out, err = run_cli(capsys, "model", "--town", str(path))
-    assert_one_line_error(code, err, str(path), place, problem)
-    assert out == ""
+    assert_file_refused(capsys, load_town, "--town", mutated(default_town(), mutate), tmp_path / "town.json",
+                        place, problem)
 
 
 def test_bad_json_names_line_and_column(tmp_path, capsys):
@@ -145,25 +130,16 @@ def test_every_missing_incident_is_counted_in_one_line(tmp_path, capsys):
     kept = {f"{u}-{v}" for u, v in data["roads"]}
     missing = sorted(set(data["incidents"]) - kept)
     data["incidents"] = {road: kind for road, kind in data["incidents"].items() if road in kept}
-    path = tmp_path / "town.json"
-    path.write_text(json.dumps(data))
-    with pytest.raises(InputError) as error:
-        load_town(path)
     assert len(missing) == len(data["roads"]) == 18
-    assert error.value.place == f"incidents.{missing[0]}"
-    first_five = ", ".join(missing[:5])
-    assert error.value.problem == f"missing incident entries for 18 directed roads: {first_five} and 13 more"
-    code, out, err = run_cli(capsys, "model", "--town", str(path))
-    assert_one_line_error(code, err, str(path), "missing incident entries for 18 directed roads")
-    assert out == ""
+    problem = f"missing incident entries for 18 directed roads: {', '.join(missing[:5])} and 13 more"
+    error = assert_file_refused(capsys, load_town, "--town", data, tmp_path / "town.json",
+                                f"incidents.{missing[0]}", problem)
+    assert error.problem == problem
 
 
 def test_a_few_missing_incidents_are_all_named(tmp_path):
     data = default_town()
     for road in ("C-J", "A-B", "J-C"):
         del data["incidents"][road]
-    path = tmp_path / "town.json"
-    path.write_text(json.dumps(data))
-    with pytest.raises(InputError) as error:
-        load_town(path)
-    assert error.value.problem == "missing incident entries for 3 directed roads: A-B, C-J, J-C"
+    error = refused_file(load_town, data, tmp_path / "town.json")
+    assert error.problem == "missing incident entries for 3 directed roads: A-B, C-J, J-C"

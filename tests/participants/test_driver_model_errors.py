@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import copy
 import json
 
 import pytest
 
-from tests.cli import run_cli
-from tests.networks.test_town_errors import assert_one_line_error
-from trustroute.core.errors import InputError
+from tests.cli import assert_file_refused, assert_one_line_error, mutated, mutation_cases, run_cli
 from trustroute.participants.driver_model import (
     DEFAULT_DRIVER_MODEL_PATH,
     driver_model_from_dict,
@@ -110,19 +107,10 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("mutate, place, problem", CASES, ids=[c[0].__name__ for c in CASES])
+@pytest.mark.parametrize("mutate, place, problem", mutation_cases(CASES))
 def test_malformed_driver_model_gives_its_error_and_exit_2(tmp_path, capsys, mutate, place, problem):
-    data = copy.deepcopy(default_model())
-    mutate(data)
-    path = tmp_path / "driver.json"
-    path.write_text(json.dumps(data))
-    with pytest.raises(InputError) as error:
-        load_driver_model(path)
-    assert error.value.place == place
-    assert problem in error.value.problem
-    code, out, err = run_cli(capsys, "model", "--driver", str(path))
-    assert_one_line_error(code, err, str(path), place, problem)
-    assert out == ""
+    assert_file_refused(capsys, load_driver_model, "--driver", mutated(default_model(), mutate),
+                        tmp_path / "driver.json", place, problem)
 
 
 def test_row_within_tolerance_is_accepted():
@@ -215,20 +203,11 @@ BOOL_CASES = [
 ]
 
 
-@pytest.mark.parametrize("mutate, place, problem", BOOL_CASES, ids=[c[0].__name__ for c in BOOL_CASES])
+@pytest.mark.parametrize("mutate, place, problem", mutation_cases(BOOL_CASES))
 def test_true_or_false_is_not_a_probability(tmp_path, capsys, mutate, place, problem):
-    data = copy.deepcopy(default_model())
-    mutate(data)
-    with pytest.raises(InputError) as error:
-        driver_model_from_dict(data, "<test>")
-    assert error.value.place == place
-    assert problem in error.value.problem
-    assert "true and false are not numbers" in error.value.fix
-    path = tmp_path / "driver.json"
-    path.write_text(json.dumps(data))
-    code, out, err = run_cli(capsys, "model", "--driver", str(path))
-    assert_one_line_error(code, err, str(path), place, problem)
-    assert out == ""
+    error = assert_file_refused(capsys, load_driver_model, "--driver", mutated(default_model(), mutate),
+                                tmp_path / "driver.json", place, problem)
+    assert "true and false are not numbers" in error.fix
 
 
 def test_numbers_equal_to_the_refused_booleans_are_accepted():

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import copy
 import json
 
 import numpy as np
 import pytest
 
+from tests.cli import mutated, mutation_cases, refused_file
 from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH, load_driver_model
 from trustroute.participants.driver_population import (
@@ -160,15 +160,10 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("mutate, place, problem", CASES, ids=[c[0].__name__ for c in CASES])
+@pytest.mark.parametrize("mutate, place, problem", mutation_cases(CASES))
 def test_bad_population_file_is_one_input_error(tmp_path, mutate, place, problem):
-    doc = copy.deepcopy(example())
-    mutate(doc)
-    path = tmp_path / "pop.json"
-    path.write_text(json.dumps(doc))
-    with pytest.raises(InputError) as info:
-        load_driver_population(path)
-    message = info.value.one_line()
+    error = refused_file(load_driver_population, mutated(example(), mutate), tmp_path / "pop.json")
+    message = error.one_line()
     assert "\n" not in message
     assert place in message and problem in message, message
     assert "(fix: " in message

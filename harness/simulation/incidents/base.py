@@ -114,6 +114,41 @@ class Incident(Protocol):
 
 # The vehicle-backed kinds (obstacle, truck) share these.
 
+@dataclass(frozen=True)
+class VehicleType:
+    """A SUMO vehicle type copied from DEFAULT_VEHTYPE: each attribute given replaces the default's
+    (None keeps it)."""
+
+    type_id: str
+    color: tuple[int, int, int, int]
+    vehicle_class: str | None = None
+    shape_class: str | None = None
+    length: float | None = None
+    width: float | None = None
+    max_speed: float | None = None
+    accel: float | None = None
+    imperfection: float | None = None
+    speed_deviation: float | None = None
+
+
+def define_vehicle_type(sumo, vehicle_type: VehicleType) -> None:
+    """Add `vehicle_type` to the simulation: the default type's copy, then the attributes given."""
+    types, type_id = sumo.vehicletype, vehicle_type.type_id
+    types.copy("DEFAULT_VEHTYPE", type_id)
+    setters = ((types.setVehicleClass, vehicle_type.vehicle_class),
+               (types.setShapeClass, vehicle_type.shape_class),
+               (types.setLength, vehicle_type.length),
+               (types.setWidth, vehicle_type.width),
+               (types.setMaxSpeed, vehicle_type.max_speed),
+               (types.setAccel, vehicle_type.accel),
+               (types.setImperfection, vehicle_type.imperfection),
+               (types.setSpeedDeviation, vehicle_type.speed_deviation),
+               (types.setColor, vehicle_type.color))
+    for setter, value in setters:
+        if value is not None:
+            setter(type_id, value)
+
+
 def vehicle_present(sumo, vehicle_id: str) -> bool:
     # getRoadID raises for a vehicle not (or no longer) in the simulation: one call, no ID list.
     try:

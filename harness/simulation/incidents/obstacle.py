@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 from trustroute.harness.simulation.incidents.base import (
     EgoState,
     Scene,
+    VehicleType,
+    define_vehicle_type,
     park_vehicle,
     remove_vehicle,
     vehicle_position,
@@ -39,17 +41,17 @@ P_UNSEEN = 0.2                  # the oncoming vehicle turns in unseen at the ro
 BLOCKED_SECONDS = 20.0          # s: how long an obstacle nobody can pass blocks after the ego arrives
 
 
+OBSTACLE_TYPES = (
+    VehicleType(TYPE_ID, color=(255, 200, 0, 255), vehicle_class="passenger", length=4.5),
+    # the passenger class: a broken bicycle may stand in a car lane
+    VehicleType(BICYCLE_TYPE_ID, color=(255, 200, 0, 255), vehicle_class="passenger",
+                shape_class="bicycle", length=1.8, width=0.65),
+)
+
+
 def define_type(sumo) -> None:
-    sumo.vehicletype.copy("DEFAULT_VEHTYPE", TYPE_ID)
-    sumo.vehicletype.setVehicleClass(TYPE_ID, "passenger")
-    sumo.vehicletype.setLength(TYPE_ID, 4.5)
-    sumo.vehicletype.setColor(TYPE_ID, (255, 200, 0, 255))
-    sumo.vehicletype.copy("DEFAULT_VEHTYPE", BICYCLE_TYPE_ID)
-    sumo.vehicletype.setVehicleClass(BICYCLE_TYPE_ID, "passenger")   # may stand in a car lane
-    sumo.vehicletype.setShapeClass(BICYCLE_TYPE_ID, "bicycle")
-    sumo.vehicletype.setLength(BICYCLE_TYPE_ID, 1.8)
-    sumo.vehicletype.setWidth(BICYCLE_TYPE_ID, 0.65)
-    sumo.vehicletype.setColor(BICYCLE_TYPE_ID, (255, 200, 0, 255))
+    for vehicle_type in OBSTACLE_TYPES:
+        define_vehicle_type(sumo, vehicle_type)
 
 
 @dataclass

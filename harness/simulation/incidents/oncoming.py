@@ -26,6 +26,8 @@ from dataclasses import dataclass
 from trustroute.harness.simulation.incidents.base import (
     EgoState,
     Scene,
+    VehicleType,
+    define_vehicle_type,
     head_on_ttc,
     remove_vehicle,
     vehicle_position,
@@ -42,17 +44,13 @@ WATCH_HORIZON = 3.0    # s: above every head-on TTC limit (harness/simulation/pe
 GONE_BEHIND = 60.0     # metres behind the ego after the meeting: the vehicle leaves the simulation
 
 
+TRUCK_TYPE = VehicleType(TYPE_ID, color=(120, 120, 255, 255), vehicle_class="truck", shape_class="truck",
+                         length=TRUCK_LENGTH, width=2.5, max_speed=TRUCK_SPEED, accel=1.0,
+                         imperfection=0.0, speed_deviation=0.0)
+
+
 def define_type(sumo: Sumo) -> None:
-    sumo.vehicletype.copy("DEFAULT_VEHTYPE", TYPE_ID)
-    sumo.vehicletype.setVehicleClass(TYPE_ID, "truck")
-    sumo.vehicletype.setShapeClass(TYPE_ID, "truck")
-    sumo.vehicletype.setLength(TYPE_ID, TRUCK_LENGTH)
-    sumo.vehicletype.setWidth(TYPE_ID, 2.5)
-    sumo.vehicletype.setMaxSpeed(TYPE_ID, TRUCK_SPEED)
-    sumo.vehicletype.setAccel(TYPE_ID, 1.0)
-    sumo.vehicletype.setImperfection(TYPE_ID, 0.0)
-    sumo.vehicletype.setSpeedDeviation(TYPE_ID, 0.0)
-    sumo.vehicletype.setColor(TYPE_ID, (120, 120, 255, 255))
+    define_vehicle_type(sumo, TRUCK_TYPE)
 
 
 @dataclass

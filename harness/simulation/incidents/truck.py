@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 from trustroute.harness.simulation.incidents.base import (
     EgoState,
     Scene,
+    VehicleType,
+    define_vehicle_type,
     park_vehicle,
     remove_vehicle,
     vehicle_position,
@@ -37,10 +39,11 @@ PARKED_BEFORE_MEETING = (0.0, 80.0)   # metres before the meeting point, along t
 PARKED_MIN_LANE = 200.0
 
 
+PARKED_TYPE = VehicleType(PARKED_TYPE_ID, color=(160, 160, 160, 255), length=4.5)
+
+
 def define_type(sumo) -> None:
-    sumo.vehicletype.copy("DEFAULT_VEHTYPE", PARKED_TYPE_ID)
-    sumo.vehicletype.setLength(PARKED_TYPE_ID, 4.5)
-    sumo.vehicletype.setColor(PARKED_TYPE_ID, (160, 160, 160, 255))
+    define_vehicle_type(sumo, PARKED_TYPE)
 
 
 @dataclass

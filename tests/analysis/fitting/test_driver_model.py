@@ -32,6 +32,8 @@ TOLERANCE_COUNTS = 0.07
 
 
 class RandomRoutes(RoutingPolicy):
+    """A uniformly random next junction at every road, drawn from `rng`."""
+
     name = "random"
 
     def __init__(self, town, rng):

@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from tests.analysis.fitting.test_driver_model import RandomRoutes
 from trustroute.analysis.fitting.driver_model import fit_em, observations_from_roads
 from trustroute.analysis.fitting.mixture import (
     fit_mixture,
@@ -36,22 +37,10 @@ from trustroute.harness.simulation.model_engine import run_model_episode
 from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.routing.protocol import RoutingPolicy
 
 PARTICIPANTS = 30
 EPISODES_EACH = 3
 PLANTED = {"builder": 0.6, "wary": 0.4}
-
-
-class RandomRoutes(RoutingPolicy):
-    name = "random"
-
-    def __init__(self, town, rng):
-        self.town, self.rng = town, rng
-
-    def next_junction(self, context):
-        actions = self.town.actions(context.road)
-        return actions[int(self.rng.integers(len(actions)))]
 
 
 def _planted_logs(town, seed: int):

@@ -39,7 +39,8 @@ class RandomStationaryPolicy(RoutingPolicy):
 
 
 def simulate(pomdp, spec, policy, episodes, rng, max_junctions, belief_rule="bayes"):
-    """Monte Carlo: returns (satisfied bool[episodes], final true trust int[episodes])."""
+    """Monte Carlo: returns (satisfied bool[episodes], final true trust int[episodes]). The DFA reads
+    the true trust level of each position (trust-state atoms, docs/trust_states.md)."""
     town, driver = pomdp.town, pomdp.driver
     dfa = build_dfa(spec)
     labeller = Labeller(spec, dfa, town)
@@ -51,7 +52,7 @@ def simulate(pomdp, spec, policy, episodes, rng, max_junctions, belief_rule="bay
         belief = np.array(driver.initial_belief, dtype=float)
         route = [spec.start]
         q = int(labeller.step(np.array([dfa.initial]), np.array([town.state_index(spec.start)]),
-                              belief[None])[0])
+                              belief[None], np.array([theta]))[0])
         for level in range(max_junctions + 1):
             if dfa.accepting[q]:
                 satisfied[n] = True
@@ -68,7 +69,8 @@ def simulate(pomdp, spec, policy, episodes, rng, max_junctions, belief_rule="bay
             theta = int(rng.choice(n_trust, p=driver.trust_transition[inc, h, e, theta]))
             belief = pomdp.belief_update(belief, inc, h, e, rule=belief_rule)[0][0]
             route.append(road)
-            q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None])[0])
+            q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None],
+                                  np.array([theta]))[0])
         final_trust[n] = driver.trust_levels[theta]
     return satisfied, final_trust
 

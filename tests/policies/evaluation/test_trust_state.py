@@ -11,16 +11,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tests.cli import run_cli
-from tests.policies.evaluation.test_plain import RandomStationaryPolicy
+from tests.policies.evaluation.test_plain import RandomStationaryPolicy, simulate
 from tests.policies.trust_paths import policy_value
 from tests.policies.trust_specs import random_problem
 from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.evaluation.trust_state import evaluate_joint
-from trustroute.policies.logic.dfa import build_dfa
-from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import trust_free_policy
-from trustroute.policies.routing.protocol import DecisionContext
 from trustroute.policies.synthesize_spec import synthesize_spec
 
 
@@ -58,37 +55,6 @@ def test_merged_unfolding_equals_the_tree_unfolding(pomdp):
     assert merged.nodes <= tree.nodes
 
 
-def simulate_hidden_trust(pomdp, spec, policy, episodes, rng, max_junctions):
-    """Monte Carlo with the true trust path drawn from the driver model; the DFA reads it."""
-    town, driver = pomdp.town, pomdp.driver
-    dfa = build_dfa(spec)
-    labeller = Labeller(spec, dfa, town)
-    satisfied = np.zeros(episodes, dtype=bool)
-    for n in range(episodes):
-        theta = int(rng.choice(driver.n_trust, p=driver.initial_belief))
-        belief = np.array(driver.initial_belief, dtype=float)
-        route = [spec.start]
-        q = int(labeller.step(np.array([dfa.initial]), np.array([town.state_index(spec.start)]),
-                              belief[None], np.array([theta]))[0])
-        for level in range(max_junctions + 1):
-            if dfa.accepting[q] or dfa.rejecting[q]:
-                break
-            context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
-            if policy.finished(context) or level == max_junctions:
-                break
-            road = town.successor(route[-1], policy.next_junction(context))
-            inc = driver.incident_index(town.incident(road))
-            h = int(rng.random() < driver.takeover_probability[inc, theta])
-            e = int(rng.random() < driver.failure_probability[inc, theta])
-            theta = int(rng.choice(driver.n_trust, p=driver.trust_transition[inc, h, e, theta]))
-            belief = pomdp.belief_update(belief, inc, h, e)[0][0]
-            route.append(road)
-            q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None],
-                                  np.array([theta]))[0])
-        satisfied[n] = bool(dfa.accepting[q])
-    return satisfied
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("policy_kind", ["free", "random"])
 def test_exact_value_agrees_with_monte_carlo_of_the_hidden_trust(pomdp, policy_kind):
@@ -99,7 +65,7 @@ def test_exact_value_agrees_with_monte_carlo_of_the_hidden_trust(pomdp, policy_k
     policy = (trust_free_policy(pomdp.town, spec) if policy_kind == "free"
               else RandomStationaryPolicy(pomdp.town, np.random.default_rng(9)))
     exact = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=12)
-    satisfied = simulate_hidden_trust(pomdp, spec, policy, 4000, rng, 12)
+    satisfied, _ = simulate(pomdp, spec, policy, 4000, rng, 12)
     p = exact.satisfaction_probability
     se = max(np.sqrt(p * (1 - p) / satisfied.size), 1.0 / satisfied.size)
     assert abs(satisfied.mean() - p) <= 4 * se + exact.gap, (satisfied.mean(), p, se)
