@@ -105,7 +105,7 @@ def _rss_mb() -> float:
 def run() -> list[dict]:
     town = load_town()
     driver_model = load_driver_model()
-    spec = load_spec(os.path.join(os.path.dirname(__file__), "..", "policies", "specs", "phi1.toml"), town)
+    spec = load_spec("phi1", town)
     setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
     policy = trust_free_policy(town, spec)
     net = build_net(town).path
@@ -267,7 +267,7 @@ if __name__ == "__main__":
     import sys
 
     _town = load_town(sys.argv[2] if len(sys.argv) > 2 else None)
-    _spec = load_spec(os.path.join(os.path.dirname(__file__), "..", "policies", "specs", "phi1.toml"), _town)
+    _spec = load_spec("phi1", _town)
     _setup = EpisodeSetup(town=_town, driver_model=load_driver_model(), spec=_spec)
     print("route:", " ".join(route_through_every_kind(_town, _spec.start)))
     print(_rates_table(incident_rates(_setup, build_net(_town).path, SumoConfig(),

@@ -8,7 +8,10 @@ prioritised pedestrian crossing over each road with a pedestrian incident, at bo
 (the person of a `U-V` incident crosses at U, ahead of the ego as it turns into `U-V`); explicit
 connections to every non-U-turn successor (U-turns only at dead ends, `--no-turnarounds`);
 narrow lanes and small junction radii so that driven lengths (edge + internal lanes of the
-connection taken) stay within 5 % of the model's Euclidean lengths (docs/model.md, "Road lengths").
+connection taken) stay within 5 % of the model's Euclidean lengths on long straight roads
+(docs/model.md, "Road lengths"); a road whose geometry bends between its junctions is drawn
+along that shape (`edge_shape`; its opposite direction along the same shape reversed), so that
+it is driven as long as the model counts it.
 One vehicle lane per direction keeps lane choice out of routing: the route can be extended one road ahead late
 on the current road, after its incident has been observed.
 
@@ -37,7 +40,7 @@ from trustroute.core.cache import cache_dir as default_cache_dir
 from trustroute.core.errors import InputError
 from trustroute.networks.town import Town, road_name
 
-NET_RECIPE = "r2"                      # bump when the recipe below changes: invalidates caches
+NET_RECIPE = "r3"                      # bump when the recipe below changes: invalidates caches
 ROAD_SPEED = 13.89                     # m/s (50 km/h)
 LANE_WIDTH = 3.0
 SIDEWALK_WIDTH = 1.5
@@ -93,6 +96,27 @@ def opposite_lane(town: Town, directed_road: str) -> str:
     return f"{directed_road}_{lane_count(town, directed_road)}"
 
 
+def edge_shape(town: Town, directed_road: str) -> tuple[tuple[float, float], ...] | None:
+    """The course netconvert draws a road's edge along: the road's geometry shape, or the opposite
+    direction's shape reversed, when it bends between the junctions; None for a straight road (the
+    edge is then drawn from junction to junction and the plain XML carries no shape)."""
+    own = town.geometry.get(directed_road)
+    if own is not None and len(own.shape) > 2:
+        return own.shape
+    u, v = directed_road.split("-")
+    other = town.geometry.get(road_name(v, u))
+    if other is not None and len(other.shape) > 2:
+        return tuple(reversed(other.shape))
+    return None
+
+
+def _shape_attribute(town: Town, directed_road: str) -> str:
+    shape = edge_shape(town, directed_road)
+    if shape is None:
+        return ""
+    return " shape=\"" + " ".join(f"{x:.3f},{y:.3f}" for x, y in shape) + "\""
+
+
 def plain_xml(town: Town) -> dict[str, str]:
     """The plain-XML inputs of netconvert: {"nod": ..., "edg": ..., "con": ...}."""
     walk = {frozenset(pair) for pair in pedestrian_roads(town)}
@@ -106,7 +130,8 @@ def plain_xml(town: Town) -> dict[str, str]:
         reverse = road_name(v, u)
         edges.append(f"  <edge id={quoteattr(road)} from={quoteattr(u)} to={quoteattr(v)} priority=\"1\" "
                      f"numLanes=\"{lane_count(town, road)}\" speed=\"{ROAD_SPEED}\" "
-                     f"width=\"{LANE_WIDTH}\" sidewalkWidth=\"{SIDEWALK_WIDTH}\" spreadType=\"right\">")
+                     f"width=\"{LANE_WIDTH}\" sidewalkWidth=\"{SIDEWALK_WIDTH}\" spreadType=\"right\""
+                     f"{_shape_attribute(town, road)}>")
         if reverse in town.states:
             # The leftmost vehicle lane of the opposite direction: overtaking through it is allowed.
             edges.append(f"    <neigh lane={quoteattr(opposite_lane(town, reverse))}/>")

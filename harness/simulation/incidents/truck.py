@@ -35,7 +35,7 @@ PARKED_BEFORE_MEETING = (0.0, 80.0)   # metres before the meeting point, along t
 # the scene is the plain oncoming truck. On Town01 the truck and the ego still stopped head-on for
 # good on the 128 m K-L with a 100 m minimum, and with a 40 m minimum they collided or stopped for
 # good on the 66 m C-D when the ego turned in from J-C, out of the truck's sight; of Town01's truck
-# roads only H-L/L-H (319 m) pass 200 m.
+# roads only H-L/L-H (444 m along the outer street) pass 200 m.
 PARKED_MIN_LANE = 200.0
 
 
