@@ -80,7 +80,7 @@ class _FixedRoute(RoutingPolicy):
         return self.route[len(context.route)].split("-")[1]
 
 
-def _bare_loop(net, route: list[str], config: SumoConfig) -> float:
+def bare_loop(net, route: list[str], config: SumoConfig) -> float:
     """Drive `route` in SUMO with nothing else; returns the sim seconds."""
     with sumo_session(net, SEED, config) as sumo:
         sumo.route.add("r", route)
@@ -105,7 +105,7 @@ def _rss_mb() -> float:
 def run() -> list[dict]:
     town = load_town()
     driver_model = load_driver_model()
-    spec = load_spec(os.path.join(os.path.dirname(__file__), "..", "policies", "specs", "phi1.toml"), town)
+    spec = load_spec("phi1", town)
     setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
     policy = trust_free_policy(town, spec)
     net = build_net(town).path
@@ -119,12 +119,12 @@ def run() -> list[dict]:
         return record
 
     episode()
-    _bare_loop(net, route, config)   # warm both paths
+    bare_loop(net, route, config)   # warm both paths
     # Interleaved pairs, median of the per-pair ratios, in wall and in CPU time of this process
     # (libsumo runs in it; CPU time is less disturbed by the other processes of a shared machine).
-    paired = paired_ratio(episode, lambda: _bare_loop(net, route, config), pairs=PAIRS)
+    paired = paired_ratio(episode, lambda: bare_loop(net, route, config), pairs=PAIRS)
     record = episode()
-    bare_sim = _bare_loop(net, route, config)
+    bare_sim = bare_loop(net, route, config)
 
     for seed in range(20):
         episode(100 + seed)
@@ -198,7 +198,7 @@ def incident_rates(setup: EpisodeSetup, net, config: SumoConfig, episodes: int =
 def _bare_route(args) -> float:
     """One bare loop (process-pool worker): (net path, route) -> sim seconds."""
     net, route = args
-    return _bare_loop(net, list(route), SumoConfig())
+    return bare_loop(net, list(route), SumoConfig())
 
 
 def _bare_routes(net, routes: list[tuple[str, ...]], workers: int) -> float:
@@ -267,7 +267,7 @@ if __name__ == "__main__":
     import sys
 
     _town = load_town(sys.argv[2] if len(sys.argv) > 2 else None)
-    _spec = load_spec(os.path.join(os.path.dirname(__file__), "..", "policies", "specs", "phi1.toml"), _town)
+    _spec = load_spec("phi1", _town)
     _setup = EpisodeSetup(town=_town, driver_model=load_driver_model(), spec=_spec)
     print("route:", " ".join(route_through_every_kind(_town, _spec.start)))
     print(_rates_table(incident_rates(_setup, build_net(_town).path, SumoConfig(),
