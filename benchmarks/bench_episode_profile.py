@@ -2,8 +2,10 @@
 
 The same episode and bare loop as bench_episode (phi1, trust-free policy, default driver,
 incidents, logs handed back as Arrow tables), run `EPISODES` times each, alternating. Each phase
-is timed by wrapping the function that does it (a perf_counter pair per call, about 0.2 µs, a few
-hundred calls per episode); the wrappers are removed afterwards. Phases:
+is timed by wrapping the function that does it, in wall time and in this thread's CPU time
+(libsumo runs in it; CPU time is what a shared machine's load disturbs least: a call that waits
+for a core shows in wall time only), a clock pair per call, a few hundred calls per episode; the
+wrappers are removed afterwards. Phases:
 
 - `sumo_start`, `sumo_steps`, `sumo_close`: libsumo's native start, simulation step and close
   (paid by both; the episode steps more objects and, with its incidents, more sim time);
@@ -13,7 +15,7 @@ hundred calls per episode); the wrappers are removed afterwards. Phases:
 - `watch`: the live incident's per-step work and the driver's view check;
 - `loop_python`: the rest of the step loop (the subscription read, logging, monitor);
 - `roads_table`, `kinematics_table`, `incidents_table`: the logs as Arrow tables;
-- `other`: the remaining wall time of the call (setup, net checks, the driver's generator).
+- `other`: the rest of the call (setup, net checks, the driver's generator).
 
 Each figure is ms per episode (total over the run / EPISODES), with the 1-minute load average.
 """
@@ -60,19 +62,20 @@ _NATIVE_PHASES = (("simulation_start", "sumo_start"), ("simulation_step", "sumo_
                   ("simulation_close", "sumo_close"))
 
 
-def _timed(function, phase: str, totals: dict[str, float], counts: dict[str, int]):
+def _timed(function, phase: str, totals: dict[str, float], cpu: dict[str, float], counts: dict[str, int]):
     def timed(*args, **kwargs):
-        started = time.perf_counter()
+        started, started_cpu = time.perf_counter(), time.thread_time()
         try:
             return function(*args, **kwargs)
         finally:
             totals[phase] += time.perf_counter() - started
+            cpu[phase] += time.thread_time() - started_cpu
             counts[phase] += 1
     return timed
 
 
 @contextlib.contextmanager
-def _phase_timers(totals: dict[str, float], counts: dict[str, int]) -> Iterator[None]:
+def _phase_timers(totals: dict[str, float], cpu: dict[str, float], counts: dict[str, int]) -> Iterator[None]:
     """Wrap every phase's function for the duration of the block (then put the originals back)."""
     import libsumo._libsumo as native
 
@@ -83,7 +86,7 @@ def _phase_timers(totals: dict[str, float], counts: dict[str, int]) -> Iterator[
         for owner, name, phase in targets:
             function = getattr(owner, name)
             originals.append((owner, name, function))
-            setattr(owner, name, _timed(function, phase, totals, counts))
+            setattr(owner, name, _timed(function, phase, totals, cpu, counts))
         yield
     finally:
         for owner, name, function in reversed(originals):
@@ -128,24 +131,26 @@ def profile(episodes: int = EPISODES) -> dict:
 
     episode()
     bare_loop(net, route, config)   # warm both paths
-    sides = {"episode": (defaultdict(float), defaultdict(int), [0.0]),
-             "bare": (defaultdict(float), defaultdict(int), [0.0])}
+    sides = {side: {"wall": defaultdict(float), "cpu": defaultdict(float), "counts": defaultdict(int),
+                    "total": [0.0, 0.0]} for side in ("episode", "bare")}
     load_before = os.getloadavg()[0]
     for _ in range(episodes):
         for side, run in (("episode", episode), ("bare", lambda: bare_loop(net, route, config))):
-            totals, counts, wall = sides[side]
-            with _phase_timers(totals, counts):
-                started = time.perf_counter()
+            timers = sides[side]
+            with _phase_timers(timers["wall"], timers["cpu"], timers["counts"]):
+                started, started_cpu = time.perf_counter(), time.thread_time()
                 run()
-                wall[0] += time.perf_counter() - started
-    episode_ms = _per_episode(sides["episode"][0], sides["episode"][2][0], episodes)
-    bare_ms = _per_episode(sides["bare"][0], sides["bare"][2][0], episodes)
-    return {"name": "episode_phi1_phases", "unit": "ms per episode", "episodes": episodes,
-            "episode": episode_ms, "bare": bare_ms,
-            "steps": {"episode": sides["episode"][1]["sumo_steps"] // episodes,
-                      "bare": sides["bare"][1]["sumo_steps"] // episodes},
-            "ratio_of_totals": round(episode_ms["total"] / bare_ms["total"], 3),
-            "load_average_1min": [load_before, os.getloadavg()[0]]}
+                timers["total"][0] += time.perf_counter() - started
+                timers["total"][1] += time.thread_time() - started_cpu
+    out = {"name": "episode_phi1_phases", "unit": "ms per episode", "episodes": episodes}
+    for clock, index in (("wall", 0), ("cpu", 1)):
+        for side in ("episode", "bare"):
+            out[f"{side}_{clock}"] = _per_episode(sides[side][clock], sides[side]["total"][index], episodes)
+        ratio = out[f"episode_{clock}"]["total"] / out[f"bare_{clock}"]["total"]
+        out[f"ratio_of_totals_{clock}"] = round(ratio, 3)
+    out["steps"] = {side: sides[side]["counts"]["sumo_steps"] // episodes for side in sides}
+    out["load_average_1min"] = [load_before, os.getloadavg()[0]]
+    return out
 
 
 def run() -> list[dict]:
@@ -153,12 +158,14 @@ def run() -> list[dict]:
 
 
 def phases_table(row: dict) -> str:
-    """The profile as a Markdown table (docs/performance.md)."""
-    lines = ["| phase | episode ms | bare ms | episode − bare |", "|---|---|---|---|"]
-    for phase, value in row["episode"].items():
-        bare = row["bare"].get(phase, 0.0)
+    """The profile as a Markdown table (docs/performance.md): CPU and wall ms per episode."""
+    lines = ["| phase | episode CPU | bare CPU | CPU difference | episode wall | bare wall |",
+             "|---|---|---|---|---|---|"]
+    for phase, value in row["episode_cpu"].items():
+        bare = row["bare_cpu"].get(phase, 0.0)
         name = f"of it: {phase}" if phase in _PARTS_OF_COMMIT else phase
-        lines.append(f"| {name} | {value:.2f} | {bare:.2f} | {value - bare:+.2f} |")
+        lines.append(f"| {name} | {value:.2f} | {bare:.2f} | {value - bare:+.2f} | "
+                     f"{row['episode_wall'][phase]:.2f} | {row['bare_wall'].get(phase, 0.0):.2f} |")
     return "\n".join(lines)
 
 
