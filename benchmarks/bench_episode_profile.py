@@ -1,0 +1,177 @@
+"""Where the milliseconds of one SUMO episode go, phase by phase, beside the bare libsumo loop.
+
+The same episode and bare loop as bench_episode (phi1, trust-free policy, default driver,
+incidents, logs handed back as Arrow tables), run `EPISODES` times each, alternating. Each phase
+is timed by wrapping the function that does it, in wall time and in this thread's CPU time
+(libsumo runs in it; CPU time is what a shared machine's load disturbs least: a call that waits
+for a core shows in wall time only), a clock pair per call, a few hundred calls per episode; the
+wrappers are removed afterwards. Phases:
+
+- `sumo_start`, `sumo_steps`, `sumo_close`: libsumo's native start, simulation step and close
+  (paid by both; the episode steps more objects and, with its incidents, more sim time);
+- `insert_ego`: the ego's type, route, insertion and subscription;
+- `commit`: the road's end (of it `inject`, the next road's incident objects; `close_road`, the
+  driver's trust, report and the tracker's record; `next_junction`, the policy and filter);
+- `watch`: the live incident's per-step work and the driver's view check;
+- `loop_python`: the rest of the step loop (the subscription read, logging, monitor);
+- `roads_table`, `kinematics_table`, `incidents_table`: the logs as Arrow tables;
+- `other`: the rest of the call (setup, net checks, the driver's generator).
+
+Each figure is ms per episode (total over the run / EPISODES), with the 1-minute load average.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from collections import defaultdict
+from collections.abc import Iterator
+
+import numpy as np
+
+from benchmarks.bench_episode import SEED, bare_loop
+from trustroute.harness.simulation import episode as episode_module
+from trustroute.harness.simulation import episode_tracker
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.sumo_start import SumoConfig
+from trustroute.networks.sumo_net import build_net
+from trustroute.networks.town import load_town
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import baseline_route, trust_free_policy
+
+EPISODES = 40
+
+# (owner, attribute, phase): the functions whose time is a phase of the episode.
+_EPISODE_PHASES = (
+    (episode_module._Episode, "insert_ego", "insert_ego"),
+    (episode_module._Episode, "commit", "commit"),
+    (episode_module._Episode, "inject", "inject"),
+    (episode_module._Episode, "close_road", "close_road"),
+    (episode_module._Episode, "watch", "watch"),
+    (episode_module._Episode, "run", "run"),
+    (episode_module._Episode, "incidents_table", "incidents_table"),
+    (episode_module._Episode, "kinematics_table", "kinematics_table"),
+    (episode_tracker.EpisodeTracker, "next_junction", "next_junction"),
+    (episode_tracker.EpisodeTracker, "roads_table", "roads_table"),
+)
+_PARTS_OF_COMMIT = ("inject", "close_road", "next_junction")   # timed inside `commit`
+_NATIVE_PHASES = (("simulation_start", "sumo_start"), ("simulation_step", "sumo_steps"),
+                  ("simulation_close", "sumo_close"))
+
+
+def _timed(function, phase: str, totals: dict[str, float], cpu: dict[str, float], counts: dict[str, int]):
+    def timed(*args, **kwargs):
+        started, started_cpu = time.perf_counter(), time.thread_time()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            totals[phase] += time.perf_counter() - started
+            cpu[phase] += time.thread_time() - started_cpu
+            counts[phase] += 1
+    return timed
+
+
+@contextlib.contextmanager
+def _phase_timers(totals: dict[str, float], cpu: dict[str, float], counts: dict[str, int]) -> Iterator[None]:
+    """Wrap every phase's function for the duration of the block (then put the originals back)."""
+    import libsumo._libsumo as native
+
+    originals = []
+    targets = [(owner, name, phase) for owner, name, phase in _EPISODE_PHASES]
+    targets += [(native, name, phase) for name, phase in _NATIVE_PHASES]
+    try:
+        for owner, name, phase in targets:
+            function = getattr(owner, name)
+            originals.append((owner, name, function))
+            setattr(owner, name, _timed(function, phase, totals, cpu, counts))
+        yield
+    finally:
+        for owner, name, function in reversed(originals):
+            setattr(owner, name, function)
+
+
+def _per_episode(totals: dict[str, float], wall: float, episodes: int) -> dict[str, float]:
+    ms = {phase: 1e3 * seconds / episodes for phase, seconds in totals.items()}
+    row = {phase: ms.get(phase, 0.0) for phase in ("sumo_start", "sumo_steps", "sumo_close")}
+    if "run" in ms:
+        inside_loop = ("sumo_steps", "insert_ego", "commit", "watch")
+        row.update({phase: ms.get(phase, 0.0) for phase in
+                    ("insert_ego", "commit", *_PARTS_OF_COMMIT, "watch")})
+        row["loop_python"] = ms["run"] - sum(ms.get(phase, 0.0) for phase in inside_loop)
+        row.update({phase: ms.get(phase, 0.0) for phase in
+                    ("roads_table", "kinematics_table", "incidents_table")})
+        counted = ms["run"] + sum(row[phase] for phase in
+                                  ("sumo_start", "sumo_close", "roads_table", "kinematics_table",
+                                   "incidents_table"))
+    else:
+        counted = sum(row.values())
+    row["other"] = 1e3 * wall / episodes - counted
+    row["total"] = 1e3 * wall / episodes
+    return {phase: round(value, 3) for phase, value in row.items()}
+
+
+def profile(episodes: int = EPISODES) -> dict:
+    """Per-phase ms of the episode and of the bare loop over `episodes` alternating runs each."""
+    town = load_town()
+    driver_model = load_driver_model()
+    spec = load_spec("phi1", town)
+    setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
+    policy = trust_free_policy(town, spec)
+    net = build_net(town).path
+    config = SumoConfig()
+    route = baseline_route(town, spec)
+
+    def episode() -> None:
+        driver = SyntheticDriver(driver_model, np.random.default_rng(SEED))
+        episode_module.run_episode(setup, policy, driver, f"bench{SEED}", SEED, net_path=net,
+                                   config=config).tables()
+
+    episode()
+    bare_loop(net, route, config)   # warm both paths
+    sides = {side: {"wall": defaultdict(float), "cpu": defaultdict(float), "counts": defaultdict(int),
+                    "total": [0.0, 0.0]} for side in ("episode", "bare")}
+    load_before = os.getloadavg()[0]
+    for _ in range(episodes):
+        for side, run in (("episode", episode), ("bare", lambda: bare_loop(net, route, config))):
+            timers = sides[side]
+            with _phase_timers(timers["wall"], timers["cpu"], timers["counts"]):
+                started, started_cpu = time.perf_counter(), time.thread_time()
+                run()
+                timers["total"][0] += time.perf_counter() - started
+                timers["total"][1] += time.thread_time() - started_cpu
+    out = {"name": "episode_phi1_phases", "unit": "ms per episode", "episodes": episodes}
+    for clock, index in (("wall", 0), ("cpu", 1)):
+        for side in ("episode", "bare"):
+            out[f"{side}_{clock}"] = _per_episode(sides[side][clock], sides[side]["total"][index], episodes)
+        ratio = out[f"episode_{clock}"]["total"] / out[f"bare_{clock}"]["total"]
+        out[f"ratio_of_totals_{clock}"] = round(ratio, 3)
+    out["steps"] = {side: sides[side]["counts"]["sumo_steps"] // episodes for side in sides}
+    out["load_average_1min"] = [load_before, os.getloadavg()[0]]
+    return out
+
+
+def run() -> list[dict]:
+    return [profile()]
+
+
+def phases_table(row: dict) -> str:
+    """The profile as a Markdown table (docs/performance.md): CPU and wall ms per episode."""
+    lines = ["| phase | episode CPU | bare CPU | CPU difference | episode wall | bare wall |",
+             "|---|---|---|---|---|---|"]
+    for phase, value in row["episode_cpu"].items():
+        bare = row["bare_cpu"].get(phase, 0.0)
+        name = f"of it: {phase}" if phase in _PARTS_OF_COMMIT else phase
+        lines.append(f"| {name} | {value:.2f} | {bare:.2f} | {value - bare:+.2f} | "
+                     f"{row['episode_wall'][phase]:.2f} | {row['bare_wall'].get(phase, 0.0):.2f} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    import json
+
+    _row = profile()
+    print(json.dumps(_row))
+    print(phases_table(_row))
