@@ -56,7 +56,16 @@ from trustroute.networks.road_geometry import (
 # as pentagon.json, so the figures measured on it (docs/real_study.md) can be re-run.
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town01_carla.json"
 PENTAGON_TOWN_PATH = Path(__file__).parent / "data" / "pentagon.json"
-TOWNS = PackagedKind("town", DEFAULT_TOWN_PATH.parent, ".json")   # the packaged towns by name
+
+
+def _city_town() -> Path:
+    """The town `city`, imported from an optional extra's package data on first use."""
+    from trustroute.networks.cities import city_town_path
+
+    return city_town_path()
+
+
+TOWNS = PackagedKind("town", DEFAULT_TOWN_PATH.parent, ".json", built=(("city", _city_town),))
 NO_INCIDENT = "none"  # a road without an incident (and the start road of an episode)
 INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", NO_INCIDENT)
 # SUMO works in metres with float coordinates: a town beyond 1000 km, or a road shorter than a car,
@@ -376,7 +385,7 @@ def extras_fields(extras: RoadExtras) -> dict:
 
 def load_town(path: str | Path | None = None) -> Town:
     """Load and validate a town file or a packaged town by name (`TOWNS`: "town01_carla",
-    "pentagon"; the packaged default when `path` is None), read through the guarded reader
+    "pentagon", "city"; the packaged default when `path` is None), read through the guarded reader
     (trustroute.core.validation)."""
     file_path = TOWNS.resolve(path) if path is not None else DEFAULT_TOWN_PATH
     shown = "default town" if path is None else str(path if file_path == Path(path) else file_path)
