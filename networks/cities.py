@@ -39,8 +39,8 @@ def scenario_files() -> tuple[Path, Path]:
     """The scenario's net and routes in the installed sumo-rl, or InputError naming the extra."""
     found = importlib.util.find_spec("sumo_rl")
     if found is None or not found.submodule_search_locations:
-        raise InputError(CITY, "", "the packaged town 'city' is the RESCO Ingolstadt scenario of sumo-rl, "
-                         "which is not installed", EXTRA_FIX)
+        raise InputError(CITY, "", "the packaged town and routes 'city' are the RESCO Ingolstadt scenario of "
+                         "sumo-rl, which is not installed", EXTRA_FIX)
     folder = Path(list(found.submodule_search_locations)[0]) / "nets" / "RESCO" / SCENARIO
     net, routes = folder / f"{SCENARIO}.net.xml", folder / f"{SCENARIO}.rou.xml"
     for path in (net, routes):
