@@ -96,4 +96,4 @@ def city_routes_path() -> Path:
 
 # Route files of background traffic by name: the city's demand (networks/data ships none).
 ROUTES = PackagedKind("route file", Path(__file__).parent / "data", ".rou.xml",
-                      built=((CITY, city_routes_path),))
+                      built={CITY: city_routes_path})

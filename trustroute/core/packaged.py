@@ -13,8 +13,8 @@ package is installed (a repository path such as specs/phi1.toml does not).
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 PACKAGED_SPECS = Path(__file__).resolve().parent / "specs"
@@ -25,20 +25,22 @@ class PackagedKind:
     """One kind of packaged input: its files are `folder/<stem><suffix>` whose stem starts with
     `prefix` and has no dot (a "x.fit.json" beside "x.json" is not an input of the kind), and the
     `built` names, each with the function that builds its file on first use and returns its path
-    (or raises InputError naming the fix, e.g. an optional extra to install)."""
+    (or raises InputError naming the fix, e.g. an optional extra to install). `built` is filled by
+    the module that builds them when that module sits above the kind's owner (networks/__init__.py
+    registers the town `city`)."""
 
     what: str          # "spec", "town", "driver model", "driver population"
     folder: Path
     suffix: str        # ".toml" or ".json"
     prefix: str = ""
-    built: tuple[tuple[str, Callable[[], Path]], ...] = ()
+    built: Mapping[str, Callable[[], Path]] = field(default_factory=dict, compare=False, hash=False)
 
     def names(self) -> list[str]:
         """The packaged names, sorted."""
         shipped = [] if not self.folder.is_dir() else [
             p.name[: -len(self.suffix)] for p in self.folder.glob(f"{self.prefix}*{self.suffix}")
             if "." not in p.name[: -len(self.suffix)]]
-        return sorted({*shipped, *(name for name, _ in self.built)})
+        return sorted({*shipped, *self.built})
 
     def path(self, name: str | Path) -> Path | None:
         """The packaged file called `name` (a bare name, with or without the suffix), or None; a
@@ -47,9 +49,8 @@ class PackagedKind:
         if not text or Path(text).name != text:   # a path with a folder is never a packaged name
             return None
         stem = text[: -len(self.suffix)] if text.endswith(self.suffix) else text
-        builders = dict(self.built)
-        if stem in builders:
-            return builders[stem]()
+        if stem in self.built:
+            return self.built[stem]()
         return self.folder / f"{stem}{self.suffix}" if stem in self.names() else None
 
     def resolve(self, value: str | Path) -> Path:
