@@ -16,7 +16,7 @@ import heapq
 import json
 import math
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TypedDict
@@ -56,7 +56,10 @@ from trustroute.networks.road_geometry import (
 # as pentagon.json, so the figures measured on it (docs/real_study.md) can be re-run.
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town01_carla.json"
 PENTAGON_TOWN_PATH = Path(__file__).parent / "data" / "pentagon.json"
-TOWNS = PackagedKind("town", DEFAULT_TOWN_PATH.parent, ".json")   # the packaged towns by name
+# Towns built on first use, by name: registered by networks/__init__.py (the town `city`,
+# networks/cities.py, which imports this module).
+BUILT_TOWNS: dict[str, Callable[[], Path]] = {}
+TOWNS = PackagedKind("town", DEFAULT_TOWN_PATH.parent, ".json", built=BUILT_TOWNS)   # packaged towns by name
 NO_INCIDENT = "none"  # a road without an incident (and the start road of an episode)
 INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", NO_INCIDENT)
 # SUMO works in metres with float coordinates: a town beyond 1000 km, or a road shorter than a car,
@@ -376,7 +379,7 @@ def extras_fields(extras: RoadExtras) -> dict:
 
 def load_town(path: str | Path | None = None) -> Town:
     """Load and validate a town file or a packaged town by name (`TOWNS`: "town01_carla",
-    "pentagon"; the packaged default when `path` is None), read through the guarded reader
+    "pentagon", "city"; the packaged default when `path` is None), read through the guarded reader
     (trustroute.core.validation)."""
     file_path = TOWNS.resolve(path) if path is not None else DEFAULT_TOWN_PATH
     shown = "default town" if path is None else str(path if file_path == Path(path) else file_path)

@@ -4,6 +4,10 @@
 analysis and report, then one episode (participant 0, φ1, aware) replayed with the same seeds into
 a Rerun `.rrd`. Resumable: a rerun skips finished episodes. When the SUMO engine is not installed
 the demo says so and runs the model engine instead (no recording).
+
+`--town city` runs the same on the packaged city (the RESCO Ingolstadt scenario, docs/cities.md):
+its 5-waypoint spec `city5`, "aware" synthesized for 40 junctions (the fallback after 40), and the
+scenario's own demand as background traffic; the recording is of `city5` instead of φ1.
 """
 
 from __future__ import annotations
@@ -25,6 +29,12 @@ DEMO_STUDY = {
     "specs": ["phi1", "phi2"],
     "conditions": ["aware", "free"],
 }
+# What the demo changes on another town than the default (keys of [study]).
+DEMO_TOWNS: dict[str, dict] = {
+    "city": {"name": "demo_city", "town": "city", "specs": ["city5"], "routes": ["city"],
+             "horizon": 40, "fallback_after": 40},
+}
+DEFAULT_TOWN = "town01_carla"
 
 
 def record_episode(config, study_dir: Path, episode_id: str) -> Path:
@@ -51,26 +61,29 @@ def record_episode(config, study_dir: Path, episode_id: str) -> Path:
 @click.option("--workers", type=WORKERS, default=None, help="Local worker processes (default: CPU count).")
 @click.option("--engine", type=click.Choice(["sumo", "model"]), default="sumo", show_default=True)
 @click.option("--participants", type=bounded_int(1, 100_000), default=21, show_default=True)
+@click.option("--town", type=click.Choice([DEFAULT_TOWN, *DEMO_TOWNS]), default=DEFAULT_TOWN,
+              show_default=True, help="The paper's town, or the city (the RESCO Ingolstadt scenario; "
+              "needs pip install 'trustroute[cities]').")
 @json_option
 @quiet_option
 @click.pass_context
-def demo(ctx: click.Context, out: str, workers: int | None, engine: str, participants: int, as_json: bool,
-         quiet: bool) -> None:
+def demo(ctx: click.Context, out: str, workers: int | None, engine: str, participants: int, town: str,
+         as_json: bool, quiet: bool) -> None:
     """Run the paper-size study (21 participants) on the defaults and show where the results are."""
     from trustroute.harness.commands.study import dataset_paths, report_paths
     from trustroute.harness.study.config import study_config_from_dict
     from trustroute.harness.study.runner import run_and_consolidate
 
-    config = study_config_from_dict(
-        {"study": {**DEMO_STUDY, "participants": participants, "engine": engine}},
-        "trustroute demo",
-        Path.cwd(),
-    )
+    study = {**DEMO_STUDY, **DEMO_TOWNS.get(town, {}), "participants": participants, "engine": engine}
+    config = study_config_from_dict({"study": study}, "trustroute demo", Path.cwd())
     study_dir = Path(out)
     workers = workers if workers is not None else (os.cpu_count() or 1)
     silent = quiet or as_json
     say = (lambda line: None) if silent else click.echo
-    say(f"demo: {participants} participants x 2 specs x 2 conditions, {engine} engine, into {study_dir}")
+    specs = len(study["specs"])
+    on_town = "" if town == DEFAULT_TOWN else f", town {town}"
+    say(f"demo: {participants} participants x {specs} spec{'s' * (specs > 1)} x 2 conditions, {engine} engine"
+        f"{on_town}, into {study_dir}")
     run, manifest = run_and_consolidate(config, study_dir, workers, None, progress=not silent, echo=say)
     if run.failed:
         click.echo(f"error: {len(run.failed)} episodes failed (reasons in {run.study_dir / 'failures'}; "
@@ -92,7 +105,7 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
     payload = {"study_dir": str(run.study_dir), "engine": engine, "failed": run.failed,
                "analysis": analysis.to_dict()}
     if engine == "sumo":
-        episode_id = f"p{0:05d}-phi1-aware"
+        episode_id = f"p{0:05d}-{study['specs'][0]}-aware"
         try:
             rrd = record_episode(config, run.study_dir, episode_id)
             paths["rrd"] = rrd

@@ -41,10 +41,14 @@ def _write_logs(out_dir: Path, record) -> dict[str, Path]:
 
 
 def routes_file(path: str) -> str:
-    """A background route file, read once to fail early with one line (absolute: SUMO resolves it)."""
+    """A background route file (a path, or a packaged name: `city`, the city's own demand), read once
+    to fail early with one line (absolute: SUMO resolves it)."""
     from trustroute.core.validation import read_input_bytes
+    from trustroute.networks.cities import ROUTES
 
-    read_input_bytes(path, "SUMO route file", max_bytes=1 << 30, fix="pass an existing .rou.xml file")
+    path = str(ROUTES.resolve(path))
+    read_input_bytes(path, "SUMO route file", max_bytes=1 << 30, fix="pass an existing .rou.xml file or "
+                     f"a packaged route name ({', '.join(ROUTES.names())})")
     return str(Path(path).resolve())
 
 
@@ -87,7 +91,8 @@ def _check_paths(out_dir: str | None, rrd_path: str | None, cache_dir: str | Non
 @click.option("--out", "out_dir", type=click.Path(), default=None,
               help="DIRECTORY to write roads/kinematics/incidents Parquet and summary.json into.")
 @json_option
-@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
+@click.option("--town", "town_path", type=click.Path(), default=None,
+              help="Town file or packaged town name, e.g. city (default town).")
 @click.option("--driver", "driver_path", type=click.Path(), default=None,
               help="Driver model file (default model).")
 @click.option("--net", "net_path", type=click.Path(), default=None,
@@ -103,7 +108,7 @@ def _check_paths(out_dir: str | None, rrd_path: str | None, cache_dir: str | Non
                    "(open with sumo-gui).")
 @click.option("--routes", "routes_paths", type=click.Path(), multiple=True,
               help="SUMO route FILE of background traffic, e.g. an imported scenario's vehicle types and "
-                   "demand (repeat for several; types first).")
+                   "demand (repeat for several; types first); 'city': the demand of --town city.")
 @click.option("--background", "background_vehicles", type=click.IntRange(min=0, max=10_000), default=0,
               show_default=True, help="Seeded background traffic: vehicles kept on the net (an imported "
               "town: trips per minute from SUMO's randomTrips.py); docs/scenes.md.")

@@ -65,6 +65,7 @@ START_BEFORE_COMMIT = 40.0  # the ego is inserted this far before the start road
 INSERT_TIMEOUT = 30.0       # seconds of sim time for the ego to appear
 MAX_LEADER_HORIZON = 1000.0  # metres: the most the subscription looks ahead for a leader
 JUNCTION_LENGTH = 8.0       # metres: a typical internal lane, for timing scenes from the commit point
+UNSEEN_ROAD = 15.0          # metres: an imported road this short is crossed within a step (0.5 s at 30 m/s)
 STEP_FIELDS = ("time", "x", "y", "speed", "lane", "mode")   # what the loop logs per step, in order
 SCENE_STREAM = 0x5CE7E      # the scene generator's stream: SeedSequence([seed, SCENE_STREAM])
 
@@ -360,8 +361,14 @@ class _Episode:
                 log.info("%s: the net has no turn from %s into %s: driving %s between",
                          self.tracker.episode_id, run.road, nxt, " ".join(detour))
         upcoming = self.new_run(run.index + 1, nxt)
-        self.inject(upcoming, now, self.length(run.road) - position + JUNCTION_LENGTH)
         self.runs.append(upcoming)
+        if self.real is not None and self.length(nxt) < UNSEEN_ROAD:
+            # The ego may cross so short a road within one step, never seen on it, and would reach
+            # the end of its route: the road is closed at once (its observation, which ends at its
+            # commit point before its start, is empty) and the route extended past it.
+            upcoming.time_in = now
+            return self.commit(upcoming, now, 0.0)
+        self.inject(upcoming, now, self.length(run.road) - position + JUNCTION_LENGTH)
         return upcoming
 
     # -- the loop -------------------------------------------------------------

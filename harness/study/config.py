@@ -31,8 +31,8 @@ Every key, its default and its check: docs/formats/study_config.md.
 
 Relative paths resolve against the config file's folder, then the current directory, then the
 packaged files by name (trustroute/core/packaged.py: specs `phi1`, also `specs/phi1.toml`; towns
-`town01_carla`, `pentagon`; driver models and populations by file stem). Bad input raises InputError
-naming the file, the key and the fix.
+`town01_carla`, `pentagon`, `city`; routes `city`; driver models and populations by file stem). Bad
+input raises InputError naming the file, the key and the fix.
 """
 
 from __future__ import annotations
@@ -197,6 +197,12 @@ def _towns() -> PackagedKind:
     from trustroute.networks.town import TOWNS
 
     return TOWNS
+
+
+def _routes() -> PackagedKind:
+    from trustroute.networks.cities import ROUTES
+
+    return ROUTES
 
 
 def _populations() -> PackagedKind:
@@ -442,7 +448,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         policy_cache=_directory(study["policy_cache"], base),
         background_vehicles=study["background_vehicles"],
         routes=tuple(str(_resolve_path(value, base, source, "study.routes", "SUMO route file",
-                                       FILE_FIX["routes"])) for value in study["routes"]),
+                                       FILE_FIX["routes"], _routes())) for value in study["routes"]),
         record=tuple(study["record"]),
         population=_population(tables["population"], source),
         robust_population=_robust_population(study, conditions, base, source),

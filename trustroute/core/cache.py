@@ -1,7 +1,8 @@
 """The one cache root of trustroute: `$XDG_CACHE_HOME/trustroute`, default `~/.cache/trustroute`.
 
-Built SUMO nets (`nets/`, networks/sumo_net.py) and synthesized "aware" policies (`policies/`,
-policies/resolve.py) live under it. The root is read when a cache path is asked for, not
+Built SUMO nets (`nets/`, networks/sumo_net.py), synthesized "aware" policies (`policies/`,
+policies/resolve.py) and the towns imported on first use (`towns/`, networks/cities.py) live
+under it. The root is read when a cache path is asked for, not
 at import, so setting XDG_CACHE_HOME (as the test suite does) moves every cache at once. A
 relative XDG_CACHE_HOME is ignored, as the XDG base directory specification says.
 """
@@ -13,6 +14,7 @@ from pathlib import Path
 
 NETS = "nets"
 POLICIES = "policies"
+TOWNS = "towns"
 
 
 def cache_root() -> Path:
@@ -23,5 +25,5 @@ def cache_root() -> Path:
 
 
 def cache_dir(kind: str) -> Path:
-    """The cache folder of one kind of artefact (NETS, POLICIES) under the cache root."""
+    """The cache folder of one kind of artefact (NETS, POLICIES, TOWNS) under the cache root."""
     return cache_root() / kind

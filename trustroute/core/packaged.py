@@ -5,13 +5,16 @@ in a study config and in the gym environment) is a path or the name of a package
 existing file wins; otherwise a bare name ("phi1" or "phi1.toml") names the packaged file of that
 stem. Each kind is a `PackagedKind`, declared by the lowest layer that owns its folder: the specs
 here (`trustroute/core/specs/`), the towns in networks/town.py (`networks/data/`), the driver
-models and populations in participants (`participants/data/`). Hints list the packaged names,
-which exist wherever the package is installed (a repository path such as specs/phi1.toml does not).
+models and populations in participants (`participants/data/`). A kind may also name inputs that
+are built on first use rather than shipped (`built`: the town `city`, imported from an optional
+extra's package data, networks/cities.py). Hints list the packaged names, which exist wherever the
+package is installed (a repository path such as specs/phi1.toml does not).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 PACKAGED_SPECS = Path(__file__).resolve().parent / "specs"
@@ -20,26 +23,34 @@ PACKAGED_SPECS = Path(__file__).resolve().parent / "specs"
 @dataclass(frozen=True)
 class PackagedKind:
     """One kind of packaged input: its files are `folder/<stem><suffix>` whose stem starts with
-    `prefix` and has no dot (a "x.fit.json" beside "x.json" is not an input of the kind)."""
+    `prefix` and has no dot (a "x.fit.json" beside "x.json" is not an input of the kind), and the
+    `built` names, each with the function that builds its file on first use and returns its path
+    (or raises InputError naming the fix, e.g. an optional extra to install). `built` is filled by
+    the module that builds them when that module sits above the kind's owner (networks/__init__.py
+    registers the town `city`)."""
 
     what: str          # "spec", "town", "driver model", "driver population"
     folder: Path
     suffix: str        # ".toml" or ".json"
     prefix: str = ""
+    built: Mapping[str, Callable[[], Path]] = field(default_factory=dict, compare=False, hash=False)
 
     def names(self) -> list[str]:
         """The packaged names, sorted."""
-        if not self.folder.is_dir():
-            return []
-        return sorted(p.name[: -len(self.suffix)] for p in self.folder.glob(f"{self.prefix}*{self.suffix}")
-                      if "." not in p.name[: -len(self.suffix)])
+        shipped = [] if not self.folder.is_dir() else [
+            p.name[: -len(self.suffix)] for p in self.folder.glob(f"{self.prefix}*{self.suffix}")
+            if "." not in p.name[: -len(self.suffix)]]
+        return sorted({*shipped, *self.built})
 
     def path(self, name: str | Path) -> Path | None:
-        """The packaged file called `name` (a bare name, with or without the suffix), or None."""
+        """The packaged file called `name` (a bare name, with or without the suffix), or None; a
+        built name's file is built here when it is not yet."""
         text = str(name)
         if not text or Path(text).name != text:   # a path with a folder is never a packaged name
             return None
         stem = text[: -len(self.suffix)] if text.endswith(self.suffix) else text
+        if stem in self.built:
+            return self.built[stem]()
         return self.folder / f"{stem}{self.suffix}" if stem in self.names() else None
 
     def resolve(self, value: str | Path) -> Path:
@@ -65,6 +76,12 @@ def packaged_spec_path(name: str) -> Path | None:
     return SPECS.path(name)
 
 
-def packaged_spec_names() -> list[str]:
-    """The names of the packaged specs, sorted."""
-    return SPECS.names()
+# The packaged specs written for a packaged town other than the default: their waypoints name
+# that town's junctions.
+SPEC_TOWNS: dict[str, str] = {"city5": "city"}
+
+
+def packaged_spec_names(town: str | None = None) -> list[str]:
+    """The names of the packaged specs written for the packaged town `town` (None: the default
+    town), sorted."""
+    return [name for name in SPECS.names() if SPEC_TOWNS.get(name) == town]

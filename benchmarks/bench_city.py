@@ -1,0 +1,106 @@
+"""Synthesis at city scale: the 5-waypoint spec `city5` on the packaged town `city` (the RESCO
+Ingolstadt scenario, docs/cities.md), at H = 40 and unbounded.
+
+First the trust-free baseline of the same run: the shortest route completing the task, evaluated
+exactly (its value and seconds). Then each synthesis `synthesize(tau=1e-3, time_limit=60)` in a
+fresh subprocess (its own peak RSS, no warm caches): seconds, peak RSS (MB), L, U, whether the
+target is met (gap <= 1e-3 within 60 s under 1 GB), and whether L stays at or above the trust-free
+value minus the gap. The machine is shared: every row carries the 1-minute load average measured
+beside it, and synthesis seconds are also given per second of the baseline's evaluation.
+Needs the optional extra `cities` (pip install 'trustroute[cities]'); without it one row says so.
+Run: `.venv/bin/python -m benchmarks bench_city`.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import sys
+import time
+
+from benchmarks.bench_synthesis_scaling import MEMORY_TARGET_MB, TAU, TIME_LIMIT, run_json_subprocess
+
+SPEC, TOWN = "city5", "city"
+HORIZONS = (40, None)
+
+
+def _problem():
+    from trustroute.networks.town import load_town
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.logic.spec import load_spec
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+
+    town = load_town(TOWN)
+    driver = load_driver_model()
+    return town, build_pomdp(town, driver), load_spec(SPEC, town, driver.n_trust)
+
+
+def _child(horizon: int | None) -> dict:
+    """Runs in the subprocess: one synthesis, its numbers and the process's peak RSS."""
+    import resource
+
+    from trustroute.policies.synthesis.belief_synthesis import synthesize
+
+    _, pomdp, spec = _problem()
+    result = synthesize(pomdp, spec, tau=TAU, time_limit=TIME_LIMIT, horizon=horizon)
+    rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb}
+
+
+def _baseline() -> dict:
+    from trustroute.policies.evaluation.plain import evaluate
+    from trustroute.policies.routing.free import baseline_route, trust_free_policy
+
+    town, pomdp, spec = _problem()
+    load = os.getloadavg()[0]
+    start = time.perf_counter()
+    value = evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None)
+    seconds = time.perf_counter() - start
+    route = baseline_route(town, spec)
+    return {"name": "city.trust_free", "value": value.satisfaction_probability, "unit": "probability",
+            "seconds": seconds, "junctions": len(town.junctions), "roads": len(town.states),
+            "route_junctions": len(route) - 1, "route_m": town.route_length(route),
+            "load_average_1min": load}
+
+
+def _synthesis_row(horizon: int | None, free: float, baseline_seconds: float) -> dict:
+    """One synthesis in a fresh subprocess, against the trust-free value `free`."""
+    load = os.getloadavg()[0]
+    out = run_json_subprocess("benchmarks.bench_city", [horizon], TIME_LIMIT * 5)
+    label = "unbounded" if horizon is None else str(horizon)
+    row = {"name": f"city.synthesis.{label}", "value": out.get("seconds"), "unit": "s",
+           "horizon": horizon, "load_average_1min": [load, os.getloadavg()[0]], **out,
+           "target": f"gap <= {TAU} within {TIME_LIMIT:.0f} s under {MEMORY_TARGET_MB:.0f} MB"}
+    if "error" not in out:
+        gap = out["upper"] - out["lower"]
+        row.update(gap=gap, target_met=bool(gap <= TAU and out["seconds"] <= TIME_LIMIT * 1.02
+                                            and out["rss_mb"] < MEMORY_TARGET_MB),
+                   trust_free=free, lower_above_trust_free=bool(out["lower"] >= free - gap),
+                   seconds_vs_baseline=out["seconds"] / max(baseline_seconds, 1e-9))
+    return row
+
+
+def run() -> list[dict]:
+    if importlib.util.find_spec("sumo_rl") is None:
+        return [{"name": "city", "error": "needs the optional extra: pip install 'trustroute[cities]'"}]
+    baseline = _baseline()
+    results = [baseline]
+    table = [f"city ({baseline['junctions']} junctions): trust-free P = {baseline['value']:.6f} "
+             f"({baseline['seconds']:.3f} s)",
+             f"{'H':>9} {'seconds':>8} {'RSS MB':>7} {'L':>9} {'U':>9} target"]
+    for horizon in HORIZONS:
+        row = _synthesis_row(horizon, baseline["value"], baseline["seconds"])
+        label = "unbounded" if horizon is None else str(horizon)
+        if "error" in row:
+            table.append(f"{label:>9} error: {row['error'][:60]}")
+        else:
+            table.append(f"{label:>9} {row['seconds']:8.2f} {row['rss_mb']:7.0f} {row['lower']:9.6f} "
+                         f"{row['upper']:9.6f} {'yes' if row['target_met'] else 'no'}")
+        results.append(row)
+    print("\n".join(table), file=sys.stderr, flush=True)
+    return results
+
+
+if __name__ == "__main__":
+    print(json.dumps(_child(*json.loads(sys.argv[1]))))
