@@ -146,8 +146,8 @@ def lane_strips(net: Net) -> list[np.ndarray]:
 def detail(town: Town) -> float:
     """The factor on the town's own lines and markers: 1 on a small town, CITY_DETAIL on a city
     (more than 30 junctions), where full-size lanes and markers would merge into one another and
-    hide the episode; incident boxes too (a city's unit is up to 25 m); the ego and its plan keep
-    their size."""
+    hide the episode; incident boxes and the ego's trail too (a city's unit is up to 25 m); the ego
+    and its plan keep their size."""
     return 1.0 if names_every_junction(town) else CITY_DETAIL
 
 
@@ -278,7 +278,7 @@ def write_recording(path: Path, net_path: Path, record: EpisodeLogs, setup: Epis
     rec.save(str(path), default_blueprint=episode_blueprint(frame))
     net = _net(Path(net_path))
     _log_map(rec, net, setup, unit)
-    _log_ego(rec, record.kinematics, unit)
+    _log_ego(rec, record.kinematics, unit, unit * detail(setup.town))
     _log_plan(rec, net, record.roads, setup.town, unit)
     _log_incidents(rec, record.incidents, unit * detail(setup.town))
     _log_series(rec, record.roads, setup)
@@ -362,7 +362,7 @@ def _log_map(rec: rr.RecordingStream, net: Net, setup: EpisodeSetup, unit: float
         )
 
 
-def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame, unit: float) -> None:
+def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame, unit: float, trail_unit: float) -> None:
     import rerun as rr
 
     time = kinematics["time"].to_numpy(dtype=float)
@@ -395,7 +395,7 @@ def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame, unit: float) -> 
     )
     rec.log(
         "world/ego/trail",
-        rr.LineStrips2D.from_fields(colors=(255, 255, 255, 150), radii=TRAIL_RADIUS * unit,
+        rr.LineStrips2D.from_fields(colors=(255, 255, 255, 150), radii=TRAIL_RADIUS * trail_unit,
                                     draw_order=DRAW_ORDER["trail"]),
         static=True,
     )
