@@ -10,8 +10,11 @@ Timeline "sim_time" (a duration, seconds of SUMO time). Rerun's 2D views draw y 
 rows), while SUMO nets and town files have y upwards (north): every position under world/ is logged
 with y negated, so the map appears the right way up. Marker sizes and line widths are multiples of
 the town's map unit (networks/town_map.py), so Town01 and a city of hundreds of junctions are both
-readable; a town of more than 30 junctions shows names on hover only. A road is drawn along its
-course: the town's geometry where it has one, else the net's lane of the edge named after it.
+readable; a town of more than 30 junctions shows names on hover only and draws its own lines and
+markers, the incident boxes and the trail at half size (`detail`). The episode is drawn over the
+town (`DRAW_ORDER`). A road is drawn along its course: the town's geometry where it has one, else
+the net's lane of the edge named after it. On an imported town `net_path` is the town's own net,
+the one the episode drove, so the ego's SUMO positions lie on the lanes of its roads' edges.
 Entities:
 - world/lanes, world/roads, world/junctions   static: every lane of the net; the town's road shapes
                                               (roads with a geometry); junction names

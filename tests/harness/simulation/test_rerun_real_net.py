@@ -217,3 +217,12 @@ def test_a_road_shorter_than_one_step_is_driven_and_recorded_on_ingolstadt(tmp_p
     assert detail(town) == CITY_DETAIL and len(town.junctions) > 200
     _, strips = column(entities["/world/ego/box"], "LineStrips2D:strips")
     assert len(strips) == len(record.kinematics)
+
+
+def test_an_ego_at_the_end_of_an_unextended_route_is_named_as_such(fokr, monkeypatch):
+    from trustroute.harness.simulation.real_roads import RealRoads
+
+    monkeypatch.setattr(RealRoads, "extend_route", lambda self, sumo, vehicle, road, nxt: [])
+    folder = fokr["folder"]
+    with pytest.raises(RuntimeError, match="the ego left the net at the end of its route on 4_begin-71"):
+        record_episode(folder / "town.json", folder / "spec.toml", 3, folder / "unextended.rrd")
