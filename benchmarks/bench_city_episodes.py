@@ -3,7 +3,7 @@ number of vehicles, against a bare libsumo run of the same net and demand measur
 
 The city is sumo-rl's RESCO Ingolstadt scenario (the `cities` extra; 381 SUMO junctions), imported
 with `trustroute town import` into the cache (`city-bench/`) once. The ego drives the trust-free
-policy of a two-waypoint spec (`SPEC`, about 20 roads and 3 km); the demand levels are none,
+policy of a two-waypoint spec (`SPEC`, 22 roads and 2.1 km); the demand levels are none,
 SUMO's randomTrips.py at TRIP_RATES trips per minute (one seeded trips file per rate, written
 before the clock) and the scenario's own routes (about 71 vehicles per minute, shifted to start
 with the episode). The episode gets the demand as route files (`SumoConfig.route_files`), as
