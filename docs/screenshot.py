@@ -1,6 +1,6 @@
 """Screenshot a page in headless Chromium after it has had real time to render (docs/ images).
 
-    python docs/screenshot.py URL OUT.png [--wait SECONDS] [--size 1600x1000]
+    python docs/screenshot.py URL OUT.png [--wait SECONDS] [--size 1600x1000] [--click X,Y ...]
 
 `chromium --screenshot` captures at the load event, before a WebAssembly app such as the Rerun web
 viewer has drawn anything, so this drives Chromium over its DevTools protocol instead (tornado's
@@ -35,7 +35,8 @@ FLAGS = [
 ]
 
 
-async def _capture(ws_url: str, url: str, out: Path, wait: float, width: int, height: int) -> None:
+async def _capture(ws_url: str, url: str, out: Path, wait: float, width: int, height: int,
+                   clicks: list[tuple[int, int]] = ()) -> None:
     from tornado.websocket import websocket_connect
 
     connection = await websocket_connect(ws_url, max_message_size=256 * 1024 * 1024)
@@ -55,6 +56,10 @@ async def _capture(ws_url: str, url: str, out: Path, wait: float, width: int, he
     )
     await call("Page.navigate", url=url)
     await asyncio.sleep(wait)
+    for x, y in clicks:  # e.g. on the Rerun viewer's time bar, to move its time cursor there
+        for kind in ("mousePressed", "mouseReleased"):
+            await call("Input.dispatchMouseEvent", type=kind, x=x, y=y, button="left", clickCount=1)
+        await asyncio.sleep(5.0)
     shot = await call("Page.captureScreenshot", format="png")
     out.write_bytes(base64.b64decode(shot["data"]))
     connection.close()
@@ -67,6 +72,8 @@ def main() -> None:
     parser.add_argument("--wait", type=float, default=20.0)
     parser.add_argument("--size", default="1600x1000")
     parser.add_argument("--port", type=int, default=9333)
+    parser.add_argument("--click", action="append", default=[], metavar="X,Y",
+                        help="click the page at pixel X,Y after --wait (repeatable), 5 s before the capture")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     profile = tempfile.mkdtemp()
@@ -95,7 +102,9 @@ def main() -> None:
             time.sleep(0.5)
         else:
             raise SystemExit("chromium did not start its DevTools endpoint")
-        asyncio.run(_capture(pages[0]["webSocketDebuggerUrl"], args.url, args.out, args.wait, width, height))
+        clicks = [(int(x), int(y)) for x, y in (c.split(",") for c in args.click)]
+        asyncio.run(_capture(pages[0]["webSocketDebuggerUrl"], args.url, args.out, args.wait, width, height,
+                             clicks))
     finally:
         browser.terminate()
         browser.wait(timeout=20)

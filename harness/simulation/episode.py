@@ -183,8 +183,12 @@ def _define_ego_type(sumo) -> None:
     sumo.vehicletype.setSpeedDeviation(EGO_TYPE, 0.0)
 
 
-def _check_insertion_time(now: float, start: str) -> None:
-    """The ego has not appeared yet at `now`: an error once INSERT_TIMEOUT has passed."""
+def _check_missing_ego(now: float, start: str, current: _RoadRun) -> None:
+    """The ego is not on the net at `now`: an error once it has left (the end of its route was
+    reached before the route was extended), or once INSERT_TIMEOUT has passed without it."""
+    if not math.isnan(current.time_in):
+        raise RuntimeError(f"the ego left the net at the end of its route on {current.road} before "
+                           "the route was extended")
     if now > INSERT_TIMEOUT:
         raise RuntimeError(f"the ego could not be inserted on {start} within {INSERT_TIMEOUT} s")
 
@@ -371,6 +375,21 @@ class _Episode:
         self.inject(upcoming, now, self.length(run.road) - position + JUNCTION_LENGTH)
         return upcoming
 
+    def commit_through_short_roads(self, run: _RoadRun, now: float,
+                                   position: float) -> tuple[_RoadRun, _RoadRun | None]:
+        """Commit `run`; a next road no longer than COMMIT_DISTANCE has its commit point before its
+        start, and the ego may pass it within one step without being seen on it (a 0.2 m edge
+        between two junctions of a city), so it is entered and committed at once, as is the road
+        after it while that one is as short. Returns (the road the ego is in, the next road)."""
+        upcoming = self.commit(run, now, position)
+        behind = self.length(run.road) - position   # metres from the ego to the end of `run`
+        while upcoming is not None and self.length(upcoming.road) <= COMMIT_DISTANCE:
+            upcoming.time_in = now
+            behind += JUNCTION_LENGTH + self.length(upcoming.road)
+            run = upcoming
+            upcoming = self.commit(run, now, self.length(run.road) - behind)
+        return run, upcoming
+
     # -- the loop -------------------------------------------------------------
     def insert_ego(self) -> Callable | None:
         """Background traffic and the ego on the start road, subscribed; returns the background's
@@ -439,7 +458,7 @@ class _Episode:
             now = get_time()
             result = get_results(EGO_ID)
             if not result:
-                _check_insertion_time(now, start)
+                _check_missing_ego(now, start, current)
                 continue
             if math.isnan(current.time_in):
                 current.time_in = now
@@ -467,7 +486,7 @@ class _Episode:
             finished = False
             along = current.offsets.get(road)   # where the ego's edge starts along the road
             if not current.committed and along is not None and along + position + speed * step >= commit_at:
-                upcoming = self.commit(current, now, along + position)
+                current, upcoming = self.commit_through_short_roads(current, now, along + position)
                 finished = upcoming is None
             # Logged after this step's decisions, so `mode` is the control the ego drives on with.
             log_floats((now, x, y, speed))

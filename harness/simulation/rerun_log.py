@@ -10,8 +10,11 @@ Timeline "sim_time" (a duration, seconds of SUMO time). Rerun's 2D views draw y 
 rows), while SUMO nets and town files have y upwards (north): every position under world/ is logged
 with y negated, so the map appears the right way up. Marker sizes and line widths are multiples of
 the town's map unit (networks/town_map.py), so Town01 and a city of hundreds of junctions are both
-readable; a town of more than 30 junctions shows names on hover only. A road is drawn along its
-course: the town's geometry where it has one, else the net's lane of the edge named after it.
+readable; a town of more than 30 junctions shows names on hover only and draws its own lines and
+markers, the incident boxes and the trail at half size (`detail`). The episode is drawn over the
+town (`DRAW_ORDER`). A road is drawn along its course: the town's geometry where it has one, else
+the net's lane of the edge named after it. On an imported town `net_path` is the town's own net,
+the one the episode drove, so the ego's SUMO positions lie on the lanes of its roads' edges.
 Entities:
 - world/lanes, world/roads, world/junctions   static: every lane of the net; the town's road shapes
                                               (roads with a geometry); junction names
@@ -80,6 +83,10 @@ PLAN_RADIUS = 0.9
 TRAIL_RADIUS = 0.6
 OUTLINE_RADIUS = 0.4
 INCIDENT_HALF_SIZE = 4.0
+CITY_DETAIL = 0.5  # lanes, roads and markers of places in a town whose names are hover text only
+# Layers of the map, bottom to top: the episode (plan, incidents, trail, ego) over the town.
+DRAW_ORDER = {"lanes": 1.0, "roads": 2.0, "start": 3.0, "waypoints": 4.0, "incident_roads": 5.0,
+              "junctions": 6.0, "plan": 7.0, "incidents": 8.0, "trail": 9.0, "ego": 10.0}
 UP = np.array([1.0, -1.0])  # town and SUMO y point up, Rerun's 2D y points down
 TRAIL_SECONDS = 30.0
 TRAIL_POINTS = 15
@@ -137,6 +144,14 @@ def lane_strips(net: Net) -> list[np.ndarray]:
         for lane in edge.getLanes():
             strips.append(np.asarray(lane.getShape(), dtype=np.float32))
     return strips
+
+
+def detail(town: Town) -> float:
+    """The factor on the town's own lines and markers: 1 on a small town, CITY_DETAIL on a city
+    (more than 30 junctions), where full-size lanes and markers would merge into one another and
+    hide the episode; incident boxes and the ego's trail too (a city's unit is up to 25 m); the ego
+    and its plan keep their size."""
+    return 1.0 if names_every_junction(town) else CITY_DETAIL
 
 
 def on_screen(points: np.ndarray | list) -> np.ndarray:
@@ -266,9 +281,9 @@ def write_recording(path: Path, net_path: Path, record: EpisodeLogs, setup: Epis
     rec.save(str(path), default_blueprint=episode_blueprint(frame))
     net = _net(Path(net_path))
     _log_map(rec, net, setup, unit)
-    _log_ego(rec, record.kinematics, unit)
+    _log_ego(rec, record.kinematics, unit, unit * detail(setup.town))
     _log_plan(rec, net, record.roads, setup.town, unit)
-    _log_incidents(rec, record.incidents, unit)
+    _log_incidents(rec, record.incidents, unit * detail(setup.town))
     _log_series(rec, record.roads, setup)
     _log_events(rec, record)
     rec.flush()
@@ -280,20 +295,24 @@ def _log_map(rec: rr.RecordingStream, net: Net, setup: EpisodeSetup, unit: float
     import rerun as rr
 
     town, spec = setup.town, setup.spec
+    fine = detail(town) * unit
     rec.log("world/lanes", rr.LineStrips2D([on_screen(s) for s in lane_strips(net)], colors=(90, 90, 90),
-                                           radii=LANE_RADIUS * unit), static=True)
+                                           radii=LANE_RADIUS * fine, draw_order=DRAW_ORDER["lanes"]),
+            static=True)
     shaped = sorted(town.geometry)
     rec.log("world/roads", rr.LineStrips2D([on_screen(road_course(net, town, r)) for r in shaped],
-                                           colors=(120, 120, 130), radii=ROAD_RADIUS * unit), static=True)
+                                           colors=(120, 120, 130), radii=ROAD_RADIUS * fine,
+                                           draw_order=DRAW_ORDER["roads"]), static=True)
     names = sorted(town.junctions)
     rec.log(
         "world/junctions",
         rr.Points2D(
             on_screen([town.junctions[n] for n in names]),
             labels=names,
-            radii=JUNCTION_RADIUS * unit * (1.0 if names_every_junction(town) else 0.5),
+            radii=JUNCTION_RADIUS * fine,
             colors=(200, 200, 200),
             show_labels=names_every_junction(town),
+            draw_order=DRAW_ORDER["junctions"],
         ),
         static=True,
     )
@@ -302,14 +321,15 @@ def _log_map(rec: rr.RecordingStream, net: Net, setup: EpisodeSetup, unit: float
         "world/start",
         rr.LineStrips2D([on_screen(road_course(net, town, spec.start))], radii=START_RADIUS * unit,
                         colors=START_COLOR, labels=[f"start {spec.start}" if small else "start"],
-                        show_labels=True),
+                        show_labels=True, draw_order=DRAW_ORDER["start"]),
         static=True,
     )
     for i, (atom, roads) in enumerate(sorted(spec.state_atoms.items())):
         shapes = [road_course(net, town, road) for road in sorted(roads)]
         colour = WAYPOINT_COLORS[i % len(WAYPOINT_COLORS)]
         rec.log(f"world/waypoints/{atom}", rr.LineStrips2D([on_screen(s) for s in shapes],
-                                                           radii=WAYPOINT_RADIUS * unit, colors=colour),
+                                                           radii=WAYPOINT_RADIUS * unit, colors=colour,
+                                                           draw_order=DRAW_ORDER["waypoints"]),
                 static=True)
         rec.log(
             f"world/waypoints/{atom}/label",
@@ -319,13 +339,15 @@ def _log_map(rec: rr.RecordingStream, net: Net, setup: EpisodeSetup, unit: float
                 colors=colour,
                 labels=[f"{atom} ({road})" for road in sorted(roads)],
                 show_labels=small,
+                draw_order=DRAW_ORDER["waypoints"],
             ),
             static=True,
         )
         if not small:  # one name per waypoint set, at its first road
             rec.log(f"world/waypoints/{atom}/name",
                     rr.Points2D(on_screen([_midpoint(shapes[0])]), radii=0.5 * WAYPOINT_RADIUS * unit,
-                                colors=colour, labels=[atom], show_labels=True), static=True)
+                                colors=colour, labels=[atom], show_labels=True,
+                                draw_order=DRAW_ORDER["waypoints"]), static=True)
     incident_roads = sorted((road, kind) for road, kind in town.incidents.items() if kind in INCIDENT_COLORS)
     if incident_roads:
         rec.log(
@@ -333,16 +355,17 @@ def _log_map(rec: rr.RecordingStream, net: Net, setup: EpisodeSetup, unit: float
             rr.Points2D(
                 on_screen([point_along(road_course(net, town, road), 0.5, unit)
                            for road, _ in incident_roads]),
-                radii=MARKER_RADIUS * unit,
+                radii=MARKER_RADIUS * fine,
                 colors=[INCIDENT_COLORS.get(k, (200, 200, 200)) for _, k in incident_roads],
                 labels=[kind for _, kind in incident_roads],
                 show_labels=False,
+                draw_order=DRAW_ORDER["incident_roads"],
             ),
             static=True,
         )
 
 
-def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame, unit: float) -> None:
+def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame, unit: float, trail_unit: float) -> None:
     import rerun as rr
 
     time = kinematics["time"].to_numpy(dtype=float)
@@ -362,6 +385,7 @@ def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame, unit: float) -> 
                                      radii=np.full(time.size, OUTLINE_RADIUS * unit, dtype=np.float32)),
         ],
     )
+    rec.log("world/ego/box", rr.LineStrips2D.from_fields(draw_order=DRAW_ORDER["ego"]), static=True)
     points, lengths = trail_strips(x, y, time)
     trails = np.split(points, np.cumsum(lengths)[:-1])
     step = float(np.median(np.diff(time))) if time.size > 1 else 1.0
@@ -374,7 +398,8 @@ def _log_ego(rec: rr.RecordingStream, kinematics: pd.DataFrame, unit: float) -> 
     )
     rec.log(
         "world/ego/trail",
-        rr.LineStrips2D.from_fields(colors=(255, 255, 255, 150), radii=TRAIL_RADIUS * unit),
+        rr.LineStrips2D.from_fields(colors=(255, 255, 255, 150), radii=TRAIL_RADIUS * trail_unit,
+                                    draw_order=DRAW_ORDER["trail"]),
         static=True,
     )
     # Control mode as a state lane: its autopilot/manual bands are the takeover intervals.
@@ -404,11 +429,13 @@ def _log_plan(rec: rr.RecordingStream, net: Net, roads: pd.DataFrame, town: Town
                 colors=PLAN_COLOR,
                 labels=["", f"next: {following}" if names_every_junction(town) else "next"],
                 show_labels=True,
+                draw_order=DRAW_ORDER["plan"],
             ),
         )
 
 
-def _log_incidents(rec: rr.RecordingStream, incidents: pd.DataFrame, unit: float) -> None:
+def _log_incidents(rec: rr.RecordingStream, incidents: pd.DataFrame, size: float) -> None:
+    """A labelled box per placed incident, INCIDENT_HALF_SIZE by `size` (metres per unit)."""
     import rerun as rr
 
     for row in incidents.itertuples(index=False):
@@ -420,11 +447,12 @@ def _log_incidents(rec: rr.RecordingStream, incidents: pd.DataFrame, unit: float
             entity,
             rr.Boxes2D(
                 centers=on_screen([row.x, row.y]),
-                half_sizes=[[INCIDENT_HALF_SIZE * unit] * 2],
-                radii=OUTLINE_RADIUS * unit,
+                half_sizes=[[INCIDENT_HALF_SIZE * size] * 2],
+                radii=OUTLINE_RADIUS * size,
                 labels=[row.incident],
                 show_labels=True,
                 colors=INCIDENT_COLORS.get(row.incident, (200, 200, 200)),
+                draw_order=DRAW_ORDER["incidents"],
             ),
         )
         if not math.isnan(row.removed_time):
