@@ -375,21 +375,6 @@ class _Episode:
         self.inject(upcoming, now, self.length(run.road) - position + JUNCTION_LENGTH)
         return upcoming
 
-    def commit_through_short_roads(self, run: _RoadRun, now: float,
-                                   position: float) -> tuple[_RoadRun, _RoadRun | None]:
-        """Commit `run`; a next road no longer than COMMIT_DISTANCE has its commit point before its
-        start, and the ego may pass it within one step without being seen on it (a 0.2 m edge
-        between two junctions of a city), so it is entered and committed at once, as is the road
-        after it while that one is as short. Returns (the road the ego is in, the next road)."""
-        upcoming = self.commit(run, now, position)
-        behind = self.length(run.road) - position   # metres from the ego to the end of `run`
-        while upcoming is not None and self.length(upcoming.road) <= COMMIT_DISTANCE:
-            upcoming.time_in = now
-            behind += JUNCTION_LENGTH + self.length(upcoming.road)
-            run = upcoming
-            upcoming = self.commit(run, now, self.length(run.road) - behind)
-        return run, upcoming
-
     # -- the loop -------------------------------------------------------------
     def insert_ego(self) -> Callable | None:
         """Background traffic and the ego on the start road, subscribed; returns the background's
@@ -486,7 +471,7 @@ class _Episode:
             finished = False
             along = current.offsets.get(road)   # where the ego's edge starts along the road
             if not current.committed and along is not None and along + position + speed * step >= commit_at:
-                current, upcoming = self.commit_through_short_roads(current, now, along + position)
+                upcoming = self.commit(current, now, along + position)
                 finished = upcoming is None
             # Logged after this step's decisions, so `mode` is the control the ego drives on with.
             log_floats((now, x, y, speed))
