@@ -119,7 +119,8 @@ def test_the_ego_drives_a_city_net_with_short_edges(tmp_path):
     """The wheel's DRT net (OpenStreetMap, 96 town junctions): edges a few metres long between
     junctions without a choice are passed within one step."""
     net = Path(sumo.SUMO_HOME) / "tools" / "game" / "DRT" / "osm.net.xml"
-    town = import_town(net, tmp_path / "drt.json", rng=np.random.default_rng(1), incident_seed=1).town
+    # incident seed 5: the route below meets a pedestrian road with sidewalks on both sides
+    town = import_town(net, tmp_path / "drt.json", rng=np.random.default_rng(5), incident_seed=5).town
     start = town.states[0]
     targets = sorted(town.reachable_states(start),
                      key=lambda road: (-town.route_length(town.shortest_route(start, [road])), road))
