@@ -170,7 +170,7 @@ def parse_sumo_net(data: Mapping, path: str) -> SumoNetRef | None:
 
 def parse_turns(data: Mapping, path: str, directed: Iterable[tuple[str, str]]) -> dict[str, tuple[str, ...]]:
     """The `turns` entries: a directed road "U-V" -> the junctions W (sorted, each once) of the
-    directed roads V-W it may turn into; W may be U (a U-turn the road's source allows)."""
+    directed roads V-W it may turn into; W may be U (a U-turn, where the source net allows one)."""
     raw = data.get("turns", {})
     if not isinstance(raw, dict):
         raise InputError(path, "turns", "expected an object of \"U-V\" -> [next junction, ...]",
