@@ -16,9 +16,9 @@ on an edge uses:
   exists, since SUMO overtakes through an oncoming lane only then;
 - whether it and its reverse edge have sidewalks (lane 0 for pedestrians only), where a
   pedestrian scene can stand;
-- the edges its connections lead to: the town format has no turn restrictions, so a move the
-  model allows may have no connection in the net (harness/simulation/real_roads.py then drives
-  SUMO's shortest way round).
+- the edges its connections lead to: a town imported with its turns (`turns`, docs/formats/town.md)
+  has a connection for every move; one written without them may allow a move the net has no
+  connection for (harness/simulation/real_roads.py then drives SUMO's shortest way round).
 
 The town's net is checked against its recorded SHA-256 first (road_geometry.check_sumo_net).
 """

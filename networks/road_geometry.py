@@ -4,7 +4,9 @@ lengths, and the SUMO net a town was imported from (docs/formats/town.md).
 - `one_way`: roads of `roads` that are driven in one direction only;
 - `geometry`: per directed road its polyline `shape`, its driven `length` (the shape's length when
   absent), the SUMO `edges` it runs along and its `street` name;
-- `sumo_net`: the source net's file and SHA-256, so a town can tell when its net has changed.
+- `sumo_net`: the source net's file and SHA-256, so a town can tell when its net has changed;
+- `turns`: per directed road the next junctions it may turn to, where the road's moves differ from
+  the town's rule (a net that forbids a turn, or allows a U-turn where nothing else is driveable).
 
 A town without these keys is the two-way, straight-road town the format started with; its content
 hash leaves them out (`identity_extras`), so nets and policy files keyed by it stay valid.
@@ -21,7 +23,7 @@ from pathlib import Path
 
 from trustroute.core.errors import InputError
 
-EXTRA_TOWN_KEYS: tuple[str, ...] = ("one_way", "geometry", "sumo_net")
+EXTRA_TOWN_KEYS: tuple[str, ...] = ("one_way", "geometry", "sumo_net", "turns")
 GEOMETRY_KEYS: tuple[str, ...] = ("shape", "length", "edges", "street")
 SHA256 = re.compile(r"[0-9a-f]{64}")
 
@@ -61,6 +63,7 @@ class RoadExtras:
     one_way: frozenset[tuple[str, str]] = frozenset()
     geometry: Mapping[str, RoadGeometry] | None = None
     sumo_net: SumoNetRef | None = None
+    turns: Mapping[str, tuple[str, ...]] | None = None
 
 
 def polyline_length(shape: Iterable[tuple[float, float]]) -> float:
@@ -165,8 +168,39 @@ def parse_sumo_net(data: Mapping, path: str) -> SumoNetRef | None:
     return SumoNetRef(file=raw["file"], sha256=raw["sha256"])
 
 
+def parse_turns(data: Mapping, path: str, directed: Iterable[tuple[str, str]]) -> dict[str, tuple[str, ...]]:
+    """The `turns` entries: a directed road "U-V" -> the junctions W (sorted, each once) of the
+    directed roads V-W it may turn into; W may be U (a U-turn, where the source net allows one)."""
+    raw = data.get("turns", {})
+    if not isinstance(raw, dict):
+        raise InputError(path, "turns", "expected an object of \"U-V\" -> [next junction, ...]",
+                         "key each restricted road's moves by its directed road name")
+    directed = list(directed)
+    leaving: dict[str, set[str]] = {}
+    for u, v in directed:
+        leaving.setdefault(u, set()).add(v)
+    names = {f"{u}-{v}": v for u, v in directed}
+    out = {}
+    for key, moves in raw.items():
+        place = f"turns.{key}"
+        if key not in names:
+            raise InputError(path, place, f"'{key}' is not a directed road of this town",
+                             "remove the entry or add the road (a one-way road has one direction only)")
+        if not (isinstance(moves, list) and moves and all(isinstance(w, str) for w in moves)
+                and len(set(moves)) == len(moves)):
+            raise InputError(path, place, "expected a non-empty list of junction names, each once",
+                             "list the junctions the road may turn to, e.g. [\"W\"]")
+        at = names[key]
+        for w in moves:
+            if w not in leaving.get(at, set()):
+                raise InputError(path, place, f"{at}-{w} is not a directed road of this town",
+                                 f"list only junctions one road on from {at} in driving direction")
+        out[key] = tuple(sorted(moves))
+    return dict(sorted(out.items()))
+
+
 def parse_road_extras(data: Mapping, path: str, roads: Iterable[tuple[str, str]]) -> RoadExtras:
-    """Validate the optional keys `one_way`, `geometry` and `sumo_net` of a town document."""
+    """Validate the optional keys `one_way`, `geometry`, `sumo_net` and `turns` of a town document."""
     roads = list(roads)
     one_way = parse_one_way(data, path, roads)
     raw_geometry = data.get("geometry", {})
@@ -181,7 +215,8 @@ def parse_road_extras(data: Mapping, path: str, roads: Iterable[tuple[str, str]]
                              "remove the entry or add the road (a one-way road has one direction only)")
         geometry[key] = parse_geometry_entry(raw, path, f"geometry.{key}")
     return RoadExtras(one_way=one_way, geometry=dict(sorted(geometry.items())),
-                      sumo_net=parse_sumo_net(data, path))
+                      sumo_net=parse_sumo_net(data, path),
+                      turns=parse_turns(data, path, directed_pairs(roads, one_way)))
 
 
 def check_strongly_connected(junctions: Iterable[str], out_neighbours: Mapping[str, Iterable[str]],
@@ -211,7 +246,7 @@ def check_strongly_connected(junctions: Iterable[str], out_neighbours: Mapping[s
 
 
 def identity_extras(one_way: frozenset[tuple[str, str]], geometry: Mapping[str, RoadGeometry],
-                    sumo_net: SumoNetRef | None) -> dict:
+                    sumo_net: SumoNetRef | None, turns: Mapping[str, tuple[str, ...]] | None = None) -> dict:
     """The extra keys of a town's canonical content (only those present, so a town without them
     keeps its hash)."""
     out: dict = {}
@@ -221,6 +256,8 @@ def identity_extras(one_way: frozenset[tuple[str, str]], geometry: Mapping[str, 
         out["geometry"] = {key: value.to_dict() for key, value in sorted(geometry.items())}
     if sumo_net is not None:
         out["sumo_net_sha256"] = sumo_net.sha256
+    if turns:
+        out["turns"] = {key: list(moves) for key, moves in sorted(turns.items())}
     return out
 
 

@@ -10,6 +10,13 @@ their summed length and concatenated shape. Where two chains would join the same
 the same direction (or a chain would return to its start), a junction in the middle of the chain
 becomes a junction of the town as well, so every road keeps its own name `U-V`.
 
+Turns follow the net's connections: a car on a road may take a next road when a connection for a
+passenger car (its lanes and the connection itself allowing `passenger`) leads from the road's last
+edge into the next road's first, and every edge of a road leads into the next by such a connection.
+The moves of a road are its connected next roads other than the way back; the way back only when
+it is connected and nothing else is. Only the largest part of the roads in which every road can be
+driven to and from every other along those moves is kept.
+
 Names are stable: a junction is named after its SUMO id (characters other than letters, digits and
 `_` become `_`; a long or clashing name is shortened and given a hash of the id), so importing the
 same net twice gives the same town.
@@ -52,6 +59,7 @@ class NetGraph:
     positions: dict[str, tuple[float, float]]
     edges: dict[str, NetEdge]
     dropped_edges: int  # normal edges a passenger car may not use
+    connections: dict[str, frozenset[str]] = field(default_factory=dict)  # edge -> edges a car may enter
 
 
 @dataclass(frozen=True)
@@ -92,6 +100,7 @@ class DecisionGraph:
     junction_ids: dict[str, str]
     positions: dict[str, tuple[float, float]]
     roads: tuple[ImportedRoad, ...]  # source/target are junction names
+    moves: dict[str, tuple[str, ...]] = field(default_factory=dict)  # road "U-V" -> next junctions W
     dropped: dict[str, int] = field(default_factory=dict)
     added_junctions: int = 0  # junctions without a choice that keep two roads' names apart
 
@@ -122,6 +131,7 @@ def read_net_graph(net_path: str | Path, shown: str | None = None) -> NetGraph:
         raise InputError(shown, "", f"not a readable SUMO net ({type(exc).__name__}: {exc})",
                          "pass a .net.xml(.gz) written by netconvert, or an .osm file") from None
     edges: dict[str, NetEdge] = {}
+    connections: dict[str, frozenset[str]] = {}
     dropped = 0
     for edge in net.getEdges(withInternal=False):
         if edge.getFunction() != "":
@@ -134,6 +144,7 @@ def read_net_graph(net_path: str | Path, shown: str | None = None) -> NetGraph:
         edges[edge.getID()] = NetEdge(
             id=edge.getID(), source=source, target=target, length=float(edge.getLength()), shape=shape,
             speed=float(edge.getSpeed()), street=edge.getName() or "")
+        connections[edge.getID()] = passenger_connections(edge)
     if not edges:
         raise InputError(shown, "", "the net has no road a passenger car may use",
                          "import a road network with streets open to cars (not a rail, bicycle or "
@@ -142,7 +153,16 @@ def read_net_graph(net_path: str | Path, shown: str | None = None) -> NetGraph:
     for node in net.getNodes():
         (point,) = _finite_points([node.getCoord()[:2]], shown, f"junction {node.getID()}")
         positions[node.getID()] = point
-    return NetGraph(positions=positions, edges=edges, dropped_edges=dropped)
+    return NetGraph(positions=positions, edges=edges, dropped_edges=dropped, connections=connections)
+
+
+def passenger_connections(edge) -> frozenset[str]:
+    """The edges a passenger car on sumolib edge `edge` may enter: some connection between them
+    allows `passenger`, from a lane and into a lane that allow it."""
+    return frozenset(
+        to.getID() for to, links in edge.getOutgoing().items()
+        if any(link.allows(PASSENGER) and link.getFromLane().allows(PASSENGER)
+               and link.getToLane().allows(PASSENGER) for link in links))
 
 
 def largest_strong_part(nodes: Iterable[str], edges: Iterable[NetEdge]) -> tuple[set[str], int]:
@@ -273,8 +293,36 @@ def junction_names(ids: Iterable[str]) -> dict[str, str]:
     return names
 
 
+def chain_moves(chains: list[list[NetEdge]], connections: Mapping[str, frozenset[str]]) -> list[list[int]]:
+    """Per chain the indices of the chains a car may take next (the module's rule for turns): none
+    when one of its own edges does not lead into the next."""
+    starting: dict[str, list[int]] = {}
+    for i, chain in enumerate(chains):
+        starting.setdefault(chain[0].source, []).append(i)
+    drivable = [all(b.id in connections.get(a.id, ()) for a, b in zip(chain, chain[1:], strict=False))
+                for chain in chains]
+    moves = []
+    for i, chain in enumerate(chains):
+        last = chain[-1]
+        connected = [j for j in starting.get(last.target, []) if drivable[i] and drivable[j]
+                     and chains[j][0].id in connections.get(last.id, ())]
+        onward = [j for j in connected if chains[j][-1].target != chain[0].source]
+        moves.append(onward or connected)
+    return moves
+
+
+def driven_part(chains: list[list[NetEdge]], moves: list[list[int]]) -> set[int]:
+    """The chains of the largest part in which every chain reaches every other along the moves
+    (ties: the part holding the smallest pair of SUMO junction ids)."""
+    keys = [f"{chain[0].source} {chain[-1].target}" for chain in chains]
+    arcs = [NetEdge(id="", source=keys[i], target=keys[j], length=0.0, shape=(), speed=0.0, street="")
+            for i, targets in enumerate(moves) for j in targets]
+    part, _ = largest_strong_part(keys, arcs)
+    return {i for i, key in enumerate(keys) if key in part}
+
+
 def decision_graph(graph: NetGraph, shown: str) -> DecisionGraph:
-    """The town's junctions and roads: the largest strongly connected part, collapsed."""
+    """The town's junctions, roads and turns: the largest strongly connected part, collapsed."""
     edges = sorted(graph.edges.values(), key=lambda e: e.id)
     nodes = {n for e in edges for n in (e.source, e.target)}
     part, n_parts = largest_strong_part(nodes, edges)
@@ -283,30 +331,36 @@ def decision_graph(graph: NetGraph, shown: str) -> DecisionGraph:
                          "other (nothing strongly connected)", "import a net whose streets form a "
                          "connected network, not separate one-way pieces")
     kept = [e for e in edges if e.source in part and e.target in part]
-    chains, added = collapse(kept)
-    # Leaving out chains (parallel edges, edges only a U-turn reaches) can cut the town again.
-    chain_edges = [NetEdge(id=str(i), source=c[0].source, target=c[-1].target, length=0.0, shape=(),
-                           speed=0.0, street="") for i, c in enumerate(chains)]
-    ends = {n for e in chain_edges for n in (e.source, e.target)}
-    core, _ = largest_strong_part(ends, chain_edges)
-    chains = [c for c in chains if c[0].source in core and c[-1].target in core]
-    if len(core) < 2:
-        raise InputError(shown, "", "the passenger roads leave no two junctions that can be driven to and "
-                         "from each other", "import a larger part of the map")
+    all_chains, added = collapse(kept)
+    # Leaving out chains (parallel edges, edges only a U-turn reaches) and the turns the net forbids
+    # can cut the town again: keep the part the moves drive to and from.
+    moves = chain_moves(all_chains, graph.connections)
+    driven = driven_part(all_chains, moves)
+    chains = [c for i, c in enumerate(all_chains) if i in driven]
+    core = {n for c in chains for n in (c[0].source, c[-1].target)}
+    if len(chains) < 2:
+        raise InputError(shown, "", "the turns the net's connections allow leave no two roads that can be "
+                         "driven to and from each other", "import a larger part of the map, or a net "
+                         "with turnarounds at its dead ends (netconvert without --no-turnarounds)")
     names = junction_names(core)
     roads = tuple(ImportedRoad(source=names[c[0].source], target=names[c[-1].target], edges=tuple(c))
                   for c in chains)
-    used = {e.id for c in chains for e in c}
+    used = {e.id for c in all_chains for e in c}
     dropped = {
         "edges closed to passenger cars": graph.dropped_edges,
         "edges outside the largest strongly connected part": len(edges) - len(kept),
         "other strongly connected parts": n_parts - 1,
         "edges only a U-turn reaches or parallel to a shorter one": len(kept) - len(used),
+        "roads the net's turns do not drive to and from the rest": len(all_chains) - len(chains),
     }
+    turns = {f"{names[c[0].source]}-{names[c[-1].target]}":
+             tuple(sorted(names[all_chains[j][-1].target] for j in moves[i] if j in driven))
+             for i, c in enumerate(all_chains) if i in driven}
     return DecisionGraph(
         junction_ids={names[n]: n for n in sorted(core)},
         positions={names[n]: graph.positions[n] for n in sorted(core)},
         roads=tuple(sorted(roads, key=lambda r: (r.source, r.target))),
+        moves=dict(sorted(turns.items())),
         dropped=dropped,
         added_junctions=added,
     )

@@ -3,7 +3,7 @@
 A town file is JSON with `junctions` (name -> [x, y] in metres), `roads` (list of
 undirected [U, V] pairs, each a two-way road unless `one_way` says otherwise) and `incidents` (one
 entry per directed road "U-V": obstacle, pedestrian, truck or none); the optional keys of real
-roads (one-way roads, shapes and lengths, the source SUMO net) are read by
+roads (one-way roads, shapes and lengths, the source SUMO net, turn restrictions) are read by
 networks/road_geometry.py; every key: docs/formats/town.md.
 A state of the model is a directed road "U-V": the vehicle has just arrived at V from U.
 """
@@ -79,11 +79,20 @@ def split_road(directed_road: str) -> tuple[str, str]:
     return from_junction, to_junction
 
 
+def rule_moves(neighbours: Mapping[str, Sequence[str]], directed_road: str) -> tuple[str, ...]:
+    """The town's rule for the moves from U-V (docs/model.md): the neighbours of V other than U,
+    and U itself only at a dead end."""
+    came_from, at = split_road(directed_road)
+    options = tuple(w for w in neighbours[at] if w != came_from)
+    return options if options else (came_from,)
+
+
 @dataclass(frozen=True)
 class Town:
     """A validated town. `states` are the directed roads in a fixed sorted order; `neighbours` the
     junctions one road away in driving direction; `one_way` the (U, V) roads driven only from U to
-    V; `geometry` the real course of the directed roads that have one (networks/road_geometry.py)."""
+    V; `geometry` the real course of the directed roads that have one; `turns` the moves of the
+    directed roads whose moves are not the rule's (networks/road_geometry.py)."""
 
     junctions: dict[str, tuple[float, float]]
     roads: tuple[tuple[str, str], ...]
@@ -93,6 +102,7 @@ class Town:
     one_way: frozenset[tuple[str, str]] = frozenset()
     geometry: dict[str, RoadGeometry] = field(default_factory=dict)
     sumo_net: SumoNetRef | None = None
+    turns: dict[str, tuple[str, ...]] = field(default_factory=dict)
     states: tuple[str, ...] = field(init=False)
     neighbours: dict[str, tuple[str, ...]] = field(init=False)
 
@@ -115,7 +125,7 @@ class Town:
                 "junctions": {k: list(v) for k, v in sorted(self.junctions.items())},
                 "roads": sorted(sorted(r) for r in self.roads),
                 "incidents": dict(sorted(self.incidents.items())),
-                **identity_extras(self.one_way, self.geometry, self.sumo_net),
+                **identity_extras(self.one_way, self.geometry, self.sumo_net, self.turns),
             },
             sort_keys=True,
             separators=(",", ":"),
@@ -151,14 +161,16 @@ class Town:
         return index
 
     def actions(self, directed_road: str) -> tuple[str, ...]:
-        """Next junctions from state U-V: neighbours of V except U, unless V is a dead end."""
+        """Next junctions from state U-V: its `turns` entry when it has one, else the neighbours of
+        V except U, unless V is a dead end; in the order of `neighbours`."""
         moves = self._actions.get(directed_road)
         return moves if moves is not None else self._moves(directed_road)
 
     def _moves(self, directed_road: str) -> tuple[str, ...]:
-        came_from, at = split_road(directed_road)
-        options = tuple(w for w in self.neighbours[at] if w != came_from)
-        return options if options else (came_from,)
+        allowed = self.turns.get(directed_road)
+        if allowed is not None:
+            return tuple(w for w in self.neighbours[split_road(directed_road)[1]] if w in allowed)
+        return rule_moves(self.neighbours, directed_road)
 
     def successor(self, directed_road: str, next_junction: str) -> str:
         _, at = split_road(directed_road)
@@ -236,6 +248,7 @@ class TownValues(TypedDict):
     one_way: object     # checked by networks/road_geometry.py
     geometry: object
     sumo_net: object
+    turns: object
 
 
 FIELDS = field_table(
@@ -253,7 +266,7 @@ FIELDS = field_table(
           problem="expected an object of \"U-V\" -> incident type", fix="write one entry per directed road",
           missing_fix="add a 'incidents' entry as in the default town (trustroute net build --help)"),
     Field(key="source", kind=Anything(), default=""),  # provenance, kept as text
-    # one-way roads, road geometry and the source SUMO net: checked by networks/road_geometry.py
+    # one-way roads, road geometry, the source SUMO net and turns: checked by networks/road_geometry.py
     *(Field(key=key, kind=Anything(), default=None) for key in EXTRA_TOWN_KEYS),
 )
 TOWN_KEYS: tuple[str, ...] = keys(FIELDS)
@@ -374,7 +387,8 @@ def town_from_dict(data: object, path: str = "<town>") -> Town:
 
 def extras_fields(extras: RoadExtras) -> dict:
     """The Town fields of the optional road keys (networks/road_geometry.py)."""
-    return {"one_way": extras.one_way, "geometry": dict(extras.geometry or {}), "sumo_net": extras.sumo_net}
+    return {"one_way": extras.one_way, "geometry": dict(extras.geometry or {}), "sumo_net": extras.sumo_net,
+            "turns": dict(extras.turns or {})}
 
 
 def load_town(path: str | Path | None = None) -> Town:

@@ -2,9 +2,11 @@
 
 The steps: an OSM extract becomes a net (networks/osm_convert.py); the net's decision-point graph
 (networks/sumo_import.py) gives the junctions and the roads, with their shapes, lengths, SUMO edges
-and street names; incidents come from a file or the seeded rule (networks/town_incidents.py). The
-town is validated as any town file is before anything is written, then the net (for an OSM source)
-and the town are each written atomically, so a failed import leaves no half-written file.
+and street names, and the turns the net's connections allow (written as `turns` for the roads
+whose moves differ from the town's rule); incidents come from a file or the seeded rule
+(networks/town_incidents.py). The town is validated as any town file is before anything is
+written, then the net (for an OSM source) and the town are each written atomically, so a failed
+import leaves no half-written file.
 The output is the same bytes for the same source and options.
 """
 
@@ -22,7 +24,7 @@ from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
 from trustroute.networks.osm_convert import convert_osm, source_kind
 from trustroute.networks.road_geometry import RoadGeometry, file_sha256
 from trustroute.networks.sumo_import import ROUND_METRES, DecisionGraph, decision_graph, read_net_graph
-from trustroute.networks.town import NO_INCIDENT, Town, road_name, town_from_dict
+from trustroute.networks.town import NO_INCIDENT, Town, road_name, rule_moves, town_from_dict
 from trustroute.networks.town_incidents import RoadFacts, draw_incidents, incidents_from_file
 
 
@@ -40,13 +42,15 @@ class TownImport:
         one_way = len(self.town.one_way)
         return {"junctions": len(self.town.junctions), "roads": len(self.town.states),
                 "one_way_roads": one_way, "two_way_roads": (len(self.town.states) - one_way) // 2,
+                "restricted_roads": len(self.town.turns),
                 "added_junctions": self.graph.added_junctions, "dropped": dict(self.graph.dropped),
                 "incidents": self.incident_rule, "content_hash": self.town.content_hash}
 
     def summary(self) -> str:
         counts = self.to_dict()
         return (f"{counts['junctions']} junctions, {counts['roads']} directed roads "
-                f"(two-way: {counts['two_way_roads']}, one-way: {counts['one_way_roads']})")
+                f"(two-way: {counts['two_way_roads']}, one-way: {counts['one_way_roads']}; "
+                f"{counts['restricted_roads']} with turn restrictions)")
 
 
 def default_net_path(town_path: Path) -> Path:
@@ -64,6 +68,11 @@ def town_document(graph: DecisionGraph, incidents: dict[str, str], net_file: str
     directed = {(r.source, r.target) for r in graph.roads}
     pairs = sorted({tuple(sorted(pair)) for pair in directed})
     one_way = sorted([u, v] for u, v in directed if (v, u) not in directed)
+    neighbours: dict[str, list[str]] = {}
+    for u, v in sorted(directed):
+        neighbours.setdefault(u, []).append(v)
+    turns = {road: list(moves) for road, moves in graph.moves.items()
+             if moves != rule_moves(neighbours, road)}
     geometry = {
         road_name(r.source, r.target): RoadGeometry(
             shape=tuple((_round(x), _round(y)) for x, y in r.shape), length=r.length,
@@ -75,6 +84,7 @@ def town_document(graph: DecisionGraph, incidents: dict[str, str], net_file: str
         "junctions": {name: [_round(x), _round(y)] for name, (x, y) in sorted(graph.positions.items())},
         "roads": [list(pair) for pair in pairs],
         "one_way": one_way,
+        "turns": turns,
         "incidents": dict(sorted(incidents.items())),
         "geometry": dict(sorted(geometry.items())),
         "sumo_net": {"file": net_file, "sha256": net_sha256},

@@ -1,5 +1,5 @@
-"""The town file's optional road keys: one-way roads, road geometry, the source SUMO net; a town
-without them keeps its content hash."""
+"""The town file's optional road keys: one-way roads, road geometry, the source SUMO net, turn
+restrictions; a town without them keeps its content hash."""
 
 from __future__ import annotations
 
@@ -132,3 +132,39 @@ def test_a_shaped_road_may_join_close_junctions_but_not_one_point():
     data["junctions"]["B"] = list(data["junctions"]["A"])
     with pytest.raises(InputError, match="road A-B is 0 m long"):
         town_from_dict(data)
+
+
+def test_turns_replace_the_rule_for_the_roads_they_name():
+    town = town_from_dict(square(turns={"A-B": ["C", "A"], "C-D": ["A"]}))
+    plain = town_from_dict(square())
+    assert town.turns == {"A-B": ("A", "C"), "C-D": ("A",)}
+    assert plain.actions("A-B") == ("C",) and town.actions("A-B") == ("A", "C")   # a U-turn allowed
+    assert town.successors("C-D") == ("D-A",)
+    assert all(town.actions(road) == plain.actions(road) for road in town.states if road not in town.turns)
+    row = town.successor_table[town.state_index("A-B")]
+    assert sorted(row[row >= 0].tolist()) == sorted(town.state_index(r) for r in ("B-A", "B-C"))
+    assert town.content_hash != plain.content_hash
+    assert town_from_dict(square(turns={})).content_hash == plain.content_hash
+    assert town_from_dict(square(turns={"C-D": ["A"], "A-B": ["A", "C"]})).content_hash == town.content_hash
+
+
+def test_a_town_without_turns_keeps_its_moves():
+    default = load_town()
+    assert default.turns == {}
+    assert all(default.actions(road) == (tuple(w for w in default.neighbours[road.split("-")[1]]
+                                               if w != road.split("-")[0])
+                                         or (road.split("-")[0],)) for road in default.states)
+
+
+@pytest.mark.parametrize(("turns", "message"), [
+    ({"A-C": ["D"]}, "'A-C' is not a directed road"),
+    ({"A-B": ["D"]}, "B-D is not a directed road"),
+    ({"A-B": []}, "non-empty list"),
+    ({"A-B": ["C", "C"]}, "each once"),
+    ({"A-B": "C"}, "non-empty list"),
+    (["A-B"], "expected an object"),
+])
+def test_turn_errors_name_the_key(turns, message):
+    with pytest.raises(InputError, match=message) as error:
+        town_from_dict(square(turns=turns), "town.json")
+    assert "turns" in error.value.one_line() and "town.json" in error.value.one_line()

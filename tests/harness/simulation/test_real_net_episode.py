@@ -24,7 +24,7 @@ from trustroute.harness.simulation.incidents.obstacle import BLOCKED_SECONDS
 from trustroute.harness.simulation.sumo_start import SumoConfig
 from trustroute.networks.real_net import road_edges, town_net_file
 from trustroute.networks.sumo_net import find_binary
-from trustroute.networks.town import load_town
+from trustroute.networks.town import load_town, town_from_dict
 from trustroute.networks.town_import import import_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.participants.synthetic_driver import SyntheticDriver
@@ -116,10 +116,11 @@ def test_the_ego_drives_the_concatenated_edge_lists(city):
 
 @pytest.mark.slow
 def test_the_ego_drives_a_city_net_with_short_edges(tmp_path):
-    """The wheel's DRT net (OpenStreetMap, 98 town junctions): edges a few metres long between
+    """The wheel's DRT net (OpenStreetMap, 96 town junctions): edges a few metres long between
     junctions without a choice are passed within one step."""
     net = Path(sumo.SUMO_HOME) / "tools" / "game" / "DRT" / "osm.net.xml"
-    town = import_town(net, tmp_path / "drt.json", rng=np.random.default_rng(1), incident_seed=1).town
+    # incident seed 5: the route below meets a pedestrian road with sidewalks on both sides
+    town = import_town(net, tmp_path / "drt.json", rng=np.random.default_rng(5), incident_seed=5).town
     start = town.states[0]
     targets = sorted(town.reachable_states(start),
                      key=lambda road: (-town.route_length(town.shortest_route(start, [road])), road))
@@ -277,3 +278,22 @@ def test_jam_relief_takes_out_stuck_background_vehicles_only():
     fake.now += CHECK_EVERY / 2
     relief.step(fake)
     assert set(fake.waiting) == {"ego", "inc3.obstacle"}
+
+
+def test_the_ego_turns_only_where_the_net_has_a_connection(tmp_path):
+    """The wheel net without the left turn from a-e into e-d: the trust-free route to e-d goes round,
+    and SUMO's route of the ego is the roads' edge lists, with no detour in between."""
+    net = build_plain_net(tmp_path, "left", WHEEL_NODES, WHEEL_ROADS, forbidden=[("a_e", "e_d")])
+    import_town(net, tmp_path / "town.json")
+    (tmp_path / "spec.toml").write_text('name = "left"\nstart = "b-a"\nformula = "F v1"\n\n'
+                                        '[states]\nv1 = ["e-d"]\n')
+    town = load_town(tmp_path / "town.json")
+    assert town.actions("a-e") == ("b", "c")
+    without_turns = json.loads((tmp_path / "town.json").read_text())
+    del without_turns["turns"]
+    assert town_from_dict(without_turns).shortest_route("b-a", ["e-d"]) == ["b-a", "a-e", "e-d"]
+    record, watcher = drive(town, load_spec(str(tmp_path / "spec.toml"), town), load_driver_model(None), 1)
+    route = record.roads["directed_road"].tolist()
+    assert record.summary["end_reason"] == "accepted" and route[-1] == "e-d"
+    assert all(b.split("-")[1] in town.actions(a) for a, b in zip(route, route[1:], strict=False))
+    check_route(town, record, watcher)
