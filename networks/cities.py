@@ -6,8 +6,9 @@ ships the RESCO scenarios under `sumo_rl/nets/RESCO/`). They are found without i
 whose import needs SUMO_HOME. On first use the net is imported as `trustroute town import` does
 (networks/town_import.py), with incidents drawn by the seeded rule (seed CITY_INCIDENT_SEED), and
 the town is written into the cache (`towns/`, trustroute/core/cache.py) beside copies of the net and
-the scenario's routes: the folder's name holds a hash of the net's and the routes' bytes and of
-the import's options, so the same scenario is imported once and a changed one gives another town.
+the scenario's routes: the folder's name holds a hash of the net's and the routes' bytes, of
+the import's options and of the importer's source, so the same scenario is imported once and a
+changed one (or a changed importer) gives another town.
 The routes are the packaged route file `city` (ROUTES: `trustroute run --routes city`, study key
 `routes = ["city"]`). Licence and provenance of the data: docs/cities.md.
 """
@@ -33,6 +34,17 @@ CITY_TOWN_FILE = "city.json"
 EXTRA_FIX = "pip install 'trustroute[cities]'"
 # Part of the cache key: a change of the import's options or rule must give a folder of its own.
 IMPORT_OPTIONS = f"trustroute town import --incident-seed {CITY_INCIDENT_SEED}; town format 1"
+# The modules whose code decides what an import writes: their source is part of the cache key too,
+# so a cached town never outlives a change of the importer's rule (turn restrictions, say).
+IMPORTER_MODULES = ("sumo_import", "town_import", "road_geometry", "town_incidents", "town", "osm_convert")
+
+
+def importer_fingerprint() -> str:
+    """A hash of the importer's own source code."""
+    digest = hashlib.sha256()
+    for name in IMPORTER_MODULES:
+        digest.update((Path(__file__).parent / f"{name}.py").read_bytes())
+    return digest.hexdigest()
 
 
 def scenario_files() -> tuple[Path, Path]:
@@ -53,7 +65,8 @@ def scenario_files() -> tuple[Path, Path]:
 def city_folder() -> Path:
     """The cache folder holding the city's town, net and routes, imported when missing."""
     net, routes = scenario_files()
-    key = hashlib.sha256(f"{IMPORT_OPTIONS}\n{file_sha256(net)}\n{file_sha256(routes)}".encode()).hexdigest()
+    key = hashlib.sha256(f"{IMPORT_OPTIONS}\n{importer_fingerprint()}\n{file_sha256(net)}\n"
+                         f"{file_sha256(routes)}".encode()).hexdigest()
     folder = cache_dir(TOWNS_CACHE) / f"{SCENARIO}-{key[:16]}"
     if (folder / CITY_TOWN_FILE).is_file():
         return folder

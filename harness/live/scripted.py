@@ -8,7 +8,9 @@ episode's driver (the participant's model, the task's Generator: harness/study/r
 `run_planned_episode`). It drives the live path end to end without a person: the tests and the
 benchmark use it. With `by_hand` it drives every road by hand instead (a takeover as each road opens, a
 brief press of the accelerator, a pull-out into the oncoming lane when an obstacle comes into view,
-the hand-back on the warning): the manual-driving path of the station, without a person.
+the hand-back on the warning): the manual-driving path of the station, without a person. In
+control after a takeover it passes an obstacle ahead through the oncoming lane, as a synthetic
+driver's manual driving style does in a headless episode.
 `ScriptedParticipant.respond` is the logic (message in, replies out);
 `run_scripted` connects it to a server.
 
@@ -103,6 +105,8 @@ class ScriptedParticipant:
             return self.on_state(message)
         if self.by_hand and kind in ("road", "mode", "frame", "warning"):
             return self.drive_by_hand(message)
+        if kind in ("mode", "frame") and not self.lockstep:
+            return self.pass_when_in_control(message)
         if kind == "incident" and self.driver is not None:
             if self.driver.decides_takeover(message["kind"]):
                 self.takeovers += 1
@@ -150,6 +154,20 @@ class ScriptedParticipant:
             return self.manual_frame(message)
         return []
 
+    def pass_when_in_control(self, message: dict) -> list[dict]:
+        """In control after a takeover (not driving by hand): an obstacle ahead in the lane is
+        passed through the oncoming lane, as the synthetic driver's manual driving style passes it
+        in a headless episode (a live episode leaves that pull-out to the person)."""
+        if message["type"] == "mode":
+            self.mode, self.passing = message["mode"], False
+            return []
+        if self.mode != "manual" or self.passing:
+            return []
+        if obstacle_ahead(message):
+            self.passing = True
+            return [{"type": "steer", "lane": "oncoming"}]
+        return []
+
     def manual_frame(self, frame: dict) -> list[dict]:
         replies = []
         if self.pedal == "accelerate":
@@ -158,8 +176,7 @@ class ScriptedParticipant:
         road = frame["road"]
         u, v = road.split("-", 1) if "-" in road else (road, road)
         edge = frame["lane"].rsplit("_", 1)[0]
-        vehicles = frame["vehicles"]
-        obstacle = any(kind == "obstacle" and in_lane_ahead(frame, x, y) for x, y, _, kind, *_ in vehicles)
+        obstacle = obstacle_ahead(frame)
         if obstacle and not self.passing:
             self.passing = True
             if self.pull_out:
@@ -189,6 +206,11 @@ class ScriptedParticipant:
             self.driver, self.mode = self.new_driver(task), "auto"
             return [{"type": "start", "trust": int(self.driver.trust)}]
         return []
+
+
+def obstacle_ahead(frame: dict) -> bool:
+    """Whether the frame shows an obstacle in the ego's lane ahead."""
+    return any(kind == "obstacle" and in_lane_ahead(frame, x, y) for x, y, _, kind, *_ in frame["vehicles"])
 
 
 def in_lane_ahead(frame: dict, x: float, y: float, reach: float = 80.0) -> bool:

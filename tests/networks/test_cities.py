@@ -30,8 +30,9 @@ def test_city_is_imported_once_into_the_cache_with_its_net_and_demand():
     assert TOWNS.resolve("city") == town_file and cities.ROUTES.resolve("city") == cities.city_routes_path()
     net, routes = cities.scenario_files()
     town = load_town("city")
-    # the scale target's size; the net beside the town is the scenario's, checked by its hash
-    assert len(town.junctions) >= 200 and len(town.states) > 600
+    # a city's size (the roads the net's turns let a car drive to and from each other); the net
+    # beside the town is the scenario's, checked by its hash
+    assert len(town.junctions) >= 200 and len(town.states) > 500
     assert town_net_file(town) == folder / net.name and file_sha256(folder / net.name) == file_sha256(net)
     assert (folder / routes.name).read_bytes() == routes.read_bytes()
     assert f"seed {cities.CITY_INCIDENT_SEED}" in town.provenance
