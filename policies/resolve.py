@@ -150,7 +150,7 @@ def synthesis_progress(description: str, enabled: bool) -> Iterator[Callable[[fl
         yield on_iteration
 
 
-POPULATION_TIME_LIMIT = 60.0     # per synthesis run of a population policy
+POPULATION_TIME_LIMIT = 60.0     # per synthesis run of a population policy (the call gets one per run)
 POPULATION_GRID_POINTS = 6       # candidate type priors of the robust objective
 
 
@@ -188,7 +188,7 @@ def population_policy(town: Town, population: DriverPopulation, spec: Spec, obje
     from trustroute.core.output_files import file_lock
     from trustroute.policies.belief.driver_types import lift_population, lift_spec
     from trustroute.policies.routing.files import load_population_policy
-    from trustroute.policies.synthesis.population import document_entries, policy_name
+    from trustroute.policies.synthesis.population import document_entries, policy_name, run_count
     from trustroute.policies.synthesize_spec import synthesize_for_population
 
     lifted_spec = lift_spec(spec, population, population_source)
@@ -214,8 +214,9 @@ def population_policy(town: Town, population: DriverPopulation, spec: Spec, obje
         if not is_objective(objective):
             raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
         with synthesis_progress(f"synthesizing {objective} for {spec.name}", progress) as on_iteration:
+            runs = run_count(population, objective, POPULATION_GRID_POINTS)
             made = synthesize_for_population(town, population, spec, objective, tau=AWARE_TAU,
-                                             time_limit=POPULATION_TIME_LIMIT, horizon=horizon,
+                                             time_limit=POPULATION_TIME_LIMIT * runs, horizon=horizon,
                                              belief_rule=belief_rule, population_source=population_source,
                                              grid_points=POPULATION_GRID_POINTS, on_iteration=on_iteration)
         save_policy(made.result, path, town, made.pomdp.driver, made.spec,

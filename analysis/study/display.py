@@ -6,15 +6,18 @@ from __future__ import annotations
 
 import pandas as pd
 
+from trustroute.analysis.belief_sources import beside_source, source_label
 from trustroute.analysis.formatting import (
     MISSING,
+    TERMINAL_WIDTH,
     estimate_column,
     finite_or_none,
     format_p,
     interval_column,
     number_text,
+    terminal_table,
+    wrapped_text,
 )
-from trustroute.analysis.satisfaction import BELIEF_SOURCES
 from trustroute.analysis.study.analysis import StudyAnalysis
 
 
@@ -67,7 +70,7 @@ def _trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
 
 def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
     """The tables as shown (formatted strings, p-values in scientific notation), by name."""
-    other = [s for s in BELIEF_SOURCES if s != analysis.belief_source][0]
+    other = beside_source(analysis.belief_source)
     tables: dict[str, pd.DataFrame] = {}
     c = analysis.cells
     if len(c):
@@ -170,18 +173,24 @@ TABLE_TITLES = {
 }
 
 
-def format_table(analysis: StudyAnalysis) -> str:
-    """Plain-text tables for the terminal."""
-    lines = [
+# columns that identify a row: repeated in every block of a table split to fit the terminal
+KEY_COLUMNS = ("driver type", "spec", "condition", "pair", "incident", "outcome")
+
+
+def format_table(analysis: StudyAnalysis, width: int | None = TERMINAL_WIDTH) -> str:
+    """Plain-text tables for the terminal, fitted to `width` columns (None: as wide as they are)."""
+    lines = wrapped_text(
         f"study {analysis.manifest.get('study')} ({analysis.manifest.get('engine')} engine); "
-        f"satisfaction on beliefs from: {analysis.belief_source}"
-    ]
+        f"satisfaction on beliefs from: {analysis.belief_source} ({source_label(analysis.belief_source)})",
+        width)
     for name, table in display_tables(analysis).items():
-        lines += ["", TABLE_TITLES[name], table.to_string(index=False)]
+        keys = next((i for i, c in enumerate(table.columns) if c not in KEY_COLUMNS), len(table.columns))
+        header = [str(c) for c in table.columns]
+        lines += ["", TABLE_TITLES[name], *terminal_table(header, table.values.tolist(), width, max(1, keys))]
     if analysis.order_tests:
-        lines.append(order_test_line(analysis.order_tests))
+        lines += wrapped_text(order_test_line(analysis.order_tests), width)
     if analysis.paper_note:
-        lines += ["", analysis.paper_note]
+        lines += ["", *wrapped_text(analysis.paper_note, width)]
     return "\n".join(lines)
 
 

@@ -8,6 +8,9 @@ evaluate  the exact satisfaction probability and expected final trust of any pol
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
+
 import click
 
 from trustroute.analysis.formatting import finite_or_none
@@ -70,8 +73,9 @@ def default_out_path(spec_name: str, *key: str) -> str:
               help="Target gap upper - lower.")
 @click.option("--horizon", type=HORIZON, default=None, help="At most H junctions (default: unbounded).")
 @click.option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), default=60.0,
-              show_default=True, help="Seconds.")
+              show_default=True, help="Seconds for the whole command (its synthesis runs share them).")
 @rule_option
+@click.option("-q", "--quiet", is_flag=True, help="No progress on stderr.")
 @click.option("--out", "out_path", type=click.Path(), default=None,
               help="Policy FILE to write (its arrays go beside it, same name with suffix .npz); "
                    "default: the policy cache's synth/ folder, printed.")
@@ -86,8 +90,8 @@ def default_out_path(spec_name: str, *key: str) -> str:
               help="With --population: the prior-weighted value (bayes) or the worst type's (robust).")
 @json_option
 def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: float,
-          horizon: int | None, time_limit: float, belief_rule: str, out_path: str | None, clusters: str,
-          population_path: str | None, objective: str, as_json: bool) -> None:
+          horizon: int | None, time_limit: float, belief_rule: str, quiet: bool, out_path: str | None,
+          clusters: str, population_path: str | None, objective: str, as_json: bool) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
     if tau <= 0:
         raise InputError("--tau", "", f"tau must be positive, got {tau}", "pass e.g. --tau 1e-3")
@@ -106,7 +110,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
             raise click.UsageError("--clusters applies to a single driver model (--driver), not to "
                                    "--population")
         _synth_population(spec_path, town_path, population_path, objective, tau, horizon, time_limit,
-                          belief_rule, out_path, as_json)
+                          belief_rule, out_path, as_json, quiet)
         return
     if objective != "bayes":
         raise click.UsageError("--objective robust needs --population FILE (the types to be robust over)")
@@ -120,7 +124,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     from trustroute.policies.synthesis.result import SynthesisStats
     from trustroute.policies.synthesize_spec import synthesize_problem
 
-    with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
+    with synthesis_progress(f"synthesizing {spec.name}", not (as_json or quiet)) as on_iteration:
         result = synthesize_problem(problem, tau=tau, time_limit=time_limit, horizon=horizon,
                                     belief_rule=checked_belief_rule(belief_rule), on_iteration=on_iteration,
                                     clusters=clusters)
@@ -165,10 +169,26 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     emit(as_json, payload, lines)
 
 
+PROGRESS_AFTER = 2.0  # seconds: a synthesis shorter than this prints no progress
+
+
+def phase_lines(enabled: bool) -> Callable[[str], None]:
+    """The on_phase callback of a population synthesis: its lines on stderr once PROGRESS_AFTER
+    seconds have passed (nothing when not `enabled`)."""
+    started = time.perf_counter()
+
+    def on_phase(line: str) -> None:
+        if enabled and time.perf_counter() - started >= PROGRESS_AFTER:
+            click.echo(f"synth: {line}", err=True)
+
+    return on_phase
+
+
 def _synth_population(spec_path: str, town_path: str | None, population_path: str, objective: str,
                       tau: float, horizon: int | None, time_limit: float, belief_rule: str,
-                      out_path: str | None, as_json: bool) -> None:
-    """`synth --population`: the Bayes or robust objective over a population's driver types."""
+                      out_path: str | None, as_json: bool, quiet: bool = False) -> None:
+    """`synth --population`: the Bayes or robust objective over a population's driver types; past
+    PROGRESS_AFTER seconds, a line per finished synthesis run with its bounds on stderr."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_population import load_driver_population
     from trustroute.policies.logic.spec import load_spec
@@ -186,11 +206,12 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
                                             spec.content_hash, objective, f"H={horizon}", f"tau={tau}",
                                             belief_rule, f"time_limit={time_limit}")
     with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
-                            not as_json) as on_iteration:
+                            not (as_json or quiet)) as on_iteration:
         found = synthesize_for_population(town, population, spec, objective, tau=tau,
                                           time_limit=time_limit, horizon=horizon,
                                           belief_rule=checked_belief_rule(belief_rule),
-                                          population_source=population_path, on_iteration=on_iteration)
+                                          population_source=population_path, on_iteration=on_iteration,
+                                          on_phase=phase_lines(not (as_json or quiet)))
     result = found.result
     path = str(save_policy(result, out_path, town, found.pomdp.driver, found.spec,
                            population=document_entries(found), name=policy_name(found)))
