@@ -8,15 +8,12 @@ evaluate  the exact satisfaction probability and expected final trust of any pol
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
-
 import click
 
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.core.errors import InputError
 from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
-from trustroute.harness.commands.output import emit, json_option, with_paths
+from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 from trustroute.policies.model.trust_pomdp import checked_belief_rule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
@@ -75,7 +72,7 @@ def default_out_path(spec_name: str, *key: str) -> str:
 @click.option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), default=60.0,
               show_default=True, help="Seconds for the whole command (its synthesis runs share them).")
 @rule_option
-@click.option("-q", "--quiet", is_flag=True, help="No progress on stderr.")
+@quiet_option
 @click.option("--out", "out_path", type=click.Path(), default=None,
               help="Policy FILE to write (its arrays go beside it, same name with suffix .npz); "
                    "default: the policy cache's synth/ folder, printed.")
@@ -169,30 +166,16 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     emit(as_json, payload, lines)
 
 
-PROGRESS_AFTER = 2.0  # seconds: a synthesis shorter than this prints no progress
-
-
-def phase_lines(enabled: bool) -> Callable[[str], None]:
-    """The on_phase callback of a population synthesis: its lines on stderr once PROGRESS_AFTER
-    seconds have passed (nothing when not `enabled`)."""
-    started = time.perf_counter()
-
-    def on_phase(line: str) -> None:
-        if enabled and time.perf_counter() - started >= PROGRESS_AFTER:
-            click.echo(f"synth: {line}", err=True)
-
-    return on_phase
-
-
 def _synth_population(spec_path: str, town_path: str | None, population_path: str, objective: str,
                       tau: float, horizon: int | None, time_limit: float, belief_rule: str,
                       out_path: str | None, as_json: bool, quiet: bool = False) -> None:
     """`synth --population`: the Bayes or robust objective over a population's driver types; past
-    PROGRESS_AFTER seconds, a line per finished synthesis run with its bounds on stderr."""
+    2 s (policies/resolve.py's PROGRESS_AFTER), a line per finished synthesis run with its bounds
+    on stderr."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_population import load_driver_population
     from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.resolve import is_objective, synthesis_progress
+    from trustroute.policies.resolve import is_objective, phase_lines, synthesis_progress
     from trustroute.policies.routing.files import array_path, save_policy
     from trustroute.policies.synthesis.population import document_entries, policy_name, summary
     from trustroute.policies.synthesize_spec import synthesize_for_population
@@ -211,7 +194,7 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
                                           time_limit=time_limit, horizon=horizon,
                                           belief_rule=checked_belief_rule(belief_rule),
                                           population_source=population_path, on_iteration=on_iteration,
-                                          on_phase=phase_lines(not (as_json or quiet)))
+                                          on_phase=phase_lines("synth", not (as_json or quiet)))
     result = found.result
     path = str(save_policy(result, out_path, town, found.pomdp.driver, found.spec,
                            population=document_entries(found), name=policy_name(found)))
@@ -297,11 +280,12 @@ population_option = click.option(
 @click.option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), default=None,
               help="Seconds, for specs with trust-state atoms: histories still open then widen "
                    "[lower, upper] (default: none).")
+@quiet_option
 @json_option
 def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_path: str | None,
              population_path: str | None, fallback_after: int, no_fallback: bool,
              max_junctions: int | None, belief_rule: str, cache_dir: str | None,
-             max_nodes: int | None, time_limit: float | None, as_json: bool) -> None:
+             max_nodes: int | None, time_limit: float | None, quiet: bool, as_json: bool) -> None:
     """Certified probability that POLICY ("free", "aware" or a file) satisfies SPEC, and final trust.
 
     "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached. The result
@@ -327,7 +311,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
         if max_nodes is not None or time_limit is not None:
             raise click.UsageError("--max-nodes and --time-limit are not used with --population")
         _evaluate_population(spec_path, policy_name, town_path, population_path, after, cap, belief_rule,
-                             cache_dir, as_json)
+                             cache_dir, as_json, quiet)
         return
     problem = _load_problem(spec_path, town_path, driver_path)
     town, driver, spec, pomdp = problem.town, problem.driver, problem.spec, problem.pomdp
@@ -335,7 +319,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
 
     if policy_name in ("robust", "bayes"):
         raise click.UsageError(f"POLICY '{policy_name}' needs --population FILE (the driver types)")
-    policy = resolve_policy(policy_name, town, driver, spec, cache_dir)
+    policy = resolve_policy(policy_name, town, driver, spec, cache_dir, progress=not (as_json or quiet))
     if time_limit is not None and not problem.dfa_hidden:
         raise click.UsageError("--time-limit applies to specs with trust-state atoms only (the others "
                                "are evaluated exactly in full)")
@@ -408,7 +392,7 @@ def load_population_routing(spec_path: str, town_path: str | None, population_pa
 
 def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None, population_path: str,
                          fallback_after: int | None, cap: int, belief_rule: str, cache_dir: str | None,
-                         as_json: bool) -> None:
+                         as_json: bool, quiet: bool) -> None:
     """`evaluate --population`: exact value over the mixture and per type."""
     from trustroute.policies.belief.problem import problem as routing_problem
     from trustroute.policies.evaluation.plain import evaluate as evaluate_policy
@@ -418,7 +402,7 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
     rule = checked_belief_rule(belief_rule)
 
     town, population, spec, policy, model, lifted_spec = load_population_routing(
-        spec_path, town_path, population_path, policy_name, cache_dir, progress=not as_json)
+        spec_path, town_path, population_path, policy_name, cache_dir, progress=not (as_json or quiet))
     found = routing_problem(town, population, spec, population_path)
     pomdp = found.pomdp
     if found.dfa_hidden:
