@@ -106,7 +106,7 @@ def test_the_demo_report_in_chromium_shows_no_impossible_interval(tmp_path, caps
             page = browser.new_page(viewport={"width": 1400, "height": 1000})
             page.goto((study / "report.html").resolve().as_uri())
             tables = page.evaluate(TABLES_JS)
-            lead = page.inner_text("p.lead")
+            lead = page.evaluate("() => (document.querySelector('p.lead') || {}).textContent || ''")
             images = page.evaluate("() => [...document.images].map(i => [i.alt, i.naturalWidth])")
             page.screenshot(path=str(tmp_path / "report.png"), full_page=True)
         finally:
