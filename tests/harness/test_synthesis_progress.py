@@ -50,12 +50,12 @@ def test_population_synth_announces_every_run(tmp_path, capsys, at_once):
     assert len(runs) > 3 and all(line.count("[") >= 2 for line in runs), err
 
 
-def test_evaluate_aware_shows_the_synthesis_it_runs(tmp_path, capsys, at_once):
-    code, _, err = run_cli(capsys, "evaluate", "phi1", "aware", "--cache-dir", str(tmp_path / "c1"))
+@pytest.mark.parametrize("command", [("evaluate", "phi1", "aware"), ("run", "phi1", "--policy", "aware")])
+def test_a_command_synthesizing_aware_shows_it(command, tmp_path, capsys, at_once):
+    code, _, err = run_cli(capsys, *command, "--cache-dir", str(tmp_path / "c1"))
     assert code == 0, err
     assert _bound_lines(err, "synthesizing aware for phi1: "), err
-    code, _, err = run_cli(capsys, "evaluate", "phi1", "aware", "--cache-dir", str(tmp_path / "c2"),
-                           "--quiet")
+    code, _, err = run_cli(capsys, *command, "--cache-dir", str(tmp_path / "c2"), "--quiet")
     assert code == 0 and err == ""
 
 
@@ -70,12 +70,3 @@ def test_a_cached_population_policy_announces_its_runs(tmp_path, capsys, town, a
     assert [line for line in err.splitlines() if line.startswith("synthesizing robust for phi1: [")], err
     resolve.population_policy(town, population, spec, "robust", tmp_path / "d", horizon=3, progress=False)
     assert capsys.readouterr().err == ""
-
-
-def test_run_aware_shows_the_synthesis_it_runs(tmp_path, capsys, at_once):
-    code, _, err = run_cli(capsys, "run", "phi1", "--policy", "aware", "--cache-dir", str(tmp_path / "c1"))
-    assert code == 0, err
-    assert _bound_lines(err, "synthesizing aware for phi1: "), err
-    code, _, err = run_cli(capsys, "run", "phi1", "--policy", "aware", "--cache-dir", str(tmp_path / "c2"),
-                           "--quiet")
-    assert code == 0 and err == ""
