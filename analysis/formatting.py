@@ -2,13 +2,16 @@
 
 Missing values (None, NaN, pd.NA) read "-" everywhere; numbers get a fixed number of decimals,
 intervals read "[low, high]", p-values are in scientific notation, and tables are rendered as
-GitHub-flavoured Markdown or as aligned plain-text columns.
+GitHub-flavoured Markdown or as aligned plain-text columns; terminal tables fit TERMINAL_WIDTH
+columns (`terminal_table`: long cells wrapped, columns split into blocks that repeat the row's key
+columns) unless shown wide.
 """
 
 from __future__ import annotations
 
 import math
 import sys
+import textwrap
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, SupportsFloat
 
@@ -18,6 +21,8 @@ if TYPE_CHECKING:
     import pandas as pd
 
 MISSING = "-"
+TERMINAL_WIDTH = 120
+CELL_WIDTH = 48  # a longer cell (a note) wraps onto continuation lines
 
 
 def is_pandas_na(value: object) -> bool:
@@ -93,3 +98,53 @@ def aligned_columns(header: Sequence[str], rows: Sequence[Sequence[object]]) -> 
     pattern = "  ".join(f"{{:<{w}}}" for w in widths)
     return [pattern.format(*header), pattern.format(*("-" * w for w in widths)),
             *(pattern.format(*row) for row in rows)]
+
+
+def _wrapped_rows(rows: Sequence[Sequence[object]], cell_width: int) -> list[list[str]]:
+    """Rows whose cells longer than `cell_width` continue on lines of their own below."""
+    out: list[list[str]] = []
+    for row in rows:
+        parts = [textwrap.wrap(str(v), cell_width) or [""] if len(str(v)) > cell_width else [str(v)]
+                 for v in row]
+        depth = max(len(p) for p in parts)
+        out += [[p[k] if k < len(p) else "" for p in parts] for k in range(depth)]
+    return out
+
+
+def terminal_table(header: Sequence[str], rows: Sequence[Sequence[object]],
+                   width: int | None = TERMINAL_WIDTH, keys: int = 1) -> list[str]:
+    """`aligned_columns` fitted to `width` characters: long cells wrapped, then the columns split
+    into blocks (a blank line between them), each block repeating the first `keys` columns so its
+    rows stay identifiable. `width` None: one block, nothing wrapped (--wide)."""
+    if width is None:
+        return aligned_columns(header, rows)
+    rows = _wrapped_rows(rows, CELL_WIDTH)
+    header = [str(h) for h in header]
+    widths = [max(len(str(x)) for x in col) for col in zip(header, *rows, strict=True)]
+    keys = max(0, min(keys, len(header) - 1))
+    key_width = sum(widths[:keys]) + 2 * keys
+    blocks: list[list[int]] = []
+    current: list[int] = []
+    used = key_width
+    for i in range(keys, len(header)):
+        if current and used + widths[i] > width:
+            blocks.append(current)
+            current, used = [], key_width
+        current.append(i)
+        used += widths[i] + 2
+    blocks.append(current)
+    lines: list[str] = []
+    for block in blocks:
+        chosen = [*range(keys), *block]
+        if lines:
+            lines.append("")
+        lines += aligned_columns([header[i] for i in chosen], [[row[i] for i in chosen] for row in rows])
+    return [line.rstrip() for line in lines]
+
+
+def wrapped_text(text: str, width: int | None = TERMINAL_WIDTH, indent: str = "") -> list[str]:
+    """A sentence for the terminal: lines of at most `width` characters, continuation lines
+    indented by `indent` (None: one line; a line that fits stays as it is)."""
+    if width is None or len(text) <= width:
+        return [text]
+    return textwrap.wrap(text, width, subsequent_indent=indent)

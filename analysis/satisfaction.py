@@ -1,7 +1,8 @@
 """Spec satisfaction of logged episodes, re-evaluated from the logs with a chosen belief source.
 
 The trace of an episode is its logged roads (row 0 = the start road, position 0) labelled by a
-belief per position. Two belief sources (docs/study.md):
+belief per position. Two ways of labelling (the study's "reference" and "true" sources are roads
+whose belief_after analysis/belief_sources.py replaced, evaluated as "filter"; docs/study.md):
 
 - "filter": the AV's online Bayes filter, the `belief_after` column (what the vehicle believed;
   the episode itself ended on this source, so it reproduces the logged `satisfied`);
@@ -29,7 +30,10 @@ from trustroute.policies.belief.problem import reads_hidden_trust
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.logic.trace import evaluate_traces
 
-BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported")
+# Belief sources of one evaluation: the roads' `belief_after` as given ("filter"; the other
+# filters of analysis/belief_sources.py arrive here as roads whose belief_after they replaced) or
+# induced from reported trust.
+EVALUATED_SOURCES: tuple[str, ...] = ("filter", "reported")
 # Real study logs (analysis/carla_study/analysis.py): the belief the AV logged, induced from reports,
 # or Bayes.
 LOGGED_BELIEF_SOURCES: tuple[str, ...] = ("logged", "reported", "bayes")
@@ -130,8 +134,8 @@ def episode_satisfaction(
     """Per episode: `episode_id`, `satisfied` and `first_accepting` (position, -1 if never) of the
     spec the episode was driven for (episodes["spec"]), on beliefs from `source`; trust-state atoms
     read the trust from `trust_source` (TRUST_SOURCES)."""
-    if source not in BELIEF_SOURCES:
-        raise ValueError(f"unknown belief source {source!r}; use one of {BELIEF_SOURCES}")
+    if source not in EVALUATED_SOURCES:
+        raise ValueError(f"unknown belief source {source!r}; use one of {EVALUATED_SOURCES}")
     frames = []
     for spec_name, group in episodes.groupby("spec", sort=True):
         spec = specs[spec_name]

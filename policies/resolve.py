@@ -14,6 +14,7 @@ import contextlib
 import hashlib
 import re
 import sys
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeGuard, TypeVar
@@ -136,21 +137,64 @@ def resolve_policy(name_or_path: str, town: Town, driver: DriverModel, spec: Spe
     return load_policy(name_or_path, town, driver, spec)
 
 
+PROGRESS_AFTER = 2.0    # seconds: a synthesis shorter than this shows no progress
+PROGRESS_EVERY = 5.0    # seconds between progress lines when stderr is not a terminal
+
+
 @contextlib.contextmanager
 def synthesis_progress(description: str, enabled: bool) -> Iterator[Callable[[float, float], None]]:
-    """A tqdm bar of synthesis rounds with the current bounds; yields the `on_iteration` callback."""
-    from tqdm import tqdm
+    """Progress of a synthesis on stderr once it has run PROGRESS_AFTER seconds, nothing when not
+    `enabled`: on a terminal a tqdm bar of its rounds with the current bounds; elsewhere (a pipe, a
+    log file) a line at most every PROGRESS_EVERY seconds with the rounds, the bounds and the time.
+    Yields the `on_iteration(lower, upper)` callback."""
+    if not enabled:
+        yield lambda lower, upper: None
+        return
+    if sys.stderr.isatty():
+        from tqdm import tqdm
 
-    with tqdm(desc=description, unit="round", disable=None if enabled else True, leave=False,
-              dynamic_ncols=True) as bar:
-        def on_iteration(lower: float, upper: float) -> None:
-            bar.update(1)
-            bar.set_postfix_str(f"L={lower:.4f} U={upper:.4f}", refresh=False)
+        with tqdm(desc=description, unit="round", delay=PROGRESS_AFTER, leave=False, dynamic_ncols=True,
+                  file=sys.stderr) as bar:
+            def on_round(lower: float, upper: float) -> None:
+                bar.update(1)
+                bar.set_postfix_str(f"L={lower:.4f} U={upper:.4f}", refresh=False)
 
-        yield on_iteration
+            yield on_round
+        return
+    yield _progress_lines(description)
 
 
-POPULATION_TIME_LIMIT = 60.0     # per synthesis run of a population policy
+def _progress_lines(description: str) -> Callable[[float, float], None]:
+    """The on_iteration callback of `synthesis_progress` away from a terminal."""
+    started = time.perf_counter()
+    rounds = 0
+    due = PROGRESS_AFTER
+
+    def on_round(lower: float, upper: float) -> None:
+        nonlocal rounds, due
+        rounds += 1
+        elapsed = time.perf_counter() - started
+        if elapsed >= due:
+            print(f"{description}: {rounds} rounds, L={lower:.4f} U={upper:.4f} ({elapsed:.0f} s)",
+                  file=sys.stderr, flush=True)
+            due = elapsed + PROGRESS_EVERY
+
+    return on_round
+
+
+def phase_lines(description: str, enabled: bool) -> Callable[[str], None]:
+    """The on_phase callback of a population synthesis: its lines (one per finished synthesis run,
+    with its bounds) on stderr once PROGRESS_AFTER seconds have passed; nothing when not `enabled`."""
+    started = time.perf_counter()
+
+    def on_phase(line: str) -> None:
+        if enabled and time.perf_counter() - started >= PROGRESS_AFTER:
+            print(f"{description}: {line}", file=sys.stderr, flush=True)
+
+    return on_phase
+
+
+POPULATION_TIME_LIMIT = 60.0     # per synthesis run of a population policy (the call gets one per run)
 POPULATION_GRID_POINTS = 6       # candidate type priors of the robust objective
 
 
@@ -188,7 +232,7 @@ def population_policy(town: Town, population: DriverPopulation, spec: Spec, obje
     from trustroute.core.output_files import file_lock
     from trustroute.policies.belief.driver_types import lift_population, lift_spec
     from trustroute.policies.routing.files import load_population_policy
-    from trustroute.policies.synthesis.population import document_entries, policy_name
+    from trustroute.policies.synthesis.population import document_entries, policy_name, run_count
     from trustroute.policies.synthesize_spec import synthesize_for_population
 
     lifted_spec = lift_spec(spec, population, population_source)
@@ -213,11 +257,14 @@ def population_policy(town: Town, population: DriverPopulation, spec: Spec, obje
             return found
         if not is_objective(objective):
             raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
-        with synthesis_progress(f"synthesizing {objective} for {spec.name}", progress) as on_iteration:
+        description = f"synthesizing {objective} for {spec.name}"
+        with synthesis_progress(description, progress) as on_iteration:
+            runs = run_count(population, objective, POPULATION_GRID_POINTS)
             made = synthesize_for_population(town, population, spec, objective, tau=AWARE_TAU,
-                                             time_limit=POPULATION_TIME_LIMIT, horizon=horizon,
+                                             time_limit=POPULATION_TIME_LIMIT * runs, horizon=horizon,
                                              belief_rule=belief_rule, population_source=population_source,
-                                             grid_points=POPULATION_GRID_POINTS, on_iteration=on_iteration)
+                                             grid_points=POPULATION_GRID_POINTS, on_iteration=on_iteration,
+                                             on_phase=phase_lines(description, progress))
         save_policy(made.result, path, town, made.pomdp.driver, made.spec,
                     population=document_entries(made), name=policy_name(made))
         # read back: a fresh entry and a cached one give the same policy object

@@ -74,12 +74,14 @@ def synthesize_for_population(town: Town, population: DriverPopulation, spec: Sp
                               tau: float = 1e-3, time_limit: float = 60.0, horizon: int | None = None,
                               belief_rule: BeliefRule = "bayes", population_source: str = "",
                               grid_points: int | None = None,
-                              on_iteration: Callable[[float, float], None] | None = None
+                              on_iteration: Callable[[float, float], None] | None = None,
+                              on_phase: Callable[[str], None] | None = None,
                               ) -> PopulationSynthesis:
     """Synthesis for driver population `population` under `objective` ("bayes": the prior-weighted
     value; "robust": the worst type's), by the case of the problem (module docstring).
     grid_points: candidate type priors of the robust objective (default
-    policies/synthesis/population.py's). time_limit applies to each synthesis run."""
+    policies/synthesis/population.py's). time_limit bounds the whole call; on_phase hears a line
+    per finished synthesis run with its bounds."""
     from trustroute.policies.synthesis.population import MAX_GRID_CANDIDATES, synthesize_population
 
     found = problem(town, population, spec, population_source)
@@ -90,8 +92,8 @@ def synthesize_for_population(town: Town, population: DriverPopulation, spec: Sp
         check_synthesis_arguments(tau, horizon, belief_rule)
         return synthesize_population_joint(found, objective, synthesize_spec, tau=tau, time_limit=time_limit,
                                            horizon=horizon, belief_rule=belief_rule, grid_points=points,
-                                           on_iteration=on_iteration)
+                                           on_iteration=on_iteration, on_phase=on_phase)
     return synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
                                  horizon=horizon, belief_rule=belief_rule,
                                  population_source=population_source, grid_points=points,
-                                 on_iteration=on_iteration)
+                                 on_iteration=on_iteration, on_phase=on_phase)

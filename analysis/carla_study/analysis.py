@@ -25,7 +25,14 @@ import pandas as pd
 
 from trustroute.analysis import paper_figures
 from trustroute.analysis.carla_study.log_schema import read_real_table
-from trustroute.analysis.formatting import MISSING, aligned_columns, finite_or_none, number_text
+from trustroute.analysis.formatting import (
+    MISSING,
+    TERMINAL_WIDTH,
+    finite_or_none,
+    number_text,
+    terminal_table,
+    wrapped_text,
+)
 from trustroute.analysis.satisfaction import (
     LOGGED_BELIEF_SOURCES,
     REPORTED_TRUST_LABEL,
@@ -402,7 +409,8 @@ def paper_matches(figures: list[dict]) -> list[dict]:
     return out
 
 
-def format_real_study(analysis: RealStudyAnalysis) -> str:
+def format_real_study(analysis: RealStudyAnalysis, width: int | None = TERMINAL_WIDTH) -> str:
+    """The real study's figures for the terminal, fitted to `width` columns (None: as wide as they are)."""
     lines = ["Real CARLA study (paper's figures are the paper's, quoted for comparison)", ""]
     header = ["figure", "reading", "subset", "aware", "free", "n (aware/free)"]
     rows = []
@@ -417,7 +425,7 @@ def format_real_study(analysis: RealStudyAnalysis) -> str:
                 f"{r['n_aware']}/{r['n_free']}",
             ]
         )
-    lines += aligned_columns(header, rows)
+    lines += terminal_table(header, rows, width, keys=1)
     lines.append("")
     for m in analysis.matches:
         found = (
@@ -442,13 +450,13 @@ def format_real_study(analysis: RealStudyAnalysis) -> str:
     for e in excluded:
         by_status[e["status"]] = by_status.get(e["status"], 0) + 1
     lines.append("excluded files: " + (", ".join(f"{v} {k}" for k, v in by_status.items()) or "none"))
-    return "\n".join(lines)
+    return "\n".join(part for line in lines for part in wrapped_text(line, width, indent="    "))
 
 
 def write_real_study_report(analysis: RealStudyAnalysis, study_dir: Path) -> Path:
     path = Path(study_dir) / "real_study.json"
     path.write_text(json.dumps(analysis.to_dict(), indent=1, default=str))
-    text = format_real_study(analysis)
+    text = format_real_study(analysis, width=None)
     (Path(study_dir) / "real_study.txt").write_text(text + "\n")
     _append_to_report(Path(study_dir), text)
     return path

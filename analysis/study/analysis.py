@@ -40,7 +40,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from trustroute.analysis.satisfaction import BELIEF_SOURCES, episode_satisfaction
+from trustroute.analysis.belief_sources import (
+    BELIEF_SOURCES,
+    default_belief_source,
+    reference_model,
+    refiltered,
+    true_roads,
+)
+from trustroute.analysis.satisfaction import episode_satisfaction
 from trustroute.analysis.study.cells import cell_table, takeover_table
 from trustroute.analysis.study.order import order_tables
 from trustroute.analysis.study.paired import paired_table_rows, per_participant_table, repeated_measures_table
@@ -103,7 +110,34 @@ def _pair_conditions(conditions: list[str]) -> tuple[str, str] | None:
 
 
 
-def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: int = 10_000) -> StudyAnalysis:
+def source_satisfaction(study_dir: Path, manifest: dict, episodes: pd.DataFrame,
+                        roads: pd.DataFrame) -> pd.DataFrame:
+    """Per episode: satisfied_<source> for every belief source the study has ("true" only for
+    simulated studies, whose config can rebuild each driver's true model)."""
+    town, driver, specs = study_inputs(manifest)
+    satisfaction = episodes[["episode_id", "participant", "spec", "condition"]].copy()
+    variants = {"filter": (roads, "filter"), "reported": (roads, "reported"),
+                "reference": (refiltered(roads, reference_model(manifest, driver), town), "filter")}
+    if manifest.get("engine") != "carla-logs":
+        try:
+            variants["true"] = (true_roads(study_dir, roads, episodes, driver, town), "filter")
+        except InputError:
+            pass  # a config this trustroute cannot rebuild: no "true" source (asking for it says so)
+    for source, (variant, evaluated) in variants.items():
+        result = episode_satisfaction(variant, episodes, specs, town, driver.trust_levels, evaluated)
+        mapped = dict(zip(result["episode_id"], result["satisfied"], strict=True))
+        satisfaction[f"satisfied_{source}"] = (
+            satisfaction["episode_id"].map(mapped).fillna(False).astype(bool)
+        )
+    return satisfaction
+
+
+def study_analysis(study_dir: Path, belief_source: str | None = None,
+                   resamples: int = 10_000) -> StudyAnalysis:
+    """The analysis of `study_dir` on `belief_source` (default: `default_belief_source`, common to
+    every condition)."""
+    manifest, episodes, roads = load_study(study_dir)
+    belief_source = default_belief_source(manifest) if belief_source is None else belief_source
     if belief_source not in BELIEF_SOURCES:
         raise InputError(
             "--belief-source",
@@ -111,17 +145,13 @@ def study_analysis(study_dir: Path, belief_source: str = "filter", resamples: in
             f"unknown belief source {belief_source!r}",
             f"use one of {', '.join(BELIEF_SOURCES)}",
         )
-    manifest, episodes, roads = load_study(study_dir)
-    town, driver, specs = study_inputs(manifest)
-    satisfaction = episodes[["episode_id", "participant", "spec", "condition"]].copy()
-    for source in BELIEF_SOURCES:
-        result = episode_satisfaction(roads, episodes, specs, town, driver.trust_levels, source)
-        mapped = dict(zip(result["episode_id"], result["satisfied"], strict=True))
-        satisfaction[f"satisfied_{source}"] = (
-            satisfaction["episode_id"].map(mapped).fillna(False).astype(bool)
-        )
+    satisfaction = source_satisfaction(Path(study_dir), manifest, episodes, roads)
+    if f"satisfied_{belief_source}" not in satisfaction:
+        raise InputError("--belief-source", "", f"belief source {belief_source!r} needs a simulated study",
+                         "use filter, reported or reference on imported logs")
     episodes = episodes.merge(
-        satisfaction[["episode_id", "satisfied_filter", "satisfied_reported"]], on="episode_id", how="left"
+        satisfaction[["episode_id", *[c for c in satisfaction if c.startswith("satisfied_")]]],
+        on="episode_id", how="left"
     )
     if "mean_reported_trust" in episodes:
         episodes["mean_reported_trust"] = pd.to_numeric(episodes["mean_reported_trust"], errors="coerce")

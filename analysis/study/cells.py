@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.belief_sources import beside_source
 from trustroute.analysis.formatting import finite_or_none
-from trustroute.analysis.satisfaction import BELIEF_SOURCES
 from trustroute.analysis.statistics import bootstrap_ci, rate_interval
 
 
@@ -23,7 +23,7 @@ def cell_table(
     rng: np.random.Generator,
     resamples: int,
 ) -> pd.DataFrame:
-    other = [s for s in BELIEF_SOURCES if s != belief_source][0]
+    other = beside_source(belief_source)
     rows = []
     for spec in spec_order:
         for condition in condition_order:

@@ -4,17 +4,22 @@ analysis table, their titles, and the plain-text rendering of `trustroute analyz
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import pandas as pd
 
+from trustroute.analysis.belief_sources import beside_source, source_label
 from trustroute.analysis.formatting import (
     MISSING,
+    TERMINAL_WIDTH,
     estimate_column,
     finite_or_none,
     format_p,
     interval_column,
     number_text,
+    terminal_table,
+    wrapped_text,
 )
-from trustroute.analysis.satisfaction import BELIEF_SOURCES
 from trustroute.analysis.study.analysis import StudyAnalysis
 
 
@@ -51,10 +56,21 @@ def paired_display(p: pd.DataFrame) -> pd.DataFrame:
     return shown
 
 
+def _rate_columns(frame: pd.DataFrame, rate: str = "satisfaction_rate") -> dict[str, pd.Series]:
+    """A rate and its exact interval (columns ci_low, ci_high), as every table of rates shows them."""
+    return {"rate": frame[rate].map(number_text), "exact 95% CI": interval_column(frame, "ci_low", "ci_high")}
+
+
 def _outcome_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
     """Satisfied count, rate and exact interval, as every per-cell display table shows them."""
-    return {"satisfied": cells["satisfied"], "rate": cells["satisfaction_rate"].map(number_text),
-            "exact 95% CI": interval_column(cells, "ci_low", "ci_high")}
+    return {"satisfied": cells["satisfied"], **_rate_columns(cells)}
+
+
+def _group_columns(groups: pd.DataFrame) -> dict[str, pd.Series]:
+    """Episodes, satisfaction rate with its exact interval and mean reported trust of a group of
+    episodes (a position in the Latin square, a preceding condition)."""
+    return {"n": groups["n"], **_rate_columns(groups),
+            "mean trust (reported)": groups["mean_trust"].map(number_text)}
 
 
 def _trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
@@ -65,96 +81,59 @@ def _trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
             "takeovers / episode": cells["takeovers_per_episode"].map(lambda v: number_text(v, 2))}
 
 
+def _cell_columns(c: pd.DataFrame, other: str) -> dict[str, pd.Series]:
+    """The main table's columns; `other`: the belief source whose rate is shown beside."""
+    return {"spec": c["spec"], "condition": c["condition"], "n": c["n"], **_outcome_columns(c),
+            "Wilson 95% CI": interval_column(c, "wilson_low", "wilson_high"),
+            f"rate ({other})": c[f"satisfaction_rate_{other}"].map(number_text),
+            "exact value [L, U]": interval_column(c, "exact_lower", "exact_upper"),
+            "synthesized [L, U]": interval_column(c, "synthesized_lower", "synthesized_upper"),
+            **_trust_columns(c),
+            "junctions": c["mean_junctions"].map(lambda v: number_text(v, 1)),
+            "fallback": c["fallback_rate"].map(lambda v: number_text(v, 2))}
+
+
+def _repeated_columns(r: pd.DataFrame) -> dict[str, pd.Series]:
+    return {"outcome": r["outcome"], "model": r["model"], "effect of": r["effect_of"],
+            "estimate [95% CI]": estimate_column(r, "estimate", "low", "high"),
+            "p": pd.Series([format_p(finite_or_none(v)) for v in r["p_value"]], index=r.index),
+            "participants": r["participants"], "episodes": r["episodes"], "note": r["note"]}
+
+
+def _takeover_columns(t: pd.DataFrame) -> dict[str, pd.Series]:
+    return {"incident": t["incident"], "condition": t["condition"], "roads": t["roads"],
+            "takeovers": t["takeovers"], **_rate_columns(t, "rate")}
+
+
+def _order_columns(o: pd.DataFrame) -> dict[str, pd.Series]:
+    return {"position": o["position"], **_group_columns(o)}
+
+
+def _carryover_columns(k: pd.DataFrame) -> dict[str, pd.Series]:
+    return {"condition": k["condition"], "driven after": k["previous_condition"], **_group_columns(k)}
+
+
+def _per_type_columns(c: pd.DataFrame) -> dict[str, pd.Series]:
+    return {"driver type": c["driver_type"], "participants": c["participants"], "spec": c["spec"],
+            "condition": c["condition"], "n": c["n"], **_outcome_columns(c), **_trust_columns(c)}
+
+
 def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
-    """The tables as shown (formatted strings, p-values in scientific notation), by name."""
-    other = [s for s in BELIEF_SOURCES if s != analysis.belief_source][0]
-    tables: dict[str, pd.DataFrame] = {}
-    c = analysis.cells
-    if len(c):
-        tables["cells"] = pd.DataFrame(
-            {
-                "spec": c["spec"],
-                "condition": c["condition"],
-                "n": c["n"],
-                **_outcome_columns(c),
-                "Wilson 95% CI": interval_column(c, "wilson_low", "wilson_high"),
-                f"rate ({other})": c[f"satisfaction_rate_{other}"].map(number_text),
-                "exact value [L, U]": interval_column(c, "exact_lower", "exact_upper"),
-                "synthesized [L, U]": interval_column(c, "synthesized_lower", "synthesized_upper"),
-                **_trust_columns(c),
-                "junctions": c["mean_junctions"].map(lambda v: number_text(v, 1)),
-                "fallback": c["fallback_rate"].map(lambda v: number_text(v, 2)),
-            }
-        )
-    if len(analysis.paired):
-        tables["paired"] = paired_display(analysis.paired)
-    r = analysis.repeated
-    if len(r):
-        tables["repeated"] = pd.DataFrame(
-            {
-                "outcome": r["outcome"],
-                "model": r["model"],
-                "effect of": r["effect_of"],
-                "estimate [95% CI]": estimate_column(r, "estimate", "low", "high"),
-                "p": [format_p(finite_or_none(v)) for v in r["p_value"]],
-                "participants": r["participants"],
-                "episodes": r["episodes"],
-                "note": r["note"],
-            }
-        )
-    t = analysis.takeovers
-    if len(t):
-        tables["takeovers"] = pd.DataFrame(
-            {
-                "incident": t["incident"],
-                "condition": t["condition"],
-                "roads": t["roads"],
-                "takeovers": t["takeovers"],
-                "rate": t["rate"].map(number_text),
-                "exact 95% CI": interval_column(t, "ci_low", "ci_high"),
-            }
-        )
-    o = analysis.order
-    if len(o):
-        tables["order"] = pd.DataFrame(
-            {
-                "position": o["position"],
-                "n": o["n"],
-                "rate": o["satisfaction_rate"].map(number_text),
-                "exact 95% CI": interval_column(o, "ci_low", "ci_high"),
-                "mean trust (reported)": o["mean_trust"].map(number_text),
-            }
-        )
-    k = analysis.carryover
-    if len(k):
-        tables["carryover"] = pd.DataFrame(
-            {
-                "condition": k["condition"],
-                "driven after": k["previous_condition"],
-                "n": k["n"],
-                "rate": k["satisfaction_rate"].map(number_text),
-                "exact 95% CI": interval_column(k, "ci_low", "ci_high"),
-                "mean trust (reported)": k["mean_trust"].map(number_text),
-            }
-        )
-    c = analysis.per_type
-    if len(c):
-        tables["per_type"] = pd.DataFrame(
-            {
-                "driver type": c["driver_type"],
-                "participants": c["participants"],
-                "spec": c["spec"],
-                "condition": c["condition"],
-                "n": c["n"],
-                **_outcome_columns(c),
-                **_trust_columns(c),
-            }
-        )
-    if len(analysis.per_type_paired):
-        tables["per_type_paired"] = paired_display(analysis.per_type_paired)
-    if len(analysis.paper):
-        tables["paper"] = analysis.paper
-    return tables
+    """The tables as shown (formatted strings, p-values in scientific notation), by name; a table
+    without rows is left out."""
+    other = beside_source(analysis.belief_source)
+    shown: dict[str, tuple[pd.DataFrame, Callable[[pd.DataFrame], pd.DataFrame]]] = {
+        "cells": (analysis.cells, lambda c: pd.DataFrame(_cell_columns(c, other))),
+        "paired": (analysis.paired, paired_display),
+        "repeated": (analysis.repeated, lambda r: pd.DataFrame(_repeated_columns(r))),
+        "takeovers": (analysis.takeovers, lambda t: pd.DataFrame(_takeover_columns(t))),
+        "order": (analysis.order, lambda o: pd.DataFrame(_order_columns(o))),
+        "carryover": (analysis.carryover, lambda k: pd.DataFrame(_carryover_columns(k))),
+        "per_type": (analysis.per_type, lambda c: pd.DataFrame(_per_type_columns(c))),
+        "per_type_paired": (analysis.per_type_paired, paired_display),
+        "paper": (analysis.paper, lambda paper: paper),
+    }
+    return {name: show(frame) for name, (frame, show) in shown.items() if len(frame)}
 
 
 TABLE_TITLES = {
@@ -170,18 +149,24 @@ TABLE_TITLES = {
 }
 
 
-def format_table(analysis: StudyAnalysis) -> str:
-    """Plain-text tables for the terminal."""
-    lines = [
+# columns that identify a row: repeated in every block of a table split to fit the terminal
+KEY_COLUMNS = ("driver type", "spec", "condition", "pair", "incident", "outcome")
+
+
+def format_table(analysis: StudyAnalysis, width: int | None = TERMINAL_WIDTH) -> str:
+    """Plain-text tables for the terminal, fitted to `width` columns (None: as wide as they are)."""
+    lines = wrapped_text(
         f"study {analysis.manifest.get('study')} ({analysis.manifest.get('engine')} engine); "
-        f"satisfaction on beliefs from: {analysis.belief_source}"
-    ]
+        f"satisfaction on beliefs from: {analysis.belief_source} ({source_label(analysis.belief_source)})",
+        width)
     for name, table in display_tables(analysis).items():
-        lines += ["", TABLE_TITLES[name], table.to_string(index=False)]
+        keys = next((i for i, c in enumerate(table.columns) if c not in KEY_COLUMNS), len(table.columns))
+        header = [str(c) for c in table.columns]
+        lines += ["", TABLE_TITLES[name], *terminal_table(header, table.values.tolist(), width, max(1, keys))]
     if analysis.order_tests:
-        lines.append(order_test_line(analysis.order_tests))
+        lines += wrapped_text(order_test_line(analysis.order_tests), width)
     if analysis.paper_note:
-        lines += ["", analysis.paper_note]
+        lines += ["", *wrapped_text(analysis.paper_note, width)]
     return "\n".join(lines)
 
 

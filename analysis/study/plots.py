@@ -1,11 +1,14 @@
-"""Plots of a study (matplotlib, Agg backend: no display needed), each written to a PNG file.
+"""Plots of a study (matplotlib, Agg backend: no display needed), each written as a PNG at
+PNG_DPI with an SVG beside it (same name, for papers); legends sit outside the data.
 
 satisfaction_plot   satisfaction rate per spec and condition with exact (Clopper–Pearson) 95 %
                     intervals, the policy's exact value and the synthesized [lower, upper] beside it
 paired_plot         per participant, mean reported trust under each condition joined by a line
                     (one panel per spec), satisfied episodes filled
 trust_plot          mean reported and true trust against the road index, per spec and condition,
-                    with a 95 % band of the mean of reported trust (normal approximation)
+                    with a 95 % band of the mean of reported trust (normal approximation), drawn
+                    only at indices with at least MIN_BAND_EPISODES reports, the legend saying
+                    how many episodes the band rests on
 route_plot          share of episodes driving each road on the town map (colour bar), with the
                     spec's start road, its waypoint roads and the incident types marked; roads
                     along their courses, offsets and markers scaled to the town (networks/town_map.py)
@@ -39,11 +42,30 @@ def _pyplot():
     return plt
 
 
-def _save(fig, path: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+PNG_DPI = 200
+MIN_BAND_EPISODES = 10  # fewer reports at an index: its 95 % band would be noise across the scale
+MIN_LINE_EPISODES = 5   # fewer episodes still running at an index: no mean drawn there
+
+
+def vector_path(path: Path) -> Path:
+    """The SVG written beside a plot's PNG."""
+    return Path(path).with_suffix(".svg")
+
+
+def _save(fig, path: Path, tight_box: bool = False) -> Path:
+    """The PNG at PNG_DPI and the SVG beside it; `tight_box` keeps legends placed outside the axes."""
+    box = {"bbox_inches": "tight"} if tight_box else {}
+    if not tight_box:
+        fig.tight_layout()
+    fig.savefig(path, dpi=PNG_DPI, **box)
+    fig.savefig(vector_path(path), **box)
     _pyplot().close(fig)
     return path
+
+
+def _legend_outside(ax) -> None:
+    """The legend right of the axes, where it covers no data."""
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, frameon=False)
 
 
 def satisfaction_plot(cells: pd.DataFrame, path: Path, belief_source: str) -> Path:
@@ -80,20 +102,20 @@ def satisfaction_plot(cells: pd.DataFrame, path: Path, belief_source: str) -> Pa
                 label="exact value (nominal driver)" if first else None,
             )
         if cell.get("synthesized_lower") is not None and not pd.isna(cell.get("synthesized_lower")):
-            ax.fill_between(
-                [x - width * 0.45, x + width * 0.45],
-                cell["synthesized_lower"],
-                max(cell["synthesized_upper"], cell["synthesized_lower"] + 0.004),
-                color="orange",
-                alpha=0.6,
-                label="synthesized [L, U] (its own objective)" if first else None,
-            )
+            # beside the bar, as a range with end caps and end markers, so that [L, U] shows even
+            # when L = U (a certified optimum)
+            low, high = cell["synthesized_lower"], cell["synthesized_upper"]
+            ax.errorbar(x + width * 0.3, (low + high) / 2, yerr=[[(high - low) / 2], [(high - low) / 2]],
+                        color="#ff7f0e", lw=2.5, capsize=5, capthick=2, zorder=4,
+                        label="synthesized [L, U] (its own objective)" if first else None)
+            ax.scatter([x + width * 0.3] * 2, [low, high], marker="D", s=16, color="#ff7f0e",
+                       edgecolor="black", linewidth=0.5, zorder=5)
     ax.set_xticks(range(len(specs)), specs)
     ax.set_ylim(0, 1.05)
     ax.set_ylabel("satisfaction rate")
     ax.set_title(f"Spec satisfaction (beliefs: {belief_source}), exact 95% CI", fontsize=10)
-    ax.legend(fontsize=8, loc="lower right")
-    return _save(fig, path)
+    _legend_outside(ax)
+    return _save(fig, path, tight_box=True)
 
 
 def paired_plot(per_participant: pd.DataFrame, pair: tuple[str, str], path: Path) -> Path:
@@ -144,31 +166,52 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
     specs = list(dict.fromkeys(episodes["spec"]))
     fig, axes = plt.subplots(1, max(1, len(specs)), figsize=(4.2 * max(1, len(specs)), 3.4), squeeze=False)
     for ax, spec in zip(axes[0], specs, strict=False):
+        notes: list[str] = []
         for j, condition in enumerate(dict.fromkeys(episodes["condition"])):
             group = merged[(merged["spec"] == spec) & (merged["condition"] == condition)]
             if group.empty:
                 continue
             colour = COLOURS[j % len(COLOURS)]
-            # Only indices where enough episodes are still running: a mean of two episodes is noise.
-            running = group.groupby("index").size()
-            enough = running.index[running >= max(3, 0.02 * running.iloc[0])]
-            true = group.groupby("index")["trust_after"].mean().loc[enough]
-            stats = group.groupby("index")["reported"].agg(["mean", "std", "count"]).loc[enough]
-            stats = stats[stats["count"] > 0]
-            half = 1.96 * stats["std"].fillna(0) / np.sqrt(stats["count"])
-            ax.fill_between(
-                stats.index, stats["mean"] - half, stats["mean"] + half, color=colour, alpha=0.2, lw=0
-            )
-            ax.plot(stats.index, stats["mean"], color=colour, label=f"{condition} reported (95% band)")
+            true, stats, band = trust_series(group)
+            if len(band):
+                ax.fill_between(band.index, band["low"], band["high"], color=colour, alpha=0.2, lw=0)
+            notes.append(f"{condition}: {band_note(band)}")
+            ax.plot(stats.index, stats["mean"], color=colour, label=f"{condition} reported (mean, 95% band)")
             ax.plot(true.index, true.values, color=colour, ls="--", lw=1, label=f"{condition} true")
-        ax.set_title(spec, fontsize=10)
+        ax.set_title("\n".join([spec, *notes]), fontsize=8)
         ax.set_xlabel("road index (junctions driven)")
         ax.set_ylim(1, 7)
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("mean trust (Muir 1-7)")
-    axes[0][0].legend(fontsize=7)
-    fig.suptitle("Trust along the episodes (mean over episodes still running, >= 2% of them)", fontsize=10)
-    return _save(fig, path)
+    _legend_outside(axes[0][-1])
+    fig.suptitle(f"Trust along the episodes (means where >= {MIN_LINE_EPISODES} episodes and >= 2% of them "
+                 f"still run; bands where >= {MIN_BAND_EPISODES} report)", fontsize=9,
+                 y=1.03 + 0.045 * episodes["condition"].nunique())  # above the panels' band notes
+    return _save(fig, path, tight_box=True)
+
+
+def band_note(band: pd.DataFrame) -> str:
+    """How many episodes a trust band rests on (the range over its indices)."""
+    if not len(band):
+        return f"no band (< {MIN_BAND_EPISODES} reports per index)"
+    low, high = int(band["count"].min()), int(band["count"].max())
+    return f"band on {low} episodes" if low == high else f"band on {low}-{high} episodes"
+
+
+def trust_series(group: pd.DataFrame) -> tuple[pd.Series, pd.DataFrame, pd.DataFrame]:
+    """(mean true trust, reported mean/std/count, band low/high/count) by road index of one cell's
+    roads (columns index, trust_after, reported): means only where enough episodes still run (a mean
+    of two episodes is noise), the 95 % band only where MIN_BAND_EPISODES episodes report."""
+    running = group.groupby("index").size()
+    enough = running.index[running >= max(MIN_LINE_EPISODES, 0.02 * running.iloc[0])]
+    true = group.groupby("index")["trust_after"].mean().loc[enough]
+    stats = group.groupby("index")["reported"].agg(["mean", "std", "count"]).loc[enough]
+    stats = stats[stats["count"] > 0]
+    banded = stats[stats["count"] >= MIN_BAND_EPISODES]
+    half = 1.96 * banded["std"].fillna(0) / np.sqrt(banded["count"])
+    band = pd.DataFrame({"low": banded["mean"] - half, "high": banded["mean"] + half,
+                         "count": banded["count"]})
+    return true, stats, band
 
 
 def _road_xy(town: Town, road: str, fraction: float = 0.5, offset: float = 18.0) -> tuple[float, float]:
@@ -293,9 +336,7 @@ def route_plot(
     )
     bar.set_label("share of episodes driving the road", fontsize=8)
     fig.suptitle("Routes driven; start, waypoint roads and incident types marked", fontsize=10)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return _save(fig, path, tight_box=True)
 
 
 def takeover_plot(takeovers: pd.DataFrame, path: Path) -> Path:
@@ -323,14 +364,15 @@ def takeover_plot(takeovers: pd.DataFrame, path: Path) -> Path:
             capsize=4,
             lw=1,
         )
-        ax.text(x, 0.02, f"{row.takeovers}/{row.roads}", ha="center", fontsize=6, rotation=90)
+        ax.text(x, row.ci_high + 0.02, f"{row.takeovers}/{row.roads}", ha="center", va="bottom", fontsize=6,
+                rotation=90)
     ax.set_xticks(range(len(incidents)), incidents)
-    ax.set_ylim(0, 1.05)
+    ax.set_ylim(0, 1.15)
     ax.set_ylabel("takeover rate")
     ax.set_title("Takeovers per incident met, exact 95% CI", fontsize=10)
     if conditions:
-        ax.legend(fontsize=8)
-    return _save(fig, path)
+        _legend_outside(ax)
+    return _save(fig, path, tight_box=True)
 
 
 def write_plots(

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from trustroute.analysis.belief_sources import default_belief_source, source_label
 from trustroute.analysis.formatting import markdown_table
 from trustroute.analysis.study.analysis import StudyAnalysis, study_analysis
 from trustroute.analysis.study.display import TABLE_TITLES, display_tables, format_table, order_test_line
@@ -24,8 +25,12 @@ from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE, read
 
 NOTES = [
     "Satisfaction is re-evaluated from the logged roads with the spec's DFA (policies.trace). "
-    "Belief source 'filter' = the AV's online Bayes filter (belief_after); 'reported' = a point mass on "
-    "the driver's last reported trust, carried forward, the AV's initial belief before the first report.",
+    "Belief source 'filter' = each AV's online Bayes filter (belief_after); 'reported' = a point mass on "
+    "the driver's last reported trust, carried forward, the AV's initial belief before the first report; "
+    "'reference' = one exact Bayes filter for every condition (the study's driver model, or the "
+    "type-aware filter of its population) run on the logged observations; 'true' = the exact filter of "
+    "each simulated driver's own model. Conditions whose AVs filter differently (robust) are compared "
+    "on 'reference' by default, each being scored by its own belief otherwise.",
     "Intervals for rates are exact (Clopper-Pearson) with Wilson beside them, from scipy.stats.binomtest. "
     "Risk differences of paired outcomes use Newcombe's interval for paired proportions; the conditional "
     "odds ratio is b/c of the discordant pairs with the exact interval of b/(b+c); trust differences use a "
@@ -104,6 +109,14 @@ def study_lines(manifest: dict) -> list[str]:
     ]
 
 
+def sources_line(lead: str, second: str, default: str) -> str:
+    """The report's statement of which belief source leads its tables."""
+    chosen = ("the default for this study: common to every condition" if lead == default
+              else f"chosen with --belief-source; this study's default is {default!r}")
+    return (f"Leading belief source: {lead!r} ({source_label(lead)}; {chosen}). "
+            f"The tables on {second!r} ({source_label(second)}) follow them.")
+
+
 def _analysis_view(analysis: StudyAnalysis) -> dict:
     return {
         "belief_source": analysis.belief_source,
@@ -116,8 +129,9 @@ def _analysis_view(analysis: StudyAnalysis) -> dict:
 def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> ReportPaths:
     """Analyse (unless given) and write report.md, report.html and plots/ in the study directory."""
     study_dir = Path(study_dir)
-    primary = analysis if analysis is not None else study_analysis(study_dir, "filter")
-    secondary = study_analysis(study_dir, "reported" if primary.belief_source == "filter" else "filter")
+    primary = analysis if analysis is not None else study_analysis(study_dir)
+    default = default_belief_source(primary.manifest)
+    secondary = study_analysis(study_dir, "reported" if primary.belief_source != "reported" else default)
     town, _, specs = study_inputs(primary.manifest)
     roads = read_roads(study_dir, ["episode_id", "index", "directed_road", "trust_after", "reported_trust"])
     plots = write_plots(study_dir, town, primary, roads, specs)
@@ -125,6 +139,7 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
     context = {
         "title": f"trustroute study report: {primary.manifest.get('study')}",
         "study_lines": study_lines(primary.manifest),
+        "sources_line": sources_line(primary.belief_source, secondary.belief_source, default),
         "analyses": [_analysis_view(primary), _analysis_view(secondary)],
         "titles": TABLE_TITLES,
         "plots": [

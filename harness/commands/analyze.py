@@ -19,17 +19,21 @@ from trustroute.harness.commands.study import report_paths
 @json_option
 @click.option(
     "--belief-source",
-    type=click.Choice(["filter", "reported"]),
-    default="filter",
-    show_default=True,
-    help="Beliefs the spec is evaluated on: the AV's filter, or induced from reported trust.",
+    type=click.Choice(["filter", "reported", "reference", "true"]),
+    default=None,
+    help="Beliefs the spec is evaluated on: each AV's own filter, induced from reported trust, one "
+    "reference filter for every condition, or each driver's true model (simulation). Default: a "
+    "source common to every condition (filter, or reference when the conditions' filters differ).",
 )
+@click.option("--wide", is_flag=True,
+              help="Print the tables as wide as they are (default: fitted to 120 columns).")
 @click.option(
     "--report/--no-report",
     default=None,
     help="(Re)write report.md, report.html and plots/ in DIR (default: yes, but no with --json).",
 )
-def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool | None) -> None:
+def analyze(study_dir: str, as_json: bool, belief_source: str | None, wide: bool,
+            report: bool | None) -> None:
     """Per spec and condition of the study directory DIR: n, satisfaction rate with CI, mean trust,
     paired tests."""
     from trustroute.analysis.study.analysis import study_analysis
@@ -57,13 +61,15 @@ def analyze(study_dir: str, as_json: bool, belief_source: str, report: bool | No
         payload = with_paths(payload, {**report_paths(paths), **real_paths} if paths is not None else {})
         click.echo(json.dumps(payload, default=str))
         return
+    from trustroute.analysis.formatting import TERMINAL_WIDTH
     from trustroute.analysis.study.display import format_table
 
-    click.echo(format_table(analysis))
+    width = None if wide else TERMINAL_WIDTH
+    click.echo(format_table(analysis, width))
     if real is not None:
         from trustroute.analysis.carla_study.analysis import format_real_study
 
         click.echo("")
-        click.echo(format_real_study(real))
+        click.echo(format_real_study(real, width))
     if paths is not None:
         click.echo(f"report: {paths.markdown} and {paths.html}")

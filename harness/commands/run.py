@@ -10,7 +10,7 @@ import click
 
 from trustroute.core.errors import InputError
 from trustroute.harness.commands.options import SEED
-from trustroute.harness.commands.output import json_option, with_paths
+from trustroute.harness.commands.output import json_option, quiet_option, with_paths
 
 
 def _write_logs(out_dir: Path, record) -> dict[str, Path]:
@@ -112,11 +112,12 @@ def _check_paths(out_dir: str | None, rrd_path: str | None, cache_dir: str | Non
 @click.option("--background", "background_vehicles", type=click.IntRange(min=0, max=10_000), default=0,
               show_default=True, help="Seeded background traffic: vehicles kept on the net (an imported "
               "town: trips per minute from SUMO's randomTrips.py); docs/scenes.md.")
+@quiet_option
 def run(spec_argument: str | None, spec_option: str | None, policy_name: str, seed: int,
         rrd_path: str | None, out_dir: str | None, as_json: bool, town_path: str | None,
         driver_path: str | None, net_path: str | None, initial_trust: int | None,
         population_path: str | None, cache_dir: str | None, sumo_dir: str | None,
-        routes_paths: tuple[str, ...], background_vehicles: int) -> None:
+        routes_paths: tuple[str, ...], background_vehicles: int, quiet: bool) -> None:
     """Run one episode of SPEC (a spec file) in SUMO with POLICY and a synthetic driver.
 
     To re-run an episode of a study exactly (its participant's drawn model and initial trust), use
@@ -151,7 +152,7 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
         if driver_path is not None:
             raise click.UsageError("give --driver or --population, not both")
         town, population, spec, policy, av_model, av_spec = load_population_routing(
-            spec_path, town_path, population_path, policy_name, cache_dir)
+            spec_path, town_path, population_path, policy_name, cache_dir, progress=not (as_json or quiet))
         k = int(rng.choice(population.n_types, p=population.weights))
         driver_type, driver_model = population.names[k], population.types[k].model
         setup = EpisodeSetup(town=town, driver_model=av_model, spec=av_spec)
@@ -159,7 +160,8 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
         town = load_town(town_path)
         driver_model = load_driver_model(driver_path)
         spec = load_spec(spec_path, town, driver_model.n_trust, driver_model.source_path)
-        policy = resolve_policy(policy_name, town, driver_model, spec, cache_dir)
+        policy = resolve_policy(policy_name, town, driver_model, spec, cache_dir,
+                                progress=not (as_json or quiet))
         setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
     if initial_trust is not None and initial_trust not in driver_model.trust_levels:
         raise InputError("--initial-trust", "", f"{initial_trust} is not a trust level of the model",

@@ -13,7 +13,7 @@ import click
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.core.errors import InputError
 from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
-from trustroute.harness.commands.output import emit, json_option, with_paths
+from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 from trustroute.policies.model.trust_pomdp import checked_belief_rule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
@@ -70,8 +70,9 @@ def default_out_path(spec_name: str, *key: str) -> str:
               help="Target gap upper - lower.")
 @click.option("--horizon", type=HORIZON, default=None, help="At most H junctions (default: unbounded).")
 @click.option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), default=60.0,
-              show_default=True, help="Seconds.")
+              show_default=True, help="Seconds for the whole command (its synthesis runs share them).")
 @rule_option
+@quiet_option
 @click.option("--out", "out_path", type=click.Path(), default=None,
               help="Policy FILE to write (its arrays go beside it, same name with suffix .npz); "
                    "default: the policy cache's synth/ folder, printed.")
@@ -86,8 +87,8 @@ def default_out_path(spec_name: str, *key: str) -> str:
               help="With --population: the prior-weighted value (bayes) or the worst type's (robust).")
 @json_option
 def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: float,
-          horizon: int | None, time_limit: float, belief_rule: str, out_path: str | None, clusters: str,
-          population_path: str | None, objective: str, as_json: bool) -> None:
+          horizon: int | None, time_limit: float, belief_rule: str, quiet: bool, out_path: str | None,
+          clusters: str, population_path: str | None, objective: str, as_json: bool) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
     if tau <= 0:
         raise InputError("--tau", "", f"tau must be positive, got {tau}", "pass e.g. --tau 1e-3")
@@ -106,7 +107,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
             raise click.UsageError("--clusters applies to a single driver model (--driver), not to "
                                    "--population")
         _synth_population(spec_path, town_path, population_path, objective, tau, horizon, time_limit,
-                          belief_rule, out_path, as_json)
+                          belief_rule, out_path, as_json, quiet)
         return
     if objective != "bayes":
         raise click.UsageError("--objective robust needs --population FILE (the types to be robust over)")
@@ -120,7 +121,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     from trustroute.policies.synthesis.result import SynthesisStats
     from trustroute.policies.synthesize_spec import synthesize_problem
 
-    with synthesis_progress(f"synthesizing {spec.name}", not as_json) as on_iteration:
+    with synthesis_progress(f"synthesizing {spec.name}", not (as_json or quiet)) as on_iteration:
         result = synthesize_problem(problem, tau=tau, time_limit=time_limit, horizon=horizon,
                                     belief_rule=checked_belief_rule(belief_rule), on_iteration=on_iteration,
                                     clusters=clusters)
@@ -167,12 +168,14 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
 
 def _synth_population(spec_path: str, town_path: str | None, population_path: str, objective: str,
                       tau: float, horizon: int | None, time_limit: float, belief_rule: str,
-                      out_path: str | None, as_json: bool) -> None:
-    """`synth --population`: the Bayes or robust objective over a population's driver types."""
+                      out_path: str | None, as_json: bool, quiet: bool = False) -> None:
+    """`synth --population`: the Bayes or robust objective over a population's driver types; past
+    2 s (policies/resolve.py's PROGRESS_AFTER), a line per finished synthesis run with its bounds
+    on stderr."""
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_population import load_driver_population
     from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.resolve import is_objective, synthesis_progress
+    from trustroute.policies.resolve import is_objective, phase_lines, synthesis_progress
     from trustroute.policies.routing.files import array_path, save_policy
     from trustroute.policies.synthesis.population import document_entries, policy_name, summary
     from trustroute.policies.synthesize_spec import synthesize_for_population
@@ -186,11 +189,12 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
                                             spec.content_hash, objective, f"H={horizon}", f"tau={tau}",
                                             belief_rule, f"time_limit={time_limit}")
     with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
-                            not as_json) as on_iteration:
+                            not (as_json or quiet)) as on_iteration:
         found = synthesize_for_population(town, population, spec, objective, tau=tau,
                                           time_limit=time_limit, horizon=horizon,
                                           belief_rule=checked_belief_rule(belief_rule),
-                                          population_source=population_path, on_iteration=on_iteration)
+                                          population_source=population_path, on_iteration=on_iteration,
+                                          on_phase=phase_lines("synth", not (as_json or quiet)))
     result = found.result
     path = str(save_policy(result, out_path, town, found.pomdp.driver, found.spec,
                            population=document_entries(found), name=policy_name(found)))
@@ -276,11 +280,12 @@ population_option = click.option(
 @click.option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), default=None,
               help="Seconds, for specs with trust-state atoms: histories still open then widen "
                    "[lower, upper] (default: none).")
+@quiet_option
 @json_option
 def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_path: str | None,
              population_path: str | None, fallback_after: int, no_fallback: bool,
              max_junctions: int | None, belief_rule: str, cache_dir: str | None,
-             max_nodes: int | None, time_limit: float | None, as_json: bool) -> None:
+             max_nodes: int | None, time_limit: float | None, quiet: bool, as_json: bool) -> None:
     """Certified probability that POLICY ("free", "aware" or a file) satisfies SPEC, and final trust.
 
     "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached. The result
@@ -306,7 +311,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
         if max_nodes is not None or time_limit is not None:
             raise click.UsageError("--max-nodes and --time-limit are not used with --population")
         _evaluate_population(spec_path, policy_name, town_path, population_path, after, cap, belief_rule,
-                             cache_dir, as_json)
+                             cache_dir, as_json, quiet)
         return
     problem = _load_problem(spec_path, town_path, driver_path)
     town, driver, spec, pomdp = problem.town, problem.driver, problem.spec, problem.pomdp
@@ -314,7 +319,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
 
     if policy_name in ("robust", "bayes"):
         raise click.UsageError(f"POLICY '{policy_name}' needs --population FILE (the driver types)")
-    policy = resolve_policy(policy_name, town, driver, spec, cache_dir)
+    policy = resolve_policy(policy_name, town, driver, spec, cache_dir, progress=not (as_json or quiet))
     if time_limit is not None and not problem.dfa_hidden:
         raise click.UsageError("--time-limit applies to specs with trust-state atoms only (the others "
                                "are evaluated exactly in full)")
@@ -387,7 +392,7 @@ def load_population_routing(spec_path: str, town_path: str | None, population_pa
 
 def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None, population_path: str,
                          fallback_after: int | None, cap: int, belief_rule: str, cache_dir: str | None,
-                         as_json: bool) -> None:
+                         as_json: bool, quiet: bool) -> None:
     """`evaluate --population`: exact value over the mixture and per type."""
     from trustroute.policies.belief.problem import problem as routing_problem
     from trustroute.policies.evaluation.plain import evaluate as evaluate_policy
@@ -397,7 +402,7 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
     rule = checked_belief_rule(belief_rule)
 
     town, population, spec, policy, model, lifted_spec = load_population_routing(
-        spec_path, town_path, population_path, policy_name, cache_dir, progress=not as_json)
+        spec_path, town_path, population_path, policy_name, cache_dir, progress=not (as_json or quiet))
     found = routing_problem(town, population, spec, population_path)
     pomdp = found.pomdp
     if found.dfa_hidden:

@@ -223,10 +223,14 @@ def episode_blueprint(frame: MapFrame | None = None) -> rrb.Blueprint:
     and belief plots, states, belief bars, events."""
     import rerun.blueprint as rrb
 
-    # The plots and the state lanes show the whole episode, with the time cursor moving across it.
+    # The plots and the state lanes show the whole episode, with the time cursor moving across it:
+    # every sample queried (time_ranges) and the horizontal axis opened on all of them (view_range;
+    # without it the viewer opens the axis on a window around the cursor's end).
     whole = rrb.VisibleTimeRange(
         TIMELINE, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
     )
+    whole_axis = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
+                                                       end=rrb.TimeRangeBoundary.infinite()))
     bounds = None
     if frame is not None:  # the town with a margin of a few units, y negated as everything on the map
         margin = 4 * frame.unit
@@ -237,6 +241,7 @@ def episode_blueprint(frame: MapFrame | None = None) -> rrb.Blueprint:
         origin="trust",
         name="trust (1-7): true, reported, belief mean",
         axis_y=rrb.ScalarAxis(range=(1.0, 7.0)),
+        axis_x=whole_axis,
         time_ranges=whole,
     )
     belief_view = rrb.TimeSeriesView(
@@ -244,10 +249,11 @@ def episode_blueprint(frame: MapFrame | None = None) -> rrb.Blueprint:
         name="belief: P(trust>=6), spec predicates, thresholds",
         contents=["+ belief/**", "- belief/distribution"],
         axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
+        axis_x=whole_axis,
         time_ranges=whole,
     )
     states_view = rrb.StateTimelineView(
-        origin="state", name="control (takeovers), road, DFA state", time_ranges=whole
+        origin="state", name="control (takeovers), road, DFA state", time_ranges=whole, time_view=whole_axis
     )
     bars = rrb.BarChartView(origin="belief/distribution", name="belief over trust 1..7")
     events = rrb.TextLogView(origin="events", name="events")

@@ -22,6 +22,11 @@ projection when the spec reads beliefs, since the AV's belief is not type k's ow
 max_π min_k V_k <= min_k max_π V_k and <= max_π Σ_k w_k V_k. The gap says how far the grid search
 may be from the robust optimum.
 
+One time limit: `time_limit` bounds the whole call (a TimeBudget, policies/synthesis/budget.py).
+Each synthesis run gets an equal share of the time left among the runs still to come (the Bayes
+run, the grid's candidates, the per-type bounds); a run that converges early leaves its time to
+the next. `on_phase` hears one line per finished run with its bounds.
+
 One type: the Bayes objective is `synthesize` on the type's own model and spec, bit for bit.
 Specs with trust-state atoms go to policies/trust_state_synthesis/population.py instead (the one
 synthesis entry, policies/synthesize_spec.py `synthesize_for_population`, decides by the case).
@@ -47,6 +52,7 @@ from trustroute.policies.routing.aware_table import BeliefTablePolicy
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synthesize
+from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.result import SynthesisResult
 
 Objective = Literal["bayes", "robust"]
@@ -144,6 +150,63 @@ def _count(k: int, m: int) -> int:
     return comb(m + k - 1, k - 1)
 
 
+MIN_RUN_SECONDS = 0.05  # a run's share never below this: a search needs a first expansion
+
+
+@dataclass
+class RunSchedule:
+    """The runs of one population synthesis under one TimeBudget: each run's time limit is an
+    equal share of the time left among the runs still to come, after the work between runs (the
+    exact per-type evaluations, at their mean cost so far) is set aside for the gaps to come."""
+
+    budget: TimeBudget
+    runs: int
+    done: int = 0
+    on_phase: Callable[[str], None] | None = None
+    last_end: float | None = None
+    between: float = 0.0  # seconds spent between runs so far
+    gaps: int = 0
+
+    def next_limit(self) -> float:
+        now = time.perf_counter()
+        if self.last_end is not None:
+            self.between += now - self.last_end
+            self.gaps += 1
+        remaining = max(self.runs - self.done, 1)
+        per_gap = self.between / self.gaps if self.gaps else 0.0
+        left = max(self.budget.deadline - now - per_gap * remaining, 0.0)
+        return max(left / remaining, MIN_RUN_SECONDS)
+
+    def affords(self, later_runs: int) -> bool:
+        """Whether one more run with its following work still fits before the deadline, with
+        `later_runs` runs after it that must run (the per-type bounds)."""
+        per_gap = self.between / self.gaps if self.gaps else 0.0
+        return self.budget.fits(per_gap + MIN_RUN_SECONDS * (1 + later_runs))
+
+    def skip(self, what: str) -> None:
+        """A run left out for want of time (a candidate prior)."""
+        self.runs -= 1
+        if self.on_phase is not None:
+            self.on_phase(f"[{self.budget.elapsed():.1f} s] {what}: skipped, the time limit is reached")
+
+    def finished(self, what: str, lower: float, upper: float) -> None:
+        self.done += 1
+        self.last_end = time.perf_counter()
+        if self.on_phase is not None:
+            self.on_phase(f"[{self.done}/{self.runs}, {self.budget.elapsed():.1f} s] {what}: "
+                          f"[{lower:.6f}, {upper:.6f}]")
+
+
+def run_count(population: DriverPopulation, objective: str, grid_points: int) -> int:
+    """Synthesis runs of a population synthesis: the Bayes run; for the robust objective also the
+    grid's candidates other than the weights and one per type."""
+    if objective != "robust":
+        return 1
+    grid = simplex_grid(population.n_types, grid_points) if population.n_types > 1 else []
+    others = sum(1 for prior in grid if not np.allclose(prior, population.weights, rtol=0, atol=1e-12))
+    return 1 + others + population.n_types
+
+
 def reweighting(population: DriverPopulation, prior: np.ndarray) -> np.ndarray:
     """r per hidden index: λ_k / w_k on type k's block (policies/routing/aware_table.py)."""
     n = population.types[0].model.n_trust
@@ -155,20 +218,24 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
                           horizon: int | None = None, belief_rule: BeliefRule = "bayes",
                           population_source: str = "", grid_points: int = MAX_GRID_CANDIDATES,
                           on_iteration: Callable[[float, float], None] | None = None,
+                          on_phase: Callable[[str], None] | None = None,
                           ) -> PopulationSynthesis:
-    """Synthesize for `population` under `objective` (module docstring). time_limit applies to each
-    synthesis run (the robust objective runs one per candidate prior and one per type)."""
+    """Synthesize for `population` under `objective` (module docstring) within `time_limit` seconds
+    in all (the robust objective runs one synthesis per candidate prior and one per type)."""
     if objective not in OBJECTIVES:
         raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
     started = time.perf_counter()
+    schedule = RunSchedule(TimeBudget.start(time_limit), run_count(population, objective, grid_points),
+                           on_phase=on_phase)
     lifted_spec = lift_spec(spec, population, population_source)
     cap = evaluation_cap(horizon)
     # The AV's filter and the spec's belief labels: the type-aware model under the population's
     # weights. Candidates of the robust objective are synthesized under other priors λ but run on
     # this filter, their beliefs reweighted to λ (so the spec means the same for every candidate).
     pomdp = build_pomdp(town, lift_population(population))
-    bayes = synthesize(pomdp, lifted_spec, tau=tau, time_limit=time_limit, horizon=horizon,
+    bayes = synthesize(pomdp, lifted_spec, tau=tau, time_limit=schedule.next_limit(), horizon=horizon,
                        belief_rule=belief_rule, on_iteration=on_iteration)
+    schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
     bayes_values = per_type_values(pomdp, lifted_spec, bayes.policy, population, cap, belief_rule)
     weights = population.weights
     if objective == "bayes":
@@ -188,9 +255,13 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
         for prior in simplex_grid(population.n_types, grid_points):
             if np.allclose(prior, weights, rtol=0, atol=1e-12):
                 continue
+            if not schedule.affords(population.n_types):
+                schedule.skip(f"candidate prior {np.round(prior, 3).tolist()}")
+                continue
             made = synthesize(build_pomdp(town, lift_population(population, prior)), lifted_spec, tau=tau,
-                              time_limit=time_limit, horizon=horizon, belief_rule=belief_rule,
+                              time_limit=schedule.next_limit(), horizon=horizon, belief_rule=belief_rule,
                               on_iteration=on_iteration)
+            schedule.finished(f"candidate prior {np.round(prior, 3).tolist()}", made.lower, made.upper)
             policy = BeliefTablePolicy(made.policy.table, town, lifted_spec, name="robust",
                                        horizon=horizon, reweight=reweighting(population, prior))
             values = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule)
@@ -202,8 +273,9 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
     own_spec = spec if not (spec.belief_atoms or spec.type_atoms) else state_only_projection(spec)
     type_upper = []
     for t in population.types:
-        own = synthesize(build_pomdp(town, t.model), own_spec, tau=tau, time_limit=time_limit,
+        own = synthesize(build_pomdp(town, t.model), own_spec, tau=tau, time_limit=schedule.next_limit(),
                          horizon=horizon, belief_rule="bayes")
+        schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper)
         type_upper.append(own.upper)
     upper = min(bayes.upper, min(type_upper))
     lower = worst(best_values)

@@ -43,13 +43,16 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
+from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.population import (
     MAX_GRID_CANDIDATES,
     OBJECTIVES,
     PopulationSynthesis,
+    RunSchedule,
     TypeValue,
     evaluation_cap,
     reweighting,
+    run_count,
     simplex_grid,
 )
 from trustroute.policies.synthesis.result import SynthesisResult
@@ -93,19 +96,24 @@ def belief_free_spec(spec: Spec) -> Spec:
                 source_path=spec.source_path, trust_atoms=dict(spec.trust_atoms))
 
 
-def type_optimum_bounds(problem: Problem, tau: float, time_limit: float, horizon: int | None,
+def type_optimum_bounds(problem: Problem, tau: float, schedule: RunSchedule, horizon: int | None,
                         synthesize: Callable[..., SynthesisResult]) -> tuple[float, ...]:
     """U_k for every type: a sound bound of max_π V_k(π), the synthesis (`synthesize`, the one
     synthesis entry) on type k's model alone of `belief_free_spec` of the spec as given."""
     population = problem.population
     assert population is not None
     own_spec = belief_free_spec(problem.given_spec)
-    return tuple(synthesize(build_pomdp(problem.town, t.model), own_spec, tau=tau, time_limit=time_limit,
-                            horizon=horizon, belief_rule="bayes").upper for t in population.types)
+    bounds = []
+    for t in population.types:
+        own = synthesize(build_pomdp(problem.town, t.model), own_spec, tau=tau,
+                         time_limit=schedule.next_limit(), horizon=horizon, belief_rule="bayes")
+        schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper)
+        bounds.append(own.upper)
+    return tuple(bounds)
 
 
 def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[TypeValue, ...],
-                      grid_points: int, tau: float, time_limit: float, horizon: int | None,
+                      grid_points: int, tau: float, schedule: RunSchedule, horizon: int | None,
                       belief_rule: BeliefRule, on_iteration: Callable[[float, float], None] | None
                       ) -> tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray, list[dict]]:
     """The candidate with the best worst type: the Bayes policy and, for every prior λ of the
@@ -126,9 +134,13 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
     for prior in simplex_grid(population.n_types, grid_points):
         if np.allclose(prior, weights, rtol=0, atol=1e-12):
             continue
+        if not schedule.affords(population.n_types):
+            schedule.skip(f"candidate prior {np.round(prior, 3).tolist()}")
+            continue
         made = synthesize_joint(build_pomdp(problem.town, lift_population(population, prior)), problem.spec,
-                                tau=tau, time_limit=time_limit, horizon=horizon, belief_rule=belief_rule,
-                                on_iteration=on_iteration)
+                                tau=tau, time_limit=schedule.next_limit(), horizon=horizon,
+                                belief_rule=belief_rule, on_iteration=on_iteration)
+        schedule.finished(f"candidate prior {np.round(prior, 3).tolist()}", made.lower, made.upper)
         policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
                                   name="robust", horizon=horizon, guide=made.policy.guide,
                                   reweight=reweighting(population, prior))
@@ -142,20 +154,25 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
 def synthesize_population_joint(problem: Problem, objective: str, synthesize: Callable[..., SynthesisResult],
                                 tau: float = 1e-3, time_limit: float = 60.0, horizon: int | None = None,
                                 belief_rule: BeliefRule = "bayes", grid_points: int = MAX_GRID_CANDIDATES,
-                                on_iteration: Callable[[float, float], None] | None = None
+                                on_iteration: Callable[[float, float], None] | None = None,
+                                on_phase: Callable[[str], None] | None = None,
                                 ) -> PopulationSynthesis:
     """The population synthesis (module docstring) of a TRUST_STATE problem with a population.
     `synthesize`: the one synthesis entry (policies/synthesize_spec.py `synthesize_spec`), for the
     per-type bounds of the robust objective; grid_points: its candidate type priors. time_limit
-    applies to each synthesis run."""
+    bounds the whole call, shared among its synthesis runs (policies/synthesis/population.py
+    RunSchedule); on_phase hears a line per finished run."""
     if objective not in OBJECTIVES:
         raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
     population = problem.population
     if population is None:
         raise ValueError("population synthesis needs a problem with a driver population")
     started = time.perf_counter()
-    bayes = synthesize_joint(problem.pomdp, problem.spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                             belief_rule=belief_rule, on_iteration=on_iteration)
+    schedule = RunSchedule(TimeBudget.start(time_limit), run_count(population, objective, grid_points),
+                           on_phase=on_phase)
+    bayes = synthesize_joint(problem.pomdp, problem.spec, tau=tau, time_limit=schedule.next_limit(),
+                             horizon=horizon, belief_rule=belief_rule, on_iteration=on_iteration)
+    schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
     values = joint_type_values(problem, bayes.policy, evaluation_cap(horizon), belief_rule)
     found = PopulationSynthesis(
         objective="bayes", population=population, result=bayes, pomdp=problem.pomdp, spec=problem.spec,
@@ -165,8 +182,8 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     if objective == "bayes":
         return found
     policy, best_values, prior, candidates = robust_candidates(
-        problem, bayes, values, grid_points, tau, time_limit, horizon, belief_rule, on_iteration)
-    type_upper = type_optimum_bounds(problem, tau, time_limit, horizon, synthesize)
+        problem, bayes, values, grid_points, tau, schedule, horizon, belief_rule, on_iteration)
+    type_upper = type_optimum_bounds(problem, tau, schedule, horizon, synthesize)
     lower = min(v.lower for v in best_values)
     upper = min(bayes.upper, *type_upper)
     if lower > upper + 1e-9:

@@ -50,3 +50,34 @@ def test_tables_as_markdown_and_aligned_text():
         "| a\\|b | n |", "|---|---|", "| x\\|y | 1 |", "| two lines | 22 |"]
     assert aligned_columns(["name", "n"], [["ab", "1"], ["a", "333"]]) == [
         "name  n  ", "----  ---", "ab    1  ", "a     333"]
+
+
+def test_terminal_tables_fit_120_columns_and_keep_every_cell():
+    from trustroute.analysis.formatting import TERMINAL_WIDTH, terminal_table, wrapped_text
+
+    header = ["spec", *[f"column {i} with a long name" for i in range(12)], "note"]
+    rows = [[f"phi{r}", *[f"{r}.{i:03d} [0.1, 0.9]" for i in range(12)],
+             "a long note explaining why this row's odds ratio is open above " * 2] for r in range(3)]
+    wide = terminal_table(header, rows, width=None)
+    assert max(len(line) for line in wide) > 300
+    lines = terminal_table(header, rows)
+    assert TERMINAL_WIDTH == 120 and max(len(line) for line in lines) <= 120
+    text = "\n".join(lines)
+    for row in rows:
+        for cell in row[:-1]:
+            assert cell in text  # every cell shown, none cut
+    assert " ".join(text.split()).count("odds ratio is open above") == 6  # the note wraps, whole
+    assert text.count("phi1") >= 3  # the key column repeats in every block
+    assert all(len(line) <= 120 for line in wrapped_text("word " * 100))
+
+
+def test_analyze_prints_within_120_columns_unless_wide(model_study):
+    from click.testing import CliRunner
+
+    from trustroute.harness.cli import cli
+
+    narrow = CliRunner().invoke(cli, ["analyze", str(model_study), "--no-report"])
+    assert narrow.exit_code == 0, narrow.output
+    assert max(len(line) for line in narrow.output.splitlines()) <= 120
+    wide = CliRunner().invoke(cli, ["analyze", str(model_study), "--no-report", "--wide"])
+    assert wide.exit_code == 0 and max(len(line) for line in wide.output.splitlines()) > 120

@@ -215,3 +215,30 @@ def test_a_road_is_drawn_along_the_towns_geometry_where_it_has_one(town, tmp_pat
     # The default town's outer street, not the net's straight edge beside the inner street.
     np.testing.assert_allclose(road_course(net, town, "A-E"), town.geometry["A-E"].shape, atol=1e-4)
     assert road_course(net, town, "A-E")[:, 0].min() < 1.0 < 80.0 < net.getEdge("A-E").getShape()[0][0]
+
+
+def test_time_views_open_on_the_whole_episode(tmp_path):
+    """The trust, belief and state views' horizontal axes open on the whole timeline (infinite
+    view range), not on a window at the end of the episode."""
+    import rerun as rr
+
+    from trustroute.harness.simulation.rerun_log import episode_blueprint
+
+    path = tmp_path / "blueprint.rrd"
+    rec = rr.RecordingStream("trustroute-blueprint-test")
+    rec.save(str(path), default_blueprint=episode_blueprint())
+    rec.flush()
+    reader = rr.chunk.RrdReader(path)
+    chunks = [c for store in reader.blueprints() for c in reader.stream(store=store).to_chunks()]
+    kinds = []  # per view range: the union variant of its start and end boundaries
+    for chunk in chunks:
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if "TimeAxis:view_range" not in name:
+                continue
+            ranges = batch.column(name).values
+            for side in ("start", "end"):
+                union = ranges.field(side)
+                kinds += [union.type.field(int(code)).name for code in union.type_codes.to_pylist()]
+    assert len(kinds) == 6, kinds  # trust, belief and state views, start and end each
+    assert set(kinds) == {"Infinite"}, kinds

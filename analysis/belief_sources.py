@@ -1,0 +1,123 @@
+"""The belief sources a study's conditions are compared on, and which one leads by default.
+
+Every source labels each logged position with a belief over trust (docs/study.md):
+
+- "filter": each AV's own online filter, the logged `belief_after` (what that vehicle believed;
+  under the `robust` condition the type-aware filter, under `aware` and `free` the nominal one);
+- "reported": beliefs induced from the driver's reported trust (analysis/satisfaction.py);
+- "reference": one exact Bayes filter for every condition, run on each episode's logged
+  observations (incident, takeover, performance): the study's driver model, or the type-aware
+  filter of the population when the study has one (its trust marginal);
+- "true" (simulated studies only): the exact Bayes filter of each driver's own true model (the
+  participant's type, or the individual sampled for it), what an AV knowing the driver would believe.
+
+Conditions whose AVs filter with different models are not judged fairly on "filter" (each would be
+scored by its own belief), so `default_belief_source` picks "reference" whenever they differ and
+"filter" otherwise; both are common to every condition then.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from trustroute.networks.town import Town
+from trustroute.participants.driver_model import DriverModel
+
+BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported", "reference", "true")
+# conditions whose AV filters with another model than the study's driver model
+OWN_FILTER_CONDITIONS: tuple[str, ...] = ("robust",)
+PERFORMANCE_INDEX = {"succ": 0, "fail": 1}
+
+
+def filters_differ(manifest: dict) -> bool:
+    """True when the study's conditions filter with different models (a `robust` condition)."""
+    conditions = (manifest.get("config") or {}).get("conditions") or []
+    return any(str(c) in OWN_FILTER_CONDITIONS for c in conditions)
+
+
+def default_belief_source(manifest: dict) -> str:
+    """The source common to every condition: "filter" when all filters agree, else "reference"."""
+    return "reference" if filters_differ(manifest) else "filter"
+
+
+def beside_source(source: str) -> str:
+    """The source whose rate the cells show beside the leading one's."""
+    return "reported" if source == "filter" else "filter"
+
+
+def source_label(source: str) -> str:
+    """How a table names its belief source."""
+    return {
+        "filter": "each AV's own filter",
+        "reported": "induced from reported trust",
+        "reference": "one reference filter for every condition",
+        "true": "exact filter of each driver's true model",
+    }[source]
+
+
+def refiltered(roads: pd.DataFrame, model: DriverModel, town: Town) -> pd.DataFrame:
+    """`roads` (sorted by episode and index) with `belief_after` replaced by the exact Bayes filter
+    of `model` run on the logged observations; its trust marginal for a type-aware model. An
+    observation the model gives probability 0 keeps the belief (never a zero row)."""
+    from trustroute.policies.belief.driver_types import trust_marginal
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+
+    roads = roads.sort_values(["episode_id", "index"], kind="stable").reset_index(drop=True)
+    if not len(roads):
+        return roads
+    pomdp = build_pomdp(town, model)
+    _, starts, lengths = np.unique(roads["episode_id"].to_numpy(), return_index=True, return_counts=True)
+    n, horizon = lengths.size, int(lengths.max())
+    row = np.repeat(np.arange(n), lengths)
+    col = np.arange(len(roads)) - np.repeat(starts, lengths)
+    incident = np.zeros((n, horizon), dtype=np.int64)
+    takeover = np.zeros((n, horizon), dtype=np.int64)
+    performance = np.zeros((n, horizon), dtype=np.int64)
+    incident[row, col] = [model.incident_index(str(i)) for i in roads["incident"].fillna("none")]
+    takeover[row, col] = roads["takeover"].fillna(False).astype(bool).to_numpy().astype(np.int64)
+    performance[row, col] = roads["performance"].fillna("succ").map(PERFORMANCE_INDEX).to_numpy()
+    beliefs = np.zeros((n, horizon, model.n_trust))
+    beliefs[:, 0] = model.initial_belief
+    for t in range(1, horizon):
+        before = beliefs[:, t - 1]
+        posterior, _ = pomdp.belief_update(before, incident[:, t], takeover[:, t], performance[:, t])
+        dead = posterior.sum(axis=1) <= 0
+        posterior[dead] = before[dead]
+        beliefs[:, t] = posterior
+    marginal = trust_marginal(model, beliefs[row, col])
+    return roads.assign(belief_after=list(marginal))
+
+
+def reference_model(manifest: dict, nominal: DriverModel) -> DriverModel:
+    """The one filter of "reference": the type-aware model of the study's population (the
+    `robust` condition's, else the drivers'), or the study's driver model."""
+    from trustroute.participants.driver_population import load_driver_population
+    from trustroute.policies.belief.driver_types import lift_population
+
+    config = manifest.get("config") or {}
+    path = config.get("robust_population") or config.get("driver_population")
+    if path and Path(path).is_file():
+        return lift_population(load_driver_population(path))
+    return nominal
+
+
+def true_roads(study_dir: Path, roads: pd.DataFrame, episodes: pd.DataFrame, nominal: DriverModel,
+               town: Town) -> pd.DataFrame:
+    """`roads` on the "true" source: each episode's roads filtered with its driver's true model."""
+    from trustroute.harness.study.plan import participant_models
+    from trustroute.harness.study.replay import study_config_from_manifest
+
+    config, _ = study_config_from_manifest(study_dir)
+    models = participant_models(config, nominal)
+    if models is None:
+        return refiltered(roads, nominal, town)
+    # one filter run per distinct model (the types' models are shared by their participants)
+    distinct = {id(m): i for i, m in enumerate(models)}
+    model_of = {p: distinct[id(m)] for p, m in enumerate(models)}
+    participant_of = dict(zip(episodes["episode_id"], episodes["participant"], strict=True))
+    owner = roads["episode_id"].map(lambda e: model_of[int(participant_of[e])])
+    frames = [refiltered(group, models[int(index)], town) for index, group in roads.groupby(owner, sort=True)]
+    return pd.concat(frames, ignore_index=True) if frames else roads

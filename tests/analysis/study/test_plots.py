@@ -1,0 +1,46 @@
+"""Figures fit for a paper: a vector file beside every PNG, PNGs at PNG_DPI, trust bands only where
+enough episodes report."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from PIL import Image
+
+from trustroute.analysis.study.plots import (
+    MIN_BAND_EPISODES,
+    MIN_LINE_EPISODES,
+    PNG_DPI,
+    trust_series,
+    vector_path,
+)
+from trustroute.analysis.study.report import write_report
+
+
+def test_every_plot_has_a_vector_file_and_a_print_resolution(model_study):
+    paths = write_report(model_study)
+    assert set(paths.plots) >= {"satisfaction", "trust", "routes", "takeovers", "participants"}
+    assert PNG_DPI >= 200
+    for path in paths.plots.values():
+        svg = vector_path(path)
+        assert svg.is_file() and svg.read_text().lstrip().startswith("<?xml") and "<svg" in svg.read_text()
+        with Image.open(path) as image:
+            assert round(image.info["dpi"][0]) >= PNG_DPI
+
+
+def _cell(episodes: int, reports_every: int = 1) -> pd.DataFrame:
+    rng = np.random.default_rng(1)
+    rows = [{"episode_id": f"e{e}", "index": i, "trust_after": int(rng.integers(1, 8)),
+             "reported": float(rng.integers(1, 8)) if i % reports_every == 0 else np.nan}
+            for e in range(episodes) for i in range(6)]
+    return pd.DataFrame(rows)
+
+
+def test_trust_bands_rest_on_enough_episodes():
+    true, stats, band = trust_series(_cell(3))
+    assert stats.empty and true.empty and band.empty  # 3 episodes: nothing drawn
+    true, stats, band = trust_series(_cell(MIN_LINE_EPISODES))
+    assert len(stats) == 6 and len(true) == 6 and band.empty  # means, but no band
+    true, stats, band = trust_series(_cell(MIN_BAND_EPISODES + 2))
+    assert len(band) == 6 and (band["count"] >= MIN_BAND_EPISODES).all()
+    assert np.allclose((band["low"] + band["high"]) / 2, stats["mean"])

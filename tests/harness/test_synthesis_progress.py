@@ -1,0 +1,72 @@
+"""Every synthesis a command runs shows its progress on stderr once it has run PROGRESS_AFTER
+seconds (away from a terminal: a line at a time, with the current bounds), and `--quiet` or
+`--json` silences it. The threshold is set to 0 here so that the small problems of a test count
+as long ones."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.cli import run_cli
+from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH
+from trustroute.policies import resolve
+
+
+@pytest.fixture
+def at_once(monkeypatch):
+    monkeypatch.setattr(resolve, "PROGRESS_AFTER", 0.0)
+
+
+def _bound_lines(err: str, prefix: str) -> list[str]:
+    return [line for line in err.splitlines() if line.startswith(prefix) and "L=" in line and "U=" in line]
+
+
+def test_synth_shows_rounds_with_bounds_and_quiet_silences_them(tmp_path, capsys, at_once):
+    code, out, err = run_cli(capsys, "synth", "phi2", "--horizon", "10", "--out", str(tmp_path / "a.json"))
+    assert code == 0, err
+    assert _bound_lines(err, "synthesizing phi2: "), err
+    code, out, err = run_cli(capsys, "synth", "phi2", "--horizon", "10", "--out", str(tmp_path / "b.json"),
+                             "--quiet")
+    assert code == 0 and err == "" and "policy written to" in out
+    code, out, err = run_cli(capsys, "synth", "phi2", "--horizon", "10", "--out", str(tmp_path / "c.json"),
+                             "--json")
+    assert code == 0 and err == "" and json.loads(out)["lower"] > 0
+
+
+def test_a_short_synthesis_prints_nothing(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(resolve, "PROGRESS_AFTER", 3600.0)
+    code, _, err = run_cli(capsys, "synth", "phi2", "--horizon", "10", "--out", str(tmp_path / "a.json"))
+    assert code == 0 and err == ""
+
+
+def test_population_synth_announces_every_run(tmp_path, capsys, at_once):
+    code, _, err = run_cli(capsys, "synth", "phi1", "--horizon", "3", "--population",
+                           str(EXAMPLE_POPULATION_PATH), "--objective", "robust", "--time-limit", "30",
+                           "--out", str(tmp_path / "r.json"))
+    assert code == 0, err
+    runs = [line for line in err.splitlines() if line.startswith("synth: [")]
+    assert len(runs) > 3 and all(line.count("[") >= 2 for line in runs), err
+
+
+@pytest.mark.parametrize("command", [("evaluate", "phi1", "aware"), ("run", "phi1", "--policy", "aware")])
+def test_a_command_synthesizing_aware_shows_it(command, tmp_path, capsys, at_once):
+    code, _, err = run_cli(capsys, *command, "--cache-dir", str(tmp_path / "c1"))
+    assert code == 0, err
+    assert _bound_lines(err, "synthesizing aware for phi1: "), err
+    code, _, err = run_cli(capsys, *command, "--cache-dir", str(tmp_path / "c2"), "--quiet")
+    assert code == 0 and err == ""
+
+
+def test_a_cached_population_policy_announces_its_runs(tmp_path, capsys, town, at_once):
+    from trustroute.participants.driver_population import load_driver_population
+    from trustroute.policies.logic.spec import load_spec
+
+    population = load_driver_population(EXAMPLE_POPULATION_PATH)
+    spec = load_spec("phi1", town, population.types[0].model.n_trust)
+    resolve.population_policy(town, population, spec, "robust", tmp_path / "c", horizon=3, progress=True)
+    err = capsys.readouterr().err
+    assert [line for line in err.splitlines() if line.startswith("synthesizing robust for phi1: [")], err
+    resolve.population_policy(town, population, spec, "robust", tmp_path / "d", horizon=3, progress=False)
+    assert capsys.readouterr().err == ""

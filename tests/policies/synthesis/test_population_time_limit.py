@@ -1,0 +1,36 @@
+"""One time limit for a whole population synthesis: every synthesis run of the robust objective
+(the Bayes run, the grid's candidates, the per-type bounds) ends by the call's deadline, and each
+run is announced with its bounds (on_phase)."""
+
+from __future__ import annotations
+
+import time
+
+from trustroute.core.packaged import PACKAGED_SPECS
+from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.synthesis import population as population_synthesis
+from trustroute.policies.synthesis.population import run_count, synthesize_population
+
+
+def test_every_run_ends_by_the_one_deadline(town, monkeypatch):
+    population = load_driver_population(EXAMPLE_POPULATION_PATH)
+    spec = load_spec(PACKAGED_SPECS / "phi1.toml", town, population.types[0].model.n_trust)
+    real = population_synthesis.synthesize
+    calls: list[tuple[float, float]] = []
+
+    def recording(*args, **kwargs):
+        calls.append((time.perf_counter(), kwargs["time_limit"]))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(population_synthesis, "synthesize", recording)
+    limit, lines = 4.0, []
+    started = time.perf_counter()
+    found = synthesize_population(town, population, spec, "robust", horizon=3, time_limit=limit,
+                                  grid_points=6, on_phase=lines.append)
+    assert len(calls) == run_count(population, "robust", 6) == len(lines) > population.n_types + 1
+    for at, run_limit in calls:
+        assert at + run_limit <= started + limit + 1e-3, (at - started, run_limit)
+    assert all(line.count("[") >= 2 for line in lines)  # its place, elapsed time and bounds
+    assert found.lower <= found.upper
+    assert run_count(population, "bayes", 6) == 1
