@@ -1,13 +1,15 @@
-"""Synthesis at city scale: the 5-waypoint spec `city5` on the packaged town `city` (the RESCO
-Ingolstadt scenario, docs/cities.md), at H = 40 and unbounded.
+"""Synthesis at city scale: the 5-waypoint specs of the packaged cities at H = 40 and unbounded,
+`city5` on the town `city` (the RESCO Ingolstadt scenario) and `csomor5` on the town `csomor`
+(RouteRL's OpenStreetMap net of Csömör, 481 choice junctions; docs/cities.md).
 
-First the trust-free baseline of the same run: the shortest route completing the task, evaluated
-exactly (its value and seconds). Then each synthesis `synthesize(tau=1e-3, time_limit=60)` in a
-fresh subprocess (its own peak RSS, no warm caches): seconds, peak RSS (MB), L, U, whether the
-target is met (gap <= 1e-3 within 60 s under 1 GB), and whether L stays at or above the trust-free
-value minus the gap. The machine is shared: every row carries the 1-minute load average measured
-beside it, and synthesis seconds are also given per second of the baseline's evaluation.
-Needs the optional extra `cities` (pip install 'trustroute[cities]'); without it one row says so.
+Per city, first the trust-free baseline of the same run: the shortest route completing the task,
+evaluated exactly (its value and seconds). Then each synthesis `synthesize(tau=1e-3,
+time_limit=60)` in a fresh subprocess (its own peak RSS, no warm caches): seconds, peak RSS (MB),
+L, U, whether the target is met (gap <= 1e-3 within 60 s under 1 GB), and whether L stays at or
+above the trust-free value minus the gap. The machine is shared: every row carries the 1-minute
+load average measured beside it, and synthesis seconds are also given per second of the
+baseline's evaluation. `city` needs the optional extra `cities` (pip install
+'trustroute[cities]'); without it one row says so. `csomor` ships with the package.
 Run: `.venv/bin/python -m benchmarks bench_city`.
 """
 
@@ -21,55 +23,59 @@ import time
 
 from benchmarks.bench_synthesis_scaling import MEMORY_TARGET_MB, TAU, TIME_LIMIT, run_json_subprocess
 
-SPEC, TOWN = "city5", "city"
+# (row name prefix, spec, town)
+CITIES = (("city", "city5", "city"), ("csomor", "csomor5", "csomor"))
 HORIZONS = (40, None)
 
 
-def _problem():
+def _problem(spec_name: str, town_name: str):
     from trustroute.networks.town import load_town
     from trustroute.participants.driver_model import load_driver_model
     from trustroute.policies.logic.spec import load_spec
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
-    town = load_town(TOWN)
+    town = load_town(town_name)
     driver = load_driver_model()
-    return town, build_pomdp(town, driver), load_spec(SPEC, town, driver.n_trust)
+    return town, build_pomdp(town, driver), load_spec(spec_name, town, driver.n_trust)
 
 
-def _child(horizon: int | None) -> dict:
+def _child(spec_name: str, town_name: str, horizon: int | None) -> dict:
     """Runs in the subprocess: one synthesis, its numbers and the process's peak RSS."""
     import resource
 
     from trustroute.policies.synthesis.belief_synthesis import synthesize
 
-    _, pomdp, spec = _problem()
+    _, pomdp, spec = _problem(spec_name, town_name)
     result = synthesize(pomdp, spec, tau=TAU, time_limit=TIME_LIMIT, horizon=horizon)
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb}
 
 
-def _baseline() -> dict:
+def _baseline(prefix: str, spec_name: str, town_name: str) -> dict:
+    from trustroute.networks.road_lookup import choice_junctions
     from trustroute.policies.evaluation.plain import evaluate
     from trustroute.policies.routing.free import baseline_route, trust_free_policy
 
-    town, pomdp, spec = _problem()
+    town, pomdp, spec = _problem(spec_name, town_name)
     load = os.getloadavg()[0]
     start = time.perf_counter()
     value = evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None)
     seconds = time.perf_counter() - start
     route = baseline_route(town, spec)
-    return {"name": "city.trust_free", "value": value.satisfaction_probability, "unit": "probability",
+    return {"name": f"{prefix}.trust_free", "value": value.satisfaction_probability, "unit": "probability",
             "seconds": seconds, "junctions": len(town.junctions), "roads": len(town.states),
+            "choice_junctions": len(choice_junctions(town)),
             "route_junctions": len(route) - 1, "route_m": town.route_length(route),
             "load_average_1min": load}
 
 
-def _synthesis_row(horizon: int | None, free: float, baseline_seconds: float) -> dict:
+def _synthesis_row(prefix: str, spec_name: str, town_name: str, horizon: int | None, free: float,
+                   baseline_seconds: float) -> dict:
     """One synthesis in a fresh subprocess, against the trust-free value `free`."""
     load = os.getloadavg()[0]
-    out = run_json_subprocess("benchmarks.bench_city", [horizon], TIME_LIMIT * 5)
+    out = run_json_subprocess("benchmarks.bench_city", [spec_name, town_name, horizon], TIME_LIMIT * 5)
     label = "unbounded" if horizon is None else str(horizon)
-    row = {"name": f"city.synthesis.{label}", "value": out.get("seconds"), "unit": "s",
+    row = {"name": f"{prefix}.synthesis.{label}", "value": out.get("seconds"), "unit": "s",
            "horizon": horizon, "load_average_1min": [load, os.getloadavg()[0]], **out,
            "target": f"gap <= {TAU} within {TIME_LIMIT:.0f} s under {MEMORY_TARGET_MB:.0f} MB"}
     if "error" not in out:
@@ -81,16 +87,14 @@ def _synthesis_row(horizon: int | None, free: float, baseline_seconds: float) ->
     return row
 
 
-def run() -> list[dict]:
-    if importlib.util.find_spec("sumo_rl") is None:
-        return [{"name": "city", "error": "needs the optional extra: pip install 'trustroute[cities]'"}]
-    baseline = _baseline()
+def _city_rows(prefix: str, spec_name: str, town_name: str, table: list[str]) -> list[dict]:
+    baseline = _baseline(prefix, spec_name, town_name)
     results = [baseline]
-    table = [f"city ({baseline['junctions']} junctions): trust-free P = {baseline['value']:.6f} "
-             f"({baseline['seconds']:.3f} s)",
-             f"{'H':>9} {'seconds':>8} {'RSS MB':>7} {'L':>9} {'U':>9} target"]
+    table += [f"{prefix} ({baseline['junctions']} junctions, {baseline['choice_junctions']} with a choice): "
+              f"trust-free P = {baseline['value']:.6f} ({baseline['seconds']:.3f} s)",
+              f"{'H':>9} {'seconds':>8} {'RSS MB':>7} {'L':>9} {'U':>9} target"]
     for horizon in HORIZONS:
-        row = _synthesis_row(horizon, baseline["value"], baseline["seconds"])
+        row = _synthesis_row(prefix, spec_name, town_name, horizon, baseline["value"], baseline["seconds"])
         label = "unbounded" if horizon is None else str(horizon)
         if "error" in row:
             table.append(f"{label:>9} error: {row['error'][:60]}")
@@ -98,6 +102,18 @@ def run() -> list[dict]:
             table.append(f"{label:>9} {row['seconds']:8.2f} {row['rss_mb']:7.0f} {row['lower']:9.6f} "
                          f"{row['upper']:9.6f} {'yes' if row['target_met'] else 'no'}")
         results.append(row)
+    return results
+
+
+def run() -> list[dict]:
+    results: list[dict] = []
+    table: list[str] = []
+    for prefix, spec_name, town_name in CITIES:
+        if town_name == "city" and importlib.util.find_spec("sumo_rl") is None:
+            results.append({"name": "city",
+                            "error": "needs the optional extra: pip install 'trustroute[cities]'"})
+            continue
+        results += _city_rows(prefix, spec_name, town_name, table)
     print("\n".join(table), file=sys.stderr, flush=True)
     return results
 

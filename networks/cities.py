@@ -1,4 +1,5 @@
-"""The packaged city: the RESCO Ingolstadt scenario (21 signals) of sumo-rl as the town `city`.
+"""The packaged cities: the RESCO Ingolstadt scenario (21 signals) of sumo-rl as the town `city`, and
+RouteRL's OpenStreetMap net of Csömör as the town `csomor`.
 
 `city` is a packaged town name like the files of networks/data, but its net and its demand are the
 package data of the optional extra `cities` (`pip install 'trustroute[cities]'`: sumo-rl, which
@@ -10,15 +11,26 @@ the scenario's routes: the folder's name holds a hash of the net's and the route
 the import's options and of the importer's source, so the same scenario is imported once and a
 changed one (or a changed importer) gives another town.
 The routes are the packaged route file `city` (ROUTES: `trustroute run --routes city`, study key
-`routes = ["city"]`). Licence and provenance of the data: docs/cities.md.
+`routes = ["city"]`).
+
+`csomor` ships with the package: the plain-XML description of the net (networks/data/csomor/,
+gzipped). On first use netconvert (the eclipse-sumo wheel's) builds the net from it and the net is
+imported by the same rule, into a cache folder whose name holds a hash of the plain files' content,
+the netconvert command, the SUMO version and the import's options. It has no demand of its own:
+background traffic comes from randomTrips.py (`--background`). Licence and provenance of the data:
+docs/cities.md and networks/data/csomor/README.md.
 """
 
 from __future__ import annotations
 
+import gzip
 import hashlib
+import importlib.metadata
 import importlib.util
 import shutil
+import subprocess
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 from trustroute.core.cache import TOWNS as TOWNS_CACHE
@@ -62,28 +74,34 @@ def scenario_files() -> tuple[Path, Path]:
     return net, routes
 
 
+def built_folder(stem: str, key: str, town_file: str, build: Callable[[Path], None]) -> Path:
+    """The cache folder `towns/<stem>-<key[:16]>` holding `town_file`, made by `build(folder)` when
+    missing."""
+    folder = cache_dir(TOWNS_CACHE) / f"{stem}-{key[:16]}"
+    if (folder / town_file).is_file():
+        return folder
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    # Built in a folder of its own and renamed into place: a concurrent build (study workers) or an
+    # interrupted one never leaves a half-written town where a reader finds it.
+    work = Path(tempfile.mkdtemp(prefix=f".{stem}-", dir=folder.parent))
+    try:
+        build(work)
+        try:
+            work.rename(folder)
+        except OSError:
+            if not (folder / town_file).is_file():   # not another process's finished build
+                raise
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return folder
+
+
 def city_folder() -> Path:
     """The cache folder holding the city's town, net and routes, imported when missing."""
     net, routes = scenario_files()
     key = hashlib.sha256(f"{IMPORT_OPTIONS}\n{importer_fingerprint()}\n{file_sha256(net)}\n"
                          f"{file_sha256(routes)}".encode()).hexdigest()
-    folder = cache_dir(TOWNS_CACHE) / f"{SCENARIO}-{key[:16]}"
-    if (folder / CITY_TOWN_FILE).is_file():
-        return folder
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    # Built in a folder of its own and renamed into place: a concurrent build (study workers) or an
-    # interrupted one never leaves a half-written town where a reader finds it.
-    work = Path(tempfile.mkdtemp(prefix=f".{SCENARIO}-", dir=folder.parent))
-    try:
-        _import_city(net, routes, work)
-        try:
-            work.rename(folder)
-        except OSError:
-            if not (folder / CITY_TOWN_FILE).is_file():   # not another process's finished build
-                raise
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
-    return folder
+    return built_folder(SCENARIO, key, CITY_TOWN_FILE, lambda work: _import_city(net, routes, work))
 
 
 def _import_city(net: Path, routes: Path, folder: Path) -> None:
@@ -105,6 +123,70 @@ def city_town_path() -> Path:
 def city_routes_path() -> Path:
     """The scenario's own demand on the city's net: 4,283 passenger-car trips over one hour."""
     return city_folder() / f"{SCENARIO}.rou.xml"
+
+
+CSOMOR = "csomor"
+CSOMOR_DATA = Path(__file__).resolve().parent / "data" / "csomor"
+CSOMOR_TOWN_FILE = "csomor.json"
+CSOMOR_NET_FILE = "csomor.net.xml"
+# netconvert's option for each plain-XML file of the net, in the order of the command.
+CSOMOR_PLAIN = {"nod": "-n", "edg": "-e", "con": "-x", "tll": "-i", "typ": "-t"}
+
+
+def csomor_plain_files() -> dict[str, Path]:
+    """The packaged plain-XML files of Csömör's net by kind ("nod", ...), gzipped."""
+    return {kind: CSOMOR_DATA / f"csomor.{kind}.xml.gz" for kind in CSOMOR_PLAIN}
+
+
+def csomor_netconvert_command(binary: str, plain: dict[str, Path], output: Path) -> list[str]:
+    """netconvert's command building the net from the unpacked plain files."""
+    command = [binary]
+    for kind, option in CSOMOR_PLAIN.items():
+        command += [option, str(plain[kind])]
+    return [*command, "-o", str(output)]
+
+
+def csomor_folder() -> Path:
+    """The cache folder holding Csömör's town and net, built and imported when missing."""
+    contents = [hashlib.sha256(gzip.decompress(path.read_bytes())).hexdigest()
+                for path in csomor_plain_files().values()]
+    plain_names = {kind: Path(kind) for kind in CSOMOR_PLAIN}
+    recipe = " ".join(csomor_netconvert_command("netconvert", plain_names, Path("net")))
+    sumo_version = importlib.metadata.version("eclipse-sumo")
+    parts = [IMPORT_OPTIONS, importer_fingerprint(), recipe, sumo_version, *contents]
+    key = hashlib.sha256("\n".join(parts).encode()).hexdigest()
+    return built_folder(CSOMOR, key, CSOMOR_TOWN_FILE, _build_csomor)
+
+
+def _build_csomor(folder: Path) -> None:
+    import numpy as np
+
+    from trustroute.networks.osm_convert import GENERATED_HEADER
+    from trustroute.networks.sumo_net import find_binary
+    from trustroute.networks.town_import import import_town
+
+    plain = {}
+    for kind, packed in csomor_plain_files().items():
+        plain[kind] = folder / packed.name.removesuffix(".gz")
+        plain[kind].write_bytes(gzip.decompress(packed.read_bytes()))
+    net = folder / CSOMOR_NET_FILE
+    result = subprocess.run(csomor_netconvert_command(find_binary("netconvert"), plain, net),
+                            capture_output=True, text=True, check=False)
+    if result.returncode != 0 or not net.is_file():
+        last = (result.stderr.strip().splitlines() or ["no output"])[-1]
+        raise InputError(str(CSOMOR_DATA), "", f"netconvert could not build the net of Csömör ({last})",
+                         "reinstall trustroute and the pinned eclipse-sumo wheel (pip install -e .)")
+    for path in plain.values():
+        path.unlink()
+    # Without netconvert's dated header: the same plain files give the same net (and content hash).
+    net.write_bytes(GENERATED_HEADER.sub(b"", net.read_bytes(), count=1))
+    import_town(net, folder / CSOMOR_TOWN_FILE, rng=np.random.default_rng(CITY_INCIDENT_SEED),
+                incident_seed=CITY_INCIDENT_SEED)
+
+
+def csomor_town_path() -> Path:
+    """The town file of `csomor` (built on first use)."""
+    return csomor_folder() / CSOMOR_TOWN_FILE
 
 
 # Route files of background traffic by name: the city's demand (networks/data ships none).

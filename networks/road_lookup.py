@@ -138,3 +138,14 @@ def waypoint_legs(town: Town, start: str,
         previous_name, previous = name, roads
     return legs
 
+
+
+def choice_junctions(town: Town) -> set[str]:
+    """The junctions where a car arriving on some road has two or more moves other than the U-turn
+    (the road back to the junction it came from): the decision junctions of the model."""
+    found = set()
+    for directed_road in town.states:
+        came_from, at = split_road(directed_road)
+        if sum(1 for w in town.neighbours[at] if w != came_from) >= 2:
+            found.add(at)
+    return found

@@ -26,6 +26,9 @@ def test_wheel_has_one_top_level_package(tmp_path):
     assert top == {"trustroute", f"{wheel.name.split('-')[0]}-{wheel.name.split('-')[1]}.dist-info"}
     # The subpackages and their data ship inside the one namespace.
     for path in ("trustroute/harness/simulation/gym_env.py", "trustroute/networks/data/town01_carla.json",
+                 "trustroute/networks/data/csomor/csomor.edg.xml.gz",
+                 "trustroute/networks/data/csomor/README.md",
+                 "trustroute/networks/data/csomor/LICENSE-routerl.txt",
                  "trustroute/participants/data/driver_model.json", "trustroute/core/specs/phi1.toml",
                  "trustroute/harness/live/pages/station.html", "trustroute/harness/live/pages/station.js"):
         assert path in names

@@ -25,7 +25,7 @@ def outside_the_repository(tmp_path, monkeypatch):
 
 def test_the_packaged_names():
     assert {"phi1", "phi2", "phi1_strict", "phi2_strict", "phi1_trust"} <= set(SPECS.names())
-    assert TOWNS.names() == ["city", "pentagon", "town01_carla"]
+    assert TOWNS.names() == ["city", "csomor", "pentagon", "town01_carla"]
     assert DRIVER_MODELS.names() == ["driver_model", "driver_model_performance"]
     assert POPULATIONS.names() == ["driver_population_real", "driver_population_three_types"]
     assert SPECS.path("phi1.toml") == SPECS.path("phi1") and SPECS.path("specs/phi1.toml") is None

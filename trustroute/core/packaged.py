@@ -7,8 +7,9 @@ stem. Each kind is a `PackagedKind`, declared by the lowest layer that owns its 
 here (`trustroute/core/specs/`), the towns in networks/town.py (`networks/data/`), the driver
 models and populations in participants (`participants/data/`). A kind may also name inputs that
 are built on first use rather than shipped (`built`: the town `city`, imported from an optional
-extra's package data, networks/cities.py). Hints list the packaged names, which exist wherever the
-package is installed (a repository path such as specs/phi1.toml does not).
+extra's package data, and the town `csomor`, built from packaged plain XML; networks/cities.py).
+Hints list the packaged names, which exist wherever the package is installed (a repository path
+such as specs/phi1.toml does not).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ class PackagedKind:
     `built` names, each with the function that builds its file on first use and returns its path
     (or raises InputError naming the fix, e.g. an optional extra to install). `built` is filled by
     the module that builds them when that module sits above the kind's owner (networks/__init__.py
-    registers the town `city`)."""
+    registers the towns `city` and `csomor`)."""
 
     what: str          # "spec", "town", "driver model", "driver population"
     folder: Path
@@ -78,7 +79,7 @@ def packaged_spec_path(name: str) -> Path | None:
 
 # The packaged specs written for a packaged town other than the default: their waypoints name
 # that town's junctions.
-SPEC_TOWNS: dict[str, str] = {"city5": "city"}
+SPEC_TOWNS: dict[str, str] = {"city5": "city", "csomor5": "csomor"}
 
 
 def packaged_spec_names(town: str | None = None) -> list[str]:
