@@ -17,7 +17,9 @@ label then takes c·b̂ (forward error γ_n Σ|c_i b̂_i|). So whenever
 
 every implementation of that filter step and of that dot product, in any summation order (batch
 or single row, einsum or BLAS), and exact arithmetic on the same previous belief, read the same
-label. Inside the margin the label is "either" (`belief_margins`): synthesis branches both ways.
+label. `belief_margins` marks beliefs inside that margin (the spec linter's `threshold-hit`).
+Synthesis, evaluation and the vehicle read labels on the exact filter's belief along the whole
+history instead, deciding them exactly where floats cannot (policies/belief/exact_labels.py).
 
 This machine's strict reading inside the margin is made the same for every caller: c·b is summed
 in trust-level order, elementwise over the batch (`atom_values`). A BLAS product `beliefs @ coeffs`

@@ -62,10 +62,10 @@ class BeliefGraph:
         self.expanded_by_level: list[list[int]] = []
         self.free_by_level: list[dict[int, None]] = []    # FREE nodes per level (insertion order)
         self.free_version: list[int] = []
-        # Labels at thresholds: an outcome whose belief is within the rounding margin of a belief
-        # atom's hyperplane has one child per DFA state it could lead to. child/prob hold the one
-        # the strict label reads; the others are "alternates" (parent, slot, outcome, child),
-        # grouped by the parent's level. L takes the minimum over them, U the maximum.
+        # Labels at thresholds: an outcome of a mixed node whose label floats cannot decide has
+        # one child per DFA state it could lead to. child/prob hold the one the float label reads;
+        # the others are "alternates" (parent, slot, outcome, child), grouped by the parent's
+        # level. L takes the minimum over them, U the maximum.
         self.alternates: dict[int, list[np.ndarray]] = {}
         self._alternates_joined: dict[int, tuple[np.ndarray, ...]] = {}
 

@@ -50,7 +50,6 @@ from typing import TypeAlias
 
 import numpy as np
 
-from trustroute.policies.belief.exact_labels import exact_labels
 from trustroute.policies.belief.product_mdp import ProductTables, build_product
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
@@ -336,11 +335,7 @@ def _check_choice(what: str, value: str, choices: tuple[str, ...]) -> None:
 def _root_dfa_states(tables: ProductTables) -> tuple[int, ...]:
     """The DFA state position 0 is read as, its belief labels decided exactly on the prior
     (policies/belief/exact_labels.py)."""
-    b0 = np.asarray(tables.pomdp.initial_belief, dtype=float)[None, :]
-    labels = exact_labels(tables.pomdp, tables.labeller)
-    q0 = labels.step(np.array([tables.dfa.initial]), np.array([tables.start]), b0,
-                     np.zeros(1, dtype=np.int64))
-    return (int(q0[0]),)
+    return (tables.initial_q,)
 
 
 def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
