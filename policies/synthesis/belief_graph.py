@@ -42,8 +42,8 @@ class BeliefGraph:
         # U, L and the strict value as rows of one array, so that a backup gathers all three at once
         self.values = np.zeros((3, capacity))
         self.upper, self.lower = self.values[0], self.values[1]
-        # value of the L-greedy choice with every label read strictly, as this machine's labeller
-        # does (no alternates): the tie-breaker among actions of equal L, and a reported figure.
+        # value of the L-greedy choice with every label read as the vehicle reads it (no
+        # alternates): the tie-breaker among actions of equal L, and a reported figure.
         self.strict = self.values[2]
         self.kind = np.zeros(capacity, dtype=np.int8)
         # Bounds on the trust-free completion's value from the node (completion_value.py): its

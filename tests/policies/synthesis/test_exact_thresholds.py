@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import pytest
 
-from tests.policies.synthesis.threshold_cases import random_case, run_case
+from tests.policies.synthesis.threshold_cases import brute_force, random_case, run_case
+from trustroute.policies.synthesis.exact_search import exact_optimum
 
 TAU = 1e-3
 TOLERANCE = 1e-9
 FAST_SEEDS = range(1000, 1012)
-SWEEP_SEEDS = range(100)
+SWEEP_SEEDS = range(200)
 
 
 @pytest.mark.parametrize("seed", FAST_SEEDS)
@@ -26,6 +27,15 @@ def test_a_threshold_case_reaches_tau_and_is_sound(driver, seed):
     assert outcome.sound(TOLERANCE), outcome
     assert outcome.policy_worth_lower(TOLERANCE), outcome
     assert outcome.reaches(TAU), outcome
+
+
+@pytest.mark.parametrize("seed", FAST_SEEDS)
+def test_the_exhaustive_search_equals_the_exact_rational_brute_force(driver, seed):
+    """policies/synthesis/exact_search.py (float beliefs, labels decided by exact_labels) and the
+    test's own integer brute force agree on every threshold case."""
+    case = random_case(seed, driver)
+    assert exact_optimum(case.pomdp, case.spec, case.horizon) == pytest.approx(
+        brute_force(case.pomdp, case.spec, case.horizon), abs=TOLERANCE)
 
 
 @pytest.mark.slow

@@ -4,12 +4,14 @@ A case: a random small town (4-8 junctions), the default or a random driver mode
 belief atom's offset is a value the float filter reaches (c·b̂ at a belief along a random
 observation sequence, a sum of prior entries, or k/7 under the uniform prior), exactly or one ulp
 either side, and a horizon H = 2-8. `brute_force` is the optimum of the exact filter written here on
-its own: the model's numbers as the decimals they print as, the prior normalised, beliefs and
-observation probabilities as Fractions, every belief label decided exactly; values in floats.
+its own: the model's numbers as the decimals they print as, the prior normalised, beliefs as
+integer-scaled vectors and observation probabilities as exact ratios, every belief label decided
+exactly; values in floats.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -140,14 +142,24 @@ def brute_force_states(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> int:
     return total
 
 
+def _scaled(values: list[Fraction]) -> tuple[list[int], int]:
+    """Integers and one denominator: values[i] = integers[i] / denominator."""
+    denominator = math.lcm(*(v.denominator for v in values))
+    return [int(v * denominator) for v in values], denominator
+
+
 def brute_force(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> float:
-    """max over policies of P(spec accepted within `horizon` junctions) on the exact filter."""
+    """max over policies of P(spec accepted within `horizon` junctions) on the exact filter.
+
+    Beliefs are integer vectors (the exact belief times a positive scale, divided by the gcd of
+    their entries: one representative per belief), updated by the integer-scaled decimal matrices;
+    a label c·b > offset is compared in integers; probabilities are exact ratios, then floats."""
     driver, town = pomdp.driver, pomdp.town
     n = pomdp.n_trust
     compiled = compile_spec(spec, town)
     labeller, dfa = compiled.labeller, compiled.dfa
-    coeffs = [[_decimal(c) for c in labeller.coeffs[:, j]] for j in range(labeller.coeffs.shape[1])]
-    offsets = [_decimal(o) for o in labeller.offsets]
+    atoms = [(_scaled([_decimal(c) for c in labeller.coeffs[:, j]]), _decimal(offset))
+             for j, offset in enumerate(labeller.offsets)]
     outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
     likelihood, update = {}, {}
     for i in range(len(driver.incident_types)):
@@ -155,23 +167,26 @@ def brute_force(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> float:
             take = [_decimal(t) for t in driver.takeover_probability[i]]
             fail = [_decimal(f) for f in driver.failure_probability[i]]
             like = [(take[k] if h else 1 - take[k]) * (fail[k] if e else 1 - fail[k]) for k in range(n)]
-            likelihood[i, h, e] = like
-            update[i, h, e] = [[like[k] * _decimal(driver.trust_transition[i, h, e, k, m]) for m in range(n)]
-                               for k in range(n)]
-    prior = [_decimal(b) for b in driver.initial_belief]
-    prior = tuple(b / sum(prior) for b in prior)
+            likelihood[i, h, e] = _scaled(like)
+            flat, _ = _scaled([like[k] * _decimal(driver.trust_transition[i, h, e, k, m])
+                               for k in range(n) for m in range(n)])
+            update[i, h, e] = [flat[k * n:(k + 1) * n] for k in range(n)]
+    prior, _ = _scaled([_decimal(b) for b in driver.initial_belief])
     successors = [[town.state_index(s) for s in town.successors(road)] for road in town.states]
     dummy = np.zeros((1, n))
 
-    def step(q: int, x: int, belief: tuple[Fraction, ...]) -> int:
+    def step(q: int, x: int, belief: tuple[int, ...]) -> int:
         valuation = labeller.valuations(np.array([x]), dummy)
+        mass = sum(belief)
         for j, column in enumerate(labeller.belief_columns.tolist()):
-            valuation[0, column] = sum(c * b for c, b in zip(coeffs[j], belief, strict=True)) > offsets[j]
+            (coeffs, scale), offset = atoms[j]
+            value = sum(c * b for c, b in zip(coeffs, belief, strict=True))
+            valuation[0, column] = value * offset.denominator > offset.numerator * mass * scale
         return int(dfa.step_many(np.array([q]), valuation)[0])
 
     memo: dict = {}
 
-    def value(t: int, x: int, q: int, belief: tuple[Fraction, ...]) -> float:
+    def value(t: int, x: int, q: int, belief: tuple[int, ...]) -> float:
         if compiled.accepting[q]:
             return 1.0
         if compiled.rejecting[q] or t == horizon:
@@ -180,24 +195,28 @@ def brute_force(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> float:
         if key in memo:
             return memo[key]
         best = 0.0
+        mass = sum(belief)
         for x2 in successors[x]:
             i = int(pomdp.road_incident[x2])
             total = 0.0
             for h, e in outcomes:
-                probability = sum(b * L for b, L in zip(belief, likelihood[i, h, e], strict=True))
-                if probability == 0:
+                like, scale = likelihood[i, h, e]
+                weight = sum(b * w for b, w in zip(belief, like, strict=True))
+                if weight == 0:
                     continue
                 matrix = update[i, h, e]
-                image = [sum(belief[k] * matrix[k][m] for k in range(n)) for m in range(n)]
-                mass = sum(image)
-                posterior = tuple(v / mass for v in image)
-                total += float(probability) * value(t + 1, x2, step(q, x2, posterior), posterior)
+                image = [sum(belief[k] * matrix[k][m] for k in range(n) if belief[k]) for m in range(n)]
+                common = math.gcd(*image)
+                posterior = tuple(v // common for v in image)
+                probability = float(Fraction(weight, mass * scale))
+                total += probability * value(t + 1, x2, step(q, x2, posterior), posterior)
             best = max(best, total)
         memo[key] = best
         return best
 
     start = town.state_index(spec.start)
-    return value(0, start, step(dfa.initial, start, prior), prior)
+    root = tuple(prior)
+    return value(0, start, step(dfa.initial, start, root), root)
 
 
 @dataclass(frozen=True)
