@@ -373,8 +373,9 @@ class HiddenDFA:
         """The DFA state after position (x, true trust level, the AV's belief) from q."""
         tracker = self.tracker
         theta = tracker.setup.driver_model.trust_levels.index(int(trust_level))
+        truth, _ = tracker._labels.truth(tracker.belief[None], np.array([tracker.word]))
         return int(tracker._compiled.labeller.step(np.array([q]), np.array([x]), tracker.belief[None],
-                                                   np.array([theta]))[0])
+                                                   np.array([theta]), belief_truth=truth)[0])
 
     def step(self, road: str, incident: int, h: int, e: int, trust_after: int) -> int:
         """J after driving `road` and observing (incident, h, e); the told and the true DFA state."""
@@ -388,7 +389,8 @@ class HiddenDFA:
         if probability[0] > 0:
             self.posterior = posterior[0]
             self.joint = self.filter.update(self.joint[None], posterior, tracker.belief[None], x, inc,
-                                            h, e, probability)[0]
+                                            h, e, probability, np.array([tracker.word]),
+                                            tracker._labels)[0]
         # else: an observation the AV's model deems impossible: J stays (as the belief does).
         self.told = int(self.filter.likeliest_q(self.joint[None])[0])
         self.true_state = self.true_step(self.true_state, int(x[0]), trust_after)

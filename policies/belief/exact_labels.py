@@ -220,10 +220,11 @@ class ExactLabels:
         beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
         words = np.asarray(words, dtype=np.int64)
         labeller = self.labeller
+        if not labeller.belief_columns.size or beliefs.shape[0] == 0:
+            empty = np.zeros((beliefs.shape[0], labeller.belief_columns.size), dtype=bool)
+            return empty, empty.copy()
         value = atom_values(beliefs, labeller.coeffs)
         truth = value > labeller.offsets
-        if not labeller.belief_columns.size or beliefs.shape[0] == 0:
-            return truth, np.zeros_like(truth)
         close = np.abs(value - labeller.offsets) <= self.margins(beliefs, words)
         either = np.zeros_like(truth)
         if not close.any():

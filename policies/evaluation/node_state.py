@@ -192,17 +192,19 @@ def observed_root(model: Observation) -> ObservedState:
 
 @dataclass(frozen=True, eq=False)
 class HiddenState:
-    """Rows of (J(θ, q), true posterior, AV belief) under one joint filter and belief rule."""
+    """Rows of (J(θ, q), true posterior, AV belief, its word) under one joint filter and belief
+    rule."""
 
     filter: JointFilter
     belief_rule: BeliefRule
     joint: np.ndarray
     posterior: np.ndarray
     belief: np.ndarray
+    word: np.ndarray
 
     def take(self, rows: np.ndarray | slice) -> HiddenState:
         return replace(self, joint=self.joint[rows], posterior=self.posterior[rows],
-                       belief=self.belief[rows])
+                       belief=self.belief[rows], word=self.word[rows])
 
     def masses(self, rows: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.filter.masses(self.joint if rows is None else self.joint[rows])
@@ -224,20 +226,24 @@ class HiddenState:
         new_av = (new_posterior if self.belief_rule == "bayes"
                   else pomdp.belief_update(self.belief, incident, h, e, rule=self.belief_rule)[0])
         possible = p_obs > 0
+        labels = self.filter.labels(self.belief_rule)
+        new_word = labels.filter.extend(self.word[possible], symbol_code(incident[possible], h, e))
         new_joint = self.filter.update(self.joint[possible], new_posterior[possible], new_av[possible],
-                                       road[possible], incident[possible], h, e, p_obs[possible])
+                                       road[possible], incident[possible], h, e, p_obs[possible],
+                                       new_word, labels)
         return p_obs, replace(self, joint=new_joint, posterior=new_posterior[possible],
-                              belief=new_av[possible])
+                              belief=new_av[possible], word=new_word)
 
     def joined(self, parts: list[HiddenState], road: np.ndarray) -> HiddenState:
-        joint, posterior, belief = (np.concatenate([getattr(part, name) for part in parts])
-                                    for name in ("joint", "posterior", "belief"))
-        return replace(self, joint=joint, posterior=posterior, belief=belief)
+        joint, posterior, belief, word = (np.concatenate([getattr(part, name) for part in parts])
+                                          for name in ("joint", "posterior", "belief", "word"))
+        return replace(self, joint=joint, posterior=posterior, belief=belief, word=word)
 
     def merge_columns(self) -> np.ndarray:
-        """Columns of belief/trust_state_filter.distinct_nodes after the road: J, posterior, b."""
-        return np.concatenate([self.joint.reshape(len(self.joint), -1), self.posterior, self.belief],
-                              axis=1)
+        """Columns of belief/trust_state_filter.distinct_nodes after the road: J, posterior, b,
+        its word."""
+        return np.concatenate([self.joint.reshape(len(self.joint), -1), self.posterior, self.belief,
+                               self.word[:, None].astype(float)], axis=1)
 
 
 def hidden_root(joint_filter: JointFilter, start: int, belief_rule: BeliefRule) -> HiddenState:
@@ -245,4 +251,4 @@ def hidden_root(joint_filter: JointFilter, start: int, belief_rule: BeliefRule) 
     belief = np.asarray(joint_filter.pomdp.initial_belief, dtype=float)[None, :].copy()
     return HiddenState(filter=joint_filter, belief_rule=belief_rule,
                        joint=joint_filter.initial(start, belief[0]), posterior=belief.copy(),
-                       belief=belief.copy())
+                       belief=belief.copy(), word=np.zeros(1, dtype=np.int64))
