@@ -143,14 +143,31 @@ def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first, inverse.ravel()
 
 
+def split_by_words(first: np.ndarray, inverse: np.ndarray, words: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(first, inverse) of `distinct_rows` with the rows whose word (exact_labels.ExactFilter)
+    differs from their group's first row's moved to groups of their own, numbered after the others
+    (so that, where no group mixes words, the grouping is distinct_rows' own, bit for bit)."""
+    words = np.asarray(words, dtype=np.int64)
+    clash = np.flatnonzero(words != words[first][inverse])
+    if clash.size == 0:
+        return first, inverse
+    keys = np.stack([inverse[clash], words[clash]], axis=1)
+    _, head, group = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.copy()
+    inverse[clash] = first.size + group.ravel()
+    return np.concatenate([first, clash[head]]), inverse
+
+
 def distinct_nodes(x: np.ndarray, joint: np.ndarray, posterior: np.ndarray,
                    belief: np.ndarray, words: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """distinct_rows of belief-tree nodes by (road, J, posterior, AV belief, its word): nodes
-    equal in all five have the same decisions and futures, so the searches and evaluations merge
-    them."""
-    return distinct_rows(np.concatenate([np.asarray(x)[:, None].astype(float),
-                                         joint.reshape(len(x), -1), posterior, belief,
-                                         np.asarray(words)[:, None].astype(float)], axis=1))
+    """distinct_rows of belief-tree nodes by (road, J, posterior, AV belief), split by the AV
+    belief's word: nodes equal in all five have the same decisions and futures, so the searches
+    and evaluations merge them."""
+    first, inverse = distinct_rows(np.concatenate([np.asarray(x)[:, None].astype(float),
+                                                   joint.reshape(len(x), -1), posterior, belief],
+                                                  axis=1))
+    return split_by_words(first, inverse, words)
 
 
 def joint_filter(pomdp: TrustPOMDP, dfa: DFA, labeller: Labeller) -> JointFilter:

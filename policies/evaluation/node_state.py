@@ -9,7 +9,7 @@ observed or hidden; only the node state differs:
   true driver other than the AV's model and a second reading of the spec (`Observation.truth`,
   `Observation.reference`, docs/driver_types.md). Belief labels are those of the exact filter
   (policies/belief/exact_labels.py): a node carries the word of its AV belief's history, and rows
-  merge only with rows of the same word.
+  merge only with rows of the same word (trust_state_filter.split_by_words).
 - `HiddenState`: the spec tests the hidden trust, so q is hidden too; a node carries the exact
   joint law J(θ, q) of policies/belief/trust_state_filter.py besides the posterior and b.
 
@@ -64,9 +64,13 @@ class NodeState(Protocol):
     def joined(self, parts: list[Self], road: np.ndarray) -> Self:
         """The children of one level in one state (`parts` in order; `road` their roads)."""
 
+    @property
+    def word(self) -> np.ndarray:
+        """[n] the AV belief's word (policies/belief/exact_labels.py): rows merge only within one."""
+
     def merge_columns(self) -> np.ndarray:
-        """[n, width] float columns: rows equal in these (and road, and the policy's route
-        memory) have equal futures."""
+        """[n, width] float columns: rows equal in these (and road, the policy's route memory and
+        the word) have equal futures."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,8 +173,7 @@ class ObservedState:
 
     def merge_columns(self) -> np.ndarray:
         return np.concatenate([self.q[:, None].astype(float), self.belief, self.posterior,
-                               self.q_ref[:, None].astype(float), self.ref_belief,
-                               self.word[:, None].astype(float)], axis=1)
+                               self.q_ref[:, None].astype(float), self.ref_belief], axis=1)
 
 
 def observed_root(model: Observation) -> ObservedState:
@@ -240,10 +243,9 @@ class HiddenState:
         return replace(self, joint=joint, posterior=posterior, belief=belief, word=word)
 
     def merge_columns(self) -> np.ndarray:
-        """Columns of belief/trust_state_filter.distinct_nodes after the road: J, posterior, b,
-        its word."""
-        return np.concatenate([self.joint.reshape(len(self.joint), -1), self.posterior, self.belief,
-                               self.word[:, None].astype(float)], axis=1)
+        """Columns of belief/trust_state_filter.distinct_nodes after the road: J, posterior, b."""
+        return np.concatenate([self.joint.reshape(len(self.joint), -1), self.posterior, self.belief],
+                              axis=1)
 
 
 def hidden_root(joint_filter: JointFilter, start: int, belief_rule: BeliefRule) -> HiddenState:

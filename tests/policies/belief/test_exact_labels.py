@@ -115,3 +115,17 @@ def test_a_node_of_several_words_branches_where_floats_cannot_decide(town, drive
     b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
     truth, either = labels.truth(b0, np.zeros(1, dtype=np.int64), undecidable=np.array([True]))
     assert either.all() and labels.exact_decisions == 0
+
+
+def test_rows_merge_only_within_one_word_and_keep_distinct_rows_grouping_otherwise():
+    from trustroute.policies.belief.trust_state_filter import distinct_rows, split_by_words
+
+    rows = np.array([[0.5, 0.5], [0.25, 0.75], [0.5, 0.5], [0.25, 0.75], [0.5, 0.5]])
+    first, inverse = distinct_rows(rows)
+    same = split_by_words(first, inverse, np.array([3, 1, 3, 1, 3]))
+    assert np.array_equal(same[0], first) and np.array_equal(same[1], inverse)
+    split_first, split_inverse = split_by_words(first, inverse, np.array([3, 1, 4, 1, 3]))
+    assert np.array_equal(split_first[:first.size], first)          # the groups before, in order
+    assert split_inverse[0] == split_inverse[4] != split_inverse[2]
+    assert split_inverse[1] == split_inverse[3] == inverse[1]
+    assert split_first[split_inverse[2]] == 2
