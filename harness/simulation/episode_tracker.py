@@ -9,7 +9,9 @@ same the exact evaluation uses:
 - at every position the rules end the episode ("accepted", "rejected", "destination", "cap")
   or ask the policy (with the fallback) for the next junction;
 - after driving a road the AV observes (incident, takeover, performance), applies its belief
-  filter (setup.belief_rule) and steps the DFA on (road, new belief).
+  filter (setup.belief_rule) and steps the DFA on (road, new belief), belief labels decided
+  exactly on the history's word where floats cannot decide them, as synthesis and `evaluate` do
+  (policies/belief/exact_labels.py).
 
 With a driver population (docs/driver_types.md) the AV's model is the type-aware one: its belief
 is over (type, trust); the roads table logs its trust marginal (so belief atoms of the analysis
@@ -34,6 +36,7 @@ from trustroute.core.dataset import ROADS_SCHEMA, frame_from_table, table_from_r
 from trustroute.networks.town import NO_INCIDENT, Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.belief.driver_types import trust_marginal, type_belief
+from trustroute.policies.belief.exact_labels import ExactLabels, exact_labels, symbol_code
 from trustroute.policies.belief.problem import DRIVER_TYPES, PLAIN, TRUST_STATE, case_of
 from trustroute.policies.belief.trust_state_filter import joint_filter
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
@@ -74,6 +77,15 @@ class EpisodeModel:
     # initial belief and meet few distinct observation sequences, so most steps repeat; a hit
     # returns the very floats the computation gave (the same seed still gives the same logs).
     updates: dict = field(default_factory=dict, repr=False)
+    exact: dict = field(default_factory=dict, repr=False)    # belief rule -> ExactLabels
+
+    def labels(self, rule: str) -> ExactLabels:
+        """The belief labels of the AV's filter under `rule` (word ids shared by the episodes)."""
+        found = self.exact.get(rule)
+        if found is None:
+            found = self.exact[rule] = exact_labels(self.pomdp, self.compiled.labeller,
+                                                    checked_belief_rule(rule))
+        return found
 
 
 MAX_MEMO = 200_000   # entries per memo before it is cleared (bounded memory in long studies)
@@ -127,6 +139,8 @@ class EpisodeTracker:
         # memo hit then needs no numpy call (cheap while SUMO's stepping keeps the caches cold).
         self._belief_bytes = self.belief.tobytes()
         self._belief_logged = self._logged(self.belief)
+        self._labels = model.labels(self.belief_rule)
+        self.word = 0       # the belief's word (exact_labels.ExactFilter), 0 = the prior's
         # How the AV follows the spec's DFA is the problem's case (policies/belief/problem.py): the
         # state itself when it is observed, else the joint belief J(θ, q) (DFA_TRACKING).
         tracking = DFA_TRACKING[case_of(setup.driver_model, setup.spec)]
@@ -230,13 +244,16 @@ class EpisodeTracker:
         if entry is None:
             posterior, _ = self._pomdp.belief_update(before, incident_index, h, e, rule=self.belief_rule)
             after = posterior[0]
-            if not after.sum() > 0:
+            possible = bool(after.sum() > 0)
+            if not possible:
                 # An observation the AV's model deems impossible: keep the prior rather than a zero vector.
                 after = before.copy()
             after.setflags(write=False)
-            entry = _memo_put(self._memo, key, (after, after.tobytes(), self._logged(after)))
-        after, self._belief_bytes, self._belief_logged = entry
+            entry = _memo_put(self._memo, key, (after, after.tobytes(), self._logged(after), possible))
+        after, self._belief_bytes, self._belief_logged, possible = entry
         self.belief = after
+        if possible:
+            self.word = self._labels.filter.extend_one(self.word, int(symbol_code(incident_index, h, e)))
         self.dfa_state = self._dfa.step(road, incident_index, h, e, int(trust_after))
         self.route.append(road)
         self._chosen = None
@@ -306,7 +323,10 @@ class ObservedDFA:
         key = ("initial", tracker._belief_bytes)
         state = tracker._memo.get(key)
         if state is None:
-            state = _memo_put(tracker._memo, key, tracker._compiled.initial_state(tracker.belief))
+            compiled = tracker._compiled
+            state = _memo_put(tracker._memo, key, int(tracker._labels.step(
+                np.array([compiled.dfa.initial]), np.array([compiled.start]), tracker.belief[None],
+                np.zeros(1, dtype=np.int64))[0]))
         self.told = state
 
     def context_joint(self) -> None:
@@ -314,11 +334,13 @@ class ObservedDFA:
 
     def step(self, road: str, incident: int, h: int, e: int, trust_after: int) -> int:
         tracker = self.tracker
-        key = ("dfa", self.told, road, tracker._belief_bytes)
+        key = ("dfa", self.told, road, tracker._belief_bytes, tracker.word, tracker.belief_rule)
         state = tracker._memo.get(key)
         if state is None:
-            state = _memo_put(tracker._memo, key,
-                              tracker._compiled.step_road(self.told, road, tracker.belief))
+            x = tracker._compiled.town.state_index(road)
+            state = _memo_put(tracker._memo, key, int(tracker._labels.step(
+                np.array([self.told]), np.array([x]), tracker.belief[None],
+                np.array([tracker.word]))[0]))
         self.told = state
         return state
 
@@ -351,8 +373,9 @@ class HiddenDFA:
         """The DFA state after position (x, true trust level, the AV's belief) from q."""
         tracker = self.tracker
         theta = tracker.setup.driver_model.trust_levels.index(int(trust_level))
+        truth, _ = tracker._labels.truth(tracker.belief[None], np.array([tracker.word]))
         return int(tracker._compiled.labeller.step(np.array([q]), np.array([x]), tracker.belief[None],
-                                                   np.array([theta]))[0])
+                                                   np.array([theta]), belief_truth=truth)[0])
 
     def step(self, road: str, incident: int, h: int, e: int, trust_after: int) -> int:
         """J after driving `road` and observing (incident, h, e); the told and the true DFA state."""
@@ -366,7 +389,8 @@ class HiddenDFA:
         if probability[0] > 0:
             self.posterior = posterior[0]
             self.joint = self.filter.update(self.joint[None], posterior, tracker.belief[None], x, inc,
-                                            h, e, probability)[0]
+                                            h, e, probability, np.array([tracker.word]),
+                                            tracker._labels)[0]
         # else: an observation the AV's model deems impossible: J stays (as the belief does).
         self.told = int(self.filter.likeliest_q(self.joint[None])[0])
         self.true_state = self.true_step(self.true_state, int(x[0]), trust_after)

@@ -37,6 +37,7 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_step import DriverTables, draw_initial_trust, draw_step, driver_tables
 from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.belief.exact_labels import exact_labels, symbol_code
 from trustroute.policies.belief.problem import dfa_is_hidden
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
@@ -233,7 +234,11 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
     theta = draw_initial_trust(sampled.drivers, index, rng)
     road = np.full(count, town.state_index(sampled.start), dtype=np.int64)
     belief = np.tile(np.asarray(pomdp.initial_belief, dtype=float), (count, 1))
-    q = compiled.initial_states(belief)
+    # belief labels as the tracker reads them (policies/belief/exact_labels.py): per episode the
+    # word of its belief's history
+    labels = exact_labels(pomdp, compiled.labeller, sampled.belief_rule)
+    word = np.zeros(count, dtype=np.int64)
+    q = np.asarray(labels.step(np.full(count, compiled.dfa.initial), road, belief, word), dtype=np.int64)
     routes: list[tuple[str, ...]] = [(sampled.start,)]
     children: dict[tuple[int, int], int] = {}
     route_id = np.zeros(count, dtype=np.int64)
@@ -282,7 +287,9 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
         impossible = ~(posterior.sum(axis=1) > 0)
         posterior[impossible] = belief[movers][impossible]
         belief[movers] = posterior
-        q[movers] = compiled.step(q[movers], x2, posterior)
+        extended = labels.filter.extend(word[movers], symbol_code(inc_av, h, e))
+        word[movers] = np.where(impossible, word[movers], extended)
+        q[movers] = labels.step(q[movers], x2, posterior, word[movers])
         road[movers] = x2
         junctions[movers] += 1
         takeovers[movers] += h

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.core.errors import InputError
+from trustroute.policies.belief.exact_labels import exact_labels
 from trustroute.policies.belief.problem import dfa_is_hidden
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA
@@ -34,6 +35,7 @@ class ProductTables:
     labeller: Labeller
     start: int                      # road index of position 0
     initial_q: int                  # DFA state after reading position 0 with the initial belief
+    #                                 (its labels decided exactly: policies/belief/exact_labels.py)
     accepting: np.ndarray           # bool [n_q]
     rejecting: np.ndarray           # bool [n_q] (and not accepting)
     successors: np.ndarray          # [n_x, n_actions] road index or -1
@@ -73,7 +75,9 @@ def build_product(pomdp: TrustPOMDP, spec: Spec) -> ProductTables:
         m, pomdp.n_trust)
     offsets = np.array([spec.belief_atoms[a].offset for a in belief_names], dtype=float)
     start = town.state_index(spec.start)
-    initial_q = compiled.initial_state(pomdp.initial_belief)
+    initial_q = int(exact_labels(pomdp, labeller).step(
+        np.array([dfa.initial]), np.array([start]), np.asarray(pomdp.initial_belief, dtype=float)[None, :],
+        np.zeros(1, dtype=np.int64))[0])
     accepting = np.asarray(dfa.accepting, dtype=bool)
     rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
     return ProductTables(pomdp=pomdp, spec=spec, dfa=dfa, labeller=labeller, start=start,

@@ -6,8 +6,9 @@ trust and DFA state given the observations. After driving road x' and seeing o =
 
     J'(θ', q') ∝ Σ_{θ, q} J(θ, q) P(h | θ, inc) P(e | θ, inc) T[inc][h][e](θ, θ') [q' = δ(q, L(x', θ', b'))]
 
-where b' is the AV's belief after the observation (belief atoms read it; under the default
-Bayes rule it is the θ-marginal of J'). The normaliser is the observation probability of
+where b' is the AV's belief after the observation (belief atoms read it, decided exactly on its
+history's word where floats cannot: policies/belief/exact_labels.py; under the default Bayes rule
+it is the θ-marginal of J'). The normaliser is the observation probability of
 policies/model/trust_pomdp.py, and the θ-marginal of J' is that module's posterior: it is taken
 from there (so beliefs are bit for bit the product filter's), and J' carries the q part. Without trust-state
 atoms q is a function of the observations: J' is the posterior times the indicator of the one
@@ -24,9 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.policies.belief.driver_types import base_trust_index
+from trustroute.policies.belief.exact_labels import ExactLabels, exact_labels
 from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.labelling import Labeller
-from trustroute.policies.model.trust_pomdp import TrustPOMDP
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,29 +49,44 @@ class JointFilter:
         population's hidden index is (type, trust): policies/belief/driver_types.py)."""
         return base_trust_index(self.pomdp.driver)
 
+    @functools.cached_property
+    def _exact(self) -> dict[str, ExactLabels]:
+        return {}
+
+    def labels(self, rule: BeliefRule = "bayes") -> ExactLabels:
+        """The belief labels of the AV's filter under `rule`, decided exactly where floats cannot
+        (policies/belief/exact_labels.py); `update`'s words are this filter's."""
+        found = self._exact.get(rule)
+        if found is None:
+            found = self._exact[rule] = exact_labels(self.pomdp, self.labeller, rule)
+        return found
+
     def initial(self, start: int, belief: np.ndarray) -> np.ndarray:
         """J [1, n_trust, n_q] at position 0: θ0 ~ `belief`, q0 = δ(initial, L(start, b0, θ0))."""
         n_t = self.pomdp.n_trust
-        belief = np.asarray(belief, dtype=float)
+        belief = np.broadcast_to(np.asarray(belief, dtype=float), (n_t, n_t))
         thetas = np.arange(n_t)
-        q0 = self.labeller.step(np.full(n_t, self.dfa.initial), np.full(n_t, start),
-                                np.broadcast_to(belief, (n_t, n_t)),
-                                self.trust_index[thetas] if self.labeller.reads_trust else None)
+        truth, _ = self.labels().truth(belief, np.zeros(n_t, dtype=np.int64))
+        q0 = self.labeller.step(np.full(n_t, self.dfa.initial), np.full(n_t, start), belief,
+                                self.trust_index[thetas] if self.labeller.reads_trust else None,
+                                belief_truth=truth)
         joint = np.zeros((1, n_t, self.n_q))
-        joint[0, thetas, q0] = belief
+        joint[0, thetas, q0] = belief[0]
         return joint
 
     def update(self, joint: np.ndarray, posterior: np.ndarray, belief_av: np.ndarray,
                road: np.ndarray, incident: np.ndarray, human_action: int, performance: int,
-               probability: np.ndarray) -> np.ndarray:
+               probability: np.ndarray, words: np.ndarray, labels: ExactLabels) -> np.ndarray:
         """J' for each row: `posterior` [n, n_trust] and `probability` [n] are the θ filter's output
-        for this observation (TrustPOMDP.belief_update), `belief_av` the AV's new belief, `road`
-        the road x' just driven. Rows of probability 0 give zero rows."""
+        for this observation (TrustPOMDP.belief_update), `belief_av` the AV's new belief and
+        `words` its words in `labels` (the AV filter's exact labels, as `labels()` gives them),
+        `road` the road x' just driven. Rows of probability 0 give zero rows."""
         n, n_t, n_q = joint.shape
+        truth, _ = labels.truth(belief_av, words)
         if not self.labeller.reads_trust:
             # q is the same on every trust path: move its one DFA state, keep the posterior.
             q = np.argmax(joint.sum(axis=1), axis=1)
-            q2 = self.labeller.step(q, road, belief_av)
+            q2 = self.labeller.step(q, road, belief_av, belief_truth=truth)
             out = np.zeros_like(joint)
             out[np.arange(n), :, q2] = posterior
             return out
@@ -79,7 +96,8 @@ class JointFilter:
                   where=probability[:, None, None] > 0)
         predicted[probability <= 0] = 0.0
         rows, thetas, qs = np.nonzero(predicted > 0)
-        q2 = self.labeller.step(qs, road[rows], belief_av[rows], self.trust_index[thetas])
+        q2 = self.labeller.step(qs, road[rows], belief_av[rows], self.trust_index[thetas],
+                                belief_truth=truth[rows])
         flat = (rows * n_t + thetas) * n_q + q2
         out = np.bincount(flat, weights=predicted[rows, thetas, qs], minlength=n * n_t * n_q)
         return out.astype(float, copy=False).reshape(n, n_t, n_q)   # (bincount of nothing is int)
@@ -125,12 +143,31 @@ def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first, inverse.ravel()
 
 
+def split_by_words(first: np.ndarray, inverse: np.ndarray, words: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(first, inverse) of `distinct_rows` with the rows whose word (exact_labels.ExactFilter)
+    differs from their group's first row's moved to groups of their own, numbered after the others
+    (so that, where no group mixes words, the grouping is distinct_rows' own, bit for bit)."""
+    words = np.asarray(words, dtype=np.int64)
+    clash = np.flatnonzero(words != words[first][inverse])
+    if clash.size == 0:
+        return first, inverse
+    keys = np.stack([inverse[clash], words[clash]], axis=1)
+    _, head, group = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.copy()
+    inverse[clash] = first.size + group.ravel()
+    return np.concatenate([first, clash[head]]), inverse
+
+
 def distinct_nodes(x: np.ndarray, joint: np.ndarray, posterior: np.ndarray,
-                   belief: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """distinct_rows of belief-tree nodes by (road, J, posterior, AV belief): nodes equal in all
-    four have the same decisions and futures, so the searches and evaluations merge them."""
-    return distinct_rows(np.concatenate([np.asarray(x)[:, None].astype(float),
-                                         joint.reshape(len(x), -1), posterior, belief], axis=1))
+                   belief: np.ndarray, words: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """distinct_rows of belief-tree nodes by (road, J, posterior, AV belief), split by the AV
+    belief's word: nodes equal in all five have the same decisions and futures, so the searches
+    and evaluations merge them."""
+    first, inverse = distinct_rows(np.concatenate([np.asarray(x)[:, None].astype(float),
+                                                   joint.reshape(len(x), -1), posterior, belief],
+                                                  axis=1))
+    return split_by_words(first, inverse, words)
 
 
 def joint_filter(pomdp: TrustPOMDP, dfa: DFA, labeller: Labeller) -> JointFilter:

@@ -7,7 +7,9 @@ observed or hidden; only the node state differs:
   atoms). A node carries q, the AV's belief b (which drives decisions and belief labels) and the
   true posterior over trust (equal to b under the default rule); optionally the posterior of a
   true driver other than the AV's model and a second reading of the spec (`Observation.truth`,
-  `Observation.reference`, docs/driver_types.md).
+  `Observation.reference`, docs/driver_types.md). Belief labels are those of the exact filter
+  (policies/belief/exact_labels.py): a node carries the word of its AV belief's history, and rows
+  merge only with rows of the same word (trust_state_filter.split_by_words).
 - `HiddenState`: the spec tests the hidden trust, so q is hidden too; a node carries the exact
   joint law J(θ, q) of policies/belief/trust_state_filter.py besides the posterior and b.
 
@@ -18,10 +20,12 @@ order of operations of the loops it serves, so values are bit for bit those of e
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Protocol, Self
 
 import numpy as np
 
+from trustroute.policies.belief.exact_labels import ExactLabels, exact_labels, symbol_code
 from trustroute.policies.belief.trust_state_filter import JointFilter
 from trustroute.policies.logic.compiled import CompiledSpec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
@@ -60,9 +64,13 @@ class NodeState(Protocol):
     def joined(self, parts: list[Self], road: np.ndarray) -> Self:
         """The children of one level in one state (`parts` in order; `road` their roads)."""
 
+    @property
+    def word(self) -> np.ndarray:
+        """[n] the AV belief's word (policies/belief/exact_labels.py): rows merge only within one."""
+
     def merge_columns(self) -> np.ndarray:
-        """[n, width] float columns: rows equal in these (and road, and the policy's route
-        memory) have equal futures."""
+        """[n, width] float columns: rows equal in these (and road, the policy's route memory and
+        the word) have equal futures."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,10 +87,16 @@ class Observation:
     def true_pomdp(self) -> TrustPOMDP:
         return self.pomdp if self.truth is None else self.truth
 
+    @cached_property
+    def labels(self) -> ExactLabels:
+        """The AV's belief labels, decided exactly where floats cannot decide them."""
+        return exact_labels(self.pomdp, self.compiled.labeller, self.belief_rule)
+
 
 @dataclass(frozen=True, eq=False)
 class ObservedState:
-    """Rows of (q, AV belief, true posterior) and the reference reading (q_ref, its belief)."""
+    """Rows of (q, AV belief, true posterior, the AV belief's word) and the reference reading
+    (q_ref, its belief)."""
 
     model: Observation
     q: np.ndarray
@@ -90,10 +104,11 @@ class ObservedState:
     posterior: np.ndarray
     q_ref: np.ndarray
     ref_belief: np.ndarray
+    word: np.ndarray
 
     def take(self, rows: np.ndarray | slice) -> ObservedState:
         return replace(self, q=self.q[rows], belief=self.belief[rows], posterior=self.posterior[rows],
-                       q_ref=self.q_ref[rows], ref_belief=self.ref_belief[rows])
+                       q_ref=self.q_ref[rows], ref_belief=self.ref_belief[rows], word=self.word[rows])
 
     def masses(self, rows: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         q = self.q if rows is None else self.q[rows]
@@ -122,15 +137,18 @@ class ObservedState:
         model, h, e = self.model, human_action, performance
         new_posterior, p_obs = model.true_pomdp.belief_update(
             self.posterior, model.true_pomdp.road_incident[road], h, e, rule="bayes")
+        incident = model.pomdp.road_incident[road]
+        new_word = model.labels.filter.extend(self.word, symbol_code(incident, h, e))
         if model.belief_rule == "bayes" and model.truth is None:
             new_av = new_posterior
         else:
-            new_av, _ = model.pomdp.belief_update(self.belief, model.pomdp.road_incident[road], h, e,
+            new_av, _ = model.pomdp.belief_update(self.belief, incident, h, e,
                                                   rule=model.belief_rule)
             if model.truth is not None:
                 # An observation the AV deems impossible leaves its belief unchanged (as the tracker).
                 impossible = ~(new_av.sum(axis=1) > 0)
                 new_av[impossible] = self.belief[impossible]
+                new_word[impossible] = self.word[impossible]
         new_ref = self.ref_belief
         if model.reference is not None:
             ref_pomdp = model.reference[0]
@@ -140,17 +158,18 @@ class ObservedState:
         possible = p_obs > 0
         return p_obs, replace(self, q=self.q[possible], belief=new_av[possible],
                               posterior=new_posterior[possible], q_ref=self.q_ref[possible],
-                              ref_belief=new_ref[possible])
+                              ref_belief=new_ref[possible], word=new_word[possible])
 
     def joined(self, parts: list[ObservedState], road: np.ndarray) -> ObservedState:
         """The parts' rows with the DFA (and the reference's) stepped on the position (road, b)."""
-        q_before, belief, posterior, q_ref, ref_belief = (
+        q_before, belief, posterior, q_ref, ref_belief, word = (
             np.concatenate([getattr(part, name) for part in parts])
-            for name in ("q", "belief", "posterior", "q_ref", "ref_belief"))
-        q = self.model.compiled.step(q_before, road, belief)
+            for name in ("q", "belief", "posterior", "q_ref", "ref_belief", "word"))
+        q = np.asarray(self.model.labels.step(q_before, road, belief, word), dtype=np.int64)
         if self.model.reference is not None:
             q_ref = self.model.reference[1].step(q_ref, road, ref_belief)
-        return replace(self, q=q, belief=belief, posterior=posterior, q_ref=q_ref, ref_belief=ref_belief)
+        return replace(self, q=q, belief=belief, posterior=posterior, q_ref=q_ref, ref_belief=ref_belief,
+                       word=word)
 
     def merge_columns(self) -> np.ndarray:
         return np.concatenate([self.q[:, None].astype(float), self.belief, self.posterior,
@@ -167,23 +186,28 @@ def observed_root(model: Observation) -> ObservedState:
         q_ref = model.reference[1].initial_states(ref_belief)
     else:
         ref_belief, q_ref = np.zeros((1, 0)), np.zeros(1, dtype=np.int64)
-    return ObservedState(model=model, q=model.compiled.initial_states(belief), belief=belief,
-                         posterior=posterior, q_ref=q_ref, ref_belief=ref_belief)
+    word = np.zeros(1, dtype=np.int64)
+    q = np.asarray(model.labels.step(np.full(1, model.compiled.dfa.initial), np.full(1, model.compiled.start),
+                                     belief, word), dtype=np.int64)
+    return ObservedState(model=model, q=q, belief=belief, posterior=posterior, q_ref=q_ref,
+                         ref_belief=ref_belief, word=word)
 
 
 @dataclass(frozen=True, eq=False)
 class HiddenState:
-    """Rows of (J(θ, q), true posterior, AV belief) under one joint filter and belief rule."""
+    """Rows of (J(θ, q), true posterior, AV belief, its word) under one joint filter and belief
+    rule."""
 
     filter: JointFilter
     belief_rule: BeliefRule
     joint: np.ndarray
     posterior: np.ndarray
     belief: np.ndarray
+    word: np.ndarray
 
     def take(self, rows: np.ndarray | slice) -> HiddenState:
         return replace(self, joint=self.joint[rows], posterior=self.posterior[rows],
-                       belief=self.belief[rows])
+                       belief=self.belief[rows], word=self.word[rows])
 
     def masses(self, rows: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.filter.masses(self.joint if rows is None else self.joint[rows])
@@ -205,15 +229,18 @@ class HiddenState:
         new_av = (new_posterior if self.belief_rule == "bayes"
                   else pomdp.belief_update(self.belief, incident, h, e, rule=self.belief_rule)[0])
         possible = p_obs > 0
+        labels = self.filter.labels(self.belief_rule)
+        new_word = labels.filter.extend(self.word[possible], symbol_code(incident[possible], h, e))
         new_joint = self.filter.update(self.joint[possible], new_posterior[possible], new_av[possible],
-                                       road[possible], incident[possible], h, e, p_obs[possible])
+                                       road[possible], incident[possible], h, e, p_obs[possible],
+                                       new_word, labels)
         return p_obs, replace(self, joint=new_joint, posterior=new_posterior[possible],
-                              belief=new_av[possible])
+                              belief=new_av[possible], word=new_word)
 
     def joined(self, parts: list[HiddenState], road: np.ndarray) -> HiddenState:
-        joint, posterior, belief = (np.concatenate([getattr(part, name) for part in parts])
-                                    for name in ("joint", "posterior", "belief"))
-        return replace(self, joint=joint, posterior=posterior, belief=belief)
+        joint, posterior, belief, word = (np.concatenate([getattr(part, name) for part in parts])
+                                          for name in ("joint", "posterior", "belief", "word"))
+        return replace(self, joint=joint, posterior=posterior, belief=belief, word=word)
 
     def merge_columns(self) -> np.ndarray:
         """Columns of belief/trust_state_filter.distinct_nodes after the road: J, posterior, b."""
@@ -226,4 +253,4 @@ def hidden_root(joint_filter: JointFilter, start: int, belief_rule: BeliefRule) 
     belief = np.asarray(joint_filter.pomdp.initial_belief, dtype=float)[None, :].copy()
     return HiddenState(filter=joint_filter, belief_rule=belief_rule,
                        joint=joint_filter.initial(start, belief[0]), posterior=belief.copy(),
-                       belief=belief.copy())
+                       belief=belief.copy(), word=np.zeros(1, dtype=np.int64))

@@ -27,7 +27,7 @@ from typing import Protocol
 import numpy as np
 
 from trustroute.networks.town import Town
-from trustroute.policies.belief.trust_state_filter import distinct_rows
+from trustroute.policies.belief.trust_state_filter import distinct_rows, split_by_words
 from trustroute.policies.evaluation.node_state import HiddenState, NodeState
 from trustroute.policies.routing.episode_rules import decide
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
@@ -302,11 +302,13 @@ def joined(parts: list[Frontier]) -> Frontier:
 
 
 def merged(frontier: Frontier, memory: np.ndarray | None) -> Frontier:
-    """One node per distinct (road, node state, route memory), its mass the sum of theirs."""
+    """One node per distinct (road, node state, route memory) and word of the AV belief, its mass
+    the sum of theirs."""
     columns = [frontier.road[:, None].astype(float), frontier.state.merge_columns()]
     if memory is not None:
         columns.append(memory[:, None])
-    first, inverse = distinct_rows(np.concatenate(columns, axis=1))
+    first, inverse = split_by_words(*distinct_rows(np.concatenate(columns, axis=1)),
+                                    frontier.state.word)
     probability = np.bincount(inverse, weights=frontier.probability)
     return replace(frontier.take(first), probability=probability)
 

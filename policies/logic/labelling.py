@@ -17,7 +17,9 @@ label then takes c·b̂ (forward error γ_n Σ|c_i b̂_i|). So whenever
 
 every implementation of that filter step and of that dot product, in any summation order (batch
 or single row, einsum or BLAS), and exact arithmetic on the same previous belief, read the same
-label. Inside the margin the label is "either" (`belief_margins`): synthesis branches both ways.
+label. `belief_margins` marks beliefs inside that margin (the spec linter's `threshold-hit`).
+Synthesis, evaluation and the vehicle read labels on the exact filter's belief along the whole
+history instead, deciding them exactly where floats cannot (policies/belief/exact_labels.py).
 
 This machine's strict reading inside the margin is made the same for every caller: c·b is summed
 in trust-level order, elementwise over the batch (`atom_values`). A BLAS product `beliefs @ coeffs`
@@ -130,14 +132,19 @@ class Labeller:
         """True iff some atom of the DFA is a trust-state atom (then `trust` must be given)."""
         return bool(self.trust_columns.size)
 
-    def valuations(self, x: np.ndarray, beliefs: np.ndarray, trust: np.ndarray | None = None
-                   ) -> np.ndarray:
-        """bool [n, len(dfa.atoms)]: the atoms at positions (x[i], beliefs[i], trust[i])."""
+    def valuations(self, x: np.ndarray, beliefs: np.ndarray, trust: np.ndarray | None = None,
+                   belief_truth: np.ndarray | None = None) -> np.ndarray:
+        """bool [n, len(dfa.atoms)]: the atoms at positions (x[i], beliefs[i], trust[i]).
+
+        belief_truth: the belief atoms' values already decided (bool [n, n_belief_atoms] in
+        `belief_columns` order; policies/belief/exact_labels.py decides them exactly)."""
         x = np.asarray(x, dtype=np.int64)
         out = np.empty((x.shape[0], len(self.dfa.atoms)), dtype=bool)
         if self.state_columns.size:
             out[:, self.state_columns] = self.membership[:, x].T
-        if self.belief_columns.size:
+        if self.belief_columns.size and belief_truth is not None:
+            out[:, self.belief_columns] = belief_truth
+        elif self.belief_columns.size:
             beliefs = np.asarray(beliefs)
             self._check_width(beliefs)
             out[:, self.belief_columns] = atom_values(np.atleast_2d(beliefs), self.coeffs) > self.offsets
@@ -150,9 +157,10 @@ class Labeller:
         return out
 
     def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray,
-             trust: np.ndarray | None = None) -> np.ndarray:
-        """int [n]: DFA states after reading positions (x, beliefs, trust) from states q."""
-        return self.dfa.step_many(q, self.valuations(x, beliefs, trust))
+             trust: np.ndarray | None = None, belief_truth: np.ndarray | None = None) -> np.ndarray:
+        """int [n]: DFA states after reading positions (x, beliefs, trust) from states q
+        (belief_truth: as in `valuations`)."""
+        return self.dfa.step_many(q, self.valuations(x, beliefs, trust, belief_truth))
 
     def belief_margins(self, beliefs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(truth, either), bool [n, n_belief_atoms] in `belief_columns` order.

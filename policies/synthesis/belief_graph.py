@@ -1,7 +1,11 @@
 """The node store of the belief-MDP search: growable arrays of the unfolded product belief MDP.
 
 One node per distinct (junctions t, road x, DFA state q, state-only task state p, belief bytes):
-identical beliefs at the same depth are merged, never approximated. Per node: its kind (below),
+identical beliefs at the same depth are merged, never approximated. A node keeps the word of the
+first history that reached it (policies/belief/exact_labels.py: its labels at thresholds are
+decided exactly on that word's belief); `mixed` marks a node that histories of different words
+reached (or whose parent is mixed), where such labels branch both ways instead, and `late_mixed`
+counts the nodes that became mixed after they were expanded. Per node: its kind (below),
 its bounds [L, U] and strict value, its completion bounds, and, once expanded, its move slots with
 their children and probabilities; per level, the alternates of outcomes at a label threshold.
 """
@@ -32,11 +36,14 @@ class BeliefGraph:
         self.p = np.zeros(capacity, dtype=np.int64)      # state of the state-only task (free route)
         self.cell = np.zeros(capacity, dtype=np.int64)
         self.belief = np.zeros((capacity, n_trust))
+        self.word = np.zeros(capacity, dtype=np.int64)
+        self.mixed = np.zeros(capacity, dtype=bool)
+        self.late_mixed = 0
         # U, L and the strict value as rows of one array, so that a backup gathers all three at once
         self.values = np.zeros((3, capacity))
         self.upper, self.lower = self.values[0], self.values[1]
-        # value of the L-greedy choice with every label read strictly, as this machine's labeller
-        # does (no alternates): the tie-breaker among actions of equal L, and a reported figure.
+        # value of the L-greedy choice with every label read as the vehicle reads it (no
+        # alternates): the tie-breaker among actions of equal L, and a reported figure.
         self.strict = self.values[2]
         self.kind = np.zeros(capacity, dtype=np.int8)
         # Bounds on the trust-free completion's value from the node (completion_value.py): its
@@ -55,10 +62,10 @@ class BeliefGraph:
         self.expanded_by_level: list[list[int]] = []
         self.free_by_level: list[dict[int, None]] = []    # FREE nodes per level (insertion order)
         self.free_version: list[int] = []
-        # Labels at thresholds: an outcome whose belief is within the rounding margin of a belief
-        # atom's hyperplane has one child per DFA state it could lead to. child/prob hold the one
-        # the strict label reads; the others are "alternates" (parent, slot, outcome, child),
-        # grouped by the parent's level. L takes the minimum over them, U the maximum.
+        # Labels at thresholds: an outcome of a mixed node whose label floats cannot decide has
+        # one child per DFA state it could lead to. child/prob hold the one the float label reads;
+        # the others are "alternates" (parent, slot, outcome, child), grouped by the parent's
+        # level. L takes the minimum over them, U the maximum.
         self.alternates: dict[int, list[np.ndarray]] = {}
         self._alternates_joined: dict[int, tuple[np.ndarray, ...]] = {}
 
@@ -92,7 +99,7 @@ class BeliefGraph:
             return
         new = max(needed, 2 * capacity)
         for name in ("level", "x", "q", "p", "cell", "kind", "free_move", "free_upper", "free_lower",
-                     "completed"):
+                     "completed", "word", "mixed"):
             old = getattr(self, name)
             grown = np.zeros(new, dtype=old.dtype)
             grown[:capacity] = old
@@ -115,8 +122,10 @@ class BeliefGraph:
         self.prob = prob
 
     def add(self, level: int | np.ndarray, x: np.ndarray, q: np.ndarray, p: np.ndarray,
-            cell: np.ndarray, belief: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Ids of the nodes (level, x, q, p, belief), creating missing ones; and a mask of new ones."""
+            cell: np.ndarray, belief: np.ndarray, word: np.ndarray, mixed: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+        """Ids of the nodes (level, x, q, p, belief), creating missing ones; and a mask of new ones.
+        word, mixed: of the history that reaches each (module docstring)."""
         level = np.broadcast_to(np.asarray(level, dtype=np.int64), x.shape)
         deepest = int(level.max()) if level.size else 0
         while len(self.memo) <= deepest:
@@ -146,6 +155,14 @@ class BeliefGraph:
         self.p[created] = p[new]
         self.cell[created] = cell[new]
         self.belief[created] = belief[new]
+        self.word[created] = word[new]
+        self.mixed[created] = mixed[new]
+        old = ids[~new]
+        becomes = ~self.mixed[old] & (mixed[~new] | (self.word[old] != word[~new]))
+        if becomes.any():
+            turned = np.unique(old[becomes])
+            self.mixed[turned] = True
+            self.late_mixed += int(np.isin(self.kind[turned], (EXPANDED, FREE)).sum())
         self.kind[created] = FRONTIER
         self.completed[created] = False
         self.free_lower[created] = 0.0

@@ -37,9 +37,8 @@ own certified [L, U]. `synthesize` runs them before the search on large problems
 unconverged search elsewhere (CLUSTER_MODES), and returns the better L with its policy and the
 smaller U.
 
-Labels at thresholds: a belief within the rounding margin of a belief atom's hyperplane
-(labelling.Labeller.belief_margins) gives one child per DFA state it could lead to; L takes the
-minimum over them and U the maximum (docs/synthesis.md, "Labels at thresholds"). Horizons shorter
+Labels at thresholds are decided exactly where floating point cannot decide them
+(policies/belief/exact_labels.py; docs/synthesis.md, "Labels at thresholds"). Horizons shorter
 than the road x DFA graph distance to acceptance are answered without search (L = U = 0).
 """
 
@@ -334,12 +333,9 @@ def _check_choice(what: str, value: str, choices: tuple[str, ...]) -> None:
 
 
 def _root_dfa_states(tables: ProductTables) -> tuple[int, ...]:
-    """The DFA states position 0 can be read as: one unless the prior sits on a threshold."""
-    b0 = np.asarray(tables.pomdp.initial_belief, dtype=float)[None, :]
-    _, either0 = tables.labeller.belief_margins(b0)
-    q0 = {tables.initial_q} | ({int(q) for q in tables.next_q[tables.dfa.initial, tables.start]}
-                               if either0.any() else set())
-    return tuple(sorted(q0))
+    """The DFA state position 0 is read as, its belief labels decided exactly on the prior
+    (policies/belief/exact_labels.py)."""
+    return (tables.initial_q,)
 
 
 def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,

@@ -2,15 +2,18 @@
 
 V_t(x, q, b) = 1 if q accepts; 0 if q rejects or t = H; else
 max over next junctions of Σ_o P(o | b) V_{t+1}(x', δ(q, L(x', f_o(b))), f_o(b)),
-memoised on (t, x, q, belief bytes). No abstraction, no pruning: the reference the scalable
-solver (policies/synthesis/belief_synthesis.py) is tested against. Exponential in H; meant for H <= 12.
-It shares only the model arrays (TrustPOMDP) and the labeller with the solver.
+memoised on (t, x, q, belief bytes, word). Belief labels are those of the exact filter (decided in
+floats where they can be, exactly on the history's word elsewhere: policies/belief/exact_labels.py).
+No abstraction, no pruning: the reference the scalable solver (policies/synthesis/belief_synthesis.py)
+is tested against. Exponential in H; meant for H <= 12. It shares only the model arrays
+(TrustPOMDP), the labeller and its exact decisions with the solver.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from trustroute.policies.belief.exact_labels import exact_labels, symbol_code
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
@@ -27,14 +30,15 @@ def exact_optimum(pomdp: TrustPOMDP, spec: Spec, horizon: int, belief_rule: Beli
     accepting, rejecting = compiled.accepting, compiled.rejecting
     outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
     successors = [[town.state_index(s) for s in town.successors(road)] for road in town.states]
-    memo: dict[tuple[int, int, int, bytes], float] = {}
+    labels = exact_labels(pomdp, compiled.labeller, belief_rule)
+    memo: dict[tuple[int, int, int, bytes, int], float] = {}
 
-    def value(t: int, x: int, q: int, belief: np.ndarray) -> float:
+    def value(t: int, x: int, q: int, belief: np.ndarray, word: int) -> float:
         if accepting[q]:
             return 1.0
         if rejecting[q] or t == horizon:
             return 0.0
-        key = (t, x, q, belief.tobytes())
+        key = (t, x, q, belief.tobytes(), word)
         cached = memo.get(key)
         if cached is not None:
             return cached
@@ -48,13 +52,15 @@ def exact_optimum(pomdp: TrustPOMDP, spec: Spec, horizon: int, belief_rule: Beli
                 if p <= 0.0:
                     continue
                 b2 = posterior[0]
-                q2 = int(compiled.step(np.array([q]), np.array([x2]), b2[None])[0])
-                total += p * value(t + 1, x2, q2, b2)
+                word2 = labels.filter.extend(np.array([word]), symbol_code(incident, h, e))
+                q2 = int(labels.step(np.array([q]), np.array([x2]), b2[None], word2)[0])
+                total += p * value(t + 1, x2, q2, b2, int(word2[0]))
             best = max(best, total)
         memo[key] = best
         return best
 
     start = town.state_index(spec.start)
     b0 = np.asarray(pomdp.initial_belief, dtype=float)
-    q0 = compiled.initial_state(b0)
-    return value(0, start, q0, b0)
+    q0 = int(labels.step(np.array([compiled.dfa.initial]), np.array([start]), b0[None],
+                         np.zeros(1, dtype=np.int64))[0])
+    return value(0, start, q0, b0, 0)

@@ -10,9 +10,10 @@ knows exactly); L = a lower bound of the trust-free completion's value from the 
 move only): L = that move's value, U = the bound. Terminal nodes are exact: accepted 1, rejected 0,
 horizon reached 0. EXPANDED nodes: U = min(U, max_a Σ_o p U_child) and L = max_a Σ_o p L_child.
 
-Labels at thresholds: a belief within the rounding margin of a belief atom's hyperplane
-(labelling.Labeller.belief_margins) gives one child per DFA state it could lead to; L takes the
-minimum over them and U the maximum (docs/synthesis.md, "Labels at thresholds").
+Labels at thresholds: a belief whose label floating point cannot decide is labelled exactly on its
+history's word (policies/belief/exact_labels.py); only at a node that histories of different words
+reached (belief_graph.py, `mixed`) does it give one child per DFA state it could lead to, L taking
+the minimum over them and U the maximum (docs/synthesis.md, "Labels at thresholds").
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import time
 
 import numpy as np
 
+from trustroute.policies.belief.exact_labels import exact_labels, symbol_code
 from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.model.trust_pomdp import BeliefRule
 from trustroute.policies.routing.free import free_completion, state_only_task
@@ -83,6 +85,9 @@ class BeliefSearch:
             self.symbols = observation_symbols(pomdp, rule)
             self.cells = suffix_cells(self.symbols, suffix_length)
         self.distance = acceptance_distance(tables)
+        self.labels = exact_labels(pomdp, tables.labeller, rule)
+        self.symbol_codes = symbol_code(self.symbols.incident, self.symbols.human_action,
+                                        self.symbols.performance)
         if horizon is not None:
             if abstraction is None:
                 abstraction = build_abstraction(tables, self.symbols, self.cells)
@@ -259,20 +264,23 @@ class BeliefSearch:
         g.lower[live] = 0.0
         g.strict[live] = 0.0
 
-    def possible_q(self, q: np.ndarray, x2: np.ndarray, belief: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """DFA states after reading (x2, belief) from q: (strict, rows, other).
+    def possible_q(self, q: np.ndarray, x2: np.ndarray, belief: np.ndarray, word: np.ndarray,
+                   mixed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """DFA states after reading (x2, belief) from q, the belief the float image of the exact
+        one after `word`: (strict, rows, other).
 
-        strict[i]: the state the labeller reads (what the vehicle and `evaluate` do); (rows, other):
-        for row rows[j] the further state other[j] that a label within the rounding margin of its
-        threshold could give (labelling.Labeller.belief_margins).
+        strict[i]: the state the labels read (exact_labels.ExactLabels, as the vehicle and
+        `evaluate` read them); (rows, other): for a `mixed` row rows[j] (a node several words
+        reach) the further state other[j] that a label floating point cannot decide could give.
         """
         tables = self.tables
-        strict = tables.step(q, x2, belief)
         empty = np.zeros(0, dtype=np.int64)
-        if not tables.belief_atom_names or q.size == 0:
-            return strict, empty, empty
-        truth, either = tables.labeller.belief_margins(belief)
+        if q.size == 0:
+            return empty, empty, empty
+        if not tables.belief_atom_names:
+            return tables.step(q, x2, belief), empty, empty
+        truth, either = self.labels.truth(belief, word, mixed)
+        strict = np.asarray(tables.labeller.step(q, x2, belief, belief_truth=truth), dtype=np.int64)
         ambiguous = np.flatnonzero(either.any(axis=1))
         if ambiguous.size == 0:
             return strict, empty, empty
@@ -298,11 +306,13 @@ class BeliefSearch:
         tables = self.tables
         b0 = np.asarray(tables.pomdp.initial_belief, dtype=float)[None, :]
         x0 = np.array([tables.start])
-        strict, _, other = self.possible_q(np.array([tables.dfa.initial]), x0, b0)
+        empty_word, single = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=bool)
+        strict, _, other = self.possible_q(np.array([tables.dfa.initial]), x0, b0, empty_word, single)
         qs = np.concatenate([strict, other])
         ids, _ = self.graph.add(0, np.repeat(x0, qs.size), qs,
                                 np.full(qs.size, self.task.initial_state, dtype=np.int64),
-                                np.zeros(qs.size, dtype=np.int64), np.repeat(b0, qs.size, axis=0))
+                                np.zeros(qs.size, dtype=np.int64), np.repeat(b0, qs.size, axis=0),
+                                np.zeros(qs.size, dtype=np.int64), np.zeros(qs.size, dtype=bool))
         self.classify(ids)
         return ids
 
@@ -334,17 +344,20 @@ class BeliefSearch:
         parent, slot, symbol, x2, belief, probability, length = (
             a[keep] for a in (parent, slot, symbol, x2, belief, probability, length))
         level2 = g.level[parent] + length
-        q2, alt_rows, alt_q = self.possible_q(g.q[parent], x2, belief)
+        word = self.labels.filter.extend(g.word[parent], self.symbol_codes[symbol])
+        mixed = g.mixed[parent]
+        q2, alt_rows, alt_q = self.possible_q(g.q[parent], x2, belief, word, mixed)
         cell2 = self.cells.next_cell[g.cell[parent], symbol]
         p2 = self.next_p[g.p[parent], x2]
-        ids, new = g.add(level2, x2, q2, p2, cell2, belief)
+        ids, new = g.add(level2, x2, q2, p2, cell2, belief, word, mixed)
         outcome = self.slot_of_symbol[symbol]
         g.child[parent, slot, outcome] = ids
         g.prob[parent, slot, outcome] = probability
         self.classify(ids[new])
         if alt_rows.size:
             alt_ids, alt_new = g.add(level2[alt_rows], x2[alt_rows], alt_q, p2[alt_rows],
-                                     cell2[alt_rows], belief[alt_rows])
+                                     cell2[alt_rows], belief[alt_rows], word[alt_rows],
+                                     mixed[alt_rows])
             self.classify(alt_ids[alt_new])
             alt_level = g.level[parent[alt_rows]]
             for level in np.unique(alt_level).tolist():

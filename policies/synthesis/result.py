@@ -62,8 +62,8 @@ class SearchRun:
     abstraction_root_upper: float
     root_dfa_states: tuple[int, ...]
     threshold_alternates: int
-    # the run's policy's value with labels read strictly (this machine's labeller) from the
-    # root the vehicle is in: a lower bound of what `evaluate` measures
+    # the run's policy's value with labels read as the vehicle reads them (policies/belief/
+    # exact_labels.py) from the root the vehicle is in: a lower bound of what `evaluate` measures
     lower_strict_labels: float
     completion_closed: bool
     # open nodes valued by cluster bounds (then L is a lower bound of the policy's value) or
@@ -158,10 +158,10 @@ Run = SearchRun | ClusterRun | GraphDistanceRun
 @dataclass(frozen=True, kw_only=True)
 class SynthesisStats:
     """How a belief-MDP synthesis obtained its bounds. lower_strict_labels: the returned policy's
-    value with labels read strictly (this machine's labeller), a lower bound of what `evaluate`
-    measures (a run's lower_strict_labels is that run's policy's). Unbounded: unbounded_upper says
-    how U was obtained and lower_from_horizon which run's horizon gave L. objective: "robust" for
-    the robust population objective (population.py)."""
+    value with labels read as the vehicle reads them (exact where floats cannot decide), a lower
+    bound of what `evaluate` measures (a run's lower_strict_labels is that run's policy's).
+    Unbounded: unbounded_upper says how U was obtained and lower_from_horizon which run's horizon
+    gave L. objective: "robust" for the robust population objective (population.py)."""
 
     method: str = "AO*-style expansion of the product belief MDP with suffix-abstraction upper bounds"
     belief_rule: str

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.policies.belief.exact_labels import symbol_code
 from trustroute.policies.belief.trust_state_filter import JointFilter, distinct_nodes, joint_filter
 from trustroute.policies.belief.trust_state_relaxation import (
     RELAXATION_MARGIN,
@@ -128,7 +129,7 @@ def _children(pomdp: TrustPOMDP, filter_: JointFilter, belief_rule: BeliefRule, 
               parents: np.ndarray, follow: np.ndarray) -> tuple[np.ndarray, ...]:
     """The children of `parents` (indices into the level `nodes`) along every action, or the
     guide's alone where `follow` names one, per observation of positive probability: (parent,
-    slot, road, J, posterior, AV belief, P(o), reach mass)."""
+    slot, road, J, posterior, AV belief, its word, P(o), reach mass)."""
     outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if pomdp.driver.depends_on_performance else (0,))]
     child_parts = []
     for slot in range(pomdp.successor_table.shape[1]):
@@ -141,11 +142,13 @@ def _children(pomdp: TrustPOMDP, filter_: JointFilter, belief_rule: BeliefRule, 
             belief = posterior if belief_rule == "bayes" else pomdp.belief_update(
                 nodes["belief"][p_idx], incident, h, e, rule=belief_rule)[0]
             ok = p_obs > 0
+            labels = filter_.labels(belief_rule)
+            words = labels.filter.extend(nodes["word"][p_idx][ok], symbol_code(incident[ok], h, e))
             joint = filter_.update(nodes["joint"][p_idx][ok], posterior[ok], belief[ok], x2[ok],
-                                   incident[ok], h, e, p_obs[ok])
+                                   incident[ok], h, e, p_obs[ok], words, labels)
             child_parts.append((p_idx[ok], np.full(int(ok.sum()), slot), x2[ok], joint, posterior[ok],
-                                belief[ok], p_obs[ok], nodes["mass"][p_idx][ok] * p_obs[ok]))
-    return tuple(np.concatenate([c[j] for c in child_parts]) for j in range(8))
+                                belief[ok], words, p_obs[ok], nodes["mass"][p_idx][ok] * p_obs[ok]))
+    return tuple(np.concatenate([c[j] for c in child_parts]) for j in range(9))
 
 
 def _back_up(edges: tuple[np.ndarray, ...], grow: np.ndarray, follow: np.ndarray, slots: int,
@@ -240,7 +243,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     start = town.state_index(spec.start)
     b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
     levels = [dict(x=np.array([start]), joint=filter_.initial(start, b0[0]), posterior=b0.copy(),
-                   belief=b0.copy(), mass=np.ones(1))]
+                   belief=b0.copy(), word=np.zeros(1, dtype=np.int64), mass=np.ones(1))]
     edges = []          # per level: (parent, slot, child, p_obs) for the children of that level
     expandable = []     # per level: bool per node, expanded with every action
     guided_slot = []    # per level: the guide's action slot per node expanded with it alone, else -1
@@ -267,13 +270,13 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         if level == depth or not (grow | (follow >= 0)).any():
             break
         parents = np.flatnonzero(grow | (follow >= 0))
-        parent, slot_of, x2, joint, posterior, belief, p_obs, mass = _children(
+        parent, slot_of, x2, joint, posterior, belief, words, p_obs, mass = _children(
             pomdp, filter_, belief_rule, nodes, parents, follow)
-        # Merge children with bit-identical (road, J, posterior, AV belief).
-        first, inverse = distinct_nodes(x2, joint, posterior, belief)
+        # Merge children with bit-identical (road, J, posterior, AV belief) and one word.
+        first, inverse = distinct_nodes(x2, joint, posterior, belief, words)
         merged_mass = np.bincount(inverse, weights=mass)
         child = dict(x=x2[first], joint=joint[first], posterior=posterior[first], belief=belief[first],
-                     mass=merged_mass)
+                     word=words[first], mass=merged_mass)
         if first.size > max_nodes:      # keep the likeliest nodes; the others are cut
             order = np.argsort(-merged_mass, kind="stable")
             rank = np.empty(first.size, dtype=np.int64)

@@ -225,3 +225,31 @@ def test_illegal_and_out_of_order_roads_are_refused(town, driver, phi1):
         tracker.record_road("A-B", "pedestrian", False, "succ", 4, 4, None, 0.0, 0.0)
     with pytest.raises(ValueError, match="performance"):
         tracker.record_road(tracker.expected_road(), "none", False, "ok", 4, 4, None, 0.0, 0.0)
+
+
+def test_a_label_floats_cannot_decide_is_read_as_synthesis_and_evaluate_read_it(town, driver, pomdp):
+    """phi1_strict with the lowtrust offset written 0.2857142857142857 (float 2/7): the uniform
+    prior's exact 2/7 is above it, while the float c·b̂ equals it. The tracker, the model engine,
+    the search's root and `evaluate` all read lowtrust true (policies/belief/exact_labels.py):
+    rejected at once."""
+    from trustroute.harness.simulation.model_engine import simulate_batch
+    from trustroute.policies.belief.product_mdp import build_product
+    from trustroute.policies.logic.spec import spec_from_text
+
+    text = (SPECS / "phi1_strict.toml").read_text()
+    assert "offset = 0.3\n" in text
+    spec = spec_from_text(text.replace("offset = 0.3\n", "offset = 0.2857142857142857\n"),
+                          "<phi1_strict 2/7>", town)
+    dfa = build_dfa(spec)
+    start = np.array([town.state_index(spec.start)])
+    prior = np.asarray(driver.initial_belief, dtype=float)[None, :]
+    float_reading = int(Labeller(spec, dfa, town).step(np.array([dfa.initial]), start, prior)[0])
+    exact_reading = build_product(pomdp, spec).initial_q
+    assert float_reading != exact_reading and bool(dfa.rejecting[exact_reading])
+    setup = EpisodeSetup(town=town, driver_model=driver, spec=spec)
+    tracker = EpisodeTracker(setup, trust_free_policy(town, spec), "e", initial_trust=4)
+    assert tracker.dfa_state == exact_reading
+    assert tracker.end_reason == "rejected"
+    batch = simulate_batch(setup, trust_free_policy(town, spec), 20, np.random.default_rng(0))
+    assert (batch.end_reason == "rejected").all()
+    assert evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None).lower == 0.0

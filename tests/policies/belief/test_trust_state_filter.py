@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from trustroute.policies.belief.exact_labels import symbol_code
 from trustroute.policies.belief.trust_state_filter import joint_filter
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
@@ -21,16 +22,20 @@ def run(pomdp, spec, route, takeovers):
     q = labeller.step(np.array([dfa.initial]), np.array([start]), belief,
                       np.array([0]) if labeller.reads_trust else None)
     history = [(joint, belief, q)]
+    labels, word = filter_.labels(), np.zeros(1, dtype=np.int64)
+    words = [word]
     for road, h in zip(route[1:], takeovers, strict=True):
         x = np.array([town.state_index(road)])
         incident = pomdp.road_incident[x]
         posterior, p = pomdp.belief_update(belief, incident, h, 0)
-        joint = filter_.update(joint, posterior, posterior, x, incident, h, 0, p)
+        word = labels.filter.extend(word, symbol_code(incident, h, 0))
+        joint = filter_.update(joint, posterior, posterior, x, incident, h, 0, p, word, labels)
         belief = posterior
         if not labeller.reads_trust:
             q = labeller.step(q, x, belief)
         history.append((joint, belief, q))
-    return filter_, history
+        words.append(word)
+    return filter_, history, words
 
 
 ROUTE = ["E-A", "A-B", "B-G", "G-I", "I-J", "J-K", "K-L", "L-H"]
@@ -44,7 +49,7 @@ def takeovers(town):
 
 def test_without_trust_atoms_the_joint_is_todays_belief_times_the_dfa_state(pomdp):
     spec = load_spec("specs/phi1.toml", pomdp.town)
-    _, history = run(pomdp, spec, ROUTE, takeovers(pomdp.town))
+    _, history, _ = run(pomdp, spec, ROUTE, takeovers(pomdp.town))
     for joint, belief, q in history:
         assert np.array_equal(joint[0, :, int(q[0])], belief[0])       # bit for bit
         assert np.count_nonzero(joint.sum(axis=1)) == 1
@@ -52,7 +57,7 @@ def test_without_trust_atoms_the_joint_is_todays_belief_times_the_dfa_state(pomd
 
 def test_with_trust_atoms_the_joint_is_a_law_whose_marginal_is_the_belief(pomdp):
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
-    filter_, history = run(pomdp, spec, ROUTE, takeovers(pomdp.town))
+    filter_, history, words = run(pomdp, spec, ROUTE, takeovers(pomdp.town))
     for joint, belief, _ in history:
         assert joint.dtype == np.float64 and abs(joint.sum() - 1.0) < 1e-12
         assert np.allclose(joint.sum(axis=2), belief, atol=1e-12)
@@ -66,9 +71,12 @@ def test_with_trust_atoms_the_joint_is_a_law_whose_marginal_is_the_belief(pomdp)
     x = np.array([pomdp.town.state_index("L-H")])   # a truck: takeovers are possible
     incident = pomdp.road_incident[x]
     total, moved = 0.0, []
+    labels = filter_.labels()
     for h in (0, 1):
         posterior, p = pomdp.belief_update(belief, incident, h, 0)
-        after = filter_.masses(filter_.update(joint, posterior, posterior, x, incident, h, 0, p))[0][0]
+        word = labels.filter.extend(words[-2], symbol_code(incident, h, 0))
+        after = filter_.masses(filter_.update(joint, posterior, posterior, x, incident, h, 0, p,
+                                              word, labels))[0][0]
         total += float(p[0]) * after
         moved.append(after)
     assert abs(total - accepted[0]) < 1e-12 and min(abs(m - accepted[0]) for m in moved) > 1e-3

@@ -1,10 +1,10 @@
 """Belief-atom thresholds that reachable beliefs hit exactly: the bounds stay sound.
 
 Synthesis, exact evaluation and the exhaustive reference all advance beliefs by the one filter
-(TrustPOMDP.belief_update). A belief within the rounding margin of a threshold is labelled
-"either" by the search (pessimistic for L, optimistic for U), so the exhaustive optimum of the
-float process (policies/synthesis/exact_search.py, strict labels) lies in [L, U] and the returned
-policy, evaluated online with strict labels, is worth at least L.
+(TrustPOMDP.belief_update) and read belief labels on the exact filter, deciding exactly where
+floats cannot (policies/belief/exact_labels.py), so the exhaustive optimum
+(policies/synthesis/exact_search.py) lies in [L, U] and the returned policy, evaluated online with
+the same labels, is worth at least L.
 """
 
 from __future__ import annotations

@@ -1,0 +1,251 @@
+"""Belief labels decided exactly where floating point cannot decide them.
+
+A belief atom is `c·b > offset` on the belief of the model's exact Bayes filter: the model's
+numbers are the decimals they print as (`decimal`: Fraction(repr(x)), what a model or spec file
+written from them holds), the prior is those decimals normalised to sum 1 (the uniform prior is
+exactly 1/n), and every step is the exact linear-fractional map b W_o / (b W_o 1) of the symbol
+o = (incident, h, e) (W_o = diag(L_o) T for Bayes, T for the authors' "paper" rule).
+
+Every caller advances the float filter (TrustPOMDP.belief_update) and reads the float label when it
+is decided: when |c·b̂ - offset| exceeds `FloatLabelBound.margin`, a bound on |c·b - c·b̂| for the
+exact belief b of the same history. Elsewhere the label is decided exactly, from the history's
+word (the sequence of symbols whose exact update is not c·I): `ExactLabels.truth`.
+
+The bound. Let d(x, y) = log max_i(x_i/y_i) - log min_i(x_i/y_i) (Hilbert's projective metric on
+vectors of one support). A nonnegative matrix never increases d (each (xW)_j is a nonnegative
+combination of the x_i, so its ratio to (yW)_j lies between the smallest and the largest x_i/y_i),
+and scaling leaves it unchanged. One float step of the filter multiplies each component of the
+exact image of b̂ under the float matrix by (1 + θ_n)(1 + δ) (an n-term product-sum and the division;
+the row sum is one scalar for every component), and the float matrix is the exact W_o times
+(1 + ε) entrywise, |ε| <= ε_W (computed exactly per symbol from the model). So each step adds at
+most σ = log((1+γ_n)(1+u)/((1-γ_n)(1-u))) + log((1+ε_W)/(1-ε_W)) to d, and after a word of k
+symbols d(b̂, b) <= D = d0 + k σ (d0: the float prior against the exact one). Both sides summing to
+S = Σb̂ and 1, every b_i/b̂_i lies in [e^-D / S, e^D / S], within ρ of 1; so
+|c·b - fl(c·b̂)| <= (ρ + γ_n + ε_c (1 + ρ)) Σ|c_i| b̂_i, plus |offset - fl(offset)| for the
+offset. The margin is twice that (the bound itself is evaluated in floats). Assumed, as in
+Higham's bounds: no underflow in the filter.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import numpy as np
+
+from trustroute.policies.logic.labelling import UNIT_ROUNDOFF, Labeller, atom_values, gamma
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+
+
+def decimal(value: float) -> Fraction:
+    """The decimal a float prints as (the shortest that reads back as it), exactly."""
+    return Fraction(repr(float(value)))
+
+
+def _relative_gap(approximate: float, exact: Fraction) -> float:
+    """|approximate - exact| / |exact|, rounded up; inf when exact is 0 and approximate is not."""
+    if exact == 0:
+        return 0.0 if approximate == 0 else math.inf
+    gap = abs(Fraction(approximate) - exact) / abs(exact)
+    return float(gap) * (1 + 4 * UNIT_ROUNDOFF)
+
+
+def symbol_code(incident: np.ndarray | int, human_action: np.ndarray | int,
+                performance: np.ndarray | int) -> np.ndarray:
+    """One integer per observation symbol (incident, h, e)."""
+    return (np.asarray(incident, dtype=np.int64) * 2 + np.asarray(human_action, dtype=np.int64)) * 2 \
+        + np.asarray(performance, dtype=np.int64)
+
+
+@dataclass(eq=False)
+class ExactFilter:
+    """The exact filter of `pomdp` under `rule`, its words and the float filter's distance to it.
+
+    Words are interned: id 0 is the empty word; `extend` gives the id of word + symbol (the same id
+    for a symbol whose exact update is c·I). `belief(word)` is memoised."""
+
+    pomdp: TrustPOMDP
+    rule: BeliefRule
+    matrices: dict[int, tuple[tuple[Fraction, ...], ...]] = field(init=False)
+    changing: np.ndarray = field(init=False)        # bool [n_codes]: exact update is not c·I
+    prior: tuple[Fraction, ...] = field(init=False)
+    prior_distance: float = field(init=False)       # d0
+    step_distance: float = field(init=False)        # σ
+    _parent: list[int] = field(init=False)
+    _code: list[int] = field(init=False)
+    _length: list[int] = field(init=False)
+    _ids: dict[tuple[int, int], int] = field(init=False)
+    _beliefs: dict[int, tuple[Fraction, ...]] = field(init=False)
+
+    def __post_init__(self) -> None:
+        driver, n = self.pomdp.driver, self.pomdp.n_trust
+        n_inc = len(driver.incident_types)
+        one = Fraction(1)
+        self.matrices, worst = {}, 0.0
+        self.changing = np.zeros(n_inc * 4, dtype=bool)
+        floats = (self.pomdp.weighted_transition if self.rule == "bayes" else driver.trust_transition)
+        for i in range(n_inc):
+            takeover = [decimal(t) for t in driver.takeover_probability[i]]
+            failure = [decimal(f) for f in driver.failure_probability[i]]
+            for h in (0, 1):
+                for e in (0, 1):
+                    like = [(takeover[k] if h else one - takeover[k])
+                            * (failure[k] if e else one - failure[k]) for k in range(n)]
+                    weights = like if self.rule == "bayes" else [one] * n
+                    matrix = tuple(tuple(weights[k] * decimal(driver.trust_transition[i, h, e, k, m])
+                                         for m in range(n)) for k in range(n))
+                    code = int(symbol_code(i, h, e))
+                    self.matrices[code] = matrix
+                    self.changing[code] = not _scaled_identity(matrix)
+                    if any(like):
+                        worst = max(worst, max(_relative_gap(floats[i, h, e, k, m], matrix[k][m])
+                                               for k in range(n) for m in range(n)))
+        g = gamma(n)
+        u = UNIT_ROUNDOFF
+        self.step_distance = (math.log((1 + g) * (1 + u) / ((1 - g) * (1 - u)))
+                              + (math.log((1 + worst) / (1 - worst)) if worst < 1 else math.inf))
+        entries = [decimal(b) for b in self.pomdp.initial_belief]
+        total = sum(entries, Fraction(0))
+        self.prior = tuple(b / total for b in entries)
+        ratios = [Fraction(float(f)) / b for f, b in zip(self.pomdp.initial_belief, self.prior,
+                                                          strict=True) if b != 0]
+        self.prior_distance = (float(max(ratios) / min(ratios)) if ratios else 1.0)
+        self.prior_distance = math.log(self.prior_distance) * (1 + 4 * u) + 4 * u
+        self._parent, self._code, self._length = [0], [-1], [0]
+        self._ids, self._beliefs = {}, {0: self.prior}
+
+    def extend(self, words: np.ndarray, codes: np.ndarray) -> np.ndarray:
+        """Word ids of words[i] + codes[i] (vectorised; an unchanging symbol keeps the word)."""
+        words = np.asarray(words, dtype=np.int64)
+        codes = np.broadcast_to(np.asarray(codes, dtype=np.int64), words.shape)
+        out = words.copy()
+        moving = self.changing[codes]
+        if not moving.any():
+            return out
+        pairs, inverse = np.unique(np.stack([words[moving], codes[moving]], axis=1), axis=0,
+                                   return_inverse=True)
+        ids = np.array([self.extend_one(word, code) for word, code in pairs.tolist()], dtype=np.int64)
+        out[moving] = ids[inverse.ravel()]
+        return out
+
+    def extend_one(self, word: int, code: int) -> int:
+        """The id of word + the symbol of `code` (`extend` for one history)."""
+        if not self.changing[code]:
+            return word
+        found = self._ids.get((word, code))
+        if found is None:
+            found = len(self._parent)
+            self._ids[(word, code)] = found
+            self._parent.append(word)
+            self._code.append(code)
+            self._length.append(self._length[word] + 1)
+        return found
+
+    def lengths(self, words: np.ndarray) -> np.ndarray:
+        table = np.asarray(self._length, dtype=np.int64)
+        return table[np.asarray(words, dtype=np.int64)]
+
+    def belief(self, word: int) -> tuple[Fraction, ...]:
+        """The exact belief after `word` (all zeros after a word of probability 0)."""
+        chain = []
+        while word not in self._beliefs:
+            chain.append(word)
+            word = self._parent[word]
+        belief = self._beliefs[word]
+        for w in reversed(chain):
+            matrix = self.matrices[self._code[w]]
+            n = len(belief)
+            image = [sum((belief[k] * matrix[k][m] for k in range(n) if belief[k]), Fraction(0))
+                     for m in range(n)]
+            total = sum(image, Fraction(0))
+            belief = tuple(v / total for v in image) if total else tuple(image)
+            self._beliefs[w] = belief
+        return belief
+
+    def distance(self, words: np.ndarray) -> np.ndarray:
+        """D per word: the bound on Hilbert's distance between the float and the exact belief."""
+        return self.prior_distance + self.lengths(words) * self.step_distance
+
+
+def _scaled_identity(matrix: tuple[tuple[Fraction, ...], ...]) -> bool:
+    n = len(matrix)
+    return (matrix[0][0] > 0 and all(matrix[k][k] == matrix[0][0] for k in range(n))
+            and all(matrix[k][m] == 0 for k in range(n) for m in range(n) if k != m))
+
+
+@dataclass(eq=False)
+class ExactLabels:
+    """The belief labels of `labeller` on the exact filter: float where the margin decides them,
+    exact elsewhere. `exact_decisions` counts the (row, atom) labels decided exactly."""
+
+    filter: ExactFilter
+    labeller: Labeller
+    exact_decisions: int = 0
+    coeffs: tuple[tuple[Fraction, ...], ...] = field(init=False)    # [atom][level]
+    offsets: tuple[Fraction, ...] = field(init=False)
+    coeff_gap: float = field(init=False)
+    offset_gap: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        c = self.labeller.coeffs
+        self.coeffs = tuple(tuple(decimal(v) for v in c[:, j]) for j in range(c.shape[1]))
+        self.offsets = tuple(decimal(v) for v in self.labeller.offsets)
+        gaps = [_relative_gap(c[k, j], self.coeffs[j][k]) for j in range(c.shape[1])
+                for k in range(c.shape[0]) if self.coeffs[j][k] != 0]
+        self.coeff_gap = max(gaps, default=0.0)
+        self.offset_gap = np.array([float(abs(Fraction(float(v)) - exact)) * (1 + 4 * UNIT_ROUNDOFF)
+                                    for v, exact in zip(self.labeller.offsets, self.offsets, strict=True)])
+
+    def margins(self, beliefs: np.ndarray, words: np.ndarray) -> np.ndarray:
+        """[n, m]: the bound on |c·b - fl(c·b̂)| + |offset - fl(offset)| (module docstring)."""
+        n = beliefs.shape[1]
+        total = beliefs.sum(axis=1)
+        g = gamma(n)
+        spread = np.exp(self.filter.distance(words))
+        low, high = total / (1 + g), total / (1 - g)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rho = np.maximum(spread / low - 1.0, 1.0 - 1.0 / (spread * high))
+        rho = np.where(total > 0, rho, np.inf)
+        weight = np.abs(beliefs) @ np.abs(self.labeller.coeffs)
+        relative = rho + g + self.coeff_gap * (1.0 + rho)
+        return 2.0 * (relative[:, None] * weight + self.offset_gap[None, :])
+
+    def truth(self, beliefs: np.ndarray, words: np.ndarray, undecidable: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """(truth, either) bool [n, m] in `belief_columns` order: the labels of the exact filter's
+        beliefs after `words`, whose float images are `beliefs`. Rows in `undecidable` (a node that
+        stands for several words) keep the float label where it is not decided, and are `either`
+        there."""
+        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        words = np.asarray(words, dtype=np.int64)
+        labeller = self.labeller
+        if not labeller.belief_columns.size or beliefs.shape[0] == 0:
+            empty = np.zeros((beliefs.shape[0], labeller.belief_columns.size), dtype=bool)
+            return empty, empty.copy()
+        value = atom_values(beliefs, labeller.coeffs)
+        truth = value > labeller.offsets
+        close = np.abs(value - labeller.offsets) <= self.margins(beliefs, words)
+        either = np.zeros_like(truth)
+        if not close.any():
+            return truth, either
+        if undecidable is not None:
+            either = close & np.asarray(undecidable, dtype=bool)[:, None]
+            close &= ~either
+        for row, atom in zip(*np.nonzero(close), strict=True):
+            exact = self.filter.belief(int(words[row]))
+            coeffs = self.coeffs[atom]
+            truth[row, atom] = sum((c * b for c, b in zip(coeffs, exact, strict=True) if c and b),
+                                   Fraction(0)) > self.offsets[atom]
+            self.exact_decisions += 1
+        return truth, either
+
+    def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray, words: np.ndarray,
+             trust: np.ndarray | None = None) -> np.ndarray:
+        """int [n]: DFA states after reading positions (x, beliefs) from q, belief labels exact."""
+        truth, _ = self.truth(beliefs, words)
+        return self.labeller.step(q, x, beliefs, trust, belief_truth=truth)
+
+
+def exact_labels(pomdp: TrustPOMDP, labeller: Labeller, rule: BeliefRule = "bayes") -> ExactLabels:
+    return ExactLabels(filter=ExactFilter(pomdp=pomdp, rule=rule), labeller=labeller)

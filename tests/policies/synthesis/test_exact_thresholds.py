@@ -1,0 +1,47 @@
+"""Thresholds at values the float filter reaches: synthesis reaches τ and stays sound.
+
+Cases (threshold_cases.py, seeded numpy Generators): random towns of 4-8 junctions, H = 2-8, a
+belief atom's offset at c·b̂ of a reached belief, a sum of prior entries or k/7 under the uniform
+prior, exactly or one ulp either side. Labels that floats cannot decide are decided exactly
+(policies/belief/exact_labels.py), so [L, U] closes to τ = 1e-3, contains the optimum of an
+exact-rational brute force written for the test, and `evaluate` values the returned policy at
+least L.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.policies.synthesis.threshold_cases import brute_force, random_case, run_case
+from trustroute.policies.synthesis.exact_search import exact_optimum
+
+TAU = 1e-3
+TOLERANCE = 1e-9
+FAST_SEEDS = range(1000, 1012)
+SWEEP_SEEDS = range(200)
+
+
+@pytest.mark.parametrize("seed", FAST_SEEDS)
+def test_a_threshold_case_reaches_tau_and_is_sound(driver, seed):
+    outcome = run_case(random_case(seed, driver), tau=TAU)
+    assert outcome.sound(TOLERANCE), outcome
+    assert outcome.policy_worth_lower(TOLERANCE), outcome
+    assert outcome.reaches(TAU), outcome
+
+
+@pytest.mark.parametrize("seed", FAST_SEEDS)
+def test_the_exhaustive_search_equals_the_exact_rational_brute_force(driver, seed):
+    """policies/synthesis/exact_search.py (float beliefs, labels decided by exact_labels) and the
+    test's own integer brute force agree on every threshold case."""
+    case = random_case(seed, driver)
+    assert exact_optimum(case.pomdp, case.spec, case.horizon) == pytest.approx(
+        brute_force(case.pomdp, case.spec, case.horizon), abs=TOLERANCE)
+
+
+@pytest.mark.slow
+def test_threshold_cases_reach_tau_in_99_per_cent_of_runs_and_are_all_sound(driver):
+    outcomes = [run_case(random_case(seed, driver), tau=TAU) for seed in SWEEP_SEEDS]
+    assert [o for o in outcomes if not o.sound(TOLERANCE)] == []
+    assert [o for o in outcomes if not o.policy_worth_lower(TOLERANCE)] == []
+    reached = sum(o.reaches(TAU) for o in outcomes)
+    assert reached >= 0.99 * len(outcomes), [o for o in outcomes if not o.reaches(TAU)]
