@@ -176,6 +176,8 @@ class RemoteDriver:
         self.drive_by_hand(sumo, ego, mode)
         hurried = self.wait_for_the_wall_clock(ego.time)
         wall = self.clock()
+        if hurried:   # the pace goes on from this step: no wall time is spent waiting for it again
+            self.origin = (wall, ego.time)
         # a stepped frame always replaces predicted ones (they are only ever the time between
         # steps), and shows the step before a takeover or hand-back is applied
         if hurried or self.predicted or wall - self.last_frame >= self.frame_interval:

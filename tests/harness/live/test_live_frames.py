@@ -95,3 +95,16 @@ def test_no_frames_are_predicted_while_paused_and_they_go_on_from_the_resume():
     assert len(after) >= 7 and after[-1]["t"] == 0.5 and not after[-1].get("predicted")
     for message in after:   # the simulated time goes on from where the pause held it
         assert message["t"] == pytest.approx(min(0.2 + (message["wall"] - 2.0), 0.5))
+
+
+def test_a_takeover_does_not_wait_for_the_pace_and_the_frames_go_on_without_a_gap():
+    clock = FakeTime(controls=[(1.2, {"type": "takeover"})])
+    driver = RemoteDriver(clock, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1.0), clock=clock)
+    for step in range(9):
+        driver.observe(NO_TRAFFIC, ego_at(0.5 * step), "auto", "A-B")   # (the episode switches the mode)
+    frames = [m for m in clock.sent if m["type"] == "frame"]
+    walls = [m["wall"] for m in frames]
+    assert max(b - a for a, b in zip(walls, walls[1:], strict=False)) <= driver.frame_interval + 1e-9
+    hurried = next(m for m in frames if m["wall"] >= 1.2 and not m.get("predicted"))
+    assert hurried["wall"] == pytest.approx(1.2) and hurried["t"] == 1.5   # shown at once, not at 1.5 s
+    assert frames[-1]["t"] == 4.0 and frames[-1]["wall"] == pytest.approx(4.0 - 0.3)   # 0.3 s gained
