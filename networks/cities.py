@@ -175,7 +175,7 @@ def _build_csomor(folder: Path) -> None:
     if result.returncode != 0 or not net.is_file():
         last = (result.stderr.strip().splitlines() or ["no output"])[-1]
         raise InputError(str(CSOMOR_DATA), "", f"netconvert could not build the net of Csömör ({last})",
-                         "reinstall trustroute and the pinned eclipse-sumo wheel (pip install -e .)")
+                         "reinstall the package with its pinned eclipse-sumo wheel (pip install -e .)")
     for path in plain.values():
         path.unlink()
     # Without netconvert's dated header: the same plain files give the same net (and content hash).

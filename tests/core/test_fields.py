@@ -157,7 +157,7 @@ def test_every_format_exposes_its_accepted_keys():
     from trustroute.policies.logic import spec
 
     assert town.TOWN_KEYS == keys(town.FIELDS) == ("junctions", "roads", "incidents", "source",
-                                                          "one_way", "geometry", "sumo_net")
+                                                          "one_way", "geometry", "sumo_net", "turns")
     assert driver_model.DRIVER_MODEL_KEYS == keys(driver_model.FIELDS)
     assert "trust_free_takeover_probability" in driver_model.DRIVER_MODEL_KEYS
     assert driver_population.POPULATION_KEYS == ("format", "version", "source", "types")

@@ -189,7 +189,7 @@ def ingolstadt_net() -> Path | None:
 
 
 INGOLSTADT_SPEC = """name = "ingolstadt"
-start = "434068771-89173763"
+start = "1423242716-1782978609"
 formula = "F (v1 & F v2)"
 
 [states]
