@@ -26,8 +26,8 @@ from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.fixed_route import FixedRoute
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
-from trustroute.policies.routing.protocol import RoutingPolicy
 
 SEED = 3
 PAIRS = 41   # (episode, bare) pairs of the ratio
@@ -63,21 +63,6 @@ def route_through_every_kind(town, start: str) -> tuple[str, ...]:
                 seen.add((nxt, kinds))
                 queue.append((route + (nxt,), kinds))
     raise ValueError("the town has no route through every incident kind")
-
-
-class _FixedRoute(RoutingPolicy):
-    """Drives a given route, then declares itself finished."""
-
-    name = "fixed"
-
-    def __init__(self, route) -> None:
-        self.route = tuple(route)
-
-    def finished(self, context) -> bool:
-        return len(context.route) >= len(self.route)
-
-    def next_junction(self, context) -> str:
-        return self.route[len(context.route)].split("-")[1]
 
 
 def bare_loop(net, route: list[str], config: SumoConfig) -> float:
@@ -174,7 +159,7 @@ def incident_rates(setup: EpisodeSetup, net, config: SumoConfig, episodes: int =
     incidents = []
     for seed in range(episodes):
         driver = SyntheticDriver(setup.driver_model, np.random.default_rng(2000 + seed))
-        incidents.append(run_episode(scenes, _FixedRoute(route), driver, f"rates{seed}", 2000 + seed,
+        incidents.append(run_episode(scenes, FixedRoute(route), driver, f"rates{seed}", 2000 + seed,
                                      net_path=net, config=config).incidents)
     rows = pd.concat(incidents, ignore_index=True)
     rates = []

@@ -40,22 +40,7 @@ from trustroute.networks.town import NO_INCIDENT, load_town  # noqa: E402
 from trustroute.participants.driver_model import load_driver_model  # noqa: E402
 from trustroute.participants.synthetic_driver import SyntheticDriver  # noqa: E402
 from trustroute.policies.logic.spec import load_spec  # noqa: E402
-from trustroute.policies.routing.protocol import RoutingPolicy  # noqa: E402
-
-
-class FixedRoute(RoutingPolicy):
-    """Drives a given route, then declares itself finished."""
-
-    name = "fixed"
-
-    def __init__(self, route) -> None:
-        self.route = tuple(route)
-
-    def finished(self, context) -> bool:
-        return len(context.route) >= len(self.route)
-
-    def next_junction(self, context) -> str:
-        return self.route[len(context.route)].split("-")[1]
+from trustroute.policies.routing.fixed_route import FixedRoute  # noqa: E402
 
 
 def record_failed_measures(failed: collections.Counter) -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from trustroute.core.packaged import PACKAGED_SPECS
-from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.routing.fixed_route import FixedRoute as FixedRoute  # the tests take it from here
 
 SPECS = PACKAGED_SPECS
 # Start E-A, then a pedestrian road, a plain road, an obstacle road and a truck road.
@@ -23,21 +23,6 @@ def run_study(config_path: Path, text: str, out: Path):
     config = load_study_config(config_path)
     run_and_consolidate(config, out, 1, None, progress=False, echo=lambda *_: None)
     return config
-
-
-class FixedRoute(RoutingPolicy):
-    """Drives a given route of directed roads, then declares itself finished."""
-
-    name = "fixed"
-
-    def __init__(self, route) -> None:
-        self.route = tuple(route)
-
-    def finished(self, context) -> bool:
-        return len(context.route) >= len(self.route)
-
-    def next_junction(self, context) -> str:
-        return self.route[len(context.route)].split("-")[1]
 
 
 class ForcedTakeover:
