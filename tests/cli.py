@@ -22,6 +22,13 @@ def run_cli(capsys: pytest.CaptureFixture, *args: str) -> tuple[int, str, str]:
     return exit_info.value.code, captured.out, captured.err
 
 
+def cli_json(capsys: pytest.CaptureFixture, *args: str) -> dict:
+    """The JSON a command prints with --json (it must succeed)."""
+    code, out, err = run_cli(capsys, *args, "--json")
+    assert code == 0, err
+    return json.loads(out)
+
+
 def assert_one_line_error(code: int, err: str, *fragments: str) -> None:
     """Exit code 2 and one `error: ... (fix: ...)` line on stderr holding every fragment."""
     assert code == 2

@@ -11,19 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli import run_cli
+from tests.cli import cli_json, run_cli
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(importlib.util.find_spec("sumo_rl") is None,
                                  reason="needs the optional extra: pip install -e '.[cities]'")]
 # A road of city5's trust-free route 0.2 m long: the ego crosses it within one step.
 SHORT_ROAD = "356699998-364445380"
-
-
-def _json(capsys, *args: str) -> dict:
-    code, out, err = run_cli(capsys, *args, "--json")
-    assert code == 0, err
-    return json.loads(out)
 
 
 @pytest.fixture(scope="module")
@@ -40,13 +34,13 @@ def synthesized(tmp_path_factory) -> dict:
 
 
 def test_spec_check_baseline_evaluate_and_synth_accept_the_city(capsys, synthesized):
-    check = _json(capsys, "spec", "check", "city5", "--town", "city")
+    check = cli_json(capsys, "spec", "check", "city5", "--town", "city")
     assert [w["junctions"] for w in check["waypoints"]] == [7, 5, 5, 4, 6]
-    baseline = _json(capsys, "baseline", "city5", "--town", "city")
+    baseline = cli_json(capsys, "baseline", "city5", "--town", "city")
     assert baseline["junctions"] == 33 and SHORT_ROAD in baseline["route"]
-    free = _json(capsys, "evaluate", "city5", "free", "--town", "city", "--no-fallback")
+    free = cli_json(capsys, "evaluate", "city5", "free", "--town", "city", "--no-fallback")
     assert free["lower"] == free["upper"] == pytest.approx(baseline["satisfaction_probability"], abs=1e-12)
-    policy = _json(capsys, "evaluate", "city5", str(synthesized["policy"]), "--town", "city",
+    policy = cli_json(capsys, "evaluate", "city5", str(synthesized["policy"]), "--town", "city",
                    "--fallback-after", "40")
     document = json.loads(Path(synthesized["policy"]).read_text())
     lower, upper = document["lower"], document["upper"]
@@ -77,12 +71,12 @@ fallback_after = 40
 
     episodes = pd.read_parquet(tmp_path / "study" / "episodes.parquet")
     assert len(episodes) == 4 and set(episodes["end_reason"]) <= {"accepted", "destination", "rejected"}
-    replay = _json(capsys, "replay", str(tmp_path / "study"), str(episodes["episode_id"].iloc[0]))
+    replay = cli_json(capsys, "replay", str(tmp_path / "study"), str(episodes["episode_id"].iloc[0]))
     assert replay["reproduced"] and replay["roads"] >= 28
 
 
 def test_an_episode_drives_the_city_with_its_own_demand(tmp_path, capsys):
-    summary = _json(capsys, "run", "city5", "--town", "city", "--routes", "city", "--policy", "free",
+    summary = cli_json(capsys, "run", "city5", "--town", "city", "--routes", "city", "--policy", "free",
                     "--seed", "2", "--sumo-files", str(tmp_path / "sumo"))
     # the trust-free route to its end, across the 0.2 m road, among the scenario's own vehicles
     assert summary["end_reason"] in ("accepted", "destination") and summary["junctions"] == 33

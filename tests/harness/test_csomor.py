@@ -11,15 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli import run_cli
+from tests.cli import cli_json, run_cli
 
 pytestmark = pytest.mark.slow
-
-
-def _json(capsys, *args: str) -> dict:
-    code, out, err = run_cli(capsys, *args, "--json")
-    assert code == 0, err
-    return json.loads(out)
 
 
 @pytest.fixture(scope="module")
@@ -36,23 +30,23 @@ def synthesized(tmp_path_factory) -> Path:
 
 
 def test_spec_check_baseline_evaluate_and_synth_accept_csomor(capsys, synthesized):
-    check = _json(capsys, "spec", "check", "csomor5", "--town", "csomor")
+    check = cli_json(capsys, "spec", "check", "csomor5", "--town", "csomor")
     assert [w["junctions"] for w in check["waypoints"]] == [8, 6, 6, 6, 6]
-    baseline = _json(capsys, "baseline", "csomor5", "--town", "csomor")
+    baseline = cli_json(capsys, "baseline", "csomor5", "--town", "csomor")
     assert baseline["junctions"] == 32 <= 40   # the trust-free route fits the horizon
-    free = _json(capsys, "evaluate", "csomor5", "free", "--town", "csomor", "--no-fallback")
+    free = cli_json(capsys, "evaluate", "csomor5", "free", "--town", "csomor", "--no-fallback")
     assert free["lower"] == free["upper"] == pytest.approx(baseline["satisfaction_probability"], abs=1e-12)
     document = json.loads(synthesized.read_text())
     lower, upper = document["lower"], document["upper"]
     assert 0.0 <= lower <= upper <= 1.0
     assert lower >= baseline["satisfaction_probability"] - (upper - lower)
-    policy = _json(capsys, "evaluate", "csomor5", str(synthesized), "--town", "csomor",
+    policy = cli_json(capsys, "evaluate", "csomor5", str(synthesized), "--town", "csomor",
                    "--fallback-after", "40")
     assert policy["lower"] >= lower - 1e-9
 
 
 def test_an_episode_drives_csomor_among_background_traffic(tmp_path, capsys):
-    summary = _json(capsys, "run", "csomor5", "--town", "csomor", "--policy", "free", "--seed", "2",
+    summary = cli_json(capsys, "run", "csomor5", "--town", "csomor", "--policy", "free", "--seed", "2",
                     "--background", "10", "--sumo-files", str(tmp_path / "sumo"))
     assert summary["end_reason"] in ("accepted", "destination") and summary["junctions"] == 32
     routes = (tmp_path / "sumo" / "routes.rou.xml").read_text()
@@ -79,5 +73,5 @@ fallback_after = 40
     episodes = pd.read_parquet(tmp_path / "study" / "episodes.parquet")
     assert len(episodes) == 2 and set(episodes["end_reason"]) <= {"accepted", "destination", "rejected"}
     for episode_id in episodes["episode_id"]:
-        replay = _json(capsys, "replay", str(tmp_path / "study"), str(episode_id))
+        replay = cli_json(capsys, "replay", str(tmp_path / "study"), str(episode_id))
         assert replay["reproduced"] and replay["roads"] >= 20
