@@ -51,18 +51,23 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
-def start_server(config_path: Path, study_dir: Path) -> tuple[subprocess.Popen, str, str]:
+def start_live_server(config_path: Path | str, study_dir: Path, *options: str,
+                      wait: float = 120.0) -> tuple[subprocess.Popen, str, str]:
+    """(process, address, experimenter token) of `trustroute live CONFIG --out STUDY_DIR OPTIONS`
+    on a free port of 127.0.0.1, once it serves (RuntimeError if it does not within `wait` s)."""
     port = free_port()
     command = [sys.executable, "-m", "trustroute.harness.cli", "live", str(config_path), "--out",
-               str(study_dir), "--port", str(port), "--pace", "1", "--no-warm-up"]
+               str(study_dir), "--port", str(port), *options]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     token = ""
     for line in process.stdout:
         if line.startswith("experimenter token: "):
             token = line.split(": ", 1)[1].strip()
             break
+    if not token:
+        raise RuntimeError("the live server printed no experimenter token")
     address = f"127.0.0.1:{port}"
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + wait
     while True:
         try:
             httpx.get(f"http://{address}/api/participants", timeout=2)
@@ -161,7 +166,8 @@ class Client(threading.Thread):
 def measure(count: int, workdir: Path) -> dict:
     config_path = workdir / f"live{count}.toml"
     config_path.write_text(CONFIG)
-    process, address, token = start_server(config_path, workdir / f"study{count}")
+    process, address, token = start_live_server(config_path, workdir / f"study{count}", "--pace", "1",
+                                                "--no-warm-up")
     try:
         idle = tree_rss_mib(process.pid)
         headers = {"Authorization": f"Bearer {token}"}

@@ -10,17 +10,15 @@ import threading
 import httpx
 import numpy as np
 import pytest
-import uvicorn
 from scipy import stats
 
 from trustroute.core.dataset import read_episodes
-from trustroute.harness.live.app import live_app
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 from trustroute.harness.study.runner import run_and_consolidate
 
 from .conftest import tiny_config
-from .test_live_episode import free_port
+from .test_live_episode import serving
 
 pytestmark = pytest.mark.slow
 
@@ -32,31 +30,23 @@ SIGNIFICANCE = 0.01  # a difference this unlikely under "same figures" fails the
 
 def live_study(config, study_dir):
     study = LiveStudy(config, study_dir, ServerOptions(pace=PACE, warm_up=False)).open()
-    port = free_port()
-    server = uvicorn.Server(uvicorn.Config(live_app(study), host="127.0.0.1", port=port,
-                                           log_level="warning", lifespan="off"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    while not server.started:
-        thread.join(0.02)
     try:
-        headers = {"Authorization": f"Bearer {study.experimenter_token}"}
-        players = [ScriptedParticipant(config, p) for p in range(config.participants)]
-        tokens = [httpx.post(f"http://127.0.0.1:{port}/api/participants", json={}, headers=headers)
-                  .json()["token"] for _ in players]
-        url = f"ws://127.0.0.1:{port}/ws"
-        for first in range(0, len(players), AT_ONCE):
-            threads = [threading.Thread(target=run_scripted, args=(url, token, player, 300))
-                       for token, player in list(zip(tokens, players, strict=True))[first:first + AT_ONCE]]
-            for each in threads:
-                each.start()
-            for each in threads:
-                each.join(600)
+        with serving(study) as address:
+            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+            players = [ScriptedParticipant(config, p) for p in range(config.participants)]
+            tokens = [httpx.post(f"http://{address}/api/participants", json={}, headers=headers)
+                      .json()["token"] for _ in players]
+            url, pairs = f"ws://{address}/ws", list(zip(tokens, players, strict=True))
+            for first in range(0, len(players), AT_ONCE):
+                threads = [threading.Thread(target=run_scripted, args=(url, token, player, 300))
+                           for token, player in pairs[first:first + AT_ONCE]]
+                for each in threads:
+                    each.start()
+                for each in threads:
+                    each.join(600)
         assert all(player.finished for player in players)
         assert [e for player in players for e in player.errors if e["code"] != "out_of_order"] == []
     finally:
-        server.should_exit = True
-        thread.join(10)
         study.close()
 
 

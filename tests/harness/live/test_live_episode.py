@@ -3,8 +3,8 @@ participant), paused, resumed and aborted by the experimenter, and read by `trus
 
 from __future__ import annotations
 
+import contextlib
 import json
-import socket
 import threading
 import time
 
@@ -13,6 +13,7 @@ import pytest
 import uvicorn
 from fastapi.testclient import TestClient
 
+from benchmarks.bench_live import free_port
 from trustroute.core.dataset import part_path, read_episodes, read_kinematics, read_manifest, read_roads
 from trustroute.harness.live.app import live_app
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
@@ -24,17 +25,12 @@ from .conftest import tiny_config
 pytestmark = pytest.mark.slow
 
 
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-@pytest.fixture
-def served(live_study):
-    """(study, base URL) of the live study on a real uvicorn at 127.0.0.1 and a random port."""
+@contextlib.contextmanager
+def serving(study: LiveStudy):
+    """The base address of the live study on a real uvicorn at 127.0.0.1 and a random port,
+    served from a thread while the block runs."""
     port = free_port()
-    server = uvicorn.Server(uvicorn.Config(live_app(live_study), host="127.0.0.1", port=port,
+    server = uvicorn.Server(uvicorn.Config(live_app(study), host="127.0.0.1", port=port,
                                            log_level="warning", lifespan="off"))
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
@@ -42,9 +38,18 @@ def served(live_study):
     while not server.started:
         assert time.monotonic() < deadline, "uvicorn did not start"
         time.sleep(0.02)
-    yield live_study, f"127.0.0.1:{port}"
-    server.should_exit = True
-    thread.join(10)
+    try:
+        yield f"127.0.0.1:{port}"
+    finally:
+        server.should_exit = True
+        thread.join(10)
+
+
+@pytest.fixture
+def served(live_study):
+    """(study, base address) of the live study on a real uvicorn (`serving`)."""
+    with serving(live_study) as address:
+        yield live_study, address
 
 
 def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_it(served, tmp_path):

@@ -7,7 +7,6 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -16,37 +15,19 @@ import httpx
 import pytest
 from websockets.exceptions import ConnectionClosed
 
+from benchmarks.bench_live import start_live_server
 from trustroute.core.dataset import part_path, read_episodes, read_roads
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.study.plan import plan_episodes
 
 from .conftest import tiny_config
-from .test_live_episode import free_port
 
 pytestmark = pytest.mark.slow
 
 
 def start_server(config_path: str, study_dir: Path, pace: float) -> tuple[subprocess.Popen, str, str]:
     """(process, address, experimenter token) of `trustroute live` once it serves."""
-    port = free_port()
-    command = [sys.executable, "-m", "trustroute.harness.cli", "live", config_path, "--out", str(study_dir),
-               "--port", str(port), "--pace", str(pace)]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    token = ""
-    for line in process.stdout:
-        if line.startswith("experimenter token: "):
-            token = line.split(": ", 1)[1].strip()
-            break
-    assert token, "the server printed no token"
-    address = f"127.0.0.1:{port}"
-    deadline = time.monotonic() + 60
-    while True:
-        try:
-            httpx.get(f"http://{address}/api/participants", timeout=2)
-            return process, address, token
-        except httpx.TransportError:
-            assert time.monotonic() < deadline and process.poll() is None, "the server did not start"
-            time.sleep(0.1)
+    return start_live_server(config_path, study_dir, "--pace", str(pace), wait=60.0)
 
 
 def children(pid: int) -> list[int]:
