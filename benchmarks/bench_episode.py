@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -28,6 +30,7 @@ from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.fixed_route import FixedRoute
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
+from trustroute.policies.routing.protocol import RoutingPolicy
 
 SEED = 3
 PAIRS = 41   # (episode, bare) pairs of the ratio
@@ -87,29 +90,46 @@ def _rss_mb() -> float:
         return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def run() -> list[dict]:
-    town = load_town()
-    driver_model = load_driver_model()
-    spec = load_spec("phi1", town)
-    setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
-    policy = trust_free_policy(town, spec)
-    net = build_net(town).path
-    config = SumoConfig()
-    route = baseline_route(town, spec)
+@dataclass(frozen=True)
+class MeasuredEpisode:
+    """The measured episode (φ1 on the default town, trust-free policy, default driver) and the
+    bare libsumo loop of the same route: what `run` and bench_episode_profile.py both time."""
 
-    def episode(seed: int = SEED):
-        driver = SyntheticDriver(driver_model, np.random.default_rng(seed))
-        record = run_episode(setup, policy, driver, f"bench{seed}", seed, net_path=net, config=config)
+    setup: EpisodeSetup
+    policy: RoutingPolicy
+    net: Path
+    config: SumoConfig
+    route: list[str]
+
+    def episode(self, seed: int = SEED):
+        driver = SyntheticDriver(self.setup.driver_model, np.random.default_rng(seed))
+        record = run_episode(self.setup, self.policy, driver, f"bench{seed}", seed, net_path=self.net,
+                             config=self.config)
         record.tables()   # the logs in the form a study writes them (Arrow), part of the cost
         return record
 
+    def bare(self) -> float:
+        return bare_loop(self.net, self.route, self.config)
+
+
+def measured_episode() -> MeasuredEpisode:
+    town = load_town()
+    spec = load_spec("phi1", town)
+    return MeasuredEpisode(setup=EpisodeSetup(town=town, driver_model=load_driver_model(), spec=spec),
+                           policy=trust_free_policy(town, spec), net=build_net(town).path,
+                           config=SumoConfig(), route=baseline_route(town, spec))
+
+
+def run() -> list[dict]:
+    measured = measured_episode()
+    setup, net, config, episode = measured.setup, measured.net, measured.config, measured.episode
     episode()
-    bare_loop(net, route, config)   # warm both paths
+    measured.bare()   # warm both paths
     # Interleaved pairs, median of the per-pair ratios, in wall and in CPU time of this process
     # (libsumo runs in it; CPU time is less disturbed by the other processes of a shared machine).
-    paired = paired_ratio(episode, lambda: bare_loop(net, route, config), pairs=PAIRS)
+    paired = paired_ratio(episode, measured.bare, pairs=PAIRS)
     record = episode()
-    bare_sim = bare_loop(net, route, config)
+    bare_sim = measured.bare()
 
     for seed in range(20):
         episode(100 + seed)

@@ -28,19 +28,9 @@ import time
 from collections import defaultdict
 from collections.abc import Iterator
 
-import numpy as np
-
-from benchmarks.bench_episode import SEED, bare_loop
+from benchmarks.bench_episode import measured_episode
 from trustroute.harness.simulation import episode as episode_module
 from trustroute.harness.simulation import episode_tracker
-from trustroute.harness.simulation.episode_tracker import EpisodeSetup
-from trustroute.harness.simulation.sumo_start import SumoConfig
-from trustroute.networks.sumo_net import build_net
-from trustroute.networks.town import load_town
-from trustroute.participants.driver_model import load_driver_model
-from trustroute.participants.synthetic_driver import SyntheticDriver
-from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.routing.free import baseline_route, trust_free_policy
 
 EPISODES = 40
 
@@ -115,27 +105,14 @@ def _per_episode(totals: dict[str, float], wall: float, episodes: int) -> dict[s
 
 def profile(episodes: int = EPISODES) -> dict:
     """Per-phase ms of the episode and of the bare loop over `episodes` alternating runs each."""
-    town = load_town()
-    driver_model = load_driver_model()
-    spec = load_spec("phi1", town)
-    setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
-    policy = trust_free_policy(town, spec)
-    net = build_net(town).path
-    config = SumoConfig()
-    route = baseline_route(town, spec)
-
-    def episode() -> None:
-        driver = SyntheticDriver(driver_model, np.random.default_rng(SEED))
-        episode_module.run_episode(setup, policy, driver, f"bench{SEED}", SEED, net_path=net,
-                                   config=config).tables()
-
-    episode()
-    bare_loop(net, route, config)   # warm both paths
+    measured = measured_episode()
+    measured.episode()
+    measured.bare()   # warm both paths
     sides = {side: {"wall": defaultdict(float), "cpu": defaultdict(float), "counts": defaultdict(int),
                     "total": [0.0, 0.0]} for side in ("episode", "bare")}
     load_before = os.getloadavg()[0]
     for _ in range(episodes):
-        for side, run in (("episode", episode), ("bare", lambda: bare_loop(net, route, config))):
+        for side, run in (("episode", measured.episode), ("bare", measured.bare)):
             timers = sides[side]
             with _phase_timers(timers["wall"], timers["cpu"], timers["counts"]):
                 started, started_cpu = time.perf_counter(), time.thread_time()
