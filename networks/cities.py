@@ -23,6 +23,7 @@ docs/cities.md and networks/data/csomor/README.md.
 
 from __future__ import annotations
 
+import functools
 import gzip
 import hashlib
 import importlib.metadata
@@ -51,8 +52,9 @@ IMPORT_OPTIONS = f"trustroute town import --incident-seed {CITY_INCIDENT_SEED}; 
 IMPORTER_MODULES = ("sumo_import", "town_import", "road_geometry", "town_incidents", "town", "osm_convert")
 
 
+@functools.cache
 def importer_fingerprint() -> str:
-    """A hash of the importer's own source code."""
+    """A hash of the importer's own source code (read once per process: it cannot change there)."""
     digest = hashlib.sha256()
     for name in IMPORTER_MODULES:
         digest.update((Path(__file__).parent / f"{name}.py").read_bytes())
