@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import itertools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -142,6 +142,24 @@ def simplex_grid(k: int, max_points: int = MAX_GRID_CANDIDATES) -> list[np.ndarr
         if sum(combo) == m:
             points.append(np.array(combo, dtype=float) / m)
     return points
+
+
+def candidate_name(prior: np.ndarray) -> str:
+    return f"candidate prior {np.round(prior, 3).tolist()}"
+
+
+def candidate_priors(weights: np.ndarray, n_types: int, grid_points: int,
+                     schedule: RunSchedule) -> Iterator[np.ndarray]:
+    """The robust search's candidate priors: the simplex grid less the population's own weights
+    (run already), each while the schedule affords its run, else skipped and said so. Lazy: the
+    schedule is asked after the run of the previous candidate has finished."""
+    for prior in simplex_grid(n_types, grid_points):
+        if np.allclose(prior, weights, rtol=0, atol=1e-12):
+            continue
+        if not schedule.affords(n_types):
+            schedule.skip(candidate_name(prior))
+            continue
+        yield prior
 
 
 def _count(k: int, m: int) -> int:
@@ -252,16 +270,11 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
     candidates = [{"prior": weights.tolist(), "worst_type_lower": worst(bayes_values),
                    "type_lower": [v.lower for v in bayes_values]}]
     if population.n_types > 1:
-        for prior in simplex_grid(population.n_types, grid_points):
-            if np.allclose(prior, weights, rtol=0, atol=1e-12):
-                continue
-            if not schedule.affords(population.n_types):
-                schedule.skip(f"candidate prior {np.round(prior, 3).tolist()}")
-                continue
+        for prior in candidate_priors(weights, population.n_types, grid_points, schedule):
             made = synthesize(build_pomdp(town, lift_population(population, prior)), lifted_spec, tau=tau,
                               time_limit=schedule.next_limit(), horizon=horizon, belief_rule=belief_rule,
                               on_iteration=on_iteration)
-            schedule.finished(f"candidate prior {np.round(prior, 3).tolist()}", made.lower, made.upper)
+            schedule.finished(candidate_name(prior), made.lower, made.upper)
             policy = BeliefTablePolicy(made.policy.table, town, lifted_spec, name="robust",
                                        horizon=horizon, reweight=reweighting(population, prior))
             values = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule)

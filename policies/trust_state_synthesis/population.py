@@ -50,10 +50,11 @@ from trustroute.policies.synthesis.population import (
     PopulationSynthesis,
     RunSchedule,
     TypeValue,
+    candidate_name,
+    candidate_priors,
     evaluation_cap,
     reweighting,
     run_count,
-    simplex_grid,
 )
 from trustroute.policies.synthesis.result import SynthesisResult
 from trustroute.policies.trust_state_synthesis.synthesis import (
@@ -131,16 +132,11 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
 
     best: tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray] = (bayes.policy, values, weights)
     candidates = [record(weights, values)]
-    for prior in simplex_grid(population.n_types, grid_points):
-        if np.allclose(prior, weights, rtol=0, atol=1e-12):
-            continue
-        if not schedule.affords(population.n_types):
-            schedule.skip(f"candidate prior {np.round(prior, 3).tolist()}")
-            continue
+    for prior in candidate_priors(weights, population.n_types, grid_points, schedule):
         made = synthesize_joint(build_pomdp(problem.town, lift_population(population, prior)), problem.spec,
                                 tau=tau, time_limit=schedule.next_limit(), horizon=horizon,
                                 belief_rule=belief_rule, on_iteration=on_iteration)
-        schedule.finished(f"candidate prior {np.round(prior, 3).tolist()}", made.lower, made.upper)
+        schedule.finished(candidate_name(prior), made.lower, made.upper)
         policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
                                   name="robust", horizon=horizon, guide=made.policy.guide,
                                   reweight=reweighting(population, prior))
