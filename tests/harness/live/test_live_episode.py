@@ -21,6 +21,7 @@ from trustroute.harness.live.server import LiveStudy, ServerOptions, warm_up_tas
 from trustroute.harness.study.parts import read_part
 
 from .conftest import tiny_config
+from .test_live_manual import play_in
 
 pytestmark = pytest.mark.slow
 
@@ -200,14 +201,8 @@ def test_scripted_participants_in_lockstep_reproduce_the_headless_study(tmp_path
     study = LiveStudy(config, tmp_path / "live", ServerOptions(pace=1e4, warm_up=False)).open()
     try:
         with TestClient(live_app(study)) as client:
-            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
             for p in range(config.participants):
-                token = client.post("/api/participants", json={}, headers=headers).json()["token"]
-                player = ScriptedParticipant(config, p, lockstep=True)
-                with client.websocket_connect("/ws", headers={"Authorization": f"Bearer {token}"}) as socket:
-                    while not player.finished:
-                        for reply in player.respond(socket.receive_json()):
-                            socket.send_json(reply)
+                play_in(client, study, ScriptedParticipant(config, p, lockstep=True))
     finally:
         study.close()
     columns = ["satisfied", "junctions", "takeovers", "end_reason", "fallback_fired", "mean_reported_trust",

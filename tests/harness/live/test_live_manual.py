@@ -20,20 +20,26 @@ from .conftest import tiny_config
 pytestmark = pytest.mark.slow
 
 
+def play_in(client: TestClient, study: LiveStudy, player: ScriptedParticipant) -> ScriptedParticipant:
+    """A new participant of `study`, played by `player` to the end through the websocket of
+    `client` (a TestClient of the study's app)."""
+    headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+    token = client.post("/api/participants", json={}, headers=headers).json()["token"]
+    with client.websocket_connect("/ws", headers={"Authorization": f"Bearer {token}"}) as socket:
+        while not player.finished:
+            for reply in player.respond(socket.receive_json()):
+                socket.send_json(reply)
+    return player
+
+
 def play(tmp_path, player: ScriptedParticipant) -> ScriptedParticipant:
     """One participant's session (no warm-up) at pace 20, played to the end through the websocket."""
     study = LiveStudy(player.config, tmp_path / "study", ServerOptions(pace=20.0, warm_up=False)).open()
     try:
         with TestClient(live_app(study)) as client:
-            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
-            token = client.post("/api/participants", json={}, headers=headers).json()["token"]
-            with client.websocket_connect("/ws", headers={"Authorization": f"Bearer {token}"}) as socket:
-                while not player.finished:
-                    for reply in player.respond(socket.receive_json()):
-                        socket.send_json(reply)
+            return play_in(client, study, player)
     finally:
         study.close()
-    return player
 
 
 def obstacle_roads(study_dir) -> list[tuple[str, float, float, pd.DataFrame]]:
