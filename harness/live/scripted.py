@@ -14,11 +14,12 @@ driver's manual driving style does in a headless episode.
 `ScriptedParticipant.respond` is the logic (message in, replies out);
 `run_scripted` connects it to a server.
 
-It keeps within the server's flood limit as a well-behaved client does: `respond` waits before
-returning replies that would exceed a client-side token bucket kept well inside the server's
-(harness/live/protocol.py BURST, RATE). In lockstep this is what keeps it correct, not just
-polite: the episode waits for every answer, so an answer refused as a flood would stall it; a
-refusal in lockstep is therefore raised (`LockstepRefused`) rather than waited on.
+In lockstep it keeps within the server's flood limit: `respond` waits before returning replies
+that would exceed a client-side token bucket kept well inside the server's
+(harness/live/protocol.py BURST, RATE). The episode waits for every answer there, so waiting
+loses nothing, while an answer refused as a flood would stall it; a refusal in lockstep is
+therefore raised (`LockstepRefused`) rather than waited on. Outside lockstep it answers at once,
+as a person does: the episode drives on meanwhile, and a late answer would miss its road.
 """
 
 from __future__ import annotations
@@ -89,8 +90,10 @@ class ScriptedParticipant:
         return SyntheticDriver(model, task.driver_rng(), report_accuracy=self.config.report_accuracy)
 
     def respond(self, message: dict) -> list[dict]:
-        """The replies to one server message, returned no faster than the flood limit allows."""
+        """The replies to one server message; in lockstep no faster than the flood limit allows."""
         replies = self.replies_to(message)
+        if not self.lockstep:
+            return replies
         for _ in replies:
             while (wait := self.bucket.seconds_to_next()) > 0.0:
                 self.sleep(wait)

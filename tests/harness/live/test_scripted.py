@@ -1,5 +1,5 @@
-"""The scripted participant keeps within the server's flood limit, and a refused lockstep answer
-fails at once instead of leaving the episode waiting."""
+"""In lockstep the scripted participant keeps within the server's flood limit, and a refused
+answer fails at once instead of leaving the episode waiting; outside lockstep it answers at once."""
 
 from __future__ import annotations
 
@@ -56,3 +56,13 @@ def test_a_refused_lockstep_answer_is_raised(tmp_path):
     relaxed = ScriptedParticipant(tiny_config(tmp_path), 0)
     assert relaxed.respond(error_reply("rate_limited", "too many messages; slow down")) == []
     assert relaxed.errors[0]["code"] == "rate_limited"
+
+
+def test_outside_lockstep_answers_go_at_once(tmp_path):
+    clock = FakeClock()
+    player = ScriptedParticipant(tiny_config(tmp_path), 0,
+                                 bucket=TokenBucket(burst=CLIENT_BURST, rate=CLIENT_RATE, clock=clock),
+                                 sleep=clock.sleep)
+    for _ in range(50):
+        assert player.respond({"type": "warning", "kind": "hand_back", "distance": 90.0, "t": 1.0})
+    assert clock.now == 0.0   # the episode drives on meanwhile: a late answer would miss its road
