@@ -107,7 +107,7 @@ class ScriptedParticipant:
         if kind == "state":
             return self.on_state(message)
         if self.by_hand and kind in ("road", "mode", "frame", "warning"):
-            return self.drive_by_hand(message)
+            return self.drive_by_hand(message) + (self.report_on(message) if kind == "road" else [])
         if kind in ("mode", "frame") and not self.lockstep:
             return self.pass_when_in_control(message)
         if kind == "incident" and self.driver is not None:
@@ -116,11 +116,8 @@ class ScriptedParticipant:
                 return [{"type": "takeover"}]
             if self.lockstep:
                 return [{"type": "pass"}]
-        elif kind == "road" and self.driver is not None:
-            self.driver.move_trust(message["incident"], message["takeover"], message["performance"])
-            if message["prompt"]:
-                self.reports += 1
-                return [{"type": "trust", "value": int(self.driver.report_trust())}]
+        elif kind == "road":
+            return self.report_on(message)
         elif kind == "warning" and message["kind"] == "hand_back":
             return [{"type": "hand_back"}]   # the rule of the study: hand back before the junction
         elif kind == "episode_end":
@@ -131,6 +128,16 @@ class ScriptedParticipant:
             if self.lockstep and message.get("code") == "rate_limited":
                 raise LockstepRefused(f"the server refused a lockstep answer: {message}")
         return []
+
+    def report_on(self, road: dict) -> list[dict]:
+        """The driver's trust moves on what the road showed; a report when the road prompts."""
+        if self.driver is None:
+            return []
+        self.driver.move_trust(road["incident"], road["takeover"], road["performance"])
+        if not road["prompt"]:
+            return []
+        self.reports += 1
+        return [{"type": "trust", "value": int(self.driver.report_trust())}]
 
     def drive_by_hand(self, message: dict) -> list[dict]:
         """Take over as each road opens; once in control, a brief press of the accelerator; an

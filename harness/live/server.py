@@ -49,6 +49,7 @@ class ServerOptions:
     resume_within: float = 120.0   # seconds a disconnected participant has to resume an episode
     warm_up: bool = True           # a warm-up drive before the trials
     secure_cookies: bool = False   # cookies only over HTTPS (behind a TLS proxy)
+    final_report_seconds: float = 15.0   # how long a trial's end waits for the last road's report
 
 
 def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:
@@ -172,7 +173,7 @@ class LiveStudy:
 
     def live_options(self, client: str, lockstep: bool = False) -> LiveOptions:
         return LiveOptions(self.options.pace, self.options.frame_rate, client, self.config.report_every,
-                           lockstep)
+                           lockstep, self.options.final_report_seconds)
 
     def episode_finished(self, task: EpisodeTask) -> None:
         """An episode wrote its part: count it done and consolidate the dataset."""

@@ -14,7 +14,9 @@ driver. The driver protocol is the seam (harness/simulation/episode.py):
 - `move_trust(...)`, when a road's observation closes: the road's event (incident, takeover,
   performance) is sent; the trust it returns is the person's latest report (their stated trust:
   the roads table's trust columns; the policy never reads them);
-- `report_trust()`: the latest report since the last road that asked for one, or None.
+- `report_trust()`: the latest report since the last road that asked for one, or None; the
+  last road's prompt is answered after the car has arrived, so the episode's end waits for it
+  (`final_report`, up to `final_report_seconds`) and puts it on the last road.
 
 The observer paces the simulation against the wall clock (`pace` sim seconds per wall second),
 reads the person's controls from the pipe, pauses while the server says so, and streams frames.
@@ -35,9 +37,12 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
+import pyarrow as pa
+
 from trustroute.harness.live.view import dead_reckoned, next_junction, surroundings
 from trustroute.harness.simulation.driving_style import MANUAL, allow_oncoming_pass, set_speed
-from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID
+from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID, EpisodeRecord
+from trustroute.harness.simulation.episode_tracker import reports_after_road
 
 PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
 WARN_DISTANCE = 100.0      # metres before the road's end: a person in control is told to hand back
@@ -57,6 +62,7 @@ class LiveOptions:
     client: str = "station"      # who drives: "station" (a person) or "scripted"
     report_every: int = 1        # the study's report_every: roads whose end prompts for a report
     lockstep: bool = False       # scripted only: the episode waits for its reply to every decision
+    final_report_seconds: float = 15.0   # wall seconds the end waits for the last road's report
 
 
 class RemoteDriver:
@@ -92,6 +98,7 @@ class RemoteDriver:
         self.held_at = 0.0                 # the simulated time shown when paused
         self.predicted = False             # the last frame sent was dead-reckoned
         self.hurry = False                 # a control to apply at once: the next step does not wait
+        self.awaiting_report = False       # the last prompt for a report has had no answer yet
 
     # -- the driver protocol (harness/simulation/episode.py) ------------------------------------
     @property
@@ -110,9 +117,10 @@ class RemoteDriver:
 
     def move_trust(self, incident: str, took_over: bool, performance: str = "succ") -> int:
         self.roads += 1
+        prompt = reports_after_road(self.roads, self.options.report_every)
+        self.awaiting_report = self.awaiting_report or prompt
         self.send({"type": "road", "index": self.roads, "incident": incident, "takeover": bool(took_over),
-                   "performance": performance, "t": self.sim_now,
-                   "prompt": self.roads % self.options.report_every == 0})
+                   "performance": performance, "t": self.sim_now, "prompt": prompt})
         return self._trust
 
     def report_trust(self) -> int | None:
@@ -120,6 +128,18 @@ class RemoteDriver:
             self.apply(self.await_reply(("trust",)), logged=True)
         report, self._report = self._report, None
         return report
+
+    def final_report(self) -> int | None:
+        """The answer to the last road's prompt when it had not come by the episode's end: a person
+        answers it after the car has arrived, so the end waits for it (up to final_report_seconds of
+        wall time, reading controls). None when nothing was awaited or nothing came."""
+        if self.options.lockstep or not self.awaiting_report:
+            return None
+        deadline = self.clock() + self.options.final_report_seconds
+        while self.awaiting_report and (left := deadline - self.clock()) > 0.0:
+            if self.connection.poll(min(left, PIPE_POLL_SECONDS * 5)):
+                self.apply(self.connection.recv())
+        return self.report_trust()
 
     # -- controls from the server ---------------------------------------------------------------
     def send(self, message: dict) -> None:
@@ -143,6 +163,7 @@ class RemoteDriver:
             self._request, self.hurry = kind == "takeover", True
         elif kind == "trust" and int(control["value"]) in self.levels:
             self._trust = self._report = int(control["value"])
+            self.awaiting_report = False
         elif kind == "drive":
             self.pedal = control["pedal"]
         elif kind == "steer":
@@ -279,6 +300,22 @@ class RemoteDriver:
             self.holding = True
 
 
+def with_final_report(record: EpisodeRecord, report: int | None) -> EpisodeRecord:
+    """The record with a report that answered the last road's prompt after the end put on the last
+    road, when that road has none (a late answer to an earlier prompt may already be there: the
+    new one is then in the events only)."""
+    roads = record.tables()["roads"]
+    reported = roads.column("reported_trust").to_pylist()
+    if report is None or len(reported) < 2 or reported[-1] is not None:
+        return record
+    reported[-1] = int(report)
+    index = roads.schema.get_field_index("reported_trust")
+    field = roads.schema.field(index)
+    roads = roads.set_column(index, field, pa.array(reported, field.type))
+    tables = record.tables()
+    return EpisodeRecord(record.summary, roads, tables["kinematics"], tables["incidents"])
+
+
 def live_summary(summary: dict, driver: RemoteDriver) -> dict:
     """The episode summary with the live marks: who drove, and every control they sent."""
     return {**summary, "live": {"driver": "person" if driver.options.client == "station" else "scripted",
@@ -299,6 +336,7 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
         driver = RemoteDriver(connection, levels, initial_trust, options)
         connection.send({"type": "episode_start", "episode_id": task.episode_id, "trust": driver.trust})
         record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
+        record = with_final_report(record, driver.final_report())
         write_part_tables(Path(study_dir), task, live_summary(record.summary, driver), record.tables(),
                           sync=True)
         summary = record.summary

@@ -114,6 +114,12 @@ def episode_model(setup: EpisodeSetup) -> EpisodeModel:
     return model
 
 
+
+def reports_after_road(road_number: int, report_every: int) -> bool:
+    """Whether the driver is asked for a trust report when road `road_number` (1 for the first
+    road after the start) closes: every `report_every`-th road."""
+    return road_number % report_every == 0
+
 class EpisodeTracker:
     """Route, online Bayes belief, DFA state and the roads table of one episode."""
 
@@ -271,7 +277,7 @@ class EpisodeTracker:
 
     def should_report(self) -> bool:
         """Whether the driver reports trust on the road about to be recorded (every report_every)."""
-        return len(self._rows) % self.setup.report_every == 0
+        return reports_after_road(len(self._rows), self.setup.report_every)
 
     def roads_table(self) -> pa.Table:
         """The roads table of the dataset (ROADS_SCHEMA) as Arrow, one row per position."""

@@ -9,6 +9,7 @@ import threading
 import time
 
 import httpx
+import pandas as pd
 import pytest
 import uvicorn
 from fastapi.testclient import TestClient
@@ -78,6 +79,7 @@ def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_i
     assert int(episodes["junctions"].iloc[0]) == len(roads) - 1 == played.episodes[1]["junctions"]
     reported = roads["reported_trust"].dropna().astype(int).tolist()
     assert reported and set(reported) <= {event["value"] for event in sent}
+    assert not pd.isna(roads.sort_values("index")["reported_trust"].iloc[-1])   # the last prompt's answer
     kinematics = read_kinematics(study.study_dir)
     assert len(kinematics) > 50 and set(kinematics["mode"]) <= {"auto", "manual"}
     progress = httpx.get(f"http://{address}/api/participants/0", headers=headers).json()

@@ -3,7 +3,10 @@ reaches SUMO and the logs, and the tracker decides exactly as it does for the sa
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
+import pandas as pd
 import pytest
 
 from trustroute.harness.live.view import next_junction, role
@@ -13,6 +16,7 @@ from trustroute.harness.live.worker import (
     LiveOptions,
     RemoteDriver,
     live_summary,
+    with_final_report,
 )
 from trustroute.harness.simulation.episode_tracker import EpisodeTracker
 from trustroute.harness.study.context import study_context
@@ -152,3 +156,32 @@ def test_road_events_prompt_every_report_every_roads_and_reports_wait_for_them()
     assert driver.takeover_request(1.0) is True and driver.takeover_request(1.5) is None
     driver.apply({"type": "hand_back"})
     assert driver.takeover_request(2.0) is False
+
+
+def test_the_last_roads_report_given_after_the_arrival_is_put_on_the_last_road(tmp_path):
+    config, task, driver, pipe, record = live_episode(
+        tmp_path, [{"type": "takeover"}, {"type": "trust", "value": 3}])
+    assert pipe.sent[-1]["type"] == "road" and pipe.sent[-1]["prompt"]
+    assert pd.isna(record.roads["reported_trust"].iloc[-1])
+    pipe.controls.append({"type": "trust", "value": 2})   # answered once the car has arrived
+    late = driver.final_report()
+    assert late == 2
+    roads = with_final_report(record, late).roads
+    assert roads["reported_trust"].dropna().astype(int).tolist() == [3, 2]
+    assert int(roads["reported_trust"].iloc[-1]) == 2
+    # a road that already has a report keeps it; nothing awaited, nothing waited for
+    assert with_final_report(with_final_report(record, 2), 6).roads.equals(roads)
+    assert driver.final_report() is None
+
+
+def test_without_an_answer_the_end_waits_final_report_seconds_then_goes_on(tmp_path):
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([])
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5,
+                          LiveOptions(pace=1e6, client="scripted", final_report_seconds=0.3))
+    record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
+    started = time.monotonic()
+    assert driver.final_report() is None
+    assert 0.3 <= time.monotonic() - started < 5.0
+    assert with_final_report(record, None) is record
