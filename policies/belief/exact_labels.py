@@ -75,7 +75,7 @@ class ExactFilter:
     step_distance: float = field(init=False)        # σ
     _parent: list[int] = field(init=False)
     _code: list[int] = field(init=False)
-    _length: list[int] = field(init=False)
+    _length: np.ndarray = field(init=False)       # int64 [capacity]: word lengths, by word id
     _ids: dict[tuple[int, int], int] = field(init=False)
     _beliefs: dict[int, tuple[Fraction, ...]] = field(init=False)
 
@@ -113,7 +113,8 @@ class ExactFilter:
                                                           strict=True) if b != 0]
         self.prior_distance = (float(max(ratios) / min(ratios)) if ratios else 1.0)
         self.prior_distance = math.log(self.prior_distance) * (1 + 4 * u) + 4 * u
-        self._parent, self._code, self._length = [0], [-1], [0]
+        self._parent, self._code = [0], [-1]
+        self._length = np.zeros(64, dtype=np.int64)
         self._ids, self._beliefs = {}, {0: self.prior}
 
     def extend(self, words: np.ndarray, codes: np.ndarray) -> np.ndarray:
@@ -140,12 +141,13 @@ class ExactFilter:
             self._ids[(word, code)] = found
             self._parent.append(word)
             self._code.append(code)
-            self._length.append(self._length[word] + 1)
+            if found == self._length.size:   # doubling: a lookup of lengths never copies them all
+                self._length = np.concatenate([self._length, np.zeros_like(self._length)])
+            self._length[found] = self._length[word] + 1
         return found
 
     def lengths(self, words: np.ndarray) -> np.ndarray:
-        table = np.asarray(self._length, dtype=np.int64)
-        return table[np.asarray(words, dtype=np.int64)]
+        return self._length[np.asarray(words, dtype=np.int64)]
 
     def belief(self, word: int) -> tuple[Fraction, ...]:
         """The exact belief after `word` (all zeros after a word of probability 0)."""
