@@ -13,7 +13,8 @@ import pytest
 
 from tests.cli import cli_json, run_cli
 
-pytestmark = [pytest.mark.slow,
+# One worker runs the module in order (make test: --dist loadgroup), so the demo finds the policy.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("city"),
               pytest.mark.skipif(importlib.util.find_spec("sumo_rl") is None,
                                  reason="needs the optional extra: pip install -e '.[cities]'")]
 # A road of city5's trust-free route 0.2 m long: the ego crosses it within one step.
@@ -21,11 +22,17 @@ SHORT_ROAD = "356699998-364445380"
 
 
 @pytest.fixture(scope="module")
-def synthesized(tmp_path_factory) -> dict:
-    """city5 at H = 40 with a short time limit (its bounds hold whether or not it converged)."""
+def synthesized() -> dict:
+    """city5 at H = 40 with a short time limit (its bounds hold whether or not it converged),
+    written where the study's "aware" policy for city5 at H = 40 is cached: `demo --town city`
+    then reads it instead of synthesizing for minutes (its synthesis is measured by bench_city)."""
+    from trustroute import load_driver_model, load_spec, load_town
     from trustroute.harness.cli import main
+    from trustroute.policies.resolve import aware_cache_path
 
-    out = tmp_path_factory.mktemp("city-synth") / "city5_h40.json"
+    town = load_town("city")
+    out = aware_cache_path(town, load_driver_model(), load_spec("city5", town), None, horizon=40)
+    out.parent.mkdir(parents=True, exist_ok=True)
 
     with pytest.raises(SystemExit) as exit_info:
         main(["synth", "city5", "--town", "city", "--horizon", "40", "--time-limit", "10", "--out", str(out)])
@@ -85,7 +92,7 @@ def test_an_episode_drives_the_city_with_its_own_demand(tmp_path, capsys):
     assert vehicles > 100
 
 
-def test_demo_runs_on_the_city(tmp_path, capsys):
+def test_demo_runs_on_the_city(tmp_path, capsys, synthesized):
     code, out, err = run_cli(capsys, "demo", "--town", "city", "--engine", "model", "--participants", "1",
                              "--out", str(tmp_path / "demo"), "--workers", "1", "--json")
     assert code == 0, err

@@ -37,7 +37,7 @@ class _Paths:
             else:
                 definition = self.spec.trust_atoms[atom]
                 on_road = definition.roads is None or road in definition.roads
-                levels = np.array([self.driver.trust_levels[t] for t in theta])
+                levels = np.asarray(self.driver.trust_levels)[theta]
                 out[:, j] = on_road & np.isin(levels, sorted(definition.trust))
         return out
 
