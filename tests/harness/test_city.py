@@ -13,8 +13,7 @@ import pytest
 
 from tests.cli import cli_json, run_cli
 
-# One worker runs the module in order (make test: --dist loadgroup), so the demo finds the policy.
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("city"),
+pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(importlib.util.find_spec("sumo_rl") is None,
                                  reason="needs the optional extra: pip install -e '.[cities]'")]
 # A road of city5's trust-free route 0.2 m long: the ego crosses it within one step.
