@@ -40,39 +40,61 @@ class RandomStationaryPolicy(RoutingPolicy):
 
 def simulate(pomdp, spec, policy, episodes, rng, max_junctions, belief_rule="bayes"):
     """Monte Carlo: returns (satisfied bool[episodes], final true trust int[episodes]). The DFA reads
-    the true trust level of each position (trust-state atoms, docs/trust_states.md)."""
+    the true trust level of each position (trust-state atoms, docs/trust_states.md).
+
+    The episodes advance together, one junction at a time: trust, takeovers and failures are drawn
+    for all of them at once (inverse CDF), and the policy, a deterministic function of its context,
+    is asked once per distinct context."""
     town, driver = pomdp.town, pomdp.driver
     dfa = build_dfa(spec)
     labeller = Labeller(spec, dfa, town)
     satisfied = np.zeros(episodes, dtype=bool)
-    final_trust = np.zeros(episodes)
-    n_trust = driver.n_trust
-    for n in range(episodes):
-        theta = int(rng.choice(n_trust, p=driver.initial_belief))
-        belief = np.array(driver.initial_belief, dtype=float)
-        route = [spec.start]
-        q = int(labeller.step(np.array([dfa.initial]), np.array([town.state_index(spec.start)]),
-                              belief[None], np.array([theta]))[0])
-        for level in range(max_junctions + 1):
-            if dfa.accepting[q]:
-                satisfied[n] = True
-                break
-            if dfa.rejecting[q]:
-                break
-            context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
-            if policy.finished(context) or level == max_junctions:
-                break
-            road = town.successor(route[-1], policy.next_junction(context))
-            inc = driver.incident_index(town.incident(road))
-            h = int(rng.random() < driver.takeover_probability[inc, theta])
-            e = int(rng.random() < driver.failure_probability[inc, theta])
-            theta = int(rng.choice(n_trust, p=driver.trust_transition[inc, h, e, theta]))
-            belief = pomdp.belief_update(belief, inc, h, e, rule=belief_rule)[0][0]
-            route.append(road)
-            q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None],
-                                  np.array([theta]))[0])
-        final_trust[n] = driver.trust_levels[theta]
+    theta = draw_rows(np.broadcast_to(driver.initial_belief, (episodes, driver.n_trust)), rng)
+    belief = np.tile(np.asarray(driver.initial_belief, dtype=float), (episodes, 1))
+    routes = [[spec.start] for _ in range(episodes)]
+    q = labeller.step(np.full(episodes, dfa.initial), np.full(episodes, town.state_index(spec.start)),
+                      belief, theta)
+    active = np.ones(episodes, dtype=bool)
+    decided: dict = {}
+    for level in range(max_junctions + 1):
+        satisfied |= active & dfa.accepting[q]
+        active &= ~(dfa.accepting[q] | dfa.rejecting[q])
+        moving = []
+        roads = []
+        for n in np.flatnonzero(active):
+            key = (tuple(routes[n]), int(q[n]), belief[n].tobytes())
+            if key not in decided:
+                context = DecisionContext(route=key[0], dfa_state=key[1], belief=belief[n].copy())
+                finished = policy.finished(context) or level == max_junctions
+                decided[key] = None if finished else town.successor(routes[n][-1],
+                                                                    policy.next_junction(context))
+            if decided[key] is not None:
+                moving.append(n)
+                roads.append(decided[key])
+        active[:] = False
+        if not moving:
+            break
+        moving = np.array(moving)
+        active[moving] = True
+        inc = np.array([driver.incident_index(town.incident(road)) for road in roads])
+        t = theta[moving]
+        h = (rng.random(moving.size) < driver.takeover_probability[inc, t]).astype(np.int64)
+        e = (rng.random(moving.size) < driver.failure_probability[inc, t]).astype(np.int64)
+        theta[moving] = draw_rows(driver.trust_transition[inc, h, e, t], rng)
+        belief[moving] = pomdp.belief_update(belief[moving], inc, h, e, rule=belief_rule)[0]
+        for n, road in zip(moving, roads, strict=True):
+            routes[n].append(road)
+        x = np.array([town.state_index(road) for road in roads])
+        q[moving] = labeller.step(q[moving], x, belief[moving], theta[moving])
+    final_trust = np.asarray(driver.trust_levels, dtype=float)[theta]
     return satisfied, final_trust
+
+
+def draw_rows(probabilities: np.ndarray, rng) -> np.ndarray:
+    """One index per row of `probabilities` [n, k], drawn by inverse CDF."""
+    cumulative = np.cumsum(probabilities, axis=1)
+    u = rng.random(probabilities.shape[0]) * cumulative[:, -1]
+    return np.minimum((cumulative <= u[:, None]).sum(axis=1), probabilities.shape[1] - 1)
 
 
 def assert_agrees(evaluation, satisfied, final_trust):
