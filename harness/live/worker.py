@@ -132,8 +132,9 @@ class RemoteDriver:
     def final_report(self) -> int | None:
         """The answer to the last road's prompt when it had not come by the episode's end: a person
         answers it after the car has arrived, so the end waits for it (up to final_report_seconds of
-        wall time, reading controls). None when nothing was awaited or nothing came."""
-        if self.options.lockstep or not self.awaiting_report:
+        wall time, reading controls); an answer read by the episode's last steps, after the last
+        road's row, is returned too. None when nothing came."""
+        if self.options.lockstep:
             return None
         deadline = self.clock() + self.options.final_report_seconds
         while self.awaiting_report and (left := deadline - self.clock()) > 0.0:

@@ -172,6 +172,9 @@ def test_the_last_roads_report_given_after_the_arrival_is_put_on_the_last_road(t
     # a road that already has a report keeps it; nothing awaited, nothing waited for
     assert with_final_report(with_final_report(record, 2), 6).roads.equals(roads)
     assert driver.final_report() is None
+    # an answer the episode's last steps read after the last road's row is the final report too
+    driver.apply({"type": "trust", "value": 5})
+    assert driver.final_report() == 5
 
 
 def test_without_an_answer_the_end_waits_final_report_seconds_then_goes_on(tmp_path):
