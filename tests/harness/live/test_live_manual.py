@@ -64,10 +64,14 @@ def test_a_scripted_participant_passes_an_obstacle_by_hand_through_the_oncoming_
     study_dir = tmp_path / "study"
     assert player.finished and player.passes >= 1
     assert [e for e in player.errors if e["code"] != "out_of_order"] == []
-    passes = [(road, oncoming) for road, _, oncoming in obstacle_roads(study_dir) if len(oncoming)]
-    assert len(passes) == player.passes
-    for road, oncoming in passes:   # every tick in the oncoming lane is the person's
-        assert set(oncoming["mode"]) == {"manual"}, road
+    excursions = [(road, oncoming) for road, _, oncoming in obstacle_roads(study_dir) if len(oncoming)]
+    # A pass the person starts is theirs to the end: every tick of it in the oncoming lane is manual.
+    # (Where the hand-back warning came before the obstacle was in reach, the person handed back
+    # first and the autopilot passed it: every tick of that excursion is the autopilot's.)
+    by_hand = [road for road, oncoming in excursions if "manual" in set(oncoming["mode"])]
+    assert len(by_hand) == player.passes
+    for road, oncoming in excursions:
+        assert set(oncoming["mode"]) in ({"manual"}, {"auto"}), road
     events = read_part(study_dir / "parts" / f"{config_episode(config)}.zip").summary["live"]["events"]
     kinds = [(e["type"], e.get("pedal") or e.get("lane")) for e in events]
     assert {("steer", "oncoming"), ("drive", "accelerate"), ("drive", "release")} <= set(kinds)
