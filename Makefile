@@ -24,7 +24,7 @@ demo: $(STAMP)
 # One pytest-xdist worker per core, and one more: the live and browser tests wait on the wall clock
 # (a study at wall-clock pace), and the extra worker runs other tests meanwhile.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $$(( $$(nproc) + 1 )); rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
+	$(BIN)/python -m pytest -q -n $$(( $$(nproc) + 1 )) --durations=10; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
