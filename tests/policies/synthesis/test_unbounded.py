@@ -67,13 +67,15 @@ def test_unbounded_gap_closes_where_the_optimum_is_below_one(driver, seed, defau
     model = driver if default_driver else random_driver(rng, driver.incident_types)
     pomdp = build_pomdp(town, model)
     spec = risky_spec(rng, town, pomdp.initial_belief)
-    # Time limits well above the idle convergence times (some examples need 12 s unbounded on an
-    # idle machine): the gap asserted below is the algorithm's, not the machine's load.
+    # Where the gap is asserted, a time limit well above the idle convergence times (some examples
+    # need 12 s unbounded on an idle machine): the gap is the algorithm's, not the machine's load.
+    # Elsewhere only soundness is asserted, which holds at any time limit.
     long = synthesize(pomdp, spec, tau=1e-4, horizon=LONG_HORIZON, time_limit=60)
-    unbounded = synthesize(pomdp, spec, tau=1e-3, time_limit=60)
+    closes = long.upper < 1 - 1e-3 and spec.formula_text in CLOSING   # optimum below 1 (within 1e-3)
+    unbounded = synthesize(pomdp, spec, tau=1e-3, time_limit=60 if closes else 10)
     assert unbounded.upper >= long.lower - TOLERANCE          # the unbounded value is at least V_H
     assert unbounded.lower <= unbounded.upper + TOLERANCE
-    if long.upper < 1 - 1e-3 and spec.formula_text in CLOSING:   # optimum below 1 (within 1e-3)
+    if closes:
         assert unbounded.gap <= 1e-3, (unbounded.lower, unbounded.upper, long.lower, long.upper)
 
 
