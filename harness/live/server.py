@@ -28,7 +28,7 @@ from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session
-from trustroute.harness.live.worker import LiveOptions
+from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 
@@ -49,7 +49,7 @@ class ServerOptions:
     resume_within: float = 120.0   # seconds a disconnected participant has to resume an episode
     warm_up: bool = True           # a warm-up drive before the trials
     secure_cookies: bool = False   # cookies only over HTTPS (behind a TLS proxy)
-    final_report_seconds: float = 15.0   # how long a trial's end waits for the last road's report
+    final_report_seconds: float = FINAL_REPORT_SECONDS   # a trial's end waits this for the last report
 
 
 def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:

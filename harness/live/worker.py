@@ -49,6 +49,7 @@ WARN_DISTANCE = 100.0      # metres before the road's end: a person in control i
 HOLD_MARGIN = 5.0          # metres before the commit point where the ego waits for the hand-back
 PEDAL_ACCEL = 2.6          # m/s² while the accelerator is held (SUMO's tools/game/racing.py)
 PEDAL_DECEL = 4.5          # m/s² while the brake is held
+FINAL_REPORT_SECONDS = 15.0   # wall seconds a trial's end waits for the last road's report
 
 
 class EpisodeAborted(Exception):
@@ -62,7 +63,7 @@ class LiveOptions:
     client: str = "station"      # who drives: "station" (a person) or "scripted"
     report_every: int = 1        # the study's report_every: roads whose end prompts for a report
     lockstep: bool = False       # scripted only: the episode waits for its reply to every decision
-    final_report_seconds: float = 15.0   # wall seconds the end waits for the last road's report
+    final_report_seconds: float = FINAL_REPORT_SECONDS
 
 
 class RemoteDriver:
@@ -305,15 +306,17 @@ def with_final_report(record: EpisodeRecord, report: int | None) -> EpisodeRecor
     """The record with a report that answered the last road's prompt after the end put on the last
     road, when that road has none (a late answer to an earlier prompt may already be there: the
     new one is then in the events only)."""
-    roads = record.tables()["roads"]
+    if report is None:
+        return record
+    tables = record.tables()
+    roads = tables["roads"]
     reported = roads.column("reported_trust").to_pylist()
-    if report is None or len(reported) < 2 or reported[-1] is not None:
+    if len(reported) < 2 or reported[-1] is not None:
         return record
     reported[-1] = int(report)
     index = roads.schema.get_field_index("reported_trust")
     field = roads.schema.field(index)
     roads = roads.set_column(index, field, pa.array(reported, field.type))
-    tables = record.tables()
     return EpisodeRecord(record.summary, roads, tables["kinematics"], tables["incidents"])
 
 

@@ -114,11 +114,11 @@ def episode_model(setup: EpisodeSetup) -> EpisodeModel:
     return model
 
 
-
 def reports_after_road(road_number: int, report_every: int) -> bool:
     """Whether the driver is asked for a trust report when road `road_number` (1 for the first
     road after the start) closes: every `report_every`-th road."""
     return road_number % report_every == 0
+
 
 class EpisodeTracker:
     """Route, online Bayes belief, DFA state and the roads table of one episode."""
