@@ -29,6 +29,17 @@ def cli_json(capsys: pytest.CaptureFixture, *args: str) -> dict:
     return json.loads(out)
 
 
+def cli_study(capsys: pytest.CaptureFixture, config: Path, text: str, out: Path):
+    """`trustroute study CONFIG --out OUT` on one worker without a report, the config `text` written
+    to `config` first (it must succeed): the study's episodes table."""
+    import pandas as pd
+
+    config.write_text(text)
+    code, _, err = run_cli(capsys, "study", str(config), "--out", str(out), "--workers", "1", "--no-report")
+    assert code == 0, err
+    return pd.read_parquet(out / "episodes.parquet")
+
+
 def assert_one_line_error(code: int, err: str, *fragments: str) -> None:
     """Exit code 2 and one `error: ... (fix: ...)` line on stderr holding every fragment."""
     assert code == 2

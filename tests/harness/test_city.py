@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli import cli_json, run_cli
+from tests.cli import cli_json, cli_study, run_cli
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(importlib.util.find_spec("sumo_rl") is None,
@@ -58,8 +58,7 @@ def test_spec_check_baseline_evaluate_and_synth_accept_the_city(capsys, synthesi
 
 
 def test_a_small_study_on_the_city_runs_and_replays(tmp_path, capsys, synthesized):
-    config = tmp_path / "city.toml"
-    config.write_text(f"""[study]
+    episodes = cli_study(capsys, tmp_path / "city.toml", f"""[study]
 participants = 2
 seed = 3
 engine = "model"
@@ -69,13 +68,7 @@ town = "city"
 routes = ["city"]
 horizon = 40
 fallback_after = 40
-""")
-    code, _, err = run_cli(capsys, "study", str(config), "--out", str(tmp_path / "study"), "--workers", "1",
-                           "--no-report")
-    assert code == 0, err
-    import pandas as pd
-
-    episodes = pd.read_parquet(tmp_path / "study" / "episodes.parquet")
+""", tmp_path / "study")
     assert len(episodes) == 4 and set(episodes["end_reason"]) <= {"accepted", "destination", "rejected"}
     replay = cli_json(capsys, "replay", str(tmp_path / "study"), str(episodes["episode_id"].iloc[0]))
     assert replay["reproduced"] and replay["roads"] >= 28

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli import cli_json, run_cli
+from tests.cli import cli_json, cli_study
 
 pytestmark = pytest.mark.slow
 
@@ -54,8 +54,7 @@ def test_an_episode_drives_csomor_among_background_traffic(tmp_path, capsys):
 
 
 def test_a_small_study_on_csomor_runs_and_replays(tmp_path, capsys, synthesized):
-    config = tmp_path / "csomor.toml"
-    config.write_text(f"""[study]
+    episodes = cli_study(capsys, tmp_path / "csomor.toml", f"""[study]
 participants = 1
 seed = 3
 engine = "model"
@@ -64,13 +63,7 @@ conditions = ["free", "{synthesized}"]
 town = "csomor"
 horizon = 40
 fallback_after = 40
-""")
-    code, _, err = run_cli(capsys, "study", str(config), "--out", str(tmp_path / "study"), "--workers", "1",
-                           "--no-report")
-    assert code == 0, err
-    import pandas as pd
-
-    episodes = pd.read_parquet(tmp_path / "study" / "episodes.parquet")
+""", tmp_path / "study")
     assert len(episodes) == 2 and set(episodes["end_reason"]) <= {"accepted", "destination", "rejected"}
     for episode_id in episodes["episode_id"]:
         replay = cli_json(capsys, "replay", str(tmp_path / "study"), str(episode_id))
