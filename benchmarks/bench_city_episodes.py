@@ -10,7 +10,8 @@ with the episode). The episode gets the demand as route files (`SumoConfig.route
 `trustroute run --routes` does; the bare run starts SUMO with the same command line and the same
 files, inserts the ego with the whole route of edges the episode drove (its roads' edges, SUMO's
 shortest way where the net has no turn between two roads) at the same place, and steps until it
-arrives: no policy, tracker, driver, incidents or logging. Per level: the median of PAIRS
+arrives: no policy, tracker, driver, incidents or logging. Episodes and bare runs each run in a
+process of their own (benchmarks/timing.py TimingProcess). Per level: the median of PAIRS
 interleaved (episode, bare) pairs of wall times and their ratio, the vehicles on the net (mean
 and largest, counted in an extra bare run), sim seconds of both, and the 1-minute load average.
 
@@ -29,13 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.timing import paired_ratio
+from benchmarks.timing import TimingProcess, paired_timings
 from trustroute.core.cache import cache_dir
 from trustroute.harness.simulation.background import random_trips, shifted_routes
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.real_roads import RealRoads
-from trustroute.harness.simulation.sumo_start import SumoConfig, sumo_session
+from trustroute.harness.simulation.sumo_start import SumoConfig, fresh_session
 from trustroute.networks.real_net import road_edges, town_net_file
 from trustroute.networks.town import load_town
 from trustroute.networks.town_import import import_town
@@ -99,7 +100,7 @@ def bare_run(net: Path, roads: dict, route: list[str], config: SumoConfig,
     """The ego alone with the demand of `config`: returns the sim seconds until it arrives; appends
     the number of vehicles on the net at every step to `count` when given (not while timed)."""
     real = RealRoads(roads, COMMIT_DISTANCE)
-    with sumo_session(net, SEED, config) as sumo:
+    with fresh_session(net, SEED, config) as sumo:
         start = route[0]
         ahead = max(0.0, real.length(start) - COMMIT_DISTANCE - START_BEFORE_COMMIT)
         first, depart = real.start(start, ahead)
@@ -165,7 +166,10 @@ def run(pairs: int = PAIRS) -> list[dict]:
             def bare(config=config, route=route):
                 return bare_run(net, roads, route, config)
 
-            paired = paired_ratio(episode, bare, pairs=pairs)
+            # each in a process of its own: the bare run starts and closes SUMO, the episodes keep
+            # theirs open where they may (sumo_start.reusable: the level without route files)
+            with TimingProcess(episode) as timed_episode, TimingProcess(bare) as timed_bare:
+                paired = paired_timings(timed_episode, timed_bare, pairs=pairs)
             rows.append({
                 "name": f"city_episode_wall.{name}", "value": paired["target_wall_median"], "unit": "s",
                 "baseline": paired["baseline_wall_median"], "ratio": paired["wall_ratio_median"],

@@ -1,14 +1,18 @@
 """Where the milliseconds of one SUMO episode go, phase by phase, beside the bare libsumo loop.
 
 The same episode and bare loop as bench_episode (phi1, trust-free policy, default driver,
-incidents, logs handed back as Arrow tables), run `EPISODES` times each, alternating. Each phase
+incidents, logs handed back as Arrow tables), run `EPISODES` times each, alternating, each side in
+a process of its own as in bench_episode (the episodes one after another in one process, as a
+study's worker runs them: the first starts SUMO, the others return it to its empty state). Each phase
 is timed by wrapping the function that does it, in wall time and in this thread's CPU time
 (libsumo runs in it; CPU time is what a shared machine's load disturbs least: a call that waits
 for a core shows in wall time only), a clock pair per call, a few hundred calls per episode; the
 wrappers are removed afterwards. Phases:
 
 - `sumo_start`, `sumo_steps`, `sumo_close`: libsumo's native start, simulation step and close
-  (paid by both; the episode steps more objects and, with its incidents, more sim time);
+  (the bare loop's every run; the episode steps more objects and, with its incidents, more sim
+  time);
+- `sumo_reset`: the episode's return of the open simulation to its empty state (loadState);
 - `insert_ego`: the ego's type, route, insertion and subscription;
 - `commit`: the road's end (of it `inject`, the next road's incident objects; `close_road`, the
   driver's trust, report and the tracker's record; `next_junction`, the policy and filter);
@@ -23,10 +27,12 @@ Each figure is ms per episode (total over the run / EPISODES), with the 1-minute
 from __future__ import annotations
 
 import contextlib
+import multiprocessing
 import os
 import time
 from collections import defaultdict
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from multiprocessing.connection import Connection
 
 from benchmarks.bench_episode import measured_episode
 from trustroute.harness.simulation import episode as episode_module
@@ -48,8 +54,10 @@ _EPISODE_PHASES = (
     (episode_tracker.EpisodeTracker, "roads_table", "roads_table"),
 )
 _PARTS_OF_COMMIT = ("inject", "close_road", "next_junction")   # timed inside `commit`
-_NATIVE_PHASES = (("simulation_start", "sumo_start"), ("simulation_step", "sumo_steps"),
+_NATIVE_PHASES = (("simulation_start", "sumo_start"), ("simulation_saveState", "sumo_start"),
+                  ("simulation_loadState", "sumo_reset"), ("simulation_step", "sumo_steps"),
                   ("simulation_close", "sumo_close"))
+_SUMO_PHASES = ("sumo_start", "sumo_reset", "sumo_steps", "sumo_close")
 
 
 def _timed(function, phase: str, totals: dict[str, float], cpu: dict[str, float], counts: dict[str, int]):
@@ -85,7 +93,7 @@ def _phase_timers(totals: dict[str, float], cpu: dict[str, float], counts: dict[
 
 def _per_episode(totals: dict[str, float], wall: float, episodes: int) -> dict[str, float]:
     ms = {phase: 1e3 * seconds / episodes for phase, seconds in totals.items()}
-    row = {phase: ms.get(phase, 0.0) for phase in ("sumo_start", "sumo_steps", "sumo_close")}
+    row = {phase: ms.get(phase, 0.0) for phase in _SUMO_PHASES}
     if "run" in ms:
         inside_loop = ("sumo_steps", "insert_ego", "commit", "watch")
         row.update({phase: ms.get(phase, 0.0) for phase in
@@ -94,8 +102,8 @@ def _per_episode(totals: dict[str, float], wall: float, episodes: int) -> dict[s
         row.update({phase: ms.get(phase, 0.0) for phase in
                     ("roads_table", "kinematics_table", "incidents_table")})
         counted = ms["run"] + sum(row[phase] for phase in
-                                  ("sumo_start", "sumo_close", "roads_table", "kinematics_table",
-                                   "incidents_table"))
+                                  ("sumo_start", "sumo_reset", "sumo_close", "roads_table",
+                                   "kinematics_table", "incidents_table"))
     else:
         counted = sum(row.values())
     row["other"] = 1e3 * wall / episodes - counted
@@ -103,31 +111,59 @@ def _per_episode(totals: dict[str, float], wall: float, episodes: int) -> dict[s
     return {phase: round(value, 3) for phase, value in row.items()}
 
 
+def _profiling_worker(connection: Connection, run: Callable[[], object]) -> None:
+    """Run `run` once per True received, under the phase timers; on False send the totals."""
+    timers = {"wall": defaultdict(float), "cpu": defaultdict(float), "counts": defaultdict(int),
+              "total": [0.0, 0.0]}
+    while connection.recv():
+        with _phase_timers(timers["wall"], timers["cpu"], timers["counts"]):
+            started, started_cpu = time.perf_counter(), time.thread_time()
+            run()
+            timers["total"][0] += time.perf_counter() - started
+            timers["total"][1] += time.thread_time() - started_cpu
+        connection.send(True)
+    connection.send({key: dict(value) if isinstance(value, defaultdict) else value
+                     for key, value in timers.items()})
+
+
 def profile(episodes: int = EPISODES) -> dict:
     """Per-phase ms of the episode and of the bare loop over `episodes` alternating runs each."""
     measured = measured_episode()
-    measured.episode()
-    measured.bare()   # warm both paths
-    sides = {side: {"wall": defaultdict(float), "cpu": defaultdict(float), "counts": defaultdict(int),
-                    "total": [0.0, 0.0]} for side in ("episode", "bare")}
+    context = multiprocessing.get_context("fork")
+    connections = {}
+    processes = []
+    for side, run in (("episode", measured.episode), ("bare", measured.bare)):
+        connections[side], child = context.Pipe()
+        processes.append(context.Process(target=_warmed_worker, args=(child, run), daemon=True))
+        processes[-1].start()
+        child.close()
+        connections[side].recv()   # warmed: the episode's first run has started SUMO
     load_before = os.getloadavg()[0]
     for _ in range(episodes):
-        for side, run in (("episode", measured.episode), ("bare", measured.bare)):
-            timers = sides[side]
-            with _phase_timers(timers["wall"], timers["cpu"], timers["counts"]):
-                started, started_cpu = time.perf_counter(), time.thread_time()
-                run()
-                timers["total"][0] += time.perf_counter() - started
-                timers["total"][1] += time.thread_time() - started_cpu
+        for side in ("episode", "bare"):
+            connections[side].send(True)
+            connections[side].recv()
+    sides = {}
+    for side, connection in connections.items():
+        connection.send(False)
+        sides[side] = connection.recv()
+    for process in processes:
+        process.join(10)
     out = {"name": "episode_phi1_phases", "unit": "ms per episode", "episodes": episodes}
     for clock, index in (("wall", 0), ("cpu", 1)):
         for side in ("episode", "bare"):
             out[f"{side}_{clock}"] = _per_episode(sides[side][clock], sides[side]["total"][index], episodes)
         ratio = out[f"episode_{clock}"]["total"] / out[f"bare_{clock}"]["total"]
         out[f"ratio_of_totals_{clock}"] = round(ratio, 3)
-    out["steps"] = {side: sides[side]["counts"]["sumo_steps"] // episodes for side in sides}
+    out["steps"] = {side: sides[side]["counts"].get("sumo_steps", 0) // episodes for side in sides}
     out["load_average_1min"] = [load_before, os.getloadavg()[0]]
     return out
+
+
+def _warmed_worker(connection: Connection, run: Callable[[], object]) -> None:
+    run()   # warm the path, untimed
+    connection.send(True)
+    _profiling_worker(connection, run)
 
 
 def run() -> list[dict]:

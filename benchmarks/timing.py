@@ -3,15 +3,21 @@
 `best_seconds`: best of several repeats. `paired_ratio`: a target against its baseline measured
 in pairs, interleaved, in wall and CPU time, reported as the median of the per-pair ratios (load
 that drifts during the run hits both members of a pair alike, and one disturbed pair moves a
-median by one rank only), with the load average beside it.
+median by one rank only), with the load average beside it. `TimingProcess`: a function run and
+timed in a process of its own, for a pair whose members cannot share one (libsumo runs one
+simulation per process: an episode that keeps its simulation open between runs, against a bare
+loop that starts and closes its own).
 """
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import statistics
 import time
 from collections.abc import Callable
+from multiprocessing.connection import Connection
+from types import TracebackType
 
 
 def best_seconds(function: Callable[[], object], repeats: int = 5) -> float:
@@ -36,8 +42,15 @@ def _quartiles(values: list[float]) -> list[float]:
 
 
 def paired_ratio(target: Callable[[], object], baseline: Callable[[], object], pairs: int = 31) -> dict:
-    """Time `target` and `baseline` in `pairs` interleaved pairs (the order alternating within a pair,
-    so neither always runs on a warmer cache); ratios are target / baseline.
+    """Time `target` and `baseline` in this process in `pairs` interleaved pairs (see paired_timings)."""
+    return paired_timings(lambda: _timed(target), lambda: _timed(baseline), pairs)
+
+
+def paired_timings(target: Callable[[], tuple[float, float]], baseline: Callable[[], tuple[float, float]],
+                   pairs: int = 31) -> dict:
+    """Run `target` and `baseline`, each returning the (wall, CPU) seconds of one run, in `pairs`
+    interleaved pairs (the order alternating within a pair, so neither always runs on a warmer
+    cache); ratios are target / baseline.
 
     Returns medians and the minimum of each, the median and quartiles of the per-pair ratios in
     wall and in CPU time, and the 1-minute load average before and after."""
@@ -45,9 +58,9 @@ def paired_ratio(target: Callable[[], object], baseline: Callable[[], object], p
     target_wall, target_cpu, base_wall, base_cpu = [], [], [], []
     for i in range(pairs):
         if i % 2:
-            b, t = _timed(baseline), _timed(target)
+            b, t = baseline(), target()
         else:
-            t, b = _timed(target), _timed(baseline)
+            t, b = target(), baseline()
         target_wall.append(t[0])
         target_cpu.append(t[1])
         base_wall.append(b[0])
@@ -64,3 +77,35 @@ def paired_ratio(target: Callable[[], object], baseline: Callable[[], object], p
         "baseline_cpu_median": statistics.median(base_cpu), "baseline_cpu_min": min(base_cpu),
         "load_average_1min": [load_before, os.getloadavg()[0]],
     }
+
+
+def _timing_worker(connection: Connection, function: Callable[[], object]) -> None:
+    while connection.recv():
+        connection.send(_timed(function))
+
+
+class TimingProcess:
+    """`function` run in a forked process of its own, one run per call, which returns the run's
+    (wall, CPU) seconds measured in that process (the pipe's round trip is outside them)."""
+
+    def __init__(self, function: Callable[[], object]) -> None:
+        context = multiprocessing.get_context("fork")
+        self.connection, child = context.Pipe()
+        self.process = context.Process(target=_timing_worker, args=(child, function), daemon=True)
+        self.process.start()
+        child.close()
+
+    def __call__(self) -> tuple[float, float]:
+        self.connection.send(True)
+        wall, cpu = self.connection.recv()
+        return wall, cpu
+
+    def __enter__(self) -> TimingProcess:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        self.connection.send(False)
+        self.process.join(10)
+        if self.process.is_alive():
+            self.process.kill()

@@ -61,6 +61,7 @@ def write_sumocfg(directory: Path, net_path: Path, seed: int, config: SumoConfig
     <processing>
         <time-to-teleport value="-1"/>
         <pedestrian.model value="striping"/>
+        <pedestrian.striping.dawdling value="0"/>
         <collision.action value="warn"/>
     </processing>
     <output>

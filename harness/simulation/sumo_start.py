@@ -1,13 +1,27 @@
-"""Starting and closing SUMO: the one place that builds the command line (every option in one list).
+"""Starting, reusing and closing SUMO: the one place that builds the command line (every option in
+one list).
 
-libsumo runs one simulation per process; `sumo_session` starts it and always closes it, so
-hundreds of episodes can run one after another in a process. Nothing happens at import time
-(libsumo itself is imported when a simulation starts).
+libsumo runs one simulation per process. Starting it parses the net, most of a short episode's
+cost, so `sumo_session` keeps the simulation open between episodes that run on the same command
+line and returns it to the empty state it had right after its start (`simulation.loadState` of a
+snapshot saved then: time 0, no vehicles, persons, routes or types, traffic lights as started).
+This is exact because nothing SUMO draws from its own random streams reaches an episode: the
+trustroute vehicles drive without imperfection or speed deviation or stand parked, a pedestrian's
+speed is set by its scene, and the striping model's dawdling is off (`--pedestrian.striping.dawdling
+0`); every random draw of an episode comes from its seeded Generator. tests/harness/simulation/
+test_sumo_reuse.py checks that an episode's tables are the same with another SUMO seed and in a
+reused simulation as in a fresh one. Runs where SUMO's own draws do matter (background traffic,
+route files) and runs with outputs or a GUI start SUMO afresh, seeded with the episode's seed, and
+close it at the end. Nothing happens at import time (libsumo itself is imported when a simulation
+starts).
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
+import shutil
+import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -83,6 +97,7 @@ def sumo_command(net_path: Path, seed: int, config: SumoConfig) -> list[str]:
         "--collision.check-junctions", "true",  # pedestrians on crossings are inside junctions
         "--collision.mingap-factor", "0",       # a collision is a real overlap, not a minGap breach
         "--pedestrian.model", "striping",
+        "--pedestrian.striping.dawdling", "0",  # a pedestrian walks at the speed its scene sets
         "--default.action-step-length", f"{config.step_length:g}",
         "--no-step-log", "true",
         "--no-warnings", "true",
@@ -169,23 +184,59 @@ def hot_calls(sumo: Sumo) -> HotCalls:
                     native.simulation_getCollidingVehiclesNumber)
 
 
-@contextlib.contextmanager
-def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sumo]:
-    """Start libsumo on `net_path`, yield the libsumo module, always close it.
+def reusable(config: SumoConfig) -> bool:
+    """Whether an episode on `config` may run in a simulation kept open from an earlier episode:
+    not when SUMO's own random draws reach it (background vehicles dawdle, route files' vehicles
+    draw their speeds), nor with SUMO's output files or a GUI, which belong to one run."""
+    return (not config.gui and config.output_dir is None and not config.route_files
+            and config.background_vehicles == 0)
 
-    An unreadable net or an unusable SUMO installation is an InputError (one line, exit 2).
-    """
-    command = sumo_command(net_path, seed, config)
-    if not Path(net_path).is_file():
-        raise InputError(str(net_path), "", "the SUMO net file does not exist",
-                         "run `trustroute net build` or pass an existing .net.xml")
-    if config.gui:
-        check_display()
-        # sumo-gui starts running at once and closes at the end; same options as the libsumo run.
-        command = [find_binary("sumo-gui"), *command[1:], "--start", "true", "--quit-on-end", "true"]
-        sumo: Sumo = _TraciWithConstants()
-    else:
-        sumo = _libsumo()
+
+@dataclass(frozen=True)
+class _OpenSimulation:
+    """The libsumo simulation this process keeps open: its command line without the seed, and the
+    snapshot of its empty state right after the start."""
+
+    command: tuple[str, ...]
+    snapshot: Path
+
+
+_open: list[_OpenSimulation] = []   # at most one: libsumo runs one simulation per process
+_exit_registered: list[bool] = []
+
+
+def _without_seed(command: list[str]) -> tuple[str, ...]:
+    at = command.index("--seed")
+    return (*command[:at], *command[at + 2:])
+
+
+def close_simulation() -> None:
+    """Close the simulation kept open between episodes, if any (also run at the process's exit).
+    Code that starts libsumo itself calls this first."""
+    while _open:
+        simulation = _open.pop()
+        with contextlib.suppress(Exception):
+            _libsumo().close()
+        shutil.rmtree(simulation.snapshot.parent, ignore_errors=True)
+
+
+def _register_exit() -> None:
+    # multiprocessing's exit (its workers end with os._exit) runs these finalizers, atexit does not
+    from multiprocessing import util
+
+    util.Finalize(None, close_simulation, exitpriority=10)
+    os.register_at_fork(after_in_child=_forget_inherited)
+
+
+def _forget_inherited() -> None:
+    """A forked child (a study's worker) starts its own simulation: the parent's snapshot stays the
+    parent's, and the child's exit must not remove it."""
+    _open.clear()
+    _exit_registered.clear()
+
+
+def _start(sumo: Sumo, command: list[str], net_path: Path, config: SumoConfig) -> None:
+    """Start SUMO on `command`; an unreadable net or an unusable SUMO installation is an InputError."""
     try:
         sumo.start(command)
     except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError types
@@ -200,7 +251,77 @@ def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sumo
         raise InputError(str(net_path), "", "SUMO cannot load the net"
                          + (f" ({message[-1]})" if message else ""),
                          "rebuild it with `trustroute net build` (delete the cached file)") from None
+
+
+def _empty_simulation(command: list[str], net_path: Path, config: SumoConfig) -> Sumo:
+    """libsumo in the empty state of `command`'s start: the open simulation returned to its
+    snapshot when it runs the same command line (the seed aside), else a fresh start."""
+    sumo = _libsumo()
+    key = _without_seed(command)
+    if _open and _open[0].command == key:
+        try:
+            sumo.simulation.loadState(str(_open[0].snapshot))
+            return sumo
+        except Exception:  # a snapshot that no longer loads: start afresh below
+            close_simulation()
+    close_simulation()
+    _start(sumo, command, net_path, config)
+    folder = Path(tempfile.mkdtemp(prefix="trustroute-sumo-"))
+    snapshot = folder / "empty.state.xml"
+    sumo.simulation.saveState(str(snapshot))
+    if not _exit_registered:
+        _register_exit()
+        _exit_registered.append(True)
+    _open.append(_OpenSimulation(key, snapshot))
+    return sumo
+
+
+@contextlib.contextmanager
+def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sumo]:
+    """libsumo on `net_path` in its empty state at time 0, for one episode.
+
+    A reusable run (`reusable`) gets the simulation kept open from the process's last episode,
+    returned to its snapshot, and leaves it open; an episode that raises closes it. Other runs
+    get `fresh_session`. An unreadable net or an unusable SUMO installation is an InputError (one
+    line, exit 2).
+    """
+    if not reusable(config):
+        with fresh_session(net_path, seed, config) as sumo:
+            yield sumo
+        return
+    _check_net_file(net_path)
+    sumo = _empty_simulation(sumo_command(net_path, seed, config), Path(net_path), config)
+    try:
+        yield sumo
+    except BaseException:
+        close_simulation()   # whatever the episode left behind goes with it
+        raise
+
+
+@contextlib.contextmanager
+def fresh_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sumo]:
+    """SUMO started on `net_path` with `seed` and closed at the end (the simulation kept open
+    between episodes is closed first): runs whose SUMO draws matter, with outputs or a GUI, and
+    the benchmarks' bare loops."""
+    _check_net_file(net_path)
+    close_simulation()
+    command = sumo_command(net_path, seed, config)
+    sumo: Sumo
+    if config.gui:
+        check_display()
+        # sumo-gui starts running at once and closes at the end; same options as the libsumo run.
+        command = [find_binary("sumo-gui"), *command[1:], "--start", "true", "--quit-on-end", "true"]
+        sumo = _TraciWithConstants()
+    else:
+        sumo = _libsumo()
+    _start(sumo, command, Path(net_path), config)
     try:
         yield sumo
     finally:
         sumo.close()
+
+
+def _check_net_file(net_path: Path) -> None:
+    if not Path(net_path).is_file():
+        raise InputError(str(net_path), "", "the SUMO net file does not exist",
+                         "run `trustroute net build` or pass an existing .net.xml")

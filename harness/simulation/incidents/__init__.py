@@ -26,16 +26,17 @@ INJECTORS: dict[str, Callable[[Sumo, Scene], Incident | None]] = {
 __all__ = ["EgoState", "Incident", "Scene", "INJECTORS", "inject", "define_types"]
 
 
-# The SUMO types each kind's objects use (the pedestrian walks as SUMO's default person type).
+# The SUMO types each kind's objects use.
 TYPE_DEFINERS: dict[str, tuple[TypeDefiner, ...]] = {
-    "pedestrian": (),
+    "pedestrian": (pedestrian.define_type,),
     "obstacle": (obstacle.define_type, oncoming.define_type),
     "truck": (oncoming.define_type, truck.define_type),
 }
 
 
 def define_types(sumo: Sumo) -> None:
-    """Every vehicle type the incident kinds use (once per simulation)."""
+    """Every vehicle and person type the incident kinds use (once per simulation)."""
+    pedestrian.define_type(sumo)
     obstacle.define_type(sumo)
     oncoming.define_type(sumo)
     truck.define_type(sumo)

@@ -112,12 +112,14 @@ class Incident(Protocol):
         """The scene's drawn parameters, as `key=value` pairs for the incidents table."""
 
 
-# The vehicle-backed kinds (obstacle, truck) share these.
+# The incident kinds share these.
 
 @dataclass(frozen=True)
 class VehicleType:
-    """A SUMO vehicle type copied from DEFAULT_VEHTYPE: each attribute given replaces the default's
-    (None keeps it)."""
+    """A SUMO type copied from `base` (SUMO's default car, or its default person): each attribute
+    given replaces the default's (None keeps it). Imperfection and speed deviation are 0 unless
+    given, so no incident object draws from SUMO's own random streams (every draw of an episode
+    comes from its seeded Generator, which is what lets episodes share one simulation: sumo_start)."""
 
     type_id: str
     color: tuple[int, int, int, int]
@@ -127,14 +129,15 @@ class VehicleType:
     width: float | None = None
     max_speed: float | None = None
     accel: float | None = None
-    imperfection: float | None = None
-    speed_deviation: float | None = None
+    imperfection: float | None = 0.0
+    speed_deviation: float | None = 0.0
+    base: str = "DEFAULT_VEHTYPE"
 
 
 def define_vehicle_type(sumo, vehicle_type: VehicleType) -> None:
-    """Add `vehicle_type` to the simulation: the default type's copy, then the attributes given."""
+    """Add `vehicle_type` to the simulation: the base type's copy, then the attributes given."""
     types, type_id = sumo.vehicletype, vehicle_type.type_id
-    types.copy("DEFAULT_VEHTYPE", type_id)
+    types.copy(vehicle_type.base, type_id)
     setters = ((types.setVehicleClass, vehicle_type.vehicle_class),
                (types.setShapeClass, vehicle_type.shape_class),
                (types.setLength, vehicle_type.length),

@@ -45,8 +45,7 @@ GONE_BEHIND = 60.0     # metres behind the ego after the meeting: the vehicle le
 
 
 TRUCK_TYPE = VehicleType(TYPE_ID, color=(120, 120, 255, 255), vehicle_class="truck", shape_class="truck",
-                         length=TRUCK_LENGTH, width=2.5, max_speed=TRUCK_SPEED, accel=1.0,
-                         imperfection=0.0, speed_deviation=0.0)
+                         length=TRUCK_LENGTH, width=2.5, max_speed=TRUCK_SPEED, accel=1.0)
 
 
 def define_type(sumo: Sumo) -> None:

@@ -30,7 +30,7 @@ import math
 from dataclasses import dataclass, field
 
 from trustroute.harness.simulation.driving_style import SAFE_SPEED_MODE
-from trustroute.harness.simulation.incidents.base import EgoState, Scene
+from trustroute.harness.simulation.incidents.base import EgoState, Scene, VehicleType, define_vehicle_type
 
 KIND = "pedestrian"
 TIMINGS = ("early", "late", "none")
@@ -50,10 +50,16 @@ START_BEFORE_JUNCTION = 1.0   # metres before the end of the opposite sidewalk: 
 ARRIVAL_POSITION = 6.0        # metres along the incident road's sidewalk
 WALKING_SPEED = 1.2           # m/s
 LATE_WALKING_SPEED = 1.6      # m/s: someone who steps out late is in a hurry
+# SUMO's default person, walking at exactly the speed the scene sets (no speed deviation drawn)
+PERSON_TYPE = VehicleType("trustroute_pedestrian", color=(255, 140, 0, 255), base="DEFAULT_PEDTYPE")
 WAIT_SECONDS = 600.0          # a person who does not cross stands this long (the road ends first)
 MEASURE_NEAR = 40.0           # metres from the crossing: the person's distance is read only this near
 PASSED_AFTER = 25.0           # metres into the road: the crossing is behind the ego (at most half
                               # the watched stretch: Town01's A-B is watched for 15 m)
+
+
+def define_type(sumo) -> None:
+    define_vehicle_type(sumo, PERSON_TYPE)
 
 
 @dataclass
@@ -90,7 +96,7 @@ class PedestrianIncident:
 
     def insert(self, sumo, time: float, before_kerb: float, crosses: bool) -> None:
         sumo.person.add(self.person_id, self.reverse_road, max(0.0, self.kerb - before_kerb), depart=-3,
-                        typeID="DEFAULT_PEDTYPE")
+                        typeID=PERSON_TYPE.type_id)
         sumo.person.setSpeed(self.person_id, WALKING_SPEED)
         if crosses:
             sumo.person.appendWalkingStage(self.person_id, [self.reverse_road, self.road], ARRIVAL_POSITION)
@@ -110,7 +116,7 @@ class PedestrianIncident:
 
     def insert_on_crossing(self, sumo, time: float) -> None:
         crossing = self.crossing
-        sumo.person.add(self.person_id, crossing.edge, crossing.start, depart=-3, typeID="DEFAULT_PEDTYPE")
+        sumo.person.add(self.person_id, crossing.edge, crossing.start, depart=-3, typeID=PERSON_TYPE.type_id)
         sumo.person.setSpeed(self.person_id, LATE_WALKING_SPEED)
         sumo.person.appendWalkingStage(self.person_id, list(crossing.walk), crossing.arrival)
         sumo.person.setColor(self.person_id, (255, 140, 0, 255))

@@ -1,0 +1,147 @@
+"""Episodes share one simulation per process (sumo_start.sumo_session): the simulation kept open is
+returned to its empty state, and an episode's tables are the same, bit for bit, as in a fresh SUMO.
+
+This rests on no SUMO random draw reaching an episode; the first test checks that directly by
+running every episode with two SUMO seeds.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from dataclasses import replace
+from pathlib import Path
+
+import pyarrow as pa
+import pytest
+
+from trustroute.harness.simulation import sumo_start
+from trustroute.harness.simulation.sumo_start import SumoConfig, close_simulation, reusable
+from trustroute.harness.study.config import study_config_from_dict
+from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+from trustroute.harness.study.runner import run_planned_episode, validate_study
+
+
+@pytest.fixture(scope="module")
+def study():
+    """Six participants, phi1 and phi2, trust-free and trust-aware: 24 episodes that meet every
+    incident kind (pedestrians early and late, obstacles with and without an oncoming vehicle,
+    trucks with parked cars)."""
+    config = study_config_from_dict({"study": {
+        "name": "reuse", "participants": 6, "seed": 11, "engine": "sumo", "specs": ["phi1", "phi2"],
+        "conditions": ["free", "aware"]}}, "test_sumo_reuse", Path.cwd())
+    validate_study(config)
+    return config, plan_episodes(config)
+
+
+def _tables(config, task: EpisodeTask) -> dict[str, pa.Table]:
+    return run_planned_episode(config, task).tables()
+
+
+def _same(a: dict[str, pa.Table], b: dict[str, pa.Table]) -> list[str]:
+    """The names of the tables that differ."""
+    return [name for name in a if not a[name].equals(b[name])]
+
+
+@pytest.fixture
+def starts(monkeypatch) -> list[list[str]]:
+    """Every libsumo start's command line, in order."""
+    import libsumo
+
+    started: list[list[str]] = []
+    original = libsumo.start
+
+    def start(command, *args, **kwargs):
+        started.append(list(command))
+        return original(command, *args, **kwargs)
+
+    monkeypatch.setattr(libsumo, "start", start)
+    return started
+
+
+def test_no_sumo_random_draw_reaches_an_episode(study, monkeypatch):
+    config, tasks = study
+    kinds = set()
+    original = sumo_start.sumo_command
+    for task in tasks:
+        close_simulation()
+        first = _tables(config, task)
+        close_simulation()
+        monkeypatch.setattr(sumo_start, "sumo_command",
+                            lambda net, seed, options: original(net, seed + 7919, options))
+        other = _tables(config, task)
+        monkeypatch.setattr(sumo_start, "sumo_command", original)
+        assert _same(first, other) == [], task.episode_id
+        kinds |= set(first["incidents"].column("incident").to_pylist())
+        scenes = first["incidents"].column("scene").to_pylist()
+        kinds |= {"oncoming" for scene in scenes if scene and "oncoming=inc" in scene}
+        kinds |= {"late" for scene in scenes if scene and "timing=late" in scene}
+    assert kinds >= {"pedestrian", "obstacle", "truck", "oncoming"}
+
+
+def test_episodes_in_one_simulation_equal_fresh_ones(study, starts):
+    config, tasks = study
+    close_simulation()
+    reused = [_tables(config, task) for task in tasks]
+    assert len(starts) == 1   # one start, then every episode returned the simulation to its snapshot
+    for task, tables in zip(reversed(tasks), reversed(reused), strict=True):
+        close_simulation()
+        assert _same(_tables(config, task), tables) == [], task.episode_id
+    assert len(starts) == 1 + len(tasks)
+
+
+def test_another_command_line_starts_afresh_and_the_seed_alone_does_not(study, starts):
+    config, tasks = study
+    close_simulation()
+    _tables(config, tasks[0])
+    _tables(config, tasks[1])   # another seed: the same simulation
+    assert len(starts) == 1
+    assert starts[0][starts[0].index("--seed") + 1] == str(tasks[0].seed)
+    coarse = replace(SumoConfig(), step_length=0.25)
+    run_planned_episode(config, tasks[0], sumo_config=coarse)
+    assert len(starts) == 2 and starts[1][starts[1].index("--step-length") + 1] == "0.25"
+
+
+def test_an_episode_that_raises_closes_the_simulation(study, starts):
+    config, tasks = study
+    close_simulation()
+    expected = _tables(config, tasks[2])
+
+    def observer(sumo, ego, mode, road):
+        if ego.time > 20.0:
+            raise RuntimeError("stop here")
+
+    with pytest.raises(RuntimeError, match="stop here"):
+        run_planned_episode(config, tasks[1], observer=observer)
+    assert sumo_start._open == []   # what the episode left behind went with the simulation
+    assert _same(_tables(config, tasks[2]), expected) == []
+    assert len(starts) == 2   # the failed episode ran in the first simulation; the next starts afresh
+
+
+def test_runs_whose_sumo_draws_matter_or_that_write_outputs_start_afresh(tmp_path):
+    assert reusable(SumoConfig())
+    assert not reusable(SumoConfig(background_vehicles=3))
+    assert not reusable(SumoConfig(route_files=("trips.rou.xml",)))
+    assert not reusable(SumoConfig(output_dir=str(tmp_path)))
+    assert not reusable(SumoConfig(gui=True))
+
+
+def _child_episode(config, task: EpisodeTask, connection) -> None:
+    tables = run_planned_episode(config, task, sumo_config=replace(SumoConfig(), step_length=0.25)).tables()
+    connection.send(len(tables["roads"]))
+
+
+def test_a_forked_worker_leaves_the_parents_simulation_alone(study, starts):
+    config, tasks = study
+    close_simulation()
+    expected = _tables(config, tasks[3])
+    snapshot = sumo_start._open[0].snapshot
+    context = multiprocessing.get_context("fork")
+    parent, child = context.Pipe()
+    process = context.Process(target=_child_episode, args=(config, tasks[3], child))
+    process.start()
+    assert parent.recv() > 0
+    process.join(60)
+    assert process.exitcode == 0
+    assert snapshot.is_file()   # the child's own simulation and exit did not touch the parent's
+    assert _same(_tables(config, tasks[3]), expected) == []
+    assert len(starts) == 1
