@@ -525,10 +525,10 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
 
     driver: a participants.synthetic_driver.SyntheticDriver (decides_takeover, move_trust, report_trust,
     trust), or a person of a live study (harness/live/worker.py RemoteDriver), who also has
-    takeover_request(now): their takeover or hand-back, asked every step. seed: SUMO's seed (the
-    driver carries its own Generator). net_path: the town's net (default: build_net(setup.town),
-    cached). observer(sumo, ego, mode, road): called every step
-    (tests use it to read SUMO state). rrd_path: also write a Rerun recording. scene_overrides:
+    takeover_request(now): their takeover or hand-back, asked every step. seed: the scenes' seed,
+    and SUMO's when the episode starts it (no SUMO draw reaches an episode: sumo_start); the
+    driver carries its own Generator. net_path: the town's net (default: build_net(setup.town),
+    cached). observer(sumo, ego, mode, road): called every step (tests use it to read SUMO state). rrd_path: also write a Rerun recording. scene_overrides:
     {incident kind: {draw name: value}} fixes scene draws (e.g. {"pedestrian": {"timing": "late"}}).
     """
     started = time.perf_counter()
