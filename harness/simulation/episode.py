@@ -528,7 +528,8 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
     takeover_request(now): their takeover or hand-back, asked every step. seed: the scenes' seed,
     and SUMO's when the episode starts it (no SUMO draw reaches an episode: sumo_start); the
     driver carries its own Generator. net_path: the town's net (default: build_net(setup.town),
-    cached). observer(sumo, ego, mode, road): called every step (tests use it to read SUMO state). rrd_path: also write a Rerun recording. scene_overrides:
+    cached). observer(sumo, ego, mode, road): called every step (tests use it to read SUMO state).
+    rrd_path: also write a Rerun recording. scene_overrides:
     {incident kind: {draw name: value}} fixes scene draws (e.g. {"pedestrian": {"timing": "late"}}).
     """
     started = time.perf_counter()
