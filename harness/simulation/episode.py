@@ -8,11 +8,11 @@ next junction and extends the ego's route one road ahead (vehicle.setRoute). The
 incident is injected at that moment so its SUMO objects are in place when the ego arrives; when
 the incident comes into view the synthetic driver decides takeover from its current trust; a
 takeover switches the ego to manual control until that road's commit point, before the next
-junction. Per step the runner reads one subscription of the ego; everything else runs only
-while an incident is live. The scenes' random draws (pedestrian timing, obstacle position,
-oncoming traffic, background traffic) come from one generator seeded by the episode's seed
-(`scene_rng`), separate from the driver's, so they never shift the driver's draws
-(docs/scenes.md).
+junction (takeover_decision.py). Per step the runner reads one subscription of the ego;
+everything else runs only while an incident is live. The scenes' random draws (pedestrian
+timing, obstacle position, oncoming traffic, background traffic) come from one generator seeded
+by the episode's seed (`scene_rng`), separate from the driver's, so they never shift the
+driver's draws (docs/scenes.md).
 """
 
 from __future__ import annotations
@@ -41,8 +41,9 @@ from trustroute.core.dataset import (
     table_from_rows,
 )
 from trustroute.harness.simulation import incidents as incident_kinds
+from trustroute.harness.simulation import takeover_decision
 from trustroute.harness.simulation.background import BackgroundTraffic, JamRelief, background_routes
-from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style, hand_back, take_over
+from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style
 from trustroute.harness.simulation.episode_net import check_net_matches, check_readable, net_key, town_net
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.simulation.incidents import EgoState, Incident, Scene
@@ -59,7 +60,6 @@ log = logging.getLogger(__name__)
 EGO_ID = "ego"
 EGO_TYPE = "trustroute_ego"
 COMMIT_DISTANCE = 30.0      # metres before a road's end: decide the next junction here
-VIEW_DISTANCE = 80.0        # metres: an incident object this close to the ego is in view
 MAX_CLOSING = 30.0          # m/s: no incident object and the ego close in on each other faster
 START_BEFORE_COMMIT = 40.0  # the ego is inserted this far before the start road's commit point
 INSERT_TIMEOUT = 30.0       # seconds of sim time for the ego to appear
@@ -226,23 +226,10 @@ class _Episode:
 
     # -- driver and incidents -------------------------------------------------
     def decide(self, run: _RoadRun, now: float) -> None:
-        run.decided = True
-        run.took_over = bool(self.driver.decides_takeover(run.kind))
-        if run.took_over:
-            self.mode = take_over(self.sumo, EGO_ID)
-            run.takeover_start = now
+        self.mode = takeover_decision.decide(self.sumo, EGO_ID, run, self.driver, run.kind, now, self.mode)
 
     def person_control(self, run: _RoadRun, now: float, request: bool | None) -> None:
-        """A person's takeover or hand-back on the open road (the synthetic driver's decision
-        point then has nothing left to decide: the road counts as taken over)."""
-        if request is True and self.mode == AUTOPILOT.name:
-            run.decided = run.took_over = True
-            if math.isnan(run.takeover_start):
-                run.takeover_start = now
-            self.mode = take_over(self.sumo, EGO_ID)
-        elif request is False and self.mode != AUTOPILOT.name:
-            self.mode = hand_back(self.sumo, EGO_ID)
-            run.takeover_end = now
+        self.mode = takeover_decision.apply_request(self.sumo, EGO_ID, run, request, self.mode, now)
 
     def new_run(self, index: int, road: str) -> _RoadRun:
         kind = self.setup.town.incident(road) if index > 0 else NO_INCIDENT
@@ -293,13 +280,14 @@ class _Episode:
             where = incident.position(self.sumo)
             if where is not None:
                 distance = math.dist(where, (ego.x, ego.y))
-                if distance <= VIEW_DISTANCE:
+                if takeover_decision.in_view(distance):
                     run.in_view_time = ego.time
                     run.x, run.y = where
                     self.decide(run, ego.time)
                 else:
                     # The gap closes at most MAX_CLOSING m/s: no need to look again before then.
-                    run.next_view_check = ego.time + (distance - VIEW_DISTANCE) / MAX_CLOSING
+                    unseen = distance - takeover_decision.VIEW_DISTANCE
+                    run.next_view_check = ego.time + unseen / MAX_CLOSING
         # The objects stay after the ego has passed (an obstacle never leaves by itself); they are
         # taken out when the road's observation closes.
         if math.isnan(run.passed_time) and incident.is_passed(self.sumo, ego):
@@ -310,9 +298,7 @@ class _Episode:
         """The observation of `run` is complete: hand back, trust moves, the tracker records it."""
         if not run.decided:
             self.decide(run, now)   # the incident never came into view: decide now, as the model does
-        if self.mode != AUTOPILOT.name:
-            self.mode = hand_back(self.sumo, EGO_ID)
-            run.takeover_end = now
+        self.mode = takeover_decision.hand_back_at_road_end(self.sumo, EGO_ID, run, self.mode, now)
         self.remove_incident(run, now)
         performance = run.monitor.result(self.limits(run))
         trust_before = self.driver.trust
