@@ -194,10 +194,11 @@ def reusable(config: SumoConfig) -> bool:
 
 @dataclass(frozen=True)
 class _OpenSimulation:
-    """The libsumo simulation this process keeps open: its command line without the seed, and the
-    snapshot of its empty state right after the start."""
+    """The libsumo simulation this process keeps open: what it was started on (the command line
+    without the seed, and the net file's identity), and the snapshot of its empty state right
+    after the start."""
 
-    command: tuple[str, ...]
+    started_on: tuple
     snapshot: Path
 
 
@@ -205,9 +206,12 @@ _open: list[_OpenSimulation] = []   # at most one: libsumo runs one simulation p
 _exit_registered: list[bool] = []
 
 
-def _without_seed(command: list[str]) -> tuple[str, ...]:
+def _started_on(command: list[str], net_path: Path) -> tuple:
+    """The command line without its seed, and the net file's identity: a net rewritten in place
+    (a town imported again into the same folder) is another simulation."""
     at = command.index("--seed")
-    return (*command[:at], *command[at + 2:])
+    stat = Path(net_path).stat()
+    return (*command[:at], *command[at + 2:], stat.st_ino, stat.st_size, stat.st_mtime_ns)
 
 
 def close_simulation() -> None:
@@ -257,8 +261,8 @@ def _empty_simulation(command: list[str], net_path: Path, config: SumoConfig) ->
     """libsumo in the empty state of `command`'s start: the open simulation returned to its
     snapshot when it runs the same command line (the seed aside), else a fresh start."""
     sumo = _libsumo()
-    key = _without_seed(command)
-    if _open and _open[0].command == key:
+    key = _started_on(command, net_path)
+    if _open and _open[0].started_on == key:
         try:
             sumo.simulation.loadState(str(_open[0].snapshot))
             return sumo

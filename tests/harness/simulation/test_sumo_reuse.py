@@ -8,17 +8,27 @@ running every episode with two SUMO seeds.
 from __future__ import annotations
 
 import multiprocessing
+import os
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
 import pytest
 
 from trustroute.harness.simulation import sumo_start
+from trustroute.harness.simulation.episode import run_episode
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.sumo_start import SumoConfig, close_simulation, reusable
 from trustroute.harness.study.config import study_config_from_dict
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.harness.study.runner import run_planned_episode, validate_study
+from trustroute.networks.sumo_net import build_net
+from trustroute.networks.town import load_town
+from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.free import trust_free_policy
 
 
 @pytest.fixture(scope="module")
@@ -145,3 +155,25 @@ def test_a_forked_worker_leaves_the_parents_simulation_alone(study, starts):
     assert snapshot.is_file()   # the child's own simulation and exit did not touch the parent's
     assert _same(_tables(config, tasks[3]), expected) == []
     assert len(starts) == 1
+
+
+def test_a_net_rewritten_in_place_starts_afresh(starts, tmp_path, driver):
+    town = load_town()
+    spec = load_spec("phi1", town)
+    setup = EpisodeSetup(town=town, driver_model=driver, spec=spec)
+    net = tmp_path / "town.net.xml"
+    shutil.copyfile(build_net(town).path, net)
+
+    def episode() -> None:
+        run_episode(setup, trust_free_policy(town, spec), SyntheticDriver(driver, np.random.default_rng(1)),
+                    "rewritten", 1, net_path=net)
+
+    close_simulation()
+    episode()
+    episode()
+    assert len(starts) == 1
+    later = net.stat().st_mtime_ns + 10**9
+    net.write_bytes(net.read_bytes())   # the same net written again, as a re-import would
+    os.utime(net, ns=(later, later))
+    episode()
+    assert len(starts) == 2
