@@ -148,10 +148,18 @@ TURNS = {"s": 0, "r": 1, "l": 1, "R": 2, "L": 2}   # SUMO link directions, strai
 
 
 def _lanes(sumo: Sumo, scene: Scene, edge: str) -> list[str]:
-    """The lanes of `edge` a vehicle may come from: lane 1 of a built net, every lane of a real one."""
+    """The lanes of `edge` a truck may come from: lane 1 of a built net, every lane of a real one
+    that lets trucks drive (a real net has bus and delivery lanes, and streets closed to trucks)."""
     if scene.end_junction is None:
         return [f"{edge}_1"]
-    return [f"{edge}_{i}" for i in range(sumo.edge.getLaneNumber(edge))]
+    return [lane for lane in (f"{edge}_{i}" for i in range(sumo.edge.getLaneNumber(edge)))
+            if allows_trucks(sumo, lane)]
+
+
+def allows_trucks(sumo: Sumo, lane: str) -> bool:
+    """Whether SUMO lets the oncoming vehicle (a truck) drive on `lane`; SUMO refuses to insert a
+    vehicle on a lane closed to its class."""
+    return TRUCK_TYPE.vehicle_class not in sumo.lane.getDisallowed(lane)
 
 
 def upstream_lane(sumo: Sumo, scene: Scene) -> str | None:

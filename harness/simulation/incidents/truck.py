@@ -24,7 +24,12 @@ from trustroute.harness.simulation.incidents.base import (
     remove_vehicle,
     vehicle_position,
 )
-from trustroute.harness.simulation.incidents.oncoming import TRUCK_SPEED, OncomingVehicle, schedule_oncoming
+from trustroute.harness.simulation.incidents.oncoming import (
+    TRUCK_SPEED,
+    OncomingVehicle,
+    allows_trucks,
+    schedule_oncoming,
+)
 
 KIND = "truck"
 PARKED_TYPE_ID = "trustroute_parked_car"
@@ -82,9 +87,13 @@ class TruckIncident:
         return f"{self.oncoming.details()} parked={'yes' if self.parked_id else 'no'}"
 
 
-def inject(sumo, scene: Scene) -> TruckIncident:
+def inject(sumo, scene: Scene) -> TruckIncident | None:
+    """The truck scene on scene.road; None on a real net whose opposite lane is closed to trucks
+    (as where the road has no opposite direction, the scene cannot happen there)."""
     if scene.reverse_road is None:
         raise ValueError(f"truck incident on {scene.road}: the road has no opposite direction")
+    if not allows_trucks(sumo, f"{scene.reverse_road}_{scene.reverse_lane}"):
+        return None
     fraction = float(scene.draw("meet_fraction", lambda rng: rng.uniform(*MEET_RANGE)))
     parked = bool(scene.draw("parked", lambda rng: rng.random() < P_PARKED))
     before = float(scene.draw("parked_before_meeting", lambda rng: rng.uniform(*PARKED_BEFORE_MEETING)))

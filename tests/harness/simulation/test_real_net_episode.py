@@ -297,3 +297,40 @@ def test_the_ego_turns_only_where_the_net_has_a_connection(tmp_path):
     assert record.summary["end_reason"] == "accepted" and route[-1] == "e-d"
     assert all(b.split("-")[1] in town.actions(a) for a, b in zip(route, route[1:], strict=False))
     check_route(town, record, watcher)
+
+
+def test_an_oncoming_truck_comes_only_from_lanes_open_to_trucks(tmp_path):
+    """The wheel's DRT net, incident seed 1: a truck scene on the route from 1652675108-2648328514
+    would start its truck on -24733697#0, which only buses, delivery vehicles, bicycles and
+    pedestrians may use; SUMO refuses a truck there, and the episode stopped with an error. The
+    truck comes from a lane open to trucks instead, and every truck drives only such lanes."""
+    from benchmarks.bench_episode import route_through_every_kind
+    from trustroute.policies.routing.fixed_route import FixedRoute
+
+    net = Path(sumo.SUMO_HOME) / "tools" / "game" / "DRT" / "osm.net.xml"
+    town = import_town(net, tmp_path / "drt.json", rng=np.random.default_rng(1), incident_seed=1).town
+    start = "1652675108-2648328514"
+    route = route_through_every_kind(town, start)
+    (tmp_path / "spec.toml").write_text(f'name = "drt"\nstart = "{start}"\nformula = "F v1"\n\n'
+                                        f'[states]\nv1 = ["{route[-1]}"]\n')
+    town = load_town(tmp_path / "drt.json")
+    model = load_driver_model(None)
+    truck_lanes: set[str] = set()
+    closed: set[str] = set()
+
+    def observe(sumo, ego, mode, road):
+        for vehicle in sumo.vehicle.getIDList():
+            if vehicle.endswith((".truck", ".oncoming")):
+                lane = sumo.vehicle.getLaneID(vehicle)
+                truck_lanes.add(lane)
+                if "truck" in sumo.lane.getDisallowed(lane):
+                    closed.add(lane)
+
+    setup = EpisodeSetup(town=town, driver_model=model, spec=load_spec(str(tmp_path / "spec.toml"), town),
+                         fallback_after=None)
+    record = run_episode(setup, FixedRoute(route), SyntheticDriver(model, np.random.default_rng(1)), "drt", 1,
+                         observer=observe)
+    assert record.summary["end_reason"] == "accepted"
+    trucks = record.incidents[(record.incidents["incident"] == "truck") & record.incidents["sumo_ids"].notna()]
+    assert len(trucks) >= 1 and truck_lanes
+    assert closed == set()
