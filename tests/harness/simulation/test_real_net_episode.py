@@ -331,6 +331,7 @@ def test_an_oncoming_truck_comes_only_from_lanes_open_to_trucks(tmp_path):
     record = run_episode(setup, FixedRoute(route), SyntheticDriver(model, np.random.default_rng(1)), "drt", 1,
                          observer=observe)
     assert record.summary["end_reason"] == "accepted"
-    trucks = record.incidents[(record.incidents["incident"] == "truck") & record.incidents["sumo_ids"].notna()]
+    incidents = record.incidents
+    trucks = incidents[(incidents["incident"] == "truck") & incidents["sumo_ids"].notna()]
     assert len(trucks) >= 1 and truck_lanes
     assert closed == set()
