@@ -19,6 +19,7 @@ import math
 from typing import Protocol
 
 from trustroute.harness.simulation.driving_style import AUTOPILOT, hand_back, take_over
+from trustroute.harness.simulation.sumo_start import Sumo
 
 VIEW_DISTANCE = 80.0   # metres: an incident object this close to the ego is in view
 
@@ -40,7 +41,7 @@ def in_view(distance: float) -> bool:
     return distance <= VIEW_DISTANCE
 
 
-def decide(sumo, vehicle_id: str, road: RoadTakeover, driver: Driver, incident: str, now: float,
+def decide(sumo: Sumo, vehicle_id: str, road: RoadTakeover, driver: Driver, incident: str, now: float,
            mode: str) -> str:
     """The synthetic driver's decision on `road`; returns the control mode after it."""
     road.decided = True
@@ -51,7 +52,7 @@ def decide(sumo, vehicle_id: str, road: RoadTakeover, driver: Driver, incident: 
     return take_over(sumo, vehicle_id)
 
 
-def apply_request(sumo, vehicle_id: str, road: RoadTakeover, request: bool | None, mode: str,
+def apply_request(sumo: Sumo, vehicle_id: str, road: RoadTakeover, request: bool | None, mode: str,
                   now: float) -> str:
     """A person's takeover (True) or hand-back (False) on the open road, None for neither; returns
     the control mode after it. A takeover also settles the road's decision: it counts as taken over."""
@@ -66,7 +67,7 @@ def apply_request(sumo, vehicle_id: str, road: RoadTakeover, request: bool | Non
     return mode
 
 
-def hand_back_at_road_end(sumo, vehicle_id: str, road: RoadTakeover, mode: str, now: float) -> str:
+def hand_back_at_road_end(sumo: Sumo, vehicle_id: str, road: RoadTakeover, mode: str, now: float) -> str:
     """Back to the autopilot at the road's commit point, before the next junction."""
     if mode == AUTOPILOT.name:
         return mode
