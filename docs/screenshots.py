@@ -18,7 +18,10 @@ real time to draw before the capture (`--wait`). Every address is a loopback one
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -81,17 +84,31 @@ def recording_screenshot(rrd: Path, out: Path, wait: float) -> None:
     """`rrd` served by `rerun --serve-web` on loopback ports and captured in its web viewer."""
     web, grpc = _free_port(), _free_port()
     rerun = shutil.which("rerun", path=str(Path(sys.executable).parent)) or "rerun"
+    # `rerun` is rerun-sdk's Python launcher, which runs the viewer binary as its child: the server
+    # gets a process group of its own, and the whole group is stopped (the launcher alone would
+    # leave the binary serving, and rendering, after the capture).
     server = subprocess.Popen([rerun, "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(web),
                                "--port", str(grpc), str(rrd)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         _wait_for_port(web)
         _wait_for_port(grpc)
         source = urllib.parse.quote(f"rerun+http://127.0.0.1:{grpc}/proxy", safe="")
         capture(f"http://127.0.0.1:{web}/?url={source}", out, VIEWER_SIZE, wait)
     finally:
-        server.terminate()
-        server.wait(timeout=30)
+        _stop_group(server)
+
+
+def _stop_group(process: subprocess.Popen) -> None:
+    """SIGTERM to the process's group, then SIGKILL if it has not ended within 30 s."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(process.pid, signal.SIGTERM)
+    try:
+        process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
 
 
 def replay_screenshot(demo: Path, out_dir: Path, wait: float) -> None:
