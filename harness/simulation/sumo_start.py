@@ -203,7 +203,7 @@ class _OpenSimulation:
 
 
 _open: list[_OpenSimulation] = []   # at most one: libsumo runs one simulation per process
-_exit_registered: list[bool] = []
+_closes_at_exit: list[int] = []     # the pid whose exit closes it (close_at_exit)
 
 
 def _started_on(command: list[str], net_path: Path) -> tuple:
@@ -224,19 +224,18 @@ def close_simulation() -> None:
         shutil.rmtree(simulation.snapshot.parent, ignore_errors=True)
 
 
-def _register_exit() -> None:
-    # multiprocessing's exit (its workers end with os._exit) runs these finalizers, atexit does not
+def _close_at_exit() -> None:
+    """Close this process's simulation, and remove its snapshot, when the process exits (once per
+    process). A forked child (a study's worker) forgets the parent's simulation: it starts its own,
+    and its exit leaves the parent's snapshot alone."""
     from multiprocessing import util
 
-    util.Finalize(None, close_simulation, exitpriority=10)
-    os.register_at_fork(after_in_child=_forget_inherited)
-
-
-def _forget_inherited() -> None:
-    """A forked child (a study's worker) starts its own simulation: the parent's snapshot stays the
-    parent's, and the child's exit must not remove it."""
-    _open.clear()
-    _exit_registered.clear()
+    if not _closes_at_exit:   # the hook is inherited by every process forked from here on
+        os.register_at_fork(after_in_child=_open.clear)
+    if _closes_at_exit != [os.getpid()]:
+        # multiprocessing's exit (its workers end with os._exit) runs these finalizers, atexit does not
+        util.Finalize(None, close_simulation, exitpriority=10)
+        _closes_at_exit[:] = [os.getpid()]
 
 
 def _start(sumo: Sumo, command: list[str], net_path: Path, config: SumoConfig) -> None:
@@ -263,19 +262,15 @@ def _empty_simulation(command: list[str], net_path: Path, config: SumoConfig) ->
     sumo = _libsumo()
     key = _started_on(command, net_path)
     if _open and _open[0].started_on == key:
-        try:
+        with contextlib.suppress(Exception):   # a snapshot that no longer loads: start afresh below
             sumo.simulation.loadState(str(_open[0].snapshot))
             return sumo
-        except Exception:  # a snapshot that no longer loads: start afresh below
-            close_simulation()
     close_simulation()
     _start(sumo, command, net_path, config)
     folder = Path(tempfile.mkdtemp(prefix="trustroute-sumo-"))
     snapshot = folder / "empty.state.xml"
     sumo.simulation.saveState(str(snapshot))
-    if not _exit_registered:
-        _register_exit()
-        _exit_registered.append(True)
+    _close_at_exit()
     _open.append(_OpenSimulation(key, snapshot))
     return sumo
 

@@ -27,7 +27,11 @@ from trustroute.harness.simulation.incidents.base import (
     remove_vehicle,
     vehicle_position,
 )
-from trustroute.harness.simulation.incidents.oncoming import OncomingVehicle, allows_trucks, schedule_oncoming
+from trustroute.harness.simulation.incidents.oncoming import (
+    OncomingVehicle,
+    oncoming_possible,
+    schedule_oncoming,
+)
 
 KIND = "obstacle"
 TYPE_ID = "trustroute_obstacle"
@@ -110,8 +114,7 @@ def inject(sumo, scene: Scene) -> ObstacleIncident:
     park_vehicle(sumo, vehicle_id, f"{scene.prefix}.obstacle_route", scene.road, position,
                  BICYCLE_TYPE_ID if bicycle else TYPE_ID, lane=scene.lane, duration=duration)
     oncoming = None
-    if (with_oncoming and scene.reverse_road is not None
-            and allows_trucks(sumo, f"{scene.reverse_road}_{scene.reverse_lane}")):
+    if with_oncoming and oncoming_possible(sumo, scene):
         eta = (scene.ego_distance + position) / scene.road_speed
         oncoming = schedule_oncoming(sumo, scene, meet_at=position, meet_in=eta + offset,
                                      vehicle_id=f"{scene.prefix}.oncoming", from_upstream=not unseen)

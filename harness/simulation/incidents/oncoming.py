@@ -162,6 +162,13 @@ def allows_trucks(sumo: Sumo, lane: str) -> bool:
     return TRUCK_TYPE.vehicle_class not in sumo.lane.getDisallowed(lane)
 
 
+def oncoming_possible(sumo: Sumo, scene: Scene) -> bool:
+    """Whether an oncoming truck can drive scene.road's opposite lane: the road has one, and it is
+    open to trucks (on a real net it may be a bus lane or a street closed to trucks)."""
+    return (scene.reverse_road is not None
+            and allows_trucks(sumo, f"{scene.reverse_road}_{scene.reverse_lane}"))
+
+
 def upstream_lane(sumo: Sumo, scene: Scene) -> str | None:
     """The lane of the road that leads into scene.reverse_road at the junction where the ego's road
     ends, other than the ego's own road, without a U-turn: the straightest, then the longest, then

@@ -27,7 +27,7 @@ from trustroute.harness.simulation.incidents.base import (
 from trustroute.harness.simulation.incidents.oncoming import (
     TRUCK_SPEED,
     OncomingVehicle,
-    allows_trucks,
+    oncoming_possible,
     schedule_oncoming,
 )
 
@@ -92,7 +92,7 @@ def inject(sumo, scene: Scene) -> TruckIncident | None:
     (as where the road has no opposite direction, the scene cannot happen there)."""
     if scene.reverse_road is None:
         raise ValueError(f"truck incident on {scene.road}: the road has no opposite direction")
-    if not allows_trucks(sumo, f"{scene.reverse_road}_{scene.reverse_lane}"):
+    if not oncoming_possible(sumo, scene):
         return None
     fraction = float(scene.draw("meet_fraction", lambda rng: rng.uniform(*MEET_RANGE)))
     parked = bool(scene.draw("parked", lambda rng: rng.random() < P_PARKED))

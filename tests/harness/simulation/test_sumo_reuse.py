@@ -47,7 +47,7 @@ def _tables(config, task: EpisodeTask) -> dict[str, pa.Table]:
     return run_planned_episode(config, task).tables()
 
 
-def _same(a: dict[str, pa.Table], b: dict[str, pa.Table]) -> list[str]:
+def _differing(a: dict[str, pa.Table], b: dict[str, pa.Table]) -> list[str]:
     """The names of the tables that differ."""
     return [name for name in a if not a[name].equals(b[name])]
 
@@ -80,7 +80,7 @@ def test_no_sumo_random_draw_reaches_an_episode(study, monkeypatch):
                             lambda net, seed, options: original(net, seed + 7919, options))
         other = _tables(config, task)
         monkeypatch.setattr(sumo_start, "sumo_command", original)
-        assert _same(first, other) == [], task.episode_id
+        assert _differing(first, other) == [], task.episode_id
         kinds |= set(first["incidents"].column("incident").to_pylist())
         scenes = first["incidents"].column("scene").to_pylist()
         kinds |= {"oncoming" for scene in scenes if scene and "oncoming=inc" in scene}
@@ -95,7 +95,7 @@ def test_episodes_in_one_simulation_equal_fresh_ones(study, starts):
     assert len(starts) == 1   # one start, then every episode returned the simulation to its snapshot
     for task, tables in zip(reversed(tasks), reversed(reused), strict=True):
         close_simulation()
-        assert _same(_tables(config, task), tables) == [], task.episode_id
+        assert _differing(_tables(config, task), tables) == [], task.episode_id
     assert len(starts) == 1 + len(tasks)
 
 
@@ -123,7 +123,7 @@ def test_an_episode_that_raises_closes_the_simulation(study, starts):
     with pytest.raises(RuntimeError, match="stop here"):
         run_planned_episode(config, tasks[1], observer=observer)
     assert sumo_start._open == []   # what the episode left behind went with the simulation
-    assert _same(_tables(config, tasks[2]), expected) == []
+    assert _differing(_tables(config, tasks[2]), expected) == []
     assert len(starts) == 2   # the failed episode ran in the first simulation; the next starts afresh
 
 
@@ -153,7 +153,7 @@ def test_a_forked_worker_leaves_the_parents_simulation_alone(study, starts):
     process.join(60)
     assert process.exitcode == 0
     assert snapshot.is_file()   # the child's own simulation and exit did not touch the parent's
-    assert _same(_tables(config, tasks[3]), expected) == []
+    assert _differing(_tables(config, tasks[3]), expected) == []
     assert len(starts) == 1
 
 
