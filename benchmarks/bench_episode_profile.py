@@ -27,14 +27,13 @@ Each figure is ms per episode (total over the run / EPISODES), with the 1-minute
 from __future__ import annotations
 
 import contextlib
-import multiprocessing
 import os
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterator
-from multiprocessing.connection import Connection
 
 from benchmarks.bench_episode import measured_episode
+from benchmarks.timing import ForkedCalls
 from trustroute.harness.simulation import episode as episode_module
 from trustroute.harness.simulation import episode_tracker
 
@@ -111,59 +110,50 @@ def _per_episode(totals: dict[str, float], wall: float, episodes: int) -> dict[s
     return {phase: round(value, 3) for phase, value in row.items()}
 
 
-def _profiling_worker(connection: Connection, run: Callable[[], object]) -> None:
-    """Run `run` once per True received, under the phase timers; on False send the totals."""
+def _profiled(run: Callable[[], object]) -> Callable[[str], dict | None]:
+    """`run` behind one call: "warm" runs it untimed, "run" runs it under the phase timers,
+    "totals" returns what the timers summed (called in its own process: ForkedCalls)."""
     timers = {"wall": defaultdict(float), "cpu": defaultdict(float), "counts": defaultdict(int),
               "total": [0.0, 0.0]}
-    while connection.recv():
+
+    def call(what: str) -> dict | None:
+        if what == "totals":
+            return {key: dict(value) if isinstance(value, defaultdict) else value
+                    for key, value in timers.items()}
+        if what == "warm":
+            run()
+            return None
         with _phase_timers(timers["wall"], timers["cpu"], timers["counts"]):
             started, started_cpu = time.perf_counter(), time.thread_time()
             run()
             timers["total"][0] += time.perf_counter() - started
             timers["total"][1] += time.thread_time() - started_cpu
-        connection.send(True)
-    connection.send({key: dict(value) if isinstance(value, defaultdict) else value
-                     for key, value in timers.items()})
+        return None
+
+    return call
 
 
 def profile(episodes: int = EPISODES) -> dict:
     """Per-phase ms of the episode and of the bare loop over `episodes` alternating runs each."""
     measured = measured_episode()
-    context = multiprocessing.get_context("fork")
-    connections = {}
-    processes = []
-    for side, run in (("episode", measured.episode), ("bare", measured.bare)):
-        connections[side], child = context.Pipe()
-        processes.append(context.Process(target=_warmed_worker, args=(child, run), daemon=True))
-        processes[-1].start()
-        child.close()
-        connections[side].recv()   # warmed: the episode's first run has started SUMO
-    load_before = os.getloadavg()[0]
-    for _ in range(episodes):
-        for side in ("episode", "bare"):
-            connections[side].send(True)
-            connections[side].recv()
-    sides = {}
-    for side, connection in connections.items():
-        connection.send(False)
-        sides[side] = connection.recv()
-    for process in processes:
-        process.join(10)
+    with ForkedCalls(_profiled(measured.episode)) as episode, ForkedCalls(_profiled(measured.bare)) as bare:
+        sides = {"episode": episode, "bare": bare}
+        for side in sides.values():
+            side("warm")   # the episode's first run starts SUMO
+        load_before = os.getloadavg()[0]
+        for _ in range(episodes):
+            for side in sides.values():
+                side("run")
+        totals = {name: side("totals") for name, side in sides.items()}
     out = {"name": "episode_phi1_phases", "unit": "ms per episode", "episodes": episodes}
     for clock, index in (("wall", 0), ("cpu", 1)):
         for side in ("episode", "bare"):
-            out[f"{side}_{clock}"] = _per_episode(sides[side][clock], sides[side]["total"][index], episodes)
+            out[f"{side}_{clock}"] = _per_episode(totals[side][clock], totals[side]["total"][index], episodes)
         ratio = out[f"episode_{clock}"]["total"] / out[f"bare_{clock}"]["total"]
         out[f"ratio_of_totals_{clock}"] = round(ratio, 3)
-    out["steps"] = {side: sides[side]["counts"].get("sumo_steps", 0) // episodes for side in sides}
+    out["steps"] = {side: totals[side]["counts"].get("sumo_steps", 0) // episodes for side in totals}
     out["load_average_1min"] = [load_before, os.getloadavg()[0]]
     return out
-
-
-def _warmed_worker(connection: Connection, run: Callable[[], object]) -> None:
-    run()   # warm the path, untimed
-    connection.send(True)
-    _profiling_worker(connection, run)
 
 
 def run() -> list[dict]:

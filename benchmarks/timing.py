@@ -4,13 +4,14 @@
 in pairs, interleaved, in wall and CPU time, reported as the median of the per-pair ratios (load
 that drifts during the run hits both members of a pair alike, and one disturbed pair moves a
 median by one rank only), with the load average beside it. `TimingProcess`: a function run and
-timed in a process of its own, for a pair whose members cannot share one (libsumo runs one
-simulation per process: an episode that keeps its simulation open between runs, against a bare
-loop that starts and closes its own).
+timed in a process of its own (`ForkedCalls`: any function called in one), for a pair whose
+members cannot share one (libsumo runs one simulation per process: an episode that keeps its
+simulation open between runs, against a bare loop that starts and closes its own).
 """
 
 from __future__ import annotations
 
+import functools
 import multiprocessing
 import os
 import statistics
@@ -18,6 +19,7 @@ import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from types import TracebackType
+from typing import Any, Self
 
 
 def best_seconds(function: Callable[[], object], repeats: int = 5) -> float:
@@ -79,33 +81,41 @@ def paired_timings(target: Callable[[], tuple[float, float]], baseline: Callable
     }
 
 
-def _timing_worker(connection: Connection, function: Callable[[], object]) -> None:
-    while connection.recv():
-        connection.send(_timed(function))
+def _calls_worker(connection: Connection, function: Callable[..., object]) -> None:
+    while (arguments := connection.recv()) is not None:
+        connection.send(function(*arguments))
 
 
-class TimingProcess:
-    """`function` run in a forked process of its own, one run per call, which returns the run's
-    (wall, CPU) seconds measured in that process (the pipe's round trip is outside them)."""
+class ForkedCalls:
+    """`function` in a forked process of its own: each call runs it there with the call's
+    arguments and returns its result (libsumo runs one simulation per process, so two SUMO loops
+    that must not share one each get a process)."""
 
-    def __init__(self, function: Callable[[], object]) -> None:
+    def __init__(self, function: Callable[..., object]) -> None:
         context = multiprocessing.get_context("fork")
         self.connection, child = context.Pipe()
-        self.process = context.Process(target=_timing_worker, args=(child, function), daemon=True)
+        self.process = context.Process(target=_calls_worker, args=(child, function), daemon=True)
         self.process.start()
         child.close()
 
-    def __call__(self) -> tuple[float, float]:
-        self.connection.send(True)
-        wall, cpu = self.connection.recv()
-        return wall, cpu
+    def __call__(self, *arguments: object) -> Any:
+        self.connection.send(arguments)
+        return self.connection.recv()
 
-    def __enter__(self) -> TimingProcess:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
                  trace: TracebackType | None) -> None:
-        self.connection.send(False)
+        self.connection.send(None)
         self.process.join(10)
         if self.process.is_alive():
             self.process.kill()
+
+
+class TimingProcess(ForkedCalls):
+    """`function` run in a forked process of its own, one run per call, which returns the run's
+    (wall, CPU) seconds measured in that process (the pipe's round trip is outside them)."""
+
+    def __init__(self, function: Callable[[], object]) -> None:
+        super().__init__(functools.partial(_timed, function))
