@@ -1,8 +1,10 @@
 """`trustroute live`: serve one study to people (docs/live_studies.md).
 
 The study config is `trustroute study`'s, with engine = "live". The server binds 127.0.0.1 by
-default, prints the experimenter's console address (carrying the token once) and the token, and
-serves until interrupted; a second server on the same study directory is refused (exit 2).
+default (another host: a warning on stderr), takes the port before it writes or prints anything
+(a port in use: one line, exit 2), prints the experimenter's console address for each address it
+is reachable at (carrying the token once) and the token, and serves until interrupted; a second
+server on the same study directory is refused (exit 2).
 """
 
 from __future__ import annotations
@@ -32,10 +34,15 @@ from trustroute.harness.commands.options import FiniteFloat, bounded_int
               help="Mark the cookies Secure (the study is served over HTTPS, e.g. behind a TLS proxy).")
 @click.option("--consent", "consent_path", type=click.Path(), default=None,
               help="Text FILE shown to participants before they consent (default: a short generic text).")
+@click.option("--public-origin", "public_origins", multiple=True, metavar="URL",
+              help="The address participants reach the study at behind a reverse proxy (e.g. "
+              "https://study.example.org); repeatable. Pages from any other origin are refused.")
 def live(config_path: str, host: str, port: int, out: str | None, pace: float, resume_within: float,
-         warm_up: bool, secure_cookies: bool, consent_path: str | None) -> None:
+         warm_up: bool, secure_cookies: bool, consent_path: str | None,
+         public_origins: tuple[str, ...]) -> None:
     """Serve the study described by CONFIG (engine = "live") to participants in their browsers."""
     from trustroute.harness.live.app import serve
+    from trustroute.harness.live.guard import bind
     from trustroute.harness.live.server import DEFAULT_CONSENT, LiveStudy, ServerOptions
     from trustroute.harness.study.config import load_study_config, study_directory
 
@@ -45,14 +52,42 @@ def live(config_path: str, host: str, port: int, out: str | None, pace: float, r
         from trustroute.core.validation import read_text
 
         consent = read_text(consent_path, consent_path, "the consent text", "pass a readable UTF-8 text file")
+    origins = checked_origins(public_origins)
     study_dir = Path(study_directory(config, out))
     options = ServerOptions(pace=pace, resume_within=resume_within, warm_up=warm_up,
-                            secure_cookies=secure_cookies)
-    with LiveStudy(config, study_dir, options, consent) as study:
-        def announce() -> None:
-            shown = host if ":" not in host else f"[{host}]"
-            click.echo(f"live study {config.name}: {study.study_dir}")
-            click.echo(f"console: http://{shown}:{port}/login?token={study.experimenter_token}")
-            click.echo(f"experimenter token: {study.experimenter_token}")
+                            secure_cookies=secure_cookies, public_origins=origins)
+    sock = bind(host, port)   # before anything is printed or written: a port in use leaves nothing
+    try:
+        with LiveStudy(config, study_dir, options, consent) as study:
+            serve(study, sock, on_ready=lambda: announce(study, host, sock.getsockname()[1], origins))
+    finally:
+        sock.close()
 
-        serve(study, host, port, on_ready=announce)
+
+def checked_origins(origins: tuple[str, ...]) -> tuple[str, ...]:
+    from trustroute.core.errors import InputError
+    from trustroute.harness.live.guard import normal_origin
+
+    for origin in origins:
+        if normal_origin(origin) is None:
+            raise InputError("--public-origin", origin, "not an http(s) origin",
+                             "give scheme://host[:port], e.g. https://study.example.org")
+    return origins
+
+
+def announce(study, host: str, port: int, public: tuple[str, ...]) -> None:
+    """The study, its console address(es) and the experimenter token; a warning on stderr when the
+    study is reachable from other computers."""
+    from trustroute.harness.live.guard import is_loopback, shown_host, usable_addresses
+
+    token = study.experimenter_token
+    click.echo(f"live study {study.config.name}: {study.study_dir}")
+    if not is_loopback(host):
+        click.echo(f"warning: --host {host} serves this study to every computer that reaches this one's "
+                   f"network at port {port}; use it on a lab network or behind an HTTPS proxy "
+                   "(--secure-cookies, --public-origin)", err=True)
+    for address in usable_addresses(host):
+        click.echo(f"console: http://{shown_host(address)}:{port}/login?token={token}")
+    for origin in public:
+        click.echo(f"console: {origin.rstrip('/')}/login?token={token}")
+    click.echo(f"experimenter token: {token}")

@@ -1,24 +1,30 @@
 """The live study's web application (FastAPI): HTTP API, participant websocket, links.
 
-Every route checks who is asking (harness/live/auth.py) before it reads anything:
+Every route checks who is asking (harness/live/auth.py) before it reads anything, and every
+state-changing request and websocket handshake its Origin (harness/live/guard.py):
 
     GET  /login?token=T                experimenter: sets the HttpOnly cookie, then to /console
-    GET  /p/{token}                    a participant's link: sets their cookie, then to /station
+    GET  /p/{token}                    a participant's link: a page that claims the token (below)
+    POST /api/claim {"token": T}       the link's page: T is replaced by a fresh token in the
+                                       cookie (the link in the browser's history is spent)
     GET  /console, /station            the pages (experimenter; participant), plain HTML and JS
-    GET  /static/{name}                their script and style sheet
+    GET  /static/{name}                their scripts and style sheet
     GET  /api/me                       participant: their own progress and the consent text
     GET  /api/net                      participant or experimenter: the net's lanes (the view)
     POST /api/participants             experimenter: create the next participant -> link
     GET  /api/participants             experimenter: every participant's progress
     GET  /api/participants/{p}         experimenter, or participant p themself
     POST /api/participants/{p}/control experimenter: pause, resume or abort p's episode
+    POST /api/participants/{p}/link    experimenter: a new link for p (the old token revoked)
     GET  /api/files                    experimenter: the study directory's files
     GET  /api/download/{path}          experimenter: one file, inside the study directory only
     WS   /ws                           participant: the protocol of harness/live/protocol.py
 
 Request bodies are capped (MAX_BODY_BYTES) and validated (protocol.py models); every refusal is
-a JSON error of the protocol's form with an HTTP status, and changes nothing. `serve` runs the application
-on uvicorn (websocket frames capped at the transport too).
+a JSON error of the protocol's form with an HTTP status, and changes nothing. A participant has
+one live websocket: a second one replaces the first (both are told); a socket silent for
+`idle_seconds` is closed. `serve` runs the application on uvicorn on a socket bound beforehand
+(websocket frames capped at the transport too, slow requests cut: guard.py).
 """
 
 from __future__ import annotations
@@ -33,10 +39,12 @@ from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
 from starlette.requests import HTTPConnection
 
 from trustroute.harness.live.auth import EXPERIMENTER_COOKIE, PARTICIPANT_COOKIE, presented_token
+from trustroute.harness.live.guard import ConnectionGate, guarded_protocol, origin_allowed
 from trustroute.harness.live.protocol import (
     MAX_BODY_BYTES,
     MAX_MESSAGE_BYTES,
     EpisodeControl,
+    LinkClaim,
     MessageError,
     NewParticipant,
     TokenBucket,
@@ -47,7 +55,8 @@ from trustroute.harness.live.server import LiveStudy
 from trustroute.harness.live.session import Session
 
 PAGES = Path(__file__).with_name("pages")
-STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js": "text/javascript"}
+STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js": "text/javascript",
+          "link.js": "text/javascript"}
 # Every response: no framing, no sniffing, no referrer (a participant link carries a token), and
 # scripts, styles and sockets from this server only.
 SECURITY_HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
@@ -56,7 +65,33 @@ SECURITY_HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DEN
                                                "img-src 'self' data:; frame-ancestors 'none'"}
 OUTBOX = 1024          # messages queued for one websocket; frames are dropped first
 FRAMES_UP_TO = OUTBOX // 2
-POLICY_VIOLATION = 1008  # websocket close code: no valid participant token
+POLICY_VIOLATION = 1008  # websocket close codes: no valid participant token, or a foreign Origin;
+TRY_AGAIN_LATER = 1013   # too many connections of this participant;
+REPLACED = 4001          # another window of the participant took the session over;
+IDLE = 4408              # nothing received for idle_seconds
+CLOSE = "close"          # the outbox's last item: close the socket with (code, reason)
+
+
+class Link:
+    """One participant websocket's outbox, pushed to from any thread (the episode's reader)."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.loop = loop
+        self.queue: asyncio.Queue = asyncio.Queue(maxsize=OUTBOX)
+
+    def __call__(self, message: dict) -> None:
+        self.loop.call_soon_threadsafe(offer, self.queue, message)
+
+    def shut(self, code: int, reason: str, last: dict | None = None) -> None:
+        """Close the socket with `code` after `last` (what is still queued is dropped)."""
+        self.loop.call_soon_threadsafe(self._shut, code, reason, last)
+
+    def _shut(self, code: int, reason: str, last: dict | None) -> None:
+        while not self.queue.empty():
+            self.queue.get_nowait()
+        if last is not None:
+            self.queue.put_nowait(last)
+        self.queue.put_nowait((CLOSE, code, reason))
 
 
 def offer(queue: asyncio.Queue, message: dict) -> None:
@@ -121,11 +156,15 @@ def session_of(request: Request, participant: int) -> Session:
 
 
 async def limit_body(request: Request, call_next):
-    """Bodies need a length within MAX_BODY_BYTES; every response gets the security headers."""
+    """State-changing requests need one of our Origins (or none) and a body length within
+    MAX_BODY_BYTES; every response gets the security headers."""
     response = None
-    if request.method in ("POST", "PUT", "PATCH"):
+    if request.method in ("POST", "PUT", "PATCH", "DELETE"):
         length = request.headers.get("content-length", "")
-        if not length.isdigit():
+        if not origin_allowed(request.headers, request.app.state.origins):
+            foreign = error_reply("forbidden", "a request from another site's page")
+            response = JSONResponse({"detail": foreign}, 403)
+        elif not length.isdigit():
             response = JSONResponse({"type": "error", "detail": "a body needs a Content-Length"}, 411)
         elif int(length) > MAX_BODY_BYTES:
             limit = f"bodies hold at most {MAX_BODY_BYTES} bytes"
@@ -151,10 +190,25 @@ def login(request: Request, token: str = "") -> RedirectResponse:
 
 
 @router.get("/p/{token}")
-def participant_link(request: Request, token: str) -> RedirectResponse:
-    if study_of(request).credentials.participant_of(token[:200]) is None:
-        raise refused(403, "forbidden", "not a participant link of this study")
-    return cookie_redirect(request, "/station", PARTICIPANT_COOKIE, token)
+def participant_link(token: str) -> FileResponse:
+    """The link's page: its script claims the token from the address (POST /api/claim) and goes on
+    to /station. Nothing changes on a GET, so a link preview spends no link."""
+    return FileResponse(PAGES / "link.html", media_type="text/html")
+
+
+@router.post("/api/claim")
+def claim(request: Request, body: LinkClaim) -> JSONResponse:
+    """The token of a link opened in a browser is replaced by a fresh one, which only the cookie
+    holds: the link left in the browser's history is spent (403 when opened again)."""
+    study = study_of(request)
+    participant = study.credentials.participant_of(body.token)
+    if participant is None:
+        raise refused(403, "forbidden", "this link is spent or revoked; ask the experimenter for a new one")
+    token = study.replace_token(participant, "link opened in a browser")
+    response = JSONResponse({"next": "/station"})
+    response.set_cookie(PARTICIPANT_COOKIE, token, httponly=True, samesite="strict", path="/",
+                        secure=study.options.secure_cookies)
+    return response
 
 
 @router.get("/console", dependencies=[Depends(experimenter)])
@@ -218,6 +272,19 @@ def control(request: Request, participant: int, body: EpisodeControl) -> dict:
         raise HTTPException(409, exc.reply) from None
 
 
+@router.post("/api/participants/{participant}/link", dependencies=[Depends(experimenter)])
+def new_link(request: Request, participant: int) -> dict:
+    """A new link for `participant`: a fresh token; the old one (link or cookie) is revoked and
+    their open websocket closed. The server keeps only digests, so a link is shown once."""
+    study = study_of(request)
+    session_of(request, participant)
+    token = study.replace_token(participant, "new link issued by the experimenter")
+    link = study.sessions[participant].push
+    if isinstance(link, Link):
+        link.shut(POLICY_VIOLATION, "revoked", {"type": "revoked", "detail": "this link was revoked"})
+    return {"participant": participant, "token": token, "link": f"/p/{token}"}
+
+
 @router.get("/api/files", dependencies=[Depends(experimenter)])
 def files(request: Request) -> dict:
     return {"files": study_of(request).files()}
@@ -234,65 +301,113 @@ def download(request: Request, path: str) -> FileResponse:
 
 @router.websocket("/ws")
 async def station_socket(websocket: WebSocket) -> None:
+    """A participant's socket: their token, one of our origins, and room under their limit."""
     study = study_of(websocket)
     participant = study.credentials.participant_of(
         presented_token(websocket.headers, websocket.cookies, PARTICIPANT_COOKIE))
-    if participant is None:
+    if participant is None or not origin_allowed(websocket.headers, websocket.app.state.origins):
         await websocket.close(code=POLICY_VIOLATION)
         return
-    await websocket.accept()
-    await converse(websocket, study.sessions[participant], study.consent_text)
+    gate: ConnectionGate = websocket.app.state.gate
+    if not gate.admit(participant):
+        await websocket.close(code=TRY_AGAIN_LATER)
+        return
+    try:
+        await websocket.accept()
+        await converse(websocket, study.sessions[participant], study.consent_text, study.options.idle_seconds)
+    finally:
+        gate.release(participant)
 
 
-def live_app(study: LiveStudy) -> FastAPI:
-    """The application serving `study` (opened: credentials and directory lock held)."""
+def live_app(study: LiveStudy, origins: frozenset[str] = frozenset()) -> FastAPI:
+    """The application serving `study` (opened: credentials and directory lock held); `origins`:
+    the server's own (guard.own_origins), beside the study's configured public ones."""
+    from trustroute.harness.live.guard import normal_origin
+
     app = FastAPI(title="trustroute live", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.study = study
+    public = {normal_origin(origin) for origin in study.options.public_origins}
+    app.state.origins = frozenset(origins) | {origin for origin in public if origin is not None}
+    app.state.gate = ConnectionGate()
     app.middleware("http")(limit_body)
     app.add_exception_handler(RequestValidationError, malformed)
     app.include_router(router)
     return app
 
 
-async def converse(websocket: WebSocket, session: Session, consent_text: str) -> None:
-    """One participant connection: replies and the episode's messages out, client messages in."""
-    queue: asyncio.Queue = asyncio.Queue(maxsize=OUTBOX)
-    loop = asyncio.get_running_loop()
-
-    def push(message: dict) -> None:   # called from the episode's reader thread
-        loop.call_soon_threadsafe(offer, queue, message)
+async def converse(websocket: WebSocket, session: Session, consent_text: str, idle_seconds: float) -> None:
+    """One participant connection: replies and the episode's messages out, client messages in.
+    It replaces the participant's previous connection (which is told and closed)."""
+    link = Link(asyncio.get_running_loop())
 
     async def send_all() -> None:
         while True:
-            await websocket.send_json(await queue.get())
+            message = await link.queue.get()
+            if isinstance(message, tuple):
+                await websocket.close(code=message[1], reason=message[2])
+                return
+            await websocket.send_json(message)
 
     sender = asyncio.create_task(send_all())
     bucket = TokenBucket()
-    offer(queue, {"type": "welcome", "participant": session.participant, "consent": consent_text})
-    offer(queue, session.progress())
-    session.attach(push)
+    offer(link.queue, {"type": "welcome", "participant": session.participant, "consent": consent_text})
+    previous = session.attach(link)
+    if isinstance(previous, Link):
+        previous.shut(REPLACED, "opened in another window",
+                      {"type": "replaced", "detail": "This session was opened in another window or tab; "
+                                                     "continue there."})
+        offer(link.queue, {"type": "notice", "kind": "replaced",
+                           "detail": "This session was open in another window or tab; that one is closed."})
+    offer(link.queue, session.progress())
     try:
-        while True:
-            raw = await websocket.receive()
-            if raw["type"] == "websocket.disconnect":
-                break
-            data = raw["text"] if raw.get("text") is not None else (raw.get("bytes") or b"")
-            for reply in respond(session, bucket, data):
-                offer(queue, reply)
-    except WebSocketDisconnect:
+        await receive_all(websocket, session, bucket, link, idle_seconds, sender)
+    except (WebSocketDisconnect, RuntimeError):
         pass
     finally:
-        session.detach(push)
+        session.detach(link)
         sender.cancel()
 
 
-def serve(study: LiveStudy, host: str, port: int, on_ready=None) -> None:
-    """Run the application on uvicorn until interrupted (the study must be open)."""
+async def receive_all(websocket: WebSocket, session: Session, bucket: TokenBucket, link: Link,
+                      idle_seconds: float, sender: asyncio.Task) -> None:
+    """Client messages until the socket closes; silence for idle_seconds closes it."""
+    while not sender.done():
+        receiving = asyncio.ensure_future(websocket.receive())
+        done, _ = await asyncio.wait({receiving, sender}, timeout=idle_seconds,
+                                     return_when=asyncio.FIRST_COMPLETED)
+        if receiving not in done:
+            receiving.cancel()
+            if not done:   # silence: the socket is closed (a running episode pauses)
+                link.shut(IDLE, "idle", {"type": "error", "code": "out_of_order",
+                                         "detail": f"nothing received for {idle_seconds:g} s; closed"})
+                with contextlib.suppress(asyncio.TimeoutError, asyncio.CancelledError):
+                    await asyncio.wait_for(asyncio.shield(sender), 2.0)
+            return
+        raw = receiving.result()
+        if raw["type"] == "websocket.disconnect":
+            return
+        data = raw["text"] if raw.get("text") is not None else (raw.get("bytes") or b"")
+        for reply in respond(session, bucket, data):
+            offer(link.queue, reply)
+
+
+def live_server(study: LiveStudy, sock):
+    """The uvicorn server of `study` for the bound socket `sock` (its `run(sockets=[sock])` serves);
+    the server's own origins are those of the socket's address."""
     import uvicorn
 
-    config = uvicorn.Config(live_app(study), host=host, port=port, log_level="warning",
-                            ws_max_size=4 * MAX_MESSAGE_BYTES, lifespan="off")
-    server = uvicorn.Server(config)
+    from trustroute.harness.live.guard import own_origins
+
+    host, port = sock.getsockname()[:2]
+    app = live_app(study, own_origins(host, port))
+    config = uvicorn.Config(app, log_level="warning", ws_max_size=4 * MAX_MESSAGE_BYTES, lifespan="off",
+                            http=guarded_protocol(study.options.request_seconds), timeout_keep_alive=5)
+    return uvicorn.Server(config)
+
+
+def serve(study: LiveStudy, sock, on_ready=None) -> None:
+    """Run the application on the bound socket `sock` until interrupted (the study must be open)."""
+    server = live_server(study, sock)
     if on_ready is not None:
         on_ready()
-    server.run()
+    server.run(sockets=[sock])

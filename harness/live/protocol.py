@@ -98,9 +98,20 @@ class Pass(ClientMessage):
     type: Literal["pass"]
 
 
+class PromptId(Message):
+    """A prompt for a report: the episode and the road (its index in the roads table) it asks about."""
+
+    episode_id: Annotated[str, Field(min_length=1, max_length=64)]
+    road: Annotated[StrictInt, Field(ge=1, le=1_000_000)]
+
+
 class TrustReport(ClientMessage):
+    """A trust report; `prompt`: the prompt it answers (the road event's), none for a report given
+    outside a prompt."""
+
     type: Literal["trust"]
     value: Annotated[StrictInt, Field(ge=TRUST_LOW, le=TRUST_HIGH)]
+    prompt: PromptId | None = None
 
 
 class Resume(ClientMessage):
@@ -120,6 +131,12 @@ CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | D
 # -- HTTP bodies ---------------------------------------------------------------------------------
 class NewParticipant(Message):
     label: Annotated[str, Field(max_length=100, pattern=r"^[\w .,:()-]*$")] = ""
+
+
+class LinkClaim(Message):
+    """The token of a participant's link, claimed by the link's page."""
+
+    token: Annotated[str, Field(min_length=1, max_length=128)]
 
 
 class EpisodeControl(Message):

@@ -38,6 +38,7 @@ from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 # apart but read back to back by the server (a busy event loop) still fit the server's bucket.
 CLIENT_BURST = BURST // 2
 CLIENT_RATE = 0.8 * RATE
+PING_SECONDS = 20.0   # a ping after this long without a message (the server's idle timeout is longer)
 
 
 class LockstepRefused(RuntimeError):
@@ -137,7 +138,7 @@ class ScriptedParticipant:
         if not road["prompt"]:
             return []
         self.reports += 1
-        return [{"type": "trust", "value": int(self.driver.report_trust())}]
+        return [{"type": "trust", "value": int(self.driver.report_trust()), "prompt": road["prompt"]}]
 
     def drive_by_hand(self, message: dict) -> list[dict]:
         """Take over as each road opens; once in control, a brief press of the accelerator; an
@@ -240,9 +241,18 @@ def run_scripted(url: str, token: str, participant: ScriptedParticipant, timeout
 
     headers = {"Authorization": f"Bearer {token}"}
     with connect(url, additional_headers=headers, open_timeout=timeout) as socket:
+        silent_since = time.monotonic()
         while not participant.finished:
             if stop_after is not None and len(participant.episodes) >= stop_after:
                 break
-            for reply in participant.respond(json.loads(socket.recv(timeout=timeout))):
+            try:
+                message = socket.recv(timeout=PING_SECONDS)
+            except TimeoutError:   # the server closes a silent socket: a ping keeps it open
+                if time.monotonic() - silent_since > timeout:
+                    raise
+                socket.send(json.dumps({"type": "ping"}))
+                continue
+            silent_since = time.monotonic()
+            for reply in participant.respond(json.loads(message)):
                 socket.send(json.dumps(reply))
     return participant

@@ -35,6 +35,7 @@ from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 LIVE_DIR = "live"
 PARTICIPANTS_FILE = "participants.json"
 WARM_UP_DIR = "warmup"
+TOKEN_LOG = "tokens.jsonl"   # every token replaced: when, whose, why
 WARM_UP_KEY = 4   # SeedSequence(study seed, spawn_key=(4, participant)): the warm-up's seeds
 DEFAULT_CONSENT = ("You are about to drive in a simulated study of an autonomous vehicle. You may take over "
                    "and hand back control, and report your trust in the vehicle from 1 to 7. You may stop "
@@ -50,6 +51,9 @@ class ServerOptions:
     warm_up: bool = True           # a warm-up drive before the trials
     secure_cookies: bool = False   # cookies only over HTTPS (behind a TLS proxy)
     final_report_seconds: float = FINAL_REPORT_SECONDS   # a trial's end waits this for the last report
+    public_origins: tuple[str, ...] = ()   # the origins the study is reached at behind a proxy
+    idle_seconds: float = 60.0     # a websocket silent this long is closed (the station pings)
+    request_seconds: float = 10.0  # an HTTP request not complete this long after it began is cut
 
 
 def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:
@@ -163,6 +167,18 @@ class LiveStudy:
             self.sessions[participant] = self.new_session(participant, label)
             self.save_participants()
             return participant, token
+
+    def replace_token(self, participant: int, reason: str) -> str:
+        """A fresh token for `participant`, the previous one revoked; logged (time, participant,
+        reason) in live/tokens.jsonl."""
+        with self.lock:
+            token = self.credentials.add_participant(participant)
+            self.save_participants()
+            log = self.study_dir / LIVE_DIR / TOKEN_LOG
+            with log.open("a", encoding="utf-8") as out:
+                out.write(json.dumps({"utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                                      "participant": participant, "event": reason}) + "\n")
+            return token
 
     def warm_up_dir(self) -> Path:
         return self.study_dir / LIVE_DIR / WARM_UP_DIR

@@ -122,6 +122,9 @@ class Session:
                 return []
             elif isinstance(message, TrustReport):
                 self.require("driving", message)
+                if message.prompt is not None and (self.task is None
+                                                   or message.prompt.episode_id != self.task.episode_id):
+                    raise MessageError("out_of_order", "the report answers a prompt of another episode")
                 self.tell(message.model_dump())
                 self.reports += 1
                 return []
@@ -243,9 +246,12 @@ class Session:
                 self.tasks.append(task)
 
     # -- the participant's connection -----------------------------------------------------------
-    def attach(self, push: Callable[[dict], None]) -> None:
+    def attach(self, push: Callable[[dict], None]) -> Callable[[dict], None] | None:
+        """The participant's connection opened; the one it replaces (None if none): one window
+        holds the session at a time."""
         with self.lock:
-            self.push = push
+            previous, self.push = self.push, push
+            return previous
 
     def detach(self, push: Callable[[dict], None]) -> None:
         """The participant's connection closed: a running episode pauses until they resume."""

@@ -39,6 +39,24 @@ function controlButton(td, participant, action) {
   td.appendChild(button);
 }
 
+function showLink(participant, link) {
+  const box = $("created");
+  box.textContent = `participant ${participant}: ${location.origin}${link}`;
+  box.classList.remove("hidden");
+}
+
+// The server keeps only digests of tokens: a link is shown once. A new one revokes the old.
+function linkButton(td, participant) {
+  const button = document.createElement("button");
+  button.textContent = "new link";
+  button.addEventListener("click", async () => {
+    if (!confirm(`A new link for participant ${participant}? Their current link and open station stop working.`)) return;
+    try { const issued = await call("POST", `/api/participants/${participant}/link`); showLink(participant, issued.link); showError(""); }
+    catch (error) { showError(error.message); }
+  });
+  td.appendChild(button);
+}
+
 async function refresh() {
   try {
     const { participants } = await call("GET", "/api/participants");
@@ -53,6 +71,7 @@ async function refresh() {
       cell(row, p.road); cell(row, p.reports); cell(row, p.takeovers); cell(row, p.last_error);
       const controls = cell(row, "");
       for (const action of ["pause", "resume", "abort"]) controlButton(controls, p.participant, action);
+      linkButton(cell(row, ""), p.participant);
       body.appendChild(row);
     }
   } catch (error) { showError(error.message); }
@@ -77,9 +96,7 @@ async function listFiles() {
 $("create").addEventListener("click", async () => {
   try {
     const created = await call("POST", "/api/participants", { label: $("label").value });
-    const box = $("created");
-    box.textContent = `participant ${created.participant}: ${location.origin}${created.link}`;
-    box.classList.remove("hidden");
+    showLink(created.participant, created.link);
     showError("");
     refresh();
   } catch (error) { showError(error.message); }

@@ -29,8 +29,11 @@ function trustButtons(container, onPick) {
   }
 }
 
+let pendingPrompt = null;   // the prompt a report answers ({episode_id, road}), else a free report
+
 function report(value) {
-  send({ type: "trust", value });
+  send(pendingPrompt ? { type: "trust", value, prompt: pendingPrompt } : { type: "trust", value });
+  pendingPrompt = null;
   $("reported").textContent = `You reported ${value}.`;
   $("prompt").classList.add("hidden");
 }
@@ -194,12 +197,13 @@ function onMessage(message) {
     case "warning": handBackDue = true; notice(""); break;
     case "road":
       notice("");
-      if (message.prompt) $("prompt").classList.remove("hidden");
+      if (message.prompt) { pendingPrompt = message.prompt; $("prompt").classList.remove("hidden"); }
       break;
-    case "episode_start": setMode("auto"); break;
+    case "episode_start": setMode("auto"); pendingPrompt = null; break;
     case "episode_end": $("status").textContent = "Trial complete."; break;
     case "episode_aborted": $("status").textContent = "The trial was stopped; it will be run again."; break;
     case "episode_failed": $("error").textContent = "The trial failed; it will be run again."; break;
+    case "notice": $("error").textContent = message.detail; break;
     case "error":
       toggling = false;   // a refused takeover or hand-back may be tried again
       $("error").textContent = message.detail;
@@ -209,16 +213,23 @@ function onMessage(message) {
   }
 }
 
+// Close codes after which reconnecting would be wrong: another window holds the session (4001),
+// or the link was revoked (1008).
+const FINAL_CLOSE = { 4001: "This session is open in another window or tab; continue there.",
+                      1008: "This session's link was revoked or is not valid; ask the experimenter." };
+
 function connect() {
   const scheme = location.protocol === "https:" ? "wss" : "ws";
   socket = new WebSocket(`${scheme}://${location.host}/ws`);
   socket.addEventListener("message", (event) => onMessage(JSON.parse(event.data)));
-  socket.addEventListener("close", () => {
+  socket.addEventListener("close", (event) => {
+    if (FINAL_CLOSE[event.code]) { $("error").textContent = FINAL_CLOSE[event.code]; return; }
     $("error").textContent = "Connection lost; reconnecting...";
     setTimeout(connect, 1000);
   });
   socket.addEventListener("open", () => { $("error").textContent = ""; });
 }
+setInterval(() => send({ type: "ping" }), 20000);   // the server closes a socket silent for a minute
 
 function toggle() {
   if (state.phase !== "driving" || toggling) return;   // one request until the mode changes

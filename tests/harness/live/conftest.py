@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import threading
+import time
+
 import pytest
 
 from trustroute.harness.live.server import LiveStudy, ServerOptions
@@ -29,3 +33,24 @@ def live_study(tmp_path):
     study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions(pace=1000.0)).open()
     yield study
     study.close()
+
+
+@contextlib.contextmanager
+def serving(study):
+    """The application of the open `study` on uvicorn in a thread, on a free port of 127.0.0.1:
+    yields its (host, port)."""
+    from trustroute.harness.live.app import live_server
+    from trustroute.harness.live.guard import bind
+
+    sock = bind("127.0.0.1", 0)
+    server = live_server(study, sock)
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    try:
+        while not server.started:
+            time.sleep(0.01)
+        yield sock.getsockname()[:2]
+    finally:
+        server.should_exit = True
+        thread.join(5)
+        sock.close()

@@ -54,7 +54,7 @@ def test_a_foreign_token_is_refused(client, live_study):
     assert client.get("/api/participants/0", headers=bearer(second)).status_code == 403
     assert client.get("/api/me", headers=bearer(foreign)).status_code == 403
     assert client.get("/api/me", headers=bearer(second)).json()["participant"] == 1
-    assert client.get(f"/p/{foreign}", follow_redirects=False).status_code == 403
+    assert client.post("/api/claim", json={"token": foreign}).status_code == 403
     assert client.get(f"/login?token={foreign}", follow_redirects=False).status_code == 403
     with pytest.raises(WebSocketDisconnect) as closed:
         with client.websocket_connect("/ws", headers=bearer(foreign)):
@@ -65,13 +65,20 @@ def test_a_foreign_token_is_refused(client, live_study):
         assert socket.receive_json()["participant"] == 1
 
 
-def test_links_set_httponly_cookies_that_authenticate(client, live_study):
+def test_links_set_httponly_cookies_that_authenticate_and_spend_the_link(client, live_study):
     token = create(client, live_study)
-    response = client.get(f"/p/{token}", follow_redirects=False)
-    assert response.status_code == 303 and response.headers["location"] == "/station"
+    page = client.get(f"/p/{token}", follow_redirects=False)   # the page only: a preview spends nothing
+    assert page.status_code == 200 and "/static/link.js" in page.text and token not in page.text
+    response = client.post("/api/claim", json={"token": token})
+    assert response.status_code == 200 and response.json()["next"] == "/station"
     cookie = response.headers["set-cookie"]
     assert "HttpOnly" in cookie and "samesite=strict" in cookie.lower() and "secure" not in cookie.lower()
+    assert token not in cookie   # a fresh token: the one in the link (and the browser's history) is spent
     assert client.get("/api/me").json()["participant"] == 0   # the cookie alone now authenticates
+    assert client.post("/api/claim", json={"token": token}).status_code == 403
+    assert client.get("/api/me", headers=bearer(token)).status_code == 403
+    log = (live_study.study_dir / "live" / "tokens.jsonl").read_text().splitlines()
+    assert [json.loads(line)["participant"] for line in log] == [0]
     login = client.get(f"/login?token={live_study.experimenter_token}", follow_redirects=False)
     assert login.status_code == 303 and "HttpOnly" in login.headers["set-cookie"]
     assert client.get("/api/participants").status_code == 200

@@ -1,0 +1,195 @@
+"""What keeps a live session to its own browser: origins, connection limits, slow clients, binding.
+
+- **Origins.** A browser sends `Origin` with every websocket handshake and every cross-origin (and
+  same-origin) POST. The server accepts only its own addresses (`own_origins`: the bound host and
+  port, the loopback names for a loopback or wildcard bind, the machine's addresses for a wildcard
+  bind) and the public addresses it is told it is reached at behind a proxy (`--public-origin`).
+  A request without `Origin` comes from no browser page (a script, the scripted participant) and
+  still needs its token.
+- **Connections per participant.** `ConnectionGate`: at most MAX_SOCKETS open websockets per
+  participant (the live one and the one replacing it) and new connections at most OPEN_BURST at
+  once, then OPEN_RATE a second (a token bucket per participant).
+- **Slow clients.** `GuardedH11Protocol` closes an HTTP connection whose request (headers and
+  body, or a websocket handshake) is not complete within `request_seconds` of its first byte or
+  of the connection (idle, slow headers, slow body: uvicorn has a keep-alive timeout only between
+  requests). An open websocket that sends nothing for `idle_seconds` is closed by the application
+  (harness/live/app.py); the station pings every 20 s.
+- **Binding.** `bind` takes the port before anything is printed or written: a port in use is an
+  InputError (one line, exit code 2) and leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import socket
+from collections.abc import Mapping
+from urllib.parse import urlsplit
+
+from uvicorn.protocols.http.h11_impl import H11Protocol
+
+from trustroute.core.errors import InputError
+from trustroute.harness.live.protocol import TokenBucket
+
+MAX_SOCKETS = 2        # open websockets per participant: the live one and the one replacing it
+OPEN_BURST = 5         # new websockets a participant may open at once ...
+OPEN_RATE = 0.5        # ... and per second after that
+WILDCARDS = ("0.0.0.0", "::", "")
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def shown_host(host: str) -> str:
+    return f"[{host}]" if ":" in host and not host.startswith("[") else host
+
+
+def usable_addresses(host: str) -> list[str]:
+    """The addresses a browser can reach a server bound to `host` at: the host itself, or for a
+    wildcard the machine's own addresses (loopback last)."""
+    if host not in WILDCARDS:
+        return [host]
+    family = socket.AF_INET6 if host == "::" else socket.AF_INET
+    found: list[str] = []
+    for name in (socket.gethostname(), socket.getfqdn()):
+        try:
+            infos = socket.getaddrinfo(name, None, family, socket.SOCK_STREAM)
+        except OSError:
+            continue
+        for info in infos:
+            address = str(info[4][0])
+            if not is_loopback(address) and address not in found:
+                found.append(address)
+    return [*found, "::1" if family == socket.AF_INET6 else "127.0.0.1"]
+
+
+def normal_origin(origin: str) -> str | None:
+    """scheme://host[:port] in lower case, the default port left out; None when it is no origin."""
+    try:
+        parts = urlsplit(origin.strip())
+        port = parts.port
+    except ValueError:
+        return None
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        return None
+    default = 443 if parts.scheme == "https" else 80
+    port_text = "" if port in (None, default) else f":{port}"
+    return f"{parts.scheme}://{shown_host(parts.hostname.lower())}{port_text}"
+
+
+def own_origins(host: str, port: int, public: tuple[str, ...] = ()) -> frozenset[str]:
+    """The origins of the server's own pages: every usable address of the bind, the loopback
+    names when it is reachable on loopback, and the configured public origins."""
+    hosts = set(usable_addresses(host))
+    if is_loopback(host) or host in WILDCARDS:
+        hosts.update(LOOPBACK_NAMES)
+    origins = {normal_origin(f"http://{shown_host(name)}:{port}") for name in hosts}
+    origins.update(normal_origin(origin) for origin in public)
+    return frozenset(origin for origin in origins if origin is not None)
+
+
+def origin_allowed(headers: Mapping[str, str], origins: frozenset[str]) -> bool:
+    """Whether a request may act: no Origin (no browser page sent it), or one of ours."""
+    origin = headers.get("origin")
+    if origin is None:
+        return True
+    return normal_origin(origin) in origins
+
+
+class ConnectionGate:
+    """Per participant: open websockets and the rate of new ones (the event loop's thread only)."""
+
+    def __init__(self, max_sockets: int = MAX_SOCKETS, burst: float = OPEN_BURST,
+                 rate: float = OPEN_RATE) -> None:
+        self.max_sockets, self.burst, self.rate = max_sockets, burst, rate
+        self.open: dict[int, int] = {}
+        self.buckets: dict[int, TokenBucket] = {}
+
+    def admit(self, participant: int) -> bool:
+        """Whether one more websocket of `participant` may open now (counted if so)."""
+        bucket = self.buckets.setdefault(participant, TokenBucket(burst=self.burst, rate=self.rate))
+        if self.open.get(participant, 0) >= self.max_sockets or not bucket.take():
+            return False
+        self.open[participant] = self.open.get(participant, 0) + 1
+        return True
+
+    def release(self, participant: int) -> None:
+        self.open[participant] = max(0, self.open.get(participant, 0) - 1)
+
+
+class GuardedH11Protocol(H11Protocol):
+    """uvicorn's HTTP/1.1 protocol with a deadline on every request: a connection that has not
+    sent a whole request (headers and body) within `request_seconds` of being opened, or of its
+    previous response, is closed (a websocket upgrade leaves this protocol, and the deadline
+    with it). Set `request_seconds` on a subclass (`guarded_protocol`)."""
+
+    request_seconds = 10.0
+
+    def connection_made(self, transport) -> None:  # type: ignore[override]
+        super().connection_made(transport)
+        self.request_deadline = None
+        self.arm()
+
+    def arm(self) -> None:
+        self.disarm()
+        self.request_deadline = self.loop.call_later(self.request_seconds, self.too_slow)
+
+    def disarm(self) -> None:
+        if getattr(self, "request_deadline", None) is not None:
+            self.request_deadline.cancel()
+            self.request_deadline = None
+
+    def data_received(self, data: bytes) -> None:
+        super().data_received(data)
+        if self.request_complete() or self.transport.get_protocol() is not self:
+            self.disarm()
+
+    def request_complete(self) -> bool:
+        import h11
+
+        return self.conn.their_state in (h11.DONE, h11.MUST_CLOSE, h11.CLOSED, h11.SWITCHED_PROTOCOL)
+
+    def on_response_complete(self) -> None:
+        super().on_response_complete()
+        if not self.transport.is_closing():
+            self.arm()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.disarm()
+        super().connection_lost(exc)
+
+    def too_slow(self) -> None:
+        self.request_deadline = None
+        transport = self.transport
+        if transport.is_closing() or transport.get_protocol() is not self or self.request_complete():
+            return
+        transport.close()
+
+
+def guarded_protocol(request_seconds: float) -> type[GuardedH11Protocol]:
+    return type("GuardedH11", (GuardedH11Protocol,), {"request_seconds": float(request_seconds)})
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening socket on (host, port); InputError when it cannot be had (in use, no such
+    address), before anything of the study is printed or written."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        if family == socket.AF_INET6:
+            sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 0)
+        sock.bind((host, port))
+        sock.listen(128)
+    except OSError as exc:
+        sock.close()
+        raise InputError("--port", f"{shown_host(host)}:{port}", f"cannot listen there ({exc.strerror})",
+                         "choose another --port (or stop what holds it), or another --host") from None
+    sock.set_inheritable(False)
+    return sock

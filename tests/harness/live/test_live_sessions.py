@@ -1,0 +1,215 @@
+"""A participant's session belongs to one browser: pages of other origins are refused, a second
+window takes the session over (both are told), connections per participant are limited, and
+idle or slow connections are closed; the server's port is taken before anything is printed."""
+
+from __future__ import annotations
+
+import json
+import socket
+import time
+
+import pytest
+from fastapi.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
+
+from tests.cli import run_cli
+from trustroute.harness.live.app import (
+    IDLE,
+    POLICY_VIOLATION,
+    REPLACED,
+    TRY_AGAIN_LATER,
+    live_app,
+)
+from trustroute.harness.live.guard import OPEN_BURST, ConnectionGate, bind, own_origins
+from trustroute.harness.live.server import LiveStudy, ServerOptions
+
+from .conftest import serving, tiny_config
+from .test_live_cli import write_config
+
+OWN = "http://testserver"
+
+
+def bearer(token: str) -> dict:
+    return {"Authorization": f"Bearer {token}"}
+
+
+@pytest.fixture
+def client(live_study):
+    with TestClient(live_app(live_study, frozenset({OWN}))) as test_client:
+        yield test_client
+
+
+def new_participant(client, study) -> str:
+    response = client.post("/api/participants", json={}, headers=bearer(study.experimenter_token))
+    assert response.status_code == 200, response.text
+    return response.json()["token"]
+
+
+def test_a_page_of_another_origin_can_neither_open_the_socket_nor_post(client, live_study):
+    token = new_participant(client, live_study)
+    for foreign in ("http://127.0.0.1:9999", "http://testserver.evil.example", "null"):
+        with pytest.raises(WebSocketDisconnect) as closed:
+            with client.websocket_connect("/ws", headers={**bearer(token), "Origin": foreign}):
+                pass
+        assert closed.value.code == POLICY_VIOLATION, foreign
+        headers = {**bearer(live_study.experimenter_token), "Origin": foreign}
+        refused = client.post("/api/participants", json={}, headers=headers)
+        assert refused.status_code == 403 and refused.json()["detail"]["code"] == "forbidden"
+        claim = client.post("/api/claim", json={"token": token}, headers={"Origin": foreign})
+        assert claim.status_code == 403
+    assert len(live_study.sessions) == 1   # nothing changed
+    with client.websocket_connect("/ws", headers={**bearer(token), "Origin": OWN}) as own:
+        assert own.receive_json()["type"] == "welcome"
+    headers = {**bearer(live_study.experimenter_token), "Origin": OWN}
+    ok = client.post("/api/participants", json={}, headers=headers)
+    assert ok.status_code == 200
+
+
+def test_the_own_origins_are_the_bound_addresses_and_the_public_ones(tmp_path):
+    loopback = own_origins("127.0.0.1", 8765)
+    assert {"http://127.0.0.1:8765", "http://localhost:8765"} <= loopback
+    assert "http://127.0.0.1:8766" not in loopback
+    assert own_origins("192.0.2.7", 80) == {"http://192.0.2.7"}
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study",
+                      ServerOptions(public_origins=("https://Study.Example.org/",))).open()
+    try:
+        app = live_app(study, loopback)
+        assert "https://study.example.org" in app.state.origins
+    finally:
+        study.close()
+
+
+def test_a_second_window_takes_the_session_over_and_both_are_told(client, live_study):
+    token = new_participant(client, live_study)
+    with client.websocket_connect("/ws", headers=bearer(token)) as first:
+        assert [first.receive_json()["type"] for _ in range(2)] == ["welcome", "state"]
+        with client.websocket_connect("/ws", headers=bearer(token)) as second:
+            replaced = first.receive_json()
+            assert replaced["type"] == "replaced" and "another window" in replaced["detail"]
+            with pytest.raises(WebSocketDisconnect) as closed:
+                first.receive_json()
+            assert closed.value.code == REPLACED
+            kinds = [second.receive_json() for _ in range(3)]
+            assert [message["type"] for message in kinds] == ["welcome", "notice", "state"]
+            assert kinds[1]["kind"] == "replaced"
+            second.send_json({"type": "ping"})   # the session is the second window's
+            assert second.receive_json() == {"type": "pong"}
+    assert live_study.sessions[0].push is None
+
+
+def test_connections_per_participant_are_limited(client, live_study):
+    token = new_participant(client, live_study)
+    client.app.state.gate = ConnectionGate(rate=1e-6)   # the burst only: no refill on a slow machine
+    codes = []
+    for _ in range(OPEN_BURST + 4):   # a flood of connections, one after the other
+        try:
+            with client.websocket_connect("/ws", headers=bearer(token)) as socket_:
+                socket_.receive_json()
+                codes.append("open")
+        except WebSocketDisconnect as closed:
+            codes.append(closed.code)
+    assert codes[:OPEN_BURST] == ["open"] * OPEN_BURST
+    assert codes[OPEN_BURST:] == [TRY_AGAIN_LATER] * 4
+    gate = ConnectionGate()   # at most two open at once (the live one and the one replacing it)
+    assert [gate.admit(0), gate.admit(0), gate.admit(0), gate.admit(1)] == [True, True, False, True]
+    gate.release(0)
+    assert gate.admit(0)
+
+
+def test_a_silent_socket_is_closed(tmp_path):
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions(idle_seconds=0.3)).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            token = new_participant(client, study)
+            with client.websocket_connect("/ws", headers=bearer(token)) as socket_:
+                socket_.receive_json(), socket_.receive_json()
+                started = time.monotonic()
+                assert "nothing received" in socket_.receive_json()["detail"]
+                with pytest.raises(WebSocketDisconnect) as closed:
+                    socket_.receive_json()
+                assert closed.value.code == IDLE and time.monotonic() - started < 3.0
+    finally:
+        study.close()
+
+
+@pytest.fixture
+def served(tmp_path):
+    """(address, study) of the application on uvicorn in a thread, requests cut after 0.4 s."""
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions(request_seconds=0.4)).open()
+    try:
+        with serving(study) as address:
+            yield address, study
+    finally:
+        study.close()
+
+
+def closed_within(address, data: bytes, seconds: float) -> tuple[bool, bytes]:
+    """(whether the server closed the connection within `seconds`, what it sent)."""
+    with socket.create_connection(address, timeout=seconds) as connection:
+        if data:
+            connection.sendall(data)
+        received = b""
+        try:
+            while chunk := connection.recv(4096):
+                received += chunk
+            return True, received
+        except TimeoutError:
+            return False, received
+
+
+def test_idle_and_slow_connections_are_closed(served):
+    address, _ = served
+    assert closed_within(address, b"", 2.0)[0]                                         # idle
+    assert closed_within(address, b"GET /api/me HTTP/1.1\r\nHost: x\r\n", 2.0)[0]     # slow headers
+    body = (b"POST /api/claim HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+            b"Content-Length: 60\r\n\r\n{")
+    assert closed_within(address, body, 2.0)[0]                                        # slow body
+    whole = b"GET /static/live.css HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+    closed, received = closed_within(address, whole, 2.0)
+    assert closed and received.startswith(b"HTTP/1.1 200")                              # a whole request
+
+
+def test_a_public_host_warns_and_prints_usable_addresses(live_study, capsys):
+    from trustroute.harness.commands.live import announce
+
+    announce(live_study, "0.0.0.0", 8765, ("https://study.example.org",))
+    out, err = capsys.readouterr()
+    assert err.startswith("warning: --host 0.0.0.0") and err.count("\n") == 1
+    consoles = [line for line in out.splitlines() if line.startswith("console: ")]
+    assert consoles and not any("0.0.0.0" in line for line in consoles)
+    assert any("http://127.0.0.1:8765/login?token=" in line for line in consoles)
+    assert any(line.startswith("console: https://study.example.org/login?token=") for line in consoles)
+    announce(live_study, "127.0.0.1", 8765, ())
+    assert capsys.readouterr().err == ""
+
+
+def test_a_port_in_use_is_one_line_and_exit_2_and_leaves_nothing(tmp_path, capsys):
+    holder = bind("127.0.0.1", 0)
+    try:
+        port = str(holder.getsockname()[1])
+        code, out, err = run_cli(capsys, "live", write_config(tmp_path), "--out", str(tmp_path / "study"),
+                                 "--port", port)
+    finally:
+        holder.close()
+    assert code == 2 and out == "" and err.count("\n") == 1 and port in err and "--port" in err
+    assert not (tmp_path / "study").exists()
+
+
+def test_a_new_link_revokes_the_old_token_and_is_logged(client, live_study):
+    token = new_participant(client, live_study)
+    assert client.post("/api/participants/0/link", headers=bearer(token)).status_code == 403
+    with client.websocket_connect("/ws", headers=bearer(token)) as station:
+        station.receive_json(), station.receive_json()
+        issued = client.post("/api/participants/0/link", headers=bearer(live_study.experimenter_token))
+        assert issued.status_code == 200 and issued.json()["link"] == f"/p/{issued.json()['token']}"
+        assert station.receive_json()["type"] == "revoked"
+        with pytest.raises(WebSocketDisconnect) as closed:
+            station.receive_json()
+        assert closed.value.code == POLICY_VIOLATION
+    assert client.get("/api/me", headers=bearer(token)).status_code == 403
+    assert client.get("/api/me", headers=bearer(issued.json()["token"])).json()["participant"] == 0
+    lines = (live_study.study_dir / "live" / "tokens.jsonl").read_text().splitlines()
+    log = [(entry["participant"], entry["event"]) for entry in map(json.loads, lines)]
+    assert log == [(0, "new link issued by the experimenter")]
+    unknown = client.post("/api/participants/5/link", headers=bearer(live_study.experimenter_token))
+    assert unknown.status_code == 404
