@@ -14,9 +14,11 @@ driver. The driver protocol is the seam (harness/simulation/episode.py):
 - `move_trust(...)`, when a road's observation closes: the road's event (incident, takeover,
   performance) is sent; the trust it returns is the person's latest report (their stated trust:
   the roads table's trust columns; the policy never reads them);
-- `report_trust()`: the latest report since the last road that asked for one, or None; the
-  last road's prompt is answered after the car has arrived, so the episode's end waits for it
-  (`final_report`, up to `final_report_seconds`) and puts it on the last road.
+- `report_trust()`: None outside lockstep: each prompt names its road (`{"episode_id", "road"}` in
+  the road event) and the answer names the prompt, so every answer is put on the road it answers
+  once the episode ends (`with_reports`), whenever it came; the last road's prompt is answered
+  after the car has arrived, so the episode's end waits for it (`await_last_answer`, up to
+  `final_report_seconds`). A report outside a prompt is logged with the road open then.
 
 The observer paces the simulation against the wall clock (`pace` sim seconds per wall second),
 reads the person's controls from the pipe, pauses while the server says so, and streams frames.
@@ -70,7 +72,7 @@ class RemoteDriver:
     """The driver of a live episode: a person (or the scripted participant) across a pipe."""
 
     def __init__(self, connection, trust_levels: tuple[int, ...], initial_trust: int | None,
-                 options: LiveOptions, clock=time.monotonic) -> None:
+                 options: LiveOptions, clock=time.monotonic, episode_id: str = "") -> None:
         self.connection = connection
         self.levels = tuple(int(level) for level in trust_levels)
         middle = self.levels[len(self.levels) // 2]
@@ -80,6 +82,9 @@ class RemoteDriver:
         self._request: bool | None = None
         self._report: int | None = None
         self.roads = 0
+        self.episode_id = episode_id
+        self.prompts: list[int] = []       # the roads whose end asked for a report
+        self.answers: dict[int, int] = {}  # road index -> the report that answered its prompt
         self.events: list[dict] = []       # every control received: (sim time, wall time, what)
         self.paused = False
         self.mode = "auto"
@@ -99,7 +104,6 @@ class RemoteDriver:
         self.held_at = 0.0                 # the simulated time shown when paused
         self.predicted = False             # the last frame sent was dead-reckoned
         self.hurry = False                 # a control to apply at once: the next step does not wait
-        self.awaiting_report = False       # the last prompt for a report has had no answer yet
 
     # -- the driver protocol (harness/simulation/episode.py) ------------------------------------
     @property
@@ -118,30 +122,46 @@ class RemoteDriver:
 
     def move_trust(self, incident: str, took_over: bool, performance: str = "succ") -> int:
         self.roads += 1
-        prompt = reports_after_road(self.roads, self.options.report_every)
-        self.awaiting_report = self.awaiting_report or prompt
+        prompt = None
+        if reports_after_road(self.roads, self.options.report_every):
+            prompt = {"episode_id": self.episode_id, "road": self.roads}
+            self.prompts.append(self.roads)
         self.send({"type": "road", "index": self.roads, "incident": incident, "takeover": bool(took_over),
                    "performance": performance, "t": self.sim_now, "prompt": prompt})
         return self._trust
 
     def report_trust(self) -> int | None:
-        if self.options.lockstep and self._report is None:
+        """In lockstep the answer to the prompt just sent (the episode waits for it); otherwise
+        None: answers go on their roads when the episode ends (`with_reports`)."""
+        if not self.options.lockstep:
+            return None
+        if self._report is None:
             self.apply(self.await_reply(("trust",)), logged=True)
         report, self._report = self._report, None
         return report
 
-    def final_report(self) -> int | None:
-        """The answer to the last road's prompt when it had not come by the episode's end: a person
-        answers it after the car has arrived, so the end waits for it (up to final_report_seconds of
-        wall time, reading controls); an answer read by the episode's last steps, after the last
-        road's row, is returned too. None when nothing came."""
+    @property
+    def awaiting_report(self) -> bool:
+        """The last prompt for a report has had no answer yet."""
+        return bool(self.prompts) and self.prompts[-1] not in self.answers
+
+    def await_last_answer(self) -> None:
+        """A person answers the last road's prompt after the car has arrived: the end waits for it
+        (up to final_report_seconds of wall time, reading controls). Answers come in the order
+        sent, so every earlier answer sent has come by then too."""
         if self.options.lockstep:
-            return None
+            return
         deadline = self.clock() + self.options.final_report_seconds
         while self.awaiting_report and (left := deadline - self.clock()) > 0.0:
             if self.connection.poll(min(left, PIPE_POLL_SECONDS * 5)):
                 self.apply(self.connection.recv())
-        return self.report_trust()
+
+    def answered_road(self, prompt) -> int | None:
+        """The road a report's `prompt` names, when it is one of this episode's prompts."""
+        if not isinstance(prompt, dict) or prompt.get("episode_id") != self.episode_id:
+            return None
+        road = prompt.get("road")
+        return road if road in self.prompts else None
 
     # -- controls from the server ---------------------------------------------------------------
     def send(self, message: dict) -> None:
@@ -159,13 +179,18 @@ class RemoteDriver:
 
     def apply(self, control: dict, logged: bool = False) -> None:
         kind = control.get("type")
+        if kind == "trust":   # the road it answers, else (a report outside a prompt) the road open
+            answered = self.answered_road(control.get("prompt"))
+            control = {**control, "road": self.roads + 1 if answered is None else answered,
+                       "answers_prompt": answered is not None}
+            if answered is not None and int(control["value"]) in self.levels:
+                self.answers[answered] = int(control["value"])
         if not logged:
             self.events.append({"t": self.sim_now, "wall": time.time(), **control})
         if kind in ("takeover", "hand_back"):
             self._request, self.hurry = kind == "takeover", True
         elif kind == "trust" and int(control["value"]) in self.levels:
             self._trust = self._report = int(control["value"])
-            self.awaiting_report = False
         elif kind == "drive":
             self.pedal = control["pedal"]
         elif kind == "steer":
@@ -302,18 +327,14 @@ class RemoteDriver:
             self.holding = True
 
 
-def with_final_report(record: EpisodeRecord, report: int | None) -> EpisodeRecord:
-    """The record with a report that answered the last road's prompt after the end put on the last
-    road, when that road has none (a late answer to an earlier prompt may already be there: the
-    new one is then in the events only)."""
-    if report is None:
-        return record
+def with_reports(record: EpisodeRecord, answers: dict[int, int]) -> EpisodeRecord:
+    """The record with each prompt's answer on the road it answers (road index -> report; the
+    latest answer to a prompt counts) and no report on the other roads."""
     tables = record.tables()
     roads = tables["roads"]
-    reported = roads.column("reported_trust").to_pylist()
-    if len(reported) < 2 or reported[-1] is not None:
+    reported = [answers.get(int(index)) for index in roads.column("index").to_pylist()]
+    if reported == roads.column("reported_trust").to_pylist():
         return record
-    reported[-1] = int(report)
     index = roads.schema.get_field_index("reported_trust")
     field = roads.schema.field(index)
     roads = roads.set_column(index, field, pa.array(reported, field.type))
@@ -337,10 +358,12 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
     die_with_parent(server_pid)   # a killed server leaves no episode running
     try:
         levels = study_context(config).driver_model(task.participant).trust_levels
-        driver = RemoteDriver(connection, levels, initial_trust, options)
+        driver = RemoteDriver(connection, levels, initial_trust, options, episode_id=task.episode_id)
         connection.send({"type": "episode_start", "episode_id": task.episode_id, "trust": driver.trust})
         record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
-        record = with_final_report(record, driver.final_report())
+        driver.await_last_answer()
+        if not options.lockstep:
+            record = with_reports(record, driver.answers)
         write_part_tables(Path(study_dir), task, live_summary(record.summary, driver), record.tables(),
                           sync=True)
         summary = record.summary

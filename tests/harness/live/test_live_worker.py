@@ -16,7 +16,7 @@ from trustroute.harness.live.worker import (
     LiveOptions,
     RemoteDriver,
     live_summary,
-    with_final_report,
+    with_reports,
 )
 from trustroute.harness.simulation.episode_tracker import EpisodeTracker
 from trustroute.harness.study.context import study_context
@@ -51,7 +51,8 @@ def live_episode(tmp_path, controls):
     config = tiny_config(tmp_path, participants=1)
     task = plan_episodes(config)[0]
     pipe = Pipe(controls)
-    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"))
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"),
+                          episode_id=task.episode_id)
     record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
     return config, task, driver, pipe, record
 
@@ -61,7 +62,9 @@ def test_a_takeover_from_the_pipe_reaches_sumo_and_the_logs(tmp_path):
         tmp_path, [{"type": "takeover"}, {"type": "trust", "value": 3}])
     roads = record.roads
     assert bool(roads["takeover"].iloc[1]) is True       # the first road after the start
-    assert roads["reported_trust"].dropna().tolist() == [3]
+    assert roads["reported_trust"].dropna().tolist() == []   # a report outside a prompt is on no road ...
+    report = next(event for event in driver.events if event["type"] == "trust")
+    assert (report["value"], report["road"], report["answers_prompt"]) == (3, 1, False)   # ... but logged
     assert int(roads["trust_before"].iloc[0]) == 5        # the trust stated at the start
     assert "manual" in set(record.kinematics["mode"])
     incidents = record.incidents
@@ -69,7 +72,8 @@ def test_a_takeover_from_the_pipe_reaches_sumo_and_the_logs(tmp_path):
     frames = [m for m in pipe.sent if m["type"] == "frame"]
     assert frames and all(isinstance(f["vehicles"], list) and isinstance(f["persons"], list) for f in frames)
     assert {f["junction"] for f in frames} - {None} <= {road.split("-")[1] for road in roads["directed_road"]}
-    assert all(m["prompt"] for m in pipe.sent if m["type"] == "road")   # report_every = 1
+    prompts = [m["prompt"] for m in pipe.sent if m["type"] == "road"]   # report_every = 1
+    assert prompts == [{"episode_id": task.episode_id, "road": k} for k in range(1, len(roads))]
     kinds = [m["type"] for m in pipe.sent]
     assert "frame" in kinds and kinds.count("road") == len(roads) - 1
     assert [m["mode"] for m in pipe.sent if m["type"] == "mode"][:2] == ["manual", "auto"]
@@ -143,38 +147,43 @@ def test_what_the_view_calls_each_object():
         "obstacle", "pedestrian", "oncoming", "traffic", "traffic"]
 
 
-def test_road_events_prompt_every_report_every_roads_and_reports_wait_for_them():
+def test_road_events_prompt_every_report_every_roads_and_answers_name_their_road():
     pipe = Pipe()
-    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), None, LiveOptions(report_every=2))
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), None, LiveOptions(report_every=2), episode_id="e1")
     assert driver.trust == 4                    # no trust stated: the middle level
-    driver.apply({"type": "trust", "value": 6})
+    driver.apply({"type": "trust", "value": 6})   # outside a prompt: the stated trust, on no road
     assert driver.move_trust("none", False, "succ") == 6
     driver.move_trust("truck", True, "fail")
-    assert [m["prompt"] for m in pipe.sent] == [False, True]
-    assert driver.report_trust() == 6 and driver.report_trust() is None   # each report is given once
+    assert [m["prompt"] for m in pipe.sent] == [None, {"episode_id": "e1", "road": 2}]
+    assert driver.report_trust() is None and driver.awaiting_report
+    driver.move_trust("none", False, "succ")   # road 4 is open when the answer to road 2 comes
+    driver.apply({"type": "trust", "value": 3, "prompt": {"episode_id": "e1", "road": 2}})
+    driver.apply({"type": "trust", "value": 5, "prompt": {"episode_id": "e0", "road": 2}})   # not ours
+    driver.apply({"type": "trust", "value": 2, "prompt": {"episode_id": "e1", "road": 3}})   # no prompt there
+    assert driver.answers == {2: 3} and not driver.awaiting_report and driver.trust == 2
+    logged = [(e["value"], e["road"], e["answers_prompt"]) for e in driver.events if e["type"] == "trust"]
+    assert logged == [(6, 1, False), (3, 2, True), (5, 4, False), (2, 4, False)]
     driver.apply({"type": "takeover"})
     assert driver.takeover_request(1.0) is True and driver.takeover_request(1.5) is None
     driver.apply({"type": "hand_back"})
     assert driver.takeover_request(2.0) is False
 
 
-def test_the_last_roads_report_given_after_the_arrival_is_put_on_the_last_road(tmp_path):
-    config, task, driver, pipe, record = live_episode(
-        tmp_path, [{"type": "takeover"}, {"type": "trust", "value": 3}])
-    assert pipe.sent[-1]["type"] == "road" and pipe.sent[-1]["prompt"]
-    assert pd.isna(record.roads["reported_trust"].iloc[-1])
-    pipe.controls.append({"type": "trust", "value": 2})   # answered once the car has arrived
-    late = driver.final_report()
-    assert late == 2
-    roads = with_final_report(record, late).roads
-    assert roads["reported_trust"].dropna().astype(int).tolist() == [3, 2]
-    assert int(roads["reported_trust"].iloc[-1]) == 2
-    # a road that already has a report keeps it; nothing awaited, nothing waited for
-    assert with_final_report(with_final_report(record, 2), 6).roads.equals(roads)
-    assert driver.final_report() is None
-    # an answer the episode's last steps read after the last road's row is the final report too
-    driver.apply({"type": "trust", "value": 5})
-    assert driver.final_report() == 5
+def test_every_answer_goes_on_the_road_it_answers_and_the_last_is_awaited(tmp_path):
+    config, task, driver, pipe, record = live_episode(tmp_path, [{"type": "takeover"}])
+    roads = [m for m in pipe.sent if m["type"] == "road"]
+    assert roads[-1]["prompt"] == {"episode_id": task.episode_id, "road": len(roads)}
+    # answers in the order sent, each late (the last after the arrival), one prompt left unanswered
+    for road in roads[1:]:
+        pipe.controls.append({"type": "trust", "value": 1 + road["index"] % 7, "prompt": road["prompt"]})
+    started = time.monotonic()
+    driver.await_last_answer()
+    assert time.monotonic() - started < 1.0 and not driver.awaiting_report
+    reported = with_reports(record, driver.answers).roads.set_index("index")["reported_trust"]
+    assert pd.isna(reported[0]) and pd.isna(reported[1])   # the start road, and the unanswered prompt
+    assert {int(k): int(v) for k, v in reported.dropna().items()} == {
+        road["index"]: 1 + road["index"] % 7 for road in roads[1:]}
+    assert with_reports(record, {}) is record   # no answers: the record as the tracker logged it
 
 
 def test_without_an_answer_the_end_waits_final_report_seconds_then_goes_on(tmp_path):
@@ -185,6 +194,6 @@ def test_without_an_answer_the_end_waits_final_report_seconds_then_goes_on(tmp_p
                           LiveOptions(pace=1e6, client="scripted", final_report_seconds=0.3))
     record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
     started = time.monotonic()
-    assert driver.final_report() is None
+    driver.await_last_answer()
     assert 0.3 <= time.monotonic() - started < 5.0
-    assert with_final_report(record, None) is record
+    assert with_reports(record, driver.answers) is record

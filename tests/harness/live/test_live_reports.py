@@ -1,0 +1,106 @@
+"""Every trust report on the road it answers, none dropped: a person-like participant answers each
+prompt a little after it comes (the next road is open by then, or the car has arrived), over the
+websocket of a served study; the roads table holds each answer on the prompt's own road."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pandas as pd
+import pytest
+
+from trustroute.core.dataset import read_roads
+from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
+from trustroute.harness.live.server import LiveStudy, ServerOptions
+
+from .conftest import serving, tiny_config
+
+pytestmark = pytest.mark.slow
+
+
+def answer(road: int) -> int:
+    return 1 + road % 7
+
+
+def drive_like_a_person(url: str, token: str, delay: float, timeout: float = 120.0) -> dict[str, dict]:
+    """Consent, start every drive, answer each prompt `delay` wall seconds after it came, and one
+    report outside any prompt per drive. {episode id: {road index: answer}} of every prompt."""
+    from websockets.sync.client import connect
+
+    answered: dict[str, dict[int, int]] = {}
+    due: list[tuple[float, dict]] = []
+    deadline = time.monotonic() + timeout
+    with connect(url, additional_headers={"Authorization": f"Bearer {token}"}) as socket:
+        while time.monotonic() < deadline:
+            while due and due[0][0] <= time.monotonic():
+                socket.send(json.dumps(due.pop(0)[1]))
+            try:
+                message = json.loads(socket.recv(timeout=0.02))
+            except TimeoutError:
+                continue
+            kind = message["type"]
+            if kind == "state" and message["phase"] == "consent":
+                socket.send(json.dumps({"type": "consent", "agree": True}))
+            elif kind == "state" and message["phase"] == "ready":
+                socket.send(json.dumps({"type": "start", "trust": 4}))
+            elif kind == "state" and message["phase"] == "done":
+                return answered
+            elif kind == "episode_start":
+                due.append((time.monotonic() + delay / 2, {"type": "trust", "value": 7}))   # no prompt
+            elif kind == "road" and message["prompt"]:
+                prompt = message["prompt"]
+                answered.setdefault(prompt["episode_id"], {})[prompt["road"]] = answer(prompt["road"])
+                due.append((time.monotonic() + delay, {"type": "trust", "value": answer(prompt["road"]),
+                                                        "prompt": prompt}))
+    raise AssertionError("the participant did not finish in time")
+
+
+def reported_by_road(study_dir) -> dict[str, dict[int, int]]:
+    roads = read_roads(study_dir)
+    found: dict[str, dict[int, int]] = {}
+    for row in roads.itertuples():
+        if not pd.isna(row.reported_trust):
+            found.setdefault(row.episode_id, {})[int(row.index)] = int(row.reported_trust)
+    return found
+
+
+# (pace, wall seconds to answer): 2 and 14 simulated seconds after the prompt, as a person answers
+# at pace 1 and at pace 20 (a whole drive at pace 1 takes minutes: the first case is its timing
+# at pace 20)
+@pytest.mark.parametrize(("pace", "delay"), [(20.0, 0.1), (20.0, 0.7)])
+def test_every_answer_is_on_its_own_road_at_any_pace(tmp_path, pace, delay):
+    config = tiny_config(tmp_path, participants=1)
+    options = ServerOptions(pace=pace, warm_up=False, final_report_seconds=10.0)
+    study = LiveStudy(config, tmp_path / "study", options).open()
+    try:
+        with serving(study) as (host, port):
+            _, token = study.create_participant()
+            answered = drive_like_a_person(f"ws://{host}:{port}/ws", token, delay, timeout=600.0)
+    finally:
+        study.close()
+    assert answered and all(len(prompts) >= 2 for prompts in answered.values())
+    assert reported_by_road(tmp_path / "study") == answered
+
+
+def test_the_scripted_participants_reports_are_on_their_roads(tmp_path):
+    config = tiny_config(tmp_path, participants=1, specs=("phi1", "phi2"))
+    study = LiveStudy(config, tmp_path / "study", ServerOptions(pace=1000.0, warm_up=False)).open()
+    sent: dict[str, dict[int, int]] = {}
+
+    class Recording(ScriptedParticipant):
+        def report_on(self, road: dict) -> list[dict]:
+            replies = super().report_on(road)
+            for reply in replies:
+                sent.setdefault(reply["prompt"]["episode_id"], {})[reply["prompt"]["road"]] = reply["value"]
+            return replies
+
+    try:
+        with serving(study) as (host, port):
+            _, token = study.create_participant()
+            participant = Recording(config, 0)
+            participant.tasks = participant.tasks[1:]   # no warm-up on this server
+            run_scripted(f"ws://{host}:{port}/ws", token, participant, 120)
+    finally:
+        study.close()
+    assert len(sent) == 2 and reported_by_road(tmp_path / "study") == sent
