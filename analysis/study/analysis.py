@@ -49,7 +49,7 @@ from trustroute.analysis.belief_sources import (
 )
 from trustroute.analysis.satisfaction import episode_satisfaction
 from trustroute.analysis.study.cells import cell_table, takeover_table
-from trustroute.analysis.study.order import order_tables
+from trustroute.analysis.study.order import order_tables, run_order
 from trustroute.analysis.study.paired import paired_table_rows, per_participant_table, repeated_measures_table
 from trustroute.analysis.study.paper_comparison import is_paper_comparable, paper_comparison
 from trustroute.analysis.study.per_type import per_type_tables
@@ -176,7 +176,7 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
         wide, paired, repeated = empty, empty, empty
     takeovers = takeover_table(roads, episodes, condition_order)
     if len(episodes):
-        order, order_tests, carryover = order_tables(episodes, column)
+        order, order_tests, carryover = order_tables(run_order(Path(study_dir), manifest, episodes), column)
     else:
         order, order_tests, carryover = empty, {}, empty
     per_type, per_type_paired = per_type_tables(episodes, spec_order, condition_order, belief_source,

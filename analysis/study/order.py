@@ -1,14 +1,34 @@
 """Order effects of the Latin square: satisfaction and reported trust per position (Cochran's Q and
 Friedman across positions within participants), and carry-over by the condition driven just before.
+
+A live study may run a participant's trials in another order than planned (an incomplete trial
+moves to the end): its positions are those of the order actually run (`run_order`, from the
+study's attempts table), not the plan's.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.analysis.statistics import rate_interval
+
+
+def run_order(study_dir: Path, manifest: dict, episodes: pd.DataFrame) -> pd.DataFrame:
+    """`episodes` with `position` the place each was run at, for a live study with an attempts
+    table (a done trial's `run_position`); any other study's episodes as they are."""
+    from trustroute.core.dataset import ATTEMPTS_FILE, read_attempts
+
+    if manifest.get("engine") != "live" or not (Path(study_dir) / ATTEMPTS_FILE).exists():
+        return episodes
+    attempts = read_attempts(study_dir, ["episode_id", "run_position", "outcome"])
+    done = attempts[(attempts["outcome"] == "done") & attempts["run_position"].notna()]
+    run = dict(zip(done["episode_id"], done["run_position"].astype(int), strict=True))
+    return episodes.assign(position=[run.get(episode, position) for episode, position
+                                     in zip(episodes["episode_id"], episodes["position"], strict=True)])
 
 
 def order_tables(episodes: pd.DataFrame, column: str) -> tuple[pd.DataFrame, dict, pd.DataFrame]:

@@ -26,6 +26,7 @@ from pathlib import Path
 from trustroute.core.dataset import part_path
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
+from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session
 from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions
@@ -88,6 +89,7 @@ class LiveStudy:
         self.done: set[str] = set()
         self.lock = threading.RLock()
         self.expected: dict = {}
+        self.attempts = AttemptLog(self.study_dir, LIVE_DIR)
         self._stack = contextlib.ExitStack()
 
     # -- opening and closing --------------------------------------------------------------------
@@ -136,14 +138,16 @@ class LiveStudy:
             self.sessions[participant] = self.new_session(participant, str(record.get("label", "")),
                                                           bool(record.get("consented")),
                                                           str(record.get("client", "station")),
-                                                          bool(record.get("warmed_up")))
+                                                          bool(record.get("warmed_up")),
+                                                          list(record.get("order", [])))
             self.sessions[participant].lockstep = bool(record.get("lockstep"))
 
     def save_participants(self) -> None:
         with self.lock:
             records = {str(p): {"digest": self.credentials.participants[p], "label": s.label,
                                 "consented": s.phase != "consent", "client": s.client,
-                                "warmed_up": s.warmed_up, "lockstep": s.lockstep}
+                                "warmed_up": s.warmed_up, "lockstep": s.lockstep,
+                                "order": [task.episode_id for task in s.tasks]}
                        for p, s in sorted(self.sessions.items())}
             atomic_write_text(self.registry_path(), json.dumps({"participants": records}, indent=1),
                               "live participants", "free disk space")
@@ -152,10 +156,17 @@ class LiveStudy:
         return sorted((t for t in self.tasks if t.participant == participant), key=lambda t: t.position)
 
     def new_session(self, participant: int, label: str = "", consented: bool = False,
-                    client: str = "station", warmed_up: bool = False) -> Session:
+                    client: str = "station", warmed_up: bool = False,
+                    order: list[str] | None = None) -> Session:
+        """The participant's session; `order`: their trials' episode ids in the order to run (the
+        plan's, with incomplete trials moved to the end), kept across restarts."""
         warm_up = warm_up_task(self.config, participant) if self.options.warm_up else None
-        return Session(self, participant, self.tasks_of(participant), label, consented, client,
-                       warm_up=warm_up, warmed_up=warmed_up)
+        tasks = self.tasks_of(participant)
+        if order:
+            place = {episode: i for i, episode in enumerate(order)}
+            tasks.sort(key=lambda task: place.get(task.episode_id, len(place)))
+        return Session(self, participant, tasks, label, consented, client, warm_up=warm_up,
+                       warmed_up=warmed_up)
 
     def create_participant(self, label: str = "") -> tuple[int, str]:
         """(index, token) of the next participant of the plan; ValueError when all exist."""
@@ -190,6 +201,17 @@ class LiveStudy:
     def live_options(self, client: str, lockstep: bool = False) -> LiveOptions:
         return LiveOptions(self.options.pace, self.options.frame_rate, client, self.config.report_every,
                            lockstep, self.options.final_report_seconds)
+
+    def attempt_started(self, task: EpisodeTask, warm_up: bool) -> None:
+        with self.lock:
+            self.attempts.started(task, warm_up)
+            self.attempts.write()
+
+    def attempt_ended(self, task: EpisodeTask, message: dict) -> None:
+        """An attempt ended (done, aborted, failed, incomplete): journalled, attempts.parquet rewritten."""
+        with self.lock:
+            self.attempts.ended(task, message)
+            self.attempts.write()
 
     def episode_finished(self, task: EpisodeTask) -> None:
         """An episode wrote its part: count it done and consolidate the dataset."""

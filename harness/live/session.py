@@ -149,6 +149,7 @@ class Session:
         self.process, self.connection = start_episode_process(
             self.study.config, target, task, self.study.live_options(self.client, self.lockstep), trust)
         self.task, self.phase, self.mode, self.road, self.last_error = task, "driving", "auto", None, None
+        self.study.attempt_started(task, task is self.warm_up)
         reader = threading.Thread(target=self.read_episode, args=(self.connection, self.process),
                                   name=f"live-reader-{task.episode_id}", daemon=True)
         reader.start()
@@ -178,6 +179,7 @@ class Session:
             elif kind == "frame":
                 self.road = message["road"]
             elif finished:
+                self.study.attempt_ended(self.task, message)
                 if kind == "episode_end" and self.warming_up:
                     self.warmed_up = True
                     self.study.save_participants()
@@ -244,6 +246,7 @@ class Session:
             if task in self.tasks:   # (a warm-up simply stays first)
                 self.tasks.remove(task)
                 self.tasks.append(task)
+                self.study.save_participants()   # the new order holds across restarts
 
     # -- the participant's connection -----------------------------------------------------------
     def attach(self, push: Callable[[dict], None]) -> Callable[[dict], None] | None:

@@ -31,6 +31,7 @@ EPISODES_FILE = "episodes.parquet"
 ROADS_FILE = "roads.parquet"
 KINEMATICS_FILE = "kinematics.parquet"  # SUMO engine only
 INCIDENTS_FILE = "incidents.parquet"    # SUMO engine only, when some road had an incident or takeover
+ATTEMPTS_FILE = "attempts.parquet"      # live studies: every attempt of every drive, in the order run
 SUMMARY_FILE = "summary.json"        # `trustroute run --out DIR`: the episode summary
 REPORT_MARKDOWN_FILE = "report.md"
 REPORT_HTML_FILE = "report.html"
@@ -151,6 +152,23 @@ EPISODES_SCHEMA = pa.schema([
     # without one.
     _field("driver_type", pa.string(), nullable=True),
 ])
+# Live studies (harness/live/attempts.py): one row per attempt of a drive (a trial or the warm-up),
+# whatever its outcome; `run_position` is the place of a done trial in the order actually run.
+ATTEMPT_OUTCOMES: tuple[str, ...] = ("started", "aborted", "failed", "incomplete", "done")
+ATTEMPTS_SCHEMA = pa.schema([
+    _field("participant", pa.int64()),
+    _field("episode_id", pa.string()),
+    _field("warm_up", pa.bool_()),
+    _field("planned_position", pa.int64(), nullable=True),   # the plan's (Williams square); null: warm-up
+    _field("attempt", pa.int64()),                           # 1, 2, ... of this drive
+    _field("sequence", pa.int64()),                          # 1, 2, ... of the participant's attempts
+    _field("run_position", pa.int64(), nullable=True),       # 0-based among their done trials; else null
+    _field("started_utc", pa.string()),
+    _field("ended_utc", pa.string(), nullable=True),         # null: still running, or the server stopped
+    _field("outcome", pa.string()),                          # one of ATTEMPT_OUTCOMES
+    _field("reason", pa.string(), nullable=True),            # why it was aborted, failed or incomplete
+])
+
 # Nullable columns appended to a schema after studies were written without them: a file that ends
 # before them reads with the columns all null (so datasets written without those columns still read).
 ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type",)}
@@ -170,6 +188,7 @@ TABLES: dict[str, tuple[str, pa.Schema]] = {
     "roads": (ROADS_FILE, ROADS_SCHEMA),
     "kinematics": (KINEMATICS_FILE, KINEMATICS_SCHEMA),
     "incidents": (INCIDENTS_FILE, INCIDENTS_SCHEMA),
+    "attempts": (ATTEMPTS_FILE, ATTEMPTS_SCHEMA),
 }
 
 
@@ -345,6 +364,11 @@ def read_incidents(study_dir: Path, columns: list[str] | None = None) -> pd.Data
     if not (Path(study_dir) / INCIDENTS_FILE).exists() and (Path(study_dir) / MANIFEST_FILE).exists():
         return frame_from_table(INCIDENTS_SCHEMA.empty_table().select(columns or INCIDENTS_SCHEMA.names))
     return _read(study_dir, "incidents", columns)
+
+
+def read_attempts(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """attempts.parquet (live studies), checked against ATTEMPTS_SCHEMA."""
+    return _read(study_dir, "attempts", columns)
 
 
 def read_manifest(study_dir: Path) -> dict:
