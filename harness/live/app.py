@@ -16,6 +16,7 @@ state-changing request and websocket handshake its Origin (harness/live/guard.py
     GET  /api/participants/{p}         experimenter, or participant p themself
     POST /api/participants/{p}/control experimenter: pause, resume or abort p's episode
     POST /api/participants/{p}/link    experimenter: a new link for p (the old token revoked)
+    POST /api/participants/{p}/withdraw experimenter: p's data deleted (harness/live/withdraw.py)
     GET  /api/files                    experimenter: the study directory's files
     GET  /api/download/{path}          experimenter: one file, inside the study directory only
     WS   /ws                           participant: the protocol of harness/live/protocol.py
@@ -48,6 +49,7 @@ from trustroute.harness.live.protocol import (
     MessageError,
     NewParticipant,
     TokenBucket,
+    Withdrawal,
     error_reply,
     parse_client_message,
 )
@@ -277,12 +279,28 @@ def new_link(request: Request, participant: int) -> dict:
     """A new link for `participant`: a fresh token; the old one (link or cookie) is revoked and
     their open websocket closed. The server keeps only digests, so a link is shown once."""
     study = study_of(request)
-    session_of(request, participant)
+    if session_of(request, participant).phase == "withdrawn":
+        raise refused(409, "out_of_order", f"participant {participant} has withdrawn")
     token = study.replace_token(participant, "new link issued by the experimenter")
     link = study.sessions[participant].push
     if isinstance(link, Link):
         link.shut(POLICY_VIOLATION, "revoked", {"type": "revoked", "detail": "this link was revoked"})
     return {"participant": participant, "token": token, "link": f"/p/{token}"}
+
+
+@router.post("/api/participants/{participant}/withdraw", dependencies=[Depends(experimenter)])
+def withdraw(request: Request, participant: int, body: Withdrawal) -> dict:
+    """Withdraw `participant`: their data deleted, the dataset consolidated without them, the
+    deletion audited (harness/live/withdraw.py); their open station closed."""
+    study = study_of(request)
+    link = session_of(request, participant).push
+    try:
+        entry = study.withdraw(participant, body.reason)
+    except ValueError as exc:
+        raise refused(409, "out_of_order", str(exc)) from None
+    if isinstance(link, Link):
+        link.shut(POLICY_VIOLATION, "withdrawn", {"type": "revoked", "detail": "withdrawn from the study"})
+    return {"participant": participant, "removed": len(entry["removed"]), "utc": entry["utc"]}
 
 
 @router.get("/api/files", dependencies=[Depends(experimenter)])

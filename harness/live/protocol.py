@@ -139,6 +139,13 @@ class LinkClaim(Message):
     token: Annotated[str, Field(min_length=1, max_length=128)]
 
 
+class Withdrawal(Message):
+    """The experimenter withdraws a participant: `confirm` must be true (the console asks first)."""
+
+    confirm: Literal[True]
+    reason: Annotated[str, Field(max_length=300, pattern=r"^[\w .,:;()'/-]*$")] = ""
+
+
 class EpisodeControl(Message):
     """The experimenter's control of a participant's running episode."""
 

@@ -90,6 +90,7 @@ class LiveStudy:
         self.lock = threading.RLock()
         self.expected: dict = {}
         self.attempts = AttemptLog(self.study_dir, LIVE_DIR)
+        self.withdrawn: dict[int, dict] = {}   # participant -> their registry record once withdrawn
         self._stack = contextlib.ExitStack()
 
     # -- opening and closing --------------------------------------------------------------------
@@ -134,7 +135,13 @@ class LiveStudy:
         records = read_json(path, "live participants", fix="restore it, or delete the study directory")
         for key, record in (records.get("participants", {}) if isinstance(records, dict) else {}).items():
             participant = int(key)
-            self.credentials.participants[participant] = str(record["digest"])
+            if record.get("withdrawn"):   # harness/live/withdraw.py: no data, no token, no re-run
+                self.withdrawn[participant] = record
+                self.sessions[participant] = self.new_session(participant)
+                self.sessions[participant].phase = "withdrawn"
+                continue
+            if record.get("digest"):   # (none after a readmission, until the console issues a link)
+                self.credentials.participants[participant] = str(record["digest"])
             self.sessions[participant] = self.new_session(participant, str(record.get("label", "")),
                                                           bool(record.get("consented")),
                                                           str(record.get("client", "station")),
@@ -144,10 +151,11 @@ class LiveStudy:
 
     def save_participants(self) -> None:
         with self.lock:
-            records = {str(p): {"digest": self.credentials.participants[p], "label": s.label,
-                                "consented": s.phase != "consent", "client": s.client,
-                                "warmed_up": s.warmed_up, "lockstep": s.lockstep,
-                                "order": [task.episode_id for task in s.tasks]}
+            records = {str(p): self.withdrawn[p] if p in self.withdrawn else
+                       {"digest": self.credentials.participants.get(p), "label": s.label,
+                        "consented": s.phase != "consent", "client": s.client,
+                        "warmed_up": s.warmed_up, "lockstep": s.lockstep,
+                        "order": [task.episode_id for task in s.tasks]}
                        for p, s in sorted(self.sessions.items())}
             atomic_write_text(self.registry_path(), json.dumps({"participants": records}, indent=1),
                               "live participants", "free disk space")
@@ -190,6 +198,30 @@ class LiveStudy:
                 out.write(json.dumps({"utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                                       "participant": participant, "event": reason}) + "\n")
             return token
+
+    def withdraw(self, participant: int, reason: str = "") -> dict:
+        """The experimenter withdraws `participant` (harness/live/withdraw.py): their episode
+        stopped, their data removed and the dataset consolidated without them; the audit entry.
+        ValueError when there is no such participant or they have withdrawn already."""
+        from trustroute.core.errors import InputError
+        from trustroute.harness.live.withdraw import read_registry, withdraw_participant
+
+        with self.lock:
+            session = self.sessions.get(participant)
+            if session is None or participant in self.withdrawn:
+                raise ValueError(f"participant {participant} does not exist or has withdrawn already")
+            with session.lock:
+                session.phase = "withdrawn"   # the episode's last message changes nothing now
+            session.stop()
+            self.credentials.participants.pop(participant, None)
+            self.save_participants()
+            try:
+                entry = withdraw_participant(self.study_dir, participant, "experimenter (console)", reason)
+            except InputError as exc:
+                raise ValueError(exc.one_line()) from None
+            self.withdrawn[participant] = read_registry(self.study_dir)["participants"][str(participant)]
+            self.done -= {task.episode_id for task in self.tasks_of(participant)}
+            return entry
 
     def warm_up_dir(self) -> Path:
         return self.study_dir / LIVE_DIR / WARM_UP_DIR

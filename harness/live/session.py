@@ -173,6 +173,8 @@ class Session:
         kind = message.get("type")
         finished = kind in ("episode_end", "episode_aborted", "episode_failed")
         with self.lock:
+            if self.phase == "withdrawn":
+                return   # withdrawn: nothing of this episode is kept, nothing is sent
             if kind == "mode":
                 self.mode = message["mode"]
                 self.takeovers += self.mode == "manual"

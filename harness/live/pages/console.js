@@ -57,6 +57,19 @@ function linkButton(td, participant) {
   td.appendChild(button);
 }
 
+// Withdrawal deletes the participant's data for good (audited in live/withdrawals.jsonl).
+function withdrawButton(td, participant) {
+  const button = document.createElement("button");
+  button.textContent = "withdraw";
+  button.addEventListener("click", async () => {
+    if (!confirm(`Withdraw participant ${participant}? Every drive and answer of theirs is deleted from the study; this cannot be undone.`)) return;
+    try { await call("POST", `/api/participants/${participant}/withdraw`, { confirm: true }); showError(""); }
+    catch (error) { showError(error.message); }
+    refresh();
+  });
+  td.appendChild(button);
+}
+
 async function refresh() {
   try {
     const { participants } = await call("GET", "/api/participants");
@@ -71,7 +84,8 @@ async function refresh() {
       cell(row, p.road); cell(row, p.reports); cell(row, p.takeovers); cell(row, p.last_error);
       const controls = cell(row, "");
       for (const action of ["pause", "resume", "abort"]) controlButton(controls, p.participant, action);
-      linkButton(cell(row, ""), p.participant);
+      const links = cell(row, "");
+      if (p.phase !== "withdrawn") { linkButton(links, p.participant); withdrawButton(links, p.participant); }
       body.appendChild(row);
     }
   } catch (error) { showError(error.message); }

@@ -1,0 +1,44 @@
+"""`trustroute withdraw STUDY PARTICIPANT`: a participant of a live study withdraws; their data is
+deleted and the deletion audited (harness/live/withdraw.py; docs/live_studies.md, "Withdrawal").
+
+The study directory's lock is taken first, so a running `trustroute live` on it is refused
+(withdraw from its console instead). `--readmit` lets a withdrawn participant take part again.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from trustroute.harness.commands.options import bounded_int
+
+
+@click.command("withdraw")
+@click.argument("study_dir", metavar="STUDY", type=click.Path())
+@click.argument("participant", metavar="PARTICIPANT", type=bounded_int(0, 10**9))
+@click.option("--reason", default="", help="Why (recorded in the audit entry).")
+@click.option("--by", default=None, help="Who withdraws them (default: the user running the command).")
+@click.option("--readmit", is_flag=True, help="Instead: let a withdrawn participant take part again.")
+@click.option("--json", "as_json", is_flag=True, help="Print the audit entry as JSON.")
+def withdraw(study_dir: str, participant: int, reason: str, by: str | None, readmit: bool,
+             as_json: bool) -> None:
+    """Delete PARTICIPANT's drives, warm-ups, answers and rows from the live study STUDY."""
+    from trustroute.core.errors import InputError
+    from trustroute.harness.live.withdraw import readmit_participant, withdraw_participant
+    from trustroute.harness.study.runner import study_lock
+
+    path = Path(study_dir)
+    if not path.is_dir():
+        raise InputError(study_dir, "", "no such study directory", "pass the directory of a live study")
+    with study_lock(path):
+        entry = (readmit_participant(path, participant, by) if readmit
+                 else withdraw_participant(path, participant, by, reason))
+    if as_json:
+        click.echo(json.dumps(entry, indent=1))
+    elif readmit:
+        click.echo(f"participant {participant} readmitted (a new link from the console lets them in)")
+    else:
+        click.echo(f"participant {participant} withdrawn: {len(entry['removed'])} file(s) removed, the "
+                   f"dataset consolidated without them; audit entry in {path / 'live' / 'withdrawals.jsonl'}")

@@ -1,0 +1,144 @@
+"""A participant's withdrawal from a live study: their data deleted, the deletion audited.
+
+`withdraw_participant` (the caller holds the study directory's lock: `trustroute withdraw`
+takes it, the live server holds it already) removes every file of the participant (their
+trials' parts and failures, their warm-up drives, recordings, questionnaire answers), their
+attempts from the journal, and their label and token from `live/participants.json` (the record
+stays, marked withdrawn, so their index is not reused and a re-run is refused until
+`readmit_participant`); then the dataset is consolidated again without them, and an audit entry
+is appended to `live/withdrawals.jsonl`: who, when, why, every file removed with its SHA-256 and
+size, and the SHA-256 of every consolidated table before and after.
+"""
+
+from __future__ import annotations
+
+import getpass
+import hashlib
+import json
+import time
+from pathlib import Path
+
+from trustroute.core.dataset import ATTEMPTS_FILE, FAILURES_DIR, MANIFEST_FILE, PARTS_DIR, TABLES
+from trustroute.core.errors import InputError
+from trustroute.core.output_files import atomic_write_text
+
+LIVE_DIR = "live"
+REGISTRY = "participants.json"
+AUDIT = "withdrawals.jsonl"
+JOURNAL = "attempts.jsonl"
+# Folders holding one file per episode id (the participant's start with p<5 digits>-).
+PARTICIPANT_FOLDERS: tuple[str, ...] = (PARTS_DIR, FAILURES_DIR, "recordings", "live/warmup/parts",
+                                        "live/questionnaires")
+
+
+def sha256_of(path: Path) -> str:
+    digest = hashlib.sha256()
+    with Path(path).open("rb") as source:
+        for block in iter(lambda: source.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def participant_files(study_dir: Path, participant: int) -> list[Path]:
+    prefix = f"p{participant:05d}-"
+    found: list[Path] = []
+    for folder in PARTICIPANT_FOLDERS:
+        if (Path(study_dir) / folder).is_dir():
+            found += [path for path in (Path(study_dir) / folder).iterdir()
+                      if path.name.startswith(prefix) and path.is_file() and not path.is_symlink()]
+    return sorted(found)
+
+
+def table_checksums(study_dir: Path) -> dict[str, str]:
+    """SHA-256 of each consolidated table present."""
+    names = [file_name for file_name, _ in TABLES.values()]
+    return {name: sha256_of(Path(study_dir) / name) for name in names if (Path(study_dir) / name).is_file()}
+
+
+def read_registry(study_dir: Path) -> dict:
+    from trustroute.core.validation import read_json
+
+    path = Path(study_dir) / LIVE_DIR / REGISTRY
+    if not path.exists():
+        raise InputError(str(study_dir), f"{LIVE_DIR}/{REGISTRY}", "not a live study with participants",
+                         "pass the directory of a live study (trustroute live)")
+    records = read_json(path, "live participants", fix="restore it from a backup")
+    if not isinstance(records, dict) or not isinstance(records.get("participants"), dict):
+        raise InputError(str(path), "participants", "not a participant registry", "restore it from a backup")
+    return records
+
+
+def write_registry(study_dir: Path, records: dict) -> None:
+    atomic_write_text(Path(study_dir) / LIVE_DIR / REGISTRY, json.dumps(records, indent=1),
+                      "live participants", "free disk space")
+
+
+def registry_record(study_dir: Path, records: dict, participant: int) -> dict:
+    record = records["participants"].get(str(participant))
+    if record is None:
+        raise InputError(str(study_dir), "PARTICIPANT", f"no participant {participant} in this study",
+                         f"pass one of {', '.join(sorted(records['participants'], key=int)) or 'none'}")
+    return record
+
+
+def drop_attempts(study_dir: Path, participant: int) -> None:
+    path = Path(study_dir) / LIVE_DIR / JOURNAL
+    if path.exists():
+        kept = [line for line in path.read_text(encoding="utf-8").splitlines()
+                if line.strip() and int(json.loads(line)["participant"]) != participant]
+        atomic_write_text(path, "".join(line + "\n" for line in kept), "live attempts", "free disk space")
+
+
+def withdraw_participant(study_dir: Path, participant: int, by: str | None = None, reason: str = "") -> dict:
+    """Withdraw `participant` (the directory's lock held by the caller); the audit entry."""
+    from trustroute.harness.live.attempts import AttemptLog
+    from trustroute.harness.study.manifest import consolidate
+    from trustroute.harness.study.plan import plan_episodes
+    from trustroute.harness.study.replay import study_config_from_manifest
+
+    study_dir = Path(study_dir)
+    records = read_registry(study_dir)
+    record = registry_record(study_dir, records, participant)
+    if record.get("withdrawn"):
+        raise InputError(str(study_dir), "PARTICIPANT", f"participant {participant} has withdrawn already",
+                         "nothing to do (see live/withdrawals.jsonl)")
+    consolidated = (study_dir / MANIFEST_FILE).exists()   # nothing to consolidate before a first episode
+    config, manifest = study_config_from_manifest(study_dir) if consolidated else (None, {})
+    before = table_checksums(study_dir)
+    files = participant_files(study_dir, participant)
+    removed = [{"path": str(path.relative_to(study_dir)), "sha256": sha256_of(path),
+                "bytes": path.stat().st_size} for path in files]
+    for path in files:
+        path.unlink()
+    drop_attempts(study_dir, participant)
+    withdrawn_utc = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    records["participants"][str(participant)] = {"withdrawn": True, "withdrawn_utc": withdrawn_utc}
+    write_registry(study_dir, records)
+    if consolidated:
+        consolidate(study_dir, config, plan_episodes(config), manifest["config_hash"],
+                    manifest.get("expected"), manifest.get("run"))
+    if (study_dir / ATTEMPTS_FILE).exists() or (study_dir / LIVE_DIR / JOURNAL).exists():
+        AttemptLog(study_dir, LIVE_DIR).write()
+    entry = {"utc": withdrawn_utc,
+             "by": by or getpass.getuser(), "participant": participant, "reason": reason,
+             "removed": removed, "tables_before": before, "tables_after": table_checksums(study_dir)}
+    with (study_dir / LIVE_DIR / AUDIT).open("a", encoding="utf-8") as out:
+        out.write(json.dumps(entry) + "\n")
+    return entry
+
+
+def readmit_participant(study_dir: Path, participant: int, by: str | None = None) -> dict:
+    """Allow a withdrawn participant to take part again (with a new link from the console); the
+    audit entry."""
+    study_dir = Path(study_dir)
+    records = read_registry(study_dir)
+    if not registry_record(study_dir, records, participant).get("withdrawn"):
+        raise InputError(str(study_dir), "PARTICIPANT", f"participant {participant} has not withdrawn",
+                         "withdraw them first, or leave them as they are")
+    records["participants"][str(participant)] = {"label": "", "consented": False, "readmitted": True}
+    write_registry(study_dir, records)
+    entry = {"utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "by": by or getpass.getuser(),
+             "participant": participant, "readmitted": True}
+    with (study_dir / LIVE_DIR / AUDIT).open("a", encoding="utf-8") as out:
+        out.write(json.dumps(entry) + "\n")
+    return entry

@@ -1,0 +1,85 @@
+"""Withdrawal: a participant's drives, warm-ups and rows leave every consolidated table, the
+deletion is audited with checksums, `analyze` reads what is left, and a re-run is refused unless
+the participant is readmitted."""
+
+from __future__ import annotations
+
+import json
+
+import httpx
+import pytest
+from click.testing import CliRunner
+
+from tests.cli import run_cli
+from trustroute.core.dataset import read_attempts, read_episodes, read_kinematics, read_roads
+from trustroute.harness.cli import cli
+from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
+from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.live.withdraw import sha256_of
+
+from .conftest import serving, tiny_config
+
+pytestmark = pytest.mark.slow
+
+
+def test_withdraw_then_analyze(tmp_path, capsys):
+    config = tiny_config(tmp_path, participants=2)
+    study_dir = tmp_path / "study"
+    study = LiveStudy(config, study_dir, ServerOptions(pace=1000.0)).open()
+    try:
+        with serving(study) as (host, port):
+            tokens = [study.create_participant()[1] for _ in range(2)]
+            for p, token in enumerate(tokens):
+                run_scripted(f"ws://{host}:{port}/ws", token, ScriptedParticipant(config, p), 120)
+            assert sorted(read_episodes(study_dir)["participant"]) == [0, 1]
+            mine = sorted(path for path in study_dir.rglob("p00001-*") if path.is_file())
+            assert {path.parent.name for path in mine} == {"parts"}   # the trial's and the warm-up's
+            checksums = {str(path.relative_to(study_dir)): sha256_of(path) for path in mine}
+            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+            url = f"http://{host}:{port}/api/participants/1/withdraw"
+            assert httpx.post(url, json={}, headers=headers).status_code == 422   # no confirmation
+            done = httpx.post(url, json={"confirm": True, "reason": "asked by phone"}, headers=headers)
+            assert done.status_code == 200 and done.json()["removed"] == len(mine) == 2
+            again = httpx.post(url, json={"confirm": True}, headers=headers)
+            assert again.status_code == 409
+            link = httpx.post(f"http://{host}:{port}/api/participants/1/link", headers=headers)
+            assert link.status_code == 409   # no new link: a re-run is refused
+            me = httpx.get(f"http://{host}:{port}/api/me", headers={"Authorization": f"Bearer {tokens[1]}"})
+            assert me.status_code == 403
+    finally:
+        study.close()
+    assert not any(path.exists() for path in mine)
+    for table in (read_episodes(study_dir), read_roads(study_dir), read_kinematics(study_dir)):
+        assert not table["episode_id"].str.startswith("p00001-").any() and len(table)
+    assert set(read_attempts(study_dir)["participant"]) == {0}
+    audit = [json.loads(line) for line in (study_dir / "live" / "withdrawals.jsonl").read_text().splitlines()]
+    assert len(audit) == 1 and audit[0]["participant"] == 1 and audit[0]["reason"] == "asked by phone"
+    assert {entry["path"]: entry["sha256"] for entry in audit[0]["removed"]} == checksums
+    assert audit[0]["tables_after"]["episodes.parquet"] == sha256_of(study_dir / "episodes.parquet")
+    assert audit[0]["tables_before"]["episodes.parquet"] != audit[0]["tables_after"]["episodes.parquet"]
+    registry = json.loads((study_dir / "live" / "participants.json").read_text())["participants"]
+    assert set(registry["1"]) == {"withdrawn", "withdrawn_utc"}   # no label, no token digest
+
+    analyzed = CliRunner().invoke(cli, ["analyze", str(study_dir), "--json", "--no-report"])
+    assert analyzed.exit_code == 0, analyzed.output
+    assert sum(cell["n"] for cell in json.loads(analyzed.output)["cells"]) == 1
+
+    code, _, err = run_cli(capsys, "withdraw", str(study_dir), "1")
+    assert code == 2 and "withdrawn already" in err and err.count("\n") == 1
+    code, _, err = run_cli(capsys, "withdraw", str(study_dir), "7")
+    assert code == 2 and "no participant 7" in err
+    reopened = LiveStudy(config, study_dir, ServerOptions(pace=1000.0)).open()
+    try:
+        assert reopened.sessions[1].phase == "withdrawn" and 1 not in reopened.credentials.participants
+        code, _, err = run_cli(capsys, "withdraw", str(study_dir), "0")   # the server holds the lock
+        assert code == 2 and "in use" in err
+    finally:
+        reopened.close()
+    code, out, _ = run_cli(capsys, "withdraw", str(study_dir), "1", "--readmit")
+    assert code == 0 and "readmitted" in out
+    readmitted = LiveStudy(config, study_dir, ServerOptions(pace=1000.0)).open()
+    try:
+        assert readmitted.sessions[1].phase == "consent"
+        readmitted.replace_token(1, "test: a new link")   # the console's new link lets them in again
+    finally:
+        readmitted.close()
