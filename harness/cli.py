@@ -27,6 +27,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "study": ("trustroute.harness.commands.study", "study", "Run a simulated within-subject study."),
     "live": ("trustroute.harness.commands.live", "live", "Serve a study to people in their browsers."),
     "analyze": ("trustroute.harness.commands.analyze", "analyze", "Analyse a study directory."),
+    "export": ("trustroute.harness.commands.export", "export",
+               "Package a study for sharing: pseudonymous tables, codebook, checksums."),
     "withdraw": ("trustroute.harness.commands.withdraw", "withdraw",
                  "Delete a live study participant's data (withdrawal), audited."),
     "fit": ("trustroute.harness.commands.fit", "fit", "Fit a driver model to a study's logs."),

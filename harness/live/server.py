@@ -36,7 +36,8 @@ from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 LIVE_DIR = "live"
 PARTICIPANTS_FILE = "participants.json"
 WARM_UP_DIR = "warmup"
-TOKEN_LOG = "tokens.jsonl"   # every token replaced: when, whose, why
+TOKEN_LOG = "tokens.jsonl"     # every token replaced: when, whose, why
+CONSENT_FILE = "consent.txt"   # the consent text participants are shown
 WARM_UP_KEY = 4   # SeedSequence(study seed, spawn_key=(4, participant)): the warm-up's seeds
 DEFAULT_CONSENT = ("You are about to drive in a simulated study of an autonomous vehicle. You may take over "
                    "and hand back control, and report your trust in the vehicle from 1 to 7. You may stop "
@@ -106,6 +107,8 @@ class LiveStudy:
             self.done = finished_episodes(self.study_dir, self.tasks)[0]
             self.expected = expected_values(self.config)
             self.load_participants()
+            atomic_write_text(self.study_dir / LIVE_DIR / CONSENT_FILE, self.consent_text,
+                              "the consent text shown", "free disk space")   # exported with the data
         except BaseException:
             self._stack.close()
             raise

@@ -1,0 +1,25 @@
+"""`trustroute export STUDY --out DIR`: a study packaged for sharing, with pseudonymous
+participants, a codebook, the config, the texts shown, the versions, checksums and a README
+(harness/study/export.py; docs/live_studies.md, "Export")."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command("export")
+@click.argument("study_dir", metavar="STUDY", type=click.Path())
+@click.option("--out", "out", type=click.Path(), required=True, help="The package DIRECTORY (new or empty).")
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=0, show_default=True,
+              help="Seed of the pseudonyms' draw (the key is kept in STUDY/export-key.json).")
+def export(study_dir: str, out: str, seed: int) -> None:
+    """Package the consolidated study STUDY for sharing (OSF, a journal) in DIR."""
+    import numpy as np
+
+    from trustroute.harness.study.export import export_study
+
+    index = export_study(Path(study_dir), Path(out), np.random.default_rng(seed))
+    click.echo(f"exported {', '.join(index['tables'])} of {index['participants']} participant(s) to {out} "
+               f"({index['files']} files, with codebook.md and SHA256SUMS)")

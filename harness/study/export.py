@@ -1,0 +1,141 @@
+"""A study packaged for sharing (`trustroute export STUDY --out DIR`): the consolidated tables
+with pseudonymous participant ids, the codebook generated from the dataset schema
+(trustroute/core/codebook.py), the study config, the texts participants were shown, the software
+versions, checksums of every file and a README.
+
+Pseudonyms: each participant number is replaced by a three-digit code drawn without replacement
+(100-999) from a Generator seeded by the caller, in the `participant` column and in every
+`episode_id` (`p<code, 5 digits>-<spec>-<condition>`). The key (original number -> code) is
+written into the study directory (`export-key.json`), never into the package. Nothing of the
+live registry (token digests, labels), the token log or the withdrawal audit is exported.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from trustroute.core.dataset import TABLES, read_manifest, read_table, write_table
+from trustroute.core.errors import InputError
+from trustroute.core.output_files import atomic_write_text
+
+KEY_FILE = "export-key.json"
+TEXTS = {"consent.txt": "live/consent.txt"}   # texts participants were shown: package name <- study path
+EPISODE_PARTICIPANT = re.compile(r"^p(\d{5})-")
+
+
+def pseudonyms(participants: list[int], rng: np.random.Generator) -> dict[int, int]:
+    codes = rng.choice(np.arange(100, 1000), size=len(participants), replace=False)
+    return {int(p): int(code) for p, code in zip(sorted(participants), codes, strict=True)}
+
+
+def participants_of(study_dir: Path) -> list[int]:
+    found: set[int] = set()
+    for file_name, schema in TABLES.values():
+        path = Path(study_dir) / file_name
+        if path.exists() and "episode_id" in schema.names:
+            episodes = read_table(path, schema, ["episode_id"]).column(0).to_pylist()
+            found.update(int(m.group(1)) for e in episodes if (m := EPISODE_PARTICIPANT.match(e)))
+    return sorted(found)
+
+
+def pseudonymised(table: pa.Table, key: dict[int, int]) -> pa.Table:
+    """`table` with its participant numbers and episode ids under the pseudonyms of `key`."""
+    names = table.schema.names
+    if "participant" in names:
+        index = names.index("participant")
+        values = [key[int(p)] for p in table.column(index).to_pylist()]
+        table = table.set_column(index, table.schema.field(index), pa.array(values, pa.int64()))
+    if "episode_id" in names:
+        index = names.index("episode_id")
+
+        def renamed(episode: str) -> str:
+            match = EPISODE_PARTICIPANT.match(episode)
+            return episode if match is None else f"p{key[int(match.group(1))]:05d}-{episode[match.end():]}"
+
+        values = [renamed(e) for e in table.column(index).to_pylist()]
+        table = table.set_column(index, table.schema.field(index), pa.array(values, pa.string()))
+    return table
+
+
+def sha256_of(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
+    """Write the package of `study_dir` into `out` (a new or empty directory); its index."""
+    from trustroute.core.codebook import codebook
+
+    study_dir, out = Path(study_dir), Path(out)
+    manifest = read_manifest(study_dir)
+    if out.exists() and any(out.iterdir()):
+        raise InputError(str(out), "--out", "the directory is not empty", "pass a new or empty directory")
+    if out.resolve().is_relative_to(study_dir.resolve()):
+        raise InputError(str(out), "--out", "the package would be inside the study directory",
+                         "pass a directory outside the study")
+    key = pseudonyms(participants_of(study_dir), rng)
+    (out / "tables").mkdir(parents=True, exist_ok=True)
+    tables = []
+    for name, (file_name, schema) in TABLES.items():
+        path = study_dir / file_name
+        if path.exists():
+            write_table(pseudonymised(read_table(path, schema), key), out / "tables" / file_name)
+            tables.append(name)
+    book = {name: entries for name, entries in codebook().items() if name in tables}
+    atomic_write_text(out / "codebook.json", json.dumps(book, indent=1), "codebook")
+    atomic_write_text(out / "codebook.md", codebook_markdown(book), "codebook")
+    atomic_write_text(out / "study_config.json", json.dumps(manifest["config"], indent=1, default=str),
+                      "study config")
+    versions = {"python": platform.python_version(), "git_revision": manifest.get("git_revision"),
+                "packages": manifest.get("packages", {}), "engine": manifest.get("engine")}
+    atomic_write_text(out / "versions.json", json.dumps(versions, indent=1), "software versions")
+    texts = []
+    for name, source in TEXTS.items():
+        if (study_dir / source).is_file():
+            (out / "texts").mkdir(exist_ok=True)
+            shutil.copyfile(study_dir / source, out / "texts" / name)
+            texts.append(name)
+    atomic_write_text(out / "README.md", readme(manifest, tables, texts, len(key)), "README")
+    atomic_write_text(study_dir / KEY_FILE, json.dumps({"pseudonyms": {str(p): c for p, c in key.items()},
+                                                        "package": str(out.resolve())}, indent=1),
+                      "export key")
+    files = sorted(path for path in out.rglob("*") if path.is_file())
+    sums = "".join(f"{sha256_of(path)}  {path.relative_to(out)}\n" for path in files)
+    atomic_write_text(out / "SHA256SUMS", sums, "checksums")
+    return {"tables": tables, "texts": texts, "participants": len(key), "files": len(files) + 1}
+
+
+def codebook_markdown(book: dict[str, list[dict]]) -> str:
+    lines = ["# Codebook", ""]
+    for table, entries in book.items():
+        lines += [f"## {table} (`tables/{entries[0]['file']}`)", "",
+                  "| column | type | null allowed | unit | meaning | allowed values |",
+                  "|---|---|---|---|---|---|"]
+        lines += [f"| `{e['column']}` | {e['type']} | {'yes' if e['nullable'] else 'no'} | {e['unit']} | "
+                  f"{e['meaning']} | {e['allowed']} |" for e in entries]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def readme(manifest: dict, tables: list[str], texts: list[str], participants: int) -> str:
+    name = manifest.get("study", "the study")
+    return "\n".join([
+        f"# {name}: data package", "",
+        f"A trustroute study ({manifest.get('engine')} engine) of {participants} participant(s), "
+        "exported with `trustroute export`.", "",
+        "- `tables/`: the consolidated tables (Apache Parquet): " + ", ".join(tables) + ".",
+        "- `codebook.md`, `codebook.json`: every column's type, whether it may be null, unit, meaning and "
+        "allowed values.",
+        "- `study_config.json`: the study's configuration; `versions.json`: the software that made it.",
+        "- `texts/`: what participants were shown (" + (", ".join(texts) or "none recorded") + ").",
+        "- `SHA256SUMS`: the SHA-256 of every other file (`sha256sum -c SHA256SUMS`).", "",
+        "Participants are pseudonymous: each participant number is a random three-digit code, in the "
+        "`participant` column and in every `episode_id` (`p<code>-<spec>-<condition>`). Missing values "
+        "are nulls.", ""])
