@@ -53,6 +53,7 @@ from trustroute.analysis.study.order import order_tables, run_order
 from trustroute.analysis.study.paired import paired_table_rows, per_participant_table, repeated_measures_table
 from trustroute.analysis.study.paper_comparison import is_paper_comparable, paper_comparison
 from trustroute.analysis.study.per_type import per_type_tables
+from trustroute.analysis.study.questionnaires import questionnaire_tables
 from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.errors import InputError
 
@@ -78,6 +79,8 @@ class StudyAnalysis:
     episodes: pd.DataFrame = field(repr=False)
     per_type: pd.DataFrame = field(default_factory=pd.DataFrame)
     per_type_paired: pd.DataFrame = field(default_factory=pd.DataFrame)
+    questionnaires: pd.DataFrame = field(default_factory=pd.DataFrame)        # live: scores, alpha
+    questionnaire_tests: pd.DataFrame = field(default_factory=pd.DataFrame)   # live: paired tests
 
     def to_dict(self) -> dict:
         def records(frame: pd.DataFrame) -> list[dict]:
@@ -99,6 +102,8 @@ class StudyAnalysis:
             "paper_note": self.paper_note,
             "per_type": records(self.per_type),
             "per_type_paired": records(self.per_type_paired),
+            "questionnaires": records(self.questionnaires),
+            "questionnaire_tests": records(self.questionnaire_tests),
             "failed_episodes": len(self.manifest.get("failed_episodes", [])),
         }
 
@@ -200,6 +205,8 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
         per_type=per_type,
         per_type_paired=per_type_paired,
     )
+    questionnaires = questionnaire_tables(Path(study_dir), episodes, pair)
+    analysis.questionnaires, analysis.questionnaire_tests = questionnaires
     comparable, note = is_paper_comparable(manifest, episodes)
     if comparable:
         analysis.paper = pd.DataFrame(paper_comparison(episodes, cells, belief_source),

@@ -118,6 +118,21 @@ def _per_type_columns(c: pd.DataFrame) -> dict[str, pd.Series]:
             "condition": c["condition"], "n": c["n"], **_outcome_columns(c), **_trust_columns(c)}
 
 
+def questionnaire_display(q: pd.DataFrame) -> pd.DataFrame:
+    return pd.DataFrame({"questionnaire": q["questionnaire"], "condition": q["condition"],
+                         "responses": q["responses"], "participants": q["participants"],
+                         "mean score": [number_text(v, 2) for v in q["mean_score"]],
+                         "sd": [number_text(v, 2) for v in q["sd_score"]],
+                         "Cronbach's alpha": [number_text(v, 2) for v in q["cronbach_alpha"]]})
+
+
+def questionnaire_test_display(t: pd.DataFrame) -> pd.DataFrame:
+    return pd.DataFrame({"questionnaire": t["questionnaire"], "pair": t["a"] + " vs " + t["b"],
+                         "n": t["pairs"],
+                         "median difference": [number_text(v, 2) for v in t["median_difference"]],
+                         "Wilcoxon p": [format_p(finite_or_none(v)) for v in t["wilcoxon_p"]]})
+
+
 def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
     """The tables as shown (formatted strings, p-values in scientific notation), by name; a table
     without rows is left out."""
@@ -131,6 +146,8 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
         "carryover": (analysis.carryover, lambda k: pd.DataFrame(_carryover_columns(k))),
         "per_type": (analysis.per_type, lambda c: pd.DataFrame(_per_type_columns(c))),
         "per_type_paired": (analysis.per_type_paired, paired_display),
+        "questionnaires": (analysis.questionnaires, questionnaire_display),
+        "questionnaire_tests": (analysis.questionnaire_tests, questionnaire_test_display),
         "paper": (analysis.paper, lambda paper: paper),
     }
     return {name: show(frame) for name, (frame, show) in shown.items() if len(frame)}
@@ -145,6 +162,8 @@ TABLE_TITLES = {
     "carryover": "Carry-over: by the condition driven just before",
     "per_type": "Satisfaction and trust per true driver type",
     "per_type_paired": "Paired effects per true driver type (every pair of conditions)",
+    "questionnaires": "Questionnaire scores per condition (mean of items, reversed items turned)",
+    "questionnaire_tests": "Questionnaire scores: paired over participants",
     "paper": "The paper beside this study",
 }
 

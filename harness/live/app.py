@@ -58,7 +58,7 @@ from trustroute.harness.live.session import Session
 
 PAGES = Path(__file__).with_name("pages")
 STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js": "text/javascript",
-          "link.js": "text/javascript"}
+          "link.js": "text/javascript", "questionnaire.js": "text/javascript"}
 # Every response: no framing, no sniffing, no referrer (a participant link carries a token), and
 # scripts, styles and sockets from this server only.
 SECURITY_HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",

@@ -20,6 +20,7 @@ from pydantic import (
     ConfigDict,
     Field,
     StrictBool,
+    StrictFloat,
     StrictInt,
     TypeAdapter,
     ValidationError,
@@ -114,6 +115,15 @@ class TrustReport(ClientMessage):
     prompt: PromptId | None = None
 
 
+class Answers(ClientMessage):
+    """The answers to the questionnaire shown: {item id: scale point} for every item."""
+
+    type: Literal["answers"]
+    questionnaire: Annotated[str, Field(pattern=r"^[a-z0-9_-]{1,40}$")]
+    answers: Annotated[dict[Annotated[str, Field(max_length=40)], StrictInt | StrictFloat],
+                       Field(max_length=100)]
+
+
 class Resume(ClientMessage):
     """Resume an episode paused by this participant's disconnect."""
 
@@ -125,7 +135,7 @@ class Ping(ClientMessage):
 
 
 CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | Drive | Steer | Pass
-                                       | TrustReport | Resume | Ping, Field(discriminator="type")])
+                                       | TrustReport | Answers | Resume | Ping, Field(discriminator="type")])
 
 
 # -- HTTP bodies ---------------------------------------------------------------------------------

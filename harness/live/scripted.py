@@ -204,10 +204,14 @@ class ScriptedParticipant:
         return replies
 
     def on_state(self, state: dict) -> list[dict]:
-        key = (state["phase"], tuple(state["done"]))
+        shown = state.get("questionnaire") or {}
+        key = (state["phase"], tuple(state["done"]),
+               *(shown.get(part) for part in ("name", "placement", "trial")))
         if key == self.acted_on:   # the same state again (a reply to a report, say): nothing new
             return []
         self.acted_on = key
+        if state["phase"] == "questionnaire":
+            return [self.answer_questionnaire(shown)]
         if state["phase"] == "consent":
             return [{"type": "consent", "agree": True, "client": "scripted", "lockstep": self.lockstep}]
         if state["phase"] == "done":
@@ -217,6 +221,16 @@ class ScriptedParticipant:
             self.driver, self.mode = self.new_driver(task), "auto"
             return [{"type": "start", "trust": int(self.driver.trust)}]
         return []
+
+
+    def answer_questionnaire(self, questionnaire: dict) -> dict:
+        """Every item at the scale point nearest its middle: the scripted participant has no model
+        of questionnaire answers; it answers so that the session goes on (the figures of these
+        answers mean nothing)."""
+        scale = questionnaire["scale"]
+        middle = scale["min"] + round((scale["max"] - scale["min"]) / scale["step"] / 2) * scale["step"]
+        return {"type": "answers", "questionnaire": questionnaire["name"],
+                "answers": {item["id"]: middle for item in questionnaire["items"]}}
 
 
 def obstacle_ahead(frame: dict) -> bool:

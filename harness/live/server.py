@@ -32,6 +32,7 @@ from trustroute.harness.live.session import Session
 from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+from trustroute.participants.questionnaires import questionnaire_plan
 
 LIVE_DIR = "live"
 PARTICIPANTS_FILE = "participants.json"
@@ -91,6 +92,8 @@ class LiveStudy:
         self.lock = threading.RLock()
         self.expected: dict = {}
         self.attempts = AttemptLog(self.study_dir, LIVE_DIR)
+        self.questionnaires = questionnaire_plan(config.questionnaires, Path(config.source_path).parent,
+                                                 config.source_path)
         self.withdrawn: dict[int, dict] = {}   # participant -> their registry record once withdrawn
         self._stack = contextlib.ExitStack()
 

@@ -1,7 +1,9 @@
 """One participant's session: the phase it is in, its trials, its running episode.
 
 Phases: "consent" (the consent text is shown) -> "ready" (a trial can start) -> "driving" <->
-"paused" -> "ready" ... -> "done" (every trial of the participant has a part). A client message
+"paused" -> "ready" ... -> "done" (every trial of the participant has a part); with the study's
+questionnaires, "questionnaire" (one is shown) comes after the consent, after a trial and at the
+end, until each is answered. A client message
 that does not fit the phase (a takeover before consent, a hand-back on autopilot, a resume of the
 experimenter's pause) is refused with an `out_of_order` error and changes nothing.
 
@@ -19,7 +21,9 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+from trustroute.harness.live.answers import answered, save_answers
 from trustroute.harness.live.protocol import (
+    Answers,
     ClientMessage,
     Consent,
     Drive,
@@ -35,6 +39,7 @@ from trustroute.harness.live.protocol import (
 )
 from trustroute.harness.live.worker import start_episode_process
 from trustroute.harness.study.plan import EpisodeTask
+from trustroute.participants.questionnaires import Questionnaire
 
 STOP_SECONDS = 5.0
 
@@ -65,14 +70,34 @@ class Session:
         self.connection: Any = None      # the episode process and our end of its pipe
         self.push: Callable[[dict], None] | None = None
         self.expiry: threading.Timer | None = None   # the deadline of a disconnect's pause
-        if consented and not self.pending():
-            self.phase = "done"
+        if consented:
+            self.phase = self.next_phase()
 
     # -- what the console and the station read --------------------------------------------------
     def pending(self) -> list[EpisodeTask]:
         """The drives still to do, in order: the warm-up first, then the trials without a part."""
         warm_up = [self.warm_up] if self.warm_up is not None and not self.warmed_up else []
         return warm_up + [task for task in self.tasks if not self.study.is_done(task)]
+
+    def pending_questionnaire(self) -> tuple[str, str | None, Questionnaire] | None:
+        """(placement, trial, questionnaire) of the next questionnaire to answer, or None: the
+        `before` ones first, then the `after_each_trial` ones of each done trial, then the `end`
+        ones once every trial is done (harness/live/answers.py)."""
+        plan, study_dir, p = self.study.questionnaires, self.study.study_dir, self.participant
+        asked = [("before", None, q) for q in plan["before"]]
+        asked += [("after_each_trial", task.episode_id, q) for task in self.tasks if self.study.is_done(task)
+                  for q in plan["after_each_trial"]]
+        if all(self.study.is_done(task) for task in self.tasks):
+            asked += [("end", None, q) for q in plan["end"]]
+        unanswered = (entry for entry in asked
+                      if not answered(study_dir, p, entry[0], entry[1], entry[2].name))
+        return next(unanswered, None)
+
+    def next_phase(self) -> str:
+        """After the consent or a drive: a questionnaire to answer, else a drive to start, else done."""
+        if self.pending_questionnaire() is not None:
+            return "questionnaire"
+        return "ready" if self.pending() else "done"
 
     def progress(self) -> dict:
         with self.lock:
@@ -85,7 +110,16 @@ class Session:
                     "trials": len(self.tasks), "episode_id": self.task.episode_id if self.task else None,
                     "mode": self.mode, "road": self.road, "reports": self.reports,
                     "takeovers": self.takeovers, "done": done, "last_error": self.last_error,
-                    "next_episode": pending[0].episode_id if pending else None}
+                    "next_episode": pending[0].episode_id if pending else None,
+                    "questionnaire": self.questionnaire_shown()}
+
+    def questionnaire_shown(self) -> dict | None:
+        """The questionnaire the station shows in phase "questionnaire" (with where it is asked)."""
+        entry = self.pending_questionnaire() if self.phase == "questionnaire" else None
+        if entry is None:
+            return None
+        placement, trial, questionnaire = entry
+        return {**questionnaire.to_client(), "placement": placement, "trial": trial}
 
     # -- the participant's messages -------------------------------------------------------------
     def handle(self, message: ClientMessage) -> list[dict]:
@@ -96,7 +130,7 @@ class Session:
             if isinstance(message, Consent):
                 self.require("consent", message)
                 self.client, self.lockstep = message.client, message.lockstep
-                self.phase = "ready" if self.pending() else "done"
+                self.phase = self.next_phase()
                 self.study.save_participants()   # the consent holds across restarts
             elif isinstance(message, Start):
                 self.require("ready", message)
@@ -128,12 +162,27 @@ class Session:
                 self.tell(message.model_dump())
                 self.reports += 1
                 return []
+            elif isinstance(message, Answers):
+                self.require("questionnaire", message)
+                self.answer(message)
             elif isinstance(message, Resume):
                 self.require("paused", message)
                 if self.pause_reason != "disconnect":
                     raise MessageError("out_of_order", "the experimenter paused this episode")
                 self.resume()
             return [self.progress()]
+
+    def answer(self, message: Answers) -> None:
+        """The participant's answers to the questionnaire shown: checked, saved, on to the next phase."""
+        placement, trial, questionnaire = self.pending_questionnaire()
+        if message.questionnaire != questionnaire.name:
+            raise MessageError("out_of_order", f"the questionnaire shown is {questionnaire.name}")
+        try:
+            answers = questionnaire.check(message.answers)
+        except ValueError as exc:
+            raise MessageError("malformed", str(exc)) from None
+        save_answers(self.study.study_dir, self.participant, placement, trial, questionnaire, answers)
+        self.phase = self.next_phase()
 
     def require(self, phase: str, message: ClientMessage) -> None:
         if self.phase != phase:
@@ -189,7 +238,7 @@ class Session:
                     self.study.episode_finished(self.task)
                 else:
                     self.last_error = message.get("error") or message.get("reason")
-                self.phase = "ready" if self.pending() else "done"
+                self.phase = self.next_phase()
                 self.pause_reason, self.process, self.connection = None, None, None
                 if self.expiry is not None:
                     self.expiry.cancel()

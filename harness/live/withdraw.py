@@ -91,6 +91,7 @@ def drop_attempts(study_dir: Path, participant: int) -> None:
 
 def withdraw_participant(study_dir: Path, participant: int, by: str | None = None, reason: str = "") -> dict:
     """Withdraw `participant` (the directory's lock held by the caller); the audit entry."""
+    from trustroute.harness.live.answers import write_answer_table
     from trustroute.harness.live.attempts import AttemptLog
     from trustroute.harness.study.manifest import consolidate
     from trustroute.harness.study.plan import plan_episodes
@@ -119,6 +120,7 @@ def withdraw_participant(study_dir: Path, participant: int, by: str | None = Non
                     manifest.get("expected"), manifest.get("run"))
     if (study_dir / ATTEMPTS_FILE).exists() or (study_dir / LIVE_DIR / JOURNAL).exists():
         AttemptLog(study_dir, LIVE_DIR).write()
+    write_answer_table(study_dir)
     entry = {"utc": withdrawn_utc,
              "by": by or getpass.getuser(), "participant": participant, "reason": reason,
              "removed": removed, "tables_before": before, "tables_after": table_checksums(study_dir)}

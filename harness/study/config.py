@@ -98,12 +98,14 @@ class StudyConfig:
     robust_population: str | None = None   # the "robust" condition's population file (absolute)
     robust_objective: str = "robust"       # its objective: "robust" (worst type) or "bayes"
     driver_population: str | None = None  # [drivers] population: absolute path of the population file
+    questionnaires: dict | None = None    # [questionnaires] (live): placement -> names or absolute files
 
     def __hash__(self) -> int:
         # Every field, [population] included: configs that differ only there must never share a
         # cached study context (harness/study/context.py). The dict is hashed as canonical JSON.
-        values = tuple(getattr(self, f.name) for f in fields(self) if f.name != "population")
-        return hash((values, json.dumps(self.population, sort_keys=True, default=str)))
+        raw = ("population", "questionnaires")
+        values = tuple(getattr(self, f.name) for f in fields(self) if f.name not in raw)
+        return hash((values, json.dumps([self.population, self.questionnaires], sort_keys=True, default=str)))
 
     @property
     def condition_names(self) -> tuple[str, ...]:
@@ -134,6 +136,8 @@ class StudyConfig:
             del settings["robust_population"], settings["robust_objective"]
         if settings["driver_population"] is None:
             del settings["driver_population"]  # a study without [drivers] hashes without it
+        if settings["questionnaires"] is None:
+            del settings["questionnaires"]  # a study without [questionnaires] hashes without it
         if not settings["routes"]:
             del settings["routes"]  # a study without background routes hashes without it
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
@@ -231,6 +235,7 @@ class StudyConfigValues(TypedDict):
     study: dict[str, object]
     population: dict[str, object] | None
     drivers: dict[str, object] | None
+    questionnaires: dict[str, object] | None
 
 
 FileKey = Literal["town", "driver_model", "robust_population"]  # the [study] keys naming a file (FILE_FIX)
@@ -275,6 +280,9 @@ FIELDS = field_table(
     # checked in full by participants.population (population_config_from_dict)
     Field(key="population", kind=Table(), problem="expected a table", fix="write a [population] table"),
     Field(key="drivers", kind=Table(), problem="expected a table", fix='write [drivers] population = "FILE"'),
+    # checked in full by participants.questionnaires (live studies: docs/live_studies.md)
+    Field(key="questionnaires", kind=Table(), problem="expected a table",
+          fix='write [questionnaires] after_each_trial = ["jian"]'),
 )
 TABLES: tuple[str, ...] = keys(FIELDS)
 _ENTRIES = ListOf(item=Text(), min_items=1, distinct=True)
@@ -454,7 +462,15 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         robust_population=_robust_population(study, conditions, base, source),
         robust_objective=study["robust_objective"],
         driver_population=_driver_population(tables["drivers"], base, source),
+        questionnaires=_questionnaires(tables["questionnaires"], base, source),
     )
+
+
+def _questionnaires(table: dict[str, object] | None, base: Path, source: str) -> dict | None:
+    """The [questionnaires] table, checked and its files resolved (participants.questionnaires)."""
+    from trustroute.participants.questionnaires import resolved_table
+
+    return resolved_table(table, base, source)
 
 
 def load_study_config(path: str | Path) -> StudyConfig:

@@ -42,7 +42,9 @@ def participants_of(study_dir: Path) -> list[int]:
         path = Path(study_dir) / file_name
         if path.exists() and "episode_id" in schema.names:
             episodes = read_table(path, schema, ["episode_id"]).column(0).to_pylist()
-            found.update(int(m.group(1)) for e in episodes if (m := EPISODE_PARTICIPANT.match(e)))
+            found.update(int(m.group(1)) for e in episodes if e and (m := EPISODE_PARTICIPANT.match(e)))
+        if path.exists() and "participant" in schema.names:
+            found.update(int(p) for p in read_table(path, schema, ["participant"]).column(0).to_pylist())
     return sorted(found)
 
 
@@ -56,8 +58,8 @@ def pseudonymised(table: pa.Table, key: dict[int, int]) -> pa.Table:
     if "episode_id" in names:
         index = names.index("episode_id")
 
-        def renamed(episode: str) -> str:
-            match = EPISODE_PARTICIPANT.match(episode)
+        def renamed(episode: str | None) -> str | None:
+            match = None if episode is None else EPISODE_PARTICIPANT.match(episode)
             return episode if match is None else f"p{key[int(match.group(1))]:05d}-{episode[match.end():]}"
 
         values = [renamed(e) for e in table.column(index).to_pylist()]

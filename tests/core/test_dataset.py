@@ -17,7 +17,7 @@ def test_consolidated_study_matches_every_schema(model_study):
     for name, (file_name, schema) in dataset.TABLES.items():
         path = model_study / file_name
         if not path.exists():
-            assert name in ("kinematics", "incidents", "attempts")  # SUMO only; live only
+            assert name in ("kinematics", "incidents", "attempts", "questionnaires")  # SUMO; live only
             continue
         table = pq.read_table(path)
         dataset.check_table(table.replace_schema_metadata(None), schema, file_name)

@@ -109,6 +109,20 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "outcome": ("", "how the attempt ended", "started, aborted, failed, incomplete, done"),
         "reason": ("", "why it was aborted, failed or incomplete", "text"),
     },
+    "questionnaires": {
+        "participant": ("", "the participant (a pseudonym in an export)", "integers >= 0"),
+        "episode_id": ("", "the trial the questionnaire followed (null: before the study or at its end)", ID),
+        "placement": ("", "when it was asked", "before, after_each_trial, end"),
+        "questionnaire": ("", "the questionnaire (jian: Jian et al. 2000; nasa_tlx: raw NASA-TLX; else a "
+                              "study's own file)", "jian, nasa_tlx, or a file's name"),
+        "item": ("", "the item's id", "the questionnaire's item ids"),
+        "item_index": ("", "the item's place in the questionnaire", "integers >= 0"),
+        "value": ("scale point", "the answer as given (reversed items not turned)", "scale_min .. scale_max"),
+        "reversed": ("", "the item is scored reversed (scale_min + scale_max - value)", "true, false"),
+        "scale_min": ("scale point", "the scale's lowest point", "real numbers"),
+        "scale_max": ("scale point", "the scale's highest point", "real numbers"),
+        "answered_utc": ("UTC", "when the questionnaire was submitted", "ISO 8601 date-time"),
+    },
 }
 
 

@@ -32,6 +32,7 @@ ROADS_FILE = "roads.parquet"
 KINEMATICS_FILE = "kinematics.parquet"  # SUMO engine only
 INCIDENTS_FILE = "incidents.parquet"    # SUMO engine only, when some road had an incident or takeover
 ATTEMPTS_FILE = "attempts.parquet"      # live studies: every attempt of every drive, in the order run
+QUESTIONNAIRES_FILE = "questionnaires.parquet"  # live studies with [questionnaires]: every answer
 SUMMARY_FILE = "summary.json"        # `trustroute run --out DIR`: the episode summary
 REPORT_MARKDOWN_FILE = "report.md"
 REPORT_HTML_FILE = "report.html"
@@ -169,6 +170,23 @@ ATTEMPTS_SCHEMA = pa.schema([
     _field("reason", pa.string(), nullable=True),            # why it was aborted, failed or incomplete
 ])
 
+# Live studies with [questionnaires] (participants/questionnaires.py, harness/live/answers.py): one
+# row per item answered.
+QUESTIONNAIRE_PLACEMENTS: tuple[str, ...] = ("before", "after_each_trial", "end")
+QUESTIONNAIRES_SCHEMA = pa.schema([
+    _field("participant", pa.int64()),
+    _field("episode_id", pa.string(), nullable=True),   # the trial it followed; null: before or end
+    _field("placement", pa.string()),                   # one of QUESTIONNAIRE_PLACEMENTS
+    _field("questionnaire", pa.string()),               # jian, nasa_tlx, or a file's name
+    _field("item", pa.string()),
+    _field("item_index", pa.int64()),                   # 0-based place in the questionnaire
+    _field("value", pa.float64()),                      # as answered (not reversed)
+    _field("reversed", pa.bool_()),                     # scored as scale_min + scale_max - value
+    _field("scale_min", pa.float64()),
+    _field("scale_max", pa.float64()),
+    _field("answered_utc", pa.string()),
+])
+
 # Nullable columns appended to a schema after studies were written without them: a file that ends
 # before them reads with the columns all null (so datasets written without those columns still read).
 ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type",)}
@@ -189,6 +207,7 @@ TABLES: dict[str, tuple[str, pa.Schema]] = {
     "kinematics": (KINEMATICS_FILE, KINEMATICS_SCHEMA),
     "incidents": (INCIDENTS_FILE, INCIDENTS_SCHEMA),
     "attempts": (ATTEMPTS_FILE, ATTEMPTS_SCHEMA),
+    "questionnaires": (QUESTIONNAIRES_FILE, QUESTIONNAIRES_SCHEMA),
 }
 
 
@@ -369,6 +388,11 @@ def read_incidents(study_dir: Path, columns: list[str] | None = None) -> pd.Data
 def read_attempts(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
     """attempts.parquet (live studies), checked against ATTEMPTS_SCHEMA."""
     return _read(study_dir, "attempts", columns)
+
+
+def read_questionnaires(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """questionnaires.parquet (live studies with questionnaires), checked against QUESTIONNAIRES_SCHEMA."""
+    return _read(study_dir, "questionnaires", columns)
 
 
 def read_manifest(study_dir: Path) -> dict:

@@ -7,7 +7,7 @@
 "use strict";
 
 const $ = (id) => document.getElementById(id);
-const steps = ["consent-step", "ready-step", "drive-step", "done-step"];
+const steps = ["consent-step", "ready-step", "drive-step", "questionnaire-step", "done-step"];
 let socket = null;
 let state = { phase: "consent" };
 let mode = "auto";
@@ -184,7 +184,11 @@ function onState(message) {
       : `Next: trial ${message.done.length + 1} of ${message.trials}.`;
     show("ready-step");
   } else if (message.phase === "driving" || message.phase === "paused") show("drive-step");
-  else if (message.phase === "done") show("done-step");
+  else if (message.phase === "questionnaire") {   // questionnaire.js
+    $("status").textContent = "Questionnaire";
+    renderQuestionnaire(message.questionnaire, send);
+    show("questionnaire-step");
+  } else if (message.phase === "done") show("done-step");
 }
 
 function onMessage(message) {

@@ -1,0 +1,69 @@
+"""The packaged questionnaires, Likert files, the study config's placement of them, and answers."""
+
+from __future__ import annotations
+
+import pytest
+
+from trustroute.analysis.study.questionnaires import cronbach_alpha
+from trustroute.core.errors import InputError
+from trustroute.participants.questionnaires import JIAN, NASA_TLX, load_questionnaire, questionnaire_plan
+
+LIKERT = """[questionnaire]
+name = "comfort"
+title = "Comfort"
+instructions = "How much do you agree?"
+scale = { min = 1, max = 5, low = "strongly disagree", high = "strongly agree" }
+[[questionnaire.items]]
+id = "c1"
+text = "The ride felt smooth."
+[[questionnaire.items]]
+id = "c2"
+text = "The ride felt jerky."
+reversed = true
+"""
+
+
+def test_the_packaged_scales():
+    assert len(JIAN.items) == 12 and (JIAN.minimum, JIAN.maximum) == (1, 7)
+    assert [item.reversed for item in JIAN.items] == [True] * 5 + [False] * 7
+    everything_high = {item.id: 7 for item in JIAN.items}
+    assert JIAN.score(everything_high) == pytest.approx((5 * 1 + 7 * 7) / 12)   # distrust items turned
+    assert len(NASA_TLX.items) == 6 and NASA_TLX.score({i.id: 50 for i in NASA_TLX.items}) == 50
+    with pytest.raises(ValueError, match="missing: j12"):
+        JIAN.check({item.id: 4 for item in JIAN.items[:11]})
+    with pytest.raises(ValueError, match="not on the scale"):
+        NASA_TLX.check({item.id: 52 for item in NASA_TLX.items})   # steps of 5
+    with pytest.raises(ValueError, match="not on the scale"):
+        JIAN.check({item.id: True for item in JIAN.items})
+    assert NASA_TLX.check({item.id: 55 for item in NASA_TLX.items})["mental"] == 55.0
+
+
+def test_a_likert_file_and_the_config_table(tmp_path):
+    (tmp_path / "comfort.toml").write_text(LIKERT)
+    comfort = load_questionnaire(tmp_path / "comfort.toml", "study.toml")
+    assert [item.reversed for item in comfort.items] == [False, True]
+    assert comfort.score({"c1": 5, "c2": 5}) == 3
+    table = {"before": ["nasa_tlx"], "after_each_trial": ["jian", "comfort.toml"]}
+    plan = questionnaire_plan(table, tmp_path, "study.toml")
+    assert [q.name for q in plan["after_each_trial"]] == ["jian", "comfort"] and plan["end"] == ()
+    for table, where in (({"during": ["jian"]}, "questionnaires.during"),
+                         ({"end": "jian"}, "questionnaires.end"),
+                         ({"end": ["jian", "jian"]}, "questionnaires.end"),
+                         ({"end": ["missing.toml"]}, "missing.toml")):
+        with pytest.raises(InputError, match=where):
+            questionnaire_plan(table, tmp_path, "study.toml")
+    (tmp_path / "bad.toml").write_text(LIKERT.replace("max = 5", "max = 0"))
+    with pytest.raises(InputError, match="questionnaire.scale"):
+        load_questionnaire(tmp_path / "bad.toml", "study.toml")
+
+
+def test_cronbach_alpha():
+    import numpy as np
+
+    items = np.array([[1, 2, 2], [3, 3, 4], [5, 4, 5], [2, 2, 1]], dtype=float)
+    # the same alpha through the item covariances: k c / (v + (k - 1) c), v the mean item variance
+    # and c the mean covariance between two items
+    covariance, k = np.cov(items, rowvar=False), 3
+    v, c = np.mean(np.diag(covariance)), covariance[~np.eye(k, dtype=bool)].mean()
+    assert cronbach_alpha(items) == pytest.approx(k * c / (v + (k - 1) * c))
+    assert cronbach_alpha(np.ones((4, 3))) is None and cronbach_alpha(items[:1]) is None
