@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from tests.browser import chromium_executable
 from trustroute.core.dataset import read_questionnaires
 from trustroute.harness.cli import cli
 
-from .test_browser import CHROMIUM_ARGS, TIMEOUT_MS, answer_prompt, chromium, create_participant
+from .test_browser import CHROMIUM_ARGS, TIMEOUT_MS, answer_prompt, create_participant
 from .test_live_restart import start_server
 
 pytestmark = pytest.mark.slow
@@ -58,7 +59,7 @@ def test_the_jian_questionnaire_after_each_trial_in_chromium(tmp_path):
     process, address, token = start_server(str(config_path), study_dir, 20.0)
     try:
         with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=chromium(), args=CHROMIUM_ARGS)
+            browser = playwright.chromium.launch(executable_path=chromium_executable(), args=CHROMIUM_ARGS)
             link = create_participant(browser, address, token)
             page = browser.new_context(viewport={"width": 1000, "height": 900}).new_page()
             page.set_default_timeout(60_000)

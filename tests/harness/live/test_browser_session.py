@@ -10,7 +10,9 @@ import sqlite3
 import httpx
 import pytest
 
-from .test_browser import CHROMIUM_ARGS, chromium, create_participant
+from tests.browser import chromium_executable
+
+from .test_browser import CHROMIUM_ARGS, create_participant
 from .test_live_restart import start_server
 
 pytestmark = pytest.mark.slow
@@ -34,12 +36,12 @@ def test_the_link_leaves_no_live_token_in_the_history_and_a_second_tab_takes_ove
     process, address, token = start_server(str(config), tmp_path / "study", 20.0)
     try:
         with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=chromium(), args=CHROMIUM_ARGS)
+            browser = playwright.chromium.launch(executable_path=chromium_executable(), args=CHROMIUM_ARGS)
             link = create_participant(browser, address, token)
             browser.close()
             spent = link.rsplit("/", 1)[1]
             context = playwright.chromium.launch_persistent_context(
-                str(profile), executable_path=chromium(), args=CHROMIUM_ARGS)
+                str(profile), executable_path=chromium_executable(), args=CHROMIUM_ARGS)
             first = context.new_page()
             first.goto(link)
             first.wait_for_url("**/station")
