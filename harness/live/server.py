@@ -29,6 +29,7 @@ from trustroute.core.output_files import atomic_write_text
 from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session
+from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study seed, (4, participant))
 from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
@@ -39,7 +40,6 @@ PARTICIPANTS_FILE = "participants.json"
 WARM_UP_DIR = "warmup"
 TOKEN_LOG = "tokens.jsonl"     # every token replaced: when, whose, why
 CONSENT_FILE = "consent.txt"   # the consent text participants are shown
-WARM_UP_KEY = 4   # SeedSequence(study seed, spawn_key=(4, participant)): the warm-up's seeds
 DEFAULT_CONSENT = ("You are about to drive in a simulated study of an autonomous vehicle. You may take over "
                    "and hand back control, and report your trust in the vehicle from 1 to 7. You may stop "
                    "at any time.")
@@ -60,8 +60,9 @@ class ServerOptions:
 
 
 def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:
-    """The participant's warm-up drive: their first trial's spec and condition on seeds of its own
-    (so it is no trial's rerun); it is not part of the dataset."""
+    """The participant's warm-up drive: their first trial's spec, condition and driver on seeds of
+    its own, driven on a route and incidents of its own (harness/live/warmup.py); it is not part of
+    the dataset."""
     import numpy as np
 
     first = min((t for t in plan_episodes(config) if t.participant == participant), key=lambda t: t.position)

@@ -360,7 +360,12 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
         levels = study_context(config).driver_model(task.participant).trust_levels
         driver = RemoteDriver(connection, levels, initial_trust, options, episode_id=task.episode_id)
         connection.send({"type": "episode_start", "episode_id": task.episode_id, "trust": driver.trust})
-        record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
+        if task.position < 0:   # the warm-up: a route and incidents of its own (harness/live/warmup.py)
+            from trustroute.harness.live.warmup import run_warm_up
+
+            record = run_warm_up(config, task, driver, driver.observe)
+        else:
+            record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
         driver.await_last_answer()
         if not options.lockstep:
             record = with_reports(record, driver.answers)
