@@ -9,6 +9,7 @@ downloaded (Playwright drives the system's Chromium)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from pathlib import Path
@@ -91,6 +92,8 @@ def drive_by_hand(page) -> int:
     when the station says an obstacle is ahead pull out (left arrow) and hand back once the ego
     is back in its own lane after the oncoming one; otherwise hand back on the warning. The first
     pass is photographed in the oncoming lane. Returns the passes made."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
     passes, pulled_out, in_oncoming, taken_on = 0, None, False, None
     deadline = time.monotonic() + TIMEOUT_MS / 1000
     while not page.locator("#ready-step:visible, #done-step:visible").count():
@@ -108,8 +111,10 @@ def drive_by_hand(page) -> int:
         elif mode == "AUTOPILOT" and road and road.split(" (")[0] != taken_on:
             page.keyboard.press("Space")
             taken_on = road.split(" (")[0]   # at most one takeover per road
-            page.keyboard.down("ArrowUp")
-            page.keyboard.up("ArrowUp")
+            with contextlib.suppress(PlaywrightTimeout):   # the pedals work once in control
+                page.locator("#mode", has_text="MANUAL").wait_for(timeout=5000)
+                page.keyboard.down("ArrowUp")
+                page.keyboard.up("ArrowUp")
         elif mode == "MANUAL" and pulled_out is None and "Obstacle ahead" in hint:
             page.keyboard.press("ArrowLeft")
             pulled_out = time.monotonic()
