@@ -18,8 +18,10 @@ from pathlib import Path
 
 import click
 
+from trustroute.app.engines import ENGINES
 from trustroute.harness.commands.options import WORKERS, bounded_int
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
+from trustroute.harness.study.plan import episode_id as planned_episode_id
 
 DEFAULT_OUT = Path("out") / "demo"
 DEMO_STUDY = {
@@ -104,8 +106,8 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
     ]
     payload = {"study_dir": str(run.study_dir), "engine": engine, "failed": run.failed,
                "analysis": analysis.to_dict()}
-    if engine == "sumo":
-        episode_id = f"p{0:05d}-{study['specs'][0]}-aware"
+    if ENGINES[engine].records:
+        episode_id = planned_episode_id(0, study["specs"][0], "aware")
         try:
             rrd = record_episode(config, run.study_dir, episode_id)
             paths["rrd"] = rrd

@@ -120,19 +120,15 @@ def fit(
     if check:
         import numpy as np
 
-        from trustroute.analysis.fitting.posterior_check import (
-            aware_vs_free,
-            plot_check,
-            posterior_check,
-            write_check,
-        )
+        from trustroute.analysis.fitting.posterior_check import plot_check, posterior_check, write_check
         from trustroute.analysis.study_directory import load_study, study_inputs
-        from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY
+        from trustroute.app.populations import REPORT_ACCURACY
+        from trustroute.app.runs import aware_vs_free
 
         manifest, _, roads = load_study(Path(study_dir))
         _, template, _ = study_inputs(manifest)
         models = {
-            "packaged": (template, DEFAULT_REPORT_ACCURACY),
+            "packaged": (template, REPORT_ACCURACY),
             "fitted": (result.model(), float(result.report_accuracy or 1.0)),
         }
         outcome = posterior_check(roads, models, CHECK_REPLICATES, np.random.default_rng(seed))
@@ -211,8 +207,8 @@ def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: 
         select_types,
         study_observations,
     )
+    from trustroute.app.populations import write_population as write_driver_population
     from trustroute.core.output_files import atomic_write_text
-    from trustroute.participants.driver_population import write_driver_population
 
     fixed = _type_count(types)
     rng = np.random.default_rng(seed)

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from trustroute.app.engines import ENGINES
+
 VIEWER_PORT, DATA_PORT = 9090, 9876
 
 
@@ -41,11 +43,12 @@ def replay(
     from trustroute.harness.study.runner import recording_path
 
     config, _ = study_config_from_manifest(Path(study_dir))
-    if config.engine == "live":
+    engine = ENGINES[config.engine]
+    if not engine.synthetic:   # people drove it: re-drawn from its log
         draw_live(Path(study_dir), episode_id, rrd_path, no_rrd, as_json)
         return
     rrd = Path(rrd_path) if rrd_path and not no_rrd else None   # model study: an error naming the engine
-    if not no_rrd and config.engine == "sumo" and rrd is None:
+    if not no_rrd and engine.records and rrd is None:
         rrd = recording_path(Path(study_dir), episode_id)
     # why no recording is written, when none is (an explicit --rrd on a model study is an error)
     no_recording = ("--no-rrd" if no_rrd else

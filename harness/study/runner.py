@@ -28,6 +28,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from trustroute.app.drivers import synthetic_driver
+from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
@@ -73,14 +75,8 @@ class StudyRun:
 
 
 def engine_function(engine: str) -> Callable:
-    """The episode function of an engine (run_episode for SUMO, run_model_episode for the model)."""
-    if engine == "model":
-        from trustroute.harness.simulation.model_engine import run_model_episode
-
-        return run_model_episode
-    from trustroute.harness.simulation.episode import run_episode
-
-    return run_episode
+    """The episode function of an engine (the registry's, trustroute/app/engines.py)."""
+    return ENGINES[engine].run
 
 
 RECORDINGS_DIR = "recordings"
@@ -100,15 +96,13 @@ def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path |
 
     rrd_path, sumo_config (e.g. sumo-gui) and observer apply to the SUMO engines only ("sumo", and
     "live", where `driver` is the remote person of harness/live in place of the synthetic driver)."""
-    from trustroute.participants.synthetic_driver import SyntheticDriver
-
     context = study_context(config)
+    engine = ENGINES[config.engine]
     if driver is None:
-        driver = SyntheticDriver(
-            context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
-        )
+        driver = synthetic_driver(context.driver_model(task.participant), task.driver_rng(),
+                                  report_accuracy=config.report_accuracy)
     options = {}
-    if config.engine in ("sumo", "live"):
+    if engine.drives_sumo:
         from trustroute.harness.simulation.sumo_start import SumoConfig
 
         sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
@@ -147,7 +141,7 @@ def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
     """The config's `record` names planned episodes of a SUMO study, or InputError."""
     if not config.record:
         return
-    if config.engine != "sumo":
+    if not ENGINES[config.engine].records:
         raise InputError(config.source_path, "study.record", "recordings need the SUMO engine",
                          'set engine = "sumo" or remove record')
     planned = {t.episode_id for t in tasks}
@@ -388,7 +382,7 @@ def run_and_consolidate(
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line. The study
     directory stays locked until the manifest is written."""
-    if config.engine == "live":
+    if not ENGINES[config.engine].synthetic:
         raise InputError(config.source_path, "study.engine",
                          "a live study is driven by people, not simulated",
                          "serve it with `trustroute live CONFIG`, or simulate it with --engine sumo")
