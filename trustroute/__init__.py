@@ -142,7 +142,8 @@ def evaluate(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
              town: Town | PathLike | None = None, driver: DriverModel | PathLike | None = None, *,
              fallback_after: int | None = defaults.FALLBACK_AFTER,
              max_junctions: int = defaults.JUNCTION_CAP, belief_rule: BeliefRule = defaults.BELIEF_RULE,
-             cache_dir: PathLike | None = None) -> Evaluation:
+             cache_dir: PathLike | None = None,
+             population: DriverPopulation | PathLike | None = None) -> Evaluation:
     """The exact probability that `policy` satisfies `spec`, its expected final trust and how
     episodes end (no sampling; `value.lower`/`value.upper` certify it).
 
@@ -150,14 +151,19 @@ def evaluate(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
     cached in `cache_dir`), a policy file, a SynthesisResult or any RoutingPolicy.
     fallback_after: the study's rule, the shortest completion after that many junctions (None:
     the policy as given). max_junctions: the episode cap (docs/model.md, "Episodes").
+    population: a driver population (instead of `driver`): the value over its mixture of types,
+    the AV filtering with its type-aware model; policy "free", "robust", "bayes" or a population
+    policy file (docs/driver_types.md), as `trustroute evaluate --population`.
     """
-    from trustroute.app.synthesis import EvaluationSettings, evaluate_single
+    from trustroute.app.synthesis import EvaluationSettings, evaluate_population, evaluate_single
 
-    problem = _compiled(spec, town, driver)
+    problem = _compiled(spec, town, driver, population)
     routing = _policy(policy, problem, cache_dir)
-    return evaluate_single(problem, routing, EvaluationSettings(fallback_after=fallback_after,
-                                                                max_junctions=max_junctions,
-                                                                belief_rule=belief_rule))
+    settings = EvaluationSettings(fallback_after=fallback_after, max_junctions=max_junctions,
+                                  belief_rule=belief_rule)
+    if problem.population is not None:
+        return evaluate_population(problem, routing, settings)[0]
+    return evaluate_single(problem, routing, settings)
 
 
 def run_episode(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,

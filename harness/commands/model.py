@@ -7,7 +7,7 @@ import json
 import click
 
 from trustroute.app.towns import model_summary
-from trustroute.harness.commands.output import json_option
+from trustroute.harness.commands.output import json_option, with_paths
 
 
 @click.command("model")
@@ -19,7 +19,7 @@ def model(town_path: str | None, driver_path: str | None, as_json: bool) -> None
     """Summarise the trust POMDP of a town and a driver model."""
     summary = model_summary(town_path, driver_path)
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(json.dumps(with_paths(summary, {})))
         return
     click.echo(f"town {summary['town']} ({summary['town_hash']}): {summary['junctions']} junctions,"
                f" {summary['roads']} two-way roads, {summary['states']} states (directed roads)")

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from trustroute.app.engines import ENGINES
+from trustroute.harness.commands.output import with_paths
 
 VIEWER_PORT, DATA_PORT = 9090, 9876
 
@@ -67,7 +68,7 @@ def replay(
         "no_recording": no_recording,
     }
     if as_json:
-        click.echo(json.dumps(payload))
+        click.echo(json.dumps(with_paths(payload, {"rrd": rrd})))
         return
     click.echo(
         f"{episode_id}: replay reproduces the log ({len(roads)} roads, trust "
@@ -96,7 +97,7 @@ def draw_live(study_dir: Path, episode_id: str, rrd_path: str | None, no_rrd: bo
                "route": roads["directed_road"].tolist(), "ticks": len(record.kinematics), "rrd": str(rrd),
                "rrd_bytes": rrd.stat().st_size}
     if as_json:
-        click.echo(json.dumps(payload))
+        click.echo(json.dumps(with_paths(payload, {"rrd": rrd})))
         return
     click.echo(f"{episode_id}: a live episode, drawn from its log ({len(roads)} roads, "
                f"{payload['ticks']} ticks; a person is not re-simulated)")

@@ -92,9 +92,9 @@ class LiveStudy:
     def open(self) -> LiveStudy:
         from trustroute.harness.study.expected import expected_values
         from trustroute.harness.study.resume import check_study_dir, finished_episodes
-        from trustroute.harness.study.runner import study_lock, validate_study
+        from trustroute.harness.study.runner import DEFAULT_ATTEMPTS, check_before_writing, study_lock
 
-        validate_study(self.config)
+        check_before_writing(self.config, self.study_dir, None, DEFAULT_ATTEMPTS, False)
         self._stack.enter_context(study_lock(self.study_dir))
         try:
             check_study_dir(self.study_dir, self.config, self.config.content_hash)

@@ -38,7 +38,7 @@ from trustroute.harness.study.expected import expected_values
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import sync_parts, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
-from trustroute.harness.study.resume import check_study_dir, finished_episodes
+from trustroute.harness.study.resume import check_study_dir, finished_episodes, recorded_config_hash
 
 if TYPE_CHECKING:
     from tqdm import tqdm
@@ -251,9 +251,39 @@ def validate_study(config: StudyConfig, scheduler: str | None = None,
                          "pass e.g. --attempts 2")
     if scheduler is not None and scheduler != "local":
         check_scheduler_address(scheduler)
+        check_scheduler_reachable(scheduler)
     engine_function(config.engine)  # fail fast, once, if the engine is missing
     study_context(config, progress)  # every input file, and the policies, once, before any worker
-    plan_episodes(config)
+    check_record_ids(config, plan_episodes(config))
+
+
+def check_before_writing(config: StudyConfig, study_dir: Path, scheduler: str | None, attempts: int,
+                         progress: bool) -> None:
+    """Every refusal of a study run, before its directory, its lock or its mark is written: the
+    inputs and the scheduler (`validate_study`), and a directory that holds another study."""
+    validate_study(config, scheduler, attempts, progress)
+    recorded_config_hash(Path(study_dir), config.content_hash)
+
+
+SCHEDULER_CONNECT_SECONDS = 5.0
+
+
+def check_scheduler_reachable(scheduler: str) -> None:
+    """A tcp:// (or bare HOST:PORT) Dask scheduler accepts connections, checked before anything is
+    written (dask's own client would only fail after its timeout, with the study folder made). Other
+    protocols (tls, ws, inproc, ucx) are left to dask."""
+    import socket
+
+    protocol, _, address = scheduler.rpartition("://")
+    if protocol not in ("", "tcp"):
+        return
+    host, _, port = address.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=SCHEDULER_CONNECT_SECONDS).close()
+    except (OSError, ValueError) as exc:
+        raise InputError("--scheduler", scheduler[:80], f"cannot reach the Dask scheduler ({exc})",
+                         "start one with `dask scheduler` and pass its address, or use --scheduler local"
+                         ) from None
 
 
 def check_scheduler_address(scheduler: str) -> None:
@@ -282,8 +312,8 @@ def run_study(
     "local" for a local Dask cluster of `workers` workers (threads in this process when
     dask_processes is False, which tests use). on_outcome: called after every episode.
     attempts: runs of a failing episode at most (the first and its retries)."""
-    validate_study(config, scheduler, attempts, progress)
     study_dir = Path(study_dir).resolve()
+    check_before_writing(config, study_dir, scheduler, attempts, progress)
     with study_lock(study_dir):
         return _run_locked(config, study_dir, workers, scheduler, progress, on_outcome, dask_processes,
                            attempts)
@@ -386,8 +416,8 @@ def run_and_consolidate(
         raise InputError(config.source_path, "study.engine",
                          "a live study is driven by people, not simulated",
                          "serve it with `trustroute live CONFIG`, or simulate it with --engine sumo")
-    validate_study(config, scheduler, attempts, progress)
     study_dir = Path(study_dir).resolve()
+    check_before_writing(config, study_dir, scheduler, attempts, progress)
     with study_lock(study_dir):
         for _ in range(CONSOLIDATION_ROUNDS):
             run = _run_locked(config, study_dir, workers, scheduler, progress, None, dask_processes, attempts)
