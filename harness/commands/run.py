@@ -153,7 +153,7 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
     written = _write_logs(Path(out_dir), record) if out_dir else {}
     if rrd_path:
         written["rrd"] = Path(rrd_path)
-    if sumo_dir is not None and types is not None:  # types are collected exactly when sumo_dir is given
+    if sumo_dir is not None and types is not None and net is not None:  # (SUMO: the net is known)
         finish_route_file(Path(sumo_dir), types.types)
         written["sumocfg"] = write_sumocfg(Path(sumo_dir), net, seed, sumo_config)
         written["routes"] = Path(sumo_dir) / "routes.rou.xml"

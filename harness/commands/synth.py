@@ -79,11 +79,12 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
           horizon: int | None, time_limit: float, belief_rule: str, quiet: bool, out_path: str | None,
           clusters: str, population_path: str | None, objective: str, as_json: bool) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
-    from trustroute.app.synthesis import SynthesisSettings, synthesize_single
+    from trustroute.app.synthesis import SynthesisSettings, belief_rule_named, synthesize_single
     from trustroute.core.output_files import check_output_file
 
-    settings = SynthesisSettings(tau=tau, time_limit=time_limit, horizon=horizon, belief_rule=belief_rule,
-                                 clusters=clusters, progress=not (as_json or quiet))
+    settings = SynthesisSettings(tau=tau, time_limit=time_limit, horizon=horizon,
+                                 belief_rule=belief_rule_named(belief_rule), clusters=clusters,
+                                 progress=not (as_json or quiet))
     if out_path is not None:
         check_output_file(out_path, "--out", "policy file")
     if population_path is not None and clusters != "auto":
@@ -180,10 +181,11 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
              as_json: bool) -> None:
     """The trust-free baseline for SPEC: shortest route completing its state-only task."""
     from trustroute.app.synthesis import baseline as trust_free_baseline
+    from trustroute.app.synthesis import belief_rule_named
 
     problem = load_problem(spec_path, town_path, driver_path)
     spec = problem.spec
-    found = trust_free_baseline(problem, belief_rule)
+    found = trust_free_baseline(problem, belief_rule_named(belief_rule))
     route, value = found.route, found.value
     payload = {"spec": spec.name, "route": route, "length_m": found.length_m,
                "junctions": len(route) - 1, "satisfaction_probability": value.satisfaction_probability,
@@ -236,7 +238,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     is exact (lower = upper) unless histories were pruned; their live mass is the width.
     """
     from trustroute.app.policy import PolicySettings, policy_for
-    from trustroute.app.synthesis import EvaluationSettings, evaluate_single
+    from trustroute.app.synthesis import EvaluationSettings, belief_rule_named, evaluate_single
 
     if fallback_after < 0:
         raise InputError("--fallback-after", "", f"must be >= 0, got {fallback_after}",
@@ -253,7 +255,8 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
                          "the pruning limits are not used with --population",
                          "drop --max-nodes and --time-limit, or evaluate for --driver")
     settings = EvaluationSettings(fallback_after=None if no_fallback else fallback_after, max_junctions=cap,
-                                  belief_rule=belief_rule, max_nodes=max_nodes, time_limit=time_limit)
+                                  belief_rule=belief_rule_named(belief_rule), max_nodes=max_nodes,
+                                  time_limit=time_limit)
     problem = load_problem(spec_path, town_path, driver_path, population_path)
     if time_limit is not None and not problem.dfa_hidden:
         raise InputError("--time-limit", "", "applies to specs with trust-state atoms only (the others "

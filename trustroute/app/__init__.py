@@ -12,6 +12,9 @@ check) assembles a run through these modules instead of its own copy:
     policy.py    `policy_for(problem, "free" | "aware" | "robust" | "bayes" | path, settings)`
     nets.py      `net_for(town)`: the SUMO net a town drives (built, or the imported net)
     drivers.py   the synthetic driver of an episode, a population's drawn type, episode ids
+    synthesis.py synthesis and exact evaluation with their settings objects, the trust-free baseline
+    spec_check.py, peers.py, towns.py, populations.py
+                 what `spec check`, `peer`, `model`/`net`/`town` and `population`/`fit` assemble
     engines.py   the engine registry (`model`, `sumo`, `live`): each member declares what it can do
     runs.py      whole runs for the API and the CLI: one episode, the packaged policy check
 

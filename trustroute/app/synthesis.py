@@ -30,6 +30,11 @@ from trustroute.policies.synthesis.result import SynthesisResult, SynthesisStats
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
 
 
+def belief_rule_named(name: str) -> BeliefRule:
+    """The AV filter called `name` ("bayes" or "paper"), checked."""
+    return checked_belief_rule(name)
+
+
 @dataclass(frozen=True)
 class SynthesisSettings:
     """A synthesis's settings: target gap, seconds, junction horizon (None: unbounded), the AV's
