@@ -48,3 +48,25 @@ def test_the_station_serves_the_net_an_imported_town_drives(tmp_path):
         assert all(edge in edges for road in town.geometry.values() for edge in road.edges)
     finally:
         study.close()
+
+
+def test_the_replay_of_a_live_episode_on_csomor_draws_on_the_driven_net(tmp_path, capsys):
+    from tests.cli import run_cli
+    from trustroute.harness.live.scripted import ScriptedParticipant
+    from trustroute.harness.study.plan import plan_episodes
+
+    from .test_live_manual import play_in
+
+    (tmp_path / "live.toml").write_text(CSOMOR_LIVE)
+    config = load_study_config(tmp_path / "live.toml")
+    study = LiveStudy(config, tmp_path / "study", ServerOptions(pace=1000.0, warm_up=False)).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            play_in(client, study, ScriptedParticipant(config, 0))
+    finally:
+        study.close()
+    (task,) = plan_episodes(config)
+    rrd = tmp_path / "live.rrd"
+    code, _, err = run_cli(capsys, "replay", str(tmp_path / "study"), task.episode_id, "--rrd", str(rrd))
+    assert code == 0, err
+    assert rrd.stat().st_size > 0
