@@ -108,7 +108,8 @@ class TrustRoutingEnv(gymnasium.Env):
 
     spec: a Spec, a spec file or a packaged spec name ("phi1"). town, driver: objects, files,
     packaged names ("pentagon", "driver_model_performance"), or None for the packaged defaults
-    (the driver model is both the AV's filter model and the synthetic driver's). engine: "model"
+    (a packaged spec's own town: "city5" drives "city"; trustroute/app/inputs.py) (the driver
+    model is both the AV's filter model and the synthetic driver's). engine: "model"
     (fast, no SUMO) or "sumo" (libsumo). junction_cap: the episode is truncated after this many
     junctions. belief_rule: the AV's filter ("bayes" or "paper").
     report_accuracy: the synthetic driver's trust-report accuracy (reports are logged only).
