@@ -21,7 +21,8 @@ def net() -> None:
               "XDG_CACHE_HOME defaulting to ~/.cache).")
 @json_option
 def build(town_path: str | None, out_dir: str | None, as_json: bool) -> None:
-    """Build the town's .net.xml with netconvert, cached by the town's content hash."""
+    """Build the town's .net.xml with netconvert, cached by the town's content hash (a town
+    imported from a net drives that net: it is printed, nothing is built)."""
     from trustroute.app.towns import build_town_net
     from trustroute.core.output_files import check_output_dir
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 from types import SimpleNamespace
 
+import pytest
+
 from trustroute.app import nets
 
 
@@ -28,3 +30,15 @@ def test_a_built_town_net_is_verified_once_per_file_version(town, tmp_path, monk
     assert nets.net_for(town) == net and len(builds) == 2   # replaced: verified again
     net.unlink()
     assert nets.net_for(town) == net and len(builds) == 3   # deleted: rebuilt
+
+
+@pytest.mark.slow   # the csomor town and net are built from packaged plain XML on first use
+def test_an_imported_town_drives_its_own_net_at_every_door(capsys):
+    from tests.cli import cli_json
+    from trustroute.networks.town import load_town
+
+    town = load_town("csomor")
+    driven = nets.net_for(town)
+    assert driven == nets.town_net_file(town)
+    built = cli_json(capsys, "net", "build", "--town", "csomor")
+    assert built["paths"]["net"] == str(driven) and built["edges"] > 1000

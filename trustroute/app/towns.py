@@ -4,16 +4,19 @@ or street (`trustroute model`, `net build`, `town import`, `town roads`)."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
 
 from trustroute.app.inputs import driver_of, town_of
+from trustroute.app.nets import net_for
 from trustroute.core.errors import InputError
 from trustroute.core.validation import read_input_bytes
 from trustroute.networks.cities import ROUTES
+from trustroute.networks.real_net import is_imported
 from trustroute.networks.road_lookup import RoadRow, road_rows, street_names
-from trustroute.networks.sumo_net import NetBuild, build_net
+from trustroute.networks.sumo_net import NetBuild, build_net, net_counts
 from trustroute.networks.town_import import TownImport, import_town
 from trustroute.policies.model.trust_pomdp import build_pomdp
 
@@ -46,8 +49,17 @@ def model_summary(town_path: str | None, driver_path: str | None) -> dict:
 
 
 def build_town_net(town_path: str | None, out_dir: str | None = None) -> NetBuild:
-    """The SUMO net built from a town's junctions and roads (cached by its content hash)."""
-    return build_net(town_of(town_path), Path(out_dir) if out_dir else None)
+    """The SUMO net the town drives: built from its junctions and roads (cached by its content
+    hash), or, for a town imported from a net, that net itself (`net_for`; nothing is built)."""
+    town = town_of(town_path)
+    if not is_imported(town):
+        return build_net(town, Path(out_dir) if out_dir else None)
+    if out_dir is not None:
+        raise InputError("--out", "", f"the town {town.source_path} drives the net it was imported from; "
+                         "nothing is built", "drop --out (the town's net is printed)")
+    started = time.perf_counter()
+    path = net_for(town)
+    return NetBuild(path=path, cached=True, seconds=time.perf_counter() - started, **net_counts(path))
 
 
 def import_town_file(source: str, out: str, incidents_path: str | None, incident_seed: int | None,
