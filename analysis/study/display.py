@@ -83,7 +83,7 @@ def _trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
 
 def _cell_columns(c: pd.DataFrame, other: str) -> dict[str, pd.Series]:
     """The main table's columns; `other`: the belief source whose rate is shown beside."""
-    return {"spec": c["spec"], "condition": c["condition"], "n": c["n"], **_outcome_columns(c),
+    return {"spec": c["spec"], "condition": condition_marked(c), "n": c["n"], **_outcome_columns(c),
             "Wilson 95% CI": interval_column(c, "wilson_low", "wilson_high"),
             f"rate ({other})": c[f"satisfaction_rate_{other}"].map(number_text),
             "exact value [L, U]": interval_column(c, "exact_lower", "exact_upper"),
@@ -91,6 +91,25 @@ def _cell_columns(c: pd.DataFrame, other: str) -> dict[str, pd.Series]:
             **_trust_columns(c),
             "junctions": c["mean_junctions"].map(lambda v: number_text(v, 1)),
             "fallback": c["fallback_rate"].map(lambda v: number_text(v, 2))}
+
+
+FALLBACK_MARK = " (fallback only)"
+
+
+def condition_marked(cells: pd.DataFrame) -> pd.Series:
+    """The condition column, each condition whose policy is only its fallback marked so."""
+    marked = cells.get("fallback_only", pd.Series(False, index=cells.index)).fillna(False).astype(bool)
+    return cells["condition"].where(~marked, cells["condition"] + FALLBACK_MARK)
+
+
+def fallback_only_lines(manifest: dict) -> list[str]:
+    """One warning per (spec, condition) whose policy has no synthesized decision (the study's
+    manifest records them, harness/study/expected.py)."""
+    return [f"Warning: the {condition} policy for {spec} has no synthesized decision (0 rows); it is "
+            f"only its fallback, {entry['fallback_only']}: the condition marked{FALLBACK_MARK} measures "
+            "that fallback, not a synthesized policy."
+            for spec, conditions in (manifest.get("expected") or {}).items()
+            for condition, entry in conditions.items() if entry.get("fallback_only")]
 
 
 def _repeated_columns(r: pd.DataFrame) -> dict[str, pd.Series]:
@@ -159,6 +178,8 @@ def format_table(analysis: StudyAnalysis, width: int | None = TERMINAL_WIDTH) ->
         f"study {analysis.manifest.get('study')} ({analysis.manifest.get('engine')} engine); "
         f"satisfaction on beliefs from: {analysis.belief_source} ({source_label(analysis.belief_source)})",
         width)
+    for warning in fallback_only_lines(analysis.manifest):
+        lines += wrapped_text(warning, width)
     for name, table in display_tables(analysis).items():
         keys = next((i for i, c in enumerate(table.columns) if c not in KEY_COLUMNS), len(table.columns))
         header = [str(c) for c in table.columns]

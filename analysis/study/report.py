@@ -18,7 +18,13 @@ import pandas as pd
 from trustroute.analysis.belief_sources import default_belief_source, source_label
 from trustroute.analysis.formatting import markdown_table
 from trustroute.analysis.study.analysis import StudyAnalysis, study_analysis
-from trustroute.analysis.study.display import TABLE_TITLES, display_tables, format_table, order_test_line
+from trustroute.analysis.study.display import (
+    TABLE_TITLES,
+    display_tables,
+    fallback_only_lines,
+    format_table,
+    order_test_line,
+)
 from trustroute.analysis.study.plots import write_plots
 from trustroute.analysis.study_directory import study_inputs
 from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE, read_roads
@@ -139,6 +145,7 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
     context = {
         "title": f"trustroute study report: {primary.manifest.get('study')}",
         "study_lines": study_lines(primary.manifest),
+        "warnings": fallback_only_lines(primary.manifest),
         "sources_line": sources_line(primary.belief_source, secondary.belief_source, default),
         "analyses": [_analysis_view(primary), _analysis_view(secondary)],
         "titles": TABLE_TITLES,

@@ -130,7 +130,9 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
 
     payload = with_paths({"spec": spec.name, "lower": result.lower, "upper": result.upper, "gap": result.gap,
                           "seconds": result.seconds, "tau": tau, "horizon": horizon,
-                          "belief_rule": belief_rule, "stats": result.stats.to_dict()},
+                          "belief_rule": belief_rule, "stats": result.stats.to_dict(),
+                          "fallback_only": _warn_fallback_only(f"the policy for {spec.name}", result.policy,
+                                                               result.stats.converged)},
                          {"policy": path, "policy_arrays": array_path(path)})
     lines = [f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
              f"{result.seconds:.1f} s)"]
@@ -164,6 +166,16 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
                      f"[{real.lower:.6f}, {real.upper:.6f}]")
     lines.append(f"policy written to {path}")
     emit(as_json, payload, lines)
+
+
+def _warn_fallback_only(what: str, policy, converged: bool) -> bool:
+    """Whether `policy` is only its fallback (no decision row); if so, one line on stderr."""
+    from trustroute.policies.routing.decision_tables import fallback_only, fallback_warning
+
+    fallback = fallback_only(policy)
+    if fallback is not None:
+        click.echo(fallback_warning(what, fallback, converged), err=True)
+    return fallback is not None
 
 
 def _synth_population(spec_path: str, town_path: str | None, population_path: str, objective: str,
@@ -200,10 +212,12 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
                            population=document_entries(found), name=policy_name(found)))
     population_summary = summary(found)
     population_summary.update({"file": population_path, "content_hash": population.content_hash})
+    only = _warn_fallback_only(f"the {objective} policy for {spec.name}", result.policy,
+                               found.gap <= tau)
     payload = with_paths({"spec": spec.name, "lower": found.lower, "upper": found.upper, "gap": found.gap,
                           "seconds": found.seconds, "tau": tau, "horizon": horizon,
                           "belief_rule": belief_rule, "population": population_summary,
-                          "stats": result.stats.to_dict()},
+                          "stats": result.stats.to_dict(), "fallback_only": only},
                          {"policy": path, "policy_arrays": array_path(path)})
     what = "P(satisfied), prior-weighted" if objective == "bayes" else "worst type's P(satisfied)"
     lines = [f"{spec.name} ({population.n_types} driver types, objective {objective}): "
@@ -330,6 +344,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     payload["spec"] = spec.name
     payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)
     payload["expected_junctions"] = finite_or_none(value.expected_junctions)
+    _mark_fallback_only(payload, f"policy {policy_name}", policy)
     lines = [
         f"{spec.name} / {value.policy}: P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], "
         f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
@@ -338,6 +353,18 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     if value.pruning is not None:
         lines.append(_pruning_line(value))
     emit(as_json, payload, lines)
+
+
+def _mark_fallback_only(payload: dict, what: str, policy) -> None:
+    """A synthesized policy that is only its fallback: one line on stderr and `"fallback_only":
+    true` in the JSON (the key only then, so the output of every other policy is unchanged)."""
+    from trustroute.policies.routing.decision_tables import fallback_only
+
+    fallback = fallback_only(policy)
+    if fallback is not None:
+        click.echo(f"warning: {what} has no synthesized decision (0 rows): it is only its fallback, "
+                   f"{fallback}; the values below are the fallback's", err=True)
+        payload["fallback_only"] = True
 
 
 def _pruning_line(value) -> str:
@@ -421,6 +448,7 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
     payload["expected_junctions"] = finite_or_none(value.expected_junctions)
     payload["population"] = {"file": population_path, "content_hash": population.content_hash,
                              "type_values": [t.to_dict() for t in types]}
+    _mark_fallback_only(payload, f"policy {policy_name}", policy)
     emit(as_json, payload, [
         f"{spec.name} / {value.policy} over the population's {population.n_types} driver types: "
         f"P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], E[final trust] = "
