@@ -12,7 +12,7 @@ import click
 
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.core.errors import InputError
-from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
+from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat, synthesis_time_left
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 from trustroute.policies.model.trust_pomdp import checked_belief_rule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
@@ -122,7 +122,8 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     from trustroute.policies.synthesize_spec import synthesize_problem
 
     with synthesis_progress(f"synthesizing {spec.name}", not (as_json or quiet)) as on_iteration:
-        result = synthesize_problem(problem, tau=tau, time_limit=time_limit, horizon=horizon,
+        result = synthesize_problem(problem, tau=tau, time_limit=synthesis_time_left(time_limit),
+                                    horizon=horizon,
                                     belief_rule=checked_belief_rule(belief_rule), on_iteration=on_iteration,
                                     clusters=clusters)
     path = str(save_policy(result, out_path, town, driver, spec))
@@ -203,7 +204,7 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
     with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
                             not (as_json or quiet)) as on_iteration:
         found = synthesize_for_population(town, population, spec, objective, tau=tau,
-                                          time_limit=time_limit, horizon=horizon,
+                                          time_limit=synthesis_time_left(time_limit), horizon=horizon,
                                           belief_rule=checked_belief_rule(belief_rule),
                                           population_source=population_path, on_iteration=on_iteration,
                                           on_phase=phase_lines("synth", not (as_json or quiet)))
