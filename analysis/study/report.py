@@ -140,7 +140,8 @@ def sources_line(lead: str, second: str, default: str, declared: bool = False, n
     if note:
         chosen = note
     elif lead != default:
-        chosen = f"chosen with --belief-source; this study's primary source is {default!r}"
+        chosen = (f"chosen by the caller (--belief-source, or analyze(belief_source=...)); this study's "
+                  f"primary source is {default!r}")
     elif declared:
         chosen = "the primary source the study config declared"
     else:
