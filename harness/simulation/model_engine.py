@@ -3,9 +3,10 @@
 Two paths with the same episode rules (policies/routing/episode_rules.py) and the same driver
 step (participants/driver_step.py: takeover, the AV's performance, trust move, in that order):
 
-- `run_model_episode(setup, policy, driver, episode_id, seed)`: one episode through the very
-  `EpisodeTracker` the SUMO engine uses, with a `SyntheticDriver`; writes the full roads table
-  of the contract (sim times NaN, no kinematics). This is what studies run.
+- `ModelEpisode(setup, policy, driver, episode_id, seed)`: one episode through the very
+  `EpisodeTracker` the SUMO engine uses, with a `SyntheticDriver`, stepped from outside like the
+  SUMO engine's episode (stepping.py); writes the full roads table of the contract (sim times NaN,
+  no kinematics). `run_model_episode` drives it with its policy to the end: what studies run.
 - `simulate_batch(...)`: many episodes at once in numpy (one array row per episode, one loop
   iteration per junction level), returning only the per-episode summaries. Policy decisions
   are asked once per distinct (route, DFA state, AV belief) per level, or once per route when
@@ -31,8 +32,9 @@ import numpy as np
 import pandas as pd
 
 from trustroute.core.dataset import KINEMATICS_SCHEMA, frame_from_table
-from trustroute.harness.simulation.episode import EpisodeRecord
+from trustroute.harness.simulation.episode_record import EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker, episode_model
+from trustroute.harness.simulation.stepping import DecisionPoint, End, run_to_end
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_step import DriverTables, draw_initial_trust, draw_step, driver_tables
@@ -61,29 +63,66 @@ def empty_kinematics() -> pd.DataFrame:
     return frame_from_table(KINEMATICS_SCHEMA.empty_table())
 
 
-def run_model_episode(
-    setup: EpisodeSetup, policy: RoutingPolicy, driver: SyntheticDriver, episode_id: str, seed: int
-) -> EpisodeRecord:
-    """One episode in the trust POMDP. `seed` is recorded by the caller only: every draw is the
+class ModelEpisode:
+    """One episode in the trust POMDP, stepped from outside (stepping.py) like the SUMO engine's:
+    `advance()` drives the chosen road (the driver's step, the tracker's record) and stops at the
+    next decision point or the end. `seed` is recorded by the caller only: every draw is the
     driver's (its Generator), so the episode is a function of the driver's seed."""
-    del seed  # the model engine has no simulator of its own to seed
-    started = time.perf_counter()
-    town = setup.town
-    tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=math.nan)
-    while tracker.next_junction() is not None:
+
+    def __init__(self, setup: EpisodeSetup, policy: RoutingPolicy, driver: SyntheticDriver,
+                 episode_id: str, seed: int) -> None:
+        del seed  # the model engine has no simulator of its own to seed
+        self.started = time.perf_counter()
+        self.setup = setup
+        self.driver = driver
+        self.tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust,
+                                      sim_time=math.nan)
+        self._end: End | None = None
+
+    @property
+    def policy(self) -> RoutingPolicy:
+        return self.tracker.policy
+
+    def advance(self) -> DecisionPoint | End:
+        if self._end is not None:
+            return self._end
+        tracker = self.tracker
         road = tracker.expected_road()
-        assert road is not None
-        incident = town.incident(road)
+        if road is not None:
+            self._drive(road)
+        context = tracker.decision_point()
+        if context is not None:
+            return DecisionPoint(context, self.setup.town.actions(context.road))
+        summary = tracker.summary(wall_seconds=time.perf_counter() - self.started, sim_seconds=math.nan)
+        self._end = End(EpisodeRecord(summary=summary, roads=tracker.roads_frame(),
+                                      kinematics=empty_kinematics()))
+        return self._end
+
+    def choose(self, junction: str) -> None:
+        self.tracker.choose(junction)
+
+    def close(self) -> None:
+        """Nothing to close: the model engine holds no simulator."""
+
+    def _drive(self, road: str) -> None:
+        """The driver's step on `road` (takeover, the AV's performance, trust move, report) and the
+        tracker's record of it."""
+        driver, tracker = self.driver, self.tracker
+        incident = self.setup.town.incident(road)
         before = driver.trust
         took_over = driver.decides_takeover(incident)
         performance = driver.performance(incident)
         after = driver.move_trust(incident, took_over, performance)
         reported = driver.report_trust() if tracker.should_report() else None
-        tracker.record_road(
-            road, incident, took_over, performance, before, after, reported, math.nan, math.nan
-        )
-    summary = tracker.summary(wall_seconds=time.perf_counter() - started, sim_seconds=math.nan)
-    return EpisodeRecord(summary=summary, roads=tracker.roads_frame(), kinematics=empty_kinematics())
+        tracker.record_road(road, incident, took_over, performance, before, after, reported,
+                            math.nan, math.nan)
+
+
+def run_model_episode(
+    setup: EpisodeSetup, policy: RoutingPolicy, driver: SyntheticDriver, episode_id: str, seed: int
+) -> EpisodeRecord:
+    """One episode in the trust POMDP driven by its own policy (`ModelEpisode` stepped to its end)."""
+    return run_to_end(ModelEpisode(setup, policy, driver, episode_id, seed))
 
 
 # -- the vectorised path -------------------------------------------------------------------------

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
+from trustroute.harness.simulation.stepping import run_to_end
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.expected import expected_values
@@ -41,6 +42,7 @@ from trustroute.harness.study.resume import check_study_dir, finished_episodes
 if TYPE_CHECKING:
     from tqdm import tqdm
 
+    from trustroute.harness.simulation.drivers import Driver, PersonControls
     from trustroute.harness.simulation.episode import EpisodeRecord
     from trustroute.harness.simulation.sumo_start import SumoConfig
 
@@ -92,14 +94,16 @@ def recording_path(study_dir: Path, episode_id: str) -> Path:
 
 
 def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path | None = None,
-                        sumo_config: SumoConfig | None = None, driver: object | None = None,
-                        observer: Callable | None = None) -> EpisodeRecord:
+                        sumo_config: SumoConfig | None = None, driver: Driver | None = None,
+                        observer: Callable | None = None, person: PersonControls | None = None
+                        ) -> EpisodeRecord:
     """Run the planned episode `task` exactly as the study runs it: the participant's driver model
     (population draw), the driver's Generator from the task's seed sequence (so the same initial trust
     and every later draw), SUMO's seed, the cell's setup and policy. Returns the EpisodeRecord.
 
-    rrd_path, sumo_config (e.g. sumo-gui) and observer apply to the SUMO engines only ("sumo", and
-    "live", where `driver` is the remote person of harness/live in place of the synthetic driver)."""
+    rrd_path, sumo_config (e.g. sumo-gui), observer and person apply to the SUMO engines only
+    ("sumo", and "live", where `driver` is the remote person of harness/live in place of the
+    synthetic driver and `person` their controls at the wheel)."""
     from trustroute.participants.synthetic_driver import SyntheticDriver
 
     context = study_context(config)
@@ -107,22 +111,20 @@ def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path |
         driver = SyntheticDriver(
             context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
         )
-    options = {}
-    if config.engine in ("sumo", "live"):
-        from trustroute.harness.simulation.sumo_start import SumoConfig
+    setup, policy = context.setup(task.spec, task.condition), context.policies[(task.spec, task.condition)]
+    if config.engine not in ("sumo", "live"):
+        return engine_function(config.engine)(setup, policy, driver, task.episode_id, task.seed)
+    from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode
+    from trustroute.harness.simulation.sumo_start import SumoConfig
 
-        sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
-                              background_vehicles=config.background_vehicles,
-                              route_files=tuple(config.routes))
-        options = {"rrd_path": rrd_path, "config": sumo_config, "observer": observer}
-    return engine_function(config.engine)(
-        context.setup(task.spec, task.condition),
-        context.policies[(task.spec, task.condition)],
-        driver,
-        task.episode_id,
-        task.seed,
-        **options,
-    )
+    sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
+                          background_vehicles=config.background_vehicles,
+                          route_files=tuple(config.routes))
+    if person is None:
+        return engine_function(config.engine)(setup, policy, driver, task.episode_id, task.seed,
+                                              rrd_path=rrd_path, config=sumo_config, observer=observer)
+    options = EpisodeOptions(config=sumo_config, observer=observer, person=person, rrd_path=rrd_path)
+    return run_to_end(SumoEpisode(setup, policy, driver, task.episode_id, task.seed, options))
 
 
 def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeOutcome:
