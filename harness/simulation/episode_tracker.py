@@ -273,14 +273,12 @@ class EpisodeTracker:
                self.setup.belief_rule)
         entry = self._memo.get(key)
         if entry is None:
-            posterior, _ = self._pomdp.belief_update(before, incident_index, h, e, rule=self.belief_rule)
+            # An observation the AV's model deems impossible keeps the prior (TrustPOMDP.filter).
+            posterior, possible = self._pomdp.filter(before, incident_index, h, e, rule=self.belief_rule)
             after = posterior[0]
-            possible = bool(after.sum() > 0)
-            if not possible:
-                # An observation the AV's model deems impossible: keep the prior rather than a zero vector.
-                after = before.copy()
             after.setflags(write=False)
-            entry = _memo_put(self._memo, key, (after, after.tobytes(), self._logged(after), possible))
+            entry = _memo_put(self._memo, key,
+                              (after, after.tobytes(), self._logged(after), bool(possible[0])))
         after, self._belief_bytes, self._belief_logged, possible = entry
         self.belief = after
         if possible:

@@ -211,10 +211,9 @@ class TrustRoutingEnv(gymnasium.Env):
 
         pomdp = build_pomdp(self.town, self.driver_model)
         incident = self.driver_model.incident_index(str(last["incident"]))
-        after = pomdp.belief_update(self._belief, incident, int(bool(last["takeover"])),
-                                    PERFORMANCE_INDEX[str(last["performance"])],
-                                    rule=self._belief_rule)[0][0]
-        return after if after.sum() > 0 else self._belief
+        posterior, _ = pomdp.filter(self._belief, incident, int(bool(last["takeover"])),
+                                    PERFORMANCE_INDEX[str(last["performance"])], rule=self._belief_rule)
+        return posterior[0]
 
     def _final(self, record: EpisodeRecord) -> tuple[dict, float, bool, bool, dict]:
         self._episode = None

@@ -39,7 +39,8 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_step import DriverTables, draw_initial_trust, draw_step, driver_tables
 from trustroute.participants.synthetic_driver import SyntheticDriver
-from trustroute.policies.belief.exact_labels import exact_labels, symbol_code
+from trustroute.policies.belief.av_step import AVStep
+from trustroute.policies.belief.exact_labels import exact_labels
 from trustroute.policies.belief.problem import dfa_is_hidden
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
@@ -276,6 +277,7 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
     # belief labels as the tracker reads them (policies/belief/exact_labels.py): per episode the
     # word of its belief's history
     labels = exact_labels(pomdp, compiled.labeller, sampled.belief_rule)
+    av = AVStep(pomdp, labels, sampled.belief_rule)
     word = np.zeros(count, dtype=np.int64)
     q = np.asarray(labels.step(np.full(count, compiled.dfa.initial), road, belief, word), dtype=np.int64)
     routes: list[tuple[str, ...]] = [(sampled.start,)]
@@ -321,14 +323,9 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
         inc_av = pomdp.road_incident[x2]
         h, e, new_theta = draw_step(sampled.drivers, index[movers], inc_av, theta[movers], rng)
         theta[movers] = new_theta
-        # The AV: Bayes filter on (incident, h, e), then the DFA on (road, new belief).
-        posterior, _ = pomdp.belief_update(belief[movers], inc_av, h, e, rule=sampled.belief_rule)
-        impossible = ~(posterior.sum(axis=1) > 0)
-        posterior[impossible] = belief[movers][impossible]
-        belief[movers] = posterior
-        extended = labels.filter.extend(word[movers], symbol_code(inc_av, h, e))
-        word[movers] = np.where(impossible, word[movers], extended)
-        q[movers] = labels.step(q[movers], x2, posterior, word[movers])
+        # The AV: its filter on (incident, h, e), then the DFA on (road, new belief) (AVStep).
+        belief[movers], word[movers], q[movers], _ = av.step(belief[movers], word[movers], q[movers], x2,
+                                                             (inc_av, h, e))
         road[movers] = x2
         junctions[movers] += 1
         takeovers[movers] += h
