@@ -197,7 +197,9 @@ class SumoEpisode:
         self.commit_at = 0.0                    # where on the current road its commit point is
         self._pending: tuple[_RoadRun, float, float] | None = None  # (run, now, position) to choose at
         self._step: _Step | None = None
+        self._point: DecisionPoint | None = None   # the decision point waiting for its answer
         self._end: End | None = None
+        self._closed = False                      # stopped before its end (close, or an error)
         self._lane_roads: dict[str, str] = {}   # "A-B_1" -> "A-B", ":A_5_0" -> ":A_5"
 
     @property
@@ -213,10 +215,14 @@ class SumoEpisode:
     def advance(self) -> DecisionPoint | End:
         if self._end is not None:
             return self._end
+        if self._closed:
+            raise RuntimeError(f"episode {self.tracker.episode_id} was closed before its end")
         try:
             if self.sumo is None:
                 self._begin()
             elif self._pending is not None:
+                if self.tracker.expected_road() is None:   # not answered yet: the same point
+                    return self._point
                 point = self._resume()
                 if point is not None:
                     return point
@@ -242,6 +248,7 @@ class SumoEpisode:
     def _close_after(self, error: BaseException) -> None:
         """Leave the SUMO session as an error does (the simulation it leaves behind is closed)."""
         stack, self._stack = self._stack, None
+        self._closed = True
         if stack is not None:
             stack.__exit__(type(error), error, error.__traceback__)
 
@@ -344,7 +351,8 @@ class SumoEpisode:
         if context is None:
             return None
         self._pending = (run, now, position)
-        return DecisionPoint(context, self.setup.town.actions(context.road))
+        self._point = DecisionPoint(context, self.setup.town.actions(context.road))
+        return self._point
 
     def extend(self, run: _RoadRun, now: float, position: float) -> _RoadRun:
         """The chosen road after `run` (committed `position` metres into it): the ego's route
@@ -368,9 +376,6 @@ class SumoEpisode:
         """After the choice at the pending decision point: the route extended, then the rest of the
         step; a further decision point or the end when the next road is crossed within the step,
         else None (the loop goes on)."""
-        if self.tracker.expected_road() is None:
-            raise ValueError(f"episode {self.tracker.episode_id}: choose the next junction before "
-                             "advancing")
         run, now, position = self._pending
         self._pending = None
         upcoming = self.extend(run, now, position)

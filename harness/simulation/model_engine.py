@@ -78,6 +78,7 @@ class ModelEpisode:
         self.driver = driver
         self.tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust,
                                       sim_time=math.nan)
+        self._point: DecisionPoint | None = None   # the decision point waiting for its answer
         self._end: End | None = None
 
     @property
@@ -88,12 +89,15 @@ class ModelEpisode:
         if self._end is not None:
             return self._end
         tracker = self.tracker
+        if self._point is not None and tracker.expected_road() is None:   # not answered yet
+            return self._point
         road = tracker.expected_road()
         if road is not None:
             self._drive(road)
         context = tracker.decision_point()
         if context is not None:
-            return DecisionPoint(context, self.setup.town.actions(context.road))
+            self._point = DecisionPoint(context, self.setup.town.actions(context.road))
+            return self._point
         summary = tracker.summary(wall_seconds=time.perf_counter() - self.started, sim_seconds=math.nan)
         self._end = End(EpisodeRecord(summary=summary, roads=tracker.roads_frame(),
                                       kinematics=empty_kinematics()))
