@@ -52,7 +52,8 @@ class PersonControls(Protocol):
     SUMO's manual style and ends at the commit point, as in simulated studies (the scripted
     participant's lockstep)."""
 
-    drives_by_hand: bool
+    @property
+    def drives_by_hand(self) -> bool: ...
 
     def takeover_request(self, now: float) -> bool | None:
         """True: take over, False: hand back, None: neither (asked every step)."""

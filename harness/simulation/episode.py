@@ -29,7 +29,7 @@ import logging
 import math
 import tempfile
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
@@ -37,7 +37,6 @@ from typing import NamedTuple
 import numpy as np
 import pyarrow as pa
 
-from trustroute.core.dataset import INCIDENTS_SCHEMA, table_from_rows
 from trustroute.harness.simulation import incidents as incident_kinds
 from trustroute.harness.simulation import takeover_decision
 from trustroute.harness.simulation.background import BackgroundTraffic, JamRelief, background_routes
@@ -46,11 +45,12 @@ from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style
 from trustroute.harness.simulation.episode_record import EpisodeRecord, StepLog
 from trustroute.harness.simulation.episode_roads import EpisodeRoads, background_vehicles, episode_roads
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
-from trustroute.harness.simulation.incidents import EgoState, Incident, Scene
+from trustroute.harness.simulation.incidents import EgoState, Scene
 from trustroute.harness.simulation.manual_driving import ManualDriving
-from trustroute.harness.simulation.performance import PerformanceMonitor, limits_for, verdict
+from trustroute.harness.simulation.performance import PerformanceMonitor, limits_for
+from trustroute.harness.simulation.road_run import RoadRun, incidents_table
 from trustroute.harness.simulation.stepping import DecisionPoint, End, run_to_end
-from trustroute.harness.simulation.sumo_start import Sumo, SumoConfig, hot_calls, sumo_session
+from trustroute.harness.simulation.sumo_start import HotCalls, Sumo, SumoConfig, hot_calls, sumo_session
 from trustroute.networks.sumo_net import ROAD_SPEED
 from trustroute.networks.town import NO_INCIDENT
 from trustroute.policies.routing.protocol import RoutingPolicy
@@ -87,7 +87,7 @@ class EpisodeOptions:
     net_path: Path | None = None
     config: SumoConfig = field(default_factory=SumoConfig)
     observer: Callable | None = None
-    scene_overrides: Mapping[str, Mapping] = field(default_factory=dict)
+    scene_overrides: dict[str, dict] = field(default_factory=dict)
     person: PersonControls | None = None
     rrd_path: Path | None = None
 
@@ -111,31 +111,6 @@ class _EpisodeStopped(Exception):
     """The episode was closed before its end: its simulation goes as after an error."""
 
 
-@dataclass
-class _RoadRun:
-    """What happens on one road of the episode (mutable while the ego drives it)."""
-
-    index: int
-    road: str
-    kind: str
-    incident: Incident | None = None
-    injected_time: float = math.nan
-    time_in: float = math.nan
-    in_view_time: float = math.nan
-    x: float = math.nan           # where the incident object was when it came into view
-    y: float = math.nan
-    passed_time: float = math.nan
-    removed_time: float = math.nan
-    decided: bool = False
-    took_over: bool = False
-    takeover_start: float = math.nan
-    takeover_end: float = math.nan
-    committed: bool = False
-    next_view_check: float = -math.inf
-    monitor: PerformanceMonitor = field(default_factory=PerformanceMonitor)
-    offsets: dict[str, float] = field(default_factory=dict)   # edge -> where it starts along the road
-
-
 def leader_horizon(config: SumoConfig) -> float:
     """How far ahead the ego's subscription looks for a leader: a leader TTC below a limit needs a
     bumper gap below speed × limit (the closing speed is at most the ego's), and the ego drives at
@@ -151,7 +126,7 @@ def _define_ego_type(sumo) -> None:
     sumo.vehicletype.setSpeedDeviation(EGO_TYPE, 0.0)
 
 
-def _check_missing_ego(now: float, start: str, current: _RoadRun) -> None:
+def _check_missing_ego(now: float, start: str, current: RoadRun) -> None:
     """The ego is not on the net at `now`: an error once it has left (the end of its route was
     reached before the route was extended), or once INSERT_TIMEOUT has passed without it."""
     if not math.isnan(current.time_in):
@@ -164,6 +139,12 @@ def _check_missing_ego(now: float, start: str, current: _RoadRun) -> None:
 class SumoEpisode:
     """One episode on libsumo, stepped from outside (stepping.py). SUMO calls stay in here and in
     the incident, takeover and manual-driving modules."""
+
+    # Set when the first `advance` starts SUMO (`_begin`), and by the loop.
+    sumo: Sumo
+    current: RoadRun                 # the road the ego is on
+    _calls: HotCalls
+    _step: _Step                      # the step a decision point was reached in
 
     def __init__(self, setup: EpisodeSetup, policy: RoutingPolicy, driver: Driver, episode_id: str,
                  seed: int, options: EpisodeOptions | None = None) -> None:
@@ -184,19 +165,16 @@ class SumoEpisode:
         self.manual = (ManualDriving(options.person, EGO_ID, COMMIT_DISTANCE)
                        if options.person is not None and options.person.drives_by_hand else None)
         self.mode = AUTOPILOT.name
-        self.runs: list[_RoadRun] = []
+        self.runs: list[RoadRun] = []
         self.steps = StepLog()         # the kinematics table, one row per step
         self.lengths: dict[str, float] = {}
         self.min_gap = 2.5
         self.defined_types: set = set()   # incident type definers run in this simulation
-        self.sumo: Sumo | None = None
         self._stack: contextlib.ExitStack | None = None
         self._background_step: Callable | None = None
-        self.current: _RoadRun | None = None    # the road the ego is on
-        self.upcoming: _RoadRun | None = None   # the road chosen next, once committed
+        self.upcoming: RoadRun | None = None   # the road chosen next, once committed
         self.commit_at = 0.0                    # where on the current road its commit point is
-        self._pending: tuple[_RoadRun, float, float] | None = None  # (run, now, position) to choose at
-        self._step: _Step | None = None
+        self._pending: tuple[RoadRun, float, float] | None = None  # (run, now, position) to choose at
         self._point: DecisionPoint | None = None   # the decision point waiting for its answer
         self._end: End | None = None
         self._closed = False                      # stopped before its end (close, or an error)
@@ -218,11 +196,11 @@ class SumoEpisode:
         if self._closed:
             raise RuntimeError(f"episode {self.tracker.episode_id} was closed before its end")
         try:
-            if self.sumo is None:
+            if self._stack is None:
                 self._begin()
             elif self._pending is not None:
-                if self.tracker.expected_road() is None:   # not answered yet: the same point
-                    return self._point
+                if self.tracker.expected_road() is None and self._point is not None:
+                    return self._point   # not answered yet: the same point
                 point = self._resume()
                 if point is not None:
                     return point
@@ -253,20 +231,20 @@ class SumoEpisode:
             stack.__exit__(type(error), error, error.__traceback__)
 
     # -- driver and incidents -------------------------------------------------
-    def decide(self, run: _RoadRun, now: float) -> None:
+    def decide(self, run: RoadRun, now: float) -> None:
         self.mode = takeover_decision.decide(self.sumo, EGO_ID, run, self.driver, run.kind, now, self.mode)
 
-    def person_control(self, run: _RoadRun, now: float, request: bool | None) -> None:
+    def person_control(self, run: RoadRun, now: float, request: bool | None) -> None:
         self.mode = takeover_decision.apply_request(self.sumo, EGO_ID, run, request, self.mode, now)
 
-    def new_run(self, index: int, road: str) -> _RoadRun:
+    def new_run(self, index: int, road: str) -> RoadRun:
         kind = self.setup.town.incident(road) if index > 0 else NO_INCIDENT
         limits = limits_for(self.config.performance_limits, kind or "none")
-        return _RoadRun(index=index, road=road, kind=kind,
+        return RoadRun(index=index, road=road, kind=kind,
                         monitor=PerformanceMonitor(ttc_horizon=limits.min_ttc),
                         offsets=self.roads.offsets(road))
 
-    def inject(self, run: _RoadRun, now: float, ego_distance: float) -> None:
+    def inject(self, run: RoadRun, now: float, ego_distance: float) -> None:
         scene = self.roads.place(Scene(
             road=run.road, reverse_road=None, road_length=self.length(run.road), prefix=f"inc{run.index}",
             ego_id=EGO_ID, time=now, ego_distance=ego_distance, rng=self.rng,
@@ -279,12 +257,12 @@ class SumoEpisode:
             log.debug("%s: %s incident on %s as %s", self.tracker.episode_id, run.kind, run.road,
                       ",".join(run.incident.sumo_ids))
 
-    def remove_incident(self, run: _RoadRun, now: float) -> None:
+    def remove_incident(self, run: RoadRun, now: float) -> None:
         if run.incident is not None and math.isnan(run.removed_time):
             run.incident.remove(self.sumo)
             run.removed_time = now
 
-    def watch(self, run: _RoadRun, ego: EgoState) -> None:
+    def watch(self, run: RoadRun, ego: EgoState) -> None:
         """Per-step work for the open road's incident and the driver (only while there is some)."""
         incident = run.incident
         if incident is None:
@@ -310,7 +288,7 @@ class SumoEpisode:
             run.passed_time = ego.time
 
     # -- the road's end -------------------------------------------------------
-    def close_road(self, run: _RoadRun, now: float) -> None:
+    def close_road(self, run: RoadRun, now: float) -> None:
         """The observation of `run` is complete: hand back, trust moves, the tracker records it."""
         if not run.decided:
             self.decide(run, now)   # the incident never came into view: decide now, as the model does
@@ -323,13 +301,13 @@ class SumoEpisode:
         self.tracker.record_road(run.road, run.kind, run.took_over, performance, trust_before,
                                  trust_after, reported, run.time_in, now)
 
-    def watch_open(self, run: _RoadRun, ego: EgoState) -> None:
+    def watch_open(self, run: RoadRun, ego: EgoState) -> None:
         """`watch` the open road while there is something to watch (its incident is live, or, with
         none, the driver has still to decide)."""
         if not run.decided if run.incident is None else math.isnan(run.removed_time):
             self.watch(run, ego)
 
-    def measure(self, run: _RoadRun, ego: EgoState | None, speed: float, accel: float, leader,
+    def measure(self, run: RoadRun, ego: EgoState | None, speed: float, accel: float, leader,
                 step: float) -> None:
         """One step of the AV's performance on the open road (called while it drives on autopilot)."""
         collided = (self.colliding_number() > 0
@@ -338,10 +316,10 @@ class SumoEpisode:
         if ego is not None and run.incident is not None:
             run.incident.measure(self.sumo, ego, run.monitor)
 
-    def limits(self, run: _RoadRun):
+    def limits(self, run: RoadRun):
         return limits_for(self.config.performance_limits, run.kind or "none")
 
-    def commit(self, run: _RoadRun, now: float, position: float) -> DecisionPoint | None:
+    def commit(self, run: RoadRun, now: float, position: float) -> DecisionPoint | None:
         """At the commit point of `run` (`position` metres into the road): close it; the decision
         point of the next junction, or None when the episode is over."""
         run.committed = True
@@ -354,12 +332,14 @@ class SumoEpisode:
         self._point = DecisionPoint(context, self.setup.town.actions(context.road))
         return self._point
 
-    def extend(self, run: _RoadRun, now: float, position: float) -> _RoadRun:
+    def extend(self, run: RoadRun, now: float, position: float) -> RoadRun:
         """The chosen road after `run` (committed `position` metres into it): the ego's route
         extended into it and its run begun, its incident injected; a road the ego may cross within
         a step is entered at once instead (its observation, which ends at its commit point before
         its start, is empty: it is committed at once too)."""
-        nxt = self.setup.town.successor(run.road, self.tracker.next_junction())
+        junction = self.tracker.next_junction()
+        assert junction is not None   # (extended only after the choice)
+        nxt = self.setup.town.successor(run.road, junction)
         detour = self.roads.extend_route(self.sumo, EGO_ID, run.road, nxt)
         if detour:
             log.info("%s: the net has no turn from %s into %s: driving %s between",
@@ -376,14 +356,16 @@ class SumoEpisode:
         """After the choice at the pending decision point: the route extended, then the rest of the
         step; a further decision point or the end when the next road is crossed within the step,
         else None (the loop goes on)."""
+        assert self._pending is not None   # (advance resumes only a pending decision point)
         run, now, position = self._pending
         self._pending = None
         upcoming = self.extend(run, now, position)
         if not math.isnan(upcoming.time_in):   # crossed within the step
             point = self.commit(upcoming, now, 0.0)
-            return point if point is not None else self._finish(ended=True)
+            return point if point is not None else self._end_after_step()
         self.upcoming = upcoming
-        return self._finish(ended=False)
+        self._go_on_after_step()
+        return None
 
     # -- the loop -------------------------------------------------------------
     def insert_ego(self) -> Callable | None:
@@ -498,7 +480,7 @@ class SumoEpisode:
                 self._step = _Step(now, road, position, x, y, speed, lane, result[angle_id],
                                    result[accel_id], open_run.road)
                 point = self.commit(current, now, along + position)
-                return point if point is not None else self._finish(ended=True)
+                return point if point is not None else self._end_after_step()
             # Logged after this step's decisions, so `mode` is the control the ego drives on with.
             log_floats((now, x, y, speed))
             log_lane(lane)
@@ -522,20 +504,23 @@ class SumoEpisode:
         raise RuntimeError(f"episode {self.tracker.episode_id} still running after "
                            f"{self.config.max_sim_seconds:.0f} s of sim time on {road}")
 
-    def _finish(self, ended: bool) -> End | None:
-        """The rest of the step a decision was taken in: its log row, the observer; then the end
-        (`ended`), else None."""
-        step, self._step = self._step, None
+    def _complete_step(self) -> None:
+        """The rest of the step a decision was taken in: its log row, then the observer."""
+        step = self._step
         self.steps.floats.extend((step.now, step.x, step.y, step.speed))
         self.steps.lanes.append(step.lane)
         self.steps.modes.append(self.mode)
         if self.observer is not None or self.manual is not None:
             self._after_step(step)
-        if ended:
-            return self._ended(step.now)
-        if step.now > self.config.max_sim_seconds:
-            self._too_long(step.now, step.road)
-        return None
+
+    def _end_after_step(self) -> End:
+        self._complete_step()
+        return self._ended(self._step.now)
+
+    def _go_on_after_step(self) -> None:
+        self._complete_step()
+        if self._step.now > self.config.max_sim_seconds:
+            self._too_long(self._step.now, self._step.road)
 
     def _ended(self, sim_seconds: float) -> End:
         stack, self._stack = self._stack, None
@@ -555,30 +540,7 @@ class SumoEpisode:
         return self._end
 
     def incidents_table(self) -> pa.Table:
-        """One row per road with an incident object or a takeover (row 0, the start road, never)."""
-        rows = []
-        for run in self.runs:
-            if run.index == 0 or (run.incident is None and not run.took_over):
-                continue
-            monitor, incident = run.monitor, run.incident
-            failed = monitor.failed_measures(self.limits(run))
-            rows.append({
-                "episode_id": self.tracker.episode_id, "index": run.index, "directed_road": run.road,
-                "incident": run.kind,
-                "sumo_ids": ",".join(incident.sumo_ids) if incident is not None else None,
-                # NaN is a null in these (the times and places of what never happened)
-                "injected_time": run.injected_time, "in_view_time": run.in_view_time, "x": run.x, "y": run.y,
-                "passed_time": run.passed_time, "removed_time": run.removed_time,
-                "takeover": run.took_over, "takeover_start": run.takeover_start,
-                "takeover_end": run.takeover_end,
-                "performance": verdict(failed),
-                "min_ttc": monitor.min_ttc, "max_deceleration": monitor.max_deceleration,
-                "collided": monitor.collided, "min_head_on_ttc": monitor.min_head_on_ttc,
-                "min_pedestrian_distance": monitor.min_pedestrian_distance, "time_lost": monitor.time_lost,
-                "failed_measures": ",".join(failed) or None,
-                "scene": incident.details() if incident is not None else None,
-            })
-        return table_from_rows(rows, INCIDENTS_SCHEMA)
+        return incidents_table(self.runs, self.tracker.episode_id, self.config.performance_limits)
 
     def kinematics_table(self) -> pa.Table:
         return self.steps.table(self.tracker.episode_id)
