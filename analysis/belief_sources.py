@@ -103,10 +103,7 @@ def refiltered(roads: pd.DataFrame, model: DriverModel, town: Town) -> pd.DataFr
     beliefs[:, 0] = model.initial_belief
     for t in range(1, horizon):
         before = beliefs[:, t - 1]
-        posterior, _ = pomdp.belief_update(before, incident[:, t], takeover[:, t], performance[:, t])
-        dead = posterior.sum(axis=1) <= 0
-        posterior[dead] = before[dead]
-        beliefs[:, t] = posterior
+        beliefs[:, t] = pomdp.filter(before, incident[:, t], takeover[:, t], performance[:, t])[0]
     marginal = trust_marginal(model, beliefs[row, col])
     return roads.assign(belief_after=list(marginal))
 
