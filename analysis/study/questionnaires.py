@@ -1,6 +1,6 @@
 """Questionnaire scores of a live study (questionnaires.parquet): per questionnaire and condition
 the mean score, its spread and Cronbach's alpha, and the paired test of the single trust rating
-(Wilcoxon signed-rank on each participant's mean score per condition) between two conditions.
+(Wilcoxon signed-rank on each participant's mean score per condition) for every pair of conditions.
 
 A response's score is the mean of its items, reversed items turned (scale_min + scale_max -
 value): Jian et al.'s scale on 1-7 with its five distrust items reversed, raw NASA-TLX on 0-100.
@@ -44,9 +44,9 @@ def responses(answers: pd.DataFrame) -> tuple[pd.DataFrame, dict[tuple, np.ndarr
 
 
 def questionnaire_tables(study_dir: Path, episodes: pd.DataFrame,
-                         pair: tuple[str, str] | None) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(scores per questionnaire and condition, paired tests per questionnaire); empty frames for a
-    study without questionnaires."""
+                         pairs: list[tuple[str, str]]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(scores per questionnaire and condition, paired tests per questionnaire and pair of
+    conditions); empty frames for a study without questionnaires."""
     from trustroute.core.dataset import QUESTIONNAIRES_FILE, read_questionnaires
 
     if not (Path(study_dir) / QUESTIONNAIRES_FILE).exists():
@@ -67,9 +67,8 @@ def questionnaire_tables(study_dir: Path, episodes: pd.DataFrame,
                      "sd_score": finite_or_none(group["score"].std(ddof=1)) if len(group) > 1 else None,
                      "cronbach_alpha": cronbach_alpha(items)})
     tests = []
-    if pair is not None:
-        a, b = pair
-        for name, group in scored[scored["condition"].isin(pair)].groupby("questionnaire", sort=True):
+    for a, b in pairs:
+        for name, group in scored[scored["condition"].isin((a, b))].groupby("questionnaire", sort=True):
             wide = group.pivot_table(index="participant", columns="condition", values="score", aggfunc="mean")
             if a in wide and b in wide:
                 wx = wilcoxon_paired(wide[a].to_numpy(dtype=float), wide[b].to_numpy(dtype=float))

@@ -98,12 +98,14 @@ def warm_up_plan(town: Town, start: str, study_seed: int, participant: int) -> t
     return route, draw_incidents(town, route, rng)
 
 
-def run_warm_up(config, task, driver, observer):
+def run_warm_up(config, task, driver, observer, person=None):
     """The warm-up episode `task` (server.warm_up_task) on its drawn route and incidents, with the
-    remote `driver`; the EpisodeRecord."""
+    remote `driver` (and `person`, their controls at the wheel, as run_planned_episode takes them);
+    the EpisodeRecord."""
+    from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode
+    from trustroute.harness.simulation.stepping import run_to_end
     from trustroute.harness.simulation.sumo_start import SumoConfig
     from trustroute.harness.study.context import study_context
-    from trustroute.harness.study.runner import engine_function
 
     setup = study_context(config).setup(task.spec, task.condition)
     town = setup.town
@@ -111,6 +113,6 @@ def run_warm_up(config, task, driver, observer):
     drawn = DrawnTown(**{f.name: getattr(town, f.name) for f in fields(Town) if f.init}, drawn=incidents)
     sumo_config = replace(SumoConfig(), background_vehicles=config.background_vehicles,
                           route_files=tuple(config.routes))
-    return engine_function(config.engine)(replace(setup, town=drawn, junction_cap=len(route)),
-                                          DrawnRoute(route), driver, task.episode_id, task.seed,
-                                          rrd_path=None, config=sumo_config, observer=observer)
+    options = EpisodeOptions(config=sumo_config, observer=observer, person=person)
+    warm_up = replace(setup, town=drawn, junction_cap=len(route))
+    return run_to_end(SumoEpisode(warm_up, DrawnRoute(route), driver, task.episode_id, task.seed, options))
