@@ -169,5 +169,5 @@ def test_every_format_exposes_its_accepted_keys():
     assert keys(spec.TYPE_BELIEF_FIELDS) == ("types", "above")
     assert config.TABLES == ("study", "population", "drivers", "questionnaires")
     assert config.DRIVERS_KEYS == ("population",)
-    assert len(config.STUDY_KEYS) == 20 and config.STUDY_KEYS[:5] == ("participants", "seed", "engine",
+    assert len(config.STUDY_KEYS) == 21 and config.STUDY_KEYS[:5] == ("participants", "seed", "engine",
                                                                      "specs", "conditions")
