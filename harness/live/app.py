@@ -47,7 +47,11 @@ from trustroute.harness.live.server import LiveStudy
 from trustroute.harness.live.session import Session
 
 PAGES = Path(__file__).with_name("pages")
-STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js": "text/javascript"}
+# The driver's view renders with three.js, shipped in pages/vendor/ with its licence (pinned:
+# docs/live_studies.md), so no page loads a script from elsewhere.
+STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js": "text/javascript",
+          "driver_view.js": "text/javascript", "map_view.js": "text/javascript",
+          "vendor/three.module.js": "text/javascript", "vendor/three.core.js": "text/javascript"}
 # Every response: no framing, no sniffing, no referrer (a participant link carries a token), and
 # scripts, styles and sockets from this server only.
 SECURITY_HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
@@ -167,7 +171,7 @@ def station() -> FileResponse:
     return FileResponse(PAGES / "station.html", media_type="text/html")
 
 
-@router.get("/static/{name}")
+@router.get("/static/{name:path}")
 def static(name: str) -> FileResponse:
     if name not in STATIC:
         raise refused(404, "not_found", "no such file")
@@ -268,7 +272,8 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str) ->
 
     sender = asyncio.create_task(send_all())
     bucket = TokenBucket()
-    offer(queue, {"type": "welcome", "participant": session.participant, "consent": consent_text})
+    offer(queue, {"type": "welcome", "participant": session.participant, "consent": consent_text,
+                  "view": session.study.config.live_view})
     offer(queue, session.progress())
     session.attach(push)
     try:

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from trustroute.harness.live.view import dead_reckoned, next_junction, surroundings
+from trustroute.harness.live.view import Statics, dead_reckoned, ego_view, next_junction, surroundings
 from trustroute.harness.simulation.driving_style import MANUAL, allow_oncoming_pass, set_speed
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import reports_after_road
@@ -100,6 +100,7 @@ class RemoteDriver:
         self.predicted = False             # the last frame sent was dead-reckoned
         self.hurry = False                 # a control to apply at once: the next step does not wait
         self.awaiting_report = False       # the last prompt for a report has had no answer yet
+        self.statics = Statics()           # the frames' handles and sizes of the objects seen
 
     # -- the driver protocol (harness/simulation/episode.py) ------------------------------------
     @property
@@ -208,7 +209,8 @@ class RemoteDriver:
             self.shown = {"type": "frame", "t": ego.time, "x": ego.x, "y": ego.y, "angle": ego.angle,
                           "speed": ego.speed, "road": road, "lane": ego.lane, "mode": mode,
                           "junction": next_junction(road),
-                          **surroundings(sumo, EGO_ID, ego.x, ego.y)}
+                          **surroundings(sumo, EGO_ID, ego.x, ego.y, self.statics),
+                          **ego_view(sumo, EGO_ID, self.statics)}
             self.send(self.shown)
 
     def wait_for_the_wall_clock(self, step_time: float) -> bool:

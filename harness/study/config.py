@@ -26,6 +26,8 @@ variation of the drivers (participants.population.PopulationConfig; omitted: eve
 nominal model, reporting trust with accuracy 0.8). Optional `[drivers]` table: `population`, a
 driver-population file (docs/driver_type_studies.md) from which each participant's true type is drawn; the
 participant's model is that type's model (varied around it by `[population]` when given).
+Optional `[live]` table (engine "live"): `view`, what the participant station shows, "driver"
+(the first-person driver's view, the default) or "map" (the top-down view alone).
 
 Every key, its default and its check: docs/formats/study_config.md.
 
@@ -68,6 +70,7 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 DEFAULT_STUDIES_DIR = Path("studies")
 ENGINES: tuple[str, ...] = ("sumo", "model", "live")  # "live": `trustroute live`, people in the loop
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
+LIVE_VIEWS: tuple[str, ...] = ("driver", "map")   # [live] view: the participant station's view
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
 
 
@@ -98,6 +101,7 @@ class StudyConfig:
     robust_population: str | None = None   # the "robust" condition's population file (absolute)
     robust_objective: str = "robust"       # its objective: "robust" (worst type) or "bayes"
     driver_population: str | None = None  # [drivers] population: absolute path of the population file
+    live_view: str = "driver"               # [live] view: the participant station's view
 
     def __hash__(self) -> int:
         # Every field, [population] included: configs that differ only there must never share a
@@ -136,6 +140,8 @@ class StudyConfig:
             del settings["driver_population"]  # a study without [drivers] hashes without it
         if not settings["routes"]:
             del settings["routes"]  # a study without background routes hashes without it
+        if settings["live_view"] == "driver":
+            del settings["live_view"]  # the default view hashes as a config without [live]
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():
@@ -231,6 +237,13 @@ class StudyConfigValues(TypedDict):
     study: dict[str, object]
     population: dict[str, object] | None
     drivers: dict[str, object] | None
+    live: dict[str, object] | None
+
+
+class LiveValues(TypedDict):
+    """The [live] table's checked values (LIVE_FIELDS)."""
+
+    view: str
 
 
 FileKey = Literal["town", "driver_model", "robust_population"]  # the [study] keys naming a file (FILE_FIX)
@@ -275,6 +288,7 @@ FIELDS = field_table(
     # checked in full by participants.population (population_config_from_dict)
     Field(key="population", kind=Table(), problem="expected a table", fix="write a [population] table"),
     Field(key="drivers", kind=Table(), problem="expected a table", fix='write [drivers] population = "FILE"'),
+    Field(key="live", kind=Table(), problem="expected a table", fix='write [live] view = "driver"'),
 )
 TABLES: tuple[str, ...] = keys(FIELDS)
 _ENTRIES = ListOf(item=Text(), min_items=1, distinct=True)
@@ -341,6 +355,11 @@ DRIVERS_FIELDS = field_table(
     Field(key="population", kind=_FILE, required=True, problem=_file_path, fix=DRIVERS_FIX),
 )
 DRIVERS_KEYS: tuple[str, ...] = keys(DRIVERS_FIELDS)
+LIVE_FIELDS = field_table(
+    LiveValues,
+    Field(key="view", kind=OneOf(choices=LIVE_VIEWS, noun="view"), default="driver",
+          fix='use view = "driver" (the first-person view) or "map" (the top-down view)'),
+)
 
 
 # -- rules ----------------------------------------------------------------------------------------------
@@ -454,6 +473,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         robust_population=_robust_population(study, conditions, base, source),
         robust_objective=study["robust_objective"],
         driver_population=_driver_population(tables["drivers"], base, source),
+        live_view=check_fields(tables["live"] or {}, LIVE_FIELDS, source, "study config", "live")["view"],
     )
 
 
