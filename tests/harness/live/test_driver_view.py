@@ -20,17 +20,15 @@ import httpx
 import numpy as np
 import pytest
 
+from tests.browser import chromium_executable
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 from trustroute.harness.simulation.incidents.oncoming import TRUCK_TYPE
 
 from .conftest import tiny_config
-from .test_browser import chromium
+from .test_browser import CHROMIUM_ARGS
 
 pytestmark = pytest.mark.slow
 
-WEBGL_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-              "--ignore-gpu-blocklist", "--disable-quic", "--no-first-run", "--disable-background-networking",
-              "--disable-component-update", "--disable-sync"]
 # the camera model of driver_view.js; the test checks the page uses these numbers
 CAMERA = {"eyeBack": 1.9, "eyeLeft": 0.35, "eyeHeight": 1.2, "fov": 40, "near": 0.3, "far": 600}
 SKY, ASPHALT, GRASS = (169, 207, 238), (74, 77, 80), (135, 169, 107)
@@ -82,7 +80,7 @@ def station(tmp_path_factory):
                          headers={"Authorization": f"Bearer {study.experimenter_token}"}).json()
     try:
         with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=chromium(), args=WEBGL_ARGS)
+            browser = playwright.chromium.launch(executable_path=chromium_executable(), args=CHROMIUM_ARGS)
             page = browser.new_context(viewport={"width": 1000, "height": 800}).new_page()
             sockets = []
             page.route_web_socket("**/ws", lambda ws: sockets.append(ws))   # answered by the test
