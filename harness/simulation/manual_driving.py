@@ -6,9 +6,11 @@ pose is the ego's in SUMO.
   in sub-steps of at most 1 / MODEL_RATE seconds with the controls held over the call.
 - `ManualDriving.step(sumo, controls, seconds)`: one SUMO step of the person's driving: the model
   integrated over the step, the ego placed at the model's pose for the next simulation step with
-  `vehicle.moveToXY(..., keepRoute=KEEP_ROUTE_FREE)` (it may leave its lane, cross into the
-  oncoming lane and leave the road: SUMO maps it to the nearest lane, or none), and what the
-  previous step's placement led to reported as events.
+  `vehicle.moveToXY(..., keepRoute=KEEP_ROUTE_FREE)` where that pose is on its road or the
+  oncoming one (it may leave its lane and cross into the oncoming lane), and with
+  keepRoute=KEEP_ROUTE elsewhere (off the road, in a junction: SUMO keeps the ego at the nearest
+  place on its route, which the episode needs); what the previous step's placement led to is
+  reported as events.
 - SUMO's free placement replaces the ego's route by the edge it was mapped to (the oncoming road,
   say); once the ego is back on an edge of its planned route, `ManualDriving` gives SUMO the
   planned route again from there (`restore_route`), so the episode's routing goes on.
@@ -23,8 +25,8 @@ Events (dicts with `t`, `type` and details), each logged when it begins:
   keeps control, and a hand-back gives the ego to the autopilot where it stands. The episode goes
   on, as it does after SUMO's own collisions in simulated studies (`--collision.action warn`).
 
-`can_hand_back` is the paper's hand-back rule for a person driving this way: the autopilot takes
-over again only with the ego on a lane of its planned route.
+`ManualDriving.may_hand_back` is the paper's hand-back rule for a person driving this way: the
+autopilot takes over again only with the ego on a lane of its planned route (by the model's pose).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 MODEL_RATE = 50.0            # Hz: the model's integration rate (at least 20 Hz whatever SUMO's step)
+KEEP_ROUTE = 1               # moveToXY: the nearest place on the ego's route
 KEEP_ROUTE_FREE = 2          # moveToXY: any lane, and off the net too
 PERSON_RADIUS = 0.3          # m: a person's footprint is a square of this half side
 NEAR = 25.0                  # m: objects farther than this from the ego are not tested for contact
@@ -128,19 +131,6 @@ def overlaps(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> bool
     return True
 
 
-def can_hand_back(sumo, vehicle_id: str, route: list[str]) -> bool:
-    """The hand-back rule: the ego is on a lane of its planned route (not the oncoming lane, not
-    off the road)."""
-    lane = sumo.vehicle.getLaneID(vehicle_id)
-    if not lane or lane.startswith(":"):
-        return bool(lane)   # inside a junction on its way: the route goes on from there
-    return sumo.lane.getEdgeID(lane) in route and on_lane(sumo, vehicle_id, lane)
-
-
-def on_lane(sumo, vehicle_id: str, lane: str) -> bool:
-    return abs(sumo.vehicle.getLateralLanePosition(vehicle_id)) <= sumo.lane.getWidth(lane) / 2
-
-
 def off_road(sumo, x: float, y: float) -> bool:
     """Whether (x, y) is on no lane open to cars: farther from the nearest one's centre line than
     half its width."""
@@ -200,9 +190,24 @@ class ManualDriving:
         if not self.touching:   # against what it hit, the car stands (until the hand-back)
             self.pose = integrate(self.pose, controls, seconds, self.params)
         pose = self.pose
-        sumo.vehicle.moveToXY(self.vehicle_id, "", -1, pose.x, pose.y, pose.angle, KEEP_ROUTE_FREE)
+        sumo.vehicle.moveToXY(self.vehicle_id, "", -1, pose.x, pose.y, pose.angle, self.placement(sumo))
         sumo.vehicle.setSpeed(self.vehicle_id, self.pose.speed)
         return self.pose
+
+    @property
+    def may_hand_back(self) -> bool:
+        return self.where == "own_lane"
+
+    def placement(self, sumo) -> int:
+        """Free placement on the ego's road and the oncoming one; anywhere else (off the road, a
+        junction, another road) SUMO keeps the ego on its route, so the episode's road and route
+        stay sound; the events and the person's view follow the model's pose all the same."""
+        fx, fy = forward(self.pose.angle)
+        centre = (self.pose.x - fx * self.length / 2, self.pose.y - fy * self.length / 2)
+        if off_road(sumo, *centre):
+            return KEEP_ROUTE
+        edge = sumo.simulation.convertRoad(*centre, False, "passenger")[0]
+        return KEEP_ROUTE_FREE if edge in self.route or self.opposite(edge) else KEEP_ROUTE
 
     def observe(self, sumo, now: float) -> None:
         lane = sumo.vehicle.getLaneID(self.vehicle_id)
@@ -214,7 +219,7 @@ class ManualDriving:
     def locate(self, sumo, lane: str, now: float) -> None:
         fx, fy = forward(self.pose.angle)
         centre = (self.pose.x - fx * self.length / 2, self.pose.y - fy * self.length / 2)
-        if not lane or off_road(sumo, *centre):
+        if not lane or off_road(sumo, *centre):   # by the model's pose: SUMO keeps the ego on the net
             where = "off_road"
         elif lane.startswith(":") or sumo.lane.getEdgeID(lane) in self.route:
             where = "own_lane"

@@ -27,7 +27,9 @@ nominal model, reporting trust with accuracy 0.8). Optional `[drivers]` table: `
 driver-population file (docs/driver_type_studies.md) from which each participant's true type is drawn; the
 participant's model is that type's model (varied around it by `[population]` when given).
 Optional `[live]` table (engine "live"): `view`, what the participant station shows, "driver"
-(the first-person driver's view, the default) or "map" (the top-down view alone).
+(the first-person driver's view, the default) or "map" (the top-down view alone); `driving`, how a
+person in control drives, "assisted" (pedal keys and a pull-out to pass, the default) or
+"continuous" (steering wheel and pedals, or their keyboard stand-ins).
 
 Every key, its default and its check: docs/formats/study_config.md.
 
@@ -71,6 +73,7 @@ DEFAULT_STUDIES_DIR = Path("studies")
 ENGINES: tuple[str, ...] = ("sumo", "model", "live")  # "live": `trustroute live`, people in the loop
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
 LIVE_VIEWS: tuple[str, ...] = ("driver", "map")   # [live] view: the participant station's view
+LIVE_DRIVING: tuple[str, ...] = ("assisted", "continuous")   # [live] driving: how a person drives
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
 
 
@@ -102,6 +105,7 @@ class StudyConfig:
     robust_objective: str = "robust"       # its objective: "robust" (worst type) or "bayes"
     driver_population: str | None = None  # [drivers] population: absolute path of the population file
     live_view: str = "driver"               # [live] view: the participant station's view
+    live_driving: str = "assisted"          # [live] driving: pedals and pull-out, or wheel and pedals
 
     def __hash__(self) -> int:
         # Every field, [population] included: configs that differ only there must never share a
@@ -140,8 +144,9 @@ class StudyConfig:
             del settings["driver_population"]  # a study without [drivers] hashes without it
         if not settings["routes"]:
             del settings["routes"]  # a study without background routes hashes without it
-        if settings["live_view"] == "driver":
-            del settings["live_view"]  # the default view hashes as a config without [live]
+        for key, default in (("live_view", "driver"), ("live_driving", "assisted")):
+            if settings[key] == default:
+                del settings[key]  # a default hashes as a config without [live]
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():
@@ -244,6 +249,7 @@ class LiveValues(TypedDict):
     """The [live] table's checked values (LIVE_FIELDS)."""
 
     view: str
+    driving: str
 
 
 FileKey = Literal["town", "driver_model", "robust_population"]  # the [study] keys naming a file (FILE_FIX)
@@ -359,6 +365,8 @@ LIVE_FIELDS = field_table(
     LiveValues,
     Field(key="view", kind=OneOf(choices=LIVE_VIEWS, noun="view"), default="driver",
           fix='use view = "driver" (the first-person view) or "map" (the top-down view)'),
+    Field(key="driving", kind=OneOf(choices=LIVE_DRIVING, noun="way of driving"), default="assisted",
+          fix='use driving = "assisted" (pedal keys, pull out to pass) or "continuous" (wheel and pedals)'),
 )
 
 
@@ -435,6 +443,12 @@ def _robust_population(study: StudyValues, conditions: tuple[str, ...], base: Pa
     return robust_population
 
 
+def _live(table: dict[str, object] | None, source: str) -> dict[str, str]:
+    """The [live] table's StudyConfig fields."""
+    live = check_fields(table or {}, LIVE_FIELDS, source, "study config", "live")
+    return {"live_view": live["view"], "live_driving": live["driving"]}
+
+
 def study_config_from_dict(data: object, source: str = "<study>", base: Path | None = None) -> StudyConfig:
     """Validate a parsed study document; relative paths resolve against `base`, then the cwd."""
     base = base if base is not None else Path.cwd()
@@ -473,7 +487,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         robust_population=_robust_population(study, conditions, base, source),
         robust_objective=study["robust_objective"],
         driver_population=_driver_population(tables["drivers"], base, source),
-        live_view=check_fields(tables["live"] or {}, LIVE_FIELDS, source, "study config", "live")["view"],
+        **_live(tables["live"], source),
     )
 
 

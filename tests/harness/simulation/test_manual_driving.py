@@ -13,7 +13,6 @@ from trustroute.harness.simulation.manual_driving import (
     ManualDriving,
     Pose,
     VehicleParams,
-    can_hand_back,
     corners,
     integrate,
     overlaps,
@@ -108,7 +107,7 @@ def drive(net, program, obstacle=None):
                 sumo.simulationStep()
                 x, y = sumo.vehicle.getPosition("ego")
                 trace.append((sumo.simulation.getTime(), x, y, sumo.vehicle.getLaneID("ego"),
-                              tuple(sumo.vehicle.getRoute("ego")), can_hand_back(sumo, "ego", driving.route)))
+                              tuple(sumo.vehicle.getRoute("ego")), driving.may_hand_back))
         driving.observe(sumo, sumo.simulation.getTime())
     return trace, driving
 
@@ -124,7 +123,8 @@ def test_a_person_steers_into_the_oncoming_lane_and_back_and_the_route_is_kept(n
     first, last = lanes.index("E-A_1"), len(lanes) - 1 - lanes[::-1].index("E-A_1")
     assert all(lane == "E-A_1" for lane in lanes[first:last + 1])   # one pass, no flicker
     assert trace[-1][4] == ("A-E",)                                   # the planned route again
-    assert not any(hand_back for *_, hand_back in trace[first:last + 1])   # no hand-back while passing
+    # no hand-back while passing (the rule reads where the previous step put the ego)
+    assert not any(hand_back for *_, hand_back in trace[first + 1:last + 2])
     assert trace[-1][5]
     times = [t for t, *_ in trace]
     assert max(b - a for a, b in zip(times, times[1:], strict=False)) == pytest.approx(0.1)   # 10 Hz in SUMO
@@ -146,3 +146,12 @@ def test_steering_into_a_parked_truck_is_a_collision_and_stops_the_car(net):
     assert driving.pose.speed == 0.0   # stopped at the crash, and standing against the truck since
     crash = next(i for i, step in enumerate(trace) if step[0] >= collisions[0]["t"])
     assert {(x, y) for _, x, y, *_ in trace[crash + 1:]} == {trace[crash + 1][1:3]}
+
+
+def test_leaving_the_road_is_an_event_and_sumo_keeps_the_ego_on_its_route(net):
+    program = [(1.2, Controls(steer=0.3, throttle=0.1)), (1.2, Controls(steer=-0.3, throttle=0.1)),
+               (1.0, Controls(throttle=0.1))]
+    trace, driving = drive(net, program)
+    assert [event["type"] for event in driving.events][:1] == ["off_road"]
+    assert {lane for _, _, _, lane, *_ in trace} == {"A-E_1"} and trace[-1][4] == ("A-E",)
+    assert driving.where == "off_road" and not trace[-1][5]   # no hand-back off the road
