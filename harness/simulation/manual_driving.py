@@ -22,9 +22,12 @@ Events (dicts with `t`, `type` and details), each logged when it begins:
 - `collision` (`object`, `speed`): the ego's footprint overlaps a vehicle's or a person's (oriented
   rectangles, `overlaps`). What a collision does: the ego stops where it is (the model's speed is
   set to 0) and stands there while it touches what it hit, whatever the pedals say; the person
-  keeps control, and a hand-back gives the ego to the autopilot where it stands. The episode goes
-  on, as it does after SUMO's own collisions in simulated studies (`--collision.action warn`).
+  keeps control and may hand back wherever the ego is (the lane rule below is waived after a
+  collision): the autopilot then takes it from the nearest place on its route (`release`). The
+  episode goes on, as it does after SUMO's own collisions in simulated studies
+  (`--collision.action warn`).
 
+`Wheel` is the hook a live episode calls every SUMO step (harness/live/worker.py).
 `ManualDriving.may_hand_back` is the paper's hand-back rule for a person driving this way: the
 autopilot takes over again only with the ego on a lane of its planned route (by the model's pose).
 """
@@ -170,6 +173,8 @@ class ManualDriving:
     events: list[dict] = field(default_factory=list)
     where: str = "own_lane"           # own_lane, oncoming or off_road
     touching: set[str] = field(default_factory=set)
+    collided: bool = False
+    current: Pose | None = None       # the pose at SUMO's time now (the model runs a step ahead)
 
     @classmethod
     def take_over(cls, sumo, vehicle_id: str, **options) -> ManualDriving:
@@ -187,6 +192,7 @@ class ManualDriving:
         over `seconds` and place the ego there for SUMO's next step. Returns the new pose."""
         now = sumo.simulation.getTime()
         self.observe(sumo, now)
+        self.current = self.pose   # where the person drives at SUMO's time now (what they see)
         if not self.touching:   # against what it hit, the car stands (until the hand-back)
             self.pose = integrate(self.pose, controls, seconds, self.params)
         pose = self.pose
@@ -196,7 +202,14 @@ class ManualDriving:
 
     @property
     def may_hand_back(self) -> bool:
-        return self.where == "own_lane"
+        return self.where == "own_lane" or self.collided
+
+    def release(self, sumo) -> None:
+        """The hand-back: SUMO drives on from here. Away from a lane of the route (after a
+        collision only) the ego is first put at the nearest place on its route."""
+        if self.where != "own_lane":
+            pose = self.pose
+            sumo.vehicle.moveToXY(self.vehicle_id, "", -1, pose.x, pose.y, pose.angle, KEEP_ROUTE)
 
     def placement(self, sumo) -> int:
         """Free placement on the ego's road and the oncoming one; anywhere else (off the road, a
@@ -261,4 +274,49 @@ class ManualDriving:
             self.events.append({"t": now, "type": "collision", "object": other,
                                 "speed": round(self.pose.speed, 2)})
             self.pose = replace(self.pose, speed=0.0)   # a crash stops the car; the person keeps control
+            self.collided = True
         self.touching = touching
+
+
+class Wheel:
+    """The hook of a live episode: the person's latest controls drive the ego while they are in
+    control (`step`, every SUMO step); a takeover starts the model from SUMO's pose and speed and a
+    hand-back gives the ego back to SUMO where it is, at its speed (no jump either way). While
+    `hold` (the ego waits for the hand-back before the junction) the model brakes fully."""
+
+    def __init__(self, vehicle_id: str) -> None:
+        self.vehicle_id = vehicle_id
+        self.controls = Controls()
+        self.driving: ManualDriving | None = None
+        self.events: list[dict] = []     # every takeover's events, in order
+
+    @property
+    def may_hand_back(self) -> bool:
+        return self.driving is None or self.driving.may_hand_back
+
+    @property
+    def pose(self) -> Pose | None:
+        """The person's pose at SUMO's time now while they drive (SUMO's own may differ off the
+        road, where SUMO keeps the ego on its route), else None."""
+        return None if self.driving is None else self.driving.current
+
+    def step(self, sumo, manual: bool, hold: bool = False) -> list[dict]:
+        """One SUMO step; the events it brought."""
+        if not manual:
+            if self.driving is not None:   # handed back: SUMO drives on from the model's pose and speed
+                self.driving.release(sumo)
+                self.driving = None
+                sumo.vehicle.setSpeed(self.vehicle_id, -1)
+            return []
+        if self.driving is None:
+            self.driving = ManualDriving.take_over(sumo, self.vehicle_id)
+            self.controls = Controls()
+        route = list(sumo.vehicle.getRoute(self.vehicle_id))
+        if len(route) > 1 or (route and route[0] in self.driving.route):
+            self.driving.route = route   # the episode extended it (not a free placement's one edge)
+        seen = len(self.driving.events)
+        controls = replace(self.controls, throttle=0.0, brake=1.0) if hold else self.controls
+        self.driving.step(sumo, controls, sumo.simulation.getDeltaT())
+        new = self.driving.events[seen:]
+        self.events.extend(new)
+        return new

@@ -22,7 +22,7 @@ const EXTRAPOLATE_LIMIT = 0.25;   // s: at most this far past the newest frame
 const SNAP_DISTANCE = 15;         // m: a jump larger than this between frames is not interpolated
 const SKY = 0xa9cfee;
 const TRAFFIC = [0x2f5d8c, 0x9c2f2f, 0xd6d6d6, 0x3a3a3a, 0x2f7a4a, 0xb8b8b8, 0x6d4c41];
-const KIND_COLOUR = { obstacle: 0xe67e00, oncoming: 0x7b1fa2, parked: 0x7b1fa2, pedestrian: 0xd81b60 };
+const KIND_COLOUR = { obstacle: 0xe67e00, oncoming: 0x7b1fa2, truck: 0x7b1fa2, parked: 0x7b1fa2, pedestrian: 0xd81b60 };
 const LEVEL = { ground: -0.05, walk: 0.004, area: 0.01, internal: 0.014, road: 0.018, crossing: 0.026,
                 marking: 0.03 };
 

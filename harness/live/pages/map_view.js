@@ -3,7 +3,7 @@
 // frame as they are in SUMO. The station draws it large ([live] view = "map") or as the driver's
 // view's mini-map.
 
-export const COLOURS = { traffic: "#1e5aa8", obstacle: "#e67e00", oncoming: "#7b1fa2", parked: "#7b1fa2",
+export const COLOURS = { traffic: "#1e5aa8", obstacle: "#e67e00", oncoming: "#7b1fa2", truck: "#7b1fa2", parked: "#7b1fa2",
                          pedestrian: "#d81b60" };
 
 function box(context, toCanvas, x, y, angle, length, width, colour, scale, outline) {
@@ -69,7 +69,7 @@ export function drawMap(canvas, net, frame, scale) {
     context.stroke();
   }
   for (const [x, y, angle, kind, , , length, width] of frame.vehicles || []) {
-    const truck = kind === "oncoming" || kind === "parked";
+    const truck = kind === "oncoming" || kind === "parked" || kind === "truck";
     box(context, toCanvas, x, y, angle, length || (truck ? 10 : 4.5), width || (truck ? 2.5 : 1.8),
         COLOURS[kind] || COLOURS.traffic, scale);
   }

@@ -7,6 +7,7 @@
 // (buttons or keys). It speaks the websocket protocol of docs/live_studies.md; the HttpOnly
 // participant cookie authenticates the socket. Texts are for the participant: no road ids.
 import { DriverView, webglAvailable } from "./driver_view.js";
+import { Calibration, Inputs } from "./inputs.js";
 import { drawMap } from "./map_view.js";
 
 const $ = (id) => document.getElementById(id);
@@ -23,6 +24,14 @@ let driverView = null;
 let net = null;
 let latest = null;          // the newest frame
 let edges = {};             // road id -> the shape of its rightmost lane (the next turn)
+let continuous = false;     // [live] driving = "continuous": wheel and pedals (inputs.js)
+let inputs = null;
+const CONTROL_INTERVAL = 1 / 30;   // s: controls are sent at most this often (the server's bucket)
+let sentControl = null;
+let sentAt = 0;
+let lastRead = performance.now() / 1000;
+const WARNINGS = { back_to_lane: "Back into your lane first: then hand back.", collision: "Collision!",
+                   off_road: "You left the road.", oncoming: "", own_lane: "", on_road: "" };
 
 function show(step) {
   for (const id of steps) $(id).classList.toggle("hidden", id !== step);
@@ -80,13 +89,13 @@ function setMode(next) {
 // server's flood limit counts every message).
 let pedal = "release";
 function press(next) {
-  if (mode !== "manual" || next === pedal) return;
+  if (mode !== "manual" || next === pedal || continuous) return;
   pedal = next;
   send({ type: "drive", pedal: next });
 }
 
 function steer(lane) {
-  if (mode === "manual") send({ type: "steer", lane });
+  if (mode === "manual" && !continuous) send({ type: "steer", lane });
 }
 
 function obstacleAhead(frame) {
@@ -175,7 +184,7 @@ function onFrame(frame) {
   const oncoming = onOncomingLane(frame);
   $("road").textContent = oncoming ? "In the oncoming lane" : "";
   $("road").dataset.road = frame.road;   // which road (for tests and the experimenter), never shown
-  if (frame.mode === "manual") {
+  if (frame.mode === "manual" && !continuous) {
     $("hint").textContent = oncoming
       ? "Passing in the oncoming lane: back into your lane once past the obstacle."
       : obstacleAhead(frame)
@@ -187,10 +196,49 @@ function onFrame(frame) {
   if (net) drawMap($("view"), net, frame, viewKind === "map" ? MAP_SCALE : MINI_SCALE);
 }
 
+// Continuous driving: the wheel and pedals (or the keyboard) read at every animation frame; the
+// controls are sent when they change, at most every CONTROL_INTERVAL.
+function readInputs() {
+  const now = performance.now() / 1000;
+  const controls = inputs.read(now - lastRead);
+  lastRead = now;
+  if (state.phase !== "driving") return;
+  if (controls.toggle) toggle();
+  if (mode !== "manual") { sentControl = null; return; }
+  const { steer, throttle, brake } = controls;
+  const changed = !sentControl || Math.abs(steer - sentControl.steer) > 0.005
+    || Math.abs(throttle - sentControl.throttle) > 0.01 || Math.abs(brake - sentControl.brake) > 0.01;
+  if (changed && now - sentAt >= CONTROL_INTERVAL) {
+    sentControl = { steer, throttle, brake };
+    sentAt = now;
+    send({ type: "control", steer: round(steer), throttle: round(throttle), brake: round(brake) });
+  }
+}
+const round = (value) => Math.round(value * 1000) / 1000;
+
 function animate() {
+  if (inputs) readInputs();
   if (driverView && state.phase === "driving") driverView.render();
   requestAnimationFrame(animate);
 }
+
+function setDriving(kind) {
+  continuous = kind === "continuous";
+  if (continuous && !inputs) inputs = new Inputs();
+  $("manual-controls").classList.toggle("hidden", continuous);
+  $("wheel-help").classList.toggle("hidden", !continuous);
+  $("calibrate-box").classList.toggle("hidden", !continuous);
+}
+
+let calibration = null;
+$("calibrate").addEventListener("click", () => {
+  calibration = new Calibration((text) => { $("calibration-text").textContent = text; });
+  $("calibrate-next").classList.remove("hidden");
+});
+$("calibrate-next").addEventListener("click", () => {
+  const done = calibration && calibration.next();
+  if (done) { inputs.calibration = done; $("calibrate-next").classList.add("hidden"); }
+});
 
 function setView(kind) {
   if (kind === "driver" && !webglAvailable()) {
@@ -263,12 +311,16 @@ function onMessage(message) {
     case "welcome":
       $("consent-text").textContent = message.consent;
       setView(message.view === "map" ? "map" : "driver");
+      setDriving(message.driving);
       break;
     case "state": onState(message); break;
     case "frame": onFrame(message); break;
     case "mode": setMode(message.mode); break;
     case "incident": notice(NOTICES[message.kind] || ""); break;
-    case "warning": handBackDue = true; notice(""); break;
+    case "warning":
+      if (message.kind === "hand_back") { handBackDue = true; notice(""); }
+      else if (message.kind in WARNINGS) notice(WARNINGS[message.kind]);
+      break;
     case "road":
       notice("");
       if (message.prompt) $("prompt").classList.remove("hidden");
@@ -321,12 +373,13 @@ $("pull-out").addEventListener("click", () => steer("oncoming"));
 $("pull-in").addEventListener("click", () => steer("own"));
 const PEDALS = { ArrowUp: "accelerate", ArrowDown: "brake" };
 document.addEventListener("keyup", (event) => {
-  if (PEDALS[event.code] && pedal === PEDALS[event.code]) press("release");
+  if (!continuous && PEDALS[event.code] && pedal === PEDALS[event.code]) press("release");
 });
 $("resume").addEventListener("click", () => send({ type: "resume" }));
 document.addEventListener("keydown", (event) => {
   if (state.phase !== "driving") return;
   if (event.code === "Space") { event.preventDefault(); toggle(); }
+  else if (continuous && event.code.startsWith("Arrow")) event.preventDefault();   // inputs.js reads them
   else if (PEDALS[event.code]) { event.preventDefault(); if (!event.repeat) press(PEDALS[event.code]); }
   else if (event.code === "ArrowLeft") { event.preventDefault(); steer("oncoming"); }
   else if (event.code === "ArrowRight") { event.preventDefault(); steer("own"); }
