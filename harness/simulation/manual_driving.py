@@ -282,7 +282,8 @@ class Wheel:
     """The hook of a live episode: the person's latest controls drive the ego while they are in
     control (`step`, every SUMO step); a takeover starts the model from SUMO's pose and speed and a
     hand-back gives the ego back to SUMO where it is, at its speed (no jump either way). While
-    `hold` (the ego waits for the hand-back before the junction) the model brakes fully."""
+    `hold` (the ego waits for the hand-back before the junction) the model brakes fully, once the
+    ego is back on a lane of its route."""
 
     def __init__(self, vehicle_id: str) -> None:
         self.vehicle_id = vehicle_id
@@ -315,6 +316,9 @@ class Wheel:
         if len(route) > 1 or (route and route[0] in self.driving.route):
             self.driving.route = route   # the episode extended it (not a free placement's one edge)
         seen = len(self.driving.events)
+        # the hold before the junction brakes the car in its own lane only: in the oncoming lane the
+        # person first comes back (the hand-back is refused there)
+        hold = hold and self.driving.may_hand_back
         controls = replace(self.controls, throttle=0.0, brake=1.0) if hold else self.controls
         self.driving.step(sumo, controls, sumo.simulation.getDeltaT())
         new = self.driving.events[seen:]
