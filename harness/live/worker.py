@@ -27,7 +27,7 @@ In control, the person drives by hand (`drive_by_hand`): the pedals set the spee
 overtaking through the oncoming lane waits for them to pull out (outside lockstep: in lockstep the
 episode runs as a headless one does).
 With `[live] driving = "continuous"` the person drives by wheel and pedals instead: the
-`manual_driving.Wheel` hook (harness/simulation/manual_driving.py) integrates a vehicle model and
+`wheel_driving.Wheel` hook (harness/simulation/wheel_driving.py) integrates a vehicle model and
 places the ego in SUMO every step (0.05 s steps: `sumo_config`), and the frames show the model's
 pose.
 The part is written atomically by this process (harness/study/parts.py), its summary marked with
@@ -47,7 +47,7 @@ from trustroute.harness.live.view import Statics, dead_reckoned, ego_view, next_
 from trustroute.harness.simulation.driving_style import MANUAL, allow_oncoming_pass, set_speed
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import reports_after_road
-from trustroute.harness.simulation.manual_driving import Controls, Wheel
+from trustroute.harness.simulation.wheel_driving import Controls, Wheel
 
 PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
 WARN_DISTANCE = 100.0      # metres before the road's end: a person in control is told to hand back
@@ -108,7 +108,7 @@ class RemoteDriver:
         self.hurry = False                 # a control to apply at once: the next step does not wait
         self.awaiting_report = False       # the last prompt for a report has had no answer yet
         self.statics = Statics()           # the frames' handles and sizes of the objects seen
-        # continuous driving (a wheel; never in lockstep): harness/simulation/manual_driving.py
+        # continuous driving (a wheel; never in lockstep): harness/simulation/wheel_driving.py
         self.wheel = Wheel(EGO_ID) if options.driving == "continuous" and not options.lockstep else None
 
     # -- the driver protocol (harness/simulation/episode.py) ------------------------------------

@@ -215,11 +215,12 @@ class ManualDriving:
         """Free placement on the ego's road and the oncoming one; anywhere else (off the road, a
         junction, another road) SUMO keeps the ego on its route, so the episode's road and route
         stay sound; the events and the person's view follow the model's pose all the same."""
-        fx, fy = forward(self.pose.angle)
-        centre = (self.pose.x - fx * self.length / 2, self.pose.y - fy * self.length / 2)
-        if off_road(sumo, *centre):
+        # SUMO places the front centre, and puts it on no lane at all (which the episode cannot
+        # follow) when that point is off every lane: free placement only with it on one
+        front = (self.pose.x, self.pose.y)
+        if off_road(sumo, *front):
             return KEEP_ROUTE
-        edge = sumo.simulation.convertRoad(*centre, False, "passenger")[0]
+        edge = sumo.simulation.convertRoad(*front, False, "passenger")[0]
         return KEEP_ROUTE_FREE if edge in self.route or self.opposite(edge) else KEEP_ROUTE
 
     def observe(self, sumo, now: float) -> None:

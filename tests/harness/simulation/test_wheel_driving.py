@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from trustroute.harness.simulation.manual_driving import (
+from trustroute.harness.simulation.wheel_driving import (
     MODEL_RATE,
     Controls,
     ManualDriving,
