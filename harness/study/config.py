@@ -75,6 +75,8 @@ NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
 LIVE_VIEWS: tuple[str, ...] = ("driver", "map")   # [live] view: the participant station's view
 LIVE_DRIVING: tuple[str, ...] = ("assisted", "continuous")   # [live] driving: how a person drives
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
+# the belief sources a study's specs are evaluated on (analysis/belief_sources.py says what each is)
+BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported", "reference", "true")
 
 
 @dataclass(frozen=True)
@@ -106,6 +108,9 @@ class StudyConfig:
     driver_population: str | None = None  # [drivers] population: absolute path of the population file
     live_view: str = "driver"               # [live] view: the participant station's view
     live_driving: str = "assisted"          # [live] driving: pedals and pull-out, or wheel and pedals
+    # the pre-registered primary belief source of the analysis (None: the neutral default,
+    # analysis/belief_sources.py `default_belief_source`)
+    belief_source: str | None = None
 
     def __hash__(self) -> int:
         # Every field, [population] included: configs that differ only there must never share a
@@ -147,6 +152,8 @@ class StudyConfig:
         for key, default in (("live_view", "driver"), ("live_driving", "assisted")):
             if settings[key] == default:
                 del settings[key]  # a default hashes as a config without [live]
+        if settings["belief_source"] is None:
+            del settings["belief_source"]  # a study without a declared source hashes without it
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():
@@ -278,6 +285,7 @@ class StudyValues(TypedDict):
     record: Sequence[str]
     robust_population: str | None
     robust_objective: str
+    belief_source: str | None
 
 
 class DriversValues(TypedDict):
@@ -352,6 +360,9 @@ STUDY_FIELDS = field_table(
     Field(key="robust_objective", kind=OneOf(choices=ROBUST_OBJECTIVES), default="robust",
           problem=lambda seen: f"unknown objective {str(seen.value)[:40]!r}",
           fix="use 'robust' (the worst type's value) or 'bayes' (the prior-weighted value)"),
+    Field(key="belief_source", kind=OneOf(choices=BELIEF_SOURCES, noun="belief source"),
+          fix="use 'true' (simulated studies), 'reported', 'reference' or 'filter', or omit it for the "
+              "neutral default (docs/study.md)"),
 )
 STUDY_KEYS: tuple[str, ...] = keys(STUDY_FIELDS)
 DRIVERS_FIX = ("give the path of a driver-population file (docs/driver_type_studies.md), "
@@ -449,6 +460,15 @@ def _live(table: dict[str, object] | None, source: str) -> dict[str, str]:
     return {"live_view": live["view"], "live_driving": live["driving"]}
 
 
+def _belief_source(study: StudyValues, source: str) -> str | None:
+    """The declared primary belief source; "true" needs drivers whose models the study knows."""
+    declared = study["belief_source"]
+    if declared == "true" and study["engine"] == "live":
+        raise InputError(source, "study.belief_source", "'true' needs simulated drivers (their own models); "
+                         "a live study's drivers are people", "use 'reported' or omit belief_source")
+    return declared
+
+
 def study_config_from_dict(data: object, source: str = "<study>", base: Path | None = None) -> StudyConfig:
     """Validate a parsed study document; relative paths resolve against `base`, then the cwd."""
     base = base if base is not None else Path.cwd()
@@ -488,6 +508,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         robust_objective=study["robust_objective"],
         driver_population=_driver_population(tables["drivers"], base, source),
         **_live(tables["live"], source),
+        belief_source=_belief_source(study, source),
     )
 
 

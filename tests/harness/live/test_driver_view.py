@@ -200,7 +200,8 @@ def test_the_driver_view_shows_sky_road_and_an_oncoming_truck_where_the_camera_s
 
     empty = show(page, socket, frame)
     rows, columns, _ = empty.shape
-    assert len(np.unique(empty.reshape(-1, 3), axis=0)) > 20, "the canvas is blank"
+    colours, counts = np.unique(empty.reshape(-1, 3), axis=0, return_counts=True)
+    assert (counts > 0.005 * rows * columns).sum() >= 4, "the canvas is blank"   # sky, grass, road, kerb
     assert near(empty[: rows // 5], SKY).mean() > 0.9, "no sky in the upper part"
     lower = empty[rows // 2:]
     assert near(lower, ASPHALT).mean() > 0.15, "no road surface in the lower half"
