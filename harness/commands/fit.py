@@ -122,10 +122,10 @@ def fit(
     if check:
         import numpy as np
 
-        from trustroute.analysis.fitting.posterior_check import plot_check, posterior_check, write_check
+        from trustroute.analysis.fitting.posterior_check import plot_check, write_check
         from trustroute.analysis.study_directory import load_study, study_inputs
         from trustroute.app.populations import REPORT_ACCURACY
-        from trustroute.app.runs import aware_vs_free
+        from trustroute.app.runs import aware_vs_free, posterior_check
 
         manifest, _, roads = load_study(Path(study_dir))
         _, template, _ = study_inputs(manifest)
