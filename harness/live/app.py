@@ -42,6 +42,7 @@ from starlette.requests import HTTPConnection
 from trustroute.harness.live.auth import EXPERIMENTER_COOKIE, PARTICIPANT_COOKIE, presented_token
 from trustroute.harness.live.guard import ConnectionGate, guarded_protocol, origin_allowed
 from trustroute.harness.live.protocol import (
+    CONTROL_RATE,
     MAX_BODY_BYTES,
     MAX_MESSAGE_BYTES,
     EpisodeControl,
@@ -57,8 +58,12 @@ from trustroute.harness.live.server import LiveStudy
 from trustroute.harness.live.session import Session
 
 PAGES = Path(__file__).with_name("pages")
+# The driver's view renders with three.js, shipped in pages/vendor/ with its licence (pinned:
+# docs/live_studies.md), so no page loads a script from elsewhere.
 STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js": "text/javascript",
-          "link.js": "text/javascript", "questionnaire.js": "text/javascript"}
+          "driver_view.js": "text/javascript", "map_view.js": "text/javascript",
+          "inputs.js": "text/javascript", "link.js": "text/javascript", "questionnaire.js": "text/javascript",
+          "vendor/three.module.js": "text/javascript", "vendor/three.core.js": "text/javascript"}
 # Every response: no framing, no sniffing, no referrer (a participant link carries a token), and
 # scripts, styles and sockets from this server only.
 SECURITY_HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
@@ -104,12 +109,18 @@ def offer(queue: asyncio.Queue, message: dict) -> None:
         queue.put_nowait(message)
 
 
-def respond(session: Session, bucket: TokenBucket, data: str | bytes) -> list[dict]:
-    """The replies to one raw client message (an error reply for a refused one)."""
-    if not bucket.take():
+def respond(session: Session, bucket: TokenBucket, data: str | bytes,
+            controls: TokenBucket | None = None) -> list[dict]:
+    """The replies to one raw client message (an error reply for a refused one). A wheel's
+    `control` messages count against `controls`, every other message against `bucket`."""
+    try:
+        message = parse_client_message(data)
+    except MessageError as exc:
+        return [exc.reply] if bucket.take() else [error_reply("rate_limited", "too many messages; slow down")]
+    if not (controls if controls is not None and message.type == "control" else bucket).take():
         return [error_reply("rate_limited", "too many messages; slow down")]
     try:
-        return session.handle(parse_client_message(data))
+        return session.handle(message)
     except MessageError as exc:
         return [exc.reply]
 
@@ -223,7 +234,7 @@ def station() -> FileResponse:
     return FileResponse(PAGES / "station.html", media_type="text/html")
 
 
-@router.get("/static/{name}")
+@router.get("/static/{name:path}")
 def static(name: str) -> FileResponse:
     if name not in STATIC:
         raise refused(404, "not_found", "no such file")
@@ -367,8 +378,9 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str, id
             await websocket.send_json(message)
 
     sender = asyncio.create_task(send_all())
-    bucket = TokenBucket()
-    offer(link.queue, {"type": "welcome", "participant": session.participant, "consent": consent_text})
+    bucket, controls = TokenBucket(), TokenBucket(burst=CONTROL_RATE, rate=CONTROL_RATE)
+    offer(link.queue, {"type": "welcome", "participant": session.participant, "consent": consent_text,
+                       "view": session.study.config.live_view, "driving": session.study.config.live_driving})
     previous = session.attach(link)
     if isinstance(previous, Link):
         previous.shut(REPLACED, "opened in another window",
@@ -378,7 +390,7 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str, id
                            "detail": "This session was open in another window or tab; that one is closed."})
     offer(link.queue, session.progress())
     try:
-        await receive_all(websocket, session, bucket, link, idle_seconds, sender)
+        await receive_all(websocket, session, (bucket, controls), link, idle_seconds, sender)
     except (WebSocketDisconnect, RuntimeError):
         pass
     finally:
@@ -386,8 +398,8 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str, id
         sender.cancel()
 
 
-async def receive_all(websocket: WebSocket, session: Session, bucket: TokenBucket, link: Link,
-                      idle_seconds: float, sender: asyncio.Task) -> None:
+async def receive_all(websocket: WebSocket, session: Session, buckets: tuple[TokenBucket, TokenBucket],
+                      link: Link, idle_seconds: float, sender: asyncio.Task) -> None:
     """Client messages until the socket closes; silence for idle_seconds closes it."""
     while not sender.done():
         receiving = asyncio.ensure_future(websocket.receive())
@@ -405,7 +417,7 @@ async def receive_all(websocket: WebSocket, session: Session, bucket: TokenBucke
         if raw["type"] == "websocket.disconnect":
             return
         data = raw["text"] if raw.get("text") is not None else (raw.get("bytes") or b"")
-        for reply in respond(session, bucket, data):
+        for reply in respond(session, buckets[0], data, buckets[1]):
             offer(link.queue, reply)
 
 

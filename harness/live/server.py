@@ -241,7 +241,7 @@ class LiveStudy:
 
     def live_options(self, client: str, lockstep: bool = False) -> LiveOptions:
         return LiveOptions(self.options.pace, self.options.frame_rate, client, self.config.report_every,
-                           lockstep, self.options.final_report_seconds)
+                           lockstep, self.options.final_report_seconds, self.config.live_driving)
 
     def attempt_started(self, task: EpisodeTask, warm_up: bool) -> None:
         with self.lock:

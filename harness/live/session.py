@@ -26,6 +26,7 @@ from trustroute.harness.live.protocol import (
     Answers,
     ClientMessage,
     Consent,
+    Control,
     Drive,
     HandBack,
     MessageError,
@@ -142,8 +143,10 @@ class Session:
                     raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
                 self.tell(message.model_dump())
                 return []
-            elif isinstance(message, (Drive, Steer)):
+            elif isinstance(message, (Drive, Steer, Control)):
                 self.require("driving", message)
+                if isinstance(message, Control) != (self.study.config.live_driving == "continuous"):
+                    raise MessageError("out_of_order", f"{message.type} is not how this study drives")
                 if self.mode != "manual":
                     raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
                 self.tell(message.model_dump())
@@ -155,12 +158,7 @@ class Session:
                 self.tell(message.model_dump())
                 return []
             elif isinstance(message, TrustReport):
-                self.require("driving", message)
-                if message.prompt is not None and (self.task is None
-                                                   or message.prompt.episode_id != self.task.episode_id):
-                    raise MessageError("out_of_order", "the report answers a prompt of another episode")
-                self.tell(message.model_dump())
-                self.reports += 1
+                self.report(message)
                 return []
             elif isinstance(message, Answers):
                 self.require("questionnaire", message)
@@ -171,6 +169,15 @@ class Session:
                     raise MessageError("out_of_order", "the experimenter paused this episode")
                 self.resume()
             return [self.progress()]
+
+    def report(self, message: TrustReport) -> None:
+        """A trust report to the running episode (answering a prompt of this episode, or none)."""
+        self.require("driving", message)
+        prompt = message.prompt
+        if prompt is not None and (self.task is None or prompt.episode_id != self.task.episode_id):
+            raise MessageError("out_of_order", "the report answers a prompt of another episode")
+        self.tell(message.model_dump())
+        self.reports += 1
 
     def answer(self, message: Answers) -> None:
         """The participant's answers to the questionnaire shown: checked, saved, on to the next phase."""

@@ -98,10 +98,10 @@ def warm_up_plan(town: Town, start: str, study_seed: int, participant: int) -> t
     return route, draw_incidents(town, route, rng)
 
 
-def run_warm_up(config, task, driver, observer, person=None):
+def run_warm_up(config, task, driver, observer, person=None, sumo_config=None):
     """The warm-up episode `task` (server.warm_up_task) on its drawn route and incidents, with the
-    remote `driver` (and `person`, their controls at the wheel, as run_planned_episode takes them);
-    the EpisodeRecord."""
+    remote `driver` (and `person`, their controls at the wheel, and SUMO's settings, as
+    run_planned_episode takes them); the EpisodeRecord."""
     from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode
     from trustroute.harness.simulation.stepping import run_to_end
     from trustroute.harness.simulation.sumo_start import SumoConfig
@@ -111,8 +111,8 @@ def run_warm_up(config, task, driver, observer, person=None):
     town = setup.town
     route, incidents = warm_up_plan(town, setup.spec.start, config.seed, task.participant)
     drawn = DrawnTown(**{f.name: getattr(town, f.name) for f in fields(Town) if f.init}, drawn=incidents)
-    sumo_config = replace(SumoConfig(), background_vehicles=config.background_vehicles,
-                          route_files=tuple(config.routes))
+    sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
+                          background_vehicles=config.background_vehicles, route_files=tuple(config.routes))
     options = EpisodeOptions(config=sumo_config, observer=observer, person=person)
     warm_up = replace(setup, town=drawn, junction_cap=len(route))
     return run_to_end(SumoEpisode(warm_up, DrawnRoute(route), driver, task.episode_id, task.seed, options))
