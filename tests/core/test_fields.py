@@ -167,7 +167,7 @@ def test_every_format_exposes_its_accepted_keys():
     assert keys(spec.BELIEF_FIELDS) == ("coeffs", "offset")
     assert keys(spec.TRUST_STATE_FIELDS) == ("roads", "trust")
     assert keys(spec.TYPE_BELIEF_FIELDS) == ("types", "above")
-    assert config.TABLES == ("study", "population", "drivers", "questionnaires")
+    assert config.TABLES == ("study", "population", "drivers", "questionnaires", "live")
     assert config.DRIVERS_KEYS == ("population",)
     assert len(config.STUDY_KEYS) == 21 and config.STUDY_KEYS[:5] == ("participants", "seed", "engine",
                                                                      "specs", "conditions")
