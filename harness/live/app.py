@@ -350,13 +350,15 @@ async def station_socket(websocket: WebSocket) -> None:
 
 def live_app(study: LiveStudy, origins: frozenset[str] = frozenset()) -> FastAPI:
     """The application serving `study` (opened: credentials and directory lock held); `origins`:
-    the server's own (guard.own_origins), beside the study's configured public ones."""
+    the server's own (guard.own_origins), beside the study's configured public ones; with
+    neither, a request's Origin must be the address it was sent to (its Host)."""
     from trustroute.harness.live.guard import normal_origin
 
     app = FastAPI(title="trustroute live", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.study = study
     public = {normal_origin(origin) for origin in study.options.public_origins}
-    app.state.origins = frozenset(origins) | {origin for origin in public if origin is not None}
+    configured = frozenset(origins) | {origin for origin in public if origin is not None}
+    app.state.origins = configured or None   # none: the origin each request was addressed to
     app.state.gate = ConnectionGate()
     app.middleware("http")(limit_body)
     app.add_exception_handler(RequestValidationError, malformed)

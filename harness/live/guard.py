@@ -94,11 +94,17 @@ def own_origins(host: str, port: int, public: tuple[str, ...] = ()) -> frozenset
     return frozenset(origin for origin in origins if origin is not None)
 
 
-def origin_allowed(headers: Mapping[str, str], origins: frozenset[str]) -> bool:
-    """Whether a request may act: no Origin (no browser page sent it), or one of ours."""
+def origin_allowed(headers: Mapping[str, str], origins: frozenset[str] | None) -> bool:
+    """Whether a request may act: no Origin (no browser page sent it), or one of ours; with no
+    origins configured (an application embedded without `serve`), the origin the request was
+    addressed to (its Host)."""
     origin = headers.get("origin")
     if origin is None:
         return True
+    if origins is None:
+        host = headers.get("host", "")
+        addressed = (normal_origin(f"http://{host}"), normal_origin(f"https://{host}"))
+        origins = frozenset(origin for origin in addressed if origin)
     return normal_origin(origin) in origins
 
 

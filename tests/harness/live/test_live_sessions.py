@@ -213,3 +213,12 @@ def test_a_new_link_revokes_the_old_token_and_is_logged(client, live_study):
     assert log == [(0, "new link issued by the experimenter")]
     unknown = client.post("/api/participants/5/link", headers=bearer(live_study.experimenter_token))
     assert unknown.status_code == 404
+
+
+def test_without_configured_origins_a_request_must_come_from_the_address_it_was_sent_to(live_study):
+    with TestClient(live_app(live_study)) as client:   # no origins: the Host decides
+        headers = bearer(live_study.experimenter_token)
+        foreign = client.post("/api/participants", json={}, headers={**headers, "Origin": "http://evil.example"})
+        assert foreign.status_code == 403
+        same = client.post("/api/participants", json={}, headers={**headers, "Origin": "http://testserver"})
+        assert same.status_code == 200
