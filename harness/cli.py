@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import importlib
 import sys
+import time
 
 import click
 
 from trustroute.core.errors import InputError
+from trustroute.harness.commands.options import CommandStart, UsageFix
 
 # name -> (module, attribute, one-line help)
 COMMANDS: dict[str, tuple[str, str, str]] = {
@@ -69,6 +71,8 @@ def cli() -> None:
 def usage_fix(exc: click.UsageError, command: str) -> str:
     """The fix of a usage error: the option click suggests, the missing argument to pass, or the
     values a parameter takes."""
+    if isinstance(exc, UsageFix):
+        return exc.fix
     if isinstance(exc, click.NoSuchOption):
         if exc.possibilities:
             return f"use {' or '.join(sorted(exc.possibilities))}"
@@ -83,14 +87,18 @@ def usage_fix(exc: click.UsageError, command: str) -> str:
         return f"pass {hint} as {param.type.name} (`{command} --help` gives its range)"
     if isinstance(exc, click.BadArgumentUsage) or "unexpected extra argument" in str(exc):
         return f"drop it; `{command} --help` lists the arguments"
-    if command == "trustroute":
-        return "pick a command `trustroute --help` lists"
+    if exc.ctx is None or exc.ctx.parent is None:   # the group itself: a command name was wrong
+        return f"pick one of the commands: {', '.join(sorted(COMMANDS))}"
     return f"follow the usage `{command} --help` prints"
 
 
 def main(argv: list[str] | None = None) -> None:
+    # when the command began, which a --time-limit counts from (harness/commands/options.py): the
+    # process's start when the process is the command (no argv given: the console script, python -m
+    # trustroute), else now (a caller running it in-process)
+    started = CommandStart.now() if argv is None else CommandStart(time.perf_counter())
     try:
-        code = cli.main(args=argv, prog_name="trustroute", standalone_mode=False)
+        code = cli.main(args=argv, prog_name="trustroute", standalone_mode=False, obj=started)
     except InputError as exc:
         click.echo(f"error: {exc.one_line()}", err=True)
         sys.exit(2)

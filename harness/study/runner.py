@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
@@ -35,7 +36,7 @@ from trustroute.core.errors import InputError
 from trustroute.harness.simulation.stepping import run_to_end
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
-from trustroute.harness.study.expected import expected_values
+from trustroute.harness.study.expected import expected_values, fallback_only_warnings
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import sync_parts, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
@@ -441,6 +442,8 @@ def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], o
         f"({run.backend}, {run.seconds:.1f} s)"
     )
     expected = expected_values(config)
+    for line in fallback_only_warnings(expected):
+        print(line, file=sys.stderr)
     return consolidate(
         run.study_dir,
         config,
