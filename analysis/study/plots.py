@@ -4,7 +4,10 @@ PNG_DPI with an SVG beside it (same name, for papers); legends sit outside the d
 satisfaction_plot   satisfaction rate per spec and condition with exact (Clopper–Pearson) 95 %
                     intervals, the policy's exact value and the synthesized [lower, upper] beside it
 paired_plot         per participant, mean reported trust under each condition joined by a line
-                    (one panel per spec), satisfied episodes filled
+                    (one panel per spec), satisfied episodes filled; above MAX_PAIRED_LINES
+                    participants in a spec, lines would hide each other, so the panel shows the
+                    participants' density instead: a 2-D histogram of (trust under A, under B)
+                    with the diagonal, how many lie on each side, and the satisfaction pairs
 trust_plot          mean reported and true trust against the road index, per spec and condition,
                     with a 95 % band of the mean of reported trust (normal approximation), drawn
                     only at indices with at least MIN_BAND_EPISODES reports, the legend saying
@@ -118,10 +121,15 @@ def satisfaction_plot(cells: pd.DataFrame, path: Path, belief_source: str) -> Pa
     return _save(fig, path, tight_box=True)
 
 
+MAX_PAIRED_LINES = 300  # participants in a spec beyond which paired_plot shows their density
+
+
 def paired_plot(per_participant: pd.DataFrame, pair: tuple[str, str], path: Path) -> Path:
+    specs = list(dict.fromkeys(per_participant["spec"])) if len(per_participant) else [""]
+    if len(per_participant) and per_participant["spec"].value_counts().max() > MAX_PAIRED_LINES:
+        return paired_density_plot(per_participant, pair, path)
     plt = _pyplot()
     a, b = pair
-    specs = list(dict.fromkeys(per_participant["spec"])) if len(per_participant) else [""]
     fig, axes = plt.subplots(1, len(specs), figsize=(3.4 * len(specs), 3.6), squeeze=False, sharey=True)
     rng = np.random.default_rng(0)  # jitter only, so overlapping participants stay visible
     for ax, spec in zip(axes[0], specs, strict=True):
@@ -153,6 +161,44 @@ def paired_plot(per_participant: pd.DataFrame, pair: tuple[str, str], path: Path
         f"Per participant: {a} vs {b} (filled = spec satisfied; green = higher under {a})", fontsize=9
     )
     return _save(fig, path)
+
+
+def paired_density_plot(per_participant: pd.DataFrame, pair: tuple[str, str], path: Path) -> Path:
+    """`paired_plot` for many participants: per spec, a 2-D histogram of each participant's mean
+    reported trust under A (x) and B (y), the diagonal, and the counts on each side of it and of
+    the satisfaction pairs (both, only A, only B, neither)."""
+    plt = _pyplot()
+    a, b = pair
+    specs = list(dict.fromkeys(per_participant["spec"]))
+    trust = per_participant[[f"trust_{a}", f"trust_{b}"]].to_numpy(dtype=float)
+    finite = trust[np.isfinite(trust).all(axis=1)]
+    low, high = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
+    edges = np.linspace(low - 0.05, high + 0.05, 25)  # coarse: means of few reports are on a lattice
+    fig, axes = plt.subplots(1, len(specs), figsize=(4.6 * len(specs), 4.6), squeeze=False)
+    image = None
+    for ax, spec in zip(axes[0], specs, strict=True):
+        group = per_participant[per_participant["spec"] == spec]
+        xa, yb = group[f"trust_{a}"].to_numpy(dtype=float), group[f"trust_{b}"].to_numpy(dtype=float)
+        keep = np.isfinite(xa) & np.isfinite(yb)
+        counts, _, _ = np.histogram2d(xa[keep], yb[keep], bins=[edges, edges])
+        image = ax.pcolormesh(edges, edges, np.where(counts.T > 0, counts.T, np.nan), cmap="viridis",
+                              shading="flat")
+        ax.plot([edges[0], edges[-1]], [edges[0], edges[-1]], color="black", lw=0.8, ls="--")
+        sat_a = group[f"satisfied_{a}"].astype(bool).to_numpy()
+        sat_b = group[f"satisfied_{b}"].astype(bool).to_numpy()
+        ax.set_title(f"{spec} (n={len(group)})", fontsize=9)
+        ax.set_xlabel(f"mean reported trust, {a}\n\nhigher under {a}: {int((xa > yb).sum())}, "
+                      f"under {b}: {int((xa < yb).sum())}\nequal: {int((xa == yb).sum())}\n"
+                      f"satisfied both: {int((sat_a & sat_b).sum())}, neither: "
+                      f"{int((~sat_a & ~sat_b).sum())}\nonly {a}: {int((sat_a & ~sat_b).sum())}, only {b}: "
+                      f"{int((~sat_a & sat_b).sum())}", fontsize=8)
+        ax.set_ylabel(f"mean reported trust, {b}")
+        ax.set_aspect("equal")
+    if image is not None:
+        fig.colorbar(image, ax=list(axes[0]), label="participants", shrink=0.8)
+    fig.suptitle(f"Per participant: {a} vs {b} ({len(per_participant)} participant-spec pairs, "
+                 f"as a density)", fontsize=9)
+    return _save(fig, path, tight_box=True)
 
 
 def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_index: int = 30) -> Path:

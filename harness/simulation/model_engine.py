@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from trustroute.core.dataset import KINEMATICS_SCHEMA, frame_from_table
+from trustroute.core.dataset import INCIDENTS_SCHEMA, KINEMATICS_SCHEMA
 from trustroute.harness.simulation.episode import EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker, episode_model
 from trustroute.networks.town import Town
@@ -55,10 +55,9 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 END_CODES: tuple[str, ...] = ("", *END_REASONS)  # index 0: still running
-
-
-def empty_kinematics() -> pd.DataFrame:
-    return frame_from_table(KINEMATICS_SCHEMA.empty_table())
+# The model engine has no kinematics or incident objects: one empty (immutable) table each
+NO_KINEMATICS = KINEMATICS_SCHEMA.empty_table()
+NO_INCIDENTS = INCIDENTS_SCHEMA.empty_table()
 
 
 def run_model_episode(
@@ -83,7 +82,9 @@ def run_model_episode(
             road, incident, took_over, performance, before, after, reported, math.nan, math.nan
         )
     summary = tracker.summary(wall_seconds=time.perf_counter() - started, sim_seconds=math.nan)
-    return EpisodeRecord(summary=summary, roads=tracker.roads_frame(), kinematics=empty_kinematics())
+    # Arrow tables: the record converts to pandas only if asked, so a study writing parts never does
+    return EpisodeRecord(summary=summary, roads=tracker.roads_table(), kinematics=NO_KINEMATICS,
+                         incidents=NO_INCIDENTS)
 
 
 # -- the vectorised path -------------------------------------------------------------------------
