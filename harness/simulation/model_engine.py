@@ -35,7 +35,13 @@ from trustroute.harness.simulation.episode import EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker, episode_model
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
-from trustroute.participants.driver_step import DriverTables, draw_initial_trust, draw_step, driver_tables
+from trustroute.participants.driver_step import (
+    DriverTables,
+    draw_initial_trust,
+    draw_report_batch,
+    draw_step,
+    driver_tables,
+)
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.belief.exact_labels import exact_labels, symbol_code
 from trustroute.policies.belief.problem import dfa_is_hidden
@@ -104,6 +110,8 @@ class BatchResult:
     policy_calls: int
     seconds: float
     decision_seconds: float = 0.0   # of `seconds`, in the policy's decisions
+    # mean reported trust level per episode (NaN without a report), when reports were drawn
+    mean_reported: np.ndarray | None = None
 
     def frame(self) -> pd.DataFrame:
         return pd.DataFrame(
@@ -156,6 +164,7 @@ def simulate_batch(
     rng: np.random.Generator,
     drivers: Sequence[DriverModel] | None = None,
     driver_index: np.ndarray | None = None,
+    report_accuracy: float | None = None,
 ) -> BatchResult:
     """`count` model-engine episodes at once; returns the per-episode summaries.
 
@@ -164,6 +173,11 @@ def simulate_batch(
     driver's initial distribution, as SyntheticDriver does. The episode rules are the tracker's
     (policies/routing/episode_rules.py). Specs with trust-state atoms need the joint belief of
     the episode tracker: run them through `run_model_episode`.
+
+    report_accuracy: also draw the drivers' trust reports (every setup.report_every roads, through
+    `draw_report_batch`) and return their mean per episode; the reports then take uniforms of
+    their own after each level's step, so the episodes are the per-episode path's in
+    distribution, not draw for draw. None (the default): no reports, no draws for them.
     """
     index = (
         np.zeros(count, dtype=np.int64) if driver_index is None else np.asarray(driver_index, dtype=np.int64)
@@ -174,7 +188,8 @@ def simulate_batch(
     sampled = _sampled(setup.town, model.pomdp, model.compiled, setup.spec, policy,
                        list(drivers) if drivers is not None else [setup.driver_model],
                        setup.junction_cap, setup.fallback_after, checked_belief_rule(setup.belief_rule))
-    return _unfold(sampled, index, rng)
+    return _unfold(sampled, index, rng, None if report_accuracy is None else
+                   (float(report_accuracy), setup.report_every))
 
 
 def _decisions(sampled: _Sampled, live: np.ndarray, route_id: np.ndarray, routes: list[tuple[str, ...]],
@@ -223,7 +238,8 @@ def _decisions(sampled: _Sampled, live: np.ndarray, route_id: np.ndarray, routes
     return chosen, finished, fired, calls, seconds
 
 
-def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> BatchResult:
+def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator,
+            reports: tuple[float, int] | None = None) -> BatchResult:
     """Episodes driven by drivers of kinds `index`, level by level: the verdicts, the policy's
     decisions, the driver's step (participants/driver_step.py) for every episode that moves, the
     AV's filter and DFA. Draws: initial trust of every episode, then per level the policy's (if it
@@ -248,6 +264,8 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
     takeovers = np.zeros(count, dtype=np.int64)
     trust_sum = levels[theta].copy()
     fired_any = np.zeros(count, dtype=bool)
+    report_sum = np.zeros(count, dtype=float)
+    report_count = np.zeros(count, dtype=np.int64)
     policy_calls, decision_seconds = 0, 0.0
 
     for _level in range(sampled.junction_cap + 1):
@@ -295,6 +313,11 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
         junctions[movers] += 1
         takeovers[movers] += h
         trust_sum[movers] += levels[new_theta]
+        if reports is not None:
+            reporters = movers[junctions[movers] % reports[1] == 0]
+            said = draw_report_batch(theta[reporters], reports[0], levels.size, rng)
+            report_sum[reporters] += levels[said]
+            report_count[reporters] += 1
     else:
         end[end == 0] = END_CODES.index("cap")
 
@@ -309,6 +332,8 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
         policy_calls=policy_calls,
         seconds=time.perf_counter() - started,
         decision_seconds=decision_seconds,
+        mean_reported=None if reports is None else np.divide(
+            report_sum, report_count, out=np.full(count, np.nan), where=report_count > 0),
     )
 
 
