@@ -83,11 +83,13 @@ def table_lines(table, minimal, target: float) -> list[str]:
 @click.option("--seed", type=SEED, default=1, show_default=True)
 @click.option("--out", type=click.Path(), default=None,
               help="Folder of the power curve (default: out/plan/<study name>).")
+@click.option("--preregistration", type=click.Path(), default=None,
+              help="Also write a pre-registration (Markdown, OSF / AsPredicted fields) to FILE.")
 @json_option
 @quiet_option
 def plan(config_path: str, sizes: str, simulations: int | None, tests: tuple[str, ...], alpha: float,
          target: float, driver: str | None, population: str | None, seed: int, out: str | None,
-         as_json: bool, quiet: bool) -> None:
+         preregistration: str | None, as_json: bool, quiet: bool) -> None:
     """Power and sample size of the study CONFIG, by simulating it on the model engine."""
     import numpy as np
 
@@ -136,4 +138,22 @@ def plan(config_path: str, sizes: str, simulations: int | None, tests: tuple[str
         "seconds": time.perf_counter() - started,
     }
     lines = [*table_lines(table, minimal, target), f"power curve: {figure} and {figure.with_suffix('.svg')}"]
-    emit(as_json, with_paths(payload, {"power_png": figure, "power_svg": figure.with_suffix(".svg")}), lines)
+    paths = {"power_png": figure, "power_svg": figure.with_suffix(".svg")}
+    if preregistration is not None:
+        paths["preregistration"] = write_preregistration(Path(preregistration), payload, config)
+        lines.append(f"pre-registration: {preregistration}")
+    emit(as_json, with_paths(payload, paths), lines)
+
+
+def write_preregistration(path: Path, payload: dict, config) -> Path:
+    """The pre-registration of this plan (analysis/study/preregistration.py), written atomically."""
+    from trustroute.analysis.study.preregistration import preregistration_text
+    from trustroute.core.output_files import atomic_write_text
+    from trustroute.harness.study.manifest import package_versions
+
+    design = {"specs": list(config.spec_names), "conditions": list(config.condition_names),
+              "seed": config.seed, "engine": config.engine, "fallback_after": config.fallback_after}
+    versions = {"trustroute": package_versions().get("trustroute", "unknown"), **package_versions()}
+    atomic_write_text(path, preregistration_text(payload, design, versions), "pre-registration",
+                      "pass a writable --preregistration path")
+    return path

@@ -4,10 +4,13 @@ simulated studies' outcomes are the model engine's (harness/study/planning.py)."
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from tests.cli import cli_json, run_cli
+from trustroute.analysis.study.preregistration import chosen_size
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import load_study_config
 from trustroute.harness.study.planning import participant_sizes, planned_participants, simulate_studies
@@ -49,7 +52,26 @@ def test_plan_reports_power_with_intervals_and_the_minimal_size(config_path, cap
         else:
             assert all(p >= 0.8 for n, p in powers.items() if n >= found["participants"])
     assert (tmp_path / "power.png").stat().st_size > 0 and (tmp_path / "power.svg").exists()
-    assert cli_json(capsys, *args)["power"] == rows  # same seed, same answer
+    document = tmp_path / "prereg.md"
+    again = cli_json(capsys, *args, "--preregistration", str(document))
+    assert again["power"] == rows  # same seed, same answer
+    _check_preregistration(document.read_text(), again)
+
+
+def _check_preregistration(text: str, answer: dict) -> None:
+    """The document's numbers are the plan's: its JSON block is the --json answer, its registered N
+    the largest minimal size, and its power table that size's rows."""
+    block = json.loads(text.split("```json\n", 1)[1].split("\n```", 1)[0])
+    assert block == {k: v for k, v in answer.items() if k != "paths"}
+    size = chosen_size(answer)
+    if size is None:
+        assert "**not determined**" in text
+    else:
+        assert f"**{size} participants**" in text
+        for row in (r for r in answer["power"] if r["participants"] == size):
+            interval = f"{row['power']:.3f} [{row['low']:.3f}, {row['high']:.3f}]"
+            assert f"| {row['participants']} | {interval} |" in text
+    assert answer["config_hash"] in text
 
 
 def test_simulated_outcomes_follow_the_model_engine(config_path):
