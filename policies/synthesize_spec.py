@@ -13,6 +13,7 @@ search on the lifted model and spec), the others to policies/synthesis/populatio
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -84,7 +85,10 @@ def synthesize_for_population(town: Town, population: DriverPopulation, spec: Sp
     per finished synthesis run with its bounds."""
     from trustroute.policies.synthesis.population import MAX_GRID_CANDIDATES, synthesize_population
 
+    entered = time.perf_counter()
     found = problem(town, population, spec, population_source)
+    # the limit is the whole call's: building the problem counts
+    time_limit = max(time_limit - (time.perf_counter() - entered), 0.0)
     points = MAX_GRID_CANDIDATES if grid_points is None else grid_points
     if found.case == TRUST_STATE:
         from trustroute.policies.trust_state_synthesis.population import synthesize_population_joint

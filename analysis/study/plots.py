@@ -3,11 +3,12 @@ PNG_DPI with an SVG beside it (same name, for papers); legends sit outside the d
 
 satisfaction_plot   satisfaction rate per spec and condition with exact (Clopper–Pearson) 95 %
                     intervals, the policy's exact value and the synthesized [lower, upper] beside it
-paired_plot         per participant, mean reported trust under each condition joined by a line
+paired_plot         per participant, mean reported trust under every condition joined by a line
                     (one panel per spec), satisfied episodes filled; above MAX_PAIRED_LINES
-                    participants in a spec, lines would hide each other, so the panel shows the
-                    participants' density instead: a 2-D histogram of (trust under A, under B)
-                    with the diagonal, how many lie on each side, and the satisfaction pairs
+                    participants in a spec, lines would hide each other, so it shows the
+                    participants' density instead: per pair of conditions a 2-D histogram of
+                    (trust under A, under B) with the diagonal, how many lie on each side, and
+                    the satisfaction pairs
 trust_plot          mean reported and true trust against the road index, per spec and condition,
                     with a 95 % band of the mean of reported trust (normal approximation), drawn
                     only at indices with at least MIN_BAND_EPISODES reports, the legend saying
@@ -124,59 +125,66 @@ def satisfaction_plot(cells: pd.DataFrame, path: Path, belief_source: str) -> Pa
 MAX_PAIRED_LINES = 300  # participants in a spec beyond which paired_plot shows their density
 
 
-def paired_plot(per_participant: pd.DataFrame, pair: tuple[str, str], path: Path) -> Path:
-    specs = list(dict.fromkeys(per_participant["spec"])) if len(per_participant) else [""]
+def paired_plot(per_participant: pd.DataFrame, conditions: tuple[str, ...], path: Path,
+                belief_source: str = "") -> Path:
+    """Per participant and spec: the mean reported trust under every condition, joined by a line;
+    filled where the spec was satisfied. With two conditions a line is green when the first is the
+    higher, red when the second is. Above MAX_PAIRED_LINES participants: `paired_density_plot`."""
     if len(per_participant) and per_participant["spec"].value_counts().max() > MAX_PAIRED_LINES:
-        return paired_density_plot(per_participant, pair, path)
+        return paired_density_plot(per_participant, conditions, path, belief_source)
     plt = _pyplot()
-    a, b = pair
-    fig, axes = plt.subplots(1, len(specs), figsize=(3.4 * len(specs), 3.6), squeeze=False, sharey=True)
+    specs = list(dict.fromkeys(per_participant["spec"])) if len(per_participant) else [""]
+    k = len(conditions)
+    width = max(3.4, 1.3 * k + 1.0)
+    fig, axes = plt.subplots(1, len(specs), figsize=(width * len(specs), 3.6), squeeze=False, sharey=True)
     rng = np.random.default_rng(0)  # jitter only, so overlapping participants stay visible
     for ax, spec in zip(axes[0], specs, strict=True):
         group = per_participant[per_participant["spec"] == spec]
         for row in group.itertuples(index=False):
-            ya, yb = getattr(row, f"trust_{a}"), getattr(row, f"trust_{b}")
+            trust = [getattr(row, f"trust_{c}", np.nan) for c in conditions]
+            satisfied = [getattr(row, f"satisfied_{c}", None) for c in conditions]
             jitter = rng.uniform(-0.04, 0.04)
-            colour = "#2ca02c" if ya > yb else "#d62728" if ya < yb else "grey"
-            ax.plot([0 + jitter, 1 + jitter], [ya, yb], color=colour, alpha=0.6, lw=1)
-            for x, y, sat in (
-                (0, ya, getattr(row, f"satisfied_{a}")),
-                (1, yb, getattr(row, f"satisfied_{b}")),
-            ):
-                ax.scatter(
-                    [x + jitter],
-                    [y],
-                    s=22,
-                    zorder=3,
-                    edgecolor="black",
-                    linewidth=0.6,
-                    color="black" if bool(sat) else "white",
-                )
-        ax.set_xticks([0, 1], [a, b])
-        ax.set_xlim(-0.4, 1.4)
+            colour = "grey"
+            if k == 2:
+                colour = "#2ca02c" if trust[0] > trust[1] else "#d62728" if trust[0] < trust[1] else "grey"
+            xs = np.arange(k) + jitter
+            ax.plot(xs, trust, color=colour, alpha=0.6, lw=1)
+            for x, y, sat in zip(xs, trust, satisfied, strict=True):
+                if sat is None or pd.isna(sat):
+                    continue
+                ax.scatter([x], [y], s=22, zorder=3, edgecolor="black", linewidth=0.6,
+                           color="black" if bool(sat) else "white")
+        ax.set_xticks(list(range(k)), list(conditions))
+        ax.set_xlim(-0.4, k - 0.6)
         ax.set_title(f"{spec} (n={len(group)})", fontsize=9)
         ax.grid(alpha=0.3, axis="y")
     axes[0][0].set_ylabel("participant's mean reported trust")
-    fig.suptitle(
-        f"Per participant: {a} vs {b} (filled = spec satisfied; green = higher under {a})", fontsize=9
-    )
+    source = f" on {belief_source}" if belief_source else ""
+    colours = f"; green = higher under {conditions[0]}" if k == 2 else ""
+    fig.suptitle(f"Per participant: {' / '.join(conditions)} (filled = spec satisfied{source}{colours})",
+                 fontsize=9)
     return _save(fig, path)
 
 
-def paired_density_plot(per_participant: pd.DataFrame, pair: tuple[str, str], path: Path) -> Path:
-    """`paired_plot` for many participants: per spec, a 2-D histogram of each participant's mean
-    reported trust under A (x) and B (y), the diagonal, and the counts on each side of it and of
-    the satisfaction pairs (both, only A, only B, neither)."""
+def paired_density_plot(per_participant: pd.DataFrame, conditions: tuple[str, ...], path: Path,
+                        belief_source: str = "") -> Path:
+    """`paired_plot` for many participants: per pair of conditions (A, B) (a row) and spec (a
+    column), a 2-D histogram of each participant's mean reported trust under A (x) and B (y), the
+    diagonal, and the counts on each side of it and of the satisfaction pairs (both, only A, only
+    B, neither)."""
+    import itertools
+
     plt = _pyplot()
-    a, b = pair
+    pairs = list(itertools.combinations(conditions, 2))
     specs = list(dict.fromkeys(per_participant["spec"]))
-    trust = per_participant[[f"trust_{a}", f"trust_{b}"]].to_numpy(dtype=float)
-    finite = trust[np.isfinite(trust).all(axis=1)]
+    trust = per_participant[[f"trust_{c}" for c in conditions]].to_numpy(dtype=float)
+    finite = trust[np.isfinite(trust)]
     low, high = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
     edges = np.linspace(low - 0.05, high + 0.05, 25)  # coarse: means of few reports are on a lattice
-    fig, axes = plt.subplots(1, len(specs), figsize=(4.6 * len(specs), 4.6), squeeze=False)
+    fig, axes = plt.subplots(len(pairs), len(specs), figsize=(4.6 * len(specs), 4.6 * len(pairs)),
+                             squeeze=False)
     image = None
-    for ax, spec in zip(axes[0], specs, strict=True):
+    for ax, ((a, b), spec) in zip(axes.flat, itertools.product(pairs, specs), strict=True):
         group = per_participant[per_participant["spec"] == spec]
         xa, yb = group[f"trust_{a}"].to_numpy(dtype=float), group[f"trust_{b}"].to_numpy(dtype=float)
         keep = np.isfinite(xa) & np.isfinite(yb)
@@ -195,9 +203,10 @@ def paired_density_plot(per_participant: pd.DataFrame, pair: tuple[str, str], pa
         ax.set_ylabel(f"mean reported trust, {b}")
         ax.set_aspect("equal")
     if image is not None:
-        fig.colorbar(image, ax=list(axes[0]), label="participants", shrink=0.8)
-    fig.suptitle(f"Per participant: {a} vs {b} ({len(per_participant)} participant-spec pairs, "
-                 f"as a density)", fontsize=9)
+        fig.colorbar(image, ax=list(axes.flat), label="participants", shrink=0.8)
+    source = f", satisfaction on {belief_source}" if belief_source else ""
+    fig.suptitle(f"Per participant: {' / '.join(conditions)} ({len(per_participant)} participant-spec "
+                 f"rows, as a density{source})", fontsize=9)
     return _save(fig, path, tight_box=True)
 
 
@@ -437,10 +446,8 @@ def write_plots(
         "takeovers": takeover_plot(analysis.takeovers, folder / "takeovers.png"),
     }
     if len(analysis.per_participant) and len(analysis.paired):
-        first = analysis.paired.iloc[0]
-        plots["participants"] = paired_plot(
-            analysis.per_participant,
-            (first["condition_a"], first["condition_b"]),
-            folder / "participants.png",
-        )
+        shown = [c for c in analysis.cells["condition"].drop_duplicates()
+                 if f"trust_{c}" in analysis.per_participant]
+        plots["participants"] = paired_plot(analysis.per_participant, tuple(shown),
+                                            folder / "participants.png", analysis.belief_source)
     return plots

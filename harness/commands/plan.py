@@ -31,14 +31,14 @@ def participant_model(config, driver: str | None, population: str | None):
     from trustroute.harness.study.planning import ParticipantModel
 
     if driver is not None:
-        from trustroute.participants.driver_model import load_driver_model
+        from trustroute.app.inputs import driver_of
 
-        model = load_driver_model(driver)
+        model = driver_of(driver)
         return ParticipantModel(label=f"driver {driver}", types=(model,), weights=(1.0,))
     if population is not None:
-        from trustroute.participants.driver_population import load_driver_population
+        from trustroute.app.inputs import population_of
 
-        types = load_driver_population(population)
+        types = population_of(population)
         return ParticipantModel(label=f"population {population}",
                                 types=tuple(t.model for t in types.types),
                                 weights=tuple(float(w) for w in types.weights))

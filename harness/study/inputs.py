@@ -94,7 +94,13 @@ def _store_population(study_dir: Path, record: Record, path: str) -> str:
 
 def _cached_policies(config: StudyConfig) -> list[Path]:
     """The policy-cache entries the study's "aware" and "robust" conditions were read from."""
-    from trustroute.harness.study.context import aware_horizon, aware_policy_path, belief_rule, study_context
+    from trustroute.harness.study.context import (
+        aware_horizon,
+        aware_policy_path,
+        belief_rule,
+        robust_problem,
+        study_context,
+    )
 
     context = study_context(config)
     paths = []
@@ -102,15 +108,14 @@ def _cached_policies(config: StudyConfig) -> list[Path]:
         if "aware" in config.conditions:
             paths.append(aware_policy_path(context.town, context.nominal, spec, config))
         if "robust" in config.conditions and config.robust_population is not None:
-            from trustroute.participants.driver_population import load_driver_population
-            from trustroute.policies.belief.driver_types import lift_population, lift_spec
             from trustroute.policies.resolve import aware_cache_path, population_cache_path
 
-            population = load_driver_population(config.robust_population)
+            problem = robust_problem(context.town, spec, config)
+            population = problem.population
+            assert population is not None
             horizon, rule = aware_horizon(config), belief_rule(config)
             if population.n_types == 1:
-                lifted = lift_spec(spec, population, config.robust_population)
-                paths.append(aware_cache_path(context.town, lift_population(population), lifted,
+                paths.append(aware_cache_path(context.town, problem.driver, problem.spec,
                                               config.policy_cache, horizon, rule))
             else:
                 paths.append(population_cache_path(context.town, population, spec, config.robust_objective,

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
@@ -32,19 +33,23 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from trustroute.app.drivers import synthetic_driver
+from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
+from trustroute.harness.simulation.stepping import run_to_end
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
-from trustroute.harness.study.expected import expected_values
+from trustroute.harness.study.expected import expected_values, fallback_only_warnings
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import sync_parts, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
-from trustroute.harness.study.resume import check_study_dir, finished_episodes
+from trustroute.harness.study.resume import check_study_dir, finished_episodes, recorded_config_hash
 
 if TYPE_CHECKING:
     from tqdm import tqdm
 
+    from trustroute.harness.simulation.drivers import Driver, PersonControls
     from trustroute.harness.simulation.episode import EpisodeRecord
     from trustroute.harness.simulation.sumo_start import SumoConfig
 
@@ -82,14 +87,8 @@ class StudyRun:
 
 
 def engine_function(engine: str) -> Callable:
-    """The episode function of an engine (run_episode for SUMO, run_model_episode for the model)."""
-    if engine == "model":
-        from trustroute.harness.simulation.model_engine import run_model_episode
-
-        return run_model_episode
-    from trustroute.harness.simulation.episode import run_episode
-
-    return run_episode
+    """The episode function of an engine (the registry's, trustroute/app/engines.py)."""
+    return ENGINES[engine].run
 
 
 RECORDINGS_DIR = "recordings"
@@ -101,37 +100,36 @@ def recording_path(study_dir: Path, episode_id: str) -> Path:
 
 
 def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path | None = None,
-                        sumo_config: SumoConfig | None = None, driver: object | None = None,
-                        observer: Callable | None = None) -> EpisodeRecord:
+                        sumo_config: SumoConfig | None = None, driver: Driver | None = None,
+                        observer: Callable | None = None, person: PersonControls | None = None
+                        ) -> EpisodeRecord:
     """Run the planned episode `task` exactly as the study runs it: the participant's driver model
     (population draw), the driver's Generator from the task's seed sequence (so the same initial trust
     and every later draw), SUMO's seed, the cell's setup and policy. Returns the EpisodeRecord.
 
-    rrd_path, sumo_config (e.g. sumo-gui) and observer apply to the SUMO engines only ("sumo", and
-    "live", where `driver` is the remote person of harness/live in place of the synthetic driver)."""
-    from trustroute.participants.synthetic_driver import SyntheticDriver
-
+    rrd_path, sumo_config (e.g. sumo-gui), observer and person apply to the SUMO engines only
+    ("sumo", and "live", where `driver` is the remote person of harness/live in place of the
+    synthetic driver and `person` their controls at the wheel)."""
     context = study_context(config)
+    engine = ENGINES[config.engine]
     if driver is None:
-        driver = SyntheticDriver(
-            context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
-        )
-    options = {}
-    if config.engine in ("sumo", "live"):
-        from trustroute.harness.simulation.sumo_start import SumoConfig
+        driver = synthetic_driver(context.driver_model(task.participant), task.driver_rng(),
+                                  report_accuracy=config.report_accuracy)
+    setup, policy = context.setup(task.spec, task.condition), context.policies[(task.spec, task.condition)]
+    run = engine_function(config.engine)
+    if not engine.drives_sumo:
+        return run(setup, policy, driver, task.episode_id, task.seed)
+    from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode
+    from trustroute.harness.simulation.sumo_start import SumoConfig
 
-        sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
-                              background_vehicles=config.background_vehicles,
-                              route_files=tuple(config.routes))
-        options = {"rrd_path": rrd_path, "config": sumo_config, "observer": observer}
-    return engine_function(config.engine)(
-        context.setup(task.spec, task.condition),
-        context.policies[(task.spec, task.condition)],
-        driver,
-        task.episode_id,
-        task.seed,
-        **options,
-    )
+    sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
+                          background_vehicles=config.background_vehicles,
+                          route_files=tuple(config.routes))
+    if person is None:
+        return run(setup, policy, driver, task.episode_id, task.seed,
+                   rrd_path=rrd_path, config=sumo_config, observer=observer)
+    options = EpisodeOptions(config=sumo_config, observer=observer, person=person, rrd_path=rrd_path)
+    return run_to_end(SumoEpisode(setup, policy, driver, task.episode_id, task.seed, options))
 
 
 def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeOutcome:
@@ -201,7 +199,7 @@ def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
     """The config's `record` names planned episodes of a SUMO study, or InputError."""
     if not config.record:
         return
-    if config.engine != "sumo":
+    if not ENGINES[config.engine].records:
         raise InputError(config.source_path, "study.record", "recordings need the SUMO engine",
                          'set engine = "sumo" or remove record')
     planned = {t.episode_id for t in tasks}
@@ -313,9 +311,39 @@ def validate_study(config: StudyConfig, scheduler: str | None = None,
                          "pass e.g. --attempts 2")
     if scheduler is not None and scheduler != "local":
         check_scheduler_address(scheduler)
+        check_scheduler_reachable(scheduler)
     engine_function(config.engine)  # fail fast, once, if the engine is missing
     study_context(config, progress)  # every input file, and the policies, once, before any worker
-    plan_episodes(config)
+    check_record_ids(config, plan_episodes(config))
+
+
+def check_before_writing(config: StudyConfig, study_dir: Path, scheduler: str | None, attempts: int,
+                         progress: bool) -> None:
+    """Every refusal of a study run, before its directory, its lock or its mark is written: the
+    inputs and the scheduler (`validate_study`), and a directory that holds another study."""
+    validate_study(config, scheduler, attempts, progress)
+    recorded_config_hash(Path(study_dir), config.content_hash)
+
+
+SCHEDULER_CONNECT_SECONDS = 5.0
+
+
+def check_scheduler_reachable(scheduler: str) -> None:
+    """A tcp:// (or bare HOST:PORT) Dask scheduler accepts connections, checked before anything is
+    written (dask's own client would only fail after its timeout, with the study folder made). Other
+    protocols (tls, ws, inproc, ucx) are left to dask."""
+    import socket
+
+    protocol, _, address = scheduler.rpartition("://")
+    if protocol not in ("", "tcp"):
+        return
+    host, _, port = address.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=SCHEDULER_CONNECT_SECONDS).close()
+    except (OSError, ValueError) as exc:
+        raise InputError("--scheduler", scheduler[:80], f"cannot reach the Dask scheduler ({exc})",
+                         "start one with `dask scheduler` and pass its address, or use --scheduler local"
+                         ) from None
 
 
 def check_scheduler_address(scheduler: str) -> None:
@@ -344,8 +372,8 @@ def run_study(
     "local" for a local Dask cluster of `workers` workers (threads in this process when
     dask_processes is False, which tests use). on_outcome: called after every episode.
     attempts: runs of a failing episode at most (the first and its retries)."""
-    validate_study(config, scheduler, attempts, progress)
     study_dir = Path(study_dir).resolve()
+    check_before_writing(config, study_dir, scheduler, attempts, progress)
     with study_lock(study_dir):
         return _run_locked(config, study_dir, workers, scheduler, progress, on_outcome, dask_processes,
                            attempts)
@@ -444,12 +472,12 @@ def run_and_consolidate(
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line. The study
     directory stays locked until the manifest is written."""
-    if config.engine == "live":
+    if not ENGINES[config.engine].synthetic:
         raise InputError(config.source_path, "study.engine",
                          "a live study is driven by people, not simulated",
                          "serve it with `trustroute live CONFIG`, or simulate it with --engine sumo")
-    validate_study(config, scheduler, attempts, progress)
     study_dir = Path(study_dir).resolve()
+    check_before_writing(config, study_dir, scheduler, attempts, progress)
     with study_lock(study_dir):
         for _ in range(CONSOLIDATION_ROUNDS):
             run = _run_locked(config, study_dir, workers, scheduler, progress, None, dask_processes, attempts)
@@ -470,6 +498,8 @@ def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], o
         f"({run.backend}, {run.seconds:.1f} s)"
     )
     expected = expected_values(config)
+    for line in fallback_only_warnings(expected):
+        print(line, file=sys.stderr)
     return consolidate(
         run.study_dir,
         config,

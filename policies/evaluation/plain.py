@@ -50,7 +50,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
              fallback_after: int | None = DEFAULT_FALLBACK_AFTER, max_junctions: int = DEFAULT_JUNCTION_CAP,
              belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
              max_nodes: int = DEFAULT_MAX_NODES, truth: TrustPOMDP | None = None,
-             reference: tuple[TrustPOMDP, Spec] | None = None) -> Evaluation:
+             reference: tuple[TrustPOMDP, Spec] | None = None, deadline: float | None = None) -> Evaluation:
     """Exact (or tightly certified) satisfaction probability of `policy` for `spec`.
 
     fallback_after: wrap the policy with the study's rule after that many junctions
@@ -69,6 +69,8 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     pomdp_ref on the same observations (e.g. the posterior under the true population), without
     changing what the vehicle does: `reference_accepted` is the mass of episodes that this
     reading accepts by the time the vehicle's episode ends (docs/driver_types.md, "Limits").
+    deadline (a time.perf_counter() time; None: none): the histories still open at the first
+    junction begun past it are cut, their mass widening [lower, upper] (a time-limited caller's).
     """
     started = time.perf_counter()
     town = pomdp.town
@@ -85,7 +87,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                          fallback_level=fallback_level, accepting=compiled.accepting,
                          routes=[(spec.start,)])
     counts = unfold(root(town.state_index(spec.start), observed_root(model)), actor, ledger,
-                    Limits(max_junctions=max_junctions),
+                    Limits(max_junctions=max_junctions, deadline=deadline),
                     outcomes(pomdp.driver.depends_on_performance
                              or true_pomdp.driver.depends_on_performance))
     return ledger.evaluation(counts.nodes, counts.max_frontier, policy=policy.name,

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.core import defaults
 from trustroute.networks.town import Town
 from trustroute.policies.logic.compiled import CompiledSpec
 from trustroute.policies.logic.spec import Spec
@@ -26,7 +27,7 @@ from trustroute.policies.routing.fallback import FallbackPolicy, with_fallback
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
-DEFAULT_JUNCTION_CAP = 60   # an episode still running after this many junctions ends ("cap")
+DEFAULT_JUNCTION_CAP = defaults.JUNCTION_CAP   # an episode still running after this many junctions ends
 RUNNING, ACCEPTED, REJECTED = 0, 1, 2
 
 
@@ -65,15 +66,29 @@ def dfa_verdict(compiled: CompiledSpec, q: int) -> str | None:
     return None
 
 
-def decide(policy: RoutingPolicy, context: DecisionContext, town: Town, junction_cap: int) -> Decision:
-    """Rules 3-5 at a position the DFA has not ended."""
+def end_before_choice(policy: RoutingPolicy, context: DecisionContext, junction_cap: int) -> str | None:
+    """Rules 3-4 at a position the DFA has not ended: "destination", "cap", or None (a junction is
+    to be chosen)."""
     if policy.finished(context):
-        return Decision("destination")
+        return "destination"
     if context.junctions_driven >= junction_cap:
-        return Decision("cap")
-    junction = policy.next_junction(context)
+        return "cap"
+    return None
+
+
+def checked_choice(policy: RoutingPolicy, context: DecisionContext, town: Town, junction: str) -> Decision:
+    """Rule 5 on a junction chosen at `context` (by `policy`, or by whoever steps the episode): it
+    must be a legal move of the town; the decision records whether the fallback drove."""
     legal = town.actions(context.road)
     if junction not in legal:
         raise ValueError(f"policy {policy.name!r} chose {junction!r}, not a legal move from "
                          f"{context.road} (legal: {', '.join(legal)})")
     return Decision(None, junction, bool(policy.fallback_active(context)))
+
+
+def decide(policy: RoutingPolicy, context: DecisionContext, town: Town, junction_cap: int) -> Decision:
+    """Rules 3-5 at a position the DFA has not ended."""
+    end = end_before_choice(policy, context, junction_cap)
+    if end is not None:
+        return Decision(end)
+    return checked_choice(policy, context, town, policy.next_junction(context))
