@@ -48,7 +48,7 @@ def power_curve_plot(table: Sequence[Power], target: float, alpha: float, path: 
         ax.set_title(TESTS[test], fontsize=9)
         ax.set_xlabel("participants")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="lower right", frameon=False)
+        ax.legend(fontsize=7, loc="upper left", frameon=False)  # power curves rise: that corner is empty
     axes[0][0].set_ylabel(f"power at α = {alpha:g} (95% interval)")
     fig.suptitle(title or f"Power by simulation (dashed: target {target:g}; dotted: minimal N)", fontsize=9)
     fig.tight_layout()
