@@ -42,6 +42,7 @@ from trustroute.analysis.carla_study.log_schema import (
 from trustroute.analysis.carla_study.town01 import ARRIVAL_RADIUS_M, CarlaTables, load_carla_tables
 from trustroute.core import dataset
 from trustroute.core.errors import InputError
+from trustroute.networks.road import Road
 
 # --sync runs CARLA with settings.fixed_delta_seconds = 0.05 (the driver script's game_loop)
 TICK_SECONDS = 0.05
@@ -185,7 +186,7 @@ def cut_roads(xy: np.ndarray, trial: int, tables: CarlaTables, relative: str = "
         arrival = first + int(within[0])
         cuts.append(RoadCut(state, first, arrival, True))
         candidates = tables.successors(state)
-        if tables.road_of_state[state].split("-")[1] == info["goal"]:
+        if Road.parse(tables.road_of_state[state]).to_junction == info["goal"]:
             candidates = [*candidates, state]  # the policy's stay-at-goal action (a3)
         best: tuple[int, str] | None = None
         for candidate in candidates:
@@ -283,7 +284,7 @@ def episode_tables(
             }
         )
     for i in range(len(rows) - 1):
-        rows[i]["action"] = rows[i + 1]["directed_road"].split("-")[1]
+        rows[i]["action"] = Road.parse(rows[i + 1]["directed_road"]).to_junction
     roads = pd.DataFrame(rows)
     for column in ("takeover",):
         roads[column] = roads[column].astype("boolean")

@@ -24,8 +24,9 @@ import numpy as np
 import pandas as pd
 
 from trustroute.core.dataset import PLOTS_DIR
+from trustroute.networks.road import Road
 from trustroute.networks.road_lookup import road_shape
-from trustroute.networks.town import Town, split_road
+from trustroute.networks.town import Town
 from trustroute.networks.town_map import map_frame, names_every_junction, point_along
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
@@ -222,7 +223,7 @@ def _road_xy(town: Town, road: str, fraction: float = 0.5, offset: float = 18.0)
 
 def _undirected_shape(town: Town, u: str, v: str) -> np.ndarray:
     """The course of road u–v (its u-v direction, or v-u for a road one-way from v)."""
-    road = f"{u}-{v}" if f"{u}-{v}" in town.incidents else f"{v}-{u}"
+    road = Road(u, v).id if Road(u, v).id in town.incidents else Road(v, u).id
     return np.asarray(road_shape(town, road), dtype=float)
 
 
@@ -248,7 +249,7 @@ def _draw_roads(ax, plt, town: Town, share: pd.Series, style: _MapStyle) -> None
     """Every road in light grey along its course, those driven coloured and widened by their share."""
     for u, v in town.roads:
         shape = _undirected_shape(town, u, v)
-        s = float(share.get("-".join(sorted((u, v))), 0.0))
+        s = float(share.get(Road(*sorted((u, v))).id, 0.0))
         ax.plot(shape[:, 0], shape[:, 1], color="lightgrey", lw=1, zorder=1)
         if s > 0:
             ax.plot(shape[:, 0], shape[:, 1], color=plt.cm.viridis(s), lw=1 + 7 * s * style.shrink, zorder=2,
@@ -318,7 +319,7 @@ def route_plot(
             group = merged[(merged["spec"] == spec) & (merged["condition"] == condition)]
             count = episodes[(episodes["spec"] == spec) & (episodes["condition"] == condition)].shape[0]
             undirected = group.assign(
-                road=group["directed_road"].map(lambda r: "-".join(sorted(split_road(r))))
+                road=group["directed_road"].map(lambda r: Road(*sorted(Road.parse(r))).id)
             )
             share = undirected.drop_duplicates(["episode_id", "road"]).groupby("road").size() / max(1, count)
             _draw_roads(ax, plt, town, share, style)

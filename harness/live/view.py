@@ -16,6 +16,8 @@ import math
 from functools import lru_cache
 from pathlib import Path
 
+from trustroute.networks.road import Road
+
 VIEW_RADIUS = 150.0   # metres around the ego that a frame describes
 INCIDENT_PREFIX = "inc"
 
@@ -41,7 +43,8 @@ def net_view(net_path: str) -> dict:
 
 def next_junction(road: str) -> str | None:
     """The junction at the end of a town road ("A-B" -> "B"); None inside a junction."""
-    return None if road.startswith(":") or "-" not in road else road.rsplit("-", 1)[1]
+    parsed = Road.parse_or_none(road)
+    return None if parsed is None else parsed.to_junction
 
 
 def role(sumo_id: str) -> str:

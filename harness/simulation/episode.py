@@ -51,8 +51,9 @@ from trustroute.harness.simulation.performance import PerformanceMonitor, limits
 from trustroute.harness.simulation.real_roads import RealRoads, real_scene
 from trustroute.harness.simulation.sumo_start import Sumo, SumoConfig, hot_calls, sumo_session
 from trustroute.networks.real_net import is_imported, road_edges, town_net_file
+from trustroute.networks.road import Road
 from trustroute.networks.sumo_net import ROAD_SPEED
-from trustroute.networks.town import NO_INCIDENT, split_road
+from trustroute.networks.town import NO_INCIDENT
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 log = logging.getLogger(__name__)
@@ -250,8 +251,8 @@ class _Episode:
                             incident_kinds.inject(run.kind, self.sumo, scene, self.defined_types))
             run.injected_time = now
             return
-        u, v = split_road(run.road)
-        reverse = f"{v}-{u}" if f"{v}-{u}" in self.setup.town.incidents else None
+        reverse = Road.parse(run.road).reverse.id
+        reverse = reverse if reverse in self.setup.town.incidents else None
         scene = Scene(road=run.road, reverse_road=reverse, road_length=self.length(run.road),
                       prefix=f"inc{run.index}", ego_id=EGO_ID, time=now, ego_distance=ego_distance,
                       rng=self.rng, overrides=self.scene_overrides.get(run.kind, {}), road_speed=ROAD_SPEED,
