@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     from trustroute.policies.routing.protocol import RoutingPolicy
     from trustroute.policies.synthesis.population import Objective, PopulationSynthesis
     from trustroute.policies.synthesis.result import SynthesisResult
+    from trustroute.policies.synthesis.settings import SynthesisSettings
 
     # a policy argument: "free", "aware", a policy file, a SynthesisResult or any RoutingPolicy
     PolicyLike = str | Path | SynthesisResult | RoutingPolicy
@@ -114,24 +115,24 @@ def synthesize(spec: Spec | PathLike, town: Town | None = None, driver: DriverMo
     """
     from trustroute.policies.model.trust_pomdp import build_pomdp
     from trustroute.policies.routing.files import save_policy
+    from trustroute.policies.synthesis.settings import SynthesisSettings
     from trustroute.policies.synthesize_spec import synthesize_spec as search
 
+    settings = SynthesisSettings(tau=tau, time_limit=time_limit, horizon=horizon, belief_rule=belief_rule)
     if population is not None:
         if driver is not None:
             raise ValueError("give driver or population, not both")
-        return _synthesize_population(spec, town, population, objective, horizon=horizon, tau=tau,
-                                      time_limit=time_limit, belief_rule=belief_rule, out=out)
+        return _synthesize_population(spec, town, population, objective, settings, out)
     town, driver, spec = _problem(spec, town, driver)
-    result = search(build_pomdp(town, driver), spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                    belief_rule=belief_rule)
+    result = search(build_pomdp(town, driver), spec, settings)
     if out is not None:
         save_policy(result, out, town, driver, spec)
     return result
 
 
 def _synthesize_population(spec: Spec | PathLike, town: Town | None, population: DriverPopulation | PathLike,
-                           objective: Objective, *, horizon: int | None, tau: float, time_limit: float,
-                           belief_rule: BeliefRule, out: PathLike | None) -> PopulationSynthesis:
+                           objective: Objective, settings: SynthesisSettings,
+                           out: PathLike | None) -> PopulationSynthesis:
     """`synthesize` for a driver population (the one synthesis entry decides the method)."""
     from trustroute.participants.driver_population import DriverPopulation, load_driver_population
     from trustroute.policies.logic.spec import Spec
@@ -144,8 +145,7 @@ def _synthesize_population(spec: Spec | PathLike, town: Town | None, population:
         population = load_driver_population(population)
     if not isinstance(spec, Spec):
         spec = load_spec(spec, town)
-    found = synthesize_for_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
-                                      horizon=horizon, belief_rule=belief_rule,
+    found = synthesize_for_population(town, population, spec, objective, settings,
                                       population_source=population.source_path)
     if out is not None:
         save_policy(found.result, out, town, found.pomdp.driver, found.spec,
@@ -178,13 +178,15 @@ def evaluate(spec: Spec | PathLike, policy: PolicyLike = "free", town: Town | No
     fallback_after: the study's rule, the shortest completion after that many junctions (None:
     the policy as given). max_junctions: the episode cap (docs/model.md, "Episodes").
     """
+    from trustroute.policies.evaluation.settings import EvaluationSettings
     from trustroute.policies.evaluation.trust_state import evaluate_joint as exact
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
     town, driver, spec = _problem(spec, town, driver)
     routing = _policy(policy, town, driver, spec, cache_dir)
-    return exact(build_pomdp(town, driver), spec, routing, fallback_after=fallback_after,
-                 max_junctions=max_junctions, belief_rule=belief_rule)
+    return exact(build_pomdp(town, driver), spec, routing,
+                 EvaluationSettings(fallback_after=fallback_after, max_junctions=max_junctions,
+                                    belief_rule=belief_rule))
 
 
 def run_episode(spec: Spec | PathLike, policy: PolicyLike = "free", town: Town | None = None,

@@ -14,9 +14,11 @@ from trustroute.analysis.formatting import finite_or_none
 from trustroute.core.errors import InputError
 from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.model.trust_pomdp import checked_belief_rule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 
 def _load_problem(spec_path: str, town_path: str | None, driver_path: str | None):
@@ -122,9 +124,11 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     from trustroute.policies.synthesize_spec import synthesize_problem
 
     with synthesis_progress(f"synthesizing {spec.name}", not (as_json or quiet)) as on_iteration:
-        result = synthesize_problem(problem, tau=tau, time_limit=time_limit, horizon=horizon,
-                                    belief_rule=checked_belief_rule(belief_rule), on_iteration=on_iteration,
-                                    clusters=clusters)
+        result = synthesize_problem(problem,
+                                    SynthesisSettings(tau=tau, time_limit=time_limit, horizon=horizon,
+                                                      belief_rule=checked_belief_rule(belief_rule),
+                                                      clusters=clusters),
+                                    on_iteration=on_iteration)
     path = str(save_policy(result, out_path, town, driver, spec))
     from trustroute.policies.routing.files import array_path
 
@@ -153,8 +157,9 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
         from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 
         cap = horizon if horizon is not None else DEFAULT_JUNCTION_CAP
-        real = evaluate_policy(pomdp, spec, result.policy, fallback_after=None, max_junctions=cap,
-                               belief_rule="paper")
+        real = evaluate_policy(pomdp, spec, result.policy,
+                               EvaluationSettings(fallback_after=None, max_junctions=cap,
+                                                  belief_rule="paper"))
         payload["bounds_refer_to"] = "the authors' belief MDP (--belief-rule paper)"
         payload["bayes_process_value"] = {"lower": real.lower, "upper": real.upper,
                                           "max_junctions": cap}
@@ -190,10 +195,11 @@ def _synth_population(spec_path: str, town_path: str | None, population_path: st
                                             belief_rule, f"time_limit={time_limit}")
     with synthesis_progress(f"synthesizing {spec.name} ({objective}, {population.n_types} types)",
                             not (as_json or quiet)) as on_iteration:
-        found = synthesize_for_population(town, population, spec, objective, tau=tau,
-                                          time_limit=time_limit, horizon=horizon,
-                                          belief_rule=checked_belief_rule(belief_rule),
-                                          population_source=population_path, on_iteration=on_iteration,
+        found = synthesize_for_population(town, population, spec, objective,
+                                          SynthesisSettings(tau=tau, time_limit=time_limit, horizon=horizon,
+                                                            belief_rule=checked_belief_rule(belief_rule)),
+                                          population_source=population_path,
+                                          on_iteration=on_iteration,
                                           on_phase=phase_lines("synth", not (as_json or quiet)))
     result = found.result
     path = str(save_policy(result, out_path, town, found.pomdp.driver, found.spec,
@@ -239,8 +245,9 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
     problem = _load_problem(spec_path, town_path, driver_path)
     town, spec, pomdp = problem.town, problem.spec, problem.pomdp
     route = baseline_route(town, spec)
-    value = evaluate_policy(pomdp, spec, trust_free_policy(town, spec), fallback_after=None,
-                            belief_rule=checked_belief_rule(belief_rule))
+    value = evaluate_policy(pomdp, spec, trust_free_policy(town, spec),
+                            EvaluationSettings(fallback_after=None,
+                                               belief_rule=checked_belief_rule(belief_rule)))
     payload = {"spec": spec.name, "route": route, "length_m": town.route_length(route),
                "junctions": len(route) - 1, "satisfaction_probability": value.satisfaction_probability,
                "lower": value.lower, "upper": value.upper,
@@ -323,9 +330,10 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     if time_limit is not None and not problem.dfa_hidden:
         raise click.UsageError("--time-limit applies to specs with trust-state atoms only (the others "
                                "are evaluated exactly in full)")
-    value = evaluate_policy(pomdp, spec, policy, fallback_after=after, max_junctions=cap,
-                            belief_rule=checked_belief_rule(belief_rule), max_nodes=max_nodes,
-                            time_limit=time_limit)
+    value = evaluate_policy(pomdp, spec, policy,
+                            EvaluationSettings(fallback_after=after, max_junctions=cap,
+                                               belief_rule=checked_belief_rule(belief_rule),
+                                               max_nodes=max_nodes, time_limit=time_limit))
     payload = value.to_dict()
     payload["spec"] = spec.name
     payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)
@@ -412,8 +420,9 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
         types = tuple(TypeValue(t.name, float(t.weight), lower, upper)
                       for t, (lower, upper) in zip(population.types, bounds, strict=True))
     else:
-        value = evaluate_policy(pomdp, lifted_spec, policy, fallback_after=fallback_after,
-                                max_junctions=cap, belief_rule=rule)
+        value = evaluate_policy(pomdp, lifted_spec, policy,
+                                EvaluationSettings(fallback_after=fallback_after, max_junctions=cap,
+                                                   belief_rule=rule))
         types = per_type_values(pomdp, lifted_spec, policy, population, cap, rule, fallback_after)
     payload = value.to_dict()
     payload["spec"] = spec.name

@@ -11,6 +11,7 @@ from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, l
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.synthesis import population as population_synthesis
 from trustroute.policies.synthesis.population import run_count, synthesize_population
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 
 def test_every_run_ends_by_the_one_deadline(town, monkeypatch):
@@ -19,15 +20,16 @@ def test_every_run_ends_by_the_one_deadline(town, monkeypatch):
     real = population_synthesis.synthesize
     calls: list[tuple[float, float]] = []
 
-    def recording(*args, **kwargs):
-        calls.append((time.perf_counter(), kwargs["time_limit"]))
-        return real(*args, **kwargs)
+    def recording(pomdp, spec, settings, **kwargs):
+        calls.append((time.perf_counter(), settings.time_limit))
+        return real(pomdp, spec, settings, **kwargs)
 
     monkeypatch.setattr(population_synthesis, "synthesize", recording)
     limit, lines = 4.0, []
     started = time.perf_counter()
-    found = synthesize_population(town, population, spec, "robust", horizon=3, time_limit=limit,
-                                  grid_points=6, on_phase=lines.append)
+    found = synthesize_population(town, population, spec, "robust",
+                                  SynthesisSettings(horizon=3, time_limit=limit, grid_points=6),
+                                  on_phase=lines.append)
     assert len(calls) == run_count(population, "robust", 6) == len(lines) > population.n_types + 1
     for at, run_limit in calls:
         assert at + run_limit <= started + limit + 1e-3, (at - started, run_limit)
