@@ -1,6 +1,6 @@
 """One vocabulary across the package, read with `ast`: a road id "U-V" is taken apart only by
 `networks/road.py`'s `Road`; no function takes more than eight parameters (settings objects
-instead)."""
+instead); module-level caches only where they keep what was read from disk."""
 
 from __future__ import annotations
 
@@ -120,3 +120,67 @@ def test_a_long_signature_is_caught():
         "class Mover:\n    def move(self, a, b, c, d, e, f, g, h):\n        return a\n")
     assert long_signatures(trees) - OVER_THE_LIMIT == {"trustroute.networks.town:route"}
 
+
+# -- module-level caches only at I/O boundaries ---------------------------------------------------
+# A module-level mapping or a memoised function hides who builds what; one is allowed where it
+# keeps what was read from disk (a net, a binary's path, the importer's own source) or holds a
+# registry. Each entry is "module:name".
+IO_CACHES = frozenset({
+    "trustroute.networks.real_net:_ROADS",              # a town's SUMO net read with sumolib
+    "trustroute.harness.live.view:net_view",            # a net file read for the station's view
+    "trustroute.harness.simulation.sumo_start:sumo_binary",   # SUMO's binary found on disk
+    "trustroute.networks.cities:importer_fingerprint",  # the importer's source files read
+    "trustroute.harness.simulation.incidents.pedestrian:_CROSSINGS",   # crossings read off a net
+    "trustroute.networks.town:BUILT_TOWNS",             # a registry of built towns, not a cache
+})
+# Caches of computed objects still to be replaced by the object passed down from where it is made
+# (a function's cache that goes must leave this list).
+COMPUTED_CACHES = frozenset({
+    "trustroute.core.dataset:_LAYOUTS",
+    "trustroute.harness.simulation.episode_tracker:_MODELS",
+    "trustroute.harness.study.context:_CONTEXTS",
+    "trustroute.participants.driver_step:_TABLES",
+    "trustroute.policies.belief.exact_labels:_filters",
+    "trustroute.policies.logic.compiled:_COMPILED",
+    "trustroute.policies.logic.dfa:_CACHE",
+    "trustroute.policies.routing.free:_TASKS",
+    "trustroute.policies.routing.free:_COMPLETIONS",
+    "trustroute.policies.synthesis.completion_value:symbol_fill_orders",
+})
+MAPPINGS = {"dict", "OrderedDict", "defaultdict", "WeakValueDictionary", "WeakKeyDictionary"}
+MEMOISERS = {"cache", "lru_cache"}
+
+
+def module_caches(trees: dict[str, ast.Module]) -> set[str]:
+    """module:name of every module-level empty mapping and every memoised function."""
+    found = set()
+    for module, tree in trees.items():
+        for node in tree.body:
+            if isinstance(node, ast.Assign | ast.AnnAssign) and node.value is not None:
+                value = node.value
+                mapping = (isinstance(value, ast.Dict) and not value.keys) or (
+                    isinstance(value, ast.Call) and not value.args
+                    and getattr(value.func, "id", getattr(value.func, "attr", None)) in MAPPINGS)
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                found |= {f"{module}:{t.id}" for t in targets if mapping and isinstance(t, ast.Name)}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                for decorator in node.decorator_list:
+                    called = decorator.func if isinstance(decorator, ast.Call) else decorator
+                    if getattr(called, "id", getattr(called, "attr", None)) in MEMOISERS:
+                        found.add(f"{module}:{node.name}")
+    return found
+
+
+def test_module_level_caches_are_only_the_listed_ones():
+    found = module_caches(package_trees())
+    assert found - IO_CACHES - COMPUTED_CACHES == set()
+    assert (IO_CACHES | COMPUTED_CACHES) - found == set(), "gone: remove them from the lists"
+
+
+def test_a_new_module_level_cache_is_caught():
+    trees = with_added("trustroute.policies.logic.spec", "_SPECS: dict[str, object] = {}\n")
+    trees["trustroute.networks.road"] = ast.parse(
+        "import functools\n\n@functools.lru_cache(maxsize=8)\ndef parsed(text):\n    return text\n")
+    assert module_caches(trees) - IO_CACHES - COMPUTED_CACHES == {
+        "trustroute.policies.logic.spec:_SPECS", "trustroute.networks.road:parsed"}
