@@ -415,8 +415,9 @@ def _evaluate_population(spec_path: str, policy_name: str, town_path: str | None
     pomdp = found.pomdp
     if found.dfa_hidden:
         # The DFA state is hidden: one unfolding over ((type, trust), q) gives every type's value.
-        value, bounds = evaluate_joint_by_type(pomdp, lifted_spec, policy, fallback_after=fallback_after,
-                                               max_junctions=cap, belief_rule=rule)
+        value, bounds = evaluate_joint_by_type(pomdp, lifted_spec, policy,
+                                               EvaluationSettings(fallback_after=fallback_after,
+                                                                  max_junctions=cap, belief_rule=rule))
         types = tuple(TypeValue(t.name, float(t.weight), lower, upper)
                       for t, (lower, upper) in zip(population.types, bounds, strict=True))
     else:
