@@ -38,6 +38,7 @@ from xml.sax.saxutils import quoteattr
 from trustroute.core.cache import NETS
 from trustroute.core.cache import cache_dir as default_cache_dir
 from trustroute.core.errors import InputError
+from trustroute.core.output_files import file_lock
 from trustroute.networks.road import Road
 from trustroute.networks.town import Town
 
@@ -238,8 +239,6 @@ def build_net(town: Town, cache_dir: Path | None = None,
     """The SUMO net of `town`, built with netconvert or taken from the cache. The entry is verified
     on every read, built under a lock (two processes never build one entry at once) and written
     atomically (fsync, then rename)."""
-    from trustroute.core.output_files import file_lock
-
     started = time.perf_counter()
     target = net_path(town, cache_dir)
     found = _cached(town, target, started, notice)

@@ -26,6 +26,7 @@ from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.population import MAX_GRID_CANDIDATES, synthesize_population
 from trustroute.policies.synthesis.result import SynthesisResult
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
+from trustroute.policies.trust_state_synthesis.population import synthesize_population_joint
 from trustroute.policies.trust_state_synthesis.synthesis import synthesize_joint
 
 if TYPE_CHECKING:
@@ -75,8 +76,6 @@ def synthesize_for_population(town: Town, population: DriverPopulation, spec: Sp
     if settings.grid_points is None:
         settings = replace(settings, grid_points=MAX_GRID_CANDIDATES)
     if found.case == TRUST_STATE:
-        from trustroute.policies.trust_state_synthesis.population import synthesize_population_joint
-
         return synthesize_population_joint(found, objective, synthesize_spec, settings,
                                            on_iteration=on_iteration, on_phase=on_phase)
     return synthesize_population(town, population, spec, objective, settings,

@@ -184,3 +184,115 @@ def test_a_new_module_level_cache_is_caught():
         "import functools\n\n@functools.lru_cache(maxsize=8)\ndef parsed(text):\n    return text\n")
     assert module_caches(trees) - IO_CACHES - COMPUTED_CACHES == {
         "trustroute.policies.logic.spec:_SPECS", "trustroute.networks.road:parsed"}
+
+
+# -- imports at module top ------------------------------------------------------------------------
+# The command line (which loads a command's modules only when it runs) and the API's entry
+# (`import trustroute` stays cheap) import inside functions; elsewhere an import sits at the top
+# of its module, unless it is a heavy or optional library loaded only by the function that needs
+# it: the top-level package names below, each with why.
+LAZY_ENTRIES = ("trustroute", "trustroute.harness.cli", "trustroute.harness.commands", "trustroute.__main__")
+HEAVY_OR_OPTIONAL = {
+    "stormpy": "optional extra (peer checkers)",
+    "paynt": "optional extra (peer checkers)",
+    "rerun": "optional viewer, loaded only with --rrd",
+    "sumolib": "SUMO's tools: reading a net is done only where a net is read",
+    "sumo": "SUMO's data files, located only when a net is converted",
+    "libsumo": "SUMO itself, started only by sumo_start (one of libsumo or traci)",
+    "traci": "SUMO itself, started only by sumo_start (one of libsumo or traci)",
+    "distributed": "dask, only for a study on a scheduler",
+    "matplotlib": "plots only",
+    "scipy": "statistics only",
+    "statsmodels": "statistics only",
+    "jinja2": "the report only",
+    "tqdm": "progress bars only",
+    "uvicorn": "the live station's server only",
+    "websockets": "the scripted live participant only",
+    "multiprocessing": "a process start method chosen where processes start",
+}
+# Imports still inside functions of modules being reworked elsewhere (module -> imported modules);
+# an entry that moves to the top is to leave this list.
+PENDING_IMPORTS = {
+    "trustroute.analysis.belief_sources": {
+        "trustroute.harness.study.plan", "trustroute.harness.study.replay",
+        "trustroute.participants.driver_population", "trustroute.policies.belief.driver_types",
+        "trustroute.policies.model.trust_pomdp"},
+    "trustroute.analysis.fitting.posterior_check": {
+        "trustroute.core.packaged", "trustroute.harness.simulation.episode_tracker",
+        "trustroute.harness.simulation.model_engine", "trustroute.networks.town",
+        "trustroute.participants.driver_model", "trustroute.policies.logic.spec",
+        "trustroute.policies.resolve"},
+    "trustroute.harness.live.replay": {
+        "trustroute.harness.simulation.episode", "trustroute.harness.simulation.rerun_log",
+        "trustroute.harness.study.context", "trustroute.harness.study.parts",
+        "trustroute.harness.study.replay", "trustroute.networks.sumo_net"},
+    "trustroute.harness.live.scripted": {
+        "trustroute.harness.live.server", "trustroute.harness.study.context",
+        "trustroute.participants.synthetic_driver"},
+    "trustroute.harness.live.server": {
+        "numpy", "trustroute.core.dataset", "trustroute.core.validation", "trustroute.harness.live.view",
+        "trustroute.harness.study.context", "trustroute.harness.study.expected",
+        "trustroute.harness.study.manifest", "trustroute.harness.study.resume",
+        "trustroute.harness.study.runner", "trustroute.networks.sumo_net"},
+    "trustroute.harness.live.worker": {
+        "os", "trustroute.harness.study.context", "trustroute.harness.study.parts",
+        "trustroute.harness.study.runner", "trustroute.harness.study.workers"},
+    "trustroute.harness.simulation.background": {"gzip", "xml.etree.ElementTree"},
+    "trustroute.harness.simulation.episode": {"trustroute.harness.simulation.rerun_log"},
+    "trustroute.harness.simulation.gym_env": {
+        "trustroute.harness.simulation.episode", "trustroute.harness.simulation.episode_tracker",
+        "trustroute.harness.simulation.model_engine", "trustroute.policies.model.trust_pomdp"},
+    "trustroute.harness.simulation.sumo_files": {"xml.etree.ElementTree"},
+    "trustroute.harness.simulation.sumo_start": {"os"},
+    "trustroute.harness.study.context": {
+        "trustroute.networks.town", "trustroute.participants.driver_model",
+        "trustroute.participants.driver_population", "trustroute.policies.logic.spec",
+        "trustroute.policies.resolve"},
+    "trustroute.harness.study.expected": {
+        "trustroute.policies.belief.problem", "trustroute.policies.evaluation.settings",
+        "trustroute.policies.evaluation.trust_state", "trustroute.policies.model.trust_pomdp",
+        "trustroute.policies.routing.files"},
+    "trustroute.harness.study.replay": {
+        "trustroute.core.dataset", "trustroute.harness.simulation.sumo_start",
+        "trustroute.harness.study.inputs", "trustroute.harness.study.manifest",
+        "trustroute.harness.study.runner"},
+    "trustroute.harness.study.runner": {
+        "re", "trustroute.core.output_files", "trustroute.harness.simulation.episode",
+        "trustroute.harness.simulation.model_engine", "trustroute.harness.simulation.sumo_start",
+        "trustroute.harness.study.workers", "trustroute.participants.synthetic_driver"},
+}
+
+
+def function_imports(trees: dict[str, ast.Module]) -> set[tuple[str, str]]:
+    """(module, imported module) of every import inside a function, outside the lazy entries."""
+    found = set()
+    for module, tree in trees.items():
+        if module == "trustroute" or module.startswith(LAZY_ENTRIES[1:]):
+            continue
+        for function in ast.walk(tree):
+            if not isinstance(function, ast.FunctionDef | ast.AsyncFunctionDef):
+                continue
+            for node in ast.walk(function):
+                if isinstance(node, ast.Import):
+                    found |= {(module, alias.name) for alias in node.names}
+                elif isinstance(node, ast.ImportFrom):
+                    found.add((module, "." * node.level + (node.module or "")))
+    return found
+
+
+def unexplained_imports(trees: dict[str, ast.Module]) -> set[tuple[str, str]]:
+    return {(module, target) for module, target in function_imports(trees)
+            if target.split(".")[0] not in HEAVY_OR_OPTIONAL
+            and target not in PENDING_IMPORTS.get(module, set())}
+
+
+def test_imports_sit_at_module_top():
+    assert unexplained_imports(package_trees()) == set()
+
+
+def test_a_new_function_level_import_is_caught():
+    trees = with_added("trustroute.networks.town",
+                       "def later():\n    import json\n    from trustroute.core import errors\n"
+                       "    import matplotlib.pyplot as plt\n    return json, errors, plt\n")
+    assert unexplained_imports(trees) == {("trustroute.networks.town", "json"),
+                                          ("trustroute.networks.town", "trustroute.core")}

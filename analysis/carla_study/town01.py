@@ -11,6 +11,7 @@ table and the evidence for it.
 from __future__ import annotations
 
 import json
+import pickle
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -129,8 +130,6 @@ def _incidents(policy_script: str, road_of_state: dict[str, str]) -> dict[str, s
 def build_carla_tables(checkout: Path) -> dict:
     """Derive the tables from a checkout of the authors' repository (reads their robot_nodes.pkl
     belief grids with pickle: run it only on a checkout you trust)."""
-    import pickle
-
     checkout = Path(checkout)
     states = _state_table(checkout)
     road_of_state = dict(zip(states["state"], states["road"], strict=True))

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from trustroute.core.dataset import DAMAGED_DIR, PART_FOLDERS, STUDY_FILE
 from trustroute.core.errors import InputError
-from trustroute.core.output_files import TEMP_PREFIX
+from trustroute.core.output_files import TEMP_PREFIX, atomic_write_text
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.parts import PartError, part_path, read_part
 from trustroute.harness.study.plan import EpisodeTask
@@ -22,8 +22,6 @@ from trustroute.harness.study.plan import EpisodeTask
 def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:
     """Check that the study directory holds this study (resume) and not another; mark it as this
     study's (the directory exists: `study_lock` made it)."""
-    from trustroute.core.output_files import atomic_write_text
-
     marker = study_dir / STUDY_FILE
     if marker.exists():
         try:
