@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench lint install clean
+.PHONY: demo test bench lint install browser clean
 
 # The repository's trustroute/ folder is the package root by design; setuptools warns about a
 # folder named like the package at every editable install, which says nothing here.
@@ -20,10 +20,22 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/trustroute demo
 
+# The browser tests drive Debian's Chromium and never skip (tests/browser.py): as root with apt-get
+# it is installed here; elsewhere one line says what to install.
+browser:
+	@command -v chromium >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing Debian's Chromium for the browser tests (apt-get install chromium)"; \
+	    apt-get update -qq >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
+	  else \
+	    echo "make test needs Debian's Chromium for the browser tests: run 'sudo apt-get install -y chromium'" >&2; \
+	    exit 2; \
+	  fi; }
+
 # pytest exits 5 when it collects nothing; that is not a failure of the project.
 # One pytest-xdist worker per core, and one more: the live and browser tests wait on the wall clock
 # (a study at wall-clock pace), and the extra worker runs other tests meanwhile.
-test: $(STAMP)
+test: $(STAMP) browser
 	$(BIN)/python -m pytest -q -n $$(( $$(nproc) + 1 )) --durations=10; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
 
 bench: $(STAMP)

@@ -66,6 +66,28 @@ def cli() -> None:
     """trustroute: trust-aware routing of an autonomous vehicle, studied on SUMO."""
 
 
+def usage_fix(exc: click.UsageError, command: str) -> str:
+    """The fix of a usage error: the option click suggests, the missing argument to pass, or the
+    values a parameter takes."""
+    if isinstance(exc, click.NoSuchOption):
+        if exc.possibilities:
+            return f"use {' or '.join(sorted(exc.possibilities))}"
+        return f"use an option `{command} --help` lists"
+    param, ctx = getattr(exc, "param", None), exc.ctx
+    if param is not None and ctx is not None:
+        hint = param.get_error_hint(ctx)
+        if isinstance(exc, click.MissingParameter):
+            return f"pass {hint} (`{command} --help` says what it takes)"
+        if isinstance(param.type, click.Choice):
+            return f"pass {hint} as one of {', '.join(map(str, param.type.choices))}"
+        return f"pass {hint} as {param.type.name} (`{command} --help` gives its range)"
+    if isinstance(exc, click.BadArgumentUsage) or "unexpected extra argument" in str(exc):
+        return f"drop it; `{command} --help` lists the arguments"
+    if command == "trustroute":
+        return "pick a command `trustroute --help` lists"
+    return f"follow the usage `{command} --help` prints"
+
+
 def main(argv: list[str] | None = None) -> None:
     try:
         code = cli.main(args=argv, prog_name="trustroute", standalone_mode=False)
@@ -76,10 +98,12 @@ def main(argv: list[str] | None = None) -> None:
         click.echo("aborted", err=True)
         sys.exit(130)
     except click.UsageError as exc:
-        # One line (click would print the usage, a hint and a blank line first).
+        # One line naming the fix, like every other error (click would print the usage, a hint and
+        # a blank line first).
         command = exc.ctx.command_path if exc.ctx is not None else "trustroute"
         message = " ".join(exc.format_message().split())
-        click.echo(f"error: {message} (see {command} --help)", err=True)
+        error = InputError(command, "", message, usage_fix(exc, command))
+        click.echo(f"error: {error.one_line()}", err=True)
         sys.exit(2)
     except click.ClickException as exc:
         click.echo(f"error: {' '.join(exc.format_message().split())}", err=True)

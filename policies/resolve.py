@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeGuard, TypeVar
 
+from trustroute.core import defaults
 from trustroute.core.cache import POLICIES
 from trustroute.core.cache import cache_dir as cache_dir_of
 from trustroute.core.errors import InputError
@@ -29,7 +30,6 @@ from trustroute.policies.belief.driver_types import lift_population, lift_spec
 from trustroute.policies.belief.problem import TRUST_STATE, case_of
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, build_pomdp
-from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.routing.files import array_path, load_policy, load_population_policy, save_policy
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
@@ -45,7 +45,7 @@ if TYPE_CHECKING:
 
 Loaded = TypeVar("Loaded")
 
-AWARE_HORIZON = DEFAULT_FALLBACK_AFTER   # synthesize for the junctions before the fallback takes over
+AWARE_HORIZON = defaults.AWARE_HORIZON   # synthesize for the junctions before the fallback takes over
 AWARE_TAU = 1e-3
 AWARE_TIME_LIMIT = 120.0
 

@@ -132,9 +132,14 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("trustroute.policies.trust_state_synthesis",),
     ("trustroute.policies.synthesize_spec", "trustroute.policies.resolve", "trustroute.policies.peer",
      "trustroute.policies.pomdp_py"),
-    ("trustroute.harness", "trustroute.harness.simulation"),
+    # the application layer's assembly (trustroute/app/__init__.py): below every entry point
+    ("trustroute.app.inputs", "trustroute.app.problem", "trustroute.app.policy",
+     "trustroute.app.nets", "trustroute.app.drivers", "trustroute.app.synthesis", "trustroute.app.spec_check",
+     "trustroute.app.peers", "trustroute.app.towns", "trustroute.app.populations"),
+    ("trustroute.harness", "trustroute.harness.simulation", "trustroute.app.engines"),
     ("trustroute.harness.study", "trustroute.harness.live"),
     ("trustroute.analysis",),
+    ("trustroute.app",),   # the runs the API and the CLI start
     ("trustroute",),
     ("trustroute.harness.cli", "trustroute.harness.commands", "trustroute.__main__"),
 )
@@ -192,3 +197,61 @@ def test_every_module_stays_small():
     long = {module: n for module, path in package_modules().items()
             if (n := len(path.read_text().splitlines())) > MAX_MODULE_LINES}
     assert long == {}
+
+
+def _under(module: str, prefixes: tuple[str, ...]) -> bool:
+    return any(module == prefix or module.startswith(prefix + ".") for prefix in prefixes)
+
+
+# The CLI parses and prints: it reaches the inputs, the policies and the nets through the
+# application layer (trustroute/app), never directly.
+CLI = ("trustroute.harness.cli", "trustroute.harness.commands")
+BEHIND_THE_APP = ("trustroute.policies", "trustroute.networks", "trustroute.participants")
+
+
+def cli_internal_imports(graph: dict[str, set[str]]) -> list[str]:
+    return sorted(f"{module} imports {target}" for module, targets in graph.items() if _under(module, CLI)
+                  for target in targets if _under(target, BEHIND_THE_APP))
+
+
+def test_the_cli_goes_through_the_application_layer():
+    assert cli_internal_imports(import_graph()) == []
+
+
+def test_a_cli_import_behind_the_application_layer_is_caught():
+    graph = import_graph()
+    graph["trustroute.harness.commands.run"] |= {"trustroute.policies.resolve"}
+    graph["trustroute.harness.cli"] |= {"trustroute.networks.town"}
+    graph["trustroute.harness.commands.model"] |= {"trustroute.participants.driver_model"}
+    assert cli_internal_imports(graph) == [
+        "trustroute.harness.cli imports trustroute.networks.town",
+        "trustroute.harness.commands.model imports trustroute.participants.driver_model",
+        "trustroute.harness.commands.run imports trustroute.policies.resolve",
+    ]
+
+
+# The analysis reads results; it runs no episode and no study (the runs that feed it, such as the
+# fitting command's policy check, are put together in trustroute/app/runs.py).
+ANALYSIS = ("trustroute.analysis",)
+RUNNING = ("trustroute.harness.simulation", "trustroute.harness.study.runner",
+           "trustroute.harness.study.workers", "trustroute.harness.live", "trustroute.app.engines",
+           "trustroute.app.runs")
+
+
+def analysis_running_imports(graph: dict[str, set[str]]) -> list[str]:
+    return sorted(f"{module} imports {target}" for module, targets in graph.items()
+                  if _under(module, ANALYSIS) for target in targets if _under(target, RUNNING))
+
+
+def test_the_analysis_runs_no_simulation():
+    assert analysis_running_imports(import_graph()) == []
+
+
+def test_an_analysis_import_of_a_simulation_is_caught():
+    graph = import_graph()
+    graph["trustroute.analysis.fitting.posterior_check"] |= {"trustroute.harness.simulation.model_engine"}
+    graph["trustroute.analysis.study.analysis"] |= {"trustroute.harness.study.runner"}
+    assert analysis_running_imports(graph) == [
+        "trustroute.analysis.fitting.posterior_check imports trustroute.harness.simulation.model_engine",
+        "trustroute.analysis.study.analysis imports trustroute.harness.study.runner",
+    ]

@@ -68,9 +68,7 @@ OVER_THE_LIMIT = frozenset({
     "trustroute.harness.commands.run:run",
     "trustroute.harness.commands.study:study",
     "trustroute.harness.commands.synth:synth",
-    "trustroute.harness.commands.synth:_synth_population",
     "trustroute.harness.commands.synth:evaluate",
-    "trustroute.harness.commands.synth:_evaluate_population",
     "trustroute.harness.simulation.episode:__init__",
     "trustroute.harness.simulation.episode:watch_open",
     "trustroute.harness.simulation.episode:run_episode",
@@ -87,6 +85,7 @@ OVER_THE_LIMIT = frozenset({
     "trustroute.policies.trust_state_synthesis.search:_open_loop_lower",
     "trustroute.policies.trust_state_synthesis.search:joint_search",
     "trustroute:synthesize",
+    "trustroute:evaluate",
     "trustroute:run_episode",
 })
 
@@ -222,12 +221,13 @@ PENDING_IMPORTS = {
         "trustroute.harness.simulation.model_engine", "trustroute.networks.town",
         "trustroute.participants.driver_model", "trustroute.policies.logic.spec",
         "trustroute.policies.resolve"},
+    "trustroute.app.peers": {"trustroute.policies.peer.paynt", "trustroute.policies.peer.storm"},
     "trustroute.harness.live.replay": {
         "trustroute.harness.simulation.episode", "trustroute.harness.simulation.rerun_log",
         "trustroute.harness.study.context", "trustroute.harness.study.parts",
         "trustroute.harness.study.replay", "trustroute.networks.sumo_net"},
     "trustroute.harness.live.scripted": {
-        "trustroute.harness.live.server", "trustroute.harness.study.context",
+        "trustroute.app.drivers", "trustroute.harness.live.server", "trustroute.harness.study.context",
         "trustroute.participants.synthetic_driver"},
     "trustroute.harness.live.server": {
         "numpy", "trustroute.core.dataset", "trustroute.core.validation", "trustroute.harness.live.view",
@@ -257,7 +257,7 @@ PENDING_IMPORTS = {
         "trustroute.harness.study.inputs", "trustroute.harness.study.manifest",
         "trustroute.harness.study.runner"},
     "trustroute.harness.study.runner": {
-        "re", "trustroute.core.output_files", "trustroute.harness.simulation.episode",
+        "re", "socket", "trustroute.core.output_files", "trustroute.harness.simulation.episode",
         "trustroute.harness.simulation.model_engine", "trustroute.harness.simulation.sumo_start",
         "trustroute.harness.study.workers", "trustroute.participants.synthetic_driver"},
 }

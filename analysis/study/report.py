@@ -112,7 +112,8 @@ def study_lines(manifest: dict) -> list[str]:
 def sources_line(lead: str, second: str, default: str) -> str:
     """The report's statement of which belief source leads its tables."""
     chosen = ("the default for this study: common to every condition" if lead == default
-              else f"chosen with --belief-source; this study's default is {default!r}")
+              else f"chosen by the caller (--belief-source, or analyze(belief_source=...)); this study's "
+                   f"default is {default!r}")
     return (f"Leading belief source: {lead!r} ({source_label(lead)}; {chosen}). "
             f"The tables on {second!r} ({source_label(second)}) follow them.")
 

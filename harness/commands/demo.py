@@ -18,8 +18,11 @@ from pathlib import Path
 
 import click
 
+from trustroute.app.engines import ENGINES, SIMULATED
+from trustroute.core import defaults
 from trustroute.harness.commands.options import WORKERS, bounded_int
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
+from trustroute.harness.study.plan import episode_id as planned_episode_id
 
 DEFAULT_OUT = Path("out") / "demo"
 DEMO_STUDY = {
@@ -59,7 +62,7 @@ def record_episode(config, study_dir: Path, episode_id: str) -> Path:
     help="Study DIRECTORY (a rerun resumes).",
 )
 @click.option("--workers", type=WORKERS, default=None, help="Local worker processes (default: CPU count).")
-@click.option("--engine", type=click.Choice(["sumo", "model"]), default="sumo", show_default=True)
+@click.option("--engine", type=click.Choice(SIMULATED), default=defaults.EPISODE_ENGINE, show_default=True)
 @click.option("--participants", type=bounded_int(1, 100_000), default=21, show_default=True)
 @click.option("--town", type=click.Choice([DEFAULT_TOWN, *DEMO_TOWNS]), default=DEFAULT_TOWN,
               show_default=True, help="The paper's town, or the city (the RESCO Ingolstadt scenario; "
@@ -104,8 +107,8 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
     ]
     payload = {"study_dir": str(run.study_dir), "engine": engine, "failed": run.failed,
                "analysis": analysis.to_dict()}
-    if engine == "sumo":
-        episode_id = f"p{0:05d}-{study['specs'][0]}-aware"
+    if ENGINES[engine].records:
+        episode_id = planned_episode_id(0, study["specs"][0], "aware")
         try:
             rrd = record_episode(config, run.study_dir, episode_id)
             paths["rrd"] = rrd

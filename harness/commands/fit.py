@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from trustroute.core.errors import InputError
 from trustroute.harness.commands.options import bounded_int
 from trustroute.harness.commands.output import json_option, quiet_option, with_paths
 
@@ -85,7 +86,8 @@ def fit(
 
     if types is not None:
         if check or method == "counts":
-            raise click.UsageError("--types fits by EM; it takes neither --check nor --method counts")
+            raise InputError("--types", "", "--types fits by EM; it takes neither --check nor --method "
+                             "counts", "drop --check and --method counts, or drop --types")
         check_output_file(out, "--out", "driver-population file")
         fit_types(Path(study_dir), Path(out), types, max_types, restarts, iterations, bootstrap, seed,
                   shared_dynamics, as_json, quiet)
@@ -120,19 +122,15 @@ def fit(
     if check:
         import numpy as np
 
-        from trustroute.analysis.fitting.posterior_check import (
-            aware_vs_free,
-            plot_check,
-            posterior_check,
-            write_check,
-        )
+        from trustroute.analysis.fitting.posterior_check import plot_check, posterior_check, write_check
         from trustroute.analysis.study_directory import load_study, study_inputs
-        from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY
+        from trustroute.app.populations import REPORT_ACCURACY
+        from trustroute.app.runs import aware_vs_free
 
         manifest, _, roads = load_study(Path(study_dir))
         _, template, _ = study_inputs(manifest)
         models = {
-            "packaged": (template, DEFAULT_REPORT_ACCURACY),
+            "packaged": (template, REPORT_ACCURACY),
             "fitted": (result.model(), float(result.report_accuracy or 1.0)),
         }
         outcome = posterior_check(roads, models, CHECK_REPLICATES, np.random.default_rng(seed))
@@ -211,8 +209,8 @@ def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: 
         select_types,
         study_observations,
     )
+    from trustroute.app.populations import write_population as write_driver_population
     from trustroute.core.output_files import atomic_write_text
-    from trustroute.participants.driver_population import write_driver_population
 
     fixed = _type_count(types)
     rng = np.random.default_rng(seed)

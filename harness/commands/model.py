@@ -5,38 +5,9 @@ from __future__ import annotations
 import json
 
 import click
-import numpy as np
 
-from trustroute.harness.commands.output import json_option
-from trustroute.networks.town import load_town
-from trustroute.participants.driver_model import load_driver_model
-from trustroute.policies.model.trust_pomdp import build_pomdp
-
-
-def model_summary(town_path: str | None, driver_path: str | None) -> dict:
-    town = load_town(town_path)
-    driver = load_driver_model(driver_path)
-    pomdp = build_pomdp(town, driver)
-    incidents = {}
-    for kind in driver.incident_types:
-        incidents[kind] = sum(1 for v in town.incidents.values() if v == kind)
-    return {
-        "town": town.source_path,
-        "town_hash": town.content_hash[:12],
-        "junctions": len(town.junctions),
-        "roads": len(town.roads),
-        "states": pomdp.n_states,
-        "incidents_per_type": incidents,
-        "trust_levels": list(driver.trust_levels),
-        "driver_model": driver.source_path,
-        "driver_hash": driver.content_hash[:12],
-        "performance_dependent": driver.depends_on_performance,
-        "initial_belief": np.round(driver.initial_belief, 4).tolist(),
-        "takeover_probability": {
-            kind: np.round(driver.takeover_probability[i], 3).tolist()
-            for i, kind in enumerate(driver.incident_types)
-        },
-    }
+from trustroute.app.towns import model_summary
+from trustroute.harness.commands.output import json_option, with_paths
 
 
 @click.command("model")
@@ -48,7 +19,7 @@ def model(town_path: str | None, driver_path: str | None, as_json: bool) -> None
     """Summarise the trust POMDP of a town and a driver model."""
     summary = model_summary(town_path, driver_path)
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(json.dumps(with_paths(summary, {})))
         return
     click.echo(f"town {summary['town']} ({summary['town_hash']}): {summary['junctions']} junctions,"
                f" {summary['roads']} two-way roads, {summary['states']} states (directed roads)")

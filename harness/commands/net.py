@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import click
 
@@ -22,14 +21,14 @@ def net() -> None:
               "XDG_CACHE_HOME defaulting to ~/.cache).")
 @json_option
 def build(town_path: str | None, out_dir: str | None, as_json: bool) -> None:
-    """Build the town's .net.xml with netconvert, cached by the town's content hash."""
+    """Build the town's .net.xml with netconvert, cached by the town's content hash (a town
+    imported from a net drives that net: it is printed, nothing is built)."""
+    from trustroute.app.towns import build_town_net
     from trustroute.core.output_files import check_output_dir
-    from trustroute.networks.sumo_net import build_net
-    from trustroute.networks.town import load_town
 
     if out_dir is not None:
         check_output_dir(out_dir, "--out", "net cache")
-    result = build_net(load_town(town_path), Path(out_dir) if out_dir else None)
+    result = build_town_net(town_path, out_dir)
     if as_json:
         click.echo(json.dumps(with_paths(result.to_dict(), {"net": result.path})))
         return

@@ -2,7 +2,8 @@
 
 A command that prints results takes `--json`: it then prints exactly one JSON object on stdout and
 nothing else. The files a command wrote are listed under one key, `"paths"`, as name -> path
-(e.g. {"policy": ..., "rrd": ...}), the same key in every command. A command with progress output
+(e.g. {"policy": ..., "rrd": ...}), the same key in every command, present (empty) when the
+command wrote nothing. A command with progress output
 takes `--quiet` (no progress bars, no chatter; `--json` implies it).
 """
 
@@ -39,8 +40,10 @@ def with_paths(payload: Mapping, paths: Mapping[str, object]) -> dict:
 
 
 def emit(as_json: bool, payload: Mapping, lines: list[str]) -> None:
-    """One JSON object (--json) or the human-readable lines."""
+    """One JSON object (--json; with "paths", empty when nothing was written) or the lines."""
     if as_json:
+        if PATHS_KEY not in payload:
+            payload = with_paths(payload, {})
         click.echo(json.dumps(payload, default=jsonable))
     else:
         for line in lines:

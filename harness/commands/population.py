@@ -7,7 +7,6 @@ show     the types of a driver-population file, their weights and what sets them
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import click
@@ -20,26 +19,6 @@ from trustroute.harness.commands.output import emit, json_option, with_paths
 @click.group("population")
 def population() -> None:
     """Sample, fit (`trustroute fit --types`) and inspect driver populations."""
-
-
-def _population_settings(config_path: str | None, concentration: float | None, spread: float | None,
-                         n_trust: int):
-    from trustroute.core.validation import parse_toml, read_text
-    from trustroute.participants.population import population_config_from_dict
-
-    table: dict = {}
-    source = "--config"
-    if config_path is not None:
-        source = str(config_path)
-        data = parse_toml(read_text(config_path, source, "the [population] settings",
-                                    "pass a TOML file with a [population] table (e.g. a study config)"),
-                          source, "population settings")
-        table = dict(data.get("population") or {})
-    if concentration is not None:
-        table["concentration"] = concentration
-    if spread is not None:
-        table["takeover_spread"] = spread
-    return population_config_from_dict(table, source, n_trust)
 
 
 @population.command("sample")
@@ -58,24 +37,12 @@ def _population_settings(config_path: str | None, concentration: float | None, s
 def sample(n_types: int, seed: int, out: str, driver_path: str | None, config_path: str | None,
            concentration: float | None, spread: float | None, as_json: bool) -> None:
     """Sample K driver types around a nominal model; equal weights."""
-    from trustroute.core.errors import InputError
+    from trustroute.app.populations import sample_population
     from trustroute.core.output_files import check_output_file
-    from trustroute.participants.driver_model import load_driver_model
-    from trustroute.participants.driver_population import write_driver_population
-    from trustroute.participants.sampled_types import sample_driver_population
 
     check_output_file(out, "--out", "driver-population file")
-    nominal = load_driver_model(driver_path)
-    settings = _population_settings(config_path, concentration, spread, nominal.n_trust)
-    if math.isinf(settings.concentration) and settings.takeover_spread == 0:
-        raise InputError(config_path or "--concentration", "population",
-                         "these settings give every type the nominal model",
-                         "give a finite --concentration or a --takeover-spread > 0")
-    provenance = (f"trustroute population sample --types {n_types} --seed {seed} around "
-                  f"{nominal.source_path}: concentration {settings.concentration:g}, takeover_spread "
-                  f"{settings.takeover_spread:g}")
-    result = sample_driver_population(nominal, n_types, settings, np.random.default_rng(seed), provenance)
-    path = write_driver_population(result, Path(out))
+    result, path = sample_population(n_types, seed, Path(out), driver_path, config_path, concentration,
+                                     spread)
     summary = {**population_summary(result), "source": str(path)}
     emit(as_json, with_paths(summary, {"population": path}),
          [*summary_lines(summary), f"driver population written to {path}"])
@@ -86,9 +53,9 @@ def sample(n_types: int, seed: int, out: str, driver_path: str | None, config_pa
 @json_option
 def show(path: str, as_json: bool) -> None:
     """Print the types of a driver-population file and their weights."""
-    from trustroute.participants.driver_population import load_driver_population
+    from trustroute.app.inputs import population_of
 
-    summary = population_summary(load_driver_population(path))
+    summary = population_summary(population_of(path))
     emit(as_json, summary, summary_lines(summary))
 
 

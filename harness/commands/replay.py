@@ -8,6 +8,9 @@ from pathlib import Path
 
 import click
 
+from trustroute.app.engines import ENGINES
+from trustroute.harness.commands.output import with_paths
+
 VIEWER_PORT, DATA_PORT = 9090, 9876
 
 
@@ -41,11 +44,12 @@ def replay(
     from trustroute.harness.study.runner import recording_path
 
     config, _ = study_config_from_manifest(Path(study_dir))
-    if config.engine == "live":
+    engine = ENGINES[config.engine]
+    if not engine.synthetic:   # people drove it: re-drawn from its log
         draw_live(Path(study_dir), episode_id, rrd_path, no_rrd, as_json)
         return
     rrd = Path(rrd_path) if rrd_path and not no_rrd else None   # model study: an error naming the engine
-    if not no_rrd and config.engine == "sumo" and rrd is None:
+    if not no_rrd and engine.records and rrd is None:
         rrd = recording_path(Path(study_dir), episode_id)
     # why no recording is written, when none is (an explicit --rrd on a model study is an error)
     no_recording = ("--no-rrd" if no_rrd else
@@ -64,7 +68,7 @@ def replay(
         "no_recording": no_recording,
     }
     if as_json:
-        click.echo(json.dumps(payload))
+        click.echo(json.dumps(with_paths(payload, {"rrd": rrd})))
         return
     click.echo(
         f"{episode_id}: replay reproduces the log ({len(roads)} roads, trust "
@@ -93,7 +97,7 @@ def draw_live(study_dir: Path, episode_id: str, rrd_path: str | None, no_rrd: bo
                "route": roads["directed_road"].tolist(), "ticks": len(record.kinematics), "rrd": str(rrd),
                "rrd_bytes": rrd.stat().st_size}
     if as_json:
-        click.echo(json.dumps(payload))
+        click.echo(json.dumps(with_paths(payload, {"rrd": rrd})))
         return
     click.echo(f"{episode_id}: a live episode, drawn from its log ({len(roads)} roads, "
                f"{payload['ticks']} ticks; a person is not re-simulated)")

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from trustroute.app.problem import load_problem
+from trustroute.core import defaults
 from trustroute.core.errors import InputError
 from trustroute.harness.commands.options import SEED
 from trustroute.harness.commands.output import json_option, quiet_option, with_paths
@@ -43,22 +45,20 @@ def _write_logs(out_dir: Path, record) -> dict[str, Path]:
 def routes_file(path: str) -> str:
     """A background route file (a path, or a packaged name: `city`, the city's own demand), read once
     to fail early with one line (absolute: SUMO resolves it)."""
-    from trustroute.core.validation import read_input_bytes
-    from trustroute.networks.cities import ROUTES
+    from trustroute.app.towns import route_file
 
-    path = str(ROUTES.resolve(path))
-    read_input_bytes(path, "SUMO route file", max_bytes=1 << 30, fix="pass an existing .rou.xml file or "
-                     f"a packaged route name ({', '.join(ROUTES.names())})")
-    return str(Path(path).resolve())
+    return route_file(path)
 
 
 def _spec_path(spec_argument: str | None, spec_option: str | None) -> str:
     """The spec file, given once: as the SPEC argument or by its old spelling --spec."""
     if spec_argument is not None and spec_option is not None:
-        raise click.UsageError("give the spec once: as the SPEC argument (--spec is its old spelling)")
+        raise InputError("--spec", "", "the spec is given twice",
+                         "give it once, as the SPEC argument (--spec is its old spelling)")
     spec_path = spec_argument if spec_argument is not None else spec_option
     if spec_path is None:
-        raise click.UsageError("missing argument SPEC (a spec file or a packaged spec name, e.g. phi1)")
+        raise InputError("SPEC", "", "missing argument SPEC",
+                         "pass a spec file or a packaged spec name, e.g. `trustroute run phi1`")
     return spec_path
 
 
@@ -84,19 +84,22 @@ def _check_paths(out_dir: str | None, rrd_path: str | None, cache_dir: str | Non
 @click.argument("spec_argument", metavar="SPEC", required=False, type=click.Path())
 @click.option("--spec", "spec_option", type=click.Path(), default=None, hidden=True,
               help="Deprecated spelling of the SPEC argument.")
-@click.option("--policy", "policy_name", default="free", show_default=True,
+@click.option("--policy", "policy_name", default=defaults.POLICY, show_default=True,
               help="'aware', 'free' or a policy file.")
-@click.option("--seed", type=SEED, default=0, show_default=True, help="SUMO seed and driver seed.")
+@click.option("--seed", type=SEED, default=defaults.SEED, show_default=True,
+              help="SUMO seed and driver seed.")
 @click.option("--rrd", "rrd_path", type=click.Path(), default=None, help="Rerun recording FILE to write.")
 @click.option("--out", "out_dir", type=click.Path(), default=None,
               help="DIRECTORY to write roads/kinematics/incidents Parquet and summary.json into.")
 @json_option
 @click.option("--town", "town_path", type=click.Path(), default=None,
-              help="Town file or packaged town name, e.g. city (default town).")
+              help="Town file or packaged town name, e.g. city (default: the town a packaged spec "
+                   "is written for, else the packaged town).")
 @click.option("--driver", "driver_path", type=click.Path(), default=None,
-              help="Driver model file (default model).")
+              help="Driver model file or packaged name (default model).")
 @click.option("--net", "net_path", type=click.Path(), default=None,
-              help="SUMO net to use (default: the town's cached net, built if missing).")
+              help="SUMO net to use (default: the net the town drives: an imported town's own, "
+                   "else its cached built net, built if missing).")
 @click.option("--initial-trust", type=int, default=None, help="Driver's initial trust (default: drawn).")
 @click.option("--population", "population_path", type=click.Path(), default=None,
               help="Driver-population FILE (instead of --driver): the driver's type is drawn from it "
@@ -123,10 +126,8 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
     To re-run an episode of a study exactly (its participant's drawn model and initial trust), use
     `trustroute replay STUDY_DIR EPISODE_ID`.
     """
-    import numpy as np
-
-    from trustroute.harness.simulation.episode import run_episode
-    from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+    from trustroute.app.policy import PolicySettings, policy_for
+    from trustroute.app.runs import EpisodeSettings, run_one_episode
     from trustroute.harness.simulation.sumo_files import (
         VehicleTypeCollector,
         finish_route_file,
@@ -134,58 +135,25 @@ def run(spec_argument: str | None, spec_option: str | None, policy_name: str, se
         write_sumocfg,
     )
     from trustroute.harness.simulation.sumo_start import SumoConfig
-    from trustroute.networks.real_net import is_imported, town_net_file
-    from trustroute.networks.sumo_net import build_net
-    from trustroute.networks.town import load_town
-    from trustroute.participants.driver_model import load_driver_model
-    from trustroute.participants.synthetic_driver import SyntheticDriver
-    from trustroute.policies.logic.spec import load_spec
-    from trustroute.policies.resolve import resolve_policy
 
     spec_path = _spec_path(spec_argument, spec_option)
     _check_paths(out_dir, rrd_path, cache_dir, net_path)
-    rng = np.random.default_rng(seed)
-    driver_type = None
-    if population_path is not None:
-        from trustroute.harness.commands.synth import load_population_routing
-
-        if driver_path is not None:
-            raise click.UsageError("give --driver or --population, not both")
-        town, population, spec, policy, av_model, av_spec = load_population_routing(
-            spec_path, town_path, population_path, policy_name, cache_dir, progress=not (as_json or quiet))
-        k = int(rng.choice(population.n_types, p=population.weights))
-        driver_type, driver_model = population.names[k], population.types[k].model
-        setup = EpisodeSetup(town=town, driver_model=av_model, spec=av_spec)
-    else:
-        town = load_town(town_path)
-        driver_model = load_driver_model(driver_path)
-        spec = load_spec(spec_path, town, driver_model.n_trust, driver_model.source_path)
-        policy = resolve_policy(policy_name, town, driver_model, spec, cache_dir,
-                                progress=not (as_json or quiet))
-        setup = EpisodeSetup(town=town, driver_model=driver_model, spec=spec)
-    if initial_trust is not None and initial_trust not in driver_model.trust_levels:
-        raise InputError("--initial-trust", "", f"{initial_trust} is not a trust level of the model",
-                         f"pass one of {list(driver_model.trust_levels)}")
-    driver = SyntheticDriver(driver_model, rng, initial_trust=initial_trust)
-    episode_id = f"{spec.name}-{policy.name}-s{seed}"
+    problem = load_problem(spec_path, town_path, driver_path, population_path)
+    policy = policy_for(problem, policy_name, PolicySettings(cache_dir=cache_dir,
+                                                             progress=not (as_json or quiet)))
     sumo_config = SumoConfig(background_vehicles=background_vehicles,
                              route_files=tuple(routes_file(path) for path in routes_paths))
     if sumo_dir is not None:
         sumo_config = replace(sumo_config, output_dir=str(prepare_directory(Path(sumo_dir)).resolve()))
-    if net_path:
-        net = Path(net_path)
-    elif is_imported(town):
-        net = town_net_file(town)   # the town's own net, checked against its recorded hash
-    else:
-        net = build_net(town).path
     types = VehicleTypeCollector() if sumo_dir is not None else None
-    record = run_episode(setup, policy, driver, episode_id, seed,
-                         rrd_path=Path(rrd_path) if rrd_path else None, net_path=net, config=sumo_config,
-                         observer=types)
+    ran = run_one_episode(problem, policy, EpisodeSettings(
+        seed=seed, initial_trust=initial_trust, rrd=Path(rrd_path) if rrd_path else None,
+        net=Path(net_path) if net_path else None, sumo=sumo_config, observer=types))
+    record, episode_id, driver_type, net = ran.record, ran.episode_id, ran.driver_type, ran.net
     written = _write_logs(Path(out_dir), record) if out_dir else {}
     if rrd_path:
         written["rrd"] = Path(rrd_path)
-    if sumo_dir is not None and types is not None:  # types are collected exactly when sumo_dir is given
+    if sumo_dir is not None and types is not None and net is not None:  # (SUMO: the net is known)
         finish_route_file(Path(sumo_dir), types.types)
         written["sumocfg"] = write_sumocfg(Path(sumo_dir), net, seed, sumo_config)
         written["routes"] = Path(sumo_dir) / "routes.rou.xml"

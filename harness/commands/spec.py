@@ -9,84 +9,12 @@ Graphviz dot.
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import click
 
-from trustroute.core.errors import InputError
+from trustroute.app.spec_check import spec_report
 from trustroute.harness.commands.output import json_option, with_paths
-
-
-def spec_report(spec_path: str, town_path: str | None, population_path: str | None = None,
-                driver_path: str | None = None) -> tuple[dict, str]:
-    """(the JSON-ready summary of a spec check, the DFA as dot text). The spec is loaded as every
-    command loads it: against the town and the driver model (`driver_path`, default the packaged
-    model) or, with population_path, the driver population (type-belief atoms, the threshold check
-    on its type-aware filter; docs/driver_types.md)."""
-    from trustroute.networks.town import load_town
-    from trustroute.participants.driver_model import load_driver_model
-    from trustroute.participants.driver_population import load_driver_population
-    from trustroute.policies.logic.dfa import DFATooLarge, dfa_from_formula
-    from trustroute.policies.logic.lint import lint
-    from trustroute.policies.logic.spec import load_spec
-
-    if population_path is not None and driver_path is not None:
-        raise click.UsageError("give --driver or --population, not both")
-    town = load_town(town_path)
-    if population_path is None:
-        population, driver = None, load_driver_model(driver_path)
-        spec = load_spec(spec_path, town, driver.n_trust, driver.source_path)
-    else:
-        population = load_driver_population(population_path)
-        spec = load_spec(spec_path, town, population.types[0].model.n_trust, population_path)
-    started = time.perf_counter()
-    try:
-        dfa = dfa_from_formula(spec.formula, spec.formula_atoms)
-    except DFATooLarge as exc:
-        raise InputError(spec.source_path, "formula", f"the formula is too large to translate ({exc})",
-                         "split the task or simplify the formula") from None
-    except RecursionError:
-        raise InputError(spec.source_path, "formula", "the formula is nested too deeply to translate",
-                         "simplify the formula") from None
-    seconds = time.perf_counter() - started
-    if population_path is not None and population is not None:
-        from trustroute.policies.belief.driver_types import lift_population, lift_spec
-
-        lifted = lift_spec(spec, population, population_path)   # a type it lacks: one line, exit 2
-        warnings = lint(lifted, town, dfa, lift_population(population))
-    else:
-        warnings = lint(spec, town, dfa, driver)
-    summary = {
-        "name": spec.name,
-        "file": spec.source_path,
-        "start": spec.start,
-        "formula": spec.formula_text,
-        "content_hash": spec.content_hash,
-        "town": town.source_path,
-        "atoms": list(dfa.atoms),
-        "state_atoms": sorted(a for a in spec.state_atoms if a in dfa.atoms),
-        "belief_atoms": sorted(a for a in spec.belief_atoms if a in dfa.atoms),
-        "trust_atoms": sorted(a for a in spec.trust_atoms if a in dfa.atoms),
-        "type_belief_atoms": sorted(a for a in spec.type_atoms if a in dfa.atoms),
-        "dfa_states": dfa.n_states,
-        "accepting_states": int(dfa.accepting.sum()),
-        "rejecting_states": int(dfa.rejecting.sum()),
-        "translation_seconds": seconds,
-        "warnings": [{"code": w.code, "message": w.message, "atom": w.atom} for w in warnings],
-        "waypoints": waypoint_summary(spec, town),
-    }
-    return summary, dfa.to_dot(spec.name)
-
-
-def waypoint_summary(spec, town) -> list[dict]:
-    """The state atoms in the order the formula first names them, with their road counts and the
-    fewest junctions from the previous one (the start road first; networks/road_lookup.py)."""
-    from trustroute.networks.road_lookup import waypoint_legs
-
-    waypoints = [(atom, spec.state_atoms[atom]) for atom in spec.formula_atoms if atom in spec.state_atoms]
-    legs = waypoint_legs(town, spec.start, waypoints)
-    return [{**leg.to_dict(), "roads": len(roads)} for leg, (_, roads) in zip(legs, waypoints, strict=True)]
 
 
 def waypoint_line(start: str, waypoints: list[dict]) -> str:

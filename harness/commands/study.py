@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from trustroute.app.engines import SIMULATED
 from trustroute.harness.commands.options import WORKERS, bounded_int
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 from trustroute.harness.study.config import study_directory
@@ -44,7 +45,7 @@ def report_paths(paths) -> dict[str, Path]:
     help="Dask scheduler ADDRESS, or 'local' for a local Dask cluster (default: local pool).",
 )
 @click.option(
-    "--engine", type=click.Choice(["sumo", "model"]), default=None, help="Override the config's engine."
+    "--engine", type=click.Choice(SIMULATED), default=None, help="Override the config's engine."
 )
 @click.option("--no-report", is_flag=True, help="Do not analyse or write the report.")
 @click.option("--report-anyway", is_flag=True,

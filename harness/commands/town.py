@@ -12,6 +12,7 @@ from pathlib import Path
 
 import click
 
+from trustroute.core.errors import InputError
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 
 
@@ -35,19 +36,16 @@ def import_command(source: str, out: str, incidents_path: str | None, incident_s
                    net_out: str | None, quiet: bool, as_json: bool) -> None:
     """Import SOURCE (.net.xml, .net.xml.gz or .osm) as a town: its decision junctions, its roads
     with their shapes and lengths, one-way streets kept one-way."""
-    import numpy as np
-
+    from trustroute.app.towns import import_town_file
     from trustroute.core.output_files import check_output_file
-    from trustroute.networks.town_import import import_town
 
     if incidents_path is not None and incident_seed is not None:
-        raise click.UsageError("pass --incidents or --incident-seed, not both")
+        raise InputError("--incident-seed", "", "--incidents and --incident-seed were both given",
+                         "pass --incidents or --incident-seed, not both")
     check_output_file(out, "--out", "town file")
     if net_out is not None:
         check_output_file(net_out, "--net-out", "SUMO net")
-    rng = np.random.default_rng(incident_seed) if incident_seed is not None else None
-    result = import_town(source, out, incidents_path=incidents_path, rng=rng, net_out=net_out,
-                         incident_seed=incident_seed)
+    result = import_town_file(source, out, incidents_path, incident_seed, net_out)
     if not (quiet or as_json):
         click.echo(f"{Path(source).name}: {result.graph.summary()}", err=True)
     emit(as_json, with_paths(result.to_dict(), {"town": result.town_path, "net": result.net_path}),
@@ -66,20 +64,9 @@ def roads_command(town_path: str, near: tuple[float, float] | None, street: str 
                   as_json: bool) -> None:
     """Print TOWN's directed roads with length, street and incident: those near a point, or on a
     street. Spec files can name waypoint sets by junction or street (docs/formats/spec.md)."""
-    from trustroute.core.errors import InputError
-    from trustroute.networks.road_lookup import road_rows, street_names
-    from trustroute.networks.town import load_town
+    from trustroute.app.towns import town_roads
 
-    town = load_town(town_path)
-    if limit is None and near is not None:
-        limit = 10
-    rows = road_rows(town, near=near, street=street, limit=limit)
-    if street is not None and not rows:
-        known = street_names(town)
-        raise InputError(town_path, "--street", f"no road is on a street named '{street}'",
-                         f"use one of the town's {len(known)} street names (e.g. {', '.join(known[:3])})"
-                         if known else "this town's roads carry no street names (import a town from a net "
-                         "with names: trustroute town import)")
+    source, rows = town_roads(town_path, near, street, limit)
     lines = [f"{row.road}  {row.length:.1f} m  {row.incident}  {row.street or '(no street name)'}"
              + ("" if row.distance is None else f"  {row.distance:.1f} m away") for row in rows]
-    emit(as_json, {"town": town.source_path, "roads": [row.to_dict() for row in rows]}, lines)
+    emit(as_json, {"town": source, "roads": [row.to_dict() for row in rows]}, lines)

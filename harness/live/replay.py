@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from trustroute.app.nets import net_for
 from trustroute.core.dataset import part_path
 from trustroute.core.errors import InputError
 
@@ -20,7 +21,6 @@ def draw_live_episode(study_dir: Path, episode_id: str, rrd_path: Path):
     from trustroute.harness.study.context import study_context
     from trustroute.harness.study.parts import read_part
     from trustroute.harness.study.replay import find_task, study_config_from_manifest
-    from trustroute.networks.sumo_net import build_net
 
     study_dir = Path(study_dir)
     config, _ = study_config_from_manifest(study_dir)
@@ -33,5 +33,5 @@ def draw_live_episode(study_dir: Path, episode_id: str, rrd_path: Path):
     record = EpisodeRecord(summary=part.summary, roads=part.tables["roads"],
                            kinematics=part.tables["kinematics"], incidents=part.tables["incidents"])
     setup = study_context(config).setup(task.spec, task.condition)
-    write_recording(Path(rrd_path), build_net(setup.town).path, record, setup)
+    write_recording(Path(rrd_path), net_for(setup.town), record, setup)
     return record

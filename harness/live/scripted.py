@@ -84,11 +84,11 @@ class ScriptedParticipant:
         self.tasks = [warm_up_task(self.config, self.participant), *trials]
 
     def new_driver(self, task: EpisodeTask):
+        from trustroute.app.drivers import synthetic_driver
         from trustroute.harness.study.context import study_context
-        from trustroute.participants.synthetic_driver import SyntheticDriver
 
         model = study_context(self.config).driver_model(task.participant)
-        return SyntheticDriver(model, task.driver_rng(), report_accuracy=self.config.report_accuracy)
+        return synthetic_driver(model, task.driver_rng(), report_accuracy=self.config.report_accuracy)
 
     def respond(self, message: dict) -> list[dict]:
         """The replies to one server message; in lockstep no faster than the flood limit allows."""

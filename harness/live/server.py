@@ -23,6 +23,8 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from trustroute.app.engines import ENGINES
+from trustroute.app.nets import net_for
 from trustroute.core.dataset import part_path
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
@@ -69,7 +71,7 @@ class LiveStudy:
 
     def __init__(self, config: StudyConfig, study_dir: Path, options: ServerOptions | None = None,
                  consent_text: str = DEFAULT_CONSENT) -> None:
-        if config.engine != "live":
+        if ENGINES[config.engine].synthetic:   # a simulated engine: `trustroute study` runs it
             raise InputError(config.source_path, "study.engine",
                              f"engine {config.engine!r} is not served live",
                              'set engine = "live" (or run `trustroute study` for a simulated study)')
@@ -90,9 +92,9 @@ class LiveStudy:
     def open(self) -> LiveStudy:
         from trustroute.harness.study.expected import expected_values
         from trustroute.harness.study.resume import check_study_dir, finished_episodes
-        from trustroute.harness.study.runner import study_lock, validate_study
+        from trustroute.harness.study.runner import DEFAULT_ATTEMPTS, check_before_writing, study_lock
 
-        validate_study(self.config)
+        check_before_writing(self.config, self.study_dir, None, DEFAULT_ATTEMPTS, False)
         self._stack.enter_context(study_lock(self.study_dir))
         try:
             check_study_dir(self.study_dir, self.config, self.config.content_hash)
@@ -187,12 +189,12 @@ class LiveStudy:
                          time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
 
     def net_view(self) -> dict:
-        """The lanes of the study's town net (harness/live/view.py), for the station's view."""
+        """The lanes of the net the study's town drives (`net_for`: an imported town's own net), for
+    the station's view (harness/live/view.py)."""
         from trustroute.harness.live.view import net_view
         from trustroute.harness.study.context import study_context
-        from trustroute.networks.sumo_net import build_net
 
-        return net_view(str(build_net(study_context(self.config).town).path))
+        return net_view(str(net_for(study_context(self.config).town)))
 
     # -- downloads ------------------------------------------------------------------------------
     def files(self) -> list[str]:

@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from trustroute.app.nets import net_for
 from trustroute.core.dataset import (
     INCIDENTS_SCHEMA,
     KINEMATICS_SCHEMA,
@@ -44,13 +45,13 @@ from trustroute.harness.simulation import incidents as incident_kinds
 from trustroute.harness.simulation import takeover_decision
 from trustroute.harness.simulation.background import BackgroundTraffic, JamRelief, background_routes
 from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style
-from trustroute.harness.simulation.episode_net import check_net_matches, check_readable, net_key, town_net
+from trustroute.harness.simulation.episode_net import check_net_matches, check_readable, net_key
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.simulation.incidents import EgoState, Incident, Scene
 from trustroute.harness.simulation.performance import PerformanceMonitor, limits_for, verdict
 from trustroute.harness.simulation.real_roads import RealRoads, real_scene
 from trustroute.harness.simulation.sumo_start import Sumo, SumoConfig, hot_calls, sumo_session
-from trustroute.networks.real_net import is_imported, road_edges, town_net_file
+from trustroute.networks.real_net import is_imported, road_edges
 from trustroute.networks.road import Road
 from trustroute.networks.sumo_net import ROAD_SPEED
 from trustroute.networks.town import NO_INCIDENT
@@ -514,23 +515,19 @@ def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver, episode_id: 
     trust), or a person of a live study (harness/live/worker.py RemoteDriver), who also has
     takeover_request(now): their takeover or hand-back, asked every step. seed: the scenes' seed,
     and SUMO's when the episode starts it (no SUMO draw reaches an episode: sumo_start); the
-    driver carries its own Generator. net_path: the town's net (default: build_net(setup.town),
-    cached). observer(sumo, ego, mode, road): called every step (tests use it to read SUMO state).
+    driver carries its own Generator. net_path: the town's net (default: `net_for(setup.town)`).
+    observer(sumo, ego, mode, road): called every step (tests use it to read SUMO state).
     rrd_path: also write a Rerun recording. scene_overrides:
     {incident kind: {draw name: value}} fixes scene draws (e.g. {"pedestrian": {"timing": "late"}}).
     """
     started = time.perf_counter()
     config = config if config is not None else SumoConfig()
     real = None
+    # The net the town drives (trustroute/app/nets.py): an imported town's own, checked against the
+    # hash the town recorded, else the built one.
+    net = net_for(setup.town) if net_path is None else Path(net_path)
     if is_imported(setup.town):
-        # An imported town drives its own net, checked against the hash the town recorded.
-        own_net = town_net_file(setup.town)
-        net = own_net if net_path is None else Path(net_path)
         real = RealRoads(road_edges(setup.town, net), COMMIT_DISTANCE)
-    elif net_path is None:
-        net = town_net(setup.town)
-    else:
-        net = Path(net_path)
     key = net_key(net)
     if net_path is not None and real is None:
         check_readable(net, key)

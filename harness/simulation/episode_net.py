@@ -1,5 +1,5 @@
-"""The net an episode on a built town drives, checked once per process: built and verified
-(`town_net`), readable (`check_readable`) and holding an edge for every road of the town
+"""The net an episode on a built town drives (`net_for`, trustroute/app/nets.py), checked once per
+process: readable (`check_readable`) and holding an edge for every road of the town
 (`check_net_matches`), each keyed by the file's path and mtime (`net_key`)."""
 
 from __future__ import annotations
@@ -8,8 +8,7 @@ from pathlib import Path
 
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
-from trustroute.networks.sumo_net import build_net, net_counts
-from trustroute.networks.sumo_net import net_path as town_net_path
+from trustroute.networks.sumo_net import net_counts
 
 _MATCHING_NETS: set[tuple[str, float, str]] = set()
 
@@ -29,23 +28,6 @@ def check_net_matches(sumo, setup: EpisodeSetup, net_path: Path, net_key: tuple[
 
 
 _READABLE: set[tuple[str, float]] = set()
-_VERIFIED_NETS: set[tuple[str, str, int]] = set()
-
-
-def town_net(town) -> Path:
-    """`build_net(town).path`, verified once per process and version of the cached file (its
-    path and mtime): build_net parses the whole net to verify it, which in a study cost about
-    5 ms of every episode. A replaced or deleted file is verified (or rebuilt) again."""
-    target = town_net_path(town)
-    try:
-        key = (town.content_hash, str(target), target.stat().st_mtime_ns)
-    except OSError:
-        key = None
-    if key in _VERIFIED_NETS:
-        return target
-    path = build_net(town).path
-    _VERIFIED_NETS.add((town.content_hash, str(path), path.stat().st_mtime_ns))
-    return path
 
 
 def net_key(net_path: Path) -> tuple[str, float]:

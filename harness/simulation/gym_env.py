@@ -28,14 +28,16 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
+from trustroute.app.drivers import draw_type, gym_episode_id, synthetic_driver
+from trustroute.app.engines import SIMULATED
+from trustroute.app.problem import load_problem
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
-from trustroute.networks.town import Town, load_town
-from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DriverModel, load_driver_model
-from trustroute.participants.driver_population import DriverPopulation, load_driver_population
+from trustroute.networks.town import Town
+from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DriverModel
+from trustroute.participants.driver_population import DriverPopulation
 from trustroute.participants.synthetic_driver import SyntheticDriver
-from trustroute.policies.belief.driver_types import lift_population, lift_spec
 from trustroute.policies.logic.dfa import build_dfa
-from trustroute.policies.logic.spec import Spec, load_spec
+from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 if TYPE_CHECKING:
@@ -50,7 +52,7 @@ if TYPE_CHECKING:
     EpisodeMessage = Decide | Ended | tuple[Literal["aborted"], None] | tuple[Literal["error"], BaseException]
 
 ENV_ID = "trustroute/TrustRouting-v0"
-ENGINES: tuple[str, ...] = ("model", "sumo")
+ENGINES: tuple[str, ...] = SIMULATED   # the engines a synthetic driver drives (trustroute/app/engines.py)
 DEFAULT_JUNCTION_CAP = EpisodeSetup.junction_cap
 # Summary fields that are not a function of the seed and the actions (the episode counter in the id,
 # the wall time): kept out of info["summary"], so equal seeds and actions give equal info, and
@@ -101,33 +103,13 @@ def _episode_thread(run: Callable[[AgentPolicy], EpisodeRecord], policy: AgentPo
         to_agent.put(("error", exc))
 
 
-def _as_town(town: Town | str | Path | None) -> Town:
-    return town if isinstance(town, Town) else load_town(town)
-
-
-def _as_driver(driver: DriverModel | str | Path | None) -> DriverModel:
-    return driver if isinstance(driver, DriverModel) else load_driver_model(driver)
-
-
-def _as_population(population: DriverPopulation | str | Path | None,
-                   driver: DriverModel | str | Path | None) -> DriverPopulation | None:
-    if population is None:
-        return None
-    if driver is not None:
-        raise ValueError("give driver or population, not both")
-    return population if isinstance(population, DriverPopulation) else load_driver_population(population)
-
-
-def _as_spec(spec: Spec | str | Path, town: Town) -> Spec:
-    return spec if isinstance(spec, Spec) else load_spec(spec, town)
-
-
 class TrustRoutingEnv(gymnasium.Env):
     """Route the AV through a town so that an scLDTL spec is satisfied; reward 1 on acceptance.
 
     spec: a Spec, a spec file or a packaged spec name ("phi1"). town, driver: objects, files,
     packaged names ("pentagon", "driver_model_performance"), or None for the packaged defaults
-    (the driver model is both the AV's filter model and the synthetic driver's). engine: "model"
+    (a packaged spec's own town: "city5" drives "city"; trustroute/app/inputs.py) (the driver
+    model is both the AV's filter model and the synthetic driver's). engine: "model"
     (fast, no SUMO) or "sumo" (libsumo). junction_cap: the episode is truncated after this many
     junctions. belief_rule: the AV's filter ("bayes" or "paper").
     report_accuracy: the synthetic driver's trust-report accuracy (reports are logged only).
@@ -155,20 +137,21 @@ class TrustRoutingEnv(gymnasium.Env):
                  population: DriverPopulation | str | Path | None = None) -> None:
         if engine not in ENGINES:
             raise ValueError(f"unknown engine {engine!r}; use one of {', '.join(ENGINES)}")
+        if population is not None and driver is not None:
+            raise ValueError("give driver or population, not both")
         if junction_cap < 1:
             raise ValueError(f"junction_cap must be >= 1, got {junction_cap}")
         if render_mode is not None:
             raise ValueError("TrustRouting has no render modes "
                              "(record a SUMO episode with trustroute run --rrd)")
-        self.town = _as_town(town)
-        # With a driver population the AV filters with its type-aware model and reads the lifted
-        # spec (docs/driver_types.md); each episode's driver is of a type drawn from its weights.
-        self.population = _as_population(population, driver)
-        self.driver_model = (_as_driver(driver) if self.population is None
-                             else lift_population(self.population))
-        self.scldtl_spec = _as_spec(spec, self.town)
-        if self.population is not None:
-            self.scldtl_spec = lift_spec(self.scldtl_spec, self.population)
+        # The compiled problem (trustroute/app): with a driver population the AV filters with its
+        # type-aware model and reads the lifted spec (docs/driver_types.md); each episode's driver
+        # is of a type drawn from its weights.
+        self.problem = load_problem(spec, town, driver, population)
+        self.town = self.problem.town
+        self.population = self.problem.population
+        self.driver_model = self.problem.driver
+        self.scldtl_spec = self.problem.spec
         self.driver_type: str | None = None     # the type of the current episode's driver
         self._belief_rule: BeliefRule = belief_rule
         self._belief = np.asarray(self.driver_model.initial_belief, dtype=np.float64)  # at the last decision
@@ -296,11 +279,10 @@ class TrustRoutingEnv(gymnasium.Env):
         sumo_seed = int(rng.integers(0, 2**31 - 1))
         model = self.driver_model
         if self.population is not None:
-            k = int(rng.choice(self.population.n_types, p=self.population.weights))
-            self.driver_type, model = self.population.names[k], self.population.types[k].model
-        driver = SyntheticDriver(model, rng, report_accuracy=self.report_accuracy)
+            self.driver_type, model = draw_type(self.population, rng)
+        driver = synthetic_driver(model, rng, report_accuracy=self.report_accuracy)
         self.episodes += 1
-        episode_id = f"gym-{self.scldtl_spec.name}-{self.episodes:06d}"
+        episode_id = gym_episode_id(self.scldtl_spec.name, self.episodes)
         policy = AgentPolicy(self._to_agent, self._to_episode)
         self._thread = threading.Thread(target=_episode_thread, name=episode_id, daemon=True,
                                         args=(self._runner(driver, episode_id, sumo_seed), policy,

@@ -12,12 +12,16 @@ from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from trustroute.app.inputs import Inputs, driver_of, population_of, spec_of, town_of
+from trustroute.app.policy import PolicySettings, policy_for
+from trustroute.app.problem import compile_problem
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import participant_models, participant_types
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.belief.problem import Problem
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, checked_belief_rule
 from trustroute.policies.routing.protocol import RoutingPolicy
@@ -67,32 +71,39 @@ def aware_horizon(config: StudyConfig) -> int:
     return AWARE_HORIZON if config.horizon is None else config.horizon
 
 
+def policy_settings(config: StudyConfig, progress: bool = False) -> PolicySettings:
+    """How the study's named conditions find or make their policies (trustroute/app/policy.py)."""
+    return PolicySettings(cache_dir=config.policy_cache, horizon=aware_horizon(config),
+                          belief_rule=belief_rule(config), progress=progress)
+
+
 def resolve_condition_policy(
     condition: str, town: Town, driver: DriverModel, spec: Spec, config: StudyConfig, progress: bool = False
 ) -> RoutingPolicy:
     """A condition ("free", "aware": synthesized and cached if missing, or a policy file) as a policy."""
-    from trustroute.policies.resolve import resolve_policy
+    return policy_for(compile_problem(Inputs(town=town, spec=spec, driver=driver)), condition,
+                      policy_settings(config, progress))
 
-    return resolve_policy(condition, town, driver, spec, config.policy_cache, aware_horizon(config),
-                          belief_rule(config), progress=progress)
+
+def robust_problem(town: Town, spec: Spec, config: StudyConfig) -> Problem:
+    """The compiled problem of the "robust" condition: `config.robust_population` lifted, with the
+    type-aware model and lifted spec its AV uses."""
+    source = config.robust_population
+    if source is None:  # load_study_config refuses such a config
+        raise InputError(config.source_path, "study.robust_population", "the 'robust' condition needs the "
+                         "driver population its policy is made for",
+                         'add robust_population = "types.json" to [study] (docs/driver_types.md)')
+    return compile_problem(Inputs(town=town, spec=spec, population=population_of(source),
+                                  population_source=str(source)))
 
 
 def robust_condition_policy(town: Town, spec: Spec, config: StudyConfig,
                             progress: bool = False) -> tuple[RoutingPolicy, DriverModel, Spec]:
     """The "robust" condition: the policy of `config.robust_objective` for `config.robust_population`
     (synthesized and cached if missing), with the type-aware model and lifted spec its AV uses."""
-    from trustroute.participants.driver_population import load_driver_population
-    from trustroute.policies.resolve import population_policy
-
-    source = config.robust_population
-    if source is None:  # load_study_config refuses such a config
-        raise InputError(config.source_path, "study.robust_population", "the 'robust' condition needs the "
-                         "driver population its policy is made for",
-                         'add robust_population = "types.json" to [study] (docs/driver_types.md)')
-    population = load_driver_population(source)
-    return population_policy(town, population, spec, config.robust_objective, config.policy_cache,
-                             aware_horizon(config), belief_rule(config),
-                             population_source=source, progress=progress)
+    problem = robust_problem(town, spec, config)
+    policy = policy_for(problem, config.robust_objective, policy_settings(config, progress))
+    return policy, problem.driver, problem.spec
 
 
 _CONTEXTS: OrderedDict[StudyConfig, StudyContext] = OrderedDict()
@@ -119,14 +130,9 @@ def load_study_inputs(town_path: str | Path | None, driver_path: str | Path | No
     """(town, nominal driver model, {spec name: Spec}) of a study: every spec checked against the
     town and the driver model's trust levels. The study's context and the analysis of a study
     directory (analysis/study_directory.py) load them here."""
-    from trustroute.networks.town import load_town
-    from trustroute.participants.driver_model import load_driver_model
-    from trustroute.policies.logic.spec import load_spec
-
-    town = load_town(town_path)
-    nominal = load_driver_model(driver_path)
-    specs = {Path(path).stem: load_spec(path, town, nominal.n_trust, nominal.source_path)
-             for path in spec_paths}
+    town = town_of(town_path)
+    nominal = driver_of(driver_path)
+    specs = {Path(path).stem: spec_of(path, town, nominal) for path in spec_paths}
     return town, nominal, specs
 
 

@@ -29,11 +29,16 @@ from pathlib import Path
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
 from trustroute.harness.study.config import NAMED_CONDITIONS, StudyConfig
-from trustroute.harness.study.context import aware_horizon, aware_policy_path, belief_rule, study_context
+from trustroute.harness.study.context import (
+    aware_horizon,
+    aware_policy_path,
+    belief_rule,
+    robust_problem,
+    study_context,
+)
 from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
 from trustroute.participants.driver_population import load_driver_population
-from trustroute.policies.belief.driver_types import lift_population, lift_spec
 from trustroute.policies.resolve import aware_cache_path, population_cache_path
 
 INPUTS_DIR = "inputs"
@@ -102,11 +107,12 @@ def _cached_policies(config: StudyConfig) -> list[Path]:
         if "aware" in config.conditions:
             paths.append(aware_policy_path(context.town, context.nominal, spec, config))
         if "robust" in config.conditions and config.robust_population is not None:
-            population = load_driver_population(config.robust_population)
+            problem = robust_problem(context.town, spec, config)
+            population = problem.population
+            assert population is not None
             horizon, rule = aware_horizon(config), belief_rule(config)
             if population.n_types == 1:
-                lifted = lift_spec(spec, population, config.robust_population)
-                paths.append(aware_cache_path(context.town, lift_population(population), lifted,
+                paths.append(aware_cache_path(context.town, problem.driver, problem.spec,
                                               config.policy_cache, horizon, rule))
             else:
                 paths.append(population_cache_path(context.town, population, spec, config.robust_objective,

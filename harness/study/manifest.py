@@ -34,6 +34,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import (
     EPISODES_FILE,
     EPISODES_SCHEMA,
@@ -170,7 +171,7 @@ def consolidate(
     write_table(roads, study_dir / ROADS_FILE)
     if kinematics_tables:
         write_table(pa.concat_tables(kinematics_tables), study_dir / KINEMATICS_FILE)
-    elif config.engine == "sumo":
+    elif ENGINES[config.engine].drives_sumo:   # SUMO logs kinematics: the table exists, if empty
         write_table(KINEMATICS_SCHEMA.empty_table(), study_dir / KINEMATICS_FILE)
     if incident_tables:
         write_table(pa.concat_tables(incident_tables), study_dir / INCIDENTS_FILE)
@@ -203,7 +204,7 @@ def consolidate(
         "files": {
             "episodes": EPISODES_FILE,
             "roads": ROADS_FILE,
-            **({"kinematics": KINEMATICS_FILE} if config.engine == "sumo" else {}),
+            **({"kinematics": KINEMATICS_FILE} if ENGINES[config.engine].drives_sumo else {}),
             **({"incidents": INCIDENTS_FILE} if incident_tables else {}),
         },
         "expected": expected or {},

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
+from trustroute.app.engines import ENGINES
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.manifest import MANIFEST_FILE, package_versions
@@ -207,7 +208,7 @@ def replay_episode(
             "the episode has no logged roads (it failed or never ran)",
             "pick a finished episode (see episodes.parquet)",
         )
-    if (rrd_path is not None or gui) and config.engine != "sumo":
+    if (rrd_path is not None or gui) and not ENGINES[config.engine].records:
         raise InputError(
             "--rrd" if rrd_path is not None else "--gui",
             "",

@@ -19,24 +19,33 @@ from trustroute.harness.study.parts import PartError, part_path, read_part
 from trustroute.harness.study.plan import EpisodeTask
 
 
+def recorded_config_hash(study_dir: Path, config_hash: str) -> str | None:
+    """The config hash the study directory is marked with (None: no readable mark); InputError
+    when it holds a study with another config. Reads only: a refused directory is left as it was,
+    so callers check it before taking the directory's lock."""
+    marker = Path(study_dir) / STUDY_FILE
+    if not marker.exists():
+        return None
+    try:
+        recorded = json.loads(marker.read_text()).get("config_hash")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if recorded is not None and recorded != config_hash:
+        raise InputError(
+            str(study_dir),
+            STUDY_FILE,
+            "the directory holds a study with a different config (hash mismatch)",
+            "pass another --out, or delete the directory to start over",
+        )
+    return recorded
+
+
 def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:
     """Check that the study directory holds this study (resume) and not another; mark it as this
     study's (the directory exists: `study_lock` made it)."""
     marker = study_dir / STUDY_FILE
-    if marker.exists():
-        try:
-            recorded = json.loads(marker.read_text()).get("config_hash")
-        except (OSError, ValueError, AttributeError):
-            recorded = None
-        if recorded is not None and recorded != config_hash:
-            raise InputError(
-                str(study_dir),
-                STUDY_FILE,
-                "the directory holds a study with a different config (hash mismatch)",
-                "pass another --out, or delete the directory to start over",
-            )
-        if recorded == config_hash:
-            return
+    if recorded_config_hash(study_dir, config_hash) == config_hash:
+        return
     config_dict = asdict(config)
     atomic_write_text(marker, json.dumps({"config_hash": config_hash, "config": config_dict}, indent=1,
                                          default=str), "study marker", "pass a writable --out")

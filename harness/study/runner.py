@@ -28,6 +28,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from trustroute.app.drivers import synthetic_driver
+from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
@@ -36,7 +38,7 @@ from trustroute.harness.study.expected import expected_values
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import sync_parts, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
-from trustroute.harness.study.resume import check_study_dir, finished_episodes
+from trustroute.harness.study.resume import check_study_dir, finished_episodes, recorded_config_hash
 
 if TYPE_CHECKING:
     from tqdm import tqdm
@@ -73,14 +75,8 @@ class StudyRun:
 
 
 def engine_function(engine: str) -> Callable:
-    """The episode function of an engine (run_episode for SUMO, run_model_episode for the model)."""
-    if engine == "model":
-        from trustroute.harness.simulation.model_engine import run_model_episode
-
-        return run_model_episode
-    from trustroute.harness.simulation.episode import run_episode
-
-    return run_episode
+    """The episode function of an engine (the registry's, trustroute/app/engines.py)."""
+    return ENGINES[engine].run
 
 
 RECORDINGS_DIR = "recordings"
@@ -100,15 +96,13 @@ def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path |
 
     rrd_path, sumo_config (e.g. sumo-gui) and observer apply to the SUMO engines only ("sumo", and
     "live", where `driver` is the remote person of harness/live in place of the synthetic driver)."""
-    from trustroute.participants.synthetic_driver import SyntheticDriver
-
     context = study_context(config)
+    engine = ENGINES[config.engine]
     if driver is None:
-        driver = SyntheticDriver(
-            context.driver_model(task.participant), task.driver_rng(), report_accuracy=config.report_accuracy
-        )
+        driver = synthetic_driver(context.driver_model(task.participant), task.driver_rng(),
+                                  report_accuracy=config.report_accuracy)
     options = {}
-    if config.engine in ("sumo", "live"):
+    if engine.drives_sumo:
         from trustroute.harness.simulation.sumo_start import SumoConfig
 
         sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
@@ -147,7 +141,7 @@ def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
     """The config's `record` names planned episodes of a SUMO study, or InputError."""
     if not config.record:
         return
-    if config.engine != "sumo":
+    if not ENGINES[config.engine].records:
         raise InputError(config.source_path, "study.record", "recordings need the SUMO engine",
                          'set engine = "sumo" or remove record')
     planned = {t.episode_id for t in tasks}
@@ -257,9 +251,39 @@ def validate_study(config: StudyConfig, scheduler: str | None = None,
                          "pass e.g. --attempts 2")
     if scheduler is not None and scheduler != "local":
         check_scheduler_address(scheduler)
+        check_scheduler_reachable(scheduler)
     engine_function(config.engine)  # fail fast, once, if the engine is missing
     study_context(config, progress)  # every input file, and the policies, once, before any worker
-    plan_episodes(config)
+    check_record_ids(config, plan_episodes(config))
+
+
+def check_before_writing(config: StudyConfig, study_dir: Path, scheduler: str | None, attempts: int,
+                         progress: bool) -> None:
+    """Every refusal of a study run, before its directory, its lock or its mark is written: the
+    inputs and the scheduler (`validate_study`), and a directory that holds another study."""
+    validate_study(config, scheduler, attempts, progress)
+    recorded_config_hash(Path(study_dir), config.content_hash)
+
+
+SCHEDULER_CONNECT_SECONDS = 5.0
+
+
+def check_scheduler_reachable(scheduler: str) -> None:
+    """A tcp:// (or bare HOST:PORT) Dask scheduler accepts connections, checked before anything is
+    written (dask's own client would only fail after its timeout, with the study folder made). Other
+    protocols (tls, ws, inproc, ucx) are left to dask."""
+    import socket
+
+    protocol, _, address = scheduler.rpartition("://")
+    if protocol not in ("", "tcp"):
+        return
+    host, _, port = address.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=SCHEDULER_CONNECT_SECONDS).close()
+    except (OSError, ValueError) as exc:
+        raise InputError("--scheduler", scheduler[:80], f"cannot reach the Dask scheduler ({exc})",
+                         "start one with `dask scheduler` and pass its address, or use --scheduler local"
+                         ) from None
 
 
 def check_scheduler_address(scheduler: str) -> None:
@@ -288,8 +312,8 @@ def run_study(
     "local" for a local Dask cluster of `workers` workers (threads in this process when
     dask_processes is False, which tests use). on_outcome: called after every episode.
     attempts: runs of a failing episode at most (the first and its retries)."""
-    validate_study(config, scheduler, attempts, progress)
     study_dir = Path(study_dir).resolve()
+    check_before_writing(config, study_dir, scheduler, attempts, progress)
     with study_lock(study_dir):
         return _run_locked(config, study_dir, workers, scheduler, progress, on_outcome, dask_processes,
                            attempts)
@@ -388,12 +412,12 @@ def run_and_consolidate(
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line. The study
     directory stays locked until the manifest is written."""
-    if config.engine == "live":
+    if not ENGINES[config.engine].synthetic:
         raise InputError(config.source_path, "study.engine",
                          "a live study is driven by people, not simulated",
                          "serve it with `trustroute live CONFIG`, or simulate it with --engine sumo")
-    validate_study(config, scheduler, attempts, progress)
     study_dir = Path(study_dir).resolve()
+    check_before_writing(config, study_dir, scheduler, attempts, progress)
     with study_lock(study_dir):
         for _ in range(CONSOLIDATION_ROUNDS):
             run = _run_locked(config, study_dir, workers, scheduler, progress, None, dask_processes, attempts)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.core import defaults
 from trustroute.networks.town import Town
 from trustroute.policies.logic.compiled import CompiledSpec
 from trustroute.policies.logic.spec import Spec
@@ -26,7 +27,7 @@ from trustroute.policies.routing.fallback import FallbackPolicy, with_fallback
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
-DEFAULT_JUNCTION_CAP = 60   # an episode still running after this many junctions ends ("cap")
+DEFAULT_JUNCTION_CAP = defaults.JUNCTION_CAP   # an episode still running after this many junctions ends
 RUNNING, ACCEPTED, REJECTED = 0, 1, 2
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Hashable
 
+from trustroute.core import defaults
 from trustroute.networks.town import Town
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA
@@ -22,7 +23,7 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.free import StateOnlyTask, state_only_task
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
-DEFAULT_FALLBACK_AFTER = 20
+DEFAULT_FALLBACK_AFTER = defaults.FALLBACK_AFTER
 
 
 class FallbackPolicy(RoutingPolicy):

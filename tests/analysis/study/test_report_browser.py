@@ -3,21 +3,17 @@ the system's chromium). No interval on a probability leaves [0, 1], no risk diff
 [-1, 1], every odds ratio open above says why beside it, the first line names the belief source
 that leads, and every plot shown has its vector version beside it.
 
-Runs when Playwright and a Chromium binary are installed (Debian: /usr/bin/chromium)."""
+Drives Debian's Chromium and never skips (tests/browser.py)."""
 
 from __future__ import annotations
 
 import math
 import re
-import shutil
 
-import pytest
+import playwright.sync_api as playwright
 
+from tests.browser import chromium_executable
 from tests.cli import run_cli
-
-playwright = pytest.importorskip("playwright.sync_api")
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary")
 
 INTERVAL = re.compile(r"\[\s*([^,\]]+),\s*([^\]]+)\]")
 # columns holding a probability or an interval on one (headers as the report prints them)
@@ -101,7 +97,7 @@ def test_the_demo_report_in_chromium_shows_no_impossible_interval(tmp_path, caps
                            "--workers", "1")
     assert code == 0, err
     with playwright.sync_playwright() as driver:
-        browser = driver.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+        browser = driver.chromium.launch(executable_path=chromium_executable(), args=["--no-sandbox"])
         try:
             page = browser.new_page(viewport={"width": 1400, "height": 1000})
             page.goto((study / "report.html").resolve().as_uri())

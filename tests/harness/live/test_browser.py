@@ -10,12 +10,12 @@ downloaded (Playwright drives the system's Chromium)."""
 from __future__ import annotations
 
 import json
-import shutil
 import time
 from pathlib import Path
 
 import pytest
 
+from tests.browser import chromium_executable
 from trustroute.core.dataset import read_episodes, read_incidents, read_kinematics, read_roads
 from trustroute.harness.study.parts import read_part
 
@@ -23,7 +23,6 @@ from .test_live_restart import start_server
 
 pytestmark = pytest.mark.slow
 
-CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 SCREENSHOT = Path(__file__).resolve().parents[3] / "docs" / "img" / "live-station.png"
@@ -38,13 +37,6 @@ report_every = 1
 """
 TIMEOUT_MS = 180_000
 PASS_WAIT = 20.0   # wall seconds a pull-out may wait for the way past the obstacle to clear
-
-
-def chromium() -> str:
-    if not (Path(CHROMIUM).is_file() or shutil.which("chromium")):
-        pytest.fail("Chromium is missing: install Debian's package (apt-get install -y chromium); "
-                    "the browser test never downloads a browser")
-    return CHROMIUM if Path(CHROMIUM).is_file() else str(shutil.which("chromium"))
 
 
 def create_participant(browser, address: str, token: str) -> str:
@@ -138,7 +130,7 @@ def drive_by_hand(page) -> int:
 def test_a_whole_session_in_chromium_is_read_by_analyze_and_fit(tmp_path):
     from playwright.sync_api import sync_playwright
 
-    executable = chromium()
+    executable = chromium_executable()
     config_path = tmp_path / "browser.toml"
     config_path.write_text(CONFIG)
     study_dir = tmp_path / "study"

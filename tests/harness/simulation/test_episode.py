@@ -187,28 +187,3 @@ def test_sumo_episodes_match_the_exact_evaluation(setup, net_path, pomdp):
     assert abs(final_trust - exact.expected_final_trust) < 0.2
 
 
-def test_the_town_net_is_verified_once_per_file_version(town, tmp_path, monkeypatch):
-    """Without a net path an episode takes the town's cached net: verified (build_net) the first
-    time in a process and again whenever the file changed or is gone, not at every episode."""
-    import os
-    from types import SimpleNamespace
-
-    from trustroute.harness.simulation import episode_net
-
-    net = tmp_path / "town.net.xml"
-    builds = []
-
-    def fake_build(town_):
-        builds.append(town_)
-        net.write_text("<net/>")
-        return SimpleNamespace(path=net)
-
-    monkeypatch.setattr(episode_net, "town_net_path", lambda town_: net)
-    monkeypatch.setattr(episode_net, "build_net", fake_build)
-    monkeypatch.setattr(episode_net, "_VERIFIED_NETS", set())
-    assert episode_net.town_net(town) == net and len(builds) == 1   # absent: built
-    assert episode_net.town_net(town) == net and len(builds) == 1   # unchanged: no second check
-    os.utime(net, ns=(0, net.stat().st_mtime_ns + 10**9))
-    assert episode_net.town_net(town) == net and len(builds) == 2   # replaced: verified again
-    net.unlink()
-    assert episode_net.town_net(town) == net and len(builds) == 3   # deleted: rebuilt

@@ -1,0 +1,131 @@
+"""The same defaults at every door: each packaged name and each default, run through the API and
+through the CLI, gives the same answer (both read trustroute/core/defaults.py and trustroute/app)."""
+
+from __future__ import annotations
+
+import inspect
+
+import pytest
+
+import trustroute
+from tests.cli import cli_json
+from trustroute.core import defaults
+from trustroute.core.packaged import SPEC_TOWNS, SPECS
+from trustroute.harness.cli import cli
+from trustroute.networks.town import TOWNS
+from trustroute.participants.driver_model import DRIVER_MODELS
+from trustroute.participants.driver_population import POPULATIONS
+
+
+def _option_default(command: str, name: str):
+    """The default of a CLI option (by its Python name) of `trustroute COMMAND`."""
+    group = cli
+    for part in command.split():
+        group = group.get_command(None, part)  # type: ignore[arg-type]
+    return next(p.default for p in group.params if p.name == name)
+
+
+def _api_default(function, name: str):
+    return inspect.signature(function).parameters[name].default
+
+
+@pytest.mark.parametrize(("command", "option", "function", "argument", "value"), [
+    ("synth", "tau", trustroute.synthesize, "tau", defaults.TAU),
+    ("synth", "time_limit", trustroute.synthesize, "time_limit", defaults.TIME_LIMIT),
+    ("synth", "horizon", trustroute.synthesize, "horizon", defaults.SYNTH_HORIZON),
+    ("synth", "belief_rule", trustroute.synthesize, "belief_rule", defaults.BELIEF_RULE),
+    ("synth", "objective", trustroute.synthesize, "objective", defaults.OBJECTIVE),
+    ("evaluate", "fallback_after", trustroute.evaluate, "fallback_after", defaults.FALLBACK_AFTER),
+    ("evaluate", "belief_rule", trustroute.evaluate, "belief_rule", defaults.BELIEF_RULE),
+    ("run", "policy_name", trustroute.run_episode, "policy", defaults.POLICY),
+    ("run", "seed", trustroute.run_episode, "seed", defaults.SEED),
+    ("analyze", "belief_source", trustroute.analyze, "belief_source", defaults.BELIEF_SOURCE),
+])
+def test_every_door_declares_the_one_default(command, option, function, argument, value):
+    assert _option_default(command, option) == _api_default(function, argument) == value
+
+
+def test_the_api_and_the_cli_cap_episodes_alike():
+    # the CLI's --max-junctions defaults to "the cap", the API's max_junctions names it
+    assert _option_default("evaluate", "max_junctions") is None
+    assert _api_default(trustroute.evaluate, "max_junctions") == defaults.JUNCTION_CAP
+    assert _api_default(trustroute.run_episode, "engine") == defaults.EPISODE_ENGINE == "sumo"
+
+
+# their towns are built on first use (csomor from packaged plain XML, city from sumo-rl's data)
+SLOW_SPECS = {"csomor5", "city5"}
+SLOW_TOWNS = {"csomor", "city"}
+
+
+@pytest.mark.parametrize("spec", [pytest.param(name, marks=pytest.mark.slow) if name in SLOW_SPECS else name
+                                  for name in SPECS.names()])
+def test_each_packaged_spec_evaluates_alike_through_the_api_and_the_cli(capsys, spec):
+    """Defaults only: a packaged spec brings its town (city5, csomor5), the policy is "free", the
+    fallback, cap and filter are the defaults."""
+    api = trustroute.evaluate(spec)
+    cli_value = cli_json(capsys, "evaluate", spec, defaults.POLICY)
+    assert (cli_value["lower"], cli_value["upper"]) == (api.lower, api.upper)
+    assert cli_value["fallback_after"] == defaults.FALLBACK_AFTER
+    assert cli_value["max_junctions"] == defaults.JUNCTION_CAP
+    assert cli_value["belief_rule"] == defaults.BELIEF_RULE
+
+
+@pytest.mark.slow
+def test_a_packaged_spec_knows_its_town():
+    assert SPEC_TOWNS == {"city5": "city", "csomor5": "csomor"}
+    assert trustroute.load_spec("city5").start in trustroute.load_town("city").states
+
+
+@pytest.mark.parametrize("town", [pytest.param(name, marks=pytest.mark.slow) if name in SLOW_TOWNS else name
+                                  for name in TOWNS.names()])
+def test_each_packaged_town_loads_alike(capsys, town):
+    summary = cli_json(capsys, "model", "--town", town)
+    assert summary["town_hash"] == trustroute.load_town(town).content_hash[:12]
+
+
+@pytest.mark.parametrize("driver", DRIVER_MODELS.names())
+def test_each_packaged_driver_loads_alike_and_the_api_takes_its_name(capsys, driver):
+    summary = cli_json(capsys, "model", "--driver", driver)
+    assert summary["driver_hash"] == trustroute.load_driver_model(driver).content_hash[:12]
+    # the API takes packaged names for town and driver wherever it takes objects
+    api = trustroute.evaluate("phi1", town="town01_carla", driver=driver)
+    cli_value = cli_json(capsys, "evaluate", "phi1", "free", "--town", "town01_carla", "--driver", driver)
+    assert (cli_value["lower"], cli_value["upper"]) == (api.lower, api.upper)
+
+
+@pytest.mark.parametrize("population", POPULATIONS.names())
+def test_each_packaged_population_evaluates_alike(capsys, population):
+    shown = cli_json(capsys, "population", "show", population)
+    api = trustroute.evaluate("phi1", population=population)
+    cli_value = cli_json(capsys, "evaluate", "phi1", "free", "--population", population)
+    assert shown["types"] and (cli_value["lower"], cli_value["upper"]) == (api.lower, api.upper)
+
+
+@pytest.mark.slow
+def test_one_episode_is_the_same_through_the_api_and_the_cli(capsys):
+    api = trustroute.run_episode("phi2", seed=3)
+    ran = cli_json(capsys, "run", "phi2", "--seed", "3")
+    assert ran["route"] == api.roads["directed_road"].tolist()
+    for key in ("episode_id", "satisfied", "junctions", "takeovers", "final_trust", "end_reason"):
+        assert ran[key] == api.summary[key], key
+
+
+@pytest.mark.slow
+def test_a_synthesis_with_the_defaults_is_the_same_through_the_api_and_the_cli(capsys, tmp_path):
+    api = trustroute.synthesize("phi1")
+    made = cli_json(capsys, "synth", "phi1", "--out", str(tmp_path / "p.json"))
+    assert (made["lower"], made["upper"], made["horizon"], made["tau"]) == (
+        api.lower, api.upper, defaults.SYNTH_HORIZON, defaults.TAU)
+
+
+@pytest.mark.slow
+def test_the_analysis_of_a_study_uses_one_default_belief_source(capsys, tmp_path):
+    config = tmp_path / "study.toml"
+    config.write_text('[study]\nparticipants = 2\nseed = 5\nengine = "model"\nspecs = ["phi1"]\n'
+                      'conditions = ["free"]\n')
+    study = tmp_path / "study"
+    trustroute.run_study(config, study)
+    api = trustroute.analyze(study)
+    cli_value = cli_json(capsys, "analyze", str(study), "--no-report")
+    assert cli_value["belief_source"] == api.belief_source
+    assert cli_value["cells"] == api.to_dict()["cells"]

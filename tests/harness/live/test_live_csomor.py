@@ -1,0 +1,74 @@
+"""A live study on an imported town (`csomor`, driven on its own SUMO net) serves and draws that
+net: the station's /api/net lists exactly the lanes of the net the town drives (`net_for`), and the
+replay of a live episode writes its recording on it (a net built from the town's junctions would
+not even build)."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ElementTree
+
+import pytest
+from fastapi.testclient import TestClient
+
+from tests.cli import run_cli
+from trustroute.app.nets import net_for
+from trustroute.harness.live.app import live_app
+from trustroute.harness.live.scripted import ScriptedParticipant
+from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.study.config import load_study_config
+from trustroute.harness.study.context import study_context
+from trustroute.harness.study.plan import plan_episodes
+
+from .test_live_manual import play_in
+
+pytestmark = pytest.mark.slow   # the csomor net is built from its packaged plain XML on first use
+
+CSOMOR_LIVE = """[study]
+name = "csomor-live"
+participants = 1
+seed = 1
+engine = "live"
+town = "csomor"
+specs = ["csomor5"]
+conditions = ["free"]
+"""
+
+
+@pytest.fixture(scope="module")
+def played(tmp_path_factory):
+    """A live csomor study, open, whose one participant has driven their trial (pace 1000)."""
+    folder = tmp_path_factory.mktemp("csomor-live")
+    (folder / "live.toml").write_text(CSOMOR_LIVE)
+    config = load_study_config(folder / "live.toml")
+    study = LiveStudy(config, folder / "study", ServerOptions(pace=1000.0, warm_up=False)).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            play_in(client, study, ScriptedParticipant(config, 0))
+            yield study, client, folder
+    finally:
+        study.close()
+
+
+def _lane_ids(net_file) -> set[str]:
+    return {lane.get("id") for lane in ElementTree.parse(net_file).getroot().iter("lane")}
+
+
+def test_the_station_serves_the_net_an_imported_town_drives(played):
+    study, client, _ = played
+    response = client.get("/api/net", headers={"Authorization": f"Bearer {study.experimenter_token}"})
+    assert response.status_code == 200, response.text
+    town = study_context(study.config).town
+    served = {lane["id"] for lane in response.json()["lanes"]}
+    assert served == _lane_ids(net_for(town))
+    # the town's roads run on the served net's edges (the net's own ids, not "U-V")
+    edges = {lane.rsplit("_", 1)[0] for lane in served}
+    assert all(edge in edges for road in town.geometry.values() for edge in road.edges)
+
+
+def test_the_replay_of_a_live_episode_on_csomor_draws_on_the_driven_net(played, capsys):
+    study, _, folder = played
+    (task,) = plan_episodes(study.config)
+    rrd = folder / "live.rrd"
+    code, _, err = run_cli(capsys, "replay", str(study.study_dir), task.episode_id, "--rrd", str(rrd))
+    assert code == 0, err
+    assert rrd.stat().st_size > 0

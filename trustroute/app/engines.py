@@ -1,0 +1,50 @@
+"""The engine registry: `model`, `sumo` and `live`, each declaring what it can do.
+
+Callers ask an engine's capabilities instead of comparing its name: whether SUMO drives it (SUMO
+options, kinematics logs, the net), whether a synthetic driver drives it (a study can simulate
+it; `live` is driven by people in their browsers, `trustroute live`), and whether an episode can be
+re-run with a Rerun recording or shown in sumo-gui. `run` is the episode function:
+run(setup, policy, driver, episode_id, seed, **sumo options) -> EpisodeRecord.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from trustroute.core.errors import InputError
+from trustroute.harness.simulation.episode import EpisodeRecord, run_episode
+from trustroute.harness.simulation.model_engine import run_model_episode
+
+
+@dataclass(frozen=True)
+class Engine:
+    name: str
+    run: Callable[..., EpisodeRecord]
+    drives_sumo: bool       # SUMO runs the episode: SUMO options, a net, kinematics logged
+    synthetic: bool         # a synthetic driver drives it, so a study simulates it (else people do)
+    description: str
+
+    @property
+    def records(self) -> bool:
+        """An episode can be re-simulated with a Rerun recording or shown in sumo-gui."""
+        return self.drives_sumo and self.synthetic
+
+
+ENGINES: dict[str, Engine] = {engine.name: engine for engine in (
+    Engine("sumo", run_episode, drives_sumo=True, synthetic=True,
+           description="libsumo: incidents, takeovers and performance measured in the simulation"),
+    Engine("model", run_model_episode, drives_sumo=False, synthetic=True,
+           description="the trust POMDP alone, no SUMO"),
+    Engine("live", run_episode, drives_sumo=True, synthetic=False,
+           description="SUMO with people driving in their browsers (`trustroute live`)"),
+)}
+SIMULATED: tuple[str, ...] = tuple(name for name, engine in ENGINES.items() if engine.synthetic)
+
+
+def engine_named(name: str, where: str = "engine", simulated: bool = False) -> Engine:
+    """The engine called `name` (`simulated`: one a synthetic driver drives); InputError otherwise."""
+    names = SIMULATED if simulated else tuple(ENGINES)
+    if name not in names:
+        raise InputError(where, "", f"unknown engine {name!r}", f"use one of {', '.join(names)}")
+    return ENGINES[name]

@@ -1,0 +1,159 @@
+"""Synthesis and exact evaluation of a compiled problem, for the API and the CLI alike: the
+settings validated once, the problem's case choosing the method (policies/synthesize_spec.py), the
+policy file written where asked."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from trustroute.core import defaults
+from trustroute.core.errors import InputError
+from trustroute.policies.belief.problem import Problem
+from trustroute.policies.evaluation.plain import Evaluation
+from trustroute.policies.evaluation.plain import evaluate as evaluate_plain
+from trustroute.policies.evaluation.settings import EvaluationSettings
+from trustroute.policies.evaluation.trust_state import evaluate_joint, evaluate_joint_by_type
+from trustroute.policies.model.trust_pomdp import BeliefRule, checked_belief_rule
+from trustroute.policies.resolve import is_objective, phase_lines, synthesis_progress
+from trustroute.policies.routing.files import array_path, save_policy
+from trustroute.policies.routing.free import baseline_route, trust_free_policy
+from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.synthesis.population import (
+    PopulationSynthesis,
+    TypeValue,
+    document_entries,
+    per_type_values,
+    policy_name,
+    summary,
+)
+from trustroute.policies.synthesis.result import SynthesisResult, SynthesisStats
+from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
+from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
+
+
+def belief_rule_named(name: str) -> BeliefRule:
+    """The AV filter called `name` ("bayes" or "paper"), checked."""
+    return checked_belief_rule(name)
+
+
+@dataclass(frozen=True)
+class SynthesisSettings(SearchSettings):
+    """The search's settings (policies/synthesis/settings.py) as the doors take them: the doors'
+    defaults, a usage error naming the option for a bad tau or horizon, and whether progress
+    shows on stderr. An instance is passed down to the search as it is."""
+
+    tau: float = defaults.TAU
+    time_limit: float = defaults.TIME_LIMIT
+    horizon: int | None = defaults.SYNTH_HORIZON
+    belief_rule: BeliefRule = defaults.BELIEF_RULE
+    clusters: str = "auto"
+    progress: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.tau > 0:
+            raise InputError("--tau", "", f"tau must be positive, got {self.tau}", "pass e.g. --tau 1e-3")
+        if self.horizon is not None and self.horizon < 1:
+            raise InputError("--horizon", "", f"horizon must be at least 1, got {self.horizon}",
+                             "pass a positive number of junctions or omit --horizon")
+        object.__setattr__(self, "belief_rule", checked_belief_rule(self.belief_rule))
+        super().__post_init__()
+
+
+def synthesize_single(problem: Problem, settings: SynthesisSettings,
+                      out: str | Path | None = None) -> SynthesisResult:
+    """A policy for a one-model problem with bounds; its file written at `out` when given
+    (`written_policy` names the file)."""
+    with synthesis_progress(f"synthesizing {problem.spec.name}", settings.progress) as on_iteration:
+        result = synthesize_problem(problem, settings, on_iteration=on_iteration)
+    if out is not None:
+        save_policy(result, out, problem.town, problem.driver, problem.spec)
+    return result
+
+
+def synthesize_population(problem: Problem, objective: str, settings: SynthesisSettings,
+                          out: str | Path | None = None) -> PopulationSynthesis:
+    """A policy for a population problem under `objective` ("bayes" or "robust"); its file
+    written at `out` when given."""
+    population = problem.population
+    assert population is not None
+    if not is_objective(objective):
+        raise InputError("--objective", "", f"unknown objective {objective!r}", "use 'bayes' or 'robust'")
+    spec = problem.given_spec
+    description = f"synthesizing {spec.name} ({objective}, {population.n_types} types)"
+    with synthesis_progress(description, settings.progress) as on_iteration:
+        found = synthesize_for_population(problem.town, population, spec, objective, settings,
+                                          population_source=population.source_path,
+                                          on_iteration=on_iteration,
+                                          on_phase=phase_lines("synth", settings.progress))
+    if out is not None:
+        save_policy(found.result, out, problem.town, found.pomdp.driver, found.spec,
+                    population=document_entries(found), name=policy_name(found))
+    return found
+
+
+def evaluate_single(problem: Problem, policy: RoutingPolicy, settings: EvaluationSettings) -> Evaluation:
+    """The exact value of `policy` on a one-model problem (the joint unfolding when the DFA state
+    is hidden, the plain one otherwise: evaluate_joint chooses)."""
+    return evaluate_joint(problem.pomdp, problem.spec, policy, settings)
+
+
+def evaluate_population(problem: Problem, policy: RoutingPolicy,
+                        settings: EvaluationSettings) -> tuple[Evaluation, tuple[TypeValue, ...]]:
+    """The exact value of `policy` over a population problem's mixture, and per driver type."""
+    population = problem.population
+    assert population is not None
+    rule, cap, after = settings.belief_rule, settings.max_junctions, settings.fallback_after
+    if problem.dfa_hidden:
+        # The DFA state is hidden: one unfolding over ((type, trust), q) gives every type's value.
+        value, bounds = evaluate_joint_by_type(problem.pomdp, problem.spec, policy, settings)
+        return value, tuple(TypeValue(t.name, float(t.weight), lower, upper)
+                            for t, (lower, upper) in zip(population.types, bounds, strict=True))
+    value = evaluate_plain(problem.pomdp, problem.spec, policy, settings)
+    return value, tuple(per_type_values(problem.pomdp, problem.spec, policy, population, cap, rule, after))
+
+
+@dataclass(frozen=True)
+class Baseline:
+    route: list[str]
+    length_m: float
+    value: Evaluation
+
+
+def baseline(problem: Problem, belief_rule: BeliefRule = defaults.BELIEF_RULE) -> Baseline:
+    """The trust-free baseline: the shortest route completing the spec's state-only task, and its
+    exact value without the fallback."""
+    town, spec = problem.town, problem.spec
+    route = baseline_route(town, spec)
+    value = evaluate_plain(problem.pomdp, spec, trust_free_policy(town, spec),
+                           EvaluationSettings(fallback_after=None,
+                                              belief_rule=checked_belief_rule(belief_rule)))
+    return Baseline(route=route, length_m=town.route_length(route), value=value)
+
+
+def policy_arrays(path: str | Path) -> Path:
+    """The array file written beside a policy file."""
+    return array_path(path)
+
+
+def bounds_notes(result: SynthesisResult) -> list[str]:
+    """What a reader of the bounds should know: a cluster policy, outcomes on a belief threshold."""
+    lines = []
+    boxes = getattr(result.policy.table, "boxes", None)
+    if boxes is not None and boxes.rows:
+        lines.append(f"a cluster policy: {boxes.rows} box rows, beliefs enclosed in boxes "
+                     "(docs/synthesis.md, \"Cluster policies\")")
+    # (only the belief-MDP search reads labels at thresholds both ways)
+    alternates = result.stats.threshold_alternates if isinstance(result.stats, SynthesisStats) else 0
+    if alternates:
+        # the returned policy's (a run's policy may not be the one returned)
+        strict = result.stats.lower_strict_labels
+        lines.append(f"{alternates} outcomes sit on a belief threshold (within rounding): L reads them "
+                     f"the worse way, U the better; with this machine's labels the policy is worth at "
+                     f"least {strict:.6f} (spec check warns about such thresholds)")
+    return lines
+
+
+def population_summary(found: PopulationSynthesis) -> dict:
+    """The population synthesis's summary (types, values, prior) as the policy file records it."""
+    return summary(found)

@@ -1,0 +1,32 @@
+"""The defaults every door reads, defined once: the API's keyword defaults, the CLI's option
+defaults, the gymnasium environment's and the modules that own each rule (the fallback, the
+episode cap, the "aware" horizon) are these names, so no door can drift from another
+(tests/app/test_defaults.py runs them through the API and the CLI and compares).
+
+Kept free of imports, so the API can name them in its signatures while `import trustroute` stays
+cheap.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+# synthesis (`synthesize`, `trustroute synth`)
+TAU = 1e-3                           # target gap upper - lower
+TIME_LIMIT = 60.0                    # seconds for the whole synthesis
+SYNTH_HORIZON: int | None = None     # junctions; None: unbounded
+OBJECTIVE: Final = "bayes"            # of a population synthesis ("robust": the worst type's)
+BELIEF_RULE: Final = "bayes"            # the AV's filter ("paper": the authors' update)
+
+# episodes and exact evaluation (`evaluate`, `run_episode`, `trustroute evaluate`, `trustroute run`)
+POLICY = "free"
+FALLBACK_AFTER = 20                  # the study's rule: the shortest completion after this many junctions
+JUNCTION_CAP = 60                    # an episode still running after this many junctions ends ("cap")
+AWARE_HORIZON = FALLBACK_AFTER       # "aware" is synthesized for the junctions before the fallback
+SEED = 0
+EPISODE_ENGINE = "sumo"
+
+# analysis (`analyze`, `trustroute analyze`): None lets the analysis choose the study's own default
+# belief source (analysis/belief_sources.py, `default_belief_source`), the one definition both
+# doors read.
+BELIEF_SOURCE: str | None = None
