@@ -252,8 +252,8 @@ class _Episode:
                             incident_kinds.inject(run.kind, self.sumo, scene, self.defined_types))
             run.injected_time = now
             return
-        reverse = Road.parse(run.road).reverse.id
-        reverse = reverse if reverse in self.setup.town.incidents else None
+        other_way = Road.parse(run.road).reverse.id
+        reverse = other_way if other_way in self.setup.town.incidents else None
         scene = Scene(road=run.road, reverse_road=reverse, road_length=self.length(run.road),
                       prefix=f"inc{run.index}", ego_id=EGO_ID, time=now, ego_distance=ego_distance,
                       rng=self.rng, overrides=self.scene_overrides.get(run.kind, {}), road_speed=ROAD_SPEED,

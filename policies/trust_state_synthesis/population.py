@@ -168,9 +168,9 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     population = problem.population
     if population is None:
         raise ValueError("population synthesis needs a problem with a driver population")
-    if settings.grid_points is None:
-        settings = replace(settings, grid_points=MAX_GRID_CANDIDATES)
-    horizon, belief_rule, grid_points = settings.horizon, settings.belief_rule, settings.grid_points
+    grid_points = MAX_GRID_CANDIDATES if settings.grid_points is None else settings.grid_points
+    settings = replace(settings, grid_points=grid_points)
+    horizon, belief_rule = settings.horizon, settings.belief_rule
     started = time.perf_counter()
     schedule = RunSchedule(TimeBudget.start(settings.time_limit),
                            run_count(population, objective, grid_points), on_phase=on_phase)
