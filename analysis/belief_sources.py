@@ -11,9 +11,14 @@ Every source labels each logged position with a belief over trust (docs/study.md
 - "true" (simulated studies only): the exact Bayes filter of each driver's own true model (the
   participant's type, or the individual sampled for it), what an AV knowing the driver would believe.
 
-Conditions whose AVs filter with different models are not judged fairly on "filter" (each would be
-scored by its own belief), so `default_belief_source` picks "reference" whenever they differ and
-"filter" otherwise; both are common to every condition then.
+The primary source (the one the tables lead with) is the study config's `belief_source`, declared
+before the study runs (pre-registered); without one it is the neutral default,
+`default_belief_source`: "true" for simulated studies, whose drivers' own models the analysis knows,
+"reported" for live and imported ones. Both are the same for every condition: neither is any
+condition's own filter. "filter" scores each condition on its own AV's belief and "reference" on
+the type-aware filter, which is the `robust` AV's own: they stay available (`--belief-source`, or
+declared) but are never the default, and the report's sensitivity table shows every comparison on
+every source. `trustroute analyze` and `trustroute.analyze()` both read the default here.
 """
 
 from __future__ import annotations
@@ -23,10 +28,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.harness.study.config import BELIEF_SOURCES as BELIEF_SOURCES  # the names, re-exported
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 
-BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported", "reference", "true")
+# engines whose drivers are simulated from models the study config names ("true" exists)
+SIMULATED_ENGINES: tuple[str, ...] = ("model", "sumo")
 # conditions whose AV filters with another model than the study's driver model
 OWN_FILTER_CONDITIONS: tuple[str, ...] = ("robust",)
 PERFORMANCE_INDEX = {"succ": 0, "fail": 1}
@@ -38,9 +45,22 @@ def filters_differ(manifest: dict) -> bool:
     return any(str(c) in OWN_FILTER_CONDITIONS for c in conditions)
 
 
+def neutral_belief_source(manifest: dict) -> str:
+    """The source neutral to every condition: each driver's own exact filter ("true") in a
+    simulated study, the driver's reports ("reported") in a live or imported one."""
+    return "true" if manifest.get("engine") in SIMULATED_ENGINES else "reported"
+
+
+def declared_belief_source(manifest: dict) -> str | None:
+    """The primary source the study config declared (`[study] belief_source`), if any."""
+    declared = (manifest.get("config") or {}).get("belief_source")
+    return str(declared) if declared else None
+
+
 def default_belief_source(manifest: dict) -> str:
-    """The source common to every condition: "filter" when all filters agree, else "reference"."""
-    return "reference" if filters_differ(manifest) else "filter"
+    """The primary source of a study's analysis: the declared one, else the neutral one (the one
+    definition every entry point reads: the CLI, the Python API, the report)."""
+    return declared_belief_source(manifest) or neutral_belief_source(manifest)
 
 
 def beside_source(source: str) -> str:
@@ -83,10 +103,7 @@ def refiltered(roads: pd.DataFrame, model: DriverModel, town: Town) -> pd.DataFr
     beliefs[:, 0] = model.initial_belief
     for t in range(1, horizon):
         before = beliefs[:, t - 1]
-        posterior, _ = pomdp.belief_update(before, incident[:, t], takeover[:, t], performance[:, t])
-        dead = posterior.sum(axis=1) <= 0
-        posterior[dead] = before[dead]
-        beliefs[:, t] = posterior
+        beliefs[:, t] = pomdp.filter(before, incident[:, t], takeover[:, t], performance[:, t])[0]
     marginal = trust_marginal(model, beliefs[row, col])
     return roads.assign(belief_after=list(marginal))
 

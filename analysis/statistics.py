@@ -33,6 +33,10 @@ separated data the Wald interval of the fit means nothing, so the effect reporte
 conditional one of the matched (participant, stratum) pairs: b ~ Binomial(b + c, OR / (1 + OR)),
 with its median-unbiased estimate, Clopper–Pearson-based interval and exact p-value, and the reason
 written in `ModelEffect.note`.
+
+Multiplicity: a study with k conditions compares every pair of them; `holm` adjusts the p-values of
+one family (one test, one spec, every pair) by Holm's step-down method, which controls the
+family-wise error rate under any dependence between the tests.
 """
 
 from __future__ import annotations
@@ -97,6 +101,18 @@ class McNemar:
     only_first: int  # pairs where A succeeded and B failed
     only_second: int  # pairs where B succeeded and A failed
     p_value: float
+
+
+def holm(p_values: list[float | None]) -> list[float | None]:
+    """Holm-adjusted p-values of one family, in the given order (None and nan stay None and are not
+    counted): the i-th smallest of m becomes max over j <= i of min(1, (m - j + 1) p_(j))."""
+    present = [(p, i) for i, p in enumerate(p_values) if p is not None and not math.isnan(p)]
+    out: list[float | None] = [None] * len(p_values)
+    running, m = 0.0, len(present)
+    for rank, (p, i) in enumerate(sorted(present)):
+        running = max(running, min(1.0, (m - rank) * p))
+        out[i] = running
+    return out
 
 
 def mcnemar_exact(first: np.ndarray, second: np.ndarray) -> McNemar:

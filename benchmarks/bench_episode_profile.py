@@ -15,7 +15,9 @@ wrappers are removed afterwards. Phases:
 - `sumo_reset`: the episode's return of the open simulation to its empty state (loadState);
 - `insert_ego`: the ego's type, route, insertion and subscription;
 - `commit`: the road's end (of it `inject`, the next road's incident objects; `close_road`, the
-  driver's trust, report and the tracker's record; `next_junction`, the policy and filter);
+  driver's trust, report and the tracker's record with the filter; `next_junction`, the tracker's
+  decision point);
+- `choose`: the answer to the decision point (the tracker's record of the junction);
 - `watch`: the live incident's per-step work and the driver's view check;
 - `loop_python`: the rest of the step loop (the subscription read, logging, monitor);
 - `roads_table`, `kinematics_table`, `incidents_table`: the logs as Arrow tables;
@@ -40,16 +42,21 @@ from trustroute.harness.simulation import episode_tracker
 EPISODES = 40
 
 # (owner, attribute, phase): the functions whose time is a phase of the episode.
+# `run` is the episode's every `advance` (SUMO's start and close, the loop, the road ends and the
+# logs all run inside it); the road's end is its `commit` (the road closed, the decision point) and
+# `extend` (the route one road ahead, then `inject`), the policy's answer `choose` (outside).
 _EPISODE_PHASES = (
-    (episode_module._Episode, "insert_ego", "insert_ego"),
-    (episode_module._Episode, "commit", "commit"),
-    (episode_module._Episode, "inject", "inject"),
-    (episode_module._Episode, "close_road", "close_road"),
-    (episode_module._Episode, "watch", "watch"),
-    (episode_module._Episode, "run", "run"),
-    (episode_module._Episode, "incidents_table", "incidents_table"),
-    (episode_module._Episode, "kinematics_table", "kinematics_table"),
-    (episode_tracker.EpisodeTracker, "next_junction", "next_junction"),
+    (episode_module.SumoEpisode, "insert_ego", "insert_ego"),
+    (episode_module.SumoEpisode, "commit", "commit"),
+    (episode_module.SumoEpisode, "extend", "commit"),
+    (episode_module.SumoEpisode, "choose", "choose"),
+    (episode_module.SumoEpisode, "inject", "inject"),
+    (episode_module.SumoEpisode, "close_road", "close_road"),
+    (episode_module.SumoEpisode, "watch", "watch"),
+    (episode_module.SumoEpisode, "advance", "run"),
+    (episode_module.SumoEpisode, "incidents_table", "incidents_table"),
+    (episode_module.SumoEpisode, "kinematics_table", "kinematics_table"),
+    (episode_tracker.EpisodeTracker, "decision_point", "next_junction"),
     (episode_tracker.EpisodeTracker, "roads_table", "roads_table"),
 )
 _PARTS_OF_COMMIT = ("inject", "close_road", "next_junction")   # timed inside `commit`
@@ -94,15 +101,13 @@ def _per_episode(totals: dict[str, float], wall: float, episodes: int) -> dict[s
     ms = {phase: 1e3 * seconds / episodes for phase, seconds in totals.items()}
     row = {phase: ms.get(phase, 0.0) for phase in _SUMO_PHASES}
     if "run" in ms:
-        inside_loop = ("sumo_steps", "insert_ego", "commit", "watch")
+        tables = ("roads_table", "kinematics_table", "incidents_table")
+        inside_run = (*_SUMO_PHASES, "insert_ego", "commit", "watch", *tables)
         row.update({phase: ms.get(phase, 0.0) for phase in
-                    ("insert_ego", "commit", *_PARTS_OF_COMMIT, "watch")})
-        row["loop_python"] = ms["run"] - sum(ms.get(phase, 0.0) for phase in inside_loop)
-        row.update({phase: ms.get(phase, 0.0) for phase in
-                    ("roads_table", "kinematics_table", "incidents_table")})
-        counted = ms["run"] + sum(row[phase] for phase in
-                                  ("sumo_start", "sumo_reset", "sumo_close", "roads_table",
-                                   "kinematics_table", "incidents_table"))
+                    ("insert_ego", "commit", *_PARTS_OF_COMMIT, "watch", "choose")})
+        row["loop_python"] = ms["run"] - sum(ms.get(phase, 0.0) for phase in inside_run)
+        row.update({phase: ms.get(phase, 0.0) for phase in tables})
+        counted = ms["run"] + row["choose"]
     else:
         counted = sum(row.values())
     row["other"] = 1e3 * wall / episodes - counted

@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import importlib
 import sys
+import time
 
 import click
 
 from trustroute.core.errors import InputError
+from trustroute.harness.commands.options import CommandStart
 
 # name -> (module, attribute, one-line help)
 COMMANDS: dict[str, tuple[str, str, str]] = {
@@ -89,8 +91,12 @@ def usage_fix(exc: click.UsageError, command: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
+    # when the command began, which a --time-limit counts from (harness/commands/options.py): the
+    # process's start when the process is the command (no argv given: the console script, python -m
+    # trustroute), else now (a caller running it in-process)
+    started = CommandStart.now() if argv is None else CommandStart(time.perf_counter())
     try:
-        code = cli.main(args=argv, prog_name="trustroute", standalone_mode=False)
+        code = cli.main(args=argv, prog_name="trustroute", standalone_mode=False, obj=started)
     except InputError as exc:
         click.echo(f"error: {exc.one_line()}", err=True)
         sys.exit(2)

@@ -13,6 +13,7 @@ search on the lifted model and spec), the others to policies/synthesis/populatio
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING
@@ -72,7 +73,10 @@ def synthesize_for_population(town: Town, population: DriverPopulation, spec: Sp
     settings.grid_points: candidate type priors of the robust objective (default
     policies/synthesis/population.py's). settings.time_limit bounds the whole call; on_phase hears
     a line per finished synthesis run with its bounds."""
+    entered = time.perf_counter()
     found = problem(town, population, spec, population_source)
+    # the limit is the whole call's: building the problem counts
+    settings = replace(settings, time_limit=max(settings.time_limit - (time.perf_counter() - entered), 0.0))
     if settings.grid_points is None:
         settings = replace(settings, grid_points=MAX_GRID_CANDIDATES)
     if found.case == TRUST_STATE:

@@ -69,8 +69,6 @@ OVER_THE_LIMIT = frozenset({
     "trustroute.harness.commands.study:study",
     "trustroute.harness.commands.synth:synth",
     "trustroute.harness.commands.synth:evaluate",
-    "trustroute.harness.simulation.episode:__init__",
-    "trustroute.harness.simulation.episode:watch_open",
     "trustroute.harness.simulation.episode:run_episode",
     "trustroute.harness.simulation.episode_tracker:record_road",
     "trustroute.harness.simulation.gym_env:__init__",
@@ -251,7 +249,7 @@ PENDING_IMPORTS = {
     "trustroute.harness.study.expected": {
         "trustroute.policies.belief.problem", "trustroute.policies.evaluation.settings",
         "trustroute.policies.evaluation.trust_state", "trustroute.policies.model.trust_pomdp",
-        "trustroute.policies.routing.files"},
+        "trustroute.policies.routing.decision_tables", "trustroute.policies.routing.files"},
     "trustroute.harness.study.replay": {
         "trustroute.core.dataset", "trustroute.harness.simulation.sumo_start",
         "trustroute.harness.study.inputs", "trustroute.harness.study.manifest",

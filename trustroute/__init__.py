@@ -232,13 +232,14 @@ def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None
 def analyze(study_dir: PathLike, *, belief_source: str | None = defaults.BELIEF_SOURCE,
             report: bool = False) -> StudyAnalysis:
     """Per spec and condition of a study directory: n, satisfaction rate with its CI, mean trust,
-    the policies' exact values, and the paired aware-vs-free tests (`analysis.cells`,
-    `analysis.paired`, `analysis.to_dict()`).
+    the policies' exact values, the paired tests of every pair of conditions with Holm-adjusted
+    p-values, and every comparison on every belief source (`analysis.cells`, `analysis.paired`,
+    `analysis.sensitivity`, `analysis.to_dict()`).
 
-    belief_source: the beliefs the spec is evaluated on ("filter": each AV's own filter, "reported":
-    induced from the reported trust, "reference", "true"); None: the study's
-    default, the same as `trustroute analyze`'s (docs/replay-and-report.md). report: also write
-    report.md, report.html and the plots into the study directory (otherwise nothing is written).
+    belief_source: the beliefs the specs are evaluated on ("true", "reported", "reference" or
+    "filter"); None: the study's primary source, the same default as `trustroute analyze`
+    (analysis/belief_sources.py `default_belief_source`). report: also write report.md,
+    report.html and the plots into the study directory (otherwise nothing is written).
     """
     from trustroute.analysis.study.analysis import study_analysis
 

@@ -253,8 +253,7 @@ def episode_tables(
         incident = tables.incidents[road] if i > 0 else "none"
         before = belief.copy()
         if i > 0:
-            posterior, _ = pomdp.belief_update(before, driver_model.incident_index(incident), int(takeover))
-            belief = posterior[0] if posterior[0].sum() > 0 else before
+            belief = pomdp.filter(before, driver_model.incident_index(incident), int(takeover))[0][0]
         segment = trust[span]
         rows.append(
             {

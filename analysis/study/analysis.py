@@ -9,7 +9,8 @@ paper_comparison; shown by display) are:
   (Clopper–Pearson) and Wilson 95 % intervals on the chosen belief source (and the rate on the
   other source), mean reported trust with a bootstrap CI, mean true and final trust, junctions,
   takeovers, fallback rate, the policy's exact value and its synthesized [lower, upper];
-- `paired`: per spec, the first two conditions ("aware" vs "free") over participants: the 2x2
+- `paired`: per spec, every pair of conditions (paired.py `condition_pairs`: "aware" first, "free"
+  last) over participants, each p-value with its Holm-adjusted value over the pairs: the 2x2
   counts, exact McNemar p, the risk difference (Newcombe interval), the conditional odds ratio
   (exact interval), the mean difference in reported trust (BCa bootstrap over participants),
   Wilcoxon p. The "all specs" row is per participant, not per pair: each participant's number of
@@ -27,6 +28,8 @@ paper_comparison; shown by display) are:
   participant's true `driver_type`): the cells' satisfaction and trust, and the paired statistics
   for every pair of conditions present (free, aware, robust, policy files), per true type and over
   all participants ("all");
+- `sensitivity`: every pair's satisfaction difference per spec and over specs on every belief
+  source the study has (sensitivity.py), the leading one marked;
 - `paper`: the paper's figures beside ours, only when the study is comparable (the paper's town,
   its φ1 and φ2, 21 participants); otherwise `paper_note` says why not.
 """
@@ -42,21 +45,31 @@ import pandas as pd
 
 from trustroute.analysis.belief_sources import (
     BELIEF_SOURCES,
+    declared_belief_source,
     default_belief_source,
     reference_model,
     refiltered,
+    source_label,
     true_roads,
 )
 from trustroute.analysis.satisfaction import episode_satisfaction
 from trustroute.analysis.study.cells import cell_table, takeover_table
 from trustroute.analysis.study.order import order_tables
-from trustroute.analysis.study.paired import paired_table_rows, per_participant_table, repeated_measures_table
+from trustroute.analysis.study.paired import (
+    all_pairs_repeated,
+    all_pairs_table,
+    condition_pairs,
+    per_participant_table,
+)
 from trustroute.analysis.study.paper_comparison import is_paper_comparable, paper_comparison
 from trustroute.analysis.study.per_type import per_type_tables
+from trustroute.analysis.study.sensitivity import sensitivity_table
 from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.errors import InputError
 
 ANALYSIS_SEED = 20240513  # bootstrap resampling: fixed, so an analysis is reproducible
+MULTIPLICITY = ("Holm over every pair of conditions, per spec and test (per outcome for the models; per "
+                "driver type and spec for the per-type tables); columns *_holm")
 
 
 @dataclass
@@ -78,6 +91,8 @@ class StudyAnalysis:
     episodes: pd.DataFrame = field(repr=False)
     per_type: pd.DataFrame = field(default_factory=pd.DataFrame)
     per_type_paired: pd.DataFrame = field(default_factory=pd.DataFrame)
+    sensitivity: pd.DataFrame = field(default_factory=pd.DataFrame)
+    source_note: str = ""   # why the leading source is not the default one, when it is not
 
     def to_dict(self) -> dict:
         def records(frame: pd.DataFrame) -> list[dict]:
@@ -88,6 +103,9 @@ class StudyAnalysis:
             "study": self.manifest.get("study"),
             "engine": self.manifest.get("engine"),
             "belief_source": self.belief_source,
+            "belief_source_label": source_label(self.belief_source),
+            "belief_source_note": self.source_note,
+            "multiplicity": MULTIPLICITY,
             "cells": records(self.cells),
             "paired": records(self.paired),
             "repeated_measures": records(self.repeated),
@@ -99,15 +117,9 @@ class StudyAnalysis:
             "paper_note": self.paper_note,
             "per_type": records(self.per_type),
             "per_type_paired": records(self.per_type_paired),
+            "sensitivity": records(self.sensitivity),
             "failed_episodes": len(self.manifest.get("failed_episodes", [])),
         }
-
-
-def _pair_conditions(conditions: list[str]) -> tuple[str, str] | None:
-    if "aware" in conditions and "free" in conditions:
-        return "aware", "free"
-    return (conditions[0], conditions[1]) if len(conditions) >= 2 else None
-
 
 
 def source_satisfaction(study_dir: Path, manifest: dict, episodes: pd.DataFrame,
@@ -137,6 +149,7 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
     """The analysis of `study_dir` on `belief_source` (default: `default_belief_source`, common to
     every condition)."""
     manifest, episodes, roads = load_study(study_dir)
+    chosen = belief_source is not None or declared_belief_source(manifest) is not None
     belief_source = default_belief_source(manifest) if belief_source is None else belief_source
     if belief_source not in BELIEF_SOURCES:
         raise InputError(
@@ -146,6 +159,13 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
             f"use one of {', '.join(BELIEF_SOURCES)}",
         )
     satisfaction = source_satisfaction(Path(study_dir), manifest, episodes, roads)
+    source_note = ""
+    if f"satisfied_{belief_source}" not in satisfaction and not chosen:
+        # a simulated study whose drivers this trustroute cannot rebuild: the reports are the
+        # neutral source left
+        source_note = (f"the default source {belief_source!r} needs the drivers' own models, which this "
+                       "trustroute cannot rebuild from the study's config: 'reported' leads instead")
+        belief_source = "reported"
     if f"satisfied_{belief_source}" not in satisfaction:
         raise InputError("--belief-source", "", f"belief source {belief_source!r} needs a simulated study",
                          "use filter, reported or reference on imported logs")
@@ -166,12 +186,12 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
     column = f"satisfied_{belief_source}"
 
     cells = cell_table(episodes, spec_order, condition_order, belief_source, expected, rng, resamples)
-    pair = _pair_conditions(condition_order)
+    pairs = condition_pairs(condition_order)
     empty = pd.DataFrame()
-    if pair is not None and len(episodes):
-        wide = per_participant_table(episodes, column, pair)
-        paired = paired_table_rows(wide, pair, spec_order, rng, resamples)
-        repeated = repeated_measures_table(episodes, column, pair)
+    if pairs and len(episodes):
+        wide = per_participant_table(episodes, column, tuple(condition_order))
+        paired = all_pairs_table(wide, pairs, spec_order, rng, resamples)
+        repeated = all_pairs_repeated(episodes, column, pairs)
     else:
         wide, paired, repeated = empty, empty, empty
     takeovers = takeover_table(roads, episodes, condition_order)
@@ -181,6 +201,9 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
         order, order_tests, carryover = empty, {}, empty
     per_type, per_type_paired = per_type_tables(episodes, spec_order, condition_order, belief_source,
                                                 rng, resamples)
+    sources = [s for s in BELIEF_SOURCES if f"satisfied_{s}" in episodes]
+    sensitivity = sensitivity_table(episodes, sources, belief_source, paired, condition_order, spec_order,
+                                    ANALYSIS_SEED, resamples)
     analysis = StudyAnalysis(
         study_dir=Path(study_dir),
         belief_source=belief_source,
@@ -199,6 +222,8 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
         episodes=episodes,
         per_type=per_type,
         per_type_paired=per_type_paired,
+        sensitivity=sensitivity,
+        source_note=source_note,
     )
     comparable, note = is_paper_comparable(manifest, episodes)
     if comparable:

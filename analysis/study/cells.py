@@ -64,6 +64,8 @@ def cell_table(
                     "synthesized_lower": exp.get("synthesized_lower"),
                     "synthesized_upper": exp.get("synthesized_upper"),
                     "synthesized_horizon": exp.get("synthesized_horizon"),
+                    # the condition's policy has no synthesized decision: it drives its fallback
+                    "fallback_only": bool(exp.get("fallback_only")),
                 }
             )
     return pd.DataFrame(rows)

@@ -20,7 +20,7 @@ from trustroute.analysis.formatting import (
     terminal_table,
     wrapped_text,
 )
-from trustroute.analysis.study.analysis import StudyAnalysis
+from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis
 
 
 def paired_display(p: pd.DataFrame) -> pd.DataFrame:
@@ -42,18 +42,42 @@ def paired_display(p: pd.DataFrame) -> pd.DataFrame:
             "risk difference [95% CI]": estimate_column(p, "risk_difference", "rd_low", "rd_high"),
             "conditional OR [exact CI]": estimate_column(p, "odds_ratio", "or_low", "or_high", 2),
             "McNemar exact p": [format_p(finite_or_none(v)) for v in p["mcnemar_p"]],
+            "McNemar p (Holm)": _p_column(p, "mcnemar_p_holm"),
             "trust difference [BCa CI]": estimate_column(
                 p, "trust_difference", "trust_diff_low", "trust_diff_high"
             ),
             "Wilcoxon p (trust)": [format_p(finite_or_none(v)) for v in p["wilcoxon_p"]],
+            "Wilcoxon p (Holm)": _p_column(p, "wilcoxon_p_holm"),
         }
     )
+    if "sign_test_p" in p and p["sign_test_p"].notna().any():  # the "all specs" rows' test
+        shown["sign test p (satisfaction)"] = _p_column(p, "sign_test_p")
+        shown["sign test p (Holm)"] = _p_column(p, "sign_test_p_holm")
     notes = p.get("or_note", pd.Series([""] * len(p), index=p.index)).fillna("")
     if notes.astype(bool).any():  # an odds ratio shown is not b / c: say why beside it
         shown["odds ratio note"] = notes.to_numpy()
     if "driver_type" in p:
         shown.insert(0, "driver type", p["driver_type"].to_numpy())
     return shown
+
+
+def _p_column(p: pd.DataFrame, column: str) -> list[str]:
+    """A p-value column as shown (missing where the table has no such column or value)."""
+    values = p[column] if column in p else [None] * len(p)
+    return [format_p(finite_or_none(v)) for v in values]
+
+
+def sensitivity_display(s: pd.DataFrame) -> pd.DataFrame:
+    """The sensitivity table as shown: one row per (pair, spec), one column per belief source (the
+    leading one marked "(primary)") with the satisfaction difference A − B and its 95% interval."""
+    shown = s.assign(pair=s["condition_a"] + " − " + s["condition_b"],
+                     value=estimate_column(s, "risk_difference", "rd_low", "rd_high"),
+                     column=[f"{source} (primary)" if primary else source
+                             for source, primary in zip(s["source"], s["primary"], strict=True)])
+    wide = shown.pivot_table(index=["pair", "spec"], columns="column", values="value", aggfunc="first",
+                             sort=False)
+    columns = list(dict.fromkeys(shown["column"]))
+    return wide.reindex(columns=columns).reset_index().rename_axis(columns=None).fillna(MISSING)
 
 
 def _rate_columns(frame: pd.DataFrame, rate: str = "satisfaction_rate") -> dict[str, pd.Series]:
@@ -83,7 +107,7 @@ def _trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
 
 def _cell_columns(c: pd.DataFrame, other: str) -> dict[str, pd.Series]:
     """The main table's columns; `other`: the belief source whose rate is shown beside."""
-    return {"spec": c["spec"], "condition": c["condition"], "n": c["n"], **_outcome_columns(c),
+    return {"spec": c["spec"], "condition": condition_marked(c), "n": c["n"], **_outcome_columns(c),
             "Wilson 95% CI": interval_column(c, "wilson_low", "wilson_high"),
             f"rate ({other})": c[f"satisfaction_rate_{other}"].map(number_text),
             "exact value [L, U]": interval_column(c, "exact_lower", "exact_upper"),
@@ -91,6 +115,25 @@ def _cell_columns(c: pd.DataFrame, other: str) -> dict[str, pd.Series]:
             **_trust_columns(c),
             "junctions": c["mean_junctions"].map(lambda v: number_text(v, 1)),
             "fallback": c["fallback_rate"].map(lambda v: number_text(v, 2))}
+
+
+FALLBACK_MARK = " (fallback only)"
+
+
+def condition_marked(cells: pd.DataFrame) -> pd.Series:
+    """The condition column, each condition whose policy is only its fallback marked so."""
+    marked = cells.get("fallback_only", pd.Series(False, index=cells.index)).fillna(False).astype(bool)
+    return cells["condition"].where(~marked, cells["condition"] + FALLBACK_MARK)
+
+
+def fallback_only_lines(manifest: dict) -> list[str]:
+    """One warning per (spec, condition) whose policy has no synthesized decision (the study's
+    manifest records them, harness/study/expected.py)."""
+    return [f"Warning: the {condition} policy for {spec} has no synthesized decision (0 rows); it is "
+            f"only its fallback, {entry['fallback_only']}: the condition marked{FALLBACK_MARK} measures "
+            "that fallback, not a synthesized policy."
+            for spec, conditions in (manifest.get("expected") or {}).items()
+            for condition, entry in conditions.items() if entry.get("fallback_only")]
 
 
 def _repeated_columns(r: pd.DataFrame) -> dict[str, pd.Series]:
@@ -131,6 +174,7 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
         "carryover": (analysis.carryover, lambda k: pd.DataFrame(_carryover_columns(k))),
         "per_type": (analysis.per_type, lambda c: pd.DataFrame(_per_type_columns(c))),
         "per_type_paired": (analysis.per_type_paired, paired_display),
+        "sensitivity": (analysis.sensitivity, sensitivity_display),
         "paper": (analysis.paper, lambda paper: paper),
     }
     return {name: show(frame) for name, (frame, show) in shown.items() if len(frame)}
@@ -145,8 +189,20 @@ TABLE_TITLES = {
     "carryover": "Carry-over: by the condition driven just before",
     "per_type": "Satisfaction and trust per true driver type",
     "per_type_paired": "Paired effects per true driver type (every pair of conditions)",
+    "sensitivity": "Sensitivity: satisfaction difference A − B [95% CI] on every belief source",
     "paper": "The paper beside this study",
 }
+
+
+# tables whose figures do not depend on the belief source (the others name it in their title)
+SOURCE_FREE_TABLES = ("takeovers", "sensitivity")
+
+
+def table_title(name: str, belief_source: str) -> str:
+    """A table's title, naming the belief source its satisfaction figures are evaluated on."""
+    if name in SOURCE_FREE_TABLES:
+        return TABLE_TITLES[name]
+    return f"{TABLE_TITLES[name]} (beliefs: {belief_source})"
 
 
 # columns that identify a row: repeated in every block of a table split to fit the terminal
@@ -159,10 +215,17 @@ def format_table(analysis: StudyAnalysis, width: int | None = TERMINAL_WIDTH) ->
         f"study {analysis.manifest.get('study')} ({analysis.manifest.get('engine')} engine); "
         f"satisfaction on beliefs from: {analysis.belief_source} ({source_label(analysis.belief_source)})",
         width)
+    for warning in fallback_only_lines(analysis.manifest):
+        lines += wrapped_text(warning, width)
+    if analysis.source_note:
+        lines += wrapped_text(f"Note: {analysis.source_note}.", width)
     for name, table in display_tables(analysis).items():
         keys = next((i for i, c in enumerate(table.columns) if c not in KEY_COLUMNS), len(table.columns))
         header = [str(c) for c in table.columns]
-        lines += ["", TABLE_TITLES[name], *terminal_table(header, table.values.tolist(), width, max(1, keys))]
+        lines += ["", table_title(name, analysis.belief_source),
+                  *terminal_table(header, table.values.tolist(), width, max(1, keys))]
+        if name == "paired":
+            lines += wrapped_text(f"Multiplicity: {MULTIPLICITY}.", width)
     if analysis.order_tests:
         lines += wrapped_text(order_test_line(analysis.order_tests), width)
     if analysis.paper_note:

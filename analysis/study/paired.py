@@ -1,10 +1,16 @@
-"""Paired effects over participants, between two conditions: the per-participant table, the paired
-statistics per spec (2x2 counts, exact McNemar, Newcombe risk difference, conditional odds ratio,
-BCa trust difference, Wilcoxon) with an "all specs" row that is per participant, and the
+"""Paired effects over participants, for every pair of conditions: the per-participant table, the
+paired statistics per spec (2x2 counts, exact McNemar, Newcombe risk difference, conditional odds
+ratio, BCa trust difference, Wilcoxon) with an "all specs" row that is per participant, and the
 repeated-measures models (conditional logit, mixed trust model) with one group per participant.
+
+With k conditions there are k(k-1)/2 pairs (`condition_pairs`); every p-value gets its Holm-adjusted
+value beside it (`<test>_holm`), the family being that test on that spec (or model outcome) over
+every pair (analysis/statistics.py `holm`). With two conditions the adjusted p equals the raw one.
 """
 
 from __future__ import annotations
+
+import itertools
 
 import numpy as np
 import pandas as pd
@@ -13,6 +19,7 @@ from trustroute.analysis.formatting import finite_or_none
 from trustroute.analysis.statistics import (
     conditional_logit,
     conditional_odds_ratio,
+    holm,
     mcnemar_exact,
     mean_difference,
     mixed_trust_model,
@@ -24,8 +31,54 @@ from trustroute.analysis.statistics import (
 ALL_SPECS = "all specs"
 
 
-def per_participant_table(episodes: pd.DataFrame, column: str, pair: tuple[str, str]) -> pd.DataFrame:
-    """One row per (participant, spec): satisfied and mean reported trust under each condition."""
+PAIRED_TESTS = ("mcnemar_p", "sign_test_p", "wilcoxon_p")   # the p-values adjusted over the pairs
+
+
+def condition_pairs(conditions) -> list[tuple[str, str]]:
+    """Every pair (a, b) of `conditions`, a the trust-aware side: "aware" first, "free" last, the
+    others in their order between (so a two-condition study keeps "aware vs free")."""
+    ranked = sorted(conditions, key=lambda c: 0 if c == "aware" else 2 if c == "free" else 1)
+    return list(itertools.combinations(ranked, 2))
+
+
+def with_holm(frame: pd.DataFrame, family: list[str], tests: tuple[str, ...]) -> pd.DataFrame:
+    """`frame` with `<test>_holm` beside every test column present: Holm over the rows sharing the
+    `family` columns (one spec, one driver type: every pair of conditions)."""
+    if not len(frame):
+        return frame
+    frame = frame.copy()
+    for test in tests:
+        if test not in frame:
+            continue
+        adjusted = pd.Series([None] * len(frame), index=frame.index, dtype=object)
+        for _, rows in frame.groupby(family, sort=False, dropna=False):
+            values = [finite_or_none(v) for v in rows[test]]
+            adjusted.loc[rows.index] = holm(values)
+        frame.insert(frame.columns.get_loc(test) + 1, f"{test}_holm", adjusted.to_numpy())
+    return frame
+
+
+def all_pairs_table(wide: pd.DataFrame, pairs: list[tuple[str, str]], spec_order, rng: np.random.Generator,
+                    resamples: int) -> pd.DataFrame:
+    """The paired statistics of every pair, with Holm-adjusted p-values per spec."""
+    frames = [paired_table_rows(wide, pair, spec_order, rng, resamples) for pair in pairs]
+    frames = [f for f in frames if len(f)]
+    if not frames:
+        return pd.DataFrame()
+    return with_holm(pd.concat(frames, ignore_index=True), ["spec"], PAIRED_TESTS)
+
+
+def all_pairs_repeated(episodes: pd.DataFrame, column: str, pairs: list[tuple[str, str]]) -> pd.DataFrame:
+    """The repeated-measures models of every pair, with Holm-adjusted p-values per outcome."""
+    frames = [repeated_measures_table(episodes, column, pair) for pair in pairs]
+    if not frames:
+        return pd.DataFrame()
+    return with_holm(pd.concat(frames, ignore_index=True), ["outcome"], ("p_value",))
+
+
+def per_participant_table(episodes: pd.DataFrame, column: str, pair: tuple[str, ...]) -> pd.DataFrame:
+    """One row per (participant, spec): satisfied and mean reported trust under each condition of
+    `pair` (two conditions, or every condition of the study)."""
     subset = episodes[episodes["condition"].isin(pair)]
     wide = subset.pivot_table(
         index=["participant", "spec"],

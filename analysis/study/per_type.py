@@ -5,13 +5,17 @@ type and over all participants ("all").
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 import pandas as pd
 
 from trustroute.analysis.study.cells import cell_table
-from trustroute.analysis.study.paired import paired_table_rows, per_participant_table
+from trustroute.analysis.study.paired import (
+    PAIRED_TESTS,
+    condition_pairs,
+    paired_table_rows,
+    per_participant_table,
+    with_holm,
+)
 
 ALL_TYPES = "all"
 PER_TYPE_CELL_COLUMNS = (
@@ -26,7 +30,8 @@ def per_type_tables(
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per true driver type and over all participants: the cells (satisfaction with exact CI, mean
     reported trust with bootstrap CI, mean true trust) and the paired statistics of every pair of
-    conditions (in config order). Empty without a `driver_type` in the episodes."""
+    conditions (paired.py `condition_pairs`), Holm-adjusted per type and spec. Empty without a
+    `driver_type` in the episodes."""
     if "driver_type" not in episodes or not episodes["driver_type"].notna().any():
         return pd.DataFrame(), pd.DataFrame()
     names = sorted(episodes["driver_type"].dropna().unique())
@@ -38,7 +43,7 @@ def per_type_tables(
         table = cell_table(group, spec_order, condition_order, belief_source, {}, rng, resamples)
         cells.append(table[list(PER_TYPE_CELL_COLUMNS)].assign(
             driver_type=name, participants=group["participant"].nunique()))
-        for pair in itertools.combinations(condition_order, 2):
+        for pair in condition_pairs(condition_order):
             rows = paired_table_rows(per_participant_table(group, column, pair), pair, spec_order, rng,
                                      resamples)
             if len(rows):
@@ -47,5 +52,5 @@ def per_type_tables(
     cell_frame = cell_frame[["driver_type", "participants", *PER_TYPE_CELL_COLUMNS]]
     if not paired:
         return cell_frame, pd.DataFrame()
-    paired_frame = pd.concat(paired, ignore_index=True)
+    paired_frame = with_holm(pd.concat(paired, ignore_index=True), ["driver_type", "spec"], PAIRED_TESTS)
     return cell_frame, paired_frame[["driver_type", *[c for c in paired_frame.columns if c != "driver_type"]]]

@@ -3,7 +3,7 @@ PNG_DPI with an SVG beside it (same name, for papers); legends sit outside the d
 
 satisfaction_plot   satisfaction rate per spec and condition with exact (Clopper–Pearson) 95 %
                     intervals, the policy's exact value and the synthesized [lower, upper] beside it
-paired_plot         per participant, mean reported trust under each condition joined by a line
+paired_plot         per participant, mean reported trust under every condition joined by a line
                     (one panel per spec), satisfied episodes filled
 trust_plot          mean reported and true trust against the road index, per spec and condition,
                     with a 95 % band of the mean of reported trust (normal approximation), drawn
@@ -119,40 +119,42 @@ def satisfaction_plot(cells: pd.DataFrame, path: Path, belief_source: str) -> Pa
     return _save(fig, path, tight_box=True)
 
 
-def paired_plot(per_participant: pd.DataFrame, pair: tuple[str, str], path: Path) -> Path:
+def paired_plot(per_participant: pd.DataFrame, conditions: tuple[str, ...], path: Path,
+                belief_source: str = "") -> Path:
+    """Per participant and spec: the mean reported trust under every condition, joined by a line;
+    filled where the spec was satisfied. With two conditions a line is green when the first is the
+    higher, red when the second is."""
     plt = _pyplot()
-    a, b = pair
     specs = list(dict.fromkeys(per_participant["spec"])) if len(per_participant) else [""]
-    fig, axes = plt.subplots(1, len(specs), figsize=(3.4 * len(specs), 3.6), squeeze=False, sharey=True)
+    k = len(conditions)
+    width = max(3.4, 1.3 * k + 1.0)
+    fig, axes = plt.subplots(1, len(specs), figsize=(width * len(specs), 3.6), squeeze=False, sharey=True)
     rng = np.random.default_rng(0)  # jitter only, so overlapping participants stay visible
     for ax, spec in zip(axes[0], specs, strict=True):
         group = per_participant[per_participant["spec"] == spec]
         for row in group.itertuples(index=False):
-            ya, yb = getattr(row, f"trust_{a}"), getattr(row, f"trust_{b}")
+            trust = [getattr(row, f"trust_{c}", np.nan) for c in conditions]
+            satisfied = [getattr(row, f"satisfied_{c}", None) for c in conditions]
             jitter = rng.uniform(-0.04, 0.04)
-            colour = "#2ca02c" if ya > yb else "#d62728" if ya < yb else "grey"
-            ax.plot([0 + jitter, 1 + jitter], [ya, yb], color=colour, alpha=0.6, lw=1)
-            for x, y, sat in (
-                (0, ya, getattr(row, f"satisfied_{a}")),
-                (1, yb, getattr(row, f"satisfied_{b}")),
-            ):
-                ax.scatter(
-                    [x + jitter],
-                    [y],
-                    s=22,
-                    zorder=3,
-                    edgecolor="black",
-                    linewidth=0.6,
-                    color="black" if bool(sat) else "white",
-                )
-        ax.set_xticks([0, 1], [a, b])
-        ax.set_xlim(-0.4, 1.4)
+            colour = "grey"
+            if k == 2:
+                colour = "#2ca02c" if trust[0] > trust[1] else "#d62728" if trust[0] < trust[1] else "grey"
+            xs = np.arange(k) + jitter
+            ax.plot(xs, trust, color=colour, alpha=0.6, lw=1)
+            for x, y, sat in zip(xs, trust, satisfied, strict=True):
+                if sat is None or pd.isna(sat):
+                    continue
+                ax.scatter([x], [y], s=22, zorder=3, edgecolor="black", linewidth=0.6,
+                           color="black" if bool(sat) else "white")
+        ax.set_xticks(list(range(k)), list(conditions))
+        ax.set_xlim(-0.4, k - 0.6)
         ax.set_title(f"{spec} (n={len(group)})", fontsize=9)
         ax.grid(alpha=0.3, axis="y")
     axes[0][0].set_ylabel("participant's mean reported trust")
-    fig.suptitle(
-        f"Per participant: {a} vs {b} (filled = spec satisfied; green = higher under {a})", fontsize=9
-    )
+    source = f" on {belief_source}" if belief_source else ""
+    colours = f"; green = higher under {conditions[0]}" if k == 2 else ""
+    fig.suptitle(f"Per participant: {' / '.join(conditions)} (filled = spec satisfied{source}{colours})",
+                 fontsize=9)
     return _save(fig, path)
 
 
@@ -392,10 +394,8 @@ def write_plots(
         "takeovers": takeover_plot(analysis.takeovers, folder / "takeovers.png"),
     }
     if len(analysis.per_participant) and len(analysis.paired):
-        first = analysis.paired.iloc[0]
-        plots["participants"] = paired_plot(
-            analysis.per_participant,
-            (first["condition_a"], first["condition_b"]),
-            folder / "participants.png",
-        )
+        shown = [c for c in analysis.cells["condition"].drop_duplicates()
+                 if f"trust_{c}" in analysis.per_participant]
+        plots["participants"] = paired_plot(analysis.per_participant, tuple(shown),
+                                            folder / "participants.png", analysis.belief_source)
     return plots

@@ -15,10 +15,16 @@ from pathlib import Path
 
 import pandas as pd
 
-from trustroute.analysis.belief_sources import default_belief_source, source_label
+from trustroute.analysis.belief_sources import declared_belief_source, default_belief_source, source_label
 from trustroute.analysis.formatting import markdown_table
-from trustroute.analysis.study.analysis import StudyAnalysis, study_analysis
-from trustroute.analysis.study.display import TABLE_TITLES, display_tables, format_table, order_test_line
+from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis, study_analysis
+from trustroute.analysis.study.display import (
+    TABLE_TITLES,
+    display_tables,
+    fallback_only_lines,
+    format_table,
+    order_test_line,
+)
 from trustroute.analysis.study.plots import write_plots
 from trustroute.analysis.study_directory import study_inputs
 from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE, read_roads
@@ -29,8 +35,11 @@ NOTES = [
     "the driver's last reported trust, carried forward, the AV's initial belief before the first report; "
     "'reference' = one exact Bayes filter for every condition (the study's driver model, or the "
     "type-aware filter of its population) run on the logged observations; 'true' = the exact filter of "
-    "each simulated driver's own model. Conditions whose AVs filter differently (robust) are compared "
-    "on 'reference' by default, each being scored by its own belief otherwise.",
+    "each simulated driver's own model. The primary source is the one the study config declares "
+    "(belief_source), else the neutral one: 'true' for simulated studies, 'reported' for live and "
+    "imported ones; the sensitivity table shows every comparison on every source.",
+    "Every pair of conditions is tested; p-values are shown with their Holm-adjusted values beside "
+    "them (the family: one test on one spec over every pair of conditions).",
     "Intervals for rates are exact (Clopper-Pearson) with Wilson beside them, from scipy.stats.binomtest. "
     "Risk differences of paired outcomes use Newcombe's interval for paired proportions; the conditional "
     "odds ratio is b/c of the discordant pairs with the exact interval of b/(b+c); trust differences use a "
@@ -109,11 +118,34 @@ def study_lines(manifest: dict) -> list[str]:
     ]
 
 
-def sources_line(lead: str, second: str, default: str) -> str:
-    """The report's statement of which belief source leads its tables."""
-    chosen = ("the default for this study: common to every condition" if lead == default
-              else f"chosen by the caller (--belief-source, or analyze(belief_source=...)); this study's "
-                   f"default is {default!r}")
+SENSITIVITY_LINE = ("Each comparison's satisfaction difference (A − B, per spec: Newcombe's interval; all "
+                    "specs: the participants' mean difference, BCa bootstrap) on every belief source the "
+                    "study has; the tables above lead with the one marked primary. 'filter' scores each "
+                    "condition on its own AV's belief and 'reference' on the type-aware filter (the "
+                    "robust AV's own), so neither is neutral when the conditions' filters differ.")
+
+
+def second_source(primary: StudyAnalysis) -> str:
+    """The source of the report's second set of tables: the reports, or when they lead, the first
+    other source the study has of "true" and "filter"."""
+    if primary.belief_source != "reported":
+        return "reported"
+    columns = primary.episodes.columns
+    return next((s for s in ("true", "filter") if f"satisfied_{s}" in columns), "filter")
+
+
+def sources_line(lead: str, second: str, default: str, declared: bool = False, note: str = "") -> str:
+    """The report's statement of which belief source leads its tables (`note`: why the default
+    could not lead)."""
+    if note:
+        chosen = note
+    elif lead != default:
+        chosen = (f"chosen by the caller (--belief-source, or analyze(belief_source=...)); this study's "
+                  f"primary source is {default!r}")
+    elif declared:
+        chosen = "the primary source the study config declared"
+    else:
+        chosen = "the neutral default for this study: the same for every condition, no condition's own filter"
     return (f"Leading belief source: {lead!r} ({source_label(lead)}; {chosen}). "
             f"The tables on {second!r} ({source_label(second)}) follow them.")
 
@@ -132,7 +164,7 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
     study_dir = Path(study_dir)
     primary = analysis if analysis is not None else study_analysis(study_dir)
     default = default_belief_source(primary.manifest)
-    secondary = study_analysis(study_dir, "reported" if primary.belief_source != "reported" else default)
+    secondary = study_analysis(study_dir, second_source(primary))
     town, _, specs = study_inputs(primary.manifest)
     roads = read_roads(study_dir, ["episode_id", "index", "directed_road", "trust_after", "reported_trust"])
     plots = write_plots(study_dir, town, primary, roads, specs)
@@ -140,7 +172,12 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
     context = {
         "title": f"trustroute study report: {primary.manifest.get('study')}",
         "study_lines": study_lines(primary.manifest),
-        "sources_line": sources_line(primary.belief_source, secondary.belief_source, default),
+        "warnings": fallback_only_lines(primary.manifest),
+        "sources_line": sources_line(primary.belief_source, secondary.belief_source, default,
+                                     declared_belief_source(primary.manifest) is not None,
+                                     primary.source_note),
+        "multiplicity": MULTIPLICITY,
+        "sensitivity_line": SENSITIVITY_LINE,
         "analyses": [_analysis_view(primary), _analysis_view(secondary)],
         "titles": TABLE_TITLES,
         "plots": [

@@ -22,8 +22,9 @@ from trustroute.harness.commands.study import report_paths
     type=click.Choice(["filter", "reported", "reference", "true"]),
     default=None,
     help="Beliefs the spec is evaluated on: each AV's own filter, induced from reported trust, one "
-    "reference filter for every condition, or each driver's true model (simulation). Default: a "
-    "source common to every condition (filter, or reference when the conditions' filters differ).",
+    "reference filter for every condition, or each driver's true model (simulation). Default: the "
+    "study config's belief_source, else the neutral one (true in simulation, reported for live and "
+    "imported studies).",
 )
 @click.option("--wide", is_flag=True,
               help="Print the tables as wide as they are (default: fitted to 120 columns).")

@@ -8,6 +8,8 @@ these types instead. A bad value is a one-line usage error with exit code 2.
 from __future__ import annotations
 
 import math
+import time
+from dataclasses import dataclass
 
 import click
 
@@ -47,3 +49,45 @@ SEED = bounded_int(0, 2**31 - 1)  # SUMO takes a signed 32-bit seed
 HORIZON = bounded_int(1, 1_000)
 JUNCTIONS = bounded_int(0, 10_000)
 WORKERS = bounded_int(1, 256)
+
+
+@dataclass(frozen=True)
+class CommandStart:
+    """When `trustroute` began (time.perf_counter()): the click context's object."""
+
+    started: float
+
+    @classmethod
+    def now(cls) -> CommandStart:
+        """The process's start: now less its age (the interpreter's start-up and first imports)."""
+        return cls(time.perf_counter() - process_age())
+
+
+def process_age() -> float:
+    """Seconds since this process started, from /proc on Linux; 0 where that cannot be read."""
+    import os
+
+    try:
+        with open("/proc/self/stat") as stat, open("/proc/uptime") as uptime:
+            start_ticks = int(stat.read().rsplit(")", 1)[1].split()[19])
+            up = float(uptime.read().split()[0])
+        return max(up - start_ticks / os.sysconf("SC_CLK_TCK"), 0.0)
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+# Of a command's --time-limit, the part kept for the work after synthesis (writing the policy
+# file, the summary): a share of the limit, at least AFTER_SYNTHESIS_MIN seconds.
+AFTER_SYNTHESIS = 0.03
+AFTER_SYNTHESIS_MIN = 0.1
+
+
+def synthesis_time_left(time_limit: float) -> float:
+    """The seconds a synthesis may take of a command's --time-limit, which bounds the whole
+    command: the limit less the time since the command began (start-up, reading the inputs) and the
+    reserve for writing the results; never below a tenth of the limit."""
+    context = click.get_current_context(silent=True)
+    start = context.find_object(CommandStart) if context is not None else None
+    spent = time.perf_counter() - start.started if start is not None else 0.0
+    reserve = max(AFTER_SYNTHESIS * time_limit, AFTER_SYNTHESIS_MIN)
+    return max(time_limit - spent - reserve, 0.1 * time_limit)

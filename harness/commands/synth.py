@@ -8,13 +8,15 @@ evaluate  the exact satisfaction probability and expected final trust of any pol
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import click
 
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults
 from trustroute.core.errors import InputError
-from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat
+from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat, synthesis_time_left
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 
 town_option = click.option("--town", "town_path", type=click.Path(), default=None,
@@ -101,13 +103,16 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     out_path = out_path or default_out_path(spec.name, town.content_hash, driver.content_hash,
                                             spec.content_hash, f"H={horizon}", f"tau={tau}", belief_rule,
                                             f"clusters={clusters}", f"time_limit={time_limit}")
-    result = synthesize_single(problem, settings, out_path)
+    result = synthesize_single(problem, replace(settings, time_limit=synthesis_time_left(time_limit)),
+                               out_path)
     path = str(out_path)
     from trustroute.app.synthesis import bounds_notes, policy_arrays
 
     payload = with_paths({"spec": spec.name, "lower": result.lower, "upper": result.upper, "gap": result.gap,
                           "seconds": result.seconds, "tau": tau, "horizon": horizon,
-                          "belief_rule": belief_rule, "stats": result.stats.to_dict()},
+                          "belief_rule": belief_rule, "stats": result.stats.to_dict(),
+                          "fallback_only": _warn_fallback_only(f"the policy for {spec.name}", result.policy,
+                                                               result.stats.converged)},
                          {"policy": path, "policy_arrays": policy_arrays(path)})
     lines = [f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
              f"{result.seconds:.1f} s)"]
@@ -131,6 +136,16 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
     emit(as_json, payload, lines)
 
 
+def _warn_fallback_only(what: str, policy, converged: bool) -> bool:
+    """Whether `policy` is only its fallback (no decision row); if so, one line on stderr."""
+    from trustroute.app.synthesis import fallback_only, fallback_warning
+
+    fallback = fallback_only(policy)
+    if fallback is not None:
+        click.echo(fallback_warning(what, fallback, converged), err=True)
+    return fallback is not None
+
+
 def _synth_population(problem, objective: str, settings, out_path: str | None, as_json: bool) -> None:
     """`synth --population`: the Bayes or robust objective over a population's driver types; past
     2 s (policies/resolve.py's PROGRESS_AFTER), a line per finished synthesis run with its bounds
@@ -142,7 +157,9 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
     out_path = out_path or default_out_path(spec.name, town.content_hash, population.content_hash,
                                             spec.content_hash, objective, f"H={horizon}", f"tau={tau}",
                                             settings.belief_rule, f"time_limit={time_limit}")
-    found = synthesize_population(problem, objective, settings, out_path)
+    # the command's limit, less what start-up and reading the inputs took (the out path's key keeps it)
+    found = synthesize_population(problem, objective,
+                                  replace(settings, time_limit=synthesis_time_left(time_limit)), out_path)
     result = found.result
     path = str(out_path)
     summary = population_summary(found)
@@ -150,7 +167,9 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
     payload = with_paths({"spec": spec.name, "lower": found.lower, "upper": found.upper, "gap": found.gap,
                           "seconds": found.seconds, "tau": tau, "horizon": horizon,
                           "belief_rule": settings.belief_rule, "population": summary,
-                          "stats": result.stats.to_dict()},
+                          "stats": result.stats.to_dict(),
+                          "fallback_only": _warn_fallback_only(f"the {objective} policy for {spec.name}",
+                                                               result.policy, found.gap <= tau)},
                          {"policy": path, "policy_arrays": policy_arrays(path)})
     what = "P(satisfied), prior-weighted" if objective == "bayes" else "worst type's P(satisfied)"
     lines = [f"{spec.name} ({population.n_types} driver types, objective {objective}): "
@@ -264,7 +283,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     policy = policy_for(problem, policy_name, PolicySettings(cache_dir=cache_dir,
                                                              progress=not (as_json or quiet)))
     if problem.population is not None:
-        _evaluate_population(problem, policy, settings, as_json)
+        _evaluate_population(problem, policy, settings, as_json, f"policy {policy_name}")
         return
     spec = problem.spec
     value = evaluate_single(problem, policy, settings)
@@ -272,6 +291,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     payload["spec"] = spec.name
     payload["expected_final_trust"] = finite_or_none(value.expected_final_trust)
     payload["expected_junctions"] = finite_or_none(value.expected_junctions)
+    _mark_fallback_only(payload, f"policy {policy_name}", policy)
     lines = [
         f"{spec.name} / {value.policy}: P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], "
         f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
@@ -280,6 +300,18 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
     if value.pruning is not None:
         lines.append(_pruning_line(value))
     emit(as_json, payload, lines)
+
+
+def _mark_fallback_only(payload: dict, what: str, policy) -> None:
+    """A synthesized policy that is only its fallback: one line on stderr and `"fallback_only":
+    true` in the JSON (the key only then, so the output of every other policy is unchanged)."""
+    from trustroute.app.synthesis import fallback_only
+
+    fallback = fallback_only(policy)
+    if fallback is not None:
+        click.echo(f"warning: {what} has no synthesized decision (0 rows): it is only its fallback, "
+                   f"{fallback}; the values below are the fallback's", err=True)
+        payload["fallback_only"] = True
 
 
 def _pruning_line(value) -> str:
@@ -296,7 +328,7 @@ def _pruning_line(value) -> str:
             f"{pruning['first_pruned_level']}: {cuts}")
 
 
-def _evaluate_population(problem, policy, settings, as_json: bool) -> None:
+def _evaluate_population(problem, policy, settings, as_json: bool, what: str) -> None:
     """`evaluate --population`: exact value over the mixture and per type."""
     from trustroute.app.synthesis import evaluate_population
 
@@ -308,6 +340,7 @@ def _evaluate_population(problem, policy, settings, as_json: bool) -> None:
     payload["expected_junctions"] = finite_or_none(value.expected_junctions)
     payload["population"] = {"file": population.source_path, "content_hash": population.content_hash,
                              "type_values": [t.to_dict() for t in types]}
+    _mark_fallback_only(payload, what, policy)
     emit(as_json, payload, [
         f"{spec.name} / {value.policy} over the population's {population.n_types} driver types: "
         f"P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], E[final trust] = "

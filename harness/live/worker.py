@@ -3,10 +3,14 @@
 libsumo runs one simulation per process, so every live episode is a process of its own
 (`start_episode_process`, multiprocessing "spawn": nothing of the server's threads is inherited).
 It runs `run_planned_episode` (harness/study/runner.py) exactly as a headless study does (same
-setup, policy, SUMO config, seed, EpisodeTracker) with a `RemoteDriver` in place of the synthetic
-driver. The driver protocol is the seam (harness/simulation/episode.py):
+setup, policy, SUMO config, seed, the same steppable SumoEpisode and EpisodeTracker) with a
+`RemoteDriver` in place of the synthetic driver. The typed drivers are the seam
+(harness/simulation/drivers.py): a `RemoteDriver` is the episode's `Driver` and, at the wheel, its
+`PersonControls`:
 
 - `takeover_request(now)`, asked every step: the person's takeover (True) or hand-back (False);
+- `manual_inputs()`, asked every step when they drive by hand: the pedal and pull-out they sent;
+- `hand_back_warning(distance, now)`: they are still in control near the road's end (sent on);
 - `decides_takeover(kind)`, asked when an incident comes into view: False (a person's takeover
   comes through takeover_request); the view event is sent to the participant. In lockstep (the
   scripted participant only) the episode waits for its answer, `takeover` or `pass`, and
@@ -18,14 +22,11 @@ driver. The driver protocol is the seam (harness/simulation/episode.py):
   last road's prompt is answered after the car has arrived, so the episode's end waits for it
   (`final_report`, up to `final_report_seconds`) and puts it on the last road.
 
-The observer paces the simulation against the wall clock (`pace` sim seconds per wall second),
-reads the person's controls from the pipe, pauses while the server says so, and streams frames.
-It also keeps the rule of the paper's study, the person hands back before the next junction: a
-person still in control WARN_DISTANCE before the road's end is warned, and the ego brakes to wait
-short of the commit point until the hand-back (`hold_for_hand_back`).
-In control, the person drives by hand (`drive_by_hand`): the pedals set the speed, and SUMO's
-overtaking through the oncoming lane waits for them to pull out (outside lockstep: in lockstep the
-episode runs as a headless one does).
+This module keeps only the pipe, the pacing and the frames: the observer paces the simulation
+against the wall clock (`pace` sim seconds per wall second), reads the person's controls from the
+pipe, pauses while the server says so, and streams frames. Driving by hand and the hold before the
+hand-back are the episode's (harness/simulation/manual_driving.py), outside lockstep: in lockstep
+the episode runs as a headless one does.
 The part is written atomically by this process (harness/study/parts.py), its summary marked with
 who drove and every control the person sent.
 """
@@ -40,15 +41,11 @@ from pathlib import Path
 import pyarrow as pa
 
 from trustroute.harness.live.view import dead_reckoned, next_junction, surroundings
-from trustroute.harness.simulation.driving_style import MANUAL, allow_oncoming_pass, set_speed
-from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID, EpisodeRecord
+from trustroute.harness.simulation.drivers import NO_INPUTS, ManualInputs
+from trustroute.harness.simulation.episode import EGO_ID, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import reports_after_road
 
 PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
-WARN_DISTANCE = 100.0      # metres before the road's end: a person in control is told to hand back
-HOLD_MARGIN = 5.0          # metres before the commit point where the ego waits for the hand-back
-PEDAL_ACCEL = 2.6          # m/s² while the accelerator is held (SUMO's tools/game/racing.py)
-PEDAL_DECEL = 4.5          # m/s² while the brake is held
 FINAL_REPORT_SECONDS = 15.0   # wall seconds a trial's end waits for the last road's report
 
 
@@ -67,7 +64,8 @@ class LiveOptions:
 
 
 class RemoteDriver:
-    """The driver of a live episode: a person (or the scripted participant) across a pipe."""
+    """The driver of a live episode, and their controls at the wheel: a person (or the scripted
+    participant) across a pipe."""
 
     def __init__(self, connection, trust_levels: tuple[int, ...], initial_trust: int | None,
                  options: LiveOptions, clock=time.monotonic) -> None:
@@ -86,13 +84,7 @@ class RemoteDriver:
         self.sim_now = 0.0
         self.origin = (clock(), 0.0)       # (wall, sim) the pace is measured from
         self.last_frame = -float("inf")
-        self.warned: str | None = None     # the road whose hand-back warning was sent
-        self.holding = False               # the ego waits for the hand-back
-        self.lengths: dict[str, float] = {}
-        self.by_hand = False               # the person's manual controls are in force
-        self.pedal = "release"             # accelerate, brake, or release
-        self.steer: str | None = None      # a pull-out ("oncoming") or pull-in ("own") to apply
-        self.speed_held = False            # the speed is the person's, not SUMO's car following
+        self.inputs = NO_INPUTS            # pedal and pull-out received since the episode last asked
         self.previous_time: float | None = None
         self.step_seconds = 0.5            # simulated seconds between the last two steps
         self.shown: dict | None = None     # the last stepped frame sent
@@ -101,14 +93,25 @@ class RemoteDriver:
         self.hurry = False                 # a control to apply at once: the next step does not wait
         self.awaiting_report = False       # the last prompt for a report has had no answer yet
 
-    # -- the driver protocol (harness/simulation/episode.py) ------------------------------------
+    # -- the Driver and PersonControls protocols (harness/simulation/drivers.py) ----------------
     @property
     def trust(self) -> int:
         return self._trust
 
+    @property
+    def drives_by_hand(self) -> bool:
+        return not self.options.lockstep
+
     def takeover_request(self, now: float) -> bool | None:
         request, self._request = self._request, None
         return request
+
+    def manual_inputs(self) -> ManualInputs:
+        inputs, self.inputs = self.inputs, NO_INPUTS
+        return inputs
+
+    def hand_back_warning(self, distance: float, now: float) -> None:
+        self.send({"type": "warning", "kind": "hand_back", "distance": round(distance, 1), "t": now})
 
     def decides_takeover(self, incident: str) -> bool:
         self.send({"type": "incident", "kind": incident, "t": self.sim_now})
@@ -167,9 +170,9 @@ class RemoteDriver:
             self._trust = self._report = int(control["value"])
             self.awaiting_report = False
         elif kind == "drive":
-            self.pedal = control["pedal"]
+            self.inputs = ManualInputs(control["pedal"], self.inputs.steer)
         elif kind == "steer":
-            self.steer = control["lane"]
+            self.inputs = ManualInputs(self.inputs.pedal, control["lane"])
         elif kind == "pause":
             if not self.paused:   # the view stands where the wall clock had brought it
                 self.held_at = min(self.sim_now, self.paced_sim_time())
@@ -187,16 +190,16 @@ class RemoteDriver:
 
     def observe(self, sumo, ego, mode: str, road: str) -> None:
         """Every step: the mode change out, controls in, the pace (frames between steps), a
-        pause, then the step's frame: shown when the wall clock reaches the step's time."""
+        pause, then the step's frame: shown when the wall clock reaches the step's time. (The
+        episode has applied the person's manual inputs of this step just before.)"""
         self.sim_now = ego.time
         if mode != self.mode:
             self.mode = mode
             self.send({"type": "mode", "mode": mode, "t": ego.time})
         if self.previous_time is not None and ego.time > self.previous_time:
             self.step_seconds = ego.time - self.previous_time
+        self.previous_time = ego.time
         self.read_controls(0.0)
-        self.hold_for_hand_back(sumo, ego, mode, road)
-        self.drive_by_hand(sumo, ego, mode)
         hurried = self.wait_for_the_wall_clock(ego.time)
         wall = self.clock()
         if hurried:   # the pace goes on from this step: no wall time is spent waiting for it again
@@ -251,56 +254,6 @@ class RemoteDriver:
             self.send(dead_reckoned(shown, seconds))
         return self.frame_interval
 
-    def drive_by_hand(self, sumo, ego, mode: str) -> None:
-        """The person's pedals and pull-out while in control; SUMO's own driving back on the
-        hand-back."""
-        step = 0.0 if self.previous_time is None else ego.time - self.previous_time
-        self.previous_time = ego.time
-        if self.options.lockstep:
-            return
-        manual = mode == MANUAL.name
-        if manual != self.by_hand:
-            self.by_hand = manual
-            allow_oncoming_pass(sumo, EGO_ID, not manual)   # in control, the person decides the pass
-            if not manual and self.speed_held:
-                set_speed(sumo, EGO_ID, None)
-            self.pedal, self.steer, self.speed_held = "release", None, False
-        if not manual:
-            return
-        if self.steer is not None:
-            allow_oncoming_pass(sumo, EGO_ID, self.steer == "oncoming")
-            self.steer = None
-        if self.holding:
-            return   # waiting for the hand-back: the pedals do not move the ego on
-        if self.pedal != "release":   # the speed set last holds once the pedal is released
-            change = PEDAL_ACCEL * step if self.pedal == "accelerate" else -PEDAL_DECEL * step
-            set_speed(sumo, EGO_ID, ego.speed + change)
-            self.speed_held = True
-
-    def hold_for_hand_back(self, sumo, ego, mode: str, road: str) -> None:
-        """Warn a person still in control near the road's end; brake to wait short of the commit
-        point until they hand back; release the ego on the hand-back."""
-        if self.options.lockstep:
-            return   # as in simulated studies: the episode hands back at the commit point
-        if mode != MANUAL.name or ego.road != road:
-            if mode != MANUAL.name:
-                self.warned = None   # a later takeover on this road is warned again
-                if self.holding:
-                    set_speed(sumo, EGO_ID, None)   # back to the autopilot's own speed
-                    self.holding = False
-            return
-        if ego.lane not in self.lengths:
-            self.lengths[ego.lane] = sumo.lane.getLength(ego.lane)
-        remaining = self.lengths[ego.lane] - ego.lane_position
-        if remaining <= WARN_DISTANCE and self.warned != road:
-            self.warned = road
-            self.send({"type": "warning", "kind": "hand_back", "distance": round(remaining, 1),
-                       "t": ego.time})
-        braking = ego.speed * ego.speed / (2.0 * MANUAL.decel) + ego.speed
-        if not self.holding and remaining <= COMMIT_DISTANCE + HOLD_MARGIN + braking:
-            set_speed(sumo, EGO_ID, 0.0)
-            self.holding = True
-
 
 def with_final_report(record: EpisodeRecord, report: int | None) -> EpisodeRecord:
     """The record with a report that answered the last road's prompt after the end put on the last
@@ -339,7 +292,7 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
         levels = study_context(config).driver_model(task.participant).trust_levels
         driver = RemoteDriver(connection, levels, initial_trust, options)
         connection.send({"type": "episode_start", "episode_id": task.episode_id, "trust": driver.trust})
-        record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
+        record = run_planned_episode(config, task, driver=driver, observer=driver.observe, person=driver)
         record = with_final_report(record, driver.final_report())
         write_part_tables(Path(study_dir), task, live_summary(record.summary, driver), record.tables(),
                           sync=True)

@@ -44,8 +44,9 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp, checked_belief_rule
 from trustroute.policies.routing.episode_rules import (
     DEFAULT_JUNCTION_CAP,
-    decide,
+    checked_choice,
     dfa_verdict,
+    end_before_choice,
     episode_policy,
 )
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
@@ -156,6 +157,7 @@ class EpisodeTracker:
         self.fallback_fired = False
         self.fallback_junction: int | None = None   # junctions driven when the fallback first drove
         self._chosen: str | None = None            # next junction chosen at the current road
+        self._asked: DecisionContext | None = None  # the decision point waiting for its choice
         self._rows: list[dict] = [{
             "episode_id": self.episode_id, "index": 0, "directed_road": start, "action": None,
             "incident": NO_INCIDENT, "takeover": None, "performance": None,
@@ -199,25 +201,48 @@ class EpisodeTracker:
     def road(self) -> str:
         return self.route[-1]
 
-    def next_junction(self) -> str | None:
-        """The policy's choice at the current road (with the 20-junction fallback); None when the
-        episode is over (end_reason set). Asking twice at the same road gives the same answer."""
-        if self.end_reason is not None:
+    def decision_point(self) -> DecisionContext | None:
+        """What the AV knows where the next junction is to be chosen, or None when the episode is
+        over (end_reason set: the DFA's verdict, the policy's destination, the junction cap). Asked
+        twice at the same road it gives the same context (the policy's `finished` asked once)."""
+        if self.end_reason is not None or self._chosen is not None:
             return None
-        if self._chosen is not None:
-            return self._chosen
-        decision = decide(self.policy, self._context(), self.setup.town, self.setup.junction_cap)
-        if decision.end is not None:
-            self.end_reason = decision.end
+        if self._asked is not None:
+            return self._asked
+        context = self._context()
+        end = end_before_choice(self.policy, context, self.setup.junction_cap)
+        if end is not None:
+            self.end_reason = end
             return None
-        junction, fired = decision.junction, decision.fallback
+        self._asked = context
+        return context
+
+    def choose(self, junction: str) -> str:
+        """The junction chosen at the decision point (by the episode's policy, or by whoever steps
+        the episode): checked legal, recorded on the current road's row; returns it."""
+        context = self._asked
+        if context is None:
+            raise ValueError(f"episode {self.episode_id}: no junction to choose here "
+                             f"({self.end_reason or 'ask decision_point first'})")
+        decision = checked_choice(self.policy, context, self.setup.town, junction)
+        fired = decision.fallback
         if fired and not self.fallback_fired:
             self.fallback_fired = True
             self.fallback_junction = self.junctions
         self._rows[-1]["action"] = junction
         self._rows[-1]["fallback"] = bool(fired)
-        self._chosen = junction
+        self._chosen, self._asked = junction, None
         return junction
+
+    def next_junction(self) -> str | None:
+        """The policy's choice at the current road (with the 20-junction fallback); None when the
+        episode is over (end_reason set). Asking twice at the same road gives the same answer."""
+        if self._chosen is not None:
+            return self._chosen
+        context = self.decision_point()
+        if context is None:
+            return None
+        return self.choose(self.policy.next_junction(context))
 
     def expected_road(self) -> str | None:
         """The road the vehicle drives next (after next_junction), or None."""
@@ -248,14 +273,12 @@ class EpisodeTracker:
                self.setup.belief_rule)
         entry = self._memo.get(key)
         if entry is None:
-            posterior, _ = self._pomdp.belief_update(before, incident_index, h, e, rule=self.belief_rule)
+            # An observation the AV's model deems impossible keeps the prior (TrustPOMDP.filter).
+            posterior, possible = self._pomdp.filter(before, incident_index, h, e, rule=self.belief_rule)
             after = posterior[0]
-            possible = bool(after.sum() > 0)
-            if not possible:
-                # An observation the AV's model deems impossible: keep the prior rather than a zero vector.
-                after = before.copy()
             after.setflags(write=False)
-            entry = _memo_put(self._memo, key, (after, after.tobytes(), self._logged(after), possible))
+            entry = _memo_put(self._memo, key,
+                              (after, after.tobytes(), self._logged(after), bool(possible[0])))
         after, self._belief_bytes, self._belief_logged, possible = entry
         self.belief = after
         if possible:

@@ -4,34 +4,32 @@ Importing this module registers the id (as sumo-rl does for its environments); w
 `gymnasium.make("trustroute.harness.simulation.gym_env:trustroute/TrustRouting-v0")` imports it itself.
 docs/gym_env.md documents the spaces, the reward and the ends.
 
-The environment does not re-implement an episode. It runs the project's own episode functions,
-`harness.simulation.model_engine.run_model_episode` (engine "model": the trust POMDP, no SUMO) or
-`harness.simulation.episode.run_episode` (engine "sumo": libsumo), in a worker thread with a routing policy
-whose every decision is handed to the agent: `step(action)` passes the junction over and waits for
-the next decision or the end of the episode. So the tracker's rules (belief filter, DFA, accept,
-reject, junction cap) and the synthetic driver's draws are exactly those of studies; the study's
-20-junction fallback is off (the agent decides every junction). Only one thread runs at a time:
-the agent waits while the episode runs and the other way round. Every draw (the driver's initial
-trust, takeovers, trust moves, reports, and the SUMO seed) comes from the `np_random` Generator
-that `reset(seed=...)` seeds.
+The environment does not re-implement an episode. It steps the project's own episode objects
+(harness/simulation/stepping.py), `model_engine.ModelEpisode` (engine "model": the trust POMDP, no
+SUMO) or `episode.SumoEpisode` (engine "sumo": libsumo), the very objects studies run: `reset`
+advances a new episode to its first decision point, `step(action)` answers it with the junction
+(`choose`) and advances to the next decision point or the end. No thread: the episode runs only
+inside `reset` and `step`. So the tracker's rules (belief filter, DFA, accept, reject, junction
+cap) and the synthetic driver's draws are exactly those of studies; the study's 20-junction
+fallback is off (the agent decides every junction). Every draw (the driver's initial trust,
+takeovers, trust moves, reports, and the SUMO seed) comes from the `np_random` Generator that
+`reset(seed=...)` seeds.
 """
 
 from __future__ import annotations
 
-import queue
-import threading
-from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING
 
 import gymnasium
 import numpy as np
 from gymnasium import spaces
 
 from trustroute.app.drivers import draw_type, gym_episode_id, synthetic_driver
-from trustroute.app.engines import SIMULATED
+from trustroute.app.engines import SIMULATED, engine_named
 from trustroute.app.problem import load_problem
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.harness.simulation.stepping import DecisionPoint, SteppableEpisode
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DriverModel
 from trustroute.participants.driver_population import DriverPopulation
@@ -43,13 +41,8 @@ from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 if TYPE_CHECKING:
     import pandas as pd
 
-    from trustroute.harness.simulation.episode import EpisodeRecord
+    from trustroute.harness.simulation.episode_record import EpisodeRecord
     from trustroute.policies.model.trust_pomdp import BeliefRule
-
-    # What the episode thread hands the agent's thread: a decision to make, or how the episode ended.
-    Decide = tuple[Literal["decide"], DecisionContext]
-    Ended = tuple[Literal["end"], EpisodeRecord]
-    EpisodeMessage = Decide | Ended | tuple[Literal["aborted"], None] | tuple[Literal["error"], BaseException]
 
 ENV_ID = "trustroute/TrustRouting-v0"
 ENGINES: tuple[str, ...] = SIMULATED   # the engines a synthetic driver drives (trustroute/app/engines.py)
@@ -60,47 +53,15 @@ DEFAULT_JUNCTION_CAP = EpisodeSetup.junction_cap
 RUN_FACTS = ("episode_id", "wall_seconds")
 
 
-class EpisodeAborted(Exception):
-    """Raised inside the episode thread when the environment is reset or closed mid-episode."""
-
-
-class _Abort:
-    """The environment's answer, instead of a junction, that ends the episode thread's episode."""
-
-
-_ABORT = _Abort()
-
-
 class AgentPolicy(RoutingPolicy):
-    """A RoutingPolicy whose decisions come from the agent, through two queues.
-
-    next_junction hands the context to the environment and blocks until `step` answers with a
-    junction (or the environment aborts the episode). It never ends an episode itself, and its
-    decision depends on more than the route, so evaluation-style batching never applies.
-    """
+    """The episode's policy when the agent chooses every junction (through `step`): it never ends
+    an episode itself and no fallback drives, so the episode rules (policies/routing/episode_rules.py)
+    only read the DFA and the junction cap before offering the agent a decision point."""
 
     name = "agent"
 
-    def __init__(self, to_agent: queue.Queue[EpisodeMessage], to_episode: queue.Queue[str | _Abort]) -> None:
-        self._to_agent = to_agent
-        self._to_episode = to_episode
-
     def next_junction(self, context: DecisionContext) -> str:
-        self._to_agent.put(("decide", context))
-        answer = self._to_episode.get()
-        if isinstance(answer, _Abort):
-            raise EpisodeAborted
-        return answer
-
-
-def _episode_thread(run: Callable[[AgentPolicy], EpisodeRecord], policy: AgentPolicy,
-                    to_agent: queue.Queue[EpisodeMessage]) -> None:
-    try:
-        to_agent.put(("end", run(policy)))
-    except EpisodeAborted:
-        to_agent.put(("aborted", None))
-    except BaseException as exc:  # handed to the agent's thread, which raises it
-        to_agent.put(("error", exc))
+        raise RuntimeError("the agent chooses the junction through TrustRoutingEnv.step")
 
 
 class TrustRoutingEnv(gymnasium.Env):
@@ -174,48 +135,33 @@ class TrustRoutingEnv(gymnasium.Env):
         self.last_record: EpisodeRecord | None = None      # of the last finished episode
         self.last_run: dict = {}  # the last episode's facts that differ between identical runs
         self.episodes = 0         # episodes started by reset()
-        self._thread: threading.Thread | None = None
-        self._to_agent: queue.Queue[EpisodeMessage] = queue.Queue()
-        self._to_episode: queue.Queue[str | _Abort] = queue.Queue()
+        self._episode: SteppableEpisode | None = None   # the running episode, None once over
         self._road = ""
 
-    # -- the episode thread -------------------------------------------------------------------
-    def _runner(self, driver: SyntheticDriver, episode_id: str,
-                sumo_seed: int) -> Callable[[AgentPolicy], EpisodeRecord]:
-        setup = self.setup
-        if self.engine == "model":
-            from trustroute.harness.simulation.model_engine import run_model_episode
+    # -- the episode -----------------------------------------------------------------------------
+    def _new_episode(self, driver: SyntheticDriver, episode_id: str, sumo_seed: int) -> SteppableEpisode:
+        if not engine_named(self.engine).drives_sumo:
+            from trustroute.harness.simulation.model_engine import ModelEpisode
 
-            return lambda policy: run_model_episode(setup, policy, driver, episode_id, sumo_seed)
-        from trustroute.harness.simulation.episode import run_episode
+            return ModelEpisode(self.setup, AgentPolicy(), driver, episode_id, sumo_seed)
+        from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode
 
-        net_path = self.net_path
-        return lambda policy: run_episode(setup, policy, driver, episode_id, sumo_seed, net_path=net_path)
+        return SumoEpisode(self.setup, AgentPolicy(), driver, episode_id, sumo_seed,
+                           EpisodeOptions(net_path=self.net_path))
 
-    def _abort(self) -> None:
-        """End a running episode (its SUMO session closes) and wait for its thread."""
-        if self._thread is None:
-            return
-        if self._thread.is_alive():
-            self._to_episode.put(_ABORT)
-            while self._to_agent.get()[0] not in ("aborted", "end", "error"):
-                pass
-        self._join_thread()
+    def _close_episode(self) -> None:
+        """End a running episode (its SUMO session closes)."""
+        episode, self._episode = self._episode, None
+        if episode is not None:
+            episode.close()
 
-    def _join_thread(self) -> None:
-        """Wait for the episode thread, which has ended or is ending."""
-        if self._thread is not None:
-            self._thread.join()
-        self._thread = None
-
-    def _receive(self) -> Decide | Ended:
-        message = self._to_agent.get()
-        if message[0] == "error":
-            self._join_thread()
-            raise message[1]
-        if message[0] == "aborted":   # only `_abort` stops an episode, and it reads the answer itself
-            raise RuntimeError("the episode thread stopped without being asked to")
-        return message
+    def _advance(self):
+        """The running episode advanced; an error ends it (and is raised)."""
+        try:
+            return self._episode.advance()
+        except BaseException:
+            self._episode = None   # it closed itself
+            raise
 
     # -- observations ---------------------------------------------------------------------------
     def _observation(self, road: str, dfa_state: int, belief: np.ndarray, junctions: int) -> dict:
@@ -248,13 +194,12 @@ class TrustRoutingEnv(gymnasium.Env):
 
         pomdp = build_pomdp(self.town, self.driver_model)
         incident = self.driver_model.incident_index(str(last["incident"]))
-        after = pomdp.belief_update(self._belief, incident, int(bool(last["takeover"])),
-                                    PERFORMANCE_INDEX[str(last["performance"])],
-                                    rule=self._belief_rule)[0][0]
-        return after if after.sum() > 0 else self._belief
+        posterior, _ = pomdp.filter(self._belief, incident, int(bool(last["takeover"])),
+                                    PERFORMANCE_INDEX[str(last["performance"])], rule=self._belief_rule)
+        return posterior[0]
 
     def _final(self, record: EpisodeRecord) -> tuple[dict, float, bool, bool, dict]:
-        self._join_thread()
+        self._episode = None
         self.last_record = record
         last = record.roads.iloc[-1]
         summary = {k: v for k, v in record.summary.items() if k not in RUN_FACTS}
@@ -274,7 +219,7 @@ class TrustRoutingEnv(gymnasium.Env):
     # -- the gymnasium API ----------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         super().reset(seed=seed)
-        self._abort()
+        self._close_episode()
         rng = self.np_random
         sumo_seed = int(rng.integers(0, 2**31 - 1))
         model = self.driver_model
@@ -283,30 +228,30 @@ class TrustRoutingEnv(gymnasium.Env):
         driver = synthetic_driver(model, rng, report_accuracy=self.report_accuracy)
         self.episodes += 1
         episode_id = gym_episode_id(self.scldtl_spec.name, self.episodes)
-        policy = AgentPolicy(self._to_agent, self._to_episode)
-        self._thread = threading.Thread(target=_episode_thread, name=episode_id, daemon=True,
-                                        args=(self._runner(driver, episode_id, sumo_seed), policy,
-                                              self._to_agent))
-        self._thread.start()
-        message = self._receive()
-        if message[0] != "decide":
-            self._join_thread()
+        self._episode = self._new_episode(driver, episode_id, sumo_seed)
+        point = self._advance()
+        if not isinstance(point, DecisionPoint):
+            self._episode = None
             raise ValueError(f"spec {self.scldtl_spec.name!r} is decided on its start road "
-                             f"({message[1].summary['end_reason']}): there is no junction to choose")
-        return self._decision(message[1]), self._info()
+                             f"({point.record.summary['end_reason']}): there is no junction to choose")
+        return self._decision(point.context), self._info()
 
     def step(self, action: int) -> tuple[dict, float, bool, bool, dict]:
-        if self._thread is None:
+        if self._episode is None:
             raise RuntimeError("the episode is over (or never started): call reset()")
         legal = self._legal[self._road]
-        self._to_episode.put(legal[int(action) % len(legal)])
-        message = self._receive()
-        if message[0] == "decide":
-            return self._decision(message[1]), 0.0, False, False, self._info()
-        return self._final(message[1])
+        try:
+            self._episode.choose(legal[int(action) % len(legal)])
+        except BaseException:
+            self._close_episode()
+            raise
+        point = self._advance()
+        if isinstance(point, DecisionPoint):
+            return self._decision(point.context), 0.0, False, False, self._info()
+        return self._final(point.record)
 
     def close(self) -> None:
-        self._abort()
+        self._close_episode()
         super().close()
 
 

@@ -3,9 +3,10 @@
 Two paths with the same episode rules (policies/routing/episode_rules.py) and the same driver
 step (participants/driver_step.py: takeover, the AV's performance, trust move, in that order):
 
-- `run_model_episode(setup, policy, driver, episode_id, seed)`: one episode through the very
-  `EpisodeTracker` the SUMO engine uses, with a `SyntheticDriver`; writes the full roads table
-  of the contract (sim times NaN, no kinematics). This is what studies run.
+- `ModelEpisode(setup, policy, driver, episode_id, seed)`: one episode through the very
+  `EpisodeTracker` the SUMO engine uses, with a `SyntheticDriver`, stepped from outside like the
+  SUMO engine's episode (stepping.py); writes the full roads table of the contract (sim times NaN,
+  no kinematics). `run_model_episode` drives it with its policy to the end: what studies run.
 - `simulate_batch(...)`: many episodes at once in numpy (one array row per episode, one loop
   iteration per junction level), returning only the per-episode summaries. Policy decisions
   are asked once per distinct (route, DFA state, AV belief) per level, or once per route when
@@ -31,13 +32,15 @@ import numpy as np
 import pandas as pd
 
 from trustroute.core.dataset import KINEMATICS_SCHEMA, frame_from_table
-from trustroute.harness.simulation.episode import EpisodeRecord
+from trustroute.harness.simulation.episode_record import EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker, episode_model
+from trustroute.harness.simulation.stepping import DecisionPoint, End, run_to_end
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_step import DriverTables, draw_initial_trust, draw_step, driver_tables
 from trustroute.participants.synthetic_driver import SyntheticDriver
-from trustroute.policies.belief.exact_labels import exact_labels, symbol_code
+from trustroute.policies.belief.av_step import AVStep
+from trustroute.policies.belief.exact_labels import exact_labels
 from trustroute.policies.belief.problem import dfa_is_hidden
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
@@ -61,29 +64,70 @@ def empty_kinematics() -> pd.DataFrame:
     return frame_from_table(KINEMATICS_SCHEMA.empty_table())
 
 
-def run_model_episode(
-    setup: EpisodeSetup, policy: RoutingPolicy, driver: SyntheticDriver, episode_id: str, seed: int
-) -> EpisodeRecord:
-    """One episode in the trust POMDP. `seed` is recorded by the caller only: every draw is the
+class ModelEpisode:
+    """One episode in the trust POMDP, stepped from outside (stepping.py) like the SUMO engine's:
+    `advance()` drives the chosen road (the driver's step, the tracker's record) and stops at the
+    next decision point or the end. `seed` is recorded by the caller only: every draw is the
     driver's (its Generator), so the episode is a function of the driver's seed."""
-    del seed  # the model engine has no simulator of its own to seed
-    started = time.perf_counter()
-    town = setup.town
-    tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust, sim_time=math.nan)
-    while tracker.next_junction() is not None:
+
+    def __init__(self, setup: EpisodeSetup, policy: RoutingPolicy, driver: SyntheticDriver,
+                 episode_id: str, seed: int) -> None:
+        del seed  # the model engine has no simulator of its own to seed
+        self.started = time.perf_counter()
+        self.setup = setup
+        self.driver = driver
+        self.tracker = EpisodeTracker(setup, policy, episode_id, initial_trust=driver.trust,
+                                      sim_time=math.nan)
+        self._point: DecisionPoint | None = None   # the decision point waiting for its answer
+        self._end: End | None = None
+
+    @property
+    def policy(self) -> RoutingPolicy:
+        return self.tracker.policy
+
+    def advance(self) -> DecisionPoint | End:
+        if self._end is not None:
+            return self._end
+        tracker = self.tracker
+        if self._point is not None and tracker.expected_road() is None:   # not answered yet
+            return self._point
         road = tracker.expected_road()
-        assert road is not None
-        incident = town.incident(road)
+        if road is not None:
+            self._drive(road)
+        context = tracker.decision_point()
+        if context is not None:
+            self._point = DecisionPoint(context, self.setup.town.actions(context.road))
+            return self._point
+        summary = tracker.summary(wall_seconds=time.perf_counter() - self.started, sim_seconds=math.nan)
+        self._end = End(EpisodeRecord(summary=summary, roads=tracker.roads_frame(),
+                                      kinematics=empty_kinematics()))
+        return self._end
+
+    def choose(self, junction: str) -> None:
+        self.tracker.choose(junction)
+
+    def close(self) -> None:
+        """Nothing to close: the model engine holds no simulator."""
+
+    def _drive(self, road: str) -> None:
+        """The driver's step on `road` (takeover, the AV's performance, trust move, report) and the
+        tracker's record of it."""
+        driver, tracker = self.driver, self.tracker
+        incident = self.setup.town.incident(road)
         before = driver.trust
         took_over = driver.decides_takeover(incident)
         performance = driver.performance(incident)
         after = driver.move_trust(incident, took_over, performance)
         reported = driver.report_trust() if tracker.should_report() else None
-        tracker.record_road(
-            road, incident, took_over, performance, before, after, reported, math.nan, math.nan
-        )
-    summary = tracker.summary(wall_seconds=time.perf_counter() - started, sim_seconds=math.nan)
-    return EpisodeRecord(summary=summary, roads=tracker.roads_frame(), kinematics=empty_kinematics())
+        tracker.record_road(road, incident, took_over, performance, before, after, reported,
+                            math.nan, math.nan)
+
+
+def run_model_episode(
+    setup: EpisodeSetup, policy: RoutingPolicy, driver: SyntheticDriver, episode_id: str, seed: int
+) -> EpisodeRecord:
+    """One episode in the trust POMDP driven by its own policy (`ModelEpisode` stepped to its end)."""
+    return run_to_end(ModelEpisode(setup, policy, driver, episode_id, seed))
 
 
 # -- the vectorised path -------------------------------------------------------------------------
@@ -237,6 +281,7 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
     # belief labels as the tracker reads them (policies/belief/exact_labels.py): per episode the
     # word of its belief's history
     labels = exact_labels(pomdp, compiled.labeller, sampled.belief_rule)
+    av = AVStep(pomdp, labels, sampled.belief_rule)
     word = np.zeros(count, dtype=np.int64)
     q = np.asarray(labels.step(np.full(count, compiled.dfa.initial), road, belief, word), dtype=np.int64)
     routes: list[tuple[str, ...]] = [(sampled.start,)]
@@ -282,14 +327,9 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
         inc_av = pomdp.road_incident[x2]
         h, e, new_theta = draw_step(sampled.drivers, index[movers], inc_av, theta[movers], rng)
         theta[movers] = new_theta
-        # The AV: Bayes filter on (incident, h, e), then the DFA on (road, new belief).
-        posterior, _ = pomdp.belief_update(belief[movers], inc_av, h, e, rule=sampled.belief_rule)
-        impossible = ~(posterior.sum(axis=1) > 0)
-        posterior[impossible] = belief[movers][impossible]
-        belief[movers] = posterior
-        extended = labels.filter.extend(word[movers], symbol_code(inc_av, h, e))
-        word[movers] = np.where(impossible, word[movers], extended)
-        q[movers] = labels.step(q[movers], x2, posterior, word[movers])
+        # The AV: its filter on (incident, h, e), then the DFA on (road, new belief) (AVStep).
+        belief[movers], word[movers], q[movers], _ = av.step(belief[movers], word[movers], q[movers], x2,
+                                                             (inc_av, h, e))
         road[movers] = x2
         junctions[movers] += 1
         takeovers[movers] += h

@@ -73,6 +73,8 @@ DEFAULT_STUDIES_DIR = Path("studies")
 ENGINES: tuple[str, ...] = ("sumo", "model", "live")  # "live": `trustroute live`, people in the loop
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
+# the belief sources a study's specs are evaluated on (analysis/belief_sources.py says what each is)
+BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported", "reference", "true")
 
 
 @dataclass(frozen=True)
@@ -102,6 +104,9 @@ class StudyConfig:
     robust_population: str | None = None   # the "robust" condition's population file (absolute)
     robust_objective: str = "robust"       # its objective: "robust" (worst type) or "bayes"
     driver_population: str | None = None  # [drivers] population: absolute path of the population file
+    # the pre-registered primary belief source of the analysis (None: the neutral default,
+    # analysis/belief_sources.py `default_belief_source`)
+    belief_source: str | None = None
 
     def __hash__(self) -> int:
         # Every field, [population] included: configs that differ only there must never share a
@@ -140,6 +145,8 @@ class StudyConfig:
             del settings["driver_population"]  # a study without [drivers] hashes without it
         if not settings["routes"]:
             del settings["routes"]  # a study without background routes hashes without it
+        if settings["belief_source"] is None:
+            del settings["belief_source"]  # a study without a declared source hashes without it
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
         for path in (*self.specs, self.town, self.driver_model, *self.conditions):
             if path and Path(path).is_file():
@@ -253,6 +260,7 @@ class StudyValues(TypedDict):
     record: Sequence[str]
     robust_population: str | None
     robust_objective: str
+    belief_source: str | None
 
 
 class DriversValues(TypedDict):
@@ -326,6 +334,9 @@ STUDY_FIELDS = field_table(
     Field(key="robust_objective", kind=OneOf(choices=ROBUST_OBJECTIVES), default="robust",
           problem=lambda seen: f"unknown objective {str(seen.value)[:40]!r}",
           fix="use 'robust' (the worst type's value) or 'bayes' (the prior-weighted value)"),
+    Field(key="belief_source", kind=OneOf(choices=BELIEF_SOURCES, noun="belief source"),
+          fix="use 'true' (simulated studies), 'reported', 'reference' or 'filter', or omit it for the "
+              "neutral default (docs/study.md)"),
 )
 STUDY_KEYS: tuple[str, ...] = keys(STUDY_FIELDS)
 DRIVERS_FIX = ("give the path of a driver-population file (docs/driver_type_studies.md), "
@@ -407,6 +418,15 @@ def _robust_population(study: StudyValues, conditions: tuple[str, ...], base: Pa
     return robust_population
 
 
+def _belief_source(study: StudyValues, source: str) -> str | None:
+    """The declared primary belief source; "true" needs drivers whose models the study knows."""
+    declared = study["belief_source"]
+    if declared == "true" and study["engine"] == "live":
+        raise InputError(source, "study.belief_source", "'true' needs simulated drivers (their own models); "
+                         "a live study's drivers are people", "use 'reported' or omit belief_source")
+    return declared
+
+
 def study_config_from_dict(data: object, source: str = "<study>", base: Path | None = None) -> StudyConfig:
     """Validate a parsed study document; relative paths resolve against `base`, then the cwd."""
     base = base if base is not None else Path.cwd()
@@ -445,6 +465,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         robust_population=_robust_population(study, conditions, base, source),
         robust_objective=study["robust_objective"],
         driver_population=_driver_population(tables["drivers"], base, source),
+        belief_source=_belief_source(study, source),
     )
 
 

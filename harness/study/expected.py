@@ -60,8 +60,27 @@ def expected_values(config: StudyConfig) -> dict:
         if bounds is not None:
             entry["synthesized_lower"], entry["synthesized_upper"] = bounds[0], bounds[1]
             entry["synthesized_horizon"] = bounds[2]
+        mark_fallback_only(entry, policy)
         out.setdefault(spec_name, {})[condition] = entry
     return out
+
+
+def mark_fallback_only(entry: dict, policy: RoutingPolicy) -> None:
+    """`entry["fallback_only"]`: what drives, when the condition's synthesized policy has no decision
+    row (policies/routing/decision_tables.py); the key only then."""
+    from trustroute.policies.routing.decision_tables import fallback_only
+
+    fallback = fallback_only(policy)
+    if fallback is not None:
+        entry["fallback_only"] = fallback
+
+
+def fallback_only_warnings(expected: dict) -> list[str]:
+    """One line per (spec, condition) whose policy is only its fallback (`mark_fallback_only`)."""
+    return [f"warning: the {condition} policy for {spec} has no synthesized decision (0 rows): it is "
+            f"only its fallback, {entry['fallback_only']}; this condition measures that fallback"
+            for spec, conditions in expected.items() for condition, entry in conditions.items()
+            if entry.get("fallback_only")]
 
 
 def not_evaluated(policy: RoutingPolicy, condition: str | None, context: StudyContext, spec_name: str,
@@ -77,6 +96,7 @@ def not_evaluated(policy: RoutingPolicy, condition: str | None, context: StudyCo
     if bounds is not None:
         entry["synthesized_lower"], entry["synthesized_upper"] = bounds[0], bounds[1]
         entry["synthesized_horizon"] = bounds[2]
+    mark_fallback_only(entry, policy)
     return entry
 
 

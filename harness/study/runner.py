@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
@@ -32,9 +33,10 @@ from trustroute.app.drivers import synthetic_driver
 from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
+from trustroute.harness.simulation.stepping import run_to_end
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
-from trustroute.harness.study.expected import expected_values
+from trustroute.harness.study.expected import expected_values, fallback_only_warnings
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import sync_parts, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
@@ -43,6 +45,7 @@ from trustroute.harness.study.resume import check_study_dir, finished_episodes, 
 if TYPE_CHECKING:
     from tqdm import tqdm
 
+    from trustroute.harness.simulation.drivers import Driver, PersonControls
     from trustroute.harness.simulation.episode import EpisodeRecord
     from trustroute.harness.simulation.sumo_start import SumoConfig
 
@@ -88,35 +91,36 @@ def recording_path(study_dir: Path, episode_id: str) -> Path:
 
 
 def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path | None = None,
-                        sumo_config: SumoConfig | None = None, driver: object | None = None,
-                        observer: Callable | None = None) -> EpisodeRecord:
+                        sumo_config: SumoConfig | None = None, driver: Driver | None = None,
+                        observer: Callable | None = None, person: PersonControls | None = None
+                        ) -> EpisodeRecord:
     """Run the planned episode `task` exactly as the study runs it: the participant's driver model
     (population draw), the driver's Generator from the task's seed sequence (so the same initial trust
     and every later draw), SUMO's seed, the cell's setup and policy. Returns the EpisodeRecord.
 
-    rrd_path, sumo_config (e.g. sumo-gui) and observer apply to the SUMO engines only ("sumo", and
-    "live", where `driver` is the remote person of harness/live in place of the synthetic driver)."""
+    rrd_path, sumo_config (e.g. sumo-gui), observer and person apply to the SUMO engines only
+    ("sumo", and "live", where `driver` is the remote person of harness/live in place of the
+    synthetic driver and `person` their controls at the wheel)."""
     context = study_context(config)
     engine = ENGINES[config.engine]
     if driver is None:
         driver = synthetic_driver(context.driver_model(task.participant), task.driver_rng(),
                                   report_accuracy=config.report_accuracy)
-    options = {}
-    if engine.drives_sumo:
-        from trustroute.harness.simulation.sumo_start import SumoConfig
+    setup, policy = context.setup(task.spec, task.condition), context.policies[(task.spec, task.condition)]
+    run = engine_function(config.engine)
+    if not engine.drives_sumo:
+        return run(setup, policy, driver, task.episode_id, task.seed)
+    from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode
+    from trustroute.harness.simulation.sumo_start import SumoConfig
 
-        sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
-                              background_vehicles=config.background_vehicles,
-                              route_files=tuple(config.routes))
-        options = {"rrd_path": rrd_path, "config": sumo_config, "observer": observer}
-    return engine_function(config.engine)(
-        context.setup(task.spec, task.condition),
-        context.policies[(task.spec, task.condition)],
-        driver,
-        task.episode_id,
-        task.seed,
-        **options,
-    )
+    sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
+                          background_vehicles=config.background_vehicles,
+                          route_files=tuple(config.routes))
+    if person is None:
+        return run(setup, policy, driver, task.episode_id, task.seed,
+                   rrd_path=rrd_path, config=sumo_config, observer=observer)
+    options = EpisodeOptions(config=sumo_config, observer=observer, person=person, rrd_path=rrd_path)
+    return run_to_end(SumoEpisode(setup, policy, driver, task.episode_id, task.seed, options))
 
 
 def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeOutcome:
@@ -438,6 +442,8 @@ def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], o
         f"({run.backend}, {run.seconds:.1f} s)"
     )
     expected = expected_values(config)
+    for line in fallback_only_warnings(expected):
+        print(line, file=sys.stderr)
     return consolidate(
         run.study_dir,
         config,

@@ -105,13 +105,18 @@ class PathLedger:
         self.trust_sum += float(p @ (frontier.state.posterior[rows] @ self.levels))
         self.junction_sum += float(p.sum()) * level
 
-    def settle(self, frontier, level: int, out_of_time: bool) -> np.ndarray:
-        """End the nodes the DFA has decided; the open ones."""
+    def settle(self, frontier, level: int, out_of_time: bool) -> np.ndarray | None:
+        """End the nodes the DFA has decided; the open ones (None: past the deadline, they are cut
+        and their mass widens [lower, upper])."""
         accepted, rejected, _ = frontier.state.masses()
         accepted, rejected = accepted > 0, rejected > 0
         self.end(frontier, accepted, "accepted", level)
         self.end(frontier, rejected, "rejected", level)
-        return ~(accepted | rejected)
+        open_nodes = ~(accepted | rejected)
+        if out_of_time:
+            self.cut(frontier, open_nodes, level, "past_deadline")
+            return None
+        return open_nodes
 
     def prune(self, frontier, alive: np.ndarray, level: int) -> np.ndarray:
         """Cut the open nodes below `prune_below`; the ones followed."""

@@ -25,6 +25,7 @@ from typing import Protocol, Self
 
 import numpy as np
 
+from trustroute.policies.belief.av_step import AVStep
 from trustroute.policies.belief.exact_labels import ExactLabels, exact_labels, symbol_code
 from trustroute.policies.belief.trust_state_filter import JointFilter
 from trustroute.policies.logic.compiled import CompiledSpec
@@ -92,6 +93,11 @@ class Observation:
         """The AV's belief labels, decided exactly where floats cannot decide them."""
         return exact_labels(self.pomdp, self.compiled.labeller, self.belief_rule)
 
+    @cached_property
+    def av_step(self) -> AVStep:
+        """The AV's step: its filter and its belief's word (policies/belief/av_step.py)."""
+        return AVStep(self.pomdp, self.labels, self.belief_rule)
+
 
 @dataclass(frozen=True, eq=False)
 class ObservedState:
@@ -138,23 +144,18 @@ class ObservedState:
         new_posterior, p_obs = model.true_pomdp.belief_update(
             self.posterior, model.true_pomdp.road_incident[road], h, e, rule="bayes")
         incident = model.pomdp.road_incident[road]
-        new_word = model.labels.filter.extend(self.word, symbol_code(incident, h, e))
         if model.belief_rule == "bayes" and model.truth is None:
+            # the AV's filter is the true one: its posterior is new_posterior (the rows of
+            # probability 0 are left out below)
             new_av = new_posterior
+            new_word = model.labels.filter.extend(self.word, symbol_code(incident, h, e))
         else:
-            new_av, _ = model.pomdp.belief_update(self.belief, incident, h, e,
-                                                  rule=model.belief_rule)
-            if model.truth is not None:
-                # An observation the AV deems impossible leaves its belief unchanged (as the tracker).
-                impossible = ~(new_av.sum(axis=1) > 0)
-                new_av[impossible] = self.belief[impossible]
-                new_word[impossible] = self.word[impossible]
+            # an observation the AV deems impossible leaves its belief and word unchanged (AVStep)
+            new_av, new_word, _ = model.av_step.belief_and_word(self.belief, self.word, incident, h, e)
         new_ref = self.ref_belief
         if model.reference is not None:
             ref_pomdp = model.reference[0]
-            new_ref, _ = ref_pomdp.belief_update(new_ref, ref_pomdp.road_incident[road], h, e)
-            stuck = ~(new_ref.sum(axis=1) > 0)
-            new_ref[stuck] = self.ref_belief[stuck]
+            new_ref, _ = ref_pomdp.filter(new_ref, ref_pomdp.road_incident[road], h, e)
         possible = p_obs > 0
         return p_obs, replace(self, q=self.q[possible], belief=new_av[possible],
                               posterior=new_posterior[possible], q_ref=self.q_ref[possible],
@@ -227,7 +228,7 @@ class HiddenState:
         incident = pomdp.road_incident[road]
         new_posterior, p_obs = pomdp.belief_update(self.posterior, incident, h, e, rule="bayes")
         new_av = (new_posterior if self.belief_rule == "bayes"
-                  else pomdp.belief_update(self.belief, incident, h, e, rule=self.belief_rule)[0])
+                  else pomdp.filter(self.belief, incident, h, e, rule=self.belief_rule)[0])
         possible = p_obs > 0
         labels = self.filter.labels(self.belief_rule)
         new_word = labels.filter.extend(self.word[possible], symbol_code(incident[possible], h, e))

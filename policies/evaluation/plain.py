@@ -49,7 +49,7 @@ __all__ = ["DEFAULT_MAX_NODES", "DEFAULT_PRUNE_BELOW", "Evaluation", "accepted_b
 
 def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
              settings: EvaluationSettings = DEFAULT_EVALUATION, truth: TrustPOMDP | None = None,
-             reference: tuple[TrustPOMDP, Spec] | None = None) -> Evaluation:
+             reference: tuple[TrustPOMDP, Spec] | None = None, deadline: float | None = None) -> Evaluation:
     """Exact (or tightly certified) satisfaction probability of `policy` for `spec`.
 
     settings (policies/evaluation/settings.py; `merge` and `time_limit` are the trust-state
@@ -70,6 +70,8 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     pomdp_ref on the same observations (e.g. the posterior under the true population), without
     changing what the vehicle does: `reference_accepted` is the mass of episodes that this
     reading accepts by the time the vehicle's episode ends (docs/driver_types.md, "Limits").
+    deadline (a time.perf_counter() time; None: none): the histories still open at the first
+    junction begun past it are cut, their mass widening [lower, upper] (a time-limited caller's).
     """
     started = time.perf_counter()
     fallback_after, max_junctions = settings.fallback_after, settings.max_junctions
@@ -90,7 +92,7 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
                          fallback_level=fallback_level, accepting=compiled.accepting,
                          routes=[(spec.start,)])
     counts = unfold(root(town.state_index(spec.start), observed_root(model)), actor, ledger,
-                    Limits(max_junctions=max_junctions),
+                    Limits(max_junctions=max_junctions, deadline=deadline),
                     outcomes(pomdp.driver.depends_on_performance
                              or true_pomdp.driver.depends_on_performance))
     return ledger.evaluation(counts.nodes, counts.max_frontier, policy=policy.name,

@@ -52,6 +52,7 @@ from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.episode_rules import episode_policy
 from trustroute.policies.routing.fallback import FallbackPolicy
 from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.routing.trust_state_table import JointTablePolicy
 
 # Defaults for specs with trust-state atoms (docs/trust_states.md, "Bounded evaluation"): the
 # unfolding keeps the JOINT_MAX_NODES likeliest nodes of each level, which bounds its cost by
@@ -108,7 +109,8 @@ def joint_unfolding(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, settin
     fallback_level = policy.after if isinstance(policy, FallbackPolicy) else None
     # A policy that decides batches of nodes at once (JointTablePolicy.prefetch) is given each
     # level's nodes in one call before the episode rules ask it node by node.
-    batched = getattr(policy.inner if isinstance(policy, FallbackPolicy) else policy, "prefetch", None)
+    inner = policy.inner if isinstance(policy, FallbackPolicy) else policy
+    batched = inner if isinstance(inner, JointTablePolicy) else None
     compiled = compile_spec(spec, town)
     filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
     start = town.state_index(spec.start)
@@ -121,7 +123,7 @@ def joint_unfolding(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, settin
                          prune_below=prune_below, max_nodes=max_nodes, types=types)
     actor = EpisodeActor(policy=policy, town=town, max_junctions=max_junctions,
                          fallback_level=fallback_level, accepting=accepting,
-                         batched=None if batched is None else batched.__self__, routes=[(spec.start,)])
+                         batched=batched, routes=[(spec.start,)])
     limits = Limits(max_junctions=max_junctions, merge=merge,
                     deadline=None if time_limit is None else started + time_limit)
     counts = unfold(root(start, hidden_root(filter_, start, belief_rule)), actor, ledger, limits,

@@ -142,6 +142,22 @@ class TrustPOMDP:
             posterior[keep] = beliefs[keep]
         return posterior, probability
 
+    def filter(self, beliefs: np.ndarray, incident: np.ndarray | int, human_action: np.ndarray | int,
+               performance: np.ndarray | int = 0,
+               rule: BeliefRule = "bayes") -> tuple[np.ndarray, np.ndarray]:
+        """The AV's filter step, vectorised over rows: (posteriors, possible). `belief_update`'s
+        posterior where the observation is possible under this model; where it is not (a zero
+        posterior: the model gives the observation probability 0, e.g. a driver unlike the AV's
+        model), the prior is kept rather than a zero row. The one place of that rule: the episode
+        tracker, the model engine, the exact evaluation, the gym env and the analysis all step the
+        AV's belief through here."""
+        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        posterior, _ = self.belief_update(beliefs, incident, human_action, performance, rule=rule)
+        possible = posterior.sum(axis=1) > 0
+        if not possible.all():
+            posterior[~possible] = beliefs[~possible]
+        return posterior, possible
+
     def next_state(self, state: int, action_slot: int) -> int:
         return int(self.successor_table[state, action_slot])
 

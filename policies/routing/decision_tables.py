@@ -217,6 +217,7 @@ class TableKind(Generic[TableT, PolicyT]):
     document: Callable[[PolicyT], dict]
     policy: Callable[[TableT, PolicyOrigin], PolicyT]
     check: Callable[[dict, str], None]
+    fallback: str = ""                       # what drives wherever the table has no row
 
     def block_names(self, version: int) -> tuple[str, ...]:
         """The arrays a file of `version` holds."""
@@ -296,13 +297,15 @@ def check_guide_horizon(document: dict, where: str) -> None:
 PLAIN_TABLE: TableKind[PolicyTable, BeliefTablePolicy] = TableKind(
     kind=None, table_type=PolicyTable, blocks=((EXACT_ROWS, 3), (BOX_ROWS, 4)), versions=(3, 4),
     acting_rule=PLAIN_ACTING_RULE, keys=(), split=plain_split, join=plain_join,
-    document=lambda policy: {}, policy=plain_policy, check=lambda document, where: None)
+    document=lambda policy: {}, policy=plain_policy, check=lambda document, where: None,
+    fallback="the free completion (the trust-free shortest completion of the spec's state-only task)")
 JOINT_TABLE: TableKind[JointPolicyTable, JointTablePolicy] = TableKind(
     kind="joint-belief", table_type=JointPolicyTable, blocks=((JOINT_ROWS, 2),), versions=(2, 3, 4),
     acting_rule=JOINT_ACTING_RULE, keys=("kind", "guide_horizon"), split=lambda table: (table,),
     join=lambda blocks: blocks[0],
     document=lambda policy: {"kind": "joint-belief", "guide_horizon": policy.guide_horizon},
-    policy=joint_policy, check=check_guide_horizon)
+    policy=joint_policy, check=check_guide_horizon,
+    fallback="the relaxed guide (the successor of the largest relaxed action value)")
 # The kinds differ in their table and policy types: a kind found at run time is read as any kind.
 TABLE_KINDS: tuple[TableKind[Any, Any], ...] = (PLAIN_TABLE, JOINT_TABLE)
 
@@ -321,3 +324,31 @@ def document_table_kind(document: dict) -> TableKind[Any, Any] | None:
         if document.get("kind") == kind.kind and ("kind" in document) == (kind.kind is not None):
             return kind
     return None
+
+
+def fallback_only(policy: RoutingPolicy) -> str | None:
+    """What drives everywhere when `policy` (or the policy inside the study's fallback wrapper) is a
+    synthesized table without a single decision row, exact or box: then nothing synthesized acts
+    and the policy is its table kind's fallback, which is returned in words. None for a table with
+    rows and for any other policy (the trust-free one is not a synthesis result)."""
+    inner = getattr(policy, "inner", None)
+    if inner is not None:
+        return fallback_only(inner)
+    table = getattr(policy, "table", None)
+    if table is None:
+        return None
+    kind = next((k for k in TABLE_KINDS if type(table) is k.table_type), None)
+    if kind is None:
+        return None
+    boxes = getattr(table, "boxes", None)
+    box_rows = boxes.rows if boxes is not None else 0
+    return kind.fallback if table.rows == 0 and box_rows == 0 else None
+
+
+def fallback_warning(what: str, fallback: str, converged: bool) -> str:
+    """The one line that says a synthesis returned only its fallback (`fallback_only`)."""
+    why = ("the search proved it within tau of the optimum" if converged else
+           "nothing was synthesized in time, so L is the fallback's value, not a synthesized "
+           "policy's (raise --time-limit)")
+    return (f"warning: {what} has no synthesized decision (0 rows): it is only its fallback, "
+            f"{fallback}; {why}")

@@ -66,15 +66,29 @@ def dfa_verdict(compiled: CompiledSpec, q: int) -> str | None:
     return None
 
 
-def decide(policy: RoutingPolicy, context: DecisionContext, town: Town, junction_cap: int) -> Decision:
-    """Rules 3-5 at a position the DFA has not ended."""
+def end_before_choice(policy: RoutingPolicy, context: DecisionContext, junction_cap: int) -> str | None:
+    """Rules 3-4 at a position the DFA has not ended: "destination", "cap", or None (a junction is
+    to be chosen)."""
     if policy.finished(context):
-        return Decision("destination")
+        return "destination"
     if context.junctions_driven >= junction_cap:
-        return Decision("cap")
-    junction = policy.next_junction(context)
+        return "cap"
+    return None
+
+
+def checked_choice(policy: RoutingPolicy, context: DecisionContext, town: Town, junction: str) -> Decision:
+    """Rule 5 on a junction chosen at `context` (by `policy`, or by whoever steps the episode): it
+    must be a legal move of the town; the decision records whether the fallback drove."""
     legal = town.actions(context.road)
     if junction not in legal:
         raise ValueError(f"policy {policy.name!r} chose {junction!r}, not a legal move from "
                          f"{context.road} (legal: {', '.join(legal)})")
     return Decision(None, junction, bool(policy.fallback_active(context)))
+
+
+def decide(policy: RoutingPolicy, context: DecisionContext, town: Town, junction_cap: int) -> Decision:
+    """Rules 3-5 at a position the DFA has not ended."""
+    end = end_before_choice(policy, context, junction_cap)
+    if end is not None:
+        return Decision(end)
+    return checked_choice(policy, context, town, policy.next_junction(context))

@@ -117,8 +117,14 @@ def fill_orders(a: np.ndarray, d: np.ndarray) -> np.ndarray:
     nudge = 1e-9 * np.maximum(np.abs(points), 1.0)
     tests = np.concatenate([points, points - nudge, points + nudge, (points[1:] + points[:-1]) / 2,
                             [points[0] - 1.0, points[-1] + 1.0]])
-    orders = {tuple(np.argsort(-(a - lam * d), kind="stable").tolist()) for lam in tests}
-    return np.array(sorted(orders), dtype=np.int64)
+    # every λ's order at once (the same float operations per λ as one at a time); the distinct
+    # orders in lexicographic order (a lexsort and a neighbour comparison: np.unique over rows
+    # costs ten times more)
+    orders = np.argsort(-(a[None, :] - tests[:, None] * d[None, :]), axis=1, kind="stable")
+    orders = orders[np.lexsort(orders.T[::-1])]
+    distinct = np.ones(len(orders), dtype=bool)
+    distinct[1:] = (orders[1:] != orders[:-1]).any(axis=1)
+    return orders[distinct].astype(np.int64)
 
 
 @lru_cache(maxsize=8)

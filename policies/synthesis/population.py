@@ -121,17 +121,18 @@ def evaluation_cap(horizon: int | None) -> int:
 
 
 def per_type_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, population: DriverPopulation,
-                    max_junctions: int, belief_rule: BeliefRule = "bayes",
-                    fallback_after: int | None = None) -> tuple[TypeValue, ...]:
+                    max_junctions: int, belief_rule: BeliefRule = "bayes", fallback_after: int | None = None,
+                    deadline: float | None = None) -> tuple[TypeValue, ...]:
     """Exact value of `policy` (its AV filtering on `pomdp`) for each type of `population` as the
-    true driver."""
+    true driver; past `deadline` (time.perf_counter()) the histories still open are cut, so a value
+    is then certified [lower, upper] rather than exact."""
     out = []
     for t in population.types:
         truth = build_pomdp(pomdp.town, t.model)
         value: Evaluation = evaluate(pomdp, spec, policy,
                                      EvaluationSettings(fallback_after=fallback_after,
                                                         max_junctions=max_junctions, belief_rule=belief_rule),
-                                     truth=truth)
+                                     truth=truth, deadline=deadline)
         out.append(TypeValue(t.name, float(t.weight), value.lower, value.upper))
     return tuple(out)
 
@@ -172,6 +173,10 @@ def _count(k: int, m: int) -> int:
 
 
 MIN_RUN_SECONDS = 0.05  # a run's share never below this: a search needs a first expansion
+# A run given MIN_RUN_SECONDS takes up to about this many times as long: its fixed costs (the
+# abstraction, the table) come before its first deadline check (measured: 0.05-0.18 s on the
+# packaged town at H = 20).
+LATER_RUN_FACTOR = 3.0
 
 
 @dataclass
@@ -188,11 +193,16 @@ class RunSchedule:
     between: float = 0.0  # seconds spent between runs so far
     gaps: int = 0
 
-    def next_limit(self) -> float:
-        now = time.perf_counter()
+    def _close_gap(self) -> None:
+        """Count the work since the last run ended (its evaluations) as one gap between runs."""
         if self.last_end is not None:
-            self.between += now - self.last_end
+            self.between += time.perf_counter() - self.last_end
             self.gaps += 1
+            self.last_end = None
+
+    def next_limit(self) -> float:
+        self._close_gap()
+        now = time.perf_counter()
         remaining = max(self.runs - self.done, 1)
         per_gap = self.between / self.gaps if self.gaps else 0.0
         left = max(self.budget.deadline - now - per_gap * remaining, 0.0)
@@ -201,6 +211,7 @@ class RunSchedule:
     def affords(self, later_runs: int) -> bool:
         """Whether one more run with its following work still fits before the deadline, with
         `later_runs` runs after it that must run (the per-type bounds)."""
+        self._close_gap()
         per_gap = self.between / self.gaps if self.gaps else 0.0
         return self.budget.fits(per_gap + MIN_RUN_SECONDS * (1 + later_runs))
 
@@ -209,6 +220,12 @@ class RunSchedule:
         self.runs -= 1
         if self.on_phase is not None:
             self.on_phase(f"[{self.budget.elapsed():.1f} s] {what}: skipped, the time limit is reached")
+
+    def evaluation_deadline(self, later_runs: int) -> float:
+        """The deadline of the exact evaluations after a run: the call's, less the shortest share
+        of the `later_runs` runs that must still come (the per-type bounds), each allowed
+        LATER_RUN_FACTOR times its share for its fixed costs."""
+        return self.budget.deadline - LATER_RUN_FACTOR * MIN_RUN_SECONDS * later_runs
 
     def finished(self, what: str, lower: float, upper: float) -> None:
         self.done += 1
@@ -259,7 +276,10 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
     bayes = synthesize(pomdp, lifted_spec, replace(settings, time_limit=schedule.next_limit()),
                        on_iteration=on_iteration)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
-    bayes_values = per_type_values(pomdp, lifted_spec, bayes.policy, population, cap, belief_rule)
+    # the per-type bounds of the robust objective must still run after the evaluations
+    later = population.n_types if objective == "robust" else 0
+    bayes_values = per_type_values(pomdp, lifted_spec, bayes.policy, population, cap, belief_rule,
+                                   deadline=schedule.evaluation_deadline(later))
     weights = population.weights
     if objective == "bayes":
         return PopulationSynthesis(
@@ -281,7 +301,8 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
             schedule.finished(candidate_name(prior), made.lower, made.upper)
             policy = BeliefTablePolicy(made.policy.table, town, lifted_spec, name="robust",
                                        horizon=horizon, reweight=reweighting(population, prior))
-            values = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule)
+            values = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule,
+                                     deadline=schedule.evaluation_deadline(later))
             candidates.append({"prior": prior.tolist(), "worst_type_lower": worst(values),
                                "type_lower": [v.lower for v in values]})
             if worst(values) > worst(best_values):

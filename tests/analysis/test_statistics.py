@@ -350,3 +350,15 @@ def test_a_stratum_without_discordance_is_left_out_with_its_reason():
 def test_paired_odds_ratio_without_discordant_pairs_says_why():
     odds = conditional_odds_ratio(PairedTable(8, 0, 0, 4))
     assert math.isnan(odds.value) and "no discordant pair" in odds.note
+
+
+def test_holm_adjusts_one_family_as_statsmodels_does():
+    from statsmodels.stats.multitest import multipletests
+
+    from trustroute.analysis.statistics import holm
+
+    assert holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
+    p = [0.2, 0.001, 0.04, 0.5, 0.012]
+    assert holm(p) == pytest.approx(list(multipletests(p, method="holm")[1]))
+    assert holm([0.02]) == [0.02]                        # one pair: nothing to adjust
+    assert holm([None, 0.01, float("nan"), 0.02]) == [None, 0.02, None, 0.02]

@@ -16,6 +16,8 @@ from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint, evaluate_joint_by_type
 from trustroute.policies.model.trust_pomdp import BeliefRule, checked_belief_rule
 from trustroute.policies.resolve import is_objective, phase_lines, synthesis_progress
+from trustroute.policies.routing.decision_tables import fallback_only as fallback_only
+from trustroute.policies.routing.decision_tables import fallback_warning as fallback_warning
 from trustroute.policies.routing.files import array_path, save_policy
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy

@@ -17,6 +17,7 @@ def test_analyze_json_and_self_contained_report(model_study, capsys):
     code, out, err = run_cli(capsys, "analyze", str(model_study), "--json", "--report")
     assert code == 0, err
     payload = json.loads(out)
+    assert payload["belief_source"] == "true"
     assert payload["paths"] == {"report_markdown": str(model_study / "report.md"),
                                 "report_html": str(model_study / "report.html")}
     cells = {(c["spec"], c["condition"]): c for c in payload["cells"]}
@@ -28,7 +29,8 @@ def test_analyze_json_and_self_contained_report(model_study, capsys):
             rate_interval(cell["satisfied"], 12, method="wilson"))
         assert 1 <= cell["mean_trust"] <= 7
         assert cell["satisfaction_rate"] == pytest.approx(cell["satisfied"] / cell["n"])
-        assert cell["satisfaction_rate"] == pytest.approx(cell["logged_satisfaction_rate"])  # filter source
+        # the default leads with each driver's true filter; each AV's own filter is shown beside
+        assert cell["satisfaction_rate_filter"] == pytest.approx(cell["logged_satisfaction_rate"])
         assert cell["exact_lower"] is not None
     assert cells[("phi1", "aware")]["synthesized_lower"] is not None
     paired = {p["spec"]: p for p in payload["paired"]}
@@ -62,7 +64,7 @@ def test_analyze_json_and_self_contained_report(model_study, capsys):
     assert html.count("data:image/png;base64,") == 5
     assert "http://" not in html and "https://" not in html and "<script" not in html
     markdown = (model_study / "report.md").read_text()
-    for needle in ("beliefs: filter", "beliefs: reported", "exact 95% CI", "Wilson 95% CI", "risk difference",
+    for needle in ("beliefs: true", "beliefs: reported", "exact 95% CI", "Wilson 95% CI", "risk difference",
                    "conditional OR", "conditional logit", "mixed model", "Takeover rate per incident type",
                    "Latin square", "Carry-over", "not comparable", "synthesized [L, U]", "McNemar"):
         assert needle in markdown, needle

@@ -111,7 +111,7 @@ def test_the_demo_report_in_chromium_shows_no_impossible_interval(tmp_path, caps
     assert check_report_page(tables) == []
     odds = [cell for t in tables for cell, _ in _odds_ratio_cells(t)]
     assert any(math.isinf(max(_numbers(cell))) for cell in odds if cell != "-")   # the odds ratios were read
-    assert lead.startswith("Leading belief source: 'filter'"), lead
+    assert lead.startswith("Leading belief source: 'true'"), lead
     assert images and all(width > 0 for _, width in images)
     plots = sorted((study / "plots").glob("*.png"))
     assert len(plots) == len(images) and all(p.with_suffix(".svg").is_file() for p in plots)

@@ -11,7 +11,6 @@ import pytest
 
 from trustroute.harness.live.view import next_junction, role
 from trustroute.harness.live.worker import (
-    WARN_DISTANCE,
     EpisodeAborted,
     LiveOptions,
     RemoteDriver,
@@ -19,6 +18,7 @@ from trustroute.harness.live.worker import (
     with_final_report,
 )
 from trustroute.harness.simulation.episode_tracker import EpisodeTracker
+from trustroute.harness.simulation.manual_driving import WARN_DISTANCE
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.plan import plan_episodes
 from trustroute.harness.study.runner import run_planned_episode
@@ -52,7 +52,7 @@ def live_episode(tmp_path, controls):
     task = plan_episodes(config)[0]
     pipe = Pipe(controls)
     driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"))
-    record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
+    record = run_planned_episode(config, task, driver=driver, observer=driver.observe, person=driver)
     return config, task, driver, pipe, record
 
 
@@ -97,13 +97,13 @@ def test_without_a_hand_back_the_ego_waits_short_of_the_junction(tmp_path):
         if not taken and room > WARN_DISTANCE + 50.0:
             taken.append(road)
             pipe.controls.append({"type": "takeover"})
-        if driver.holding and ego.speed == 0.0:
+        if mode == "manual" and ego.speed == 0.0:   # held short of the commit point
             waited.append(ego.time)
             if len(waited) == 40:   # 20 s of simulated time standing: the person hands back now
                 pipe.controls.append({"type": "hand_back"})
 
-    record = run_planned_episode(config, task, driver=driver, observer=observe)
-    assert len(waited) >= 40 and not driver.holding
+    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver)
+    assert len(waited) >= 40
     ticks = record.kinematics
     manual = ticks["time"][ticks["mode"] == "manual"]
     back = ticks["time"][(ticks["mode"] == "auto") & (ticks["time"] > manual.min())].min()
@@ -183,7 +183,7 @@ def test_without_an_answer_the_end_waits_final_report_seconds_then_goes_on(tmp_p
     pipe = Pipe([])
     driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5,
                           LiveOptions(pace=1e6, client="scripted", final_report_seconds=0.3))
-    record = run_planned_episode(config, task, driver=driver, observer=driver.observe)
+    record = run_planned_episode(config, task, driver=driver, observer=driver.observe, person=driver)
     started = time.monotonic()
     assert driver.final_report() is None
     assert 0.3 <= time.monotonic() - started < 5.0

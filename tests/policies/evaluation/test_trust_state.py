@@ -19,6 +19,8 @@ from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import trust_free_policy
+from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.routing.trust_state_table import JointTablePolicy
 from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesize_spec import synthesize_spec
 
@@ -169,6 +171,22 @@ def test_pruning_the_joint_policy_brackets_its_exact_value(pomdp, phi1_trust_pol
     assert default.gap == 0.0 and default.lower == pytest.approx(exact.lower, abs=1e-12)
 
 
+class NodeByNode(RoutingPolicy):
+    """A joint-table policy asked node by node: not a JointTablePolicy, so evaluate_joint has no
+    batch path for it; its decisions and route memory are the table policy's."""
+
+    name = "node-by-node"
+
+    def __init__(self, inner: JointTablePolicy) -> None:
+        self.inner = inner
+
+    def next_junction(self, context):
+        return self.inner.next_junction(context)
+
+    def route_memory(self, route):
+        return self.inner.route_memory(route)
+
+
 def test_prefetched_decisions_are_the_node_by_node_decisions(pomdp):
     """The joint policy decides each level's nodes in one batch (prefetch); without it every node
     asks on its own: the same evaluation, number for number (a policy of horizon 12 on 14
@@ -176,11 +194,8 @@ def test_prefetched_decisions_are_the_node_by_node_decisions(pomdp):
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
     policy = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=12, time_limit=20)).policy
     batched = evaluate_joint(pomdp, spec, policy, EvaluationSettings(fallback_after=None, max_junctions=14))
-    policy.prefetch = None           # hides the batch path from evaluate_joint (instance attribute)
-    try:
-        alone = evaluate_joint(pomdp, spec, policy, EvaluationSettings(fallback_after=None, max_junctions=14))
-    finally:
-        del policy.prefetch
+    alone = evaluate_joint(pomdp, spec, NodeByNode(policy), EvaluationSettings(fallback_after=None,
+                                                                               max_junctions=14))
     for name in ("lower", "upper", "expected_final_trust", "nodes"):
         assert getattr(batched, name) == getattr(alone, name), name
     assert batched.end_mass == alone.end_mass

@@ -35,3 +35,17 @@ def test_mixture_value_is_the_weighted_per_type_values(town):
     assert abs(mixture.lower - weighted) <= 1e-12
     trust = sum(t.weight * v.expected_final_trust for t, v in zip(population.types, per_type, strict=True))
     assert abs(mixture.expected_final_trust - trust) <= 1e-9
+
+
+def test_a_deadline_cuts_the_open_histories_into_the_bracket(town, pomdp):
+    import time
+
+    spec = load_spec("specs/phi1.toml", town)
+    policy = trust_free_policy(town, spec)
+    settings = EvaluationSettings(fallback_after=None, max_junctions=20)
+    exact = evaluate(pomdp, spec, policy, settings)
+    assert exact.lower == exact.upper
+    assert evaluate(pomdp, spec, policy, settings, deadline=time.perf_counter() + 3600).lower == exact.lower
+    cut = evaluate(pomdp, spec, policy, settings, deadline=time.perf_counter())
+    assert cut.lower <= exact.lower <= cut.upper and cut.upper - cut.lower > 0.5
+    assert cut.end_mass["pruned"] == cut.upper - cut.lower

@@ -176,3 +176,30 @@ def test_observation_probabilities_sum_to_one(pomdp):
     for inc in range(4):
         total = sum(pomdp.observation_probability(beliefs, inc, h, e) for h in (0, 1) for e in (0, 1))
         assert np.allclose(total, 1.0)
+
+
+@pytest.mark.parametrize("seed", [3, 11])
+def test_the_filter_keeps_the_prior_exactly_where_the_observation_is_impossible(town, seed):
+    rng = np.random.default_rng(seed)
+    model = random_model(rng, 5, performance_dependent=True, sparse=True)
+    pomdp = pomdp_for(town, model)
+    beliefs = rng.dirichlet(np.ones(5), size=64)
+    beliefs[rng.uniform(size=beliefs.shape) < 0.5] = 0.0   # sparse beliefs: more impossible rows
+    beliefs[beliefs.sum(axis=1) == 0, 0] = 1.0
+    beliefs /= beliefs.sum(axis=1, keepdims=True)
+    incident = rng.integers(0, len(INCIDENTS), size=64)
+    h, e = rng.integers(0, 2, size=64), rng.integers(0, 2, size=64)
+    # row 0 certainly impossible: sure of a trust level that never takes over there, a takeover
+    never = np.argwhere(model.takeover_probability == 0.0)
+    assert len(never)
+    incident[0], level = never[0]
+    beliefs[0], h[0] = np.eye(5)[level], 1
+    for rule in ("paper", "bayes"):
+        update, probability = pomdp.belief_update(beliefs, incident, h, e, rule=rule)
+        posterior, possible = pomdp.filter(beliefs, incident, h, e, rule=rule)
+        assert np.array_equal(possible, update.sum(axis=1) > 0)
+        assert np.array_equal(posterior[possible], update[possible])
+        assert np.array_equal(posterior[~possible], beliefs[~possible])
+    # under Bayes both kinds of row were met; impossible ones are those of probability 0
+    assert (~possible).any() and possible.any()
+    assert (probability[~possible] == 0).all()

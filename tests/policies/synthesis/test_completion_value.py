@@ -320,3 +320,20 @@ def test_bounds_on_a_long_route_are_tight_and_bracket_monte_carlo(driver):
     estimate = accepted.mean()
     error = 4.0 * np.sqrt(max(estimate * (1 - estimate), 1e-4) / count)
     assert bounds.lower[0] - error <= estimate <= bounds.upper[0] + error
+
+
+def test_fill_orders_are_every_lambdas_order_once_in_lexicographic_order():
+    # the definition, one λ at a time: a descending order of a - λ d at every test point
+    from trustroute.policies.synthesis.completion_value import fill_orders
+
+    rng = np.random.default_rng(7)
+    for n in (2, 3, 7, 21):
+        a, d = rng.random(n) * (rng.random(n) < 0.7), rng.random(n)
+        d[-1] = d[0]                                  # a pair of equal slopes: no crossing
+        points = np.sort(np.array([(a[i] - a[k]) / (d[i] - d[k]) for i in range(n)
+                                   for k in range(i + 1, n) if d[i] != d[k]] + [0.0]))
+        nudge = 1e-9 * np.maximum(np.abs(points), 1.0)
+        tests = np.concatenate([points, points - nudge, points + nudge, (points[1:] + points[:-1]) / 2,
+                                [points[0] - 1.0, points[-1] + 1.0]])
+        expected = sorted({tuple(np.argsort(-(a - lam * d), kind="stable").tolist()) for lam in tests})
+        assert fill_orders(a, d).tolist() == [list(order) for order in expected]

@@ -1,0 +1,99 @@
+"""A person driving the ego by hand, and the hold before their hand-back (live studies).
+
+The rule of the paper's study is that the person hands back before the next junction. In
+control, the person drives by hand (`ManualDriving.step`, every step after the takeover): the
+pedals set the speed (PEDAL_ACCEL, PEDAL_DECEL per second held; the speed set last holds once the
+pedal is released), and SUMO's overtaking through the oncoming lane waits for them to pull out.
+A person still in control WARN_DISTANCE before the road's end is warned; the ego then brakes to
+wait short of the commit point (HOLD_MARGIN before it, plus its braking distance) until the
+hand-back, and SUMO's own driving comes back with it. The inputs come from the person's
+`PersonControls` (drivers.py).
+"""
+
+from __future__ import annotations
+
+from trustroute.harness.simulation.drivers import PersonControls
+from trustroute.harness.simulation.driving_style import MANUAL, allow_oncoming_pass, set_speed
+from trustroute.harness.simulation.incidents.base import EgoState
+from trustroute.harness.simulation.sumo_start import Sumo
+
+WARN_DISTANCE = 100.0      # metres before the road's end: a person in control is told to hand back
+HOLD_MARGIN = 5.0          # metres before the commit point where the ego waits for the hand-back
+PEDAL_ACCEL = 2.6          # m/s² while the accelerator is held (SUMO's tools/game/racing.py)
+PEDAL_DECEL = 4.5          # m/s² while the brake is held
+
+
+class ManualDriving:
+    """The person's pedals and pull-out while in control, and the hold before the hand-back, for
+    one episode of `vehicle_id`, whose roads are committed `commit_distance` metres before their
+    end."""
+
+    def __init__(self, person: PersonControls, vehicle_id: str, commit_distance: float) -> None:
+        self.person = person
+        self.vehicle_id = vehicle_id
+        self.commit_distance = commit_distance
+        self.by_hand = False               # the person's manual controls are in force
+        self.pedal = "release"             # accelerate, brake, or release
+        self.steer: str | None = None      # a pull-out ("oncoming") or pull-in ("own") to apply
+        self.speed_held = False            # the speed is the person's, not SUMO's car following
+        self.previous_time: float | None = None
+        self.warned: str | None = None     # the road whose hand-back warning was sent
+        self.holding = False               # the ego waits for the hand-back
+        self.lengths: dict[str, float] = {}
+
+    def step(self, sumo: Sumo, ego: EgoState, mode: str, road: str) -> None:
+        """Every step, after the step's decisions (`mode` the control the ego drives on, `road` the
+        open road): the inputs received, the hold, then the pedals."""
+        inputs = self.person.manual_inputs()
+        if inputs.pedal is not None:
+            self.pedal = inputs.pedal
+        if inputs.steer is not None:
+            self.steer = inputs.steer
+        self.hold_for_hand_back(sumo, ego, mode, road)
+        self.drive_by_hand(sumo, ego, mode)
+
+    def drive_by_hand(self, sumo: Sumo, ego: EgoState, mode: str) -> None:
+        """The person's pedals and pull-out while in control; SUMO's own driving back on the
+        hand-back."""
+        step = 0.0 if self.previous_time is None else ego.time - self.previous_time
+        self.previous_time = ego.time
+        manual = mode == MANUAL.name
+        vehicle = self.vehicle_id
+        if manual != self.by_hand:
+            self.by_hand = manual
+            allow_oncoming_pass(sumo, vehicle, not manual)   # in control, the person decides the pass
+            if not manual and self.speed_held:
+                set_speed(sumo, vehicle, None)
+            self.pedal, self.steer, self.speed_held = "release", None, False
+        if not manual:
+            return
+        if self.steer is not None:
+            allow_oncoming_pass(sumo, vehicle, self.steer == "oncoming")
+            self.steer = None
+        if self.holding:
+            return   # waiting for the hand-back: the pedals do not move the ego on
+        if self.pedal != "release":   # the speed set last holds once the pedal is released
+            change = PEDAL_ACCEL * step if self.pedal == "accelerate" else -PEDAL_DECEL * step
+            set_speed(sumo, vehicle, ego.speed + change)
+            self.speed_held = True
+
+    def hold_for_hand_back(self, sumo: Sumo, ego: EgoState, mode: str, road: str) -> None:
+        """Warn a person still in control near the road's end; brake to wait short of the commit
+        point until they hand back; release the ego on the hand-back."""
+        if mode != MANUAL.name or ego.road != road:
+            if mode != MANUAL.name:
+                self.warned = None   # a later takeover on this road is warned again
+                if self.holding:
+                    set_speed(sumo, self.vehicle_id, None)   # back to the autopilot's own speed
+                    self.holding = False
+            return
+        if ego.lane not in self.lengths:
+            self.lengths[ego.lane] = sumo.lane.getLength(ego.lane)
+        remaining = self.lengths[ego.lane] - ego.lane_position
+        if remaining <= WARN_DISTANCE and self.warned != road:
+            self.warned = road
+            self.person.hand_back_warning(remaining, ego.time)
+        braking = ego.speed * ego.speed / (2.0 * MANUAL.decel) + ego.speed
+        if not self.holding and remaining <= self.commit_distance + HOLD_MARGIN + braking:
+            set_speed(sumo, self.vehicle_id, 0.0)
+            self.holding = True

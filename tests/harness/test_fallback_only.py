@@ -1,0 +1,80 @@
+"""A synthesis that returns no decision row is only its fallback, and every command says so:
+`synth` in one line on stderr and `"fallback_only": true` in --json, `evaluate` the same, a study
+on stderr and in its manifest, and the analysis marks the condition in its tables and report.
+(phi1 needs 6 junctions: at horizon 1 or 3 synthesis answers by graph distance, without rows.)"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.cli import run_cli
+from tests.harness.helpers import run_study
+from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH
+
+
+def test_synth_and_evaluate_say_a_policy_without_rows_is_its_fallback(tmp_path, capsys):
+    out = tmp_path / "h1.json"
+    code, stdout, err = run_cli(capsys, "synth", "phi1", "--horizon", "1", "--out", str(out), "--json")
+    assert code == 0, err
+    answer = json.loads(stdout)
+    assert answer["stats"]["policy_rows"] == 0 and answer["fallback_only"] is True
+    warnings = [line for line in err.splitlines() if line.startswith("warning:")]
+    assert len(warnings) == 1 and "0 rows" in warnings[0] and "free completion" in warnings[0]
+    code, stdout, err = run_cli(capsys, "evaluate", "phi1", str(out), "--json")
+    assert code == 0, err
+    assert json.loads(stdout)["fallback_only"] is True and "only its fallback" in err
+
+
+def test_a_policy_with_rows_is_not_flagged(tmp_path, capsys):
+    out = tmp_path / "h8.json"
+    code, stdout, err = run_cli(capsys, "synth", "phi1", "--horizon", "8", "--out", str(out), "--json")
+    assert code == 0, err
+    answer = json.loads(stdout)
+    assert answer["stats"]["policy_rows"] > 0 and answer["fallback_only"] is False
+    assert "warning" not in err
+    code, stdout, err = run_cli(capsys, "evaluate", "phi1", str(out), "--json")
+    assert code == 0 and "fallback_only" not in json.loads(stdout) and "warning" not in err
+
+
+@pytest.mark.slow
+def test_a_robust_synthesis_without_rows_says_so(tmp_path, capsys):
+    code, stdout, err = run_cli(capsys, "synth", "phi1", "--horizon", "3", "--population",
+                                str(EXAMPLE_POPULATION_PATH), "--objective", "robust",
+                                "--out", str(tmp_path / "robust.json"), "--json")
+    assert code == 0, err
+    answer = json.loads(stdout)
+    assert answer["fallback_only"] is True and answer["stats"]["policy_rows"] == 0
+    assert "the robust policy for phi1 has no synthesized decision" in err
+    code, stdout, err = run_cli(capsys, "evaluate", "phi1", str(tmp_path / "robust.json"), "--population",
+                                str(EXAMPLE_POPULATION_PATH), "--json")
+    assert code == 0 and json.loads(stdout)["fallback_only"] is True and "only its fallback" in err
+
+
+@pytest.mark.slow
+def test_a_study_marks_a_condition_whose_policy_is_its_fallback(tmp_path, capsys):
+    from trustroute.analysis.study.analysis import study_analysis
+    from trustroute.analysis.study.display import FALLBACK_MARK, display_tables, format_table
+    from trustroute.analysis.study.report import write_report
+
+    run_study(tmp_path / "study.toml", f"""[study]
+participants = 2
+seed = 5
+engine = "model"
+specs = ["phi1"]
+conditions = ["aware", "free"]
+horizon = 3
+policy_cache = "{tmp_path / 'cache'}"
+""", tmp_path / "out")
+    assert "aware policy for phi1 has no synthesized decision" in capsys.readouterr().err
+    manifest = json.loads((tmp_path / "out" / "manifest.json").read_text())
+    assert "free completion" in manifest["expected"]["phi1"]["aware"]["fallback_only"]
+    assert "fallback_only" not in manifest["expected"]["phi1"]["free"]
+    analysis = study_analysis(tmp_path / "out", resamples=20)
+    shown = display_tables(analysis)["cells"]["condition"].tolist()
+    assert shown == [f"aware{FALLBACK_MARK}", "free"]
+    assert "Warning: the aware policy for phi1 has no synthesized decision" in format_table(analysis)
+    write_report(tmp_path / "out", analysis)
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "**Warning: the aware policy for phi1" in report and f"aware{FALLBACK_MARK}" in report
