@@ -234,7 +234,8 @@ PENDING_IMPORTS = {
         "trustroute.harness.study.runner", "trustroute.networks.sumo_net"},
     "trustroute.harness.live.worker": {
         "os", "trustroute.harness.study.context", "trustroute.harness.study.parts",
-        "trustroute.harness.study.runner", "trustroute.harness.study.workers"},
+        "trustroute.harness.simulation.sumo_start", "trustroute.harness.study.runner",
+        "trustroute.harness.study.workers"},
     "trustroute.harness.simulation.background": {"gzip", "xml.etree.ElementTree"},
     "trustroute.harness.simulation.episode": {"trustroute.harness.simulation.rerun_log"},
     "trustroute.harness.simulation.gym_env": {
