@@ -106,7 +106,9 @@ def draw_rows(cdf: np.ndarray, rng: np.random.Generator):
     at most u · total, u uniform (inverse CDF, capped at k - 1)."""
     last = cdf.shape[-1] - 1
     if cdf.ndim == 1:
-        return min(int((cdf <= rng.random() * cdf[-1]).sum()), last)
+        # A cumulative row never decreases, so the count is a binary search (one call, no
+        # temporary array: a SUMO episode draws a row per road, between simulation steps).
+        return min(int(cdf.searchsorted(rng.random() * cdf[-1], side="right")), last)
     u = rng.random(cdf.shape[:-1]) * cdf[..., -1]
     return np.minimum((cdf <= u[..., None]).sum(axis=-1), last)
 
