@@ -33,6 +33,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                "Package a study for sharing: pseudonymous tables, codebook, checksums."),
     "withdraw": ("trustroute.harness.commands.withdraw", "withdraw",
                  "Delete a live study participant's data (withdrawal), audited."),
+    "plan": ("trustroute.harness.commands.plan", "plan", "Power and sample size of a study, by simulation."),
     "fit": ("trustroute.harness.commands.fit", "fit", "Fit a driver model to a study's logs."),
     "population": ("trustroute.harness.commands.population", "population",
                    "Sample and inspect driver populations (driver types)."),
