@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.core.errors import InputError
+from trustroute.core.validation import parse_toml, read_text
 
 PLACEMENTS: tuple[str, ...] = ("before", "after_each_trial", "end")
 NAME = re.compile(r"^[a-z0-9_-]{1,40}$")
@@ -158,8 +159,6 @@ PACKAGED: dict[str, Questionnaire] = {"jian": JIAN, "nasa_tlx": NASA_TLX}
 
 def load_questionnaire(path: Path, source: str) -> Questionnaire:
     """A Likert questionnaire file (the module's format), or InputError naming the place and fix."""
-    from trustroute.core.validation import parse_toml, read_text
-
     shown = str(path)
     data = parse_toml(
         read_text(path, shown, "the questionnaire", "pass an existing TOML file"), shown, "questionnaire"

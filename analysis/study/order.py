@@ -15,13 +15,12 @@ import pandas as pd
 
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.analysis.statistics import rate_interval
+from trustroute.core.dataset import ATTEMPTS_FILE, read_attempts
 
 
 def run_order(study_dir: Path, manifest: dict, episodes: pd.DataFrame) -> pd.DataFrame:
     """`episodes` with `position` the place each was run at, for a live study with an attempts
     table (a done trial's `run_position`); any other study's episodes as they are."""
-    from trustroute.core.dataset import ATTEMPTS_FILE, read_attempts
-
     if manifest.get("engine") != "live" or not (Path(study_dir) / ATTEMPTS_FILE).exists():
         return episodes
     attempts = read_attempts(study_dir, ["episode_id", "run_position", "outcome"])

@@ -17,6 +17,7 @@ import pandas as pd
 
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.analysis.statistics import wilcoxon_paired
+from trustroute.core.dataset import QUESTIONNAIRES_FILE, read_questionnaires
 
 KEYS = ["participant", "episode_id", "placement", "questionnaire"]
 
@@ -47,8 +48,6 @@ def questionnaire_tables(study_dir: Path, episodes: pd.DataFrame,
                          pairs: list[tuple[str, str]]) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(scores per questionnaire and condition, paired tests per questionnaire and pair of
     conditions); empty frames for a study without questionnaires."""
-    from trustroute.core.dataset import QUESTIONNAIRES_FILE, read_questionnaires
-
     if not (Path(study_dir) / QUESTIONNAIRES_FILE).exists():
         return pd.DataFrame(), pd.DataFrame()
     scored, matrices = responses(read_questionnaires(study_dir))

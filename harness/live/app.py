@@ -40,7 +40,13 @@ from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
 from starlette.requests import HTTPConnection
 
 from trustroute.harness.live.auth import EXPERIMENTER_COOKIE, PARTICIPANT_COOKIE, presented_token
-from trustroute.harness.live.guard import ConnectionGate, guarded_protocol, origin_allowed
+from trustroute.harness.live.guard import (
+    ConnectionGate,
+    guarded_protocol,
+    normal_origin,
+    origin_allowed,
+    own_origins,
+)
 from trustroute.harness.live.protocol import (
     CONTROL_RATE,
     MAX_BODY_BYTES,
@@ -352,8 +358,6 @@ def live_app(study: LiveStudy, origins: frozenset[str] = frozenset()) -> FastAPI
     """The application serving `study` (opened: credentials and directory lock held); `origins`:
     the server's own (guard.own_origins), beside the study's configured public ones; with
     neither, a request's Origin must be the address it was sent to (its Host)."""
-    from trustroute.harness.live.guard import normal_origin
-
     app = FastAPI(title="trustroute live", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.study = study
     public = {normal_origin(origin) for origin in study.options.public_origins}
@@ -427,8 +431,6 @@ def live_server(study: LiveStudy, sock):
     """The uvicorn server of `study` for the bound socket `sock` (its `run(sockets=[sock])` serves);
     the server's own origins are those of the socket's address."""
     import uvicorn
-
-    from trustroute.harness.live.guard import own_origins
 
     host, port = sock.getsockname()[:2]
     app = live_app(study, own_origins(host, port))

@@ -25,6 +25,7 @@ import socket
 from collections.abc import Mapping
 from urllib.parse import urlsplit
 
+import h11
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from trustroute.core.errors import InputError
@@ -157,8 +158,6 @@ class GuardedH11Protocol(H11Protocol):
             self.disarm()
 
     def request_complete(self) -> bool:
-        import h11
-
         return self.conn.their_state in (h11.DONE, h11.MUST_CLOSE, h11.CLOSED, h11.SWITCHED_PROTOCOL)
 
     def on_response_complete(self) -> None:

@@ -32,6 +32,7 @@ from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session
 from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study seed, (4, participant))
+from trustroute.harness.live.withdraw import read_registry, withdraw_participant
 from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
@@ -212,9 +213,6 @@ class LiveStudy:
         """The experimenter withdraws `participant` (harness/live/withdraw.py): their episode
         stopped, their data removed and the dataset consolidated without them; the audit entry.
         ValueError when there is no such participant or they have withdrawn already."""
-        from trustroute.core.errors import InputError
-        from trustroute.harness.live.withdraw import read_registry, withdraw_participant
-
         with self.lock:
             session = self.sessions.get(participant)
             if session is None or participant in self.withdrawn:

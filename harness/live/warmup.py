@@ -22,7 +22,13 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from trustroute.networks.town import NO_INCIDENT, Town, split_road
+from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode
+from trustroute.harness.simulation.stepping import run_to_end
+from trustroute.harness.simulation.sumo_start import SumoConfig
+from trustroute.harness.study.context import study_context
+from trustroute.networks.road import Road
+from trustroute.networks.sumo_net import pedestrian_roads
+from trustroute.networks.town import NO_INCIDENT, Town
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 WARM_UP_ROADS = 6      # roads after the start road
@@ -50,7 +56,7 @@ class DrawnRoute(RoutingPolicy):
         self.route = route
 
     def next_junction(self, context: DecisionContext) -> str:
-        return split_road(self.route[len(context.route)])[1]
+        return Road.parse(self.route[len(context.route)]).to_junction
 
     def finished(self, context: DecisionContext) -> bool:
         return len(context.route) >= len(self.route)
@@ -68,7 +74,7 @@ def draw_route(town: Town, start: str, rng: np.random.Generator,
     route = [start]
     for _ in range(roads):
         here = route[-1]
-        back = "-".join(reversed(split_road(here)))
+        back = Road.parse(here).reverse.id
         moves = [town.successor(here, junction) for junction in town.actions(here)]
         onward = [road for road in moves if road != back] or moves
         route.append(onward[int(rng.integers(len(onward)))])
@@ -79,13 +85,11 @@ def draw_incidents(town: Town, route: tuple[str, ...], rng: np.random.Generator)
     """An incident for each road after the start, drawn from the town's own mix of incidents; a
     pedestrian only where the town's SUMO net has its crossing (the roads with a pedestrian
     incident in the town)."""
-    from trustroute.networks.sumo_net import pedestrian_roads
-
     crossings = {frozenset(pair) for pair in pedestrian_roads(town)}
     mix = [town.incidents[road] for road in town.states]
     drawn = {}
     for road in route[1:]:
-        crossed = frozenset(split_road(road)) in crossings
+        crossed = frozenset(Road.parse(road)) in crossings
         kinds = [kind for kind in mix if kind != "pedestrian" or crossed]
         drawn[road] = str(kinds[int(rng.integers(len(kinds)))])
     return drawn
@@ -102,11 +106,6 @@ def run_warm_up(config, task, driver, observer, person=None, sumo_config=None):
     """The warm-up episode `task` (server.warm_up_task) on its drawn route and incidents, with the
     remote `driver` (and `person`, their controls at the wheel, and SUMO's settings, as
     run_planned_episode takes them); the EpisodeRecord."""
-    from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode
-    from trustroute.harness.simulation.stepping import run_to_end
-    from trustroute.harness.simulation.sumo_start import SumoConfig
-    from trustroute.harness.study.context import study_context
-
     setup = study_context(config).setup(task.spec, task.condition)
     town = setup.town
     route, incidents = warm_up_plan(town, setup.spec.start, config.seed, task.participant)

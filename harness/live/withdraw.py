@@ -21,6 +21,12 @@ from pathlib import Path
 from trustroute.core.dataset import ATTEMPTS_FILE, FAILURES_DIR, MANIFEST_FILE, PARTS_DIR, TABLES
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
+from trustroute.core.validation import read_json
+from trustroute.harness.live.answers import write_answer_table
+from trustroute.harness.live.attempts import AttemptLog
+from trustroute.harness.study.manifest import consolidate
+from trustroute.harness.study.plan import plan_episodes
+from trustroute.harness.study.replay import study_config_from_manifest
 
 LIVE_DIR = "live"
 REGISTRY = "participants.json"
@@ -56,8 +62,6 @@ def table_checksums(study_dir: Path) -> dict[str, str]:
 
 
 def read_registry(study_dir: Path) -> dict:
-    from trustroute.core.validation import read_json
-
     path = Path(study_dir) / LIVE_DIR / REGISTRY
     if not path.exists():
         raise InputError(str(study_dir), f"{LIVE_DIR}/{REGISTRY}", "not a live study with participants",
@@ -91,12 +95,6 @@ def drop_attempts(study_dir: Path, participant: int) -> None:
 
 def withdraw_participant(study_dir: Path, participant: int, by: str | None = None, reason: str = "") -> dict:
     """Withdraw `participant` (the directory's lock held by the caller); the audit entry."""
-    from trustroute.harness.live.answers import write_answer_table
-    from trustroute.harness.live.attempts import AttemptLog
-    from trustroute.harness.study.manifest import consolidate
-    from trustroute.harness.study.plan import plan_episodes
-    from trustroute.harness.study.replay import study_config_from_manifest
-
     study_dir = Path(study_dir)
     records = read_registry(study_dir)
     record = registry_record(study_dir, records, participant)

@@ -47,6 +47,7 @@ from pathlib import Path
 import pyarrow as pa
 
 from trustroute.harness.live.view import Statics, dead_reckoned, ego_view, next_junction, surroundings
+from trustroute.harness.live.warmup import run_warm_up
 from trustroute.harness.simulation.drivers import NO_INPUTS, ManualInputs
 from trustroute.harness.simulation.driving_style import MANUAL
 from trustroute.harness.simulation.episode import EGO_ID, EpisodeRecord
@@ -353,8 +354,6 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
         driver = RemoteDriver(connection, levels, initial_trust, options, episode_id=task.episode_id)
         connection.send({"type": "episode_start", "episode_id": task.episode_id, "trust": driver.trust})
         if task.position < 0:   # the warm-up: a route and incidents of its own (harness/live/warmup.py)
-            from trustroute.harness.live.warmup import run_warm_up
-
             record = run_warm_up(config, task, driver, driver.observe, person=driver,
                                  sumo_config=sumo_config(options))
         else:

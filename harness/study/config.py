@@ -69,6 +69,7 @@ from trustroute.networks.town import TOWNS
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER_MODELS
 from trustroute.participants.driver_population import POPULATIONS, load_driver_population
 from trustroute.participants.population import population_config_from_dict
+from trustroute.participants.questionnaires import resolved_table
 from trustroute.policies.model.trust_pomdp import BELIEF_RULES, BeliefRule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
@@ -514,8 +515,6 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
 
 def _questionnaires(table: dict[str, object] | None, base: Path, source: str) -> dict | None:
     """The [questionnaires] table, checked and its files resolved (participants.questionnaires)."""
-    from trustroute.participants.questionnaires import resolved_table
-
     return resolved_table(table, base, source)
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from trustroute.core.codebook import codebook
 from trustroute.core.dataset import TABLES, read_manifest, read_table, write_table
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
@@ -73,8 +74,6 @@ def sha256_of(path: Path) -> str:
 
 def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
     """Write the package of `study_dir` into `out` (a new or empty directory); its index."""
-    from trustroute.core.codebook import codebook
-
     study_dir, out = Path(study_dir), Path(out)
     manifest = read_manifest(study_dir)
     if out.exists() and any(out.iterdir()):
