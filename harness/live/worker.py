@@ -47,7 +47,7 @@ import pyarrow as pa
 from trustroute.harness.live.view import Statics, dead_reckoned, ego_view, next_junction, surroundings
 from trustroute.harness.simulation.drivers import NO_INPUTS, ManualInputs
 from trustroute.harness.simulation.driving_style import MANUAL
-from trustroute.harness.simulation.episode import EGO_ID, EpisodeRecord
+from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import reports_after_road
 from trustroute.harness.simulation.wheel_driving import Controls, Wheel
 
@@ -102,7 +102,8 @@ class RemoteDriver:
         self.awaiting_report = False       # the last prompt for a report has had no answer yet
         self.statics = Statics()           # the frames' handles and sizes of the objects seen
         # continuous driving (a wheel; never in lockstep): harness/simulation/wheel_driving.py
-        self.wheel = Wheel(EGO_ID) if options.driving == "continuous" and not options.lockstep else None
+        by_wheel = options.driving == "continuous" and not options.lockstep
+        self.wheel = Wheel(EGO_ID, COMMIT_DISTANCE) if by_wheel else None
 
     # -- the Driver and PersonControls protocols (harness/simulation/drivers.py) ----------------
     @property
@@ -220,7 +221,7 @@ class RemoteDriver:
         self.previous_time = ego.time
         self.read_controls(0.0)
         if self.wheel is not None:
-            for event in self.wheel.step(sumo, mode == MANUAL.name):
+            for event in self.wheel.step(sumo, mode == MANUAL.name, road):
                 self.send({**event, "type": "warning", "kind": event["type"]})
         hurried = self.wait_for_the_wall_clock(ego.time)
         wall = self.clock()
