@@ -37,6 +37,7 @@ who drove and every control the person sent.
 
 from __future__ import annotations
 
+import math
 import time
 import traceback
 from dataclasses import dataclass
@@ -44,11 +45,13 @@ from pathlib import Path
 
 import pyarrow as pa
 
+from trustroute.core.dataset import INCIDENTS_SCHEMA, table_from_rows
 from trustroute.harness.live.view import Statics, dead_reckoned, ego_view, next_junction, surroundings
 from trustroute.harness.simulation.drivers import NO_INPUTS, ManualInputs
 from trustroute.harness.simulation.driving_style import MANUAL
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import reports_after_road
+from trustroute.harness.simulation.manual_measures import takeover_measures
 from trustroute.harness.simulation.wheel_driving import Controls, Wheel
 
 PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
@@ -300,6 +303,22 @@ def with_final_report(record: EpisodeRecord, report: int | None) -> EpisodeRecor
     return EpisodeRecord(record.summary, roads, tables["kinematics"], tables["incidents"])
 
 
+def with_manual_measures(record: EpisodeRecord, wheel: Wheel | None) -> EpisodeRecord:
+    """The record with the wheel's measures of each takeover in its incidents table (null columns
+    stay null without a wheel: assisted driving has only the reaction)."""
+    incidents = record.tables()["incidents"]
+    if wheel is None or not incidents.num_rows:
+        return record
+    rows = incidents.to_pylist()
+    for row in rows:
+        if row["takeover"] and row["takeover_start"] is not None:
+            end = math.nan if row["takeover_end"] is None else row["takeover_end"]
+            row.update(takeover_measures(wheel.trace, wheel.events, row["takeover_start"], end))
+    tables = record.tables()
+    return EpisodeRecord(record.summary, tables["roads"], tables["kinematics"],
+                         table_from_rows(rows, INCIDENTS_SCHEMA))
+
+
 def live_summary(summary: dict, driver: RemoteDriver) -> dict:
     """The episode summary with the live marks: who drove, and every control they sent."""
     live = {"driver": "person" if driver.options.client == "station" else "scripted",
@@ -334,7 +353,7 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
         connection.send({"type": "episode_start", "episode_id": task.episode_id, "trust": driver.trust})
         record = run_planned_episode(config, task, driver=driver, observer=driver.observe, person=driver,
                                      sumo_config=sumo_config(options))
-        record = with_final_report(record, driver.final_report())
+        record = with_manual_measures(with_final_report(record, driver.final_report()), driver.wheel)
         write_part_tables(Path(study_dir), task, live_summary(record.summary, driver), record.tables(),
                           sync=True)
         summary = record.summary

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field, replace
 
 from trustroute.harness.simulation.driving_style import MANUAL
 from trustroute.harness.simulation.manual_driving import HOLD_MARGIN, hold_distance
+from trustroute.harness.simulation.manual_measures import TTC_RANGE, Sample, signed_offset, ttc_ahead
 
 MODEL_RATE = 50.0            # Hz: the model's integration rate (at least 20 Hz whatever SUMO's step)
 KEEP_ROUTE = 1               # moveToXY: the nearest place on the ego's route
@@ -196,6 +197,7 @@ class ManualDriving:
     collided: bool = False
     current: Pose | None = None       # the pose at SUMO's time now (the model runs a step ahead)
     lane_index: int = 0               # the lane of its road the ego was in at the takeover
+    edge: str = ""                    # the edge of its route it was on last (its own road)
 
     @classmethod
     def take_over(cls, sumo, vehicle_id: str, **options) -> ManualDriving:
@@ -206,7 +208,8 @@ class ManualDriving:
         return cls(vehicle_id, pose, list(sumo.vehicle.getRoute(vehicle_id)),
                    length=sumo.vehicletype.getLength(vehicle_type),
                    width=sumo.vehicletype.getWidth(vehicle_type),
-                   lane_index=max(0, sumo.vehicle.getLaneIndex(vehicle_id)), **options)
+                   lane_index=max(0, sumo.vehicle.getLaneIndex(vehicle_id)),
+                   edge=sumo.vehicle.getRoadID(vehicle_id), **options)
 
     def step(self, sumo, controls: Controls, seconds: float) -> Pose:
         """Read where the last placement put the ego (events), then integrate the person's controls
@@ -230,9 +233,9 @@ class ManualDriving:
         collision, or held off its lane before the junction) the ego is first put at the nearest
         place of its lane on the planned road, facing along it; True then: the planned route is
         to be given back once SUMO has it there (`restore_route`)."""
-        if self.where == "own_lane" or not self.route:
+        if self.where == "own_lane" or not self.edge or self.edge.startswith(":"):
             return False
-        edge = self.route[0]
+        edge = self.edge
         lane = f"{edge}_{self.lane_index}"
         x, y, angle = nearest_on(sumo.lane.getShape(lane), self.pose.x, self.pose.y)
         sumo.vehicle.moveToXY(self.vehicle_id, edge, self.lane_index, x, y, angle, KEEP_ROUTE_FREE)
@@ -253,7 +256,8 @@ class ManualDriving:
     def observe(self, sumo, now: float) -> None:
         lane = sumo.vehicle.getLaneID(self.vehicle_id)
         if lane and not lane.startswith(":"):
-            restore_route(sumo, self.vehicle_id, self.route)
+            if restore_route(sumo, self.vehicle_id, self.route):
+                self.edge = sumo.lane.getEdgeID(lane)
         self.locate(sumo, lane, now)
         self.contacts(sumo, now)
 
@@ -275,7 +279,7 @@ class ManualDriving:
             self.where = where
 
     def opposite(self, edge: str) -> bool:
-        road = self.route[0] if self.route else ""
+        road = self.edge
         return "-" in road and edge == "-".join(reversed(road.rsplit("-", 1)))
 
     def contacts(self, sumo, now: float) -> None:
@@ -330,6 +334,8 @@ class Wheel:
         self.held_off_lane = False       # stopped off its lane at the road's end: may hand back there
         self.lengths: dict[str, float] = {}
         self.restore: list[str] | None = None   # the planned route, to give back after a release
+        self.trace: list[Sample] = []    # every manual step: the measures' raw material
+        self.shapes: dict[str, list] = {}
 
     @property
     def may_hand_back(self) -> bool:
@@ -362,9 +368,34 @@ class Wheel:
         seen = len(self.driving.events)
         controls = self.held(sumo, road) if road is not None else self.controls
         self.driving.step(sumo, controls, sumo.simulation.getDeltaT())
+        self.sample(sumo)
         new = self.driving.events[seen:]
         self.events.extend(new)
         return new
+
+    def sample(self, sumo) -> None:
+        """The step's sample of the person's driving (manual_measures.py), at SUMO's time now."""
+        driving = self.driving
+        pose = driving.current if driving is not None else None
+        if pose is None or not driving.edge or driving.edge.startswith(":"):
+            return
+        lane = f"{driving.edge}_{driving.lane_index}"
+        if lane not in self.shapes:
+            self.shapes[lane] = list(sumo.lane.getShape(lane))
+        fx, fy = forward(pose.angle)
+        centre = (pose.x - fx * driving.length / 2, pose.y - fy * driving.length / 2)
+        others = []
+        for other in sumo.vehicle.getIDList():
+            if other == self.vehicle_id:
+                continue
+            ox, oy = sumo.vehicle.getPosition(other)
+            if math.hypot(ox - pose.x, oy - pose.y) <= TTC_RANGE + 20.0:
+                kind = sumo.vehicle.getTypeID(other)
+                others.append((ox, oy, sumo.vehicle.getAngle(other), sumo.vehicle.getSpeed(other),
+                               sumo.vehicletype.getLength(kind), sumo.vehicletype.getWidth(kind)))
+        self.trace.append(Sample(sumo.simulation.getTime(), signed_offset(self.shapes[lane], *centre),
+                                 pose.speed, ttc_ahead(pose.x, pose.y, pose.angle, pose.speed,
+                                                       driving.width, others)))
 
     def to_road_end(self, sumo, road: str) -> float | None:
         """Metres from the ego (where SUMO has it) to the end of `road`: along its own lane, or back

@@ -121,7 +121,21 @@ INCIDENTS_SCHEMA = pa.schema([
     _field("time_lost", pa.float64()),                      # s against free driving, on autopilot
     _field("failed_measures", pa.string(), nullable=True),  # comma-separated; null: succ
     _field("scene", pa.string(), nullable=True),            # the drawn scene; null: no SUMO objects
+    # Manual-driving measures of the takeover (harness/simulation/manual_measures.py): the reaction
+    # wherever there was a takeover of an incident in view; the others only when a person drove by
+    # wheel ([live] driving = "continuous"); null otherwise.
+    _field("takeover_reaction", pa.float64(), nullable=True),      # s from in view to the takeover
+    _field("lateral_sd", pa.float64(), nullable=True),             # m: SD of the lateral position
+    _field("manual_min_ttc", pa.float64(), nullable=True),         # s; inf: nothing closing in its path
+    _field("manual_max_deceleration", pa.float64(), nullable=True),  # m/s²
+    _field("oncoming_seconds", pa.float64(), nullable=True),       # s in the oncoming lane
+    _field("road_departures", pa.int64(), nullable=True),
+    _field("collisions", pa.int64(), nullable=True),
 ])
+MANUAL_MEASURES: tuple[str, ...] = (
+    "takeover_reaction", "lateral_sd", "manual_min_ttc", "manual_max_deceleration", "oncoming_seconds",
+    "road_departures", "collisions",
+)
 
 # The plan's columns, then the episode summary's (harness/simulation/episode_tracker.py), then report stats.
 PLAN_COLUMNS: tuple[str, ...] = ("episode_id", "participant", "position", "spec", "condition", "seed")
@@ -153,7 +167,7 @@ EPISODES_SCHEMA = pa.schema([
 ])
 # Nullable columns appended to a schema after studies were written without them: a file that ends
 # before them reads with the columns all null (so datasets written without those columns still read).
-ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type",)}
+ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type",), "incidents": MANUAL_MEASURES}
 END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
 
 # Top-level keys of manifest.json (harness/study/manifest.py writes them; docs/dataset.md).

@@ -17,6 +17,7 @@ from trustroute.harness.live.worker import (
     live_summary,
     sumo_config,
     with_final_report,
+    with_manual_measures,
 )
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE
 from trustroute.harness.simulation.episode_tracker import EpisodeTracker
@@ -155,6 +156,11 @@ def test_by_wheel_without_a_hand_back_the_ego_is_held_short_of_the_junction(tmp_
     manual = ticks["time"][ticks["mode"] == "manual"]
     back = ticks["time"][(ticks["mode"] == "auto") & (ticks["time"] > manual.min())].min()
     assert back > held[39][0] and len(record.roads) > 2   # handed back, and the episode went on
+    # the takeover's measures: in its lane all along, braked by the hold at 3 m/s² (and rolling)
+    row = with_manual_measures(record, driver.wheel).incidents.query("takeover").iloc[0]
+    assert (row["road_departures"], row["collisions"], row["oncoming_seconds"]) == (0, 0, 0.0)
+    assert 0.0 < row["lateral_sd"] < 0.5 and 3.0 < row["manual_max_deceleration"] < 3.3
+    assert row["manual_min_ttc"] > 0.0
 
 
 def test_the_tracker_decides_as_for_the_same_observations_headless(tmp_path):
