@@ -28,6 +28,8 @@ paper_comparison; shown by display) are:
   participant's true `driver_type`): the cells' satisfaction and trust, and the paired statistics
   for every pair of conditions present (free, aware, robust, policy files), per true type and over
   all participants ("all");
+- `manual`: per incident type and condition, the manual-driving measures of the takeovers
+  (manual.py; the incidents table's, docs/dataset.md); empty without takeovers;
 - `sensitivity`: every pair's satisfaction difference per spec and over specs on every belief
   source the study has (sensitivity.py), the leading one marked;
 - `paper`: the paper's figures beside ours, only when the study is comparable (the paper's town,
@@ -54,6 +56,7 @@ from trustroute.analysis.belief_sources import (
 )
 from trustroute.analysis.satisfaction import episode_satisfaction
 from trustroute.analysis.study.cells import cell_table, takeover_table
+from trustroute.analysis.study.manual import manual_table, study_incidents
 from trustroute.analysis.study.order import order_tables
 from trustroute.analysis.study.paired import (
     all_pairs_repeated,
@@ -92,6 +95,7 @@ class StudyAnalysis:
     per_type: pd.DataFrame = field(default_factory=pd.DataFrame)
     per_type_paired: pd.DataFrame = field(default_factory=pd.DataFrame)
     sensitivity: pd.DataFrame = field(default_factory=pd.DataFrame)
+    manual: pd.DataFrame = field(default_factory=pd.DataFrame)
     source_note: str = ""   # why the leading source is not the default one, when it is not
 
     def to_dict(self) -> dict:
@@ -118,6 +122,7 @@ class StudyAnalysis:
             "per_type": records(self.per_type),
             "per_type_paired": records(self.per_type_paired),
             "sensitivity": records(self.sensitivity),
+            "manual_driving": records(self.manual),
             "failed_episodes": len(self.manifest.get("failed_episodes", [])),
         }
 
@@ -223,6 +228,7 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
         per_type=per_type,
         per_type_paired=per_type_paired,
         sensitivity=sensitivity,
+        manual=manual_table(study_incidents(Path(study_dir)), episodes, condition_order),
         source_note=source_note,
     )
     comparable, note = is_paper_comparable(manifest, episodes)

@@ -21,6 +21,7 @@ from trustroute.analysis.formatting import (
     wrapped_text,
 )
 from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis
+from trustroute.analysis.study.manual import manual_display
 
 
 def paired_display(p: pd.DataFrame) -> pd.DataFrame:
@@ -175,6 +176,7 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
         "per_type": (analysis.per_type, lambda c: pd.DataFrame(_per_type_columns(c))),
         "per_type_paired": (analysis.per_type_paired, paired_display),
         "sensitivity": (analysis.sensitivity, sensitivity_display),
+        "manual": (analysis.manual, manual_display),
         "paper": (analysis.paper, lambda paper: paper),
     }
     return {name: show(frame) for name, (frame, show) in shown.items() if len(frame)}
@@ -190,12 +192,13 @@ TABLE_TITLES = {
     "per_type": "Satisfaction and trust per true driver type",
     "per_type_paired": "Paired effects per true driver type (every pair of conditions)",
     "sensitivity": "Sensitivity: satisfaction difference A − B [95% CI] on every belief source",
+    "manual": "Manual driving per incident type and condition (the takeovers' measures)",
     "paper": "The paper beside this study",
 }
 
 
 # tables whose figures do not depend on the belief source (the others name it in their title)
-SOURCE_FREE_TABLES = ("takeovers", "sensitivity")
+SOURCE_FREE_TABLES = ("takeovers", "sensitivity", "manual")
 
 
 def table_title(name: str, belief_source: str) -> str:
