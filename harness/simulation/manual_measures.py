@@ -132,3 +132,27 @@ def ttc_ahead(x: float, y: float, angle: float, speed: float, width: float,
         if closing > 0.0:
             best = min(best, gap / closing)
     return best
+
+
+def episode_measures(rows: list[dict]) -> dict:
+    """An episode's measures over its incidents rows (dicts with the incidents table's columns):
+    the mean reaction over its takeovers; over those driven by wheel (a `lateral_sd`) the mean SD
+    of lateral position, the least TTC, the largest deceleration, and the sums of the time in the
+    oncoming lane, the road departures and the collisions. None where nothing was measured."""
+    def present(name: str, among: list[dict]) -> list:
+        return [row[name] for row in among if row.get(name) is not None and not
+                (isinstance(row[name], float) and math.isnan(row[name]))]
+
+    taken = [row for row in rows if row.get("takeover")]
+    reactions = present("takeover_reaction", taken)
+    wheel = [row for row in taken if present("lateral_sd", [row])]
+    measured = bool(wheel)
+    return {
+        "mean_takeover_reaction": sum(reactions) / len(reactions) if reactions else None,
+        "mean_lateral_sd": (sum(present("lateral_sd", wheel)) / len(wheel)) if measured else None,
+        "manual_min_ttc": min(present("manual_min_ttc", wheel), default=None),
+        "manual_max_deceleration": max(present("manual_max_deceleration", wheel), default=None),
+        "oncoming_seconds": sum(present("oncoming_seconds", wheel)) if measured else None,
+        "road_departures": sum(present("road_departures", wheel)) if measured else None,
+        "collisions": sum(present("collisions", wheel)) if measured else None,
+    }

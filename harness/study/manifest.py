@@ -49,6 +49,7 @@ from trustroute.core.dataset import (
     table_from_columns,
     write_table,
 )
+from trustroute.harness.simulation.manual_measures import episode_measures
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.parts import PartError, read_failures, read_part
 from trustroute.harness.study.plan import EpisodeTask
@@ -153,6 +154,7 @@ def consolidate(
                 "mean_reported_trust": mean_reported,
                 "reports": reports,
                 "driver_type": None if types is None else types[task.participant],
+                **episode_measures(part.tables["incidents"].to_pylist()),
             }
         )
         roads_tables.append(table)

@@ -164,10 +164,24 @@ EPISODES_SCHEMA = pa.schema([
     # The participant's true driver type ([drivers] population, docs/driver_type_studies.md); null
     # without one.
     _field("driver_type", pa.string(), nullable=True),
+    # The episode's manual-driving measures over its takeovers (the incidents table's columns of
+    # the same names, harness/simulation/manual_measures.py `episode_measures`); null without them.
+    _field("mean_takeover_reaction", pa.float64(), nullable=True),   # s, mean over the takeovers
+    _field("mean_lateral_sd", pa.float64(), nullable=True),          # m, mean over those by wheel
+    _field("manual_min_ttc", pa.float64(), nullable=True),           # s, least
+    _field("manual_max_deceleration", pa.float64(), nullable=True),  # m/s², largest
+    _field("oncoming_seconds", pa.float64(), nullable=True),         # s, in all
+    _field("road_departures", pa.int64(), nullable=True),
+    _field("collisions", pa.int64(), nullable=True),
 ])
+EPISODE_MANUAL_MEASURES: tuple[str, ...] = (
+    "mean_takeover_reaction", "mean_lateral_sd", "manual_min_ttc", "manual_max_deceleration",
+    "oncoming_seconds", "road_departures", "collisions",
+)
 # Nullable columns appended to a schema after studies were written without them: a file that ends
 # before them reads with the columns all null (so datasets written without those columns still read).
-ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type",), "incidents": MANUAL_MEASURES}
+ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type", *EPISODE_MANUAL_MEASURES),
+                                             "incidents": MANUAL_MEASURES}
 END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
 
 # Top-level keys of manifest.json (harness/study/manifest.py writes them; docs/dataset.md).

@@ -8,6 +8,7 @@ import pytest
 
 from trustroute.harness.simulation.manual_measures import (
     Sample,
+    episode_measures,
     lateral_sd,
     max_deceleration,
     min_ttc,
@@ -79,3 +80,20 @@ def test_the_lateral_offset_is_signed_left_positive():
     assert signed_offset(lane, 5.0, 1.5) == pytest.approx(1.5)     # north of an eastbound line: left
     assert signed_offset(lane, 5.0, -0.5) == pytest.approx(-0.5)
     assert signed_offset(lane, 11.0, 6.0) == pytest.approx(-1.0)   # east of a northbound line: right
+
+
+def test_an_episodes_measures_gather_its_takeovers():
+    nan = math.nan
+    rows = [  # a takeover by wheel, one assisted (the reaction only), a road without a takeover
+        {"takeover": True, "takeover_reaction": 1.0, "lateral_sd": 0.3, "manual_min_ttc": 2.0,
+         "manual_max_deceleration": 4.0, "oncoming_seconds": 3.0, "road_departures": 1, "collisions": 0},
+        {"takeover": True, "takeover_reaction": 2.0, "lateral_sd": None, "manual_min_ttc": None,
+         "manual_max_deceleration": None, "oncoming_seconds": None, "road_departures": None,
+         "collisions": None},
+        {"takeover": False, "takeover_reaction": nan, "lateral_sd": None},
+    ]
+    assert episode_measures(rows) == {"mean_takeover_reaction": 1.5, "mean_lateral_sd": 0.3,
+                                      "manual_min_ttc": 2.0, "manual_max_deceleration": 4.0,
+                                      "oncoming_seconds": 3.0, "road_departures": 1, "collisions": 0}
+    assert set(episode_measures(rows[1:]).values()) == {2.0, None}
+    assert set(episode_measures([]).values()) == {None}
