@@ -41,6 +41,7 @@ from dataclasses import dataclass, field, replace
 from trustroute.harness.simulation.driving_style import MANUAL
 from trustroute.harness.simulation.manual_driving import HOLD_MARGIN, hold_distance
 from trustroute.harness.simulation.manual_measures import TTC_RANGE, Sample, signed_offset, ttc_ahead
+from trustroute.networks.road import Road
 
 MODEL_RATE = 50.0            # Hz: the model's integration rate (at least 20 Hz whatever SUMO's step)
 KEEP_ROUTE = 1               # moveToXY: the nearest place on the ego's route
@@ -279,8 +280,8 @@ class ManualDriving:
             self.where = where
 
     def opposite(self, edge: str) -> bool:
-        road = self.edge
-        return "-" in road and edge == "-".join(reversed(road.rsplit("-", 1)))
+        road = Road.parse_or_none(self.edge) if self.edge else None   # its own road, not the route's first
+        return road is not None and edge == road.reverse.id
 
     def contacts(self, sumo, now: float) -> None:
         ego = corners(self.pose.x, self.pose.y, self.pose.angle, self.length, self.width)

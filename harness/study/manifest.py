@@ -45,15 +45,16 @@ from trustroute.core.dataset import (
     MANIFEST_KEYS,
     ROADS_FILE,
     ROADS_SCHEMA,
-    part_path,
     table_from_columns,
     write_table,
 )
+from trustroute.core.output_files import atomic_write_text
 from trustroute.harness.simulation.manual_measures import episode_measures
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.parts import PartError, read_failures, read_part
-from trustroute.harness.study.plan import EpisodeTask
-from trustroute.harness.study.resume import quarantine_part
+from trustroute.harness.study.inputs import store_inputs
+from trustroute.harness.study.parts import read_failures
+from trustroute.harness.study.plan import EpisodeTask, participant_types
+from trustroute.harness.study.resume import read_parts
 
 PACKAGES: tuple[str, ...] = (
     "trustroute",
@@ -123,22 +124,14 @@ def consolidate(
     Raises DamagedParts (after moving them aside) when a part fails verification."""
     from tqdm import tqdm
 
-    from trustroute.harness.study.plan import participant_types
-
     study_dir = Path(study_dir)
     types = participant_types(config)
     episode_rows, roads_tables, kinematics_tables, incident_tables = [], [], [], []
-    damaged: list[str] = []
+    parts, damaged = read_parts(study_dir, tasks)
     for task in tqdm(tasks, desc="consolidating", unit="episode", disable=None if progress else True,
                      leave=False, dynamic_ncols=True):
-        path = part_path(study_dir, task.episode_id)
-        if not path.exists():
-            continue
-        try:
-            part = read_part(path)
-        except PartError:
-            damaged.append(task.episode_id)
-            quarantine_part(study_dir, task.episode_id)
+        part = parts.get(task.episode_id)
+        if part is None:
             continue
         summary, table = part.summary, part.tables["roads"]
         mean_reported, reports = _reported(table.column("reported_trust"))
@@ -178,7 +171,6 @@ def consolidate(
     if incident_tables:
         write_table(pa.concat_tables(incident_tables), study_dir / INCIDENTS_FILE)
     failures = read_failures(study_dir)
-    from trustroute.harness.study.inputs import store_inputs
 
     recorded_config, inputs = store_inputs(study_dir, config)
     manifest = {
@@ -216,7 +208,6 @@ def consolidate(
     }
     if tuple(manifest) != MANIFEST_KEYS:  # the dataset's definition and this writer must agree
         raise RuntimeError(f"manifest keys {tuple(manifest)} differ from the dataset's {MANIFEST_KEYS}")
-    from trustroute.core.output_files import atomic_write_text
 
     atomic_write_text(study_dir / MANIFEST_FILE, json.dumps(manifest, indent=1, default=_jsonable),
                       "study manifest", "free disk space or pass a writable --out, then rerun")

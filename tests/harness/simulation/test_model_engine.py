@@ -21,6 +21,7 @@ from trustroute.harness.simulation.model_engine import monte_carlo, run_model_ep
 from trustroute.participants.driver_model import driver_model_from_dict
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
@@ -62,7 +63,7 @@ def test_batch_matches_exact_for_free_policy(town, driver, pomdp, spec_name):
     spec = load_spec(f"specs/{spec_name}.toml", town)
     policy = trust_free_policy(town, spec)
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec)
-    exact = evaluate(pomdp, spec, policy, fallback_after=20)
+    exact = evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=20))
     batch = simulate_batch(setup, policy, 40_000, np.random.default_rng(1))
     p = exact.satisfaction_probability
     assert exact.gap < 1e-9
@@ -72,11 +73,12 @@ def test_batch_matches_exact_for_free_policy(town, driver, pomdp, spec_name):
     assert _close(batch.junctions.mean(), exact.expected_junctions, batch.junctions.std() / 200 + 1e-9)
 
 
+@pytest.mark.slow
 def test_per_episode_path_matches_exact_and_batch_for_looping_policy(town, driver, pomdp):
     spec = load_spec("specs/phi1.toml", town)
     policy = LoopingPolicy(town)
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec, fallback_after=20)
-    exact = evaluate(pomdp, spec, policy, fallback_after=20)
+    exact = evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=20))
     n_single, n_batch = 600, 20_000
     single = _per_episode(setup, policy, driver, n_single, 3)
     batch = simulate_batch(setup, policy, n_batch, np.random.default_rng(4))
@@ -164,6 +166,7 @@ def test_one_batch_episode_is_the_tracker_episode_draw_for_draw(town):
         assert len(outcomes) >= 5     # the episodes differ: the equality is not a constant
 
 
+@pytest.mark.slow
 def test_monte_carlo_is_the_batch_path_one_episode_at_a_time(town, pomdp):
     spec = load_spec("specs/phi2.toml", town)
     policy = LoopingPolicy(town)
@@ -177,6 +180,7 @@ def test_monte_carlo_is_the_batch_path_one_episode_at_a_time(town, pomdp):
     assert result.policy == "looping+fallback20" and 0 < result.satisfaction < 1
 
 
+@pytest.mark.slow
 def test_monte_carlo_of_the_baseline_agrees_with_exact_evaluation(pomdp):
     spec = load_spec("specs/phi1.toml", pomdp.town)
     policy = trust_free_policy(pomdp.town, spec)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.exact_search import exact_optimum
@@ -29,13 +30,15 @@ def routes(town, start, length):
     return [[start] + rest for nxt in town.successors(start) for rest in routes(town, nxt, length - 1)]
 
 
+@pytest.mark.slow
 def test_exact_optimum_dominates_every_open_loop_route_and_grows_with_the_horizon(pomdp):
     town = pomdp.town
     spec = load_spec("specs/phi1.toml", town)
     horizon = 7
     optimum = exact_optimum(pomdp, spec, horizon)
-    best_route = max(evaluate(pomdp, spec, FixedRoutePolicy(town, r), fallback_after=None,
-                              max_junctions=horizon).lower for r in routes(town, spec.start, horizon))
+    best_route = max(evaluate(pomdp, spec, FixedRoutePolicy(town, r),
+                              EvaluationSettings(fallback_after=None, max_junctions=horizon)).lower
+                     for r in routes(town, spec.start, horizon))
     assert 0.5 < best_route <= optimum + 1e-12
     assert exact_optimum(pomdp, spec, 5) == 0.0  # the task needs 6 junctions
     assert exact_optimum(pomdp, spec, 6) <= optimum <= exact_optimum(pomdp, spec, 8)
