@@ -326,3 +326,44 @@ class BoundLedger:
 
     def bounds(self) -> tuple[float, float]:
         return accepted_bounds(self.accepted, self.unknown)
+
+
+# Added to the unresolved mass per level of an unbounded evaluation, as a margin for the rounding
+# of the double-precision masses summed and multiplied along the way (a level's masses carry a
+# relative error of order 1e-16 per operation over about a thousand operations per node).
+ROUNDING_MARGIN_PER_LEVEL = 1e-12
+
+
+@dataclass(eq=False)
+class UnboundedLedger(BoundLedger):
+    """BoundLedger without a junction cap: [lower, upper] of P(accepted eventually). Every level's
+    accepted mass is a lower bound (accepting states are absorbing), and it only grows with the
+    levels, like value iteration from below on the policy's chain of beliefs; the live mass of the
+    open nodes is still unresolved and counts in `upper` only. The unfolding stops when that mass
+    is at most `tolerance` (`converged`) or at the deadline."""
+
+    tolerance: float = 1e-9
+    converged: bool = False
+    levels_done: int = 0
+    open_live: float = 0.0
+
+    def settle(self, frontier, level: int, out_of_time: bool) -> np.ndarray | None:
+        self.levels_done = level
+        if out_of_time:
+            self.cut(frontier, slice(None), level, "past_deadline")
+            return None
+        self.live_masses = frontier.state.masses()
+        accepted, _, live = self.live_masses
+        open_live = float(frontier.probability @ live)
+        if open_live <= self.tolerance:
+            self.converged = True
+            self.cut(frontier, slice(None), level, "converged")
+            return None
+        ending = live <= 0
+        self.accepted += float(frontier.probability[ending] @ accepted[ending])
+        return ~ending
+
+    def bounds(self) -> tuple[float, float]:
+        margin = ROUNDING_MARGIN_PER_LEVEL * (self.levels_done + 1)
+        lower, upper = accepted_bounds(self.accepted, self.unknown + margin)
+        return max(lower - margin, 0.0), upper
