@@ -340,7 +340,7 @@ class UnboundedLedger(BoundLedger):
     accepted mass is a lower bound (accepting states are absorbing), and it only grows with the
     levels, like value iteration from below on the policy's chain of beliefs; the live mass of the
     open nodes is still unresolved and counts in `upper` only. The unfolding stops when that mass
-    is at most `tolerance` (`converged`) or at the deadline."""
+    is at most `tolerance` (`converged`), at the deadline or after `max_junctions` junctions."""
 
     tolerance: float = 1e-9
     converged: bool = False
@@ -355,9 +355,9 @@ class UnboundedLedger(BoundLedger):
         self.live_masses = frontier.state.masses()
         accepted, _, live = self.live_masses
         open_live = float(frontier.probability @ live)
-        if open_live <= self.tolerance:
-            self.converged = True
-            self.cut(frontier, slice(None), level, "converged")
+        if open_live <= self.tolerance or level == self.max_junctions:
+            self.converged = open_live <= self.tolerance
+            self.cut(frontier, slice(None), level, "converged" if self.converged else "cap")
             return None
         ending = live <= 0
         self.accepted += float(frontier.probability[ending] @ accepted[ending])

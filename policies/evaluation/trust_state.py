@@ -208,21 +208,23 @@ class UnboundedValue:
 
 def evaluate_joint_table_unbounded(pomdp: TrustPOMDP, spec: Spec, policy, belief_rule: BeliefRule = "bayes",
                                    max_nodes: int = DEFAULT_MAX_NODES, deadline: float | None = None,
-                                   tolerance: float = UNBOUNDED_TOLERANCE) -> UnboundedValue:
+                                   tolerance: float = UNBOUNDED_TOLERANCE,
+                                   max_junctions: int = UNBOUNDED_MAX_LEVELS) -> UnboundedValue:
     """`evaluate_joint_table` over unbounded time: the same merged unfolding of the policy's
     chain of joint beliefs, without a junction cap. The accepted mass after k junctions is k
     steps of value iteration from below on that chain (monotone in k, each a lower bound of the
     policy's value); the live mass still open bounds what is missing. It stops when that mass is
     at most `tolerance` or at `deadline`; nodes dropped beyond `max_nodes` per level leave their
     live mass unknown. lower is lowered and upper raised by a margin for floating-point
-    rounding (ledgers.ROUNDING_MARGIN_PER_LEVEL)."""
+    rounding (ledgers.ROUNDING_MARGIN_PER_LEVEL). `max_junctions` stops it after that many
+    junctions (an iterate of the value iteration, its open live mass unknown; tests compare it)."""
     town = pomdp.town
     compiled = compile_spec(spec, town)
     filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
     start = town.state_index(spec.start)
-    ledger = UnboundedLedger(max_junctions=UNBOUNDED_MAX_LEVELS, max_nodes=max_nodes, tolerance=tolerance)
+    ledger = UnboundedLedger(max_junctions=max_junctions, max_nodes=max_nodes, tolerance=tolerance)
     actor = SlotActor(slots=policy.action_slots, successor_table=pomdp.successor_table)
-    limits = Limits(max_junctions=UNBOUNDED_MAX_LEVELS, deadline=deadline, chunk=TABLE_CHUNK,
+    limits = Limits(max_junctions=max_junctions, deadline=deadline, chunk=TABLE_CHUNK,
                     paced=True, merge=True)
     unfold(root(start, hidden_root(filter_, start, belief_rule)), actor, ledger, limits,
            outcomes(pomdp.driver.depends_on_performance))
