@@ -19,7 +19,8 @@ which adds in the same order for every row of a stacked table as on the row alon
 
 Users: `participants.synthetic_driver.SyntheticDriver` (one driver, both engines), the model
 engine's batch path and Monte Carlo (harness/simulation/model_engine.py), POUCT's search step
-(policies/pomdp_py/pouct.py) and the posterior-predictive check (analysis/fitting/posterior_check.py).
+(policies/pomdp_py/pouct.py) and the posterior-predictive check's draws (trustroute/app/drivers.py,
+`simulate`).
 """
 
 from __future__ import annotations

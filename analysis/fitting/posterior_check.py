@@ -1,6 +1,8 @@
 """Posterior-predictive check: how far simulated drivers are from the real participants.
 
-Drivers of a model are simulated on the real episodes' own roads (the routes the participants
+Drivers of a model are simulated (trustroute/app/drivers.py, `simulate`; trustroute/app/runs.py,
+`posterior_check`, puts the check together; this module only computes on the draws) on the real
+episodes' own roads (the routes the participants
 were driven, so route choice is held fixed and only the driver differs) with the synthetic
 driver's step (participants/driver_step.py): θ_0 ~ π; on each road t >= 1 the takeover
 h_t ~ P(h | θ_{t-1}, incident), the AV's performance e_t ~ P(fail | θ_{t-1}, incident),
@@ -25,12 +27,6 @@ import numpy as np
 import pandas as pd
 
 from trustroute.participants.driver_model import DriverModel
-from trustroute.participants.driver_step import (
-    draw_initial_trust,
-    draw_reports,
-    draw_step,
-    driver_tables,
-)
 
 CHANGE_VALUES = np.arange(-6, 7)
 
@@ -105,51 +101,6 @@ def real_arrays(roads: pd.DataFrame, model: DriverModel) -> tuple[np.ndarray, ..
     return incident, takeover, report, mask
 
 
-@dataclass(frozen=True)
-class Simulated:
-    """Drivers simulated on given roads: takeover and performance (1 = fail) [n, S] (roads 1..S,
-    False past an episode's end), reported trust levels [n, S+1] (column 0: the start road; past
-    an episode's end the last report is repeated)."""
-
-    takeover: np.ndarray
-    failed: np.ndarray
-    report: np.ndarray
-
-
-def simulate(
-    model: DriverModel,
-    incident: np.ndarray,
-    mask: np.ndarray,
-    accuracy: float,
-    replicates: int,
-    rng: np.random.Generator,
-    incident_types: tuple[str, ...] | None = None,
-) -> Simulated:
-    """`replicates` drivers of `model` per row of the given roads (incident indices into
-    `incident_types`, default the model's own [n, S]; mask [n, S]), rows in order n*R."""
-    incident = np.repeat(incident, replicates, axis=0)
-    mask = np.repeat(mask, replicates, axis=0)
-    n: int
-    steps: int
-    n, steps = incident.shape
-    tables = driver_tables([model], incident_types)
-    levels = np.asarray(model.trust_levels)
-    kind = np.zeros(n, dtype=np.int64)
-    theta = draw_initial_trust(tables, kind, rng)
-    takeover = np.zeros((n, steps), dtype=bool)
-    failed = np.zeros((n, steps), dtype=bool)
-    report = np.zeros((n, steps + 1), dtype=np.int64)
-    report[:, 0] = levels[draw_reports(theta, accuracy, model.n_trust, rng)]
-    for t in range(steps):
-        live = np.flatnonzero(mask[:, t])
-        h, e, theta[live] = draw_step(tables, kind[live], incident[live, t], theta[live], rng)
-        takeover[live, t] = h.astype(bool)
-        failed[live, t] = e.astype(bool)
-        report[:, t + 1] = report[:, t]
-        report[live, t + 1] = levels[draw_reports(theta[live], accuracy, model.n_trust, rng)]
-    return Simulated(takeover=takeover, failed=failed, report=report)
-
-
 def total_variation(p: np.ndarray, q: np.ndarray) -> float:
     size = max(p.size, q.size)
     return 0.5 * float(np.abs(np.pad(p, (0, size - p.size)) - np.pad(q, (0, size - q.size))).sum())
@@ -166,47 +117,31 @@ def distances(sim: Statistics, real: Statistics) -> dict:
     }
 
 
-def posterior_check(
-    roads: pd.DataFrame,
-    models: dict[str, tuple[DriverModel, float]],
-    replicates: int,
-    rng: np.random.Generator,
-) -> dict:
-    """Real statistics, and per model (name -> (model, report accuracy)) its simulated statistics
-    and distances to the real ones."""
-    template = next(iter(models.values()))[0]
+def check_of(roads: pd.DataFrame, template: DriverModel, replicates: int) -> tuple[dict, Statistics]:
+    """The check's frame from the real logs (`template` reads the incidents): its sizes, the real
+    statistics, and an empty "models" entry that `add_model` fills."""
     incident, takeover, report, mask = real_arrays(roads, template)
-    max_roads = int(mask.sum(axis=1).max())
-    real = statistics(incident, takeover, report, mask, template.incident_types, max_roads)
-    by_model: dict[str, dict] = {}
-    out = {
-        "replicates": replicates,
-        "episodes": int(mask.shape[0]),
-        "roads": int(mask.sum()),
-        "real": real.to_dict(),
-        "models": by_model,
-    }
-    stats = {"real": real}
-    for name, (model, accuracy) in models.items():
-        simulated = simulate(
-            model, incident, mask, accuracy, replicates, rng, template.incident_types
-        )
-        sim = statistics(
-            np.repeat(incident, replicates, axis=0),
-            simulated.takeover,
-            simulated.report,
-            np.repeat(mask, replicates, axis=0),
-            model.incident_types,
-            max_roads,
-        )
-        stats[name] = sim
-        by_model[name] = {
-            "report_accuracy": accuracy,
-            "statistics": sim.to_dict(),
-            "distance": distances(sim, real),
-        }
-    out["_stats"] = stats
-    return out
+    real = statistics(incident, takeover, report, mask, template.incident_types, max_roads(mask))
+    check = {"replicates": replicates, "episodes": int(mask.shape[0]), "roads": int(mask.sum()),
+             "real": real.to_dict(), "models": {}, "_stats": {"real": real}}
+    return check, real
+
+
+def max_roads(mask: np.ndarray) -> int:
+    return int(mask.sum(axis=1).max())
+
+
+def add_model(check: dict, name: str, model: DriverModel, accuracy: float, incident: np.ndarray,
+              mask: np.ndarray, takeover: np.ndarray, report: np.ndarray) -> None:
+    """One model's simulated drivers (takeovers and reports on the real roads, `replicates` per
+    episode, drawn outside the analysis: trustroute/app/runs.py) into `check`: its statistics and
+    their distances to the real ones."""
+    replicates = check["replicates"]
+    sim = statistics(np.repeat(incident, replicates, axis=0), takeover, report,
+                     np.repeat(mask, replicates, axis=0), model.incident_types, max_roads(mask))
+    check["_stats"][name] = sim
+    check["models"][name] = {"report_accuracy": accuracy, "statistics": sim.to_dict(),
+                             "distance": distances(sim, check["_stats"]["real"])}
 
 
 def plot_check(check: dict, path: Path) -> Path:

@@ -164,7 +164,7 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
         # a simulated study whose drivers this trustroute cannot rebuild: the reports are the
         # neutral source left
         source_note = (f"the default source {belief_source!r} needs the drivers' own models, which this "
-                       "trustroute cannot rebuild from the study's config: 'reported' leads instead")
+                       "installation cannot rebuild from the study's config: 'reported' leads instead")
         belief_source = "reported"
     if f"satisfied_{belief_source}" not in satisfaction:
         raise InputError("--belief-source", "", f"belief source {belief_source!r} needs a simulated study",

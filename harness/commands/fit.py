@@ -10,8 +10,7 @@ from pathlib import Path
 
 import click
 
-from trustroute.core.errors import InputError
-from trustroute.harness.commands.options import bounded_int
+from trustroute.harness.commands.options import UsageFix, bounded_int
 from trustroute.harness.commands.output import json_option, quiet_option, with_paths
 
 CHECK_REPLICATES = 50  # simulated drivers per real episode in `fit --check`
@@ -86,8 +85,8 @@ def fit(
 
     if types is not None:
         if check or method == "counts":
-            raise InputError("--types", "", "--types fits by EM; it takes neither --check nor --method "
-                             "counts", "drop --check and --method counts, or drop --types")
+            raise UsageFix("--types fits by EM; it takes neither --check nor --method counts",
+                           "drop --check and --method counts, or drop --types")
         check_output_file(out, "--out", "driver-population file")
         fit_types(Path(study_dir), Path(out), types, max_types, restarts, iterations, bootstrap, seed,
                   shared_dynamics, as_json, quiet)
@@ -122,10 +121,10 @@ def fit(
     if check:
         import numpy as np
 
-        from trustroute.analysis.fitting.posterior_check import plot_check, posterior_check, write_check
+        from trustroute.analysis.fitting.posterior_check import plot_check, write_check
         from trustroute.analysis.study_directory import load_study, study_inputs
         from trustroute.app.populations import REPORT_ACCURACY
-        from trustroute.app.runs import aware_vs_free
+        from trustroute.app.runs import aware_vs_free, posterior_check
 
         manifest, _, roads = load_study(Path(study_dir))
         _, template, _ = study_inputs(manifest)

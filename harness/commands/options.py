@@ -14,6 +14,15 @@ from dataclasses import dataclass
 import click
 
 
+class UsageFix(click.UsageError):
+    """A usage error of a command's own (options that exclude each other, a missing argument)
+    with the fix its one line names: exit code 2 under click's own runner too."""
+
+    def __init__(self, message: str, fix: str, ctx: click.Context | None = None) -> None:
+        super().__init__(message, ctx)
+        self.fix = fix
+
+
 class FiniteFloat(click.ParamType):
     """A finite float within [minimum, maximum] (minimum excluded when `open_minimum`)."""
 

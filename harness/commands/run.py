@@ -10,8 +10,7 @@ import click
 
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults
-from trustroute.core.errors import InputError
-from trustroute.harness.commands.options import SEED
+from trustroute.harness.commands.options import SEED, UsageFix
 from trustroute.harness.commands.output import json_option, quiet_option, with_paths
 
 
@@ -53,12 +52,12 @@ def routes_file(path: str) -> str:
 def _spec_path(spec_argument: str | None, spec_option: str | None) -> str:
     """The spec file, given once: as the SPEC argument or by its old spelling --spec."""
     if spec_argument is not None and spec_option is not None:
-        raise InputError("--spec", "", "the spec is given twice",
-                         "give it once, as the SPEC argument (--spec is its old spelling)")
+        raise UsageFix("the spec is given twice",
+                       "give it once, as the SPEC argument (--spec is its old spelling)")
     spec_path = spec_argument if spec_argument is not None else spec_option
     if spec_path is None:
-        raise InputError("SPEC", "", "missing argument SPEC",
-                         "pass a spec file or a packaged spec name, e.g. `trustroute run phi1`")
+        raise UsageFix("missing argument SPEC", "pass a spec file or a packaged spec name, e.g. "
+                       "`trustroute run phi1`")
     return spec_path
 
 

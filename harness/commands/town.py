@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from trustroute.core.errors import InputError
+from trustroute.harness.commands.options import UsageFix
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 
 
@@ -40,8 +40,8 @@ def import_command(source: str, out: str, incidents_path: str | None, incident_s
     from trustroute.core.output_files import check_output_file
 
     if incidents_path is not None and incident_seed is not None:
-        raise InputError("--incident-seed", "", "--incidents and --incident-seed were both given",
-                         "pass --incidents or --incident-seed, not both")
+        raise UsageFix("--incidents and --incident-seed were both given",
+                       "pass --incidents or --incident-seed, not both")
     check_output_file(out, "--out", "town file")
     if net_out is not None:
         check_output_file(net_out, "--net-out", "SUMO net")

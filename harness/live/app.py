@@ -34,6 +34,7 @@ from starlette.requests import HTTPConnection
 
 from trustroute.harness.live.auth import EXPERIMENTER_COOKIE, PARTICIPANT_COOKIE, presented_token
 from trustroute.harness.live.protocol import (
+    CONTROL_RATE,
     MAX_BODY_BYTES,
     MAX_MESSAGE_BYTES,
     EpisodeControl,
@@ -47,7 +48,12 @@ from trustroute.harness.live.server import LiveStudy
 from trustroute.harness.live.session import Session
 
 PAGES = Path(__file__).with_name("pages")
-STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js": "text/javascript"}
+# The driver's view renders with three.js, shipped in pages/vendor/ with its licence (pinned:
+# docs/live_studies.md), so no page loads a script from elsewhere.
+STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js": "text/javascript",
+          "driver_view.js": "text/javascript", "map_view.js": "text/javascript",
+          "inputs.js": "text/javascript",
+          "vendor/three.module.js": "text/javascript", "vendor/three.core.js": "text/javascript"}
 # Every response: no framing, no sniffing, no referrer (a participant link carries a token), and
 # scripts, styles and sockets from this server only.
 SECURITY_HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
@@ -67,12 +73,18 @@ def offer(queue: asyncio.Queue, message: dict) -> None:
         queue.put_nowait(message)
 
 
-def respond(session: Session, bucket: TokenBucket, data: str | bytes) -> list[dict]:
-    """The replies to one raw client message (an error reply for a refused one)."""
-    if not bucket.take():
+def respond(session: Session, bucket: TokenBucket, data: str | bytes,
+            controls: TokenBucket | None = None) -> list[dict]:
+    """The replies to one raw client message (an error reply for a refused one). A wheel's
+    `control` messages count against `controls`, every other message against `bucket`."""
+    try:
+        message = parse_client_message(data)
+    except MessageError as exc:
+        return [exc.reply] if bucket.take() else [error_reply("rate_limited", "too many messages; slow down")]
+    if not (controls if controls is not None and message.type == "control" else bucket).take():
         return [error_reply("rate_limited", "too many messages; slow down")]
     try:
-        return session.handle(parse_client_message(data))
+        return session.handle(message)
     except MessageError as exc:
         return [exc.reply]
 
@@ -167,7 +179,7 @@ def station() -> FileResponse:
     return FileResponse(PAGES / "station.html", media_type="text/html")
 
 
-@router.get("/static/{name}")
+@router.get("/static/{name:path}")
 def static(name: str) -> FileResponse:
     if name not in STATIC:
         raise refused(404, "not_found", "no such file")
@@ -267,8 +279,10 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str) ->
             await websocket.send_json(await queue.get())
 
     sender = asyncio.create_task(send_all())
-    bucket = TokenBucket()
-    offer(queue, {"type": "welcome", "participant": session.participant, "consent": consent_text})
+    bucket, controls = TokenBucket(), TokenBucket(burst=CONTROL_RATE, rate=CONTROL_RATE)
+    offer(queue, {"type": "welcome", "participant": session.participant, "consent": consent_text,
+                  "view": session.study.config.live_view,
+                  "driving": session.study.config.live_driving})
     offer(queue, session.progress())
     session.attach(push)
     try:
@@ -277,7 +291,7 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str) ->
             if raw["type"] == "websocket.disconnect":
                 break
             data = raw["text"] if raw.get("text") is not None else (raw.get("bytes") or b"")
-            for reply in respond(session, bucket, data):
+            for reply in respond(session, bucket, data, controls):
                 offer(queue, reply)
     except WebSocketDisconnect:
         pass

@@ -30,6 +30,7 @@ MAX_MESSAGE_BYTES = 4096       # a websocket message larger than this is refused
 MAX_BODY_BYTES = 16 * 1024     # an HTTP request body larger than this is refused (413)
 BURST = 20                     # messages a connection may send at once ...
 RATE = 10.0                    # ... and per second after that (token bucket)
+CONTROL_RATE = 30.0            # `control` messages per second (their own bucket: a wheel streams)
 TRUST_LOW, TRUST_HIGH = 1, 7   # the trust scale of reports (the authors' 1-7)
 
 
@@ -92,6 +93,17 @@ class Steer(ClientMessage):
     lane: Literal["oncoming", "own"]
 
 
+class Control(ClientMessage):
+    """Continuous driving (`[live] driving = "continuous"`), in control only: the wheel and the
+    pedals as they are now, steering -1 (full left) .. 1 (full right), pedals 0 .. 1. Sent at most
+    CONTROL_RATE times a second, counted by a token bucket of its own."""
+
+    type: Literal["control"]
+    steer: Annotated[float, Field(ge=-1.0, le=1.0, allow_inf_nan=False)]
+    throttle: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
+    brake: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
+
+
 class Pass(ClientMessage):
     """Lockstep: the answer "no takeover" to an `incident` event."""
 
@@ -113,8 +125,8 @@ class Ping(ClientMessage):
     type: Literal["ping"]
 
 
-CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | Drive | Steer | Pass
-                                       | TrustReport | Resume | Ping, Field(discriminator="type")])
+CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | Drive | Steer | Control
+                                       | Pass | TrustReport | Resume | Ping, Field(discriminator="type")])
 
 
 # -- HTTP bodies ---------------------------------------------------------------------------------

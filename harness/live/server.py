@@ -175,7 +175,7 @@ class LiveStudy:
 
     def live_options(self, client: str, lockstep: bool = False) -> LiveOptions:
         return LiveOptions(self.options.pace, self.options.frame_rate, client, self.config.report_every,
-                           lockstep, self.options.final_report_seconds)
+                           lockstep, self.options.final_report_seconds, self.config.live_driving)
 
     def episode_finished(self, task: EpisodeTask) -> None:
         """An episode wrote its part: count it done and consolidate the dataset."""

@@ -22,6 +22,7 @@ from typing import Any
 from trustroute.harness.live.protocol import (
     ClientMessage,
     Consent,
+    Control,
     Drive,
     HandBack,
     MessageError,
@@ -108,8 +109,10 @@ class Session:
                     raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
                 self.tell(message.model_dump())
                 return []
-            elif isinstance(message, (Drive, Steer)):
+            elif isinstance(message, (Drive, Steer, Control)):
                 self.require("driving", message)
+                if isinstance(message, Control) != (self.study.config.live_driving == "continuous"):
+                    raise MessageError("out_of_order", f"{message.type} is not how this study drives")
                 if self.mode != "manual":
                     raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
                 self.tell(message.model_dump())

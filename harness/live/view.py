@@ -5,9 +5,12 @@
 `surroundings` reads, at frame time only, every other vehicle and person within VIEW_RADIUS of
 the ego from the running simulation: background traffic, and the incidents' SUMO objects (ids
 "inc<road index>.<role>": the obstacle, the oncoming vehicle, the parked truck, the pedestrian).
-Reading changes nothing in the simulation. A SUMO step is 0.5 s of simulated time, so at wall-clock
-pace the steps alone give two frames a second; `dead_reckoned` fills the time between them (each
-vehicle moved on at its speed and heading), marked as predicted.
+Reading changes nothing in the simulation. Each object carries what the driver's view draws: a
+handle (stable within the episode, so the station interpolates one object between frames), its
+size, SUMO's shape class and signals (brake lights, indicators); the sizes are read once per object
+(`Statics`). A SUMO step is 0.5 s of simulated time, so at wall-clock pace the steps alone give two
+frames a second; `dead_reckoned` fills the time between them (each vehicle moved on at its speed
+and heading), marked as predicted.
 """
 
 from __future__ import annotations
@@ -18,6 +21,9 @@ from pathlib import Path
 
 VIEW_RADIUS = 150.0   # metres around the ego that a frame describes
 INCIDENT_PREFIX = "inc"
+# the signals the view shows: right (1), left (2) indicator, hazard lights (4), brake light (8)
+SIGNAL_BITS = 0b1111
+ROUTE_AHEAD = 6       # roads of the ego's route a frame names, from the one it is on
 
 
 @lru_cache(maxsize=4)
@@ -31,12 +37,26 @@ def net_view(net_path: str) -> dict:
     for edge in net.getEdges(withInternal=True):
         for lane in edge.getLanes():
             lanes.append({"id": lane.getID(), "width": round(lane.getWidth(), 2),
-                          "internal": edge.getFunction() != "",
+                          "internal": edge.getFunction() != "", "kind": lane_kind(edge, lane),
+                          "index": lane.getIndex(),
                           "shape": [[round(x, 2), round(y, 2)] for x, y in lane.getShape()]})
-    junctions = {node.getID(): [round(c, 2) for c in node.getCoord()] for node in net.getNodes()
-                 if node.getType() != "internal"}
+    nodes = [node for node in net.getNodes() if node.getType() != "internal"]
+    junctions = {node.getID(): [round(c, 2) for c in node.getCoord()] for node in nodes}
+    areas = [[[round(x, 2), round(y, 2)] for x, y, *_ in node.getShape()] for node in nodes
+             if len(node.getShape()) >= 3]
     (x0, y0), (x1, y1) = net.getBBoxXY()
-    return {"lanes": lanes, "junctions": junctions, "bounds": [x0, y0, x1, y1]}
+    return {"lanes": lanes, "junctions": junctions, "areas": areas, "bounds": [x0, y0, x1, y1]}
+
+
+def lane_kind(edge, lane) -> str:
+    """What a lane is to the driver's view: "crossing", "walkingarea", "sidewalk" (pedestrians
+    only), "internal" (a road lane inside a junction) or "road"."""
+    function = edge.getFunction()
+    if function in ("crossing", "walkingarea"):
+        return function
+    if lane.allows("pedestrian") and not lane.allows("passenger"):
+        return "sidewalk"
+    return "internal" if function else "road"
 
 
 def next_junction(road: str) -> str | None:
@@ -51,10 +71,35 @@ def role(sumo_id: str) -> str:
     return "traffic"
 
 
-def surroundings(sumo, ego_id: str, x: float, y: float) -> dict:
-    """{"vehicles": [[x, y, angle, kind, speed]], "persons": [[x, y, kind]]} within VIEW_RADIUS of
-    (x, y); kind is an incident object's role ("obstacle", "oncoming", "parked", "pedestrian"),
-    else "traffic"."""
+class Statics:
+    """What does not change about an object while it is in the simulation, read once: its handle
+    (a number given in the order objects are first seen, so no SUMO id reaches the page) and, for
+    a vehicle, [length, width, height, shape class]."""
+
+    def __init__(self) -> None:
+        self.handles: dict[str, int] = {}
+        self.sizes: dict[str, list] = {}
+
+    def handle(self, sumo_id: str) -> int:
+        return self.handles.setdefault(sumo_id, len(self.handles))
+
+    def vehicle(self, sumo, vehicle: str) -> list:
+        if vehicle not in self.sizes:
+            vehicle_type = sumo.vehicle.getTypeID(vehicle)
+            self.sizes[vehicle] = [round(sumo.vehicletype.getLength(vehicle_type), 2),
+                                   round(sumo.vehicletype.getWidth(vehicle_type), 2),
+                                   round(sumo.vehicletype.getHeight(vehicle_type), 2),
+                                   sumo.vehicletype.getShapeClass(vehicle_type)]
+        return self.sizes[vehicle]
+
+
+def surroundings(sumo, ego_id: str, x: float, y: float, statics: Statics | None = None) -> dict:
+    """{"vehicles": [[x, y, angle, kind, speed, handle, length, width, height, shape, signals]],
+    "persons": [[x, y, kind, handle, angle]]} within VIEW_RADIUS of (x, y); kind is an incident
+    object's role ("obstacle", "oncoming", "parked", "pedestrian"), else "traffic"; (x, y) is a
+    vehicle's front centre, angle SUMO's (degrees clockwise from north), signals SUMO's bits
+    (1 right indicator, 2 left, 4 hazard lights, 8 brake light)."""
+    statics = statics if statics is not None else Statics()
     vehicles, persons = [], []
     for vehicle in sumo.vehicle.getIDList():
         if vehicle == ego_id:
@@ -63,12 +108,24 @@ def surroundings(sumo, ego_id: str, x: float, y: float) -> dict:
         if math.hypot(vx - x, vy - y) <= VIEW_RADIUS:
             angle = round(sumo.vehicle.getAngle(vehicle), 1)
             speed = round(sumo.vehicle.getSpeed(vehicle), 2)
-            vehicles.append([round(vx, 2), round(vy, 2), angle, role(vehicle), speed])
+            vehicles.append([round(vx, 2), round(vy, 2), angle, role(vehicle), speed, statics.handle(vehicle),
+                             *statics.vehicle(sumo, vehicle), sumo.vehicle.getSignals(vehicle) & SIGNAL_BITS])
     for person in sumo.person.getIDList():
         px, py = sumo.person.getPosition(person)
         if math.hypot(px - x, py - y) <= VIEW_RADIUS:
-            persons.append([round(px, 2), round(py, 2), role(person)])
+            persons.append([round(px, 2), round(py, 2), role(person), statics.handle(person),
+                            round(sumo.person.getAngle(person), 1)])
     return {"vehicles": vehicles, "persons": persons}
+
+
+def ego_view(sumo, ego_id: str, statics: Statics) -> dict:
+    """The ego's own part of a frame: its size, signals and the roads of its route from the one it
+    is on (the next turn, and the route on the mini-map)."""
+    length, width, _, _ = statics.vehicle(sumo, ego_id)
+    route = sumo.vehicle.getRoute(ego_id)
+    index = max(sumo.vehicle.getRouteIndex(ego_id), 0)
+    return {"length": length, "width": width, "signals": sumo.vehicle.getSignals(ego_id) & SIGNAL_BITS,
+            "route": list(route[index:index + ROUTE_AHEAD])}
 
 
 def moved_on(x: float, y: float, angle: float, speed: float, seconds: float) -> tuple[float, float]:
@@ -82,7 +139,7 @@ def dead_reckoned(frame: dict, seconds: float) -> dict:
     the ego and every vehicle along its heading at its speed (persons, at walking pace, stay).
     It is marked `predicted`: only the stepped frames are the simulation's state."""
     x, y = moved_on(frame["x"], frame["y"], frame["angle"], frame["speed"], seconds)
-    vehicles = [[*moved_on(vx, vy, angle, speed, seconds), angle, kind, speed]
-                for vx, vy, angle, kind, speed in frame["vehicles"]]
+    vehicles = [[*moved_on(vx, vy, angle, speed, seconds), angle, kind, speed, *rest]
+                for vx, vy, angle, kind, speed, *rest in frame["vehicles"]]
     return {**frame, "t": frame["t"] + seconds, "x": round(x, 2), "y": round(y, 2),
             "vehicles": [[round(v[0], 2), round(v[1], 2), *v[2:]] for v in vehicles], "predicted": True}

@@ -27,6 +27,10 @@ against the wall clock (`pace` sim seconds per wall second), reads the person's 
 pipe, pauses while the server says so, and streams frames. Driving by hand and the hold before the
 hand-back are the episode's (harness/simulation/manual_driving.py), outside lockstep: in lockstep
 the episode runs as a headless one does.
+With `[live] driving = "continuous"` the person drives by wheel and pedals instead: the
+`wheel_driving.Wheel` hook (harness/simulation/wheel_driving.py) integrates a vehicle model and
+places the ego in SUMO every step (0.05 s steps: `sumo_config`), and the frames show the model's
+pose.
 The part is written atomically by this process (harness/study/parts.py), its summary marked with
 who drove and every control the person sent.
 """
@@ -40,13 +44,16 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from trustroute.harness.live.view import dead_reckoned, next_junction, surroundings
+from trustroute.harness.live.view import Statics, dead_reckoned, ego_view, next_junction, surroundings
 from trustroute.harness.simulation.drivers import NO_INPUTS, ManualInputs
+from trustroute.harness.simulation.driving_style import MANUAL
 from trustroute.harness.simulation.episode import EGO_ID, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import reports_after_road
+from trustroute.harness.simulation.wheel_driving import Controls, Wheel
 
 PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
 FINAL_REPORT_SECONDS = 15.0   # wall seconds a trial's end waits for the last road's report
+CONTINUOUS_STEP = 0.05     # s: SUMO's step while a person may drive by wheel (the paper's CARLA tick)
 
 
 class EpisodeAborted(Exception):
@@ -61,6 +68,7 @@ class LiveOptions:
     report_every: int = 1        # the study's report_every: roads whose end prompts for a report
     lockstep: bool = False       # scripted only: the episode waits for its reply to every decision
     final_report_seconds: float = FINAL_REPORT_SECONDS
+    driving: str = "assisted"    # [live] driving: "continuous" drives a vehicle model by wheel
 
 
 class RemoteDriver:
@@ -92,6 +100,9 @@ class RemoteDriver:
         self.predicted = False             # the last frame sent was dead-reckoned
         self.hurry = False                 # a control to apply at once: the next step does not wait
         self.awaiting_report = False       # the last prompt for a report has had no answer yet
+        self.statics = Statics()           # the frames' handles and sizes of the objects seen
+        # continuous driving (a wheel; never in lockstep): harness/simulation/wheel_driving.py
+        self.wheel = Wheel(EGO_ID) if options.driving == "continuous" and not options.lockstep else None
 
     # -- the Driver and PersonControls protocols (harness/simulation/drivers.py) ----------------
     @property
@@ -104,6 +115,10 @@ class RemoteDriver:
 
     def takeover_request(self, now: float) -> bool | None:
         request, self._request = self._request, None
+        if request is False and self.wheel is not None and not self.wheel.may_hand_back:
+            # the hand-back rule: back on a lane of the route first
+            self.send({"type": "warning", "kind": "back_to_lane", "t": now})
+            return None
         return request
 
     def manual_inputs(self) -> ManualInputs:
@@ -165,7 +180,9 @@ class RemoteDriver:
         if not logged:
             self.events.append({"t": self.sim_now, "wall": time.time(), **control})
         if kind in ("takeover", "hand_back"):
-            self._request, self.hurry = kind == "takeover", True
+            # by wheel, SUMO steps 0.1 s: the next step comes soon enough, and no step is hurried
+            # ahead of the wall clock (the view would jump)
+            self._request, self.hurry = kind == "takeover", self.wheel is None
         elif kind == "trust" and int(control["value"]) in self.levels:
             self._trust = self._report = int(control["value"])
             self.awaiting_report = False
@@ -173,6 +190,8 @@ class RemoteDriver:
             self.inputs = ManualInputs(control["pedal"], self.inputs.steer)
         elif kind == "steer":
             self.inputs = ManualInputs(self.inputs.pedal, control["lane"])
+        elif kind == "control" and self.wheel is not None:
+            self.wheel.controls = Controls(control["steer"], control["throttle"], control["brake"])
         elif kind == "pause":
             if not self.paused:   # the view stands where the wall clock had brought it
                 self.held_at = min(self.sim_now, self.paced_sim_time())
@@ -200,6 +219,9 @@ class RemoteDriver:
             self.step_seconds = ego.time - self.previous_time
         self.previous_time = ego.time
         self.read_controls(0.0)
+        if self.wheel is not None:
+            for event in self.wheel.step(sumo, mode == MANUAL.name):
+                self.send({**event, "type": "warning", "kind": event["type"]})
         hurried = self.wait_for_the_wall_clock(ego.time)
         wall = self.clock()
         if hurried:   # the pace goes on from this step: no wall time is spent waiting for it again
@@ -208,10 +230,14 @@ class RemoteDriver:
         # steps), and shows the step before a takeover or hand-back is applied
         if hurried or self.predicted or wall - self.last_frame >= self.frame_interval:
             self.last_frame, self.predicted = wall, False
-            self.shown = {"type": "frame", "t": ego.time, "x": ego.x, "y": ego.y, "angle": ego.angle,
-                          "speed": ego.speed, "road": road, "lane": ego.lane, "mode": mode,
+            pose = self.wheel.pose if self.wheel is not None else None
+            x, y, angle, speed = (ego.x, ego.y, ego.angle, ego.speed) if pose is None else \
+                (round(pose.x, 2), round(pose.y, 2), round(pose.angle, 2), round(pose.speed, 2))
+            self.shown = {"type": "frame", "t": ego.time, "x": x, "y": y, "angle": angle,
+                          "speed": speed, "road": road, "lane": ego.lane, "mode": mode,
                           "junction": next_junction(road),
-                          **surroundings(sumo, EGO_ID, ego.x, ego.y)}
+                          **surroundings(sumo, EGO_ID, ego.x, ego.y, self.statics),
+                          **ego_view(sumo, EGO_ID, self.statics)}
             self.send(self.shown)
 
     def wait_for_the_wall_clock(self, step_time: float) -> bool:
@@ -275,8 +301,21 @@ def with_final_report(record: EpisodeRecord, report: int | None) -> EpisodeRecor
 
 def live_summary(summary: dict, driver: RemoteDriver) -> dict:
     """The episode summary with the live marks: who drove, and every control they sent."""
-    return {**summary, "live": {"driver": "person" if driver.options.client == "station" else "scripted",
-                                "pace": driver.options.pace, "events": driver.events}}
+    live = {"driver": "person" if driver.options.client == "station" else "scripted",
+            "pace": driver.options.pace, "events": driver.events}
+    if driver.wheel is not None:   # what the person's driving led to (collisions, the oncoming lane)
+        live["driving"] = driver.wheel.events
+    return {**summary, "live": live}
+
+
+def sumo_config(options: LiveOptions):
+    """SUMO's settings of a live episode: the study's, with 0.05 s steps while a person may drive
+    by wheel (the vehicle model is placed in SUMO every step)."""
+    if options.driving != "continuous" or options.lockstep:
+        return None
+    from trustroute.harness.simulation.sumo_start import SumoConfig
+
+    return SumoConfig(step_length=CONTINUOUS_STEP)
 
 
 def episode_worker(config, study_dir: str, task, connection, options: LiveOptions,
@@ -292,7 +331,8 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
         levels = study_context(config).driver_model(task.participant).trust_levels
         driver = RemoteDriver(connection, levels, initial_trust, options)
         connection.send({"type": "episode_start", "episode_id": task.episode_id, "trust": driver.trust})
-        record = run_planned_episode(config, task, driver=driver, observer=driver.observe, person=driver)
+        record = run_planned_episode(config, task, driver=driver, observer=driver.observe, person=driver,
+                                     sumo_config=sumo_config(options))
         record = with_final_report(record, driver.final_report())
         write_part_tables(Path(study_dir), task, live_summary(record.summary, driver), record.tables(),
                           sync=True)

@@ -26,6 +26,10 @@ variation of the drivers (participants.population.PopulationConfig; omitted: eve
 nominal model, reporting trust with accuracy 0.8). Optional `[drivers]` table: `population`, a
 driver-population file (docs/driver_type_studies.md) from which each participant's true type is drawn; the
 participant's model is that type's model (varied around it by `[population]` when given).
+Optional `[live]` table (engine "live"): `view`, what the participant station shows, "driver"
+(the first-person driver's view, the default) or "map" (the top-down view alone); `driving`, how a
+person in control drives, "assisted" (pedal keys and a pull-out to pass, the default) or
+"continuous" (steering wheel and pedals, or their keyboard stand-ins).
 
 Every key, its default and its check: docs/formats/study_config.md.
 
@@ -68,6 +72,8 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 DEFAULT_STUDIES_DIR = Path("studies")
 ENGINES: tuple[str, ...] = ("sumo", "model", "live")  # "live": `trustroute live`, people in the loop
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
+LIVE_VIEWS: tuple[str, ...] = ("driver", "map")   # [live] view: the participant station's view
+LIVE_DRIVING: tuple[str, ...] = ("assisted", "continuous")   # [live] driving: how a person drives
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
 # the belief sources a study's specs are evaluated on (analysis/belief_sources.py says what each is)
 BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported", "reference", "true")
@@ -100,6 +106,8 @@ class StudyConfig:
     robust_population: str | None = None   # the "robust" condition's population file (absolute)
     robust_objective: str = "robust"       # its objective: "robust" (worst type) or "bayes"
     driver_population: str | None = None  # [drivers] population: absolute path of the population file
+    live_view: str = "driver"               # [live] view: the participant station's view
+    live_driving: str = "assisted"          # [live] driving: pedals and pull-out, or wheel and pedals
     # the pre-registered primary belief source of the analysis (None: the neutral default,
     # analysis/belief_sources.py `default_belief_source`)
     belief_source: str | None = None
@@ -141,6 +149,9 @@ class StudyConfig:
             del settings["driver_population"]  # a study without [drivers] hashes without it
         if not settings["routes"]:
             del settings["routes"]  # a study without background routes hashes without it
+        for key, default in (("live_view", "driver"), ("live_driving", "assisted")):
+            if settings[key] == default:
+                del settings[key]  # a default hashes as a config without [live]
         if settings["belief_source"] is None:
             del settings["belief_source"]  # a study without a declared source hashes without it
         digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
@@ -238,6 +249,14 @@ class StudyConfigValues(TypedDict):
     study: dict[str, object]
     population: dict[str, object] | None
     drivers: dict[str, object] | None
+    live: dict[str, object] | None
+
+
+class LiveValues(TypedDict):
+    """The [live] table's checked values (LIVE_FIELDS)."""
+
+    view: str
+    driving: str
 
 
 FileKey = Literal["town", "driver_model", "robust_population"]  # the [study] keys naming a file (FILE_FIX)
@@ -283,6 +302,7 @@ FIELDS = field_table(
     # checked in full by participants.population (population_config_from_dict)
     Field(key="population", kind=Table(), problem="expected a table", fix="write a [population] table"),
     Field(key="drivers", kind=Table(), problem="expected a table", fix='write [drivers] population = "FILE"'),
+    Field(key="live", kind=Table(), problem="expected a table", fix='write [live] view = "driver"'),
 )
 TABLES: tuple[str, ...] = keys(FIELDS)
 _ENTRIES = ListOf(item=Text(), min_items=1, distinct=True)
@@ -352,6 +372,13 @@ DRIVERS_FIELDS = field_table(
     Field(key="population", kind=_FILE, required=True, problem=_file_path, fix=DRIVERS_FIX),
 )
 DRIVERS_KEYS: tuple[str, ...] = keys(DRIVERS_FIELDS)
+LIVE_FIELDS = field_table(
+    LiveValues,
+    Field(key="view", kind=OneOf(choices=LIVE_VIEWS, noun="view"), default="driver",
+          fix='use view = "driver" (the first-person view) or "map" (the top-down view)'),
+    Field(key="driving", kind=OneOf(choices=LIVE_DRIVING, noun="way of driving"), default="assisted",
+          fix='use driving = "assisted" (pedal keys, pull out to pass) or "continuous" (wheel and pedals)'),
+)
 
 
 # -- rules ----------------------------------------------------------------------------------------------
@@ -427,6 +454,12 @@ def _robust_population(study: StudyValues, conditions: tuple[str, ...], base: Pa
     return robust_population
 
 
+def _live(table: dict[str, object] | None, source: str) -> dict[str, str]:
+    """The [live] table's StudyConfig fields."""
+    live = check_fields(table or {}, LIVE_FIELDS, source, "study config", "live")
+    return {"live_view": live["view"], "live_driving": live["driving"]}
+
+
 def _belief_source(study: StudyValues, source: str) -> str | None:
     """The declared primary belief source; "true" needs drivers whose models the study knows."""
     declared = study["belief_source"]
@@ -474,6 +507,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         robust_population=_robust_population(study, conditions, base, source),
         robust_objective=study["robust_objective"],
         driver_population=_driver_population(tables["drivers"], base, source),
+        **_live(tables["live"], source),
         belief_source=_belief_source(study, source),
     )
 

@@ -171,3 +171,20 @@ def test_background_vehicles_key():
     for bad in (-1, "many", 1000, True):
         with pytest.raises(InputError, match="background_vehicles"):
             study_config_from_dict({"study": {**base, "background_vehicles": bad}})
+
+
+def test_the_live_view_key(tmp_path, monkeypatch):
+    monkeypatch.chdir(REPO)
+    default = load_study_config(_write(tmp_path, MINIMAL))
+    driver = load_study_config(_write(tmp_path, MINIMAL + '[live]\nview = "driver"\n', "driver.toml"))
+    shown = load_study_config(_write(tmp_path, MINIMAL + '[live]\nview = "map"\n', "map.toml"))
+    assert default.live_view == driver.live_view == "driver" and shown.live_view == "map"
+    # the default view hashes as a config without [live]; another view is another study
+    assert default.content_hash == driver.content_hash != shown.content_hash
+    wheel = load_study_config(_write(tmp_path, MINIMAL + '[live]\ndriving = "continuous"\n', "wheel.toml"))
+    assert default.live_driving == "assisted" and wheel.live_driving == "continuous"
+    assert wheel.content_hash not in (default.content_hash, shown.content_hash)
+    with pytest.raises(InputError, match="live.view"):
+        load_study_config(_write(tmp_path, MINIMAL + '[live]\nview = "bird"\n', "bad.toml"))
+    with pytest.raises(InputError, match="live"):
+        load_study_config(_write(tmp_path, MINIMAL + '[live]\nseat = "left"\n', "unknown.toml"))

@@ -1,6 +1,7 @@
 """Whole runs put together for the API and the CLI: one episode of a compiled problem with a
-policy and a synthetic driver, and the packaged policies driven by fitted driver models (the
-fitting command's check; the analysis only receives its rows)."""
+policy and a synthetic driver, and the fitting command's checks (the packaged policies driven by
+fitted driver models; fitted drivers simulated on the real roads): the analysis only receives
+their draws and rows."""
 
 from __future__ import annotations
 
@@ -9,8 +10,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
-from trustroute.app.drivers import draw_type, episode_id, synthetic_driver
+from trustroute.analysis.fitting.posterior_check import add_model, check_of, real_arrays
+from trustroute.app.drivers import draw_type, episode_id, simulate, synthetic_driver
 from trustroute.app.engines import engine_named
 from trustroute.app.inputs import load_inputs
 from trustroute.app.nets import net_for
@@ -100,3 +103,17 @@ def aware_vs_free(drivers: dict[str, DriverModel], count: int, seed: int,
                     "takeovers_per_episode": float(np.mean(frame["takeovers"])),
                 })
     return rows
+
+
+def posterior_check(roads: pd.DataFrame, models: dict[str, tuple[DriverModel, float]], replicates: int,
+                    rng: np.random.Generator) -> dict:
+    """Real statistics, and per model (name -> (model, report accuracy)) its simulated statistics
+    and distances to the real ones (analysis/fitting/posterior_check.py): `replicates` drivers of
+    each model drawn on the real episodes' roads, models in order, one Generator."""
+    template = next(iter(models.values()))[0]
+    incident, _, _, mask = real_arrays(roads, template)
+    check, _ = check_of(roads, template, replicates)
+    for name, (model, accuracy) in models.items():
+        drawn = simulate(model, incident, mask, accuracy, replicates, rng, template.incident_types)
+        add_model(check, name, model, accuracy, incident, mask, drawn.takeover, drawn.report)
+    return check

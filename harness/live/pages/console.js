@@ -32,6 +32,8 @@ function controlButton(td, participant, action) {
   const button = document.createElement("button");
   button.textContent = action;
   button.addEventListener("click", async () => {
+    // an abort throws the trial's drive away (it is run again): the experimenter confirms it
+    if (action === "abort" && !window.confirm(`Abort participant ${participant}'s trial? It will be run again.`)) return;
     try { await call("POST", `/api/participants/${participant}/control`, { action }); showError(""); }
     catch (error) { showError(error.message); }
     refresh();

@@ -1,16 +1,37 @@
-// The participant station: consent, then each trial; the mode indicator, a top-down view (the
-// net's lanes, the ego, traffic and the incidents' objects around it), the takeover / hand-back
-// control (button or space), manual driving while in control (accelerate / brake while the arrow
-// key or button is held, pull out into the oncoming lane to pass an obstacle) and trust reports
-// 1-7 (buttons or keys). It speaks the websocket protocol of docs/live_studies.md; the HttpOnly participant
-// cookie authenticates the socket.
-"use strict";
+// The participant station: consent, then each trial. While driving: the driver's view (a
+// first-person WebGL view, driver_view.js; [live] view = "driver", the default) with a dashboard
+// (speed, AUTOPILOT / MANUAL, the next turn of the route, the notices) and the top-down map as a
+// mini-map, or the top-down map alone (view = "map", map_view.js); the takeover / hand-back control
+// (button or space), manual driving while in control (accelerate / brake while the arrow key or
+// button is held, pull out into the oncoming lane to pass an obstacle) and trust reports 1-7
+// (buttons or keys). It speaks the websocket protocol of docs/live_studies.md; the HttpOnly
+// participant cookie authenticates the socket. Texts are for the participant: no road ids.
+import { DriverView, webglAvailable } from "./driver_view.js";
+import { Calibration, Inputs } from "./inputs.js";
+import { drawMap } from "./map_view.js";
 
 const $ = (id) => document.getElementById(id);
 const steps = ["consent-step", "ready-step", "drive-step", "done-step"];
+const MAP_SCALE = 3;        // pixels per metre of the large map
+const MINI_SCALE = 1.3;     // and of the mini-map
+const NOTICES = { obstacle: "Obstacle ahead in your lane", truck: "Truck ahead",
+                  pedestrian: "Pedestrian ahead" };
 let socket = null;
 let state = { phase: "consent" };
 let mode = "auto";
+let viewKind = null;        // "driver" or "map", from the welcome message
+let driverView = null;
+let net = null;
+let latest = null;          // the newest frame
+let edges = {};             // road id -> the shape of its rightmost lane (the next turn)
+let continuous = false;     // [live] driving = "continuous": wheel and pedals (inputs.js)
+let inputs = null;
+const CONTROL_INTERVAL = 1 / 30;   // s: controls are sent at most this often (the server's bucket)
+let sentControl = null;
+let sentAt = 0;
+let lastRead = performance.now() / 1000;
+const WARNINGS = { back_to_lane: "Back into your lane first: then hand back.", collision: "Collision!",
+                   off_road: "You left the road.", oncoming: "", own_lane: "", on_road: "" };
 
 function show(step) {
   for (const id of steps) $(id).classList.toggle("hidden", id !== step);
@@ -43,6 +64,12 @@ function notice(text) {
     : text;
 }
 
+function overlay(text, resumable = false) {
+  $("overlay").classList.toggle("hidden", !text);
+  $("overlay-text").textContent = text;
+  $("resume").classList.toggle("hidden", !resumable);
+}
+
 let toggling = false;   // a takeover or hand-back sent, its mode change not yet seen
 
 function setMode(next) {
@@ -62,13 +89,13 @@ function setMode(next) {
 // server's flood limit counts every message).
 let pedal = "release";
 function press(next) {
-  if (mode !== "manual" || next === pedal) return;
+  if (mode !== "manual" || next === pedal || continuous) return;
   pedal = next;
   send({ type: "drive", pedal: next });
 }
 
 function steer(lane) {
-  if (mode === "manual") send({ type: "steer", lane });
+  if (mode === "manual" && !continuous) send({ type: "steer", lane });
 }
 
 function obstacleAhead(frame) {
@@ -85,126 +112,234 @@ function onOncomingLane(frame) {
   return v !== undefined && String(frame.lane).startsWith(`${v}-${u}_`);
 }
 
-const COLOURS = { traffic: "#1e5aa8", obstacle: "#e67e00", oncoming: "#7b1fa2", parked: "#7b1fa2",
-                  pedestrian: "#d81b60" };
-let lanes = [];
-let junctions = {};
+// -- the next turn of the route -------------------------------------------------------------------
+function direction([ax, ay], [bx, by]) { return Math.atan2(by - ay, bx - ax); }
 
-async function loadNet() {
-  const response = await fetch("/api/net");
-  if (response.ok) ({ lanes, junctions } = await response.json());
+// "left", "right", "straight" or "back" from the end of road `from` into road `to`.
+function turnBetween(from, to) {
+  if (!from || !to || from.length < 2 || to.length < 2) return null;
+  const before = direction(from[from.length - 2], from[from.length - 1]);
+  const after = direction(to[0], to[1]);
+  const delta = ((((after - before) * 180) / Math.PI + 540) % 360) - 180;   // counter-clockwise: left
+  if (Math.abs(delta) > 150) return "back";
+  if (delta > 30) return "left";
+  if (delta < -30) return "right";
+  return "straight";
 }
 
-function box(context, toCanvas, x, y, angle, length, width, colour, scale, outline) {
-  const [u, v] = toCanvas(x, y);
+function remaining(shape, x, y) {   // metres from the point of `shape` nearest (x, y) to its end
+  let best = Infinity;
+  let index = 0;
+  shape.forEach(([px, py], i) => { const d = Math.hypot(px - x, py - y); if (d < best) { best = d; index = i; } });
+  let total = Math.hypot(shape[index][0] - x, shape[index][1] - y);
+  for (let i = index; i + 1 < shape.length; i++) total += Math.hypot(shape[i + 1][0] - shape[i][0], shape[i + 1][1] - shape[i][1]);
+  return total;
+}
+
+function drawTurn(turn) {
+  const canvas = $("turn");
+  const context = canvas.getContext("2d");
+  context.clearRect(0, 0, canvas.width, canvas.height);
+  canvas.classList.toggle("hidden", !turn);
+  if (!turn) return;
   context.save();
-  context.translate(u, v);
-  context.rotate((angle * Math.PI) / 180);   // SUMO's angle: degrees clockwise from north
-  context.fillStyle = colour;
-  context.fillRect((-width / 2) * scale, 0, width * scale, length * scale);   // the front at (x, y)
-  if (outline) {   // the ego: outlined, with its heading marked, so it stands out from traffic
-    context.strokeStyle = outline;
-    context.lineWidth = 2;
-    context.strokeRect((-width / 2) * scale, 0, width * scale, length * scale);
-    context.fillStyle = outline;
-    context.beginPath();
-    context.moveTo(0, -3 * scale);
-    context.lineTo((-width / 2) * scale, -0.5 * scale);
-    context.lineTo((width / 2) * scale, -0.5 * scale);
-    context.fill();
-  }
+  context.translate(canvas.width / 2, canvas.height / 2 + 6);
+  context.strokeStyle = "#ffffff";
+  context.fillStyle = "#ffffff";
+  context.lineWidth = 6;
+  context.lineJoin = "round";
+  context.beginPath();
+  context.moveTo(0, 20);
+  const tip = { straight: [0, -22], left: [-20, -12], right: [20, -12], back: [-14, 14] }[turn];
+  if (turn === "straight") context.lineTo(0, -12);
+  else if (turn === "back") { context.lineTo(0, -14); context.arc(-7, -14, 7, 0, Math.PI, true); context.lineTo(-14, 4); }
+  else { context.lineTo(0, -12); context.lineTo(tip[0] * 0.55, -12); }
+  context.stroke();
+  context.beginPath();   // the arrow head
+  const [hx, hy] = tip;
+  if (turn === "straight") { context.moveTo(hx, hy); context.lineTo(hx - 10, hy + 12); context.lineTo(hx + 10, hy + 12); }
+  else if (turn === "back") { context.moveTo(hx, hy); context.lineTo(hx - 9, hy - 11); context.lineTo(hx + 9, hy - 11); }
+  else { const s = Math.sign(hx); context.moveTo(hx, -12); context.lineTo(hx - s * 12, -22); context.lineTo(hx - s * 12, -2); }
+  context.fill();
   context.restore();
 }
 
-function draw(frame) {
-  const canvas = $("view");
-  const context = canvas.getContext("2d");
-  const scale = 3;   // pixels per metre, north up, the ego at the centre
-  const toCanvas = (x, y) => [canvas.width / 2 + (x - frame.x) * scale, canvas.height / 2 - (y - frame.y) * scale];
-  context.fillStyle = "#dfe8d8";
-  context.fillRect(0, 0, canvas.width, canvas.height);
-  context.lineCap = "round";
-  // two passes: a light band per lane, then the asphalt a little narrower, so that the lanes of a
-  // road stay apart by a thin marking
-  for (const [colour, inset] of [["#f4f4f4", 0], [null, 1.5]]) {
-    for (const lane of lanes) {
-      context.strokeStyle = colour || (lane.internal ? "#8c8c8c" : "#6f6f6f");
-      context.lineWidth = Math.max(lane.width * scale - inset, 1);
-      context.beginPath();
-      lane.shape.forEach(([x, y], i) => { const [u, v] = toCanvas(x, y); if (i) context.lineTo(u, v); else context.moveTo(u, v); });
-      context.stroke();
-    }
-  }
-  const next = junctions[frame.junction];
-  if (next) {   // the junction the ego drives to: the policy chooses the road after it
-    const [u, v] = toCanvas(next[0], next[1]);
-    context.strokeStyle = "#f9a825";
-    context.lineWidth = 3;
-    context.beginPath();
-    context.arc(u, v, 9 * scale, 0, 2 * Math.PI);
-    context.stroke();
-  }
-  for (const [x, y, angle, kind] of frame.vehicles || []) {
-    const truck = kind === "oncoming" || kind === "parked";
-    box(context, toCanvas, x, y, angle, truck ? 10 : 4.5, truck ? 2.5 : 1.8, COLOURS[kind] || COLOURS.traffic, scale);
-  }
-  for (const [x, y, kind] of frame.persons || []) {
-    const [u, v] = toCanvas(x, y);
-    context.fillStyle = COLOURS[kind] || COLOURS.pedestrian;
-    context.beginPath();
-    context.arc(u, v, 0.6 * scale, 0, 2 * Math.PI);
-    context.fill();
-  }
-  box(context, toCanvas, frame.x, frame.y, frame.angle, 4.5, 1.8, frame.mode === "manual" ? "#c62828" : "#2e7d32", scale,
-      "#ffffff");
+const TURN_WORDS = { left: "Turn left", right: "Turn right", straight: "Straight on", back: "Turn around" };
+
+function showNextTurn(frame) {
+  const route = frame.route || [];
+  const current = edges[route[0]];
+  const turn = route.length > 1 ? turnBetween(current, edges[route[1]]) : null;
+  drawTurn(turn);
+  const distance = current ? Math.round(remaining(current, frame.x, frame.y) / 10) * 10 : null;
+  $("turn-text").textContent = turn && distance !== null ? `${TURN_WORDS[turn]} in ${distance} m`
+    : distance !== null && !String(frame.road).startsWith(":") ? `Junction in ${distance} m` : "";
+}
+
+// -- frames ---------------------------------------------------------------------------------------
+function onFrame(frame) {
+  latest = frame;
+  if (state.phase !== "paused") overlay("");
   $("speed").textContent = `${(frame.speed * 3.6).toFixed(0)} km/h`;
-  $("road").textContent = `road ${frame.road}` + (onOncomingLane(frame) ? " (oncoming lane)" : "");
-  if (frame.mode === "manual") {
-    $("hint").textContent = onOncomingLane(frame)
+  const oncoming = onOncomingLane(frame);
+  $("road").textContent = oncoming ? "In the oncoming lane" : "";
+  $("road").dataset.road = frame.road;   // which road (for tests and the experimenter), never shown
+  if (frame.mode === "manual" && !continuous) {
+    $("hint").textContent = oncoming
       ? "Passing in the oncoming lane: back into your lane once past the obstacle."
       : obstacleAhead(frame)
         ? "Obstacle ahead: pull out with \u2190 to pass it through the oncoming lane when the way is clear."
         : "";
   }
+  showNextTurn(frame);
+  if (driverView) driverView.push(frame);
+  if (net) drawMap($("view"), net, frame, viewKind === "map" ? MAP_SCALE : MINI_SCALE);
 }
 
+// Continuous driving: the wheel and pedals (or the keyboard) read at every animation frame; the
+// controls are sent when they change, at most every CONTROL_INTERVAL.
+function readInputs() {
+  const now = performance.now() / 1000;
+  const controls = inputs.read(now - lastRead);
+  lastRead = now;
+  if (state.phase !== "driving") return;
+  if (controls.toggle) toggle();
+  if (mode !== "manual") { sentControl = null; return; }
+  const { steer, throttle, brake } = controls;
+  const changed = !sentControl || Math.abs(steer - sentControl.steer) > 0.005
+    || Math.abs(throttle - sentControl.throttle) > 0.01 || Math.abs(brake - sentControl.brake) > 0.01;
+  if (changed && now - sentAt >= CONTROL_INTERVAL) {
+    sentControl = { steer, throttle, brake };
+    sentAt = now;
+    send({ type: "control", steer: round(steer), throttle: round(throttle), brake: round(brake) });
+  }
+}
+const round = (value) => Math.round(value * 1000) / 1000;
+
+function animate() {
+  if (inputs) readInputs();
+  if (driverView && state.phase === "driving") driverView.render();
+  requestAnimationFrame(animate);
+}
+
+function setDriving(kind) {
+  continuous = kind === "continuous";
+  if (continuous && !inputs) inputs = new Inputs();
+  $("manual-controls").classList.toggle("hidden", continuous);
+  $("wheel-help").classList.toggle("hidden", !continuous);
+  $("calibrate-box").classList.toggle("hidden", !continuous);
+}
+
+let calibration = null;
+$("calibrate").addEventListener("click", () => {
+  calibration = new Calibration((text) => { $("calibration-text").textContent = text; });
+  $("calibrate-next").classList.remove("hidden");
+});
+$("calibrate-next").addEventListener("click", () => {
+  const done = calibration && calibration.next();
+  if (done) { inputs.calibration = done; $("calibrate-next").classList.add("hidden"); }
+});
+
+function setView(kind) {
+  if (kind === "driver" && !webglAvailable()) {
+    kind = "map";   // the fallback: this browser has no WebGL, so the top-down map is shown
+    $("error").textContent = "This browser cannot show the driver's view (no WebGL): showing the map instead.";
+  }
+  if (viewKind === kind) return;
+  viewKind = kind;
+  $("scene").className = kind;
+  const map = $("view");
+  [map.width, map.height] = kind === "map" ? [640, 480] : [200, 200];
+  $("legend").classList.toggle("hidden", kind === "driver");
+  if (kind === "driver") {
+    driverView = new DriverView($("driver"));
+    window.driverView = driverView;   // its stats (renders, frames, pose, camera) for measurements
+    if (net) driverView.setNet(net);
+  }
+}
+
+async function loadNet() {
+  const response = await fetch("/api/net");
+  if (!response.ok) return;
+  net = await response.json();
+  edges = {};
+  for (const lane of net.lanes) {
+    const edge = lane.id.slice(0, lane.id.lastIndexOf("_"));
+    if (!(edge in edges) || (lane.index ?? 0) === 0) edges[edge] = lane.shape;
+  }
+  if (driverView) driverView.setNet(net);
+}
+
+// -- the session ----------------------------------------------------------------------------------
 function onState(message) {
   state = message;
+  const next = message.done.length + 1;
   $("status").textContent = message.phase === "paused"
     ? `Paused (${message.paused_by === "disconnect" ? "connection lost" : "by the experimenter"})`
-    : message.warm_up === "pending" ? "Warm-up drive" : `Trial ${message.trial} of ${message.trials}`;
-  $("resume").classList.toggle("hidden", !(message.phase === "paused" && message.paused_by === "disconnect"));
+    : message.warm_up === "pending" ? "Warm-up drive"
+      : message.phase === "driving" ? `Trial ${message.trial} of ${message.trials}`
+        : message.phase === "ready" ? `Trial ${next} of ${message.trials} is next` : "";
+  if (message.phase === "paused") {
+    overlay(message.paused_by === "disconnect"
+      ? "Paused: the connection was lost. Press Resume to go on."
+      : "Paused by the experimenter. Please wait.", message.paused_by === "disconnect");
+  } else if (message.phase === "driving" && !latest) overlay("The vehicle is getting ready\u2026");
+  else if (message.phase === "driving") overlay("");
   if (message.phase === "consent") show("consent-step");
   else if (message.phase === "ready") {
     $("trial-text").textContent = message.warm_up === "pending"
       ? "Next: a warm-up drive, to get to know the vehicle."
-      : `Next: trial ${message.done.length + 1} of ${message.trials}.`;
+      : `Next: trial ${next} of ${message.trials}.`;
     show("ready-step");
   } else if (message.phase === "driving" || message.phase === "paused") show("drive-step");
   else if (message.phase === "done") show("done-step");
 }
 
+function startEpisode() {
+  latest = null;
+  if (driverView) driverView.clear();
+  setMode("auto");
+  notice("");
+  $("speed").textContent = "";
+  drawTurn(null);
+  $("turn-text").textContent = "";
+  overlay("The vehicle is getting ready\u2026");
+}
+
 function onMessage(message) {
   switch (message.type) {
-    case "welcome": $("consent-text").textContent = message.consent; break;
+    case "welcome":
+      $("consent-text").textContent = message.consent;
+      setView(message.view === "map" ? "map" : "driver");
+      setDriving(message.driving);
+      break;
     case "state": onState(message); break;
-    case "frame": draw(message); break;
+    case "frame": onFrame(message); break;
     case "mode": setMode(message.mode); break;
-    case "incident": notice(`Ahead: ${message.kind}`); break;
-    case "warning": handBackDue = true; notice(""); break;
+    case "incident": notice(NOTICES[message.kind] || ""); break;
+    case "warning":
+      if (message.kind === "hand_back") { handBackDue = true; notice(""); }
+      else if (message.kind in WARNINGS) notice(WARNINGS[message.kind]);
+      break;
     case "road":
       notice("");
       if (message.prompt) $("prompt").classList.remove("hidden");
       break;
-    case "episode_start": setMode("auto"); break;
+    case "episode_start": startEpisode(); break;
     case "episode_end": $("status").textContent = "Trial complete."; break;
-    case "episode_aborted": $("status").textContent = "The trial was stopped; it will be run again."; break;
-    case "episode_failed": $("error").textContent = "The trial failed; it will be run again."; break;
-    case "error":
-      toggling = false;   // a refused takeover or hand-back may be tried again
-      $("error").textContent = message.detail;
-      setTimeout(() => { if ($("error").textContent === message.detail) $("error").textContent = ""; }, 5000);
+    case "episode_aborted":
+      $("status").textContent = "The experimenter stopped this trial; it will be run again.";
+      overlay("The experimenter stopped this trial.");
       break;
+    case "episode_failed": $("error").textContent = "The trial failed; it will be run again."; break;
+    case "error": {
+      toggling = false;   // a refused takeover or hand-back may be tried again
+      if (state.phase === "paused") break;   // the overlay says why nothing moves
+      const text = message.code === "out_of_order" ? "Not possible right now." : message.detail;
+      $("error").textContent = text;
+      setTimeout(() => { if ($("error").textContent === text) $("error").textContent = ""; }, 5000);
+      break;
+    }
     default: break;
   }
 }
@@ -238,12 +373,13 @@ $("pull-out").addEventListener("click", () => steer("oncoming"));
 $("pull-in").addEventListener("click", () => steer("own"));
 const PEDALS = { ArrowUp: "accelerate", ArrowDown: "brake" };
 document.addEventListener("keyup", (event) => {
-  if (PEDALS[event.code] && pedal === PEDALS[event.code]) press("release");
+  if (!continuous && PEDALS[event.code] && pedal === PEDALS[event.code]) press("release");
 });
 $("resume").addEventListener("click", () => send({ type: "resume" }));
 document.addEventListener("keydown", (event) => {
   if (state.phase !== "driving") return;
   if (event.code === "Space") { event.preventDefault(); toggle(); }
+  else if (continuous && event.code.startsWith("Arrow")) event.preventDefault();   // inputs.js reads them
   else if (PEDALS[event.code]) { event.preventDefault(); if (!event.repeat) press(PEDALS[event.code]); }
   else if (event.code === "ArrowLeft") { event.preventDefault(); steer("oncoming"); }
   else if (event.code === "ArrowRight") { event.preventDefault(); steer("own"); }
@@ -251,3 +387,4 @@ document.addEventListener("keydown", (event) => {
 });
 loadNet();
 connect();
+requestAnimationFrame(animate);

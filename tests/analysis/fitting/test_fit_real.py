@@ -13,7 +13,9 @@ import pandas as pd
 import pytest
 
 from trustroute.analysis.fitting.driver_model import bootstrap_fit, fit_roads, regularised_takeover
-from trustroute.analysis.fitting.posterior_check import posterior_check, real_arrays, simulate
+from trustroute.analysis.fitting.posterior_check import real_arrays
+from trustroute.app.drivers import simulate
+from trustroute.app.runs import posterior_check
 from trustroute.core.dataset import read_episodes, read_roads
 from trustroute.participants.driver_model import driver_model_from_dict, load_driver_model
 

@@ -12,7 +12,7 @@ import numpy as np
 from scipy import stats
 
 from tests.policies.model.test_trust_pomdp import random_model
-from trustroute.analysis.fitting.posterior_check import simulate
+from trustroute.app.drivers import simulate
 from trustroute.participants.synthetic_driver import SyntheticDriver
 
 

@@ -23,7 +23,9 @@ from .test_live_restart import start_server
 
 pytestmark = pytest.mark.slow
 
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+# software WebGL (SwiftShader) for the driver's view
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                 "--ignore-gpu-blocklist", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 SCREENSHOT = Path(__file__).resolve().parents[3] / "docs" / "img" / "live-station.png"
 CONFIG = """[study]
@@ -63,6 +65,9 @@ def drive_trial(page, by_hand: bool) -> int:
     page.locator("#drive-step").wait_for(state="visible")
     # the first frame comes once the episode's process has started SUMO: seconds on a busy machine
     expect(page.locator("#speed")).to_contain_text("km/h", timeout=TIMEOUT_MS)
+    # the driver's view (WebGL) draws, and the participant sees no road id
+    assert page.evaluate("window.driverView.stats.renders") > 0
+    assert page.locator("#road").get_attribute("data-road") not in page.locator("#drive-step").inner_text()
     page.keyboard.press("6")
     expect(page.locator("#reported")).to_contain_text("6")
     passes = drive_by_hand(page) if by_hand else ride(page)
@@ -96,7 +101,9 @@ def drive_by_hand(page) -> int:
     while not page.locator("#ready-step:visible, #done-step:visible").count():
         assert time.monotonic() < deadline, ("the trial did not end", page.locator("body").inner_text(),
                                               pulled_out, in_oncoming, taken_on)
-        mode, road = page.locator("#mode").inner_text(), page.locator("#road").inner_text()
+        mode = page.locator("#mode").inner_text()
+        road = page.locator("#road").get_attribute("data-road") or ""   # the road id is never shown
+        oncoming = "oncoming lane" in page.locator("#road").inner_text()
         hint, notice = page.locator("#hint").inner_text(), page.locator("#incident").inner_text()
         answer_prompt(page)
         if mode == "AUTOPILOT":
@@ -105,15 +112,15 @@ def drive_by_hand(page) -> int:
                 and time.monotonic() - pulled_out > PASS_WAIT:
             pulled_out = None   # no way past it on this road (the ego waits at the junction): hand back
             page.keyboard.press("Space")
-        elif mode == "AUTOPILOT" and road and road.split(" (")[0] != taken_on:
+        elif mode == "AUTOPILOT" and road and road != taken_on:
             page.keyboard.press("Space")
-            taken_on = road.split(" (")[0]   # at most one takeover per road
+            taken_on = road   # at most one takeover per road
             page.keyboard.down("ArrowUp")
             page.keyboard.up("ArrowUp")
         elif mode == "MANUAL" and pulled_out is None and "Obstacle ahead" in hint:
             page.keyboard.press("ArrowLeft")
             pulled_out = time.monotonic()
-        elif mode == "MANUAL" and pulled_out is not None and "(oncoming lane)" in road:
+        elif mode == "MANUAL" and pulled_out is not None and oncoming:
             if not in_oncoming and passes == 0:
                 SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
                 page.screenshot(path=str(SCREENSHOT), full_page=True)
@@ -140,7 +147,7 @@ def test_a_whole_session_in_chromium_is_read_by_analyze_and_fit(tmp_path):
             browser = playwright.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
             try:
                 link = create_participant(browser, address, token)
-                page = browser.new_context(viewport={"width": 760, "height": 900}).new_page()
+                page = browser.new_context(viewport={"width": 1000, "height": 900}).new_page()
                 page.set_default_timeout(60_000)
                 page.goto(link)
                 assert page.url.endswith("/station")
@@ -148,6 +155,7 @@ def test_a_whole_session_in_chromium_is_read_by_analyze_and_fit(tmp_path):
                 page.locator("#ready-step").wait_for(state="visible")
                 assert "warm-up" in page.locator("#trial-text").inner_text()
                 drive_trial(page, by_hand=False)   # the warm-up
+                assert page.locator("#status").inner_text() == "Trial 1 of 4 is next"
                 passes = sum(drive_trial(page, by_hand=True) for _ in range(4))
                 page.locator("#done-step").wait_for(state="visible")
             finally:

@@ -55,8 +55,12 @@ class FakeTime:
         return self.controls.pop(0)[1]
 
 
-NO_TRAFFIC = SimpleNamespace(vehicle=SimpleNamespace(getIDList=lambda: []),
-                             person=SimpleNamespace(getIDList=lambda: []))
+NO_TRAFFIC = SimpleNamespace(   # SUMO with the ego alone (what the frames read of it)
+    vehicle=SimpleNamespace(getIDList=lambda: [], getTypeID=lambda _: "car", getSignals=lambda _: 0,
+                            getRoute=lambda _: ("A-B", "B-C"), getRouteIndex=lambda _: 0),
+    vehicletype=SimpleNamespace(getLength=lambda _: 5.0, getWidth=lambda _: 1.8, getHeight=lambda _: 1.5,
+                                getShapeClass=lambda _: "passenger"),
+    person=SimpleNamespace(getIDList=lambda: []))
 
 
 def ego_at(time: float) -> SimpleNamespace:

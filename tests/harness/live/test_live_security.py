@@ -132,7 +132,10 @@ def test_malformed_oversized_and_out_of_order_messages_get_errors_and_change_not
                  ('{"type": "takeover"}', "out_of_order"), ('{"type": "hand_back"}', "out_of_order"),
                  ('{"type": "start"}', "out_of_order"), ('{"type": "trust", "value": 4}', "out_of_order"),
                  ('{"type": "resume"}', "out_of_order"), ('{"type": "pass"}', "out_of_order"),
-                 ('{"type": "consent", "agree": true, "lockstep": true}', "malformed")]
+                 ('{"type": "consent", "agree": true, "lockstep": true}', "malformed"),
+                 ('{"type": "control", "steer": 2, "throttle": 0, "brake": 0}', "malformed"),
+                 ('{"type": "control", "steer": 0, "throttle": 0.5}', "malformed"),
+                 ('{"type": "control", "steer": 0, "throttle": 0, "brake": 0}', "out_of_order")]
         for raw, code in cases:
             socket.send_text(raw)
             reply = socket.receive_json()
@@ -156,6 +159,11 @@ def test_a_flood_is_rate_limited_and_changes_nothing(client, live_study):
         codes = [reply.get("code") for reply in replies]
         assert codes.count("rate_limited") >= flood - BURST - 5
         assert set(codes) <= {"rate_limited", "out_of_order"}
+        # a wheel's controls count in a bucket of their own: they never starve the other messages
+        control = '{"type": "control", "steer": 0, "throttle": 0, "brake": 0}'
+        for _ in range(5):
+            socket.send_text(control)
+            assert socket.receive_json()["code"] == "out_of_order"   # not driving, and not a wheel study
         time.sleep(0.5)   # the bucket refills: the connection is usable again
         socket.send_text('{"type": "ping"}')
         assert socket.receive_json() == {"type": "pong"}
@@ -219,9 +227,10 @@ def test_the_pages_need_their_token_and_carry_the_security_headers(client, live_
     station = client.get("/station", headers=bearer(token))
     assert console.status_code == station.status_code == 200
     assert "experimenter console" in console.text and "/static/station.js" in station.text
-    for name in ("live.css", "console.js", "station.js"):
+    for name in ("live.css", "console.js", "station.js", "driver_view.js", "map_view.js", "inputs.js",
+                 "vendor/three.module.js", "vendor/three.core.js"):
         assert client.get(f"/static/{name}").status_code == 200
-    for name in ("..%2Fserver.py", "app.py", "console.html"):
+    for name in ("..%2Fserver.py", "app.py", "console.html", "vendor/three.LICENSE", "vendor/../app.py"):
         assert client.get(f"/static/{name}").status_code == 404
     for response in (console, station, client.get("/api/participants")):
         assert response.headers["x-frame-options"] == "DENY"

@@ -1,0 +1,182 @@
+"""The driver's view in a browser: how fast it draws and how much the stream costs.
+
+Starts `trustroute live` at pace 1 (wall-clock time) with one participant whose station is
+Debian's Chromium, headless, with software WebGL (SwiftShader: no GPU is used), and drives the
+trial on autopilot. Measured over WINDOW wall seconds once the first frame has arrived:
+- the rate at which the page draws the driver's view (requestAnimationFrame callbacks that
+  rendered, from `window.driverView.stats.renders`), against the display rate Chromium gives a
+  headless page (rAF callbacks counted by a probe script in the same window);
+- the frames received per second (`stats.frames`) and the websocket's bytes per second to the
+  participant (every server message, counted by a Playwright websocket listener);
+- the server's CPU time per wall second (the server and its episode process, from /proc).
+With `[live] driving = "continuous"` and a virtual wheel (a script replacing
+`navigator.getGamepads`, read in the standard mapping), once in control: the latency from turning
+the wheel to the first drawn frame whose ego heading has turned (by more than 0.2°), measured in the
+page with performance.now() (LATENCY_SAMPLES pulses of the wheel, each undone), and the server's
+CPU time per wall second while the person drives.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import httpx
+
+from benchmarks.bench_live import start_live_server
+
+CONFIG = """[study]
+name = "bench-driver-view"
+participants = 1
+seed = 1
+engine = "live"
+specs = ["phi1"]
+conditions = ["free"]
+"""
+WINDOW = 20.0   # wall seconds measured
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                 "--ignore-gpu-blocklist", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+COUNTS = "[window.driverView.stats.renders, window.driverView.stats.frames, window.rafProbe]"
+LATENCY_SAMPLES = 20
+WHEEL = """
+window.wheel = { steer: 0, throttle: 0.25, button: false };
+navigator.getGamepads = () => [{ id: "virtual", index: 0, connected: true, mapping: "standard",
+  timestamp: performance.now(), axes: [window.wheel.steer, 0, 0, 0],
+  buttons: Array.from({ length: 17 }, (_, i) => {
+    const value = i === 7 ? window.wheel.throttle : i === 0 && window.wheel.button ? 1 : 0;
+    return { pressed: value > 0.5, touched: value > 0, value };
+  }) }];
+"""
+# one pulse: the wheel turned at t0; the first animation frame whose drawn heading differs from
+# the heading at t0 ends it; the wheel is turned back as long to undo the turn
+PULSE = """async (steer) => {
+  const view = window.driverView;
+  const start = view.stats.pose[2];
+  const t0 = performance.now();
+  window.wheel.steer = steer;
+  const latency = await new Promise((resolve) => {
+    const check = () => {
+      const turned = Math.abs(((view.stats.pose[2] - start + 540) % 360) - 180);
+      if (turned > 0.2) resolve(performance.now() - t0);
+      else if (performance.now() - t0 > 3000) resolve(null);
+      else requestAnimationFrame(check);
+    };
+    requestAnimationFrame(check);
+  });
+  window.wheel.steer = -steer;
+  await new Promise((resolve) => setTimeout(resolve, (latency || 0) + 50));
+  window.wheel.steer = 0;
+  await new Promise((resolve) => setTimeout(resolve, 700));
+  return latency;
+}"""
+RAF_PROBE = "window.rafProbe = 0; (function tick() { window.rafProbe += 1; requestAnimationFrame(tick); })();"
+
+
+def tree_cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of `pid` and its children (the episode processes)."""
+    ticks = os.sysconf("SC_CLK_TCK")
+    total = 0.0
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(entry.name) == pid or int(fields[1]) == pid:
+            total += (int(fields[11]) + int(fields[12])) / ticks
+    return total
+
+
+def measure(workdir: Path) -> dict:
+    from playwright.sync_api import sync_playwright
+
+    config_path = workdir / "view.toml"
+    config_path.write_text(CONFIG)
+    process, address, token = start_live_server(config_path, workdir / "study", "--pace", "1", "--no-warm-up")
+    try:
+        headers = {"Authorization": f"Bearer {token}"}
+        link = httpx.post(f"http://{address}/api/participants", json={}, headers=headers).json()["link"]
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+            page = browser.new_context(viewport={"width": 1000, "height": 800}).new_page()
+            received = []
+            page.on("websocket", lambda ws: ws.on("framereceived", lambda payload: received.append(
+                (time.perf_counter(), len(payload if isinstance(payload, bytes) else payload.encode())))))
+            page.goto(f"http://{address}{link}")
+            page.locator("#agree").click()
+            page.locator("#start-trust button", has_text="4").click()
+            page.locator("#speed").filter(has_text="km/h").wait_for(timeout=120_000)
+            page.evaluate(RAF_PROBE)
+            before = page.evaluate(COUNTS)
+            cpu_before, started = tree_cpu_seconds(process.pid), time.perf_counter()
+            page.wait_for_timeout(WINDOW * 1000)
+            after = page.evaluate(COUNTS)
+            elapsed = time.perf_counter() - started
+            cpu = tree_cpu_seconds(process.pid) - cpu_before
+            browser.close()
+    finally:
+        process.kill()
+        process.wait()
+    sent = sum(size for at, size in received if started <= at <= started + elapsed)
+    return {"renders_per_s": (after[0] - before[0]) / elapsed,
+            "frames_per_s": (after[1] - before[1]) / elapsed,
+            "raf_per_s": (after[2] - before[2]) / elapsed, "bytes_per_s": sent / elapsed,
+            "server_cpu_per_s": cpu / elapsed, "window_s": elapsed}
+
+
+def measure_latency(workdir: Path) -> dict:
+    from playwright.sync_api import sync_playwright
+
+    config_path = workdir / "wheel.toml"
+    config_path.write_text(CONFIG.replace('name = "bench-driver-view"', 'name = "bench-wheel"')
+                           + '\n[live]\ndriving = "continuous"\n')
+    process, address, token = start_live_server(config_path, workdir / "wheel", "--pace", "1", "--no-warm-up")
+    try:
+        headers = {"Authorization": f"Bearer {token}"}
+        link = httpx.post(f"http://{address}/api/participants", json={}, headers=headers).json()["link"]
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+            page = browser.new_context(viewport={"width": 1000, "height": 800}).new_page()
+            page.add_init_script(WHEEL)
+            page.goto(f"http://{address}{link}")
+            page.locator("#agree").click()
+            page.locator("#start-trust button", has_text="4").click()
+            page.locator("#speed").filter(has_text="km/h").wait_for(timeout=120_000)
+            page.wait_for_timeout(3000)
+            page.evaluate("window.wheel.button = true")
+            page.locator("#mode").filter(has_text="MANUAL").wait_for(timeout=30_000)
+            page.evaluate("window.wheel.button = false")
+            cpu_before, started = tree_cpu_seconds(process.pid), time.perf_counter()
+            latencies = [page.evaluate(PULSE, 0.3 if i % 2 else -0.3) for i in range(LATENCY_SAMPLES)]
+            cpu = (tree_cpu_seconds(process.pid) - cpu_before) / (time.perf_counter() - started)
+            browser.close()
+    finally:
+        process.kill()
+        process.wait()
+    return {"latencies": [value for value in latencies if value is not None],
+            "missed": sum(value is None for value in latencies), "server_cpu_per_s": cpu}
+
+
+def run() -> list[dict]:
+    load = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory() as directory:
+        m = measure(Path(directory))
+        wheel = measure_latency(Path(directory))
+    latencies = sorted(wheel["latencies"])
+    return [{"name": "driver_view_frame_rate", "renders_per_s": round(m["renders_per_s"], 1),
+             "raf_per_s": round(m["raf_per_s"], 1), "frames_received_per_s": round(m["frames_per_s"], 1),
+             "window_s": round(m["window_s"], 1), "renderer": "SwiftShader (software WebGL)",
+             "load_average": round(load, 2)},
+            {"name": "driver_view_stream", "bytes_per_s": round(m["bytes_per_s"]),
+             "server_cpu_seconds_per_s": round(m["server_cpu_per_s"], 3), "pace": 1.0},
+            {"name": "driver_view_wheel_latency", "samples": len(latencies), "missed": wheel["missed"],
+             "median_ms": round(statistics.median(latencies), 1) if latencies else None,
+             "p95_ms": round(latencies[min(len(latencies) - 1, math.ceil(0.95 * len(latencies)) - 1)], 1)
+             if latencies else None, "target_ms": 100,
+             "server_cpu_seconds_per_s_driving": round(wheel["server_cpu_per_s"], 3)}]

@@ -1,0 +1,144 @@
+// Continuous driving inputs ([live] driving = "continuous"): a steering wheel with pedals or a
+// gamepad through the browser's Gamepad API, calibrated once and remembered by this browser
+// (localStorage), or the keyboard as the fallback. `read(seconds)` gives the controls now:
+// {steer: -1 (full left) .. 1 (full right), throttle: 0..1, brake: 0..1, toggle: true once when
+// the take-over / hand-back button is pressed}.
+//
+// Without a calibration a gamepad is read in the browser's "standard" mapping (left stick: steer,
+// right trigger: throttle, left trigger: brake, A: take over / hand back). A wheel (G29, G920:
+// their pedals are axes whose resting value differs per model) needs the calibration.
+
+const STORAGE_KEY = "trustroute.wheel";
+const KEY_STEER_RATE = 1.5;    // per second: how fast a held arrow key turns the wheel
+const KEY_CENTRE_RATE = 3.0;   // per second: how fast it comes back when let go
+
+export function loadCalibration(storage = window.localStorage) {
+  try { return JSON.parse(storage.getItem(STORAGE_KEY) || "null"); } catch { return null; }
+}
+
+function saveCalibration(calibration, storage = window.localStorage) {
+  storage.setItem(STORAGE_KEY, JSON.stringify(calibration));
+}
+
+const clamp = (value, low, high) => Math.min(Math.max(value, low), high);
+
+// 0 at `rest`, 1 at `full`, whichever way the axis runs.
+function pedal(value, rest, full) {
+  return full === rest ? 0 : clamp((value - rest) / (full - rest), 0, 1);
+}
+
+export function firstGamepad() {
+  for (const pad of navigator.getGamepads ? navigator.getGamepads() : []) if (pad && pad.connected) return pad;
+  return null;
+}
+
+export class Inputs {
+  constructor() {
+    this.calibration = loadCalibration();
+    this.keys = new Set();
+    this.keySteer = 0;
+    this.buttonDown = false;
+    document.addEventListener("keydown", (event) => this.keys.add(event.code));
+    document.addEventListener("keyup", (event) => this.keys.delete(event.code));
+    window.addEventListener("blur", () => this.keys.clear());
+  }
+
+  read(seconds) {
+    const pad = firstGamepad();
+    return pad ? this.fromGamepad(pad) : this.fromKeyboard(seconds);
+  }
+
+  fromGamepad(pad) {
+    const c = this.calibration;
+    const axis = (index) => pad.axes[index] ?? 0;
+    const button = (index) => pad.buttons[index] ?? { pressed: false, value: 0 };
+    let steer, throttle, brake, pressed;
+    if (c) {
+      const { centre, left, right } = c.steer;
+      const away = axis(c.steer.axis) - centre;   // the axis may run either way
+      steer = Math.sign(away) === Math.sign(left - centre)
+        ? -clamp(Math.abs(away) / (Math.abs(left - centre) || 1), 0, 1)
+        : clamp(Math.abs(away) / (Math.abs(right - centre) || 1), 0, 1);
+      throttle = pedal(axis(c.throttle.axis), c.throttle.rest, c.throttle.full);
+      brake = pedal(axis(c.brake.axis), c.brake.rest, c.brake.full);
+      pressed = button(c.button).pressed;
+    } else {
+      steer = clamp(axis(0), -1, 1);
+      throttle = button(7).value;
+      brake = button(6).value;
+      pressed = button(0).pressed;
+    }
+    const toggle = pressed && !this.buttonDown;
+    this.buttonDown = pressed;
+    return { steer, throttle, brake, toggle, source: "gamepad" };
+  }
+
+  fromKeyboard(seconds) {
+    const left = this.keys.has("ArrowLeft");
+    const right = this.keys.has("ArrowRight");
+    if (left !== right) this.keySteer = clamp(this.keySteer + (right ? 1 : -1) * KEY_STEER_RATE * seconds, -1, 1);
+    else this.keySteer -= Math.sign(this.keySteer) * Math.min(Math.abs(this.keySteer), KEY_CENTRE_RATE * seconds);
+    return { steer: this.keySteer, throttle: this.keys.has("ArrowUp") ? 1 : 0,
+             brake: this.keys.has("ArrowDown") ? 1 : 0, toggle: false, source: "keyboard" };
+  }
+}
+
+// The calibration: one step at a time, each read from the first gamepad when the person presses
+// Next. `onText(text)` shows the instruction; `done(calibration)` when saved.
+const STEPS = [
+  ["rest", "Let go of the wheel and the pedals, then press Next."],
+  ["left", "Turn the wheel fully to the left and hold it, then press Next."],
+  ["right", "Turn the wheel fully to the right and hold it, then press Next."],
+  ["throttle", "Press the accelerator pedal fully and hold it, then press Next."],
+  ["brake", "Press the brake pedal fully and hold it, then press Next."],
+  ["button", "Hold the button you will use to take over and hand back, then press Next."],
+];
+
+export class Calibration {
+  constructor(onText) {
+    this.onText = onText;
+    this.step = 0;
+    this.readings = {};
+    onText(firstGamepad() ? STEPS[0][1] : "Connect the wheel or gamepad and press any of its buttons, then press Next.");
+  }
+
+  // The axis that moved most from the resting reading (not `except`).
+  moved(pad, except = -1) {
+    let best = -1;
+    let largest = 0.2;   // an axis must move at least this far to count
+    pad.axes.forEach((value, index) => {
+      const change = Math.abs(value - this.readings.rest[index]);
+      if (index !== except && change > largest) { largest = change; best = index; }
+    });
+    return best;
+  }
+
+  next() {
+    const pad = firstGamepad();
+    if (!pad) { this.onText("No wheel or gamepad found: connect it and press one of its buttons."); return false; }
+    const [name] = STEPS[this.step];
+    if (name === "rest") this.readings.rest = [...pad.axes];
+    else if (name === "button") {
+      const index = pad.buttons.findIndex((b) => b.pressed);
+      if (index < 0) { this.onText("No button is held: hold it, then press Next."); return false; }
+      this.readings.button = index;
+    } else {
+      const except = name === "left" || name === "right" ? -1 : this.readings.left?.axis;
+      const axis = name === "right" ? this.readings.left.axis : this.moved(pad, except);
+      if (axis < 0) { this.onText("Nothing moved: try again, then press Next."); return false; }
+      this.readings[name] = { axis, value: pad.axes[axis] };
+    }
+    this.step += 1;
+    if (this.step < STEPS.length) { this.onText(STEPS[this.step][1]); return false; }
+    const r = this.readings;
+    const calibration = {
+      steer: { axis: r.left.axis, left: r.left.value, right: r.right.value, centre: r.rest[r.left.axis] },
+      throttle: { axis: r.throttle.axis, rest: r.rest[r.throttle.axis], full: r.throttle.value },
+      brake: { axis: r.brake.axis, rest: r.rest[r.brake.axis], full: r.brake.value },
+      button: r.button,
+    };
+    saveCalibration(calibration);
+    this.onText("Calibrated: this browser remembers it.");
+    return calibration;
+  }
+}

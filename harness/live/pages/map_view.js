@@ -1,0 +1,85 @@
+// The top-down view: north up, the ego at the centre; the net's lanes, junctions and crossings
+// (from /api/net), the ego's route, the next junction ringed, and the vehicles and persons of the
+// frame as they are in SUMO. The station draws it large ([live] view = "map") or as the driver's
+// view's mini-map.
+
+export const COLOURS = { traffic: "#1e5aa8", obstacle: "#e67e00", oncoming: "#7b1fa2", truck: "#7b1fa2", parked: "#7b1fa2",
+                         pedestrian: "#d81b60" };
+
+function box(context, toCanvas, x, y, angle, length, width, colour, scale, outline) {
+  const [u, v] = toCanvas(x, y);
+  context.save();
+  context.translate(u, v);
+  context.rotate((angle * Math.PI) / 180);   // SUMO's angle: degrees clockwise from north
+  context.fillStyle = colour;
+  context.fillRect((-width / 2) * scale, 0, width * scale, length * scale);   // the front at (x, y)
+  if (outline) {   // the ego: outlined, with its heading marked, so it stands out from traffic
+    context.strokeStyle = outline;
+    context.lineWidth = 2;
+    context.strokeRect((-width / 2) * scale, 0, width * scale, length * scale);
+    context.fillStyle = outline;
+    context.beginPath();
+    context.moveTo(0, -3 * scale);
+    context.lineTo((-width / 2) * scale, -0.5 * scale);
+    context.lineTo((width / 2) * scale, -0.5 * scale);
+    context.fill();
+  }
+  context.restore();
+}
+
+function strokeLane(context, toCanvas, lane) {
+  context.beginPath();
+  lane.shape.forEach(([x, y], i) => {
+    const [u, v] = toCanvas(x, y);
+    if (i) context.lineTo(u, v); else context.moveTo(u, v);
+  });
+  context.stroke();
+}
+
+// `scale`: pixels per metre. `route`: the roads of the ego's route from the one it is on.
+export function drawMap(canvas, net, frame, scale) {
+  const context = canvas.getContext("2d");
+  const toCanvas = (x, y) => [canvas.width / 2 + (x - frame.x) * scale, canvas.height / 2 - (y - frame.y) * scale];
+  context.fillStyle = "#dfe8d8";
+  context.fillRect(0, 0, canvas.width, canvas.height);
+  context.lineCap = "round";
+  // two passes: a light band per lane, then the asphalt a little narrower, so that the lanes of a
+  // road stay apart by a thin marking
+  for (const [colour, inset] of [["#f4f4f4", 0], [null, Math.min(1.5, scale / 2)]]) {
+    for (const lane of net.lanes) {
+      context.strokeStyle = colour || (lane.internal ? "#8c8c8c" : "#6f6f6f");
+      context.lineWidth = Math.max(lane.width * scale - inset, 1);
+      strokeLane(context, toCanvas, lane);
+    }
+  }
+  const route = new Set(frame.route || []);
+  context.strokeStyle = "rgba(30, 136, 229, 0.85)";
+  for (const lane of net.lanes) {
+    if (!route.has(lane.id.slice(0, lane.id.lastIndexOf("_")))) continue;
+    context.lineWidth = Math.max(lane.width * scale * 0.45, 2);
+    strokeLane(context, toCanvas, lane);
+  }
+  const next = net.junctions[frame.junction];
+  if (next) {   // the junction the ego drives to: the policy chooses the road after it
+    const [u, v] = toCanvas(next[0], next[1]);
+    context.strokeStyle = "#f9a825";
+    context.lineWidth = 3;
+    context.beginPath();
+    context.arc(u, v, 9 * scale, 0, 2 * Math.PI);
+    context.stroke();
+  }
+  for (const [x, y, angle, kind, , , length, width] of frame.vehicles || []) {
+    const truck = kind === "oncoming" || kind === "parked" || kind === "truck";
+    box(context, toCanvas, x, y, angle, length || (truck ? 10 : 4.5), width || (truck ? 2.5 : 1.8),
+        COLOURS[kind] || COLOURS.traffic, scale);
+  }
+  for (const [x, y, kind] of frame.persons || []) {
+    const [u, v] = toCanvas(x, y);
+    context.fillStyle = COLOURS[kind] || COLOURS.pedestrian;
+    context.beginPath();
+    context.arc(u, v, Math.max(0.6 * scale, 2.5), 0, 2 * Math.PI);
+    context.fill();
+  }
+  box(context, toCanvas, frame.x, frame.y, frame.angle, frame.length || 4.5, frame.width || 1.8,
+      frame.mode === "manual" ? "#c62828" : "#2e7d32", scale, "#ffffff");
+}

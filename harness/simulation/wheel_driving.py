@@ -1,0 +1,327 @@
+"""Continuous manual driving: a person's steering wheel and pedals drive a vehicle model whose
+pose is the ego's in SUMO.
+
+- `integrate(pose, controls, seconds, params)`: a kinematic bicycle model (speed, heading,
+  position; the rear axle is the reference point, SUMO's front centre follows from it), integrated
+  in sub-steps of at most 1 / MODEL_RATE seconds with the controls held over the call.
+- `ManualDriving.step(sumo, controls, seconds)`: one SUMO step of the person's driving: the model
+  integrated over the step, the ego placed at the model's pose for the next simulation step with
+  `vehicle.moveToXY(..., keepRoute=KEEP_ROUTE_FREE)` where that pose is on its road or the
+  oncoming one (it may leave its lane and cross into the oncoming lane), and with
+  keepRoute=KEEP_ROUTE elsewhere (off the road, in a junction: SUMO keeps the ego at the nearest
+  place on its route, which the episode needs); what the previous step's placement led to is
+  reported as events.
+- SUMO's free placement replaces the ego's route by the edge it was mapped to (the oncoming road,
+  say); once the ego is back on an edge of its planned route, `ManualDriving` gives SUMO the
+  planned route again from there (`restore_route`), so the episode's routing goes on.
+
+Events (dicts with `t`, `type` and details), each logged when it begins:
+- `off_road`: the ego's centre is on no lane open to cars (SUMO maps it to none, or to a lane
+  farther away than half its width); `on_road` when it is back;
+- `oncoming`: on a lane of the road's opposite direction; `own_lane` when back on its route;
+- `collision` (`object`, `speed`): the ego's footprint overlaps a vehicle's or a person's (oriented
+  rectangles, `overlaps`). What a collision does: the ego stops where it is (the model's speed is
+  set to 0) and stands there while it touches what it hit, whatever the pedals say; the person
+  keeps control and may hand back wherever the ego is (the lane rule below is waived after a
+  collision): the autopilot then takes it from the nearest place on its route (`release`). The
+  episode goes on, as it does after SUMO's own collisions in simulated studies
+  (`--collision.action warn`).
+
+`Wheel` is the hook a live episode calls every SUMO step (harness/live/worker.py).
+`ManualDriving.may_hand_back` is the paper's hand-back rule for a person driving this way: the
+autopilot takes over again only with the ego on a lane of its planned route (by the model's pose).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+MODEL_RATE = 50.0            # Hz: the model's integration rate (at least 20 Hz whatever SUMO's step)
+KEEP_ROUTE = 1               # moveToXY: the nearest place on the ego's route
+KEEP_ROUTE_FREE = 2          # moveToXY: any lane, and off the net too
+PERSON_RADIUS = 0.3          # m: a person's footprint is a square of this half side
+NEAR = 25.0                  # m: objects farther than this from the ego are not tested for contact
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    wheelbase: float = 2.7         # m
+    front_overhang: float = 0.9    # m from the front axle to the front bumper
+    max_wheel_angle: float = 30.0  # degrees of the front wheels at full lock
+    max_accel: float = 3.0         # m/s² at full throttle
+    max_brake: float = 8.0         # m/s² at full brake
+    rolling: float = 0.15          # m/s²: what slows a rolling car with the pedals released
+    drag: float = 0.0004           # 1/m: aerodynamic drag, drag * v² in m/s²
+    max_speed: float = 25.0        # m/s
+
+
+@dataclass(frozen=True)
+class Controls:
+    """The person's inputs: steering -1 (full left) .. 1 (full right); pedals 0 .. 1."""
+
+    steer: float = 0.0
+    throttle: float = 0.0
+    brake: float = 0.0
+
+    def clamped(self) -> Controls:
+        def clamp(value: float, low: float) -> float:
+            return min(max(float(value), low), 1.0) if math.isfinite(value) else 0.0
+
+        return Controls(clamp(self.steer, -1.0), clamp(self.throttle, 0.0), clamp(self.brake, 0.0))
+
+
+@dataclass(frozen=True)
+class Pose:
+    """SUMO's view of a vehicle: front centre (x, y), angle in degrees clockwise from north, speed."""
+
+    x: float
+    y: float
+    angle: float
+    speed: float
+
+
+def forward(angle: float) -> tuple[float, float]:
+    heading = math.radians(angle)
+    return math.sin(heading), math.cos(heading)
+
+
+DEFAULT_PARAMS = VehicleParams()
+
+
+def integrate(pose: Pose, controls: Controls, seconds: float, params: VehicleParams = DEFAULT_PARAMS) -> Pose:
+    """The pose after `seconds` of the kinematic bicycle model under `controls` (no reversing)."""
+    controls = controls.clamped()
+    steps = max(1, math.ceil(seconds * MODEL_RATE - 1e-9))
+    dt = seconds / steps
+    fx, fy = forward(pose.angle)
+    to_rear = params.wheelbase + params.front_overhang
+    x, y = pose.x - to_rear * fx, pose.y - to_rear * fy     # the rear axle
+    angle, speed = pose.angle, pose.speed
+    wheel = math.tan(math.radians(controls.steer * params.max_wheel_angle))
+    for _ in range(steps):
+        accel = controls.throttle * params.max_accel - controls.brake * params.max_brake
+        accel -= (params.rolling if speed > 0 else 0.0) + params.drag * speed * speed
+        new_speed = min(max(speed + accel * dt, 0.0), params.max_speed)
+        travelled = 0.5 * (speed + new_speed) * dt
+        turned = math.degrees(travelled * wheel / params.wheelbase)   # right: clockwise
+        fx, fy = forward(angle + turned / 2)   # along the sub-step's mean heading (second order)
+        x, y = x + travelled * fx, y + travelled * fy
+        angle, speed = (angle + turned) % 360.0, new_speed
+    fx, fy = forward(angle)
+    return Pose(x + to_rear * fx, y + to_rear * fy, angle, speed)
+
+
+def corners(x: float, y: float, angle: float, length: float, width: float) -> list[tuple[float, float]]:
+    """The four corners of a vehicle whose front centre is (x, y)."""
+    fx, fy = forward(angle)
+    lx, ly = -fy, fx
+    return [(x - along * fx + side * lx, y - along * fy + side * ly)
+            for along, side in ((0.0, width / 2), (0.0, -width / 2), (length, -width / 2),
+                                (length, width / 2))]
+
+
+def overlaps(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> bool:
+    """Whether two convex polygons overlap (separating axis test)."""
+    for polygon in (a, b):
+        for i, (x0, y0) in enumerate(polygon):
+            x1, y1 = polygon[(i + 1) % len(polygon)]
+            nx, ny = y0 - y1, x1 - x0
+            pa = [nx * x + ny * y for x, y in a]
+            pb = [nx * x + ny * y for x, y in b]
+            if max(pa) < min(pb) or max(pb) < min(pa):
+                return False
+    return True
+
+
+def off_road(sumo, x: float, y: float) -> bool:
+    """Whether (x, y) is on no lane open to cars: farther from the nearest one's centre line than
+    half its width."""
+    try:
+        edge, position, index = sumo.simulation.convertRoad(x, y, False, "passenger")
+    except Exception:   # no lane open to cars near enough to be matched at all
+        return True
+    if not edge:
+        return True
+    lane = f"{edge}_{index}"
+    cx, cy = sumo.simulation.convert2D(edge, position, index)
+    return math.hypot(x - cx, y - cy) > sumo.lane.getWidth(lane) / 2
+
+
+def restore_route(sumo, vehicle_id: str, route: list[str]) -> bool:
+    """After a free placement: the planned route again from the edge the ego is on, when that
+    edge is on it (True then)."""
+    edge = sumo.vehicle.getRoadID(vehicle_id)
+    if edge not in route:
+        return False
+    wanted = route[route.index(edge):]
+    if list(sumo.vehicle.getRoute(vehicle_id)) != wanted:
+        sumo.vehicle.setRoute(vehicle_id, wanted)
+    return True
+
+
+@dataclass
+class ManualDriving:
+    """A person driving the ego by wheel and pedals, one SUMO step at a time."""
+
+    vehicle_id: str
+    pose: Pose
+    route: list[str]                  # the planned route: the road and the next when chosen
+    length: float = 4.5
+    width: float = 1.8
+    params: VehicleParams = DEFAULT_PARAMS
+    events: list[dict] = field(default_factory=list)
+    where: str = "own_lane"           # own_lane, oncoming or off_road
+    touching: set[str] = field(default_factory=set)
+    collided: bool = False
+    current: Pose | None = None       # the pose at SUMO's time now (the model runs a step ahead)
+
+    @classmethod
+    def take_over(cls, sumo, vehicle_id: str, **options) -> ManualDriving:
+        """From where SUMO has the ego now: no jump of its pose or speed."""
+        x, y = sumo.vehicle.getPosition(vehicle_id)
+        pose = Pose(x, y, sumo.vehicle.getAngle(vehicle_id), sumo.vehicle.getSpeed(vehicle_id))
+        vehicle_type = sumo.vehicle.getTypeID(vehicle_id)
+        return cls(vehicle_id, pose, list(sumo.vehicle.getRoute(vehicle_id)),
+                   length=sumo.vehicletype.getLength(vehicle_type),
+                   width=sumo.vehicletype.getWidth(vehicle_type),
+                   **options)
+
+    def step(self, sumo, controls: Controls, seconds: float) -> Pose:
+        """Read where the last placement put the ego (events), then integrate the person's controls
+        over `seconds` and place the ego there for SUMO's next step. Returns the new pose."""
+        now = sumo.simulation.getTime()
+        self.observe(sumo, now)
+        self.current = self.pose   # where the person drives at SUMO's time now (what they see)
+        if not self.touching:   # against what it hit, the car stands (until the hand-back)
+            self.pose = integrate(self.pose, controls, seconds, self.params)
+        pose = self.pose
+        sumo.vehicle.moveToXY(self.vehicle_id, "", -1, pose.x, pose.y, pose.angle, self.placement(sumo))
+        sumo.vehicle.setSpeed(self.vehicle_id, self.pose.speed)
+        return self.pose
+
+    @property
+    def may_hand_back(self) -> bool:
+        return self.where == "own_lane" or self.collided
+
+    def release(self, sumo) -> None:
+        """The hand-back: SUMO drives on from here. Away from a lane of the route (after a
+        collision only) the ego is first put at the nearest place on its route."""
+        if self.where != "own_lane":
+            pose = self.pose
+            sumo.vehicle.moveToXY(self.vehicle_id, "", -1, pose.x, pose.y, pose.angle, KEEP_ROUTE)
+
+    def placement(self, sumo) -> int:
+        """Free placement on the ego's road and the oncoming one; anywhere else (off the road, a
+        junction, another road) SUMO keeps the ego on its route, so the episode's road and route
+        stay sound; the events and the person's view follow the model's pose all the same."""
+        # SUMO places the front centre, and puts it on no lane at all (which the episode cannot
+        # follow) when that point is off every lane: free placement only with it on one
+        front = (self.pose.x, self.pose.y)
+        if off_road(sumo, *front):
+            return KEEP_ROUTE
+        edge = sumo.simulation.convertRoad(*front, False, "passenger")[0]
+        return KEEP_ROUTE_FREE if edge in self.route or self.opposite(edge) else KEEP_ROUTE
+
+    def observe(self, sumo, now: float) -> None:
+        lane = sumo.vehicle.getLaneID(self.vehicle_id)
+        if lane and not lane.startswith(":"):
+            restore_route(sumo, self.vehicle_id, self.route)
+        self.locate(sumo, lane, now)
+        self.contacts(sumo, now)
+
+    def locate(self, sumo, lane: str, now: float) -> None:
+        fx, fy = forward(self.pose.angle)
+        centre = (self.pose.x - fx * self.length / 2, self.pose.y - fy * self.length / 2)
+        if not lane or off_road(sumo, *centre):   # by the model's pose: SUMO keeps the ego on the net
+            where = "off_road"
+        elif lane.startswith(":") or sumo.lane.getEdgeID(lane) in self.route:
+            where = "own_lane"
+        else:
+            where = "oncoming" if self.opposite(sumo.lane.getEdgeID(lane)) else "own_lane"
+        if where != self.where:
+            kind = {"off_road": "off_road", "oncoming": "oncoming"}.get(where)
+            if kind is None:
+                kind = "on_road" if self.where == "off_road" else "own_lane"
+            self.events.append({"t": now, "type": kind, "x": round(self.pose.x, 2),
+                                "y": round(self.pose.y, 2)})
+            self.where = where
+
+    def opposite(self, edge: str) -> bool:
+        road = self.route[0] if self.route else ""
+        return "-" in road and edge == "-".join(reversed(road.rsplit("-", 1)))
+
+    def contacts(self, sumo, now: float) -> None:
+        ego = corners(self.pose.x, self.pose.y, self.pose.angle, self.length, self.width)
+        touching = set()
+        for other in sumo.vehicle.getIDList():
+            if other == self.vehicle_id:
+                continue
+            ox, oy = sumo.vehicle.getPosition(other)
+            if math.hypot(ox - self.pose.x, oy - self.pose.y) > NEAR:
+                continue
+            other_type = sumo.vehicle.getTypeID(other)
+            shape = corners(ox, oy, sumo.vehicle.getAngle(other), sumo.vehicletype.getLength(other_type),
+                            sumo.vehicletype.getWidth(other_type))
+            if overlaps(ego, shape):
+                touching.add(other)
+        for person in sumo.person.getIDList():
+            px, py = sumo.person.getPosition(person)
+            if math.hypot(px - self.pose.x, py - self.pose.y) <= NEAR and overlaps(
+                    ego, corners(px, py + PERSON_RADIUS, 0.0,
+                                 2 * PERSON_RADIUS, 2 * PERSON_RADIUS)):
+                touching.add(person)
+        for other in sorted(touching - self.touching):
+            self.events.append({"t": now, "type": "collision", "object": other,
+                                "speed": round(self.pose.speed, 2)})
+            self.pose = replace(self.pose, speed=0.0)   # a crash stops the car; the person keeps control
+            self.collided = True
+        self.touching = touching
+
+
+class Wheel:
+    """The hook of a live episode: the person's latest controls drive the ego while they are in
+    control (`step`, every SUMO step); a takeover starts the model from SUMO's pose and speed and a
+    hand-back gives the ego back to SUMO where it is, at its speed (no jump either way). While
+    `hold` (the ego waits for the hand-back before the junction) the model brakes fully, once the
+    ego is back on a lane of its route."""
+
+    def __init__(self, vehicle_id: str) -> None:
+        self.vehicle_id = vehicle_id
+        self.controls = Controls()
+        self.driving: ManualDriving | None = None
+        self.events: list[dict] = []     # every takeover's events, in order
+
+    @property
+    def may_hand_back(self) -> bool:
+        return self.driving is None or self.driving.may_hand_back
+
+    @property
+    def pose(self) -> Pose | None:
+        """The person's pose at SUMO's time now while they drive (SUMO's own may differ off the
+        road, where SUMO keeps the ego on its route), else None."""
+        return None if self.driving is None else self.driving.current
+
+    def step(self, sumo, manual: bool, hold: bool = False) -> list[dict]:
+        """One SUMO step; the events it brought."""
+        if not manual:
+            if self.driving is not None:   # handed back: SUMO drives on from the model's pose and speed
+                self.driving.release(sumo)
+                self.driving = None
+                sumo.vehicle.setSpeed(self.vehicle_id, -1)
+            return []
+        if self.driving is None:
+            self.driving = ManualDriving.take_over(sumo, self.vehicle_id)
+            self.controls = Controls()
+        route = list(sumo.vehicle.getRoute(self.vehicle_id))
+        if len(route) > 1 or (route and route[0] in self.driving.route):
+            self.driving.route = route   # the episode extended it (not a free placement's one edge)
+        seen = len(self.driving.events)
+        # the hold before the junction brakes the car in its own lane only: in the oncoming lane the
+        # person first comes back (the hand-back is refused there)
+        hold = hold and self.driving.may_hand_back
+        controls = replace(self.controls, throttle=0.0, brake=1.0) if hold else self.controls
+        self.driving.step(sumo, controls, sumo.simulation.getDeltaT())
+        new = self.driving.events[seen:]
+        self.events.extend(new)
+        return new

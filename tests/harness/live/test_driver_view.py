@@ -1,0 +1,226 @@
+"""Screenshots of the driver's view in real Chromium with software WebGL (SwiftShader): the live
+application serves the station and the net the ego drives (Town01, the default town); the
+websocket is answered by the test (Playwright's route_web_socket) with frames that place the ego
+on a lane of the net and, in one of them, a truck in the oncoming lane ahead. The canvas's pixels
+are read back (toDataURL) and checked against the camera model (driver_view.js CAMERA): the sky
+in the upper part, road surface in the lower half, and the truck where the projection puts it.
+
+Never skips: without Chromium it fails and says how to install it."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import math
+import threading
+import time
+
+import httpx
+import numpy as np
+import pytest
+
+from tests.browser import chromium_executable
+from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.simulation.incidents.oncoming import TRUCK_TYPE
+
+from .conftest import tiny_config
+from .test_browser import CHROMIUM_ARGS
+
+pytestmark = pytest.mark.slow
+
+# the camera model of driver_view.js; the test checks the page uses these numbers
+CAMERA = {"eyeBack": 1.9, "eyeLeft": 0.35, "eyeHeight": 1.2, "fov": 40, "near": 0.3, "far": 600}
+SKY, ASPHALT, GRASS = (169, 207, 238), (74, 77, 80), (135, 169, 107)
+EGO_AT, TRUCK_AHEAD = 25.0, 35.0   # m along the ego's lane; the truck's front this far ahead
+TRUCK_HEIGHT = 3.4                 # SUMO's default height of the truck shape class
+TRUCK_LENGTH = TRUCK_TYPE.length
+
+
+class Server(threading.Thread):
+    """The live application on uvicorn in this process (a thread), on a free port."""
+
+    def __init__(self, study: LiveStudy) -> None:
+        import uvicorn
+
+        from benchmarks.bench_live import free_port
+        from trustroute.harness.live.app import live_app
+
+        super().__init__(daemon=True)
+        self.port = free_port()
+        self.server = uvicorn.Server(uvicorn.Config(live_app(study), host="127.0.0.1", port=self.port,
+                                                    log_level="warning", lifespan="off"))
+
+    def run(self) -> None:
+        self.server.run()
+
+    def stop(self) -> None:
+        self.server.should_exit = True
+        self.join(10)
+
+
+@pytest.fixture(scope="module")
+def station(tmp_path_factory):
+    """(page, net path): a participant's station page in Chromium with WebGL, its socket the test's."""
+    from playwright.sync_api import sync_playwright
+
+    from trustroute.harness.study.context import study_context
+    from trustroute.networks.sumo_net import build_net
+
+    tmp_path = tmp_path_factory.mktemp("driver-view")
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    server = Server(study)
+    server.start()
+    address = f"http://127.0.0.1:{server.port}"
+    deadline = time.monotonic() + 30
+    while not server.server.started:
+        assert time.monotonic() < deadline, "the live application did not start"
+        time.sleep(0.05)
+    created = httpx.post(f"{address}/api/participants", json={"label": "view"},
+                         headers={"Authorization": f"Bearer {study.experimenter_token}"}).json()
+    try:
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch(executable_path=chromium_executable(), args=CHROMIUM_ARGS)
+            page = browser.new_context(viewport={"width": 1000, "height": 800}).new_page()
+            sockets = []
+            page.route_web_socket("**/ws", lambda ws: sockets.append(ws))   # answered by the test
+            page.goto(address + created["link"])
+            deadline = time.monotonic() + 30
+            while not sockets:
+                assert time.monotonic() < deadline, "the station opened no websocket"
+                page.wait_for_timeout(50)
+            yield page, sockets[0], build_net(study_context(study.config).town).path
+            browser.close()
+    finally:
+        server.stop()
+        study.close()
+
+
+def lane_pose(lane, offset: float) -> tuple[float, float, float]:
+    """(x, y, SUMO angle) at `offset` metres along a sumolib lane."""
+    import sumolib
+
+    x, y = sumolib.geomhelper.positionAtShapeOffset(lane.getShape(), offset)
+    ahead = sumolib.geomhelper.positionAtShapeOffset(lane.getShape(), offset + 1.0)
+    return x, y, math.degrees(math.atan2(ahead[0] - x, ahead[1] - y)) % 360
+
+
+def scene_on(net_path) -> tuple[dict, list]:
+    """A frame of the ego on a straight lane of Town01 with an oncoming lane, and the truck's entry:
+    its front TRUCK_AHEAD metres ahead in the oncoming lane, facing the ego."""
+    import sumolib
+
+    net = sumolib.net.readNet(str(net_path))
+    for edge in sorted(net.getEdges(), key=lambda e: e.getID()):
+        lanes = [lane for lane in edge.getLanes() if lane.allows("passenger")]
+        if not lanes or lanes[-1].getNeigh() is None or lanes[0].getLength() < 120:
+            continue
+        lane, oncoming = lanes[0], net.getLane(lanes[-1].getNeigh())   # the rightmost lane; the opposite one
+        x, y, angle = lane_pose(lane, EGO_AT)
+        far_x, far_y, far_angle = lane_pose(lane, EGO_AT + TRUCK_AHEAD + TRUCK_LENGTH)
+        if abs((far_angle - angle + 180) % 360 - 180) > 1.0:
+            continue   # a straight stretch, so the projection's box is the truck's
+        tx, ty, tangle = lane_pose(oncoming, oncoming.getLength() - EGO_AT - TRUCK_AHEAD)
+        frame = {"type": "frame", "t": 10.0, "x": x, "y": y, "angle": angle, "speed": 0.0,
+                 "road": edge.getID(), "lane": lane.getID(), "mode": "auto",
+                 "junction": edge.getToNode().getID(), "length": 5.0, "width": 1.8, "signals": 0,
+                 "route": [edge.getID()], "vehicles": [], "persons": []}
+        truck = [tx, ty, tangle, "oncoming", 0.0, 7, TRUCK_LENGTH, TRUCK_TYPE.width, TRUCK_HEIGHT, "truck", 8]
+        return frame, truck
+    raise AssertionError("Town01 has no straight road with an oncoming lane")
+
+
+
+def project(frame: dict, points, width: int, height: int) -> np.ndarray:
+    """Pixel (column, row) of SUMO points (x, y, height) seen by the camera model from the ego."""
+    heading = math.radians(frame["angle"])
+    forward = np.array([math.sin(heading), math.cos(heading)])
+    left = np.array([-math.cos(heading), math.sin(heading)])
+    eye = np.array([frame["x"], frame["y"]]) - CAMERA["eyeBack"] * forward + CAMERA["eyeLeft"] * left
+    focal = (height / 2) / math.tan(math.radians(CAMERA["fov"]) / 2)
+    out = []
+    for x, y, z in points:
+        relative = np.array([x, y]) - eye
+        depth, aside = relative @ forward, relative @ left
+        assert depth > CAMERA["near"]
+        rise = z - CAMERA["eyeHeight"]
+        out.append((width / 2 - focal * aside / depth, height / 2 - focal * rise / depth))
+    return np.array(out)
+
+
+def truck_box(truck: list) -> list:
+    x, y, angle, _, _, _, length, width, height, *_ = truck
+    heading = math.radians(angle)
+    forward = np.array([math.sin(heading), math.cos(heading)])
+    left = np.array([-math.cos(heading), math.sin(heading)])
+    front = np.array([x, y])
+    return [(*(front - along * length * forward + side * width / 2 * left), z)
+            for along in (0, 1) for side in (-1, 1) for z in (0.3, height)]
+
+
+def show(page, socket, frame: dict) -> np.ndarray:
+    """The canvas's pixels (rows, columns, RGB) once the view has rendered `frame`."""
+    from PIL import Image
+
+    for _ in range(3):
+        socket.send(json.dumps(frame))
+        page.wait_for_timeout(60)
+    renders = page.evaluate("window.driverView.stats.renders")
+    wait_until(page, f"window.driverView.stats.renders > {renders + 3}")
+    pose = page.evaluate("window.driverView.stats.pose")
+    assert pose == pytest.approx([frame["x"], frame["y"], frame["angle"]], abs=1e-6)
+    data = page.evaluate("document.getElementById('driver').toDataURL('image/png')")
+    image = Image.open(io.BytesIO(base64.b64decode(data.split(",", 1)[1]))).convert("RGB")
+    return np.asarray(image).astype(int)
+
+
+def wait_until(page, expression: str, seconds: float = 60.0) -> None:
+    """Poll an expression in the page (evaluated by the driver, outside the page's CSP)."""
+    deadline = time.monotonic() + seconds
+    while not page.evaluate(expression):
+        assert time.monotonic() < deadline, f"never true: {expression}"
+        page.wait_for_timeout(50)
+
+
+def near(pixels: np.ndarray, colour, tolerance: int = 14) -> np.ndarray:
+    return (np.abs(pixels - np.array(colour)) <= tolerance).all(axis=-1)
+
+
+def test_the_driver_view_shows_sky_road_and_an_oncoming_truck_where_the_camera_says(station):
+    page, socket, net_path = station
+    socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver"}))
+    socket.send(json.dumps({"type": "state", "participant": 0, "label": "view", "phase": "driving",
+                            "paused_by": None, "warm_up": None, "trial": 1, "trials": 1, "episode_id": "x",
+                            "next_episode": None, "mode": "auto", "road": None, "reports": 0, "takeovers": 0,
+                            "done": [], "last_error": None}))
+    socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
+    wait_until(page, "Boolean(window.driverView && window.driverView.net)")
+    assert page.evaluate("window.driverView.stats.camera") == CAMERA
+    frame, truck = scene_on(net_path)
+
+    empty = show(page, socket, frame)
+    rows, columns, _ = empty.shape
+    colours, counts = np.unique(empty.reshape(-1, 3), axis=0, return_counts=True)
+    assert (counts > 0.005 * rows * columns).sum() >= 4, "the canvas is blank"   # sky, grass, road, kerb
+    assert near(empty[: rows // 5], SKY).mean() > 0.9, "no sky in the upper part"
+    lower = empty[rows // 2:]
+    assert near(lower, ASPHALT).mean() > 0.15, "no road surface in the lower half"
+    assert near(lower, GRASS).mean() > 0.05, "no ground beside the road"
+    # the road ahead: the ego's lane centre 13 m ahead of its front is asphalt where the camera puts it
+    heading = math.radians(frame["angle"])
+    ahead = (frame["x"] + 13 * math.sin(heading), frame["y"] + 13 * math.cos(heading), 0.0)
+    column, row = project(frame, [ahead], columns, rows)[0]
+    assert near(empty[int(row), int(column)], ASPHALT, 20), "the lane ahead is not where the camera looks"
+
+    with_truck = show(page, socket, {**frame, "vehicles": [truck]})
+    corners = project(frame, truck_box(truck), columns, rows)
+    (c0, r0), (c1, r1) = corners.min(axis=0), corners.max(axis=0)
+    assert c1 < columns / 2, "the oncoming lane is to the left"
+    inner = (slice(int(r0 + 0.2 * (r1 - r0)), int(r1 - 0.2 * (r1 - r0))),
+             slice(int(c0 + 0.2 * (c1 - c0)), int(c1 - 0.2 * (c1 - c0))))
+    changed = (np.abs(with_truck[inner] - empty[inner]).sum(axis=-1) > 30).mean()
+    assert changed > 0.9, f"the truck covers {changed:.0%} of where the camera model puts it"
+    outside = np.ones(with_truck.shape[:2], bool)
+    outside[int(r0) - 3: int(r1) + 4, max(int(c0) - 3, 0): int(c1) + 4] = False
+    moved = (np.abs(with_truck - empty).sum(axis=-1) > 30) & outside
+    assert moved.mean() < 0.002, "the truck is drawn where the camera model does not put it"

@@ -1,0 +1,157 @@
+"""Continuous manual driving: the kinematic bicycle model, and the ego placed in SUMO at its pose
+(into the oncoming lane and back, off the road, into a parked truck) on the Town01 net."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from trustroute.harness.simulation.wheel_driving import (
+    MODEL_RATE,
+    Controls,
+    ManualDriving,
+    Pose,
+    VehicleParams,
+    corners,
+    integrate,
+    overlaps,
+)
+
+NO_DRAG = VehicleParams(rolling=0.0, drag=0.0)
+
+
+def test_straight_at_constant_speed_moves_along_the_heading():
+    after = integrate(Pose(0.0, 0.0, 90.0, 10.0), Controls(), 2.0, NO_DRAG)   # east at 10 m/s
+    assert (after.x, after.y, after.angle, after.speed) == pytest.approx((20.0, 0.0, 90.0, 10.0), abs=1e-9)
+
+
+def test_a_held_steering_angle_turns_on_the_bicycle_models_circle():
+    params = NO_DRAG
+    steer = 0.5
+    radius = params.wheelbase / math.tan(math.radians(steer * params.max_wheel_angle))   # of the rear axle
+    quarter = (math.pi / 2) * radius / 8.0
+    after = integrate(Pose(0.0, 0.0, 0.0, 8.0), Controls(steer=steer), quarter, params)
+    assert after.angle == pytest.approx(90.0, abs=0.01)   # right: clockwise, from north to east
+    left = integrate(Pose(0.0, 0.0, 0.0, 8.0), Controls(steer=-steer), quarter, params)
+    assert left.angle == pytest.approx(270.0, abs=0.01)
+    # the rear axle went a quarter circle: from (0, -to_rear) to (radius, radius - to_rear)
+    to_rear = params.wheelbase + params.front_overhang
+    rear = (after.x - to_rear, after.y)
+    assert rear == pytest.approx((radius, radius - to_rear), abs=0.05)
+
+
+def test_pedals_accelerate_and_brake_to_a_stop_without_reversing():
+    params = NO_DRAG
+    faster = integrate(Pose(0.0, 0.0, 0.0, 0.0), Controls(throttle=1.0), 2.0, params)
+    assert faster.speed == pytest.approx(2 * params.max_accel)
+    stopped = integrate(Pose(0.0, 0.0, 0.0, 10.0), Controls(brake=1.0), 3.0, params)
+    assert stopped.speed == 0.0
+    assert stopped.y == pytest.approx(10.0 ** 2 / (2 * params.max_brake), abs=0.1)
+    assert Controls(steer=5.0, throttle=-1.0, brake=float("nan")).clamped() == Controls(1.0, 0.0, 0.0)
+
+
+def test_the_model_is_integrated_at_its_rate_whatever_the_step():
+    # held controls: one 0.5 s call is the same as 25 calls of 1/MODEL_RATE s
+    pose = Pose(3.0, 4.0, 30.0, 7.0)
+    controls = Controls(steer=0.3, throttle=0.4)
+    whole = integrate(pose, controls, 0.5)
+    for _ in range(int(0.5 * MODEL_RATE)):
+        pose = integrate(pose, controls, 1.0 / MODEL_RATE)
+    assert [whole.x, whole.y, whole.angle, whole.speed] == pytest.approx(
+        [pose.x, pose.y, pose.angle, pose.speed])
+
+
+def test_footprints_overlap_only_when_they_touch():
+    ego = corners(0.0, 0.0, 0.0, 4.5, 1.8)
+    assert overlaps(ego, corners(0.0, -0.5, 180.0, 4.5, 1.8))       # head on, fronts 0.5 m into each other
+    assert not overlaps(ego, corners(0.0, 0.5, 180.0, 4.5, 1.8))     # head on, 0.5 m apart
+    assert overlaps(ego, corners(0.0, 3.0, 0.0, 4.5, 1.8))           # into the back of the one ahead
+    assert not overlaps(ego, corners(2.0, 0.0, 0.0, 4.5, 1.8))       # side by side, 0.2 m apart
+    assert overlaps(ego, corners(1.5, 0.0, 45.0, 4.5, 1.8))
+
+
+@pytest.fixture(scope="module")
+def net():
+    from trustroute.harness.study.config import study_config_from_dict
+    from trustroute.harness.study.context import study_context
+    from trustroute.networks.sumo_net import build_net
+
+    config = study_config_from_dict({"study": {"participants": 1, "seed": 1, "engine": "sumo",
+                                               "specs": ["phi1"], "conditions": ["free"]}})
+    return build_net(study_context(config).town).path
+
+
+def drive(net, program, obstacle=None):
+    """The ego on A-E (a long straight stretch with an oncoming lane) driven by `program`: a list of
+    (seconds, Controls); SUMO steps 0.1 s. Returns (trace of (time, x, y, lane, route), driving)."""
+    from trustroute.harness.simulation.sumo_start import SumoConfig, fresh_session
+
+    with fresh_session(net, 1, SumoConfig(step_length=0.1)) as sumo:
+        sumo.route.add("planned", ["A-E"])
+        sumo.vehicle.add("ego", "planned", departPos="10", departSpeed="8", departLane="1")
+        if obstacle is not None:
+            sumo.vehicletype.copy("DEFAULT_VEHTYPE", "truck")
+            sumo.vehicletype.setLength("truck", 12.0)
+            sumo.vehicletype.setWidth("truck", 2.5)
+            sumo.route.add("against", ["E-A"])
+            sumo.vehicle.add("parked", "against", typeID="truck", departPos=str(obstacle), departLane="1")
+            sumo.vehicle.setSpeedMode("parked", 0)
+            sumo.vehicle.setSpeed("parked", 0.0)
+        sumo.simulationStep()
+        driving = ManualDriving.take_over(sumo, "ego")
+        trace = []
+        for seconds, controls in program:
+            for _ in range(round(seconds / 0.1)):
+                driving.step(sumo, controls, 0.1)
+                sumo.simulationStep()
+                x, y = sumo.vehicle.getPosition("ego")
+                trace.append((sumo.simulation.getTime(), x, y, sumo.vehicle.getLaneID("ego"),
+                              tuple(sumo.vehicle.getRoute("ego")), driving.may_hand_back))
+        driving.observe(sumo, sumo.simulation.getTime())
+    return trace, driving
+
+
+def test_a_person_steers_into_the_oncoming_lane_and_back_and_the_route_is_kept(net):
+    cruise = Controls(throttle=0.1)
+    left, right = Controls(steer=-0.25, throttle=0.1), Controls(steer=0.25, throttle=0.1)
+    # out (left, then straighten), along the oncoming lane, back (right, then straighten): 7 s, 56 m
+    trace, driving = drive(net, [(0.5, cruise), (1.0, left), (1.0, right), (1.5, cruise), (1.0, right),
+                                 (1.0, left), (1.0, cruise)])
+    lanes = [lane for _, _, _, lane, _, _ in trace]
+    assert "E-A_1" in lanes and lanes[-1] == "A-E_1", lanes
+    first, last = lanes.index("E-A_1"), len(lanes) - 1 - lanes[::-1].index("E-A_1")
+    assert all(lane == "E-A_1" for lane in lanes[first:last + 1])   # one pass, no flicker
+    assert trace[-1][4] == ("A-E",)                                   # the planned route again
+    # no hand-back while passing (the rule reads where the previous step put the ego)
+    assert not any(hand_back for *_, hand_back in trace[first + 1:last + 2])
+    assert trace[-1][5]
+    times = [t for t, *_ in trace]
+    assert max(b - a for a, b in zip(times, times[1:], strict=False)) == pytest.approx(0.1)   # 10 Hz in SUMO
+    # the lateral movement: the ego's centre left its lane by a lane's width and came back
+    assert [event["type"] for event in driving.events] == ["oncoming", "own_lane"]
+    xs = [x for _, x, *_ in trace]
+    assert xs == sorted(xs, reverse=True)   # westwards all along: no teleport, no jump back
+    steps = [math.hypot(b[1] - a[1], b[2] - a[2]) for a, b in zip(trace, trace[1:], strict=False)]
+    assert max(steps) < 1.5   # at about 8 m/s: at most 0.8 m per 0.1 s step and nothing more
+
+
+def test_steering_into_a_parked_truck_is_a_collision_and_stops_the_car(net):
+    # a truck stands in the oncoming lane 20 m ahead (its front 29 m before the end of E-A)
+    program = [(1.0, Controls(steer=-0.25, throttle=0.3)), (1.0, Controls(steer=0.25, throttle=0.3)),
+               (3.0, Controls(throttle=0.3))]
+    trace, driving = drive(net, program, obstacle=470.0)
+    collisions = [event for event in driving.events if event["type"] == "collision"]
+    assert [event["object"] for event in collisions] == ["parked"] and collisions[0]["speed"] > 5.0
+    assert driving.pose.speed == 0.0   # stopped at the crash, and standing against the truck since
+    crash = next(i for i, step in enumerate(trace) if step[0] >= collisions[0]["t"])
+    assert {(x, y) for _, x, y, *_ in trace[crash + 1:]} == {trace[crash + 1][1:3]}
+
+
+def test_leaving_the_road_is_an_event_and_sumo_keeps_the_ego_on_its_route(net):
+    program = [(1.2, Controls(steer=0.3, throttle=0.1)), (1.2, Controls(steer=-0.3, throttle=0.1)),
+               (1.0, Controls(throttle=0.1))]
+    trace, driving = drive(net, program)
+    assert [event["type"] for event in driving.events][:1] == ["off_road"]
+    assert {lane for _, _, _, lane, *_ in trace} == {"A-E_1"} and trace[-1][4] == ("A-E",)
+    assert driving.where == "off_road" and not trace[-1][5]   # no hand-back off the road
