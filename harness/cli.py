@@ -29,6 +29,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "study": ("trustroute.harness.commands.study", "study", "Run a simulated within-subject study."),
     "live": ("trustroute.harness.commands.live", "live", "Serve a study to people in their browsers."),
     "analyze": ("trustroute.harness.commands.analyze", "analyze", "Analyse a study directory."),
+    "plan": ("trustroute.harness.commands.plan", "plan", "Power and sample size of a study, by simulation."),
     "fit": ("trustroute.harness.commands.fit", "fit", "Fit a driver model to a study's logs."),
     "population": ("trustroute.harness.commands.population", "population",
                    "Sample and inspect driver populations (driver types)."),

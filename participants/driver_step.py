@@ -7,7 +7,8 @@ one incident list), and the draws of a step, in the order a road is driven:
 2. `draw_performances`: the AV's performance e ~ P(fail | θ, inc) (the SUMO engine measures e
    instead of drawing it);
 3. `draw_trust`: θ' ~ T[inc][h][e](θ, ·);
-4. `draw_reports`: the report of θ' through the driver model's noise model (`draw_report`).
+4. `draw_reports`: the report of θ' through the driver model's noise model (`draw_report`);
+   `draw_report_batch` draws the same model for many drivers at once (in distribution).
 
 `draw_step` is 1-3 in that order; `draw_initial_trust` draws θ_0. Every function takes either one
 driver (integer indices) or arrays of drivers (kind, incident and trust indices broadcast
@@ -106,7 +107,9 @@ def draw_rows(cdf: np.ndarray, rng: np.random.Generator):
     at most u · total, u uniform (inverse CDF, capped at k - 1)."""
     last = cdf.shape[-1] - 1
     if cdf.ndim == 1:
-        return min(int((cdf <= rng.random() * cdf[-1]).sum()), last)
+        # A cumulative row never decreases, so the count is a binary search (one call, no
+        # temporary array: a SUMO episode draws a row per road, between simulation steps).
+        return min(int(cdf.searchsorted(rng.random() * cdf[-1], side="right")), last)
     u = rng.random(cdf.shape[:-1]) * cdf[..., -1]
     return np.minimum((cdf <= u[..., None]).sum(axis=-1), last)
 
@@ -146,3 +149,17 @@ def draw_reports(theta, accuracy: float, n_trust: int, rng: np.random.Generator)
         return draw_report(int(theta), accuracy, n_trust, rng)
     flat = [draw_report(t, accuracy, n_trust, rng) for t in np.asarray(theta).ravel().tolist()]
     return np.array(flat, dtype=np.int64).reshape(np.shape(theta))
+
+
+def draw_report_batch(theta: np.ndarray, accuracy: float, n_trust: int,
+                      rng: np.random.Generator) -> np.ndarray:
+    """Reports of many drivers at once, from the noise model of `draw_report` (the true index with
+    probability `accuracy`, else one level down or up with equal chance, clipped), in distribution:
+    one uniform per driver, then one per driver whose report is off, each batch in driver order
+    (the model engine's batch path; `draw_reports` draws as the single driver does)."""
+    theta = np.asarray(theta, dtype=np.int64)
+    off = rng.random(theta.shape) >= accuracy
+    step = np.where(rng.random(int(off.sum())) < 0.5, -1, 1)
+    out = theta.copy()
+    out[off] = np.clip(theta[off] + step, 0, n_trust - 1)
+    return out

@@ -61,3 +61,11 @@ conditions = ["aware", "free"]
 policy_cache = "{cache}"
 """, root / "out")
     return root / "out"
+
+
+def pytest_collection_modifyitems(config, items):
+    """The tests marked `slow` (seconds to minutes each, many of them waiting on the wall clock of a
+    live study) first, the rest in their order after them: pytest-xdist hands the items out in this
+    order, so the long ones start at once and the short ones fill the workers around them instead
+    of a long test starting last and running alone."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)

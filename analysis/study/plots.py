@@ -4,7 +4,11 @@ PNG_DPI with an SVG beside it (same name, for papers); legends sit outside the d
 satisfaction_plot   satisfaction rate per spec and condition with exact (Clopper–Pearson) 95 %
                     intervals, the policy's exact value and the synthesized [lower, upper] beside it
 paired_plot         per participant, mean reported trust under every condition joined by a line
-                    (one panel per spec), satisfied episodes filled
+                    (one panel per spec), satisfied episodes filled; above MAX_PAIRED_LINES
+                    participants in a spec, lines would hide each other, so it shows the
+                    participants' density instead: per pair of conditions a 2-D histogram of
+                    (trust under A, under B) with the diagonal, how many lie on each side, and
+                    the satisfaction pairs
 trust_plot          mean reported and true trust against the road index, per spec and condition,
                     with a 95 % band of the mean of reported trust (normal approximation), drawn
                     only at indices with at least MIN_BAND_EPISODES reports, the legend saying
@@ -118,11 +122,16 @@ def satisfaction_plot(cells: pd.DataFrame, path: Path, belief_source: str) -> Pa
     return _save(fig, path, tight_box=True)
 
 
+MAX_PAIRED_LINES = 300  # participants in a spec beyond which paired_plot shows their density
+
+
 def paired_plot(per_participant: pd.DataFrame, conditions: tuple[str, ...], path: Path,
                 belief_source: str = "") -> Path:
     """Per participant and spec: the mean reported trust under every condition, joined by a line;
     filled where the spec was satisfied. With two conditions a line is green when the first is the
-    higher, red when the second is."""
+    higher, red when the second is. Above MAX_PAIRED_LINES participants: `paired_density_plot`."""
+    if len(per_participant) and per_participant["spec"].value_counts().max() > MAX_PAIRED_LINES:
+        return paired_density_plot(per_participant, conditions, path, belief_source)
     plt = _pyplot()
     specs = list(dict.fromkeys(per_participant["spec"])) if len(per_participant) else [""]
     k = len(conditions)
@@ -155,6 +164,50 @@ def paired_plot(per_participant: pd.DataFrame, conditions: tuple[str, ...], path
     fig.suptitle(f"Per participant: {' / '.join(conditions)} (filled = spec satisfied{source}{colours})",
                  fontsize=9)
     return _save(fig, path)
+
+
+def paired_density_plot(per_participant: pd.DataFrame, conditions: tuple[str, ...], path: Path,
+                        belief_source: str = "") -> Path:
+    """`paired_plot` for many participants: per pair of conditions (A, B) (a row) and spec (a
+    column), a 2-D histogram of each participant's mean reported trust under A (x) and B (y), the
+    diagonal, and the counts on each side of it and of the satisfaction pairs (both, only A, only
+    B, neither)."""
+    import itertools
+
+    plt = _pyplot()
+    pairs = list(itertools.combinations(conditions, 2))
+    specs = list(dict.fromkeys(per_participant["spec"]))
+    trust = per_participant[[f"trust_{c}" for c in conditions]].to_numpy(dtype=float)
+    finite = trust[np.isfinite(trust)]
+    low, high = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
+    edges = np.linspace(low - 0.05, high + 0.05, 25)  # coarse: means of few reports are on a lattice
+    fig, axes = plt.subplots(len(pairs), len(specs), figsize=(4.6 * len(specs), 4.6 * len(pairs)),
+                             squeeze=False)
+    image = None
+    for ax, ((a, b), spec) in zip(axes.flat, itertools.product(pairs, specs), strict=True):
+        group = per_participant[per_participant["spec"] == spec]
+        xa, yb = group[f"trust_{a}"].to_numpy(dtype=float), group[f"trust_{b}"].to_numpy(dtype=float)
+        keep = np.isfinite(xa) & np.isfinite(yb)
+        counts, _, _ = np.histogram2d(xa[keep], yb[keep], bins=[edges, edges])
+        image = ax.pcolormesh(edges, edges, np.where(counts.T > 0, counts.T, np.nan), cmap="viridis",
+                              shading="flat")
+        ax.plot([edges[0], edges[-1]], [edges[0], edges[-1]], color="black", lw=0.8, ls="--")
+        sat_a = group[f"satisfied_{a}"].astype(bool).to_numpy()
+        sat_b = group[f"satisfied_{b}"].astype(bool).to_numpy()
+        ax.set_title(f"{spec} (n={len(group)})", fontsize=9)
+        ax.set_xlabel(f"mean reported trust, {a}\n\nhigher under {a}: {int((xa > yb).sum())}, "
+                      f"under {b}: {int((xa < yb).sum())}\nequal: {int((xa == yb).sum())}\n"
+                      f"satisfied both: {int((sat_a & sat_b).sum())}, neither: "
+                      f"{int((~sat_a & ~sat_b).sum())}\nonly {a}: {int((sat_a & ~sat_b).sum())}, only {b}: "
+                      f"{int((~sat_a & sat_b).sum())}", fontsize=8)
+        ax.set_ylabel(f"mean reported trust, {b}")
+        ax.set_aspect("equal")
+    if image is not None:
+        fig.colorbar(image, ax=list(axes.flat), label="participants", shrink=0.8)
+    source = f", satisfaction on {belief_source}" if belief_source else ""
+    fig.suptitle(f"Per participant: {' / '.join(conditions)} ({len(per_participant)} participant-spec "
+                 f"rows, as a density{source})", fontsize=9)
+    return _save(fig, path, tight_box=True)
 
 
 def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_index: int = 30) -> Path:

@@ -31,13 +31,19 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from trustroute.core.dataset import KINEMATICS_SCHEMA, frame_from_table
+from trustroute.core.dataset import INCIDENTS_SCHEMA, KINEMATICS_SCHEMA
 from trustroute.harness.simulation.episode_record import EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker, episode_model
 from trustroute.harness.simulation.stepping import DecisionPoint, End, run_to_end
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
-from trustroute.participants.driver_step import DriverTables, draw_initial_trust, draw_step, driver_tables
+from trustroute.participants.driver_step import (
+    DriverTables,
+    draw_initial_trust,
+    draw_report_batch,
+    draw_step,
+    driver_tables,
+)
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.belief.av_step import AVStep
 from trustroute.policies.belief.exact_labels import exact_labels
@@ -58,10 +64,9 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 END_CODES: tuple[str, ...] = ("", *END_REASONS)  # index 0: still running
-
-
-def empty_kinematics() -> pd.DataFrame:
-    return frame_from_table(KINEMATICS_SCHEMA.empty_table())
+# The model engine has no kinematics or incident objects: one empty (immutable) table each
+NO_KINEMATICS = KINEMATICS_SCHEMA.empty_table()
+NO_INCIDENTS = INCIDENTS_SCHEMA.empty_table()
 
 
 class ModelEpisode:
@@ -99,8 +104,9 @@ class ModelEpisode:
             self._point = DecisionPoint(context, self.setup.town.actions(context.road))
             return self._point
         summary = tracker.summary(wall_seconds=time.perf_counter() - self.started, sim_seconds=math.nan)
-        self._end = End(EpisodeRecord(summary=summary, roads=tracker.roads_frame(),
-                                      kinematics=empty_kinematics()))
+        # Arrow tables: the record converts to pandas only if asked, so a study writing parts never does
+        self._end = End(EpisodeRecord(summary=summary, roads=tracker.roads_table(), kinematics=NO_KINEMATICS,
+                                      incidents=NO_INCIDENTS))
         return self._end
 
     def choose(self, junction: str) -> None:
@@ -147,6 +153,8 @@ class BatchResult:
     policy_calls: int
     seconds: float
     decision_seconds: float = 0.0   # of `seconds`, in the policy's decisions
+    # mean reported trust level per episode (NaN without a report), when reports were drawn
+    mean_reported: np.ndarray | None = None
 
     def frame(self) -> pd.DataFrame:
         return pd.DataFrame(
@@ -199,6 +207,7 @@ def simulate_batch(
     rng: np.random.Generator,
     drivers: Sequence[DriverModel] | None = None,
     driver_index: np.ndarray | None = None,
+    report_accuracy: float | None = None,
 ) -> BatchResult:
     """`count` model-engine episodes at once; returns the per-episode summaries.
 
@@ -207,6 +216,11 @@ def simulate_batch(
     driver's initial distribution, as SyntheticDriver does. The episode rules are the tracker's
     (policies/routing/episode_rules.py). Specs with trust-state atoms need the joint belief of
     the episode tracker: run them through `run_model_episode`.
+
+    report_accuracy: also draw the drivers' trust reports (every setup.report_every roads, through
+    `draw_report_batch`) and return their mean per episode; the reports then take uniforms of
+    their own after each level's step, so the episodes are the per-episode path's in
+    distribution, not draw for draw. None (the default): no reports, no draws for them.
     """
     index = (
         np.zeros(count, dtype=np.int64) if driver_index is None else np.asarray(driver_index, dtype=np.int64)
@@ -217,7 +231,8 @@ def simulate_batch(
     sampled = _sampled(setup.town, model.pomdp, model.compiled, setup.spec, policy,
                        list(drivers) if drivers is not None else [setup.driver_model],
                        setup.junction_cap, setup.fallback_after, checked_belief_rule(setup.belief_rule))
-    return _unfold(sampled, index, rng)
+    return _unfold(sampled, index, rng, None if report_accuracy is None else
+                   (float(report_accuracy), setup.report_every))
 
 
 def _decisions(sampled: _Sampled, live: np.ndarray, route_id: np.ndarray, routes: list[tuple[str, ...]],
@@ -266,7 +281,8 @@ def _decisions(sampled: _Sampled, live: np.ndarray, route_id: np.ndarray, routes
     return chosen, finished, fired, calls, seconds
 
 
-def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> BatchResult:
+def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator,
+            reports: tuple[float, int] | None = None) -> BatchResult:
     """Episodes driven by drivers of kinds `index`, level by level: the verdicts, the policy's
     decisions, the driver's step (participants/driver_step.py) for every episode that moves, the
     AV's filter and DFA. Draws: initial trust of every episode, then per level the policy's (if it
@@ -292,6 +308,8 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
     takeovers = np.zeros(count, dtype=np.int64)
     trust_sum = levels[theta].copy()
     fired_any = np.zeros(count, dtype=bool)
+    report_sum = np.zeros(count, dtype=float)
+    report_count = np.zeros(count, dtype=np.int64)
     policy_calls, decision_seconds = 0, 0.0
 
     for _level in range(sampled.junction_cap + 1):
@@ -334,6 +352,11 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
         junctions[movers] += 1
         takeovers[movers] += h
         trust_sum[movers] += levels[new_theta]
+        if reports is not None:
+            reporters = movers[junctions[movers] % reports[1] == 0]
+            said = draw_report_batch(theta[reporters], reports[0], levels.size, rng)
+            report_sum[reporters] += levels[said]
+            report_count[reporters] += 1
     else:
         end[end == 0] = END_CODES.index("cap")
 
@@ -348,6 +371,8 @@ def _unfold(sampled: _Sampled, index: np.ndarray, rng: np.random.Generator) -> B
         policy_calls=policy_calls,
         seconds=time.perf_counter() - started,
         decision_seconds=decision_seconds,
+        mean_reported=None if reports is None else np.divide(
+            report_sum, report_count, out=np.full(count, np.nan), where=report_count > 0),
     )
 
 

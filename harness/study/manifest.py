@@ -45,14 +45,13 @@ from trustroute.core.dataset import (
     MANIFEST_KEYS,
     ROADS_FILE,
     ROADS_SCHEMA,
-    part_path,
     table_from_columns,
     write_table,
 )
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.parts import PartError, read_failures, read_part
+from trustroute.harness.study.parts import read_failures
 from trustroute.harness.study.plan import EpisodeTask
-from trustroute.harness.study.resume import quarantine_part
+from trustroute.harness.study.resume import read_parts
 
 PACKAGES: tuple[str, ...] = (
     "trustroute",
@@ -127,17 +126,11 @@ def consolidate(
     study_dir = Path(study_dir)
     types = participant_types(config)
     episode_rows, roads_tables, kinematics_tables, incident_tables = [], [], [], []
-    damaged: list[str] = []
+    parts, damaged = read_parts(study_dir, tasks)
     for task in tqdm(tasks, desc="consolidating", unit="episode", disable=None if progress else True,
                      leave=False, dynamic_ncols=True):
-        path = part_path(study_dir, task.episode_id)
-        if not path.exists():
-            continue
-        try:
-            part = read_part(path)
-        except PartError:
-            damaged.append(task.episode_id)
-            quarantine_part(study_dir, task.episode_id)
+        part = parts.get(task.episode_id)
+        if part is None:
             continue
         summary, table = part.summary, part.tables["roads"]
         mean_reported, reports = _reported(table.column("reported_trust"))

@@ -2,6 +2,7 @@
 
 Layout of a study directory while it runs (names: trustroute.core.dataset, docs/dataset.md):
     parts/<episode_id>.zip      the episode's part: every table of the episode and its checksum
+    parts/batch-<first episode_id>.zip   a batch part: several episodes' tables (model engine)
     failures/<episode_id>.json  every attempt's error of an episode that failed (cleared on success)
     damaged/<episode_id>.zip    parts found damaged, missing a table or foreign, moved aside
 
@@ -18,6 +19,12 @@ same bytes) of
 episode id of the file name, of part.json and of every row, the row count of the roads), so one
 flipped bit in any table, a truncated or a swapped-in part is a `PartError`, on resume
 (resume.py `finished_episodes`: the part is moved aside and the episode re-run) and again at consolidation.
+
+A batch part (`write_batch_part`, `read_batch_part`) holds a run of episodes the model engine ran
+in one task: the same entries, part.json listing every episode (task, summary, row count per
+table) and each table the episodes' rows one after the other. It is verified as a whole (any
+damage puts every episode of it back to run) and read back as the episodes' `Part`s, so resume
+and consolidation treat an episode the same wherever it is stored.
 
 A part is written to a temporary file beside it and renamed into place, so a killed run leaves a
 whole part or none. The study does not fsync every part: it syncs the file system once per batch
@@ -36,6 +43,7 @@ import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -278,3 +286,134 @@ def read_failures(study_dir: Path) -> list[dict]:
         except (OSError, json.JSONDecodeError):
             out.append({"episode_id": path.stem, "error": "unreadable failure record"})
     return out
+
+
+# -- batch parts ---------------------------------------------------------------------------------
+
+BATCH_FORMAT = "trustroute-batch-part"
+BATCH_PREFIX = "batch-"
+
+
+def batch_part_path(study_dir: Path, first_episode_id: str) -> Path:
+    """Where the batch part starting with episode `first_episode_id` is written."""
+    return part_path(study_dir, BATCH_PREFIX + first_episode_id)
+
+
+def batch_part_paths(study_dir: Path) -> list[Path]:
+    """The batch parts of a study directory, by name."""
+    folder = part_path(study_dir, BATCH_PREFIX).parent
+    return sorted(folder.glob(f"{BATCH_PREFIX}*.zip")) if folder.is_dir() else []
+
+
+def encode_batch_part(tasks: list[EpisodeTask], summaries: list[dict], rows: list[dict[str, int]],
+                      joined: dict[str, pa.Table]) -> bytes:
+    """The bytes of a batch part of the episodes `tasks` (deterministic, as `encode_part`): `rows`
+    the episodes' row counts per table, `joined` the tables with their rows one after the other."""
+    blobs = {name: _ipc_bytes(joined[name]) for name in PART_TABLES}
+    meta = {
+        "format": BATCH_FORMAT,
+        "version": PART_VERSION,
+        "dataset": DATASET_FORMAT,
+        "episodes": [{"episode_id": task.episode_id, "task": asdict(task),
+                      "summary": {k: _plain(v) for k, v in summary.items()}, "rows": counts}
+                     for task, summary, counts in zip(tasks, summaries, rows, strict=True)],
+        "tables": {name: {"rows": joined[name].num_rows, "sha256": hashlib.sha256(blob).hexdigest()}
+                   for name, blob in blobs.items()},
+    }
+    meta_bytes = json.dumps(meta, sort_keys=True).encode()
+    checksum = hashlib.sha256(meta_bytes)
+    for name in PART_TABLES:
+        checksum.update(blobs[name])
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_STORED) as archive:
+        entries = [(META_ENTRY, meta_bytes), *((f"{name}.arrows", blobs[name]) for name in PART_TABLES),
+                   (CHECKSUM_ENTRY, checksum.hexdigest().encode())]
+        for entry, data in entries:
+            archive.writestr(zipfile.ZipInfo(entry, date_time=ZIP_DATE), data)
+    return buffer.getvalue()
+
+
+def write_batch_part(study_dir: Path, tasks: list[EpisodeTask], summaries: list[dict],
+                     tables: list[dict[str, pa.Table]]) -> Path:
+    """Write the batch part of `tasks` (their summaries and tables, in that order) atomically, named
+    after the first episode; clear the episodes' failure records."""
+    rows = [{name: t[name].num_rows if t.get(name) is not None else 0 for name in PART_TABLES}
+            for t in tables]
+    joined = {}
+    for name, schema in PART_TABLES.items():
+        present = [t[name].replace_schema_metadata(None) for t in tables if t.get(name) is not None]
+        joined[name] = check_table(pa.concat_tables(present, promote_options="none"), schema, name) \
+            if present else schema.empty_table()
+    path = batch_part_path(study_dir, tasks[0].episode_id)
+    atomic_write_bytes(path, encode_batch_part(tasks, summaries, rows, joined), "episode part",
+                       "free disk space or pass a writable --out, then rerun (the study resumes)")
+    for task in tasks:
+        failure = failure_path(study_dir, task.episode_id)
+        if failure.exists():
+            failure.unlink()
+    return path
+
+
+def _batch_episodes(path: Path, meta: object) -> list[dict]:
+    if (not isinstance(meta, dict) or meta.get("format") != BATCH_FORMAT
+            or meta.get("version") != PART_VERSION):
+        raise PartError(f"{path}: not a part of format {BATCH_FORMAT} version {PART_VERSION}")
+    if meta.get("dataset") != DATASET_FORMAT:
+        raise PartError(f"{path}: dataset format {meta.get('dataset')!r}, this trustroute writes "
+                        f"{DATASET_FORMAT!r} (the episodes are re-run, so a study never mixes two formats)")
+    episodes = meta.get("episodes")
+    if not isinstance(episodes, list) or not episodes:
+        raise PartError(f"{path}: part.json lists no episodes")
+    for entry in episodes:
+        ok = isinstance(entry, dict) and isinstance(entry.get("task"), dict) and isinstance(
+            entry.get("summary"), dict) and isinstance(entry.get("rows"), dict)
+        episode = entry.get("episode_id") if isinstance(entry, dict) else None
+        if not ok or episode != entry["task"].get("episode_id") \
+                or episode != entry["summary"].get("episode_id"):
+            raise PartError(f"{path}: an episode entry of part.json is incomplete or inconsistent")
+    if path.name != batch_part_path(path.parent.parent, episodes[0]["episode_id"]).name:
+        raise PartError(f"{path}: begins with episode {episodes[0]['episode_id']!r} (a foreign part)")
+    return episodes
+
+
+def read_batch_part(path: Path) -> list[Part]:
+    """The episodes of a batch part, verified in full as `read_part` verifies a part (every row
+    belongs to the episode part.json places it in); PartError otherwise."""
+    path = Path(path)
+    entries = _part_entries(path)
+    try:
+        meta = json.loads(entries[META_ENTRY])
+    except ValueError as exc:
+        raise PartError(f"{path}: unreadable part.json ({exc})") from None
+    episodes = _batch_episodes(path, meta)
+    tables: dict[str, pa.Table] = {}
+    for name in PART_TABLES:
+        recorded = (meta.get("tables") or {}).get(name) or {}
+        blob = entries[f"{name}.arrows"]
+        if recorded.get("sha256") != hashlib.sha256(blob).hexdigest():
+            raise PartError(f"{path}: table {name} does not match its SHA-256")
+        try:
+            table = check_table(pa.ipc.open_stream(blob).read_all(), PART_TABLES[name], f"{path.name}:{name}")
+        except (pa.ArrowException, SchemaError, ValueError) as exc:
+            raise PartError(f"{path}: table {name}: {exc}") from None
+        counts = [entry["rows"].get(name) for entry in episodes]
+        if not all(isinstance(c, int) and c >= 0 for c in counts) or sum(counts) != table.num_rows \
+                or table.num_rows != recorded.get("rows"):
+            raise PartError(f"{path}: table {name} has {table.num_rows} rows, part.json says otherwise")
+        owners = pa.array([entry["episode_id"] for entry in episodes]).take(
+            pa.array(np.repeat(np.arange(len(episodes)), counts)))
+        if table.num_rows and not pc.all(pc.equal(table.column("episode_id"), owners)).as_py():
+            raise PartError(f"{path}: table {name} holds rows of another episode")
+        tables[name] = table
+    parts, offsets = [], dict.fromkeys(PART_TABLES, 0)
+    for entry in episodes:
+        own = {}
+        for name in PART_TABLES:
+            own[name] = tables[name].slice(offsets[name], entry["rows"][name])
+            offsets[name] += entry["rows"][name]
+        if own["roads"].num_rows != int(entry["summary"].get("junctions", -1)) + 1:
+            raise PartError(f"{path}: {own['roads'].num_rows} roads for {entry['summary'].get('junctions')} "
+                            f"junctions in episode {entry['episode_id']}")
+        parts.append(Part(episode_id=entry["episode_id"], task=entry["task"], summary=entry["summary"],
+                          tables=own))
+    return parts

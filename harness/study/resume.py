@@ -8,14 +8,21 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from pathlib import Path
 
 from trustroute.core.dataset import DAMAGED_DIR, PART_FOLDERS, STUDY_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import TEMP_PREFIX
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.parts import PartError, part_path, read_part
+from trustroute.harness.study.parts import (
+    Part,
+    PartError,
+    batch_part_paths,
+    part_path,
+    read_batch_part,
+    read_part,
+)
 from trustroute.harness.study.plan import EpisodeTask
 
 
@@ -61,6 +68,72 @@ def quarantine_part(study_dir: Path, episode_id: str) -> None:
     os.replace(path, target)
 
 
+def quarantine_batch(study_dir: Path, path: Path) -> None:
+    """Move a batch part that failed verification to damaged/ (all its episodes run again)."""
+    target = Path(study_dir) / DAMAGED_DIR / path.name
+    target.parent.mkdir(parents=True, exist_ok=True)
+    os.replace(path, target)
+
+
+def read_parts(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[dict[str, Part], list[str]]:
+    """(the verified part of every planned episode that has one, by episode id; the planned episodes
+    whose part was damaged or written for another plan, moved aside). Batch parts first, then the
+    episodes' own parts; an episode is taken once wherever it is stored, so no row is duplicated."""
+    study_dir = Path(study_dir)
+    planned = {task.episode_id: task for task in tasks}
+    found: dict[str, Part] = {}
+    damaged: list[str] = []
+    for path in batch_part_paths(study_dir):
+        try:
+            batch = read_batch_part(path)
+            if any(part.episode_id not in planned or _recorded(planned[part.episode_id]) != part.task
+                   for part in batch):
+                raise PartError(f"{path}: written for a different plan")
+        except PartError:
+            names = _batch_names(path)
+            damaged += [name for name in names if name in planned]
+            quarantine_batch(study_dir, path)
+            continue
+        for part in batch:
+            found.setdefault(part.episode_id, part)
+    for episode_id, task in planned.items():
+        path = part_path(study_dir, episode_id)
+        if episode_id in found or not path.exists():
+            continue
+        try:
+            part = read_part(path)
+            if part.task != _recorded(task):
+                raise PartError(f"{path}: written for a different plan")
+        except PartError:
+            damaged.append(episode_id)
+            quarantine_part(study_dir, episode_id)
+            continue
+        found[episode_id] = part
+    # a damaged batch names what it claims to hold: only episodes no valid part holds are damaged
+    return found, list(dict.fromkeys(name for name in damaged if name not in found))
+
+
+def _recorded(task: EpisodeTask) -> dict:
+    """The task as a part records it (JSON: the seed's spawn key a list)."""
+    recorded = {name: getattr(task, name) for name in TASK_FIELDS}
+    return {**recorded, "driver_entropy": list(task.driver_entropy)}
+
+
+TASK_FIELDS = tuple(field.name for field in fields(EpisodeTask))
+
+
+def _batch_names(path: Path) -> list[str]:
+    """The episode ids a (possibly damaged) batch part claims, as far as they can be read."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as archive:
+            meta = json.loads(archive.read("part.json"))
+        return [str(entry["episode_id"]) for entry in meta["episodes"]]
+    except Exception:  # a damaged part may fail in any way: its episodes show as missing instead
+        return []
+
+
 def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[str], list[str]]:
     """(episode ids with a valid part, episode ids whose part was damaged and has been moved aside).
 
@@ -71,19 +144,5 @@ def finished_episodes(study_dir: Path, tasks: list[EpisodeTask]) -> tuple[set[st
     for folder in PART_FOLDERS:
         for temp in (study_dir / folder).glob(f"{TEMP_PREFIX}*"):
             temp.unlink(missing_ok=True)
-    done: set[str] = set()
-    damaged: list[str] = []
-    for task in tasks:
-        path = part_path(study_dir, task.episode_id)
-        if not path.exists():
-            continue
-        try:
-            part = read_part(path)
-            if part.task != json.loads(json.dumps(asdict(task))):
-                raise PartError(f"{path}: written for a different plan")
-        except PartError:
-            damaged.append(task.episode_id)
-            quarantine_part(study_dir, task.episode_id)
-            continue
-        done.add(task.episode_id)
-    return done, damaged
+    found, damaged = read_parts(study_dir, tasks)
+    return set(found), damaged

@@ -1,8 +1,12 @@
 """Running a study: plan, skip what is done, run the rest on a backend, consolidate.
 
-One worker function, `run_task(config, study_dir, task)`, runs an episode and writes its part; it
-never raises (an error comes back as a failed `EpisodeOutcome`). Three backends hand it tasks:
-in-process (`workers=1`), a local process pool (`workers=N`), and Dask distributed
+One worker function, `run_unit(config, study_dir, unit)`, runs a unit of episodes and writes their
+parts; it never raises (an error comes back as a failed `EpisodeOutcome`). A unit is one episode
+(`run_task`: its own part), or on the model engine a batch of consecutive episodes (`run_batch`:
+one batch part, harness/study/parts.py), since a model-engine episode takes about a millisecond
+and a part file per episode would cost more than the episode. Retries run episode by episode,
+so an episode that fails a batch (or whose worker died with it) is isolated on its retry. Three
+backends hand it units: in-process (`workers=1`), a local process pool (`workers=N`), and Dask distributed
 (`scheduler="ADDRESS"`, or `scheduler="local"` for a local Dask cluster). Each worker process
 builds the study's context (town, specs, policies, participants' driver models) once, from the
 config alone (harness/study/context.py), so nothing large travels with the tasks and the result
@@ -50,8 +54,13 @@ if TYPE_CHECKING:
     from trustroute.harness.simulation.sumo_start import SumoConfig
 
 DEFAULT_ATTEMPTS = 2
+BATCH_EPISODES = 250  # model-engine episodes per batch part (at most)
+# Fewer episodes to run: one part each (a batch saves nothing there, and a damaged part costs one
+# episode, not a batch)
+BATCH_MIN_EPISODES = 1000
 CONSOLIDATION_ROUNDS = 3
-SYNC_EVERY = 64  # parts per file-system sync (harness/study/parts.py: sync_parts)
+SYNC_EVERY = 64  # parts per file-system sync (harness/study/parts.py: sync_parts); for the model
+# engine's batches, episodes of SYNC_EVERY full batches
 MAX_ATTEMPTS = 10
 
 
@@ -141,6 +150,51 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
     return EpisodeOutcome(task.episode_id, True, wall_seconds=time.perf_counter() - started)
 
 
+def run_batch(config: StudyConfig, study_dir: str, tasks: tuple[EpisodeTask, ...]) -> list[EpisodeOutcome]:
+    """Run model-engine episodes one after the other, exactly as `run_task` runs each, and write
+    the ones that finished as one batch part. Never raises: errors come back in the outcomes."""
+    from trustroute.harness.study.parts import write_batch_part
+
+    outcomes: list[EpisodeOutcome] = []
+    done: list[tuple[EpisodeTask, dict, dict]] = []
+    for task in tasks:
+        started = time.perf_counter()
+        try:
+            record = run_planned_episode(config, task)
+            done.append((task, record.summary, record.tables()))
+            outcomes.append(EpisodeOutcome(task.episode_id, True, wall_seconds=time.perf_counter() - started))
+        except Exception as exc:  # one bad episode must never stop the others
+            outcomes.append(EpisodeOutcome(task.episode_id, False, f"{type(exc).__name__}: {exc}",
+                                           traceback.format_exc(), time.perf_counter() - started))
+    if done:
+        try:
+            write_batch_part(Path(study_dir), *(list(column) for column in zip(*done, strict=True)))
+        except Exception as exc:  # nothing of the batch was stored: every episode of it failed
+            return [EpisodeOutcome(task.episode_id, False, f"{type(exc).__name__}: {exc}",
+                                   traceback.format_exc()) for task in tasks]
+    return outcomes
+
+
+Unit = tuple[EpisodeTask, ...]
+
+
+def run_unit(config: StudyConfig, study_dir: str, unit: Unit) -> list[EpisodeOutcome]:
+    """A unit of work for the backends: one episode (its own part) or a batch (one batch part)."""
+    if len(unit) == 1:
+        return [run_task(config, study_dir, unit[0])]
+    return run_batch(config, study_dir, unit)
+
+
+def plan_units(config: StudyConfig, tasks: list[EpisodeTask], workers: int) -> list[Unit]:
+    """The units of `tasks`: on the model engine, from BATCH_MIN_EPISODES episodes on, batches of
+    consecutive episodes (at most BATCH_EPISODES, and enough batches to keep `workers` busy);
+    otherwise one episode each."""
+    if config.engine != "model" or len(tasks) < BATCH_MIN_EPISODES:
+        return [(task,) for task in tasks]
+    size = max(1, min(BATCH_EPISODES, -(-len(tasks) // max(1, 4 * workers))))
+    return [tuple(tasks[i:i + size]) for i in range(0, len(tasks), size)]
+
+
 def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
     """The config's `record` names planned episodes of a SUMO study, or InputError."""
     if not config.record:
@@ -159,26 +213,26 @@ def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
 # -- backends: each yields outcomes as they complete -------------------------------------------
 
 
-EpisodeFunction = Callable[[EpisodeTask], EpisodeOutcome]   # run_task with the config and directory bound
+UnitFunction = Callable[[Unit], list[EpisodeOutcome]]   # run_unit with the config and directory bound
 
 
-def _serial(function: EpisodeFunction, tasks: list[EpisodeTask]) -> Iterator[EpisodeOutcome]:
+def _serial(function: UnitFunction, tasks: list[Unit]) -> Iterator[list[EpisodeOutcome]]:
     for task in tasks:
         yield function(task)
 
 
-def _process_pool(function: EpisodeFunction, tasks: list[EpisodeTask],
-                  workers: int) -> Iterator[EpisodeOutcome]:
+def _process_pool(function: UnitFunction, tasks: list[Unit],
+                  workers: int) -> Iterator[list[EpisodeOutcome]]:
     from trustroute.harness.study.workers import process_pool
 
-    def died(task: EpisodeTask, reason: str) -> EpisodeOutcome:
-        return EpisodeOutcome(task.episode_id, False, f"worker died: {reason}")
+    def died(unit: Unit, reason: str) -> list[EpisodeOutcome]:
+        return [EpisodeOutcome(task.episode_id, False, f"worker died: {reason}") for task in unit]
 
     return process_pool(function, tasks, workers, died)
 
 
-def _dask(function: EpisodeFunction, tasks: list[EpisodeTask], scheduler: str, workers: int,
-          processes: bool) -> Iterator[EpisodeOutcome]:
+def _dask(function: UnitFunction, tasks: list[Unit], scheduler: str, workers: int,
+          processes: bool) -> Iterator[list[EpisodeOutcome]]:
     from distributed import Client, LocalCluster, as_completed
 
     cluster = None
@@ -203,8 +257,8 @@ def _dask(function: EpisodeFunction, tasks: list[EpisodeTask], scheduler: str, w
             try:
                 yield future.result()
             except Exception as exc:
-                task = futures[future]
-                yield EpisodeOutcome(task.episode_id, False, f"dask: {type(exc).__name__}: {exc}")
+                yield [EpisodeOutcome(task.episode_id, False, f"dask: {type(exc).__name__}: {exc}")
+                       for task in futures[future]]
     finally:
         client.close()
         if cluster is not None:
@@ -212,16 +266,18 @@ def _dask(function: EpisodeFunction, tasks: list[EpisodeTask], scheduler: str, w
 
 
 def _outcomes(
-    function: EpisodeFunction, tasks: list[EpisodeTask], workers: int, scheduler: str | None,
+    function: UnitFunction, units: list[Unit], workers: int, scheduler: str | None,
     dask_processes: bool = True,
 ) -> Iterator[EpisodeOutcome]:
-    if not tasks:
+    if not units:
         return iter(())
     if scheduler is not None:
-        return _dask(function, tasks, scheduler, workers, dask_processes)
-    if workers <= 1:
-        return _serial(function, tasks)
-    return _process_pool(function, tasks, min(workers, len(tasks)))
+        batches = _dask(function, units, scheduler, workers, dask_processes)
+    elif workers <= 1:
+        batches = _serial(function, units)
+    else:
+        batches = _process_pool(function, units, min(workers, len(units)))
+    return (outcome for batch in batches for outcome in batch)
 
 
 def backend_name(workers: int, scheduler: str | None) -> str:
@@ -342,7 +398,7 @@ def _run_locked(
     check_record_ids(config, tasks)
     done, damaged = finished_episodes(study_dir, tasks)
     todo = [t for t in tasks if t.episode_id not in done]
-    function = functools.partial(run_task, config, str(study_dir))
+    function = functools.partial(run_unit, config, str(study_dir))
     ran = retried = 0
     failed: dict[str, tuple[EpisodeTask, EpisodeOutcome]] = {}
     errors: dict[str, list[str]] = {}
@@ -353,7 +409,7 @@ def _run_locked(
         nonlocal ran
         for outcome in outcomes:
             ran += 1
-            if ran % SYNC_EVERY == 0:
+            if ran % (SYNC_EVERY * (BATCH_EPISODES if config.engine == "model" else 1)) == 0:
                 sync_parts(study_dir)
             if outcome.ok:
                 failed.pop(outcome.episode_id, None)
@@ -365,13 +421,13 @@ def _run_locked(
                 on_outcome(outcome)
 
     with sigterm_raises():
-        consume(_outcomes(function, todo, workers, scheduler, dask_processes))
+        consume(_outcomes(function, plan_units(config, todo, workers), workers, scheduler, dask_processes))
         for _ in range(attempts - 1):  # after everything else: a transient failure gets another chance
             retry = [task for task, _ in failed.values()]
             if not retry:
                 break
             retried += len(retry)
-            consume(_outcomes(function, retry, workers, scheduler, dask_processes))
+            consume(_outcomes(function, [(task,) for task in retry], workers, scheduler, dask_processes))
     bar.close()
     sync_parts(study_dir)
     for task, outcome in failed.values():

@@ -260,6 +260,7 @@ def test_committed_study_free_runs_follow_the_preset_routes_except_two_recorded_
     assert detours == ["d03-t2-free", "d06-t1-free"]  # docs/real_study.md, "Mapping decisions"
 
 
+@pytest.mark.slow
 def test_committed_study_is_analysed_with_every_file_accounted_for(tmp_path, capsys):
     import json
 

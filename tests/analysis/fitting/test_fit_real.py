@@ -104,6 +104,7 @@ def test_participant_bootstrap_is_seeded_and_ordered(real_roads):
     assert a["resamples"] == 3 and 0 <= a["converged"] <= 3
 
 
+@pytest.mark.slow
 def test_check_puts_the_true_model_nearer_than_a_wrong_one(real_roads):
     driver = load_driver_model(None)
     observed = simulated_roads(real_roads, driver, 100, seed=11)

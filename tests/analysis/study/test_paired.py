@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from trustroute.analysis.study.display import paired_display
 from trustroute.analysis.study.paired import paired_table_rows, per_participant_table, repeated_measures_table
@@ -43,6 +44,7 @@ def test_paired_display_names_the_reason_beside_an_unbounded_odds_ratio():
         assert "inf [" not in text  # the estimate itself is finite
 
 
+@pytest.mark.slow
 def test_the_report_shows_no_unbounded_odds_ratio_without_its_reason(model_study, capsys):
     import json
     import re

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 from PIL import Image
 
 from trustroute.analysis.study.plots import (
@@ -17,6 +18,7 @@ from trustroute.analysis.study.plots import (
 from trustroute.analysis.study.report import write_report
 
 
+@pytest.mark.slow
 def test_every_plot_has_a_vector_file_and_a_print_resolution(model_study):
     paths = write_report(model_study)
     assert set(paths.plots) >= {"satisfaction", "trust", "routes", "takeovers", "participants"}

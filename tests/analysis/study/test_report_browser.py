@@ -11,6 +11,7 @@ import math
 import re
 
 import playwright.sync_api as playwright
+import pytest
 
 from tests.browser import chromium_executable
 from tests.cli import run_cli
@@ -91,6 +92,7 @@ def test_the_checks_catch_what_they_look_for():
     assert check_report_page([odds, fine]) == []
 
 
+@pytest.mark.slow
 def test_the_demo_report_in_chromium_shows_no_impossible_interval(tmp_path, capsys):
     study = tmp_path / "demo"
     code, _, err = run_cli(capsys, "demo", "--engine", "model", "--out", str(study), "--quiet",

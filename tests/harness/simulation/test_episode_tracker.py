@@ -148,6 +148,7 @@ def test_monte_carlo_matches_exact_evaluation(town, driver, pomdp, phi1):
     assert abs(final_trust / n - exact.expected_final_trust) < 0.15
 
 
+@pytest.mark.slow
 def test_trust_state_spec_with_driver_types_matches_the_exact_per_type_values(town):
     """A spec testing the hidden trust, a population of three types: the tracker follows
     J((type, trust), q) and reads satisfaction on the driver's true trust; per type, the

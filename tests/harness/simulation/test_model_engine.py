@@ -72,6 +72,7 @@ def test_batch_matches_exact_for_free_policy(town, driver, pomdp, spec_name):
     assert _close(batch.junctions.mean(), exact.expected_junctions, batch.junctions.std() / 200 + 1e-9)
 
 
+@pytest.mark.slow
 def test_per_episode_path_matches_exact_and_batch_for_looping_policy(town, driver, pomdp):
     spec = load_spec("specs/phi1.toml", town)
     policy = LoopingPolicy(town)
@@ -164,6 +165,7 @@ def test_one_batch_episode_is_the_tracker_episode_draw_for_draw(town):
         assert len(outcomes) >= 5     # the episodes differ: the equality is not a constant
 
 
+@pytest.mark.slow
 def test_monte_carlo_is_the_batch_path_one_episode_at_a_time(town, pomdp):
     spec = load_spec("specs/phi2.toml", town)
     policy = LoopingPolicy(town)
@@ -177,6 +179,7 @@ def test_monte_carlo_is_the_batch_path_one_episode_at_a_time(town, pomdp):
     assert result.policy == "looping+fallback20" and 0 < result.satisfaction < 1
 
 
+@pytest.mark.slow
 def test_monte_carlo_of_the_baseline_agrees_with_exact_evaluation(pomdp):
     spec = load_spec("specs/phi1.toml", pomdp.town)
     policy = trust_free_policy(pomdp.town, spec)

@@ -48,6 +48,7 @@ def _random_problem(driver, seed: int):
     return pomdp, spec, int(rng.integers(3, 7))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(16))
 def test_bounds_bracket_the_optimum_and_the_policy_is_worth_lower(driver, seed):
     pomdp, spec, horizon = _random_problem(driver, seed)

@@ -29,6 +29,7 @@ def routes(town, start, length):
     return [[start] + rest for nxt in town.successors(start) for rest in routes(town, nxt, length - 1)]
 
 
+@pytest.mark.slow
 def test_exact_optimum_dominates_every_open_loop_route_and_grows_with_the_horizon(pomdp):
     town = pomdp.town
     spec = load_spec("specs/phi1.toml", town)

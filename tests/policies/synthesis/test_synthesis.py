@@ -19,6 +19,7 @@ from trustroute.policies.synthesis.result import ClusterRun, SearchRun
 EXACT_TOLERANCE = 1e-9
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["phi1", "phi2_strict"])
 @pytest.mark.parametrize("belief_rule", ["bayes", "paper"])
 def test_small_horizon_bounds_bracket_the_brute_force_optimum(pomdp, name, belief_rule):

@@ -149,6 +149,7 @@ def _return_problem(driver, seed: int):
     return pomdp, spec, int(rng.integers(7, 11))
 
 
+@pytest.mark.slow
 def test_open_nodes_are_valued_by_the_completion_that_returns(driver):
     """Open nodes are valued by the free completion (state-only task, then back to what the DFA
     still needs) and the policy drives it where it has no row: early stops (tau 0.2) on seeded

@@ -1,0 +1,116 @@
+"""Simulated studies in memory, for `trustroute plan`: many whole studies of one size on the model
+engine, with no part files, returning each participant's outcomes per (spec, condition).
+
+A study config gives the cells (specs x conditions), the AV's policies (synthesized once, from the
+policy cache, by the study's context) and its filter; the participants are drawn from a
+`ParticipantModel`: the config's own driver model (every participant nominal), another true
+driver model (`driver`), or a population of driver types (`types` with weights, one type per
+participant for all its episodes). Each cell is one `simulate_batch` call over every participant
+of every simulated study, with the drivers' trust reports drawn (every `report_every` roads), so a
+participant's outcome in a cell is (satisfied, mean reported trust) as the consolidated dataset
+has them. The model engine has no order or carry-over effects: a participant's episodes are
+independent given its driver model, so the Williams square only rounds the sample size
+(`planned_participants`). The analysis of the simulated studies is analysis/study/power.py's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.core.errors import InputError
+from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.latin_square import williams_rows
+from trustroute.participants.driver_model import DriverModel
+
+
+@dataclass(frozen=True, eq=False)
+class ParticipantModel:
+    """Who the simulated participants are: `types` (driver models) drawn with `weights`; one
+    type with weight 1 is a single driver model."""
+
+    label: str
+    types: tuple[DriverModel, ...]
+    weights: tuple[float, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatedStudies:
+    """`studies` simulated studies of `participants` participants: per study, participant, spec
+    and condition (axes in that order) whether the episode satisfied its spec, and the mean
+    reported trust (NaN when no report was given)."""
+
+    participants: int
+    specs: tuple[str, ...]
+    conditions: tuple[str, ...]
+    satisfied: np.ndarray   # bool [studies, participants, specs, conditions]
+    reported: np.ndarray    # float [studies, participants, specs, conditions]
+
+    @property
+    def studies(self) -> int:
+        return int(self.satisfied.shape[0])
+
+
+def planned_participants(requested: int, cells: int) -> int:
+    """The smallest sample size >= `requested` that uses every row of the Williams design of
+    `cells` cells equally often (harness/study/latin_square.py)."""
+    rows = len(williams_rows(cells))
+    return -(-max(1, requested) // rows) * rows
+
+
+def participant_sizes(spec: str, cells: int) -> list[int]:
+    """The sample sizes of `--participants`: "N", "A:B" or "A:B:STEP" (inclusive), each rounded up
+    to a multiple of the Williams design's rows, without repeats; InputError otherwise."""
+    try:
+        numbers = [int(part) for part in spec.split(":")]
+    except ValueError:
+        numbers = []
+    if not 1 <= len(numbers) <= 3 or any(n < 1 for n in numbers):
+        raise InputError("--participants", spec, "not a size or a range of sizes",
+                         "pass e.g. 24, 8:60 or 8:60:4 (from:to:step, participants >= 1)")
+    low, high = numbers[0], numbers[1] if len(numbers) > 1 else numbers[0]
+    step = numbers[2] if len(numbers) > 2 else max(1, len(williams_rows(cells)))
+    if high < low:
+        raise InputError("--participants", spec, f"the range ends ({high}) before it starts ({low})",
+                         "pass from:to with from <= to, e.g. 8:60:4")
+    return list(dict.fromkeys(planned_participants(n, cells) for n in range(low, high + 1, step)))
+
+
+def simulate_studies(config: StudyConfig, participants: int, studies: int, rng: np.random.Generator,
+                     model: ParticipantModel | None = None) -> SimulatedStudies:
+    """`studies` studies of `participants` participants of `config` on the model engine, drawn from
+    `rng` (module docstring). model: the participants (default: the config's driver model)."""
+    from trustroute.harness.simulation.model_engine import simulate_batch
+    from trustroute.harness.study.context import study_context
+
+    context = study_context(config)
+    total = studies * participants
+    if model is None:
+        drivers, index = [context.nominal], np.zeros(total, dtype=np.int64)
+    else:
+        weights = np.cumsum(np.asarray(model.weights, dtype=float))
+        drivers = list(model.types)
+        index = np.minimum(np.searchsorted(weights / weights[-1], rng.random(total), side="right"),
+                           len(drivers) - 1).astype(np.int64)
+    specs, conditions = tuple(config.spec_names), tuple(config.condition_names)
+    satisfied = np.zeros((studies, participants, len(specs), len(conditions)), dtype=bool)
+    reported = np.full(satisfied.shape, np.nan)
+    for s, spec in enumerate(specs):
+        for c, condition in enumerate(conditions):
+            result = simulate_batch(context.setup(spec, condition), context.policies[(spec, condition)],
+                                    total, rng, drivers=drivers, driver_index=index,
+                                    report_accuracy=config.report_accuracy)
+            satisfied[:, :, s, c] = result.satisfied.reshape(studies, participants)
+            reported[:, :, s, c] = np.asarray(result.mean_reported).reshape(studies, participants)
+    return SimulatedStudies(participants=participants, specs=specs, conditions=conditions,
+                            satisfied=satisfied, reported=reported)
+
+
+def check_plannable(config: StudyConfig) -> None:
+    """Planning simulates on the model engine the AV of the config: InputError for what it cannot."""
+    if config.population is not None or config.driver_population is not None:
+        raise InputError(config.source_path, "population",
+                         "plan draws its participants from --driver or --population, not from the "
+                         "config's [population] or [drivers]",
+                         "remove them from the config you plan with and pass --driver or --population")

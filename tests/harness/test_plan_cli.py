@@ -1,0 +1,94 @@
+"""`trustroute plan`: the power table, the minimal sizes and the power curve from simulated
+studies of a config, sizes rounded to the Williams square, one-line errors for bad input; and the
+simulated studies' outcomes are the model engine's (harness/study/planning.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.cli import cli_json, run_cli
+from trustroute.analysis.study.preregistration import chosen_size
+from trustroute.core.errors import InputError
+from trustroute.harness.study.config import load_study_config
+from trustroute.harness.study.planning import participant_sizes, planned_participants, simulate_studies
+
+
+@pytest.fixture(scope="module")
+def config_path(model_study):
+    return model_study.parent / "study.toml"   # aware vs free on phi1, phi2; its policies cached
+
+
+def test_sizes_are_rounded_to_the_williams_square():
+    assert planned_participants(5, 4) == 8 and planned_participants(8, 4) == 8
+    assert planned_participants(7, 3) == 12  # 3 cells: the square and its mirror, 6 rows
+    assert participant_sizes("8:16:4", 4) == [8, 12, 16]
+    assert participant_sizes("5:9", 4) == [8, 12]
+    for bad in ("x", "8:4", "0:8", "1:2:3:4"):
+        with pytest.raises(InputError):
+            participant_sizes(bad, 4)
+
+
+def test_plan_reports_power_with_intervals_and_the_minimal_size(config_path, capsys, tmp_path):
+    # sizes above 13: Wilcoxon's p-value of fewer pairs with ties is scipy's exact permutation test
+    # (2^N sign flips), seconds per study
+    args = ("plan", str(config_path), "--participants", "14:40:12", "--simulations", "30",
+            "--out", str(tmp_path), "--seed", "3")
+    answer = cli_json(capsys, *args)
+    assert answer["sizes"] == [16, 28, 40]
+    rows = answer["power"]
+    assert {(r["test"], r["spec"]) for r in rows} >= {("mcnemar", "phi1"), ("conditional_or", "phi2"),
+                                                      ("wilcoxon", "all specs")}
+    for row in rows:
+        assert row["studies"] == 30 and row["power"] == row["rejected"] / 30
+        assert row["low"] <= row["power"] <= row["high"]
+    for found in answer["minimal_participants"]:
+        powers = {r["participants"]: r["power"] for r in rows
+                  if (r["test"], r["spec"]) == (found["test"], found["spec"])}
+        if found["participants"] is None:
+            assert powers[40] < 0.8
+        else:
+            assert all(p >= 0.8 for n, p in powers.items() if n >= found["participants"])
+    assert (tmp_path / "power.png").stat().st_size > 0 and (tmp_path / "power.svg").exists()
+    document = tmp_path / "prereg.md"
+    again = cli_json(capsys, *args, "--preregistration", str(document))
+    assert again["power"] == rows  # same seed, same answer
+    _check_preregistration(document.read_text(), again)
+
+
+def _check_preregistration(text: str, answer: dict) -> None:
+    """The document's numbers are the plan's: its JSON block is the --json answer, its registered N
+    the largest minimal size, and its power table that size's rows."""
+    block = json.loads(text.split("```json\n", 1)[1].split("\n```", 1)[0])
+    assert block == {k: v for k, v in answer.items() if k != "paths"}
+    size = chosen_size(answer)
+    if size is None:
+        assert "**not determined**" in text
+    else:
+        assert f"**{size} participants**" in text
+        for row in (r for r in answer["power"] if r["participants"] == size):
+            interval = f"{row['power']:.3f} [{row['low']:.3f}, {row['high']:.3f}]"
+            assert f"| {row['participants']} | {interval} |" in text
+    assert answer["config_hash"] in text
+
+
+def test_simulated_outcomes_follow_the_model_engine(config_path):
+    """Satisfaction of the free condition and the reports as the per-episode study gives them (in
+    distribution: the fixture's study of 12 participants sets the scale)."""
+    config = load_study_config(config_path)
+    sims = simulate_studies(config, 8, 100, np.random.default_rng(0))
+    assert sims.satisfied.shape == (100, 8, 2, 2)
+    rates = sims.satisfied.mean(axis=(0, 1))
+    assert rates[0, 0] > 0.95 and 0.8 < rates[0, 1] < 0.95 and 0.7 < rates[1, 1] < 0.86
+    assert np.isfinite(sims.reported).all() and 4.0 < sims.reported.mean() < 6.0
+
+
+@pytest.mark.parametrize("args, where", [
+    (("--participants", "9:3"), "--participants"),
+    (("--driver", "no-such-driver.json"), "no-such-driver"),
+])
+def test_bad_input_is_one_line(config_path, capsys, tmp_path, args, where):
+    code, out, err = run_cli(capsys, "plan", str(config_path), *args, "--out", str(tmp_path))
+    assert code == 2 and err.count("\n") == 1 and where in err, err
