@@ -363,6 +363,25 @@ class UnboundedLedger(BoundLedger):
         self.accepted += float(frontier.probability[ending] @ accepted[ending])
         return ~ending
 
+    def prune(self, frontier, go: np.ndarray, level: int) -> np.ndarray:
+        """Beyond `max_nodes` open nodes, those with the least live mass are cut: what a cut
+        leaves unknown is its live mass, and with no cap a node's accepted mass is already
+        counted, so this keeps the most of what is still to be decided (measured on the
+        unbounded phi1_trust: docs/peers.md)."""
+        if go.sum() <= self.max_nodes:
+            return go
+        if self.live_masses is None:
+            raise TypeError("prune reads the level's masses, which settle computes first")
+        accepted, _, live = self.live_masses
+        mass = frontier.probability
+        order = np.argsort(-np.where(go, mass * live, -np.inf), kind="stable")
+        dropped = np.zeros(mass.size, dtype=bool)
+        dropped[order[self.max_nodes:]] = True
+        dropped &= go
+        self.accepted += float(mass[dropped] @ accepted[dropped])
+        self.unknown += float(mass[dropped] @ live[dropped])
+        return go & ~dropped
+
     def bounds(self) -> tuple[float, float]:
         margin = ROUNDING_MARGIN_PER_LEVEL * (self.levels_done + 1)
         lower, upper = accepted_bounds(self.accepted, self.unknown + margin)

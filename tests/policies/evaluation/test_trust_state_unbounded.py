@@ -49,6 +49,18 @@ def test_each_iterate_is_the_brute_force_value_within_its_junctions(looping):
         assert value.lower <= longer.lower <= longer.upper <= value.upper + MARGIN
 
 
+def test_a_frontier_cut_by_live_mass_still_brackets_the_value(looping):
+    """Beyond a few nodes per level the nodes with the least live mass are dropped: their live
+    mass is unknown, so the bracket still holds the brute-force value within 4 junctions (and
+    the value over unbounded time, which is at least that) while it is wider than uncut."""
+    pomdp, spec, policy = looping
+    reference = policy_value(pomdp, spec, policy, 4)
+    full = evaluate_joint_table_unbounded(pomdp, spec, policy, max_junctions=4)
+    cut = evaluate_joint_table_unbounded(pomdp, spec, policy, max_nodes=3, max_junctions=4)
+    assert cut.lower <= reference + MARGIN <= cut.upper + 2 * MARGIN
+    assert cut.lower < full.lower - 1e-6 and cut.upper - cut.lower > full.upper - full.lower
+
+
 @pytest.mark.slow
 def test_monte_carlo_of_the_looping_policy_is_at_least_its_lower_bound(looping, driver):
     """Episodes of the same policy through the episode tracker, 60 junctions each: their
