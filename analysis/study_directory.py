@@ -14,14 +14,15 @@ import pandas as pd
 
 from trustroute.core.dataset import read_episodes, read_manifest, read_roads
 from trustroute.core.errors import InputError
+from trustroute.core.packaged import PACKAGED_SPECS
+from trustroute.harness.study.context import load_study_inputs
+from trustroute.harness.study.inputs import relocated_config, verify_inputs
 
 
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset;
     the manifest's config names the study directory's own copies of its inputs (absolute paths
     where the directory lies, harness/study/inputs.py), checked against their hashes."""
-    from trustroute.harness.study.inputs import relocated_config, verify_inputs
-
     study_dir = Path(study_dir)
     manifest = read_manifest(study_dir)
     verify_inputs(manifest, study_dir)
@@ -32,8 +33,6 @@ def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
 def study_inputs(manifest: dict):
     """(town, nominal driver model, {spec name: Spec}) named by the study's config, loaded as the
     study loaded them (harness/study/context.py, `load_study_inputs`)."""
-    from trustroute.harness.study.context import load_study_inputs
-
     config = manifest["config"]
     return load_study_inputs(_recorded_input(config.get("town"), "town", manifest),
                              _recorded_input(config.get("driver_model"), "driver model", manifest),
@@ -54,8 +53,6 @@ def _recorded_input(path: str | None, what: str, manifest: dict) -> str | None:
 def spec_path(path: str) -> Path:
     """A manifest's spec path; a packaged spec when the recorded path is gone (a study directory
     shipped with the package, or moved to another machine)."""
-    from trustroute.core.packaged import PACKAGED_SPECS
-
     recorded = Path(path)
     packaged = PACKAGED_SPECS / recorded.name
     return recorded if recorded.exists() or not packaged.exists() else packaged

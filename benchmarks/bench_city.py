@@ -22,6 +22,8 @@ import sys
 import time
 
 from benchmarks.bench_synthesis_scaling import MEMORY_TARGET_MB, TAU, TIME_LIMIT, run_json_subprocess
+from trustroute.policies.evaluation.settings import EvaluationSettings
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 # (row name prefix, spec, town)
 CITIES = (("city", "city5", "city"), ("csomor", "csomor5", "csomor"))
@@ -46,7 +48,7 @@ def _child(spec_name: str, town_name: str, horizon: int | None) -> dict:
     from trustroute.policies.synthesis.belief_synthesis import synthesize
 
     _, pomdp, spec = _problem(spec_name, town_name)
-    result = synthesize(pomdp, spec, tau=TAU, time_limit=TIME_LIMIT, horizon=horizon)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=TAU, time_limit=TIME_LIMIT, horizon=horizon))
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb}
 
@@ -59,7 +61,7 @@ def _baseline(prefix: str, spec_name: str, town_name: str) -> dict:
     town, pomdp, spec = _problem(spec_name, town_name)
     load = os.getloadavg()[0]
     start = time.perf_counter()
-    value = evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None)
+    value = evaluate(pomdp, spec, trust_free_policy(town, spec), EvaluationSettings(fallback_after=None))
     seconds = time.perf_counter() - start
     route = baseline_route(town, spec)
     return {"name": f"{prefix}.trust_free", "value": value.satisfaction_probability, "unit": "probability",

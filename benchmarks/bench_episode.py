@@ -27,6 +27,7 @@ from trustroute.harness.simulation.episode import COMMIT_DISTANCE, START_BEFORE_
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.incidents import truck
 from trustroute.harness.simulation.sumo_start import SumoConfig, fresh_session, sumo_session
+from trustroute.networks.road import Road
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
@@ -47,7 +48,7 @@ def full_scene(town, road: str) -> bool:
     net's 5 % of the SUMO lane's), the only way an oncoming truck enters the ego's lane."""
     if town.incident(road) != "truck":
         return True
-    u, v = road.split("-")
+    u, v = Road.parse(road)
     return town.length(f"{v}-{u}") >= truck.PARKED_MIN_LANE
 
 

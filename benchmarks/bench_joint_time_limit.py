@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 
 from benchmarks.bench_storm import HORIZON, _problem
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 RUNS = (("paper", 0.5), ("paper", 2.0), ("paper", 4.0), ("grid25", 4.0))
 TAU = 1e-12
@@ -31,7 +32,7 @@ def run() -> list[dict]:
     for town_kind, limit in RUNS:
         pomdp, spec = _problem(town_kind)
         started = time.perf_counter()
-        result = synthesize_spec(pomdp, spec, tau=TAU, time_limit=limit, horizon=HORIZON)
+        result = synthesize_spec(pomdp, spec, SynthesisSettings(tau=TAU, time_limit=limit, horizon=HORIZON))
         seconds = time.perf_counter() - started
         results.append(time_limit_row(f"joint_time_limit_{town_kind}_{limit:g}s", limit, seconds,
                                       rounds=len(result.stats.runs), lower=result.lower,

@@ -17,6 +17,8 @@ import resource
 import sys
 import time
 
+from trustroute.policies.synthesis.settings import SynthesisSettings
+
 OUR_TAU = 1e-3
 OUR_TIME_LIMIT = 60
 STORM_TIME_LIMIT = 20          # seconds of Storm's belief unfolding
@@ -57,7 +59,8 @@ def _ours(queue, town_kind: str, paper_spec: str | None, horizon: int | None) ->
 
     pomdp, spec = problem(town_kind, paper_spec)
     started = time.perf_counter()
-    result = synthesize_spec(pomdp, spec, tau=OUR_TAU, time_limit=OUR_TIME_LIMIT, horizon=horizon)
+    result = synthesize_spec(pomdp, spec,
+                             SynthesisSettings(tau=OUR_TAU, time_limit=OUR_TIME_LIMIT, horizon=horizon))
     queue.put({"lower": result.lower, "upper": result.upper, "seconds": time.perf_counter() - started,
                "peak_rss_mb": _peak_mb()})
 

@@ -16,6 +16,7 @@ from trustroute.harness.simulation.model_engine import monte_carlo
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import trust_free_policy
@@ -60,7 +61,7 @@ def run() -> list[dict]:
 
     spec = load_spec("specs/phi1.toml", town)
     deep = _FixedRandomPolicy(town, np.random.default_rng(2))
-    tree = evaluate(pomdp, spec, deep, fallback_after=28)
+    tree = evaluate(pomdp, spec, deep, EvaluationSettings(fallback_after=28))
     results.append({"name": "trustroute.policies.evaluation.plain.deep_tree_nodes_per_second",
                     "value": tree.nodes / tree.seconds, "unit": "nodes/s", "nodes": tree.nodes,
                     "max_frontier": tree.max_frontier, "seconds": tree.seconds, "gap": tree.gap})

@@ -46,12 +46,14 @@ from trustroute.participants.driver_population import (
 from trustroute.participants.population import PopulationConfig, sample_population
 from trustroute.policies.belief.driver_types import lift_population, lift_spec
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.population import synthesize_population
 from trustroute.policies.synthesis.result import SearchRun
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 SPECS = ("phi1", "phi2")
 HORIZON = 20
@@ -71,7 +73,8 @@ def row_values(av_pomdp, av_spec, policy, population: DriverPopulation, spec) ->
     reference = (build_pomdp(av_pomdp.town, lift_population(population)), lift_spec(spec, population))
     per_type = {}
     for t in population.types:
-        value = evaluate(av_pomdp, av_spec, policy, fallback_after=None, max_junctions=HORIZON,
+        value = evaluate(av_pomdp, av_spec, policy,
+                         EvaluationSettings(fallback_after=None, max_junctions=HORIZON),
                          truth=build_pomdp(av_pomdp.town, t.model), reference=reference)
         per_type[t.name] = {"weight": t.weight, "lower": value.lower, "upper": value.upper,
                             "ref": value.reference_accepted, "final_trust": value.expected_final_trust}
@@ -101,10 +104,12 @@ def run() -> list[dict]:
         spec = load_spec(SPEC_DIR / f"{spec_name}.toml", town)
         nominal_pomdp = build_pomdp(town, nominal)
         started = time.perf_counter()
-        aware = synthesize(nominal_pomdp, spec, tau=TAU, time_limit=TIME_LIMIT, horizon=HORIZON)
+        aware = synthesize(nominal_pomdp, spec,
+                           SynthesisSettings(tau=TAU, time_limit=TIME_LIMIT, horizon=HORIZON))
         aware_seconds = time.perf_counter() - started
-        robust = synthesize_population(town, example, spec, "robust", tau=TAU, time_limit=TIME_LIMIT,
-                                       horizon=HORIZON, grid_points=GRID_POINTS)
+        robust = synthesize_population(town, example, spec, "robust",
+                                       SynthesisSettings(tau=TAU, time_limit=TIME_LIMIT, horizon=HORIZON,
+                                                         grid_points=GRID_POINTS))
         columns = {
             "free": (nominal_pomdp, spec, trust_free_policy(town, spec)),
             "aware": (nominal_pomdp, spec, aware.policy),
@@ -150,8 +155,9 @@ def timing(town, nominal, example: DriverPopulation) -> dict:
     for k, population in populations.items():
         tracemalloc.start()
         started = time.perf_counter()
-        found = synthesize_population(town, population, spec, "bayes", tau=TAU,
-                                      time_limit=TIMING_TIME_LIMIT, horizon=HORIZON)
+        found = synthesize_population(town, population, spec, "bayes",
+                                      SynthesisSettings(tau=TAU, time_limit=TIMING_TIME_LIMIT,
+                                                        horizon=HORIZON))
         seconds = time.perf_counter() - started
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()

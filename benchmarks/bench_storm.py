@@ -15,6 +15,8 @@ import multiprocessing
 import resource
 import time
 
+from trustroute.policies.synthesis.settings import SynthesisSettings
+
 HORIZON = 20
 STORM_TIME_LIMIT = 60          # seconds of Storm's belief unfolding (its lower bound)
 STORM_RESOLUTION = 2           # Storm's discretisation (its upper bound)
@@ -99,7 +101,8 @@ def _ours(queue, town_kind: str) -> None:
 
     pomdp, spec = _problem(town_kind)
     started = time.perf_counter()
-    result = synthesize_spec(pomdp, spec, tau=OUR_TAU, time_limit=OUR_TIME_LIMIT, horizon=HORIZON)
+    result = synthesize_spec(pomdp, spec,
+                             SynthesisSettings(tau=OUR_TAU, time_limit=OUR_TIME_LIMIT, horizon=HORIZON))
     last = result.stats.runs[-1]
     queue.put({"lower": result.lower, "upper": result.upper,
                "lower_is": "the returned policy's exact value (trustroute synth)",

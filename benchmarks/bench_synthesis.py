@@ -28,12 +28,14 @@ from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.belief.product_mdp import build_product
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.pomdp_py.pouct import pouct_policy
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols
 from trustroute.policies.synthesis.belief_synthesis import synthesize
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 SPECS = ("phi1", "phi2", "phi1_strict", "phi2_strict")
 RULES = ("bayes", "paper")
@@ -119,8 +121,9 @@ def run() -> list[dict]:
         spec = load_spec(f"specs/{name}.toml", town)
         for rule in RULES:
             for horizon in HORIZONS:
-                result = synthesize(pomdp, spec, tau=TAU, time_limit=TIME_LIMIT, horizon=horizon,
-                                    belief_rule=rule)
+                result = synthesize(pomdp, spec,
+                                    SynthesisSettings(tau=TAU, time_limit=TIME_LIMIT, horizon=horizon,
+                                                      belief_rule=rule))
                 label = "unbounded" if horizon is None else f"H{horizon}"
                 row = {"name": f"synthesis.{name}.{rule}.{label}", "value": result.lower,
                        "unit": "probability", "lower": result.lower, "upper": result.upper,
@@ -130,8 +133,9 @@ def run() -> list[dict]:
                 if horizon == DEFAULT_FALLBACK_AFTER:
                     # What the study measures: the policy, then the fallback after 20 junctions, with
                     # the true (Bayes) observation probabilities even when the AV filters by "paper".
-                    study = evaluate(pomdp, spec, result.policy, fallback_after=DEFAULT_FALLBACK_AFTER,
-                                     belief_rule=rule)
+                    study = evaluate(pomdp, spec, result.policy,
+                                     EvaluationSettings(fallback_after=DEFAULT_FALLBACK_AFTER,
+                                                        belief_rule=rule))
                     row.update({"with_fallback20_lower": study.lower, "with_fallback20_upper": study.upper,
                                 "with_fallback20_final_trust": study.expected_final_trust})
                 results.append(row)

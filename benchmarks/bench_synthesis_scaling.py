@@ -21,6 +21,8 @@ import os
 import subprocess
 import sys
 
+from trustroute.policies.synthesis.settings import SynthesisSettings
+
 GRIDS = {12: (3, 4), 50: (5, 10), 100: (10, 10), 200: (10, 20)}
 WAYPOINTS = (3, 5, 8)
 HORIZONS = (10, 20, 40, None)
@@ -88,7 +90,7 @@ def _child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str 
     from trustroute.policies.synthesis.belief_synthesis import synthesize
 
     pomdp, spec = grid_or_paper_problem(junctions, waypoints, paper_spec)
-    result = synthesize(pomdp, spec, tau=TAU, time_limit=TIME_LIMIT, horizon=horizon)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=TAU, time_limit=TIME_LIMIT, horizon=horizon))
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     last = result.stats.runs[-1]
     return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb,

@@ -19,6 +19,7 @@ import time
 
 from benchmarks.bench_joint_time_limit import TAU, time_limit_row
 from benchmarks.bench_synthesis_scaling import grid_or_paper_problem, run_json_subprocess
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 WAYPOINTS = 5
 # (label, junctions, paper spec, horizon): the paper's town at H = 20, the grids at H = 40
@@ -35,7 +36,7 @@ def _child(junctions: int, paper_spec: str | None, horizon: int | None, limit: f
 
     pomdp, spec = grid_or_paper_problem(junctions, WAYPOINTS, paper_spec)
     wall, cpu = time.perf_counter(), time.process_time()
-    result = synthesize(pomdp, spec, tau=TAU, time_limit=limit, horizon=horizon)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=TAU, time_limit=limit, horizon=horizon))
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     return {"seconds": wall, "cpu_seconds": cpu, "lower": result.lower, "upper": result.upper,
             "runs": len(result.stats.runs), "nodes": result.stats.runs[-1].nodes}

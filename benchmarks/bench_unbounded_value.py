@@ -19,11 +19,12 @@ FRONTIERS = (20_000, 50_000, 200_000)
 def run() -> list[dict]:
     from benchmarks.bench_peers import problem
     from trustroute.policies.evaluation.trust_state import evaluate_joint_table_unbounded
+    from trustroute.policies.synthesis.settings import SynthesisSettings
     from trustroute.policies.synthesize_spec import synthesize_spec
 
     pomdp, spec = problem("paper", "phi1_trust")
     started = time.perf_counter()
-    result = synthesize_spec(pomdp, spec, tau=1e-3, time_limit=TIME_LIMIT, horizon=None)
+    result = synthesize_spec(pomdp, spec, SynthesisSettings(tau=1e-3, time_limit=TIME_LIMIT, horizon=None))
     value = result.stats.to_dict()["policy_value"]
     rows = [{"name": "unbounded_phi1_trust_synth", "lower": result.lower, "upper": result.upper,
              "seconds": time.perf_counter() - started, "policy_rows": result.stats.policy_rows,

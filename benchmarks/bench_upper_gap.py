@@ -15,13 +15,14 @@ TAUS = (1e-3, 1e-6)
 
 def run() -> list[dict]:
     from benchmarks.bench_peers import problem
+    from trustroute.policies.synthesis.settings import SynthesisSettings
     from trustroute.policies.synthesize_spec import synthesize_spec
 
     pomdp, spec = problem("paper", "phi1_trust")
     rows = []
     for tau in TAUS:
         started = time.perf_counter()
-        result = synthesize_spec(pomdp, spec, tau=tau, time_limit=TIME_LIMIT, horizon=20)
+        result = synthesize_spec(pomdp, spec, SynthesisSettings(tau=tau, time_limit=TIME_LIMIT, horizon=20))
         rows.append({"name": f"paper_phi1_trust_h20_tau_{tau:g}", "lower": result.lower,
                      "upper": result.upper, "seconds": time.perf_counter() - started,
                      "above_storm_upper": result.upper - STORM_UPPER,

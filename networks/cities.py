@@ -34,11 +34,16 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from trustroute.core.cache import TOWNS as TOWNS_CACHE
 from trustroute.core.cache import cache_dir
 from trustroute.core.errors import InputError
 from trustroute.core.packaged import PackagedKind
+from trustroute.networks.osm_convert import GENERATED_HEADER
 from trustroute.networks.road_geometry import file_sha256
+from trustroute.networks.sumo_net import find_binary
+from trustroute.networks.town_import import import_town
 
 CITY = "city"
 SCENARIO = "ingolstadt21"          # sumo-rl's nets/RESCO/<SCENARIO>/<SCENARIO>.net.xml and .rou.xml
@@ -107,10 +112,6 @@ def city_folder() -> Path:
 
 
 def _import_city(net: Path, routes: Path, folder: Path) -> None:
-    import numpy as np
-
-    from trustroute.networks.town_import import import_town
-
     shutil.copyfile(net, folder / net.name)
     shutil.copyfile(routes, folder / routes.name)
     import_town(folder / net.name, folder / CITY_TOWN_FILE, rng=np.random.default_rng(CITY_INCIDENT_SEED),
@@ -161,12 +162,6 @@ def csomor_folder() -> Path:
 
 
 def _build_csomor(folder: Path) -> None:
-    import numpy as np
-
-    from trustroute.networks.osm_convert import GENERATED_HEADER
-    from trustroute.networks.sumo_net import find_binary
-    from trustroute.networks.town_import import import_town
-
     plain = {}
     for kind, packed in csomor_plain_files().items():
         plain[kind] = folder / packed.name.removesuffix(".gz")

@@ -30,8 +30,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.core.errors import InputError
+from trustroute.networks.road import Road
 from trustroute.networks.road_geometry import check_sumo_net
-from trustroute.networks.town import Town, road_name, split_road
+from trustroute.networks.town import Town
 
 PASSENGER = "passenger"
 
@@ -169,8 +170,7 @@ def road_edges(town: Town, net_file: Path) -> dict[str, RoadEdges]:
     net = sumolib.net.readNet(str(net_file), withInternal=False)
     out: dict[str, RoadEdges] = {}
     for road in town.states:
-        u, v = split_road(road)
-        other_way = town.geometry.get(road_name(v, u))
+        other_way = town.geometry.get(Road.parse(road).reverse.id)
         reverse_edges = [net.getEdge(e) for e in (other_way.edges if other_way else ()) if net.hasEdge(e)]
         geometry = town.geometry.get(road)
         if geometry is None or not geometry.edges:

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.core.errors import InputError
+from trustroute.networks.road import Road
 
 EXTRA_TOWN_KEYS: tuple[str, ...] = ("one_way", "geometry", "sumo_net", "turns")
 GEOMETRY_KEYS: tuple[str, ...] = ("shape", "length", "edges", "street")
@@ -179,7 +180,7 @@ def parse_turns(data: Mapping, path: str, directed: Iterable[tuple[str, str]]) -
     leaving: dict[str, set[str]] = {}
     for u, v in directed:
         leaving.setdefault(u, set()).add(v)
-    names = {f"{u}-{v}": v for u, v in directed}
+    names = {Road(u, v).id: v for u, v in directed}
     out = {}
     for key, moves in raw.items():
         place = f"turns.{key}"
@@ -193,7 +194,7 @@ def parse_turns(data: Mapping, path: str, directed: Iterable[tuple[str, str]]) -
         at = names[key]
         for w in moves:
             if w not in leaving.get(at, set()):
-                raise InputError(path, place, f"{at}-{w} is not a directed road of this town",
+                raise InputError(path, place, f"{Road(at, w).id} is not a directed road of this town",
                                  f"list only junctions one road on from {at} in driving direction")
         out[key] = tuple(sorted(moves))
     return dict(sorted(out.items()))
@@ -207,7 +208,7 @@ def parse_road_extras(data: Mapping, path: str, roads: Iterable[tuple[str, str]]
     if not isinstance(raw_geometry, dict):
         raise InputError(path, "geometry", "expected an object of \"U-V\" -> {\"shape\": ...}",
                          "key each road's geometry by its directed road name")
-    directed = {f"{u}-{v}" for u, v in directed_pairs(roads, one_way)}
+    directed = {Road(u, v).id for u, v in directed_pairs(roads, one_way)}
     geometry = {}
     for key, raw in raw_geometry.items():
         if key not in directed:

@@ -13,7 +13,8 @@ from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from trustroute.networks.town import Town, split_road
+from trustroute.networks.road import Road
+from trustroute.networks.town import Town
 
 STREET_SEPARATOR = "; "  # an imported road along several streets names them all, joined by this
 
@@ -23,7 +24,7 @@ def road_shape(town: Town, directed_road: str) -> tuple[tuple[float, float], ...
     geometry = town.geometry.get(directed_road)
     if geometry is not None:
         return geometry.shape
-    u, v = split_road(directed_road)
+    u, v = Road.parse(directed_road)
     return (town.junctions[u], town.junctions[v])
 
 
@@ -37,7 +38,7 @@ def road_streets(town: Town, directed_road: str) -> tuple[str, ...]:
 
 def roads_into(town: Town, junction: str) -> frozenset[str]:
     """Every directed road of the town that ends at `junction`."""
-    return frozenset(road for road in town.states if split_road(road)[1] == junction)
+    return frozenset(road for road in town.states if Road.parse(road).to_junction == junction)
 
 
 def roads_on_street(town: Town, street: str) -> frozenset[str]:
@@ -145,7 +146,7 @@ def choice_junctions(town: Town) -> set[str]:
     (the road back to the junction it came from): the decision junctions of the model."""
     found = set()
     for directed_road in town.states:
-        came_from, at = split_road(directed_road)
+        came_from, at = Road.parse(directed_road)
         if sum(1 for w in town.neighbours[at] if w != came_from) >= 2:
             found.add(at)
     return found

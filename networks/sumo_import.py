@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from trustroute.core.errors import InputError
+from trustroute.networks.road import Road
 
 PASSENGER = "passenger"
 MAX_NAME = 64
@@ -353,7 +354,7 @@ def decision_graph(graph: NetGraph, shown: str) -> DecisionGraph:
         "edges only a U-turn reaches or parallel to a shorter one": len(kept) - len(used),
         "roads the net's turns do not drive to and from the rest": len(all_chains) - len(chains),
     }
-    turns = {f"{names[c[0].source]}-{names[c[-1].target]}":
+    turns = {Road(names[c[0].source], names[c[-1].target]).id:
              tuple(sorted(names[all_chains[j][-1].target] for j in moves[i] if j in driven))
              for i, c in enumerate(all_chains) if i in driven}
     return DecisionGraph(

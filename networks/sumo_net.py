@@ -38,7 +38,9 @@ from xml.sax.saxutils import quoteattr
 from trustroute.core.cache import NETS
 from trustroute.core.cache import cache_dir as default_cache_dir
 from trustroute.core.errors import InputError
-from trustroute.networks.town import Town, road_name
+from trustroute.core.output_files import file_lock
+from trustroute.networks.road import Road
+from trustroute.networks.town import Town
 
 NET_RECIPE = "r3"                      # bump when the recipe below changes: invalidates caches
 ROAD_SPEED = 13.89                     # m/s (50 km/h)
@@ -83,7 +85,7 @@ def pedestrian_roads(town: Town) -> list[tuple[str, str]]:
     """Undirected roads (sorted pairs) with a pedestrian incident in either direction."""
     incident = town.incidents.get  # a one-way road has one direction only
     return sorted({(u, v) if u <= v else (v, u) for u, v in town.roads
-                   if "pedestrian" in (incident(road_name(u, v)), incident(road_name(v, u)))})
+                   if "pedestrian" in (incident(Road(u, v).id), incident(Road(v, u).id))})
 
 
 def lane_count(town: Town, directed_road: str) -> int:
@@ -103,8 +105,8 @@ def edge_shape(town: Town, directed_road: str) -> tuple[tuple[float, float], ...
     own = town.geometry.get(directed_road)
     if own is not None and len(own.shape) > 2:
         return own.shape
-    u, v = directed_road.split("-")
-    other = town.geometry.get(road_name(v, u))
+    u, v = Road.parse(directed_road)
+    other = town.geometry.get(Road(v, u).id)
     if other is not None and len(other.shape) > 2:
         return tuple(reversed(other.shape))
     return None
@@ -126,8 +128,8 @@ def plain_xml(town: Town) -> dict[str, str]:
     nodes.append("</nodes>")
     edges = ["<edges>"]
     for road in town.states:
-        u, v = road.split("-")
-        reverse = road_name(v, u)
+        u, v = Road.parse(road)
+        reverse = Road(v, u).id
         edges.append(f"  <edge id={quoteattr(road)} from={quoteattr(u)} to={quoteattr(v)} priority=\"1\" "
                      f"numLanes=\"{lane_count(town, road)}\" speed=\"{ROAD_SPEED}\" "
                      f"width=\"{LANE_WIDTH}\" sidewalkWidth=\"{SIDEWALK_WIDTH}\" spreadType=\"right\""
@@ -146,8 +148,8 @@ def plain_xml(town: Town) -> dict[str, str]:
                                    f"fromLane=\"{lane}\" toLane=\"1\"/>")
     for u, v in sorted(tuple(sorted(p)) for p in walk):
         for at in (u, v):
-            connections.append(f"  <crossing node={quoteattr(at)} edges=\"{road_name(u, v)} "
-                               f"{road_name(v, u)}\" priority=\"true\"/>")
+            connections.append(f"  <crossing node={quoteattr(at)} edges=\"{Road(u, v).id} "
+                               f"{Road(v, u).id}\" priority=\"true\"/>")
     connections.append("</connections>")
     return {"nod": "\n".join(nodes) + "\n", "edg": "\n".join(edges) + "\n",
             "con": "\n".join(connections) + "\n"}
@@ -237,8 +239,6 @@ def build_net(town: Town, cache_dir: Path | None = None,
     """The SUMO net of `town`, built with netconvert or taken from the cache. The entry is verified
     on every read, built under a lock (two processes never build one entry at once) and written
     atomically (fsync, then rename)."""
-    from trustroute.core.output_files import file_lock
-
     started = time.perf_counter()
     target = net_path(town, cache_dir)
     found = _cached(town, target, started, notice)

@@ -39,6 +39,7 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import PackagedKind
 from trustroute.core.validation import parse_json, read_text, require_object
+from trustroute.networks.road import Road
 from trustroute.networks.road_geometry import (
     EXTRA_TOWN_KEYS,
     RoadExtras,
@@ -70,19 +71,10 @@ MAX_JUNCTION_NAME = 64
 JUNCTION_NAME = re.compile(r"[A-Za-z0-9_]+")
 
 
-def road_name(from_junction: str, to_junction: str) -> str:
-    return f"{from_junction}-{to_junction}"
-
-
-def split_road(directed_road: str) -> tuple[str, str]:
-    from_junction, _, to_junction = directed_road.partition("-")
-    return from_junction, to_junction
-
-
 def rule_moves(neighbours: Mapping[str, Sequence[str]], directed_road: str) -> tuple[str, ...]:
     """The town's rule for the moves from U-V (docs/model.md): the neighbours of V other than U,
     and U itself only at a dead end."""
-    came_from, at = split_road(directed_road)
+    came_from, at = Road.parse(directed_road)
     options = tuple(w for w in neighbours[at] if w != came_from)
     return options if options else (came_from,)
 
@@ -113,7 +105,7 @@ class Town:
         object.__setattr__(
             self, "neighbours", {k: tuple(sorted(v)) for k, v in neighbours.items()}
         )
-        states = sorted(road_name(u, v) for u, v in directed_pairs(self.roads, self.one_way))
+        states = sorted(Road(u, v).id for u, v in directed_pairs(self.roads, self.one_way))
         object.__setattr__(self, "states", tuple(states))
 
     # -- identity -----------------------------------------------------------
@@ -169,14 +161,14 @@ class Town:
     def _moves(self, directed_road: str) -> tuple[str, ...]:
         allowed = self.turns.get(directed_road)
         if allowed is not None:
-            return tuple(w for w in self.neighbours[split_road(directed_road)[1]] if w in allowed)
+            return tuple(w for w in self.neighbours[Road.parse(directed_road).to_junction] if w in allowed)
         return rule_moves(self.neighbours, directed_road)
 
     def successor(self, directed_road: str, next_junction: str) -> str:
-        _, at = split_road(directed_road)
+        at = Road.parse(directed_road).to_junction
         if next_junction not in self.actions(directed_road):
             raise ValueError(f"{next_junction} is not a legal move from {directed_road}")
-        return road_name(at, next_junction)
+        return Road(at, next_junction).id
 
     def successors(self, directed_road: str) -> tuple[str, ...]:
         return tuple(self.successor(directed_road, w) for w in self.actions(directed_road))
@@ -191,7 +183,7 @@ class Town:
         geometry = self.geometry.get(directed_road)
         if geometry is not None:
             return geometry.length
-        u, v = split_road(directed_road)
+        u, v = Road.parse(directed_road)
         (x1, y1), (x2, y2) = self.junctions[u], self.junctions[v]
         return math.hypot(x2 - x1, y2 - y1)
 
@@ -307,7 +299,7 @@ def _road(road: object, place: str, junctions: dict[str, tuple[float, float]], p
         raise InputError(path, place, f"road {u}-{v} is a self-loop", "remove it; roads join two "
                          "different junctions")
     apart = math.dist(junctions[u], junctions[v])
-    if apart == 0 or (not {road_name(u, v), road_name(v, u)} & shaped and apart < MIN_ROAD_LENGTH):
+    if apart == 0 or (not {Road(u, v).id, Road(v, u).id} & shaped and apart < MIN_ROAD_LENGTH):
         raise InputError(path, place, f"road {u}-{v} is {math.dist(junctions[u], junctions[v]):.3g} m long "
                          f"(junctions {u} and {v} almost coincide)", f"place the junctions at least "
                          f"{MIN_ROAD_LENGTH:g} m apart")
@@ -335,7 +327,7 @@ SHOWN_MISSING = 5  # directed roads named in the message when many lack an incid
 def _check_incidents(incidents: Mapping[str, str], roads: tuple[tuple[str, str], ...],
                      one_way: frozenset[tuple[str, str]], path: str) -> None:
     """Exactly one entry per directed road of the town (one direction only for one-way roads)."""
-    directed = {road_name(a, b) for a, b in directed_pairs(roads, one_way)}
+    directed = {Road(a, b).id for a, b in directed_pairs(roads, one_way)}
     missing = sorted(key for key in directed if key not in incidents)
     if len(missing) == 1:
         raise InputError(path, f"incidents.{missing[0]}",

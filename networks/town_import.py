@@ -22,9 +22,10 @@ import numpy as np
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
 from trustroute.networks.osm_convert import convert_osm, source_kind
+from trustroute.networks.road import Road
 from trustroute.networks.road_geometry import RoadGeometry, file_sha256
 from trustroute.networks.sumo_import import ROUND_METRES, DecisionGraph, decision_graph, read_net_graph
-from trustroute.networks.town import NO_INCIDENT, Town, road_name, rule_moves, town_from_dict
+from trustroute.networks.town import NO_INCIDENT, Town, rule_moves, town_from_dict
 from trustroute.networks.town_incidents import RoadFacts, draw_incidents, incidents_from_file
 
 
@@ -74,7 +75,7 @@ def town_document(graph: DecisionGraph, incidents: dict[str, str], net_file: str
     turns = {road: list(moves) for road, moves in graph.moves.items()
              if moves != rule_moves(neighbours, road)}
     geometry = {
-        road_name(r.source, r.target): RoadGeometry(
+        Road(r.source, r.target).id: RoadGeometry(
             shape=tuple((_round(x), _round(y)) for x, y in r.shape), length=r.length,
             edges=tuple(e.id for e in r.edges), street=r.street).to_dict()
         for r in graph.roads
@@ -111,7 +112,7 @@ def town_json(document: dict) -> str:
 
 
 def road_facts(graph: DecisionGraph) -> list[RoadFacts]:
-    return [RoadFacts(name=road_name(r.source, r.target), length=r.length, speed=r.speed,
+    return [RoadFacts(name=Road(r.source, r.target).id, length=r.length, speed=r.speed,
                       edges=tuple(e.id for e in r.edges)) for r in graph.roads]
 
 

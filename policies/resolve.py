@@ -23,15 +23,20 @@ from trustroute.core import defaults
 from trustroute.core.cache import POLICIES
 from trustroute.core.cache import cache_dir as cache_dir_of
 from trustroute.core.errors import InputError
+from trustroute.core.output_files import file_lock
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.belief.driver_types import lift_population, lift_spec
 from trustroute.policies.belief.problem import TRUST_STATE, case_of
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, build_pomdp
-from trustroute.policies.routing.files import array_path, load_policy, save_policy
+from trustroute.policies.routing.files import array_path, load_policy, load_population_policy, save_policy
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.synthesis.population import OBJECTIVES, document_entries, policy_name, run_count
+from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesis.version import JOINT_SYNTHESIS_VERSION, SYNTHESIS_VERSION
+from trustroute.policies.synthesize_spec import synthesize_for_population
 from trustroute.policies.synthesize_spec import synthesize_spec as synthesize
 
 if TYPE_CHECKING:
@@ -96,8 +101,6 @@ def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | P
     synthesizing). Entries are written atomically (policies.routing.files), filled under a lock
     (two processes never synthesize one entry at once, and the second reads what the first wrote)
     and verified on every read."""
-    from trustroute.core.output_files import file_lock
-
     path = aware_cache_path(town, driver, spec, cache_dir, horizon, belief_rule)
 
     def load(entry: Path) -> RoutingPolicy:
@@ -113,8 +116,10 @@ def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | P
         if policy is not None:
             return policy
         with synthesis_progress(f"synthesizing aware for {spec.name}", progress) as on_iteration:
-            result = synthesize(build_pomdp(town, driver), spec, tau=AWARE_TAU, time_limit=AWARE_TIME_LIMIT,
-                                horizon=horizon, belief_rule=belief_rule, on_iteration=on_iteration)
+            result = synthesize(build_pomdp(town, driver), spec,
+                                SynthesisSettings(tau=AWARE_TAU, time_limit=AWARE_TIME_LIMIT, horizon=horizon,
+                                                  belief_rule=belief_rule),
+                                on_iteration=on_iteration)
         save_policy(result, path, town, driver, spec)
     return result.policy
 
@@ -215,8 +220,6 @@ def population_cache_path(town: Town, population: DriverPopulation, spec: Spec, 
 
 def is_objective(name: str) -> TypeGuard[Objective]:
     """`name` is an objective of population synthesis ("bayes" or "robust")."""
-    from trustroute.policies.synthesis.population import OBJECTIVES
-
     return name in OBJECTIVES
 
 
@@ -229,12 +232,6 @@ def population_policy(town: Town, population: DriverPopulation, spec: Spec, obje
     synthesized when missing or damaged (policies/synthesis/population.py): (policy, the lifted
     driver model its AV filters with, the lifted spec). One type: the "aware" policy of that
     type's model."""
-    from trustroute.core.output_files import file_lock
-    from trustroute.policies.belief.driver_types import lift_population, lift_spec
-    from trustroute.policies.routing.files import load_population_policy
-    from trustroute.policies.synthesis.population import document_entries, policy_name, run_count
-    from trustroute.policies.synthesize_spec import synthesize_for_population
-
     lifted_spec = lift_spec(spec, population, population_source)
     if population.n_types == 1:
         model = lift_population(population)
@@ -260,10 +257,13 @@ def population_policy(town: Town, population: DriverPopulation, spec: Spec, obje
         description = f"synthesizing {objective} for {spec.name}"
         with synthesis_progress(description, progress) as on_iteration:
             runs = run_count(population, objective, POPULATION_GRID_POINTS)
-            made = synthesize_for_population(town, population, spec, objective, tau=AWARE_TAU,
-                                             time_limit=POPULATION_TIME_LIMIT * runs, horizon=horizon,
-                                             belief_rule=belief_rule, population_source=population_source,
-                                             grid_points=POPULATION_GRID_POINTS, on_iteration=on_iteration,
+            made = synthesize_for_population(town, population, spec, objective,
+                                             SynthesisSettings(tau=AWARE_TAU,
+                                                               time_limit=POPULATION_TIME_LIMIT * runs,
+                                                               horizon=horizon, belief_rule=belief_rule,
+                                                               grid_points=POPULATION_GRID_POINTS),
+                                             population_source=population_source,
+                                             on_iteration=on_iteration,
                                              on_phase=phase_lines(description, progress))
         save_policy(made.result, path, town, made.pomdp.driver, made.spec,
                     population=document_entries(made), name=policy_name(made))

@@ -15,89 +15,73 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from trustroute.networks.town import Town
 from trustroute.participants.driver_population import DriverPopulation
 from trustroute.policies.belief.problem import DRIVER_TYPES, PLAIN, TRUST_STATE, Problem, problem, problem_of
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
-from trustroute.policies.synthesis.arguments import check_synthesis_arguments
+from trustroute.policies.model.trust_pomdp import TrustPOMDP
 from trustroute.policies.synthesis.belief_synthesis import synthesize
+from trustroute.policies.synthesis.population import MAX_GRID_CANDIDATES, synthesize_population
 from trustroute.policies.synthesis.result import SynthesisResult
+from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
+from trustroute.policies.trust_state_synthesis.population import synthesize_population_joint
+from trustroute.policies.trust_state_synthesis.synthesis import synthesize_joint
 
 if TYPE_CHECKING:
     from trustroute.policies.synthesis.population import Objective, PopulationSynthesis
 
 
-def belief_search(problem: Problem, tau: float, time_limit: float, horizon: int | None,
-                  belief_rule: BeliefRule, on_iteration: Callable[[float, float], None] | None,
-                  clusters: str) -> SynthesisResult:
-    return synthesize(problem.pomdp, problem.spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                      belief_rule=belief_rule, on_iteration=on_iteration, clusters=clusters)
+def belief_search(problem: Problem, settings: SynthesisSettings,
+                  on_iteration: Callable[[float, float], None] | None) -> SynthesisResult:
+    return synthesize(problem.pomdp, problem.spec, settings, on_iteration=on_iteration)
 
 
-def joint_search(problem: Problem, tau: float, time_limit: float, horizon: int | None,
-                 belief_rule: BeliefRule, on_iteration: Callable[[float, float], None] | None,
-                 clusters: str) -> SynthesisResult:
-    """`clusters` is for belief-MDP searches only."""
-    check_synthesis_arguments(tau, horizon, belief_rule)
-    from trustroute.policies.trust_state_synthesis.synthesis import synthesize_joint
-
-    return synthesize_joint(problem.pomdp, problem.spec, tau=tau, time_limit=time_limit, horizon=horizon,
-                            belief_rule=belief_rule, on_iteration=on_iteration)
+def joint_search(problem: Problem, settings: SynthesisSettings,
+                 on_iteration: Callable[[float, float], None] | None) -> SynthesisResult:
+    """The belief-MDP search's settings (`clusters`, `compress`, ...) do not apply here."""
+    return synthesize_joint(problem.pomdp, problem.spec, settings, on_iteration=on_iteration)
 
 
 METHODS: dict[str, Callable[..., SynthesisResult]] = {
     PLAIN: belief_search, DRIVER_TYPES: belief_search, TRUST_STATE: joint_search}
 
 
-def synthesize_problem(problem: Problem, tau: float = 1e-3, time_limit: float = 60.0,
-                       horizon: int | None = None, belief_rule: BeliefRule = "bayes",
-                       on_iteration: Callable[[float, float], None] | None = None,
-                       clusters: str = "auto") -> SynthesisResult:
+def synthesize_problem(problem: Problem, settings: SynthesisSettings = DEFAULT_SYNTHESIS,
+                       on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
     """lower <= Pr_max(spec) <= upper and a policy whose value is at least lower (see `synthesize`;
-    `clusters` applies to belief-MDP searches, docs/synthesis.md "Cluster policies")."""
-    return METHODS[problem.case](problem, tau, time_limit, horizon, belief_rule, on_iteration, clusters)
+    `settings.clusters` applies to belief-MDP searches, docs/synthesis.md "Cluster policies")."""
+    return METHODS[problem.case](problem, settings, on_iteration)
 
 
-def synthesize_spec(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
-                    horizon: int | None = None, belief_rule: BeliefRule = "bayes",
-                    on_iteration: Callable[[float, float], None] | None = None,
-                    clusters: str = "auto") -> SynthesisResult:
+def synthesize_spec(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings = DEFAULT_SYNTHESIS,
+                    on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
     """`synthesize_problem` of the problem of `pomdp` and `spec`."""
-    return synthesize_problem(problem_of(pomdp, spec), tau=tau, time_limit=time_limit, horizon=horizon,
-                              belief_rule=belief_rule, on_iteration=on_iteration, clusters=clusters)
+    return synthesize_problem(problem_of(pomdp, spec), settings, on_iteration=on_iteration)
 
 
 def synthesize_for_population(town: Town, population: DriverPopulation, spec: Spec,
                               objective: Objective = "bayes",
-                              tau: float = 1e-3, time_limit: float = 60.0, horizon: int | None = None,
-                              belief_rule: BeliefRule = "bayes", population_source: str = "",
-                              grid_points: int | None = None,
+                              settings: SynthesisSettings = DEFAULT_SYNTHESIS, population_source: str = "",
                               on_iteration: Callable[[float, float], None] | None = None,
                               on_phase: Callable[[str], None] | None = None,
                               ) -> PopulationSynthesis:
     """Synthesis for driver population `population` under `objective` ("bayes": the prior-weighted
     value; "robust": the worst type's), by the case of the problem (module docstring).
-    grid_points: candidate type priors of the robust objective (default
-    policies/synthesis/population.py's). time_limit bounds the whole call; on_phase hears a line
-    per finished synthesis run with its bounds."""
-    from trustroute.policies.synthesis.population import MAX_GRID_CANDIDATES, synthesize_population
-
+    settings.grid_points: candidate type priors of the robust objective (default
+    policies/synthesis/population.py's). settings.time_limit bounds the whole call; on_phase hears
+    a line per finished synthesis run with its bounds."""
     entered = time.perf_counter()
     found = problem(town, population, spec, population_source)
     # the limit is the whole call's: building the problem counts
-    time_limit = max(time_limit - (time.perf_counter() - entered), 0.0)
-    points = MAX_GRID_CANDIDATES if grid_points is None else grid_points
+    settings = replace(settings, time_limit=max(settings.time_limit - (time.perf_counter() - entered), 0.0))
+    if settings.grid_points is None:
+        settings = replace(settings, grid_points=MAX_GRID_CANDIDATES)
     if found.case == TRUST_STATE:
-        from trustroute.policies.trust_state_synthesis.population import synthesize_population_joint
-
-        check_synthesis_arguments(tau, horizon, belief_rule)
-        return synthesize_population_joint(found, objective, synthesize_spec, tau=tau, time_limit=time_limit,
-                                           horizon=horizon, belief_rule=belief_rule, grid_points=points,
+        return synthesize_population_joint(found, objective, synthesize_spec, settings,
                                            on_iteration=on_iteration, on_phase=on_phase)
-    return synthesize_population(town, population, spec, objective, tau=tau, time_limit=time_limit,
-                                 horizon=horizon, belief_rule=belief_rule,
-                                 population_source=population_source, grid_points=points,
+    return synthesize_population(town, population, spec, objective, settings,
+                                 population_source=population_source,
                                  on_iteration=on_iteration, on_phase=on_phase)

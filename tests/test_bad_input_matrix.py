@@ -27,6 +27,7 @@ from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.networks.town import DEFAULT_TOWN_PATH
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
 from trustroute.policies.routing.files import VERSION as POLICY_VERSION
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 SPECS = PACKAGED_SPECS
 PHI1 = SPECS / "phi1.toml"
@@ -349,7 +350,8 @@ def good_policy(tmp_path_factory) -> Path:
 
     town, driver = load_town(), load_driver_model()
     spec = load_spec(PHI1, town)
-    result = synthesize(build_pomdp(town, driver), spec, tau=1e-3, time_limit=30, horizon=6)
+    result = synthesize(build_pomdp(town, driver), spec,
+                        SynthesisSettings(tau=1e-3, time_limit=30, horizon=6))
     assert result.policy.table.rows > 0
     return save_policy(result, tmp_path_factory.mktemp("policy") / "good.json", town, driver, spec)
 

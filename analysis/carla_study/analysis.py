@@ -16,7 +16,9 @@ those ticks; takeover probability is the fraction of ticks with the autopilot of
 
 from __future__ import annotations
 
+import html
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,6 +40,8 @@ from trustroute.analysis.satisfaction import (
     REPORTED_TRUST_LABEL,
     satisfaction_by_source,
 )
+from trustroute.analysis.study_directory import load_study, study_inputs
+from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE
 from trustroute.policies.belief.problem import reads_hidden_trust
 
 AUTHORS_SATISFIED_FRACTION = 0.99  # statistic_test_point_based.py: precetage >= 0.99
@@ -229,7 +233,6 @@ def _subset_drivers(manifest: dict) -> set[int] | None:
     names = [n for files in subsets.values() for n in files]
     if not names:
         return None
-    import re
 
     return {int(m.group(1)) for n in names if (m := re.search(r"driver_(\d+)_", n))}
 
@@ -245,8 +248,6 @@ def with_real_columns(
 
 
 def real_study_analysis(study_dir: Path) -> RealStudyAnalysis:
-    from trustroute.analysis.study_directory import load_study, study_inputs
-
     study_dir = Path(study_dir)
     manifest, episodes, roads = load_study(study_dir)
     episodes, roads = with_real_columns(study_dir, episodes, roads)
@@ -464,10 +465,6 @@ def write_real_study_report(analysis: RealStudyAnalysis, study_dir: Path) -> Pat
 
 def _append_to_report(study_dir: Path, text: str) -> None:
     """The real-study section at the end of report.md and report.html (written just before)."""
-    import html
-
-    from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE
-
     heading = "Real CARLA study: the paper's figures recomputed from the released logs"
     markdown = Path(study_dir) / REPORT_MARKDOWN_FILE
     if markdown.exists():

@@ -40,8 +40,16 @@ from trustroute.analysis.carla_study.log_schema import (
     TICKS_SCHEMA,
 )
 from trustroute.analysis.carla_study.town01 import ARRIVAL_RADIUS_M, CarlaTables, load_carla_tables
+from trustroute.analysis.satisfaction import satisfaction_by_source
 from trustroute.core import dataset
 from trustroute.core.errors import InputError
+from trustroute.core.packaged import PACKAGED_SPECS
+from trustroute.harness.study.manifest import git_revision, package_versions
+from trustroute.networks.road import Road
+from trustroute.networks.town import load_town
+from trustroute.participants.driver_model import load_driver_model
+from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.model.trust_pomdp import build_pomdp
 
 # --sync runs CARLA with settings.fixed_delta_seconds = 0.05 (the driver script's game_loop)
 TICK_SECONDS = 0.05
@@ -185,7 +193,7 @@ def cut_roads(xy: np.ndarray, trial: int, tables: CarlaTables, relative: str = "
         arrival = first + int(within[0])
         cuts.append(RoadCut(state, first, arrival, True))
         candidates = tables.successors(state)
-        if tables.road_of_state[state].split("-")[1] == info["goal"]:
+        if Road.parse(tables.road_of_state[state]).to_junction == info["goal"]:
             candidates = [*candidates, state]  # the policy's stay-at-goal action (a3)
         best: tuple[int, str] | None = None
         for candidate in candidates:
@@ -230,8 +238,6 @@ def episode_tables(
     log: LogFile, ticks: pd.DataFrame, tables: CarlaTables, driver_model, town
 ) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     """(episode row, roads frame, run-length ticks frame) of one log."""
-    from trustroute.policies.model.trust_pomdp import build_pomdp
-
     cuts = cut_roads(ticks[["x", "y"]].to_numpy(), log.trial, tables, log.relative)
     pomdp = build_pomdp(town, driver_model)
     trust = ticks["trust"].to_numpy()
@@ -282,7 +288,7 @@ def episode_tables(
             }
         )
     for i in range(len(rows) - 1):
-        rows[i]["action"] = rows[i + 1]["directed_road"].split("-")[1]
+        rows[i]["action"] = Road.parse(rows[i + 1]["directed_road"]).to_junction
     roads = pd.DataFrame(rows)
     for column in ("takeover",):
         roads[column] = roads[column].astype("boolean")
@@ -386,11 +392,6 @@ def import_carla_logs(
 
     `listed_absent`: files the source's index lists but whose content is absent (the git tree of
     the authors' repository lists 14 CSVs whose blobs were never stored); recorded as absent."""
-    from trustroute.core.packaged import PACKAGED_SPECS
-    from trustroute.harness.study.manifest import git_revision, package_versions
-    from trustroute.networks.town import load_town
-    from trustroute.participants.driver_model import load_driver_model
-
     source, out = Path(source), Path(out)
     tables = load_carla_tables()
     town, driver_model = load_town(None), load_driver_model(None)
@@ -539,10 +540,6 @@ def import_carla_logs(
 
 def _logged_satisfaction(episodes: pd.DataFrame, roads: pd.DataFrame, town, driver_model) -> np.ndarray:
     """The episode's `satisfied`: its spec on the belief the AV logged (what the AV saw)."""
-    from trustroute.analysis.satisfaction import satisfaction_by_source
-    from trustroute.core.packaged import PACKAGED_SPECS
-    from trustroute.policies.logic.spec import load_spec
-
     specs = {name: load_spec(PACKAGED_SPECS / f"{name}.toml", town) for name in ("phi1", "phi2")}
     sat = satisfaction_by_source(episodes, roads, specs, town, driver_model.trust_levels)
     return sat["satisfied_logged"].fillna(False).to_numpy(dtype=bool)

@@ -11,6 +11,7 @@ table and the evidence for it.
 from __future__ import annotations
 
 import json
+import pickle
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from trustroute.core.errors import InputError
+from trustroute.networks.road import Road
 from trustroute.networks.road_geometry import polyline_length
 
 TABLES_PATH = Path(__file__).resolve().parents[1] / "data" / "real_study" / "town01.json"
@@ -52,11 +54,11 @@ class CarlaTables:
     def successors(self, state: str) -> list[str]:
         """States reachable from `state` at its junction: the town's moves, plus staying at the
         goal (the policy's self-loop action a3 at the goal's roads)."""
-        came_from, at = self.road_of_state[state].split("-")
+        came_from, at = Road.parse(self.road_of_state[state])
         out = [
             s
             for s, road in self.road_of_state.items()
-            if road.split("-")[0] == at and road.split("-")[1] != came_from
+            if Road.parse(road).from_junction == at and Road.parse(road).to_junction != came_from
         ]
         return sorted(out)
 
@@ -94,7 +96,7 @@ def _state_table(checkout: Path) -> pd.DataFrame:
     spawn = pd.read_csv(checkout / "spawn_point_list.csv", index_col=0)
     states = pd.read_csv(checkout / "state_route_info" / "state_location.csv")
     pair = states["last_current_junc"].str.strip("()").str.split(",")
-    states["road"] = pair.map(lambda p: f"{p[0].strip()}-{p[1].strip()}")
+    states["road"] = pair.map(lambda p: Road(p[0].strip(), p[1].strip()).id)
     index = states["destination_spawnpoint_index"].to_numpy()
     states["x"] = spawn.loc[index, "x"].to_numpy() + states["delta_x"].to_numpy()
     states["y"] = spawn.loc[index, "y"].to_numpy() + states["delta_y"].to_numpy()
@@ -116,7 +118,7 @@ def _incidents(policy_script: str, road_of_state: dict[str, str]) -> dict[str, s
     for a, b, name in re.findall(r"\('([A-L]\d)', '([A-L]\d)'\): '(\w+)'", policy_script):
         if a == b:
             continue  # the goal self-loop, not a road
-        road = f"{road_of_state[a].split('-')[1]}-{road_of_state[b].split('-')[1]}"
+        road = Road(Road.parse(road_of_state[a]).to_junction, Road.parse(road_of_state[b]).to_junction).id
         if road_of_state[b] != road:
             raise ValueError(f"edge {a}->{b} does not enter {b} from {a}'s junction")
         previous = out.setdefault(road, INCIDENT_NAMES[name])
@@ -128,8 +130,6 @@ def _incidents(policy_script: str, road_of_state: dict[str, str]) -> dict[str, s
 def build_carla_tables(checkout: Path) -> dict:
     """Derive the tables from a checkout of the authors' repository (reads their robot_nodes.pkl
     belief grids with pickle: run it only on a checkout you trust)."""
-    import pickle
-
     checkout = Path(checkout)
     states = _state_table(checkout)
     road_of_state = dict(zip(states["state"], states["road"], strict=True))
@@ -225,7 +225,7 @@ def town01_geometry(tables: CarlaTables, junctions: dict[str, list[float]]) -> d
     streets = outer_streets(tables)
     geometry: dict[str, dict] = {}
     for road in sorted(set(tables.road_of_state.values())):
-        u, v = road.split("-")
+        u, v = Road.parse(road)
         a = (float(junctions[u][0]), float(junctions[u][1]))
         b = (float(junctions[v][0]), float(junctions[v][1]))
         side = OUTER_ROADS.get((u, v)) or OUTER_ROADS.get((v, u))
@@ -256,9 +256,9 @@ def town01_town_dict(tables: CarlaTables) -> dict:
     (`town01_geometry`). The packaged default town is this output."""
     points: dict[str, list[tuple[float, float]]] = {}
     for state, road in tables.road_of_state.items():
-        points.setdefault(road.split("-")[1], []).append(tables.arrival_point[state])
+        points.setdefault(Road.parse(road).to_junction, []).append(tables.arrival_point[state])
     centres = {j: np.mean(np.asarray(p), axis=0) for j, p in sorted(points.items())}
-    roads = sorted({tuple(sorted(road.split("-"))) for road in tables.road_of_state.values()})
+    roads = sorted({tuple(sorted(Road.parse(road))) for road in tables.road_of_state.values()})
     junctions = {j: [round(float(c[0]), 2), round(float(-c[1]), 2)] for j, c in centres.items()}
     return {
         "junctions": junctions,

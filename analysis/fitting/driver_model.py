@@ -28,7 +28,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.errors import InputError
+from trustroute.core.output_files import atomic_write_text
 from trustroute.participants.driver_model import (
     DEFAULT_REPORT_ACCURACY,
     PERFORMANCES,
@@ -333,8 +335,6 @@ class FitResult:
         return driver_model_from_dict(self.model_dict(), "fitted model")
 
     def write(self, path: Path) -> Path:
-        from trustroute.core.output_files import atomic_write_text
-
         self.model()  # validates
         return atomic_write_text(Path(path), json.dumps(self.model_dict(), indent=1), "driver model file",
                                  "pass a writable path with --out")
@@ -498,8 +498,6 @@ def fit_study(
     study_dir: Path, method: str = "auto", iterations: int = 200, progress: bool = False
 ) -> FitResult:
     """Fit a driver model to the consolidated logs of a study directory."""
-    from trustroute.analysis.study_directory import load_study, study_inputs
-
     if iterations < 1:
         raise InputError("--iterations", "", f"must be >= 1, got {iterations}", "pass e.g. --iterations 200")
     manifest, _, roads = load_study(Path(study_dir))

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -46,8 +47,10 @@ from trustroute.analysis.fitting.driver_model import (
     observations_from_roads,
     starting_parameters,
 )
+from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DriverModel
+from trustroute.participants.driver_population import DriverPopulation, DriverType
 
 DEFAULT_RESTARTS = 5
 DEFAULT_MAX_TYPES = 4
@@ -426,8 +429,6 @@ def bootstrap_type_count(roads: pd.DataFrame, episodes: pd.DataFrame, template: 
 
 def mixture_population(fit: MixtureFit, source: str, provenance: str):
     """The fitted mixture as a driver population (participants/driver_population.py)."""
-    from trustroute.participants.driver_population import DriverPopulation, DriverType
-
     types = tuple(
         DriverType(name=name, weight=float(w), model=model)
         for name, w, model in zip(fit.type_names(), fit.weights, fit.models(), strict=True)
@@ -438,10 +439,6 @@ def mixture_population(fit: MixtureFit, source: str, provenance: str):
 def study_observations(study_dir) -> tuple[Observations, np.ndarray, list, DriverModel, pd.DataFrame,
                                            pd.DataFrame]:
     """(observations, participant row per episode, participant ids, template, roads, episodes)."""
-    from pathlib import Path
-
-    from trustroute.analysis.study_directory import load_study, study_inputs
-
     manifest, episodes, roads = load_study(Path(study_dir))
     _, template, _ = study_inputs(manifest)
     obs = observations_from_roads(roads, template)

@@ -12,14 +12,13 @@ import pandas as pd
 from trustroute.analysis import paper_figures
 from trustroute.analysis.statistics import rate_interval
 from trustroute.analysis.study_directory import spec_path
+from trustroute.core.packaged import PACKAGED_SPECS
+from trustroute.networks.town import load_town
+from trustroute.policies.logic.spec import load_spec
 
 
 def is_paper_comparable(manifest: dict, episodes: pd.DataFrame) -> tuple[bool, str]:
     """The paper's table applies to the paper's town, its φ1 and φ2 and 21 participants only."""
-    from trustroute.core.packaged import PACKAGED_SPECS
-    from trustroute.networks.town import load_town
-    from trustroute.policies.logic.spec import load_spec
-
     config = manifest.get("config", {})
     reasons = []
     participants = config.get("participants")

@@ -21,6 +21,7 @@ takeover_plot       takeover rate per incident type and condition with exact 95 
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,8 +29,9 @@ import numpy as np
 import pandas as pd
 
 from trustroute.core.dataset import PLOTS_DIR
+from trustroute.networks.road import Road
 from trustroute.networks.road_lookup import road_shape
-from trustroute.networks.town import Town, split_road
+from trustroute.networks.town import Town
 from trustroute.networks.town_map import map_frame, names_every_junction, point_along
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
@@ -172,7 +174,6 @@ def paired_density_plot(per_participant: pd.DataFrame, conditions: tuple[str, ..
     column), a 2-D histogram of each participant's mean reported trust under A (x) and B (y), the
     diagonal, and the counts on each side of it and of the satisfaction pairs (both, only A, only
     B, neither)."""
-    import itertools
 
     plt = _pyplot()
     pairs = list(itertools.combinations(conditions, 2))
@@ -277,7 +278,7 @@ def _road_xy(town: Town, road: str, fraction: float = 0.5, offset: float = 18.0)
 
 def _undirected_shape(town: Town, u: str, v: str) -> np.ndarray:
     """The course of road u–v (its u-v direction, or v-u for a road one-way from v)."""
-    road = f"{u}-{v}" if f"{u}-{v}" in town.incidents else f"{v}-{u}"
+    road = Road(u, v).id if Road(u, v).id in town.incidents else Road(v, u).id
     return np.asarray(road_shape(town, road), dtype=float)
 
 
@@ -303,7 +304,7 @@ def _draw_roads(ax, plt, town: Town, share: pd.Series, style: _MapStyle) -> None
     """Every road in light grey along its course, those driven coloured and widened by their share."""
     for u, v in town.roads:
         shape = _undirected_shape(town, u, v)
-        s = float(share.get("-".join(sorted((u, v))), 0.0))
+        s = float(share.get(Road(*sorted((u, v))).id, 0.0))
         ax.plot(shape[:, 0], shape[:, 1], color="lightgrey", lw=1, zorder=1)
         if s > 0:
             ax.plot(shape[:, 0], shape[:, 1], color=plt.cm.viridis(s), lw=1 + 7 * s * style.shrink, zorder=2,
@@ -373,7 +374,7 @@ def route_plot(
             group = merged[(merged["spec"] == spec) & (merged["condition"] == condition)]
             count = episodes[(episodes["spec"] == spec) & (episodes["condition"] == condition)].shape[0]
             undirected = group.assign(
-                road=group["directed_road"].map(lambda r: "-".join(sorted(split_road(r))))
+                road=group["directed_road"].map(lambda r: Road(*sorted(Road.parse(r))).id)
             )
             share = undirected.drop_duplicates(["episode_id", "road"]).groupby("road").size() / max(1, count)
             _draw_roads(ax, plt, town, share, style)

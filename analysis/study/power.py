@@ -104,7 +104,8 @@ def study_tests(satisfied: np.ndarray, reported: np.ndarray, specs: Sequence[str
             out.append(TestResult("wilcoxon", pair, ALL_SPECS, wx.p_value < alpha, wx.p_value,
                                   wx.median_difference))
         if "mixed_model" in tests:
-            out.append(_mixed(*_long(reported, specs, a, b), pair, alpha))
+            value, treated, participant, strata = _long(reported, specs, a, b)
+            out.append(_mixed(value, treated, participant, strata, pair, alpha))
     return out
 
 

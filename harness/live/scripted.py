@@ -33,6 +33,7 @@ from typing import Any
 from trustroute.harness.live.protocol import BURST, RATE, TokenBucket
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+from trustroute.networks.road import Road
 
 # The client's own limit: half the server's burst and 80 % of its rate, so that messages sent
 # apart but read back to back by the server (a busy event loop) still fit the server's bucket.
@@ -184,7 +185,8 @@ class ScriptedParticipant:
             self.pedal = "release"
             replies.append({"type": "drive", "pedal": "release"})
         road = frame["road"]
-        u, v = road.split("-", 1) if "-" in road else (road, road)
+        parsed = Road.parse_or_none(road)
+        reverse = None if parsed is None else parsed.reverse.id   # None matches no edge
         edge = frame["lane"].rsplit("_", 1)[0]
         obstacle = obstacle_ahead(frame)
         if obstacle and not self.passing:
@@ -194,7 +196,7 @@ class ScriptedParticipant:
         elif self.passing and not self.pull_out and frame["speed"] < 0.1:
             self.passing = False   # it waits behind the obstacle: the autopilot is to pass it
             replies.append({"type": "hand_back"})
-        elif self.passing and edge == f"{v}-{u}":
+        elif self.passing and edge == reverse:
             self.pass_lane = frame["lane"]   # in the oncoming lane
         elif self.passing and self.pass_lane is not None and edge == road:
             self.passing, self.pass_lane = False, None

@@ -19,6 +19,8 @@ import math
 from functools import lru_cache
 from pathlib import Path
 
+from trustroute.networks.road import Road
+
 VIEW_RADIUS = 150.0   # metres around the ego that a frame describes
 INCIDENT_PREFIX = "inc"
 # the signals the view shows: right (1), left (2) indicator, hazard lights (4), brake light (8)
@@ -61,7 +63,8 @@ def lane_kind(edge, lane) -> str:
 
 def next_junction(road: str) -> str | None:
     """The junction at the end of a town road ("A-B" -> "B"); None inside a junction."""
-    return None if road.startswith(":") or "-" not in road else road.rsplit("-", 1)[1]
+    parsed = Road.parse_or_none(road)
+    return None if parsed is None else parsed.to_junction
 
 
 def role(sumo_id: str) -> str:

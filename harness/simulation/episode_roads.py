@@ -19,7 +19,8 @@ from trustroute.harness.simulation.incidents.base import Scene
 from trustroute.harness.simulation.real_roads import RealRoads, real_scene
 from trustroute.harness.simulation.sumo_start import Sumo, SumoConfig
 from trustroute.networks.real_net import is_imported, road_edges
-from trustroute.networks.town import Town, split_road
+from trustroute.networks.road import Road
+from trustroute.networks.town import Town
 
 UNSEEN_ROAD = 15.0   # metres: an imported road this short is crossed within a step (0.5 s at 30 m/s)
 
@@ -80,8 +81,8 @@ class BuiltRoads:
         return {road: 0.0}
 
     def place(self, scene: Scene, kind: str) -> Scene:
-        u, v = split_road(scene.road)
-        reverse = f"{v}-{u}" if f"{v}-{u}" in self.town.incidents else None
+        other_way = Road.parse(scene.road).reverse.id
+        reverse = other_way if other_way in self.town.incidents else None
         return replace(scene, reverse_road=reverse, observed_length=scene.road_length - self.commit_distance)
 
     def start(self, road: str, depart: float) -> tuple[list[str], float]:

@@ -37,6 +37,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
+from trustroute.networks.road import Road
+
 MODEL_RATE = 50.0            # Hz: the model's integration rate (at least 20 Hz whatever SUMO's step)
 KEEP_ROUTE = 1               # moveToXY: the nearest place on the ego's route
 KEEP_ROUTE_FREE = 2          # moveToXY: any lane, and off the net too
@@ -248,8 +250,8 @@ class ManualDriving:
             self.where = where
 
     def opposite(self, edge: str) -> bool:
-        road = self.route[0] if self.route else ""
-        return "-" in road and edge == "-".join(reversed(road.rsplit("-", 1)))
+        road = Road.parse_or_none(self.route[0]) if self.route else None
+        return road is not None and edge == road.reverse.id
 
     def contacts(self, sumo, now: float) -> None:
         ego = corners(self.pose.x, self.pose.y, self.pose.angle, self.length, self.width)

@@ -64,7 +64,11 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import SPECS, PackagedKind
 from trustroute.core.validation import parse_toml, read_text
+from trustroute.networks.cities import ROUTES
+from trustroute.networks.town import TOWNS
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER_MODELS
+from trustroute.participants.driver_population import POPULATIONS, load_driver_population
+from trustroute.participants.population import population_config_from_dict
 from trustroute.policies.model.trust_pomdp import BELIEF_RULES, BeliefRule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
@@ -159,12 +163,9 @@ class StudyConfig:
             if path and Path(path).is_file():
                 digest.update(Path(path).read_bytes())
         if self.robust_population is not None:
-            from trustroute.participants.driver_population import load_driver_population
-
             digest.update(load_driver_population(self.robust_population).content_hash.encode())
         if self.driver_population is not None:
             # the population's content hash covers the model files its types name
-            from trustroute.participants.driver_population import load_driver_population
 
             digest.update(load_driver_population(self.driver_population).content_hash.encode())
         return digest.hexdigest()
@@ -212,20 +213,14 @@ def _resolve_spec(value: str, base: Path, source: str, key: str) -> Path:
 
 
 def _towns() -> PackagedKind:
-    from trustroute.networks.town import TOWNS
-
     return TOWNS
 
 
 def _routes() -> PackagedKind:
-    from trustroute.networks.cities import ROUTES
-
     return ROUTES
 
 
 def _populations() -> PackagedKind:
-    from trustroute.participants.driver_population import POPULATIONS
-
     return POPULATIONS
 
 
@@ -233,7 +228,6 @@ def _population(table: dict[str, object] | None, source: str) -> dict | None:
     """The raw [population] table, validated by participants.population."""
     if table is None:
         return None
-    from trustroute.participants.population import population_config_from_dict
 
     population_config_from_dict(table, source)  # raises InputError naming the key
     return dict(table)
@@ -391,7 +385,6 @@ def _driver_population(table: dict[str, object] | None, base: Path, source: str)
     value = check_fields(table, DRIVERS_FIELDS, source, "study config", "drivers")["population"]
     path = _resolve_path(value, base, source, "drivers.population", "driver-population file", DRIVERS_FIX,
                          _populations())
-    from trustroute.participants.driver_population import load_driver_population
 
     load_driver_population(path)  # raises InputError naming the file and the place
     return str(path)
@@ -444,8 +437,6 @@ def _robust_population(study: StudyValues, conditions: tuple[str, ...], base: Pa
     robust_population = _optional_file(study, "robust_population", "driver-population file", base, source,
                                        _populations())
     if robust_population is not None:
-        from trustroute.participants.driver_population import load_driver_population
-
         load_driver_population(robust_population)  # raises InputError naming the file and the place
     if "robust" in conditions and robust_population is None:
         raise InputError(source, "study.robust_population", "the 'robust' condition needs the driver "

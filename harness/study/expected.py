@@ -21,6 +21,7 @@ def expected_values(config: StudyConfig) -> dict:
     """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluation.plain),
     and the synthesized bounds when the policy carries them."""
     from trustroute.policies.belief.problem import dfa_is_hidden
+    from trustroute.policies.evaluation.settings import EvaluationSettings
     from trustroute.policies.evaluation.trust_state import evaluate_joint as evaluate
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
@@ -44,9 +45,8 @@ def expected_values(config: StudyConfig) -> dict:
             build_pomdp(context.town, setup.driver_model) if own else pomdp,
             setup.spec,
             policy,
-            fallback_after=config.fallback_after,
-            max_junctions=config.junction_cap,
-            belief_rule=belief_rule(config),
+            EvaluationSettings(fallback_after=config.fallback_after, max_junctions=config.junction_cap,
+                               belief_rule=belief_rule(config)),
             truth=pomdp if own else None,
         )
         entry: dict[str, float | None] = {

@@ -27,7 +27,19 @@ from dataclasses import asdict
 from pathlib import Path
 
 from trustroute.core.errors import InputError
+from trustroute.core.output_files import atomic_write_bytes
 from trustroute.harness.study.config import NAMED_CONDITIONS, StudyConfig
+from trustroute.harness.study.context import (
+    aware_horizon,
+    aware_policy_path,
+    belief_rule,
+    robust_problem,
+    study_context,
+)
+from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
+from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
+from trustroute.participants.driver_population import load_driver_population
+from trustroute.policies.resolve import aware_cache_path, population_cache_path
 
 INPUTS_DIR = "inputs"
 POLICIES_DIR = f"{INPUTS_DIR}/policies"
@@ -47,8 +59,6 @@ def _write(study_dir: Path, record: Record, data: bytes, name: str, source: str,
     folder = folder or study_dir / INPUTS_DIR / hashlib.sha256(data).hexdigest()[:16]
     target = folder / name
     if not (target.is_file() and target.read_bytes() == data):
-        from trustroute.core.output_files import atomic_write_bytes
-
         folder.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(target, data, "study input copy", "free disk space in the study directory")
     relative = target.relative_to(study_dir).as_posix()
@@ -69,8 +79,6 @@ def _store_file(study_dir: Path, record: Record, path: str | Path, folder: Path 
 def _store_town(study_dir: Path, record: Record, path: str | Path) -> str:
     """A town file, and the SUMO net an imported town drives where the town expects it (its
     `sumo_net.file`, relative to the town's folder)."""
-    from trustroute.networks.town import load_town
-
     relative = _store_file(study_dir, record, path)
     town = load_town(path)
     net = town.sumo_net
@@ -86,7 +94,6 @@ def _store_population(study_dir: Path, record: Record, path: str) -> str:
     raw = json.loads(Path(path).read_text())
     if not any(isinstance(t, dict) and "model_file" in t for t in raw.get("types", [])):
         return _store_file(study_dir, record, path)
-    from trustroute.participants.driver_population import load_driver_population
 
     text = json.dumps(load_driver_population(path).to_dict(), indent=2) + "\n"
     return _write(study_dir, record, text.encode(), Path(path).name, path)
@@ -94,22 +101,12 @@ def _store_population(study_dir: Path, record: Record, path: str) -> str:
 
 def _cached_policies(config: StudyConfig) -> list[Path]:
     """The policy-cache entries the study's "aware" and "robust" conditions were read from."""
-    from trustroute.harness.study.context import (
-        aware_horizon,
-        aware_policy_path,
-        belief_rule,
-        robust_problem,
-        study_context,
-    )
-
     context = study_context(config)
     paths = []
     for spec in context.specs.values():
         if "aware" in config.conditions:
             paths.append(aware_policy_path(context.town, context.nominal, spec, config))
         if "robust" in config.conditions and config.robust_population is not None:
-            from trustroute.policies.resolve import aware_cache_path, population_cache_path
-
             problem = robust_problem(context.town, spec, config)
             population = problem.population
             assert population is not None
@@ -126,9 +123,6 @@ def _cached_policies(config: StudyConfig) -> list[Path]:
 def store_inputs(study_dir: Path, config: StudyConfig) -> tuple[dict, dict]:
     """Copy the study's inputs into `study_dir/inputs`; return (the config as the manifest records
     it, every path relative to the study directory; the `inputs` record)."""
-    from trustroute.networks.town import DEFAULT_TOWN_PATH
-    from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
-
     study_dir = Path(study_dir)
     record: Record = {}
     recorded = json.loads(json.dumps(asdict(config), default=str))

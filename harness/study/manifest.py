@@ -48,9 +48,11 @@ from trustroute.core.dataset import (
     table_from_columns,
     write_table,
 )
+from trustroute.core.output_files import atomic_write_text
 from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.inputs import store_inputs
 from trustroute.harness.study.parts import read_failures
-from trustroute.harness.study.plan import EpisodeTask
+from trustroute.harness.study.plan import EpisodeTask, participant_types
 from trustroute.harness.study.resume import read_parts
 
 PACKAGES: tuple[str, ...] = (
@@ -121,8 +123,6 @@ def consolidate(
     Raises DamagedParts (after moving them aside) when a part fails verification."""
     from tqdm import tqdm
 
-    from trustroute.harness.study.plan import participant_types
-
     study_dir = Path(study_dir)
     types = participant_types(config)
     episode_rows, roads_tables, kinematics_tables, incident_tables = [], [], [], []
@@ -169,7 +169,6 @@ def consolidate(
     if incident_tables:
         write_table(pa.concat_tables(incident_tables), study_dir / INCIDENTS_FILE)
     failures = read_failures(study_dir)
-    from trustroute.harness.study.inputs import store_inputs
 
     recorded_config, inputs = store_inputs(study_dir, config)
     manifest = {
@@ -207,7 +206,6 @@ def consolidate(
     }
     if tuple(manifest) != MANIFEST_KEYS:  # the dataset's definition and this writer must agree
         raise RuntimeError(f"manifest keys {tuple(manifest)} differ from the dataset's {MANIFEST_KEYS}")
-    from trustroute.core.output_files import atomic_write_text
 
     atomic_write_text(study_dir / MANIFEST_FILE, json.dumps(manifest, indent=1, default=_jsonable),
                       "study manifest", "free disk space or pass a writable --out, then rerun")

@@ -62,6 +62,7 @@ from trustroute.core.dataset import (
 )
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
+from trustroute.core.validation import read_input_bytes
 from trustroute.harness.study.plan import EpisodeTask
 
 PART_FORMAT = "trustroute-part"
@@ -170,8 +171,6 @@ def write_part_tables(study_dir: Path, task: EpisodeTask, summary: dict, tables:
 
 def _part_entries(path: Path) -> dict[str, bytes]:
     """The part's zip entries, each CRC-checked, in the expected order, the checksum verified."""
-    from trustroute.core.validation import read_input_bytes
-
     try:
         data = read_input_bytes(path, "episode part", MAX_PART_BYTES)
     except InputError as exc:

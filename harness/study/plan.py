@@ -21,9 +21,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.latin_square import participant_order
 from trustroute.participants.driver_model import DriverModel
+from trustroute.participants.driver_population import load_driver_population
+from trustroute.participants.population import (
+    population_config_from_dict,
+    sample_individual,
+    sample_population,
+)
 
 EPISODE_KEY = 1
 POPULATION_KEY = 2
@@ -101,7 +108,6 @@ def participant_types(config: StudyConfig) -> list[str] | None:
     """The participants' true type names, or None when the study has no [drivers] population."""
     if config.driver_population is None:
         return None
-    from trustroute.participants.driver_population import load_driver_population
 
     population = load_driver_population(config.driver_population)
     names = population.names
@@ -109,8 +115,6 @@ def participant_types(config: StudyConfig) -> list[str] | None:
 
 
 def _check_type_model(model: DriverModel, nominal: DriverModel, config: StudyConfig, name: str) -> None:
-    from trustroute.core.errors import InputError
-
     if (tuple(model.trust_levels) != tuple(nominal.trust_levels)
             or tuple(model.incident_types) != tuple(nominal.incident_types)):
         raise InputError(
@@ -124,17 +128,11 @@ def participant_models(config: StudyConfig, nominal: DriverModel) -> list[Driver
     """The participants' driver models, or None when every driver is the nominal model."""
     if config.population is None and config.driver_population is None:
         return None
-    from trustroute.participants.population import (
-        population_config_from_dict,
-        sample_individual,
-        sample_population,
-    )
 
     spread = population_config_from_dict(config.population, config.source_path, nominal.n_trust)
     rng = np.random.default_rng(np.random.SeedSequence(config.seed, spawn_key=(POPULATION_KEY,)))
     if config.driver_population is None:
         return sample_population(nominal, config.participants, spread, rng)
-    from trustroute.participants.driver_population import load_driver_population
 
     population = load_driver_population(config.driver_population)
     for driver_type in population.types:

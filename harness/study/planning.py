@@ -20,7 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.core.errors import InputError
+from trustroute.harness.simulation.model_engine import simulate_batch
 from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.context import study_context
 from trustroute.harness.study.latin_square import williams_rows
 from trustroute.participants.driver_model import DriverModel
 
@@ -81,8 +83,6 @@ def simulate_studies(config: StudyConfig, participants: int, studies: int, rng: 
                      model: ParticipantModel | None = None) -> SimulatedStudies:
     """`studies` studies of `participants` participants of `config` on the model engine, drawn from
     `rng` (module docstring). model: the participants (default: the config's driver model)."""
-    from trustroute.harness.simulation.model_engine import simulate_batch
-    from trustroute.harness.study.context import study_context
 
     context = study_context(config)
     total = studies * participants

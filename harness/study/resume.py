@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from dataclasses import asdict, fields
 from pathlib import Path
 
 from trustroute.core.dataset import DAMAGED_DIR, PART_FOLDERS, STUDY_FILE
 from trustroute.core.errors import InputError
-from trustroute.core.output_files import TEMP_PREFIX
+from trustroute.core.output_files import TEMP_PREFIX, atomic_write_text
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.parts import (
     Part,
@@ -50,8 +51,6 @@ def recorded_config_hash(study_dir: Path, config_hash: str) -> str | None:
 def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:
     """Check that the study directory holds this study (resume) and not another; mark it as this
     study's (the directory exists: `study_lock` made it)."""
-    from trustroute.core.output_files import atomic_write_text
-
     marker = study_dir / STUDY_FILE
     if recorded_config_hash(study_dir, config_hash) == config_hash:
         return
@@ -124,7 +123,6 @@ TASK_FIELDS = tuple(field.name for field in fields(EpisodeTask))
 
 def _batch_names(path: Path) -> list[str]:
     """The episode ids a (possibly damaged) batch part claims, as far as they can be read."""
-    import zipfile
 
     try:
         with zipfile.ZipFile(path) as archive:

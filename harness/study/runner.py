@@ -42,7 +42,7 @@ from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.expected import expected_values, fallback_only_warnings
 from trustroute.harness.study.manifest import DamagedParts, consolidate
-from trustroute.harness.study.parts import sync_parts, write_failure, write_part_tables
+from trustroute.harness.study.parts import sync_parts, write_batch_part, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.harness.study.resume import check_study_dir, finished_episodes, recorded_config_hash
 
@@ -153,7 +153,6 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
 def run_batch(config: StudyConfig, study_dir: str, tasks: tuple[EpisodeTask, ...]) -> list[EpisodeOutcome]:
     """Run model-engine episodes one after the other, exactly as `run_task` runs each, and write
     the ones that finished as one batch part. Never raises: errors come back in the outcomes."""
-    from trustroute.harness.study.parts import write_batch_part
 
     outcomes: list[EpisodeOutcome] = []
     done: list[tuple[EpisodeTask, dict, dict]] = []

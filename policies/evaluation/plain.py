@@ -35,24 +35,25 @@ from trustroute.policies.evaluation.ledgers import (
     accepted_bounds,
 )
 from trustroute.policies.evaluation.node_state import Observation, observed_root
+from trustroute.policies.evaluation.settings import DEFAULT_EVALUATION, EvaluationSettings
 from trustroute.policies.evaluation.unfolding import EpisodeActor, Limits, outcomes, root, unfold
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
-from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP, episode_policy
-from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER, FallbackPolicy
+from trustroute.policies.model.trust_pomdp import TrustPOMDP
+from trustroute.policies.routing.episode_rules import episode_policy
+from trustroute.policies.routing.fallback import FallbackPolicy
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 __all__ = ["DEFAULT_MAX_NODES", "DEFAULT_PRUNE_BELOW", "Evaluation", "accepted_bounds", "evaluate"]
 
 
 def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
-             fallback_after: int | None = DEFAULT_FALLBACK_AFTER, max_junctions: int = DEFAULT_JUNCTION_CAP,
-             belief_rule: BeliefRule = "bayes", prune_below: float = DEFAULT_PRUNE_BELOW,
-             max_nodes: int = DEFAULT_MAX_NODES, truth: TrustPOMDP | None = None,
+             settings: EvaluationSettings = DEFAULT_EVALUATION, truth: TrustPOMDP | None = None,
              reference: tuple[TrustPOMDP, Spec] | None = None, deadline: float | None = None) -> Evaluation:
     """Exact (or tightly certified) satisfaction probability of `policy` for `spec`.
 
+    settings (policies/evaluation/settings.py; `merge` and `time_limit` are the trust-state
+    unfolding's):
     fallback_after: wrap the policy with the study's rule after that many junctions
     (None: evaluate the policy as given; a policy already wrapped is not wrapped again).
     max_junctions: the episode's hard cap; an episode still running there is unsatisfied.
@@ -73,6 +74,10 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     junction begun past it are cut, their mass widening [lower, upper] (a time-limited caller's).
     """
     started = time.perf_counter()
+    fallback_after, max_junctions = settings.fallback_after, settings.max_junctions
+    belief_rule = settings.belief_rule
+    prune_below = DEFAULT_PRUNE_BELOW if settings.prune_below is None else settings.prune_below
+    max_nodes = DEFAULT_MAX_NODES if settings.max_nodes is None else settings.max_nodes
     town = pomdp.town
     policy = episode_policy(policy, town, spec, fallback_after)
     fallback_level = policy.after if isinstance(policy, FallbackPolicy) else None

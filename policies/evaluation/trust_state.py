@@ -39,6 +39,7 @@ from trustroute.policies.evaluation.ledgers import (
 )
 from trustroute.policies.evaluation.node_state import hidden_root
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import DEFAULT_EVALUATION, EvaluationSettings
 from trustroute.policies.evaluation.unfolding import (
     EpisodeActor,
     Limits,
@@ -50,8 +51,8 @@ from trustroute.policies.evaluation.unfolding import (
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
-from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP, episode_policy
-from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER, FallbackPolicy
+from trustroute.policies.routing.episode_rules import episode_policy
+from trustroute.policies.routing.fallback import FallbackPolicy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
 
@@ -64,19 +65,16 @@ JOINT_PRUNE_BELOW = DEFAULT_PRUNE_BELOW
 
 
 def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
-                   fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
-                   max_junctions: int = DEFAULT_JUNCTION_CAP,
-                   belief_rule: BeliefRule = "bayes", prune_below: float | None = None,
-                   max_nodes: int | None = None, force_joint: bool = False,
+                   settings: EvaluationSettings = DEFAULT_EVALUATION, force_joint: bool = False,
                    truth: TrustPOMDP | None = None,
-                   reference: tuple[TrustPOMDP, Spec] | None = None,
-                   merge: bool = True, time_limit: float | None = None) -> Evaluation:
+                   reference: tuple[TrustPOMDP, Spec] | None = None) -> Evaluation:
     """Certified P(spec satisfied) of `policy`, for any mix of road, belief and trust-state atoms.
 
-    Arguments as policies.evaluation.plain.evaluate. `force_joint` runs the joint unfolding even when the
+    Arguments as policies.evaluation.plain.evaluate (settings: policies/evaluation/settings.py).
+    `force_joint` runs the joint unfolding even when the
     spec has no trust-state atoms (tests compare it with evaluate there). A true driver other than
     the AV's model (`truth`) or a second reading (`reference`) is evaluated for specs without
-    trust-state atoms only. `merge` (default) merges, level by level, the histories that reach the
+    trust-state atoms only. `settings.merge` (default) merges, level by level, the histories that reach the
     same road and beliefs on routes the policy reads alike (`RoutingPolicy.route_memory`): the same
     value as the tree unfolding (`merge=False`, which tests compare), on far fewer nodes.
 
@@ -89,28 +87,25 @@ def evaluate_joint(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     and JOINT_PRUNE_BELOW, JOINT_MAX_NODES (no time limit) otherwise; `pruning` reports them and
     what they cut."""
     if not force_joint and not dfa_is_hidden(pomdp.driver, spec):
-        if time_limit is not None:
+        if settings.time_limit is not None:
             raise ValueError("a time limit applies to specs with trust-state atoms only")
-        return evaluate(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,
-                        DEFAULT_PRUNE_BELOW if prune_below is None else prune_below,
-                        DEFAULT_MAX_NODES if max_nodes is None else max_nodes,
-                        truth=truth, reference=reference)
+        return evaluate(pomdp, spec, policy, settings, truth=truth, reference=reference)
     if truth is not None or reference is not None:
         raise ValueError("a separate true driver or reference reading is not evaluated for specs with "
                          "trust-state atoms")
-    return joint_unfolding(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,
-                           prune_below, max_nodes, merge, time_limit)[0]
+    return joint_unfolding(pomdp, spec, policy, settings)[0]
 
 
-def joint_unfolding(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, fallback_after: int | None,
-                    max_junctions: int, belief_rule: BeliefRule, prune_below: float | None,
-                    max_nodes: int | None, merge: bool, time_limit: float | None,
+def joint_unfolding(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, settings: EvaluationSettings,
                     by_type: bool = False) -> tuple[Evaluation, TypeMasses | None]:
     """The unfolding of `evaluate_joint` on the joint-belief node state; with `by_type`, also the
     masses of each driver type of a type-aware model (its hidden index is (type, trust))."""
     started = time.perf_counter()
-    prune_below = JOINT_PRUNE_BELOW if prune_below is None else prune_below
-    max_nodes = JOINT_MAX_NODES if max_nodes is None else max_nodes
+    fallback_after, max_junctions = settings.fallback_after, settings.max_junctions
+    belief_rule = settings.belief_rule
+    merge, time_limit = settings.merge, settings.time_limit
+    prune_below = JOINT_PRUNE_BELOW if settings.prune_below is None else settings.prune_below
+    max_nodes = JOINT_MAX_NODES if settings.max_nodes is None else settings.max_nodes
     town = pomdp.town
     policy = episode_policy(policy, town, spec, fallback_after)
     fallback_level = policy.after if isinstance(policy, FallbackPolicy) else None
@@ -143,18 +138,14 @@ def joint_unfolding(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, fallba
 
 
 def evaluate_joint_by_type(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
-                           fallback_after: int | None = DEFAULT_FALLBACK_AFTER,
-                           max_junctions: int = DEFAULT_JUNCTION_CAP, belief_rule: BeliefRule = "bayes",
-                           prune_below: float | None = None, max_nodes: int | None = None,
-                           merge: bool = True, time_limit: float | None = None
+                           settings: EvaluationSettings = DEFAULT_EVALUATION
                            ) -> tuple[Evaluation, list[tuple[float, float]]]:
     """`evaluate_joint` on the joint belief over ((type, trust), DFA state) of a driver
     population's type-aware model (policies/belief/driver_types.py) and lifted spec, which may test
     the hidden trust: the value under the type prior, and [lower, upper] of P(satisfied | type k)
     for each type, read off the same unfolding (J's block of type k holds P(type k, θ, q | history);
     a cut node's live mass of type k widens type k's bracket only)."""
-    evaluation, types = joint_unfolding(pomdp, spec, policy, fallback_after, max_junctions, belief_rule,
-                                        prune_below, max_nodes, merge, time_limit, by_type=True)
+    evaluation, types = joint_unfolding(pomdp, spec, policy, settings, by_type=True)
     assert types is not None
     prior = np.asarray(pomdp.initial_belief, dtype=float)
     weights = prior.reshape(types.n_types, -1).sum(axis=1)

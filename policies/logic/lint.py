@@ -61,6 +61,7 @@ from trustroute.policies.logic.formula import (
     walk,
 )
 from trustroute.policies.logic.spec import N_TRUST_LEVELS, Spec, state_only_projection
+from trustroute.policies.model.trust_pomdp import build_pomdp
 
 THRESHOLD_DEPTH = 3
 
@@ -256,7 +257,6 @@ def threshold_warnings(spec: Spec, town: Town, driver: DriverModel) -> list[Lint
     if (not spec.belief_atoms or spec.type_atoms
             or any(len(a.coeffs) != driver.n_trust for a in spec.belief_atoms.values())):
         return []
-    from trustroute.policies.model.trust_pomdp import build_pomdp
 
     pomdp = build_pomdp(town, driver)
     compiled = compile_spec(spec, town)

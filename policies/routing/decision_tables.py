@@ -30,7 +30,9 @@ from trustroute.core.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, BoxRows, PolicyTable
+from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 
@@ -125,8 +127,6 @@ def read_node_rows(arrays: dict, context: ReadContext, integers: tuple[str, ...]
 
 def read_exact_rows(arrays: dict, context: ReadContext) -> PolicyTable:
     """Exact rows, checked; the state-only task states in range of the spec's task."""
-    from trustroute.policies.routing.free import state_only_task
-
     n_p = state_only_task(context.town, context.spec).dfa.n_states
     _, decoded = read_node_rows(
         arrays, context, ("t", "x", "q", "projected", "action"),
@@ -269,8 +269,6 @@ def plain_policy(table: PolicyTable, origin: PolicyOrigin) -> BeliefTablePolicy:
 
 def joint_policy(table: JointPolicyTable, origin: PolicyOrigin) -> JointTablePolicy:
     """The policy of joint rows (a population's: reweighted to the type prior its file records)."""
-    from trustroute.policies.model.trust_pomdp import build_pomdp
-
     document = origin.document
     return JointTablePolicy(table, build_pomdp(origin.town, origin.driver), origin.spec,
                             document.get("guide_horizon"), name=str(document.get("name", "aware")),

@@ -24,8 +24,12 @@ from typing import Any
 import numpy as np
 
 from trustroute.core.errors import InputError
+from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
+from trustroute.core.validation import MAX_ARRAY_BYTES, check_keys, read_input_bytes, read_json
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.belief.driver_types import lift_population, lift_spec
+from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.decision_tables import (
     BOX_ROWS,
@@ -75,8 +79,6 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
     """Write the policy of a SynthesisResult to `path` (+ `.npz`); returns the JSON path.
     population: the POPULATION_KEYS entries of a policy made for several driver types (driver and
     spec are then the lifted ones, policies/belief/driver_types.py)."""
-    from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
-
     path = Path(path)
     table = result.policy.table
     kind = table_kind(table)
@@ -117,8 +119,6 @@ def save_policy(result, path: str | Path, town: Town, driver: DriverModel, spec:
 
 def read_policy_document(path: str | Path) -> dict:
     """The JSON part of a policy file, checked for format (InputError otherwise)."""
-    from trustroute.core.validation import check_keys, read_json
-
     path = Path(path)
     where = str(path)
     document = read_json(path, "policy file", fix="pass 'free', 'aware' or a file written by trustroute "
@@ -167,9 +167,6 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
     """The decision table of a policy file, verified: the hash its JSON records, a readable .npz
     without pickles, the arrays of its table kind with consistent shapes and integer types, and
     every entry in range for this town, driver model and spec (InputError otherwise)."""
-    from trustroute.core.validation import MAX_ARRAY_BYTES, read_input_bytes
-    from trustroute.policies.logic.dfa import build_dfa
-
     where = str(arrays)
     if not arrays.exists():
         raise InputError(where, "arrays", "the policy's array file is missing",
@@ -256,8 +253,6 @@ def load_population_policy(path: str | Path, town: Town, population, spec: Spec,
     (policy, the lifted driver model its AV filters with, the lifted spec). The lifted model uses
     the type prior the file records. A file made for another population or spec, or for a single
     driver model while the population has several types: InputError (one line, exit 2)."""
-    from trustroute.policies.belief.driver_types import lift_population, lift_spec
-
     document = read_policy_document(path)
     lifted_spec = lift_spec(spec, population, population_source)
     if document.get("population_hash") not in (None, population.content_hash):

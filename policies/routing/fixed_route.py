@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from trustroute.networks.road import Road
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 
@@ -19,4 +20,4 @@ class FixedRoute(RoutingPolicy):
         return len(context.route) >= len(self.route)
 
     def next_junction(self, context) -> str:
-        return self.route[len(context.route)].split("-")[1]
+        return Road.parse(self.route[len(context.route)]).to_junction

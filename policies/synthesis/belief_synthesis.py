@@ -55,14 +55,13 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
 from trustroute.policies.routing.free import state_only_task
-from trustroute.policies.synthesis.arguments import check_synthesis_arguments
 from trustroute.policies.synthesis.belief_cells import ObservationSymbols, observation_symbols, suffix_cells
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.cluster_policy import ClusterSolution, best_cluster_solution
 from trustroute.policies.synthesis.end_components import UnboundedBound, unbounded_bound
-from trustroute.policies.synthesis.expansion import AUTO_TREE_LEAVES, COMPLETION_MODES, UNBOUNDED_DEPTH
+from trustroute.policies.synthesis.expansion import AUTO_TREE_LEAVES, UNBOUNDED_DEPTH
 from trustroute.policies.synthesis.open_node_bounds import completion_tree_leaves
-from trustroute.policies.synthesis.refinement import DEFAULT_BATCH, bounded_search
+from trustroute.policies.synthesis.refinement import bounded_search
 from trustroute.policies.synthesis.result import (
     ClusterAttempt,
     ClusterRun,
@@ -72,6 +71,7 @@ from trustroute.policies.synthesis.result import (
     SynthesisResult,
     SynthesisStats,
 )
+from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.synthesis.upper_bound import (
     Abstraction,
     acceptance_distance,
@@ -85,11 +85,10 @@ UNBOUNDED_HORIZONS = (20, 30, 40, 60, 80, 120, 160)
 UNBOUNDED_BOUND_SHARE = 0.3  # share of the time limit the end-component bound may take
 UNBOUNDED_SEARCH_SHARE = 0.25  # share of the time left the search of the unbounded problem may take
 FINISH_SHARE = 0.04          # share of the time limit kept for finishing after the last check
-# Cluster policies (cluster_policy.py) under the Bayes rule: "auto" before the search where open
-# nodes would get cluster bounds (the free route's observation tree exceeds AUTO_TREE_LEAVES), and
-# after it elsewhere when the search ends with a gap above tau (it then has SEARCH_SHARE of the
-# time); "on" always before the search; "off" never.
-CLUSTER_MODES = ("auto", "on", "off")
+# Cluster policies (cluster_policy.py) under the Bayes rule (settings.py's CLUSTER_MODES): "auto"
+# before the search where open nodes would get cluster bounds (the free route's observation tree
+# exceeds AUTO_TREE_LEAVES), and after it elsewhere when the search ends with a gap above tau (it
+# then has SEARCH_SHARE of the time); "on" always before the search; "off" never.
 CLUSTER_SHARE = 0.75          # share of the time limit the cluster policies may take before the search
 SEARCH_SHARE = 0.5            # share of the time limit of a search that cluster policies may follow
 # unbounded: cluster policies for these junction counts beyond the shortest acceptance, in turn
@@ -104,25 +103,31 @@ class _Problem:
     """One synthesize call's product, settings and time budget, shared by its phases."""
 
     tables: ProductTables
-    belief_rule: BeliefRule
-    tau: float
-    suffix_length: int
-    batch: int
+    settings: SynthesisSettings      # its suffix_length chosen (not None)
     on_iteration: Callable[[float, float], None] | None
-    compress: str
-    completion: str
-    clusters: str
     budget: TimeBudget
     roots_q: tuple[int, ...]         # the DFA states position 0 can be read as
     shortest: int                    # junctions to acceptance in the road x DFA graph, at least
 
+    @property
+    def tau(self) -> float:
+        return self.settings.tau
+
+    @property
+    def belief_rule(self) -> BeliefRule:
+        return self.settings.belief_rule
+
+    @property
+    def suffix_length(self) -> int:
+        assert self.settings.suffix_length is not None
+        return self.settings.suffix_length
+
     def search(self, horizon: int | None, tau: float, suffix_length: int, until: float,
                value: np.ndarray | None = None, abstraction: Abstraction | None = None
                ) -> tuple[PolicyTable, SearchRun]:
-        return bounded_search(self.tables, self.belief_rule, horizon, tau, suffix_length, self.batch,
-                              self.budget.ending(until), value, abstraction,
-                              on_iteration=self.on_iteration, compress=self.compress,
-                              completion=self.completion)
+        return bounded_search(self.tables, replace(self.settings, tau=tau, suffix_length=suffix_length),
+                              horizon, self.budget.ending(until), value, abstraction,
+                              on_iteration=self.on_iteration)
 
     def report(self, lower: float, upper: float) -> None:
         if self.on_iteration is not None:
@@ -197,7 +202,7 @@ def _bounded(problem: _Problem, horizon: int) -> _Answer:
     tables, budget, tau = problem.tables, problem.budget, problem.tau
     n_trust = tables.pomdp.n_trust
     symbols = observation_symbols(tables.pomdp, problem.belief_rule)
-    order = _cluster_order(tables, symbols, horizon, problem.completion, problem.clusters)
+    order = _cluster_order(tables, symbols, horizon, problem.settings.completion, problem.settings.clusters)
     runs: list[Run] = []
     cluster, cluster_upper = None, 1.0
     if order == "first":
@@ -306,7 +311,7 @@ def _unbounded(problem: _Problem) -> _Answer:
     upper = float(max(value[tables.start, q, 0] for q in problem.roots_q))
     best = _Answer(-1.0, upper, None, 0.0, (), note)
     runs: list[Run] = []
-    order = _cluster_order(tables, symbols, None, problem.completion, problem.clusters)
+    order = _cluster_order(tables, symbols, None, problem.settings.completion, problem.settings.clusters)
     if order == "first":
         best = _with_cluster(best, _unbounded_clusters(problem, symbols, upper, best.lower,
                                                        budget.share(CLUSTER_SHARE), runs), tables)
@@ -327,26 +332,17 @@ def _with_cluster(best: _Answer, found: ClusterSolution | None, tables: ProductT
                    strict=found.lower)
 
 
-def _check_choice(what: str, value: str, choices: tuple[str, ...]) -> None:
-    if value not in choices:
-        raise ValueError(f"unknown {what} {value!r}; use one of {', '.join(choices)}")
-
-
 def _root_dfa_states(tables: ProductTables) -> tuple[int, ...]:
     """The DFA state position 0 is read as, its belief labels decided exactly on the prior
     (policies/belief/exact_labels.py)."""
     return (tables.initial_q,)
 
 
-def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
-               horizon: int | None = None, belief_rule: BeliefRule = "bayes",
-               suffix_length: int | None = None,
-               batch: int = DEFAULT_BATCH,
-               on_iteration: Callable[[float, float], None] | None = None,
-               compress: str = "chains", completion: str = "auto", clusters: str = "auto"
-               ) -> BeliefSynthesis:
+def synthesize(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings = DEFAULT_SYNTHESIS,
+               on_iteration: Callable[[float, float], None] | None = None) -> BeliefSynthesis:
     """Maximal probability of satisfying `spec` from (spec.start, initial belief), with a policy.
 
+    settings (policies/synthesis/settings.py):
     horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter and the
     belief MDP's dynamics ("bayes", or the authors' "paper" update with observation probabilities
     b·P(o|θ) of that belief). Returns lower <= Pr_max <= upper with lower a lower bound of the value of
@@ -366,13 +362,12 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     (policies/synthesis/cluster_policy.py) are solved before the search (CLUSTER_MODES); the better
     certified L of the two is returned, and the smaller U.
     """
-    check_synthesis_arguments(tau, horizon, belief_rule)
-    _check_choice("completion", completion, COMPLETION_MODES)
-    _check_choice("clusters", clusters, CLUSTER_MODES)
+    tau, horizon, belief_rule = settings.tau, settings.horizon, settings.belief_rule
     # The last few per cent are kept for the work after the deadline check (final backup, the
     # policy table, the stats), so that the whole call ends within the limit.
-    budget = TimeBudget.start(time_limit, reserve=FINISH_SHARE)
+    budget = TimeBudget.start(settings.time_limit, reserve=FINISH_SHARE)
     tables = build_product(pomdp, spec)
+    suffix_length = settings.suffix_length
     if suffix_length is None:
         n_changing = observation_symbols(pomdp, belief_rule).n_changing
         suffix_length = automatic_suffix_length(n_changing)
@@ -381,8 +376,8 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: flo
     distance = acceptance_distance(tables)
     roots_q = _root_dfa_states(tables)
     shortest = int(min(distance[tables.start, q] for q in roots_q))
-    problem = _Problem(tables, belief_rule, tau, suffix_length, batch, on_iteration, compress, completion,
-                       clusters, budget, roots_q, shortest)
+    problem = _Problem(tables, replace(settings, suffix_length=suffix_length), on_iteration, budget, roots_q,
+                       shortest)
     never = shortest > tables.n_x * tables.n_q      # unreachable in the road x DFA graph
     if never or (horizon is not None and shortest > horizon):
         answer = _by_graph_distance(problem, horizon, never)

@@ -24,7 +24,6 @@ import numpy as np
 
 from trustroute.policies.belief.exact_labels import exact_labels, symbol_code
 from trustroute.policies.belief.product_mdp import ProductTables
-from trustroute.policies.model.trust_pomdp import BeliefRule
 from trustroute.policies.routing.free import free_completion, state_only_task
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols, suffix_cells
 from trustroute.policies.synthesis.belief_graph import (
@@ -47,6 +46,7 @@ from trustroute.policies.synthesis.open_node_bounds import (
     held_choice,
     policy_choice,
 )
+from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesis.upper_bound import (
     Abstraction,
     acceptance_distance,
@@ -58,14 +58,13 @@ UNBOUNDED_DEPTH = 60        # the unbounded search leaves nodes this deep open (
 # Most macro moves per context for which the event graph is used: node arrays hold one slot per
 # move, so a town whose quiet roads connect many event roads is searched junction by junction.
 MAX_MACRO_WIDTH = 16
-# How open nodes are valued: "exact" trees along the free moves (L is the returned policy's exact
-# value; the trees grow exponentially with the incident roads left on long routes), "bounds"
+# How open nodes are valued (settings.py's COMPLETION_MODES): "exact" trees along the free moves
+# (L is the returned policy's exact value; the trees grow exponentially with the incident roads
+# left on long routes), "bounds"
 # (cluster bounds on the completion, completion_value.py; L a lower bound of the policy's value),
 # "auto": exact where the trust-free route's own observation tree within the horizon has at most
 # AUTO_TREE_LEAVES leaves (completion_tree_leaves), bounds otherwise.
-COMPLETION_MODES = ("auto", "exact", "bounds")
 AUTO_TREE_LEAVES = NODE_BUDGET // 4
-COMPRESS_MODES = ("off", "chains", "full")
 
 
 class BeliefSearch:
@@ -73,10 +72,14 @@ class BeliefSearch:
     and the moves of the last backup. `budget`: the synthesis' start (abstraction_seconds counts
     from it) and this search's deadline (the bounded abstraction stops there)."""
 
-    def __init__(self, tables: ProductTables, rule: BeliefRule, horizon: int | None, suffix_length: int,
+    def __init__(self, tables: ProductTables, settings: SynthesisSettings, horizon: int | None,
                  budget: TimeBudget, unbounded_value: np.ndarray | None = None,
-                 abstraction: Abstraction | None = None, compress: str = "chains",
-                 completion: str = "auto") -> None:
+                 abstraction: Abstraction | None = None) -> None:
+        """`settings.suffix_length` is the search's own (not None); `horizon` may differ from
+        `settings.horizon` (the unbounded synthesis runs bounded searches)."""
+        rule, suffix_length = settings.belief_rule, settings.suffix_length
+        compress, completion = settings.compress, settings.completion
+        assert suffix_length is not None
         self.tables, self.rule, self.horizon = tables, rule, horizon
         pomdp = tables.pomdp
         if abstraction is not None:        # built once per synthesize call and shared by its runs
@@ -118,8 +121,6 @@ class BeliefSearch:
         # is quiet and the widest context has at most MAX_MACRO_WIDTH of them; else the junctions.
         self.events: EventGraph | None = None
         self.macro_width: int | None = None
-        if compress not in COMPRESS_MODES:
-            raise ValueError(f"unknown compression {compress!r}; use one of {', '.join(COMPRESS_MODES)}")
         if compress != "off":
             events = EventGraph(tables, self.symbols, self.task, chains_only=compress == "chains",
                                 free_slot=self.free_slot)

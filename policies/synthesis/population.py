@@ -38,6 +38,7 @@ import itertools
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
+from math import comb
 from typing import Literal
 
 import numpy as np
@@ -46,6 +47,7 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_population import DriverPopulation
 from trustroute.policies.belief.driver_types import lift_population, lift_spec
 from trustroute.policies.evaluation.plain import Evaluation, evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import Spec, state_only_projection
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
 from trustroute.policies.routing.aware_table import BeliefTablePolicy
@@ -54,6 +56,7 @@ from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synthesize
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.result import SynthesisResult
+from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 
 Objective = Literal["bayes", "robust"]
 OBJECTIVES: tuple[str, ...] = ("bayes", "robust")
@@ -126,9 +129,10 @@ def per_type_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, popula
     out = []
     for t in population.types:
         truth = build_pomdp(pomdp.town, t.model)
-        value: Evaluation = evaluate(pomdp, spec, policy, fallback_after=fallback_after,
-                                     max_junctions=max_junctions, belief_rule=belief_rule, truth=truth,
-                                     deadline=deadline)
+        value: Evaluation = evaluate(pomdp, spec, policy,
+                                     EvaluationSettings(fallback_after=fallback_after,
+                                                        max_junctions=max_junctions, belief_rule=belief_rule),
+                                     truth=truth, deadline=deadline)
         out.append(TypeValue(t.name, float(t.weight), value.lower, value.upper))
     return tuple(out)
 
@@ -165,8 +169,6 @@ def candidate_priors(weights: np.ndarray, n_types: int, grid_points: int,
 
 
 def _count(k: int, m: int) -> int:
-    from math import comb
-
     return comb(m + k - 1, k - 1)
 
 
@@ -250,14 +252,16 @@ def reweighting(population: DriverPopulation, prior: np.ndarray) -> np.ndarray:
 
 
 def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
-                          objective: Objective = "bayes", tau: float = 1e-3, time_limit: float = 60.0,
-                          horizon: int | None = None, belief_rule: BeliefRule = "bayes",
-                          population_source: str = "", grid_points: int = MAX_GRID_CANDIDATES,
+                          objective: Objective = "bayes", settings: SynthesisSettings = DEFAULT_SYNTHESIS,
+                          population_source: str = "",
                           on_iteration: Callable[[float, float], None] | None = None,
                           on_phase: Callable[[str], None] | None = None,
                           ) -> PopulationSynthesis:
-    """Synthesize for `population` under `objective` (module docstring) within `time_limit` seconds
-    in all (the robust objective runs one synthesis per candidate prior and one per type)."""
+    """Synthesize for `population` under `objective` (module docstring) within `settings.time_limit`
+    seconds in all (the robust objective runs one synthesis per candidate prior and one per type;
+    `settings.grid_points` candidate priors, default MAX_GRID_CANDIDATES)."""
+    horizon, belief_rule, time_limit = settings.horizon, settings.belief_rule, settings.time_limit
+    grid_points = MAX_GRID_CANDIDATES if settings.grid_points is None else settings.grid_points
     if objective not in OBJECTIVES:
         raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
     started = time.perf_counter()
@@ -269,8 +273,8 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
     # weights. Candidates of the robust objective are synthesized under other priors λ but run on
     # this filter, their beliefs reweighted to λ (so the spec means the same for every candidate).
     pomdp = build_pomdp(town, lift_population(population))
-    bayes = synthesize(pomdp, lifted_spec, tau=tau, time_limit=schedule.next_limit(), horizon=horizon,
-                       belief_rule=belief_rule, on_iteration=on_iteration)
+    bayes = synthesize(pomdp, lifted_spec, replace(settings, time_limit=schedule.next_limit()),
+                       on_iteration=on_iteration)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
     # the per-type bounds of the robust objective must still run after the evaluations
     later = population.n_types if objective == "robust" else 0
@@ -292,9 +296,8 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
                    "type_lower": [v.lower for v in bayes_values]}]
     if population.n_types > 1:
         for prior in candidate_priors(weights, population.n_types, grid_points, schedule):
-            made = synthesize(build_pomdp(town, lift_population(population, prior)), lifted_spec, tau=tau,
-                              time_limit=schedule.next_limit(), horizon=horizon, belief_rule=belief_rule,
-                              on_iteration=on_iteration)
+            made = synthesize(build_pomdp(town, lift_population(population, prior)), lifted_spec,
+                              replace(settings, time_limit=schedule.next_limit()), on_iteration=on_iteration)
             schedule.finished(candidate_name(prior), made.lower, made.upper)
             policy = BeliefTablePolicy(made.policy.table, town, lifted_spec, name="robust",
                                        horizon=horizon, reweight=reweighting(population, prior))
@@ -308,8 +311,8 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
     own_spec = spec if not (spec.belief_atoms or spec.type_atoms) else state_only_projection(spec)
     type_upper = []
     for t in population.types:
-        own = synthesize(build_pomdp(town, t.model), own_spec, tau=tau, time_limit=schedule.next_limit(),
-                         horizon=horizon, belief_rule="bayes")
+        own = synthesize(build_pomdp(town, t.model), own_spec,
+                         replace(settings, time_limit=schedule.next_limit(), belief_rule="bayes"))
         schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper)
         type_upper.append(own.upper)
     upper = min(bayes.upper, min(type_upper))

@@ -16,16 +16,15 @@ from collections.abc import Callable
 import numpy as np
 
 from trustroute.policies.belief.product_mdp import ProductTables
-from trustroute.policies.model.trust_pomdp import BeliefRule
 from trustroute.policies.routing.aware_table import PolicyTable
 from trustroute.policies.synthesis.belief_graph import FREE, FRONTIER, NODE_BUDGET
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.expansion import UNBOUNDED_DEPTH, BeliefSearch
 from trustroute.policies.synthesis.policy_extraction import policy_table
 from trustroute.policies.synthesis.result import SearchRun
+from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesis.upper_bound import Abstraction
 
-DEFAULT_BATCH = 4096
 MIN_BATCH = 64
 LOOKAHEAD = 3      # further expansion steps per round along the upper-greedy moves
 FULL_SHARE = 0.5   # share of the gap-weighted frontier fully expanded per round
@@ -187,19 +186,21 @@ def _refine(search: BeliefSearch, roots: np.ndarray, depth_cap: int, batch: int,
     return expanded
 
 
-def bounded_search(tables: ProductTables, belief_rule: BeliefRule, horizon: int | None, tau: float,
-                   suffix_length: int, batch: int, budget: TimeBudget,
-                   unbounded_value: np.ndarray | None = None, abstraction: Abstraction | None = None,
-                   on_iteration: Callable[[float, float], None] | None = None, compress: str = "chains",
-                   completion: str = "auto") -> tuple[PolicyTable, SearchRun]:
+def bounded_search(tables: ProductTables, settings: SynthesisSettings, horizon: int | None,
+                   budget: TimeBudget, unbounded_value: np.ndarray | None = None,
+                   abstraction: Abstraction | None = None,
+                   on_iteration: Callable[[float, float], None] | None = None
+                   ) -> tuple[PolicyTable, SearchRun]:
     """One AO*-style search until `budget`'s deadline; returns the policy's table and the run
     (with its root bounds lower and upper).
 
     horizon H: P(accepted within H junctions). None: the unbounded problem, nodes deeper than
     UNBOUNDED_DEPTH left open with the unbounded abstraction's bound `unbounded_value`.
+    `settings.suffix_length` is this search's (not None).
     """
-    search = BeliefSearch(tables, belief_rule, horizon, suffix_length, budget, unbounded_value,
-                          abstraction, compress, completion)
+    tau, suffix_length, batch = settings.tau, settings.suffix_length, settings.batch
+    assert suffix_length is not None
+    search = BeliefSearch(tables, settings, horizon, budget, unbounded_value, abstraction)
     g = search.graph
     roots = search.roots()
     depth_cap = horizon if horizon is not None else UNBOUNDED_DEPTH

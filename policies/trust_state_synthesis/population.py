@@ -37,6 +37,7 @@ import numpy as np
 
 from trustroute.policies.belief.driver_types import lift_population
 from trustroute.policies.belief.problem import Problem
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
 from trustroute.policies.logic.formula import TRUE, Formula, Literal, format_formula, map_literals
 from trustroute.policies.logic.spec import Spec
@@ -57,6 +58,7 @@ from trustroute.policies.synthesis.population import (
     run_count,
 )
 from trustroute.policies.synthesis.result import SynthesisResult
+from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.synthesis import (
     EVALUATION_NODES,
     JointSynthesis,
@@ -73,8 +75,10 @@ def joint_type_values(problem: Problem, policy: RoutingPolicy, max_junctions: in
     if population is None:
         raise ValueError("per-type values need a problem with a driver population")
     _, bounds = evaluate_joint_by_type(pomdp or problem.pomdp, problem.spec, policy,
-                                       fallback_after=fallback_after, max_junctions=max_junctions,
-                                       belief_rule=belief_rule, max_nodes=EVALUATION_NODES)
+                                       EvaluationSettings(fallback_after=fallback_after,
+                                                          max_junctions=max_junctions,
+                                                          belief_rule=belief_rule,
+                                                          max_nodes=EVALUATION_NODES))
     return tuple(TypeValue(t.name, float(t.weight), lower, upper)
                  for t, (lower, upper) in zip(population.types, bounds, strict=True))
 
@@ -97,7 +101,7 @@ def belief_free_spec(spec: Spec) -> Spec:
                 source_path=spec.source_path, trust_atoms=dict(spec.trust_atoms))
 
 
-def type_optimum_bounds(problem: Problem, tau: float, schedule: RunSchedule, horizon: int | None,
+def type_optimum_bounds(problem: Problem, settings: SynthesisSettings, schedule: RunSchedule,
                         synthesize: Callable[..., SynthesisResult]) -> tuple[float, ...]:
     """U_k for every type: a sound bound of max_π V_k(π), the synthesis (`synthesize`, the one
     synthesis entry) on type k's model alone of `belief_free_spec` of the spec as given."""
@@ -106,16 +110,16 @@ def type_optimum_bounds(problem: Problem, tau: float, schedule: RunSchedule, hor
     own_spec = belief_free_spec(problem.given_spec)
     bounds = []
     for t in population.types:
-        own = synthesize(build_pomdp(problem.town, t.model), own_spec, tau=tau,
-                         time_limit=schedule.next_limit(), horizon=horizon, belief_rule="bayes")
+        own = synthesize(build_pomdp(problem.town, t.model), own_spec,
+                         replace(settings, time_limit=schedule.next_limit(), belief_rule="bayes"))
         schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper)
         bounds.append(own.upper)
     return tuple(bounds)
 
 
 def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[TypeValue, ...],
-                      grid_points: int, tau: float, schedule: RunSchedule, horizon: int | None,
-                      belief_rule: BeliefRule, on_iteration: Callable[[float, float], None] | None
+                      settings: SynthesisSettings, schedule: RunSchedule,
+                      on_iteration: Callable[[float, float], None] | None
                       ) -> tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray, list[dict]]:
     """The candidate with the best worst type: the Bayes policy and, for every prior λ of the
     simplex grid, the trust-state synthesis as if the type prior were λ, run on the AV's filter
@@ -123,6 +127,8 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
     record)."""
     population = problem.population
     assert population is not None
+    horizon, belief_rule, grid_points = settings.horizon, settings.belief_rule, settings.grid_points
+    assert grid_points is not None
     weights = population.weights
     cap = evaluation_cap(horizon)
 
@@ -134,8 +140,8 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
     candidates = [record(weights, values)]
     for prior in candidate_priors(weights, population.n_types, grid_points, schedule):
         made = synthesize_joint(build_pomdp(problem.town, lift_population(population, prior)), problem.spec,
-                                tau=tau, time_limit=schedule.next_limit(), horizon=horizon,
-                                belief_rule=belief_rule, on_iteration=on_iteration)
+                                replace(settings, time_limit=schedule.next_limit()),
+                                on_iteration=on_iteration)
         schedule.finished(candidate_name(prior), made.lower, made.upper)
         policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
                                   name="robust", horizon=horizon, guide=made.policy.guide,
@@ -148,26 +154,28 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
 
 
 def synthesize_population_joint(problem: Problem, objective: str, synthesize: Callable[..., SynthesisResult],
-                                tau: float = 1e-3, time_limit: float = 60.0, horizon: int | None = None,
-                                belief_rule: BeliefRule = "bayes", grid_points: int = MAX_GRID_CANDIDATES,
+                                settings: SynthesisSettings = DEFAULT_SYNTHESIS,
                                 on_iteration: Callable[[float, float], None] | None = None,
                                 on_phase: Callable[[str], None] | None = None,
                                 ) -> PopulationSynthesis:
     """The population synthesis (module docstring) of a TRUST_STATE problem with a population.
     `synthesize`: the one synthesis entry (policies/synthesize_spec.py `synthesize_spec`), for the
-    per-type bounds of the robust objective; grid_points: its candidate type priors. time_limit
-    bounds the whole call, shared among its synthesis runs (policies/synthesis/population.py
-    RunSchedule); on_phase hears a line per finished run."""
+    per-type bounds of the robust objective; settings.grid_points: its candidate type priors (None:
+    MAX_GRID_CANDIDATES). settings.time_limit bounds the whole call, shared among its synthesis
+    runs (policies/synthesis/population.py RunSchedule); on_phase hears a line per finished run."""
     if objective not in OBJECTIVES:
         raise ValueError(f"unknown objective {objective!r}; use 'bayes' or 'robust'")
     population = problem.population
     if population is None:
         raise ValueError("population synthesis needs a problem with a driver population")
+    grid_points = MAX_GRID_CANDIDATES if settings.grid_points is None else settings.grid_points
+    settings = replace(settings, grid_points=grid_points)
+    horizon, belief_rule = settings.horizon, settings.belief_rule
     started = time.perf_counter()
-    schedule = RunSchedule(TimeBudget.start(time_limit), run_count(population, objective, grid_points),
-                           on_phase=on_phase)
-    bayes = synthesize_joint(problem.pomdp, problem.spec, tau=tau, time_limit=schedule.next_limit(),
-                             horizon=horizon, belief_rule=belief_rule, on_iteration=on_iteration)
+    schedule = RunSchedule(TimeBudget.start(settings.time_limit),
+                           run_count(population, objective, grid_points), on_phase=on_phase)
+    bayes = synthesize_joint(problem.pomdp, problem.spec, replace(settings, time_limit=schedule.next_limit()),
+                             on_iteration=on_iteration)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
     values = joint_type_values(problem, bayes.policy, evaluation_cap(horizon), belief_rule)
     found = PopulationSynthesis(
@@ -178,8 +186,8 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     if objective == "bayes":
         return found
     policy, best_values, prior, candidates = robust_candidates(
-        problem, bayes, values, grid_points, tau, schedule, horizon, belief_rule, on_iteration)
-    type_upper = type_optimum_bounds(problem, tau, schedule, horizon, synthesize)
+        problem, bayes, values, settings, schedule, on_iteration)
+    type_upper = type_optimum_bounds(problem, settings, schedule, synthesize)
     lower = min(v.lower for v in best_values)
     upper = min(bayes.upper, *type_upper)
     if lower > upper + 1e-9:

@@ -47,6 +47,7 @@ from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.result import SynthesisResult, record_dict
+from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.search import JointBounds, JointDecisions, joint_search
 
 FIRST_NODES = 500                  # nodes per level of the first round
@@ -227,10 +228,13 @@ def _policy_rounds(problem: _Joint, policy_horizon: int, until: float, upper: fl
     return upper
 
 
-def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, tau: float = 1e-3, time_limit: float = 60.0,
-                     horizon: int | None = None, belief_rule: BeliefRule = "bayes",
+def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings = DEFAULT_SYNTHESIS,
                      on_iteration: Callable[[float, float], None] | None = None) -> JointSynthesis:
-    """A JointTablePolicy for `spec` and certified lower <= Pr_max <= upper (a SynthesisResult)."""
+    """A JointTablePolicy for `spec` and certified lower <= Pr_max <= upper (a SynthesisResult);
+    of `settings`, tau, time_limit, horizon and belief_rule apply (the others are the belief-MDP
+    search's)."""
+    tau, time_limit, horizon = settings.tau, settings.time_limit, settings.horizon
+    belief_rule = settings.belief_rule
     # Every search and evaluation checks its deadline as it goes (and does not begin a batch it
     # predicts would end past it), so the whole synthesis keeps to the time limit.
     budget = TimeBudget.start(time_limit, reserve=FINISH_RESERVE)

@@ -18,9 +18,10 @@ from tests.cli import run_cli
 from trustroute.core.packaged import SPEC_TOWNS, packaged_spec_names
 from trustroute.networks import cities
 from trustroute.networks.real_net import town_net_file
+from trustroute.networks.road import Road
 from trustroute.networks.road_geometry import file_sha256
 from trustroute.networks.road_lookup import choice_junctions
-from trustroute.networks.town import TOWNS, load_town, split_road
+from trustroute.networks.town import TOWNS, load_town
 
 needs_extra = pytest.mark.skipif(importlib.util.find_spec("sumo_rl") is None,
                                  reason="needs the optional extra: pip install -e '.[cities]'")
@@ -163,8 +164,8 @@ def test_csomor_choice_junctions_against_an_independent_count_from_sumolib():
         # The net's extra choice is the model's road back to the junction the car came from, by
         # another way than the edge it arrived on (a loop of one-way edges): the model's U-turn.
         loops = []
-        for road in (r for r in town.states if split_road(r)[1] == junction):
-            came_from = split_road(road)[0]
+        for road in (r for r in town.states if Road.parse(r).to_junction == junction):
+            came_from = Road.parse(road).from_junction
             back = town.geometry.get(f"{junction}-{came_from}")
             arrived = net.getEdge(town.geometry[road].edges[-1])
             if back is not None and net.getEdge(back.edges[0]).getToNode() != arrived.getFromNode():

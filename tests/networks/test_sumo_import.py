@@ -17,8 +17,8 @@ from tests.networks.sumo_nets import (
     passenger_edges,
     sumolib_decision_junctions,
 )
+from trustroute.networks.road import Road
 from trustroute.networks.sumo_import import decision_graph, junction_names, read_net_graph
-from trustroute.networks.town import road_name
 
 
 def graph_of(net_path):
@@ -26,7 +26,7 @@ def graph_of(net_path):
 
 
 def directed(graph) -> set[str]:
-    return {road_name(r.source, r.target) for r in graph.roads}
+    return {Road(r.source, r.target).id for r in graph.roads}
 
 
 def check_roads_follow_the_net(graph, net_path) -> None:
@@ -93,8 +93,8 @@ def test_roundabout(tmp_path):
     net = build_plain_net(tmp_path, "roundabout", {**ring, **outer}, arms + square, one_way=ring_edges)
     graph = graph_of(net)
     assert set(graph.junction_ids.values()) == sumolib_decision_junctions(net) == set(ring) | set(outer)
-    assert {road_name(u, v) for u, v in ring_edges} <= directed(graph)
-    assert not {road_name(v, u) for u, v in ring_edges} & directed(graph)
+    assert {Road(u, v).id for u, v in ring_edges} <= directed(graph)
+    assert not {Road(v, u).id for u, v in ring_edges} & directed(graph)
     assert len(graph.roads) == 4 + 2 * 4 + 2 * 4
     check_roads_follow_the_net(graph, net)
 

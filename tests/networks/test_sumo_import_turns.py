@@ -24,9 +24,10 @@ from tests.networks.sumo_nets import (
     sumolib_moves,
     unconnected_moves,
 )
+from trustroute.networks.road import Road
 from trustroute.networks.sumo_import import decision_graph, read_net_graph
 from trustroute.networks.sumo_net import find_binary
-from trustroute.networks.town import load_town, road_name
+from trustroute.networks.town import load_town
 from trustroute.networks.town_import import import_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.model.trust_pomdp import TrustPOMDP
@@ -38,9 +39,9 @@ DEAD_END = {**WHEEL_NODES, "f": (-200, 0)}   # f: a dead end beside a
 def moves_as_edges(net_path: Path) -> dict[str, set[str]]:
     """The importer's moves of every road, as SUMO edge ids (on these nets a road is one edge)."""
     graph = decision_graph(read_net_graph(net_path), str(net_path))
-    edge = {road_name(r.source, r.target): r.edges[0].id for r in graph.roads}
+    edge = {Road(r.source, r.target).id: r.edges[0].id for r in graph.roads}
     assert all(len(r.edges) == 1 for r in graph.roads)
-    return {edge[road]: {edge[road_name(road.split("-")[1], w)] for w in moves}
+    return {edge[road]: {edge[Road(Road.parse(road).to_junction, w).id] for w in moves}
             for road, moves in graph.moves.items()}
 
 

@@ -10,8 +10,9 @@ import pytest
 import sumolib
 
 from trustroute.core.errors import InputError
+from trustroute.networks.road import Road
 from trustroute.networks.sumo_net import build_net, net_counts
-from trustroute.networks.town import PENTAGON_TOWN_PATH, load_town, split_road
+from trustroute.networks.town import PENTAGON_TOWN_PATH, load_town
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +52,7 @@ def test_net_loads_in_libsumo(built, town):
 def test_counts(built, town):
     assert (built.edges, built.junctions) == (len(town.states), len(town.junctions))
     assert built.connections == sum(len(town.successors(s)) for s in town.states)
-    pedestrian_roads = {frozenset(split_road(r)) for r in town.states if town.incident(r) == "pedestrian"}
+    pedestrian_roads = {frozenset(Road.parse(r)) for r in town.states if town.incident(r) == "pedestrian"}
     assert built.crossings == 2 * len(pedestrian_roads)
 
 
@@ -62,7 +63,7 @@ def _driven_against_model(net, town) -> list[tuple[str, str, float, float]]:
     out = []
     for road in town.states:
         edge = net.getEdge(road)
-        u, v = split_road(road)
+        u, v = Road.parse(road)
         assert (edge.getFromNode().getID(), edge.getToNode().getID()) == (u, v)
         euclidean = math.dist(town.junctions[u], town.junctions[v])
         if road in town.geometry and len(town.geometry[road].shape) > 2:
@@ -148,7 +149,7 @@ def test_movements_and_no_u_turns(net, town):
         edge = net.getEdge(road)
         vehicle_targets = {nxt.getID() for nxt in edge.getOutgoing() if not nxt.getFunction()}
         assert vehicle_targets == set(town.successors(road)), road
-        u, v = split_road(road)
+        u, v = Road.parse(road)
         assert f"{v}-{u}" not in vehicle_targets  # no dead ends in the default town
 
 
@@ -160,7 +161,7 @@ def test_pedestrian_roads_have_crossings_at_both_ends(net, town):
                 frozenset(e.getID() for e in edge.getCrossingEdges()))
     for road in town.states:
         if town.incident(road) == "pedestrian":
-            u, v = split_road(road)
+            u, v = Road.parse(road)
             assert frozenset((road, f"{v}-{u}")) in crossings.get(u, []), road
 
 

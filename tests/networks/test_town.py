@@ -121,10 +121,10 @@ def test_shortest_route_start_is_target_and_unreachable(town):
 def test_cached_moves_and_indices_match_their_definition(town):
     """Town.actions and Town.state_index (tables built once per town) agree with the definition:
     neighbours of V except U (U itself at a dead end), and the position in the sorted states."""
-    from trustroute.networks.town import split_road
+    from trustroute.networks.road import Road
 
     for i, road in enumerate(town.states):
-        came_from, at = split_road(road)
+        came_from, at = Road.parse(road)
         expected = tuple(w for w in town.neighbours[at] if w != came_from) or (came_from,)
         assert town.actions(road) == expected
         assert town.state_index(road) == i

@@ -21,6 +21,7 @@ from trustroute.policies.routing.files import (
     save_policy,
 )
 from trustroute.policies.synthesis.belief_synthesis import synthesize
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 
 def _document(path) -> dict:
@@ -33,7 +34,7 @@ def _document(path) -> dict:
 def test_without_trust_atoms_the_cli_writes_the_plain_synthesis_file_byte_for_byte(
         tmp_path, capsys, town, driver, pomdp, name, horizon):
     spec = load_spec(f"specs/{name}.toml", town)
-    plain = synthesize(pomdp, spec, horizon=horizon, time_limit=60)
+    plain = synthesize(pomdp, spec, SynthesisSettings(horizon=horizon, time_limit=60))
     assert plain.gap <= 1e-3           # converged: the run is deterministic (no time cut)
     reference = save_policy(plain, tmp_path / "plain.json", town, driver, spec)
     code, out, _ = run_cli(capsys, "synth", f"specs/{name}.toml", "--horizon", str(horizon),

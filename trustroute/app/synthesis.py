@@ -12,6 +12,7 @@ from trustroute.core.errors import InputError
 from trustroute.policies.belief.problem import Problem
 from trustroute.policies.evaluation.plain import Evaluation
 from trustroute.policies.evaluation.plain import evaluate as evaluate_plain
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint, evaluate_joint_by_type
 from trustroute.policies.model.trust_pomdp import BeliefRule, checked_belief_rule
 from trustroute.policies.resolve import is_objective, phase_lines, synthesis_progress
@@ -29,6 +30,7 @@ from trustroute.policies.synthesis.population import (
     summary,
 )
 from trustroute.policies.synthesis.result import SynthesisResult, SynthesisStats
+from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
 
 
@@ -38,9 +40,10 @@ def belief_rule_named(name: str) -> BeliefRule:
 
 
 @dataclass(frozen=True)
-class SynthesisSettings:
-    """A synthesis's settings: target gap, seconds, junction horizon (None: unbounded), the AV's
-    filter, cluster policies ("auto", "on", "off") and whether progress shows on stderr."""
+class SynthesisSettings(SearchSettings):
+    """The search's settings (policies/synthesis/settings.py) as the doors take them: the doors'
+    defaults, a usage error naming the option for a bad tau or horizon, and whether progress
+    shows on stderr. An instance is passed down to the search as it is."""
 
     tau: float = defaults.TAU
     time_limit: float = defaults.TIME_LIMIT
@@ -56,21 +59,7 @@ class SynthesisSettings:
             raise InputError("--horizon", "", f"horizon must be at least 1, got {self.horizon}",
                              "pass a positive number of junctions or omit --horizon")
         object.__setattr__(self, "belief_rule", checked_belief_rule(self.belief_rule))
-
-
-@dataclass(frozen=True)
-class EvaluationSettings:
-    """An exact evaluation's settings: the study's fallback (None: none), the episode cap, the
-    AV's filter, and the pruning limits of the joint unfolding (None: its defaults)."""
-
-    fallback_after: int | None = defaults.FALLBACK_AFTER
-    max_junctions: int = defaults.JUNCTION_CAP
-    belief_rule: BeliefRule = defaults.BELIEF_RULE
-    max_nodes: int | None = None
-    time_limit: float | None = None
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "belief_rule", checked_belief_rule(self.belief_rule))
+        super().__post_init__()
 
 
 def synthesize_single(problem: Problem, settings: SynthesisSettings,
@@ -78,9 +67,7 @@ def synthesize_single(problem: Problem, settings: SynthesisSettings,
     """A policy for a one-model problem with bounds; its file written at `out` when given
     (`written_policy` names the file)."""
     with synthesis_progress(f"synthesizing {problem.spec.name}", settings.progress) as on_iteration:
-        result = synthesize_problem(problem, tau=settings.tau, time_limit=settings.time_limit,
-                                    horizon=settings.horizon, belief_rule=settings.belief_rule,
-                                    on_iteration=on_iteration, clusters=settings.clusters)
+        result = synthesize_problem(problem, settings, on_iteration=on_iteration)
     if out is not None:
         save_policy(result, out, problem.town, problem.driver, problem.spec)
     return result
@@ -97,9 +84,7 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
     spec = problem.given_spec
     description = f"synthesizing {spec.name} ({objective}, {population.n_types} types)"
     with synthesis_progress(description, settings.progress) as on_iteration:
-        found = synthesize_for_population(problem.town, population, spec, objective, tau=settings.tau,
-                                          time_limit=settings.time_limit, horizon=settings.horizon,
-                                          belief_rule=settings.belief_rule,
+        found = synthesize_for_population(problem.town, population, spec, objective, settings,
                                           population_source=population.source_path,
                                           on_iteration=on_iteration,
                                           on_phase=phase_lines("synth", settings.progress))
@@ -112,9 +97,7 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
 def evaluate_single(problem: Problem, policy: RoutingPolicy, settings: EvaluationSettings) -> Evaluation:
     """The exact value of `policy` on a one-model problem (the joint unfolding when the DFA state
     is hidden, the plain one otherwise: evaluate_joint chooses)."""
-    return evaluate_joint(problem.pomdp, problem.spec, policy, fallback_after=settings.fallback_after,
-                          max_junctions=settings.max_junctions, belief_rule=settings.belief_rule,
-                          max_nodes=settings.max_nodes, time_limit=settings.time_limit)
+    return evaluate_joint(problem.pomdp, problem.spec, policy, settings)
 
 
 def evaluate_population(problem: Problem, policy: RoutingPolicy,
@@ -125,12 +108,10 @@ def evaluate_population(problem: Problem, policy: RoutingPolicy,
     rule, cap, after = settings.belief_rule, settings.max_junctions, settings.fallback_after
     if problem.dfa_hidden:
         # The DFA state is hidden: one unfolding over ((type, trust), q) gives every type's value.
-        value, bounds = evaluate_joint_by_type(problem.pomdp, problem.spec, policy, fallback_after=after,
-                                               max_junctions=cap, belief_rule=rule)
+        value, bounds = evaluate_joint_by_type(problem.pomdp, problem.spec, policy, settings)
         return value, tuple(TypeValue(t.name, float(t.weight), lower, upper)
                             for t, (lower, upper) in zip(population.types, bounds, strict=True))
-    value = evaluate_plain(problem.pomdp, problem.spec, policy, fallback_after=after, max_junctions=cap,
-                           belief_rule=rule)
+    value = evaluate_plain(problem.pomdp, problem.spec, policy, settings)
     return value, tuple(per_type_values(problem.pomdp, problem.spec, policy, population, cap, rule, after))
 
 
@@ -146,8 +127,9 @@ def baseline(problem: Problem, belief_rule: BeliefRule = defaults.BELIEF_RULE) -
     exact value without the fallback."""
     town, spec = problem.town, problem.spec
     route = baseline_route(town, spec)
-    value = evaluate_plain(problem.pomdp, spec, trust_free_policy(town, spec), fallback_after=None,
-                           belief_rule=checked_belief_rule(belief_rule))
+    value = evaluate_plain(problem.pomdp, spec, trust_free_policy(town, spec),
+                           EvaluationSettings(fallback_after=None,
+                                              belief_rule=checked_belief_rule(belief_rule)))
     return Baseline(route=route, length_m=town.route_length(route), value=value)
 
 

@@ -22,6 +22,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from trustroute.core.errors import InputError
+from trustroute.core.output_files import atomic_write_bytes
+from trustroute.core.validation import read_input_bytes, read_json
 
 # -- files of a study directory ------------------------------------------------------------------
 STUDY_FILE = "study.json"            # the config hash and config of the study in this directory
@@ -273,8 +275,6 @@ def frame_from_table(table: pa.Table) -> pd.DataFrame:
 def write_table(table: pa.Table, path: Path) -> Path:
     """Write a dataset table (already checked) as Parquet with page checksums, atomically (a full
     disk or a kill leaves the previous file or none, never part of one; trustroute.core.output_files)."""
-    from trustroute.core.output_files import atomic_write_bytes
-
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, write_page_checksum=True)
     return atomic_write_bytes(Path(path), sink.getvalue().to_pybytes(), f"dataset table {Path(path).name}",
@@ -298,8 +298,6 @@ def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None,
                added: tuple[str, ...] = ()) -> pa.Table:
     """A dataset table file checked against its schema; InputError naming the file when it is
     missing, unreadable or of another schema. Columns of `added` missing at the end read as nulls."""
-    from trustroute.core.validation import read_input_bytes
-
     path = Path(path)
     if not path.exists():
         raise InputError(str(path), "", "no such dataset file",
@@ -353,7 +351,6 @@ def read_manifest(study_dir: Path) -> dict:
     if not path.exists():
         raise InputError(str(study_dir), MANIFEST_FILE, "not a finished study directory (no manifest)",
                          "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
-    from trustroute.core.validation import read_json
 
     manifest = read_json(path, "study manifest",
                          fix="rerun `trustroute study` on this directory to rebuild it")

@@ -20,6 +20,8 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
+from trustroute.networks.road import Road
+
 NOT_ON_THE_NET = 1e8   # metres: beyond any town; SUMO's invalid position is about -1.07e9
 
 
@@ -74,7 +76,7 @@ class Scene:
     @property
     def ends_at(self) -> str:
         """The junction where the scene's road ends."""
-        return self.end_junction if self.end_junction is not None else self.road.split("-")[1]
+        return self.end_junction if self.end_junction is not None else Road.parse(self.road).to_junction
 
     @property
     def watched(self) -> float:

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 from trustroute.harness.simulation.driving_style import SAFE_SPEED_MODE
 from trustroute.harness.simulation.incidents.base import EgoState, Scene, VehicleType, define_vehicle_type
+from trustroute.networks.road import Road
 
 KIND = "pedestrian"
 TIMINGS = ("early", "late", "none")
@@ -264,7 +265,7 @@ def crossing_path(sumo, road: str, lane: int = 1, junction: str | None = None) -
 
 def _find_crossing(sumo, road: str, lane_start: tuple[float, float], junction: str | None) -> CrossingPath:
     real = junction is not None
-    junction = junction if junction is not None else road.split("-")[0]
+    junction = junction if junction is not None else Road.parse(road).from_junction
     best = None
     for edge in sumo.junction.getOutgoingEdges(junction):
         if not edge.startswith(f":{junction}_c"):
@@ -284,7 +285,7 @@ def _find_crossing(sumo, road: str, lane_start: tuple[float, float], junction: s
     walking_area = sumo.lane.getLinks(f"{edge}_0")[0][0]     # the crossing leads to one walking area
     sidewalk = next(link[0] for link in sumo.lane.getLinks(walking_area) if not link[0].startswith(":"))
     sidewalk_edge = sidewalk.rsplit("_", 1)[0]
-    ends_at = sumo.edge.getToJunction(sidewalk_edge) if real else sidewalk_edge.split("-")[1]
+    ends_at = sumo.edge.getToJunction(sidewalk_edge) if real else Road.parse(sidewalk_edge).to_junction
     ends_here = ends_at == junction
     arrival = max(0.0, sumo.lane.getLength(sidewalk) - 2.0) if ends_here else 2.0
     return CrossingPath(edge=edge, conflict=point, conflict_position=t * length,

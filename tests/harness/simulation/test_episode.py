@@ -15,6 +15,7 @@ from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import town_from_dict
 from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
@@ -175,7 +176,8 @@ def test_sumo_episodes_match_the_exact_evaluation(setup, net_path, pomdp):
     """End to end: satisfaction and final trust of SUMO episodes vs the exact tree evaluation."""
     from trustroute.policies.evaluation.plain import evaluate
 
-    exact = evaluate(pomdp, setup.spec, trust_free_policy(setup.town, setup.spec), fallback_after=20)
+    exact = evaluate(pomdp, setup.spec, trust_free_policy(setup.town, setup.spec),
+                     EvaluationSettings(fallback_after=20))
     n = 300
     records = [_episode(setup, net_path, 5000 + seed) for seed in range(n)]
     satisfied = np.mean([r.summary["satisfied"] for r in records])

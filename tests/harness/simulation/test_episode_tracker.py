@@ -13,6 +13,7 @@ from trustroute.core.dataset import ROADS_SCHEMA
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
@@ -133,7 +134,7 @@ def test_monte_carlo_matches_exact_evaluation(town, driver, pomdp, phi1):
     """Satisfaction frequency of tracker episodes vs the exact tree evaluation (fallback 20)."""
     setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1)
     policy = trust_free_policy(town, phi1)
-    exact = evaluate(pomdp, phi1, policy, fallback_after=20)
+    exact = evaluate(pomdp, phi1, policy, EvaluationSettings(fallback_after=20))
     rng = np.random.default_rng(12345)
     n = 1500
     satisfied = 0
@@ -163,8 +164,8 @@ def test_trust_state_spec_with_driver_types_matches_the_exact_per_type_values(to
     setup = EpisodeSetup(town=town, driver_model=found.driver, spec=found.spec, junction_cap=14,
                          fallback_after=None)
     policy = trust_free_policy(town, found.spec)
-    _, per_type = evaluate_joint_by_type(found.pomdp, found.spec, policy, fallback_after=None,
-                                         max_junctions=14)
+    _, per_type = evaluate_joint_by_type(found.pomdp, found.spec, policy,
+                                         EvaluationSettings(fallback_after=None, max_junctions=14))
     rng = np.random.default_rng(2024)
     n = 600
     for kind, (lower, upper) in zip(population.types, per_type, strict=True):
@@ -253,4 +254,5 @@ def test_a_label_floats_cannot_decide_is_read_as_synthesis_and_evaluate_read_it(
     assert tracker.end_reason == "rejected"
     batch = simulate_batch(setup, trust_free_policy(town, spec), 20, np.random.default_rng(0))
     assert (batch.end_reason == "rejected").all()
-    assert evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None).lower == 0.0
+    free = trust_free_policy(town, spec)
+    assert evaluate(pomdp, spec, free, EvaluationSettings(fallback_after=None)).lower == 0.0

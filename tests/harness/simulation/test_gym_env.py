@@ -9,6 +9,7 @@ from gymnasium.utils.env_checker import check_env, data_equivalence
 
 from trustroute.core.packaged import packaged_spec_names
 from trustroute.harness.simulation.gym_env import ENV_ID, RUN_FACTS, TrustRoutingEnv
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 
@@ -222,7 +223,8 @@ def test_population_with_a_trust_state_spec_matches_exact_per_type_values(driver
     assert spec.uses_trust_atoms and env.observation_space["belief"].shape == (3 * 7,)
     check_env(env, skip_render_check=True)
     exact, per_type = evaluate_joint_by_type(build_pomdp(town, env.driver_model), env.scldtl_spec,
-                                             FirstJunction(town).policy, fallback_after=None, max_junctions=6)
+                                             FirstJunction(town).policy,
+                                             EvaluationSettings(fallback_after=None, max_junctions=6))
     assert exact.gap == 0 and 0.05 < exact.lower < 0.95    # the test has teeth
     episodes = 1500
     ends = {name: [] for name in population.names}

@@ -21,6 +21,7 @@ from trustroute.harness.simulation.model_engine import monte_carlo, run_model_ep
 from trustroute.participants.driver_model import driver_model_from_dict
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
@@ -62,7 +63,7 @@ def test_batch_matches_exact_for_free_policy(town, driver, pomdp, spec_name):
     spec = load_spec(f"specs/{spec_name}.toml", town)
     policy = trust_free_policy(town, spec)
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec)
-    exact = evaluate(pomdp, spec, policy, fallback_after=20)
+    exact = evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=20))
     batch = simulate_batch(setup, policy, 40_000, np.random.default_rng(1))
     p = exact.satisfaction_probability
     assert exact.gap < 1e-9
@@ -77,7 +78,7 @@ def test_per_episode_path_matches_exact_and_batch_for_looping_policy(town, drive
     spec = load_spec("specs/phi1.toml", town)
     policy = LoopingPolicy(town)
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec, fallback_after=20)
-    exact = evaluate(pomdp, spec, policy, fallback_after=20)
+    exact = evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=20))
     n_single, n_batch = 600, 20_000
     single = _per_episode(setup, policy, driver, n_single, 3)
     batch = simulate_batch(setup, policy, n_batch, np.random.default_rng(4))

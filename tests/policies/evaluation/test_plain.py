@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
@@ -111,7 +112,7 @@ def assert_agrees(evaluation, satisfied, final_trust):
 def test_baseline_value_agrees_with_monte_carlo(pomdp, name, belief_rule):
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     policy = trust_free_policy(pomdp.town, spec)
-    evaluation = evaluate(pomdp, spec, policy, belief_rule=belief_rule)
+    evaluation = evaluate(pomdp, spec, policy, EvaluationSettings(belief_rule=belief_rule))
     assert evaluation.gap == 0.0
     assert evaluation.end_mass["accepted"] + evaluation.end_mass["destination"] == pytest.approx(1.0)
     satisfied, trust = simulate(pomdp, spec, policy, 3000, np.random.default_rng(11), 60, belief_rule)
@@ -125,7 +126,7 @@ def test_random_stationary_policy_agrees_with_monte_carlo(pomdp, name, after):
     # Seeds chosen so that, without the fallback, the policy satisfies the spec sometimes but not always.
     policy = RandomStationaryPolicy(pomdp.town, np.random.default_rng(RANDOM_POLICY_SEED[name]))
     cap = 14
-    evaluation = evaluate(pomdp, spec, policy, fallback_after=after, max_junctions=cap)
+    evaluation = evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=after, max_junctions=cap))
     simulated = policy if after is None else with_fallback(policy, pomdp.town, spec, after=after)
     satisfied, trust = simulate(pomdp, spec, simulated, 3000, np.random.default_rng(17), cap)
     assert_agrees(evaluation, satisfied, trust)
@@ -140,10 +141,11 @@ def test_random_stationary_policy_agrees_with_monte_carlo(pomdp, name, after):
 def test_pruning_gives_an_interval_around_the_exact_value(pomdp):
     spec = load_spec("specs/phi2.toml", pomdp.town)
     policy = RandomStationaryPolicy(pomdp.town, np.random.default_rng(RANDOM_POLICY_SEED["phi2"]))
-    exact = evaluate(pomdp, spec, policy, fallback_after=5, max_junctions=14)
+    exact = evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=5, max_junctions=14))
     assert exact.gap == 0.0
     for kwargs in ({"prune_below": 1e-2}, {"max_nodes": 10}):
-        rough = evaluate(pomdp, spec, policy, fallback_after=5, max_junctions=14, **kwargs)
+        rough = evaluate(pomdp, spec, policy,
+                         EvaluationSettings(fallback_after=5, max_junctions=14, **kwargs))
         assert rough.end_mass["pruned"] > 0
         assert rough.lower <= exact.lower + 1e-12 <= rough.upper + 2e-12
         assert rough.final_trust_lower <= exact.expected_final_trust + 1e-9
@@ -153,7 +155,7 @@ def test_pruning_gives_an_interval_around_the_exact_value(pomdp):
 def test_spec_accepted_at_the_start_is_worth_one_and_wrapping_is_not_repeated(pomdp):
     spec = load_spec("specs/phi1.toml", pomdp.town)
     policy = with_fallback(trust_free_policy(pomdp.town, spec), pomdp.town, spec, after=3)
-    evaluation = evaluate(pomdp, spec, policy, fallback_after=20)
+    evaluation = evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=20))
     assert isinstance(policy, FallbackPolicy)
     assert evaluation.fallback_after == 3
     assert evaluation.policy == "free+fallback3"
@@ -166,7 +168,7 @@ def test_baseline_value_agrees_with_large_monte_carlo(pomdp, name, belief_rule):
     ~0.01 difference that using the AV's belief for observation probabilities would make."""
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     policy = trust_free_policy(pomdp.town, spec)
-    evaluation = evaluate(pomdp, spec, policy, belief_rule=belief_rule)
+    evaluation = evaluate(pomdp, spec, policy, EvaluationSettings(belief_rule=belief_rule))
     satisfied, trust = simulate(pomdp, spec, policy, 20000, np.random.default_rng(23), 60, belief_rule)
     assert_agrees(evaluation, satisfied, trust)
 
@@ -223,7 +225,7 @@ def test_evaluate_equals_plain_recursion(pomdp, name, belief_rule):
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     inner = RandomStationaryPolicy(pomdp.town, np.random.default_rng(RANDOM_POLICY_SEED[name]))
     policy = with_fallback(inner, pomdp.town, spec, after=6)
-    evaluation = evaluate(pomdp, spec, policy, max_junctions=13, belief_rule=belief_rule)
+    evaluation = evaluate(pomdp, spec, policy, EvaluationSettings(max_junctions=13, belief_rule=belief_rule))
     satisfied, final_trust = recursive_value(pomdp, spec, policy, 13, belief_rule)
     assert evaluation.gap == 0.0
     assert 0.05 < satisfied < 0.95 and evaluation.end_mass["destination"] > 0.01

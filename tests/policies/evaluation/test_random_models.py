@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from tests.policies.evaluation.test_plain import RandomStationaryPolicy, recursive_value
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.fallback import with_fallback
@@ -40,7 +41,8 @@ def test_evaluate_equals_plain_recursion_on_random_models(town, driver, seed, be
     for policy, after, cap in ((trust_free_policy(town, spec), None, 6),
                                (RandomStationaryPolicy(town, rng), 2, 7)):
         wrapped = policy if after is None else with_fallback(policy, town, spec, after=after)
-        evaluation = evaluate(pomdp, spec, wrapped, max_junctions=cap, belief_rule=belief_rule)
+        evaluation = evaluate(pomdp, spec, wrapped,
+                              EvaluationSettings(max_junctions=cap, belief_rule=belief_rule))
         satisfied, final_trust = recursive_value(pomdp, spec, wrapped, cap, belief_rule)
         assert evaluation.gap == 0.0
         assert abs(evaluation.lower - satisfied) <= 1e-10

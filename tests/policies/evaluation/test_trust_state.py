@@ -15,11 +15,13 @@ from tests.policies.evaluation.test_plain import RandomStationaryPolicy, simulat
 from tests.policies.trust_paths import policy_value
 from tests.policies.trust_specs import random_problem
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
+from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesize_spec import synthesize_spec
 
 
@@ -31,7 +33,8 @@ def test_exact_value_equals_brute_force_over_trust_paths(driver, seed, kind, cap
     rng = np.random.default_rng(seed)
     pomdp, spec = random_problem(rng, driver, kind)
     for policy in (RandomStationaryPolicy(pomdp.town, rng), trust_free_policy(pomdp.town, spec)):
-        exact = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=cap,
+        exact = evaluate_joint(pomdp, spec, policy,
+                               EvaluationSettings(fallback_after=None, max_junctions=cap),
                                force_joint=True)
         reference = policy_value(pomdp, spec, policy, cap)
         assert exact.gap == 0.0
@@ -44,10 +47,11 @@ def test_merged_unfolding_equals_the_tree_unfolding(pomdp):
     the synthesized joint policy with the fallback (its memory: the projected state) and the
     trust-free route (its memory: the whole route), on φ1 with the trust atom."""
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
-    synthesized = synthesize_spec(pomdp, spec, horizon=6, time_limit=20).policy
+    synthesized = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=6, time_limit=20)).policy
     for policy, fallback_after in ((synthesized, 4), (trust_free_policy(pomdp.town, spec), None)):
-        merged, tree = (evaluate_joint(pomdp, spec, policy, fallback_after=fallback_after,
-                                       max_junctions=12, merge=merge) for merge in (True, False))
+        merged, tree = (evaluate_joint(pomdp, spec, policy,
+                                       EvaluationSettings(fallback_after=fallback_after, max_junctions=12,
+                                                          merge=merge)) for merge in (True, False))
         assert tree.gap == 0.0 and merged.gap == 0.0
         for name in ("lower", "upper", "expected_final_trust", "expected_junctions",
                      "fallback_probability"):
@@ -66,7 +70,7 @@ def test_exact_value_agrees_with_monte_carlo_of_the_hidden_trust(pomdp, policy_k
     rng = np.random.default_rng(20261201)
     policy = (trust_free_policy(pomdp.town, spec) if policy_kind == "free"
               else RandomStationaryPolicy(pomdp.town, np.random.default_rng(9)))
-    exact = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=12)
+    exact = evaluate_joint(pomdp, spec, policy, EvaluationSettings(fallback_after=None, max_junctions=12))
     satisfied, _ = simulate(pomdp, spec, policy, 4000, rng, 12)
     p = exact.satisfaction_probability
     se = max(np.sqrt(p * (1 - p) / satisfied.size), 1.0 / satisfied.size)
@@ -78,8 +82,9 @@ def test_without_trust_atoms_the_joint_unfolding_gives_todays_evaluation(pomdp, 
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     for policy in (trust_free_policy(pomdp.town, spec),
                    RandomStationaryPolicy(pomdp.town, np.random.default_rng(6))):
-        today = evaluate(pomdp, spec, policy, fallback_after=3, max_junctions=10)
-        joint = evaluate_joint(pomdp, spec, policy, fallback_after=3, max_junctions=10, force_joint=True)
+        today = evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=3, max_junctions=10))
+        joint = evaluate_joint(pomdp, spec, policy, EvaluationSettings(fallback_after=3, max_junctions=10),
+                               force_joint=True)
         # The two sum the same terms in different orders: equal up to rounding (on the Town01 default
         # town phi2_strict's free policy differs by one ulp; on the earlier pentagon they were equal).
         assert abs(joint.lower - today.lower) <= 2 * math.ulp(today.lower)
@@ -88,7 +93,8 @@ def test_without_trust_atoms_the_joint_unfolding_gives_todays_evaluation(pomdp, 
         assert joint.expected_junctions == pytest.approx(today.expected_junctions, abs=1e-12)
         for reason, value in today.end_mass.items():
             assert joint.end_mass[reason] == pytest.approx(value, abs=1e-15)
-        dispatched = evaluate_joint(pomdp, spec, policy, fallback_after=3, max_junctions=10)
+        dispatched = evaluate_joint(pomdp, spec, policy,
+                                    EvaluationSettings(fallback_after=3, max_junctions=10))
         assert {k: v for k, v in dispatched.to_dict().items() if k != "seconds"} == \
             {k: v for k, v in today.to_dict().items() if k != "seconds"}
 
@@ -123,20 +129,24 @@ def test_pruned_bracket_holds_the_brute_force_value(driver, seed, kind):
     pomdp, spec = random_problem(rng, driver, kind)
     policy = RandomStationaryPolicy(pomdp.town, rng)
     reference = policy_value(pomdp, spec, policy, 4)
-    off = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=4, force_joint=True,
-                         prune_below=0.0, max_nodes=10**9)
+    off = evaluate_joint(pomdp, spec, policy,
+                         EvaluationSettings(fallback_after=None, max_junctions=4, prune_below=0.0,
+                                            max_nodes=10**9),
+                         force_joint=True)
     assert off.gap == 0.0 and off.lower == pytest.approx(reference, abs=1e-10)
     assert not any(off.pruning["pruned_nodes"].values())
     for prune_below, max_nodes in ((0.0, 2), (0.05, 10**9), (0.02, 3)):
-        pruned = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=4,
-                                force_joint=True, prune_below=prune_below, max_nodes=max_nodes)
+        pruned = evaluate_joint(pomdp, spec, policy,
+                                EvaluationSettings(fallback_after=None, max_junctions=4,
+                                                   prune_below=prune_below, max_nodes=max_nodes),
+                                force_joint=True)
         _assert_bracket(pruned, reference)
 
 
 @pytest.fixture(scope="module")
 def phi1_trust_policy(pomdp):
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
-    return spec, synthesize_spec(pomdp, spec, horizon=6, time_limit=20).policy
+    return spec, synthesize_spec(pomdp, spec, SynthesisSettings(horizon=6, time_limit=20)).policy
 
 
 def test_pruning_the_joint_policy_brackets_its_exact_value(pomdp, phi1_trust_policy):
@@ -144,18 +154,20 @@ def test_pruning_the_joint_policy_brackets_its_exact_value(pomdp, phi1_trust_pol
     tree unfolding with pruning off is exact; each cut (budget, threshold, deadline) gives a
     bracket around it whose width is the pruned mass, and the cuts actually cut."""
     spec, policy = phi1_trust_policy
-    exact = evaluate_joint(pomdp, spec, policy, fallback_after=4, max_junctions=12, merge=False,
-                           prune_below=0.0, max_nodes=10**9)
+    exact = evaluate_joint(pomdp, spec, policy,
+                           EvaluationSettings(fallback_after=4, max_junctions=12, merge=False,
+                                              prune_below=0.0, max_nodes=10**9))
     assert exact.gap == 0.0
     cuts = {"beyond_budget": {"max_nodes": 20}, "below_threshold": {"prune_below": 1e-4},
             "past_deadline": {"time_limit": 1e-9}}
     for cut, options in cuts.items():
-        pruned = evaluate_joint(pomdp, spec, policy, fallback_after=4, max_junctions=12, **options)
+        settings = EvaluationSettings(fallback_after=4, max_junctions=12, **options)
+        pruned = evaluate_joint(pomdp, spec, policy, settings)
         _assert_bracket(pruned, exact.lower)
         assert pruned.gap > 1e-6 and pruned.pruning["pruned_nodes"][cut] > 0, cut
         assert pruned.pruning["pruned_mass"][cut] == pytest.approx(pruned.gap, abs=1e-12), cut
     # The default limits cut nothing here: the same value as the exact tree.
-    default = evaluate_joint(pomdp, spec, policy, fallback_after=4, max_junctions=12)
+    default = evaluate_joint(pomdp, spec, policy, EvaluationSettings(fallback_after=4, max_junctions=12))
     assert default.gap == 0.0 and default.lower == pytest.approx(exact.lower, abs=1e-12)
 
 
@@ -180,9 +192,10 @@ def test_prefetched_decisions_are_the_node_by_node_decisions(pomdp):
     asks on its own: the same evaluation, number for number (a policy of horizon 12 on 14
     junctions without the fallback, where its decisions differ between nodes of a level)."""
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
-    policy = synthesize_spec(pomdp, spec, horizon=12, time_limit=20).policy
-    batched = evaluate_joint(pomdp, spec, policy, fallback_after=None, max_junctions=14)
-    alone = evaluate_joint(pomdp, spec, NodeByNode(policy), fallback_after=None, max_junctions=14)
+    policy = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=12, time_limit=20)).policy
+    batched = evaluate_joint(pomdp, spec, policy, EvaluationSettings(fallback_after=None, max_junctions=14))
+    alone = evaluate_joint(pomdp, spec, NodeByNode(policy), EvaluationSettings(fallback_after=None,
+                                                                               max_junctions=14))
     for name in ("lower", "upper", "expected_final_trust", "nodes"):
         assert getattr(batched, name) == getattr(alone, name), name
     assert batched.end_mass == alone.end_mass

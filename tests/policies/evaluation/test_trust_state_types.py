@@ -14,6 +14,7 @@ from tests.policies.trust_specs import random_problem
 from trustroute.participants.driver_population import DriverPopulation, DriverType
 from trustroute.policies.belief.driver_types import lift_population, lift_spec
 from trustroute.policies.belief.problem import TRUST_STATE, problem
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint, evaluate_joint_by_type
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import trust_free_policy
@@ -55,8 +56,8 @@ def test_mixture_and_per_type_values_equal_brute_force_over_trust_paths(driver, 
     assert found.case == TRUST_STATE
     lifted, weights = found.pomdp, population.weights
     for policy in (TypeReadingPolicy(town, rng, 7), trust_free_policy(town, found.spec)):
-        mixture, per_type = evaluate_joint_by_type(lifted, found.spec, policy, fallback_after=None,
-                                                   max_junctions=cap)
+        mixture, per_type = evaluate_joint_by_type(lifted, found.spec, policy,
+                                                   EvaluationSettings(fallback_after=None, max_junctions=cap))
         by_type = policy_value_by_type(lifted, found.spec, policy, cap, 2)
         assert mixture.gap == 0.0
         assert mixture.lower == pytest.approx(policy_value(lifted, found.spec, policy, cap), abs=1e-10)
@@ -82,8 +83,9 @@ def test_pruned_per_type_brackets_hold_the_brute_force_values(driver, seed):
     policy = TypeReadingPolicy(town, rng, 7)
     by_type = policy_value_by_type(lifted, lifted_spec, policy, 4, 2) / population.weights
     for options in ({"max_nodes": 3}, {"prune_below": 1e-3}, {"max_nodes": 1, "merge": False}):
-        mixture, per_type = evaluate_joint_by_type(lifted, lifted_spec, policy, fallback_after=None,
-                                                   max_junctions=4, **options)
+        mixture, per_type = evaluate_joint_by_type(lifted, lifted_spec, policy,
+                                                   EvaluationSettings(fallback_after=None, max_junctions=4,
+                                                                      **options))
         for (lower, upper), exact in zip(per_type, by_type, strict=True):
             assert lower - 1e-10 <= exact <= upper + 1e-10
         assert mixture.lower - 1e-10 <= float(by_type @ population.weights) <= mixture.upper + 1e-10
@@ -96,8 +98,8 @@ def test_one_type_is_the_single_model_evaluation(pomdp):
     population = DriverPopulation(types=(DriverType("only", 1.0, pomdp.driver),))
     assert lift_spec(spec, population) is spec
     policy = trust_free_policy(pomdp.town, spec)
-    alone = evaluate_joint(pomdp, spec, policy, max_junctions=12)
-    mixture, per_type = evaluate_joint_by_type(pomdp, spec, policy, max_junctions=12)
+    alone = evaluate_joint(pomdp, spec, policy, EvaluationSettings(max_junctions=12))
+    mixture, per_type = evaluate_joint_by_type(pomdp, spec, policy, EvaluationSettings(max_junctions=12))
     assert mixture.to_dict() | {"seconds": 0} == alone.to_dict() | {"seconds": 0}
     # the same masses summed per type (another order): equal up to rounding
     assert per_type[0] == pytest.approx((alone.lower, alone.upper), abs=1e-12)

@@ -15,6 +15,7 @@ from trustroute.harness.simulation.model_engine import run_model_episode
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.evaluation.trust_state import evaluate_joint_table_unbounded
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
+from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesize_spec import synthesize_spec
 
 MARGIN = 1e-9
@@ -25,7 +26,7 @@ def looping(driver):
     """F (a & trusting) on a random town: a policy of 2 junctions' table that goes on driving
     after them (no horizon: it never declares itself finished), so mass keeps being accepted."""
     pomdp, spec = random_problem(np.random.default_rng(1), driver, "trust")
-    table = synthesize_spec(pomdp, spec, horizon=2, time_limit=2).policy
+    table = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=2, time_limit=2)).policy
     return pomdp, spec, JointTablePolicy(table.table, pomdp, spec, guide_horizon=2, horizon=None)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
 from trustroute.policies.belief.driver_types import lift_population, lift_spec
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import trust_free_policy
@@ -13,8 +14,8 @@ from trustroute.policies.routing.free import trust_free_policy
 def test_truth_equal_to_the_av_model_and_the_own_reference_change_nothing(town, pomdp):
     spec = load_spec("specs/phi1.toml", town)
     policy = trust_free_policy(town, spec)
-    plain = evaluate(pomdp, spec, policy, fallback_after=None, max_junctions=20)
-    same = evaluate(pomdp, spec, policy, fallback_after=None, max_junctions=20,
+    plain = evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=None, max_junctions=20))
+    same = evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=None, max_junctions=20),
                     truth=build_pomdp(town, pomdp.driver), reference=(pomdp, spec))
     assert (same.lower, same.upper, same.expected_final_trust) == (plain.lower, plain.upper,
                                                                     plain.expected_final_trust)
@@ -27,8 +28,8 @@ def test_mixture_value_is_the_weighted_per_type_values(town):
     lifted = build_pomdp(town, lift_population(population))
     spec = lift_spec(load_spec("specs/phi1.toml", town), population)
     policy = trust_free_policy(town, spec)
-    mixture = evaluate(lifted, spec, policy, fallback_after=None, max_junctions=12)
-    per_type = [evaluate(lifted, spec, policy, fallback_after=None, max_junctions=12,
+    mixture = evaluate(lifted, spec, policy, EvaluationSettings(fallback_after=None, max_junctions=12))
+    per_type = [evaluate(lifted, spec, policy, EvaluationSettings(fallback_after=None, max_junctions=12),
                          truth=build_pomdp(town, t.model)) for t in population.types]
     weighted = sum(t.weight * v.lower for t, v in zip(population.types, per_type, strict=True))
     assert abs(mixture.lower - weighted) <= 1e-12
@@ -41,10 +42,10 @@ def test_a_deadline_cuts_the_open_histories_into_the_bracket(town, pomdp):
 
     spec = load_spec("specs/phi1.toml", town)
     policy = trust_free_policy(town, spec)
-    exact = evaluate(pomdp, spec, policy, fallback_after=None, max_junctions=20)
+    settings = EvaluationSettings(fallback_after=None, max_junctions=20)
+    exact = evaluate(pomdp, spec, policy, settings)
     assert exact.lower == exact.upper
-    assert evaluate(pomdp, spec, policy, fallback_after=None, max_junctions=20,
-                    deadline=time.perf_counter() + 3600).lower == exact.lower
-    cut = evaluate(pomdp, spec, policy, fallback_after=None, max_junctions=20, deadline=time.perf_counter())
+    assert evaluate(pomdp, spec, policy, settings, deadline=time.perf_counter() + 3600).lower == exact.lower
+    cut = evaluate(pomdp, spec, policy, settings, deadline=time.perf_counter())
     assert cut.lower <= exact.lower <= cut.upper and cut.upper - cut.lower > 0.5
     assert cut.end_mass["pruned"] == cut.upper - cut.lower

@@ -21,6 +21,7 @@ from trustroute.policies.trust_state_synthesis.search import joint_bounds
 pytest.importorskip("paynt", reason="PAYNT tests need the optional extra: pip install -e '.[peer]'")
 
 from trustroute.policies.peer.paynt import PRECISION, run_paynt  # noqa: E402
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 
 def brute_force_optimum(pomdp, spec, horizon):
@@ -88,7 +89,7 @@ def test_paynt_never_exceeds_the_brute_force_optimum_with_trust_atoms(driver, se
     ours = joint_bounds(pomdp, spec, depth=0, horizon=horizon)
     assert abs(ours.lower - exact) <= 1e-9 and abs(ours.upper - exact) <= 1e-9, (ours, exact)
     paynt = run_paynt(explicit_product(pomdp, spec, horizon), time_limit=1)
-    certified = synthesize_spec(pomdp, spec, tau=1e-3, time_limit=10, horizon=horizon)
+    certified = synthesize_spec(pomdp, spec, SynthesisSettings(tau=1e-3, time_limit=10, horizon=horizon))
     assert paynt.lower <= min(exact, certified.upper) + PRECISION, (paynt, exact, certified)
 
 
@@ -97,14 +98,14 @@ def test_paynt_never_exceeds_the_brute_force_optimum_with_trust_atoms(driver, se
 def test_paynt_unbounded_never_exceeds_our_certified_upper_bound(driver, seed):
     pomdp, spec = random_problem(np.random.default_rng(seed), driver, "trust")
     unbounded = run_paynt(explicit_product(pomdp, spec, None), time_limit=1)
-    ours = synthesize_spec(pomdp, spec, tau=1e-3, time_limit=10)
+    ours = synthesize_spec(pomdp, spec, SynthesisSettings(tau=1e-3, time_limit=10))
     assert unbounded.lower <= ours.upper + PRECISION, (unbounded, ours)
 
 
 def test_paynt_on_the_paper_town_stays_below_synth_upper_bound(pomdp):
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
     paynt = run_paynt(explicit_product(pomdp, spec, 8), time_limit=2)
-    ours = synthesize_spec(pomdp, spec, tau=1e-3, time_limit=20, horizon=8)
+    ours = synthesize_spec(pomdp, spec, SynthesisSettings(tau=1e-3, time_limit=20, horizon=8))
     assert paynt.found and 0 < paynt.value <= ours.upper + PRECISION, (paynt, ours)
 
 

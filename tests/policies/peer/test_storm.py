@@ -13,6 +13,7 @@ from trustroute.policies.trust_state_synthesis.search import joint_bounds
 pytest.importorskip("stormpy", reason="Storm tests need the optional extra: pip install -e '.[peer]'")
 
 from trustroute.policies.peer.storm import run_storm  # noqa: E402
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 # Storm's iterative solvers stop at a relative precision of 1e-6.
 STORM_PRECISION = 1e-6
@@ -93,7 +94,8 @@ def test_storm_overlaps_our_population_synthesis_on_the_lifted_product(driver, s
     found = problem(town, population, spec)
     product = explicit_product(found.pomdp, found.spec, 3)
     storm = run_storm(product, time_limit=2)
-    ours = synthesize_for_population(town, population, spec, "bayes", horizon=3, time_limit=10)
+    ours = synthesize_for_population(town, population, spec, "bayes",
+                                     SynthesisSettings(horizon=3, time_limit=10))
     assert_overlap(storm, ours)
     if storm.lower_complete:   # Storm's unfolding is exact: our certified value lies in it
         assert storm.lower - STORM_PRECISION <= ours.lower <= storm.upper + STORM_PRECISION
@@ -117,7 +119,8 @@ def test_storm_agrees_with_our_population_value_on_phi1_trust_with_three_types(t
     spec = load_spec("specs/phi1_trust.toml", town)
     found = problem(town, population, spec)
     storm = run_storm(explicit_product(found.pomdp, found.spec, 10), time_limit=60)
-    ours = synthesize_for_population(town, population, spec, "bayes", horizon=10, time_limit=30)
+    ours = synthesize_for_population(town, population, spec, "bayes",
+                                     SynthesisSettings(horizon=10, time_limit=30))
     assert_overlap(storm, ours)
     assert storm.lower_complete          # Storm's unfolding is exact: our certified value is its value
     assert ours.lower == pytest.approx(storm.lower, rel=STORM_PRECISION)

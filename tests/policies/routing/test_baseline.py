@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from trustroute.networks.town import split_road
+from trustroute.networks.road import Road
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import baseline_route, completion_route, trust_free_policy
 from trustroute.policies.routing.protocol import DecisionContext
@@ -30,7 +30,7 @@ def brute_force_shortest(town, start, junctions, max_roads=12):
         if len(route) > max_roads:
             return
         for nxt in town.successors(route[-1]):
-            arrived = split_road(nxt)[1]
+            arrived = Road.parse(nxt).to_junction
             extend(route + [nxt], need[1:] if arrived == need[0] else need, length + town.length(nxt))
 
     extend([start], tuple(junctions), 0.0)
@@ -72,7 +72,7 @@ def test_free_policy_follows_the_baseline_and_replans_off_it(town, name):
     # Off the route: take a different first move, then the policy must re-plan the shortest completion.
     start, junctions = WAYPOINTS[name]
     detour = next(s for s in town.successors(start) if s != route[1])
-    arrived = split_road(detour)[1]
+    arrived = Road.parse(detour).to_junction
     need = junctions[1:] if arrived == junctions[0] else junctions
     length, expected = brute_force_shortest(town, detour, need)
     assert completion_route(town, spec, [start, detour]) == expected

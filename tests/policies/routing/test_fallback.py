@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trustroute.networks.town import split_road
+from trustroute.networks.road import Road
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
@@ -63,7 +63,7 @@ def test_fallback_delegates_then_completes_the_state_only_task(town, after):
     final = contexts[-1]
     assert list(final.route[after:]) == expected
     assert policy.finished(final)
-    arrivals = [split_road(r)[1] for r in final.route]
+    arrivals = [Road.parse(r).to_junction for r in final.route]
     # The state-only task of φ1 (G, then J, then L) is done at the end.
     g = arrivals.index("G")
     j = arrivals.index("J", g)

@@ -15,6 +15,7 @@ import pytest
 
 from tests.policies.synthesis.test_synthesis_random import random_spec, random_town
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
@@ -84,10 +85,10 @@ def test_the_completion_alone_is_worth_more_than_the_state_only_one(pomdp, name)
     rule"). (Not more on every town: the return route ignores trust, and the first legal move may
     by chance drive a loop that builds more of it.)"""
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
-    new = evaluate(pomdp, spec, policy_without_rows(pomdp, spec), fallback_after=None,
-                   max_junctions=HORIZON)
-    old = evaluate(pomdp, spec, StateOnlyCompletion(pomdp.town, spec), fallback_after=None,
-                   max_junctions=HORIZON)
+    new = evaluate(pomdp, spec, policy_without_rows(pomdp, spec),
+                   EvaluationSettings(fallback_after=None, max_junctions=HORIZON))
+    old = evaluate(pomdp, spec, StateOnlyCompletion(pomdp.town, spec),
+                   EvaluationSettings(fallback_after=None, max_junctions=HORIZON))
     assert new.gap == 0.0 and old.gap == 0.0
     assert new.lower > old.lower
     if name == "phi1":

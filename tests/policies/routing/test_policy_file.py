@@ -12,17 +12,19 @@ from tests.cli import run_cli
 from trustroute.core.errors import InputError
 from trustroute.networks.town import DEFAULT_TOWN_PATH, town_from_dict
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.resolve import aware_cache_path, resolve_policy
 from trustroute.policies.routing.files import array_path, load_policy, read_policy_document, save_policy
 from trustroute.policies.routing.protocol import DecisionContext
 from trustroute.policies.synthesis.belief_synthesis import synthesize
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 
 @pytest.fixture(scope="module")
 def phi1_result(pomdp):
     spec = load_spec("specs/phi1.toml", pomdp.town)
-    return spec, synthesize(pomdp, spec, horizon=8)
+    return spec, synthesize(pomdp, spec, SynthesisSettings(horizon=8))
 
 
 def test_round_trip_keeps_every_decision_and_the_value(pomdp, driver, phi1_result, tmp_path):
@@ -40,7 +42,7 @@ def test_round_trip_keeps_every_decision_and_the_value(pomdp, driver, phi1_resul
         context = DecisionContext(route=("E-A",) * int(rng.integers(10)) + (road,),
                                   dfa_state=int(rng.integers(4)), belief=rng.dirichlet(np.ones(7)))
         assert loaded.next_junction(context) == result.policy.next_junction(context)
-    value = evaluate(pomdp, spec, loaded, fallback_after=None, max_junctions=8)
+    value = evaluate(pomdp, spec, loaded, EvaluationSettings(fallback_after=None, max_junctions=8))
     assert value.lower == pytest.approx(result.lower, abs=1e-12)
 
 
@@ -131,7 +133,7 @@ def test_cluster_policy_round_trip_and_damaged_boxes(pomdp, town, driver, tmp_pa
     random contexts, and `evaluate` of the loaded policy at least its L; damaged box arrays are one
     line naming the array."""
     spec = load_spec("specs/phi1.toml", town)
-    result = synthesize(pomdp, spec, horizon=8, tau=0.05, clusters="on")
+    result = synthesize(pomdp, spec, SynthesisSettings(horizon=8, tau=0.05, clusters="on"))
     boxes = result.policy.table.boxes
     assert boxes is not None and boxes.rows > 0 and result.policy.table.rows == 0
     path = save_policy(result, tmp_path / "c.json", town, driver, spec)
@@ -147,7 +149,7 @@ def test_cluster_policy_round_trip_and_damaged_boxes(pomdp, town, driver, tmp_pa
         context = DecisionContext(route=(spec.start,) * int(boxes.t[row]) + (town.states[boxes.x[row]],),
                                   dfa_state=int(boxes.q[row]), belief=belief)
         assert loaded.next_junction(context) == result.policy.next_junction(context)
-    value = evaluate(pomdp, spec, loaded, fallback_after=None, max_junctions=8)
+    value = evaluate(pomdp, spec, loaded, EvaluationSettings(fallback_after=None, max_junctions=8))
     assert value.lower >= result.lower - 1e-9
     with np.load(array_path(path)) as archive:
         arrays = {name: archive[name] for name in archive.files}
@@ -172,7 +174,7 @@ def test_version_3_files_are_read_without_box_rows(pomdp, town, driver, phi1_res
     _rewrite_arrays(path, {**old, "version": 3}, arrays)
     loaded = load_policy(path, town, driver, spec)
     assert loaded.table.boxes is None
-    value = evaluate(pomdp, spec, loaded, fallback_after=None, max_junctions=8)
+    value = evaluate(pomdp, spec, loaded, EvaluationSettings(fallback_after=None, max_junctions=8))
     assert value.lower == pytest.approx(result.lower, abs=1e-12)
 
 

@@ -18,6 +18,7 @@ from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.synthesis.test_synthesis_random import random_spec, random_town
 from trustroute.policies.belief.product_mdp import build_product
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, BoxRows, PolicyTable
 from trustroute.policies.synthesis.belief_cells import observation_symbols
@@ -25,6 +26,7 @@ from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.cluster_policy import best_cluster_solution, solve_clusters
 from trustroute.policies.synthesis.exact_search import exact_optimum
 from trustroute.policies.synthesis.result import ClusterRun, GraphDistanceRun
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 TOLERANCE = 1e-9
 FAR = 1e9
@@ -59,8 +61,8 @@ def test_bounds_bracket_the_optimum_and_the_policy_is_worth_lower(driver, seed):
     for cap in (1, 4, 4096):
         solution = _solve(tables, symbols, [tables.initial_q], horizon, cap)
         assert solution.lower - TOLERANCE <= optimum <= solution.upper + TOLERANCE, (cap, solution, optimum)
-        value = evaluate(pomdp, spec, _cluster_policy(pomdp, spec, solution), fallback_after=None,
-                         max_junctions=horizon)
+        value = evaluate(pomdp, spec, _cluster_policy(pomdp, spec, solution),
+                         EvaluationSettings(fallback_after=None, max_junctions=horizon))
         assert value.lower >= solution.lower - TOLERANCE, (cap, value.lower, solution.lower)
         assert value.upper <= optimum + TOLERANCE
         gaps[cap] = solution.upper - solution.lower
@@ -104,8 +106,8 @@ def test_thresholds_on_reachable_beliefs(town, driver, offset):
                                          if either.any() else set()))
     solution = _solve(tables, observation_symbols(pomdp), roots, horizon, 256)
     assert solution.lower - TOLERANCE <= optimum <= solution.upper + TOLERANCE
-    value = evaluate(pomdp, spec, _cluster_policy(pomdp, spec, solution), fallback_after=None,
-                     max_junctions=horizon)
+    value = evaluate(pomdp, spec, _cluster_policy(pomdp, spec, solution),
+                     EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert value.lower >= solution.lower - TOLERANCE
 
 
@@ -116,13 +118,15 @@ def test_synthesize_with_clusters_on(driver, seed):
     pomdp, spec, horizon = _random_problem(driver, seed)
     optimum = exact_optimum(pomdp, spec, horizon)
     for tau in (1e-6, 0.3):
-        result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20, clusters="on")
+        result = synthesize(pomdp, spec,
+                            SynthesisSettings(tau=tau, horizon=horizon, time_limit=20, clusters="on"))
         first = result.stats.runs[0]
         by_distance = isinstance(first, GraphDistanceRun)
         assert by_distance or isinstance(first, ClusterRun)
         assert not by_distance or result.upper == 0.0
         assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE
-        value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+        value = evaluate(pomdp, spec, result.policy,
+                         EvaluationSettings(fallback_after=None, max_junctions=horizon))
         assert value.lower >= result.lower - TOLERANCE
 
 

@@ -16,6 +16,7 @@ import pytest
 from tests.policies.synthesis.test_synthesis_random import random_spec, random_town
 from trustroute.policies.belief.product_mdp import build_product
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import free_completion, state_only_task
@@ -25,6 +26,7 @@ from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.completion_value import FreeRoute, completion_bounds
 from trustroute.policies.synthesis.exact_search import exact_optimum
 from trustroute.policies.synthesis.open_node_bounds import held_choice, policy_choice
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 HORIZON = 8
 TOLERANCE = 1e-12
@@ -156,8 +158,9 @@ def test_policy_is_worth_l_with_coarse_completion_bounds(pomdp, name, monkeypatc
     monkeypatch.setattr(completion_value, "CLUSTER_CAP", 3)
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     horizon = 9
-    result = synthesize(pomdp, spec, tau=0.05, horizon=horizon, completion="bounds")
-    value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=0.05, horizon=horizon, completion="bounds"))
+    value = evaluate(pomdp, spec, result.policy,
+                     EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert value.gap == 0.0
     assert result.lower > 0.1
     assert result.lower <= value.lower + TOLERANCE

@@ -18,6 +18,7 @@ from tests.policies.synthesis.test_synthesis_random import random_spec, random_t
 from trustroute.networks.town import INCIDENT_TYPES, NO_INCIDENT
 from trustroute.policies.belief.product_mdp import build_product
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import free_completion, state_only_task
@@ -25,6 +26,7 @@ from trustroute.policies.synthesis.belief_cells import observation_symbols
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.event_graph import EventGraph
 from trustroute.policies.synthesis.exact_search import exact_optimum
+from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesis.upper_bound import acceptance_distance
 
 TOLERANCE = 1e-12
@@ -109,8 +111,10 @@ def test_macro_moves_are_the_shortest_quiet_paths(driver, seed, mode):
 def _compare(pomdp, spec, horizon: int, mode: str) -> bool | None:
     """Compressed and plain search agree, bracket the optimum, and the policy is worth L. Returns
     whether the search was compressed (None: answered by graph distance, no search)."""
-    plain = synthesize(pomdp, spec, tau=TOLERANCE, horizon=horizon, time_limit=60, compress="off")
-    packed = synthesize(pomdp, spec, tau=TOLERANCE, horizon=horizon, time_limit=60, compress=mode)
+    plain = synthesize(pomdp, spec,
+                       SynthesisSettings(tau=TOLERANCE, horizon=horizon, time_limit=60, compress="off"))
+    packed = synthesize(pomdp, spec,
+                        SynthesisSettings(tau=TOLERANCE, horizon=horizon, time_limit=60, compress=mode))
     run = packed.stats.runs[0]
     if not run.nodes:
         assert plain.upper == packed.upper == 0.0
@@ -122,7 +126,8 @@ def _compare(pomdp, spec, horizon: int, mode: str) -> bool | None:
     assert packed.upper == pytest.approx(plain.upper, abs=TOLERANCE)
     optimum = exact_optimum(pomdp, spec, horizon)
     assert packed.lower - TOLERANCE <= optimum <= packed.upper + TOLERANCE
-    online = evaluate(pomdp, spec, packed.policy, fallback_after=None, max_junctions=horizon)
+    online = evaluate(pomdp, spec, packed.policy,
+                      EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert online.lower >= packed.lower - TOLERANCE
     if run.row_conflicts == 0:
         assert online.lower == pytest.approx(packed.lower, abs=TOLERANCE)
@@ -167,7 +172,7 @@ def test_no_quiet_road_gives_the_plain_search(driver):
         pomdp = build_pomdp(town, driver)
         spec = random_spec(rng, town, pomdp.initial_belief)
         assert not _event_graph(pomdp, spec, "full").compresses
-        runs = [synthesize(pomdp, spec, tau=1e-3, horizon=6, time_limit=60, compress=c)
+        runs = [synthesize(pomdp, spec, SynthesisSettings(tau=1e-3, horizon=6, time_limit=60, compress=c))
                 for c in ("off", "chains", "full")]
         for run in runs[1:]:
             assert run.lower == runs[0].lower and run.upper == runs[0].upper

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.exact_search import exact_optimum
@@ -35,8 +36,9 @@ def test_exact_optimum_dominates_every_open_loop_route_and_grows_with_the_horizo
     spec = load_spec("specs/phi1.toml", town)
     horizon = 7
     optimum = exact_optimum(pomdp, spec, horizon)
-    best_route = max(evaluate(pomdp, spec, FixedRoutePolicy(town, r), fallback_after=None,
-                              max_junctions=horizon).lower for r in routes(town, spec.start, horizon))
+    best_route = max(evaluate(pomdp, spec, FixedRoutePolicy(town, r),
+                              EvaluationSettings(fallback_after=None, max_junctions=horizon)).lower
+                     for r in routes(town, spec.start, horizon))
     assert 0.5 < best_route <= optimum + 1e-12
     assert exact_optimum(pomdp, spec, 5) == 0.0  # the task needs 6 junctions
     assert exact_optimum(pomdp, spec, 6) <= optimum <= exact_optimum(pomdp, spec, 8)

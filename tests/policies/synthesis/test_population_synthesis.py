@@ -27,6 +27,7 @@ from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.routing.episode_rules import decide, episode_policy
 from trustroute.policies.routing.protocol import DecisionContext
 from trustroute.policies.synthesis.population import synthesize_population
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 TOLERANCE = 1e-9
 INCIDENTS = ("obstacle", "pedestrian", "truck", "none")
@@ -177,8 +178,8 @@ def test_population_optimum_in_bounds_and_monte_carlo_agrees(k, seed, with_type_
     spec = small_spec(rng, town, population, with_type_atom)
     horizon = 3
     optimum, own = brute_force(town, population, spec, horizon)
-    found = synthesize_population(town, population, spec, "bayes", tau=1e-12, horizon=horizon,
-                                  time_limit=30)
+    found = synthesize_population(town, population, spec, "bayes",
+                                  SynthesisSettings(tau=1e-12, horizon=horizon, time_limit=30))
     assert found.lower - TOLERANCE <= optimum <= found.upper + TOLERANCE, (found.lower, optimum, found.upper)
     mixture_lower, mixture_upper = found.mixture_value
     assert mixture_lower >= found.lower - TOLERANCE          # L is a value the policy reaches
@@ -197,8 +198,9 @@ def test_population_optimum_in_bounds_and_monte_carlo_agrees(k, seed, with_type_
         se_j = max(per_type.std(ddof=1) / np.sqrt(per_type.size), 1e-3)
         assert abs(per_type.mean() - value.lower) <= 4 * se_j, (value.name, per_type.mean(), value.lower)
     # robust: certified worst-type value, sound upper bound
-    robust = synthesize_population(town, population, spec, "robust", tau=1e-12, horizon=horizon,
-                                   time_limit=30, grid_points=3)
+    robust = synthesize_population(town, population, spec, "robust",
+                                   SynthesisSettings(tau=1e-12, horizon=horizon, time_limit=30,
+                                                     grid_points=3))
     assert robust.lower == pytest.approx(min(v.lower for v in robust.type_values), abs=0)
     assert robust.lower >= min(v.lower for v in found.type_values) - TOLERANCE   # at least the Bayes policy's
     assert robust.lower <= min(optimum, *own) + TOLERANCE      # a value some policy reaches

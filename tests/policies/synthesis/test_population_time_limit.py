@@ -13,6 +13,7 @@ from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, l
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.synthesis import population as population_synthesis
 from trustroute.policies.synthesis.population import run_count, synthesize_population
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 
 def test_every_run_ends_by_the_one_deadline(town, monkeypatch):
@@ -21,15 +22,16 @@ def test_every_run_ends_by_the_one_deadline(town, monkeypatch):
     real = population_synthesis.synthesize
     calls: list[tuple[float, float]] = []
 
-    def recording(*args, **kwargs):
-        calls.append((time.perf_counter(), kwargs["time_limit"]))
-        return real(*args, **kwargs)
+    def recording(pomdp, spec, settings, **kwargs):
+        calls.append((time.perf_counter(), settings.time_limit))
+        return real(pomdp, spec, settings, **kwargs)
 
     monkeypatch.setattr(population_synthesis, "synthesize", recording)
     limit, lines = 4.0, []
     started = time.perf_counter()
-    found = synthesize_population(town, population, spec, "robust", horizon=3, time_limit=limit,
-                                  grid_points=6, on_phase=lines.append)
+    found = synthesize_population(town, population, spec, "robust",
+                                  SynthesisSettings(horizon=3, time_limit=limit, grid_points=6),
+                                  on_phase=lines.append)
     assert len(calls) == run_count(population, "robust", 6) == len(lines) > population.n_types + 1
     for at, run_limit in calls:
         assert at + run_limit <= started + limit + 1e-3, (at - started, run_limit)
@@ -47,7 +49,8 @@ def test_the_exact_evaluations_keep_the_deadline_at_h20(town):
     for objective in ("bayes", "robust"):
         limit = 2.0
         started = time.perf_counter()
-        found = synthesize_population(town, population, spec, objective, horizon=20, time_limit=limit)
+        found = synthesize_population(town, population, spec, objective,
+                                      SynthesisSettings(horizon=20, time_limit=limit))
         # the command's target: the limit plus 10 %, at least 1 s (docs/synthesis.md, "Time limit")
         assert time.perf_counter() - started <= limit + max(0.1 * limit, 1.0), objective
         assert 0.0 <= found.lower <= found.upper <= 1.0

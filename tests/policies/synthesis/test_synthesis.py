@@ -9,12 +9,14 @@ import pytest
 
 from tests.policies.routing.test_free_completion import policy_without_rows
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec, spec_from_text
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import DecisionContext
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.exact_search import exact_optimum
 from trustroute.policies.synthesis.result import ClusterRun, SearchRun
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 EXACT_TOLERANCE = 1e-9
 
@@ -27,12 +29,13 @@ def test_small_horizon_bounds_bracket_the_brute_force_optimum(pomdp, name, belie
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     for horizon in (5, 6, 8):
         optimum = exact_optimum(pomdp, spec, horizon, belief_rule)
-        closed = synthesize(pomdp, spec, tau=1e-12, horizon=horizon, belief_rule=belief_rule)
+        closed = synthesize(pomdp, spec,
+                            SynthesisSettings(tau=1e-12, horizon=horizon, belief_rule=belief_rule))
         assert closed.lower - EXACT_TOLERANCE <= optimum <= closed.upper + EXACT_TOLERANCE
         if closed.gap <= 1e-12:
             assert closed.lower == pytest.approx(optimum, abs=EXACT_TOLERANCE)
         # A coarse run stops early: the bracket must still hold, and its policy is worth `lower`.
-        coarse = synthesize(pomdp, spec, tau=0.3, horizon=horizon, belief_rule=belief_rule)
+        coarse = synthesize(pomdp, spec, SynthesisSettings(tau=0.3, horizon=horizon, belief_rule=belief_rule))
         assert coarse.lower - EXACT_TOLERANCE <= optimum <= coarse.upper + EXACT_TOLERANCE
     assert optimum > 0.5  # H = 8 leaves room for the whole task: the test is not about zeros
 
@@ -40,8 +43,8 @@ def test_small_horizon_bounds_bracket_the_brute_force_optimum(pomdp, name, belie
 def test_phi1_at_horizon_six_is_the_trust_free_route(pomdp):
     """With 6 junctions only the shortest task route fits: the optimum is the baseline's value."""
     spec = load_spec("specs/phi1.toml", pomdp.town)
-    result = synthesize(pomdp, spec, tau=1e-12, horizon=6)
-    free = evaluate(pomdp, spec, trust_free_policy(pomdp.town, spec), fallback_after=None)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-12, horizon=6))
+    free = evaluate(pomdp, spec, trust_free_policy(pomdp.town, spec), EvaluationSettings(fallback_after=None))
     assert result.gap <= 1e-12
     assert result.lower == pytest.approx(free.lower, abs=EXACT_TOLERANCE)
     assert baseline_route(pomdp.town, spec) == ["E-A", "A-F", "F-G", "G-I", "I-J", "J-K", "K-L"]
@@ -58,16 +61,17 @@ def test_lower_is_the_value_of_the_returned_policy(pomdp, name, completion):
     waypoint reached with too little trust); also for a coarse run that stops with many open nodes."""
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     horizon = 12
-    free = evaluate(pomdp, spec, trust_free_policy(pomdp.town, spec), fallback_after=None,
-                    max_junctions=horizon)
+    free = evaluate(pomdp, spec, trust_free_policy(pomdp.town, spec),
+                    EvaluationSettings(fallback_after=None, max_junctions=horizon))
     # the free completion alone (a policy without rows: state-only route, then back to what the
     # DFA still needs), which the search values open nodes by
-    alone = evaluate(pomdp, spec, policy_without_rows(pomdp, spec), fallback_after=None,
-                     max_junctions=horizon)
+    alone = evaluate(pomdp, spec, policy_without_rows(pomdp, spec),
+                     EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert alone.lower >= free.lower - EXACT_TOLERANCE
     for tau in (1e-3, 0.05):
-        result = synthesize(pomdp, spec, tau=tau, horizon=horizon, completion=completion)
-        value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+        result = synthesize(pomdp, spec, SynthesisSettings(tau=tau, horizon=horizon, completion=completion))
+        value = evaluate(pomdp, spec, result.policy,
+                         EvaluationSettings(fallback_after=None, max_junctions=horizon))
         run = result.stats.runs[0]
         assert value.gap == 0.0
         assert result.gap <= tau
@@ -103,11 +107,11 @@ def test_state_only_reachability_is_one_or_zero(pomdp):
     for target in ("A-F", "F-G", "G-I", "I-J", "J-K", "D-C", "K-L"):
         spec = spec_from_text(f'name = "reach"\nstart = "E-A"\nformula = "F target"\n'
                               f'[states]\ntarget = ["{target}"]\n', town=town)
-        result = synthesize(pomdp, spec, tau=1e-9, horizon=horizon)
+        result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=horizon))
         expected = 1.0 if distance[target] <= horizon else 0.0
         assert result.lower == pytest.approx(expected) and result.upper == pytest.approx(expected)
         if target in ("F-G", "D-C"):
-            unbounded = synthesize(pomdp, spec, tau=1e-9, time_limit=20)
+            unbounded = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, time_limit=20))
             assert unbounded.lower == pytest.approx(1.0) and unbounded.upper == pytest.approx(1.0)
 
 
@@ -117,13 +121,13 @@ def test_unsatisfiable_state_sequence_is_zero_unbounded(pomdp):
     town = pomdp.town
     spec = spec_from_text('name = "never"\nstart = "E-A"\nformula = "F (a & X b)"\n'
                           '[states]\na = ["E-A"]\nb = ["B-C"]\n', town=town)
-    result = synthesize(pomdp, spec, tau=1e-6, time_limit=20)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-6, time_limit=20))
     assert result.lower == 0.0 and result.upper == 0.0
 
 
 def test_policy_acts_on_unvisited_beliefs_and_contexts(pomdp):
     spec = load_spec("specs/phi1.toml", pomdp.town)
-    result = synthesize(pomdp, spec, horizon=8)
+    result = synthesize(pomdp, spec, SynthesisSettings(horizon=8))
     rng = np.random.default_rng(3)
     for road in pomdp.town.states:
         belief = rng.dirichlet(np.ones(7))
@@ -135,7 +139,7 @@ def test_policy_acts_on_unvisited_beliefs_and_contexts(pomdp):
 
 def test_unbounded_phi1_reaches_the_target_gap(pomdp):
     spec = load_spec("specs/phi1.toml", pomdp.town)
-    result = synthesize(pomdp, spec, tau=1e-3, time_limit=30)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-3, time_limit=30))
     assert result.upper == pytest.approx(1.0)
     assert result.gap <= 1e-3
     assert result.stats.converged
@@ -149,10 +153,10 @@ def test_unbounded_upper_closes_on_unavoidable_risk(pomdp):
     spec = spec_from_text('name = "risky"\nstart = "E-A"\nformula = "(!lowtrust) U target"\n'
                           '[states]\ntarget = ["D-K"]\n'
                           '[beliefs.lowtrust]\ncoeffs = [1, 1, 0, 0, 0, 0, 0]\noffset = 0.3\n', town=town)
-    result = synthesize(pomdp, spec, tau=1e-3, time_limit=20)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-3, time_limit=20))
     assert result.gap <= 1e-3 and 0.5 < result.upper < 0.9
     assert exact_optimum(pomdp, spec, 8) <= result.upper + EXACT_TOLERANCE
-    value = evaluate(pomdp, spec, result.policy, fallback_after=None)
+    value = evaluate(pomdp, spec, result.policy, EvaluationSettings(fallback_after=None))
     assert result.lower - EXACT_TOLERANCE <= value.lower <= result.upper + EXACT_TOLERANCE
 
 
@@ -160,10 +164,12 @@ def test_progress_callback_sees_the_search_bounds(pomdp):
     """on_iteration (the progress bars' feed) gets every round's root bounds, bracketing the result."""
     spec = load_spec("specs/phi1.toml", pomdp.town)
     seen: list[tuple[float, float]] = []
-    result = synthesize(pomdp, spec, tau=1e-9, horizon=8, on_iteration=lambda lo, up: seen.append((lo, up)))
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=8),
+                        on_iteration=lambda lo, up: seen.append((lo, up)))
     assert seen and all(lo <= up + EXACT_TOLERANCE for lo, up in seen)
     assert seen[-1] == pytest.approx((result.lower, result.upper), abs=EXACT_TOLERANCE)
-    assert result.lower == synthesize(pomdp, spec, tau=1e-9, horizon=8).lower  # the callback changes nothing
+    # the callback changes nothing
+    assert result.lower == synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=8)).lower
 
 
 @pytest.mark.slow
@@ -177,15 +183,17 @@ def test_node_budget_stops_the_search_soundly(pomdp, monkeypatch):
     monkeypatch.setattr(refinement, "NODE_BUDGET", 300)
     optimum = exact_optimum(pomdp, spec, horizon)
     # the search alone (clusters "off"); by default cluster policies follow an unconverged search
-    result = synthesize(pomdp, spec, tau=1e-9, horizon=horizon, clusters="off")
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=horizon, clusters="off"))
     run = result.stats.runs[0]
     assert run.nodes >= 300 and not result.stats.converged
-    value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+    value = evaluate(pomdp, spec, result.policy,
+                     EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert result.lower <= value.lower + EXACT_TOLERANCE
     assert optimum <= result.upper + EXACT_TOLERANCE
-    after = synthesize(pomdp, spec, tau=1e-9, horizon=horizon)
+    after = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=horizon))
     assert [type(r) for r in after.stats.runs] == [SearchRun, ClusterRun]
     assert after.lower >= result.lower and after.upper <= result.upper
     assert after.lower - EXACT_TOLERANCE <= optimum <= after.upper + EXACT_TOLERANCE
-    value = evaluate(pomdp, spec, after.policy, fallback_after=None, max_junctions=horizon)
+    value = evaluate(pomdp, spec, after.policy,
+                     EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert after.lower <= value.lower + EXACT_TOLERANCE

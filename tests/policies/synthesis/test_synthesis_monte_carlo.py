@@ -12,12 +12,14 @@ import numpy as np
 import pytest
 
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.routing.protocol import DecisionContext
 from trustroute.policies.synthesis.belief_synthesis import synthesize
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 EPISODES = 100_000
 HORIZON = 20
@@ -78,14 +80,15 @@ def simulate_policy(pomdp, spec, policy, episodes, horizon, rng, check_scalar=0)
 @pytest.mark.parametrize("name", ["phi1", "phi2"])
 def test_monte_carlo_agrees_with_the_certified_value(pomdp, name):
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
-    result = synthesize(pomdp, spec, tau=1e-3, horizon=HORIZON)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-3, horizon=HORIZON))
     satisfied = simulate_policy(pomdp, spec, result.policy, EPISODES, HORIZON, np.random.default_rng(5))
     rate = satisfied.mean()
     se = max(np.sqrt(rate * (1 - rate) / EPISODES), 1.0 / EPISODES)
     # The policy's value lies in [lower, upper]; the simulation estimates it.
     assert result.lower - 4 * se <= rate <= result.upper + 4 * se, (rate, result.lower, result.upper, se)
     # and agrees with the exact value of the same policy computed by the independent evaluator.
-    exact = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=HORIZON)
+    exact = evaluate(pomdp, spec, result.policy,
+                     EvaluationSettings(fallback_after=None, max_junctions=HORIZON))
     assert abs(rate - exact.lower) <= 4 * se + exact.gap, (rate, exact.lower, se)
 
 
@@ -94,7 +97,7 @@ def test_vectorised_and_scalar_decisions_agree(pomdp):
     state-only task state from the route) and the vectorised one agree; a stored belief gives its
     row's action, a belief 1e-3 away the trust-free completion's move."""
     spec = load_spec("specs/phi2.toml", pomdp.town)
-    policy = synthesize(pomdp, spec, horizon=10).policy
+    policy = synthesize(pomdp, spec, SynthesisSettings(horizon=10)).policy
     simulate_policy(pomdp, spec, policy, 300, 10, np.random.default_rng(2), check_scalar=300)
     table = policy.table
     exact = policy.action_slots(table.t, table.x, table.q, table.beliefs, projected=table.projected)

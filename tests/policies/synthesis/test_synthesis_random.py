@@ -16,11 +16,13 @@ from hypothesis import strategies as st
 from tests.policies.evaluation.test_random_models import random_driver
 from trustroute.networks.town import INCIDENT_TYPES, MIN_ROAD_LENGTH, town_from_dict
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.exact_search import exact_optimum
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 FORMULAS = ("F (a & F (b & high))", "(!high) U a", "F (a & high)", "(!high) U (a & X (F (b & high)))")
 TOLERANCE = 1e-9
@@ -83,11 +85,13 @@ def test_bounds_bracket_brute_force_on_random_problems(driver, seed, horizon, be
     spec = random_spec(rng, town, pomdp.initial_belief)
     optimum = exact_optimum(pomdp, spec, horizon, belief_rule)
     for tau in (1e-12, 0.2):
-        result = synthesize(pomdp, spec, tau=tau, horizon=horizon, belief_rule=belief_rule, time_limit=20,
-                            suffix_length=int(rng.integers(0, 3)))
+        result = synthesize(pomdp, spec,
+                            SynthesisSettings(tau=tau, horizon=horizon, belief_rule=belief_rule,
+                                              time_limit=20, suffix_length=int(rng.integers(0, 3))))
         assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE, (result.lower, optimum)
         assert result.stats.runs[0].abstraction_root_upper >= optimum - TOLERANCE
-    unbounded = synthesize(pomdp, spec, belief_rule=belief_rule, time_limit=1.0, suffix_length=2)
+    unbounded = synthesize(pomdp, spec,
+                           SynthesisSettings(belief_rule=belief_rule, time_limit=1.0, suffix_length=2))
     assert unbounded.upper >= optimum - TOLERANCE
     assert unbounded.lower <= unbounded.upper + TOLERANCE
 
@@ -99,7 +103,8 @@ def _early_stop_problem(driver, seed: int):
     pomdp = build_pomdp(town, random_driver(rng, driver.incident_types))
     spec = random_spec(rng, town, pomdp.initial_belief)
     horizon = int(rng.integers(4, 8))
-    free = evaluate(pomdp, spec, trust_free_policy(town, spec), fallback_after=None, max_junctions=horizon)
+    free = evaluate(pomdp, spec, trust_free_policy(town, spec),
+                    EvaluationSettings(fallback_after=None, max_junctions=horizon))
     return pomdp, spec, horizon, free
 
 
@@ -110,8 +115,9 @@ def test_returned_policy_is_worth_exactly_lower_on_random_problems(driver, seed)
     policy equals L and is >= the trust-free route's value."""
     pomdp, spec, horizon, free = _early_stop_problem(driver, seed)
     for tau in (0.2, 1e-6):
-        result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20)
-        value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+        result = synthesize(pomdp, spec, SynthesisSettings(tau=tau, horizon=horizon, time_limit=20))
+        value = evaluate(pomdp, spec, result.policy,
+                         EvaluationSettings(fallback_after=None, max_junctions=horizon))
         run = result.stats.runs[0]
         assert not run.completion_bounds
         strict = run.lower_strict_labels
@@ -129,8 +135,10 @@ def test_returned_policy_is_worth_at_least_lower_with_completion_bounds(driver, 
     value, and at most U; once converged L is within tau of the trust-free route's value or above."""
     pomdp, spec, horizon, free = _early_stop_problem(driver, seed)
     for tau in (0.2, 1e-6):
-        result = synthesize(pomdp, spec, tau=tau, horizon=horizon, time_limit=20, completion="bounds")
-        value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+        result = synthesize(pomdp, spec,
+                            SynthesisSettings(tau=tau, horizon=horizon, time_limit=20, completion="bounds"))
+        value = evaluate(pomdp, spec, result.policy,
+                         EvaluationSettings(fallback_after=None, max_junctions=horizon))
         strict = result.stats.runs[0].lower_strict_labels
         assert value.lower >= strict - TOLERANCE, (value.lower, strict, result.lower)
         assert result.lower - TOLERANCE <= value.lower <= result.upper + TOLERANCE
@@ -162,14 +170,17 @@ def test_open_nodes_are_valued_by_the_completion_that_returns(driver):
     returns = 0
     for seed in range(10):
         pomdp, spec, horizon = _return_problem(driver, seed)
-        alone = evaluate(pomdp, spec, policy_without_rows(pomdp, spec), fallback_after=None,
-                         max_junctions=horizon)
-        old = evaluate(pomdp, spec, StateOnlyCompletion(pomdp.town, spec), fallback_after=None,
-                       max_junctions=horizon)
+        alone = evaluate(pomdp, spec, policy_without_rows(pomdp, spec),
+                         EvaluationSettings(fallback_after=None, max_junctions=horizon))
+        old = evaluate(pomdp, spec, StateOnlyCompletion(pomdp.town, spec),
+                       EvaluationSettings(fallback_after=None, max_junctions=horizon))
         returns += alone.lower > old.lower + 1e-6
         for completion in ("auto", "bounds"):
-            result = synthesize(pomdp, spec, tau=0.2, horizon=horizon, time_limit=20, completion=completion)
-            value = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+            result = synthesize(pomdp, spec,
+                                SynthesisSettings(tau=0.2, horizon=horizon, time_limit=20,
+                                                  completion=completion))
+            value = evaluate(pomdp, spec, result.policy,
+                             EvaluationSettings(fallback_after=None, max_junctions=horizon))
             run = result.stats.runs[0]
             exact_labels = run.threshold_alternates == 0 and len(run.root_dfa_states) == 1
             if completion == "auto" and run.nodes:

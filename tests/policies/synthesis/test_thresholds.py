@@ -19,11 +19,13 @@ from hypothesis import strategies as st
 from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.synthesis.test_synthesis_random import random_town
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.labelling import atom_values
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.exact_search import exact_optimum
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 TOLERANCE = 1e-12
 
@@ -40,10 +42,11 @@ def test_thresholds_at_multiples_of_one_seventh_bracket_the_optimum(pomdp, offse
     spec = spec_from_text(_strict_with_lowtrust_offset(offset), "<phi1_strict k/7>", pomdp.town)
     horizon = 8
     optimum = exact_optimum(pomdp, spec, horizon)
-    result = synthesize(pomdp, spec, tau=1e-3, horizon=horizon, time_limit=60)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-3, horizon=horizon, time_limit=60))
     assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE, (result.lower, optimum,
                                                                              result.upper)
-    online = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+    online = evaluate(pomdp, spec, result.policy,
+                      EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert online.gap == 0.0
     assert online.lower >= result.lower - TOLERANCE
     assert online.lower <= result.upper + TOLERANCE
@@ -55,8 +58,9 @@ def test_thresholds_at_multiples_of_one_seventh_bracket_the_optimum(pomdp, offse
 def _search_alone_is_worth_its_strict_value(pomdp, spec, horizon: int, **options) -> None:
     """The search's own policy (clusters "off": by default a cluster policy of larger L may be
     returned instead) is worth at least its run's strict-label value and its L."""
-    search = synthesize(pomdp, spec, horizon=horizon, clusters="off", **options)
-    online = evaluate(pomdp, spec, search.policy, fallback_after=None, max_junctions=horizon)
+    search = synthesize(pomdp, spec, SynthesisSettings(horizon=horizon, clusters="off", **options))
+    online = evaluate(pomdp, spec, search.policy,
+                      EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert online.lower >= search.lower - TOLERANCE
     assert online.lower >= search.stats.runs[0].lower_strict_labels - TOLERANCE
 
@@ -107,9 +111,11 @@ def test_threshold_on_a_reachable_belief(driver, seed, where, default_driver, nu
     spec = spec_from_text(text, "<threshold spec>", town)
     horizon = int(rng.integers(2, 5))
     optimum = exact_optimum(pomdp, spec, horizon)
-    result = synthesize(pomdp, spec, tau=1e-9, horizon=horizon, time_limit=20, suffix_length=1)
+    result = synthesize(pomdp, spec,
+                        SynthesisSettings(tau=1e-9, horizon=horizon, time_limit=20, suffix_length=1))
     assert result.lower - TOLERANCE <= optimum <= result.upper + TOLERANCE
-    online = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+    online = evaluate(pomdp, spec, result.policy,
+                      EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert online.lower >= result.lower - TOLERANCE
     assert online.lower >= result.stats.lower_strict_labels - TOLERANCE
     _search_alone_is_worth_its_strict_value(pomdp, spec, horizon, tau=1e-9, time_limit=20, suffix_length=1)

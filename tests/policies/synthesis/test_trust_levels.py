@@ -12,10 +12,12 @@ from tests.cli import run_cli
 from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.evaluation.plain import evaluate
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.exact_search import exact_optimum
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 
 def five_level_driver(default: DriverModel) -> DriverModel:
@@ -55,10 +57,11 @@ def test_five_trust_levels_synthesise_and_bracket_the_optimum(town, driver):
                           .replace("COEFFS_HIGH", "[0, 0, 0, 0, 1]"), "<five>", town)
     horizon = 6
     optimum = exact_optimum(pomdp, spec, horizon)
-    result = synthesize(pomdp, spec, tau=1e-9, horizon=horizon, time_limit=30)
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=horizon, time_limit=30))
     assert result.lower - 1e-12 <= optimum <= result.upper + 1e-12
     assert optimum > 0.1
-    online = evaluate(pomdp, spec, result.policy, fallback_after=None, max_junctions=horizon)
+    online = evaluate(pomdp, spec, result.policy,
+                      EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert online.lower >= result.lower - 1e-12
 
 
@@ -70,7 +73,7 @@ def test_seven_coefficients_for_a_five_level_model_is_one_line_exit_2(town, driv
                          .replace("COEFFS_HIGH", "[0, 0, 0, 0, 0, 0, 1]"))
     spec = spec_from_text(spec_path.read_text(), str(spec_path), town)
     with pytest.raises(InputError, match="5 trust levels"):
-        synthesize(build_pomdp(town, model), spec, horizon=4)
+        synthesize(build_pomdp(town, model), spec, SynthesisSettings(horizon=4))
     driver_path = tmp_path / "five.json"
     driver_path.write_text(json.dumps(model.to_dict()))
     code, out, err = run_cli(capsys, "synth", str(spec_path), "--driver", str(driver_path),

@@ -19,6 +19,7 @@ from trustroute.networks.town import INCIDENT_TYPES, town_from_dict
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.synthesis.belief_synthesis import synthesize
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 FORMULAS = ("(!high) U a", "(!high) U (a & F b)", "F (a & high)", "(!high) U (a & X (F (b & high)))")
 # Where the closure is asserted: after the until only state atoms remain. With a belief atom after
@@ -70,9 +71,9 @@ def test_unbounded_gap_closes_where_the_optimum_is_below_one(driver, seed, defau
     # Where the gap is asserted, a time limit well above the idle convergence times (some examples
     # need 12 s unbounded on an idle machine): the gap is the algorithm's, not the machine's load.
     # Elsewhere only soundness is asserted, which holds at any time limit.
-    long = synthesize(pomdp, spec, tau=1e-4, horizon=LONG_HORIZON, time_limit=60)
+    long = synthesize(pomdp, spec, SynthesisSettings(tau=1e-4, horizon=LONG_HORIZON, time_limit=60))
     closes = long.upper < 1 - 1e-3 and spec.formula_text in CLOSING   # optimum below 1 (within 1e-3)
-    unbounded = synthesize(pomdp, spec, tau=1e-3, time_limit=60 if closes else 10)
+    unbounded = synthesize(pomdp, spec, SynthesisSettings(tau=1e-3, time_limit=60 if closes else 10))
     assert unbounded.upper >= long.lower - TOLERANCE          # the unbounded value is at least V_H
     assert unbounded.lower <= unbounded.upper + TOLERANCE
     if closes:
@@ -90,7 +91,7 @@ def test_end_components_close_a_case_the_greatest_fixed_point_left_at_one(driver
     assert spec.formula_text == "(!high) U (a & X (F (b & high)))"
     # Time limits well above the idle convergence times (some examples need 12 s unbounded on an
     # idle machine): the gap asserted below is the algorithm's, not the machine's load.
-    long = synthesize(pomdp, spec, tau=1e-4, horizon=LONG_HORIZON, time_limit=60)
-    unbounded = synthesize(pomdp, spec, tau=1e-3, time_limit=60)
+    long = synthesize(pomdp, spec, SynthesisSettings(tau=1e-4, horizon=LONG_HORIZON, time_limit=60))
+    unbounded = synthesize(pomdp, spec, SynthesisSettings(tau=1e-3, time_limit=60))
     assert long.upper < 1e-3
     assert unbounded.gap <= 1e-3 and unbounded.upper >= long.lower - TOLERANCE

@@ -21,10 +21,12 @@ from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.synthesis.test_synthesis_random import random_junctions
 from trustroute.networks.town import INCIDENT_TYPES, town_from_dict
 from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.labelling import atom_values
 from trustroute.policies.logic.spec import Spec, spec_from_text
 from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp
+from trustroute.policies.synthesis.settings import SynthesisSettings
 
 FORMULAS = ("F (v1 & !high)", "(!high) U a", "F (a & high)", "(!high) U (a & F b)", "F (a & F (b & high))")
 KINDS = ("reached", "prior_sum", "sevenths")
@@ -244,8 +246,9 @@ def run_case(case: Case, tau: float = 1e-3, time_limit: float = 20.0) -> Outcome
     from trustroute.policies.evaluation.plain import evaluate
     from trustroute.policies.synthesis.belief_synthesis import synthesize
 
-    result = synthesize(case.pomdp, case.spec, tau=tau, horizon=case.horizon, time_limit=time_limit)
-    online = evaluate(case.pomdp, case.spec, result.policy, fallback_after=None,
-                      max_junctions=case.horizon)
+    result = synthesize(case.pomdp, case.spec,
+                        SynthesisSettings(tau=tau, horizon=case.horizon, time_limit=time_limit))
+    online = evaluate(case.pomdp, case.spec, result.policy,
+                      EvaluationSettings(fallback_after=None, max_junctions=case.horizon))
     return Outcome(case=case, lower=result.lower, upper=result.upper,
                    optimum=brute_force(case.pomdp, case.spec, case.horizon), evaluated=online.lower)

@@ -15,12 +15,14 @@ from tests.policies.trust_paths import optimum, policy_value_by_type, robust_opt
 from tests.policies.trust_specs import random_problem
 from trustroute.participants.driver_population import DriverPopulation, DriverType
 from trustroute.policies.belief.problem import TRUST_STATE, problem
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.files import load_population_policy, save_policy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
 from trustroute.policies.synthesis.population import document_entries, policy_name, reweighting
+from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population
 from trustroute.policies.trust_state_synthesis.population import belief_free_spec
 
@@ -48,7 +50,8 @@ def test_bayes_bounds_bracket_the_brute_force_population_optimum(driver, seed, n
     town, population, spec = random_population_problem(rng, driver, n_types, kind)
     found = problem(town, population, spec)
     assert found.case == TRUST_STATE
-    made = synthesize_for_population(town, population, spec, "bayes", horizon=horizon, time_limit=20)
+    made = synthesize_for_population(town, population, spec, "bayes",
+                                     SynthesisSettings(horizon=horizon, time_limit=20))
     # The brute-force optimum over every history-dependent policy, path by path of every type.
     reference = optimum(found.pomdp, found.spec, horizon)
     assert made.lower - TOLERANCE <= reference <= made.upper + TOLERANCE
@@ -71,7 +74,8 @@ def test_robust_bounds_bracket_the_brute_force_worst_type_optimum(driver, seed, 
     rng = np.random.default_rng(seed)
     town, population, spec = random_population_problem(rng, driver, n_types, kind)
     found = problem(town, population, spec)
-    made = synthesize_for_population(town, population, spec, "robust", horizon=horizon, time_limit=20)
+    made = synthesize_for_population(town, population, spec, "robust",
+                                     SynthesisSettings(horizon=horizon, time_limit=20))
     reference = robust_optimum(found.pomdp, found.spec, horizon, population.weights)
     assert made.lower - TOLERANCE <= reference <= made.upper + TOLERANCE
     by_type = policy_value_by_type(found.pomdp, found.spec, made.result.policy, horizon, n_types)
@@ -96,7 +100,8 @@ def test_belief_free_spec_keeps_road_and_trust_atoms_and_drops_belief_literals(t
 def test_population_joint_policy_file_round_trips(tmp_path, driver, objective):
     rng = np.random.default_rng(3)
     town, population, spec = random_population_problem(rng, driver, 3)
-    made = synthesize_for_population(town, population, spec, objective, horizon=3, time_limit=10)
+    made = synthesize_for_population(town, population, spec, objective,
+                                     SynthesisSettings(horizon=3, time_limit=10))
     path = save_policy(made.result, tmp_path / "policy.json", town, made.pomdp.driver, made.spec,
                        population=document_entries(made), name=policy_name(made))
     document = json.loads(path.read_text())
@@ -110,9 +115,10 @@ def test_population_joint_policy_file_round_trips(tmp_path, driver, objective):
     if objective == "robust":   # here a grid prior beats the Bayes policy's worst type
         assert loaded.reweight is not None and document["belief_prior"] != document["population_weights"]
         assert made.lower > min(v.lower for v in made.bayes_type_values)
-    _, again = evaluate_joint_by_type(made.pomdp, lifted_spec, loaded, fallback_after=None, max_junctions=3)
-    _, first = evaluate_joint_by_type(made.pomdp, made.spec, made.result.policy, fallback_after=None,
-                                      max_junctions=3)
+    _, again = evaluate_joint_by_type(made.pomdp, lifted_spec, loaded,
+                                      EvaluationSettings(fallback_after=None, max_junctions=3))
+    _, first = evaluate_joint_by_type(made.pomdp, made.spec, made.result.policy,
+                                      EvaluationSettings(fallback_after=None, max_junctions=3))
     assert again == first == [(v.lower, v.upper) for v in made.type_values]
 
 
@@ -121,7 +127,8 @@ def test_reweighting_a_joint_policy_is_the_posterior_under_the_other_prior(drive
     town, population, spec = random_population_problem(rng, driver, 2)
     prior = np.array([0.9, 0.1])
     other = problem(town, population, spec)
-    made = synthesize_for_population(town, population, spec, "bayes", horizon=2, time_limit=5)
+    made = synthesize_for_population(town, population, spec, "bayes",
+                                     SynthesisSettings(horizon=2, time_limit=5))
     policy = JointTablePolicy(made.result.policy.table, other.pomdp, other.spec,
                               made.result.policy.guide_horizon, reweight=reweighting(population, prior))
     joint = rng.dirichlet(np.ones(14 * 3)).reshape(1, 14, 3)
@@ -138,7 +145,8 @@ def test_three_type_population_on_phi1_trust_routes_to_the_trust_state_search(to
 
     population = load_driver_population("participants/data/driver_population_three_types.json")
     spec = load_spec("specs/phi1_trust.toml", town)
-    made = synthesize_for_population(town, population, spec, "bayes", horizon=5, time_limit=10)
+    made = synthesize_for_population(town, population, spec, "bayes",
+                                     SynthesisSettings(horizon=5, time_limit=10))
     assert isinstance(made.result.policy, JointTablePolicy)
     assert made.lower <= made.upper
     assert [v.name for v in made.type_values] == list(population.names)

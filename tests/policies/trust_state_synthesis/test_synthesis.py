@@ -12,9 +12,11 @@ from tests.policies.trust_specs import random_problem
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.model_engine import run_model_episode
 from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint, evaluate_joint_table
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
+from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesize_spec import synthesize_spec
 from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
@@ -30,7 +32,7 @@ def test_bounds_bracket_the_brute_force_optimum_and_lower_is_the_policys_value(d
     rng = np.random.default_rng(seed)
     pomdp, spec = random_problem(rng, driver, kind)
     reference = optimum(pomdp, spec, horizon)
-    result = synthesize_spec(pomdp, spec, horizon=horizon, time_limit=20)
+    result = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=horizon, time_limit=20))
     assert result.lower - TOLERANCE <= reference <= result.upper + TOLERANCE
     # The returned policy's value by brute force over trust paths (its joint belief computed
     # there from the paths, not by the filter): L is exactly that value (joint), at most it (plain).
@@ -47,7 +49,7 @@ def test_bounds_bracket_the_brute_force_optimum_and_lower_is_the_policys_value(d
 def test_unbounded_bounds_bracket_the_bounded_optimum_and_lower_is_the_policys_value(driver):
     pomdp, spec = random_problem(np.random.default_rng(5), driver, "trust")
     reference = optimum(pomdp, spec, 3)
-    unbounded = synthesize_spec(pomdp, spec, horizon=None, time_limit=10)
+    unbounded = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=None, time_limit=10))
     # Pr_max of the unbounded objective is at least the bounded optimum.
     assert unbounded.upper >= reference - TOLERANCE
     assert 0 < unbounded.lower <= unbounded.upper + TOLERANCE
@@ -55,8 +57,8 @@ def test_unbounded_bounds_bracket_the_bounded_optimum_and_lower_is_the_policys_v
     # L is a certified lower end of the policy's value over unbounded time, which is at least
     # its value within its search horizon: the pruned tree unfolding's lower end there is below
     # the unbounded upper end.
-    exact = evaluate_joint(pomdp, spec, unbounded.policy, fallback_after=None, max_junctions=cap,
-                           max_nodes=2_000)
+    exact = evaluate_joint(pomdp, spec, unbounded.policy,
+                           EvaluationSettings(fallback_after=None, max_junctions=cap, max_nodes=2_000))
     value = unbounded.stats.policy_value
     assert value.lower == unbounded.lower and value.converged is not None
     assert exact.lower <= value.upper + TOLERANCE
@@ -65,15 +67,17 @@ def test_unbounded_bounds_bracket_the_bounded_optimum_and_lower_is_the_policys_v
 
 def test_merged_evaluation_equals_the_tree_unfolding_of_evaluate_joint(pomdp):
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
-    result = synthesize_spec(pomdp, spec, horizon=8, time_limit=20)
+    result = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=8, time_limit=20))
     assert result.gap <= 1e-3
     for cap in (8, 12):
-        tree = evaluate_joint(pomdp, spec, result.policy, fallback_after=None, max_junctions=cap)
+        tree = evaluate_joint(pomdp, spec, result.policy,
+                              EvaluationSettings(fallback_after=None, max_junctions=cap))
         merged = evaluate_joint_table(pomdp, spec, result.policy, cap)
         assert tree.gap == 0.0 and merged[0] == merged[1]
         assert merged[0] == pytest.approx(tree.lower, abs=1e-12)
-    assert result.lower == pytest.approx(evaluate_joint(pomdp, spec, result.policy, fallback_after=None,
-                                                        max_junctions=8).lower, abs=1e-12)
+    assert result.lower == pytest.approx(evaluate_joint(pomdp, spec, result.policy,
+                                                        EvaluationSettings(fallback_after=None,
+                                                                           max_junctions=8)).lower, abs=1e-12)
 
 
 def test_a_time_limit_shorter_than_the_first_round_stops_it_with_sound_bounds(pomdp):
@@ -82,7 +86,7 @@ def test_a_time_limit_shorter_than_the_first_round_stops_it_with_sound_bounds(po
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
     exact = joint_bounds(pomdp, spec, depth=0, horizon=8)
     assert exact.cut_nodes == 0 and exact.nodes > 1000
-    result = synthesize_spec(pomdp, spec, horizon=8, time_limit=1e-6)
+    result = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=8, time_limit=1e-6))
     assert [run.bounds.nodes for run in result.stats.runs] == [1]
     assert result.lower - TOLERANCE <= exact.lower <= result.upper + TOLERANCE
     assert result.upper < 1.0
@@ -103,7 +107,7 @@ def test_monte_carlo_of_the_returned_policy_with_hidden_trust_agrees_with_lower(
     hidden from the AV, satisfaction read on the true trust) agree with L within 4 SE."""
     spec = load_spec("specs/phi1_trust.toml", town)
     horizon = 10
-    result = synthesize_spec(pomdp, spec, horizon=horizon, time_limit=20)
+    result = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=horizon, time_limit=20))
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec, junction_cap=horizon,
                          fallback_after=None)
     rng = np.random.default_rng(20261201)

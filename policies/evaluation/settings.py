@@ -1,0 +1,40 @@
+"""How an exact evaluation unfolds an episode tree: one frozen settings object, checked once where
+it is made and passed to `plain.evaluate`, `trust_state.evaluate_joint` and their unfoldings."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from trustroute.policies.model.trust_pomdp import BELIEF_RULES, BeliefRule
+from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
+from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
+
+
+@dataclass(frozen=True)
+class EvaluationSettings:
+    """fallback_after: wrap the policy with the study's fallback after that many junctions (None:
+    evaluate the policy as given). max_junctions: the episode's hard cap. belief_rule: the AV's
+    filter ("bayes" or the authors' "paper" update). prune_below / max_nodes: branches below this
+    probability, or beyond this frontier size, are not followed (None: the defaults of the
+    unfolding the spec goes to, policies/evaluation/ledgers.py and trust_state.py). merge: merge
+    the histories a policy reads alike (trust-state unfolding). time_limit: seconds after which
+    open branches are cut (trust-state unfolding; None: no limit)."""
+
+    fallback_after: int | None = DEFAULT_FALLBACK_AFTER
+    max_junctions: int = DEFAULT_JUNCTION_CAP
+    belief_rule: BeliefRule = "bayes"
+    prune_below: float | None = None
+    max_nodes: int | None = None
+    merge: bool = True
+    time_limit: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.belief_rule not in BELIEF_RULES:
+            raise ValueError(f"unknown belief rule {self.belief_rule!r}; use 'bayes' or 'paper'")
+        if self.max_junctions < 0:
+            raise ValueError("max_junctions must be >= 0")
+        if self.fallback_after is not None and self.fallback_after < 0:
+            raise ValueError("fallback_after must be >= 0")
+
+
+DEFAULT_EVALUATION = EvaluationSettings()
