@@ -346,6 +346,7 @@ def episode_tables(
         "mean_reported_trust": float(driven["reported_trust"].mean()) if len(driven) else float("nan"),
         "reports": int(len(driven)),
         "driver_type": None,  # a real participant's type is not known
+        **dict.fromkeys(dataset.EPISODE_MANUAL_MEASURES),   # no takeover measures in the logs
         "trust_changes": int((trust[1:] != trust[:-1]).sum()),
     }
     return episode, roads, runs

@@ -28,6 +28,8 @@ paper_comparison; shown by display) are:
   participant's true `driver_type`): the cells' satisfaction and trust, and the paired statistics
   for every pair of conditions present (free, aware, robust, policy files), per true type and over
   all participants ("all");
+- `manual`: per incident type and condition, the manual-driving measures of the takeovers
+  (manual.py; the incidents table's, docs/dataset.md); empty without takeovers;
 - `sensitivity`: every pair's satisfaction difference per spec and over specs on every belief
   source the study has (sensitivity.py), the leading one marked;
 - `paper`: the paper's figures beside ours, only when the study is comparable (the paper's town,
@@ -54,6 +56,7 @@ from trustroute.analysis.belief_sources import (
 )
 from trustroute.analysis.satisfaction import episode_satisfaction
 from trustroute.analysis.study.cells import cell_table, takeover_table
+from trustroute.analysis.study.manual import manual_table, study_incidents
 from trustroute.analysis.study.order import order_tables, run_order
 from trustroute.analysis.study.paired import (
     all_pairs_repeated,
@@ -95,6 +98,7 @@ class StudyAnalysis:
     questionnaires: pd.DataFrame = field(default_factory=pd.DataFrame)        # live: scores, alpha
     questionnaire_tests: pd.DataFrame = field(default_factory=pd.DataFrame)   # live: paired tests
     sensitivity: pd.DataFrame = field(default_factory=pd.DataFrame)
+    manual: pd.DataFrame = field(default_factory=pd.DataFrame)
     source_note: str = ""   # why the leading source is not the default one, when it is not
 
     def to_dict(self) -> dict:
@@ -123,6 +127,7 @@ class StudyAnalysis:
             "questionnaires": records(self.questionnaires),
             "questionnaire_tests": records(self.questionnaire_tests),
             "sensitivity": records(self.sensitivity),
+            "manual_driving": records(self.manual),
             "failed_episodes": len(self.manifest.get("failed_episodes", [])),
         }
 
@@ -228,6 +233,7 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
         per_type=per_type,
         per_type_paired=per_type_paired,
         sensitivity=sensitivity,
+        manual=manual_table(study_incidents(Path(study_dir)), episodes, condition_order),
         source_note=source_note,
     )
     questionnaires = questionnaire_tables(Path(study_dir), episodes, pairs)

@@ -21,6 +21,7 @@ from trustroute.analysis.formatting import (
     wrapped_text,
 )
 from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis
+from trustroute.analysis.study.manual import manual_display
 
 
 def paired_display(p: pd.DataFrame) -> pd.DataFrame:
@@ -192,6 +193,7 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
         "questionnaires": (analysis.questionnaires, questionnaire_display),
         "questionnaire_tests": (analysis.questionnaire_tests, questionnaire_test_display),
         "sensitivity": (analysis.sensitivity, sensitivity_display),
+        "manual": (analysis.manual, manual_display),
         "paper": (analysis.paper, lambda paper: paper),
     }
     return {name: show(frame) for name, (frame, show) in shown.items() if len(frame)}
@@ -209,12 +211,13 @@ TABLE_TITLES = {
     "questionnaires": "Questionnaire scores per condition (mean of items, reversed items turned)",
     "questionnaire_tests": "Questionnaire scores: paired over participants",
     "sensitivity": "Sensitivity: satisfaction difference A − B [95% CI] on every belief source",
+    "manual": "Manual driving per incident type and condition (the takeovers' measures)",
     "paper": "The paper beside this study",
 }
 
 
 # tables whose figures do not depend on the belief source (the others name it in their title)
-SOURCE_FREE_TABLES = ("takeovers", "sensitivity")
+SOURCE_FREE_TABLES = ("takeovers", "sensitivity", "manual")
 
 
 def table_title(name: str, belief_source: str) -> str:

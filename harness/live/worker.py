@@ -39,6 +39,7 @@ who drove and every control the person sent.
 
 from __future__ import annotations
 
+import math
 import time
 import traceback
 from dataclasses import dataclass
@@ -46,12 +47,14 @@ from pathlib import Path
 
 import pyarrow as pa
 
+from trustroute.core.dataset import INCIDENTS_SCHEMA, table_from_rows
 from trustroute.harness.live.view import Statics, dead_reckoned, ego_view, next_junction, surroundings
 from trustroute.harness.live.warmup import run_warm_up
 from trustroute.harness.simulation.drivers import NO_INPUTS, ManualInputs
 from trustroute.harness.simulation.driving_style import MANUAL
-from trustroute.harness.simulation.episode import EGO_ID, EpisodeRecord
+from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import reports_after_road
+from trustroute.harness.simulation.manual_measures import takeover_measures
 from trustroute.harness.simulation.wheel_driving import Controls, Wheel
 
 PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
@@ -107,7 +110,8 @@ class RemoteDriver:
         self.hurry = False                 # a control to apply at once: the next step does not wait
         self.statics = Statics()           # the frames' handles and sizes of the objects seen
         # continuous driving (a wheel; never in lockstep): harness/simulation/wheel_driving.py
-        self.wheel = Wheel(EGO_ID) if options.driving == "continuous" and not options.lockstep else None
+        by_wheel = options.driving == "continuous" and not options.lockstep
+        self.wheel = Wheel(EGO_ID, COMMIT_DISTANCE) if by_wheel else None
 
     # -- the Driver and PersonControls protocols (harness/simulation/drivers.py) ----------------
     @property
@@ -246,7 +250,7 @@ class RemoteDriver:
         self.previous_time = ego.time
         self.read_controls(0.0)
         if self.wheel is not None:
-            for event in self.wheel.step(sumo, mode == MANUAL.name):
+            for event in self.wheel.step(sumo, mode == MANUAL.name, road):
                 self.send({**event, "type": "warning", "kind": event["type"]})
         hurried = self.wait_for_the_wall_clock(ego.time)
         wall = self.clock()
@@ -321,6 +325,22 @@ def with_reports(record: EpisodeRecord, answers: dict[int, int]) -> EpisodeRecor
     return EpisodeRecord(record.summary, roads, tables["kinematics"], tables["incidents"])
 
 
+def with_manual_measures(record: EpisodeRecord, wheel: Wheel | None) -> EpisodeRecord:
+    """The record with the wheel's measures of each takeover in its incidents table (null columns
+    stay null without a wheel: assisted driving has only the reaction)."""
+    incidents = record.tables()["incidents"]
+    if wheel is None or not incidents.num_rows:
+        return record
+    rows = incidents.to_pylist()
+    for row in rows:
+        if row["takeover"] and row["takeover_start"] is not None:
+            end = math.nan if row["takeover_end"] is None else row["takeover_end"]
+            row.update(takeover_measures(wheel.trace, wheel.events, row["takeover_start"], end))
+    tables = record.tables()
+    return EpisodeRecord(record.summary, tables["roads"], tables["kinematics"],
+                         table_from_rows(rows, INCIDENTS_SCHEMA))
+
+
 def live_summary(summary: dict, driver: RemoteDriver) -> dict:
     """The episode summary with the live marks: who drove, and every control they sent."""
     live = {"driver": "person" if driver.options.client == "station" else "scripted",
@@ -362,6 +382,7 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
         driver.await_last_answer()
         if not options.lockstep:
             record = with_reports(record, driver.answers)
+        record = with_manual_measures(record, driver.wheel)
         write_part_tables(Path(study_dir), task, live_summary(record.summary, driver), record.tables(),
                           sync=True)
         summary = record.summary

@@ -23,6 +23,14 @@ PEDAL_ACCEL = 2.6          # m/s² while the accelerator is held (SUMO's tools/g
 PEDAL_DECEL = 4.5          # m/s² while the brake is held
 
 
+def hold_distance(speed: float, commit_distance: float) -> float:
+    """Metres before the road's end where a person still in control at `speed` starts braking to
+    wait for the hand-back: the commit point, HOLD_MARGIN, and the braking distance (with a
+    second's reaction)."""
+    braking = speed * speed / (2.0 * MANUAL.decel) + speed
+    return commit_distance + HOLD_MARGIN + braking
+
+
 class ManualDriving:
     """The person's pedals and pull-out while in control, and the hold before the hand-back, for
     one episode of `vehicle_id`, whose roads are committed `commit_distance` metres before their
@@ -93,7 +101,6 @@ class ManualDriving:
         if remaining <= WARN_DISTANCE and self.warned != road:
             self.warned = road
             self.person.hand_back_warning(remaining, ego.time)
-        braking = ego.speed * ego.speed / (2.0 * MANUAL.decel) + ego.speed
-        if not self.holding and remaining <= self.commit_distance + HOLD_MARGIN + braking:
+        if not self.holding and remaining <= hold_distance(ego.speed, self.commit_distance):
             set_speed(sumo, self.vehicle_id, 0.0)
             self.holding = True

@@ -11,6 +11,7 @@ import pyarrow as pa
 
 from trustroute.core.dataset import INCIDENTS_SCHEMA, table_from_rows
 from trustroute.harness.simulation.incidents import Incident
+from trustroute.harness.simulation.manual_measures import takeover_reaction
 from trustroute.harness.simulation.performance import (
     PerformanceLimits,
     PerformanceMonitor,
@@ -68,5 +69,6 @@ def incidents_table(runs: list[RoadRun], episode_id: str,
             "min_pedestrian_distance": monitor.min_pedestrian_distance, "time_lost": monitor.time_lost,
             "failed_measures": ",".join(failed) or None,
             "scene": incident.details() if incident is not None else None,
+            "takeover_reaction": takeover_reaction(run.in_view_time, run.takeover_start),
         })
     return table_from_rows(rows, INCIDENTS_SCHEMA)

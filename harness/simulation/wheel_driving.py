@@ -27,7 +27,8 @@ Events (dicts with `t`, `type` and details), each logged when it begins:
   episode goes on, as it does after SUMO's own collisions in simulated studies
   (`--collision.action warn`).
 
-`Wheel` is the hook a live episode calls every SUMO step (harness/live/worker.py).
+`Wheel` is the hook a live episode calls every SUMO step (harness/live/worker.py), with the hold
+before the junction (the assisted driving's rule, manual_driving.py `hold_distance`).
 `ManualDriving.may_hand_back` is the paper's hand-back rule for a person driving this way: the
 autopilot takes over again only with the ego on a lane of its planned route (by the model's pose).
 """
@@ -37,12 +38,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
+from trustroute.harness.simulation.driving_style import MANUAL
+from trustroute.harness.simulation.manual_driving import HOLD_MARGIN, hold_distance
+from trustroute.harness.simulation.manual_measures import TTC_RANGE, Sample, signed_offset, ttc_ahead
 from trustroute.networks.road import Road
 
 MODEL_RATE = 50.0            # Hz: the model's integration rate (at least 20 Hz whatever SUMO's step)
 KEEP_ROUTE = 1               # moveToXY: the nearest place on the ego's route
 KEEP_ROUTE_FREE = 2          # moveToXY: any lane, and off the net too
 PERSON_RADIUS = 0.3          # m: a person's footprint is a square of this half side
+CREEP_SPEED = 3.0            # m/s: held off its lane, the car is not driven faster than this
+CREEP_BRAKE = 0.5            # the brake applied above CREEP_SPEED then (of full braking)
 NEAR = 25.0                  # m: objects farther than this from the ego are not tested for contact
 
 
@@ -136,6 +142,20 @@ def overlaps(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> bool
     return True
 
 
+def nearest_on(shape, x: float, y: float) -> tuple[float, float, float]:
+    """The point of a polyline nearest (x, y), and the polyline's angle there (SUMO's degrees)."""
+    best = (math.inf, 0.0, 0.0, 0.0)
+    for (x0, y0), (x1, y1) in zip(shape, shape[1:], strict=False):
+        dx, dy = x1 - x0, y1 - y0
+        length2 = dx * dx + dy * dy
+        along = 0.0 if length2 == 0.0 else min(max(((x - x0) * dx + (y - y0) * dy) / length2, 0.0), 1.0)
+        px, py = x0 + along * dx, y0 + along * dy
+        distance = math.hypot(x - px, y - py)
+        if distance < best[0]:
+            best = (distance, px, py, math.degrees(math.atan2(dx, dy)) % 360.0)
+    return best[1], best[2], best[3]
+
+
 def off_road(sumo, x: float, y: float) -> bool:
     """Whether (x, y) is on no lane open to cars: farther from the nearest one's centre line than
     half its width."""
@@ -177,6 +197,8 @@ class ManualDriving:
     touching: set[str] = field(default_factory=set)
     collided: bool = False
     current: Pose | None = None       # the pose at SUMO's time now (the model runs a step ahead)
+    lane_index: int = 0               # the lane of its road the ego was in at the takeover
+    edge: str = ""                    # the edge of its route it was on last (its own road)
 
     @classmethod
     def take_over(cls, sumo, vehicle_id: str, **options) -> ManualDriving:
@@ -187,7 +209,8 @@ class ManualDriving:
         return cls(vehicle_id, pose, list(sumo.vehicle.getRoute(vehicle_id)),
                    length=sumo.vehicletype.getLength(vehicle_type),
                    width=sumo.vehicletype.getWidth(vehicle_type),
-                   **options)
+                   lane_index=max(0, sumo.vehicle.getLaneIndex(vehicle_id)),
+                   edge=sumo.vehicle.getRoadID(vehicle_id), **options)
 
     def step(self, sumo, controls: Controls, seconds: float) -> Pose:
         """Read where the last placement put the ego (events), then integrate the person's controls
@@ -206,12 +229,18 @@ class ManualDriving:
     def may_hand_back(self) -> bool:
         return self.where == "own_lane" or self.collided
 
-    def release(self, sumo) -> None:
+    def release(self, sumo) -> bool:
         """The hand-back: SUMO drives on from here. Away from a lane of the route (after a
-        collision only) the ego is first put at the nearest place on its route."""
-        if self.where != "own_lane":
-            pose = self.pose
-            sumo.vehicle.moveToXY(self.vehicle_id, "", -1, pose.x, pose.y, pose.angle, KEEP_ROUTE)
+        collision, or held off its lane before the junction) the ego is first put at the nearest
+        place of its lane on the planned road, facing along it; True then: the planned route is
+        to be given back once SUMO has it there (`restore_route`)."""
+        if self.where == "own_lane" or not self.edge or self.edge.startswith(":"):
+            return False
+        edge = self.edge
+        lane = f"{edge}_{self.lane_index}"
+        x, y, angle = nearest_on(sumo.lane.getShape(lane), self.pose.x, self.pose.y)
+        sumo.vehicle.moveToXY(self.vehicle_id, edge, self.lane_index, x, y, angle, KEEP_ROUTE_FREE)
+        return True
 
     def placement(self, sumo) -> int:
         """Free placement on the ego's road and the oncoming one; anywhere else (off the road, a
@@ -228,7 +257,8 @@ class ManualDriving:
     def observe(self, sumo, now: float) -> None:
         lane = sumo.vehicle.getLaneID(self.vehicle_id)
         if lane and not lane.startswith(":"):
-            restore_route(sumo, self.vehicle_id, self.route)
+            if restore_route(sumo, self.vehicle_id, self.route):
+                self.edge = sumo.lane.getEdgeID(lane)
         self.locate(sumo, lane, now)
         self.contacts(sumo, now)
 
@@ -250,7 +280,7 @@ class ManualDriving:
             self.where = where
 
     def opposite(self, edge: str) -> bool:
-        road = Road.parse_or_none(self.route[0]) if self.route else None
+        road = Road.parse_or_none(self.edge) if self.edge else None   # its own road, not the route's first
         return road is not None and edge == road.reverse.id
 
     def contacts(self, sumo, now: float) -> None:
@@ -284,19 +314,33 @@ class ManualDriving:
 class Wheel:
     """The hook of a live episode: the person's latest controls drive the ego while they are in
     control (`step`, every SUMO step); a takeover starts the model from SUMO's pose and speed and a
-    hand-back gives the ego back to SUMO where it is, at its speed (no jump either way). While
-    `hold` (the ego waits for the hand-back before the junction) the model brakes fully, once the
-    ego is back on a lane of its route."""
+    hand-back gives the ego back to SUMO where it is, at its speed (no jump either way).
 
-    def __init__(self, vehicle_id: str) -> None:
+    The hand-back rule before the junction (the assisted driving's, manual_driving.py: the same
+    `hold_distance`): a person still in control that close to the open road's end is held. In a
+    lane of the route the car brakes to a stop and waits for the hand-back (event `hold`). Elsewhere
+    (the oncoming lane, off the road) the station guides them back (event `guide_back`) and the
+    car is braked above CREEP_SPEED so they can steer back; should the car still be off its lane
+    HOLD_MARGIN before the road's end, it brakes to a stop there (event `held_off_lane`) and the
+    hand-back is allowed where it stands: the autopilot takes it from the nearest place on its route
+    (`ManualDriving.release`), short of the junction either way."""
+
+    def __init__(self, vehicle_id: str, commit_distance: float = 0.0) -> None:
         self.vehicle_id = vehicle_id
+        self.commit_distance = commit_distance
         self.controls = Controls()
         self.driving: ManualDriving | None = None
         self.events: list[dict] = []     # every takeover's events, in order
+        self.holding = False             # held before the junction until the hand-back
+        self.held_off_lane = False       # stopped off its lane at the road's end: may hand back there
+        self.lengths: dict[str, float] = {}
+        self.restore: list[str] | None = None   # the planned route, to give back after a release
+        self.trace: list[Sample] = []    # every manual step: the measures' raw material
+        self.shapes: dict[str, list] = {}
 
     @property
     def may_hand_back(self) -> bool:
-        return self.driving is None or self.driving.may_hand_back
+        return self.driving is None or self.driving.may_hand_back or self.held_off_lane
 
     @property
     def pose(self) -> Pose | None:
@@ -304,13 +348,17 @@ class Wheel:
         road, where SUMO keeps the ego on its route), else None."""
         return None if self.driving is None else self.driving.current
 
-    def step(self, sumo, manual: bool, hold: bool = False) -> list[dict]:
-        """One SUMO step; the events it brought."""
+    def step(self, sumo, manual: bool, road: str | None = None) -> list[dict]:
+        """One SUMO step (`road`: the episode's open road, None: no hold); the events it brought."""
         if not manual:
+            if self.restore is not None and restore_route(sumo, self.vehicle_id, self.restore):
+                self.restore = None
             if self.driving is not None:   # handed back: SUMO drives on from the model's pose and speed
-                self.driving.release(sumo)
+                if self.driving.release(sumo):
+                    self.restore = list(self.driving.route)
                 self.driving = None
                 sumo.vehicle.setSpeed(self.vehicle_id, -1)
+            self.holding = self.held_off_lane = False
             return []
         if self.driving is None:
             self.driving = ManualDriving.take_over(sumo, self.vehicle_id)
@@ -319,11 +367,71 @@ class Wheel:
         if len(route) > 1 or (route and route[0] in self.driving.route):
             self.driving.route = route   # the episode extended it (not a free placement's one edge)
         seen = len(self.driving.events)
-        # the hold before the junction brakes the car in its own lane only: in the oncoming lane the
-        # person first comes back (the hand-back is refused there)
-        hold = hold and self.driving.may_hand_back
-        controls = replace(self.controls, throttle=0.0, brake=1.0) if hold else self.controls
+        controls = self.held(sumo, road) if road is not None else self.controls
         self.driving.step(sumo, controls, sumo.simulation.getDeltaT())
+        self.sample(sumo)
         new = self.driving.events[seen:]
         self.events.extend(new)
         return new
+
+    def sample(self, sumo) -> None:
+        """The step's sample of the person's driving (manual_measures.py), at SUMO's time now."""
+        driving = self.driving
+        pose = driving.current if driving is not None else None
+        if pose is None or not driving.edge or driving.edge.startswith(":"):
+            return
+        lane = f"{driving.edge}_{driving.lane_index}"
+        if lane not in self.shapes:
+            self.shapes[lane] = list(sumo.lane.getShape(lane))
+        fx, fy = forward(pose.angle)
+        centre = (pose.x - fx * driving.length / 2, pose.y - fy * driving.length / 2)
+        others = []
+        for other in sumo.vehicle.getIDList():
+            if other == self.vehicle_id:
+                continue
+            ox, oy = sumo.vehicle.getPosition(other)
+            if math.hypot(ox - pose.x, oy - pose.y) <= TTC_RANGE + 20.0:
+                kind = sumo.vehicle.getTypeID(other)
+                others.append((ox, oy, sumo.vehicle.getAngle(other), sumo.vehicle.getSpeed(other),
+                               sumo.vehicletype.getLength(kind), sumo.vehicletype.getWidth(kind)))
+        self.trace.append(Sample(sumo.simulation.getTime(), signed_offset(self.shapes[lane], *centre),
+                                 pose.speed, ttc_ahead(pose.x, pose.y, pose.angle, pose.speed,
+                                                       driving.width, others)))
+
+    def to_road_end(self, sumo, road: str) -> float | None:
+        """Metres from the ego (where SUMO has it) to the end of `road`: along its own lane, or back
+        along the oncoming one (which starts at that junction); None elsewhere."""
+        lane = sumo.vehicle.getLaneID(self.vehicle_id)
+        if not lane or lane.startswith(":"):
+            return None
+        edge = sumo.lane.getEdgeID(lane)
+        position = sumo.vehicle.getLanePosition(self.vehicle_id)
+        if edge == road:
+            if lane not in self.lengths:
+                self.lengths[lane] = sumo.lane.getLength(lane)
+            return self.lengths[lane] - position
+        return position if self.driving is not None and self.driving.opposite(edge) else None
+
+    def held(self, sumo, road: str) -> Controls:
+        """The person's controls under the hold before the junction (see the class)."""
+        driving = self.driving
+        assert driving is not None
+        remaining = self.to_road_end(sumo, road)
+        now = sumo.simulation.getTime()
+        if not self.holding and remaining is not None and \
+                remaining <= hold_distance(driving.pose.speed, self.commit_distance):
+            self.holding = True
+            kind = "hold" if driving.may_hand_back else "guide_back"
+            driving.events.append({"t": now, "type": kind, "remaining": round(remaining, 1)})
+        if not self.holding:
+            return self.controls
+        if driving.may_hand_back or self.held_off_lane:   # braking as the assisted hold does
+            return replace(self.controls, throttle=0.0, brake=MANUAL.decel / driving.params.max_brake)
+        stopping = driving.pose.speed ** 2 / (2 * driving.params.max_brake)
+        if remaining is not None and remaining <= HOLD_MARGIN + stopping:
+            self.held_off_lane = True
+            driving.events.append({"t": now, "type": "held_off_lane", "remaining": round(remaining, 1)})
+            return replace(self.controls, throttle=0.0, brake=1.0)   # (at a creep: stopped at once)
+        if driving.pose.speed >= CREEP_SPEED:
+            return replace(self.controls, throttle=0.0, brake=max(self.controls.brake, CREEP_BRAKE))
+        return self.controls

@@ -49,6 +49,7 @@ from trustroute.core.dataset import (
     write_table,
 )
 from trustroute.core.output_files import atomic_write_text
+from trustroute.harness.simulation.manual_measures import episode_measures
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.inputs import store_inputs
 from trustroute.harness.study.parts import read_failures
@@ -146,6 +147,7 @@ def consolidate(
                 "mean_reported_trust": mean_reported,
                 "reports": reports,
                 "driver_type": None if types is None else types[task.participant],
+                **episode_measures(part.tables["incidents"].to_pylist()),
             }
         )
         roads_tables.append(table)

@@ -49,6 +49,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from trustroute.core.dataset import (
+    ADDED_COLUMNS,
     DATASET_FORMAT,
     FAILURES_DIR,
     INCIDENTS_SCHEMA,
@@ -59,6 +60,7 @@ from trustroute.core.dataset import (
     failure_path,
     part_path,
     table_from_frame,
+    with_added_columns,
 )
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
@@ -219,7 +221,9 @@ def _part_table(path: Path, name: str, blob: bytes, recorded: dict, episode: str
     if recorded.get("sha256") != hashlib.sha256(blob).hexdigest():
         raise PartError(f"{path}: table {name} does not match its SHA-256")
     try:
-        table = check_table(pa.ipc.open_stream(blob).read_all(), PART_TABLES[name], f"{path.name}:{name}")
+        table = with_added_columns(pa.ipc.open_stream(blob).read_all(), PART_TABLES[name],
+                                   ADDED_COLUMNS.get(name, ()))   # a part written before them
+        table = check_table(table, PART_TABLES[name], f"{path.name}:{name}")
     except (pa.ArrowException, SchemaError, ValueError) as exc:
         raise PartError(f"{path}: table {name}: {exc}") from None
     if table.num_rows != recorded.get("rows"):
@@ -392,7 +396,9 @@ def read_batch_part(path: Path) -> list[Part]:
         if recorded.get("sha256") != hashlib.sha256(blob).hexdigest():
             raise PartError(f"{path}: table {name} does not match its SHA-256")
         try:
-            table = check_table(pa.ipc.open_stream(blob).read_all(), PART_TABLES[name], f"{path.name}:{name}")
+            table = with_added_columns(pa.ipc.open_stream(blob).read_all(), PART_TABLES[name],
+                                       ADDED_COLUMNS.get(name, ()))   # a part written before them
+            table = check_table(table, PART_TABLES[name], f"{path.name}:{name}")
         except (pa.ArrowException, SchemaError, ValueError) as exc:
             raise PartError(f"{path}: table {name}: {exc}") from None
         counts = [entry["rows"].get(name) for entry in episodes]

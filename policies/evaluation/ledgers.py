@@ -326,3 +326,63 @@ class BoundLedger:
 
     def bounds(self) -> tuple[float, float]:
         return accepted_bounds(self.accepted, self.unknown)
+
+
+# Added to the unresolved mass per level of an unbounded evaluation, as a margin for the rounding
+# of the double-precision masses summed and multiplied along the way (a level's masses carry a
+# relative error of order 1e-16 per operation over about a thousand operations per node).
+ROUNDING_MARGIN_PER_LEVEL = 1e-12
+
+
+@dataclass(eq=False)
+class UnboundedLedger(BoundLedger):
+    """BoundLedger without a junction cap: [lower, upper] of P(accepted eventually). Every level's
+    accepted mass is a lower bound (accepting states are absorbing), and it only grows with the
+    levels, like value iteration from below on the policy's chain of beliefs; the live mass of the
+    open nodes is still unresolved and counts in `upper` only. The unfolding stops when that mass
+    is at most `tolerance` (`converged`), at the deadline or after `max_junctions` junctions."""
+
+    tolerance: float = 1e-9
+    converged: bool = False
+    levels_done: int = 0
+    open_live: float = 0.0
+
+    def settle(self, frontier, level: int, out_of_time: bool) -> np.ndarray | None:
+        self.levels_done = level
+        if out_of_time:
+            self.cut(frontier, slice(None), level, "past_deadline")
+            return None
+        self.live_masses = frontier.state.masses()
+        accepted, _, live = self.live_masses
+        open_live = float(frontier.probability @ live)
+        if open_live <= self.tolerance or level == self.max_junctions:
+            self.converged = open_live <= self.tolerance
+            self.cut(frontier, slice(None), level, "converged" if self.converged else "cap")
+            return None
+        ending = live <= 0
+        self.accepted += float(frontier.probability[ending] @ accepted[ending])
+        return ~ending
+
+    def prune(self, frontier, go: np.ndarray, level: int) -> np.ndarray:
+        """Beyond `max_nodes` open nodes, those with the least live mass are cut: what a cut
+        leaves unknown is its live mass, and with no cap a node's accepted mass is already
+        counted, so this keeps the most of what is still to be decided (measured on the
+        unbounded phi1_trust: docs/peers.md)."""
+        if go.sum() <= self.max_nodes:
+            return go
+        if self.live_masses is None:
+            raise TypeError("prune reads the level's masses, which settle computes first")
+        accepted, _, live = self.live_masses
+        mass = frontier.probability
+        order = np.argsort(-np.where(go, mass * live, -np.inf), kind="stable")
+        dropped = np.zeros(mass.size, dtype=bool)
+        dropped[order[self.max_nodes:]] = True
+        dropped &= go
+        self.accepted += float(mass[dropped] @ accepted[dropped])
+        self.unknown += float(mass[dropped] @ live[dropped])
+        return go & ~dropped
+
+    def bounds(self) -> tuple[float, float]:
+        margin = ROUNDING_MARGIN_PER_LEVEL * (self.levels_done + 1)
+        lower, upper = accepted_bounds(self.accepted, self.unknown + margin)
+        return max(lower - margin, 0.0), upper

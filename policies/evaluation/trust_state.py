@@ -21,6 +21,7 @@ index: `evaluate_joint_by_type` reads every type's value off the same unfolding.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -34,6 +35,7 @@ from trustroute.policies.evaluation.ledgers import (
     Evaluation,
     JointLedger,
     TypeMasses,
+    UnboundedLedger,
 )
 from trustroute.policies.evaluation.node_state import hidden_root
 from trustroute.policies.evaluation.plain import evaluate
@@ -177,3 +179,45 @@ def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: i
     unfold(root(start, hidden_root(filter_, start, belief_rule)), actor, ledger, limits,
            outcomes(pomdp.driver.depends_on_performance))
     return ledger.bounds()
+
+
+UNBOUNDED_TOLERANCE = 1e-9    # live mass still open at which an unbounded evaluation has converged
+UNBOUNDED_MAX_LEVELS = 100_000  # a guard only: the tolerance or the deadline ends it first
+
+
+@dataclass(frozen=True)
+class UnboundedValue:
+    """Certified [lower, upper] of P(accepted eventually) under a policy; `converged`: the live
+    mass still open was at most the tolerance when it stopped (otherwise the deadline stopped it),
+    after `junctions` junctions."""
+
+    lower: float
+    upper: float
+    converged: bool
+    junctions: int
+
+
+def evaluate_joint_table_unbounded(pomdp: TrustPOMDP, spec: Spec, policy, belief_rule: BeliefRule = "bayes",
+                                   max_nodes: int = DEFAULT_MAX_NODES, deadline: float | None = None,
+                                   tolerance: float = UNBOUNDED_TOLERANCE,
+                                   max_junctions: int = UNBOUNDED_MAX_LEVELS) -> UnboundedValue:
+    """`evaluate_joint_table` over unbounded time: the same merged unfolding of the policy's
+    chain of joint beliefs, without a junction cap. The accepted mass after k junctions is k
+    steps of value iteration from below on that chain (monotone in k, each a lower bound of the
+    policy's value); the live mass still open bounds what is missing. It stops when that mass is
+    at most `tolerance` or at `deadline`; nodes dropped beyond `max_nodes` per level leave their
+    live mass unknown. lower is lowered and upper raised by a margin for floating-point
+    rounding (ledgers.ROUNDING_MARGIN_PER_LEVEL). `max_junctions` stops it after that many
+    junctions (an iterate of the value iteration, its open live mass unknown; tests compare it)."""
+    town = pomdp.town
+    compiled = compile_spec(spec, town)
+    filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
+    start = town.state_index(spec.start)
+    ledger = UnboundedLedger(max_junctions=max_junctions, max_nodes=max_nodes, tolerance=tolerance)
+    actor = SlotActor(slots=policy.action_slots, successor_table=pomdp.successor_table)
+    limits = Limits(max_junctions=max_junctions, deadline=deadline, chunk=TABLE_CHUNK,
+                    paced=True, merge=True)
+    unfold(root(start, hidden_root(filter_, start, belief_rule)), actor, ledger, limits,
+           outcomes(pomdp.driver.depends_on_performance))
+    lower, upper = ledger.bounds()
+    return UnboundedValue(lower=lower, upper=upper, converged=ledger.converged, junctions=ledger.levels_done)

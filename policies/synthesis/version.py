@@ -13,4 +13,4 @@ SYNTHESIS_VERSION = "8"
 # trust_state_relaxation.py, policies/routing/trust_state_table.py): part of the key of those specs'
 # cached policies only, so a change
 # there rebuilds them and leaves every other cached policy valid.
-JOINT_SYNTHESIS_VERSION = "2"
+JOINT_SYNTHESIS_VERSION = "3"

@@ -18,7 +18,10 @@
   unfolding `evaluate_joint_table` (policies/evaluation/trust_state.py; tests check it against
   `evaluate_joint` and brute force), its certified lower end when the least likely nodes are
   dropped. A policy accepting within H junctions with probability L satisfies the spec (bounded
-  by any H' >= H, or unbounded) with probability >= L. U is the smallest search upper bound (each
+  by any H' >= H) with probability >= L. Unbounded objective: L is the policy's value over
+  unbounded time, its merged unfolding continued past H (`evaluate_joint_table_unbounded`: value
+  iteration from below on the policy's chain of beliefs) until the live mass left is at most
+  1e-9 or the round's deadline, each level a sound lower bound. U is the smallest search upper bound (each
   sound for Pr_max). So L <= value(policy) <= Pr_max <= U.
 * Rounds: N starts at FIRST_NODES and grows by NODE_GROWTH while upper - lower > tau, some node
   was cut, and the next round (predicted NODE_GROWTH times the last) fits the time left. Each
@@ -37,7 +40,7 @@ from typing import Any, TypeAlias
 import numpy as np
 
 from trustroute.policies.belief.trust_state_relaxation import RelaxedGuide, relaxed_guide
-from trustroute.policies.evaluation.trust_state import evaluate_joint_table
+from trustroute.policies.evaluation.trust_state import evaluate_joint_table, evaluate_joint_table_unbounded
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
@@ -61,8 +64,13 @@ SEARCH_SHARE = 0.6                 # share of a round's time left for its search
 
 @dataclass(frozen=True)
 class PolicyValue:
+    """The returned policy's certified [lower, upper]; unbounded objective: whether its
+    evaluation converged (else the deadline stopped it) and how many junctions it unfolded."""
+
     lower: float
     upper: float
+    converged: bool | None = None
+    junctions: int | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -98,9 +106,15 @@ class JointSynthesisStats:
     policy_value: PolicyValue
 
     def to_dict(self) -> dict:
-        return {**record_dict(self), "policy_value": {
-            "lower": self.policy_value.lower, "upper": self.policy_value.upper,
-            "max_junctions": self.policy_search_horizon}}
+        value = self.policy_value
+        if value.converged is None:
+            policy_value = {"lower": value.lower, "upper": value.upper,
+                            "max_junctions": self.policy_search_horizon}
+        else:
+            policy_value = {"lower": value.lower, "upper": value.upper, "unbounded": True,
+                            "junctions_unfolded": value.junctions,
+                            "stopped_by": "convergence" if value.converged else "time limit"}
+        return {**record_dict(self), "policy_value": policy_value}
 
 
 JointSynthesis: TypeAlias = SynthesisResult[JointTablePolicy, JointSynthesisStats]
@@ -170,6 +184,19 @@ def _unbounded_upper(problem: _Joint, deadline: float, log: list[JointRun],
     return upper
 
 
+def _policy_value(problem: _Joint, policy: JointTablePolicy, policy_horizon: int,
+                  deadline: float) -> PolicyValue:
+    """The policy's certified value: within the horizon for a bounded objective; over unbounded
+    time for the unbounded one (its chain of beliefs unfolded past `policy_horizon` until the
+    live mass left is negligible or the deadline)."""
+    if problem.horizon is not None:
+        return PolicyValue(*evaluate_joint_table(problem.pomdp, problem.spec, policy, policy_horizon,
+                                                 problem.belief_rule, EVALUATION_NODES, deadline=deadline))
+    value = evaluate_joint_table_unbounded(problem.pomdp, problem.spec, policy, problem.belief_rule,
+                                           EVALUATION_NODES, deadline=deadline)
+    return PolicyValue(value.lower, value.upper, value.converged, value.junctions)
+
+
 def _policy_rounds(problem: _Joint, policy_horizon: int, until: float, upper: float,
                    best: list[_Candidate], guides: dict[int, RelaxedGuide], log: list[JointRun],
                    report: Callable[[float], None]) -> float:
@@ -190,9 +217,7 @@ def _policy_rounds(problem: _Joint, policy_horizon: int, until: float, upper: fl
             upper = min(upper, bounds.upper)
         policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=policy_horizon,
                                   horizon=horizon, guide=guide)
-        value = PolicyValue(*evaluate_joint_table(pomdp, spec, policy, policy_horizon,
-                                                  problem.belief_rule, EVALUATION_NODES,
-                                                  deadline=deadline))
+        value = _policy_value(problem, policy, policy_horizon, deadline)
         log.append(JointRun(search=f"H={policy_horizon}", max_nodes=nodes, bounds=bounds, policy=value))
         if not best or value.lower > best[0].value.lower:
             best[:] = [_Candidate(policy, value, bounds, policy_horizon)]

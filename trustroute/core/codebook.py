@@ -38,6 +38,17 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "mean_reported_trust": ("trust level", "mean of the episode's trust reports", "1.0-7.0"),
         "reports": ("reports", "number of trust reports in the episode", "integers >= 0"),
         "driver_type": ("", "the simulated participant's true driver type", "the population's type names"),
+        # the person's manual driving (live studies; null otherwise)
+        "mean_takeover_reaction": ("s", "mean time from an incident coming into view to the takeover",
+                                   ">= 0"),
+        "mean_lateral_sd": ("m", "mean standard deviation of the lateral position while driving by wheel",
+                            ">= 0"),
+        "manual_min_ttc": ("s", "least time to collision while the person drove; inf: nothing closing in",
+                           "> 0, inf"),
+        "manual_max_deceleration": ("m/s^2", "largest deceleration while the person drove", ">= 0"),
+        "oncoming_seconds": ("s", "time in the oncoming lane", ">= 0"),
+        "road_departures": ("", "times the vehicle left the road while the person drove", "integers >= 0"),
+        "collisions": ("", "collisions while the person drove", "integers >= 0"),
     },
     "roads": {
         "episode_id": ("", "the episode", ID),
@@ -95,6 +106,15 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "failed_measures": ("", "comma-separated measures beyond their limits",
                             "collision, deceleration, ttc, head_on_ttc, pedestrian_distance, time_lost"),
         "scene": ("", "the scene's drawn parameters and what happened (key=value pairs)", "text"),
+        # the person's manual driving on this road (live studies; null otherwise)
+        "takeover_reaction": ("s", "time from the incident coming into view to the takeover", ">= 0"),
+        "lateral_sd": ("m", "standard deviation of the lateral position while driving by wheel", ">= 0"),
+        "manual_min_ttc": ("s", "least time to collision while the person drove; inf: nothing closing in",
+                           "> 0, inf"),
+        "manual_max_deceleration": ("m/s^2", "largest deceleration while the person drove", ">= 0"),
+        "oncoming_seconds": ("s", "time in the oncoming lane", ">= 0"),
+        "road_departures": ("", "times the vehicle left the road while the person drove", "integers >= 0"),
+        "collisions": ("", "collisions while the person drove", "integers >= 0"),
     },
     "attempts": {
         "participant": ("", "the participant (a pseudonym in an export)", "integers >= 0"),

@@ -125,7 +125,21 @@ INCIDENTS_SCHEMA = pa.schema([
     _field("time_lost", pa.float64()),                      # s against free driving, on autopilot
     _field("failed_measures", pa.string(), nullable=True),  # comma-separated; null: succ
     _field("scene", pa.string(), nullable=True),            # the drawn scene; null: no SUMO objects
+    # Manual-driving measures of the takeover (harness/simulation/manual_measures.py): the reaction
+    # wherever there was a takeover of an incident in view; the others only when a person drove by
+    # wheel ([live] driving = "continuous"); null otherwise.
+    _field("takeover_reaction", pa.float64(), nullable=True),      # s from in view to the takeover
+    _field("lateral_sd", pa.float64(), nullable=True),             # m: SD of the lateral position
+    _field("manual_min_ttc", pa.float64(), nullable=True),         # s; inf: nothing closing in its path
+    _field("manual_max_deceleration", pa.float64(), nullable=True),  # m/s²
+    _field("oncoming_seconds", pa.float64(), nullable=True),       # s in the oncoming lane
+    _field("road_departures", pa.int64(), nullable=True),
+    _field("collisions", pa.int64(), nullable=True),
 ])
+MANUAL_MEASURES: tuple[str, ...] = (
+    "takeover_reaction", "lateral_sd", "manual_min_ttc", "manual_max_deceleration", "oncoming_seconds",
+    "road_departures", "collisions",
+)
 
 # The plan's columns, then the episode summary's (harness/simulation/episode_tracker.py), then report stats.
 PLAN_COLUMNS: tuple[str, ...] = ("episode_id", "participant", "position", "spec", "condition", "seed")
@@ -154,6 +168,15 @@ EPISODES_SCHEMA = pa.schema([
     # The participant's true driver type ([drivers] population, docs/driver_type_studies.md); null
     # without one.
     _field("driver_type", pa.string(), nullable=True),
+    # The episode's manual-driving measures over its takeovers (the incidents table's columns of
+    # the same names, harness/simulation/manual_measures.py `episode_measures`); null without them.
+    _field("mean_takeover_reaction", pa.float64(), nullable=True),   # s, mean over the takeovers
+    _field("mean_lateral_sd", pa.float64(), nullable=True),          # m, mean over those by wheel
+    _field("manual_min_ttc", pa.float64(), nullable=True),           # s, least
+    _field("manual_max_deceleration", pa.float64(), nullable=True),  # m/s², largest
+    _field("oncoming_seconds", pa.float64(), nullable=True),         # s, in all
+    _field("road_departures", pa.int64(), nullable=True),
+    _field("collisions", pa.int64(), nullable=True),
 ])
 # Live studies (harness/live/attempts.py): one row per attempt of a drive (a trial or the warm-up),
 # whatever its outcome; `run_position` is the place of a done trial in the order actually run.
@@ -189,9 +212,14 @@ QUESTIONNAIRES_SCHEMA = pa.schema([
     _field("answered_utc", pa.string()),
 ])
 
+EPISODE_MANUAL_MEASURES: tuple[str, ...] = (
+    "mean_takeover_reaction", "mean_lateral_sd", "manual_min_ttc", "manual_max_deceleration",
+    "oncoming_seconds", "road_departures", "collisions",
+)
 # Nullable columns appended to a schema after studies were written without them: a file that ends
 # before them reads with the columns all null (so datasets written without those columns still read).
-ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type",)}
+ADDED_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("driver_type", *EPISODE_MANUAL_MEASURES),
+                                             "incidents": MANUAL_MEASURES}
 END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
 
 # Top-level keys of manifest.json (harness/study/manifest.py writes them; docs/dataset.md).

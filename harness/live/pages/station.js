@@ -31,7 +31,10 @@ let sentControl = null;
 let sentAt = 0;
 let lastRead = performance.now() / 1000;
 const WARNINGS = { back_to_lane: "Back into your lane first: then hand back.", collision: "Collision!",
-                   off_road: "You left the road.", oncoming: "", own_lane: "", on_road: "" };
+                   off_road: "You left the road.", oncoming: "", own_lane: "", on_road: "",
+                   hold: "The junction is near: the car stops here. Hand back now.",
+                   guide_back: "The junction is near: steer back into your lane, then hand back.",
+                   held_off_lane: "Stopped before the junction: hand back now." };
 
 function show(step) {
   for (const id of steps) $(id).classList.toggle("hidden", id !== step);
@@ -61,8 +64,11 @@ function report(value) {
 
 let handBackDue = false;   // warned: the ego waits for the hand-back; the warning stays up until it
 
-function notice(text) {
-  $("incident").textContent = handBackDue
+// what the person must do first, shown even while the hand-back is due (which it would not answer)
+const FIRST = new Set(["back_to_lane", "guide_back", "held_off_lane"]);
+
+function notice(text, first = false) {
+  $("incident").textContent = handBackDue && !first
     ? "Hand back before the junction (space): the vehicle waits for you."
     : text;
 }
@@ -326,7 +332,7 @@ function onMessage(message) {
     case "incident": notice(NOTICES[message.kind] || ""); break;
     case "warning":
       if (message.kind === "hand_back") { handBackDue = true; notice(""); }
-      else if (message.kind in WARNINGS) notice(WARNINGS[message.kind]);
+      else if (message.kind in WARNINGS) notice(WARNINGS[message.kind], FIRST.has(message.kind));
       break;
     case "road":
       notice("");

@@ -1,5 +1,7 @@
 """Screenshots of the driver's view in real Chromium with software WebGL (SwiftShader): the live
-application serves the station and the net the ego drives (Town01, the default town); the
+application serves the station and the net the ego drives (Town01, the default town, and the
+imported Csömör, whose net declares no opposite-lane neighbours: the oncoming lane is found by its
+place and direction); the
 websocket is answered by the test (Playwright's route_web_socket) with frames that place the ego
 on a lane of the net and, in one of them, a truck in the oncoming lane ahead. The canvas's pixels
 are read back (toDataURL) and checked against the camera model (driver_view.js CAMERA): the sky
@@ -59,16 +61,37 @@ class Server(threading.Thread):
         self.join(10)
 
 
-@pytest.fixture(scope="module")
-def station(tmp_path_factory):
-    """(page, net path): a participant's station page in Chromium with WebGL, its socket the test's."""
+CSOMOR_LIVE = """[study]
+name = "csomor-view"
+participants = 1
+seed = 1
+engine = "live"
+town = "csomor"
+specs = ["csomor5"]
+conditions = ["free"]
+"""
+
+
+def town_config(town: str, tmp_path):
+    if town == "town01":
+        return tiny_config(tmp_path)
+    from trustroute.harness.study.config import load_study_config
+
+    (tmp_path / "live.toml").write_text(CSOMOR_LIVE)
+    return load_study_config(tmp_path / "live.toml")
+
+
+@pytest.fixture(scope="module", params=["town01", "csomor"])
+def station(request, tmp_path_factory):
+    """(page, net path): a participant's station page in Chromium with WebGL, its socket the test's,
+    on each town."""
     from playwright.sync_api import sync_playwright
 
+    from trustroute.app.nets import net_for
     from trustroute.harness.study.context import study_context
-    from trustroute.networks.sumo_net import build_net
 
     tmp_path = tmp_path_factory.mktemp("driver-view")
-    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    study = LiveStudy(town_config(request.param, tmp_path), tmp_path / "study", ServerOptions()).open()
     server = Server(study)
     server.start()
     address = f"http://127.0.0.1:{server.port}"
@@ -89,7 +112,7 @@ def station(tmp_path_factory):
             while not sockets:
                 assert time.monotonic() < deadline, "the station opened no websocket"
                 page.wait_for_timeout(50)
-            yield page, sockets[0], build_net(study_context(study.config).town).path
+            yield page, sockets[0], net_for(study_context(study.config).town)
             browser.close()
     finally:
         server.stop()
@@ -105,30 +128,63 @@ def lane_pose(lane, offset: float) -> tuple[float, float, float]:
     return x, y, math.degrees(math.atan2(ahead[0] - x, ahead[1] - y)) % 360
 
 
+def oncoming_lane(net, lane):
+    """The lane of the road's other direction beside `lane`'s left: its declared neighbour, else the
+    car lane of another edge whose centre line passes about a lane's width to the left of `lane`'s
+    middle, running the other way (imported nets declare no neighbours)."""
+    if lane.getNeigh() is not None:
+        return net.getLane(lane.getNeigh())
+    import sumolib
+
+    middle = lane.getLength() / 2
+    x, y, angle = lane_pose(lane, middle)
+    heading, width = math.radians(angle), lane.getWidth()
+    left = (x - math.cos(heading) * width, y + math.sin(heading) * width)
+    best = None
+    for other, distance in net.getNeighboringLanes(*left, r=lane.getWidth()):
+        if other.getEdge() is lane.getEdge() or not other.allows("passenger"):
+            continue
+        offset, _ = sumolib.geomhelper.polygonOffsetAndDistanceToPoint(left, other.getShape())
+        other_angle = lane_pose(other, min(offset, other.getLength() - 1.0))[2]
+        if abs((other_angle - angle) % 360 - 180) < 10 and (best is None or distance < best[1]):
+            best = (other, distance)
+    return best[0] if best else None
+
+
 def scene_on(net_path) -> tuple[dict, list]:
-    """A frame of the ego on a straight lane of Town01 with an oncoming lane, and the truck's entry:
-    its front TRUCK_AHEAD metres ahead in the oncoming lane, facing the ego."""
+    """A frame of the ego on a straight lane of the net with an oncoming lane, and the truck's
+    entry: its front TRUCK_AHEAD metres ahead in the oncoming lane, facing the ego."""
     import sumolib
 
     net = sumolib.net.readNet(str(net_path))
     for edge in sorted(net.getEdges(), key=lambda e: e.getID()):
         lanes = [lane for lane in edge.getLanes() if lane.allows("passenger")]
-        if not lanes or lanes[-1].getNeigh() is None or lanes[0].getLength() < 120:
+        if not lanes or lanes[0].getLength() < 120:
             continue
-        lane, oncoming = lanes[0], net.getLane(lanes[-1].getNeigh())   # the rightmost lane; the opposite one
+        lane = lanes[0]   # the rightmost car lane
         x, y, angle = lane_pose(lane, EGO_AT)
         far_x, far_y, far_angle = lane_pose(lane, EGO_AT + TRUCK_AHEAD + TRUCK_LENGTH)
         if abs((far_angle - angle + 180) % 360 - 180) > 1.0:
             continue   # a straight stretch, so the projection's box is the truck's
-        tx, ty, tangle = lane_pose(oncoming, oncoming.getLength() - EGO_AT - TRUCK_AHEAD)
+        oncoming = oncoming_lane(net, lanes[-1])
+        if oncoming is None:
+            continue
+        # the truck's front TRUCK_AHEAD metres ahead of the ego's, along the oncoming lane
+        heading = math.radians(angle)
+        ahead = (x + math.sin(heading) * TRUCK_AHEAD, y + math.cos(heading) * TRUCK_AHEAD)
+        along, _ = sumolib.geomhelper.polygonOffsetAndDistanceToPoint(ahead, oncoming.getShape())
+        if along <= 0.0 or along + TRUCK_LENGTH >= oncoming.getLength():
+            continue
+        tx, ty, tangle = lane_pose(oncoming, along)
+        if abs((tangle - angle) % 360 - 180) > 1.0:
+            continue
         frame = {"type": "frame", "t": 10.0, "x": x, "y": y, "angle": angle, "speed": 0.0,
                  "road": edge.getID(), "lane": lane.getID(), "mode": "auto",
                  "junction": edge.getToNode().getID(), "length": 5.0, "width": 1.8, "signals": 0,
                  "route": [edge.getID()], "vehicles": [], "persons": []}
         truck = [tx, ty, tangle, "oncoming", 0.0, 7, TRUCK_LENGTH, TRUCK_TYPE.width, TRUCK_HEIGHT, "truck", 8]
         return frame, truck
-    raise AssertionError("Town01 has no straight road with an oncoming lane")
-
+    raise AssertionError(f"{net_path} has no straight road with an oncoming lane")
 
 
 def project(frame: dict, points, width: int, height: int) -> np.ndarray:

@@ -98,6 +98,11 @@ def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_i
     analysis = json.loads(result.output)
     assert analysis["engine"] == "live"
     assert [(c["spec"], c["condition"], c["n"]) for c in analysis["cells"]] == [("phi1", "free", 1)]
+    # the manual-driving table: one row per incident type with a takeover (assisted: the reaction only)
+    incidents = pd.read_parquet(study.study_dir / "incidents.parquet")
+    took = incidents[incidents["takeover"]]
+    assert sum(row["takeovers"] for row in analysis["manual_driving"]) == len(took)
+    assert all(row["by_wheel"] == 0 for row in analysis["manual_driving"])
     fit_path = tmp_path / "fit.json"
     fitted = CliRunner().invoke(cli, ["fit", str(study.study_dir), "--out", str(fit_path), "--json"])
     assert fitted.exit_code == 0, fitted.output

@@ -15,8 +15,11 @@ from trustroute.harness.live.worker import (
     LiveOptions,
     RemoteDriver,
     live_summary,
+    sumo_config,
+    with_manual_measures,
     with_reports,
 )
+from trustroute.harness.simulation.episode import COMMIT_DISTANCE
 from trustroute.harness.simulation.episode_tracker import EpisodeTracker
 from trustroute.harness.simulation.manual_driving import WARN_DISTANCE
 from trustroute.harness.study.context import study_context
@@ -113,6 +116,55 @@ def test_without_a_hand_back_the_ego_waits_short_of_the_junction(tmp_path):
     back = ticks["time"][(ticks["mode"] == "auto") & (ticks["time"] > manual.min())].min()
     assert back > waited[39] and manual.max() >= waited[39]   # handed back by the person, after waiting
 
+
+def keep_lane(sumo, pose) -> dict:
+    """A person keeping their lane by wheel: steering against the heading's error to the lane and
+    the ego's lateral offset (SUMO's, left positive), the accelerator held down."""
+    ego = "ego"
+    lane, position = sumo.vehicle.getLaneID(ego), sumo.vehicle.getLanePosition(ego)
+    error = (sumo.lane.getAngle(lane, position) - pose.angle + 180.0) % 360.0 - 180.0
+    steer = 0.05 * error + 0.3 * sumo.vehicle.getLateralLanePosition(ego)
+    return {"type": "control", "steer": max(-1.0, min(1.0, steer)), "throttle": 0.6, "brake": 0.0}
+
+
+def test_by_wheel_without_a_hand_back_the_ego_is_held_short_of_the_junction(tmp_path):
+    """Continuous driving, the accelerator held down: the wheel's hold stops the car before the
+    commit point (harness/simulation/wheel_driving.py `Wheel`) until the person hands back."""
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([], hand_back_when_warned=False)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
+    held, taken = [], []
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        room = sumo.lane.getLength(ego.lane) - ego.lane_position if ego.road == road else 0.0
+        if not taken and room > WARN_DISTANCE + 50.0:
+            taken.append(road)
+            pipe.controls.append({"type": "takeover"})
+        if mode == "manual" and driver.wheel.pose is not None and not held:
+            pipe.controls.append(keep_lane(sumo, driver.wheel.pose))
+        if mode == "manual" and ego.speed == 0.0 and ego.road == road:
+            held.append((ego.time, sumo.lane.getLength(ego.lane) - ego.lane_position))
+            if len(held) == 40:
+                pipe.controls.append({"type": "hand_back"})
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+                                 sumo_config=sumo_config(driver.options))
+    assert [e["type"] for e in driver.wheel.events] == ["hold"]   # in its lane all along
+    assert len(held) >= 40 and {round(left, 2) for _, left in held} == {round(held[0][1], 2)}
+    assert held[0][1] > COMMIT_DISTANCE   # standing before the commit point, accelerator down
+    kinds = [m.get("kind") for m in pipe.sent if m["type"] == "warning"]
+    assert kinds == ["hand_back", "hold"]
+    ticks = record.kinematics
+    manual = ticks["time"][ticks["mode"] == "manual"]
+    back = ticks["time"][(ticks["mode"] == "auto") & (ticks["time"] > manual.min())].min()
+    assert back > held[39][0] and len(record.roads) > 2   # handed back, and the episode went on
+    # the takeover's measures: in its lane all along, braked by the hold at 3 m/s² (and rolling)
+    row = with_manual_measures(record, driver.wheel).incidents.query("takeover").iloc[0]
+    assert (row["road_departures"], row["collisions"], row["oncoming_seconds"]) == (0, 0, 0.0)
+    assert 0.0 < row["lateral_sd"] < 0.5 and 3.0 < row["manual_max_deceleration"] < 3.3
+    assert row["manual_min_ttc"] > 0.0
 
 
 def test_the_tracker_decides_as_for_the_same_observations_headless(tmp_path):

@@ -7,12 +7,16 @@ import math
 
 import pytest
 
+from trustroute.harness.simulation.episode import COMMIT_DISTANCE
+from trustroute.harness.simulation.manual_driving import HOLD_MARGIN, hold_distance
 from trustroute.harness.simulation.wheel_driving import (
+    CREEP_SPEED,
     MODEL_RATE,
     Controls,
     ManualDriving,
     Pose,
     VehicleParams,
+    Wheel,
     corners,
     integrate,
     overlaps,
@@ -155,3 +159,77 @@ def test_leaving_the_road_is_an_event_and_sumo_keeps_the_ego_on_its_route(net):
     assert [event["type"] for event in driving.events][:1] == ["off_road"]
     assert {lane for _, _, _, lane, *_ in trace} == {"A-E_1"} and trace[-1][4] == ("A-E",)
     assert driving.where == "off_road" and not trace[-1][5]   # no hand-back off the road
+
+
+def drive_to_the_junction(net, program, start=418.0):
+    """A person driving the ego by `Wheel` (the live episode's hook) towards the end of A-E, the
+    episode's open road: `program` as in `drive`, then a hand-back and 3 s of SUMO's driving.
+    Returns (trace of (time, lane, distance to A-E's end by the model, model speed, may hand back),
+    SUMO's trace after the hand-back (lane, speed, route), wheel)."""
+    from trustroute.harness.simulation.sumo_start import SumoConfig, fresh_session
+
+    with fresh_session(net, 1, SumoConfig(step_length=0.1)) as sumo:
+        sumo.route.add("planned", ["A-E", "E-D"])
+        sumo.vehicle.add("ego", "planned", departPos=str(start), departSpeed="8", departLane="1")
+        sumo.simulationStep()
+        end = sumo.lane.getShape("A-E_1")[-1]
+        wheel = Wheel("ego", COMMIT_DISTANCE)
+        trace = []
+        for seconds, controls in program:
+            for _ in range(round(seconds / 0.1)):
+                wheel.step(sumo, True, "A-E")
+                wheel.controls = controls   # (a takeover starts from released controls)
+                sumo.simulationStep()
+                pose = wheel.driving.pose
+                trace.append((sumo.simulation.getTime(), sumo.vehicle.getLaneID("ego"),
+                              math.hypot(pose.x - end[0], pose.y - end[1]), pose.speed, wheel.may_hand_back))
+        after = []
+        for _ in range(30):
+            wheel.step(sumo, False, "A-E")
+            sumo.simulationStep()
+            after.append((sumo.vehicle.getLaneID("ego"), sumo.vehicle.getSpeed("ego"),
+                          tuple(sumo.vehicle.getRoute("ego"))))
+    return trace, after, wheel
+
+
+def test_a_person_in_their_lane_is_held_before_the_junction_until_the_hand_back(net):
+    # throttle held all the way: the car still stops short of the commit point's margin
+    trace, after, wheel = drive_to_the_junction(net, [(12.0, Controls(throttle=0.5))])
+    kinds = [event["type"] for event in wheel.events]
+    assert kinds == ["hold"], kinds
+    hold = wheel.events[0]
+    speed_then = next(speed for t, _, _, speed, _ in trace if t >= hold["t"])
+    assert hold["remaining"] <= hold_distance(speed_then, COMMIT_DISTANCE) + 1.0
+    stopped = [step for step in trace if step[3] == 0.0]
+    assert stopped and stopped[0][0] < trace[-1][0] - 3.0   # standing for seconds, throttle held
+    assert {round(step[2], 3) for step in stopped} == {round(stopped[0][2], 3)}
+    assert stopped[0][2] > HOLD_MARGIN and all(step[4] for step in stopped)
+    assert {lane for lane, *_ in after} == {"A-E_1"} and after[-1][1] > 1.0   # the autopilot drives on
+
+
+def test_a_person_in_the_oncoming_lane_is_guided_back_and_stopped_short_of_the_junction(net):
+    # out into the oncoming lane and along it (the lanes bend 3 degrees left on the way)
+    out = [(1.0, Controls(steer=-0.25, throttle=0.3)), (0.9, Controls(steer=0.25, throttle=0.3))]
+    trace, after, wheel = drive_to_the_junction(net, [*out, (22.0, Controls(throttle=0.6))])
+    kinds = [event["type"] for event in wheel.events]
+    assert kinds == ["oncoming", "guide_back", "held_off_lane"], kinds
+    guided, held = wheel.events[1]["t"], wheel.events[2]["t"]
+    # throttle held: no faster than a creep once guided back (but for the first step's braking)
+    creeping = [speed for t, _, _, speed, _ in trace if t > guided + 3.0 and t <= held]
+    assert creeping and max(creeping) <= CREEP_SPEED + 0.2
+    passing = [hand_back for t, *_, hand_back in trace if wheel.events[0]["t"] < t < held]
+    assert passing and not any(passing)   # no hand-back in the oncoming lane until held there
+    assert trace[-1][1] == "E-A_1" and trace[-1][3] == 0.0 and trace[-1][4]   # stopped, and may hand back
+    assert 0.0 < trace[-1][2] <= HOLD_MARGIN + 1.0    # short of the junction
+    # the hand-back: the autopilot takes the car from the nearest place on its route
+    assert after[0][0] == "A-E_1" and after[-1][2] == ("A-E", "E-D") and after[-1][1] > 1.0
+
+
+def test_a_person_guided_back_into_their_lane_is_held_there(net):
+    out = [(1.0, Controls(steer=-0.25, throttle=0.3)), (0.9, Controls(steer=0.25, throttle=0.3))]
+    back = [(1.5, Controls(steer=0.5)), (1.5, Controls(steer=-0.5))]
+    trace, _, wheel = drive_to_the_junction(net, [*out, (2.5, Controls(throttle=0.6)), *back,
+                                                  (6.0, Controls(throttle=0.6))])
+    kinds = [event["type"] for event in wheel.events]
+    assert kinds == ["oncoming", "guide_back", "own_lane"], kinds
+    assert trace[-1][1] == "A-E_1" and trace[-1][3] == 0.0 and trace[-1][4] and trace[-1][2] > HOLD_MARGIN
