@@ -30,6 +30,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 from trustroute.core.errors import InputError
 from trustroute.core.validation import parse_toml, read_text
@@ -184,8 +185,12 @@ def load_questionnaire(path: Path, source: str) -> Questionnaire:
     if not isinstance(scale, dict) or set(scale) - {"min", "max", "step", "low", "high"}:
         raise bad("scale", "expected { min, max, step, low, high }", "write scale = { min = 1, max = 5 }")
     low, high, step = scale.get("min"), scale.get("max"), scale.get("step", 1)
-    numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (low, high, step))
-    if not numbers or not low < high or step <= 0 or ((high - low) / step) % 1:
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in (low, high, step)):
+        raise bad(
+            "scale", "min < max with max - min a multiple of step (> 0) is needed", "e.g. min = 1, max = 7"
+        )
+    low, high, step = cast(float, low), cast(float, high), cast(float, step)  # checked numbers above
+    if not low < high or step <= 0 or ((high - low) / step) % 1:
         raise bad(
             "scale", "min < max with max - min a multiple of step (> 0) is needed", "e.g. min = 1, max = 7"
         )

@@ -25,7 +25,8 @@ DOCS = Path(__file__).resolve().parents[1] / "docs" / "formats"
 # doc -> {key path prefix: the field table of the keys under it}
 ACCEPTED: dict[str, dict[str, tuple[Field, ...]]] = {
     "study_config.md": {"": study_config.FIELDS, "study": study_config.STUDY_FIELDS,
-                        "population": population.FIELDS, "drivers": study_config.DRIVERS_FIELDS},
+                        "population": population.FIELDS, "drivers": study_config.DRIVERS_FIELDS,
+                        "live": study_config.LIVE_FIELDS},
     "spec.md": {"": spec.FIELDS, "beliefs": spec.BELIEF_FIELDS, "trust_states": spec.TRUST_STATE_FIELDS,
                 "type_beliefs": spec.TYPE_BELIEF_FIELDS},
     "town.md": {"": town.FIELDS},

@@ -87,7 +87,8 @@ class AttemptLog:
                        "started_utc": record["utc"], "ended_utc": None, "outcome": "started", "reason": None}
                 rows.append(row)
                 open_rows[episode] = row
-            elif (row := open_rows.pop(episode, None)) is not None:
+            elif episode in open_rows:
+                row = open_rows.pop(episode)
                 row.update(ended_utc=record["utc"], outcome=record["outcome"], reason=record["reason"])
                 if row["outcome"] == "done" and not row["warm_up"]:
                     row["run_position"] = done.get(participant, 0)

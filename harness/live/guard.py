@@ -20,6 +20,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import ipaddress
 import socket
 from collections.abc import Mapping
@@ -138,7 +139,9 @@ class GuardedH11Protocol(H11Protocol):
 
     request_seconds = 10.0
 
-    def connection_made(self, transport) -> None:  # type: ignore[override]
+    request_deadline: asyncio.TimerHandle | None = None
+
+    def connection_made(self, transport) -> None:
         super().connection_made(transport)
         self.request_deadline = None
         self.arm()
@@ -148,7 +151,7 @@ class GuardedH11Protocol(H11Protocol):
         self.request_deadline = self.loop.call_later(self.request_seconds, self.too_slow)
 
     def disarm(self) -> None:
-        if getattr(self, "request_deadline", None) is not None:
+        if self.request_deadline is not None:
             self.request_deadline.cancel()
             self.request_deadline = None
 

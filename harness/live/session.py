@@ -85,7 +85,7 @@ class Session:
         `before` ones first, then the `after_each_trial` ones of each done trial, then the `end`
         ones once every trial is done (harness/live/answers.py)."""
         plan, study_dir, p = self.study.questionnaires, self.study.study_dir, self.participant
-        asked = [("before", None, q) for q in plan["before"]]
+        asked: list[tuple[str, str | None, Questionnaire]] = [("before", None, q) for q in plan["before"]]
         asked += [("after_each_trial", task.episode_id, q) for task in self.tasks if self.study.is_done(task)
                   for q in plan["after_each_trial"]]
         if all(self.study.is_done(task) for task in self.tasks):
@@ -181,7 +181,10 @@ class Session:
 
     def answer(self, message: Answers) -> None:
         """The participant's answers to the questionnaire shown: checked, saved, on to the next phase."""
-        placement, trial, questionnaire = self.pending_questionnaire()
+        pending = self.pending_questionnaire()
+        if pending is None:
+            raise MessageError("out_of_order", "no questionnaire is shown")
+        placement, trial, questionnaire = pending
         if message.questionnaire != questionnaire.name:
             raise MessageError("out_of_order", f"the questionnaire shown is {questionnaire.name}")
         try:

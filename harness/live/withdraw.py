@@ -113,7 +113,7 @@ def withdraw_participant(study_dir: Path, participant: int, by: str | None = Non
     withdrawn_utc = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     records["participants"][str(participant)] = {"withdrawn": True, "withdrawn_utc": withdrawn_utc}
     write_registry(study_dir, records)
-    if consolidated:
+    if config is not None:
         consolidate(study_dir, config, plan_episodes(config), manifest["config_hash"],
                     manifest.get("expected"), manifest.get("run"))
     if (study_dir / ATTEMPTS_FILE).exists() or (study_dir / LIVE_DIR / JOURNAL).exists():

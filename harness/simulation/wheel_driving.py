@@ -377,9 +377,9 @@ class Wheel:
     def sample(self, sumo) -> None:
         """The step's sample of the person's driving (manual_measures.py), at SUMO's time now."""
         driving = self.driving
-        pose = driving.current if driving is not None else None
-        if pose is None or not driving.edge or driving.edge.startswith(":"):
+        if driving is None or driving.current is None or not driving.edge or driving.edge.startswith(":"):
             return
+        pose = driving.current
         lane = f"{driving.edge}_{driving.lane_index}"
         if lane not in self.shapes:
             self.shapes[lane] = list(sumo.lane.getShape(lane))

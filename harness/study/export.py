@@ -60,11 +60,12 @@ def pseudonymised(table: pa.Table, key: dict[int, int]) -> pa.Table:
         index = names.index("episode_id")
 
         def renamed(episode: str | None) -> str | None:
-            match = None if episode is None else EPISODE_PARTICIPANT.match(episode)
-            return episode if match is None else f"p{key[int(match.group(1))]:05d}-{episode[match.end():]}"
+            if episode is None or (match := EPISODE_PARTICIPANT.match(episode)) is None:
+                return episode
+            return f"p{key[int(match.group(1))]:05d}-{episode[match.end():]}"
 
-        values = [renamed(e) for e in table.column(index).to_pylist()]
-        table = table.set_column(index, table.schema.field(index), pa.array(values, pa.string()))
+        ids = [renamed(e) for e in table.column(index).to_pylist()]
+        table = table.set_column(index, table.schema.field(index), pa.array(ids, pa.string()))
     return table
 
 

@@ -107,6 +107,7 @@ class JointSynthesisStats:
 
     def to_dict(self) -> dict:
         value = self.policy_value
+        policy_value: dict[str, object]
         if value.converged is None:
             policy_value = {"lower": value.lower, "upper": value.upper,
                             "max_junctions": self.policy_search_horizon}
