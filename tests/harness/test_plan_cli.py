@@ -5,6 +5,7 @@ simulated studies' outcomes are the model engine's (harness/study/planning.py)."
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -92,3 +93,27 @@ def test_simulated_outcomes_follow_the_model_engine(config_path):
 def test_bad_input_is_one_line(config_path, capsys, tmp_path, args, where):
     code, out, err = run_cli(capsys, "plan", str(config_path), *args, "--out", str(tmp_path))
     assert code == 2 and err.count("\n") == 1 and where in err, err
+
+
+REPO = Path(__file__).resolve().parents[2]
+DEMO_PREREGISTRATION = REPO / "docs" / "preregistration_demo.md"
+
+
+@pytest.mark.slow
+def test_the_demo_preregistration_in_docs_is_plans_answer(capsys, tmp_path):
+    """docs/preregistration_demo.md (written by `trustroute plan harness/study/examples/paper.toml
+    --participants 8:60:4 --test mcnemar --test conditional_or --preregistration ...`): its tables
+    and sample size are its JSON block's, and that block's rows at the registered size, the size
+    where φ2 first reaches the target, are what `plan --json` answers today for that size alone
+    (the simulated studies of one size do not depend on the other sizes tried)."""
+    text = DEMO_PREREGISTRATION.read_text()
+    block = json.loads(text.split("```json\n", 1)[1].split("\n```", 1)[0])
+    _check_preregistration(text, block)
+    reached = [found["participants"] for found in block["minimal_participants"] if found["participants"]]
+    assert reached, "no planned test reaches the target in the document"
+    size = min(reached)
+    answer = cli_json(capsys, "plan", str(REPO / block["config_path"]), "--participants", str(size),
+                      *[arg for test in block["tests"] for arg in ("--test", test)],
+                      "--seed", str(block["seed"]), "--out", str(tmp_path))
+    assert answer["config_hash"] == block["config_hash"]
+    assert answer["power"] == [row for row in block["power"] if row["participants"] == size]
