@@ -126,17 +126,7 @@ def encode_part(task: EpisodeTask, summary: dict, tables: dict[str, pa.Table]) -
         "tables": {name: {"rows": tables[name].num_rows, "sha256": hashlib.sha256(blob).hexdigest()}
                    for name, blob in blobs.items()},
     }
-    meta_bytes = json.dumps(meta, sort_keys=True).encode()
-    checksum = hashlib.sha256(meta_bytes)
-    for name in PART_TABLES:
-        checksum.update(blobs[name])
-    buffer = io.BytesIO()
-    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_STORED) as archive:
-        entries = [(META_ENTRY, meta_bytes), *((f"{name}.arrows", blobs[name]) for name in PART_TABLES),
-                   (CHECKSUM_ENTRY, checksum.hexdigest().encode())]
-        for entry, data in entries:
-            archive.writestr(zipfile.ZipInfo(entry, date_time=ZIP_DATE), data)
-    return buffer.getvalue()
+    return part_archive(meta, blobs)
 
 
 def write_part(
@@ -323,17 +313,7 @@ def encode_batch_part(tasks: list[EpisodeTask], summaries: list[dict], rows: lis
         "tables": {name: {"rows": joined[name].num_rows, "sha256": hashlib.sha256(blob).hexdigest()}
                    for name, blob in blobs.items()},
     }
-    meta_bytes = json.dumps(meta, sort_keys=True).encode()
-    checksum = hashlib.sha256(meta_bytes)
-    for name in PART_TABLES:
-        checksum.update(blobs[name])
-    buffer = io.BytesIO()
-    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_STORED) as archive:
-        entries = [(META_ENTRY, meta_bytes), *((f"{name}.arrows", blobs[name]) for name in PART_TABLES),
-                   (CHECKSUM_ENTRY, checksum.hexdigest().encode())]
-        for entry, data in entries:
-            archive.writestr(zipfile.ZipInfo(entry, date_time=ZIP_DATE), data)
-    return buffer.getvalue()
+    return part_archive(meta, blobs)
 
 
 def write_batch_part(study_dir: Path, tasks: list[EpisodeTask], summaries: list[dict],
@@ -422,3 +402,19 @@ def read_batch_part(path: Path) -> list[Part]:
         parts.append(Part(episode_id=entry["episode_id"], task=entry["task"], summary=entry["summary"],
                           tables=own))
     return parts
+
+
+def part_archive(meta: dict, blobs: dict[str, bytes]) -> bytes:
+    """A part's zip, one format for an episode's part and a batch's: the metadata, each table's
+    Arrow stream, and the checksum over both (fixed entry dates, so equal parts are equal bytes)."""
+    meta_bytes = json.dumps(meta, sort_keys=True).encode()
+    checksum = hashlib.sha256(meta_bytes)
+    for name in PART_TABLES:
+        checksum.update(blobs[name])
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_STORED) as archive:
+        entries = [(META_ENTRY, meta_bytes), *((f"{name}.arrows", blobs[name]) for name in PART_TABLES),
+                   (CHECKSUM_ENTRY, checksum.hexdigest().encode())]
+        for entry, data in entries:
+            archive.writestr(zipfile.ZipInfo(entry, date_time=ZIP_DATE), data)
+    return buffer.getvalue()
