@@ -33,10 +33,14 @@ browser:
 	  fi; }
 
 # pytest exits 5 when it collects nothing; that is not a failure of the project.
-# One pytest-xdist worker per core, and one more: the live and browser tests wait on the wall clock
+# One pytest-xdist worker per core, and one more (the `serial` browser session runs alone afterwards): the live and browser tests wait on the wall clock
 # (a study at wall-clock pace), and the extra worker runs other tests meanwhile.
 test: $(STAMP) browser
-	$(BIN)/python -m pytest -q -n $$(( $$(nproc) + 1 )) --durations=10; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
+	$(BIN)/python -m pytest -q -n $$(( $$(nproc) + 1 )) -m "not serial" --durations=10; rc=$$?; \
+	if [ $$rc -eq 5 ]; then echo "no tests collected"; rc=0; fi; \
+	$(BIN)/python -m pytest -q -m serial; serial=$$?; \
+	if [ $$serial -eq 5 ]; then echo "no serial tests collected"; serial=0; fi; \
+	if [ $$rc -ne 0 ]; then exit $$rc; fi; exit $$serial
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
