@@ -208,14 +208,7 @@ def _part_meta(path: Path, blob: bytes) -> dict:
 
 def _part_table(path: Path, name: str, blob: bytes, recorded: dict, episode: str) -> pa.Table:
     """One table of a part: its recorded SHA-256 and row count, its schema, the part's episode."""
-    if recorded.get("sha256") != hashlib.sha256(blob).hexdigest():
-        raise PartError(f"{path}: table {name} does not match its SHA-256")
-    try:
-        table = with_added_columns(pa.ipc.open_stream(blob).read_all(), PART_TABLES[name],
-                                   ADDED_COLUMNS.get(name, ()))   # a part written before them
-        table = check_table(table, PART_TABLES[name], f"{path.name}:{name}")
-    except (pa.ArrowException, SchemaError, ValueError) as exc:
-        raise PartError(f"{path}: table {name}: {exc}") from None
+    table = _checked_table(path, name, blob, recorded)
     if table.num_rows != recorded.get("rows"):
         raise PartError(f"{path}: table {name} has {table.num_rows} rows, part.json says "
                         f"{recorded.get('rows')}")
@@ -372,15 +365,7 @@ def read_batch_part(path: Path) -> list[Part]:
     tables: dict[str, pa.Table] = {}
     for name in PART_TABLES:
         recorded = (meta.get("tables") or {}).get(name) or {}
-        blob = entries[f"{name}.arrows"]
-        if recorded.get("sha256") != hashlib.sha256(blob).hexdigest():
-            raise PartError(f"{path}: table {name} does not match its SHA-256")
-        try:
-            table = with_added_columns(pa.ipc.open_stream(blob).read_all(), PART_TABLES[name],
-                                       ADDED_COLUMNS.get(name, ()))   # a part written before them
-            table = check_table(table, PART_TABLES[name], f"{path.name}:{name}")
-        except (pa.ArrowException, SchemaError, ValueError) as exc:
-            raise PartError(f"{path}: table {name}: {exc}") from None
+        table = _checked_table(path, name, entries[f"{name}.arrows"], recorded)
         counts = [entry["rows"].get(name) for entry in episodes]
         if not all(isinstance(c, int) and c >= 0 for c in counts) or sum(counts) != table.num_rows \
                 or table.num_rows != recorded.get("rows"):
@@ -418,3 +403,16 @@ def part_archive(meta: dict, blobs: dict[str, bytes]) -> bytes:
         for entry, data in entries:
             archive.writestr(zipfile.ZipInfo(entry, date_time=ZIP_DATE), data)
     return buffer.getvalue()
+
+
+def _checked_table(path: Path, name: str, blob: bytes, recorded: dict) -> pa.Table:
+    """A part's table `name` read from its Arrow stream: its recorded SHA-256 and its schema checked
+    (an episode's part and a batch's alike)."""
+    if recorded.get("sha256") != hashlib.sha256(blob).hexdigest():
+        raise PartError(f"{path}: table {name} does not match its SHA-256")
+    try:
+        table = with_added_columns(pa.ipc.open_stream(blob).read_all(), PART_TABLES[name],
+                                   ADDED_COLUMNS.get(name, ()))   # a part written before them
+        return check_table(table, PART_TABLES[name], f"{path.name}:{name}")
+    except (pa.ArrowException, SchemaError, ValueError) as exc:
+        raise PartError(f"{path}: table {name}: {exc}") from None
