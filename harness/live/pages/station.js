@@ -212,15 +212,16 @@ function readInputs() {
   const controls = inputs.read(now - lastRead);
   lastRead = now;
   if (state.phase !== "driving") return;
+  if (!controls) { notice(inputs.missing()); return; }
   if (controls.toggle) toggle();
   if (mode !== "manual") { sentControl = null; return; }
-  const { steer, throttle, brake } = controls;
+  const { steer, throttle, brake, source } = controls;
   const changed = !sentControl || Math.abs(steer - sentControl.steer) > 0.005
     || Math.abs(throttle - sentControl.throttle) > 0.01 || Math.abs(brake - sentControl.brake) > 0.01;
   if (changed && now - sentAt >= CONTROL_INTERVAL) {
     sentControl = { steer, throttle, brake };
     sentAt = now;
-    send({ type: "control", steer: round(steer), throttle: round(throttle), brake: round(brake) });
+    send({ type: "control", source, steer: round(steer), throttle: round(throttle), brake: round(brake) });
   }
 }
 const round = (value) => Math.round(value * 1000) / 1000;
@@ -231,9 +232,9 @@ function animate() {
   requestAnimationFrame(animate);
 }
 
-function setDriving(kind) {
+function setDriving(kind, allowed) {
   continuous = kind === "continuous";
-  if (continuous && !inputs) inputs = new Inputs();
+  if (continuous && !inputs) inputs = new Inputs(allowed);
   $("manual-controls").classList.toggle("hidden", continuous);
   $("wheel-help").classList.toggle("hidden", !continuous);
   $("calibrate-box").classList.toggle("hidden", !continuous);
@@ -324,7 +325,7 @@ function onMessage(message) {
     case "welcome":
       $("consent-text").textContent = message.consent;
       setView(message.view === "map" ? "map" : "driver");
-      setDriving(message.driving);
+      setDriving(message.driving, message.inputs);
       break;
     case "state": onState(message); break;
     case "frame": onFrame(message); break;
