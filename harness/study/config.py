@@ -465,7 +465,15 @@ def _robust_population(study: StudyValues, conditions: tuple[str, ...], base: Pa
     return robust_population
 
 
-def _live(table: dict[str, object] | None, source: str) -> dict[str, object]:
+class LiveSettings(TypedDict):
+    """StudyConfig's fields from the [live] table."""
+
+    live_view: str
+    live_driving: str
+    live_inputs: tuple[str, ...]
+
+
+def _live(table: dict[str, object] | None, source: str) -> LiveSettings:
     """The [live] table's StudyConfig fields; `inputs` choose among continuous driving's inputs."""
     live = check_fields(table or {}, LIVE_FIELDS, source, "study config", "live")
     if live["inputs"] is not None and live["driving"] != "continuous":
@@ -473,7 +481,7 @@ def _live(table: dict[str, object] | None, source: str) -> dict[str, object]:
                          f"study drives {live['driving']!r}",
                          'add driving = "continuous" to [live], or remove inputs')
     inputs = LIVE_INPUTS if live["inputs"] is None else tuple(i for i in LIVE_INPUTS if i in live["inputs"])
-    return {"live_view": live["view"], "live_driving": live["driving"], "live_inputs": inputs}
+    return LiveSettings(live_view=live["view"], live_driving=live["driving"], live_inputs=inputs)
 
 
 def _belief_source(study: StudyValues, source: str) -> str | None:
