@@ -34,7 +34,8 @@ const WARNINGS = { back_to_lane: "Back into your lane first: then hand back.", c
                    off_road: "You left the road.", oncoming: "", own_lane: "", on_road: "",
                    hold: "The junction is near: the car stops here. Hand back now.",
                    guide_back: "The junction is near: steer back into your lane, then hand back.",
-                   held_off_lane: "Stopped before the junction: hand back now." };
+                   held_off_lane: "Stopped before the junction: hand back now.",
+                   stopped_off_road: "Off the road: the car has stopped. Hand back now." };
 
 function show(step) {
   for (const id of steps) $(id).classList.toggle("hidden", id !== step);
