@@ -18,7 +18,8 @@ pose is the ego's in SUMO.
 Events (dicts with `t`, `type` and details), each logged when it begins:
 - `off_road`: the ego's centre is on no lane open to cars (SUMO maps it to none, or to a lane
   farther away than half its width); `on_road` when it is back;
-- `oncoming`: on a lane of the road's opposite direction; `own_lane` when back on its route;
+- `oncoming`: on a lane of the opposite direction of its road or of another road of its route;
+  `own_lane` when back on its route;
 - `collision` (`object`, `speed`): the ego's footprint overlaps a vehicle's or a person's (oriented
   rectangles, `overlaps`). What a collision does: the ego stops where it is (the model's speed is
   set to 0) and stands there while it touches what it hit, whatever the pedals say; the person
@@ -180,6 +181,19 @@ def off_road(sumo, x: float, y: float) -> bool:
     return math.hypot(x - cx, y - cy) > sumo.lane.getWidth(lane) / 2
 
 
+def nearest_car_lane(sumo, edge: str, x: float, y: float) -> int:
+    """The index of the lane of `edge` open to cars whose centre line is nearest (x, y)."""
+    best = (math.inf, 0)
+    for index in range(sumo.edge.getLaneNumber(edge)):
+        lane = f"{edge}_{index}"
+        allowed = sumo.lane.getAllowed(lane)
+        if allowed and "passenger" not in allowed:
+            continue
+        px, py, _ = nearest_on(sumo.lane.getShape(lane), x, y)
+        best = min(best, (math.hypot(x - px, y - py), index))
+    return best[1]
+
+
 def restore_route(sumo, vehicle_id: str, route: list[str]) -> bool:
     """After a free placement: the planned route again from the edge the ego is on, when that
     edge is on it (True then). A route SUMO has that goes on from there as planned is kept: the
@@ -243,17 +257,27 @@ class ManualDriving:
     def may_hand_back(self) -> bool:
         return self.where == "own_lane" or self.collided or self.stranded
 
-    def release(self, sumo) -> bool:
+    def release(self, sumo, ahead: str | None = None) -> bool:
         """The hand-back: SUMO drives on from here. Away from a lane of the route (after a
         collision, or held off its lane before the junction) the ego is first put at the nearest
         place of its lane on the planned road, facing along it; True then: the planned route is
-        to be given back once SUMO has it there (`restore_route`)."""
-        if (self.where == "own_lane" and not self.stranded) or not self.edge or self.edge.startswith(":"):
+        to be given back once SUMO has it there (`restore_route`). So is a car that its last
+        placement put on a road off its route (free placement maps the model's pose by itself).
+        Taken over in a junction and never on a road of its route since, the ego is put on the
+        nearest lane open to cars of `ahead` (the episode's open road: the one after that
+        junction)."""
+        now_on = sumo.vehicle.getRoadID(self.vehicle_id)
+        off_route = bool(now_on) and not now_on.startswith(":") and now_on not in self.route
+        if self.where == "own_lane" and not self.stranded and not off_route:
             return False
-        edge = self.edge
-        lane = f"{edge}_{self.lane_index}"
-        x, y, angle = nearest_on(sumo.lane.getShape(lane), self.pose.x, self.pose.y)
-        sumo.vehicle.moveToXY(self.vehicle_id, edge, self.lane_index, x, y, angle, KEEP_ROUTE_FREE)
+        if self.edge and not self.edge.startswith(":"):
+            edge, index = self.edge, self.lane_index
+        elif ahead in self.route:
+            edge, index = ahead, nearest_car_lane(sumo, ahead, self.pose.x, self.pose.y)
+        else:
+            return False
+        x, y, angle = nearest_on(sumo.lane.getShape(f"{edge}_{index}"), self.pose.x, self.pose.y)
+        sumo.vehicle.moveToXY(self.vehicle_id, edge, index, x, y, angle, KEEP_ROUTE_FREE)
         return True
 
     def placement(self, sumo) -> int:
@@ -312,8 +336,10 @@ class ManualDriving:
             self.where = where
 
     def opposite(self, edge: str) -> bool:
-        road = Road.parse_or_none(self.edge) if self.edge else None   # its own road, not the route's first
-        return road is not None and edge == road.reverse.id
+        """Whether `edge` runs against its own road or another road of its route (the oncoming
+        lane of the road it turns into, say, entered from the junction)."""
+        reverse = Road.parse_or_none(edge)
+        return reverse is not None and reverse.reverse.id in ([self.edge] if self.edge else []) + self.route
 
     def contacts(self, sumo, now: float) -> None:
         ego = corners(self.pose.x, self.pose.y, self.pose.angle, self.length, self.width)
@@ -398,7 +424,7 @@ class Wheel:
                 self.restore = None
             if self.driving is not None:   # handed back: SUMO drives on from the model's pose and speed
                 self.follow_route(sumo)   # the episode may have extended it in this very step
-                if self.driving.release(sumo):
+                if self.driving.release(sumo, road):
                     self.restore = list(self.driving.route)
                 self.driving = None
                 sumo.vehicle.setSpeed(self.vehicle_id, -1)
