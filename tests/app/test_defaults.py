@@ -9,6 +9,7 @@ import pytest
 
 import trustroute
 from tests.cli import cli_json
+from trustroute.app.planning import PlanSettings
 from trustroute.core import defaults
 from trustroute.core.packaged import SPEC_TOWNS, SPECS
 from trustroute.harness.cli import cli
@@ -40,6 +41,14 @@ def _api_default(function, name: str):
     ("run", "policy_name", trustroute.run_episode, "policy", defaults.POLICY),
     ("run", "seed", trustroute.run_episode, "seed", defaults.SEED),
     ("analyze", "belief_source", trustroute.analyze, "belief_source", defaults.BELIEF_SOURCE),
+    # `trustroute plan` and its run in the application layer (trustroute/app/planning.py)
+    ("plan", "sizes", PlanSettings, "sizes", defaults.PLAN_PARTICIPANTS),
+    ("plan", "alpha", PlanSettings, "alpha", defaults.PLAN_ALPHA),
+    ("plan", "target", PlanSettings, "target", defaults.PLAN_TARGET),
+    ("plan", "seed", PlanSettings, "seed", defaults.PLAN_SEED),
+    ("plan", "pilot_bootstrap", PlanSettings, "pilot_bootstrap", defaults.PILOT_BOOTSTRAP),
+    ("plan", "simulations", PlanSettings, "simulations", None),
+    ("plan", "pilot", PlanSettings, "pilot", None),
 ])
 def test_every_door_declares_the_one_default(command, option, function, argument, value):
     assert _option_default(command, option) == _api_default(function, argument) == value
