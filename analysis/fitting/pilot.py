@@ -21,7 +21,7 @@ import numpy as np
 
 from trustroute.analysis.fitting.driver_model import bootstrap_refits, fit_study
 from trustroute.analysis.study_directory import load_study, study_inputs
-from trustroute.core.dataset import EPISODES_FILE, ROADS_FILE
+from trustroute.core.dataset import EPISODES_FILE, MANIFEST_FILE, ROADS_FILE
 from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DriverModel
 
@@ -64,9 +64,10 @@ class PilotFit:
                 "fits": 1 + len(self.refits), "report_accuracy": self.report_accuracy}
 
 
-def check_pilot(study_dir: Path):
+def check_pilot(study_dir: Path, expected: DriverModel | None = None):
     """(manifest, episodes, roads, template) of a pilot study a plan can fit, or InputError: not a
-    finished study, too few participants, no trust report."""
+    finished study, too few participants, no trust report, or (given `expected`, the AV's driver
+    model) other trust levels or incidents than it has."""
     manifest, episodes, roads = load_study(study_dir)
     participants = int(episodes["participant"].nunique())
     if participants < MIN_PILOT_PARTICIPANTS:
@@ -81,15 +82,22 @@ def check_pilot(study_dir: Path):
                          "plan from a pilot whose drivers report trust (report_every in its config), "
                          "or plan with --driver")
     _, template, _ = study_inputs(manifest)
+    if expected is not None and (tuple(template.trust_levels) != tuple(expected.trust_levels)
+                                 or tuple(template.incident_types) != tuple(expected.incident_types)):
+        raise InputError(str(study_dir / MANIFEST_FILE), "config.driver_model",
+                         f"the pilot's trust levels {list(template.trust_levels)} / incidents "
+                         f"{list(template.incident_types)} differ from the planned study's "
+                         f"({list(expected.trust_levels)} / {list(expected.incident_types)})",
+                         "plan from a pilot run with the driver model of the config you plan")
     return manifest, episodes, roads, template
 
 
 def fit_pilot(study_dir: Path, resamples: int, rng: np.random.Generator, iterations: int = 200,
-              progress: Callable[[], object] | None = None) -> PilotFit:
+              progress: Callable[[], object] | None = None, expected: DriverModel | None = None) -> PilotFit:
     """The point fit of the pilot in `study_dir` and `resamples` refits on its participants drawn
-    from `rng` (module docstring); progress() after each refit."""
+    from `rng` (module docstring); progress() after each refit; `expected`: `check_pilot`'s."""
     study_dir = Path(study_dir)
-    _, episodes, roads, template = check_pilot(study_dir)
+    _, episodes, roads, template = check_pilot(study_dir, expected)
     point = fit_study(study_dir, method="auto", iterations=iterations)
     refits, converged = [], int(point.converged)
     for result in bootstrap_refits(roads, episodes, template, point.method, iterations, resamples, rng):

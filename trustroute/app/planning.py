@@ -80,16 +80,6 @@ class PlanRun:
     payload: dict
 
 
-def _check_model(model, nominal, where: str, place: str) -> None:
-    if (tuple(model.trust_levels) != tuple(nominal.trust_levels)
-            or tuple(model.incident_types) != tuple(nominal.incident_types)):
-        raise InputError(where, place,
-                         f"trust levels {list(model.trust_levels)} / incidents {list(model.incident_types)} "
-                         f"differ from the AV's driver model ({list(nominal.trust_levels)} / "
-                         f"{list(nominal.incident_types)})",
-                         "plan from a pilot run with the driver model and town of the config you plan")
-
-
 def pilot_model(config: StudyConfig, settings: PlanSettings,
                 progress: bool) -> tuple[ParticipantModel, PilotFit]:
     """The participants of a plan `--pilot`: the pilot's refits, one drawn per simulated study,
@@ -100,8 +90,8 @@ def pilot_model(config: StudyConfig, settings: PlanSettings,
     rng = np.random.default_rng(np.random.SeedSequence(settings.seed, spawn_key=(PILOT_KEY,)))
     with tqdm(total=settings.pilot_bootstrap, desc="pilot bootstrap refits", disable=not progress,
               leave=False) as bar:
-        fit = fit_pilot(Path(settings.pilot), settings.pilot_bootstrap, rng, progress=bar.update)
-    _check_model(fit.fitted, driver_of(config.driver_model), settings.pilot, "driver model")
+        fit = fit_pilot(Path(settings.pilot), settings.pilot_bootstrap, rng, progress=bar.update,
+                        expected=driver_of(config.driver_model))
     models = fit.models
     return ParticipantModel(label=fit.label(), types=models, weights=(1.0,) * len(models), per_study=True,
                             report_accuracy=fit.report_accuracy), fit

@@ -4,6 +4,8 @@ uncertainty), and a study that cannot be fitted is refused with the file, the pl
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -26,6 +28,10 @@ def test_the_pilot_is_fitted_by_fit_and_its_refits_are_seeded(pilot_study):
     assert "8 participants" in fit.label() and "6 bootstrap refits" in fit.label()
     alone = fit_pilot(pilot, 0, np.random.default_rng(3))
     assert alone.models == (alone.fitted,) and "uncertainty not drawn" in alone.label()
+    other = dataclasses.replace(fit.fitted, incident_types=("rain", *fit.fitted.incident_types[1:]))
+    with pytest.raises(InputError) as error:   # refused before any fit
+        fit_pilot(pilot, 2, np.random.default_rng(3), expected=other)
+    assert error.value.place == "config.driver_model" and "rain" in str(error.value)
 
 
 def test_a_study_directory_is_required(tmp_path):
