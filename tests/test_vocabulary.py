@@ -68,8 +68,6 @@ OVER_THE_LIMIT = frozenset({
     "trustroute.harness.commands.peer:paynt",
     "trustroute.harness.commands.run:run",
     "trustroute.harness.commands.study:study",
-    "trustroute.harness.commands.synth:synth",
-    "trustroute.harness.commands.synth:evaluate",
     "trustroute.harness.simulation.episode:run_episode",
     "trustroute.harness.simulation.episode_tracker:record_road",
     "trustroute.harness.simulation.gym_env:__init__",
