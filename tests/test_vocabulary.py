@@ -66,7 +66,6 @@ OVER_THE_LIMIT = frozenset({
     "trustroute.harness.commands.plan:plan",
     "trustroute.harness.commands.peer:storm",
     "trustroute.harness.commands.peer:paynt",
-    "trustroute.harness.commands.study:study",
     "trustroute.harness.simulation.episode:run_episode",
     "trustroute.harness.simulation.episode_tracker:record_road",
     "trustroute.harness.simulation.gym_env:__init__",
