@@ -62,7 +62,6 @@ OVER_THE_LIMIT = frozenset({
     "trustroute.analysis.fitting.mixture:bootstrap_type_count",
     "trustroute.harness.commands.fit:fit",
     "trustroute.harness.commands.fit:fit_types",
-    "trustroute.harness.commands.plan:plan",
     "trustroute.harness.commands.peer:storm",
     "trustroute.harness.commands.peer:paynt",
     "trustroute.harness.simulation.episode:run_episode",

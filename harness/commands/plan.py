@@ -10,12 +10,18 @@ sizes. docs/planning.md says what the simulation assumes and what it cannot tell
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
+from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import SEED, FiniteFloat, bounded_int
-from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
+from trustroute.harness.commands.output import emit, json_flag, quiet_flag, with_paths
+
+if TYPE_CHECKING:
+    from trustroute.analysis.study.power import PowerSettings
 
 DEFAULT_OUT = Path("out") / "plan"
 
@@ -66,48 +72,66 @@ def table_lines(table, minimal, target: float) -> list[str]:
             *aligned_columns(("test", "pair", "spec", f"minimal N for power {target:g}"), found)]
 
 
+@dataclass(frozen=True)
+class PlanOptions:
+    """`trustroute plan`'s options, in the order --help lists them."""
+
+    sizes: str = option("--participants", default="8:60:4", show_default=True,
+                        help="Sample sizes: N, FROM:TO or FROM:TO:STEP (each rounded up to the Williams "
+                             "square).")
+    simulations: int | None = option(
+        "--simulations", type=bounded_int(10, 100_000), default=None,
+        help="Simulated studies per size (default: until every power is within ±0.02, at most 2400).")
+    tests: tuple[str, ...] = option(
+        "--test", multiple=True, type=click.Choice(["mcnemar", "conditional_or", "wilcoxon", "mixed_model"]),
+        help="A planned test (repeatable; default: mcnemar, conditional_or, wilcoxon).")
+    alpha: float = option("--alpha", type=FiniteFloat(0.0, 0.5, open_minimum=True), default=0.05,
+                          show_default=True)
+    target: float = option("--target", type=FiniteFloat(0.0, 1.0, open_minimum=True), default=0.8,
+                           show_default=True, help="Target power.")
+    driver: str | None = option("--driver", default=None,
+                                help="The participants' true driver model (default: the config's).")
+    population: str | None = option("--population", default=None,
+                                    help="The participants as a population of driver types.")
+    seed: int = option("--seed", type=SEED, default=1, show_default=True)
+    out: str | None = option("--out", type=click.Path(), default=None,
+                             help="Folder of the power curve (default: out/plan/<study name>).")
+    preregistration: str | None = option(
+        "--preregistration", type=click.Path(), default=None,
+        help="Also write a pre-registration (Markdown, OSF / AsPredicted fields) to FILE.")
+    as_json: bool = json_flag()
+    quiet: bool = quiet_flag()
+
+    def power_settings(self) -> PowerSettings:
+        """The power estimate's settings (the tests, alpha, the target and the simulations)."""
+        from trustroute.analysis.study.power import DEFAULT_TESTS, PowerSettings
+
+        return PowerSettings(tests=tuple(self.tests) or DEFAULT_TESTS, alpha=self.alpha, target=self.target,
+                             simulations=self.simulations)
+
+
 @click.command("plan")
 @click.argument("config_path", metavar="CONFIG", type=click.Path())
-@click.option("--participants", "sizes", default="8:60:4", show_default=True,
-              help="Sample sizes: N, FROM:TO or FROM:TO:STEP (each rounded up to the Williams square).")
-@click.option("--simulations", type=bounded_int(10, 100_000), default=None,
-              help="Simulated studies per size (default: until every power is within ±0.02, at most 2400).")
-@click.option("--test", "tests", multiple=True,
-              type=click.Choice(["mcnemar", "conditional_or", "wilcoxon", "mixed_model"]),
-              help="A planned test (repeatable; default: mcnemar, conditional_or, wilcoxon).")
-@click.option("--alpha", type=FiniteFloat(0.0, 0.5, open_minimum=True), default=0.05, show_default=True)
-@click.option("--target", "target", type=FiniteFloat(0.0, 1.0, open_minimum=True), default=0.8,
-              show_default=True, help="Target power.")
-@click.option("--driver", default=None, help="The participants' true driver model (default: the config's).")
-@click.option("--population", default=None, help="The participants as a population of driver types.")
-@click.option("--seed", type=SEED, default=1, show_default=True)
-@click.option("--out", type=click.Path(), default=None,
-              help="Folder of the power curve (default: out/plan/<study name>).")
-@click.option("--preregistration", type=click.Path(), default=None,
-              help="Also write a pre-registration (Markdown, OSF / AsPredicted fields) to FILE.")
-@json_option
-@quiet_option
-def plan(config_path: str, sizes: str, simulations: int | None, tests: tuple[str, ...], alpha: float,
-         target: float, driver: str | None, population: str | None, seed: int, out: str | None,
-         preregistration: str | None, as_json: bool, quiet: bool) -> None:
+@takes(options=PlanOptions)
+def plan(config_path: str, options: PlanOptions) -> None:
     """Power and sample size of the study CONFIG, by simulating it on the model engine."""
     import numpy as np
 
-    from trustroute.analysis.study.power import DEFAULT_TESTS, PowerSettings, estimate_power, minimal_sizes
+    from trustroute.analysis.study.power import estimate_power, minimal_sizes
     from trustroute.analysis.study.power_plot import power_curve_plot
     from trustroute.harness.study.config import load_study_config
     from trustroute.harness.study.context import study_context
     from trustroute.harness.study.planning import check_plannable, participant_sizes, simulate_studies
 
+    seed, alpha, target = options.seed, options.alpha, options.target
     started = time.perf_counter()
     config = load_study_config(config_path).with_overrides(engine="model")
     check_plannable(config)
-    model = participant_model(config, driver, population)
+    model = participant_model(config, options.driver, options.population)
     cells = len(config.spec_names) * len(config.condition_names)
-    size_list = participant_sizes(sizes, cells)
-    settings = PowerSettings(tests=tuple(tests) or DEFAULT_TESTS, alpha=alpha, target=target,
-                             simulations=simulations)
-    silent = quiet or as_json
+    size_list = participant_sizes(options.sizes, cells)
+    settings = options.power_settings()
+    silent = options.quiet or options.as_json
     study_context(config, progress=not silent)  # every input, and the policies once, before simulating
 
     def simulate(participants: int, studies: int):
@@ -121,7 +145,7 @@ def plan(config_path: str, sizes: str, simulations: int | None, tests: tuple[str
     echo = (lambda *_: None) if silent else (lambda size, n: click.echo(f"  N={size}: {n} studies", err=True))
     table = estimate_power(simulate, size_list, settings, echo)
     minimal = minimal_sizes(table, target)
-    folder = Path(out) if out is not None else DEFAULT_OUT / config.name
+    folder = Path(options.out) if options.out is not None else DEFAULT_OUT / config.name
     folder.mkdir(parents=True, exist_ok=True)
     who = model.label if model is not None else "the config's driver model"
     figure = power_curve_plot(table, target, alpha, folder / "power.png",
@@ -131,7 +155,7 @@ def plan(config_path: str, sizes: str, simulations: int | None, tests: tuple[str
         "study": config.name, "config_path": str(config.source_path), "config_hash": config.content_hash,
         "participants_model": who,
         "sizes": size_list, "tests": list(settings.tests), "alpha": alpha, "target": target, "seed": seed,
-        "simulations": simulations, "precision": settings.precision,
+        "simulations": options.simulations, "precision": settings.precision,
         "power": power_rows(table),
         "minimal_participants": [{"test": t, "pair": list(p), "spec": s, "participants": n}
                                  for (t, p, s), n in minimal.items()],
@@ -139,10 +163,10 @@ def plan(config_path: str, sizes: str, simulations: int | None, tests: tuple[str
     }
     lines = [*table_lines(table, minimal, target), f"power curve: {figure} and {figure.with_suffix('.svg')}"]
     paths = {"power_png": figure, "power_svg": figure.with_suffix(".svg")}
-    if preregistration is not None:
-        paths["preregistration"] = write_preregistration(Path(preregistration), payload, config)
-        lines.append(f"pre-registration: {preregistration}")
-    emit(as_json, with_paths(payload, paths), lines)
+    if options.preregistration is not None:
+        paths["preregistration"] = write_preregistration(Path(options.preregistration), payload, config)
+        lines.append(f"pre-registration: {options.preregistration}")
+    emit(options.as_json, with_paths(payload, paths), lines)
 
 
 def write_preregistration(path: Path, payload: dict, config) -> Path:
