@@ -60,8 +60,6 @@ OVER_THE_LIMIT = frozenset({
     "trustroute.analysis.fitting.mixture:fit_mixture",
     "trustroute.analysis.fitting.mixture:select_types",
     "trustroute.analysis.fitting.mixture:bootstrap_type_count",
-    "trustroute.harness.commands.fit:fit",
-    "trustroute.harness.commands.fit:fit_types",
     "trustroute.harness.simulation.episode:run_episode",
     "trustroute.harness.simulation.episode_tracker:record_road",
     "trustroute.harness.simulation.gym_env:__init__",
