@@ -73,9 +73,6 @@ OVER_THE_LIMIT = frozenset({
     "trustroute.policies.synthesis.refinement:_search_run",
     "trustroute.policies.trust_state_synthesis.search:_open_loop_lower",
     "trustroute.policies.trust_state_synthesis.search:joint_search",
-    "trustroute:synthesize",
-    "trustroute:evaluate",
-    "trustroute:run_episode",
 })
 
 
