@@ -62,7 +62,6 @@ OVER_THE_LIMIT = frozenset({
     "trustroute.analysis.fitting.mixture:bootstrap_type_count",
     "trustroute.harness.simulation.episode:run_episode",
     "trustroute.harness.simulation.episode_tracker:record_road",
-    "trustroute.harness.simulation.gym_env:__init__",
     "trustroute.harness.simulation.model_engine:_sampled",
     "trustroute.policies.belief.trust_state_filter:update",
     "trustroute.policies.resolve:population_policy",
