@@ -54,8 +54,7 @@ def test_a_hand_split_is_caught():
 # settings.py), whose generated constructors are not function definitions here.
 MAX_PARAMETERS = 8
 # Functions still above the limit, each by "module:function" (and nothing else: a function that
-# drops to the limit must leave this list). The click commands take one parameter per option until
-# their options are generated from the settings objects; the others wait for their own settings.
+# drops to the limit must leave this list); each waits for its own settings object.
 OVER_THE_LIMIT = frozenset({
     "trustroute.analysis.fitting.mixture:fit_mixture",
     "trustroute.analysis.fitting.mixture:select_types",
