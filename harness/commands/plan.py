@@ -12,13 +12,19 @@ prints. docs/planning.md says what the simulation assumes and what it cannot tel
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from trustroute.core import defaults
+from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import SEED, FiniteFloat, bounded_int
-from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
+from trustroute.harness.commands.output import emit, json_flag, quiet_flag, with_paths
+
+if TYPE_CHECKING:
+    from trustroute.app.planning import PlanSettings
 
 
 def table_lines(table, minimal, target: float) -> list[str]:
@@ -51,50 +57,68 @@ def pilot_lines(pilot) -> list[str]:
             "studies, so Monte Carlo noise widens it)", ""]
 
 
+@dataclass(frozen=True)
+class PlanOptions:
+    """`trustroute plan`'s options, in the order --help lists them."""
+
+    sizes: str = option("--participants", default=defaults.PLAN_PARTICIPANTS, show_default=True,
+                        help="Sample sizes: N, FROM:TO or FROM:TO:STEP (each rounded up to the Williams "
+                             "square).")
+    simulations: int | None = option(
+        "--simulations", type=bounded_int(10, 100_000), default=None,
+        help="Simulated studies per size (default: until every power is within ±0.02, at most 2400).")
+    tests: tuple[str, ...] = option(
+        "--test", multiple=True, type=click.Choice(["mcnemar", "conditional_or", "wilcoxon", "mixed_model"]),
+        help="A planned test (repeatable; default: mcnemar, conditional_or, wilcoxon).")
+    alpha: float = option("--alpha", type=FiniteFloat(0.0, 0.5, open_minimum=True),
+                          default=defaults.PLAN_ALPHA, show_default=True)
+    target: float = option("--target", type=FiniteFloat(0.0, 1.0, open_minimum=True),
+                           default=defaults.PLAN_TARGET, show_default=True, help="Target power.")
+    driver: str | None = option("--driver", default=None,
+                                help="The participants' true driver model (default: the config's).")
+    population: str | None = option("--population", default=None,
+                                    help="The participants as a population of driver types.")
+    pilot: str | None = option(
+        "--pilot", default=None, metavar="STUDY_DIR",
+        help="The participants as the driver model fitted on this pilot study, with its uncertainty "
+             "(bootstrap refits over the pilot's participants, one drawn per simulated study).")
+    pilot_bootstrap: int = option("--pilot-bootstrap", type=bounded_int(0, 10_000),
+                                  default=defaults.PILOT_BOOTSTRAP, show_default=True,
+                                  help="With --pilot: bootstrap refits (0: the point fit alone, no "
+                                       "uncertainty).")
+    seed: int = option("--seed", type=SEED, default=defaults.PLAN_SEED, show_default=True)
+    out: str | None = option("--out", type=click.Path(), default=None,
+                             help="Folder of the power curve (default: out/plan/<study name>).")
+    preregistration: str | None = option(
+        "--preregistration", type=click.Path(), default=None,
+        help="Also write a pre-registration (Markdown, OSF / AsPredicted fields) to FILE.")
+    as_json: bool = json_flag()
+    quiet: bool = quiet_flag()
+
+    def settings(self) -> PlanSettings:
+        """The plan's settings (trustroute/app/planning.py)."""
+        from trustroute.app.planning import PlanSettings
+
+        return PlanSettings(sizes=self.sizes, simulations=self.simulations, tests=tuple(self.tests),
+                            alpha=self.alpha, target=self.target, driver=self.driver,
+                            population=self.population, pilot=self.pilot,
+                            pilot_bootstrap=self.pilot_bootstrap, seed=self.seed, out=self.out)
+
+
 @click.command("plan")
 @click.argument("config_path", metavar="CONFIG", type=click.Path())
-@click.option("--participants", "sizes", default=defaults.PLAN_PARTICIPANTS, show_default=True,
-              help="Sample sizes: N, FROM:TO or FROM:TO:STEP (each rounded up to the Williams square).")
-@click.option("--simulations", type=bounded_int(10, 100_000), default=None,
-              help="Simulated studies per size (default: until every power is within ±0.02, at most 2400).")
-@click.option("--test", "tests", multiple=True,
-              type=click.Choice(["mcnemar", "conditional_or", "wilcoxon", "mixed_model"]),
-              help="A planned test (repeatable; default: mcnemar, conditional_or, wilcoxon).")
-@click.option("--alpha", type=FiniteFloat(0.0, 0.5, open_minimum=True), default=defaults.PLAN_ALPHA,
-              show_default=True)
-@click.option("--target", "target", type=FiniteFloat(0.0, 1.0, open_minimum=True),
-              default=defaults.PLAN_TARGET, show_default=True, help="Target power.")
-@click.option("--driver", default=None, help="The participants' true driver model (default: the config's).")
-@click.option("--population", default=None, help="The participants as a population of driver types.")
-@click.option("--pilot", default=None, metavar="STUDY_DIR",
-              help="The participants as the driver model fitted on this pilot study, with its uncertainty "
-              "(bootstrap refits over the pilot's participants, one drawn per simulated study).")
-@click.option("--pilot-bootstrap", type=bounded_int(0, 10_000), default=defaults.PILOT_BOOTSTRAP,
-              show_default=True,
-              help="With --pilot: bootstrap refits (0: the point fit alone, no uncertainty).")
-@click.option("--seed", type=SEED, default=defaults.PLAN_SEED, show_default=True)
-@click.option("--out", type=click.Path(), default=None,
-              help="Folder of the power curve (default: out/plan/<study name>).")
-@click.option("--preregistration", type=click.Path(), default=None,
-              help="Also write a pre-registration (Markdown, OSF / AsPredicted fields) to FILE.")
-@json_option
-@quiet_option
-def plan(config_path: str, sizes: str, simulations: int | None, tests: tuple[str, ...], alpha: float,
-         target: float, driver: str | None, population: str | None, pilot: str | None, pilot_bootstrap: int,
-         seed: int, out: str | None, preregistration: str | None, as_json: bool, quiet: bool) -> None:
+@takes(options=PlanOptions)
+def plan(config_path: str, options: PlanOptions) -> None:
     """Power and sample size of the study CONFIG, by simulating it on the model engine."""
-    from trustroute.app.planning import PlanSettings, plan_study, write_preregistration
+    from trustroute.app.planning import plan_study, write_preregistration
 
-    settings = PlanSettings(sizes=sizes, simulations=simulations, tests=tuple(tests), alpha=alpha,
-                            target=target, driver=driver, population=population, pilot=pilot,
-                            pilot_bootstrap=pilot_bootstrap, seed=seed, out=out)
-    progress = None if quiet or as_json else (lambda line: click.echo(line, err=True))
-    run = plan_study(config_path, settings, progress)
+    progress = None if options.quiet or options.as_json else (lambda line: click.echo(line, err=True))
+    run = plan_study(config_path, options.settings(), progress)
     figure = run.figure
-    lines = [*pilot_lines(run.pilot), *table_lines(run.table, run.minimal, target),
+    lines = [*pilot_lines(run.pilot), *table_lines(run.table, run.minimal, options.target),
              f"power curve: {figure} and {figure.with_suffix('.svg')}"]
     paths = {"power_png": figure, "power_svg": figure.with_suffix(".svg")}
-    if preregistration is not None:
-        paths["preregistration"] = write_preregistration(Path(preregistration), run)
-        lines.append(f"pre-registration: {preregistration}")
-    emit(as_json, with_paths(run.payload, paths), lines)
+    if options.preregistration is not None:
+        paths["preregistration"] = write_preregistration(Path(options.preregistration), run)
+        lines.append(f"pre-registration: {options.preregistration}")
+    emit(options.as_json, with_paths(run.payload, paths), lines)
