@@ -139,10 +139,6 @@ COMPUTED_CACHES = frozenset({
     "trustroute.harness.study.context:_CONTEXTS",
     "trustroute.participants.driver_step:_TABLES",
     "trustroute.policies.belief.exact_labels:_filters",
-    "trustroute.policies.logic.compiled:_COMPILED",
-    "trustroute.policies.logic.dfa:_CACHE",
-    "trustroute.policies.routing.free:_TASKS",
-    "trustroute.policies.routing.free:_COMPLETIONS",
     "trustroute.policies.synthesis.completion_value:symbol_fill_orders",
 })
 MAPPINGS = {"dict", "OrderedDict", "defaultdict", "WeakValueDictionary", "WeakKeyDictionary"}

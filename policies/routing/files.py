@@ -29,7 +29,7 @@ from trustroute.core.validation import MAX_ARRAY_BYTES, check_keys, read_input_b
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.belief.driver_types import lift_population, lift_spec
-from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.decision_tables import (
     BOX_ROWS,
@@ -191,7 +191,7 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         raise InputError(where, "", f"not a readable .npz array file ({type(exc).__name__})",
                          RESYNTH) from None
     context = ReadContext(where=where, document=document, town=town, driver=driver, spec=spec,
-                         n_q=build_dfa(spec).n_states)
+                         n_q=compile_spec(spec, town).dfa.n_states)
     return kind.read(arrays_read, version, context)
 
 
