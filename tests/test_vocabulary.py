@@ -135,7 +135,6 @@ IO_CACHES = frozenset({
 # (a function's cache that goes must leave this list).
 COMPUTED_CACHES = frozenset({
     "trustroute.core.dataset:_LAYOUTS",
-    "trustroute.harness.simulation.episode_tracker:_MODELS",
     "trustroute.harness.study.context:_CONTEXTS",
     "trustroute.participants.driver_step:_TABLES",
     "trustroute.policies.belief.exact_labels:_filters",
