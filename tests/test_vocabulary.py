@@ -137,7 +137,6 @@ COMPUTED_CACHES = frozenset({
     "trustroute.core.dataset:_LAYOUTS",
     "trustroute.harness.study.context:_CONTEXTS",
     "trustroute.participants.driver_step:_TABLES",
-    "trustroute.policies.synthesis.completion_value:symbol_fill_orders",
 })
 MAPPINGS = {"dict", "OrderedDict", "defaultdict", "WeakValueDictionary", "WeakKeyDictionary"}
 MEMOISERS = {"cache", "lru_cache"}
