@@ -136,7 +136,6 @@ IO_CACHES = frozenset({
 COMPUTED_CACHES = frozenset({
     "trustroute.core.dataset:_LAYOUTS",
     "trustroute.harness.study.context:_CONTEXTS",
-    "trustroute.participants.driver_step:_TABLES",
 })
 MAPPINGS = {"dict", "OrderedDict", "defaultdict", "WeakValueDictionary", "WeakKeyDictionary"}
 MEMOISERS = {"cache", "lru_cache"}

@@ -36,14 +36,8 @@ from trustroute.harness.simulation.episode_record import EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.simulation.stepping import DecisionPoint, End, run_to_end
 from trustroute.networks.town import Town
-from trustroute.participants.driver_model import DriverModel
-from trustroute.participants.driver_step import (
-    DriverTables,
-    draw_initial_trust,
-    draw_report_batch,
-    draw_step,
-    driver_tables,
-)
+from trustroute.participants.driver_model import DriverModel, DriverTables, driver_tables
+from trustroute.participants.driver_step import draw_initial_trust, draw_report_batch, draw_step
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.belief.av_step import AVStep
 from trustroute.policies.belief.exact_labels import exact_labels
