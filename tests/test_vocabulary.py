@@ -134,7 +134,6 @@ IO_CACHES = frozenset({
 # Caches of computed objects still to be replaced by the object passed down from where it is made
 # (a function's cache that goes must leave this list).
 COMPUTED_CACHES = frozenset({
-    "trustroute.core.dataset:_LAYOUTS",
     "trustroute.harness.study.context:_CONTEXTS",
 })
 MAPPINGS = {"dict", "OrderedDict", "defaultdict", "WeakValueDictionary", "WeakKeyDictionary"}

@@ -278,7 +278,7 @@ def table_from_rows(rows: list[dict], schema: pa.Schema) -> pa.Table:
     null too) as an Arrow table of `schema`: one conversion through the schema's struct type
     instead of one per column, the cheap form for the few rows an episode logs per road."""
     try:
-        table = pa.Table.from_struct_array(pa.array(rows, type=_layout(schema)[1], from_pandas=True))
+        table = pa.Table.from_struct_array(pa.array(rows, type=pa.struct(list(schema)), from_pandas=True))
     except (pa.ArrowException, TypeError, ValueError) as exc:
         raise SchemaError(str(exc)) from None
     return _check_required(table, schema, "table")
@@ -292,22 +292,9 @@ def _check_required(table: pa.Table, schema: pa.Schema, source: str) -> pa.Table
     return table
 
 
-_LAYOUTS: dict[int, tuple[pa.Schema, pa.StructType, tuple[int, ...]]] = {}
-
-
-def _layout(schema: pa.Schema) -> tuple[pa.Schema, pa.StructType, tuple[int, ...]]:
-    """(schema, its struct type, indices of its non-null fields), memoised per schema object
-    (the dataset's schemas are module constants)."""
-    entry = _LAYOUTS.get(id(schema))
-    if entry is None or entry[0] is not schema:
-        entry = (schema, pa.struct(list(schema)), tuple(i for i, f in enumerate(schema) if not f.nullable))
-        _LAYOUTS[id(schema)] = entry
-    return entry
-
-
 def _required_columns(schema: pa.Schema) -> tuple[int, ...]:
     """Indices of the non-null fields of `schema`."""
-    return _layout(schema)[2]
+    return tuple(i for i, f in enumerate(schema) if not f.nullable)
 
 
 def check_table(table: pa.Table, schema: pa.Schema, source: str = "table") -> pa.Table:
