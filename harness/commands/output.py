@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import click
+import numpy as np
 
 PATHS_KEY = "paths"
 
@@ -24,9 +25,8 @@ quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar
 
 def jsonable(value: object) -> object:
     """numpy scalars and arrays, paths and sets as plain JSON values."""
-    tolist = getattr(value, "tolist", None)
-    if callable(tolist):
-        return tolist()
+    if isinstance(value, np.ndarray | np.generic):
+        return value.tolist()
     if isinstance(value, Path):
         return str(value)
     if isinstance(value, set | frozenset | tuple):
