@@ -51,6 +51,7 @@ from trustroute.harness.live.protocol import (
     CONTROL_RATE,
     MAX_BODY_BYTES,
     MAX_MESSAGE_BYTES,
+    SHOWN_RATE,
     EpisodeControl,
     LinkClaim,
     MessageError,
@@ -116,14 +117,16 @@ def offer(queue: asyncio.Queue, message: dict) -> None:
 
 
 def respond(session: Session, bucket: TokenBucket, data: str | bytes,
-            controls: TokenBucket | None = None) -> list[dict]:
+            controls: TokenBucket | None = None, shown: TokenBucket | None = None) -> list[dict]:
     """The replies to one raw client message (an error reply for a refused one). A wheel's
-    `control` messages count against `controls`, every other message against `bucket`."""
+    `control` messages count against `controls`, the station's `shown` against `shown`, every
+    other message against `bucket`."""
     try:
         message = parse_client_message(data)
     except MessageError as exc:
         return [exc.reply] if bucket.take() else [error_reply("rate_limited", "too many messages; slow down")]
-    if not (controls if controls is not None and message.type == "control" else bucket).take():
+    stream = {"control": controls, "shown": shown}.get(message.type)
+    if not (stream if stream is not None else bucket).take():
         return [error_reply("rate_limited", "too many messages; slow down")]
     try:
         return session.handle(message)
@@ -384,7 +387,8 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str, id
             await websocket.send_json(message)
 
     sender = asyncio.create_task(send_all())
-    bucket, controls = TokenBucket(), TokenBucket(burst=CONTROL_RATE, rate=CONTROL_RATE)
+    buckets = (TokenBucket(), TokenBucket(burst=CONTROL_RATE, rate=CONTROL_RATE),
+               TokenBucket(burst=SHOWN_RATE, rate=SHOWN_RATE))
     offer(link.queue, {"type": "welcome", "participant": session.participant, "consent": consent_text,
                        "view": session.study.config.live_view, "driving": session.study.config.live_driving,
                        "inputs": list(session.study.config.live_inputs)})
@@ -397,7 +401,7 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str, id
                            "detail": "This session was open in another window or tab; that one is closed."})
     offer(link.queue, session.progress())
     try:
-        await receive_all(websocket, session, (bucket, controls), link, idle_seconds, sender)
+        await receive_all(websocket, session, buckets, link, idle_seconds, sender)
     except (WebSocketDisconnect, RuntimeError):
         pass
     finally:
@@ -405,7 +409,7 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str, id
         sender.cancel()
 
 
-async def receive_all(websocket: WebSocket, session: Session, buckets: tuple[TokenBucket, TokenBucket],
+async def receive_all(websocket: WebSocket, session: Session, buckets: tuple[TokenBucket, ...],
                       link: Link, idle_seconds: float, sender: asyncio.Task) -> None:
     """Client messages until the socket closes; silence for idle_seconds closes it."""
     while not sender.done():
@@ -424,7 +428,7 @@ async def receive_all(websocket: WebSocket, session: Session, buckets: tuple[Tok
         if raw["type"] == "websocket.disconnect":
             return
         data = raw["text"] if raw.get("text") is not None else (raw.get("bytes") or b"")
-        for reply in respond(session, buckets[0], data, buckets[1]):
+        for reply in respond(session, buckets[0], data, buckets[1], buckets[2]):
             offer(link.queue, reply)
 
 

@@ -34,6 +34,7 @@ MAX_BODY_BYTES = 16 * 1024     # an HTTP request body larger than this is refuse
 BURST = 20                     # messages a connection may send at once ...
 RATE = 10.0                    # ... and per second after that (token bucket)
 CONTROL_RATE = 30.0            # `control` messages per second (their own bucket: a wheel streams)
+SHOWN_RATE = 30.0              # `shown` messages per second (their own bucket: one per frame drawn)
 TRUST_LOW, TRUST_HIGH = 1, 7   # the trust scale of reports (the authors' 1-7)
 
 
@@ -150,8 +151,18 @@ class Ping(ClientMessage):
     type: Literal["ping"]
 
 
+class Shown(ClientMessage):
+    """The station has drawn the frame of simulated time `t` (sent for each frame it draws): the
+    episode runs at most STATION_LEAD simulated seconds ahead of what the person has seen
+    (harness/live/worker.py). Counted by a token bucket of its own (SHOWN_RATE); ignored outside
+    an episode."""
+
+    type: Literal["shown"]
+    t: Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+
+
 CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | Drive | Steer | Control
-                                       | Pass | TrustReport | Answers | Resume | Ping,
+                                       | Pass | TrustReport | Answers | Resume | Ping | Shown,
                                        Field(discriminator="type")])
 
 

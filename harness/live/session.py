@@ -33,6 +33,7 @@ from trustroute.harness.live.protocol import (
     Pass,
     Ping,
     Resume,
+    Shown,
     Start,
     Steer,
     Takeover,
@@ -139,8 +140,8 @@ class Session:
     def handle(self, message: ClientMessage) -> list[dict]:
         """Apply a validated client message; its replies. MessageError when out of order."""
         with self.lock:
-            if isinstance(message, Ping):
-                return [{"type": "pong"}]
+            if isinstance(message, (Ping, Shown)):
+                return self.signal(message)
             if isinstance(message, Consent):
                 self.require("consent", message)
                 self.client, self.lockstep = message.client, message.lockstep
@@ -177,6 +178,15 @@ class Session:
                     raise MessageError("out_of_order", "the experimenter paused this episode")
                 self.resume()
             return [self.progress()]
+
+    def signal(self, message: Ping | Shown) -> list[dict]:
+        """A ping's pong; the station's `shown` to the running episode, for its pace (no reply)."""
+        if isinstance(message, Ping):
+            return [{"type": "pong"}]
+        if self.phase == "driving":
+            with contextlib.suppress(MessageError):   # (the episode has just ended)
+                self.tell(message.model_dump())
+        return []
 
     def report(self, message: TrustReport) -> None:
         """A trust report to the running episode (answering a prompt of this episode, or none)."""

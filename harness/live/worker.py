@@ -58,6 +58,8 @@ from trustroute.harness.simulation.manual_measures import takeover_measures
 from trustroute.harness.simulation.wheel_driving import Controls, Wheel
 
 PIPE_POLL_SECONDS = 0.02   # while paced or paused: how often the pipe is checked
+STATION_LEAD = 2.0         # sim s: the most the frames sent run ahead of the last the station drew
+STATION_WAIT = 5.0         # wall s: a station that confirms no frame for this long is not waited for
 FINAL_REPORT_SECONDS = 15.0   # wall seconds a trial's end waits for the last road's report
 CONTINUOUS_STEP = 0.05     # s: SUMO's step while a person may drive by wheel (the paper's CARLA tick)
 
@@ -108,6 +110,9 @@ class RemoteDriver:
         self.held_at = 0.0                 # the simulated time shown when paused
         self.predicted = False             # the last frame sent was dead-reckoned
         self.hurry = False                 # a control to apply at once: the next step does not wait
+        self.frame_time = 0.0              # the simulated time of the last frame sent
+        self.station_time: float | None = None   # of the last frame the station confirmed (`shown`)
+        self.behind_since: float | None = None   # wall time the wait for the station began
         self.statics = Statics()           # the frames' handles and sizes of the objects seen
         # continuous driving (a wheel; never in lockstep): harness/simulation/wheel_driving.py
         by_wheel = options.driving == "continuous" and not options.lockstep
@@ -202,6 +207,9 @@ class RemoteDriver:
 
     def apply(self, control: dict, logged: bool = False) -> None:
         kind = control.get("type")
+        if kind == "shown":   # the pace's, not the person's: not an event
+            self.station_time = float(control["t"])
+            return
         if kind == "trust":   # the road it answers, else (a report outside a prompt) the road open
             answered = self.answered_road(control.get("prompt"))
             control = {**control, "road": self.roads + 1 if answered is None else answered,
@@ -225,7 +233,7 @@ class RemoteDriver:
         elif kind == "pause":
             if not self.paused:   # the view stands where the wall clock had brought it
                 self.held_at = min(self.sim_now, self.paced_sim_time())
-            self.paused = True
+            self.paused, self.station_time = True, None   # (a station back after it confirms anew)
         elif kind == "resume":
             self.paused = False
             self.origin = (self.clock(), self.held_at)
@@ -269,10 +277,14 @@ class RemoteDriver:
                           **surroundings(sumo, EGO_ID, ego.x, ego.y, self.statics),
                           **ego_view(sumo, EGO_ID, self.statics)}
             self.send(self.shown)
+            self.frame_time = ego.time
 
     def wait_for_the_wall_clock(self, step_time: float) -> bool:
-        """Until the wall clock reaches the step's time at the pace (and while paused), reading
-        controls; a takeover or hand-back ends the wait (the next step applies it): True then."""
+        """Until the wall clock reaches the step's time at the pace, then while the station is
+        behind (`station_behind`), and while paused, reading controls; a takeover or hand-back ends
+        the wait (the next step applies it). True when the pace goes on from this step: after a
+        takeover or hand-back, or after waiting for the station."""
+        waited = False
         while True:
             wait = PIPE_POLL_SECONDS
             if self.hurry and not self.paused:
@@ -280,10 +292,30 @@ class RemoteDriver:
                 return True
             if not self.paused:
                 remaining = self.origin[0] + (step_time - self.origin[1]) / self.options.pace - self.clock()
-                if remaining <= 0:
-                    return False
-                wait = min(wait, remaining, self.stream_between_steps(step_time))
+                if remaining > 0:
+                    wait = min(wait, remaining, self.stream_between_steps(step_time))
+                elif self.station_behind():
+                    waited = True
+                else:
+                    return waited
             self.read_controls(wait)
+
+    def station_behind(self) -> bool:
+        """The station confirms the frames it draws (`shown`), and the last it confirmed is more
+        than STATION_LEAD simulated seconds before the last frame sent: the simulation waits for
+        it, so a slow browser does not leave the person deciding on what is long past. A station
+        that confirms nothing for STATION_WAIT wall seconds is not waited for (until it confirms a
+        frame again); one that never confirms (the scripted participant) never is."""
+        if self.station_time is None or self.frame_time - self.station_time <= STATION_LEAD:
+            self.behind_since = None
+            return False
+        now = self.clock()
+        if self.behind_since is None:
+            self.behind_since = now
+        if now - self.behind_since > STATION_WAIT:
+            self.station_time = self.behind_since = None
+            return False
+        return True
 
     def paced_sim_time(self) -> float:
         """The simulated time the wall clock has reached at the pace."""
@@ -308,6 +340,7 @@ class RemoteDriver:
         if seconds > 0.0:
             self.last_frame, self.predicted = wall, True
             self.send(dead_reckoned(shown, seconds))
+            self.frame_time = shown["t"] + seconds
         return self.frame_interval
 
 

@@ -165,6 +165,7 @@ class SumoEpisode:
         self.manual = (ManualDriving(options.person, EGO_ID, COMMIT_DISTANCE)
                        if options.person is not None and options.person.drives_by_hand else None)
         self.mode = AUTOPILOT.name
+        self.carried_takeover = False   # a person's takeover in a road's closing step, for the next road
         self.runs: list[RoadRun] = []
         self.steps = StepLog()         # the kinematics table, one row per step
         self.lengths: dict[str, float] = {}
@@ -234,8 +235,16 @@ class SumoEpisode:
     def decide(self, run: RoadRun, now: float) -> None:
         self.mode = takeover_decision.decide(self.sumo, EGO_ID, run, self.driver, run.kind, now, self.mode)
 
-    def person_control(self, run: RoadRun, now: float, request: bool | None) -> None:
-        self.mode = takeover_decision.apply_request(self.sumo, EGO_ID, run, request, self.mode, now)
+    def person_control(self, run: RoadRun, now: float, request: bool | None, closing: bool) -> None:
+        """A person's takeover or hand-back on the open road `run`. A takeover in the step that
+        reaches the road's commit point (`closing`) goes to the next road: applied on this one,
+        the road's end would hand back in the same step, unseen, and the person's station would
+        wait for a mode change that never comes."""
+        if request is None and self.carried_takeover:
+            request = True
+        self.carried_takeover = request is True and closing and self.mode == AUTOPILOT.name
+        if not self.carried_takeover:
+            self.mode = takeover_decision.apply_request(self.sumo, EGO_ID, run, request, self.mode, now)
 
     def new_run(self, index: int, road: str) -> RoadRun:
         kind = self.setup.town.incident(road) if index > 0 else NO_INCIDENT
@@ -466,17 +475,20 @@ class SumoEpisode:
             open_run = upcoming if upcoming is not None else current
             if background_step is not None:
                 background_step(sumo)
+            along = current.offsets.get(road)   # where the ego's edge starts along the road
+            commits = (not current.committed and along is not None
+                       and along + position + speed * step >= commit_at)
             if open_run.index > 0:
                 if person is not None:
-                    self.person_control(open_run, now, person(now))
+                    self.person_control(open_run, now, person(now), commits)
                 ego = None
                 if not open_run.decided if open_run.incident is None else math.isnan(open_run.removed_time):
                     ego = EgoState(now, road, position, x, y, speed, lane, result[angle_id], result[accel_id])
                     self.watch(open_run, ego)
                 if self.mode == auto:
                     self.measure(open_run, ego, speed, result[accel_id], result[leader_id], step)
-            along = current.offsets.get(road)   # where the ego's edge starts along the road
-            if not current.committed and along is not None and along + position + speed * step >= commit_at:
+            if commits:
+                assert along is not None   # (commits only on a road of the current run)
                 self._step = _Step(now, road, position, x, y, speed, lane, result[angle_id],
                                    result[accel_id], open_run.road)
                 point = self.commit(current, now, along + position)

@@ -188,6 +188,23 @@ function showNextTurn(frame) {
 }
 
 // -- frames ---------------------------------------------------------------------------------------
+// Each frame drawn is confirmed (`shown`: its simulated time), at most one confirmation per
+// SHOWN_INTERVAL and the newest always: the episode waits for a station that falls behind
+// (docs/live_studies.md), so a slow browser does not leave the person deciding on what is past.
+const SHOWN_INTERVAL = 0.04;   // s (the server's bucket allows 30 a second)
+let shownAt = 0;
+let shownTimer = null;
+function confirmShown() {
+  if (shownTimer !== null) return;   // the newest is confirmed when the timer fires
+  const wait = shownAt + SHOWN_INTERVAL - performance.now() / 1000;
+  if (wait > 0) {
+    shownTimer = setTimeout(() => { shownTimer = null; confirmShown(); }, wait * 1000);
+    return;
+  }
+  shownAt = performance.now() / 1000;
+  if (latest) send({ type: "shown", t: latest.t });
+}
+
 function onFrame(frame) {
   latest = frame;
   if (state.phase !== "paused") overlay("");
@@ -205,6 +222,7 @@ function onFrame(frame) {
   showNextTurn(frame);
   if (driverView) driverView.push(frame);
   if (net) drawMap($("view"), net, frame, viewKind === "map" ? MAP_SCALE : MINI_SCALE);
+  confirmShown();
 }
 
 // Continuous driving: the wheel and pedals (or the keyboard) read at every animation frame; the
@@ -291,8 +309,13 @@ async function loadNet() {
 }
 
 // -- the session ----------------------------------------------------------------------------------
+let shownEpisode = null;   // the episode the drive step shows
+
 function onState(message) {
   state = message;
+  // a new trial starts driving: the last trial's frame, speed and mode go at once (its SUMO takes
+  // seconds to start; meanwhile the person sees the vehicle getting ready, not the last trial)
+  if (message.phase === "driving" && message.episode_id !== shownEpisode) startEpisode(message.episode_id);
   const next = message.done.length + 1;
   $("status").textContent = message.phase === "paused"
     ? `Paused (${message.paused_by === "disconnect" ? "connection lost" : "by the experimenter"})`
@@ -319,12 +342,15 @@ function onState(message) {
   } else if (message.phase === "done") show("done-step");
 }
 
-function startEpisode() {
+function startEpisode(episodeId) {
+  shownEpisode = episodeId;
   latest = null;
   if (driverView) driverView.clear();
   setMode("auto");
   notice("");
   $("speed").textContent = "";
+  $("road").textContent = "";
+  delete $("road").dataset.road;
   drawTurn(null);
   $("turn-text").textContent = "";
   overlay("The vehicle is getting ready\u2026");
@@ -349,7 +375,7 @@ function onMessage(message) {
       notice("");
       if (message.prompt) { pendingPrompt = message.prompt; $("prompt").classList.remove("hidden"); }
       break;
-    case "episode_start": startEpisode(); pendingPrompt = null; break;
+    case "episode_start": startEpisode(message.episode_id); pendingPrompt = null; break;
     case "episode_end": $("status").textContent = "Trial complete."; break;
     case "notice": $("error").textContent = message.detail; break;
     case "episode_aborted":

@@ -66,13 +66,14 @@ def drive_trial(page, by_hand: bool) -> int:
 
     page.locator("#start-trust button", has_text="5").click()
     page.locator("#drive-step").wait_for(state="visible")
+    # a report outside a prompt, while the vehicle gets ready: no road has ended to prompt for one
+    page.keyboard.press("6")
+    expect(page.locator("#reported")).to_contain_text("6")
     # the first frame comes once the episode's process has started SUMO: seconds on a busy machine
     expect(page.locator("#speed")).to_contain_text("km/h", timeout=TIMEOUT_MS)
     # the driver's view (WebGL) draws, and the participant sees no road id
     assert page.evaluate("window.driverView.stats.renders") > 0
     assert page.locator("#road").get_attribute("data-road") not in page.locator("#drive-step").inner_text()
-    page.keyboard.press("6")
-    expect(page.locator("#reported")).to_contain_text("6")
     passes = drive_by_hand(page) if by_hand else ride(page)
     expect(page.locator("#ready-step:visible, #done-step:visible")).to_have_count(1, timeout=TIMEOUT_MS)
     return passes
@@ -84,61 +85,105 @@ def answer_prompt(page) -> None:
         page.keyboard.press("4")
 
 
+# What the person sees, read in the page in one go: a JSON text, returned once it differs from the
+# text last acted on (`seen`). Waited for in the page rather than polled element by element from
+# Python: at pace 20 an obstacle road opens and reaches its obstacle in about half a second of wall
+# time, and each Playwright call waits for a renderer busy drawing software WebGL.
+SEEN = """(seen) => {
+  const $ = (id) => document.getElementById(id);
+  const shown = (id) => $(id).checkVisibility();
+  const now = JSON.stringify({
+    ended: shown("ready-step") || shown("done-step"), mode: $("mode").innerText,
+    road: $("road").dataset.road || "", oncoming: $("road").innerText.includes("oncoming lane"),
+    hint: $("hint").innerText, notice: $("incident").innerText, prompt: shown("prompt")});
+  return now !== seen && now;
+}"""
+
+
+def what_is_seen(page, seen: str) -> str:
+    """The page's state (SEEN) once it changes from `seen`, checked every 20 ms in the page; as
+    it is after a second unchanged."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+    with contextlib.suppress(PlaywrightTimeout):
+        return page.wait_for_function(SEEN, arg=seen, polling=20, timeout=1000).json_value()
+    return page.evaluate(SEEN, None)
+
+
 def ride(page) -> int:
-    """On autopilot to the end, answering every prompt for a report. No passes by hand: 0."""
+    """On autopilot to the end, answering every prompt for a report (4) as it shows. No passes by
+    hand: 0."""
     deadline = time.monotonic() + TIMEOUT_MS / 1000
-    while not page.locator("#ready-step:visible, #done-step:visible").count():
+    seen = what_is_seen(page, "")
+    while not json.loads(seen)["ended"]:
         assert time.monotonic() < deadline, ("the trial did not end", page.locator("body").inner_text())
-        answer_prompt(page)
-        time.sleep(0.02)
+        if json.loads(seen)["prompt"]:
+            page.keyboard.press("4")
+        seen = what_is_seen(page, seen)
     return 0
 
 
-def drive_by_hand(page) -> int:
-    """As a person would: take over as each road opens (space), press the accelerator once, and
-    when the station says an obstacle is ahead pull out (left arrow) and hand back once the ego
-    is back in its own lane after the oncoming one; otherwise hand back on the warning. The first
-    pass is photographed in the oncoming lane. Returns the passes made."""
-    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+class ByHand:
+    """A person who drives every road by hand (see `drive_by_hand`): what they have done so far."""
 
-    passes, pulled_out, in_oncoming, taken_on = 0, None, False, None
-    deadline = time.monotonic() + TIMEOUT_MS / 1000
-    while not page.locator("#ready-step:visible, #done-step:visible").count():
-        assert time.monotonic() < deadline, ("the trial did not end", page.locator("body").inner_text(),
-                                              pulled_out, in_oncoming, taken_on)
-        mode = page.locator("#mode").inner_text()
-        road = page.locator("#road").get_attribute("data-road") or ""   # the road id is never shown
-        oncoming = "oncoming lane" in page.locator("#road").inner_text()
-        hint, notice = page.locator("#hint").inner_text(), page.locator("#incident").inner_text()
-        answer_prompt(page)
+    def __init__(self) -> None:
+        self.passes = 0
+        self.taken_on = None        # the road last taken over on: at most one takeover per road
+        self.accelerated = None     # the road the accelerator was last pressed on
+        self.pulled_out = None      # wall time of the pull-out on this road
+        self.in_oncoming = False    # the pass has reached the oncoming lane
+
+    def act(self, page, seen: dict) -> None:
+        """What the person does on seeing `seen` (SEEN's fields)."""
+        mode, road = seen["mode"], seen["road"]
         if mode == "AUTOPILOT":
-            pulled_out, in_oncoming = None, False
-        if mode == "MANUAL" and pulled_out is not None and not in_oncoming \
-                and time.monotonic() - pulled_out > PASS_WAIT:
-            pulled_out = None   # no way past it on this road (the ego waits at the junction): hand back
+            self.pulled_out, self.in_oncoming = None, False
+            if road and road != self.taken_on:   # a new road: take over at once
+                page.keyboard.press("Space")
+                self.taken_on = road
+        elif self.pulled_out is None and self.accelerated != road:
+            page.keyboard.down("ArrowUp")   # the pedals work once in control: press the accelerator once
+            page.keyboard.up("ArrowUp")
+            self.accelerated = road
+        if mode != "MANUAL":
+            return
+        if self.pulled_out is not None and not self.in_oncoming \
+                and time.monotonic() - self.pulled_out > PASS_WAIT:
+            self.pulled_out = None   # no way past it on this road (the ego waits at the junction): hand back
             page.keyboard.press("Space")
-        elif mode == "AUTOPILOT" and road and road != taken_on:
-            page.keyboard.press("Space")
-            taken_on = road   # at most one takeover per road
-            with contextlib.suppress(PlaywrightTimeout):   # the pedals work once in control
-                page.locator("#mode", has_text="MANUAL").wait_for(timeout=5000)
-                page.keyboard.down("ArrowUp")
-                page.keyboard.up("ArrowUp")
-        elif mode == "MANUAL" and pulled_out is None and "Obstacle ahead" in hint:
+        elif self.pulled_out is None and "Obstacle ahead" in seen["hint"]:
             page.keyboard.press("ArrowLeft")
-            pulled_out = time.monotonic()
-        elif mode == "MANUAL" and pulled_out is not None and oncoming:
-            if not in_oncoming and passes == 0:
+            self.pulled_out = time.monotonic()
+        elif self.pulled_out is not None and seen["oncoming"]:
+            if not self.in_oncoming and self.passes == 0:
                 SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
                 page.screenshot(path=str(SCREENSHOT), full_page=True)
-            in_oncoming = True
-        elif mode == "MANUAL" and pulled_out is not None and in_oncoming:
+            self.in_oncoming = True
+        elif self.pulled_out is not None and self.in_oncoming:
             page.keyboard.press("Space")   # past the obstacle: hand back
-            passes, pulled_out, in_oncoming = passes + 1, None, False
-        elif mode == "MANUAL" and pulled_out is None and "Hand back" in notice:
+            self.passes, self.pulled_out, self.in_oncoming = self.passes + 1, None, False
+        elif self.pulled_out is None and "Hand back" in seen["notice"]:
             page.keyboard.press("Space")
-        time.sleep(0.02)
-    return passes
+
+
+def drive_by_hand(page) -> int:
+    """As a person would: take over as each road opens (space), press the accelerator once in
+    control, and when the station says an obstacle is ahead pull out (left arrow) and hand back
+    once the ego is back in its own lane after the oncoming one; otherwise hand back on the
+    warning; answer every prompt for a report (4). The person reacts to what the page shows as it
+    changes. The first pass is photographed in the oncoming lane. Returns the passes made."""
+    person = ByHand()
+    deadline = time.monotonic() + TIMEOUT_MS / 1000
+    seen = what_is_seen(page, "")
+    while not json.loads(seen)["ended"]:
+        state = json.loads(seen)
+        assert time.monotonic() < deadline, ("the trial did not end", page.locator("body").inner_text(),
+                                              vars(person))
+        person.act(page, state)
+        if state["prompt"]:
+            page.keyboard.press("4")
+        seen = what_is_seen(page, seen)
+    return person.passes
 
 
 def test_a_whole_session_in_chromium_is_read_by_analyze_and_fit(tmp_path):

@@ -11,6 +11,7 @@ import pytest
 
 from trustroute.harness.live.view import next_junction, role
 from trustroute.harness.live.worker import (
+    STATION_WAIT,
     EpisodeAborted,
     LiveOptions,
     RemoteDriver,
@@ -336,3 +337,68 @@ def test_without_an_answer_the_end_waits_final_report_seconds_then_goes_on(tmp_p
     driver.await_last_answer()
     assert 0.3 <= time.monotonic() - started < 5.0
     assert with_reports(record, driver.answers) is record
+
+
+def test_a_takeover_in_the_step_a_road_closes_goes_to_the_next_road_and_the_station_sees_it(tmp_path):
+    # where the first road closes, from the same episode without a takeover: its road event is sent
+    # in the closing step, stamped with the step before it
+    *_, quiet, _ = live_episode(tmp_path, [])
+    before_closing = next(m["t"] for m in quiet.sent if m["type"] == "road" and m["index"] == 1)
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([])
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"),
+                          episode_id=task.episode_id)
+
+    def observe(sumo, ego, mode, road):
+        if ego.time == before_closing:   # read now, so the episode applies it in the closing step
+            pipe.controls.append({"type": "takeover"})
+        driver.observe(sumo, ego, mode, road)
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver)
+    taken = dict(zip(record.roads["index"], record.roads["takeover"], strict=True))
+    assert (bool(taken[1]), bool(taken[2])) == (False, True)
+    # the station is told: the takeover shows as a mode change, after the first road's event
+    kinds = [(m["type"], m.get("mode"), m.get("index")) for m in pipe.sent if m["type"] in ("mode", "road")]
+    assert kinds[:3] == [("road", None, 1), ("mode", "manual", None), ("mode", "auto", None)]
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+class SlowStation(Pipe):
+    """A station that confirms the frame of `t` only once `at` wall seconds have passed."""
+
+    def __init__(self, clock: Clock, t: float, at: float) -> None:
+        super().__init__()
+        self.clock, self.t, self.at = clock, t, at
+
+    def poll(self, timeout: float = 0.0) -> bool:
+        self.clock.now += timeout
+        if self.t is not None and self.clock.now >= self.at:
+            self.controls.append({"type": "shown", "t": self.t})
+            self.t = None
+        return bool(self.controls)
+
+
+def test_the_episode_waits_for_a_station_that_falls_behind_and_not_for_one_gone_silent():
+    clock = Clock()
+    pipe = SlowStation(clock, t=29.5, at=101.0)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=20.0), clock=clock)
+    driver.origin, driver.frame_time = (clock.now - 10.0, 0.0), 30.0   # the wall clock is past step 30.5
+    assert driver.wait_for_the_wall_clock(30.5) is False          # no confirmation yet: not waited for
+    driver.apply({"type": "shown", "t": 25.0})                     # 5 s behind the last frame sent
+    assert driver.wait_for_the_wall_clock(30.5) is True            # waited; the pace goes on from here
+    assert clock.now >= 101.0 and driver.station_time == 29.5
+    assert "shown" not in {event["type"] for event in driver.events}   # the pace's, not an event
+    # a station that confirms nothing more for STATION_WAIT is no longer waited for
+    driver.frame_time = 60.0
+    started = clock.now
+    assert driver.wait_for_the_wall_clock(60.5) is True
+    assert STATION_WAIT < clock.now - started < STATION_WAIT + 0.1 and driver.station_time is None
+    assert driver.wait_for_the_wall_clock(61.0) is False
