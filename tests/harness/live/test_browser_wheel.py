@@ -13,8 +13,8 @@ presses its pedals as a person would, reading the driver's view's frames:
 The person is a script in the page too (`PERSON`): it reacts to every frame the page receives,
 within the page's own input delay, however loaded the machine (a round trip to the test per frame
 made it steer late and weave). Each session is one short trial of a spec written here (two
-Town01 roads: a start road, then the incident's road, entered straight on), at pace 0.5: under a
-minute of simulated time, about two minutes of wall time per session."""
+Town01 roads: a start road, then the incident's road, entered straight on), at pace 0.5: about a
+minute of simulated time, two to three minutes of wall time per session."""
 
 from __future__ import annotations
 
@@ -43,10 +43,12 @@ conditions = ["free"]
 
 [live]
 driving = "continuous"
+inputs = ["wheel"]
 """
 # one trial: the start road, then the incident's road (its end satisfies the spec)
 SPEC = 'name = "{name}"\nstart = "{start}"\nformula = "F v1"\n\n[states]\nv1 = ["{road}"]\n'
-PASS = {"name": "wheelpass", "start": "C-D", "road": "D-E"}     # D-E, straight on: an obstacle, 126 m
+# E-A: an obstacle 180-280 m into its 510 m, after a corner; entered straight on from L-E
+PASS = {"name": "wheelpass", "start": "L-E", "road": "E-A"}
 CRASH = {"name": "wheelcrash", "start": "J-K", "road": "K-L"}   # K-L: an oncoming truck, 128 m
 VIRTUAL_WHEEL = """
 window.wheel = { steer: 0, throttle: 0, brake: 0, button: false };
@@ -103,6 +105,10 @@ window.startPerson = async ({ road, crash, cruise }) => {
     const heading = frame.angle * Math.PI / 180;
     return (thing[0] - frame.x) * Math.sin(heading) + (thing[1] - frame.y) * Math.cos(heading);
   };
+  const aside = (frame, thing) => {   // metres to the right of the car's heading
+    const heading = frame.angle * Math.PI / 180;
+    return (thing[0] - frame.x) * Math.cos(heading) - (thing[1] - frame.y) * Math.sin(heading);
+  };
   // toward `target` metres left of the lane's centre at about `speed` (m/s)
   const steerTo = (frame, target, speed) => {
     const [left] = onLane(frame.x, frame.y);
@@ -137,11 +143,16 @@ window.startPerson = async ({ road, crash, cruise }) => {
     if (person.trace.length > 4000) person.trace.shift();
     const stage = person.stage;
     if (stage === "wait") {
-      // the incident's road open (from the commit point of the road before) and the car along it
-      if (frame.road !== road || frame.mode !== "auto" || Math.abs(headingError(frame)) > 0.2) return;
+      // in the junction before the incident's road or on it (a takeover still on the road before is
+      // held at that road's end), along it, in its own lane, with the obstacle straight ahead: past
+      // the road's corner, and before SUMO's autopilot pulls out to pass it (some 90 m before it)
+      const there = String(frame.lane).startsWith(":") || String(frame.lane).startsWith(`${road}_`);
+      if (frame.road !== road || !there || frame.mode !== "auto" || Math.abs(headingError(frame)) > 0.2
+          || Math.abs(left) > 1) return;
       const thing = (frame.vehicles || []).find((v) => crash
         ? v[3] === "truck" && ahead(frame, v) > 25 && ahead(frame, v) < 90
-        : v[3] === "obstacle" && ahead(frame, v) > 10 && Math.abs(onLane(v[0], v[1])[0]) < 1);
+        : v[3] === "obstacle" && ahead(frame, v) > 10 && ahead(frame, v) < 130
+          && Math.abs(aside(frame, v)) < 3 && Math.abs(onLane(v[0], v[1])[0]) < 1);   // straight ahead
       if (!thing) return;
       person.thing = thing;
       wheel.throttle = 0.3;
@@ -304,11 +315,13 @@ def test_a_person_passes_an_obstacle_by_wheel(tmp_path):
     left = [left_of(shape, x, y) for x, y in zip(manual["x"], manual["y"], strict=True)]
     assert abs(left[0]) < 1.5 and max(left) > 2.5 and abs(left[-1]) < 1.0, (left[0], max(left), left[-1])
     # the pass through the oncoming lane, driven by hand
-    oncoming = kinematics[kinematics["lane"].str.startswith("E-D_")]
+    oncoming = kinematics[kinematics["lane"].str.startswith("A-E_")]
     assert len(oncoming) >= 10 and set(oncoming["mode"]) == {"manual"}, kinematics["lane"].value_counts()
     part = read_part(next((study_dir / "parts").glob("*.zip")))
     events = [event["type"] for event in part.summary["live"]["driving"]]
     assert "oncoming" in events and "own_lane" in events and "collision" not in events
+    # a wheel-only study: every control came from the wheel
+    assert {e["source"] for e in part.summary["live"]["events"] if e["type"] == "control"} == {"wheel"}
 
 
 def test_steering_into_the_oncoming_truck_is_a_logged_collision_and_the_episode_goes_on(tmp_path):
