@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import click
+import numpy as np
 
 from trustroute.harness.commands.option_groups import option, option_decorator
 
@@ -37,9 +38,8 @@ quiet_option = option_decorator("quiet", quiet_flag())
 
 def jsonable(value: object) -> object:
     """numpy scalars and arrays, paths and sets as plain JSON values."""
-    tolist = getattr(value, "tolist", None)
-    if callable(tolist):
-        return tolist()
+    if isinstance(value, np.ndarray | np.generic):
+        return value.tolist()
     if isinstance(value, Path):
         return str(value)
     if isinstance(value, set | frozenset | tuple):

@@ -36,7 +36,7 @@ from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DriverModel
 from trustroute.participants.driver_population import DriverPopulation
 from trustroute.participants.synthetic_driver import SyntheticDriver
-from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
@@ -145,7 +145,7 @@ class TrustRoutingEnv(gymnasium.Env):
         self.action_space = spaces.Discrete(self._width)
         self.observation_space = spaces.Dict({
             "road": spaces.Discrete(len(self.town.states)),
-            "dfa_state": spaces.Discrete(int(build_dfa(self.scldtl_spec).n_states)),
+            "dfa_state": spaces.Discrete(int(compile_spec(self.scldtl_spec, self.town).dfa.n_states)),
             "belief": spaces.Box(0.0, 1.0, shape=(self.driver_model.n_trust,), dtype=np.float64),
             "junctions": spaces.Discrete(self.setup.junction_cap + 1),
         })

@@ -33,17 +33,11 @@ import pandas as pd
 
 from trustroute.core.dataset import INCIDENTS_SCHEMA, KINEMATICS_SCHEMA
 from trustroute.harness.simulation.episode_record import EpisodeRecord
-from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker, episode_model
+from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
 from trustroute.harness.simulation.stepping import DecisionPoint, End, run_to_end
 from trustroute.networks.town import Town
-from trustroute.participants.driver_model import DriverModel
-from trustroute.participants.driver_step import (
-    DriverTables,
-    draw_initial_trust,
-    draw_report_batch,
-    draw_step,
-    driver_tables,
-)
+from trustroute.participants.driver_model import DriverModel, DriverTables, driver_tables
+from trustroute.participants.driver_step import draw_initial_trust, draw_report_batch, draw_step
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.belief.av_step import AVStep
 from trustroute.policies.belief.exact_labels import exact_labels
@@ -227,7 +221,7 @@ def simulate_batch(
     )
     if index.shape != (count,):
         raise ValueError(f"driver_index must have {count} entries, got shape {index.shape}")
-    model = episode_model(setup)
+    model = setup.model
     sampled = _sampled(setup.town, model.pomdp, model.compiled, setup.spec, policy,
                        list(drivers) if drivers is not None else [setup.driver_model],
                        setup.junction_cap, setup.fallback_after, checked_belief_rule(setup.belief_rule))

@@ -440,8 +440,8 @@ class Wheel:
             self.controls = Controls()
         self.follow_route(sumo)
         seen = len(self.driving.events)
-        standing = road is None or self.driving.stranded   # (stopped off its road: no hold to apply)
-        controls = self.controls if standing else self.held(sumo, road)
+        # no hold without a road, nor for a car stopped off its road
+        controls = self.controls if road is None or self.driving.stranded else self.held(sumo, road)
         self.driving.step(sumo, controls, sumo.simulation.getDeltaT())
         self.sample(sumo)
         new = self.driving.events[seen:]
