@@ -10,10 +10,14 @@ trial on autopilot. Measured over WINDOW wall seconds once the first frame has a
   participant (every server message, counted by a Playwright websocket listener);
 - the server's CPU time per wall second (the server and its episode process, from /proc).
 With `[live] driving = "continuous"` and a virtual wheel (a script replacing
-`navigator.getGamepads`, read in the standard mapping), once in control: the latency from turning
-the wheel to the first drawn frame whose ego heading has turned (by more than 0.2°), measured in the
-page with performance.now() (LATENCY_SAMPLES pulses of the wheel, each undone), and the server's
-CPU time per wall second while the person drives.
+`navigator.getGamepads`, read in the standard mapping), on a trial of WHEEL_SPEC (a 53 m start road,
+then Town01's 444 m H-L, long enough to drive the whole measurement by hand before its junction):
+once in control on H-L, the page holds about CRUISE m/s with the accelerator and the benchmark
+measures the latency from turning the wheel to the first drawn frame whose ego heading has turned
+(by more than 0.2°), in the page with performance.now() (LATENCY_SAMPLES pulses of the wheel, each
+undone), and, over the same wall seconds, the server's CPU time per wall second (server and
+episode process) and the websocket's bytes per second to the participant while the person drives.
+The load average before and after each part is reported: the machine may be shared.
 """
 
 from __future__ import annotations
@@ -43,8 +47,16 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--ena
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 COUNTS = "[window.driverView.stats.renders, window.driverView.stats.frames, window.rafProbe]"
 LATENCY_SAMPLES = 20
+CRUISE = 8.0    # m/s the page holds while the wheel is measured
+# one trial: a short start road (no takeover there), then H-L, an oncoming truck's road of 444 m
+WHEEL_SPEC = 'name = "benchwheel"\nstart = "I-H"\nformula = "F v1"\n\n[states]\nv1 = ["H-L"]\n'
 WHEEL = """
-window.wheel = { steer: 0, throttle: 0.25, button: false };
+window.wheel = { steer: 0, throttle: 0, button: false };
+// the person's foot: about CRUISE m/s on the accelerator, from the newest frame's speed
+window.cruise = (speed) => setInterval(() => {
+  const frames = window.driverView ? window.driverView.frames : [];
+  if (frames.length) window.wheel.throttle = frames[frames.length - 1].frame.speed < speed ? 0.4 : 0;
+}, 50);
 navigator.getGamepads = () => [{ id: "virtual", index: 0, connected: true, mapping: "standard",
   timestamp: performance.now(), axes: [window.wheel.steer, 0, 0, 0],
   buttons: Array.from({ length: 17 }, (_, i) => {
@@ -133,9 +145,12 @@ def measure(workdir: Path) -> dict:
 def measure_latency(workdir: Path) -> dict:
     from playwright.sync_api import sync_playwright
 
+    (workdir / "benchwheel.toml").write_text(WHEEL_SPEC)
     config_path = workdir / "wheel.toml"
     config_path.write_text(CONFIG.replace('name = "bench-driver-view"', 'name = "bench-wheel"')
+                           .replace('specs = ["phi1"]', 'specs = ["benchwheel.toml"]')
                            + '\n[live]\ndriving = "continuous"\n')
+    load_before = os.getloadavg()[0]
     process, address, token = start_live_server(config_path, workdir / "wheel", "--pace", "1", "--no-warm-up")
     try:
         headers = {"Authorization": f"Bearer {token}"}
@@ -143,40 +158,53 @@ def measure_latency(workdir: Path) -> dict:
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
             page = browser.new_context(viewport={"width": 1000, "height": 800}).new_page()
+            received = []
+            page.on("websocket", lambda ws: ws.on("framereceived", lambda payload: received.append(
+                (time.perf_counter(), len(payload if isinstance(payload, bytes) else payload.encode())))))
             page.add_init_script(WHEEL)
             page.goto(f"http://{address}{link}")
             page.locator("#agree").click()
             page.locator("#start-trust button", has_text="4").click()
-            page.locator("#speed").filter(has_text="km/h").wait_for(timeout=120_000)
-            page.wait_for_timeout(3000)
+            page.locator("#road[data-road='H-L']").wait_for(state="attached", timeout=180_000)
             page.evaluate("window.wheel.button = true")
             page.locator("#mode").filter(has_text="MANUAL").wait_for(timeout=30_000)
-            page.evaluate("window.wheel.button = false")
+            page.evaluate(f"window.wheel.button = false; window.cruise({CRUISE})")
+            page.wait_for_function(f"window.driverView.frames.at(-1).frame.speed > {CRUISE - 1}",
+                                   timeout=30_000)
             cpu_before, started = tree_cpu_seconds(process.pid), time.perf_counter()
             latencies = [page.evaluate(PULSE, 0.3 if i % 2 else -0.3) for i in range(LATENCY_SAMPLES)]
-            cpu = (tree_cpu_seconds(process.pid) - cpu_before) / (time.perf_counter() - started)
+            elapsed = time.perf_counter() - started
+            cpu = (tree_cpu_seconds(process.pid) - cpu_before) / elapsed
+            still_manual = page.locator("#mode").inner_text() == "MANUAL"
             browser.close()
     finally:
         process.kill()
         process.wait()
+    sent = sum(size for at, size in received if started <= at <= started + elapsed)
     return {"latencies": [value for value in latencies if value is not None],
-            "missed": sum(value is None for value in latencies), "server_cpu_per_s": cpu}
+            "missed": sum(value is None for value in latencies), "server_cpu_per_s": cpu,
+            "bytes_per_s": sent / elapsed, "window_s": elapsed, "manual_throughout": still_manual,
+            "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)]}
 
 
 def run() -> list[dict]:
     load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as directory:
         m = measure(Path(directory))
+        load_after = os.getloadavg()[0]
         wheel = measure_latency(Path(directory))
     latencies = sorted(wheel["latencies"])
     return [{"name": "driver_view_frame_rate", "renders_per_s": round(m["renders_per_s"], 1),
              "raf_per_s": round(m["raf_per_s"], 1), "frames_received_per_s": round(m["frames_per_s"], 1),
              "window_s": round(m["window_s"], 1), "renderer": "SwiftShader (software WebGL)",
-             "load_average": round(load, 2)},
+             "load_average": [round(load, 2), round(load_after, 2)], "cpus": os.cpu_count()},
             {"name": "driver_view_stream", "bytes_per_s": round(m["bytes_per_s"]),
              "server_cpu_seconds_per_s": round(m["server_cpu_per_s"], 3), "pace": 1.0},
             {"name": "driver_view_wheel_latency", "samples": len(latencies), "missed": wheel["missed"],
              "median_ms": round(statistics.median(latencies), 1) if latencies else None,
              "p95_ms": round(latencies[min(len(latencies) - 1, math.ceil(0.95 * len(latencies)) - 1)], 1)
-             if latencies else None, "target_ms": 100,
-             "server_cpu_seconds_per_s_driving": round(wheel["server_cpu_per_s"], 3)}]
+             if latencies else None, "target_ms": 100, "pace": 1.0,
+             "manual_throughout": wheel["manual_throughout"], "load_average": wheel["load_average"]},
+            {"name": "driver_view_wheel_participant", "window_s": round(wheel["window_s"], 1),
+             "server_cpu_seconds_per_s_driving": round(wheel["server_cpu_per_s"], 3),
+             "bytes_per_s_driving": round(wheel["bytes_per_s"]), "sumo_step_s": 0.05}]

@@ -58,6 +58,10 @@ PERSON_RADIUS = 0.3          # m: a person's footprint is a square of this half 
 CREEP_SPEED = 3.0            # m/s: held off its lane, the car is not driven faster than this
 CREEP_BRAKE = 0.5            # the brake applied above CREEP_SPEED then (of full braking)
 NEAR = 25.0                  # m: objects farther than this from the ego are not tested for contact
+# SUMO's speed mode while the model drives: none of its checks. With the autopilot's (31) SUMO
+# would bring its speed to the model's within its own acceleration and deceleration limits only,
+# so a car standing against what it hit would be logged still rolling at up to its speed before.
+MODEL_SPEED_MODE = 0
 # m: the model's front farther than this from where SUMO keeps the ego on its route: the car has
 # left its road and stops there (SUMO cannot map a placement beyond 100 m of its route at all)
 OFF_ROUTE_LIMIT = 10.0
@@ -234,6 +238,7 @@ class ManualDriving:
         x, y = sumo.vehicle.getPosition(vehicle_id)
         pose = Pose(x, y, sumo.vehicle.getAngle(vehicle_id), sumo.vehicle.getSpeed(vehicle_id))
         vehicle_type = sumo.vehicle.getTypeID(vehicle_id)
+        sumo.vehicle.setSpeedMode(vehicle_id, MODEL_SPEED_MODE)   # the hand-back's style sets SUMO's again
         return cls(vehicle_id, pose, list(sumo.vehicle.getRoute(vehicle_id)),
                    length=sumo.vehicletype.getLength(vehicle_type),
                    width=sumo.vehicletype.getWidth(vehicle_type),

@@ -112,7 +112,8 @@ def drive(net, program, obstacle=None):
                 sumo.simulationStep()
                 x, y = sumo.vehicle.getPosition("ego")
                 trace.append((sumo.simulation.getTime(), x, y, sumo.vehicle.getLaneID("ego"),
-                              tuple(sumo.vehicle.getRoute("ego")), driving.may_hand_back))
+                              tuple(sumo.vehicle.getRoute("ego")), driving.may_hand_back,
+                              sumo.vehicle.getSpeed("ego")))
         driving.observe(sumo, sumo.simulation.getTime())
     return trace, driving
 
@@ -123,13 +124,13 @@ def test_a_person_steers_into_the_oncoming_lane_and_back_and_the_route_is_kept(n
     # out (left, then straighten), along the oncoming lane, back (right, then straighten): 7 s, 56 m
     trace, driving = drive(net, [(0.5, cruise), (1.0, left), (1.0, right), (1.5, cruise), (1.0, right),
                                  (1.0, left), (1.0, cruise)])
-    lanes = [lane for _, _, _, lane, _, _ in trace]
+    lanes = [lane for _, _, _, lane, *_ in trace]
     assert "E-A_1" in lanes and lanes[-1] == "A-E_1", lanes
     first, last = lanes.index("E-A_1"), len(lanes) - 1 - lanes[::-1].index("E-A_1")
     assert all(lane == "E-A_1" for lane in lanes[first:last + 1])   # one pass, no flicker
     assert trace[-1][4] == ("A-E",)                                   # the planned route again
     # no hand-back while passing (the rule reads where the previous step put the ego)
-    assert not any(hand_back for *_, hand_back in trace[first + 1:last + 2])
+    assert not any(step[5] for step in trace[first + 1:last + 2])
     assert trace[-1][5]
     times = [t for t, *_ in trace]
     assert max(b - a for a, b in zip(times, times[1:], strict=False)) == pytest.approx(0.1)   # 10 Hz in SUMO
@@ -151,6 +152,8 @@ def test_steering_into_a_parked_truck_is_a_collision_and_stops_the_car(net):
     assert driving.pose.speed == 0.0   # stopped at the crash, and standing against the truck since
     crash = next(i for i, step in enumerate(trace) if step[0] >= collisions[0]["t"])
     assert {(x, y) for _, x, y, *_ in trace[crash + 1:]} == {trace[crash + 1][1:3]}
+    # and SUMO has it at rest too (its speed is what the kinematics table logs)
+    assert {step[6] for step in trace[crash + 1:]} == {0.0}
 
 
 def test_leaving_the_road_is_an_event_and_sumo_keeps_the_ego_on_its_route(net):
