@@ -57,9 +57,6 @@ MAX_PARAMETERS = 8
 # drops to the limit must leave this list). The click commands take one parameter per option until
 # their options are generated from the settings objects; the others wait for their own settings.
 OVER_THE_LIMIT = frozenset({
-    "trustroute.analysis.fitting.mixture:fit_mixture",
-    "trustroute.analysis.fitting.mixture:select_types",
-    "trustroute.analysis.fitting.mixture:bootstrap_type_count",
     "trustroute.harness.commands.fit:fit",
     "trustroute.harness.commands.fit:fit_types",
     "trustroute.harness.commands.live:live",
