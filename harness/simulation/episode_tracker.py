@@ -417,8 +417,8 @@ class HiddenDFA:
                                                               rule="bayes")
         if probability[0] > 0:
             self.posterior = posterior[0]
-            self.joint = self.filter.update(self.joint[None], posterior, tracker.belief[None], x, inc,
-                                            h, e, probability, np.array([tracker.word]),
+            self.joint = self.filter.update(self.joint[None], posterior, tracker.belief[None], x,
+                                            (inc, h, e), probability, np.array([tracker.word]),
                                             tracker._labels)[0]
         # else: an observation the AV's model deems impossible: J stays (as the belief does).
         self.told = int(self.filter.likeliest_q(self.joint[None])[0])
