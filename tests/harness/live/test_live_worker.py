@@ -124,7 +124,8 @@ def keep_lane(sumo, pose) -> dict:
     lane, position = sumo.vehicle.getLaneID(ego), sumo.vehicle.getLanePosition(ego)
     error = (sumo.lane.getAngle(lane, position) - pose.angle + 180.0) % 360.0 - 180.0
     steer = 0.05 * error + 0.3 * sumo.vehicle.getLateralLanePosition(ego)
-    return {"type": "control", "steer": max(-1.0, min(1.0, steer)), "throttle": 0.6, "brake": 0.0}
+    return {"type": "control", "source": "wheel", "steer": max(-1.0, min(1.0, steer)), "throttle": 0.6,
+            "brake": 0.0}
 
 
 def test_by_wheel_without_a_hand_back_the_ego_is_held_short_of_the_junction(tmp_path):
