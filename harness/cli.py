@@ -82,7 +82,7 @@ def usage_fix(exc: click.UsageError, command: str) -> str:
         if exc.possibilities:
             return f"use {' or '.join(sorted(exc.possibilities))}"
         return f"use an option `{command} --help` lists"
-    param, ctx = getattr(exc, "param", None), exc.ctx
+    param, ctx = (exc.param if isinstance(exc, click.BadParameter) else None), exc.ctx
     if param is not None and ctx is not None:
         hint = param.get_error_hint(ctx)
         if isinstance(exc, click.MissingParameter):

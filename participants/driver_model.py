@@ -27,7 +27,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, TypedDict
@@ -85,6 +85,52 @@ MAX_NAME = 64
 
 
 @dataclass(frozen=True, eq=False)
+class DriverTables:
+    """The tables of driver models (kinds) on one incident list; arrays are read-only.
+
+    takeover[k, i, θ]              = P(h = takeover | θ, incident i) of kind k
+    failure[k, i, θ]               = P(e = fail | θ, incident i)
+    transition_cdf[k, i, h, e, θ]  = the cumulative row of T[i][h][e](θ, ·)
+    initial_cdf[k]                 = the cumulative initial distribution of θ
+    """
+
+    incident_types: tuple[str, ...]
+    takeover: np.ndarray
+    failure: np.ndarray
+    transition_cdf: np.ndarray
+    initial_cdf: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("takeover", "failure", "transition_cdf", "initial_cdf"):
+            getattr(self, name).setflags(write=False)
+
+
+def driver_tables(models: Sequence[DriverModel],
+                  incident_types: Sequence[str] | None = None) -> DriverTables:
+    """The tables of `models` (kind k = models[k]) indexed by `incident_types` (default: the first
+    model's); every model must cover those incidents and have as many trust levels."""
+    models = list(models)
+    if not models:
+        raise ValueError("driver_tables needs at least one driver model")
+    incidents = tuple(incident_types) if incident_types is not None else models[0].incident_types
+    if any(m.n_trust != models[0].n_trust for m in models):
+        raise ValueError("the driver models have different numbers of trust levels")
+    for m in models:
+        missing = [i for i in incidents if i not in m.incident_types]
+        if missing:
+            raise ValueError(f"driver model {m.source_path} does not cover incident {missing[0]!r}")
+    rows = [[m.incident_index(i) for i in incidents] for m in models]
+    return DriverTables(
+        incident_types=incidents,
+        takeover=np.stack([m.takeover_probability[r] for m, r in zip(models, rows, strict=True)]),
+        failure=np.stack([m.failure_probability[r] for m, r in zip(models, rows, strict=True)]),
+        transition_cdf=np.cumsum(
+            np.stack([m.trust_transition[r] for m, r in zip(models, rows, strict=True)]), axis=-1),
+        initial_cdf=np.cumsum(np.stack([m.initial_belief for m in models]), axis=-1),
+    )
+
+
+@dataclass(frozen=True, eq=False)
 class DriverModel:
     """A validated driver model; arrays are read-only.
 
@@ -120,6 +166,12 @@ class DriverModel:
     @property
     def depends_on_performance(self) -> bool:
         return bool(self.failure_probability.any())
+
+    @functools.cached_property
+    def tables(self) -> DriverTables:
+        """`driver_tables([self])`: the model's own tables on its incident list (kind 0), built
+        once and held here (a study makes a synthetic driver per episode from a few models)."""
+        return driver_tables([self])
 
     @functools.cached_property
     def content_hash(self) -> str:

@@ -1,7 +1,8 @@
 """The synthetic driver's step: the one definition of every draw of a simulated driver.
 
-Owns `DriverTables`, the probability tables a step draws from (for one or more driver models on
-one incident list), and the draws of a step, in the order a road is driven:
+Owns the draws of a step from `DriverTables` (participants/driver_model.py: the probability tables
+of one or more driver models on one incident list; a model holds its own, `DriverModel.tables`), in
+the order a road is driven:
 
 1. `draw_takeovers`: h ~ P(takeover | θ, inc), from the trust before the road;
 2. `draw_performances`: the AV's performance e ~ P(fail | θ, inc) (the SUMO engine measures e
@@ -26,73 +27,9 @@ engine's batch path and Monte Carlo (harness/simulation/model_engine.py), POUCT'
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
-
 import numpy as np
 
-from trustroute.participants.driver_model import DriverModel, draw_report
-
-
-@dataclass(frozen=True, eq=False)
-class DriverTables:
-    """The tables of driver models (kinds) on one incident list; arrays are read-only.
-
-    takeover[k, i, θ]              = P(h = takeover | θ, incident i) of kind k
-    failure[k, i, θ]               = P(e = fail | θ, incident i)
-    transition_cdf[k, i, h, e, θ]  = the cumulative row of T[i][h][e](θ, ·)
-    initial_cdf[k]                 = the cumulative initial distribution of θ
-    """
-
-    incident_types: tuple[str, ...]
-    takeover: np.ndarray
-    failure: np.ndarray
-    transition_cdf: np.ndarray
-    initial_cdf: np.ndarray
-
-    def __post_init__(self) -> None:
-        for name in ("takeover", "failure", "transition_cdf", "initial_cdf"):
-            getattr(self, name).setflags(write=False)
-
-
-def driver_tables(models: Sequence[DriverModel],
-                  incident_types: Sequence[str] | None = None) -> DriverTables:
-    """The tables of `models` (kind k = models[k]) indexed by `incident_types` (default: the first
-    model's); every model must cover those incidents and have as many trust levels."""
-    models = list(models)
-    if not models:
-        raise ValueError("driver_tables needs at least one driver model")
-    incidents = tuple(incident_types) if incident_types is not None else models[0].incident_types
-    if any(m.n_trust != models[0].n_trust for m in models):
-        raise ValueError("the driver models have different numbers of trust levels")
-    for m in models:
-        missing = [i for i in incidents if i not in m.incident_types]
-        if missing:
-            raise ValueError(f"driver model {m.source_path} does not cover incident {missing[0]!r}")
-    rows = [[m.incident_index(i) for i in incidents] for m in models]
-    return DriverTables(
-        incident_types=incidents,
-        takeover=np.stack([m.takeover_probability[r] for m, r in zip(models, rows, strict=True)]),
-        failure=np.stack([m.failure_probability[r] for m, r in zip(models, rows, strict=True)]),
-        transition_cdf=np.cumsum(
-            np.stack([m.trust_transition[r] for m, r in zip(models, rows, strict=True)]), axis=-1),
-        initial_cdf=np.cumsum(np.stack([m.initial_belief for m in models]), axis=-1),
-    )
-
-
-_TABLES: dict[int, tuple[DriverModel, DriverTables]] = {}
-
-
-def model_tables(model: DriverModel) -> DriverTables:
-    """`driver_tables([model])` on the model's own incident list (kind 0), built once per model:
-    a study creates a driver per episode from a few models."""
-    entry = _TABLES.get(id(model))
-    if entry is None or entry[0] is not model:
-        if len(_TABLES) > 64:
-            _TABLES.clear()
-        entry = (model, driver_tables([model]))
-        _TABLES[id(model)] = entry
-    return entry[1]
+from trustroute.participants.driver_model import DriverTables, draw_report
 
 
 def _bernoulli(p, rng: np.random.Generator):

@@ -26,7 +26,6 @@ from trustroute.participants.driver_step import (
     draw_reports,
     draw_takeovers,
     draw_trust,
-    model_tables,
 )
 
 KIND = 0   # the driver's model is kind 0 of its own tables
@@ -43,7 +42,7 @@ class SyntheticDriver:
         self.model = model
         self.rng = rng
         self.report_accuracy = float(report_accuracy)
-        self._tables = model_tables(model)
+        self._tables = model.tables
         if initial_trust is None:
             self._theta = int(draw_initial_trust(self._tables, KIND, rng))
         elif initial_trust in model.trust_levels:

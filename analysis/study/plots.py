@@ -143,8 +143,9 @@ def paired_plot(per_participant: pd.DataFrame, conditions: tuple[str, ...], path
     for ax, spec in zip(axes[0], specs, strict=True):
         group = per_participant[per_participant["spec"] == spec]
         for row in group.itertuples(index=False):
-            trust = [getattr(row, f"trust_{c}", np.nan) for c in conditions]
-            satisfied = [getattr(row, f"satisfied_{c}", None) for c in conditions]
+            values = row._asdict()   # a condition without participants has no columns
+            trust = [values.get(f"trust_{c}", np.nan) for c in conditions]
+            satisfied = [values.get(f"satisfied_{c}", None) for c in conditions]
             jitter = rng.uniform(-0.04, 0.04)
             colour = "grey"
             if k == 2:

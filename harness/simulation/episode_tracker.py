@@ -24,6 +24,7 @@ table's schema is `trustroute.core.dataset.ROADS_SCHEMA` (docs/dataset.md).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -68,6 +69,14 @@ class EpisodeSetup:
     report_every: int = 1          # the driver reports trust every N roads
     belief_rule: str = "bayes"
 
+    @functools.cached_property
+    def model(self) -> EpisodeModel:
+        """The arrays the setup's episodes read, built on first use and held by the setup: every
+        episode run with one setup (a study's cell, the gymnasium environment's episodes) shares
+        them and their memos."""
+        return EpisodeModel(pomdp=build_pomdp(self.town, self.driver_model),
+                            compiled=compile_spec(self.spec, self.town))
+
 
 @dataclass(frozen=True)
 class DrivenRoad:
@@ -93,7 +102,7 @@ class EpisodeModel:
 
     pomdp: TrustPOMDP
     compiled: CompiledSpec
-    # Memoised filter and DFA steps, shared by the episodes of a process. Episodes start from one
+    # Memoised filter and DFA steps, shared by the episodes of one setup. Episodes start from one
     # initial belief and meet few distinct observation sequences, so most steps repeat; a hit
     # returns the very floats the computation gave (the same seed still gives the same logs).
     updates: dict = field(default_factory=dict, repr=False)
@@ -118,22 +127,6 @@ def _memo_put(memo: dict, key, value):
     return value
 
 
-_MODELS: dict[tuple[str, str, str], EpisodeModel] = {}
-
-
-def episode_model(setup: EpisodeSetup) -> EpisodeModel:
-    """Built once per (town, driver, spec) content: hundreds of episodes share the arrays."""
-    key = (setup.town.content_hash, setup.driver_model.content_hash, setup.spec.content_hash)
-    model = _MODELS.get(key)
-    if model is None:
-        model = EpisodeModel(pomdp=build_pomdp(setup.town, setup.driver_model),
-                             compiled=compile_spec(setup.spec, setup.town))
-        if len(_MODELS) > 32:
-            _MODELS.clear()
-        _MODELS[key] = model
-    return model
-
-
 def reports_after_road(road_number: int, report_every: int) -> bool:
     """Whether the driver is asked for a trust report when road `road_number` (1 for the first
     road after the start) closes: every `report_every`-th road."""
@@ -152,7 +145,7 @@ class EpisodeTracker:
         self.belief_rule = checked_belief_rule(setup.belief_rule)
         self.setup = setup
         self.episode_id = str(episode_id)
-        model = episode_model(setup)
+        model = setup.model
         self._pomdp, self._compiled = model.pomdp, model.compiled
         self._memo = model.updates
         self.dfa = model.compiled.dfa

@@ -38,18 +38,11 @@ from trustroute.harness.simulation.episode_tracker import (
     EpisodeModel,
     EpisodeSetup,
     EpisodeTracker,
-    episode_model,
 )
 from trustroute.harness.simulation.stepping import DecisionPoint, End, run_to_end
 from trustroute.networks.town import Town
-from trustroute.participants.driver_model import DriverModel
-from trustroute.participants.driver_step import (
-    DriverTables,
-    draw_initial_trust,
-    draw_report_batch,
-    draw_step,
-    driver_tables,
-)
+from trustroute.participants.driver_model import DriverModel, DriverTables, driver_tables
+from trustroute.participants.driver_step import draw_initial_trust, draw_report_batch, draw_step
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.belief.av_step import AVStep
 from trustroute.policies.belief.exact_labels import exact_labels
@@ -236,7 +229,7 @@ def simulate_batch(
     if index.shape != (count,):
         raise ValueError(f"driver_index must have {count} entries, got shape {index.shape}")
     true_drivers = list(drivers) if drivers is not None else [setup.driver_model]
-    sampled = _sampled(episode_model(setup), setup.spec, policy, true_drivers, setup.junction_cap,
+    sampled = _sampled(setup.model, setup.spec, policy, true_drivers, setup.junction_cap,
                        setup.fallback_after, checked_belief_rule(setup.belief_rule))
     return _unfold(sampled, index, rng, None if report_accuracy is None else
                    (float(report_accuracy), setup.report_every))

@@ -96,8 +96,7 @@ class Part:
 
 def _plain(value: object) -> object:
     """numpy scalars as JSON values."""
-    item = getattr(value, "item", None)
-    return item() if callable(item) else value
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def _ipc_bytes(table: pa.Table) -> bytes:

@@ -29,7 +29,6 @@ Higham's bounds: no underflow in the filter.
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from dataclasses import dataclass, field
 from fractions import Fraction
 
@@ -250,26 +249,14 @@ class ExactLabels:
         return self.labeller.step(q, x, beliefs, trust, belief_truth=truth)
 
 
-# Exact filters by model: building one converts the whole model to fractions, which costs far more
-# than an episode's labels, and trackers, evaluations and searches of one model share it (its
-# memoised beliefs are a pure function of the model). The entry keeps the model itself, so its id
-# cannot be reused while the entry lives.
-SHARED_FILTERS = 16
-_filters: OrderedDict[tuple[int, str], tuple[TrustPOMDP, ExactFilter]] = OrderedDict()
-
-
 def exact_filter(pomdp: TrustPOMDP, rule: BeliefRule = "bayes") -> ExactFilter:
-    """The exact filter of `pomdp` under `rule`, shared with every other caller for that model."""
-    key = (id(pomdp), rule)
-    found = _filters.get(key)
-    if found is not None and found[0] is pomdp:
-        _filters.move_to_end(key)
-        return found[1]
-    made = ExactFilter(pomdp=pomdp, rule=rule)
-    _filters[key] = (pomdp, made)
-    while len(_filters) > SHARED_FILTERS:
-        _filters.popitem(last=False)
-    return made
+    """The exact filter of `pomdp` under `rule`, held by the model and shared with every other
+    caller for it: building one converts the whole model to fractions, which costs far more than
+    an episode's labels (its memoised beliefs are a pure function of the model)."""
+    found = pomdp.exact_filters.get(rule)
+    if found is None:
+        found = pomdp.exact_filters[rule] = ExactFilter(pomdp=pomdp, rule=rule)
+    return found
 
 
 def exact_labels(pomdp: TrustPOMDP, labeller: Labeller, rule: BeliefRule = "bayes") -> ExactLabels:

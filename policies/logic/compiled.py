@@ -3,7 +3,8 @@
 `compile_spec(spec, town)` is the one place the DFA-plus-labeller pair is built. Episodes, the exact
 evaluation, synthesis, POUCT, trace evaluation, the linter and the state-only task all read a spec
 through it. Position 0 of a trace is the spec's start road: q_0 = step(dfa.initial, start, b_0).
-Cached by the spec's and the town's content hashes, so episodes share the arrays.
+The spec holds its compilations (Spec.compilations, by the town's content hash), so everything
+reading one loaded spec shares one DFA and its arrays.
 """
 
 from __future__ import annotations
@@ -18,8 +19,6 @@ from trustroute.policies.logic.dfa import DFA, build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import Spec
 
-CACHE_SIZE = 64
-
 
 @dataclass(frozen=True, eq=False)
 class CompiledSpec:
@@ -33,6 +32,9 @@ class CompiledSpec:
     rejecting: np.ndarray   # bool [n_states]: can no longer accept
     start: int              # index of the spec's start road in town.states
     _label_table: tuple | None = field(default=None, repr=False)
+    # What other modules derive from this compiled spec, built once and held with it (name ->
+    # object): policies/routing/free.py's state-only task and trust-free completion.
+    derived: dict = field(default_factory=dict, repr=False)
 
     def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
         """int64 [n]: DFA states after reading positions (x[i], beliefs[i]) from states q[i]."""
@@ -83,13 +85,9 @@ class CompiledSpec:
         return cached
 
 
-_COMPILED: dict[tuple[str, str], CompiledSpec] = {}
-
-
 def compile_spec(spec: Spec, town: Town) -> CompiledSpec:
-    """`spec` compiled against `town` (cached by their content hashes)."""
-    key = (spec.content_hash, town.content_hash)
-    compiled = _COMPILED.get(key)
+    """`spec` compiled against `town`: built on the first call and held by the spec."""
+    compiled = spec.compilations.get(town.content_hash)
     if compiled is None:
         if spec.start not in town.states:
             raise InputError(spec.source_path or spec.name, "start",
@@ -101,7 +99,5 @@ def compile_spec(spec: Spec, town: Town) -> CompiledSpec:
                                 accepting=np.asarray(dfa.accepting, dtype=bool),
                                 rejecting=np.asarray(dfa.rejecting, dtype=bool),
                                 start=town.state_index(spec.start))
-        if len(_COMPILED) >= CACHE_SIZE:
-            _COMPILED.clear()
-        _COMPILED[key] = compiled
+        spec.compilations[town.content_hash] = compiled
     return compiled

@@ -461,16 +461,11 @@ def dfa_from_formula(formula: Formula, atoms: Sequence[str] | None = None, max_s
                node_target=node_target, state_formulas=formulas)
 
 
-_CACHE: dict[str, DFA] = {}
-
-
 def build_dfa(spec: Spec) -> DFA:
-    """The minimal DFA of `spec.formula` over the atoms it uses, cached by the spec's content hash."""
-    key = spec.content_hash
-    if key not in _CACHE:
-        try:
-            _CACHE[key] = dfa_from_formula(spec.formula, spec.formula_atoms)
-        except DFATooLarge as exc:
-            raise InputError(spec.source_path or spec.name, "formula", f"the formula is too large to "
-                             f"translate ({exc})", "split the task or simplify the formula") from None
-    return _CACHE[key]
+    """The minimal DFA of `spec.formula` over the atoms it uses (InputError when it is too large).
+    A spec's compilation on its town holds it (policies/logic/compiled.py: compile_spec)."""
+    try:
+        return dfa_from_formula(spec.formula, spec.formula_atoms)
+    except DFATooLarge as exc:
+        raise InputError(spec.source_path or spec.name, "formula", f"the formula is too large to "
+                         f"translate ({exc})", "split the task or simplify the formula") from None

@@ -109,6 +109,10 @@ class Spec:
     source_path: str = ""
     trust_atoms: dict[str, TrustStateAtom] = field(default_factory=dict)
     type_atoms: dict[str, TypeBeliefAtom] = field(default_factory=dict)
+    # The spec compiled on the towns it is checked against (town content hash -> CompiledSpec),
+    # built by policies/logic/compiled.py's compile_spec and held here, so every reader of this
+    # spec shares one DFA, labeller and state-only task.
+    compilations: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @functools.cached_property
     def content_hash(self) -> str:

@@ -41,6 +41,9 @@ class TrustPOMDP:
     # observations whose probability is the same for every trust level (then exactly that constant)
     uniform_likelihood: np.ndarray = field(init=False)      # bool [n_inc, 2, 2]
     _preserving: dict = field(init=False, repr=False)       # rule -> bool [n_inc, 2, 2]
+    # The model's exact filters (rule -> policies/belief/exact_labels.py's ExactFilter), built
+    # there on first use and held here: trackers, evaluations and searches of one model share one.
+    exact_filters: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         town, driver = self.town, self.driver

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import pomdp_py
 
-from trustroute.participants.driver_step import DriverTables, draw_rows, draw_step, model_tables
+from trustroute.participants.driver_model import DriverTables
+from trustroute.participants.driver_step import draw_rows, draw_step
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
@@ -129,7 +130,7 @@ def build_product_model(pomdp: TrustPOMDP, spec: Spec, belief_rule: BeliefRule =
         raise ValueError(f"unknown belief rule {belief_rule!r}; use 'bayes' or 'paper'")
     return ProductModel(
         pomdp=pomdp, spec=spec, task=state_only_task(town, spec), compiled=compiled,
-        actions=actions, driver=model_tables(driver), belief_matrices=np.asarray(matrices))
+        actions=actions, driver=driver.tables, belief_matrices=np.asarray(matrices))
 
 
 class _TransitionModel(pomdp_py.TransitionModel):

@@ -32,6 +32,7 @@ from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, BoxRows, PolicyTable
+from trustroute.policies.routing.fallback import FallbackPolicy
 from trustroute.policies.routing.free import state_only_task
 from trustroute.policies.routing.protocol import Certificate, RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
@@ -333,17 +334,15 @@ def fallback_only(policy: RoutingPolicy) -> str | None:
     synthesized table without a single decision row, exact or box: then nothing synthesized acts
     and the policy is its table kind's fallback, which is returned in words. None for a table with
     rows and for any other policy (the trust-free one is not a synthesis result)."""
-    inner = getattr(policy, "inner", None)
-    if inner is not None:
-        return fallback_only(inner)
-    table = getattr(policy, "table", None)
-    if table is None:
+    if isinstance(policy, FallbackPolicy):
+        return fallback_only(policy.inner)
+    if not isinstance(policy, BeliefTablePolicy | JointTablePolicy):
         return None
+    table = policy.table
     kind = next((k for k in TABLE_KINDS if type(table) is k.table_type), None)
     if kind is None:
         return None
-    boxes = getattr(table, "boxes", None)
-    box_rows = boxes.rows if boxes is not None else 0
+    box_rows = table.boxes.rows if isinstance(table, PolicyTable) and table.boxes is not None else 0
     return kind.fallback if table.rows == 0 and box_rows == 0 else None
 
 

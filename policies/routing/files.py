@@ -28,8 +28,8 @@ from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
 from trustroute.core.validation import MAX_ARRAY_BYTES, check_keys, read_input_bytes, read_json
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
-from trustroute.policies.belief.driver_types import lift_population, lift_spec
-from trustroute.policies.logic.dfa import build_dfa
+from trustroute.policies.belief.driver_types import TypeLiftedModel, lift_population, lift_spec
+from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.decision_tables import (
     BOX_ROWS,
@@ -191,7 +191,7 @@ def read_policy_table(arrays: Path, document: dict, town: Town, driver: DriverMo
         raise InputError(where, "", f"not a readable .npz array file ({type(exc).__name__})",
                          RESYNTH) from None
     context = ReadContext(where=where, document=document, town=town, driver=driver, spec=spec,
-                         n_q=build_dfa(spec).n_states)
+                         n_q=compile_spec(spec, town).dfa.n_states)
     return kind.read(arrays_read, version, context)
 
 
@@ -201,12 +201,13 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
     where = str(path)
     document = read_policy_document(path)
     made_for_population = document.get("population_hash")
-    if made_for_population is not None and getattr(driver, "population_hash", None) != made_for_population:
+    given_population = driver.population_hash if isinstance(driver, TypeLiftedModel) else ""
+    if made_for_population is not None and given_population != made_for_population:
         raise InputError(where, "population_hash", "policy was synthesized for a driver population "
                          f"(hash {str(made_for_population)[:12]}...) that is not the one given",
                          "pass the driver population it was made for (--population), or re-run "
                          "trustroute synth --population for this one")
-    if made_for_population is None and bool(getattr(driver, "population_hash", "")):
+    if made_for_population is None and given_population:
         raise InputError(where, "population_hash", "policy was synthesized for a single driver model, "
                          "not for a driver population", "pass the driver model it was made for "
                          "(--driver), or re-run trustroute synth --population")

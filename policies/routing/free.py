@@ -188,20 +188,13 @@ def build_state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
                          road_index={road: i for i, road in enumerate(town.states)})
 
 
-_TASKS: dict[tuple[str, str], StateOnlyTask] = {}
-_COMPLETIONS: dict[tuple[str, str], FreeCompletion] = {}
-
-
 def state_only_task(town: Town, spec: Spec) -> StateOnlyTask:
-    """`build_state_only_task`, cached by the town's and the spec's content hashes."""
-    key = (town.content_hash, spec.content_hash)
-    if key not in _TASKS:
-        if spec.start not in town.states:
-            raise InputError(spec.source_path or spec.name, "start",
-                             f"start road {spec.start!r} is not a directed road of the town",
-                             "use a road 'U-V' of the town the spec is checked against")
-        _TASKS[key] = build_state_only_task(town, spec)
-    return _TASKS[key]
+    """`build_state_only_task`, built once per compiled spec and held by it."""
+    compiled = compile_spec(spec, town)
+    task = compiled.derived.get("state_only_task")
+    if task is None:
+        task = compiled.derived["state_only_task"] = build_state_only_task(town, spec)
+    return task
 
 
 def label_free_distance(successors: np.ndarray, next_q: np.ndarray, accepting: np.ndarray,
@@ -283,11 +276,12 @@ def build_free_completion(town: Town, spec: Spec) -> FreeCompletion:
 
 
 def free_completion(town: Town, spec: Spec) -> FreeCompletion:
-    """`build_free_completion`, cached by the town's and the spec's content hashes."""
-    key = (town.content_hash, spec.content_hash)
-    if key not in _COMPLETIONS:
-        _COMPLETIONS[key] = build_free_completion(town, spec)
-    return _COMPLETIONS[key]
+    """`build_free_completion`, built once per compiled spec and held by it."""
+    compiled = compile_spec(spec, town)
+    completion = compiled.derived.get("free_completion")
+    if completion is None:
+        completion = compiled.derived["free_completion"] = build_free_completion(town, spec)
+    return completion
 
 
 def completion_route(town: Town, spec: Spec, route: Sequence[str]) -> list[str] | None:

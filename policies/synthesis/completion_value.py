@@ -21,7 +21,8 @@ This module propagates probability mass over *clusters* of beliefs instead:
   max_B (a - λ* d)·b = 0, and a linear function is maximised over B by filling 1 - Σ lo into the
   coordinates in decreasing order of (a - λ* d)_i, each up to hi_i - lo_i. That order changes
   only where two lines a_i - λ d_i cross, so the orders of every λ interval (`fill_orders`, fixed
-  per symbol and coordinate) contain the optimal one. Dinkelbach's iteration (λ <- R_j of the
+  per symbol and coordinate: `ObservationSymbols.fill_orders`, policies/synthesis/belief_cells.py)
+  contain the optimal one. Dinkelbach's iteration (λ <- R_j of the
   greedy vertex of λ, until a vertex repeats) finds it in a few fills; where it does not settle,
   every such order is tried. So the next box is the exact range of f_o over B per coordinate
   (the minimum with the reversed orders), widened by CORNER_MARGIN. Merging takes
@@ -53,7 +54,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -130,39 +130,6 @@ class FreeRoute:
         road = np.where(road >= 0, road, tables.successors[:, :1, None])
         task = next_p[np.arange(next_p.shape[0])[None, None, :], road]
         return FreeRoute(next_road=road, next_task=task)
-
-
-def fill_orders(a: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """int [k, n]: the orders of decreasing a_i - λ d_i over every λ (one per interval between the
-    crossings of the lines, at the crossings, just beside them, and at both ends): the greedy fill
-    in one of them maximises (a - λ d)·b over a box-simplex for every λ. The crossings are float
-    quotients, so the orders just beside each one are taken too; extra orders only cost time (every
-    greedy vertex is a point of the box), a missing one would cost soundness."""
-    n = a.size
-    crossings = [(a[i] - a[k]) / (d[i] - d[k]) for i in range(n) for k in range(i + 1, n) if d[i] != d[k]]
-    points = np.sort(np.array(crossings + [0.0]))
-    nudge = 1e-9 * np.maximum(np.abs(points), 1.0)
-    tests = np.concatenate([points, points - nudge, points + nudge, (points[1:] + points[:-1]) / 2,
-                            [points[0] - 1.0, points[-1] + 1.0]])
-    # every λ's order at once (the same float operations per λ as one at a time); the distinct
-    # orders in lexicographic order (a lexsort and a neighbour comparison: np.unique over rows
-    # costs ten times more)
-    orders = np.argsort(-(a[None, :] - tests[:, None] * d[None, :]), axis=1, kind="stable")
-    orders = orders[np.lexsort(orders.T[::-1])]
-    distinct = np.ones(len(orders), dtype=bool)
-    distinct[1:] = (orders[1:] != orders[:-1]).any(axis=1)
-    return orders[distinct].astype(np.int64)
-
-
-@lru_cache(maxsize=8)
-def symbol_fill_orders(symbols: ObservationSymbols) -> tuple[tuple[np.ndarray, ...], ...]:
-    """fill_orders of every symbol's every coordinate: [o][j] -> [k, n] (the minimum's orders are
-    these reversed)."""
-    out = []
-    for o in range(symbols.n_symbols):
-        update = symbols.update[o]
-        out.append(tuple(fill_orders(update[:, j], update.sum(axis=1)) for j in range(update.shape[1])))
-    return tuple(out)
 
 
 def greedy_vertices(lo: np.ndarray, hi: np.ndarray, orders: np.ndarray) -> np.ndarray:
@@ -251,7 +218,7 @@ def box_image(lo: np.ndarray, hi: np.ndarray, symbols: ObservationSymbols, o: in
     rows, columns = np.nonzero(~(high_settled & low_settled))
     for j in np.unique(columns).tolist():
         which = rows[columns == j]
-        orders = symbol_fill_orders(symbols)[o][j]
+        orders = symbols.fill_orders[o][j]
         tops = greedy_vertices(blo[which], bhi[which], orders)
         bottoms = greedy_vertices(blo[which], bhi[which], orders[:, ::-1])
         top_den, bottom_den = tops @ likelihood, bottoms @ likelihood

@@ -29,9 +29,17 @@ class Statistics(Protocol):
 StatsT = TypeVar("StatsT", bound=Statistics)
 
 
+class Record:
+    """A record of how bounds were obtained (a run, an attempt): its JSON is `to_dict()`, and a
+    record inside another's fields is written by its own `to_dict`."""
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+
 def _plain(value: Any) -> Any:
     """`value` as JSON-ready data: records by their to_dict, tuples as lists."""
-    if hasattr(value, "to_dict"):
+    if isinstance(value, Record):
         return value.to_dict()
     if isinstance(value, tuple | list):
         return [_plain(v) for v in value]
@@ -50,7 +58,7 @@ def record_dict(record: Any, optional: tuple[str, ...] = ()) -> dict:
 
 
 @dataclass(frozen=True, kw_only=True)
-class SearchRun:
+class SearchRun(Record):
     """One AO*-style search of the product belief MDP (refinement.py): horizon None is the
     unbounded problem (then end_component_seconds: the unbounded abstraction's bound's time)."""
 
@@ -92,7 +100,7 @@ class SearchRun:
 
 
 @dataclass(frozen=True, kw_only=True)
-class ClusterAttempt:
+class ClusterAttempt(Record):
     """One cap tried by best_cluster_solution (cluster_policy.py); lower is None when the
     deadline stopped it."""
 
@@ -110,7 +118,7 @@ class ClusterAttempt:
 
 
 @dataclass(frozen=True, kw_only=True)
-class ClusterRun:
+class ClusterRun(Record):
     """A cluster policy (cluster_policy.py) with the caps tried; labels are read the worse way
     wherever a box straddles a threshold, so L holds under any reading."""
 
@@ -128,12 +136,9 @@ class ClusterRun:
     completion_closed: bool = True
     completion_bounds: bool = False
 
-    def to_dict(self) -> dict:
-        return record_dict(self)
-
 
 @dataclass(frozen=True, kw_only=True)
-class GraphDistanceRun:
+class GraphDistanceRun(Record):
     """An answer without search: no route accepts within the horizon (L = U = 0)."""
 
     horizon: int | None
@@ -147,9 +152,6 @@ class GraphDistanceRun:
     root_dfa_states: tuple[int, ...]
     completion_closed: bool = True
     completion_bounds: bool = False
-
-    def to_dict(self) -> dict:
-        return record_dict(self)
 
 
 Run = SearchRun | ClusterRun | GraphDistanceRun

@@ -47,7 +47,7 @@ from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.protocol import Certificate
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 from trustroute.policies.synthesis.budget import TimeBudget
-from trustroute.policies.synthesis.result import SynthesisResult, record_dict
+from trustroute.policies.synthesis.result import Record, SynthesisResult, record_dict
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.search import (
     JointBounds,
@@ -80,7 +80,7 @@ class PolicyValue:
 
 
 @dataclass(frozen=True, kw_only=True)
-class JointRun:
+class JointRun(Record):
     """One search round: which search (its depth or policy horizon), the nodes per level it
     kept, its bounds, and (policy rounds) the certified value of the policy it gave."""
 

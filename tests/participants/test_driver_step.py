@@ -13,7 +13,7 @@ import pytest
 
 from tests.participants.test_synthetic_driver import chi_square_p
 from tests.policies.model.test_trust_pomdp import random_model
-from trustroute.participants.driver_model import PERFORMANCES, driver_model_from_dict
+from trustroute.participants.driver_model import PERFORMANCES, driver_model_from_dict, driver_tables
 from trustroute.participants.driver_step import (
     draw_initial_trust,
     draw_performances,
@@ -22,8 +22,6 @@ from trustroute.participants.driver_step import (
     draw_step,
     draw_takeovers,
     draw_trust,
-    driver_tables,
-    model_tables,
 )
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.model.trust_pomdp import build_pomdp
@@ -38,7 +36,7 @@ def failing_model():
 
 def test_a_batch_of_one_is_the_synthetic_driver(failing_model):
     """Batch-shaped calls ([1] arrays) and the synthetic driver, on one seed each: equal draws."""
-    tables = model_tables(failing_model)
+    tables = failing_model.tables
     incidents = ["obstacle", "pedestrian", "truck", "none"] * 5
     for seed in range(20):
         person = SyntheticDriver(failing_model, np.random.default_rng(seed), report_accuracy=0.6)
@@ -59,7 +57,7 @@ def test_a_batch_of_one_is_the_synthetic_driver(failing_model):
 
 def test_one_step_of_many_drivers_follows_the_joint_probability(town, failing_model):
     pomdp = build_pomdp(town, failing_model)
-    tables = model_tables(failing_model)
+    tables = failing_model.tables
     rng = np.random.default_rng(3)
     n = 20000
     for trust in (0, 3, 6):
@@ -74,7 +72,7 @@ def test_one_step_of_many_drivers_follows_the_joint_probability(town, failing_mo
 
 def test_each_draw_takes_one_uniform_per_driver(failing_model):
     """n drivers take n uniforms per draw, in driver order: the same stream as n single calls."""
-    tables = model_tables(failing_model)
+    tables = failing_model.tables
     n = 50
     kind, inc = np.zeros(n, dtype=np.int64), np.arange(n) % 4
     theta = np.arange(n) % 7
@@ -111,4 +109,4 @@ def test_tables_follow_incidents_by_name_and_drivers_by_kind(driver, failing_mod
         driver_tables([driver], ["obstacle", "flood"])
     with pytest.raises(ValueError, match="at least one"):
         driver_tables([])
-    assert model_tables(driver) is model_tables(driver)
+    assert driver.tables is driver.tables

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DriverModel
+from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DriverModel, driver_tables
 from trustroute.participants.driver_population import DriverPopulation
-from trustroute.participants.driver_step import draw_initial_trust, draw_reports, draw_step, driver_tables
+from trustroute.participants.driver_step import draw_initial_trust, draw_reports, draw_step
 from trustroute.participants.synthetic_driver import SyntheticDriver
 
 

@@ -16,6 +16,7 @@ from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint, evaluate_joint_by_type
 from trustroute.policies.model.trust_pomdp import BeliefRule, checked_belief_rule
 from trustroute.policies.resolve import is_objective, phase_lines, synthesis_progress
+from trustroute.policies.routing.aware_table import BeliefTablePolicy
 from trustroute.policies.routing.decision_tables import fallback_only as fallback_only
 from trustroute.policies.routing.decision_tables import fallback_warning as fallback_warning
 from trustroute.policies.routing.files import array_path, save_policy
@@ -141,7 +142,8 @@ def policy_arrays(path: str | Path) -> Path:
 def bounds_notes(result: SynthesisResult) -> list[str]:
     """What a reader of the bounds should know: a cluster policy, outcomes on a belief threshold."""
     lines = []
-    boxes = getattr(result.policy.table, "boxes", None)
+    table = result.policy.table if isinstance(result.policy, BeliefTablePolicy) else None
+    boxes = table.boxes if table is not None else None
     if boxes is not None and boxes.rows:
         lines.append(f"a cluster policy: {boxes.rows} box rows, beliefs enclosed in boxes "
                      "(docs/synthesis.md, \"Cluster policies\")")

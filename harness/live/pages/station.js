@@ -26,6 +26,7 @@ let latest = null;          // the newest frame
 let edges = {};             // road id -> the shape of its rightmost lane (the next turn)
 let continuous = false;     // [live] driving = "continuous": wheel and pedals (inputs.js)
 let inputs = null;
+let askedForInput = false;   // the notice asks for an input the study allows
 const CONTROL_INTERVAL = 1 / 30;   // s: controls are sent at most this often (the server's bucket)
 let sentControl = null;
 let sentAt = 0;
@@ -34,7 +35,8 @@ const WARNINGS = { back_to_lane: "Back into your lane first: then hand back.", c
                    off_road: "You left the road.", oncoming: "", own_lane: "", on_road: "",
                    hold: "The junction is near: the car stops here. Hand back now.",
                    guide_back: "The junction is near: steer back into your lane, then hand back.",
-                   held_off_lane: "Stopped before the junction: hand back now." };
+                   held_off_lane: "Stopped before the junction: hand back now.",
+                   stopped_off_road: "Off the road: the car has stopped. Hand back now." };
 
 function show(step) {
   for (const id of steps) $(id).classList.toggle("hidden", id !== step);
@@ -214,8 +216,10 @@ function readInputs() {
   if (state.phase !== "driving") return;
   if (!controls) {   // nothing the study allows is connected: say so, with the hand-back rule when due
     $("incident").textContent = [inputs.missing(), handBackDue ? HAND_BACK_DUE : ""].join(" ").trim();
+    askedForInput = true;
     return;
   }
+  if (askedForInput) { askedForInput = false; notice(""); }   // connected now
   if (controls.toggle) toggle();
   if (mode !== "manual") { sentControl = null; return; }
   const { steer, throttle, brake, source } = controls;

@@ -95,10 +95,8 @@ def test_memoised_steps_give_the_computed_floats(town, driver, pomdp, phi1):
     performance, run after each other so later ones take steps from the memo: every belief is
     bit-identical to the direct filter's and every DFA state to the labeller's. A memo key that
     ignored the takeover or the performance would hand the second sequence the first one's belief."""
-    from trustroute.harness.simulation.episode_tracker import episode_model
-
     setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1)
-    episode_model(setup).updates.clear()
+    assert not setup.model.updates   # a new setup's memo starts empty
     dfa = build_dfa(phi1)
     labeller = Labeller(phi1, dfa, town)
     # The same route; up to its first incident the priors agree, then the sequences differ in one
@@ -120,7 +118,7 @@ def test_memoised_steps_give_the_computed_floats(town, driver, pomdp, phi1):
             q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None])[0])
             assert tracker.belief.tobytes() == belief.tobytes()
             assert tracker.dfa_state == q
-    assert len(episode_model(setup).updates) > 0
+    assert len(setup.model.updates) > 0
 
 
 def test_free_policy_drives_the_baseline_route(town, driver, phi1):

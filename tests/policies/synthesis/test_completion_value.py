@@ -326,7 +326,7 @@ def test_bounds_on_a_long_route_are_tight_and_bracket_monte_carlo(driver):
 
 def test_fill_orders_are_every_lambdas_order_once_in_lexicographic_order():
     # the definition, one λ at a time: a descending order of a - λ d at every test point
-    from trustroute.policies.synthesis.completion_value import fill_orders
+    from trustroute.policies.synthesis.belief_cells import fill_orders
 
     rng = np.random.default_rng(7)
     for n in (2, 3, 7, 21):
