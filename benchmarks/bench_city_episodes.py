@@ -33,7 +33,12 @@ import numpy as np
 from benchmarks.timing import TimingProcess, paired_timings
 from trustroute.core.cache import cache_dir
 from trustroute.harness.simulation.background import random_trips, shifted_routes
-from trustroute.harness.simulation.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
+from trustroute.harness.simulation.episode import (
+    COMMIT_DISTANCE,
+    START_BEFORE_COMMIT,
+    EpisodeOptions,
+    run_episode,
+)
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.real_roads import RealRoads
 from trustroute.harness.simulation.sumo_start import SumoConfig, fresh_session
@@ -154,7 +159,7 @@ def run(pairs: int = PAIRS) -> list[dict]:
 
             def episode(config=config):
                 driver = SyntheticDriver(model, np.random.default_rng(SEED))
-                record = run_episode(setup, policy, driver, "city", SEED, config=config)
+                record = run_episode(setup, policy, driver, "city", SEED, EpisodeOptions(config=config))
                 record.tables()
                 return record
 

@@ -23,7 +23,12 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.timing import TimingProcess, paired_timings
-from trustroute.harness.simulation.episode import COMMIT_DISTANCE, START_BEFORE_COMMIT, run_episode
+from trustroute.harness.simulation.episode import (
+    COMMIT_DISTANCE,
+    START_BEFORE_COMMIT,
+    EpisodeOptions,
+    run_episode,
+)
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.incidents import truck
 from trustroute.harness.simulation.sumo_start import SumoConfig, fresh_session, sumo_session
@@ -110,8 +115,8 @@ class MeasuredEpisode:
 
     def episode(self, seed: int = SEED):
         driver = SyntheticDriver(self.setup.driver_model, np.random.default_rng(seed))
-        record = run_episode(self.setup, self.policy, driver, f"bench{seed}", seed, net_path=self.net,
-                             config=self.config)
+        record = run_episode(self.setup, self.policy, driver, f"bench{seed}", seed,
+                             EpisodeOptions(net_path=self.net, config=self.config))
         record.tables()   # the logs in the form a study writes them (Arrow), part of the cost
         return record
 
@@ -206,7 +211,7 @@ def incident_rates(setup: EpisodeSetup, net, config: SumoConfig, episodes: int =
     for seed in range(episodes):
         driver = SyntheticDriver(setup.driver_model, np.random.default_rng(2000 + seed))
         incidents.append(run_episode(scenes, FixedRoute(route), driver, f"rates{seed}", 2000 + seed,
-                                     net_path=net, config=config).incidents)
+                                     EpisodeOptions(net_path=net, config=config)).incidents)
     rows = pd.concat(incidents, ignore_index=True)
     rates = []
     for kind, group in rows.groupby("incident"):

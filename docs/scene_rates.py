@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_episode import route_through_every_kind  # noqa: E402
 from trustroute.harness.simulation import episode as episode_module  # noqa: E402
-from trustroute.harness.simulation.episode import run_episode  # noqa: E402
+from trustroute.harness.simulation.episode import EpisodeOptions, run_episode  # noqa: E402
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup  # noqa: E402
 from trustroute.harness.simulation.sumo_start import SumoConfig  # noqa: E402
 from trustroute.networks.town import NO_INCIDENT, load_town  # noqa: E402
@@ -112,7 +112,8 @@ def main() -> None:
     for k in range(args.episodes):
         route, setup = kept[k % len(kept)]
         driver = SyntheticDriver(model, np.random.default_rng(2000 + k))
-        record = run_episode(setup, FixedRoute(route), driver, f"rates{k}", 2000 + k, config=SumoConfig())
+        record = run_episode(setup, FixedRoute(route), driver, f"rates{k}", 2000 + k,
+                             EpisodeOptions(config=SumoConfig()))
         roads.append(record.roads)
         incidents.append(record.incidents)
     all_roads = pd.concat(roads, ignore_index=True)

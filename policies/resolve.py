@@ -16,6 +16,7 @@ import re
 import sys
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeGuard, TypeVar
 
@@ -48,6 +49,21 @@ Loaded = TypeVar("Loaded")
 AWARE_HORIZON = defaults.AWARE_HORIZON   # synthesize for the junctions before the fallback takes over
 AWARE_TAU = 1e-3
 AWARE_TIME_LIMIT = 120.0
+
+
+@dataclass(frozen=True)
+class PolicySettings:
+    """How a named policy is found or made: the policy cache (None: the cache root's), the horizon
+    and AV filter "aware" and population policies are synthesized for, and whether a synthesis
+    shows its progress."""
+
+    cache_dir: str | Path | None = None
+    horizon: int | None = AWARE_HORIZON
+    belief_rule: BeliefRule = defaults.BELIEF_RULE
+    progress: bool = False
+
+
+DEFAULT_POLICY = PolicySettings()
 
 
 def _code_version(case: str) -> str:
@@ -224,14 +240,14 @@ def is_objective(name: str) -> TypeGuard[Objective]:
 
 
 def population_policy(town: Town, population: DriverPopulation, spec: Spec, objective: str = "robust",
-                      cache_dir: str | Path | None = None, horizon: int | None = AWARE_HORIZON,
-                      belief_rule: BeliefRule = "bayes", population_source: str = "",
-                      notice: Callable[[str], object] = _stderr,
-                      progress: bool = False) -> tuple[RoutingPolicy, DriverModel, Spec]:
+                      settings: PolicySettings = DEFAULT_POLICY, population_source: str = "",
+                      notice: Callable[[str], object] = _stderr) -> tuple[RoutingPolicy, DriverModel, Spec]:
     """The cached policy of `objective` for driver population `population` (a DriverPopulation),
     synthesized when missing or damaged (policies/synthesis/population.py): (policy, the lifted
     driver model its AV filters with, the lifted spec). One type: the "aware" policy of that
-    type's model."""
+    type's model. `settings`: the cache, the horizon and AV filter it is made for, progress."""
+    cache_dir, horizon, belief_rule, progress = (settings.cache_dir, settings.horizon, settings.belief_rule,
+                                                 settings.progress)
     lifted_spec = lift_spec(spec, population, population_source)
     if population.n_types == 1:
         model = lift_population(population)

@@ -58,6 +58,40 @@ START_HARDNESS = 0.8  # weight of the random partition in a restart's starting r
 RESPONSIBILITY_FLOOR = 1e-200  # keeps an emptied type's statistics finite (its rows stay at the start)
 
 
+@dataclass(frozen=True, eq=False)
+class StudyLogs:
+    """A study's logged roads and episodes (one row per episode, with its participant), and the
+    driver model they were logged with (the template every fitted type's shape follows)."""
+
+    roads: pd.DataFrame
+    episodes: pd.DataFrame
+    template: DriverModel
+
+
+@dataclass(frozen=True, eq=False)
+class ParticipantObservations:
+    """The observations of a study's roads with the participant each episode belongs to:
+    `owner[i]` is the row in `participants` (ids, sorted) of observation row i's participant."""
+
+    observations: Observations
+    owner: np.ndarray
+    participants: list
+    template: DriverModel
+
+
+@dataclass(frozen=True)
+class EMSettings:
+    """How EM fits a mixture: `restarts` runs from random partitions (the best converged wins),
+    at most `iterations` iterations each, and whether the types share their trust dynamics."""
+
+    restarts: int = DEFAULT_RESTARTS
+    iterations: int = 500
+    shared_dynamics: bool = False
+
+
+DEFAULT_EM = EMSettings()
+
+
 @dataclass
 class MixtureFit:
     """One fitted mixture of `n_types` driver models."""
@@ -139,6 +173,13 @@ def participant_index(obs: Observations, episodes: pd.DataFrame) -> tuple[np.nda
     return np.array([row_of[of_episode[e]] for e in obs.episode_ids], dtype=np.int64), ids
 
 
+def participant_observations(logs: StudyLogs) -> ParticipantObservations:
+    """The logs' observations (analysis/fitting/driver_model.py) with each episode's participant."""
+    obs = observations_from_roads(logs.roads, logs.template)
+    owner, participants = participant_index(obs, logs.episodes)
+    return ParticipantObservations(obs, owner, participants, logs.template)
+
+
 def free_parameters(components: list[FitResult], n_trust: int, shared_dynamics: bool = False) -> int:
     """Estimated parameters: per type π (k-1), every non-structural takeover and failure entry,
     k-1 per transition row with enough data (rows below MIN_ROW_WEIGHT stay at the start value and
@@ -174,9 +215,10 @@ def _pooled_dynamics(stats: list) -> list:
     return [replace(s, transition=pooled) for s in stats]
 
 
-def _run_em(obs: Observations, owner: np.ndarray, n_participants: int, template: DriverModel,
-            responsibilities: np.ndarray, iterations: int, shared_dynamics: bool = False,
+def _run_em(data: ParticipantObservations, responsibilities: np.ndarray, settings: EMSettings,
             start: list[Parameters] | None = None) -> MixtureFit:
+    obs, owner, template = data.observations, data.owner, data.template
+    n_participants, shared_dynamics = len(data.participants), settings.shared_dynamics
     n_inc, k_trust = len(template.incident_types), template.n_trust
     n_types = responsibilities.shape[1]
     params = ([copy_parameters(p) for p in start] if start is not None
@@ -185,7 +227,7 @@ def _run_em(obs: Observations, owner: np.ndarray, n_participants: int, template:
     history: list[float] = []
     converged = False
     stats = []
-    for _ in range(iterations):
+    for _ in range(settings.iterations):
         r = np.maximum(responsibilities, RESPONSIBILITY_FLOOR)
         stats = [expectation(obs, params[k], weights=r[owner, k]) for k in range(n_types)]
         if shared_dynamics:
@@ -262,43 +304,32 @@ def split_start(previous: MixtureFit, rng: np.random.Generator) -> tuple[np.ndar
     return r, [*params, params[largest]]
 
 
-def fit_mixture(
-    obs: Observations,
-    owner: np.ndarray,
-    participants: list,
-    template: DriverModel,
-    n_types: int,
-    rng: np.random.Generator,
-    restarts: int = DEFAULT_RESTARTS,
-    iterations: int = 500,
-    shared_dynamics: bool = False,
-    previous: MixtureFit | None = None,
-) -> MixtureFit:
-    """The best of `restarts` EM runs (one for a single type: there is nothing to restart), plus
-    one run split from `previous` (a fit with one type fewer) when given.
-    `shared_dynamics`: the types share the trust-transition rows (fitted on all participants) and
-    differ in initial trust, takeover and failure probabilities."""
+def fit_mixture(data: ParticipantObservations, n_types: int, rng: np.random.Generator,
+                settings: EMSettings = DEFAULT_EM, previous: MixtureFit | None = None) -> MixtureFit:
+    """The best of `settings.restarts` EM runs (one for a single type: there is nothing to
+    restart), plus one run split from `previous` (a fit with one type fewer) when given.
+    `settings.shared_dynamics`: the types share the trust-transition rows (fitted on all
+    participants) and differ in initial trust, takeover and failure probabilities."""
     if n_types < 1:
         raise ValueError(f"n_types must be >= 1, got {n_types}")
-    n_participants = len(participants)
+    n_participants = len(data.participants)
     if n_types > n_participants:
         raise InputError("--types", "", f"{n_types} types for {n_participants} participants",
                          "fit at most one type per participant")
     runs = []
-    for _ in range(1 if n_types == 1 else max(1, restarts)):
+    for _ in range(1 if n_types == 1 else max(1, settings.restarts)):
         # a random partition of the participants, softened (a soft uniform start keeps the types
         # alike for many iterations and ends in poorer optima)
         hard = np.eye(n_types)[rng.integers(n_types, size=n_participants)]
         start = START_HARDNESS * hard + (1 - START_HARDNESS) * rng.dirichlet(np.ones(n_types),
                                                                              size=n_participants)
-        runs.append(_run_em(obs, owner, n_participants, template, start, iterations, shared_dynamics))
+        runs.append(_run_em(data, start, settings))
     if previous is not None and previous.n_types == n_types - 1:
         responsibilities, params = split_start(previous, rng)
-        runs.append(_run_em(obs, owner, n_participants, template, responsibilities, iterations,
-                            shared_dynamics, start=params))
+        runs.append(_run_em(data, responsibilities, settings, start=params))
     converged = [r for r in runs if r.converged]
     best = max(converged or runs, key=lambda r: r.loglik)
-    best.participants = list(participants)
+    best.participants = list(data.participants)
     best.restarts, best.restarts_converged = len(runs), len(converged)
     return best
 
@@ -334,16 +365,14 @@ class TypeSelection:
         ]
 
 
-def select_types(obs: Observations, owner: np.ndarray, participants: list, template: DriverModel,
-                 max_types: int, rng: np.random.Generator, restarts: int = DEFAULT_RESTARTS,
-                 iterations: int = 500, progress: Callable[[], None] | None = None,
-                 shared_dynamics: bool = False) -> TypeSelection:
+def select_types(data: ParticipantObservations, max_types: int, rng: np.random.Generator,
+                 settings: EMSettings = DEFAULT_EM,
+                 progress: Callable[[], None] | None = None) -> TypeSelection:
     """Fit K = 1..max_types (each K also from a split of the best K-1 fit); choose the K with the
     lowest BIC."""
     fits: list[MixtureFit] = []
-    for k in range(1, min(max_types, len(participants)) + 1):
-        fits.append(fit_mixture(obs, owner, participants, template, k, rng, restarts, iterations,
-                                shared_dynamics, previous=fits[-1] if fits else None))
+    for k in range(1, min(max_types, len(data.participants)) + 1):
+        fits.append(fit_mixture(data, k, rng, settings, previous=fits[-1] if fits else None))
         if progress is not None:
             progress()
     chosen = 1 + int(np.argmin([f.bic for f in fits]))
@@ -367,16 +396,15 @@ def _takeover_signature(fit: MixtureFit) -> np.ndarray:
     return np.stack([c.parameters.takeover.ravel() for c in fit.components])
 
 
-def bootstrap_type_count(roads: pd.DataFrame, episodes: pd.DataFrame, template: DriverModel,
-                         selection: TypeSelection, max_types: int, resamples: int,
-                         rng: np.random.Generator, restarts: int = DEFAULT_RESTARTS, iterations: int = 500,
-                         progress: Callable[[], None] | None = None, choose: bool = True,
-                         shared_dynamics: bool = False) -> dict:
+def bootstrap_type_count(logs: StudyLogs, selection: TypeSelection, max_types: int, resamples: int,
+                         rng: np.random.Generator, settings: EMSettings = DEFAULT_EM,
+                         progress: Callable[[], None] | None = None, choose: bool = True) -> dict:
     """Participants resampled with replacement (all their episodes together), K chosen again by BIC
     (`choose`; else K stays the selection's): how often each K wins; and, refitting the chosen K,
     2.5/97.5 percentiles of each type's weight and takeover probabilities, the resample's types
     matched to the fit's by their takeover probabilities (Hungarian assignment, so labels cannot
     switch)."""
+    roads, episodes, template = logs.roads, logs.episodes, logs.template
     participants = sorted(episodes["participant"].unique())
     chosen = selection.chosen
     reference = _takeover_signature(selection.best)
@@ -384,17 +412,14 @@ def bootstrap_type_count(roads: pd.DataFrame, episodes: pd.DataFrame, template: 
     weights, takeovers, converged = [], [], 0
     for _ in range(resamples):
         drawn = rng.choice(len(participants), size=len(participants), replace=True)
-        sample_roads, sample_episodes = _resampled(roads, episodes, drawn, participants)
-        obs = observations_from_roads(sample_roads, template)
-        owner, ids = participant_index(obs, sample_episodes)
+        sample = participant_observations(StudyLogs(*_resampled(roads, episodes, drawn, participants),
+                                                    template))
         if choose:
-            result = select_types(obs, owner, ids, template, max_types, rng, restarts, iterations,
-                                  shared_dynamics=shared_dynamics)
+            result = select_types(sample, max_types, rng, settings)
             wins[result.chosen - 1] += 1
             fit = result.fits[chosen - 1] if chosen <= len(result.fits) else None
         else:
-            fit = fit_mixture(obs, owner, ids, template, chosen, rng, restarts, iterations,
-                              shared_dynamics)
+            fit = fit_mixture(sample, chosen, rng, settings)
         if fit is not None:
             converged += bool(fit.converged)
             cost = ((reference[:, None, :] - _takeover_signature(fit)[None, :, :]) ** 2).sum(axis=-1)
@@ -436,14 +461,14 @@ def mixture_population(fit: MixtureFit, source: str, provenance: str):
     return DriverPopulation(types=types, source_path=source, provenance=provenance)
 
 
-def study_observations(study_dir) -> tuple[Observations, np.ndarray, list, DriverModel, pd.DataFrame,
-                                           pd.DataFrame]:
-    """(observations, participant row per episode, participant ids, template, roads, episodes)."""
+def study_observations(study_dir) -> tuple[ParticipantObservations, StudyLogs]:
+    """A study's observations with each episode's participant, and its logs."""
     manifest, episodes, roads = load_study(Path(study_dir))
     _, template, _ = study_inputs(manifest)
+    logs = StudyLogs(roads, episodes, template)
     obs = observations_from_roads(roads, template)
     if obs.steps == 0:
         raise InputError("roads.parquet", "", "no roads driven in the logs",
                          "run a study with episodes first")
     owner, participants = participant_index(obs, episodes)
-    return obs, owner, participants, template, roads, episodes
+    return ParticipantObservations(obs, owner, participants, template), logs

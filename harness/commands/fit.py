@@ -182,6 +182,7 @@ def fit_types(study_dir: Path, out: Path, options: FitOptions) -> None:
     from tqdm import tqdm
 
     from trustroute.analysis.fitting.mixture import (
+        EMSettings,
         bootstrap_type_count,
         fit_mixture,
         mixture_population,
@@ -197,17 +198,17 @@ def fit_types(study_dir: Path, out: Path, options: FitOptions) -> None:
     assert types is not None   # (fit calls this only with --types)
     fixed = _type_count(types)
     rng = np.random.default_rng(seed)
-    obs, owner, participants, template, roads, episodes = study_observations(study_dir)
+    data, logs = study_observations(study_dir)
+    obs, participants = data.observations, data.participants
+    settings = EMSettings(restarts=restarts, iterations=iterations, shared_dynamics=shared_dynamics)
     if fixed is None:
         with tqdm(total=min(max_types, len(participants)), desc="fitting K = 1..", unit="K",
                   disable=quiet or as_json) as bar:
-            selection = select_types(obs, owner, participants, template, max_types, rng, restarts,
-                                     iterations, progress=bar.update, shared_dynamics=shared_dynamics)
+            selection = select_types(data, max_types, rng, settings, progress=bar.update)
     else:
         from trustroute.analysis.fitting.mixture import TypeSelection
 
-        fits = [fit_mixture(obs, owner, participants, template, fixed, rng, restarts, iterations,
-                            shared_dynamics)]
+        fits = [fit_mixture(data, fixed, rng, settings)]
         selection = TypeSelection(fits=fits, chosen=fixed)
     best = selection.best
     command = "trustroute fit " + " ".join(
@@ -232,9 +233,8 @@ def fit_types(study_dir: Path, out: Path, options: FitOptions) -> None:
         payload["bic_table"] = selection.table()
     if bootstrap:
         with tqdm(total=bootstrap, desc="bootstrap", disable=quiet or as_json) as bar:
-            payload["bootstrap"] = bootstrap_type_count(
-                roads, episodes, template, selection, max_types, bootstrap, rng, restarts, iterations,
-                progress=bar.update, choose=fixed is None, shared_dynamics=shared_dynamics)
+            payload["bootstrap"] = bootstrap_type_count(logs, selection, max_types, bootstrap, rng, settings,
+                                                        progress=bar.update, choose=fixed is None)
     details = out.with_suffix(".fit.json")
     atomic_write_text(details, json.dumps(payload, indent=1, default=str), "fit details",
                       "pass a writable path with --out")

@@ -44,7 +44,7 @@ from trustroute.harness.simulation.drivers import Driver, PersonControls
 from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style
 from trustroute.harness.simulation.episode_record import EpisodeRecord, StepLog
 from trustroute.harness.simulation.episode_roads import EpisodeRoads, background_vehicles, episode_roads
-from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
+from trustroute.harness.simulation.episode_tracker import DrivenRoad, EpisodeSetup, EpisodeTracker
 from trustroute.harness.simulation.incidents import EgoState, Scene
 from trustroute.harness.simulation.manual_driving import ManualDriving
 from trustroute.harness.simulation.performance import PerformanceMonitor, limits_for
@@ -307,8 +307,8 @@ class SumoEpisode:
         trust_before = self.driver.trust
         trust_after = self.driver.move_trust(run.kind, run.took_over, performance)
         reported = self.driver.report_trust() if self.tracker.should_report() else None
-        self.tracker.record_road(run.road, run.kind, run.took_over, performance, trust_before,
-                                 trust_after, reported, run.time_in, now)
+        self.tracker.record_road(DrivenRoad(run.road, run.kind, run.took_over, performance, trust_before,
+                                            trust_after, reported, run.time_in, now))
 
     def watch_open(self, run: RoadRun, ego: EgoState) -> None:
         """`watch` the open road while there is something to watch (its incident is live, or, with
@@ -560,12 +560,9 @@ class SumoEpisode:
 
 
 def run_episode(setup: EpisodeSetup, policy: RoutingPolicy, driver: Driver, episode_id: str, seed: int,
-                rrd_path: Path | None = None, *, net_path: Path | None = None,
-                config: SumoConfig | None = None, observer: Callable | None = None,
-                scene_overrides: dict[str, dict] | None = None) -> EpisodeRecord:
+                options: EpisodeOptions | None = None) -> EpisodeRecord:
     """Run one episode in SUMO, driven by its own routing policy (`SumoEpisode` stepped to its end),
-    and return its logs. The keywords are `EpisodeOptions`' (there: a person at the wheel too)."""
-    options = EpisodeOptions(net_path=net_path, config=config if config is not None else SumoConfig(),
-                             observer=observer, scene_overrides=scene_overrides or {},
-                             rrd_path=rrd_path)
+    and return its logs; `options`: the net, SUMO's settings, an observer, scene draws, a person at
+    the wheel, a Rerun recording (None: the defaults)."""
+    options = options if options is not None else EpisodeOptions()
     return run_to_end(SumoEpisode(setup, policy, driver, episode_id, seed, options))

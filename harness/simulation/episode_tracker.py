@@ -25,6 +25,7 @@ table's schema is `trustroute.core.dataset.ROADS_SCHEMA` (docs/dataset.md).
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -75,6 +76,24 @@ class EpisodeSetup:
         them and their memos."""
         return EpisodeModel(pomdp=build_pomdp(self.town, self.driver_model),
                             compiled=compile_spec(self.spec, self.town))
+
+
+@dataclass(frozen=True)
+class DrivenRoad:
+    """One road as driven: the AV's observation on it (the road's incident, whether the driver
+    took over, the AV's performance "succ" or "fail"), the driver's true trust before and after,
+    the trust the driver reported (None: no report on this road), and the simulator's clock
+    entering and leaving the road (NaN: the model engine has no simulator clock)."""
+
+    road: str
+    incident: str
+    takeover: bool
+    performance: str
+    trust_before: int
+    trust_after: int
+    reported_trust: int | None = None
+    sim_time_in: float = math.nan
+    sim_time_out: float = math.nan
 
 
 @dataclass(frozen=True, eq=False)
@@ -243,13 +262,12 @@ class EpisodeTracker:
             return None
         return self.setup.town.successor(self.road, self._chosen)
 
-    def record_road(self, road: str, incident: str, takeover: bool, performance: str,
-                    trust_before: int, trust_after: int, reported_trust: int | None,
-                    sim_time_in: float, sim_time_out: float) -> None:
+    def record_road(self, driven: DrivenRoad) -> None:
         """Append the row of a driven road, apply the belief filter on (incident, takeover,
         performance), step the DFA, and set end_reason when the DFA accepts or rejects.
-        reported_trust is None when the driver gave no report on this road; NaN sim times are
-        stored as nulls (the model engine has no simulator clock)."""
+        NaN sim times are stored as nulls (the model engine has no simulator clock)."""
+        road, incident, takeover = driven.road, driven.incident, driven.takeover
+        performance = driven.performance
         if self.end_reason is not None:
             raise ValueError(f"episode {self.episode_id} is over ({self.end_reason}); no more roads")
         expected = self.expected_road()
@@ -276,18 +294,19 @@ class EpisodeTracker:
         self.belief = after
         if possible:
             self.word = self._labels.filter.extend_one(self.word, int(symbol_code(incident_index, h, e)))
-        self.dfa_state = self._dfa.step(road, incident_index, h, e, int(trust_after))
+        self.dfa_state = self._dfa.step(road, incident_index, h, e, int(driven.trust_after))
         self.route.append(road)
         self._chosen = None
-        self._rows[-1]["sim_time_out"] = float(sim_time_in)
+        self._rows[-1]["sim_time_out"] = float(driven.sim_time_in)
+        reported = driven.reported_trust
         self._rows.append({
             "episode_id": self.episode_id, "index": len(self._rows), "directed_road": road,
             "action": None, "incident": incident, "takeover": bool(takeover), "performance": performance,
-            "trust_before": int(trust_before), "trust_after": int(trust_after),
-            "reported_trust": None if reported_trust is None else int(reported_trust),
+            "trust_before": int(driven.trust_before), "trust_after": int(driven.trust_after),
+            "reported_trust": None if reported is None else int(reported),
             "belief_before": before_logged,
             "belief_after": self._belief_logged, "dfa_state": self.dfa_state, "fallback": False,
-            "sim_time_in": float(sim_time_in), "sim_time_out": float(sim_time_out),
+            "sim_time_in": float(driven.sim_time_in), "sim_time_out": float(driven.sim_time_out),
         })
         self.end_reason = self._verdict()
 
@@ -410,8 +429,8 @@ class HiddenDFA:
                                                               rule="bayes")
         if probability[0] > 0:
             self.posterior = posterior[0]
-            self.joint = self.filter.update(self.joint[None], posterior, tracker.belief[None], x, inc,
-                                            h, e, probability, np.array([tracker.word]),
+            self.joint = self.filter.update(self.joint[None], posterior, tracker.belief[None], x,
+                                            (inc, h, e), probability, np.array([tracker.word]),
                                             tracker._labels)[0]
         # else: an observation the AV's model deems impossible: J stays (as the belief does).
         self.told = int(self.filter.likeliest_q(self.joint[None])[0])

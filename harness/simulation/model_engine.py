@@ -33,7 +33,12 @@ import pandas as pd
 
 from trustroute.core.dataset import INCIDENTS_SCHEMA, KINEMATICS_SCHEMA
 from trustroute.harness.simulation.episode_record import EpisodeRecord
-from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
+from trustroute.harness.simulation.episode_tracker import (
+    DrivenRoad,
+    EpisodeModel,
+    EpisodeSetup,
+    EpisodeTracker,
+)
 from trustroute.harness.simulation.stepping import DecisionPoint, End, run_to_end
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel, DriverTables, driver_tables
@@ -119,8 +124,7 @@ class ModelEpisode:
         performance = driver.performance(incident)
         after = driver.move_trust(incident, took_over, performance)
         reported = driver.report_trust() if tracker.should_report() else None
-        tracker.record_road(road, incident, took_over, performance, before, after, reported,
-                            math.nan, math.nan)
+        tracker.record_road(DrivenRoad(road, incident, took_over, performance, before, after, reported))
 
 
 def run_model_episode(
@@ -179,9 +183,12 @@ class _Sampled:
     successor: dict[tuple[int, str], int]
 
 
-def _sampled(town: Town, pomdp: TrustPOMDP, compiled: CompiledSpec, spec: Spec, policy: RoutingPolicy,
-             drivers: Sequence[DriverModel], junction_cap: int, fallback_after: int | None,
-             belief_rule: BeliefRule) -> _Sampled:
+def _sampled(model: EpisodeModel, spec: Spec, policy: RoutingPolicy, drivers: Sequence[DriverModel],
+             junction_cap: int, fallback_after: int | None, belief_rule: BeliefRule) -> _Sampled:
+    """The batch path's arrays: the AV's model and compiled spec (`model`, on its town), the
+    policy with the episode's fallback, the true drivers' tables and the episode's rules."""
+    pomdp, compiled = model.pomdp, model.compiled
+    town = pomdp.town
     if dfa_is_hidden(pomdp.driver, spec):
         raise ValueError(f"spec {spec.name!r} has trust-state atoms: the batch path does not "
                          "track the joint belief; run its episodes with run_model_episode")
@@ -221,10 +228,9 @@ def simulate_batch(
     )
     if index.shape != (count,):
         raise ValueError(f"driver_index must have {count} entries, got shape {index.shape}")
-    model = setup.model
-    sampled = _sampled(setup.town, model.pomdp, model.compiled, setup.spec, policy,
-                       list(drivers) if drivers is not None else [setup.driver_model],
-                       setup.junction_cap, setup.fallback_after, checked_belief_rule(setup.belief_rule))
+    true_drivers = list(drivers) if drivers is not None else [setup.driver_model]
+    sampled = _sampled(setup.model, setup.spec, policy, true_drivers, setup.junction_cap,
+                       setup.fallback_after, checked_belief_rule(setup.belief_rule))
     return _unfold(sampled, index, rng, None if report_accuracy is None else
                    (float(report_accuracy), setup.report_every))
 
@@ -394,8 +400,8 @@ def monte_carlo(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, episodes: 
     policy that draws from `rng` while it plans (POUCT) draws between its own episode's driver
     draws, and no two episodes share a decision."""
     started = time.perf_counter()
-    sampled = _sampled(pomdp.town, pomdp, compile_spec(spec, pomdp.town), spec, policy, [pomdp.driver],
-                       max_junctions, fallback_after, belief_rule)
+    model = EpisodeModel(pomdp=pomdp, compiled=compile_spec(spec, pomdp.town))
+    sampled = _sampled(model, spec, policy, [pomdp.driver], max_junctions, fallback_after, belief_rule)
     runs = [_unfold(sampled, np.zeros(1, dtype=np.int64), rng) for _ in range(episodes)]
     satisfied = np.array([bool(run.satisfied[0]) for run in runs])
     decisions = int(sum(int(run.junctions[0]) for run in runs))

@@ -37,7 +37,6 @@ from trustroute.app.drivers import synthetic_driver
 from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
-from trustroute.harness.simulation.stepping import run_to_end
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.expected import expected_values, fallback_only_warnings
@@ -119,17 +118,14 @@ def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path |
     run = engine_function(config.engine)
     if not engine.drives_sumo:
         return run(setup, policy, driver, task.episode_id, task.seed)
-    from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode
+    from trustroute.harness.simulation.episode import EpisodeOptions
     from trustroute.harness.simulation.sumo_start import SumoConfig
 
     sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
                           background_vehicles=config.background_vehicles,
                           route_files=tuple(config.routes))
-    if person is None:
-        return run(setup, policy, driver, task.episode_id, task.seed,
-                   rrd_path=rrd_path, config=sumo_config, observer=observer)
     options = EpisodeOptions(config=sumo_config, observer=observer, person=person, rrd_path=rrd_path)
-    return run_to_end(SumoEpisode(setup, policy, driver, task.episode_id, task.seed, options))
+    return run(setup, policy, driver, task.episode_id, task.seed, options)
 
 
 def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeOutcome:

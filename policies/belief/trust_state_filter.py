@@ -74,13 +74,15 @@ class JointFilter:
         joint[0, thetas, q0] = belief[0]
         return joint
 
-    def update(self, joint: np.ndarray, posterior: np.ndarray, belief_av: np.ndarray,
-               road: np.ndarray, incident: np.ndarray, human_action: int, performance: int,
-               probability: np.ndarray, words: np.ndarray, labels: ExactLabels) -> np.ndarray:
-        """J' for each row: `posterior` [n, n_trust] and `probability` [n] are the θ filter's output
-        for this observation (TrustPOMDP.belief_update), `belief_av` the AV's new belief and
-        `words` its words in `labels` (the AV filter's exact labels, as `labels()` gives them),
-        `road` the road x' just driven. Rows of probability 0 give zero rows."""
+    def update(self, joint: np.ndarray, posterior: np.ndarray, belief_av: np.ndarray, road: np.ndarray,
+               observation: tuple[np.ndarray, int, int], probability: np.ndarray, words: np.ndarray,
+               labels: ExactLabels) -> np.ndarray:
+        """J' for each row after driving road x' (`road`) and observing `observation` = (incident
+        [n], human action h, performance e): `posterior` [n, n_trust] and `probability` [n] are the
+        θ filter's output for this observation (TrustPOMDP.belief_update), `belief_av` the AV's
+        new belief and `words` its words in `labels` (the AV filter's exact labels, as `labels()`
+        gives them). Rows of probability 0 give zero rows."""
+        incident, human_action, performance = observation
         n, n_t, n_q = joint.shape
         truth, _ = labels.truth(belief_av, words)
         if not self.labeller.reads_trust:

@@ -233,7 +233,7 @@ class HiddenState:
         labels = self.filter.labels(self.belief_rule)
         new_word = labels.filter.extend(self.word[possible], symbol_code(incident[possible], h, e))
         new_joint = self.filter.update(self.joint[possible], new_posterior[possible], new_av[possible],
-                                       road[possible], incident[possible], h, e, p_obs[possible],
+                                       road[possible], (incident[possible], h, e), p_obs[possible],
                                        new_word, labels)
         return p_obs, replace(self, joint=new_joint, posterior=new_posterior[possible],
                               belief=new_av[possible], word=new_word)

@@ -34,7 +34,7 @@ from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, BoxRows, PolicyTable
 from trustroute.policies.routing.fallback import FallbackPolicy
 from trustroute.policies.routing.free import state_only_task
-from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.routing.protocol import Certificate, RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 
 RESYNTH = "re-run trustroute synth to write both files again"
@@ -81,10 +81,12 @@ def check_integers(arrays: dict, names: tuple[str, ...], rows: int, where: str) 
                              f"(shape {array.shape}, type {array.dtype})", RESYNTH)
 
 
-def check_decisions(where: str, prefix: str, what_rows: str, t: np.ndarray, x: np.ndarray, q: np.ndarray,
-                    action: np.ndarray, town: Town, n_q: int, extra: list) -> None:
-    """InputError at the first array (named with `prefix`) whose entries are out of range for this
-    town and spec: junction counts, roads, DFA states, the `extra` (name, bad, what) checks, moves."""
+def check_decisions(context: ReadContext, prefix: str, what_rows: str, t: np.ndarray, x: np.ndarray,
+                    q: np.ndarray, action: np.ndarray, extra: list) -> None:
+    """InputError at the first array (named with `prefix`) whose entries are out of range for the
+    context's town and spec: junction counts, roads, DFA states, the `extra` (name, bad, what)
+    checks, moves."""
+    where, town, n_q = context.where, context.town, context.n_q
     n_x = len(town.states)
     slots = np.array([len(town.actions(state)) for state in town.states], dtype=np.int64)
     problems = [
@@ -118,8 +120,8 @@ def read_node_rows(arrays: dict, context: ReadContext, integers: tuple[str, ...]
         raise InputError(where, "", f"{rows} rows but the policy file records "
                          f"{context.document.get('rows')}", RESYNTH)
     decoded = {name: arrays[name].astype(np.int64) for name in integers}
-    check_decisions(where, "", "decision table", decoded["t"], decoded["x"], decoded["q"],
-                    decoded["action"], context.town, context.n_q, extra(decoded))
+    check_decisions(context, "", "decision table", decoded["t"], decoded["x"], decoded["q"],
+                    decoded["action"], extra(decoded))
     if (not np.isfinite(beliefs).all() or (beliefs < 0).any() or (beliefs > 1).any()
             or (np.abs(beliefs.sum(axis=1) - 1) > 1e-6).any()):
         raise InputError(where, "beliefs", "beliefs are not probability vectors", RESYNTH)
@@ -176,7 +178,7 @@ def read_box_rows(arrays: dict, context: ReadContext) -> BoxRows:
         ("box_value", not np.isfinite(value).all() or (value < 0).any() or (value > 1).any(),
          "values that are not probabilities"),
     ]
-    check_decisions(where, "box_", "box rows", t, x, q, action, context.town, context.n_q, extra)
+    check_decisions(context, "box_", "box rows", t, x, q, action, extra)
     return BoxRows(t=t, x=x, q=q, lo=lo, hi=hi, value=value, action=action)
 
 
@@ -271,10 +273,10 @@ def plain_policy(table: PolicyTable, origin: PolicyOrigin) -> BeliefTablePolicy:
 def joint_policy(table: JointPolicyTable, origin: PolicyOrigin) -> JointTablePolicy:
     """The policy of joint rows (a population's: reweighted to the type prior its file records)."""
     document = origin.document
+    certificate = Certificate(document.get("lower"), document.get("upper"), document.get("horizon"))
     return JointTablePolicy(table, build_pomdp(origin.town, origin.driver), origin.spec,
                             document.get("guide_horizon"), name=str(document.get("name", "aware")),
-                            lower=document.get("lower"), upper=document.get("upper"),
-                            horizon=document.get("horizon"), reweight=origin.reweight)
+                            certificate=certificate, reweight=origin.reweight)
 
 
 def check_junction_count(value: object, key: str, where: str) -> None:

@@ -43,6 +43,19 @@ class DecisionContext:
         return len(self.route) - 1
 
 
+@dataclass(frozen=True)
+class Certificate:
+    """What synthesis certified for a policy: lower <= its value <= upper for the objective of
+    `horizon` junctions (None: unbounded); lower and upper None where nothing was certified."""
+
+    lower: float | None = None
+    upper: float | None = None
+    horizon: int | None = None
+
+
+UNCERTIFIED = Certificate()
+
+
 @runtime_checkable
 class RoutingPolicy(Protocol):
     """A route chooser: a name and the next junction at a DecisionContext.

@@ -35,7 +35,7 @@ from trustroute.policies.belief.trust_state_relaxation import RelaxedGuide, rela
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import TrustPOMDP
 from trustroute.policies.routing.aware_table import store_row_arrays
-from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
+from trustroute.policies.routing.protocol import UNCERTIFIED, Certificate, DecisionContext, RoutingPolicy
 
 MATCH_TOLERANCE = 1e-9
 
@@ -68,12 +68,11 @@ class JointTablePolicy(RoutingPolicy):
     """RoutingPolicy "aware" for specs with trust-state atoms: reads `context.joint`."""
 
     def __init__(self, table: JointPolicyTable, pomdp: TrustPOMDP, spec: Spec, guide_horizon: int | None,
-                 name: str = "aware", lower: float | None = None, upper: float | None = None,
-                 horizon: int | None = None, guide: RelaxedGuide | None = None,
-                 reweight: np.ndarray | None = None) -> None:
+                 name: str = "aware", certificate: Certificate = UNCERTIFIED,
+                 guide: RelaxedGuide | None = None, reweight: np.ndarray | None = None) -> None:
         self.table = table
         self.reweight = None if reweight is None else np.asarray(reweight, dtype=float)
-        self.lower, self.upper, self.horizon = lower, upper, horizon   # as certified by synthesis
+        self.lower, self.upper, self.horizon = certificate.lower, certificate.upper, certificate.horizon
         self.pomdp = pomdp
         self.town: Town = pomdp.town
         self.spec = spec

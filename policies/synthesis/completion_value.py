@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -82,6 +83,32 @@ class CompletionBounds:
     straddle: np.ndarray
     clusters: int
     interrupted: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class CompletionStarts:
+    """The nodes a completion is valued from, one per start i: road x, DFA state q after reading
+    it, state-only task state p, the AV's belief [n, n_trust] and the junctions left (`steps`)."""
+
+    x: np.ndarray
+    q: np.ndarray
+    p: np.ndarray
+    belief: np.ndarray
+    steps: np.ndarray
+
+
+class _Clusters(NamedTuple):
+    """Clusters in flight, one row each: the start they came from (owner), their DFA state, the
+    sum α of their sequences' forward vectors [r, n], their box [lo, hi] [r, n], road x and task
+    state p."""
+
+    owner: np.ndarray
+    state: np.ndarray
+    alpha: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    x: np.ndarray
+    p: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -214,19 +241,18 @@ def outcome_table(symbols: ObservationSymbols) -> np.ndarray:
 
 
 def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route: FreeRoute,
-                      x: np.ndarray, q: np.ndarray, p: np.ndarray, belief: np.ndarray,
-                      steps: np.ndarray, deadline: float | None = None) -> CompletionBounds:
+                      starts: CompletionStarts, deadline: float | None = None) -> CompletionBounds:
     """Bounds on P(the DFA accepts within `steps` junctions | trust-free completion from (x, q, p, b)),
-    for each start i; DFA state q is the state after reading the current road.
+    for each start i of `starts`; DFA state q is the state after reading the current road.
 
     deadline (time.perf_counter() seconds): the propagation stops there, junction step by junction
     step; the mass still in flight then counts to the upper bound only (`interrupted` is True), so
     both bounds stay sound, only looser."""
     if symbols.rule != "bayes":
         raise ValueError("cluster bounds need the Bayes rule (observation mass linear in α)")
-    x = np.asarray(x, dtype=np.int64).copy()
-    p = np.asarray(p, dtype=np.int64).copy()
-    steps = np.asarray(steps, dtype=np.int64).copy()
+    x = np.asarray(starts.x, dtype=np.int64).copy()
+    p = np.asarray(starts.p, dtype=np.int64).copy()
+    steps = np.asarray(starts.steps, dtype=np.int64).copy()
     steps0 = steps.copy()
     n_start = x.size
     n = symbols.likelihood.shape[1]
@@ -240,10 +266,10 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
     margin = label_margin_factor(n) * np.abs(coeffs).sum(axis=1) + CORNER_MARGIN  # [m]
     bit_values = (np.arange(2 ** m)[:, None] >> np.arange(m)[None, :]) & 1      # [bits, m]
 
-    q = np.asarray(q, dtype=np.int64)
+    q = np.asarray(starts.q, dtype=np.int64)
     owner = np.arange(n_start)
     state = q.copy()
-    alpha = np.asarray(belief, dtype=float).copy()
+    alpha = np.asarray(starts.belief, dtype=float).copy()
     lo = alpha.copy()                                    # the enclosing box [r, n]: lo, hi
     hi = alpha.copy()
     done = tables.accepting[state]
@@ -308,7 +334,7 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
                                              for k in range(7))
         live = steps[owner] > 0
         owner, state, alpha, lo, hi, x, p = (a[live] for a in (owner, state, alpha, lo, hi, x, p))
-        owner, state, alpha, lo, hi, x, p = _merge(owner, state, alpha, lo, hi, x, p, resolution,
+        owner, state, alpha, lo, hi, x, p = _merge(_Clusters(owner, state, alpha, lo, hi, x, p), resolution,
                                                    tables.n_x, tables.n_q)
         most = max(most, owner.size)
     # Rounding: each start's sequences have at most steps0 factors of (1 + γ_{4n+2}) between the
@@ -342,16 +368,15 @@ def grid_merge(place: np.ndarray, group: np.ndarray, features: np.ndarray, resol
         resolution[crowded] *= 2.0
 
 
-def _merge(owner: np.ndarray, state: np.ndarray, alpha: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-           x: np.ndarray, p: np.ndarray, resolution: np.ndarray, n_x: int, n_q: int
-           ) -> tuple[np.ndarray, ...]:
+def _merge(clusters: _Clusters, resolution: np.ndarray, n_x: int, n_q: int) -> _Clusters:
     """Merge clusters in the same (owner, road, task state, DFA state, grid cell of the box's
     centre); coarsen owners over CLUSTER_CAP. A merged cluster's box is the hull of its members'
     boxes widened by CORNER_MARGIN; a cluster alone in its cell keeps its box.
 
     (owner, x, p, q) is packed exactly into one integer, the place of `grid_merge`."""
+    owner, state, alpha, lo, hi, x, p = clusters
     if owner.size == 0:
-        return owner, state, alpha, lo, hi, x, p
+        return clusters
     n_p = int(p.max(initial=0)) + 1
     place = ((owner * n_x + x) * n_p + p) * n_q + state
     order, first = grid_merge(place, owner, 0.5 * (lo + hi), resolution, CLUSTER_CAP)
@@ -366,4 +391,4 @@ def _merge(owner: np.ndarray, state: np.ndarray, alpha: np.ndarray, lo: np.ndarr
         merged_hi[several] = np.minimum(
             np.maximum.reduceat(hi[order], starts, axis=0)[several] + CORNER_MARGIN, 1.0)
     alpha = np.add.reduceat(alpha[order], starts, axis=0)
-    return owner[pick], state[pick], alpha, merged_lo, merged_hi, x[pick], p[pick]
+    return _Clusters(owner[pick], state[pick], alpha, merged_lo, merged_hi, x[pick], p[pick])

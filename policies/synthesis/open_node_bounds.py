@@ -17,7 +17,7 @@ from trustroute.policies.routing.free import StateOnlyTask
 from trustroute.policies.synthesis.belief_cells import ObservationSymbols
 from trustroute.policies.synthesis.belief_graph import FRONTIER, BeliefGraph
 from trustroute.policies.synthesis.budget import TimeBudget
-from trustroute.policies.synthesis.completion_value import FreeRoute, completion_bounds
+from trustroute.policies.synthesis.completion_value import CompletionStarts, FreeRoute, completion_bounds
 
 COMPLETION_CHUNK = 64        # start nodes per batched cluster propagation (memory: ~25 MB each)
 
@@ -56,8 +56,9 @@ def bound_completions(graph: BeliefGraph, tables: ProductTables, symbols: Observ
         if budget.expired():
             break
         chunk = nodes[begin:begin + COMPLETION_CHUNK]
-        bounds = completion_bounds(tables, symbols, route, g.x[chunk], g.q[chunk], g.p[chunk],
-                                   g.belief[chunk], depth_cap - g.level[chunk], deadline)
+        starts = CompletionStarts(g.x[chunk], g.q[chunk], g.p[chunk], g.belief[chunk],
+                                  depth_cap - g.level[chunk])
+        bounds = completion_bounds(tables, symbols, route, starts, deadline)
         # (stopped by the deadline, the chunk's bounds are sound but loose; they are kept, as
         # the node is marked completed, since nothing runs after the deadline to redo them)
         g.free_lower[chunk] = bounds.lower

@@ -223,18 +223,18 @@ def bounded_search(tables: ProductTables, settings: SynthesisSettings, horizon: 
     closed = (close_bounds(search, roots, depth_cap, budget.deadline, COMPLETION_TAIL * tau)
               if search.completion else close_completions(search, roots, depth_cap, budget.deadline))
     table, conflicts = policy_table(search)
-    return table, _search_run(search, roots, horizon, suffix_length, closed, conflicts, expanded,
-                              iterations, table.rows)
+    return table, _search_run(search, roots, suffix_length, closed, conflicts, expanded, iterations,
+                              table.rows)
 
 
-def _search_run(search: BeliefSearch, roots: np.ndarray, horizon: int | None, suffix_length: int,
-                closed: bool, conflicts: int, expanded: int, iterations: int, rows: int) -> SearchRun:
-    """The statistics of a finished search."""
+def _search_run(search: BeliefSearch, roots: np.ndarray, suffix_length: int, closed: bool,
+                conflicts: int, expanded: int, iterations: int, rows: int) -> SearchRun:
+    """The statistics of a finished search (of horizon `search.horizon`)."""
     g = search.graph
     lower, upper = _root_bounds(search, roots)
     open_nodes = g.kind[: g.n] == FRONTIER
     return SearchRun(
-        horizon=horizon, suffix_length=suffix_length, abstract_cells=search.cells.n_cells,
+        horizon=search.horizon, suffix_length=suffix_length, abstract_cells=search.cells.n_cells,
         abstraction_seconds=search.abstraction_seconds, abstraction_bound=search.bound_note,
         abstraction_root_upper=float(search.frontier_upper(0, g.x[roots], g.q[roots],
                                                            g.cell[roots]).max()),

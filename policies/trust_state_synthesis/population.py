@@ -42,7 +42,7 @@ from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
 from trustroute.policies.logic.formula import TRUE, Formula, Literal, format_formula, map_literals
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
-from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.routing.protocol import Certificate, RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.population import (
@@ -144,8 +144,8 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
                                 on_iteration=on_iteration)
         schedule.finished(candidate_name(prior), made.lower, made.upper)
         policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
-                                  name="robust", horizon=horizon, guide=made.policy.guide,
-                                  reweight=reweighting(population, prior))
+                                  name="robust", certificate=Certificate(horizon=horizon),
+                                  guide=made.policy.guide, reweight=reweighting(population, prior))
         found = joint_type_values(problem, policy, cap, belief_rule)
         candidates.append(record(prior, found))
         if min(v.lower for v in found) > min(v.lower for v in best[1]):

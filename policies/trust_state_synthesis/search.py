@@ -26,6 +26,7 @@ value gets the same allowance.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,53 +63,76 @@ OPEN_LOOP_CHUNK = 4_000       # nodes per vectorised batch of the open-loop cont
 EXPAND_SHARE = 0.5            # with a deadline: share of the time for the forward pass
 
 
-def _open_loop_accepted(pomdp: TrustPOMDP, next_q: np.ndarray, move: np.ndarray, guide,
-                        x: np.ndarray, joint: np.ndarray, steps: int,
-                        accepting: np.ndarray) -> np.ndarray:
-    """P(accepted within `steps` more junctions) of the policy that ignores observations and moves,
-    at each step, to the successor with the largest relaxed value `guide(k)` (k junctions left
-    after the move). The labels must not depend on the belief (then the observations can be
-    summed out). Exact for that policy, so a lower bound on the optimum from each node."""
-    n, n_t, n_q = joint.shape
-    rows = np.arange(n)[:, None]
-    thetas = np.arange(n_t)[None, :]
-    successors = pomdp.successor_table
-    for k in range(steps):
-        table = guide(steps - k - 1)
-        best_score = np.full(n, -np.inf)
-        best_joint = joint
-        best_x = x
-        for slot in range(successors.shape[1]):
-            x2 = successors[x, slot]
-            valid = x2 >= 0
-            if not valid.any():
-                continue
-            x2 = np.where(valid, x2, 0)
-            predicted = np.einsum("ntq,ntu->nuq", joint, move[pomdp.road_incident[x2]])
-            moved = np.zeros_like(predicted)
-            for q in range(n_q):
-                moved[rows, thetas, next_q[q][x2]] += predicted[:, :, q]
-            score = np.where(valid, np.einsum("ntq,ntq->n", moved, table[x2]), -np.inf)
-            better = score > best_score
-            best_score = np.where(better, score, best_score)
-            best_joint = np.where(better[:, None, None], moved, best_joint)
-            best_x = np.where(better, x2, best_x)
-        joint, x = best_joint, best_x
-    return joint[:, :, accepting].sum(axis=(1, 2))
+@dataclass(frozen=True, eq=False)
+class OpenLoop:
+    """The policy that ignores observations and moves, at each step, to the successor with the
+    largest relaxed value `guide(k)` (k junctions left after the move): `next_q` [n_q, n_x] the
+    DFA's successor on a road (labels that do not read the belief), `move` [incident, θ, θ'] the
+    trust move summed over observations, `accepting` the DFA's accepting states."""
+
+    pomdp: TrustPOMDP
+    next_q: np.ndarray
+    move: np.ndarray
+    guide: Callable[[int], np.ndarray]
+    accepting: np.ndarray
+
+    def accepted(self, x: np.ndarray, joint: np.ndarray, steps: int) -> np.ndarray:
+        """P(accepted within `steps` more junctions) from each node (road x, joint J). The labels
+        must not depend on the belief (then the observations can be summed out). Exact for that
+        policy, so a lower bound on the optimum from each node."""
+        n, n_t, n_q = joint.shape
+        rows = np.arange(n)[:, None]
+        thetas = np.arange(n_t)[None, :]
+        pomdp, next_q, move = self.pomdp, self.next_q, self.move
+        successors = pomdp.successor_table
+        for k in range(steps):
+            table = self.guide(steps - k - 1)
+            best_score = np.full(n, -np.inf)
+            best_joint = joint
+            best_x = x
+            for slot in range(successors.shape[1]):
+                x2 = successors[x, slot]
+                valid = x2 >= 0
+                if not valid.any():
+                    continue
+                x2 = np.where(valid, x2, 0)
+                predicted = np.einsum("ntq,ntu->nuq", joint, move[pomdp.road_incident[x2]])
+                moved = np.zeros_like(predicted)
+                for q in range(n_q):
+                    moved[rows, thetas, next_q[q][x2]] += predicted[:, :, q]
+                score = np.where(valid, np.einsum("ntq,ntq->n", moved, table[x2]), -np.inf)
+                better = score > best_score
+                best_score = np.where(better, score, best_score)
+                best_joint = np.where(better[:, None, None], moved, best_joint)
+                best_x = np.where(better, x2, best_x)
+            joint, x = best_joint, best_x
+        return joint[:, :, self.accepting].sum(axis=(1, 2))
+
+    def lower(self, x: np.ndarray, joint: np.ndarray, steps: int, budget: TimeBudget) -> np.ndarray:
+        """`accepted` chunk by chunk; 0 (no claim) for the chunks past the deadline."""
+        out = np.zeros(x.size)
+        for begin in range(0, x.size, OPEN_LOOP_CHUNK):
+            if budget.expired():
+                break
+            part = slice(begin, begin + OPEN_LOOP_CHUNK)
+            out[part] = self.accepted(x[part], joint[part], steps)
+        return out
 
 
-def _open_loop_lower(pomdp: TrustPOMDP, next_q: np.ndarray, move: np.ndarray, guide, x: np.ndarray,
-                     joint: np.ndarray, steps: int, accepting: np.ndarray, budget: TimeBudget
-                     ) -> np.ndarray:
-    """_open_loop_accepted chunk by chunk; 0 (no claim) for the chunks past the deadline."""
-    out = np.zeros(x.size)
-    for begin in range(0, x.size, OPEN_LOOP_CHUNK):
-        if budget.expired():
-            break
-        part = slice(begin, begin + OPEN_LOOP_CHUNK)
-        out[part] = _open_loop_accepted(pomdp, next_q, move, guide, x[part], joint[part], steps,
-                                        accepting)
-    return out
+@dataclass(frozen=True)
+class JointLimits:
+    """Where the trust-state search stops unfolding: nodes of probability below `prune_below`, and
+    those beyond the `max_nodes` likeliest of a level, are cut; with a guide the next
+    `guided_nodes` of a level follow the guide's action instead; `deadline` (time.perf_counter(),
+    None: none) ends the search (`joint_search`)."""
+
+    prune_below: float = 0.0
+    max_nodes: int = 200_000
+    guided_nodes: int = 0
+    deadline: float | None = None
+
+
+NO_LIMITS = JointLimits()
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,7 +169,7 @@ def _children(pomdp: TrustPOMDP, filter_: JointFilter, belief_rule: BeliefRule, 
             labels = filter_.labels(belief_rule)
             words = labels.filter.extend(nodes["word"][p_idx][ok], symbol_code(incident[ok], h, e))
             joint = filter_.update(nodes["joint"][p_idx][ok], posterior[ok], belief[ok], x2[ok],
-                                   incident[ok], h, e, p_obs[ok], words, labels)
+                                   (incident[ok], h, e), p_obs[ok], words, labels)
             child_parts.append((p_idx[ok], np.full(int(ok.sum()), slot), x2[ok], joint, posterior[ok],
                                 belief[ok], words, p_obs[ok], nodes["mass"][p_idx][ok] * p_obs[ok]))
     return tuple(np.concatenate([c[j] for c in child_parts]) for j in range(9))
@@ -183,15 +207,15 @@ def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
                  max_nodes: int = 200_000) -> JointBounds:
     """[lower, upper] on max over policies of P(accepted) (within `horizon` junctions when given;
     then depth = horizon)."""
-    return joint_search(pomdp, spec, depth, horizon, belief_rule, prune_below, max_nodes)[0]
+    return joint_search(pomdp, spec, depth, horizon, belief_rule,
+                        JointLimits(prune_below=prune_below, max_nodes=max_nodes))[0]
 
 
 def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
-                 belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
-                 max_nodes: int = 200_000, guide: RelaxedGuide | None = None,
-                 guided_nodes: int = 0,
-                 deadline: float | None = None) -> tuple[JointBounds, JointDecisions]:
-    """joint_bounds, and the lower-greedy decisions at the expanded nodes (JointDecisions).
+                 belief_rule: BeliefRule = "bayes", limits: JointLimits = NO_LIMITS,
+                 guide: RelaxedGuide | None = None) -> tuple[JointBounds, JointDecisions]:
+    """joint_bounds, and the lower-greedy decisions at the expanded nodes (JointDecisions), within
+    `limits` (prune_below, max_nodes, guided_nodes, deadline: JointLimits).
 
     With a `guide` (the acting rule of the joint policy off its stored rows), the nodes ranked
     just below the `max_nodes` likeliest of a level (up to `guided_nodes` more) are expanded
@@ -206,7 +230,8 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     open nodes of that level become leaves worth their accepted mass (lower) and the relaxation
     (upper); past the deadline, the leaves not yet valued by the open-loop continuation keep
     their accepted mass. The bounds stay sound either way."""
-    budget = TimeBudget.until(math.inf if deadline is None else deadline)
+    prune_below, max_nodes, guided_nodes = limits.prune_below, limits.max_nodes, limits.guided_nodes
+    budget = TimeBudget.until(math.inf if limits.deadline is None else limits.deadline)
     if horizon is not None:
         depth = horizon
     town, driver = pomdp.town, pomdp.driver
@@ -229,10 +254,11 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     def relaxed_at(k: int) -> np.ndarray:
         return relaxed[min(k, horizon)] if horizon is not None else relaxed
 
+    continuation = OpenLoop(pomdp, relaxed_q[..., 0], move, relaxed_at, accepting)
+
     def open_loop_lower(x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
         steps = left if horizon is not None else OPEN_LOOP_STEPS
-        return _open_loop_lower(pomdp, relaxed_q[..., 0], move, relaxed_at, x, joint, steps, accepting,
-                                budget)
+        return continuation.lower(x, joint, steps, budget)
 
     def leaf_bounds(x: np.ndarray, joint: np.ndarray, left: int) -> tuple[np.ndarray, np.ndarray]:
         table = relaxed[left] if horizon is not None else relaxed

@@ -44,11 +44,17 @@ from trustroute.policies.evaluation.trust_state import evaluate_joint_table, eva
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+from trustroute.policies.routing.protocol import Certificate
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.result import Record, SynthesisResult, record_dict
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
-from trustroute.policies.trust_state_synthesis.search import JointBounds, JointDecisions, joint_search
+from trustroute.policies.trust_state_synthesis.search import (
+    JointBounds,
+    JointDecisions,
+    JointLimits,
+    joint_search,
+)
 
 FIRST_NODES = 500                  # nodes per level of the first round
 NODE_GROWTH = 4                    # nodes per level grow by this factor per round
@@ -175,7 +181,7 @@ def _unbounded_upper(problem: _Joint, deadline: float, log: list[JointRun],
         def run_upper(nodes: int, deadline: float, depth: int = depth) -> JointBounds:
             nonlocal upper
             bounds, _ = joint_search(problem.pomdp, problem.spec, depth, None, problem.belief_rule,
-                                     max_nodes=nodes, deadline=deadline)
+                                     JointLimits(max_nodes=nodes, deadline=deadline))
             upper = min(upper, bounds.upper)
             log.append(JointRun(search=f"unbounded depth {depth}", max_nodes=nodes, bounds=bounds))
             report(upper)
@@ -211,13 +217,13 @@ def _policy_rounds(problem: _Joint, policy_horizon: int, until: float, upper: fl
         guide = guides.get(policy_horizon) or guides.setdefault(
             policy_horizon, relaxed_guide(pomdp, spec, policy_horizon))
         search_deadline = TimeBudget.until(deadline).share_of_rest(SEARCH_SHARE)
+        limits = JointLimits(max_nodes=nodes, guided_nodes=GUIDED_FACTOR * nodes, deadline=search_deadline)
         bounds, decisions = joint_search(pomdp, spec, policy_horizon, policy_horizon, problem.belief_rule,
-                                         max_nodes=nodes, guide=guide, guided_nodes=GUIDED_FACTOR * nodes,
-                                         deadline=search_deadline)
+                                         limits, guide=guide)
         if horizon is not None:
             upper = min(upper, bounds.upper)
         policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=policy_horizon,
-                                  horizon=horizon, guide=guide)
+                                  certificate=Certificate(horizon=horizon), guide=guide)
         value = _policy_value(problem, policy, policy_horizon, deadline)
         log.append(JointRun(search=f"H={policy_horizon}", max_nodes=nodes, bounds=bounds, policy=value))
         if not best or value.lower > best[0].value.lower:

@@ -65,8 +65,10 @@ def test_a_cached_population_policy_announces_its_runs(tmp_path, capsys, town, a
 
     population = load_driver_population(EXAMPLE_POPULATION_PATH)
     spec = load_spec("phi1", town, population.types[0].model.n_trust)
-    resolve.population_policy(town, population, spec, "robust", tmp_path / "c", horizon=3, progress=True)
+    resolve.population_policy(town, population, spec, "robust",
+                              resolve.PolicySettings(tmp_path / "c", horizon=3, progress=True))
     err = capsys.readouterr().err
     assert [line for line in err.splitlines() if line.startswith("synthesizing robust for phi1: [")], err
-    resolve.population_policy(town, population, spec, "robust", tmp_path / "d", horizon=3, progress=False)
+    resolve.population_policy(town, population, spec, "robust",
+                              resolve.PolicySettings(tmp_path / "d", horizon=3, progress=False))
     assert capsys.readouterr().err == ""

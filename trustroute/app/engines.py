@@ -4,7 +4,7 @@ Callers ask an engine's capabilities instead of comparing its name: whether SUMO
 options, kinematics logs, the net), whether a synthetic driver drives it (a study can simulate
 it; `live` is driven by people in their browsers, `trustroute live`), and whether an episode can be
 re-run with a Rerun recording or shown in sumo-gui. `run` is the episode function:
-run(setup, policy, driver, episode_id, seed, **sumo options) -> EpisodeRecord.
+run(setup, policy, driver, episode_id, seed[, EpisodeOptions for SUMO]) -> EpisodeRecord.
 """
 
 from __future__ import annotations

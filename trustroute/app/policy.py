@@ -9,14 +9,11 @@ drives with its type-aware model and lifted spec.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
-from trustroute.core import defaults
 from trustroute.core.errors import InputError
 from trustroute.policies.belief.problem import Problem
-from trustroute.policies.model.trust_pomdp import BeliefRule
-from trustroute.policies.resolve import population_policy, resolve_policy
+from trustroute.policies.resolve import DEFAULT_POLICY, PolicySettings, population_policy, resolve_policy
 from trustroute.policies.routing.files import load_population_policy
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
@@ -24,20 +21,8 @@ from trustroute.policies.routing.protocol import RoutingPolicy
 POPULATION_POLICIES: tuple[str, ...] = ("robust", "bayes")   # objectives of a population policy
 
 
-@dataclass(frozen=True)
-class PolicySettings:
-    """How a named policy is found or made: the policy cache (None: the cache root's), the horizon
-    and AV filter "aware" and population policies are synthesized for, and whether a synthesis
-    shows its progress."""
-
-    cache_dir: str | Path | None = None
-    horizon: int | None = defaults.AWARE_HORIZON
-    belief_rule: BeliefRule = defaults.BELIEF_RULE
-    progress: bool = False
-
-
 def policy_for(problem: Problem, name: str | Path,
-               settings: PolicySettings = PolicySettings()) -> RoutingPolicy:
+               settings: PolicySettings = DEFAULT_POLICY) -> RoutingPolicy:
     """The policy `name` for `problem` ("free", "aware", "robust", "bayes" or a policy file)."""
     name = str(name)
     if problem.population is not None:
@@ -56,9 +41,8 @@ def _population_policy(problem: Problem, name: str, settings: PolicySettings) ->
     if name == "free":
         return trust_free_policy(problem.town, problem.spec)
     if name in POPULATION_POLICIES:
-        policy, _, _ = population_policy(problem.town, population, problem.given_spec, name,
-                                         settings.cache_dir, settings.horizon, settings.belief_rule,
-                                         population_source=source, progress=settings.progress)
+        policy, _, _ = population_policy(problem.town, population, problem.given_spec, name, settings,
+                                         population_source=source)
         return policy
     if name == "aware":
         raise InputError(name, "", "with a driver population the policy is 'free', 'robust', 'bayes' or "

@@ -20,7 +20,7 @@ from trustroute.app.nets import net_for
 from trustroute.app.policy import PolicySettings, policy_for
 from trustroute.app.problem import check_initial_trust, compile_problem
 from trustroute.core import defaults
-from trustroute.harness.simulation.episode import EpisodeRecord
+from trustroute.harness.simulation.episode import EpisodeOptions, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.model_engine import simulate_batch
 from trustroute.harness.simulation.sumo_start import SumoConfig
@@ -69,8 +69,9 @@ def run_one_episode(problem: Problem, policy: RoutingPolicy, settings: EpisodeSe
     if not engine.drives_sumo:
         return EpisodeRun(engine.run(setup, policy, driver, name, settings.seed), name, driver_type, None)
     net = settings.net if settings.net is not None else net_for(problem.town)
-    record = engine.run(setup, policy, driver, name, settings.seed, rrd_path=settings.rrd, net_path=net,
-                        config=settings.sumo, observer=settings.observer)
+    sumo = settings.sumo if settings.sumo is not None else SumoConfig()
+    options = EpisodeOptions(net_path=net, config=sumo, observer=settings.observer, rrd_path=settings.rrd)
+    record = engine.run(setup, policy, driver, name, settings.seed, options)
     return EpisodeRun(record, name, driver_type, net)
 
 

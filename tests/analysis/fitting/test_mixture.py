@@ -26,6 +26,8 @@ import pytest
 from tests.analysis.fitting.test_driver_model import RandomRoutes
 from trustroute.analysis.fitting.driver_model import fit_em, observations_from_roads
 from trustroute.analysis.fitting.mixture import (
+    EMSettings,
+    ParticipantObservations,
     fit_mixture,
     participant_index,
     select_types,
@@ -76,15 +78,14 @@ def planted(town):
     roads, episodes, truth, models = _planted_logs(town, seed=21)
     obs = observations_from_roads(roads, models[0])
     owner, ids = participant_index(obs, episodes)
-    return obs, owner, ids, truth, models
+    return ParticipantObservations(obs, owner, ids, models[0]), truth, models
 
 
 @pytest.mark.slow
 def test_bic_picks_the_planted_number_of_types_and_em_recovers_them(planted):
-    obs, owner, ids, truth, models = planted
+    data, truth, models = planted
     template = models[0]
-    selection = select_types(obs, owner, ids, template, 3, np.random.default_rng(2), restarts=2,
-                             shared_dynamics=True)
+    selection = select_types(data, 3, np.random.default_rng(2), EMSettings(restarts=2, shared_dynamics=True))
     bics = [f.bic for f in selection.fits]
     assert selection.chosen == 2, f"BIC {bics}"
     fit = selection.best
@@ -110,20 +111,20 @@ def test_bic_picks_the_planted_number_of_types_and_em_recovers_them(planted):
 
 @pytest.mark.slow
 def test_full_types_assign_participants_to_their_planted_type(planted):
-    obs, owner, ids, truth, models = planted
-    fit = fit_mixture(obs, owner, ids, models[0], 2, np.random.default_rng(5), restarts=2)
+    data, truth, models = planted
+    fit = fit_mixture(data, 2, np.random.default_rng(5), EMSettings(restarts=2))
     assert fit.converged
     _, correct = _matched(fit, truth, models)
     assert correct >= PARTICIPANTS - 2
     # a single type cannot separate them: the 2-type likelihood is far higher
-    single = fit_mixture(obs, owner, ids, models[0], 1, np.random.default_rng(5))
+    single = fit_mixture(data, 1, np.random.default_rng(5))
     assert fit.loglik - single.loglik > 100
 
 
 def test_one_type_is_exactly_trustroute_fit(model_study):
-    obs, owner, ids, template, _, _ = study_observations(model_study)
-    single = fit_em(obs, template, 200)
-    mixture = fit_mixture(obs, owner, ids, template, 1, np.random.default_rng(0), iterations=200)
+    data, _ = study_observations(model_study)
+    single = fit_em(data.observations, data.template, 200)
+    mixture = fit_mixture(data, 1, np.random.default_rng(0), EMSettings(iterations=200))
     assert mixture.iterations == single.iterations
     assert mixture.loglik == pytest.approx(single.loglik, rel=1e-12, abs=1e-9)
     component = mixture.components[0].parameters

@@ -21,7 +21,7 @@ from trustroute.harness.live.worker import (
     with_reports,
 )
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE
-from trustroute.harness.simulation.episode_tracker import EpisodeTracker
+from trustroute.harness.simulation.episode_tracker import DrivenRoad, EpisodeTracker
 from trustroute.harness.simulation.manual_driving import WARN_DISTANCE
 from trustroute.harness.simulation.wheel_driving import OFF_ROUTE_LIMIT
 from trustroute.harness.study.context import study_context
@@ -265,8 +265,9 @@ def test_the_tracker_decides_as_for_the_same_observations_headless(tmp_path):
     rows = record.roads.to_dict("records")
     for row in rows[1:]:
         tracker.next_junction()
-        tracker.record_road(row["directed_road"], row["incident"], bool(row["takeover"]), row["performance"],
-                            5, 5, None, row["sim_time_in"], row["sim_time_out"])
+        tracker.record_road(DrivenRoad(row["directed_road"], row["incident"], bool(row["takeover"]),
+                                       row["performance"], 5, 5, None, row["sim_time_in"],
+                                       row["sim_time_out"]))
     tracker.next_junction()
     replayed = tracker.roads_frame()
     for column in ("directed_road", "action", "belief_after", "dfa_state"):

@@ -7,7 +7,7 @@ import pytest
 
 from tests.harness.helpers import INCIDENT_ROUTE, SPECS, FixedRoute, ForcedTakeover
 from trustroute.harness.simulation.driving_style import AUTOPILOT, MANUAL
-from trustroute.harness.simulation.episode import EGO_ID, run_episode
+from trustroute.harness.simulation.episode import EGO_ID, EpisodeOptions, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import PENTAGON_TOWN_PATH, load_town
@@ -26,8 +26,8 @@ def _run(town, driver, net, kinds):
                       "decel": sumo.vehicle.getDecel(EGO_ID), "speed": ego.speed})
 
     synthetic = ForcedTakeover(SyntheticDriver(driver, np.random.default_rng(0), initial_trust=5), kinds)
-    record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), synthetic, "t", seed=0, net_path=net,
-                         observer=observe)
+    record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), synthetic, "t", seed=0,
+                         options=EpisodeOptions(net_path=net, observer=observe))
     return record, steps
 
 

@@ -10,7 +10,7 @@ from tests.harness.helpers import SPECS
 from trustroute.core.dataset import KINEMATICS_SCHEMA, ROADS_SCHEMA
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation import sumo_start
-from trustroute.harness.simulation.episode import run_episode
+from trustroute.harness.simulation.episode import EpisodeOptions, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import town_from_dict
@@ -39,7 +39,7 @@ def setup(town, driver, phi1):
 def _episode(setup, net_path, seed, trust=None, episode_id="e"):
     driver = SyntheticDriver(setup.driver_model, np.random.default_rng(seed), initial_trust=trust)
     return run_episode(setup, trust_free_policy(setup.town, setup.spec), driver, episode_id, seed,
-                       net_path=net_path)
+                       EpisodeOptions(net_path=net_path))
 
 
 def _roads_driven(kinematics: pd.DataFrame) -> list[str]:
@@ -110,7 +110,7 @@ def test_fallback_fires_and_is_logged(town, driver, phi1, net_path, caplog):
     setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1, fallback_after=4)
     synthetic = SyntheticDriver(driver, np.random.default_rng(0), initial_trust=6)
     with caplog.at_level("INFO", logger="trustroute.harness.simulation.episode"):
-        record = run_episode(setup, LoopPolicy(), synthetic, "fb", 0, net_path=net_path)
+        record = run_episode(setup, LoopPolicy(), synthetic, "fb", 0, EpisodeOptions(net_path=net_path))
     roads = record.roads
     assert record.summary["fallback_fired"]
     assert roads["fallback"].tolist().index(True) == 4 and not roads["fallback"].iloc[:4].any()

@@ -10,7 +10,7 @@ import pytest
 
 from tests.harness.helpers import SPECS, FixedRoute
 from trustroute.core.dataset import ROADS_SCHEMA
-from trustroute.harness.simulation.episode_tracker import EpisodeSetup, EpisodeTracker
+from trustroute.harness.simulation.episode_tracker import DrivenRoad, EpisodeSetup, EpisodeTracker
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.evaluation.settings import EvaluationSettings
@@ -54,7 +54,8 @@ def model_episode(setup, policy, driver, episode_id="e"):
         before = driver.trust
         after = driver.move_trust(incident, took_over, performance)
         reported = driver.report_trust() if tracker.should_report() else None
-        tracker.record_road(road, incident, took_over, performance, before, after, reported, t, t + 1)
+        tracker.record_road(DrivenRoad(road, incident, took_over, performance, before, after, reported,
+                                       t, t + 1))
         t += 1
     return tracker
 
@@ -74,7 +75,7 @@ def test_belief_and_dfa_follow_the_filter_step_by_step(town, driver, pomdp, phi1
         road = town.successor(tracker.road, junction)
         incident = town.incident(road)
         took_over = took_over and incident != "none"   # no takeover without an incident (probability 0)
-        tracker.record_road(road, incident, took_over, performance, 3, 3, None, 0.0, 1.0)
+        tracker.record_road(DrivenRoad(road, incident, took_over, performance, 3, 3, None, 0.0, 1.0))
         belief, _ = pomdp.belief_update(belief, driver.incident_index(incident), int(took_over), 0)
         belief = belief[0]
         q = int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None])[0])
@@ -110,7 +111,7 @@ def test_memoised_steps_give_the_computed_floats(town, driver, pomdp, phi1):
             road = town.successor(tracker.road, tracker.next_junction())
             incident = town.incident(road)
             took_over = took_over and incident != "none"
-            tracker.record_road(road, incident, took_over, performance, 3, 3, None, 0.0, 1.0)
+            tracker.record_road(DrivenRoad(road, incident, took_over, performance, 3, 3, None, 0.0, 1.0))
             posterior, _ = pomdp.belief_update(belief, driver.incident_index(incident), int(took_over),
                                                {"succ": 0, "fail": 1}[performance])
             belief = posterior[0] if posterior[0].sum() > 0 else belief
@@ -182,7 +183,7 @@ def test_rejected_end(town, driver, phi1_strict):
         if junction is None:
             break
         road = town.successor(tracker.road, junction)
-        tracker.record_road(road, town.incident(road), True, "succ", 1, 1, 1, 0.0, 0.0)
+        tracker.record_road(DrivenRoad(road, town.incident(road), True, "succ", 1, 1, 1, 0.0, 0.0))
     assert tracker.end_reason == "rejected"
     assert bool(tracker.dfa.rejecting[tracker.dfa_state])
     assert tracker.next_junction() is None
@@ -194,8 +195,8 @@ def test_cap_and_fallback(town, driver, phi1):
     standstill = SyntheticDriver(driver, np.random.default_rng(1), initial_trust=4)
     while (junction := capped.next_junction()) is not None:
         road = town.successor(capped.road, junction)
-        capped.record_road(road, town.incident(road), False, "succ", standstill.trust, standstill.trust, None,
-                           0.0, 0.0)
+        capped.record_road(DrivenRoad(road, town.incident(road), False, "succ", standstill.trust,
+                                      standstill.trust, None, 0.0, 0.0))
     assert capped.end_reason == "cap" and capped.junctions == 5
     assert not capped.fallback_fired
 
@@ -219,12 +220,12 @@ def test_illegal_and_out_of_order_roads_are_refused(town, driver, phi1):
     setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1)
     tracker = EpisodeTracker(setup, trust_free_policy(town, phi1), "e", initial_trust=4)
     with pytest.raises(ValueError, match="before next_junction"):
-        tracker.record_road("A-F", "none", False, "succ", 4, 4, None, 0.0, 0.0)
+        tracker.record_road(DrivenRoad("A-F", "none", False, "succ", 4, 4, None, 0.0, 0.0))
     tracker.next_junction()
     with pytest.raises(ValueError, match="policy chose"):
-        tracker.record_road("A-B", "pedestrian", False, "succ", 4, 4, None, 0.0, 0.0)
+        tracker.record_road(DrivenRoad("A-B", "pedestrian", False, "succ", 4, 4, None, 0.0, 0.0))
     with pytest.raises(ValueError, match="performance"):
-        tracker.record_road(tracker.expected_road(), "none", False, "ok", 4, 4, None, 0.0, 0.0)
+        tracker.record_road(DrivenRoad(tracker.expected_road(), "none", False, "ok", 4, 4, None, 0.0, 0.0))
 
 
 def test_a_label_floats_cannot_decide_is_read_as_synthesis_and_evaluate_read_it(town, driver, pomdp):

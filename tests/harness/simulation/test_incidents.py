@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tests.harness.helpers import INCIDENT_ROUTE, SPECS, FixedRoute, ForcedTakeover
-from trustroute.harness.simulation.episode import EGO_ID, run_episode
+from trustroute.harness.simulation.episode import EGO_ID, EpisodeOptions, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import PENTAGON_TOWN_PATH, load_town
@@ -52,8 +52,8 @@ def episode(request, town, driver, tmp_path_factory):
     kinds = () if request.param == "auto" else ("pedestrian", "obstacle", "truck")
     synthetic = ForcedTakeover(SyntheticDriver(driver, np.random.default_rng(4), initial_trust=4), kinds)
     recorder = Recorder()
-    record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), synthetic, "inc", seed=3, net_path=net,
-                         observer=recorder)
+    record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), synthetic, "inc", seed=3,
+                         options=EpisodeOptions(net_path=net, observer=recorder))
     return record, recorder.steps
 
 

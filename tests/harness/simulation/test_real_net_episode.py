@@ -18,7 +18,7 @@ from tests.cli import run_cli
 from tests.networks.sumo_nets import WHEEL_NODES, WHEEL_ROADS, build_plain_net
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.background import CHECK_EVERY, STUCK_SECONDS, JamRelief, trips_seed
-from trustroute.harness.simulation.episode import EGO_ID, run_episode
+from trustroute.harness.simulation.episode import EGO_ID, EpisodeOptions, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.incidents.obstacle import BLOCKED_SECONDS
 from trustroute.harness.simulation.sumo_start import SumoConfig
@@ -91,8 +91,10 @@ def drive(town, spec, model, seed: int, config: SumoConfig | None = None, overri
     policy = resolve_policy("free", town, model, spec, None)
     watcher = Watcher()
     driver = SyntheticDriver(model, np.random.default_rng(seed))
+    options = EpisodeOptions(config=config if config is not None else SumoConfig(), observer=watcher,
+                             scene_overrides=overrides or {})
     record = run_episode(EpisodeSetup(town=town, driver_model=model, spec=spec), policy, driver, f"e{seed}",
-                         seed, config=config, observer=watcher, scene_overrides=overrides)
+                         seed, options)
     return record, watcher
 
 
@@ -329,7 +331,7 @@ def test_an_oncoming_truck_comes_only_from_lanes_open_to_trucks(tmp_path):
     setup = EpisodeSetup(town=town, driver_model=model, spec=load_spec(str(tmp_path / "spec.toml"), town),
                          fallback_after=None)
     record = run_episode(setup, FixedRoute(route), SyntheticDriver(model, np.random.default_rng(1)), "drt", 1,
-                         observer=observe)
+                         EpisodeOptions(observer=observe))
     assert record.summary["end_reason"] == "accepted"
     incidents = record.incidents
     trucks = incidents[(incidents["incident"] == "truck") & incidents["sumo_ids"].notna()]

@@ -11,7 +11,7 @@ import pyarrow as pa
 import pytest
 
 from tests.harness.helpers import INCIDENT_ROUTE, SPECS, FixedRoute, ForcedTakeover
-from trustroute.harness.simulation.episode import run_episode
+from trustroute.harness.simulation.episode import EpisodeOptions, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.rerun_log import ENTITIES, episode_events
 from trustroute.networks.sumo_net import build_net
@@ -31,9 +31,8 @@ def recorded(town, driver, tmp_path_factory):
     setup = EpisodeSetup(town=town, driver_model=driver, spec=spec, fallback_after=None)
     synthetic = ForcedTakeover(SyntheticDriver(driver, np.random.default_rng(1), initial_trust=4), ("truck",))
     path = directory / "episode.rrd"
-    record = run_episode(
-        setup, FixedRoute(INCIDENT_ROUTE), synthetic, "rr", seed=2, rrd_path=path, net_path=net
-    )
+    record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), synthetic, "rr", seed=2,
+                         options=EpisodeOptions(rrd_path=path, net_path=net))
     reader = rr.chunk.RrdReader(path)
     entities: dict[str, list] = {}
     for chunk in reader.stream().to_chunks():

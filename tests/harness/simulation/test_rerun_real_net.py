@@ -18,7 +18,7 @@ import sumolib
 
 from tests.cli import run_cli
 from tests.harness.simulation.test_real_net_episode import DEMAND, INCIDENTS, NET, SPEC, TYPES
-from trustroute.harness.simulation.episode import run_episode
+from trustroute.harness.simulation.episode import EpisodeOptions, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.rerun_log import (
     CITY_DETAIL,
@@ -75,7 +75,7 @@ def record_episode(town_path: Path, spec_path: Path, seed: int, rrd: Path):
     policy = resolve_policy("free", town, model, spec, None)
     driver = SyntheticDriver(model, np.random.default_rng(seed))
     record = run_episode(EpisodeSetup(town=town, driver_model=model, spec=spec), policy, driver, f"r{seed}",
-                         seed, rrd_path=rrd)
+                         seed, EpisodeOptions(rrd_path=rrd))
     return town, record, read_recording(rrd)
 
 

@@ -13,7 +13,7 @@ import pytest
 
 import trustroute.participants as participants
 from tests.harness.helpers import INCIDENT_ROUTE, SPECS, FixedRoute, ForcedTakeover
-from trustroute.harness.simulation.episode import EGO_ID, run_episode
+from trustroute.harness.simulation.episode import EGO_ID, EpisodeOptions, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.performance import PerformanceLimits, PerformanceMonitor
 from trustroute.networks.sumo_net import build_net
@@ -61,8 +61,9 @@ def _run(setup, net, seed, overrides=None, observer=None, model=None, takeovers=
     model = model if model is not None else setup.driver_model
     synthetic = ForcedTakeover(SyntheticDriver(model, np.random.default_rng(seed), initial_trust=4),
                                takeovers)
-    return run_episode(setup, FixedRoute(route), synthetic, f"s{seed}", seed=seed, net_path=net,
-                       observer=observer, scene_overrides=overrides)
+    return run_episode(setup, FixedRoute(route), synthetic, f"s{seed}", seed=seed,
+                       options=EpisodeOptions(net_path=net, observer=observer,
+                                              scene_overrides=overrides or {}))
 
 
 def _ego_steps(setup, net, seed, overrides):
@@ -201,8 +202,8 @@ def test_background_traffic_is_seeded(setup, net):
     for _ in range(2):
         counts.clear()
         synthetic = SyntheticDriver(driver, np.random.default_rng(1), initial_trust=4)
-        record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), synthetic, "bg", seed=1, net_path=net,
-                             config=config, observer=observe)
+        record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), synthetic, "bg", seed=1,
+                             options=EpisodeOptions(net_path=net, config=config, observer=observe))
         runs.append((record.kinematics.copy(), list(counts)))
     assert runs[0][0].equals(runs[1][0]) and runs[0][1] == runs[1][1]
     assert max(runs[0][1]) == 6 and min(runs[0][1][5:]) >= 4

@@ -53,7 +53,7 @@ def _same_tables(a, b) -> None:
 
 def test_a_sumo_episode_stepped_by_hand_logs_what_run_episode_logs(setup, net_path):
     policy = trust_free_policy(setup.town, setup.spec)
-    expected = run_episode(setup, policy, _driver(setup, 5), "s", 5, net_path=net_path)
+    expected = run_episode(setup, policy, _driver(setup, 5), "s", 5, EpisodeOptions(net_path=net_path))
     episode = SumoEpisode(setup, policy, _driver(setup, 5), "s", 5, EpisodeOptions(net_path=net_path))
     end, points = _stepped(episode)
     _same_tables(end.record, expected)
@@ -84,6 +84,6 @@ def test_an_illegal_choice_is_refused_and_a_closed_episode_leaves_sumo_usable(se
     episode.close()   # mid-episode: SUMO's simulation goes as after an error
     with pytest.raises(RuntimeError, match="closed before its end"):
         episode.advance()
-    expected = run_episode(setup, policy, _driver(setup, 5), "s", 5, net_path=net_path)
-    again = run_episode(setup, policy, _driver(setup, 5), "s", 5, net_path=net_path)
+    expected = run_episode(setup, policy, _driver(setup, 5), "s", 5, EpisodeOptions(net_path=net_path))
+    again = run_episode(setup, policy, _driver(setup, 5), "s", 5, EpisodeOptions(net_path=net_path))
     _same_tables(again, expected)

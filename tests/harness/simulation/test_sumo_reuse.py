@@ -18,7 +18,7 @@ import pyarrow as pa
 import pytest
 
 from trustroute.harness.simulation import sumo_start
-from trustroute.harness.simulation.episode import run_episode
+from trustroute.harness.simulation.episode import EpisodeOptions, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.sumo_start import SumoConfig, close_simulation, reusable
 from trustroute.harness.study.config import study_config_from_dict
@@ -166,7 +166,7 @@ def test_a_net_rewritten_in_place_starts_afresh(starts, tmp_path, driver):
 
     def episode() -> None:
         run_episode(setup, trust_free_policy(town, spec), SyntheticDriver(driver, np.random.default_rng(1)),
-                    "rewritten", 1, net_path=net)
+                    "rewritten", 1, EpisodeOptions(net_path=net))
 
     close_simulation()
     episode()

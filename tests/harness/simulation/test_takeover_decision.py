@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.harness.helpers import INCIDENT_ROUTE, SPECS, FixedRoute, ForcedTakeover
-from trustroute.harness.simulation.episode import run_episode
+from trustroute.harness.simulation.episode import EpisodeOptions, run_episode
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.takeover_decision import VIEW_DISTANCE
 from trustroute.networks.sumo_net import build_net
@@ -43,8 +43,8 @@ def episode(driver):
     def observe(sumo, ego, mode, road):
         positions[ego.time] = (ego.x, ego.y)
 
-    record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), counting, "t", seed=4, net_path=net,
-                         observer=observe)
+    record = run_episode(setup, FixedRoute(INCIDENT_ROUTE), counting, "t", seed=4,
+                         options=EpisodeOptions(net_path=net, observer=observe))
     return record, counting, positions
 
 

@@ -29,7 +29,7 @@ def run(pomdp, spec, route, takeovers):
         incident = pomdp.road_incident[x]
         posterior, p = pomdp.belief_update(belief, incident, h, 0)
         word = labels.filter.extend(word, symbol_code(incident, h, 0))
-        joint = filter_.update(joint, posterior, posterior, x, incident, h, 0, p, word, labels)
+        joint = filter_.update(joint, posterior, posterior, x, (incident, h, 0), p, word, labels)
         belief = posterior
         if not labeller.reads_trust:
             q = labeller.step(q, x, belief)
@@ -75,7 +75,7 @@ def test_with_trust_atoms_the_joint_is_a_law_whose_marginal_is_the_belief(pomdp)
     for h in (0, 1):
         posterior, p = pomdp.belief_update(belief, incident, h, 0)
         word = labels.filter.extend(words[-2], symbol_code(incident, h, 0))
-        after = filter_.masses(filter_.update(joint, posterior, posterior, x, incident, h, 0, p,
+        after = filter_.masses(filter_.update(joint, posterior, posterior, x, (incident, h, 0), p,
                                               word, labels))[0][0]
         total += float(p[0]) * after
         moved.append(after)

@@ -27,7 +27,7 @@ def looping(driver):
     after them (no horizon: it never declares itself finished), so mass keeps being accepted."""
     pomdp, spec = random_problem(np.random.default_rng(1), driver, "trust")
     table = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=2, time_limit=2)).policy
-    return pomdp, spec, JointTablePolicy(table.table, pomdp, spec, guide_horizon=2, horizon=None)
+    return pomdp, spec, JointTablePolicy(table.table, pomdp, spec, guide_horizon=2)
 
 
 def test_each_iterate_is_the_brute_force_value_within_its_junctions(looping):

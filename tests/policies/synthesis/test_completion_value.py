@@ -23,7 +23,7 @@ from trustroute.policies.routing.free import free_completion, state_only_task
 from trustroute.policies.synthesis import completion_value
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols
 from trustroute.policies.synthesis.belief_synthesis import synthesize
-from trustroute.policies.synthesis.completion_value import FreeRoute, completion_bounds
+from trustroute.policies.synthesis.completion_value import CompletionStarts, FreeRoute, completion_bounds
 from trustroute.policies.synthesis.exact_search import exact_optimum
 from trustroute.policies.synthesis.open_node_bounds import held_choice, policy_choice
 from trustroute.policies.synthesis.settings import SynthesisSettings
@@ -69,8 +69,8 @@ def _bounds_and_exact(driver, seed, deadline=None):
     q = np.full(roads.size, tables.initial_q)
     p = np.full(roads.size, task.initial_state)
     steps = np.full(roads.size, HORIZON)
-    bounds = completion_bounds(tables, symbols, route, roads, q, p, np.repeat(belief[None], roads.size, 0),
-                               steps, deadline)
+    starts = CompletionStarts(roads, q, p, np.repeat(belief[None], roads.size, 0), steps)
+    bounds = completion_bounds(tables, symbols, route, starts, deadline)
     exact = np.array([exact_free_value(tables, symbols, route, int(x), int(q[0]), int(p[0]), belief,
                                        HORIZON) for x in roads])
     return bounds, exact
@@ -143,9 +143,10 @@ def test_paper_rule_is_refused(pomdp):
     route = FreeRoute.build(tables, np.where(task.next_slot >= 0, task.next_slot, 0),
                             np.asarray(task.next_state, dtype=np.int64))
     with pytest.raises(ValueError, match="Bayes"):
-        completion_bounds(tables, observation_symbols(pomdp, "paper"), route, np.array([0]),
-                          np.array([tables.initial_q]), np.array([task.initial_state]),
-                          np.asarray(pomdp.initial_belief)[None], np.array([3]))
+        completion_bounds(tables, observation_symbols(pomdp, "paper"), route,
+                          CompletionStarts(np.array([0]), np.array([tables.initial_q]),
+                                           np.array([task.initial_state]),
+                                           np.asarray(pomdp.initial_belief)[None], np.array([3])))
 
 
 @pytest.mark.slow
@@ -290,8 +291,9 @@ def test_bounds_on_a_long_route_are_tight_and_bracket_monte_carlo(driver):
                             np.asarray(task.next_state, dtype=np.int64))
     belief = np.asarray(pomdp.initial_belief, dtype=float)
     horizon = 40
-    bounds = completion_bounds(tables, symbols, route, np.array([tables.start]), np.array([tables.initial_q]),
-                               np.array([task.initial_state]), belief[None], np.array([horizon]))
+    starts = CompletionStarts(np.array([tables.start]), np.array([tables.initial_q]),
+                              np.array([task.initial_state]), belief[None], np.array([horizon]))
+    bounds = completion_bounds(tables, symbols, route, starts)
     assert bounds.upper[0] - bounds.lower[0] <= 0.01
 
     rng = np.random.default_rng(11)

@@ -12,9 +12,10 @@ from tests.policies.trust_specs import random_problem
 from trustroute.policies.belief.trust_state_relaxation import relaxed_guide, relaxed_values
 from trustroute.policies.evaluation.trust_state import evaluate_joint_table
 from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.routing.protocol import Certificate
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
 from trustroute.policies.synthesis.exact_search import exact_optimum
-from trustroute.policies.trust_state_synthesis.search import joint_bounds, joint_search
+from trustroute.policies.trust_state_synthesis.search import JointLimits, joint_bounds, joint_search
 from trustroute.policies.trust_state_synthesis.synthesis import decision_table
 
 TOLERANCE = 1e-9
@@ -66,14 +67,16 @@ def test_with_a_guide_the_cut_search_lower_bound_is_the_value_of_the_policy_it_r
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
     horizon = 10
     guide = relaxed_guide(pomdp, spec, horizon)
-    bounds, decisions = joint_search(pomdp, spec, horizon, horizon, max_nodes=20, guide=guide,
-                                     guided_nodes=10**7)
+    bounds, decisions = joint_search(pomdp, spec, horizon, horizon,
+                                     limits=JointLimits(max_nodes=20, guided_nodes=10**7), guide=guide)
     assert bounds.cut_nodes > 0
-    policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=horizon, horizon=horizon)
+    policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=horizon,
+                              certificate=Certificate(horizon=horizon))
     value = evaluate_joint_table(pomdp, spec, policy, horizon)
     assert value[0] == value[1]
     assert bounds.lower == pytest.approx(value[0], abs=1e-12)
     # Without the guide the open-loop continuation the search credits is not what the policy does.
-    open_loop, decisions = joint_search(pomdp, spec, horizon, horizon, max_nodes=20)
-    policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=horizon, horizon=horizon)
+    open_loop, decisions = joint_search(pomdp, spec, horizon, horizon, limits=JointLimits(max_nodes=20))
+    policy = JointTablePolicy(decision_table(decisions), pomdp, spec, guide_horizon=horizon,
+                              certificate=Certificate(horizon=horizon))
     assert abs(open_loop.lower - evaluate_joint_table(pomdp, spec, policy, horizon)[0]) > 1e-9
