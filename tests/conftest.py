@@ -63,6 +63,39 @@ policy_cache = "{cache}"
     return root / "out"
 
 
+@pytest.fixture(scope="session")
+def pilot_study(model_study, tmp_path_factory):
+    """make(seed, participants=8, extra=""): a finished model-engine pilot study (aware vs free on
+    φ1 and φ2, the model study's policy cache) whose drivers report their exact trust on every road
+    (so `fit` counts: a refit takes hundredths of a second), `extra` appended to its config; each
+    made once per session."""
+    from trustroute.harness.study.config import load_study_config
+
+    cache = load_study_config(model_study.parent / "study.toml").policy_cache
+    made: dict[tuple, Path] = {}
+
+    def make(seed: int, participants: int = 8, extra: str = "") -> Path:
+        key = (seed, participants, extra)
+        if key not in made:
+            root = tmp_path_factory.mktemp(f"pilot{seed}")
+            run_study(root / "pilot.toml", f"""[study]
+name = "pilot-{seed}"
+participants = {participants}
+seed = {seed}
+engine = "model"
+specs = ["phi1", "phi2"]
+conditions = ["aware", "free"]
+policy_cache = "{cache}"
+{extra}
+[population]
+report_accuracy = 1.0
+""", root / "out")
+            made[key] = root / "out"
+        return made[key]
+
+    return make
+
+
 def pytest_collection_modifyitems(config, items):
     """The tests marked `slow` (seconds to minutes each, many of them waiting on the wall clock of a
     live study) first, the rest in their order after them: pytest-xdist hands the items out in this

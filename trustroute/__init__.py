@@ -20,13 +20,16 @@ documentation of the model and the file formats.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from trustroute.core import defaults
 
 if TYPE_CHECKING:
     from trustroute.analysis.study.analysis import StudyAnalysis
+    from trustroute.app.runs import EpisodeSettings
+    from trustroute.app.synthesis import SynthesisSettings
     from trustroute.harness.simulation.episode import EpisodeRecord
     from trustroute.harness.study.config import StudyConfig
     from trustroute.harness.study.runner import StudyRun
@@ -35,8 +38,8 @@ if TYPE_CHECKING:
     from trustroute.participants.driver_population import DriverPopulation
     from trustroute.policies.belief.problem import Problem
     from trustroute.policies.evaluation.plain import Evaluation
+    from trustroute.policies.evaluation.settings import EvaluationSettings
     from trustroute.policies.logic.spec import Spec
-    from trustroute.policies.model.trust_pomdp import BeliefRule
     from trustroute.policies.routing.protocol import RoutingPolicy
     from trustroute.policies.synthesis.population import Objective, PopulationSynthesis
     from trustroute.policies.synthesis.result import SynthesisResult
@@ -98,17 +101,19 @@ def _compiled(spec: Spec | PathLike, town: Town | PathLike | None, driver: Drive
 
 
 def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
-               driver: DriverModel | PathLike | None = None, *,
-               horizon: int | None = defaults.SYNTH_HORIZON, tau: float = defaults.TAU,
-               time_limit: float = defaults.TIME_LIMIT, belief_rule: BeliefRule = defaults.BELIEF_RULE,
+               driver: DriverModel | PathLike | None = None, *, settings: SynthesisSettings | None = None,
                out: PathLike | None = None, population: DriverPopulation | PathLike | None = None,
-               objective: Objective = defaults.OBJECTIVE) -> SynthesisResult | PopulationSynthesis:
+               objective: Objective = defaults.OBJECTIVE,
+               **options: Any) -> SynthesisResult | PopulationSynthesis:
     """A trust-aware policy for `spec` with certified bounds `result.lower <= Pr_max <= result.upper`.
 
-    horizon: at most this many junctions (None: unbounded). tau: stop when upper - lower <= tau.
-    time_limit: seconds (about). belief_rule: the AV's filter, exact "bayes" or the authors'
-    "paper" update (docs/model.md). out: also write the policy file there
-    (docs/formats/policy_file.md). `result.policy` is the policy; `result.lower` is its exact value.
+    settings: how the search runs, a `trustroute.app.synthesis.SynthesisSettings` (default: its
+    defaults, `trustroute synth`'s); any of its fields may instead be given by keyword, over
+    `settings`: horizon (at most this many junctions; None: unbounded), tau (stop when
+    upper - lower <= tau), time_limit (seconds, about), belief_rule (the AV's filter, exact
+    "bayes" or the authors' "paper" update, docs/model.md), ... out: also write the policy file
+    there (docs/formats/policy_file.md). `result.policy` is the policy; `result.lower` is its
+    exact value.
 
     population: a driver population (object, file or packaged name; instead of `driver`): synthesis
     for its mixture of driver types under `objective` ("bayes": the prior-weighted value, "robust":
@@ -117,12 +122,13 @@ def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
     policy's value per type, `result` its SynthesisResult (`result.policy` the policy).
     """
     from trustroute.app.synthesis import SynthesisSettings, synthesize_population, synthesize_single
+    from trustroute.core.settings import with_options
 
     problem = _compiled(spec, town, driver, population)
-    settings = SynthesisSettings(tau=tau, time_limit=time_limit, horizon=horizon, belief_rule=belief_rule)
+    chosen = with_options(settings if settings is not None else SynthesisSettings(), options, "synthesize")
     if problem.population is not None:
-        return synthesize_population(problem, objective, settings, out)
-    return synthesize_single(problem, settings, out)
+        return synthesize_population(problem, objective, chosen, out)
+    return synthesize_single(problem, chosen, out)
 
 
 def _policy(policy: PolicyLike, problem: Problem, cache_dir: PathLike | None) -> RoutingPolicy:
@@ -140,61 +146,65 @@ def _policy(policy: PolicyLike, problem: Problem, cache_dir: PathLike | None) ->
 
 def evaluate(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
              town: Town | PathLike | None = None, driver: DriverModel | PathLike | None = None, *,
-             fallback_after: int | None = defaults.FALLBACK_AFTER,
-             max_junctions: int = defaults.JUNCTION_CAP, belief_rule: BeliefRule = defaults.BELIEF_RULE,
-             cache_dir: PathLike | None = None,
-             population: DriverPopulation | PathLike | None = None) -> Evaluation:
+             settings: EvaluationSettings | None = None, cache_dir: PathLike | None = None,
+             population: DriverPopulation | PathLike | None = None, **options: Any) -> Evaluation:
     """The exact probability that `policy` satisfies `spec`, its expected final trust and how
     episodes end (no sampling; `value.lower`/`value.upper` certify it).
 
     policy: "free" (the trust-free shortest route), "aware" (synthesized for 20 junctions and
     cached in `cache_dir`), a policy file, a SynthesisResult or any RoutingPolicy.
-    fallback_after: the study's rule, the shortest completion after that many junctions (None:
-    the policy as given). max_junctions: the episode cap (docs/model.md, "Episodes").
+    settings: how the episodes unfold, a `trustroute.policies.evaluation.settings.EvaluationSettings`
+    (default: its defaults, `trustroute evaluate`'s); any of its fields may instead be given by
+    keyword, over `settings`: fallback_after (the study's rule, the shortest completion after that
+    many junctions; None: the policy as given), max_junctions (the episode cap, docs/model.md,
+    "Episodes"), belief_rule, ...
     population: a driver population (instead of `driver`): the value over its mixture of types,
     the AV filtering with its type-aware model; policy "free", "robust", "bayes" or a population
     policy file (docs/driver_types.md), as `trustroute evaluate --population`.
     """
     from trustroute.app.synthesis import EvaluationSettings, evaluate_population, evaluate_single
+    from trustroute.core.settings import with_options
 
     problem = _compiled(spec, town, driver, population)
     routing = _policy(policy, problem, cache_dir)
-    settings = EvaluationSettings(fallback_after=fallback_after, max_junctions=max_junctions,
-                                  belief_rule=belief_rule)
+    chosen = with_options(settings if settings is not None else EvaluationSettings(), options, "evaluate")
     if problem.population is not None:
-        return evaluate_population(problem, routing, settings)[0]
-    return evaluate_single(problem, routing, settings)
+        return evaluate_population(problem, routing, chosen)[0]
+    return evaluate_single(problem, routing, chosen)
 
 
 def run_episode(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
                 town: Town | PathLike | None = None, driver: DriverModel | PathLike | None = None, *,
-                seed: int = defaults.SEED, engine: str = defaults.EPISODE_ENGINE,
-                initial_trust: int | None = None, rrd: PathLike | None = None,
-                cache_dir: PathLike | None = None,
-                population: DriverPopulation | PathLike | None = None) -> EpisodeRecord:
+                settings: EpisodeSettings | None = None, cache_dir: PathLike | None = None,
+                population: DriverPopulation | PathLike | None = None, **options: Any) -> EpisodeRecord:
     """One episode of `spec` with `policy` and a synthetic driver drawn from `driver`.
 
-    engine: "sumo" (libsumo: incidents, takeovers and performance measured in the simulation) or
-    "model" (the trust POMDP alone, no SUMO). seed: SUMO's seed and the driver's Generator seed.
-    initial_trust: the driver's initial trust (default: drawn from the model). rrd: also write a
-    Rerun recording (SUMO engine only). policy: as for `evaluate` ("robust"/"bayes" with a
-    population). population: a driver population (instead of `driver`): the driver's type is drawn
-    from it (seeded) and the AV filters with its type-aware model. Returns the logs:
-    `record.summary` (dict), `record.roads`, `record.kinematics`, `record.incidents` (DataFrames,
-    docs/dataset.md); the episode follows the study's rules (20-junction fallback, 60-junction cap).
+    settings: how the episode runs, a `trustroute.app.runs.EpisodeSettings`; any of its fields may
+    instead be given by keyword, over `settings`: engine ("sumo", libsumo: incidents, takeovers
+    and performance measured in the simulation, or "model": the trust POMDP alone, no SUMO), seed
+    (SUMO's seed and the driver's Generator seed), initial_trust (the driver's initial trust;
+    default: drawn from the model), rrd (also write a Rerun recording there; SUMO engine only),
+    net, sumo, ... policy: as for `evaluate` ("robust"/"bayes" with a population). population: a
+    driver population (instead of `driver`): the driver's type is drawn from it (seeded) and the
+    AV filters with its type-aware model. Returns the logs: `record.summary` (dict),
+    `record.roads`, `record.kinematics`, `record.incidents` (DataFrames, docs/dataset.md); the
+    episode follows the study's rules (20-junction fallback, 60-junction cap).
     """
     from trustroute.app.engines import ENGINES, SIMULATED
     from trustroute.app.runs import EpisodeSettings, run_one_episode
+    from trustroute.core.settings import with_options
 
-    if engine not in SIMULATED:
-        raise ValueError(f"unknown engine {engine!r}; use one of {', '.join(repr(e) for e in SIMULATED)}")
-    if rrd is not None and not ENGINES[engine].records:
+    chosen = with_options(settings if settings is not None else EpisodeSettings(option="initial_trust"),
+                          options, "run_episode")
+    if chosen.engine not in SIMULATED:
+        raise ValueError(f"unknown engine {chosen.engine!r}; use one of "
+                         f"{', '.join(repr(e) for e in SIMULATED)}")
+    if chosen.rrd is not None and not ENGINES[chosen.engine].records:
         raise ValueError("a Rerun recording needs the SUMO engine (engine='sumo')")
     problem = _compiled(spec, town, driver, population)
     routing = _policy(policy, problem, cache_dir)
-    settings = EpisodeSettings(engine=engine, seed=seed, initial_trust=initial_trust,
-                               rrd=Path(rrd) if rrd else None, option="initial_trust")
-    return run_one_episode(problem, routing, settings).record
+    chosen = replace(chosen, rrd=Path(chosen.rrd) if chosen.rrd else None)
+    return run_one_episode(problem, routing, chosen).record
 
 
 def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None, *, workers: int = 1,

@@ -22,6 +22,7 @@ Recovery on synthetic data: tests/analysis/fitting/test_driver_model.py (stated 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -524,18 +525,9 @@ def bootstrap_fit(
     """Uncertainty by resampling participants with replacement (all their episodes together) and
     refitting: 2.5/97.5 percentiles of every takeover probability and of every trust row's expected
     change E[θ' - θ] (standstill/takeover, AV success), and how many refits converged."""
-    by_participant = {p: list(g["episode_id"]) for p, g in episodes.groupby("participant")}
-    participants = sorted(by_participant)
-    grouped = {e: g for e, g in roads.groupby("episode_id")}
     levels = np.asarray(template.trust_levels, dtype=float)
     takeovers, changes, converged = [], [], 0
-    for _ in range(resamples):
-        drawn = rng.choice(len(participants), size=len(participants), replace=True)
-        parts = []
-        for copy, index in enumerate(drawn):
-            for episode_id in by_participant[participants[index]]:
-                parts.append(grouped[episode_id].assign(episode_id=f"{episode_id}#{copy}"))
-        result = fit_roads(pd.concat(parts, ignore_index=True), template, method, iterations)
+    for result in bootstrap_refits(roads, episodes, template, method, iterations, resamples, rng):
         converged += bool(result.converged)
         takeovers.append(result.parameters.takeover)
         changes.append(result.parameters.transition[:, :, 0] @ levels - levels)  # [I, 2, k]
@@ -564,3 +556,20 @@ def bootstrap_fit(
             for h, action in enumerate(("standstill", "takeover"))
         },
     }
+
+
+def bootstrap_refits(roads: pd.DataFrame, episodes: pd.DataFrame, template: DriverModel, method: str,
+                     iterations: int, resamples: int, rng: np.random.Generator) -> Iterator[FitResult]:
+    """`resamples` refits, each on the participants drawn with replacement from `rng` (all of a
+    drawn participant's episodes together, a participant drawn twice counted twice): the fits
+    `bootstrap_fit` summarises and `trustroute plan --pilot` simulates with."""
+    by_participant = {p: list(g["episode_id"]) for p, g in episodes.groupby("participant")}
+    participants = sorted(by_participant)
+    grouped = {e: g for e, g in roads.groupby("episode_id")}
+    for _ in range(resamples):
+        drawn = rng.choice(len(participants), size=len(participants), replace=True)
+        parts = []
+        for copy, index in enumerate(drawn):
+            for episode_id in by_participant[participants[index]]:
+                parts.append(grouped[episode_id].assign(episode_id=f"{episode_id}#{copy}"))
+        yield fit_roads(pd.concat(parts, ignore_index=True), template, method, iterations)

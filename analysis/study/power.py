@@ -163,7 +163,11 @@ def episodes_tests(episodes: pd.DataFrame, tests: Sequence[str], alpha: float) -
 @dataclass(frozen=True)
 class Power:
     """A test's power at one sample size: the share of `studies` rejecting, its Wilson 95 %
-    interval, and the estimated effect's median and central 95 % range (finite values)."""
+    interval, and the estimated effect's median and central 95 % range (finite values). When each
+    study drew its participants' model from `models` fitted models (a pilot's bootstrap refits),
+    the power is averaged over them, and `fit_low`/`fit_high` are the 2.5/97.5 % percentiles of the
+    refits' own powers (each the share of its own studies rejecting, so the range holds their
+    Monte Carlo noise too); otherwise `models` is 0 and they are NaN."""
 
     test: str
     pair: tuple[str, str]
@@ -177,23 +181,39 @@ class Power:
     effect_median: float
     effect_low: float
     effect_high: float
+    models: int = 0
+    fit_low: float = math.nan
+    fit_high: float = math.nan
 
 
-def power_table(results: Sequence[Sequence[TestResult]], participants: int) -> list[Power]:
-    """The power of every test over the studies' results (one list of TestResult per study)."""
-    grouped: dict[tuple, list[TestResult]] = {}
-    for study in results:
+def _over_models(rejected: np.ndarray, models: np.ndarray) -> tuple[int, float, float]:
+    """(models drawn, 2.5 %, 97.5 % percentile of their powers) of studies drawn from `models`."""
+    drawn, index = np.unique(models, return_inverse=True)
+    powers = np.bincount(index, weights=rejected) / np.bincount(index)
+    low, high = np.percentile(powers, [2.5, 97.5])
+    return int(drawn.size), float(low), float(high)
+
+
+def power_table(results: Sequence[Sequence[TestResult]], participants: int,
+                models: Sequence[int] | None = None) -> list[Power]:
+    """The power of every test over the studies' results (one list of TestResult per study);
+    models: the model each study drew its participants from (Power's docstring), or None."""
+    grouped: dict[tuple, list[tuple[TestResult, int]]] = {}
+    for i, study in enumerate(results):
         for r in study:
-            grouped.setdefault((r.test, r.pair, r.spec), []).append(r)
+            grouped.setdefault((r.test, r.pair, r.spec), []).append((r, -1 if models is None else models[i]))
     out = []
-    for (test, pair, spec), rows in grouped.items():
+    for (test, pair, spec), pairs in grouped.items():
+        rows = [r for r, _ in pairs]
         k, n = sum(r.rejected for r in rows), len(rows)
         low, high = rate_interval(k, n, method="wilson")
         effects = np.array([r.effect for r in rows], dtype=float)
         effects = effects[np.isfinite(effects)]
         q = np.quantile(effects, [0.5, 0.025, 0.975]) if effects.size else [math.nan] * 3
+        spread = () if models is None else _over_models(np.array([r.rejected for r in rows], dtype=float),
+                                                        np.array([m for _, m in pairs]))
         out.append(Power(test, pair, spec, participants, n, int(k), k / n, low, high,
-                         float(q[0]), float(q[1]), float(q[2])))
+                         float(q[0]), float(q[1]), float(q[2]), *spread))
     return out
 
 
@@ -233,26 +253,33 @@ class PowerSettings:
     max_simulations: int = 2400
 
 
-# simulate(participants, studies) -> (satisfied, reported, specs, conditions) of the simulated studies
-Simulate = Callable[[int, int], tuple[np.ndarray, np.ndarray, Sequence[str], Sequence[str]]]
+# simulate(participants, studies) -> (satisfied, reported, specs, conditions) of the simulated studies,
+# and optionally a fifth item: the index of the model each study drew its participants from
+# (a pilot's refits), or None
+Simulate = Callable[[int, int], tuple]
 
 
 def estimate_power(simulate: Simulate, sizes: Sequence[int], settings: PowerSettings,
                    progress: Callable[[int, int], object] | None = None) -> list[Power]:
     """The power table over `sizes`: at each size, studies from `simulate` (a callable the harness
     passes in: analysis runs no simulation itself) analysed with `study_tests`, in rounds as
-    `settings` says. progress(size, studies) is called after every round."""
+    `settings` says. progress(size, studies) is called after every round. When `simulate` also
+    names the model each study drew (its fifth item), every power carries the spread over those
+    models (`Power`)."""
     memo = _Memo()
     table: list[Power] = []
     for size in sizes:
         results: list[list[TestResult]] = []
+        models: list[int] = []
         while True:
             wanted = settings.simulations if settings.simulations is not None else settings.max_simulations
             batch = min(settings.round_size, wanted - len(results))
-            satisfied, reported, specs, conditions = simulate(size, batch)
+            satisfied, reported, specs, conditions, *drawn = simulate(size, batch)
             results += [study_tests(satisfied[i], reported[i], specs, conditions, settings.tests,
                                     settings.alpha, memo) for i in range(batch)]
-            rows = power_table(results, size)
+            if drawn and drawn[0] is not None:
+                models += [int(m) for m in drawn[0]]
+            rows = power_table(results, size, models or None)
             if progress is not None:
                 progress(size, len(results))
             if len(results) >= wanted or (settings.simulations is None

@@ -1,6 +1,7 @@
 """The power curve of `trustroute plan`: per planned test (one panel each) the estimated power
 against the number of participants, one line per (pair, spec) with its Wilson 95 % band, the
-target power as a dashed line and the minimal sample size reaching it marked; PNG and SVG."""
+target power as a dashed line and the minimal sample size reaching it marked; PNG and SVG. A plan
+from a pilot adds, per line, the range of its refits' powers as thin dash-dotted lines."""
 
 from __future__ import annotations
 
@@ -36,6 +37,9 @@ def power_curve_plot(table: Sequence[Power], target: float, alpha: float, path: 
             label = f"{spec}" + (f" ({pair[0]} vs {pair[1]})" if len({q for q, _ in keys}) > 1 else "")
             ax.fill_between(sizes, [p.low for p in rows], [p.high for p in rows], color=colour, alpha=0.2,
                             lw=0)
+            if any(p.models for p in rows):   # a pilot's refits: the power's range over the fit
+                ax.plot(sizes, [p.fit_low for p in rows], color=colour, ls="-.", lw=0.8)
+                ax.plot(sizes, [p.fit_high for p in rows], color=colour, ls="-.", lw=0.8)
             ax.plot(sizes, [p.power for p in rows], marker="o", ms=3, color=colour, label=label)
             found = minimal[(test, pair, spec)]
             if found is not None:

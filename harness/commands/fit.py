@@ -6,90 +6,71 @@ with an optional bootstrap and posterior-predictive check; with --types, a mixtu
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import UsageFix, bounded_int
-from trustroute.harness.commands.output import json_option, quiet_option, with_paths
+from trustroute.harness.commands.output import json_flag, quiet_flag, with_paths
 
 CHECK_REPLICATES = 50  # simulated drivers per real episode in `fit --check`
 CHECK_EPISODES = 20_000  # model-engine episodes per spec, condition and driver model in `fit --check`
 
 
+@dataclass(frozen=True)
+class FitOptions:
+    """`trustroute fit`'s options, in the order --help lists them."""
+
+    out: str = option("--out", type=click.Path(), default="driver.json", show_default=True,
+                      help="Driver model FILE to write.")
+    method: str = option(
+        "--method", type=click.Choice(["auto", "counts", "em"]), default="auto", show_default=True,
+        help="counts: reports are exact trust; em: reports are noisy (EM over hidden trust); "
+        "auto: counts when the study's report accuracy is 1 and trust is reported every road.")
+    iterations: int = option("--iterations", type=bounded_int(1, 100_000), default=200, show_default=True,
+                             help="EM iterations at most.")
+    bootstrap: int = option("--bootstrap", type=bounded_int(0, 100_000), default=0, show_default=True,
+                            help="Resamples of participants for percentile intervals (0: none).")
+    seed: int = option("--seed", type=bounded_int(0, 2**63 - 1), default=0, show_default=True,
+                       help="Seed of the bootstrap and the check.")
+    check: bool = option(
+        "--check", is_flag=True,
+        help="Posterior-predictive check: simulate the packaged and the fitted model on the study's "
+        "roads and compare with its logs (writes <out>.check.json and <out>.check.png).")
+    types: str | None = option("--types", default=None, metavar="K|auto",
+                               help="Fit a mixture of K driver types (or choose K by BIC with 'auto') and "
+                               "write a driver-population file.")
+    max_types: int = option("--max-types", type=bounded_int(1, 20), default=4, show_default=True,
+                            help="With --types auto: the largest K tried.")
+    restarts: int = option("--restarts", type=bounded_int(1, 1_000), default=5, show_default=True,
+                           help="With --types: seeded EM restarts per K.")
+    shared_dynamics: bool = option(
+        "--shared-dynamics", is_flag=True,
+        help="With --types: the types share the trust-transition rows and differ in initial "
+        "trust and takeover (and failure) probabilities.")
+    as_json: bool = json_flag()
+    quiet: bool = quiet_flag()
+
+
 @click.command("fit")
 @click.argument("study_dir", metavar="DIR", type=click.Path())
-@click.option(
-    "--out",
-    "out",
-    type=click.Path(),
-    default="driver.json",
-    show_default=True,
-    help="Driver model FILE to write.",
-)
-@click.option(
-    "--method",
-    type=click.Choice(["auto", "counts", "em"]),
-    default="auto",
-    show_default=True,
-    help="counts: reports are exact trust; em: reports are noisy (EM over hidden trust); "
-    "auto: counts when the study's report accuracy is 1 and trust is reported every road.",
-)
-@click.option("--iterations", type=bounded_int(1, 100_000), default=200, show_default=True,
-              help="EM iterations at most.")
-@click.option(
-    "--bootstrap",
-    type=bounded_int(0, 100_000),
-    default=0,
-    show_default=True,
-    help="Resamples of participants for percentile intervals (0: none).",
-)
-@click.option("--seed", type=bounded_int(0, 2**63 - 1), default=0, show_default=True,
-              help="Seed of the bootstrap and the check.")
-@click.option(
-    "--check",
-    is_flag=True,
-    help="Posterior-predictive check: simulate the packaged and the fitted model on the study's "
-    "roads and compare with its logs (writes <out>.check.json and <out>.check.png).",
-)
-@click.option("--types", "types", default=None, metavar="K|auto",
-              help="Fit a mixture of K driver types (or choose K by BIC with 'auto') and write a "
-              "driver-population file.")
-@click.option("--max-types", type=bounded_int(1, 20), default=4, show_default=True,
-              help="With --types auto: the largest K tried.")
-@click.option("--restarts", type=bounded_int(1, 1_000), default=5, show_default=True,
-              help="With --types: seeded EM restarts per K.")
-@click.option("--shared-dynamics", is_flag=True,
-              help="With --types: the types share the trust-transition rows and differ in initial "
-              "trust and takeover (and failure) probabilities.")
-@json_option
-@quiet_option
-def fit(
-    study_dir: str,
-    out: str,
-    method: str,
-    iterations: int,
-    bootstrap: int,
-    seed: int,
-    check: bool,
-    types: str | None,
-    max_types: int,
-    restarts: int,
-    shared_dynamics: bool,
-    as_json: bool,
-    quiet: bool,
-) -> None:
+@takes(options=FitOptions)
+def fit(study_dir: str, options: FitOptions) -> None:
     """Estimate trust dynamics and the takeover model from a study's logs; write a driver model."""
     from trustroute.analysis.fitting.driver_model import bootstrap_fit, fit_study
     from trustroute.core.output_files import check_output_file
 
-    if types is not None:
+    out, method, iterations, bootstrap, seed = (options.out, options.method, options.iterations,
+                                                options.bootstrap, options.seed)
+    check, as_json, quiet = options.check, options.as_json, options.quiet
+    if options.types is not None:
         if check or method == "counts":
             raise UsageFix("--types fits by EM; it takes neither --check nor --method counts",
                            "drop --check and --method counts, or drop --types")
         check_output_file(out, "--out", "driver-population file")
-        fit_types(Path(study_dir), Path(out), types, max_types, restarts, iterations, bootstrap, seed,
-                  shared_dynamics, as_json, quiet)
+        fit_types(Path(study_dir), Path(out), options)
         return
     check_output_file(out, "--out", "driver model file")
     result = fit_study(Path(study_dir), method=method, iterations=iterations,
@@ -193,8 +174,7 @@ def _type_count(types: str) -> int | None:
     return value
 
 
-def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: int, iterations: int,
-              bootstrap: int, seed: int, shared_dynamics: bool, as_json: bool, quiet: bool) -> None:
+def fit_types(study_dir: Path, out: Path, options: FitOptions) -> None:
     """`trustroute fit --types`: the mixture, its BIC table and bootstrap, a driver-population file."""
     import time
 
@@ -211,6 +191,10 @@ def fit_types(study_dir: Path, out: Path, types: str, max_types: int, restarts: 
     from trustroute.app.populations import write_population as write_driver_population
     from trustroute.core.output_files import atomic_write_text
 
+    types, max_types, restarts = options.types, options.max_types, options.restarts
+    iterations, bootstrap, seed = options.iterations, options.bootstrap, options.seed
+    shared_dynamics, as_json, quiet = options.shared_dynamics, options.as_json, options.quiet
+    assert types is not None   # (fit calls this only with --types)
     fixed = _type_count(types)
     rng = np.random.default_rng(seed)
     obs, owner, participants, template, roads, episodes = study_observations(study_dir)

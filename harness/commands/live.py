@@ -9,56 +9,86 @@ server on the same study directory is refused (exit 2).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
+from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import FiniteFloat, bounded_int
+
+if TYPE_CHECKING:
+    from trustroute.harness.live.server import ServerOptions
+
+
+@dataclass(frozen=True)
+class ServeOptions:
+    """`trustroute live`'s options, in the order --help lists them."""
+
+    host: str = option("--host", default="127.0.0.1", show_default=True,
+                       help="Address to bind (another than 127.0.0.1 exposes the study to the network).")
+    port: int = option("--port", type=bounded_int(0, 65535), default=8765, show_default=True,
+                       help="Port to bind.")
+    out: str | None = option("--out", type=click.Path(), default=None,
+                             help="Study DIRECTORY (default: the config's output, else studies/<name>).")
+    pace: float = option("--pace", type=FiniteFloat(0.0, 10_000.0, open_minimum=True), default=1.0,
+                         show_default=True, help="Simulated seconds per wall-clock second (1: real time).")
+    resume_within: float = option(
+        "--resume-within", type=FiniteFloat(0.0, 86_400.0, open_minimum=True), default=120.0,
+        show_default=True, help="Seconds a disconnected participant has to resume; after that the "
+        "episode is incomplete and runs again at the end of their plan.")
+    warm_up: bool = option("--warm-up/--no-warm-up", default=True, show_default=True,
+                           help="A warm-up drive before each participant's trials (not part of the dataset).")
+    secure_cookies: bool = option(
+        "--secure-cookies", is_flag=True,
+        help="Mark the cookies Secure (the study is served over HTTPS, e.g. behind a TLS proxy).")
+    consent_path: str | None = option(
+        "--consent", type=click.Path(), default=None,
+        help="Text FILE shown to participants before they consent (default: a short generic text).")
+    public_origins: tuple[str, ...] = option(
+        "--public-origin", multiple=True, metavar="URL",
+        help="The address participants reach the study at behind a reverse proxy (e.g. "
+        "https://study.example.org); repeatable. Pages from any other origin are refused.")
+
+    def server_options(self) -> ServerOptions:
+        """The station's options, the public origins checked."""
+        from trustroute.harness.live.server import ServerOptions
+
+        return ServerOptions(pace=self.pace, resume_within=self.resume_within, warm_up=self.warm_up,
+                             secure_cookies=self.secure_cookies,
+                             public_origins=checked_origins(self.public_origins))
+
+    def consent(self) -> str:
+        """The consent text: --consent's file, else the generic one."""
+        from trustroute.harness.live.server import DEFAULT_CONSENT
+
+        if self.consent_path is None:
+            return DEFAULT_CONSENT
+        from trustroute.core.validation import read_text
+
+        return read_text(self.consent_path, self.consent_path, "the consent text",
+                         "pass a readable UTF-8 text file")
 
 
 @click.command("live")
 @click.argument("config_path", metavar="CONFIG", type=click.Path())
-@click.option("--host", default="127.0.0.1", show_default=True,
-              help="Address to bind (another than 127.0.0.1 exposes the study to the network).")
-@click.option("--port", type=bounded_int(0, 65535), default=8765, show_default=True, help="Port to bind.")
-@click.option("--out", "out", type=click.Path(), default=None,
-              help="Study DIRECTORY (default: the config's output, else studies/<name>).")
-@click.option("--pace", type=FiniteFloat(0.0, 10_000.0, open_minimum=True), default=1.0, show_default=True,
-              help="Simulated seconds per wall-clock second (1: real time).")
-@click.option("--resume-within", type=FiniteFloat(0.0, 86_400.0, open_minimum=True), default=120.0,
-              show_default=True, help="Seconds a disconnected participant has to resume; after that the "
-              "episode is incomplete and runs again at the end of their plan.")
-@click.option("--warm-up/--no-warm-up", default=True, show_default=True,
-              help="A warm-up drive before each participant's trials (not part of the dataset).")
-@click.option("--secure-cookies", is_flag=True,
-              help="Mark the cookies Secure (the study is served over HTTPS, e.g. behind a TLS proxy).")
-@click.option("--consent", "consent_path", type=click.Path(), default=None,
-              help="Text FILE shown to participants before they consent (default: a short generic text).")
-@click.option("--public-origin", "public_origins", multiple=True, metavar="URL",
-              help="The address participants reach the study at behind a reverse proxy (e.g. "
-              "https://study.example.org); repeatable. Pages from any other origin are refused.")
-def live(config_path: str, host: str, port: int, out: str | None, pace: float, resume_within: float,
-         warm_up: bool, secure_cookies: bool, consent_path: str | None,
-         public_origins: tuple[str, ...]) -> None:
+@takes(options=ServeOptions)
+def live(config_path: str, options: ServeOptions) -> None:
     """Serve the study described by CONFIG (engine = "live") to participants in their browsers."""
     from trustroute.harness.live.app import serve
     from trustroute.harness.live.guard import bind
-    from trustroute.harness.live.server import DEFAULT_CONSENT, LiveStudy, ServerOptions
+    from trustroute.harness.live.server import LiveStudy
     from trustroute.harness.study.config import load_study_config, study_directory
 
     config = load_study_config(config_path)
-    consent = DEFAULT_CONSENT
-    if consent_path is not None:
-        from trustroute.core.validation import read_text
-
-        consent = read_text(consent_path, consent_path, "the consent text", "pass a readable UTF-8 text file")
-    origins = checked_origins(public_origins)
-    study_dir = Path(study_directory(config, out))
-    options = ServerOptions(pace=pace, resume_within=resume_within, warm_up=warm_up,
-                            secure_cookies=secure_cookies, public_origins=origins)
-    sock = bind(host, port)   # before anything is printed or written: a port in use leaves nothing
+    consent = options.consent()
+    server_options = options.server_options()
+    study_dir = Path(study_directory(config, options.out))
+    host, origins = options.host, server_options.public_origins
+    sock = bind(host, options.port)   # before anything is printed or written: a port in use leaves nothing
     try:
-        with LiveStudy(config, study_dir, options, consent) as study:
+        with LiveStudy(config, study_dir, server_options, consent) as study:
             serve(study, sock, on_ready=lambda: announce(study, host, sock.getsockname()[1], origins))
     finally:
         sock.close()

@@ -12,14 +12,27 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import click
 
+from trustroute.harness.commands.option_groups import option, option_decorator
+
 PATHS_KEY = "paths"
 
-json_option = click.option("--json", "as_json", is_flag=True,
-                           help="Print one JSON object (written files under \"paths\").")
-quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bars or chatter.")
+
+def json_flag() -> Any:
+    """--json, as a field of a command's options (harness/commands/option_groups.py)."""
+    return option("--json", is_flag=True, help="Print one JSON object (written files under \"paths\").")
+
+
+def quiet_flag() -> Any:
+    """--quiet, as a field of a command's options."""
+    return option("--quiet", "-q", is_flag=True, help="No progress bars or chatter.")
+
+
+json_option = option_decorator("as_json", json_flag())
+quiet_option = option_decorator("quiet", quiet_flag())
 
 
 def jsonable(value: object) -> object:

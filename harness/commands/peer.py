@@ -11,38 +11,61 @@ finds is a lower bound of Pr_max (policies/peer/paynt.py). Needs the optional `[
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import click
 
 from trustroute.app.peers import paynt_comparison, storm_comparison
+from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.output import emit
 
 
-def problem_options(command):
-    """SPEC, --town, --driver and --horizon: the problem both a peer and ours are given."""
-    for option in reversed((
-        click.argument("spec_path", metavar="SPEC"),
-        click.option("--town", "town_path", type=click.Path(), default=None,
-                     help="Town file (default town)."),
-        click.option("--driver", "driver_path", type=click.Path(), default=None,
-                     help="Driver model file (default: the packaged model)."),
-        click.option("--horizon", type=click.IntRange(min=0), default=None,
-                     help="Accepted within H junctions (a step counter in the product; default: unbounded)."),
-    )):
-        command = option(command)
-    return command
+@dataclass(frozen=True)
+class PeerProblem:
+    """--town, --driver and --horizon: the problem (with SPEC) both a peer and ours are given."""
+
+    town_path: str | None = option("--town", type=click.Path(), default=None,
+                                   help="Town file (default town).")
+    driver_path: str | None = option("--driver", type=click.Path(), default=None,
+                                     help="Driver model file (default: the packaged model).")
+    horizon: int | None = option(
+        "--horizon", type=click.IntRange(min=0), default=None,
+        help="Accepted within H junctions (a step counter in the product; default: unbounded).")
 
 
-def our_options(command):
+@dataclass(frozen=True)
+class OurSide:
     """--depth, --max-nodes and --json: our side of a comparison, and the output."""
-    for option in reversed((
-        click.option("--depth", type=click.IntRange(min=0), default=10, show_default=True,
-                     help="Our search depth for the unbounded objective (the horizon when given)."),
-        click.option("--max-nodes", type=click.IntRange(min=1), default=200_000, show_default=True,
-                     help="Our belief nodes per level; beyond, the least likely are bounded, not expanded."),
-        click.option("--json", "as_json", is_flag=True, help="Print one JSON object."),
-    )):
-        command = option(command)
-    return command
+
+    depth: int = option("--depth", type=click.IntRange(min=0), default=10, show_default=True,
+                        help="Our search depth for the unbounded objective (the horizon when given).")
+    max_nodes: int = option(
+        "--max-nodes", type=click.IntRange(min=1), default=200_000, show_default=True,
+        help="Our belief nodes per level; beyond, the least likely are bounded, not expanded.")
+    as_json: bool = option("--json", is_flag=True, help="Print one JSON object.")
+
+
+def peer_time_limit(help: str) -> Any:
+    return option("--time-limit", type=click.FloatRange(min=1), default=30.0, show_default=True, help=help)
+
+
+@dataclass(frozen=True)
+class StormLimits:
+    """Storm's side: the seconds of its belief unfolding and its discretisation's resolution."""
+
+    time_limit: float = peer_time_limit("Seconds of Storm's belief unfolding (lower bound).")
+    resolution: int = option("--resolution", type=click.IntRange(min=1), default=2, show_default=True,
+                             help="Storm's discretisation resolution (upper bound).")
+
+
+@dataclass(frozen=True)
+class PayntLimits:
+    """PAYNT's side: the seconds of its controller search and the largest product it is handed."""
+
+    time_limit: float = peer_time_limit("Seconds of PAYNT's controller search.")
+    max_states: int = option("--max-states", type=click.IntRange(min=1), default=200_000, show_default=True,
+                             help="Largest product POMDP handed to PAYNT; beyond, exit 2.")
 
 
 def problem_line(result: dict) -> str:
@@ -64,18 +87,13 @@ def peer() -> None:
 
 
 @peer.command("storm")
-@problem_options
-@click.option("--time-limit", type=click.FloatRange(min=1), default=30.0, show_default=True,
-              help="Seconds of Storm's belief unfolding (lower bound).")
-@click.option("--resolution", type=click.IntRange(min=1), default=2, show_default=True,
-              help="Storm's discretisation resolution (upper bound).")
-@our_options
-def storm(spec_path: str, town_path: str | None, driver_path: str | None, horizon: int | None,
-          time_limit: float, resolution: int, depth: int, max_nodes: int, as_json: bool) -> None:
+@click.argument("spec_path", metavar="SPEC")
+@takes(problem=PeerProblem, limits=StormLimits, ours=OurSide)
+def storm(spec_path: str, problem: PeerProblem, limits: StormLimits, ours: OurSide) -> None:
     """Storm's [lower, upper] and time beside ours, for SPEC."""
-    result = storm_comparison(spec_path, town_path, driver_path, horizon, time_limit, resolution,
-                              depth, max_nodes)
-    emit(as_json, result, [] if as_json else storm_lines(result))
+    result = storm_comparison(spec_path, problem.town_path, problem.driver_path, problem.horizon,
+                              limits.time_limit, limits.resolution, ours.depth, ours.max_nodes)
+    emit(ours.as_json, result, [] if ours.as_json else storm_lines(result))
 
 
 def storm_lines(result: dict) -> list[str]:
@@ -90,18 +108,13 @@ def storm_lines(result: dict) -> list[str]:
 
 
 @peer.command("paynt")
-@problem_options
-@click.option("--time-limit", type=click.FloatRange(min=1), default=30.0, show_default=True,
-              help="Seconds of PAYNT's controller search.")
-@click.option("--max-states", type=click.IntRange(min=1), default=200_000, show_default=True,
-              help="Largest product POMDP handed to PAYNT; beyond, exit 2.")
-@our_options
-def paynt(spec_path: str, town_path: str | None, driver_path: str | None, horizon: int | None,
-          time_limit: float, max_states: int, depth: int, max_nodes: int, as_json: bool) -> None:
+@click.argument("spec_path", metavar="SPEC")
+@takes(problem=PeerProblem, limits=PayntLimits, ours=OurSide)
+def paynt(spec_path: str, problem: PeerProblem, limits: PayntLimits, ours: OurSide) -> None:
     """PAYNT's finite-state controller value (a lower bound of Pr_max) beside ours, for SPEC."""
-    result = paynt_comparison(spec_path, town_path, driver_path, horizon, time_limit, max_states,
-                              depth, max_nodes)
-    emit(as_json, result, [] if as_json else paynt_lines(result))
+    result = paynt_comparison(spec_path, problem.town_path, problem.driver_path, problem.horizon,
+                              limits.time_limit, limits.max_states, ours.depth, ours.max_nodes)
+    emit(ours.as_json, result, [] if ours.as_json else paynt_lines(result))
 
 
 def paynt_lines(result: dict) -> list[str]:

@@ -2,158 +2,123 @@
 --participants, many whole studies of CONFIG are simulated in memory on the model engine
 (harness/study/planning.py: the policies synthesized once, no part files) and each is analysed
 with the report's own tests (analysis/study/power.py); the power of each test is the share of
-studies in which it rejects at α. Prints a table, writes the power curve (PNG and SVG), and with
---json one object with every power, its interval, the effect's distribution and the minimal
-sizes. docs/planning.md says what the simulation assumes and what it cannot tell.
+studies in which it rejects at α. The participants are the config's driver model, --driver,
+--population, or --pilot: the driver model fitted on a pilot study with its bootstrap refits, one
+drawn per simulated study (analysis/fitting/pilot.py). Prints a table, writes the power curve (PNG
+and SVG), and with --json one object with every power, its interval, the effect's distribution and
+the minimal sizes. The run is assembled in trustroute/app/planning.py; this command parses and
+prints. docs/planning.md says what the simulation assumes and what it cannot tell.
 """
 
 from __future__ import annotations
 
-import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
+from trustroute.core import defaults
+from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import SEED, FiniteFloat, bounded_int
-from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
+from trustroute.harness.commands.output import emit, json_flag, quiet_flag, with_paths
 
-DEFAULT_OUT = Path("out") / "plan"
-
-
-def participant_model(config, driver: str | None, population: str | None):
-    """The simulated participants: --driver (one true driver model), --population (driver types
-    with weights), or None (the config's driver model)."""
-    if driver is not None and population is not None:
-        from trustroute.core.errors import InputError
-
-        raise InputError("--population", population, "--driver and --population both name the participants",
-                         "pass one of them")
-    from trustroute.harness.study.planning import ParticipantModel
-
-    if driver is not None:
-        from trustroute.app.inputs import driver_of
-
-        model = driver_of(driver)
-        return ParticipantModel(label=f"driver {driver}", types=(model,), weights=(1.0,))
-    if population is not None:
-        from trustroute.app.inputs import population_of
-
-        types = population_of(population)
-        return ParticipantModel(label=f"population {population}",
-                                types=tuple(t.model for t in types.types),
-                                weights=tuple(float(w) for w in types.weights))
-    return None
-
-
-def power_rows(table) -> list[dict]:
-    """The power table as JSON rows."""
-    return [{"test": p.test, "pair": list(p.pair), "spec": p.spec, "participants": p.participants,
-             "studies": p.studies, "rejected": p.rejected, "power": p.power, "low": p.low, "high": p.high,
-             "effect": {"median": p.effect_median, "low": p.effect_low, "high": p.effect_high}}
-            for p in table]
+if TYPE_CHECKING:
+    from trustroute.app.planning import PlanSettings
 
 
 def table_lines(table, minimal, target: float) -> list[str]:
     from trustroute.analysis.formatting import aligned_columns
 
+    over_fit = any(p.models for p in table)   # a pilot's refits: the power's range over them
     rows = [(p.test, f"{p.pair[0]} vs {p.pair[1]}", p.spec, p.participants, p.studies,
              f"{p.power:.3f} [{p.low:.3f}, {p.high:.3f}]",
+             *([f"[{p.fit_low:.3f}, {p.fit_high:.3f}]"] if over_fit else []),
              f"{p.effect_median:.3g} [{p.effect_low:.3g}, {p.effect_high:.3g}]") for p in table]
     found = [(test, f"{pair[0]} vs {pair[1]}", spec, "not reached" if n is None else str(n))
              for (test, pair, spec), n in minimal.items()]
     return [*aligned_columns(("test", "pair", "spec", "N", "studies", "power [95% CI]",
+                              *(["refits' powers [2.5%, 97.5%]"] if over_fit else []),
                               "effect median [2.5%, 97.5%]"), rows), "",
             *aligned_columns(("test", "pair", "spec", f"minimal N for power {target:g}"), found)]
 
 
+def pilot_lines(pilot) -> list[str]:
+    """What the participants of a --pilot plan rest on (the JSON's "pilot")."""
+    if pilot is None:
+        return []
+    fits = 1 + len(pilot.refits)
+    converged = f"; {pilot.converged} of {fits} fits converged" if pilot.method == "em" else ""
+    return [f"participants: {pilot.label()}",
+            f"  fitted by {pilot.method} on {pilot.episodes} episodes ({pilot.roads} roads, {pilot.reports} "
+            f"trust reports); reports drawn with the fitted accuracy {pilot.report_accuracy:.3f}{converged}",
+            "  power: averaged over the refits, with the Monte Carlo 95% interval of that average; the "
+            "refits' powers: the range over the pilot's uncertainty (each refit's power from its own "
+            "studies, so Monte Carlo noise widens it)", ""]
+
+
+@dataclass(frozen=True)
+class PlanOptions:
+    """`trustroute plan`'s options, in the order --help lists them."""
+
+    sizes: str = option("--participants", default=defaults.PLAN_PARTICIPANTS, show_default=True,
+                        help="Sample sizes: N, FROM:TO or FROM:TO:STEP (each rounded up to the Williams "
+                             "square).")
+    simulations: int | None = option(
+        "--simulations", type=bounded_int(10, 100_000), default=None,
+        help="Simulated studies per size (default: until every power is within ±0.02, at most 2400).")
+    tests: tuple[str, ...] = option(
+        "--test", multiple=True, type=click.Choice(["mcnemar", "conditional_or", "wilcoxon", "mixed_model"]),
+        help="A planned test (repeatable; default: mcnemar, conditional_or, wilcoxon).")
+    alpha: float = option("--alpha", type=FiniteFloat(0.0, 0.5, open_minimum=True),
+                          default=defaults.PLAN_ALPHA, show_default=True)
+    target: float = option("--target", type=FiniteFloat(0.0, 1.0, open_minimum=True),
+                           default=defaults.PLAN_TARGET, show_default=True, help="Target power.")
+    driver: str | None = option("--driver", default=None,
+                                help="The participants' true driver model (default: the config's).")
+    population: str | None = option("--population", default=None,
+                                    help="The participants as a population of driver types.")
+    pilot: str | None = option(
+        "--pilot", default=None, metavar="STUDY_DIR",
+        help="The participants as the driver model fitted on this pilot study, with its uncertainty "
+             "(bootstrap refits over the pilot's participants, one drawn per simulated study).")
+    pilot_bootstrap: int = option("--pilot-bootstrap", type=bounded_int(0, 10_000),
+                                  default=defaults.PILOT_BOOTSTRAP, show_default=True,
+                                  help="With --pilot: bootstrap refits (0: the point fit alone, no "
+                                       "uncertainty).")
+    seed: int = option("--seed", type=SEED, default=defaults.PLAN_SEED, show_default=True)
+    out: str | None = option("--out", type=click.Path(), default=None,
+                             help="Folder of the power curve (default: out/plan/<study name>).")
+    preregistration: str | None = option(
+        "--preregistration", type=click.Path(), default=None,
+        help="Also write a pre-registration (Markdown, OSF / AsPredicted fields) to FILE.")
+    as_json: bool = json_flag()
+    quiet: bool = quiet_flag()
+
+    def settings(self) -> PlanSettings:
+        """The plan's settings (trustroute/app/planning.py)."""
+        from trustroute.app.planning import PlanSettings
+
+        return PlanSettings(sizes=self.sizes, simulations=self.simulations, tests=tuple(self.tests),
+                            alpha=self.alpha, target=self.target, driver=self.driver,
+                            population=self.population, pilot=self.pilot,
+                            pilot_bootstrap=self.pilot_bootstrap, seed=self.seed, out=self.out)
+
+
 @click.command("plan")
 @click.argument("config_path", metavar="CONFIG", type=click.Path())
-@click.option("--participants", "sizes", default="8:60:4", show_default=True,
-              help="Sample sizes: N, FROM:TO or FROM:TO:STEP (each rounded up to the Williams square).")
-@click.option("--simulations", type=bounded_int(10, 100_000), default=None,
-              help="Simulated studies per size (default: until every power is within ±0.02, at most 2400).")
-@click.option("--test", "tests", multiple=True,
-              type=click.Choice(["mcnemar", "conditional_or", "wilcoxon", "mixed_model"]),
-              help="A planned test (repeatable; default: mcnemar, conditional_or, wilcoxon).")
-@click.option("--alpha", type=FiniteFloat(0.0, 0.5, open_minimum=True), default=0.05, show_default=True)
-@click.option("--target", "target", type=FiniteFloat(0.0, 1.0, open_minimum=True), default=0.8,
-              show_default=True, help="Target power.")
-@click.option("--driver", default=None, help="The participants' true driver model (default: the config's).")
-@click.option("--population", default=None, help="The participants as a population of driver types.")
-@click.option("--seed", type=SEED, default=1, show_default=True)
-@click.option("--out", type=click.Path(), default=None,
-              help="Folder of the power curve (default: out/plan/<study name>).")
-@click.option("--preregistration", type=click.Path(), default=None,
-              help="Also write a pre-registration (Markdown, OSF / AsPredicted fields) to FILE.")
-@json_option
-@quiet_option
-def plan(config_path: str, sizes: str, simulations: int | None, tests: tuple[str, ...], alpha: float,
-         target: float, driver: str | None, population: str | None, seed: int, out: str | None,
-         preregistration: str | None, as_json: bool, quiet: bool) -> None:
+@takes(options=PlanOptions)
+def plan(config_path: str, options: PlanOptions) -> None:
     """Power and sample size of the study CONFIG, by simulating it on the model engine."""
-    import numpy as np
+    from trustroute.app.planning import plan_study, write_preregistration
 
-    from trustroute.analysis.study.power import DEFAULT_TESTS, PowerSettings, estimate_power, minimal_sizes
-    from trustroute.analysis.study.power_plot import power_curve_plot
-    from trustroute.harness.study.config import load_study_config
-    from trustroute.harness.study.context import study_context
-    from trustroute.harness.study.planning import check_plannable, participant_sizes, simulate_studies
-
-    started = time.perf_counter()
-    config = load_study_config(config_path).with_overrides(engine="model")
-    check_plannable(config)
-    model = participant_model(config, driver, population)
-    cells = len(config.spec_names) * len(config.condition_names)
-    size_list = participant_sizes(sizes, cells)
-    settings = PowerSettings(tests=tuple(tests) or DEFAULT_TESTS, alpha=alpha, target=target,
-                             simulations=simulations)
-    silent = quiet or as_json
-    study_context(config, progress=not silent)  # every input, and the policies once, before simulating
-
-    def simulate(participants: int, studies: int):
-        # one Generator per size, so a size's studies do not depend on the other sizes tried
-        rng = streams.setdefault(participants, np.random.default_rng(
-            np.random.SeedSequence(seed, spawn_key=(participants,))))
-        sims = simulate_studies(config, participants, studies, rng, model)
-        return sims.satisfied, sims.reported, sims.specs, sims.conditions
-
-    streams: dict[int, np.random.Generator] = {}
-    echo = (lambda *_: None) if silent else (lambda size, n: click.echo(f"  N={size}: {n} studies", err=True))
-    table = estimate_power(simulate, size_list, settings, echo)
-    minimal = minimal_sizes(table, target)
-    folder = Path(out) if out is not None else DEFAULT_OUT / config.name
-    folder.mkdir(parents=True, exist_ok=True)
-    who = model.label if model is not None else "the config's driver model"
-    figure = power_curve_plot(table, target, alpha, folder / "power.png",
-                              title=f"{config.name}: power by simulation ({who}; dashed: target {target:g}, "
-                                    f"dotted: minimal N)")
-    payload = {
-        "study": config.name, "config_path": str(config.source_path), "config_hash": config.content_hash,
-        "participants_model": who,
-        "sizes": size_list, "tests": list(settings.tests), "alpha": alpha, "target": target, "seed": seed,
-        "simulations": simulations, "precision": settings.precision,
-        "power": power_rows(table),
-        "minimal_participants": [{"test": t, "pair": list(p), "spec": s, "participants": n}
-                                 for (t, p, s), n in minimal.items()],
-        "seconds": time.perf_counter() - started,
-    }
-    lines = [*table_lines(table, minimal, target), f"power curve: {figure} and {figure.with_suffix('.svg')}"]
+    progress = None if options.quiet or options.as_json else (lambda line: click.echo(line, err=True))
+    run = plan_study(config_path, options.settings(), progress)
+    figure = run.figure
+    lines = [*pilot_lines(run.pilot), *table_lines(run.table, run.minimal, options.target),
+             f"power curve: {figure} and {figure.with_suffix('.svg')}"]
     paths = {"power_png": figure, "power_svg": figure.with_suffix(".svg")}
-    if preregistration is not None:
-        paths["preregistration"] = write_preregistration(Path(preregistration), payload, config)
-        lines.append(f"pre-registration: {preregistration}")
-    emit(as_json, with_paths(payload, paths), lines)
-
-
-def write_preregistration(path: Path, payload: dict, config) -> Path:
-    """The pre-registration of this plan (analysis/study/preregistration.py), written atomically."""
-    from trustroute.analysis.study.preregistration import preregistration_text
-    from trustroute.core.output_files import atomic_write_text
-    from trustroute.harness.study.manifest import package_versions
-
-    design = {"specs": list(config.spec_names), "conditions": list(config.condition_names),
-              "seed": config.seed, "engine": config.engine, "fallback_after": config.fallback_after}
-    versions = {"trustroute": package_versions().get("trustroute", "unknown"), **package_versions()}
-    atomic_write_text(path, preregistration_text(payload, design, versions), "pre-registration",
-                      "pass a writable --preregistration path")
-    return path
+    if options.preregistration is not None:
+        paths["preregistration"] = write_preregistration(Path(options.preregistration), run)
+        lines.append(f"pre-registration: {options.preregistration}")
+    emit(options.as_json, with_paths(run.payload, paths), lines)

@@ -3,15 +3,23 @@
 from __future__ import annotations
 
 import json
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults
+from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import SEED, UsageFix
-from trustroute.harness.commands.output import json_option, quiet_option, with_paths
+from trustroute.harness.commands.output import json_flag, quiet_flag, with_paths
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from trustroute.app.runs import EpisodeSettings
+    from trustroute.harness.simulation.sumo_start import SumoConfig
 
 
 def _write_logs(out_dir: Path, record) -> dict[str, Path]:
@@ -79,77 +87,104 @@ def _check_paths(out_dir: str | None, rrd_path: str | None, cache_dir: str | Non
                          "`trustroute net build`")
 
 
+@dataclass(frozen=True)
+class RunOptions:
+    """`trustroute run`'s options, in the order --help lists them."""
+
+    spec_option: str | None = option("--spec", type=click.Path(), default=None, hidden=True,
+                                      help="Deprecated spelling of the SPEC argument.")
+    policy_name: str = option("--policy", default=defaults.POLICY, show_default=True,
+                              help="'aware', 'free' or a policy file.")
+    seed: int = option("--seed", type=SEED, default=defaults.SEED, show_default=True,
+                       help="SUMO seed and driver seed.")
+    rrd_path: str | None = option("--rrd", type=click.Path(), default=None,
+                                  help="Rerun recording FILE to write.")
+    out_dir: str | None = option(
+        "--out", type=click.Path(), default=None,
+        help="DIRECTORY to write roads/kinematics/incidents Parquet and summary.json into.")
+    as_json: bool = json_flag()
+    town_path: str | None = option(
+        "--town", type=click.Path(), default=None,
+        help="Town file or packaged town name, e.g. city (default: the town a packaged spec "
+             "is written for, else the packaged town).")
+    driver_path: str | None = option("--driver", type=click.Path(), default=None,
+                                     help="Driver model file or packaged name (default model).")
+    net_path: str | None = option(
+        "--net", type=click.Path(), default=None,
+        help="SUMO net to use (default: the net the town drives: an imported town's own, "
+             "else its cached built net, built if missing).")
+    initial_trust: int | None = option("--initial-trust", type=int, default=None,
+                                       help="Driver's initial trust (default: drawn).")
+    population_path: str | None = option(
+        "--population", type=click.Path(), default=None,
+        help="Driver-population FILE (instead of --driver): the driver's type is drawn from it "
+             "(seeded), the AV filters with its type-aware model; POLICY 'free', 'robust', "
+             "'bayes' or a population policy file (docs/driver_types.md).")
+    cache_dir: str | None = option("--cache-dir", type=click.Path(), default=None,
+                                   help="Where 'aware' policies are cached.")
+    sumo_dir: str | None = option(
+        "--sumo-files", type=click.Path(), default=None,
+        help="DIRECTORY to write episode.sumocfg, the net, SUMO's route and FCD outputs into "
+             "(open with sumo-gui).")
+    routes_paths: tuple[str, ...] = option(
+        "--routes", type=click.Path(), multiple=True,
+        help="SUMO route FILE of background traffic, e.g. an imported scenario's vehicle types and "
+             "demand (repeat for several; types first); 'city': the demand of --town city.")
+    background_vehicles: int = option(
+        "--background", type=click.IntRange(min=0, max=10_000), default=0, show_default=True,
+        help="Seeded background traffic: vehicles kept on the net (an imported "
+             "town: trips per minute from SUMO's randomTrips.py); docs/scenes.md.")
+    quiet: bool = quiet_flag()
+
+    def sumo_config(self) -> SumoConfig:
+        """SUMO's options: the background traffic, and with --sumo-files the folder of its files."""
+        from trustroute.harness.simulation.sumo_files import prepare_directory
+        from trustroute.harness.simulation.sumo_start import SumoConfig
+
+        config = SumoConfig(background_vehicles=self.background_vehicles,
+                            route_files=tuple(routes_file(path) for path in self.routes_paths))
+        if self.sumo_dir is None:
+            return config
+        return replace(config, output_dir=str(prepare_directory(Path(self.sumo_dir)).resolve()))
+
+    def episode(self, sumo: SumoConfig, observer: Callable | None) -> EpisodeSettings:
+        """The episode's settings: the seed, the initial trust, the Rerun file, the net, SUMO's."""
+        from trustroute.app.runs import EpisodeSettings
+
+        return EpisodeSettings(seed=self.seed, initial_trust=self.initial_trust,
+                               rrd=Path(self.rrd_path) if self.rrd_path else None,
+                               net=Path(self.net_path) if self.net_path else None, sumo=sumo,
+                               observer=observer)
+
+
 @click.command("run")
 @click.argument("spec_argument", metavar="SPEC", required=False, type=click.Path())
-@click.option("--spec", "spec_option", type=click.Path(), default=None, hidden=True,
-              help="Deprecated spelling of the SPEC argument.")
-@click.option("--policy", "policy_name", default=defaults.POLICY, show_default=True,
-              help="'aware', 'free' or a policy file.")
-@click.option("--seed", type=SEED, default=defaults.SEED, show_default=True,
-              help="SUMO seed and driver seed.")
-@click.option("--rrd", "rrd_path", type=click.Path(), default=None, help="Rerun recording FILE to write.")
-@click.option("--out", "out_dir", type=click.Path(), default=None,
-              help="DIRECTORY to write roads/kinematics/incidents Parquet and summary.json into.")
-@json_option
-@click.option("--town", "town_path", type=click.Path(), default=None,
-              help="Town file or packaged town name, e.g. city (default: the town a packaged spec "
-                   "is written for, else the packaged town).")
-@click.option("--driver", "driver_path", type=click.Path(), default=None,
-              help="Driver model file or packaged name (default model).")
-@click.option("--net", "net_path", type=click.Path(), default=None,
-              help="SUMO net to use (default: the net the town drives: an imported town's own, "
-                   "else its cached built net, built if missing).")
-@click.option("--initial-trust", type=int, default=None, help="Driver's initial trust (default: drawn).")
-@click.option("--population", "population_path", type=click.Path(), default=None,
-              help="Driver-population FILE (instead of --driver): the driver's type is drawn from it "
-                   "(seeded), the AV filters with its type-aware model; POLICY 'free', 'robust', "
-                   "'bayes' or a population policy file (docs/driver_types.md).")
-@click.option("--cache-dir", type=click.Path(), default=None, help="Where 'aware' policies are cached.")
-@click.option("--sumo-files", "sumo_dir", type=click.Path(), default=None,
-              help="DIRECTORY to write episode.sumocfg, the net, SUMO's route and FCD outputs into "
-                   "(open with sumo-gui).")
-@click.option("--routes", "routes_paths", type=click.Path(), multiple=True,
-              help="SUMO route FILE of background traffic, e.g. an imported scenario's vehicle types and "
-                   "demand (repeat for several; types first); 'city': the demand of --town city.")
-@click.option("--background", "background_vehicles", type=click.IntRange(min=0, max=10_000), default=0,
-              show_default=True, help="Seeded background traffic: vehicles kept on the net (an imported "
-              "town: trips per minute from SUMO's randomTrips.py); docs/scenes.md.")
-@quiet_option
-def run(spec_argument: str | None, spec_option: str | None, policy_name: str, seed: int,
-        rrd_path: str | None, out_dir: str | None, as_json: bool, town_path: str | None,
-        driver_path: str | None, net_path: str | None, initial_trust: int | None,
-        population_path: str | None, cache_dir: str | None, sumo_dir: str | None,
-        routes_paths: tuple[str, ...], background_vehicles: int, quiet: bool) -> None:
+@takes(options=RunOptions)
+def run(spec_argument: str | None, options: RunOptions) -> None:
     """Run one episode of SPEC (a spec file) in SUMO with POLICY and a synthetic driver.
 
     To re-run an episode of a study exactly (its participant's drawn model and initial trust), use
     `trustroute replay STUDY_DIR EPISODE_ID`.
     """
     from trustroute.app.policy import PolicySettings, policy_for
-    from trustroute.app.runs import EpisodeSettings, run_one_episode
+    from trustroute.app.runs import run_one_episode
     from trustroute.harness.simulation.sumo_files import (
         VehicleTypeCollector,
         finish_route_file,
-        prepare_directory,
         write_sumocfg,
     )
-    from trustroute.harness.simulation.sumo_start import SumoConfig
 
-    spec_path = _spec_path(spec_argument, spec_option)
-    _check_paths(out_dir, rrd_path, cache_dir, net_path)
-    problem = load_problem(spec_path, town_path, driver_path, population_path)
-    policy = policy_for(problem, policy_name, PolicySettings(cache_dir=cache_dir,
-                                                             progress=not (as_json or quiet)))
-    sumo_config = SumoConfig(background_vehicles=background_vehicles,
-                             route_files=tuple(routes_file(path) for path in routes_paths))
-    if sumo_dir is not None:
-        sumo_config = replace(sumo_config, output_dir=str(prepare_directory(Path(sumo_dir)).resolve()))
+    as_json, seed, sumo_dir, rrd_path = options.as_json, options.seed, options.sumo_dir, options.rrd_path
+    spec_path = _spec_path(spec_argument, options.spec_option)
+    _check_paths(options.out_dir, rrd_path, options.cache_dir, options.net_path)
+    problem = load_problem(spec_path, options.town_path, options.driver_path, options.population_path)
+    policy = policy_for(problem, options.policy_name, PolicySettings(cache_dir=options.cache_dir,
+                                                                     progress=not (as_json or options.quiet)))
+    sumo_config = options.sumo_config()
     types = VehicleTypeCollector() if sumo_dir is not None else None
-    ran = run_one_episode(problem, policy, EpisodeSettings(
-        seed=seed, initial_trust=initial_trust, rrd=Path(rrd_path) if rrd_path else None,
-        net=Path(net_path) if net_path else None, sumo=sumo_config, observer=types))
+    ran = run_one_episode(problem, policy, options.episode(sumo_config, types))
     record, episode_id, driver_type, net = ran.record, ran.episode_id, ran.driver_type, ran.net
-    written = _write_logs(Path(out_dir), record) if out_dir else {}
+    written = _write_logs(Path(options.out_dir), record) if options.out_dir else {}
     if rrd_path:
         written["rrd"] = Path(rrd_path)
     if sumo_dir is not None and types is not None and net is not None:  # (SUMO: the net is known)

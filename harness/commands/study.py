@@ -6,13 +6,15 @@ failed it names them and exits 1, and writes the report only with --report-anywa
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import click
 
 from trustroute.app.engines import SIMULATED
+from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import WORKERS, bounded_int
-from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
+from trustroute.harness.commands.output import emit, json_flag, quiet_flag, with_paths
 from trustroute.harness.study.config import study_directory
 
 
@@ -29,59 +31,48 @@ def report_paths(paths) -> dict[str, Path]:
     return {"report_markdown": paths.markdown, "report_html": paths.html}
 
 
+@dataclass(frozen=True)
+class StudyOptions:
+    """`trustroute study`'s options, in the order --help lists them."""
+
+    out: str | None = option("--out", type=click.Path(), default=None,
+                             help="Study DIRECTORY (default: the config's output, else studies/<name>).")
+    workers: int | None = option("--workers", type=WORKERS, default=None,
+                                 help="Local worker processes (default: CPU count).")
+    scheduler: str | None = option(
+        "--scheduler", default=None,
+        help="Dask scheduler ADDRESS, or 'local' for a local Dask cluster (default: local pool).")
+    engine: str | None = option("--engine", type=click.Choice(SIMULATED), default=None,
+                                help="Override the config's engine.")
+    no_report: bool = option("--no-report", is_flag=True, help="Do not analyse or write the report.")
+    report_anyway: bool = option(
+        "--report-anyway", is_flag=True,
+        help="Write the report even when some episodes failed (default: only a complete study).")
+    attempts: int = option("--attempts", type=bounded_int(1, 10), default=2, show_default=True,
+                           help="Runs of a failing episode at most (the first and its retries).")
+    as_json: bool = json_flag()
+    quiet: bool = quiet_flag()
+
+
 @click.command("study")
 @click.argument("config_path", metavar="CONFIG", type=click.Path())
-@click.option(
-    "--out",
-    "out",
-    type=click.Path(),
-    default=None,
-    help="Study DIRECTORY (default: the config's output, else studies/<name>).",
-)
-@click.option("--workers", type=WORKERS, default=None, help="Local worker processes (default: CPU count).")
-@click.option(
-    "--scheduler",
-    default=None,
-    help="Dask scheduler ADDRESS, or 'local' for a local Dask cluster (default: local pool).",
-)
-@click.option(
-    "--engine", type=click.Choice(SIMULATED), default=None, help="Override the config's engine."
-)
-@click.option("--no-report", is_flag=True, help="Do not analyse or write the report.")
-@click.option("--report-anyway", is_flag=True,
-              help="Write the report even when some episodes failed (default: only a complete study).")
-@click.option("--attempts", type=bounded_int(1, 10), default=2, show_default=True,
-              help="Runs of a failing episode at most (the first and its retries).")
-@json_option
-@quiet_option
+@takes(options=StudyOptions)
 @click.pass_context
-def study(
-    ctx: click.Context,
-    config_path: str,
-    out: str | None,
-    workers: int | None,
-    scheduler: str | None,
-    engine: str | None,
-    no_report: bool,
-    report_anyway: bool,
-    attempts: int,
-    as_json: bool,
-    quiet: bool,
-) -> None:
+def study(ctx: click.Context, config_path: str, options: StudyOptions) -> None:
     """Run (or resume) the simulated within-subject study described by CONFIG (a TOML file).
 
     Exit code 1 when episodes failed (they are named; a rerun retries them), 2 for bad input."""
     from trustroute.harness.study.config import load_study_config
 
-    config = load_study_config(config_path).with_overrides(engine=engine)
-    workers = workers if workers is not None else (os.cpu_count() or 1)
-    study_dir = study_directory(config, out)
+    config = load_study_config(config_path).with_overrides(engine=options.engine)
+    workers = options.workers if options.workers is not None else (os.cpu_count() or 1)
+    study_dir = study_directory(config, options.out)
     from trustroute.harness.study.runner import run_and_consolidate
 
-    silent = quiet or as_json
-    run, manifest = run_and_consolidate(config, study_dir, workers, scheduler, progress=not silent,
+    silent = options.quiet or options.as_json
+    run, manifest = run_and_consolidate(config, study_dir, workers, options.scheduler, progress=not silent,
                                         echo=(lambda line: None) if silent else click.echo,
-                                        attempts=attempts)
+                                        attempts=options.attempts)
     from trustroute.core.dataset import EPISODES_FILE, FAILURES_DIR, ROADS_FILE
 
     paths = dataset_paths(run.study_dir, manifest)
@@ -96,7 +87,7 @@ def study(
     payload = {"study_dir": str(run.study_dir), "planned": run.planned, "skipped": run.skipped,
                "ran": run.ran, "retried": run.retried, "failed": run.failed, "backend": run.backend,
                "seconds": run.seconds}
-    if not no_report and (not run.failed or report_anyway):
+    if not options.no_report and (not run.failed or options.report_anyway):
         from trustroute.analysis.study.analysis import study_analysis
         from trustroute.analysis.study.report import write_report
 
@@ -105,6 +96,6 @@ def study(
         paths.update(report_paths(written))
         payload["analysis"] = analysis.to_dict()
         lines += [written.table_text, f"report: {written.markdown} and {written.html}"]
-    emit(as_json, with_paths(payload, paths), lines)
+    emit(options.as_json, with_paths(payload, paths), lines)
     if run.failed:
         ctx.exit(1)

@@ -8,7 +8,8 @@ evaluate  the exact satisfaction probability and expected final trust of any pol
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -16,17 +17,39 @@ from trustroute.analysis.formatting import finite_or_none
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults
 from trustroute.core.errors import InputError
+from trustroute.harness.commands.option_groups import option, option_decorator, takes
 from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat, synthesis_time_left
-from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
+from trustroute.harness.commands.output import emit, json_flag, json_option, quiet_flag, with_paths
 
-town_option = click.option("--town", "town_path", type=click.Path(), default=None,
-                           help="Town file or packaged town name (default: the town a packaged spec is "
-                                "written for, else the packaged town).")
-driver_option = click.option("--driver", "driver_path", type=click.Path(), default=None,
-                             help="Driver model file or packaged name (default: the packaged model).")
-rule_option = click.option("--belief-rule", type=click.Choice(["bayes", "paper"]),
-                           default=defaults.BELIEF_RULE, show_default=True,
-                           help="AV belief filter: exact Bayes, or the authors' released update.")
+if TYPE_CHECKING:
+    from trustroute.app.synthesis import EvaluationSettings, SynthesisSettings
+
+
+def town_field() -> Any:
+    return option("--town", type=click.Path(), default=None,
+                  help="Town file or packaged town name (default: the town a packaged spec is "
+                       "written for, else the packaged town).")
+
+
+def driver_field() -> Any:
+    return option("--driver", type=click.Path(), default=None,
+                  help="Driver model file or packaged name (default: the packaged model).")
+
+
+def rule_field() -> Any:
+    return option("--belief-rule", type=click.Choice(["bayes", "paper"]), default=defaults.BELIEF_RULE,
+                  show_default=True, help="AV belief filter: exact Bayes, or the authors' released update.")
+
+
+def command_time_limit(help: str, **attrs: Any) -> Any:
+    """--time-limit in seconds, at most a week."""
+    return option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), help=help,
+                  **attrs)
+
+
+town_option = option_decorator("town_path", town_field())
+driver_option = option_decorator("driver_path", driver_field())
+rule_option = option_decorator("belief_rule", rule_field())
 
 
 SYNTH_FOLDER = "synth"   # under the policy cache: what `synth` writes without --out
@@ -50,79 +73,94 @@ def default_out_path(spec_name: str, *key: str) -> str:
     return str(path)
 
 
+@dataclass(frozen=True)
+class SynthOptions:
+    """`trustroute synth`'s options, in the order --help lists them."""
+
+    town_path: str | None = town_field()
+    driver_path: str | None = driver_field()
+    tau: float = option("--tau", type=FiniteFloat(0.0, 1.0, open_minimum=True), default=defaults.TAU,
+                        show_default=True, help="Target gap upper - lower.")
+    horizon: int | None = option("--horizon", type=HORIZON, default=defaults.SYNTH_HORIZON,
+                                 help="At most H junctions (default: unbounded).")
+    time_limit: float = command_time_limit("Seconds for the whole command (its synthesis runs share them).",
+                                           default=defaults.TIME_LIMIT, show_default=True)
+    belief_rule: str = rule_field()
+    quiet: bool = quiet_flag()
+    out_path: str | None = option(
+        "--out", type=click.Path(), default=None,
+        help="Policy FILE to write (its arrays go beside it, same name with suffix .npz); "
+             "default: the policy cache's synth/ folder, printed.")
+    clusters: str = option(
+        "--clusters", type=click.Choice(["auto", "on", "off"]), default="auto", show_default=True,
+        help="Cluster policies (Bayes rule; docs/synthesis.md, \"Cluster policies\"): before the "
+             "search on large problems and after an unconverged one (auto), always first (on), "
+             "never (off).")
+    population_path: str | None = option(
+        "--population", type=click.Path(), default=None,
+        help="Driver-population FILE: synthesize for its mixture of driver types "
+             "(docs/driver_types.md); instead of --driver.")
+    objective: str = option(
+        "--objective", type=click.Choice(["bayes", "robust"]), default=defaults.OBJECTIVE, show_default=True,
+        help="With --population: the prior-weighted value (bayes) or the worst type's (robust).")
+    as_json: bool = json_flag()
+
+    def settings(self) -> SynthesisSettings:
+        """The synthesis's settings (the whole command's --time-limit; `synth` gives the search
+        what is left of it)."""
+        from trustroute.app.synthesis import SynthesisSettings, belief_rule_named
+
+        return SynthesisSettings(tau=self.tau, time_limit=self.time_limit, horizon=self.horizon,
+                                 belief_rule=belief_rule_named(self.belief_rule), clusters=self.clusters,
+                                 progress=not (self.as_json or self.quiet))
+
+
 @click.command("synth")
 @click.argument("spec_path", metavar="SPEC")
-@town_option
-@driver_option
-@click.option("--tau", type=FiniteFloat(0.0, 1.0, open_minimum=True), default=defaults.TAU, show_default=True,
-              help="Target gap upper - lower.")
-@click.option("--horizon", type=HORIZON, default=defaults.SYNTH_HORIZON,
-              help="At most H junctions (default: unbounded).")
-@click.option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True),
-              default=defaults.TIME_LIMIT, show_default=True,
-              help="Seconds for the whole command (its synthesis runs share them).")
-@rule_option
-@quiet_option
-@click.option("--out", "out_path", type=click.Path(), default=None,
-              help="Policy FILE to write (its arrays go beside it, same name with suffix .npz); "
-                   "default: the policy cache's synth/ folder, printed.")
-@click.option("--clusters", type=click.Choice(["auto", "on", "off"]), default="auto", show_default=True,
-              help="Cluster policies (Bayes rule; docs/synthesis.md, \"Cluster policies\"): before the "
-                   "search on large problems and after an unconverged one (auto), always first (on), "
-                   "never (off).")
-@click.option("--population", "population_path", type=click.Path(), default=None,
-              help="Driver-population FILE: synthesize for its mixture of driver types "
-                   "(docs/driver_types.md); instead of --driver.")
-@click.option("--objective", type=click.Choice(["bayes", "robust"]), default=defaults.OBJECTIVE,
-              show_default=True,
-              help="With --population: the prior-weighted value (bayes) or the worst type's (robust).")
-@json_option
-def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: float,
-          horizon: int | None, time_limit: float, belief_rule: str, quiet: bool, out_path: str | None,
-          clusters: str, population_path: str | None, objective: str, as_json: bool) -> None:
+@takes(options=SynthOptions)
+def synth(spec_path: str, options: SynthOptions) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
-    from trustroute.app.synthesis import SynthesisSettings, belief_rule_named, synthesize_single
+    from trustroute.app.synthesis import synthesize_single
     from trustroute.core.output_files import check_output_file
 
-    settings = SynthesisSettings(tau=tau, time_limit=time_limit, horizon=horizon,
-                                 belief_rule=belief_rule_named(belief_rule), clusters=clusters,
-                                 progress=not (as_json or quiet))
+    settings, out_path = options.settings(), options.out_path
     if out_path is not None:
         check_output_file(out_path, "--out", "policy file")
-    if population_path is not None and clusters != "auto":
+    if options.population_path is not None and options.clusters != "auto":
         raise InputError("--clusters", "", "cluster policies apply to a single driver model (--driver)",
                          "drop --clusters, or synthesize for --driver instead of --population")
-    if population_path is None and objective != defaults.OBJECTIVE:
-        raise InputError("--objective", "", f"--objective {objective} needs the types to weigh",
+    if options.population_path is None and options.objective != defaults.OBJECTIVE:
+        raise InputError("--objective", "", f"--objective {options.objective} needs the types to weigh",
                          "add --population FILE (the driver types)")
-    problem = load_problem(spec_path, town_path, driver_path, population_path)
+    problem = load_problem(spec_path, options.town_path, options.driver_path, options.population_path)
     if problem.population is not None:
-        _synth_population(problem, objective, settings, out_path, as_json)
+        _synth_population(problem, options.objective, settings, out_path, options.as_json)
         return
     town, driver, spec = problem.town, problem.driver, problem.spec
     out_path = out_path or default_out_path(spec.name, town.content_hash, driver.content_hash,
-                                            spec.content_hash, f"H={horizon}", f"tau={tau}", belief_rule,
-                                            f"clusters={clusters}", f"time_limit={time_limit}")
-    result = synthesize_single(problem, replace(settings, time_limit=synthesis_time_left(time_limit)),
+                                            spec.content_hash, f"H={options.horizon}", f"tau={options.tau}",
+                                            options.belief_rule, f"clusters={options.clusters}",
+                                            f"time_limit={options.time_limit}")
+    result = synthesize_single(problem, replace(settings, time_limit=synthesis_time_left(options.time_limit)),
                                out_path)
     path = str(out_path)
     from trustroute.app.synthesis import bounds_notes, policy_arrays
 
     payload = with_paths({"spec": spec.name, "lower": result.lower, "upper": result.upper, "gap": result.gap,
-                          "seconds": result.seconds, "tau": tau, "horizon": horizon,
-                          "belief_rule": belief_rule, "stats": result.stats.to_dict(),
+                          "seconds": result.seconds, "tau": options.tau, "horizon": options.horizon,
+                          "belief_rule": options.belief_rule, "stats": result.stats.to_dict(),
                           "fallback_only": _warn_fallback_only(f"the policy for {spec.name}", result.policy,
                                                                result.stats.converged)},
                          {"policy": path, "policy_arrays": policy_arrays(path)})
     lines = [f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
              f"{result.seconds:.1f} s)"]
     lines += bounds_notes(result)
-    if belief_rule == "paper":
+    if options.belief_rule == "paper":
         # L and U are about the authors' belief MDP (their filter drives beliefs and labels); a
         # study measures the real process: observations drawn from the Bayes posterior.
         from trustroute.app.synthesis import EvaluationSettings, evaluate_single
 
-        cap = horizon if horizon is not None else defaults.JUNCTION_CAP
+        cap = options.horizon if options.horizon is not None else defaults.JUNCTION_CAP
         real = evaluate_single(problem, result.policy, EvaluationSettings(
             fallback_after=None, max_junctions=cap, belief_rule="paper"))
         payload["bounds_refer_to"] = "the authors' belief MDP (--belief-rule paper)"
@@ -133,7 +171,7 @@ def synth(spec_path: str, town_path: str | None, driver_path: str | None, tau: f
         lines.append(f"the policy's value under the real (Bayes) process within {cap} junctions: "
                      f"[{real.lower:.6f}, {real.upper:.6f}]")
     lines.append(f"policy written to {path}")
-    emit(as_json, payload, lines)
+    emit(options.as_json, payload, lines)
 
 
 def _warn_fallback_only(what: str, policy, converged: bool) -> bool:
@@ -217,73 +255,83 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
         f"{value.expected_final_trust:.4f}"])
 
 
-population_option = click.option(
-    "--population", "population_path", type=click.Path(), default=None,
-    help="Driver-population FILE (instead of --driver): the AV filters with its type-aware model and "
-         "the drivers are its mixture; POLICY may then be 'robust' or 'bayes' (docs/driver_types.md).")
+@dataclass(frozen=True)
+class EvaluateOptions:
+    """`trustroute evaluate`'s options, in the order --help lists them."""
+
+    town_path: str | None = town_field()
+    driver_path: str | None = driver_field()
+    population_path: str | None = option(
+        "--population", type=click.Path(), default=None,
+        help="Driver-population FILE (instead of --driver): the AV filters with its type-aware model and "
+             "the drivers are its mixture; POLICY may then be 'robust' or 'bayes' (docs/driver_types.md).")
+    fallback_after: int = option("--fallback-after", type=JUNCTIONS, default=defaults.FALLBACK_AFTER,
+                                 show_default=True,
+                                 help="Switch to the shortest completion after this many junctions.")
+    no_fallback: bool = option("--no-fallback", is_flag=True,
+                               help="Evaluate the policy without the fallback rule.")
+    max_junctions: int | None = option("--max-junctions", type=JUNCTIONS, default=None,
+                                       help=f"Episode cap (default {defaults.JUNCTION_CAP}).")
+    belief_rule: str = rule_field()
+    cache_dir: str | None = option(
+        "--cache-dir", type=click.Path(), default=None,
+        help="Where 'aware' policies are cached (default: $XDG_CACHE_HOME/trustroute/policies, "
+             "XDG_CACHE_HOME defaulting to ~/.cache).")
+    max_nodes: int | None = option(
+        "--max-nodes", type=click.IntRange(min=1), default=None,
+        help="Follow at most this many (the likeliest) histories per junction; the rest widen "
+             "[lower, upper] (default: 5,000 for specs with trust-state atoms, 2,000,000 otherwise).")
+    time_limit: float | None = command_time_limit(
+        "Seconds, for specs with trust-state atoms: histories still open then widen [lower, upper] "
+        "(default: none).", default=None)
+    quiet: bool = quiet_flag()
+    as_json: bool = json_flag()
+
+    def settings(self) -> EvaluationSettings:
+        """The evaluation's settings, each limit checked (a usage error names its option)."""
+        from trustroute.app.synthesis import EvaluationSettings, belief_rule_named
+
+        if self.fallback_after < 0:
+            raise InputError("--fallback-after", "", f"must be >= 0, got {self.fallback_after}",
+                             "pass a number of junctions or --no-fallback")
+        cap = defaults.JUNCTION_CAP if self.max_junctions is None else self.max_junctions
+        if cap < 0:
+            raise InputError("--max-junctions", "", f"must be >= 0, got {cap}", "pass e.g. 60")
+        if self.cache_dir is not None:
+            from trustroute.core.output_files import check_output_dir
+
+            check_output_dir(self.cache_dir, "--cache-dir", "policy cache")
+        if self.population_path is not None and (self.max_nodes is not None or self.time_limit is not None):
+            raise InputError("--max-nodes" if self.max_nodes is not None else "--time-limit", "",
+                             "the pruning limits are not used with --population",
+                             "drop --max-nodes and --time-limit, or evaluate for --driver")
+        return EvaluationSettings(fallback_after=None if self.no_fallback else self.fallback_after,
+                                  max_junctions=cap, belief_rule=belief_rule_named(self.belief_rule),
+                                  max_nodes=self.max_nodes, time_limit=self.time_limit)
 
 
 @click.command("evaluate")
 @click.argument("spec_path", metavar="SPEC")
 @click.argument("policy_name", metavar="POLICY")
-@town_option
-@driver_option
-@population_option
-@click.option("--fallback-after", type=JUNCTIONS, default=defaults.FALLBACK_AFTER, show_default=True,
-              help="Switch to the shortest completion after this many junctions.")
-@click.option("--no-fallback", is_flag=True, help="Evaluate the policy without the fallback rule.")
-@click.option("--max-junctions", type=JUNCTIONS, default=None,
-              help=f"Episode cap (default {defaults.JUNCTION_CAP}).")
-@rule_option
-@click.option("--cache-dir", type=click.Path(), default=None,
-              help="Where 'aware' policies are cached (default: $XDG_CACHE_HOME/trustroute/policies, "
-              "XDG_CACHE_HOME defaulting to ~/.cache).")
-@click.option("--max-nodes", type=click.IntRange(min=1), default=None,
-              help="Follow at most this many (the likeliest) histories per junction; the rest widen "
-                   "[lower, upper] (default: 5,000 for specs with trust-state atoms, 2,000,000 "
-                   "otherwise).")
-@click.option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), default=None,
-              help="Seconds, for specs with trust-state atoms: histories still open then widen "
-                   "[lower, upper] (default: none).")
-@quiet_option
-@json_option
-def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_path: str | None,
-             population_path: str | None, fallback_after: int, no_fallback: bool,
-             max_junctions: int | None, belief_rule: str, cache_dir: str | None,
-             max_nodes: int | None, time_limit: float | None, quiet: bool, as_json: bool) -> None:
+@takes(options=EvaluateOptions)
+def evaluate(spec_path: str, policy_name: str, options: EvaluateOptions) -> None:
     """Certified probability that POLICY ("free", "aware" or a file) satisfies SPEC, and final trust.
 
     "aware" is synthesized for a horizon of 20 junctions (the study's rule) and cached. The result
     is exact (lower = upper) unless histories were pruned; their live mass is the width.
     """
     from trustroute.app.policy import PolicySettings, policy_for
-    from trustroute.app.synthesis import EvaluationSettings, belief_rule_named, evaluate_single
+    from trustroute.app.synthesis import evaluate_single
 
-    if fallback_after < 0:
-        raise InputError("--fallback-after", "", f"must be >= 0, got {fallback_after}",
-                         "pass a number of junctions or --no-fallback")
-    cap = defaults.JUNCTION_CAP if max_junctions is None else max_junctions
-    if cap < 0:
-        raise InputError("--max-junctions", "", f"must be >= 0, got {cap}", "pass e.g. 60")
-    if cache_dir is not None:
-        from trustroute.core.output_files import check_output_dir
-
-        check_output_dir(cache_dir, "--cache-dir", "policy cache")
-    if population_path is not None and (max_nodes is not None or time_limit is not None):
-        raise InputError("--max-nodes" if max_nodes is not None else "--time-limit", "",
-                         "the pruning limits are not used with --population",
-                         "drop --max-nodes and --time-limit, or evaluate for --driver")
-    settings = EvaluationSettings(fallback_after=None if no_fallback else fallback_after, max_junctions=cap,
-                                  belief_rule=belief_rule_named(belief_rule), max_nodes=max_nodes,
-                                  time_limit=time_limit)
-    problem = load_problem(spec_path, town_path, driver_path, population_path)
-    if time_limit is not None and not problem.dfa_hidden:
+    settings = options.settings()
+    problem = load_problem(spec_path, options.town_path, options.driver_path, options.population_path)
+    if options.time_limit is not None and not problem.dfa_hidden:
         raise InputError("--time-limit", "", "applies to specs with trust-state atoms only (the others "
                          "are evaluated exactly in full)", "drop --time-limit")
-    policy = policy_for(problem, policy_name, PolicySettings(cache_dir=cache_dir,
-                                                             progress=not (as_json or quiet)))
+    policy = policy_for(problem, policy_name, PolicySettings(cache_dir=options.cache_dir,
+                                                             progress=not (options.as_json or options.quiet)))
     if problem.population is not None:
-        _evaluate_population(problem, policy, settings, as_json, f"policy {policy_name}")
+        _evaluate_population(problem, policy, settings, options.as_json, f"policy {policy_name}")
         return
     spec = problem.spec
     value = evaluate_single(problem, policy, settings)
@@ -299,7 +347,7 @@ def evaluate(spec_path: str, policy_name: str, town_path: str | None, driver_pat
         "episode ends: " + ", ".join(f"{k} {v:.4f}" for k, v in value.end_mass.items())]
     if value.pruning is not None:
         lines.append(_pruning_line(value))
-    emit(as_json, payload, lines)
+    emit(options.as_json, payload, lines)
 
 
 def _mark_fallback_only(payload: dict, what: str, policy) -> None:

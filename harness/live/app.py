@@ -386,7 +386,8 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str, id
     sender = asyncio.create_task(send_all())
     bucket, controls = TokenBucket(), TokenBucket(burst=CONTROL_RATE, rate=CONTROL_RATE)
     offer(link.queue, {"type": "welcome", "participant": session.participant, "consent": consent_text,
-                       "view": session.study.config.live_view, "driving": session.study.config.live_driving})
+                       "view": session.study.config.live_view, "driving": session.study.config.live_driving,
+                       "inputs": list(session.study.config.live_inputs)})
     previous = session.attach(link)
     if isinstance(previous, Link):
         previous.shut(REPLACED, "opened in another window",

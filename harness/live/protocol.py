@@ -27,6 +27,8 @@ from pydantic import (
     model_validator,
 )
 
+from trustroute.harness.study.config import LiveInput
+
 MAX_MESSAGE_BYTES = 4096       # a websocket message larger than this is refused unread
 MAX_BODY_BYTES = 16 * 1024     # an HTTP request body larger than this is refused (413)
 BURST = 20                     # messages a connection may send at once ...
@@ -97,9 +99,11 @@ class Steer(ClientMessage):
 class Control(ClientMessage):
     """Continuous driving (`[live] driving = "continuous"`), in control only: the wheel and the
     pedals as they are now, steering -1 (full left) .. 1 (full right), pedals 0 .. 1. Sent at most
-    CONTROL_RATE times a second, counted by a token bucket of its own."""
+    CONTROL_RATE times a second, counted by a token bucket of its own. `source`: the input read
+    (one of the study's `[live] inputs`: a control from another is refused)."""
 
     type: Literal["control"]
+    source: LiveInput
     steer: Annotated[float, Field(ge=-1.0, le=1.0, allow_inf_nan=False)]
     throttle: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
     brake: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]

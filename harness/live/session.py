@@ -123,6 +123,19 @@ class Session:
         return {**questionnaire.to_client(), "placement": placement, "trial": trial}
 
     # -- the participant's messages -------------------------------------------------------------
+    def drive(self, message: Drive | Steer | Control) -> None:
+        """Manual driving in control: the study's way of driving (a control by wheel, gamepad or
+        keyboard only as `[live] inputs` allows), passed to the episode."""
+        self.require("driving", message)
+        config = self.study.config
+        if isinstance(message, Control) != (config.live_driving == "continuous"):
+            raise MessageError("out_of_order", f"{message.type} is not how this study drives")
+        if isinstance(message, Control) and message.source not in config.live_inputs:
+            raise MessageError("out_of_order", f"this study does not allow driving by {message.source}")
+        if self.mode != "manual":
+            raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
+        self.tell(message.model_dump())
+
     def handle(self, message: ClientMessage) -> list[dict]:
         """Apply a validated client message; its replies. MessageError when out of order."""
         with self.lock:
@@ -144,12 +157,7 @@ class Session:
                 self.tell(message.model_dump())
                 return []
             elif isinstance(message, (Drive, Steer, Control)):
-                self.require("driving", message)
-                if isinstance(message, Control) != (self.study.config.live_driving == "continuous"):
-                    raise MessageError("out_of_order", f"{message.type} is not how this study drives")
-                if self.mode != "manual":
-                    raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
-                self.tell(message.model_dump())
+                self.drive(message)
                 return []
             elif isinstance(message, Pass):
                 self.require("driving", message)

@@ -18,8 +18,9 @@ takeovers, trust moves, reports, and the SUMO seed) comes from the `np_random` G
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import gymnasium
 import numpy as np
@@ -28,6 +29,7 @@ from gymnasium import spaces
 from trustroute.app.drivers import draw_type, gym_episode_id, synthetic_driver
 from trustroute.app.engines import SIMULATED, engine_named
 from trustroute.app.problem import load_problem
+from trustroute.core.settings import with_options
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.stepping import DecisionPoint, SteppableEpisode
 from trustroute.networks.town import Town
@@ -53,6 +55,26 @@ DEFAULT_JUNCTION_CAP = EpisodeSetup.junction_cap
 RUN_FACTS = ("episode_id", "wall_seconds")
 
 
+@dataclass(frozen=True)
+class EnvSettings:
+    """How the environment's episodes run. engine: "model" (fast, no SUMO) or "sumo" (libsumo).
+    junction_cap: the episode is truncated after this many junctions. belief_rule: the AV's filter
+    ("bayes" or "paper"). report_accuracy: the synthetic driver's trust-report accuracy (reports
+    are logged only). net_path: the SUMO net (None: the town's)."""
+
+    engine: str = "model"
+    junction_cap: int = DEFAULT_JUNCTION_CAP
+    belief_rule: BeliefRule = "bayes"
+    report_accuracy: float = DEFAULT_REPORT_ACCURACY
+    net_path: str | Path | None = None
+
+    def __post_init__(self) -> None:
+        if self.engine not in ENGINES:
+            raise ValueError(f"unknown engine {self.engine!r}; use one of {', '.join(ENGINES)}")
+        if self.junction_cap < 1:
+            raise ValueError(f"junction_cap must be >= 1, got {self.junction_cap}")
+
+
 class AgentPolicy(RoutingPolicy):
     """The episode's policy when the agent chooses every junction (through `step`): it never ends
     an episode itself and no fallback drives, so the episode rules (policies/routing/episode_rules.py)
@@ -70,10 +92,9 @@ class TrustRoutingEnv(gymnasium.Env):
     spec: a Spec, a spec file or a packaged spec name ("phi1"). town, driver: objects, files,
     packaged names ("pentagon", "driver_model_performance"), or None for the packaged defaults
     (a packaged spec's own town: "city5" drives "city"; trustroute/app/inputs.py) (the driver
-    model is both the AV's filter model and the synthetic driver's). engine: "model"
-    (fast, no SUMO) or "sumo" (libsumo). junction_cap: the episode is truncated after this many
-    junctions. belief_rule: the AV's filter ("bayes" or "paper").
-    report_accuracy: the synthetic driver's trust-report accuracy (reports are logged only).
+    model is both the AV's filter model and the synthetic driver's). settings: an EnvSettings
+    (engine, junction_cap, belief_rule, report_accuracy, net_path); any of its fields may instead
+    be given by keyword (`engine="sumo"`, as gymnasium.make passes them), over `settings`.
     population: a driver population (object or file; instead of driver): the AV's filter is its
     type-aware model and the spec is lifted onto it; each episode's driver is of a type drawn from
     the weights (`driver_type`).
@@ -91,17 +112,13 @@ class TrustRoutingEnv(gymnasium.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, spec: Spec | str | Path = "phi1", town: Town | str | Path | None = None,
-                 driver: DriverModel | str | Path | None = None, engine: str = "model",
-                 junction_cap: int = DEFAULT_JUNCTION_CAP, belief_rule: BeliefRule = "bayes",
-                 report_accuracy: float = DEFAULT_REPORT_ACCURACY, net_path: str | Path | None = None,
-                 render_mode: str | None = None,
-                 population: DriverPopulation | str | Path | None = None) -> None:
-        if engine not in ENGINES:
-            raise ValueError(f"unknown engine {engine!r}; use one of {', '.join(ENGINES)}")
+                 driver: DriverModel | str | Path | None = None, *, settings: EnvSettings | None = None,
+                 render_mode: str | None = None, population: DriverPopulation | str | Path | None = None,
+                 **options: Any) -> None:
+        settings = with_options(settings if settings is not None else EnvSettings(), options,
+                                "TrustRoutingEnv")
         if population is not None and driver is not None:
             raise ValueError("give driver or population, not both")
-        if junction_cap < 1:
-            raise ValueError(f"junction_cap must be >= 1, got {junction_cap}")
         if render_mode is not None:
             raise ValueError("TrustRouting has no render modes "
                              "(record a SUMO episode with trustroute run --rrd)")
@@ -114,14 +131,15 @@ class TrustRoutingEnv(gymnasium.Env):
         self.driver_model = self.problem.driver
         self.scldtl_spec = self.problem.spec
         self.driver_type: str | None = None     # the type of the current episode's driver
-        self._belief_rule: BeliefRule = belief_rule
+        self.settings = settings
+        self._belief_rule: BeliefRule = settings.belief_rule
         self._belief = np.asarray(self.driver_model.initial_belief, dtype=np.float64)  # at the last decision
-        self.engine = engine
-        self.report_accuracy = float(report_accuracy)
-        self.net_path = Path(net_path) if net_path is not None else None
+        self.engine = settings.engine
+        self.report_accuracy = float(settings.report_accuracy)
+        self.net_path = Path(settings.net_path) if settings.net_path is not None else None
         self.setup = EpisodeSetup(town=self.town, driver_model=self.driver_model, spec=self.scldtl_spec,
-                                  junction_cap=int(junction_cap), fallback_after=None,
-                                  belief_rule=belief_rule)
+                                  junction_cap=int(settings.junction_cap), fallback_after=None,
+                                  belief_rule=settings.belief_rule)
         self._legal = {road: self.town.actions(road) for road in self.town.states}
         self._width = max(len(actions) for actions in self._legal.values())
         self.action_space = spaces.Discrete(self._width)

@@ -18,7 +18,8 @@ pose is the ego's in SUMO.
 Events (dicts with `t`, `type` and details), each logged when it begins:
 - `off_road`: the ego's centre is on no lane open to cars (SUMO maps it to none, or to a lane
   farther away than half its width); `on_road` when it is back;
-- `oncoming`: on a lane of the road's opposite direction; `own_lane` when back on its route;
+- `oncoming`: on a lane of the opposite direction of its road or of another road of its route;
+  `own_lane` when back on its route;
 - `collision` (`object`, `speed`): the ego's footprint overlaps a vehicle's or a person's (oriented
   rectangles, `overlaps`). What a collision does: the ego stops where it is (the model's speed is
   set to 0) and stands there while it touches what it hit, whatever the pedals say; the person
@@ -26,6 +27,12 @@ Events (dicts with `t`, `type` and details), each logged when it begins:
   collision): the autopilot then takes it from the nearest place on its route (`release`). The
   episode goes on, as it does after SUMO's own collisions in simulated studies
   (`--collision.action warn`).
+- `stopped_off_road` (`distance`): the model's front is farther than OFF_ROUTE_LIMIT from where
+  SUMO keeps the ego on its route (off the road, or on a road it is not routed on, which counts as
+  `off_road` too): the car stops there and stands whatever the pedals say; the person may hand
+  back from there, and the autopilot takes it from the nearest place on its route (`release`), as
+  after a collision. So no placement ever asks SUMO to map the ego farther from its route than it
+  can (100 m), and the episode goes on whatever the person does with the wheel.
 
 `Wheel` is the hook a live episode calls every SUMO step (harness/live/worker.py), with the hold
 before the junction (the assisted driving's rule, manual_driving.py `hold_distance`).
@@ -37,6 +44,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 from trustroute.harness.simulation.driving_style import MANUAL
 from trustroute.harness.simulation.manual_driving import HOLD_MARGIN, hold_distance
@@ -50,6 +58,9 @@ PERSON_RADIUS = 0.3          # m: a person's footprint is a square of this half 
 CREEP_SPEED = 3.0            # m/s: held off its lane, the car is not driven faster than this
 CREEP_BRAKE = 0.5            # the brake applied above CREEP_SPEED then (of full braking)
 NEAR = 25.0                  # m: objects farther than this from the ego are not tested for contact
+# m: the model's front farther than this from where SUMO keeps the ego on its route: the car has
+# left its road and stops there (SUMO cannot map a placement beyond 100 m of its route at all)
+OFF_ROUTE_LIMIT = 10.0
 
 
 @dataclass(frozen=True)
@@ -170,14 +181,30 @@ def off_road(sumo, x: float, y: float) -> bool:
     return math.hypot(x - cx, y - cy) > sumo.lane.getWidth(lane) / 2
 
 
+def nearest_car_lane(sumo, edge: str, x: float, y: float) -> int:
+    """The index of the lane of `edge` open to cars whose centre line is nearest (x, y)."""
+    best = (math.inf, 0)
+    for index in range(sumo.edge.getLaneNumber(edge)):
+        lane = f"{edge}_{index}"
+        allowed = sumo.lane.getAllowed(lane)
+        if allowed and "passenger" not in allowed:
+            continue
+        px, py, _ = nearest_on(sumo.lane.getShape(lane), x, y)
+        best = min(best, (math.hypot(x - px, y - py), index))
+    return best[1]
+
+
 def restore_route(sumo, vehicle_id: str, route: list[str]) -> bool:
     """After a free placement: the planned route again from the edge the ego is on, when that
-    edge is on it (True then)."""
+    edge is on it (True then). A route SUMO has that goes on from there as planned is kept: the
+    episode may have extended it meanwhile (a road's choice is made while the person drives)."""
     edge = sumo.vehicle.getRoadID(vehicle_id)
     if edge not in route:
         return False
     wanted = route[route.index(edge):]
-    if list(sumo.vehicle.getRoute(vehicle_id)) != wanted:
+    current = list(sumo.vehicle.getRoute(vehicle_id))
+    ahead = current[current.index(edge):] if edge in current else []
+    if ahead[:len(wanted)] != wanted:
         sumo.vehicle.setRoute(vehicle_id, wanted)
     return True
 
@@ -199,6 +226,7 @@ class ManualDriving:
     current: Pose | None = None       # the pose at SUMO's time now (the model runs a step ahead)
     lane_index: int = 0               # the lane of its road the ego was in at the takeover
     edge: str = ""                    # the edge of its route it was on last (its own road)
+    stranded: bool = False            # stopped off its route (`stopped_off_road`) until the hand-back
 
     @classmethod
     def take_over(cls, sumo, vehicle_id: str, **options) -> ManualDriving:
@@ -218,7 +246,7 @@ class ManualDriving:
         now = sumo.simulation.getTime()
         self.observe(sumo, now)
         self.current = self.pose   # where the person drives at SUMO's time now (what they see)
-        if not self.touching:   # against what it hit, the car stands (until the hand-back)
+        if not self.touching and not self.stranded:   # it stands (until the hand-back)
             self.pose = integrate(self.pose, controls, seconds, self.params)
         pose = self.pose
         sumo.vehicle.moveToXY(self.vehicle_id, "", -1, pose.x, pose.y, pose.angle, self.placement(sumo))
@@ -227,19 +255,29 @@ class ManualDriving:
 
     @property
     def may_hand_back(self) -> bool:
-        return self.where == "own_lane" or self.collided
+        return self.where == "own_lane" or self.collided or self.stranded
 
-    def release(self, sumo) -> bool:
+    def release(self, sumo, ahead: str | None = None) -> bool:
         """The hand-back: SUMO drives on from here. Away from a lane of the route (after a
         collision, or held off its lane before the junction) the ego is first put at the nearest
         place of its lane on the planned road, facing along it; True then: the planned route is
-        to be given back once SUMO has it there (`restore_route`)."""
-        if self.where == "own_lane" or not self.edge or self.edge.startswith(":"):
+        to be given back once SUMO has it there (`restore_route`). So is a car that its last
+        placement put on a road off its route (free placement maps the model's pose by itself).
+        Taken over in a junction and never on a road of its route since, the ego is put on the
+        nearest lane open to cars of `ahead` (the episode's open road: the one after that
+        junction)."""
+        now_on = sumo.vehicle.getRoadID(self.vehicle_id)
+        off_route = bool(now_on) and not now_on.startswith(":") and now_on not in self.route
+        if self.where == "own_lane" and not self.stranded and not off_route:
             return False
-        edge = self.edge
-        lane = f"{edge}_{self.lane_index}"
-        x, y, angle = nearest_on(sumo.lane.getShape(lane), self.pose.x, self.pose.y)
-        sumo.vehicle.moveToXY(self.vehicle_id, edge, self.lane_index, x, y, angle, KEEP_ROUTE_FREE)
+        if self.edge and not self.edge.startswith(":"):
+            edge, index = self.edge, self.lane_index
+        elif ahead in self.route:
+            edge, index = ahead, nearest_car_lane(sumo, ahead, self.pose.x, self.pose.y)
+        else:
+            return False
+        x, y, angle = nearest_on(sumo.lane.getShape(f"{edge}_{index}"), self.pose.x, self.pose.y)
+        sumo.vehicle.moveToXY(self.vehicle_id, edge, index, x, y, angle, KEEP_ROUTE_FREE)
         return True
 
     def placement(self, sumo) -> int:
@@ -259,8 +297,26 @@ class ManualDriving:
         if lane and not lane.startswith(":"):
             if restore_route(sumo, self.vehicle_id, self.route):
                 self.edge = sumo.lane.getEdgeID(lane)
-        self.locate(sumo, lane, now)
+        if not self.stranded:   # standing where it stopped: its place is settled
+            self.locate(sumo, lane, now)
+            self.leash(sumo, now)
         self.contacts(sumo, now)
+
+    def leash(self, sumo, now: float) -> None:
+        """Stop the car once the model's front (placed last step) is farther than OFF_ROUTE_LIMIT
+        from where SUMO keeps the ego on its route (free placement puts the ego at the model's
+        pose, so only a car off its road or on a road off its route gets that far)."""
+        x, y = sumo.vehicle.getPosition(self.vehicle_id)
+        distance = math.hypot(self.pose.x - x, self.pose.y - y)
+        if distance <= OFF_ROUTE_LIMIT:
+            return
+        place = {"x": round(self.pose.x, 2), "y": round(self.pose.y, 2)}
+        if self.where != "off_road":   # on a road it is not routed on: it has left its road too
+            self.events.append({"t": now, "type": "off_road", **place})
+            self.where = "off_road"
+        self.events.append({"t": now, "type": "stopped_off_road", **place, "distance": round(distance, 1)})
+        self.pose = replace(self.pose, speed=0.0)
+        self.stranded = True
 
     def locate(self, sumo, lane: str, now: float) -> None:
         fx, fy = forward(self.pose.angle)
@@ -280,8 +336,10 @@ class ManualDriving:
             self.where = where
 
     def opposite(self, edge: str) -> bool:
-        road = Road.parse_or_none(self.edge) if self.edge else None   # its own road, not the route's first
-        return road is not None and edge == road.reverse.id
+        """Whether `edge` runs against its own road or another road of its route (the oncoming
+        lane of the road it turns into, say, entered from the junction)."""
+        reverse = Road.parse_or_none(edge)
+        return reverse is not None and reverse.reverse.id in ([self.edge] if self.edge else []) + self.route
 
     def contacts(self, sumo, now: float) -> None:
         ego = corners(self.pose.x, self.pose.y, self.pose.angle, self.length, self.width)
@@ -311,6 +369,14 @@ class ManualDriving:
         self.touching = touching
 
 
+class HoldPoint(NamedTuple):
+    """Where the hold before a junction wants the car to stand."""
+
+    remaining: float   # m from the ego (where SUMO has it) to the end of the road it is to stop before
+    short_of: float    # m short of that end: the commit point and HOLD_MARGIN, or HOLD_MARGIN alone
+    firm: bool         # no hand-back at a commit point comes first: braked as hard as it takes
+
+
 class Wheel:
     """The hook of a live episode: the person's latest controls drive the ego while they are in
     control (`step`, every SUMO step); a takeover starts the model from SUMO's pose and speed and a
@@ -323,7 +389,10 @@ class Wheel:
     car is braked above CREEP_SPEED so they can steer back; should the car still be off its lane
     HOLD_MARGIN before the road's end, it brakes to a stop there (event `held_off_lane`) and the
     hand-back is allowed where it stands: the autopilot takes it from the nearest place on its route
-    (`ManualDriving.release`), short of the junction either way."""
+    (`ManualDriving.release`), short of the junction either way. A takeover after the junction
+    ahead was chosen (the episode's open road is then the next one) is held at the end of the road
+    the ego is on, braked as hard as it takes to stop HOLD_MARGIN short of it, or, in the junction
+    already, at the next road's commit point (`to_hold_point`)."""
 
     def __init__(self, vehicle_id: str, commit_distance: float = 0.0) -> None:
         self.vehicle_id = vehicle_id
@@ -354,7 +423,8 @@ class Wheel:
             if self.restore is not None and restore_route(sumo, self.vehicle_id, self.restore):
                 self.restore = None
             if self.driving is not None:   # handed back: SUMO drives on from the model's pose and speed
-                if self.driving.release(sumo):
+                self.follow_route(sumo)   # the episode may have extended it in this very step
+                if self.driving.release(sumo, road):
                     self.restore = list(self.driving.route)
                 self.driving = None
                 sumo.vehicle.setSpeed(self.vehicle_id, -1)
@@ -363,16 +433,23 @@ class Wheel:
         if self.driving is None:
             self.driving = ManualDriving.take_over(sumo, self.vehicle_id)
             self.controls = Controls()
-        route = list(sumo.vehicle.getRoute(self.vehicle_id))
-        if len(route) > 1 or (route and route[0] in self.driving.route):
-            self.driving.route = route   # the episode extended it (not a free placement's one edge)
+        self.follow_route(sumo)
         seen = len(self.driving.events)
-        controls = self.held(sumo, road) if road is not None else self.controls
+        # no hold without a road, nor for a car stopped off its road
+        controls = self.controls if road is None or self.driving.stranded else self.held(sumo, road)
         self.driving.step(sumo, controls, sumo.simulation.getDeltaT())
         self.sample(sumo)
         new = self.driving.events[seen:]
         self.events.extend(new)
         return new
+
+    def follow_route(self, sumo) -> None:
+        """The planned route as SUMO has it now, when it is that (the episode extends it at each
+        choice), not a free placement's one edge off it."""
+        assert self.driving is not None
+        route = list(sumo.vehicle.getRoute(self.vehicle_id))
+        if len(route) > 1 or (route and route[0] in self.driving.route):
+            self.driving.route = route
 
     def sample(self, sumo) -> None:
         """The step's sample of the person's driving (manual_measures.py), at SUMO's time now."""
@@ -398,40 +475,70 @@ class Wheel:
                                  pose.speed, ttc_ahead(pose.x, pose.y, pose.angle, pose.speed,
                                                        driving.width, others)))
 
-    def to_road_end(self, sumo, road: str) -> float | None:
-        """Metres from the ego (where SUMO has it) to the end of `road`: along its own lane, or back
-        along the oncoming one (which starts at that junction); None elsewhere."""
+    def lane_length(self, sumo, lane: str) -> float:
+        if lane not in self.lengths:
+            self.lengths[lane] = sumo.lane.getLength(lane)
+        return self.lengths[lane]
+
+    def to_hold_point(self, sumo, road: str) -> HoldPoint | None:
+        """Where the hold wants the car to stand (None where there is no such road), from where
+        SUMO has the ego.
+
+        `road` is the episode's open road: the ego's own, or, once the junction after it is
+        chosen (COMMIT_DISTANCE before its end), the next one while the ego is still on the road
+        before it or in the junction between. A person who takes over in that window is held at
+        the end of the road they are on (HOLD_MARGIN before the junction: its commit point is
+        behind them, so no hand-back at it will come), or, in the junction already, at the commit
+        point of the road after it."""
+        driving = self.driving
+        assert driving is not None
         lane = sumo.vehicle.getLaneID(self.vehicle_id)
-        if not lane or lane.startswith(":"):
+        if not lane:
             return None
-        edge = sumo.lane.getEdgeID(lane)
+        commit = self.commit_distance + HOLD_MARGIN
         position = sumo.vehicle.getLanePosition(self.vehicle_id)
+        route = driving.route
+        if lane.startswith(":"):   # (never the junction after `road`: the episode hands back before it)
+            if road not in route:
+                return None
+            rest = self.lane_length(sumo, lane) - position
+            return HoldPoint(rest + self.lane_length(sumo, f"{road}_0"), commit, False)
+        edge = sumo.lane.getEdgeID(lane)
         if edge == road:
-            if lane not in self.lengths:
-                self.lengths[lane] = sumo.lane.getLength(lane)
-            return self.lengths[lane] - position
-        return position if self.driving is not None and self.driving.opposite(edge) else None
+            return HoldPoint(self.lane_length(sumo, lane) - position, commit, False)
+        if road in route and edge in route[:route.index(road)]:
+            return HoldPoint(self.lane_length(sumo, lane) - position, HOLD_MARGIN, True)
+        if driving.opposite(edge):   # back along the oncoming lane, which starts at that junction
+            own = driving.edge == road
+            return HoldPoint(position, commit if own else HOLD_MARGIN, not own)
+        return None
 
     def held(self, sumo, road: str) -> Controls:
         """The person's controls under the hold before the junction (see the class)."""
         driving = self.driving
         assert driving is not None
-        remaining = self.to_road_end(sumo, road)
+        point = self.to_hold_point(sumo, road)
+        remaining = None if point is None else point.remaining
         now = sumo.simulation.getTime()
-        if not self.holding and remaining is not None and \
-                remaining <= hold_distance(driving.pose.speed, self.commit_distance):
+        speed = driving.pose.speed
+        if not self.holding and point is not None and \
+                point.remaining <= hold_distance(speed, point.short_of - HOLD_MARGIN):
             self.holding = True
             kind = "hold" if driving.may_hand_back else "guide_back"
-            driving.events.append({"t": now, "type": kind, "remaining": round(remaining, 1)})
+            driving.events.append({"t": now, "type": kind, "remaining": round(point.remaining, 1)})
         if not self.holding:
             return self.controls
-        if driving.may_hand_back or self.held_off_lane:   # braking as the assisted hold does
-            return replace(self.controls, throttle=0.0, brake=MANUAL.decel / driving.params.max_brake)
-        stopping = driving.pose.speed ** 2 / (2 * driving.params.max_brake)
+        if driving.may_hand_back or self.held_off_lane:   # braking as the assisted hold does ...
+            decel = MANUAL.decel
+            if point is not None and point.firm:   # ... or harder, as it takes to stop short of it
+                room = point.remaining - point.short_of
+                decel = driving.params.max_brake if room <= 0.5 else max(decel, speed * speed / (2 * room))
+            return replace(self.controls, throttle=0.0, brake=min(decel / driving.params.max_brake, 1.0))
+        stopping = speed ** 2 / (2 * driving.params.max_brake)
         if remaining is not None and remaining <= HOLD_MARGIN + stopping:
             self.held_off_lane = True
             driving.events.append({"t": now, "type": "held_off_lane", "remaining": round(remaining, 1)})
             return replace(self.controls, throttle=0.0, brake=1.0)   # (at a creep: stopped at once)
-        if driving.pose.speed >= CREEP_SPEED:
+        if speed >= CREEP_SPEED:
             return replace(self.controls, throttle=0.0, brake=max(self.controls.brake, CREEP_BRAKE))
         return self.controls

@@ -47,7 +47,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
-from typing import Literal, TypedDict
+from typing import Literal, TypedDict, get_args
 
 from trustroute.core.errors import InputError
 from trustroute.core.fields import (
@@ -79,6 +79,10 @@ ENGINES: tuple[str, ...] = ("sumo", "model", "live")  # "live": `trustroute live
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
 LIVE_VIEWS: tuple[str, ...] = ("driver", "map")   # [live] view: the participant station's view
 LIVE_DRIVING: tuple[str, ...] = ("assisted", "continuous")   # [live] driving: how a person drives
+# [live] inputs: what a participant may drive with in continuous driving (all, unless the study
+# says otherwise): a steering wheel with pedals, a gamepad, the keyboard (harness/live/pages/inputs.js)
+LiveInput = Literal["wheel", "gamepad", "keyboard"]
+LIVE_INPUTS: tuple[str, ...] = get_args(LiveInput)
 ROBUST_OBJECTIVES: tuple[str, ...] = ("robust", "bayes")
 # the belief sources a study's specs are evaluated on (analysis/belief_sources.py says what each is)
 BELIEF_SOURCES: tuple[str, ...] = ("filter", "reported", "reference", "true")
@@ -114,6 +118,7 @@ class StudyConfig:
     questionnaires: dict | None = None    # [questionnaires] (live): placement -> names or absolute files
     live_view: str = "driver"               # [live] view: the participant station's view
     live_driving: str = "assisted"          # [live] driving: pedals and pull-out, or wheel and pedals
+    live_inputs: tuple[str, ...] = LIVE_INPUTS   # [live] inputs: the inputs continuous driving allows
     # the pre-registered primary belief source of the analysis (None: the neutral default,
     # analysis/belief_sources.py `default_belief_source`)
     belief_source: str | None = None
@@ -158,7 +163,8 @@ class StudyConfig:
             del settings["questionnaires"]  # a study without [questionnaires] hashes without it
         if not settings["routes"]:
             del settings["routes"]  # a study without background routes hashes without it
-        for key, default in (("live_view", "driver"), ("live_driving", "assisted")):
+        live_defaults = (("live_view", "driver"), ("live_driving", "assisted"), ("live_inputs", LIVE_INPUTS))
+        for key, default in live_defaults:
             if settings[key] == default:
                 del settings[key]  # a default hashes as a config without [live]
         if settings["belief_source"] is None:
@@ -257,6 +263,7 @@ class LiveValues(TypedDict):
 
     view: str
     driving: str
+    inputs: list[str] | None
 
 
 FileKey = Literal["town", "driver_model", "robust_population"]  # the [study] keys naming a file (FILE_FIX)
@@ -381,6 +388,10 @@ LIVE_FIELDS = field_table(
           fix='use view = "driver" (the first-person view) or "map" (the top-down view)'),
     Field(key="driving", kind=OneOf(choices=LIVE_DRIVING, noun="way of driving"), default="assisted",
           fix='use driving = "assisted" (pedal keys, pull out to pass) or "continuous" (wheel and pedals)'),
+    Field(key="inputs", kind=ListOf(item=OneOf(choices=LIVE_INPUTS, noun="input"), min_items=1,
+                                    distinct=True),
+          default=None, fix='list what a participant may drive with, e.g. inputs = ["wheel", "keyboard"] '
+                            '(any of "wheel", "gamepad", "keyboard")'),
 )
 
 
@@ -454,10 +465,23 @@ def _robust_population(study: StudyValues, conditions: tuple[str, ...], base: Pa
     return robust_population
 
 
-def _live(table: dict[str, object] | None, source: str) -> dict[str, str]:
-    """The [live] table's StudyConfig fields."""
+class LiveSettings(TypedDict):
+    """StudyConfig's fields from the [live] table."""
+
+    live_view: str
+    live_driving: str
+    live_inputs: tuple[str, ...]
+
+
+def _live(table: dict[str, object] | None, source: str) -> LiveSettings:
+    """The [live] table's StudyConfig fields; `inputs` choose among continuous driving's inputs."""
     live = check_fields(table or {}, LIVE_FIELDS, source, "study config", "live")
-    return {"live_view": live["view"], "live_driving": live["driving"]}
+    if live["inputs"] is not None and live["driving"] != "continuous":
+        raise InputError(source, "live.inputs", "inputs choose what continuous driving reads, and this "
+                         f"study drives {live['driving']!r}",
+                         'add driving = "continuous" to [live], or remove inputs')
+    inputs = LIVE_INPUTS if live["inputs"] is None else tuple(i for i in LIVE_INPUTS if i in live["inputs"])
+    return LiveSettings(live_view=live["view"], live_driving=live["driving"], live_inputs=inputs)
 
 
 def _belief_source(study: StudyValues, source: str) -> str | None:

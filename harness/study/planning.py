@@ -4,10 +4,12 @@ engine, with no part files, returning each participant's outcomes per (spec, con
 A study config gives the cells (specs x conditions), the AV's policies (synthesized once, from the
 policy cache, by the study's context) and its filter; the participants are drawn from a
 `ParticipantModel`: the config's own driver model (every participant nominal), another true
-driver model (`driver`), or a population of driver types (`types` with weights, one type per
-participant for all its episodes). Each cell is one `simulate_batch` call over every participant
-of every simulated study, with the drivers' trust reports drawn (every `report_every` roads), so a
-participant's outcome in a cell is (satisfied, mean reported trust) as the consolidated dataset
+driver model (`driver`), a population of driver types (`types` with weights, one type per
+participant for all its episodes), or the refits of a pilot's fitted model (one drawn per
+simulated study for all its participants: the fit's uncertainty is common to a study's
+participants). Each cell is one `simulate_batch` call over every participant of every simulated
+study, with the drivers' trust reports drawn (every `report_every` roads), so a participant's
+outcome in a cell is (satisfied, mean reported trust) as the consolidated dataset
 has them. The model engine has no order or carry-over effects: a participant's episodes are
 independent given its driver model, so the Williams square only rounds the sample size
 (`planned_participants`). The analysis of the simulated studies is analysis/study/power.py's.
@@ -29,12 +31,17 @@ from trustroute.participants.driver_model import DriverModel
 
 @dataclass(frozen=True, eq=False)
 class ParticipantModel:
-    """Who the simulated participants are: `types` (driver models) drawn with `weights`; one
-    type with weight 1 is a single driver model."""
+    """Who the simulated participants are: `types` (driver models) drawn with `weights`, one per
+    participant (a population); one type with weight 1 is a single driver model. `per_study`: one
+    type drawn per simulated study for all its participants instead (the refits of a fitted model:
+    its uncertainty is shared by every participant of a study). `report_accuracy`: the accuracy of
+    the participants' reports (None: the config's)."""
 
     label: str
     types: tuple[DriverModel, ...]
     weights: tuple[float, ...]
+    per_study: bool = False
+    report_accuracy: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,6 +55,7 @@ class SimulatedStudies:
     conditions: tuple[str, ...]
     satisfied: np.ndarray   # bool [studies, participants, specs, conditions]
     reported: np.ndarray    # float [studies, participants, specs, conditions]
+    models: np.ndarray | None = None   # int [studies]: the type each study drew (`per_study`), else None
 
     @property
     def studies(self) -> int:
@@ -86,13 +94,20 @@ def simulate_studies(config: StudyConfig, participants: int, studies: int, rng: 
 
     context = study_context(config)
     total = studies * participants
+    accuracy, drawn = config.report_accuracy, None
     if model is None:
         drivers, index = [context.nominal], np.zeros(total, dtype=np.int64)
     else:
         weights = np.cumsum(np.asarray(model.weights, dtype=float))
         drivers = list(model.types)
-        index = np.minimum(np.searchsorted(weights / weights[-1], rng.random(total), side="right"),
+        draws = rng.random(studies) if model.per_study else rng.random(total)
+        index = np.minimum(np.searchsorted(weights / weights[-1], draws, side="right"),
                            len(drivers) - 1).astype(np.int64)
+        if model.per_study:
+            drawn = index
+            index = np.repeat(index, participants)   # studies x participants, study-major
+        if model.report_accuracy is not None:
+            accuracy = model.report_accuracy
     specs, conditions = tuple(config.spec_names), tuple(config.condition_names)
     satisfied = np.zeros((studies, participants, len(specs), len(conditions)), dtype=bool)
     reported = np.full(satisfied.shape, np.nan)
@@ -100,17 +115,18 @@ def simulate_studies(config: StudyConfig, participants: int, studies: int, rng: 
         for c, condition in enumerate(conditions):
             result = simulate_batch(context.setup(spec, condition), context.policies[(spec, condition)],
                                     total, rng, drivers=drivers, driver_index=index,
-                                    report_accuracy=config.report_accuracy)
+                                    report_accuracy=accuracy)
             satisfied[:, :, s, c] = result.satisfied.reshape(studies, participants)
             reported[:, :, s, c] = np.asarray(result.mean_reported).reshape(studies, participants)
     return SimulatedStudies(participants=participants, specs=specs, conditions=conditions,
-                            satisfied=satisfied, reported=reported)
+                            satisfied=satisfied, reported=reported, models=drawn)
 
 
 def check_plannable(config: StudyConfig) -> None:
     """Planning simulates on the model engine the AV of the config: InputError for what it cannot."""
     if config.population is not None or config.driver_population is not None:
         raise InputError(config.source_path, "population",
-                         "plan draws its participants from --driver or --population, not from the "
-                         "config's [population] or [drivers]",
-                         "remove them from the config you plan with and pass --driver or --population")
+                         "plan draws its participants from --driver, --population or --pilot, not from "
+                         "the config's [population] or [drivers]",
+                         "remove them from the config you plan with and pass --driver, --population "
+                         "or --pilot")

@@ -3,12 +3,16 @@ through the CLI, gives the same answer (both read trustroute/core/defaults.py an
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 
 import pytest
 
 import trustroute
 from tests.cli import cli_json
+from trustroute.app.planning import PlanSettings
+from trustroute.app.runs import EpisodeSettings
+from trustroute.app.synthesis import EvaluationSettings, SynthesisSettings
 from trustroute.core import defaults
 from trustroute.core.packaged import SPEC_TOWNS, SPECS
 from trustroute.harness.cli import cli
@@ -25,8 +29,18 @@ def _option_default(command: str, name: str):
     return next(p.default for p in group.params if p.name == name)
 
 
+# The API's calls take a settings object (`settings=`, None: the object's defaults) and its fields
+# by keyword: the default of such a field is the settings object's.
+API_SETTINGS = {trustroute.synthesize: SynthesisSettings, trustroute.evaluate: EvaluationSettings,
+                trustroute.run_episode: EpisodeSettings}
+
+
 def _api_default(function, name: str):
-    return inspect.signature(function).parameters[name].default
+    parameters = inspect.signature(function).parameters
+    if name in parameters:
+        return parameters[name].default
+    assert parameters["settings"].default is None
+    return next(f.default for f in dataclasses.fields(API_SETTINGS[function]) if f.name == name)
 
 
 @pytest.mark.parametrize(("command", "option", "function", "argument", "value"), [
@@ -40,6 +54,14 @@ def _api_default(function, name: str):
     ("run", "policy_name", trustroute.run_episode, "policy", defaults.POLICY),
     ("run", "seed", trustroute.run_episode, "seed", defaults.SEED),
     ("analyze", "belief_source", trustroute.analyze, "belief_source", defaults.BELIEF_SOURCE),
+    # `trustroute plan` and its run in the application layer (trustroute/app/planning.py)
+    ("plan", "sizes", PlanSettings, "sizes", defaults.PLAN_PARTICIPANTS),
+    ("plan", "alpha", PlanSettings, "alpha", defaults.PLAN_ALPHA),
+    ("plan", "target", PlanSettings, "target", defaults.PLAN_TARGET),
+    ("plan", "seed", PlanSettings, "seed", defaults.PLAN_SEED),
+    ("plan", "pilot_bootstrap", PlanSettings, "pilot_bootstrap", defaults.PILOT_BOOTSTRAP),
+    ("plan", "simulations", PlanSettings, "simulations", None),
+    ("plan", "pilot", PlanSettings, "pilot", None),
 ])
 def test_every_door_declares_the_one_default(command, option, function, argument, value):
     assert _option_default(command, option) == _api_default(function, argument) == value

@@ -186,5 +186,19 @@ def test_the_live_view_key(tmp_path, monkeypatch):
     assert wheel.content_hash not in (default.content_hash, shown.content_hash)
     with pytest.raises(InputError, match="live.view"):
         load_study_config(_write(tmp_path, MINIMAL + '[live]\nview = "bird"\n', "bad.toml"))
+    # the inputs continuous driving allows: all by default (and hashed as without the key); a
+    # study may allow fewer, in the canonical order, and only when it drives continuously
+    assert wheel.live_inputs == ("wheel", "gamepad", "keyboard") and default.live_inputs == wheel.live_inputs
+    every = '[live]\ndriving = "continuous"\ninputs = ["keyboard", "gamepad", "wheel"]\n'
+    every_input = load_study_config(_write(tmp_path, MINIMAL + every, "every.toml"))
+    assert every_input.content_hash == wheel.content_hash
+    only = '[live]\ndriving = "continuous"\ninputs = ["keyboard", "wheel"]\n'
+    fewer = load_study_config(_write(tmp_path, MINIMAL + only, "fewer.toml"))
+    assert fewer.live_inputs == ("wheel", "keyboard") and fewer.content_hash != wheel.content_hash
+    for bad, place in (('driving = "continuous"\ninputs = ["mouse"]', "live.inputs"),
+                       ('driving = "continuous"\ninputs = []', "live.inputs"),
+                       ('inputs = ["wheel"]', "live.inputs")):   # an assisted study reads no inputs
+        with pytest.raises(InputError, match=place):
+            load_study_config(_write(tmp_path, MINIMAL + "[live]\n" + bad + "\n", "bad.toml"))
     with pytest.raises(InputError, match="live"):
         load_study_config(_write(tmp_path, MINIMAL + '[live]\nseat = "left"\n', "unknown.toml"))

@@ -17,9 +17,11 @@ check) assembles a run through these modules instead of its own copy:
                  what `spec check`, `peer`, `model`/`net`/`town` and `population`/`fit` assemble
     engines.py   the engine registry (`model`, `sumo`, `live`): each member declares what it can do
     runs.py      whole runs for the API and the CLI: one episode, the packaged policy check
+    planning.py  `trustroute plan`'s run: the participants (a pilot's fit), the simulated studies,
+                 their power, the power curve and the payload
 
 The package is spread over three layers (tests/test_architecture.py, docs/internals.md): the
 assembly modules sit just above `policies`, so the simulation, study, live and analysis layers may
 call them; `engines.py` sits with `harness.simulation` (its members run that layer's episodes); the
-package itself and `runs.py` sit above `analysis`, below the API and the CLI.
+package itself, `runs.py` and `planning.py` sit above `analysis`, below the API and the CLI.
 """

@@ -30,3 +30,12 @@ EPISODE_ENGINE = "sumo"
 # belief source (analysis/belief_sources.py, `default_belief_source`), the one definition both
 # doors read.
 BELIEF_SOURCE: str | None = None
+
+# planning (`trustroute plan`, trustroute/app/planning.py)
+PLAN_PARTICIPANTS = "8:60:4"         # the sample sizes tried: FROM:TO:STEP
+PLAN_ALPHA = 0.05
+PLAN_TARGET = 0.8                    # the power a sample size must reach
+PLAN_SEED = 1
+# `--pilot`: bootstrap refits of the pilot's fit, one drawn per simulated study (an EM refit of an
+# 8-participant pilot takes seconds, a counts refit a few hundredths)
+PILOT_BOOTSTRAP = 50

@@ -2,7 +2,10 @@
 // gamepad through the browser's Gamepad API, calibrated once and remembered by this browser
 // (localStorage), or the keyboard as the fallback. `read(seconds)` gives the controls now:
 // {steer: -1 (full left) .. 1 (full right), throttle: 0..1, brake: 0..1, toggle: true once when
-// the take-over / hand-back button is pressed}.
+// the take-over / hand-back button is pressed, source: "wheel" | "gamepad" | "keyboard"}, or null
+// when nothing the study allows ([live] inputs) is there to read.
+//
+// A device in the browser's "standard" mapping is a gamepad; any other (a wheel's) is a wheel.
 //
 // Without a calibration a gamepad is read in the browser's "standard" mapping (left stick: steer,
 // right trigger: throttle, left trigger: brake, A: take over / hand back). A wheel (G29, G920:
@@ -32,8 +35,15 @@ export function firstGamepad() {
   return null;
 }
 
+export const INPUTS = ["wheel", "gamepad", "keyboard"];
+
+export function padKind(pad) {
+  return pad.mapping === "standard" ? "gamepad" : "wheel";
+}
+
 export class Inputs {
-  constructor() {
+  constructor(allowed = INPUTS) {
+    this.allowed = allowed;
     this.calibration = loadCalibration();
     this.keys = new Set();
     this.keySteer = 0;
@@ -45,7 +55,15 @@ export class Inputs {
 
   read(seconds) {
     const pad = firstGamepad();
-    return pad ? this.fromGamepad(pad) : this.fromKeyboard(seconds);
+    if (pad && this.allowed.includes(padKind(pad))) return this.fromGamepad(pad);
+    return this.allowed.includes("keyboard") ? this.fromKeyboard(seconds) : null;
+  }
+
+  // What the person is asked to connect when nothing allowed is there ("" when the keyboard is).
+  missing() {
+    if (this.allowed.includes("keyboard")) return "";
+    const names = this.allowed.map((kind) => (kind === "wheel" ? "a steering wheel with pedals" : "a gamepad"));
+    return `Connect ${names.join(" or ")} to drive: this study does not use the keyboard.`;
   }
 
   fromGamepad(pad) {
@@ -70,7 +88,7 @@ export class Inputs {
     }
     const toggle = pressed && !this.buttonDown;
     this.buttonDown = pressed;
-    return { steer, throttle, brake, toggle, source: "gamepad" };
+    return { steer, throttle, brake, toggle, source: padKind(pad) };
   }
 
   fromKeyboard(seconds) {

@@ -26,6 +26,7 @@ let latest = null;          // the newest frame
 let edges = {};             // road id -> the shape of its rightmost lane (the next turn)
 let continuous = false;     // [live] driving = "continuous": wheel and pedals (inputs.js)
 let inputs = null;
+let askedForInput = false;   // the notice asks for an input the study allows
 const CONTROL_INTERVAL = 1 / 30;   // s: controls are sent at most this often (the server's bucket)
 let sentControl = null;
 let sentAt = 0;
@@ -34,7 +35,8 @@ const WARNINGS = { back_to_lane: "Back into your lane first: then hand back.", c
                    off_road: "You left the road.", oncoming: "", own_lane: "", on_road: "",
                    hold: "The junction is near: the car stops here. Hand back now.",
                    guide_back: "The junction is near: steer back into your lane, then hand back.",
-                   held_off_lane: "Stopped before the junction: hand back now." };
+                   held_off_lane: "Stopped before the junction: hand back now.",
+                   stopped_off_road: "Off the road: the car has stopped. Hand back now." };
 
 function show(step) {
   for (const id of steps) $(id).classList.toggle("hidden", id !== step);
@@ -67,10 +69,10 @@ let handBackDue = false;   // warned: the ego waits for the hand-back; the warni
 // what the person must do first, shown even while the hand-back is due (which it would not answer)
 const FIRST = new Set(["back_to_lane", "guide_back", "held_off_lane"]);
 
+const HAND_BACK_DUE = "Hand back before the junction (space): the vehicle waits for you.";
+
 function notice(text, first = false) {
-  $("incident").textContent = handBackDue && !first
-    ? "Hand back before the junction (space): the vehicle waits for you."
-    : text;
+  $("incident").textContent = handBackDue && !first ? HAND_BACK_DUE : text;
 }
 
 function overlay(text, resumable = false) {
@@ -212,15 +214,21 @@ function readInputs() {
   const controls = inputs.read(now - lastRead);
   lastRead = now;
   if (state.phase !== "driving") return;
+  if (!controls) {   // nothing the study allows is connected: say so, with the hand-back rule when due
+    $("incident").textContent = [inputs.missing(), handBackDue ? HAND_BACK_DUE : ""].join(" ").trim();
+    askedForInput = true;
+    return;
+  }
+  if (askedForInput) { askedForInput = false; notice(""); }   // connected now
   if (controls.toggle) toggle();
   if (mode !== "manual") { sentControl = null; return; }
-  const { steer, throttle, brake } = controls;
+  const { steer, throttle, brake, source } = controls;
   const changed = !sentControl || Math.abs(steer - sentControl.steer) > 0.005
     || Math.abs(throttle - sentControl.throttle) > 0.01 || Math.abs(brake - sentControl.brake) > 0.01;
   if (changed && now - sentAt >= CONTROL_INTERVAL) {
     sentControl = { steer, throttle, brake };
     sentAt = now;
-    send({ type: "control", steer: round(steer), throttle: round(throttle), brake: round(brake) });
+    send({ type: "control", source, steer: round(steer), throttle: round(throttle), brake: round(brake) });
   }
 }
 const round = (value) => Math.round(value * 1000) / 1000;
@@ -231,11 +239,14 @@ function animate() {
   requestAnimationFrame(animate);
 }
 
-function setDriving(kind) {
+function setDriving(kind, allowed = ["wheel", "gamepad", "keyboard"]) {
   continuous = kind === "continuous";
-  if (continuous && !inputs) inputs = new Inputs();
+  if (continuous && !inputs) inputs = new Inputs(allowed);
   $("manual-controls").classList.toggle("hidden", continuous);
   $("wheel-help").classList.toggle("hidden", !continuous);
+  if (continuous && !allowed.includes("keyboard")) {   // the keys are no help where they are not read
+    $("wheel-help").textContent = "In control: steer with the wheel, accelerate and brake with the pedals.";
+  }
   $("calibrate-box").classList.toggle("hidden", !continuous);
 }
 
@@ -324,7 +335,7 @@ function onMessage(message) {
     case "welcome":
       $("consent-text").textContent = message.consent;
       setView(message.view === "map" ? "map" : "driver");
-      setDriving(message.driving);
+      setDriving(message.driving, message.inputs);
       break;
     case "state": onState(message); break;
     case "frame": onFrame(message); break;

@@ -1,7 +1,8 @@
-"""A live study on an imported town (`csomor`, driven on its own SUMO net) serves and draws that
-net: the station's /api/net lists exactly the lanes of the net the town drives (`net_for`), and the
-replay of a live episode writes its recording on it (a net built from the town's junctions would
-not even build)."""
+"""A live study on an imported town (`csomor`, driven on its own SUMO net) and on a generated one
+(`city`) serves and draws the net it drives: the station's /api/net lists exactly the lanes of the
+net the town drives (`net_for`), a scripted participant drives its trial through the websocket,
+and the replay of a live episode writes its recording on that net (on `csomor`, a net built from
+the town's junctions would not even build)."""
 
 from __future__ import annotations
 
@@ -23,22 +24,22 @@ from .test_live_manual import play_in
 
 pytestmark = pytest.mark.slow   # the csomor net is built from its packaged plain XML on first use
 
-CSOMOR_LIVE = """[study]
-name = "csomor-live"
+LIVE = """[study]
+name = "{town}-live"
 participants = 1
 seed = 1
 engine = "live"
-town = "csomor"
-specs = ["csomor5"]
+town = "{town}"
+specs = ["{town}5"]
 conditions = ["free"]
 """
 
 
-@pytest.fixture(scope="module")
-def played(tmp_path_factory):
-    """A live csomor study, open, whose one participant has driven their trial (pace 1000)."""
-    folder = tmp_path_factory.mktemp("csomor-live")
-    (folder / "live.toml").write_text(CSOMOR_LIVE)
+@pytest.fixture(scope="module", params=["csomor", "city"])
+def played(request, tmp_path_factory):
+    """A live study on the town, open, whose one participant has driven their trial (pace 1000)."""
+    folder = tmp_path_factory.mktemp(f"{request.param}-live")
+    (folder / "live.toml").write_text(LIVE.format(town=request.param))
     config = load_study_config(folder / "live.toml")
     study = LiveStudy(config, folder / "study", ServerOptions(pace=1000.0, warm_up=False)).open()
     try:
@@ -63,9 +64,11 @@ def test_the_station_serves_the_net_an_imported_town_drives(played):
     # the town's roads run on the served net's edges (the net's own ids, not "U-V")
     edges = {lane.rsplit("_", 1)[0] for lane in served}
     assert all(edge in edges for road in town.geometry.values() for edge in road.edges)
+    # the scripted participant's trial was driven and logged
+    assert (study.study_dir / "parts").is_dir() and any((study.study_dir / "parts").iterdir())
 
 
-def test_the_replay_of_a_live_episode_on_csomor_draws_on_the_driven_net(played, capsys):
+def test_the_replay_of_a_live_episode_draws_on_the_driven_net(played, capsys):
     study, _, folder = played
     (task,) = plan_episodes(study.config)
     rrd = folder / "live.rrd"

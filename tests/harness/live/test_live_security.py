@@ -15,6 +15,7 @@ from trustroute.core.errors import InputError
 from trustroute.harness.live.app import POLICY_VIOLATION, live_app
 from trustroute.harness.live.protocol import BURST, MAX_BODY_BYTES, MAX_MESSAGE_BYTES
 from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.study.config import load_study_config
 
 from .conftest import tiny_config
 
@@ -125,6 +126,10 @@ def state_of(client, study) -> dict:
     return client.get("/api/participants", headers=bearer(study.experimenter_token)).json()
 
 
+def control(**fields) -> str:
+    return json.dumps({"type": "control", "steer": 0, "throttle": 0, "brake": 0} | fields)
+
+
 def test_malformed_oversized_and_out_of_order_messages_get_errors_and_change_nothing(client, live_study):
     token = create(client, live_study)
     before, registry = state_of(client, live_study), live_study.registry_path().read_bytes()
@@ -140,9 +145,10 @@ def test_malformed_oversized_and_out_of_order_messages_get_errors_and_change_not
                  ('{"type": "start"}', "out_of_order"), ('{"type": "trust", "value": 4}', "out_of_order"),
                  ('{"type": "resume"}', "out_of_order"), ('{"type": "pass"}', "out_of_order"),
                  ('{"type": "consent", "agree": true, "lockstep": true}', "malformed"),
-                 ('{"type": "control", "steer": 2, "throttle": 0, "brake": 0}', "malformed"),
-                 ('{"type": "control", "steer": 0, "throttle": 0.5}', "malformed"),
-                 ('{"type": "control", "steer": 0, "throttle": 0, "brake": 0}', "out_of_order")]
+                 (control(source="wheel", steer=2), "malformed"),
+                 ('{"type": "control", "source": "wheel", "steer": 0, "throttle": 0.5}', "malformed"),
+                 ('{"type": "control", "steer": 0, "throttle": 0, "brake": 0}', "malformed"),   # no source
+                 (control(source="mouse"), "malformed"), (control(source="wheel"), "out_of_order")]
         for raw, code in cases:
             socket.send_text(raw)
             reply = socket.receive_json()
@@ -167,7 +173,7 @@ def test_a_flood_is_rate_limited_and_changes_nothing(client, live_study):
         assert codes.count("rate_limited") >= flood - BURST - 5
         assert set(codes) <= {"rate_limited", "out_of_order"}
         # a wheel's controls count in a bucket of their own: they never starve the other messages
-        control = '{"type": "control", "steer": 0, "throttle": 0, "brake": 0}'
+        control = '{"type": "control", "source": "keyboard", "steer": 0, "throttle": 0, "brake": 0}'
         for _ in range(5):
             socket.send_text(control)
             assert socket.receive_json()["code"] == "out_of_order"   # not driving, and not a wheel study
@@ -255,3 +261,32 @@ def test_the_net_view_is_for_participants_and_the_experimenter(client, live_stud
     roads = {lane["id"].rsplit("_", 1)[0] for lane in view["lanes"] if not lane["internal"]}
     assert {"E-A", "A-B"} <= roads and all(len(lane["shape"]) >= 2 for lane in view["lanes"])
     assert {"A", "B", "E"} <= set(view["junctions"])
+
+
+def test_a_control_from_an_input_the_study_does_not_allow_is_refused(tmp_path):
+    """`[live] inputs = ["wheel"]`: the welcome names the inputs, and in a trial a keyboard's
+    control is refused for its input, before anything else is asked of it (a wheel's, sent while
+    the autopilot drives, is refused only for the mode)."""
+    tiny_config(tmp_path, participants=1)
+    path = tmp_path / "live.toml"
+    path.write_text(path.read_text() + '\n[live]\ndriving = "continuous"\ninputs = ["wheel"]\n')
+    options = ServerOptions(pace=1.0, warm_up=False)
+    study = LiveStudy(load_study_config(path), tmp_path / "study", options).open()
+    try:
+        with TestClient(live_app(study)) as client, \
+                client.websocket_connect("/ws", headers=bearer(create(client, study))) as socket:
+            welcome = socket.receive_json()
+            assert (welcome["driving"], welcome["inputs"]) == ("continuous", ["wheel"])
+            socket.send_json({"type": "consent", "agree": True})
+            socket.send_json({"type": "start", "trust": 4})
+            while (message := socket.receive_json()).get("type") != "state" or message["phase"] != "driving":
+                pass
+            for source, detail in (("keyboard", "does not allow driving by keyboard"),
+                                   ("gamepad", "does not allow driving by gamepad"),
+                                   ("wheel", "while the mode is auto")):
+                socket.send_json({"type": "control", "source": source, "steer": 0, "throttle": 0, "brake": 0})
+                while (reply := socket.receive_json())["type"] != "error":
+                    pass
+                assert reply["code"] == "out_of_order" and detail in reply["detail"], reply
+    finally:
+        study.close()

@@ -22,6 +22,7 @@ from trustroute.harness.live.worker import (
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE
 from trustroute.harness.simulation.episode_tracker import EpisodeTracker
 from trustroute.harness.simulation.manual_driving import WARN_DISTANCE
+from trustroute.harness.simulation.wheel_driving import OFF_ROUTE_LIMIT
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.plan import plan_episodes
 from trustroute.harness.study.runner import run_planned_episode
@@ -124,7 +125,8 @@ def keep_lane(sumo, pose) -> dict:
     lane, position = sumo.vehicle.getLaneID(ego), sumo.vehicle.getLanePosition(ego)
     error = (sumo.lane.getAngle(lane, position) - pose.angle + 180.0) % 360.0 - 180.0
     steer = 0.05 * error + 0.3 * sumo.vehicle.getLateralLanePosition(ego)
-    return {"type": "control", "steer": max(-1.0, min(1.0, steer)), "throttle": 0.6, "brake": 0.0}
+    return {"type": "control", "source": "wheel", "steer": max(-1.0, min(1.0, steer)), "throttle": 0.6,
+            "brake": 0.0}
 
 
 def test_by_wheel_without_a_hand_back_the_ego_is_held_short_of_the_junction(tmp_path):
@@ -165,6 +167,91 @@ def test_by_wheel_without_a_hand_back_the_ego_is_held_short_of_the_junction(tmp_
     assert (row["road_departures"], row["collisions"], row["oncoming_seconds"]) == (0, 0, 0.0)
     assert 0.0 < row["lateral_sd"] < 0.5 and 3.0 < row["manual_max_deceleration"] < 3.3
     assert row["manual_min_ttc"] > 0.0
+
+
+# Simulated times of a takeover on the tiny study's route (E-A, A-F, F-G, G-I, ...): on the first
+# road, where it waits for the next road to open (the ego still on E-A); on a road after its
+# junction's choice (A-F, F-G: the open road is already the next one), near enough the junction
+# that the car cannot stop before it (10: it stops in the junction); inside a junction (16, :G_5).
+COASTING_TAKEOVERS = (2.0, 4.0, 8.0, 10.0, 14.0, 16.0)
+
+
+@pytest.mark.parametrize("at", COASTING_TAKEOVERS)
+def test_by_wheel_a_takeover_without_controls_is_held_or_stopped_and_the_episode_goes_on(tmp_path, at):
+    """The person takes over and gives no controls (the wheel not connected yet): the car coasts
+    straight on. It is held before the junction (event `hold`), or, leaving the road, stopped off
+    it (`off_road`, `stopped_off_road`) before SUMO could not place it any more; either way it
+    never drives beyond the road open at the takeover in the person's hands, their hand-back
+    where it stands gives it back to the autopilot, and the episode runs to its end."""
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([], hand_back_when_warned=False)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
+    asked, taken, stood = [], [], []
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        if not asked and ego.time >= at:
+            asked.append(ego.time)
+            pipe.controls.append({"type": "takeover"})
+        if mode == "manual" and not taken:
+            taken.append((ego.road, road))   # the ego's edge and the open road when it applies
+        if mode == "manual" and ego.speed == 0.0:
+            stood.append(ego.time)
+            if len(stood) == 20:   # standing 1 s: the person hands back where the car is
+                pipe.controls.append({"type": "hand_back"})
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+                                 sumo_config=sumo_config(driver.options))
+    assert record.summary["end_reason"] == "accepted" and len(record.roads) == 7   # as without it
+    events = driver.wheel.events
+    kinds = [e["type"] for e in events]
+    assert kinds in (["hold"], ["off_road", "stopped_off_road"]), kinds
+    if kinds[-1] == "stopped_off_road":
+        assert OFF_ROUTE_LIMIT < events[-1]["distance"] < OFF_ROUTE_LIMIT + 2.0
+    (edge, road), = taken
+    ticks = record.kinematics
+    manual = ticks[ticks["mode"] == "manual"]
+    driven = {lane.rsplit("_", 1)[0] for lane in manual["lane"] if not lane.startswith(":")}
+    assert driven <= {edge, road}, (driven, edge, road)   # never past the road open at the takeover
+    assert len(stood) >= 20 and manual["time"].max() >= stood[19]
+    back = ticks["time"][(ticks["mode"] == "auto") & (ticks["time"] > manual["time"].min())].min()
+    assert back > stood[19]   # the person's hand-back, where the car stood
+    assert [e["type"] for e in driver.events] == ["takeover", "hand_back"]
+
+
+def test_by_wheel_off_the_road_at_the_commit_point_the_autopilot_goes_on_along_the_route(tmp_path):
+    """Taken over on the short road A-F, steered to the right with the accelerator half down: the
+    car leaves the road while the hold brakes it, and the road's commit point hands back first.
+    The autopilot takes the car from its lane there with the route the episode has just extended
+    (not the one before the choice), and the episode runs to its end."""
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([], hand_back_when_warned=False)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
+    taken = []
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        if not taken and ego.time >= 7.0:
+            taken.append(road)
+            pipe.controls.append({"type": "takeover"})
+        elif mode == "manual" and len(taken) == 1:
+            taken.append(road)
+            pipe.controls.append({"type": "control", "source": "wheel", "steer": 0.5, "throttle": 0.5,
+                                  "brake": 0.0})
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+                                 sumo_config=sumo_config(driver.options))
+    assert taken == ["A-F", "A-F"]
+    assert [e["type"] for e in driver.wheel.events] == ["hold", "off_road"]
+    assert record.summary["end_reason"] == "accepted" and len(record.roads) == 7
+    assert [e["type"] for e in driver.events] == ["takeover", "control"]   # handed back by the episode
+    ticks = record.kinematics
+    manual = ticks[ticks["mode"] == "manual"]
+    assert set(manual["lane"].str.rsplit("_", n=1).str[0]) == {"A-F"}
+    after = ticks[ticks["time"] > manual["time"].max()]
+    assert after["lane"].iloc[0].startswith("A-F_") and "F-G_1" in set(after["lane"])
 
 
 def test_the_tracker_decides_as_for_the_same_observations_headless(tmp_path):

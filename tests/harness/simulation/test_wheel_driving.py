@@ -20,6 +20,7 @@ from trustroute.harness.simulation.wheel_driving import (
     corners,
     integrate,
     overlaps,
+    restore_route,
 )
 
 NO_DRAG = VehicleParams(rolling=0.0, drag=0.0)
@@ -159,6 +160,20 @@ def test_leaving_the_road_is_an_event_and_sumo_keeps_the_ego_on_its_route(net):
     assert [event["type"] for event in driving.events][:1] == ["off_road"]
     assert {lane for _, _, _, lane, *_ in trace} == {"A-E_1"} and trace[-1][4] == ("A-E",)
     assert driving.where == "off_road" and not trace[-1][5]   # no hand-back off the road
+
+
+def test_restoring_the_planned_route_keeps_an_extension_the_episode_made_meanwhile(net):
+    from trustroute.harness.simulation.sumo_start import SumoConfig, fresh_session
+
+    with fresh_session(net, 1, SumoConfig(step_length=0.1)) as sumo:
+        sumo.route.add("planned", ["A-E"])
+        sumo.vehicle.add("ego", "planned", departPos="100", departSpeed="8", departLane="1")
+        sumo.simulationStep()
+        assert restore_route(sumo, "ego", ["A-E", "E-D"])   # a free placement had cut it: given back
+        assert sumo.vehicle.getRoute("ego") == ("A-E", "E-D")
+        assert restore_route(sumo, "ego", ["A-E"])   # planned before the choice: the extension stays
+        assert sumo.vehicle.getRoute("ego") == ("A-E", "E-D")
+        assert not restore_route(sumo, "ego", ["E-D"])   # not on the route given: nothing to restore
 
 
 def drive_to_the_junction(net, program, start=418.0):

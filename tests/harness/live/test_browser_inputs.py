@@ -1,0 +1,110 @@
+"""The inputs a study allows, in a real browser: `[live] inputs = ["wheel"]` on a continuous study.
+Debian's Chromium (software WebGL) against `trustroute live`: once in control with no wheel
+connected, the station asks for one and sends no control; a gamepad (the browser's standard
+mapping) is not read either; a wheel (another mapping) drives, and every control the page sends
+names it as its input."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pytest
+
+from benchmarks.bench_live import start_live_server
+from tests.browser import chromium_executable
+
+from .test_browser import CHROMIUM_ARGS, create_participant
+
+pytestmark = pytest.mark.slow
+
+CONFIG = """[study]
+name = "wheel-only"
+participants = 1
+seed = 1
+engine = "live"
+specs = ["phi1"]
+conditions = ["free"]
+
+[live]
+driving = "continuous"
+inputs = ["wheel"]
+"""
+# a device whose mapping the page reads from window.pad (none until a test sets it)
+VIRTUAL_DEVICE = """
+window.pad = null;
+navigator.getGamepads = () => window.pad === null ? [] : [{
+  id: "virtual", index: 0, connected: true, mapping: window.pad.mapping, timestamp: performance.now(),
+  axes: [0, -1, 1, 1], buttons: Array.from({ length: 17 }, (_, i) => ({
+    pressed: false, touched: false, value: i === 7 ? window.pad.throttle : 0 })),
+}];
+"""
+
+
+def take_over(page) -> None:
+    """In control (space), unless already: the autopilot takes the car back at a junction."""
+    from playwright.sync_api import expect
+
+    if "MANUAL" not in page.locator("#mode").inner_text():
+        page.keyboard.press("Space")
+        expect(page.locator("#mode")).to_contain_text("MANUAL")
+
+
+def manual_for(page, seconds: float) -> None:
+    """`seconds` of wall time in control, taking over again whenever the autopilot has the car."""
+    held_since = time.monotonic()
+    while time.monotonic() - held_since < seconds:
+        if "MANUAL" not in page.locator("#mode").inner_text():
+            take_over(page)
+            held_since = time.monotonic()
+        time.sleep(0.05)
+
+
+def test_a_wheel_only_study_reads_only_a_wheel(tmp_path):
+    from playwright.sync_api import expect, sync_playwright
+
+    executable = chromium_executable()
+    config_path = tmp_path / "wheel.toml"
+    config_path.write_text(CONFIG)
+    process, address, token = start_live_server(config_path, tmp_path / "study", "--pace", "1",
+                                                "--no-warm-up")
+    sent: list[dict] = []
+    try:
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
+            try:
+                link = create_participant(browser, address, token)
+                page = browser.new_context(viewport={"width": 1000, "height": 900}).new_page()
+                page.set_default_timeout(60_000)
+                page.add_init_script(VIRTUAL_DEVICE)
+                errors: list[str] = []
+                page.on("pageerror", lambda error: errors.append(str(error)))
+                page.on("websocket", lambda socket: socket.on(
+                    "framesent", lambda payload: sent.append(json.loads(payload))))
+                page.goto(link)
+                page.wait_for_url("**/station")
+                page.locator("#agree").click()
+                page.locator("#start-trust button", has_text="5").click()
+                expect(page.locator("#speed")).to_contain_text("km/h", timeout=120_000)
+                take_over(page)
+                asked = "Connect a steering wheel with pedals to drive"
+                expect(page.locator("#incident")).to_contain_text(asked)
+                page.screenshot(path=tmp_path / "no-wheel.png")
+                page.evaluate("window.pad = {mapping: 'standard', throttle: 1}")   # a gamepad
+                manual_for(page, 1.0)
+                expect(page.locator("#incident")).to_contain_text(asked)
+                assert not [message for message in sent if message["type"] == "control"]
+                page.evaluate("window.pad = {mapping: '', throttle: 1}")   # a wheel
+                deadline = time.monotonic() + 60
+                while not [message for message in sent if message["type"] == "control"]:
+                    assert time.monotonic() < deadline, ("no control was sent for the wheel", errors)
+                    take_over(page)
+                    time.sleep(0.05)
+                expect(page.locator("#incident")).not_to_contain_text(asked)
+            finally:
+                browser.close()
+    finally:
+        process.kill()
+        process.wait()
+    controls = [message for message in sent if message["type"] == "control"]
+    assert controls and {message["source"] for message in controls} == {"wheel"}
