@@ -422,7 +422,10 @@ def die_with_server(server_pid: int) -> None:
 
 
 def episode_context():
-    """The multiprocessing context of the episode processes."""
+    """The multiprocessing context of the episode processes: "forkserver", or "spawn" as the fallback
+    where the platform has no fork server (Windows; each episode then imports everything itself)."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(EPISODE_MODULES)
     return context
