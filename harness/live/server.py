@@ -33,7 +33,7 @@ from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session
 from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study seed, (4, participant))
 from trustroute.harness.live.withdraw import read_registry, withdraw_participant
-from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions
+from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions, start_fork_server
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.participants.questionnaires import questionnaire_plan
@@ -109,6 +109,7 @@ class LiveStudy:
 
         check_before_writing(self.config, self.study_dir, None, DEFAULT_ATTEMPTS, False)
         self._stack.enter_context(study_lock(self.study_dir))
+        start_fork_server()   # it imports the episodes' modules while the study opens
         try:
             check_study_dir(self.study_dir, self.config, self.config.content_hash)
             self.done = finished_episodes(self.study_dir, self.tasks)[0]

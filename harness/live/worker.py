@@ -1,7 +1,9 @@
 """One live episode in its own process: the study's episode code on SUMO, with a remote person.
 
 libsumo runs one simulation per process, so every live episode is a process of its own
-(`start_episode_process`, multiprocessing "spawn": nothing of the server's threads is inherited).
+(`start_episode_process`, multiprocessing "forkserver": forked from a fork server that has imported
+the episode's modules once, so nothing of the server's threads is inherited and no episode pays
+Python's and the libraries' imports again).
 It runs `run_planned_episode` (harness/study/runner.py) exactly as a headless study does (same
 setup, policy, SUMO config, seed, the same steppable SumoEpisode and EpisodeTracker) with a
 `RemoteDriver` in place of the synthetic driver. The typed drivers are the seam
@@ -40,6 +42,8 @@ who drove and every control the person sent.
 from __future__ import annotations
 
 import math
+import multiprocessing
+import os
 import time
 import traceback
 from dataclasses import dataclass
@@ -399,9 +403,7 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
     from trustroute.harness.study.context import study_context
     from trustroute.harness.study.parts import write_part_tables
     from trustroute.harness.study.runner import run_planned_episode
-    from trustroute.harness.study.workers import die_with_parent
-
-    die_with_parent(server_pid)   # a killed server leaves no episode running
+    die_with_server(server_pid)   # a killed server leaves no episode running
     try:
         levels = study_context(config).driver_model(task.participant).trust_levels
         driver = RemoteDriver(connection, levels, initial_trust, options, episode_id=task.episode_id)
@@ -431,12 +433,50 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
         connection.close()
 
 
+# What the fork server imports before it forks the first episode: the modules episode_worker runs
+# and libsumo (a study's pool forks workers after libsumo is loaded too, harness/study/workers.py).
+EPISODE_MODULES = ["trustroute.harness.live.worker", "trustroute.harness.study.context",
+                   "trustroute.harness.study.parts", "trustroute.harness.study.runner",
+                   "trustroute.harness.study.workers", "libsumo"]
+
+
+def die_with_server(server_pid: int) -> None:
+    """Exit with the server. An episode process's parent is the fork server, which exits when the
+    server does (its pipe from the server closes); the episode dies with the fork server
+    (PR_SET_PDEATHSIG). A server gone before that was armed leaves the fork server gone too: then
+    this process is not the server's any more and exits."""
+    from trustroute.harness.study.workers import die_with_parent
+
+    die_with_parent(os.getppid())
+    try:
+        os.kill(server_pid, 0)
+    except ProcessLookupError:
+        os._exit(1)
+
+
+def episode_context():
+    """The multiprocessing context of the episode processes: "forkserver", or "spawn" as the fallback
+    where the platform has no fork server (Windows; each episode then imports everything itself)."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(EPISODE_MODULES)
+    return context
+
+
+def start_fork_server() -> None:
+    """Start the fork server and wait until it can fork (LiveStudy.open, before the study serves):
+    it imports the episode's modules (a second of CPU, longer on a busy machine) now, not when the
+    first trial starts, where the server would wait for it without answering."""
+    context = episode_context()
+    ready = context.Process(target=time.sleep, args=(0,), name="live-fork-server-ready", daemon=True)
+    ready.start()
+    ready.join()
+
+
 def start_episode_process(config, study_dir: Path, task, options: LiveOptions, initial_trust: int | None):
     """(process, parent end of its pipe) of a started episode worker."""
-    import multiprocessing
-    import os
-
-    context = multiprocessing.get_context("spawn")
+    context = episode_context()
     parent, child = context.Pipe()
     process = context.Process(target=episode_worker, name=f"live-{task.episode_id}", daemon=True,
                               args=(config, str(study_dir), task, child, options, initial_trust, os.getpid()))

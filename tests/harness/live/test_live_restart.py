@@ -43,6 +43,14 @@ def children(pid: int) -> list[int]:
     return found
 
 
+def descendants(pid: int) -> list[int]:
+    """Every process below `pid`: the episode processes are forked by the server's fork server."""
+    found = children(pid)
+    for child in list(found):
+        found += descendants(child)
+    return found
+
+
 def alive(pid: int) -> bool:
     try:
         state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
@@ -75,8 +83,8 @@ def test_sigkill_mid_episode_then_restart_continues_at_the_interrupted_trial(tmp
                 break
             assert time.monotonic() < deadline, progress
             time.sleep(0.05)
-        workers = children(server.pid)
-        assert workers, "the episode runs in a process of its own"
+        workers = descendants(server.pid)
+        assert len(workers) > len(children(server.pid)), "the episode runs in a process of its own"
         server.send_signal(signal.SIGKILL)
         server.wait(10)
     finally:
