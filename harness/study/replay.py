@@ -69,7 +69,7 @@ def study_config_from_manifest(study_dir: Path) -> tuple[StudyConfig, dict]:
             f"the study was made by a different trustroute (unknown config key {unknown[0]!r})",
             "replay it with the trustroute that made it",
         )
-    for key in ("specs", "conditions", "record", "routes"):
+    for key in ("specs", "conditions", "record", "routes", "live_inputs"):
         if key in data and data[key] is not None:
             data[key] = tuple(data[key])
     try:
