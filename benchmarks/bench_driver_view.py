@@ -11,11 +11,13 @@ trial on autopilot. Measured over WINDOW wall seconds once the first frame has a
 - the server's CPU time per wall second (the server and its episode process, from /proc).
 With `[live] driving = "continuous"` and a virtual wheel (a script replacing
 `navigator.getGamepads`, read in the standard mapping), on a trial of WHEEL_SPEC (a 53 m start road,
-then Town01's 444 m H-L, long enough to drive the whole measurement by hand before its junction):
-once in control on H-L, the page holds about CRUISE m/s with the accelerator and the benchmark
-measures the latency from turning the wheel to the first drawn frame whose ego heading has turned
-(by more than 0.2°), in the page with performance.now() (LATENCY_SAMPLES pulses of the wheel, each
-undone), and, over the same wall seconds, the server's CPU time per wall second (server and
+then Town01's H-L, whose 320 m straight after its corner is long enough to drive the whole
+measurement by hand before its junction): 20 m into that straight, the page takes over, holds
+about CRUISE m/s with the accelerator and the benchmark measures the latency from turning the wheel
+to the first drawn frame whose ego heading has turned (by more than 0.2°), in the page with
+performance.now() (LATENCY_SAMPLES pulses of PULSE_STEER, each undone, the rest between them
+steering back to the straight's heading: without it the car drifts off the road, where it is
+stopped), and, over the same wall seconds, the server's CPU time per wall second (server and
 episode process) and the websocket's bytes per second to the participant while the person drives.
 The load average before and after each part is reported: the machine may be shared.
 """
@@ -48,25 +50,30 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--ena
 COUNTS = "[window.driverView.stats.renders, window.driverView.stats.frames, window.rafProbe]"
 LATENCY_SAMPLES = 20
 CRUISE = 8.0    # m/s the page holds while the wheel is measured
+PULSE_STEER = 0.15   # the wheel's turn in a pulse (of full lock): a clear turn that stays in the lane
 # one trial: a short start road (no takeover there), then H-L, an oncoming truck's road of 444 m
 WHEEL_SPEC = 'name = "benchwheel"\nstart = "I-H"\nformula = "F v1"\n\n[states]\nv1 = ["H-L"]\n'
 WHEEL = """
-window.wheel = { steer: 0, throttle: 0, button: false };
+window.wheel = { steer: 0, throttle: 0, brake: 0, button: false };
 // the person's foot: about CRUISE m/s on the accelerator, from the newest frame's speed
 window.cruise = (speed) => setInterval(() => {
   const frames = window.driverView ? window.driverView.frames : [];
-  if (frames.length) window.wheel.throttle = frames[frames.length - 1].frame.speed < speed ? 0.4 : 0;
+  if (!frames.length) return;
+  const now = frames[frames.length - 1].frame.speed;
+  window.wheel.throttle = now < speed ? 0.4 : 0;
+  window.wheel.brake = now > speed + 1 ? 0.3 : 0;
 }, 50);
 navigator.getGamepads = () => [{ id: "virtual", index: 0, connected: true, mapping: "standard",
   timestamp: performance.now(), axes: [window.wheel.steer, 0, 0, 0],
   buttons: Array.from({ length: 17 }, (_, i) => {
-    const value = i === 7 ? window.wheel.throttle : i === 0 && window.wheel.button ? 1 : 0;
+    const value = i === 7 ? window.wheel.throttle : i === 6 ? window.wheel.brake
+      : i === 0 && window.wheel.button ? 1 : 0;
     return { pressed: value > 0.5, touched: value > 0, value };
   }) }];
 """
 # one pulse: the wheel turned at t0; the first animation frame whose drawn heading differs from
 # the heading at t0 ends it; the wheel is turned back as long to undo the turn
-PULSE = """async (steer) => {
+PULSE = """async ([steer, reference]) => {
   const view = window.driverView;
   const start = view.stats.pose[2];
   const t0 = performance.now();
@@ -82,8 +89,17 @@ PULSE = """async (steer) => {
   });
   window.wheel.steer = -steer;
   await new Promise((resolve) => setTimeout(resolve, (latency || 0) + 50));
-  window.wheel.steer = 0;
-  await new Promise((resolve) => setTimeout(resolve, 700));
+  // the rest between pulses keeps the lane: the wheel steers the drawn heading back to the road's
+  const until = performance.now() + 700;
+  await new Promise((resolve) => {
+    const keep = () => {
+      const error = ((reference - view.stats.pose[2] + 540) % 360) - 180;
+      window.wheel.steer = Math.max(-0.2, Math.min(0.2, 0.05 * error));
+      if (performance.now() < until) requestAnimationFrame(keep);
+      else { window.wheel.steer = 0; resolve(); }
+    };
+    requestAnimationFrame(keep);
+  });
   return latency;
 }"""
 RAF_PROBE = "window.rafProbe = 0; (function tick() { window.rafProbe += 1; requestAnimationFrame(tick); })();"
@@ -103,6 +119,26 @@ def tree_cpu_seconds(pid: int) -> float:
         if int(entry.name) == pid or int(fields[1]) == pid:
             total += (int(fields[11]) + int(fields[12])) / ticks
     return total
+
+
+def wait_in_page(page, expression: str, seconds: float) -> None:
+    """Poll `expression` in the page until it is true (the station's CSP refuses the eval that
+    Playwright's wait_for_function needs)."""
+    deadline = time.monotonic() + seconds
+    while not page.evaluate(expression):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"not true within {seconds} s: {expression}")
+        page.wait_for_timeout(50)
+
+
+def longest_segment(lane: str) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The longest straight piece of `lane` of the paper's town's net (sumolib)."""
+    import sumolib
+
+    from trustroute.app.towns import build_town_net
+
+    shape = sumolib.net.readNet(str(build_town_net(None).path)).getLane(lane).getShape()
+    return max(zip(shape, shape[1:], strict=False), key=lambda piece: math.dist(*piece))
 
 
 def measure(workdir: Path) -> dict:
@@ -150,6 +186,7 @@ def measure_latency(workdir: Path) -> dict:
     config_path.write_text(CONFIG.replace('name = "bench-driver-view"', 'name = "bench-wheel"')
                            .replace('specs = ["phi1"]', 'specs = ["benchwheel.toml"]')
                            + '\n[live]\ndriving = "continuous"\n')
+    straight = longest_segment("H-L_0")
     load_before = os.getloadavg()[0]
     process, address, token = start_live_server(config_path, workdir / "wheel", "--pace", "1", "--no-warm-up")
     try:
@@ -165,14 +202,25 @@ def measure_latency(workdir: Path) -> dict:
             page.goto(f"http://{address}{link}")
             page.locator("#agree").click()
             page.locator("#start-trust button", has_text="4").click()
-            page.locator("#road[data-road='H-L']").wait_for(state="attached", timeout=180_000)
+            # on H-L itself: a takeover still on I-H (the station shows H-L once its junction is
+            # chosen) is held at I-H's end, and the car would stand for every pulse
+            (ax, ay), (bx, by) = straight
+            reference = math.degrees(math.atan2(bx - ax, by - ay)) % 360
+            # on H-L's long straight, 20 m into it: a takeover still on I-H (the station shows H-L
+            # once its junction is chosen) is held at I-H's end, and H-L's first part ends in a
+            # right-angle corner
+            length = math.dist((ax, ay), (bx, by))
+            into = (f"((window.driverView.stats.pose[0] - {ax}) * {bx - ax} + "
+                    f"(window.driverView.stats.pose[1] - {ay}) * {by - ay}) / {length}")
+            wait_in_page(page, "(window.driverView?.frames.at(-1)?.frame.lane || '').startsWith('H-L_') && "
+                         f"{into} > 20", 180)
             page.evaluate("window.wheel.button = true")
             page.locator("#mode").filter(has_text="MANUAL").wait_for(timeout=30_000)
             page.evaluate(f"window.wheel.button = false; window.cruise({CRUISE})")
-            page.wait_for_function(f"window.driverView.frames.at(-1).frame.speed > {CRUISE - 1}",
-                                   timeout=30_000)
+            wait_in_page(page, f"window.driverView.frames.at(-1).frame.speed > {CRUISE - 1}", 30)
             cpu_before, started = tree_cpu_seconds(process.pid), time.perf_counter()
-            latencies = [page.evaluate(PULSE, 0.3 if i % 2 else -0.3) for i in range(LATENCY_SAMPLES)]
+            latencies = [page.evaluate(PULSE, [PULSE_STEER if i % 2 else -PULSE_STEER, reference])
+                         for i in range(LATENCY_SAMPLES)]
             elapsed = time.perf_counter() - started
             cpu = (tree_cpu_seconds(process.pid) - cpu_before) / elapsed
             still_manual = page.locator("#mode").inner_text() == "MANUAL"
