@@ -257,18 +257,23 @@ def run_scripted(url: str, token: str, participant: ScriptedParticipant, timeout
 
     headers = {"Authorization": f"Bearer {token}"}
     with connect(url, additional_headers=headers, open_timeout=timeout) as socket:
-        silent_since = time.monotonic()
+        silent_since = sent_at = time.monotonic()
         while not participant.finished:
             if stop_after is not None and len(participant.episodes) >= stop_after:
                 break
+            # the server closes a socket that has sent nothing for its idle time, however much it
+            # receives (a trial on autopilot streams frames and asks nothing): a ping keeps it open
+            if time.monotonic() - sent_at > PING_SECONDS:
+                socket.send(json.dumps({"type": "ping"}))
+                sent_at = time.monotonic()
             try:
                 message = socket.recv(timeout=PING_SECONDS)
-            except TimeoutError:   # the server closes a silent socket: a ping keeps it open
+            except TimeoutError:
                 if time.monotonic() - silent_since > timeout:
                     raise
-                socket.send(json.dumps({"type": "ping"}))
                 continue
             silent_since = time.monotonic()
             for reply in participant.respond(json.loads(message)):
                 socket.send(json.dumps(reply))
+                sent_at = time.monotonic()
     return participant

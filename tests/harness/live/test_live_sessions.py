@@ -8,11 +8,13 @@ import json
 import socket
 import time
 
+import httpx
 import pytest
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
 from tests.cli import run_cli
+from trustroute.harness.live import scripted
 from trustroute.harness.live.app import (
     IDLE,
     POLICY_VIOLATION,
@@ -222,3 +224,24 @@ def test_without_configured_origins_a_request_must_come_from_the_address_it_was_
         assert foreign.status_code == 403
         same = client.post("/api/participants", json={}, headers={**headers, "Origin": "http://testserver"})
         assert same.status_code == 200
+
+
+def test_a_scripted_participant_on_a_streaming_trial_keeps_its_socket_open(tmp_path, monkeypatch):
+    """The server's idle rule counts what a socket sends, not what it receives: a participant who
+    only watches a trial stream its frames is closed unless it pings. The scripted participant
+    pings by what it has sent (a trial at pace 10 streams its frames for seconds, longer than the
+    idle time here)."""
+    monkeypatch.setattr(scripted, "PING_SECONDS", 0.3)
+    config = tiny_config(tmp_path, participants=1)
+    options = ServerOptions(pace=10.0, idle_seconds=1.5, warm_up=False)
+    study = LiveStudy(config, tmp_path / "study", options).open()
+    try:
+        with serving(study) as (host, port):
+            address = f"{host}:{port}"
+            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+            token = httpx.post(f"http://{address}/api/participants", json={}, headers=headers).json()["token"]
+            player = scripted.ScriptedParticipant(config, 0)
+            scripted.run_scripted(f"ws://{address}/ws", token, player, 60, stop_after=1)
+            assert len(player.episodes) == 1
+    finally:
+        study.close()
