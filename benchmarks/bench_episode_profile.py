@@ -27,6 +27,12 @@ wrappers are removed afterwards. Phases:
 - `roads_table`, `kinematics_table`, `incidents_table`: the logs as Arrow tables;
 - `other`: the rest of the call (setup, net checks, the driver's generator).
 
+Then, in as many runs again with no phase timed, every function of libsumo's native module is timed
+instead (`libsumo_cpu`, `libsumo_wall`, `libsumo_calls`, beside those runs' `libsumo_run_cpu` and
+`libsumo_run_wall` totals): the part of each side that is SUMO's own work (its steps, reset,
+queries, `vehicle.add`, `setRoute`, the subscription reads), which no change to the Python can
+remove; each call's clock pair adds about a microsecond to it.
+
 Each figure is ms per episode (total over the run / EPISODES), with the 1-minute load average.
 """
 
@@ -82,14 +88,25 @@ def _timed(function, phase: str, totals: dict[str, float], cpu: dict[str, float]
     return timed
 
 
+def _is_api(native, name: str) -> bool:
+    """A function of libsumo's API in its native module ("vehicle_add"; not SWIG's helpers)."""
+    return (name[:1].islower() and "_" in name and "swig" not in name
+            and not name.startswith(("new_", "delete_")) and callable(getattr(native, name)))
+
+
 @contextlib.contextmanager
-def _phase_timers(totals: dict[str, float], cpu: dict[str, float], counts: dict[str, int]) -> Iterator[None]:
-    """Wrap every phase's function for the duration of the block (then put the originals back)."""
+def _phase_timers(totals: dict[str, float], cpu: dict[str, float], counts: dict[str, int],
+                  all_native: bool = False) -> Iterator[None]:
+    """Wrap every phase's function for the duration of the block (then put the originals back);
+    all_native: instead every function of libsumo's native module, as the one phase "libsumo"."""
     import libsumo._libsumo as native
 
     originals = []
-    targets = [(owner, name, phase) for owner, name, phase in _EPISODE_PHASES]
-    targets += [(native, name, phase) for name, phase in _NATIVE_PHASES]
+    if all_native:
+        targets = [(native, name, "libsumo") for name in dir(native) if _is_api(native, name)]
+    else:
+        targets = [(owner, name, phase) for owner, name, phase in _EPISODE_PHASES]
+        targets += [(native, name, phase) for name, phase in _NATIVE_PHASES]
     try:
         for owner, name, phase in targets:
             function = getattr(owner, name)
@@ -121,9 +138,11 @@ def _per_episode(totals: dict[str, float], wall: float, episodes: int) -> dict[s
 
 def _profiled(run: Callable[[], object]) -> Callable[[str], dict | None]:
     """`run` behind one call: "warm" runs it untimed, "run" runs it under the phase timers,
-    "totals" returns what the timers summed (called in its own process: ForkedCalls)."""
+    "native" under timers on every function of libsumo's, "totals" returns what the timers
+    summed (called in its own process: ForkedCalls)."""
     timers = {"wall": defaultdict(float), "cpu": defaultdict(float), "counts": defaultdict(int),
-              "total": [0.0, 0.0]}
+              "total": [0.0, 0.0], "native_wall": defaultdict(float), "native_cpu": defaultdict(float),
+              "native_counts": defaultdict(int), "native_total": [0.0, 0.0]}
 
     def call(what: str) -> dict | None:
         if what == "totals":
@@ -132,11 +151,13 @@ def _profiled(run: Callable[[], object]) -> Callable[[str], dict | None]:
         if what == "warm":
             run()
             return None
-        with _phase_timers(timers["wall"], timers["cpu"], timers["counts"]):
+        prefix = "native_" if what == "native" else ""
+        with _phase_timers(timers[f"{prefix}wall"], timers[f"{prefix}cpu"], timers[f"{prefix}counts"],
+                           all_native=what == "native"):
             started, started_cpu = time.perf_counter(), time.thread_time()
             run()
-            timers["total"][0] += time.perf_counter() - started
-            timers["total"][1] += time.thread_time() - started_cpu
+            timers[f"{prefix}total"][0] += time.perf_counter() - started
+            timers[f"{prefix}total"][1] += time.thread_time() - started_cpu
         return None
 
     return call
@@ -154,6 +175,9 @@ def profile(episodes: int = EPISODES) -> dict:
         for _ in range(episodes):
             for side in sides.values():
                 side("run")
+        for _ in range(episodes):
+            for side in sides.values():
+                side("native")
         totals = {name: side("totals") for name, side in sides.items()}
     out = {"name": "episode_phi1_phases", "unit": "ms per episode", "episodes": episodes}
     for clock, index in (("wall", 0), ("cpu", 1)):
@@ -164,6 +188,14 @@ def profile(episodes: int = EPISODES) -> dict:
         ratio = out[f"episode_{clock}"]["total"] / out[f"bare_open_{clock}"]["total"]
         out[f"ratio_of_totals_kept_open_{clock}"] = round(ratio, 3)
     out["steps"] = {side: totals[side]["counts"].get("sumo_steps", 0) // episodes for side in totals}
+    for side in sides:
+        for clock, index in (("wall", 0), ("cpu", 1)):
+            native = totals[side][f"native_{clock}"].get("libsumo", 0.0)
+            out.setdefault(f"libsumo_{clock}", {})[side] = round(1e3 * native / episodes, 3)
+            run_total = totals[side]["native_total"][index]
+            out.setdefault(f"libsumo_run_{clock}", {})[side] = round(1e3 * run_total / episodes, 3)
+        calls = totals[side]["native_counts"].get("libsumo", 0)
+        out.setdefault("libsumo_calls", {})[side] = round(calls / episodes, 1)
     out["load_average_1min"] = [load_before, os.getloadavg()[0]]
     return out
 

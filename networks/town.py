@@ -135,6 +135,11 @@ class Town:
         return {road: self._moves(road) for road in self.states}
 
     @functools.cached_property
+    def _successors(self) -> dict[tuple[str, str], str]:
+        return {(road, w): Road(Road.parse(road).to_junction, w).id
+                for road in self.states for w in self._actions[road]}
+
+    @functools.cached_property
     def successor_table(self) -> np.ndarray:
         """int64 [n_states, widest move count], read-only: per state (in `states` order) the state
         index of each move's road, in the order of `actions`, padded with -1. The road graph as
@@ -165,6 +170,9 @@ class Town:
         return rule_moves(self.neighbours, directed_road)
 
     def successor(self, directed_road: str, next_junction: str) -> str:
+        road = self._successors.get((directed_road, next_junction))
+        if road is not None:
+            return road
         at = Road.parse(directed_road).to_junction
         if next_junction not in self.actions(directed_road):
             raise ValueError(f"{next_junction} is not a legal move from {directed_road}")

@@ -254,6 +254,9 @@ class SumoEpisode:
                         offsets=self.roads.offsets(road))
 
     def inject(self, run: RoadRun, now: float, ego_distance: float) -> None:
+        run.injected_time = now
+        if run.kind == NO_INCIDENT:
+            return   # no scene to place (placing draws nothing)
         scene = self.roads.place(Scene(
             road=run.road, reverse_road=None, road_length=self.length(run.road), prefix=f"inc{run.index}",
             ego_id=EGO_ID, time=now, ego_distance=ego_distance, rng=self.rng,
@@ -261,7 +264,6 @@ class SumoEpisode:
             step_length=self.config.step_length), run.kind)
         run.incident = (None if scene is None else
                         incident_kinds.inject(run.kind, self.sumo, scene, self.defined_types))
-        run.injected_time = now
         if run.incident is not None:
             log.debug("%s: %s incident on %s as %s", self.tracker.episode_id, run.kind, run.road,
                       ",".join(run.incident.sumo_ids))
@@ -448,9 +450,11 @@ class SumoEpisode:
         auto = AUTOPILOT.name
         log_floats, log_lane, log_mode = (self.steps.floats.extend, self.steps.lanes.append,
                                           self.steps.modes.append)
-        observer, manual, background_step = self.observer, self.manual, self._background_step
+        background_step = self._background_step
+        after_step = self.observer is not None or self.manual is not None
         person = self.person.takeover_request if self.person is not None else None
         max_sim_seconds = self.config.max_sim_seconds
+        isnan = math.isnan
         while True:
             simulation_step()
             now = get_time()
@@ -458,7 +462,7 @@ class SumoEpisode:
             if not result:
                 _check_missing_ego(now, start, current)
                 continue
-            if math.isnan(current.time_in):
+            if isnan(current.time_in):
                 current.time_in = now
             lane = result[lane_id]
             road = lane_roads.get(lane)
@@ -482,7 +486,7 @@ class SumoEpisode:
                 if person is not None:
                     self.person_control(open_run, now, person(now), commits)
                 ego = None
-                if not open_run.decided if open_run.incident is None else math.isnan(open_run.removed_time):
+                if not open_run.decided if open_run.incident is None else isnan(open_run.removed_time):
                     ego = EgoState(now, road, position, x, y, speed, lane, result[angle_id], result[accel_id])
                     self.watch(open_run, ego)
                 if self.mode == auto:
@@ -497,7 +501,7 @@ class SumoEpisode:
             log_floats((now, x, y, speed))
             log_lane(lane)
             log_mode(self.mode)
-            if observer is not None or manual is not None:
+            if after_step:
                 self._after_step(_Step(now, road, position, x, y, speed, lane, result[angle_id],
                                        result[accel_id], open_run.road))
             if now > max_sim_seconds:

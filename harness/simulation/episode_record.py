@@ -84,7 +84,7 @@ class StepLog:
     def table(self, episode_id: str) -> pa.Table:
         floats = np.frombuffer(self.floats, dtype=np.float64).reshape(-1, 4).T
         rows = len(self.lanes)
-        columns = {"episode_id": pa.array([episode_id], pa.string()).take(np.zeros(rows, dtype=np.int64)),
+        columns = {"episode_id": pa.repeat(pa.scalar(episode_id, pa.string()), rows),
                    **{name: pa.array(floats[i]) for i, name in enumerate(STEP_FIELDS[:4])},
                    "lane": self.lanes, "mode": self.modes}
         return table_from_columns(columns, KINEMATICS_SCHEMA, nan_as_null=False)

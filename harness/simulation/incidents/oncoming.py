@@ -71,12 +71,21 @@ class OncomingVehicle:
     _on_road: bool = False
     _next_meeting_check: float = -math.inf
     _next_ttc_check: float = -math.inf
+    _read_at: float = math.nan     # the sim time of the step `_where` was read in
+    _where: tuple[float, float] | None = None
 
     def insert(self, sumo: Sumo) -> None:
         sumo.vehicle.add(self.vehicle_id, self.route_id, typeID=TYPE_ID, depart="now",
                          departLane=self.depart_lane,
                          departPos=f"{self.depart_position:.2f}", departSpeed="max")
         self.inserted = True
+
+    def _position(self, sumo: Sumo, now: float) -> tuple[float, float] | None:
+        """Where the vehicle is in the step at `now`: read from SUMO once per step (the meeting
+        check and the TTC both read it in the same steps, their schedules being the same bound)."""
+        if now != self._read_at:
+            self._where, self._read_at = vehicle_position(sumo, self.vehicle_id), now
+        return self._where
 
     def _quiet_until(self, now: float, gap: float) -> float:
         """The earliest time the gap could come within WATCH_HORIZON seconds of closing."""
@@ -92,7 +101,7 @@ class OncomingVehicle:
         if not math.isnan(self.met_time):
             self._leave_when_behind(sumo, ego)
             return
-        where = vehicle_position(sumo, self.vehicle_id)
+        where = self._position(sumo, ego.time)
         if where is None:
             self._gone = self._gone or not vehicle_present(sumo, self.vehicle_id)
             return
@@ -112,13 +121,13 @@ class OncomingVehicle:
         """After the meeting the vehicle drives away behind the ego, where nothing the ego does
         depends on it: it leaves the simulation once `GONE_BEHIND` metres away (SUMO then has one
         vehicle less to step)."""
-        where = vehicle_position(sumo, self.vehicle_id)
+        where = self._position(sumo, ego.time)
         if where is None:
             self._gone = True
             return
         gap = math.dist(where, (ego.x, ego.y))
         if gap >= GONE_BEHIND:
-            remove_vehicle(sumo, self.vehicle_id)
+            self.remove(sumo)
             self._gone = True
         else:
             self._next_meeting_check = ego.time + (GONE_BEHIND - gap) / MAX_CLOSING
@@ -127,7 +136,7 @@ class OncomingVehicle:
         """The head-on TTC of this step, when it can be below WATCH_HORIZON."""
         if not self.inserted or self._gone or ego.time < self._next_ttc_check:
             return
-        where = vehicle_position(sumo, self.vehicle_id)
+        where = self._position(sumo, ego.time)
         if where is None:
             return
         x, y = where
@@ -138,6 +147,7 @@ class OncomingVehicle:
 
     def remove(self, sumo: Sumo) -> None:
         remove_vehicle(sumo, self.vehicle_id)
+        self._where, self._read_at = None, math.nan
 
     def details(self) -> str:
         return (f"oncoming={self.vehicle_id} meet_at={self.meet_at:.1f} meet_in={self.meet_in:.1f} "
