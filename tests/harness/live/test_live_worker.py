@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from trustroute.app.nets import net_for
 from trustroute.harness.live.view import next_junction, role
 from trustroute.harness.live.worker import (
     STATION_WAIT,
@@ -23,10 +24,13 @@ from trustroute.harness.live.worker import (
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE
 from trustroute.harness.simulation.episode_tracker import DrivenRoad, EpisodeTracker
 from trustroute.harness.simulation.manual_driving import WARN_DISTANCE
+from trustroute.harness.simulation.real_roads import RealRoads
 from trustroute.harness.simulation.wheel_driving import OFF_ROUTE_LIMIT
+from trustroute.harness.study.config import load_study_config
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.plan import plan_episodes
 from trustroute.harness.study.runner import run_planned_episode
+from trustroute.networks.real_net import road_edges
 
 from .conftest import tiny_config
 
@@ -168,6 +172,65 @@ def test_by_wheel_without_a_hand_back_the_ego_is_held_short_of_the_junction(tmp_
     assert (row["road_departures"], row["collisions"], row["oncoming_seconds"]) == (0, 0, 0.0)
     assert 0.0 < row["lateral_sd"] < 0.5 and 3.0 < row["manual_max_deceleration"] < 3.3
     assert row["manual_min_ttc"] > 0.0
+
+
+CSOMOR = """[study]
+name = "csomor-live"
+participants = 1
+seed = 1
+engine = "live"
+town = "csomor"
+specs = ["csomor5"]
+conditions = ["free"]
+"""
+
+
+def test_by_wheel_on_an_imported_town_the_ego_is_held_short_of_the_road_end(tmp_path):
+    """The same on `csomor`, an imported town: a road there runs along SUMO edges with ids of
+    their own, and junctions between them (real_roads.py). Taken over on the first edge of a road
+    of two, the accelerator held down, the car is held short of the road's commit point, never
+    drives into the next road in the person's hands, and the person hands back there."""
+    (tmp_path / "live.toml").write_text(CSOMOR)
+    config = load_study_config(tmp_path / "live.toml")
+    town = study_context(config).town
+    real = RealRoads(road_edges(town, net_for(town)), COMMIT_DISTANCE)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([], hand_back_when_warned=False)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
+    held, taken = [], []
+
+    def to_end(ego, road):   # metres to the end of the road's last edge, as the episode counts them
+        return real.length(road) - real.offsets(road)[ego.road] - ego.lane_position
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        chain = real.roads[road].ids
+        if not taken and len(chain) > 1 and ego.road == chain[0] and to_end(ego, road) > WARN_DISTANCE + 50:
+            taken.append((road, chain))
+            pipe.controls.append({"type": "takeover"})
+        if mode == "manual" and driver.wheel.pose is not None and not held:
+            pipe.controls.append(keep_lane(sumo, driver.wheel.pose))
+        if mode == "manual" and ego.speed == 0.0 and ego.road in real.offsets(taken[0][0]):
+            held.append((ego.time, ego.lane, round(to_end(ego, taken[0][0]), 2)))
+            if len(held) == 40:
+                pipe.controls.append({"type": "hand_back"})
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+                                 sumo_config=sumo_config(driver.options))
+    (road, chain), = taken
+    assert [e["type"] for e in driver.wheel.events] == ["hold"]   # in its lane all along
+    assert len(held) >= 40 and {(lane, left) for _, lane, left in held} == {held[0][1:]}   # in one place
+    assert held[0][2] > COMMIT_DISTANCE   # before the commit point, accelerator down
+    kinds = [m.get("kind") for m in pipe.sent if m["type"] == "warning"]
+    assert sorted(kinds) == ["hand_back", "hold"]   # told to hand back, and held (faster: held first)
+    ticks = record.kinematics
+    manual = ticks[ticks["mode"] == "manual"]
+    driven = {lane.rsplit("_", 1)[0] for lane in manual["lane"] if not lane.startswith(":")}
+    assert driven <= set(chain), (road, chain, driven)   # never into the next road
+    back = ticks["time"][(ticks["mode"] == "auto") & (ticks["time"] > manual["time"].min())].min()
+    assert back > held[39][0] and record.summary["end_reason"] == "accepted"
+    handed = [e["type"] for e in driver.events if e["type"] != "control"]
+    assert handed == ["takeover", "hand_back"]   # handed back by the person, not at the commit point
 
 
 # Simulated times of a takeover on the tiny study's route (E-A, A-F, F-G, G-I, ...): on the first
