@@ -233,6 +233,46 @@ def test_by_wheel_on_an_imported_town_the_ego_is_held_short_of_the_road_end(tmp_
     assert handed == ["takeover", "hand_back"]   # handed back by the person, not at the commit point
 
 
+def test_by_wheel_on_an_imported_town_a_takeover_after_the_choice_is_held_at_its_road_end(tmp_path):
+    """On `csomor`, taken over after the junction ahead was chosen (the open road is the next one,
+    the ego still on an edge of the road before it), the accelerator held down: the car is held
+    at the end of the road it is on, never drives into the next road in the person's hands, and
+    the person hands back there."""
+    (tmp_path / "live.toml").write_text(CSOMOR)
+    config = load_study_config(tmp_path / "live.toml")
+    real = RealRoads(road_edges(study_context(config).town, net_for(study_context(config).town)),
+                     COMMIT_DISTANCE)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([], hand_back_when_warned=False)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
+    held, taken = [], []
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        behind = not ego.road.startswith(":") and ego.road not in real.offsets(road)
+        if not taken and ego.time > 5.0 and behind:   # the first road's choice is behind the ego
+            taken.append((ego.road, road))
+            pipe.controls.append({"type": "takeover"})
+        if mode == "manual" and driver.wheel.pose is not None and not held:
+            pipe.controls.append(keep_lane(sumo, driver.wheel.pose))
+        if mode == "manual" and ego.speed == 0.0:
+            held.append((ego.time, ego.lane, round(sumo.lane.getLength(ego.lane) - ego.lane_position, 2)))
+            if len(held) == 20:
+                pipe.controls.append({"type": "hand_back"})
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+                                 sumo_config=sumo_config(driver.options))
+    (edge, road), = taken
+    assert [e["type"] for e in driver.wheel.events] == ["hold"]
+    assert len(held) >= 20 and {(lane, left) for _, lane, left in held} == {held[0][1:]}   # in one place
+    assert held[0][1].rsplit("_", 1)[0] == edge and held[0][2] > 0.0   # short of its road's end
+    ticks = record.kinematics
+    manual = ticks[ticks["mode"] == "manual"]
+    assert not set(manual["lane"].str.rsplit("_", n=1).str[0]) & set(real.roads[road].ids)   # not into it
+    handed = [e["type"] for e in driver.events if e["type"] != "control"]
+    assert handed == ["takeover", "hand_back"] and record.summary["end_reason"] == "accepted"
+
+
 # Simulated times of a takeover on the tiny study's route (E-A, A-F, F-G, G-I, ...): on the first
 # road, where it waits for the next road to open (the ego still on E-A); on a road after its
 # junction's choice (A-F, F-G: the open road is already the next one), near enough the junction
