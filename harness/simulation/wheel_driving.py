@@ -56,7 +56,6 @@ from trustroute.harness.simulation.manual_driving import (
     to_road_end,
 )
 from trustroute.harness.simulation.manual_measures import TTC_RANGE, Sample, signed_offset, ttc_ahead
-from trustroute.networks.road import Road
 
 MODEL_RATE = 50.0            # Hz: the model's integration rate (at least 20 Hz whatever SUMO's step)
 KEEP_ROUTE = 1               # moveToXY: the nearest place on the ego's route
@@ -238,6 +237,7 @@ class ManualDriving:
     lane_index: int = 0               # the lane of its road the ego was in at the takeover
     edge: str = ""                    # the edge of its route it was on last (its own road)
     stranded: bool = False            # stopped off its route (`stopped_off_road`) until the hand-back
+    junctions: dict[str, tuple[str, str]] = field(default_factory=dict)   # edge -> (from, to) junction
 
     @classmethod
     def take_over(cls, sumo, vehicle_id: str, **options) -> ManualDriving:
@@ -302,7 +302,7 @@ class ManualDriving:
         if off_road(sumo, *front):
             return KEEP_ROUTE
         edge = sumo.simulation.convertRoad(*front, False, "passenger")[0]
-        return KEEP_ROUTE_FREE if edge in self.route or self.opposite(edge) else KEEP_ROUTE
+        return KEEP_ROUTE_FREE if edge in self.route or self.opposite(sumo, edge) else KEEP_ROUTE
 
     def observe(self, sumo, now: float) -> None:
         lane = sumo.vehicle.getLaneID(self.vehicle_id)
@@ -338,7 +338,7 @@ class ManualDriving:
         elif lane.startswith(":") or sumo.lane.getEdgeID(lane) in self.route:
             where = "own_lane"
         else:
-            where = "oncoming" if self.opposite(sumo.lane.getEdgeID(lane)) else "own_lane"
+            where = "oncoming" if self.opposite(sumo, sumo.lane.getEdgeID(lane)) else "own_lane"
         if where != self.where:
             kind = {"off_road": "off_road", "oncoming": "oncoming"}.get(where)
             if kind is None:
@@ -347,11 +347,22 @@ class ManualDriving:
                                 "y": round(self.pose.y, 2)})
             self.where = where
 
-    def opposite(self, edge: str) -> bool:
+    def opposite(self, sumo, edge: str) -> bool:
         """Whether `edge` runs against its own road or another road of its route (the oncoming
-        lane of the road it turns into, say, entered from the junction)."""
-        reverse = Road.parse_or_none(edge)
-        return reverse is not None and reverse.reverse.id in ([self.edge] if self.edge else []) + self.route
+        lane of the road it turns into, say, entered from the junction): it joins the junctions of
+        one of their edges the other way round, as the net has them (on a built town "V-U" against
+        "U-V"; on an imported town the net's own reverse edge of an edge of the road's chain)."""
+        if not edge or edge.startswith(":"):
+            return False
+        start, end = self.ends(sumo, edge)
+        own = [self.edge, *self.route]
+        return any(self.ends(sumo, mine) == (end, start) for mine in own if mine and not mine.startswith(":"))
+
+    def ends(self, sumo, edge: str) -> tuple[str, str]:
+        """The junctions `edge` runs from and to (read once per edge)."""
+        if edge not in self.junctions:
+            self.junctions[edge] = (sumo.edge.getFromJunction(edge), sumo.edge.getToJunction(edge))
+        return self.junctions[edge]
 
     def contacts(self, sumo, now: float) -> None:
         ego = corners(self.pose.x, self.pose.y, self.pose.angle, self.length, self.width)
@@ -531,7 +542,7 @@ class Wheel:
         if chain[0] in route and edge in route[:route.index(chain[0])]:   # on the road before it
             own = None if self.behind is None else to_road_end(self.chain(self.behind), edge, rest, length)
             return HoldPoint(rest if own is None else own, HOLD_MARGIN, True)
-        if driving.opposite(edge):   # back along the oncoming lane, which starts at that junction
+        if driving.opposite(sumo, edge):   # back along the oncoming lane, which starts at that junction
             own_road = driving.edge in chain
             return HoldPoint(position, commit if own_road else HOLD_MARGIN, not own_road)
         return None
