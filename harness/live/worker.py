@@ -58,6 +58,7 @@ from trustroute.harness.simulation.drivers import NO_INPUTS, ManualInputs
 from trustroute.harness.simulation.driving_style import MANUAL
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import reports_after_road
+from trustroute.harness.simulation.manual_driving import RoadChain
 from trustroute.harness.simulation.manual_measures import takeover_measures
 from trustroute.harness.simulation.wheel_driving import Controls, Wheel
 
@@ -142,6 +143,10 @@ class RemoteDriver:
     def manual_inputs(self) -> ManualInputs:
         inputs, self.inputs = self.inputs, NO_INPUTS
         return inputs
+
+    def drive_on(self, chain: RoadChain) -> None:
+        if self.wheel is not None:
+            self.wheel.chain = chain
 
     def hand_back_warning(self, distance: float, now: float) -> None:
         self.send({"type": "warning", "kind": "hand_back", "distance": round(distance, 1), "t": now})

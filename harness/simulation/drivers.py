@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
@@ -66,4 +67,9 @@ class PersonControls(Protocol):
     def hand_back_warning(self, distance: float, now: float) -> None:
         """The person is still in control `distance` metres before the road's end: tell them to
         hand back."""
+        ...
+
+    def drive_on(self, chain: Callable[[str], tuple[str, ...]]) -> None:
+        """The SUMO edges each road of the episode runs along, in driving order (episode_roads.py
+        `EpisodeRoads.chain`), given before the episode's first step."""
         ...

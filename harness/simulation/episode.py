@@ -162,8 +162,10 @@ class SumoEpisode:
         self.driver = driver
         self.observer = options.observer
         self.person = options.person
-        self.manual = (ManualDriving(options.person, EGO_ID, COMMIT_DISTANCE)
+        self.manual = (ManualDriving(options.person, EGO_ID, COMMIT_DISTANCE, self.roads.chain)
                        if options.person is not None and options.person.drives_by_hand else None)
+        if options.person is not None:
+            options.person.drive_on(self.roads.chain)
         self.mode = AUTOPILOT.name
         self.carried_takeover = False   # a person's takeover in a road's closing step, for the next road
         self.runs: list[RoadRun] = []

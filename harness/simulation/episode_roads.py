@@ -16,6 +16,7 @@ from trustroute.app.nets import net_for
 from trustroute.harness.simulation.episode_net import check_net_matches, check_readable, net_key
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.incidents.base import Scene
+from trustroute.harness.simulation.manual_driving import one_edge
 from trustroute.harness.simulation.real_roads import RealRoads, real_scene
 from trustroute.harness.simulation.sumo_start import Sumo, SumoConfig
 from trustroute.networks.real_net import is_imported, road_edges
@@ -39,6 +40,10 @@ class EpisodeRoads(Protocol):
 
     def offsets(self, road: str) -> dict[str, float]:
         """Edge id -> where it starts along the road (the edges the ego is on while on `road`)."""
+        ...
+
+    def chain(self, road: str) -> tuple[str, ...]:
+        """The SUMO edges `road` runs along, in driving order (its end is the last one's end)."""
         ...
 
     def place(self, scene: Scene, kind: str) -> Scene | None:
@@ -80,6 +85,9 @@ class BuiltRoads:
     def offsets(self, road: str) -> dict[str, float]:
         return {road: 0.0}
 
+    def chain(self, road: str) -> tuple[str, ...]:
+        return one_edge(road)
+
     def place(self, scene: Scene, kind: str) -> Scene:
         other_way = Road.parse(scene.road).reverse.id
         reverse = other_way if other_way in self.town.incidents else None
@@ -113,6 +121,9 @@ class ImportedRoads:
 
     def offsets(self, road: str) -> dict[str, float]:
         return self.real.offsets(road)
+
+    def chain(self, road: str) -> tuple[str, ...]:
+        return self.real.chain(road)
 
     def place(self, scene: Scene, kind: str) -> Scene | None:
         return real_scene(self.real, scene.road, kind, scene)

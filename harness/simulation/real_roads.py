@@ -56,6 +56,10 @@ class RealRoads:
         starts along the road."""
         return self._offsets[road]
 
+    def chain(self, road: str) -> tuple[str, ...]:
+        """The SUMO edges `road` runs along, in driving order."""
+        return self.roads[road].ids
+
     def edges(self) -> set[str]:
         """Every edge the town's roads run along."""
         return {edge for value in self.roads.values() for edge in value.ids}

@@ -43,13 +43,19 @@ autopilot takes over again only with the ego on a lane of its planned route (by 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 from trustroute.harness.simulation.driving_style import MANUAL
-from trustroute.harness.simulation.manual_driving import HOLD_MARGIN, hold_distance
+from trustroute.harness.simulation.manual_driving import (
+    HOLD_MARGIN,
+    RoadChain,
+    hold_distance,
+    one_edge,
+    to_road_end,
+)
 from trustroute.harness.simulation.manual_measures import TTC_RANGE, Sample, signed_offset, ttc_ahead
-from trustroute.networks.road import Road
 
 MODEL_RATE = 50.0            # Hz: the model's integration rate (at least 20 Hz whatever SUMO's step)
 KEEP_ROUTE = 1               # moveToXY: the nearest place on the ego's route
@@ -231,6 +237,7 @@ class ManualDriving:
     lane_index: int = 0               # the lane of its road the ego was in at the takeover
     edge: str = ""                    # the edge of its route it was on last (its own road)
     stranded: bool = False            # stopped off its route (`stopped_off_road`) until the hand-back
+    junctions: dict[str, tuple[str, str]] = field(default_factory=dict)   # edge -> (from, to) junction
 
     @classmethod
     def take_over(cls, sumo, vehicle_id: str, **options) -> ManualDriving:
@@ -269,8 +276,8 @@ class ManualDriving:
         to be given back once SUMO has it there (`restore_route`). So is a car that its last
         placement put on a road off its route (free placement maps the model's pose by itself).
         Taken over in a junction and never on a road of its route since, the ego is put on the
-        nearest lane open to cars of `ahead` (the episode's open road: the one after that
-        junction)."""
+        nearest lane open to cars of `ahead` (the first edge of the episode's open road: the one
+        after that junction)."""
         now_on = sumo.vehicle.getRoadID(self.vehicle_id)
         off_route = bool(now_on) and not now_on.startswith(":") and now_on not in self.route
         if self.where == "own_lane" and not self.stranded and not off_route:
@@ -295,7 +302,7 @@ class ManualDriving:
         if off_road(sumo, *front):
             return KEEP_ROUTE
         edge = sumo.simulation.convertRoad(*front, False, "passenger")[0]
-        return KEEP_ROUTE_FREE if edge in self.route or self.opposite(edge) else KEEP_ROUTE
+        return KEEP_ROUTE_FREE if edge in self.route or self.opposite(sumo, edge) else KEEP_ROUTE
 
     def observe(self, sumo, now: float) -> None:
         lane = sumo.vehicle.getLaneID(self.vehicle_id)
@@ -331,7 +338,7 @@ class ManualDriving:
         elif lane.startswith(":") or sumo.lane.getEdgeID(lane) in self.route:
             where = "own_lane"
         else:
-            where = "oncoming" if self.opposite(sumo.lane.getEdgeID(lane)) else "own_lane"
+            where = "oncoming" if self.opposite(sumo, sumo.lane.getEdgeID(lane)) else "own_lane"
         if where != self.where:
             kind = {"off_road": "off_road", "oncoming": "oncoming"}.get(where)
             if kind is None:
@@ -340,11 +347,22 @@ class ManualDriving:
                                 "y": round(self.pose.y, 2)})
             self.where = where
 
-    def opposite(self, edge: str) -> bool:
+    def opposite(self, sumo, edge: str) -> bool:
         """Whether `edge` runs against its own road or another road of its route (the oncoming
-        lane of the road it turns into, say, entered from the junction)."""
-        reverse = Road.parse_or_none(edge)
-        return reverse is not None and reverse.reverse.id in ([self.edge] if self.edge else []) + self.route
+        lane of the road it turns into, say, entered from the junction): it joins the junctions of
+        one of their edges the other way round, as the net has them (on a built town "V-U" against
+        "U-V"; on an imported town the net's own reverse edge of an edge of the road's chain)."""
+        if not edge or edge.startswith(":"):
+            return False
+        start, end = self.ends(sumo, edge)
+        own = [self.edge, *self.route]
+        return any(self.ends(sumo, mine) == (end, start) for mine in own if mine and not mine.startswith(":"))
+
+    def ends(self, sumo, edge: str) -> tuple[str, str]:
+        """The junctions `edge` runs from and to (read once per edge)."""
+        if edge not in self.junctions:
+            self.junctions[edge] = (sumo.edge.getFromJunction(edge), sumo.edge.getToJunction(edge))
+        return self.junctions[edge]
 
     def contacts(self, sumo, now: float) -> None:
         ego = corners(self.pose.x, self.pose.y, self.pose.angle, self.length, self.width)
@@ -397,11 +415,18 @@ class Wheel:
     (`ManualDriving.release`), short of the junction either way. A takeover after the junction
     ahead was chosen (the episode's open road is then the next one) is held at the end of the road
     the ego is on, braked as hard as it takes to stop HOLD_MARGIN short of it, or, in the junction
-    already, at the next road's commit point (`to_hold_point`)."""
+    already, at the next road's commit point (`to_hold_point`).
 
-    def __init__(self, vehicle_id: str, commit_distance: float = 0.0) -> None:
+    A road's end is the end of the last SUMO edge it runs along (`chain`, given by the episode:
+    the road itself on a built town, the net's own edges on an imported one), and the distance to
+    it is summed over the road's edges still ahead (manual_driving.py `to_road_end`)."""
+
+    def __init__(self, vehicle_id: str, commit_distance: float = 0.0, chain: RoadChain = one_edge) -> None:
         self.vehicle_id = vehicle_id
         self.commit_distance = commit_distance
+        self.chain = chain
+        self.open_road: str | None = None    # the episode's open road at the last step
+        self.behind: str | None = None       # the open road before it: the ego's own until it leaves it
         self.controls = Controls()
         self.driving: ManualDriving | None = None
         self.events: list[dict] = []     # every takeover's events, in order
@@ -424,12 +449,14 @@ class Wheel:
 
     def step(self, sumo, manual: bool, road: str | None = None) -> list[dict]:
         """One SUMO step (`road`: the episode's open road, None: no hold); the events it brought."""
+        if road is not None and road != self.open_road:
+            self.behind, self.open_road = self.open_road, road
         if not manual:
             if self.restore is not None and restore_route(sumo, self.vehicle_id, self.restore):
                 self.restore = None
             if self.driving is not None:   # handed back: SUMO drives on from the model's pose and speed
                 self.follow_route(sumo)   # the episode may have extended it in this very step
-                if self.driving.release(sumo, road):
+                if self.driving.release(sumo, None if road is None else self.chain(road)[0]):
                     self.restore = list(self.driving.route)
                 self.driving = None
                 sumo.vehicle.setSpeed(self.vehicle_id, -1)
@@ -502,21 +529,42 @@ class Wheel:
             return None
         commit = self.commit_distance + HOLD_MARGIN
         position = sumo.vehicle.getLanePosition(self.vehicle_id)
-        route = driving.route
+        rest = self.lane_length(sumo, lane) - position
+        route, chain = driving.route, self.chain(road)
+        length = self.edge_lengths(sumo)
         if lane.startswith(":"):   # (never the junction after `road`: the episode hands back before it)
-            if road not in route:
-                return None
-            rest = self.lane_length(sumo, lane) - position
-            return HoldPoint(rest + self.lane_length(sumo, f"{road}_0"), commit, False)
+            ahead = self.through_junction(sumo, chain, rest)
+            return None if ahead is None else HoldPoint(ahead, commit, False)
         edge = sumo.lane.getEdgeID(lane)
-        if edge == road:
-            return HoldPoint(self.lane_length(sumo, lane) - position, commit, False)
-        if road in route and edge in route[:route.index(road)]:
-            return HoldPoint(self.lane_length(sumo, lane) - position, HOLD_MARGIN, True)
-        if driving.opposite(edge):   # back along the oncoming lane, which starts at that junction
-            own = driving.edge == road
-            return HoldPoint(position, commit if own else HOLD_MARGIN, not own)
+        ahead = to_road_end(chain, edge, rest, length)
+        if ahead is not None:
+            return HoldPoint(ahead, commit, False)
+        if chain[0] in route and edge in route[:route.index(chain[0])]:   # on the road before it
+            own = None if self.behind is None else to_road_end(self.chain(self.behind), edge, rest, length)
+            return HoldPoint(rest if own is None else own, HOLD_MARGIN, True)
+        if driving.opposite(sumo, edge):   # back along the oncoming lane, which starts at that junction
+            own_road = driving.edge in chain
+            return HoldPoint(position, commit if own_road else HOLD_MARGIN, not own_road)
         return None
+
+    def through_junction(self, sumo, chain: tuple[str, ...], rest: float) -> float | None:
+        """From a junction `rest` metres before its end to the end of the road whose edges are
+        `chain`: a junction inside the road (between two of its edges, on an imported town) or the
+        one before it; None when the road is not on the ego's route."""
+        assert self.driving is not None
+        length = self.edge_lengths(sumo)
+        # SUMO's route index stays on the edge before the junction until the ego leaves it
+        edges, index = sumo.vehicle.getRoute(self.vehicle_id), sumo.vehicle.getRouteIndex(self.vehicle_id)
+        inside = to_road_end(chain, edges[index], rest, length) if 0 <= index < len(edges) else None
+        if inside is not None:
+            return inside
+        if chain[0] not in self.driving.route:
+            return None
+        return rest + sum(length(edge) for edge in chain)
+
+    def edge_lengths(self, sumo) -> Callable[[str], float]:
+        """An edge's length: its lane 0's."""
+        return lambda edge: self.lane_length(sumo, f"{edge}_0")
 
     def held(self, sumo, road: str) -> Controls:
         """The person's controls under the hold before the junction (see the class)."""

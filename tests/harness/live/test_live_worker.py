@@ -3,12 +3,14 @@ reaches SUMO and the logs, and the tracker decides exactly as it does for the sa
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
 import pandas as pd
 import pytest
 
+from trustroute.app.nets import net_for
 from trustroute.harness.live.view import next_junction, role
 from trustroute.harness.live.worker import (
     STATION_WAIT,
@@ -23,10 +25,14 @@ from trustroute.harness.live.worker import (
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE
 from trustroute.harness.simulation.episode_tracker import DrivenRoad, EpisodeTracker
 from trustroute.harness.simulation.manual_driving import WARN_DISTANCE
-from trustroute.harness.simulation.wheel_driving import OFF_ROUTE_LIMIT
+from trustroute.harness.simulation.manual_measures import oncoming_seconds
+from trustroute.harness.simulation.real_roads import RealRoads
+from trustroute.harness.simulation.wheel_driving import OFF_ROUTE_LIMIT, nearest_on
+from trustroute.harness.study.config import load_study_config
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.plan import plan_episodes
 from trustroute.harness.study.runner import run_planned_episode
+from trustroute.networks.real_net import road_edges
 
 from .conftest import tiny_config
 
@@ -168,6 +174,187 @@ def test_by_wheel_without_a_hand_back_the_ego_is_held_short_of_the_junction(tmp_
     assert (row["road_departures"], row["collisions"], row["oncoming_seconds"]) == (0, 0, 0.0)
     assert 0.0 < row["lateral_sd"] < 0.5 and 3.0 < row["manual_max_deceleration"] < 3.3
     assert row["manual_min_ttc"] > 0.0
+
+
+CSOMOR = """[study]
+name = "csomor-live"
+participants = 1
+seed = 1
+engine = "live"
+town = "csomor"
+specs = ["csomor5"]
+conditions = ["free"]
+"""
+
+
+def test_by_wheel_on_an_imported_town_the_ego_is_held_short_of_the_road_end(tmp_path):
+    """The same on `csomor`, an imported town: a road there runs along SUMO edges with ids of
+    their own, and junctions between them (real_roads.py). Taken over on the first edge of a road
+    of two, the accelerator held down, the car is held short of the road's commit point, never
+    drives into the next road in the person's hands, and the person hands back there."""
+    (tmp_path / "live.toml").write_text(CSOMOR)
+    config = load_study_config(tmp_path / "live.toml")
+    town = study_context(config).town
+    real = RealRoads(road_edges(town, net_for(town)), COMMIT_DISTANCE)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([], hand_back_when_warned=False)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
+    held, taken = [], []
+
+    def to_end(ego, road):   # metres to the end of the road's last edge, as the episode counts them
+        return real.length(road) - real.offsets(road)[ego.road] - ego.lane_position
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        chain = real.roads[road].ids
+        if not taken and len(chain) > 1 and ego.road == chain[0] and to_end(ego, road) > WARN_DISTANCE + 50:
+            taken.append((road, chain))
+            pipe.controls.append({"type": "takeover"})
+        if mode == "manual" and driver.wheel.pose is not None and not held:
+            pipe.controls.append(keep_lane(sumo, driver.wheel.pose))
+        if mode == "manual" and ego.speed == 0.0 and ego.road in real.offsets(taken[0][0]):
+            held.append((ego.time, ego.lane, round(to_end(ego, taken[0][0]), 2)))
+            if len(held) == 40:
+                pipe.controls.append({"type": "hand_back"})
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+                                 sumo_config=sumo_config(driver.options))
+    (road, chain), = taken
+    assert [e["type"] for e in driver.wheel.events] == ["hold"]   # in its lane all along
+    assert len(held) >= 40 and {(lane, left) for _, lane, left in held} == {held[0][1:]}   # in one place
+    assert held[0][2] > COMMIT_DISTANCE   # before the commit point, accelerator down
+    kinds = [m.get("kind") for m in pipe.sent if m["type"] == "warning"]
+    assert sorted(kinds) == ["hand_back", "hold"]   # told to hand back, and held (faster: held first)
+    ticks = record.kinematics
+    manual = ticks[ticks["mode"] == "manual"]
+    driven = {lane.rsplit("_", 1)[0] for lane in manual["lane"] if not lane.startswith(":")}
+    assert driven <= set(chain), (road, chain, driven)   # never into the next road
+    back = ticks["time"][(ticks["mode"] == "auto") & (ticks["time"] > manual["time"].min())].min()
+    assert back > held[39][0] and record.summary["end_reason"] == "accepted"
+    handed = [e["type"] for e in driver.events if e["type"] != "control"]
+    assert handed == ["takeover", "hand_back"]   # handed back by the person, not at the commit point
+
+
+def test_by_wheel_on_an_imported_town_a_takeover_after_the_choice_is_held_at_its_road_end(tmp_path):
+    """On `csomor`, taken over after the junction ahead was chosen (the open road is the next one,
+    the ego still on an edge of the road before it), the accelerator held down: the car is held
+    at the end of the road it is on, never drives into the next road in the person's hands, and
+    the person hands back there."""
+    (tmp_path / "live.toml").write_text(CSOMOR)
+    config = load_study_config(tmp_path / "live.toml")
+    real = RealRoads(road_edges(study_context(config).town, net_for(study_context(config).town)),
+                     COMMIT_DISTANCE)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([], hand_back_when_warned=False)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
+    held, taken = [], []
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        behind = not ego.road.startswith(":") and ego.road not in real.offsets(road)
+        if not taken and ego.time > 5.0 and behind:   # the first road's choice is behind the ego
+            taken.append((ego.road, road))
+            pipe.controls.append({"type": "takeover"})
+        if mode == "manual" and driver.wheel.pose is not None and not held:
+            pipe.controls.append(keep_lane(sumo, driver.wheel.pose))
+        if mode == "manual" and ego.speed == 0.0:
+            held.append((ego.time, ego.lane, round(sumo.lane.getLength(ego.lane) - ego.lane_position, 2)))
+            if len(held) == 20:
+                pipe.controls.append({"type": "hand_back"})
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+                                 sumo_config=sumo_config(driver.options))
+    (edge, road), = taken
+    assert [e["type"] for e in driver.wheel.events] == ["hold"]
+    assert len(held) >= 20 and {(lane, left) for _, lane, left in held} == {held[0][1:]}   # in one place
+    assert held[0][1].rsplit("_", 1)[0] == edge and held[0][2] > 0.0   # short of its road's end
+    ticks = record.kinematics
+    manual = ticks[ticks["mode"] == "manual"]
+    assert not set(manual["lane"].str.rsplit("_", n=1).str[0]) & set(real.roads[road].ids)   # not into it
+    handed = [e["type"] for e in driver.events if e["type"] != "control"]
+    assert handed == ["takeover", "hand_back"] and record.summary["end_reason"] == "accepted"
+
+
+def follow(shape, pose) -> dict:
+    """A person by wheel following the polyline `shape` (SUMO's x, y points, in the ego's
+    direction) from the model's `pose`: steering against the heading's error and the lateral
+    offset (left positive), the accelerator lightly down."""
+    x, y, angle = nearest_on(shape, pose.x, pose.y)
+    radians = math.radians(angle)
+    lateral = (pose.x - x) * -math.cos(radians) + (pose.y - y) * math.sin(radians)
+    error = (angle - pose.angle + 180.0) % 360.0 - 180.0
+    steer = 0.05 * error + 0.3 * lateral
+    return {"type": "control", "source": "wheel", "steer": max(-0.3, min(0.3, steer)), "throttle": 0.2,
+            "brake": 0.0}
+
+
+def test_by_wheel_on_an_imported_town_the_oncoming_lane_is_the_net_s_reverse_edge(tmp_path):
+    """On `csomor`, taken over on a long edge of a two-way street (the net has an edge between the
+    same junctions the other way round: its oncoming lane), the person steers into the oncoming
+    lane and back: the `oncoming` event is logged, then `own_lane`, the time there is measured,
+    and a hand-back asked for there is refused (the person hands back in their lane later)."""
+    (tmp_path / "live.toml").write_text(CSOMOR)
+    config = load_study_config(tmp_path / "live.toml")
+    real = RealRoads(road_edges(study_context(config).town, net_for(study_context(config).town)),
+                     COMMIT_DISTANCE)
+    task = plan_episodes(config)[0]
+    pipe = Pipe([], hand_back_when_warned=False)
+    driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
+    taken: list[tuple[str, str, float]] = []
+    refused: list[bool] = []
+
+    def reverse_of(sumo, edge):
+        ends = (sumo.edge.getToJunction(edge), sumo.edge.getFromJunction(edge))
+        reverse = lanes_of(edge).reverse_edge
+        swapped = reverse is not None and (sumo.edge.getFromJunction(reverse),
+                                           sumo.edge.getToJunction(reverse)) == ends
+        return reverse if swapped else None
+
+    def road_of(edge):
+        return next(road for road, value in real.roads.items() if edge in value.ids)
+
+    def lanes_of(edge):
+        return next(lanes for lanes in real.roads[road_of(edge)].edges if lanes.edge == edge)
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        if not taken and ego.road in real.roads[road].ids and ego.time > 2.0:
+            rest = sumo.lane.getLength(ego.lane) - ego.lane_position
+            reverse = reverse_of(sumo, ego.road)
+            if reverse is not None and rest > 150.0 and ego.speed > 3.0:
+                taken.append((ego.road, reverse, ego.time))
+                pipe.controls.append({"type": "takeover"})
+        if mode != "manual" or driver.wheel.pose is None or not taken:
+            return
+        edge, reverse, since = taken[0]
+        lanes = lanes_of(edge)
+        own = sumo.lane.getShape(f"{edge}_{lanes.driving_lane}")
+        there = sumo.lane.getShape(f"{reverse}_{lanes.reverse_lane}")[::-1]   # in the ego's direction
+        seconds = ego.time - since
+        pipe.controls.append(follow(there if 1.0 < seconds < 5.0 else own, driver.wheel.pose))
+        if seconds > 3.5 and not refused:   # in the oncoming lane: the hand-back is refused
+            refused.append(driver.wheel.may_hand_back)
+            pipe.controls.append({"type": "hand_back"})
+        if seconds > 9.0 and len(taken) == 1 and driver.wheel.may_hand_back:
+            taken.append((edge, reverse, ego.time))
+            pipe.controls.append({"type": "hand_back"})
+
+    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+                                 sumo_config=sumo_config(driver.options))
+    edge, reverse, since = taken[0]
+    kinds = [e["type"] for e in driver.wheel.events]
+    assert kinds[:2] == ["oncoming", "own_lane"], (edge, reverse, kinds)
+    assert 1.0 < oncoming_seconds(driver.wheel.events, since, math.inf) < 6.0
+    ticks = record.kinematics
+    assert f"{reverse}_{lanes_of(edge).reverse_lane}" in set(ticks["lane"][ticks["mode"] == "manual"])
+    warnings = [m["kind"] for m in pipe.sent if m["type"] == "warning"]
+    assert refused == [False] and "back_to_lane" in warnings, warnings
+    handed = [(e["type"], e["t"]) for e in driver.events if e["type"] != "control"]
+    assert [kind for kind, _ in handed] == ["takeover", "hand_back", "hand_back"]   # the first refused
+    assert len(taken) == 2   # handed back in its lane
+    manual = ticks["time"][ticks["mode"] == "manual"]
+    assert manual.min() < handed[1][1] < handed[2][1] <= manual.max() + 0.5
+    assert record.summary["end_reason"] == "accepted"
 
 
 # Simulated times of a takeover on the tiny study's route (E-A, A-F, F-G, G-I, ...): on the first
