@@ -264,11 +264,13 @@ def study_against_bare(participants: int = 21, workers: int = 2,
     config = study_config_from_dict({"study": {
         "name": "bench-study-vs-bare", "participants": participants, "seed": 1, "engine": "sumo",
         "specs": ["phi1", "phi2"], "conditions": list(conditions)}}, "bench_episode", Path.cwd())
-    validate_study(config)   # synthesizes a missing "aware" policy into the cache before the clock starts
+    # the study's context, built before the clock starts (a missing "aware" policy synthesized into
+    # the cache), and handed to the run
+    context = validate_study(config)
     load = [os.getloadavg()[0]]
     with tempfile.TemporaryDirectory(prefix="trustroute-bench-") as folder:
         started = time.perf_counter()
-        run, _ = run_and_consolidate(config, Path(folder) / "study", workers, None, progress=False,
+        run, _ = run_and_consolidate(context, Path(folder) / "study", workers, None, progress=False,
                                      echo=lambda *_: None)
         study_seconds = time.perf_counter() - started
         roads = read_roads(Path(folder) / "study")

@@ -103,9 +103,7 @@ IO_CACHES = frozenset({
 })
 # Caches of computed objects still to be replaced by the object passed down from where it is made
 # (a function's cache that goes must leave this list).
-COMPUTED_CACHES = frozenset({
-    "trustroute.harness.study.context:_CONTEXTS",
-})
+COMPUTED_CACHES: frozenset[str] = frozenset()
 MAPPINGS = {"dict", "OrderedDict", "defaultdict", "WeakValueDictionary", "WeakKeyDictionary"}
 MEMOISERS = {"cache", "lru_cache"}
 
@@ -237,11 +235,11 @@ PENDING_IMPORTS = {
         "trustroute.harness.study.context", "trustroute.harness.study.parts",
         "trustroute.harness.study.replay", "trustroute.networks.sumo_net"},
     "trustroute.harness.live.scripted": {
-        "trustroute.app.drivers", "trustroute.harness.live.server", "trustroute.harness.study.context",
+        "trustroute.app.drivers", "trustroute.harness.live.server",
         "trustroute.participants.synthetic_driver"},
     "trustroute.harness.live.server": {
         "numpy", "trustroute.core.dataset", "trustroute.core.validation", "trustroute.harness.live.view",
-        "trustroute.harness.study.context", "trustroute.harness.study.expected",
+        "trustroute.harness.study.expected",
         "trustroute.harness.study.manifest", "trustroute.harness.study.resume",
         "trustroute.harness.study.runner", "trustroute.networks.sumo_net"},
     "trustroute.harness.live.worker": {

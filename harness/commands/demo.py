@@ -40,15 +40,16 @@ DEMO_TOWNS: dict[str, dict] = {
 DEFAULT_TOWN = "town01_carla"
 
 
-def record_episode(config, study_dir: Path, episode_id: str) -> Path:
-    """Replay one planned episode in SUMO with its seeds and write `<study>/<episode_id>.rrd`."""
+def record_episode(context, study_dir: Path, episode_id: str) -> Path:
+    """Replay one planned episode of the study whose context is `context` (the run's) in SUMO with
+    its seeds and write `<study>/<episode_id>.rrd`."""
     from trustroute.harness.study.plan import plan_episodes
     from trustroute.harness.study.runner import run_planned_episode
 
-    task = next(t for t in plan_episodes(config) if t.episode_id == episode_id)
+    task = next(t for t in plan_episodes(context.config) if t.episode_id == episode_id)
     path = Path(study_dir) / f"{episode_id}.rrd"
     if not path.exists():
-        run_planned_episode(config, task, rrd_path=path)
+        run_planned_episode(context, task, rrd_path=path)
     return path
 
 
@@ -110,7 +111,7 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
     if ENGINES[engine].records:
         episode_id = planned_episode_id(0, study["specs"][0], "aware")
         try:
-            rrd = record_episode(config, run.study_dir, episode_id)
+            rrd = record_episode(run.context, run.study_dir, episode_id)
             paths["rrd"] = rrd
             lines.append(f"episode recording: {rrd}  (open with: {_rerun_command()} {rrd})")
         except Exception as exc:  # the study is done; a failed recording must not hide it

@@ -28,10 +28,12 @@ import json
 import math
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 from trustroute.harness.live.protocol import BURST, RATE, TokenBucket
 from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.context import StudyContext, study_context
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.networks.road import Road
 
@@ -84,11 +86,16 @@ class ScriptedParticipant:
                         key=lambda t: t.position)
         self.tasks = [warm_up_task(self.config, self.participant), *trials]
 
+    @cached_property
+    def context(self) -> StudyContext:
+        """The study's context, built once for this participant's drivers (it plays in a process of
+        its own, or beside the server: either way it holds its own)."""
+        return study_context(self.config)
+
     def new_driver(self, task: EpisodeTask):
         from trustroute.app.drivers import synthetic_driver
-        from trustroute.harness.study.context import study_context
 
-        model = study_context(self.config).driver_model(task.participant)
+        model = self.context.driver_model(task.participant)
         return synthetic_driver(model, task.driver_rng(), report_accuracy=self.config.report_accuracy)
 
     def respond(self, message: dict) -> list[dict]:

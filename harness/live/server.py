@@ -1,10 +1,11 @@
 """The live study's directory and participants: the one object the web application serves.
 
 `LiveStudy.open()` does what `trustroute study` does before it writes anything (every input
-validated and the "aware" policies synthesized: `validate_study`), takes the study directory's
-lock (`study_lock`: a second server, or a `trustroute study`, on the same directory is refused
-with the holder named) and marks the directory as this config's (`check_study_dir`). The
-directory then holds, besides a study's files,
+validated and the "aware" policies synthesized: `validate_study`; the study's context it builds
+is held as `LiveStudy.context`, for the expected values, every consolidation and the station's
+view of the net), takes the study directory's lock (`study_lock`: a second server, or a
+`trustroute study`, on the same directory is refused with the holder named) and marks the
+directory as this config's (`check_study_dir`). The directory then holds, besides a study's files,
 
     live/participants.json   each created participant: SHA-256 of their token, label, consent,
                              whether the warm-up drive is done
@@ -35,6 +36,7 @@ from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study see
 from trustroute.harness.live.withdraw import read_registry, withdraw_participant
 from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions, start_fork_server
 from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.context import StudyContext
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.participants.questionnaires import questionnaire_plan
 
@@ -95,6 +97,7 @@ class LiveStudy:
         self.done: set[str] = set()
         self.lock = threading.RLock()
         self.expected: dict = {}
+        self.context: StudyContext   # the study's context, built by `open` (`check_before_writing`)
         self.attempts = AttemptLog(self.study_dir, LIVE_DIR)
         self.questionnaires = questionnaire_plan(config.questionnaires, Path(config.source_path).parent,
                                                  config.source_path)
@@ -107,13 +110,13 @@ class LiveStudy:
         from trustroute.harness.study.resume import check_study_dir, finished_episodes
         from trustroute.harness.study.runner import DEFAULT_ATTEMPTS, check_before_writing, study_lock
 
-        check_before_writing(self.config, self.study_dir, None, DEFAULT_ATTEMPTS, False)
+        self.context = check_before_writing(self.config, self.study_dir, None, DEFAULT_ATTEMPTS, False)
         self._stack.enter_context(study_lock(self.study_dir))
         start_fork_server()   # it imports the episodes' modules while the study opens
         try:
             check_study_dir(self.study_dir, self.config, self.config.content_hash)
             self.done = finished_episodes(self.study_dir, self.tasks)[0]
-            self.expected = expected_values(self.config)
+            self.expected = expected_values(self.context)
             self.load_participants()
             atomic_write_text(self.study_dir / LIVE_DIR / CONSENT_FILE, self.consent_text,
                               "the consent text shown", "free disk space")   # exported with the data
@@ -260,7 +263,7 @@ class LiveStudy:
         with self.lock:
             if part_path(self.study_dir, task.episode_id).exists():
                 self.done.add(task.episode_id)
-            consolidate(self.study_dir, self.config, self.tasks, self.config.content_hash, self.expected,
+            consolidate(self.study_dir, self.context, self.tasks, self.config.content_hash, self.expected,
                         {"backend": "live", "pace": self.options.pace, "finished_utc":
                          time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
 
@@ -268,9 +271,8 @@ class LiveStudy:
         """The lanes of the net the study's town drives (`net_for`: an imported town's own net), for
     the station's view (harness/live/view.py)."""
         from trustroute.harness.live.view import net_view
-        from trustroute.harness.study.context import study_context
 
-        return net_view(str(net_for(study_context(self.config).town)))
+        return net_view(str(net_for(self.context.town)))
 
     # -- downloads ------------------------------------------------------------------------------
     def files(self) -> list[str]:

@@ -25,7 +25,7 @@ import numpy as np
 from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode
 from trustroute.harness.simulation.stepping import run_to_end
 from trustroute.harness.simulation.sumo_start import SumoConfig
-from trustroute.harness.study.context import study_context
+from trustroute.harness.study.context import StudyContext
 from trustroute.networks.road import Road
 from trustroute.networks.sumo_net import pedestrian_roads
 from trustroute.networks.town import NO_INCIDENT, Town
@@ -102,11 +102,12 @@ def warm_up_plan(town: Town, start: str, study_seed: int, participant: int) -> t
     return route, draw_incidents(town, route, rng)
 
 
-def run_warm_up(config, task, driver, observer, person=None, sumo_config=None):
-    """The warm-up episode `task` (server.warm_up_task) on its drawn route and incidents, with the
-    remote `driver` (and `person`, their controls at the wheel, and SUMO's settings, as
-    run_planned_episode takes them); the EpisodeRecord."""
-    setup = study_context(config).setup(task.spec, task.condition)
+def run_warm_up(context: StudyContext, task, driver, observer, person=None, sumo_config=None):
+    """The warm-up episode `task` (server.warm_up_task) of the study whose context is `context`, on
+    its drawn route and incidents, with the remote `driver` (and `person`, their controls at the
+    wheel, and SUMO's settings, as run_planned_episode takes them); the EpisodeRecord."""
+    config = context.config
+    setup = context.setup(task.spec, task.condition)
     town = setup.town
     route, incidents = warm_up_plan(town, setup.spec.start, config.seed, task.participant)
     drawn = DrawnTown(**{f.name: getattr(town, f.name) for f in fields(Town) if f.init}, drawn=incidents)

@@ -24,6 +24,7 @@ from trustroute.core.output_files import atomic_write_text
 from trustroute.core.validation import read_json
 from trustroute.harness.live.answers import write_answer_table
 from trustroute.harness.live.attempts import AttemptLog
+from trustroute.harness.study.context import study_context
 from trustroute.harness.study.manifest import consolidate
 from trustroute.harness.study.plan import plan_episodes
 from trustroute.harness.study.replay import study_config_from_manifest
@@ -114,7 +115,7 @@ def withdraw_participant(study_dir: Path, participant: int, by: str | None = Non
     records["participants"][str(participant)] = {"withdrawn": True, "withdrawn_utc": withdrawn_utc}
     write_registry(study_dir, records)
     if config is not None:
-        consolidate(study_dir, config, plan_episodes(config), manifest["config_hash"],
+        consolidate(study_dir, study_context(config), plan_episodes(config), manifest["config_hash"],
                     manifest.get("expected"), manifest.get("run"))
     if (study_dir / ATTEMPTS_FILE).exists() or (study_dir / LIVE_DIR / JOURNAL).exists():
         AttemptLog(study_dir, LIVE_DIR).write()

@@ -410,14 +410,15 @@ def episode_worker(config, study_dir: str, task, connection, options: LiveOption
     from trustroute.harness.study.runner import run_planned_episode
     die_with_server(server_pid)   # a killed server leaves no episode running
     try:
-        levels = study_context(config).driver_model(task.participant).trust_levels
+        context = study_context(config)   # this process's own, built once for its episode
+        levels = context.driver_model(task.participant).trust_levels
         driver = RemoteDriver(connection, levels, initial_trust, options, episode_id=task.episode_id)
         connection.send({"type": "episode_start", "episode_id": task.episode_id, "trust": driver.trust})
         if task.position < 0:   # the warm-up: a route and incidents of its own (harness/live/warmup.py)
-            record = run_warm_up(config, task, driver, driver.observe, person=driver,
+            record = run_warm_up(context, task, driver, driver.observe, person=driver,
                                  sumo_config=sumo_config(options))
         else:
-            record = run_planned_episode(config, task, driver=driver, observer=driver.observe, person=driver,
+            record = run_planned_episode(context, task, driver=driver, observer=driver.observe, person=driver,
                                          sumo_config=sumo_config(options))
         driver.await_last_answer()
         if not options.lockstep:

@@ -124,8 +124,8 @@ class StudyConfig:
     belief_source: str | None = None
 
     def __hash__(self) -> int:
-        # Every field, [population] included: configs that differ only there must never share a
-        # cached study context (harness/study/context.py). The dict is hashed as canonical JSON.
+        # Every field, [population] included: configs that differ only there hash apart, equal
+        # configs hash alike (the generated hash would fail on the dicts, hashed as canonical JSON).
         raw = ("population", "questionnaires")
         values = tuple(getattr(self, f.name) for f in fields(self) if f.name not in raw)
         return hash((values, json.dumps([self.population, self.questionnaires], sort_keys=True, default=str)))

@@ -1,14 +1,15 @@
 """The study's context: what every episode of a study shares, built from the config alone.
 
 Town, nominal driver model, specs, episode setups, the policies of every (spec, condition) and the
-participants' driver models. Built once per process and cached by the config (StudyConfig's
-equality covers every setting, [population] included); the runner (harness/study/runner.py), the
-expected values (harness/study/expected.py) and the demo read it from here.
+participants' driver models. `study_context` builds it; whoever runs the study builds it once and
+hands it down: the runner (harness/study/runner.py: `validate_study` builds it before any worker,
+the workers forked after that inherit it, and the expected values and the consolidation are given
+it), the live study (harness/live/server.py, and each live episode's process), replay, planning
+and the benchmarks.
 """
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -106,25 +107,6 @@ def robust_condition_policy(town: Town, spec: Spec, config: StudyConfig,
     return policy, problem.driver, problem.spec
 
 
-_CONTEXTS: OrderedDict[StudyConfig, StudyContext] = OrderedDict()
-MAX_CONTEXTS = 4
-
-
-def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
-    """The study's shared context, built once per process and cached by the config alone (equal
-    configs, every setting and the [population] table included, share one context; `progress`
-    only shows bars while policies are synthesized, in the main process). Workers forked after
-    `validate_study` inherit the main process's context, so they load no policy again; the
-    consolidation's expected values reuse it too."""
-    context = _CONTEXTS.get(config)
-    if context is None:
-        context = _build_study_context(config, progress)
-        _CONTEXTS[config] = context
-        while len(_CONTEXTS) > MAX_CONTEXTS:
-            _CONTEXTS.popitem(last=False)
-    return context
-
-
 def load_study_inputs(town_path: str | Path | None, driver_path: str | Path | None,
                       spec_paths) -> tuple[Town, DriverModel, dict[str, Spec]]:
     """(town, nominal driver model, {spec name: Spec}) of a study: every spec checked against the
@@ -136,7 +118,10 @@ def load_study_inputs(town_path: str | Path | None, driver_path: str | Path | No
     return town, nominal, specs
 
 
-def _build_study_context(config: StudyConfig, progress: bool) -> StudyContext:
+def study_context(config: StudyConfig, progress: bool = False) -> StudyContext:
+    """Build the study's context from the config alone (`progress`: bars while policies are
+    synthesized, in the main process). Each call builds a new one: the caller holds it and passes
+    it to what needs it (workers forked after it is built inherit it and load no policy again)."""
     town, nominal, specs = load_study_inputs(config.town, config.driver_model, config.specs)
     setups = {
         name: EpisodeSetup(

@@ -13,19 +13,19 @@ from pathlib import Path
 
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.context import StudyContext, aware_policy_path, belief_rule, study_context
+from trustroute.harness.study.context import StudyContext, aware_policy_path, belief_rule
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 
-def expected_values(config: StudyConfig) -> dict:
-    """Exact value of each (spec, condition) policy for the nominal driver (policies.evaluation.plain),
-    and the synthesized bounds when the policy carries them."""
+def expected_values(context: StudyContext) -> dict:
+    """Exact value of each (spec, condition) policy of the study's context for the nominal driver
+    (policies.evaluation.plain), and the synthesized bounds when the policy carries them."""
     from trustroute.policies.belief.problem import dfa_is_hidden
     from trustroute.policies.evaluation.settings import EvaluationSettings
     from trustroute.policies.evaluation.trust_state import evaluate_joint as evaluate
     from trustroute.policies.model.trust_pomdp import build_pomdp
 
-    context = study_context(config)
+    config = context.config
     pomdp = build_pomdp(context.town, context.nominal)
     condition_path = dict(zip(config.condition_names, config.conditions, strict=True))
     out: dict = {}

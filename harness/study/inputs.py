@@ -28,13 +28,13 @@ from pathlib import Path
 
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
-from trustroute.harness.study.config import NAMED_CONDITIONS, StudyConfig
+from trustroute.harness.study.config import NAMED_CONDITIONS
 from trustroute.harness.study.context import (
+    StudyContext,
     aware_horizon,
     aware_policy_path,
     belief_rule,
     robust_problem,
-    study_context,
 )
 from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
@@ -99,9 +99,9 @@ def _store_population(study_dir: Path, record: Record, path: str) -> str:
     return _write(study_dir, record, text.encode(), Path(path).name, path)
 
 
-def _cached_policies(config: StudyConfig) -> list[Path]:
+def _cached_policies(context: StudyContext) -> list[Path]:
     """The policy-cache entries the study's "aware" and "robust" conditions were read from."""
-    context = study_context(config)
+    config = context.config
     paths = []
     for spec in context.specs.values():
         if "aware" in config.conditions:
@@ -120,10 +120,11 @@ def _cached_policies(config: StudyConfig) -> list[Path]:
     return [p for p in paths if p.is_file()]
 
 
-def store_inputs(study_dir: Path, config: StudyConfig) -> tuple[dict, dict]:
-    """Copy the study's inputs into `study_dir/inputs`; return (the config as the manifest records
-    it, every path relative to the study directory; the `inputs` record)."""
+def store_inputs(study_dir: Path, context: StudyContext) -> tuple[dict, dict]:
+    """Copy the inputs of the study (its context's) into `study_dir/inputs`; return (the config as
+    the manifest records it, every path relative to the study directory; the `inputs` record)."""
     study_dir = Path(study_dir)
+    config = context.config
     record: Record = {}
     recorded = json.loads(json.dumps(asdict(config), default=str))
     recorded["specs"] = [_store_file(study_dir, record, p) for p in config.specs]
@@ -136,7 +137,7 @@ def store_inputs(study_dir: Path, config: StudyConfig) -> tuple[dict, dict]:
     for key in ("robust_population", "driver_population"):
         value = getattr(config, key)
         recorded[key] = None if value is None else _store_population(study_dir, record, value)
-    for path in _cached_policies(config):
+    for path in _cached_policies(context):
         _store_file(study_dir, record, path, study_dir / POLICIES_DIR)
     recorded["policy_cache"] = POLICIES_DIR
     recorded["output"] = None   # the directory is wherever it is copied to

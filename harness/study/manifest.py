@@ -50,7 +50,7 @@ from trustroute.core.dataset import (
 )
 from trustroute.core.output_files import atomic_write_text
 from trustroute.harness.simulation.manual_measures import episode_measures
-from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.context import StudyContext
 from trustroute.harness.study.inputs import store_inputs
 from trustroute.harness.study.parts import read_failures
 from trustroute.harness.study.plan import EpisodeTask, participant_types
@@ -113,18 +113,20 @@ def _reported(reports: pa.ChunkedArray) -> tuple[float | None, int]:
 
 def consolidate(
     study_dir: Path,
-    config: StudyConfig,
+    context: StudyContext,
     tasks: list[EpisodeTask],
     config_hash: str,
     expected: dict | None = None,
     run_info: dict | None = None,
     progress: bool = False,
 ) -> dict:
-    """Write episodes/roads/kinematics Parquet files and manifest.json; return the manifest.
-    Raises DamagedParts (after moving them aside) when a part fails verification."""
+    """Write episodes/roads/kinematics Parquet files and manifest.json of the study whose context is
+    `context` (its config; the inputs stored with it); return the manifest. Raises DamagedParts
+    (after moving them aside) when a part fails verification."""
     from tqdm import tqdm
 
     study_dir = Path(study_dir)
+    config = context.config
     types = participant_types(config)
     episode_rows, roads_tables, kinematics_tables, incident_tables = [], [], [], []
     parts, damaged = read_parts(study_dir, tasks)
@@ -172,7 +174,7 @@ def consolidate(
         write_table(pa.concat_tables(incident_tables), study_dir / INCIDENTS_FILE)
     failures = read_failures(study_dir)
 
-    recorded_config, inputs = store_inputs(study_dir, config)
+    recorded_config, inputs = store_inputs(study_dir, context)
     manifest = {
         "study": config.name,
         "config_path": recorded_config["source_path"],

@@ -24,7 +24,7 @@ import numpy as np
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.model_engine import simulate_batch
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.context import study_context
+from trustroute.harness.study.context import StudyContext
 from trustroute.harness.study.latin_square import williams_rows
 from trustroute.participants.driver_model import DriverModel
 
@@ -87,12 +87,13 @@ def participant_sizes(spec: str, cells: int) -> list[int]:
     return list(dict.fromkeys(planned_participants(n, cells) for n in range(low, high + 1, step)))
 
 
-def simulate_studies(config: StudyConfig, participants: int, studies: int, rng: np.random.Generator,
+def simulate_studies(context: StudyContext, participants: int, studies: int, rng: np.random.Generator,
                      model: ParticipantModel | None = None) -> SimulatedStudies:
-    """`studies` studies of `participants` participants of `config` on the model engine, drawn from
-    `rng` (module docstring). model: the participants (default: the config's driver model)."""
+    """`studies` studies of `participants` participants of the study whose context is `context`, on
+    the model engine, drawn from `rng` (module docstring). model: the participants (default: the
+    config's driver model)."""
 
-    context = study_context(config)
+    config = context.config
     total = studies * participants
     accuracy, drawn = config.report_accuracy, None
     if model is None:

@@ -23,6 +23,7 @@ import pandas as pd
 from trustroute.app.engines import ENGINES
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.context import study_context
 from trustroute.harness.study.manifest import MANIFEST_FILE, package_versions
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 
@@ -221,7 +222,7 @@ def replay_episode(
 
         check_display()
         sumo_config = SumoConfig(gui=True)
-    record = run_planned_episode(config, task, rrd_path=rrd_path, sumo_config=sumo_config)
+    record = run_planned_episode(study_context(config), task, rrd_path=rrd_path, sumo_config=sumo_config)
     difference = compare_roads(logged, record.roads)
     if difference is not None:
         from trustroute.harness.study.manifest import git_revision

@@ -1,18 +1,21 @@
 """Running a study: plan, skip what is done, run the rest on a backend, consolidate.
 
-One worker function, `run_unit(config, study_dir, unit)`, runs a unit of episodes and writes their
+One worker function, `run_unit(study_dir, context, unit)`, runs a unit of episodes and writes their
 parts; it never raises (an error comes back as a failed `EpisodeOutcome`). A unit is one episode
 (`run_task`: its own part), or on the model engine a batch of consecutive episodes (`run_batch`:
 one batch part, harness/study/parts.py), since a model-engine episode takes about a millisecond
 and a part file per episode would cost more than the episode. Retries run episode by episode,
 so an episode that fails a batch (or whose worker died with it) is isolated on its retry. Three
 backends hand it units: in-process (`workers=1`), a local process pool (`workers=N`), and Dask distributed
-(`scheduler="ADDRESS"`, or `scheduler="local"` for a local Dask cluster). Each worker process
-builds the study's context (town, specs, policies, participants' driver models) once, from the
-config alone (harness/study/context.py), so nothing large travels with the tasks and the result
-cannot depend on the backend. A failed episode (an error, or its worker process dying) is retried up to
-`attempts - 1` times (default: once); if it still fails, every attempt's reason is recorded in
-failures/ and the study goes on. A rerun resumes: valid parts are skipped, damaged parts re-run.
+(`scheduler="ADDRESS"`, or `scheduler="local"` for a local Dask cluster). The study's context
+(town, specs, policies, participants' driver models: harness/study/context.py) is built once,
+by `validate_study` before any worker starts, and handed to `run_unit`: the pool's workers are
+forked after it and inherit it, a Dask cluster gets one copy per worker (scattered before the
+tasks), so nothing large travels with the tasks and the result cannot depend on the backend. The
+consolidation is given the same context (the expected values, the inputs it stores). A failed
+episode (an error, or its worker process dying) is retried up to `attempts - 1` times (default:
+once); if it still fails, every attempt's reason is recorded in failures/ and the study goes on.
+A rerun resumes: valid parts are skipped, damaged parts re-run.
 
 Nothing is written before every input has validated (town, driver model, specs, policies,
 population: `study_context`) and the output directory is known to be writable; a study directory
@@ -29,7 +32,7 @@ import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -38,7 +41,7 @@ from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import StudyConfig
-from trustroute.harness.study.context import study_context
+from trustroute.harness.study.context import StudyContext, study_context
 from trustroute.harness.study.expected import expected_values, fallback_only_warnings
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import sync_parts, write_batch_part, write_failure, write_part_tables
@@ -83,6 +86,7 @@ class StudyRun:
     retried: int
     seconds: float
     backend: str
+    context: StudyContext | None = field(default=None, repr=False, compare=False)  # the one it ran with
 
 
 def engine_function(engine: str) -> Callable:
@@ -98,18 +102,19 @@ def recording_path(study_dir: Path, episode_id: str) -> Path:
     return Path(study_dir) / RECORDINGS_DIR / f"{episode_id}.rrd"
 
 
-def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path | None = None,
+def run_planned_episode(context: StudyContext, task: EpisodeTask, rrd_path: Path | None = None,
                         sumo_config: SumoConfig | None = None, driver: Driver | None = None,
                         observer: Callable | None = None, person: PersonControls | None = None
                         ) -> EpisodeRecord:
-    """Run the planned episode `task` exactly as the study runs it: the participant's driver model
+    """Run the planned episode `task` of the study whose context is `context` exactly as the study
+    runs it: the participant's driver model
     (population draw), the driver's Generator from the task's seed sequence (so the same initial trust
     and every later draw), SUMO's seed, the cell's setup and policy. Returns the EpisodeRecord.
 
     rrd_path, sumo_config (e.g. sumo-gui), observer and person apply to the SUMO engines only
     ("sumo", and "live", where `driver` is the remote person of harness/live in place of the
     synthetic driver and `person` their controls at the wheel)."""
-    context = study_context(config)
+    config = context.config
     engine = ENGINES[config.engine]
     if driver is None:
         driver = synthetic_driver(context.driver_model(task.participant), task.driver_rng(),
@@ -128,12 +133,13 @@ def run_planned_episode(config: StudyConfig, task: EpisodeTask, rrd_path: Path |
     return run(setup, policy, driver, task.episode_id, task.seed, options)
 
 
-def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeOutcome:
+def run_task(context: StudyContext, study_dir: str, task: EpisodeTask) -> EpisodeOutcome:
     """Run one episode and write its part. Never raises: errors come back in the outcome."""
     started = time.perf_counter()
     try:
-        rrd = recording_path(Path(study_dir), task.episode_id) if task.episode_id in config.record else None
-        record = run_planned_episode(config, task, rrd_path=rrd)
+        recorded = task.episode_id in context.config.record
+        rrd = recording_path(Path(study_dir), task.episode_id) if recorded else None
+        record = run_planned_episode(context, task, rrd_path=rrd)
         write_part_tables(Path(study_dir), task, record.summary, record.tables())
     except Exception as exc:  # one bad episode must never stop the study
         return EpisodeOutcome(
@@ -146,7 +152,7 @@ def run_task(config: StudyConfig, study_dir: str, task: EpisodeTask) -> EpisodeO
     return EpisodeOutcome(task.episode_id, True, wall_seconds=time.perf_counter() - started)
 
 
-def run_batch(config: StudyConfig, study_dir: str, tasks: tuple[EpisodeTask, ...]) -> list[EpisodeOutcome]:
+def run_batch(context: StudyContext, study_dir: str, tasks: tuple[EpisodeTask, ...]) -> list[EpisodeOutcome]:
     """Run model-engine episodes one after the other, exactly as `run_task` runs each, and write
     the ones that finished as one batch part. Never raises: errors come back in the outcomes."""
 
@@ -155,7 +161,7 @@ def run_batch(config: StudyConfig, study_dir: str, tasks: tuple[EpisodeTask, ...
     for task in tasks:
         started = time.perf_counter()
         try:
-            record = run_planned_episode(config, task)
+            record = run_planned_episode(context, task)
             done.append((task, record.summary, record.tables()))
             outcomes.append(EpisodeOutcome(task.episode_id, True, wall_seconds=time.perf_counter() - started))
         except Exception as exc:  # one bad episode must never stop the others
@@ -173,11 +179,11 @@ def run_batch(config: StudyConfig, study_dir: str, tasks: tuple[EpisodeTask, ...
 Unit = tuple[EpisodeTask, ...]
 
 
-def run_unit(config: StudyConfig, study_dir: str, unit: Unit) -> list[EpisodeOutcome]:
+def run_unit(study_dir: str, context: StudyContext, unit: Unit) -> list[EpisodeOutcome]:
     """A unit of work for the backends: one episode (its own part) or a batch (one batch part)."""
     if len(unit) == 1:
-        return [run_task(config, study_dir, unit[0])]
-    return run_batch(config, study_dir, unit)
+        return [run_task(context, study_dir, unit[0])]
+    return run_batch(context, study_dir, unit)
 
 
 def plan_units(config: StudyConfig, tasks: list[EpisodeTask], workers: int) -> list[Unit]:
@@ -208,25 +214,27 @@ def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
 # -- backends: each yields outcomes as they complete -------------------------------------------
 
 
-UnitFunction = Callable[[Unit], list[EpisodeOutcome]]   # run_unit with the config and directory bound
+UnitFunction = Callable[[StudyContext, Unit], list[EpisodeOutcome]]   # run_unit with the directory bound
 
 
-def _serial(function: UnitFunction, tasks: list[Unit]) -> Iterator[list[EpisodeOutcome]]:
+def _serial(function: UnitFunction, context: StudyContext,
+            tasks: list[Unit]) -> Iterator[list[EpisodeOutcome]]:
     for task in tasks:
-        yield function(task)
+        yield function(context, task)
 
 
-def _process_pool(function: UnitFunction, tasks: list[Unit],
+def _process_pool(function: UnitFunction, context: StudyContext, tasks: list[Unit],
                   workers: int) -> Iterator[list[EpisodeOutcome]]:
     from trustroute.harness.study.workers import process_pool
 
     def died(unit: Unit, reason: str) -> list[EpisodeOutcome]:
         return [EpisodeOutcome(task.episode_id, False, f"worker died: {reason}") for task in unit]
 
-    return process_pool(function, tasks, workers, died)
+    # the workers are forked: they inherit the context, nothing of it is sent
+    return process_pool(functools.partial(function, context), tasks, workers, died)
 
 
-def _dask(function: UnitFunction, tasks: list[Unit], scheduler: str, workers: int,
+def _dask(function: UnitFunction, context: StudyContext, tasks: list[Unit], scheduler: str, workers: int,
           processes: bool) -> Iterator[list[EpisodeOutcome]]:
     from distributed import Client, LocalCluster, as_completed
 
@@ -247,7 +255,8 @@ def _dask(function: UnitFunction, tasks: list[Unit], scheduler: str, workers: in
                 "start one with `dask scheduler` and pass its address, or use --scheduler local",
             ) from None
     try:
-        futures = {client.submit(function, task, pure=False): task for task in tasks}
+        shared = client.scatter(context, broadcast=True, hash=False)   # one copy per worker
+        futures = {client.submit(function, shared, task, pure=False): task for task in tasks}
         for future in as_completed(futures):
             try:
                 yield future.result()
@@ -261,17 +270,17 @@ def _dask(function: UnitFunction, tasks: list[Unit], scheduler: str, workers: in
 
 
 def _outcomes(
-    function: UnitFunction, units: list[Unit], workers: int, scheduler: str | None,
+    function: UnitFunction, context: StudyContext, units: list[Unit], workers: int, scheduler: str | None,
     dask_processes: bool = True,
 ) -> Iterator[EpisodeOutcome]:
     if not units:
         return iter(())
     if scheduler is not None:
-        batches = _dask(function, units, scheduler, workers, dask_processes)
+        batches = _dask(function, context, units, scheduler, workers, dask_processes)
     elif workers <= 1:
-        batches = _serial(function, units)
+        batches = _serial(function, context, units)
     else:
-        batches = _process_pool(function, units, min(workers, len(units)))
+        batches = _process_pool(function, context, units, min(workers, len(units)))
     return (outcome for batch in batches for outcome in batch)
 
 
@@ -296,11 +305,15 @@ def study_lock(study_dir: Path) -> Iterator[None]:
         yield
 
 
-def validate_study(config: StudyConfig, scheduler: str | None = None,
-                   attempts: int = DEFAULT_ATTEMPTS, progress: bool = False) -> None:
+def validate_study(config: StudyConfig | StudyContext, scheduler: str | None = None,
+                   attempts: int = DEFAULT_ATTEMPTS, progress: bool = False) -> StudyContext:
     """Every input of the study, checked before anything is written: the engine, the town, driver
     model, specs, policies and population (building the context, synthesizing missing "aware"
-    policies into the policy cache), the retry bound and the scheduler address."""
+    policies into the policy cache), the retry bound and the scheduler address. Returns the study's
+    context: built here, or `config` itself when it is the context already built (the inputs
+    were checked when it was)."""
+    given = config if isinstance(config, StudyContext) else None
+    config = config.config if isinstance(config, StudyContext) else config
     if not 1 <= attempts <= MAX_ATTEMPTS:
         raise InputError("--attempts", "", f"must be from 1 to {MAX_ATTEMPTS}, got {attempts}",
                          "pass e.g. --attempts 2")
@@ -308,16 +321,20 @@ def validate_study(config: StudyConfig, scheduler: str | None = None,
         check_scheduler_address(scheduler)
         check_scheduler_reachable(scheduler)
     engine_function(config.engine)  # fail fast, once, if the engine is missing
-    study_context(config, progress)  # every input file, and the policies, once, before any worker
+    # every input file, and the policies, once, before any worker
+    context = given if given is not None else study_context(config, progress)
     check_record_ids(config, plan_episodes(config))
+    return context
 
 
-def check_before_writing(config: StudyConfig, study_dir: Path, scheduler: str | None, attempts: int,
-                         progress: bool) -> None:
+def check_before_writing(config: StudyConfig | StudyContext, study_dir: Path, scheduler: str | None,
+                         attempts: int, progress: bool) -> StudyContext:
     """Every refusal of a study run, before its directory, its lock or its mark is written: the
-    inputs and the scheduler (`validate_study`), and a directory that holds another study."""
-    validate_study(config, scheduler, attempts, progress)
-    recorded_config_hash(Path(study_dir), config.content_hash)
+    inputs and the scheduler (`validate_study`), and a directory that holds another study. Returns
+    the study's context (`validate_study`'s)."""
+    context = validate_study(config, scheduler, attempts, progress)
+    recorded_config_hash(Path(study_dir), context.config.content_hash)
+    return context
 
 
 SCHEDULER_CONNECT_SECONDS = 5.0
@@ -352,7 +369,7 @@ def check_scheduler_address(scheduler: str) -> None:
 
 
 def run_study(
-    config: StudyConfig,
+    config: StudyConfig | StudyContext,
     study_dir: Path,
     workers: int = 1,
     scheduler: str | None = None,
@@ -363,19 +380,20 @@ def run_study(
 ) -> StudyRun:
     """Run (or resume) every episode of `config` in `study_dir`; return what happened.
 
+    config: the study's config, or its context when the caller built it already (`validate_study`).
     workers: local processes (1: in this process); scheduler: a Dask scheduler address, or
     "local" for a local Dask cluster of `workers` workers (threads in this process when
     dask_processes is False, which tests use). on_outcome: called after every episode.
     attempts: runs of a failing episode at most (the first and its retries)."""
     study_dir = Path(study_dir).resolve()
-    check_before_writing(config, study_dir, scheduler, attempts, progress)
+    context = check_before_writing(config, study_dir, scheduler, attempts, progress)
     with study_lock(study_dir):
-        return _run_locked(config, study_dir, workers, scheduler, progress, on_outcome, dask_processes,
+        return _run_locked(context, study_dir, workers, scheduler, progress, on_outcome, dask_processes,
                            attempts)
 
 
 def _run_locked(
-    config: StudyConfig,
+    context: StudyContext,
     study_dir: Path,
     workers: int,
     scheduler: str | None,
@@ -387,13 +405,14 @@ def _run_locked(
     from trustroute.harness.study.workers import sigterm_raises
 
     started = time.perf_counter()
+    config = context.config
     config_hash = config.content_hash
     check_study_dir(study_dir, config, config_hash)
     tasks = plan_episodes(config)
     check_record_ids(config, tasks)
     done, damaged = finished_episodes(study_dir, tasks)
     todo = [t for t in tasks if t.episode_id not in done]
-    function = functools.partial(run_unit, config, str(study_dir))
+    function = functools.partial(run_unit, str(study_dir))
     ran = retried = 0
     failed: dict[str, tuple[EpisodeTask, EpisodeOutcome]] = {}
     errors: dict[str, list[str]] = {}
@@ -416,13 +435,15 @@ def _run_locked(
                 on_outcome(outcome)
 
     with sigterm_raises():
-        consume(_outcomes(function, plan_units(config, todo, workers), workers, scheduler, dask_processes))
+        consume(_outcomes(function, context, plan_units(config, todo, workers), workers, scheduler,
+                          dask_processes))
         for _ in range(attempts - 1):  # after everything else: a transient failure gets another chance
             retry = [task for task, _ in failed.values()]
             if not retry:
                 break
             retried += len(retry)
-            consume(_outcomes(function, [(task,) for task in retry], workers, scheduler, dask_processes))
+            consume(_outcomes(function, context, [(task,) for task in retry], workers, scheduler,
+                              dask_processes))
     bar.close()
     sync_parts(study_dir)
     for task, outcome in failed.values():
@@ -438,6 +459,7 @@ def _run_locked(
         retried=retried,
         seconds=time.perf_counter() - started,
         backend=backend_name(workers, scheduler),
+        context=context,
     )
 
 
@@ -455,7 +477,7 @@ def _progress_bar(total: int, initial: int, enabled: bool) -> tqdm:
 
 
 def run_and_consolidate(
-    config: StudyConfig,
+    config: StudyConfig | StudyContext,
     study_dir: Path,
     workers: int,
     scheduler: str | None,
@@ -466,25 +488,29 @@ def run_and_consolidate(
 ) -> tuple[StudyRun, dict]:
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line. The study
-    directory stays locked until the manifest is written."""
-    if not ENGINES[config.engine].synthetic:
-        raise InputError(config.source_path, "study.engine",
+    directory stays locked until the manifest is written. config: the study's config, or its
+    context when the caller built it already (`validate_study`); the run's `context` is the one
+    the episodes and the consolidation used."""
+    study = config.config if isinstance(config, StudyContext) else config
+    if not ENGINES[study.engine].synthetic:
+        raise InputError(study.source_path, "study.engine",
                          "a live study is driven by people, not simulated",
                          "serve it with `trustroute live CONFIG`, or simulate it with --engine sumo")
     study_dir = Path(study_dir).resolve()
-    check_before_writing(config, study_dir, scheduler, attempts, progress)
+    context = check_before_writing(config, study_dir, scheduler, attempts, progress)
     with study_lock(study_dir):
         for _ in range(CONSOLIDATION_ROUNDS):
-            run = _run_locked(config, study_dir, workers, scheduler, progress, None, dask_processes, attempts)
+            run = _run_locked(context, study_dir, workers, scheduler, progress, None, dask_processes,
+                              attempts)
             try:
-                return run, _consolidate_run(config, run, echo, progress)
+                return run, _consolidate_run(context, run, echo, progress)
             except DamagedParts as exc:  # damaged between the run and consolidation: moved aside
                 echo(f"notice: consolidation found {exc}; running them again")
     raise InputError(str(study_dir), "parts", "parts fail verification as soon as they are written",
                      "check the disk holding the study directory")
 
 
-def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], object],
+def _consolidate_run(context: StudyContext, run: StudyRun, echo: Callable[[str], object],
                      progress: bool = False) -> dict:
     echo(
         f"{run.planned} episodes planned: {run.skipped} already done, {run.ran - run.retried} run"
@@ -492,12 +518,13 @@ def _consolidate_run(config: StudyConfig, run: StudyRun, echo: Callable[[str], o
         f"{f', {len(run.damaged)} damaged parts re-run' if run.damaged else ''} "
         f"({run.backend}, {run.seconds:.1f} s)"
     )
-    expected = expected_values(config)
+    config = context.config
+    expected = expected_values(context)
     for line in fallback_only_warnings(expected):
         print(line, file=sys.stderr)
     return consolidate(
         run.study_dir,
-        config,
+        context,
         plan_episodes(config),
         config.content_hash,
         expected,

@@ -14,6 +14,7 @@ from tests.cli import cli_json, run_cli
 from trustroute.analysis.study.preregistration import chosen_size
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import load_study_config
+from trustroute.harness.study.context import study_context
 from trustroute.harness.study.planning import participant_sizes, planned_participants, simulate_studies
 
 
@@ -79,7 +80,7 @@ def test_simulated_outcomes_follow_the_model_engine(config_path):
     """Satisfaction of the free condition and the reports as the per-episode study gives them (in
     distribution: the fixture's study of 12 participants sets the scale)."""
     config = load_study_config(config_path)
-    sims = simulate_studies(config, 8, 100, np.random.default_rng(0))
+    sims = simulate_studies(study_context(config), 8, 100, np.random.default_rng(0))
     assert sims.satisfied.shape == (100, 8, 2, 2)
     rates = sims.satisfied.mean(axis=(0, 1))
     assert rates[0, 0] > 0.95 and 0.8 < rates[0, 1] < 0.95 and 0.7 < rates[1, 1] < 0.86

@@ -100,11 +100,11 @@ def test_a_run_killed_between_batches_resumes_without_duplicates(reference, batc
     real = runner_module.run_batch
     calls = []
 
-    def killed_after_two(config, study_dir, tasks):
+    def killed_after_two(context, study_dir, tasks):
         if len(calls) == 2:
             raise KeyboardInterrupt  # the run stops as a killed one does: two batch parts on disk
         calls.append(tasks)
-        return real(config, study_dir, tasks)
+        return real(context, study_dir, tasks)
 
     monkeypatch.setattr(runner_module, "run_batch", killed_after_two)
     with pytest.raises(KeyboardInterrupt):

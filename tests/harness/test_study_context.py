@@ -1,4 +1,4 @@
-"""The study context is built per config: settings that change the drivers change the context."""
+"""The study context is built from the config: settings that change the drivers change the context."""
 
 from __future__ import annotations
 
@@ -42,11 +42,16 @@ def test_configs_differing_only_in_population_get_their_own_context(tmp_path):
     assert narrow != wide and hash(narrow) != hash(wide)
 
 
-def test_equal_configs_share_one_context(tmp_path):
+def test_each_build_is_the_callers_own(tmp_path):
+    """study_context caches nothing: equal configs build equal contexts, each a new one that its
+    builder holds and passes down."""
     a = _config(tmp_path, "study.toml", "[population]\nconcentration = 30.0\n")
     b = _config(tmp_path, "study.toml", "[population]\nconcentration = 30.0\n")
     assert a == b and hash(a) == hash(b)
-    assert study_context(a) is study_context(b)
+    first, second = study_context(a), study_context(b)
+    assert first is not second and first.config == second.config
+    assert all(np.array_equal(x.trust_transition, y.trust_transition)
+               for x, y in zip(first.participants, second.participants, strict=True))
 
 
 def test_nominal_and_population_configs_do_not_share_a_context(tmp_path):
@@ -57,32 +62,3 @@ def test_nominal_and_population_configs_do_not_share_a_context(tmp_path):
     varied = type(varied)(**{**varied.__dict__, "source_path": nominal.source_path})
     assert study_context(nominal).participants is None
     assert study_context(varied).participants is not None
-
-
-def test_progress_does_not_split_the_cache(tmp_path):
-    """validate_study builds the context with its progress flag; workers forked after it and the
-    consolidation ask without one and must get that very context (no policy loaded again)."""
-    config = _config(tmp_path, "study.toml", "[population]\nconcentration = 40.0\n")
-    first = study_context(config, True)
-    assert study_context(config) is first
-    assert study_context(config, False) is first
-
-
-def test_a_forked_worker_inherits_the_context(tmp_path):
-    import multiprocessing
-
-    from trustroute.harness.study import context as context_module
-
-    config = _config(tmp_path, "study.toml", "[population]\nconcentration = 50.0\n")
-    study_context(config, False)
-    fork = multiprocessing.get_context("fork")
-    with fork.Pool(1) as pool:
-        built_in_worker = pool.apply(_builds_in_worker, (config,))
-    assert built_in_worker is False
-    assert config in context_module._CONTEXTS
-
-
-def _builds_in_worker(config) -> bool:
-    from trustroute.harness.study import context as context_module
-
-    return config not in context_module._CONTEXTS

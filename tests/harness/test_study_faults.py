@@ -31,6 +31,7 @@ from trustroute.core.dataset import (
 )
 from trustroute.harness.study import runner as runner_module
 from trustroute.harness.study.config import load_study_config
+from trustroute.harness.study.context import study_context
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.plan import plan_episodes
 from trustroute.harness.study.runner import run_and_consolidate
@@ -131,17 +132,17 @@ def test_consolidation_verifies_every_part_again(tmp_path, monkeypatch):
     victim = part_path(study, tasks[2].episode_id)
     _flip_bit_in_entry(victim, "roads.arrows")
     with pytest.raises(DamagedParts) as error:
-        consolidate(study, config, tasks, config.content_hash)
+        consolidate(study, study_context(config), tasks, config.content_hash)
     assert error.value.episode_ids == [tasks[2].episode_id] and not victim.exists()
 
     real_consolidate = runner_module._consolidate_run
     calls = []
 
-    def damage_then_consolidate(config, run, echo, progress=False):
+    def damage_then_consolidate(context, run, echo, progress=False):
         if not calls:  # damage a part between the run and its consolidation, once
             _flip_bit_in_entry(part_path(study, tasks[1].episode_id), "roads.arrows")
         calls.append(run)
-        return real_consolidate(config, run, echo, progress)
+        return real_consolidate(context, run, echo, progress)
 
     monkeypatch.setattr(runner_module, "_consolidate_run", damage_then_consolidate)
     _run(config, study)
@@ -221,10 +222,10 @@ def test_a_worker_killed_twice_fails_only_its_episode_and_a_rerun_completes(tmp_
     parent = os.getpid()
     real_run_task = runner_module.run_task
 
-    def run_task_killing_one_worker(config, study_dir, task):
+    def run_task_killing_one_worker(context, study_dir, task):
         if task.episode_id == victim and os.getpid() != parent:
             os.kill(os.getpid(), signal.SIGKILL)
-        return real_run_task(config, study_dir, task)
+        return real_run_task(context, study_dir, task)
 
     monkeypatch.setattr(runner_module, "run_task", run_task_killing_one_worker)
     study = tmp_path / "study"

@@ -47,14 +47,14 @@ def test_robust_condition_runs_on_the_type_aware_filter(tmp_path):
     assert context.setup("phi1", "free") is context.setups["phi1"]
     cached = list((tmp_path / "cache").glob("robust-phi1-*.json"))
     assert len(cached) == 1 and json.loads(cached[0].read_text())["objective"] == "robust"
-    run_and_consolidate(config, tmp_path / "out", 1, None, progress=False, echo=lambda *_: None)
+    run_and_consolidate(context, tmp_path / "out", 1, None, progress=False, echo=lambda *_: None)
     episodes = pd.read_parquet(tmp_path / "out" / "episodes.parquet")
     roads = pd.read_parquet(tmp_path / "out" / "roads.parquet")
     assert sorted(episodes["condition"].unique()) == ["free", "robust"]
     robust_roads = roads[roads["episode_id"].str.endswith("-robust")]
     beliefs = np.stack(robust_roads["belief_after"].to_numpy())
     assert beliefs.shape[1] == 7 and np.allclose(beliefs.sum(axis=1), 1.0)
-    entry = expected_values(config)["phi1"]["robust"]
+    entry = expected_values(context)["phi1"]["robust"]
     assert 0.0 <= entry["exact_lower"] <= entry["exact_upper"] <= 1.0
 
 
@@ -87,7 +87,7 @@ def test_robust_condition_with_a_trust_state_spec_runs_on_the_joint_policy(tmp_p
     config = load_study_config(path)
     context = study_context(config)
     assert isinstance(context.policies[("phi1_trust", "robust")], JointTablePolicy)
-    run_and_consolidate(config, tmp_path / "out", 1, None, progress=False, echo=lambda *_: None)
+    run_and_consolidate(context, tmp_path / "out", 1, None, progress=False, echo=lambda *_: None)
     manifest = json.loads((tmp_path / "out" / "manifest.json").read_text())
     robust, free = manifest["expected"]["phi1_trust"]["robust"], manifest["expected"]["phi1_trust"]["free"]
     # the joint unfolding evaluates the AV's own model only: the nominal driver's value is not given

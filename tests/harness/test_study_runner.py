@@ -187,7 +187,7 @@ def test_dask_and_local_pool_give_identical_datasets(tmp_path):
     from trustroute.harness.study.expected import expected_values
     from trustroute.harness.study.manifest import consolidate
 
-    consolidate(dask, config, plan_episodes(config), config.content_hash, expected_values(config))
+    consolidate(dask, run.context, plan_episodes(config), config.content_hash, expected_values(run.context))
     _assert_complete(pool, config)
     _assert_same(pool, dask)
     serial = tmp_path / "serial"
@@ -231,7 +231,7 @@ policy_cache = "{tmp_path / 'cache'}"
     assert cached.is_file() and "aware-phi1-" in cached.name
     document = json.loads(cached.read_text())
     assert document["horizon"] == 6
-    entry = expected_values(config)["phi1"]["aware"]
+    entry = expected_values(context)["phi1"]["aware"]
     assert entry["synthesized_horizon"] == 6
     assert entry["synthesized_lower"] == pytest.approx(document["lower"])
     # Within 6 junctions phi1 is worth what its shortest completion is worth (0.87), far below H = 20's ~1.

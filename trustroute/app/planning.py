@@ -131,14 +131,14 @@ def plan_study(config_path: str | Path, settings: PlanSettings = PlanSettings(),
     power = PowerSettings(tests=tuple(settings.tests) or DEFAULT_TESTS, alpha=settings.alpha,
                           target=settings.target, simulations=settings.simulations)
     model, pilot = participant_model(config, settings, progress is not None)  # a pilot: fitted here
-    study_context(config, progress=progress is not None)  # every input, and the policies once
+    context = study_context(config, progress=progress is not None)  # every input, and the policies once
     streams: dict[int, np.random.Generator] = {}
 
     def simulate(participants: int, studies: int):
         # one Generator per size, so a size's studies do not depend on the other sizes tried
         rng = streams.setdefault(participants, np.random.default_rng(
             np.random.SeedSequence(settings.seed, spawn_key=(participants,))))
-        sims = simulate_studies(config, participants, studies, rng, model)
+        sims = simulate_studies(context, participants, studies, rng, model)
         return sims.satisfied, sims.reported, sims.specs, sims.conditions, sims.models
 
     echo = None if progress is None else (lambda size, n: progress(f"  N={size}: {n} studies"))

@@ -88,7 +88,6 @@ def station(request, tmp_path_factory):
     from playwright.sync_api import sync_playwright
 
     from trustroute.app.nets import net_for
-    from trustroute.harness.study.context import study_context
 
     tmp_path = tmp_path_factory.mktemp("driver-view")
     study = LiveStudy(town_config(request.param, tmp_path), tmp_path / "study", ServerOptions()).open()
@@ -112,7 +111,7 @@ def station(request, tmp_path_factory):
             while not sockets:
                 assert time.monotonic() < deadline, "the station opened no websocket"
                 page.wait_for_timeout(50)
-            yield page, sockets[0], net_for(study_context(study.config).town)
+            yield page, sockets[0], net_for(study.context.town)
             browser.close()
     finally:
         server.stop()

@@ -17,7 +17,6 @@ from trustroute.harness.live.app import live_app
 from trustroute.harness.live.scripted import ScriptedParticipant
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 from trustroute.harness.study.config import load_study_config
-from trustroute.harness.study.context import study_context
 from trustroute.harness.study.plan import plan_episodes
 
 from .test_live_manual import play_in
@@ -58,7 +57,7 @@ def test_the_station_serves_the_net_an_imported_town_drives(played):
     study, client, _ = played
     response = client.get("/api/net", headers={"Authorization": f"Bearer {study.experimenter_token}"})
     assert response.status_code == 200, response.text
-    town = study_context(study.config).town
+    town = study.context.town
     served = {lane["id"] for lane in response.json()["lanes"]}
     assert served == _lane_ids(net_for(town))
     # the town's roads run on the served net's edges (the net's own ids, not "U-V")

@@ -23,7 +23,7 @@ def drive(config, task, warm_up: bool):
     driver = RemoteDriver(Pipe(), (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"),
                           episode_id=task.episode_id)
     run = run_warm_up if warm_up else run_planned_episode
-    return run(config, task, driver=driver, observer=driver.observe, person=driver)
+    return run(study_context(config), task, driver=driver, observer=driver.observe, person=driver)
 
 
 def test_the_warm_up_drives_its_own_drawn_route_and_incidents(tmp_path):

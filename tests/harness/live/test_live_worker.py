@@ -64,7 +64,8 @@ def live_episode(tmp_path, controls):
     pipe = Pipe(controls)
     driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"),
                           episode_id=task.episode_id)
-    record = run_planned_episode(config, task, driver=driver, observer=driver.observe, person=driver)
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=driver.observe,
+                                 person=driver)
     return config, task, driver, pipe, record
 
 
@@ -117,7 +118,7 @@ def test_without_a_hand_back_the_ego_waits_short_of_the_junction(tmp_path):
             if len(waited) == 40:   # 20 s of simulated time standing: the person hands back now
                 pipe.controls.append({"type": "hand_back"})
 
-    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver)
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver)
     assert len(waited) >= 40
     ticks = record.kinematics
     manual = ticks["time"][ticks["mode"] == "manual"]
@@ -158,7 +159,7 @@ def test_by_wheel_without_a_hand_back_the_ego_is_held_short_of_the_junction(tmp_
             if len(held) == 40:
                 pipe.controls.append({"type": "hand_back"})
 
-    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver,
                                  sumo_config=sumo_config(driver.options))
     assert [e["type"] for e in driver.wheel.events] == ["hold"]   # in its lane all along
     assert len(held) >= 40 and {round(left, 2) for _, left in held} == {round(held[0][1], 2)}
@@ -217,7 +218,7 @@ def test_by_wheel_on_an_imported_town_the_ego_is_held_short_of_the_road_end(tmp_
             if len(held) == 40:
                 pipe.controls.append({"type": "hand_back"})
 
-    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver,
                                  sumo_config=sumo_config(driver.options))
     (road, chain), = taken
     assert [e["type"] for e in driver.wheel.events] == ["hold"]   # in its lane all along
@@ -262,7 +263,7 @@ def test_by_wheel_on_an_imported_town_a_takeover_after_the_choice_is_held_at_its
             if len(held) == 20:
                 pipe.controls.append({"type": "hand_back"})
 
-    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver,
                                  sumo_config=sumo_config(driver.options))
     (edge, road), = taken
     assert [e["type"] for e in driver.wheel.events] == ["hold"]
@@ -339,7 +340,7 @@ def test_by_wheel_on_an_imported_town_the_oncoming_lane_is_the_net_s_reverse_edg
             taken.append((edge, reverse, ego.time))
             pipe.controls.append({"type": "hand_back"})
 
-    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver,
                                  sumo_config=sumo_config(driver.options))
     edge, reverse, since = taken[0]
     kinds = [e["type"] for e in driver.wheel.events]
@@ -389,7 +390,7 @@ def test_by_wheel_a_takeover_without_controls_is_held_or_stopped_and_the_episode
             if len(stood) == 20:   # standing 1 s: the person hands back where the car is
                 pipe.controls.append({"type": "hand_back"})
 
-    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver,
                                  sumo_config=sumo_config(driver.options))
     assert record.summary["end_reason"] == "accepted" and len(record.roads) == 7   # as without it
     events = driver.wheel.events
@@ -429,7 +430,7 @@ def test_by_wheel_off_the_road_at_the_commit_point_the_autopilot_goes_on_along_t
             pipe.controls.append({"type": "control", "source": "wheel", "steer": 0.5, "throttle": 0.5,
                                   "brake": 0.0})
 
-    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver,
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver,
                                  sumo_config=sumo_config(driver.options))
     assert taken == ["A-F", "A-F"]
     assert [e["type"] for e in driver.wheel.events] == ["hold", "off_road"]
@@ -520,7 +521,8 @@ def test_without_an_answer_the_end_waits_final_report_seconds_then_goes_on(tmp_p
     pipe = Pipe([])
     driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5,
                           LiveOptions(pace=1e6, client="scripted", final_report_seconds=0.3))
-    record = run_planned_episode(config, task, driver=driver, observer=driver.observe, person=driver)
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=driver.observe,
+                                 person=driver)
     started = time.monotonic()
     driver.await_last_answer()
     assert 0.3 <= time.monotonic() - started < 5.0
@@ -543,7 +545,7 @@ def test_a_takeover_in_the_step_a_road_closes_goes_to_the_next_road_and_the_stat
             pipe.controls.append({"type": "takeover"})
         driver.observe(sumo, ego, mode, road)
 
-    record = run_planned_episode(config, task, driver=driver, observer=observe, person=driver)
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver)
     taken = dict(zip(record.roads["index"], record.roads["takeover"], strict=True))
     assert (bool(taken[1]), bool(taken[2])) == (False, True)
     # the station is told: the takeover shows as a mode change, after the first road's event

@@ -308,7 +308,7 @@ def test_a_seeded_study_measures_failures_and_the_example_driver_reacts(tmp_path
         config = study_config_from_dict({"study": study}, "scenes", tmp_path)
         run = run_study(config, tmp_path / label, progress=False)
         assert not run.failed
-        consolidate(run.study_dir, config, plan_episodes(config), config.content_hash, {}, {})
+        consolidate(run.study_dir, run.context, plan_episodes(config), config.content_hash, {}, {})
         roads[label] = read_roads(run.study_dir).sort_values(["episode_id", "index"], ignore_index=True)
     default, example = roads["default"], roads["example"]
     assert default["directed_road"].tolist() == example["directed_road"].tolist()

@@ -39,12 +39,11 @@ def study():
     config = study_config_from_dict({"study": {
         "name": "reuse", "participants": 6, "seed": 11, "engine": "sumo", "specs": ["phi1", "phi2"],
         "conditions": ["free", "aware"]}}, "test_sumo_reuse", Path.cwd())
-    validate_study(config)
-    return config, plan_episodes(config)
+    return validate_study(config), plan_episodes(config)   # the study's context, built once
 
 
-def _tables(config, task: EpisodeTask) -> dict[str, pa.Table]:
-    return run_planned_episode(config, task).tables()
+def _tables(context, task: EpisodeTask) -> dict[str, pa.Table]:
+    return run_planned_episode(context, task).tables()
 
 
 def _differing(a: dict[str, pa.Table], b: dict[str, pa.Table]) -> list[str]:
@@ -69,16 +68,16 @@ def starts(monkeypatch) -> list[list[str]]:
 
 
 def test_no_sumo_random_draw_reaches_an_episode(study, monkeypatch):
-    config, tasks = study
+    context, tasks = study
     kinds = set()
     original = sumo_start.sumo_command
     for task in tasks:
         close_simulation()
-        first = _tables(config, task)
+        first = _tables(context, task)
         close_simulation()
         monkeypatch.setattr(sumo_start, "sumo_command",
                             lambda net, seed, options: original(net, seed + 7919, options))
-        other = _tables(config, task)
+        other = _tables(context, task)
         monkeypatch.setattr(sumo_start, "sumo_command", original)
         assert _differing(first, other) == [], task.episode_id
         kinds |= set(first["incidents"].column("incident").to_pylist())
@@ -89,41 +88,41 @@ def test_no_sumo_random_draw_reaches_an_episode(study, monkeypatch):
 
 
 def test_episodes_in_one_simulation_equal_fresh_ones(study, starts):
-    config, tasks = study
+    context, tasks = study
     close_simulation()
-    reused = [_tables(config, task) for task in tasks]
+    reused = [_tables(context, task) for task in tasks]
     assert len(starts) == 1   # one start, then every episode returned the simulation to its snapshot
     for task, tables in zip(reversed(tasks), reversed(reused), strict=True):
         close_simulation()
-        assert _differing(_tables(config, task), tables) == [], task.episode_id
+        assert _differing(_tables(context, task), tables) == [], task.episode_id
     assert len(starts) == 1 + len(tasks)
 
 
 def test_another_command_line_starts_afresh_and_the_seed_alone_does_not(study, starts):
-    config, tasks = study
+    context, tasks = study
     close_simulation()
-    _tables(config, tasks[0])
-    _tables(config, tasks[1])   # another seed: the same simulation
+    _tables(context, tasks[0])
+    _tables(context, tasks[1])   # another seed: the same simulation
     assert len(starts) == 1
     assert starts[0][starts[0].index("--seed") + 1] == str(tasks[0].seed)
     coarse = replace(SumoConfig(), step_length=0.25)
-    run_planned_episode(config, tasks[0], sumo_config=coarse)
+    run_planned_episode(context, tasks[0], sumo_config=coarse)
     assert len(starts) == 2 and starts[1][starts[1].index("--step-length") + 1] == "0.25"
 
 
 def test_an_episode_that_raises_closes_the_simulation(study, starts):
-    config, tasks = study
+    context, tasks = study
     close_simulation()
-    expected = _tables(config, tasks[2])
+    expected = _tables(context, tasks[2])
 
     def observer(sumo, ego, mode, road):
         if ego.time > 20.0:
             raise RuntimeError("stop here")
 
     with pytest.raises(RuntimeError, match="stop here"):
-        run_planned_episode(config, tasks[1], observer=observer)
+        run_planned_episode(context, tasks[1], observer=observer)
     assert sumo_start._open == []   # what the episode left behind went with the simulation
-    assert _differing(_tables(config, tasks[2]), expected) == []
+    assert _differing(_tables(context, tasks[2]), expected) == []
     assert len(starts) == 2   # the failed episode ran in the first simulation; the next starts afresh
 
 
@@ -135,25 +134,25 @@ def test_runs_whose_sumo_draws_matter_or_that_write_outputs_start_afresh(tmp_pat
     assert not reusable(SumoConfig(gui=True))
 
 
-def _child_episode(config, task: EpisodeTask, connection) -> None:
-    tables = run_planned_episode(config, task, sumo_config=replace(SumoConfig(), step_length=0.25)).tables()
+def _child_episode(context, task: EpisodeTask, connection) -> None:
+    tables = run_planned_episode(context, task, sumo_config=replace(SumoConfig(), step_length=0.25)).tables()
     connection.send(len(tables["roads"]))
 
 
 def test_a_forked_worker_leaves_the_parents_simulation_alone(study, starts):
-    config, tasks = study
+    context, tasks = study
     close_simulation()
-    expected = _tables(config, tasks[3])
+    expected = _tables(context, tasks[3])
     snapshot = sumo_start._open[0].snapshot
-    context = multiprocessing.get_context("fork")
-    parent, child = context.Pipe()
-    process = context.Process(target=_child_episode, args=(config, tasks[3], child))
+    fork = multiprocessing.get_context("fork")
+    parent, child = fork.Pipe()
+    process = fork.Process(target=_child_episode, args=(context, tasks[3], child))
     process.start()
     assert parent.recv() > 0
     process.join(60)
     assert process.exitcode == 0
     assert snapshot.is_file()   # the child's own simulation and exit did not touch the parent's
-    assert _differing(_tables(config, tasks[3]), expected) == []
+    assert _differing(_tables(context, tasks[3]), expected) == []
     assert len(starts) == 1
 
 
