@@ -188,16 +188,22 @@ conditions = ["free"]
 """
 
 
+def csomor_episode(tmp_path):
+    """(the study context, its roads as SUMO edge chains, the first planned episode) of a one-
+    participant continuous-driving study on `csomor`: the context built once per test."""
+    (tmp_path / "live.toml").write_text(CSOMOR)
+    config = load_study_config(tmp_path / "live.toml")
+    context = study_context(config)
+    return context, RealRoads(road_edges(context.town, net_for(context.town)), COMMIT_DISTANCE), \
+        plan_episodes(config)[0]
+
+
 def test_by_wheel_on_an_imported_town_the_ego_is_held_short_of_the_road_end(tmp_path):
     """The same on `csomor`, an imported town: a road there runs along SUMO edges with ids of
     their own, and junctions between them (real_roads.py). Taken over on the first edge of a road
     of two, the accelerator held down, the car is held short of the road's commit point, never
     drives into the next road in the person's hands, and the person hands back there."""
-    (tmp_path / "live.toml").write_text(CSOMOR)
-    config = load_study_config(tmp_path / "live.toml")
-    town = study_context(config).town
-    real = RealRoads(road_edges(town, net_for(town)), COMMIT_DISTANCE)
-    task = plan_episodes(config)[0]
+    context, real, task = csomor_episode(tmp_path)
     pipe = Pipe([], hand_back_when_warned=False)
     driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
     held, taken = [], []
@@ -218,7 +224,7 @@ def test_by_wheel_on_an_imported_town_the_ego_is_held_short_of_the_road_end(tmp_
             if len(held) == 40:
                 pipe.controls.append({"type": "hand_back"})
 
-    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver,
+    record = run_planned_episode(context, task, driver=driver, observer=observe, person=driver,
                                  sumo_config=sumo_config(driver.options))
     (road, chain), = taken
     assert [e["type"] for e in driver.wheel.events] == ["hold"]   # in its lane all along
@@ -241,11 +247,7 @@ def test_by_wheel_on_an_imported_town_a_takeover_after_the_choice_is_held_at_its
     the ego still on an edge of the road before it), the accelerator held down: the car is held
     at the end of the road it is on, never drives into the next road in the person's hands, and
     the person hands back there."""
-    (tmp_path / "live.toml").write_text(CSOMOR)
-    config = load_study_config(tmp_path / "live.toml")
-    real = RealRoads(road_edges(study_context(config).town, net_for(study_context(config).town)),
-                     COMMIT_DISTANCE)
-    task = plan_episodes(config)[0]
+    context, real, task = csomor_episode(tmp_path)
     pipe = Pipe([], hand_back_when_warned=False)
     driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
     held, taken = [], []
@@ -263,7 +265,7 @@ def test_by_wheel_on_an_imported_town_a_takeover_after_the_choice_is_held_at_its
             if len(held) == 20:
                 pipe.controls.append({"type": "hand_back"})
 
-    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver,
+    record = run_planned_episode(context, task, driver=driver, observer=observe, person=driver,
                                  sumo_config=sumo_config(driver.options))
     (edge, road), = taken
     assert [e["type"] for e in driver.wheel.events] == ["hold"]
@@ -294,11 +296,7 @@ def test_by_wheel_on_an_imported_town_the_oncoming_lane_is_the_net_s_reverse_edg
     same junctions the other way round: its oncoming lane), the person steers into the oncoming
     lane and back: the `oncoming` event is logged, then `own_lane`, the time there is measured,
     and a hand-back asked for there is refused (the person hands back in their lane later)."""
-    (tmp_path / "live.toml").write_text(CSOMOR)
-    config = load_study_config(tmp_path / "live.toml")
-    real = RealRoads(road_edges(study_context(config).town, net_for(study_context(config).town)),
-                     COMMIT_DISTANCE)
-    task = plan_episodes(config)[0]
+    context, real, task = csomor_episode(tmp_path)
     pipe = Pipe([], hand_back_when_warned=False)
     driver = RemoteDriver(pipe, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, driving="continuous"))
     taken: list[tuple[str, str, float]] = []
@@ -340,7 +338,7 @@ def test_by_wheel_on_an_imported_town_the_oncoming_lane_is_the_net_s_reverse_edg
             taken.append((edge, reverse, ego.time))
             pipe.controls.append({"type": "hand_back"})
 
-    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver,
+    record = run_planned_episode(context, task, driver=driver, observer=observe, person=driver,
                                  sumo_config=sumo_config(driver.options))
     edge, reverse, since = taken[0]
     kinds = [e["type"] for e in driver.wheel.events]
