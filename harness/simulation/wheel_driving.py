@@ -1,9 +1,7 @@
 """Continuous manual driving: a person's steering wheel and pedals drive a vehicle model whose
 pose is the ego's in SUMO.
 
-- `integrate(pose, controls, seconds, params)`: a kinematic bicycle model (speed, heading,
-  position; the rear axle is the reference point, SUMO's front centre follows from it), integrated
-  in sub-steps of at most 1 / MODEL_RATE seconds with the controls held over the call.
+- the vehicle model (vehicle_model.py `integrate`): a kinematic bicycle model of the person's car.
 - `ManualDriving.step(sumo, controls, seconds)`: one SUMO step of the person's driving: the model
   integrated over the step, the ego placed at the model's pose for the next simulation step with
   `vehicle.moveToXY(..., keepRoute=KEEP_ROUTE_FREE)` where that pose is on its road or the
@@ -56,10 +54,20 @@ from trustroute.harness.simulation.manual_driving import (
     to_road_end,
 )
 from trustroute.harness.simulation.manual_measures import TTC_RANGE, Sample, signed_offset, ttc_ahead
+from trustroute.harness.simulation.vehicle_model import (
+    DEFAULT_PARAMS,
+    Controls,
+    Pose,
+    VehicleParams,
+    corners,
+    forward,
+    integrate,
+    overlaps,
+)
 
-MODEL_RATE = 50.0            # Hz: the model's integration rate (at least 20 Hz whatever SUMO's step)
 KEEP_ROUTE = 1               # moveToXY: the nearest place on the ego's route
 KEEP_ROUTE_FREE = 2          # moveToXY: any lane, and off the net too
+MOVE_TELEPORT = 1            # moveTo's reason: off the net and back on it (SUMO's lane state reset)
 PERSON_RADIUS = 0.3          # m: a person's footprint is a square of this half side
 CREEP_SPEED = 3.0            # m/s: held off its lane, the car is not driven faster than this
 CREEP_BRAKE = 0.5            # the brake applied above CREEP_SPEED then (of full braking)
@@ -71,96 +79,6 @@ MODEL_SPEED_MODE = 0
 # m: the model's front farther than this from where SUMO keeps the ego on its route: the car has
 # left its road and stops there (SUMO cannot map a placement beyond 100 m of its route at all)
 OFF_ROUTE_LIMIT = 10.0
-
-
-@dataclass(frozen=True)
-class VehicleParams:
-    wheelbase: float = 2.7         # m
-    front_overhang: float = 0.9    # m from the front axle to the front bumper
-    max_wheel_angle: float = 30.0  # degrees of the front wheels at full lock
-    max_accel: float = 3.0         # m/s² at full throttle
-    max_brake: float = 8.0         # m/s² at full brake
-    rolling: float = 0.15          # m/s²: what slows a rolling car with the pedals released
-    drag: float = 0.0004           # 1/m: aerodynamic drag, drag * v² in m/s²
-    max_speed: float = 25.0        # m/s
-
-
-@dataclass(frozen=True)
-class Controls:
-    """The person's inputs: steering -1 (full left) .. 1 (full right); pedals 0 .. 1."""
-
-    steer: float = 0.0
-    throttle: float = 0.0
-    brake: float = 0.0
-
-    def clamped(self) -> Controls:
-        def clamp(value: float, low: float) -> float:
-            return min(max(float(value), low), 1.0) if math.isfinite(value) else 0.0
-
-        return Controls(clamp(self.steer, -1.0), clamp(self.throttle, 0.0), clamp(self.brake, 0.0))
-
-
-@dataclass(frozen=True)
-class Pose:
-    """SUMO's view of a vehicle: front centre (x, y), angle in degrees clockwise from north, speed."""
-
-    x: float
-    y: float
-    angle: float
-    speed: float
-
-
-def forward(angle: float) -> tuple[float, float]:
-    heading = math.radians(angle)
-    return math.sin(heading), math.cos(heading)
-
-
-DEFAULT_PARAMS = VehicleParams()
-
-
-def integrate(pose: Pose, controls: Controls, seconds: float, params: VehicleParams = DEFAULT_PARAMS) -> Pose:
-    """The pose after `seconds` of the kinematic bicycle model under `controls` (no reversing)."""
-    controls = controls.clamped()
-    steps = max(1, math.ceil(seconds * MODEL_RATE - 1e-9))
-    dt = seconds / steps
-    fx, fy = forward(pose.angle)
-    to_rear = params.wheelbase + params.front_overhang
-    x, y = pose.x - to_rear * fx, pose.y - to_rear * fy     # the rear axle
-    angle, speed = pose.angle, pose.speed
-    wheel = math.tan(math.radians(controls.steer * params.max_wheel_angle))
-    for _ in range(steps):
-        accel = controls.throttle * params.max_accel - controls.brake * params.max_brake
-        accel -= (params.rolling if speed > 0 else 0.0) + params.drag * speed * speed
-        new_speed = min(max(speed + accel * dt, 0.0), params.max_speed)
-        travelled = 0.5 * (speed + new_speed) * dt
-        turned = math.degrees(travelled * wheel / params.wheelbase)   # right: clockwise
-        fx, fy = forward(angle + turned / 2)   # along the sub-step's mean heading (second order)
-        x, y = x + travelled * fx, y + travelled * fy
-        angle, speed = (angle + turned) % 360.0, new_speed
-    fx, fy = forward(angle)
-    return Pose(x + to_rear * fx, y + to_rear * fy, angle, speed)
-
-
-def corners(x: float, y: float, angle: float, length: float, width: float) -> list[tuple[float, float]]:
-    """The four corners of a vehicle whose front centre is (x, y)."""
-    fx, fy = forward(angle)
-    lx, ly = -fy, fx
-    return [(x - along * fx + side * lx, y - along * fy + side * ly)
-            for along, side in ((0.0, width / 2), (0.0, -width / 2), (length, -width / 2),
-                                (length, width / 2))]
-
-
-def overlaps(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> bool:
-    """Whether two convex polygons overlap (separating axis test)."""
-    for polygon in (a, b):
-        for i, (x0, y0) in enumerate(polygon):
-            x1, y1 = polygon[(i + 1) % len(polygon)]
-            nx, ny = y0 - y1, x1 - x0
-            pa = [nx * x + ny * y for x, y in a]
-            pb = [nx * x + ny * y for x, y in b]
-            if max(pa) < min(pb) or max(pb) < min(pa):
-                return False
-    return True
 
 
 def nearest_on(shape, x: float, y: float) -> tuple[float, float, float]:
@@ -238,6 +156,10 @@ class ManualDriving:
     edge: str = ""                    # the edge of its route it was on last (its own road)
     stranded: bool = False            # stopped off its route (`stopped_off_road`) until the hand-back
     junctions: dict[str, tuple[str, str]] = field(default_factory=dict)   # edge -> (from, to) junction
+    # taken over while SUMO's own overtaking had the ego in the oncoming lane: SUMO keeps that state
+    # through every placement and, handed back, would drive the ego backwards along its own lane
+    # until what it passed stops it; `leave_sumo_opposite` clears it
+    sumo_opposite: bool = False
 
     @classmethod
     def take_over(cls, sumo, vehicle_id: str, **options) -> ManualDriving:
@@ -246,11 +168,19 @@ class ManualDriving:
         pose = Pose(x, y, sumo.vehicle.getAngle(vehicle_id), sumo.vehicle.getSpeed(vehicle_id))
         vehicle_type = sumo.vehicle.getTypeID(vehicle_id)
         sumo.vehicle.setSpeedMode(vehicle_id, MODEL_SPEED_MODE)   # the hand-back's style sets SUMO's again
-        return cls(vehicle_id, pose, list(sumo.vehicle.getRoute(vehicle_id)),
-                   length=sumo.vehicletype.getLength(vehicle_type),
-                   width=sumo.vehicletype.getWidth(vehicle_type),
-                   lane_index=max(0, sumo.vehicle.getLaneIndex(vehicle_id)),
-                   edge=sumo.vehicle.getRoadID(vehicle_id), **options)
+        driving = cls(vehicle_id, pose, list(sumo.vehicle.getRoute(vehicle_id)),
+                      length=sumo.vehicletype.getLength(vehicle_type),
+                      width=sumo.vehicletype.getWidth(vehicle_type),
+                      lane_index=max(0, sumo.vehicle.getLaneIndex(vehicle_id)),
+                      edge=sumo.vehicle.getRoadID(vehicle_id), **options)
+        if driving.edge not in driving.route and driving.opposite(sumo, driving.edge):
+            # SUMO's overtaking: its own road is the route's edge this one runs against
+            against = driving.ends(sumo, driving.edge)[::-1]
+            own = next(edge for edge in driving.route
+                       if not edge.startswith(":") and driving.ends(sumo, edge) == against)
+            driving.edge, driving.lane_index = own, nearest_car_lane(sumo, own, x, y)
+            driving.sumo_opposite = True
+        return driving
 
     def step(self, sumo, controls: Controls, seconds: float) -> Pose:
         """Read where the last placement put the ego (events), then integrate the person's controls
@@ -290,6 +220,33 @@ class ManualDriving:
             return False
         x, y, angle = nearest_on(sumo.lane.getShape(f"{edge}_{index}"), self.pose.x, self.pose.y)
         sumo.vehicle.moveToXY(self.vehicle_id, edge, index, x, y, angle, KEEP_ROUTE_FREE)
+        return True
+
+    def leave_sumo_opposite(self, sumo) -> bool:
+        """After the hand-back of a car taken over in SUMO's own overtaking (`sumo_opposite`), once
+        SUMO has it on an edge of its route: SUMO's oncoming-lane state cleared (True then). Only a
+        move to another lane clears it (SUMO takes the car off the net and puts it back there), so
+        the car goes to another lane of that edge (or of another edge of its route) and straight
+        back, within this step: it stays where it is, at its speed."""
+        lane = sumo.vehicle.getLaneID(self.vehicle_id)
+        if not lane or lane.startswith(":"):
+            return False
+        edge = sumo.lane.getEdgeID(lane)
+        route = list(sumo.vehicle.getRoute(self.vehicle_id))
+        if edge not in route:
+            return False
+        others = [f"{edge}_{index}" for index in range(sumo.edge.getLaneNumber(edge))]
+        others.remove(lane)
+        others += [f"{other}_0" for other in route if other != edge and not other.startswith(":")]
+        if not others:
+            return False
+        position = sumo.vehicle.getLanePosition(self.vehicle_id)
+        speed = sumo.vehicle.getSpeed(self.vehicle_id)
+        via = others[0]
+        sumo.vehicle.moveTo(self.vehicle_id, via, min(position, sumo.lane.getLength(via)), MOVE_TELEPORT)
+        sumo.vehicle.moveTo(self.vehicle_id, lane, position, MOVE_TELEPORT)
+        sumo.vehicle.setPreviousSpeed(self.vehicle_id, speed)
+        self.sumo_opposite = False
         return True
 
     def placement(self, sumo) -> int:
@@ -434,6 +391,7 @@ class Wheel:
         self.held_off_lane = False       # stopped off its lane at the road's end: may hand back there
         self.lengths: dict[str, float] = {}
         self.restore: list[str] | None = None   # the planned route, to give back after a release
+        self.released: ManualDriving | None = None   # handed back in SUMO's oncoming-lane state
         self.trace: list[Sample] = []    # every manual step: the measures' raw material
         self.shapes: dict[str, list] = {}
 
@@ -454,16 +412,24 @@ class Wheel:
         if not manual:
             if self.restore is not None and restore_route(sumo, self.vehicle_id, self.restore):
                 self.restore = None
+            if self.released is not None and self.restore is None and self.released.leave_sumo_opposite(sumo):
+                self.released = None
             if self.driving is not None:   # handed back: SUMO drives on from the model's pose and speed
                 self.follow_route(sumo)   # the episode may have extended it in this very step
                 if self.driving.release(sumo, None if road is None else self.chain(road)[0]):
                     self.restore = list(self.driving.route)
+                elif self.driving.sumo_opposite:   # where it is: cleared now
+                    self.driving.leave_sumo_opposite(sumo)
+                if self.driving.sumo_opposite:   # placed by the release: cleared once SUMO has it there
+                    self.released = self.driving
                 self.driving = None
                 sumo.vehicle.setSpeed(self.vehicle_id, -1)
             self.holding = self.held_off_lane = False
             return []
         if self.driving is None:
             self.driving = ManualDriving.take_over(sumo, self.vehicle_id)
+            self.driving.sumo_opposite |= self.released is not None   # taken over again before it was cleared
+            self.released = None
             self.controls = Controls()
         self.follow_route(sumo)
         seen = len(self.driving.events)

@@ -9,19 +9,16 @@ import pytest
 
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE
 from trustroute.harness.simulation.manual_driving import HOLD_MARGIN, hold_distance
-from trustroute.harness.simulation.wheel_driving import (
-    CREEP_SPEED,
+from trustroute.harness.simulation.vehicle_model import (
     MODEL_RATE,
     Controls,
-    ManualDriving,
     Pose,
     VehicleParams,
-    Wheel,
     corners,
     integrate,
     overlaps,
-    restore_route,
 )
+from trustroute.harness.simulation.wheel_driving import CREEP_SPEED, ManualDriving, Wheel, restore_route
 
 NO_DRAG = VehicleParams(rolling=0.0, drag=0.0)
 
@@ -251,3 +248,48 @@ def test_a_person_guided_back_into_their_lane_is_held_there(net):
     kinds = [event["type"] for event in wheel.events]
     assert kinds == ["oncoming", "guide_back", "own_lane"], kinds
     assert trace[-1][1] == "A-E_1" and trace[-1][3] == 0.0 and trace[-1][4] and trace[-1][2] > HOLD_MARGIN
+
+
+def test_a_takeover_in_sumos_own_overtaking_is_handed_back_driving_forward(net):
+    """SUMO's autopilot overtakes a standing car through the oncoming lane; the person takes over
+    there, passes it, steers back into their lane and hands back: SUMO drives on along the road
+    (SUMO's oncoming-lane state, kept through every placement, drove the car backwards until what
+    it had passed stopped it, and the episode stood there for good)."""
+    from trustroute.harness.simulation.manual_measures import signed_offset
+    from trustroute.harness.simulation.sumo_start import SumoConfig, fresh_session
+
+    with fresh_session(net, 1, SumoConfig(step_length=0.05)) as sumo:
+        sumo.route.add("planned", ["E-A"])
+        sumo.vehicle.add("ego", "planned", departPos="10", departSpeed="13", departLane="1")
+        sumo.vehicle.add("standing", "planned", departPos="200", departLane="1")
+        sumo.vehicle.setSpeedMode("standing", 0)
+        sumo.vehicle.setSpeed("standing", 0.0)
+        shape = sumo.lane.getShape("E-A_1")
+        lane_angle = math.degrees(math.atan2(shape[-1][0] - shape[0][0], shape[-1][1] - shape[0][1]))
+        wheel, manual, handed_back, since = Wheel("ego"), False, None, 0
+        for _ in range(1600):   # 80 s
+            if not manual and handed_back is None and sumo.vehicle.getLaneID("ego").startswith("A-E"):
+                manual = True   # taken over in the oncoming lane, SUMO overtaking
+            pose = wheel.driving.pose if manual and wheel.driving else None
+            if pose is not None:   # out past the standing car, then back into the own lane
+                left = signed_offset(shape, pose.x, pose.y)
+                fx, fy = math.sin(math.radians(pose.angle)), math.cos(math.radians(pose.angle))
+                sx, sy = sumo.vehicle.getPosition("standing")
+                ahead = (sx - pose.x) * fx + (sy - pose.y) * fy
+                error = math.radians((pose.angle - lane_angle + 540) % 360 - 180)
+                wanted = max(-0.25, min(0.25, 0.12 * (left - (3.0 if ahead > -10 else 0.0))))
+                wheel.controls = Controls(steer=max(-0.3, min(0.3, 0.8 * (wanted - error))),
+                                          throttle=0.5 if pose.speed < 6 else 0.0)
+                if ahead < -12 and abs(left) < 0.5 and wheel.may_hand_back:
+                    manual, handed_back = False, sumo.vehicle.getLanePosition("ego")
+            wheel.step(sumo, manual, "E-A")
+            sumo.simulationStep()
+            since += handed_back is not None
+            if since == 100:   # 5 s after the hand-back
+                break
+        assert handed_back is not None
+        assert [event["type"] for event in wheel.events] == ["oncoming", "own_lane"]
+        # the autopilot drove on along its lane, ahead of where it was handed back
+        assert sumo.vehicle.getLaneID("ego") == "E-A_1"
+        assert sumo.vehicle.getLanePosition("ego") > handed_back + 30.0
+        assert sumo.vehicle.getSpeed("ego") > 5.0
