@@ -12,7 +12,8 @@ setup, policy, SUMO config, seed, the same steppable SumoEpisode and EpisodeTrac
 
 - `takeover_request(now)`, asked every step: the person's takeover (True) or hand-back (False);
 - `manual_inputs()`, asked every step when they drive by hand: the pedal and pull-out they sent;
-- `hand_back_warning(distance, now)`: they are still in control near the road's end (sent on);
+- `hand_back_warning(distance, now)`: they are still in control near the road's end (sent on,
+  after the mode: the server checks the hand-back that answers it against the mode);
 - `decides_takeover(kind)`, asked when an incident comes into view: False (a person's takeover
   comes through takeover_request); the view event is sent to the participant. In lockstep (the
   scripted participant only) the episode waits for its answer, `takeover` or `pass`, and
@@ -149,6 +150,11 @@ class RemoteDriver:
             self.wheel.chain = chain
 
     def hand_back_warning(self, distance: float, now: float) -> None:
+        # The warning goes to a person in control only. In the step a takeover is applied it comes
+        # before the observer, and the server refuses a hand-back while it has not been told of the
+        # takeover: the mode goes out first, or an answer to the warning could be refused and the
+        # ego would wait short of the junction for a hand-back that does not come again.
+        self.announce_mode(MANUAL.name, now)
         self.send({"type": "warning", "kind": "hand_back", "distance": round(distance, 1), "t": now})
 
     def decides_takeover(self, incident: str) -> bool:
@@ -249,6 +255,13 @@ class RemoteDriver:
         elif kind == "abort":
             raise EpisodeAborted(str(control.get("reason", "aborted")))
 
+    def announce_mode(self, mode: str, now: float) -> None:
+        """Tell the server the mode the ego drives on when it changes (it checks every takeover and
+        hand-back against the mode it was told last)."""
+        if mode != self.mode:
+            self.mode = mode
+            self.send({"type": "mode", "mode": mode, "t": now})
+
     def read_controls(self, timeout: float) -> None:
         while self.connection.poll(timeout):
             self.apply(self.connection.recv())
@@ -259,9 +272,7 @@ class RemoteDriver:
         pause, then the step's frame: shown when the wall clock reaches the step's time. (The
         episode has applied the person's manual inputs of this step just before.)"""
         self.sim_now = ego.time
-        if mode != self.mode:
-            self.mode = mode
-            self.send({"type": "mode", "mode": mode, "t": ego.time})
+        self.announce_mode(mode, ego.time)
         if self.previous_time is not None and ego.time > self.previous_time:
             self.step_seconds = ego.time - self.previous_time
         self.previous_time = ego.time

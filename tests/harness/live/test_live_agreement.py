@@ -45,6 +45,10 @@ def live_study(config, study_dir):
                 for each in threads:
                     each.join(600)
         assert all(player.finished for player in players)
+        # every drive ran once, to its end: a trial run again after a failed attempt still leaves
+        # every part, so only this shows a drive that stood until max_sim_seconds
+        ends = [record for record in study.attempts.records() if record["event"] == "end"]
+        assert [record for record in ends if record["outcome"] != "done"] == []
         assert [e for player in players for e in player.errors if e["code"] != "out_of_order"] == []
     finally:
         study.close()

@@ -1,0 +1,93 @@
+"""A hand-back answering the episode's warning is never refused. The server checks a hand-back
+against the mode the episode last told it of (harness/live/session.py), so in the step a takeover
+comes within the warning's distance of the road's end, the mode must reach the session before the
+warning does: a participant who answers the warning at once, before the server has read the next
+message from the episode, would otherwise be refused, and the ego would wait short of the
+junction for a hand-back that no longer comes."""
+
+from __future__ import annotations
+
+import pytest
+
+from trustroute.harness.live.protocol import parse_client_message
+from trustroute.harness.live.session import Session
+from trustroute.harness.live.worker import LiveOptions, RemoteDriver
+from trustroute.harness.simulation.episode import COMMIT_DISTANCE
+from trustroute.harness.simulation.manual_driving import WARN_DISTANCE
+from trustroute.harness.study.context import study_context
+from trustroute.harness.study.plan import plan_episodes
+from trustroute.harness.study.runner import run_planned_episode
+
+from .conftest import tiny_config
+
+pytestmark = pytest.mark.slow
+
+
+class Relay:
+    """The episode's pipe with the server's reader on the other end: each message the episode
+    sends goes to the session as it is sent, and each control the session tells the episode is
+    read from here. The participant answers within the session's push, so a warning is answered
+    before the reader takes the message after it: the closest the two can come."""
+
+    def __init__(self, session: Session) -> None:
+        self.session = session
+        self.controls: list[dict] = []   # told by the session, for the episode to read
+        self.sent: list[dict] = []       # sent by the episode
+        self.answered: list[dict] = []   # the warnings the participant answered
+        session.connection, session.push = SessionEnd(self.controls), self.participant
+
+    # the episode's end
+    def send(self, message: dict) -> None:
+        self.sent.append(message)
+        self.session.on_episode_message(message)
+
+    def poll(self, timeout: float = 0.0) -> bool:
+        return bool(self.controls)
+
+    def recv(self) -> dict:
+        return self.controls.pop(0)
+
+    def participant(self, message: dict) -> None:
+        if message["type"] == "warning" and message["kind"] == "hand_back":
+            self.answered.append(message)
+            self.session.handle(parse_client_message('{"type": "hand_back"}'))   # refused: MessageError
+
+
+class SessionEnd:
+    """The session's end of the pipe (Session.tell): a control is queued for the episode."""
+
+    def __init__(self, controls: list[dict]) -> None:
+        self.controls = controls
+
+    def send(self, control: dict) -> None:
+        self.controls.append(control)
+
+
+def test_a_takeover_near_the_road_end_reaches_the_session_before_its_warning(tmp_path):
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    session = Session(None, task.participant, [task], consented=False)
+    session.phase, session.task = "driving", task   # the session of the running episode
+    relay = Relay(session)
+    driver = RemoteDriver(relay, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"),
+                          episode_id=task.episode_id)
+    taken: list[str] = []
+
+    def observe(sumo, ego, mode, road):
+        driver.observe(sumo, ego, mode, road)
+        # the takeover is asked for inside the warning's distance, well before the commit point
+        room = sumo.lane.getLength(ego.lane) - ego.lane_position if ego.road == road else 0.0
+        if not taken and mode == "auto" and COMMIT_DISTANCE + 40.0 < room < WARN_DISTANCE - 20.0:
+            taken.append(road)
+            session.handle(parse_client_message('{"type": "takeover"}'))
+
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver)
+    (warning,) = relay.answered
+    manual = next(m for m in relay.sent if m["type"] == "mode" and m["mode"] == "manual")
+    assert warning["t"] == manual["t"]   # warned in the step the takeover was applied
+    assert relay.sent.index(manual) < relay.sent.index(warning)
+    assert [e["type"] for e in driver.events] == ["takeover", "hand_back"]
+    ticks = record.kinematics
+    first_manual = ticks["time"][ticks["mode"] == "manual"].min()
+    back = ticks["time"][(ticks["mode"] == "auto") & (ticks["time"] > first_manual)].min()
+    assert back - first_manual <= 2.0   # handed back at once, not held short of the junction
