@@ -46,8 +46,10 @@ from trustroute.policies.routing.protocol import Certificate, RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.population import (
+    BAYES_SHARE,
     MAX_GRID_CANDIDATES,
     OBJECTIVES,
+    TYPE_BOUND_SHARE,
     PopulationSynthesis,
     RunSchedule,
     TypeValue,
@@ -111,7 +113,8 @@ def type_optimum_bounds(problem: Problem, settings: SynthesisSettings, schedule:
     bounds = []
     for t in population.types:
         own = synthesize(build_pomdp(problem.town, t.model), own_spec,
-                         replace(settings, time_limit=schedule.next_limit(), belief_rule="bayes"))
+                         replace(settings, time_limit=schedule.capped_limit(TYPE_BOUND_SHARE),
+                                 belief_rule="bayes"))
         schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper)
         bounds.append(own.upper)
     return tuple(bounds)
@@ -174,7 +177,12 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     started = time.perf_counter()
     schedule = RunSchedule(TimeBudget.start(settings.time_limit),
                            run_count(population, objective, grid_points), on_phase=on_phase)
-    bayes = synthesize_joint(problem.pomdp, problem.spec, replace(settings, time_limit=schedule.next_limit()),
+    # the per-type bounds first (capped shares), then the Bayes run with most of the time
+    # (policies/synthesis/population.py: a run given less than its fixed costs finds nothing)
+    robust = objective == "robust"
+    type_upper = type_optimum_bounds(problem, settings, schedule, synthesize) if robust else ()
+    limit = schedule.next_limit(BAYES_SHARE) if robust else schedule.next_limit()
+    bayes = synthesize_joint(problem.pomdp, problem.spec, replace(settings, time_limit=limit),
                              on_iteration=on_iteration)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
     values = joint_type_values(problem, bayes.policy, evaluation_cap(horizon), belief_rule)
@@ -187,7 +195,6 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
         return found
     policy, best_values, prior, candidates = robust_candidates(
         problem, bayes, values, settings, schedule, on_iteration)
-    type_upper = type_optimum_bounds(problem, settings, schedule, synthesize)
     lower = min(v.lower for v in best_values)
     upper = min(bayes.upper, *type_upper)
     if lower > upper + 1e-9:
