@@ -358,8 +358,11 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
         found = candidate_values(pomdp, spec, policy, population, evaluation,
                                  schedule.evaluation_deadline(0), worst_first, worst_type(best[1]))
         known = [v for v in found if v is not None]
-        candidates.append({"prior": prior.tolist(), "worst_type_lower": min(v.lower for v in known),
-                           "type_lower": [None if v is None else v.lower for v in found]})
+        record = {"prior": prior.tolist(), "worst_type_lower": min(v.lower for v in known),
+                  "type_lower": [None if v is None else v.lower for v in found]}
+        if len(known) < population.n_types:   # its worst type may be lower still
+            record["beaten"] = True
+        candidates.append(record)
         if len(known) == population.n_types and worst_type(tuple(known)) > worst_type(best[1]):
             best = (policy, tuple(known), prior, made.stats)
     return best, candidates
@@ -390,6 +393,8 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
     # weights. Candidates of the robust objective are synthesized under other priors λ but run on
     # this filter, their beliefs reweighted to λ (so the spec means the same for every candidate).
     pomdp = build_pomdp(town, lift_population(population))
+    if population.n_types > 1 and settings.clusters == "auto":
+        settings = replace(settings, clusters="early")
     if objective == "robust":
         limit = schedule.next_limit(BAYES_SHARE)
     else:   # one type: the single-model synthesis with its whole limit (the same result)

@@ -2,7 +2,8 @@
 root and closes the Bayes gap where the lifted search can, within one time limit shared by all
 its runs: the Bayes run is given most of the time (a run given less than its fixed costs never
 expands its root), the per-type bounds come first with a capped share, and the returned policy's
-per-type values are its exact values (checked by Monte Carlo with sampled hidden trust)."""
+per-type values are its exact values (checked by Monte Carlo with sampled hidden trust). The
+lifted runs take the search's whole share: no cluster policies after it (cluster mode "early")."""
 
 from __future__ import annotations
 
@@ -15,11 +16,13 @@ from tests.policies.synthesis.test_population_synthesis import monte_carlo
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
 from trustroute.policies.belief.driver_types import lift_population
+from trustroute.policies.belief.product_mdp import build_product
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.decision_tables import fallback_only
 from trustroute.policies.synthesis import population as population_synthesis
 from trustroute.policies.synthesis.belief_cells import observation_symbols, reachable_states, suffix_cells
+from trustroute.policies.synthesis.belief_synthesis import cluster_order
 from trustroute.policies.synthesis.population import BAYES_SHARE, synthesize_population
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
@@ -35,9 +38,11 @@ def test_the_bayes_run_gets_most_of_the_robust_limit(town, three_types, monkeypa
     spec = load_spec(PACKAGED_SPECS / "phi1.toml", town, three_types.types[0].model.n_trust)
     real = population_synthesis.synthesize
     calls: list[tuple[int, float, float]] = []   # (hidden states, start, limit)
+    modes: dict[int, set[str]] = {7: set(), 21: set()}
 
     def recording(pomdp, spec, settings, **kwargs):
         calls.append((pomdp.n_trust, time.perf_counter(), settings.time_limit))
+        modes[pomdp.n_trust].add(settings.clusters)
         return real(pomdp, spec, settings, **kwargs)
 
     monkeypatch.setattr(population_synthesis, "synthesize", recording)
@@ -55,6 +60,8 @@ def test_the_bayes_run_gets_most_of_the_robust_limit(town, three_types, monkeypa
     for _, at, run_limit in calls:
         assert at + run_limit <= started + limit + 1e-3
     assert found.lower <= found.upper
+    # no cluster policies after an unconverged lifted search (they took half of its time)
+    assert modes == {7: {"auto"}, 21: {"early"}}
 
 
 def test_the_lifted_abstraction_spans_the_reachable_face(town, three_types, pomdp):
@@ -96,3 +103,13 @@ def test_robust_synthesis_expands_the_root_and_closes_the_bayes_gap(town, three_
         sampled = monte_carlo(found, town, horizon, rng, 400, j)
         se = max(sampled.std(ddof=1) / np.sqrt(sampled.size), 1e-3)
         assert abs(sampled.mean() - value.lower) <= 4 * se, (value.name, sampled.mean(), value.lower)
+
+
+def test_early_cluster_mode_never_follows_the_search(pomdp):
+    # "auto" solves cluster policies after a search that ends with a gap on a problem whose free
+    # route's tree is small; "early" does not, and keeps "auto"'s choice before the search.
+    tables = build_product(pomdp, load_spec(PACKAGED_SPECS / "phi1.toml", pomdp.town, pomdp.n_trust))
+    symbols = observation_symbols(pomdp)
+    assert cluster_order(tables, symbols, 20, "auto", "auto") == "after"
+    assert cluster_order(tables, symbols, 20, "auto", "early") == "never"
+    assert cluster_order(tables, symbols, 20, "auto", "on") == "first"
