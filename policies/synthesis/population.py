@@ -22,10 +22,14 @@ projection when the spec reads beliefs, since the AV's belief is not type k's ow
 max_π min_k V_k <= min_k max_π V_k and <= max_π Σ_k w_k V_k. The gap says how far the grid search
 may be from the robust optimum.
 
-One time limit: `time_limit` bounds the whole call (a TimeBudget, policies/synthesis/budget.py).
-Each synthesis run gets an equal share of the time left among the runs still to come (the Bayes
-run, the grid's candidates, the per-type bounds); a run that converges early leaves its time to
-the next. `on_phase` hears one line per finished run with its bounds.
+One time limit: `time_limit` bounds the whole call (a TimeBudget, policies/synthesis/budget.py),
+shared by its runs in this order (RunSchedule): the per-type bounds (robust; each an equal share of
+the time left, at most TYPE_BOUND_SHARE of it), the Bayes run (robust: BAYES_SHARE of the time
+left; bayes: all but EVALUATION_SHARE, kept for its exact per-type evaluations), then the grid's
+candidates while a run with time for its fixed costs still fits. A run that converges early leaves
+its time to the next. The lifted runs take cluster policies only before their search ("early"):
+after it they took half of its time for a lower L. `on_phase` hears one line per finished run with
+its bounds.
 
 One type: the Bayes objective is `synthesize` on the type's own model and spec, bit for bit.
 Specs with trust-state atoms go to policies/trust_state_synthesis/population.py instead (the one
@@ -226,10 +230,12 @@ class RunSchedule:
 
     def next_limit(self, share: float = 0.0, at_least: float = 0.0) -> float:
         """The next run's limit: the larger of an equal share, `share` of the time left and
-        `at_least` seconds, never more than the time left (and never below MIN_RUN_SECONDS)."""
+        `at_least` seconds, never more than the time to the deadline less the run's own following
+        work (the runs after it may be skipped), and never below MIN_RUN_SECONDS."""
         left = self.left()
         remaining = max(self.runs - self.done, 1)
-        return max(min(max(left / remaining, share * left, at_least), left), MIN_RUN_SECONDS)
+        own = max(self.budget.deadline - time.perf_counter() - self.per_gap, 0.0)
+        return max(min(max(left / remaining, share * left, at_least), own), MIN_RUN_SECONDS)
 
     def capped_limit(self, share: float) -> float:
         """An equal share of the time left, at most `share` of it."""

@@ -23,7 +23,8 @@ from trustroute.policies.routing.decision_tables import fallback_only
 from trustroute.policies.synthesis import population as population_synthesis
 from trustroute.policies.synthesis.belief_cells import observation_symbols, reachable_states, suffix_cells
 from trustroute.policies.synthesis.belief_synthesis import cluster_order
-from trustroute.policies.synthesis.population import BAYES_SHARE, synthesize_population
+from trustroute.policies.synthesis.budget import TimeBudget
+from trustroute.policies.synthesis.population import BAYES_SHARE, RunSchedule, synthesize_population
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 
@@ -56,7 +57,9 @@ def test_the_bayes_run_gets_most_of_the_robust_limit(town, three_types, monkeypa
     assert max(at for at, _ in bounds) < lifted[0][0]          # the per-type bounds come first
     bayes_at, bayes_limit = lifted[0]
     left = started + limit - bayes_at
-    assert bayes_limit >= BAYES_SHARE * left - 0.05, (bayes_limit, left)
+    # half of the time left, less the (small) gaps measured between the bound runs, set aside
+    # for the runs to come: at least 0.8 of it (an equal share was a nineteenth)
+    assert bayes_limit >= 0.8 * BAYES_SHARE * left, (bayes_limit, left)
     for _, at, run_limit in calls:
         assert at + run_limit <= started + limit + 1e-3
     assert found.lower <= found.upper
@@ -113,3 +116,12 @@ def test_early_cluster_mode_never_follows_the_search(pomdp):
     assert cluster_order(tables, symbols, 20, "auto", "auto") == "after"
     assert cluster_order(tables, symbols, 20, "auto", "early") == "never"
     assert cluster_order(tables, symbols, 20, "auto", "on") == "first"
+
+
+def test_a_candidate_gets_its_fixed_costs_after_costly_evaluations():
+    # the evaluations predicted for every run to come used to be taken off first: after one
+    # evaluation of 7 s with 15 runs to come, a run got the floor of 0.05 s and never expanded
+    schedule = RunSchedule(TimeBudget.start(30.0), runs=19, done=4, between=7.0, gaps=1)
+    assert schedule.affords(0, 4.0)
+    assert schedule.next_limit(at_least=4.0) >= 4.0
+    assert schedule.next_limit(at_least=40.0) <= 30.0 - 7.0        # its own evaluation still fits
