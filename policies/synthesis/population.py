@@ -144,16 +144,27 @@ def per_type_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, popula
                     deadline: float | None = None) -> tuple[TypeValue, ...]:
     """Exact value of `policy` (its AV filtering on `pomdp`) for each type of `population` as the
     true driver; past `deadline` (time.perf_counter()) the histories still open are cut, so a value
-    is then certified [lower, upper] rather than exact."""
+    is then certified [lower, upper] rather than exact; each type has its share of the time left
+    (`type_deadline`), so that a cut falls on every type alike."""
     out = []
-    for t in population.types:
+    for i, t in enumerate(population.types):
         truth = build_pomdp(pomdp.town, t.model)
         value: Evaluation = evaluate(pomdp, spec, policy,
                                      EvaluationSettings(fallback_after=fallback_after,
                                                         max_junctions=max_junctions, belief_rule=belief_rule),
-                                     truth=truth, deadline=deadline)
+                                     truth=truth, deadline=type_deadline(deadline, population.n_types - i))
         out.append(TypeValue(t.name, float(t.weight), value.lower, value.upper))
     return tuple(out)
+
+
+def type_deadline(deadline: float | None, types_left: int) -> float | None:
+    """The deadline of the next of `types_left` per-type evaluations: an equal share of the time
+    left before `deadline` (a cut evaluation leaves its type's value [lower, upper]; one type
+    taking all the time would leave the others at lower 0)."""
+    if deadline is None:
+        return None
+    now = time.perf_counter()
+    return now + max(deadline - now, 0.0) / max(types_left, 1)
 
 
 def simplex_grid(k: int, max_points: int = MAX_GRID_CANDIDATES) -> list[np.ndarray]:
@@ -324,10 +335,10 @@ def candidate_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, popul
     most `beaten_at` (the best worst type so far) the candidate cannot be returned and the types
     left are not evaluated (None)."""
     out: list[TypeValue | None] = [None] * population.n_types
-    for k in order:
+    for i, k in enumerate(order):
         t = population.types[k]
         value = evaluate(pomdp, spec, policy, settings, truth=build_pomdp(pomdp.town, t.model),
-                         deadline=deadline)
+                         deadline=type_deadline(deadline, len(order) - i))
         out[k] = TypeValue(t.name, float(t.weight), value.lower, value.upper)
         if value.upper <= beaten_at:
             break
