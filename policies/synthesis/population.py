@@ -54,7 +54,8 @@ from trustroute.policies.evaluation.plain import Evaluation, evaluate
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import Spec, state_only_projection
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
-from trustroute.policies.routing.aware_table import BeliefTablePolicy
+from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
+from trustroute.policies.routing.decision_tables import fallback_only
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synthesize
@@ -74,7 +75,8 @@ LATER_RUN_FACTOR = 3.0
 # robust objective and its U bounds the robust optimum, and a run given less than its fixed costs
 # (the lifted model's exact filter, product and abstraction: 2-4 s at H = 20 on the paper's town)
 # never expands its root: so the Bayes run comes first with most of the time, a candidate prior
-# runs only with at least CANDIDATE_SETUP_FACTOR times the Bayes run's fixed costs, and the exact
+# starts only while the Bayes run's fixed costs fit and is given CANDIDATE_SETUP_FACTOR times
+# them where the time allows, and the exact
 # per-type evaluation of the Bayes objective's policy keeps EVALUATION_SHARE of the limit.
 BAYES_SHARE = 0.5             # robust: share of the time left the Bayes run takes
 TYPE_BOUND_SHARE = 0.1        # robust: share of the time left each per-type bound run takes at most
@@ -345,6 +347,24 @@ def candidate_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, popul
     return tuple(out)
 
 
+def complete(found: tuple[TypeValue | None, ...]) -> tuple[TypeValue, ...] | None:
+    """Every type's value, or None when some type was not evaluated."""
+    known = tuple(v for v in found if v is not None)
+    return known if len(known) == len(found) else None
+
+
+def candidate_record(prior: np.ndarray | None, found: tuple[TypeValue | None, ...]) -> dict:
+    """A candidate's line in the summary: its prior (None: the free completion), the lower ends of
+    the types evaluated (None: not evaluated, once it was beaten, `"beaten": true`)."""
+    known = [v for v in found if v is not None]
+    record: dict = {"prior": None if prior is None else prior.tolist(),
+                    "worst_type_lower": min(v.lower for v in known),
+                    "type_lower": [None if v is None else v.lower for v in found]}
+    if len(known) < len(found):   # its worst type may be lower still
+        record["beaten"] = True
+    return record
+
+
 def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, settings: SynthesisSettings,
                       schedule: RunSchedule, bayes_run: BayesRun,
                       on_iteration: Callable[[float, float], None] | None) -> tuple[Candidate, list[dict]]:
@@ -365,7 +385,20 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
     evaluation = EvaluationSettings(max_junctions=evaluation_cap(horizon), belief_rule=settings.belief_rule)
     setup = CANDIDATE_SETUP_FACTOR * setup_seconds(bayes)
     worst_first = sorted(range(population.n_types), key=lambda k: bayes_values[k].lower)
-    for prior in candidate_priors(weights, population.n_types, grid_points, schedule, worst_first[0], setup):
+    # the free completion, what a table without rows drives: a run stopped before its first row
+    # returns it, and it can serve the worst type better than a table made for the prior
+    if fallback_only(bayes.policy) is None:     # else the Bayes policy is that completion
+        free = BeliefTablePolicy(PolicyTable.empty(pomdp.n_trust), town, spec, name="robust", horizon=horizon)
+        found = candidate_values(pomdp, spec, free, population, evaluation, schedule.budget.deadline,
+                                 worst_first, worst_type(best[1]))
+        candidates.append(candidate_record(None, found))
+        values = complete(found)
+        if values is not None and worst_type(values) > worst_type(best[1]):
+            best = (free, values, weights, replace(bayes.stats, policy_rows=0))
+    # started while its fixed costs fit, given twice them where the time allows (small problems
+    # converge within their fixed costs; larger ones need time to expand)
+    for prior in candidate_priors(weights, population.n_types, grid_points, schedule, worst_first[0],
+                                  setup / CANDIDATE_SETUP_FACTOR):
         made = synthesize(build_pomdp(town, lift_population(population, prior)), spec,
                           replace(settings, time_limit=schedule.next_limit(at_least=setup)),
                           on_iteration=on_iteration)
@@ -374,14 +407,10 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
                                    horizon=horizon, reweight=reweighting(population, prior))
         found = candidate_values(pomdp, spec, policy, population, evaluation,
                                  schedule.evaluation_deadline(0), worst_first, worst_type(best[1]))
-        known = [v for v in found if v is not None]
-        record = {"prior": prior.tolist(), "worst_type_lower": min(v.lower for v in known),
-                  "type_lower": [None if v is None else v.lower for v in found]}
-        if len(known) < population.n_types:   # its worst type may be lower still
-            record["beaten"] = True
-        candidates.append(record)
-        if len(known) == population.n_types and worst_type(tuple(known)) > worst_type(best[1]):
-            best = (policy, tuple(known), prior, made.stats)
+        candidates.append(candidate_record(prior, found))
+        values = complete(found)
+        if values is not None and worst_type(values) > worst_type(best[1]):
+            best = (policy, values, prior, made.stats)
     return best, candidates
 
 
