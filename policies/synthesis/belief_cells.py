@@ -15,6 +15,14 @@ lies in P_w (f_{uw}(Δ) ⊆ f_w(Δ)), so the cell of the last k symbols always c
 Because f_o maps the hull of points to the hull of their images, the vertices of P_w are the
 images of the simplex corners; a belief atom (affine in b) is all-true / all-false / mixed on a
 cell by its signs at the vertices.
+
+The simplex here is the face of the hidden states reachable from the initial belief's support
+(`reachable_states`): every belief of every history is supported there (b W_o is supported on the
+one-step successors of b's support), so the argument above holds with that face for Δ. With a full
+support (the uniform prior of one driver) the face is the whole simplex. It matters for a type-aware
+model (policies/belief/driver_types.py): a type whose trust never moves from its initial level
+adds one corner, not seven, and corners such as "that type at trust 7", fixed points of every
+update that would keep a belief atom possible in every cell, are not vertices of any cell.
 """
 
 from __future__ import annotations
@@ -166,13 +174,25 @@ def _normalise_rows(matrix: np.ndarray) -> np.ndarray:
     return np.divide(matrix, total, out=np.zeros_like(matrix), where=total > 0)
 
 
+def reachable_states(symbols: ObservationSymbols) -> np.ndarray:
+    """bool [n_trust]: the hidden states some history can give positive belief, from the initial
+    belief's support through the support of every symbol's update matrix."""
+    reached = np.asarray(symbols.pomdp.initial_belief, dtype=float) > 0
+    step = np.asarray((symbols.update > 0).any(axis=0))                   # [θ, θ']
+    while True:
+        grown = reached | step[reached].any(axis=0)
+        if (grown == reached).all():
+            return reached
+        reached = grown
+
+
 def suffix_cells(symbols: ObservationSymbols, k: int) -> SuffixCells:
     if k < 0:
         raise ValueError("suffix length k must be >= 0")
     changing = np.flatnonzero(~symbols.identity)
-    n_trust = symbols.likelihood.shape[1]
+    # the corners of the reachable face; an unreachable corner is a zero row, absent from every cell
     words: list[tuple[int, ...]] = [()]
-    vertices = [np.eye(n_trust)]
+    vertices = [np.diag(reachable_states(symbols).astype(float))]
     index: dict[tuple[int, ...], int] = {(): 0}
     frontier: list[tuple[int, ...]] = [()]
     for _ in range(k):

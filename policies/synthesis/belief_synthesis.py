@@ -147,10 +147,10 @@ class _Answer:
     unbounded_upper: str | None = None
 
 
-def _cluster_order(tables: ProductTables, symbols: ObservationSymbols, horizon: int | None,
+def cluster_order(tables: ProductTables, symbols: ObservationSymbols, horizon: int | None,
                    completion: str, clusters: str) -> str:
     """CLUSTER_MODES: "first" (cluster policies before the search), "after" (after a search that
-    ends with a gap above tau) or "never"."""
+    ends with a gap above tau; not in the "early" mode) or "never"."""
     if clusters == "off" or symbols.rule != "bayes":
         return "never"
     if clusters == "on":
@@ -158,7 +158,9 @@ def _cluster_order(tables: ProductTables, symbols: ObservationSymbols, horizon: 
     depth = horizon if horizon is not None else UNBOUNDED_DEPTH
     large = completion == "auto" and completion_tree_leaves(
         tables, symbols, state_only_task(tables.pomdp.town, tables.spec), depth) > AUTO_TREE_LEAVES
-    return "first" if large else "after"
+    if large:
+        return "first"
+    return "never" if clusters == "early" else "after"
 
 
 def _cluster_table(solution: ClusterSolution, n_trust: int) -> PolicyTable:
@@ -202,7 +204,7 @@ def _bounded(problem: _Problem, horizon: int) -> _Answer:
     tables, budget, tau = problem.tables, problem.budget, problem.tau
     n_trust = tables.pomdp.n_trust
     symbols = observation_symbols(tables.pomdp, problem.belief_rule)
-    order = _cluster_order(tables, symbols, horizon, problem.settings.completion, problem.settings.clusters)
+    order = cluster_order(tables, symbols, horizon, problem.settings.completion, problem.settings.clusters)
     runs: list[Run] = []
     cluster, cluster_upper = None, 1.0
     if order == "first":
@@ -311,7 +313,7 @@ def _unbounded(problem: _Problem) -> _Answer:
     upper = float(max(value[tables.start, q, 0] for q in problem.roots_q))
     best = _Answer(-1.0, upper, None, 0.0, (), note)
     runs: list[Run] = []
-    order = _cluster_order(tables, symbols, None, problem.settings.completion, problem.settings.clusters)
+    order = cluster_order(tables, symbols, None, problem.settings.completion, problem.settings.clusters)
     if order == "first":
         best = _with_cluster(best, _unbounded_clusters(problem, symbols, upper, best.lower,
                                                        budget.share(CLUSTER_SHARE), runs), tables)

@@ -22,10 +22,14 @@ projection when the spec reads beliefs, since the AV's belief is not type k's ow
 max_π min_k V_k <= min_k max_π V_k and <= max_π Σ_k w_k V_k. The gap says how far the grid search
 may be from the robust optimum.
 
-One time limit: `time_limit` bounds the whole call (a TimeBudget, policies/synthesis/budget.py).
-Each synthesis run gets an equal share of the time left among the runs still to come (the Bayes
-run, the grid's candidates, the per-type bounds); a run that converges early leaves its time to
-the next. `on_phase` hears one line per finished run with its bounds.
+One time limit: `time_limit` bounds the whole call (a TimeBudget, policies/synthesis/budget.py),
+shared by its runs in this order (RunSchedule): the per-type bounds (robust; each an equal share of
+the time left, at most TYPE_BOUND_SHARE of it), the Bayes run (robust: BAYES_SHARE of the time
+left; bayes: all but EVALUATION_SHARE, kept for its exact per-type evaluations), then the grid's
+candidates while a run with time for its fixed costs still fits. A run that converges early leaves
+its time to the next. The lifted runs take cluster policies only before their search ("early"):
+after it they took half of its time for a lower L. `on_phase` hears one line per finished run with
+its bounds.
 
 One type: the Bayes objective is `synthesize` on the type's own model and spec, bit for bit.
 Specs with trust-state atoms go to policies/trust_state_synthesis/population.py instead (the one
@@ -39,7 +43,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from math import comb
-from typing import Literal
+from typing import Literal, TypeAlias
 
 import numpy as np
 
@@ -50,17 +54,34 @@ from trustroute.policies.evaluation.plain import Evaluation, evaluate
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import Spec, state_only_projection
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
-from trustroute.policies.routing.aware_table import BeliefTablePolicy
+from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
+from trustroute.policies.routing.decision_tables import fallback_only
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synthesize
 from trustroute.policies.synthesis.budget import TimeBudget
-from trustroute.policies.synthesis.result import SynthesisResult
+from trustroute.policies.synthesis.result import SearchRun, SynthesisResult, SynthesisStats
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 
 Objective = Literal["bayes", "robust"]
 OBJECTIVES: tuple[str, ...] = ("bayes", "robust")
 MAX_GRID_CANDIDATES = 16
+MIN_RUN_SECONDS = 0.05  # a run's share never below this: a search needs a first expansion
+# A run given MIN_RUN_SECONDS takes up to about this many times as long: its fixed costs (the
+# abstraction, the table) come before its first deadline check (measured: 0.05-0.18 s on the
+# packaged town at H = 20).
+LATER_RUN_FACTOR = 3.0
+# The shares of one population synthesis. The Bayes run's policy is the first candidate of the
+# robust objective and its U bounds the robust optimum, and a run given less than its fixed costs
+# (the lifted model's exact filter, product and abstraction: 2-4 s at H = 20 on the paper's town)
+# never expands its root: so the Bayes run comes first with most of the time, a candidate prior
+# starts only while the Bayes run's fixed costs fit and is given CANDIDATE_SETUP_FACTOR times
+# them where the time allows, and the exact
+# per-type evaluation of the Bayes objective's policy keeps EVALUATION_SHARE of the limit.
+BAYES_SHARE = 0.5             # robust: share of the time left the Bayes run takes
+TYPE_BOUND_SHARE = 0.1        # robust: share of the time left each per-type bound run takes at most
+EVALUATION_SHARE = 0.2        # bayes: share of the time left kept for the per-type evaluations
+CANDIDATE_SETUP_FACTOR = 2.0
 
 
 @dataclass(frozen=True)
@@ -125,16 +146,27 @@ def per_type_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, popula
                     deadline: float | None = None) -> tuple[TypeValue, ...]:
     """Exact value of `policy` (its AV filtering on `pomdp`) for each type of `population` as the
     true driver; past `deadline` (time.perf_counter()) the histories still open are cut, so a value
-    is then certified [lower, upper] rather than exact."""
+    is then certified [lower, upper] rather than exact; each type has its share of the time left
+    (`type_deadline`), so that a cut falls on every type alike."""
     out = []
-    for t in population.types:
+    for i, t in enumerate(population.types):
         truth = build_pomdp(pomdp.town, t.model)
         value: Evaluation = evaluate(pomdp, spec, policy,
                                      EvaluationSettings(fallback_after=fallback_after,
                                                         max_junctions=max_junctions, belief_rule=belief_rule),
-                                     truth=truth, deadline=deadline)
+                                     truth=truth, deadline=type_deadline(deadline, population.n_types - i))
         out.append(TypeValue(t.name, float(t.weight), value.lower, value.upper))
     return tuple(out)
+
+
+def type_deadline(deadline: float | None, types_left: int) -> float | None:
+    """The deadline of the next of `types_left` per-type evaluations: an equal share of the time
+    left before `deadline` (a cut evaluation leaves its type's value [lower, upper]; one type
+    taking all the time would leave the others at lower 0)."""
+    if deadline is None:
+        return None
+    now = time.perf_counter()
+    return now + max(deadline - now, 0.0) / max(types_left, 1)
 
 
 def simplex_grid(k: int, max_points: int = MAX_GRID_CANDIDATES) -> list[np.ndarray]:
@@ -154,15 +186,18 @@ def candidate_name(prior: np.ndarray) -> str:
     return f"candidate prior {np.round(prior, 3).tolist()}"
 
 
-def candidate_priors(weights: np.ndarray, n_types: int, grid_points: int,
-                     schedule: RunSchedule) -> Iterator[np.ndarray]:
+def candidate_priors(weights: np.ndarray, n_types: int, grid_points: int, schedule: RunSchedule,
+                     favoured: int | None = None, seconds: float = MIN_RUN_SECONDS) -> Iterator[np.ndarray]:
     """The robust search's candidate priors: the simplex grid less the population's own weights
-    (run already), each while the schedule affords its run, else skipped and said so. Lazy: the
-    schedule is asked after the run of the previous candidate has finished."""
-    for prior in simplex_grid(n_types, grid_points):
-        if np.allclose(prior, weights, rtol=0, atol=1e-12):
-            continue
-        if not schedule.affords(n_types):
+    (run already), each while the schedule affords its run of `seconds`, else skipped and said so;
+    with `favoured` (a type), those giving it the most weight first, since the time may not afford
+    them all. Lazy: the schedule is asked after the run of the previous candidate has finished."""
+    grid = [prior for prior in simplex_grid(n_types, grid_points)
+            if not np.allclose(prior, weights, rtol=0, atol=1e-12)]
+    if favoured is not None:
+        grid.sort(key=lambda prior: -prior[favoured])   # stable: the grid's order among equals
+    for prior in grid:
+        if not schedule.affords(0, seconds):
             schedule.skip(candidate_name(prior))
             continue
         yield prior
@@ -172,18 +207,14 @@ def _count(k: int, m: int) -> int:
     return comb(m + k - 1, k - 1)
 
 
-MIN_RUN_SECONDS = 0.05  # a run's share never below this: a search needs a first expansion
-# A run given MIN_RUN_SECONDS takes up to about this many times as long: its fixed costs (the
-# abstraction, the table) come before its first deadline check (measured: 0.05-0.18 s on the
-# packaged town at H = 20).
-LATER_RUN_FACTOR = 3.0
 
 
 @dataclass
 class RunSchedule:
-    """The runs of one population synthesis under one TimeBudget: each run's time limit is an
-    equal share of the time left among the runs still to come, after the work between runs (the
-    exact per-type evaluations, at their mean cost so far) is set aside for the gaps to come."""
+    """The runs of one population synthesis under one TimeBudget: by default each run's time limit
+    is an equal share of the time left among the runs still to come, after the work between runs
+    (the exact per-type evaluations, at their mean cost so far) is set aside for the gaps to come;
+    a run may be given a larger share of the time left (`next_limit`)."""
 
     budget: TimeBudget
     runs: int
@@ -200,20 +231,35 @@ class RunSchedule:
             self.gaps += 1
             self.last_end = None
 
-    def next_limit(self) -> float:
-        self._close_gap()
-        now = time.perf_counter()
-        remaining = max(self.runs - self.done, 1)
-        per_gap = self.between / self.gaps if self.gaps else 0.0
-        left = max(self.budget.deadline - now - per_gap * remaining, 0.0)
-        return max(left / remaining, MIN_RUN_SECONDS)
+    @property
+    def per_gap(self) -> float:
+        return self.between / self.gaps if self.gaps else 0.0
 
-    def affords(self, later_runs: int) -> bool:
-        """Whether one more run with its following work still fits before the deadline, with
-        `later_runs` runs after it that must run (the per-type bounds)."""
+    def left(self) -> float:
+        """Seconds left for the runs still to come, the gaps after them set aside."""
         self._close_gap()
-        per_gap = self.between / self.gaps if self.gaps else 0.0
-        return self.budget.fits(per_gap + MIN_RUN_SECONDS * (1 + later_runs))
+        remaining = max(self.runs - self.done, 1)
+        return max(self.budget.deadline - time.perf_counter() - self.per_gap * remaining, 0.0)
+
+    def next_limit(self, share: float = 0.0, at_least: float = 0.0) -> float:
+        """The next run's limit: the larger of an equal share, `share` of the time left and
+        `at_least` seconds, never more than the time to the deadline less the run's own following
+        work (the runs after it may be skipped), and never below MIN_RUN_SECONDS."""
+        left = self.left()
+        remaining = max(self.runs - self.done, 1)
+        own = max(self.budget.deadline - time.perf_counter() - self.per_gap, 0.0)
+        return max(min(max(left / remaining, share * left, at_least), own), MIN_RUN_SECONDS)
+
+    def capped_limit(self, share: float) -> float:
+        """An equal share of the time left, at most `share` of it."""
+        left = self.left()
+        return max(min(left / max(self.runs - self.done, 1), share * left), MIN_RUN_SECONDS)
+
+    def affords(self, later_runs: int, seconds: float = MIN_RUN_SECONDS) -> bool:
+        """Whether one more run of `seconds` with its following work still fits before the
+        deadline, with `later_runs` runs after it that must run."""
+        self._close_gap()
+        return self.budget.fits(self.per_gap + seconds + MIN_RUN_SECONDS * later_runs)
 
     def skip(self, what: str) -> None:
         """A run left out for want of time (a candidate prior)."""
@@ -251,6 +297,123 @@ def reweighting(population: DriverPopulation, prior: np.ndarray) -> np.ndarray:
     return np.repeat(np.asarray(prior, dtype=float) / population.weights, n)
 
 
+# the AV's model, the Bayes run and its per-type values
+BayesRun: TypeAlias = tuple[TrustPOMDP, BeliefSynthesis, tuple["TypeValue", ...]]
+# a robust candidate: its policy, per-type values, type prior λ and run statistics
+Candidate: TypeAlias = tuple[BeliefTablePolicy, tuple["TypeValue", ...], np.ndarray, SynthesisStats]
+
+
+def worst_type(values: tuple[TypeValue, ...]) -> float:
+    """The robust value of a policy: the lower end of its worst type's value."""
+    return min(v.lower for v in values)
+
+
+def setup_seconds(result: BeliefSynthesis) -> float:
+    """A synthesis run's fixed costs before its search could expand (the exact filter, the product,
+    the abstraction), as its search runs report them."""
+    return max((run.abstraction_seconds for run in result.stats.runs if isinstance(run, SearchRun)),
+               default=0.0)
+
+
+def type_bounds(town: Town, population: DriverPopulation, spec: Spec, settings: SynthesisSettings,
+                schedule: RunSchedule) -> tuple[float, ...]:
+    """U_k for every type: a sound bound of type k's own optimum, the synthesis on type k's model
+    alone (of the spec's state-only projection when labels read the AV's belief)."""
+    own_spec = spec if not (spec.belief_atoms or spec.type_atoms) else state_only_projection(spec)
+    bounds = []
+    for t in population.types:
+        own = synthesize(build_pomdp(town, t.model), own_spec,
+                         replace(settings, time_limit=schedule.capped_limit(TYPE_BOUND_SHARE),
+                                 belief_rule="bayes"))
+        schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper)
+        bounds.append(own.upper)
+    return tuple(bounds)
+
+
+def candidate_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, population: DriverPopulation,
+                     settings: EvaluationSettings, deadline: float, order: list[int], beaten_at: float
+                     ) -> tuple[TypeValue | None, ...]:
+    """A candidate's exact per-type values, type by type in `order`; once a type's upper end is at
+    most `beaten_at` (the best worst type so far) the candidate cannot be returned and the types
+    left are not evaluated (None)."""
+    out: list[TypeValue | None] = [None] * population.n_types
+    for i, k in enumerate(order):
+        t = population.types[k]
+        value = evaluate(pomdp, spec, policy, settings, truth=build_pomdp(pomdp.town, t.model),
+                         deadline=type_deadline(deadline, len(order) - i))
+        out[k] = TypeValue(t.name, float(t.weight), value.lower, value.upper)
+        if value.upper <= beaten_at:
+            break
+    return tuple(out)
+
+
+def complete(found: tuple[TypeValue | None, ...]) -> tuple[TypeValue, ...] | None:
+    """Every type's value, or None when some type was not evaluated."""
+    known = tuple(v for v in found if v is not None)
+    return known if len(known) == len(found) else None
+
+
+def candidate_record(prior: np.ndarray | None, found: tuple[TypeValue | None, ...]) -> dict:
+    """A candidate's line in the summary: its prior (None: the free completion), the lower ends of
+    the types evaluated (None: not evaluated, once it was beaten, `"beaten": true`)."""
+    known = [v for v in found if v is not None]
+    record: dict = {"prior": None if prior is None else prior.tolist(),
+                    "worst_type_lower": min(v.lower for v in known),
+                    "type_lower": [None if v is None else v.lower for v in found]}
+    if len(known) < len(found):   # its worst type may be lower still
+        record["beaten"] = True
+    return record
+
+
+def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, settings: SynthesisSettings,
+                      schedule: RunSchedule, bayes_run: BayesRun,
+                      on_iteration: Callable[[float, float], None] | None) -> tuple[Candidate, list[dict]]:
+    """The candidate with the best worst type: the Bayes policy (`bayes_run`: the AV's model, the
+    run, its per-type values) and the λ-policies of the grid the time affords, those favouring
+    the Bayes policy's worst type first, each given at least CANDIDATE_SETUP_FACTOR times the
+    Bayes run's fixed costs. (policy, its per-type values, λ, its run's stats, every candidate's
+    record.)"""
+    pomdp, bayes, bayes_values = bayes_run
+    weights, horizon = population.weights, settings.horizon
+    best: Candidate = (
+        bayes.policy, bayes_values, weights, bayes.stats)
+    candidates = [{"prior": weights.tolist(), "worst_type_lower": worst_type(bayes_values),
+                   "type_lower": [v.lower for v in bayes_values]}]
+    if population.n_types == 1:
+        return best, candidates
+    grid_points = MAX_GRID_CANDIDATES if settings.grid_points is None else settings.grid_points
+    evaluation = EvaluationSettings(max_junctions=evaluation_cap(horizon), belief_rule=settings.belief_rule)
+    setup = CANDIDATE_SETUP_FACTOR * setup_seconds(bayes)
+    worst_first = sorted(range(population.n_types), key=lambda k: bayes_values[k].lower)
+    # the free completion, what a table without rows drives: a run stopped before its first row
+    # returns it, and it can serve the worst type better than a table made for the prior
+    if fallback_only(bayes.policy) is None:     # else the Bayes policy is that completion
+        free = BeliefTablePolicy(PolicyTable.empty(pomdp.n_trust), town, spec, name="robust", horizon=horizon)
+        found = candidate_values(pomdp, spec, free, population, evaluation, schedule.budget.deadline,
+                                 worst_first, worst_type(best[1]))
+        candidates.append(candidate_record(None, found))
+        values = complete(found)
+        if values is not None and worst_type(values) > worst_type(best[1]):
+            best = (free, values, weights, replace(bayes.stats, policy_rows=0))
+    # started while its fixed costs fit, given twice them where the time allows (small problems
+    # converge within their fixed costs; larger ones need time to expand)
+    for prior in candidate_priors(weights, population.n_types, grid_points, schedule, worst_first[0],
+                                  setup / CANDIDATE_SETUP_FACTOR):
+        made = synthesize(build_pomdp(town, lift_population(population, prior)), spec,
+                          replace(settings, time_limit=schedule.next_limit(at_least=setup)),
+                          on_iteration=on_iteration)
+        schedule.finished(candidate_name(prior), made.lower, made.upper)
+        policy = BeliefTablePolicy(made.policy.table, town, spec, name="robust",
+                                   horizon=horizon, reweight=reweighting(population, prior))
+        found = candidate_values(pomdp, spec, policy, population, evaluation,
+                                 schedule.evaluation_deadline(0), worst_first, worst_type(best[1]))
+        candidates.append(candidate_record(prior, found))
+        values = complete(found)
+        if values is not None and worst_type(values) > worst_type(best[1]):
+            best = (policy, values, prior, made.stats)
+    return best, candidates
+
+
 def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
                           objective: Objective = "bayes", settings: SynthesisSettings = DEFAULT_SYNTHESIS,
                           population_source: str = "",
@@ -269,17 +432,23 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
                            on_phase=on_phase)
     lifted_spec = lift_spec(spec, population, population_source)
     cap = evaluation_cap(horizon)
+    # U_k first: single-model runs, each at most TYPE_BOUND_SHARE of the time left, so that the
+    # candidates after the Bayes run cannot leave them nothing.
+    type_upper = type_bounds(town, population, spec, settings, schedule) if objective == "robust" else ()
     # The AV's filter and the spec's belief labels: the type-aware model under the population's
     # weights. Candidates of the robust objective are synthesized under other priors λ but run on
     # this filter, their beliefs reweighted to λ (so the spec means the same for every candidate).
     pomdp = build_pomdp(town, lift_population(population))
-    bayes = synthesize(pomdp, lifted_spec, replace(settings, time_limit=schedule.next_limit()),
-                       on_iteration=on_iteration)
+    if population.n_types > 1 and settings.clusters == "auto":
+        settings = replace(settings, clusters="early")
+    if objective == "robust":
+        limit = schedule.next_limit(BAYES_SHARE)
+    else:   # one type: the single-model synthesis with its whole limit (the same result)
+        limit = schedule.capped_limit(1.0 - (EVALUATION_SHARE if population.n_types > 1 else 0.0))
+    bayes = synthesize(pomdp, lifted_spec, replace(settings, time_limit=limit), on_iteration=on_iteration)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
-    # the per-type bounds of the robust objective must still run after the evaluations
-    later = population.n_types if objective == "robust" else 0
     bayes_values = per_type_values(pomdp, lifted_spec, bayes.policy, population, cap, belief_rule,
-                                   deadline=schedule.evaluation_deadline(later))
+                                   deadline=schedule.evaluation_deadline(0))
     weights = population.weights
     if objective == "bayes":
         return PopulationSynthesis(
@@ -287,36 +456,10 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
             prior=tuple(float(w) for w in weights), type_values=bayes_values, lower=bayes.lower,
             upper=bayes.upper, seconds=time.perf_counter() - started, bayes_lower=bayes.lower,
             bayes_upper=bayes.upper, bayes_type_values=bayes_values)
-
-    def worst(values: tuple[TypeValue, ...]) -> float:
-        return min(v.lower for v in values)
-
-    best_policy, best_values, best_prior, best_stats = bayes.policy, bayes_values, weights, bayes.stats
-    candidates = [{"prior": weights.tolist(), "worst_type_lower": worst(bayes_values),
-                   "type_lower": [v.lower for v in bayes_values]}]
-    if population.n_types > 1:
-        for prior in candidate_priors(weights, population.n_types, grid_points, schedule):
-            made = synthesize(build_pomdp(town, lift_population(population, prior)), lifted_spec,
-                              replace(settings, time_limit=schedule.next_limit()), on_iteration=on_iteration)
-            schedule.finished(candidate_name(prior), made.lower, made.upper)
-            policy = BeliefTablePolicy(made.policy.table, town, lifted_spec, name="robust",
-                                       horizon=horizon, reweight=reweighting(population, prior))
-            values = per_type_values(pomdp, lifted_spec, policy, population, cap, belief_rule,
-                                     deadline=schedule.evaluation_deadline(later))
-            candidates.append({"prior": prior.tolist(), "worst_type_lower": worst(values),
-                               "type_lower": [v.lower for v in values]})
-            if worst(values) > worst(best_values):
-                best_policy, best_values, best_prior, best_stats = policy, values, prior, made.stats
-    # U_k: type k's own optimum; the state-only projection when labels read the AV's belief.
-    own_spec = spec if not (spec.belief_atoms or spec.type_atoms) else state_only_projection(spec)
-    type_upper = []
-    for t in population.types:
-        own = synthesize(build_pomdp(town, t.model), own_spec,
-                         replace(settings, time_limit=schedule.next_limit(), belief_rule="bayes"))
-        schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper)
-        type_upper.append(own.upper)
+    (best_policy, best_values, best_prior, best_stats), candidates = robust_candidates(
+        town, population, lifted_spec, settings, schedule, (pomdp, bayes, bayes_values), on_iteration)
     upper = min(bayes.upper, min(type_upper))
-    lower = worst(best_values)
+    lower = worst_type(best_values)
     if lower > upper + 1e-9:
         raise RuntimeError(f"robust value {lower!r} above its bound {upper!r}: a soundness bug")
     upper = max(upper, lower)   # equal up to rounding

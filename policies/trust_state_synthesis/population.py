@@ -46,8 +46,11 @@ from trustroute.policies.routing.protocol import Certificate, RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.population import (
+    BAYES_SHARE,
+    EVALUATION_SHARE,
     MAX_GRID_CANDIDATES,
     OBJECTIVES,
+    TYPE_BOUND_SHARE,
     PopulationSynthesis,
     RunSchedule,
     TypeValue,
@@ -68,17 +71,21 @@ from trustroute.policies.trust_state_synthesis.synthesis import (
 
 def joint_type_values(problem: Problem, policy: RoutingPolicy, max_junctions: int,
                       belief_rule: BeliefRule = "bayes", fallback_after: int | None = None,
-                      pomdp: TrustPOMDP | None = None) -> tuple[TypeValue, ...]:
+                      pomdp: TrustPOMDP | None = None, deadline: float | None = None
+                      ) -> tuple[TypeValue, ...]:
     """Certified value of `policy` for each type of the problem's population as the true driver,
-    from one joint unfolding on the lifted model (`evaluate_joint_by_type`)."""
+    from one joint unfolding on the lifted model (`evaluate_joint_by_type`); branches still open
+    at `deadline` (time.perf_counter()) are cut, widening [lower, upper]."""
     population = problem.population
     if population is None:
         raise ValueError("per-type values need a problem with a driver population")
+    time_limit = None if deadline is None else max(deadline - time.perf_counter(), 0.0)
     _, bounds = evaluate_joint_by_type(pomdp or problem.pomdp, problem.spec, policy,
                                        EvaluationSettings(fallback_after=fallback_after,
                                                           max_junctions=max_junctions,
                                                           belief_rule=belief_rule,
-                                                          max_nodes=EVALUATION_NODES))
+                                                          max_nodes=EVALUATION_NODES,
+                                                          time_limit=time_limit))
     return tuple(TypeValue(t.name, float(t.weight), lower, upper)
                  for t, (lower, upper) in zip(population.types, bounds, strict=True))
 
@@ -111,7 +118,8 @@ def type_optimum_bounds(problem: Problem, settings: SynthesisSettings, schedule:
     bounds = []
     for t in population.types:
         own = synthesize(build_pomdp(problem.town, t.model), own_spec,
-                         replace(settings, time_limit=schedule.next_limit(), belief_rule="bayes"))
+                         replace(settings, time_limit=schedule.capped_limit(TYPE_BOUND_SHARE),
+                                 belief_rule="bayes"))
         schedule.finished(f"bound of type {t.name}'s own optimum", own.lower, own.upper)
         bounds.append(own.upper)
     return tuple(bounds)
@@ -146,7 +154,7 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
         policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
                                   name="robust", certificate=Certificate(horizon=horizon),
                                   guide=made.policy.guide, reweight=reweighting(population, prior))
-        found = joint_type_values(problem, policy, cap, belief_rule)
+        found = joint_type_values(problem, policy, cap, belief_rule, deadline=schedule.budget.deadline)
         candidates.append(record(prior, found))
         if min(v.lower for v in found) > min(v.lower for v in best[1]):
             best = (policy, found, prior)
@@ -174,10 +182,19 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     started = time.perf_counter()
     schedule = RunSchedule(TimeBudget.start(settings.time_limit),
                            run_count(population, objective, grid_points), on_phase=on_phase)
-    bayes = synthesize_joint(problem.pomdp, problem.spec, replace(settings, time_limit=schedule.next_limit()),
+    # the per-type bounds first (capped shares), then the Bayes run with most of the time
+    # (policies/synthesis/population.py: a run given less than its fixed costs finds nothing)
+    robust = objective == "robust"
+    type_upper = type_optimum_bounds(problem, settings, schedule, synthesize) if robust else ()
+    if robust:
+        limit = schedule.next_limit(BAYES_SHARE)
+    else:   # the rest for its per-type evaluation (one type: the single-model run's whole limit)
+        limit = schedule.capped_limit(1.0 - (EVALUATION_SHARE if population.n_types > 1 else 0.0))
+    bayes = synthesize_joint(problem.pomdp, problem.spec, replace(settings, time_limit=limit),
                              on_iteration=on_iteration)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
-    values = joint_type_values(problem, bayes.policy, evaluation_cap(horizon), belief_rule)
+    values = joint_type_values(problem, bayes.policy, evaluation_cap(horizon), belief_rule,
+                               deadline=schedule.budget.deadline)
     found = PopulationSynthesis(
         objective="bayes", population=population, result=bayes, pomdp=problem.pomdp, spec=problem.spec,
         prior=tuple(float(w) for w in population.weights), type_values=values, lower=bayes.lower,
@@ -187,7 +204,6 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
         return found
     policy, best_values, prior, candidates = robust_candidates(
         problem, bayes, values, settings, schedule, on_iteration)
-    type_upper = type_optimum_bounds(problem, settings, schedule, synthesize)
     lower = min(v.lower for v in best_values)
     upper = min(bayes.upper, *type_upper)
     if lower > upper + 1e-9:
