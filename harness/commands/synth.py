@@ -174,13 +174,13 @@ def synth(spec_path: str, options: SynthOptions) -> None:
     emit(options.as_json, payload, lines)
 
 
-def _warn_fallback_only(what: str, policy, converged: bool) -> bool:
+def _warn_fallback_only(what: str, policy, converged: bool, outranked: bool = False) -> bool:
     """Whether `policy` is only its fallback (no decision row); if so, one line on stderr."""
     from trustroute.app.synthesis import fallback_only, fallback_warning
 
     fallback = fallback_only(policy)
     if fallback is not None:
-        click.echo(fallback_warning(what, fallback, converged), err=True)
+        click.echo(fallback_warning(what, fallback, converged, outranked), err=True)
     return fallback is not None
 
 
@@ -206,8 +206,9 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
                           "seconds": found.seconds, "tau": tau, "horizon": horizon,
                           "belief_rule": settings.belief_rule, "population": summary,
                           "stats": result.stats.to_dict(),
-                          "fallback_only": _warn_fallback_only(f"the {objective} policy for {spec.name}",
-                                                               result.policy, found.gap <= tau)},
+                          "fallback_only": _warn_fallback_only(
+                              f"the {objective} policy for {spec.name}", result.policy, found.gap <= tau,
+                              any(c.get("rows", 0) > 0 for c in found.candidates))},
                          {"policy": path, "policy_arrays": policy_arrays(path)})
     what = "P(satisfied), prior-weighted" if objective == "bayes" else "worst type's P(satisfied)"
     lines = [f"{spec.name} ({population.n_types} driver types, objective {objective}): "

@@ -346,10 +346,17 @@ def fallback_only(policy: RoutingPolicy) -> str | None:
     return kind.fallback if table.rows == 0 and box_rows == 0 else None
 
 
-def fallback_warning(what: str, fallback: str, converged: bool) -> str:
-    """The one line that says a synthesis returned only its fallback (`fallback_only`)."""
-    why = ("the search proved it within tau of the optimum" if converged else
-           "nothing was synthesized in time, so L is the fallback's value, not a synthesized "
-           "policy's (raise --time-limit)")
+def fallback_warning(what: str, fallback: str, converged: bool, outranked: bool = False) -> str:
+    """The one line that says a synthesis returned only its fallback (`fallback_only`);
+    `outranked`: synthesized candidates with rows were valued and none was worth more (a robust
+    synthesis keeps the candidate with the best worst type, the fallback among them)."""
+    if converged:
+        why = "the search proved it within tau of the optimum"
+    elif outranked:
+        why = ("no synthesized candidate was worth more for its worst type, so L is the fallback's "
+               "value (raise --time-limit for candidates searched further)")
+    else:
+        why = ("nothing was synthesized in time, so L is the fallback's value, not a synthesized "
+               "policy's (raise --time-limit)")
     return (f"warning: {what} has no synthesized decision (0 rows): it is only its fallback, "
             f"{fallback}; {why}")

@@ -353,11 +353,12 @@ def complete(found: tuple[TypeValue | None, ...]) -> tuple[TypeValue, ...] | Non
     return known if len(known) == len(found) else None
 
 
-def candidate_record(prior: np.ndarray | None, found: tuple[TypeValue | None, ...]) -> dict:
-    """A candidate's line in the summary: its prior (None: the free completion), the lower ends of
-    the types evaluated (None: not evaluated, once it was beaten, `"beaten": true`)."""
+def candidate_record(prior: np.ndarray | None, found: tuple[TypeValue | None, ...], rows: int) -> dict:
+    """A candidate's line in the summary: its prior (None: the free completion), its policy's
+    decision rows, the lower ends of the types evaluated (None: not evaluated, once it was
+    beaten, `"beaten": true`)."""
     known = [v for v in found if v is not None]
-    record: dict = {"prior": None if prior is None else prior.tolist(),
+    record: dict = {"prior": None if prior is None else prior.tolist(), "rows": rows,
                     "worst_type_lower": min(v.lower for v in known),
                     "type_lower": [None if v is None else v.lower for v in found]}
     if len(known) < len(found):   # its worst type may be lower still
@@ -377,7 +378,8 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
     weights, horizon = population.weights, settings.horizon
     best: Candidate = (
         bayes.policy, bayes_values, weights, bayes.stats)
-    candidates = [{"prior": weights.tolist(), "worst_type_lower": worst_type(bayes_values),
+    candidates = [{"prior": weights.tolist(), "rows": bayes.stats.policy_rows,
+                   "worst_type_lower": worst_type(bayes_values),
                    "type_lower": [v.lower for v in bayes_values]}]
     if population.n_types == 1:
         return best, candidates
@@ -391,7 +393,7 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
         free = BeliefTablePolicy(PolicyTable.empty(pomdp.n_trust), town, spec, name="robust", horizon=horizon)
         found = candidate_values(pomdp, spec, free, population, evaluation, schedule.budget.deadline,
                                  worst_first, worst_type(best[1]))
-        candidates.append(candidate_record(None, found))
+        candidates.append(candidate_record(None, found, 0))
         values = complete(found)
         if values is not None and worst_type(values) > worst_type(best[1]):
             best = (free, values, weights, replace(bayes.stats, policy_rows=0))
@@ -407,7 +409,7 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
                                    horizon=horizon, reweight=reweighting(population, prior))
         found = candidate_values(pomdp, spec, policy, population, evaluation,
                                  schedule.evaluation_deadline(0), worst_first, worst_type(best[1]))
-        candidates.append(candidate_record(prior, found))
+        candidates.append(candidate_record(prior, found, made.stats.policy_rows))
         values = complete(found)
         if values is not None and worst_type(values) > worst_type(best[1]):
             best = (policy, values, prior, made.stats)

@@ -78,3 +78,17 @@ policy_cache = "{tmp_path / 'cache'}"
     write_report(tmp_path / "out", analysis)
     report = (tmp_path / "out" / "report.md").read_text()
     assert "**Warning: the aware policy for phi1" in report and f"aware{FALLBACK_MARK}" in report
+
+
+def test_the_warning_says_why_the_fallback_was_returned():
+    from trustroute.app.synthesis import fallback_warning
+
+    timed_out = fallback_warning("p", "the free completion", converged=False)
+    outranked = fallback_warning("p", "the free completion", converged=False, outranked=True)
+    proved = fallback_warning("p", "the free completion", converged=True, outranked=True)
+    assert "nothing was synthesized in time" in timed_out
+    # synthesized candidates were valued and the fallback served the worst type best
+    assert "no synthesized candidate was worth more" in outranked and "in time" not in outranked
+    assert "within tau of the optimum" in proved
+    lines = (timed_out, outranked, proved)
+    assert len(set(lines)) == 3 and all("\n" not in line for line in lines)
