@@ -165,7 +165,7 @@ def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: i
     without the fallback. Histories that reach bit-identical (road, J, posterior, AV belief) at the
     same level are merged (their decisions and futures are the same), so this is the unfolding of
     `evaluate_joint` on far fewer nodes; beyond `max_nodes` per level the least likely nodes are
-    dropped, their live mass unknown; by `deadline` (time.perf_counter()) the unfolding stops (a
+    dropped, their live mass unknown; by `deadline` (on the synthesis' clock) the unfolding stops (a
     batch of TABLE_CHUNK nodes or a level's merge is not begun when, at the last one's pace, it
     would end past it) and the live mass of every open node is unknown."""
     town = pomdp.town

@@ -57,6 +57,7 @@ from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synt
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.result import SynthesisResult
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
+from trustroute.policies.work_clock import now as clock_now
 
 Objective = Literal["bayes", "robust"]
 OBJECTIVES: tuple[str, ...] = ("bayes", "robust")
@@ -124,7 +125,7 @@ def per_type_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, popula
                     max_junctions: int, belief_rule: BeliefRule = "bayes", fallback_after: int | None = None,
                     deadline: float | None = None) -> tuple[TypeValue, ...]:
     """Exact value of `policy` (its AV filtering on `pomdp`) for each type of `population` as the
-    true driver; past `deadline` (time.perf_counter()) the histories still open are cut, so a value
+    true driver; past `deadline` (on the synthesis' clock) the histories still open are cut, so a value
     is then certified [lower, upper] rather than exact."""
     out = []
     for t in population.types:
@@ -196,13 +197,13 @@ class RunSchedule:
     def _close_gap(self) -> None:
         """Count the work since the last run ended (its evaluations) as one gap between runs."""
         if self.last_end is not None:
-            self.between += time.perf_counter() - self.last_end
+            self.between += clock_now() - self.last_end
             self.gaps += 1
             self.last_end = None
 
     def next_limit(self) -> float:
         self._close_gap()
-        now = time.perf_counter()
+        now = clock_now()
         remaining = max(self.runs - self.done, 1)
         per_gap = self.between / self.gaps if self.gaps else 0.0
         left = max(self.budget.deadline - now - per_gap * remaining, 0.0)
@@ -229,7 +230,7 @@ class RunSchedule:
 
     def finished(self, what: str, lower: float, upper: float) -> None:
         self.done += 1
-        self.last_end = time.perf_counter()
+        self.last_end = clock_now()
         if self.on_phase is not None:
             self.on_phase(f"[{self.done}/{self.runs}, {self.budget.elapsed():.1f} s] {what}: "
                           f"[{lower:.6f}, {upper:.6f}]")
