@@ -19,7 +19,7 @@ read the installed one, so the routines that check a deadline need no clock argu
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -64,10 +64,13 @@ class WorkClock:
 _CLOCK: ContextVar[WorkClock | None] = ContextVar("work_clock", default=None)
 
 
-def now() -> float:
-    """The time on the installed clock (time.perf_counter() when no work limit is installed)."""
+def now(wall: Callable[[], float] | None = None) -> float:
+    """The time on the installed clock; when no work limit is installed, `wall()` (default
+    time.perf_counter())."""
     clock = _CLOCK.get()
-    return time.perf_counter() if clock is None else clock.now()
+    if clock is not None:
+        return clock.now()
+    return time.perf_counter() if wall is None else wall()
 
 
 def spend(units: int) -> None:
