@@ -49,7 +49,8 @@ def _policy_file(path: Path) -> tuple[dict, dict[str, bytes]]:
 @pytest.mark.parametrize(("spec", "horizon", "work_limit"), [
     ("phi1", 10, 20_000),            # the bounded belief-MDP search
     ("phi1", None, 100_000),         # the unbounded one: end components, growing horizons
-    ("phi1_trust", None, 1_000_000),  # the trust-state search and its unbounded evaluation
+    # the trust-state search and its unbounded evaluation (about 10 s a run)
+    pytest.param("phi1_trust", None, 1_000_000, marks=pytest.mark.slow),
 ])
 def test_a_work_limit_stops_at_the_same_point_however_the_clock_runs(monkeypatch, tmp_path, spec, horizon,
                                                                      work_limit):
