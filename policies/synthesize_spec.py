@@ -13,7 +13,6 @@ search on the lifted model and spec), the others to policies/synthesis/populatio
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING
@@ -29,6 +28,8 @@ from trustroute.policies.synthesis.result import SynthesisResult
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.population import synthesize_population_joint
 from trustroute.policies.trust_state_synthesis.synthesis import synthesize_joint
+from trustroute.policies.work_clock import now as clock_now
+from trustroute.policies.work_clock import work_clock
 
 if TYPE_CHECKING:
     from trustroute.policies.synthesis.population import Objective, PopulationSynthesis
@@ -72,11 +73,24 @@ def synthesize_for_population(town: Town, population: DriverPopulation, spec: Sp
     value; "robust": the worst type's), by the case of the problem (module docstring).
     settings.grid_points: candidate type priors of the robust objective (default
     policies/synthesis/population.py's). settings.time_limit bounds the whole call; on_phase hears
-    a line per finished synthesis run with its bounds."""
-    entered = time.perf_counter()
+    a line per finished synthesis run with its bounds. settings.work_limit: the units of work of
+    the whole call, its runs included (policies/work_clock.py)."""
+    with work_clock(settings.work_limit, settings.time_limit) as limit:
+        return _for_population(town, population, spec, objective,
+                               replace(settings, time_limit=limit), population_source,
+                               (on_iteration, on_phase))
+
+
+def _for_population(town: Town, population: DriverPopulation, spec: Spec, objective: Objective,
+                    settings: SynthesisSettings, population_source: str,
+                    listeners: tuple[Callable[[float, float], None] | None, Callable[[str], None] | None],
+                    ) -> PopulationSynthesis:
+    """`synthesize_for_population` on the clock installed for it."""
+    on_iteration, on_phase = listeners
+    entered = clock_now()
     found = problem(town, population, spec, population_source)
     # the limit is the whole call's: building the problem counts
-    settings = replace(settings, time_limit=max(settings.time_limit - (time.perf_counter() - entered), 0.0))
+    settings = replace(settings, time_limit=max(settings.time_limit - (clock_now() - entered), 0.0))
     if settings.grid_points is None:
         settings = replace(settings, grid_points=MAX_GRID_CANDIDATES)
     if found.case == TRUST_STATE:

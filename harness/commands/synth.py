@@ -85,6 +85,11 @@ class SynthOptions:
                                  help="At most H junctions (default: unbounded).")
     time_limit: float = command_time_limit("Seconds for the whole command (its synthesis runs share them).",
                                            default=defaults.TIME_LIMIT, show_default=True)
+    work_limit: int | None = option(
+        "--work-limit", type=click.IntRange(min=1), default=defaults.WORK_LIMIT,
+        help="Units of work for the whole command (node expansions, sweeps, ...): a stop that does not "
+             "depend on the machine or its load, so the same inputs give the same policy; "
+             '--time-limit still applies (default: none; docs/synthesis.md, "Work limit").')
     belief_rule: str = rule_field()
     quiet: bool = quiet_flag()
     out_path: str | None = option(
@@ -110,7 +115,8 @@ class SynthOptions:
         what is left of it)."""
         from trustroute.app.synthesis import SynthesisSettings, belief_rule_named
 
-        return SynthesisSettings(tau=self.tau, time_limit=self.time_limit, horizon=self.horizon,
+        return SynthesisSettings(tau=self.tau, time_limit=self.time_limit, work_limit=self.work_limit,
+                                 horizon=self.horizon,
                                  belief_rule=belief_rule_named(self.belief_rule), clusters=self.clusters,
                                  progress=not (self.as_json or self.quiet))
 
@@ -140,7 +146,8 @@ def synth(spec_path: str, options: SynthOptions) -> None:
     out_path = out_path or default_out_path(spec.name, town.content_hash, driver.content_hash,
                                             spec.content_hash, f"H={options.horizon}", f"tau={options.tau}",
                                             options.belief_rule, f"clusters={options.clusters}",
-                                            f"time_limit={options.time_limit}")
+                                            f"time_limit={options.time_limit}",
+                                            *_work_key(options.work_limit))
     result = synthesize_single(problem, replace(settings, time_limit=synthesis_time_left(options.time_limit)),
                                out_path)
     path = str(out_path)
@@ -148,7 +155,8 @@ def synth(spec_path: str, options: SynthOptions) -> None:
 
     payload = with_paths({"spec": spec.name, "lower": result.lower, "upper": result.upper, "gap": result.gap,
                           "seconds": result.seconds, "tau": options.tau, "horizon": options.horizon,
-                          "belief_rule": options.belief_rule, "stats": result.stats.to_dict(),
+                          "belief_rule": options.belief_rule, "stopped_by": result.stopped_by,
+                          "stats": result.stats.to_dict(),
                           "fallback_only": _warn_fallback_only(f"the policy for {spec.name}", result.policy,
                                                                result.stats.converged)},
                          {"policy": path, "policy_arrays": policy_arrays(path)})
@@ -174,6 +182,12 @@ def synth(spec_path: str, options: SynthOptions) -> None:
     emit(options.as_json, payload, lines)
 
 
+def _work_key(work_limit: int | None) -> tuple[str, ...]:
+    """The work limit's part of the default policy path's key (none without one, so the paths of
+    time-limited runs stay what they were)."""
+    return () if work_limit is None else (f"work_limit={work_limit}",)
+
+
 def _warn_fallback_only(what: str, policy, converged: bool, outranked: bool = False) -> bool:
     """Whether `policy` is only its fallback (no decision row); if so, one line on stderr."""
     from trustroute.app.synthesis import fallback_only, fallback_warning
@@ -194,7 +208,8 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
     tau, horizon, time_limit = settings.tau, settings.horizon, settings.time_limit
     out_path = out_path or default_out_path(spec.name, town.content_hash, population.content_hash,
                                             spec.content_hash, objective, f"H={horizon}", f"tau={tau}",
-                                            settings.belief_rule, f"time_limit={time_limit}")
+                                            settings.belief_rule, f"time_limit={time_limit}",
+                                            *_work_key(settings.work_limit))
     # the command's limit, less what start-up and reading the inputs took (the out path's key keeps it)
     found = synthesize_population(problem, objective,
                                   replace(settings, time_limit=synthesis_time_left(time_limit)), out_path)
@@ -204,7 +219,8 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
     summary.update({"file": population.source_path, "content_hash": population.content_hash})
     payload = with_paths({"spec": spec.name, "lower": found.lower, "upper": found.upper, "gap": found.gap,
                           "seconds": found.seconds, "tau": tau, "horizon": horizon,
-                          "belief_rule": settings.belief_rule, "population": summary,
+                          "belief_rule": settings.belief_rule, "stopped_by": result.stopped_by,
+                          "population": summary,
                           "stats": result.stats.to_dict(),
                           "fallback_only": _warn_fallback_only(
                               f"the {objective} policy for {spec.name}", result.policy, found.gap <= tau,

@@ -70,8 +70,9 @@ def evaluate(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
     pomdp_ref on the same observations (e.g. the posterior under the true population), without
     changing what the vehicle does: `reference_accepted` is the mass of episodes that this
     reading accepts by the time the vehicle's episode ends (docs/driver_types.md, "Limits").
-    deadline (a time.perf_counter() time; None: none): the histories still open at the first
-    junction begun past it are cut, their mass widening [lower, upper] (a time-limited caller's).
+    deadline (a time on the synthesis' clock, policies/work_clock.py; None: none): the histories
+    still open at the first junction begun past it are cut, their mass widening [lower, upper] (a
+    time-limited caller's).
     """
     started = time.perf_counter()
     fallback_after, max_junctions = settings.fallback_after, settings.max_junctions

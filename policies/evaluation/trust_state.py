@@ -55,6 +55,7 @@ from trustroute.policies.routing.episode_rules import episode_policy
 from trustroute.policies.routing.fallback import FallbackPolicy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
+from trustroute.policies.work_clock import now as clock_now
 
 # Defaults for specs with trust-state atoms (docs/trust_states.md, "Bounded evaluation"): the
 # unfolding keeps the JOINT_MAX_NODES likeliest nodes of each level, which bounds its cost by
@@ -126,8 +127,8 @@ def joint_unfolding(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, settin
     actor = EpisodeActor(policy=policy, town=town, max_junctions=max_junctions,
                          fallback_level=fallback_level, accepting=accepting,
                          batched=batched, routes=[(spec.start,)])
-    limits = Limits(max_junctions=max_junctions, merge=merge,
-                    deadline=None if time_limit is None else started + time_limit)
+    limits = Limits(max_junctions=max_junctions, merge=merge,   # (the deadline on the unfolding's clock)
+                    deadline=None if time_limit is None else clock_now() + time_limit)
     counts = unfold(root(start, hidden_root(filter_, start, belief_rule)), actor, ledger, limits,
                     outcomes(pomdp.driver.depends_on_performance))
     evaluation = ledger.evaluation(counts.nodes, counts.max_frontier, time_limit=time_limit,
@@ -165,7 +166,7 @@ def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: i
     without the fallback. Histories that reach bit-identical (road, J, posterior, AV belief) at the
     same level are merged (their decisions and futures are the same), so this is the unfolding of
     `evaluate_joint` on far fewer nodes; beyond `max_nodes` per level the least likely nodes are
-    dropped, their live mass unknown; by `deadline` (time.perf_counter()) the unfolding stops (a
+    dropped, their live mass unknown; by `deadline` (on the synthesis' clock) the unfolding stops (a
     batch of TABLE_CHUNK nodes or a level's merge is not begun when, at the last one's pace, it
     would end past it) and the live mass of every open node is unknown."""
     town = pomdp.town

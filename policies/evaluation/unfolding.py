@@ -19,7 +19,6 @@ Cut mass is unknown: it is the width of [lower, upper].
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Protocol
@@ -31,6 +30,8 @@ from trustroute.policies.belief.trust_state_filter import distinct_rows, split_b
 from trustroute.policies.evaluation.node_state import HiddenState, NodeState
 from trustroute.policies.routing.episode_rules import decide
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
+from trustroute.policies.work_clock import now as clock_now
+from trustroute.policies.work_clock import spend
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,7 +241,8 @@ class SlotActor:
 
 @dataclass(frozen=True)
 class Limits:
-    """How far the unfolding goes: the junction cap, the deadline (time.perf_counter(); every node
+    """How far the unfolding goes: the junction cap, the deadline (on the synthesis' clock,
+    policies/work_clock.py, time.perf_counter() outside a synthesis under a work limit; every node
     still open at a level begun past it is cut), batches of `chunk` nodes (None: the level at once)
     paced against the deadline, merging of equal children."""
 
@@ -263,7 +265,7 @@ class Pace:
         return self.deadline is not None and began + self.batch_seconds > self.deadline
 
     def merge_is_late(self, rows: int) -> bool:
-        return self.deadline is not None and time.perf_counter() + self.merge_rate * rows > self.deadline
+        return self.deadline is not None and clock_now() + self.merge_rate * rows > self.deadline
 
 
 @dataclass(frozen=True, eq=False)
@@ -271,6 +273,10 @@ class Counts:
     nodes: int
     max_frontier: int
 
+
+# units of work (policies/work_clock.py) per node moved (its decision and branching) and per node merged
+ROW_UNITS = 100
+MERGE_UNITS = 5
 
 OUTCOMES_WITH_PERFORMANCE = ((0, 0), (0, 1), (1, 0), (1, 1))
 OUTCOMES = ((0, 0), (1, 0))
@@ -341,7 +347,7 @@ def advance(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits
     parts: list[Frontier] = []
     late = False
     for rows in chunks(frontier.size, limits.chunk):
-        began = time.perf_counter()
+        began = clock_now()
         late = limits.paced and pace.batch_is_late(began)
         if late:
             # Out of time within the level: the nodes not moved yet are cut.
@@ -351,7 +357,8 @@ def advance(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits
         if branched is None:
             return None
         parts += branched
-        pace.batch_seconds = time.perf_counter() - began
+        spend(ROW_UNITS * (min(rows.stop, frontier.size) - rows.start))
+        pace.batch_seconds = clock_now() - began
     if not parts:
         return None
     children = joined(parts)
@@ -360,10 +367,11 @@ def advance(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits
         ledger.cut(children, slice(None), level, "past_deadline")
         return None
     if limits.merge:
-        began = time.perf_counter()
+        began = clock_now()
         unmerged = children.size
         children = merged(children, actor.memory(children))
-        pace.merge_rate = (time.perf_counter() - began) / unmerged
+        spend(MERGE_UNITS * unmerged)
+        pace.merge_rate = (clock_now() - began) / unmerged
     return children
 
 
@@ -373,7 +381,7 @@ def unfold(frontier: Frontier, actor: Actor, ledger: Ledger, limits: Limits,
     nodes = max_frontier = frontier.size
     pace = Pace(limits.deadline)
     for level in range(limits.max_junctions + 1):
-        out_of_time = limits.deadline is not None and level > 0 and time.perf_counter() > limits.deadline
+        out_of_time = limits.deadline is not None and level > 0 and clock_now() > limits.deadline
         alive = ledger.settle(frontier, level, out_of_time)
         if alive is None:
             break

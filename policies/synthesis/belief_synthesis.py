@@ -80,6 +80,7 @@ from trustroute.policies.synthesis.upper_bound import (
     build_abstraction,
     unbounded_suffix_length,
 )
+from trustroute.policies.work_clock import work_clock
 
 UNBOUNDED_HORIZONS = (20, 30, 40, 60, 80, 120, 160)
 UNBOUNDED_BOUND_SHARE = 0.3  # share of the time limit the end-component bound may take
@@ -362,8 +363,16 @@ def synthesize(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings = DEFA
     trust-free route's observation tree fits AUTO_TREE_LEAVES, cluster bounds otherwise;
     docs/synthesis.md, "Open nodes and the acting rule"). clusters: whether cluster policies
     (policies/synthesis/cluster_policy.py) are solved before the search (CLUSTER_MODES); the better
-    certified L of the two is returned, and the smaller U.
+    certified L of the two is returned, and the smaller U. work_limit: the whole call's units of
+    work (policies/work_clock.py): every schedule below then reads the work done, not the time.
     """
+    with work_clock(settings.work_limit, settings.time_limit) as limit:
+        return _synthesize(pomdp, spec, replace(settings, time_limit=limit), on_iteration)
+
+
+def _synthesize(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings,
+                on_iteration: Callable[[float, float], None] | None) -> BeliefSynthesis:
+    """`synthesize` on the clock installed for it."""
     tau, horizon, belief_rule = settings.tau, settings.horizon, settings.belief_rule
     # The last few per cent are kept for the work after the deadline check (final backup, the
     # policy table, the stats), so that the whole call ends within the limit.

@@ -53,6 +53,8 @@ from trustroute.policies.synthesis.completion_value import (
 )
 from trustroute.policies.synthesis.result import ClusterAttempt
 from trustroute.policies.synthesis.upper_bound import acceptance_distance
+from trustroute.policies.work_clock import now as clock_now
+from trustroute.policies.work_clock import spend
 
 VALUE_MARGIN = 1e-12              # every level's lower values are lowered, upper raised, by this
 CLUSTER_CAPS = (16, 64, 256, 512)  # clusters per (t, x, q), tried in turn while the gap exceeds tau
@@ -62,6 +64,7 @@ CLUSTER_CAPS = (16, 64, 256, 512)  # clusters per (t, x, q), tried in turn while
 # 64 to 256, 2.1x and 2x from 256 to 512), so that is the prediction.
 BYTES_PER_CLUSTER = 700
 MEMORY_BUDGET = 600e6
+EDGE_UNITS = 28                   # units of work (policies/work_clock.py) per edge and outcome of a level
 BACKWARD_SHARE = 0.25             # the forward pass stops where what follows would pass the deadline
 
 
@@ -177,10 +180,11 @@ def _forward(tables: ProductTables, symbols: ObservationSymbols, roots_q: list[i
             break
         # the backward pass and the rows take about 15 % of the forward pass's time (measured;
         # BACKWARD_SHARE leaves room for a slower machine)
-        if not budget.fits(BACKWARD_SHARE * budget.elapsed()):
+        if not budget.fits(BACKWARD_SHARE * budget.used()):
             return None
         slots = tables.successors[x]
         edge_cluster, edge_slot = np.nonzero(slots >= 0)
+        spend(EDGE_UNITS * edge_cluster.size * width)
         next_road = slots[edge_cluster, edge_slot]
         edge_symbols = outcomes[incident_of[next_road]]
         parts = []
@@ -324,6 +328,7 @@ def best_cluster_solution(tables: ProductTables, symbols: ObservationSymbols, ro
     Returns (the solution of the largest L, the smallest U of all, a record per cap tried)."""
     best: ClusterSolution | None = None
     previous: ClusterSolution | None = None       # the last cap's solution
+    previous_used = 0.0                           # its seconds on the clock
     upper = 1.0
     tried: list[ClusterAttempt] = []
     budget = TimeBudget.until(deadline)
@@ -332,10 +337,12 @@ def best_cluster_solution(tables: ProductTables, symbols: ObservationSymbols, ro
             break
         if previous is not None:
             growth = cap / previous.cap
-            if (not budget.fits(growth * previous.seconds)
+            if (not budget.fits(growth * previous_used)
                     or growth * previous.clusters * BYTES_PER_CLUSTER > MEMORY_BUDGET):
                 break
+        began = clock_now()
         solution = solve_clusters(tables, symbols, roots_q, horizon, cap, deadline)
+        previous_used = clock_now() - began
         if solution is None:
             tried.append(ClusterAttempt(cap=cap))
             break

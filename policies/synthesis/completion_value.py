@@ -61,6 +61,8 @@ import numpy as np
 from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.logic.labelling import gamma, label_margin_factor
 from trustroute.policies.synthesis.belief_cells import LABEL_TOLERANCE, ObservationSymbols
+from trustroute.policies.work_clock import now as clock_now
+from trustroute.policies.work_clock import spend
 
 CORNER_MARGIN = LABEL_TOLERANCE   # every box image and merge is widened by this
 CLUSTER_CAP = 64                  # clusters per start node after a step's merge
@@ -245,9 +247,9 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
     """Bounds on P(the DFA accepts within `steps` junctions | trust-free completion from (x, q, p, b)),
     for each start i of `starts`; DFA state q is the state after reading the current road.
 
-    deadline (time.perf_counter() seconds): the propagation stops there, junction step by junction
-    step; the mass still in flight then counts to the upper bound only (`interrupted` is True), so
-    both bounds stay sound, only looser."""
+    deadline (a time on the synthesis' clock, policies/work_clock.py): the propagation stops there,
+    junction step by junction step; the mass still in flight then counts to the upper bound only
+    (`interrupted` is True), so both bounds stay sound, only looser."""
     if symbols.rule != "bayes":
         raise ValueError("cluster bounds need the Bayes rule (observation mass linear in α)")
     x = np.asarray(starts.x, dtype=np.int64).copy()
@@ -279,11 +281,13 @@ def completion_bounds(tables: ProductTables, symbols: ObservationSymbols, route:
     most = owner.size
     interrupted = False
     while owner.size:
-        if deadline is not None and time.perf_counter() >= deadline:
+        # (the wall clock read through this module's `time`, which a caller may replace)
+        if deadline is not None and clock_now(time.perf_counter) >= deadline:
             # the sequences still followed may yet accept: all their mass to the upper bound
             np.add.at(straddle, owner, alpha.sum(axis=1))
             interrupted = True
             break
+        spend(owner.size)
         x2 = route.next_road[x, state, p]                # per cluster: x, p and q
         p2 = route.next_task[x, state, p]
         incident = incident_of[x2]

@@ -31,8 +31,13 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from trustroute.policies.synthesis.belief_cells import vertex_mask
 from trustroute.policies.synthesis.upper_bound import Abstraction, can_accept
+from trustroute.policies.work_clock import now as clock_now
+from trustroute.policies.work_clock import spend
 
 TARGET, ZERO = -1, -2
+# units of work (policies/work_clock.py): per road of the abstraction's construction, per edges of a sweep
+STATE_UNITS = 200
+EDGES_PER_UNIT = 20
 
 
 @dataclass(frozen=True)
@@ -83,8 +88,9 @@ def abstract_mdp(abstraction: Abstraction, deadline: float) -> tuple[ChoiceMDP, 
     live_q = np.flatnonzero(live)
     road_incident = tables.pomdp.road_incident
     for x in range(n_x):
-        if time.perf_counter() > deadline:
+        if clock_now() > deadline:
             return None
+        spend(STATE_UNITS)
         for x2 in tables.successors[x]:
             if x2 < 0:
                 continue
@@ -105,8 +111,9 @@ def abstract_mdp(abstraction: Abstraction, deadline: float) -> tuple[ChoiceMDP, 
                 edge_prob.append(p[positive])
     # intermediate choices (x2, q, c, o) -> q' for every possible label value
     for x2 in range(n_x):
-        if time.perf_counter() > deadline:
+        if clock_now() > deadline:
             return None
+        spend(STATE_UNITS)
         for o in symbols.by_incident[int(road_incident[x2])]:
             for bits in range(abstraction.possible_bits.shape[2]):
                 possible_c = np.flatnonzero(abstraction.possible_bits[:, o, bits])
@@ -155,8 +162,9 @@ def maximal_end_components(mdp: ChoiceMDP, states: np.ndarray, deadline: float) 
     choice_ok &= ~bad
     candidate = states.copy()
     while True:
-        if time.perf_counter() > deadline:
+        if clock_now() > deadline:
             return None
+        spend(1 + mdp.edge_choice.size // EDGES_PER_UNIT)
         has_choice = np.bincount(mdp.choice_state[choice_ok], minlength=n) > 0
         candidate &= has_choice
         edge_ok = choice_ok[mdp.edge_choice] & inside
@@ -241,7 +249,8 @@ def unbounded_bound(abstraction: Abstraction, deadline: float, tolerance: float 
 
     iterations = 0
     gap = 1.0
-    while iterations < max_iterations and time.perf_counter() < deadline:
+    while iterations < max_iterations and clock_now() < deadline:
+        spend(1 + 2 * e_choice.size // EDGES_PER_UNIT)
         upper = np.minimum(upper, backup(upper))
         lower = np.maximum(lower, backup(lower))
         iterations += 1

@@ -53,6 +53,7 @@ from trustroute.policies.synthesis.upper_bound import (
     bounded_upper,
     build_abstraction,
 )
+from trustroute.policies.work_clock import spend
 
 UNBOUNDED_DEPTH = 60        # the unbounded search leaves nodes this deep open (<= evaluate's cap)
 # Most macro moves per context for which the event graph is used: node arrays hold one slot per
@@ -65,6 +66,9 @@ MAX_MACRO_WIDTH = 16
 # "auto": exact where the trust-free route's own observation tree within the horizon has at most
 # AUTO_TREE_LEAVES leaves (completion_tree_leaves), bounds otherwise.
 AUTO_TREE_LEAVES = NODE_BUDGET // 4
+# Units of work (policies/work_clock.py): per child an expansion makes, and nodes per unit of a backup
+CHILD_UNITS = 16
+NODES_PER_UNIT = 2
 
 
 class BeliefSearch:
@@ -377,6 +381,7 @@ class BeliefSearch:
                 g.expanded_by_level[level].extend(members)
             g.free_version[level] += 1
         g.kind[nodes] = FREE if free_only else EXPANDED
+        spend(CHILD_UNITS * row.size)
 
     def backup(self) -> None:
         """Bellman backups from the deepest level up. At each level the FREE nodes first (L and the
@@ -385,6 +390,7 @@ class BeliefSearch:
         The move values and the policy's moves are kept (self.moves) for the reach computations
         until the next expansion."""
         g = self.graph
+        spend(1 + g.n // NODES_PER_UNIT)
         self.moves = {}
         self.binding = []
         if self.completion:

@@ -62,6 +62,7 @@ from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synt
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.result import SearchRun, SynthesisResult, SynthesisStats
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
+from trustroute.policies.work_clock import now as clock_now
 
 Objective = Literal["bayes", "robust"]
 OBJECTIVES: tuple[str, ...] = ("bayes", "robust")
@@ -145,7 +146,7 @@ def per_type_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, popula
                     max_junctions: int, belief_rule: BeliefRule = "bayes", fallback_after: int | None = None,
                     deadline: float | None = None) -> tuple[TypeValue, ...]:
     """Exact value of `policy` (its AV filtering on `pomdp`) for each type of `population` as the
-    true driver; past `deadline` (time.perf_counter()) the histories still open are cut, so a value
+    true driver; past `deadline` (on the synthesis' clock) the histories still open are cut, so a value
     is then certified [lower, upper] rather than exact; each type has its share of the time left
     (`type_deadline`), so that a cut falls on every type alike."""
     out = []
@@ -165,7 +166,7 @@ def type_deadline(deadline: float | None, types_left: int) -> float | None:
     taking all the time would leave the others at lower 0)."""
     if deadline is None:
         return None
-    now = time.perf_counter()
+    now = clock_now()
     return now + max(deadline - now, 0.0) / max(types_left, 1)
 
 
@@ -227,7 +228,7 @@ class RunSchedule:
     def _close_gap(self) -> None:
         """Count the work since the last run ended (its evaluations) as one gap between runs."""
         if self.last_end is not None:
-            self.between += time.perf_counter() - self.last_end
+            self.between += clock_now() - self.last_end
             self.gaps += 1
             self.last_end = None
 
@@ -239,7 +240,7 @@ class RunSchedule:
         """Seconds left for the runs still to come, the gaps after them set aside."""
         self._close_gap()
         remaining = max(self.runs - self.done, 1)
-        return max(self.budget.deadline - time.perf_counter() - self.per_gap * remaining, 0.0)
+        return max(self.budget.deadline - clock_now() - self.per_gap * remaining, 0.0)
 
     def next_limit(self, share: float = 0.0, at_least: float = 0.0) -> float:
         """The next run's limit: the larger of an equal share, `share` of the time left and
@@ -247,7 +248,7 @@ class RunSchedule:
         work (the runs after it may be skipped), and never below MIN_RUN_SECONDS."""
         left = self.left()
         remaining = max(self.runs - self.done, 1)
-        own = max(self.budget.deadline - time.perf_counter() - self.per_gap, 0.0)
+        own = max(self.budget.deadline - clock_now() - self.per_gap, 0.0)
         return max(min(max(left / remaining, share * left, at_least), own), MIN_RUN_SECONDS)
 
     def capped_limit(self, share: float) -> float:
@@ -275,7 +276,7 @@ class RunSchedule:
 
     def finished(self, what: str, lower: float, upper: float) -> None:
         self.done += 1
-        self.last_end = time.perf_counter()
+        self.last_end = clock_now()
         if self.on_phase is not None:
             self.on_phase(f"[{self.done}/{self.runs}, {self.budget.elapsed():.1f} s] {what}: "
                           f"[{lower:.6f}, {upper:.6f}]")

@@ -196,6 +196,8 @@ class SynthesisResult(Generic[PolicyT, StatsT]):
     """lower <= Pr_max <= upper; lower is a certified lower bound of the value of `policy`.
 
     horizon: the junction horizon solved for (None: unbounded); stats: how the bounds were obtained.
+    stopped_by: what ended the call, "convergence", "work limit" or "time limit"
+    (policies/work_clock.py, `stopped_by`; None where the caller did not say).
     """
 
     policy: PolicyT
@@ -205,6 +207,7 @@ class SynthesisResult(Generic[PolicyT, StatsT]):
     stats: StatsT
     horizon: int | None = None
     belief_rule: str = "bayes"
+    stopped_by: str | None = None
 
     @property
     def gap(self) -> float:

@@ -31,7 +31,9 @@ class SynthesisSettings:
     """tau: stop when upper - lower <= tau at the root. time_limit: seconds for the whole call.
     horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter ("bayes"
     or the authors' "paper" update). suffix_length: the abstraction's (None: chosen from the
-    problem). batch: nodes expanded per round. compress, completion, clusters: the search's modes
+    problem). work_limit: units of work for the whole call (policies/work_clock.py: a deterministic
+    stop, the same on any machine; None: the time limit alone). batch: nodes expanded per round.
+    compress, completion, clusters: the search's modes
     (COMPRESS_MODES, COMPLETION_MODES, CLUSTER_MODES; docs/synthesis.md). grid_points: candidate
     type priors of a population's robust objective (None: policies/synthesis/population.py's)."""
 
@@ -45,9 +47,12 @@ class SynthesisSettings:
     completion: str = "auto"
     clusters: str = "auto"
     grid_points: int | None = None
+    work_limit: int | None = None
 
     def __post_init__(self) -> None:
         check_synthesis_arguments(self.tau, self.horizon, self.belief_rule)
+        if self.work_limit is not None and not (isinstance(self.work_limit, int) and self.work_limit >= 1):
+            raise ValueError(f"work_limit must be a positive number of units, got {self.work_limit!r}")
         _check_choice("completion", self.completion, COMPLETION_MODES)
         _check_choice("clusters", self.clusters, CLUSTER_MODES)
         if self.compress not in COMPRESS_MODES:

@@ -25,7 +25,6 @@ automatic_suffix_length (CELL_BUDGET words) and capped by what the bounded abstr
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import overload
 
@@ -35,11 +34,14 @@ from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.routing.free import label_free_distance
 from trustroute.policies.synthesis.belief_cells import ObservationSymbols, SuffixCells, image_label_status
 from trustroute.policies.synthesis.budget import TimeBudget
+from trustroute.policies.work_clock import now as clock_now
+from trustroute.policies.work_clock import spend
 
 BACKUP_CHUNK_ENTRIES = 4_000_000   # floats of one chunk of the vectorised backup (32 MB)
 CELL_BUDGET = 5000          # automatic suffix length: the longest k with n_symbols**k <= this
 BOUNDED_ENTRY_BUDGET = 20_000_000   # floats of the bounded abstraction (160 MB)
 UNBOUNDED_STATE_BUDGET = 20_000
+ENTRIES_PER_UNIT = 25        # abstraction entries backed up per unit of work (policies/work_clock.py)
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,9 +102,10 @@ def abstract_backup(abstraction: Abstraction, value_next: np.ndarray,
     for incident, members in enumerate(symbols.by_incident):
         roads = np.flatnonzero(road_incident == incident)
         for start in range(0, roads.size, chunk):
-            if deadline is not None and time.perf_counter() > deadline:
+            if deadline is not None and clock_now() > deadline:
                 return None
             x2 = roads[start:start + chunk]
+            spend(1 + x2.size * live.size * n_c * len(members) // ENTRIES_PER_UNIT)
             # Σ_o P(o | v) value_o per vertex v of each cell, then the max over the vertices
             # (vertex axis first: a max over a short last axis is several times slower)
             per_vertex = np.zeros((n_vertices, x2.size, live.size, n_c))

@@ -67,6 +67,7 @@ from trustroute.policies.trust_state_synthesis.synthesis import (
     JointSynthesis,
     synthesize_joint,
 )
+from trustroute.policies.work_clock import now as clock_now
 
 
 def joint_type_values(problem: Problem, policy: RoutingPolicy, max_junctions: int,
@@ -75,11 +76,11 @@ def joint_type_values(problem: Problem, policy: RoutingPolicy, max_junctions: in
                       ) -> tuple[TypeValue, ...]:
     """Certified value of `policy` for each type of the problem's population as the true driver,
     from one joint unfolding on the lifted model (`evaluate_joint_by_type`); branches still open
-    at `deadline` (time.perf_counter()) are cut, widening [lower, upper]."""
+    at `deadline` (on the synthesis' clock, policies/work_clock.py) are cut, widening [lower, upper]."""
     population = problem.population
     if population is None:
         raise ValueError("per-type values need a problem with a driver population")
-    time_limit = None if deadline is None else max(deadline - time.perf_counter(), 0.0)
+    time_limit = None if deadline is None else max(deadline - clock_now(), 0.0)
     _, bounds = evaluate_joint_by_type(pomdp or problem.pomdp, problem.spec, policy,
                                        EvaluationSettings(fallback_after=fallback_after,
                                                           max_junctions=max_junctions,

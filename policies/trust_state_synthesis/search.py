@@ -44,6 +44,7 @@ from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.synthesis.budget import TimeBudget
+from trustroute.policies.work_clock import spend
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,7 @@ class JointBounds(Bracket):
 OPEN_LOOP_STEPS = 30          # junctions of the open-loop continuation at unbounded leaves
 OPEN_LOOP_CHUNK = 4_000       # nodes per vectorised batch of the open-loop continuation
 EXPAND_SHARE = 0.5            # with a deadline: share of the time for the forward pass
+CHILD_UNITS = 20              # units of work (policies/work_clock.py) per node expanded
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,6 +118,7 @@ class OpenLoop:
                 break
             part = slice(begin, begin + OPEN_LOOP_CHUNK)
             out[part] = self.accepted(x[part], joint[part], steps)
+            spend(steps * x[part].size)
         return out
 
 
@@ -123,8 +126,8 @@ class OpenLoop:
 class JointLimits:
     """Where the trust-state search stops unfolding: nodes of probability below `prune_below`, and
     those beyond the `max_nodes` likeliest of a level, are cut; with a guide the next
-    `guided_nodes` of a level follow the guide's action instead; `deadline` (time.perf_counter(),
-    None: none) ends the search (`joint_search`)."""
+    `guided_nodes` of a level follow the guide's action instead; `deadline` (on the synthesis'
+    clock, policies/work_clock.py; None: none) ends the search (`joint_search`)."""
 
     prune_below: float = 0.0
     max_nodes: int = 200_000
@@ -225,7 +228,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     nodes beyond both caps, which are worth their accepted mass (at most that policy's value
     there). Without a guide, cut nodes are leaves valued by the open-loop continuation.
 
-    With a `deadline` (time.perf_counter()) the search returns by it, up to one level's or one
+    With a `deadline` (on the synthesis' clock) the search returns by it, up to one level's or one
     chunk's work: past EXPAND_SHARE of the time left, checked before each level is expanded, the
     open nodes of that level become leaves worth their accepted mass (lower) and the relaxation
     (upper); past the deadline, the leaves not yet valued by the open-loop continuation keep
@@ -296,6 +299,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         if level == depth or not (grow | (follow >= 0)).any():
             break
         parents = np.flatnonzero(grow | (follow >= 0))
+        spend(CHILD_UNITS * parents.size)
         parent, slot_of, x2, joint, posterior, belief, words, p_obs, mass = _children(
             pomdp, filter_, belief_rule, nodes, parents, follow)
         # Merge children with bit-identical (road, J, posterior, AV belief) and one word.

@@ -34,7 +34,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, TypeAlias
 
 import numpy as np
@@ -55,6 +55,7 @@ from trustroute.policies.trust_state_synthesis.search import (
     JointLimits,
     joint_search,
 )
+from trustroute.policies.work_clock import work_clock
 
 FIRST_NODES = 500                  # nodes per level of the first round
 NODE_GROWTH = 4                    # nodes per level grow by this factor per round
@@ -152,11 +153,11 @@ def _grow(run: Callable[[int, float], Any], stop: Callable[[Any], bool], deadlin
     nodes = FIRST_NODES
     budget = TimeBudget.until(deadline)
     while nodes <= MAX_NODES:
-        began = budget.elapsed()
+        began = budget.used()
         result = run(nodes, deadline)
         if stop(result):
             return
-        if not budget.fits(NODE_GROWTH * (budget.elapsed() - began)):
+        if not budget.fits(NODE_GROWTH * (budget.used() - began)):
             return
         nodes *= NODE_GROWTH
 
@@ -238,8 +239,15 @@ def _policy_rounds(problem: _Joint, policy_horizon: int, until: float, upper: fl
 def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings = DEFAULT_SYNTHESIS,
                      on_iteration: Callable[[float, float], None] | None = None) -> JointSynthesis:
     """A JointTablePolicy for `spec` and certified lower <= Pr_max <= upper (a SynthesisResult);
-    of `settings`, tau, time_limit, horizon and belief_rule apply (the others are the belief-MDP
-    search's)."""
+    of `settings`, tau, time_limit, work_limit, horizon and belief_rule apply (the others are the
+    belief-MDP search's)."""
+    with work_clock(settings.work_limit, settings.time_limit) as limit:
+        return _synthesize_joint(pomdp, spec, replace(settings, time_limit=limit), on_iteration)
+
+
+def _synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings,
+                      on_iteration: Callable[[float, float], None] | None) -> JointSynthesis:
+    """`synthesize_joint` on the clock installed for it."""
     tau, time_limit, horizon = settings.tau, settings.time_limit, settings.horizon
     belief_rule = settings.belief_rule
     # Every search and evaluation checks its deadline as it goes (and does not begin a batch it

@@ -46,6 +46,7 @@ def _api_default(function, name: str):
 @pytest.mark.parametrize(("command", "option", "function", "argument", "value"), [
     ("synth", "tau", trustroute.synthesize, "tau", defaults.TAU),
     ("synth", "time_limit", trustroute.synthesize, "time_limit", defaults.TIME_LIMIT),
+    ("synth", "work_limit", trustroute.synthesize, "work_limit", defaults.WORK_LIMIT),
     ("synth", "horizon", trustroute.synthesize, "horizon", defaults.SYNTH_HORIZON),
     ("synth", "belief_rule", trustroute.synthesize, "belief_rule", defaults.BELIEF_RULE),
     ("synth", "objective", trustroute.synthesize, "objective", defaults.OBJECTIVE),
@@ -138,6 +139,15 @@ def test_a_synthesis_with_the_defaults_is_the_same_through_the_api_and_the_cli(c
     made = cli_json(capsys, "synth", "phi1", "--out", str(tmp_path / "p.json"))
     assert (made["lower"], made["upper"], made["horizon"], made["tau"]) == (
         api.lower, api.upper, defaults.SYNTH_HORIZON, defaults.TAU)
+
+
+def test_a_work_limited_synthesis_is_the_same_through_the_api_and_the_cli(capsys, tmp_path):
+    """A work limit stops both doors after the same work: the same bounds, whatever the clock."""
+    api = trustroute.synthesize("phi1", horizon=10, work_limit=20_000)
+    made = cli_json(capsys, "synth", "phi1", "--horizon", "10", "--work-limit", "20000",
+                    "--out", str(tmp_path / "p.json"))
+    assert (made["lower"], made["upper"], made["stopped_by"]) == (api.lower, api.upper, api.stopped_by)
+    assert api.stopped_by == "work limit"
 
 
 @pytest.mark.slow

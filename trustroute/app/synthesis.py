@@ -4,7 +4,7 @@ policy file written where asked."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from trustroute.core import defaults
@@ -33,6 +33,7 @@ from trustroute.policies.synthesis.population import (
 from trustroute.policies.synthesis.result import SynthesisResult, SynthesisStats
 from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
+from trustroute.policies.work_clock import installed, stopped_by, work_clock
 
 
 def belief_rule_named(name: str) -> BeliefRule:
@@ -48,6 +49,7 @@ class SynthesisSettings(SearchSettings):
 
     tau: float = defaults.TAU
     time_limit: float = defaults.TIME_LIMIT
+    work_limit: int | None = defaults.WORK_LIMIT
     horizon: int | None = defaults.SYNTH_HORIZON
     belief_rule: BeliefRule = defaults.BELIEF_RULE
     clusters: str = "auto"
@@ -59,6 +61,9 @@ class SynthesisSettings(SearchSettings):
         if self.horizon is not None and self.horizon < 1:
             raise InputError("--horizon", "", f"horizon must be at least 1, got {self.horizon}",
                              "pass a positive number of junctions or omit --horizon")
+        if self.work_limit is not None and not (isinstance(self.work_limit, int) and self.work_limit >= 1):
+            raise InputError("--work-limit", "", f"work limit must be a positive whole number of units, "
+                             f"got {self.work_limit!r}", "pass e.g. --work-limit 20000000 or omit it")
         object.__setattr__(self, "belief_rule", checked_belief_rule(self.belief_rule))
         super().__post_init__()
 
@@ -67,8 +72,12 @@ def synthesize_single(problem: Problem, settings: SynthesisSettings,
                       out: str | Path | None = None) -> SynthesisResult:
     """A policy for a one-model problem with bounds; its file written at `out` when given
     (`written_policy` names the file)."""
-    with synthesis_progress(f"synthesizing {problem.spec.name}", settings.progress) as on_iteration:
-        result = synthesize_problem(problem, settings, on_iteration=on_iteration)
+    with work_clock(settings.work_limit, settings.time_limit) as limit:
+        clock = installed()
+        with synthesis_progress(f"synthesizing {problem.spec.name}", settings.progress) as on_iteration:
+            result = synthesize_problem(problem, replace(settings, time_limit=limit),
+                                        on_iteration=on_iteration)
+    result = replace(result, stopped_by=stopped_by(result.stats.converged, clock))
     if out is not None:
         save_policy(result, out, problem.town, problem.driver, problem.spec)
     return result
@@ -84,11 +93,16 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
         raise InputError("--objective", "", f"unknown objective {objective!r}", "use 'bayes' or 'robust'")
     spec = problem.given_spec
     description = f"synthesizing {spec.name} ({objective}, {population.n_types} types)"
-    with synthesis_progress(description, settings.progress) as on_iteration:
-        found = synthesize_for_population(problem.town, population, spec, objective, settings,
+    with work_clock(settings.work_limit, settings.time_limit) as limit, \
+            synthesis_progress(description, settings.progress) as on_iteration:
+        clock = installed()
+        found = synthesize_for_population(problem.town, population, spec, objective,
+                                          replace(settings, time_limit=limit),
                                           population_source=population.source_path,
                                           on_iteration=on_iteration,
                                           on_phase=phase_lines("synth", settings.progress))
+    ended = stopped_by(found.gap <= settings.tau, clock)
+    found = replace(found, result=replace(found.result, stopped_by=ended))
     if out is not None:
         save_policy(found.result, out, problem.town, found.pomdp.driver, found.spec,
                     population=document_entries(found), name=policy_name(found))

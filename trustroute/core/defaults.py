@@ -14,6 +14,7 @@ from typing import Final
 # synthesis (`synthesize`, `trustroute synth`)
 TAU = 1e-3                           # target gap upper - lower
 TIME_LIMIT = 60.0                    # seconds for the whole synthesis
+WORK_LIMIT: int | None = None        # units of work for the whole synthesis (policies/work_clock.py)
 SYNTH_HORIZON: int | None = None     # junctions; None: unbounded
 OBJECTIVE: Final = "bayes"            # of a population synthesis ("robust": the worst type's)
 BELIEF_RULE: Final = "bayes"            # the AV's filter ("paper": the authors' update)

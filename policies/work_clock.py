@@ -1,0 +1,111 @@
+"""The clock a synthesis schedules by: the wall clock, or, under a work limit, the work done.
+
+Every deadline of a synthesis (its time limit, the shares of it its phases get, the predictions of
+whether more work still fits) is a time on this clock. Without a work limit it is
+time.perf_counter(), so a run stops where the wall clock says. With a work limit (`work_limit`
+units, SynthesisSettings) the clock reads the units of work done so far, counted where the
+searches check their deadlines (node expansions, value-iteration sweeps, propagation steps,
+unfolded histories: `spend`), each unit worth WORK_UNIT_SECONDS of the scheduler's time; every
+schedule then depends on the work done only, so the same problem stops at the same point on any
+machine and under any load. The wall-clock time limit stays a safety net: once it has passed,
+the clock reads LATE, past every deadline, and the run stops as it would at its time limit (its
+result then depends on the clock; `WorkClock.timed_out` says so).
+
+The clock is ambient as time.perf_counter() is: `work_clock` installs it for the duration of one
+synthesis call (the outermost one: a population synthesis' runs share it), and `now` and `spend`
+read the installed one, so the routines that check a deadline need no clock argument.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass
+
+# One unit of work is worth this many seconds of the scheduler's time, so that the shares and
+# predictions of a schedule keep their meaning (measured: about 100,000 units a second on one
+# core of the project's 2-core test machine, for the unbounded and the population syntheses).
+WORK_UNIT_SECONDS = 1e-5
+# Past the wall-clock limit the clock reads this: later than every deadline a schedule makes
+# (finite, so a deadline computed from it stays a number).
+LATE = 1e18
+# The wall-clock limit stops a run under a work limit this share early, for the work after the
+# last deadline check (as the searches' own reserves do).
+WALL_RESERVE = 0.04
+
+
+@dataclass
+class WorkClock:
+    """Units of work spent against `limit` units, and the wall-clock time (time.perf_counter())
+    after which the clock reads LATE."""
+
+    limit: int
+    wall_deadline: float
+    spent: int = 0
+    timed_out: bool = False
+
+    def now(self) -> float:
+        if not self.timed_out and time.perf_counter() >= self.wall_deadline:
+            self.timed_out = True
+        return LATE if self.timed_out else self.spent * WORK_UNIT_SECONDS
+
+    @property
+    def seconds(self) -> float:
+        """The whole limit in the scheduler's seconds (what a synthesis takes as its time limit)."""
+        return self.limit * WORK_UNIT_SECONDS
+
+    def exhausted(self) -> bool:
+        """Whether the work done reached the limit."""
+        return self.spent >= self.limit
+
+
+_CLOCK: ContextVar[WorkClock | None] = ContextVar("work_clock", default=None)
+
+
+def now(wall: Callable[[], float] | None = None) -> float:
+    """The time on the installed clock; when no work limit is installed, `wall()` (default
+    time.perf_counter())."""
+    clock = _CLOCK.get()
+    if clock is not None:
+        return clock.now()
+    return time.perf_counter() if wall is None else wall()
+
+
+def spend(units: int) -> None:
+    """Count `units` of work on the installed clock (nothing without a work limit)."""
+    clock = _CLOCK.get()
+    if clock is not None:
+        clock.spent += int(units)
+
+
+def installed() -> WorkClock | None:
+    """The clock of the synthesis call under way, if it has a work limit."""
+    return _CLOCK.get()
+
+
+@contextmanager
+def work_clock(work_limit: int | None, time_limit: float) -> Iterator[float]:
+    """Install a WorkClock of `work_limit` units for the block, unless one is installed already
+    (an outer call's) or there is no work limit; yields the time limit to schedule by: the work
+    limit in the scheduler's seconds when a clock is installed here, else `time_limit` (an outer
+    call's share, already on its clock; or seconds on the wall clock)."""
+    if work_limit is None or _CLOCK.get() is not None:
+        yield time_limit
+        return
+    clock = WorkClock(limit=work_limit,
+                      wall_deadline=time.perf_counter() + (1.0 - WALL_RESERVE) * time_limit)
+    token = _CLOCK.set(clock)
+    try:
+        yield clock.seconds
+    finally:
+        _CLOCK.reset(token)
+
+
+def stopped_by(converged: bool, clock: WorkClock | None) -> str:
+    """Which limit ended a synthesis: "convergence" (the gap reached tau), "work limit" (its work
+    limit, the wall clock never reached) or "time limit"."""
+    if converged:
+        return "convergence"
+    return "work limit" if clock is not None and not clock.timed_out else "time limit"

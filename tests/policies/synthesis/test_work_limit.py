@@ -1,0 +1,100 @@
+"""A work limit stops a synthesis after the same work whatever the clock says (policies/work_clock.py):
+the same inputs under a clock that drags (every reading later than the last by a good share of a
+second) give the same bounds, runs and policy; the wall-clock time limit still stops a run."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import trustroute
+
+POPULATION = "driver_population_three_types"
+SLOW = 1e6    # a time limit that never binds here, but for a dragging clock
+
+
+def _dragging_clock(step: float = 0.02):
+    """time.perf_counter() that runs fast: each reading `step` seconds after the last one."""
+    real = time.perf_counter
+    readings = [0]
+
+    def perf_counter() -> float:
+        readings[0] += 1
+        return real() + step * readings[0]
+
+    return perf_counter
+
+
+TIMED = ("seconds", "created")   # what a policy file and the statistics say of the time taken
+
+
+def _untimed(value):
+    if isinstance(value, dict):
+        return {k: _untimed(v) for k, v in value.items() if not any(t in k for t in TIMED)}
+    if isinstance(value, list):
+        return [_untimed(v) for v in value]
+    return value
+
+
+def _policy_file(path: Path) -> tuple[dict, dict[str, bytes]]:
+    arrays = np.load(path.with_suffix(".npz"))
+    document = {k: v for k, v in json.loads(path.read_text()).items() if k != "arrays"}   # (its own name)
+    return _untimed(document), {name: arrays[name].tobytes() for name in arrays.files}
+
+
+@pytest.mark.parametrize(("spec", "horizon", "work_limit"), [
+    ("phi1", 10, 20_000),            # the bounded belief-MDP search
+    ("phi1", None, 100_000),         # the unbounded one: end components, growing horizons
+    # the trust-state search and its unbounded evaluation (about 10 s a run)
+    pytest.param("phi1_trust", None, 1_000_000, marks=pytest.mark.slow),
+])
+def test_a_work_limit_stops_at_the_same_point_however_the_clock_runs(monkeypatch, tmp_path, spec, horizon,
+                                                                     work_limit):
+    first = trustroute.synthesize(spec, horizon=horizon, work_limit=work_limit, time_limit=SLOW,
+                                  out=tmp_path / "first.json")
+    monkeypatch.setattr(time, "perf_counter", _dragging_clock())
+    second = trustroute.synthesize(spec, horizon=horizon, work_limit=work_limit, time_limit=SLOW,
+                                   out=tmp_path / "second.json")
+    assert first.stopped_by == second.stopped_by == "work limit"
+    assert first.upper - first.lower > 1e-3              # honestly unconverged
+    assert (first.lower, first.upper) == (second.lower, second.upper)
+    assert _untimed(first.stats.to_dict()) == _untimed(second.stats.to_dict())
+    assert _policy_file(tmp_path / "first.json") == _policy_file(tmp_path / "second.json")
+
+
+def test_the_dragging_clock_stops_a_run_on_its_time_limit(monkeypatch):
+    """The control: without a work limit the same clock ends the search early."""
+    assert trustroute.synthesize("phi1", horizon=10, time_limit=SLOW).stopped_by == "convergence"
+    monkeypatch.setattr(time, "perf_counter", _dragging_clock(0.05))
+    assert trustroute.synthesize("phi1", horizon=10, time_limit=2.0).stopped_by == "time limit"
+
+
+def test_the_time_limit_still_stops_a_run_under_a_work_limit(monkeypatch):
+    monkeypatch.setattr(time, "perf_counter", _dragging_clock(0.05))
+    result = trustroute.synthesize("phi1", horizon=10, time_limit=2.0, work_limit=10**12)
+    assert result.stopped_by == "time limit" and result.upper - result.lower > 1e-3
+
+
+def test_a_work_limit_that_is_not_reached_changes_nothing():
+    free = trustroute.synthesize("phi1", horizon=10, time_limit=SLOW)
+    limited = trustroute.synthesize("phi1", horizon=10, time_limit=SLOW, work_limit=10**9)
+    assert free.stopped_by == limited.stopped_by == "convergence"
+    assert (free.lower, free.upper) == (limited.lower, limited.upper)
+
+
+@pytest.mark.slow
+def test_the_runs_of_a_population_synthesis_share_the_work_limit(monkeypatch):
+    """The Bayes run, the candidate priors and the per-type evaluations between them are scheduled
+    on the work done (policies/synthesis/population.py's RunSchedule)."""
+    settings = dict(horizon=6, population=POPULATION, objective="robust", grid_points=1, work_limit=30_000,
+                    time_limit=SLOW)
+    first = trustroute.synthesize("phi1_strict", **settings)
+    monkeypatch.setattr(time, "perf_counter", _dragging_clock())
+    second = trustroute.synthesize("phi1_strict", **settings)
+    assert first.result.stopped_by == second.result.stopped_by == "work limit"
+    assert (first.lower, first.upper, first.candidates) == (second.lower, second.upper, second.candidates)
+    assert [(v.lower, v.upper) for v in first.type_values] == [(v.lower, v.upper) for v in second.type_values]
