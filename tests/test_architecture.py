@@ -4,6 +4,7 @@ included), and no module imports another module's `_private` names."""
 from __future__ import annotations
 
 import ast
+import functools
 import tomllib
 from pathlib import Path
 
@@ -23,11 +24,17 @@ def package_modules() -> dict[str, Path]:
     return modules
 
 
+@functools.cache
+def parsed(path: Path) -> ast.Module:
+    """The file's syntax tree, parsed once per session: the checks only read the trees."""
+    return ast.parse(path.read_text(), str(path))
+
+
 def imports(path: Path, module: str, known: dict[str, Path]) -> list[tuple[str, str | None, int]]:
     """(imported module, imported name or None, line) of every import statement in the file."""
     is_package = path.name == "__init__.py"
     out = []
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+    for node in ast.walk(parsed(path)):
         if isinstance(node, ast.Import):
             out += [(alias.name, None, node.lineno) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -45,12 +52,19 @@ def imports(path: Path, module: str, known: dict[str, Path]) -> list[tuple[str, 
     return out
 
 
-def import_graph() -> dict[str, set[str]]:
+@functools.cache
+def package_import_graph() -> dict[str, frozenset[str]]:
+    """The package's import graph, read once per session."""
     known = package_modules()
     return {
-        module: {t for t, _, _ in imports(path, module, known) if t in known and t != module}
+        module: frozenset(t for t, _, _ in imports(path, module, known) if t in known and t != module)
         for module, path in known.items()
     }
+
+
+def import_graph() -> dict[str, set[str]]:
+    """A copy of the package's import graph of its own: the tests that plant an edge add it there."""
+    return {module: set(targets) for module, targets in package_import_graph().items()}
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:

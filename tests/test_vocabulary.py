@@ -8,13 +8,14 @@ from __future__ import annotations
 import ast
 import functools
 
-from tests.test_architecture import package_modules
+from tests.test_architecture import package_modules, parsed
 
 
 @functools.cache
 def package_trees() -> dict[str, ast.Module]:
-    """Module name -> parsed source, for every module of the package (parsed once per session)."""
-    return {module: ast.parse(path.read_text(), str(path)) for module, path in package_modules().items()}
+    """Module name -> parsed source, for every module of the package (parsed once per session, the
+    trees shared with the import-graph checks)."""
+    return {module: parsed(path) for module, path in package_modules().items()}
 
 
 def with_added(module: str, source: str) -> dict[str, ast.Module]:

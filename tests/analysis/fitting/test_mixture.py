@@ -12,6 +12,9 @@ reports with accuracy 0.9. Stated tolerances (each far from what a wrong fit giv
   (>= 40 expected visits, so 0.15 is about 2 SE or more) is within 0.15 of the planted one, and
   at least one type's is 0.3 or more from the other planted type's;
 - with full types (K = 2 given) the same assignment tolerance holds.
+One random start per K is enough here (each K >= 2 also starts from a split of the K-1 fit): the
+planted types are far apart, and an E-step that ignores the likelihood or credits episodes to the
+wrong participant, or a lighter or heavier BIC penalty, each fail these tests at that size.
 """
 
 from __future__ import annotations
@@ -85,7 +88,7 @@ def planted(town):
 def test_bic_picks_the_planted_number_of_types_and_em_recovers_them(planted):
     data, truth, models = planted
     template = models[0]
-    selection = select_types(data, 3, np.random.default_rng(2), EMSettings(restarts=2, shared_dynamics=True))
+    selection = select_types(data, 3, np.random.default_rng(2), EMSettings(restarts=1, shared_dynamics=True))
     bics = [f.bic for f in selection.fits]
     assert selection.chosen == 2, f"BIC {bics}"
     fit = selection.best
@@ -112,7 +115,7 @@ def test_bic_picks_the_planted_number_of_types_and_em_recovers_them(planted):
 @pytest.mark.slow
 def test_full_types_assign_participants_to_their_planted_type(planted):
     data, truth, models = planted
-    fit = fit_mixture(data, 2, np.random.default_rng(5), EMSettings(restarts=2))
+    fit = fit_mixture(data, 2, np.random.default_rng(5), EMSettings(restarts=1))
     assert fit.converged
     _, correct = _matched(fit, truth, models)
     assert correct >= PARTICIPANTS - 2
@@ -141,7 +144,7 @@ def test_fit_types_cli_writes_a_population_with_a_bic_table(model_study, tmp_pat
     with pytest.raises(SystemExit) as exit_info:
         main([
             "fit", str(model_study), "--types", "auto", "--max-types", "2", "--restarts", "1",
-            "--iterations", "60", "--bootstrap", "1", "--seed", "3", "--out", str(out), "--json",
+            "--iterations", "20", "--bootstrap", "1", "--seed", "3", "--out", str(out), "--json",
         ])
     assert exit_info.value.code == 0
     payload = json.loads(capsys.readouterr().out)

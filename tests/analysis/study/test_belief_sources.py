@@ -49,11 +49,17 @@ population = "{EXAMPLE_POPULATION_PATH}"
     return root / "out"
 
 
+@pytest.fixture(scope="module")
+def default_analysis(robust_study):
+    """The study's analysis on its default source, read (never changed) by several tests."""
+    return study_analysis(robust_study, resamples=50)
+
+
 @pytest.mark.slow
-def test_the_default_source_is_neutral_to_every_condition(robust_study):
+def test_the_default_source_is_neutral_to_every_condition(robust_study, default_analysis):
     manifest, episodes, roads = load_study(robust_study)
     assert default_belief_source(manifest) == "true"
-    analysis = study_analysis(robust_study, resamples=50)
+    analysis = default_analysis
     assert analysis.belief_source == "true" and analysis.source_note == ""
     town, driver, _ = study_inputs(manifest)
     model = reference_model(manifest, driver)
@@ -94,8 +100,8 @@ def test_the_api_and_the_cli_share_the_default(robust_study):
 
 
 @pytest.mark.slow
-def test_every_pair_of_conditions_is_tested_with_holm(robust_study):
-    analysis = study_analysis(robust_study, resamples=50)
+def test_every_pair_of_conditions_is_tested_with_holm(default_analysis):
+    analysis = default_analysis
     pairs = set(zip(analysis.paired["condition_a"], analysis.paired["condition_b"], strict=True))
     assert pairs == {("aware", "robust"), ("aware", "free"), ("robust", "free")}
     assert (analysis.paired["spec"] == "phi1").sum() == 3
@@ -110,10 +116,10 @@ def test_every_pair_of_conditions_is_tested_with_holm(robust_study):
 
 
 @pytest.mark.slow
-def test_the_sensitivity_table_shows_every_comparison_on_every_source(robust_study):
+def test_the_sensitivity_table_shows_every_comparison_on_every_source(robust_study, default_analysis):
     from trustroute.analysis.study.display import display_tables
 
-    analysis = study_analysis(robust_study, resamples=50)
+    analysis = default_analysis
     table = analysis.sensitivity
     assert set(table["source"]) == {"filter", "reported", "reference", "true"}
     assert set(table.loc[table["primary"], "source"]) == {"true"}
