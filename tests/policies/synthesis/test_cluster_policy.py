@@ -105,7 +105,7 @@ def test_merging_everything_loosens_but_stays_sound(driver):
 
 
 @pytest.mark.parametrize("offset", [2 / 7, 3 / 7])
-def test_thresholds_on_reachable_beliefs(town, driver, offset):
+def test_thresholds_on_reachable_beliefs(town, driver, strict_lowtrust_optimum, offset):
     """The issue's cases: phi1_strict with the lowtrust offset at 2/7 or 3/7 (the uniform prior and
     beliefs after `none` roads sit on the threshold): the bounds bracket the exhaustive optimum
     and the policy is worth at least L with this machine's labels."""
@@ -120,7 +120,7 @@ def test_thresholds_on_reachable_beliefs(town, driver, offset):
     pomdp = build_pomdp(town, driver)
     tables = build_product(pomdp, spec)
     horizon = 8
-    optimum = exact_optimum(pomdp, spec, horizon)
+    optimum = strict_lowtrust_optimum(offset, horizon)
     b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
     _, either = tables.labeller.belief_margins(b0)
     roots = sorted({tables.initial_q} | ({int(q) for q in tables.next_q[tables.dfa.initial, tables.start]}
