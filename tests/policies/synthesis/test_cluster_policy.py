@@ -50,13 +50,34 @@ def _random_problem(driver, seed: int):
     return pomdp, spec, int(rng.integers(3, 7))
 
 
+@pytest.fixture(scope="module")
+def random_optimum(driver):
+    """optimum(seed): exact_optimum of _random_problem(seed), each computed once per module."""
+    found: dict[int, float] = {}
+
+    def optimum(seed: int) -> float:
+        if seed not in found:
+            pomdp, spec, horizon = _random_problem(driver, seed)
+            found[seed] = exact_optimum(pomdp, spec, horizon)
+        return found[seed]
+
+    return optimum
+
+
+# Seed 6 left out: its brute force takes 12 s (four fifths of the test's CPU) for an optimum of 0,
+# where the bracket's L <= 0 is already implied by the evaluation check; the other 15 problems
+# (optima 0 to 1, caps that merge and caps that do not) catch an optimistic merge of lower
+# values and an upper taken over the worst move alike.
+BRACKET_SEEDS = [seed for seed in range(16) if seed != 6]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", range(16))
-def test_bounds_bracket_the_optimum_and_the_policy_is_worth_lower(driver, seed):
+@pytest.mark.parametrize("seed", BRACKET_SEEDS)
+def test_bounds_bracket_the_optimum_and_the_policy_is_worth_lower(driver, random_optimum, seed):
     pomdp, spec, horizon = _random_problem(driver, seed)
     tables = build_product(pomdp, spec)
     symbols = observation_symbols(pomdp)
-    optimum = exact_optimum(pomdp, spec, horizon)
+    optimum = random_optimum(seed)
     gaps = {}
     for cap in (1, 4, 4096):
         solution = _solve(tables, symbols, [tables.initial_q], horizon, cap)
@@ -84,7 +105,7 @@ def test_merging_everything_loosens_but_stays_sound(driver):
 
 
 @pytest.mark.parametrize("offset", [2 / 7, 3 / 7])
-def test_thresholds_on_reachable_beliefs(town, driver, offset):
+def test_thresholds_on_reachable_beliefs(town, driver, strict_lowtrust_optimum, offset):
     """The issue's cases: phi1_strict with the lowtrust offset at 2/7 or 3/7 (the uniform prior and
     beliefs after `none` roads sit on the threshold): the bounds bracket the exhaustive optimum
     and the policy is worth at least L with this machine's labels."""
@@ -99,7 +120,7 @@ def test_thresholds_on_reachable_beliefs(town, driver, offset):
     pomdp = build_pomdp(town, driver)
     tables = build_product(pomdp, spec)
     horizon = 8
-    optimum = exact_optimum(pomdp, spec, horizon)
+    optimum = strict_lowtrust_optimum(offset, horizon)
     b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
     _, either = tables.labeller.belief_margins(b0)
     roots = sorted({tables.initial_q} | ({int(q) for q in tables.next_q[tables.dfa.initial, tables.start]}
@@ -112,11 +133,11 @@ def test_thresholds_on_reachable_beliefs(town, driver, offset):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_synthesize_with_clusters_on(driver, seed):
+def test_synthesize_with_clusters_on(driver, random_optimum, seed):
     """synthesize(clusters="on") returns the better L of the cluster policy and the search, the
     smaller U, and a policy `evaluate` values at least at L."""
     pomdp, spec, horizon = _random_problem(driver, seed)
-    optimum = exact_optimum(pomdp, spec, horizon)
+    optimum = random_optimum(seed)
     for tau in (1e-6, 0.3):
         result = synthesize(pomdp, spec,
                             SynthesisSettings(tau=tau, horizon=horizon, time_limit=20, clusters="on"))

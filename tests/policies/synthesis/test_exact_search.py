@@ -31,17 +31,17 @@ def routes(town, start, length):
 
 
 @pytest.mark.slow
-def test_exact_optimum_dominates_every_open_loop_route_and_grows_with_the_horizon(pomdp):
+def test_exact_optimum_dominates_every_open_loop_route_and_grows_with_the_horizon(pomdp, packaged_optimum):
     town = pomdp.town
     spec = load_spec("specs/phi1.toml", town)
     horizon = 7
-    optimum = exact_optimum(pomdp, spec, horizon)
+    optimum = packaged_optimum("phi1", horizon)
     best_route = max(evaluate(pomdp, spec, FixedRoutePolicy(town, r),
                               EvaluationSettings(fallback_after=None, max_junctions=horizon)).lower
                      for r in routes(town, spec.start, horizon))
     assert 0.5 < best_route <= optimum + 1e-12
-    assert exact_optimum(pomdp, spec, 5) == 0.0  # the task needs 6 junctions
-    assert exact_optimum(pomdp, spec, 6) <= optimum <= exact_optimum(pomdp, spec, 8)
+    assert packaged_optimum("phi1", 5) == 0.0  # the task needs 6 junctions
+    assert packaged_optimum("phi1", 6) <= optimum <= packaged_optimum("phi1", 8)
 
 
 def test_horizon_outside_the_exact_range_is_refused(pomdp):

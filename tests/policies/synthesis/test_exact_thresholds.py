@@ -18,7 +18,9 @@ from trustroute.policies.synthesis.exact_search import exact_optimum
 TAU = 1e-3
 TOLERANCE = 1e-9
 FAST_SEEDS = range(1000, 1012)
-SWEEP_SEEDS = range(200)
+# Sized to what the sweep finds: with float labels never decided exactly (`close` cleared in
+# policies/belief/exact_labels.py's truth), 12 of these 60 cases, of every kind, come out unsound.
+SWEEP_SEEDS = range(60)
 
 
 @pytest.mark.parametrize("seed", FAST_SEEDS)

@@ -24,11 +24,11 @@ EXACT_TOLERANCE = 1e-9
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["phi1", "phi2_strict"])
 @pytest.mark.parametrize("belief_rule", ["bayes", "paper"])
-def test_small_horizon_bounds_bracket_the_brute_force_optimum(pomdp, name, belief_rule):
+def test_small_horizon_bounds_bracket_the_brute_force_optimum(pomdp, packaged_optimum, name, belief_rule):
     """(a) H <= 6 (and 8 for the interesting case): lower <= optimum <= upper, equal when the gap is 0."""
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     for horizon in (5, 6, 8):
-        optimum = exact_optimum(pomdp, spec, horizon, belief_rule)
+        optimum = packaged_optimum(name, horizon, belief_rule)
         closed = synthesize(pomdp, spec,
                             SynthesisSettings(tau=1e-12, horizon=horizon, belief_rule=belief_rule))
         assert closed.lower - EXACT_TOLERANCE <= optimum <= closed.upper + EXACT_TOLERANCE
@@ -173,7 +173,7 @@ def test_progress_callback_sees_the_search_bounds(pomdp):
 
 
 @pytest.mark.slow
-def test_node_budget_stops_the_search_soundly(pomdp, monkeypatch):
+def test_node_budget_stops_the_search_soundly(pomdp, packaged_optimum, monkeypatch):
     """With a small node budget the search stops early; L stays a lower bound of the returned
     policy's value (its completions may be left open) and U an upper bound of the optimum."""
     from trustroute.policies.synthesis import refinement
@@ -181,7 +181,7 @@ def test_node_budget_stops_the_search_soundly(pomdp, monkeypatch):
     spec = load_spec("specs/phi1.toml", pomdp.town)
     horizon = 8
     monkeypatch.setattr(refinement, "NODE_BUDGET", 300)
-    optimum = exact_optimum(pomdp, spec, horizon)
+    optimum = packaged_optimum("phi1", horizon)
     # the search alone (clusters "off"); by default cluster policies follow an unconverged search
     result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=horizon, clusters="off"))
     run = result.stats.runs[0]

@@ -157,6 +157,12 @@ def _return_problem(driver, seed: int):
     return pomdp, spec, int(rng.integers(7, 11))
 
 
+# Seed 3 left out: its exact evaluations at H = 9 take 19 s of CPU (over half the test's) and it
+# needs no return; seeds 6 and 9, which do, stay, and the remaining nine still catch an L raised
+# above the returned policy's value.
+RETURN_SEEDS = [seed for seed in range(10) if seed != 3]
+
+
 @pytest.mark.slow
 def test_open_nodes_are_valued_by_the_completion_that_returns(driver):
     """Open nodes are valued by the free completion (state-only task, then back to what the DFA
@@ -168,7 +174,7 @@ def test_open_nodes_are_valued_by_the_completion_that_returns(driver):
     from tests.policies.routing.test_free_completion import StateOnlyCompletion, policy_without_rows
 
     returns = 0
-    for seed in range(10):
+    for seed in RETURN_SEEDS:
         pomdp, spec, horizon = _return_problem(driver, seed)
         alone = evaluate(pomdp, spec, policy_without_rows(pomdp, spec),
                          EvaluationSettings(fallback_after=None, max_junctions=horizon))
