@@ -39,6 +39,7 @@ synthesis entry, policies/synthesize_spec.py `synthesize_for_population`, decide
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
@@ -50,7 +51,7 @@ import numpy as np
 from trustroute.networks.town import Town
 from trustroute.participants.driver_population import DriverPopulation
 from trustroute.policies.belief.driver_types import lift_population, lift_spec
-from trustroute.policies.evaluation.plain import Evaluation, evaluate
+from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import Spec, state_only_projection
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
@@ -149,15 +150,11 @@ def per_type_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, popula
     true driver; past `deadline` (on the synthesis' clock) the histories still open are cut, so a value
     is then certified [lower, upper] rather than exact; each type has its share of the time left
     (`type_deadline`), so that a cut falls on every type alike."""
-    out = []
-    for i, t in enumerate(population.types):
-        truth = build_pomdp(pomdp.town, t.model)
-        value: Evaluation = evaluate(pomdp, spec, policy,
-                                     EvaluationSettings(fallback_after=fallback_after,
-                                                        max_junctions=max_junctions, belief_rule=belief_rule),
-                                     truth=truth, deadline=type_deadline(deadline, population.n_types - i))
-        out.append(TypeValue(t.name, float(t.weight), value.lower, value.upper))
-    return tuple(out)
+    settings = EvaluationSettings(fallback_after=fallback_after, max_junctions=max_junctions,
+                                  belief_rule=belief_rule)
+    found = candidate_values(pomdp, spec, policy, population, settings, deadline,
+                             list(range(population.n_types)), beaten_at=-math.inf)
+    return tuple(v for v in found if v is not None)   # none left out: nothing is beaten below -inf
 
 
 def type_deadline(deadline: float | None, types_left: int) -> float | None:
@@ -332,7 +329,7 @@ def type_bounds(town: Town, population: DriverPopulation, spec: Spec, settings: 
 
 
 def candidate_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, population: DriverPopulation,
-                     settings: EvaluationSettings, deadline: float, order: list[int], beaten_at: float
+                     settings: EvaluationSettings, deadline: float | None, order: list[int], beaten_at: float
                      ) -> tuple[TypeValue | None, ...]:
     """A candidate's exact per-type values, type by type in `order`; once a type's upper end is at
     most `beaten_at` (the best worst type so far) the candidate cannot be returned and the types
@@ -379,9 +376,7 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
     weights, horizon = population.weights, settings.horizon
     best: Candidate = (
         bayes.policy, bayes_values, weights, bayes.stats)
-    candidates = [{"prior": weights.tolist(), "rows": bayes.stats.policy_rows,
-                   "worst_type_lower": worst_type(bayes_values),
-                   "type_lower": [v.lower for v in bayes_values]}]
+    candidates = [candidate_record(weights, bayes_values, bayes.stats.policy_rows)]
     if population.n_types == 1:
         return best, candidates
     grid_points = MAX_GRID_CANDIDATES if settings.grid_points is None else settings.grid_points
