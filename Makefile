@@ -32,15 +32,12 @@ browser:
 	    exit 2; \
 	  fi; }
 
-# pytest exits 5 when it collects nothing; that is not a failure of the project.
-# One pytest-xdist worker per core, and one more (the `serial` browser session runs alone afterwards): the live and browser tests wait on the wall clock
-# (a study at wall-clock pace), and the extra worker runs other tests meanwhile.
+# tests/suite.py runs the suite in two lanes at once: the tests that wait on the wall clock (live
+# stations, browsers; the `serial` browser session first and alone) at normal priority, the
+# CPU-bound rest niced, one pytest-xdist worker per core in each. A lane that collects nothing is
+# not a failure of the project.
 test: $(STAMP) browser
-	$(BIN)/python -m pytest -q -n $$(( $$(nproc) + 1 )) -m "not serial" --durations=10; rc=$$?; \
-	if [ $$rc -eq 5 ]; then echo "no tests collected"; rc=0; fi; \
-	$(BIN)/python -m pytest -q -m serial; serial=$$?; \
-	if [ $$serial -eq 5 ]; then echo "no serial tests collected"; serial=0; fi; \
-	if [ $$rc -ne 0 ]; then exit $$rc; fi; exit $$serial
+	$(BIN)/python -m tests.suite
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks

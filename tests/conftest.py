@@ -17,13 +17,16 @@ from trustroute.policies.model.trust_pomdp import build_pomdp
 def temporary_cache(tmp_path_factory):
     """Every test caches nets and policies in one temporary root (XDG_CACHE_HOME), never in the
     real ~/.cache; one per run, shared by the run's pytest-xdist workers (the base temp folder
-    they share), so a policy or net built by one test is reused by the next on any worker. The
-    cache's entries are filled under locks and renamed into place (core/output_files.py), which
-    this sharing exercises."""
-    base = tmp_path_factory.getbasetemp()
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        base = base.parent   # <run>/popen-gwN: the run's own folder is the workers' common one
-    root = base / "xdg-cache"
+    they share, or the root tests/suite.py gives all its runs), so a policy or net built by one
+    test is reused by the next on any worker. The cache's entries are filled under locks and
+    renamed into place (core/output_files.py), which this sharing exercises."""
+    if os.environ.get("TRUSTROUTE_TEST_CACHE"):
+        root = Path(os.environ["TRUSTROUTE_TEST_CACHE"])   # tests/suite.py: one root for its lanes
+    else:
+        base = tmp_path_factory.getbasetemp()
+        if os.environ.get("PYTEST_XDIST_WORKER"):
+            base = base.parent   # <run>/popen-gwN: the run's own folder is the workers' common one
+        root = base / "xdg-cache"
     root.mkdir(exist_ok=True)
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("XDG_CACHE_HOME", str(root))

@@ -22,9 +22,10 @@ from trustroute.harness.study.parts import read_part
 
 from .test_live_restart import start_server
 
-# Alone, after the parallel run (Makefile): its person drives at wall-clock pace, and two cores shared
-# with the other workers made it miss the obstacle it passes by hand.
-pytestmark = [pytest.mark.slow, pytest.mark.serial]
+# Alone in the wall-clock lane, beside only the niced CPU-bound lane (tests/suite.py): its person
+# drives at wall-clock pace, and two cores shared equally with other workers made it miss the
+# obstacle it passes by hand.
+pytestmark = [pytest.mark.slow, pytest.mark.serial, pytest.mark.wallclock]
 
 # software WebGL (SwiftShader) for the driver's view
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",

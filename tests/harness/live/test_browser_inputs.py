@@ -16,7 +16,7 @@ from tests.browser import chromium_executable
 
 from .test_browser import CHROMIUM_ARGS, create_participant
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 CONFIG = """[study]
 name = "wheel-only"

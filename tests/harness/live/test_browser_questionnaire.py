@@ -17,7 +17,7 @@ from trustroute.harness.cli import cli
 from .test_browser import CHROMIUM_ARGS, TIMEOUT_MS, answer_prompt, create_participant
 from .test_live_restart import start_server
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 SCREENSHOT = "questionnaire.png"
 CONFIG = """[study]
 name = "browser-questionnaire"

@@ -15,7 +15,7 @@ from tests.browser import chromium_executable
 from .test_browser import CHROMIUM_ARGS, create_participant
 from .test_live_restart import start_server
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 CONFIG = """[study]
 name = "browser-session"

@@ -31,7 +31,7 @@ from trustroute.harness.study.parts import read_part
 
 from .test_browser import CHROMIUM_ARGS, create_participant
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 CONFIG = """[study]
 name = "wheel-live"

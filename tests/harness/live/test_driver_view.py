@@ -29,7 +29,7 @@ from trustroute.harness.simulation.incidents.oncoming import TRUCK_TYPE
 from .conftest import tiny_config
 from .test_browser import CHROMIUM_ARGS
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 # the camera model of driver_view.js; the test checks the page uses these numbers
 CAMERA = {"eyeBack": 1.9, "eyeLeft": 0.35, "eyeHeight": 1.2, "fov": 40, "near": 0.3, "far": 600}

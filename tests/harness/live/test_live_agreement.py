@@ -20,7 +20,7 @@ from trustroute.harness.study.runner import run_and_consolidate
 from .conftest import tiny_config
 from .test_live_episode import serving
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 PARTICIPANTS = 12
 AT_ONCE = 4          # participants connected at the same time (the machine has 2 cores)

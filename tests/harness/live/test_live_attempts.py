@@ -20,7 +20,7 @@ from trustroute.harness.live.server import LiveStudy, ServerOptions
 from .conftest import serving, tiny_config
 from .test_live_episode import receive_until
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 
 def leave_mid_trial(study: LiveStudy) -> str:

@@ -21,7 +21,8 @@ from trustroute.harness.study.plan import plan_episodes
 
 from .test_live_manual import play_in
 
-pytestmark = pytest.mark.slow   # the csomor net is built from its packaged plain XML on first use
+# slow: the csomor net is built from its packaged plain XML on first use
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 LIVE = """[study]
 name = "{town}-live"

@@ -24,7 +24,7 @@ from trustroute.harness.study.parts import read_part
 from .conftest import tiny_config
 from .test_live_manual import play_in
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 
 @contextlib.contextmanager

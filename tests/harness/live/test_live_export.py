@@ -18,7 +18,7 @@ from trustroute.harness.live.server import LiveStudy, ServerOptions
 
 from .conftest import serving, tiny_config
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 WORDS = re.compile(r"^[a-z_]+(, [a-z_]+)+$")
 
 

@@ -20,7 +20,7 @@ from trustroute.harness.study.runner import run_planned_episode
 
 from .conftest import tiny_config
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 
 class Relay:

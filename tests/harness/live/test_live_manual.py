@@ -17,7 +17,7 @@ from trustroute.harness.study.parts import read_part
 
 from .conftest import tiny_config
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 
 def play_in(client: TestClient, study: LiveStudy, player: ScriptedParticipant) -> ScriptedParticipant:

@@ -20,7 +20,7 @@ from trustroute.harness.study.config import load_study_config
 from .conftest import TINY, serving
 from .test_live_episode import receive_until
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 PLACED = """
 [questionnaires]
 before = ["nasa_tlx"]

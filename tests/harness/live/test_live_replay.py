@@ -19,7 +19,7 @@ from trustroute.harness.study.plan import plan_episodes
 from .conftest import tiny_config
 from .test_live_manual import play
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 
 def column(chunks, suffix: str) -> tuple[np.ndarray, list]:

@@ -16,7 +16,7 @@ from trustroute.harness.live.server import LiveStudy, ServerOptions
 
 from .conftest import serving, tiny_config
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 
 def answer(road: int) -> int:

@@ -22,7 +22,7 @@ from trustroute.harness.study.plan import plan_episodes
 
 from .conftest import tiny_config
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 
 def start_server(config_path: str, study_dir: Path, pace: float) -> tuple[subprocess.Popen, str, str]:

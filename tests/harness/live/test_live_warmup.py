@@ -16,7 +16,7 @@ from trustroute.networks.road import Road
 from .conftest import tiny_config
 from .test_live_worker import Pipe
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 
 def drive(config, task, warm_up: bool):

@@ -19,7 +19,7 @@ from trustroute.harness.live.withdraw import sha256_of
 
 from .conftest import serving, tiny_config
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 
 def test_withdraw_then_analyze(tmp_path, capsys):

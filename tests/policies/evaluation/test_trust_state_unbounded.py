@@ -3,8 +3,6 @@ over trust paths and Monte Carlo, on a small town where the policy loops."""
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
@@ -17,8 +15,11 @@ from trustroute.policies.evaluation.trust_state import evaluate_joint_table_unbo
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
 from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesize_spec import synthesize_spec
+from trustroute.policies.work_clock import now as clock_now
+from trustroute.policies.work_clock import work_clock
 
 MARGIN = 1e-9
+DEADLINE_WORK = 10**8   # a work clock's limit far beyond the deadline the test sets on it
 
 
 @pytest.fixture(scope="module")
@@ -28,6 +29,13 @@ def looping(driver):
     pomdp, spec = random_problem(np.random.default_rng(1), driver, "trust")
     table = synthesize_spec(pomdp, spec, SynthesisSettings(horizon=2, time_limit=2)).policy
     return pomdp, spec, JointTablePolicy(table.table, pomdp, spec, guide_horizon=2)
+
+
+def to_the_deadline(pomdp, spec, policy):
+    """The unbounded evaluation run to a deadline 0.5 s ahead on a work clock (in units of work,
+    policies/work_clock.py): the same junctions at any load."""
+    with work_clock(DEADLINE_WORK, time_limit=600.0):
+        return evaluate_joint_table_unbounded(pomdp, spec, policy, deadline=clock_now() + 0.5)
 
 
 def test_each_iterate_is_the_brute_force_value_within_its_junctions(looping):
@@ -44,7 +52,7 @@ def test_each_iterate_is_the_brute_force_value_within_its_junctions(looping):
         assert value.upper > value.lower + 1e-3       # mass is still looping
         iterates.append(value)
     assert all(a.lower <= b.lower + MARGIN for a, b in zip(iterates, iterates[1:], strict=False))
-    longer = evaluate_joint_table_unbounded(pomdp, spec, policy, deadline=time.perf_counter() + 0.5)
+    longer = to_the_deadline(pomdp, spec, policy)
     assert longer.junctions > 4 and longer.lower > iterates[-1].lower + 1e-2
     for value in iterates:
         assert value.lower <= longer.lower <= longer.upper <= value.upper + MARGIN
@@ -67,7 +75,7 @@ def test_monte_carlo_of_the_looping_policy_is_at_least_its_lower_bound(looping, 
     """Episodes of the same policy through the episode tracker, 60 junctions each: their
     satisfied share is not below L (L counts fewer junctions) beyond 4 SE."""
     pomdp, spec, policy = looping
-    value = evaluate_joint_table_unbounded(pomdp, spec, policy, deadline=time.perf_counter() + 0.5)
+    value = to_the_deadline(pomdp, spec, policy)
     assert value.junctions <= 60
     setup = EpisodeSetup(town=pomdp.town, driver_model=pomdp.driver, spec=spec, junction_cap=60,
                          fallback_after=None)
