@@ -66,8 +66,15 @@ class _Paths:
             return None
         weight2 = moved[path, theta2]
         belief = self.belief(theta2, weight2)
-        q2 = self.dfa.step_many(q[path], self.valuations(road, belief, theta2))
-        return theta2, weight2, np.asarray(q2), belief
+        # A path's labels depend on its own trust only (the road and belief are the history's), so
+        # each path's DFA step is read from the steps of every (q, θ') pair: the same successors,
+        # without stepping and labelling every path one by one.
+        n_q = self.dfa.n_states
+        levels = np.arange(self.n_t)
+        pairs = self.dfa.step_many(np.repeat(np.arange(n_q), self.n_t),
+                                   np.tile(self.valuations(road, belief, levels), (n_q, 1)))
+        q2 = np.asarray(pairs).reshape(n_q, self.n_t)[q[path], theta2]
+        return theta2, weight2, q2, belief
 
     def accepted(self, weight, q) -> float:
         return float(weight[self.dfa.accepting[q]].sum())

@@ -80,7 +80,10 @@ def test_monte_carlo_of_the_looping_policy_is_at_least_its_lower_bound(looping, 
     setup = EpisodeSetup(town=pomdp.town, driver_model=pomdp.driver, spec=spec, junction_cap=60,
                          fallback_after=None)
     rng = np.random.default_rng(20261205)
-    episodes = 200
+    # Sized to the one-sided check: the policy satisfies the spec on every one of the first 200
+    # seeded episodes; the SE below is recomputed from these 100 (at least 1/100), so with L near
+    # 0.66 an acceptance rate under about 0.47 (0.52 with 200 episodes) still fails.
+    episodes = 100
     satisfied = np.zeros(episodes, dtype=bool)
     for n in range(episodes):
         synthetic = SyntheticDriver(pomdp.driver, np.random.default_rng(rng.integers(2**63)))

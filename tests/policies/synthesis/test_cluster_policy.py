@@ -51,6 +51,28 @@ def _random_problem(driver, seed: int):
 
 
 @pytest.fixture(scope="module")
+def random_solution(driver):
+    """solution(seed, cap): (pomdp, spec, horizon, the cluster solution at `cap`) of
+    _random_problem(seed), each product and solution built once per module: the bracket test and
+    the merge test below solve the same problems at caps 1 and 4096 (building the product is
+    most of the merge test's CPU)."""
+    problems: dict[int, tuple] = {}
+    solutions: dict[tuple[int, int], object] = {}
+
+    def solution(seed: int, cap: int):
+        if seed not in problems:
+            pomdp, spec, horizon = _random_problem(driver, seed)
+            tables = build_product(pomdp, spec)
+            problems[seed] = (pomdp, spec, horizon, tables, observation_symbols(pomdp))
+        pomdp, spec, horizon, tables, symbols = problems[seed]
+        if (seed, cap) not in solutions:
+            solutions[seed, cap] = _solve(tables, symbols, [tables.initial_q], horizon, cap)
+        return pomdp, spec, horizon, solutions[seed, cap]
+
+    return solution
+
+
+@pytest.fixture(scope="module")
 def random_optimum(driver):
     """optimum(seed): exact_optimum of _random_problem(seed), each computed once per module."""
     found: dict[int, float] = {}
@@ -73,14 +95,11 @@ BRACKET_SEEDS = [seed for seed in range(16) if seed != 6]
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", BRACKET_SEEDS)
-def test_bounds_bracket_the_optimum_and_the_policy_is_worth_lower(driver, random_optimum, seed):
-    pomdp, spec, horizon = _random_problem(driver, seed)
-    tables = build_product(pomdp, spec)
-    symbols = observation_symbols(pomdp)
+def test_bounds_bracket_the_optimum_and_the_policy_is_worth_lower(random_solution, random_optimum, seed):
     optimum = random_optimum(seed)
     gaps = {}
     for cap in (1, 4, 4096):
-        solution = _solve(tables, symbols, [tables.initial_q], horizon, cap)
+        pomdp, spec, horizon, solution = random_solution(seed, cap)
         assert solution.lower - TOLERANCE <= optimum <= solution.upper + TOLERANCE, (cap, solution, optimum)
         value = evaluate(pomdp, spec, _cluster_policy(pomdp, spec, solution),
                          EvaluationSettings(fallback_after=None, max_junctions=horizon))
@@ -91,15 +110,12 @@ def test_bounds_bracket_the_optimum_and_the_policy_is_worth_lower(driver, random
     assert gaps[4096] <= 1e-6, gaps
 
 
-def test_merging_everything_loosens_but_stays_sound(driver):
+def test_merging_everything_loosens_but_stays_sound(random_solution):
     """Cap 1 (one box per node) must give a wider bracket than cap 4096 on some problem, or the
     merges were never exercised."""
     wider = 0
     for seed in range(16):
-        pomdp, spec, horizon = _random_problem(driver, seed)
-        tables = build_product(pomdp, spec)
-        symbols = observation_symbols(pomdp)
-        coarse, fine = (_solve(tables, symbols, [tables.initial_q], horizon, cap) for cap in (1, 4096))
+        coarse, fine = (random_solution(seed, cap)[-1] for cap in (1, 4096))
         wider += (coarse.upper - coarse.lower) > (fine.upper - fine.lower) + 1e-6
     assert wider >= 3
 

@@ -61,7 +61,26 @@ def _problem(driver, seed):
     return tables, observation_symbols(pomdp), route, task
 
 
-def _bounds_and_exact(driver, seed, deadline=None):
+@pytest.fixture(scope="module")
+def exact_values(driver):
+    """exact(seed): the exact tree's value from every road of `_problem(seed)`, each computed once
+    per module (the recursion is most of these tests' CPU, and several tests, with several merge
+    settings and deadlines, bracket the same seeds' values; it reads none of those settings)."""
+    found: dict[int, np.ndarray] = {}
+
+    def exact(seed: int) -> np.ndarray:
+        if seed not in found:
+            tables, symbols, route, task = _problem(driver, seed)
+            belief = np.asarray(tables.pomdp.initial_belief, dtype=float)
+            found[seed] = np.array([exact_free_value(tables, symbols, route, x, tables.initial_q,
+                                                     task.initial_state, belief, HORIZON)
+                                    for x in range(tables.n_x)])
+        return found[seed]
+
+    return exact
+
+
+def _bounds_and_exact(driver, exact_values, seed, deadline=None):
     tables, symbols, route, task = _problem(driver, seed)
     belief = np.asarray(tables.pomdp.initial_belief, dtype=float)
     roads = np.arange(tables.n_x)
@@ -70,29 +89,27 @@ def _bounds_and_exact(driver, seed, deadline=None):
     steps = np.full(roads.size, HORIZON)
     starts = CompletionStarts(roads, q, p, np.repeat(belief[None], roads.size, 0), steps)
     bounds = completion_bounds(tables, symbols, route, starts, deadline)
-    exact = np.array([exact_free_value(tables, symbols, route, int(x), int(q[0]), int(p[0]), belief,
-                                       HORIZON) for x in roads])
-    return bounds, exact
+    return bounds, exact_values(seed)
 
 
 @pytest.mark.parametrize("seed", range(8))
-def test_default_bounds_bracket_and_nearly_equal_the_exact_tree(driver, seed, monkeypatch):
-    bounds, exact = _bounds_and_exact(driver, seed)
+def test_default_bounds_bracket_and_nearly_equal_the_exact_tree(driver, exact_values, seed, monkeypatch):
+    bounds, exact = _bounds_and_exact(driver, exact_values, seed)
     assert np.all(bounds.lower <= exact + TOLERANCE)
     assert np.all(exact <= bounds.upper + TOLERANCE)
     # with room for every cluster (a few hundred sequences here; the default cap, 64, can be
     # exceeded), only equal beliefs merge on the default grid: the bounds are the exact value
     monkeypatch.setattr(completion_value, "CLUSTER_CAP", 4096)
-    bounds, exact = _bounds_and_exact(driver, seed)
+    bounds, exact = _bounds_and_exact(driver, exact_values, seed)
     assert np.max(bounds.upper - bounds.lower) <= 1e-9
     assert np.all(bounds.lower <= exact + TOLERANCE) and np.all(exact <= bounds.upper + TOLERANCE)
 
 
 @pytest.mark.parametrize("seed", range(12))
-def test_coarse_merging_stays_sound(driver, seed, monkeypatch):
+def test_coarse_merging_stays_sound(driver, exact_values, seed, monkeypatch):
     monkeypatch.setattr(completion_value, "INITIAL_RESOLUTION", 0.05)
     monkeypatch.setattr(completion_value, "CLUSTER_CAP", 3)
-    bounds, exact = _bounds_and_exact(driver, seed)
+    bounds, exact = _bounds_and_exact(driver, exact_values, seed)
     assert np.all(bounds.lower <= exact + TOLERANCE), (bounds.lower, exact)
     assert np.all(exact <= bounds.upper + TOLERANCE), (exact, bounds.upper)
 
@@ -111,27 +128,29 @@ class _SteppedClock:
 
 @pytest.mark.parametrize("seed", range(6))
 @pytest.mark.parametrize("steps_before_deadline", [0, 1, 3])
-def test_bounds_stopped_by_the_deadline_stay_sound(driver, seed, steps_before_deadline, monkeypatch):
+def test_bounds_stopped_by_the_deadline_stay_sound(driver, exact_values, seed, steps_before_deadline,
+                                                   monkeypatch):
     monkeypatch.setattr(completion_value, "time", _SteppedClock())
-    bounds, exact = _bounds_and_exact(driver, seed, deadline=float(steps_before_deadline))
+    bounds, exact = _bounds_and_exact(driver, exact_values, seed, deadline=float(steps_before_deadline))
     assert np.all(bounds.lower <= exact + TOLERANCE), (bounds.lower, exact)
     assert np.all(exact <= bounds.upper + TOLERANCE), (exact, bounds.upper)
 
 
-def test_bounds_stopped_by_the_deadline_are_looser(driver, monkeypatch):
+def test_bounds_stopped_by_the_deadline_are_looser(driver, exact_values, monkeypatch):
     """Stopped after one junction step, the mass in flight widens the bounds (the soundness test
     above is not vacuous); with no deadline they are nearly exact."""
     monkeypatch.setattr(completion_value, "time", _SteppedClock())
-    stopped = [_bounds_and_exact(driver, seed, deadline=1.0)[0] for seed in range(6)]
+    stopped = [_bounds_and_exact(driver, exact_values, seed, deadline=1.0)[0] for seed in range(6)]
     assert sum(b.interrupted for b in stopped) >= 3
     assert max(float(np.max(b.straddle)) for b in stopped) > 0.01
 
 
-def test_coarse_merging_loosens_where_labels_matter(driver, monkeypatch):
+def test_coarse_merging_loosens_where_labels_matter(driver, exact_values, monkeypatch):
     """The coarse grid does widen some bound (the soundness test above is not vacuous)."""
     monkeypatch.setattr(completion_value, "INITIAL_RESOLUTION", 0.05)
     monkeypatch.setattr(completion_value, "CLUSTER_CAP", 3)
-    widest = max(float(np.max(_bounds_and_exact(driver, seed)[0].straddle)) for seed in range(12))
+    widest = max(float(np.max(_bounds_and_exact(driver, exact_values, seed)[0].straddle))
+                 for seed in range(12))
     assert widest > 0.01
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.policies.synthesis.threshold_cases import brute_force, random_case, run_case
+from tests.policies.synthesis.threshold_cases import Outcome, random_case, run_case
 from trustroute.policies.synthesis.exact_search import exact_optimum
 
 TAU = 1e-3
@@ -23,21 +23,35 @@ FAST_SEEDS = range(1000, 1012)
 SWEEP_SEEDS = range(60)
 
 
+@pytest.fixture(scope="module")
+def fast_outcome(driver):
+    """outcome(seed): run_case of FAST_SEEDS' case, once per module: its exact-rational brute force
+    (Outcome.optimum) is also the reference of the exhaustive-search test below."""
+    found: dict[int, Outcome] = {}
+
+    def outcome(seed: int) -> Outcome:
+        if seed not in found:
+            found[seed] = run_case(random_case(seed, driver), tau=TAU)
+        return found[seed]
+
+    return outcome
+
+
 @pytest.mark.parametrize("seed", FAST_SEEDS)
-def test_a_threshold_case_reaches_tau_and_is_sound(driver, seed):
-    outcome = run_case(random_case(seed, driver), tau=TAU)
+def test_a_threshold_case_reaches_tau_and_is_sound(fast_outcome, seed):
+    outcome = fast_outcome(seed)
     assert outcome.sound(TOLERANCE), outcome
     assert outcome.policy_worth_lower(TOLERANCE), outcome
     assert outcome.reaches(TAU), outcome
 
 
 @pytest.mark.parametrize("seed", FAST_SEEDS)
-def test_the_exhaustive_search_equals_the_exact_rational_brute_force(driver, seed):
+def test_the_exhaustive_search_equals_the_exact_rational_brute_force(fast_outcome, seed):
     """policies/synthesis/exact_search.py (float beliefs, labels decided by exact_labels) and the
     test's own integer brute force agree on every threshold case."""
-    case = random_case(seed, driver)
-    assert exact_optimum(case.pomdp, case.spec, case.horizon) == pytest.approx(
-        brute_force(case.pomdp, case.spec, case.horizon), abs=TOLERANCE)
+    outcome = fast_outcome(seed)
+    case = outcome.case
+    assert exact_optimum(case.pomdp, case.spec, case.horizon) == pytest.approx(outcome.optimum, abs=TOLERANCE)
 
 
 @pytest.mark.slow

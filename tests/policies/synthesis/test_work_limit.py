@@ -66,9 +66,16 @@ def test_a_work_limit_stops_at_the_same_point_however_the_clock_runs(monkeypatch
     assert _policy_file(tmp_path / "first.json") == _policy_file(tmp_path / "second.json")
 
 
-def test_the_dragging_clock_stops_a_run_on_its_time_limit(monkeypatch):
+@pytest.fixture(scope="module")
+def converged():
+    """φ1 at H = 10 without a work limit, run to convergence once for the two tests that need it
+    (a converged run stops where the search does, whatever the clock)."""
+    return trustroute.synthesize("phi1", horizon=10, time_limit=SLOW)
+
+
+def test_the_dragging_clock_stops_a_run_on_its_time_limit(monkeypatch, converged):
     """The control: without a work limit the same clock ends the search early."""
-    assert trustroute.synthesize("phi1", horizon=10, time_limit=SLOW).stopped_by == "convergence"
+    assert converged.stopped_by == "convergence"
     monkeypatch.setattr(time, "perf_counter", _dragging_clock(0.05))
     assert trustroute.synthesize("phi1", horizon=10, time_limit=2.0).stopped_by == "time limit"
 
@@ -79,8 +86,8 @@ def test_the_time_limit_still_stops_a_run_under_a_work_limit(monkeypatch):
     assert result.stopped_by == "time limit" and result.upper - result.lower > 1e-3
 
 
-def test_a_work_limit_that_is_not_reached_changes_nothing():
-    free = trustroute.synthesize("phi1", horizon=10, time_limit=SLOW)
+def test_a_work_limit_that_is_not_reached_changes_nothing(converged):
+    free = converged
     limited = trustroute.synthesize("phi1", horizon=10, time_limit=SLOW, work_limit=10**9)
     assert free.stopped_by == limited.stopped_by == "convergence"
     assert (free.lower, free.upper) == (limited.lower, limited.upper)
