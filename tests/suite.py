@@ -1,13 +1,13 @@
 """Run the whole suite the way `make test` does: `python -m tests.suite [PYTEST_ARGS...]`.
 
-Two lanes run at once. The tests that wait on the wall clock (marked `wallclock`: a live station
-paced in real time, a browser driven as a person would) leave their core idle most of the time,
-and a paced drive fails if it is starved, so they run at normal priority: first the `serial`
-browser session alone in its lane, then the other `wallclock` tests on one pytest-xdist worker per
-core. The CPU-bound rest runs meanwhile at a lower priority (`nice`), on one worker per core with
-work stealing, and takes every cycle the waiting lane leaves. Both lanes share one cache root for
-nets and policies (tests/conftest.py, `temporary_cache`), so a policy one lane builds the other
-reads. The exit code is the first lane's that failed; a lane that collects nothing is not a
+Two lanes run at once. The tests whose outcome depends on the wall clock (marked `wallclock`: a
+live station paced in real time, a browser driven as a person would, a peer's wall-clock time
+limit) mostly wait, and fail if starved of a core, so they run at normal priority: first the
+`serial` browser session alone in its lane, then the other `wallclock` tests on one pytest-xdist
+worker per core. The CPU-bound rest runs meanwhile at a lower priority (`nice`), on one worker per
+core with work stealing, and takes every cycle the waiting lane leaves. Both lanes share one cache
+root for nets and policies (tests/conftest.py, `temporary_cache`), so a policy one lane builds the
+other reads. The exit code is the first lane's that failed; a lane that collects nothing is not a
 failure (pytest's exit code 5)."""
 
 from __future__ import annotations

@@ -71,6 +71,9 @@ def road_spec(pomdp, spec):
     return spec_from_text(text, "<road spec>", pomdp.town)
 
 
+# PAYNT's time limit is on the wall clock (its build included): starved of a core it finds no
+# controller, so the tests that require one run at normal priority (tests/suite.py)
+@pytest.mark.wallclock
 @pytest.mark.parametrize("seed", [21, 22])
 def test_paynt_never_exceeds_the_exact_search_optimum_on_road_specs(driver, seed):
     pomdp, spec = random_problem(np.random.default_rng(seed), driver, "trust")
@@ -105,6 +108,7 @@ def test_paynt_unbounded_never_exceeds_our_certified_upper_bound(driver, seed):
     assert unbounded.lower <= ours.upper + PRECISION, (unbounded, ours)
 
 
+@pytest.mark.wallclock
 def test_paynt_on_the_paper_town_stays_below_synth_upper_bound(pomdp):
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
     paynt = run_paynt(explicit_product(pomdp, spec, 8), time_limit=2)
