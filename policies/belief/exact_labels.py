@@ -124,6 +124,9 @@ class ExactFilter:
         moving = self.changing[codes]
         if not moving.any():
             return out
+        if words.size == 1:   # one history (an episode at a time): no pairs to deduplicate
+            out[moving] = self.extend_one(int(words[moving][0]), int(codes[moving][0]))
+            return out
         pairs, inverse = np.unique(np.stack([words[moving], codes[moving]], axis=1), axis=0,
                                    return_inverse=True)
         ids = np.array([self.extend_one(word, code) for word, code in pairs.tolist()], dtype=np.int64)
