@@ -4,6 +4,7 @@ log while it runs (`StepLog`)."""
 from __future__ import annotations
 
 from array import array
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -51,6 +52,17 @@ class EpisodeRecord:
     @property
     def roads(self) -> pd.DataFrame:
         return self._frame("roads")
+
+    def last_road(self) -> dict[str, Any]:
+        """The roads table's last row as {column: Python value} (None where null), read from the
+        Arrow table when the roads are not in pandas yet: a gym episode's end reads its last road
+        only, and a table's conversion to pandas costs milliseconds whatever its length."""
+        source = self._sources["roads"]
+        if "roads" not in self._frames and isinstance(source, pa.Table):
+            return source.slice(source.num_rows - 1).to_pylist()[0]
+        row = self.roads.iloc[-1]
+        return {name: None if pd.api.types.is_scalar(value) and pd.isna(value) else value
+                for name, value in row.items()}
 
     @property
     def kinematics(self) -> pd.DataFrame:

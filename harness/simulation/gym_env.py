@@ -41,7 +41,7 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 if TYPE_CHECKING:
-    import pandas as pd
+    from collections.abc import Mapping
 
     from trustroute.harness.simulation.episode_record import EpisodeRecord
     from trustroute.policies.model.trust_pomdp import BeliefRule
@@ -201,7 +201,7 @@ class TrustRoutingEnv(gymnasium.Env):
         self._belief = np.asarray(context.belief, dtype=np.float64)
         return self._observation(context.road, context.dfa_state, context.belief, context.junctions_driven)
 
-    def _final_belief(self, last: pd.Series) -> np.ndarray:
+    def _final_belief(self, last: Mapping[str, Any]) -> np.ndarray:
         """The AV's belief after the last road. The roads table logs a type-aware belief's trust
         marginal only: with a population, the last decision's belief is filtered once more with
         the last road's observation, as the tracker does."""
@@ -219,7 +219,7 @@ class TrustRoutingEnv(gymnasium.Env):
     def _final(self, record: EpisodeRecord) -> tuple[dict, float, bool, bool, dict]:
         self._episode = None
         self.last_record = record
-        last = record.roads.iloc[-1]
+        last = record.last_road()
         summary = {k: v for k, v in record.summary.items() if k not in RUN_FACTS}
         if self.engine == "model":  # no simulated clock: sim_seconds is NaN, which equals nothing
             summary.pop("sim_seconds", None)

@@ -29,6 +29,7 @@ Higham's bounds: no underflow in the filter.
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, field
 from fractions import Fraction
 
@@ -124,6 +125,9 @@ class ExactFilter:
         moving = self.changing[codes]
         if not moving.any():
             return out
+        if words.size == 1:   # one history (an episode at a time): no pairs to deduplicate
+            out[moving] = self.extend_one(int(words[moving][0]), int(codes[moving][0]))
+            return out
         pairs, inverse = np.unique(np.stack([words[moving], codes[moving]], axis=1), axis=0,
                                    return_inverse=True)
         ids = np.array([self.extend_one(word, code) for word, code in pairs.tolist()], dtype=np.int64)
@@ -176,6 +180,24 @@ def _scaled_identity(matrix: tuple[tuple[Fraction, ...], ...]) -> bool:
             and all(matrix[k][m] == 0 for k in range(n) for m in range(n) if k != m))
 
 
+def _labeller_constants(labeller: Labeller) -> tuple:
+    """(coeffs, offsets, coeff_gap, offset_gap) of ExactLabels: the decimals of `labeller`'s
+    coefficients and offsets and their float gaps, a pure function of the labeller."""
+    c = labeller.coeffs
+    coeffs = tuple(tuple(decimal(v) for v in c[:, j]) for j in range(c.shape[1]))
+    offsets = tuple(decimal(v) for v in labeller.offsets)
+    gaps = [_relative_gap(c[k, j], coeffs[j][k]) for j in range(c.shape[1])
+            for k in range(c.shape[0]) if coeffs[j][k] != 0]
+    offset_gap = np.array([float(abs(Fraction(float(v)) - exact)) * (1 + 4 * UNIT_ROUNDOFF)
+                           for v, exact in zip(labeller.offsets, offsets, strict=True)])
+    return coeffs, offsets, max(gaps, default=0.0), offset_gap
+
+
+# Each labeller's constants, computed once: an episode's labels (one ExactLabels per episode, for
+# its own count of exact decisions) would otherwise convert every coefficient to a fraction again.
+_LABELLER_CONSTANTS: weakref.WeakKeyDictionary[Labeller, tuple] = weakref.WeakKeyDictionary()
+
+
 @dataclass(eq=False)
 class ExactLabels:
     """The belief labels of `labeller` on the exact filter: float where the margin decides them,
@@ -190,14 +212,11 @@ class ExactLabels:
     offset_gap: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        c = self.labeller.coeffs
-        self.coeffs = tuple(tuple(decimal(v) for v in c[:, j]) for j in range(c.shape[1]))
-        self.offsets = tuple(decimal(v) for v in self.labeller.offsets)
-        gaps = [_relative_gap(c[k, j], self.coeffs[j][k]) for j in range(c.shape[1])
-                for k in range(c.shape[0]) if self.coeffs[j][k] != 0]
-        self.coeff_gap = max(gaps, default=0.0)
-        self.offset_gap = np.array([float(abs(Fraction(float(v)) - exact)) * (1 + 4 * UNIT_ROUNDOFF)
-                                    for v, exact in zip(self.labeller.offsets, self.offsets, strict=True)])
+        constants = _LABELLER_CONSTANTS.get(self.labeller)
+        if constants is None:
+            constants = _LABELLER_CONSTANTS[self.labeller] = _labeller_constants(self.labeller)
+        self.coeffs, self.offsets, self.coeff_gap, offset_gap = constants
+        self.offset_gap = offset_gap.copy()
 
     def margins(self, beliefs: np.ndarray, words: np.ndarray) -> np.ndarray:
         """[n, m]: the bound on |c·b - fl(c·b̂)| + |offset - fl(offset)| (module docstring)."""
