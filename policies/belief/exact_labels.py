@@ -29,7 +29,6 @@ Higham's bounds: no underflow in the filter.
 from __future__ import annotations
 
 import math
-import weakref
 from dataclasses import dataclass, field
 from fractions import Fraction
 
@@ -193,11 +192,6 @@ def _labeller_constants(labeller: Labeller) -> tuple:
     return coeffs, offsets, max(gaps, default=0.0), offset_gap
 
 
-# Each labeller's constants, computed once: an episode's labels (one ExactLabels per episode, for
-# its own count of exact decisions) would otherwise convert every coefficient to a fraction again.
-_LABELLER_CONSTANTS: weakref.WeakKeyDictionary[Labeller, tuple] = weakref.WeakKeyDictionary()
-
-
 @dataclass(eq=False)
 class ExactLabels:
     """The belief labels of `labeller` on the exact filter: float where the margin decides them,
@@ -212,9 +206,9 @@ class ExactLabels:
     offset_gap: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        constants = _LABELLER_CONSTANTS.get(self.labeller)
+        constants = self.labeller.exact_constants
         if constants is None:
-            constants = _LABELLER_CONSTANTS[self.labeller] = _labeller_constants(self.labeller)
+            constants = self.labeller.exact_constants = _labeller_constants(self.labeller)
         self.coeffs, self.offsets, self.coeff_gap, offset_gap = constants
         self.offset_gap = offset_gap.copy()
 

@@ -122,6 +122,10 @@ class Labeller:
                             else np.zeros((0, len(town.states)), dtype=bool))   # [n_trust_atoms, n_x]
         self.trust_levels = (np.array(trust_levels, dtype=bool) if trust_levels
                              else np.zeros((0, N_TRUST_LEVELS), dtype=bool))   # [n_trust_atoms, n_trust]
+        # The exact decimals of the coefficients and offsets with their float gaps, built by
+        # policies/belief/exact_labels.py on first use and held here: every episode's exact labels
+        # of this labeller share them.
+        self.exact_constants: tuple | None = None
 
     def _check_width(self, beliefs: np.ndarray) -> None:
         if self.belief_columns.size and beliefs.shape[-1] != self.coeffs.shape[0]:

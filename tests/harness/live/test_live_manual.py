@@ -32,9 +32,9 @@ def play_in(client: TestClient, study: LiveStudy, player: ScriptedParticipant) -
     return player
 
 
-def play(tmp_path, player: ScriptedParticipant) -> ScriptedParticipant:
-    """One participant's session (no warm-up) at pace 20, played to the end through the websocket."""
-    study = LiveStudy(player.config, tmp_path / "study", ServerOptions(pace=20.0, warm_up=False)).open()
+def play(tmp_path, player: ScriptedParticipant, pace: float = 20.0) -> ScriptedParticipant:
+    """One participant's session (no warm-up) at `pace`, played to the end through the websocket."""
+    study = LiveStudy(player.config, tmp_path / "study", ServerOptions(pace=pace, warm_up=False)).open()
     try:
         with TestClient(live_app(study)) as client:
             return play_in(client, study, player)
@@ -79,7 +79,9 @@ def test_a_scripted_participant_passes_an_obstacle_by_hand_through_the_oncoming_
 
 def test_in_control_without_a_pull_out_the_ego_waits_behind_the_obstacle(tmp_path):
     config = tiny_config(tmp_path, participants=1, specs=("phi2",))
-    player = play(tmp_path, ScriptedParticipant(config, 0, by_hand=True, pull_out=False))
+    # Pace 10: the takeover sent as the road opens must reach the episode before the autopilot
+    # reaches the obstacle and pulls out itself; at pace 20 a busy machine delayed it that long.
+    player = play(tmp_path, ScriptedParticipant(config, 0, by_hand=True, pull_out=False), pace=10.0)
     assert player.finished and player.passes == 0
     roads = obstacle_roads(tmp_path / "study")
     assert roads

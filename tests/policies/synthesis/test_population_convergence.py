@@ -33,6 +33,7 @@ def three_types():
     return load_driver_population(EXAMPLE_POPULATION_PATH)
 
 
+@pytest.mark.wallclock   # the shares of a wall-clock time limit
 def test_the_bayes_run_gets_most_of_the_robust_limit(town, three_types, monkeypatch):
     # With an equal share for each of the 19 runs (the Bayes run, 15 grid priors, 3 per-type
     # bounds) the lifted Bayes run got a twentieth of the limit, less than its fixed costs at H = 20.

@@ -15,6 +15,9 @@ from trustroute.policies.synthesis import population as population_synthesis
 from trustroute.policies.synthesis.population import run_count, synthesize_population
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
+# time limits on the wall clock, and what a run does with its share of one
+pytestmark = pytest.mark.wallclock
+
 
 def test_every_run_ends_by_the_one_deadline(town, monkeypatch):
     population = load_driver_population(EXAMPLE_POPULATION_PATH)
