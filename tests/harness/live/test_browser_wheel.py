@@ -200,7 +200,9 @@ window.startPerson = async ({ road, crash, cruise }) => {
 """
 OVER = "#ready-step:visible, #done-step:visible"
 TRIAL_MS = 300_000      # wall milliseconds a trial may take on a loaded machine
-PACE = 0.5              # simulated seconds per wall second: the person reacts in time under load
+# simulated seconds per wall second: the person reacts in time under load (at pace 1 on a loaded
+# machine its takeover, a round trip to the server, came after SUMO's autopilot had pulled out)
+PACE = 0.5
 CRUISE = 6.0            # m/s the person drives at
 
 
