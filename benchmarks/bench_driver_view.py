@@ -4,8 +4,9 @@ Starts `trustroute live` at pace 1 (wall-clock time) with one participant whose 
 Debian's Chromium, headless, with software WebGL (SwiftShader: no GPU is used), and drives the
 trial on autopilot. Measured over WINDOW wall seconds once the first frame has arrived:
 - the rate at which the page draws the driver's view (requestAnimationFrame callbacks that
-  rendered, from `window.driverView.stats.renders`), against the display rate Chromium gives a
-  headless page (rAF callbacks counted by a probe script in the same window);
+  rendered, from `window.driverView.stats.renders`: at most one per frame received while the
+  frames stream, driver_view.js), against the display rate Chromium gives a headless page (rAF
+  callbacks counted by a probe script in the same window);
 - the frames received per second (`stats.frames`) and the websocket's bytes per second to the
   participant (every server message, counted by a Playwright websocket listener);
 - the server's CPU time per wall second (the server and its episode process, from /proc).

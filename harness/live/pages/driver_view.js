@@ -8,9 +8,15 @@
 // from north) is a rotation of -angle about y. A vehicle's SUMO position is its front centre.
 //
 // Motion: the server's frames (25 a second, stepped or dead-reckoned) are buffered by arrival
-// time and the view renders at every animation frame the state INTERPOLATION seconds back,
-// interpolated between the two frames around it (positions, headings); past the newest frame it
-// moves on along each heading at its speed for at most EXTRAPOLATE_LIMIT seconds.
+// time and the view renders the state INTERPOLATION seconds back, interpolated between the two
+// frames around it (positions, headings); past the newest frame it moves on along each heading at
+// its speed for at most EXTRAPOLATE_LIMIT seconds.
+//
+// Drawing: an animation frame draws only when the picture would change: once per frame arriving
+// while the frames stream, at every animation frame while the view moves on to the newest frame
+// after they stop, and on a resize or an indicator's blink; an unchanged picture is never drawn
+// again. Software WebGL (no GPU) spends a core drawing every animation frame, and a laptop's GPU
+// its battery.
 import * as THREE from "./vendor/three.module.js";
 
 // The camera model (the screenshot tests project with the same numbers): the eye EYE_BACK metres
@@ -20,6 +26,7 @@ export const CAMERA = { eyeBack: 1.9, eyeLeft: 0.35, eyeHeight: 1.2, fov: 40, ne
 const INTERPOLATION = 0.06;       // s: rendered this far behind the newest frame (1.5 frame intervals)
 const EXTRAPOLATE_LIMIT = 0.25;   // s: at most this far past the newest frame
 const SNAP_DISTANCE = 15;         // m: a jump larger than this between frames is not interpolated
+const STREAMING = 0.1;            // s: frames arriving at most this far apart are a stream
 const SKY = 0xa9cfee;
 const TRAFFIC = [0x2f5d8c, 0x9c2f2f, 0xd6d6d6, 0x3a3a3a, 0x2f7a4a, 0xb8b8b8, 0x6d4c41];
 const KIND_COLOUR = { obstacle: 0xe67e00, oncoming: 0x7b1fa2, truck: 0x7b1fa2, parked: 0x7b1fa2, pedestrian: 0xd81b60 };
@@ -257,24 +264,40 @@ export class DriverView {
     this.camera.position.set(0, 60, 0);   // before the first frame: above the net, looking down the road
     this.objects = new Map();              // "v<handle>" / "p<handle>" -> {group, lights}
     this.frames = [];                      // [{arrival (s), frame}], oldest first
-    this.stats = { renders: 0, frames: 0, pose: null, camera: CAMERA, started: performance.now() };
+    // renders: pictures drawn; skipped: animation frames that drew none; settled: the frames
+    // received when the picture drawn was last found to be the newest frame's, at rest
+    this.stats = { renders: 0, skipped: 0, settled: 0, frames: 0, pose: null, camera: CAMERA,
+                   started: performance.now() };
     this.net = null;
+    this.drawn = null;    // what the last picture drew (`picture`), null: draw at the next call
+    this.fresh = true;    // a frame has arrived since the last picture
   }
 
   setNet(net) {
     if (this.net) this.scene.remove(this.net);
     this.net = netScene(net);
     this.scene.add(this.net);
+    this.drawn = null;
   }
 
   push(frame) {
     const now = performance.now() / 1000;
     this.frames.push({ arrival: now, frame });
     this.stats.frames += 1;
+    this.fresh = true;
     while (this.frames.length > 2 && this.frames[1].arrival < now - 1) this.frames.shift();
   }
 
-  clear() { this.frames = []; }
+  clear() { this.frames = []; this.drawn = null; }
+
+  // Everything a picture of `state` shows that moves: the camera's pose, each object's pose and lamps.
+  static picture(state, blinkOn) {
+    if (!state) return "";
+    const objects = [];
+    for (const [key, { pose, v }] of state.vehicles) objects.push(key, ...pose, v[10] || 0, (v[10] & 7) !== 0 && blinkOn);
+    for (const [key, { pose }] of state.persons) objects.push(key, ...pose);
+    return JSON.stringify([state.ego, objects]);
+  }
 
   // The state to render at `now`: {ego: [x, y, angle], vehicles: Map, persons: Map, frame}.
   state(now) {
@@ -323,12 +346,26 @@ export class DriverView {
     return object;
   }
 
+  // Draws the view at this moment if its picture changed (see Drawing above); the state drawn, or
+  // null when nothing was drawn.
   render() {
     const now = performance.now() / 1000;
     const state = this.state(now);
+    const blinkOn = Math.floor(now * 3) % 2 === 0;   // indicators at 1.5 Hz
+    const resized = this.resize();
+    const picture = DriverView.picture(state, blinkOn);
+    const newest = this.frames.length ? this.frames[this.frames.length - 1].arrival : -Infinity;
+    const streaming = now - newest < STREAMING;
+    const unchanged = !resized && this.drawn !== null && picture === this.drawn;
+    if (unchanged && !streaming) this.stats.settled = this.stats.frames;
+    if (unchanged || (!resized && this.drawn !== null && streaming && !this.fresh)) {
+      this.stats.skipped += 1;
+      return null;
+    }
+    this.drawn = picture;
+    this.fresh = false;
     if (state) {
       for (const object of this.objects.values()) object.seen = false;
-      const blinkOn = Math.floor(now * 3) % 2 === 0;   // indicators at 1.5 Hz
       for (const [key, { pose, v }] of state.vehicles) {
         const [, , , kind, , handle, length, width, height, shape, signals] = v;
         const object = this.place(key, pose, () => vehicleShape(kind, handle, length || 4.5, width || 1.8, height || 1.5, shape));
@@ -346,19 +383,20 @@ export class DriverView {
       this.camera.rotation.set(0, -heading, 0);
       this.stats.pose = [x, y, angle];
     }
-    this.resize();
     this.renderer.render(this.scene, this.camera);
     this.stats.renders += 1;
     return state;
   }
 
-  resize() {
+  resize() {   // whether the canvas took its displayed size
     const { clientWidth: width, clientHeight: height } = this.canvas;
     if (width && height && (this.canvas.width !== width || this.canvas.height !== height)) {
       this.renderer.setSize(width, height, false);
       this.camera.aspect = width / height;
       this.camera.updateProjectionMatrix();
+      return true;
     }
+    return false;
   }
 }
 

@@ -27,9 +27,11 @@ from .test_live_restart import start_server
 # obstacle it passes by hand.
 pytestmark = [pytest.mark.slow, pytest.mark.serial, pytest.mark.wallclock]
 
-# software WebGL (SwiftShader) for the driver's view
+# software WebGL (SwiftShader) for the driver's view; the page composited in software: composited
+# through SwiftShader, every change of the page (the speed, the mini-map, 25 times a second) kept
+# Chromium's GPU process busy on a whole core, more than the driver's view itself
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                 "--ignore-gpu-blocklist", "--disable-quic", "--no-first-run",
+                 "--ignore-gpu-blocklist", "--disable-gpu-compositing", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 SCREENSHOT = Path(__file__).resolve().parents[3] / "docs" / "img" / "live-station.png"
 CONFIG = """[study]

@@ -217,11 +217,13 @@ def show(page, socket, frame: dict) -> np.ndarray:
     """The canvas's pixels (rows, columns, RGB) once the view has rendered `frame`."""
     from PIL import Image
 
+    frames = page.evaluate("window.driverView.stats.frames")
     for _ in range(3):
         socket.send(json.dumps(frame))
         page.wait_for_timeout(60)
-    renders = page.evaluate("window.driverView.stats.renders")
-    wait_until(page, f"window.driverView.stats.renders > {renders + 3}")
+    # the view draws only when its picture changes: once all three have arrived, it has drawn the
+    # newest and found the picture at rest
+    wait_until(page, f"window.driverView.stats.settled === {frames + 3}")
     pose = page.evaluate("window.driverView.stats.pose")
     assert pose == pytest.approx([frame["x"], frame["y"], frame["angle"]], abs=1e-6)
     data = page.evaluate("document.getElementById('driver').toDataURL('image/png')")
