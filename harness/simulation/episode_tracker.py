@@ -39,7 +39,7 @@ from trustroute.networks.town import NO_INCIDENT, Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.belief.driver_types import trust_marginal, type_belief
 from trustroute.policies.belief.exact_labels import ExactLabels, exact_labels, symbol_code
-from trustroute.policies.belief.problem import DRIVER_TYPES, PLAIN, TRUST_STATE, case_of
+from trustroute.policies.belief.problem import DRIVER_TYPES, PLAIN, TRUST_STATE, Problem, case_of
 from trustroute.policies.belief.trust_state_filter import joint_filter
 from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
@@ -68,14 +68,29 @@ class EpisodeSetup:
     fallback_after: int | None = DEFAULT_FALLBACK_AFTER
     report_every: int = 1          # the driver reports trust every N roads
     belief_rule: str = "bayes"
+    # The AV's trust POMDP of town and driver_model when its caller holds it already (a Problem's:
+    # `of`); None: built on first use
+    pomdp: TrustPOMDP | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.pomdp is not None and (self.pomdp.town is not self.town
+                                       or self.pomdp.driver is not self.driver_model):
+            raise ValueError("EpisodeSetup: `pomdp` is not the trust POMDP of its town and driver model")
+
+    @classmethod
+    def of(cls, problem: Problem, **rules) -> EpisodeSetup:
+        """The setup of `problem` (its town, AV model, spec as the AV reads it, and trust POMDP),
+        with `rules` (junction_cap, fallback_after, report_every, belief_rule) where given."""
+        return cls(town=problem.town, driver_model=problem.driver, spec=problem.spec,
+                   pomdp=problem.pomdp, **rules)
 
     @functools.cached_property
     def model(self) -> EpisodeModel:
         """The arrays the setup's episodes read, built on first use and held by the setup: every
         episode run with one setup (a study's cell, the gymnasium environment's episodes) shares
         them and their memos."""
-        return EpisodeModel(pomdp=build_pomdp(self.town, self.driver_model),
-                            compiled=compile_spec(self.spec, self.town))
+        pomdp = self.pomdp if self.pomdp is not None else build_pomdp(self.town, self.driver_model)
+        return EpisodeModel(pomdp=pomdp, compiled=compile_spec(self.spec, self.town))
 
 
 @dataclass(frozen=True)

@@ -137,9 +137,8 @@ class TrustRoutingEnv(gymnasium.Env):
         self.engine = settings.engine
         self.report_accuracy = float(settings.report_accuracy)
         self.net_path = Path(settings.net_path) if settings.net_path is not None else None
-        self.setup = EpisodeSetup(town=self.town, driver_model=self.driver_model, spec=self.scldtl_spec,
-                                  junction_cap=int(settings.junction_cap), fallback_after=None,
-                                  belief_rule=settings.belief_rule)
+        self.setup = EpisodeSetup.of(self.problem, junction_cap=int(settings.junction_cap),
+                                     fallback_after=None, belief_rule=settings.belief_rule)
         self._legal = {road: self.town.actions(road) for road in self.town.states}
         self._width = max(len(actions) for actions in self._legal.values())
         self.action_space = spaces.Discrete(self._width)

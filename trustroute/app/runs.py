@@ -64,7 +64,7 @@ def run_one_episode(problem: Problem, policy: RoutingPolicy, settings: EpisodeSe
         driver_type, model = draw_type(problem.population, rng)
     check_initial_trust(model, settings.initial_trust, settings.option)
     driver = synthetic_driver(model, rng, initial_trust=settings.initial_trust)
-    setup = EpisodeSetup(town=problem.town, driver_model=problem.driver, spec=problem.spec)
+    setup = EpisodeSetup.of(problem)
     name = episode_id(problem.spec.name, policy.name, settings.seed)
     if not engine.drives_sumo:
         return EpisodeRun(engine.run(setup, policy, driver, name, settings.seed), name, driver_type, None)
@@ -88,7 +88,7 @@ def aware_vs_free(drivers: dict[str, DriverModel], count: int, seed: int,
     settings = PolicySettings(cache_dir=policy_cache)
     for spec_name in CHECK_SPECS:
         problem = compile_problem(load_inputs(spec_name))
-        setup = EpisodeSetup(town=problem.town, driver_model=problem.driver, spec=problem.spec)
+        setup = EpisodeSetup.of(problem)
         for condition in CHECK_CONDITIONS:
             policy = policy_for(problem, condition, settings)
             for name, driver in drivers.items():
