@@ -20,6 +20,7 @@ study_model`).
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 import os
@@ -141,18 +142,27 @@ def digest(work: Path, only: list[str]) -> dict:
 
 
 def main(argv: list[str]) -> None:
-    only = [argv[i + 1] for i, word in enumerate(argv) if word == "--only"]
-    argv = [word for i, word in enumerate(argv) if word != "--only" and (i == 0 or argv[i - 1] != "--only")]
-    if len(argv) == 2:
-        a, b = (json.loads(Path(p).read_text()) for p in argv)
-        keys = sorted((set(a) & set(b)) if only == ["common"] else (set(a) | set(b)))
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.result_digest",
+        description="OUT.json: write the digest of this tree's results; A.json B.json: compare two "
+                    "digests (exit 1 if they differ).")
+    parser.add_argument("paths", nargs="+", metavar="JSON")
+    parser.add_argument("--only", action="append", default=[], metavar="PREFIX",
+                        help="run only the entries whose names start with PREFIX (repeatable); "
+                             "comparing, 'common' compares only the entries both digests have")
+    args = parser.parse_args(argv)
+    if len(args.paths) > 2:
+        parser.error("give OUT.json, or A.json B.json")
+    if len(args.paths) == 2:
+        a, b = (json.loads(Path(p).read_text()) for p in args.paths)
+        keys = sorted((set(a) & set(b)) if args.only == ["common"] else (set(a) | set(b)))
         differing = [k for k in keys if a.get(k) != b.get(k)]
         print("identical" if not differing else f"differ: {differing}")
         raise SystemExit(1 if differing else 0)
     with tempfile.TemporaryDirectory() as tmp:
         os.environ["XDG_CACHE_HOME"] = str(Path(tmp) / "cache")
-        results = digest(Path(tmp), only)
-    Path(argv[0]).write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
+        results = digest(Path(tmp), args.only)
+    Path(args.paths[0]).write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
 
 
 if __name__ == "__main__":
