@@ -56,10 +56,6 @@ class WorkClock:
         """The whole limit in the scheduler's seconds (what a synthesis takes as its time limit)."""
         return self.limit * WORK_UNIT_SECONDS
 
-    def exhausted(self) -> bool:
-        """Whether the work done reached the limit."""
-        return self.spent >= self.limit
-
 
 _CLOCK: ContextVar[WorkClock | None] = ContextVar("work_clock", default=None)
 

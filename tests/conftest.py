@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from tests.harness.helpers import run_study
+from tests.suite import CACHE_ENV
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.model.trust_pomdp import build_pomdp
@@ -20,8 +21,8 @@ def temporary_cache(tmp_path_factory):
     they share, or the root tests/suite.py gives all its runs), so a policy or net built by one
     test is reused by the next on any worker. The cache's entries are filled under locks and
     renamed into place (core/output_files.py), which this sharing exercises."""
-    if os.environ.get("TRUSTROUTE_TEST_CACHE"):
-        root = Path(os.environ["TRUSTROUTE_TEST_CACHE"])   # tests/suite.py: one root for its lanes
+    if os.environ.get(CACHE_ENV):
+        root = Path(os.environ[CACHE_ENV])   # tests/suite.py: one root for its lanes
     else:
         base = tmp_path_factory.getbasetemp()
         if os.environ.get("PYTEST_XDIST_WORKER"):

@@ -24,7 +24,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 NO_TESTS = 5      # pytest: nothing collected
 NICENESS = 10     # the CPU-bound lane's: a paced test that wants its core gets about 90 % of it
-CACHE_ENV = "TRUSTROUTE_TEST_CACHE"
+CACHE_ENV = "TRUSTROUTE_TEST_CACHE"   # the cache root of every run (tests/conftest.py reads it)
 
 
 @dataclass(frozen=True)
@@ -67,17 +67,17 @@ def main(extra: list[str]) -> int:
         root = Path(folder)
         (root / "cache").mkdir()
         os.environ[CACHE_ENV] = str(root / "cache")
-        waiting_log = (root / "wallclock.log").open("w+")
         result: dict[str, int] = {}
-        lane = threading.Thread(target=lambda: result.update(
-            rc=run_lane(waiting, root / "wallclock", waiting_log, extra)))
-        lane.start()
-        computing_rc = run_lane(computing, root / "computing", sys.stdout, extra, niceness=NICENESS)
-        lane.join()
+        with (root / "wallclock.log").open("w+") as waiting_log:
+            lane = threading.Thread(target=lambda: result.update(
+                rc=run_lane(waiting, root / "wallclock", waiting_log, extra)))
+            lane.start()
+            computing_rc = run_lane(computing, root / "computing", sys.stdout, extra, niceness=NICENESS)
+            lane.join()
+            waiting_log.seek(0)
+            print("\n---- the wall-clock lane (serial browser session, then live and browser tests) ----")
+            print(waiting_log.read(), end="", flush=True)
         waiting_rc = result["rc"]
-        waiting_log.seek(0)
-        print("\n---- the wall-clock lane (serial browser session, then live and browser tests) ----")
-        print(waiting_log.read(), end="", flush=True)
     print(f"suite: {time.monotonic() - started:.0f} s wall; exit codes: CPU-bound lane {computing_rc}, "
           f"wall-clock lane {waiting_rc}")
     return computing_rc or waiting_rc
