@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from pathlib import Path
 
@@ -17,14 +18,9 @@ def packaged_optimum(pomdp: TrustPOMDP) -> Callable[..., float]:
     """optimum(name, horizon, belief_rule="bayes"): exact_optimum of specs/<name>.toml on the default
     POMDP, each computed once per session: the exhaustive search is exponential in the horizon
     (seconds at H = 8) and several modules check their bounds against the same few optima."""
-    found: dict[tuple[str, int, BeliefRule], float] = {}
-
+    @functools.cache
     def optimum(name: str, horizon: int, belief_rule: BeliefRule = "bayes") -> float:
-        key = (name, horizon, belief_rule)
-        if key not in found:
-            spec = load_spec(f"specs/{name}.toml", pomdp.town)
-            found[key] = exact_optimum(pomdp, spec, horizon, belief_rule)
-        return found[key]
+        return exact_optimum(pomdp, load_spec(f"specs/{name}.toml", pomdp.town), horizon, belief_rule)
 
     return optimum
 
@@ -34,16 +30,13 @@ def strict_lowtrust_optimum(pomdp: TrustPOMDP) -> Callable[[float, int], float]:
     """optimum(offset, horizon): exact_optimum of specs/phi1_strict.toml with its lowtrust offset
     replaced, each computed once per session (the threshold tests here and the cluster-policy
     tests check their bounds at 2/7 and 3/7, H = 8, against the same optima)."""
-    found: dict[tuple[float, int], float] = {}
-
+    @functools.cache
     def optimum(offset: float, horizon: int) -> float:
-        if (offset, horizon) not in found:
-            text = Path("specs/phi1_strict.toml").read_text()
-            assert "offset = 0.3\n" in text
-            spec = spec_from_text(text.replace("offset = 0.3\n", f"offset = {offset!r}\n"),
-                                  "<phi1_strict lowtrust offset>", pomdp.town)
-            assert spec.belief_atoms["lowtrust"].offset == offset
-            found[offset, horizon] = exact_optimum(pomdp, spec, horizon)
-        return found[offset, horizon]
+        text = Path("specs/phi1_strict.toml").read_text()
+        assert "offset = 0.3\n" in text
+        spec = spec_from_text(text.replace("offset = 0.3\n", f"offset = {offset!r}\n"),
+                              "<phi1_strict lowtrust offset>", pomdp.town)
+        assert spec.belief_atoms["lowtrust"].offset == offset
+        return exact_optimum(pomdp, spec, horizon)
 
     return optimum

@@ -9,6 +9,7 @@ cases; `synthesize(clusters="on")` end to end; the acting rule's choice among bo
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -56,18 +57,16 @@ def random_solution(driver):
     _random_problem(seed), each product and solution built once per module: the bracket test and
     the merge test below solve the same problems at caps 1 and 4096 (building the product is
     most of the merge test's CPU)."""
-    problems: dict[int, tuple] = {}
-    solutions: dict[tuple[int, int], object] = {}
+    @functools.cache
+    def problem(seed: int):
+        pomdp, spec, horizon = _random_problem(driver, seed)
+        tables = build_product(pomdp, spec)
+        return pomdp, spec, horizon, tables, observation_symbols(pomdp)
 
+    @functools.cache
     def solution(seed: int, cap: int):
-        if seed not in problems:
-            pomdp, spec, horizon = _random_problem(driver, seed)
-            tables = build_product(pomdp, spec)
-            problems[seed] = (pomdp, spec, horizon, tables, observation_symbols(pomdp))
-        pomdp, spec, horizon, tables, symbols = problems[seed]
-        if (seed, cap) not in solutions:
-            solutions[seed, cap] = _solve(tables, symbols, [tables.initial_q], horizon, cap)
-        return pomdp, spec, horizon, solutions[seed, cap]
+        pomdp, spec, horizon, tables, symbols = problem(seed)
+        return pomdp, spec, horizon, _solve(tables, symbols, [tables.initial_q], horizon, cap)
 
     return solution
 

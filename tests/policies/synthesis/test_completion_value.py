@@ -10,6 +10,8 @@ returned policy of a search whose open nodes use coarse bounds is worth at least
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -66,16 +68,13 @@ def exact_values(driver):
     """exact(seed): the exact tree's value from every road of `_problem(seed)`, each computed once
     per module (the recursion is most of these tests' CPU, and several tests, with several merge
     settings and deadlines, bracket the same seeds' values; it reads none of those settings)."""
-    found: dict[int, np.ndarray] = {}
-
+    @functools.cache
     def exact(seed: int) -> np.ndarray:
-        if seed not in found:
-            tables, symbols, route, task = _problem(driver, seed)
-            belief = np.asarray(tables.pomdp.initial_belief, dtype=float)
-            found[seed] = np.array([exact_free_value(tables, symbols, route, x, tables.initial_q,
-                                                     task.initial_state, belief, HORIZON)
-                                    for x in range(tables.n_x)])
-        return found[seed]
+        tables, symbols, route, task = _problem(driver, seed)
+        belief = np.asarray(tables.pomdp.initial_belief, dtype=float)
+        return np.array([exact_free_value(tables, symbols, route, x, tables.initial_q,
+                                          task.initial_state, belief, HORIZON)
+                         for x in range(tables.n_x)])
 
     return exact
 

@@ -10,6 +10,8 @@ least L.
 
 from __future__ import annotations
 
+import functools
+
 import pytest
 
 from tests.policies.synthesis.threshold_cases import Outcome, random_case, run_case
@@ -27,12 +29,9 @@ SWEEP_SEEDS = range(60)
 def fast_outcome(driver):
     """outcome(seed): run_case of FAST_SEEDS' case, once per module: its exact-rational brute force
     (Outcome.optimum) is also the reference of the exhaustive-search test below."""
-    found: dict[int, Outcome] = {}
-
+    @functools.cache
     def outcome(seed: int) -> Outcome:
-        if seed not in found:
-            found[seed] = run_case(random_case(seed, driver), tau=TAU)
-        return found[seed]
+        return run_case(random_case(seed, driver), tau=TAU)
 
     return outcome
 
