@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from tests.harness.helpers import run_study
-from tests.suite import CACHE_ENV
+from tests.suite import CACHE_ENV, LEDGER_ENV
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.model.trust_pomdp import build_pomdp
@@ -106,3 +106,22 @@ def pytest_collection_modifyitems(config, items):
     order, so the long ones start at once and the short ones fill the workers around them instead
     of a long test starting last and running alone."""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
+def _write_ledger(kind: str, items) -> None:
+    """tests/suite.py's ledger: the node ids this process kept (`kept`) or its `-m` left out
+    (`left-out`), one file per process and kind."""
+    if not (folder := os.environ.get(LEDGER_ENV)):
+        return
+    path = Path(folder) / f"{os.environ.get('PYTEST_XDIST_WORKER', 'main')}.{kind}"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("a") as ledger:
+        ledger.writelines(f"{item.nodeid}\n" for item in items)
+
+
+def pytest_deselected(items):
+    _write_ledger("left-out", items)
+
+
+def pytest_collection_finish(session):
+    _write_ledger("kept", session.items)

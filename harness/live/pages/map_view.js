@@ -36,17 +36,36 @@ function strokeLane(context, toCanvas, lane) {
   context.stroke();
 }
 
-// `scale`: pixels per metre. `route`: the roads of the ego's route from the one it is on.
+// A lane's box in net metres, widened by its width (computed once per lane).
+const laneBoxes = new WeakMap();
+function laneBox(lane) {
+  if (!laneBoxes.has(lane)) {
+    const xs = lane.shape.map(([x]) => x);
+    const ys = lane.shape.map(([, y]) => y);
+    const pad = lane.width || 0;
+    laneBoxes.set(lane, [Math.min(...xs) - pad, Math.min(...ys) - pad, Math.max(...xs) + pad, Math.max(...ys) + pad]);
+  }
+  return laneBoxes.get(lane);
+}
+
+// `scale`: pixels per metre. `route`: the roads of the ego's route from the one it is on. Only the
+// lanes that reach into the canvas are stroked: the map shows a few hundred metres of a town that
+// may have thousands of lanes, and it is drawn at every frame.
 export function drawMap(canvas, net, frame, scale) {
   const context = canvas.getContext("2d");
   const toCanvas = (x, y) => [canvas.width / 2 + (x - frame.x) * scale, canvas.height / 2 - (y - frame.y) * scale];
+  const [halfWidth, halfHeight] = [canvas.width / 2 / scale, canvas.height / 2 / scale];
+  const lanes = net.lanes.filter((lane) => {
+    const [x0, y0, x1, y1] = laneBox(lane);
+    return x1 >= frame.x - halfWidth && x0 <= frame.x + halfWidth && y1 >= frame.y - halfHeight && y0 <= frame.y + halfHeight;
+  });
   context.fillStyle = "#dfe8d8";
   context.fillRect(0, 0, canvas.width, canvas.height);
   context.lineCap = "round";
   // two passes: a light band per lane, then the asphalt a little narrower, so that the lanes of a
   // road stay apart by a thin marking
   for (const [colour, inset] of [["#f4f4f4", 0], [null, Math.min(1.5, scale / 2)]]) {
-    for (const lane of net.lanes) {
+    for (const lane of lanes) {
       context.strokeStyle = colour || (lane.internal ? "#8c8c8c" : "#6f6f6f");
       context.lineWidth = Math.max(lane.width * scale - inset, 1);
       strokeLane(context, toCanvas, lane);
@@ -54,7 +73,7 @@ export function drawMap(canvas, net, frame, scale) {
   }
   const route = new Set(frame.route || []);
   context.strokeStyle = "rgba(30, 136, 229, 0.85)";
-  for (const lane of net.lanes) {
+  for (const lane of lanes) {
     if (!route.has(lane.id.slice(0, lane.id.lastIndexOf("_")))) continue;
     context.lineWidth = Math.max(lane.width * scale * 0.45, 2);
     strokeLane(context, toCanvas, lane);

@@ -13,7 +13,7 @@ import { drawMap } from "./map_view.js";
 const $ = (id) => document.getElementById(id);
 const steps = ["consent-step", "ready-step", "drive-step", "questionnaire-step", "done-step"];
 const MAP_SCALE = 3;        // pixels per metre of the large map
-const MINI_SCALE = 1.3;     // and of the mini-map
+const MINI_SPAN = 370;      // metres across the mini-map (square, drawn at its displayed size)
 const NOTICES = { obstacle: "Obstacle ahead in your lane", truck: "Truck ahead",
                   pedestrian: "Pedestrian ahead" };
 let socket = null;
@@ -205,6 +205,18 @@ function confirmShown() {
   if (latest) send({ type: "shown", t: latest.t });
 }
 
+// The mini-map's canvas takes its displayed size in device pixels: drawn at the map's own 640 x 480
+// and shown in a 200 px square, it was squashed sideways and cost eight times the pixels. The size
+// comes from a ResizeObserver: reading clientWidth at every frame would force a layout each time.
+let miniSize = null;   // [width, height] in CSS pixels
+new ResizeObserver(([entry]) => { miniSize = [entry.contentRect.width, entry.contentRect.height]; }).observe($("view"));
+function miniScale(canvas) {
+  const ratio = window.devicePixelRatio || 1;
+  const [width, height] = (miniSize || [canvas.clientWidth, canvas.clientHeight]).map((size) => Math.round(size * ratio));
+  if (width && height && (canvas.width !== width || canvas.height !== height)) [canvas.width, canvas.height] = [width, height];
+  return Math.min(canvas.width, canvas.height) / MINI_SPAN;
+}
+
 function onFrame(frame) {
   latest = frame;
   if (state.phase !== "paused") overlay("");
@@ -221,7 +233,7 @@ function onFrame(frame) {
   }
   showNextTurn(frame);
   if (driverView) driverView.push(frame);
-  if (net) drawMap($("view"), net, frame, viewKind === "map" ? MAP_SCALE : MINI_SCALE);
+  if (net) drawMap($("view"), net, frame, viewKind === "map" ? MAP_SCALE : miniScale($("view")));
   confirmShown();
 }
 

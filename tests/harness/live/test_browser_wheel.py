@@ -254,7 +254,7 @@ def session(tmp_path, spec: dict, crash: bool):
             browser = playwright.chromium.launch(executable_path=chromium_executable(), args=CHROMIUM_ARGS)
             try:
                 link = create_participant(browser, address, token)
-                page = browser.new_context(viewport={"width": 800, "height": 600}).new_page()
+                page = browser.new_context(viewport={"width": 480, "height": 360}).new_page()
                 page.set_default_timeout(60_000)
                 page.add_init_script(VIRTUAL_WHEEL + PERSON)
                 errors: list[str] = []   # the page's uncaught errors, for the assertions' messages

@@ -1,0 +1,43 @@
+"""`make test`'s two lanes (tests/suite.py): the wall-clock lane's files and the ledger that makes
+sure every test runs in exactly one lane."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from tests.suite import REPO, applies, lanes_disagree, marked_files
+
+
+def test_marked_files_are_the_files_that_apply_the_waiting_marks():
+    files = marked_files()
+    assert "tests/harness/live/test_browser_wheel.py" in files
+    assert "tests/policies/peer/test_paynt.py" in files          # two tests of its many
+    assert "tests/harness/live/test_live_security.py" not in files   # a live test that does not wait
+    assert marked_files(("serial",)) == ["tests/harness/live/test_browser.py"]
+    assert all(applies((REPO / name).read_text()) for name in files)
+    mark = "pytest.mark"
+    assert applies(f"pytestmark = [{mark}.slow, {mark}.wallclock]")
+    assert applies(f"@{mark}.serial\ndef test_x(): ...", ("serial",))
+    assert not applies(f"@{mark}.wallclocked")
+    assert not applies(f"@{mark}.slow")
+
+
+def _write(folder: Path, lane: str, kind: str, ids: list[str]) -> None:
+    path = folder / lane / "ledger" / "run0" / f"gw0.{kind}"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("".join(f"{node}\n" for node in ids))
+
+
+def test_the_ledger_agrees_only_when_the_wall_clock_lane_ran_what_the_other_left_out(tmp_path):
+    _write(tmp_path, "computing", "kept", ["a.py::fast"])
+    _write(tmp_path, "computing", "left-out", ["b.py::paced", "c.py::browser"])
+    _write(tmp_path, "wallclock", "kept", ["b.py::paced", "c.py::browser"])
+    assert lanes_disagree(tmp_path) == ""
+
+    _write(tmp_path, "wallclock", "kept", ["b.py::paced"])
+    message = lanes_disagree(tmp_path)
+    assert "1 test(s) left out by the CPU-bound lane did not run" in message
+    assert "c.py::browser" in message
+
+    _write(tmp_path, "wallclock", "kept", ["b.py::paced", "c.py::browser", "a.py::fast"])
+    assert "1 ran in both ['a.py::fast']" in lanes_disagree(tmp_path)
