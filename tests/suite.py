@@ -15,7 +15,13 @@ the whole suite costs each pytest process about 12 CPU-seconds. So that no test 
 lanes, each pytest process writes the tests it kept and the ones its `-m` left out to a ledger
 (tests/conftest.py, `LEDGER_ENV`), and the suite fails unless the wall-clock lane ran exactly the
 tests the CPU-bound lane left out. Given pytest arguments (paths, `-k`), both lanes take those
-instead, and no ledger is kept."""
+instead, and no ledger is kept.
+
+Every Python process of the suite may write bytecode caches (`__pycache__`, ignored by git) even
+where the environment says not to (PYTHONDONTWRITEBYTECODE): the suite starts dozens of processes
+(pytest workers, live stations, study workers) that import the same modules, and without caches
+each compiles them afresh and pytest rewrites every test module's assertions again, about 5
+CPU-seconds per pytest process."""
 
 from __future__ import annotations
 
@@ -111,6 +117,7 @@ def main(extra: list[str]) -> int:
                Run("wallclock and not serial", cores, marked_files() if whole else [])]
     computing = [Run("not wallclock and not serial", cores)]
     started = time.monotonic()
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)   # inherited by every process of both lanes
     with tempfile.TemporaryDirectory(prefix="trustroute-suite-") as folder:
         root = Path(folder)
         (root / "cache").mkdir()
