@@ -1,0 +1,209 @@
+"""The E-step of the driver model's EM (analysis/fitting/driver_model.py): forward-backward over
+every episode at once, scaled, and the expected sufficient statistics.
+
+The forward pass depends on the parameters only, so it is a value of its own (`Forward`): the
+mixture's EM (analysis/fitting/mixture.py) computes it once per type and iteration, for the
+participants' log-likelihoods and then for the weighted statistics of the next M-step.
+
+Every sum keeps a fixed order, so a fit is the same to the last bit however the work is laid out:
+a contraction over trust levels adds the terms level by level (as `np.einsum` and `.sum(axis=...)`
+do over these short axes), and the report counts add each (θ, r) term in road order (as
+`np.add.at` does). `np.cumsum` is a running sum, so its last row is that ordered sum.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trustroute.participants.driver_model import report_matrix
+
+
+@dataclass(frozen=True)
+class Observations:
+    """Padded per-episode sequences: steps t = 1..L (roads after the start)."""
+
+    incident: np.ndarray  # int [n, S] driver-model incident index (0 on padding)
+    takeover: np.ndarray  # int [n, S]
+    performance: np.ndarray  # int [n, S]
+    report: np.ndarray  # int [n, S+1] trust index reported after step t (column 0: at the start), -1 none
+    mask: np.ndarray  # bool [n, S] step exists
+    episode_ids: tuple[str, ...] = ()  # the episode of each row, in row order (sorted ids)
+
+    @property
+    def episodes(self) -> int:
+        return int(self.mask.shape[0])
+
+    @property
+    def steps(self) -> int:
+        return int(self.mask.sum())
+
+
+@dataclass
+class Parameters:
+    initial: np.ndarray  # [k]
+    takeover: np.ndarray  # [I, k]
+    failure: np.ndarray  # [I, k]
+    transition: np.ndarray  # [I, 2, 2, k, k]
+    accuracy: float
+
+
+@dataclass
+class Statistics:
+    loglik: float
+    initial: np.ndarray
+    takeover_num: np.ndarray
+    failure_num: np.ndarray
+    visits: np.ndarray  # [I, k] expected trust-before counts per incident
+    transition: np.ndarray  # [I, 2, 2, k, k] expected transition counts
+    report: np.ndarray  # [k, k] expected (θ, r) counts
+    episode_loglik: np.ndarray | None = None  # [n] log-likelihood of each episode
+
+
+@dataclass(frozen=True)
+class Forward:
+    """The scaled forward pass of one set of parameters over the observations."""
+
+    alpha: np.ndarray  # [n, S+1, k] scaled forward probabilities
+    scale: np.ndarray  # [n, S+1] the scale factors (their logs sum to the log-likelihood)
+    matrices: np.ndarray  # [S, n, k, k] step t's joint observation-transition matrix (identity on padding)
+    emission: np.ndarray  # [n, S+1, k] the report's likelihood per trust level (1 without a report)
+
+    @property
+    def episode_loglik(self) -> np.ndarray:
+        return np.log(self.scale).sum(axis=1)
+
+
+def _level_sum(terms: np.ndarray, axis: int) -> np.ndarray:
+    """`terms.sum(axis=axis)` over a short trust axis, added level by level (the same order)."""
+    first = np.moveaxis(terms, axis, 0)
+    out = first[0].copy()
+    for level in first[1:]:
+        out += level
+    return out
+
+
+def forward(obs: Observations, p: Parameters) -> Forward:
+    n, steps = obs.mask.shape
+    k = p.initial.size
+    R = report_matrix(p.accuracy, k)
+    emission = np.ones((n, steps + 1, k))
+    has = obs.report >= 0
+    emission[has] = R[:, obs.report[has]].T
+    # P(h | θ) P(e | θ) T[inc][h][e](θ, ·) per (inc, h, e): the same products a road's gathers give
+    p_h = np.stack([1 - p.takeover, p.takeover], axis=1)  # [I, 2, k]
+    p_e = np.stack([1 - p.failure, p.failure], axis=1)
+    like = p_h[:, :, None, :] * p_e[:, None, :, :]  # [I, 2, 2, k]
+    joint = (like[..., None] * p.transition).reshape(-1, k, k)
+    group = (obs.incident * 2 + obs.takeover) * 2 + obs.performance  # [n, S]
+    matrices = np.empty((steps, n, k, k))
+    alpha = np.zeros((n, steps + 1, k))
+    scale = np.ones((n, steps + 1))
+    a0 = p.initial[None, :] * emission[:, 0]
+    scale[:, 0] = a0.sum(axis=1)
+    alpha[:, 0] = a0 / scale[:, 0:1]
+    for t in range(steps):
+        M = matrices[t]
+        np.take(joint, group[:, t], axis=0, out=M)
+        M *= emission[:, t + 1, None, :]
+        M[~obs.mask[:, t]] = np.eye(k)
+        a = np.einsum("ni,nij->nj", alpha[:, t], M)
+        s = a.sum(axis=1)
+        s = np.where(s > 0, s, 1e-300)
+        scale[:, t + 1] = s
+        alpha[:, t + 1] = a / s[:, None]
+    return Forward(alpha=alpha, scale=scale, matrices=matrices, emission=emission)
+
+
+def _ordered_report_counts(reports: list[np.ndarray], posteriors: list[np.ndarray], k: int) -> np.ndarray:
+    """[k, k] Σ posterior[θ] over the roads reporting r, each (θ, r) sum in the order given."""
+    levels = np.concatenate(reports)
+    rows = np.concatenate(posteriors)
+    counts = np.zeros((k, k))
+    for r in range(k):
+        chosen = rows[levels == r]
+        if chosen.size:
+            counts[:, r] = np.cumsum(chosen, axis=0)[-1]
+    return counts
+
+
+def backward(obs: Observations, p: Parameters, fwd: Forward, weights: np.ndarray | None = None) -> Statistics:
+    """The expected sufficient statistics given the forward pass `fwd` of `p` (see `expectation`)."""
+    n, steps = obs.mask.shape
+    weight = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
+    k = p.initial.size
+    inc, h, e, mask = obs.incident, obs.takeover, obs.performance, obs.mask
+    alpha, scale = fwd.alpha, fwd.scale
+    beta = np.ones((n, k))
+    stats_transition = np.zeros_like(p.transition)
+    visits = np.zeros_like(p.takeover)
+    take_num = np.zeros_like(p.takeover)
+    fail_num = np.zeros_like(p.failure)
+    groups = p.transition.shape[0] * 4
+    rows = np.arange(n)
+    step_weight = mask * weight[:, None]  # [n, S]
+    xi = np.empty((n, k, k))
+    group = (inc * 2 + h) * 2 + e  # [n, S]
+    cell = np.arange(k * k)
+    inc_hot = np.zeros((n, p.takeover.shape[0]))
+    reported, posteriors = [], []
+    for t in range(steps - 1, -1, -1):
+        M = fwd.matrices[t]
+        np.multiply(alpha[:, t, :, None], M, out=xi)
+        xi *= beta[:, None, :]
+        xi /= scale[:, t + 1, None, None]
+        xi *= step_weight[:, t, None, None]
+        # Σ over the roads of each (inc, h, e) group, road by road (bincount adds in index order)
+        cells = (np.where(mask[:, t], group[:, t], groups)[:, None] * (k * k) + cell).ravel()
+        per_group = np.bincount(cells, weights=xi.ravel(), minlength=(groups + 1) * k * k)
+        stats_transition += per_group[: groups * k * k].reshape(stats_transition.shape)
+        before = _level_sum(xi, axis=2)  # posterior of θ_{t-1}
+        inc_hot.fill(0.0)
+        inc_hot[rows, inc[:, t]] = mask[:, t]
+        visits += inc_hot.T @ before
+        take_num += (inc_hot * h[:, t, None]).T @ before
+        fail_num += (inc_hot * e[:, t, None]).T @ before
+        reports = obs.report[:, t + 1]
+        has = (reports >= 0) & mask[:, t]
+        reported.append(reports[has])
+        posteriors.append(_level_sum(xi[has], axis=1))  # posterior of θ_t
+        beta = np.einsum("nij,nj->ni", M, beta) / scale[:, t + 1, None]
+    gamma0 = alpha[:, 0] * beta
+    gamma0 /= gamma0.sum(axis=1, keepdims=True)
+    gamma0 *= weight[:, None]
+    has0 = obs.report[:, 0] >= 0
+    reported.append(obs.report[has0, 0])
+    posteriors.append(gamma0[has0])
+    episode_loglik = fwd.episode_loglik
+    return Statistics(
+        loglik=float(episode_loglik.sum()),
+        initial=gamma0.sum(axis=0),
+        takeover_num=take_num,
+        failure_num=fail_num,
+        visits=visits,
+        transition=stats_transition,
+        report=_ordered_report_counts(reported, posteriors, k),
+        episode_loglik=episode_loglik,
+    )
+
+
+def expectation(obs: Observations, p: Parameters, weights: np.ndarray | None = None) -> Statistics:
+    """Forward-backward over every episode at once (scaled), expected sufficient statistics.
+
+    `weights` [n] (default 1) scale each episode's contribution to the statistics: a mixture's
+    responsibility of this model for the episode's participant (analysis/fitting/mixture.py). The
+    log-likelihoods (total and per episode) are unweighted."""
+    return backward(obs, p, forward(obs, p), weights)
+
+
+def initial_posterior(obs: Observations, p: Parameters) -> tuple[np.ndarray, float]:
+    """(Σ over episodes of the posterior of θ_0, the log-likelihood): the part of `expectation`
+    that fitting π alone needs, without the other statistics."""
+    fwd = forward(obs, p)
+    beta = np.ones((obs.mask.shape[0], p.initial.size))
+    for t in range(obs.mask.shape[1] - 1, -1, -1):
+        beta = np.einsum("nij,nj->ni", fwd.matrices[t], beta) / fwd.scale[:, t + 1, None]
+    gamma0 = fwd.alpha[:, 0] * beta
+    gamma0 /= gamma0.sum(axis=1, keepdims=True)
+    return gamma0.sum(axis=0), float(fwd.episode_loglik.sum())
