@@ -142,30 +142,33 @@ def backward(obs: Observations, p: Parameters, fwd: Forward, weights: np.ndarray
     fail_num = np.zeros_like(p.failure)
     groups = p.transition.shape[0] * 4
     rows = np.arange(n)
-    step_weight = mask * weight[:, None]  # [n, S]
-    xi = np.empty((n, k, k))
     group = (inc * 2 + h) * 2 + e  # [n, S]
     cell = np.arange(k * k)
     inc_hot = np.zeros((n, p.takeover.shape[0]))
+    before = np.zeros((n, k))
     reported, posteriors = [], []
     for t in range(steps - 1, -1, -1):
         M = fwd.matrices[t]
-        np.multiply(alpha[:, t, :, None], M, out=xi)
-        xi *= beta[:, None, :]
-        xi /= scale[:, t + 1, None, None]
-        xi *= step_weight[:, t, None, None]
+        # Only the roads driven at step t carry statistics (a padded step's ξ is 0): ξ of those
+        # rows, in row order
+        active = np.flatnonzero(mask[:, t])
+        xi = alpha[active, t, :, None] * M[active]
+        xi *= beta[active, None, :]
+        xi /= scale[active, t + 1, None, None]
+        xi *= weight[active, None, None]
         # Σ over the roads of each (inc, h, e) group, road by road (bincount adds in index order)
-        cells = (np.where(mask[:, t], group[:, t], groups)[:, None] * (k * k) + cell).ravel()
-        per_group = np.bincount(cells, weights=xi.ravel(), minlength=(groups + 1) * k * k)
-        stats_transition += per_group[: groups * k * k].reshape(stats_transition.shape)
-        before = _level_sum(xi, axis=2)  # posterior of θ_{t-1}
+        cells = (group[active, t][:, None] * (k * k) + cell).ravel()
+        per_group = np.bincount(cells, weights=xi.ravel(), minlength=groups * k * k)
+        stats_transition += per_group.reshape(stats_transition.shape)
+        before.fill(0.0)
+        before[active] = _level_sum(xi, axis=2)  # posterior of θ_{t-1}
         inc_hot.fill(0.0)
         inc_hot[rows, inc[:, t]] = mask[:, t]
         visits += inc_hot.T @ before
         take_num += (inc_hot * h[:, t, None]).T @ before
         fail_num += (inc_hot * e[:, t, None]).T @ before
-        reports = obs.report[:, t + 1]
-        has = (reports >= 0) & mask[:, t]
+        reports = obs.report[active, t + 1]
+        has = reports >= 0
         reported.append(reports[has])
         posteriors.append(_level_sum(xi[has], axis=1))  # posterior of θ_t
         beta = np.einsum("nij,nj->ni", M, beta) / scale[:, t + 1, None]
