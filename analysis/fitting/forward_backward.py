@@ -63,12 +63,13 @@ class Statistics:
 
 @dataclass(frozen=True)
 class Forward:
-    """The scaled forward pass of one set of parameters over the observations."""
+    """The scaled forward pass of one set of parameters over the observations. A padded step's
+    matrix is the identity (it moves nothing), so only the driven roads' matrices are kept."""
 
     alpha: np.ndarray  # [n, S+1, k] scaled forward probabilities
     scale: np.ndarray  # [n, S+1] the scale factors (their logs sum to the log-likelihood)
-    matrices: np.ndarray  # [S, n, k, k] step t's joint observation-transition matrix (identity on padding)
-    emission: np.ndarray  # [n, S+1, k] the report's likelihood per trust level (1 without a report)
+    active: list[np.ndarray]  # per step t: the rows (episodes) that drive a road at t, ascending
+    matrices: list[np.ndarray]  # per step t: [len(active[t]), k, k] joint observation-transition matrices
 
     @property
     def episode_loglik(self) -> np.ndarray:
@@ -97,23 +98,32 @@ def forward(obs: Observations, p: Parameters) -> Forward:
     like = p_h[:, :, None, :] * p_e[:, None, :, :]  # [I, 2, 2, k]
     joint = (like[..., None] * p.transition).reshape(-1, k, k)
     group = (obs.incident * 2 + obs.takeover) * 2 + obs.performance  # [n, S]
-    matrices = np.empty((steps, n, k, k))
+    active = [np.flatnonzero(obs.mask[:, t]) for t in range(steps)]
+    matrices = []
     alpha = np.zeros((n, steps + 1, k))
     scale = np.ones((n, steps + 1))
     a0 = p.initial[None, :] * emission[:, 0]
     scale[:, 0] = a0.sum(axis=1)
     alpha[:, 0] = a0 / scale[:, 0:1]
     for t in range(steps):
-        M = matrices[t]
-        np.take(joint, group[:, t], axis=0, out=M)
-        M *= emission[:, t + 1, None, :]
-        M[~obs.mask[:, t]] = np.eye(k)
-        a = np.einsum("ni,nij->nj", alpha[:, t], M)
+        rows = active[t]
+        M = joint[group[rows, t]]
+        M *= emission[rows, t + 1, None, :]
+        matrices.append(M)
+        a = alpha[:, t].copy()  # a padded row: α times the identity, exactly α
+        a[rows] = np.einsum("ni,nij->nj", alpha[rows, t], M)
         s = a.sum(axis=1)
         s = np.where(s > 0, s, 1e-300)
         scale[:, t + 1] = s
         alpha[:, t + 1] = a / s[:, None]
-    return Forward(alpha=alpha, scale=scale, matrices=matrices, emission=emission)
+    return Forward(alpha=alpha, scale=scale, active=active, matrices=matrices)
+
+
+def _backward_step(M: np.ndarray, rows: np.ndarray, beta: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """β of the step before: the matrices `M` of the driven `rows`, the identity elsewhere."""
+    out = beta / scale[:, None]
+    out[rows] = np.einsum("nij,nj->ni", M, beta[rows]) / scale[rows, None]
+    return out
 
 
 def _ordered_report_counts(reports: list[np.ndarray], posteriors: list[np.ndarray], k: int) -> np.ndarray:
@@ -148,11 +158,10 @@ def backward(obs: Observations, p: Parameters, fwd: Forward, weights: np.ndarray
     before = np.zeros((n, k))
     reported, posteriors = [], []
     for t in range(steps - 1, -1, -1):
-        M = fwd.matrices[t]
         # Only the roads driven at step t carry statistics (a padded step's ξ is 0): ξ of those
         # rows, in row order
-        active = np.flatnonzero(mask[:, t])
-        xi = alpha[active, t, :, None] * M[active]
+        active, M = fwd.active[t], fwd.matrices[t]
+        xi = alpha[active, t, :, None] * M
         xi *= beta[active, None, :]
         xi /= scale[active, t + 1, None, None]
         xi *= weight[active, None, None]
@@ -171,7 +180,7 @@ def backward(obs: Observations, p: Parameters, fwd: Forward, weights: np.ndarray
         has = reports >= 0
         reported.append(reports[has])
         posteriors.append(_level_sum(xi[has], axis=1))  # posterior of θ_t
-        beta = np.einsum("nij,nj->ni", M, beta) / scale[:, t + 1, None]
+        beta = _backward_step(M, active, beta, scale[:, t + 1])
     gamma0 = alpha[:, 0] * beta
     gamma0 /= gamma0.sum(axis=1, keepdims=True)
     gamma0 *= weight[:, None]
@@ -206,7 +215,7 @@ def initial_posterior(obs: Observations, p: Parameters) -> tuple[np.ndarray, flo
     fwd = forward(obs, p)
     beta = np.ones((obs.mask.shape[0], p.initial.size))
     for t in range(obs.mask.shape[1] - 1, -1, -1):
-        beta = np.einsum("nij,nj->ni", fwd.matrices[t], beta) / fwd.scale[:, t + 1, None]
+        beta = _backward_step(fwd.matrices[t], fwd.active[t], beta, fwd.scale[:, t + 1])
     gamma0 = fwd.alpha[:, 0] * beta
     gamma0 /= gamma0.sum(axis=1, keepdims=True)
     return gamma0.sum(axis=0), float(fwd.episode_loglik.sum())
