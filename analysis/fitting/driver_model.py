@@ -7,9 +7,10 @@ never read. The model (docs/model.md, "The model") is a hidden Markov model over
 θ_t ~ T[inc_t][h_t][e_t](θ_{t-1}, ·); the report r_t is θ_t with probability a, else one level
 up or down (equal chance, clipped at the ends: the driver model's `report_matrix`).
 
-- method "em": Baum-Welch (forward-backward with scaling, vectorised over episodes) for π, the
-  takeover and failure probabilities, every T row and a. Rows with little expected data keep
-  their starting value (a generic banded matrix) and are listed in `sparse_rows`.
+- method "em": Baum-Welch (forward-backward with scaling, vectorised over episodes:
+  analysis/fitting/forward_backward.py) for π, the takeover and failure probabilities, every T
+  row and a. Rows with little expected data keep their starting value (a generic banded matrix)
+  and are listed in `sparse_rows`.
 - method "counts": reports are exact (a = 1) and given on every road, so θ_t = r_t for t >= 1
   and the rows are plain counts over the roads t >= 2 (θ_0 is never reported: π is then fitted
   by EM on θ_0 alone, with the counted model).
