@@ -5,10 +5,10 @@ The forward pass depends on the parameters only, so it is a value of its own (`F
 mixture's EM (analysis/fitting/mixture.py) computes it once per type and iteration, for the
 participants' log-likelihoods and then for the weighted statistics of the next M-step.
 
-Every sum keeps a fixed order, so a fit is the same to the last bit however the work is laid out:
-a contraction over trust levels adds the terms level by level (as `np.einsum` and `.sum(axis=...)`
-do over these short axes), and the report counts add each (θ, r) term in road order (as
-`np.add.at` does). `np.cumsum` is a running sum, so its last row is that ordered sum.
+Every sum adds its terms in one fixed order, that of a plain numpy reduction, so a fit is the same
+to the last bit: over trust levels as `.sum(axis=...)` does (`_level_sum`), over roads one road
+after the other in row order (`np.bincount`, and the last row of `np.cumsum`); a padded step is
+the identity and is skipped.
 """
 
 from __future__ import annotations
@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.participants.driver_model import report_matrix
+
+PAIRWISE_FROM = 8  # numpy's sums of this many terms or more along a contiguous axis are pairwise
 
 
 @dataclass(frozen=True)
@@ -77,7 +79,11 @@ class Forward:
 
 
 def _level_sum(terms: np.ndarray, axis: int) -> np.ndarray:
-    """`terms.sum(axis=axis)` over a short trust axis, added level by level (the same order)."""
+    """`terms.sum(axis=axis)`, to the last bit. numpy adds fewer than PAIRWISE_FROM terms one after
+    the other, as this does level by level (without numpy's per-row reduction loop); more along
+    the last axis in its own pairwise order, so those are left to it."""
+    if terms.shape[axis] >= PAIRWISE_FROM:
+        return terms.sum(axis=axis)
     first = np.moveaxis(terms, axis, 0)
     out = first[0].copy()
     for level in first[1:]:
@@ -119,11 +125,40 @@ def forward(obs: Observations, p: Parameters) -> Forward:
     return Forward(alpha=alpha, scale=scale, active=active, matrices=matrices)
 
 
+def _with_identity(M: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:
+    """[n, k, k] the step's matrices: `M` on the driven `rows`, the identity on the others."""
+    full = np.broadcast_to(np.eye(M.shape[-1]), (n, *M.shape[1:])).copy()
+    full[rows] = M
+    return full
+
+
 def _backward_step(M: np.ndarray, rows: np.ndarray, beta: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """β of the step before: the matrices `M` of the driven `rows`, the identity elsewhere."""
+    """β of the step before: the matrices `M` of the driven `rows`, the identity elsewhere (a
+    non-finite β, after an impossible observation, goes through the identity's zeros as NaN)."""
+    if not np.isfinite(beta).all():
+        return np.einsum("nij,nj->ni", _with_identity(M, rows, beta.shape[0]), beta) / scale[:, None]
     out = beta / scale[:, None]
     out[rows] = np.einsum("nij,nj->ni", M, beta[rows]) / scale[rows, None]
     return out
+
+
+def _every_road_step(obs: Observations, fwd: Forward, t: int, beta: np.ndarray, weight: np.ndarray,
+                     groups: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Step t's (transition counts per group, posterior of θ_{t-1} per row, reported levels, their
+    posteriors of θ_t) over every row, padded ones included with their identity and weight 0: where
+    a value is not finite (an impossible observation), its zero-weighted products are NaN and
+    spread as they do through these sums."""
+    n, k = beta.shape
+    mask = obs.mask[:, t]
+    M = _with_identity(fwd.matrices[t], fwd.active[t], n)
+    xi = fwd.alpha[:, t, :, None] * M * beta[:, None, :] / fwd.scale[:, t + 1, None, None]
+    xi *= (mask * weight)[:, None, None]
+    onehot = np.zeros((n, groups))
+    g = (obs.incident[:, t] * 2 + obs.takeover[:, t]) * 2 + obs.performance[:, t]
+    onehot[np.arange(n), g] = mask
+    reports = obs.report[:, t + 1]
+    has = (reports >= 0) & mask
+    return (np.einsum("ng,nij->gij", onehot, xi), xi.sum(axis=2), reports[has], xi.sum(axis=1)[has])
 
 
 def _ordered_report_counts(reports: list[np.ndarray], posteriors: list[np.ndarray], k: int) -> np.ndarray:
@@ -165,22 +200,28 @@ def backward(obs: Observations, p: Parameters, fwd: Forward, weights: np.ndarray
         xi *= beta[active, None, :]
         xi /= scale[active, t + 1, None, None]
         xi *= weight[active, None, None]
-        # Σ over the roads of each (inc, h, e) group, road by road (bincount adds in index order)
-        cells = (group[active, t][:, None] * (k * k) + cell).ravel()
-        per_group = np.bincount(cells, weights=xi.ravel(), minlength=groups * k * k)
+        beta_before = _backward_step(M, active, beta, scale[:, t + 1])
+        if np.isfinite(beta).all() and np.isfinite(xi).all() and np.isfinite(beta_before).all():
+            # Σ over the roads of each (inc, h, e) group, road by road (bincount adds in row order)
+            cells = (group[active, t][:, None] * (k * k) + cell).ravel()
+            per_group = np.bincount(cells, weights=xi.ravel(), minlength=groups * k * k)
+            before.fill(0.0)
+            before[active] = _level_sum(xi, axis=2)  # posterior of θ_{t-1}
+            reports = obs.report[active, t + 1]
+            has = reports >= 0
+            reported.append(reports[has])
+            posteriors.append(_level_sum(xi[has], axis=1))  # posterior of θ_t
+        else:
+            per_group, before, levels, after = _every_road_step(obs, fwd, t, beta, weight, groups)
+            reported.append(levels)
+            posteriors.append(after)
         stats_transition += per_group.reshape(stats_transition.shape)
-        before.fill(0.0)
-        before[active] = _level_sum(xi, axis=2)  # posterior of θ_{t-1}
         inc_hot.fill(0.0)
         inc_hot[rows, inc[:, t]] = mask[:, t]
         visits += inc_hot.T @ before
         take_num += (inc_hot * h[:, t, None]).T @ before
         fail_num += (inc_hot * e[:, t, None]).T @ before
-        reports = obs.report[active, t + 1]
-        has = reports >= 0
-        reported.append(reports[has])
-        posteriors.append(_level_sum(xi[has], axis=1))  # posterior of θ_t
-        beta = _backward_step(M, active, beta, scale[:, t + 1])
+        beta = beta_before
     gamma0 = alpha[:, 0] * beta
     gamma0 /= gamma0.sum(axis=1, keepdims=True)
     gamma0 *= weight[:, None]
