@@ -7,9 +7,10 @@ never read. The model (docs/model.md, "The model") is a hidden Markov model over
 θ_t ~ T[inc_t][h_t][e_t](θ_{t-1}, ·); the report r_t is θ_t with probability a, else one level
 up or down (equal chance, clipped at the ends: the driver model's `report_matrix`).
 
-- method "em": Baum-Welch (forward-backward with scaling, vectorised over episodes) for π, the
-  takeover and failure probabilities, every T row and a. Rows with little expected data keep
-  their starting value (a generic banded matrix) and are listed in `sparse_rows`.
+- method "em": Baum-Welch (forward-backward with scaling, vectorised over episodes:
+  analysis/fitting/forward_backward.py) for π, the takeover and failure probabilities, every T
+  row and a. Rows with little expected data keep their starting value (a generic banded matrix)
+  and are listed in `sparse_rows`.
 - method "counts": reports are exact (a = 1) and given on every road, so θ_t = r_t for t >= 1
   and the rows are plain counts over the roads t >= 2 (θ_0 is never reported: π is then fitted
   by EM on θ_0 alone, with the counted model).
@@ -29,6 +30,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.fitting.forward_backward import (
+    Observations,
+    Parameters,
+    Statistics,
+    expectation,
+    initial_posterior,
+)
 from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
@@ -37,7 +45,6 @@ from trustroute.participants.driver_model import (
     PERFORMANCES,
     DriverModel,
     driver_model_from_dict,
-    report_matrix,
 )
 
 MIN_ROW_WEIGHT = 5.0  # expected visits below which a T row keeps its starting value
@@ -47,26 +54,6 @@ EM_TOLERANCE = 1e-7  # stop when the mean log-likelihood per road improves less 
 # visits gets its incident's rate, not 0 or 1 (unregularised EM gave 5e-123), and a probability
 # is never exactly 0 or 1 unless the incident is never taken over at all (a structural zero).
 TAKEOVER_PRIOR_VISITS = 2.0
-
-
-@dataclass(frozen=True)
-class Observations:
-    """Padded per-episode sequences: steps t = 1..L (roads after the start)."""
-
-    incident: np.ndarray  # int [n, S] driver-model incident index (0 on padding)
-    takeover: np.ndarray  # int [n, S]
-    performance: np.ndarray  # int [n, S]
-    report: np.ndarray  # int [n, S+1] trust index reported after step t (column 0: at the start), -1 none
-    mask: np.ndarray  # bool [n, S] step exists
-    episode_ids: tuple[str, ...] = ()  # the episode of each row, in row order (sorted ids)
-
-    @property
-    def episodes(self) -> int:
-        return int(self.mask.shape[0])
-
-    @property
-    def steps(self) -> int:
-        return int(self.mask.sum())
 
 
 def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observations:
@@ -111,15 +98,6 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observat
     )
 
 
-@dataclass
-class Parameters:
-    initial: np.ndarray  # [k]
-    takeover: np.ndarray  # [I, k]
-    failure: np.ndarray  # [I, k]
-    transition: np.ndarray  # [I, 2, 2, k, k]
-    accuracy: float
-
-
 def starting_parameters(n_incidents: int, k: int, observations: Observations) -> Parameters:
     """A generic start, not the truth: uniform π, banded T (0.5 stay, the rest to neighbours),
     takeover 0.5 where takeovers occur (0 on incidents never taken over), accuracy 0.7."""
@@ -142,115 +120,30 @@ def starting_parameters(n_incidents: int, k: int, observations: Observations) ->
     )
 
 
-@dataclass
-class Statistics:
-    loglik: float
-    initial: np.ndarray
-    takeover_num: np.ndarray
-    failure_num: np.ndarray
-    visits: np.ndarray  # [I, k] expected trust-before counts per incident
-    transition: np.ndarray  # [I, 2, 2, k, k] expected transition counts
-    report: np.ndarray  # [k, k] expected (θ, r) counts
-    episode_loglik: np.ndarray | None = None  # [n] log-likelihood of each episode
-
-
-def expectation(obs: Observations, p: Parameters, weights: np.ndarray | None = None) -> Statistics:
-    """Forward-backward over every episode at once (scaled), expected sufficient statistics.
-
-    `weights` [n] (default 1) scale each episode's contribution to the statistics: a mixture's
-    responsibility of this model for the episode's participant (analysis/fitting/mixture.py). The
-    log-likelihoods (total and per episode) are unweighted."""
-    n, steps = obs.mask.shape
-    weight = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
-    k = p.initial.size
-    R = report_matrix(p.accuracy, k)
-    inc, h, e, mask = obs.incident, obs.takeover, obs.performance, obs.mask
-
-    def emission(reports: np.ndarray) -> np.ndarray:
-        out = np.ones((reports.size, k))
-        has = reports >= 0
-        out[has] = R[:, reports[has]].T
-        return out
-
-    p_h = np.where(h[..., None] == 1, p.takeover[inc], 1 - p.takeover[inc])  # [n, S, k]
-    p_e = np.where(e[..., None] == 1, p.failure[inc], 1 - p.failure[inc])
-    like = p_h * p_e
-    alpha = np.zeros((n, steps + 1, k))
-    scale = np.ones((n, steps + 1))
-    a0 = p.initial[None, :] * emission(obs.report[:, 0])
-    scale[:, 0] = a0.sum(axis=1)
-    alpha[:, 0] = a0 / scale[:, 0:1]
-    matrices = []
-    for t in range(steps):
-        M = (
-            like[:, t, :, None]
-            * p.transition[inc[:, t], h[:, t], e[:, t]]
-            * emission(obs.report[:, t + 1])[:, None, :]
-        )
-        M[~mask[:, t]] = np.eye(k)
-        matrices.append(M)
-        a = np.einsum("ni,nij->nj", alpha[:, t], M)
-        s = a.sum(axis=1)
-        s = np.where(s > 0, s, 1e-300)
-        scale[:, t + 1] = s
-        alpha[:, t + 1] = a / s[:, None]
-    beta = np.ones((n, k))
-    stats_transition = np.zeros_like(p.transition)
-    visits = np.zeros_like(p.takeover)
-    take_num = np.zeros_like(p.takeover)
-    fail_num = np.zeros_like(p.failure)
-    report_counts = np.zeros((k, k))
-    groups = p.transition.shape[0] * 4
-    for t in range(steps - 1, -1, -1):
-        M = matrices[t]
-        xi = alpha[:, t, :, None] * M * beta[:, None, :] / scale[:, t + 1, None, None]
-        xi *= (mask[:, t] * weight)[:, None, None]
-        g = (inc[:, t] * 2 + h[:, t]) * 2 + e[:, t]
-        onehot = np.zeros((n, groups))
-        onehot[np.arange(n), g] = mask[:, t]
-        stats_transition += np.einsum("ng,nij->gij", onehot, xi).reshape(stats_transition.shape)
-        before = xi.sum(axis=2)  # posterior of θ_{t-1}
-        inc_hot = np.zeros((n, p.takeover.shape[0]))
-        inc_hot[np.arange(n), inc[:, t]] = mask[:, t]
-        visits += inc_hot.T @ before
-        take_num += (inc_hot * h[:, t, None]).T @ before
-        fail_num += (inc_hot * e[:, t, None]).T @ before
-        after = xi.sum(axis=1)  # posterior of θ_t
-        reports = obs.report[:, t + 1]
-        has = (reports >= 0) & mask[:, t]
-        np.add.at(report_counts.T, reports[has], after[has])
-        beta = np.einsum("nij,nj->ni", M, beta) / scale[:, t + 1, None]
-    gamma0 = alpha[:, 0] * beta
-    gamma0 /= gamma0.sum(axis=1, keepdims=True)
-    gamma0 *= weight[:, None]
-    has0 = obs.report[:, 0] >= 0
-    np.add.at(report_counts.T, obs.report[has0, 0], gamma0[has0])
-    episode_loglik = np.log(scale).sum(axis=1)
-    return Statistics(
-        loglik=float(episode_loglik.sum()),
-        initial=gamma0.sum(axis=0),
-        takeover_num=take_num,
-        failure_num=fail_num,
-        visits=visits,
-        transition=stats_transition,
-        report=report_counts,
-        episode_loglik=episode_loglik,
-    )
+def _report_matrices(accuracies: np.ndarray, k: int) -> np.ndarray:
+    """[G, k, k] the driver model's `report_matrix` of each accuracy, by the same additions entry by entry."""
+    matrices = np.zeros((accuracies.size, k, k))
+    half = (1 - accuracies) / 2
+    for theta in range(k):
+        matrices[:, theta, theta] += accuracies
+        matrices[:, theta, max(theta - 1, 0)] += half
+        matrices[:, theta, min(theta + 1, k - 1)] += half
+    return matrices
 
 
 def fit_accuracy(report_counts: np.ndarray, k: int) -> float:
     """argmax_a Σ counts log R_a (grid then a local refinement; concave in a on [0, 1])."""
 
-    def score(a: float) -> float:
-        R = report_matrix(a, k)
+    def scores(accuracies: np.ndarray) -> np.ndarray:
+        R = _report_matrices(accuracies, k)
         with np.errstate(divide="ignore"):
             logs = np.where(report_counts > 0, np.log(np.maximum(R, 1e-300)), 0.0)
-        return float((report_counts * logs).sum())
+        return (report_counts * logs).sum(axis=(1, 2))
 
     grid = np.linspace(0.0, 1.0, 201)
-    best = grid[int(np.argmax([score(a) for a in grid]))]
+    best = grid[int(np.argmax(scores(grid)))]
     fine = np.linspace(max(0.0, best - 0.005), min(1.0, best + 0.005), 101)
-    return float(fine[int(np.argmax([score(a) for a in fine]))])
+    return float(fine[int(np.argmax(scores(fine)))])
 
 
 def regularised_takeover(taken: np.ndarray, visits: np.ndarray, previous: np.ndarray) -> np.ndarray:
@@ -463,8 +356,8 @@ def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
     params.accuracy = 1.0
     # θ_0 is never reported: fit π alone by EM with the counted model held fixed.
     for _ in range(30):
-        stats = expectation(obs, params)
-        params.initial = stats.initial / stats.initial.sum()
+        initial, loglik = initial_posterior(obs, params)
+        params.initial = initial / initial.sum()
     return FitResult(
         method="counts",
         template=template,
@@ -472,7 +365,7 @@ def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
         episodes=obs.episodes,
         transitions=obs.steps,
         iterations=0,
-        loglik=stats.loglik,
+        loglik=loglik,
         row_weight=totals,
         report_accuracy=1.0,
         takeover_weight=visits,

@@ -6,11 +6,11 @@ takeover and failure probabilities, trust-transition rows), all types share the 
 (the report noise is a property of the display and the question, docs/driver_type_studies.md).
 EM alternates:
 
-- E-step: per type, the forward pass of driver_model.py's `expectation` gives every episode's
+- E-step: per type, the forward pass (analysis/fitting/forward_backward.py) gives every episode's
   log-likelihood; a participant's is the sum over their episodes; responsibilities
   r[p, k] ∝ w_k · exp(loglik[p, k]);
-- M-step: driver_model.py's `expectation` with every episode weighted by its participant's
-  responsibility gives each type's expected statistics, and its `maximisation` turns them into
+- M-step: the type's backward pass, with every episode weighted by its participant's
+  responsibility, gives its expected statistics, and driver_model.py's `maximisation` turns them into
   the type's model with the same regularisation as `trustroute fit` (MIN_ROW_WEIGHT, the takeover
   prior); w_k is the mean responsibility; the shared accuracy is fitted on the pooled report counts.
 
@@ -41,12 +41,12 @@ from trustroute.analysis.fitting.driver_model import (
     FitResult,
     Observations,
     Parameters,
-    expectation,
     fit_accuracy,
     maximisation,
     observations_from_roads,
     starting_parameters,
 )
+from trustroute.analysis.fitting.forward_backward import Forward, backward, forward
 from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DriverModel
@@ -194,12 +194,12 @@ def free_parameters(components: list[FitResult], n_trust: int, shared_dynamics: 
     return total
 
 
-def _participant_loglik(obs: Observations, params: list[Parameters], owner: np.ndarray,
-                        n_participants: int) -> np.ndarray:
-    """[P, K] log-likelihood of each participant's episodes under each type."""
-    out = np.empty((n_participants, len(params)))
-    for k, p in enumerate(params):
-        out[:, k] = np.bincount(owner, weights=expectation(obs, p).episode_loglik, minlength=n_participants)
+def _participant_loglik(passes: list[Forward], owner: np.ndarray, n_participants: int) -> np.ndarray:
+    """[P, K] log-likelihood of each participant's episodes under each type (from each type's
+    forward pass)."""
+    out = np.empty((n_participants, len(passes)))
+    for k, fwd in enumerate(passes):
+        out[:, k] = np.bincount(owner, weights=fwd.episode_loglik, minlength=n_participants)
     return out
 
 
@@ -227,9 +227,12 @@ def _run_em(data: ParticipantObservations, responsibilities: np.ndarray, setting
     history: list[float] = []
     converged = False
     stats = []
+    # a type's forward pass serves its participants' log-likelihoods and then, unchanged (it does
+    # not depend on the responsibilities), the next iteration's weighted statistics
+    passes = [forward(obs, p) for p in params]
     for _ in range(settings.iterations):
         r = np.maximum(responsibilities, RESPONSIBILITY_FLOOR)
-        stats = [expectation(obs, params[k], weights=r[owner, k]) for k in range(n_types)]
+        stats = [backward(obs, params[k], passes[k], weights=r[owner, k]) for k in range(n_types)]
         if shared_dynamics:
             stats = _pooled_dynamics(stats)
         accuracy = fit_accuracy(sum((s.report for s in stats), np.zeros((k_trust, k_trust))), k_trust)
@@ -237,8 +240,8 @@ def _run_em(data: ParticipantObservations, responsibilities: np.ndarray, setting
         weights = responsibilities.mean(axis=0)
         with np.errstate(divide="ignore"):
             log_weights = np.log(weights)
-        responsibilities, loglik = _posterior(log_weights, _participant_loglik(obs, params, owner,
-                                                                                n_participants))
+        passes = [forward(obs, p) for p in params]
+        responsibilities, loglik = _posterior(log_weights, _participant_loglik(passes, owner, n_participants))
         history.append(loglik)
         if len(history) > 1 and history[-1] - history[-2] < EM_TOLERANCE * max(1, obs.steps):
             converged = True
@@ -246,7 +249,7 @@ def _run_em(data: ParticipantObservations, responsibilities: np.ndarray, setting
     # The statistics of the final parameters, weighted by the final responsibilities: each type's
     # expected visits (which rows it identifies).
     r = np.maximum(responsibilities, RESPONSIBILITY_FLOOR)
-    final = [expectation(obs, params[k], weights=r[owner, k]) for k in range(n_types)]
+    final = [backward(obs, params[k], passes[k], weights=r[owner, k]) for k in range(n_types)]
     if shared_dynamics:
         final = _pooled_dynamics(final)
     weights = responsibilities.mean(axis=0)

@@ -188,10 +188,13 @@ def test_monte_carlo_of_the_baseline_agrees_with_exact_evaluation(pomdp):
     spec = load_spec("specs/phi1.toml", pomdp.town)
     policy = trust_free_policy(pomdp.town, spec)
     exact = evaluate(pomdp, spec, policy)
-    result = monte_carlo(pomdp, spec, policy, 3000, np.random.default_rng(4))
-    assert result.episodes == 3000
+    # 2000 episodes are enough to fail a takeover drawn from the trust after the road (about 5
+    # standard errors off here) or from one level above the trust before it (about 8)
+    episodes = 2000
+    result = monte_carlo(pomdp, spec, policy, episodes, np.random.default_rng(4))
+    assert result.episodes == episodes
     assert abs(result.satisfaction - exact.lower) <= 4 * result.standard_error
-    assert result.decisions == 3000 * (len(baseline_route(pomdp.town, spec)) - 1)
+    assert result.decisions == episodes * (len(baseline_route(pomdp.town, spec)) - 1)
 
 
 def test_monte_carlo_drives_the_pomdps_driver(town):
