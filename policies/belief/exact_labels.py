@@ -29,7 +29,7 @@ Higham's bounds: no underflow in the filter.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 from fractions import Fraction
 
 import numpy as np
@@ -63,10 +63,13 @@ class ExactFilter:
     """The exact filter of `pomdp` under `rule`, its words and the float filter's distance to it.
 
     Words are interned: id 0 is the empty word; `extend` gives the id of word + symbol (the same id
-    for a symbol whose exact update is c·I). `belief(word)` is memoised."""
+    for a symbol whose exact update is c·I). `belief(word)` is memoised. `like`: a filter of another
+    model under the same rule whose symbol matrices, if that model's arrays are this one's (a
+    driver population under another type prior), are taken rather than converted again."""
 
     pomdp: TrustPOMDP
     rule: BeliefRule
+    like: InitVar[ExactFilter | None] = None
     matrices: dict[int, tuple[tuple[Fraction, ...], ...]] = field(init=False)
     changing: np.ndarray = field(init=False)        # bool [n_codes]: exact update is not c·I
     prior: tuple[Fraction, ...] = field(init=False)
@@ -78,33 +81,16 @@ class ExactFilter:
     _ids: dict[tuple[int, int], int] = field(init=False)
     _beliefs: dict[int, tuple[Fraction, ...]] = field(init=False)
 
-    def __post_init__(self) -> None:
-        driver, n = self.pomdp.driver, self.pomdp.n_trust
-        n_inc = len(driver.incident_types)
-        one = Fraction(1)
-        self.matrices, worst = {}, 0.0
-        self.changing = np.zeros(n_inc * 4, dtype=bool)
-        floats = (self.pomdp.weighted_transition if self.rule == "bayes" else driver.trust_transition)
-        for i in range(n_inc):
-            takeover = [decimal(t) for t in driver.takeover_probability[i]]
-            failure = [decimal(f) for f in driver.failure_probability[i]]
-            for h in (0, 1):
-                for e in (0, 1):
-                    like = [(takeover[k] if h else one - takeover[k])
-                            * (failure[k] if e else one - failure[k]) for k in range(n)]
-                    weights = like if self.rule == "bayes" else [one] * n
-                    matrix = tuple(tuple(weights[k] * decimal(driver.trust_transition[i, h, e, k, m])
-                                         for m in range(n)) for k in range(n))
-                    code = int(symbol_code(i, h, e))
-                    self.matrices[code] = matrix
-                    self.changing[code] = not _scaled_identity(matrix)
-                    if any(like):
-                        worst = max(worst, max(_relative_gap(floats[i, h, e, k, m], matrix[k][m])
-                                               for k in range(n) for m in range(n)))
-        g = gamma(n)
+    def __post_init__(self, like: ExactFilter | None) -> None:
+        if like is not None and like.rule == self.rule and same_symbol_arrays(like.pomdp, self.pomdp):
+            self.matrices, self.changing = dict(like.matrices), like.changing.copy()
+            self.step_distance = like.step_distance
+        else:
+            self.matrices, self.changing, worst = _exact_symbol_matrices(self.pomdp, self.rule)
+            g, u = gamma(self.pomdp.n_trust), UNIT_ROUNDOFF
+            self.step_distance = (math.log((1 + g) * (1 + u) / ((1 - g) * (1 - u)))
+                                  + (math.log((1 + worst) / (1 - worst)) if worst < 1 else math.inf))
         u = UNIT_ROUNDOFF
-        self.step_distance = (math.log((1 + g) * (1 + u) / ((1 - g) * (1 - u)))
-                              + (math.log((1 + worst) / (1 - worst)) if worst < 1 else math.inf))
         entries = [decimal(b) for b in self.pomdp.initial_belief]
         total = sum(entries, Fraction(0))
         self.prior = tuple(b / total for b in entries)
@@ -171,6 +157,45 @@ class ExactFilter:
     def distance(self, words: np.ndarray) -> np.ndarray:
         """D per word: the bound on Hilbert's distance between the float and the exact belief."""
         return self.prior_distance + self.lengths(words) * self.step_distance
+
+
+def same_symbol_arrays(one: TrustPOMDP, other: TrustPOMDP) -> bool:
+    """Whether two models' exact symbol matrices are the same: equal likelihoods and transitions
+    (their priors may differ)."""
+    a, b = one.driver, other.driver
+    return (len(a.incident_types) == len(b.incident_types)
+            and all(np.array_equal(x, y) for x, y in ((a.takeover_probability, b.takeover_probability),
+                                                      (a.failure_probability, b.failure_probability),
+                                                      (a.trust_transition, b.trust_transition))))
+
+
+def _exact_symbol_matrices(pomdp: TrustPOMDP, rule: BeliefRule
+                           ) -> tuple[dict[int, tuple[tuple[Fraction, ...], ...]], np.ndarray, float]:
+    """(exact matrix W_o per symbol code, bool per code: W_o is not c·I, the largest relative gap
+    of the float matrices to the exact ones) of `pomdp` under `rule`."""
+    driver, n = pomdp.driver, pomdp.n_trust
+    floats = (pomdp.weighted_transition if rule == "bayes" else driver.trust_transition)
+    n_inc = len(driver.incident_types)
+    one = Fraction(1)
+    matrices, worst = {}, 0.0
+    changing = np.zeros(n_inc * 4, dtype=bool)
+    for i in range(n_inc):
+        takeover = [decimal(t) for t in driver.takeover_probability[i]]
+        failure = [decimal(f) for f in driver.failure_probability[i]]
+        for h in (0, 1):
+            for e in (0, 1):
+                like = [(takeover[k] if h else one - takeover[k])
+                        * (failure[k] if e else one - failure[k]) for k in range(n)]
+                weights = like if rule == "bayes" else [one] * n
+                matrix = tuple(tuple(weights[k] * decimal(driver.trust_transition[i, h, e, k, m])
+                                     for m in range(n)) for k in range(n))
+                code = int(symbol_code(i, h, e))
+                matrices[code] = matrix
+                changing[code] = not _scaled_identity(matrix)
+                if any(like):
+                    worst = max(worst, max(_relative_gap(floats[i, h, e, k, m], matrix[k][m])
+                                           for k in range(n) for m in range(n)))
+    return matrices, changing, worst
 
 
 def _scaled_identity(matrix: tuple[tuple[Fraction, ...], ...]) -> bool:
@@ -262,13 +287,15 @@ class ExactLabels:
         return self.labeller.step(q, x, beliefs, trust, belief_truth=truth)
 
 
-def exact_filter(pomdp: TrustPOMDP, rule: BeliefRule = "bayes") -> ExactFilter:
+def exact_filter(pomdp: TrustPOMDP, rule: BeliefRule = "bayes", like: ExactFilter | None = None
+                 ) -> ExactFilter:
     """The exact filter of `pomdp` under `rule`, held by the model and shared with every other
     caller for it: building one converts the whole model to fractions, which costs far more than
-    an episode's labels (its memoised beliefs are a pure function of the model)."""
+    an episode's labels (its memoised beliefs are a pure function of the model). `like`: as in
+    ExactFilter, for the first call."""
     found = pomdp.exact_filters.get(rule)
     if found is None:
-        found = pomdp.exact_filters[rule] = ExactFilter(pomdp=pomdp, rule=rule)
+        found = pomdp.exact_filters[rule] = ExactFilter(pomdp=pomdp, rule=rule, like=like)
     return found
 
 

@@ -54,8 +54,8 @@ class NodeState(Protocol):
     def joint_row(self, row: int) -> np.ndarray | None:
         """J(θ, q) of a row for the policy's context; None when q is observed."""
 
-    def key(self, row: int) -> bytes:
-        """Bytes equal for two rows of the same route iff a policy must decide them alike."""
+    def keys(self) -> list[bytes]:
+        """Per row, bytes equal for two rows of the same route iff a policy must decide them alike."""
 
     def children(self, road: np.ndarray, human_action: int, performance: int
                  ) -> tuple[np.ndarray, Self]:
@@ -72,6 +72,18 @@ class NodeState(Protocol):
     def merge_columns(self) -> np.ndarray:
         """[n, width] float columns: rows equal in these (and road, the policy's route memory and
         the word) have equal futures."""
+
+
+def row_bytes(*columns: np.ndarray) -> list[bytes]:
+    """Per row, the bytes of its entries in `columns`, one after another (row by row in one
+    buffer: a `tobytes` per row and column costs more than the decision it keys)."""
+    n = len(columns[0])
+    if n == 0:
+        return []
+    rows = np.concatenate([np.ascontiguousarray(c).reshape(n, -1).view(np.uint8) for c in columns],
+                          axis=1)
+    width, raw = rows.shape[1], rows.tobytes()
+    return [raw[i * width:(i + 1) * width] for i in range(n)]
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,8 +147,8 @@ class ObservedState:
     def joint_row(self, row: int) -> None:
         return None
 
-    def key(self, row: int) -> bytes:
-        return np.int64(self.q[row]).tobytes() + self.belief[row].tobytes()
+    def keys(self) -> list[bytes]:
+        return row_bytes(self.q.astype(np.int64), self.belief)
 
     def children(self, road: np.ndarray, human_action: int, performance: int
                  ) -> tuple[np.ndarray, ObservedState]:
@@ -219,8 +231,8 @@ class HiddenState:
     def joint_row(self, row: int) -> np.ndarray:
         return self.joint[row]
 
-    def key(self, row: int) -> bytes:
-        return self.belief[row].tobytes() + self.joint[row].tobytes()
+    def keys(self) -> list[bytes]:
+        return row_bytes(self.belief, self.joint)
 
     def children(self, road: np.ndarray, human_action: int, performance: int
                  ) -> tuple[np.ndarray, HiddenState]:

@@ -173,16 +173,24 @@ class EpisodeActor:
         order = np.argsort(inverse, kind="stable")
         bounds = np.searchsorted(inverse[order], np.arange(unique_routes.size + 1))
         decisions: dict[tuple[int, int, bytes], tuple[bool, bool, int]] = {}
+        keys, told_rows, roads = state.keys(), told.tolist(), frontier.road.tolist()
+        rows: list[int] = []
+        chosen: list[tuple[bool, bool, int]] = []
         for r, rid in enumerate(unique_routes.tolist()):
             members = order[bounds[r]:bounds[r + 1]]
             rest = self.decide_route(level, frontier, told, members[~told_accepting[members]], out)
             for k in (members if rest else members[told_accepting[members]]).tolist():
-                key = (rid, int(told[k]), state.key(k))
+                key = (rid, told_rows[k], keys[k])
                 decision = decisions.get(key)
                 if decision is None:
-                    decision = self.decide_node(self.context(frontier, told, k), int(frontier.road[k]), level)
-                    decisions[key] = decision
-                out[0][k], out[1][k], out[2][k] = decision
+                    context = DecisionContext(route=self.routes[rid], dfa_state=told_rows[k],
+                                              belief=state.belief[k], joint=state.joint_row(k))
+                    decision = decisions[key] = self.decide_node(context, roads[k], level)
+                rows.append(k)
+                chosen.append(decision)
+        if rows:
+            finished, fired, next_road = zip(*chosen, strict=True)
+            out[0][rows], out[1][rows], out[2][rows] = finished, fired, next_road
         return Moves(*out)
 
     def decide_route(self, level: int, frontier: Frontier, told: np.ndarray, members: np.ndarray,

@@ -99,12 +99,11 @@ class TrustPOMDP:
         exactly c (its value for every belief in exact arithmetic; Σθ b(θ) c of a float belief can
         be c·(1 - 2e-16)), so a road where nothing can happen costs no probability mass."""
         beliefs = np.atleast_2d(beliefs)
-        likelihood = self.observation_likelihood[incident, human_action, performance]
-        probability = np.einsum("nk,nk->n", beliefs, np.broadcast_to(likelihood, beliefs.shape))
-        uniform = np.broadcast_to(self.uniform_likelihood[incident, human_action, performance],
-                                  probability.shape)
+        likelihood = _shaped(self.observation_likelihood[incident, human_action, performance], beliefs.shape)
+        probability = np.einsum("nk,nk->n", beliefs, likelihood)
+        uniform = _shaped(self.uniform_likelihood[incident, human_action, performance], probability.shape)
         if uniform.any():
-            constant = np.broadcast_to(likelihood, beliefs.shape)[:, 0]
+            constant = likelihood[:, 0]
             # a zero belief row (a history of probability 0) keeps probability 0
             probability = np.where(uniform & beliefs.any(axis=1), constant, probability)
         return probability
@@ -126,9 +125,8 @@ class TrustPOMDP:
         """
         beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
         n = beliefs.shape[0]
-        incident = np.broadcast_to(np.asarray(incident), (n,))
-        human_action = np.broadcast_to(np.asarray(human_action), (n,))
-        performance = np.broadcast_to(np.asarray(performance), (n,))
+        incident, human_action, performance = (_index_rows(value, n)
+                                               for value in (incident, human_action, performance))
         probability = self.observation_probability(beliefs, incident, human_action, performance)
         if rule == "bayes":
             matrices = self.weighted_transition[incident, human_action, performance]
@@ -140,7 +138,7 @@ class TrustPOMDP:
         total = unnormalised.sum(axis=1, keepdims=True)
         posterior = np.divide(unnormalised, total, out=np.zeros_like(unnormalised),
                               where=total > 0)
-        keep = np.broadcast_to(self.preserves_belief(rule)[incident, human_action, performance], (n,))
+        keep = self.preserves_belief(rule)[incident, human_action, performance]
         if keep.any():
             posterior[keep] = beliefs[keep]
         return posterior, probability
@@ -163,6 +161,20 @@ class TrustPOMDP:
 
     def next_state(self, state: int, action_slot: int) -> int:
         return int(self.successor_table[state, action_slot])
+
+
+# The filter runs once per history in the recursions (exact search, exact evaluation), where
+# np.broadcast_to, a few microseconds a call, cost as much as the arithmetic: arrays already of
+# their shape are used as they are, and scalar indices filled, which gives the same values.
+def _shaped(array: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """`array` broadcast to `shape` (itself when it has that shape)."""
+    return array if array.shape == shape else np.broadcast_to(array, shape)
+
+
+def _index_rows(value: np.ndarray | int, n: int) -> np.ndarray:
+    """An index per row: `value` broadcast to [n]."""
+    value = np.asarray(value)
+    return np.full(n, value) if value.ndim == 0 else _shaped(value, (n,))
 
 
 def _scaled_identity(matrices: np.ndarray) -> np.ndarray:

@@ -33,6 +33,18 @@ def exact_optimum(pomdp: TrustPOMDP, spec: Spec, horizon: int, belief_rule: Beli
     labels = exact_labels(pomdp, compiled.labeller, belief_rule)
     memo: dict[tuple[int, int, int, bytes, int], float] = {}
 
+    def observed(belief: np.ndarray, word: int, incident: int) -> list[tuple[float, np.ndarray, np.ndarray]]:
+        """(P(o | b), f_o(b), word + o) of every possible outcome o at a road of `incident`, in
+        outcome order."""
+        found = []
+        for h, e in outcomes:
+            posterior, probability = pomdp.belief_update(belief, incident, h, e, rule=belief_rule)
+            p = float(probability[0])
+            if p > 0.0:
+                word2 = labels.filter.extend(np.array([word]), symbol_code(incident, h, e))
+                found.append((p, posterior[0], word2))
+        return found
+
     def value(t: int, x: int, q: int, belief: np.ndarray, word: int) -> float:
         if accepting[q]:
             return 1.0
@@ -43,16 +55,14 @@ def exact_optimum(pomdp: TrustPOMDP, spec: Spec, horizon: int, belief_rule: Beli
         if cached is not None:
             return cached
         best = 0.0
+        # successors with one incident type see the same outcomes: filtered once per incident
+        by_incident: dict[int, list[tuple[float, np.ndarray, np.ndarray]]] = {}
         for x2 in successors[x]:
             incident = int(pomdp.road_incident[x2])
+            if incident not in by_incident:
+                by_incident[incident] = observed(belief, word, incident)
             total = 0.0
-            for h, e in outcomes:
-                posterior, probability = pomdp.belief_update(belief, incident, h, e, rule=belief_rule)
-                p = float(probability[0])
-                if p <= 0.0:
-                    continue
-                b2 = posterior[0]
-                word2 = labels.filter.extend(np.array([word]), symbol_code(incident, h, e))
+            for p, b2, word2 in by_incident[incident]:
                 q2 = int(labels.step(np.array([q]), np.array([x2]), b2[None], word2)[0])
                 total += p * value(t + 1, x2, q2, b2, int(word2[0]))
             best = max(best, total)

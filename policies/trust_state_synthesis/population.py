@@ -36,6 +36,7 @@ from dataclasses import replace
 import numpy as np
 
 from trustroute.policies.belief.driver_types import lift_population
+from trustroute.policies.belief.exact_labels import exact_filter
 from trustroute.policies.belief.problem import Problem
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
@@ -148,7 +149,12 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
     best: tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray] = (bayes.policy, values, weights)
     candidates = [record(weights, values)]
     for prior in candidate_priors(weights, population.n_types, grid_points, schedule):
-        made = synthesize_joint(build_pomdp(problem.town, lift_population(population, prior)), problem.spec,
+        model = build_pomdp(problem.town, lift_population(population, prior))
+        # the candidate's model differs from the population's in its prior only: its exact
+        # filters take the symbol matrices of the population model's rather than convert them again
+        for rule, source in problem.pomdp.exact_filters.items():
+            exact_filter(model, rule, like=source)
+        made = synthesize_joint(model, problem.spec,
                                 replace(settings, time_limit=schedule.next_limit()),
                                 on_iteration=on_iteration)
         schedule.finished(candidate_name(prior), made.lower, made.upper)

@@ -157,10 +157,12 @@ def _return_problem(driver, seed: int):
     return pomdp, spec, int(rng.integers(7, 11))
 
 
-# Seed 3 left out: its exact evaluations at H = 9 take 19 s of CPU (over half the test's) and it
-# needs no return; seeds 6 and 9, which do, stay, and the remaining nine still catch an L raised
-# above the returned policy's value.
-RETURN_SEEDS = [seed for seed in range(10) if seed != 3]
+# Seeds 6 and 12 need the return (seed 12 in 3 s of CPU where seed 9 takes 7 s) and search
+# thousands of nodes, seeds 0 and 2 a few hundred or fewer (seed 2 stops with open nodes), seeds
+# 4, 7 and 8 have nothing to reach. Seeds 1, 3, 5 and 9 cost seconds each (seed 3 at H = 9, 19 s)
+# and catch nothing these miss: a policy whose completion does not return, and an L raised above
+# the returned policy's value, fail here.
+RETURN_SEEDS = [0, 2, 4, 6, 7, 8, 12]
 
 
 @pytest.mark.slow
