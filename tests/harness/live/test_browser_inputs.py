@@ -74,7 +74,7 @@ def test_a_wheel_only_study_reads_only_a_wheel(tmp_path):
             browser = playwright.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
             try:
                 link = create_participant(browser, address, token)
-                page = browser.new_context(viewport={"width": 1000, "height": 900}).new_page()
+                page = browser.new_context(viewport={"width": 640, "height": 480}).new_page()
                 page.set_default_timeout(60_000)
                 page.add_init_script(VIRTUAL_DEVICE)
                 errors: list[str] = []

@@ -61,7 +61,7 @@ def test_the_jian_questionnaire_after_each_trial_in_chromium(tmp_path):
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path=chromium_executable(), args=CHROMIUM_ARGS)
             link = create_participant(browser, address, token)
-            page = browser.new_context(viewport={"width": 1000, "height": 900}).new_page()
+            page = browser.new_context(viewport={"width": 640, "height": 480}).new_page()
             page.set_default_timeout(60_000)
             page.goto(link)
             page.wait_for_url("**/station")
