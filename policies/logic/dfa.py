@@ -83,8 +83,14 @@ class DFA:
     def step_many(self, q: np.ndarray, valuations: np.ndarray) -> np.ndarray:
         """Successors of states q (int [n]) on valuations (bool [n, len(atoms)])."""
         q = np.asarray(q, dtype=np.int64)
-        node = self.root[q]
         values = np.asarray(valuations, dtype=bool)
+        if q.shape == (1,):   # one position (an episode's road, say): a plain walk costs less
+            one = int(self.root[q[0]])
+            row = values[0]
+            while (atom := self.node_atom[one]) >= 0:
+                one = int(self.node_high[one] if row[atom] else self.node_low[one])
+            return self.node_target[[one]]
+        node = self.root[q]
         active = np.flatnonzero(self.node_atom[node] >= 0)
         while active.size:
             current = node[active]

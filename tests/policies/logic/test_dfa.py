@@ -140,6 +140,12 @@ def test_shipped_spec_dfa_equals_good_prefix_semantics_on_random_traces(town, na
     rejected = dfa.rejecting[runs].any(axis=1)
     assert not (rejected & (expected >= 0)).any()
     assert rejected.any() == bool(dfa.rejecting.any())
+    # step_many on one position at a time (its plain walk) agrees with the batch.
+    for i in range(200):
+        q = np.array([dfa.initial])
+        for t in range(horizon):
+            q = dfa.step_many(q, values[i:i + 1, t])
+            assert q.shape == (1,) and q.dtype == runs.dtype and q[0] == runs[i, t]
     # The scalar step agrees with step_many on a sample.
     for i in range(200):
         q = dfa.initial
