@@ -282,8 +282,11 @@ def _unbounded_searches(problem: _Problem, symbols: ObservationSymbols, bound: _
         best = _better(best, run, table)
         if not searched_unbounded and best.upper - best.lower > tau:
             searched_unbounded = True
+            # a share of the search's time, or of the whole budget's once a bounded search has
+            # overrun the search's share: a share of nothing would leave U at the bound's 1
             table, run = problem.search(None, tau, bound.k,
-                                        budget.share_of_rest(UNBOUNDED_SEARCH_SHARE, until),
+                                        budget.share_of_rest(UNBOUNDED_SEARCH_SHARE,
+                                                             None if budget.expired(until) else until),
                                         bound.value, bound.abstraction)
             run = replace(run, end_component_seconds=bound.bound.seconds)
             runs.append(run)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from tests.policies.evaluation.test_random_models import random_driver
@@ -66,6 +66,10 @@ def risky_spec(rng: np.random.Generator, town, initial_belief: np.ndarray):
 @pytest.mark.slow
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(seed=st.integers(0, 2**32 - 1), default_driver=st.booleans())
+# (!high) U (a & F b) on 8 roads, optimum 0.6214: the search at H = 20 overran the search's share
+# of the work, and the unbounded problem's search, given a share of what was left of it, never ran
+# (U stayed at 1)
+@example(seed=288965858, default_driver=False)
 def test_unbounded_gap_closes_where_the_optimum_is_below_one(driver, seed, default_driver):
     rng = np.random.default_rng(seed)
     town = deterministic_town(rng)
