@@ -62,13 +62,16 @@ ROW_TOLERANCE = 1e-9
 DEFAULT_REPORT_ACCURACY = 0.8   # P(a trust report is the true level)
 
 
-def report_matrix(accuracy: float, k: int) -> np.ndarray:
-    """R[θ, r] = P(report index r | trust index θ) over k levels: the noise model of reports."""
-    matrix = np.zeros((k, k))
+def report_matrix(accuracy: float | np.ndarray, k: int) -> np.ndarray:
+    """R[θ, r] = P(report index r | trust index θ) over k levels: the noise model of reports. An
+    array of accuracies gives one matrix per accuracy ([..., k, k])."""
+    accuracy = np.asarray(accuracy, dtype=float)
+    matrix = np.zeros((*accuracy.shape, k, k))
+    half = (1 - accuracy) / 2
     for theta in range(k):
-        matrix[theta, theta] += accuracy
-        matrix[theta, max(theta - 1, 0)] += (1 - accuracy) / 2
-        matrix[theta, min(theta + 1, k - 1)] += (1 - accuracy) / 2
+        matrix[..., theta, theta] += accuracy
+        matrix[..., theta, max(theta - 1, 0)] += half
+        matrix[..., theta, min(theta + 1, k - 1)] += half
     return matrix
 
 

@@ -15,7 +15,7 @@ the whole suite costs each pytest process about 12 CPU-seconds. So that no test 
 lanes, each pytest process writes the tests it kept and the ones its `-m` left out to a ledger
 (tests/conftest.py, `LEDGER_ENV`), and the suite fails unless the wall-clock lane ran exactly the
 tests the CPU-bound lane left out. Given pytest arguments (paths, `-k`), both lanes take those
-instead, and no ledger is kept.
+instead, and the ledger is not checked.
 
 Every Python process of the suite may write bytecode caches (`__pycache__`, ignored by git) even
 where the environment says not to (PYTHONDONTWRITEBYTECODE): the suite starts dozens of processes

@@ -45,6 +45,7 @@ from trustroute.participants.driver_model import (
     PERFORMANCES,
     DriverModel,
     driver_model_from_dict,
+    report_matrix,
 )
 
 MIN_ROW_WEIGHT = 5.0  # expected visits below which a T row keeps its starting value
@@ -120,22 +121,11 @@ def starting_parameters(n_incidents: int, k: int, observations: Observations) ->
     )
 
 
-def _report_matrices(accuracies: np.ndarray, k: int) -> np.ndarray:
-    """[G, k, k] the driver model's `report_matrix` of each accuracy, by the same additions entry by entry."""
-    matrices = np.zeros((accuracies.size, k, k))
-    half = (1 - accuracies) / 2
-    for theta in range(k):
-        matrices[:, theta, theta] += accuracies
-        matrices[:, theta, max(theta - 1, 0)] += half
-        matrices[:, theta, min(theta + 1, k - 1)] += half
-    return matrices
-
-
 def fit_accuracy(report_counts: np.ndarray, k: int) -> float:
     """argmax_a Σ counts log R_a (grid then a local refinement; concave in a on [0, 1])."""
 
     def scores(accuracies: np.ndarray) -> np.ndarray:
-        R = _report_matrices(accuracies, k)
+        R = report_matrix(accuracies, k)
         with np.errstate(divide="ignore"):
             logs = np.where(report_counts > 0, np.log(np.maximum(R, 1e-300)), 0.0)
         return (report_counts * logs).sum(axis=(1, 2))

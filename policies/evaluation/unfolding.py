@@ -183,9 +183,8 @@ class EpisodeActor:
                 key = (rid, told_rows[k], keys[k])
                 decision = decisions.get(key)
                 if decision is None:
-                    context = DecisionContext(route=self.routes[rid], dfa_state=told_rows[k],
-                                              belief=state.belief[k], joint=state.joint_row(k))
-                    decision = decisions[key] = self.decide_node(context, roads[k], level)
+                    decision = decisions[key] = self.decide_node(self.context(frontier, told, k), roads[k],
+                                                                 level)
                 rows.append(k)
                 chosen.append(decision)
         if rows:
