@@ -86,6 +86,107 @@ def relaxed_values(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) ->
 
 
 
+def informed_values(pomdp: TrustPOMDP, next_q: np.ndarray, accepting: np.ndarray, rejecting: np.ndarray,
+                    horizon: int) -> np.ndarray:
+    """A [horizon + 1, slots, n_x, n_trust, n_q]: A[k, s, x, θ, q] bounds from above the value of
+    moving through successor slot s of road x from (θ, q) with k junctions left, for any policy
+    (-inf where road x has no slot s; A[0] is never used). The relaxation behind it learns θ and q
+    one junction late: each next slot is chosen on the junction's observation (h, e) and the
+    previous (θ, q), not on the new θ (the fast informed bound of POMDPs). It is tighter than the
+    relaxation that observes θ and q at once (relaxed_values), which it never exceeds; each
+    backup adds RELAXATION_MARGIN so that rounding cannot take it below the true value."""
+    n_x, n_t, n_q = pomdp.n_states, pomdp.n_trust, int(next_q.shape[0])
+    successors = pomdp.successor_table
+    slots = successors.shape[1]
+    valid = successors >= 0                                              # [x, s]
+    x2 = np.where(valid, successors, 0)
+    # P(h, e, θ' | θ, inc): the observation and the next trust, jointly
+    joint = pomdp.observation_likelihood[..., None] * pomdp.driver.trust_transition  # [i, h, e, θ, θ']
+    weights = joint[pomdp.road_incident[x2]]                             # [x, s, h, e, θ, θ']
+    has_next = valid[x2]                                                 # [x, s, s']: slot s' of x2
+    xs = np.arange(n_x)[None, :, None, None]
+    ts = np.arange(n_t)[None, None, :, None]
+    table = np.full((horizon + 1, slots, n_x, n_t, n_q), -np.inf)
+    done = np.asarray(accepting, dtype=float)[next_q].max(axis=3)      # [q, x2, θ']: accepted on arrival
+    for k in range(1, horizon + 1):
+        if k == 1:   # no junction after this one: whether the new road's label accepts
+            arrive = np.einsum("xshetu,qxsu->xstq", weights, done[:, x2, :])
+        else:
+            previous = np.where(np.isfinite(table[k - 1]), table[k - 1], 0.0)   # [s', x, θ, q]
+            # max over the belief bits of the value at the DFA state they lead to: [s', q, x, θ']
+            best = np.stack([previous[b][xs, ts, next_q].max(axis=3) for b in range(slots)])
+            per_slot = np.einsum("xshetu,Sqxsu->xshetqS", weights, best[:, :, x2, :])
+            per_slot = np.where(has_next[:, :, None, None, None, None, :], per_slot, -np.inf)
+            chosen = per_slot.max(axis=6)                                # the next slot, on (h, e)
+            # a road without successors ends the drive there: what its label accepted
+            stuck = np.einsum("xshetu,qxsu->xshetq", weights, done[:, x2, :])
+            chosen = np.where(has_next.any(axis=2)[:, :, None, None, None, None], chosen, stuck)
+            arrive = chosen.sum(axis=(2, 3))                             # [x, s, θ, q]
+        value = np.minimum(1.0, arrive + RELAXATION_MARGIN)
+        value[:, :, :, np.asarray(accepting, dtype=bool)] = 1.0
+        value[:, :, :, np.asarray(rejecting, dtype=bool)] = 0.0
+        table[k] = np.where(valid[:, :, None, None], value, -np.inf).transpose(1, 0, 2, 3)
+    return table
+
+
+LEAF_CHUNK = 16_384   # leaves valued at once (bounds the arrays of InformedLeaves.slot_values)
+
+
+@dataclass(frozen=True, eq=False)
+class InformedLeaves:
+    """Upper bounds on the value of each successor slot at joint beliefs J over (θ, q), within a
+    horizon: the slot's junction is chosen on J, the next one on J and that junction's observation
+    (h, e), and from there on informed_values bounds the rest. Choosing both on J rather than on θ
+    is what a policy can do, so these never exceed Σ J informed_values."""
+
+    pomdp: TrustPOMDP
+    weights: np.ndarray     # [n_incidents, h, e, θ, θ']: P(h, e, θ' | θ, incident)
+    arrival: np.ndarray     # [n_q, n_x, θ']: accepted on arriving on the road, best belief bits
+    best: np.ndarray        # [K + 1, slots, n_q, n_x, θ']: informed values, best belief bits (0: no slot)
+
+    @classmethod
+    def of(cls, pomdp: TrustPOMDP, next_q: np.ndarray, accepting: np.ndarray, rejecting: np.ndarray,
+           horizon: int) -> InformedLeaves:
+        table = informed_values(pomdp, next_q, accepting, rejecting, horizon)
+        table = np.where(np.isfinite(table), table, 0.0)
+        xs = np.arange(pomdp.n_states)[None, :, None, None]
+        ts = np.arange(pomdp.n_trust)[None, None, :, None]
+        best = np.stack([np.stack([level[s][xs, ts, next_q].max(axis=3) for s in range(level.shape[0])])
+                         for level in table])
+        weights = pomdp.observation_likelihood[..., None] * pomdp.driver.trust_transition
+        arrival = np.asarray(accepting, dtype=float)[next_q].max(axis=3)
+        return cls(pomdp=pomdp, weights=weights, arrival=arrival, best=best)
+
+    def slot_values(self, x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        """float [n, slots]: bounds on the value of each successor slot of roads x [n] at joint
+        beliefs [n, n_trust, n_q] (live mass only) with `left` ≥ 1 junctions left (-inf where a road
+        has no such slot)."""
+        successors = self.pomdp.successor_table[np.asarray(x, dtype=np.int64)]
+        out = np.full(successors.shape, -np.inf)
+        for start in range(0, successors.shape[0], LEAF_CHUNK):
+            part = slice(start, start + LEAF_CHUNK)
+            out[part] = self._chunk(successors[part], joint[part], left)
+        return out
+
+    def _chunk(self, successors: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        valid = self.pomdp.successor_table >= 0
+        out = np.full(successors.shape, -np.inf)
+        for slot in range(successors.shape[1]):
+            rows = np.flatnonzero(successors[:, slot] >= 0)
+            x2 = successors[rows, slot]
+            # J(θ, q) P(h, e, θ' | θ, inc(x2)): [n, h, e, q, θ']
+            mass = np.einsum("ntq,nhetu->nhequ", joint[rows], self.weights[self.pomdp.road_incident[x2]])
+            value = np.einsum("nhequ,qnu->nhe", mass, self.arrival[:, x2, :])
+            if left > 1:
+                nexts = valid[x2]                                                  # [n, slots']
+                after = np.einsum("nhequ,Sqnu->nheS", mass, self.best[left - 1][:, :, x2, :])
+                after = np.where(nexts[:, None, None, :], after, -np.inf).max(axis=3)
+                # a road without successors ends the drive there: what arriving on it accepted
+                value = np.where(nexts.any(axis=1)[:, None, None], after, value)
+            out[rows, slot] = value.sum(axis=(1, 2))
+        return out
+
+
 @dataclass(frozen=True, eq=False)
 class RelaxedGuide:
     """The relaxation's action values at a joint belief: for each successor slot of road x,
@@ -134,7 +235,12 @@ def relaxed_guide(pomdp: TrustPOMDP, spec: Spec, horizon: int | None) -> Relaxed
     """The RelaxedGuide of `spec` for junction horizon `horizon` (None: unbounded)."""
     compiled = compile_spec(spec, pomdp.town)
     next_q = relaxed_next_q(pomdp, spec, compiled.dfa, compiled.labeller)    # [q, x, θ, bits]
-    values = relaxed_values(pomdp, spec, horizon)
+    return guide_of(pomdp, next_q, relaxed_values(pomdp, spec, horizon), horizon)
+
+
+def guide_of(pomdp: TrustPOMDP, next_q: np.ndarray, values: np.ndarray, horizon: int | None) -> RelaxedGuide:
+    """The RelaxedGuide of the relaxation's values `values` (relaxed_values) and successor DFA
+    states `next_q` (relaxed_next_q)."""
     tables = values[None] if horizon is None else values                      # [K, x, θ, q]
     n_x, n_t = pomdp.n_states, pomdp.n_trust
     xs = np.arange(n_x)[None, :, None, None]

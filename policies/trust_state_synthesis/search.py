@@ -35,7 +35,9 @@ from trustroute.policies.belief.exact_labels import symbol_code
 from trustroute.policies.belief.trust_state_filter import JointFilter, distinct_nodes, joint_filter
 from trustroute.policies.belief.trust_state_relaxation import (
     RELAXATION_MARGIN,
+    InformedLeaves,
     RelaxedGuide,
+    guide_of,
     relaxed_next_q,
     relaxed_values,
 )
@@ -205,6 +207,13 @@ def _back_up(edges: tuple[np.ndarray, ...], grow: np.ndarray, follow: np.ndarray
     return low, high, slot
 
 
+def _leaf_upper(accepted: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """A leaf's upper bound from its accepted mass and its slots' bounds `values` [n, slots] (the
+    best slot; a road without successors ends the drive, where only what is accepted counts)."""
+    optimistic = np.maximum(values.max(axis=1), 0.0) + RELAXATION_MARGIN
+    return np.minimum(1.0, accepted + optimistic)
+
+
 def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
                  belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
                  max_nodes: int = 200_000) -> JointBounds:
@@ -263,11 +272,17 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         steps = left if horizon is not None else OPEN_LOOP_STEPS
         return continuation.lower(x, joint, steps, budget)
 
+    # Within a horizon each slot of a leaf is bounded by InformedLeaves (its next two junctions
+    # chosen on its belief, then the relaxation that learns θ and q a junction late); unbounded, by
+    # the relaxation that observes θ and q, the next junction chosen on the belief.
+    slot_values = (InformedLeaves.of(pomdp, relaxed_q, accepting, rejecting, horizon).slot_values
+                   if horizon is not None else guide_of(pomdp, relaxed_q, relaxed, horizon).action_values)
+
     def leaf_bounds(x: np.ndarray, joint: np.ndarray, left: int) -> tuple[np.ndarray, np.ndarray]:
-        table = relaxed[left] if horizon is not None else relaxed
         accepted = joint[:, :, accepting].sum(axis=(1, 2))
-        optimistic = np.einsum("ntq,ntq->n", joint * live_q, table[x])
-        return accepted, np.minimum(1.0, accepted + optimistic)
+        if horizon is not None and left == 0:     # no junction left: what is accepted now
+            return accepted, accepted
+        return accepted, _leaf_upper(accepted, slot_values(x, joint * live_q, left))
 
     start = town.state_index(spec.start)
     b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
