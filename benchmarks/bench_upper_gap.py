@@ -1,7 +1,8 @@
-"""Why Storm's upper bound is tighter than ours on the paper's town with the trust atom at H = 20
+"""Our upper bound against Storm's on the paper's town with the trust atom at H = 20
 (docs/peers.md): the synthesis at the peer table's τ = 1e-3 and at τ = 1e-6 (so the rounds go on
 until the time limit), 60 s each, with every round's nodes per level, search upper bound and cut
-nodes. Storm's discretisation gives 0.99707 there (the peer table's run).
+nodes. Storm's discretisation gives 0.99707 there (the peer table's run); `above_storm_upper` is
+negative where ours is the tighter.
 """
 
 from __future__ import annotations
