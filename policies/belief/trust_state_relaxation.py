@@ -103,14 +103,18 @@ def informed_values(pomdp: TrustPOMDP, next_q: np.ndarray, accepting: np.ndarray
     # P(h, e, θ' | θ, inc): the observation and the next trust, jointly
     joint = pomdp.observation_likelihood[..., None] * pomdp.driver.trust_transition  # [i, h, e, θ, θ']
     weights = joint[pomdp.road_incident[x2]]                             # [x, s, h, e, θ, θ']
-    has_next = valid[x2]                                                 # [x, s, s']: slot s' of x2
+    has_next: np.ndarray = valid[x2]                                     # [x, s, s']: slot s' of x2
+    goes_on = np.asarray(has_next.any(axis=2))                           # x2 has a successor
     xs = np.arange(n_x)[None, :, None, None]
     ts = np.arange(n_t)[None, None, :, None]
     table = np.full((horizon + 1, slots, n_x, n_t, n_q), -np.inf)
     done = np.asarray(accepting, dtype=float)[next_q].max(axis=3)      # [q, x2, θ']: accepted on arrival
+    # per observation, whether the new road's label accepts: the value with no junction after it,
+    # and on a road without successors, where the drive ends
+    arrived = np.einsum("xshetu,qxsu->xshetq", weights, done[:, x2, :])
     for k in range(1, horizon + 1):
-        if k == 1:   # no junction after this one: whether the new road's label accepts
-            arrive = np.einsum("xshetu,qxsu->xstq", weights, done[:, x2, :])
+        if k == 1:
+            arrive = arrived.sum(axis=(2, 3))
         else:
             previous = np.where(np.isfinite(table[k - 1]), table[k - 1], 0.0)   # [s', x, θ, q]
             # max over the belief bits of the value at the DFA state they lead to: [s', q, x, θ']
@@ -118,9 +122,7 @@ def informed_values(pomdp: TrustPOMDP, next_q: np.ndarray, accepting: np.ndarray
             per_slot = np.einsum("xshetu,Sqxsu->xshetqS", weights, best[:, :, x2, :])
             per_slot = np.where(has_next[:, :, None, None, None, None, :], per_slot, -np.inf)
             chosen = per_slot.max(axis=6)                                # the next slot, on (h, e)
-            # a road without successors ends the drive there: what its label accepted
-            stuck = np.einsum("xshetu,qxsu->xshetq", weights, done[:, x2, :])
-            chosen = np.where(has_next.any(axis=2)[:, :, None, None, None, None], chosen, stuck)
+            chosen = np.where(goes_on[:, :, None, None, None, None], chosen, arrived)
             arrive = chosen.sum(axis=(2, 3))                             # [x, s, θ, q]
         value = np.minimum(1.0, arrive + RELAXATION_MARGIN)
         value[:, :, :, np.asarray(accepting, dtype=bool)] = 1.0
@@ -169,22 +171,32 @@ class InformedLeaves:
         return out
 
     def _chunk(self, successors: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
-        valid = self.pomdp.successor_table >= 0
         out = np.full(successors.shape, -np.inf)
         for slot in range(successors.shape[1]):
             rows = np.flatnonzero(successors[:, slot] >= 0)
-            x2 = successors[rows, slot]
-            # J(θ, q) P(h, e, θ' | θ, inc(x2)): [n, h, e, q, θ']
-            mass = np.einsum("ntq,nhetu->nhequ", joint[rows], self.weights[self.pomdp.road_incident[x2]])
-            value = np.einsum("nhequ,qnu->nhe", mass, self.arrival[:, x2, :])
-            if left > 1:
-                nexts = valid[x2]                                                  # [n, slots']
-                after = np.einsum("nhequ,Sqnu->nheS", mass, self.best[left - 1][:, :, x2, :])
-                after = np.where(nexts[:, None, None, :], after, -np.inf).max(axis=3)
-                # a road without successors ends the drive there: what arriving on it accepted
-                value = np.where(nexts.any(axis=1)[:, None, None], after, value)
-            out[rows, slot] = value.sum(axis=(1, 2))
+            incidents = self.pomdp.road_incident[successors[rows, slot]]
+            for incident in np.unique(incidents):   # one shared P(h, e, θ' | θ) per incident kind
+                these = rows[incidents == incident]
+                out[these, slot] = self._arrivals(successors[these, slot], joint[these], incident, left)
         return out
+
+    def _arrivals(self, x2: np.ndarray, joint: np.ndarray, incident: int, left: int) -> np.ndarray:
+        """float [n]: the bound of moving to roads x2 [n] (all with `incident`) from joint beliefs."""
+        n, n_t, n_q = x2.size, self.pomdp.n_trust, self.arrival.shape[0]
+        # Σ_θ J(θ, q) P(h, e, θ' | θ, incident), the observation (h, e) as one axis o, as one matrix
+        # product: [n, o, (q, θ')]
+        weights = self.weights[incident].reshape(-1, n_t, n_t)
+        n_o = weights.shape[0]
+        mass = joint.transpose(0, 2, 1).reshape(n * n_q, n_t) @ weights.transpose(1, 0, 2).reshape(n_t, -1)
+        mass = mass.reshape(n, n_q, n_o, n_t).transpose(0, 2, 1, 3).reshape(n, n_o, n_q * n_t)
+        value = np.matmul(mass, self.arrival[:, x2, :].transpose(1, 0, 2).reshape(n, -1, 1))[:, :, 0]
+        if left > 1:
+            nexts = self.pomdp.successor_table[x2] >= 0                              # [n, slots']
+            best = self.best[left - 1][:, :, x2, :].transpose(2, 1, 3, 0).reshape(n, n_q * n_t, -1)
+            after = np.where(nexts[:, None, :], np.matmul(mass, best), -np.inf).max(axis=2)
+            # a road without successors ends the drive there: what arriving on it accepted
+            value = np.where(nexts.any(axis=1)[:, None], after, value)
+        return value.sum(axis=1)
 
 
 @dataclass(frozen=True, eq=False)
