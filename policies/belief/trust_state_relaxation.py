@@ -40,6 +40,24 @@ def relaxed_next_q(pomdp: TrustPOMDP, spec: Spec, dfa: DFA, labeller: Labeller) 
     return np.asarray(dfa.step_many(q, valuations), dtype=np.int64).reshape(n_q, n_x, n_t, 2 ** m)
 
 
+def over_bits(values: np.ndarray, next_q: np.ndarray) -> np.ndarray:
+    """[q, x, θ]: max over the belief bits of values[x, θ, δ(q, L(x, θ, bits))], for values
+    [n_x, n_trust, n_q] and next_q [n_q, n_x, n_trust, bits] (relaxed_next_q)."""
+    roads = np.arange(values.shape[0])[None, :, None, None]
+    trust = np.arange(values.shape[1])[None, None, :, None]
+    return values[roads, trust, next_q].max(axis=3)
+
+
+def trust_move(pomdp: TrustPOMDP) -> np.ndarray:
+    """[incident, θ, θ']: P(θ' | θ, incident), summed over the observations (h, e)."""
+    return np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, pomdp.driver.trust_transition)
+
+
+def observation_and_trust(pomdp: TrustPOMDP) -> np.ndarray:
+    """[incident, h, e, θ, θ']: P(h, e, θ' | θ, incident), the observation and the next trust."""
+    return pomdp.observation_likelihood[..., None] * pomdp.driver.trust_transition
+
+
 def relaxed_values(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) -> np.ndarray:
     """R [n_x, n_trust, n_q] (unbounded), or [horizon + 1, n_x, n_trust, n_q] with R[k] for k
     junctions left: upper bounds on P(accepted) from (x, θ, q) for any policy."""
@@ -50,16 +68,14 @@ def relaxed_values(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) ->
     accepting = np.asarray(dfa.accepting, dtype=bool)
     rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
     # P(θ' | θ, inc) summed over the observations: the relaxation sees θ, so (h, e) do not matter.
-    move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, pomdp.driver.trust_transition)
+    move = trust_move(pomdp)
     successors = pomdp.successor_table
     valid = successors >= 0
     x2 = np.where(valid, successors, 0)                           # [n_x, slots]
     incident = pomdp.road_incident[x2]
 
     def backup(values: np.ndarray) -> np.ndarray:
-        # best[q, x', θ'] = max over belief bits of values[x', θ', δ(q, L(x', θ', bits))]
-        best = values[np.arange(n_x)[None, :, None, None], np.arange(n_t)[None, None, :, None],
-                      next_q].max(axis=3)
+        best = over_bits(values, next_q)                          # [q, x', θ']
         # per (x, slot, θ, q): Σ_θ' move[inc(x2)][θ, θ'] best[q, x2, θ']
         expected = np.einsum("astu,asqu->astq", move[incident], best.transpose(1, 0, 2)[x2])
         expected = np.where(valid[:, :, None, None], expected, -np.inf).max(axis=1)
@@ -100,13 +116,9 @@ def informed_values(pomdp: TrustPOMDP, next_q: np.ndarray, accepting: np.ndarray
     slots = successors.shape[1]
     valid = successors >= 0                                              # [x, s]
     x2 = np.where(valid, successors, 0)
-    # P(h, e, θ' | θ, inc): the observation and the next trust, jointly
-    joint = pomdp.observation_likelihood[..., None] * pomdp.driver.trust_transition  # [i, h, e, θ, θ']
-    weights = joint[pomdp.road_incident[x2]]                             # [x, s, h, e, θ, θ']
+    weights = observation_and_trust(pomdp)[pomdp.road_incident[x2]]      # [x, s, h, e, θ, θ']
     has_next: np.ndarray = valid[x2]                                     # [x, s, s']: slot s' of x2
     goes_on = np.asarray(has_next.any(axis=2))                           # x2 has a successor
-    xs = np.arange(n_x)[None, :, None, None]
-    ts = np.arange(n_t)[None, None, :, None]
     table = np.full((horizon + 1, slots, n_x, n_t, n_q), -np.inf)
     done = np.asarray(accepting, dtype=float)[next_q].max(axis=3)      # [q, x2, θ']: accepted on arrival
     # per observation, whether the new road's label accepts: the value with no junction after it,
@@ -118,7 +130,7 @@ def informed_values(pomdp: TrustPOMDP, next_q: np.ndarray, accepting: np.ndarray
         else:
             previous = np.where(np.isfinite(table[k - 1]), table[k - 1], 0.0)   # [s', x, θ, q]
             # max over the belief bits of the value at the DFA state they lead to: [s', q, x, θ']
-            best = np.stack([previous[b][xs, ts, next_q].max(axis=3) for b in range(slots)])
+            best = np.stack([over_bits(previous[b], next_q) for b in range(slots)])
             per_slot = np.einsum("xshetu,Sqxsu->xshetqS", weights, best[:, :, x2, :])
             per_slot = np.where(has_next[:, :, None, None, None, None, :], per_slot, -np.inf)
             chosen = per_slot.max(axis=6)                                # the next slot, on (h, e)
@@ -151,13 +163,9 @@ class InformedLeaves:
            horizon: int) -> InformedLeaves:
         table = informed_values(pomdp, next_q, accepting, rejecting, horizon)
         table = np.where(np.isfinite(table), table, 0.0)
-        xs = np.arange(pomdp.n_states)[None, :, None, None]
-        ts = np.arange(pomdp.n_trust)[None, None, :, None]
-        best = np.stack([np.stack([level[s][xs, ts, next_q].max(axis=3) for s in range(level.shape[0])])
-                         for level in table])
-        weights = pomdp.observation_likelihood[..., None] * pomdp.driver.trust_transition
+        best = np.stack([np.stack([over_bits(slot, next_q) for slot in level]) for level in table])
         arrival = np.asarray(accepting, dtype=float)[next_q].max(axis=3)
-        return cls(pomdp=pomdp, weights=weights, arrival=arrival, best=best)
+        return cls(pomdp=pomdp, weights=observation_and_trust(pomdp), arrival=arrival, best=best)
 
     def slot_values(self, x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
         """float [n, slots]: bounds on the value of each successor slot of roads x [n] at joint
@@ -254,9 +262,6 @@ def guide_of(pomdp: TrustPOMDP, next_q: np.ndarray, values: np.ndarray, horizon:
     """The RelaxedGuide of the relaxation's values `values` (relaxed_values) and successor DFA
     states `next_q` (relaxed_next_q)."""
     tables = values[None] if horizon is None else values                      # [K, x, θ, q]
-    n_x, n_t = pomdp.n_states, pomdp.n_trust
-    xs = np.arange(n_x)[None, :, None, None]
-    ts = np.arange(n_t)[None, None, :, None]
-    best = np.stack([table[xs, ts, next_q].max(axis=3) for table in tables])  # [K, q, x, θ]
-    move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, pomdp.driver.trust_transition)
+    best = np.stack([over_bits(table, next_q) for table in tables])           # [K, q, x, θ]
+    move = trust_move(pomdp)
     return RelaxedGuide(pomdp=pomdp, best=best, move=move, horizon=horizon)

@@ -40,6 +40,7 @@ from trustroute.policies.belief.trust_state_relaxation import (
     guide_of,
     relaxed_next_q,
     relaxed_values,
+    trust_move,
 )
 from trustroute.policies.bracket import Bracket
 from trustroute.policies.logic.compiled import compile_spec
@@ -246,7 +247,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     budget = TimeBudget.until(math.inf if limits.deadline is None else limits.deadline)
     if horizon is not None:
         depth = horizon
-    town, driver = pomdp.town, pomdp.driver
+    town = pomdp.town
     compiled = compile_spec(spec, town)
     dfa, labeller = compiled.dfa, compiled.labeller
     filter_ = joint_filter(pomdp, dfa, labeller)
@@ -261,7 +262,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     # a guide, whose lower bound is the value of what the policy does (the guide, not open loop).
     relaxed_q = relaxed_next_q(pomdp, spec, dfa, labeller)
     open_loop = bool(np.all(relaxed_q == relaxed_q[..., :1]))
-    move = np.einsum("ihet,ihetu->itu", pomdp.observation_likelihood, driver.trust_transition)
+    move = trust_move(pomdp)
 
     def relaxed_at(k: int) -> np.ndarray:
         return relaxed[min(k, horizon)] if horizon is not None else relaxed
