@@ -208,6 +208,25 @@ def _back_up(edges: tuple[np.ndarray, ...], grow: np.ndarray, follow: np.ndarray
     return low, high, slot
 
 
+SlotBounds = Callable[[np.ndarray, np.ndarray, int], np.ndarray]   # (x, live joint, left) -> [n, slots]
+
+
+def _slot_bounds(pomdp: TrustPOMDP, next_q: np.ndarray, relaxed: np.ndarray, accepting: np.ndarray,
+                 rejecting: np.ndarray, horizon: int | None) -> SlotBounds:
+    """The bounds of the slots of leaves (x, live joint belief, junctions left). Within a horizon:
+    InformedLeaves (the next two junctions chosen on the belief, then the relaxation that learns θ
+    and q a junction late); unbounded: the next junction chosen on the belief, then the relaxation
+    that observes θ and q. Built at the first leaf: a search that cuts no node has none."""
+    built: list[SlotBounds] = []
+
+    def slot_values(x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
+        if not built:
+            built.append(InformedLeaves.of(pomdp, next_q, accepting, rejecting, horizon).slot_values
+                         if horizon is not None else guide_of(pomdp, next_q, relaxed, horizon).action_values)
+        return built[0](x, joint, left)
+    return slot_values
+
+
 def _leaf_upper(accepted: np.ndarray, values: np.ndarray) -> np.ndarray:
     """A leaf's upper bound from its accepted mass and its slots' bounds `values` [n, slots] (the
     best slot; a road without successors ends the drive, where only what is accepted counts)."""
@@ -273,17 +292,19 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         steps = left if horizon is not None else OPEN_LOOP_STEPS
         return continuation.lower(x, joint, steps, budget)
 
-    # Within a horizon each slot of a leaf is bounded by InformedLeaves (its next two junctions
-    # chosen on its belief, then the relaxation that learns θ and q a junction late); unbounded, by
-    # the relaxation that observes θ and q, the next junction chosen on the belief.
-    slot_values = (InformedLeaves.of(pomdp, relaxed_q, accepting, rejecting, horizon).slot_values
-                   if horizon is not None else guide_of(pomdp, relaxed_q, relaxed, horizon).action_values)
+    slot_values = _slot_bounds(pomdp, relaxed_q, relaxed, accepting, rejecting, horizon)
 
-    def leaf_bounds(x: np.ndarray, joint: np.ndarray, left: int) -> tuple[np.ndarray, np.ndarray]:
+    def leaf_bounds(x: np.ndarray, joint: np.ndarray, left: int,
+                    bounded: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) of nodes: their accepted mass, and for the `bounded` ones with live mass
+        and a junction left, the relaxation's bound (the other nodes' upper bound is their
+        accepted mass, or their children's backup once expanded)."""
         accepted = joint[:, :, accepting].sum(axis=(1, 2))
-        if horizon is not None and left == 0:     # no junction left: what is accepted now
-            return accepted, accepted
-        return accepted, _leaf_upper(accepted, slot_values(x, joint * live_q, left))
+        high = accepted.copy()
+        which = bounded & (filter_.masses(joint)[2] > 0) & (horizon is None or left > 0)
+        if which.any():
+            high[which] = _leaf_upper(accepted[which], slot_values(x[which], (joint * live_q)[which], left))
+        return accepted, high
 
     start = town.state_index(spec.start)
     b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
@@ -340,9 +361,9 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         """(low, high) of a level's nodes with its leaves valued by their bounds."""
         nodes = levels[level]
         left = depth - level
-        low, high = leaf_bounds(nodes["x"], nodes["joint"], left)
-        leaf = (~expandable[level] & (guided_slot[level] < 0) if level < len(expandable)
-                else np.ones(low.size, dtype=bool))
+        grown = expandable[level] if level < len(expandable) else np.zeros(nodes["x"].size, dtype=bool)
+        low, high = leaf_bounds(nodes["x"], nodes["joint"], left, ~grown)
+        leaf = ~grown & (guided_slot[level] < 0) if level < len(expandable) else ~grown
         leaf &= filter_.masses(nodes["joint"])[2] > 0
         if open_loop and leaf.any() and (horizon is None or left > 0):
             low[leaf] = np.maximum(low[leaf], open_loop_lower(nodes["x"][leaf], nodes["joint"][leaf], left))
