@@ -58,6 +58,12 @@ def observation_and_trust(pomdp: TrustPOMDP) -> np.ndarray:
     return pomdp.observation_likelihood[..., None] * pomdp.driver.trust_transition
 
 
+def accepted_on_arrival(accepting: np.ndarray, next_q: np.ndarray) -> np.ndarray:
+    """[q, x, θ]: 1 where arriving on road x with trust θ from DFA state q accepts for the best
+    belief bits, else 0."""
+    return np.asarray(accepting, dtype=float)[next_q].max(axis=3)
+
+
 def relaxed_values(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) -> np.ndarray:
     """R [n_x, n_trust, n_q] (unbounded), or [horizon + 1, n_x, n_trust, n_q] with R[k] for k
     junctions left: upper bounds on P(accepted) from (x, θ, q) for any policy."""
@@ -120,7 +126,7 @@ def informed_values(pomdp: TrustPOMDP, next_q: np.ndarray, accepting: np.ndarray
     has_next: np.ndarray = valid[x2]                                     # [x, s, s']: slot s' of x2
     goes_on = np.asarray(has_next.any(axis=2))                           # x2 has a successor
     table = np.full((horizon + 1, slots, n_x, n_t, n_q), -np.inf)
-    done = np.asarray(accepting, dtype=float)[next_q].max(axis=3)      # [q, x2, θ']: accepted on arrival
+    done = accepted_on_arrival(accepting, next_q)                        # [q, x2, θ']
     # per observation, whether the new road's label accepts: the value with no junction after it,
     # and on a road without successors, where the drive ends
     arrived = np.einsum("xshetu,qxsu->xshetq", weights, done[:, x2, :])
@@ -164,8 +170,8 @@ class InformedLeaves:
         table = informed_values(pomdp, next_q, accepting, rejecting, horizon)
         table = np.where(np.isfinite(table), table, 0.0)
         best = np.stack([np.stack([over_bits(slot, next_q) for slot in level]) for level in table])
-        arrival = np.asarray(accepting, dtype=float)[next_q].max(axis=3)
-        return cls(pomdp=pomdp, weights=observation_and_trust(pomdp), arrival=arrival, best=best)
+        return cls(pomdp=pomdp, weights=observation_and_trust(pomdp),
+                   arrival=accepted_on_arrival(accepting, next_q), best=best)
 
     def slot_values(self, x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
         """float [n, slots]: bounds on the value of each successor slot of roads x [n] at joint

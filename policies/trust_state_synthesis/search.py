@@ -217,7 +217,7 @@ def _slot_bounds(pomdp: TrustPOMDP, next_q: np.ndarray, relaxed: np.ndarray, acc
     InformedLeaves (the next two junctions chosen on the belief, then the relaxation that learns θ
     and q a junction late); unbounded: the next junction chosen on the belief, then the relaxation
     that observes θ and q. Built at the first leaf: a search that cuts no node has none."""
-    built: list[SlotBounds] = []
+    built: list[SlotBounds] = []   # this search's own, built at its first leaf
 
     def slot_values(x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
         if not built:
@@ -296,12 +296,12 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
 
     def leaf_bounds(x: np.ndarray, joint: np.ndarray, left: int,
                     bounded: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(lower, upper) of nodes: their accepted mass, and for the `bounded` ones with live mass
-        and a junction left, the relaxation's bound (the other nodes' upper bound is their
+        """(lower, upper) of nodes: their accepted mass, and for the `bounded` ones (with live mass)
+        with a junction left, the relaxation's bound (the other nodes' upper bound is their
         accepted mass, or their children's backup once expanded)."""
         accepted = joint[:, :, accepting].sum(axis=(1, 2))
         high = accepted.copy()
-        which = bounded & (filter_.masses(joint)[2] > 0) & (horizon is None or left > 0)
+        which = bounded & (horizon is None or left > 0)
         if which.any():
             high[which] = _leaf_upper(accepted[which], slot_values(x[which], (joint * live_q)[which], left))
         return accepted, high
@@ -362,9 +362,9 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         nodes = levels[level]
         left = depth - level
         grown = expandable[level] if level < len(expandable) else np.zeros(nodes["x"].size, dtype=bool)
-        low, high = leaf_bounds(nodes["x"], nodes["joint"], left, ~grown)
-        leaf = ~grown & (guided_slot[level] < 0) if level < len(expandable) else ~grown
-        leaf &= filter_.masses(nodes["joint"])[2] > 0
+        alive = filter_.masses(nodes["joint"])[2] > 0
+        low, high = leaf_bounds(nodes["x"], nodes["joint"], left, ~grown & alive)
+        leaf = (~grown & (guided_slot[level] < 0) if level < len(expandable) else ~grown) & alive
         if open_loop and leaf.any() and (horizon is None or left > 0):
             low[leaf] = np.maximum(low[leaf], open_loop_lower(nodes["x"][leaf], nodes["joint"][leaf], left))
         return low, high
