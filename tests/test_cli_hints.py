@@ -5,12 +5,14 @@ option; the road hint names roads of the town; the Rerun hint serves on 127.0.0.
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
 import click
 import pytest
 
+from tests.test_architecture import parsed
 from trustroute.core.errors import InputError
 from trustroute.harness.cli import COMMANDS, cli
 
@@ -32,13 +34,15 @@ def _docstrings(tree: ast.AST) -> set[int]:
     return found
 
 
+@functools.cache
 def message_hints() -> list[tuple[str, list[str]]]:
     """(where, tokens after "trustroute") for every mention in a string of the package's code
-    (docstrings left out: they describe, they do not instruct)."""
+    (docstrings left out: they describe, they do not instruct). Read when a test asks, not when
+    the tests are collected: each pytest process collects this file, one runs its tests."""
     hints = []
     for package in PACKAGES:
         for path in sorted((ROOT / package).rglob("*.py")):
-            tree = ast.parse(path.read_text())
+            tree = parsed(path)
             docstrings = _docstrings(tree)
             for node in ast.walk(tree):
                 if (isinstance(node, ast.Constant) and isinstance(node.value, str)
@@ -47,9 +51,6 @@ def message_hints() -> list[tuple[str, list[str]]]:
                         tokens = [token.rstrip(".") for token in match.group(1).split()]
                         hints.append((f"{path.relative_to(ROOT)}:{node.lineno}", tokens))
     return hints
-
-
-HINTS = message_hints()
 
 
 def _options(command: click.Command) -> set[str]:
@@ -74,15 +75,14 @@ def resolve(tokens: list[str]) -> str | None:
 
 
 def test_the_scan_finds_the_hints():
-    assert len(HINTS) >= 20
-    assert any(tokens[:2] == ["net", "build"] for _, tokens in HINTS)
+    assert len(message_hints()) >= 20
+    assert any(tokens[:2] == ["net", "build"] for _, tokens in message_hints())
 
 
-@pytest.mark.parametrize(("where", "tokens"), HINTS, ids=[where for where, _ in HINTS])
-def test_every_hinted_command_exists(where, tokens):
-    if tokens[0] in PROSE:
-        return
-    assert resolve(tokens) is None, f"{where}: 'trustroute {' '.join(tokens)}': {resolve(tokens)}"
+def test_every_hinted_command_exists():
+    problems = [f"{where}: 'trustroute {' '.join(tokens)}': {problem}" for where, tokens in message_hints()
+                if tokens[0] not in PROSE and (problem := resolve(tokens)) is not None]
+    assert problems == []
 
 
 def test_prose_words_are_not_commands():

@@ -44,11 +44,14 @@ def decimal(value: float) -> Fraction:
 
 
 def _relative_gap(approximate: float, exact: Fraction) -> float:
-    """|approximate - exact| / |exact|, rounded up; inf when exact is 0 and approximate is not."""
+    """|approximate - exact| / |exact|, rounded up; inf when exact is 0 and approximate is not.
+    In integers: Python's int / int is correctly rounded, as float(Fraction) is."""
     if exact == 0:
         return 0.0 if approximate == 0 else math.inf
-    gap = abs(Fraction(approximate) - exact) / abs(exact)
-    return float(gap) * (1 + 4 * UNIT_ROUNDOFF)
+    numerator, denominator = float(approximate).as_integer_ratio()
+    difference = abs(numerator * exact.denominator - exact.numerator * denominator)
+    gap = difference / (denominator * abs(exact.numerator))
+    return gap * (1 + 4 * UNIT_ROUNDOFF)
 
 
 def symbol_code(incident: np.ndarray | int, human_action: np.ndarray | int,
@@ -78,7 +81,7 @@ class ExactFilter:
     _parent: list[int] = field(init=False)
     _code: list[int] = field(init=False)
     _length: np.ndarray = field(init=False)       # int64 [capacity]: word lengths, by word id
-    _ids: dict[tuple[int, int], int] = field(init=False)
+    _ids: dict[int, int] = field(init=False)        # word * n_codes + code -> word id
     _beliefs: dict[int, tuple[Fraction, ...]] = field(init=False)
 
     def __post_init__(self, like: ExactFilter | None) -> None:
@@ -113,9 +116,12 @@ class ExactFilter:
         if words.size == 1:   # one history (an episode at a time): no pairs to deduplicate
             out[moving] = self.extend_one(int(words[moving][0]), int(codes[moving][0]))
             return out
-        pairs, inverse = np.unique(np.stack([words[moving], codes[moving]], axis=1), axis=0,
-                                   return_inverse=True)
-        ids = np.array([self.extend_one(word, code) for word, code in pairs.tolist()], dtype=np.int64)
+        # one integer per (word, code) pair: a 1-D unique is many times cheaper than rows'
+        n_codes = self.changing.size
+        keys, inverse = np.unique(words[moving] * n_codes + codes[moving], return_inverse=True)
+        known, add = self._ids.get, self._add
+        ids = np.array([known(key) or add(key // n_codes, key % n_codes, key) for key in keys.tolist()],
+                       dtype=np.int64)
         out[moving] = ids[inverse.ravel()]
         return out
 
@@ -123,15 +129,18 @@ class ExactFilter:
         """The id of word + the symbol of `code` (`extend` for one history)."""
         if not self.changing[code]:
             return word
-        found = self._ids.get((word, code))
-        if found is None:
-            found = len(self._parent)
-            self._ids[(word, code)] = found
-            self._parent.append(word)
-            self._code.append(code)
-            if found == self._length.size:   # doubling: a lookup of lengths never copies them all
-                self._length = np.concatenate([self._length, np.zeros_like(self._length)])
-            self._length[found] = self._length[word] + 1
+        key = word * self.changing.size + code
+        return self._ids.get(key) or self._add(word, code, key)
+
+    def _add(self, word: int, code: int, key: int) -> int:
+        """A new word: `word` + the changing symbol `code` (`key` is the pair's, as in `extend`);
+        its id, never 0 (the empty word's)."""
+        found = self._ids[key] = len(self._parent)
+        self._parent.append(word)
+        self._code.append(code)
+        if found == self._length.size:   # doubling: a lookup of lengths never copies them all
+            self._length = np.concatenate([self._length, np.zeros_like(self._length)])
+        self._length[found] = self._length[word] + 1
         return found
 
     def lengths(self, words: np.ndarray) -> np.ndarray:
@@ -172,30 +181,55 @@ def same_symbol_arrays(one: TrustPOMDP, other: TrustPOMDP) -> bool:
 def _exact_symbol_matrices(pomdp: TrustPOMDP, rule: BeliefRule
                            ) -> tuple[dict[int, tuple[tuple[Fraction, ...], ...]], np.ndarray, float]:
     """(exact matrix W_o per symbol code, bool per code: W_o is not c·I, the largest relative gap
-    of the float matrices to the exact ones) of `pomdp` under `rule`."""
+    of the float matrices to the exact ones) of `pomdp` under `rule`.
+
+    A model's arrays hold few distinct numbers (a population's lifted transitions are mostly the
+    zeros between types), so each decimal is computed once per number (`_Exact`)."""
     driver, n = pomdp.driver, pomdp.n_trust
     floats = (pomdp.weighted_transition if rule == "bayes" else driver.trust_transition)
     n_inc = len(driver.incident_types)
     one = Fraction(1)
+    exact = _Exact()
     matrices, worst = {}, 0.0
     changing = np.zeros(n_inc * 4, dtype=bool)
     for i in range(n_inc):
-        takeover = [decimal(t) for t in driver.takeover_probability[i]]
-        failure = [decimal(f) for f in driver.failure_probability[i]]
+        takeover = [exact.decimal(t) for t in driver.takeover_probability[i].tolist()]
+        failure = [exact.decimal(f) for f in driver.failure_probability[i].tolist()]
         for h in (0, 1):
             for e in (0, 1):
                 like = [(takeover[k] if h else one - takeover[k])
                         * (failure[k] if e else one - failure[k]) for k in range(n)]
                 weights = like if rule == "bayes" else [one] * n
-                matrix = tuple(tuple(weights[k] * decimal(driver.trust_transition[i, h, e, k, m])
-                                     for m in range(n)) for k in range(n))
+                rows = driver.trust_transition[i, h, e].tolist()
+                matrix = tuple(tuple(exact.product(weights[k], value) for value in rows[k]) for k in range(n))
                 code = int(symbol_code(i, h, e))
                 matrices[code] = matrix
                 changing[code] = not _scaled_identity(matrix)
                 if any(like):
-                    worst = max(worst, max(_relative_gap(floats[i, h, e, k, m], matrix[k][m])
+                    approximate = floats[i, h, e].tolist()
+                    worst = max(worst, max(_relative_gap(approximate[k][m], matrix[k][m])
                                            for k in range(n) for m in range(n)))
     return matrices, changing, worst
+
+
+class _Exact:
+    """The decimals of one conversion, each computed once per distinct float; a zero's products
+    are the one zero."""
+
+    def __init__(self) -> None:
+        self.decimals: dict[float, Fraction] = {}
+
+    def decimal(self, value: float) -> Fraction:
+        found = self.decimals.get(value)
+        if found is None:
+            found = self.decimals[value] = decimal(value)
+        return found
+
+    def product(self, weight: Fraction, value: float) -> Fraction:
+        return ZERO if value == 0 else weight * self.decimal(value)
+
+
+ZERO = Fraction(0)
 
 
 def _scaled_identity(matrix: tuple[tuple[Fraction, ...], ...]) -> bool:

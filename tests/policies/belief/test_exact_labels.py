@@ -129,3 +129,35 @@ def test_rows_merge_only_within_one_word_and_keep_distinct_rows_grouping_otherwi
     assert split_inverse[0] == split_inverse[4] != split_inverse[2]
     assert split_inverse[1] == split_inverse[3] == inverse[1]
     assert split_first[split_inverse[2]] == 2
+
+
+def test_the_conversion_s_numbers_equal_those_computed_entry_by_entry_in_fractions(town):
+    """The symbol matrices and their float gap, computed with each decimal once and the gap in
+    integers, equal the direct computation: every entry weight·decimal(T) as a Fraction, and the
+    gap as |Fraction(float) - exact| / |exact| in Fractions, rounded up the same way."""
+    from trustroute.policies.belief.exact_labels import _exact_symbol_matrices
+    from trustroute.policies.logic.labelling import UNIT_ROUNDOFF
+
+    rng = np.random.default_rng(5)
+    pomdp = build_pomdp(town, random_driver(rng, ("none", "pedestrian", "obstacle", "truck")))
+    driver, n = pomdp.driver, pomdp.n_trust
+    for rule in ("bayes", "paper"):
+        matrices, _, worst = _exact_symbol_matrices(pomdp, rule)
+        floats = pomdp.weighted_transition if rule == "bayes" else driver.trust_transition
+        expected_worst = 0.0
+        for i in range(len(driver.incident_types)):
+            for h in (0, 1):
+                for e in (0, 1):
+                    t = [decimal(v) for v in driver.takeover_probability[i]]
+                    f = [decimal(v) for v in driver.failure_probability[i]]
+                    like = [(t[k] if h else 1 - t[k]) * (f[k] if e else 1 - f[k]) for k in range(n)]
+                    weights = like if rule == "bayes" else [Fraction(1)] * n
+                    matrix = matrices[int(symbol_code(i, h, e))]
+                    for k in range(n):
+                        for m in range(n):
+                            exact = weights[k] * decimal(driver.trust_transition[i, h, e, k, m])
+                            assert matrix[k][m] == exact
+                            if any(like) and exact != 0:
+                                gap = abs(Fraction(float(floats[i, h, e, k, m])) - exact) / abs(exact)
+                                expected_worst = max(expected_worst, float(gap) * (1 + 4 * UNIT_ROUNDOFF))
+        assert worst == expected_worst
