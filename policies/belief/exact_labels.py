@@ -89,7 +89,7 @@ class ExactFilter:
             self.matrices, self.changing = dict(like.matrices), like.changing.copy()
             self.step_distance = like.step_distance
         else:
-            self.matrices, self.changing, worst = _exact_symbol_matrices(self.pomdp, self.rule)
+            self.matrices, self.changing, worst = exact_symbol_matrices(self.pomdp, self.rule)
             g, u = gamma(self.pomdp.n_trust), UNIT_ROUNDOFF
             self.step_distance = (math.log((1 + g) * (1 + u) / ((1 - g) * (1 - u)))
                                   + (math.log((1 + worst) / (1 - worst)) if worst < 1 else math.inf))
@@ -178,7 +178,7 @@ def same_symbol_arrays(one: TrustPOMDP, other: TrustPOMDP) -> bool:
                                                       (a.trust_transition, b.trust_transition))))
 
 
-def _exact_symbol_matrices(pomdp: TrustPOMDP, rule: BeliefRule
+def exact_symbol_matrices(pomdp: TrustPOMDP, rule: BeliefRule
                            ) -> tuple[dict[int, tuple[tuple[Fraction, ...], ...]], np.ndarray, float]:
     """(exact matrix W_o per symbol code, bool per code: W_o is not c·I, the largest relative gap
     of the float matrices to the exact ones) of `pomdp` under `rule`.

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from tests.policies.evaluation.test_random_models import random_driver
-from trustroute.policies.belief.exact_labels import decimal, exact_labels, symbol_code
+from trustroute.policies.belief.exact_labels import decimal, exact_labels, exact_symbol_matrices, symbol_code
 from trustroute.policies.logic.compiled import compile_spec
-from trustroute.policies.logic.labelling import atom_values
+from trustroute.policies.logic.labelling import UNIT_ROUNDOFF, atom_values
 from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.model.trust_pomdp import build_pomdp
 
@@ -135,14 +135,11 @@ def test_the_conversion_s_numbers_equal_those_computed_entry_by_entry_in_fractio
     """The symbol matrices and their float gap, computed with each decimal once and the gap in
     integers, equal the direct computation: every entry weight·decimal(T) as a Fraction, and the
     gap as |Fraction(float) - exact| / |exact| in Fractions, rounded up the same way."""
-    from trustroute.policies.belief.exact_labels import _exact_symbol_matrices
-    from trustroute.policies.logic.labelling import UNIT_ROUNDOFF
-
     rng = np.random.default_rng(5)
     pomdp = build_pomdp(town, random_driver(rng, ("none", "pedestrian", "obstacle", "truck")))
     driver, n = pomdp.driver, pomdp.n_trust
     for rule in ("bayes", "paper"):
-        matrices, _, worst = _exact_symbol_matrices(pomdp, rule)
+        matrices, _, worst = exact_symbol_matrices(pomdp, rule)
         floats = pomdp.weighted_transition if rule == "bayes" else driver.trust_transition
         expected_worst = 0.0
         for i in range(len(driver.incident_types)):
