@@ -173,7 +173,10 @@ def _children(pomdp: TrustPOMDP, filter_: JointFilter, belief_rule: BeliefRule, 
                 nodes["belief"][p_idx], incident, h, e, rule=belief_rule)[0]
             ok = p_obs > 0
             labels = filter_.labels(belief_rule)
-            words = labels.filter.extend(nodes["word"][p_idx][ok], symbol_code(incident[ok], h, e))
+            # a history's word decides only belief labels: without them every node has the empty
+            # word, and the filter interns none (some 400,000 words on the 5 x 5 grid otherwise)
+            words = (labels.filter.extend(nodes["word"][p_idx][ok], symbol_code(incident[ok], h, e))
+                     if filter_.labeller.belief_columns.size else np.zeros(int(ok.sum()), dtype=np.int64))
             joint = filter_.update(nodes["joint"][p_idx][ok], posterior[ok], belief[ok], x2[ok],
                                    (incident[ok], h, e), p_obs[ok], words, labels)
             child_parts.append((p_idx[ok], np.full(int(ok.sum()), slot), x2[ok], joint, posterior[ok],
@@ -351,8 +354,12 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
             child["frozen"] = rank >= max_nodes
             if guide is not None:       # the next ones follow the guide, the rest are leaves
                 child["guided"] = child["frozen"] & (rank < max_nodes + guided_nodes)
+        # What the backward pass reads of the level just expanded: its roads and joint beliefs (the
+        # leaves' bounds) and its expanded nodes' AV beliefs (the decisions); the rest was only
+        # for making children. The edges' indices as int32, slots as int8: half the bytes.
+        levels[-1] = dict(x=nodes["x"], joint=nodes["joint"], belief=nodes["belief"][grow])
         levels.append(child)
-        edges.append((parent, slot_of, inverse, p_obs))
+        edges.append((parent.astype(np.int32), slot_of.astype(np.int8), inverse.astype(np.int32), p_obs))
 
     # Backward: leaves by their bounds, expanded nodes by the best action's expectation.
     n_levels = len(levels)
@@ -380,7 +387,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     decided.sort(key=lambda item: item[0])
     n_t, n_q = pomdp.n_trust, filter_.n_q
     parts = [(np.full(nodes.size, level, dtype=np.int64), levels[level]["x"][nodes],
-              levels[level]["joint"][nodes], levels[level]["belief"][nodes], slot)
+              levels[level]["joint"][nodes], levels[level]["belief"], slot)
              for level, nodes, slot in decided]
     empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, n_t, n_q)),
              np.zeros((0, n_t)), np.zeros(0, dtype=np.int64))
