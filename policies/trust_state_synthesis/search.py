@@ -356,10 +356,12 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
                 child["guided"] = child["frozen"] & (rank < max_nodes + guided_nodes)
         # What the backward pass reads of the level just expanded: its roads and joint beliefs (the
         # leaves' bounds) and its expanded nodes' AV beliefs (the decisions); the rest was only
-        # for making children. The edges' indices as int32, slots as int8: half the bytes.
+        # for making children. The edges' indices as int32, slots in the smallest type that holds
+        # them (a byte on any town): half the bytes.
         levels[-1] = dict(x=nodes["x"], joint=nodes["joint"], belief=nodes["belief"][grow])
         levels.append(child)
-        edges.append((parent.astype(np.int32), slot_of.astype(np.int8), inverse.astype(np.int32), p_obs))
+        edges.append((parent.astype(np.int32), slot_of.astype(np.min_scalar_type(slots)),
+                      inverse.astype(np.int32), p_obs))
 
     # Backward: leaves by their bounds, expanded nodes by the best action's expectation.
     n_levels = len(levels)
