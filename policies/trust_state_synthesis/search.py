@@ -306,7 +306,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         high = accepted.copy()
         which = bounded & (horizon is None or left > 0)
         if which.any():
-            high[which] = _leaf_upper(accepted[which], slot_values(x[which], (joint * live_q)[which], left))
+            high[which] = _leaf_upper(accepted[which], slot_values(x[which], joint[which] * live_q, left))
         return accepted, high
 
     start = town.state_index(spec.start)
@@ -316,14 +316,15 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     edges = []          # per level: (parent, slot, child, p_obs) for the children of that level
     expandable = []     # per level: bool per node, expanded with every action
     guided_slot = []    # per level: the guide's action slot per node expanded with it alone, else -1
+    alive = []          # per level: bool per node, some of its mass still live
     cut_total = 0
     stopped = False     # the expansion's time is up: no further level is expanded
     # The forward pass gets EXPAND_SHARE of the time, the backward pass (open-loop values) the rest.
     expand_until = budget.share(EXPAND_SHARE)
     for level in range(depth + 1):
         nodes = levels[-1]
-        _, _, live = filter_.masses(nodes["joint"])
-        open_ = (live > 0) & (nodes["mass"] >= prune_below) & (level < depth)
+        alive.append(filter_.masses(nodes["joint"])[2] > 0)
+        open_ = alive[level] & (nodes["mass"] >= prune_below) & (level < depth)
         if budget.expired(expand_until):
             stopped = True
             grow = np.zeros_like(open_)
@@ -363,17 +364,17 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         edges.append((parent.astype(np.int32), slot_of.astype(np.min_scalar_type(slots)),
                       inverse.astype(np.int32), p_obs))
 
-    # Backward: leaves by their bounds, expanded nodes by the best action's expectation.
+    # Backward: leaves by their bounds, expanded nodes by the best action's expectation. Every
+    # level has its masks: the forward pass reaches each level it makes, and stops at one.
     n_levels = len(levels)
 
     def level_leaf_bounds(level: int) -> tuple[np.ndarray, np.ndarray]:
         """(low, high) of a level's nodes with its leaves valued by their bounds."""
         nodes = levels[level]
         left = depth - level
-        grown = expandable[level] if level < len(expandable) else np.zeros(nodes["x"].size, dtype=bool)
-        alive = filter_.masses(nodes["joint"])[2] > 0
-        low, high = leaf_bounds(nodes["x"], nodes["joint"], left, ~grown & alive)
-        leaf = (~grown & (guided_slot[level] < 0) if level < len(expandable) else ~grown) & alive
+        grown = expandable[level]
+        low, high = leaf_bounds(nodes["x"], nodes["joint"], left, ~grown & alive[level])
+        leaf = ~grown & (guided_slot[level] < 0) & alive[level]
         if open_loop and leaf.any() and (horizon is None or left > 0):
             low[leaf] = np.maximum(low[leaf], open_loop_lower(nodes["x"][leaf], nodes["joint"][leaf], left))
         return low, high
