@@ -127,20 +127,37 @@ def _hash_multipliers(width: int) -> np.ndarray:
     return np.random.default_rng(20261201).integers(0, 2**63, size=width, dtype=np.uint64) * 2 + 1
 
 
-def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(first, inverse) for the bit-identical rows of a float matrix [n, width]: first[k] is the
-    first row of the k-th distinct row, inverse[i] the distinct row of row i. The rows are
-    grouped by a 64-bit hash of their bits (sorting n integers instead of n byte strings) and the
-    grouping is then checked bit for bit; should two different rows share a hash, the rows' bytes
-    are sorted instead. Groups are numbered in hash order."""
-    rows = np.ascontiguousarray(rows, dtype=float)
-    if rows.shape[0] == 0:
+HASH_CHUNK = 32_768   # rows hashed and checked at a time: the temporaries stay a few MB
+
+
+def distinct_rows(*blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(first, inverse) for the bit-identical rows of a float matrix [n, width], given as one or
+    more blocks of its columns ([n, w_i] each, in order): first[k] is the first row of the k-th
+    distinct row, inverse[i] the distinct row of row i. The rows are grouped by a 64-bit hash of
+    their bits (sorting n integers instead of n byte strings) and the grouping is then checked bit
+    for bit; should two different rows share a hash, the rows' bytes are sorted instead. Groups
+    are numbered in hash order. The hash is a sum modulo 2**64 over the columns, so it is the
+    same however the columns are split into blocks and the rows into chunks: the matrix is
+    never put together (a search's level has hundreds of thousands of rows of 43 columns)."""
+    blocks = tuple(np.ascontiguousarray(block, dtype=float) for block in blocks)
+    n = blocks[0].shape[0]
+    if n == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    bits = rows.view(np.uint64)
-    hashes = (bits * _hash_multipliers(rows.shape[1])[None, :]).sum(axis=1, dtype=np.uint64)
+    bits = [block.view(np.uint64) for block in blocks]
+    ends = np.cumsum([block.shape[1] for block in blocks])
+    multipliers = np.split(_hash_multipliers(int(ends[-1])), ends[:-1])
+    hashes = np.zeros(n, dtype=np.uint64)
+    for begin in range(0, n, HASH_CHUNK):
+        rows = slice(begin, begin + HASH_CHUNK)
+        for block, multiplier in zip(bits, multipliers, strict=True):
+            hashes[rows] += (block[rows] * multiplier[None, :]).sum(axis=1, dtype=np.uint64)
     _, first, inverse = np.unique(hashes, return_index=True, return_inverse=True)
-    if not np.array_equal(bits, bits[first[inverse]]):
-        keys = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
+    inverse = inverse.ravel()
+    if not all(np.array_equal(block[rows], block[first[inverse[rows]]])
+               for rows in (slice(begin, begin + HASH_CHUNK) for begin in range(0, n, HASH_CHUNK))
+               for block in bits):
+        matrix = np.concatenate(blocks, axis=1)
+        keys = matrix.view(np.dtype((np.void, matrix.dtype.itemsize * matrix.shape[1]))).ravel()
         _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
     return first, inverse.ravel()
 
@@ -166,9 +183,8 @@ def distinct_nodes(x: np.ndarray, joint: np.ndarray, posterior: np.ndarray,
     """distinct_rows of belief-tree nodes by (road, J, posterior, AV belief), split by the AV
     belief's word: nodes equal in all five have the same decisions and futures, so the searches
     and evaluations merge them."""
-    first, inverse = distinct_rows(np.concatenate([np.asarray(x)[:, None].astype(float),
-                                                   joint.reshape(len(x), -1), posterior, belief],
-                                                  axis=1))
+    first, inverse = distinct_rows(np.asarray(x)[:, None].astype(float), joint.reshape(len(x), -1),
+                                   posterior, belief)
     return split_by_words(first, inverse, words)
 
 

@@ -320,7 +320,7 @@ def merged(frontier: Frontier, memory: np.ndarray | None) -> Frontier:
     columns = [frontier.road[:, None].astype(float), frontier.state.merge_columns()]
     if memory is not None:
         columns.append(memory[:, None])
-    first, inverse = split_by_words(*distinct_rows(np.concatenate(columns, axis=1)),
+    first, inverse = split_by_words(*distinct_rows(*columns),
                                     frontier.state.word)
     probability = np.bincount(inverse, weights=frontier.probability)
     return replace(frontier.take(first), probability=probability)

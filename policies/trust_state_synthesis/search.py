@@ -43,10 +43,11 @@ from trustroute.policies.belief.trust_state_relaxation import (
     trust_move,
 )
 from trustroute.policies.bracket import Bracket
-from trustroute.policies.logic.compiled import compile_spec
+from trustroute.policies.logic.compiled import CompiledSpec, compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.synthesis.budget import TimeBudget
+from trustroute.policies.work_clock import now as clock_now
 from trustroute.policies.work_clock import spend
 
 
@@ -113,15 +114,29 @@ class OpenLoop:
             joint, x = best_joint, best_x
         return joint[:, :, self.accepting].sum(axis=(1, 2))
 
-    def lower(self, x: np.ndarray, joint: np.ndarray, steps: int, budget: TimeBudget) -> np.ndarray:
-        """`accepted` chunk by chunk; 0 (no claim) for the chunks past the deadline."""
+    def values(self, x: np.ndarray, joint: np.ndarray, steps: int, budget: TimeBudget) -> np.ndarray:
+        """`accepted` chunk by chunk, 0 (no claim) for the chunks past the deadline. It spends no
+        work: `charged` spends it where the values are used."""
         out = np.zeros(x.size)
         for begin in range(0, x.size, OPEN_LOOP_CHUNK):
             if budget.expired():
                 break
             part = slice(begin, begin + OPEN_LOOP_CHUNK)
             out[part] = self.accepted(x[part], joint[part], steps)
-            spend(steps * x[part].size)
+        return out
+
+    @staticmethod
+    def charged(values: np.ndarray, steps: int, budget: TimeBudget) -> np.ndarray:
+        """`values` (of `values`, computed earlier) as if computed now: chunk by chunk, each chunk
+        spending its work, 0 for the chunks past the deadline. The clock only moves on, so a
+        chunk this uses was valued by `values` too."""
+        out = np.zeros(values.size)
+        for begin in range(0, values.size, OPEN_LOOP_CHUNK):
+            if budget.expired():
+                break
+            part = slice(begin, begin + OPEN_LOOP_CHUNK)
+            out[part] = values[part]
+            spend(steps * out[part].size)
         return out
 
 
@@ -159,9 +174,11 @@ def _children(pomdp: TrustPOMDP, filter_: JointFilter, belief_rule: BeliefRule, 
               parents: np.ndarray, follow: np.ndarray) -> tuple[np.ndarray, ...]:
     """The children of `parents` (indices into the level `nodes`) along every action, or the
     guide's alone where `follow` names one, per observation of positive probability: (parent,
-    slot, road, J, posterior, AV belief, its word, P(o), reach mass)."""
+    slot, road, J, posterior, AV belief, its word, P(o), reach mass). Under Bayes' rule the AV
+    belief is the posterior, the same array."""
     outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if pomdp.driver.depends_on_performance else (0,))]
-    child_parts = []
+    bayes = belief_rule == "bayes"
+    columns: list[list[np.ndarray]] = [[] for _ in range(9)]
     for slot in range(pomdp.successor_table.shape[1]):
         x2 = pomdp.successor_table[nodes["x"][parents], slot]
         has = (x2 >= 0) & ((follow[parents] < 0) | (follow[parents] == slot))
@@ -169,7 +186,7 @@ def _children(pomdp: TrustPOMDP, filter_: JointFilter, belief_rule: BeliefRule, 
         incident = pomdp.road_incident[x2]
         for h, e in outcomes:
             posterior, p_obs = pomdp.belief_update(nodes["posterior"][p_idx], incident, h, e)
-            belief = posterior if belief_rule == "bayes" else pomdp.belief_update(
+            belief = posterior if bayes else pomdp.belief_update(
                 nodes["belief"][p_idx], incident, h, e, rule=belief_rule)[0]
             ok = p_obs > 0
             labels = filter_.labels(belief_rule)
@@ -179,9 +196,17 @@ def _children(pomdp: TrustPOMDP, filter_: JointFilter, belief_rule: BeliefRule, 
                      if filter_.labeller.belief_columns.size else np.zeros(int(ok.sum()), dtype=np.int64))
             joint = filter_.update(nodes["joint"][p_idx][ok], posterior[ok], belief[ok], x2[ok],
                                    (incident[ok], h, e), p_obs[ok], words, labels)
-            child_parts.append((p_idx[ok], np.full(int(ok.sum()), slot), x2[ok], joint, posterior[ok],
-                                belief[ok], words, p_obs[ok], nodes["mass"][p_idx][ok] * p_obs[ok]))
-    return tuple(np.concatenate([c[j] for c in child_parts]) for j in range(9))
+            part = (p_idx[ok], np.full(int(ok.sum()), slot), x2[ok], joint, posterior[ok],
+                    None if bayes else belief[ok], words, p_obs[ok], nodes["mass"][p_idx][ok] * p_obs[ok])
+            for column, piece in zip(columns, part, strict=True):
+                column.append(piece)
+    # One field at a time, each field's pieces dropped once joined: a level's children are
+    # hundreds of thousands of rows, and joining all fields at once would hold them twice.
+    out: list[np.ndarray] = []
+    for j, column in enumerate(columns):
+        out.append(out[4] if bayes and j == 5 else np.concatenate(column))
+        column.clear()
+    return tuple(out)
 
 
 def _back_up(edges: tuple[np.ndarray, ...], grow: np.ndarray, follow: np.ndarray, slots: int,
@@ -237,6 +262,88 @@ def _leaf_upper(accepted: np.ndarray, values: np.ndarray) -> np.ndarray:
     return np.minimum(1.0, accepted + optimistic)
 
 
+@dataclass(eq=False)
+class _Leaves:
+    """How one search values its leaves. Lower: a leaf's accepted mass, or where the labels do
+    not read the belief (`continuation`; else None) the value of the open-loop continuation
+    (never with a guide's nodes, worth what the guide does). Upper: the relaxation's bound from its
+    slots (`slot_values`). `valuing`: the clock's seconds the continuation took in the forward
+    pass (`keep`), which the expansion's share does not count."""
+
+    depth: int
+    horizon: int | None
+    accepting: np.ndarray
+    live_q: np.ndarray
+    slot_values: SlotBounds
+    continuation: OpenLoop | None
+    budget: TimeBudget
+    valuing: float = 0.0
+
+    @classmethod
+    def of(cls, pomdp: TrustPOMDP, spec: Spec, compiled: CompiledSpec, reach: tuple[int, int | None],
+           budget: TimeBudget) -> _Leaves:
+        """The leaves of a search of `spec` (compiled) to `reach` = (depth, horizon)."""
+        depth, horizon = reach
+        dfa, labeller = compiled.dfa, compiled.labeller
+        relaxed = relaxed_values(pomdp, spec, horizon)
+        accepting = np.asarray(dfa.accepting, dtype=bool)
+        rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
+        relaxed_q = relaxed_next_q(pomdp, spec, dfa, labeller)
+
+        def relaxed_at(k: int) -> np.ndarray:
+            return relaxed[min(k, horizon)] if horizon is not None else relaxed
+
+        continuation = (OpenLoop(pomdp, relaxed_q[..., 0], trust_move(pomdp), relaxed_at, accepting)
+                        if bool(np.all(relaxed_q == relaxed_q[..., :1])) else None)
+        return cls(depth=depth, horizon=horizon, accepting=accepting, live_q=~(accepting | rejecting),
+                   slot_values=_slot_bounds(pomdp, relaxed_q, relaxed, accepting, rejecting, horizon),
+                   continuation=continuation, budget=budget)
+
+    def bounds(self, x: np.ndarray, joint: np.ndarray, left: int,
+               bounded: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) of nodes: their accepted mass, and for the `bounded` ones (with live mass)
+        with a junction left, the relaxation's bound (the other nodes' upper bound is their
+        accepted mass, or their children's backup once expanded)."""
+        accepted = joint[:, :, self.accepting].sum(axis=(1, 2))
+        high = accepted.copy()
+        which = bounded & (self.horizon is None or left > 0)
+        if which.any():
+            live = joint[which] * self.live_q
+            high[which] = _leaf_upper(accepted[which], self.slot_values(x[which], live, left))
+        return accepted, high
+
+    def steps(self, left: int) -> int:
+        """Junctions of the open-loop continuation at a leaf with `left` junctions to the depth."""
+        return left if self.horizon is not None else OPEN_LOOP_STEPS
+
+    def keep(self, nodes: dict, level: int, grow: np.ndarray, follow: np.ndarray, alive: np.ndarray) -> dict:
+        """What the backward pass reads of a level once its expansion is decided: its nodes' leaf
+        bounds, the open-loop values of its leaves, and its expanded nodes' roads, joint and AV
+        beliefs (the decisions). So the joint beliefs of the cut nodes, 28 floats or more each,
+        are not held to the end of the search. Neither valuation spends work here: the
+        continuation's work is spent in the backward pass (`finish`), where it was scheduled."""
+        left = self.depth - level
+        low, high = self.bounds(nodes["x"], nodes["joint"], left, ~grow & alive)
+        leaf = np.flatnonzero(~grow & (follow < 0) & alive)
+        values = np.zeros(0)
+        if self.continuation is not None and leaf.size and (self.horizon is None or left > 0):
+            started = clock_now()
+            values = self.continuation.values(nodes["x"][leaf], nodes["joint"][leaf], self.steps(left),
+                                              self.budget)
+            self.valuing += clock_now() - started
+        return dict(low=low, high=high, x=nodes["x"][grow], joint=nodes["joint"][grow],
+                    belief=nodes["belief"][grow], leaf=leaf[:values.size], values=values)
+
+    def finish(self, part: dict, level: int) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) of a level's nodes with its leaves valued, the continuation's work spent
+        (`part` from `keep`, its bounds handed over)."""
+        low, high, leaf, values = part.pop("low"), part.pop("high"), part.pop("leaf"), part.pop("values")
+        if leaf.size:
+            charged = OpenLoop.charged(values, self.steps(self.depth - level), self.budget)
+            low[leaf] = np.maximum(low[leaf], charged)
+        return low, high
+
+
 def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
                  belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
                  max_nodes: int = 200_000) -> JointBounds:
@@ -269,63 +376,31 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     budget = TimeBudget.until(math.inf if limits.deadline is None else limits.deadline)
     if horizon is not None:
         depth = horizon
-    town = pomdp.town
-    compiled = compile_spec(spec, town)
-    dfa, labeller = compiled.dfa, compiled.labeller
-    filter_ = joint_filter(pomdp, dfa, labeller)
-    relaxed = relaxed_values(pomdp, spec, horizon)
-    accepting = np.asarray(dfa.accepting, dtype=bool)
-    rejecting = np.asarray(dfa.rejecting, dtype=bool) & ~accepting
-    live_q = ~(accepting | rejecting)
+    compiled = compile_spec(spec, pomdp.town)
+    filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
+    leaves = _Leaves.of(pomdp, spec, compiled, (depth, horizon), budget)
     slots = pomdp.successor_table.shape[1]
-
-    # Where the labels do not read the belief, cut nodes and unbounded leaves get the value of an
-    # open-loop continuation as their lower bound instead of their accepted mass alone; not with
-    # a guide, whose lower bound is the value of what the policy does (the guide, not open loop).
-    relaxed_q = relaxed_next_q(pomdp, spec, dfa, labeller)
-    open_loop = bool(np.all(relaxed_q == relaxed_q[..., :1]))
-    move = trust_move(pomdp)
-
-    def relaxed_at(k: int) -> np.ndarray:
-        return relaxed[min(k, horizon)] if horizon is not None else relaxed
-
-    continuation = OpenLoop(pomdp, relaxed_q[..., 0], move, relaxed_at, accepting)
-
-    def open_loop_lower(x: np.ndarray, joint: np.ndarray, left: int) -> np.ndarray:
-        steps = left if horizon is not None else OPEN_LOOP_STEPS
-        return continuation.lower(x, joint, steps, budget)
-
-    slot_values = _slot_bounds(pomdp, relaxed_q, relaxed, accepting, rejecting, horizon)
-
-    def leaf_bounds(x: np.ndarray, joint: np.ndarray, left: int,
-                    bounded: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(lower, upper) of nodes: their accepted mass, and for the `bounded` ones (with live mass)
-        with a junction left, the relaxation's bound (the other nodes' upper bound is their
-        accepted mass, or their children's backup once expanded)."""
-        accepted = joint[:, :, accepting].sum(axis=(1, 2))
-        high = accepted.copy()
-        which = bounded & (horizon is None or left > 0)
-        if which.any():
-            high[which] = _leaf_upper(accepted[which], slot_values(x[which], joint[which] * live_q, left))
-        return accepted, high
-
-    start = town.state_index(spec.start)
+    start = pomdp.town.state_index(spec.start)
     b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
     levels = [dict(x=np.array([start]), joint=filter_.initial(start, b0[0]), posterior=b0.copy(),
                    belief=b0.copy(), word=np.zeros(1, dtype=np.int64), mass=np.ones(1))]
-    edges = []          # per level: (parent, slot, child, p_obs) for the children of that level
+    kept: list[dict] = []   # per level: what the backward pass reads of it (_Leaves.keep)
+    edges: list[tuple[np.ndarray, ...]] = []   # per level: (parent, slot, child, p_obs) of its children
     expandable = []     # per level: bool per node, expanded with every action
     guided_slot = []    # per level: the guide's action slot per node expanded with it alone, else -1
-    alive = []          # per level: bool per node, some of its mass still live
     cut_total = 0
+    n_nodes = 0
     stopped = False     # the expansion's time is up: no further level is expanded
-    # The forward pass gets EXPAND_SHARE of the time, the backward pass (open-loop values) the rest.
+
+    # The expansion gets EXPAND_SHARE of the time, the open-loop values (computed as the levels are
+    # made, their work spent in the backward pass) and the backward pass the rest.
     expand_until = budget.share(EXPAND_SHARE)
     for level in range(depth + 1):
         nodes = levels[-1]
-        alive.append(filter_.masses(nodes["joint"])[2] > 0)
-        open_ = alive[level] & (nodes["mass"] >= prune_below) & (level < depth)
-        if budget.expired(expand_until):
+        n_nodes += nodes["x"].size
+        alive = filter_.masses(nodes["joint"])[2] > 0
+        open_ = alive & (nodes["mass"] >= prune_below) & (level < depth)
+        if budget.expired(min(expand_until + leaves.valuing, budget.deadline)):
             stopped = True
             grow = np.zeros_like(open_)
         else:
@@ -337,6 +412,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         cut_total += int((open_ & ~grow).sum())
         expandable.append(grow)
         guided_slot.append(follow)
+        kept.append(leaves.keep(nodes, level, grow, follow, alive))
         if level == depth or not (grow | (follow >= 0)).any():
             break
         parents = np.flatnonzero(grow | (follow >= 0))
@@ -346,8 +422,12 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         # Merge children with bit-identical (road, J, posterior, AV belief) and one word.
         first, inverse = distinct_nodes(x2, joint, posterior, belief, words)
         merged_mass = np.bincount(inverse, weights=mass)
-        child = dict(x=x2[first], joint=joint[first], posterior=posterior[first], belief=belief[first],
+        merged_posterior = posterior[first]
+        child = dict(x=x2[first], joint=joint[first], posterior=merged_posterior,
+                     belief=merged_posterior if belief is posterior else belief[first],
                      word=words[first], mass=merged_mass)
+        # the children before merging are not read again: not held while the next level's are made
+        del x2, joint, posterior, belief, words, mass
         if first.size > max_nodes:      # keep the likeliest nodes; the others are cut
             order = np.argsort(-merged_mass, kind="stable")
             rank = np.empty(first.size, dtype=np.int64)
@@ -355,43 +435,31 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
             child["frozen"] = rank >= max_nodes
             if guide is not None:       # the next ones follow the guide, the rest are leaves
                 child["guided"] = child["frozen"] & (rank < max_nodes + guided_nodes)
-        # What the backward pass reads of the level just expanded: its roads and joint beliefs (the
-        # leaves' bounds) and its expanded nodes' AV beliefs (the decisions); the rest was only
-        # for making children. The edges' indices as int32, slots in the smallest type that holds
-        # them (a byte on any town): half the bytes.
-        levels[-1] = dict(x=nodes["x"], joint=nodes["joint"], belief=nodes["belief"][grow])
-        levels.append(child)
+        levels[-1] = child
+        # The edges' indices as int32, slots in the smallest type that holds them (a byte on any
+        # town): half the bytes.
         edges.append((parent.astype(np.int32), slot_of.astype(np.min_scalar_type(slots)),
                       inverse.astype(np.int32), p_obs))
+        del parent, slot_of, inverse, p_obs
+    del levels
 
     # Backward: leaves by their bounds, expanded nodes by the best action's expectation. Every
     # level has its masks: the forward pass reaches each level it makes, and stops at one.
-    n_levels = len(levels)
+    n_levels = len(kept)
 
-    def level_leaf_bounds(level: int) -> tuple[np.ndarray, np.ndarray]:
-        """(low, high) of a level's nodes with its leaves valued by their bounds."""
-        nodes = levels[level]
-        left = depth - level
-        grown = expandable[level]
-        low, high = leaf_bounds(nodes["x"], nodes["joint"], left, ~grown & alive[level])
-        leaf = ~grown & (guided_slot[level] < 0) & alive[level]
-        if open_loop and leaf.any() and (horizon is None or left > 0):
-            low[leaf] = np.maximum(low[leaf], open_loop_lower(nodes["x"][leaf], nodes["joint"][leaf], left))
-        return low, high
-
-    lower, upper = level_leaf_bounds(n_levels - 1)
-    decided: list[tuple[int, np.ndarray, np.ndarray]] = []     # (level, nodes, slot)
+    lower, upper = leaves.finish(kept[-1], n_levels - 1)
+    decided: list[tuple[int, np.ndarray]] = []     # (level, slot)
     for level in range(n_levels - 2, -1, -1):
-        low, high = level_leaf_bounds(level)
+        low, high = leaves.finish(kept[level], level)
         low, high, slot = _back_up(edges[level], expandable[level], guided_slot[level], slots,
                                    lower, upper, low, high)
-        decided.append((level, np.flatnonzero(expandable[level]), slot[expandable[level]]))
+        edges[level] = ()
+        decided.append((level, slot[expandable[level]]))
         lower, upper = low, high
     decided.sort(key=lambda item: item[0])
     n_t, n_q = pomdp.n_trust, filter_.n_q
-    parts = [(np.full(nodes.size, level, dtype=np.int64), levels[level]["x"][nodes],
-              levels[level]["joint"][nodes], levels[level]["belief"], slot)
-             for level, nodes, slot in decided]
+    parts = [(np.full(slot.size, level, dtype=np.int64), kept[level]["x"], kept[level]["joint"],
+              kept[level]["belief"], slot) for level, slot in decided]
     empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, n_t, n_q)),
              np.zeros((0, n_t)), np.zeros(0, dtype=np.int64))
     decisions = JointDecisions(*(np.concatenate([p[j] for p in parts]) if parts else empty[j]
@@ -399,7 +467,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
     # The backed-up upper value is a float sum of products: allow for its rounding.
     bounds = JointBounds(lower=float(lower[0]), upper=min(1.0, float(upper[0]) + RELAXATION_MARGIN),
                          depth=depth, horizon=horizon,
-                         nodes=int(sum(lv["x"].size for lv in levels)), cut_nodes=cut_total,
+                         nodes=n_nodes, cut_nodes=cut_total,
                          seconds=budget.elapsed(), belief_rule=belief_rule)
     return bounds, decisions
 

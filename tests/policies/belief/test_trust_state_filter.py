@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from trustroute.policies.belief.exact_labels import symbol_code
 from trustroute.policies.belief.trust_state_filter import joint_filter
@@ -80,3 +81,35 @@ def test_with_trust_atoms_the_joint_is_a_law_whose_marginal_is_the_belief(pomdp)
         total += float(p[0]) * after
         moved.append(after)
     assert abs(total - accepted[0]) < 1e-12 and min(abs(m - accepted[0]) for m in moved) > 1e-3
+
+
+def _grouping_by_bytes(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each row, the index of the first row with the same bits; and each row's bytes."""
+    first_of: dict[bytes, int] = {}
+    firsts = np.array([first_of.setdefault(row.tobytes(), i) for i, row in enumerate(rows)])
+    return firsts, np.array([row.tobytes() for row in rows], dtype=object)
+
+
+@pytest.mark.parametrize("collide", [False, True], ids=["hashed", "every_hash_equal"])
+def test_distinct_rows_over_column_blocks_and_row_chunks_groups_rows_by_their_bits(monkeypatch, collide):
+    """Rows split into column blocks and hashed a few rows at a time are grouped exactly as their
+    bits are (checked against a dictionary of each row's bytes), -0.0 apart from 0.0; the grouping
+    and its numbering equal those of the whole matrix in one block. With every hash equal (all
+    multipliers zero), the bytes are sorted instead and the grouping is still exact."""
+    import trustroute.policies.belief.trust_state_filter as module
+
+    monkeypatch.setattr(module, "HASH_CHUNK", 7)
+    if collide:
+        monkeypatch.setattr(module, "_hash_multipliers", lambda width: np.zeros(width, dtype=np.uint64))
+    rng = np.random.default_rng(3)
+    pool = rng.random((12, 9))
+    pool[3, 4] = -0.0      # the same number as 0.0 below, other bits: another row
+    pool[5] = pool[3]
+    pool[5, 4] = 0.0
+    rows = pool[rng.integers(0, len(pool), size=200)]
+    first, inverse = module.distinct_rows(rows[:, :1], rows[:, 1:5], rows[:, 5:])
+    whole = module.distinct_rows(rows)
+    assert np.array_equal(first, whole[0]) and np.array_equal(inverse, whole[1])
+    firsts, keys = _grouping_by_bytes(rows)
+    assert np.array_equal(first[inverse], firsts)          # each row's group starts at its first copy
+    assert len(set(keys[first])) == first.size             # and no two groups hold the same bits
