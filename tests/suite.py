@@ -17,6 +17,12 @@ lanes, each pytest process writes the tests it kept and the ones its `-m` left o
 tests the CPU-bound lane left out. Given pytest arguments (paths, `-k`), both lanes take those
 instead, and the ledger is not checked.
 
+The wall-clock lane starts once the CPU-bound lane's workers have collected (their ledgers are
+written), at most COLLECTION_WAIT seconds later: on a fresh clone the first processes compile
+every module the suite imports, the project's and the installed packages', and each process that
+starts before those caches exist compiles them all again (about 7 CPU-seconds each). The
+wall-clock lane mostly waits and ends well before the CPU-bound one, so its start can wait.
+
 Every Python process of the suite may write bytecode caches (`__pycache__`, ignored by git) even
 where the environment says not to (PYTHONDONTWRITEBYTECODE): the suite starts dozens of processes
 (pytest workers, live stations, study workers) that import the same modules, and without caches
@@ -41,6 +47,7 @@ NICENESS = 10     # the CPU-bound lane's: a paced test that wants its core gets 
 CACHE_ENV = "TRUSTROUTE_TEST_CACHE"   # the cache root of every run (tests/conftest.py reads it)
 LEDGER_ENV = "TRUSTROUTE_TEST_LEDGER"  # where each run writes the tests it kept and left out
 WAITING_MARKS = ("wallclock", "serial")
+COLLECTION_WAIT = 60.0   # s: the longest the wall-clock lane waits for the CPU-bound lane's collection
 
 
 def applies(text: str, marks: tuple[str, ...] = WAITING_MARKS) -> bool:
@@ -92,6 +99,14 @@ def pytest_command(run: Run, basetemp: Path, extra: list[str]) -> list[str]:
     return command + extra
 
 
+def await_collection(ledger: Path, processes: int, timeout: float = COLLECTION_WAIT) -> None:
+    """Returns once `processes` pytest processes have written their `kept` ledger in `ledger` (their
+    collection is done), or after `timeout` seconds."""
+    deadline = time.monotonic() + timeout
+    while len(list(ledger.glob("*.kept"))) < processes and time.monotonic() < deadline:
+        time.sleep(0.2)
+
+
 def run_lane(runs: list[Run], root: Path, log, extra: list[str], niceness: int = 0) -> int:
     """Runs one lane's invocations one after another, writing to `log`; the first failing exit
     code, else 0. Run N's base temporary folder is `root/runN`; its ledger is `root/ledger/runN`,
@@ -127,8 +142,11 @@ def main(extra: list[str]) -> int:
         os.environ[CACHE_ENV] = str(root / "cache")
         result: dict[str, int] = {}
         with (root / "wallclock.log").open("w+") as waiting_log:
-            lane = threading.Thread(target=lambda: result.update(
-                rc=run_lane(waiting, root / "wallclock", waiting_log, extra)))
+            def waiting_lane() -> None:
+                await_collection(root / "computing" / "ledger" / "run0", cores)
+                result.update(rc=run_lane(waiting, root / "wallclock", waiting_log, extra))
+
+            lane = threading.Thread(target=waiting_lane)
             lane.start()
             computing_rc = run_lane(computing, root / "computing", sys.stdout, extra, niceness=NICENESS)
             lane.join()

@@ -41,3 +41,25 @@ def test_the_ledger_agrees_only_when_the_wall_clock_lane_ran_what_the_other_left
 
     _write(tmp_path, "wallclock", "kept", ["b.py::paced", "c.py::browser", "a.py::fast"])
     assert "1 ran in both ['a.py::fast']" in lanes_disagree(tmp_path)
+
+
+def test_the_wall_clock_lane_waits_for_every_worker_s_collection_or_its_timeout(tmp_path):
+    """await_collection returns once as many `kept` ledgers as workers exist, not at the first
+    one, and after its timeout when a worker never writes one."""
+    import threading
+    import time
+
+    from tests.suite import await_collection
+
+    ledger = tmp_path / "computing" / "ledger" / "run0"
+    ledger.mkdir(parents=True)
+    (ledger / "gw0.kept").write_text("")
+    (ledger / "gw0.left-out").write_text("")
+    timer = threading.Timer(0.6, lambda: (ledger / "gw1.kept").write_text(""))
+    started = time.monotonic()
+    timer.start()
+    await_collection(ledger, 2, timeout=30)
+    assert 0.6 <= time.monotonic() - started < 10
+    started = time.monotonic()
+    await_collection(ledger, 3, timeout=0.5)
+    assert time.monotonic() - started >= 0.5
