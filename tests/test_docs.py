@@ -19,6 +19,8 @@ def sources() -> list[Path]:
         subfolders[:] = sorted(d for d in subfolders if d not in SKIPPED)
         found += [Path(folder, name) for name in sorted(files) if name.endswith((".py", ".toml", ".md"))]
     return found
+
+
 CITATION = re.compile(r"docs/([\w/.-]+\.md)((?:,? ?\"[^\"]+\"(?: and)?)*)")
 
 

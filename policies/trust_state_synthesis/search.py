@@ -26,7 +26,7 @@ value gets the same allowance.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -118,10 +118,7 @@ class OpenLoop:
         """`accepted` chunk by chunk, 0 (no claim) for the chunks past the deadline. It spends no
         work: `charged` spends it where the values are used."""
         out = np.zeros(x.size)
-        for begin in range(0, x.size, OPEN_LOOP_CHUNK):
-            if budget.expired():
-                break
-            part = slice(begin, begin + OPEN_LOOP_CHUNK)
+        for part in _chunks_in_time(x.size, budget):
             out[part] = self.accepted(x[part], joint[part], steps)
         return out
 
@@ -131,13 +128,19 @@ class OpenLoop:
         spending its work, 0 for the chunks past the deadline. The clock only moves on, so a
         chunk this uses was valued by `values` too."""
         out = np.zeros(values.size)
-        for begin in range(0, values.size, OPEN_LOOP_CHUNK):
-            if budget.expired():
-                break
-            part = slice(begin, begin + OPEN_LOOP_CHUNK)
+        for part in _chunks_in_time(values.size, budget):
             out[part] = values[part]
             spend(steps * out[part].size)
         return out
+
+
+def _chunks_in_time(size: int, budget: TimeBudget) -> Iterator[slice]:
+    """The OPEN_LOOP_CHUNK slices of `size` rows, until the budget's deadline (checked before each):
+    `OpenLoop.values` and `OpenLoop.charged` cut their rows alike."""
+    for begin in range(0, size, OPEN_LOOP_CHUNK):
+        if budget.expired():
+            return
+        yield slice(begin, begin + OPEN_LOOP_CHUNK)
 
 
 @dataclass(frozen=True)
@@ -325,14 +328,16 @@ class _Leaves:
         left = self.depth - level
         low, high = self.bounds(nodes["x"], nodes["joint"], left, ~grow & alive)
         leaf = np.flatnonzero(~grow & (follow < 0) & alive)
+        if self.continuation is None or not leaf.size or (self.horizon is not None and left == 0):
+            leaf = leaf[:0]    # no leaf this level gets the continuation
         values = np.zeros(0)
-        if self.continuation is not None and leaf.size and (self.horizon is None or left > 0):
+        if leaf.size and self.continuation is not None:
             started = clock_now()
             values = self.continuation.values(nodes["x"][leaf], nodes["joint"][leaf], self.steps(left),
                                               self.budget)
             self.valuing += clock_now() - started
         return dict(low=low, high=high, x=nodes["x"][grow], joint=nodes["joint"][grow],
-                    belief=nodes["belief"][grow], leaf=leaf[:values.size], values=values)
+                    belief=nodes["belief"][grow], leaf=leaf, values=values)
 
     def finish(self, part: dict, level: int) -> tuple[np.ndarray, np.ndarray]:
         """(low, high) of a level's nodes with its leaves valued, the continuation's work spent
@@ -443,8 +448,7 @@ def joint_search(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None 
         del parent, slot_of, inverse, p_obs
     del levels
 
-    # Backward: leaves by their bounds, expanded nodes by the best action's expectation. Every
-    # level has its masks: the forward pass reaches each level it makes, and stops at one.
+    # Backward: leaves by their bounds, expanded nodes by the best action's expectation.
     n_levels = len(kept)
 
     lower, upper = leaves.finish(kept[-1], n_levels - 1)
