@@ -151,8 +151,9 @@ class ScriptedParticipant:
     def drive_by_hand(self, message: dict) -> list[dict]:
         """Take over as each road opens; once in control, a brief press of the accelerator; an
         obstacle in view: pull out, and hand back once past it (back in the own lane after the
-        oncoming one), or without `pull_out` hand back once stopped behind it; otherwise hand back
-        on the warning."""
+        oncoming one), or without `pull_out` hand back once stopped behind it (with it too once
+        stopped there after the hand-back warning, the pull-out not begun); otherwise hand back on
+        the warning."""
         kind = message["type"]
         if kind == "mode":
             self.mode = message["mode"]
@@ -201,8 +202,11 @@ class ScriptedParticipant:
             self.passing = True
             if self.pull_out:
                 replies.append({"type": "steer", "lane": "oncoming"})
-        elif self.passing and not self.pull_out and frame["speed"] < 0.1:
-            self.passing = False   # it waits behind the obstacle: the autopilot is to pass it
+        elif self.passing and frame["speed"] < 0.1 and (
+                not self.pull_out or self.warned and self.pass_lane is None):
+            # it waits behind the obstacle (without a pull-out, or with one not begun when the
+            # ego stands for the hand-back short of the junction): the autopilot is to pass it
+            self.passing = False
             replies.append({"type": "hand_back"})
         elif self.passing and edge == reverse:
             self.pass_lane = frame["lane"]   # in the oncoming lane

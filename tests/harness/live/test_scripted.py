@@ -66,3 +66,33 @@ def test_outside_lockstep_answers_go_at_once(tmp_path):
     for _ in range(50):
         assert player.respond({"type": "warning", "kind": "hand_back", "distance": 90.0, "t": 1.0})
     assert clock.now == 0.0   # the episode drives on meanwhile: a late answer would miss its road
+
+
+def by_hand_frame(speed: float, t: float) -> dict:
+    """A frame of the ego heading north on road A-B in its own lane, an obstacle 20 m ahead."""
+    return {"type": "frame", "t": t, "x": 0.0, "y": 0.0, "angle": 0.0, "speed": speed, "road": "A-B",
+            "lane": "A-B_0", "mode": "manual", "vehicles": [[0.0, 20.0, 0.0, "obstacle"]], "persons": []}
+
+
+def test_by_hand_a_pull_out_not_begun_when_the_ego_stands_for_the_hand_back_is_given_up(tmp_path):
+    # A slow answer (a loaded machine, a fast pace) can let the hand-back warning come before the
+    # pull-out has begun; the ego then stands short of the junction for the hand-back while the
+    # person waited for the pass, and the episode waited until the server closed the silent socket.
+    player = ScriptedParticipant(tiny_config(tmp_path, specs=("phi2",)), 0, by_hand=True)
+    assert player.respond({"type": "road", "road": "A-B", "t": 0.0}) == [{"type": "takeover"}]
+    pressed = player.respond({"type": "mode", "mode": "manual", "t": 0.1})
+    assert pressed == [{"type": "drive", "pedal": "accelerate"}]
+    assert {"type": "steer", "lane": "oncoming"} in player.respond(by_hand_frame(5.0, 0.2))
+    assert player.respond({"type": "warning", "kind": "hand_back", "distance": 40.0, "t": 0.3}) == []
+    assert player.respond(by_hand_frame(2.0, 0.4)) == []   # still moving: the pull-out may begin
+    assert player.respond(by_hand_frame(0.0, 0.5)) == [{"type": "hand_back"}]
+    assert not player.passing and player.passes == 0
+
+
+def test_by_hand_a_pull_out_waits_for_its_gap_before_the_warning(tmp_path):
+    player = ScriptedParticipant(tiny_config(tmp_path, specs=("phi2",)), 0, by_hand=True)
+    player.respond({"type": "road", "road": "A-B", "t": 0.0})
+    player.respond({"type": "mode", "mode": "manual", "t": 0.1})
+    player.respond(by_hand_frame(5.0, 0.2))
+    assert player.respond(by_hand_frame(0.0, 0.3)) == []   # behind the obstacle, waiting to pull out
+    assert player.passing
