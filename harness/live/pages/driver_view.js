@@ -73,7 +73,10 @@ function ribbon(positions, shape, left, right, height) {
   }
 }
 
-// Pieces of a polyline: [from, to] metres along it, every `period` metres.
+// Pieces of a polyline: [from, to] metres along it, every `period` metres, their ends found in
+// steps of 0.5 m. A piece keeps only its ends and the polyline's corners: the points between lie
+// on a straight segment, and as vertices they only multiply the triangles software WebGL draws at
+// every frame (nine in ten of a town's, the markings being most of its geometry).
 function dashes(shape, on, period) {
   const pieces = [];
   let along = 0;
@@ -82,11 +85,15 @@ function dashes(shape, on, period) {
     const [ax, ay] = shape[i];
     const [bx, by] = shape[i + 1];
     const length = Math.hypot(bx - ax, by - ay);
+    let kept = 0;   // the current piece's points in this segment
     for (let s = 0; s < length; s += 0.5) {
       const phase = (along + s) % period;
       const point = [ax + ((bx - ax) * s) / length, ay + ((by - ay) * s) / length];
-      if (phase < on) { if (!current) { current = [point]; pieces.push(current); } else current.push(point); }
-      else current = null;
+      if (phase >= on) { current = null; kept = 0; continue; }
+      if (!current) { current = []; pieces.push(current); }
+      if (kept < 2) current.push(point);
+      else current[current.length - 1] = point;   // the piece's straight run in this segment goes on
+      kept += 1;
     }
     along += length;
   }
@@ -271,6 +278,10 @@ export class DriverView {
     this.net = null;
     this.drawn = null;    // what the last picture drew (`picture`), null: draw at the next call
     this.fresh = true;    // a frame has arrived since the last picture
+    // the canvas's displayed size, from a ResizeObserver: reading clientWidth at every picture
+    // would force a layout each time the page's text changed
+    this.shown = null;
+    new ResizeObserver(() => { this.shown = [canvas.clientWidth, canvas.clientHeight]; }).observe(canvas);
   }
 
   setNet(net) {
@@ -389,7 +400,7 @@ export class DriverView {
   }
 
   resize() {   // whether the canvas took its displayed size
-    const { clientWidth: width, clientHeight: height } = this.canvas;
+    const [width, height] = this.shown || [this.canvas.clientWidth, this.canvas.clientHeight];
     if (width && height && (this.canvas.width !== width || this.canvas.height !== height)) {
       this.renderer.setSize(width, height, false);
       this.camera.aspect = width / height;
