@@ -6,7 +6,7 @@ import numpy as np
 
 from trustroute.networks.town import load_town
 from trustroute.policies.logic.compiled import compile_spec
-from trustroute.policies.logic.labelling import atom_values
+from trustroute.policies.logic.labelling import SMALL_BATCH, atom_values
 from trustroute.policies.logic.spec import spec_from_text
 
 
@@ -39,3 +39,21 @@ def test_a_belief_on_its_threshold_reads_the_same_label_in_every_batch():
             assert truth[where, 0] == truth_alone[0, 0] and either[where, 0] == either_alone[0, 0]
             checked += 1
     assert checked == 40 * 8
+
+
+def test_atom_values_sum_in_trust_level_order_at_every_batch_size():
+    """Both of atom_values' paths (one accumulate for small batches, a loop over the levels for
+    large ones) give c·b summed level after level, as Python floats add it, bit for bit."""
+    rng = np.random.default_rng(20261205)
+    for rows in (1, 2, SMALL_BATCH, SMALL_BATCH + 1, 300):
+        levels, atoms = int(rng.integers(1, 22)), int(rng.integers(1, 4))
+        beliefs = rng.dirichlet(np.ones(levels), size=rows) * rng.uniform(0.5, 2.0)
+        coeffs = rng.normal(size=(levels, atoms)) * 10.0 ** rng.uniform(-3, 3, size=(levels, 1))
+        values = atom_values(beliefs, coeffs)
+        assert values.shape == (rows, atoms) and values.flags.c_contiguous
+        for i in range(rows):
+            for j in range(atoms):
+                total = float(beliefs[i, 0]) * float(coeffs[0, j])
+                for level in range(1, levels):
+                    total += float(beliefs[i, level]) * float(coeffs[level, j])
+                assert values[i, j] == total, (rows, i, j)
