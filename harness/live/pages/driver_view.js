@@ -76,7 +76,7 @@ function ribbon(positions, shape, left, right, height) {
 // Pieces of a polyline: [from, to] metres along it, every `period` metres, their ends found in
 // steps of 0.5 m. A piece keeps only its ends and the polyline's corners: the points between lie
 // on a straight segment, and as vertices they only multiply the triangles software WebGL draws at
-// every frame (nine in ten of a town's, the markings being most of its geometry).
+// every frame (on Town01 they were nine in ten of the net's triangles).
 function dashes(shape, on, period) {
   const pieces = [];
   let along = 0;
