@@ -3,8 +3,10 @@ sure every test runs in exactly one lane."""
 
 from __future__ import annotations
 
+import gc
 from pathlib import Path
 
+from tests.conftest import GC_THRESHOLD
 from tests.suite import REPO, applies, lanes_disagree, marked_files
 
 
@@ -63,3 +65,7 @@ def test_the_wall_clock_lane_waits_for_every_worker_s_collection_or_its_timeout(
     started = time.monotonic()
     await_collection(ledger, 3, timeout=0.5)
     assert time.monotonic() - started >= 0.5
+
+
+def test_a_test_runs_with_the_collected_objects_frozen_out_of_the_collector():
+    assert gc.get_threshold() == GC_THRESHOLD and gc.get_freeze_count() > 0
