@@ -26,10 +26,9 @@ settings.register_profile("explore", database=None)
 settings.load_profile("suite")
 
 # The garbage collector of a pytest process: a worker holds a million objects by the end of its
-# share (the modules, the collected tests, the session fixtures), and each full collection scanned
-# them all, 20 CPU-s of the CPU-bound lane's two workers. What exists once collection is done lives
-# to the end and is frozen out of the scans; young collections run every GC_THRESHOLD allocations
-# instead of 700. Measured on the CPU-bound lane: 8 CPU-s of collection against 20.
+# share (the modules, the collected tests, the session fixtures), and each full collection scans
+# them all. What exists once collection is done lives to the end, so it is frozen out of the
+# scans; young collections run every GC_THRESHOLD allocations instead of 700.
 GC_THRESHOLD = (10_000, 10, 10)
 
 

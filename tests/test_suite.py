@@ -4,10 +4,12 @@ sure every test runs in exactly one lane."""
 from __future__ import annotations
 
 import gc
+import threading
+import time
 from pathlib import Path
 
 from tests.conftest import GC_THRESHOLD
-from tests.suite import REPO, applies, lanes_disagree, marked_files
+from tests.suite import REPO, applies, await_collection, lanes_disagree, marked_files
 
 
 def test_marked_files_are_the_files_that_apply_the_waiting_marks():
@@ -48,11 +50,6 @@ def test_the_ledger_agrees_only_when_the_wall_clock_lane_ran_what_the_other_left
 def test_the_wall_clock_lane_waits_for_every_worker_s_collection_or_its_timeout(tmp_path):
     """await_collection returns once as many `kept` ledgers as workers exist, not at the first
     one, and after its timeout when a worker never writes one."""
-    import threading
-    import time
-
-    from tests.suite import await_collection
-
     ledger = tmp_path / "computing" / "ledger" / "run0"
     ledger.mkdir(parents=True)
     (ledger / "gw0.kept").write_text("")

@@ -20,6 +20,7 @@ Arrays are vectorised over rows n: J [n, n_trust, n_q].
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,6 +131,10 @@ def _hash_multipliers(width: int) -> np.ndarray:
 HASH_CHUNK = 32_768   # rows hashed and checked at a time: the temporaries stay a few MB
 
 
+def _row_chunks(n: int) -> Iterator[slice]:
+    return (slice(begin, begin + HASH_CHUNK) for begin in range(0, n, HASH_CHUNK))
+
+
 def distinct_rows(*blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(first, inverse) for the bit-identical rows of a float matrix [n, width], given as one or
     more blocks of its columns ([n, w_i] each, in order): first[k] is the first row of the k-th
@@ -147,15 +152,13 @@ def distinct_rows(*blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ends = np.cumsum([block.shape[1] for block in blocks])
     multipliers = np.split(_hash_multipliers(int(ends[-1])), ends[:-1])
     hashes = np.zeros(n, dtype=np.uint64)
-    for begin in range(0, n, HASH_CHUNK):
-        rows = slice(begin, begin + HASH_CHUNK)
+    for rows in _row_chunks(n):
         for block, multiplier in zip(bits, multipliers, strict=True):
             hashes[rows] += (block[rows] * multiplier[None, :]).sum(axis=1, dtype=np.uint64)
     _, first, inverse = np.unique(hashes, return_index=True, return_inverse=True)
     inverse = inverse.ravel()
     if not all(np.array_equal(block[rows], block[first[inverse[rows]]])
-               for rows in (slice(begin, begin + HASH_CHUNK) for begin in range(0, n, HASH_CHUNK))
-               for block in bits):
+               for rows in _row_chunks(n) for block in bits):
         matrix = np.concatenate(blocks, axis=1)
         keys = matrix.view(np.dtype((np.void, matrix.dtype.itemsize * matrix.shape[1]))).ravel()
         _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)

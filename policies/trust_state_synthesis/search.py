@@ -327,14 +327,14 @@ class _Leaves:
         continuation's work is spent in the backward pass (`finish`), where it was scheduled."""
         left = self.depth - level
         low, high = self.bounds(nodes["x"], nodes["joint"], left, ~grow & alive)
-        leaf = np.flatnonzero(~grow & (follow < 0) & alive)
-        if self.continuation is None or not leaf.size or (self.horizon is not None and left == 0):
-            leaf = leaf[:0]    # no leaf this level gets the continuation
+        # the leaves that get the continuation: none without one, or at the horizon
+        continuation = self.continuation if self.horizon is None or left > 0 else None
+        leaf = np.flatnonzero(~grow & (follow < 0) & alive & (continuation is not None))
         values = np.zeros(0)
-        if leaf.size and self.continuation is not None:
+        if continuation is not None and leaf.size:
             started = clock_now()
-            values = self.continuation.values(nodes["x"][leaf], nodes["joint"][leaf], self.steps(left),
-                                              self.budget)
+            values = continuation.values(nodes["x"][leaf], nodes["joint"][leaf], self.steps(left),
+                                         self.budget)
             self.valuing += clock_now() - started
         return dict(low=low, high=high, x=nodes["x"][grow], joint=nodes["joint"][grow],
                     belief=nodes["belief"][grow], leaf=leaf, values=values)
