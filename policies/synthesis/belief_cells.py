@@ -190,32 +190,31 @@ def suffix_cells(symbols: ObservationSymbols, k: int) -> SuffixCells:
     if k < 0:
         raise ValueError("suffix length k must be >= 0")
     changing = np.flatnonzero(~symbols.identity)
-    # the corners of the reachable face; an unreachable corner is a zero row, absent from every cell
-    words: list[tuple[int, ...]] = [()]
-    vertices = [np.diag(reachable_states(symbols).astype(float))]
-    index: dict[tuple[int, ...], int] = {(): 0}
+    # The corners of the reachable face; an unreachable corner is a zero row, absent from every
+    # cell. Words are numbered level by level, each level's words in the order of their prefix and
+    # then of their last symbol; a level's images are one stacked matmul per symbol (numpy's matmul
+    # calls the same BLAS product per stacked matrix, so each is the single product's, bit for bit).
+    level = np.diag(reachable_states(symbols).astype(float))[None]          # [words, θ, θ]
+    levels, words = [level], [()]
     frontier: list[tuple[int, ...]] = [()]
     for _ in range(k):
-        grown = []
-        for word in frontier:
-            for o in changing.tolist():
-                new = word + (o,)
-                index[new] = len(words)
-                words.append(new)
-                vertices.append(_normalise_rows(vertices[index[word]] @ symbols.update[o]))
-                grown.append(new)
-        frontier = grown
-    # Cells of a vertex row that is zero (f_w undefined at a corner: P(w | e_i) = 0) carry a zero
-    # row; it is dropped from every max over vertices below by using -inf weights.
-    next_cell = np.zeros((len(words), symbols.n_symbols), dtype=np.int64)
-    for c, word in enumerate(words):
-        for o in range(symbols.n_symbols):
-            if symbols.identity[o]:
-                next_cell[c, o] = c
-            else:
-                new = (word + (o,))[-k:] if k > 0 else ()
-                next_cell[c, o] = index[new]
-    return SuffixCells(k=k, words=tuple(words), vertices=np.array(vertices), next_cell=next_cell)
+        images = np.stack([level @ symbols.update[o] for o in changing], axis=1)   # [w, o, θ, θ]
+        level = _normalise_rows(images.reshape(-1, *images.shape[2:]))
+        frontier = [word + (o,) for word in frontier for o in changing.tolist()]
+        levels.append(level)
+        words.extend(frontier)
+    # A word of length L is cell start[L] + its digits (positions in `changing`) read in base n.
+    # Reading a belief-changing symbol appends its digit, the oldest dropping out of a word of k;
+    # an identity symbol keeps the cell (and with k = 0 every symbol keeps the one cell).
+    n = changing.size
+    start = np.cumsum([0] + [n ** length for length in range(k + 1)])
+    next_cell = np.repeat(np.arange(len(words), dtype=np.int64)[:, None], symbols.n_symbols, axis=1)
+    for length in range(k + 1 if k else 0):
+        cells = np.arange(start[length], start[length + 1], dtype=np.int64)
+        kept = cells - start[length] if length < k else (cells - start[length]) % n ** (k - 1)
+        for digit, o in enumerate(changing.tolist()):
+            next_cell[cells, o] = start[min(length + 1, k)] + kept * n + digit
+    return SuffixCells(k=k, words=tuple(words), vertices=np.concatenate(levels), next_cell=next_cell)
 
 
 def vertex_mask(cells: SuffixCells) -> np.ndarray:
@@ -224,19 +223,21 @@ def vertex_mask(cells: SuffixCells) -> np.ndarray:
 
 
 def image_label_status(cells: SuffixCells, symbols: ObservationSymbols, coeffs: np.ndarray,
-                       offset: float) -> np.ndarray:
-    """int8 [n_cells, n_symbols]: status of the atom (offset - coeffs·b < 0) on f_o(P_c).
+                       offsets: np.ndarray) -> np.ndarray:
+    """int8 [n_atoms, n_cells, n_symbols]: status of each atom j (offsets[j] - coeffs[j]·b < 0) on
+    f_o(P_c); `coeffs` [n_atoms, n_trust], `offsets` [n_atoms].
 
     1 all true, 0 all false, 2 mixed (either value possible). Vertices with zero weight (P(o|v)=0)
-    are dropped (they contribute nothing to the hull of the image).
+    are dropped (they contribute nothing to the hull of the image). Each symbol's images are
+    computed once for all atoms.
     """
-    status = np.zeros((cells.n_cells, symbols.n_symbols), dtype=np.int8)
-    for o in range(symbols.n_symbols):
-        image = cells.vertices @ symbols.update[o]                        # [c, v, θ]
-        total = image.sum(axis=-1)
-        valid = total > 0
-        value = offset - np.einsum("cvk,k->cv", _normalise_rows(image), coeffs)
-        true_somewhere = (valid & (value < LABEL_TOLERANCE)).any(axis=1)
-        false_somewhere = (valid & (value > -LABEL_TOLERANCE)).any(axis=1)
-        status[:, o] = np.where(true_somewhere & false_somewhere, 2, np.where(true_somewhere, 1, 0))
+    status = np.zeros((len(offsets), cells.n_cells, symbols.n_symbols), dtype=np.int8)
+    for o in range(symbols.n_symbols if len(offsets) else 0):
+        image = _normalise_rows(cells.vertices @ symbols.update[o])         # [c, v, θ]
+        valid = image.any(axis=-1)
+        for j, (coeff, offset) in enumerate(zip(coeffs, offsets, strict=True)):
+            value = offset - np.einsum("cvk,k->cv", image, coeff)
+            true_somewhere = (valid & (value < LABEL_TOLERANCE)).any(axis=1)
+            false_somewhere = (valid & (value > -LABEL_TOLERANCE)).any(axis=1)
+            status[j, :, o] = np.where(true_somewhere & false_somewhere, 2, np.where(true_somewhere, 1, 0))
     return status

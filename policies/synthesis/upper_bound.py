@@ -57,8 +57,8 @@ def build_abstraction(tables: ProductTables, symbols: ObservationSymbols, cells:
                       ) -> Abstraction:
     m = len(tables.belief_atom_names)
     possible = np.ones((cells.n_cells, symbols.n_symbols, 2 ** m), dtype=bool)
-    for j in range(m):
-        status = image_label_status(cells, symbols, tables.belief_coeffs[j], tables.belief_offsets[j])
+    statuses = image_label_status(cells, symbols, tables.belief_coeffs, tables.belief_offsets)
+    for j, status in enumerate(statuses):
         bit = (np.arange(2 ** m) >> j) & 1                                # [β]
         possible &= (status[:, :, None] == 2) | (status[:, :, None] == bit[None, None, :])
     vertex_likelihood = np.ascontiguousarray(
