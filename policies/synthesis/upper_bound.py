@@ -51,6 +51,9 @@ class Abstraction:
     cells: SuffixCells
     possible_bits: np.ndarray     # bool [n_cells, n_symbols, 2**n_atoms]
     vertex_likelihood: np.ndarray  # [n_symbols, n_trust (vertex), n_cells]: P(o | vertex v of cell c)
+    # [n_symbols, n_cells]: max_v P(o | vertex v of cell c), for incidents with one symbol (see
+    # abstract_backup)
+    best_vertex_likelihood: np.ndarray
 
 
 def build_abstraction(tables: ProductTables, symbols: ObservationSymbols, cells: SuffixCells
@@ -64,7 +67,8 @@ def build_abstraction(tables: ProductTables, symbols: ObservationSymbols, cells:
     vertex_likelihood = np.ascontiguousarray(
         np.einsum("cvk,ok->ovc", cells.vertices, symbols.likelihood))
     return Abstraction(tables=tables, symbols=symbols, cells=cells, possible_bits=possible,
-                       vertex_likelihood=vertex_likelihood)
+                       vertex_likelihood=vertex_likelihood,
+                       best_vertex_likelihood=vertex_likelihood.max(axis=1))
 
 
 @overload
@@ -95,7 +99,6 @@ def abstract_backup(abstraction: Abstraction, value_next: np.ndarray,
     if live.size == 0:
         return out
     n_vertices = cells.vertices.shape[1]
-    n_bits = abstraction.possible_bits.shape[2]
     entered = np.zeros((n_x, live.size, n_c))          # value of entering road x2, per (q, cell)
     chunk = max(1, BACKUP_CHUNK_ENTRIES // max(1, live.size * n_c * n_vertices))
     road_incident = tables.pomdp.road_incident
@@ -106,26 +109,52 @@ def abstract_backup(abstraction: Abstraction, value_next: np.ndarray,
                 return None
             x2 = roads[start:start + chunk]
             spend(1 + x2.size * live.size * n_c * len(members) // ENTRIES_PER_UNIT)
+            branches = [_branch(abstraction, value_next, live, x2, o) for o in members]
+            if len(members) == 1:
+                # one symbol: max_v P(o | v)·value is (max_v P(o | v))·value exactly, as rounding
+                # a product with a factor >= 0 is monotone in the other factor
+                entered[x2] = abstraction.best_vertex_likelihood[members[0]][None, None, :] * branches[0]
+                continue
             # Σ_o P(o | v) value_o per vertex v of each cell, then the max over the vertices
             # (vertex axis first: a max over a short last axis is several times slower)
             per_vertex = np.zeros((n_vertices, x2.size, live.size, n_c))
-            for o in members:
-                c2 = cells.next_cell[:, o]
-                branch = np.zeros((x2.size, live.size, n_c))
-                for bits in range(n_bits):
-                    allowed = abstraction.possible_bits[:, o, bits]
-                    if not allowed.any():
-                        continue
-                    q2 = tables.next_q[live[:, None], x2[None, :], bits].T      # [roads, n_live]
-                    candidate = value_next[x2[:, None], q2][:, :, c2]          # [roads, n_live, c]
-                    np.maximum(branch, np.where(allowed[None, None, :], candidate, 0.0), out=branch)
-                per_vertex += abstraction.vertex_likelihood[o][:, None, None, :] * branch[None]
+            term = np.empty_like(per_vertex)
+            for o, branch in zip(members, branches, strict=True):
+                per_vertex += np.multiply(abstraction.vertex_likelihood[o][:, None, None, :], branch[None],
+                                          out=term)
             entered[x2] = per_vertex.max(axis=0)
-    successors = tables.successors
-    legal = successors >= 0
-    best = np.where(legal[:, :, None, None], entered[np.maximum(successors, 0)], 0.0).max(axis=1)
+    # each road's best successor, one successor slot at a time (a max is exact in any order; a
+    # road without a successor keeps 0)
+    best = np.zeros_like(entered)
+    for slot in tables.successors.T:
+        legal = slot >= 0
+        if legal.any():
+            successor = entered[np.maximum(slot, 0)]
+            successor[~legal] = 0.0
+            np.maximum(best, successor, out=best)
     out[:, live, :] = np.minimum(best, 1.0)
     return out
+
+
+def _branch(abstraction: Abstraction, value_next: np.ndarray, live: np.ndarray, x2: np.ndarray,
+            o: int) -> np.ndarray:
+    """[roads x2, live q, cells]: the value after reading symbol o on entering x2, the best over
+    the belief-label values possible on the image of each cell."""
+    tables, cells = abstraction.tables, abstraction.cells
+    c2 = cells.next_cell[:, o]
+    branch = np.zeros((x2.size, live.size, c2.size))
+    for bits in range(abstraction.possible_bits.shape[2]):
+        allowed = abstraction.possible_bits[:, o, bits]
+        if not allowed.any():
+            continue
+        q2 = tables.next_q[live[:, None], x2[None, :], bits].T              # [roads, n_live]
+        candidate = value_next[x2[:, None], q2]                             # [roads, n_live, c]
+        if not abstraction.symbols.identity[o]:                             # else c2 is every cell
+            candidate = np.take(candidate, c2, axis=2)
+        if not allowed.all():   # 0 where the label value is impossible on the cell's image
+            np.multiply(candidate, allowed, out=candidate)
+        np.maximum(branch, candidate, out=branch)
+    return branch
 
 
 def bounded_upper(abstraction: Abstraction, horizon: int, deadline: float | None = None,
