@@ -35,7 +35,9 @@ conditions = ["free"]
 """
 
 
-@pytest.fixture(scope="module", params=["csomor", "city"])
+# One test per town: its played study is most of its time, and the suite's workers steal tests
+# one at a time, so a town's study shared by two tests could be played once in each worker.
+@pytest.fixture(params=["csomor", "city"])
 def played(request, tmp_path_factory):
     """A live study on the town, open, whose one participant has driven their trial (pace 1000)."""
     folder = tmp_path_factory.mktemp(f"{request.param}-live")
@@ -54,8 +56,8 @@ def _lane_ids(net_file) -> set[str]:
     return {lane.get("id") for lane in ElementTree.parse(net_file).getroot().iter("lane")}
 
 
-def test_the_station_serves_the_net_an_imported_town_drives(played):
-    study, client, _ = played
+def test_the_station_serves_the_net_the_town_drives_and_the_replay_draws_on_it(played, capsys):
+    study, client, folder = played
     response = client.get("/api/net", headers={"Authorization": f"Bearer {study.experimenter_token}"})
     assert response.status_code == 200, response.text
     town = study.context.town
@@ -66,10 +68,7 @@ def test_the_station_serves_the_net_an_imported_town_drives(played):
     assert all(edge in edges for road in town.geometry.values() for edge in road.edges)
     # the scripted participant's trial was driven and logged
     assert (study.study_dir / "parts").is_dir() and any((study.study_dir / "parts").iterdir())
-
-
-def test_the_replay_of_a_live_episode_draws_on_the_driven_net(played, capsys):
-    study, _, folder = played
+    # the replay of the live episode writes its recording on the driven net
     (task,) = plan_episodes(study.config)
     rrd = folder / "live.rrd"
     code, _, err = run_cli(capsys, "replay", str(study.study_dir), task.episode_id, "--rrd", str(rrd))
