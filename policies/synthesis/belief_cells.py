@@ -195,7 +195,8 @@ def suffix_cells(symbols: ObservationSymbols, k: int) -> SuffixCells:
     # then of their last symbol; a level's images are one stacked matmul per symbol (numpy's matmul
     # calls the same BLAS product per stacked matrix, so each is the single product's, bit for bit).
     level = np.diag(reachable_states(symbols).astype(float))[None]          # [words, θ, θ]
-    levels, words = [level], [()]
+    levels = [level]
+    words: list[tuple[int, ...]] = [()]
     frontier: list[tuple[int, ...]] = [()]
     for _ in range(k):
         images = np.stack([level @ symbols.update[o] for o in changing], axis=1)   # [w, o, θ, θ]
