@@ -28,6 +28,7 @@ update that would keep a belief atom possible in every cell, are not vertices of
 from __future__ import annotations
 
 import functools
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -189,31 +190,29 @@ def reachable_states(symbols: ObservationSymbols) -> np.ndarray:
 def suffix_cells(symbols: ObservationSymbols, k: int) -> SuffixCells:
     if k < 0:
         raise ValueError("suffix length k must be >= 0")
-    changing = np.flatnonzero(~symbols.identity)
-    # The corners of the reachable face; an unreachable corner is a zero row, absent from every
-    # cell. Words are numbered level by level, each level's words in the order of their prefix and
-    # then of their last symbol; a level's images are one stacked matmul per symbol (numpy's matmul
-    # calls the same BLAS product per stacked matrix, so each is the single product's, bit for bit).
+    changing = np.flatnonzero(~symbols.identity).tolist()
+    # Words are numbered level by level, each level's words in the order of their prefix and then
+    # of their last symbol (itertools.product's order). The corners of the reachable face; an
+    # unreachable corner is a zero row, absent from every cell. A level's images are one stacked
+    # matmul per symbol (numpy's matmul calls the same BLAS product per stacked matrix, so each is
+    # the single product's, bit for bit).
+    words = [word for length in range(k + 1) for word in itertools.product(changing, repeat=length)]
     level = np.diag(reachable_states(symbols).astype(float))[None]          # [words, θ, θ]
     levels = [level]
-    words: list[tuple[int, ...]] = [()]
-    frontier: list[tuple[int, ...]] = [()]
-    for _ in range(k):
+    for _ in range(k if changing else 0):   # without a belief-changing symbol the one cell is the simplex
         images = np.stack([level @ symbols.update[o] for o in changing], axis=1)   # [w, o, θ, θ]
         level = _normalise_rows(images.reshape(-1, *images.shape[2:]))
-        frontier = [word + (o,) for word in frontier for o in changing.tolist()]
         levels.append(level)
-        words.extend(frontier)
     # A word of length L is cell start[L] + its digits (positions in `changing`) read in base n.
     # Reading a belief-changing symbol appends its digit, the oldest dropping out of a word of k;
     # an identity symbol keeps the cell (and with k = 0 every symbol keeps the one cell).
-    n = changing.size
+    n = len(changing)
     start = np.cumsum([0] + [n ** length for length in range(k + 1)])
     next_cell = np.repeat(np.arange(len(words), dtype=np.int64)[:, None], symbols.n_symbols, axis=1)
     for length in range(k + 1 if k else 0):
         cells = np.arange(start[length], start[length + 1], dtype=np.int64)
         kept = cells - start[length] if length < k else (cells - start[length]) % n ** (k - 1)
-        for digit, o in enumerate(changing.tolist()):
+        for digit, o in enumerate(changing):
             next_cell[cells, o] = start[min(length + 1, k)] + kept * n + digit
     return SuffixCells(k=k, words=tuple(words), vertices=np.concatenate(levels), next_cell=next_cell)
 

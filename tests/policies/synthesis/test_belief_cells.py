@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tests.policies.evaluation.test_random_models import random_driver
+from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
 from trustroute.policies.belief.driver_types import lift_population
 from trustroute.policies.model.trust_pomdp import build_pomdp
@@ -43,12 +44,24 @@ def cells_by_word(symbols, k: int) -> tuple[list[tuple[int, ...]], np.ndarray, n
     return words, np.array(corners), successor
 
 
+def still_driver(driver) -> DriverModel:
+    """A driver whom nothing moves: no takeover, no failure, every trust transition the identity,
+    so that every observation symbol leaves the belief as it is."""
+    k, n = len(driver.incident_types), 7
+    return DriverModel(trust_levels=tuple(range(1, n + 1)), incident_types=driver.incident_types,
+                       takeover_probability=np.zeros((k, n)), failure_probability=np.zeros((k, n)),
+                       trust_transition=np.broadcast_to(np.eye(n), (k, 2, 2, n, n)).copy(),
+                       initial_belief=np.full(n, 1 / n), trust_free_takeover_probability={},
+                       source_path="<still>")
+
+
 def models(town, driver):
     rng = np.random.default_rng(11)
     population = load_driver_population(EXAMPLE_POPULATION_PATH)
     return {"paper": build_pomdp(town, driver),
             "three types": build_pomdp(town, lift_population(population)),
-            "random": build_pomdp(town, random_driver(rng, driver.incident_types))}
+            "random": build_pomdp(town, random_driver(rng, driver.incident_types)),
+            "still": build_pomdp(town, still_driver(driver))}
 
 
 @pytest.mark.parametrize("k", [0, 1, 2, 3])
@@ -56,6 +69,8 @@ def test_cells_equal_their_words_corners_and_last_k_symbols(town, driver, k):
     for name, pomdp in models(town, driver).items():
         symbols = observation_symbols(pomdp)
         cells = suffix_cells(symbols, k)
+        if name == "still":
+            assert symbols.identity.all() and cells.n_cells == 1
         words, corners, successor = cells_by_word(symbols, k)
         assert list(cells.words) == words, name
         assert cells.vertices.tobytes() == corners.tobytes(), name
