@@ -11,6 +11,11 @@ import { Calibration, Inputs } from "./inputs.js";
 import { drawMap } from "./map_view.js";
 
 const $ = (id) => document.getElementById(id);
+// Text set only where it changes: frames arrive 25 times a second, and each assignment of a text,
+// the same one included, makes the browser lay out and paint the page again.
+function setText(element, text) {
+  if (element.textContent !== text) element.textContent = text;
+}
 const steps = ["consent-step", "ready-step", "drive-step", "questionnaire-step", "done-step"];
 const MAP_SCALE = 3;        // pixels per metre of the large map
 const MINI_SPAN = 370;      // metres across the mini-map (square, drawn at its displayed size)
@@ -72,12 +77,12 @@ const FIRST = new Set(["back_to_lane", "guide_back", "held_off_lane"]);
 const HAND_BACK_DUE = "Hand back before the junction (space): the vehicle waits for you.";
 
 function notice(text, first = false) {
-  $("incident").textContent = handBackDue && !first ? HAND_BACK_DUE : text;
+  setText($("incident"), handBackDue && !first ? HAND_BACK_DUE : text);
 }
 
 function overlay(text, resumable = false) {
   $("overlay").classList.toggle("hidden", !text);
-  $("overlay-text").textContent = text;
+  setText($("overlay-text"), text);
   $("resume").classList.toggle("hidden", !resumable);
 }
 
@@ -147,7 +152,10 @@ function remaining(shape, x, y) {   // metres from the point of `shape` nearest 
   return total;
 }
 
+let drawnTurn;   // the arrow on the canvas (null: none); it is drawn again only when it changes
 function drawTurn(turn) {
+  if (turn === drawnTurn) return;
+  drawnTurn = turn;
   const canvas = $("turn");
   const context = canvas.getContext("2d");
   context.clearRect(0, 0, canvas.width, canvas.height);
@@ -183,8 +191,8 @@ function showNextTurn(frame) {
   const turn = route.length > 1 ? turnBetween(current, edges[route[1]]) : null;
   drawTurn(turn);
   const distance = current ? Math.round(remaining(current, frame.x, frame.y) / 10) * 10 : null;
-  $("turn-text").textContent = turn && distance !== null ? `${TURN_WORDS[turn]} in ${distance} m`
-    : distance !== null && !String(frame.road).startsWith(":") ? `Junction in ${distance} m` : "";
+  setText($("turn-text"), turn && distance !== null ? `${TURN_WORDS[turn]} in ${distance} m`
+    : distance !== null && !String(frame.road).startsWith(":") ? `Junction in ${distance} m` : "");
 }
 
 // -- frames ---------------------------------------------------------------------------------------
@@ -220,16 +228,17 @@ function miniScale(canvas) {
 function onFrame(frame) {
   latest = frame;
   if (state.phase !== "paused") overlay("");
-  $("speed").textContent = `${(frame.speed * 3.6).toFixed(0)} km/h`;
+  setText($("speed"), `${(frame.speed * 3.6).toFixed(0)} km/h`);
   const oncoming = onOncomingLane(frame);
-  $("road").textContent = oncoming ? "In the oncoming lane" : "";
-  $("road").dataset.road = frame.road;   // which road (for tests and the experimenter), never shown
+  setText($("road"), oncoming ? "In the oncoming lane" : "");
+  // which road (for tests and the experimenter), never shown
+  if ($("road").dataset.road !== frame.road) $("road").dataset.road = frame.road;
   if (frame.mode === "manual" && !continuous) {
-    $("hint").textContent = oncoming
+    setText($("hint"), oncoming
       ? "Passing in the oncoming lane: back into your lane once past the obstacle."
       : obstacleAhead(frame)
         ? "Obstacle ahead: pull out with \u2190 to pass it through the oncoming lane when the way is clear."
-        : "";
+        : "");
   }
   showNextTurn(frame);
   if (driverView) driverView.push(frame);
@@ -245,7 +254,7 @@ function readInputs() {
   lastRead = now;
   if (state.phase !== "driving") return;
   if (!controls) {   // nothing the study allows is connected: say so, with the hand-back rule when due
-    $("incident").textContent = [inputs.missing(), handBackDue ? HAND_BACK_DUE : ""].join(" ").trim();
+    setText($("incident"), [inputs.missing(), handBackDue ? HAND_BACK_DUE : ""].join(" ").trim());
     askedForInput = true;
     return;
   }
@@ -263,9 +272,22 @@ function readInputs() {
 }
 const round = (value) => Math.round(value * 1000) / 1000;
 
+// The animation loop runs while a trial drives, the one phase that draws the view or reads the
+// wheel: an animation frame requested in any other phase makes the browser run its frame pipeline
+// 60 times a second for nothing (about a tenth of a core with software rendering).
+let animating = false;
 function animate() {
+  if (state.phase !== "driving") { animating = false; return; }
   if (inputs) readInputs();
-  if (driverView && state.phase === "driving") driverView.render();
+  if (driverView) driverView.render();
+  requestAnimationFrame(animate);
+}
+
+function startAnimating() {
+  if (animating) return;
+  animating = true;
+  lastRead = performance.now() / 1000;   // the keys turn the wheel by the time since the last read
+  if (inputs) inputs.read(0);             // a button held since before is not a press
   requestAnimationFrame(animate);
 }
 
@@ -328,6 +350,7 @@ function onState(message) {
   // a new trial starts driving: the last trial's frame, speed and mode go at once (its SUMO takes
   // seconds to start; meanwhile the person sees the vehicle getting ready, not the last trial)
   if (message.phase === "driving" && message.episode_id !== shownEpisode) startEpisode(message.episode_id);
+  if (message.phase === "driving") startAnimating();
   const next = message.done.length + 1;
   $("status").textContent = message.phase === "paused"
     ? `Paused (${message.paused_by === "disconnect" ? "connection lost" : "by the experimenter"})`
@@ -457,4 +480,3 @@ document.addEventListener("keydown", (event) => {
 });
 loadNet();
 connect();
-requestAnimationFrame(animate);
