@@ -252,7 +252,6 @@ function readInputs() {
   const now = performance.now() / 1000;
   const controls = inputs.read(now - lastRead);
   lastRead = now;
-  if (state.phase !== "driving") return;
   if (!controls) {   // nothing the study allows is connected: say so, with the hand-back rule when due
     setText($("incident"), [inputs.missing(), handBackDue ? HAND_BACK_DUE : ""].join(" ").trim());
     askedForInput = true;
