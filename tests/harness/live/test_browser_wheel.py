@@ -241,7 +241,12 @@ def drive(page, road: str, crash: bool) -> dict:
         person = page.evaluate("window.person")
         raise AssertionError(("the trial did not end", person["stage"], person["trace"][-30:])) from None
     person = page.evaluate("window.person")
-    return {**person["outcome"], "trace": person["trace"][-30:]}
+    trace = person["trace"]
+    # where each stage began (with the lane, the mode and the metres along and left of the road):
+    # when the takeover came against where SUMO's autopilot pulled out, say
+    stages = [row for before, row in zip([None, *trace], trace, strict=False)
+              if before is None or before[6] != row[6] or before[2] != row[2]]
+    return {**person["outcome"], "trace": trace[-30:], "stages": stages}
 
 
 def session(tmp_path, spec: dict, crash: bool):
@@ -321,7 +326,8 @@ def test_a_person_passes_an_obstacle_by_wheel(tmp_path):
     assert len(times) > 40 and max(b - a for a, b in zip(times, times[1:], strict=False)) <= 0.05 + 1e-6
     # the lateral movement: out to the oncoming lane's centre (a lane's width to the left) and back
     left = [left_of(shape, x, y) for x, y in zip(manual["x"], manual["y"], strict=True)]
-    assert abs(left[0]) < 1.5 and max(left) > 2.5 and abs(left[-1]) < 1.0, (left[0], max(left), left[-1])
+    assert abs(left[0]) < 1.5 and max(left) > 2.5 and abs(left[-1]) < 1.0, \
+        (left[0], max(left), left[-1], outcome["stages"])
     # the pass through the oncoming lane, driven by hand
     oncoming = kinematics[kinematics["lane"].str.startswith("A-E_")]
     assert len(oncoming) >= 10 and set(oncoming["mode"]) == {"manual"}, kinematics["lane"].value_counts()
