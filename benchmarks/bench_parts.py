@@ -49,7 +49,8 @@ def _frames(episode_id: str, rng: np.random.Generator) -> tuple[pd.DataFrame, pd
     incidents = pd.DataFrame({name: [None] * m for name in INCIDENTS_SCHEMA.names})
     incidents = incidents.assign(
         episode_id=episode_id, index=np.arange(m), directed_road="A-B", incident="truck", takeover=False,
-        performance="succ", min_ttc=np.inf, max_deceleration=1.0, collided=False)
+        performance="succ", min_ttc=np.inf, max_deceleration=1.0, collided=False, min_head_on_ttc=np.inf,
+        min_pedestrian_distance=np.inf, time_lost=0.0)
     return roads, kinematics, incidents
 
 
