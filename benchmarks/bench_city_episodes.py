@@ -1,9 +1,10 @@
 """Episodes on a real city with background traffic: how the per-episode wall time grows with the
 number of vehicles, against a bare libsumo run of the same net and demand measured in the same run.
 
-The city is sumo-rl's RESCO Ingolstadt scenario (the `cities` extra; 381 SUMO junctions), imported
-with `trustroute town import` into the cache (`city-bench/`) once. The ego drives the trust-free
-policy of a two-waypoint spec (`SPEC`, 22 roads and 2.1 km); the demand levels are none,
+The city is the packaged town `city`: sumo-rl's RESCO Ingolstadt scenario (the `cities` extra; 381
+SUMO junctions) as the package imports it (networks/cities.py, into the cache, again whenever the
+importer's code changes). The ego drives the trust-free policy of a two-waypoint spec (`SPEC`, 22
+roads and 1.8 km); the demand levels are none,
 SUMO's randomTrips.py at TRIP_RATES trips per minute (one seeded trips file per rate, written
 before the clock) and the scenario's own routes (about 71 vehicles per minute, shifted to start
 with the episode). The episode gets the demand as route files (`SumoConfig.route_files`), as
@@ -22,7 +23,6 @@ from __future__ import annotations
 
 import importlib.util
 import os
-import shutil
 import tempfile
 import time
 from dataclasses import replace
@@ -31,7 +31,6 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.timing import TimingProcess, paired_timings
-from trustroute.core.cache import cache_dir
 from trustroute.harness.simulation.background import random_trips, shifted_routes
 from trustroute.harness.simulation.episode import (
     COMMIT_DISTANCE,
@@ -42,9 +41,9 @@ from trustroute.harness.simulation.episode import (
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.real_roads import RealRoads
 from trustroute.harness.simulation.sumo_start import SumoConfig, fresh_session
+from trustroute.networks.cities import CITY, city_routes_path
 from trustroute.networks.real_net import road_edges, town_net_file
 from trustroute.networks.town import load_town
-from trustroute.networks.town_import import import_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
@@ -55,37 +54,13 @@ PAIRS = 7
 TRIP_RATES = (10, 30, 60, 120)   # randomTrips.py trips per minute
 BARE_LIMIT = 3600.0              # sim seconds: a bare run whose ego is locked in a jam stops here
 SPEC = """name = "ingolstadt"
-start = "434068771-89173763"
+start = "2068408769-89173763"
 formula = "F (v1 & F v2)"
 
 [states]
 v1 = { junction = "267783873" }
 v2 = { junction = "30624898" }
 """
-
-
-def scenario_folder() -> Path | None:
-    """sumo-rl's Ingolstadt scenario, located without importing sumo_rl (None without the extra)."""
-    spec = importlib.util.find_spec("sumo_rl")
-    if spec is None or not spec.submodule_search_locations:
-        return None
-    folder = Path(spec.submodule_search_locations[0]) / "nets" / "RESCO" / "ingolstadt21"
-    return folder if (folder / "ingolstadt21.net.xml").is_file() else None
-
-
-def city_town(scenario: Path) -> Path:
-    """The imported town in the cache (imported again when the scenario's net has changed)."""
-    folder = cache_dir("city-bench")
-    folder.mkdir(parents=True, exist_ok=True)
-    net, town = folder / "ingolstadt21.net.xml", folder / "town.json"
-    source = scenario / "ingolstadt21.net.xml"
-    if not net.is_file() or net.read_bytes() != source.read_bytes():
-        shutil.copyfile(source, net)
-        town.unlink(missing_ok=True)
-    if not town.is_file():
-        import_town(net, town, rng=np.random.default_rng(1), incident_seed=1)
-    (folder / "spec.toml").write_text(SPEC)
-    return town
 
 
 def bare_route(sumo, roads: dict, route: list[str]) -> list[str]:
@@ -125,7 +100,7 @@ def bare_run(net: Path, roads: dict, route: list[str], config: SumoConfig,
                 return sumo.simulation.getTime()
 
 
-def demand_levels(net: Path, scenario: Path, folder: Path) -> list[tuple[str, tuple[str, ...], dict]]:
+def demand_levels(net: Path, scenario_routes: Path, folder: Path) -> list[tuple[str, tuple[str, ...], dict]]:
     """(name, route files, details) per level of demand, files written before any clock starts."""
     levels: list[tuple[str, tuple[str, ...], dict]] = [("none", (), {})]
     for rate in TRIP_RATES:
@@ -135,26 +110,26 @@ def demand_levels(net: Path, scenario: Path, folder: Path) -> list[tuple[str, tu
         trips = random_trips(net, SEED, rate, sub)
         levels.append((f"random_trips_{rate}_per_min", (str(trips),),
                        {"trips_per_minute": rate, "random_trips_seconds": time.perf_counter() - started}))
-    scenario_files = shifted_routes((str(scenario / "ingolstadt21.rou.xml"),), folder)
+    scenario_files = shifted_routes((str(scenario_routes),), folder)
     levels.append(("scenario_demand", scenario_files, {"trips_per_minute": 4283 / 60.0}))
     return levels
 
 
 def run(pairs: int = PAIRS) -> list[dict]:
-    scenario = scenario_folder()
-    if scenario is None:
+    if importlib.util.find_spec("sumo_rl") is None:
         return [{"name": "city_episodes", "skipped": "sumo-rl (the cities extra) is not installed"}]
-    town_path = city_town(scenario)
-    town = load_town(town_path)
+    town = load_town(CITY)
     model = load_driver_model()
-    spec = load_spec(str(town_path.parent / "spec.toml"), town)
-    setup = EpisodeSetup(town=town, driver_model=model, spec=spec)
-    policy = trust_free_policy(town, spec)
     net = town_net_file(town)
     roads = road_edges(town, net)
     rows = []
     with tempfile.TemporaryDirectory(prefix="trustroute-city-bench-") as folder:
-        for name, files, details in demand_levels(net, scenario, Path(folder)):
+        spec_path = Path(folder) / "spec.toml"
+        spec_path.write_text(SPEC)
+        spec = load_spec(str(spec_path), town)
+        setup = EpisodeSetup(town=town, driver_model=model, spec=spec)
+        policy = trust_free_policy(town, spec)
+        for name, files, details in demand_levels(net, city_routes_path(), Path(folder)):
             config = replace(SumoConfig(), route_files=files)
 
             def episode(config=config):
