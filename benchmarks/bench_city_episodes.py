@@ -63,6 +63,13 @@ v2 = { junction = "30624898" }
 """
 
 
+def city_spec(town, folder: Path):
+    """`SPEC` on the packaged city, written to `folder` and loaded as a spec file is."""
+    path = folder / "spec.toml"
+    path.write_text(SPEC)
+    return load_spec(str(path), town)
+
+
 def bare_route(sumo, roads: dict, route: list[str]) -> list[str]:
     """The roads' edges one after another, SUMO's shortest way between two roads the net does not
     connect (as the episode drives them)."""
@@ -124,9 +131,7 @@ def run(pairs: int = PAIRS) -> list[dict]:
     roads = road_edges(town, net)
     rows = []
     with tempfile.TemporaryDirectory(prefix="trustroute-city-bench-") as folder:
-        spec_path = Path(folder) / "spec.toml"
-        spec_path.write_text(SPEC)
-        spec = load_spec(str(spec_path), town)
+        spec = city_spec(town, Path(folder))
         setup = EpisodeSetup(town=town, driver_model=model, spec=spec)
         policy = trust_free_policy(town, spec)
         for name, files, details in demand_levels(net, city_routes_path(), Path(folder)):

@@ -11,7 +11,6 @@ import pytest
 from benchmarks import bench_city_episodes as bench
 from trustroute.networks.cities import CITY
 from trustroute.networks.town import load_town
-from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import baseline_route
 
 pytestmark = pytest.mark.skipif(importlib.util.find_spec("sumo_rl") is None,
@@ -20,9 +19,7 @@ pytestmark = pytest.mark.skipif(importlib.util.find_spec("sumo_rl") is None,
 
 def test_the_benchmarks_spec_is_a_spec_of_the_packaged_city(tmp_path):
     town = load_town(CITY)
-    path = tmp_path / "spec.toml"
-    path.write_text(bench.SPEC)
-    spec = load_spec(str(path), town)   # an InputError where the start road or a waypoint is not the town's
+    spec = bench.city_spec(town, tmp_path)   # an InputError where a road or waypoint is not the town's
     # the trust-free route the benchmark's ego drives, from its start road through both waypoints
     route = baseline_route(town, spec)
     assert route[0] == spec.start and len(route) == 22
