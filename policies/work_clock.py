@@ -99,9 +99,12 @@ def work_clock(work_limit: int | None, time_limit: float) -> Iterator[float]:
         _CLOCK.reset(token)
 
 
-def stopped_by(converged: bool, clock: WorkClock | None) -> str:
-    """Which limit ended a synthesis: "convergence" (the gap reached tau), "work limit" (its work
+def stopped_by(converged: bool, clock: WorkClock | None, node_budget: bool = False) -> str:
+    """Which limit ended a synthesis: "convergence" (the gap reached tau), "node budget" (its
+    search stopped at its node budget, `node_budget`, before any limit), "work limit" (its work
     limit, the wall clock never reached) or "time limit"."""
     if converged:
         return "convergence"
+    if node_budget:
+        return "node budget"
     return "work limit" if clock is not None and not clock.timed_out else "time limit"

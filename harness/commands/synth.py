@@ -202,7 +202,7 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
     """`synth --population`: the Bayes or robust objective over a population's driver types; past
     2 s (policies/resolve.py's PROGRESS_AFTER), a line per finished synthesis run with its bounds
     on stderr."""
-    from trustroute.app.synthesis import policy_arrays, population_summary, synthesize_population
+    from trustroute.app.synthesis import policy_arrays, population_summary, stop_notes, synthesize_population
 
     town, population, spec = problem.town, problem.population, problem.given_spec
     tau, horizon, time_limit = settings.tau, settings.horizon, settings.time_limit
@@ -241,6 +241,7 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
                      f"{found.bayes_upper:.6f}, its worst type {worst_bayes:.6f}; robust value certified "
                      f">= {found.lower:.6f} (best of {len(found.candidates)} candidate priors), <= "
                      f"{found.upper:.6f}")
+    lines += stop_notes(result)
     lines.append(f"policy written to {path}")
     emit(as_json, payload, lines)
 

@@ -21,7 +21,7 @@ from trustroute.policies.synthesis.belief_graph import FREE, FRONTIER, NODE_BUDG
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.expansion import UNBOUNDED_DEPTH, BeliefSearch
 from trustroute.policies.synthesis.policy_extraction import policy_table
-from trustroute.policies.synthesis.result import SearchRun
+from trustroute.policies.synthesis.result import SearchRun, SynthesisStats
 from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesis.upper_bound import Abstraction
 
@@ -184,6 +184,14 @@ def _refine(search: BeliefSearch, roots: np.ndarray, depth_cap: int, batch: int,
         search.complete(np.array(search.binding, dtype=np.int64), deadline)
         search.backup()
     return expanded
+
+
+def reached_node_budget(stats: object) -> bool:
+    """Whether a search run of a synthesis' statistics stopped at NODE_BUDGET nodes: its bounds
+    would not tighten with more time (the runs of other syntheses, which have no node budget,
+    never did)."""
+    return isinstance(stats, SynthesisStats) and any(
+        isinstance(run, SearchRun) and run.nodes >= NODE_BUDGET for run in stats.runs)
 
 
 def bounded_search(tables: ProductTables, settings: SynthesisSettings, horizon: int | None,

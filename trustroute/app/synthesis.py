@@ -30,7 +30,8 @@ from trustroute.policies.synthesis.population import (
     policy_name,
     summary,
 )
-from trustroute.policies.synthesis.result import SynthesisResult, SynthesisStats
+from trustroute.policies.synthesis.refinement import reached_node_budget
+from trustroute.policies.synthesis.result import SearchRun, SynthesisResult, SynthesisStats
 from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
 from trustroute.policies.work_clock import installed, stopped_by, work_clock
@@ -77,7 +78,8 @@ def synthesize_single(problem: Problem, settings: SynthesisSettings,
         with synthesis_progress(f"synthesizing {problem.spec.name}", settings.progress) as on_iteration:
             result = synthesize_problem(problem, replace(settings, time_limit=limit),
                                         on_iteration=on_iteration)
-    result = replace(result, stopped_by=stopped_by(result.stats.converged, clock))
+    result = replace(result, stopped_by=stopped_by(result.stats.converged, clock,
+                                                   reached_node_budget(result.stats)))
     if out is not None:
         save_policy(result, out, problem.town, problem.driver, problem.spec)
     return result
@@ -101,7 +103,10 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
                                           population_source=population.source_path,
                                           on_iteration=on_iteration,
                                           on_phase=phase_lines("synth", settings.progress))
-    ended = stopped_by(found.gap <= settings.tau, clock)
+    # the Bayes objective's bounds are its one search's; the robust one's candidates run on
+    # until the time limit, whatever stopped one of their searches
+    ended = stopped_by(found.gap <= settings.tau, clock,
+                       objective == "bayes" and reached_node_budget(found.result.stats))
     found = replace(found, result=replace(found.result, stopped_by=ended))
     if out is not None:
         save_policy(found.result, out, problem.town, found.pomdp.driver, found.spec,
@@ -153,9 +158,20 @@ def policy_arrays(path: str | Path) -> Path:
     return array_path(path)
 
 
+def stop_notes(result: SynthesisResult) -> list[str]:
+    """What a reader should know of how the run ended: a search stopped at its node budget, which
+    more time would not have moved."""
+    if result.stopped_by != "node budget":
+        return []
+    nodes = max(run.nodes for run in result.stats.runs if isinstance(run, SearchRun))
+    return [f"the search stopped at its node budget ({nodes:,} nodes) after {result.seconds:.1f} s, "
+            "before its time limit: a longer --time-limit would not tighten these bounds"]
+
+
 def bounds_notes(result: SynthesisResult) -> list[str]:
-    """What a reader of the bounds should know: a cluster policy, outcomes on a belief threshold."""
-    lines = []
+    """What a reader of the bounds should know: how the run ended, a cluster policy, outcomes on a
+    belief threshold."""
+    lines = stop_notes(result)
     table = result.policy.table if isinstance(result.policy, BeliefTablePolicy) else None
     boxes = table.boxes if table is not None else None
     if boxes is not None and boxes.rows:

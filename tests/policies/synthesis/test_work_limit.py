@@ -105,3 +105,48 @@ def test_the_runs_of_a_population_synthesis_share_the_work_limit(monkeypatch):
     assert first.result.stopped_by == second.result.stopped_by == "work limit"
     assert (first.lower, first.upper, first.candidates) == (second.lower, second.upper, second.candidates)
     assert [(v.lower, v.upper) for v in first.type_values] == [(v.lower, v.upper) for v in second.type_values]
+
+
+def test_a_search_stopped_by_its_node_budget_says_so(monkeypatch, capsys, tmp_path):
+    """A search that stops at its node budget, long before its time limit, says so: `stopped_by` is
+    "node budget" in the API and in --json (not "time limit": more time would not have moved its
+    bounds), and the command's summary says so in a line."""
+    from tests.cli import cli_json, run_cli
+    from trustroute.policies.synthesis import refinement
+    from trustroute.policies.synthesis.result import SearchRun
+
+    monkeypatch.setattr(refinement, "NODE_BUDGET", 300)
+    # the search alone: cluster policies after an unconverged search would take half its limit
+    result = trustroute.synthesize("phi1", horizon=8, tau=1e-9, time_limit=60.0, clusters="off")
+    assert result.stopped_by == "node budget"
+    assert result.upper - result.lower > 1e-9
+    assert max(run.nodes for run in result.stats.runs if isinstance(run, SearchRun)) >= 300
+    command = ["synth", "phi1", "--horizon", "8", "--tau", "1e-9", "--time-limit", "60", "--clusters", "off"]
+    payload = cli_json(capsys, *command, "--out", str(tmp_path / "a.json"))
+    assert payload["stopped_by"] == "node budget"
+    code, out, err = run_cli(capsys, *command, "--out", str(tmp_path / "b.json"))
+    assert code == 0, err
+    assert "the search stopped at its node budget" in out and "would not tighten" in out
+
+
+def test_a_converged_search_below_its_node_budget_says_convergence(monkeypatch):
+    """The control: with a node budget the search never reaches, the same call converges."""
+    from trustroute.policies.synthesis import refinement
+
+    monkeypatch.setattr(refinement, "NODE_BUDGET", 10**7)
+    result = trustroute.synthesize("phi1", horizon=8, time_limit=60.0, clusters="off")
+    assert result.stopped_by == "convergence"
+
+
+def test_a_population_bayes_search_stopped_by_its_node_budget_says_so(monkeypatch):
+    """The Bayes objective's bounds are its one search's: stopped at the node budget, it says so. The
+    robust objective's candidates run on until the time limit, and it says that."""
+    from trustroute.policies.synthesis import refinement
+
+    monkeypatch.setattr(refinement, "NODE_BUDGET", 300)
+    bayes = trustroute.synthesize("phi1", horizon=8, time_limit=10.0, population=POPULATION,
+                                  objective="bayes")
+    assert bayes.result.stopped_by == "node budget"
+    robust = trustroute.synthesize("phi1", horizon=8, time_limit=4.0, population=POPULATION,
+                                   objective="robust")
+    assert robust.result.stopped_by == "time limit"
