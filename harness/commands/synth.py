@@ -90,6 +90,10 @@ class SynthOptions:
         help="Units of work for the whole command (node expansions, sweeps, ...): a stop that does not "
              "depend on the machine or its load, so the same inputs give the same policy; "
              '--time-limit still applies (default: none; docs/synthesis.md, "Work limit").')
+    node_budget: int = option(
+        "--node-budget", type=click.IntRange(min=1), default=defaults.NODE_BUDGET, show_default=True,
+        help="The most nodes a search holds, about 1 kB of memory each: past them it stops, whatever "
+             "its limits (it says so: \"stopped_by\": \"node budget\").")
     belief_rule: str = rule_field()
     quiet: bool = quiet_flag()
     out_path: str | None = option(
@@ -116,7 +120,7 @@ class SynthOptions:
         from trustroute.app.synthesis import SynthesisSettings, belief_rule_named
 
         return SynthesisSettings(tau=self.tau, time_limit=self.time_limit, work_limit=self.work_limit,
-                                 horizon=self.horizon,
+                                 horizon=self.horizon, node_budget=self.node_budget,
                                  belief_rule=belief_rule_named(self.belief_rule), clusters=self.clusters,
                                  progress=not (self.as_json or self.quiet))
 
@@ -147,7 +151,7 @@ def synth(spec_path: str, options: SynthOptions) -> None:
                                             spec.content_hash, f"H={options.horizon}", f"tau={options.tau}",
                                             options.belief_rule, f"clusters={options.clusters}",
                                             f"time_limit={options.time_limit}",
-                                            *_work_key(options.work_limit))
+                                            *_work_key(options.work_limit, options.node_budget))
     result = synthesize_single(problem, replace(settings, time_limit=synthesis_time_left(options.time_limit)),
                                out_path)
     path = str(out_path)
@@ -182,10 +186,11 @@ def synth(spec_path: str, options: SynthOptions) -> None:
     emit(options.as_json, payload, lines)
 
 
-def _work_key(work_limit: int | None) -> tuple[str, ...]:
-    """The work limit's part of the default policy path's key (none without one, so the paths of
-    time-limited runs stay what they were)."""
-    return () if work_limit is None else (f"work_limit={work_limit}",)
+def _work_key(work_limit: int | None, node_budget: int) -> tuple[str, ...]:
+    """The work limit's and the node budget's part of the default policy path's key (none with
+    their defaults, so the paths of runs that keep them stay what they were)."""
+    key = () if work_limit is None else (f"work_limit={work_limit}",)
+    return key + (() if node_budget == defaults.NODE_BUDGET else (f"node_budget={node_budget}",))
 
 
 def _warn_fallback_only(what: str, policy, converged: bool, outranked: bool = False) -> bool:
@@ -209,7 +214,7 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
     out_path = out_path or default_out_path(spec.name, town.content_hash, population.content_hash,
                                             spec.content_hash, objective, f"H={horizon}", f"tau={tau}",
                                             settings.belief_rule, f"time_limit={time_limit}",
-                                            *_work_key(settings.work_limit))
+                                            *_work_key(settings.work_limit, settings.node_budget))
     # the command's limit, less what start-up and reading the inputs took (the out path's key keeps it)
     found = synthesize_population(problem, objective,
                                   replace(settings, time_limit=synthesis_time_left(time_limit)), out_path)

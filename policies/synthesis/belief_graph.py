@@ -20,7 +20,6 @@ import numpy as np
 # FREE: expanded along the trust-free completion's move only; L is that move's exact value, U the
 # abstraction's bound (the other moves are unexplored). EXPANDED: every move; a policy row.
 FRONTIER, EXPANDED, ACCEPTED, ZERO, FREE = 0, 1, 2, 3, 4
-NODE_BUDGET = 600_000   # search nodes (about 0.7 kB each with the memo): the search stops there
 
 
 class BeliefGraph:

@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from trustroute.core import defaults
 from trustroute.policies.belief.exact_labels import exact_labels, symbol_code
 from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.routing.free import free_completion, state_only_task
@@ -31,7 +32,6 @@ from trustroute.policies.synthesis.belief_graph import (
     EXPANDED,
     FREE,
     FRONTIER,
-    NODE_BUDGET,
     ZERO,
     BeliefGraph,
     ExpandedLevel,
@@ -65,7 +65,7 @@ MAX_MACRO_WIDTH = 16
 # (cluster bounds on the completion, completion_value.py; L a lower bound of the policy's value),
 # "auto": exact where the trust-free route's own observation tree within the horizon has at most
 # AUTO_TREE_LEAVES leaves (completion_tree_leaves), bounds otherwise.
-AUTO_TREE_LEAVES = NODE_BUDGET // 4
+AUTO_TREE_LEAVES = defaults.NODE_BUDGET // 4
 # Units of work (policies/work_clock.py): per child an expansion makes, and nodes per unit of a backup
 CHILD_UNITS = 16
 NODES_PER_UNIT = 2
@@ -85,6 +85,7 @@ class BeliefSearch:
         compress, completion = settings.compress, settings.completion
         assert suffix_length is not None
         self.tables, self.rule, self.horizon = tables, rule, horizon
+        self.node_budget = settings.node_budget
         pomdp = tables.pomdp
         if abstraction is not None:        # built once per synthesize call and shared by its runs
             self.symbols, self.cells = abstraction.symbols, abstraction.cells

@@ -4,7 +4,7 @@ returned policy's open nodes after it.
 Per round: expand the open nodes carrying the most of the root's gap — reach probability under
 the upper-greedy policy times (U - L) — and look ahead along their upper-greedy moves; bound
 (Bayes) or free-expand (authors' rule) the FRONTIER nodes the returned policy reaches; until
-U - L <= tau at the root, the frontier is exhausted, NODE_BUDGET nodes exist, or the deadline.
+U - L <= tau at the root, the frontier is exhausted, the settings' node budget is reached, or the deadline.
 After the last round the completions the policy reaches are bounded (Bayes) or closed (authors'
 rule), so L is a lower bound of that policy's value (its exact value when closed exactly).
 """
@@ -17,7 +17,7 @@ import numpy as np
 
 from trustroute.policies.belief.product_mdp import ProductTables
 from trustroute.policies.routing.aware_table import PolicyTable
-from trustroute.policies.synthesis.belief_graph import FREE, FRONTIER, NODE_BUDGET
+from trustroute.policies.synthesis.belief_graph import FREE, FRONTIER
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.expansion import UNBOUNDED_DEPTH, BeliefSearch
 from trustroute.policies.synthesis.policy_extraction import policy_table
@@ -56,7 +56,7 @@ def _root_bounds(search: BeliefSearch, roots: np.ndarray) -> tuple[float, float]
 
 def close_completions(search: BeliefSearch, roots: np.ndarray, depth_cap: int, deadline: float) -> bool:
     """Free-expand FRONTIER nodes reached by the returned policy, or by the trust-free route
-    from the root, until there are none (True) or the deadline or NODE_BUDGET comes first
+    from the root, until there are none (True) or the deadline or the node budget comes first
     (False: L is then a lower bound of the policy's value). Then L is the
     policy's exact value (every node it reaches without a row is valued by the completion it
     drives there), and L at the root is at least the trust-free route's value (along that
@@ -73,7 +73,7 @@ def close_completions(search: BeliefSearch, roots: np.ndarray, depth_cap: int, d
         # the free one whatever the values); then one backup, after which the policy's moves
         # at EXPANDED nodes may have changed, so reach is computed again.
         while todo.size:
-            if budget.expired() or g.n >= NODE_BUDGET:
+            if budget.expired() or g.n >= search.node_budget:
                 search.backup()
                 return False
             search.expand(todo, free_only=True)
@@ -159,7 +159,7 @@ def _value_open_nodes(search: BeliefSearch, reach_policy: np.ndarray, depth_cap:
     if search.completion:
         search.complete(_heaviest_prefix(open_nodes[positive], free_weight[positive],
                                          COMPLETION_TAIL * tau), deadline)
-    elif positive.any() and g.n < NODE_BUDGET:
+    elif positive.any() and g.n < search.node_budget:
         if FREE_SHARE >= 1.0:
             search.expand(open_nodes[positive], free_only=True)
         else:
@@ -186,12 +186,12 @@ def _refine(search: BeliefSearch, roots: np.ndarray, depth_cap: int, batch: int,
     return expanded
 
 
-def reached_node_budget(stats: object) -> bool:
-    """Whether a search run of a synthesis' statistics stopped at NODE_BUDGET nodes: its bounds
-    would not tighten with more time (the runs of other syntheses, which have no node budget,
-    never did)."""
+def reached_node_budget(stats: object, node_budget: int) -> bool:
+    """Whether a search run of a synthesis' statistics stopped at its `node_budget` nodes
+    (SynthesisSettings.node_budget): its bounds would not tighten with more time (the runs of
+    other syntheses, which have no node budget, never did)."""
     return isinstance(stats, SynthesisStats) and any(
-        isinstance(run, SearchRun) and run.nodes >= NODE_BUDGET for run in stats.runs)
+        isinstance(run, SearchRun) and run.nodes >= node_budget for run in stats.runs)
 
 
 def bounded_search(tables: ProductTables, settings: SynthesisSettings, horizon: int | None,
@@ -215,7 +215,7 @@ def bounded_search(tables: ProductTables, settings: SynthesisSettings, horizon: 
     iterations = 0
     expanded = 0
     while (np.subtract(*_root_bounds(search, roots)[::-1]) > tau and not budget.expired()
-           and g.n < NODE_BUDGET):
+           and g.n < search.node_budget):
         grown = _refine(search, roots, depth_cap, batch, tau, budget.deadline)
         if grown is None:
             break

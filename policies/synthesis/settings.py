@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from trustroute.core import defaults
 from trustroute.policies.model.trust_pomdp import BeliefRule
 from trustroute.policies.synthesis.arguments import check_synthesis_arguments
 
@@ -32,7 +33,8 @@ class SynthesisSettings:
     horizon: at most this many junctions (None: unbounded). belief_rule: the AV's filter ("bayes"
     or the authors' "paper" update). suffix_length: the abstraction's (None: chosen from the
     problem). work_limit: units of work for the whole call (policies/work_clock.py: a deterministic
-    stop, the same on any machine; None: the time limit alone). batch: nodes expanded per round.
+    stop, the same on any machine; None: the time limit alone). node_budget: the most nodes a
+    search holds (it stops there, whatever its limits). batch: nodes expanded per round.
     compress, completion, clusters: the search's modes
     (COMPRESS_MODES, COMPLETION_MODES, CLUSTER_MODES; docs/synthesis.md). grid_points: candidate
     type priors of a population's robust objective (None: policies/synthesis/population.py's)."""
@@ -48,11 +50,14 @@ class SynthesisSettings:
     clusters: str = "auto"
     grid_points: int | None = None
     work_limit: int | None = None
+    node_budget: int = defaults.NODE_BUDGET
 
     def __post_init__(self) -> None:
         check_synthesis_arguments(self.tau, self.horizon, self.belief_rule)
         if self.work_limit is not None and not (isinstance(self.work_limit, int) and self.work_limit >= 1):
             raise ValueError(f"work_limit must be a positive number of units, got {self.work_limit!r}")
+        if not (isinstance(self.node_budget, int) and self.node_budget >= 1):
+            raise ValueError(f"node_budget must be a positive number of nodes, got {self.node_budget!r}")
         _check_choice("completion", self.completion, COMPLETION_MODES)
         _check_choice("clusters", self.clusters, CLUSTER_MODES)
         if self.compress not in COMPRESS_MODES:

@@ -65,6 +65,9 @@ class SynthesisSettings(SearchSettings):
         if self.work_limit is not None and not (isinstance(self.work_limit, int) and self.work_limit >= 1):
             raise InputError("--work-limit", "", f"work limit must be a positive whole number of units, "
                              f"got {self.work_limit!r}", "pass e.g. --work-limit 20000000 or omit it")
+        if not (isinstance(self.node_budget, int) and self.node_budget >= 1):
+            raise InputError("--node-budget", "", f"node budget must be a positive whole number of nodes, "
+                             f"got {self.node_budget!r}", "pass e.g. --node-budget 2000000 or omit it")
         object.__setattr__(self, "belief_rule", checked_belief_rule(self.belief_rule))
         super().__post_init__()
 
@@ -79,7 +82,7 @@ def synthesize_single(problem: Problem, settings: SynthesisSettings,
             result = synthesize_problem(problem, replace(settings, time_limit=limit),
                                         on_iteration=on_iteration)
     result = replace(result, stopped_by=stopped_by(result.stats.converged, clock,
-                                                   reached_node_budget(result.stats)))
+                                                   reached_node_budget(result.stats, settings.node_budget)))
     if out is not None:
         save_policy(result, out, problem.town, problem.driver, problem.spec)
     return result
@@ -106,7 +109,7 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
     # the Bayes objective's bounds are its one search's; the robust one's candidates run on
     # until the time limit, whatever stopped one of their searches
     ended = stopped_by(found.gap <= settings.tau, clock,
-                       objective == "bayes" and reached_node_budget(found.result.stats))
+                       objective == "bayes" and reached_node_budget(found.result.stats, settings.node_budget))
     found = replace(found, result=replace(found.result, stopped_by=ended))
     if out is not None:
         save_policy(found.result, out, problem.town, found.pomdp.driver, found.spec,
@@ -165,7 +168,8 @@ def stop_notes(result: SynthesisResult) -> list[str]:
         return []
     nodes = max(run.nodes for run in result.stats.runs if isinstance(run, SearchRun))
     return [f"the search stopped at its node budget ({nodes:,} nodes) after {result.seconds:.1f} s, "
-            "before its time limit: a longer --time-limit would not tighten these bounds"]
+            "before its time limit: a longer --time-limit would not tighten these bounds, a larger "
+            "--node-budget may (about 1 kB of memory a node)"]
 
 
 def bounds_notes(result: SynthesisResult) -> list[str]:

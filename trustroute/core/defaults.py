@@ -15,6 +15,8 @@ from typing import Final
 TAU = 1e-3                           # target gap upper - lower
 TIME_LIMIT = 60.0                    # seconds for the whole synthesis
 WORK_LIMIT: int | None = None        # units of work for the whole synthesis (policies/work_clock.py)
+# nodes a belief-MDP search may hold (about 1 kB each): past them it stops, whatever its limits
+NODE_BUDGET = 600_000
 SYNTH_HORIZON: int | None = None     # junctions; None: unbounded
 OBJECTIVE: Final = "bayes"            # of a population synthesis ("robust": the worst type's)
 BELIEF_RULE: Final = "bayes"            # the AV's filter ("paper": the authors' update)

@@ -175,24 +175,22 @@ def test_progress_callback_sees_the_search_bounds(pomdp):
 
 
 @pytest.mark.slow
-def test_node_budget_stops_the_search_soundly(pomdp, packaged_optimum, monkeypatch):
+def test_node_budget_stops_the_search_soundly(pomdp, packaged_optimum):
     """With a small node budget the search stops early; L stays a lower bound of the returned
     policy's value (its completions may be left open) and U an upper bound of the optimum."""
-    from trustroute.policies.synthesis import refinement
-
     spec = load_spec("specs/phi1.toml", pomdp.town)
     horizon = 8
-    monkeypatch.setattr(refinement, "NODE_BUDGET", 300)
     optimum = packaged_optimum("phi1", horizon)
     # the search alone (clusters "off"); by default cluster policies follow an unconverged search
-    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=horizon, clusters="off"))
+    result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=horizon, clusters="off",
+                                                       node_budget=300))
     run = result.stats.runs[0]
     assert run.nodes >= 300 and not result.stats.converged
     value = evaluate(pomdp, spec, result.policy,
                      EvaluationSettings(fallback_after=None, max_junctions=horizon))
     assert result.lower <= value.lower + EXACT_TOLERANCE
     assert optimum <= result.upper + EXACT_TOLERANCE
-    after = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=horizon))
+    after = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=horizon, node_budget=300))
     assert [type(r) for r in after.stats.runs] == [SearchRun, ClusterRun]
     assert after.lower >= result.lower and after.upper <= result.upper
     assert after.lower - EXACT_TOLERANCE <= optimum <= after.upper + EXACT_TOLERANCE

@@ -107,21 +107,22 @@ def test_the_runs_of_a_population_synthesis_share_the_work_limit(monkeypatch):
     assert [(v.lower, v.upper) for v in first.type_values] == [(v.lower, v.upper) for v in second.type_values]
 
 
-def test_a_search_stopped_by_its_node_budget_says_so(monkeypatch, capsys, tmp_path):
+
+def test_a_search_stopped_by_its_node_budget_says_so(capsys, tmp_path):
     """A search that stops at its node budget, long before its time limit, says so: `stopped_by` is
     "node budget" in the API and in --json (not "time limit": more time would not have moved its
     bounds), and the command's summary says so in a line."""
     from tests.cli import cli_json, run_cli
-    from trustroute.policies.synthesis import refinement
     from trustroute.policies.synthesis.result import SearchRun
 
-    monkeypatch.setattr(refinement, "NODE_BUDGET", 300)
     # the search alone: cluster policies after an unconverged search would take half its limit
-    result = trustroute.synthesize("phi1", horizon=8, tau=1e-9, time_limit=60.0, clusters="off")
+    result = trustroute.synthesize("phi1", horizon=8, tau=1e-9, time_limit=60.0, clusters="off",
+                                   node_budget=300)
     assert result.stopped_by == "node budget"
     assert result.upper - result.lower > 1e-9
     assert max(run.nodes for run in result.stats.runs if isinstance(run, SearchRun)) >= 300
-    command = ["synth", "phi1", "--horizon", "8", "--tau", "1e-9", "--time-limit", "60", "--clusters", "off"]
+    command = ["synth", "phi1", "--horizon", "8", "--tau", "1e-9", "--time-limit", "60", "--clusters", "off",
+               "--node-budget", "300"]
     payload = cli_json(capsys, *command, "--out", str(tmp_path / "a.json"))
     assert payload["stopped_by"] == "node budget"
     code, out, err = run_cli(capsys, *command, "--out", str(tmp_path / "b.json"))
@@ -129,24 +130,29 @@ def test_a_search_stopped_by_its_node_budget_says_so(monkeypatch, capsys, tmp_pa
     assert "the search stopped at its node budget" in out and "would not tighten" in out
 
 
-def test_a_converged_search_below_its_node_budget_says_convergence(monkeypatch):
+def test_a_larger_node_budget_lets_the_same_search_converge():
     """The control: with a node budget the search never reaches, the same call converges."""
-    from trustroute.policies.synthesis import refinement
-
-    monkeypatch.setattr(refinement, "NODE_BUDGET", 10**7)
-    result = trustroute.synthesize("phi1", horizon=8, time_limit=60.0, clusters="off")
+    result = trustroute.synthesize("phi1", horizon=8, tau=1e-9, time_limit=60.0, clusters="off",
+                                   node_budget=10**7)
     assert result.stopped_by == "convergence"
 
 
-def test_a_population_bayes_search_stopped_by_its_node_budget_says_so(monkeypatch):
+def test_a_population_bayes_search_stopped_by_its_node_budget_says_so():
     """The Bayes objective's bounds are its one search's: stopped at the node budget, it says so. The
     robust objective's candidates run on until the time limit, and it says that."""
-    from trustroute.policies.synthesis import refinement
-
-    monkeypatch.setattr(refinement, "NODE_BUDGET", 300)
     bayes = trustroute.synthesize("phi1", horizon=8, time_limit=10.0, population=POPULATION,
-                                  objective="bayes")
+                                  objective="bayes", node_budget=300)
     assert bayes.result.stopped_by == "node budget"
     robust = trustroute.synthesize("phi1", horizon=8, time_limit=4.0, population=POPULATION,
-                                   objective="robust")
+                                   objective="robust", node_budget=300)
     assert robust.result.stopped_by == "time limit"
+
+
+def test_a_bad_node_budget_is_one_error_line_with_its_fix(capsys):
+    from tests.cli import assert_one_line_error, run_cli
+    from trustroute.core.errors import InputError
+
+    code, _, err = run_cli(capsys, "synth", "phi1", "--node-budget", "0")
+    assert_one_line_error(code, err, "--node-budget")
+    with pytest.raises(InputError, match="node budget must be a positive whole number"):
+        trustroute.synthesize("phi1", horizon=8, node_budget=0)
