@@ -92,8 +92,9 @@ class SynthOptions:
              '--time-limit still applies (default: none; docs/synthesis.md, "Work limit").')
     node_budget: int = option(
         "--node-budget", type=click.IntRange(min=1), default=defaults.NODE_BUDGET, show_default=True,
-        help="The most nodes a search holds, about 1 kB of memory each: past them it stops, whatever "
-             "its limits (it says so: \"stopped_by\": \"node budget\").")
+        help="The most nodes the belief-MDP search holds (specs without trust-state atoms), about 1 kB "
+             "of memory each: past them it stops, whatever its limits (it says so: \"stopped_by\": "
+             "\"node budget\").")
     belief_rule: str = rule_field()
     quiet: bool = quiet_flag()
     out_path: str | None = option(

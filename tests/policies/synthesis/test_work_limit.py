@@ -107,7 +107,6 @@ def test_the_runs_of_a_population_synthesis_share_the_work_limit(monkeypatch):
     assert [(v.lower, v.upper) for v in first.type_values] == [(v.lower, v.upper) for v in second.type_values]
 
 
-
 def test_a_search_stopped_by_its_node_budget_says_so(capsys, tmp_path):
     """A search that stops at its node budget, long before its time limit, says so: `stopped_by` is
     "node budget" in the API and in --json (not "time limit": more time would not have moved its
