@@ -4,17 +4,13 @@ turn restrictions, dropped its former start road from the town)."""
 
 from __future__ import annotations
 
-import importlib.util
-
-import pytest
-
 from benchmarks import bench_city_episodes as bench
+from tests.extras import needs_cities_extra
 from trustroute.networks.cities import CITY
 from trustroute.networks.town import load_town
 from trustroute.policies.routing.free import baseline_route
 
-pytestmark = pytest.mark.skipif(importlib.util.find_spec("sumo_rl") is None,
-                                reason="needs the optional extra: pip install -e '.[cities]'")
+pytestmark = needs_cities_extra
 
 
 def test_the_benchmarks_spec_is_a_spec_of_the_packaged_city(tmp_path):

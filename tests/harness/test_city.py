@@ -5,17 +5,15 @@ demand, and `demo --town city` runs its study."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
 from tests.cli import cli_json, cli_study, run_cli
+from tests.extras import needs_cities_extra
 
-pytestmark = [pytest.mark.slow,
-              pytest.mark.skipif(importlib.util.find_spec("sumo_rl") is None,
-                                 reason="needs the optional extra: pip install -e '.[cities]'")]
+pytestmark = [pytest.mark.slow, needs_cities_extra]
 # A road of city5's trust-free route 0.2 m long: the ego crosses it within one step.
 SHORT_ROAD = "356699998-364445380"
 

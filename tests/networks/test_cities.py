@@ -15,6 +15,7 @@ import pytest
 import sumolib
 
 from tests.cli import run_cli
+from tests.extras import needs_cities_extra
 from trustroute.core.packaged import SPEC_TOWNS, packaged_spec_names
 from trustroute.networks import cities
 from trustroute.networks.real_net import town_net_file
@@ -23,11 +24,8 @@ from trustroute.networks.road_geometry import file_sha256
 from trustroute.networks.road_lookup import choice_junctions
 from trustroute.networks.town import TOWNS, load_town
 
-needs_extra = pytest.mark.skipif(importlib.util.find_spec("sumo_rl") is None,
-                                 reason="needs the optional extra: pip install -e '.[cities]'")
 
-
-@needs_extra
+@needs_cities_extra
 def test_city_is_imported_once_into_the_cache_with_its_net_and_demand():
     folder = cities.city_folder()
     town_file = folder / cities.CITY_TOWN_FILE
@@ -45,7 +43,7 @@ def test_city_is_imported_once_into_the_cache_with_its_net_and_demand():
     assert {kind for kind in town.incidents.values()} == {"none", "obstacle", "truck", "pedestrian"}
 
 
-@needs_extra
+@needs_cities_extra
 def test_another_scenario_content_is_another_town(tmp_path, monkeypatch):
     net, routes = cities.scenario_files()
     changed = tmp_path / routes.name
