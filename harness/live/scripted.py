@@ -19,7 +19,11 @@ that would exceed a client-side token bucket kept well inside the server's
 (harness/live/protocol.py BURST, RATE). The episode waits for every answer there, so waiting
 loses nothing, while an answer refused as a flood would stall it; a refusal in lockstep is
 therefore raised (`LockstepRefused`) rather than waited on. Outside lockstep it answers at once,
-as a person does: the episode drives on meanwhile, and a late answer would miss its road.
+as a person does (the episode drives on meanwhile, and a late takeover or hand-back would come
+too late), except its trust reports: those keep within the same bucket, since each names the
+prompt it answers and lands on that road whenever it comes, while at a fast pace (the tests'
+1000) a whole trial's reports come within a second and the server would refuse most of them,
+the last road's too, whose answer the trial's end then waits for in vain (`final_report_seconds`).
 """
 
 from __future__ import annotations
@@ -99,13 +103,13 @@ class ScriptedParticipant:
         return synthetic_driver(model, task.driver_rng(), report_accuracy=self.config.report_accuracy)
 
     def respond(self, message: dict) -> list[dict]:
-        """The replies to one server message; in lockstep no faster than the flood limit allows."""
+        """The replies to one server message, each counted against the client's flood limit; in
+        lockstep, and for a trust report, no faster than that limit allows."""
         replies = self.replies_to(message)
-        if not self.lockstep:
-            return replies
-        for _ in replies:
-            while (wait := self.bucket.seconds_to_next()) > 0.0:
-                self.sleep(wait)
+        for reply in replies:
+            if self.lockstep or reply["type"] == "trust":
+                while (wait := self.bucket.seconds_to_next()) > 0.0:
+                    self.sleep(wait)
             self.bucket.take()
         return replies
 

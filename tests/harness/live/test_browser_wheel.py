@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 
 import httpx
 import pytest
@@ -204,6 +205,8 @@ window.startPerson = async ({ road, crash, cruise }) => {
 };
 """
 OVER = "#ready-step:visible, #done-step:visible"
+PROMPT = "#prompt:visible"   # a road's report prompt, answered with a key from 1 to 7
+REPORT = "5"
 TRIAL_MS = 300_000      # wall milliseconds a trial may take on a loaded machine
 # simulated seconds per wall second, a person's: the person, in the page, sees the obstacle once
 # it is straight ahead and takes over (a round trip to the server) before SUMO's autopilot pulls
@@ -235,8 +238,16 @@ def drive(page, road: str, crash: bool) -> dict:
     page.evaluate("(plan) => window.startPerson(plan)", {"road": road, "crash": crash, "cruise": CRUISE})
     page.locator("#start-trust button", has_text="5").click()
     page.locator("#drive-step").wait_for(state="visible")
+    deadline = time.monotonic() + TRIAL_MS / 1000
     try:
-        page.locator(OVER).first.wait_for(state="visible", timeout=TRIAL_MS)
+        # the person answers each road's report prompt as it shows: the trial's end waits for the
+        # last road's answer (harness/live/worker.py, final_report_seconds)
+        while not page.locator(OVER).first.is_visible():
+            left_ms = (deadline - time.monotonic()) * 1000
+            page.locator(f"{OVER}, {PROMPT}").first.wait_for(state="visible", timeout=max(left_ms, 1.0))
+            if page.locator(PROMPT).is_visible():
+                page.keyboard.press(REPORT)
+                page.locator(PROMPT).wait_for(state="hidden", timeout=max(left_ms, 1.0))
     except PlaywrightTimeout:
         person = page.evaluate("window.person")
         raise AssertionError(("the trial did not end", person["stage"], person["trace"][-30:])) from None
@@ -336,6 +347,10 @@ def test_a_person_passes_an_obstacle_by_wheel(tmp_path):
     assert "oncoming" in events and "own_lane" in events and "collision" not in events
     # a wheel-only study: every control came from the wheel
     assert {e["source"] for e in part.summary["live"]["events"] if e["type"] == "control"} == {"wheel"}
+    # the person's report after the incident's road (the one road that ends in the trial) answers
+    # that road's prompt: the trial's end waited for it, not for final_report_seconds
+    reports = [e for e in part.summary["live"]["events"] if e["type"] == "trust"]
+    assert [(e["road"], e["answers_prompt"], e["value"]) for e in reports] == [(1, True, int(REPORT))]
 
 
 def test_steering_into_the_oncoming_truck_is_a_logged_collision_and_the_episode_goes_on(tmp_path):

@@ -46,7 +46,8 @@ def played(request, tmp_path_factory):
     study = LiveStudy(config, folder / "study", ServerOptions(pace=1000.0, warm_up=False)).open()
     try:
         with TestClient(live_app(study)) as client:
-            play_in(client, study, ScriptedParticipant(config, 0))
+            player = play_in(client, study, ScriptedParticipant(config, 0))
+            assert not player.errors, player.errors[:3]   # no report refused as a flood, say
             yield study, client, folder
     finally:
         study.close()

@@ -1,5 +1,6 @@
 """In lockstep the scripted participant keeps within the server's flood limit, and a refused
-answer fails at once instead of leaving the episode waiting; outside lockstep it answers at once."""
+answer fails at once instead of leaving the episode waiting; outside lockstep it answers at once,
+but its trust reports still keep within that limit."""
 
 from __future__ import annotations
 
@@ -66,6 +67,29 @@ def test_outside_lockstep_answers_go_at_once(tmp_path):
     for _ in range(50):
         assert player.respond({"type": "warning", "kind": "hand_back", "distance": 90.0, "t": 1.0})
     assert clock.now == 0.0   # the episode drives on meanwhile: a late answer would miss its road
+
+
+def test_outside_lockstep_reports_keep_within_the_limit_so_the_server_refuses_none(tmp_path):
+    # a whole trial's prompts within an instant, as a live station at pace 1000 sends them: the
+    # last road's answer, which the trial's end waits for, would otherwise be refused as a flood
+    clock = FakeClock()
+    player = ScriptedParticipant(tiny_config(tmp_path), 0,
+                                 bucket=TokenBucket(burst=CLIENT_BURST, rate=CLIENT_RATE, clock=clock),
+                                 sleep=clock.sleep)
+    player.driver = player.new_driver(player.tasks[1])
+    server = TokenBucket(clock=clock)
+    roads = 60
+    for index in range(1, roads + 1):
+        prompt = {"episode_id": "e", "road": index}
+        replies = player.respond({"type": "road", "index": index, "incident": "none", "takeover": False,
+                                  "performance": "succ", "t": float(index), "prompt": prompt})
+        assert [(reply["type"], reply["prompt"]) for reply in replies] == [("trust", prompt)]
+        assert server.take(), f"the server refused report {index}"
+    assert clock.now == pytest.approx((roads - CLIENT_BURST) / CLIENT_RATE)   # it waited, and no longer
+    waited = clock.now
+    for _ in range(50):   # the bucket is empty, and the other answers still go at once
+        assert player.respond({"type": "warning", "kind": "hand_back", "distance": 90.0, "t": 1.0})
+    assert clock.now == waited
 
 
 def by_hand_frame(speed: float, t: float) -> dict:
