@@ -62,9 +62,9 @@ def test_a_scripted_participant_passes_an_obstacle_by_hand_through_the_oncoming_
     config = tiny_config(tmp_path, participants=1, specs=("phi2",))
     # Pace 5, as below. At pace 20 the takeover sent as each road opens has under a second of the
     # wall clock to reach the episode before the autopilot reaches the obstacle, and a frame stands
-    # for 0.8 s of driving; once in the suite two excursions into the oncoming lane had manual
-    # ticks where the person had counted one pass of its own (a takeover that came during the
-    # autopilot's pull-out, or the frame back in the own lane missed before the road ended).
+    # for 0.8 s of driving: a takeover could land during the autopilot's pull-out, or the frame
+    # back in the own lane be missed before the road ends, and the manual excursions into the
+    # oncoming lane then differ from the passes the person counted.
     player = play(tmp_path, ScriptedParticipant(config, 0, by_hand=True), pace=5.0)
     study_dir = tmp_path / "study"
     assert player.finished and player.passes >= 1
