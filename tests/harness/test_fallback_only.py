@@ -87,6 +87,8 @@ def test_the_warning_says_why_the_fallback_was_returned():
     outranked = fallback_warning("p", "the free completion", converged=False, outranked=True)
     proved = fallback_warning("p", "the free completion", converged=True, outranked=True)
     assert "nothing was synthesized in time" in timed_out
+    # either stop a synthesis obeys is named as the one to raise
+    assert all("--time-limit" in line and "--work-limit" in line for line in (timed_out, outranked))
     # synthesized candidates were valued and the fallback served the worst type best
     assert "no synthesized candidate was worth more" in outranked and "in time" not in outranked
     assert "within tau of the optimum" in proved
