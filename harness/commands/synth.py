@@ -245,11 +245,18 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
         worst_bayes = min(v.lower for v in found.bayes_type_values)
         lines.append(f"Bayes-optimal synthesis beside it: {found.bayes_lower:.6f} <= prior-weighted <= "
                      f"{found.bayes_upper:.6f}, its worst type {worst_bayes:.6f}; robust value certified "
-                     f">= {found.lower:.6f} (best of {len(found.candidates)} candidate priors), <= "
-                     f"{found.upper:.6f}")
+                     f">= {found.lower:.6f} (best of {len(found.candidates)} candidate priors"
+                     f"{not_needed_note(found.candidates_not_needed)}), <= {found.upper:.6f}")
     lines += stop_notes(result)
     lines.append(f"policy written to {path}")
     emit(as_json, payload, lines)
+
+
+def not_needed_note(not_needed: int) -> str:
+    """What the robust summary adds when candidate priors were left out as not needed."""
+    if not not_needed:
+        return ""
+    return f"; {not_needed} more not run, the best being within tau of the bound"
 
 
 @click.command("baseline")

@@ -120,6 +120,7 @@ class PopulationSynthesis:
     candidates: list[dict] = field(default_factory=list)
     type_upper: tuple[float, ...] = ()  # U_k (robust objective)
     bayes_policy: RoutingPolicy | None = None   # the Bayes synthesis' policy (robust objective)
+    candidates_not_needed: int = 0    # candidate priors not run: the best was within tau of `upper`
 
     @property
     def gap(self) -> float:
@@ -185,16 +186,22 @@ def candidate_name(prior: np.ndarray) -> str:
 
 
 def candidate_priors(weights: np.ndarray, n_types: int, grid_points: int, schedule: RunSchedule,
-                     favoured: int | None = None, seconds: float = MIN_RUN_SECONDS) -> Iterator[np.ndarray]:
+                     settled: Callable[[], bool], favoured: int | None = None,
+                     seconds: float = MIN_RUN_SECONDS) -> Iterator[np.ndarray]:
     """The robust search's candidate priors: the simplex grid less the population's own weights
     (run already), each while the schedule affords its run of `seconds`, else skipped and said so;
-    with `favoured` (a type), those giving it the most weight first, since the time may not afford
-    them all. Lazy: the schedule is asked after the run of the previous candidate has finished."""
+    none once `settled()` (the best candidate so far is within tau of the robust bound, so no
+    candidate can be worth more than tau above it), and said so; with `favoured` (a type), those
+    giving it the most weight first, since the time may not afford them all. Lazy: the schedule and
+    `settled` are asked after the run of the previous candidate has finished."""
     grid = [prior for prior in simplex_grid(n_types, grid_points)
             if not np.allclose(prior, weights, rtol=0, atol=1e-12)]
     if favoured is not None:
         grid.sort(key=lambda prior: -prior[favoured])   # stable: the grid's order among equals
-    for prior in grid:
+    for index, prior in enumerate(grid):
+        if settled():
+            schedule.settle(len(grid) - index)
+            return
         if not schedule.affords(0, seconds):
             schedule.skip(candidate_name(prior))
             continue
@@ -221,6 +228,7 @@ class RunSchedule:
     last_end: float | None = None
     between: float = 0.0  # seconds spent between runs so far
     gaps: int = 0
+    not_needed: int = 0   # candidate priors left out once the best was within tau of the bound
 
     def _close_gap(self) -> None:
         """Count the work since the last run ended (its evaluations) as one gap between runs."""
@@ -264,6 +272,15 @@ class RunSchedule:
         self.runs -= 1
         if self.on_phase is not None:
             self.on_phase(f"[{self.budget.elapsed():.1f} s] {what}: skipped, the time limit is reached")
+
+    def settle(self, left_out: int) -> None:
+        """The last `left_out` candidate priors left out: the best candidate so far is within tau
+        of the robust bound."""
+        self.runs -= left_out
+        self.not_needed += left_out
+        if self.on_phase is not None:
+            self.on_phase(f"[{self.budget.elapsed():.1f} s] the best candidate's worst type is within "
+                          f"tau of the robust bound: the other {left_out} candidate priors are not run")
 
     def evaluation_deadline(self, later_runs: int) -> float:
         """The deadline of the exact evaluations after a run: the call's, less the shortest share
@@ -365,12 +382,13 @@ def candidate_record(prior: np.ndarray | None, found: tuple[TypeValue | None, ..
 
 
 def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, settings: SynthesisSettings,
-                      schedule: RunSchedule, bayes_run: BayesRun,
+                      schedule: RunSchedule, bayes_run: BayesRun, bound: float,
                       on_iteration: Callable[[float, float], None] | None) -> tuple[Candidate, list[dict]]:
     """The candidate with the best worst type: the Bayes policy (`bayes_run`: the AV's model, the
     run, its per-type values) and the λ-policies of the grid the time affords, those favouring
     the Bayes policy's worst type first, each given at least CANDIDATE_SETUP_FACTOR times the
-    Bayes run's fixed costs. (policy, its per-type values, λ, its run's stats, every candidate's
+    Bayes run's fixed costs, until the best is within tau of `bound` (the robust objective's
+    certified upper bound). (policy, its per-type values, λ, its run's stats, every candidate's
     record.)"""
     pomdp, bayes, bayes_values = bayes_run
     weights, horizon = population.weights, settings.horizon
@@ -395,8 +413,11 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
             best = (free, values, weights, replace(bayes.stats, policy_rows=0))
     # started while its fixed costs fit, given twice them where the time allows (small problems
     # converge within their fixed costs; larger ones need time to expand)
-    for prior in candidate_priors(weights, population.n_types, grid_points, schedule, worst_first[0],
-                                  setup / CANDIDATE_SETUP_FACTOR):
+    def settled() -> bool:
+        return worst_type(best[1]) >= bound - settings.tau
+
+    for prior in candidate_priors(weights, population.n_types, grid_points, schedule, settled,
+                                  worst_first[0], setup / CANDIDATE_SETUP_FACTOR):
         made = synthesize(build_pomdp(town, lift_population(population, prior)), spec,
                           replace(settings, time_limit=schedule.next_limit(at_least=setup)),
                           on_iteration=on_iteration)
@@ -454,9 +475,10 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
             prior=tuple(float(w) for w in weights), type_values=bayes_values, lower=bayes.lower,
             upper=bayes.upper, seconds=time.perf_counter() - started, bayes_lower=bayes.lower,
             bayes_upper=bayes.upper, bayes_type_values=bayes_values)
-    (best_policy, best_values, best_prior, best_stats), candidates = robust_candidates(
-        town, population, lifted_spec, settings, schedule, (pomdp, bayes, bayes_values), on_iteration)
     upper = min(bayes.upper, min(type_upper))
+    (best_policy, best_values, best_prior, best_stats), candidates = robust_candidates(
+        town, population, lifted_spec, settings, schedule, (pomdp, bayes, bayes_values), upper,
+        on_iteration)
     lower = worst_type(best_values)
     if lower > upper + 1e-9:
         raise RuntimeError(f"robust value {lower!r} above its bound {upper!r}: a soundness bug")
@@ -476,7 +498,7 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
         prior=tuple(float(p) for p in best_prior), type_values=best_values, lower=lower,
         upper=upper, seconds=seconds, bayes_lower=bayes.lower, bayes_upper=bayes.upper,
         bayes_type_values=bayes_values, candidates=candidates, type_upper=tuple(type_upper),
-        bayes_policy=bayes.policy)
+        bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed)
 
 
 def policy_name(synthesis: PopulationSynthesis) -> str:
@@ -522,4 +544,5 @@ def summary(synthesis: PopulationSynthesis) -> dict:
     if synthesis.objective == "robust":
         out["type_upper"] = list(synthesis.type_upper)
         out["candidates"] = synthesis.candidates
+        out["candidates_not_needed"] = synthesis.candidates_not_needed
     return out

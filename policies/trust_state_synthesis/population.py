@@ -128,12 +128,13 @@ def type_optimum_bounds(problem: Problem, settings: SynthesisSettings, schedule:
 
 
 def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[TypeValue, ...],
-                      settings: SynthesisSettings, schedule: RunSchedule,
+                      settings: SynthesisSettings, schedule: RunSchedule, bound: float,
                       on_iteration: Callable[[float, float], None] | None
                       ) -> tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray, list[dict]]:
     """The candidate with the best worst type: the Bayes policy and, for every prior λ of the
     simplex grid, the trust-state synthesis as if the type prior were λ, run on the AV's filter
-    (weights w) with J and b reweighted to λ. (policy, its per-type values, λ, every candidate's
+    (weights w) with J and b reweighted to λ, until the best is within tau of `bound` (the robust
+    objective's certified upper bound). (policy, its per-type values, λ, every candidate's
     record)."""
     population = problem.population
     assert population is not None
@@ -148,7 +149,10 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
 
     best: tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray] = (bayes.policy, values, weights)
     candidates = [record(weights, values)]
-    for prior in candidate_priors(weights, population.n_types, grid_points, schedule):
+    def settled() -> bool:
+        return min(v.lower for v in best[1]) >= bound - settings.tau
+
+    for prior in candidate_priors(weights, population.n_types, grid_points, schedule, settled):
         model = build_pomdp(problem.town, lift_population(population, prior))
         # the candidate's model differs from the population's in its prior only: its exact
         # filters take the symbol matrices of the population model's rather than convert them again
@@ -209,10 +213,10 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
         bayes_upper=bayes.upper, bayes_type_values=values)
     if objective == "bayes":
         return found
-    policy, best_values, prior, candidates = robust_candidates(
-        problem, bayes, values, settings, schedule, on_iteration)
-    lower = min(v.lower for v in best_values)
     upper = min(bayes.upper, *type_upper)
+    policy, best_values, prior, candidates = robust_candidates(
+        problem, bayes, values, settings, schedule, upper, on_iteration)
+    lower = min(v.lower for v in best_values)
     if lower > upper + 1e-9:
         raise RuntimeError(f"robust value {lower!r} above its bound {upper!r}: a soundness bug")
     # The policy file's bounds keep their meaning L <= Pr_max <= U under the type prior: L the
@@ -223,4 +227,4 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     return replace(found, objective="robust", result=result, prior=tuple(float(p) for p in prior),
                    type_values=best_values, lower=lower, upper=max(upper, lower),
                    seconds=time.perf_counter() - started, candidates=candidates, type_upper=type_upper,
-                   bayes_policy=bayes.policy)
+                   bayes_policy=bayes.policy, candidates_not_needed=schedule.not_needed)

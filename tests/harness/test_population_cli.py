@@ -123,3 +123,8 @@ def test_trust_state_spec_with_three_types_synthesizes_and_evaluates(tmp_path, c
     robust = json.loads(text)
     assert robust["lower"] == min(t["lower"] for t in robust["population"]["type_values"])
     assert robust["lower"] <= robust["upper"] <= min(robust["population"]["type_upper"]) + 1e-12
+    # the flat type cannot satisfy phi1_trust within 10 junctions (its own bound is 0), so the Bayes
+    # policy is robust-optimal already and no candidate prior is synthesized after it
+    assert min(robust["population"]["type_upper"]) <= 1e-12 and robust["upper"] - robust["lower"] <= 1e-3
+    assert len(robust["population"]["candidates"]) == 1
+    assert robust["population"]["candidates_not_needed"] == 15

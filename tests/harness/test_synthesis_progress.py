@@ -47,7 +47,11 @@ def test_population_synth_announces_every_run(tmp_path, capsys, at_once):
                            "--out", str(tmp_path / "r.json"))
     assert code == 0, err
     runs = [line for line in err.splitlines() if line.startswith("synth: [")]
-    assert len(runs) > 3 and all(line.count("[") >= 2 for line in runs), err
+    # within 3 junctions no route satisfies phi1: the per-type bounds and the Bayes run, each with
+    # its place, time and bounds, prove the robust value 0, and the one line after them says that
+    # the candidate priors are not run
+    assert len(runs) == 5 and all(line.count("[") >= 2 for line in runs[:4]), err
+    assert "the other 15 candidate priors are not run" in runs[4], err
 
 
 @pytest.mark.parametrize("command", [("evaluate", "phi1", "aware"), ("run", "phi1", "--policy", "aware")])

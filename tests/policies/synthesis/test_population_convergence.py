@@ -125,3 +125,24 @@ def test_a_candidate_gets_its_fixed_costs_after_costly_evaluations():
     assert schedule.affords(0, 4.0)
     assert schedule.next_limit(at_least=4.0) >= 4.0
     assert schedule.next_limit(at_least=40.0) <= 30.0 - 7.0        # its own evaluation still fits
+
+
+def test_the_robust_search_stops_once_its_best_candidate_reaches_the_bound(town, driver):
+    # Two copies of one type: the Bayes policy serves both alike, so its worst type is its value,
+    # which the Bayes bound U certifies optimal within tau: no candidate prior can do better, and
+    # none is run (without that stop, all 16 would run, each a synthesis of its own).
+    from trustroute.participants.driver_population import DriverPopulation, DriverType
+    from trustroute.policies.synthesis.population import MAX_GRID_CANDIDATES, run_count
+
+    twins = DriverPopulation(types=(DriverType("one", 0.5, driver), DriverType("two", 0.5, driver)))
+    spec = load_spec(PACKAGED_SPECS / "phi1.toml", town, driver.n_trust)
+    phases: list[str] = []
+    found = synthesize_population(town, twins, spec, "robust",
+                                  SynthesisSettings(horizon=6, time_limit=60, work_limit=1_000_000),
+                                  on_phase=phases.append)
+    grid = run_count(twins, "robust", MAX_GRID_CANDIDATES) - 1 - twins.n_types
+    assert found.candidates_not_needed == grid == 16
+    assert [c["prior"] for c in found.candidates] == [[0.5, 0.5], None]   # the Bayes policy, the free one
+    assert found.gap <= 1e-3 and found.lower == pytest.approx(found.bayes_lower, abs=1e-12)
+    assert sum("candidate priors are not run" in line for line in phases) == 1
+    assert not any(line.startswith("[") and "candidate prior [" in line for line in phases)
