@@ -88,6 +88,13 @@ def test_paynt_never_exceeds_the_exact_search_optimum_on_road_specs(driver, seed
     assert paynt.value <= exact + PRECISION, (paynt, exact)
 
 
+# PAYNT searches ever larger memories until its time limit. On these small problems the value it
+# reports after 0.25 s is the one it reports after 1 s (measured on every seed below, horizon 3 and
+# unbounded; at horizon 3 it is the exact optimum), so the checks are as strong at a quarter of the
+# cost. Starved of its core it may report less, which these one-sided checks still hold for.
+QUICK_PAYNT_SECONDS = 0.25
+
+
 @pytest.mark.parametrize("seed", [11, 12, 13, 14])
 def test_paynt_never_exceeds_the_brute_force_optimum_with_trust_atoms(driver, seed):
     pomdp, spec = random_problem(np.random.default_rng(seed), driver, "trust")
@@ -95,7 +102,7 @@ def test_paynt_never_exceeds_the_brute_force_optimum_with_trust_atoms(driver, se
     exact = brute_force_optimum(pomdp, spec, horizon)
     ours = joint_bounds(pomdp, spec, depth=0, horizon=horizon)
     assert abs(ours.lower - exact) <= 1e-9 and abs(ours.upper - exact) <= 1e-9, (ours, exact)
-    paynt = run_paynt(explicit_product(pomdp, spec, horizon), time_limit=1)
+    paynt = run_paynt(explicit_product(pomdp, spec, horizon), time_limit=QUICK_PAYNT_SECONDS)
     certified = synthesize_spec(pomdp, spec, SynthesisSettings(tau=1e-3, time_limit=10, horizon=horizon))
     assert paynt.lower <= min(exact, certified.upper) + PRECISION, (paynt, exact, certified)
 
@@ -104,7 +111,7 @@ def test_paynt_never_exceeds_the_brute_force_optimum_with_trust_atoms(driver, se
 @pytest.mark.parametrize("seed", [11, 12])
 def test_paynt_unbounded_never_exceeds_our_certified_upper_bound(driver, seed):
     pomdp, spec = random_problem(np.random.default_rng(seed), driver, "trust")
-    unbounded = run_paynt(explicit_product(pomdp, spec, None), time_limit=1)
+    unbounded = run_paynt(explicit_product(pomdp, spec, None), time_limit=QUICK_PAYNT_SECONDS)
     # A work limit (policies/work_clock.py), not the wall clock: the unbounded search does not
     # close its gap on these problems and would run to any time limit; its U on both is 1.0 after
     # these units as after 10 s, and the same on any machine.
