@@ -48,29 +48,62 @@ function laneBox(lane) {
   return laneBoxes.get(lane);
 }
 
-// `scale`: pixels per metre. `route`: the roads of the ego's route from the one it is on. Only the
-// lanes that reach into the canvas are stroked: the map shows a few hundred metres of a town that
-// may have thousands of lanes, and it is drawn at every frame.
-export function drawMap(canvas, net, frame, scale) {
-  const context = canvas.getContext("2d");
-  const toCanvas = (x, y) => [canvas.width / 2 + (x - frame.x) * scale, canvas.height / 2 - (y - frame.y) * scale];
-  const [halfWidth, halfHeight] = [canvas.width / 2 / scale, canvas.height / 2 / scale];
-  const lanes = net.lanes.filter((lane) => {
+// The lanes within `halfWidth` x `halfHeight` metres of (x, y), by their boxes.
+function lanesAround(net, x, y, halfWidth, halfHeight) {
+  return net.lanes.filter((lane) => {
     const [x0, y0, x1, y1] = laneBox(lane);
-    return x1 >= frame.x - halfWidth && x0 <= frame.x + halfWidth && y1 >= frame.y - halfHeight && y0 <= frame.y + halfHeight;
+    return x1 >= x - halfWidth && x0 <= x + halfWidth && y1 >= y - halfHeight && y0 <= y + halfHeight;
   });
+}
+
+// The net's lanes drawn once into a canvas LAYER_SPAN times the map's size around where the ego
+// was, and copied at every frame until the ego's view leaves it: stroking every lane at every frame
+// took about as long as the rest of the station's page drawing with software rendering.
+const LAYER_SPAN = 3;
+const layers = new WeakMap();   // map canvas -> its lane layer
+
+function laneLayer(canvas, net, frame, scale) {
+  const [width, height] = [canvas.width, canvas.height];
+  let layer = layers.get(canvas);
+  const covers = layer && layer.net === net && layer.scale === scale && layer.width === width
+    && layer.height === height && Math.abs(frame.x - layer.x) * scale <= width * (LAYER_SPAN - 1) / 2
+    && Math.abs(frame.y - layer.y) * scale <= height * (LAYER_SPAN - 1) / 2;
+  if (covers) return layer;
+  const image = document.createElement("canvas");
+  [image.width, image.height] = [LAYER_SPAN * width, LAYER_SPAN * height];
+  const context = image.getContext("2d");
+  const toLayer = (x, y) => [image.width / 2 + (x - frame.x) * scale, image.height / 2 - (y - frame.y) * scale];
   context.fillStyle = "#dfe8d8";
-  context.fillRect(0, 0, canvas.width, canvas.height);
+  context.fillRect(0, 0, image.width, image.height);
   context.lineCap = "round";
+  const lanes = lanesAround(net, frame.x, frame.y, image.width / 2 / scale, image.height / 2 / scale);
   // two passes: a light band per lane, then the asphalt a little narrower, so that the lanes of a
   // road stay apart by a thin marking
   for (const [colour, inset] of [["#f4f4f4", 0], [null, Math.min(1.5, scale / 2)]]) {
     for (const lane of lanes) {
       context.strokeStyle = colour || (lane.internal ? "#8c8c8c" : "#6f6f6f");
       context.lineWidth = Math.max(lane.width * scale - inset, 1);
-      strokeLane(context, toCanvas, lane);
+      strokeLane(context, toLayer, lane);
     }
   }
+  layer = { net, scale, width, height, x: frame.x, y: frame.y, image };
+  layers.set(canvas, layer);
+  return layer;
+}
+
+// `scale`: pixels per metre. `route`: the roads of the ego's route from the one it is on. The map
+// shows a few hundred metres of a town that may have thousands of lanes, and it is drawn at every
+// frame: the lanes come from the lane layer, whole pixels from where the ego is (the overlays are
+// drawn at the frame's own position, at most half a pixel from the lanes under them).
+export function drawMap(canvas, net, frame, scale) {
+  const context = canvas.getContext("2d");
+  const toCanvas = (x, y) => [canvas.width / 2 + (x - frame.x) * scale, canvas.height / 2 - (y - frame.y) * scale];
+  const layer = laneLayer(canvas, net, frame, scale);
+  const left = Math.round((layer.image.width - canvas.width) / 2 + (frame.x - layer.x) * scale);
+  const top = Math.round((layer.image.height - canvas.height) / 2 - (frame.y - layer.y) * scale);
+  context.drawImage(layer.image, left, top, canvas.width, canvas.height, 0, 0, canvas.width, canvas.height);
+  context.lineCap = "round";
+  const lanes = lanesAround(net, frame.x, frame.y, canvas.width / 2 / scale, canvas.height / 2 / scale);
   const route = new Set(frame.route || []);
   context.strokeStyle = "rgba(30, 136, 229, 0.85)";
   for (const lane of lanes) {

@@ -243,15 +243,21 @@ def near(pixels: np.ndarray, colour, tolerance: int = 14) -> np.ndarray:
     return (np.abs(pixels - np.array(colour)) <= tolerance).all(axis=-1)
 
 
-def test_the_driver_view_shows_sky_road_and_an_oncoming_truck_where_the_camera_says(station):
-    page, socket, net_path = station
-    socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver"}))
+def start_driving(page, socket, view: str) -> None:
+    """The server's messages that put the station in a drive with `view` ("driver" or "map")."""
+    socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": view}))
     socket.send(json.dumps({"type": "state", "participant": 0, "label": "view", "phase": "driving",
                             "paused_by": None, "warm_up": None, "trial": 1, "trials": 1, "episode_id": "x",
                             "next_episode": None, "mode": "auto", "road": None, "reports": 0, "takeovers": 0,
                             "done": [], "last_error": None}))
     socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
-    wait_until(page, "Boolean(window.driverView && window.driverView.net)")
+    if view == "driver":
+        wait_until(page, "Boolean(window.driverView && window.driverView.net)")
+
+
+def test_the_driver_view_shows_sky_road_and_an_oncoming_truck_where_the_camera_says(station):
+    page, socket, net_path = station
+    start_driving(page, socket, "driver")
     assert page.evaluate("window.driverView.stats.camera") == CAMERA
     frame, truck = scene_on(net_path)
 
@@ -281,3 +287,76 @@ def test_the_driver_view_shows_sky_road_and_an_oncoming_truck_where_the_camera_s
     outside[int(r0) - 3: int(r1) + 4, max(int(c0) - 3, 0): int(c1) + 4] = False
     moved = (np.abs(with_truck - empty).sum(axis=-1) > 30) & outside
     assert moved.mean() < 0.002, "the truck is drawn where the camera model does not put it"
+
+
+# the large map's scale (station.js MAP_SCALE, pixels per metre) and colours (map_view.js)
+MAP_SCALE = 3
+MAP_ROAD, MAP_GROUND = (111, 111, 111), (223, 232, 216)
+
+
+def map_pixels(page, socket, frame: dict) -> np.ndarray:
+    """The map canvas's pixels (rows, columns, RGB) once it has drawn `frame` with the net: the
+    frame is sent until the page shows its speed (each frame here has its own) on a map drawn
+    to its corner (nothing is drawn before the net has come)."""
+    from PIL import Image
+
+    shown = f"{frame['speed'] * 3.6:.0f} km/h"
+    drawn = "document.getElementById('view').getContext('2d').getImageData(0, 0, 1, 1).data[3] === 255"
+    deadline = time.monotonic() + 60
+    while not (page.evaluate("document.getElementById('speed').textContent") == shown
+               and page.evaluate(drawn)):
+        assert time.monotonic() < deadline, "the map never drew the frame"
+        socket.send(json.dumps(frame))
+        page.wait_for_timeout(100)
+    data = page.evaluate("document.getElementById('view').toDataURL('image/png')")
+    image = Image.open(io.BytesIO(base64.b64decode(data.split(",", 1)[1]))).convert("RGB")
+    return np.asarray(image).astype(int)
+
+
+def on_map(pixels: np.ndarray, frame: dict, x: float, y: float) -> np.ndarray:
+    """The map's pixel at net point (x, y), the frame's ego at the canvas's centre."""
+    rows, columns, _ = pixels.shape
+    return pixels[int(round(rows / 2 - (y - frame["y"]) * MAP_SCALE)),
+                  int(round(columns / 2 + (x - frame["x"]) * MAP_SCALE))]
+
+
+def far_lane(net, frame: dict, beyond: float):
+    """A car lane of another road at least 80 m long whose point 20 m along is more than `beyond`
+    metres from the frame's ego in x or y."""
+    for edge in sorted(net.getEdges(), key=lambda e: e.getID()):
+        for lane in edge.getLanes():
+            if not lane.allows("passenger") or lane.getLength() < 80 or edge.getID() == frame["road"]:
+                continue
+            x, y, _ = lane_pose(lane, 20.0)
+            if max(abs(x - frame["x"]), abs(y - frame["y"])) > beyond:
+                return lane
+    raise AssertionError(f"no car lane more than {beyond} m from the ego")
+
+
+def test_the_map_shows_the_lanes_under_the_ego_wherever_it_drives(station):
+    """The large map ("map" view) draws the net's lanes from a layer a few times its size around
+    the ego, drawn once and copied at every frame: a lane is road-coloured where the ego drives,
+    there and again after a jump past the layer's reach (the layer drawn anew), and ground away
+    from any road."""
+    import sumolib
+
+    page, socket, net_path = station
+    start_driving(page, socket, "map")
+    net = sumolib.net.readNet(str(net_path))
+    frame, _ = scene_on(net_path)
+    width, height = 640, 480   # the map canvas (station.js setView)
+    far = far_lane(net, frame, max(width, height) / MAP_SCALE)
+    x, y, angle = lane_pose(far, 20.0)
+    jumped = {**frame, "x": x, "y": y, "angle": angle, "road": far.getEdge().getID(), "lane": far.getID(),
+              "junction": far.getEdge().getToNode().getID(), "route": [], "speed": 10.0}
+    for shown in ({**frame, "route": [], "speed": 5.0}, jumped):
+        pixels = map_pixels(page, socket, shown)
+        assert pixels.shape[:2] == (height, width)
+        lane = net.getLane(shown["lane"])
+        ahead = lane_pose(lane, (EGO_AT if shown is not jumped else 20.0) + 12.0)
+        assert near(on_map(pixels, shown, ahead[0], ahead[1]), MAP_ROAD, 20), (shown["lane"], "no road ahead")
+        steps = range(-60, 61, 12)
+        away = next(((shown["x"] + dx, shown["y"] + dy) for dx in steps for dy in steps
+                     if not net.getNeighboringLanes(shown["x"] + dx, shown["y"] + dy, r=12)), None)
+        assert away is not None, "no point of the map 12 m from every lane"
+        assert near(on_map(pixels, shown, *away), MAP_GROUND, 6), "no ground off the road"
