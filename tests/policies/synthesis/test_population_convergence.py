@@ -14,7 +14,12 @@ import pytest
 
 from tests.policies.synthesis.test_population_synthesis import monte_carlo
 from trustroute.core.packaged import PACKAGED_SPECS
-from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH, load_driver_population
+from trustroute.participants.driver_population import (
+    EXAMPLE_POPULATION_PATH,
+    DriverPopulation,
+    DriverType,
+    load_driver_population,
+)
 from trustroute.policies.belief.driver_types import lift_population
 from trustroute.policies.belief.product_mdp import build_product
 from trustroute.policies.logic.spec import load_spec
@@ -24,7 +29,13 @@ from trustroute.policies.synthesis import population as population_synthesis
 from trustroute.policies.synthesis.belief_cells import observation_symbols, reachable_states, suffix_cells
 from trustroute.policies.synthesis.belief_synthesis import cluster_order
 from trustroute.policies.synthesis.budget import TimeBudget
-from trustroute.policies.synthesis.population import BAYES_SHARE, RunSchedule, synthesize_population
+from trustroute.policies.synthesis.population import (
+    BAYES_SHARE,
+    MAX_GRID_CANDIDATES,
+    RunSchedule,
+    run_count,
+    synthesize_population,
+)
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 
@@ -131,9 +142,6 @@ def test_the_robust_search_stops_once_its_best_candidate_reaches_the_bound(town,
     # Two copies of one type: the Bayes policy serves both alike, so its worst type is its value,
     # which the Bayes bound U certifies optimal within tau: no candidate prior can do better, and
     # none is run (without that stop, all 16 would run, each a synthesis of its own).
-    from trustroute.participants.driver_population import DriverPopulation, DriverType
-    from trustroute.policies.synthesis.population import MAX_GRID_CANDIDATES, run_count
-
     twins = DriverPopulation(types=(DriverType("one", 0.5, driver), DriverType("two", 0.5, driver)))
     spec = load_spec(PACKAGED_SPECS / "phi1.toml", town, driver.n_trust)
     phases: list[str] = []
