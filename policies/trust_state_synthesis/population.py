@@ -60,6 +60,7 @@ from trustroute.policies.synthesis.population import (
     evaluation_cap,
     reweighting,
     run_count,
+    worst_type,
 )
 from trustroute.policies.synthesis.result import SynthesisResult
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
@@ -144,13 +145,13 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
     cap = evaluation_cap(horizon)
 
     def record(prior: np.ndarray, found: tuple[TypeValue, ...]) -> dict:
-        return {"prior": prior.tolist(), "worst_type_lower": min(v.lower for v in found),
+        return {"prior": prior.tolist(), "worst_type_lower": worst_type(found),
                 "type_lower": [v.lower for v in found]}
 
     best: tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray] = (bayes.policy, values, weights)
     candidates = [record(weights, values)]
     def settled() -> bool:
-        return min(v.lower for v in best[1]) >= bound - settings.tau
+        return worst_type(best[1]) >= bound - settings.tau
 
     for prior in candidate_priors(weights, population.n_types, grid_points, schedule, settled):
         model = build_pomdp(problem.town, lift_population(population, prior))
@@ -167,7 +168,7 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
                                   guide=made.policy.guide, reweight=reweighting(population, prior))
         found = joint_type_values(problem, policy, cap, belief_rule, deadline=schedule.budget.deadline)
         candidates.append(record(prior, found))
-        if min(v.lower for v in found) > min(v.lower for v in best[1]):
+        if worst_type(found) > worst_type(best[1]):
             best = (policy, found, prior)
     return (*best, candidates)
 
@@ -216,7 +217,7 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
     upper = min(bayes.upper, *type_upper)
     policy, best_values, prior, candidates = robust_candidates(
         problem, bayes, values, settings, schedule, upper, on_iteration)
-    lower = min(v.lower for v in best_values)
+    lower = worst_type(best_values)
     if lower > upper + 1e-9:
         raise RuntimeError(f"robust value {lower!r} above its bound {upper!r}: a soundness bug")
     # The policy file's bounds keep their meaning L <= Pr_max <= U under the type prior: L the
