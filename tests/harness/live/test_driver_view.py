@@ -349,11 +349,10 @@ def test_the_map_shows_the_lanes_under_the_ego_wherever_it_drives(station):
     x, y, angle = lane_pose(far, 20.0)
     jumped = {**frame, "x": x, "y": y, "angle": angle, "road": far.getEdge().getID(), "lane": far.getID(),
               "junction": far.getEdge().getToNode().getID(), "route": [], "speed": 10.0}
-    for shown in ({**frame, "route": [], "speed": 5.0}, jumped):
+    for shown, along in (({**frame, "route": [], "speed": 5.0}, EGO_AT), (jumped, 20.0)):
         pixels = map_pixels(page, socket, shown)
         assert pixels.shape[:2] == (height, width)
-        lane = net.getLane(shown["lane"])
-        ahead = lane_pose(lane, (EGO_AT if shown is not jumped else 20.0) + 12.0)
+        ahead = lane_pose(net.getLane(shown["lane"]), along + 12.0)   # 12 m ahead of the ego
         assert near(on_map(pixels, shown, ahead[0], ahead[1]), MAP_ROAD, 20), (shown["lane"], "no road ahead")
         steps = range(-60, 61, 12)
         away = next(((shown["x"] + dx, shown["y"] + dy) for dx in steps for dy in steps

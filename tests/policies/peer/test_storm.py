@@ -39,7 +39,7 @@ def test_storm_and_ours_overlap_on_phi1_with_the_trust_atom(pomdp, horizon):
     assert_overlap(storm, ours)
     if horizon is None:
         assert storm.lower_beliefs <= UNFOLDED_BELIEFS and not storm.lower_complete
-    if horizon is not None:   # our value is exact there: inside Storm's interval
+    else:   # our value is exact there: inside Storm's interval
         assert ours.gap <= 1e-11
         assert storm.lower - STORM_PRECISION <= ours.lower <= storm.upper + STORM_PRECISION
 
