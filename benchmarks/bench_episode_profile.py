@@ -50,6 +50,8 @@ from trustroute.harness.simulation import episode as episode_module
 from trustroute.harness.simulation import episode_tracker
 
 EPISODES = 40
+BY_FUNCTION_SHOWN = 14      # libsumo functions listed one by one, the rest summed
+MIN_CALLS_CHEAPEST = 10     # calls per episode for a function's mean to stand for a timer's cost
 
 # (owner, attribute, phase): the functions whose time is a phase of the episode.
 # `run` is the episode's every `advance` (SUMO's start and close, the loop, the road ends and the
@@ -98,12 +100,12 @@ def _is_api(native, name: str) -> bool:
 def _phase_timers(totals: dict[str, float], cpu: dict[str, float], counts: dict[str, int],
                   all_native: bool = False) -> Iterator[None]:
     """Wrap every phase's function for the duration of the block (then put the originals back);
-    all_native: instead every function of libsumo's native module, as the one phase "libsumo"."""
+    all_native: instead every function of libsumo's native module, each its own phase (its name)."""
     import libsumo._libsumo as native
 
     originals = []
     if all_native:
-        targets = [(native, name, "libsumo") for name in dir(native) if _is_api(native, name)]
+        targets = [(native, name, name) for name in dir(native) if _is_api(native, name)]
     else:
         targets = [(owner, name, phase) for owner, name, phase in _EPISODE_PHASES]
         targets += [(native, name, phase) for name, phase in _NATIVE_PHASES]
@@ -190,14 +192,58 @@ def profile(episodes: int = EPISODES) -> dict:
     out["steps"] = {side: totals[side]["counts"].get("sumo_steps", 0) // episodes for side in totals}
     for side in sides:
         for clock, index in (("wall", 0), ("cpu", 1)):
-            native = totals[side][f"native_{clock}"].get("libsumo", 0.0)
+            native = sum(totals[side][f"native_{clock}"].values())
             out.setdefault(f"libsumo_{clock}", {})[side] = round(1e3 * native / episodes, 3)
             run_total = totals[side]["native_total"][index]
             out.setdefault(f"libsumo_run_{clock}", {})[side] = round(1e3 * run_total / episodes, 3)
-        calls = totals[side]["native_counts"].get("libsumo", 0)
+        calls = sum(totals[side]["native_counts"].values())
         out.setdefault("libsumo_calls", {})[side] = round(calls / episodes, 1)
+    out["libsumo_by_function_cpu"] = by_function(totals, episodes)
+    out["sumo_alone_vs_bare_kept_open_cpu"] = sumo_alone_ratio(totals, out["bare_open_cpu"]["total"],
+                                                               episodes)
     out["load_average_1min"] = [load_before, os.getloadavg()[0]]
     return out
+
+
+def by_function(totals: dict, episodes: int, shown: int = BY_FUNCTION_SHOWN) -> dict[str, dict]:
+    """libsumo's functions by the episode's CPU in them, the most first: [ms, calls] per episode
+    for the episode and the bare loop kept open; the rest summed as "others"."""
+    cpu = {side: totals[side]["native_cpu"] for side in ("episode", "bare_open")}
+    counts = {side: totals[side]["native_counts"] for side in ("episode", "bare_open")}
+    names = sorted(set(cpu["episode"]) | set(cpu["bare_open"]), key=lambda n: -cpu["episode"].get(n, 0.0))
+    out: dict[str, dict] = {}
+    for i, name in enumerate(names):
+        key = name if i < shown else "others"
+        for side in cpu:
+            ms, calls = out.setdefault(key, {}).get(side, (0.0, 0.0))
+            out[key][side] = (ms + 1e3 * cpu[side].get(name, 0.0) / episodes,
+                              calls + counts[side].get(name, 0) / episodes)
+    return {name: {side: [round(ms, 3), round(calls, 1)] for side, (ms, calls) in row.items()}
+            for name, row in out.items()}
+
+
+def sumo_alone_ratio(totals: dict, bare_open_ms: float, episodes: int) -> dict[str, float]:
+    """The episode's libsumo CPU alone against the whole bare loop kept open (its CPU total with
+    no function timed): "timed" as measured, timers included; "lower" less, for every call, the
+    cheapest mean per call of any function called at least MIN_CALLS_CHEAPEST times per episode,
+    which is more than a timer costs (that call's own work is in it), so no less than SUMO's work."""
+    cpu, counts = totals["episode"]["native_cpu"], totals["episode"]["native_counts"]
+    ms = 1e3 * sum(cpu.values()) / episodes
+    calls = sum(counts.values()) / episodes
+    cheapest = min(1e3 * cpu[name] / counts[name] for name in cpu
+                   if counts[name] >= MIN_CALLS_CHEAPEST * episodes)
+    return {"timed": round(ms / bare_open_ms, 3), "lower": round((ms - calls * cheapest) / bare_open_ms, 3),
+            "cheapest_call_ms": round(cheapest, 5)}
+
+
+def functions_table(row: dict) -> str:
+    """libsumo's CPU by function (docs/performance.md): ms and calls per episode on each side."""
+    lines = ["| libsumo function | episode CPU ms | calls | bare kept open CPU ms | calls |",
+             "|---|---|---|---|---|"]
+    for name, sides in row["libsumo_by_function_cpu"].items():
+        (ms, calls), (bare_ms, bare_calls) = sides["episode"], sides["bare_open"]
+        lines.append(f"| {name} | {ms:.3f} | {calls:g} | {bare_ms:.3f} | {bare_calls:g} |")
+    return "\n".join(lines)
 
 
 def run() -> list[dict]:
@@ -225,3 +271,4 @@ if __name__ == "__main__":
     _row = profile()
     print(json.dumps(_row))
     print(phases_table(_row))
+    print(functions_table(_row))
