@@ -32,9 +32,10 @@ def _normalised(text: str) -> str:
 
 
 def missing_figures(readme: str, page: str) -> list[str]:
-    """README figures the page does not list."""
+    """README figures the page does not list, each as a whole figure ("21 s" is not in "21 seeds")."""
     listed = _normalised(page)
-    return sorted({figure for figure in figures(readme) if figure not in listed})
+    return sorted({figure for figure in figures(readme)
+                   if not re.search(rf"(?<![\w.]){re.escape(figure)}(?!\w)", listed)})
 
 
 def unlisted_pages(pages: dict[str, str], page: str) -> list[str]:
@@ -53,6 +54,8 @@ def test_a_readme_figure_the_page_does_not_list_fails():
     assert missing_figures("converged in 0.9 s", page) == []
     assert missing_figures("converged in 0.9 s, the episode at 1.43× bare libsumo", page) == ["1.43×"]
     assert missing_figures("about 10 s on a laptop", page) == ["10 s"]
+    assert missing_figures("about 21 s", "21 synthetic drivers, 121 s, 0.21 s") == ["21 s"]
+    assert missing_figures("about 21 s", "took 21 s.") == []
     docs = "docs/"   # pages that do not exist (written so that test_docs does not read them as citations)
     assert unlisted_pages({"a.md": "took 3.2 s", "b.md": "no figures"}, f"see {docs}b.md") == ["a.md"]
     assert unlisted_pages({"a.md": "took 3.2 s"}, f"see {docs}a.md") == []
