@@ -31,7 +31,9 @@ Then, in as many runs again with no phase timed, every function of libsumo's nat
 instead (`libsumo_cpu`, `libsumo_wall`, `libsumo_calls`, beside those runs' `libsumo_run_cpu` and
 `libsumo_run_wall` totals): the part of each side that is SUMO's own work (its steps, reset,
 queries, `vehicle.add`, `setRoute`, the subscription reads), which no change to the Python can
-remove; each call's clock pair adds about a microsecond to it.
+remove; each call's clock pair adds under a microsecond to it. `libsumo_by_function_cpu` splits it
+by function (`functions_table`), and `sumo_alone_vs_bare_kept_open_cpu` sets it against the whole
+bare loop kept open: "timed" with the clocks' cost, "lower" without it (`sumo_alone_ratio`).
 
 Each figure is ms per episode (total over the run / EPISODES), with the 1-minute load average.
 """
