@@ -242,7 +242,7 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
     lines.append(f"returned policy under the type prior: [{mixture[0]:.6f}, {mixture[1]:.6f}]; worst type "
                  f"{found.worst_type_value:.6f}; AV type prior {', '.join(f'{p:g}' for p in found.prior)}")
     if objective == "robust":
-        worst_bayes = min(v.lower for v in found.bayes_type_values)
+        worst_bayes = summary["bayes"]["worst_type_value"]
         lines.append(f"Bayes-optimal synthesis beside it: {found.bayes_lower:.6f} <= prior-weighted <= "
                      f"{found.bayes_upper:.6f}, its worst type {worst_bayes:.6f}; robust value certified "
                      f">= {found.lower:.6f} (best of {len(found.candidates)} candidate priors"

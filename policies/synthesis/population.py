@@ -41,7 +41,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from math import comb
 from typing import Literal, TypeAlias
@@ -135,7 +135,7 @@ class PopulationSynthesis:
 
     @property
     def worst_type_value(self) -> float:
-        return min(v.lower for v in self.type_values)
+        return worst_type(self.type_values)
 
 
 def evaluation_cap(horizon: int | None) -> int:
@@ -318,7 +318,7 @@ BayesRun: TypeAlias = tuple[TrustPOMDP, BeliefSynthesis, tuple["TypeValue", ...]
 Candidate: TypeAlias = tuple[BeliefTablePolicy, tuple["TypeValue", ...], np.ndarray, SynthesisStats]
 
 
-def worst_type(values: tuple[TypeValue, ...]) -> float:
+def worst_type(values: Iterable[TypeValue]) -> float:
     """The robust value of a policy: the lower end of its worst type's value."""
     return min(v.lower for v in values)
 
@@ -374,7 +374,7 @@ def candidate_record(prior: np.ndarray | None, found: tuple[TypeValue | None, ..
     beaten, `"beaten": true`)."""
     known = [v for v in found if v is not None]
     record: dict = {"prior": None if prior is None else prior.tolist(), "rows": rows,
-                    "worst_type_lower": min(v.lower for v in known),
+                    "worst_type_lower": worst_type(known),
                     "type_lower": [None if v is None else v.lower for v in found]}
     if len(known) < len(found):   # its worst type may be lower still
         record["beaten"] = True
@@ -538,7 +538,7 @@ def summary(synthesis: PopulationSynthesis) -> dict:
         "worst_type_value": synthesis.worst_type_value,
         "bayes": {"lower": synthesis.bayes_lower, "upper": synthesis.bayes_upper,
                   "type_values": [v.to_dict() for v in synthesis.bayes_type_values],
-                  "worst_type_value": min(v.lower for v in synthesis.bayes_type_values)},
+                  "worst_type_value": worst_type(synthesis.bayes_type_values)},
         "seconds": synthesis.seconds,
     }
     if synthesis.objective == "robust":
