@@ -323,6 +323,12 @@ def worst_type(values: Iterable[TypeValue]) -> float:
     return min(v.lower for v in values)
 
 
+def within_tau(values: Iterable[TypeValue], bound: float, tau: float) -> bool:
+    """Whether a policy with these per-type values settles the robust search: its worst type is
+    within tau of the robust bound, so no candidate can be worth more than tau above it."""
+    return worst_type(values) >= bound - tau
+
+
 def setup_seconds(result: BeliefSynthesis) -> float:
     """A synthesis run's fixed costs before its search could expand (the exact filter, the product,
     the abstraction), as its search runs report them."""
@@ -414,7 +420,7 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
     # started while its fixed costs fit, given twice them where the time allows (small problems
     # converge within their fixed costs; larger ones need time to expand)
     def settled() -> bool:
-        return worst_type(best[1]) >= bound - settings.tau
+        return within_tau(best[1], bound, settings.tau)
 
     for prior in candidate_priors(weights, population.n_types, grid_points, schedule, settled,
                                   worst_first[0], setup / CANDIDATE_SETUP_FACTOR):

@@ -60,6 +60,7 @@ from trustroute.policies.synthesis.population import (
     evaluation_cap,
     reweighting,
     run_count,
+    within_tau,
     worst_type,
 )
 from trustroute.policies.synthesis.result import SynthesisResult
@@ -151,7 +152,7 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
     best: tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray] = (bayes.policy, values, weights)
     candidates = [record(weights, values)]
     def settled() -> bool:
-        return worst_type(best[1]) >= bound - settings.tau
+        return within_tau(best[1], bound, settings.tau)
 
     for prior in candidate_priors(weights, population.n_types, grid_points, schedule, settled):
         model = build_pomdp(problem.town, lift_population(population, prior))

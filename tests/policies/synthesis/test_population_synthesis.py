@@ -207,3 +207,20 @@ def test_population_optimum_in_bounds_and_monte_carlo_agrees(k, seed, with_type_
     for bound, best in zip(robust.type_upper, own, strict=True):
         assert bound >= best - TOLERANCE                         # U_k bounds type k's own optimum
     assert robust.upper >= robust.lower
+
+
+def test_within_tau_settles_exactly_at_the_bound_less_tau():
+    """The robust search stops once the worst type is within tau of the bound: at bound - tau
+    exactly it stops (the threshold is hit, not approached), a hair below it goes on, and the worst
+    type is the minimum over types, not the mean."""
+    from fractions import Fraction
+
+    from trustroute.policies.synthesis.population import TypeValue, within_tau
+    bound, tau = 0.75, 0.25                      # dyadic: bound - tau is exactly 0.5
+    assert float(Fraction(bound) - Fraction(tau)) == 0.5
+    at = (TypeValue("a", 0.5, 0.5, 0.6), TypeValue("b", 0.5, 0.9, 1.0))
+    below = (TypeValue("a", 0.5, np.nextafter(0.5, 0.0), 0.6), TypeValue("b", 0.5, 0.9, 1.0))
+    assert within_tau(at, bound, tau)
+    assert not within_tau(below, bound, tau)
+    mean_above = (TypeValue("a", 0.5, 0.4, 0.6), TypeValue("b", 0.5, 1.0, 1.0))  # mean 0.7
+    assert not within_tau(mean_above, bound, tau)
