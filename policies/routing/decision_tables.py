@@ -353,11 +353,12 @@ def fallback_warning(what: str, fallback: str, converged: bool, outranked: bool 
     if converged:
         why = "the search proved it within tau of the optimum"
     elif outranked:
-        why = ("no synthesized candidate was worth more for its worst type, so L is the fallback's "
-               "value (raise --time-limit, or --work-limit where one is set, for candidates searched "
-               "further)")
+        why = ("no synthesized candidate was worth more for its worst type, so L is a lower bound of "
+               "the fallback's worst type (raise --time-limit, or --work-limit where one is set, for "
+               "candidates searched further)")
     else:
-        why = ("nothing was synthesized in time, so L is the fallback's value, not a synthesized "
-               "policy's (raise --time-limit, or --work-limit where one is set)")
+        why = ("nothing was synthesized in time, so L is only a lower bound of the fallback's value, "
+               "0 if the search stopped before valuing it (trustroute evaluate values it exactly; "
+               "raise --time-limit, or --work-limit where one is set)")
     return (f"warning: {what} has no synthesized decision (0 rows): it is only its fallback, "
             f"{fallback}; {why}")

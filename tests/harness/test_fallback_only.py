@@ -94,3 +94,21 @@ def test_the_warning_says_why_the_fallback_was_returned():
     assert "within tau of the optimum" in proved
     lines = (timed_out, outranked, proved)
     assert len(set(lines)) == 3 and all("\n" not in line for line in lines)
+
+
+def test_a_search_stopped_before_any_row_reports_l_below_the_fallbacks_exact_value(tmp_path, capsys):
+    """A work limit too small for the first row returns only the free completion: the warning calls
+    L a lower bound of the fallback's value, and the exact evaluation of the policy file is at least
+    L (here L is 0: the search stopped before valuing the root)."""
+    out = tmp_path / "w.json"
+    code, stdout, err = run_cli(capsys, "synth", "phi1", "--work-limit", "3000", "--out", str(out),
+                                "--json")
+    assert code == 0, err
+    answer = json.loads(stdout)
+    assert answer["fallback_only"] is True and answer["stats"]["policy_rows"] == 0
+    assert "only a lower bound of the fallback's value" in err
+    code, stdout, err = run_cli(capsys, "evaluate", "phi1", str(out), "--json")
+    assert code == 0, err
+    exact = json.loads(stdout)
+    assert exact["fallback_only"] is True
+    assert answer["lower"] <= exact["lower"] and exact["lower"] > 0.9
