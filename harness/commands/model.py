@@ -21,8 +21,11 @@ def model(town_path: str | None, driver_path: str | None, as_json: bool) -> None
     if as_json:
         click.echo(json.dumps(with_paths(summary, {})))
         return
+    one_way = summary["one_way_roads"]
+    roads = (f"{summary['roads']} two-way roads" if one_way == 0 else
+             f"{summary['roads'] - one_way} two-way and {one_way} one-way roads")
     click.echo(f"town {summary['town']} ({summary['town_hash']}): {summary['junctions']} junctions,"
-               f" {summary['roads']} two-way roads, {summary['states']} states (directed roads)")
+               f" {roads}, {summary['states']} states (directed roads)")
     click.echo("incidents per directed road: " + ", ".join(
         f"{k} {v}" for k, v in summary["incidents_per_type"].items()))
     click.echo(f"driver model {summary['driver_model']} ({summary['driver_hash']}): trust levels "

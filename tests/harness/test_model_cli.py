@@ -52,3 +52,20 @@ def test_unknown_option_is_a_usage_error(capsys):
     code, _, err = run_cli(capsys, "model", "--no-such-option")
     assert code == 2
     assert "Traceback" not in err
+
+
+def test_one_way_roads_are_counted_apart_from_two_way_ones(tmp_path, capsys):
+    """A square with one one-way road: 3 two-way and 1 one-way road, 7 directed roads (states)."""
+    from tests.networks.test_road_geometry import square
+
+    data = square(one_way=[["A", "B"]])
+    del data["incidents"]["B-A"]
+    path = tmp_path / "square.json"
+    path.write_text(json.dumps(data))
+    code, out, err = run_cli(capsys, "model", "--town", str(path))
+    assert code == 0, err
+    assert "4 junctions, 3 two-way and 1 one-way roads, 7 states" in out
+    code, out, _ = run_cli(capsys, "model", "--town", str(path), "--json")
+    summary = json.loads(out)
+    two_way = summary["roads"] - summary["one_way_roads"]
+    assert summary["states"] == 2 * two_way + summary["one_way_roads"] == 7

@@ -34,6 +34,7 @@ def model_summary(town_path: str | None, driver_path: str | None) -> dict:
         "town_hash": town.content_hash[:12],
         "junctions": len(town.junctions),
         "roads": len(town.roads),
+        "one_way_roads": len(town.one_way),
         "states": pomdp.n_states,
         "incidents_per_type": incidents,
         "trust_levels": list(driver.trust_levels),
