@@ -121,11 +121,22 @@ def _finite_points(points: Iterable[Iterable[float]], path: str,
     return out
 
 
+NET_FIX = "run `trustroute net build` or pass an existing .net.xml"
+
+
+def require_net_file(net_path: str | Path, shown: str | None = None, fix: str = NET_FIX) -> None:
+    """InputError unless the SUMO net is a file (sumolib and SUMO say less when it is not)."""
+    if not Path(net_path).is_file():
+        what = "path is not a file" if Path(net_path).exists() else "file does not exist"
+        raise InputError(shown or str(net_path), "", f"the SUMO net {what}", fix)
+
+
 def read_net_graph(net_path: str | Path, shown: str | None = None) -> NetGraph:
     """The passenger graph of a SUMO `.net.xml` / `.net.xml.gz` read with sumolib."""
     import sumolib
 
     shown = shown or str(net_path)
+    require_net_file(net_path, shown, "pass an existing .net.xml(.gz) written by netconvert, or an .osm file")
     try:
         net = sumolib.net.readNet(str(net_path), withInternal=False)
     except Exception as exc:  # sumolib raises what its XML parser raises

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
+from trustroute.networks.sumo_import import require_net_file
 from trustroute.networks.sumo_net import net_counts
 
 _MATCHING_NETS: set[tuple[str, float, str]] = set()
@@ -35,8 +36,8 @@ def net_key(net_path: Path) -> tuple[str, float]:
     try:
         return str(net_path), net_path.stat().st_mtime
     except OSError:
-        raise InputError(str(net_path), "", "the SUMO net file does not exist",
-                         "run `trustroute net build` or pass an existing .net.xml") from None
+        require_net_file(net_path)
+        raise
 
 
 def check_readable(net_path: Path, key: tuple[str, float]) -> None:

@@ -30,6 +30,7 @@ from typing import Any, Protocol
 
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.performance import DEFAULT_LIMITS, PerformanceLimits
+from trustroute.networks.sumo_import import require_net_file
 from trustroute.networks.sumo_net import find_binary
 
 
@@ -288,7 +289,7 @@ def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sumo
         with fresh_session(net_path, seed, config) as sumo:
             yield sumo
         return
-    _check_net_file(net_path)
+    require_net_file(net_path)
     sumo = _empty_simulation(sumo_command(net_path, seed, config), Path(net_path), config)
     try:
         yield sumo
@@ -302,7 +303,7 @@ def fresh_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sum
     """SUMO started on `net_path` with `seed` and closed at the end (the simulation kept open
     between episodes is closed first): runs whose SUMO draws matter, with outputs or a GUI, and
     the benchmarks' bare loops."""
-    _check_net_file(net_path)
+    require_net_file(net_path)
     close_simulation()
     command = sumo_command(net_path, seed, config)
     sumo: Sumo
@@ -319,8 +320,3 @@ def fresh_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sum
     finally:
         sumo.close()
 
-
-def _check_net_file(net_path: Path) -> None:
-    if not Path(net_path).is_file():
-        raise InputError(str(net_path), "", "the SUMO net file does not exist",
-                         "run `trustroute net build` or pass an existing .net.xml")

@@ -178,3 +178,15 @@ def test_the_wheel_osm_extract_imports_the_same_twice(tmp_path, capsys):
     assert one["sumo_net"]["sha256"] == file_sha256(tmp_path / "one.net.xml")
     town = load_town(tmp_path / "one.json")
     assert len(town.junctions) >= 2 and town.states
+
+
+def test_a_missing_net_or_a_folder_is_named_as_such(tmp_path, capsys):
+    """A net that is not there is "does not exist", a folder "is not a file", before sumolib is asked
+    (which reports a missing file as an unknown URL type)."""
+    (tmp_path / "folder.net.xml").mkdir()
+    for path, words in ((tmp_path / "nofile.net.xml", "file does not exist"),
+                        (tmp_path / "folder.net.xml", "path is not a file")):
+        code, _, err = run_cli(capsys, "town", "import", str(path), "--out", str(tmp_path / "t.json"))
+        assert code == 2 and err.count("\n") == 1, err
+        assert f"{path}: the SUMO net {words}" in err and "url" not in err.lower()
+    assert not (tmp_path / "t.json").exists()
