@@ -50,3 +50,25 @@ def test_readme_api_script_runs(tmp_path):
     assert all(c[2].endswith("/4") for c in cells)
     assert (tmp_path / "studies" / "api-demo" / "episodes.parquet").is_file()
     assert not (tmp_path / "studies" / "api-demo" / "report.md").exists()  # analyze wrote nothing
+
+
+def test_the_settings_classes_import_from_where_the_readme_says():
+    """Each "`Name` ... from `module`" the API section names imports, and is the class the API's
+    calls take as `settings=`."""
+    import importlib
+    import inspect
+
+    import trustroute
+
+    section = README.read_text()
+    section = section[section.index("## Python API"):section.index("```python")]
+    section = " ".join(section.split())
+    named = re.findall(r"((?:`\w+Settings`(?: and |, )?)+) from `([\w.]+)`", section)
+    found = {name: module for names, module in named for name in re.findall(r"`(\w+)`", names)}
+    assert set(found) == {"SynthesisSettings", "EvaluationSettings", "EpisodeSettings"}, found
+    calls = {"SynthesisSettings": trustroute.synthesize, "EvaluationSettings": trustroute.evaluate,
+             "EpisodeSettings": trustroute.run_episode}
+    for name, module in found.items():
+        cls = getattr(importlib.import_module(module), name)
+        annotation = str(inspect.signature(calls[name]).parameters["settings"].annotation)
+        assert annotation.startswith(name) and inspect.isclass(cls) and cls() is not None
