@@ -127,11 +127,10 @@ def main(argv: list[str] | None = None) -> None:
     except OSError as exc:
         # The last net under every command: an I/O failure no command foresaw (a disk that filled
         # up, a folder that became read-only) is still one line, not a traceback.
-        from trustroute.core.output_files import os_error_text
+        from trustroute.core.output_files import os_error_fix, os_error_text
 
         where = exc.filename if exc.filename is not None else "trustroute"
-        error = InputError(str(where), "", os_error_text(exc), "free disk space or fix the permissions, "
-                           "then rerun")
+        error = InputError(str(where), "", os_error_text(exc), os_error_fix(exc))
         click.echo(f"error: {error.one_line()}", err=True)
         sys.exit(2)
     sys.exit(code if isinstance(code, int) else 0)

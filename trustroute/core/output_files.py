@@ -40,9 +40,44 @@ def os_error_text(exc: OSError) -> str:
     return exc.strerror or type(exc).__name__
 
 
+# The fix of an OSError by its errno; {path} is the path in the way. mkdir(exist_ok=True) fails with
+# EEXIST only where a non-directory stands, so EEXIST and ENOTDIR both mean "a file where a directory
+# must be".
+_NOT_A_DIRECTORY_FIX = "{path} must be a directory, not a file: move the file aside or pass another path"
+OS_ERROR_FIXES: dict[int, str] = {
+    errno.ENOTDIR: _NOT_A_DIRECTORY_FIX,
+    errno.EEXIST: _NOT_A_DIRECTORY_FIX,
+    errno.EISDIR: "{path} must be a file, not a directory: pass a file path",
+    errno.ENOSPC: "free disk space, then rerun",
+    errno.EDQUOT: "free disk space (the disk quota is used up), then rerun",
+    errno.EACCES: "fix the permissions of {path} or pass a writable location, then rerun",
+    errno.EPERM: "fix the permissions of {path} or pass a writable location, then rerun",
+    errno.EROFS: "pass a location on a writable file system, then rerun",
+}
+OTHER_OS_ERROR_FIX = "check that {path} can be read and written, then rerun"
+
+
+def os_error_fix(exc: OSError, path: str | Path | None = None) -> str:
+    """The fix of an OSError from `OS_ERROR_FIXES`, naming `path` (default: the error's own file)
+    or, when a file stands where a directory must be, that file."""
+    named = path if path is not None else exc.filename
+    where: object = "the path" if named is None else Path(named)
+    if exc.errno == errno.ENOTDIR and isinstance(where, Path):
+        where = _file_in_the_way(where)
+    return OS_ERROR_FIXES.get(exc.errno or 0, OTHER_OS_ERROR_FIX).format(path=where)
+
+
+def _file_in_the_way(path: Path) -> Path:
+    """The nearest of `path` and its ancestors that exists and is not a directory (`path` if none)."""
+    for candidate in (path, *path.parents):
+        if candidate.exists() or candidate.is_symlink():
+            return path if candidate.is_dir() else candidate
+    return path
+
+
 def write_error(path: str | Path, what: str, exc: OSError, fix: str = "") -> InputError:
     return InputError(str(path), "", f"cannot write the {what} ({os_error_text(exc)})",
-                      fix or "free disk space or pass a writable location")
+                      fix or os_error_fix(exc, path))
 
 
 def temp_path(path: Path) -> Path:

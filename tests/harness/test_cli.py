@@ -1,0 +1,36 @@
+"""The CLI's last net: an OSError no command foresaw is one line whose fix follows the errno."""
+
+from __future__ import annotations
+
+import errno
+from pathlib import Path
+
+import click
+import pytest
+
+from tests.cli import assert_one_line_error, run_cli
+from trustroute.harness import cli
+
+RAW = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "raw"
+
+
+def test_an_output_directory_that_is_a_file_is_named_in_the_fix(tmp_path, capsys):
+    blocker = tmp_path / "afile"
+    blocker.write_text("a file, not a folder\n")
+    code, _, err = run_cli(capsys, "import", "carla-logs", str(RAW), "--out", str(blocker))
+    assert_one_line_error(code, err, str(blocker), f"{blocker} must be a directory, not a file")
+    assert "disk space" not in err
+    assert blocker.read_text() == "a file, not a folder\n"
+
+
+@pytest.mark.parametrize(("code", "fix"), [(errno.ENOSPC, "free disk space, then rerun"),
+                                           (errno.EACCES, "fix the permissions of /x/y"),
+                                           (errno.EIO, "check that /x/y can be read and written")])
+def test_an_unforeseen_os_error_gets_the_fix_of_its_errno(code, fix, monkeypatch, capsys):
+    @click.command("boom")
+    def boom() -> None:
+        raise OSError(code, "failed", "/x/y")
+
+    monkeypatch.setattr(cli.LazyGroup, "get_command", lambda self, ctx, name: boom)
+    exit_code, _, err = run_cli(capsys, "boom")
+    assert_one_line_error(exit_code, err, "/x/y", fix)
