@@ -316,8 +316,12 @@ def format_formula(formula: Formula) -> str:
 
 # -- parsing ------------------------------------------------------------------------------------
 
+NEAR_CHARS = 24  # of the formula shown from the offending offset on
+
+
 class FormulaError(InputError):
-    """A formula that does not parse or is not co-safe, at `offset` (0-based) in `text`."""
+    """A formula that does not parse or is not co-safe, at `offset` (0-based) in `text`: placed at
+    the file's line and column of the `formula` key, the problem ending with the text there."""
 
     def __init__(self, text: str, offset: int, problem: str, fix: str, source: str = "<formula>",
                  line: int = 1, column: int = 1) -> None:
@@ -325,15 +329,15 @@ class FormulaError(InputError):
         self.offset = offset
         self.line = line
         self.column = column + offset
-        super().__init__(source, f"line {line} column {self.column}", problem, fix)
+        super().__init__(source, f"line {line} column {self.column} (formula)", problem + self.near(), fix)
 
-    def excerpt(self) -> str:
-        """Two lines: the formula text and a caret under the offending column."""
-        return f"    {self.text}\n    {' ' * self.offset}^"
-
-    def one_line(self) -> str:
-        # The CLI prints one_line(): the message first, then the formula with a caret.
-        return super().one_line() + "\n" + self.excerpt()
+    def near(self) -> str:
+        """`, near '...'`: the formula from the offending offset on (empty at the end of the text,
+        which the problem names)."""
+        rest = self.text[self.offset:].strip()
+        if not rest:
+            return ""
+        return f", near '{rest if len(rest) <= NEAR_CHARS else rest[:NEAR_CHARS - 3] + '...'}'"
 
 
 @dataclass(frozen=True)

@@ -138,12 +138,21 @@ def test_parse_errors_name_line_column_and_expectation(text, offset, words):
     assert error.offset == offset
     assert error.line == 5 and error.column == 12 + offset
     message = error.one_line()
-    first, *excerpt = message.split("\n")
-    assert first.startswith(f"spec.toml: line 5 column {12 + offset}: ")
+    assert "\n" not in message
+    assert message.startswith(f"spec.toml: line 5 column {12 + offset} (formula): ")
     for word in words:
-        assert word in first
-    # the caret sits under the offending character of the formula text
-    assert excerpt == [f"    {text}", "    " + " " * offset + "^"]
+        assert word in message
+    # the formula from the offending character on ends the problem (nothing past the end of the text)
+    rest = text[offset:].strip()
+    if rest:
+        assert error.problem.endswith(f", near '{rest}'")
+    else:
+        assert "near '" not in message
+
+
+def test_the_text_near_an_error_is_cut_short():
+    error = error_for("a $ " + " & ".join(["b"] * 30))
+    assert error.problem.endswith(", near '$ b & b & b & b & b &...'")
 
 
 def test_unknown_atom_is_accepted_without_an_atom_list():

@@ -92,11 +92,10 @@ def error(text: str, town=None) -> str:
 
 def test_unknown_atom_names_file_line_and_column():
     message = error(PHI1_TEXT.replace("F (v3 & hightrust)", "F (v9 & hightrust)"))
-    first, formula_line, caret = message.split("\n")
     line = next(i for i, x in enumerate(PHI1_TEXT.splitlines(), start=1) if x.startswith("formula"))
     column = len('formula = "') + PAPER_FORMULA.index("v3") + 1
-    assert first.startswith(f"bad.toml: line {line} column {column}: unknown atom 'v9'")
-    assert caret.index("^") == formula_line.index("v9")
+    assert message.startswith(f"bad.toml: line {line} column {column} (formula): unknown atom 'v9'")
+    assert "\n" not in message and "near 'v9 & hightrust))))'" in message
 
 
 def test_state_not_in_the_town(town):
