@@ -49,3 +49,31 @@ def test_integers_beyond_int64_are_refused(value):
         parse_json(f'{{"n": {value}}}', "x", "file")
     with pytest.raises(InputError, match="out of the 64-bit range|digits"):
         parse_toml(f"n = {value}", "x", "file")
+
+
+@pytest.mark.parametrize(("text", "place", "problem"), [
+    ('{"types": [{"name": "a", "weight": NaN}]}', "types[0].weight", "NaN is not a number JSON allows"),
+    ('{"types": [{"w": 1}, {"w": -Infinity}]}', "types[1].w", "-Infinity is not a number JSON allows"),
+    ('{"types": [{"name": "a", "name": "b"}]}', "types[0].name", "duplicate key 'name' in one object"),
+    ('[1, {"a": [2, 1e400]}]', "[1].a[1]", "number 1e400 is out of the floating-point range"),
+    ('{"seed": 9999999999999999999}', "seed", "out of the 64-bit range"),
+    ("NaN", "top level", "NaN is not a number JSON allows"),
+    ('{"a": NaN, "b": {"c": 1, "c": 2}}', "a", "NaN"),   # the first in the file
+])
+def test_json_refusals_name_the_key(text, place, problem):
+    with pytest.raises(InputError) as error:
+        parse_json(text, "pop.json", "driver population")
+    assert error.value.place == place
+    assert problem in error.value.problem
+
+
+@pytest.mark.parametrize(("text", "place"), [
+    ("[population]\ntakeover_spread = nan\n", "population.takeover_spread"),
+    ("seed = 1\nweights = [0.5, -nan]\n", "weights[1]"),
+    ("[[types]]\nw = 1.0\n[[types]]\nw = nan\n", "types[1].w"),
+])
+def test_toml_nan_names_the_key(text, place):
+    with pytest.raises(InputError) as error:
+        parse_toml(text, "cfg.toml", "study config")
+    assert error.value.place == place
+    assert "is not a number" in error.value.problem

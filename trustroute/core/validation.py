@@ -151,48 +151,87 @@ def parse_json(text: str, source: str, what: str = "file") -> object:
         raise InputError(source, _line_column(text, offset), f"nested {deepest} levels deep (the limit "
                          f"is {MAX_DEPTH})", f"a {what} needs only a few levels; fix the file")
 
-    def integer(literal: str) -> int:
+    refused: list[str] = []  # the hooks' refusals, located by key once the whole text is parsed
+
+    def refuse(problem: str) -> _Refused:
+        refused.append(problem)
+        return _Refused(problem)
+
+    def integer(literal: str) -> int | _Refused:
         if len(literal.lstrip("-")) > MAX_INT_DIGITS:
-            raise _NumberError(f"integer literal of {len(literal.lstrip('-'))} digits (the limit is "
-                               f"{MAX_INT_DIGITS})")
+            return refuse(f"integer literal of {len(literal.lstrip('-'))} digits (the limit is "
+                          f"{MAX_INT_DIGITS})")
         value = int(literal)
         if not INT64_MIN <= value <= INT64_MAX:
-            raise _NumberError(f"integer {literal} is out of the 64-bit range")
+            return refuse(f"integer {literal} is out of the 64-bit range")
         return value
 
-    def real(literal: str) -> float:
+    def real(literal: str) -> float | _Refused:
         value = float(literal)
         if not math.isfinite(value):
-            raise _NumberError(f"number {literal[:24]} is out of the floating-point range")
+            return refuse(f"number {literal[:24]} is out of the floating-point range")
         return value
 
-    def constant(name: str) -> float:
-        raise _NumberError(f"{name} is not a number JSON allows")
+    def constant(name: str) -> _Refused:
+        return refuse(f"{name} is not a number JSON allows")
 
     def no_duplicates(pairs: list[tuple[str, object]]) -> dict:
         out: dict = {}
         for key, value in pairs:
             if key in out:
-                raise _NumberError(f"duplicate key {key[:40]!r} in one object")
+                refused.append(key)
+                return _RepeatedKey(pairs, key)
             out[key] = value
         return out
 
     try:
-        return json.loads(text, parse_int=integer, parse_float=real, parse_constant=constant,
+        data = json.loads(text, parse_int=integer, parse_float=real, parse_constant=constant,
                           object_pairs_hook=no_duplicates)
     except json.JSONDecodeError as exc:
         raise InputError(source, f"line {exc.lineno} column {exc.colno}", f"not valid JSON ({exc.msg})",
                          "fix the JSON syntax") from None
-    except _NumberError as exc:
-        raise InputError(source, "", str(exc), f"fix the {what}: numbers must be ordinary finite "
-                         "values and every key appears once") from None
     except (RecursionError, ValueError, MemoryError) as exc:
         raise InputError(source, "", f"cannot parse the {what} ({type(exc).__name__})",
                          "fix the JSON") from None
+    if refused:
+        place, problem = _first_refusal(data)
+        raise InputError(source, place, problem, f"fix the {what}: numbers must be ordinary finite "
+                         "values and every key appears once")
+    return data
 
 
-class _NumberError(ValueError):
-    """Raised inside the JSON/TOML hooks; becomes an InputError."""
+class _Refused:
+    """A value the JSON/TOML number hooks refuse, left in place so the error can name its key."""
+
+    __slots__ = ("problem",)
+
+    def __init__(self, problem: str) -> None:
+        self.problem = problem
+
+
+class _RepeatedKey(dict):
+    """A JSON object that gives `key` twice, left in place so the error can name where."""
+
+    def __init__(self, pairs: list[tuple[str, object]], key: str) -> None:
+        super().__init__(pairs)
+        self.key = key
+
+
+def _first_refusal(data: object) -> tuple[str, str]:
+    """(key path such as `types[0].weight`, problem) of the first refused value or repeated key of
+    parsed data, in the order of the file."""
+    stack: list[tuple[str, object]] = [("", data)]
+    while stack:
+        path, value = stack.pop()
+        if isinstance(value, _Refused):
+            return path or "top level", value.problem
+        if isinstance(value, _RepeatedKey):
+            return key_place(path, value.key), f"duplicate key {value.key[:40]!r} in one object"
+        if isinstance(value, dict):
+            stack.extend(reversed([(key_place(path, str(key)), item) for key, item in value.items()]))
+        elif isinstance(value, list):
+            stack.extend(reversed([(f"{path}[{index}]", item) for index, item in enumerate(value)]))
+    return "", "a value is refused"
 
 
 def read_json(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix: str = "") -> object:
@@ -219,12 +258,16 @@ def parse_toml(text: str, source: str, what: str = "file") -> dict:
                              f"{sum(c.isdigit() for c in big.group())} digits (the limit is "
                              f"{MAX_INT_DIGITS})", f"fix the {what}: write an ordinary number")
 
-    def real(literal: str) -> float:
+    refused = False
+
+    def real(literal: str) -> float | _Refused:
         # TOML's inf stays allowed (e.g. a population's concentration = inf); keys that need a
         # finite value check it. nan is never a meaningful setting.
+        nonlocal refused
         value = float(literal)
         if math.isnan(value):
-            raise _NumberError(f"{literal[:24]} is not a number")
+            refused = True
+            return _Refused(f"{literal[:24]} is not a number")
         return value
 
     try:
@@ -234,12 +277,13 @@ def parse_toml(text: str, source: str, what: str = "file") -> dict:
         place = f"line {where.group(1)} column {where.group(2)}" if where else ""
         message = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(exc))
         raise InputError(source, place, f"not valid TOML ({message})", "fix the TOML syntax") from None
-    except _NumberError as exc:
-        raise InputError(source, "", str(exc), f"fix the {what}: numbers must be finite") from None
     except (RecursionError, ValueError, MemoryError) as exc:
         raise InputError(source, "", f"cannot parse the {what} ({type(exc).__name__})",
                          "fix the TOML") from None
     _check_depth(data, source, what)
+    if refused:
+        place, problem = _first_refusal(data)
+        raise InputError(source, place, problem, f"fix the {what}: numbers must be finite")
     return data
 
 
