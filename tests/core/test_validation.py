@@ -77,3 +77,12 @@ def test_toml_nan_names_the_key(text, place):
         parse_toml(text, "cfg.toml", "study config")
     assert error.value.place == place
     assert "is not a number" in error.value.problem
+
+
+@pytest.mark.parametrize(("parse", "text"), [(parse_json, '{"a": 1}'), (parse_toml, "a = 1")])
+def test_a_byte_order_mark_is_named_with_its_fix(parse, text):
+    with pytest.raises(InputError) as error:
+        parse("\ufeff" + text, "f", "study config")
+    assert error.value.place == "line 1 column 1"
+    assert error.value.problem == "the study config starts with a UTF-8 byte order mark (BOM)"
+    assert error.value.fix == "save the file as UTF-8 without a BOM"

@@ -9,7 +9,8 @@ any parser sees a byte:
 - the path is a regular file (not a FIFO, a device or a directory): opened non-blocking and
   checked with fstat, so a FIFO can never block the reader;
 - its size is at most a cap (per kind; `MAX_TEXT_BYTES` for JSON/TOML);
-- text is strict UTF-8 (the error names the line and column of the first bad byte);
+- text is strict UTF-8 (the error names the line and column of the first bad byte), without a
+  byte order mark;
 - JSON is parsed with limits: nesting depth at most `MAX_DEPTH`, integers within the signed 64-bit
   range (`INT64_MIN`..`INT64_MAX`; literals of at most `MAX_INT_DIGITS` digits), finite floats
   only (no NaN/Infinity, no 1e400), and no duplicate keys in an object;
@@ -143,8 +144,17 @@ def _blank(match: re.Match) -> str:
     return "".join("\n" if c == "\n" else " " for c in match.group())
 
 
+def _refuse_bom(text: str, source: str, what: str) -> None:
+    """InputError when text starts with a UTF-8 byte order mark (some Windows editors write one;
+    neither JSON nor TOML allows it)."""
+    if text.startswith("\ufeff"):
+        raise InputError(source, "line 1 column 1", f"the {what} starts with a UTF-8 byte order mark "
+                         "(BOM)", "save the file as UTF-8 without a BOM")
+
+
 def parse_json(text: str, source: str, what: str = "file") -> object:
     """JSON with depth, number-size and duplicate-key limits, or InputError."""
+    _refuse_bom(text, source, what)
     stripped = _JSON_STRING.sub(_blank, text)
     deepest, offset = _max_bracket_depth(stripped, "[{", "]}")
     if deepest > MAX_DEPTH:
@@ -245,6 +255,7 @@ def read_json(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix:
 
 def parse_toml(text: str, source: str, what: str = "file") -> dict:
     """TOML with depth, integer-size and finiteness limits, or InputError."""
+    _refuse_bom(text, source, what)
     stripped = _TOML_STRINGS.sub(_blank, text)
     stripped = _TOML_COMMENT.sub(_blank, stripped)
     deepest, offset = _max_bracket_depth(stripped, "[{", "]}")
