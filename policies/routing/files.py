@@ -25,7 +25,7 @@ import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
-from trustroute.core.validation import MAX_ARRAY_BYTES, check_keys, read_input_bytes, read_json
+from trustroute.core.validation import MAX_ARRAY_BYTES, check_keys, decode_utf8, parse_json, read_input_bytes
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.belief.driver_types import TypeLiftedModel, lift_population, lift_spec
@@ -49,6 +49,7 @@ from trustroute.policies.routing.decision_tables import (
 from trustroute.policies.routing.protocol import RoutingPolicy
 
 FORMAT = "trustroute-policy"
+ZIP_MAGIC = b"PK\x03\x04"  # the first bytes of every .npz (a zip archive)
 # The version written; the versions each table kind is read from: policies/routing/decision_tables.py.
 VERSION = 4
 
@@ -121,8 +122,11 @@ def read_policy_document(path: str | Path) -> dict:
     """The JSON part of a policy file, checked for format (InputError otherwise)."""
     path = Path(path)
     where = str(path)
-    document = read_json(path, "policy file", fix="pass 'free', 'aware' or a file written by trustroute "
-                         "synth --out")
+    data = read_input_bytes(path, "policy file", fix="pass 'free', 'aware' or a file written by trustroute "
+                            "synth --out")
+    if data.startswith(ZIP_MAGIC):
+        raise _arrays_instead_of_policy(path)
+    document = parse_json(decode_utf8(data, where, "policy file"), where, "policy file")
     if not isinstance(document, dict) or document.get("format") != FORMAT:
         raise InputError(where, "format", f"not a trustroute policy file (format {FORMAT!r} expected)",
                          "pass a file written by trustroute synth --out")
@@ -152,6 +156,16 @@ def read_policy_document(path: str | Path) -> dict:
     if not isinstance(document.get("arrays"), str) or Path(document["arrays"]).name != document["arrays"]:
         raise InputError(where, "arrays", "must name the .npz file beside the policy file", RESYNTH)
     return document
+
+
+def _arrays_instead_of_policy(path: Path) -> InputError:
+    """The error for a policy's .npz (a zip archive) given where its JSON policy file belongs."""
+    beside = path.with_suffix(".json")
+    fix = (f"pass the policy file {beside} (the .json beside it names and checks this table)"
+           if beside.is_file() and beside != path else
+           "pass the policy's .json file, written beside its .npz by trustroute synth --out")
+    return InputError(str(path), "", "this is a policy's decision table (its .npz array file), not "
+                      "the policy file", fix)
 
 
 def checked_table_kind(document: dict) -> TableKind[Any, Any]:

@@ -117,6 +117,21 @@ def test_version_2_files_are_refused_with_the_reason(town, driver, phi1_result, 
         read_policy_document(path)
 
 
+def test_the_npz_given_as_the_policy_names_the_json_beside_it(town, driver, phi1_result, tmp_path):
+    spec, result = phi1_result
+    path = save_policy(result, tmp_path / "p.json", town, driver, spec)
+    with pytest.raises(InputError) as error:
+        read_policy_document(array_path(path))
+    assert error.value.source == str(array_path(path))
+    assert "a policy's decision table (its .npz array file), not the policy file" in error.value.problem
+    assert error.value.fix.startswith(f"pass the policy file {path} ")
+    moved = tmp_path / "moved.npz"
+    array_path(path).rename(moved)
+    with pytest.raises(InputError) as error:
+        load_policy(moved, town, driver, spec)
+    assert "UTF-8" not in error.value.one_line() and "pass the policy's .json file" in error.value.fix
+
+
 def _rewrite_arrays(path, document: dict, arrays: dict) -> None:
     """Replace a policy file's .npz by `arrays` and record its hash in the document."""
     import hashlib
