@@ -428,6 +428,11 @@ def load_driver_model(path: str | Path | None = None) -> DriverModel:
     file_path = DRIVER_MODELS.resolve(path) if path is not None else DEFAULT_DRIVER_MODEL_PATH
     shown = "default driver model" if path is None else str(path if file_path == Path(path) else file_path)
     text = read_text(file_path, shown, "the driver model", DRIVER_MODELS.fix("--driver"))
+    return driver_model_from_text(text, shown)
+
+
+def driver_model_from_text(text: str, shown: str) -> DriverModel:
+    """Parse and validate the text of a driver model file; `shown` names it in errors."""
     return driver_model_from_dict(parse_json(text, shown, "driver model"), shown)
 
 

@@ -40,8 +40,13 @@ from trustroute.core.fields import (
 )
 from trustroute.core.output_files import atomic_write_text
 from trustroute.core.packaged import PackagedKind
-from trustroute.core.validation import parse_json, read_text, require_object
-from trustroute.participants.driver_model import DriverModel, driver_model_from_dict, load_driver_model
+from trustroute.core.validation import decode_utf8, parse_json, read_input_bytes, read_text, require_object
+from trustroute.participants.driver_model import (
+    DRIVER_MODELS,
+    DriverModel,
+    driver_model_from_dict,
+    driver_model_from_text,
+)
 
 POPULATION_FORMAT = "trustroute-driver-population"
 POPULATION_VERSION = 1
@@ -181,9 +186,23 @@ def _type_entry(entry: object, index: int, path: str, base: Path | None) -> tupl
     if file is None:
         model = driver_model_from_dict(values["model"], f"{path} ({place}.model)")
     else:
-        model_path = (base / file) if base is not None and not Path(file).is_absolute() else Path(file)
-        model = load_driver_model(model_path)
+        model = _model_file(file, base, path, f"{place}.model_file")
     return values["name"], float(values["weight"]), model
+
+
+def _model_file(file: str, base: Path | None, path: str, place: str) -> DriverModel:
+    """The driver model a type's `model_file` names. A file that cannot be read (missing, a
+    directory, far too large) is an error of the population file at that key; what is wrong inside
+    the model file is an error of the model file."""
+    model_path = DRIVER_MODELS.resolve((base / file) if base is not None and not Path(file).is_absolute()
+                                       else Path(file))
+    try:
+        data = read_input_bytes(model_path, f"driver model {file[:80]!r}")
+    except InputError as exc:
+        raise InputError(path, place, exc.problem, f"set {place} to an existing driver model file, "
+                         "relative to the population file's folder") from None
+    shown = str(model_path)
+    return driver_model_from_text(decode_utf8(data, shown, "driver model"), shown)
 
 
 def _check_alike(types: list[DriverType], index: int, path: str) -> None:

@@ -65,6 +65,29 @@ def test_model_file_is_read_relative_to_the_population_file(tmp_path):
     assert population.types[0].model.content_hash == load_driver_model().content_hash
 
 
+@pytest.mark.parametrize(("model_file", "problem"), [
+    ("nowhere.json", "cannot read the driver model 'nowhere.json' (No such file or directory)"),
+    ("models", "the driver model 'models' is a directory"),
+])
+def test_a_model_file_that_cannot_be_read_is_placed_at_its_key(tmp_path, model_file, problem):
+    (tmp_path / "models").mkdir()
+    doc = {"format": "trustroute-driver-population", "version": 1,
+           "types": [{"name": "nominal", "weight": 1.0, "model_file": model_file}]}
+    path = tmp_path / "pop.json"
+    error = refused_file(load_driver_population, doc, path)
+    assert (error.source, error.place, error.problem) == (str(path), "types[0].model_file", problem)
+    assert error.fix == ("set types[0].model_file to an existing driver model file, relative to the "
+                         "population file's folder")
+
+
+def test_what_is_wrong_inside_a_model_file_names_that_file(tmp_path):
+    (tmp_path / "m.json").write_text('{"trust_levels": [1, 2], "x": NaN}')
+    doc = {"format": "trustroute-driver-population", "version": 1,
+           "types": [{"name": "nominal", "weight": 1.0, "model_file": "m.json"}]}
+    error = refused_file(load_driver_population, doc, tmp_path / "pop.json")
+    assert (error.source, error.place) == (str(tmp_path / "m.json"), "x")
+
+
 def test_single_type_population_is_its_model():
     model = load_driver_model()
     population = single_type_population(model)
@@ -153,7 +176,7 @@ CASES = [
     (_weights_not_one, "types", "the weights sum to"),
     (_both_model_and_file, "types[0]", "exactly one of"),
     (_neither_model_nor_file, "types[0]", "exactly one of"),
-    (_missing_model_file, "does-not-exist.json", "cannot read"),
+    (_missing_model_file, "types[0].model_file", "cannot read the driver model 'does-not-exist.json'"),
     (_other_trust_levels, "types[1]", "trust levels"),
     (_other_incidents, "types[2]", "covers incidents"),
     (_bad_model, "takeover_probability.truck", "expected 7 numbers"),
