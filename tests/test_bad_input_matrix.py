@@ -3,7 +3,8 @@
 Every case must give exit code 2, at most 3 lines on stderr, no traceback, finish within 20 s,
 and write nothing: the folder holding the case (its input files and the command's --out, dot,
 policy-cache or net-cache paths) has exactly the same files before and after. Kinds: town, driver
-model, spec, study config, policy file (JSON + .npz), and command-line options and outputs.
+model, spec, study config, policy file (JSON + .npz), command-line options and outputs, and
+outputs that are an input of their command (a net, a study).
 Runs in-process (tests/cli.py); a SIGALRM turns a hang (a FIFO read, a runaway loop) into a failure.
 """
 
@@ -23,6 +24,8 @@ import numpy as np
 import pytest
 
 from tests.cli import run_cli
+from tests.harness.helpers import run_study
+from tests.networks.sumo_nets import WHEEL_NODES, WHEEL_ROADS, build_plain_net
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.networks.town import DEFAULT_TOWN_PATH
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
@@ -500,13 +503,45 @@ OPTION_CASES = [
                                    "0")),
     ("study_out_is_a_file", options("study", "{folder}/study.toml", "--out", "{folder}/marker")),
     ("evaluate_max_junctions_negative", options("evaluate", str(PHI1), "free", "--max-junctions", "-5")),
+    # an output that is an input of the command: refused before the input is overwritten
+    ("synth_out_is_the_spec", options("synth", "{folder}/spec.toml", "--horizon", "3", "--out",
+                                      "{folder}/spec.toml")),
+    ("synth_out_is_a_link_to_the_spec", options("synth", "{folder}/spec.toml", "--horizon", "3", "--out",
+                                                "{folder}/link.json")),
+    ("synth_arrays_are_the_driver", options("synth", str(PHI1), "--driver", "{folder}/model.npz", "--horizon",
+                                            "3", "--out", "{folder}/model.json")),
+    ("population_out_is_the_driver", options("population", "sample", "--types", "2", "--seed", "1",
+                                             "--driver", "{folder}/driver.json", "--concentration", "50",
+                                             "--out", "{folder}/driver.json")),
+    ("spec_dot_is_the_spec", options("spec", "check", "{folder}/spec.toml", "--dot", "{folder}/spec.toml")),
+    ("run_rrd_is_the_spec", options("run", "{folder}/spec.toml", "--rrd", "{folder}/spec.toml")),
+    ("plan_preregistration_is_the_config", options("plan", "{folder}/study.toml", "--participants", "2",
+                                                   "--simulations", "10", "--out", "{folder}/plan",
+                                                   "--preregistration", "{folder}/study.toml")),
 ]
 
 
 def _option_inputs(folder: Path) -> Path:
     (folder / "study.toml").write_text(STUDY_TEXT)
     (folder / "marker").write_text("a file, not a folder\n")
+    (folder / "spec.toml").write_text(SPEC_TEXT)
+    (folder / "link.json").symlink_to("spec.toml")
+    (folder / "driver.json").write_text(DRIVER_TEXT)
+    (folder / "model.npz").write_text(DRIVER_TEXT)   # a driver model named as the policy's arrays would be
     return folder
+
+
+def _small_study(folder: Path) -> Path:
+    run_study(folder / "study.toml", STUDY_TEXT, folder / "study")
+    return folder / "study"
+
+
+OUTPUT_CASES = [
+    ("town_import_out_is_the_net", lambda folder: build_plain_net(folder, "wheel", WHEEL_NODES, WHEEL_ROADS),
+     lambda net, folder: ["town", "import", str(net), "--out", str(net), "--incident-seed", "1"]),
+    ("fit_out_is_in_the_study", _small_study,
+     lambda study, folder: ["fit", str(study), "--out", str(study / "manifest.json")]),
+]
 
 
 CASES: list[Case] = (
@@ -516,6 +551,7 @@ CASES: list[Case] = (
     + [Case("study", n, make, study_command) for n, make in STUDY_CASES]
     + [Case("policy", n, make, policy_command) for n, make in POLICY_CASES]
     + [Case("options", n, _option_inputs, command) for n, command in OPTION_CASES]
+    + [Case("outputs", n, make, command) for n, make, command in OUTPUT_CASES]
 )
 
 

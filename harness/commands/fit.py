@@ -69,10 +69,10 @@ def fit(study_dir: str, options: FitOptions) -> None:
         if check or method == "counts":
             raise UsageFix("--types fits by EM; it takes neither --check nor --method counts",
                            "drop --check and --method counts, or drop --types")
-        check_output_file(out, "--out", "driver-population file")
+        check_output_file(out, "--out", "driver-population file", studies={"DIR": study_dir})
         fit_types(Path(study_dir), Path(out), options)
         return
-    check_output_file(out, "--out", "driver model file")
+    check_output_file(out, "--out", "driver model file", studies={"DIR": study_dir})
     result = fit_study(Path(study_dir), method=method, iterations=iterations,
                        progress=not (quiet or as_json))
     path = result.write(Path(out))

@@ -111,7 +111,12 @@ class PlanOptions:
 def plan(config_path: str, options: PlanOptions) -> None:
     """Power and sample size of the study CONFIG, by simulating it on the model engine."""
     from trustroute.app.planning import plan_study, write_preregistration
+    from trustroute.core.output_files import check_output_file
 
+    if options.preregistration is not None:
+        check_output_file(options.preregistration, "--preregistration", "pre-registration",
+                          {"CONFIG": config_path, "--driver": options.driver,
+                           "--population": options.population}, {"--pilot": options.pilot})
     progress = None if options.quiet or options.as_json else (lambda line: click.echo(line, err=True))
     run = plan_study(config_path, options.settings(), progress)
     figure = run.figure

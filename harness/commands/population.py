@@ -40,7 +40,8 @@ def sample(n_types: int, seed: int, out: str, driver_path: str | None, config_pa
     from trustroute.app.populations import sample_population
     from trustroute.core.output_files import check_output_file
 
-    check_output_file(out, "--out", "driver-population file")
+    check_output_file(out, "--out", "driver-population file",
+                      {"--driver": driver_path, "--config": config_path})
     result, path = sample_population(n_types, seed, Path(out), driver_path, config_path, concentration,
                                      spread)
     summary = {**population_summary(result), "source": str(path)}

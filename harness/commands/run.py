@@ -69,17 +69,25 @@ def _spec_path(spec_argument: str | None, spec_option: str | None) -> str:
     return spec_path
 
 
-def _check_paths(out_dir: str | None, rrd_path: str | None, cache_dir: str | None,
-                 net_path: str | None) -> None:
-    """Every output is writable and the given net readable, before SUMO starts."""
+def _check_paths(options: RunOptions, spec_path: str) -> None:
+    """Every output is writable, the recording overwrites no input, and the given net is readable,
+    before SUMO starts."""
+    from trustroute.app.synthesis import policy_arrays
     from trustroute.core.output_files import check_output_dir, check_output_file
 
+    out_dir, rrd_path, net_path = options.out_dir, options.rrd_path, options.net_path
     if out_dir is not None:
         check_output_dir(out_dir, "--out", "log directory")
     if rrd_path is not None:
-        check_output_file(rrd_path, "--rrd", "Rerun recording")
-    if cache_dir is not None:
-        check_output_dir(cache_dir, "--cache-dir", "policy cache")
+        policy = options.policy_name   # a file, or a name such as aware
+        reads = {"SPEC": spec_path, "--policy": policy,
+                 "--policy's .npz": policy_arrays(policy) if Path(policy).is_file() else None,
+                 "--town": options.town_path,
+                 "--driver": options.driver_path, "--net": net_path, "--population": options.population_path,
+                 **{f"--routes #{number}": path for number, path in enumerate(options.routes_paths, 1)}}
+        check_output_file(rrd_path, "--rrd", "Rerun recording", reads)
+    if options.cache_dir is not None:
+        check_output_dir(options.cache_dir, "--cache-dir", "policy cache")
     if net_path is not None:
         from trustroute.core.validation import read_input_bytes
 
@@ -176,7 +184,7 @@ def run(spec_argument: str | None, options: RunOptions) -> None:
 
     as_json, seed, sumo_dir, rrd_path = options.as_json, options.seed, options.sumo_dir, options.rrd_path
     spec_path = _spec_path(spec_argument, options.spec_option)
-    _check_paths(options.out_dir, rrd_path, options.cache_dir, options.net_path)
+    _check_paths(options, spec_path)
     problem = load_problem(spec_path, options.town_path, options.driver_path, options.population_path)
     policy = policy_for(problem, options.policy_name, PolicySettings(cache_dir=options.cache_dir,
                                                                      progress=not (as_json or options.quiet)))

@@ -131,12 +131,15 @@ class SynthOptions:
 @takes(options=SynthOptions)
 def synth(spec_path: str, options: SynthOptions) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
-    from trustroute.app.synthesis import synthesize_single
+    from trustroute.app.synthesis import policy_arrays, synthesize_single
     from trustroute.core.output_files import check_output_file
 
     settings, out_path = options.settings(), options.out_path
     if out_path is not None:
-        check_output_file(out_path, "--out", "policy file")
+        reads = {"SPEC": spec_path, "--town": options.town_path, "--driver": options.driver_path,
+                 "--population": options.population_path}
+        check_output_file(out_path, "--out", "policy file", reads)
+        check_output_file(policy_arrays(out_path), "--out", "policy array file (.npz beside it)", reads)
     if options.population_path is not None and options.clusters != "auto":
         raise InputError("--clusters", "", "cluster policies apply to a single driver model (--driver)",
                          "drop --clusters, or synthesize for --driver instead of --population")
@@ -156,7 +159,7 @@ def synth(spec_path: str, options: SynthOptions) -> None:
     result = synthesize_single(problem, replace(settings, time_limit=synthesis_time_left(options.time_limit)),
                                out_path)
     path = str(out_path)
-    from trustroute.app.synthesis import bounds_notes, policy_arrays
+    from trustroute.app.synthesis import bounds_notes
 
     payload = with_paths({"spec": spec.name, "lower": result.lower, "upper": result.upper, "gap": result.gap,
                           "seconds": result.seconds, "tau": options.tau, "horizon": options.horizon,

@@ -42,9 +42,10 @@ def import_command(source: str, out: str, incidents_path: str | None, incident_s
     if incidents_path is not None and incident_seed is not None:
         raise UsageFix("--incidents and --incident-seed were both given",
                        "pass --incidents or --incident-seed, not both")
-    check_output_file(out, "--out", "town file")
+    reads = {"SOURCE": source, "--incidents": incidents_path}
+    check_output_file(out, "--out", "town file", reads)
     if net_out is not None:
-        check_output_file(net_out, "--net-out", "SUMO net")
+        check_output_file(net_out, "--net-out", "SUMO net", reads)
     result = import_town_file(source, out, incidents_path, incident_seed, net_out)
     if not (quiet or as_json):
         click.echo(f"{Path(source).name}: {result.graph.summary()}", err=True)

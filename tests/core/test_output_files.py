@@ -1,4 +1,5 @@
-"""Output files: the fix of an OS error follows its errno (one table), naming the path in the way."""
+"""Output files: the fix of an OS error follows its errno (one table), naming the path in the way;
+an output that is an input of its command is refused before any work."""
 
 from __future__ import annotations
 
@@ -7,7 +8,8 @@ import os
 
 import pytest
 
-from trustroute.core.output_files import OS_ERROR_FIXES, os_error_fix, write_error
+from trustroute.core.errors import InputError
+from trustroute.core.output_files import OS_ERROR_FIXES, check_output_file, os_error_fix, write_error
 
 
 @pytest.mark.parametrize(("code", "words"), [
@@ -43,3 +45,46 @@ def test_write_errors_without_a_fix_of_their_own_use_the_table(tmp_path):
     error = write_error(tmp_path / "t.json", "town file", OSError(errno.EISDIR, "Is a directory"))
     assert error.fix == OS_ERROR_FIXES[errno.EISDIR].format(path=tmp_path / "t.json")
     assert write_error(tmp_path, "x", OSError(errno.ENOSPC, "full"), "pass --out").fix == "pass --out"
+
+
+@pytest.mark.parametrize("link", ["same", "symlink", "hard link", "spelling"])
+def test_an_output_that_is_an_input_file_by_any_name_is_refused(tmp_path, link):
+    spec = tmp_path / "spec.toml"
+    spec.write_text("name = 'x'\n")
+    out = {"same": spec, "symlink": tmp_path / "l.json", "hard link": tmp_path / "h.json",
+           "spelling": tmp_path / "sub" / ".." / "spec.toml"}[link]
+    (tmp_path / "sub").mkdir()
+    if link == "symlink":
+        out.symlink_to(spec)
+    elif link == "hard link":
+        os.link(spec, out)
+    with pytest.raises(InputError) as error:
+        check_output_file(out, "--out", "policy file", {"SPEC": spec, "--town": None})
+    assert (error.value.source, error.value.place) == (str(out), "--out")
+    assert error.value.problem == f"the policy file would overwrite SPEC {spec}, which this command reads"
+    assert error.value.fix == "pass another path to --out"
+    assert spec.read_text() == "name = 'x'\n"
+
+
+def test_inputs_that_are_no_files_do_not_refuse_an_output(tmp_path):
+    # a packaged name, a missing file (its reader says so), a new output
+    out = tmp_path / "driver_model"
+    reads = {"--driver": "driver_model", "--town": tmp_path / "none"}
+    assert check_output_file(out, "--out", "x", reads) == out
+    (tmp_path / "d.json").write_text("{}")
+    assert check_output_file(tmp_path / "new.json", "--out", "x", {"--driver": tmp_path / "d.json"})
+
+
+def test_an_output_inside_a_study_it_reads_is_refused_through_any_link(tmp_path):
+    study = tmp_path / "study"
+    (study / "parts").mkdir(parents=True)
+    (tmp_path / "alias").symlink_to(study)
+    for out in (study / "manifest.json", study / "parts" / "new.json", tmp_path / "alias" / "x.json"):
+        with pytest.raises(InputError) as error:
+            check_output_file(out, "--out", "driver model file", studies={"DIR": study})
+        assert error.value.problem == (f"the driver model file would be written inside the study "
+                                       f"directory {study} (DIR), which this command reads")
+        assert error.value.fix == f"pass a path outside {study} to --out"
+    assert check_output_file(tmp_path / "study.json", "--out", "x", studies={"DIR": study})
+    with pytest.raises(InputError, match="inside the study directory"):
+        check_output_file(study / "x.json", "--out", "x", studies={"DIR": tmp_path / "alias"})

@@ -5,7 +5,9 @@
   kill) sees the old file or the whole new one, never a partial one; on failure the temporary
   file is removed and the error is an InputError (one line, exit 2) naming the path and the cause.
 - `check_output_file` / `check_output_dir`: run before any work starts, so a command given an
-  unwritable `--out` fails at once instead of after minutes of computation.
+  unwritable `--out` fails at once instead of after minutes of computation; `check_output_file`
+  also refuses an output that is one of the command's input files or lies inside a study
+  directory it reads (`check_apart`), which writing it would destroy.
 - `file_lock`: an advisory `fcntl.flock` lock on a lock file (study directories, cache entries
   being filled); the lock file records its holder (pid, host, start time) for the error message.
 """
@@ -19,7 +21,7 @@ import json
 import os
 import socket
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 from trustroute.core.errors import InputError
@@ -134,11 +136,17 @@ def _writable_folder(folder: Path) -> Path:
     return folder
 
 
-def check_output_file(path: str | Path, option: str, what: str) -> Path:
-    """Before work starts: `path` can be written as a file (not a directory, folder writable)."""
+Inputs = Mapping[str, str | Path | None]   # what the command reads, by the option or argument naming it
+
+
+def check_output_file(path: str | Path, option: str, what: str, reads: Inputs | None = None,
+                      studies: Inputs | None = None) -> Path:
+    """Before work starts: `path` can be written as a file (not a directory, folder writable), is
+    none of the files the command `reads` and lies in none of the study directories it reads."""
     path = Path(path)
     if "\x00" in str(path):
         raise InputError(option, "", f"the {what} path contains a NUL byte", "pass an ordinary path")
+    check_apart(path, option, what, reads or {}, studies or {})
     if path.is_dir():
         raise InputError(str(path), option, f"the {what} path is a directory",
                          f"pass a file path to {option}, e.g. {path / 'out'}")
@@ -156,6 +164,29 @@ def check_output_file(path: str | Path, option: str, what: str) -> Path:
         raise InputError(str(path), option, f"{folder} is on a read-only file system",
                          f"pass a writable path to {option}")
     return path
+
+
+def check_apart(path: Path, option: str, what: str, reads: Inputs, studies: Inputs) -> None:
+    """InputError when writing `path` would replace an input: it is one of the existing files in
+    `reads` (the same file by any name: a symlink, a hard link, another spelling), or lies inside
+    one of the study directories in `studies` (symlinks resolved)."""
+    for name, given in reads.items():
+        if given is not None and "\x00" not in str(given) and _same_file(path, Path(given)):
+            raise InputError(str(path), option, f"the {what} would overwrite {name} {given}, which this "
+                             "command reads", f"pass another path to {option}")
+    where = Path(os.path.realpath(path))
+    for name, given in studies.items():
+        if given is not None and "\x00" not in str(given) and where.is_relative_to(os.path.realpath(given)):
+            raise InputError(str(path), option, f"the {what} would be written inside the study directory "
+                             f"{given} ({name}), which this command reads",
+                             f"pass a path outside {given} to {option}")
+
+
+def _same_file(output: Path, given: Path) -> bool:
+    try:
+        return os.path.samefile(output, given)
+    except OSError:   # a new output, or an input that is no file (a packaged name): nothing to lose
+        return False
 
 
 def check_output_dir(path: str | Path, option: str, what: str) -> Path:
