@@ -336,6 +336,7 @@ STUDY_CASES = [
     ("missing_spec_file", study_with('specs = ["phi1"]', 'specs = ["nowhere.toml"]')),
     ("policy_file_that_is_a_directory", study_with('conditions = ["free"]', 'conditions = ["."]')),
     ("bad_spec_name_inside", _study_with_bad_spec),
+    ("name_with_parent_dirs", study_with("seed = 1", 'seed = 1\nname = "../../escaped"')),
     ("bad_town_inside", _study_with_bad_town),
 ]
 

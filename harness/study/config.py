@@ -63,7 +63,7 @@ from trustroute.core.fields import (
     keys,
 )
 from trustroute.core.packaged import SPECS, PackagedKind
-from trustroute.core.validation import parse_toml, read_text
+from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
 from trustroute.networks.cities import ROUTES
 from trustroute.networks.town import TOWNS
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER_MODELS
@@ -324,6 +324,13 @@ def _file_path(seen: Seen) -> str:
     return f"expected a file path, got {seen.value!r}"
 
 
+def _study_name(seen: Seen) -> str:
+    # the name is the default folder studies/<name>: a path in it would write elsewhere
+    if not isinstance(seen.value, str):
+        return f"expected a non-empty string, got {seen.value!r}"
+    return f"study name {seen.value[:40]!r} is not {FILE_NAME_RULE} (it names the study's folder)"
+
+
 FILE_FIX: dict[FileKey | Literal["routes"], str] = {
     "town": "give an existing town file or omit town (the default)",
     "driver_model": "give an existing driver model file or omit driver_model (the default)",
@@ -343,7 +350,8 @@ STUDY_FIELDS = field_table(
     Field(key="specs", kind=_ENTRIES, required=True,
           fix='write specs = ["phi1", "phi2"] (packaged specs) or spec file paths'),
     Field(key="conditions", kind=_ENTRIES, required=True, fix='write conditions = ["aware", "free"]'),
-    Field(key="name", kind=Text(), fix='write name = "paper"'),  # default: the config file's stem
+    Field(key="name", kind=Text(pattern=FILE_NAME), problem=_study_name,  # default: the config's stem
+          fix='write e.g. name = "paper"; --out or output chooses another folder'),
     Field(key="town", kind=_FILE, problem=_file_path, fix=FILE_FIX["town"]),
     Field(key="driver_model", kind=_FILE, problem=_file_path, fix=FILE_FIX["driver_model"]),
     Field(key="horizon", kind=Integer(minimum=1, maximum=1_000),

@@ -42,7 +42,7 @@ from trustroute.core.fields import (
     keys,
 )
 from trustroute.core.packaged import SPECS
-from trustroute.core.validation import parse_toml, read_text
+from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
 from trustroute.networks.town import Town
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
@@ -59,9 +59,6 @@ from trustroute.policies.logic.formula import (
 from trustroute.policies.logic.road_selectors import selected_roads
 
 N_TRUST_LEVELS = 7  # the Muir scale 1..7 of the default driver model (any number >= 2 is accepted)
-MAX_SPEC_NAME = 64
-# Names become file names (policy cache entries): no path separators, NUL or leading dot.
-SPEC_NAME = re.compile(rf"[A-Za-z0-9_][A-Za-z0-9_.+-]{{0,{MAX_SPEC_NAME - 1}}}")
 # The parser and DFA construction recurse over the formula; these limits keep them far from
 # Python's recursion limit while allowing any task a person would write.
 MAX_FORMULA_CHARS = 20_000
@@ -344,9 +341,9 @@ def _check_name(name: str, spec: _SpecSource) -> None:
     needles = (r"^\s*name\s*=",)
     if not name.strip():
         raise spec.error("name", needles, "'name' is empty", 'write name = "phi1"')
-    if not SPEC_NAME.fullmatch(name):
+    if not FILE_NAME.fullmatch(name):
         raise spec.error("name", needles, f"spec name {name[:40]!r}{'...' if len(name) > 40 else ''} "
-                         f"is not 1-{MAX_SPEC_NAME} letters, digits, '_', '.' or '-' (it names cache files)",
+                         f"is not {FILE_NAME_RULE} (it names cache files)",
                          'write e.g. name = "phi1"')
 
 

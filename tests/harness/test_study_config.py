@@ -125,6 +125,8 @@ BAD = {
     "bad population": (MINIMAL + "[population]\nreport_accuracy = 2\n", "population.report_accuracy"),
     "unknown table": (MINIMAL + "[drivers]\nx = 1\n", "drivers"),
     "bad belief rule": (MINIMAL + 'belief_rule = "magic"\n', "study.belief_rule"),
+    "name leaving studies/": (MINIMAL + 'name = "../../x"\n', "study.name"),
+    "absolute name": (MINIMAL + 'name = "/tmp/x"\n', "study.name"),
 }
 
 

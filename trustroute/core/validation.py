@@ -43,6 +43,11 @@ MAX_DEPTH = 64  # nesting of JSON/TOML arrays and tables
 INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1  # every integer of an input fits an int64
 MAX_INT_DIGITS = len(str(INT64_MAX))  # 19: a longer literal is out of range before it is parsed
 MAX_TOML_KEY_PARTS = MAX_DEPTH  # dotted keys a.b.c... nest tables too
+MAX_FILE_NAME = 64
+# A name that becomes a file or folder name (a spec's names its policy cache entries, a study's its
+# default folder): no path separators, NUL or leading dot, so it cannot point outside its folder.
+FILE_NAME = re.compile(rf"[A-Za-z0-9_][A-Za-z0-9_.+-]{{0,{MAX_FILE_NAME - 1}}}")
+FILE_NAME_RULE = f"1-{MAX_FILE_NAME} letters, digits, '_', '.', '+' or '-', not starting with '.'"
 
 _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
 _TOML_STRINGS = re.compile(
