@@ -12,10 +12,11 @@ import zipfile
 from dataclasses import asdict, fields
 from pathlib import Path
 
-from trustroute.core.dataset import DAMAGED_DIR, PART_FOLDERS, STUDY_FILE
+from trustroute.core.dataset import DAMAGED_DIR, PART_FOLDERS, PLOTS_DIR, STUDY_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import TEMP_PREFIX, atomic_write_text
 from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.inputs import INPUTS_DIR
 from trustroute.harness.study.parts import (
     Part,
     PartError,
@@ -46,6 +47,21 @@ def recorded_config_hash(study_dir: Path, config_hash: str) -> str | None:
             "pass another --out, or delete the directory to start over",
         )
     return recorded
+
+
+# The folders a study writes in: a file in the place of one would fail every episode (or the
+# consolidation) with the cause named only in each episode's failure.
+STUDY_FOLDERS: tuple[str, ...] = (*PART_FOLDERS, DAMAGED_DIR, INPUTS_DIR, PLOTS_DIR)
+
+
+def check_study_folders(study_dir: Path) -> None:
+    """Each folder the study writes in is a folder where it exists; InputError naming the first
+    that is not. Reads only, like `recorded_config_hash`."""
+    for name in STUDY_FOLDERS:
+        path = Path(study_dir) / name
+        if (path.exists() or path.is_symlink()) and not path.is_dir():
+            raise InputError(str(study_dir), name, f"not a folder (the study writes its {name} in it)",
+                             f"move {path} aside, or pass another --out")
 
 
 def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:

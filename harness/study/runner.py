@@ -46,7 +46,12 @@ from trustroute.harness.study.expected import expected_values, fallback_only_war
 from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import sync_parts, write_batch_part, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
-from trustroute.harness.study.resume import check_study_dir, finished_episodes, recorded_config_hash
+from trustroute.harness.study.resume import (
+    check_study_dir,
+    check_study_folders,
+    finished_episodes,
+    recorded_config_hash,
+)
 
 if TYPE_CHECKING:
     from tqdm import tqdm
@@ -330,10 +335,11 @@ def validate_study(config: StudyConfig | StudyContext, scheduler: str | None = N
 def check_before_writing(config: StudyConfig | StudyContext, study_dir: Path, scheduler: str | None,
                          attempts: int, progress: bool) -> StudyContext:
     """Every refusal of a study run, before its directory, its lock or its mark is written: the
-    inputs and the scheduler (`validate_study`), and a directory that holds another study. Returns
-    the study's context (`validate_study`'s)."""
+    inputs and the scheduler (`validate_study`), a directory that holds another study, and one where
+    a folder the study writes in is not a folder. Returns the study's context (`validate_study`'s)."""
     context = validate_study(config, scheduler, attempts, progress)
     recorded_config_hash(Path(study_dir), context.config.content_hash)
+    check_study_folders(Path(study_dir))
     return context
 
 

@@ -74,3 +74,18 @@ def test_a_usage_error_names_its_fix(capsys):
     code, _, err = run_cli(capsys, "synth", "phi1", "--belief-rule", "nope")
     assert_one_line_error(code, err, "--belief-rule", "one of bayes, paper")
     assert "--help)" not in err
+
+
+def test_a_file_where_the_study_writes_a_folder_is_named_before_any_episode_runs(capsys, tmp_path):
+    out = tmp_path / "study"
+    config = _config(tmp_path, 1)
+    code, _, err = run_cli(capsys, "study", str(config), "--out", str(out), "--workers", "1", "--no-report")
+    assert code == 0, err
+    for part in (out / "parts").iterdir():
+        part.unlink()
+    (out / "parts").rmdir()
+    (out / "parts").write_text("not a folder")
+    before = _snapshot(out)
+    code, _, err = run_cli(capsys, "study", str(config), "--out", str(out), "--workers", "1", "--no-report")
+    assert_one_line_error(code, err, f"{out}: parts: not a folder", "move", "pass another --out")
+    assert _snapshot(out) == before
