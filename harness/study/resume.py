@@ -12,9 +12,17 @@ import zipfile
 from dataclasses import asdict, fields
 from pathlib import Path
 
-from trustroute.core.dataset import DAMAGED_DIR, PART_FOLDERS, PLOTS_DIR, STUDY_FILE
+from trustroute.core.dataset import (
+    DAMAGED_DIR,
+    PART_FOLDERS,
+    PLOTS_DIR,
+    STUDY_FILE,
+    read_manifest,
+    study_files,
+)
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import TEMP_PREFIX, atomic_write_text
+from trustroute.core.validation import read_json
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.inputs import INPUTS_DIR
 from trustroute.harness.study.parts import (
@@ -30,16 +38,16 @@ from trustroute.harness.study.plan import EpisodeTask
 
 def recorded_config_hash(study_dir: Path, config_hash: str) -> str | None:
     """The config hash the study directory is marked with (None: no readable mark); InputError
-    when it holds a study with another config. Reads only: a refused directory is left as it was,
-    so callers check it before taking the directory's lock."""
-    marker = Path(study_dir) / STUDY_FILE
-    if not marker.exists():
+    when it holds a study with another config, or holds a study's files (`study_files`) without a
+    readable mark and its manifest does not name this config. Reads only: a refused directory is
+    left as it was, so callers check it before taking the directory's lock."""
+    study_dir = Path(study_dir)
+    marker = study_dir / STUDY_FILE
+    recorded = _marked_hash(marker)
+    if recorded is None:
+        _check_unmarked(study_dir, config_hash, "missing" if not marker.exists() else "unreadable")
         return None
-    try:
-        recorded = json.loads(marker.read_text()).get("config_hash")
-    except (OSError, ValueError, AttributeError):
-        return None
-    if recorded is not None and recorded != config_hash:
+    if recorded != config_hash:
         raise InputError(
             str(study_dir),
             STUDY_FILE,
@@ -47,6 +55,39 @@ def recorded_config_hash(study_dir: Path, config_hash: str) -> str | None:
             "pass another --out, or delete the directory to start over",
         )
     return recorded
+
+
+def _marked_hash(marker: Path) -> str | None:
+    """The config hash of a study mark; None when there is none or it cannot be read."""
+    if not (marker.exists() or marker.is_symlink()):
+        return None
+    try:
+        recorded = read_json(marker, "study marker")
+    except InputError:
+        return None
+    value = recorded.get("config_hash") if isinstance(recorded, dict) else None
+    return value if isinstance(value, str) else None
+
+
+def _check_unmarked(study_dir: Path, config_hash: str, state: str) -> None:
+    """A directory without a readable mark is this study's to write when it holds none of a
+    study's files, or when its manifest names this config (a resume: the mark is written again)."""
+    found = study_files(study_dir)
+    if not found:
+        return
+    try:
+        recorded = read_manifest(study_dir).get("config_hash")
+    except InputError:
+        recorded = None
+    if recorded == config_hash:
+        return
+    raise InputError(
+        str(study_dir),
+        STUDY_FILE,
+        f"{state}, and the directory holds a study ({', '.join(found[:3])}) whose manifest does not "
+        "name this config",
+        f"pass another --out, or restore {STUDY_FILE} from a backup to resume that study",
+    )
 
 
 # The folders a study writes in: a file in the place of one would fail every episode (or the

@@ -4,8 +4,11 @@ untouched)."""
 
 from __future__ import annotations
 
+import json
 import socket
 from pathlib import Path
+
+import pytest
 
 from tests.cli import assert_one_line_error, run_cli
 
@@ -89,3 +92,28 @@ def test_a_file_where_the_study_writes_a_folder_is_named_before_any_episode_runs
     code, _, err = run_cli(capsys, "study", str(config), "--out", str(out), "--workers", "1", "--no-report")
     assert_one_line_error(code, err, f"{out}: parts: not a folder", "move", "pass another --out")
     assert _snapshot(out) == before
+
+
+@pytest.mark.parametrize("mark", ["damaged", "missing"])
+def test_a_study_whose_mark_is_lost_is_refused_to_another_config_and_resumed_by_its_own(mark, capsys,
+                                                                                        tmp_path):
+    out = tmp_path / "study"
+    config = _config(tmp_path, 1)
+    code, _, err = run_cli(capsys, "study", str(config), "--out", str(out), "--workers", "1", "--no-report")
+    assert code == 0, err
+    if mark == "damaged":
+        (out / "study.json").write_text('{"config_hash": 5')
+    else:
+        (out / "study.json").unlink()
+    before = _snapshot(out)
+    code, _, err = run_cli(capsys, "study", str(_config(tmp_path, 2, "other.toml")), "--out", str(out),
+                           "--workers", "1", "--no-report")
+    assert_one_line_error(code, err, f"{out}: study.json: {'unreadable' if mark == 'damaged' else 'missing'}",
+                          "manifest.json", "pass another --out, or restore study.json")
+    assert _snapshot(out) == before
+    (out / "parts" / sorted(p.name for p in (out / "parts").iterdir())[0]).unlink()
+    code, _, err = run_cli(capsys, "study", str(config), "--out", str(out), "--workers", "1", "--no-report")
+    assert code == 0, err   # its own config: the manifest names it, so the run resumes
+    assert json.loads((out / "study.json").read_text())["config_hash"] == json.loads(
+        (out / "manifest.json").read_text())["config_hash"]
+    assert not (out / "damaged").exists()
