@@ -43,6 +43,7 @@ from trustroute.analysis.carla_study.town01 import ARRIVAL_RADIUS_M, CarlaTables
 from trustroute.analysis.satisfaction import satisfaction_by_source
 from trustroute.core import dataset
 from trustroute.core.errors import InputError
+from trustroute.core.output_files import check_output_dir
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.harness.study.manifest import git_revision, package_versions
 from trustroute.networks.road import Road
@@ -374,6 +375,26 @@ def discover(source: Path) -> list[LogFile]:
     return logs
 
 
+def check_import_target(out: Path, logs: list[LogFile]) -> None:
+    """Before anything is written: `out` holds no study's files (`dataset.study_files`), or is an
+    earlier import of the same logs (the same files found), which is imported again in place."""
+    found = dataset.study_files(out)
+    if not found:
+        return
+    try:
+        manifest = dataset.read_manifest(out)
+    except InputError:
+        manifest = {}
+    real = manifest.get("real_study")
+    inventory = real.get("inventory") if isinstance(real, dict) else None
+    earlier = ({str(entry.get("file")) for entry in inventory if isinstance(entry, dict) and "role" in entry}
+               if isinstance(inventory, list) else None)
+    if manifest.get("engine") == "carla-logs" and earlier == {log.relative for log in logs}:
+        return
+    raise InputError(str(out), "--out", f"holds a study ({', '.join(found[:3])}) that is not an import of "
+                     "these logs", "pass another --out: a new or empty directory")
+
+
 def authors_subsets(source: Path) -> dict[str, list[str]]:
     """The file lists of statistic_test/ (the subsets the authors' scripts read), by folder."""
     root = Path(source) / "statistic_test"
@@ -394,9 +415,11 @@ def import_carla_logs(
     `listed_absent`: files the source's index lists but whose content is absent (the git tree of
     the authors' repository lists 14 CSVs whose blobs were never stored); recorded as absent."""
     source, out = Path(source), Path(out)
+    check_output_dir(out, "--out", "study directory")
     tables = load_carla_tables()
     town, driver_model = load_town(None), load_driver_model(None)
     logs = discover(source)
+    check_import_target(out, logs)
     seen: dict[str, LogFile] = {}
     inventory, episode_rows, road_frames, run_frames, kin_frames = [], [], [], [], []
     worst_distance = 0.0

@@ -203,6 +203,32 @@ def _one_line_error(capsys, folder: Path, tmp_path: Path) -> str:
     return err
 
 
+def _files(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_another_study_in_out_is_refused_and_left_as_it_was(imported, tmp_path, capsys):
+    simulated = tmp_path / "simulated"
+    (simulated / "parts").mkdir(parents=True)
+    (simulated / "parts" / "p00000-phi1-free.zip").write_bytes(b"a part")
+    (simulated / "manifest.json").write_text('{"study": "mine", "engine": "model"}')
+    other_logs = tmp_path / "other"
+    other_logs.mkdir()
+    shutil.copy(RAW / SAMPLE, other_logs / SAMPLE)
+    earlier = tmp_path / "earlier"
+    shutil.copytree(imported, earlier)
+    for source, out in ((RAW, simulated), (other_logs, earlier)):
+        before = _files(out)
+        code, _, err = run_cli(capsys, "import", "carla-logs", str(source), "--out", str(out), "--quiet")
+        assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+        assert f"{out}: --out: holds a study (manifest.json" in err and "not an import of these logs" in err
+        assert _files(out) == before
+    # the same logs again into their own earlier import: imported again in place
+    code, _, err = run_cli(capsys, "import", "carla-logs", str(RAW), "--out", str(earlier), "--quiet")
+    assert code == 0, err
+    assert read_episodes(earlier).equals(read_episodes(imported))
+
+
 def test_missing_column_is_one_line(tmp_path, capsys):
     folder = _bad_copy(tmp_path, SAMPLE, lambda f: f.drop(columns=["if_autopilot"]))
     assert "if_autopilot" in _one_line_error(capsys, folder, tmp_path)
