@@ -33,7 +33,7 @@ from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session
 from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study seed, (4, participant))
-from trustroute.harness.live.withdraw import read_registry, withdraw_participant
+from trustroute.harness.live.withdraw import load_registry, read_registry, withdraw_participant
 from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions, start_fork_server
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext
@@ -141,13 +141,11 @@ class LiveStudy:
         return self.study_dir / LIVE_DIR / PARTICIPANTS_FILE
 
     def load_participants(self) -> None:
-        from trustroute.core.validation import read_json
-
         path = self.registry_path()
         if not path.exists():
             return
-        records = read_json(path, "live participants", fix="restore it, or delete the study directory")
-        for key, record in (records.get("participants", {}) if isinstance(records, dict) else {}).items():
+        records = load_registry(path, "restore it, or delete the study directory")
+        for key, record in records["participants"].items():
             participant = int(key)
             if record.get("withdrawn"):   # harness/live/withdraw.py: no data, no token, no re-run
                 self.withdrawn[participant] = record

@@ -15,6 +15,7 @@ from __future__ import annotations
 import getpass
 import hashlib
 import json
+import re
 import time
 from pathlib import Path
 
@@ -63,13 +64,35 @@ def table_checksums(study_dir: Path) -> dict[str, str]:
 
 
 def read_registry(study_dir: Path) -> dict:
+    """The study's participant registry (`load_registry`); InputError when there is none."""
     path = Path(study_dir) / LIVE_DIR / REGISTRY
     if not path.exists():
         raise InputError(str(study_dir), f"{LIVE_DIR}/{REGISTRY}", "not a live study with participants",
                          "pass the directory of a live study (trustroute live)")
-    records = read_json(path, "live participants", fix="restore it from a backup")
+    return load_registry(path, "restore it from a backup")
+
+
+# A participant's index as a registry key: 0, 1, 2, ... (what `trustroute withdraw` accepts)
+PARTICIPANT_KEY = re.compile(r"0|[1-9][0-9]{0,8}")
+
+
+def load_registry(path: Path, fix: str) -> dict:
+    """A participant registry (`live/participants.json`), checked wherever it is read: an object
+    whose "participants" maps each participant's index ("0", "1", ...) to their record, an object
+    (its "order", when given, a list of episode ids); InputError naming the key otherwise."""
+    records = read_json(path, "live participants", fix=fix)
     if not isinstance(records, dict) or not isinstance(records.get("participants"), dict):
-        raise InputError(str(path), "participants", "not a participant registry", "restore it from a backup")
+        raise InputError(str(path), "participants", "not a participant registry", fix)
+    for key, record in records["participants"].items():
+        place = f"participants.{key}"
+        if not PARTICIPANT_KEY.fullmatch(key):
+            raise InputError(str(path), place, "not a participant's index (0, 1, 2, ...)", fix)
+        if not isinstance(record, dict):
+            raise InputError(str(path), place, f"expected an object (the participant's record), got "
+                             f"{json.dumps(record)[:40]}", fix)
+        order = record.get("order", [])
+        if not isinstance(order, list) or not all(isinstance(episode, str) for episode in order):
+            raise InputError(str(path), f"{place}.order", "expected a list of episode ids", fix)
     return records
 
 

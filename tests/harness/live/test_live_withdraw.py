@@ -10,8 +10,9 @@ import httpx
 import pytest
 from click.testing import CliRunner
 
-from tests.cli import run_cli
+from tests.cli import assert_one_line_error, run_cli
 from trustroute.core.dataset import read_attempts, read_episodes, read_kinematics, read_roads
+from trustroute.core.errors import InputError
 from trustroute.harness.cli import cli
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
@@ -19,9 +20,9 @@ from trustroute.harness.live.withdraw import sha256_of
 
 from .conftest import serving, tiny_config
 
-pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
-
+@pytest.mark.slow
+@pytest.mark.wallclock
 def test_withdraw_then_analyze(tmp_path, capsys):
     config = tiny_config(tmp_path, participants=2)
     study_dir = tmp_path / "study"
@@ -83,3 +84,37 @@ def test_withdraw_then_analyze(tmp_path, capsys):
         readmitted.replace_token(1, "test: a new link")   # the console's new link lets them in again
     finally:
         readmitted.close()
+
+
+BAD_REGISTRIES = {   # (registry, place, problem)
+    "record not an object": ('{"participants": {"0": "alice"}}', "participants.0", "expected an object"),
+    "index not an integer": ('{"participants": {"zero": {}}}', "participants.zero",
+                             "not a participant's index"),
+    "order not a list": ('{"participants": {"0": {"order": 5}}}', "participants.0.order",
+                         "expected a list of episode ids"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD_REGISTRIES))
+@pytest.mark.parametrize("readmit", [False, True])
+def test_a_malformed_registry_is_one_line_naming_the_key(kind, readmit, tmp_path, capsys):
+    text, place, problem = BAD_REGISTRIES[kind]
+    registry = tmp_path / "study" / "live" / "participants.json"
+    registry.parent.mkdir(parents=True)
+    registry.write_text(text)
+    code, _, err = run_cli(capsys, "withdraw", str(tmp_path / "study"), "0" if readmit else "5",
+                           *(["--readmit"] if readmit else []))
+    assert_one_line_error(code, err, f"{registry}: {place}: {problem}", "restore it from a backup")
+    assert registry.read_text() == text
+
+
+@pytest.mark.parametrize("kind", sorted(BAD_REGISTRIES))
+def test_the_station_reads_the_registry_with_the_same_checks(kind, tmp_path):
+    text, place, problem = BAD_REGISTRIES[kind]
+    registry = tmp_path / "study" / "live" / "participants.json"
+    registry.parent.mkdir(parents=True)
+    registry.write_text(text)
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions(pace=1000.0))
+    with pytest.raises(InputError) as refused:
+        study.open()
+    assert f"{registry}: {place}: {problem}" in refused.value.one_line()
