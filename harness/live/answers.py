@@ -42,8 +42,9 @@ def answered(study_dir: Path, participant: int, placement: str, trial: str | Non
     return answer_path(study_dir, participant, placement, trial, name).is_file()
 
 
-def write_answer_table(study_dir: Path) -> None:
-    """questionnaires.parquet from every answer file (in file-name order); removed when none is left."""
+def answer_rows(study_dir: Path) -> list[dict]:
+    """One row per item answered (QUESTIONNAIRES_SCHEMA's columns), from every answer file in
+    file-name order."""
     rows = []
     folder = Path(study_dir) / FOLDER
     for path in sorted(folder.glob("p*.json")) if folder.is_dir() else []:
@@ -54,6 +55,13 @@ def write_answer_table(study_dir: Path) -> None:
                   "item": item["item"], "item_index": index, "value": float(item["value"]),
                   "reversed": bool(item["reversed"]), "scale_min": float(low), "scale_max": float(high),
                   "answered_utc": record["utc"]} for index, item in enumerate(record["items"])]
+    return rows
+
+
+def write_answer_table(study_dir: Path, rows: list[dict] | None = None) -> None:
+    """questionnaires.parquet from `rows` (by default every answer file's: `answer_rows`); removed
+    when none is left."""
+    rows = answer_rows(study_dir) if rows is None else rows
     target = Path(study_dir) / QUESTIONNAIRES_FILE
     if rows:
         write_table(table_from_rows(rows, QUESTIONNAIRES_SCHEMA), target)

@@ -13,14 +13,44 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pyarrow as pa
 
-from trustroute.core.dataset import ATTEMPTS_FILE, ATTEMPTS_SCHEMA, table_from_rows, write_table
+from trustroute.core.dataset import (
+    ATTEMPT_OUTCOMES,
+    ATTEMPTS_FILE,
+    ATTEMPTS_SCHEMA,
+    table_from_rows,
+    write_table,
+)
+from trustroute.core.errors import InputError
+from trustroute.core.output_files import atomic_write_text
+from trustroute.core.validation import parse_json, read_input_text
 from trustroute.harness.study.plan import EpisodeTask
 
 JOURNAL = "attempts.jsonl"
+JOURNAL_FIX = "restore it from a backup or correct that line; attempts.parquet is rebuilt from it"
+
+
+def _index(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _text(value: object) -> bool:
+    return isinstance(value, str)
+
+
+# The keys of each event of the journal and what each holds (what `AttemptLog.rows` reads).
+RECORD_KEYS: dict[str, dict[str, Callable[[object], bool]]] = {
+    "start": {"utc": _text, "participant": _index, "episode_id": _text,
+              "warm_up": lambda value: isinstance(value, bool),
+              "planned_position": lambda value: value is None or _index(value)},
+    "end": {"utc": _text, "participant": _index, "episode_id": _text,
+            "outcome": lambda value: value in ATTEMPT_OUTCOMES,
+            "reason": lambda value: value is None or _text(value)},
+}
 
 
 def utc_now() -> str:
@@ -47,8 +77,18 @@ class AttemptLog:
 
     def append(self, record: dict) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        with self.path.open("a", encoding="utf-8") as out:
-            out.write(json.dumps(record) + "\n")
+        with self.path.open("a+b") as out:   # writes go to the end; reads and truncate anywhere
+            out.seek(0)
+            data = out.read()
+            if data and not data.endswith(b"\n"):
+                # a crash cut the last append short: the new record starts its own line, and a cut
+                # record (not JSON, left out by `entries`) goes
+                start = data.rfind(b"\n") + 1
+                if _whole(data[start:]):
+                    out.write(b"\n")
+                else:
+                    out.truncate(start)
+            out.write((json.dumps(record) + "\n").encode())
 
     def started(self, task: EpisodeTask, warm_up: bool) -> None:
         self.append({"event": "start", "utc": utc_now(), "participant": task.participant,
@@ -60,11 +100,32 @@ class AttemptLog:
         self.append({"event": "end", "utc": utc_now(), "participant": task.participant,
                      "episode_id": task.episode_id, "outcome": outcome, "reason": reason})
 
-    def records(self) -> list[dict]:
+    def entries(self) -> list[tuple[str, dict]]:
+        """(line, record) of every attempt journalled, in order, each record checked (`RECORD_KEYS`):
+        the one reader of the journal. A last line without its newline that is not JSON is an append
+        a crash cut short, and is left out; any other bad line is an InputError naming it."""
         if not self.path.exists():
             return []
-        lines = self.path.read_text(encoding="utf-8").splitlines()
-        return [json.loads(line) for line in lines if line.strip()]
+        shown = str(self.path)
+        text = read_input_text(self.path, "live attempts journal", fix=JOURNAL_FIX)
+        lines = text.split("\n")
+        entries = []
+        for number, line in enumerate(lines, 1):
+            if not line.strip():
+                continue
+            cut = number == len(lines)   # the last line, and no newline after it
+            if cut and not _whole(line.encode()):
+                break
+            entries.append((line, _record(line, shown, number)))
+        return entries
+
+    def records(self) -> list[dict]:
+        return [record for _, record in self.entries()]
+
+    def rewrite(self, entries: list[tuple[str, dict]]) -> None:
+        """The journal holding `entries` (lines of `entries()`) only."""
+        atomic_write_text(self.path, "".join(line + "\n" for line, _ in entries), "live attempts",
+                          "free disk space")
 
     def rows(self, drop: set[int] | None = None) -> list[dict]:
         """One row per attempt (ATTEMPTS_SCHEMA's columns), in the journal's order; participants in
@@ -101,3 +162,31 @@ class AttemptLog:
 
     def write(self) -> Path:
         return write_table(self.table(), self.study_dir / ATTEMPTS_FILE)
+
+
+def _whole(line: bytes) -> bool:
+    """Whether a journal line is whole JSON (a cut append is not)."""
+    try:
+        json.loads(line)
+    except ValueError:
+        return False
+    return True
+
+
+def _record(line: str, shown: str, number: int) -> dict:
+    """The journal's record on line `number`, checked; InputError naming the line otherwise."""
+    place = f"line {number}"
+    try:
+        record = parse_json(line, shown, "live attempts journal")
+    except InputError as exc:   # placed in the file, not in the line alone
+        column = exc.place.partition(" column ")[2]
+        raise InputError(shown, f"{place} column {column}" if column else place, exc.problem,
+                         JOURNAL_FIX) from None
+    if not isinstance(record, dict) or record.get("event") not in RECORD_KEYS:
+        raise InputError(shown, place, "not an attempt record (an object whose event is 'start' or 'end')",
+                         JOURNAL_FIX)
+    for key, accepts in RECORD_KEYS[record["event"]].items():
+        if key not in record or not accepts(record[key]):
+            raise InputError(shown, f"{place} key {key!r}", "missing" if key not in record else
+                             f"unexpected value {json.dumps(record[key])[:40]}", JOURNAL_FIX)
+    return record

@@ -23,7 +23,7 @@ from trustroute.core.dataset import ATTEMPTS_FILE, FAILURES_DIR, MANIFEST_FILE, 
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
 from trustroute.core.validation import read_json
-from trustroute.harness.live.answers import write_answer_table
+from trustroute.harness.live.answers import answer_rows, write_answer_table
 from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.manifest import consolidate
@@ -33,7 +33,6 @@ from trustroute.harness.study.replay import study_config_from_manifest
 LIVE_DIR = "live"
 REGISTRY = "participants.json"
 AUDIT = "withdrawals.jsonl"
-JOURNAL = "attempts.jsonl"
 # Folders holding one file per episode id (the participant's start with p<5 digits>-).
 PARTICIPANT_FOLDERS: tuple[str, ...] = (PARTS_DIR, FAILURES_DIR, "recordings", "live/warmup/parts",
                                         "live/questionnaires")
@@ -109,16 +108,10 @@ def registry_record(study_dir: Path, records: dict, participant: int) -> dict:
     return record
 
 
-def drop_attempts(study_dir: Path, participant: int) -> None:
-    path = Path(study_dir) / LIVE_DIR / JOURNAL
-    if path.exists():
-        kept = [line for line in path.read_text(encoding="utf-8").splitlines()
-                if line.strip() and int(json.loads(line)["participant"]) != participant]
-        atomic_write_text(path, "".join(line + "\n" for line in kept), "live attempts", "free disk space")
-
-
 def withdraw_participant(study_dir: Path, participant: int, by: str | None = None, reason: str = "") -> dict:
-    """Withdraw `participant` (the directory's lock held by the caller); the audit entry."""
+    """Withdraw `participant` (the directory's lock held by the caller); the audit entry. Everything
+    it reads (the registry, the manifest and the study's inputs, the attempts journal, the answers)
+    is read and checked before a file is removed, so a refusal leaves the study as it was."""
     study_dir = Path(study_dir)
     records = read_registry(study_dir)
     record = registry_record(study_dir, records, participant)
@@ -127,22 +120,27 @@ def withdraw_participant(study_dir: Path, participant: int, by: str | None = Non
                          "nothing to do (see live/withdrawals.jsonl)")
     consolidated = (study_dir / MANIFEST_FILE).exists()   # nothing to consolidate before a first episode
     config, manifest = study_config_from_manifest(study_dir) if consolidated else (None, {})
+    context = study_context(config) if config is not None else None
+    journal = AttemptLog(study_dir, LIVE_DIR)
+    attempts = [entry for entry in journal.entries() if entry[1]["participant"] != participant]
+    answers = [row for row in answer_rows(study_dir) if row["participant"] != participant]
     before = table_checksums(study_dir)
     files = participant_files(study_dir, participant)
     removed = [{"path": str(path.relative_to(study_dir)), "sha256": sha256_of(path),
                 "bytes": path.stat().st_size} for path in files]
     for path in files:
         path.unlink()
-    drop_attempts(study_dir, participant)
+    if journal.path.exists():
+        journal.rewrite(attempts)
     withdrawn_utc = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     records["participants"][str(participant)] = {"withdrawn": True, "withdrawn_utc": withdrawn_utc}
     write_registry(study_dir, records)
-    if config is not None:
-        consolidate(study_dir, study_context(config), plan_episodes(config), manifest["config_hash"],
+    if config is not None and context is not None:
+        consolidate(study_dir, context, plan_episodes(config), manifest["config_hash"],
                     manifest.get("expected"), manifest.get("run"))
-    if (study_dir / ATTEMPTS_FILE).exists() or (study_dir / LIVE_DIR / JOURNAL).exists():
-        AttemptLog(study_dir, LIVE_DIR).write()
-    write_answer_table(study_dir)
+    if (study_dir / ATTEMPTS_FILE).exists() or journal.path.exists():
+        journal.write()
+    write_answer_table(study_dir, answers)
     entry = {"utc": withdrawn_utc,
              "by": by or getpass.getuser(), "participant": participant, "reason": reason,
              "removed": removed, "tables_before": before, "tables_after": table_checksums(study_dir)}

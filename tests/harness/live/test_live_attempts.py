@@ -4,6 +4,7 @@ effects use the positions the trials were run at."""
 
 from __future__ import annotations
 
+import json
 import time
 
 import pandas as pd
@@ -13,14 +14,19 @@ from fastapi.testclient import TestClient
 from trustroute.analysis.study.analysis import study_analysis
 from trustroute.analysis.study.order import run_order
 from trustroute.core.dataset import read_attempts, read_episodes, read_manifest
+from trustroute.core.errors import InputError
 from trustroute.harness.live.app import live_app
+from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 
 from .conftest import serving, tiny_config
 from .test_live_episode import receive_until
 
-pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
+START = {"event": "start", "utc": "2026-01-01T00:00:00Z", "participant": 0, "episode_id": "p00000-phi1-free",
+         "warm_up": False, "planned_position": 0}
+END = {"event": "end", "utc": "2026-01-01T00:01:00Z", "participant": 0, "episode_id": "p00000-phi1-free",
+       "outcome": "done", "reason": None}
 
 
 def leave_mid_trial(study: LiveStudy) -> str:
@@ -43,6 +49,8 @@ def leave_mid_trial(study: LiveStudy) -> str:
     return first
 
 
+@pytest.mark.slow
+@pytest.mark.wallclock
 def test_an_incomplete_trial_runs_last_across_a_restart_and_analyze_uses_the_order_run(tmp_path):
     config = tiny_config(tmp_path, participants=1, specs=("phi1", "phi2"))
     study_dir = tmp_path / "study"
@@ -81,3 +89,38 @@ def test_an_incomplete_trial_runs_last_across_a_restart_and_analyze_uses_the_ord
     order = study_analysis(study_dir, resamples=200).order.set_index("position")
     assert order.loc[1, "mean_trust"] == pytest.approx(trust[planned[1]])   # the trial run first
     assert order.loc[2, "mean_trust"] == pytest.approx(trust[first])
+
+
+def _journal(tmp_path, text: str) -> AttemptLog:
+    log = AttemptLog(tmp_path, "live")
+    log.path.parent.mkdir(parents=True)
+    log.path.write_text(text)
+    return log
+
+
+def test_an_append_a_crash_cut_short_is_left_out_and_the_next_append_starts_a_clean_line(tmp_path):
+    log = _journal(tmp_path, json.dumps(START) + "\n" + json.dumps(END)[:30])
+    assert log.records() == [START]
+    log.append(END)
+    assert log.path.read_text() == json.dumps(START) + "\n" + json.dumps(END) + "\n"
+    assert [row["outcome"] for row in log.rows()] == ["done"]
+
+
+def test_a_whole_last_record_without_its_newline_is_kept(tmp_path):
+    log = _journal(tmp_path, json.dumps(START))
+    assert log.records() == [START]
+    log.append(END)
+    assert log.records() == [START, END]
+
+
+@pytest.mark.parametrize(("line", "place", "problem"), [
+    ('{"partic', "line 2 column 2", "not valid JSON"),
+    ('{"participant": 0}', "line 2", "not an attempt record"),
+    (json.dumps({k: v for k, v in END.items() if k != "participant"}), "line 2 key 'participant'", "missing"),
+    (json.dumps({**END, "participant": "zero"}), "line 2 key 'participant'", 'unexpected value "zero"'),
+])
+def test_a_bad_line_before_the_last_is_one_error_naming_the_line(tmp_path, line, place, problem):
+    log = _journal(tmp_path, "\n".join([json.dumps(START), line, json.dumps(END), ""]))
+    with pytest.raises(InputError) as refused:
+        log.rows()
+    assert refused.value.one_line().startswith(f"{log.path}: {place}: {problem}")

@@ -118,3 +118,45 @@ def test_the_station_reads_the_registry_with_the_same_checks(kind, tmp_path):
     with pytest.raises(InputError) as refused:
         study.open()
     assert f"{registry}: {place}: {problem}" in refused.value.one_line()
+
+
+def _unconsolidated(tmp_path, journal: str):
+    """A live study of two participants before its first consolidation: a part each, the journal."""
+    study = tmp_path / "study"
+    (study / "live").mkdir(parents=True)
+    (study / "parts").mkdir()
+    (study / "live" / "participants.json").write_text(
+        '{"participants": {"0": {"label": "a", "consented": true}, "1": {"label": "b", "consented": true}}}')
+    for participant in (0, 1):
+        (study / "parts" / f"p0000{participant}-phi1-free.zip").write_bytes(b"a part")
+    (study / "live" / "attempts.jsonl").write_text(journal)
+    return study
+
+
+def _attempt(participant: int) -> str:
+    return json.dumps({"event": "start", "utc": "2026-01-01T00:00:00Z", "participant": participant,
+                       "episode_id": f"p0000{participant}-phi1-free", "warm_up": False,
+                       "planned_position": 0})
+
+
+def test_a_journal_whose_last_append_was_cut_short_withdraws_like_the_station_reads_it(tmp_path, capsys):
+    study = _unconsolidated(tmp_path, f"{_attempt(0)}\n{_attempt(1)}\n{_attempt(0)[:12]}")
+    code, _, err = run_cli(capsys, "withdraw", str(study), "0")
+    assert code == 0, err
+    assert sorted(path.name for path in (study / "parts").iterdir()) == ["p00001-phi1-free.zip"]
+    assert (study / "live" / "attempts.jsonl").read_text() == _attempt(1) + "\n"
+    assert set(read_attempts(study)["participant"]) == {1}
+    audit = json.loads((study / "live" / "withdrawals.jsonl").read_text())
+    assert audit["participant"] == 0
+    assert [entry["path"] for entry in audit["removed"]] == ["parts/p00000-phi1-free.zip"]
+
+
+@pytest.mark.parametrize("bad", ['{"partic', '{"participant": 0}'])
+def test_a_bad_journal_line_is_refused_before_anything_is_deleted(bad, tmp_path, capsys):
+    study = _unconsolidated(tmp_path, f"{_attempt(0)}\n{bad}\n{_attempt(1)}\n")
+    before = {str(p.relative_to(study)): p.read_bytes() for p in study.rglob("*") if p.is_file()}
+    code, _, err = run_cli(capsys, "withdraw", str(study), "0")
+    journal = study / "live" / "attempts.jsonl"
+    assert_one_line_error(code, err, f"{journal}: line 2", "restore it from a backup")
+    after = {str(p.relative_to(study)): p.read_bytes() for p in study.rglob("*") if p.is_file()}
+    assert after == {**before, "study.lock": after["study.lock"]}
