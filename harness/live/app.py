@@ -21,8 +21,9 @@ state-changing request and websocket handshake its Origin (harness/live/guard.py
     GET  /api/download/{path}          experimenter: one file, inside the study directory only
     WS   /ws                           participant: the protocol of harness/live/protocol.py
 
-Request bodies are capped (MAX_BODY_BYTES) and validated (protocol.py models); every refusal is
-a JSON error of the protocol's form with an HTTP status, and changes nothing. A participant has
+Request bodies are capped (MAX_BODY_BYTES, counted as received: guard.py) and validated
+(protocol.py models); every refusal is a JSON error of the protocol's form with an HTTP status,
+and changes nothing. A participant has
 one live websocket: a second one replaces the first (both are told); a socket silent for
 `idle_seconds` is closed. `serve` runs the application on uvicorn on a socket bound beforehand
 (websocket frames capped at the transport too, slow requests cut: guard.py).
@@ -42,6 +43,7 @@ from starlette.requests import HTTPConnection
 from trustroute.harness.live.auth import EXPERIMENTER_COOKIE, PARTICIPANT_COOKIE, presented_token
 from trustroute.harness.live.guard import (
     ConnectionGate,
+    RequestGuard,
     guarded_protocol,
     normal_origin,
     origin_allowed,
@@ -49,7 +51,6 @@ from trustroute.harness.live.guard import (
 )
 from trustroute.harness.live.protocol import (
     CONTROL_RATE,
-    MAX_BODY_BYTES,
     MAX_MESSAGE_BYTES,
     SHOWN_RATE,
     EpisodeControl,
@@ -71,12 +72,6 @@ STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js":
           "driver_view.js": "text/javascript", "map_view.js": "text/javascript",
           "inputs.js": "text/javascript", "link.js": "text/javascript", "questionnaire.js": "text/javascript",
           "vendor/three.module.js": "text/javascript", "vendor/three.core.js": "text/javascript"}
-# Every response: no framing, no sniffing, no referrer (a participant link carries a token), and
-# scripts, styles and sockets from this server only.
-SECURITY_HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
-                    "Referrer-Policy": "no-referrer", "Cache-Control": "no-store",
-                    "Content-Security-Policy": "default-src 'self'; connect-src 'self'; "
-                                               "img-src 'self' data:; frame-ancestors 'none'"}
 OUTBOX = 1024          # messages queued for one websocket; frames are dropped first
 FRAMES_UP_TO = OUTBOX // 2
 POLICY_VIOLATION = 1008  # websocket close codes: no valid participant token, or a foreign Origin;
@@ -175,26 +170,6 @@ def session_of(request: Request, participant: int) -> Session:
     if session is None:
         raise refused(404, "not_found", f"no participant {participant}")
     return session
-
-
-async def limit_body(request: Request, call_next):
-    """State-changing requests need one of our Origins (or none) and a body length within
-    MAX_BODY_BYTES; every response gets the security headers."""
-    response = None
-    if request.method in ("POST", "PUT", "PATCH", "DELETE"):
-        length = request.headers.get("content-length", "")
-        if not origin_allowed(request.headers, request.app.state.origins):
-            foreign = error_reply("forbidden", "a request from another site's page")
-            response = JSONResponse({"detail": foreign}, 403)
-        elif not length.isdigit():
-            response = JSONResponse({"type": "error", "detail": "a body needs a Content-Length"}, 411)
-        elif int(length) > MAX_BODY_BYTES:
-            limit = f"bodies hold at most {MAX_BODY_BYTES} bytes"
-            response = JSONResponse(error_reply("oversized", limit), 413)
-    if response is None:
-        response = await call_next(request)
-    response.headers.update(SECURITY_HEADERS)
-    return response
 
 
 async def malformed(request: Request, exc: Exception) -> JSONResponse:
@@ -367,7 +342,7 @@ def live_app(study: LiveStudy, origins: frozenset[str] = frozenset()) -> FastAPI
     configured = frozenset(origins) | {origin for origin in public if origin is not None}
     app.state.origins = configured or None   # none: the origin each request was addressed to
     app.state.gate = ConnectionGate()
-    app.middleware("http")(limit_body)
+    app.add_middleware(RequestGuard)
     app.add_exception_handler(RequestValidationError, malformed)
     app.include_router(router)
     return app

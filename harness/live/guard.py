@@ -9,6 +9,11 @@
 - **Connections per participant.** `ConnectionGate`: at most MAX_SOCKETS open websockets per
   participant (the live one and the one replacing it) and new connections at most OPEN_BURST at
   once, then OPEN_RATE a second (a token bucket per participant).
+- **Request bodies.** `RequestGuard` (ASGI middleware before every HTTP route): a state-changing
+  request needs one of our origins (or none) and a Content-Length; a request framed by
+  Transfer-Encoding is refused (a chunked body has no length to check before it is read); and the
+  body actually received is counted, reading stopped and the request refused (413) as soon as it
+  passes MAX_BODY_BYTES, whatever the headers said.
 - **Slow clients.** `GuardedH11Protocol` closes an HTTP connection whose request (headers and
   body, or a websocket handshake) is not complete within `request_seconds` of its first byte or
   of the connection (idle, slow headers, slow body: uvicorn has a keep-alive timeout only between
@@ -27,16 +32,26 @@ from collections.abc import Mapping
 from urllib.parse import urlsplit
 
 import h11
+from starlette.datastructures import Headers, MutableHeaders
+from starlette.responses import JSONResponse
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from trustroute.core.errors import InputError
-from trustroute.harness.live.protocol import TokenBucket
+from trustroute.harness.live.protocol import MAX_BODY_BYTES, TokenBucket, error_reply
 
 MAX_SOCKETS = 2        # open websockets per participant: the live one and the one replacing it
 OPEN_BURST = 5         # new websockets a participant may open at once ...
 OPEN_RATE = 0.5        # ... and per second after that
 WILDCARDS = ("0.0.0.0", "::", "")
 LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+STATE_CHANGING = ("POST", "PUT", "PATCH", "DELETE")
+# Every response: no framing, no sniffing, no referrer (a participant link carries a token), and
+# scripts, styles and sockets from this server only.
+SECURITY_HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
+                    "Referrer-Policy": "no-referrer", "Cache-Control": "no-store",
+                    "Content-Security-Policy": "default-src 'self'; connect-src 'self'; "
+                                               "img-src 'self' data:; frame-ancestors 'none'"}
 
 
 def is_loopback(host: str) -> bool:
@@ -129,6 +144,84 @@ class ConnectionGate:
 
     def release(self, participant: int) -> None:
         self.open[participant] = max(0, self.open.get(participant, 0) - 1)
+
+
+class RequestGuard:
+    """ASGI middleware before every HTTP route (the module's "Request bodies"); the origins are
+    the application's `state.origins` (None: the origin each request was addressed to)."""
+
+    def __init__(self, app: ASGIApp, limit: int = MAX_BODY_BYTES) -> None:
+        self.app, self.limit = app, limit
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+
+        async def secured(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                MutableHeaders(scope=message).update(SECURITY_HEADERS)
+            await send(message)
+
+        origins = scope["app"].state.origins
+        refusal = request_refusal(scope["method"], Headers(scope=scope), origins, self.limit)
+        if refusal is None:
+            received = await read_body(receive, self.limit)
+            if received is not None:
+                await self.app(scope, replayed(received, receive), secured)
+                return
+            refusal = oversized(self.limit)
+        await refusal(scope, receive, secured)
+
+
+def refused(status: int, content: dict) -> JSONResponse:
+    """A refusal; it ends the connection (the body it leaves unread is never read)."""
+    return JSONResponse(content, status, headers={"Connection": "close"})
+
+
+def request_refusal(method: str, headers: Headers, origins: frozenset[str] | None,
+                    limit: int) -> JSONResponse | None:
+    """The refusal a request's method and headers call for before its body is read, or None."""
+    length = headers.get("content-length", "")
+    if "transfer-encoding" in headers:
+        framed = "a body needs a Content-Length, not a Transfer-Encoding"
+        return refused(411, {"type": "error", "detail": framed})
+    if method in STATE_CHANGING and not origin_allowed(headers, origins):
+        return refused(403, {"detail": error_reply("forbidden", "a request from another site's page")})
+    if method in STATE_CHANGING and not length.isdigit():
+        return refused(411, {"type": "error", "detail": "a body needs a Content-Length"})
+    if length.isdigit() and int(length) > limit:
+        return oversized(limit)
+    return None
+
+
+def oversized(limit: int) -> JSONResponse:
+    return refused(413, error_reply("oversized", f"bodies hold at most {limit} bytes"))
+
+
+async def read_body(receive: Receive, limit: int) -> list[Message] | None:
+    """The request's messages from the ASGI channel up to its body's end (or the client's
+    disconnect); None as soon as the body received passes `limit` bytes (nothing more is read)."""
+    received: list[Message] = []
+    size = 0
+    while True:
+        message = await receive()
+        received.append(message)
+        size += len(message.get("body", b""))
+        if size > limit:
+            return None
+        if message["type"] != "http.request" or not message.get("more_body", False):
+            return received
+
+
+def replayed(received: list[Message], receive: Receive) -> Receive:
+    """A receive channel giving `received` first, then the connection's own (its disconnect)."""
+    pending = list(received)
+
+    async def replay() -> Message:
+        return pending.pop(0) if pending else await receive()
+
+    return replay
 
 
 class GuardedH11Protocol(H11Protocol):

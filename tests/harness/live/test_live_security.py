@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import secrets
@@ -201,6 +202,27 @@ def test_bad_http_bodies_get_errors_and_change_nothing(client, live_study):
     unknown = client.post("/api/participants/7/control", json={"action": "pause"}, headers=headers)
     assert unknown.status_code == 404
     assert state_of(client, live_study) == before
+
+
+def test_a_body_is_counted_as_it_is_received(live_study):
+    """Whatever the headers say, reading a body stops once it passes MAX_BODY_BYTES: 413."""
+    chunk, pulled, sent = 1024, [], []
+
+    async def receive() -> dict:
+        pulled.append(chunk)
+        return {"type": "http.request", "body": b"a" * chunk, "more_body": len(pulled) < 1024}
+
+    async def send(message: dict) -> None:
+        sent.append(message)
+
+    headers = [(b"host", b"testserver"), (b"content-type", b"application/json"), (b"content-length", b"2")]
+    scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST",
+             "scheme": "http", "path": "/api/claim", "raw_path": b"/api/claim", "root_path": "",
+             "query_string": b"", "headers": headers, "client": ("127.0.0.1", 1),
+             "server": ("testserver", 80)}
+    asyncio.run(live_app(live_study)(scope, receive, send))
+    assert sent[0]["status"] == 413 and json.loads(sent[1]["body"])["code"] == "oversized"
+    assert sum(pulled) <= MAX_BODY_BYTES + chunk
 
 
 def test_all_planned_participants_then_no_more(client, live_study):

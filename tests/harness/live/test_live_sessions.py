@@ -171,6 +171,19 @@ def test_idle_and_slow_connections_are_closed(served):
     assert closed and received.startswith(b"HTTP/1.1 200")                              # a whole request
 
 
+def test_a_chunked_body_is_refused_before_it_is_read(served):
+    """A body framed by Transfer-Encoding has no length to check before it is read: it is refused
+    at its headers, whatever Content-Length says beside it, and the connection closed."""
+    address, _ = served
+    for length in (b"Content-Length: 2\r\n", b""):
+        head = (b"POST /api/claim HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n" + length
+                + b"Transfer-Encoding: chunked\r\n\r\n")
+        chunk = b"100000\r\n" + b"a" * 0x10000   # the first 64 KiB of a 1 MiB chunk
+        closed, received = closed_within(address, head + chunk, 2.0)
+        assert closed and received.startswith(b"HTTP/1.1 411"), (length, received[:80])
+        assert b"Transfer-Encoding" in received
+
+
 def test_a_public_host_warns_and_prints_usable_addresses(live_study, capsys):
     from trustroute.harness.commands.live import announce
 
