@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import threading
 from pathlib import Path
 
 from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
@@ -40,7 +41,12 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
 from starlette.requests import HTTPConnection
 
-from trustroute.harness.live.auth import EXPERIMENTER_COOKIE, PARTICIPANT_COOKIE, presented_token
+from trustroute.harness.live.auth import (
+    EXPERIMENTER_COOKIE,
+    PARTICIPANT_COOKIE,
+    presented_token,
+    token_digest,
+)
 from trustroute.harness.live.guard import (
     ConnectionGate,
     RequestGuard,
@@ -82,17 +88,20 @@ CLOSE = "close"          # the outbox's last item: close the socket with (code, 
 
 
 class Link:
-    """One participant websocket's outbox, pushed to from any thread (the episode's reader)."""
+    """One participant websocket's outbox, pushed to from any thread (the episode's reader);
+    `digest`: the digest of the token the socket was opened with."""
 
-    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
-        self.loop = loop
+    def __init__(self, loop: asyncio.AbstractEventLoop, digest: str) -> None:
+        self.loop, self.digest = loop, digest
         self.queue: asyncio.Queue = asyncio.Queue(maxsize=OUTBOX)
+        self.closed = False   # set by `shut` at once: nothing the socket sends after it is acted on
 
     def __call__(self, message: dict) -> None:
         self.loop.call_soon_threadsafe(offer, self.queue, message)
 
     def shut(self, code: int, reason: str, last: dict | None = None) -> None:
         """Close the socket with `code` after `last` (what is still queued is dropped)."""
+        self.closed = True
         self.loop.call_soon_threadsafe(self._shut, code, reason, last)
 
     def _shut(self, code: int, reason: str, last: dict | None) -> None:
@@ -101,6 +110,36 @@ class Link:
         if last is not None:
             self.queue.put_nowait(last)
         self.queue.put_nowait((CLOSE, code, reason))
+
+
+class OpenSockets:
+    """Every open participant websocket's Link, by participant (from any thread)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.links: dict[int, set[Link]] = {}
+
+    def add(self, participant: int, link: Link) -> None:
+        with self.lock:
+            self.links.setdefault(participant, set()).add(link)
+
+    def discard(self, participant: int, link: Link) -> None:
+        with self.lock:
+            self.links.get(participant, set()).discard(link)
+
+    def of(self, participant: int) -> list[Link]:
+        with self.lock:
+            return list(self.links.get(participant, ()))
+
+
+def revoke_stale(connection: HTTPConnection, participant: int, reason: str = "revoked",
+                 detail: str = "this link was revoked") -> None:
+    """Close every open websocket of `participant` opened with a token that is no longer theirs
+    (replaced by a claimed link or a new one, or gone with a withdrawal): told `revoked`, code 1008."""
+    current = study_of(connection).credentials.participants.get(participant)
+    for link in connection.app.state.sockets.of(participant):
+        if link.digest != current:
+            link.shut(POLICY_VIOLATION, reason, {"type": "revoked", "detail": detail})
 
 
 def offer(queue: asyncio.Queue, message: dict) -> None:
@@ -202,6 +241,7 @@ def claim(request: Request, body: LinkClaim) -> JSONResponse:
     if participant is None:
         raise refused(403, "forbidden", "this link is spent or revoked; ask the experimenter for a new one")
     token = study.replace_token(participant, "link opened in a browser")
+    revoke_stale(request, participant)   # a socket opened with the link's token acts no more
     response = JSONResponse({"next": "/station"})
     response.set_cookie(PARTICIPANT_COOKIE, token, httponly=True, samesite="strict", path="/",
                         secure=study.options.secure_cookies)
@@ -277,9 +317,7 @@ def new_link(request: Request, participant: int) -> dict:
     if session_of(request, participant).phase == "withdrawn":
         raise refused(409, "out_of_order", f"participant {participant} has withdrawn")
     token = study.replace_token(participant, "new link issued by the experimenter")
-    link = study.sessions[participant].push
-    if isinstance(link, Link):
-        link.shut(POLICY_VIOLATION, "revoked", {"type": "revoked", "detail": "this link was revoked"})
+    revoke_stale(request, participant)
     return {"participant": participant, "token": token, "link": f"/p/{token}"}
 
 
@@ -288,13 +326,12 @@ def withdraw(request: Request, participant: int, body: Withdrawal) -> dict:
     """Withdraw `participant`: their data deleted, the dataset consolidated without them, the
     deletion audited (harness/live/withdraw.py); their open station closed."""
     study = study_of(request)
-    link = session_of(request, participant).push
+    session_of(request, participant)
     try:
         entry = study.withdraw(participant, body.reason)
     except ValueError as exc:
         raise refused(409, "out_of_order", str(exc)) from None
-    if isinstance(link, Link):
-        link.shut(POLICY_VIOLATION, "withdrawn", {"type": "revoked", "detail": "withdrawn from the study"})
+    revoke_stale(request, participant, "withdrawn", "withdrawn from the study")
     return {"participant": participant, "removed": len(entry["removed"]), "utc": entry["utc"]}
 
 
@@ -316,19 +353,25 @@ def download(request: Request, path: str) -> FileResponse:
 async def station_socket(websocket: WebSocket) -> None:
     """A participant's socket: their token, one of our origins, and room under their limit."""
     study = study_of(websocket)
-    participant = study.credentials.participant_of(
-        presented_token(websocket.headers, websocket.cookies, PARTICIPANT_COOKIE))
-    if participant is None or not origin_allowed(websocket.headers, websocket.app.state.origins):
+    token = presented_token(websocket.headers, websocket.cookies, PARTICIPANT_COOKIE)
+    participant = study.credentials.participant_of(token)
+    foreign = not origin_allowed(websocket.headers, websocket.app.state.origins)
+    if token is None or participant is None or foreign:
         await websocket.close(code=POLICY_VIOLATION)
         return
     gate: ConnectionGate = websocket.app.state.gate
     if not gate.admit(participant):
         await websocket.close(code=TRY_AGAIN_LATER)
         return
+    link, sockets = Link(asyncio.get_running_loop(), token_digest(token)), websocket.app.state.sockets
+    sockets.add(participant, link)
+    revoke_stale(websocket, participant)   # (its token replaced since it was checked above)
     try:
         await websocket.accept()
-        await converse(websocket, study.sessions[participant], study.consent_text, study.options.idle_seconds)
+        await converse(websocket, study.sessions[participant], link, study.consent_text,
+                       study.options.idle_seconds)
     finally:
+        sockets.discard(participant, link)
         gate.release(participant)
 
 
@@ -342,16 +385,18 @@ def live_app(study: LiveStudy, origins: frozenset[str] = frozenset()) -> FastAPI
     configured = frozenset(origins) | {origin for origin in public if origin is not None}
     app.state.origins = configured or None   # none: the origin each request was addressed to
     app.state.gate = ConnectionGate()
+    app.state.sockets = OpenSockets()
     app.add_middleware(RequestGuard)
     app.add_exception_handler(RequestValidationError, malformed)
     app.include_router(router)
     return app
 
 
-async def converse(websocket: WebSocket, session: Session, consent_text: str, idle_seconds: float) -> None:
+async def converse(websocket: WebSocket, session: Session, link: Link, consent_text: str,
+                   idle_seconds: float) -> None:
     """One participant connection: replies and the episode's messages out, client messages in.
-    It replaces the participant's previous connection (which is told and closed)."""
-    link = Link(asyncio.get_running_loop())
+    It replaces the participant's previous connection (which is told and closed), unless it is
+    closed already (revoked)."""
 
     async def send_all() -> None:
         while True:
@@ -367,7 +412,7 @@ async def converse(websocket: WebSocket, session: Session, consent_text: str, id
     offer(link.queue, {"type": "welcome", "participant": session.participant, "consent": consent_text,
                        "view": session.study.config.live_view, "driving": session.study.config.live_driving,
                        "inputs": list(session.study.config.live_inputs)})
-    previous = session.attach(link)
+    previous = None if link.closed else session.attach(link)
     if isinstance(previous, Link):
         previous.shut(REPLACED, "opened in another window",
                       {"type": "replaced", "detail": "This session was opened in another window or tab; "
@@ -402,6 +447,8 @@ async def receive_all(websocket: WebSocket, session: Session, buckets: tuple[Tok
         raw = receiving.result()
         if raw["type"] == "websocket.disconnect":
             return
+        if link.closed:   # revoked, replaced or idle: only its closing goes on
+            continue
         data = raw["text"] if raw.get("text") is not None else (raw.get("bytes") or b"")
         for reply in respond(session, buckets[0], data, buckets[1], buckets[2]):
             offer(link.queue, reply)

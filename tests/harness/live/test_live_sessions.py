@@ -230,6 +230,23 @@ def test_a_new_link_revokes_the_old_token_and_is_logged(client, live_study):
     assert unknown.status_code == 404
 
 
+def test_a_claimed_link_closes_the_sockets_opened_with_it(client, live_study):
+    """Opening a link in a browser replaces its token: a socket opened with the link's token (by
+    whoever had the link first) is told `revoked` and closed, and what it sends after the claim
+    changes nothing."""
+    token = new_participant(client, live_study)
+    with client.websocket_connect("/ws", headers=bearer(token)) as early:
+        early.receive_json(), early.receive_json()
+        assert client.post("/api/claim", json={"token": token}).status_code == 200
+        early.send_json({"type": "consent", "agree": True, "client": "scripted", "lockstep": True})
+        assert early.receive_json()["type"] == "revoked"
+        with pytest.raises(WebSocketDisconnect) as closed:
+            early.receive_json()
+        assert closed.value.code == POLICY_VIOLATION
+    assert live_study.sessions[0].phase == "consent" and live_study.sessions[0].push is None
+    assert not json.loads(live_study.registry_path().read_text())["participants"]["0"]["consented"]
+
+
 def test_without_configured_origins_a_request_must_come_from_the_address_it_was_sent_to(live_study):
     with TestClient(live_app(live_study)) as client:   # no origins: the Host decides
         headers = bearer(live_study.experimenter_token)
