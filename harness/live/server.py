@@ -95,6 +95,10 @@ class LiveStudy:
         self.credentials, self.experimenter_token = experimenter_credentials()
         self.sessions: dict[int, Session] = {}
         self.done: set[str] = set()
+        # The study's lock guards the registry, the journal and the dataset. Lock order: a
+        # session's lock (harness/live/session.py) may be held when the study's is taken (a
+        # consent saves the registry, a start journals its attempt, an episode's end consolidates),
+        # never the other way round: no code holding the study's lock takes a session's.
         self.lock = threading.RLock()
         self.expected: dict = {}
         self.context: StudyContext   # the study's context, built by `open` (`check_before_writing`)
@@ -215,13 +219,13 @@ class LiveStudy:
         """The experimenter withdraws `participant` (harness/live/withdraw.py): their episode
         stopped, their data removed and the dataset consolidated without them; the audit entry.
         ValueError when there is no such participant or they have withdrawn already."""
+        session = self.sessions.get(participant)
+        if session is None or participant in self.withdrawn:
+            raise ValueError(f"participant {participant} does not exist or has withdrawn already")
+        with session.lock:   # not inside the study's lock (the lock order: LiveStudy.lock)
+            session.phase = "withdrawn"   # the episode's last message changes nothing now
+        session.stop()
         with self.lock:
-            session = self.sessions.get(participant)
-            if session is None or participant in self.withdrawn:
-                raise ValueError(f"participant {participant} does not exist or has withdrawn already")
-            with session.lock:
-                session.phase = "withdrawn"   # the episode's last message changes nothing now
-            session.stop()
             self.credentials.participants.pop(participant, None)
             self.save_participants()
             try:

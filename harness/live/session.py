@@ -60,6 +60,7 @@ class Session:
         self.label = label
         self.client = client
         self.lockstep = False
+        # Taken before the study's lock whenever both are held (harness/live/server.py, LiveStudy.lock).
         self.lock = threading.RLock()
         self.phase = "ready" if consented else "consent"
         self.pause_reason: str | None = None

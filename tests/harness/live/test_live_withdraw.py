@@ -5,6 +5,8 @@ the participant is readmitted."""
 from __future__ import annotations
 
 import json
+import threading
+import time
 
 import httpx
 import pytest
@@ -14,6 +16,8 @@ from tests.cli import assert_one_line_error, run_cli
 from trustroute.core.dataset import read_attempts, read_episodes, read_kinematics, read_roads
 from trustroute.core.errors import InputError
 from trustroute.harness.cli import cli
+from trustroute.harness.live import session as live_session
+from trustroute.harness.live.protocol import Consent, Start
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 from trustroute.harness.live.withdraw import sha256_of
@@ -160,3 +164,33 @@ def test_a_bad_journal_line_is_refused_before_anything_is_deleted(bad, tmp_path,
     assert_one_line_error(code, err, f"{journal}: line 2", "restore it from a backup")
     after = {str(p.relative_to(study)): p.read_bytes() for p in study.rglob("*") if p.is_file()}
     assert after == {**before, "study.lock": after["study.lock"]}
+
+
+def test_a_withdrawal_while_a_trial_starts_waits_for_the_start(tmp_path, monkeypatch):
+    """A start holds the participant's session while its episode process spawns, then journals
+    the attempt (the study's lock); a withdrawal meanwhile takes the same two locks in the same
+    order, so it waits for the start and then stops the episode (the spawn is slowed here so the
+    withdrawal comes inside it)."""
+    spawn = live_session.start_episode_process
+
+    def slow_spawn(*args, **kwargs):
+        time.sleep(0.3)
+        return spawn(*args, **kwargs)
+
+    monkeypatch.setattr(live_session, "start_episode_process", slow_spawn)
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions(pace=1.0)).open()
+    participant = study.create_participant()[0]
+    session = study.sessions[participant]
+    session.handle(Consent(type="consent", agree=True))
+    starting = threading.Thread(target=session.handle, args=(Start(type="start"),), daemon=True)
+    withdrawing = threading.Thread(target=study.withdraw, args=(participant,), daemon=True)
+    starting.start()
+    time.sleep(0.1)
+    withdrawing.start()
+    starting.join(10), withdrawing.join(10)
+    hung = starting.is_alive() or withdrawing.is_alive()
+    if not hung:   # (a hung study cannot be closed: its locks are held for good)
+        study.close()
+    assert not hung, "the start and the withdrawal wait for each other"
+    assert session.phase == "withdrawn" and participant in study.withdrawn
+    assert session.process is not None and not session.process.is_alive()
