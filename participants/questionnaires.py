@@ -27,8 +27,10 @@ trial), each a list of `jian`, `nasa_tlx` or file paths (relative to the config)
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 from typing import cast
 
@@ -77,14 +79,16 @@ class Questionnaire:
                 f"unknown: {', '.join(sorted(set(answers) - {i.id for i in self.items})) or 'none'})"
             )
         for key, value in answers.items():
-            steps = (value - self.minimum) / self.step if isinstance(value, int | float) else -1
             if (
                 isinstance(value, bool)
-                or not self.minimum <= value <= self.maximum
-                or abs(steps - round(steps)) > 1e-9
+                or not isinstance(value, int | float)
+                or not self.minimum <= value <= self.maximum   # first: a huge number goes no further
+                or not whole_steps(value, self.minimum, self.step)
             ):
+                shown = repr(value) if len(repr(value)) <= 24 else repr(value)[:21] + "..."
                 raise ValueError(
-                    f"{self.name}.{key}: {value!r} is not on the scale {self.minimum:g}-{self.maximum:g}"
+                    f"{self.name}.{key}: {shown} is not on the scale {self.minimum:g}-{self.maximum:g} "
+                    f"in steps of {self.step:g}"
                 )
         return {key: float(value) for key, value in answers.items()}
 
@@ -103,6 +107,20 @@ class Questionnaire:
             },
             "items": [{"id": i.id, "text": i.text, "low": i.low, "high": i.high} for i in self.items],
         }
+
+
+def as_written(number: float) -> Fraction:
+    """The number exactly as written: an int as it is, a float by its shortest decimal form (0.1 is
+    one tenth, not the binary fraction nearest to it)."""
+    return Fraction(number) if isinstance(number, int) else Fraction(repr(float(number)))
+
+
+def whole_steps(value: float, start: float, step: float) -> bool:
+    """Whether `value` is `start` plus a whole number of `step`s, in exact arithmetic: no tolerance
+    lets a number between two points of a scale pass as one."""
+    if any(isinstance(x, float) and not math.isfinite(x) for x in (value, start, step)) or not step:
+        return False
+    return ((as_written(value) - as_written(start)) / as_written(step)).denominator == 1
 
 
 JIAN_TEXTS = (
@@ -190,7 +208,7 @@ def load_questionnaire(path: Path, source: str) -> Questionnaire:
             "scale", "min < max with max - min a multiple of step (> 0) is needed", "e.g. min = 1, max = 7"
         )
     low, high, step = cast(float, low), cast(float, high), cast(float, step)  # checked numbers above
-    if not low < high or step <= 0 or ((high - low) / step) % 1:
+    if not low < high or step <= 0 or not whole_steps(high, low, step):
         raise bad(
             "scale", "min < max with max - min a multiple of step (> 0) is needed", "e.g. min = 1, max = 7"
         )

@@ -38,6 +38,27 @@ def test_the_packaged_scales():
     assert NASA_TLX.check({item.id: 55 for item in NASA_TLX.items})["mental"] == 55.0
 
 
+def test_an_answer_is_a_point_of_the_scale_exactly():
+    """The range is checked before the steps (a huge number is refused, not an overflow), and the
+    steps exactly: a number a hair off a point is no point of the scale."""
+    everything = {item.id: 0 for item in NASA_TLX.items}
+    for value in (10**400, -(10**400), 50.0000000001, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="not on the scale"):
+            NASA_TLX.check(everything | {"mental": value})
+    assert NASA_TLX.check(everything | {"mental": 55.0, "effort": 100})["effort"] == 100.0
+
+
+def test_a_scale_in_decimal_steps(tmp_path):
+    """A step of 0.1 is one tenth: 0.3 is the scale's third point (in binary floating point
+    0.3 / 0.1 is not 3), and 0.25 is no point of it."""
+    (tmp_path / "tenths.toml").write_text(LIKERT.replace("max = 5", "max = 0.3, step = 0.1")
+                                          .replace("min = 1", "min = 0"))
+    tenths = load_questionnaire(tmp_path / "tenths.toml", "study.toml")
+    assert tenths.check({"c1": 0.3, "c2": 0.1}) == {"c1": 0.3, "c2": 0.1}
+    with pytest.raises(ValueError, match="not on the scale"):
+        tenths.check({"c1": 0.25, "c2": 0.1})
+
+
 def test_a_likert_file_and_the_config_table(tmp_path):
     (tmp_path / "comfort.toml").write_text(LIKERT)
     comfort = load_questionnaire(tmp_path / "comfort.toml", "study.toml")

@@ -109,3 +109,28 @@ def config_trial(config) -> str:
     from trustroute.harness.study.plan import plan_episodes
 
     return plan_episodes(config)[0].episode_id
+
+
+def test_an_answer_off_the_scale_is_malformed_and_the_socket_stays(tmp_path):
+    """A huge number or a number a hair off a point of the scale gets a `malformed` reply; the
+    connection goes on and the answers are asked again."""
+    study = LiveStudy(questionnaire_config(tmp_path), tmp_path / "study", ServerOptions(warm_up=False)).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+            token = client.post("/api/participants", json={}, headers=headers).json()["token"]
+            with client.websocket_connect("/ws", headers={"Authorization": f"Bearer {token}"}) as station:
+                station.send_json({"type": "consent", "agree": True})
+                receive_until(station, lambda m: m.get("phase") == "questionnaire")
+                rest = ',"physical":0,"temporal":0,"performance":0,"effort":0,"frustration":0}}'
+                for mental in ("1" + "0" * 400, "50.0000000001"):
+                    station.send_text('{"type":"answers","questionnaire":"nasa_tlx","answers":{"mental":'
+                                      + mental + rest)
+                    reply = receive_until(station, lambda m: m["type"] == "error")
+                    assert reply["code"] == "malformed" and "not on the scale" in reply["detail"], reply
+                station.send_json({"type": "ping"})
+                assert receive_until(station, lambda m: m["type"] == "pong")
+        assert study.sessions[0].phase == "questionnaire"
+        assert not (study.study_dir / "live" / "questionnaires").exists()
+    finally:
+        study.close()
