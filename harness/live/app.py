@@ -49,7 +49,9 @@ from trustroute.harness.live.auth import (
 )
 from trustroute.harness.live.guard import (
     ConnectionGate,
+    GuardedServer,
     RequestGuard,
+    connection_cap,
     guarded_protocol,
     normal_origin,
     origin_allowed,
@@ -456,14 +458,16 @@ async def receive_all(websocket: WebSocket, session: Session, buckets: tuple[Tok
 
 def live_server(study: LiveStudy, sock):
     """The uvicorn server of `study` for the bound socket `sock` (its `run(sockets=[sock])` serves);
-    the server's own origins are those of the socket's address."""
+    the server's own origins are those of the socket's address; its connections capped
+    (`ServerOptions.max_connections`, by default sized for the study: guard.connection_cap)."""
     import uvicorn
 
     host, port = sock.getsockname()[:2]
     app = live_app(study, own_origins(host, port))
+    cap = study.options.max_connections or connection_cap(study.config.participants)
     config = uvicorn.Config(app, log_level="warning", ws_max_size=4 * MAX_MESSAGE_BYTES, lifespan="off",
-                            http=guarded_protocol(study.options.request_seconds), timeout_keep_alive=5)
-    return uvicorn.Server(config)
+                            http=guarded_protocol(study.options.request_seconds, cap), timeout_keep_alive=5)
+    return GuardedServer(config)
 
 
 def serve(study: LiveStudy, sock, on_ready=None) -> None:

@@ -14,6 +14,12 @@
   Transfer-Encoding is refused (a chunked body has no length to check before it is read); and the
   body actually received is counted, reading stopped and the request refused (413) as soon as it
   passes MAX_BODY_BYTES, whatever the headers said.
+- **Connections in all.** At most `connection_cap` connections are open at once (HTTP and
+  websocket; sized for the study: CONNECTIONS_PER_PARTICIPANT for each planned participant and
+  CONNECTIONS_SPARE, never more than half the process's open-file limit): one beyond is answered
+  503 and closed as it is accepted, so clients that open connections and send nothing cannot use
+  up the server's file descriptors. Should accept() still fail for want of descriptors, asyncio's
+  traceback per attempt becomes one warning (`GuardedServer`).
 - **Slow clients.** `GuardedH11Protocol` closes an HTTP connection whose request (headers and
   body, or a websocket handshake) is not complete within `request_seconds` of its first byte or
   of the connection (idle, slow headers, slow body: uvicorn has a keep-alive timeout only between
@@ -27,11 +33,14 @@ from __future__ import annotations
 
 import asyncio
 import ipaddress
+import logging
+import resource
 import socket
 from collections.abc import Mapping
 from urllib.parse import urlsplit
 
 import h11
+import uvicorn
 from starlette.datastructures import Headers, MutableHeaders
 from starlette.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -43,6 +52,11 @@ from trustroute.harness.live.protocol import MAX_BODY_BYTES, TokenBucket, error_
 MAX_SOCKETS = 2        # open websockets per participant: the live one and the one replacing it
 OPEN_BURST = 5         # new websockets a participant may open at once ...
 OPEN_RATE = 0.5        # ... and per second after that
+CONNECTIONS_PER_PARTICIPANT = 8   # their 2 websockets and the 6 HTTP connections a browser keeps to a host
+CONNECTIONS_SPARE = 32            # the experimenter's console, scripts, connections being closed
+FULL_TEXT = b"too many open connections; try again later"
+FULL = (b"HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\nConnection: close\r\n"
+        b"Content-Length: %d\r\n\r\n%s" % (len(FULL_TEXT), FULL_TEXT))
 WILDCARDS = ("0.0.0.0", "::", "")
 LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
 STATE_CHANGING = ("POST", "PUT", "PATCH", "DELETE")
@@ -224,19 +238,32 @@ def replayed(received: list[Message], receive: Receive) -> Receive:
     return replay
 
 
+def connection_cap(participants: int) -> int:
+    """The open connections a study's server allows at once (the module's "Connections in all")."""
+    files = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    wanted = participants * CONNECTIONS_PER_PARTICIPANT + CONNECTIONS_SPARE
+    return wanted if files == resource.RLIM_INFINITY else max(1, min(wanted, files // 2))
+
+
 class GuardedH11Protocol(H11Protocol):
-    """uvicorn's HTTP/1.1 protocol with a deadline on every request: a connection that has not
-    sent a whole request (headers and body) within `request_seconds` of being opened, or of its
-    previous response, is closed (a websocket upgrade leaves this protocol, and the deadline
-    with it). Set `request_seconds` on a subclass (`guarded_protocol`)."""
+    """uvicorn's HTTP/1.1 protocol with a cap on open connections and a deadline on every
+    request: a connection beyond `max_connections` is answered 503 and closed at once; one that
+    has not sent a whole request (headers and body) within `request_seconds` of being opened, or
+    of its previous response, is closed (a websocket upgrade leaves this protocol, and the
+    deadline with it; it stays counted). Set both on a subclass (`guarded_protocol`)."""
 
     request_seconds = 10.0
+    max_connections = 1 << 30
 
     request_deadline: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport) -> None:
         super().connection_made(transport)
         self.request_deadline = None
+        if len(self.connections) > self.max_connections:   # (this one counted)
+            transport.write(FULL)
+            transport.close()
+            return
         self.arm()
 
     def arm(self) -> None:
@@ -273,8 +300,34 @@ class GuardedH11Protocol(H11Protocol):
         transport.close()
 
 
-def guarded_protocol(request_seconds: float) -> type[GuardedH11Protocol]:
-    return type("GuardedH11", (GuardedH11Protocol,), {"request_seconds": float(request_seconds)})
+def guarded_protocol(request_seconds: float, max_connections: int) -> type[GuardedH11Protocol]:
+    return type("GuardedH11", (GuardedH11Protocol,), {"request_seconds": float(request_seconds),
+                                                      "max_connections": int(max_connections)})
+
+
+class GuardedServer(uvicorn.Server):
+    """uvicorn's server whose event loop says a failed accept() (out of file descriptors; asyncio
+    tries again a second later) once, as one warning line, instead of a traceback each time."""
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        quiet_accept_errors(asyncio.get_running_loop())
+        await super().startup(sockets)
+
+
+def quiet_accept_errors(loop: asyncio.AbstractEventLoop) -> None:
+    said = False
+
+    def handler(loop: asyncio.AbstractEventLoop, context: dict) -> None:
+        nonlocal said
+        if not str(context.get("message", "")).startswith("socket.accept() out of system resource"):
+            loop.default_exception_handler(context)
+        elif not said:
+            said = True
+            logging.getLogger("uvicorn.error").warning(
+                "the server is out of file descriptors (%s): new connections wait until some close "
+                "(said once)", context.get("exception"))
+
+    loop.set_exception_handler(handler)
 
 
 def bind(host: str, port: int) -> socket.socket:

@@ -62,6 +62,7 @@ class ServerOptions:
     public_origins: tuple[str, ...] = ()   # the origins the study is reached at behind a proxy
     idle_seconds: float = 60.0     # a websocket silent this long is closed (the station pings)
     request_seconds: float = 10.0  # an HTTP request not complete this long after it began is cut
+    max_connections: int | None = None   # open at once (None: sized for the study, guard.connection_cap)
 
 
 def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:

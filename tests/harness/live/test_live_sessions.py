@@ -4,7 +4,11 @@ idle or slow connections are closed; the server's port is taken before anything 
 
 from __future__ import annotations
 
+import asyncio
+import errno
 import json
+import logging
+import resource
 import socket
 import time
 
@@ -22,7 +26,16 @@ from trustroute.harness.live.app import (
     TRY_AGAIN_LATER,
     live_app,
 )
-from trustroute.harness.live.guard import OPEN_BURST, ConnectionGate, bind, own_origins
+from trustroute.harness.live.guard import (
+    CONNECTIONS_PER_PARTICIPANT,
+    CONNECTIONS_SPARE,
+    OPEN_BURST,
+    ConnectionGate,
+    bind,
+    connection_cap,
+    own_origins,
+    quiet_accept_errors,
+)
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 
 from .conftest import serving, tiny_config
@@ -169,6 +182,70 @@ def test_idle_and_slow_connections_are_closed(served):
     whole = b"GET /static/live.css HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
     closed, received = closed_within(address, whole, 2.0)
     assert closed and received.startswith(b"HTTP/1.1 200")                              # a whole request
+
+
+def served_request(connection: socket.socket, path: str = "/api/me") -> bytes:
+    """One keep-alive request on an open connection: the response's head (its body is short)."""
+    connection.sendall(f"GET {path} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
+    received = b""
+    while b"\r\n\r\n" not in received:
+        received += connection.recv(4096)
+    return received
+
+
+def test_connections_beyond_the_cap_are_refused_at_once(tmp_path):
+    """With the study's connections all open, one more is answered 503 and closed as it is
+    accepted (it holds no descriptor until a deadline); those open are still served, and once
+    they close a new connection is served again."""
+    options = ServerOptions(request_seconds=5.0, max_connections=4)
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", options).open()
+    try:
+        with serving(study) as address:
+            held = [socket.create_connection(address, timeout=5) for _ in range(4)]
+            try:
+                assert all(served_request(c).startswith(b"HTTP/1.1 403") for c in held)   # all accepted
+                started = time.monotonic()
+                closed, received = closed_within(address, b"", 3.0)
+                assert closed and received.startswith(b"HTTP/1.1 503") and b"too many" in received
+                assert time.monotonic() - started < 2.0
+                assert served_request(held[0]).startswith(b"HTTP/1.1 403")
+            finally:
+                for connection in held:
+                    connection.close()
+            whole = b"GET /static/live.css HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+            deadline = time.monotonic() + 3.0
+            while not (received := closed_within(address, whole, 2.0)[1]).startswith(b"HTTP/1.1 200"):
+                assert time.monotonic() < deadline, received[:80]   # (the server sees the closes soon)
+                time.sleep(0.05)
+    finally:
+        study.close()
+
+
+def test_the_connection_cap_is_sized_for_the_study_within_the_open_file_limit():
+    files = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    assert connection_cap(12) == 12 * CONNECTIONS_PER_PARTICIPANT + CONNECTIONS_SPARE <= files // 2
+    assert connection_cap(10**6) <= files // 2   # half the descriptors stay for episodes and files
+
+
+def test_accept_failures_for_want_of_descriptors_are_said_once():
+    """asyncio reports every accept() that fails for want of file descriptors (with a traceback,
+    and tries again a second later): the server's loop says it once, in one line."""
+    records: list[logging.LogRecord] = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    logger = logging.getLogger("uvicorn.error")
+    logger.addHandler(handler)
+    loop = asyncio.new_event_loop()
+    try:
+        quiet_accept_errors(loop)
+        for _ in range(3):
+            loop.call_exception_handler({"message": "socket.accept() out of system resource",
+                                         "exception": OSError(errno.EMFILE, "Too many open files")})
+    finally:
+        loop.close()
+        logger.removeHandler(handler)
+    assert len(records) == 1 and records[0].exc_info is None
+    assert "file descriptors" in records[0].getMessage() and "\n" not in records[0].getMessage()
 
 
 def test_a_chunked_body_is_refused_before_it_is_read(served):
