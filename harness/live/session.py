@@ -68,6 +68,7 @@ class Session:
         self.mode = "auto"
         self.road: str | None = None
         self.reports = self.takeovers = 0
+        self.prompted: set[int] = set()   # the roads the running episode has asked a report about
         self.last_error: str | None = None
         self.process: Any = None
         self.connection: Any = None      # the episode process and our end of its pipe
@@ -195,6 +196,8 @@ class Session:
         prompt = message.prompt
         if prompt is not None and (self.task is None or prompt.episode_id != self.task.episode_id):
             raise MessageError("out_of_order", "the report answers a prompt of another episode")
+        if prompt is not None and prompt.road not in self.prompted:
+            raise MessageError("out_of_order", f"no report has been asked about road {prompt.road}")
         self.tell(message.model_dump())
         self.reports += 1
 
@@ -227,6 +230,7 @@ class Session:
         self.process, self.connection = start_episode_process(
             self.study.config, target, task, self.study.live_options(self.client, self.lockstep), trust)
         self.task, self.phase, self.mode, self.road, self.last_error = task, "driving", "auto", None, None
+        self.prompted = set()
         self.study.attempt_started(task, task is self.warm_up)
         reader = threading.Thread(target=self.read_episode, args=(self.connection, self.process),
                                   name=f"live-reader-{task.episode_id}", daemon=True)
@@ -258,6 +262,8 @@ class Session:
                 self.takeovers += self.mode == "manual"
             elif kind == "frame":
                 self.road = message["road"]
+            elif kind == "road" and message.get("prompt"):   # (recorded before the station sees it)
+                self.prompted.add(int(message["prompt"]["road"]))
             elif finished:
                 self.study.attempt_ended(self.task, message)
                 if kind == "episode_end" and self.warming_up:

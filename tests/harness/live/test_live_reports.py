@@ -105,3 +105,39 @@ def test_the_scripted_participants_reports_are_on_their_roads(tmp_path):
     finally:
         study.close()
     assert len(sent) == 2 and reported_by_road(tmp_path / "study") == sent
+
+
+def test_a_report_on_a_prompt_never_asked_is_refused(tmp_path):
+    """A report may name a prompt of this episode that has been asked (however late), or none; one
+    naming a road not asked about (a road to come, or none of the route's) is `out_of_order` and
+    reaches no episode."""
+    from fastapi.testclient import TestClient
+
+    from trustroute.harness.live.app import live_app
+
+    from .test_live_episode import receive_until
+
+    config = tiny_config(tmp_path, participants=1)
+    study = LiveStudy(config, tmp_path / "study", ServerOptions(pace=20.0, warm_up=False)).open()
+    headers = {"Authorization": f"Bearer {study.create_participant()[1]}"}
+    try:
+        with TestClient(live_app(study)) as client, client.websocket_connect("/ws", headers=headers) as ws:
+            ws.send_json({"type": "consent", "agree": True})
+            ws.send_json({"type": "start", "trust": 4})
+            episode = receive_until(ws, lambda m: m["type"] == "episode_start")["episode_id"]
+
+            def refused(road: int) -> dict:
+                prompt = {"episode_id": episode, "road": road}
+                ws.send_json({"type": "trust", "value": 7, "prompt": prompt})
+                return receive_until(ws, lambda m: m["type"] == "error")
+
+            assert refused(50)["code"] == "out_of_order"
+            prompt = receive_until(ws, lambda m: m["type"] == "road" and m["prompt"])["prompt"]
+            ahead = refused(prompt["road"] + 1)
+            assert ahead["code"] == "out_of_order" and f"road {prompt['road'] + 1}" in ahead["detail"]
+            ws.send_json({"type": "trust", "value": 2, "prompt": prompt})
+            ws.send_json({"type": "ping"})
+            assert receive_until(ws, lambda m: m["type"] in ("pong", "error"))["type"] == "pong"
+            assert study.sessions[0].reports == 1
+    finally:
+        study.close()
