@@ -185,12 +185,17 @@ def test_idle_and_slow_connections_are_closed(served):
 
 
 def served_request(connection: socket.socket, path: str = "/api/me") -> bytes:
-    """One keep-alive request on an open connection: the response's head (its body is short)."""
+    """One keep-alive request on an open connection: its whole response (by its Content-Length)."""
     connection.sendall(f"GET {path} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
     received = b""
     while b"\r\n\r\n" not in received:
         received += connection.recv(4096)
-    return received
+    head, body = received.split(b"\r\n\r\n", 1)
+    length = int(next(line.split(b":")[1] for line in head.split(b"\r\n")
+                      if line.lower().startswith(b"content-length:")))
+    while len(body) < length:
+        body += connection.recv(4096)
+    return head + b"\r\n\r\n" + body
 
 
 def test_connections_beyond_the_cap_are_refused_at_once(tmp_path):
