@@ -225,6 +225,7 @@ class LiveStudy:
             raise ValueError(f"participant {participant} does not exist or has withdrawn already")
         with session.lock:   # not inside the study's lock (the lock order: LiveStudy.lock)
             session.phase = "withdrawn"   # the episode's last message changes nothing now
+            session.label = ""            # (the registry keeps none either)
         session.stop()
         with self.lock:
             self.credentials.participants.pop(participant, None)

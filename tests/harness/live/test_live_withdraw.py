@@ -194,3 +194,25 @@ def test_a_withdrawal_while_a_trial_starts_waits_for_the_start(tmp_path, monkeyp
     assert not hung, "the start and the withdrawal wait for each other"
     assert session.phase == "withdrawn" and participant in study.withdrawn
     assert session.process is not None and not session.process.is_alive()
+
+
+def test_a_withdrawn_participants_label_is_gone_at_once(tmp_path):
+    """The console shows a withdrawn participant without their label while the server runs, as
+    the registry keeps none."""
+    from fastapi.testclient import TestClient
+
+    from trustroute.harness.live.app import live_app
+
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
+            created = client.post("/api/participants", json={"label": "Ada L."}, headers=headers)
+            assert created.status_code == 200
+            withdrawn = client.post("/api/participants/0/withdraw", json={"confirm": True}, headers=headers)
+            assert withdrawn.status_code == 200
+            state = client.get("/api/participants/0", headers=headers).json()
+            assert (state["phase"], state["label"]) == ("withdrawn", "")
+            assert "Ada" not in client.get("/api/participants", headers=headers).text
+    finally:
+        study.close()
