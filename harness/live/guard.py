@@ -11,9 +11,10 @@
   once, then OPEN_RATE a second (a token bucket per participant).
 - **Request bodies.** `RequestGuard` (ASGI middleware before every HTTP route): a state-changing
   request needs one of our origins (or none) and a Content-Length; a request framed by
-  Transfer-Encoding is refused (a chunked body has no length to check before it is read); and the
+  Transfer-Encoding is refused (a chunked body has no length to check before it is read); the
   body actually received is counted, reading stopped and the request refused (413) as soon as it
-  passes MAX_BODY_BYTES, whatever the headers said.
+  passes MAX_BODY_BYTES, whatever the headers said; a JSON body naming a key twice (or nested too
+  deeply to parse) is refused (422), as websocket messages are.
 - **Connections in all.** At most `connection_cap` connections are open at once (HTTP and
   websocket; sized for the study: CONNECTIONS_PER_PARTICIPANT for each planned participant and
   CONNECTIONS_SPARE, never more than half the process's open-file limit): one beyond is answered
@@ -33,6 +34,7 @@ from __future__ import annotations
 
 import asyncio
 import ipaddress
+import json
 import logging
 import resource
 import socket
@@ -47,7 +49,13 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from trustroute.core.errors import InputError
-from trustroute.harness.live.protocol import MAX_BODY_BYTES, TokenBucket, error_reply
+from trustroute.harness.live.protocol import (
+    MAX_BODY_BYTES,
+    MessageError,
+    TokenBucket,
+    error_reply,
+    unique_keys,
+)
 
 MAX_SOCKETS = 2        # open websockets per participant: the live one and the one replacing it
 OPEN_BURST = 5         # new websockets a participant may open at once ...
@@ -181,10 +189,13 @@ class RequestGuard:
         refusal = request_refusal(scope["method"], Headers(scope=scope), origins, self.limit)
         if refusal is None:
             received = await read_body(receive, self.limit)
-            if received is not None:
-                await self.app(scope, replayed(received, receive), secured)
-                return
-            refusal = oversized(self.limit)
+            if received is None:
+                refusal = oversized(self.limit)
+            else:
+                refusal = unparsed(received)
+                if refusal is None:
+                    await self.app(scope, replayed(received, receive), secured)
+                    return
         await refusal(scope, receive, secured)
 
 
@@ -206,6 +217,21 @@ def request_refusal(method: str, headers: Headers, origins: frozenset[str] | Non
         return refused(411, {"type": "error", "detail": "a body needs a Content-Length"})
     if length.isdigit() and int(length) > limit:
         return oversized(limit)
+    return None
+
+
+def unparsed(received: list[Message]) -> JSONResponse | None:
+    """422 `malformed` for a JSON body that names a key twice (protocol.unique_keys) or is nested
+    too deeply to parse, else None (a body that is no JSON is the route's to refuse)."""
+    body = b"".join(message.get("body", b"") for message in received)
+    try:
+        json.loads(body, object_pairs_hook=unique_keys)
+    except MessageError as exc:
+        return refused(422, exc.reply)
+    except RecursionError:
+        return refused(422, error_reply("malformed", "the body is nested too deeply"))
+    except ValueError:
+        pass
     return None
 
 

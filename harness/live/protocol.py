@@ -1,8 +1,9 @@
 """The live study's messages: every websocket and HTTP message as a schema, the size cap, the flood
 limit, and the error replies (docs/live_studies.md, "Protocol").
 
-A participant's websocket carries JSON text messages of at most MAX_MESSAGE_BYTES. Each is
-validated against CLIENT_MESSAGE (a union on `type`; unknown keys and wrong types are refused);
+A participant's websocket carries JSON text messages of at most MAX_MESSAGE_BYTES (a binary frame
+is refused). Each is validated against CLIENT_MESSAGE (a union on `type`; unknown keys, a key
+given twice and wrong types are refused);
 a message that is oversized, malformed, arrives faster than the connection's token bucket allows,
 or does not fit the session's phase gets one `error` reply and changes nothing.
 """
@@ -209,19 +210,34 @@ class MessageError(Exception):
         self.reply = error_reply(code, detail)
 
 
+def unique_keys(pairs: list[tuple[str, object]]) -> dict:
+    """`json.loads`' object_pairs_hook: an object naming a key twice is refused (MessageError
+    `malformed`), where a JSON parser would silently keep one of the two values."""
+    seen: set[str] = set()
+    for key, _ in pairs:
+        if key in seen:
+            raise MessageError("malformed", f"the key {key[:40]!r} is given twice")
+        seen.add(key)
+    return dict(pairs)
+
+
 def parse_client_message(raw: str | bytes) -> ClientMessage:
-    """The validated message, or MessageError (oversized or malformed)."""
-    size = len(raw.encode() if isinstance(raw, str) else raw)
+    """The validated message, or MessageError (binary, oversized or malformed)."""
+    if not isinstance(raw, str):
+        raise MessageError("malformed", "a message is JSON text, not a binary frame")
+    size = len(raw.encode())
     if size > MAX_MESSAGE_BYTES:
         raise MessageError("oversized", f"{size} bytes; a message holds at most {MAX_MESSAGE_BYTES}")
     try:
-        return CLIENT_MESSAGE.validate_json(raw)
+        message = CLIENT_MESSAGE.validate_json(raw)
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(part) for part in first.get("loc", ())) or "message"
         raise MessageError("malformed", f"{where}: {first.get('msg', 'invalid')}") from None
     except (ValueError, json.JSONDecodeError) as exc:
         raise MessageError("malformed", f"not a JSON message ({exc})") from None
+    json.loads(raw, object_pairs_hook=unique_keys)   # (a valid message, so a shallow one)
+    return message
 
 
 @dataclass

@@ -161,6 +161,27 @@ def test_malformed_oversized_and_out_of_order_messages_get_errors_and_change_not
     assert not (live_study.study_dir / "parts").exists()
 
 
+def test_a_key_given_twice_or_a_binary_frame_is_malformed(client, live_study):
+    """A message naming a key twice is refused, not read by its last value; a message is JSON
+    text, so a binary frame is refused whatever it holds."""
+    token = create(client, live_study)
+    before = state_of(client, live_study)
+    with client.websocket_connect("/ws", headers=bearer(token)) as socket:
+        socket.receive_json(), socket.receive_json()
+        for raw in ('{"type": "ping", "type": "consent", "agree": true}',
+                    '{"type": "consent", "agree": true, "client": "station", "client": "scripted"}',
+                    "[" * 2000):
+            socket.send_text(raw)
+            reply = socket.receive_json()
+            assert (reply["type"], reply["code"]) == ("error", "malformed"), raw
+        socket.send_bytes(b'{"type": "consent", "agree": true}')
+        reply = socket.receive_json()
+        assert reply["code"] == "malformed" and "binary" in reply["detail"]
+        socket.send_text('{"type": "ping"}')
+        assert socket.receive_json() == {"type": "pong"}
+    assert state_of(client, live_study) == before
+
+
 def test_a_flood_is_rate_limited_and_changes_nothing(client, live_study):
     token = create(client, live_study)
     before = state_of(client, live_study)
@@ -191,7 +212,8 @@ def test_bad_http_bodies_get_errors_and_change_nothing(client, live_study):
     big = client.post("/api/participants", content=json.dumps({"label": "x" * MAX_BODY_BYTES}),
                       headers={**headers, "content-type": "application/json"})
     assert big.status_code == 413 and big.json()["code"] == "oversized"
-    for body in ("{", '{"label": 5}', '{"label": "a", "admin": true}', '{"label": "<script>"}'):
+    for body in ("{", '{"label": 5}', '{"label": "a", "admin": true}', '{"label": "<script>"}',
+                 '{"label": "a", "label": "b"}', "[" * 10_000):
         response = client.post("/api/participants", content=body,
                                headers={**headers, "content-type": "application/json"})
         assert response.status_code == 422 and response.json()["code"] == "malformed", body
