@@ -106,18 +106,19 @@ def checked_origins(origins: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def announce(study, host: str, port: int, public: tuple[str, ...]) -> None:
-    """The study, its console address(es) and the experimenter token; a warning on stderr when the
-    study is reachable from other computers."""
+    """The study, its console address(es) (one login token: the link works once, at any of them)
+    and the experimenter token (for scripts); a warning on stderr when the study is reachable from
+    other computers."""
     from trustroute.harness.live.guard import is_loopback, shown_host, usable_addresses
 
-    token = study.experimenter_token
+    login = study.login_token
     click.echo(f"live study {study.config.name}: {study.study_dir}")
     if not is_loopback(host):
         click.echo(f"warning: --host {host} serves this study to every computer that reaches this one's "
                    f"network at port {port}; use it on a lab network or behind an HTTPS proxy "
                    "(--secure-cookies, --public-origin)", err=True)
     for address in usable_addresses(host):
-        click.echo(f"console: http://{shown_host(address)}:{port}/login?token={token}")
+        click.echo(f"console: http://{shown_host(address)}:{port}/login?token={login}")
     for origin in public:
-        click.echo(f"console: {origin.rstrip('/')}/login?token={token}")
-    click.echo(f"experimenter token: {token}")
+        click.echo(f"console: {origin.rstrip('/')}/login?token={login}")
+    click.echo(f"experimenter token: {study.experimenter_token}")

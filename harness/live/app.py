@@ -3,7 +3,9 @@
 Every route checks who is asking (harness/live/auth.py) before it reads anything, and every
 state-changing request and websocket handshake its Origin (harness/live/guard.py):
 
-    GET  /login?token=T                experimenter: sets the HttpOnly cookie, then to /console
+    GET  /login?token=T                the console link: T (one-time) is exchanged for a fresh
+                                       session token in the HttpOnly cookie, then to /console
+    POST /api/login-link               experimenter: a new one-time console link
     GET  /p/{token}                    a participant's link: a page that claims the token (below)
     POST /api/claim {"token": T}       the link's page: T is replaced by a fresh token in the
                                        cookie (the link in the browser's history is spent)
@@ -222,9 +224,19 @@ async def malformed(request: Request, exc: Exception) -> JSONResponse:
 
 @router.get("/login")
 def login(request: Request, token: str = "") -> RedirectResponse:
-    if not study_of(request).credentials.is_experimenter(token[:200] or None):
-        raise refused(403, "forbidden", "the experimenter's token is needed")
-    return cookie_redirect(request, "/console", EXPERIMENTER_COOKIE, token)
+    """The console link: its one-time token is exchanged for a fresh session token, which only the
+    cookie holds (the link left in the browser's history, or a proxy's log, is spent)."""
+    session = study_of(request).login(token[:200] or None)
+    if session is None:
+        raise refused(403, "forbidden", "this login link is spent or unknown; ask the server for a new one "
+                                        "(POST /api/login-link with the experimenter token)")
+    return cookie_redirect(request, "/console", EXPERIMENTER_COOKIE, session)
+
+
+@router.post("/api/login-link", dependencies=[Depends(experimenter)])
+def login_link(request: Request) -> dict:
+    """A new one-time console link (the experimenter token never goes into an address)."""
+    return {"link": f"/login?token={study_of(request).new_login_link()}"}
 
 
 @router.get("/p/{token}")

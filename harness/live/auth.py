@@ -6,6 +6,10 @@ participant's link survives a restart) and compares digests with `secrets.compar
 arrives in an HttpOnly, SameSite=Strict cookie set by the link a person opens, or (scripts, the
 scripted participant) in an `Authorization: Bearer` header. A participant token names exactly one
 participant: the session it acts on is the one it names, never one chosen by the request.
+
+The experimenter has three kinds: the experimenter token (printed at start, for scripts: Bearer
+only, never in an address), one-time login tokens (the console link's: the first use spends it,
+`spend_login`) and the session tokens a login puts in the browser's cookie.
 """
 
 from __future__ import annotations
@@ -41,13 +45,39 @@ def presented_token(headers: Mapping[str, str], cookies: Mapping[str, str], cook
 
 @dataclass
 class Credentials:
-    """The experimenter's token digest and each participant's (participant index -> digest)."""
+    """The experimenter's token digest, their open console sessions' and their unspent login
+    link's; each participant's (participant index -> digest)."""
 
     experimenter_digest: str
     participants: dict[int, str] = field(default_factory=dict)
+    consoles: list[str] = field(default_factory=list)
+    login_digest: str | None = None
 
     def is_experimenter(self, token: str | None) -> bool:
-        return token is not None and secrets.compare_digest(token_digest(token), self.experimenter_digest)
+        """The experimenter token or a console session's (every digest compared: no early exit)."""
+        if token is None:
+            return False
+        digest = token_digest(token)
+        known = (self.experimenter_digest, *self.consoles)
+        return any([secrets.compare_digest(digest, each) for each in known])
+
+    def new_login(self) -> str:
+        """A one-time login token (returned once); it replaces an unspent one."""
+        token = new_token()
+        self.login_digest = token_digest(token)
+        return token
+
+    def spend_login(self, token: str | None) -> str | None:
+        """A fresh console session token for the unspent login token `token` (which is spent), or
+        None for any other token. (The caller serializes calls: a link is spent once.)"""
+        if token is None or self.login_digest is None:
+            return None
+        if not secrets.compare_digest(token_digest(token), self.login_digest):
+            return None
+        self.login_digest = None
+        session = new_token()
+        self.consoles.append(token_digest(session))
+        return session
 
     def participant_of(self, token: str | None) -> int | None:
         """The participant the token names, or None. Every digest is compared (no early exit)."""

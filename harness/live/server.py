@@ -94,6 +94,7 @@ class LiveStudy:
         self.tasks = plan_episodes(config)
         self.credentials: Credentials
         self.credentials, self.experimenter_token = experimenter_credentials()
+        self.login_token = self.credentials.new_login()   # the console link printed at start
         self.sessions: dict[int, Session] = {}
         self.done: set[str] = set()
         # The study's lock guards the registry, the journal and the dataset. Lock order: a
@@ -215,6 +216,17 @@ class LiveStudy:
                 out.write(json.dumps({"utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                                       "participant": participant, "event": reason}) + "\n")
             return token
+
+    def login(self, token: str | None) -> str | None:
+        """The console session token a login link's `token` is exchanged for (the link spent), or
+        None when it is no unspent login token."""
+        with self.lock:
+            return self.credentials.spend_login(token)
+
+    def new_login_link(self) -> str:
+        """A fresh one-time login token (an unspent earlier one no longer logs in)."""
+        with self.lock:
+            return self.credentials.new_login()
 
     def withdraw(self, participant: int, reason: str = "") -> dict:
         """The experimenter withdraws `participant` (harness/live/withdraw.py): their episode

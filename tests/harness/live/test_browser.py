@@ -50,9 +50,13 @@ PASS_WAIT = 20.0   # wall seconds a pull-out may wait for the way past the obsta
 
 
 def create_participant(browser, address: str, token: str) -> str:
-    """The experimenter's console: log in with the token, create a participant, read its link."""
+    """The experimenter's console: log in with a console link made with the experimenter token,
+    create a participant, read its link."""
+    import httpx
+
+    made = httpx.post(f"http://{address}/api/login-link", headers={"Authorization": f"Bearer {token}"})
     console = browser.new_context().new_page()
-    console.goto(f"http://{address}/login?token={token}")
+    console.goto(f"http://{address}{made.json()['link']}")
     assert console.url.endswith("/console")   # the token left the address bar
     console.fill("#label", "browser")
     console.click("#create")

@@ -81,16 +81,39 @@ def test_links_set_httponly_cookies_that_authenticate_and_spend_the_link(client,
     assert client.get("/api/me", headers=bearer(token)).status_code == 403
     log = (live_study.study_dir / "live" / "tokens.jsonl").read_text().splitlines()
     assert [json.loads(line)["participant"] for line in log] == [0]
-    login = client.get(f"/login?token={live_study.experimenter_token}", follow_redirects=False)
+    login = client.get(f"/login?token={live_study.login_token}", follow_redirects=False)
     assert login.status_code == 303 and "HttpOnly" in login.headers["set-cookie"]
     assert client.get("/api/participants").status_code == 200
+
+
+def test_the_console_link_works_once_and_its_cookie_holds_a_fresh_token(client, live_study):
+    """Like a participant's link, the console link's token is exchanged for a fresh one that only
+    the cookie holds: the link in the browser's history (or a proxy's log) is spent. The
+    experimenter token, for scripts, opens no console by address; with it a new link is made."""
+    printed, experimenter = live_study.login_token, live_study.experimenter_token
+    login = client.get(f"/login?token={printed}", follow_redirects=False)
+    assert login.status_code == 303 and login.headers["location"] == "/console"
+    cookie = login.headers["set-cookie"]
+    assert printed not in cookie and experimenter not in cookie and "HttpOnly" in cookie
+    assert client.get("/console").status_code == 200   # the cookie's fresh token
+    assert client.get(f"/login?token={printed}", follow_redirects=False).status_code == 403   # spent
+    assert client.get(f"/login?token={experimenter}", follow_redirects=False).status_code == 403
+    participant = create(client, live_study)
+    assert client.post("/api/login-link", headers=bearer(participant)).status_code == 403
+    link = client.post("/api/login-link", headers=bearer(experimenter)).json()["link"]
+    client.cookies.clear()
+    assert client.get("/console").status_code == 401
+    assert client.get(link, follow_redirects=False).status_code == 303
+    assert client.get("/api/participants").status_code == 200
+    assert client.get(link, follow_redirects=False).status_code == 403
+    assert client.get("/api/participants", headers=bearer(experimenter)).status_code == 200   # scripts
 
 
 def test_secure_cookies_for_studies_served_over_https(tmp_path):
     study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions(secure_cookies=True)).open()
     try:
         with TestClient(live_app(study)) as client:
-            response = client.get(f"/login?token={study.experimenter_token}", follow_redirects=False)
+            response = client.get(f"/login?token={study.login_token}", follow_redirects=False)
             assert "secure" in response.headers["set-cookie"].lower()
     finally:
         study.close()
