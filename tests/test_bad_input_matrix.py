@@ -519,6 +519,8 @@ OPTION_CASES = [
     ("plan_preregistration_is_the_config", options("plan", "{folder}/study.toml", "--participants", "2",
                                                    "--simulations", "10", "--out", "{folder}/plan",
                                                    "--preregistration", "{folder}/study.toml")),
+    ("plan_participants_over_a_study", options("plan", "{folder}/study.toml", "--participants",
+                                               "99999999999")),
 ]
 
 

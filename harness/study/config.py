@@ -318,6 +318,7 @@ TABLES: tuple[str, ...] = keys(FIELDS)
 _ENTRIES = ListOf(item=Text(), min_items=1, distinct=True)
 _FILE = Text()
 MAX_BACKGROUND_VEHICLES = 200  # what the town's roads hold
+MAX_PARTICIPANTS = 100_000  # of a study, and of every sample size `trustroute plan` simulates
 
 
 def _file_path(seen: Seen) -> str:
@@ -340,7 +341,7 @@ FILE_FIX: dict[FileKey | Literal["routes"], str] = {
 }
 STUDY_FIELDS = field_table(
     StudyValues,
-    Field(key="participants", kind=Integer(minimum=1, maximum=100_000), required=True,
+    Field(key="participants", kind=Integer(minimum=1, maximum=MAX_PARTICIPANTS), required=True,
           fix="write the number of participants, e.g. participants = 21",
           missing_fix="add participants = 21"),
     Field(key="seed", kind=Integer(minimum=0, maximum=2**63 - 1), required=True,

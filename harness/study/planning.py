@@ -23,7 +23,7 @@ import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.model_engine import simulate_batch
-from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.config import MAX_PARTICIPANTS, StudyConfig
 from trustroute.harness.study.context import StudyContext
 from trustroute.harness.study.latin_square import williams_rows
 from trustroute.participants.driver_model import DriverModel
@@ -81,6 +81,9 @@ def participant_sizes(spec: str, cells: int) -> list[int]:
                          "pass e.g. 24, 8:60 or 8:60:4 (from:to:step, participants >= 1)")
     low, high = numbers[0], numbers[1] if len(numbers) > 1 else numbers[0]
     step = numbers[2] if len(numbers) > 2 else max(1, len(williams_rows(cells)))
+    if high > MAX_PARTICIPANTS:
+        raise InputError("--participants", spec, "more participants than a study can have (at most "
+                         f"{MAX_PARTICIPANTS})", f"pass sizes of at most {MAX_PARTICIPANTS} participants")
     if high < low:
         raise InputError("--participants", spec, f"the range ends ({high}) before it starts ({low})",
                          "pass from:to with from <= to, e.g. 8:60:4")

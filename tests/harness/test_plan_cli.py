@@ -28,7 +28,7 @@ def test_sizes_are_rounded_to_the_williams_square():
     assert planned_participants(7, 3) == 12  # 3 cells: the square and its mirror, 6 rows
     assert participant_sizes("8:16:4", 4) == [8, 12, 16]
     assert participant_sizes("5:9", 4) == [8, 12]
-    for bad in ("x", "8:4", "0:8", "1:2:3:4"):
+    for bad in ("x", "8:4", "0:8", "1:2:3:4", "99999999999", "8:100001"):
         with pytest.raises(InputError):
             participant_sizes(bad, 4)
 
