@@ -38,6 +38,7 @@ from trustroute.analysis.fitting.forward_backward import (
     initial_posterior,
 )
 from trustroute.analysis.study_directory import load_study, study_inputs
+from trustroute.core.dataset import ROADS_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
 from trustroute.participants.driver_model import (
@@ -57,8 +58,10 @@ EM_TOLERANCE = 1e-7  # stop when the mean log-likelihood per road improves less 
 TAKEOVER_PRIOR_VISITS = 2.0
 
 
-def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observations:
-    """The observable part of a roads table (incident, takeover, performance, reported trust)."""
+def observations_from_roads(roads: pd.DataFrame, model: DriverModel,
+                            source: str = ROADS_FILE) -> Observations:
+    """The observable part of a roads table (incident, takeover, performance, reported trust);
+    `source`, the table's file, is named in errors."""
     roads = roads.sort_values(["episode_id", "index"], kind="stable")
     ids, starts, lengths = np.unique(roads["episode_id"].to_numpy(), return_index=True, return_counts=True)
     n, width = ids.size, int(lengths.max()) if ids.size else 1
@@ -68,7 +71,7 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observat
     unknown = set(roads["incident"].unique()) - set(incident_of)
     if unknown:
         raise InputError(
-            "roads.parquet",
+            source,
             "incident",
             f"incident {sorted(unknown)[0]!r} is not in the driver model",
             "fit with a driver model covering the town's incidents",
@@ -96,6 +99,7 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel) -> Observat
         report=report,
         mask=present[:, 1:],
         episode_ids=tuple(str(e) for e in ids),
+        source=source,
     )
 
 
@@ -318,7 +322,7 @@ def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
     """Exact reports on every road: count transitions r_{t-1} -> r_t and takeovers at r_{t-1}."""
     if ((obs.report[:, 1:] < 0) & obs.mask).any():
         raise InputError(
-            "roads.parquet",
+            obs.source,
             "reported_trust",
             "some roads carry no trust report",
             "fit with --method em (reports every N roads or noisy reports)",
@@ -364,12 +368,12 @@ def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
 
 def fit_roads(
     roads: pd.DataFrame, template: DriverModel, method: str = "em", iterations: int = 200,
-    progress: bool = False,
+    progress: bool = False, source: str = ROADS_FILE,
 ) -> FitResult:
-    obs = observations_from_roads(roads, template)
+    obs = observations_from_roads(roads, template, source)
     if obs.steps == 0:
         raise InputError(
-            "roads.parquet", "", "no roads driven in the logs", "run a study with episodes first"
+            obs.source, "", "no roads driven in the logs", "run a study with episodes first"
         )
     if method == "counts":
         return fit_counts(obs, template)
@@ -390,7 +394,7 @@ def fit_study(
     if method == "auto":
         accuracy = (config.get("population") or {}).get("report_accuracy", DEFAULT_REPORT_ACCURACY)
         method = "counts" if accuracy == 1 and config.get("report_every", 1) == 1 else "em"
-    result = fit_roads(roads, template, method, iterations, progress)
+    result = fit_roads(roads, template, method, iterations, progress, str(Path(study_dir) / ROADS_FILE))
     result.source = str(study_dir)
     return result
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.core.dataset import ROADS_FILE
 from trustroute.participants.driver_model import report_matrix
 
 PAIRWISE_FROM = 8  # numpy's sums of this many terms or more along a contiguous axis are pairwise
@@ -32,6 +33,7 @@ class Observations:
     report: np.ndarray  # int [n, S+1] trust index reported after step t (column 0: at the start), -1 none
     mask: np.ndarray  # bool [n, S] step exists
     episode_ids: tuple[str, ...] = ()  # the episode of each row, in row order (sorted ids)
+    source: str = ROADS_FILE  # the roads table they were read from, named in errors
 
     @property
     def episodes(self) -> int:

@@ -48,6 +48,7 @@ from trustroute.analysis.fitting.driver_model import (
 )
 from trustroute.analysis.fitting.forward_backward import Forward, backward, forward
 from trustroute.analysis.study_directory import load_study, study_inputs
+from trustroute.core.dataset import EPISODES_FILE, ROADS_FILE
 from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_population import DriverPopulation, DriverType
@@ -166,8 +167,9 @@ def participant_index(obs: Observations, episodes: pd.DataFrame) -> tuple[np.nda
     of_episode = dict(zip(episodes["episode_id"].astype(str), episodes["participant"], strict=True))
     missing = [e for e in obs.episode_ids if e not in of_episode]
     if missing:
-        raise InputError("episodes.parquet", "participant", f"episode {missing[0]!r} of the roads has no "
-                         "participant", "rebuild the study's dataset")
+        raise InputError(str(Path(obs.source).with_name(EPISODES_FILE)), "participant",
+                         f"episode {missing[0]!r} of the roads has no participant",
+                         "rebuild the study's dataset")
     ids = sorted({of_episode[e] for e in obs.episode_ids})
     row_of = {p: i for i, p in enumerate(ids)}
     return np.array([row_of[of_episode[e]] for e in obs.episode_ids], dtype=np.int64), ids
@@ -469,9 +471,9 @@ def study_observations(study_dir) -> tuple[ParticipantObservations, StudyLogs]:
     manifest, episodes, roads = load_study(Path(study_dir))
     _, template, _ = study_inputs(manifest)
     logs = StudyLogs(roads, episodes, template)
-    obs = observations_from_roads(roads, template)
+    obs = observations_from_roads(roads, template, str(Path(study_dir) / ROADS_FILE))
     if obs.steps == 0:
-        raise InputError("roads.parquet", "", "no roads driven in the logs",
+        raise InputError(obs.source, "", "no roads driven in the logs",
                          "run a study with episodes first")
     owner, participants = participant_index(obs, episodes)
     return ParticipantObservations(obs, owner, participants, template), logs

@@ -19,8 +19,9 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
+from tests.study_tables import set_values, study_copy
 from trustroute.analysis.fitting.driver_model import fit_roads, observations_from_roads, starting_parameters
-from trustroute.core.dataset import frame_from_table
+from trustroute.core.dataset import ROADS_FILE, frame_from_table
 from trustroute.harness.cli import main
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.model_engine import run_model_episode
@@ -107,6 +108,23 @@ def test_counts_refuse_missing_reports(town, driver):
 
     with pytest.raises(InputError, match="no trust report"):
         fit_roads(roads, driver, "counts")
+
+
+def test_fit_errors_name_the_study_s_roads_file(model_study, tmp_path):
+    """An error about the logs names the roads table of the study fitted, directory and all."""
+    from trustroute.analysis.fitting.driver_model import fit_study
+    from trustroute.core.errors import InputError
+
+    roads_file = study_copy(model_study, tmp_path / "unreported", ROADS_FILE,
+                            set_values("reported_trust", None, [2])) / ROADS_FILE
+    with pytest.raises(InputError, match="no trust report") as info:
+        fit_study(roads_file.parent, method="counts")
+    assert info.value.source == str(roads_file)
+    roads_file = study_copy(model_study, tmp_path / "meteor", ROADS_FILE,
+                            set_values("incident", "meteor", [2])) / ROADS_FILE
+    with pytest.raises(InputError, match="meteor") as info:
+        fit_study(roads_file.parent)
+    assert info.value.source == str(roads_file)
 
 
 @pytest.mark.slow
