@@ -31,6 +31,7 @@ import importlib.util
 import shutil
 import subprocess
 import tempfile
+import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from pathlib import Path
 
@@ -40,6 +41,7 @@ from trustroute.core.cache import TOWNS as TOWNS_CACHE
 from trustroute.core.cache import cache_dir
 from trustroute.core.errors import InputError
 from trustroute.core.packaged import PackagedKind
+from trustroute.core.validation import read_input_bytes
 from trustroute.networks.osm_convert import GENERATED_HEADER
 from trustroute.networks.road_geometry import file_sha256
 from trustroute.networks.sumo_net import find_binary
@@ -189,3 +191,19 @@ def csomor_town_path() -> Path:
 # Route files of background traffic by name: the city's demand (networks/data ships none).
 ROUTES = PackagedKind("route file", Path(__file__).parent / "data", ".rou.xml",
                       built={CITY: city_routes_path})
+ROUTE_FILE_BYTES = 1 << 30  # a city's demand of a day is tens of MB
+ROUTE_FILE_FIX = "pass a .rou.xml / .trips.xml (gzip allowed) written for this net"
+
+
+def read_route_file(path: str | Path) -> ET.ElementTree:
+    """A SUMO route file (gzipped when its name ends in .gz) parsed as XML, through the guarded
+    reader; InputError naming it when it cannot be read or parsed. The one reader of route files:
+    the study config's check, `trustroute run --routes` and the episodes' background traffic
+    (harness/simulation/background.py) all parse them here."""
+    data = read_input_bytes(path, "SUMO route file", ROUTE_FILE_BYTES, fix=ROUTE_FILE_FIX)
+    try:
+        if str(path).endswith(".gz"):
+            data = gzip.decompress(data)
+        return ET.ElementTree(ET.fromstring(data))
+    except (OSError, EOFError, ET.ParseError) as exc:
+        raise InputError(str(path), "", f"not a readable SUMO route file ({exc})", ROUTE_FILE_FIX) from None

@@ -316,6 +316,11 @@ def _study_with_bad_town(folder: Path) -> Path:
     return study_with("seed = 1", 'seed = 1\ntown = "town.json"')(folder)
 
 
+def _study_with_garbage_routes(folder: Path) -> Path:
+    (folder / "garbage.rou.xml").write_bytes(bytes(range(256)) * 8)
+    return study_with('engine = "model"', 'engine = "sumo"\nroutes = ["garbage.rou.xml"]')(folder)
+
+
 STUDY_CASES = [
     ("non_utf8_byte", text("study.toml", STUDY_TEXT.encode().replace(b"seed", b"se\xc3\x28d", 1))),
     ("participants_2_pow_63_minus_1", study_with("participants = 2", "participants = 9223372036854775807")),
@@ -338,6 +343,7 @@ STUDY_CASES = [
     ("bad_spec_name_inside", _study_with_bad_spec),
     ("name_with_parent_dirs", study_with("seed = 1", 'seed = 1\nname = "../../escaped"')),
     ("bad_town_inside", _study_with_bad_town),
+    ("routes_of_random_bytes", _study_with_garbage_routes),
 ]
 
 # -- policy file ----------------------------------------------------------------------------------------

@@ -31,6 +31,7 @@ import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.sumo_start import Sumo
+from trustroute.networks.cities import read_route_file
 
 TYPE_ID = "trustroute_background"
 PREFIX = "bg"
@@ -53,18 +54,7 @@ def _seconds(value: str | None) -> float | None:
 def shifted_routes(files: tuple[str, ...], folder: Path) -> tuple[str, ...]:
     """The route files with every numeric departure moved by one offset, so the earliest is 0 s
     (files without a departure, such as vehicle types, are passed through unchanged)."""
-    import gzip
-    import xml.etree.ElementTree as ET
-
-    trees = []
-    for name in files:
-        opener = gzip.open if name.endswith(".gz") else open
-        try:
-            with opener(name, "rb") as handle:
-                trees.append(ET.parse(handle))
-        except (OSError, ET.ParseError) as exc:
-            raise InputError(name, "", f"not a readable SUMO route file ({exc})",
-                             "pass a .rou.xml / .trips.xml (gzip allowed) written for this net") from None
+    trees = [read_route_file(name) for name in files]
     times = [t for tree in trees for tag, key in TIMED[:5] for element in tree.iter(tag)
              if (t := _seconds(element.get(key))) is not None]
     offset = min(times, default=0.0)

@@ -64,7 +64,7 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import SPECS, PackagedKind
 from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
-from trustroute.networks.cities import ROUTES
+from trustroute.networks.cities import ROUTES, read_route_file
 from trustroute.networks.town import TOWNS
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER_MODELS
 from trustroute.participants.driver_population import POPULATIONS, load_driver_population
@@ -449,6 +449,20 @@ def _optional_file(study: StudyValues, key: FileKey, what: str, base: Path, sour
     return str(_resolve_path(value, base, source, f"study.{key}", what, FILE_FIX[key], packaged))
 
 
+def _route_files(values: Sequence[str], base: Path, source: str) -> tuple[str, ...]:
+    """The background route files, resolved and each parsed once (networks/cities.py
+    `read_route_file`, as the episodes read them): a file SUMO cannot load is refused before any
+    study directory is made, not in every episode."""
+    paths = tuple(str(_resolve_path(value, base, source, "study.routes", "SUMO route file",
+                                    FILE_FIX["routes"], _routes())) for value in values)
+    for path in paths:
+        try:
+            read_route_file(path)
+        except InputError as exc:
+            raise InputError(source, "study.routes", f"{path}: {exc.problem}", FILE_FIX["routes"]) from None
+    return paths
+
+
 def _directory(value: str | None, base: Path) -> str | None:
     return None if value is None else str((base / value).resolve())
 
@@ -533,8 +547,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
                           base),
         policy_cache=_directory(study["policy_cache"], base),
         background_vehicles=study["background_vehicles"],
-        routes=tuple(str(_resolve_path(value, base, source, "study.routes", "SUMO route file",
-                                       FILE_FIX["routes"], _routes())) for value in study["routes"]),
+        routes=_route_files(study["routes"], base, source),
         record=tuple(study["record"]),
         population=_population(tables["population"], source),
         robust_population=_robust_population(study, conditions, base, source),

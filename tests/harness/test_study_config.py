@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gzip
 import os
 from pathlib import Path
 
@@ -144,6 +145,24 @@ def test_malformed_config_one_line_exit_2(kind, tmp_path, monkeypatch, capsys):
     assert exit_info.value.code == 2
     assert err.count("\n") == 1 and err.startswith("error: ") and "fix:" in err
     assert "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_route_file_sumo_cannot_read_is_refused_with_the_config(tmp_path, monkeypatch, capsys):
+    """Each route file is parsed once as the config is read (a gzipped one too): one that is not
+    XML is one line naming it and `study.routes`, before any study directory is made."""
+    monkeypatch.chdir(REPO)
+    (tmp_path / "garbage.rou.xml").write_bytes(bytes(range(256)) * 8)
+    (tmp_path / "types.rou.xml.gz").write_bytes(gzip.compress(b'<routes><vType id="car"/></routes>'))
+    path = _write(tmp_path, MINIMAL + 'routes = ["types.rou.xml.gz", "garbage.rou.xml"]\n')
+    with pytest.raises(InputError) as info:
+        load_study_config(path)
+    assert (info.value.source, info.value.place) == (str(path), "study.routes")
+    assert str(tmp_path / "garbage.rou.xml") in info.value.problem
+    assert load_study_config(_write(tmp_path, MINIMAL + 'routes = ["types.rou.xml.gz"]\n', "ok.toml")).routes
+    with pytest.raises(SystemExit) as exit_info:
+        main(["study", str(path), "--out", str(tmp_path / "out")])
+    assert exit_info.value.code == 2 and "study.routes" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
 
 

@@ -12,8 +12,7 @@ import numpy as np
 from trustroute.app.inputs import driver_of, town_of
 from trustroute.app.nets import net_for
 from trustroute.core.errors import InputError
-from trustroute.core.validation import read_input_bytes
-from trustroute.networks.cities import ROUTES
+from trustroute.networks.cities import ROUTES, read_route_file
 from trustroute.networks.real_net import is_imported
 from trustroute.networks.road_lookup import RoadRow, road_rows, street_names
 from trustroute.networks.sumo_net import NetBuild, build_net, net_counts
@@ -89,9 +88,11 @@ def town_roads(town_path: str, near: tuple[float, float] | None, street: str | N
 
 
 def route_file(path: str) -> str:
-    """A background route file (a path, or a packaged name: `city`, the city's own demand), read once
-    to fail early with one line (absolute: SUMO resolves it)."""
+    """A background route file (a path, or a packaged name: `city`, the city's own demand), read and
+    parsed once to fail early with one line (absolute: SUMO resolves it)."""
     path = str(ROUTES.resolve(path))
-    read_input_bytes(path, "SUMO route file", max_bytes=1 << 30, fix="pass an existing .rou.xml file or "
-                     f"a packaged route name ({', '.join(ROUTES.names())})")
+    if not Path(path).exists():
+        raise InputError(path, "", "no such SUMO route file", "pass an existing .rou.xml file or a "
+                         f"packaged route name ({', '.join(ROUTES.names())})")
+    read_route_file(path)
     return str(Path(path).resolve())
