@@ -5,7 +5,8 @@ One CSV per (driver, trial, condition) has one row per CARLA tick: the displayed
 autopilot was on, and the belief the AV logged. This module
 
 - names every file (driver, trial, if_baseline) and classifies it: study episode, warm-up
-  (trial 3), pilot (driver 0 / pilot_study), or the authors' sample copies;
+  (trial 3), pilot (driver 0 / pilot_study), or the authors' sample copies, and reads it with
+  every cell checked (analysis/carla_study/log_file.py);
 - cuts each episode into directed roads the way their simulator did: a road ends at the first
   tick within 15 m of the arrival point of its state (state_location.csv), and the next road is
   the successor state whose arrival point the vehicle reaches next;
@@ -31,6 +32,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from trustroute.analysis.carla_study.log_file import read_log
 from trustroute.analysis.carla_study.log_schema import (
     REAL_EPISODES_FILE,
     REAL_EPISODES_SCHEMA,
@@ -54,7 +56,6 @@ from trustroute.policies.model.trust_pomdp import build_pomdp
 
 # --sync runs CARLA with settings.fixed_delta_seconds = 0.05 (the driver script's game_loop)
 TICK_SECONDS = 0.05
-LOG_COLUMNS = ("trust_level", "location", "if_autopilot", "trust_belief")
 LOG_NAME = re.compile(
     r"trust_level_record_driver_(?P<driver>\d+)_trial_(?P<trial>\d+)_if_baseline_(?P<baseline>[01])"
     r"(?P<tag>.*)\.csv$"
@@ -108,67 +109,6 @@ def classify(path: Path, root: Path) -> LogFile | None:
             "remove the file or rename it to trial_1, trial_2 or trial_3",
         )
     return LogFile(path, relative, driver, trial, baseline, role)
-
-
-def read_log(path: Path, relative: str) -> pd.DataFrame:
-    """The tick table: trust, x, y, carla_road, carla_lane, autopilot, belief [n, 7]."""
-    try:
-        raw = pd.read_csv(path)
-    except (OSError, ValueError, pd.errors.ParserError) as exc:
-        raise InputError(
-            relative, "", f"cannot read the CSV ({exc})", "pass the authors' CSV unchanged"
-        ) from None
-    missing = [c for c in LOG_COLUMNS if c not in raw.columns]
-    if missing:
-        raise InputError(
-            relative,
-            "header",
-            f"missing column(s) {', '.join(missing)}",
-            f"a trust_level_record file has columns {', '.join(LOG_COLUMNS)}",
-        )
-    if raw.empty:
-        raise InputError(relative, "rows", "no ticks", "pass a non-empty log")
-    tick = raw[raw.columns[0]].to_numpy() if raw.columns[0].startswith("Unnamed") else np.arange(len(raw))
-    try:
-        location = raw["location"].str.strip("()").str.split(",", expand=True).astype(float).to_numpy()
-        belief = raw["trust_belief"].str.strip("()").str.split(",", expand=True).astype(float).to_numpy()
-    except (ValueError, AttributeError) as exc:
-        raise InputError(
-            relative,
-            "location/trust_belief",
-            f"not a tuple of numbers ({exc})",
-            'location is "(x, y, road_id, lane_id)", trust_belief a 7-tuple',
-        ) from None
-    if location.shape[1] != 4 or belief.shape[1] != 7:
-        raise InputError(
-            relative,
-            "location/trust_belief",
-            "wrong tuple length",
-            'location is "(x, y, road_id, lane_id)", trust_belief a 7-tuple',
-        )
-    trust = pd.to_numeric(raw["trust_level"], errors="coerce").to_numpy()
-    if np.isnan(trust).any() or ((trust < 1) | (trust > 7)).any():
-        row = int(np.flatnonzero(np.isnan(trust) | (trust < 1) | (trust > 7))[0])
-        raise InputError(
-            relative, f"row {row}", "trust_level is not a level 1..7", "pass the authors' CSV unchanged"
-        )
-    autopilot = raw["if_autopilot"].astype(str).str.strip().map({"True": True, "False": False})
-    if autopilot.isna().any():
-        row = int(np.flatnonzero(autopilot.isna().to_numpy())[0])
-        raise InputError(
-            relative, f"row {row}", "if_autopilot is not True/False", "pass the authors' CSV unchanged"
-        )
-    return pd.DataFrame(
-        {
-            "tick": tick.astype(np.int64),
-            "trust": trust.astype(np.int64),
-            "x": location[:, 0],
-            "y": location[:, 1],
-            "carla_road": location[:, 2].astype(np.int64),
-            "carla_lane": location[:, 3].astype(np.int64),
-            "autopilot": autopilot.to_numpy(dtype=bool),
-        }
-    ).assign(belief=list(belief))
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 
 from trustroute.core.errors import InputError
+from trustroute.core.validation import first_non_belief
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
@@ -122,8 +123,7 @@ def read_node_rows(arrays: dict, context: ReadContext, integers: tuple[str, ...]
     decoded = {name: arrays[name].astype(np.int64) for name in integers}
     check_decisions(context, "", "decision table", decoded["t"], decoded["x"], decoded["q"],
                     decoded["action"], extra(decoded))
-    if (not np.isfinite(beliefs).all() or (beliefs < 0).any() or (beliefs > 1).any()
-            or (np.abs(beliefs.sum(axis=1) - 1) > 1e-6).any()):
+    if first_non_belief(beliefs) is not None:
         raise InputError(where, "beliefs", "beliefs are not probability vectors", RESYNTH)
     return rows, decoded
 

@@ -86,3 +86,21 @@ def test_a_byte_order_mark_is_named_with_its_fix(parse, text):
     assert error.value.place == "line 1 column 1"
     assert error.value.problem == "the study config starts with a UTF-8 byte order mark (BOM)"
     assert error.value.fix == "save the file as UTF-8 without a BOM"
+
+
+def test_beliefs_are_probability_vectors_within_the_tolerance():
+    import numpy as np
+
+    from trustroute.core.validation import BELIEF_TOLERANCE, first_non_belief
+
+    good = np.full((3, 7), 1 / 7)
+    assert first_non_belief(good) is None and first_non_belief(np.zeros((0, 7))) is None
+    near = good.copy()
+    near[1, 0] += BELIEF_TOLERANCE / 2
+    assert first_non_belief(near) is None
+    for value, problem in ((np.nan, "not a finite number"), (np.inf, "not a finite number"),
+                           (-0.1, "outside [0, 1]"), (1 / 7 + 3 * BELIEF_TOLERANCE, "sum to 1.000003")):
+        bad = good.copy()
+        bad[2, 3] = value
+        row, found = first_non_belief(bad)
+        assert row == 2 and problem in found

@@ -348,6 +348,30 @@ def check_keys(data: dict, allowed: tuple[str, ...], source: str, place: Place, 
                          f"use only {', '.join(allowed)} (a misspelt key would be ignored otherwise)")
 
 
+# -- beliefs ----------------------------------------------------------------------------------------
+
+BELIEF_TOLERANCE = 1e-6  # a stored belief's entries sum to 1 within this (rounding of logs and tables)
+
+
+def first_non_belief(rows: np.ndarray) -> tuple[int, str] | None:
+    """(first row, what is wrong) of the rows of `rows` [n, k] that are not probability vectors
+    (finite entries in [0, 1] summing to 1 within BELIEF_TOLERANCE); None when every row is one.
+    The one rule for beliefs read from a file: the dataset's tables, the CARLA logs, policy tables."""
+    rows = np.asarray(rows, dtype=float)
+    finite = np.isfinite(rows).all(axis=1)
+    in_range = finite & ((rows >= 0) & (rows <= 1)).all(axis=1)
+    sums = np.where(np.isfinite(rows), rows, 0.0).sum(axis=1)
+    bad = np.flatnonzero(~(in_range & (np.abs(sums - 1) <= BELIEF_TOLERANCE)))
+    if not bad.size:
+        return None
+    row = int(bad[0])
+    if not finite[row]:
+        return row, "an entry is not a finite number"
+    if not in_range[row]:
+        return row, "an entry lies outside [0, 1]"
+    return row, f"the entries sum to {sums[row]:.9g}, not 1 (tolerance {BELIEF_TOLERANCE:g})"
+
+
 def require_object(data: object, shown: str, fix: str) -> dict:
     """`data` itself when it is a JSON object (a dict); InputError at "top level" otherwise."""
     if not isinstance(data, dict):

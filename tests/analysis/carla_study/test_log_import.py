@@ -249,6 +249,61 @@ def test_location_off_every_road_is_one_line(tmp_path, capsys):
     assert "maps to no road" in err and "row 40" in err
 
 
+def _cell(column: str, value: object, row: int = 40):
+    def edit(frame: pd.DataFrame) -> pd.DataFrame:
+        frame = frame.astype({column: object})
+        frame.iloc[row, frame.columns.get_loc(column)] = value
+        return frame
+
+    return edit
+
+
+def _ticks(change):
+    """An edit of the tick index (the unnamed first column)."""
+    def edit(frame: pd.DataFrame) -> pd.DataFrame:
+        ticks = frame.index.to_numpy().astype(object)
+        change(ticks)
+        frame.index = ticks
+        return frame
+
+    return edit
+
+
+def _set(ticks, row, value):
+    ticks[row] = value
+
+
+def _swap(ticks, row):
+    ticks[row], ticks[row + 1] = ticks[row + 1], ticks[row]
+
+
+MALFORMED_CELLS = {
+    "tick_not_a_number": (_ticks(lambda t: _set(t, 40, "x")), "row 40, column tick", "not a tick index"),
+    "tick_repeated": (_ticks(lambda t: _set(t, 41, t[40])), "row 41, column tick", "does not follow"),
+    "ticks_reversed": (_ticks(lambda t: _swap(t, 40)), "row 41, column tick", "does not follow"),
+    "location_of_two_numbers": (_cell("location", "(67.1, 1.9)"), "row 40, column location", "2 entries"),
+    "location_nan": (_cell("location", "(nan, 1.9, 3, 1)"), "row 40, column location", "not 4 numbers"),
+    "location_inf": (_cell("location", "(inf, 1.9, 3, 1)"), "row 40, column location", "not finite"),
+    "location_fractional_road_id": (_cell("location", "(67.1, 1.9, 3.5, 1)"), "row 40, column location",
+                                    "whole road"),
+    "trust_between_levels": (_cell("trust_level", 4.5), "row 40, column trust_level", "not a level 1..7"),
+    "belief_of_two_levels": (_cell("trust_belief", "(0.5, 0.5)"), "row 40, column trust_belief",
+                             "2 entries, not 7"),
+    "belief_with_negative_entries": (_cell("trust_belief", "(-0.5, 0.5, 0.5, 0.5, 0, 0, 0)"),
+                                     "row 40, column trust_belief", "outside [0, 1]"),
+    "belief_not_summing_to_one": (_cell("trust_belief", "(0.5, 0.5, 0.5, 0, 0, 0, 0)"),
+                                  "row 40, column trust_belief", "sum to 1.5"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(MALFORMED_CELLS))
+def test_a_malformed_cell_is_one_line_naming_its_row_and_column(case, tmp_path, capsys):
+    edit, place, problem = MALFORMED_CELLS[case]
+    err = _one_line_error(capsys, _bad_copy(tmp_path, SAMPLE, edit), tmp_path)
+    assert f"{SAMPLE}: {place}" in err and problem in err, err
+    assert not (tmp_path / "out").exists()
+
+
 def test_not_a_log_folder_is_one_line(tmp_path, capsys):
     (tmp_path / "logs").mkdir()
     err = _one_line_error(capsys, tmp_path / "logs", tmp_path)
