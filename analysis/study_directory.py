@@ -2,8 +2,11 @@
 trustroute.core.dataset), and the town, driver model and specs its config names (the directory's
 own copies, wherever it has been copied).
 
-Every analysis of a study starts here: the study tables, the real-study analysis, and fitting
-driver models to the logs.
+Every analysis of a study starts here: the study tables, the real-study analysis, fitting driver
+models to the logs, and the export. `load_study` reads the tables against the study's inputs: the
+trust levels of its driver model (trustroute.core.dataset checks them with the other values), and
+here what only the inputs know: every road is one of the town's, every incident one of the driver
+model's, every episode's spec one of the study's.
 """
 
 from __future__ import annotations
@@ -12,22 +15,51 @@ from pathlib import Path
 
 import pandas as pd
 
-from trustroute.core.dataset import read_episodes, read_manifest, read_roads
+from trustroute.core.dataset import (
+    EPISODES_FILE,
+    ROADS_FILE,
+    check_allowed,
+    read_episodes,
+    read_manifest,
+    read_roads,
+)
 from trustroute.core.errors import InputError
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.harness.study.context import load_study_inputs
 from trustroute.harness.study.inputs import relocated_config, verify_inputs
+from trustroute.networks.town import Town
+from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.logic.spec import Spec
 
 
 def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     """(manifest, episodes, roads) of a consolidated study, read through trustroute.core.dataset;
     the manifest's config names the study directory's own copies of its inputs (absolute paths
-    where the directory lies, harness/study/inputs.py), checked against their hashes."""
+    where the directory lies, harness/study/inputs.py), checked against their hashes, and the
+    tables are checked against those inputs (module docstring)."""
     study_dir = Path(study_dir)
     manifest = read_manifest(study_dir)
     verify_inputs(manifest, study_dir)
     manifest = {**manifest, "config": relocated_config(manifest.get("config") or {}, study_dir)}
-    return manifest, read_episodes(study_dir), read_roads(study_dir)
+    town, driver, specs = study_inputs(manifest)
+    episodes = read_episodes(study_dir, trust_levels=driver.trust_levels)
+    roads = read_roads(study_dir, trust_levels=driver.trust_levels)
+    check_logged_inputs(study_dir, episodes, roads, (town, driver, specs))
+    return manifest, episodes, roads
+
+
+def check_logged_inputs(study_dir: Path, episodes: pd.DataFrame, roads: pd.DataFrame,
+                        inputs: tuple[Town, DriverModel, dict[str, Spec]]) -> None:
+    """The tables name only what the study's inputs have, or InputError naming the file, column and
+    first row that does not: roads of the town, incidents of the driver model, specs of the study."""
+    town, driver, specs = inputs
+    roads_file, episodes_file = str(Path(study_dir) / ROADS_FILE), str(Path(study_dir) / EPISODES_FILE)
+    check_allowed(episodes["spec"], specs, episodes_file, "spec",
+                  f"one of the study's specs ({', '.join(specs)})")
+    check_allowed(roads["directed_road"], town.states, roads_file, "directed_road",
+                  "a road of the study's town")
+    check_allowed(roads["incident"], driver.incident_types, roads_file, "incident",
+                  f"an incident type of the study's driver model ({', '.join(driver.incident_types)})")
 
 
 def study_inputs(manifest: dict):

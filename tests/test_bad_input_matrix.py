@@ -3,8 +3,9 @@
 Every case must give exit code 2, at most 3 lines on stderr, no traceback, finish within 20 s,
 and write nothing: the folder holding the case (its input files and the command's --out, dot,
 policy-cache or net-cache paths) has exactly the same files before and after. Kinds: town, driver
-model, spec, study config, policy file (JSON + .npz), command-line options and outputs, and
-outputs that are an input of their command (a net, a study).
+model, spec, study config, policy file (JSON + .npz), command-line options and outputs, outputs
+that are an input of their command (a net, a study), and the tables of a finished study (analyze,
+fit, export).
 Runs in-process (tests/cli.py); a SIGALRM turns a hang (a FIFO read, a runaway loop) into a failure.
 """
 
@@ -26,6 +27,8 @@ import pytest
 from tests.cli import run_cli
 from tests.harness.helpers import run_study
 from tests.networks.sumo_nets import WHEEL_NODES, WHEEL_ROADS, build_plain_net
+from tests.study_tables import Edit, duplicate_row, set_values, study_copy
+from trustroute.core.dataset import EPISODES_FILE, ROADS_FILE
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.networks.town import DEFAULT_TOWN_PATH
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
@@ -475,6 +478,34 @@ def _nan_belief(good: Path) -> dict:
     return {"beliefs": beliefs}
 
 
+# -- a finished study's tables ----------------------------------------------------------------------
+
+
+def table_case(file_name: str, edit: Edit) -> Callable[[Path, Path], Path]:
+    """A copy of the finished `model_study` in the case's folder with one table edited."""
+    return lambda study, folder: study_copy(study, folder / "study", file_name, edit)
+
+
+def table_command(*args: str) -> Callable[[Path, Path], list[str]]:
+    return lambda study, folder: [a.replace("{study}", str(study)).replace("{folder}", str(folder))
+                                  for a in args]
+
+
+ANALYZE = table_command("analyze", "{study}", "--json")
+FIT = table_command("fit", "{study}", "--out", "{folder}/fitted.json")
+EXPORT = table_command("export", "{study}", "--out", "{folder}/package")
+TABLE_CASES = [
+    ("road_not_in_the_town", table_case(ROADS_FILE, set_values("directed_road", "ZZ-YY")), ANALYZE),
+    ("incident_not_in_the_driver_model", table_case(ROADS_FILE, set_values("incident", "meteor")), ANALYZE),
+    ("spec_not_in_the_study", table_case(EPISODES_FILE, set_values("spec", "phi9")), ANALYZE),
+    ("reported_trust_99", table_case(ROADS_FILE, set_values("reported_trust", 99, [3])), FIT),
+    ("true_trust_negative", table_case(ROADS_FILE, set_values("trust_after", -3, [3])), EXPORT),
+    ("nan_belief", table_case(ROADS_FILE, set_values("belief_after", [float("nan")] * 7, [3])), ANALYZE),
+    ("duplicated_episode", table_case(EPISODES_FILE, duplicate_row(0)), ANALYZE),
+    ("roads_of_no_episode", table_case(ROADS_FILE, set_values("episode_id", "p00000-phi1-none", [3])),
+     EXPORT),
+]
+
 # -- command-line options and outputs -----------------------------------------------------------------
 
 
@@ -561,6 +592,7 @@ CASES: list[Case] = (
     + [Case("policy", n, make, policy_command) for n, make in POLICY_CASES]
     + [Case("options", n, _option_inputs, command) for n, command in OPTION_CASES]
     + [Case("outputs", n, make, command) for n, make, command in OUTPUT_CASES]
+    + [Case("table", n, make, command) for n, make, command in TABLE_CASES]
 )
 
 
@@ -584,8 +616,8 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(case, tmp_path, capsys,
     monkeypatch.setattr(dfa, "MAX_STATES", 2_000)
     folder = tmp_path / "case"
     folder.mkdir()
-    if case.kind == "policy":
-        good = request.getfixturevalue("good_policy")
+    if case.kind in ("policy", "table"):
+        good = request.getfixturevalue("good_policy" if case.kind == "policy" else "model_study")
         path = case.make(good, folder)
     else:
         path = case.make(folder)

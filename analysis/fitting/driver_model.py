@@ -38,7 +38,7 @@ from trustroute.analysis.fitting.forward_backward import (
     initial_posterior,
 )
 from trustroute.analysis.study_directory import load_study, study_inputs
-from trustroute.core.dataset import ROADS_FILE
+from trustroute.core.dataset import ROADS_FILE, check_allowed
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
 from trustroute.participants.driver_model import (
@@ -62,20 +62,15 @@ def observations_from_roads(roads: pd.DataFrame, model: DriverModel,
                             source: str = ROADS_FILE) -> Observations:
     """The observable part of a roads table (incident, takeover, performance, reported trust);
     `source`, the table's file, is named in errors."""
+    check_allowed(roads["incident"], model.incident_types, source, "incident",
+                  f"an incident type of the driver model ({', '.join(model.incident_types)})",
+                  "fit with a driver model covering the town's incidents")
     roads = roads.sort_values(["episode_id", "index"], kind="stable")
     ids, starts, lengths = np.unique(roads["episode_id"].to_numpy(), return_index=True, return_counts=True)
     n, width = ids.size, int(lengths.max()) if ids.size else 1
     row = np.repeat(np.arange(n), lengths)
     col = np.arange(len(roads)) - np.repeat(starts, lengths)
     incident_of = {name: i for i, name in enumerate(model.incident_types)}
-    unknown = set(roads["incident"].unique()) - set(incident_of)
-    if unknown:
-        raise InputError(
-            source,
-            "incident",
-            f"incident {sorted(unknown)[0]!r} is not in the driver model",
-            "fit with a driver model covering the town's incidents",
-        )
     level_of = np.full(max(model.trust_levels) + 2, -1, dtype=np.int64)
     level_of[list(model.trust_levels)] = np.arange(model.n_trust)
     reported = roads["reported_trust"].to_numpy(dtype=np.int64, na_value=-1)  # -1 here: no report

@@ -18,8 +18,10 @@ def export(study_dir: str, out: str, seed: int) -> None:
     """Package the consolidated study STUDY for sharing (OSF, a journal) in DIR."""
     import numpy as np
 
+    from trustroute.analysis.study_directory import load_study
     from trustroute.harness.study.export import export_study
 
+    load_study(Path(study_dir))   # its tables checked against its inputs before anything is written
     index = export_study(Path(study_dir), Path(out), np.random.default_rng(seed))
     click.echo(f"exported {', '.join(index['tables'])} of {index['participants']} participant(s) to {out} "
                f"({index['files']} files, with codebook.md and SHA256SUMS)")

@@ -23,7 +23,7 @@ import numpy as np
 import pyarrow as pa
 
 from trustroute.core.codebook import codebook
-from trustroute.core.dataset import TABLES, read_manifest, read_table, write_table
+from trustroute.core.dataset import TABLES, read_manifest, read_study_table, write_table
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
 
@@ -39,13 +39,14 @@ def pseudonyms(participants: list[int], rng: np.random.Generator) -> dict[int, i
 
 def participants_of(study_dir: Path) -> list[int]:
     found: set[int] = set()
-    for file_name, schema in TABLES.values():
+    for name, (file_name, schema) in TABLES.items():
         path = Path(study_dir) / file_name
         if path.exists() and "episode_id" in schema.names:
-            episodes = read_table(path, schema, ["episode_id"]).column(0).to_pylist()
+            episodes = read_study_table(study_dir, name, ["episode_id"]).column(0).to_pylist()
             found.update(int(m.group(1)) for e in episodes if e and (m := EPISODE_PARTICIPANT.match(e)))
         if path.exists() and "participant" in schema.names:
-            found.update(int(p) for p in read_table(path, schema, ["participant"]).column(0).to_pylist())
+            numbers = read_study_table(study_dir, name, ["participant"]).column(0).to_pylist()
+            found.update(int(p) for p in numbers)
     return sorted(found)
 
 
@@ -85,10 +86,10 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
     key = pseudonyms(participants_of(study_dir), rng)
     (out / "tables").mkdir(parents=True, exist_ok=True)
     tables = []
-    for name, (file_name, schema) in TABLES.items():
+    for name, (file_name, _) in TABLES.items():
         path = study_dir / file_name
         if path.exists():
-            write_table(pseudonymised(read_table(path, schema), key), out / "tables" / file_name)
+            write_table(pseudonymised(read_study_table(study_dir, name), key), out / "tables" / file_name)
             tables.append(name)
     book = {name: entries for name, entries in codebook().items() if name in tables}
     atomic_write_text(out / "codebook.json", json.dumps(book, indent=1), "codebook")

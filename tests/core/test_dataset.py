@@ -9,6 +9,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+from tests.study_tables import duplicate_row, set_values, study_copy
 from trustroute.core import dataset
 from trustroute.core.errors import InputError
 
@@ -108,3 +109,59 @@ def test_check_table_fast_path_still_finds_nulls_and_casts():
     holed = pa.Table.from_arrays([pa.array([None], pa.string()), *table.columns[1:]], schema=schema)
     with pytest.raises(dataset.SchemaError, match="episode_id"):
         dataset.check_table(holed, schema)
+
+
+NAN = float("nan")
+# (table, edit, column and row named, what the message says); every trust level given is the model's
+IMPOSSIBLE_VALUES = {
+    "nan_belief": (dataset.ROADS_FILE, set_values("belief_after", [NAN] * 7, [3]), "belief_after, row 3",
+                   "not a finite number"),
+    "negative_belief": (dataset.ROADS_FILE, set_values("belief_before", [-0.5, 1.5, 0, 0, 0, 0, 0], [4]),
+                        "belief_before, row 4", "outside [0, 1]"),
+    "belief_not_summing_to_1": (dataset.ROADS_FILE, set_values("belief_after", [0.5] * 7, [2]),
+                                "belief_after, row 2", "sum to 3.5"),
+    "belief_of_two_levels": (dataset.ROADS_FILE, set_values("belief_after", [0.5, 0.5], [6]),
+                             "belief_after, row 6", "a belief of 2 entries, not 7"),
+    "reported_trust_99": (dataset.ROADS_FILE, set_values("reported_trust", 99, [3]), "reported_trust, row 3",
+                          "99 is not a trust level"),
+    "negative_true_trust": (dataset.ROADS_FILE, set_values("trust_before", -3, [1]), "trust_before, row 1",
+                            "-3 is not a trust level"),
+    "duplicated_episode": (dataset.EPISODES_FILE, duplicate_row(1), "episode_id, row 48",
+                           "a second row of episode_id"),
+    "duplicated_road": (dataset.ROADS_FILE, duplicate_row(5), "index, row",
+                        "a second row of episode_id"),
+    "roads_of_no_episode": (dataset.ROADS_FILE, set_values("episode_id", "p00000-phi1-nowhere", [3]),
+                            "episode_id, row 3",
+                            "'p00000-phi1-nowhere' is not an episode of episodes.parquet"),
+}
+LEVELS = tuple(range(1, 8))
+
+
+@pytest.mark.parametrize("case", sorted(IMPOSSIBLE_VALUES))
+def test_impossible_values_are_refused_naming_the_file_column_and_row(case, model_study, tmp_path):
+    """A table of the right schema holding impossible values is one InputError, on every read (trust
+    against the levels of the study's driver model when the reader is given them)."""
+    file_name, edit, place, problem = IMPOSSIBLE_VALUES[case]
+    study = study_copy(model_study, tmp_path / "study", file_name, edit)
+    levels = {"trust_levels": LEVELS} if "trust" in case else {}
+    with pytest.raises(InputError) as info:
+        dataset.read_episodes(study, **levels)
+        dataset.read_roads(study, **levels)
+    assert info.value.source == str(study / file_name) and info.value.place.startswith(place)
+    assert problem in info.value.problem and "rebuild" in info.value.fix
+
+
+def test_kinematics_of_no_episode_are_refused(model_study, tmp_path):
+    study = study_copy(model_study, tmp_path / "study")
+    row = {"episode_id": ["nowhere"], "time": [0.0], "x": [1.0], "y": [2.0], "speed": [0.0],
+           "lane": ["A-B_1"], "mode": ["autopilot"]}
+    dataset.write_table(dataset.table_from_columns(row, dataset.KINEMATICS_SCHEMA),
+                        study / dataset.KINEMATICS_FILE)
+    with pytest.raises(InputError, match="kinematics.parquet: episode_id, row 0: 'nowhere' is not an"):
+        dataset.read_kinematics(study)
+
+
+def test_a_finished_study_has_possible_values(model_study):
+    episodes = dataset.read_episodes(model_study, trust_levels=LEVELS)
+    roads = dataset.read_roads(model_study, trust_levels=LEVELS)
+    assert len(episodes) == 48 and set(roads["episode_id"]) == set(episodes["episode_id"])

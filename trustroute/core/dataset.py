@@ -1,8 +1,9 @@
 """The study dataset, defined once: file names, Arrow schemas of its four tables, manifest keys.
 
 The harness writes through this module (harness/study/parts.py, harness/study/manifest.py,
-`trustroute run --out`) and analysis reads through it (one reader per table, each checking the
-schema). Every column and file is documented in docs/dataset.md; change both together.
+`trustroute run --out`) and analysis reads through it (`read_study_table`, and one reader per
+table on it, each checking the schema and the values). Every column and file is documented in
+docs/dataset.md; change both together.
 
 Missing values are nulls (never -1, "" or a NaN standing for "none"): a report not given, the
 action after the last road, the performance of the start road, sim times of the model engine.
@@ -15,16 +16,19 @@ string dtype with missing values for nulls.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 from types import MappingProxyType
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
-from trustroute.core.validation import read_input_bytes, read_json
+from trustroute.core.validation import first_non_belief, read_input_bytes, read_json
 
 # -- files of a study directory ------------------------------------------------------------------
 STUDY_FILE = "study.json"            # the config hash and config of the study in this directory
@@ -381,6 +385,87 @@ def with_added_columns(table: pa.Table, schema: pa.Schema, added: tuple[str, ...
     return table
 
 
+# -- values ----------------------------------------------------------------------------------------
+# What a study's tables hold beyond their schemas (docs/dataset.md, "Values"), checked on every
+# read, vectorised: a table of the right columns can still hold impossible values.
+REBUILD_FIX = "rerun `trustroute study` on this directory to rebuild it"
+UNIQUE_ROWS: dict[str, tuple[str, ...]] = {"episodes": ("episode_id",), "roads": ("episode_id", "index")}
+BELIEF_COLUMNS: dict[str, tuple[str, ...]] = {"roads": ("belief_before", "belief_after")}
+# Columns of a trust level (null where nullable): checked against the study's driver model.
+TRUST_COLUMNS: dict[str, tuple[str, ...]] = {"episodes": ("final_trust",),
+                                             "roads": ("trust_before", "trust_after", "reported_trust")}
+# Tables whose every row belongs to an episode of episodes.parquet.
+EPISODE_ROWS: tuple[str, ...] = ("roads", "kinematics", "incidents")
+
+
+def check_allowed(values: pd.Series, allowed: Iterable, source: str, column: str, what: str,
+                  fix: str = REBUILD_FIX) -> None:
+    """InputError at the first row of `values` (a table's column, in file order; nulls pass) whose
+    value is not in `allowed`: "`column`, row N: VALUE is not `what`"."""
+    outside = ~(values.isna() | values.isin(list(allowed))).to_numpy(dtype=bool)
+    if outside.any():
+        row = int(np.flatnonzero(outside)[0])
+        value = values.iloc[row]
+        shown = repr(value) if isinstance(value, str) else str(value)
+        raise InputError(source, f"{column}, row {row}", f"{shown} is not {what}", fix)
+
+
+def _check_unique(table: pa.Table, keys: tuple[str, ...], source: str) -> None:
+    repeated = table.select(list(keys)).to_pandas().duplicated().to_numpy(dtype=bool)
+    if repeated.any():
+        row = int(np.flatnonzero(repeated)[0])
+        key = ", ".join(f"{k} {table.column(k)[row].as_py()!r}" for k in keys)
+        raise InputError(source, f"{keys[-1]}, row {row}", f"a second row of {key}", REBUILD_FIX)
+
+
+def _check_beliefs(table: pa.Table, column: str, source: str, width: int | None) -> None:
+    """Every belief of `column` a probability vector of `width` entries (default: the first row's)."""
+    beliefs = table.column(column).combine_chunks()
+    lengths = pc.list_value_length(beliefs).to_numpy(zero_copy_only=False)
+    if not lengths.size:
+        return
+    width = int(lengths[0]) if width is None else width
+    wrong = np.flatnonzero(lengths != width)
+    if wrong.size:
+        row = int(wrong[0])
+        raise InputError(source, f"{column}, row {row}", f"a belief of {lengths[row]} entries, not {width} "
+                         "(one per trust level of the study's driver model)", REBUILD_FIX)
+    values = pc.list_flatten(beliefs).to_numpy(zero_copy_only=False).astype(float)
+    found = first_non_belief(values.reshape(lengths.size, width))
+    if found is not None:
+        raise InputError(source, f"{column}, row {found[0]}", f"not a probability vector: {found[1]}",
+                         REBUILD_FIX)
+
+
+def check_values(table: pa.Table, name: str, source: str,
+                 trust_levels: tuple[int, ...] | None = None) -> None:
+    """The values of the study table `name` (a key of TABLES) read from `source`, or InputError naming
+    the column and first bad row: no two rows of one episode (one road of an episode), beliefs that
+    are probability vectors of one length, and given the study driver model's `trust_levels`, every
+    trust one of them (or null) and beliefs of one entry per level."""
+    if name in UNIQUE_ROWS:
+        _check_unique(table, UNIQUE_ROWS[name], source)
+    width = None if trust_levels is None else len(trust_levels)
+    for column in BELIEF_COLUMNS.get(name, ()):
+        _check_beliefs(table, column, source, width)
+    if trust_levels is None:
+        return
+    levels = ", ".join(str(level) for level in trust_levels)
+    for column in TRUST_COLUMNS.get(name, ()):
+        check_allowed(table.column(column).to_pandas().astype("Int64"), trust_levels, source, column,
+                      f"a trust level of the study's driver model ({levels})")
+
+
+def _check_episode_rows(study_dir: Path, table: pa.Table, source: str) -> None:
+    """Every row's episode id is one of episodes.parquet (when the directory has one: `trustroute
+    run --out` writes one episode's tables without it)."""
+    if not (Path(study_dir) / EPISODES_FILE).exists():
+        return
+    known = read_study_table(study_dir, "episodes", ["episode_id"]).column(0).combine_chunks()
+    ids = table.column("episode_id").to_pandas()
+    check_allowed(ids, known.to_pylist(), source, "episode_id", f"an episode of {EPISODES_FILE}")
+
+
 def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None,
                added: tuple[str, ...] = ()) -> pa.Table:
     """A dataset table file checked against its schema; InputError naming the file when it is
@@ -403,24 +488,39 @@ def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None,
     return table.select(columns) if columns is not None else table
 
 
-def _read(study_dir: Path, name: str, columns: list[str] | None) -> pd.DataFrame:
+def read_study_table(study_dir: Path, name: str, columns: list[str] | None = None,
+                     trust_levels: tuple[int, ...] | None = None) -> pa.Table:
+    """The table `name` (a key of TABLES) of a study directory: the one reader of a study's tables,
+    checking the file against its schema (`read_table`), its values (`check_values`; trust levels
+    given: those of the study's driver model) and that its rows belong to the study's episodes."""
     file_name, schema = TABLES[name]
-    return frame_from_table(read_table(Path(study_dir) / file_name, schema, columns,
-                                       ADDED_COLUMNS.get(name, ())))
+    path = Path(study_dir) / file_name
+    table = read_table(path, schema, None, ADDED_COLUMNS.get(name, ()))
+    check_values(table, name, str(path), trust_levels)
+    if name in EPISODE_ROWS:
+        _check_episode_rows(study_dir, table, str(path))
+    return table.select(columns) if columns is not None else table
 
 
-def read_episodes(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
-    """episodes.parquet of a consolidated study, checked against EPISODES_SCHEMA."""
-    return _read(study_dir, "episodes", columns)
+def _read(study_dir: Path, name: str, columns: list[str] | None,
+          trust_levels: tuple[int, ...] | None = None) -> pd.DataFrame:
+    return frame_from_table(read_study_table(study_dir, name, columns, trust_levels))
 
 
-def read_roads(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
-    """roads.parquet of a consolidated study (or of `trustroute run --out`), checked against ROADS_SCHEMA."""
-    return _read(study_dir, "roads", columns)
+def read_episodes(study_dir: Path, columns: list[str] | None = None,
+                  trust_levels: tuple[int, ...] | None = None) -> pd.DataFrame:
+    """episodes.parquet of a consolidated study, checked (`read_study_table`)."""
+    return _read(study_dir, "episodes", columns, trust_levels)
+
+
+def read_roads(study_dir: Path, columns: list[str] | None = None,
+               trust_levels: tuple[int, ...] | None = None) -> pd.DataFrame:
+    """roads.parquet of a consolidated study (or of `trustroute run --out`), checked (`read_study_table`)."""
+    return _read(study_dir, "roads", columns, trust_levels)
 
 
 def read_kinematics(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
-    """kinematics.parquet (SUMO engine), checked against KINEMATICS_SCHEMA."""
+    """kinematics.parquet (SUMO engine), checked (`read_study_table`)."""
     return _read(study_dir, "kinematics", columns)
 
 

@@ -1,0 +1,36 @@
+"""Reading a study directory against its inputs: tables naming roads, incidents or specs the study's
+inputs lack, or trust outside its driver model's levels, are each one InputError naming the file,
+the place in it and the fix."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.study_tables import set_values, study_copy
+from trustroute.analysis.study_directory import load_study
+from trustroute.core.dataset import EPISODES_FILE, ROADS_FILE
+from trustroute.core.errors import InputError
+
+# (table, edit, column, what the message says)
+UNKNOWN_NAMES = {
+    "road": (ROADS_FILE, set_values("directed_road", "ZZ-YY"), "directed_road", "'ZZ-YY' is not a road of"),
+    "incident": (ROADS_FILE, set_values("incident", "meteor", [3]), "incident",
+                 "'meteor' is not an incident type of the study's driver model (obstacle"),
+    "spec": (EPISODES_FILE, set_values("spec", "phi9", [5]), "spec",
+             "'phi9' is not one of the study's specs"),
+    "reported_trust": (ROADS_FILE, set_values("reported_trust", 99, [3]), "reported_trust",
+                       "99 is not a trust level of the study's driver model (1, 2, 3, 4, 5, 6, 7)"),
+    "final_trust": (EPISODES_FILE, set_values("final_trust", 0, [5]), "final_trust",
+                    "0 is not a trust level"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(UNKNOWN_NAMES))
+def test_a_value_the_study_s_inputs_lack_names_the_table_column_and_row(case, model_study, tmp_path):
+    file_name, edit, column, problem = UNKNOWN_NAMES[case]
+    study = study_copy(model_study, tmp_path / "study", file_name, edit)
+    with pytest.raises(InputError) as info:
+        load_study(study)
+    row = {"road": 0, "incident": 3, "spec": 5, "reported_trust": 3, "final_trust": 5}[case]
+    assert (info.value.source, info.value.place) == (str(study / file_name), f"{column}, row {row}")
+    assert problem in info.value.problem and "rebuild" in info.value.fix
