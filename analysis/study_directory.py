@@ -17,6 +17,7 @@ import pandas as pd
 
 from trustroute.core.dataset import (
     EPISODES_FILE,
+    MANIFEST_FILE,
     ROADS_FILE,
     check_allowed,
     read_episodes,
@@ -26,7 +27,7 @@ from trustroute.core.dataset import (
 from trustroute.core.errors import InputError
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.harness.study.context import load_study_inputs
-from trustroute.harness.study.inputs import relocated_config, verify_inputs
+from trustroute.harness.study.inputs import MANIFEST_FIX, relocated_config, verify_inputs
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
@@ -41,7 +42,7 @@ def load_study(study_dir: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     manifest = read_manifest(study_dir)
     verify_inputs(manifest, study_dir)
     manifest = {**manifest, "config": relocated_config(manifest.get("config") or {}, study_dir)}
-    town, driver, specs = study_inputs(manifest)
+    town, driver, specs = study_inputs(manifest, study_dir)
     episodes = read_episodes(study_dir, trust_levels=driver.trust_levels)
     roads = read_roads(study_dir, trust_levels=driver.trust_levels)
     check_logged_inputs(study_dir, episodes, roads, (town, driver, specs))
@@ -62,20 +63,39 @@ def check_logged_inputs(study_dir: Path, episodes: pd.DataFrame, roads: pd.DataF
                   f"an incident type of the study's driver model ({', '.join(driver.incident_types)})")
 
 
-def study_inputs(manifest: dict):
-    """(town, nominal driver model, {spec name: Spec}) named by the study's config, loaded as the
-    study loaded them (harness/study/context.py, `load_study_inputs`)."""
+def study_inputs(manifest: dict, study_dir: Path):
+    """(town, nominal driver model, {spec name: Spec}) named by the config of the study in
+    `study_dir` (its manifest as `load_study` returns it), loaded as the study loaded them
+    (harness/study/context.py, `load_study_inputs`); an input that cannot be loaded is an
+    InputError naming the manifest and the config key."""
     config = manifest["config"]
-    return load_study_inputs(_recorded_input(config.get("town"), "town", manifest),
-                             _recorded_input(config.get("driver_model"), "driver model", manifest),
-                             [spec_path(p) for p in config["specs"]])
+    shown = str(Path(study_dir) / MANIFEST_FILE)
+    town = _recorded_input(config.get("town"), "town", shown)
+    driver = _recorded_input(config.get("driver_model"), "driver model", shown)
+    specs = [spec_path(p) for p in config["specs"]]
+    keyed = [("config.town", town), ("config.driver_model", driver),
+             *((f"config.specs[{i}]", str(p)) for i, p in enumerate(specs))]
+    try:
+        return load_study_inputs(town, driver, specs)
+    except InputError as exc:
+        key = next((k for k, p in keyed if p is not None and Path(exc.source) == Path(p)), None)
+        if key is None:
+            raise
+        where = f"{exc.place}: " if exc.place else ""
+        raise InputError(shown, key, f"cannot load {exc.source} ({where}{exc.problem})", exc.fix) from None
 
 
-def _recorded_input(path: str | None, what: str, manifest: dict) -> str | None:
-    """A town or driver model path the config records; InputError when it is gone (a study made
-    before its inputs were stored in it, moved away from them): no option of a command can stand in."""
+def _recorded_input(path: str | None, what: str, shown: str) -> str | None:
+    """A town or driver model path the config records (`shown`: the manifest): one of the study's
+    stored copies, or the absolute path of a study made before its inputs were stored; InputError
+    for any other path (never read relative to where the command runs), or when it is gone (no
+    option of a command can stand in)."""
+    key = f"config.{what.replace(' ', '_')}"
+    if path is not None and not Path(path).is_absolute():
+        raise InputError(shown, key, f"the study's {what} {path!r} is neither one of its stored inputs "
+                         "(inputs/...) nor an absolute path", MANIFEST_FIX)
     if path is not None and not Path(path).is_file():
-        raise InputError(str(manifest.get("study")), f"config.{what.replace(' ', '_')}",
+        raise InputError(shown, key,
                          f"the study's {what} {path} is gone, and this study directory holds no copy of "
                          "its inputs (it was made before studies stored them)",
                          f"restore {path}, or analyse the study where it was made")

@@ -251,7 +251,7 @@ def real_study_analysis(study_dir: Path) -> RealStudyAnalysis:
     study_dir = Path(study_dir)
     manifest, episodes, roads = load_study(study_dir)
     episodes, roads = with_real_columns(study_dir, episodes, roads)
-    town, driver, specs = study_inputs(manifest)
+    town, driver, specs = study_inputs(manifest, study_dir)
     ticks = read_real_table(study_dir, "ticks")
     sat = satisfaction_by_source(episodes, roads, specs, town, driver.trust_levels)
     per = (

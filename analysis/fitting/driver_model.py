@@ -384,7 +384,7 @@ def fit_study(
     if iterations < 1:
         raise InputError("--iterations", "", f"must be >= 1, got {iterations}", "pass e.g. --iterations 200")
     manifest, _, roads = load_study(Path(study_dir))
-    _, template, _ = study_inputs(manifest)
+    _, template, _ = study_inputs(manifest, study_dir)
     config = manifest.get("config", {})
     if method == "auto":
         accuracy = (config.get("population") or {}).get("report_accuracy", DEFAULT_REPORT_ACCURACY)

@@ -469,7 +469,7 @@ def mixture_population(fit: MixtureFit, source: str, provenance: str):
 def study_observations(study_dir) -> tuple[ParticipantObservations, StudyLogs]:
     """A study's observations with each episode's participant, and its logs."""
     manifest, episodes, roads = load_study(Path(study_dir))
-    _, template, _ = study_inputs(manifest)
+    _, template, _ = study_inputs(manifest, study_dir)
     logs = StudyLogs(roads, episodes, template)
     obs = observations_from_roads(roads, template, str(Path(study_dir) / ROADS_FILE))
     if obs.steps == 0:

@@ -81,7 +81,7 @@ def check_pilot(study_dir: Path, expected: DriverModel | None = None):
                          "no road carries a trust report, so the trust dynamics cannot be fitted",
                          "plan from a pilot whose drivers report trust (report_every in its config), "
                          "or plan with --driver")
-    _, template, _ = study_inputs(manifest)
+    _, template, _ = study_inputs(manifest, study_dir)
     if expected is not None and (tuple(template.trust_levels) != tuple(expected.trust_levels)
                                  or tuple(template.incident_types) != tuple(expected.incident_types)):
         raise InputError(str(study_dir / MANIFEST_FILE), "config.driver_model",

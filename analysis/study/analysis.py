@@ -136,7 +136,7 @@ def source_satisfaction(study_dir: Path, manifest: dict, episodes: pd.DataFrame,
                         roads: pd.DataFrame) -> pd.DataFrame:
     """Per episode: satisfied_<source> for every belief source the study has ("true" only for
     simulated studies, whose config can rebuild each driver's true model)."""
-    town, driver, specs = study_inputs(manifest)
+    town, driver, specs = study_inputs(manifest, study_dir)
     satisfaction = episodes[["episode_id", "participant", "spec", "condition"]].copy()
     variants = {"filter": (roads, "filter"), "reported": (roads, "reported"),
                 "reference": (refiltered(roads, reference_model(manifest, driver), town), "filter")}

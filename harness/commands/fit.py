@@ -85,7 +85,7 @@ def fit(study_dir: str, options: FitOptions) -> None:
         from trustroute.analysis.study_directory import load_study, study_inputs
 
         manifest, episodes, roads = load_study(Path(study_dir))
-        _, template, _ = study_inputs(manifest)
+        _, template, _ = study_inputs(manifest, Path(study_dir))
         with tqdm(total=bootstrap, desc="bootstrap", disable=quiet or as_json) as bar:
             payload["bootstrap"] = bootstrap_fit(
                 roads,
@@ -108,7 +108,7 @@ def fit(study_dir: str, options: FitOptions) -> None:
         from trustroute.app.runs import aware_vs_free, posterior_check
 
         manifest, _, roads = load_study(Path(study_dir))
-        _, template, _ = study_inputs(manifest)
+        _, template, _ = study_inputs(manifest, Path(study_dir))
         models = {
             "packaged": (template, REPORT_ACCURACY),
             "fitted": (result.model(), float(result.report_accuracy or 1.0)),

@@ -23,9 +23,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from dataclasses import asdict
 from pathlib import Path
 
+from trustroute.core.dataset import MANIFEST_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
 from trustroute.harness.study.config import NAMED_CONDITIONS
@@ -43,6 +45,7 @@ from trustroute.policies.resolve import aware_cache_path, population_cache_path
 
 INPUTS_DIR = "inputs"
 POLICIES_DIR = f"{INPUTS_DIR}/policies"
+MANIFEST_FIX = f"restore {MANIFEST_FILE} from the study directory's original copy"
 
 
 def _sha256(path: Path) -> str:
@@ -149,17 +152,23 @@ def store_inputs(study_dir: Path, context: StudyContext) -> tuple[dict, dict]:
 def relocated_config(config: dict, study_dir: Path) -> dict:
     """The manifest's config with its stored inputs' paths (relative, under inputs/) made absolute
     in `study_dir`; other values, and the absolute paths of a study made before its inputs were
-    stored, stay as they are."""
+    stored, stay as they are. A path under inputs/ that leads out of the directory ("inputs/../..")
+    is an InputError naming the manifest and the key."""
+    shown = str(Path(study_dir) / MANIFEST_FILE)
     study_dir = Path(study_dir).resolve()
 
-    def place(value: object) -> object:
+    def place(key: str, value: object) -> object:
         if isinstance(value, str) and value.startswith(f"{INPUTS_DIR}/"):
-            return str(study_dir / value)
+            path = study_dir / value
+            if not Path(os.path.normpath(path)).is_relative_to(study_dir / INPUTS_DIR):
+                raise InputError(shown, f"config.{key}", f"{value!r} leads out of "
+                                 "the study directory's stored inputs", MANIFEST_FIX)
+            return str(path)
         if isinstance(value, list):
-            return [place(v) for v in value]
+            return [place(key, v) for v in value]
         return value
 
-    return {key: place(value) for key, value in config.items()}
+    return {key: place(key, value) for key, value in config.items()}
 
 
 def verify_inputs(manifest: dict, study_dir: Path) -> None:

@@ -16,7 +16,7 @@ from trustroute.policies.routing.free import baseline_route
 @pytest.mark.slow
 def test_filter_source_reproduces_logged_satisfaction(model_study):
     manifest, episodes, roads = load_study(model_study)
-    town, driver, specs = study_inputs(manifest)
+    town, driver, specs = study_inputs(manifest, model_study)
     result = episode_satisfaction(roads, episodes, specs, town, driver.trust_levels, "filter")
     assert list(result["episode_id"]) == list(episodes["episode_id"])
     assert (result["satisfied"].to_numpy() == episodes["satisfied"].to_numpy()).all()

@@ -1,14 +1,18 @@
 """Reading a study directory against its inputs: tables naming roads, incidents or specs the study's
-inputs lack, or trust outside its driver model's levels, are each one InputError naming the file,
-the place in it and the fix."""
+inputs lack, trust outside its driver model's levels, and a manifest naming its inputs elsewhere
+are each one InputError naming the file, the place in it and the fix."""
 
 from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
 
 import pytest
 
 from tests.study_tables import set_values, study_copy
 from trustroute.analysis.study_directory import load_study
-from trustroute.core.dataset import EPISODES_FILE, ROADS_FILE
+from trustroute.core.dataset import EPISODES_FILE, MANIFEST_FILE, ROADS_FILE
 from trustroute.core.errors import InputError
 
 # (table, edit, column, what the message says)
@@ -34,3 +38,35 @@ def test_a_value_the_study_s_inputs_lack_names_the_table_column_and_row(case, mo
     row = {"road": 0, "incident": 3, "spec": 5, "reported_trust": 3, "final_trust": 5}[case]
     assert (info.value.source, info.value.place) == (str(study / file_name), f"{column}, row {row}")
     assert problem in info.value.problem and "rebuild" in info.value.fix
+
+
+def _with_town(model_study: Path, tmp_path: Path, town: str) -> Path:
+    study = study_copy(model_study, tmp_path / "study")
+    manifest = json.loads((study / MANIFEST_FILE).read_text())
+    manifest["config"]["town"] = town
+    (study / MANIFEST_FILE).write_text(json.dumps(manifest))
+    return study
+
+
+@pytest.mark.parametrize("town", ["../../../../etc/passwd", "inputs/../../../../etc/passwd", "/etc/passwd",
+                                  "town01_carla.json"])
+def test_a_town_the_manifest_names_outside_the_study_is_refused_naming_the_key(town, model_study, tmp_path,
+                                                                                monkeypatch):
+    """Never read relative to where the command runs, never out of the stored inputs; a file that is
+    no town is named by the manifest's key, not only by its own path."""
+    monkeypatch.chdir(tmp_path)
+    # a file of that name where the command runs, not the study's town
+    shutil.copyfile(model_study / MANIFEST_FILE, tmp_path / "town01_carla.json")
+    study = _with_town(model_study, tmp_path, town)
+    with pytest.raises(InputError) as info:
+        load_study(study)
+    assert (info.value.source, info.value.place) == (str(study / MANIFEST_FILE), "config.town")
+    assert town in info.value.problem
+
+
+def test_a_town_file_of_the_user_s_own_by_absolute_path_is_still_read(model_study, tmp_path):
+    recorded = json.loads((model_study / MANIFEST_FILE).read_text())["config"]["town"]
+    own = tmp_path / "my_town.json"
+    shutil.copyfile(model_study / recorded, own)
+    manifest, _, roads = load_study(_with_town(model_study, tmp_path, str(own)))
+    assert manifest["config"]["town"] == str(own) and len(roads)

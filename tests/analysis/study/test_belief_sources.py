@@ -61,7 +61,7 @@ def test_the_default_source_is_neutral_to_every_condition(robust_study, default_
     assert default_belief_source(manifest) == "true"
     analysis = default_analysis
     assert analysis.belief_source == "true" and analysis.source_note == ""
-    town, driver, _ = study_inputs(manifest)
+    town, driver, _ = study_inputs(manifest, robust_study)
     model = reference_model(manifest, driver)
     assert isinstance(model, TypeLiftedModel) and model.n_types == 3
     reference = refiltered(roads, model, town).set_index(["episode_id", "index"])["belief_after"]
@@ -138,7 +138,7 @@ def test_the_sensitivity_table_shows_every_comparison_on_every_source(robust_stu
 @pytest.mark.slow
 def test_true_source_filters_with_each_drivers_type(robust_study):
     manifest, episodes, roads = load_study(robust_study)
-    town, driver, _ = study_inputs(manifest)
+    town, driver, _ = study_inputs(manifest, robust_study)
     population = load_driver_population(EXAMPLE_POPULATION_PATH)
     true = true_roads(robust_study, roads, episodes, driver, town)
     for type_name in episodes["driver_type"].unique():
