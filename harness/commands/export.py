@@ -8,20 +8,26 @@ from pathlib import Path
 
 import click
 
+from trustroute.harness.commands.output import emit, json_option, with_paths
+
 
 @click.command("export")
 @click.argument("study_dir", metavar="STUDY", type=click.Path())
 @click.option("--out", "out", type=click.Path(), required=True, help="The package DIRECTORY (new or empty).")
 @click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=0, show_default=True,
               help="Seed of the pseudonyms' draw (the key is kept in STUDY/export-key.json).")
-def export(study_dir: str, out: str, seed: int) -> None:
+@json_option
+def export(study_dir: str, out: str, seed: int, as_json: bool) -> None:
     """Package the consolidated study STUDY for sharing (OSF, a journal) in DIR."""
     import numpy as np
 
     from trustroute.analysis.study_directory import load_study
-    from trustroute.harness.study.export import export_study
+    from trustroute.harness.study.export import KEY_FILE, export_study
 
     load_study(Path(study_dir))   # its tables checked against its inputs before anything is written
     index = export_study(Path(study_dir), Path(out), np.random.default_rng(seed))
-    click.echo(f"exported {', '.join(index['tables'])} of {index['participants']} participant(s) to {out} "
-               f"({index['files']} files, with codebook.md and SHA256SUMS)")
+    # the package is a folder of many files, listed as the folder; the key stays in the study
+    paths = {"package": Path(out), "export_key": Path(study_dir) / KEY_FILE}
+    line = (f"exported {', '.join(index['tables'])} of {index['participants']} participant(s) to {out} "
+            f"({index['files']} files, with codebook.md and SHA256SUMS)")
+    emit(as_json, with_paths(index, paths), [line])

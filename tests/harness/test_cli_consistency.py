@@ -10,9 +10,10 @@ from tests.cli import run_cli
 
 RESULT_COMMANDS = [("net", "build"), ("spec", "check"), ("model",), ("synth",), ("baseline",),
                    ("evaluate",), ("run",), ("study",), ("analyze",), ("fit",), ("demo",),
-                   ("import", "carla-logs")]
+                   ("import", "carla-logs"), ("export",)]
 OUT_IS = {("synth",): "FILE", ("fit",): "FILE", ("run",): "DIRECTORY", ("study",): "DIRECTORY",
-          ("demo",): "DIRECTORY", ("net", "build"): "DIRECTORY", ("import", "carla-logs"): "DIRECTORY"}
+          ("demo",): "DIRECTORY", ("net", "build"): "DIRECTORY", ("import", "carla-logs"): "DIRECTORY",
+          ("export",): "DIRECTORY"}
 
 
 @pytest.mark.parametrize("command", RESULT_COMMANDS, ids=" ".join)
