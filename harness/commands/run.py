@@ -176,11 +176,7 @@ def run(spec_argument: str | None, options: RunOptions) -> None:
     """
     from trustroute.app.policy import PolicySettings, policy_for
     from trustroute.app.runs import run_one_episode
-    from trustroute.harness.simulation.sumo_files import (
-        VehicleTypeCollector,
-        finish_route_file,
-        write_sumocfg,
-    )
+    from trustroute.harness.simulation.sumo_files import VehicleTypeCollector, write_episode_files
 
     as_json, seed, sumo_dir, rrd_path = options.as_json, options.seed, options.sumo_dir, options.rrd_path
     spec_path = _spec_path(spec_argument, options.spec_option)
@@ -196,10 +192,7 @@ def run(spec_argument: str | None, options: RunOptions) -> None:
     if rrd_path:
         written["rrd"] = Path(rrd_path)
     if sumo_dir is not None and types is not None and net is not None:  # (SUMO: the net is known)
-        finish_route_file(Path(sumo_dir), types.types)
-        written["sumocfg"] = write_sumocfg(Path(sumo_dir), net, seed, sumo_config)
-        written["routes"] = Path(sumo_dir) / "routes.rou.xml"
-        written["fcd"] = Path(sumo_dir) / "fcd.xml"
+        written.update(write_episode_files(Path(sumo_dir), types.types, net, seed, sumo_config))
     summary = dict(record.summary)
     summary["route"] = record.roads["directed_road"].tolist()
     if driver_type is not None:

@@ -27,8 +27,19 @@ def dataset_paths(study_dir: Path, manifest: dict) -> dict[str, Path]:
 
 
 def report_paths(paths) -> dict[str, Path]:
-    """The files of analysis.study.report.write_report, by name."""
-    return {"report_markdown": paths.markdown, "report_html": paths.html}
+    """The files of analysis.study.report.write_report, by name (its plots as their folder)."""
+    written = {"report_markdown": paths.markdown, "report_html": paths.html}
+    if paths.plots:
+        written["plots"] = next(iter(paths.plots.values())).parent
+    return written
+
+
+def recordings_paths(study_dir: Path, record: tuple[str, ...]) -> dict[str, Path]:
+    """The folder of the Rerun recordings of the config's `record` episodes, when it holds any."""
+    from trustroute.harness.study.runner import recording_path
+
+    recorded = [recording_path(study_dir, episode_id) for episode_id in record]
+    return {"recordings": recorded[0].parent} if any(path.is_file() for path in recorded) else {}
 
 
 @dataclass(frozen=True)
@@ -75,7 +86,7 @@ def study(ctx: click.Context, config_path: str, options: StudyOptions) -> None:
                                         attempts=options.attempts)
     from trustroute.core.dataset import EPISODES_FILE, FAILURES_DIR, ROADS_FILE
 
-    paths = dataset_paths(run.study_dir, manifest)
+    paths = {**dataset_paths(run.study_dir, manifest), **recordings_paths(run.study_dir, config.record)}
     lines = [f"dataset: {run.study_dir / EPISODES_FILE}, {run.study_dir / ROADS_FILE}"]
     if run.failed:
         # On stderr, so --json keeps exactly one JSON object on stdout.

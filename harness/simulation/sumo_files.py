@@ -40,10 +40,26 @@ def prepare_directory(directory: Path) -> Path:
     return directory
 
 
+def write_episode_files(directory: Path, types: dict[str, dict[str, str]], net_path: Path, seed: int,
+                        config: SumoConfig) -> dict[str, Path]:
+    """After the episode: finish SUMO's route output, copy the net beside it and write the .sumocfg
+    that opens them; every file in `directory`, by name (those SUMO wrote during the run too)."""
+    directory = Path(directory)
+    routes = finish_route_file(directory, types)
+    sumocfg = write_sumocfg(directory, net_path, seed, config)
+    return {"sumocfg": sumocfg, "net": directory / net_file_name(net_path), "routes": routes,
+            "fcd": directory / "fcd.xml"}
+
+
+def net_file_name(net_path: Path) -> str:
+    """The name of the net's copy: gzipped stays gzipped (SUMO reads either)."""
+    return "net.net.xml.gz" if str(net_path).endswith(".gz") else "net.net.xml"
+
+
 def write_sumocfg(directory: Path, net_path: Path, seed: int, config: SumoConfig) -> Path:
     """Copy the net beside the outputs and write the .sumocfg that opens them."""
     directory = Path(directory)
-    net_file = "net.net.xml.gz" if str(net_path).endswith(".gz") else "net.net.xml"
+    net_file = net_file_name(net_path)
     shutil.copyfile(net_path, directory / net_file)
     text = f"""<?xml version="1.0" encoding="UTF-8"?>
 <!-- One trustroute episode. Open with: sumo-gui -c {CONFIG_FILE} (fcd.xml is the episode as run). -->

@@ -61,11 +61,14 @@ def test_study_json_quiet_and_analyze_writes_nothing_without_report(tmp_path, ca
     assert not (out / "report.md").exists() and not (out / "plots").exists()
     code, text, _ = run_cli(capsys, "analyze", str(out), "--json", "--report")
     paths = json.loads(text)["paths"]
-    assert paths == {"report_markdown": str(out / "report.md"), "report_html": str(out / "report.html")}
+    assert paths == {"report_markdown": str(out / "report.md"), "report_html": str(out / "report.html"),
+                     "plots": str(out / "plots")}
     assert (out / "report.md").is_file() and (out / "report.html").is_file()
+    assert any((out / "plots").iterdir())
 
     code, text, _ = run_cli(capsys, "study", _config(tmp_path), "--out", str(out), "--json")
     payload = json.loads(text)
     assert payload["skipped"] == 2 and payload["ran"] == 0
     assert payload["analysis"]["cells"][0]["n"] == 2
-    assert set(payload["paths"]) == {"episodes", "roads", "manifest", "report_markdown", "report_html"}
+    assert set(payload["paths"]) == {"episodes", "roads", "manifest", "report_markdown", "report_html",
+                                     "plots"}

@@ -41,3 +41,30 @@ def test_export_prints_one_json_object_with_its_package_and_key_under_paths(caps
     assert payload["paths"] == {"package": str(tmp_path / "package"),
                                 "export_key": str(study_dir / "export-key.json")}
     assert all(Path(path).exists() for path in payload["paths"].values())
+
+
+def unlisted(paths: dict[str, str], folder: Path) -> list[str]:
+    """The files under `folder` that no entry of "paths" names, itself or as a folder holding it."""
+    listed = [Path(path) for path in paths.values()]
+    return sorted(str(file) for file in folder.rglob("*") if file.is_file()
+                  and not any(file == path or file.is_relative_to(path) for path in listed))
+
+
+@pytest.mark.slow
+def test_run_lists_every_file_of_its_sumo_files_folder(capsys, tmp_path):
+    payload = cli_json(capsys, "run", "phi1", "--sumo-files", str(tmp_path / "sumo"))
+    assert unlisted(payload["paths"], tmp_path / "sumo") == []
+    assert payload["paths"]["net"] == str(tmp_path / "sumo" / "net.net.xml")
+
+
+@pytest.mark.slow
+def test_study_lists_its_recordings_and_plots(capsys, tmp_path):
+    config = tmp_path / "study.toml"
+    config.write_text('[study]\nparticipants = 1\nseed = 1\nengine = "sumo"\nspecs = ["phi1"]\n'
+                      'conditions = ["free"]\nrecord = ["p00000-phi1-free"]\n')
+    out = tmp_path / "out"
+    payload = cli_json(capsys, "study", str(config), "--out", str(out), "--workers", "1")
+    assert payload["paths"]["recordings"] == str(out / "recordings")
+    assert payload["paths"]["plots"] == str(out / "plots")
+    assert unlisted(payload["paths"], out / "recordings") == unlisted(payload["paths"], out / "plots") == []
+    assert (out / "recordings" / "p00000-phi1-free.rrd").is_file() and any((out / "plots").iterdir())

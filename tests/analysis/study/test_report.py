@@ -19,7 +19,8 @@ def test_analyze_json_and_self_contained_report(model_study, capsys):
     payload = json.loads(out)
     assert payload["belief_source"] == "true"
     assert payload["paths"] == {"report_markdown": str(model_study / "report.md"),
-                                "report_html": str(model_study / "report.html")}
+                                "report_html": str(model_study / "report.html"),
+                                "plots": str(model_study / "plots")}
     cells = {(c["spec"], c["condition"]): c for c in payload["cells"]}
     assert set(cells) == {(s, c) for s in ("phi1", "phi2") for c in ("aware", "free")}
     for cell in cells.values():
