@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.core.errors import InputError
+from trustroute.core.validation import check_keys
 from trustroute.networks.road import Road
 
 EXTRA_TOWN_KEYS: tuple[str, ...] = ("one_way", "geometry", "sumo_net", "turns")
@@ -139,10 +140,7 @@ def parse_geometry_entry(raw: object, path: str, place: str) -> RoadGeometry:
     if not isinstance(raw, dict) or "shape" not in raw:
         raise InputError(path, place, "expected an object with a \"shape\"",
                          "write {\"shape\": [[x, y], ...], \"length\": metres}")
-    unknown = sorted(set(raw) - set(GEOMETRY_KEYS))
-    if unknown:
-        raise InputError(path, f"{place}.{unknown[0]}", "unknown key",
-                         f"use only {', '.join(GEOMETRY_KEYS)}")
+    check_keys(raw, GEOMETRY_KEYS, path, place, "geometry entry")
     shape = parse_shape(raw["shape"], path, f"{place}.shape")
     length = raw.get("length", polyline_length(shape))
     if not _is_number(length) or length <= 0:

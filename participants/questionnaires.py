@@ -35,9 +35,10 @@ from pathlib import Path
 from typing import cast
 
 from trustroute.core.errors import InputError
-from trustroute.core.validation import parse_toml, read_text
+from trustroute.core.validation import check_keys, parse_toml, read_text
 
 PLACEMENTS: tuple[str, ...] = ("before", "after_each_trial", "end")
+QUESTIONNAIRE_KEYS: tuple[str, ...] = ("name", "title", "instructions", "scale", "items")
 NAME = re.compile(r"^[a-z0-9_-]{1,40}$")
 MAX_ITEMS = 100
 
@@ -189,9 +190,7 @@ def load_questionnaire(path: Path, source: str) -> Questionnaire:
 
     if not isinstance(table, dict):
         raise bad("", "missing [questionnaire] table", "start the file with [questionnaire]")
-    unknown = sorted(set(table) - {"name", "title", "instructions", "scale", "items"})
-    if unknown:
-        raise bad(unknown[0], "unknown key", "use name, title, instructions, scale and items")
+    check_keys(table, QUESTIONNAIRE_KEYS, shown, "questionnaire", "questionnaire")
     name = table.get("name")
     if not isinstance(name, str) or not NAME.match(name) or name in PACKAGED:
         raise bad(
@@ -252,11 +251,7 @@ def questionnaire_plan(table: dict | None, base: Path, source: str) -> dict[str,
     plan: dict[str, tuple[Questionnaire, ...]] = {placement: () for placement in PLACEMENTS}
     if table is None:
         return plan
-    unknown = sorted(set(table) - set(PLACEMENTS))
-    if unknown:
-        raise InputError(
-            source, f"questionnaires.{unknown[0]}", "unknown key", f"use {', '.join(PLACEMENTS)}"
-        )
+    check_keys(table, PLACEMENTS, source, "questionnaires", "[questionnaires] table")
     for placement in PLACEMENTS:
         entries = table.get(placement, [])
         if not isinstance(entries, list) or not all(isinstance(e, str) and e for e in entries):

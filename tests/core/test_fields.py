@@ -99,7 +99,10 @@ def test_values_and_defaults():
 def test_unknown_then_missing_then_values_in_table_order():
     bad = error({"cuont": 2, "mode": "x"}, "t")
     assert (bad.place, bad.problem) == ("t.cuont", "unknown key 'cuont' in the test table")
-    assert bad.fix == "use only count, mode, weights, label (a misspelt key would be ignored otherwise)"
+    assert bad.fix == ("write count, the closest key, or one of count, mode, weights, label (a misspelt key "
+                       "would be ignored otherwise)")
+    assert error({"zzz": 1}).fix == ("use only count, mode, weights, label (a misspelt key would be ignored "
+                                     "otherwise)")
     bad = error({"mode": "x"}, "t")
     assert (bad.place, bad.problem, bad.fix) == ("t.count", "missing key 'count'", "add count = 3")
     bad = error({"count": 0, "mode": "x"})

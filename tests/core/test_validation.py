@@ -36,6 +36,20 @@ def test_unknown_key_names_the_key_and_the_allowed_ones():
     assert error.value.place == "junctoins" and "junctions, roads" in error.value.fix
 
 
+LONG_KEYS = tuple(f"setting_number_{i}" for i in range(30)) + ("seed",)
+
+
+@pytest.mark.parametrize(("key", "start"), [("sede", "write seed, the closest key, or another key of the "
+                                             "test config docs/input_files.md lists"),
+                                            ("xyzzy", "use only the keys of the test config "
+                                             "docs/input_files.md lists")])
+def test_an_unknown_key_among_many_names_the_closest_and_the_doc_uncut(key, start):
+    with pytest.raises(InputError) as error:
+        check_keys({key: 1}, LONG_KEYS, "c.toml", "study", "test config")
+    assert error.value.fix == f"{start} (a misspelt key would be ignored otherwise)"
+    assert error.value.one_line().endswith("ignored otherwise))")
+
+
 @pytest.mark.parametrize("value", [2**63 - 1, -(2**63), 10**18])
 def test_every_int64_is_an_integer_of_an_input(value):
     """The documented range (docs/input_files.md) is the signed 64-bit one: 2**63 - 1 is a valid seed."""

@@ -166,6 +166,16 @@ def test_a_route_file_sumo_cannot_read_is_refused_with_the_config(tmp_path, monk
     assert not (tmp_path / "out").exists()
 
 
+def test_a_misspelt_study_key_is_told_the_closest_key_on_an_uncut_line(tmp_path, capsys):
+    path = _write(tmp_path, MINIMAL + "sede = 1\n")
+    with pytest.raises(SystemExit) as exit_info:
+        main(["study", str(path)])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and "study.sede" in err
+    assert "write seed, the closest key" in err
+    assert err.endswith("(a misspelt key would be ignored otherwise))\n")
+
+
 def test_missing_config_file_exit_2(tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["study", str(tmp_path / "absent.toml")])

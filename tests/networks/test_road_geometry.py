@@ -107,6 +107,13 @@ def test_geometry_errors_name_the_road(geometry, message):
     assert "geometry" in error.value.one_line() and "town.json" in error.value.one_line()
 
 
+def test_a_misspelt_geometry_key_names_the_closest():
+    with pytest.raises(InputError) as error:
+        town_from_dict(square(geometry={"A-B": {"shape": [[0, 0], [1, 0]], "lenght": 1}}), "town.json")
+    assert error.value.place == "geometry.A-B.lenght"
+    assert error.value.fix.startswith("write length, the closest key, or one of shape, length, edges, street")
+
+
 def test_sumo_net_reference_and_hash(tmp_path):
     net = tmp_path / "city.net.xml"
     net.write_text("<net/>")

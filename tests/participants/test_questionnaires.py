@@ -88,3 +88,15 @@ def test_cronbach_alpha():
     v, c = np.mean(np.diag(covariance)), covariance[~np.eye(k, dtype=bool)].mean()
     assert cronbach_alpha(items) == pytest.approx(k * c / (v + (k - 1) * c))
     assert cronbach_alpha(np.ones((4, 3))) is None and cronbach_alpha(items[:1]) is None
+
+
+def test_a_misspelt_key_of_a_questionnaire_or_its_placement_names_the_closest(tmp_path):
+    (tmp_path / "typo.toml").write_text(LIKERT.replace("title =", "titel ="))
+    with pytest.raises(InputError) as error:
+        load_questionnaire(tmp_path / "typo.toml", "study.toml")
+    assert error.value.place == "questionnaire.titel"
+    assert error.value.fix.startswith("write title, the closest key, or one of name, title, ")
+    with pytest.raises(InputError) as error:
+        questionnaire_plan({"ends": ["jian"]}, tmp_path, "study.toml")
+    assert error.value.place == "questionnaires.ends"
+    assert error.value.fix.startswith("write end, the closest key, or one of before, after_each_trial, end")

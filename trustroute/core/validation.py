@@ -24,6 +24,7 @@ bad input is one line on stderr and exit code 2 whatever kind of file it is.
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 import os
@@ -339,13 +340,33 @@ def key_place(place: Place, key: str) -> str:
     return f"{place}.{key}" if place else key
 
 
+# The longest list of keys an unknown-key fix spells out; a longer one (a study config's, a policy
+# file's) would not fit the capped line, so the fix names the closest key and the doc listing them.
+LISTED_KEYS_MAX = 150
+KEYS_DOC = 'docs/input_files.md'
+
+
 def check_keys(data: dict, allowed: tuple[str, ...], source: str, place: Place, what: str) -> None:
     """Strict key policy (docs/input_files.md): a key the format does not define is an error."""
     unknown = sorted(str(k) for k in data if k not in allowed)
     if unknown:
         where = key_place(place, unknown[0])
         raise InputError(source, where, f"unknown key {unknown[0][:60]!r} in the {what}",
-                         f"use only {', '.join(allowed)} (a misspelt key would be ignored otherwise)")
+                         unknown_key_fix(unknown[0], allowed, what))
+
+
+def unknown_key_fix(key: str, allowed: tuple[str, ...], what: str) -> str:
+    """The fix of an unknown key: the closest allowed key when one is close, and the allowed keys,
+    spelt out when they fit the line, else where docs/input_files.md lists them."""
+    listed = ", ".join(allowed)
+    short = len(listed) <= LISTED_KEYS_MAX
+    closest = difflib.get_close_matches(key, allowed, n=1)
+    if closest:
+        others = f"one of {listed}" if short else f"another key of the {what} {KEYS_DOC} lists"
+        fix = f"write {closest[0]}, the closest key, or {others}"
+    else:
+        fix = f"use only {listed}" if short else f"use only the keys of the {what} {KEYS_DOC} lists"
+    return f"{fix} (a misspelt key would be ignored otherwise)"
 
 
 # -- beliefs ----------------------------------------------------------------------------------------
