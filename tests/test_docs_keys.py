@@ -4,7 +4,8 @@ Each format doc has key tables whose first column names a key (`participants`, `
 `[beliefs.NAME].coeffs`, `types[i].weight`). A key's path is its section's table (a heading such as
 "## `[study]`") followed by the key's own parts; placeholders (NAME, `[i]`) drop out. The loaders'
 field tables (trustroute/core/fields.py) are the accepted keys: every documented key must be one of
-them, and every one of them must be documented.
+them, and every one of them must be documented. The summary in docs/input_files.md ("Keys: strict
+by default") lists each kind's keys again, and is held to the same loaders' keys.
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ import pytest
 
 from trustroute.core.fields import Field, keys
 from trustroute.harness.study import config as study_config
-from trustroute.networks import town
-from trustroute.participants import driver_model, driver_population, population
+from trustroute.networks import road_geometry, town
+from trustroute.participants import driver_model, driver_population, population, questionnaires
 from trustroute.policies.logic import spec
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "formats"
@@ -95,3 +96,57 @@ def test_the_walker_reads_sections_placeholders_and_list_items():
         "| `seed` | s |", "| `types[i].weight` | w |", "## Other", "| `not_a_row` | header |",
     ])
     assert documented_keys(text) == {"name", "beliefs.coeffs", "study.seed", "study.types.weight"}
+
+
+
+# docs/input_files.md, "Keys: strict by default": kind -> {table ("" the file's top level): its keys}
+INPUT_FILES = DOCS.parent / "input_files.md"
+KEY_LISTS: dict[str, dict[str, tuple[str, ...]]] = {
+    "town": {"": keys(town.FIELDS), "geometry.<road>": road_geometry.GEOMETRY_KEYS},
+    "driver model": {"": keys(driver_model.FIELDS), "trust_transition.<incident>": driver_model.HUMAN_ACTIONS,
+                     "trust_transition.<incident>.<action>": keys(driver_model.PERFORMANCE_FIELDS)},
+    "driver population": {"": keys(driver_population.FIELDS),
+                          "types[i]": keys(driver_population.TYPE_FIELDS)},
+    "spec": {"": keys(spec.FIELDS), "[beliefs.NAME]": keys(spec.BELIEF_FIELDS),
+             "[trust_states].NAME": keys(spec.TRUST_STATE_FIELDS),
+             "[type_beliefs].NAME": keys(spec.TYPE_BELIEF_FIELDS)},
+    "study config": {"": keys(study_config.FIELDS), "[study]": study_config.STUDY_KEYS,
+                     "[population]": keys(population.FIELDS), "[drivers]": keys(study_config.DRIVERS_FIELDS),
+                     "[questionnaires]": questionnaires.PLACEMENTS, "[live]": keys(study_config.LIVE_FIELDS)},
+}
+KIND_ITEM = re.compile(r"^  - ([a-z ]+): (.*)$")
+
+
+def key_lists(text: str) -> dict[str, dict[str, list[str]]]:
+    """The lists of the doc's items `  - kind: `a`, `b`; inside `table` only `c`, `d`; ...` (an
+    item wraps over lines indented deeper; a part's words in parentheses are not keys): kind ->
+    {table: its keys, brackets dropped}."""
+    items: dict[str, str] = {}
+    kind = None
+    for line in text.splitlines():
+        item = KIND_ITEM.match(line)
+        if item:
+            kind = item.group(1)
+            items[kind] = item.group(2)
+        elif kind is not None and line.startswith("    "):
+            items[kind] += " " + line.strip()
+        else:
+            kind = None
+    found: dict[str, dict[str, list[str]]] = {}
+    for kind, listed in items.items():
+        found[kind] = {}
+        for part in filter(str.strip, listed.split(";")):
+            names = re.findall(r"`([^`]+)`", part.split(" (")[0])
+            table, names = (names[0], names[1:]) if part.strip().startswith("inside") else ("", names)
+            found[kind][table] = [name.strip("[]") for name in names]
+    return found
+
+
+def test_the_input_files_key_lists_are_the_loaders_keys():
+    """docs/input_files.md lists every kind's keys: exactly the keys its loader accepts."""
+    listed = key_lists(INPUT_FILES.read_text())
+    for kind, tables in KEY_LISTS.items():
+        assert kind in listed, f"docs/input_files.md lists no keys of the {kind}"
+        assert set(listed[kind]) == set(tables), (kind, sorted(listed[kind]))
+        for table, accepted in tables.items():
+            assert sorted(listed[kind][table]) == sorted(accepted), (kind, table)
