@@ -391,11 +391,12 @@ def extras_fields(extras: RoadExtras) -> dict:
             "turns": dict(extras.turns or {})}
 
 
-def load_town(path: str | Path | None = None) -> Town:
+def load_town(path: str | Path | None = None, given: str = "--town") -> Town:
     """Load and validate a town file or a packaged town by name (`TOWNS`: "town01_carla",
     "pentagon", "city"; the packaged default when `path` is None), read through the guarded reader
-    (trustroute.core.validation)."""
+    (trustroute.core.validation). `given`: how the command line takes it, named in the hint when it
+    cannot be read (PackagedKind.fix)."""
     file_path = TOWNS.resolve(path) if path is not None else DEFAULT_TOWN_PATH
     shown = "default town" if path is None else str(path if file_path == Path(path) else file_path)
-    text = read_text(file_path, shown, "the town file", TOWNS.fix("--town"))
+    text = read_text(file_path, shown, "the town file", TOWNS.fix(given))
     return town_from_dict(parse_json(text, shown, "town file"), shown)

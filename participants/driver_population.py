@@ -242,12 +242,13 @@ def driver_population_from_dict(data: object, path: str = "<driver population>")
     return DriverPopulation(types=tuple(types), source_path=path, provenance=values["source"])
 
 
-def load_driver_population(path: str | Path) -> DriverPopulation:
+def load_driver_population(path: str | Path, given: str = "--population") -> DriverPopulation:
     """Load and validate a driver-population file or a packaged population by name (`POPULATIONS`:
-    "driver_population_three_types", "driver_population_real") through the guarded reader."""
+    "driver_population_three_types", "driver_population_real") through the guarded reader.
+    `given`: how the command line takes it, named in the hint when it cannot be read."""
     file_path = POPULATIONS.resolve(path)
     shown = str(path if file_path == Path(path) else file_path)
-    text = read_text(file_path, shown, "the driver population", POPULATIONS.fix("--population"))
+    text = read_text(file_path, shown, "the driver population", POPULATIONS.fix(given))
     return driver_population_from_dict(parse_json(text, shown, "driver population"), shown)
 
 

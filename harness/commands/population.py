@@ -56,7 +56,7 @@ def show(path: str, as_json: bool) -> None:
     """Print the types of a driver-population file and their weights."""
     from trustroute.app.inputs import population_of
 
-    summary = population_summary(population_of(path))
+    summary = population_summary(population_of(path, given="FILE"))
     emit(as_json, summary, summary_lines(summary))
 
 

@@ -76,6 +76,7 @@ BAD = [
     (["model", "--driver", "nosuch"], DRIVER_MODELS),
     (["net", "build", "--town", "nosuch"], TOWNS),
     (["population", "show", "nosuch"], POPULATIONS),
+    (["town", "roads", "nosuch"], TOWNS),
     (["population", "sample", "--driver", "nosuch", "--types", "2", "--seed", "1", "--out", "t.json"],
      DRIVER_MODELS),
     (["run", "nosuch"], SPECS),
@@ -98,6 +99,18 @@ def test_a_bad_name_is_one_line_naming_what_exists(capsys, args, kind):
     assert code == 2 and out == "" and err.count("\n") == 1, err
     assert "nosuch" in err and ", ".join(kind.names()) in err
     assert "specs/phi1.toml" not in err and "participants/data" not in err
+
+
+@pytest.mark.parametrize(("args", "how"), [
+    (["town", "roads", "nosuch"], "town file as TOWN or"),
+    (["population", "show", "nosuch"], "driver population file as FILE or"),
+    (["run", "phi1", "--town", "nosuch"], "town file with --town or"),
+    (["model", "--driver", "nosuch"], "driver model file with --driver or"),
+    (["spec", "check", "phi1", "--population", "nosuch"], "driver population file with --population or"),
+], ids=_bad_id)
+def test_the_hint_names_a_positional_argument_as_one_and_an_option_as_one(capsys, args, how):
+    code, _, err = run_cli(capsys, *args)
+    assert code == 2 and f"(fix: pass an existing {how} a packaged" in err, err
 
 
 def test_study_config_takes_packaged_names(outside_the_repository):

@@ -34,14 +34,14 @@ def packaged_spec_town(spec: Spec | PathLike) -> str | None:
     return SPEC_TOWNS.get(path.stem) if packaged else None
 
 
-def town_of(town: Town | PathLike | None, spec: Spec | PathLike | None = None) -> Town:
+def town_of(town: Town | PathLike | None, spec: Spec | PathLike | None = None, given: str = "--town") -> Town:
     """A Town from an object, a file, a packaged name, or None: the town a packaged `spec` is
-    written for, else the packaged default town."""
+    written for, else the packaged default town (`given`: how the command line takes it)."""
     if isinstance(town, Town):
         return town
     if town is None and spec is not None:
         town = packaged_spec_town(spec)
-    return load_town(town)
+    return load_town(town, given)
 
 
 def driver_of(driver: DriverModel | PathLike | None) -> DriverModel:
@@ -49,11 +49,12 @@ def driver_of(driver: DriverModel | PathLike | None) -> DriverModel:
     return driver if isinstance(driver, DriverModel) else load_driver_model(driver)
 
 
-def population_of(population: DriverPopulation | PathLike) -> DriverPopulation:
-    """A DriverPopulation from an object, a file or a packaged name."""
+def population_of(population: DriverPopulation | PathLike, given: str = "--population") -> DriverPopulation:
+    """A DriverPopulation from an object, a file or a packaged name (`given`: how the command line
+    takes it)."""
     if isinstance(population, DriverPopulation):
         return population
-    return load_driver_population(population)
+    return load_driver_population(population, given)
 
 
 @dataclass(frozen=True, eq=False)

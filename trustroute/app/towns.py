@@ -74,7 +74,7 @@ def import_town_file(source: str, out: str, incidents_path: str | None, incident
 def town_roads(town_path: str, near: tuple[float, float] | None, street: str | None,
                limit: int | None) -> tuple[str, list[RoadRow]]:
     """(the town's file, its directed roads near a point or on a street, at most `limit`)."""
-    town = town_of(town_path)
+    town = town_of(town_path, given="TOWN")
     if limit is None and near is not None:
         limit = 10
     rows = road_rows(town, near=near, street=street, limit=limit)

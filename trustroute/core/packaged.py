@@ -62,11 +62,13 @@ class PackagedKind:
             return path
         return self.path(value) or path
 
-    def fix(self, option: str = "") -> str:
-        """The hint for a missing input: a file, or one of the packaged names (which exist)."""
+    def fix(self, given: str = "") -> str:
+        """The hint for a missing input: a file, or one of the packaged names (which exist).
+        `given` is how the command line takes it: an option ("--town": "with --town") or a
+        positional argument ("TOWN": "as TOWN"); "" names neither (a config key, the API)."""
         names = ", ".join(self.names())
-        given = f" with {option}" if option else ""
-        return f"pass an existing {self.what} file{given} or a packaged {self.what} name ({names})"
+        how = "" if not given else f" with {given}" if given.startswith("-") else f" as {given}"
+        return f"pass an existing {self.what} file{how} or a packaged {self.what} name ({names})"
 
 
 SPECS = PackagedKind("spec", PACKAGED_SPECS, ".toml")
