@@ -45,6 +45,7 @@ from trustroute.core.validation import read_input_bytes
 from trustroute.networks.osm_convert import GENERATED_HEADER
 from trustroute.networks.road_geometry import file_sha256
 from trustroute.networks.sumo_net import find_binary
+from trustroute.networks.town import Town, load_town
 from trustroute.networks.town_import import import_town
 
 CITY = "city"
@@ -207,3 +208,33 @@ def read_route_file(path: str | Path) -> ET.ElementTree:
         return ET.ElementTree(ET.fromstring(data))
     except (OSError, EOFError, ET.ParseError) as exc:
         raise InputError(str(path), "", f"not a readable SUMO route file ({exc})", ROUTE_FILE_FIX) from None
+
+
+# The packaged town whose net each packaged route set drives: its routes are edges of that net only.
+ROUTE_TOWNS: dict[str, str] = {CITY: CITY}
+
+
+def route_set_town(value: str, resolved: str | Path) -> str | None:
+    """The packaged town of the route file given as `value` (`resolved`: the file it names) when it
+    is a packaged route set, else None (a route file of the user's)."""
+    stem = value.removesuffix(ROUTES.suffix)
+    if stem not in ROUTE_TOWNS or Path(value).name != value:
+        return None
+    packaged = ROUTES.path(stem)
+    same = packaged is not None and packaged.resolve() == Path(resolved).resolve()
+    return ROUTE_TOWNS[stem] if same else None
+
+
+def check_route_set_town(value: str, resolved: str | Path, town: Town, source: str, place: str,
+                         fix: str) -> None:
+    """A packaged route set runs on its own town's net only (SUMO would stop at the first route's
+    unknown edge): when `value` is one and `town` drives another net, InputError with `fix`
+    ("{town}" in it: the route set's town)."""
+    owner = route_set_town(value, resolved)
+    if owner is None:
+        return
+    own_net, net = load_town(owner).sumo_net, town.sumo_net
+    if net is None or own_net is None or net.sha256 != own_net.sha256:
+        raise InputError(source, place, f"the packaged route set {value!r} is traffic on the town {owner}'s "
+                         f"roads, not on those of the town driven ({town.source_path})",
+                         fix.format(town=owner))

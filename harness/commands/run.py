@@ -176,12 +176,14 @@ def run(spec_argument: str | None, options: RunOptions) -> None:
     """
     from trustroute.app.policy import PolicySettings, policy_for
     from trustroute.app.runs import run_one_episode
+    from trustroute.app.towns import check_routes_town
     from trustroute.harness.simulation.sumo_files import VehicleTypeCollector, write_episode_files
 
     as_json, seed, sumo_dir, rrd_path = options.as_json, options.seed, options.sumo_dir, options.rrd_path
     spec_path = _spec_path(spec_argument, options.spec_option)
     _check_paths(options, spec_path)
     problem = load_problem(spec_path, options.town_path, options.driver_path, options.population_path)
+    check_routes_town(options.routes_paths, problem.town)
     policy = policy_for(problem, options.policy_name, PolicySettings(cache_dir=options.cache_dir,
                                                                      progress=not (as_json or options.quiet)))
     sumo_config = options.sumo_config()

@@ -64,8 +64,8 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import SPECS, PackagedKind
 from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
-from trustroute.networks.cities import ROUTES, read_route_file
-from trustroute.networks.town import TOWNS
+from trustroute.networks.cities import ROUTES, check_route_set_town, read_route_file, route_set_town
+from trustroute.networks.town import TOWNS, load_town
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER_MODELS
 from trustroute.participants.driver_population import POPULATIONS, load_driver_population
 from trustroute.participants.population import population_config_from_dict
@@ -229,6 +229,24 @@ def _towns() -> PackagedKind:
 
 def _routes() -> PackagedKind:
     return ROUTES
+
+
+def _route_files(values: Sequence[str], town: str | None, base: Path, source: str) -> tuple[str, ...]:
+    """The background route files, resolved and each parsed once (networks/cities.py
+    `read_route_file`, as the episodes read them): a file SUMO cannot load is refused before any
+    study directory is made, not in every episode; a packaged route set only with its own town
+    (`town`: the study's town file, None the default)."""
+    routes = tuple(_resolve_path(value, base, source, "study.routes", "SUMO route file", FILE_FIX["routes"],
+                                 _routes()) for value in values)
+    for value, path in zip(values, routes, strict=True):
+        try:
+            read_route_file(path)
+        except InputError as exc:
+            raise InputError(source, "study.routes", f"{path}: {exc.problem}", FILE_FIX["routes"]) from None
+        if route_set_town(value, path) is not None:
+            check_route_set_town(value, path, load_town(town), source, "study.routes",
+                                 f'set town = "{{town}}", or drop "{value}" from routes')
+    return tuple(map(str, routes))
 
 
 def _populations() -> PackagedKind:
@@ -449,20 +467,6 @@ def _optional_file(study: StudyValues, key: FileKey, what: str, base: Path, sour
     return str(_resolve_path(value, base, source, f"study.{key}", what, FILE_FIX[key], packaged))
 
 
-def _route_files(values: Sequence[str], base: Path, source: str) -> tuple[str, ...]:
-    """The background route files, resolved and each parsed once (networks/cities.py
-    `read_route_file`, as the episodes read them): a file SUMO cannot load is refused before any
-    study directory is made, not in every episode."""
-    paths = tuple(str(_resolve_path(value, base, source, "study.routes", "SUMO route file",
-                                    FILE_FIX["routes"], _routes())) for value in values)
-    for path in paths:
-        try:
-            read_route_file(path)
-        except InputError as exc:
-            raise InputError(source, "study.routes", f"{path}: {exc.problem}", FILE_FIX["routes"]) from None
-    return paths
-
-
 def _directory(value: str | None, base: Path) -> str | None:
     return None if value is None else str((base / value).resolve())
 
@@ -528,6 +532,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
     _check_background_vehicles(study["background_vehicles"], source)
     default_name = Path(source).stem if source.endswith(".toml") else "study"
     name = str(study["name"]) if study["name"] is not None else default_name
+    town = _optional_file(study, "town", "town file", base, source, _towns())
     return StudyConfig(
         source_path=source,
         name=name,
@@ -536,7 +541,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
         engine=study["engine"],
         specs=specs,
         conditions=conditions,
-        town=_optional_file(study, "town", "town file", base, source, _towns()),
+        town=town,
         driver_model=_optional_file(study, "driver_model", "driver model file", base, source, DRIVER_MODELS),
         horizon=study["horizon"],
         fallback_after=None if study["fallback_after"] is False else study["fallback_after"],
@@ -547,7 +552,7 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
                           base),
         policy_cache=_directory(study["policy_cache"], base),
         background_vehicles=study["background_vehicles"],
-        routes=_route_files(study["routes"], base, source),
+        routes=_route_files(study["routes"], town, base, source),
         record=tuple(study["record"]),
         population=_population(tables["population"], source),
         robust_population=_robust_population(study, conditions, base, source),

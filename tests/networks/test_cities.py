@@ -90,6 +90,32 @@ def test_a_sumo_rl_without_the_scenario_is_one_line_too(capsys, monkeypatch, tmp
     assert "pip install 'trustroute[cities]'" in err
 
 
+@needs_cities_extra
+@pytest.mark.parametrize("town", [[], ["--town", "pentagon"]], ids=["default town", "pentagon"])
+def test_the_city_routes_on_another_town_name_the_town_they_need(capsys, town):
+    code, out, err = run_cli(capsys, "run", "phi1", "--routes", "city", *town)
+    assert code == 2 and out == "" and err.count("\n") == 1, err
+    assert "--routes: the packaged route set 'city' is traffic on the town city's roads" in err
+    assert "(fix: add --town city, or drop --routes city)" in err
+
+
+@needs_cities_extra
+def test_a_study_config_takes_the_city_routes_with_the_city_only(tmp_path):
+    from trustroute.core.errors import InputError
+    from trustroute.harness.study.config import load_study_config
+
+    config = tmp_path / "s.toml"
+    text = ('[study]\nparticipants = 1\nseed = 1\nspecs = ["city5"]\nconditions = ["free"]\n'
+            'routes = ["city"]\n')
+    config.write_text(text + 'town = "city"\n')
+    assert load_study_config(config).routes == (str(cities.city_routes_path().resolve()),)
+    config.write_text(text)
+    with pytest.raises(InputError) as error:
+        load_study_config(config)
+    assert error.value.place == "study.routes"
+    assert error.value.fix == 'set town = "city", or drop "city" from routes'
+
+
 def test_the_city_specs_are_packaged_for_their_city_only():
     assert "city" in TOWNS.names() and "city" in cities.ROUTES.names()
     assert "csomor" in TOWNS.names() and "csomor" not in cities.ROUTES.names()

@@ -12,10 +12,11 @@ import numpy as np
 from trustroute.app.inputs import driver_of, town_of
 from trustroute.app.nets import net_for
 from trustroute.core.errors import InputError
-from trustroute.networks.cities import ROUTES, read_route_file
+from trustroute.networks.cities import ROUTES, check_route_set_town, read_route_file
 from trustroute.networks.real_net import is_imported
 from trustroute.networks.road_lookup import RoadRow, road_rows, street_names
 from trustroute.networks.sumo_net import NetBuild, build_net, net_counts
+from trustroute.networks.town import Town
 from trustroute.networks.town_import import TownImport, import_town
 from trustroute.policies.model.trust_pomdp import build_pomdp
 
@@ -85,6 +86,13 @@ def town_roads(town_path: str, near: tuple[float, float] | None, street: str | N
                          if known else "this town's roads carry no street names (import a town from a net "
                          "with names: trustroute town import)")
     return town.source_path, rows
+
+
+def check_routes_town(paths: tuple[str, ...], town: Town) -> None:
+    """The packaged route sets among --routes are traffic on `town`'s roads (networks/cities.py)."""
+    for path in paths:
+        check_route_set_town(path, ROUTES.resolve(path), town, path, "--routes",
+                             f"add --town {{town}}, or drop --routes {path}")
 
 
 def route_file(path: str) -> str:
