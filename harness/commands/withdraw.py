@@ -8,23 +8,44 @@ The study directory's lock is taken first, so a running `trustroute live` on it 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import click
 
-from trustroute.harness.commands.options import bounded_int
+from trustroute.harness.commands.options import UsageFix
+
+PARTICIPANT = re.compile(r"p?([0-9]{1,9})")
+
+
+class Participant(click.ParamType):
+    """A participant of a live study: its id as the dataset writes it (p00003, `p` and the index)
+    or its index (3); both name the same participant."""
+
+    name = "participant"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, int):
+            return value
+        match = PARTICIPANT.fullmatch(str(value).strip())
+        if match is None:
+            raise UsageFix(f"{str(value)[:40]!r} is not a participant",
+                           "pass the participant's id as in the dataset (p00003) or its index (3)", ctx)
+        return int(match.group(1))
 
 
 @click.command("withdraw")
 @click.argument("study_dir", metavar="STUDY", type=click.Path())
-@click.argument("participant", metavar="PARTICIPANT", type=bounded_int(0, 10**9))
+@click.argument("participant", metavar="PARTICIPANT", type=Participant())
 @click.option("--reason", default="", help="Why (recorded in the audit entry).")
 @click.option("--by", default=None, help="Who withdraws them (default: the user running the command).")
 @click.option("--readmit", is_flag=True, help="Instead: let a withdrawn participant take part again.")
 @click.option("--json", "as_json", is_flag=True, help="Print the audit entry as JSON.")
 def withdraw(study_dir: str, participant: int, reason: str, by: str | None, readmit: bool,
              as_json: bool) -> None:
-    """Delete PARTICIPANT's drives, warm-ups, answers and rows from the live study STUDY."""
+    """Delete PARTICIPANT's drives, warm-ups, answers and rows from the live study STUDY.
+
+    PARTICIPANT is the participant's id as in the dataset (p00003) or its index (3)."""
     from trustroute.core.errors import InputError
     from trustroute.harness.live.withdraw import readmit_participant, withdraw_participant
     from trustroute.harness.study.runner import study_lock

@@ -69,7 +69,7 @@ def test_withdraw_then_analyze(tmp_path, capsys):
     assert analyzed.exit_code == 0, analyzed.output
     assert sum(cell["n"] for cell in json.loads(analyzed.output)["cells"]) == 1
 
-    code, _, err = run_cli(capsys, "withdraw", str(study_dir), "1")
+    code, _, err = run_cli(capsys, "withdraw", str(study_dir), "p00001")   # the dataset's id of 1
     assert code == 2 and "withdrawn already" in err and err.count("\n") == 1
     code, _, err = run_cli(capsys, "withdraw", str(study_dir), "7")
     assert code == 2 and "no participant 7" in err
