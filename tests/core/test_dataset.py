@@ -165,3 +165,12 @@ def test_a_finished_study_has_possible_values(model_study):
     episodes = dataset.read_episodes(model_study, trust_levels=LEVELS)
     roads = dataset.read_roads(model_study, trust_levels=LEVELS)
     assert len(episodes) == 48 and set(roads["episode_id"]) == set(episodes["episode_id"])
+
+
+@pytest.mark.parametrize(("engine", "command"), [("live", "trustroute live CONFIG --out DIR"),
+                                                 ("sumo", "trustroute study CONFIG --out DIR")])
+def test_a_study_without_a_manifest_is_told_the_command_that_writes_it(tmp_path, engine, command):
+    (tmp_path / dataset.STUDY_FILE).write_text(json.dumps({"config_hash": "x", "config": {"engine": engine}}))
+    with pytest.raises(InputError) as error:
+        dataset.read_manifest(tmp_path)
+    assert error.value.place == dataset.MANIFEST_FILE and f"`{command}`" in error.value.fix

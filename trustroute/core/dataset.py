@@ -542,12 +542,27 @@ def read_questionnaires(study_dir: Path, columns: list[str] | None = None) -> pd
     return _read(study_dir, "questionnaires", columns)
 
 
+def no_manifest_fix(study_dir: Path) -> str:
+    """How a study directory without a manifest gets one: a live study (its STUDY_FILE says so)
+    by serving it, as `trustroute study` refuses live configs; any other by running it."""
+    marker = study_dir / STUDY_FILE
+    try:
+        recorded = read_json(marker, "study marker") if marker.is_file() else {}
+    except InputError:   # a damaged marker: the general fix
+        recorded = {}
+    config = recorded.get("config") if isinstance(recorded, dict) else None
+    if isinstance(config, dict) and config.get("engine") == "live":
+        return ("serve it with `trustroute live CONFIG --out DIR`: the dataset and its manifest are written "
+                "once a participant finishes an episode")
+    return "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)"
+
+
 def read_manifest(study_dir: Path) -> dict:
     """manifest.json of a consolidated study, with every key of MANIFEST_KEYS."""
     path = Path(study_dir) / MANIFEST_FILE
     if not path.exists():
         raise InputError(str(study_dir), MANIFEST_FILE, "not a finished study directory (no manifest)",
-                         "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
+                         no_manifest_fix(Path(study_dir)))
 
     manifest = read_json(path, "study manifest",
                          fix="rerun `trustroute study` on this directory to rebuild it")
