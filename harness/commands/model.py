@@ -7,13 +7,13 @@ import json
 import click
 
 from trustroute.app.towns import model_summary
+from trustroute.harness.commands.inputs import driver_option, town_only_option
 from trustroute.harness.commands.output import json_option, with_paths
 
 
 @click.command("model")
-@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
-@click.option("--driver", "driver_path", type=click.Path(), default=None,
-              help="Driver model file (default model).")
+@town_only_option
+@driver_option
 @json_option
 def model(town_path: str | None, driver_path: str | None, as_json: bool) -> None:
     """Summarise the trust POMDP of a town and a driver model."""

@@ -6,6 +6,7 @@ import json
 
 import click
 
+from trustroute.harness.commands.inputs import town_only_option
 from trustroute.harness.commands.output import json_option, with_paths
 
 
@@ -15,7 +16,7 @@ def net() -> None:
 
 
 @net.command("build")
-@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
+@town_only_option
 @click.option("--out", "out_dir", type=click.Path(), default=None,
               help="DIRECTORY of the net cache (default: $XDG_CACHE_HOME/trustroute/nets, "
               "XDG_CACHE_HOME defaulting to ~/.cache).")

@@ -17,6 +17,7 @@ from typing import Any
 import click
 
 from trustroute.app.peers import paynt_comparison, storm_comparison
+from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.output import emit
 
@@ -25,10 +26,8 @@ from trustroute.harness.commands.output import emit
 class PeerProblem:
     """--town, --driver and --horizon: the problem (with SPEC) both a peer and ours are given."""
 
-    town_path: str | None = option("--town", type=click.Path(), default=None,
-                                   help="Town file (default town).")
-    driver_path: str | None = option("--driver", type=click.Path(), default=None,
-                                     help="Driver model file (default: the packaged model).")
+    town_path: str | None = town_field()
+    driver_path: str | None = driver_field()
     horizon: int | None = option(
         "--horizon", type=click.IntRange(min=0), default=None,
         help="Accepted within H junctions (a step counter in the product; default: unbounded).")
@@ -87,7 +86,7 @@ def peer() -> None:
 
 
 @peer.command("storm")
-@click.argument("spec_path", metavar="SPEC")
+@spec_argument()
 @takes(problem=PeerProblem, limits=StormLimits, ours=OurSide)
 def storm(spec_path: str, problem: PeerProblem, limits: StormLimits, ours: OurSide) -> None:
     """Storm's [lower, upper] and time beside ours, for SPEC."""
@@ -108,7 +107,7 @@ def storm_lines(result: dict) -> list[str]:
 
 
 @peer.command("paynt")
-@click.argument("spec_path", metavar="SPEC")
+@spec_argument()
 @takes(problem=PeerProblem, limits=PayntLimits, ours=OurSide)
 def paynt(spec_path: str, problem: PeerProblem, limits: PayntLimits, ours: OurSide) -> None:
     """PAYNT's finite-state controller value (a lower bound of Pr_max) beside ours, for SPEC."""

@@ -11,6 +11,7 @@ import click
 
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults
+from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import SEED, UsageFix
 from trustroute.harness.commands.output import json_flag, quiet_flag, with_paths
@@ -111,12 +112,8 @@ class RunOptions:
         "--out", type=click.Path(), default=None,
         help="DIRECTORY to write roads/kinematics/incidents Parquet and summary.json into.")
     as_json: bool = json_flag()
-    town_path: str | None = option(
-        "--town", type=click.Path(), default=None,
-        help="Town file or packaged town name, e.g. city (default: the town a packaged spec "
-             "is written for, else the packaged town).")
-    driver_path: str | None = option("--driver", type=click.Path(), default=None,
-                                     help="Driver model file or packaged name (default model).")
+    town_path: str | None = town_field()
+    driver_path: str | None = driver_field()
     net_path: str | None = option(
         "--net", type=click.Path(), default=None,
         help="SUMO net to use (default: the net the town drives: an imported town's own, "
@@ -166,10 +163,10 @@ class RunOptions:
 
 
 @click.command("run")
-@click.argument("spec_argument", metavar="SPEC", required=False, type=click.Path())
+@spec_argument("spec_argument", required=False, type=click.Path())
 @takes(options=RunOptions)
 def run(spec_argument: str | None, options: RunOptions) -> None:
-    """Run one episode of SPEC (a spec file) in SUMO with POLICY and a synthetic driver.
+    """Run one episode of SPEC in SUMO with POLICY and a synthetic driver.
 
     To re-run an episode of a study exactly (its participant's drawn model and initial trust), use
     `trustroute replay STUDY_DIR EPISODE_ID`.

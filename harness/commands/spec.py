@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from trustroute.app.spec_check import spec_report
+from trustroute.harness.commands.inputs import spec_argument, town_option
 from trustroute.harness.commands.output import json_option, with_paths
 
 
@@ -33,8 +34,8 @@ def spec() -> None:
 
 
 @spec.command("check")
-@click.argument("spec_path", metavar="SPEC")
-@click.option("--town", "town_path", type=click.Path(), default=None, help="Town file (default town).")
+@spec_argument()
+@town_option
 @json_option
 @click.option("--dot", "dot_path", type=click.Path(), default=None,
               help="FILE to write the DFA into, as Graphviz dot.")

@@ -17,23 +17,19 @@ from trustroute.analysis.formatting import finite_or_none
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults
 from trustroute.core.errors import InputError
+from trustroute.harness.commands.inputs import (
+    driver_field,
+    driver_option,
+    spec_argument,
+    town_field,
+    town_option,
+)
 from trustroute.harness.commands.option_groups import option, option_decorator, takes
 from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat, synthesis_time_left
 from trustroute.harness.commands.output import emit, json_flag, json_option, quiet_flag, with_paths
 
 if TYPE_CHECKING:
     from trustroute.app.synthesis import EvaluationSettings, SynthesisSettings
-
-
-def town_field() -> Any:
-    return option("--town", type=click.Path(), default=None,
-                  help="Town file or packaged town name (default: the town a packaged spec is "
-                       "written for, else the packaged town).")
-
-
-def driver_field() -> Any:
-    return option("--driver", type=click.Path(), default=None,
-                  help="Driver model file or packaged name (default: the packaged model).")
 
 
 def rule_field() -> Any:
@@ -47,8 +43,6 @@ def command_time_limit(help: str, **attrs: Any) -> Any:
                   **attrs)
 
 
-town_option = option_decorator("town_path", town_field())
-driver_option = option_decorator("driver_path", driver_field())
 rule_option = option_decorator("belief_rule", rule_field())
 
 
@@ -127,7 +121,7 @@ class SynthOptions:
 
 
 @click.command("synth")
-@click.argument("spec_path", metavar="SPEC")
+@spec_argument()
 @takes(options=SynthOptions)
 def synth(spec_path: str, options: SynthOptions) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
@@ -263,7 +257,7 @@ def not_needed_note(not_needed: int) -> str:
 
 
 @click.command("baseline")
-@click.argument("spec_path", metavar="SPEC")
+@spec_argument()
 @town_option
 @driver_option
 @rule_option
@@ -345,7 +339,7 @@ class EvaluateOptions:
 
 
 @click.command("evaluate")
-@click.argument("spec_path", metavar="SPEC")
+@spec_argument()
 @click.argument("policy_name", metavar="POLICY")
 @takes(options=EvaluateOptions)
 def evaluate(spec_path: str, policy_name: str, options: EvaluateOptions) -> None:

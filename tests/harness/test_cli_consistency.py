@@ -72,3 +72,40 @@ def test_study_json_quiet_and_analyze_writes_nothing_without_report(tmp_path, ca
     assert payload["analysis"]["cells"][0]["n"] == 2
     assert set(payload["paths"]) == {"episodes", "roads", "manifest", "report_markdown", "report_html",
                                      "plots"}
+
+
+def _commands():
+    """Every command of the CLI, subcommands of groups included, as (path, command)."""
+    import click
+
+    from trustroute.harness.cli import cli
+
+    context = click.Context(cli)
+    stack = [(name, cli.get_command(context, name)) for name in cli.list_commands(context)]
+    while stack:
+        path, command = stack.pop()
+        if isinstance(command, click.Group):
+            stack += [(f"{path} {name}", command.get_command(context, name))
+                      for name in command.list_commands(context)]
+        else:
+            yield path, command
+
+
+def test_every_spec_town_and_driver_says_it_takes_a_packaged_name():
+    """SPEC, --town PATH and --driver PATH have one help text each (harness/commands/inputs.py)."""
+    from trustroute.harness.commands.inputs import DRIVER_HELP, SPEC_HELP, TOWN_HELP
+
+    seen = {"SPEC": 0, "--town": 0, "--driver": 0}
+    for path, command in _commands():
+        for param in command.params:
+            if param.human_readable_name == "SPEC":
+                seen["SPEC"] += 1
+                assert SPEC_HELP in (command.help or ""), path
+            elif "--town" in param.opts and param.type.name == "path":
+                seen["--town"] += 1
+                assert param.help.startswith(f"{TOWN_HELP} (default: "), (path, param.help)
+            elif "--driver" in param.opts and path in ("synth", "baseline", "evaluate", "run", "model",
+                                                       "peer storm", "peer paynt"):
+                seen["--driver"] += 1
+                assert param.help == DRIVER_HELP, (path, param.help)
+    assert seen == {"SPEC": 7, "--town": 9, "--driver": 7}
