@@ -106,10 +106,24 @@ class DecisionGraph:
     added_junctions: int = 0  # junctions without a choice that keep two roads' names apart
 
     def summary(self) -> str:
-        parts = [f"{count} {what}" for what, count in self.dropped.items() if count]
-        added = (f"; {self.added_junctions} junctions without a choice kept to tell parallel roads apart"
+        parts = [f"{count} {what if count != 1 else DROPPED_ONE[what]}"
+                 for what, count in self.dropped.items() if count]
+        junctions = "junction" if self.added_junctions == 1 else "junctions"
+        added = (f"; {self.added_junctions} {junctions} without a choice kept to tell parallel roads apart"
                  if self.added_junctions else "")
         return "dropped " + (", ".join(parts) if parts else "nothing") + added
+
+
+# Each kind of DecisionGraph.dropped (its key, plural, is the --json's) with a count of one.
+DROPPED_ONE = {
+    "edges closed to passenger cars": "edge closed to passenger cars",
+    "edges outside the largest strongly connected part": "edge outside the largest strongly connected part",
+    "other strongly connected parts": "other strongly connected part",
+    "edges only a U-turn reaches or parallel to a shorter one":
+        "edge only a U-turn reaches or parallel to a shorter one",
+    "roads the net's turns do not drive to and from the rest":
+        "road the net's turns do not drive to and from the rest",
+}
 
 
 def _finite_points(points: Iterable[Iterable[float]], path: str,

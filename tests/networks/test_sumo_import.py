@@ -108,7 +108,7 @@ def test_parallel_roads_keep_their_own_names(tmp_path):
     assert "q" not in sumolib_decision_junctions(net)
     assert set(graph.junction_ids) == {*"abcde", "q"} and graph.added_junctions == 1
     assert directed(graph) >= {"a-b", "a-q", "q-b", "b-q", "q-a"}
-    assert "1 junctions without a choice kept" in graph.summary()
+    assert "1 junction without a choice kept" in graph.summary()
     check_roads_follow_the_net(graph, net)
 
 
@@ -122,6 +122,17 @@ def test_only_the_largest_strongly_connected_part_is_kept(tmp_path):
     assert graph.dropped["edges outside the largest strongly connected part"] == 7
     assert graph.dropped["other strongly connected parts"] == 1
     assert "dropped 7 edges outside" in graph.summary()
+    assert graph.summary().endswith(", 1 other strongly connected part")
+
+
+def test_the_summary_counts_one_in_the_singular():
+    from trustroute.networks.sumo_import import DROPPED_ONE, DecisionGraph
+
+    one = DecisionGraph(junction_ids={}, positions={}, roads=(), dropped=dict.fromkeys(DROPPED_ONE, 1))
+    assert one.summary() == "dropped " + ", ".join(f"1 {what}" for what in DROPPED_ONE.values())
+    assert "1 edge closed to passenger cars" in one.summary() and "edges" not in one.summary()
+    two = DecisionGraph(junction_ids={}, positions={}, roads=(), dropped=dict.fromkeys(DROPPED_ONE, 2))
+    assert two.summary() == "dropped " + ", ".join(f"2 {what}" for what in DROPPED_ONE)
 
 
 def test_passenger_edges_are_all_used_on_hand_made_nets(tmp_path):
