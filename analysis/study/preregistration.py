@@ -41,6 +41,13 @@ def _simulations(plan: Mapping) -> str:
     return f"simulated studies per size until every power is within ±{plan['precision']:g}"
 
 
+def _fallback_rule(after: object) -> str:
+    """The fallback rule of the study config's `fallback_after` (None: the study has none)."""
+    if after is None:
+        return "the AV never falls back to the shortest route (no fallback rule)"
+    return f"after {after} junctions the AV falls back to the shortest completion (the fallback rule)"
+
+
 def preregistration_text(plan: Mapping, config: Mapping, versions: Mapping[str, str]) -> str:
     """The document. plan: `trustroute plan --json`'s payload (without "paths"); config: the
     study's design (`specs`, `conditions`, `seed`, `engine` and `fallback_after` at least);
@@ -73,8 +80,8 @@ def preregistration_text(plan: Mapping, config: Mapping, versions: Mapping[str, 
         "- Counterbalancing: the order of the cells follows the rows of a Williams (balanced Latin) "
         "square; participant p drives row p mod the number of rows, so the sample size is a multiple "
         "of the rows.",
-        f"- Warm-up and rules: the 20-junction fallback rule is {config.get('fallback_after')} "
-        "junctions; a warm-up drive (live studies) is not part of the data.",
+        f"- Warm-up and rules: {_fallback_rule(config.get('fallback_after'))}; a warm-up drive (live "
+        "studies) is not part of the data.",
         f"- Study seed {config.get('seed')}, engine {config.get('engine')}.",
         "",
         "## 3. Dependent variables (AsPredicted 3; OSF: Measured variables)",
