@@ -76,7 +76,7 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
     """Run the paper-size study (21 participants) on the defaults and show where the results are."""
     from trustroute.harness.commands.study import dataset_paths, report_paths
     from trustroute.harness.study.config import study_config_from_dict
-    from trustroute.harness.study.runner import run_and_consolidate
+    from trustroute.harness.study.runner import check_study_output, run_and_consolidate
 
     study = {**DEMO_STUDY, **DEMO_TOWNS.get(town, {}), "participants": participants, "engine": engine}
     config = study_config_from_dict({"study": study}, "trustroute demo", Path.cwd())
@@ -86,6 +86,7 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
     say = (lambda line: None) if silent else click.echo
     specs = len(study["specs"])
     on_town = "" if town == DEFAULT_TOWN else f", town {town}"
+    check_study_output(study_dir)   # before the line announcing the run (the run checks it again)
     say(f"demo: {participants} participants x {specs} spec{'s' * (specs > 1)} x 2 conditions, {engine} engine"
         f"{on_town}, into {study_dir}")
     run, manifest = run_and_consolidate(config, study_dir, workers, None, progress=not silent, echo=say)

@@ -302,12 +302,20 @@ def backend_name(workers: int, scheduler: str | None) -> str:
 def study_lock(study_dir: Path) -> Iterator[None]:
     """Create the study directory (checked writable first) and hold its lock, or InputError naming
     the run that holds it."""
-    from trustroute.core.output_files import check_output_dir, file_lock
+    from trustroute.core.output_files import file_lock
 
-    check_output_dir(study_dir, "--out", "study directory")
+    check_study_output(study_dir)
     with file_lock(Path(study_dir) / LOCK_FILE, "study directory", wait=False,
                    fix="wait for that run to finish (or stop it), or pass another --out"):
         yield
+
+
+def check_study_output(study_dir: Path) -> None:
+    """The study directory (--out) is a directory or can be made: checked before any input is (a
+    missing "aware" policy is synthesized then, which may take minutes) and before anything is said."""
+    from trustroute.core.output_files import check_output_dir
+
+    check_output_dir(study_dir, "--out", "study directory")
 
 
 def validate_study(config: StudyConfig | StudyContext, scheduler: str | None = None,
@@ -336,10 +344,12 @@ def check_before_writing(config: StudyConfig | StudyContext, study_dir: Path, sc
                          attempts: int, progress: bool) -> StudyContext:
     """Every refusal of a study run, before its directory, its lock or its mark is written: the
     inputs and the scheduler (`validate_study`), a directory that holds another study, and one where
-    a folder the study writes in is not a folder. Returns the study's context (`validate_study`'s)."""
+    a folder the study writes in is not a folder; the directory first, as the inputs may take minutes
+    (a missing policy is synthesized). Returns the study's context (`validate_study`'s)."""
+    check_study_output(study_dir)
+    check_study_folders(Path(study_dir))
     context = validate_study(config, scheduler, attempts, progress)
     recorded_config_hash(Path(study_dir), context.config.content_hash)
-    check_study_folders(Path(study_dir))
     return context
 
 

@@ -4,8 +4,16 @@ from __future__ import annotations
 
 import pytest
 
-from tests.cli import run_cli
+from tests.cli import assert_one_line_error, run_cli
 from trustroute.core.dataset import read_episodes
+
+
+def test_demo_refuses_an_out_that_is_a_file_before_it_says_anything(tmp_path, capsys):
+    policy = tmp_path / "policy.json"
+    policy.write_text("{}\n")
+    code, text, err = run_cli(capsys, "demo", "--engine", "model", "--out", str(policy))
+    assert_one_line_error(code, err, "policy.json", "--out", "not a directory")
+    assert text == "" and policy.read_text() == "{}\n"
 
 
 @pytest.mark.slow
