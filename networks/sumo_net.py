@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from trustroute.core.cache import NETS
+from trustroute.core.cache import NETS, entry_lock_path
 from trustroute.core.cache import cache_dir as default_cache_dir
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import file_lock
@@ -250,7 +250,7 @@ def build_net(town: Town, cache_dir: Path | None = None,
     except OSError as exc:
         raise InputError(str(target.parent), "", f"cannot create the net cache ({exc.strerror})",
                          "pass a writable directory with --out") from None
-    with file_lock(target.with_name(target.name + ".lock"), "net cache entry", wait=True,
+    with file_lock(entry_lock_path(target), "net cache entry", wait=True,
                    fix="pass a writable directory with --out"):
         found = _cached(town, target, started, notice)  # built while we waited?
         if found is not None:

@@ -59,3 +59,18 @@ def test_content_hashes_are_computed_once(town, driver):
         first = thing.content_hash
         assert "content_hash" in vars(thing)  # stored on the object after the first use
         assert thing.content_hash is first
+
+
+def test_an_entry_is_locked_beside_it_in_the_cache_and_in_the_cache_for_a_folder_of_the_user(
+        monkeypatch, tmp_path):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    own = cache.cache_dir(cache.NETS) / "a.net.xml"
+    assert cache.entry_lock_path(own) == own.with_name("a.net.xml.lock")
+    users = tmp_path / "nets" / "a.net.xml"
+    lock = cache.entry_lock_path(users)
+    assert lock.parent == tmp_path / "cache" / "trustroute" / cache.LOCKS
+    assert lock.name.endswith("-a.net.xml.lock")
+    assert cache.entry_lock_path(tmp_path / "other" / "a.net.xml") != lock   # by the entry's path
+    (tmp_path / "marker").write_text("a file, where the cache root's parent would be\n")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "marker"))
+    assert cache.entry_lock_path(users) == users.with_name("a.net.xml.lock")   # no cache: beside

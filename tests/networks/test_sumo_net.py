@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 import sumolib
 
+from trustroute.core.cache import entry_lock_path as cache_entry_lock
 from trustroute.core.errors import InputError
 from trustroute.networks.road import Road
 from trustroute.networks.sumo_net import build_net, net_counts
@@ -172,8 +173,10 @@ def test_second_build_is_cache_hit(town, tmp_path):
     assert first.path == second.path and first.path.parent == tmp_path
     assert first.path.name.startswith(town.content_hash)
     assert first.connections == second.connections
-    # no temp files left (the lock file of the entry stays: removing it would race other builders)
-    assert sorted(p.name for p in tmp_path.iterdir()) == [first.path.name, first.path.name + ".lock"]
+    # no temp files left, and no lock in a folder of the user's: it stays in the cache (removing it
+    # would race other builders)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [first.path.name]
+    assert cache_entry_lock(first.path).is_file()
 
 
 def test_truncated_cache_is_rebuilt(town, tmp_path):
