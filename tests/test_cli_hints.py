@@ -120,3 +120,26 @@ def test_the_rerun_hint_serves_on_127_0_0_1_only():
     readme = (ROOT / "README.md").read_text()
     served = re.search(r"rerun (--serve-web --bind 127\.0\.0\.1 [^\n]*) F\.rrd", readme)
     assert served and f"rerun {served.group(1)} study/recordings/e.rrd" in hint
+
+
+def test_the_rerun_viewer_is_named_on_path_or_by_its_absolute_path(tmp_path, monkeypatch):
+    """A viewer beside the Python of a virtual environment that is not activated is named by its
+    absolute path (a relative one breaks on the next `cd`); on PATH, or nowhere, plainly `rerun`."""
+    import sys
+
+    from trustroute.harness.commands.replay import rerun_command, viewer_hint
+
+    bin_dir = tmp_path / "venv" / "bin"
+    bin_dir.mkdir(parents=True)
+    (bin_dir / "rerun").write_text("#!/bin/sh\n")
+    (bin_dir / "rerun").chmod(0o755)
+    monkeypatch.setattr(sys, "executable", str(bin_dir / "python"))
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    monkeypatch.chdir(tmp_path / "venv")
+    assert rerun_command() == str(bin_dir / "rerun")
+    assert f"`{bin_dir / 'rerun'} e.rrd`" in viewer_hint(Path("e.rrd"))
+    monkeypatch.setenv("PATH", str(bin_dir))
+    assert rerun_command() == "rerun"
+    (bin_dir / "rerun").unlink()
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    assert rerun_command() == "rerun"

@@ -13,7 +13,6 @@ scenario's own demand as background traffic; the recording is of `city5` instead
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
 
 import click
@@ -74,6 +73,7 @@ def record_episode(context, study_dir: Path, episode_id: str) -> Path:
 def demo(ctx: click.Context, out: str, workers: int | None, engine: str, participants: int, town: str,
          as_json: bool, quiet: bool) -> None:
     """Run the paper-size study (21 participants) on the defaults and show where the results are."""
+    from trustroute.harness.commands.replay import viewer_hint
     from trustroute.harness.commands.study import dataset_paths, report_paths
     from trustroute.harness.study.config import study_config_from_dict
     from trustroute.harness.study.runner import check_study_output, run_and_consolidate
@@ -114,14 +114,8 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
         try:
             rrd = record_episode(run.context, run.study_dir, episode_id)
             paths["rrd"] = rrd
-            lines.append(f"episode recording: {rrd}  (open with: {_rerun_command()} {rrd})")
+            lines.append(f"episode recording: {rrd}; {viewer_hint(rrd)}")
         except Exception as exc:  # the study is done; a failed recording must not hide it
             payload["recording_error"] = f"{type(exc).__name__}: {exc}"
             lines.append(f"episode recording failed: {payload['recording_error']}")
     emit(as_json, with_paths(payload, paths), lines)
-
-
-def _rerun_command() -> str:
-    """The rerun viewer installed beside this Python (e.g. .venv/bin/rerun), else plain `rerun`."""
-    beside = Path(sys.executable).parent / "rerun"
-    return os.path.relpath(beside) if beside.is_file() else "rerun"

@@ -14,10 +14,24 @@ from trustroute.harness.commands.output import with_paths
 VIEWER_PORT, DATA_PORT = 9090, 9876
 
 
+def rerun_command() -> str:
+    """The Rerun viewer as the user types it: `rerun` when it is on PATH (or nowhere to be found),
+    else the one installed beside this Python (a virtual environment not activated), by its
+    absolute path: a path relative to the working directory would break on the next `cd`."""
+    import shutil
+    import sys
+
+    beside = Path(sys.executable).parent / "rerun"
+    if shutil.which("rerun") is not None or not beside.is_file():
+        return "rerun"
+    return str(beside.absolute())
+
+
 def viewer_hint(rrd: Path) -> str:
     """How to open a recording: the viewer, or without a display a web viewer served on 127.0.0.1
     only (the README's form: never every interface)."""
-    return (f"open it with `rerun {rrd}`, or on a machine without a display: `rerun --serve-web --bind "
+    rerun = rerun_command()
+    return (f"open it with `{rerun} {rrd}`, or on a machine without a display: `{rerun} --serve-web --bind "
             f"127.0.0.1 --web-viewer-port {VIEWER_PORT} --port {DATA_PORT} {rrd}` and browse to "
             f"http://127.0.0.1:{VIEWER_PORT}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{DATA_PORT}%2Fproxy")
 
