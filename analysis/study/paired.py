@@ -16,13 +16,12 @@ import numpy as np
 import pandas as pd
 
 from trustroute.analysis.formatting import finite_or_none
+from trustroute.analysis.repeated_measures import conditional_logit, mixed_trust_model
 from trustroute.analysis.statistics import (
-    conditional_logit,
     conditional_odds_ratio,
     holm,
     mcnemar_exact,
     mean_difference,
-    mixed_trust_model,
     paired_risk_difference,
     paired_table,
     wilcoxon_paired,

@@ -28,10 +28,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.repeated_measures import mixed_trust_model
 from trustroute.analysis.statistics import (
     conditional_odds_ratio,
     mcnemar_exact,
-    mixed_trust_model,
     paired_table,
     rate_interval,
     wilcoxon_paired,

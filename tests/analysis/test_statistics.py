@@ -1,4 +1,5 @@
-"""Statistics against brute force: exact McNemar and Wilcoxon by enumeration, bootstrap coverage."""
+"""Statistics against brute force: exact McNemar and Wilcoxon tests by enumeration, bootstrap
+coverage, and the repeated-measures models (analysis/repeated_measures.py)."""
 
 from __future__ import annotations
 
@@ -128,12 +129,11 @@ def test_bootstrap_edge_cases():
 
 from scipy import stats  # noqa: E402
 
+from trustroute.analysis.repeated_measures import conditional_logit, mixed_trust_model  # noqa: E402
 from trustroute.analysis.statistics import (  # noqa: E402
     PairedTable,
-    conditional_logit,
     conditional_odds_ratio,
     mean_difference,
-    mixed_trust_model,
     paired_risk_difference,
     paired_table,
     rate_interval,
@@ -237,12 +237,8 @@ def test_mixed_model_recovers_a_difference():
 
 # -- separation: detected from the data, and what is estimable reported with its reason ----------
 
-from trustroute.analysis.statistics import (  # noqa: E402
-    EXACT_MODEL,
-    exact_odds_ratio,
-    median_unbiased_proportion,
-    separation,
-)
+from trustroute.analysis.repeated_measures import EXACT_MODEL, separation  # noqa: E402
+from trustroute.analysis.statistics import exact_odds_ratio, median_unbiased_proportion  # noqa: E402
 
 
 def _binomial_tail_at_least(k: int, n: int, p: float) -> float:

@@ -1,0 +1,267 @@
+"""Repeated-measures models of a study, over every episode with one group per participant.
+
+Across specs (statsmodels): `conditional_logit` fits satisfaction on the condition with spec fixed
+effects and one stratum per participant (the participant effect is conditioned away, so four
+episodes of one person never count as four people); `mixed_trust_model` fits mean trust with a
+random intercept per participant.
+
+Separation is detected from the data before the conditional logit is fitted (`separation`): the
+conditional likelihood grows without bound along a coefficient direction d exactly when, within every
+participant, no episode that failed scores above one that succeeded (d . (x_success - x_failure) >= 0
+for every such pair), and a linear programme finds whether such a d moves the treatment coefficient.
+Complete separation: some d orders every such pair strictly; quasi-separation: only with ties. On
+separated data the Wald interval of the fit means nothing, so the effect reported is the exact
+conditional one of the matched (participant, stratum) pairs: b ~ Binomial(b + c, OR / (1 + OR)),
+with its median-unbiased estimate, Clopper–Pearson-based interval and exact p-value, and the reason
+written in `ModelEffect.note`.
+
+The exact pieces (median-unbiased odds ratio, binomial test at 1/2) are analysis/statistics.py's.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import stats
+
+from trustroute.analysis.statistics import DEFAULT_LEVEL, binomial_half_p, exact_odds_ratio
+
+
+@dataclass(frozen=True)
+class ModelEffect:
+    """One coefficient of a repeated-measures model; `note` says why it is missing if it is."""
+
+    model: str
+    term: str
+    estimate: float = math.nan  # odds ratio (conditional logit) or difference (mixed model)
+    low: float = math.nan
+    high: float = math.nan
+    p_value: float = math.nan
+    groups: int = 0
+    observations: int = 0
+    note: str = ""
+
+
+def _design(treated: np.ndarray, strata: np.ndarray | None) -> np.ndarray:
+    """Columns: the treatment indicator, then one dummy per stratum level but the first."""
+    columns = [np.asarray(treated, dtype=float)]
+    if strata is not None:
+        levels = list(dict.fromkeys(np.asarray(strata).tolist()))
+        columns += [(np.asarray(strata) == level).astype(float) for level in levels[1:]]
+    return np.column_stack(columns)
+
+
+@dataclass(frozen=True)
+class Separation:
+    """Whether the conditional likelihood is unbounded along the treatment coefficient.
+
+    `kind`: "none", "complete" (some direction orders every success/failure pair of a participant
+    strictly) or "quasi" (only with ties); `favours`: "treated" or "control" when separated."""
+
+    kind: str
+    favours: str = ""
+
+
+def _contrasts(y: np.ndarray, exog: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """x_success - x_failure for every pair of a success and a failure of the same participant."""
+    rows = []
+    for group in np.unique(groups):
+        member = groups == group
+        success, failure = exog[member & (y == 1)], exog[member & (y == 0)]
+        if len(success) and len(failure):
+            rows.append((success[:, None, :] - failure[None, :, :]).reshape(-1, exog.shape[1]))
+    return np.vstack(rows) if rows else np.zeros((0, exog.shape[1]))
+
+
+def _furthest(contrasts: np.ndarray, sign: float, margin: bool) -> float:
+    """max sign * d[0] (margin False) or the largest t with contrasts . d >= t, sign * d[0] >= t
+    (margin True) over |d| <= 1, contrasts . d >= 0: a linear programme (scipy HiGHS)."""
+    from scipy.optimize import linprog
+
+    width = contrasts.shape[1]
+    if margin:  # variables (d, t): maximise t subject to contrasts . d >= t and sign * d0 >= t
+        first = np.zeros(width)
+        first[0] = sign
+        a_ub = np.hstack([-np.vstack([contrasts, first]), np.ones((len(contrasts) + 1, 1))])
+        cost = np.zeros(width + 1)
+        cost[-1] = -1.0
+        bounds = [(-1.0, 1.0)] * width + [(0.0, 1.0)]
+    else:
+        a_ub, cost, bounds = -contrasts, np.zeros(width), [(-1.0, 1.0)] * width
+        cost[0] = -sign
+    result = linprog(cost, A_ub=a_ub, b_ub=np.zeros(len(a_ub)), bounds=bounds, method="highs")
+    return float(-result.fun) if result.status == 0 else 0.0
+
+
+SEPARATION_TOLERANCE = 1e-9
+
+
+def separation(outcome: np.ndarray, exog: np.ndarray, participant: np.ndarray) -> Separation:
+    """Separation of the conditional logit's first coefficient (the treatment) from the data alone."""
+    y = np.asarray(outcome, dtype=float)
+    contrasts = _contrasts(y, np.asarray(exog, dtype=float), np.asarray(participant))
+    if not len(contrasts):
+        return Separation("none")
+    for sign, favours in ((1.0, "treated"), (-1.0, "control")):
+        if _furthest(contrasts, sign, margin=False) > SEPARATION_TOLERANCE:
+            complete = _furthest(contrasts, sign, margin=True) > SEPARATION_TOLERANCE
+            return Separation("complete" if complete else "quasi", favours)
+    return Separation("none")
+
+
+def matched_discordance(
+    outcome: np.ndarray, treated: np.ndarray, participant: np.ndarray, strata: np.ndarray | None
+) -> tuple[int, int, int]:
+    """(b, c, unmatched) over the (participant, stratum) pairs of one treated and one control episode:
+    b pairs where only the treated one succeeded, c where only the control one did; `unmatched`
+    counts the (participant, stratum) cells that are not such a pair."""
+    frame = {"y": np.asarray(outcome, dtype=float), "t": np.asarray(treated, dtype=float)}
+    keys = list(zip(np.asarray(participant).tolist(),
+                    [None] * len(frame["y"]) if strata is None else np.asarray(strata).tolist(), strict=True))
+    cells: dict = {}
+    for key, y, t in zip(keys, frame["y"], frame["t"], strict=True):
+        cells.setdefault(key, []).append((t, y))
+    b = c = unmatched = 0
+    for episodes in cells.values():
+        treated_y = [y for t, y in episodes if t == 1]
+        control_y = [y for t, y in episodes if t != 1]
+        if len(treated_y) != 1 or len(control_y) != 1:
+            unmatched += 1
+            continue
+        b += int(treated_y[0] == 1 and control_y[0] == 0)
+        c += int(treated_y[0] == 0 and control_y[0] == 1)
+    return b, c, unmatched
+
+
+EXACT_MODEL = "exact conditional (matched pairs)"
+
+
+def _separated_effect(base: ModelEffect, found: Separation, discordance: tuple[int, int, int],
+                      level: float, sides: tuple[str, str]) -> ModelEffect:
+    """The estimable effect on separated data: the exact conditional odds ratio of the matched pairs."""
+    b, c, unmatched = discordance
+    side = sides[0] if found.favours == "treated" else sides[1]
+    kind = "complete separation" if found.kind == "complete" else "quasi-separation"
+    reason = f"{kind}, all {b + c} discordant pairs ({b} / {c}) favour {side}: the logit's OR is infinite"
+    if unmatched or b + c == 0:
+        return replace(base, note=f"{reason}; no exact estimate (episodes not in matched pairs)")
+    exact = exact_odds_ratio(b, c, level)
+    p = binomial_half_p(b, c)
+    return replace(
+        base, model=EXACT_MODEL, estimate=exact.value, low=exact.low, high=exact.high, p_value=p,
+        note=f"{reason}; shown: the matched pairs' exact median-unbiased OR, CI open "
+        f"{'above' if c == 0 else 'below'}",
+    )
+
+
+def conditional_logit(
+    outcome: np.ndarray,
+    treated: np.ndarray,
+    participant: np.ndarray,
+    strata: np.ndarray | None = None,
+    level: float = DEFAULT_LEVEL,
+    sides: tuple[str, str] = ("the treated condition", "the control condition"),
+) -> ModelEffect:
+    """Conditional logistic regression of a binary outcome on `treated` (+ stratum dummies, e.g. the
+    spec), one group per participant (statsmodels ConditionalLogit). Returns the treatment's odds ratio.
+
+    Participants whose outcomes are all equal carry no information and drop out of the likelihood;
+    with no informative participant the effect is missing with a note. Separated data (`separation`)
+    are not fitted: the effect is the exact conditional one of the matched pairs, with the reason
+    (naming the treated and the control condition by `sides`)."""
+    from statsmodels.discrete.conditional_models import ConditionalLogit
+
+    y = np.asarray(outcome, dtype=float)
+    groups = np.asarray(participant)
+    treated = np.asarray(treated, dtype=float)
+    observations = int(y.size)
+    keep, dropped = _constant_strata(y, strata)
+    if dropped:
+        y, groups, treated = y[keep], groups[keep], treated[keep]
+        strata = np.asarray(strata)[keep]
+    informative = {g for g in np.unique(groups) if 0 < y[groups == g].sum() < (groups == g).sum()}
+    base = ModelEffect("conditional logit", "condition", groups=len(informative), observations=observations,
+                       note=dropped)
+    if not informative:
+        return replace(base, note=_joined("no participant had different outcomes between episodes", dropped))
+    exog = _design(treated, strata)
+    found = separation(y, exog, groups)
+    if found.kind != "none":
+        effect = _separated_effect(base, found, matched_discordance(y, treated, groups, strata), level, sides)
+        return replace(effect, note=_joined(effect.note, dropped))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            result = ConditionalLogit(y, exog, groups=groups).fit(disp=False)
+        beta, se = float(result.params[0]), float(result.bse[0])
+        p = float(result.pvalues[0])
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        return replace(base, note=_joined(f"fit failed ({type(exc).__name__})", dropped))
+    if not (math.isfinite(beta) and math.isfinite(se)):
+        return replace(base, note=_joined("the fit did not converge", dropped))
+    z = stats.norm.ppf(0.5 + level / 2)
+    return replace(
+        base, estimate=math.exp(beta), low=math.exp(beta - z * se), high=math.exp(beta + z * se), p_value=p
+    )
+
+
+def _joined(*notes: str) -> str:
+    return "; ".join(n for n in notes if n)
+
+
+def _constant_strata(y: np.ndarray, strata: np.ndarray | None) -> tuple[np.ndarray, str]:
+    """Rows to keep, and a note naming the strata left out: a stratum (spec) whose outcomes are all
+    equal has an infinite effect (quasi-separation of its dummy) and, at that limit, tells nothing
+    about the condition, so the fit without it is the limit of the fit with it."""
+    keep = np.ones(y.size, dtype=bool)
+    if strata is None:
+        return keep, ""
+    levels = np.asarray(strata)
+    constant = [level for level in dict.fromkeys(levels.tolist())
+                if len(np.unique(y[levels == level])) == 1]
+    if not constant or len(constant) == len(set(levels.tolist())):
+        return keep, ""   # all constant: no participant differs, said by the caller
+    keep = ~np.isin(levels, constant)
+    return keep, "; ".join(
+        f"{level} left out (every episode {'satisfied' if y[levels == level][0] == 1 else 'unsatisfied'}:"
+        " no discordance, an infinite effect of its own)" for level in constant)
+
+
+def mixed_trust_model(
+    value: np.ndarray,
+    treated: np.ndarray,
+    participant: np.ndarray,
+    strata: np.ndarray | None = None,
+    level: float = DEFAULT_LEVEL,
+) -> ModelEffect:
+    """Linear mixed model value ~ treated (+ stratum dummies) with a random intercept per
+    participant (statsmodels MixedLM, REML). Returns the treatment's difference in means."""
+    from statsmodels.regression.mixed_linear_model import MixedLM
+
+    y = np.asarray(value, dtype=float)
+    keep = ~np.isnan(y)
+    groups = np.asarray(participant)[keep]
+    base = ModelEffect(
+        "mixed model (random intercept)",
+        "condition",
+        groups=len(np.unique(groups)),
+        observations=int(keep.sum()),
+    )
+    if keep.sum() < 4 or len(np.unique(groups)) < 2:
+        return replace(base, note="too few observations")
+    kept_strata = None if strata is None else np.asarray(strata)[keep]
+    exog = np.column_stack([np.ones(keep.sum()), _design(np.asarray(treated)[keep], kept_strata)])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            result = MixedLM(y[keep], exog, groups=groups).fit(reml=True)
+        beta, se, p = float(result.params[1]), float(result.bse[1]), float(result.pvalues[1])
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        return replace(base, note=f"fit failed ({type(exc).__name__})")
+    if not (math.isfinite(beta) and math.isfinite(se)):
+        return replace(base, note="the fit did not converge")
+    z = stats.norm.ppf(0.5 + level / 2)
+    return replace(base, estimate=beta, low=beta - z * se, high=beta + z * se, p_value=p)
