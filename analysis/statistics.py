@@ -14,6 +14,8 @@ give a 2x2 table with discordant counts b (only A) and c (only B):
   median-unbiased one (`exact_odds_ratio`) and the reason is written in `Estimate.note`.
 
 Paired values (a participant's trust under A and under B):
+- `sign_test`: the exact two-sided sign test, the binomial test of the positive differences among
+  the nonzero ones at 1/2 (zero differences are ties, dropped); the "all specs" satisfaction test;
 - `wilcoxon_paired`: Wilcoxon signed-rank test via scipy; p = 1 when every difference is zero.
   Where scipy enumerates every sign flip by a permutation test (at most 13 pairs, with ties or
   zero differences: 2^n statistics each recomputed, seconds at n = 13), the same exact null
@@ -108,8 +110,8 @@ def holm(p_values: list[float | None]) -> list[float | None]:
 
 def binomial_half_p(first: int, second: int) -> float:
     """Two-sided exact p-value of `first` against `second` under equal chances: the binomial test
-    of `first` among `first + second` at 1/2 (1 when both are 0). McNemar's test and the matched
-    pairs' exact test are both this one."""
+    of `first` among `first + second` at 1/2 (1 when both are 0). McNemar's test, the sign test and
+    the matched pairs' exact test are all this one."""
     total = int(first) + int(second)
     return 1.0 if total == 0 else float(stats.binomtest(int(first), total, 0.5).pvalue)
 
@@ -119,6 +121,27 @@ def mcnemar_exact(first: np.ndarray, second: np.ndarray) -> McNemar:
     table = paired_table(first, second)
     p = binomial_half_p(table.only_first, table.only_second)
     return McNemar(pairs=table.pairs, only_first=table.only_first, only_second=table.only_second, p_value=p)
+
+
+@dataclass(frozen=True)
+class SignTest:
+    """The exact sign test of paired differences: how many are above zero, below it and zero."""
+
+    positive: int
+    negative: int
+    zero: int
+    p_value: float
+
+
+def sign_test(differences: np.ndarray) -> SignTest:
+    """Exact two-sided sign test of paired differences (NaN dropped): the binomial test of the
+    positive ones among the nonzero ones at 1/2; zero differences are ties and are dropped, and
+    with no nonzero difference p = 1."""
+    values = np.asarray(differences, dtype=float)
+    values = values[~np.isnan(values)]
+    positive, negative = int(np.sum(values > 0)), int(np.sum(values < 0))
+    return SignTest(positive, negative, int(values.size) - positive - negative,
+                    binomial_half_p(positive, negative))
 
 
 @dataclass(frozen=True)

@@ -32,14 +32,7 @@ def paired_display(p: pd.DataFrame) -> pd.DataFrame:
             "pair": p["condition_a"] + " vs " + p["condition_b"],
             "unit": p["unit"],
             "n": p["pairs"],
-            "only A / only B sat.": [
-                f"{int(a)} / {int(b)}" if number_text(a) != MISSING else MISSING
-                for a, b in zip(
-                    p.get("only_a_satisfied", [None] * len(p)),
-                    p.get("only_b_satisfied", [None] * len(p)),
-                    strict=True,
-                )
-            ],
+            "only A / only B sat.": _counts_column(p, "only_a_satisfied", "only_b_satisfied"),
             "risk difference [95% CI]": estimate_column(p, "risk_difference", "rd_low", "rd_high"),
             "conditional OR [exact CI]": estimate_column(p, "odds_ratio", "or_low", "or_high", 2),
             "McNemar exact p": [format_p(finite_or_none(v)) for v in p["mcnemar_p"]],
@@ -52,6 +45,7 @@ def paired_display(p: pd.DataFrame) -> pd.DataFrame:
         }
     )
     if "sign_test_p" in p and p["sign_test_p"].notna().any():  # the "all specs" rows' test
+        shown["participants ahead A / B"] = _counts_column(p, "a_ahead", "b_ahead")
         shown["sign test p (satisfaction)"] = _p_column(p, "sign_test_p")
         shown["sign test p (Holm)"] = _p_column(p, "sign_test_p_holm")
     notes = p.get("or_note", pd.Series([""] * len(p), index=p.index)).fillna("")
@@ -60,6 +54,12 @@ def paired_display(p: pd.DataFrame) -> pd.DataFrame:
     if "driver_type" in p:
         shown.insert(0, "driver type", p["driver_type"].to_numpy())
     return shown
+
+
+def _counts_column(p: pd.DataFrame, first: str, second: str) -> list[str]:
+    """Two counts as "a / b" (missing where the row or the table has none)."""
+    return [f"{int(a)} / {int(b)}" if number_text(a) != MISSING else MISSING
+            for a, b in zip(p.get(first, [None] * len(p)), p.get(second, [None] * len(p)), strict=True)]
 
 
 def _p_column(p: pd.DataFrame, column: str) -> list[str]:

@@ -1,6 +1,7 @@
 """Paired effects over participants, for every pair of conditions: the per-participant table, the
 paired statistics per spec (2x2 counts, exact McNemar, Newcombe risk difference, conditional odds
-ratio, BCa trust difference, Wilcoxon) with an "all specs" row that is per participant, and the
+ratio, BCa trust difference, Wilcoxon) with an "all specs" row that is per participant (its
+satisfaction: the exact sign test of the participants' mean differences over specs), and the
 repeated-measures models (conditional logit, mixed trust model) with one group per participant.
 
 With k conditions there are k(k-1)/2 pairs (`condition_pairs`); every p-value gets its Holm-adjusted
@@ -24,6 +25,7 @@ from trustroute.analysis.statistics import (
     mean_difference,
     paired_risk_difference,
     paired_table,
+    sign_test,
     wilcoxon_paired,
 )
 
@@ -154,7 +156,7 @@ def paired_table_rows(
             .groupby("participant")[["sat_diff", "trust_diff"]]
             .mean()
         )
-        sat = wilcoxon_paired(person["sat_diff"].to_numpy(), np.zeros(len(person)))
+        sat = sign_test(person["sat_diff"].to_numpy())
         trust = mean_difference(person["trust_diff"].to_numpy(), np.zeros(len(person)), rng, resamples)
         sat_mean = mean_difference(person["sat_diff"].to_numpy(), np.zeros(len(person)), rng, resamples)
         wx = wilcoxon_paired(person["trust_diff"].to_numpy(), np.zeros(len(person)))
@@ -166,6 +168,8 @@ def paired_table_rows(
                 "unit": "participant (mean over specs)",
                 "pairs": int(len(person)),
                 "mcnemar_p": None,
+                "a_ahead": sat.positive,
+                "b_ahead": sat.negative,
                 "sign_test_p": sat.p_value,
                 "risk_difference": finite_or_none(sat_mean.value),
                 "rd_low": finite_or_none(sat_mean.low),

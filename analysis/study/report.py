@@ -44,9 +44,11 @@ NOTES = [
     "Risk differences of paired outcomes use Newcombe's interval for paired proportions; the conditional "
     "odds ratio is b/c of the discordant pairs with the exact interval of b/(b+c); trust differences use a "
     "BCa bootstrap over participants (scipy.stats.bootstrap). p-values are printed in scientific notation.",
-    "The 'all specs' row is per participant (the mean over specs of each participant's difference), and "
-    "the repeated-measures models use one group per participant, so a participant's episodes under both "
-    "specs never count as independent pairs. Separation is checked from the data before the "
+    "The 'all specs' row is per participant (the mean over specs of each participant's difference); its "
+    "satisfaction test is the exact two-sided sign test of the participants ahead under A against those "
+    "ahead under B (participants without a difference dropped), and the repeated-measures models use "
+    "one group per participant, so a participant's episodes under both specs never count as independent "
+    "pairs. Separation is checked from the data before the "
     "conditional logit is fitted; on separated data the row shows the exact conditional odds ratio of "
     "the matched pairs and says why in its note.",
     "mean trust = mean over episodes of the episode's mean reported trust (as the paper's participants "

@@ -1,4 +1,4 @@
-"""Statistics against brute force: exact McNemar and Wilcoxon tests by enumeration, bootstrap
+"""Statistics against brute force: exact McNemar, sign and Wilcoxon tests by enumeration, bootstrap
 coverage, and the repeated-measures models (analysis/repeated_measures.py)."""
 
 from __future__ import annotations
@@ -92,6 +92,27 @@ def test_wilcoxon_with_ties_and_zeros_is_the_exact_sign_flip_test():
         warnings.simplefilter("ignore")
         reference = stats.wilcoxon(x13, y13, zero_method="wilcox")
     assert wilcoxon_paired(x13, y13).p_value == float(reference.pvalue)
+
+
+def test_sign_test_is_the_binomial_test_of_the_signs():
+    """Mean satisfaction differences tie heavily: the sign test counts the positive and the negative
+    ones, drops the zeros (and NaN) and is the exact binomial test at 1/2, here by enumeration and
+    by scipy's binomtest."""
+    from trustroute.analysis.statistics import sign_test
+
+    rng = np.random.default_rng(8)
+    for _ in range(60):
+        n = int(rng.integers(1, 30))
+        d = rng.choice([-1.0, -0.5, 0.0, 0.0, 0.5, 1.0, np.nan], n)
+        positive, negative = int(np.sum(d > 0)), int(np.sum(d < 0))
+        result = sign_test(d)
+        assert (result.positive, result.negative, result.zero) == (positive, negative, int(np.sum(d == 0)))
+        expected = 1.0 if positive + negative == 0 else _binomial_two_sided(positive, positive + negative)
+        assert result.p_value == pytest.approx(expected, rel=1e-9)
+        if positive + negative:
+            assert result.p_value == pytest.approx(stats.binomtest(positive, positive + negative).pvalue)
+    six_of_six = sign_test(np.array([0.5] * 6 + [0.0] * 15))   # 6 ahead, none behind, 15 tied
+    assert six_of_six.p_value == pytest.approx(2 * 0.5**6)
 
 
 def test_wilcoxon_all_equal_and_nan_pairs():

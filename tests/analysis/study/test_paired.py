@@ -71,3 +71,49 @@ def test_the_report_shows_no_unbounded_odds_ratio_without_its_reason(model_study
     html = (model_study / "report.html").read_text()
     intervals = re.findall(r"\[(-?[\d.]+|inf), (-?[\d.]+|inf)\]", html)
     assert intervals and all(float(v) < 1e6 for pair in intervals for v in pair if v != "inf")
+
+
+def _three_spec_episodes() -> pd.DataFrame:
+    """16 participants x 3 specs x (aware, robust, free), outcomes drawn so that the participants'
+    mean differences over specs tie often and take both signs."""
+    rng = np.random.default_rng(21)
+    rows = []
+    for person in range(16):
+        for spec in ("s1", "s2", "s3"):
+            for condition, chance in (("aware", 0.8), ("robust", 0.6), ("free", 0.4)):
+                rows.append({"participant": person, "spec": spec, "condition": condition,
+                             "satisfied": bool(rng.random() < chance),
+                             "mean_reported_trust": float(rng.integers(1, 8))})
+    return pd.DataFrame(rows)
+
+
+def test_the_all_specs_satisfaction_test_is_the_exact_sign_test_with_holm():
+    """The "all specs" row's sign test p is the two-sided binomial test of the participants ahead
+    under A among those not tied (their mean satisfaction over specs), and its Holm value adjusts
+    it over the pairs of conditions."""
+    from scipy import stats
+    from statsmodels.stats.multitest import multipletests
+
+    from trustroute.analysis.study.paired import ALL_SPECS, all_pairs_table, condition_pairs
+
+    episodes = _three_spec_episodes()
+    conditions = ("aware", "robust", "free")
+    wide = per_participant_table(episodes, "satisfied", conditions)
+    table = all_pairs_table(wide, condition_pairs(conditions), ["s1", "s2", "s3"], np.random.default_rng(0),
+                            200)
+    rows = table[table["spec"] == ALL_SPECS].set_index(["condition_a", "condition_b"])
+    expected = {}
+    for a, b in condition_pairs(conditions):
+        rate = episodes.pivot_table(index="participant", columns="condition", values="satisfied",
+                                    aggfunc="mean")
+        difference = rate[a] - rate[b]
+        ahead, behind = int((difference > 0).sum()), int((difference < 0).sum())
+        expected[(a, b)] = stats.binomtest(ahead, ahead + behind, 0.5).pvalue
+        assert rows.loc[(a, b), "sign_test_p"] == pytest.approx(expected[(a, b)], rel=1e-12)
+        assert (rows.loc[(a, b), "a_ahead"], rows.loc[(a, b), "b_ahead"]) == (ahead, behind)
+    assert len({round(p, 12) for p in expected.values()}) == 3   # three different tests
+    adjusted = multipletests(list(expected.values()), method="holm")[1]
+    for (pair, _), holm_p in zip(expected.items(), adjusted, strict=True):
+        assert rows.loc[pair, "sign_test_p_holm"] == pytest.approx(holm_p, rel=1e-12)
+    shown = paired_display(table)
+    assert "participants ahead A / B" in shown and "sign test p (satisfaction)" in shown
