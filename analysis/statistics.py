@@ -23,7 +23,9 @@ Paired values (a participant's trust under A and under B):
   programming over the doubled midranks), which gives scipy's very p-value in microseconds;
 - `mean_difference`: the mean paired difference with a BCa bootstrap interval over participants
   from `scipy.stats.bootstrap` (the Generator passed in drives the resampling);
-- `bootstrap_ci`: percentile bootstrap of a mean (scipy.stats.bootstrap), for single cells.
+- `bootstrap_ci`: percentile bootstrap of a mean (scipy.stats.bootstrap), for single cells;
+- `keyed_rng`: the Generator of one resampling, from the analysis seed and a key naming what is
+  resampled, so the same data and comparison get the same interval wherever and whenever computed.
 
 Repeated-measures models (conditional logit, mixed model) are in analysis/repeated_measures.py.
 
@@ -34,6 +36,7 @@ family-wise error rate under any dependence between the tests.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import warnings
 from dataclasses import dataclass, replace
@@ -343,6 +346,17 @@ def bootstrap_ci(
         raise ValueError(f"level must lie in (0, 1), got {level}")
     data = np.asarray(values, dtype=float)
     return _bootstrap_mean(data[~np.isnan(data)], rng, resamples, level, "percentile")
+
+
+def keyed_rng(seed: int, *key: object) -> np.random.Generator:
+    """The Generator of one resampling: `seed`'s SeedSequence spawned at a stable hash of `key`, which
+    names what is resampled (the statistic and the comparison, e.g. "trust difference", "phi1",
+    "aware", "free"), never where the result is shown. Two bootstraps of the same data under the same
+    key draw alike, and no bootstrap's draws depend on which ran before it. SHA-256 of the key's
+    text, as Python's hash() of a str differs between runs."""
+    digest = hashlib.sha256("\x1f".join(str(part) for part in key).encode()).digest()
+    words = tuple(int.from_bytes(digest[i:i + 4], "little") for i in range(0, len(digest), 4))
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=words))
 
 
 def mean_difference(

@@ -42,7 +42,6 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from trustroute.analysis.belief_sources import (
@@ -71,7 +70,9 @@ from trustroute.analysis.study.sensitivity import sensitivity_table
 from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.errors import InputError
 
-ANALYSIS_SEED = 20240513  # bootstrap resampling: fixed, so an analysis is reproducible
+# bootstrap resampling: fixed, so an analysis is reproducible; each bootstrap draws from a Generator
+# keyed by what it resamples (statistics.py `keyed_rng`)
+ANALYSIS_SEED = 20240513
 MULTIPLICITY = ("Holm over every pair of conditions, per spec and test (per outcome for the models; per "
                 "driver type and spec for the per-type tables); columns *_holm")
 
@@ -186,7 +187,6 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
     if "mean_reported_trust" in episodes:
         episodes["mean_reported_trust"] = pd.to_numeric(episodes["mean_reported_trust"], errors="coerce")
     expected = manifest.get("expected", {})
-    rng = np.random.default_rng(ANALYSIS_SEED)
     spec_order = [Path(p).stem for p in manifest["config"]["specs"]]
     condition_order = list(dict.fromkeys(episodes["condition"])) if len(episodes) else []
     config_conditions = [
@@ -195,12 +195,13 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
     condition_order = [c for c in config_conditions if c in condition_order] or condition_order
     column = f"satisfied_{belief_source}"
 
-    cells = cell_table(episodes, spec_order, condition_order, belief_source, expected, rng, resamples)
+    cells = cell_table(episodes, spec_order, condition_order, belief_source, expected, ANALYSIS_SEED,
+                       resamples)
     pairs = condition_pairs(condition_order)
     empty = pd.DataFrame()
     if pairs and len(episodes):
         wide = per_participant_table(episodes, column, tuple(condition_order))
-        paired = all_pairs_table(wide, pairs, spec_order, rng, resamples)
+        paired = all_pairs_table(wide, pairs, spec_order, ANALYSIS_SEED, resamples)
         repeated = all_pairs_repeated(episodes, column, pairs)
     else:
         wide, paired, repeated = empty, empty, empty
@@ -210,7 +211,7 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
     else:
         order, order_tests, carryover = empty, {}, empty
     per_type, per_type_paired = per_type_tables(episodes, spec_order, condition_order, belief_source,
-                                                rng, resamples)
+                                                ANALYSIS_SEED, resamples)
     sources = [s for s in BELIEF_SOURCES if f"satisfied_{s}" in episodes]
     sensitivity = sensitivity_table(episodes, sources, belief_source, paired, condition_order, spec_order,
                                     ANALYSIS_SEED, resamples)

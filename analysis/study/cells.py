@@ -11,7 +11,9 @@ import pandas as pd
 
 from trustroute.analysis.belief_sources import beside_source
 from trustroute.analysis.formatting import finite_or_none
-from trustroute.analysis.statistics import bootstrap_ci, rate_interval
+from trustroute.analysis.statistics import bootstrap_ci, keyed_rng, rate_interval
+
+TRUST_MEAN = "mean reported trust"   # the key of a cell's trust bootstrap
 
 
 def cell_table(
@@ -20,9 +22,11 @@ def cell_table(
     condition_order,
     belief_source: str,
     expected: dict,
-    rng: np.random.Generator,
+    seed: int,
     resamples: int,
 ) -> pd.DataFrame:
+    """One row per (spec, condition); the trust interval's resampling is keyed by the cell
+    (statistics.py `keyed_rng`), so the same episodes give the same interval in any table."""
     other = beside_source(belief_source)
     rows = []
     for spec in spec_order:
@@ -33,6 +37,7 @@ def cell_table(
             low, high = rate_interval(k, n)
             wilson_low, wilson_high = rate_interval(k, n, method="wilson")
             trust = group["mean_reported_trust"].to_numpy(dtype=float)
+            rng = keyed_rng(seed, TRUST_MEAN, spec, condition)
             trust_low, trust_high = bootstrap_ci(trust, rng, resamples)
             exp = expected.get(spec, {}).get(condition, {})
             rows.append(

@@ -21,6 +21,7 @@ from trustroute.analysis.repeated_measures import conditional_logit, mixed_trust
 from trustroute.analysis.statistics import (
     conditional_odds_ratio,
     holm,
+    keyed_rng,
     mcnemar_exact,
     mean_difference,
     paired_risk_difference,
@@ -30,6 +31,9 @@ from trustroute.analysis.statistics import (
 )
 
 ALL_SPECS = "all specs"
+# the keys of the bootstraps (with the spec and the pair): what is resampled, not where it is shown
+TRUST_DIFFERENCE = "trust difference"
+SATISFACTION_DIFFERENCE = "satisfaction difference"
 
 
 PAIRED_TESTS = ("mcnemar_p", "sign_test_p", "wilcoxon_p")   # the p-values adjusted over the pairs
@@ -59,10 +63,10 @@ def with_holm(frame: pd.DataFrame, family: list[str], tests: tuple[str, ...]) ->
     return frame
 
 
-def all_pairs_table(wide: pd.DataFrame, pairs: list[tuple[str, str]], spec_order, rng: np.random.Generator,
+def all_pairs_table(wide: pd.DataFrame, pairs: list[tuple[str, str]], spec_order, seed: int,
                     resamples: int) -> pd.DataFrame:
     """The paired statistics of every pair, with Holm-adjusted p-values per spec."""
-    frames = [paired_table_rows(wide, pair, spec_order, rng, resamples) for pair in pairs]
+    frames = [paired_table_rows(wide, pair, spec_order, seed, resamples) for pair in pairs]
     frames = [f for f in frames if len(f)]
     if not frames:
         return pd.DataFrame()
@@ -108,8 +112,11 @@ def trust_difference_columns(trust, wx) -> dict:
 
 
 def paired_table_rows(
-    wide: pd.DataFrame, pair: tuple[str, str], spec_order, rng: np.random.Generator, resamples: int
+    wide: pd.DataFrame, pair: tuple[str, str], spec_order, seed: int, resamples: int
 ) -> pd.DataFrame:
+    """The paired statistics of one pair, per spec and over specs; each bootstrap draws from its own
+    Generator keyed by the statistic, the spec and the pair (statistics.py `keyed_rng`), so the same
+    data give the same interval in every table (per type "all", sensitivity) and in any order."""
     a, b = pair
     rows = []
     for spec in spec_order:
@@ -121,7 +128,8 @@ def paired_table_rows(
         mc = mcnemar_exact(first, second)
         rd = paired_risk_difference(table)
         odds = conditional_odds_ratio(table, sides=pair)
-        trust = mean_difference(group[f"trust_{a}"], group[f"trust_{b}"], rng, resamples)
+        trust = mean_difference(group[f"trust_{a}"], group[f"trust_{b}"],
+                                keyed_rng(seed, TRUST_DIFFERENCE, spec, a, b), resamples)
         wx = wilcoxon_paired(group[f"trust_{a}"], group[f"trust_{b}"])
         rows.append(
             {
@@ -157,8 +165,10 @@ def paired_table_rows(
             .mean()
         )
         sat = sign_test(person["sat_diff"].to_numpy())
-        trust = mean_difference(person["trust_diff"].to_numpy(), np.zeros(len(person)), rng, resamples)
-        sat_mean = mean_difference(person["sat_diff"].to_numpy(), np.zeros(len(person)), rng, resamples)
+        trust = mean_difference(person["trust_diff"].to_numpy(), np.zeros(len(person)),
+                                keyed_rng(seed, TRUST_DIFFERENCE, ALL_SPECS, a, b), resamples)
+        sat_mean = mean_difference(person["sat_diff"].to_numpy(), np.zeros(len(person)),
+                                   keyed_rng(seed, SATISFACTION_DIFFERENCE, ALL_SPECS, a, b), resamples)
         wx = wilcoxon_paired(person["trust_diff"].to_numpy(), np.zeros(len(person)))
         rows.append(
             {

@@ -5,7 +5,6 @@ type and over all participants ("all").
 
 from __future__ import annotations
 
-import numpy as np
 import pandas as pd
 
 from trustroute.analysis.study.cells import cell_table
@@ -25,13 +24,13 @@ PER_TYPE_CELL_COLUMNS = (
 
 
 def per_type_tables(
-    episodes: pd.DataFrame, spec_order, condition_order, belief_source: str, rng: np.random.Generator,
-    resamples: int,
+    episodes: pd.DataFrame, spec_order, condition_order, belief_source: str, seed: int, resamples: int,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per true driver type and over all participants: the cells (satisfaction with exact CI, mean
     reported trust with bootstrap CI, mean true trust) and the paired statistics of every pair of
     conditions (paired.py `condition_pairs`), Holm-adjusted per type and spec. Empty without a
-    `driver_type` in the episodes."""
+    `driver_type` in the episodes. The bootstraps are keyed by what they resample (cells.py,
+    paired.py), so the "all" rows are the main tables' rows."""
     if "driver_type" not in episodes or not episodes["driver_type"].notna().any():
         return pd.DataFrame(), pd.DataFrame()
     names = sorted(episodes["driver_type"].dropna().unique())
@@ -40,11 +39,11 @@ def per_type_tables(
     column = f"satisfied_{belief_source}"
     cells, paired = [], []
     for name, group in groups:
-        table = cell_table(group, spec_order, condition_order, belief_source, {}, rng, resamples)
+        table = cell_table(group, spec_order, condition_order, belief_source, {}, seed, resamples)
         cells.append(table[list(PER_TYPE_CELL_COLUMNS)].assign(
             driver_type=name, participants=group["participant"].nunique()))
         for pair in condition_pairs(condition_order):
-            rows = paired_table_rows(per_participant_table(group, column, pair), pair, spec_order, rng,
+            rows = paired_table_rows(per_participant_table(group, column, pair), pair, spec_order, seed,
                                      resamples)
             if len(rows):
                 paired.append(rows.assign(driver_type=name))

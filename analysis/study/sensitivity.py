@@ -4,13 +4,14 @@ For every pair of conditions (paired.py `condition_pairs`) and every spec, and o
 participant ("all specs"), the satisfaction difference A − B with its interval on every belief
 source the study has (analysis/belief_sources.py): Newcombe's interval per spec, the BCa bootstrap
 of the participants' mean differences over specs. The primary source's rows are those of the
-paired table itself; another source's come from the same code on its column, with a generator
-seeded alike for each source, so a source's figures never depend on which sources precede it.
+paired table itself; another source's come from the same code on its column. Every bootstrap is
+keyed by what it resamples (statistics.py `keyed_rng`: the statistic, the spec, the pair), so two
+sources with the same outcomes show the same interval, and no source's figures depend on which
+sources precede it.
 """
 
 from __future__ import annotations
 
-import numpy as np
 import pandas as pd
 
 from trustroute.analysis.study.paired import all_pairs_table, condition_pairs, per_participant_table
@@ -33,6 +34,6 @@ def sensitivity_table(episodes: pd.DataFrame, sources: list[str], primary: str, 
         else:
             column = f"satisfied_{source}"
             wide = per_participant_table(episodes, column, tuple(condition_order))
-            rows = all_pairs_table(wide, pairs, spec_order, np.random.default_rng(seed), resamples)
+            rows = all_pairs_table(wide, pairs, spec_order, seed, resamples)
         frames.append(rows[list(SENSITIVITY_COLUMNS)].assign(source=source, primary=source == primary))
     return pd.concat(frames, ignore_index=True)

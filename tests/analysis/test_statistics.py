@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 import warnings
 
 import numpy as np
@@ -113,6 +114,29 @@ def test_sign_test_is_the_binomial_test_of_the_signs():
             assert result.p_value == pytest.approx(stats.binomtest(positive, positive + negative).pvalue)
     six_of_six = sign_test(np.array([0.5] * 6 + [0.0] * 15))   # 6 ahead, none behind, 15 tied
     assert six_of_six.p_value == pytest.approx(2 * 0.5**6)
+
+
+def test_keyed_generators_depend_on_the_seed_and_key_alone():
+    """A key's draws are the same in any order, in another process (another str hash seed) and
+    for no other key or seed."""
+    import subprocess
+    import sys
+
+    from trustroute.analysis.statistics import keyed_rng
+
+    key = ("trust difference", "phi1", "aware", "free")
+    first = keyed_rng(7, *key).random(3).tolist()
+    keyed_rng(7, "satisfaction difference", "all specs", "aware", "free").random(100)
+    assert keyed_rng(7, *key).random(3).tolist() == first
+    assert keyed_rng(8, *key).random(3).tolist() != first
+    assert keyed_rng(7, *key[:3], "robust").random(3).tolist() != first
+    assert keyed_rng(7, "trust difference", "phi1aware", "free").random(3).tolist() != first
+    code = ("from trustroute.analysis.statistics import keyed_rng; "
+            f"print(keyed_rng(7, *{key!r}).random(3).tolist())")
+    for hash_seed in ("1", "2"):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                             env={**os.environ, "PYTHONHASHSEED": hash_seed}).stdout
+        assert out.strip() == repr(first)
 
 
 def test_wilcoxon_all_equal_and_nan_pairs():

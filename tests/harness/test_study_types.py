@@ -4,7 +4,7 @@
   and a participant's type does not depend on how many participants the study has;
 - a model-engine study with the packaged three-type population logs each participant's type in
   the `driver_type` column, resumes without duplicates, and its per-type tables equal a direct
-  pandas computation on the episodes;
+  pandas computation on the episodes, their "all" rows the main tables' rows;
 - a bad [drivers] table is a one-line error with exit code 2.
 """
 
@@ -108,12 +108,13 @@ def test_per_type_tables_match_a_direct_computation(type_study):
         assert row["pairs"] == len(wide)
         assert row["only_a_satisfied"] == int((wide["aware"] & ~wide["free"]).sum())
         assert row["only_b_satisfied"] == int((~wide["aware"] & wide["free"]).sum())
-    # the overall paired rows are the study's own paired table
-    all_rows = paired[(paired["driver_type"] == ALL_TYPES) & (paired["spec"] != "all specs")]
-    mine = all_rows[["spec", "pairs", "only_a_satisfied", "only_b_satisfied"]].reset_index(drop=True)
-    study = analysis.paired[analysis.paired["spec"] != "all specs"]
-    theirs = study[["spec", "pairs", "only_a_satisfied", "only_b_satisfied"]].reset_index(drop=True)
-    assert mine.astype(str).equals(theirs.astype(str))
+    # the overall rows are the study's own paired table and cells, every bootstrap interval included
+    columns = list(analysis.paired.columns)
+    mine = paired.loc[paired["driver_type"] == ALL_TYPES, columns].reset_index(drop=True)
+    assert mine.astype(str).equals(analysis.paired.reset_index(drop=True).astype(str))
+    assert analysis.paired["trust_diff_low"].notna().all()
+    shown = [c for c in overall.columns if c in analysis.cells]
+    assert overall[shown].reset_index(drop=True).astype(str).equals(analysis.cells[shown].astype(str))
     assert analysis.to_dict()["per_type"]
 
 

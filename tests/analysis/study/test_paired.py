@@ -35,7 +35,7 @@ def test_repeated_measures_row_on_separated_data_is_exact_and_says_why():
 def test_paired_display_names_the_reason_beside_an_unbounded_odds_ratio():
     episodes = _episodes()
     wide = per_participant_table(episodes, "satisfied", ("aware", "free"))
-    rows = paired_table_rows(wide, ("aware", "free"), ["phi1", "phi2"], np.random.default_rng(0), 200)
+    rows = paired_table_rows(wide, ("aware", "free"), ["phi1", "phi2"], 20240513, 200)
     shown = paired_display(rows)
     assert "odds ratio note" in shown
     for text, note in zip(shown["conditional OR [exact CI]"], shown["odds ratio note"], strict=True):
@@ -99,8 +99,7 @@ def test_the_all_specs_satisfaction_test_is_the_exact_sign_test_with_holm():
     episodes = _three_spec_episodes()
     conditions = ("aware", "robust", "free")
     wide = per_participant_table(episodes, "satisfied", conditions)
-    table = all_pairs_table(wide, condition_pairs(conditions), ["s1", "s2", "s3"], np.random.default_rng(0),
-                            200)
+    table = all_pairs_table(wide, condition_pairs(conditions), ["s1", "s2", "s3"], 20240513, 200)
     rows = table[table["spec"] == ALL_SPECS].set_index(["condition_a", "condition_b"])
     expected = {}
     for a, b in condition_pairs(conditions):

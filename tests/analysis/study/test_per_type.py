@@ -1,4 +1,5 @@
-"""Episodes tables without a driver type: earlier studies still read, and have no per-type tables."""
+"""Episodes tables without a driver type: earlier studies still read, and have no per-type tables; the
+per-type tables' "all" rows are the main tables' rows."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+from tests.analysis.study.made_episodes import made_episodes
 from trustroute.analysis.study.analysis import study_analysis
 from trustroute.core import dataset
 from trustroute.core.errors import InputError
@@ -43,3 +45,33 @@ def test_an_episodes_file_written_before_driver_type_reads_with_nulls(model_stud
     pq.write_table(wrong, tmp_path / dataset.EPISODES_FILE)
     with pytest.raises(InputError):
         dataset.read_episodes(tmp_path)
+
+
+def _rows(frame, columns) -> list[dict]:
+    """The rows as comparable records (NaN and None both missing)."""
+    return frame[list(columns)].astype(object).where(frame[list(columns)].notna(), None).to_dict("records")
+
+
+@pytest.mark.parametrize("types", [("builder", "wary"), ("builder",)])
+def test_the_all_rows_are_the_main_tables_rows_every_interval_included(types):
+    """Per type "all" is every participant: its cells and paired rows are the main tables' own, bootstrap
+    intervals included, whichever table is computed first; with one type, that type's rows are too."""
+    from trustroute.analysis.study.analysis import ANALYSIS_SEED
+    from trustroute.analysis.study.cells import cell_table
+    from trustroute.analysis.study.paired import all_pairs_table, condition_pairs, per_participant_table
+    from trustroute.analysis.study.per_type import PER_TYPE_CELL_COLUMNS, per_type_tables
+
+    episodes = made_episodes(types=types)
+    specs, conditions = ["phi1", "phi2"], ["aware", "robust", "free"]
+    per_type, per_type_paired = per_type_tables(episodes, specs, conditions, "true", ANALYSIS_SEED, 400)
+    wide = per_participant_table(episodes, "satisfied_true", tuple(conditions))
+    paired = all_pairs_table(wide, condition_pairs(conditions), specs, ANALYSIS_SEED, 400)
+    cells = cell_table(episodes, specs, conditions, "true", {}, ANALYSIS_SEED, 400)
+    assert paired["trust_diff_low"].notna().all() and paired["rd_low"].notna().any()
+    for name in ("all", *(types if len(types) == 1 else ())):
+        mine = per_type_paired[per_type_paired["driver_type"] == name]
+        assert _rows(mine, paired.columns) == _rows(paired, paired.columns)
+        mine_cells = per_type[per_type["driver_type"] == name]
+        assert _rows(mine_cells, PER_TYPE_CELL_COLUMNS) == _rows(cells, PER_TYPE_CELL_COLUMNS)
+    again = per_type_tables(episodes, specs, conditions, "true", ANALYSIS_SEED, 400)[1]
+    assert _rows(again, again.columns) == _rows(per_type_paired, per_type_paired.columns)
