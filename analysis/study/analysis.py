@@ -38,10 +38,11 @@ paper_comparison; shown by display) are:
 
 from __future__ import annotations
 
-import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from trustroute.analysis.belief_sources import (
@@ -103,9 +104,6 @@ class StudyAnalysis:
     source_note: str = ""   # why the leading source is not the default one, when it is not
 
     def to_dict(self) -> dict:
-        def records(frame: pd.DataFrame) -> list[dict]:
-            return json.loads(frame.to_json(orient="records"))
-
         return {
             "study_dir": str(self.study_dir),
             "study": self.manifest.get("study"),
@@ -114,23 +112,47 @@ class StudyAnalysis:
             "belief_source_label": source_label(self.belief_source),
             "belief_source_note": self.source_note,
             "multiplicity": MULTIPLICITY,
-            "cells": records(self.cells),
-            "paired": records(self.paired),
-            "repeated_measures": records(self.repeated),
-            "takeovers": records(self.takeovers),
-            "order": records(self.order),
+            "cells": json_records(self.cells),
+            "paired": json_records(self.paired),
+            "repeated_measures": json_records(self.repeated),
+            "takeovers": json_records(self.takeovers),
+            "order": json_records(self.order),
             "order_tests": self.order_tests,
-            "carryover": records(self.carryover),
-            "paper_comparison": records(self.paper),
+            "carryover": json_records(self.carryover),
+            "paper_comparison": json_records(self.paper),
             "paper_note": self.paper_note,
-            "per_type": records(self.per_type),
-            "per_type_paired": records(self.per_type_paired),
-            "questionnaires": records(self.questionnaires),
-            "questionnaire_tests": records(self.questionnaire_tests),
-            "sensitivity": records(self.sensitivity),
-            "manual_driving": records(self.manual),
+            "per_type": json_records(self.per_type),
+            "per_type_paired": json_records(self.per_type_paired),
+            "questionnaires": json_records(self.questionnaires),
+            "questionnaire_tests": json_records(self.questionnaire_tests),
+            "sensitivity": json_records(self.sensitivity),
+            "manual_driving": json_records(self.manual),
             "failed_episodes": len(self.manifest.get("failed_episodes", [])),
         }
+
+
+def json_value(value: object) -> object:
+    """One table value as JSON: a float at full precision (json writes its repr, the shortest text
+    that reads back as the same float), null when missing or infinite, numpy scalars as Python's."""
+    if value is None or value is pd.NA or value is pd.NaT:
+        return None
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): json_value(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [json_value(v) for v in value]
+    return value if isinstance(value, str) else str(value)
+
+
+def json_records(frame: pd.DataFrame) -> list[dict]:
+    """The rows of `frame` as JSON objects, every float at full precision: pandas' to_json rounds to
+    10 decimal places, which writes a p-value of 2e-11 as 0."""
+    return [{str(k): json_value(v) for k, v in row.items()} for row in frame.to_dict("records")]
 
 
 def source_satisfaction(study_dir: Path, manifest: dict, episodes: pd.DataFrame,
