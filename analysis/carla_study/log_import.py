@@ -65,9 +65,12 @@ LOG_NAME = re.compile(
 # reported by the importer (manifest "max_distance_to_spawn_point_m") and is far below this.
 OFF_ROAD_M = 60.0
 KINEMATICS_EVERY = 25  # ticks between kept positions in kinematics.parquet (ticks.parquet is lossless)
-# The session order of the README: warm-up, trial 1 aware, trial 1 baseline, trial 2 aware, trial 2 baseline.
-SESSION_ORDER = {(3, 0): 0, (1, 0): 1, (1, 1): 2, (2, 0): 3, (2, 1): 4}
-EXPECTED_FILES = tuple(SESSION_ORDER)
+# The session order of the README: the warm-up (trial 3), then trial 1 aware, trial 1 baseline, trial 2
+# aware, trial 2 baseline. An episode's position is its place among the study sessions, 0-based as
+# in every study (docs/dataset.md): the warm-up is driven first but is no episode.
+WARM_UP_SESSION = (3, 0)
+STUDY_SESSIONS = ((1, 0), (1, 1), (2, 0), (2, 1))
+EXPECTED_FILES = (WARM_UP_SESSION, *STUDY_SESSIONS)
 CONDITIONS = {0: "aware", 1: "free"}
 
 
@@ -265,7 +268,7 @@ def episode_tables(
     episode = {
         "episode_id": log.episode_id,
         "participant": log.driver,
-        "position": SESSION_ORDER[(log.trial, log.baseline)],
+        "position": STUDY_SESSIONS.index((log.trial, log.baseline)),
         "spec": tables.trials[log.trial]["spec"],
         "condition": CONDITIONS[log.baseline],
         "seed": -1,  # a real participant: no seed

@@ -21,6 +21,7 @@ from trustroute.analysis.formatting import (
     wrapped_text,
 )
 from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis
+from trustroute.analysis.study.design import order_text
 from trustroute.analysis.study.manual import manual_display
 
 
@@ -204,7 +205,7 @@ TABLE_TITLES = {
     "paired": "Paired effects over participants",
     "repeated": "Repeated-measures models (one group per participant, both specs)",
     "takeovers": "Takeover rate per incident type and condition",
-    "order": "Order effects: by position in the Latin square",
+    "order": "Order effects: by position in each participant's order",
     "carryover": "Carry-over: by the condition driven just before",
     "per_type": "Satisfaction and trust per true driver type",
     "per_type_paired": "Paired effects per true driver type (every pair of conditions)",
@@ -256,6 +257,12 @@ def format_table(analysis: StudyAnalysis, width: int | None = TERMINAL_WIDTH) ->
 
 
 def order_test_line(tests: dict) -> str:
+    """The order tests as a sentence; for a fixed order, why there are none."""
+    if tests.get("fixed_order"):
+        return (f"Every participant drove the cells in one fixed order ({order_text(tests['fixed_order'])}): "
+                "position is confounded with spec and condition, so the rows by position are the cells in "
+                "session order and the carry-over rows follow the same sequence; no order effect is "
+                "estimable (Cochran's Q and Friedman across positions would compare the cells, not orders).")
     return (
         f"Across positions within {tests.get('participants', 0)} participants: Cochran's Q p = "
         f"{format_p(tests.get('cochran_q_p'))} (satisfaction), Friedman p = "

@@ -1,5 +1,7 @@
 """Order effects of the Latin square: satisfaction and reported trust per position (Cochran's Q and
 Friedman across positions within participants), and carry-over by the condition driven just before.
+Positions are 0-based in the data (docs/dataset.md) and shown from 1. A study whose participants all
+drove one fixed order (an imported one) has no order effect to test: position is the cell there.
 
 A live study may run a participant's trials in another order than planned (an incomplete trial
 moves to the end): its positions are those of the order actually run (`run_order`, from the
@@ -15,6 +17,7 @@ import pandas as pd
 
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.analysis.statistics import rate_interval
+from trustroute.analysis.study.design import fixed_order
 from trustroute.core.dataset import ATTEMPTS_FILE, read_attempts
 
 
@@ -30,11 +33,37 @@ def run_order(study_dir: Path, manifest: dict, episodes: pd.DataFrame) -> pd.Dat
                                      in zip(episodes["episode_id"], episodes["position"], strict=True)])
 
 
-def order_tables(episodes: pd.DataFrame, column: str) -> tuple[pd.DataFrame, dict, pd.DataFrame]:
-    """Position effects (per Latin-square position) and carry-over (by the previous condition)."""
+def position_tests(episodes: pd.DataFrame, column: str) -> dict:
+    """Cochran's Q (satisfaction) and Friedman (reported trust) across positions within the
+    participants who drove every position. When every participant drove the cells in one fixed order
+    (design.py `fixed_order`), position is the cell: those tests would compare the cells, not the
+    orders, so there are none, and `fixed_order` lists the cells by position instead."""
     from scipy import stats
     from statsmodels.stats.contingency_tables import cochrans_q
 
+    tests: dict = {"cochran_q_p": None, "friedman_p": None, "participants": 0}
+    positions = episodes["position"].nunique()
+    complete = episodes.groupby("participant").filter(lambda g: g["position"].nunique() == positions)
+    fixed = fixed_order(episodes)
+    if fixed is not None:
+        return {**tests, "participants": int(complete["participant"].nunique()),
+                "fixed_order": [list(cell) for cell in fixed]}
+    if positions >= 2 and complete["participant"].nunique() >= 2:
+        sat = complete.pivot_table(index="participant", columns="position", values=column, aggfunc="first")
+        trust = complete.pivot_table(
+            index="participant", columns="position", values="mean_reported_trust", aggfunc="first"
+        ).dropna()
+        tests["participants"] = int(len(sat))
+        if sat.to_numpy().std() > 0:
+            tests["cochran_q_p"] = float(cochrans_q(sat.to_numpy(dtype=int)).pvalue)
+        if positions >= 3 and len(trust) >= 2 and trust.to_numpy().std() > 0:
+            tests["friedman_p"] = float(stats.friedmanchisquare(*trust.to_numpy().T).pvalue)
+    return tests
+
+
+def order_tables(episodes: pd.DataFrame, column: str) -> tuple[pd.DataFrame, dict, pd.DataFrame]:
+    """Position effects (per position in the participants' orders: 1 is the first) and carry-over
+    (by the previous condition)."""
     rows = []
     for position, group in episodes.groupby("position", sort=True):
         n, k = len(group), int(group[column].sum())
@@ -53,19 +82,7 @@ def order_tables(episodes: pd.DataFrame, column: str) -> tuple[pd.DataFrame, dic
             }
         )
     order = pd.DataFrame(rows)
-    tests: dict = {"cochran_q_p": None, "friedman_p": None, "participants": 0}
-    positions = episodes["position"].nunique()
-    complete = episodes.groupby("participant").filter(lambda g: g["position"].nunique() == positions)
-    if positions >= 2 and complete["participant"].nunique() >= 2:
-        sat = complete.pivot_table(index="participant", columns="position", values=column, aggfunc="first")
-        trust = complete.pivot_table(
-            index="participant", columns="position", values="mean_reported_trust", aggfunc="first"
-        ).dropna()
-        tests["participants"] = int(len(sat))
-        if sat.to_numpy().std() > 0:
-            tests["cochran_q_p"] = float(cochrans_q(sat.to_numpy(dtype=int)).pvalue)
-        if positions >= 3 and len(trust) >= 2 and trust.to_numpy().std() > 0:
-            tests["friedman_p"] = float(stats.friedmanchisquare(*trust.to_numpy().T).pvalue)
+    tests = position_tests(episodes, column)
     ordered = episodes.sort_values(["participant", "position"])
     previous = ordered.groupby("participant")["condition"].shift(1).fillna("none (first)")
     carry = ordered.assign(previous=previous)

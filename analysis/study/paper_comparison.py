@@ -11,6 +11,7 @@ import pandas as pd
 
 from trustroute.analysis import paper_figures
 from trustroute.analysis.statistics import rate_interval
+from trustroute.analysis.study.design import study_participants
 from trustroute.analysis.study_directory import spec_path
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.networks.town import load_town
@@ -21,7 +22,7 @@ def is_paper_comparable(manifest: dict, episodes: pd.DataFrame) -> tuple[bool, s
     """The paper's table applies to the paper's town, its φ1 and φ2 and 21 participants only."""
     config = manifest.get("config", {})
     reasons = []
-    participants = config.get("participants")
+    participants = study_participants(manifest, episodes)
     if participants != paper_figures.PARTICIPANTS:
         reasons.append(f"{participants} participants, the paper had {paper_figures.PARTICIPANTS}")
     default_town = load_town(None)

@@ -18,6 +18,7 @@ import pandas as pd
 from trustroute.analysis.belief_sources import declared_belief_source, default_belief_source, source_label
 from trustroute.analysis.formatting import markdown_table
 from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis, study_analysis
+from trustroute.analysis.study.design import design_text, study_participants
 from trustroute.analysis.study.display import (
     TABLE_TITLES,
     display_tables,
@@ -103,15 +104,16 @@ def _environment():
     return environment
 
 
-def study_lines(manifest: dict) -> list[str]:
+def study_lines(manifest: dict, episodes: pd.DataFrame) -> list[str]:
+    """What was run: the design (participants from the episodes when the config has no count, the
+    order as the data show it), the episodes, the config and the versions."""
     config = manifest.get("config", {})
     n_specs, n_conditions = len(config.get("specs", [])), len(config.get("conditions", []))
     failed = len(manifest.get("failed_episodes", []))
     packages = ", ".join(f"{k} {v}" for k, v in manifest.get("packages", {}).items())
     return [
-        f"{manifest.get('study')}: {config.get('participants')} participants x {n_specs} specs x "
-        f"{n_conditions} conditions, {manifest.get('engine')} engine, seed {config.get('seed')}, "
-        "counterbalanced by a Williams Latin square.",
+        f"{manifest.get('study')}: {study_participants(manifest, episodes)} participants x {n_specs} specs x "
+        f"{n_conditions} conditions, {manifest.get('engine')} engine, {design_text(manifest, episodes)}.",
         f"Episodes: {manifest.get('finished_episodes')} finished of "
         f"{manifest.get('planned_episodes')} planned; {failed} failed.",
         f"Config {manifest.get('config_path')} (hash {str(manifest.get('config_hash'))[:16]}), git "
@@ -173,7 +175,7 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
     failures = primary.manifest.get("failed_episodes", [])
     context = {
         "title": f"trustroute study report: {primary.manifest.get('study')}",
-        "study_lines": study_lines(primary.manifest),
+        "study_lines": study_lines(primary.manifest, primary.episodes),
         "warnings": fallback_only_lines(primary.manifest),
         "sources_line": sources_line(primary.belief_source, secondary.belief_source, default,
                                      declared_belief_source(primary.manifest) is not None,

@@ -171,6 +171,18 @@ def test_warm_up_and_missing_sessions_are_recorded_not_dropped(imported):
     assert "driver 4 trial 2 aware" in manifest["real_study"]["missing_sessions"]
 
 
+SESSION_POSITIONS = {"t1-aware": 0, "t1-free": 1, "t2-aware": 2, "t2-free": 3}   # docs/real_study.md
+
+
+def test_positions_are_the_study_sessions_from_0(imported):
+    """An episode's position is its place among the four study sessions, 0-based as in every study
+    (docs/dataset.md); the warm-up driven before them is no episode. The committed import agrees."""
+    for study in (imported, STUDY):
+        episodes = read_episodes(study)
+        expected = [SESSION_POSITIONS[e[4:]] for e in episodes["episode_id"]]
+        assert episodes["position"].tolist() == expected, study
+
+
 def test_analyze_reads_the_imported_study(imported, capsys):
     import json
 

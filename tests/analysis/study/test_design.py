@@ -1,0 +1,74 @@
+"""A study's design as its data show it: the packaged real study (21 participants, no seed, one
+fixed session order) is described as it was run, compared with the paper, and its order table says
+that position is confounded with the cell; a Williams study keeps its order tests."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from trustroute.analysis.study.design import fixed_order, study_participants
+from trustroute.analysis.study.display import order_test_line
+from trustroute.analysis.study.order import order_tables
+from trustroute.analysis.study.paper_comparison import is_paper_comparable
+from trustroute.analysis.study.report import study_lines
+
+REAL_STUDY = Path(__file__).resolve().parents[3] / "analysis" / "data" / "real_study" / "study"
+SESSIONS = [["phi1", "aware"], ["phi1", "free"], ["phi2", "aware"], ["phi2", "free"]]
+
+
+def _real() -> tuple[dict, pd.DataFrame]:
+    manifest = json.loads((REAL_STUDY / "manifest.json").read_text())
+    return manifest, pd.read_parquet(REAL_STUDY / "episodes.parquet")
+
+
+def test_the_real_study_is_described_as_it_was_run_and_compared_with_the_paper():
+    manifest, episodes = _real()
+    assert "participants" not in manifest["config"] and "seed" not in manifest["config"]
+    assert episodes["participant"].nunique() == 21
+    assert study_participants(manifest, episodes) == 21
+    line = study_lines(manifest, episodes)[0]
+    assert line.startswith("carla-real-study: 21 participants x 2 specs x 2 conditions"), line
+    assert "None" not in line and "no seed" in line and "Latin square" not in line
+    assert "one fixed order (phi1 aware, phi1 free, phi2 aware, phi2 free)" in line
+    comparable, note = is_paper_comparable(manifest, episodes)
+    assert comparable and note == ""
+
+
+def test_a_fixed_order_has_no_order_tests_and_says_why():
+    _, episodes = _real()
+    order, tests, _ = order_tables(episodes, "satisfied")
+    assert order["position"].tolist() == [1, 2, 3, 4]
+    for position, row in zip(range(4), order.itertuples(), strict=True):
+        at = episodes[episodes["position"] == position]
+        assert (row.n, row.satisfied) == (len(at), int(at["satisfied"].sum()))
+    assert tests["fixed_order"] == SESSIONS
+    assert tests["cochran_q_p"] is None and tests["friedman_p"] is None
+    line = order_test_line(tests)
+    assert "confounded" in line and "Cochran's Q p =" not in line
+
+
+def _williams(participants: int) -> pd.DataFrame:
+    """Participants in the rows of the 4-cell Williams square (0 1 3 2, 1 2 0 3, 2 3 1 0, 3 0 2 1)."""
+    rows = [(0, 1, 3, 2), (1, 2, 0, 3), (2, 3, 1, 0), (3, 0, 2, 1)]
+    cells = [tuple(cell) for cell in SESSIONS]
+    return pd.DataFrame([
+        {"participant": p, "position": position, "spec": cells[cell][0], "condition": cells[cell][1],
+         "satisfied": (p + cell) % 3 != 0, "mean_reported_trust": float(1 + (p * 5 + cell * 3) % 7)}
+        for p in range(participants) for position, cell in enumerate(rows[p % 4])])
+
+
+def test_a_counterbalanced_study_keeps_its_order_tests():
+    episodes = _williams(8)
+    assert fixed_order(episodes) is None
+    assert fixed_order(_williams(1)) is None          # one participant shows no common order
+    assert fixed_order(episodes[episodes["participant"] % 4 == 1]) == [
+        ("phi1", "free"), ("phi2", "aware"), ("phi1", "aware"), ("phi2", "free")]
+    _, tests, _ = order_tables(episodes, "satisfied")
+    assert "fixed_order" not in tests and tests["participants"] == 8
+    assert tests["cochran_q_p"] is not None and tests["friedman_p"] is not None
+    manifest = {"study": "s", "engine": "model", "config": {"participants": 8, "seed": 3, "specs": [1, 2],
+                                                            "conditions": [1, 2]}}
+    assert "seed 3, counterbalanced by a Williams Latin square" in study_lines(manifest, episodes)[0]
