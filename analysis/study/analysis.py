@@ -13,9 +13,10 @@ paper_comparison; shown by display) are:
   last) over participants, each p-value with its Holm-adjusted value over the pairs: the 2x2
   counts, exact McNemar p, the risk difference (Newcombe interval), the conditional odds ratio
   (exact interval), the mean difference in reported trust (BCa bootstrap over participants),
-  Wilcoxon p. The "all specs" row is per participant, not per pair: each participant's number of
-  specs satisfied under A minus under B, and their trust difference averaged over specs, so 21
-  participants count as 21, never as 42 pairs;
+  Wilcoxon p. The "all specs" row is per participant, not per pair: each participant's satisfaction
+  under A minus under B averaged over specs (the risk difference is the mean of these, with a BCa
+  interval; the sign test counts their signs), and their trust difference averaged over specs, so
+  21 participants count as 21, never as 42 pairs;
 - `repeated`: models over every episode with one group per participant: conditional logistic
   regression of satisfaction on the condition with spec fixed effects, and a mixed model of mean
   reported trust with a random intercept per participant (statsmodels);

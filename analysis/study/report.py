@@ -44,7 +44,10 @@ NOTES = [
     "Intervals for rates are exact (Clopper-Pearson) with Wilson beside them, from scipy.stats.binomtest. "
     "Risk differences of paired outcomes use Newcombe's interval for paired proportions; the conditional "
     "odds ratio is b/c of the discordant pairs with the exact interval of b/(b+c); trust differences use a "
-    "BCa bootstrap over participants (scipy.stats.bootstrap). p-values are printed in scientific notation.",
+    "BCa bootstrap over participants (scipy.stats.bootstrap, 10,000 resamples), as does the 'all specs' "
+    "satisfaction difference: a bootstrap bound moves between seeds by a standard deviation of up to "
+    "about 0.02 (measured on 14 to 21 participants), so its third decimal is not reliable. p-values are "
+    "printed in scientific notation.",
     "The 'all specs' row is per participant (the mean over specs of each participant's difference); its "
     "satisfaction test is the exact two-sided sign test of the participants ahead under A against those "
     "ahead under B (participants without a difference dropped), and the repeated-measures models use "

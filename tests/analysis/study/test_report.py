@@ -98,3 +98,20 @@ def test_analyze_reported_source_text(model_study, capsys):
 def test_analyze_not_a_study_exit_2(tmp_path, capsys):
     code, _, err = run_cli(capsys, "analyze", str(tmp_path))
     assert code == 2 and "not a finished study directory" in err
+
+
+def test_the_docs_and_notes_name_the_intervals_the_code_computes():
+    """The cells' satisfaction interval is exact and Wilson (cells.py), not a bootstrap; the all-specs
+    difference is the mean over specs, not a count of specs; a bootstrap bound says how approximate
+    it is."""
+    from pathlib import Path
+
+    from trustroute.analysis.study import analysis
+    from trustroute.analysis.study.report import NOTES
+
+    study_doc = (Path(__file__).resolve().parents[3] / "docs" / "study.md").read_text()
+    bullet = " ".join(study_doc.split("- **Analysis** (`analysis/study/`):")[1].split("\n- ")[0].split())
+    assert "satisfaction rate with its exact (Clopper–Pearson) and Wilson intervals" in bullet, bullet
+    assert "bootstrap CI" not in bullet
+    assert "number of specs" not in " ".join((analysis.__doc__ or "").split())
+    assert any("third decimal is not reliable" in note for note in NOTES)
