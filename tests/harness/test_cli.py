@@ -14,12 +14,28 @@ from trustroute.harness import cli
 RAW = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "raw"
 
 
-def test_an_output_directory_that_is_a_file_is_named_in_the_fix(tmp_path, capsys):
+def test_an_output_directory_that_is_a_file_is_named_in_the_fix(tmp_path, monkeypatch, capsys):
+    """A folder made under a file (the file system's own ENOTDIR, unforeseen by the command): the fix
+    names the file in the way, not the folder, and says nothing of disk space."""
+    blocker = tmp_path / "afile"
+    blocker.write_text("a file, not a folder\n")
+
+    @click.command("mkdir")
+    def make_folder() -> None:
+        (blocker / "sub").mkdir()
+
+    monkeypatch.setattr(cli.LazyGroup, "get_command", lambda self, ctx, name: make_folder)
+    code, _, err = run_cli(capsys, "mkdir")
+    assert_one_line_error(code, err, str(blocker / "sub"), f"{blocker} must be a directory, not a file")
+    assert "disk space" not in err
+    assert blocker.read_text() == "a file, not a folder\n"
+
+
+def test_import_carla_logs_refuses_an_out_that_is_a_file(tmp_path, capsys):
     blocker = tmp_path / "afile"
     blocker.write_text("a file, not a folder\n")
     code, _, err = run_cli(capsys, "import", "carla-logs", str(RAW), "--out", str(blocker))
-    assert_one_line_error(code, err, str(blocker), f"{blocker} must be a directory, not a file")
-    assert "disk space" not in err
+    assert_one_line_error(code, err, str(blocker), "not a directory")
     assert blocker.read_text() == "a file, not a folder\n"
 
 
