@@ -119,10 +119,18 @@ def study_lines(manifest: dict, episodes: pd.DataFrame) -> list[str]:
         f"{n_conditions} conditions, {manifest.get('engine')} engine, {design_text(manifest, episodes)}.",
         f"Episodes: {manifest.get('finished_episodes')} finished of "
         f"{manifest.get('planned_episodes')} planned; {failed} failed.",
-        f"Config {manifest.get('config_path')} (hash {str(manifest.get('config_hash'))[:16]}), git "
-        f"{manifest.get('git_revision')}, created {manifest.get('created_utc')}.",
+        f"{config_text(manifest)}, git {manifest.get('git_revision')}, "
+        f"created {manifest.get('created_utc')}.",
         f"Packages: {packages}",
     ]
+
+
+def config_text(manifest: dict) -> str:
+    """The config a study ran from, or where its episodes came from when no config made them (an
+    import of logs records its source instead)."""
+    if manifest.get("config_path") is None:
+        return f"No config: episodes imported from {manifest.get('source') or 'logs'}"
+    return f"Config {manifest['config_path']} (hash {str(manifest.get('config_hash'))[:16]})"
 
 
 SENSITIVITY_LINE = ("Each comparison's satisfaction difference (A − B, per spec: Newcombe's interval; all "

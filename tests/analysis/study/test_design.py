@@ -32,6 +32,8 @@ def test_the_real_study_is_described_as_it_was_run_and_compared_with_the_paper()
     line = study_lines(manifest, episodes)[0]
     assert line.startswith("carla-real-study: 21 participants x 2 specs x 2 conditions"), line
     assert "None" not in line and "no seed" in line and "Latin square" not in line
+    assert not any("None" in later for later in study_lines(manifest, episodes)[1:3])
+    assert "episodes imported from trust_aware_hrc_carla_sim" in study_lines(manifest, episodes)[2]
     assert "one fixed order (phi1 aware, phi1 free, phi2 aware, phi2 free)" in line
     comparable, note = is_paper_comparable(manifest, episodes)
     assert comparable and note == ""
