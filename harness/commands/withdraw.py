@@ -7,13 +7,13 @@ The study directory's lock is taken first, so a running `trustroute live` on it 
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
 import click
 
 from trustroute.harness.commands.options import UsageFix
+from trustroute.harness.commands.output import emit, json_option, with_paths
 
 PARTICIPANT = re.compile(r"p?([0-9]{1,9})")
 
@@ -40,14 +40,20 @@ class Participant(click.ParamType):
 @click.option("--reason", default="", help="Why (recorded in the audit entry).")
 @click.option("--by", default=None, help="Who withdraws them (default: the user running the command).")
 @click.option("--readmit", is_flag=True, help="Instead: let a withdrawn participant take part again.")
-@click.option("--json", "as_json", is_flag=True, help="Print the audit entry as JSON.")
+@json_option
 def withdraw(study_dir: str, participant: int, reason: str, by: str | None, readmit: bool,
              as_json: bool) -> None:
     """Delete PARTICIPANT's drives, warm-ups, answers and rows from the live study STUDY.
 
     PARTICIPANT is the participant's id as in the dataset (p00003) or its index (3)."""
     from trustroute.core.errors import InputError
-    from trustroute.harness.live.withdraw import readmit_participant, withdraw_participant
+    from trustroute.harness.live.withdraw import (
+        AUDIT,
+        LIVE_DIR,
+        REGISTRY,
+        readmit_participant,
+        withdraw_participant,
+    )
     from trustroute.harness.study.runner import study_lock
 
     path = Path(study_dir)
@@ -56,10 +62,12 @@ def withdraw(study_dir: str, participant: int, reason: str, by: str | None, read
     with study_lock(path):
         entry = (readmit_participant(path, participant, by) if readmit
                  else withdraw_participant(path, participant, by, reason))
-    if as_json:
-        click.echo(json.dumps(entry, indent=1))
-    elif readmit:
-        click.echo(f"participant {participant} readmitted (a new link from the console lets them in)")
+    audit = path / LIVE_DIR / AUDIT
+    # the audit entry appended, the registry rewritten; a withdrawal also consolidates the tables again
+    written = {"audit": audit, "registry": path / LIVE_DIR / REGISTRY, "study": None if readmit else path}
+    if readmit:
+        line = f"participant {participant} readmitted (a new link from the console lets them in)"
     else:
-        click.echo(f"participant {participant} withdrawn: {len(entry['removed'])} file(s) removed, the "
-                   f"dataset consolidated without them; audit entry in {path / 'live' / 'withdrawals.jsonl'}")
+        line = (f"participant {participant} withdrawn: {len(entry['removed'])} file(s) removed, the "
+                f"dataset consolidated without them; audit entry in {audit}")
+    emit(as_json, with_paths(entry, written), [line])

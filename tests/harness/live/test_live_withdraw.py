@@ -216,3 +216,17 @@ def test_a_withdrawn_participants_label_is_gone_at_once(tmp_path):
             assert "Ada" not in client.get("/api/participants", headers=headers).text
     finally:
         study.close()
+
+
+def test_withdraw_json_is_the_audit_entry_with_the_files_it_wrote(tmp_path, capsys):
+    study = _unconsolidated(tmp_path, f"{_attempt(0)}\n{_attempt(1)}\n")
+    code, out, err = run_cli(capsys, "withdraw", str(study), "p00000", "--json")
+    assert code == 0, err
+    answer = json.loads(out)
+    audit = study / "live" / "withdrawals.jsonl"
+    assert answer["participant"] == 0 and answer == {**json.loads(audit.read_text()), "paths": answer["paths"]}
+    assert answer["paths"] == {"audit": str(audit), "registry": str(study / "live" / "participants.json"),
+                               "study": str(study)}
+    code, out, err = run_cli(capsys, "withdraw", str(study), "0", "--readmit", "--json")
+    assert code == 0, err
+    assert set(json.loads(out)["paths"]) == {"audit", "registry"}
