@@ -19,7 +19,7 @@ import click
 from trustroute.app.peers import paynt_comparison, storm_comparison
 from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
-from trustroute.harness.commands.output import emit
+from trustroute.harness.commands.output import emit, json_flag
 
 
 @dataclass(frozen=True)
@@ -42,7 +42,7 @@ class OurSide:
     max_nodes: int = option(
         "--max-nodes", type=click.IntRange(min=1), default=200_000, show_default=True,
         help="Our belief nodes per level; beyond, the least likely are bounded, not expanded.")
-    as_json: bool = option("--json", is_flag=True, help="Print one JSON object.")
+    as_json: bool = json_flag()
 
 
 def peer_time_limit(help: str) -> Any:

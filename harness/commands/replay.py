@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from trustroute.app.engines import ENGINES
-from trustroute.harness.commands.output import with_paths
+from trustroute.harness.commands.output import json_option, with_paths
 
 VIEWER_PORT, DATA_PORT = 9090, 9876
 
@@ -48,7 +48,7 @@ def viewer_hint(rrd: Path) -> str:
 )
 @click.option("--no-rrd", is_flag=True, help="Only check the replay; write no recording.")
 @click.option("--gui", is_flag=True, help="Show the episode in sumo-gui (needs a display).")
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@json_option
 def replay(
     study_dir: str, episode_id: str, rrd_path: str | None, no_rrd: bool, gui: bool, as_json: bool
 ) -> None:

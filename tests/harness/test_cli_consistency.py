@@ -10,7 +10,9 @@ from tests.cli import run_cli
 
 RESULT_COMMANDS = [("net", "build"), ("spec", "check"), ("model",), ("synth",), ("baseline",),
                    ("evaluate",), ("run",), ("study",), ("analyze",), ("fit",), ("demo",),
-                   ("import", "carla-logs"), ("export",)]
+                   ("import", "carla-logs"), ("export",), ("withdraw",), ("replay",), ("plan",),
+                   ("town", "import"), ("town", "roads"), ("population", "sample"), ("population", "show"),
+                   ("peer", "storm"), ("peer", "paynt")]
 OUT_IS = {("synth",): "FILE", ("fit",): "FILE", ("run",): "DIRECTORY", ("study",): "DIRECTORY",
           ("demo",): "DIRECTORY", ("net", "build"): "DIRECTORY", ("import", "carla-logs"): "DIRECTORY",
           ("export",): "DIRECTORY"}

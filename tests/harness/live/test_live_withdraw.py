@@ -224,7 +224,8 @@ def test_withdraw_json_is_the_audit_entry_with_the_files_it_wrote(tmp_path, caps
     assert code == 0, err
     answer = json.loads(out)
     audit = study / "live" / "withdrawals.jsonl"
-    assert answer["participant"] == 0 and answer == {**json.loads(audit.read_text()), "paths": answer["paths"]}
+    entry = json.loads(audit.read_text())
+    assert answer["participant"] == 0 and answer == {**entry, "paths": answer["paths"]}
     assert answer["paths"] == {"audit": str(audit), "registry": str(study / "live" / "participants.json"),
                                "study": str(study)}
     code, out, err = run_cli(capsys, "withdraw", str(study), "0", "--readmit", "--json")
