@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TypeGuard, TypeVar
 
 from trustroute.core import defaults
-from trustroute.core.cache import POLICIES
+from trustroute.core.cache import POLICIES, entry_lock_path
 from trustroute.core.cache import cache_dir as cache_dir_of
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import file_lock
@@ -126,7 +126,7 @@ def aware_policy(town: Town, driver: DriverModel, spec: Spec, cache_dir: str | P
         policy = _cached_policy(path, load, notice)
         if policy is not None:
             return policy
-    with file_lock(path.with_name(path.name + ".lock"), "policy cache entry", wait=True,
+    with file_lock(entry_lock_path(path), "policy cache entry", wait=True,
                    fix="pass a writable --cache-dir"):
         policy = _cached_policy(path, load, notice)  # filled while we waited?
         if policy is not None:
@@ -263,7 +263,7 @@ def population_policy(town: Town, population: DriverPopulation, spec: Spec, obje
         found = cached()
         if found is not None:
             return found
-    with file_lock(path.with_name(path.name + ".lock"), "policy cache entry", wait=True,
+    with file_lock(entry_lock_path(path), "policy cache entry", wait=True,
                    fix="pass a writable --cache-dir"):
         found = cached()
         if found is not None:

@@ -245,3 +245,16 @@ def test_cli_synth_clusters_on_writes_a_cluster_policy_that_evaluates_to_at_leas
     code, _, err = run_cli(capsys, "synth", "specs/phi1.toml", "--clusters", "sometimes",
                            "--out", str(out_path))
     assert code == 2 and "--clusters" in err
+
+
+def test_an_aware_policy_synthesized_into_a_named_cache_leaves_only_policy_files(
+        town, driver, phi1_result, tmp_path, monkeypatch):
+    """The entry's lock is kept in trustroute's own cache (core/cache.py entry_lock_path), not in a
+    folder the user named for the policies."""
+    spec, result = phi1_result
+    monkeypatch.setattr("trustroute.policies.resolve.synthesize", lambda *a, **k: result)
+    named = tmp_path / "policies"
+    aware = resolve_policy("aware", town, driver, spec, named)
+    assert aware.table.rows == result.policy.table.rows
+    written = sorted(path.name for path in named.rglob("*") if path.is_file())
+    assert written and not any(name.endswith(".lock") for name in written), written
