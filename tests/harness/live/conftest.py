@@ -54,3 +54,19 @@ def serving(study):
         server.should_exit = True
         thread.join(5)
         sock.close()
+
+
+def experimenter(study) -> dict:
+    """The experimenter's Authorization header for `study`."""
+    return {"Authorization": f"Bearer {study.experimenter_token}"}
+
+
+@contextlib.contextmanager
+def consenting_participant(client, study):
+    """A new participant of `study` whose websocket on `client` (a TestClient of its app) has sent
+    its consent: yields (the socket, the participant's Authorization header, for reconnecting)."""
+    token = client.post("/api/participants", json={}, headers=experimenter(study)).json()["token"]
+    participant = {"Authorization": f"Bearer {token}"}
+    with client.websocket_connect("/ws", headers=participant) as station:
+        station.send_json({"type": "consent", "agree": True})
+        yield station, participant

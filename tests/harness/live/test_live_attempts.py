@@ -20,7 +20,7 @@ from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 
-from .conftest import serving, tiny_config
+from .conftest import consenting_participant, experimenter, serving, tiny_config
 from .test_live_episode import receive_until
 
 START = {"event": "start", "utc": "2026-01-01T00:00:00Z", "participant": 0, "episode_id": "p00000-phi1-free",
@@ -33,10 +33,8 @@ def leave_mid_trial(study: LiveStudy) -> str:
     """A participant created, who consents, starts their first trial and goes away: it becomes
     incomplete. Its episode id."""
     with TestClient(live_app(study)) as client:
-        headers = {"Authorization": f"Bearer {study.experimenter_token}"}
-        token = client.post("/api/participants", json={}, headers=headers).json()["token"]
-        with client.websocket_connect("/ws", headers={"Authorization": f"Bearer {token}"}) as station:
-            station.send_json({"type": "consent", "agree": True})
+        headers = experimenter(study)
+        with consenting_participant(client, study) as (station, _):
             receive_until(station, lambda m: m.get("phase") == "ready")
             station.send_json({"type": "start"})
             first = receive_until(station, lambda m: m["type"] == "episode_start")["episode_id"]

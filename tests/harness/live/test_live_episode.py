@@ -21,7 +21,7 @@ from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions, warm_up_task
 from trustroute.harness.study.parts import read_part
 
-from .conftest import tiny_config
+from .conftest import consenting_participant, experimenter, tiny_config
 from .test_live_manual import play_in
 
 pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
@@ -123,11 +123,8 @@ def test_disconnect_pauses_resume_continues_and_the_experimenter_aborts(tmp_path
     study = LiveStudy(config, tmp_path / "study", ServerOptions(pace=1.0)).open()
     try:
         with TestClient(live_app(study)) as client:
-            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
-            token = client.post("/api/participants", json={}, headers=headers).json()["token"]
-            participant = {"Authorization": f"Bearer {token}"}
-            with client.websocket_connect("/ws", headers=participant) as station:
-                station.send_json({"type": "consent", "agree": True})
+            headers = experimenter(study)
+            with consenting_participant(client, study) as (station, participant):
                 receive_until(station, lambda m: m.get("phase") == "ready")
                 station.send_json({"type": "start", "trust": 5})
                 receive_until(station, lambda m: m["type"] == "frame")
@@ -156,10 +153,8 @@ def test_no_reconnection_in_time_makes_the_episode_incomplete(tmp_path):
     study = LiveStudy(config, tmp_path / "study", ServerOptions(pace=1.0, resume_within=0.3)).open()
     try:
         with TestClient(live_app(study)) as client:
-            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
-            token = client.post("/api/participants", json={}, headers=headers).json()["token"]
-            with client.websocket_connect("/ws", headers={"Authorization": f"Bearer {token}"}) as station:
-                station.send_json({"type": "consent", "agree": True})
+            headers = experimenter(study)
+            with consenting_participant(client, study) as (station, _):
                 receive_until(station, lambda m: m.get("phase") == "ready")
                 station.send_json({"type": "start"})
                 receive_until(station, lambda m: m["type"] == "frame")

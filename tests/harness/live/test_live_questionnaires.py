@@ -17,7 +17,7 @@ from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 from trustroute.harness.study.config import load_study_config
 
-from .conftest import TINY, serving
+from .conftest import TINY, consenting_participant, serving
 from .test_live_episode import receive_until
 
 pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
@@ -53,10 +53,7 @@ def test_questionnaires_are_asked_where_placed_checked_and_stored(tmp_path):
     study = LiveStudy(config, study_dir, ServerOptions(pace=1000.0, warm_up=False)).open()
     try:
         with TestClient(live_app(study)) as client:
-            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
-            token = client.post("/api/participants", json={}, headers=headers).json()["token"]
-            with client.websocket_connect("/ws", headers={"Authorization": f"Bearer {token}"}) as station:
-                station.send_json({"type": "consent", "agree": True})
+            with consenting_participant(client, study) as (station, _):
                 state = receive_until(station, lambda m: m.get("phase") == "questionnaire")
                 shown = state["questionnaire"]
                 assert (shown["name"], shown["placement"], shown["trial"]) == ("nasa_tlx", "before", None)
@@ -117,10 +114,7 @@ def test_an_answer_off_the_scale_is_malformed_and_the_socket_stays(tmp_path):
     study = LiveStudy(questionnaire_config(tmp_path), tmp_path / "study", ServerOptions(warm_up=False)).open()
     try:
         with TestClient(live_app(study)) as client:
-            headers = {"Authorization": f"Bearer {study.experimenter_token}"}
-            token = client.post("/api/participants", json={}, headers=headers).json()["token"]
-            with client.websocket_connect("/ws", headers={"Authorization": f"Bearer {token}"}) as station:
-                station.send_json({"type": "consent", "agree": True})
+            with consenting_participant(client, study) as (station, _):
                 receive_until(station, lambda m: m.get("phase") == "questionnaire")
                 rest = ',"physical":0,"temporal":0,"performance":0,"effort":0,"frustration":0}}'
                 for mental in ("1" + "0" * 400, "50.0000000001"):
