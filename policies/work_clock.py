@@ -99,12 +99,17 @@ def work_clock(work_limit: int | None, time_limit: float) -> Iterator[float]:
         _CLOCK.reset(token)
 
 
-def stopped_by(converged: bool, clock: WorkClock | None, node_budget: bool = False) -> str:
+def stopped_by(converged: bool, clock: WorkClock | None, node_budget: bool = False,
+               cluster_cap: bool = False) -> str:
     """Which limit ended a synthesis: "convergence" (the gap reached tau), "node budget" (its
-    search stopped at its node budget, `node_budget`, before any limit), "work limit" (its work
-    limit, the wall clock never reached) or "time limit"."""
+    search stopped at its node budget, `node_budget`, before any limit), "cluster cap" (its bounds
+    are its cluster policies' at their largest cap, `cluster_cap`, unless a run under a work limit
+    reached the wall clock, whose stop then depends on the machine), "work limit" (its work limit,
+    the wall clock never reached) or "time limit"."""
     if converged:
         return "convergence"
     if node_budget:
         return "node budget"
+    if cluster_cap and (clock is None or not clock.timed_out):
+        return "cluster cap"
     return "work limit" if clock is not None and not clock.timed_out else "time limit"

@@ -51,7 +51,7 @@ from trustroute.policies.synthesis.completion_value import (
     ordered_fill,
     outcome_table,
 )
-from trustroute.policies.synthesis.result import ClusterAttempt
+from trustroute.policies.synthesis.result import ClusterAttempt, ClusterRun, SynthesisStats
 from trustroute.policies.synthesis.upper_bound import acceptance_distance
 from trustroute.policies.work_clock import now as clock_now
 from trustroute.policies.work_clock import spend
@@ -354,3 +354,14 @@ def best_cluster_solution(tables: ProductTables, symbols: ObservationSymbols, ro
             best = solution
         previous = solution
     return best, upper, tried
+
+
+def reached_cluster_cap(stats: object, lower: float, upper: float) -> bool:
+    """Whether a synthesis' bounds (`lower`, `upper`) are those of its cluster policies at their
+    largest cap (CLUSTER_CAPS): the search before them had looser bounds, so a longer time limit,
+    which only lengthens that search, need not move them."""
+    if not isinstance(stats, SynthesisStats) or not stats.runs:
+        return False
+    last = stats.runs[-1]
+    return (isinstance(last, ClusterRun) and last.cluster_cap == CLUSTER_CAPS[-1]
+            and (last.lower, last.upper) == (lower, upper))

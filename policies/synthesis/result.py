@@ -196,7 +196,8 @@ class SynthesisResult(Generic[PolicyT, StatsT]):
     """lower <= Pr_max <= upper; lower is a certified lower bound of the value of `policy`.
 
     horizon: the junction horizon solved for (None: unbounded); stats: how the bounds were obtained.
-    stopped_by: what ended the call, "convergence", "node budget", "work limit" or "time limit"
+    stopped_by: what ended the call, "convergence", "node budget", "cluster cap", "work limit" or
+        "time limit"
     (policies/work_clock.py, `stopped_by`; None where the caller did not say).
     """
 

@@ -22,6 +22,7 @@ from trustroute.policies.routing.decision_tables import fallback_warning as fall
 from trustroute.policies.routing.files import array_path, save_policy
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS, reached_cluster_cap
 from trustroute.policies.synthesis.population import (
     PopulationSynthesis,
     TypeValue,
@@ -81,8 +82,9 @@ def synthesize_single(problem: Problem, settings: SynthesisSettings,
         with synthesis_progress(f"synthesizing {problem.spec.name}", settings.progress) as on_iteration:
             result = synthesize_problem(problem, replace(settings, time_limit=limit),
                                         on_iteration=on_iteration)
-    result = replace(result, stopped_by=stopped_by(result.stats.converged, clock,
-                                                   reached_node_budget(result.stats, settings.node_budget)))
+    result = replace(result, stopped_by=stopped_by(
+        result.stats.converged, clock, reached_node_budget(result.stats, settings.node_budget),
+        reached_cluster_cap(result.stats, result.lower, result.upper)))
     if out is not None:
         save_policy(result, out, problem.town, problem.driver, problem.spec)
     return result
@@ -163,7 +165,11 @@ def policy_arrays(path: str | Path) -> Path:
 
 def stop_notes(result: SynthesisResult) -> list[str]:
     """What a reader should know of how the run ended: a search stopped at its node budget, which
-    more time would not have moved."""
+    more time would not have moved; bounds that are the cluster policies' at their largest cap."""
+    if result.stopped_by == "cluster cap":
+        return [f"the bounds are the cluster policies' at their largest cap ({CLUSTER_CAPS[-1]} clusters "
+                "per junction, road and automaton state), tighter than the search's before them: a longer "
+                "--time-limit lengthens that search and need not move them"]
     if result.stopped_by != "node budget":
         return []
     nodes = max(run.nodes for run in result.stats.runs if isinstance(run, SearchRun))

@@ -256,3 +256,36 @@ def test_best_cluster_solution_stops_at_tau(driver):
     best, upper, tried = best_cluster_solution(tables, observation_symbols(pomdp), [tables.initial_q],
                                                horizon, 1.0, time.perf_counter() + FAR)
     assert len(tried) == 1 and best is not None and upper - best.lower <= 1.0
+
+
+def _stats_ending_in_clusters(cap: int, lower: float, upper: float):
+    from trustroute.policies.synthesis.result import ClusterAttempt, ClusterRun, SynthesisStats
+
+    run = ClusterRun(horizon=40, lower=lower, upper=upper, cluster_cap=cap, clusters=10, policy_rows=5,
+                     cluster_runs=(ClusterAttempt(cap=cap, lower=lower, upper=upper),),
+                     lower_strict_labels=lower)
+    return SynthesisStats(belief_rule="bayes", converged=False, tau=1e-3, runs=(run,), policy_rows=5,
+                          lower_strict_labels=lower)
+
+
+def test_bounds_of_the_largest_cluster_cap_are_said_to_end_the_run():
+    """"cluster cap" only when the returned bounds are the cluster policies' at the largest cap: a
+    smaller cap, or bounds of another run, leave the stop to the clocks; convergence and the node
+    budget come first, and a work-limited run that reached the wall clock says so."""
+    from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS, reached_cluster_cap
+    from trustroute.policies.work_clock import WorkClock, stopped_by
+
+    largest = _stats_ending_in_clusters(CLUSTER_CAPS[-1], 0.99, 0.999)
+    assert reached_cluster_cap(largest, 0.99, 0.999)
+    assert not reached_cluster_cap(largest, 0.995, 0.999)          # L from another run
+    assert not reached_cluster_cap(_stats_ending_in_clusters(CLUSTER_CAPS[-2], 0.99, 0.999), 0.99, 0.999)
+    assert not reached_cluster_cap(None, 0.99, 0.999)
+    assert stopped_by(False, None, cluster_cap=True) == "cluster cap"
+    assert stopped_by(False, None, node_budget=True, cluster_cap=True) == "node budget"
+    assert stopped_by(True, None, cluster_cap=True) == "convergence"
+    assert stopped_by(False, None) == "time limit"
+    # under a work limit, a run that reached the wall clock depends on the machine: that is said
+    late = WorkClock(limit=10, wall_deadline=0.0, timed_out=True)
+    in_time = WorkClock(limit=10, wall_deadline=1e18)
+    assert stopped_by(False, late, cluster_cap=True) == "time limit"
+    assert stopped_by(False, in_time, cluster_cap=True) == "cluster cap"
