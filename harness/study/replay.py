@@ -12,7 +12,9 @@ is an InputError (one line, exit 2) naming the first road and column that differ
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -22,6 +24,7 @@ import pandas as pd
 
 from trustroute.app.engines import ENGINES
 from trustroute.core.errors import InputError
+from trustroute.core.output_files import fsync_directory, temp_path, write_error
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.manifest import MANIFEST_FILE, package_versions
@@ -222,18 +225,40 @@ def replay_episode(
 
         check_display()
         sumo_config = SumoConfig(gui=True)
-    record = run_planned_episode(study_context(config), task, rrd_path=rrd_path, sumo_config=sumo_config)
-    difference = compare_roads(logged, record.roads)
-    if difference is not None:
-        from trustroute.harness.study.manifest import git_revision
-
-        made, now = manifest.get("git_revision", "unknown"), git_revision()
-        if made != now:
-            difference += f" (the study was made at git {made}, this is {now})"
-        raise InputError(
-            str(study_dir),
-            episode_id,
-            f"the replay does not reproduce the log: {difference}",
-            "replay with the code and packages the study was made with (see its manifest)",
-        )
+    # the recording goes to a temporary file, moved into place only once the replay matches the
+    # log: a failed replay leaves an existing recording as it was and creates none
+    temp = None if rrd_path is None else temp_path(Path(rrd_path))
+    try:
+        record = run_planned_episode(study_context(config), task, rrd_path=temp, sumo_config=sumo_config)
+        difference = compare_roads(logged, record.roads)
+        if difference is not None:
+            raise not_reproduced(study_dir, episode_id, manifest, difference)
+        if temp is not None and rrd_path is not None:
+            move_into_place(temp, Path(rrd_path))
+    finally:
+        if temp is not None:
+            with contextlib.suppress(OSError):
+                temp.unlink()
     return Replay(task=task, config=config, record=record, logged_roads=logged, rrd_path=rrd_path)
+
+
+def move_into_place(temp: Path, path: Path) -> None:
+    try:
+        os.replace(temp, path)
+    except OSError as exc:
+        raise write_error(path, "recording", exc) from None
+    fsync_directory(path.parent)
+
+
+def not_reproduced(study_dir: Path, episode_id: str, manifest: dict, difference: str) -> InputError:
+    from trustroute.harness.study.manifest import git_revision
+
+    made, now = manifest.get("git_revision", "unknown"), git_revision()
+    if made != now:
+        difference += f" (the study was made at git {made}, this is {now})"
+    return InputError(
+        str(study_dir),
+        episode_id,
+        f"the replay does not reproduce the log: {difference}",
+        "replay with the code and packages the study was made with (see its manifest)",
+    )

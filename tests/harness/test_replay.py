@@ -86,9 +86,8 @@ def test_replay_of_a_study_made_with_other_code_fails(sumo_study, tmp_path, caps
     assert err.count("\n") == 1 and "made with trustroute 0.0.1" in err and "Traceback" not in err
 
 
-@pytest.mark.slow
-def test_replay_that_differs_from_the_log_fails(sumo_study, tmp_path, capsys):
-    study = _copy(sumo_study, tmp_path)
+def _tamper_trust(study, episode_id, index):
+    """Change the logged trust after road `index` of `episode_id` by one level."""
     from trustroute.core.dataset import (
         ROADS_FILE,
         ROADS_SCHEMA,
@@ -98,12 +97,31 @@ def test_replay_that_differs_from_the_log_fails(sumo_study, tmp_path, capsys):
     )
 
     roads = read_roads(study)
-    row = roads.index[(roads["episode_id"] == "p00000-phi2-free") & (roads["index"] == 2)][0]
+    row = roads.index[(roads["episode_id"] == episode_id) & (roads["index"] == index)][0]
     logged = int(roads.loc[row, "trust_after"])
     roads.loc[row, "trust_after"] = logged + 1 if logged < 7 else logged - 1
     write_table(table_from_frame(roads, ROADS_SCHEMA), study / ROADS_FILE)
+
+
+@pytest.mark.slow
+def test_replay_that_differs_from_the_log_fails(sumo_study, tmp_path, capsys):
+    study = _copy(sumo_study, tmp_path)
+    _tamper_trust(study, "p00000-phi2-free", 2)
     code, _, err = run_cli(capsys, "replay", str(study), "p00000-phi2-free", "--no-rrd")
     assert code == 2 and "does not reproduce the log: road 2 trust_after" in err
+
+
+@pytest.mark.slow
+def test_failed_replay_keeps_the_recording_and_writes_none(sumo_study, tmp_path, capsys):
+    study = _copy(sumo_study, tmp_path)
+    recordings = study / "recordings"
+    recorded = (recordings / "p00001-phi1-free.rrd").read_bytes()
+    for episode_id in ("p00001-phi1-free", "p00000-phi2-free"):   # with and without a recording
+        _tamper_trust(study, episode_id, 2)
+        code, _, err = run_cli(capsys, "replay", str(study), episode_id)
+        assert code == 2 and "does not reproduce the log: road 2 trust_after" in err
+    assert sorted(p.name for p in recordings.iterdir()) == ["p00001-phi1-free.rrd"]
+    assert (recordings / "p00001-phi1-free.rrd").read_bytes() == recorded
 
 
 def test_replay_bad_input(tmp_path, capsys, monkeypatch):
