@@ -15,8 +15,9 @@ need not repeat exactly).
 
 The manifest's `config` names the copies by paths relative to the study directory, and its
 `inputs` lists each copy's path and SHA-256 with the file it was copied from (provenance, never
-read). `relocated_config` turns the manifest's config into absolute paths in the directory where
-the study lies; `verify_inputs` checks every copy against its recorded hash.
+read), and the SHA-256 of the config itself (`config_sha256`). `relocated_config` turns the
+manifest's config into absolute paths in the directory where the study lies; `verify_inputs`
+checks every copy, and the manifest's config, against its recorded hash.
 """
 
 from __future__ import annotations
@@ -146,7 +147,13 @@ def store_inputs(study_dir: Path, context: StudyContext) -> tuple[dict, dict]:
     recorded["output"] = None   # the directory is wherever it is copied to
     if Path(config.source_path).is_file():
         recorded["source_path"] = _store_file(study_dir, record, config.source_path)
-    return recorded, {"dir": INPUTS_DIR, "files": record}
+    return recorded, {"dir": INPUTS_DIR, "files": record, "config_sha256": config_sha256(recorded)}
+
+
+def config_sha256(config: dict) -> str:
+    """SHA-256 of the manifest's config (canonical JSON): its settings are no stored file, so the
+    manifest records their hash beside the stored files' hashes."""
+    return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()
 
 
 def relocated_config(config: dict, study_dir: Path) -> dict:
@@ -183,3 +190,7 @@ def verify_inputs(manifest: dict, study_dir: Path) -> None:
             raise InputError(str(study_dir), relative, "a stored input of the study changed since it was "
                              "run (its SHA-256 differs from the manifest's)",
                              "restore the study directory from its original copy")
+    recorded = (manifest.get("inputs") or {}).get("config_sha256")
+    if recorded is not None and config_sha256(manifest.get("config") or {}) != recorded:
+        raise InputError(str(study_dir / MANIFEST_FILE), "config", "the manifest's config changed since the "
+                         "study was run (its SHA-256 differs from inputs.config_sha256)", MANIFEST_FIX)

@@ -111,6 +111,26 @@ def _reported(reports: pa.ChunkedArray) -> tuple[float | None, int]:
     return (pc.mean(reports).as_py() if count else None), count
 
 
+def episode_row(task: EpisodeTask, summary: dict, tables: dict[str, pa.Table],
+                types: list[str] | None) -> dict:
+    """The episodes-table row of the episode `task` from its summary and its roads and incidents
+    tables; `types` are the participants' driver types (`participant_types`), None without them."""
+    mean_reported, reports = _reported(tables["roads"].column("reported_trust"))
+    return {
+        "episode_id": task.episode_id,
+        "participant": task.participant,
+        "position": task.position,
+        "spec": task.spec,
+        "condition": task.condition,
+        "seed": task.seed,
+        **{k: v for k, v in summary.items() if k != "episode_id"},
+        "mean_reported_trust": mean_reported,
+        "reports": reports,
+        "driver_type": None if types is None else types[task.participant],
+        **episode_measures(tables["incidents"].to_pylist()),
+    }
+
+
 def consolidate(
     study_dir: Path,
     context: StudyContext,
@@ -135,24 +155,8 @@ def consolidate(
         part = parts.get(task.episode_id)
         if part is None:
             continue
-        summary, table = part.summary, part.tables["roads"]
-        mean_reported, reports = _reported(table.column("reported_trust"))
-        episode_rows.append(
-            {
-                "episode_id": task.episode_id,
-                "participant": task.participant,
-                "position": task.position,
-                "spec": task.spec,
-                "condition": task.condition,
-                "seed": task.seed,
-                **{k: v for k, v in summary.items() if k != "episode_id"},
-                "mean_reported_trust": mean_reported,
-                "reports": reports,
-                "driver_type": None if types is None else types[task.participant],
-                **episode_measures(part.tables["incidents"].to_pylist()),
-            }
-        )
-        roads_tables.append(table)
+        episode_rows.append(episode_row(task, part.summary, part.tables, types))
+        roads_tables.append(part.tables["roads"])
         if part.tables["kinematics"].num_rows:
             kinematics_tables.append(part.tables["kinematics"])
         if part.tables["incidents"].num_rows:

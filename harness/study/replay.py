@@ -6,8 +6,9 @@ study whose inputs or code differ from what is installed now (the stored inputs'
 study made before they were stored the config's content hash; the versions of trustroute and of
 the packages the episodes depend on), re-runs the planned episode
 through the same function the study runner uses (runner.run_planned_episode), and compares the
-replayed roads and trust with the logged ones, column by column (REPLAY_COLUMNS). Any difference
-is an InputError (one line, exit 2) naming the first road and column that differ.
+replayed roads and the episode's summary row with the logged ones, column by column
+(REPLAY_COLUMNS, EPISODE_COLUMNS). Any difference is an InputError (one line, exit 2) naming the
+first road and column that differ.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from trustroute.app.engines import ENGINES
+from trustroute.core.dataset import EPISODES_SCHEMA, ROADS_SCHEMA
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import fsync_directory, temp_path, write_error
 from trustroute.harness.study.config import StudyConfig
@@ -33,16 +35,14 @@ from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 if TYPE_CHECKING:
     from trustroute.harness.simulation.episode import EpisodeRecord
 
-# What must match exactly between the logged and the replayed episode.
-REPLAY_COLUMNS: tuple[str, ...] = (
-    "directed_road",
-    "incident",
-    "takeover",
-    "trust_before",
-    "trust_after",
-    "reported_trust",
-    "dfa_state",
-)
+# The logged columns a replay reproduces, compared on every road and in the episode's summary row:
+# exactly, but the beliefs, floats after many Bayes updates, to BELIEF_TOLERANCE. Not compared:
+# `episode_id` (the rows are the episode's) and `wall_seconds` (the machine's time, never the same).
+BELIEF_COLUMNS: tuple[str, ...] = ("belief_before", "belief_after")
+BELIEF_TOLERANCE = 1e-12
+REPLAY_COLUMNS: tuple[str, ...] = tuple(name for name in ROADS_SCHEMA.names if name != "episode_id")
+EPISODE_COLUMNS: tuple[str, ...] = tuple(name for name in EPISODES_SCHEMA.names
+                                         if name not in ("episode_id", "wall_seconds"))
 # Packages whose version changes what an episode does: a different one means different code.
 EPISODE_PACKAGES: tuple[str, ...] = ("trustroute", "numpy", "scipy", "eclipse-sumo", "libsumo", "sumolib")
 
@@ -158,8 +158,16 @@ def _equal(a: Cell, b: Cell) -> bool:
     return bool(a == b)
 
 
+def _same(column: str, a: object, b: object) -> bool:
+    if column in BELIEF_COLUMNS:
+        return bool(np.allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float),
+                                rtol=0, atol=BELIEF_TOLERANCE))
+    return _equal(a, b)  # type: ignore[arg-type]
+
+
 def compare_roads(logged: pd.DataFrame, replayed: pd.DataFrame) -> str | None:
-    """The first difference between two roads tables on REPLAY_COLUMNS, or None when they agree."""
+    """The first difference (road by road, column by column of REPLAY_COLUMNS) between two roads
+    tables, or None when they agree."""
     if len(logged) != len(replayed):
         route_a, route_b = list(logged["directed_road"]), list(replayed["directed_road"])
         first = next(
@@ -170,14 +178,41 @@ def compare_roads(logged: pd.DataFrame, replayed: pd.DataFrame) -> str | None:
             f"the replay drove {len(replayed)} roads, the log has {len(logged)} "
             f"(first difference at road {first})"
         )
-    for column in REPLAY_COLUMNS:
-        for i, (a, b) in enumerate(zip(logged[column].tolist(), replayed[column].tolist(), strict=True)):
-            if not _equal(a, b):
-                return f"road {i} {column}: logged {a!r}, replayed {b!r}"
-    for i, (a, b) in enumerate(zip(logged["belief_after"], replayed["belief_after"], strict=True)):
-        if not np.allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float), rtol=0, atol=1e-12):
-            return f"road {i} belief_after differs"
+    rows = zip(logged[list(REPLAY_COLUMNS)].to_dict("records"),
+               replayed[list(REPLAY_COLUMNS)].to_dict("records"), strict=True)
+    for i, (row_a, row_b) in enumerate(rows):
+        for column in REPLAY_COLUMNS:
+            a, b = row_a[column], row_b[column]
+            if not _same(column, a, b):
+                shown = "differs" if column in BELIEF_COLUMNS else f"logged {a!r}, replayed {b!r}"
+                return f"road {i} {column}: {shown}"
     return None
+
+
+def compare_episode(logged: dict, replayed: dict) -> str | None:
+    """The first column of EPISODE_COLUMNS where the episode's logged summary row and the
+    replayed one differ, or None when they agree."""
+    for column in EPISODE_COLUMNS:
+        a, b = logged.get(column), replayed.get(column)
+        if not _equal(a, b):
+            return f"episodes.parquet {column}: logged {a!r}, replayed {b!r}"
+    return None
+
+
+def logged_episode(study_dir: Path, episode_id: str) -> dict:
+    from trustroute.core.dataset import read_episodes
+
+    episodes = read_episodes(Path(study_dir))
+    rows = episodes[episodes["episode_id"] == episode_id].to_dict("records")
+    return rows[0] if rows else {}
+
+
+def replayed_episode(config: StudyConfig, task: EpisodeTask, record: EpisodeRecord) -> dict:
+    """The episodes-table row the study would have written for the replayed episode."""
+    from trustroute.harness.study.manifest import episode_row
+    from trustroute.harness.study.plan import participant_types
+
+    return episode_row(task, record.summary, record.tables(), participant_types(config))
 
 
 def find_task(config: StudyConfig, episode_id: str, study_dir: Path) -> EpisodeTask:
@@ -230,7 +265,8 @@ def replay_episode(
     temp = None if rrd_path is None else temp_path(Path(rrd_path))
     try:
         record = run_planned_episode(study_context(config), task, rrd_path=temp, sumo_config=sumo_config)
-        difference = compare_roads(logged, record.roads)
+        difference = compare_roads(logged, record.roads) or compare_episode(
+            logged_episode(study_dir, episode_id), replayed_episode(config, task, record))
         if difference is not None:
             raise not_reproduced(study_dir, episode_id, manifest, difference)
         if temp is not None and rrd_path is not None:

@@ -136,3 +136,72 @@ def test_replay_unknown_episode_and_gui_without_display(sumo_study, capsys, monk
     monkeypatch.delenv("DISPLAY", raising=False)
     code, _, err = run_cli(capsys, "replay", str(sumo_study), "p00000-phi1-aware", "--gui", "--no-rrd")
     assert code == 2 and "no display" in err and err.count("\n") == 1
+
+
+@pytest.fixture(scope="module")
+def model_study(tmp_path_factory):
+    root = tmp_path_factory.mktemp("replay-model")
+    run_study(root / "study.toml", f"""[study]
+name = "replay-model"
+participants = 2
+seed = 1
+engine = "model"
+specs = ["phi1"]
+conditions = ["aware", "free"]
+horizon = 6
+policy_cache = "{tmp_path_factory.mktemp("policies")}"
+""", root / "out")
+    return root / "out"
+
+
+def _tamper(study, table, episode_id, column, change, index=3):
+    """Change `column` of `episode_id`'s row in episodes.parquet, or of its road `index` in
+    roads.parquet, by `change` (old value -> new value)."""
+    from trustroute.core import dataset
+
+    episodes = (dataset.read_episodes, dataset.EPISODES_SCHEMA, dataset.EPISODES_FILE)
+    roads = (dataset.read_roads, dataset.ROADS_SCHEMA, dataset.ROADS_FILE)
+    read, schema, name = episodes if table == "episodes" else roads
+    frame = read(study)
+    chosen = frame["episode_id"] == episode_id
+    if table == "roads":
+        chosen &= frame["index"] == index
+    row = frame.index[chosen][0]
+    frame.at[row, column] = change(frame.at[row, column])
+    dataset.write_table(dataset.table_from_frame(frame, schema), study / name)
+
+
+@pytest.mark.parametrize(("table", "column", "change"), [
+    ("roads", "performance", lambda v: "fail" if v == "succ" else "succ"),
+    ("roads", "action", lambda v: "Z"),
+    ("roads", "fallback", lambda v: not v),
+    ("roads", "sim_time_in", lambda v: 7.5),
+    ("roads", "belief_before", lambda v: [float(v[0]) + 1e-6, *v[1:]]),
+    ("episodes", "satisfied", lambda v: not v),
+    ("episodes", "end_reason", lambda v: "rejected"),
+    ("episodes", "takeovers", lambda v: v + 7),
+    ("episodes", "mean_trust", lambda v: v + 1e-9),
+])
+def test_replay_compares_every_logged_column(model_study, tmp_path, capsys, table, column, change):
+    study = _copy(model_study, tmp_path)
+    _tamper(study, table, "p00001-phi1-free", column, change)
+    code, out, err = run_cli(capsys, "replay", str(study), "p00001-phi1-free", "--no-rrd")
+    where = f"road 3 {column}" if table == "roads" else f"episodes.parquet {column}"
+    assert code == 2 and out == "" and f"does not reproduce the log: {where}" in err, err
+
+
+def test_replay_ignores_the_wall_clock(model_study, tmp_path, capsys):
+    study = _copy(model_study, tmp_path)
+    _tamper(study, "episodes", "p00001-phi1-free", "wall_seconds", lambda v: v + 99.0)
+    code, out, err = run_cli(capsys, "replay", str(study), "p00001-phi1-free", "--no-rrd")
+    assert code == 0 and "replay reproduces the log" in out, err
+
+
+def test_replay_refuses_a_changed_config_in_the_manifest(model_study, tmp_path, capsys):
+    study = _copy(model_study, tmp_path)
+    manifest = json.loads((study / "manifest.json").read_text())
+    manifest["config"]["seed"] = 2
+    (study / "manifest.json").write_text(json.dumps(manifest))
+    code, _, err = run_cli(capsys, "replay", str(study), "p00001-phi1-free", "--no-rrd")
+    assert code == 2 and err.count("\n") == 1
+    assert "manifest.json: config: the manifest's config changed since the study was run" in err
