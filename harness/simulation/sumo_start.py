@@ -12,8 +12,9 @@ speed is set by its scene, and the striping model's dawdling is off (`--pedestri
 test_sumo_reuse.py checks that an episode's tables are the same with another SUMO seed and in a
 reused simulation as in a fresh one. Runs where SUMO's own draws do matter (background traffic,
 route files) and runs with outputs or a GUI start SUMO afresh, seeded with the episode's seed, and
-close it at the end. Nothing happens at import time (libsumo itself is imported when a simulation
-starts).
+close it at the end. One episode at a time holds the process's simulation: a second started while
+one runs is refused (`SimulationInUse`) rather than reloaded under it. Nothing happens at import
+time (libsumo itself is imported when a simulation starts).
 """
 
 from __future__ import annotations
@@ -205,6 +206,30 @@ class _OpenSimulation:
 
 _open: list[_OpenSimulation] = []   # at most one: libsumo runs one simulation per process
 _closes_at_exit: list[int] = []     # the pid whose exit closes it (close_at_exit)
+_in_use: list[int] = []             # the pid of a process whose simulation an episode is driving
+
+
+class SimulationInUse(RuntimeError):
+    """A second episode asked for the process's one SUMO simulation while another drives it."""
+
+
+@contextlib.contextmanager
+def _one_user() -> Iterator[None]:
+    """Hold the process's simulation for one episode. libsumo runs one simulation per process: a
+    second episode started while one is running (two gym environments, run_episode during a gym
+    episode) would load its own start under the first one, so it is refused here instead. Keyed by
+    pid, so a process forked while an episode runs holds nothing."""
+    if os.getpid() in _in_use:
+        raise SimulationInUse(
+            "libsumo runs one SUMO simulation per process, and another episode of this process is "
+            "driving it (a TrustRouting environment or run_episode with engine=\"sumo\" not yet "
+            "finished or closed): finish or close that episode first, run each SUMO environment in "
+            "its own process (e.g. gymnasium.vector.AsyncVectorEnv), or use engine=\"model\"")
+    _in_use.append(os.getpid())
+    try:
+        yield
+    finally:
+        _in_use.remove(os.getpid())
 
 
 def _started_on(command: list[str], net_path: Path) -> tuple:
@@ -290,12 +315,13 @@ def sumo_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sumo
             yield sumo
         return
     require_net_file(net_path)
-    sumo = _empty_simulation(sumo_command(net_path, seed, config), Path(net_path), config)
-    try:
-        yield sumo
-    except BaseException:
-        close_simulation()   # whatever the episode left behind goes with it
-        raise
+    with _one_user():
+        sumo = _empty_simulation(sumo_command(net_path, seed, config), Path(net_path), config)
+        try:
+            yield sumo
+        except BaseException:
+            close_simulation()   # whatever the episode left behind goes with it
+            raise
 
 
 @contextlib.contextmanager
@@ -304,19 +330,20 @@ def fresh_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sum
     between episodes is closed first): runs whose SUMO draws matter, with outputs or a GUI, and
     the benchmarks' bare loops."""
     require_net_file(net_path)
-    close_simulation()
-    command = sumo_command(net_path, seed, config)
-    sumo: Sumo
-    if config.gui:
-        check_display()
-        # sumo-gui starts running at once and closes at the end; same options as the libsumo run.
-        command = [find_binary("sumo-gui"), *command[1:], "--start", "true", "--quit-on-end", "true"]
-        sumo = _TraciWithConstants()
-    else:
-        sumo = _libsumo()
-    _start(sumo, command, Path(net_path), config)
-    try:
-        yield sumo
-    finally:
-        sumo.close()
+    with _one_user():
+        close_simulation()
+        command = sumo_command(net_path, seed, config)
+        sumo: Sumo
+        if config.gui:
+            check_display()
+            # sumo-gui starts running at once and closes at the end; same options as the libsumo run.
+            command = [find_binary("sumo-gui"), *command[1:], "--start", "true", "--quit-on-end", "true"]
+            sumo = _TraciWithConstants()
+        else:
+            sumo = _libsumo()
+        _start(sumo, command, Path(net_path), config)
+        try:
+            yield sumo
+        finally:
+            sumo.close()
 

@@ -249,3 +249,41 @@ def test_population_with_a_trust_state_spec_matches_exact_per_type_values(driver
     with pytest.raises(ValueError, match="not both"):
         TrustRoutingEnv(spec, town=town, driver=driver, population=population)
     env.close()
+
+
+def _to_the_end(env, seed):
+    _, info = env.reset(seed=seed)
+    done = False
+    while not done:
+        _, _, terminated, truncated, info = env.step(0)
+        done = terminated or truncated
+    return info["summary"]
+
+
+def test_a_second_sumo_episode_in_one_process_is_refused_and_sequential_ones_run():
+    import gc
+
+    import trustroute
+    from trustroute.harness.simulation.sumo_start import SimulationInUse
+
+    first, second = (TrustRoutingEnv("phi1", engine="sumo") for _ in range(2))
+    alone = _to_the_end(first, 5)
+    first.reset(seed=5)
+    with pytest.raises(SimulationInUse, match="one SUMO simulation per process.*AsyncVectorEnv"):
+        second.reset(seed=6)
+    with pytest.raises(SimulationInUse):
+        trustroute.run_episode("phi1", engine="sumo", seed=1)
+    done = False
+    while not done:   # the running episode is untouched by the refused ones
+        _, _, terminated, truncated, info = first.step(0)
+        done = terminated or truncated
+    assert data_equivalence(info["summary"], alone)
+    assert data_equivalence(_to_the_end(second, 5), alone)   # once it has ended, the next one runs
+    first.reset(seed=5)
+    first.close()                                             # closed mid-episode
+    assert data_equivalence(_to_the_end(second, 5), alone)
+    first.reset(seed=5)
+    del first                                                 # dropped mid-episode
+    gc.collect()
+    assert data_equivalence(_to_the_end(second, 5), alone)
+    second.close()
