@@ -103,7 +103,8 @@ class TrustRoutingEnv(gymnasium.Env):
     the current position), "belief" (the AV's belief over trust levels), "junctions" (driven so
     far). Action: Discrete(max out-degree); action a at a road with k legal next junctions
     (town.actions(road), sorted) drives to junction a mod k, so every action is legal;
-    info["action_mask"] marks the k legal ones (for `action_space.sample(mask=...)`).
+    info["action_mask"] marks the k legal ones (for `action_space.sample(mask=...)`). Anything not
+    in the action space is a ValueError, and the episode goes on.
 
     info is a function of the seed and the actions: the last step's info["summary"] leaves out the
     episode id and wall time (RUN_FACTS), which `last_run` holds with the episode counter.
@@ -257,8 +258,9 @@ class TrustRoutingEnv(gymnasium.Env):
         if self._episode is None:
             raise RuntimeError("the episode is over (or never started): call reset()")
         legal = self._legal[self._road]
+        junction = legal[self._checked(action) % len(legal)]
         try:
-            self._episode.choose(legal[int(action) % len(legal)])
+            self._episode.choose(junction)
         except BaseException:
             self._close_episode()
             raise
@@ -266,6 +268,15 @@ class TrustRoutingEnv(gymnasium.Env):
         if isinstance(point, DecisionPoint):
             return self._decision(point.context), 0.0, False, False, self._info()
         return self._final(point.record)
+
+    def _checked(self, action: object) -> int:
+        """`action` as an int, or ValueError (the episode goes on) when it is not in the action
+        space: an int or numpy integer scalar in 0..n-1, never a bool, float, string or array."""
+        if isinstance(action, (bool, np.bool_)) or not self.action_space.contains(action):
+            raise ValueError(f"action {action!r} is not in the action space {self.action_space}: pass "
+                             f"an integer from 0 to {self._width - 1} (info[\"action_mask\"] marks the "
+                             "legal ones)")
+        return int(action)  # type: ignore[call-overload]
 
     def close(self) -> None:
         self._close_episode()

@@ -156,7 +156,8 @@ def test_ends_rewards_and_masks_follow_the_tracker():
         observation, info = env.reset(seed=seed)
         done, steps = False, 0
         while not done:
-            observation, reward, terminated, truncated, info = env.step(int(rng.integers(0, 5)))
+            action = int(rng.integers(0, env.action_space.n))
+            observation, reward, terminated, truncated, info = env.step(action)
             steps += 1
             done = terminated or truncated
             assert reward == (1.0 if terminated and info.get("end_reason") == "accepted" else 0.0)
@@ -287,3 +288,14 @@ def test_a_second_sumo_episode_in_one_process_is_refused_and_sequential_ones_run
     gc.collect()
     assert data_equivalence(_to_the_end(second, 5), alone)
     second.close()
+
+
+@pytest.mark.parametrize("action", [5, -1, 1.7, "1", True, np.array([1]), None, "x"])
+def test_an_action_outside_the_action_space_is_refused_and_the_episode_goes_on(action):
+    env, twin = TrustRoutingEnv("phi1"), TrustRoutingEnv("phi1")
+    env.reset(seed=3)
+    twin.reset(seed=3)
+    refused = r"not in the action space Discrete\(2\): pass an integer from 0 to 1"
+    with pytest.raises(ValueError, match=refused):
+        env.step(action)
+    assert data_equivalence(env.step(np.int64(1)), twin.step(1))
