@@ -29,8 +29,8 @@ from trustroute.core.errors import InputError
 from trustroute.core.output_files import fsync_directory, temp_path, write_error
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
-from trustroute.harness.study.manifest import MANIFEST_FILE, package_versions
-from trustroute.harness.study.plan import EpisodeTask, plan_episodes
+from trustroute.harness.study.manifest import MANIFEST_FILE, episode_row, package_versions
+from trustroute.harness.study.plan import EpisodeTask, participant_types, plan_episodes
 
 if TYPE_CHECKING:
     from trustroute.harness.simulation.episode import EpisodeRecord
@@ -209,9 +209,6 @@ def logged_episode(study_dir: Path, episode_id: str) -> dict:
 
 def replayed_episode(config: StudyConfig, task: EpisodeTask, record: EpisodeRecord) -> dict:
     """The episodes-table row the study would have written for the replayed episode."""
-    from trustroute.harness.study.manifest import episode_row
-    from trustroute.harness.study.plan import participant_types
-
     return episode_row(task, record.summary, record.tables(), participant_types(config))
 
 
