@@ -29,6 +29,9 @@ from gymnasium import spaces
 from trustroute.app.drivers import draw_type, gym_episode_id, synthetic_driver
 from trustroute.app.engines import SIMULATED, engine_named
 from trustroute.app.problem import load_problem
+from trustroute.core import defaults
+from trustroute.core.errors import InputError
+from trustroute.core.fields import PROBABILITY, check_value
 from trustroute.core.settings import with_options
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.stepping import DecisionPoint, SteppableEpisode
@@ -38,6 +41,8 @@ from trustroute.participants.driver_population import DriverPopulation
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
+from trustroute.policies.model.trust_pomdp import BELIEF_RULE_NAMES
+from trustroute.policies.routing.episode_rules import JUNCTION_CAPS
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 if TYPE_CHECKING:
@@ -60,19 +65,28 @@ class EnvSettings:
     """How the environment's episodes run. engine: "model" (fast, no SUMO) or "sumo" (libsumo).
     junction_cap: the episode is truncated after this many junctions. belief_rule: the AV's filter
     ("bayes" or "paper"). report_accuracy: the synthetic driver's trust-report accuracy (reports
-    are logged only). net_path: the SUMO net (None: the town's)."""
+    are logged only). net_path: the SUMO net (None: the town's). Every field is checked here, by
+    the rules a study config's keys of the same names follow; a bad one is an InputError naming it."""
 
-    engine: str = "model"
+    engine: str = defaults.GYM_ENGINE
     junction_cap: int = DEFAULT_JUNCTION_CAP
-    belief_rule: BeliefRule = "bayes"
+    belief_rule: BeliefRule = defaults.BELIEF_RULE
     report_accuracy: float = DEFAULT_REPORT_ACCURACY
     net_path: str | Path | None = None
 
     def __post_init__(self) -> None:
-        if self.engine not in ENGINES:
-            raise ValueError(f"unknown engine {self.engine!r}; use one of {', '.join(ENGINES)}")
-        if self.junction_cap < 1:
-            raise ValueError(f"junction_cap must be >= 1, got {self.junction_cap}")
+        engine_named(self.engine, "EnvSettings.engine", simulated=True)
+        check_value(self.junction_cap, JUNCTION_CAPS, "EnvSettings", "junction_cap",
+                    lambda seen: f"expected an integer from {JUNCTION_CAPS.minimum} to "
+                                 f"{JUNCTION_CAPS.maximum}, got {seen.value!r}",
+                    f"pass a whole number of junctions, e.g. junction_cap={DEFAULT_JUNCTION_CAP}")
+        check_value(self.belief_rule, BELIEF_RULE_NAMES, "EnvSettings", "belief_rule",
+                    fix="pass 'bayes' or 'paper'")
+        check_value(self.report_accuracy, PROBABILITY, "EnvSettings", "report_accuracy",
+                    fix=f"pass a number in [0, 1], e.g. report_accuracy={DEFAULT_REPORT_ACCURACY}")
+        if self.net_path is not None and not isinstance(self.net_path, str | Path):
+            raise InputError("EnvSettings", "net_path", f"expected a file path, got {self.net_path!r}",
+                             "pass the path of a SUMO .net.xml, or None for the town's net")
 
 
 class AgentPolicy(RoutingPolicy):

@@ -70,8 +70,8 @@ from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER
 from trustroute.participants.driver_population import POPULATIONS, load_driver_population
 from trustroute.participants.population import population_config_from_dict
 from trustroute.participants.questionnaires import resolved_table
-from trustroute.policies.model.trust_pomdp import BELIEF_RULES, BeliefRule
-from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
+from trustroute.policies.model.trust_pomdp import BELIEF_RULE_NAMES, BeliefRule
+from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP, JUNCTION_CAPS
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
 DEFAULT_STUDIES_DIR = Path("studies")
@@ -378,11 +378,11 @@ STUDY_FIELDS = field_table(
     Field(key="fallback_after", kind=Integer(minimum=0, maximum=10_000, false_allowed=True),
           default=DEFAULT_FALLBACK_AFTER,
           fix=f"write fallback_after = {DEFAULT_FALLBACK_AFTER}, or false to disable the rule"),
-    Field(key="junction_cap", kind=Integer(minimum=1, maximum=10_000), default=DEFAULT_JUNCTION_CAP,
+    Field(key="junction_cap", kind=JUNCTION_CAPS, default=DEFAULT_JUNCTION_CAP,
           fix="write e.g. junction_cap = 1"),
     Field(key="report_every", kind=Integer(minimum=1, maximum=10_000), default=1,
           fix="write e.g. report_every = 1"),
-    Field(key="belief_rule", kind=OneOf(choices=BELIEF_RULES, noun="belief rule"), default="bayes",
+    Field(key="belief_rule", kind=BELIEF_RULE_NAMES, default="bayes",
           fix="use 'bayes' or 'paper'"),
     Field(key="output", kind=Text(), problem=lambda seen: f"expected a directory path, got {seen.value!r}",
           fix='write output = "out/paper"'),

@@ -12,11 +12,13 @@ from typing import Literal, get_args
 
 import numpy as np
 
+from trustroute.core.fields import OneOf
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel, check_covers_town
 
 BeliefRule = Literal["bayes", "paper"]
 BELIEF_RULES: tuple[BeliefRule, ...] = get_args(BeliefRule)
+BELIEF_RULE_NAMES = OneOf(choices=BELIEF_RULES, noun="belief rule")   # as a config or a setting names one
 
 
 def checked_belief_rule(rule: str) -> BeliefRule:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trustroute.core import defaults
+from trustroute.core.fields import Integer
 from trustroute.networks.town import Town
 from trustroute.policies.logic.compiled import CompiledSpec
 from trustroute.policies.logic.spec import Spec
@@ -28,6 +29,7 @@ from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
 DEFAULT_JUNCTION_CAP = defaults.JUNCTION_CAP   # an episode still running after this many junctions ends
+JUNCTION_CAPS = Integer(minimum=1, maximum=10_000)   # the caps a study config or an environment takes
 RUNNING, ACCEPTED, REJECTED = 0, 1, 2
 
 

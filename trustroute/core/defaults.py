@@ -1,6 +1,6 @@
 """The defaults every door reads, defined once: the API's keyword defaults, the CLI's option
-defaults, the gymnasium environment's and the modules that own each rule (the fallback, the
-episode cap, the "aware" horizon) are these names, so no door can drift from another
+defaults, the gymnasium environment's settings and the modules that own each rule (the fallback,
+the episode cap, the "aware" horizon) are these names, so no door can drift from another
 (tests/app/test_defaults.py runs them through the API and the CLI and compares).
 
 Kept free of imports, so the API can name them in its signatures while `import trustroute` stays
@@ -28,6 +28,9 @@ JUNCTION_CAP = 60                    # an episode still running after this many 
 AWARE_HORIZON = FALLBACK_AFTER       # "aware" is synthesized for the junctions before the fallback
 SEED = 0
 EPISODE_ENGINE = "sumo"
+# the gymnasium environment's own (docs/gym_env.md): the model engine, fast and without SUMO, for
+# the many episodes an agent learns from
+GYM_ENGINE = "model"
 
 # analysis (`analyze`, `trustroute analyze`): None lets the analysis choose the study's own default
 # belief source (analysis/belief_sources.py, `default_belief_source`), the one definition both

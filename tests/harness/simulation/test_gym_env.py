@@ -299,3 +299,32 @@ def test_an_action_outside_the_action_space_is_refused_and_the_episode_goes_on(a
     with pytest.raises(ValueError, match=refused):
         env.step(action)
     assert data_equivalence(env.step(np.int64(1)), twin.step(1))
+
+
+@pytest.mark.parametrize(("field", "value", "problem"), [
+    ("belief_rule", "foo", "unknown belief rule 'foo'"),
+    ("report_accuracy", 2.0, "2.0 is not a probability"),
+    ("report_accuracy", -0.5, "-0.5 is not a probability"),
+    ("junction_cap", 2.5, "expected an integer from 1 to 10000, got 2.5"),
+    ("junction_cap", "10", "expected an integer from 1 to 10000, got '10'"),
+    ("junction_cap", 0, "expected an integer from 1 to 10000, got 0"),
+    ("engine", "live", "unknown engine 'live'"),
+    ("net_path", 5, "expected a file path, got 5"),
+])
+def test_every_env_setting_is_checked_when_made(field, value, problem):
+    from trustroute.core.errors import InputError
+    from trustroute.harness.simulation.gym_env import EnvSettings
+
+    with pytest.raises(InputError, match=problem):
+        EnvSettings(**{field: value})
+    with pytest.raises(InputError, match=problem):   # before any episode
+        gymnasium.make(ENV_ID, spec="phi1", **{field: value})
+
+
+def test_env_settings_read_the_shared_defaults():
+    from trustroute.core import defaults
+    from trustroute.harness.simulation.gym_env import EnvSettings
+
+    settings = EnvSettings()
+    assert (settings.engine, settings.belief_rule, settings.junction_cap) == (
+        defaults.GYM_ENGINE, defaults.BELIEF_RULE, defaults.JUNCTION_CAP)
