@@ -125,7 +125,7 @@ def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
     from trustroute.core.settings import with_options
 
     problem = _compiled(spec, town, driver, population)
-    chosen = with_options(settings if settings is not None else SynthesisSettings(), options, "synthesize")
+    chosen = with_options(settings, SynthesisSettings(), options, "synthesize")
     if problem.population is not None:
         return synthesize_population(problem, objective, chosen, out)
     return synthesize_single(problem, chosen, out)
@@ -167,7 +167,7 @@ def evaluate(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
 
     problem = _compiled(spec, town, driver, population)
     routing = _policy(policy, problem, cache_dir)
-    chosen = with_options(settings if settings is not None else EvaluationSettings(), options, "evaluate")
+    chosen = with_options(settings, EvaluationSettings(), options, "evaluate")
     if problem.population is not None:
         return evaluate_population(problem, routing, chosen)[0]
     return evaluate_single(problem, routing, chosen)
@@ -194,8 +194,7 @@ def run_episode(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
     from trustroute.app.runs import EpisodeSettings, run_one_episode
     from trustroute.core.settings import with_options
 
-    chosen = with_options(settings if settings is not None else EpisodeSettings(option="initial_trust"),
-                          options, "run_episode")
+    chosen = with_options(settings, EpisodeSettings(option="initial_trust"), options, "run_episode")
     if chosen.engine not in SIMULATED:
         raise ValueError(f"unknown engine {chosen.engine!r}; use one of "
                          f"{', '.join(repr(e) for e in SIMULATED)}")

@@ -130,8 +130,7 @@ class TrustRoutingEnv(gymnasium.Env):
                  driver: DriverModel | str | Path | None = None, *, settings: EnvSettings | None = None,
                  render_mode: str | None = None, population: DriverPopulation | str | Path | None = None,
                  **options: Any) -> None:
-        settings = with_options(settings if settings is not None else EnvSettings(), options,
-                                "TrustRoutingEnv")
+        settings = with_options(settings, EnvSettings(), options, "TrustRoutingEnv")
         if population is not None and driver is not None:
             raise ValueError("give driver or population, not both")
         if render_mode is not None:

@@ -15,9 +15,17 @@ if TYPE_CHECKING:
 Settings = TypeVar("Settings", bound="DataclassInstance")
 
 
-def with_options(settings: Settings, options: Mapping[str, Any], where: str) -> Settings:
-    """`settings` with the fields named in `options` replaced, checked again by its constructor;
-    a name that is not one of its fields is a TypeError naming `where` and the fields."""
+def with_options(settings: object, default: Settings, options: Mapping[str, Any], where: str) -> Settings:
+    """`settings` (None: `default`) with the fields named in `options` replaced, checked again by
+    its constructor. A `settings` that is not of `default`'s class, or a name that is not one of
+    its fields, is a TypeError naming `where` and the class."""
+    expected = type(default)
+    if settings is None:
+        settings = default
+    elif not isinstance(settings, expected):
+        raise TypeError(f"{where}() got settings of type {type(settings).__name__}; pass a "
+                        f"{expected.__module__}.{expected.__qualname__}, or its fields by keyword "
+                        f"({', '.join(f.name for f in dataclasses.fields(default))})")
     names = [field.name for field in dataclasses.fields(settings)]
     unknown = sorted(set(options) - set(names))
     if unknown:
