@@ -59,6 +59,7 @@ from trustroute.core.fields import (
     Table,
     Text,
     check_fields,
+    check_value,
     field_table,
     keys,
 )
@@ -76,6 +77,8 @@ from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
 DEFAULT_STUDIES_DIR = Path("studies")
 ENGINES: tuple[str, ...] = ("sumo", "model", "live")  # "live": `trustroute live`, people in the loop
+ENGINE_NAMES = OneOf(choices=ENGINES, noun="engine")   # the config's `engine` and its override
+ENGINE_FIX = f"use one of {', '.join(repr(e) for e in ENGINES)}"
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")
 LIVE_VIEWS: tuple[str, ...] = ("driver", "map")   # [live] view: the participant station's view
 LIVE_DRIVING: tuple[str, ...] = ("assisted", "continuous")   # [live] driving: how a person drives
@@ -182,8 +185,11 @@ class StudyConfig:
         return digest.hexdigest()
 
     def with_overrides(self, *, engine: str | None = None) -> StudyConfig:
-        """A copy, with `engine` replaced when given (not None)."""
-        return replace(self) if engine is None else replace(self, engine=engine)
+        """A copy, with `engine` replaced when given (not None), checked by the config key's rule
+        (an InputError naming `engine`)."""
+        if engine is None:
+            return replace(self)
+        return replace(self, engine=check_value(engine, ENGINE_NAMES, "engine", "", fix=ENGINE_FIX))
 
 
 def condition_label(condition: str) -> str:
@@ -364,8 +370,7 @@ STUDY_FIELDS = field_table(
           missing_fix="add participants = 21"),
     Field(key="seed", kind=Integer(minimum=0, maximum=2**63 - 1), required=True,
           fix="write a non-negative integer, e.g. seed = 1", missing_fix="add seed = 1"),
-    Field(key="engine", kind=OneOf(choices=ENGINES, noun="engine"), default="sumo",
-          fix=f"use one of {', '.join(repr(e) for e in ENGINES)}"),
+    Field(key="engine", kind=ENGINE_NAMES, default="sumo", fix=ENGINE_FIX),
     Field(key="specs", kind=_ENTRIES, required=True,
           fix='write specs = ["phi1", "phi2"] (packaged specs) or spec file paths'),
     Field(key="conditions", kind=_ENTRIES, required=True, fix='write conditions = ["aware", "free"]'),

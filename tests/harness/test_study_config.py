@@ -233,3 +233,18 @@ def test_the_live_view_key(tmp_path, monkeypatch):
             load_study_config(_write(tmp_path, MINIMAL + "[live]\n" + bad + "\n", "bad.toml"))
     with pytest.raises(InputError, match="live"):
         load_study_config(_write(tmp_path, MINIMAL + '[live]\nseat = "left"\n', "unknown.toml"))
+
+
+@pytest.mark.parametrize("engine", ["bogus", 5, "Model"])
+def test_an_engine_override_follows_the_config_key_rule(engine, tmp_path, monkeypatch):
+    import trustroute
+
+    monkeypatch.chdir(tmp_path)
+    config = load_study_config(_write(tmp_path, MINIMAL.replace("specs/phi1.toml", "phi1")))
+    assert config.with_overrides(engine="model").engine == "model"
+    refused = rf"engine: unknown engine {engine!r} \(fix: use one of 'sumo', 'model', 'live'\)"
+    with pytest.raises(InputError, match=refused):
+        config.with_overrides(engine=engine)
+    with pytest.raises(InputError, match=refused):
+        trustroute.run_study(config, tmp_path / "out", engine=engine)
+    assert not (tmp_path / "out").exists()
