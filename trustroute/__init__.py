@@ -20,11 +20,14 @@ documentation of the model and the file formats.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from trustroute.core import defaults
+from trustroute.core.errors import InputError, keyword_names
 
 if TYPE_CHECKING:
     from trustroute.analysis.study.analysis import StudyAnalysis
@@ -59,8 +62,23 @@ __all__ = [
 ]
 
 PathLike = str | Path
+Call = TypeVar("Call", bound=Callable[..., Any])
 
 
+def _door(function: Call) -> Call:
+    """An API call whose InputErrors name its keyword arguments where the messages, shared with
+    the CLI, name its flags (`keyword_names`: "--initial-trust" is `initial_trust`)."""
+    @functools.wraps(function)
+    def door(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return function(*args, **kwargs)
+        except InputError as error:
+            raise keyword_names(error) from None
+
+    return door  # type: ignore[return-value]
+
+
+@_door
 def load_town(path: PathLike | None = None) -> Town:
     """The validated town of a town file or packaged town name (docs/formats/town.md); the packaged
     town when omitted."""
@@ -69,6 +87,7 @@ def load_town(path: PathLike | None = None) -> Town:
     return town_of(path)
 
 
+@_door
 def load_driver_model(path: PathLike | None = None) -> DriverModel:
     """The validated driver model of a file or packaged name (docs/formats/driver_model.md); the
     packaged one when omitted."""
@@ -77,6 +96,7 @@ def load_driver_model(path: PathLike | None = None) -> DriverModel:
     return driver_of(path)
 
 
+@_door
 def load_spec(spec: PathLike, town: Town | PathLike | None = None) -> Spec:
     """The validated scLDTL spec of a spec file (docs/formats/spec.md), checked against `town`
     (default: the town a packaged spec is written for, else the packaged town).
@@ -100,6 +120,7 @@ def _compiled(spec: Spec | PathLike, town: Town | PathLike | None, driver: Drive
     return load_problem(spec, town, driver, population)
 
 
+@_door
 def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
                driver: DriverModel | PathLike | None = None, *, settings: SynthesisSettings | None = None,
                out: PathLike | None = None, population: DriverPopulation | PathLike | None = None,
@@ -144,6 +165,7 @@ def _policy(policy: PolicyLike, problem: Problem, cache_dir: PathLike | None) ->
     return policy
 
 
+@_door
 def evaluate(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
              town: Town | PathLike | None = None, driver: DriverModel | PathLike | None = None, *,
              settings: EvaluationSettings | None = None, cache_dir: PathLike | None = None,
@@ -173,6 +195,7 @@ def evaluate(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
     return evaluate_single(problem, routing, chosen)
 
 
+@_door
 def run_episode(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
                 town: Town | PathLike | None = None, driver: DriverModel | PathLike | None = None, *,
                 settings: EpisodeSettings | None = None, cache_dir: PathLike | None = None,
@@ -206,6 +229,7 @@ def run_episode(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
     return run_one_episode(problem, routing, chosen).record
 
 
+@_door
 def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None, *, workers: int = 1,
               engine: str | None = None, scheduler: str | None = None,
               progress: bool = False) -> StudyRun:
@@ -238,6 +262,7 @@ def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None
     return run
 
 
+@_door
 def analyze(study_dir: PathLike, *, belief_source: str | None = defaults.BELIEF_SOURCE,
             report: bool = False) -> StudyAnalysis:
     """Per spec and condition of a study directory: n, satisfaction rate with its CI, mean trust,

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import click
 
+from trustroute.core import defaults
+
 
 class UsageFix(click.UsageError):
     """A usage error of a command's own (options that exclude each other, a missing argument)
@@ -54,7 +56,7 @@ def bounded_int(minimum: int, maximum: int) -> click.IntRange:
     return click.IntRange(minimum, maximum)
 
 
-SEED = bounded_int(0, 2**31 - 1)  # SUMO takes a signed 32-bit seed
+SEED = bounded_int(0, defaults.MAX_SEED)
 HORIZON = bounded_int(1, 1_000)
 JUNCTIONS = bounded_int(0, 10_000)
 WORKERS = bounded_int(1, 256)

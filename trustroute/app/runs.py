@@ -20,6 +20,7 @@ from trustroute.app.nets import net_for
 from trustroute.app.policy import PolicySettings, policy_for
 from trustroute.app.problem import check_initial_trust, compile_problem
 from trustroute.core import defaults
+from trustroute.core.fields import Integer, check_value
 from trustroute.harness.simulation.episode import EpisodeOptions, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.model_engine import simulate_batch
@@ -43,6 +44,13 @@ class EpisodeSettings:
     sumo: SumoConfig | None = None
     observer: Callable | None = None
     option: str = "--initial-trust"   # how the initial trust is named in messages
+
+    def __post_init__(self) -> None:
+        seed = int(self.seed) if isinstance(self.seed, np.integer) else self.seed
+        object.__setattr__(self, "seed", check_value(
+            seed, Integer(minimum=0, maximum=defaults.MAX_SEED), "--seed", "",
+            lambda seen: f"expected an integer from 0 to {defaults.MAX_SEED}, got {seen.value!r}",
+            f"pass a whole number from 0 to {defaults.MAX_SEED}"))
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,7 @@ FALLBACK_AFTER = 20                  # the study's rule: the shortest completion
 JUNCTION_CAP = 60                    # an episode still running after this many junctions ends ("cap")
 AWARE_HORIZON = FALLBACK_AFTER       # "aware" is synthesized for the junctions before the fallback
 SEED = 0
+MAX_SEED = 2**31 - 1                 # the largest episode seed a door takes: SUMO's is a signed 32-bit int
 EPISODE_ENGINE = "sumo"
 # the gymnasium environment's own (docs/gym_env.md): the model engine, fast and without SUMO, for
 # the many episodes an agent learns from

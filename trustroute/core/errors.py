@@ -6,6 +6,8 @@ the CLI turns it into a single line on stderr and exit code 2.
 
 from __future__ import annotations
 
+import re
+
 
 class InputError(Exception):
     """Bad user input: a malformed file, a missing binary, a mismatched policy."""
@@ -22,6 +24,26 @@ class InputError(Exception):
         name or key taken from bad input must not spill over lines or screens)."""
         where = f"{_clean(self.source)}: {_clean(self.place)}" if self.place else _clean(self.source)
         return f"{where}: {_clean(self.problem, 400)} (fix: {_clean(self.fix, 300)})"
+
+
+# A command-line flag in a message ("--initial-trust"), not a dash inside a word or a path.
+_FLAG = re.compile(r"(?<![\w/.-])--([a-z][a-z0-9]*(?:-[a-z0-9]+)*)")
+_WITH_FLAG = re.compile(r"\bwith (--[a-z])")
+
+
+def keyword_names(error: InputError) -> InputError:
+    """`error` as the Python API says it: the command-line flags it names (`--initial-trust`), the
+    CLI's words, become the API's keyword arguments of the same names (`initial_trust`)."""
+    def keyword(text: str) -> str:
+        text = _WITH_FLAG.sub(r"as \1", text)   # "a file with --town": "a file as town"
+        return _FLAG.sub(lambda flag: flag.group(1).replace("-", "_"), text)
+
+    said = InputError.__new__(type(error))
+    said.__dict__.update(error.__dict__)
+    said.source, said.place = keyword(error.source), keyword(error.place)
+    said.problem, said.fix = keyword(error.problem), keyword(error.fix)
+    Exception.__init__(said, said.one_line())
+    return said
 
 
 def _clean(text: str, limit: int = 200) -> str:

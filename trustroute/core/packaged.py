@@ -18,6 +18,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from trustroute.core.errors import InputError
+
 PACKAGED_SPECS = Path(__file__).resolve().parent / "specs"
 
 
@@ -57,6 +59,8 @@ class PackagedKind:
     def resolve(self, value: str | Path) -> Path:
         """The file `value` names: an existing file, else the packaged file of that name, else
         `value` unchanged (its reader then says it cannot be read, with `fix()`)."""
+        if str(value) == "":   # Path("") is the current directory
+            raise InputError(self.what, "", f"the {self.what} name is empty", self.fix())
         path = Path(value)
         if path.is_file():
             return path
