@@ -285,7 +285,9 @@ class Session:
                 push(self.progress())
 
     def control(self, action: str) -> dict:
-        """The experimenter's pause, resume or abort of the running episode."""
+        """The experimenter's pause, resume or abort of the running episode. A pause or resume is
+        pushed to the station too: the participant must see why the view stands still, and when
+        it goes on (an abort is told by the episode's own `episode_aborted`)."""
         with self.lock:
             if action == "pause" and self.phase == "driving":
                 self.pause("experimenter")
@@ -295,7 +297,10 @@ class Session:
                 self.tell({"type": "abort", "reason": "aborted by the experimenter"})
             else:
                 raise MessageError("out_of_order", f"{action} in phase {self.phase!r}")
-            return self.progress()
+            progress, push = self.progress(), self.push
+        if push is not None and action != "abort":
+            push(progress)
+        return progress
 
     def tell(self, control: dict) -> None:
         """Send a control to the running episode (MessageError when it has just ended)."""

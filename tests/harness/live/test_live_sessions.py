@@ -357,3 +357,27 @@ def test_a_scripted_participant_on_a_streaming_trial_keeps_its_socket_open(tmp_p
             assert len(player.episodes) == 1
     finally:
         study.close()
+
+
+class EpisodeEnd:
+    """The session's end of a running episode's pipe: the controls the session tells it."""
+
+    def __init__(self) -> None:
+        self.controls: list[dict] = []
+
+    def send(self, control: dict) -> None:
+        self.controls.append(control)
+
+
+def test_the_experimenters_pause_and_resume_reach_the_station(client, live_study):
+    new_participant(client, live_study)
+    session = live_study.sessions[0]
+    pushed: list[dict] = []
+    session.attach(pushed.append)
+    session.phase, session.task = "driving", session.tasks[0]   # a running episode
+    session.connection = EpisodeEnd()
+    session.control("pause")
+    assert [(m["type"], m["phase"], m["paused_by"]) for m in pushed] == [("state", "paused", "experimenter")]
+    session.control("resume")
+    assert (pushed[-1]["phase"], pushed[-1]["paused_by"]) == ("driving", None)
+    assert [c["type"] for c in session.connection.controls] == ["pause", "resume"]
