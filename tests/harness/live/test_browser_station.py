@@ -1,0 +1,95 @@
+"""What a participant sees at the station, in real Chromium: the live application serves the page
+and the net, and the websocket is answered by the test (Playwright's route_web_socket) with the
+server's messages, so each case puts the page in the state it checks without running SUMO.
+
+Never skips: without Chromium it fails and says how to install it."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import time
+
+import httpx
+import pytest
+
+from tests.browser import chromium_executable
+from trustroute.harness.live.server import LiveStudy, ServerOptions
+
+from .conftest import tiny_config
+from .test_browser import CHROMIUM_ARGS
+from .test_driver_view import Server, scene_on, start_driving, wait_until
+
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
+
+
+class Station:
+    """The served study and a browser: `open` gives a new participant's station page."""
+
+    def __init__(self, browser, address: str, study: LiveStudy, net_path) -> None:
+        self.browser, self.address, self.study, self.net_path = browser, address, study, net_path
+
+    @contextlib.contextmanager
+    def open(self, width: int = 1280, height: int = 800):
+        """(page, socket): a new participant's station at width x height, its socket the test's."""
+        created = httpx.post(f"{self.address}/api/participants", json={},
+                             headers={"Authorization": f"Bearer {self.study.experimenter_token}"}).json()
+        context = self.browser.new_context(viewport={"width": width, "height": height})
+        page = context.new_page()
+        sockets: list = []
+        page.route_web_socket("**/ws", lambda ws: sockets.append(ws))
+        page.goto(self.address + created["link"])
+        deadline = time.monotonic() + 30
+        while not sockets:
+            assert time.monotonic() < deadline, "the station opened no websocket"
+            page.wait_for_timeout(50)
+        try:
+            yield page, sockets[0]
+        finally:
+            context.close()
+
+
+@pytest.fixture(scope="module")
+def station(tmp_path_factory):
+    from playwright.sync_api import sync_playwright
+
+    from trustroute.app.nets import net_for
+
+    tmp_path = tmp_path_factory.mktemp("station")
+    study = LiveStudy(tiny_config(tmp_path, participants=12), tmp_path / "study", ServerOptions()).open()
+    server = Server(study)
+    server.start()
+    deadline = time.monotonic() + 30
+    while not server.server.started:
+        assert time.monotonic() < deadline, "the live application did not start"
+        time.sleep(0.05)
+    try:
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch(executable_path=chromium_executable(), args=CHROMIUM_ARGS)
+            yield Station(browser, f"http://127.0.0.1:{server.port}", study, net_for(study.context.town))
+            browser.close()
+    finally:
+        server.stop()
+        study.close()
+
+
+def box(page, selector: str) -> dict:
+    return page.locator(selector).bounding_box()
+
+
+@pytest.mark.parametrize(("width", "height"), [(1280, 800), (1024, 640)])
+def test_the_prompt_and_the_trust_buttons_fit_the_window_beside_the_view(station, width, height, tmp_path):
+    frame, _ = scene_on(station.net_path)
+    with station.open(width, height) as (page, socket):
+        start_driving(page, socket, "driver")
+        socket.send(json.dumps(frame))
+        socket.send(json.dumps({"type": "road", "index": 1, "incident": None, "takeover": False,
+                                "performance": None, "t": 10.0, "prompt": {"episode_id": "x", "road": 1}}))
+        page.locator("#prompt").wait_for(state="visible")
+        wait_until(page, "document.getElementById('speed').textContent.includes('km/h')")
+        page.screenshot(path=str(tmp_path / f"prompt-{width}x{height}.png"))
+        for selector in ("#prompt", "#toggle", "#trust button >> nth=6", "#brake"):
+            shown = box(page, selector)
+            assert shown["y"] >= 0 and shown["y"] + shown["height"] <= height, (selector, shown)
+        assert page.evaluate("document.documentElement.scrollHeight") <= height   # nothing to scroll to
+        assert box(page, "#scene")["width"] >= 0.6 * min(width, 960)   # the view is not shrunk away
