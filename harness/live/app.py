@@ -81,6 +81,7 @@ PAGES = Path(__file__).with_name("pages")
 STATIC = {"live.css": "text/css", "console.js": "text/javascript", "station.js": "text/javascript",
           "driver_view.js": "text/javascript", "map_view.js": "text/javascript",
           "inputs.js": "text/javascript", "link.js": "text/javascript", "questionnaire.js": "text/javascript",
+          "next_turn.js": "text/javascript",
           "vendor/three.module.js": "text/javascript", "vendor/three.core.js": "text/javascript"}
 OUTBOX = 1024          # messages queued for one websocket; frames are dropped first
 FRAMES_UP_TO = OUTBOX // 2

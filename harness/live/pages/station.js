@@ -9,6 +9,7 @@
 import { DriverView, webglAvailable } from "./driver_view.js";
 import { Calibration, Inputs } from "./inputs.js";
 import { drawMap } from "./map_view.js";
+import { drawArrow, nextTurn } from "./next_turn.js";
 
 const $ = (id) => document.getElementById(id);
 // Text set only where it changes: frames arrive 25 times a second, and each assignment of a text,
@@ -128,71 +129,19 @@ function onOncomingLane(frame) {
   return v !== undefined && String(frame.lane).startsWith(`${v}-${u}_`);
 }
 
-// -- the next turn of the route -------------------------------------------------------------------
-function direction([ax, ay], [bx, by]) { return Math.atan2(by - ay, bx - ax); }
-
-// "left", "right", "straight" or "back" from the end of road `from` into road `to`.
-function turnBetween(from, to) {
-  if (!from || !to || from.length < 2 || to.length < 2) return null;
-  const before = direction(from[from.length - 2], from[from.length - 1]);
-  const after = direction(to[0], to[1]);
-  const delta = ((((after - before) * 180) / Math.PI + 540) % 360) - 180;   // counter-clockwise: left
-  if (Math.abs(delta) > 150) return "back";
-  if (delta > 30) return "left";
-  if (delta < -30) return "right";
-  return "straight";
-}
-
-function remaining(shape, x, y) {   // metres from the point of `shape` nearest (x, y) to its end
-  let best = Infinity;
-  let index = 0;
-  shape.forEach(([px, py], i) => { const d = Math.hypot(px - x, py - y); if (d < best) { best = d; index = i; } });
-  let total = Math.hypot(shape[index][0] - x, shape[index][1] - y);
-  for (let i = index; i + 1 < shape.length; i++) total += Math.hypot(shape[i + 1][0] - shape[i][0], shape[i + 1][1] - shape[i][1]);
-  return total;
-}
-
+// -- the next turn of the route (next_turn.js) ----------------------------------------------------
 let drawnTurn;   // the arrow on the canvas (null: none); it is drawn again only when it changes
 function drawTurn(turn) {
   if (turn === drawnTurn) return;
   drawnTurn = turn;
-  const canvas = $("turn");
-  const context = canvas.getContext("2d");
-  context.clearRect(0, 0, canvas.width, canvas.height);
-  canvas.classList.toggle("hidden", !turn);
-  if (!turn) return;
-  context.save();
-  context.translate(canvas.width / 2, canvas.height / 2 + 6);
-  context.strokeStyle = "#ffffff";
-  context.fillStyle = "#ffffff";
-  context.lineWidth = 6;
-  context.lineJoin = "round";
-  context.beginPath();
-  context.moveTo(0, 20);
-  const tip = { straight: [0, -22], left: [-20, -12], right: [20, -12], back: [-14, 14] }[turn];
-  if (turn === "straight") context.lineTo(0, -12);
-  else if (turn === "back") { context.lineTo(0, -14); context.arc(-7, -14, 7, 0, Math.PI, true); context.lineTo(-14, 4); }
-  else { context.lineTo(0, -12); context.lineTo(tip[0] * 0.55, -12); }
-  context.stroke();
-  context.beginPath();   // the arrow head
-  const [hx, hy] = tip;
-  if (turn === "straight") { context.moveTo(hx, hy); context.lineTo(hx - 10, hy + 12); context.lineTo(hx + 10, hy + 12); }
-  else if (turn === "back") { context.moveTo(hx, hy); context.lineTo(hx - 9, hy - 11); context.lineTo(hx + 9, hy - 11); }
-  else { const s = Math.sign(hx); context.moveTo(hx, -12); context.lineTo(hx - s * 12, -22); context.lineTo(hx - s * 12, -2); }
-  context.fill();
-  context.restore();
+  $("turn").classList.toggle("hidden", !turn);
+  drawArrow($("turn"), turn);
 }
 
-const TURN_WORDS = { left: "Turn left", right: "Turn right", straight: "Straight on", back: "Turn around" };
-
 function showNextTurn(frame) {
-  const route = frame.route || [];
-  const current = edges[route[0]];
-  const turn = route.length > 1 ? turnBetween(current, edges[route[1]]) : null;
+  const { turn, text } = nextTurn(frame, edges);
   drawTurn(turn);
-  const distance = current ? Math.round(remaining(current, frame.x, frame.y) / 10) * 10 : null;
-  setText($("turn-text"), turn && distance !== null ? `${TURN_WORDS[turn]} in ${distance} m`
-    : distance !== null && !String(frame.road).startsWith(":") ? `Junction in ${distance} m` : "");
+  setText($("turn-text"), text);
 }
 
 // -- frames ---------------------------------------------------------------------------------------

@@ -93,3 +93,29 @@ def test_the_prompt_and_the_trust_buttons_fit_the_window_beside_the_view(station
             assert shown["y"] >= 0 and shown["y"] + shown["height"] <= height, (selector, shown)
         assert page.evaluate("document.documentElement.scrollHeight") <= height   # nothing to scroll to
         assert box(page, "#scene")["width"] >= 0.6 * min(width, 960)   # the view is not shrunk away
+
+
+# A road's lane that bends: 100 m east, then 100 m north (its end is the junction).
+BEND = [[0, 0], [100, 0], [100, 100]]
+REMAINING = """async ([shape, points]) => {
+  const { remaining } = await import("/static/next_turn.js");
+  return points.map(([x, y]) => remaining(shape, x, y));
+}"""
+NEXT_TURN = """async ([frame, edges]) => (await import("/static/next_turn.js")).nextTurn(frame, edges)"""
+
+
+def test_the_distance_to_the_junction_falls_steadily_along_the_road(station):
+    """Measured from the car's projection on the lane, along the lane: driving on, the distance
+    only falls (it grew, then jumped, measured from the nearest vertex of the lane's shape)."""
+    along = [(x, 1.5) for x in range(0, 100, 5)] + [(98.5, y) for y in range(0, 101, 5)]
+    with station.open() as (page, _):
+        distances = page.evaluate(REMAINING, [BEND, along])
+        expected = [200 - x for x, _ in along[:20]] + [100 - y for _, y in along[20:]]
+        assert distances == pytest.approx(expected, abs=1.6)
+        assert all(later <= earlier for earlier, later in zip(distances, distances[1:], strict=False))
+        edges = {"a": BEND, "b": [[100, 100], [0, 100]]}   # at the end of the bend: a left turn
+        frame = {"x": 40.0, "y": 1.0, "road": "a", "route": ["a", "b"]}
+        assert page.evaluate(NEXT_TURN, [frame, edges]) == {"turn": "left", "text": "Turn left in 160 m"}
+        assert page.evaluate(NEXT_TURN, [{**frame, "route": ["a"]}, edges])["text"] == "Junction in 160 m"
+        inside = {**frame, "road": ":j_0"}   # in the junction, the turn under way: nothing to say
+        assert page.evaluate(NEXT_TURN, [inside, edges]) == {"turn": None, "text": ""}

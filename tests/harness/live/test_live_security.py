@@ -308,7 +308,7 @@ def test_the_pages_need_their_token_and_carry_the_security_headers(client, live_
     assert console.status_code == station.status_code == 200
     assert "experimenter console" in console.text and "/static/station.js" in station.text
     for name in ("live.css", "console.js", "station.js", "driver_view.js", "map_view.js", "inputs.js",
-                 "vendor/three.module.js", "vendor/three.core.js"):
+                 "next_turn.js", "vendor/three.module.js", "vendor/three.core.js"):
         assert client.get(f"/static/{name}").status_code == 200
     for name in ("..%2Fserver.py", "app.py", "console.html", "vendor/three.LICENSE", "vendor/../app.py"):
         assert client.get(f"/static/{name}").status_code == 404
