@@ -182,13 +182,12 @@ function onFrame(frame) {
   setText($("road"), oncoming ? "In the oncoming lane" : "");
   // which road (for tests and the experimenter), never shown
   if ($("road").dataset.road !== frame.road) $("road").dataset.road = frame.road;
-  if (frame.mode === "manual" && !continuous) {
-    setText($("hint"), oncoming
-      ? "Passing in the oncoming lane: back into your lane once past the obstacle."
+  // the hint is for a person driving by hand: on autopilot (the frames after a hand-back) it goes
+  setText($("hint"), frame.mode !== "manual" || continuous ? ""
+    : oncoming ? "Passing in the oncoming lane: back into your lane once past the obstacle."
       : obstacleAhead(frame)
         ? "Obstacle ahead: pull out with \u2190 to pass it through the oncoming lane when the way is clear."
         : "");
-  }
   showNextTurn(frame);
   if (driverView) driverView.push(frame);
   if (net) drawMap($("view"), net, frame, viewKind === "map" ? MAP_SCALE : miniScale($("view")));

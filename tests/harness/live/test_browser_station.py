@@ -119,3 +119,23 @@ def test_the_distance_to_the_junction_falls_steadily_along_the_road(station):
         assert page.evaluate(NEXT_TURN, [{**frame, "route": ["a"]}, edges])["text"] == "Junction in 160 m"
         inside = {**frame, "road": ":j_0"}   # in the junction, the turn under way: nothing to say
         assert page.evaluate(NEXT_TURN, [inside, edges]) == {"turn": None, "text": ""}
+
+
+def test_the_driving_hint_goes_once_the_frames_are_on_autopilot(station):
+    """After a hand-back, a frame still marked manual (sent before the switch) may set the hint
+    again: the first frame on autopilot takes it away."""
+    frame, _ = scene_on(station.net_path)
+    u, v = frame["road"].split("-")
+    oncoming = {**frame, "mode": "manual", "lane": f"{v}-{u}_0"}
+    with station.open() as (page, socket):
+        start_driving(page, socket, "driver")
+        socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 10.0}))
+        socket.send(json.dumps(oncoming))
+        hint = page.locator("#hint")
+        wait_until(page, "document.getElementById('hint').textContent.includes('oncoming lane')")
+        socket.send(json.dumps({"type": "mode", "mode": "auto", "t": 10.2}))
+        socket.send(json.dumps({**oncoming, "t": 10.2}))   # the last frame before the switch
+        socket.send(json.dumps({**frame, "t": 10.4}))
+        wait_until(page, "document.getElementById('mode').textContent === 'AUTOPILOT'")
+        wait_until(page, "!document.getElementById('road').textContent")   # the autopilot's frame is shown
+        assert hint.inner_text() == ""
