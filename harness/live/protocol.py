@@ -167,6 +167,17 @@ CLIENT_MESSAGE = TypeAdapter(Annotated[Consent | Start | Takeover | HandBack | D
                                        Field(discriminator="type")])
 
 
+# -- server messages ------------------------------------------------------------------------------
+class Reported(Message):
+    """Server -> client: a trust report accepted and passed to the running episode (the station
+    says "You reported N." on this, not on sending: a refused report is not one); `prompt`: the
+    prompt it answers, as the report named it."""
+
+    type: Literal["reported"] = "reported"
+    value: Annotated[StrictInt, Field(ge=TRUST_LOW, le=TRUST_HIGH)]
+    prompt: PromptId | None = None
+
+
 # -- HTTP bodies ---------------------------------------------------------------------------------
 class NewParticipant(Message):
     label: Annotated[str, Field(max_length=100, pattern=r"^[\w .,:()-]*$")] = ""

@@ -32,6 +32,7 @@ from trustroute.harness.live.protocol import (
     MessageError,
     Pass,
     Ping,
+    Reported,
     Resume,
     Shown,
     Start,
@@ -170,7 +171,7 @@ class Session:
                 return []
             elif isinstance(message, TrustReport):
                 self.report(message)
-                return []
+                return [Reported(value=message.value, prompt=message.prompt).model_dump()]
             elif isinstance(message, Answers):
                 self.require("questionnaire", message)
                 self.answer(message)

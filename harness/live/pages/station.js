@@ -63,10 +63,12 @@ function trustButtons(container, onPick) {
 
 let pendingPrompt = null;   // the prompt a report answers ({episode_id, road}), else a free report
 
+// "You reported N." comes with the server's `reported`: a report refused (paused, the trial over)
+// is not one. Outside a drive nothing is sent, as with the keys.
 function report(value) {
+  if (state.phase !== "driving") return;
   send(pendingPrompt ? { type: "trust", value, prompt: pendingPrompt } : { type: "trust", value });
   pendingPrompt = null;
-  $("reported").textContent = `You reported ${value}.`;
   $("prompt").classList.add("hidden");
 }
 
@@ -336,6 +338,7 @@ function startEpisode(episodeId) {
   drawTurn(null);
   $("turn-text").textContent = "";
   overlay("The vehicle is getting ready\u2026");
+  $("reported").textContent = "";   // the last drive's report is not this one's
 }
 
 function onMessage(message) {
@@ -347,6 +350,7 @@ function onMessage(message) {
       break;
     case "state": onState(message); break;
     case "frame": onFrame(message); break;
+    case "reported": $("reported").textContent = `You reported ${message.value}.`; break;
     case "mode": setMode(message.mode); break;
     case "incident": notice(NOTICES[message.kind] || ""); break;
     case "warning":

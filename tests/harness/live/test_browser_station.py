@@ -139,3 +139,23 @@ def test_the_driving_hint_goes_once_the_frames_are_on_autopilot(station):
         wait_until(page, "document.getElementById('mode').textContent === 'AUTOPILOT'")
         wait_until(page, "!document.getElementById('road').textContent")   # the autopilot's frame is shown
         assert hint.inner_text() == ""
+
+
+def test_you_reported_is_said_on_the_servers_acknowledgement_and_not_into_the_next_drive(station):
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        received: list[dict] = []
+        socket.on_message(lambda text: received.append(json.loads(text)))
+        start_driving(page, socket, "driver")
+        socket.send(json.dumps(frame))
+        wait_until(page, "document.getElementById('speed').textContent.includes('km/h')")
+        page.keyboard.press("5")
+        deadline = time.monotonic() + 10
+        while not any(m["type"] == "trust" for m in received):
+            assert time.monotonic() < deadline, received
+            page.wait_for_timeout(50)
+        assert page.locator("#reported").inner_text() == ""   # sent, not yet accepted (it may be refused)
+        socket.send(json.dumps({"type": "reported", "value": 5, "prompt": None}))
+        wait_until(page, "document.getElementById('reported').textContent === 'You reported 5.'")
+        socket.send(json.dumps({"type": "episode_start", "episode_id": "y", "trust": 4}))   # the next drive
+        wait_until(page, "document.getElementById('reported').textContent === ''")

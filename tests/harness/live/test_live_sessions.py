@@ -36,6 +36,7 @@ from trustroute.harness.live.guard import (
     own_origins,
     quiet_accept_errors,
 )
+from trustroute.harness.live.protocol import MessageError, parse_client_message
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 
 from .conftest import serving, tiny_config
@@ -369,15 +370,37 @@ class EpisodeEnd:
         self.controls.append(control)
 
 
-def test_the_experimenters_pause_and_resume_reach_the_station(client, live_study):
-    new_participant(client, live_study)
-    session = live_study.sessions[0]
+def running(client, study):
+    """The session of a new participant of `study` with an episode running (its pipe an
+    EpisodeEnd) and its station's messages collected: (session, the messages pushed)."""
+    new_participant(client, study)
+    session = study.sessions[max(study.sessions)]
     pushed: list[dict] = []
     session.attach(pushed.append)
-    session.phase, session.task = "driving", session.tasks[0]   # a running episode
+    session.phase, session.task = "driving", session.tasks[0]
     session.connection = EpisodeEnd()
+    return session, pushed
+
+
+def test_the_experimenters_pause_and_resume_reach_the_station(client, live_study):
+    session, pushed = running(client, live_study)
     session.control("pause")
     assert [(m["type"], m["phase"], m["paused_by"]) for m in pushed] == [("state", "paused", "experimenter")]
     session.control("resume")
     assert (pushed[-1]["phase"], pushed[-1]["paused_by"]) == ("driving", None)
     assert [c["type"] for c in session.connection.controls] == ["pause", "resume"]
+
+
+def test_an_accepted_trust_report_is_acknowledged_and_a_refused_one_is_not(client, live_study):
+    session, _ = running(client, live_study)
+    prompt = {"episode_id": session.task.episode_id, "road": 2}
+    session.prompted.add(2)
+    assert session.handle(parse_client_message('{"type": "trust", "value": 5}')) == [
+        {"type": "reported", "value": 5, "prompt": None}]
+    answer = json.dumps({"type": "trust", "value": 3, "prompt": prompt})
+    assert session.handle(parse_client_message(answer)) == [
+        {"type": "reported", "value": 3, "prompt": prompt}]
+    session.control("pause")
+    with pytest.raises(MessageError):   # refused: no acknowledgement, nothing told to the episode
+        session.handle(parse_client_message('{"type": "trust", "value": 4}'))
+    assert [c.get("value") for c in session.connection.controls if c["type"] == "trust"] == [5, 3]
