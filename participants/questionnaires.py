@@ -20,7 +20,9 @@ A Likert questionnaire file (TOML):
     text = "The ride felt smooth."
     reversed = false                 # optional
 
-The study config's `[questionnaires]` table places them: `before` (after the consent, before
+A packaged questionnaire's instructions follow where it is asked (before any drive they speak
+of the drives to come, at the end of all of them); a file's are its `instructions`, wherever it
+is placed. The study config's `[questionnaires]` table places them: `before` (after the consent, before
 any drive), `after_each_trial` (after each trial, not the warm-up) and `end` (after the last
 trial), each a list of `jian`, `nasa_tlx` or file paths (relative to the config).
 """
@@ -63,6 +65,13 @@ class Questionnaire:
     step: float
     low: str
     high: str
+    # ((placement, instructions), ...): the instructions where they differ by where the
+    # questionnaire is asked (before any drive there is no drive "just completed"); else `instructions`
+    placed: tuple[tuple[str, str], ...] = ()
+
+    def instructions_for(self, placement: str) -> str:
+        """The instructions shown where the questionnaire is asked (a placement of PLACEMENTS)."""
+        return dict(self.placed).get(placement, self.instructions)
 
     def score(self, answers: dict[str, float]) -> float:
         """The mean item value, reversed items turned (min + max - value)."""
@@ -93,12 +102,12 @@ class Questionnaire:
                 )
         return {key: float(value) for key, value in answers.items()}
 
-    def to_client(self) -> dict:
-        """What the station shows (no scoring keys)."""
+    def to_client(self, placement: str) -> dict:
+        """What the station shows where the questionnaire is asked (no scoring keys)."""
         return {
             "name": self.name,
             "title": self.title,
-            "instructions": self.instructions,
+            "instructions": self.instructions_for(placement),
             "scale": {
                 "min": self.minimum,
                 "max": self.maximum,
@@ -148,6 +157,10 @@ JIAN = Questionnaire(
     1,
     "not at all",
     "extremely",
+    (
+        ("before", "Rate how much each statement applies to the automated vehicle you are about to ride in."),
+        ("end", "Rate how much each statement applies to the automated vehicle you rode in today."),
+    ),
 )
 NASA_TLX = Questionnaire(
     "nasa_tlx",
@@ -173,6 +186,10 @@ NASA_TLX = Questionnaire(
     5,
     "very low",
     "very high",
+    (
+        ("before", "You have not driven yet: rate the workload you expect a drive to bring on each scale."),
+        ("end", "Rate the drives of this session as a whole on each scale."),
+    ),
 )
 PACKAGED: dict[str, Questionnaire] = {"jian": JIAN, "nasa_tlx": NASA_TLX}
 

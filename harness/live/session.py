@@ -124,7 +124,7 @@ class Session:
         if entry is None:
             return None
         placement, trial, questionnaire = entry
-        return {**questionnaire.to_client(), "placement": placement, "trial": trial}
+        return {**questionnaire.to_client(placement), "placement": placement, "trial": trial}
 
     # -- the participant's messages -------------------------------------------------------------
     def drive(self, message: Drive | Steer | Control) -> None:

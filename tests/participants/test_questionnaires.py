@@ -6,7 +6,13 @@ import pytest
 
 from trustroute.analysis.study.questionnaires import cronbach_alpha
 from trustroute.core.errors import InputError
-from trustroute.participants.questionnaires import JIAN, NASA_TLX, load_questionnaire, questionnaire_plan
+from trustroute.participants.questionnaires import (
+    JIAN,
+    NASA_TLX,
+    PLACEMENTS,
+    load_questionnaire,
+    questionnaire_plan,
+)
 
 LIKERT = """[questionnaire]
 name = "comfort"
@@ -100,3 +106,16 @@ def test_a_misspelt_key_of_a_questionnaire_or_its_placement_names_the_closest(tm
         questionnaire_plan({"ends": ["jian"]}, tmp_path, "study.toml")
     assert error.value.place == "questionnaires.ends"
     assert error.value.fix.startswith("write end, the closest key, or one of before, after_each_trial, end")
+
+
+def test_the_packaged_instructions_follow_where_the_questionnaire_is_asked(tmp_path):
+    """Before any drive there is no drive just completed; at the end, all of them are rated."""
+    for questionnaire in (JIAN, NASA_TLX):
+        before, after, end = (questionnaire.to_client(p)["instructions"] for p in PLACEMENTS)
+        assert "just" in after and "just" not in before and "just" not in end
+        assert len({before, after, end}) == 3
+    after_trial = NASA_TLX.to_client("after_each_trial")["instructions"]
+    assert after_trial == "Rate the drive you just completed on each scale."
+    (tmp_path / "comfort.toml").write_text(LIKERT)
+    comfort = load_questionnaire(tmp_path / "comfort.toml", "study.toml")   # a file's: as written, anywhere
+    assert {comfort.to_client(p)["instructions"] for p in PLACEMENTS} == {"How much do you agree?"}

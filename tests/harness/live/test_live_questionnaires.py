@@ -16,6 +16,7 @@ from trustroute.harness.live.app import live_app
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 from trustroute.harness.study.config import load_study_config
+from trustroute.participants.questionnaires import NASA_TLX
 
 from .conftest import TINY, consenting_participant, serving
 from .test_live_episode import receive_until
@@ -58,6 +59,7 @@ def test_questionnaires_are_asked_where_placed_checked_and_stored(tmp_path):
                 shown = state["questionnaire"]
                 assert (shown["name"], shown["placement"], shown["trial"]) == ("nasa_tlx", "before", None)
                 assert len(shown["items"]) == 6 and "reversed" not in shown["items"][0]
+                assert shown["instructions"] == NASA_TLX.instructions_for("before")   # no drive done yet
                 station.send_json({"type": "start"})
                 assert receive_until(station, lambda m: m["type"] == "error")["code"] == "out_of_order"
                 partial = {"type": "answers", "questionnaire": "nasa_tlx", "answers": {"mental": 50}}
