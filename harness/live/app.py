@@ -36,11 +36,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import threading
+from html import escape
 from pathlib import Path
 
 from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse
 from starlette.requests import HTTPConnection
 
 from trustroute.harness.live.auth import (
@@ -223,14 +224,37 @@ async def malformed(request: Request, exc: Exception) -> JSONResponse:
     return JSONResponse(error_reply("malformed", f"{where}: {first.get('msg', 'invalid')}"), 422)
 
 
-@router.get("/login")
-def login(request: Request, token: str = "") -> RedirectResponse:
+# What a browser opening a page it may not see is told (refused_page), by page.
+CONSOLE_TITLE, STATION_TITLE = "trustroute live: experimenter console", "Driving study"
+NEW_CONSOLE_LINK = ("open the new console link the server printed when it started, or make one with the "
+                    "experimenter token (POST /api/login-link; docs/live_studies.md, Running a session).")
+CONSOLE_REFUSED = ("This browser is not logged in to the console: the server was restarted, or the login "
+                   "is gone. To go on, " + NEW_CONSOLE_LINK)
+LOGIN_REFUSED = "This console link is spent or unknown. To log in, " + NEW_CONSOLE_LINK
+STATION_REFUSED = ("This session is not open in this browser. Open the link the experimenter gave you, or "
+                   "ask the experimenter for a new one. If you have withdrawn from the study, your data "
+                   "has been deleted: you can close this window.")
+
+
+def refused_page(request: Request, refusal: HTTPException, title: str, text: str) -> HTMLResponse:
+    """A page refused to a browser (its request accepts text/html: a navigation) is a readable page
+    saying what to do, with the refusal's status; any other client gets the JSON refusal."""
+    if "text/html" not in request.headers.get("accept", ""):
+        raise refusal
+    page = (PAGES / "refused.html").read_text()
+    page = page.replace("{title}", escape(title)).replace("{text}", escape(text))
+    return HTMLResponse(page, refusal.status_code)
+
+
+@router.get("/login", response_model=None)
+def login(request: Request, token: str = "") -> RedirectResponse | HTMLResponse:
     """The console link: its one-time token is exchanged for a fresh session token, which only the
     cookie holds (the link left in the browser's history, or a proxy's log, is spent)."""
     session = study_of(request).login(token[:200] or None)
     if session is None:
-        raise refused(403, "forbidden", "this login link is spent or unknown; ask the server for a new one "
-                                        "(POST /api/login-link with the experimenter token)")
+        refusal = refused(403, "forbidden", "this login link is spent or unknown; ask the server for a new "
+                                            "one (POST /api/login-link with the experimenter token)")
+        return refused_page(request, refusal, CONSOLE_TITLE, LOGIN_REFUSED)
     return cookie_redirect(request, "/console", EXPERIMENTER_COOKIE, session)
 
 
@@ -263,13 +287,21 @@ def claim(request: Request, body: LinkClaim) -> JSONResponse:
     return response
 
 
-@router.get("/console", dependencies=[Depends(experimenter)])
-def console() -> FileResponse:
+@router.get("/console", response_model=None)
+def console(request: Request) -> FileResponse | HTMLResponse:
+    try:
+        experimenter(request)
+    except HTTPException as refusal:
+        return refused_page(request, refusal, CONSOLE_TITLE, CONSOLE_REFUSED)
     return FileResponse(PAGES / "console.html", media_type="text/html")
 
 
-@router.get("/station", dependencies=[Depends(participant_token)])
-def station() -> FileResponse:
+@router.get("/station", response_model=None)
+def station(request: Request) -> FileResponse | HTMLResponse:
+    try:
+        participant_token(request)
+    except HTTPException as refusal:
+        return refused_page(request, refusal, STATION_TITLE, STATION_REFUSED)
     return FileResponse(PAGES / "station.html", media_type="text/html")
 
 

@@ -382,16 +382,27 @@ function onMessage(message) {
 }
 
 // Close codes after which reconnecting would be wrong: another window holds the session (4001),
-// or the link was revoked (1008).
+// or the link was revoked (1008), by a withdrawal too (its close reason "withdrawn").
 const FINAL_CLOSE = { 4001: "This session is open in another window or tab; continue there.",
                       1008: "This session's link was revoked or is not valid; ask the experimenter." };
+const WITHDRAWN = "You have withdrawn from the study; your data has been deleted. You can close this window.";
+
+// The session is over in this window: its text, and nothing left to press.
+function closed(text, withdrawn) {
+  state = { phase: "closed" };
+  $("error").textContent = text;
+  setText($("status"), "");
+  if (withdrawn) show(null);   // every drive and answer is deleted: no step of the study is shown
+  for (const control of document.querySelectorAll("button, input")) control.disabled = true;
+}
 
 function connect() {
   const scheme = location.protocol === "https:" ? "wss" : "ws";
   socket = new WebSocket(`${scheme}://${location.host}/ws`);
   socket.addEventListener("message", (event) => onMessage(JSON.parse(event.data)));
   socket.addEventListener("close", (event) => {
-    if (FINAL_CLOSE[event.code]) { $("error").textContent = FINAL_CLOSE[event.code]; return; }
+    if (event.code === 1008 && event.reason === "withdrawn") { closed(WITHDRAWN, true); return; }
+    if (FINAL_CLOSE[event.code]) { closed(FINAL_CLOSE[event.code], false); return; }
     $("error").textContent = "Connection lost; reconnecting...";
     setTimeout(connect, 1000);
   });

@@ -159,3 +159,32 @@ def test_you_reported_is_said_on_the_servers_acknowledgement_and_not_into_the_ne
         wait_until(page, "document.getElementById('reported').textContent === 'You reported 5.'")
         socket.send(json.dumps({"type": "episode_start", "episode_id": "y", "trust": 4}))   # the next drive
         wait_until(page, "document.getElementById('reported').textContent === ''")
+
+
+def test_a_withdrawn_participant_is_told_so_and_has_nothing_left_to_press(station, tmp_path):
+    with station.open() as (page, socket):
+        socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver"}))
+        socket.send(json.dumps({"type": "state", "participant": 0, "label": "", "phase": "ready",
+                                "paused_by": None, "warm_up": None, "trial": 0, "trials": 1,
+                                "episode_id": None, "next_episode": "x", "mode": "auto", "road": None,
+                                "reports": 0, "takeovers": 0, "done": [], "last_error": None,
+                                "questionnaire": None}))
+        page.locator("#ready-step").wait_for(state="visible")
+        # the server's withdrawal (harness/live/app.py revoke_stale): told, then closed with 1008
+        socket.send(json.dumps({"type": "revoked", "detail": "withdrawn from the study"}))
+        socket.close(code=1008, reason="withdrawn")
+        error = page.locator("#error")
+        error.filter(has_text="You have withdrawn from the study").wait_for()
+        assert "your data has been deleted" in error.inner_text() and "revoked" not in error.inner_text()
+        assert page.locator("#ready-step").is_hidden()
+        assert page.locator("button:enabled").count() == 0
+        page.screenshot(path=str(tmp_path / "withdrawn.png"))
+    # opened again without the session's cookie (withdrawn, or a browser that never had it): a page
+    # that says what to do, not the API's JSON
+    page = station.browser.new_page()
+    response = page.goto(f"{station.address}/station")
+    assert response.status == 403
+    assert "link the experimenter gave you" in page.locator("#message").inner_text()
+    assert "{" not in page.locator("body").inner_text()
+    page.screenshot(path=str(tmp_path / "no-cookie.png"))
+    page.close()

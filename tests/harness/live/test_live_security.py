@@ -302,6 +302,13 @@ def test_the_pages_need_their_token_and_carry_the_security_headers(client, live_
     assert client.get("/console").status_code == 401
     assert client.get("/console", headers=bearer(token)).status_code == 403
     assert client.get("/station").status_code == 403
+    # a browser's navigation is told what to do in a page; any other client gets the JSON refusal
+    for path, says in (("/station", "link the experimenter gave you"), ("/console", "new console link"),
+                       ("/login?token=spent", "new console link")):
+        page = client.get(path, headers={"Accept": "text/html,application/xhtml+xml,*/*;q=0.8"})
+        assert page.status_code in (401, 403) and page.headers["content-type"].startswith("text/html")
+        assert says in page.text and "{" not in page.text
+        assert client.get(path).json()["detail"]["code"] == "forbidden"
     assert client.get("/station", headers=bearer(secrets.token_urlsafe(32))).status_code == 403
     console = client.get("/console", headers=bearer(live_study.experimenter_token))
     station = client.get("/station", headers=bearer(token))
