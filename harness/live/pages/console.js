@@ -4,7 +4,12 @@
 
 const $ = (id) => document.getElementById(id);
 
-function showError(text) { $("error").textContent = text || ""; }
+function showError(text) { if ($("error").textContent !== (text || "")) $("error").textContent = text || ""; }
+
+// the server restarted (its console logins are new at every start) or the cookie is gone
+const LOGGED_OUT = "This console is no longer logged in (the server was restarted, or the login is gone): "
+  + "open the new console link the server printed, or make one with POST /api/login-link.";
+const GONE = "The server does not answer (stopped?); the console tries again every second.";
 
 async function call(method, path, body) {
   const options = { method, headers: {} };
@@ -12,8 +17,11 @@ async function call(method, path, body) {
     options.headers["content-type"] = "application/json";
     options.body = JSON.stringify(body);
   }
-  const response = await fetch(path, options);
+  let response;
+  try { response = await fetch(path, options); }
+  catch { throw new Error(GONE); }
   const payload = await response.json().catch(() => ({}));
+  if (response.status === 401 || response.status === 403) throw new Error(LOGGED_OUT);
   if (!response.ok) {
     const detail = payload.detail && payload.detail.detail ? payload.detail.detail : payload.detail;
     throw new Error(`${response.status}: ${detail || payload.code || "refused"}`);
@@ -72,23 +80,41 @@ function withdrawButton(td, participant) {
   td.appendChild(button);
 }
 
+// The table is refreshed every second in place: each participant's row (by its number) is made
+// once with its buttons and only its texts change, so a button keeps the keyboard's focus.
+const TEXTS = 10;   // the cells before the episode control and participant buttons
+function texts(p) {
+  return [p.participant, p.label, p.paused_by ? `${p.phase} (${p.paused_by})` : p.phase, `${p.trial} of ${p.trials}`,
+          p.episode_id, p.mode, p.road, p.reports, p.takeovers, p.last_error];
+}
+
+function rowOf(body, participant) {
+  const found = body.querySelector(`tr[data-participant="${participant}"]`);
+  if (found) return found;
+  const row = document.createElement("tr");
+  row.dataset.participant = participant;
+  for (let i = 0; i < TEXTS; i++) cell(row, "");
+  const controls = cell(row, "");
+  for (const action of ["pause", "resume", "abort"]) controlButton(controls, participant, action);
+  const links = cell(row, "");
+  linkButton(links, participant);
+  withdrawButton(links, participant);
+  body.appendChild(row);
+  return row;
+}
+
 async function refresh() {
   try {
     const { participants } = await call("GET", "/api/participants");
+    if ([GONE, LOGGED_OUT].includes($("error").textContent)) showError("");   // answered again
     const body = $("participants");
-    body.replaceChildren();
     for (const p of participants) {
-      const row = document.createElement("tr");
-      row.dataset.participant = p.participant;
-      cell(row, p.participant); cell(row, p.label);
-      cell(row, p.paused_by ? `${p.phase} (${p.paused_by})` : p.phase);
-      cell(row, `${p.trial} of ${p.trials}`); cell(row, p.episode_id); cell(row, p.mode);
-      cell(row, p.road); cell(row, p.reports); cell(row, p.takeovers); cell(row, p.last_error);
-      const controls = cell(row, "");
-      for (const action of ["pause", "resume", "abort"]) controlButton(controls, p.participant, action);
-      const links = cell(row, "");
-      if (p.phase !== "withdrawn") { linkButton(links, p.participant); withdrawButton(links, p.participant); }
-      body.appendChild(row);
+      const row = rowOf(body, p.participant);
+      texts(p).forEach((text, i) => {
+        const shown = text === null || text === undefined ? "" : String(text);
+        if (row.cells[i].textContent !== shown) row.cells[i].textContent = shown;
+      });
+      if (p.phase === "withdrawn" && row.cells[TEXTS + 1].childElementCount) row.cells[TEXTS + 1].replaceChildren();
     }
   } catch (error) { showError(error.message); }
 }
