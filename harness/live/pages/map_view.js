@@ -132,6 +132,16 @@ export function drawMap(canvas, net, frame, scale) {
     context.arc(u, v, Math.max(0.6 * scale, 2.5), 0, 2 * Math.PI);
     context.fill();
   }
-  box(context, toCanvas, frame.x, frame.y, frame.angle, frame.length || 4.5, frame.width || 1.8,
-      frame.mode === "manual" ? "#c62828" : "#2e7d32", scale, "#ffffff");
+  drawEgo(context, toCanvas, frame, scale);
+}
+
+// The ego is drawn at least EGO_PIXELS long (CSS pixels) and half as wide: at the mini-map's scale
+// (a few hundred metres in 200 pixels) a car at its size is a speck of two or three pixels.
+const EGO_PIXELS = 16;
+function drawEgo(context, toCanvas, frame, scale) {
+  const length = frame.length || 4.5;
+  const shown = Math.max(scale, (EGO_PIXELS * (window.devicePixelRatio || 1)) / length);
+  const width = shown > scale ? Math.max(frame.width || 1.8, length / 2) : frame.width || 1.8;
+  box(context, toCanvas, frame.x, frame.y, frame.angle, length, width,
+      frame.mode === "manual" ? "#c62828" : "#2e7d32", shown, "#ffffff");
 }

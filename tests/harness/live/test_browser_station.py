@@ -31,11 +31,13 @@ class Station:
         self.browser, self.address, self.study, self.net_path = browser, address, study, net_path
 
     @contextlib.contextmanager
-    def open(self, width: int = 1280, height: int = 800):
-        """(page, socket): a new participant's station at width x height, its socket the test's."""
+    def open(self, width: int = 1280, height: int = 800, phone: bool = False):
+        """(page, socket): a new participant's station at width x height (as a phone's browser lays
+        pages out: `phone`), its socket the test's."""
         created = httpx.post(f"{self.address}/api/participants", json={},
                              headers={"Authorization": f"Bearer {self.study.experimenter_token}"}).json()
-        context = self.browser.new_context(viewport={"width": width, "height": height})
+        context = self.browser.new_context(viewport={"width": width, "height": height}, is_mobile=phone,
+                                           has_touch=phone, device_scale_factor=2 if phone else 1)
         page = context.new_page()
         sockets: list = []
         page.route_web_socket("**/ws", lambda ws: sockets.append(ws))
@@ -217,3 +219,46 @@ def test_the_console_keeps_the_keyboards_focus_and_says_how_to_log_in_again(stat
     assert response.status == 401 and "new console link" in page.locator("#message").inner_text()
     page.screenshot(path=str(tmp_path / "console-refused.png"))
     context.close()
+
+
+EGO_GREEN = (46, 125, 50)   # map_view.js: the ego on autopilot
+
+
+def ego_pixels(page) -> int:
+    """How many pixels of the mini-map's canvas are the ego's colour."""
+    import base64
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    data = page.evaluate("document.getElementById('view').toDataURL('image/png')")
+    image = Image.open(io.BytesIO(base64.b64decode(data.split(",", 1)[1]))).convert("RGB")
+    pixels = np.asarray(image).astype(int)
+    return int((np.abs(pixels - np.array(EGO_GREEN)) <= 12).all(axis=-1).sum())
+
+
+@pytest.mark.parametrize(("width", "height", "phone"), [(1280, 800, False), (400, 800, True)])
+def test_the_own_car_is_seen_on_the_mini_map_and_a_phone_shows_the_station_whole(
+        station, width, height, phone, tmp_path):
+    frame, _ = scene_on(station.net_path)
+    with station.open(width, height, phone) as (page, socket):
+        start_driving(page, socket, "driver")
+        socket.send(json.dumps({**frame, "speed": 13.9}))
+        socket.send(json.dumps({"type": "road", "index": 1, "incident": None, "takeover": False,
+                                "performance": None, "t": 10.0, "prompt": {"episode_id": "x", "road": 1}}))
+        wait_until(page, "document.getElementById('speed').textContent === '50 km/h'")
+        wait_until(page, "document.getElementById('view').getContext('2d').getImageData(0, 0, 1, 1).data[3]")
+        page.screenshot(path=str(tmp_path / f"station-{width}.png"))
+        ratio = page.evaluate("window.devicePixelRatio")
+        # the car 16 x 8 CSS pixels, its white outline and heading aside (at the mini-map's scale it
+        # was 2 or 3 pixels)
+        assert ego_pixels(page) >= 50 * ratio**2
+        assert page.evaluate("window.innerWidth") == width   # laid out for the window, not a desktop's
+        assert page.evaluate("document.documentElement.scrollWidth") <= width   # nothing sticks out
+        scene, mini = box(page, "#scene"), box(page, "#view")
+        assert mini["width"] <= 0.3 * scene["width"] + 1
+        for selector in ("#mode", "#speed", "#turn-text", "#prompt"):
+            shown = box(page, selector)
+            right = scene["x"] + scene["width"] + 1
+            assert scene["x"] <= shown["x"] and shown["x"] + shown["width"] <= right, selector
