@@ -327,6 +327,9 @@ function onState(message) {
 }
 
 function startEpisode(episodeId) {
+  // the last drive's report is not this one's; one given while this drive got ready (its
+  // `episode_start` comes once its SUMO runs) is
+  if (episodeId !== shownEpisode) $("reported").textContent = "";
   shownEpisode = episodeId;
   latest = null;
   if (driverView) driverView.clear();
@@ -338,7 +341,6 @@ function startEpisode(episodeId) {
   drawTurn(null);
   $("turn-text").textContent = "";
   overlay("The vehicle is getting ready\u2026");
-  $("reported").textContent = "";   // the last drive's report is not this one's
 }
 
 function onMessage(message) {

@@ -160,6 +160,11 @@ def test_you_reported_is_said_on_the_servers_acknowledgement_and_not_into_the_ne
         assert page.locator("#reported").inner_text() == ""   # sent, not yet accepted (it may be refused)
         socket.send(json.dumps({"type": "reported", "value": 5, "prompt": None}))
         wait_until(page, "document.getElementById('reported').textContent === 'You reported 5.'")
+        # this drive's own episode_start (it comes once its SUMO runs) keeps a report made meanwhile
+        socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
+        socket.send(json.dumps({**frame, "speed": 5.0}))
+        wait_until(page, "document.getElementById('speed').textContent === '18 km/h'")
+        assert page.locator("#reported").inner_text() == "You reported 5."
         socket.send(json.dumps({"type": "episode_start", "episode_id": "y", "trust": 4}))   # the next drive
         wait_until(page, "document.getElementById('reported').textContent === ''")
 
