@@ -41,9 +41,14 @@ def test_a_value_the_study_s_inputs_lack_names_the_table_column_and_row(case, mo
 
 
 def _with_town(model_study: Path, tmp_path: Path, town: str) -> Path:
+    """A copy of the study whose manifest names `town`, as if it had been run so (its config's
+    SHA-256 recorded again, so the manifest is not taken for an edited one)."""
+    from trustroute.harness.study.inputs import config_sha256
+
     study = study_copy(model_study, tmp_path / "study")
     manifest = json.loads((study / MANIFEST_FILE).read_text())
     manifest["config"]["town"] = town
+    manifest["inputs"]["config_sha256"] = config_sha256(manifest["config"])
     (study / MANIFEST_FILE).write_text(json.dumps(manifest))
     return study
 
