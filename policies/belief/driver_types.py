@@ -42,6 +42,9 @@ class TypeLiftedModel(DriverModel):
     type_names: tuple[str, ...] = ()
     n_base_trust: int = 0
     type_prior: tuple[float, ...] = ()      # λ, the AV's prior over types
+    # each type's own initial trust law b0_k: the exact filter builds λ ⊗ b0 from these, as the float
+    # products λ_k·b0_k round (0.5·(1/3) is not half of 1/3 in floats)
+    type_initial: tuple[tuple[float, ...], ...] = ()
     population_hash: str = ""
 
     @property
@@ -98,6 +101,7 @@ def lift_population(population: DriverPopulation, prior: np.ndarray | None = Non
         provenance=f"type-aware model of the driver population {population.source_path}",
         type_names=population.names,
         n_base_trust=n,
+        type_initial=tuple(tuple(float(b) for b in m.initial_belief) for m in models),
         type_prior=tuple(float(w) for w in weights),
         population_hash=population.content_hash,
     )

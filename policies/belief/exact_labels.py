@@ -43,6 +43,24 @@ def decimal(value: float) -> Fraction:
     return Fraction(repr(float(value)))
 
 
+def _normalised(values) -> list[Fraction]:
+    entries = [decimal(v) for v in values]
+    total = sum(entries, Fraction(0))
+    return [e / total for e in entries]
+
+
+def exact_prior(driver) -> tuple[Fraction, ...]:
+    """The model's prior belief exactly: each entry the decimal it prints as, normalised; a
+    type-aware model's λ ⊗ b0 block by block, from the type weights' decimals and each type's own
+    prior's (its float products round: a type of weight 0.5 with 1/3 on three levels would weigh a
+    hair under 1/2, and a label on exactly 1/2 would flip)."""
+    weights, blocks = getattr(driver, "type_prior", ()), getattr(driver, "type_initial", ())
+    if weights and blocks:
+        return tuple(w * b for w, block in zip(_normalised(weights), blocks, strict=True)
+                     for b in _normalised(block))
+    return tuple(_normalised(driver.initial_belief))
+
+
 def _relative_gap(approximate: float, exact: Fraction) -> float:
     """|approximate - exact| / |exact|, rounded up; inf when exact is 0 and approximate is not.
     In integers: Python's int / int is correctly rounded, as float(Fraction) is."""
@@ -94,9 +112,7 @@ class ExactFilter:
             self.step_distance = (math.log((1 + g) * (1 + u) / ((1 - g) * (1 - u)))
                                   + (math.log((1 + worst) / (1 - worst)) if worst < 1 else math.inf))
         u = UNIT_ROUNDOFF
-        entries = [decimal(b) for b in self.pomdp.initial_belief]
-        total = sum(entries, Fraction(0))
-        self.prior = tuple(b / total for b in entries)
+        self.prior = exact_prior(self.pomdp.driver)
         ratios = [Fraction(float(f)) / b for f, b in zip(self.pomdp.initial_belief, self.prior,
                                                           strict=True) if b != 0]
         self.prior_distance = (float(max(ratios) / min(ratios)) if ratios else 1.0)

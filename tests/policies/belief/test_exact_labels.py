@@ -158,3 +158,62 @@ def test_the_conversion_s_numbers_equal_those_computed_entry_by_entry_in_fractio
                                 gap = abs(Fraction(float(floats[i, h, e, k, m])) - exact) / abs(exact)
                                 expected_worst = max(expected_worst, float(gap) * (1 + 4 * UNIT_ROUNDOFF))
         assert worst == expected_worst
+
+
+def _still_population(tmp_path):
+    """Two types of weight 0.5 on a town whose roads have no incidents and whose trust never moves:
+    type A starts uniform over three levels, type B at the top. The AV's belief stays the prior, so
+    P(type B) is exactly 1/2 at every junction."""
+    import json
+
+    identity = [[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]]
+    kinds = ["obstacle", "pedestrian", "truck", "none"]
+
+    def model(**extra):
+        return {"trust_levels": [1, 2, 3], "incident_types": kinds,
+                "takeover_probability": {k: [0.0] * 3 if k == "none" else [0.5] * 3 for k in kinds},
+                "trust_transition": {k: {"takeover": identity, "standstill": identity} for k in kinds},
+                **extra}
+
+    town = {"junctions": {"A": [0, 0], "B": [300, 0], "C": [0, 300]},
+            "roads": [["A", "B"], ["B", "C"], ["A", "C"]],
+            "incidents": {r: "none" for r in ("A-B", "B-A", "B-C", "C-B", "A-C", "C-A")}}
+    population = {"format": "trustroute-driver-population", "version": 1, "types": [
+        {"name": "A", "weight": 0.5, "model": model()},
+        {"name": "B", "weight": 0.5, "model": model(initial_belief=[0.0, 0.0, 1.0])}]}
+    (tmp_path / "town.json").write_text(json.dumps(town))
+    (tmp_path / "population.json").write_text(json.dumps(population))
+    for name, formula in (("tb", "F tb"), ("not_tb", "!tb")):
+        (tmp_path / f"{name}.toml").write_text(
+            f'name = "{name}"\nstart = "A-B"\nformula = "{formula}"\n'
+            '[type_beliefs]\ntb = { types = ["B"], above = 0.5 }\n')
+    return tmp_path
+
+
+def test_a_type_prior_on_a_threshold_is_read_exactly(tmp_path, capsys):
+    """The lifted prior λ ⊗ b0 in floats weighs type B a hair over 1/2 (0.5·(1/3) rounds down); the
+    exact filter builds it from the weights' and each type's decimals, so `P(B) > 0.5` is false at
+    every junction: `F tb` is worth 0 and `!tb` 1, whatever the policy."""
+    import json
+
+    from tests.cli import run_cli
+    from trustroute.participants.driver_population import load_driver_population
+    from trustroute.policies.belief.driver_types import lift_population
+    from trustroute.policies.belief.exact_labels import exact_prior
+
+    folder = _still_population(tmp_path)
+    lifted = lift_population(load_driver_population(folder / "population.json"))
+    prior = exact_prior(lifted)
+    assert sum(prior[3:]) == Fraction(1, 2) and sum(prior) == 1
+    products = [decimal(b) for b in lifted.initial_belief]       # the float products' decimals
+    assert sum(products[3:]) / sum(products) > Fraction(1, 2)
+    for name, value in (("tb", 0.0), ("not_tb", 1.0)):
+        for objective in ("bayes", "robust"):
+            code, out, err = run_cli(
+                capsys, "synth", str(folder / f"{name}.toml"), "--town", str(folder / "town.json"),
+                "--population", str(folder / "population.json"), "--objective", objective,
+                "--horizon", "3", "--out", str(folder / f"{name}-{objective}.json"), "--json")
+            assert code == 0, err
+            answer = json.loads(out)
+            bounds = (answer["lower"], answer["upper"])
+            assert bounds[0] <= value <= bounds[1], (name, objective, bounds)
