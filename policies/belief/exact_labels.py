@@ -34,6 +34,8 @@ from fractions import Fraction
 
 import numpy as np
 
+from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.belief.driver_types import TypeLiftedModel
 from trustroute.policies.logic.labelling import UNIT_ROUNDOFF, Labeller, atom_values, gamma
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 
@@ -49,15 +51,14 @@ def _normalised(values) -> list[Fraction]:
     return [e / total for e in entries]
 
 
-def exact_prior(driver) -> tuple[Fraction, ...]:
+def exact_prior(driver: DriverModel) -> tuple[Fraction, ...]:
     """The model's prior belief exactly: each entry the decimal it prints as, normalised; a
     type-aware model's λ ⊗ b0 block by block, from the type weights' decimals and each type's own
     prior's (its float products round: a type of weight 0.5 with 1/3 on three levels would weigh a
     hair under 1/2, and a label on exactly 1/2 would flip)."""
-    weights, blocks = getattr(driver, "type_prior", ()), getattr(driver, "type_initial", ())
-    if weights and blocks:
-        return tuple(w * b for w, block in zip(_normalised(weights), blocks, strict=True)
-                     for b in _normalised(block))
+    if isinstance(driver, TypeLiftedModel) and driver.type_initial:
+        return tuple(w * b for w, block in zip(_normalised(driver.type_prior), driver.type_initial,
+                                               strict=True) for b in _normalised(block))
     return tuple(_normalised(driver.initial_belief))
 
 
