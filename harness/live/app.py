@@ -36,6 +36,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import threading
+from collections.abc import Callable
 from html import escape
 from pathlib import Path
 
@@ -287,22 +288,25 @@ def claim(request: Request, body: LinkClaim) -> JSONResponse:
     return response
 
 
+def guarded_page(request: Request, admit: Callable[[Request], object], page: str, title: str,
+                 refused: str) -> FileResponse | HTMLResponse:
+    """A page for whom `admit` lets in; to anyone else the refusal as a readable page (JSON for
+    clients that are not browsers)."""
+    try:
+        admit(request)
+    except HTTPException as refusal:
+        return refused_page(request, refusal, title, refused)
+    return FileResponse(PAGES / page, media_type="text/html")
+
+
 @router.get("/console", response_model=None)
 def console(request: Request) -> FileResponse | HTMLResponse:
-    try:
-        experimenter(request)
-    except HTTPException as refusal:
-        return refused_page(request, refusal, CONSOLE_TITLE, CONSOLE_REFUSED)
-    return FileResponse(PAGES / "console.html", media_type="text/html")
+    return guarded_page(request, experimenter, "console.html", CONSOLE_TITLE, CONSOLE_REFUSED)
 
 
 @router.get("/station", response_model=None)
 def station(request: Request) -> FileResponse | HTMLResponse:
-    try:
-        participant_token(request)
-    except HTTPException as refusal:
-        return refused_page(request, refusal, STATION_TITLE, STATION_REFUSED)
-    return FileResponse(PAGES / "station.html", media_type="text/html")
+    return guarded_page(request, participant_token, "station.html", STATION_TITLE, STATION_REFUSED)
 
 
 @router.get("/static/{name:path}")
