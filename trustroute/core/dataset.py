@@ -31,6 +31,7 @@ from trustroute.core.output_files import atomic_write_bytes
 from trustroute.core.validation import first_non_belief, read_input_bytes, read_json
 
 # -- files of a study directory ------------------------------------------------------------------
+REBUILD_FIX = "rerun `trustroute study` on this directory to rebuild it"   # a damaged file's fix
 STUDY_FILE = "study.json"            # the config hash and config of the study in this directory
 LOCK_FILE = "study.lock"             # held (fcntl.flock) by the run using the directory; names it
 MANIFEST_FILE = "manifest.json"
@@ -388,7 +389,6 @@ def with_added_columns(table: pa.Table, schema: pa.Schema, added: tuple[str, ...
 # -- values ----------------------------------------------------------------------------------------
 # What a study's tables hold beyond their schemas (docs/dataset.md, "Values"), checked on every
 # read, vectorised: a table of the right columns can still hold impossible values.
-REBUILD_FIX = "rerun `trustroute study` on this directory to rebuild it"
 UNIQUE_ROWS: dict[str, tuple[str, ...]] = {"episodes": ("episode_id",), "roads": ("episode_id", "index")}
 BELIEF_COLUMNS: dict[str, tuple[str, ...]] = {"roads": ("belief_before", "belief_after")}
 # Columns of a trust level (null where nullable): checked against the study's driver model.
@@ -461,7 +461,10 @@ def _check_episode_rows(study_dir: Path, table: pa.Table, source: str) -> None:
     run --out` writes one episode's tables without it)."""
     if not (Path(study_dir) / EPISODES_FILE).exists():
         return
-    known = read_study_table(study_dir, "episodes", ["episode_id"]).column(0).combine_chunks()
+    file_name, schema = TABLES["episodes"]
+    # the ids only: the episodes' own values are checked where the episodes are read
+    known = read_table(Path(study_dir) / file_name, schema, ["episode_id"],
+                       ADDED_COLUMNS.get("episodes", ())).column(0).combine_chunks()
     ids = table.column("episode_id").to_pandas()
     check_allowed(ids, known.to_pylist(), source, "episode_id", f"an episode of {EPISODES_FILE}")
 
@@ -476,7 +479,7 @@ def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None,
                          "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)")
     # Through the guarded reader: a FIFO or a device in place of a table must not block.
     data = read_input_bytes(path, "dataset table", MAX_TABLE_BYTES,
-                            fix="rerun `trustroute study` on this directory to rebuild it")
+                            fix=REBUILD_FIX)
     try:
         table = pq.read_table(pa.BufferReader(data), page_checksum_verification=True)
         table = with_added_columns(table.replace_schema_metadata(None), schema, added)
@@ -484,7 +487,7 @@ def read_table(path: Path, schema: pa.Schema, columns: list[str] | None = None,
     except (OSError, pa.ArrowException, SchemaError) as exc:
         raise InputError(str(path), "schema" if isinstance(exc, SchemaError) else "",
                          f"cannot read the dataset table ({exc})",
-                         "rerun `trustroute study` on this directory to rebuild it") from None
+                         REBUILD_FIX) from None
     return table.select(columns) if columns is not None else table
 
 
@@ -565,10 +568,10 @@ def read_manifest(study_dir: Path) -> dict:
                          no_manifest_fix(Path(study_dir)))
 
     manifest = read_json(path, "study manifest",
-                         fix="rerun `trustroute study` on this directory to rebuild it")
+                         fix=REBUILD_FIX)
     missing = ([key for key in MANIFEST_KEYS if key not in manifest and key not in MANIFEST_OPTIONAL_KEYS]
                if isinstance(manifest, dict) else ["all"])
     if missing or not isinstance(manifest, dict):   # not a dict: missing is ["all"]
         raise InputError(str(path), missing[0], "missing manifest key",
-                         "rerun `trustroute study` on this directory to rebuild it")
+                         REBUILD_FIX)
     return manifest
