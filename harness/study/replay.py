@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -26,7 +25,7 @@ import pandas as pd
 from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import EPISODES_SCHEMA, ROADS_SCHEMA
 from trustroute.core.errors import InputError
-from trustroute.core.output_files import fsync_directory, temp_path, write_error
+from trustroute.core.output_files import move_into_place, temp_path
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.manifest import MANIFEST_FILE, episode_row, package_versions
@@ -267,20 +266,12 @@ def replay_episode(
         if difference is not None:
             raise not_reproduced(study_dir, episode_id, manifest, difference)
         if temp is not None and rrd_path is not None:
-            move_into_place(temp, Path(rrd_path))
+            move_into_place(temp, Path(rrd_path), "recording")
     finally:
         if temp is not None:
             with contextlib.suppress(OSError):
                 temp.unlink()
     return Replay(task=task, config=config, record=record, logged_roads=logged, rrd_path=rrd_path)
-
-
-def move_into_place(temp: Path, path: Path) -> None:
-    try:
-        os.replace(temp, path)
-    except OSError as exc:
-        raise write_error(path, "recording", exc) from None
-    fsync_directory(path.parent)
 
 
 def not_reproduced(study_dir: Path, episode_id: str, manifest: dict, difference: str) -> InputError:

@@ -115,6 +115,18 @@ def atomic_write_bytes(path: str | Path, data: bytes, what: str, fix: str = "", 
             handle.flush()
             if sync:
                 os.fsync(handle.fileno())
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            temp.unlink()
+        raise write_error(path, what, exc, fix) from None
+    move_into_place(temp, path, what, fix, sync)
+    return path
+
+
+def move_into_place(temp: Path, path: Path, what: str, fix: str = "", sync: bool = True) -> None:
+    """Rename the finished temporary file `temp` onto `path` (atomic on one file system) and, with
+    `sync`, make the rename durable; InputError on an OS failure, the temporary file removed."""
+    try:
         os.replace(temp, path)
     except OSError as exc:
         with contextlib.suppress(OSError):
@@ -122,7 +134,6 @@ def atomic_write_bytes(path: str | Path, data: bytes, what: str, fix: str = "", 
         raise write_error(path, what, exc, fix) from None
     if sync:
         fsync_directory(path.parent)
-    return path
 
 
 def atomic_write_text(path: str | Path, text: str, what: str, fix: str = "", sync: bool = True) -> Path:
