@@ -35,10 +35,10 @@ if TYPE_CHECKING:
     from trustroute.harness.simulation.episode import EpisodeRecord
 
 # The logged columns a replay reproduces, compared on every road and in the episode's summary row:
-# exactly, but the beliefs, floats after many Bayes updates, to BELIEF_TOLERANCE. Not compared:
+# exactly, but the beliefs, floats after many Bayes updates, to REPLAYED_BELIEF_TOLERANCE. Not compared:
 # `episode_id` (the rows are the episode's) and `wall_seconds` (the machine's time, never the same).
 BELIEF_COLUMNS: tuple[str, ...] = ("belief_before", "belief_after")
-BELIEF_TOLERANCE = 1e-12
+REPLAYED_BELIEF_TOLERANCE = 1e-12
 REPLAY_COLUMNS: tuple[str, ...] = tuple(name for name in ROADS_SCHEMA.names if name != "episode_id")
 EPISODE_COLUMNS: tuple[str, ...] = tuple(name for name in EPISODES_SCHEMA.names
                                          if name not in ("episode_id", "wall_seconds"))
@@ -160,7 +160,7 @@ def _equal(a: Cell, b: Cell) -> bool:
 def _same(column: str, a: object, b: object) -> bool:
     if column in BELIEF_COLUMNS:
         return bool(np.allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float),
-                                rtol=0, atol=BELIEF_TOLERANCE))
+                                rtol=0, atol=REPLAYED_BELIEF_TOLERANCE))
     return _equal(a, b)  # type: ignore[arg-type]
 
 
