@@ -429,7 +429,7 @@ class HiddenDFA:
         """The DFA state after position (x, true trust level, the AV's belief) from q."""
         tracker = self.tracker
         theta = tracker.setup.driver_model.trust_levels.index(int(trust_level))
-        truth, _ = tracker._labels.truth(tracker.belief[None], np.array([tracker.word]))
+        truth = tracker._labels.truth(tracker.belief[None], np.array([tracker.word]))
         return int(tracker._compiled.labeller.step(np.array([q]), np.array([x]), tracker.belief[None],
                                                    np.array([theta]), belief_truth=truth)[0])
 

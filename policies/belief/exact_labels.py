@@ -180,6 +180,11 @@ class ExactFilter:
             self._beliefs[w] = belief
         return belief
 
+    def same_belief(self, one: int, other: int) -> bool:
+        """Whether two words lead to one exact belief (then every label after any further symbols
+        is the same on both)."""
+        return one == other or self.belief(one) == self.belief(other)
+
     def distance(self, words: np.ndarray) -> np.ndarray:
         """D per word: the bound on Hilbert's distance between the float and the exact belief."""
         return self.prior_distance + self.lengths(words) * self.step_distance
@@ -302,39 +307,29 @@ class ExactLabels:
         relative = rho + g + self.coeff_gap * (1.0 + rho)
         return 2.0 * (relative[:, None] * weight + self.offset_gap[None, :])
 
-    def truth(self, beliefs: np.ndarray, words: np.ndarray, undecidable: np.ndarray | None = None
-              ) -> tuple[np.ndarray, np.ndarray]:
-        """(truth, either) bool [n, m] in `belief_columns` order: the labels of the exact filter's
-        beliefs after `words`, whose float images are `beliefs`. Rows in `undecidable` (a node that
-        stands for several words) keep the float label where it is not decided, and are `either`
-        there."""
+    def truth(self, beliefs: np.ndarray, words: np.ndarray) -> np.ndarray:
+        """bool [n, m] in `belief_columns` order: the labels of the exact filter's beliefs after
+        `words`, whose float images are `beliefs`."""
         beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
         words = np.asarray(words, dtype=np.int64)
         labeller = self.labeller
         if not labeller.belief_columns.size or beliefs.shape[0] == 0:
-            empty = np.zeros((beliefs.shape[0], labeller.belief_columns.size), dtype=bool)
-            return empty, empty.copy()
+            return np.zeros((beliefs.shape[0], labeller.belief_columns.size), dtype=bool)
         value = atom_values(beliefs, labeller.coeffs)
         truth = value > labeller.offsets
         close = np.abs(value - labeller.offsets) <= self.margins(beliefs, words)
-        either = np.zeros_like(truth)
-        if not close.any():
-            return truth, either
-        if undecidable is not None:
-            either = close & np.asarray(undecidable, dtype=bool)[:, None]
-            close &= ~either
         for row, atom in zip(*np.nonzero(close), strict=True):
             exact = self.filter.belief(int(words[row]))
             coeffs = self.coeffs[atom]
             truth[row, atom] = sum((c * b for c, b in zip(coeffs, exact, strict=True) if c and b),
                                    Fraction(0)) > self.offsets[atom]
             self.exact_decisions += 1
-        return truth, either
+        return truth
 
     def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray, words: np.ndarray,
              trust: np.ndarray | None = None) -> np.ndarray:
         """int [n]: DFA states after reading positions (x, beliefs) from q, belief labels exact."""
-        truth, _ = self.truth(beliefs, words)
+        truth = self.truth(beliefs, words)
         return self.labeller.step(q, x, beliefs, trust, belief_truth=truth)
 
 

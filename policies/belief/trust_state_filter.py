@@ -67,7 +67,7 @@ class JointFilter:
         n_t = self.pomdp.n_trust
         belief = np.broadcast_to(np.asarray(belief, dtype=float), (n_t, n_t))
         thetas = np.arange(n_t)
-        truth, _ = self.labels().truth(belief, np.zeros(n_t, dtype=np.int64))
+        truth = self.labels().truth(belief, np.zeros(n_t, dtype=np.int64))
         q0 = self.labeller.step(np.full(n_t, self.dfa.initial), np.full(n_t, start), belief,
                                 self.trust_index[thetas] if self.labeller.reads_trust else None,
                                 belief_truth=truth)
@@ -85,7 +85,7 @@ class JointFilter:
         gives them). Rows of probability 0 give zero rows."""
         incident, human_action, performance = observation
         n, n_t, n_q = joint.shape
-        truth, _ = labels.truth(belief_av, words)
+        truth = labels.truth(belief_av, words)
         if not self.labeller.reads_trust:
             # q is the same on every trust path: move its one DFA state, keep the posterior.
             q = np.argmax(joint.sum(axis=1), axis=1)

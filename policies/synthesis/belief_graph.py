@@ -1,17 +1,19 @@
 """The node store of the belief-MDP search: growable arrays of the unfolded product belief MDP.
 
-One node per distinct (junctions t, road x, DFA state q, state-only task state p, belief bytes):
-identical beliefs at the same depth are merged, never approximated. A node keeps the word of the
-first history that reached it (policies/belief/exact_labels.py: its labels at thresholds are
-decided exactly on that word's belief); `mixed` marks a node that histories of different words
-reached (or whose parent is mixed), where such labels branch both ways instead, and `late_mixed`
-counts the nodes that became mixed after they were expanded. Per node: its kind (below),
-its bounds [L, U] and strict value, its completion bounds, and, once expanded, its move slots with
-their children and probabilities; per level, the alternates of outcomes at a label threshold.
+One node per distinct (junctions t, road x, DFA state q, state-only task state p, belief bytes,
+exact belief): identical beliefs at the same depth are merged, never approximated. A node keeps the
+word of the first history that reached it (policies/belief/exact_labels.py: its labels at
+thresholds are decided exactly on that word's belief), and a history of another word joins it only
+when both words lead to one exact belief (`same_belief`); one of another exact belief, whose float
+belief happens to be the same, gets a node of its own. So every label at every node is the one the
+vehicle reads on any history that reaches the node. Per node: its kind (below), its bounds [L, U] and
+strict value, its completion bounds, and, once expanded, its move slots with their children and
+probabilities.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,8 +27,11 @@ FRONTIER, EXPANDED, ACCEPTED, ZERO, FREE = 0, 1, 2, 3, 4
 class BeliefGraph:
     """Growable node arrays of the unfolded product belief MDP."""
 
-    def __init__(self, n_trust: int, n_actions: int, n_outcomes: int) -> None:
+    def __init__(self, n_trust: int, n_actions: int, n_outcomes: int,
+                 same_belief: Callable[[int, int], bool]) -> None:
+        """same_belief(word, word): whether two words lead to one exact belief (ExactFilter)."""
         self.n = 0
+        self.same_belief = same_belief
         self.n_actions, self.n_outcomes = n_actions, n_outcomes
         capacity = 1024
         self.level = np.zeros(capacity, dtype=np.int64)
@@ -36,13 +41,11 @@ class BeliefGraph:
         self.cell = np.zeros(capacity, dtype=np.int64)
         self.belief = np.zeros((capacity, n_trust))
         self.word = np.zeros(capacity, dtype=np.int64)
-        self.mixed = np.zeros(capacity, dtype=bool)
-        self.late_mixed = 0
         # U, L and the strict value as rows of one array, so that a backup gathers all three at once
         self.values = np.zeros((3, capacity))
         self.upper, self.lower = self.values[0], self.values[1]
-        # value of the L-greedy choice with every label read as the vehicle reads it (no
-        # alternates): the tie-breaker among actions of equal L, and a reported figure.
+        # value of the L-greedy choice with every label read as the vehicle reads it: the
+        # tie-breaker among actions of equal L, and a reported figure.
         self.strict = self.values[2]
         self.kind = np.zeros(capacity, dtype=np.int8)
         # Bounds on the trust-free completion's value from the node (completion_value.py): its
@@ -57,40 +60,11 @@ class BeliefGraph:
         self.free_move = np.zeros(capacity, dtype=np.int64)
         self.child = np.full((capacity, n_actions, n_outcomes), -1, dtype=np.int64)
         self.prob = np.zeros((capacity, n_actions, n_outcomes))
-        self.memo: list[dict[tuple[int, int, int, bytes], int]] = []
+        # per level: (x, q, p, belief bytes) -> (node, word), or a list of them, one per exact belief
+        self.memo: list[dict[tuple[int, int, int, bytes], tuple[int, int] | list[tuple[int, int]]]] = []
         self.expanded_by_level: list[list[int]] = []
         self.free_by_level: list[dict[int, None]] = []    # FREE nodes per level (insertion order)
         self.free_version: list[int] = []
-        # Labels at thresholds: an outcome of a mixed node whose label floats cannot decide has
-        # one child per DFA state it could lead to. child/prob hold the one the float label reads;
-        # the others are "alternates" (parent, slot, outcome, child), grouped by the parent's
-        # level. L takes the minimum over them, U the maximum.
-        self.alternates: dict[int, list[np.ndarray]] = {}
-        self._alternates_joined: dict[int, tuple[np.ndarray, ...]] = {}
-
-    def add_alternates(self, level: int, parent: np.ndarray, slot: np.ndarray, outcome: np.ndarray,
-                       child: np.ndarray) -> None:
-        if parent.size == 0:
-            return
-        self.alternates.setdefault(level, []).append(np.stack([parent, slot, outcome, child]))
-        self._alternates_joined.pop(level, None)
-
-    def alternates_of(self, level: int | None) -> tuple[np.ndarray, ...]:
-        """(parent, slot, outcome, child) of the alternates of parents at `level` (None: all)."""
-        if level is None:
-            parts = [self.alternates_of(lv) for lv in sorted(self.alternates)]
-            if not parts:
-                return tuple(np.zeros(0, dtype=np.int64) for _ in range(4))
-            return tuple(np.concatenate([p[j] for p in parts]) for j in range(4))
-        joined = self._alternates_joined.get(level)
-        if joined is None:
-            chunks = self.alternates.get(level)
-            if not chunks:
-                return tuple(np.zeros(0, dtype=np.int64) for _ in range(4))
-            stacked = np.concatenate(chunks, axis=1)
-            joined = tuple(stacked[j] for j in range(4))
-            self._alternates_joined[level] = joined
-        return joined
 
     def _grow(self, needed: int) -> None:
         capacity = self.level.shape[0]
@@ -98,7 +72,7 @@ class BeliefGraph:
             return
         new = max(needed, 2 * capacity)
         for name in ("level", "x", "q", "p", "cell", "kind", "free_move", "free_upper", "free_lower",
-                     "completed", "word", "mixed"):
+                     "completed", "word"):
             old = getattr(self, name)
             grown = np.zeros(new, dtype=old.dtype)
             grown[:capacity] = old
@@ -121,10 +95,9 @@ class BeliefGraph:
         self.prob = prob
 
     def add(self, level: int | np.ndarray, x: np.ndarray, q: np.ndarray, p: np.ndarray,
-            cell: np.ndarray, belief: np.ndarray, word: np.ndarray, mixed: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray]:
-        """Ids of the nodes (level, x, q, p, belief), creating missing ones; and a mask of new ones.
-        word, mixed: of the history that reaches each (module docstring)."""
+            cell: np.ndarray, belief: np.ndarray, word: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ids of the nodes (level, x, q, p, belief, the exact belief of `word`), creating missing
+        ones; and a mask of new ones. word: of the history that reaches each (module docstring)."""
         level = np.broadcast_to(np.asarray(level, dtype=np.int64), x.shape)
         deepest = int(level.max()) if level.size else 0
         while len(self.memo) <= deepest:
@@ -132,20 +105,24 @@ class BeliefGraph:
             self.expanded_by_level.append([])
             self.free_by_level.append({})
             self.free_version.append(0)
-        memos = self.memo
         ids = np.empty(x.size, dtype=np.int64)
         new = np.zeros(x.size, dtype=bool)
         start = self.n
         self._grow(self.n + x.size)
-        for i, (lv, *key) in enumerate(zip(level.tolist(), x.tolist(), q.tolist(), p.tolist(),
-                                           (row.tobytes() for row in belief), strict=True)):
-            memo = memos[lv]
-            node = memo.get(tuple(key))
+        memos = self.memo
+        for i, (lv, w, *key) in enumerate(zip(level.tolist(), word.tolist(), x.tolist(), q.tolist(),
+                                              p.tolist(), (row.tobytes() for row in belief), strict=True)):
+            memo, k = memos[lv], tuple(key)
+            found = memo.get(k)
+            if isinstance(found, tuple) and found[1] == w:
+                ids[i] = found[0]         # (the usual case: one word per float belief)
+                continue
+            node = None if found is None else self._same(found, w)
             if node is None:
                 node = self.n
-                memo[tuple(key)] = node
                 self.n += 1
                 new[i] = True
+                memo[k] = (node, w) if found is None else [*_entries(found), (node, w)]
             ids[i] = node
         created = ids[new]
         self.level[created] = level[new]
@@ -155,18 +132,22 @@ class BeliefGraph:
         self.cell[created] = cell[new]
         self.belief[created] = belief[new]
         self.word[created] = word[new]
-        self.mixed[created] = mixed[new]
-        old = ids[~new]
-        becomes = ~self.mixed[old] & (mixed[~new] | (self.word[old] != word[~new]))
-        if becomes.any():
-            turned = np.unique(old[becomes])
-            self.mixed[turned] = True
-            self.late_mixed += int(np.isin(self.kind[turned], (EXPANDED, FREE)).sum())
         self.kind[created] = FRONTIER
         self.completed[created] = False
         self.free_lower[created] = 0.0
         assert self.n == start + created.size
         return ids, new
+
+    def _same(self, found: tuple[int, int] | list[tuple[int, int]], word: int) -> int | None:
+        """The node among `found` whose word leads to the exact belief of `word`, if any."""
+        for node, other in _entries(found):
+            if self.same_belief(other, word):
+                return node
+        return None
+
+
+def _entries(found: tuple[int, int] | list[tuple[int, int]]) -> list[tuple[int, int]]:
+    return [found] if isinstance(found, tuple) else found
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,17 +155,11 @@ class ExpandedLevel:
     """The expanded nodes of one level with their (fixed) children, for the backups.
 
     nodes [m]; child [m, actions, outcomes] (0 where absent, masked by has_child); prob; legal
-    [m, actions]; alternates as (row, slot, outcome, child) with row an index into nodes."""
+    [m, actions]."""
 
     count: int
-    alternate_chunks: int
     nodes: np.ndarray
     child: np.ndarray
     has_child: np.ndarray
     prob: np.ndarray
     legal: np.ndarray
-    alt_row: np.ndarray
-    alt_slot: np.ndarray
-    alt_outcome: np.ndarray
-    alt_child: np.ndarray
-

@@ -11,9 +11,9 @@ move only): L = that move's value, U = the bound. Terminal nodes are exact: acce
 horizon reached 0. EXPANDED nodes: U = min(U, max_a Σ_o p U_child) and L = max_a Σ_o p L_child.
 
 Labels at thresholds: a belief whose label floating point cannot decide is labelled exactly on its
-history's word (policies/belief/exact_labels.py); only at a node that histories of different words
-reached (belief_graph.py, `mixed`) does it give one child per DFA state it could lead to, L taking
-the minimum over them and U the maximum (docs/synthesis.md, "Labels at thresholds").
+history's word (policies/belief/exact_labels.py); histories merge at a node only where their words
+lead to one exact belief (belief_graph.py), so that label is every history's there
+(docs/synthesis.md, "Labels at thresholds").
 """
 
 from __future__ import annotations
@@ -133,10 +133,10 @@ class BeliefSearch:
                 self.events = events
             self.macro_width = events.width
         n_actions = self.events.width if self.events is not None else tables.successors.shape[1]
-        self.graph = BeliefGraph(pomdp.n_trust, n_actions, n_outcomes)
+        self.graph = BeliefGraph(pomdp.n_trust, n_actions, n_outcomes, self.labels.filter.same_belief)
         self.levels: dict[int, ExpandedLevel] = {}
         self.moves: dict[int, list[tuple[ExpandedLevel, np.ndarray, np.ndarray]]] = {}
-        self.free_levels: dict[int, tuple[tuple[int, int], ExpandedLevel]] = {}
+        self.free_levels: dict[int, tuple[int, ExpandedLevel]] = {}
         self.depth_cap = horizon if horizon is not None else UNBOUNDED_DEPTH
         # Bayes rule: open nodes are valued by cluster bounds on the free completion's value
         # (completion_value.py) instead of trees along the free moves (FREE nodes, kept for the
@@ -166,74 +166,46 @@ class BeliefSearch:
         return target, legal.astype(np.int64), legal, self.free_slot[g.x[nodes], g.q[nodes], g.p[nodes]]
 
     def level_arrays(self, level: int) -> ExpandedLevel:
-        """The cached ExpandedLevel of `level`, rebuilt when nodes or alternates were added there."""
+        """The cached ExpandedLevel of `level`, rebuilt when nodes were expanded there."""
         g = self.graph
         members = g.expanded_by_level[level]
-        chunks = len(g.alternates.get(level, ()))
         cached = self.levels.get(level)
-        if cached is not None and cached.count == len(members) and cached.alternate_chunks == chunks:
+        if cached is not None and cached.count == len(members):
             return cached
-        cached = self._level(level, np.array(members, dtype=np.int64), chunks, len(members))
+        cached = self._level(np.array(members, dtype=np.int64), len(members))
         self.levels[level] = cached
         return cached
 
     def free_level_arrays(self, level: int) -> ExpandedLevel:
         """The FREE nodes of `level` as a ExpandedLevel whose only legal move is the free one."""
         g = self.graph
-        version = (g.free_version[level], len(g.alternates.get(level, ())))
+        version = g.free_version[level]
         cached = self.free_levels.get(level)
         if cached is not None and cached[0] == version:
             return cached[1]
         nodes = np.fromiter(g.free_by_level[level], dtype=np.int64)
-        lv = self._level(level, nodes, version[1], nodes.size)
+        lv = self._level(nodes, nodes.size)
         only = np.zeros_like(lv.legal)
         only[np.arange(nodes.size), g.free_move[nodes]] = True
         lv = ExpandedLevel(**{**lv.__dict__, "legal": lv.legal & only})
         self.free_levels[level] = (version, lv)
         return lv
 
-    def _level(self, level: int, nodes: np.ndarray, chunks: int, count: int) -> ExpandedLevel:
+    def _level(self, nodes: np.ndarray, count: int) -> ExpandedLevel:
         g = self.graph
         child = g.child[nodes]
-        parent, slot, outcome, alt_child = g.alternates_of(level)
-        row = np.zeros(0, dtype=np.int64)
-        if parent.size:
-            order = np.argsort(nodes, kind="stable")
-            where = np.minimum(np.searchsorted(nodes[order], parent), nodes.size - 1)
-            hit = nodes[order][where] == parent
-            row, slot, outcome, alt_child = order[where[hit]], slot[hit], outcome[hit], alt_child[hit]
-        else:
-            slot = outcome = alt_child = row
-        return ExpandedLevel(count=count, alternate_chunks=chunks, nodes=nodes,
-                      child=np.maximum(child, 0), has_child=child >= 0, prob=g.prob[nodes],
-                      legal=g.legal[nodes], alt_row=row, alt_slot=slot,
-                      alt_outcome=outcome, alt_child=alt_child)
+        return ExpandedLevel(count=count, nodes=nodes, child=np.maximum(child, 0), has_child=child >= 0,
+                             prob=g.prob[nodes], legal=g.legal[nodes])
 
     @staticmethod
     def level_values3(lv: ExpandedLevel, values: np.ndarray) -> np.ndarray:
-        """level_values for U (optimistic), L (pessimistic) and the strict value at once:
-        [3, nodes, moves] from values [3, n]."""
+        """Move values Σ_o p(o) value(child) for U, L and the strict value at once, -1 where
+        illegal: [3, nodes, moves] from values [3, n]."""
         child_value = np.where(lv.has_child[None], values[:, lv.child], 0.0)
-        if lv.alt_row.size:
-            index = (lv.alt_row, lv.alt_slot, lv.alt_outcome)
-            np.maximum.at(child_value[0], index, values[0, lv.alt_child])
-            np.minimum.at(child_value[1], index, values[1, lv.alt_child])
         q = lv.prob[None, :, :, 0] * child_value[:, :, :, 0]
         for o in range(1, child_value.shape[3]):
             q += lv.prob[None, :, :, o] * child_value[:, :, :, o]
         return np.where(lv.legal[None], q, -1.0)
-
-    @staticmethod
-    def level_values(lv: ExpandedLevel, values: np.ndarray, pessimistic: bool | None) -> np.ndarray:
-        """Move values on a cached level: Σ_o p(o) value(child) per action, -1 where illegal."""
-        child_value = np.where(lv.has_child, values[lv.child], 0.0)
-        if pessimistic is not None and lv.alt_row.size:
-            combine = np.minimum.at if pessimistic else np.maximum.at
-            combine(child_value, (lv.alt_row, lv.alt_slot, lv.alt_outcome), values[lv.alt_child])
-        q = lv.prob[:, :, 0] * child_value[:, :, 0]
-        for o in range(1, child_value.shape[2]):
-            q += lv.prob[:, :, o] * child_value[:, :, o]
-        return np.where(lv.legal, q, -1.0)
 
     def frontier_upper(self, level: int | np.ndarray, x: np.ndarray, q: np.ndarray, cell: np.ndarray
                        ) -> np.ndarray:
@@ -270,55 +242,25 @@ class BeliefSearch:
         g.lower[live] = 0.0
         g.strict[live] = 0.0
 
-    def possible_q(self, q: np.ndarray, x2: np.ndarray, belief: np.ndarray, word: np.ndarray,
-                   mixed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def next_q(self, q: np.ndarray, x2: np.ndarray, belief: np.ndarray, word: np.ndarray) -> np.ndarray:
         """DFA states after reading (x2, belief) from q, the belief the float image of the exact
-        one after `word`: (strict, rows, other).
-
-        strict[i]: the state the labels read (exact_labels.ExactLabels, as the vehicle and
-        `evaluate` read them); (rows, other): for a `mixed` row rows[j] (a node several words
-        reach) the further state other[j] that a label floating point cannot decide could give.
-        """
+        one after `word`: labels read as the vehicle and `evaluate` read them
+        (exact_labels.ExactLabels)."""
         tables = self.tables
-        empty = np.zeros(0, dtype=np.int64)
-        if q.size == 0:
-            return empty, empty, empty
-        if not tables.belief_atom_names:
-            return tables.step(q, x2, belief), empty, empty
-        truth, either = self.labels.truth(belief, word, mixed)
-        strict = np.asarray(tables.labeller.step(q, x2, belief, belief_truth=truth), dtype=np.int64)
-        ambiguous = np.flatnonzero(either.any(axis=1))
-        if ambiguous.size == 0:
-            return strict, empty, empty
-        m = truth.shape[1]
-        rows, other = [], []
-        for bits in range(2 ** m):
-            value = ((bits >> np.arange(m)) & 1).astype(bool)
-            fits = ((value[None, :] == truth[ambiguous]) | either[ambiguous]).all(axis=1)
-            members = ambiguous[fits]
-            q_bits = tables.next_q[q[members], x2[members], bits]
-            differs = q_bits != strict[members]
-            rows.append(members[differs])
-            other.append(q_bits[differs])
-        rows_all, other_all = np.concatenate(rows), np.concatenate(other)
-        if rows_all.size:
-            pair = np.unique(np.stack([rows_all, other_all], axis=1), axis=0)
-            rows_all, other_all = pair[:, 0], pair[:, 1]
-        return strict, rows_all, other_all
+        if q.size == 0 or not tables.belief_atom_names:
+            return tables.step(q, x2, belief)
+        truth = self.labels.truth(belief, word)
+        return np.asarray(tables.labeller.step(q, x2, belief, belief_truth=truth), dtype=np.int64)
 
     def roots(self) -> np.ndarray:
-        """Root nodes: one per DFA state position 0 can be read as (one unless the prior sits on a
-        threshold); the root value is the minimum of their L and the maximum of their U."""
+        """The root node (one, as an array: its labels decided exactly on the prior)."""
         tables = self.tables
         b0 = np.asarray(tables.pomdp.initial_belief, dtype=float)[None, :]
         x0 = np.array([tables.start])
-        empty_word, single = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=bool)
-        strict, _, other = self.possible_q(np.array([tables.dfa.initial]), x0, b0, empty_word, single)
-        qs = np.concatenate([strict, other])
-        ids, _ = self.graph.add(0, np.repeat(x0, qs.size), qs,
-                                np.full(qs.size, self.task.initial_state, dtype=np.int64),
-                                np.zeros(qs.size, dtype=np.int64), np.repeat(b0, qs.size, axis=0),
-                                np.zeros(qs.size, dtype=np.int64), np.zeros(qs.size, dtype=bool))
+        empty_word = np.zeros(1, dtype=np.int64)
+        q0 = self.next_q(np.array([tables.dfa.initial]), x0, b0, empty_word)
+        ids, _ = self.graph.add(0, x0, q0, np.full(1, self.task.initial_state, dtype=np.int64),
+                                np.zeros(1, dtype=np.int64), b0, empty_word)
         self.classify(ids)
         return ids
 
@@ -351,25 +293,14 @@ class BeliefSearch:
             a[keep] for a in (parent, slot, symbol, x2, belief, probability, length))
         level2 = g.level[parent] + length
         word = self.labels.filter.extend(g.word[parent], self.symbol_codes[symbol])
-        mixed = g.mixed[parent]
-        q2, alt_rows, alt_q = self.possible_q(g.q[parent], x2, belief, word, mixed)
+        q2 = self.next_q(g.q[parent], x2, belief, word)
         cell2 = self.cells.next_cell[g.cell[parent], symbol]
         p2 = self.next_p[g.p[parent], x2]
-        ids, new = g.add(level2, x2, q2, p2, cell2, belief, word, mixed)
+        ids, new = g.add(level2, x2, q2, p2, cell2, belief, word)
         outcome = self.slot_of_symbol[symbol]
         g.child[parent, slot, outcome] = ids
         g.prob[parent, slot, outcome] = probability
         self.classify(ids[new])
-        if alt_rows.size:
-            alt_ids, alt_new = g.add(level2[alt_rows], x2[alt_rows], alt_q, p2[alt_rows],
-                                     cell2[alt_rows], belief[alt_rows], word[alt_rows],
-                                     mixed[alt_rows])
-            self.classify(alt_ids[alt_new])
-            alt_level = g.level[parent[alt_rows]]
-            for level in np.unique(alt_level).tolist():
-                here = alt_rows[alt_level == level]
-                g.add_alternates(level, parent[here], slot[here], outcome[here],
-                                 alt_ids[alt_level == level])
         levels = g.level[nodes]
         for level in np.unique(levels).tolist():
             members = nodes[levels == level].tolist()
@@ -478,8 +409,8 @@ class BeliefSearch:
 
     def reach_lower(self, roots: np.ndarray, trust_free: bool = False) -> np.ndarray:
         """Probability of reaching each node under the returned policy (its move at EXPANDED
-        nodes, the free move at FREE ones; alternates each get their full probability), from the
-        moves of the last backup. trust_free: under the trust-free completion everywhere instead."""
+        nodes, the free move at FREE ones), from the moves of the last backup. trust_free: under
+        the trust-free completion everywhere instead."""
         g = self.graph
         reach = np.zeros(g.n)
         reach[roots] = 1.0
@@ -502,15 +433,12 @@ class BeliefSearch:
             chosen &= lv.legal
         mass = mass_here[:, None, None] * lv.prob * (chosen[:, :, None] & lv.has_child)
         np.add.at(reach, lv.child[lv.has_child], mass[lv.has_child])
-        if lv.alt_row.size:
-            np.add.at(reach, lv.alt_child, mass[lv.alt_row, lv.alt_slot, lv.alt_outcome])
 
     def reach(self, roots: np.ndarray, every_action: bool = False) -> np.ndarray:
-        """Probability of reaching each node under the upper-greedy policy (alternates of an
-        outcome each get its full probability: either may be the one that happens). every_action:
-        every action carries the node's full mass instead (used once the upper-greedy frontier is
-        closed while the gap is not, as at thresholds where L takes the worse alternate). Only
-        EXPANDED nodes pass mass on; from the moves of the last backup."""
+        """Probability of reaching each node under the upper-greedy policy. every_action: every
+        action carries the node's full mass instead (used once the upper-greedy frontier is closed
+        while the gap is not: the returned policy's move, held to the free one, may lead elsewhere).
+        Only EXPANDED nodes pass mass on; from the moves of the last backup."""
         g = self.graph
         reach = np.zeros(g.n)
         reach[roots] = 1.0

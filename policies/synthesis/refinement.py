@@ -186,12 +186,12 @@ def _refine(search: BeliefSearch, roots: np.ndarray, depth_cap: int, batch: int,
     return expanded
 
 
-def reached_node_budget(stats: object, node_budget: int) -> bool:
-    """Whether a search run of a synthesis' statistics stopped at its `node_budget` nodes
-    (SynthesisSettings.node_budget): its bounds would not tighten with more time (the runs of
-    other syntheses, which have no node budget, never did)."""
+def reached_node_budget(stats: object) -> bool:
+    """Whether a search run of a synthesis' statistics says it stopped at its node budget
+    (SearchRun.stopped): its bounds would not tighten with more time (the runs of other
+    syntheses, which have no node budget, never do)."""
     return isinstance(stats, SynthesisStats) and any(
-        isinstance(run, SearchRun) and run.nodes >= node_budget for run in stats.runs)
+        isinstance(run, SearchRun) and run.stopped == "node budget" for run in stats.runs)
 
 
 def bounded_search(tables: ProductTables, settings: SynthesisSettings, horizon: int | None,
@@ -214,10 +214,10 @@ def bounded_search(tables: ProductTables, settings: SynthesisSettings, horizon: 
     depth_cap = horizon if horizon is not None else UNBOUNDED_DEPTH
     iterations = 0
     expanded = 0
-    while (np.subtract(*_root_bounds(search, roots)[::-1]) > tau and not budget.expired()
-           and g.n < search.node_budget):
+    while (stopped := _stop(search, roots, tau, budget)) is None:
         grown = _refine(search, roots, depth_cap, batch, tau, budget.deadline)
         if grown is None:
+            stopped = "frontier closed"
             break
         expanded += grown
         iterations += 1
@@ -231,13 +231,28 @@ def bounded_search(tables: ProductTables, settings: SynthesisSettings, horizon: 
     closed = (close_bounds(search, roots, depth_cap, budget.deadline, COMPLETION_TAIL * tau)
               if search.completion else close_completions(search, roots, depth_cap, budget.deadline))
     table, conflicts = policy_table(search)
-    return table, _search_run(search, roots, suffix_length, closed, conflicts, expanded, iterations,
-                              table.rows)
+    if g.n >= search.node_budget:
+        stopped = "node budget"          # (closing the completions may reach it too)
+    return table, _search_run(search, roots, suffix_length, closed, conflicts, (expanded, iterations),
+                              stopped, table.rows)
+
+
+def _stop(search: BeliefSearch, roots: np.ndarray, tau: float, budget: TimeBudget) -> str | None:
+    """What ends the refinement before its next round (SEARCH_STOPS), if anything."""
+    if np.subtract(*_root_bounds(search, roots)[::-1]) <= tau:
+        return "convergence"
+    if budget.expired():
+        return "deadline"
+    if search.graph.n >= search.node_budget:
+        return "node budget"
+    return None
 
 
 def _search_run(search: BeliefSearch, roots: np.ndarray, suffix_length: int, closed: bool,
-                conflicts: int, expanded: int, iterations: int, rows: int) -> SearchRun:
-    """The statistics of a finished search (of horizon `search.horizon`)."""
+                conflicts: int, rounds: tuple[int, int], stopped: str, rows: int) -> SearchRun:
+    """The statistics of a finished search (of horizon `search.horizon`); rounds: the nodes
+    expanded fully and the refinement's iterations."""
+    expanded, iterations = rounds
     g = search.graph
     lower, upper = _root_bounds(search, roots)
     open_nodes = g.kind[: g.n] == FRONTIER
@@ -247,7 +262,6 @@ def _search_run(search: BeliefSearch, roots: np.ndarray, suffix_length: int, clo
         abstraction_root_upper=float(search.frontier_upper(0, g.x[roots], g.q[roots],
                                                            g.cell[roots]).max()),
         root_dfa_states=tuple(g.q[roots].tolist()),
-        threshold_alternates=int(g.alternates_of(None)[0].size),
         lower_strict_labels=float(g.strict[roots[0]]), completion_closed=closed,
         completion_bounds=bool(search.completion), free_tree_leaves=search.tree_leaves,
         completion_seconds=search.completion_seconds, completion_clusters=search.completion_clusters,
@@ -255,4 +269,4 @@ def _search_run(search: BeliefSearch, roots: np.ndarray, suffix_length: int, clo
         macro_width=search.macro_width, row_conflicts=conflicts, nodes=int(g.n),
         expanded_nodes=int(expanded), open_frontier_nodes=int(open_nodes.sum()),
         open_frontier_mass_upper_policy=float(search.reach(roots)[open_nodes].sum()),
-        iterations=iterations, policy_rows=rows, lower=lower, upper=upper)
+        iterations=iterations, stopped=stopped, policy_rows=rows, lower=lower, upper=upper)

@@ -57,6 +57,9 @@ def record_dict(record: Any, optional: tuple[str, ...] = ()) -> dict:
     return out
 
 
+SEARCH_STOPS = ("convergence", "node budget", "deadline", "frontier closed")
+
+
 @dataclass(frozen=True, kw_only=True)
 class SearchRun(Record):
     """One AO*-style search of the product belief MDP (refinement.py): horizon None is the
@@ -69,7 +72,6 @@ class SearchRun(Record):
     abstraction_bound: str
     abstraction_root_upper: float
     root_dfa_states: tuple[int, ...]
-    threshold_alternates: int
     # the run's policy's value with labels read as the vehicle reads them (policies/belief/
     # exact_labels.py) from the root the vehicle is in: a lower bound of what `evaluate` measures
     lower_strict_labels: float
@@ -90,6 +92,10 @@ class SearchRun(Record):
     open_frontier_nodes: int
     open_frontier_mass_upper_policy: float
     iterations: int
+    # what ended its refinement (SEARCH_STOPS): "convergence" (the root's gap reached its tau),
+    # "node budget", "deadline" (its share of the time or work limit), or "frontier closed" (no
+    # open node carries any of the gap: more time would not move its bounds)
+    stopped: str
     policy_rows: int
     lower: float
     upper: float
@@ -131,7 +137,6 @@ class ClusterRun(Record):
     clusters: int
     policy_rows: int
     cluster_runs: tuple[ClusterAttempt, ...]
-    threshold_alternates: int = 0
     lower_strict_labels: float
     completion_closed: bool = True
     completion_bounds: bool = False
@@ -147,7 +152,6 @@ class GraphDistanceRun(Record):
     nodes: int = 0
     abstraction_root_upper: float = 0.0
     abstraction_bound: str
-    threshold_alternates: int = 0
     lower_strict_labels: float = 0.0
     root_dfa_states: tuple[int, ...]
     completion_closed: bool = True
@@ -175,11 +179,6 @@ class SynthesisStats:
     unbounded_upper: str | None = None
     lower_from_horizon: int | None = None
     objective: str | None = None
-
-    @property
-    def threshold_alternates(self) -> int:
-        """Outcomes of all runs that sit on a belief threshold (within rounding)."""
-        return sum(run.threshold_alternates for run in self.runs)
 
     def to_dict(self) -> dict:
         out = record_dict(self, optional=("unbounded_upper", "lower_from_horizon", "objective"))

@@ -32,7 +32,7 @@ from trustroute.policies.synthesis.population import (
     summary,
 )
 from trustroute.policies.synthesis.refinement import reached_node_budget
-from trustroute.policies.synthesis.result import SearchRun, SynthesisResult, SynthesisStats
+from trustroute.policies.synthesis.result import SearchRun, SynthesisResult
 from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
 from trustroute.policies.work_clock import installed, stopped_by, work_clock
@@ -83,7 +83,7 @@ def synthesize_single(problem: Problem, settings: SynthesisSettings,
             result = synthesize_problem(problem, replace(settings, time_limit=limit),
                                         on_iteration=on_iteration)
     result = replace(result, stopped_by=stopped_by(
-        result.stats.converged, clock, reached_node_budget(result.stats, settings.node_budget),
+        result.stats.converged, clock, reached_node_budget(result.stats),
         reached_cluster_cap(result.stats, result.lower, result.upper)))
     if out is not None:
         save_policy(result, out, problem.town, problem.driver, problem.spec)
@@ -111,7 +111,7 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
     # the Bayes objective's bounds are its one search's; the robust one's candidates run on
     # until the time limit, whatever stopped one of their searches
     ended = stopped_by(found.gap <= settings.tau, clock,
-                       objective == "bayes" and reached_node_budget(found.result.stats, settings.node_budget))
+                       objective == "bayes" and reached_node_budget(found.result.stats))
     found = replace(found, result=replace(found.result, stopped_by=ended))
     if out is not None:
         save_policy(found.result, out, problem.town, found.pomdp.driver, found.spec,
@@ -179,22 +179,13 @@ def stop_notes(result: SynthesisResult) -> list[str]:
 
 
 def bounds_notes(result: SynthesisResult) -> list[str]:
-    """What a reader of the bounds should know: how the run ended, a cluster policy, outcomes on a
-    belief threshold."""
+    """What a reader of the bounds should know: how the run ended, a cluster policy."""
     lines = stop_notes(result)
     table = result.policy.table if isinstance(result.policy, BeliefTablePolicy) else None
     boxes = table.boxes if table is not None else None
     if boxes is not None and boxes.rows:
         lines.append(f"a cluster policy: {boxes.rows} box rows, beliefs enclosed in boxes "
                      "(docs/synthesis.md, \"Cluster policies\")")
-    # (only the belief-MDP search reads labels at thresholds both ways)
-    alternates = result.stats.threshold_alternates if isinstance(result.stats, SynthesisStats) else 0
-    if alternates:
-        # the returned policy's (a run's policy may not be the one returned)
-        strict = result.stats.lower_strict_labels
-        lines.append(f"{alternates} outcomes sit on a belief threshold (within rounding): L reads them "
-                     f"the worse way, U the better; with this machine's labels the policy is worth at "
-                     f"least {strict:.6f} (spec check warns about such thresholds)")
     return lines
 
 

@@ -75,8 +75,7 @@ def test_k_sevenths_at_the_uniform_prior_are_decided_exactly(town, driver, k, nu
     coeffs = [1.0] * k + [0.0] * (7 - k)
     labels = exact_labels(pomdp, compile_spec(_spec(town, coeffs, offset), town).labeller)
     b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
-    truth, either = labels.truth(b0, np.zeros(1, dtype=np.int64))
-    assert not either.any()
+    truth = labels.truth(b0, np.zeros(1, dtype=np.int64))
     assert bool(truth[0, 0]) == (Fraction(k, 7) > decimal(offset))
     assert labels.exact_decisions == 1
 
@@ -99,8 +98,7 @@ def test_labels_equal_the_exact_filter_s_at_and_next_to_reached_values(town, dri
         walk = _random_walk(pomdp, labels, np.random.default_rng(seed), 12)
         beliefs = np.array([b for b, _ in walk])
         words = np.array([w for _, w in walk])
-        truth, either = labels.truth(beliefs, words)
-        assert not either.any()
+        truth = labels.truth(beliefs, words)
         for row, word in enumerate(words.tolist()):
             exact = labels.filter.belief(word)
             expected = sum(decimal(c) * b for c, b in zip(coeffs, exact, strict=True)) > decimal(offset)
@@ -109,12 +107,20 @@ def test_labels_equal_the_exact_filter_s_at_and_next_to_reached_values(town, dri
             assert labels.exact_decisions == 0
 
 
-def test_a_node_of_several_words_branches_where_floats_cannot_decide(town, driver):
-    pomdp = build_pomdp(town, driver)
-    labels = exact_labels(pomdp, compile_spec(_spec(town, [1, 1, 0, 0, 0, 0, 0], 2 / 7), town).labeller)
-    b0 = np.asarray(pomdp.initial_belief, dtype=float)[None, :]
-    truth, either = labels.truth(b0, np.zeros(1, dtype=np.int64), undecidable=np.array([True]))
-    assert either.all() and labels.exact_decisions == 0
+def test_words_of_one_exact_belief_are_the_same_belief_and_others_are_not():
+    """`same_belief` compares the exact beliefs, not the words: on the reset case a standstill and
+    a takeover at the obstacle both reset the belief to one row, under two words; the uniform prior
+    (the empty word) is another belief."""
+    from tests.policies.synthesis.threshold_cases import reset_case
+
+    case = reset_case()
+    labels = exact_labels(case.pomdp, compile_spec(case.spec, case.pomdp.town).labeller)
+    exact = labels.filter
+    obstacle = case.pomdp.driver.incident_types.index("obstacle")
+    standstill, takeover = (int(exact.extend(np.zeros(1, dtype=np.int64), symbol_code(obstacle, h, 0))[0])
+                            for h in (0, 1))
+    assert standstill != takeover and exact.same_belief(standstill, takeover)
+    assert not exact.same_belief(0, standstill) and exact.same_belief(0, 0)
 
 
 def test_rows_merge_only_within_one_word_and_keep_distinct_rows_grouping_otherwise():

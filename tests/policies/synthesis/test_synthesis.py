@@ -79,8 +79,7 @@ def test_lower_is_the_value_of_the_returned_policy(pomdp, name, completion):
         assert run.completion_bounds == (completion == "bounds")
         if completion == "auto":
             assert value.lower == pytest.approx(result.lower, abs=EXACT_TOLERANCE)
-            if run.threshold_alternates == 0:
-                assert result.lower >= alone.lower - EXACT_TOLERANCE
+            assert result.lower >= alone.lower - EXACT_TOLERANCE
         else:
             assert result.lower - EXACT_TOLERANCE <= value.lower <= result.upper + EXACT_TOLERANCE
         assert result.lower >= free.lower - EXACT_TOLERANCE

@@ -7,6 +7,10 @@ either side, and a horizon H = 2-8. `brute_force` is the optimum of the exact fi
 its own: the model's numbers as the decimals they print as, the prior normalised, beliefs as
 integer-scaled vectors and observation probabilities as exact ratios, every belief label decided
 exactly; values in floats.
+
+`reset_case` is a belief many histories reach on a threshold: two histories of different words
+(a standstill and a takeover at an obstacle that resets trust) reach one belief, whose label floats
+cannot decide.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import numpy as np
 from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.synthesis.test_synthesis_random import random_junctions
 from trustroute.networks.town import INCIDENT_TYPES, town_from_dict
-from trustroute.participants.driver_model import DriverModel
+from trustroute.participants.driver_model import DriverModel, driver_model_from_dict
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.labelling import atom_values
@@ -120,6 +124,35 @@ def random_case(seed: int, default_driver) -> Case:
     while horizon > 2 and brute_force_states(pomdp, spec, horizon) > BRUTE_FORCE_STATES:
         horizon -= 1
     return Case(seed=seed, kind=kind, nudge=nudge, horizon=horizon, pomdp=pomdp, spec=spec)
+
+
+def reset_case() -> Case:
+    """A 5-junction line A-B-C-D with a detour B-E-C, 3 trust levels from the uniform prior; the
+    obstacle on B-C is taken over with probability 1/2 at every level and either way resets the
+    belief to (1/4, 1/4, 1/2), the other roads are quiet. The spec: reach C-D while P(level 3) >
+    0.5 - 1 ulp, H = 3. Exactly 1/2 > that offset, so driving A-B, B-C, C-D satisfies it with
+    probability 1; in floats the label at 1/2 lies within the rounding margin."""
+    kinds = ["obstacle", "pedestrian", "truck", "none"]
+    identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    reset = [[0.25, 0.25, 0.5]] * 3
+    driver = driver_model_from_dict({
+        "trust_levels": [1, 2, 3], "incident_types": kinds,
+        "takeover_probability": {k: [0.0] * 3 if k == "none" else [0.5] * 3 for k in kinds},
+        "trust_transition": {k: {"takeover": reset if k == "obstacle" else identity,
+                                 "standstill": reset if k == "obstacle" else identity} for k in kinds}},
+        "<reset driver>")
+    roads = [["A", "B"], ["B", "C"], ["C", "D"], ["B", "E"], ["E", "C"]]
+    town = town_from_dict({"junctions": {"A": [0, 0], "B": [300, 0], "C": [600, 0], "D": [900, 0],
+                                         "E": [600, 300]},
+                           "roads": roads,
+                           "incidents": {f"{u}-{v}": "obstacle" if (u, v) == ("B", "C") else "none"
+                                         for a, b in roads for u, v in ((a, b), (b, a))}},
+                          "<reset town>")
+    offset = float(np.nextafter(0.5, 0.0))
+    spec = spec_from_text(f'name = "reset"\nstart = "A-B"\nformula = "F (a & high)"\n[states]\n'
+                          f'a = ["C-D"]\n[beliefs.high]\ncoeffs = [0.0, 0.0, 1.0]\noffset = {offset!r}\n',
+                          "<reset spec>", town)
+    return Case(seed=-1, kind="reset", nudge=-1, horizon=3, pomdp=build_pomdp(town, driver), spec=spec)
 
 
 def brute_force_states(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> int:
