@@ -277,10 +277,10 @@ def claim(request: Request, body: LinkClaim) -> JSONResponse:
     """The token of a link opened in a browser is replaced by a fresh one, which only the cookie
     holds: the link left in the browser's history is spent (403 when opened again)."""
     study = study_of(request)
-    participant = study.credentials.participant_of(body.token)
-    if participant is None:
-        raise refused(403, "forbidden", "this link is spent or revoked; ask the experimenter for a new one")
-    token = study.replace_token(participant, "link opened in a browser")
+    try:
+        participant, token = study.claim_link(body.token)
+    except ValueError as exc:
+        raise refused(403, "forbidden", str(exc)) from None
     revoke_stale(request, participant)   # a socket opened with the link's token acts no more
     response = JSONResponse({"next": "/station"})
     response.set_cookie(PARTICIPANT_COOKIE, token, httponly=True, samesite="strict", path="/",
@@ -364,10 +364,11 @@ def control(request: Request, participant: int, body: EpisodeControl) -> dict:
 def new_link(request: Request, participant: int) -> dict:
     """A new link for `participant`: a fresh token; the old one (link or cookie) is revoked and
     their open websocket closed. The server keeps only digests, so a link is shown once."""
-    study = study_of(request)
-    if session_of(request, participant).phase == "withdrawn":
-        raise refused(409, "out_of_order", f"participant {participant} has withdrawn")
-    token = study.replace_token(participant, "new link issued by the experimenter")
+    session_of(request, participant)
+    try:
+        token = study_of(request).replace_token(participant, "new link issued by the experimenter")
+    except ValueError as exc:   # (they have withdrawn)
+        raise refused(409, "out_of_order", str(exc)) from None
     revoke_stale(request, participant)
     return {"participant": participant, "token": token, "link": f"/p/{token}"}
 

@@ -49,6 +49,7 @@ DEFAULT_CONSENT = ("You are about to drive in a simulated study of an autonomous
                    "and hand back control, and report your trust in the vehicle from 1 to 7. You may stop "
                    "at any time.")
 MAX_DOWNLOAD_PATH = 512
+SPENT_LINK = "this link is spent or revoked; ask the experimenter for a new one"
 
 
 @dataclass(frozen=True)
@@ -99,8 +100,9 @@ class LiveStudy:
         self.done: set[str] = set()
         # The study's lock guards the registry, the journal and the dataset. Lock order: a
         # session's lock (harness/live/session.py) may be held when the study's is taken (a
-        # consent saves the registry, a start journals its attempt, an episode's end consolidates),
-        # never the other way round: no code holding the study's lock takes a session's.
+        # consent saves the registry, a start journals its attempt, an episode's end consolidates,
+        # a token's issue and a withdrawal's start hold both), never the other way round: no code
+        # holding the study's lock takes a session's.
         self.lock = threading.RLock()
         self.expected: dict = {}
         self.context: StudyContext   # the study's context, built by `open` (`check_before_writing`)
@@ -205,10 +207,19 @@ class LiveStudy:
             self.save_participants()
             return participant, token
 
-    def replace_token(self, participant: int, reason: str) -> str:
+    def replace_token(self, participant: int, reason: str, spent: str | None = None) -> str:
         """A fresh token for `participant`, the previous one revoked; logged (time, participant,
-        reason) in live/tokens.jsonl."""
-        with self.lock:
+        reason) in live/tokens.jsonl. ValueError, and no token, once their withdrawal has begun,
+        or when `spent` (the token of the link being claimed) is no longer theirs: spent by
+        another claim, or revoked. A token is issued, and a withdrawal begins (`withdraw`), under
+        the participant's session lock and then the study's, so neither comes between the
+        other's check and its change."""
+        session = self.sessions[participant]
+        with session.lock, self.lock:
+            if session.phase == "withdrawn":
+                raise ValueError(f"participant {participant} has withdrawn")
+            if spent is not None and self.credentials.participant_of(spent) != participant:
+                raise ValueError(SPENT_LINK)
             token = self.credentials.add_participant(participant)
             self.save_participants()
             log = self.study_dir / LIVE_DIR / TOKEN_LOG
@@ -216,6 +227,14 @@ class LiveStudy:
                 out.write(json.dumps({"utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                                       "participant": participant, "event": reason}) + "\n")
             return token
+
+    def claim_link(self, token: str) -> tuple[int, str]:
+        """(participant, fresh token) for the token of a participant's link opened in a browser
+        (the link spent); ValueError when it is no participant's token now, or they have withdrawn."""
+        participant = self.credentials.participant_of(token)
+        if participant is None:
+            raise ValueError(SPENT_LINK)
+        return participant, self.replace_token(participant, "link opened in a browser", spent=token)
 
     def login(self, token: str | None) -> str | None:
         """The console session token a login link's `token` is exchanged for (the link spent), or
@@ -233,15 +252,18 @@ class LiveStudy:
         stopped, their data removed and the dataset consolidated without them; the audit entry.
         ValueError when there is no such participant or they have withdrawn already."""
         session = self.sessions.get(participant)
-        if session is None or participant in self.withdrawn:
-            raise ValueError(f"participant {participant} does not exist or has withdrawn already")
-        with session.lock:   # not inside the study's lock (the lock order: LiveStudy.lock)
+        refusal = f"participant {participant} does not exist or has withdrawn already"
+        if session is None:
+            raise ValueError(refusal)
+        with session.lock, self.lock:   # the withdrawal begins: no token is issued after it (replace_token)
+            if participant in self.withdrawn:
+                raise ValueError(refusal)
             session.phase = "withdrawn"   # the episode's last message changes nothing now
             session.label = ""            # (the registry keeps none either)
+            self.credentials.participants.pop(participant, None)   # their token revoked
+            self.save_participants()
         session.stop()
         with self.lock:
-            self.credentials.participants.pop(participant, None)
-            self.save_participants()
             try:
                 entry = withdraw_participant(self.study_dir, participant, "experimenter (console)", reason)
             except InputError as exc:

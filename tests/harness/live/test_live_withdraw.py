@@ -22,7 +22,7 @@ from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 from trustroute.harness.live.withdraw import sha256_of
 
-from .conftest import serving, tiny_config
+from .conftest import experimenter, serving, tiny_config
 
 
 @pytest.mark.slow
@@ -231,3 +231,109 @@ def test_withdraw_json_is_the_audit_entry_with_the_files_it_wrote(tmp_path, caps
     code, out, err = run_cli(capsys, "withdraw", str(study), "0", "--readmit", "--json")
     assert code == 0, err
     assert set(json.loads(out)["paths"]) == {"audit", "registry"}
+
+
+def _issue_while_paused(study, client, issue: str, meanwhile):
+    """`issue` ("claim": the participant's link opened; "link": the console's new link) for
+    participant 0, paused where the server is about to issue the token (LiveStudy.replace_token
+    entered) while `meanwhile()` runs to its end on this thread; the issuing request's response."""
+    real, reached, go, responses = study.replace_token, threading.Event(), threading.Event(), []
+
+    def paused(*args, **kwargs):
+        if not reached.is_set():   # (the issuing request's call; `meanwhile`'s go on)
+            reached.set()
+            go.wait(10)
+        return real(*args, **kwargs)
+
+    link = client.post("/api/participants", json={}, headers=experimenter(study)).json()["token"]
+    request = (("/api/claim", {"json": {"token": link}}) if issue == "claim" else
+               ("/api/participants/0/link", {"headers": experimenter(study)}))
+    study.replace_token = paused
+    issuing = threading.Thread(target=lambda: responses.append(client.post(request[0], **request[1])))
+    issuing.start()
+    try:
+        assert reached.wait(10), "the request did not reach the token's issue"
+        meanwhile(link)
+    finally:
+        go.set()
+        issuing.join(10)
+        study.replace_token = real
+    return responses[0]
+
+
+@pytest.mark.parametrize("issue, refusal", [("claim", 403), ("link", 409)])
+def test_no_token_is_issued_once_a_withdrawal_has_begun(issue, refusal, tmp_path):
+    """A link claimed, or a new link issued, at the instant of a withdrawal: the withdrawal comes
+    between the request's checks and the token's issue, and the request is refused; the withdrawn
+    participant has no token and nothing authenticates as them."""
+    from fastapi.testclient import TestClient
+
+    from trustroute.harness.live.app import live_app
+
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    withdrawals = []
+    try:
+        with TestClient(live_app(study)) as client:
+            def withdraw(_link):
+                withdrawals.append(client.post("/api/participants/0/withdraw", json={"confirm": True},
+                                               headers=experimenter(study)))
+
+            response = _issue_while_paused(study, client, issue, withdraw)
+            assert withdrawals[0].status_code == 200, withdrawals[0].text
+            assert response.status_code == refusal, response.text
+            assert study.credentials.participants == {}   # no token of the withdrawn participant
+            assert client.get("/api/me").status_code == 403   # (no cookie was set either)
+            registry = json.loads(study.registry_path().read_text())["participants"]
+            assert set(registry["0"]) == {"withdrawn", "withdrawn_utc"}
+            assert not (study.study_dir / "live" / "tokens.jsonl").exists()   # no token was replaced
+    finally:
+        study.close()
+
+
+def test_a_link_claimed_twice_at_once_gives_one_token(tmp_path):
+    """Two browsers claim the same link at once: the one that comes second to the token's issue
+    is refused (the link is spent), and the first one's token stays the participant's."""
+    from fastapi.testclient import TestClient
+
+    from trustroute.harness.live.app import live_app
+
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    first = []
+    try:
+        with TestClient(live_app(study)) as client, TestClient(live_app(study)) as other:
+            def claim_first(link):
+                first.append(other.post("/api/claim", json={"token": link}))
+
+            late = _issue_while_paused(study, client, "claim", claim_first)
+            assert first[0].status_code == 200 and late.status_code == 403, (first[0].text, late.text)
+            assert other.get("/api/me").json()["participant"] == 0   # the first claim's cookie
+            assert client.get("/api/me").status_code == 403
+    finally:
+        study.close()
+
+
+def test_a_withdrawal_closes_the_station_of_a_claimed_link(tmp_path):
+    """A withdrawal after a link was claimed revokes the claimed token: the station opened with it
+    is told and closed (code 1008, reason "withdrawn"), and the token authenticates no more."""
+    from fastapi.testclient import TestClient
+    from starlette.websockets import WebSocketDisconnect
+
+    from trustroute.harness.live.app import POLICY_VIOLATION, live_app
+
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            link = client.post("/api/participants", json={}, headers=experimenter(study)).json()["token"]
+            assert client.post("/api/claim", json={"token": link}).status_code == 200
+            with client.websocket_connect("/ws") as station:   # the claimed token, in the cookie
+                station.receive_json(), station.receive_json()
+                withdrawn = client.post("/api/participants/0/withdraw", json={"confirm": True},
+                                        headers=experimenter(study))
+                assert withdrawn.status_code == 200
+                assert station.receive_json() == {"type": "revoked", "detail": "withdrawn from the study"}
+                with pytest.raises(WebSocketDisconnect) as closed:
+                    station.receive_json()
+                assert (closed.value.code, closed.value.reason) == (POLICY_VIOLATION, "withdrawn")
+            assert client.get("/api/me").status_code == 403 and study.credentials.participants == {}
+    finally:
+        study.close()
