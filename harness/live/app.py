@@ -23,12 +23,12 @@ state-changing request and websocket handshake its Origin (harness/live/guard.py
     GET  /api/download/{path}          experimenter: one file, inside the study directory only
     WS   /ws                           participant: the protocol of harness/live/protocol.py
 
-Request bodies are capped (MAX_BODY_BYTES, counted as received: guard.py) and validated
-(protocol.py models); every refusal is a JSON error of the protocol's form with an HTTP status,
-and changes nothing. A participant has
-one live websocket: a second one replaces the first (both are told); a socket silent for
-`idle_seconds` is closed. `serve` runs the application on uvicorn on a socket bound beforehand
-(websocket frames capped at the transport too, slow requests cut: guard.py).
+Request bodies are capped (MAX_BODY_BYTES, counted as received), parsed once (a key given twice
+refused: guard.py) and validated (protocol.py models); every refusal is a JSON error of the
+protocol's form with an HTTP status, and changes nothing. A participant has one live websocket:
+a second one replaces the first (both are told); a socket silent for `idle_seconds` is closed.
+`serve` runs the application on uvicorn on a socket bound beforehand (websocket frames capped at
+the transport too, slow requests cut: guard.py).
 """
 
 from __future__ import annotations
@@ -53,6 +53,7 @@ from trustroute.harness.live.auth import (
 )
 from trustroute.harness.live.guard import (
     ConnectionGate,
+    GuardedRoute,
     GuardedServer,
     RequestGuard,
     connection_cap,
@@ -188,7 +189,7 @@ def cookie_redirect(request: Request, target: str, cookie: str, token: str) -> R
     return response
 
 
-router = APIRouter()
+router = APIRouter(route_class=GuardedRoute)   # (the body RequestGuard parsed is the one validated)
 
 
 def study_of(connection: HTTPConnection) -> LiveStudy:

@@ -14,7 +14,8 @@
   Transfer-Encoding is refused (a chunked body has no length to check before it is read); the
   body actually received is counted, reading stopped and the request refused (413) as soon as it
   passes MAX_BODY_BYTES, whatever the headers said; a JSON body naming a key twice (or nested too
-  deeply to parse) is refused (422), as websocket messages are.
+  deeply to parse) is refused (422), as websocket messages are. The body is parsed there once: the
+  routes (`GuardedRoute`) validate the value the guard parsed.
 - **Connections in all.** At most `connection_cap` connections are open at once (HTTP and
   websocket; sized for the study: CONNECTIONS_PER_PARTICIPANT for each planned participant and
   CONNECTIONS_SPARE, never more than half the process's open-file limit): one beyond is answered
@@ -43,8 +44,10 @@ from urllib.parse import urlsplit
 
 import h11
 import uvicorn
+from fastapi.routing import APIRoute
 from starlette.datastructures import Headers, MutableHeaders
-from starlette.responses import JSONResponse
+from starlette.requests import Request
+from starlette.responses import JSONResponse, Response
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
@@ -74,6 +77,7 @@ SECURITY_HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DEN
                     "Referrer-Policy": "no-referrer", "Cache-Control": "no-store",
                     "Content-Security-Policy": "default-src 'self'; connect-src 'self'; "
                                                "img-src 'self' data:; frame-ancestors 'none'"}
+PARSED_BODY = "trustroute.parsed_body"   # the scope key of a body's JSON, as RequestGuard parsed it
 
 
 def is_loopback(host: str) -> bool:
@@ -192,7 +196,7 @@ class RequestGuard:
             if received is None:
                 refusal = oversized(self.limit)
             else:
-                refusal = unparsed(received)
+                refusal = parse_body(received, scope)
                 if refusal is None:
                     await self.app(scope, replayed(received, receive), secured)
                     return
@@ -220,19 +224,43 @@ def request_refusal(method: str, headers: Headers, origins: frozenset[str] | Non
     return None
 
 
-def unparsed(received: list[Message]) -> JSONResponse | None:
+def parse_body(received: list[Message], scope: Scope) -> JSONResponse | None:
     """422 `malformed` for a JSON body that names a key twice (protocol.unique_keys) or is nested
-    too deeply to parse, else None (a body that is no JSON is the route's to refuse)."""
+    too deeply to parse, else None, the parsed value kept as scope[PARSED_BODY] for the route (a
+    body that is no JSON keeps its ValueError there: the route's to refuse, if it reads a body)."""
     body = b"".join(message.get("body", b"") for message in received)
     try:
-        json.loads(body, object_pairs_hook=unique_keys)
+        scope[PARSED_BODY] = json.loads(body, object_pairs_hook=unique_keys)
     except MessageError as exc:
         return refused(422, exc.reply)
     except RecursionError:
         return refused(422, error_reply("malformed", "the body is nested too deeply"))
-    except ValueError:
-        pass
+    except ValueError as exc:
+        scope[PARSED_BODY] = exc
     return None
+
+
+class ParsedRequest(Request):
+    """A request whose JSON is the value RequestGuard parsed (FastAPI reads a body model's JSON
+    with `json()`): a body is parsed once."""
+
+    async def json(self) -> object:
+        parsed = self.scope[PARSED_BODY]
+        if isinstance(parsed, ValueError):
+            raise parsed
+        return parsed
+
+
+class GuardedRoute(APIRoute):
+    """A route behind RequestGuard: it validates the body the guard parsed (`ParsedRequest`)."""
+
+    def get_route_handler(self):
+        handler = super().get_route_handler()
+
+        async def parsed(request: Request) -> Response:
+            return await handler(ParsedRequest(request.scope, request.receive))
+
+        return parsed
 
 
 def oversized(limit: int) -> JSONResponse:

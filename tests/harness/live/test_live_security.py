@@ -249,6 +249,23 @@ def test_bad_http_bodies_get_errors_and_change_nothing(client, live_study):
     assert state_of(client, live_study) == before
 
 
+def test_a_body_is_parsed_once(client, live_study, monkeypatch):
+    """The guard parses a JSON body (refusing a key given twice) and the route validates what it
+    parsed: the body's text is read by the JSON parser once."""
+    loads, parsed = json.loads, []
+    body = '{"label": "parsed once"}'
+
+    def counting(text, *args, **kwargs):
+        parsed.extend([text] if text in (body, body.encode()) else [])
+        return loads(text, *args, **kwargs)
+
+    monkeypatch.setattr(json, "loads", counting)
+    response = client.post("/api/participants", content=body, headers={
+        **bearer(live_study.experimenter_token), "content-type": "application/json"})
+    assert response.status_code == 200 and live_study.sessions[0].label == "parsed once"
+    assert len(parsed) == 1
+
+
 def test_a_body_is_counted_as_it_is_received(live_study):
     """Whatever the headers say, reading a body stops once it passes MAX_BODY_BYTES: 413."""
     chunk, pulled, sent = 1024, [], []
