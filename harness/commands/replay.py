@@ -69,7 +69,9 @@ def replay(
     no_recording = ("--no-rrd" if no_rrd else
                     f"the study ran the {config.engine} engine, which has no SUMO scene to record "
                     '(run the study with engine = "sumo" for recordings)' if rrd is None else None)
-    result = replay_episode(Path(study_dir), episode_id, rrd_path=rrd, gui=gui)
+    # said on stderr before the episode runs, so even a replay that then fails says it
+    result = replay_episode(Path(study_dir), episode_id, rrd_path=rrd, gui=gui,
+                            warn=lambda line: click.echo(f"warning: {line}", err=True))
     roads = result.record.roads
     payload = {
         "episode_id": episode_id,
@@ -80,6 +82,7 @@ def replay(
         "rrd": str(rrd) if rrd else None,
         "rrd_bytes": rrd.stat().st_size if rrd else None,
         "no_recording": no_recording,
+        "warnings": list(result.warnings),
     }
     if as_json:
         click.echo(json.dumps(with_paths(payload, {"rrd": rrd})))

@@ -17,7 +17,8 @@ The manifest's `config` names the copies by paths relative to the study director
 `inputs` lists each copy's path and SHA-256 with the file it was copied from (provenance, never
 read), and the SHA-256 of the config itself (`config_sha256`). `relocated_config` turns the
 manifest's config into absolute paths in the directory where the study lies; `verify_inputs`
-checks every copy, and the manifest's config, against its recorded hash.
+checks every copy, and the manifest's config, against its recorded hash; `unchecked_config` is the
+warning for a manifest that records no hash of its config.
 """
 
 from __future__ import annotations
@@ -176,6 +177,19 @@ def relocated_config(config: dict, study_dir: Path) -> dict:
         return value
 
     return {key: place(key, value) for key, value in config.items()}
+
+
+def unchecked_config(manifest: dict, study_dir: Path) -> str | None:
+    """The warning line for a manifest that stored its inputs but no `inputs.config_sha256` (one
+    written before config hashes were recorded): nothing checks its config, so an edit to it shows
+    only as a replay that differs from the log. None when the hash is recorded, or when the manifest
+    stored no inputs (its config is checked by `config_hash`, harness/study/replay.py)."""
+    inputs = manifest.get("inputs")
+    if not inputs or "config_sha256" in inputs:
+        return None
+    return (f"{Path(study_dir) / MANIFEST_FILE}: inputs.config_sha256: absent (the manifest predates config "
+            "hashes), so its config is not checked: an edited config shows only as a replay that differs "
+            "from the log")
 
 
 def verify_inputs(manifest: dict, study_dir: Path) -> None:

@@ -6,24 +6,29 @@ study whose inputs or code differ from what is installed now (the stored inputs'
 study made before they were stored the config's content hash; the versions of trustroute and of
 the packages the episodes depend on), re-runs the planned episode
 through the same function the study runner uses (runner.run_planned_episode), and compares the
-replayed roads and the episode's summary row with the logged ones, column by column
-(REPLAY_COLUMNS, EPISODE_COLUMNS). Any difference is an InputError (one line, exit 2) naming the
-first road and column that differ.
+episode's replayed tables with the logged ones row by row, column by column (roads, kinematics,
+incidents: TABLE_COLUMNS), then its summary row (EPISODE_COLUMNS). Any difference is an InputError
+(one line, exit 2) naming the table, the first row and the column that differ. A manifest that
+stored its inputs before it recorded its config's SHA-256 has a config no hash checks: the replay
+says so (inputs.unchecked_config) rather than passing over it.
 """
 
 from __future__ import annotations
 
 import contextlib
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from trustroute.app.engines import ENGINES
-from trustroute.core.dataset import EPISODES_SCHEMA, ROADS_SCHEMA
+from trustroute.core.dataset import BELIEF_COLUMNS, EPISODE_ROWS, EPISODES_SCHEMA, TABLES, frame_from_table
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import move_into_place, temp_path
 from trustroute.harness.study.config import StudyConfig
@@ -34,12 +39,17 @@ from trustroute.harness.study.plan import EpisodeTask, participant_types, plan_e
 if TYPE_CHECKING:
     from trustroute.harness.simulation.episode import EpisodeRecord
 
-# The logged columns a replay reproduces, compared on every road and in the episode's summary row:
-# exactly, but the beliefs, floats after many Bayes updates, to REPLAYED_BELIEF_TOLERANCE. Not compared:
-# `episode_id` (the rows are the episode's) and `wall_seconds` (the machine's time, never the same).
-BELIEF_COLUMNS: tuple[str, ...] = ("belief_before", "belief_after")
+# The logged columns a replay reproduces, compared on every row of the episode's tables (EPISODE_ROWS:
+# roads, kinematics, incidents) and in its summary row: exactly (the same code, seeds and SUMO give
+# the same floats), but the beliefs (dataset.BELIEF_COLUMNS), floats after many Bayes updates, to
+# REPLAYED_BELIEF_TOLERANCE. Not compared: `episode_id` (the rows are the episode's) and
+# `wall_seconds` (the machine's time, never the same).
 REPLAYED_BELIEF_TOLERANCE = 1e-12
-REPLAY_COLUMNS: tuple[str, ...] = tuple(name for name in ROADS_SCHEMA.names if name != "episode_id")
+TABLE_COLUMNS: dict[str, tuple[str, ...]] = {
+    name: tuple(column for column in TABLES[name][1].names if column != "episode_id")
+    for name in EPISODE_ROWS}
+# The column that orders an episode's rows in each table, as the episode wrote them.
+ROW_ORDER: dict[str, str] = {"roads": "index", "kinematics": "time", "incidents": "index"}
 EPISODE_COLUMNS: tuple[str, ...] = tuple(name for name in EPISODES_SCHEMA.names
                                          if name not in ("episode_id", "wall_seconds"))
 # Packages whose version changes what an episode does: a different one means different code.
@@ -53,6 +63,7 @@ class Replay:
     record: EpisodeRecord  # the replayed episode
     logged_roads: pd.DataFrame
     rrd_path: Path | None
+    warnings: tuple[str, ...] = ()   # what the replay could not check (one line each)
 
 
 def study_config_from_manifest(study_dir: Path) -> tuple[StudyConfig, dict]:
@@ -87,8 +98,10 @@ def study_config_from_manifest(study_dir: Path) -> tuple[StudyConfig, dict]:
     return config, manifest
 
 
-def check_same_code(manifest: dict, config: StudyConfig, study_dir: Path) -> None:
-    """The installed code and the study's inputs are those the study was made with, or InputError."""
+def check_same_code(manifest: dict, config: StudyConfig, study_dir: Path) -> str | None:
+    """The installed code and the study's inputs are those the study was made with, or InputError;
+    returns the warning line when the manifest's config has no recorded hash to check
+    (inputs.unchecked_config), else None."""
     logged = manifest.get("packages", {})
     installed = package_versions()
     for name in EPISODE_PACKAGES:
@@ -103,10 +116,10 @@ def check_same_code(manifest: dict, config: StudyConfig, study_dir: Path) -> Non
     if manifest.get("inputs"):
         # the study carries its inputs (harness/study/inputs.py): they are checked by their hashes,
         # wherever the directory lies (the config hash covers the paths it was run with)
-        from trustroute.harness.study.inputs import verify_inputs
+        from trustroute.harness.study.inputs import unchecked_config, verify_inputs
 
         verify_inputs(manifest, study_dir)
-        return
+        return unchecked_config(manifest, study_dir)
     for path in (
         *config.specs,
         config.town,
@@ -127,13 +140,25 @@ def check_same_code(manifest: dict, config: StudyConfig, study_dir: Path) -> Non
             "the study's spec, town, driver model or policy files changed since it was run",
             "restore them (see the manifest's config) or rerun the study",
         )
+    return None
 
 
-def logged_roads(study_dir: Path, episode_id: str) -> pd.DataFrame:
-    from trustroute.core.dataset import read_roads
+def logged_tables(study_dir: Path, episode_id: str, engine: str) -> dict[str, pa.Table]:
+    """The episode's rows of each table of EPISODE_ROWS in ROW_ORDER, read through
+    trustroute.core.dataset (checked); a study whose engine drives no SUMO logs no kinematics."""
+    from trustroute.core.dataset import read_incidents_table, read_study_table
 
-    roads = read_roads(Path(study_dir))
-    return roads[roads["episode_id"] == episode_id].sort_values("index").reset_index(drop=True)
+    study_dir = Path(study_dir)
+    tables = {"roads": read_study_table(study_dir, "roads"),
+              "kinematics": (read_study_table(study_dir, "kinematics") if ENGINES[engine].drives_sumo
+                             else TABLES["kinematics"][1].empty_table()),
+              "incidents": read_incidents_table(study_dir)}
+    return {name: _episode_rows(tables[name], episode_id, name) for name in EPISODE_ROWS}
+
+
+def _episode_rows(table: pa.Table, episode_id: str, name: str) -> pa.Table:
+    rows = table.filter(pc.equal(table.column("episode_id"), episode_id))
+    return rows.sort_by(ROW_ORDER[name])   # a stable sort: rows of one key keep the file's order
 
 
 def _missing(value: object) -> bool:
@@ -145,7 +170,7 @@ def _missing(value: object) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and value == -1
 
 
-# A roads-table value as `tolist()` gives it (ints and bools are floats to the type checker).
+# A table value as `to_pylist` gives it (ints and bools are floats to the type checker).
 Cell = str | float | None
 
 
@@ -157,34 +182,60 @@ def _equal(a: Cell, b: Cell) -> bool:
     return bool(a == b)
 
 
-def _same(column: str, a: object, b: object) -> bool:
-    if column in BELIEF_COLUMNS:
+def _same(belief: bool, a: object, b: object) -> bool:
+    if belief:
         return bool(np.allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float),
                                 rtol=0, atol=REPLAYED_BELIEF_TOLERANCE))
     return _equal(a, b)  # type: ignore[arg-type]
 
 
-def compare_roads(logged: pd.DataFrame, replayed: pd.DataFrame) -> str | None:
-    """The first difference (road by road, column by column of REPLAY_COLUMNS) between two roads
-    tables, or None when they agree."""
-    if len(logged) != len(replayed):
-        route_a, route_b = list(logged["directed_road"]), list(replayed["directed_road"])
-        first = next(
-            (i for i, (a, b) in enumerate(zip(route_a, route_b, strict=False)) if a != b),
-            min(len(route_a), len(route_b)),
-        )
-        return (
-            f"the replay drove {len(replayed)} roads, the log has {len(logged)} "
-            f"(first difference at road {first})"
-        )
-    rows = zip(logged[list(REPLAY_COLUMNS)].to_dict("records"),
-               replayed[list(REPLAY_COLUMNS)].to_dict("records"), strict=True)
-    for i, (row_a, row_b) in enumerate(rows):
-        for column in REPLAY_COLUMNS:
-            a, b = row_a[column], row_b[column]
-            if not _same(column, a, b):
-                shown = "differs" if column in BELIEF_COLUMNS else f"logged {a!r}, replayed {b!r}"
-                return f"road {i} {column}: {shown}"
+def _first_difference(name: str, logged: pa.Table, replayed: pa.Table
+                      ) -> tuple[int, str, object, object] | None:
+    """(row, column, logged value, replayed value) of the first difference between the rows two
+    tables of `name` have in common, row by row and column by column of TABLE_COLUMNS, or None."""
+    columns = list(TABLE_COLUMNS[name])
+    logged, replayed = logged.select(columns), replayed.select(columns)
+    if logged.equals(replayed):   # identical (NaN aside): no need to look at each value
+        return None
+    beliefs = BELIEF_COLUMNS.get(name, ())
+    values = {column: (logged.column(column).to_pylist(), replayed.column(column).to_pylist())
+              for column in columns}
+    for i in range(min(logged.num_rows, replayed.num_rows)):
+        for column in columns:
+            a, b = values[column][0][i], values[column][1][i]
+            if not _same(column in beliefs, a, b):
+                return i, column, a, b
+    return None
+
+
+def compare_table(name: str, logged: pa.Table, replayed: pa.Table) -> str | None:
+    """The first difference between the episode's logged rows of the table `name` (a key of
+    TABLE_COLUMNS) and its replayed ones, as the words of the one-line error, or None when they agree."""
+    file_name = TABLES[name][0]
+    difference = _first_difference(name, logged, replayed)
+    if logged.num_rows != replayed.num_rows:
+        first = difference[0] if difference is not None else min(logged.num_rows, replayed.num_rows)
+        if name == "roads":
+            return (f"the replay drove {replayed.num_rows} roads, the log has {logged.num_rows} "
+                    f"(first difference at road {first})")
+        return (f"{file_name}: the replay has {replayed.num_rows} rows of the episode, the log "
+                f"{logged.num_rows} (first difference at row {first})")
+    if difference is None:
+        return None
+    row, column, a, b = difference
+    shown = "differs" if column in BELIEF_COLUMNS.get(name, ()) else f"logged {a!r}, replayed {b!r}"
+    return f"road {row} {column}: {shown}" if name == "roads" else f"{file_name} row {row} {column}: {shown}"
+
+
+def compare_tables(logged: dict[str, pa.Table], replayed: EpisodeRecord) -> str | None:
+    """The first difference between the logged tables of the episode (`logged_tables`) and the
+    replayed ones, table by table in EPISODE_ROWS' order (roads first: another route explains
+    every later difference), or None."""
+    tables = replayed.tables()
+    for name in EPISODE_ROWS:
+        difference = compare_table(name, logged[name], tables[name])
+        if difference is not None:
+            return difference
     return None
 
 
@@ -225,18 +276,24 @@ def find_task(config: StudyConfig, episode_id: str, study_dir: Path) -> EpisodeT
 
 
 def replay_episode(
-    study_dir: Path, episode_id: str, rrd_path: Path | None = None, gui: bool = False, check_code: bool = True
+    study_dir: Path, episode_id: str, rrd_path: Path | None = None, gui: bool = False,
+    check_code: bool = True, warn: Callable[[str], None] | None = None,
 ) -> Replay:
-    """Re-run `episode_id` of the study in `study_dir`; InputError if it differs from the log."""
+    """Re-run `episode_id` of the study in `study_dir`; InputError if it differs from the log.
+    What the replay cannot check is a line of Replay.warnings, handed to `warn` (when given) before
+    the episode runs, so it is said even when the replay then fails."""
     from trustroute.harness.study.runner import run_planned_episode
 
     study_dir = Path(study_dir)
     config, manifest = study_config_from_manifest(study_dir)
-    if check_code:
-        check_same_code(manifest, config, study_dir)
+    warning = check_same_code(manifest, config, study_dir) if check_code else None
+    warnings = () if warning is None else (warning,)
+    if warn is not None:
+        for line in warnings:
+            warn(line)
     task = find_task(config, episode_id, study_dir)
-    logged = logged_roads(study_dir, episode_id)
-    if logged.empty:
+    logged = logged_tables(study_dir, episode_id, config.engine)
+    if logged["roads"].num_rows == 0:
         raise InputError(
             str(study_dir),
             episode_id,
@@ -261,7 +318,7 @@ def replay_episode(
     temp = None if rrd_path is None else temp_path(Path(rrd_path))
     try:
         record = run_planned_episode(study_context(config), task, rrd_path=temp, sumo_config=sumo_config)
-        difference = compare_roads(logged, record.roads) or compare_episode(
+        difference = compare_tables(logged, record) or compare_episode(
             logged_episode(study_dir, episode_id), replayed_episode(config, task, record))
         if difference is not None:
             raise not_reproduced(study_dir, episode_id, manifest, difference)
@@ -271,7 +328,8 @@ def replay_episode(
         if temp is not None:
             with contextlib.suppress(OSError):
                 temp.unlink()
-    return Replay(task=task, config=config, record=record, logged_roads=logged, rrd_path=rrd_path)
+    return Replay(task=task, config=config, record=record, logged_roads=frame_from_table(logged["roads"]),
+                  rrd_path=rrd_path, warnings=warnings)
 
 
 def not_reproduced(study_dir: Path, episode_id: str, manifest: dict, difference: str) -> InputError:

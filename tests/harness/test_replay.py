@@ -63,6 +63,7 @@ def test_every_episode_of_the_study_replays_exactly(sumo_study):
     for episode_id in episodes["episode_id"]:
         replay = replay_episode(sumo_study, episode_id)  # raises InputError on any difference
         assert replay.record.roads["trust_after"].tolist() == replay.logged_roads["trust_after"].tolist()
+        assert replay.warnings == ()
 
 
 @pytest.mark.slow
@@ -88,19 +89,7 @@ def test_replay_of_a_study_made_with_other_code_fails(sumo_study, tmp_path, caps
 
 def _tamper_trust(study, episode_id, index):
     """Change the logged trust after road `index` of `episode_id` by one level."""
-    from trustroute.core.dataset import (
-        ROADS_FILE,
-        ROADS_SCHEMA,
-        read_roads,
-        table_from_frame,
-        write_table,
-    )
-
-    roads = read_roads(study)
-    row = roads.index[(roads["episode_id"] == episode_id) & (roads["index"] == index)][0]
-    logged = int(roads.loc[row, "trust_after"])
-    roads.loc[row, "trust_after"] = logged + 1 if logged < 7 else logged - 1
-    write_table(table_from_frame(roads, ROADS_SCHEMA), study / ROADS_FILE)
+    _tamper(study, "roads", episode_id, "trust_after", lambda t: t + 1 if t < 7 else t - 1, index)
 
 
 @pytest.mark.slow
@@ -122,6 +111,42 @@ def test_failed_replay_keeps_the_recording_and_writes_none(sumo_study, tmp_path,
         assert code == 2 and "does not reproduce the log: road 2 trust_after" in err
     assert sorted(p.name for p in recordings.iterdir()) == ["p00001-phi1-free.rrd"]
     assert (recordings / "p00001-phi1-free.rrd").read_bytes() == recorded
+
+
+# Every column of the kinematics and incidents tables, a float changed by 1e-9 or a value set where
+# the log has none: each is named by its table, the episode, its row and its column.
+@pytest.mark.slow
+@pytest.mark.parametrize(("table", "column", "change", "row"), [
+    ("kinematics", "speed", lambda v: v + 1e-9, 40),
+    ("kinematics", "lane", lambda v: f"{v}x", 40),
+    ("kinematics", "mode", lambda v: "manual" if v == "auto" else "auto", 0),
+    ("incidents", "time_lost", lambda v: v + 1e-9, 2),
+    ("incidents", "scene", lambda v: f"{v} edited", 2),
+    ("incidents", "takeover_reaction", lambda v: 0.5 if pd.isna(v) or v != 0.5 else 0.25, 2),
+])
+def test_replay_compares_every_row_of_kinematics_and_incidents(sumo_study, tmp_path, capsys, table, column,
+                                                               change, row):
+    study = _copy(sumo_study, tmp_path)
+    _tamper(study, table, "p00000-phi2-free", column, change, row)
+    code, out, err = run_cli(capsys, "replay", str(study), "p00000-phi2-free", "--no-rrd")
+    assert code == 2 and out == "" and err.count("\n") == 1 and "Traceback" not in err
+    assert (f"p00000-phi2-free: the replay does not reproduce the log: {table}.parquet row {row} {column}: "
+            "logged ") in err, err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("table", "row"), [("kinematics", -1), ("incidents", 1)])
+def test_replay_compares_the_rows_of_kinematics_and_incidents_one_by_one(sumo_study, tmp_path, capsys,
+                                                                         table, row):
+    study = _copy(sumo_study, tmp_path)
+    logged = pd.read_parquet(study / f"{table}.parquet")
+    rows = int((logged["episode_id"] == "p00000-phi2-free").sum())
+    _tamper(study, table, "p00000-phi2-free", "", None, row)   # one row deleted
+    code, out, err = run_cli(capsys, "replay", str(study), "p00000-phi2-free", "--no-rrd")
+    first = row % rows
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert (f"{table}.parquet: the replay has {rows} rows of the episode, the log {rows - 1} "
+            f"(first difference at row {first})") in err, err
 
 
 def test_replay_bad_input(tmp_path, capsys, monkeypatch):
@@ -154,21 +179,20 @@ policy_cache = "{tmp_path_factory.mktemp("policies")}"
     return root / "out"
 
 
-def _tamper(study, table, episode_id, column, change, index=3):
-    """Change `column` of `episode_id`'s row in episodes.parquet, or of its road `index` in
-    roads.parquet, by `change` (old value -> new value)."""
+def _tamper(study, table, episode_id, column, change, row):
+    """Change `column` of the `row`-th row of `episode_id` (in the file's order: a road's row is
+    its index) in the study table `table` (a key of dataset.TABLES) by `change` (old -> new value);
+    `change=None` deletes the row."""
     from trustroute.core import dataset
 
-    episodes = (dataset.read_episodes, dataset.EPISODES_SCHEMA, dataset.EPISODES_FILE)
-    roads = (dataset.read_roads, dataset.ROADS_SCHEMA, dataset.ROADS_FILE)
-    read, schema, name = episodes if table == "episodes" else roads
-    frame = read(study)
-    chosen = frame["episode_id"] == episode_id
-    if table == "roads":
-        chosen &= frame["index"] == index
-    row = frame.index[chosen][0]
-    frame.at[row, column] = change(frame.at[row, column])
-    dataset.write_table(dataset.table_from_frame(frame, schema), study / name)
+    file_name, schema = dataset.TABLES[table]
+    frame = dataset.frame_from_table(dataset.read_study_table(study, table))
+    at = frame.index[frame["episode_id"] == episode_id][row]
+    if change is None:
+        frame = frame.drop(index=at)
+    else:
+        frame.at[at, column] = change(frame.at[at, column])
+    dataset.write_table(dataset.table_from_frame(frame, schema), study / file_name)
 
 
 @pytest.mark.parametrize(("table", "column", "change"), [
@@ -184,7 +208,7 @@ def _tamper(study, table, episode_id, column, change, index=3):
 ])
 def test_replay_compares_every_logged_column(model_study, tmp_path, capsys, table, column, change):
     study = _copy(model_study, tmp_path)
-    _tamper(study, table, "p00001-phi1-free", column, change)
+    _tamper(study, table, "p00001-phi1-free", column, change, 0 if table == "episodes" else 3)
     code, out, err = run_cli(capsys, "replay", str(study), "p00001-phi1-free", "--no-rrd")
     where = f"road 3 {column}" if table == "roads" else f"episodes.parquet {column}"
     assert code == 2 and out == "" and f"does not reproduce the log: {where}" in err, err
@@ -192,9 +216,29 @@ def test_replay_compares_every_logged_column(model_study, tmp_path, capsys, tabl
 
 def test_replay_ignores_the_wall_clock(model_study, tmp_path, capsys):
     study = _copy(model_study, tmp_path)
-    _tamper(study, "episodes", "p00001-phi1-free", "wall_seconds", lambda v: v + 99.0)
+    _tamper(study, "episodes", "p00001-phi1-free", "wall_seconds", lambda v: v + 99.0, 0)
     code, out, err = run_cli(capsys, "replay", str(study), "p00001-phi1-free", "--no-rrd")
     assert code == 0 and "replay reproduces the log" in out, err
+
+
+def test_replay_warns_of_a_manifest_without_a_config_hash(model_study, tmp_path, capsys):
+    study = _copy(model_study, tmp_path)
+    code, out, err = run_cli(capsys, "replay", str(study), "p00001-phi1-free", "--no-rrd", "--json")
+    assert code == 0 and json.loads(out)["warnings"] == [] and "warning" not in err
+    manifest = json.loads((study / "manifest.json").read_text())
+    del manifest["inputs"]["config_sha256"]   # as a manifest written before config hashes were recorded
+    (study / "manifest.json").write_text(json.dumps(manifest))
+    code, out, err = run_cli(capsys, "replay", str(study), "p00001-phi1-free", "--no-rrd", "--json")
+    warning = f"{study / 'manifest.json'}: inputs.config_sha256: absent"
+    assert code == 0 and err.count("\n") == 1 and err.startswith(f"warning: {warning}"), err
+    assert json.loads(out)["warnings"] == [err.removeprefix("warning: ").rstrip("\n")]
+    # an edited config is then found only by the replay's difference: the warning comes first
+    manifest["config"]["seed"] = 2
+    (study / "manifest.json").write_text(json.dumps(manifest))
+    code, out, err = run_cli(capsys, "replay", str(study), "p00001-phi1-free", "--no-rrd")
+    lines = err.splitlines()
+    assert code == 2 and out == "" and len(lines) == 2, err
+    assert lines[0].startswith(f"warning: {warning}") and "does not reproduce the log" in lines[1]
 
 
 def test_replay_refuses_a_changed_config_in_the_manifest(model_study, tmp_path, capsys):

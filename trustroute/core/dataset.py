@@ -527,12 +527,17 @@ def read_kinematics(study_dir: Path, columns: list[str] | None = None) -> pd.Dat
     return _read(study_dir, "kinematics", columns)
 
 
-def read_incidents(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
-    """incidents.parquet (SUMO engine), checked against INCIDENTS_SCHEMA; an empty table when the
+def read_incidents_table(study_dir: Path, columns: list[str] | None = None) -> pa.Table:
+    """incidents.parquet (SUMO engine), checked (`read_study_table`); an empty table when the
     study had no incident objects and no takeovers (the file is then not written)."""
     if not (Path(study_dir) / INCIDENTS_FILE).exists() and (Path(study_dir) / MANIFEST_FILE).exists():
-        return frame_from_table(INCIDENTS_SCHEMA.empty_table().select(columns or INCIDENTS_SCHEMA.names))
-    return _read(study_dir, "incidents", columns)
+        return INCIDENTS_SCHEMA.empty_table().select(columns or INCIDENTS_SCHEMA.names)
+    return read_study_table(study_dir, "incidents", columns)
+
+
+def read_incidents(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """incidents.parquet in pandas (`read_incidents_table`)."""
+    return frame_from_table(read_incidents_table(study_dir, columns))
 
 
 def read_attempts(study_dir: Path, columns: list[str] | None = None) -> pd.DataFrame:
