@@ -71,6 +71,7 @@ from trustroute.policies.synthesis.result import (
     SynthesisResult,
     SynthesisStats,
 )
+from trustroute.policies.synthesis.rounding import model_rounding, relative_margin, rounded_down, widen
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.synthesis.upper_bound import (
     Abstraction,
@@ -338,6 +339,15 @@ def _with_cluster(best: _Answer, found: ClusterSolution | None, tables: ProductT
                    strict=found.lower)
 
 
+def rounding_depth(runs: tuple[Run, ...], horizon: int | None) -> int:
+    """The most observation steps a history has in any computation behind the bounds: the
+    horizon, or (unbounded) the deepest run's (a search of the unbounded problem leaves nodes
+    UNBOUNDED_DEPTH deep open, valued by the end-component bound, itself rounded up per sweep)."""
+    if horizon is not None:
+        return horizon
+    return max((UNBOUNDED_DEPTH if run.horizon is None else run.horizon for run in runs), default=0)
+
+
 def _root_dfa_states(tables: ProductTables) -> tuple[int, ...]:
     """The DFA state position 0 is read as, its belief labels decided exactly on the prior
     (policies/belief/exact_labels.py)."""
@@ -399,13 +409,19 @@ def _synthesize(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings,
         answer = _bounded(problem, horizon)
     else:
         answer = _unbounded(problem)
-    lower, upper, table = answer.lower, answer.upper, answer.table
+    table = answer.table
     if table is None:
         raise AttributeError("the synthesis ended without a policy table")
+    # Convergence is decided on the bounds as computed (a search that closed its gap exactly has
+    # closed it); what is reported is rounded outward, so that it holds exactly (rounding.py).
+    converged = bool(answer.upper - answer.lower <= tau)
+    margin = relative_margin(model_rounding(pomdp, belief_rule), rounding_depth(answer.runs, horizon),
+                             belief_rule)
+    lower, upper = widen(answer.lower, answer.upper, margin)
     policy = BeliefTablePolicy(table, pomdp.town, spec, lower=lower, upper=upper, horizon=horizon)
     stats = SynthesisStats(
-        belief_rule=belief_rule, converged=bool(upper - lower <= tau), tau=tau, runs=answer.runs,
-        policy_rows=table.rows, lower_strict_labels=max(answer.strict, lower),
+        belief_rule=belief_rule, converged=converged, tau=tau, runs=answer.runs,
+        policy_rows=table.rows, lower_strict_labels=max(float(rounded_down(answer.strict, margin)), lower),
         unbounded_upper=answer.unbounded_upper,
         lower_from_horizon=(max(answer.runs, key=lambda r: r.lower).horizon
                             if horizon is None else None))

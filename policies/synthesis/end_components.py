@@ -29,7 +29,9 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
+from trustroute.policies.logic.labelling import gamma
 from trustroute.policies.synthesis.belief_cells import vertex_mask
+from trustroute.policies.synthesis.rounding import MAX_OUTCOMES, model_rounding, rounded_down, rounded_up
 from trustroute.policies.synthesis.upper_bound import Abstraction, can_accept
 from trustroute.policies.work_clock import now as clock_now
 from trustroute.policies.work_clock import spend
@@ -247,12 +249,18 @@ def unbounded_bound(abstraction: Abstraction, deadline: float, tolerance: float 
             out[owners] = np.maximum.reduceat(choice_value, starts)
         return np.minimum(out, 1.0)
 
+    # Rounded up at every sweep (docs/synthesis.md, "Rounding"): a choice's value is a float sum
+    # of at most MAX_OUTCOMES products with float vertex probabilities P̂(o | v), within
+    # (1 ± γ_sweep) of the exact sum, so inflating it by that factor keeps every iterate at or
+    # above the exact operator's image, and by induction above its least fixed point, however
+    # many sweeps run. The iteration from below is deflated alike.
+    sweep = gamma(tables.pomdp.n_trust + model_rounding(tables.pomdp).likelihood + MAX_OUTCOMES + 2)
     iterations = 0
     gap = 1.0
     while iterations < max_iterations and clock_now() < deadline:
         spend(1 + 2 * e_choice.size // EDGES_PER_UNIT)
-        upper = np.minimum(upper, backup(upper))
-        lower = np.maximum(lower, backup(lower))
+        upper = np.minimum(upper, rounded_up(backup(upper), sweep))
+        lower = np.maximum(lower, rounded_down(backup(lower), sweep))
         iterations += 1
         gap = float((upper - lower).max()) if upper.size else 0.0
         if gap <= tolerance:

@@ -53,6 +53,7 @@ from trustroute.participants.driver_population import DriverPopulation
 from trustroute.policies.belief.driver_types import lift_population, lift_spec
 from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.evaluation.settings import EvaluationSettings
+from trustroute.policies.logic.labelling import gamma
 from trustroute.policies.logic.spec import Spec, state_only_projection
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
 from trustroute.policies.routing.aware_table import BeliefTablePolicy, PolicyTable
@@ -62,6 +63,13 @@ from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synthesize
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.result import SearchRun, SynthesisResult, SynthesisStats
+from trustroute.policies.synthesis.rounding import (
+    ModelRounding,
+    model_rounding,
+    relative_margin,
+    rounded_down,
+    widen,
+)
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.work_clock import now as clock_now
 
@@ -97,6 +105,23 @@ class TypeValue:
 
     def to_dict(self) -> dict:
         return {"name": self.name, "weight": self.weight, "lower": self.lower, "upper": self.upper}
+
+    @classmethod
+    def certified(cls, name: str, weight: float, computed: tuple[float, float], truth: ModelRounding,
+                  max_junctions: int) -> TypeValue:
+        """A type's value from an evaluation's computed [lower, upper], rounded outward for its
+        histories of at most `max_junctions` steps under the true driver's constants `truth`
+        (rounding.py: an evaluation sums the same products of observation probabilities as a
+        search; the true driver's posterior gives them)."""
+        margin = relative_margin(truth, max_junctions, "bayes")
+        lower, upper = widen(computed[0], computed[1], margin)
+        return cls(name, weight, lower, upper)
+
+
+def mixture_lower(weights: np.ndarray, values: Iterable[TypeValue]) -> float:
+    """Σ_k w_k V_k's lower end, its float sum rounded down (a sum of nonnegative terms: γ_{k+1})."""
+    lowers = [v.lower for v in values]
+    return float(rounded_down(float(weights @ lowers), gamma(len(lowers) + 1)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -360,9 +385,11 @@ def candidate_values(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy, popul
     out: list[TypeValue | None] = [None] * population.n_types
     for i, k in enumerate(order):
         t = population.types[k]
-        value = evaluate(pomdp, spec, policy, settings, truth=build_pomdp(pomdp.town, t.model),
+        truth = build_pomdp(pomdp.town, t.model)
+        value = evaluate(pomdp, spec, policy, settings, truth=truth,
                          deadline=type_deadline(deadline, len(order) - i))
-        out[k] = TypeValue(t.name, float(t.weight), value.lower, value.upper)
+        out[k] = TypeValue.certified(t.name, float(t.weight), (value.lower, value.upper),
+                                     model_rounding(truth), settings.max_junctions)
         if value.upper <= beaten_at:
             break
     return tuple(out)
@@ -491,7 +518,7 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
     upper = max(upper, lower)   # equal up to rounding
     # The returned policy's file bounds keep their meaning L <= Pr_max <= U under the type prior: L
     # its exact prior-weighted value (the lower ends), U the Bayes synthesis' bound.
-    mixture = float(weights @ [v.lower for v in best_values])
+    mixture = mixture_lower(weights, best_values)
     policy = BeliefTablePolicy(best_policy.table, town, lifted_spec, name="robust",
                                lower=min(mixture, bayes.upper), upper=bayes.upper, horizon=horizon,
                                reweight=best_policy.reweight)

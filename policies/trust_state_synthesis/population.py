@@ -40,6 +40,7 @@ from trustroute.policies.belief.exact_labels import exact_filter
 from trustroute.policies.belief.problem import Problem
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
+from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.formula import TRUE, Formula, Literal, format_formula, map_literals
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
@@ -58,12 +59,14 @@ from trustroute.policies.synthesis.population import (
     candidate_name,
     candidate_priors,
     evaluation_cap,
+    mixture_lower,
     reweighting,
     run_count,
     within_tau,
     worst_type,
 )
 from trustroute.policies.synthesis.result import SynthesisResult
+from trustroute.policies.synthesis.rounding import joint_rounding
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.synthesis import (
     EVALUATION_NODES,
@@ -90,8 +93,10 @@ def joint_type_values(problem: Problem, policy: RoutingPolicy, max_junctions: in
                                                           belief_rule=belief_rule,
                                                           max_nodes=EVALUATION_NODES,
                                                           time_limit=time_limit))
-    return tuple(TypeValue(t.name, float(t.weight), lower, upper)
-                 for t, (lower, upper) in zip(population.types, bounds, strict=True))
+    # the joint unfolding runs the lifted (θ, q) filter: its vectors' length sets the units
+    rounding = joint_rounding(pomdp or problem.pomdp, compile_spec(problem.spec, problem.town).dfa.n_states)
+    return tuple(TypeValue.certified(t.name, float(t.weight), found, rounding, max_junctions)
+                 for t, found in zip(population.types, bounds, strict=True))
 
 
 def belief_free_spec(spec: Spec) -> Spec:
@@ -223,7 +228,7 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
         raise RuntimeError(f"robust value {lower!r} above its bound {upper!r}: a soundness bug")
     # The policy file's bounds keep their meaning L <= Pr_max <= U under the type prior: L the
     # returned policy's prior-weighted value (the lower ends), U the Bayes synthesis' bound.
-    mixture = min(float(population.weights @ [v.lower for v in best_values]), bayes.upper)
+    mixture = min(mixture_lower(population.weights, best_values), bayes.upper)
     policy.lower, policy.upper = mixture, bayes.upper
     result = replace(bayes, policy=policy, lower=mixture, seconds=time.perf_counter() - started)
     return replace(found, objective="robust", result=result, prior=tuple(float(p) for p in prior),

@@ -48,6 +48,7 @@ from trustroute.policies.routing.protocol import Certificate
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.result import Record, SynthesisResult, record_dict
+from trustroute.policies.synthesis.rounding import joint_rounding, relative_margin, rounded_down
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.search import (
     JointBounds,
@@ -274,10 +275,15 @@ def _synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings
             break
     chosen = best[0]
     policy, value = chosen.policy, chosen.value
-    lower = value.lower
+    # converged on the computed values; L reported rounded down for the joint filter's histories
+    # of at most the policy's evaluation cap (rounding.py; U carries its per-backup margins)
+    converged = bool(upper - value.lower <= tau)
+    rounding = joint_rounding(pomdp, compile_spec(spec, pomdp.town).dfa.n_states, belief_rule)
+    depth = chosen.horizon if value.junctions is None else max(value.junctions, chosen.horizon)
+    lower = float(rounded_down(value.lower, relative_margin(rounding, depth, belief_rule)))
     policy.lower, policy.upper = lower, upper
     stats = JointSynthesisStats(
-        belief_rule=belief_rule, converged=bool(upper - lower <= tau), tau=tau, runs=tuple(log),
+        belief_rule=belief_rule, converged=converged, tau=tau, runs=tuple(log),
         policy_rows=policy.table.rows, policy_search_horizon=chosen.horizon,
         search_lower=chosen.bounds.lower, policy_value=value)
     return SynthesisResult(policy=policy, lower=lower, upper=upper, seconds=budget.elapsed(),

@@ -30,6 +30,7 @@ from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.labelling import atom_values
 from trustroute.policies.logic.spec import Spec, spec_from_text
 from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp
+from trustroute.policies.routing.aware_table import BeliefTablePolicy
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 FORMULAS = ("F (v1 & !high)", "(!high) U a", "F (a & high)", "(!high) U (a & F b)", "F (a & F (b & high))")
@@ -41,10 +42,10 @@ def _decimal(value: float) -> Fraction:
     return Fraction(repr(float(value)))
 
 
-def random_town(rng: np.random.Generator, quiet: float):
-    """4-8 junctions, a random tree plus a few chords; each road has an incident with probability
-    1 - quiet."""
-    n = int(rng.integers(4, 9))
+def random_town(rng: np.random.Generator, quiet: float, junctions: tuple[int, int] = (4, 8)):
+    """`junctions` (at least, at most) junctions, a random tree plus a few chords; each road has an
+    incident with probability 1 - quiet."""
+    n = int(rng.integers(junctions[0], junctions[1] + 1))
     names = [chr(ord("A") + i) for i in range(n)]
     junctions = random_junctions(rng, names)
     roads = {tuple(sorted((names[i], names[int(rng.integers(i))]))) for i in range(1, n)}
@@ -184,11 +185,21 @@ def _scaled(values: list[Fraction]) -> tuple[list[int], int]:
 
 
 def brute_force(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> float:
-    """max over policies of P(spec accepted within `horizon` junctions) on the exact filter.
+    """max over policies of P(spec accepted within `horizon` junctions) on the exact filter, in
+    floats (`exact_value`'s sums in floats: quicker on the larger threshold cases)."""
+    return float(exact_value(pomdp, spec, horizon, number=float))
+
+
+def exact_value(pomdp: TrustPOMDP, spec: Spec, horizon: int, policy: BeliefTablePolicy | None = None,
+                number: type = Fraction) -> Fraction:
+    """max over policies (or the value of `policy`, acting on the vehicle's float filter) of
+    P(spec accepted within `horizon` junctions) on the exact filter, exactly (`number` Fraction).
 
     Beliefs are integer vectors (the exact belief times a positive scale, divided by the gcd of
     their entries: one representative per belief), updated by the integer-scaled decimal matrices;
-    a label c·b > offset is compared in integers; probabilities are exact ratios, then floats."""
+    a label c·b > offset is compared in integers; probabilities are exact ratios. A policy reads
+    the float belief of TrustPOMDP.belief_update along the same history, and the DFA state of the
+    exact labels, as the vehicle does."""
     driver, town = pomdp.driver, pomdp.town
     n = pomdp.n_trust
     compiled = compile_spec(spec, town)
@@ -221,19 +232,28 @@ def brute_force(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> float:
 
     memo: dict = {}
 
-    def value(t: int, x: int, q: int, belief: tuple[int, ...]) -> float:
+    def moves(t: int, x: int, q: int, route: tuple[str, ...], float_belief: np.ndarray) -> list[int]:
+        if policy is None:
+            return successors[x]
+        p = policy.task.projected_state(route)
+        slot = int(policy.exact_action_slots(np.array([t]), np.array([x]), np.array([q]), np.array([p]),
+                                             float_belief[None, :])[0])
+        return [town.state_index(town.successors(town.states[x])[slot])]
+
+    def value(t: int, x: int, q: int, belief: tuple[int, ...], route: tuple[str, ...],
+              float_belief: np.ndarray):
         if compiled.accepting[q]:
-            return 1.0
+            return number(1)
         if compiled.rejecting[q] or t == horizon:
-            return 0.0
-        key = (t, x, q, belief)
+            return number(0)
+        key = (t, x, q, belief) if policy is None else (t, x, q, belief, route, float_belief.tobytes())
         if key in memo:
             return memo[key]
-        best = 0.0
+        best = number(0)
         mass = sum(belief)
-        for x2 in successors[x]:
+        for x2 in moves(t, x, q, route, float_belief):
             i = int(pomdp.road_incident[x2])
-            total = 0.0
+            total = number(0)
             for h, e in outcomes:
                 like, scale = likelihood[i, h, e]
                 weight = sum(b * w for b, w in zip(belief, like, strict=True))
@@ -243,15 +263,19 @@ def brute_force(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> float:
                 image = [sum(belief[k] * matrix[k][m] for k in range(n) if belief[k]) for m in range(n)]
                 common = math.gcd(*image)
                 posterior = tuple(v // common for v in image)
-                probability = float(Fraction(weight, mass * scale))
-                total += probability * value(t + 1, x2, step(q, x2, posterior), posterior)
+                probability = number(Fraction(weight, mass * scale))
+                follow = (float_belief if policy is None
+                          else pomdp.belief_update(float_belief[None, :], i, h, e)[0][0])
+                total += probability * value(t + 1, x2, step(q, x2, posterior), posterior,
+                                             (*route, town.states[x2]), follow)
             best = max(best, total)
         memo[key] = best
         return best
 
     start = town.state_index(spec.start)
     root = tuple(prior)
-    return value(0, start, step(dfa.initial, start, root), root)
+    return value(0, start, step(dfa.initial, start, root), root, (spec.start,),
+                 np.asarray(pomdp.initial_belief, dtype=float))
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,87 @@
+"""Certified bounds hold exactly, rounding included (policies/synthesis/rounding.py).
+
+On small random towns (3-5 junctions, H <= 5, the default and random driver models, a belief atom
+at a random offset) the synthesized [L, U] contains the exact-rational optimum with no tolerance,
+L is at most the returned policy's exact value, and both lie in [0, 1]. Without the outward
+rounding U fell below the optimum by an ulp or two on some of these seeds.
+"""
+
+from __future__ import annotations
+
+import functools
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from tests.policies.evaluation.test_random_models import random_driver
+from tests.policies.synthesis.threshold_cases import FORMULAS, _without_failures, exact_value, random_town
+from trustroute.policies.logic.spec import spec_from_text
+from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.synthesis.belief_synthesis import synthesize
+from trustroute.policies.synthesis.rounding import model_rounding, relative_margin, widen
+from trustroute.policies.synthesis.settings import SynthesisSettings
+
+SEEDS = range(40)
+
+
+def small_case(seed: int, default_driver):
+    rng = np.random.default_rng(seed)
+    town = random_town(rng, quiet=float(rng.uniform(0.2, 0.6)), junctions=(3, 5))
+    model = default_driver if rng.random() < 0.5 else _without_failures(
+        random_driver(rng, default_driver.incident_types))
+    pomdp = build_pomdp(town, model)
+    coeffs = np.zeros(7)
+    coeffs[rng.choice(7, size=int(rng.integers(1, 7)), replace=False)] = 1.0
+    offset = float(rng.uniform(0.05, 0.6))
+    start = str(rng.choice(town.states))
+    reachable = sorted(town.reachable_states(start) - {start}) or [start]
+
+    def some(k: int) -> str:
+        return str(sorted(rng.choice(reachable, size=min(k, len(reachable)), replace=False).tolist()))
+
+    formula = FORMULAS[int(rng.integers(len(FORMULAS)))]
+    text = (f'name = "rounding"\nstart = "{start}"\nformula = "{formula}"\n'
+            f"[states]\na = {some(2)}\nb = {some(2)}\nv1 = {some(3)}\n".replace("'", '"')
+            + f"[beliefs.high]\ncoeffs = {coeffs.tolist()}\noffset = {offset!r}\n")
+    return pomdp, spec_from_text(text, "<rounding spec>", town), int(rng.integers(1, 6))
+
+
+@pytest.fixture(scope="module")
+def outcome(driver):
+    @functools.cache
+    def run(seed: int):
+        pomdp, spec, horizon = small_case(seed, driver)
+        result = synthesize(pomdp, spec, SynthesisSettings(tau=1e-9, horizon=horizon, time_limit=20.0))
+        optimum = exact_value(pomdp, spec, horizon)
+        policy_value = exact_value(pomdp, spec, horizon, policy=result.policy)
+        return result, optimum, policy_value
+
+    return run
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_bounds_contain_the_exact_optimum_with_no_tolerance(outcome, seed):
+    result, optimum, policy_value = outcome(seed)
+    assert 0.0 <= result.lower <= result.upper <= 1.0
+    assert Fraction(result.lower) <= optimum <= Fraction(result.upper), (seed, result.lower, result.upper)
+    assert Fraction(result.lower) <= policy_value, (seed, result.lower, policy_value)
+    assert result.stats.converged      # decided on the computed bounds (their gap, not the margin)
+
+
+def test_unbounded_bounds_lie_in_the_unit_interval(driver):
+    for seed in range(6):
+        pomdp, spec, _ = small_case(seed, driver)
+        result = synthesize(pomdp, spec, SynthesisSettings(horizon=None, time_limit=5.0))
+        assert 0.0 <= result.lower <= result.upper <= 1.0
+
+
+def test_widening_keeps_zero_and_one_and_moves_the_rest_outward(driver):
+    margin = relative_margin(model_rounding(build_pomdp(small_case(0, driver)[0].town, driver)), 20, "bayes")
+    assert 0 < margin < 1e-12
+    assert widen(0.0, 1.0, margin) == (0.0, 1.0)
+    assert widen(0.0, 0.0, margin) == (0.0, 0.0)
+    above_one = widen(1.0000000000000002, 1.0000000000000002, margin)
+    assert above_one[0] < 1.0 and above_one[1] == 1.0
+    low, high = widen(0.5, 0.5, margin)
+    assert low < 0.5 < high and 0.5 - low < 1e-12 and high - 0.5 < 1e-12
