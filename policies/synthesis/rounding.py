@@ -22,6 +22,8 @@ from fractions import Fraction
 import numpy as np
 
 from trustroute.policies.belief.exact_labels import decimal, exact_prior
+from trustroute.policies.belief.problem import Problem
+from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.labelling import UNIT_ROUNDOFF, gamma
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 
@@ -119,6 +121,16 @@ def joint_rounding(pomdp: TrustPOMDP, n_q: int, rule: BeliefRule = "bayes") -> M
     """The constants of the joint (θ, q) filter of trust-state specs: vectors of n_trust · n_q
     entries, the same model numbers."""
     return replace(model_rounding(pomdp, rule), n=pomdp.n_trust * max(n_q, 1))
+
+
+def problem_rounding(problem: Problem, pomdp: TrustPOMDP | None = None) -> ModelRounding:
+    """The constants of the unfolding that values a policy on `problem` (or on `pomdp` in its
+    place): the joint (θ, q) filter's when the DFA state is hidden, the model's otherwise. Its
+    probabilities are the true process's, a Bayes posterior whatever the AV's own rule."""
+    pomdp = pomdp or problem.pomdp
+    if problem.dfa_hidden:
+        return joint_rounding(pomdp, compile_spec(problem.spec, problem.town).dfa.n_states)
+    return model_rounding(pomdp)
 
 
 def relative_margin(rounding: ModelRounding, depth: int, rule: BeliefRule) -> float:

@@ -30,7 +30,7 @@ elsewhere; its value is evaluated exactly either way.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -40,7 +40,6 @@ from trustroute.policies.belief.exact_labels import exact_filter
 from trustroute.policies.belief.problem import Problem
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.evaluation.trust_state import evaluate_joint_by_type
-from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.formula import TRUE, Formula, Literal, format_formula, map_literals
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
@@ -66,7 +65,7 @@ from trustroute.policies.synthesis.population import (
     worst_type,
 )
 from trustroute.policies.synthesis.result import SynthesisResult
-from trustroute.policies.synthesis.rounding import joint_rounding
+from trustroute.policies.synthesis.rounding import problem_rounding
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.synthesis import (
     EVALUATION_NODES,
@@ -93,8 +92,16 @@ def joint_type_values(problem: Problem, policy: RoutingPolicy, max_junctions: in
                                                           belief_rule=belief_rule,
                                                           max_nodes=EVALUATION_NODES,
                                                           time_limit=time_limit))
-    # the joint unfolding runs the lifted (θ, q) filter: its vectors' length sets the units
-    rounding = joint_rounding(pomdp or problem.pomdp, compile_spec(problem.spec, problem.town).dfa.n_states)
+    return certified_type_values(problem, bounds, max_junctions, pomdp)
+
+
+def certified_type_values(problem: Problem, bounds: Sequence[tuple[float, float]], max_junctions: int,
+                          pomdp: TrustPOMDP | None = None) -> tuple[TypeValue, ...]:
+    """Each type's computed [lower, upper] from the joint unfolding on the lifted model, rounded
+    outward for the lifted (θ, q) filter's histories of at most `max_junctions` steps."""
+    population = problem.population
+    assert population is not None
+    rounding = problem_rounding(problem, pomdp)
     return tuple(TypeValue.certified(t.name, float(t.weight), found, rounding, max_junctions)
                  for t, found in zip(population.types, bounds, strict=True))
 

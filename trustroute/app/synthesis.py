@@ -33,8 +33,10 @@ from trustroute.policies.synthesis.population import (
 )
 from trustroute.policies.synthesis.refinement import reached_node_budget
 from trustroute.policies.synthesis.result import SearchRun, SynthesisResult
+from trustroute.policies.synthesis.rounding import problem_rounding, relative_margin, widen
 from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
+from trustroute.policies.trust_state_synthesis.population import certified_type_values
 from trustroute.policies.work_clock import installed, stopped_by, work_clock
 
 
@@ -119,25 +121,33 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
     return found
 
 
+def certified(problem: Problem, value: Evaluation) -> Evaluation:
+    """An evaluation's computed [lower, upper] rounded outward for its histories of at most
+    `max_junctions` steps (policies/synthesis/rounding.py), so that it holds exactly."""
+    margin = relative_margin(problem_rounding(problem), value.max_junctions, "bayes")
+    lower, upper = widen(value.lower, value.upper, margin)
+    return replace(value, lower=lower, upper=upper)
+
+
 def evaluate_single(problem: Problem, policy: RoutingPolicy, settings: EvaluationSettings) -> Evaluation:
-    """The exact value of `policy` on a one-model problem (the joint unfolding when the DFA state
-    is hidden, the plain one otherwise: evaluate_joint chooses)."""
-    return evaluate_joint(problem.pomdp, problem.spec, policy, settings)
+    """The certified value of `policy` on a one-model problem (the joint unfolding when the DFA
+    state is hidden, the plain one otherwise: evaluate_joint chooses)."""
+    return certified(problem, evaluate_joint(problem.pomdp, problem.spec, policy, settings))
 
 
 def evaluate_population(problem: Problem, policy: RoutingPolicy,
                         settings: EvaluationSettings) -> tuple[Evaluation, tuple[TypeValue, ...]]:
-    """The exact value of `policy` over a population problem's mixture, and per driver type."""
+    """The certified value of `policy` over a population problem's mixture, and per driver type."""
     population = problem.population
     assert population is not None
     rule, cap, after = settings.belief_rule, settings.max_junctions, settings.fallback_after
     if problem.dfa_hidden:
         # The DFA state is hidden: one unfolding over ((type, trust), q) gives every type's value.
         value, bounds = evaluate_joint_by_type(problem.pomdp, problem.spec, policy, settings)
-        return value, tuple(TypeValue(t.name, float(t.weight), lower, upper)
-                            for t, (lower, upper) in zip(population.types, bounds, strict=True))
+        return certified(problem, value), certified_type_values(problem, bounds, cap)
     value = evaluate_plain(problem.pomdp, problem.spec, policy, settings)
-    return value, tuple(per_type_values(problem.pomdp, problem.spec, policy, population, cap, rule, after))
+    return (certified(problem, value),
+            tuple(per_type_values(problem.pomdp, problem.spec, policy, population, cap, rule, after)))
 
 
 @dataclass(frozen=True)

@@ -211,7 +211,10 @@ def test_the_cli_brackets_phi1_trust_at_the_default_cap(capsys, tmp_path):
     value = json.loads(out)
     assert value["max_junctions"] == 60
     assert 0.0 <= value["lower"] <= value["upper"] <= 1.0
-    assert value["upper"] - value["lower"] == pytest.approx(value["end_mass"]["pruned"], abs=1e-12)
+    # the width is the pruned mass plus the outward rounding (policies/synthesis/rounding.py: a few
+    # 1e-12 on the joint (θ, q) filter at 60 junctions), never less than the pruned mass
+    width, pruned = value["upper"] - value["lower"], value["end_mass"]["pruned"]
+    assert pruned - 1e-15 <= width <= pruned + 1e-10
     assert value["pruning"]["max_nodes"] > 0
     code, out, _ = run_cli(capsys, "evaluate", "specs/phi1_trust.toml", "aware", "--cache-dir",
                            str(tmp_path), "--max-junctions", "20", "--max-nodes", "1000000", "--json")

@@ -58,8 +58,9 @@ def test_histories_of_two_words_at_one_belief_on_a_threshold_close_the_gap():
     """The reset case (threshold_cases.py): a standstill and a takeover at the obstacle reach one
     float belief under two words, and its label at C-D floats cannot decide. Both words lead to
     one exact belief, on which the label holds: the search reads it there as the vehicle does and
-    closes [L, U] on the optimum, 1 (L less its rounding margin), and says it converged; it does not end early with the label
-    read both ways ([0, 1], said to be stopped by a time limit it never reached)."""
+    closes [L, U] on the optimum, 1 (L less its rounding margin), and says it converged; it does
+    not end early with the label read both ways ([0, 1], said to be stopped by a time limit it
+    never reached)."""
     case = reset_case()
     result = trustroute.synthesize(case.spec, case.pomdp.town, case.pomdp.driver, horizon=case.horizon,
                                    tau=TAU, time_limit=30.0)
