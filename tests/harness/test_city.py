@@ -46,7 +46,8 @@ def test_spec_check_baseline_evaluate_and_synth_accept_the_city(capsys, synthesi
     baseline = cli_json(capsys, "baseline", "city5", "--town", "city")
     assert baseline["junctions"] == 33 and SHORT_ROAD in baseline["route"]
     free = cli_json(capsys, "evaluate", "city5", "free", "--town", "city", "--no-fallback")
-    assert free["lower"] == free["upper"] == pytest.approx(baseline["satisfaction_probability"], abs=1e-12)
+    # exact up to the outward rounding of evaluate's bounds (policies/synthesis/rounding.py)
+    assert free["lower"] <= baseline["satisfaction_probability"] <= free["upper"] <= free["lower"] + 1e-11
     policy = cli_json(capsys, "evaluate", "city5", str(synthesized["policy"]), "--town", "city",
                    "--fallback-after", "40")
     document = json.loads(Path(synthesized["policy"]).read_text())

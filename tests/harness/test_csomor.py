@@ -39,7 +39,8 @@ def test_spec_check_baseline_evaluate_and_synth_accept_csomor(capsys, synthesize
     baseline = cli_json(capsys, "baseline", "csomor5", "--town", "csomor")
     assert baseline["junctions"] == 32 <= 40   # the trust-free route fits the horizon
     free = cli_json(capsys, "evaluate", "csomor5", "free", "--town", "csomor", "--no-fallback")
-    assert free["lower"] == free["upper"] == pytest.approx(baseline["satisfaction_probability"], abs=1e-12)
+    # exact up to the outward rounding of evaluate's bounds (policies/synthesis/rounding.py)
+    assert free["lower"] <= baseline["satisfaction_probability"] <= free["upper"] <= free["lower"] + 1e-11
     document = json.loads(synthesized.read_text())
     lower, upper = document["lower"], document["upper"]
     assert 0.0 <= lower <= upper <= 1.0
