@@ -32,6 +32,7 @@ const TRAFFIC = [0x2f5d8c, 0x9c2f2f, 0xd6d6d6, 0x3a3a3a, 0x2f7a4a, 0xb8b8b8, 0x6
 const KIND_COLOUR = { obstacle: 0xe67e00, oncoming: 0x7b1fa2, truck: 0x7b1fa2, parked: 0x7b1fa2, pedestrian: 0xd81b60 };
 const LEVEL = { ground: -0.05, walk: 0.004, area: 0.01, internal: 0.014, road: 0.018, crossing: 0.026,
                 marking: 0.03 };
+const FLAT_ORDER = -100;   // the render order of the lowest level (objects above them: 0)
 
 const toScene = (x, y, height = 0) => new THREE.Vector3(x, height, -y);
 
@@ -107,10 +108,24 @@ function polygon(positions, points, height) {
   }
 }
 
-function mesh(positions, colour) {
+// The ground and the net's layers lie in one plane, centimetres apart (LEVEL): they are drawn first,
+// in the order of their levels, each over the one below, and neither test nor write the depth
+// buffer, so no renderer's depth precision decides which shows. SwiftShader's would: it gives the
+// ground's two triangles (thousands of metres across, cut by the near plane) depths nearer than
+// the road's at some canvas sizes (about 216-228, 268-278, 376-392 and 486-500 pixels wide at
+// 16:9, a 400 px phone's among them), and grass would cover the road. Everything else stands on
+// these layers and is drawn after them, with the depth buffer.
+function flat(object, level) {
+  object.renderOrder = FLAT_ORDER - 1 + Object.values(LEVEL).filter((other) => other <= level).length;
+  object.material.depthTest = false;
+  object.material.depthWrite = false;
+  return object;
+}
+
+function mesh(positions, colour, level) {
   const geometry = new THREE.BufferGeometry();
   geometry.setAttribute("position", new THREE.Float32BufferAttribute(positions, 3));
-  return new THREE.Mesh(geometry, new THREE.MeshBasicMaterial({ color: colour, side: THREE.DoubleSide }));
+  return flat(new THREE.Mesh(geometry, new THREE.MeshBasicMaterial({ color: colour, side: THREE.DoubleSide })), level);
 }
 
 export function netScene(net) {
@@ -147,10 +162,14 @@ export function netScene(net) {
   for (const area of net.areas || []) polygon(parts.area, area, LEVEL.area);
   const colours = { road: 0x4a4d50, internal: 0x505356, area: 0x505356, walk: 0xb9b4aa, crossing: 0xf2f2f2,
                     marking: 0xf2f2f2, edge: 0xf2f2f2 };
-  for (const [name, positions] of Object.entries(parts)) if (positions.length) group.add(mesh(positions, colours[name]));
+  const levels = { ...LEVEL, edge: LEVEL.marking };
+  for (const [name, positions] of Object.entries(parts)) {
+    if (positions.length) group.add(mesh(positions, colours[name], levels[name]));
+  }
   const [x0, y0, x1, y1] = net.bounds;
   const size = Math.max(x1 - x0, y1 - y0) + 3000;
   const ground = new THREE.Mesh(new THREE.PlaneGeometry(size, size), new THREE.MeshBasicMaterial({ color: 0x87a96b }));
+  flat(ground, LEVEL.ground);
   ground.rotation.x = -Math.PI / 2;
   ground.position.copy(toScene((x0 + x1) / 2, (y0 + y1) / 2, LEVEL.ground));
   group.add(ground);

@@ -19,7 +19,7 @@ from trustroute.harness.live.server import LiveStudy, ServerOptions
 
 from .conftest import tiny_config
 from .test_browser import CHROMIUM_ARGS
-from .test_driver_view import Server, scene_on, start_driving, wait_until
+from .test_driver_view import Server, assert_sky_and_road, scene_on, show, start_driving, wait_until
 
 pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
@@ -59,7 +59,7 @@ def station(tmp_path_factory):
     from trustroute.app.nets import net_for
 
     tmp_path = tmp_path_factory.mktemp("station")
-    study = LiveStudy(tiny_config(tmp_path, participants=12), tmp_path / "study", ServerOptions()).open()
+    study = LiveStudy(tiny_config(tmp_path, participants=32), tmp_path / "study", ServerOptions()).open()
     server = Server(study)
     server.start()
     deadline = time.monotonic() + 30
@@ -267,3 +267,19 @@ def test_the_own_car_is_seen_on_the_mini_map_and_a_phone_shows_the_station_whole
             shown = box(page, selector)
             right = scene["x"] + scene["width"] + 1
             assert scene["x"] <= shown["x"] and shown["x"] + shown["width"] <= right, selector
+
+
+@pytest.mark.parametrize(("width", "phone"), [(400, True), (400, False), (420, False), (510, False)])
+def test_the_driver_view_draws_the_road_in_a_narrow_window(station, width, phone, tmp_path):
+    """The ground and the road lie centimetres apart; drawn by depth, software WebGL gave the
+    ground's large triangles depths nearer than the road's at some canvas sizes (a 400 or 510 px
+    window's among them) and the view showed grass where the road is. Drawn in the order of their
+    levels, the road shows at every width."""
+    frame, _ = scene_on(station.net_path)
+    with station.open(width, 800, phone) as (page, socket):
+        start_driving(page, socket, "driver")
+        pixels = show(page, socket, frame)
+        page.screenshot(path=str(tmp_path / f"narrow-{width}-{phone}.png"))
+        shown = box(page, "#driver")   # drawn at its displayed size (one pixel per CSS pixel)
+        assert pixels.shape[:2] == (round(shown["height"]), round(shown["width"]))
+        assert_sky_and_road(pixels, frame)

@@ -255,6 +255,23 @@ def start_driving(page, socket, view: str) -> None:
         wait_until(page, "Boolean(window.driverView && window.driverView.net)")
 
 
+def assert_sky_and_road(pixels: np.ndarray, frame: dict) -> None:
+    """The view of `frame` (the ego on a straight lane, nothing else about) as the camera model
+    draws it: sky in the upper part, road and ground in the lower half, and the ego's lane 13 m
+    ahead where the camera puts it."""
+    rows, columns, _ = pixels.shape
+    colours, counts = np.unique(pixels.reshape(-1, 3), axis=0, return_counts=True)
+    assert (counts > 0.005 * rows * columns).sum() >= 4, "the canvas is blank"   # sky, grass, road, kerb
+    assert near(pixels[: rows // 5], SKY).mean() > 0.9, "no sky in the upper part"
+    lower = pixels[rows // 2:]
+    assert near(lower, ASPHALT).mean() > 0.15, "no road surface in the lower half"
+    assert near(lower, GRASS).mean() > 0.05, "no ground beside the road"
+    heading = math.radians(frame["angle"])
+    ahead = (frame["x"] + 13 * math.sin(heading), frame["y"] + 13 * math.cos(heading), 0.0)
+    column, row = project(frame, [ahead], columns, rows)[0]
+    assert near(pixels[int(row), int(column)], ASPHALT, 20), "the lane ahead is not where the camera looks"
+
+
 def test_the_driver_view_shows_sky_road_and_an_oncoming_truck_where_the_camera_says(station):
     page, socket, net_path = station
     start_driving(page, socket, "driver")
@@ -262,18 +279,8 @@ def test_the_driver_view_shows_sky_road_and_an_oncoming_truck_where_the_camera_s
     frame, truck = scene_on(net_path)
 
     empty = show(page, socket, frame)
+    assert_sky_and_road(empty, frame)
     rows, columns, _ = empty.shape
-    colours, counts = np.unique(empty.reshape(-1, 3), axis=0, return_counts=True)
-    assert (counts > 0.005 * rows * columns).sum() >= 4, "the canvas is blank"   # sky, grass, road, kerb
-    assert near(empty[: rows // 5], SKY).mean() > 0.9, "no sky in the upper part"
-    lower = empty[rows // 2:]
-    assert near(lower, ASPHALT).mean() > 0.15, "no road surface in the lower half"
-    assert near(lower, GRASS).mean() > 0.05, "no ground beside the road"
-    # the road ahead: the ego's lane centre 13 m ahead of its front is asphalt where the camera puts it
-    heading = math.radians(frame["angle"])
-    ahead = (frame["x"] + 13 * math.sin(heading), frame["y"] + 13 * math.cos(heading), 0.0)
-    column, row = project(frame, [ahead], columns, rows)[0]
-    assert near(empty[int(row), int(column)], ASPHALT, 20), "the lane ahead is not where the camera looks"
 
     with_truck = show(page, socket, {**frame, "vehicles": [truck]})
     corners = project(frame, truck_box(truck), columns, rows)
