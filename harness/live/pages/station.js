@@ -100,21 +100,38 @@ function setMode(next) {
   indicator.textContent = next === "manual" ? "MANUAL" : "AUTOPILOT";
   indicator.className = next;
   $("toggle").textContent = next === "manual" ? "Hand back (space)" : "Take over (space)";
-  for (const id of ["accelerate", "brake", "pull-out", "pull-in"]) $(id).disabled = next !== "manual";
+  updateControls();
   if (next !== "manual") $("hint").textContent = "";
 }
 
+// Which driving control works now (its button, key and gamepad button alike): none while the drive
+// is paused or its vehicle is getting ready (no frame of it yet: nothing to take over), the pedals
+// and the pull-out in control only, and no accelerating once the hand-back is due (the vehicle
+// stops for it: harness/simulation/manual_driving.py).
+function allowed(control) {
+  if (state.phase !== "driving" || !latest) return false;
+  if (control === "toggle") return true;
+  return mode === "manual" && !(control === "accelerate" && handBackDue);
+}
+
+// The buttons' ids are the controls' names.
+function updateControls() {
+  for (const control of ["toggle", "accelerate", "brake", "pull-out", "pull-in"]) $(control).disabled = !allowed(control);
+  if (pedal === "accelerate" && !allowed("accelerate")) press("release");
+}
+
 // Manual driving: a pedal is sent when pressed and `release` when let go (no key repeat: the
-// server's flood limit counts every message).
+// server's flood limit counts every message). A pedal let go while the drive is paused is sent
+// when it resumes (the server takes no control while paused, and the episode keeps the last).
 let pedal = "release";
 function press(next) {
-  if (mode !== "manual" || next === pedal || continuous) return;
+  if (next === pedal || continuous || (next !== "release" && !allowed(next))) return;
   pedal = next;
-  send({ type: "drive", pedal: next });
+  if (state.phase === "driving") send({ type: "drive", pedal: next });
 }
 
 function steer(lane) {
-  if (mode === "manual" && !continuous) send({ type: "steer", lane });
+  if (allowed(lane === "oncoming" ? "pull-out" : "pull-in") && !continuous) send({ type: "steer", lane });
 }
 
 function obstacleAhead(frame) {
@@ -177,7 +194,9 @@ function miniScale(canvas) {
 }
 
 function onFrame(frame) {
+  const first = !latest;
   latest = frame;
+  if (first) updateControls();   // the vehicle is ready: it can be taken over
   if (state.phase !== "paused") overlay("");
   setText($("speed"), `${(frame.speed * 3.6).toFixed(0)} km/h`);
   const oncoming = onOncomingLane(frame);
@@ -295,7 +314,10 @@ async function loadNet() {
 let shownEpisode = null;   // the episode the drive step shows
 
 function onState(message) {
+  const resumed = state.phase === "paused" && message.phase === "driving";
   state = message;
+  if (resumed && mode === "manual" && !continuous) send({ type: "drive", pedal });
+  updateControls();
   // a new trial starts driving: the last trial's frame, speed and mode go at once (its SUMO takes
   // seconds to start; meanwhile the person sees the vehicle getting ready, not the last trial)
   if (message.phase === "driving" && message.episode_id !== shownEpisode) startEpisode(message.episode_id);
@@ -356,7 +378,7 @@ function onMessage(message) {
     case "mode": setMode(message.mode); break;
     case "incident": notice(NOTICES[message.kind] || ""); break;
     case "warning":
-      if (message.kind === "hand_back") { handBackDue = true; notice(""); }
+      if (message.kind === "hand_back") { handBackDue = true; notice(""); updateControls(); }
       else if (message.kind in WARNINGS) notice(WARNINGS[message.kind], FIRST.has(message.kind));
       break;
     case "road":
@@ -413,7 +435,7 @@ function connect() {
 setInterval(() => send({ type: "ping" }), 20000);   // the server closes a socket silent for a minute
 
 function toggle() {
-  if (state.phase !== "driving" || toggling) return;   // one request until the mode changes
+  if (!allowed("toggle") || toggling) return;   // one request until the mode changes
   toggling = true;
   send({ type: mode === "manual" ? "hand_back" : "takeover" });
 }

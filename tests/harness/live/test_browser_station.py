@@ -283,3 +283,63 @@ def test_the_driver_view_draws_the_road_in_a_narrow_window(station, width, phone
         shown = box(page, "#driver")   # drawn at its displayed size (one pixel per CSS pixel)
         assert pixels.shape[:2] == (round(shown["height"]), round(shown["width"]))
         assert_sky_and_road(pixels, frame)
+
+
+def state_message(phase: str, **changes) -> str:
+    """The server's `state` message for participant 0 of one trial, in `phase`."""
+    message = {"type": "state", "participant": 0, "label": "", "phase": phase, "paused_by": None,
+               "warm_up": None, "trial": 1, "trials": 1, "episode_id": "x", "next_episode": None,
+               "mode": "auto", "road": None, "reports": 0, "takeovers": 0, "done": [], "last_error": None,
+               "questionnaire": None}
+    return json.dumps({**message, **changes})
+
+
+DRIVING = ("toggle", "accelerate", "brake", "pull-out", "pull-in")
+
+
+def enabled(page) -> set[str]:
+    return {control for control in DRIVING if page.locator(f"#{control}").is_enabled()}
+
+
+def test_the_driving_controls_work_only_while_the_drive_runs(station):
+    """Before the vehicle is ready, while the drive is paused, and (accelerating) while the vehicle
+    stops for the hand-back, the buttons are disabled and their keys send nothing."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        received: list[dict] = []
+        socket.on_message(lambda text: received.append(json.loads(text)))
+
+        def sent(kind: str) -> list[dict]:
+            page.wait_for_timeout(300)   # what a key would send has arrived by then
+            return [message for message in received if message["type"] == kind]
+
+        start_driving(page, socket, "driver")   # the vehicle getting ready: no frame yet
+        page.locator("#overlay-text").filter(has_text="getting ready").wait_for()
+        assert enabled(page) == set()
+        page.keyboard.press("Space")
+        assert sent("takeover") == []
+        socket.send(json.dumps(frame))
+        wait_until(page, "!document.getElementById('toggle').disabled")
+        assert enabled(page) == {"toggle"}
+        socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 10.0}))
+        wait_until(page, "document.getElementById('mode').textContent === 'MANUAL'")
+        assert enabled(page) == set(DRIVING)
+        page.keyboard.down("ArrowUp")   # accelerating when the hand-back falls due: let go at once
+        socket.send(json.dumps({"type": "warning", "kind": "hand_back", "distance": 100.0, "t": 11.0}))
+        wait_until(page, "document.getElementById('accelerate').disabled")
+        assert enabled(page) == set(DRIVING) - {"accelerate"}
+        assert [message["pedal"] for message in sent("drive")] == ["accelerate", "release"]
+        page.keyboard.up("ArrowUp")
+        page.keyboard.press("ArrowUp")
+        assert [message["pedal"] for message in sent("drive")] == ["accelerate", "release"]
+        socket.send(state_message("paused", paused_by="experimenter", mode="manual"))
+        page.locator("#overlay-text").filter(has_text="Paused by the experimenter").wait_for()
+        assert enabled(page) == set()
+        for key in ("Space", "ArrowDown", "ArrowLeft"):
+            page.keyboard.press(key)
+        assert sent("hand_back") == [] and sent("steer") == [] and len(sent("drive")) == 2
+        socket.send(state_message("driving", mode="manual"))
+        wait_until(page, "!document.getElementById('toggle').disabled")
+        assert enabled(page) == set(DRIVING) - {"accelerate"}
+        page.keyboard.press("Space")
+        assert len(sent("hand_back")) == 1
