@@ -12,8 +12,15 @@
 // their pedals are axes whose resting value differs per model) needs the calibration.
 
 const STORAGE_KEY = "trustroute.wheel";
-const KEY_STEER_RATE = 1.5;    // per second: how fast a held arrow key turns the wheel
-const KEY_CENTRE_RATE = 3.0;   // per second: how fast it comes back when let go
+// A held arrow key turns the wheel KEY_STEER_RATE per second up to full lock at up to
+// KEY_FULL_LOCK_SPEED; faster, both its reach and its rate fall with the square of the speed. The
+// vehicle model's lateral acceleration grows with speed squared times the steering
+// (harness/simulation/vehicle_model.py), so the keys then ask for at most what full lock asks at
+// KEY_FULL_LOCK_SPEED (about 4.3 m/s^2), reached in the same 0.67 s at any speed: a tap at 50 km/h
+// is a lane change, not a swerve.
+const KEY_STEER_RATE = 1.5;       // per second
+const KEY_FULL_LOCK_SPEED = 4.5;  // m/s
+const KEY_CENTRE_RATE = 3.0;      // per second: how fast the wheel comes back when the keys are let go
 
 export function loadCalibration(storage = window.localStorage) {
   try { return JSON.parse(storage.getItem(STORAGE_KEY) || "null"); } catch { return null; }
@@ -53,10 +60,11 @@ export class Inputs {
     window.addEventListener("blur", () => this.keys.clear());
   }
 
-  read(seconds) {
+  // `speed` (m/s): the vehicle's, which the keys' steering follows.
+  read(seconds, speed = 0) {
     const pad = firstGamepad();
     if (pad && this.allowed.includes(padKind(pad))) return this.fromGamepad(pad);
-    return this.allowed.includes("keyboard") ? this.fromKeyboard(seconds) : null;
+    return this.allowed.includes("keyboard") ? this.fromKeyboard(seconds, speed) : null;
   }
 
   // What the person is asked to connect when nothing allowed is there ("" when the keyboard is).
@@ -91,11 +99,13 @@ export class Inputs {
     return { steer, throttle, brake, toggle, source: padKind(pad) };
   }
 
-  fromKeyboard(seconds) {
+  fromKeyboard(seconds, speed) {
     const left = this.keys.has("ArrowLeft");
     const right = this.keys.has("ArrowRight");
-    if (left !== right) this.keySteer = clamp(this.keySteer + (right ? 1 : -1) * KEY_STEER_RATE * seconds, -1, 1);
+    const reach = Math.min(1, (KEY_FULL_LOCK_SPEED / Math.max(speed, 1e-6)) ** 2);
+    if (left !== right) this.keySteer += (right ? 1 : -1) * KEY_STEER_RATE * reach * seconds;
     else this.keySteer -= Math.sign(this.keySteer) * Math.min(Math.abs(this.keySteer), KEY_CENTRE_RATE * seconds);
+    this.keySteer = clamp(this.keySteer, -reach, reach);   // (the reach falls as the car speeds up)
     return { steer: this.keySteer, throttle: this.keys.has("ArrowUp") ? 1 : 0,
              brake: this.keys.has("ArrowDown") ? 1 : 0, toggle: false, source: "keyboard" };
   }

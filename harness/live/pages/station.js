@@ -219,7 +219,7 @@ function onFrame(frame) {
 // controls are sent when they change, at most every CONTROL_INTERVAL.
 function readInputs() {
   const now = performance.now() / 1000;
-  const controls = inputs.read(now - lastRead);
+  const controls = inputs.read(now - lastRead, latest ? latest.speed : 0);
   lastRead = now;
   if (!controls) {   // nothing the study allows is connected: say so, with the hand-back rule when due
     setText($("incident"), [inputs.missing(), handBackDue ? HAND_BACK_DUE : ""].join(" ").trim());

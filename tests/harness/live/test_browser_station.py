@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import time
 
 import httpx
@@ -343,3 +344,36 @@ def test_the_driving_controls_work_only_while_the_drive_runs(station):
         assert enabled(page) == set(DRIVING) - {"accelerate"}
         page.keyboard.press("Space")
         assert len(sent("hand_back")) == 1
+
+
+KEY_STEERING = """async ([speed, step, steps]) => {
+  if (!window.keyInputs) window.keyInputs = new (await import("/static/inputs.js")).Inputs(["keyboard"]);
+  window.keyInputs.keySteer = 0;
+  return Array.from({ length: steps }, () => window.keyInputs.read(step, speed).steer);
+}"""
+
+
+def lateral_acceleration(speed: float, steer: float) -> float:
+    """m/s^2 of the vehicle model (harness/simulation/vehicle_model.py) at `speed` and `steer`."""
+    from trustroute.harness.simulation.vehicle_model import VehicleParams
+
+    params = VehicleParams()
+    return speed**2 * math.tan(math.radians(abs(steer) * params.max_wheel_angle)) / params.wheelbase
+
+
+def test_the_arrow_keys_steer_more_gently_the_faster_the_car(station):
+    """A held arrow key turns the wheel to full lock in about 0.67 s at a walking pace; at 50 km/h
+    a tap of 0.1 s asks for under 1 m/s^2 of lateral acceleration and a key held on for 3 s for no
+    more than about 4.3 m/s^2 (full lock at 4.5 m/s), reached in about the same 0.67 s."""
+    step = 0.02
+    with station.open() as (page, _):
+        page.evaluate(KEY_STEERING, [0, step, 1])   # listening to the keys
+        page.keyboard.down("ArrowRight")
+        slow = page.evaluate(KEY_STEERING, [2.0, step, 40])
+        fast = page.evaluate(KEY_STEERING, [13.9, step, 150])
+        page.keyboard.up("ArrowRight")
+    assert slow[33] == pytest.approx(1.0)   # full lock after 0.68 s
+    assert lateral_acceleration(13.9, fast[4]) < 1.0   # a tap of 0.1 s
+    assert max(lateral_acceleration(13.9, steer) for steer in fast) <= 4.4
+    assert lateral_acceleration(13.9, fast[34]) > 3.5   # the most it asks, within 0.7 s
+    assert all(later >= earlier for earlier, later in zip(fast, fast[1:], strict=False))
