@@ -17,7 +17,8 @@ state-changing request and websocket handshake its Origin (harness/live/guard.py
     GET  /api/participants             experimenter: every participant's progress
     GET  /api/participants/{p}         experimenter, or participant p themself
     POST /api/participants/{p}/control experimenter: pause, resume or abort p's episode
-    POST /api/participants/{p}/link    experimenter: a new link for p (the old token revoked)
+    POST /api/participants/{p}/link    experimenter: a new link for p (the old token revoked; one
+                                       who declined is asked for their consent again)
     POST /api/participants/{p}/withdraw experimenter: p's data deleted (harness/live/withdraw.py)
     GET  /api/files                    experimenter: the study directory's files
     GET  /api/download/{path}          experimenter: one file, inside the study directory only
@@ -235,7 +236,8 @@ CONSOLE_REFUSED = ("This browser is not logged in to the console: the server was
 LOGIN_REFUSED = "This console link is spent or unknown. To log in, " + NEW_CONSOLE_LINK
 STATION_REFUSED = ("This session is not open in this browser. Open the link the experimenter gave you, or "
                    "ask the experimenter for a new one. If you have withdrawn from the study, your data "
-                   "has been deleted: you can close this window.")
+                   "has been deleted; if you did not agree to take part, none was recorded: you can close "
+                   "this window.")
 
 
 def refused_page(request: Request, refusal: HTTPException, title: str, text: str) -> HTMLResponse:
@@ -365,9 +367,11 @@ def control(request: Request, participant: int, body: EpisodeControl) -> dict:
 def new_link(request: Request, participant: int) -> dict:
     """A new link for `participant`: a fresh token; the old one (link or cookie) is revoked and
     their open websocket closed. The server keeps only digests, so a link is shown once."""
-    session_of(request, participant)
+    study = study_of(request)
+    if session_of(request, participant).phase == "declined":
+        study.ask_again(participant)
     try:
-        token = study_of(request).replace_token(participant, "new link issued by the experimenter")
+        token = study.replace_token(participant, "new link issued by the experimenter")
     except ValueError as exc:   # (they have withdrawn)
         raise refused(409, "out_of_order", str(exc)) from None
     revoke_stale(request, participant)
@@ -505,6 +509,8 @@ async def receive_all(websocket: WebSocket, session: Session, buckets: tuple[Tok
         data = raw["text"] if raw.get("text") is not None else (raw.get("bytes") or b"")
         for reply in respond(session, buckets[0], data, buckets[1], buckets[2]):
             offer(link.queue, reply)
+        if session.phase == "declined":   # (their token is gone: LiveStudy.decline)
+            revoke_stale(websocket, session.participant, "declined", "did not agree to take part")
 
 
 def live_server(study: LiveStudy, sock):

@@ -50,12 +50,13 @@ class ClientMessage(Message):
 
 
 class Consent(ClientMessage):
-    """The participant has read the consent text and agrees; `client` says who drives (a person
+    """The participant has read the consent text and agrees (`agree` true) or does not (false: the
+    session ends, harness/live/server.py `LiveStudy.decline`); `client` says who drives (a person
     at the station, or the scripted participant): the episodes' parts record it. `lockstep`
     (scripted only): every episode waits for the participant's answer at each decision."""
 
     type: Literal["consent"]
-    agree: Literal[True]
+    agree: StrictBool
     client: Literal["station", "scripted"] = "station"
     lockstep: StrictBool = False
 

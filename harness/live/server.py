@@ -33,7 +33,12 @@ from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session
 from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study seed, (4, participant))
-from trustroute.harness.live.withdraw import load_registry, read_registry, withdraw_participant
+from trustroute.harness.live.withdraw import (
+    declined_refusal,
+    load_registry,
+    read_registry,
+    withdraw_participant,
+)
 from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions, start_fork_server
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext
@@ -110,6 +115,7 @@ class LiveStudy:
         self.questionnaires = questionnaire_plan(config.questionnaires, Path(config.source_path).parent,
                                                  config.source_path)
         self.withdrawn: dict[int, dict] = {}   # participant -> their registry record once withdrawn
+        self.declined: dict[int, dict] = {}    # participant -> their registry record once declined
         self._stack = contextlib.ExitStack()
 
     # -- opening and closing --------------------------------------------------------------------
@@ -155,10 +161,12 @@ class LiveStudy:
         records = load_registry(path, "restore it, or delete the study directory")
         for key, record in records["participants"].items():
             participant = int(key)
-            if record.get("withdrawn"):   # harness/live/withdraw.py: no data, no token, no re-run
-                self.withdrawn[participant] = record
+            # withdrawn (harness/live/withdraw.py) or declined (`decline`): no data, no token
+            ended = next((phase for phase in ("withdrawn", "declined") if record.get(phase)), None)
+            if ended is not None:
+                (self.withdrawn if ended == "withdrawn" else self.declined)[participant] = record
                 self.sessions[participant] = self.new_session(participant)
-                self.sessions[participant].phase = "withdrawn"
+                self.sessions[participant].phase = ended
                 continue
             if record.get("digest"):   # (none after a readmission, until the console issues a link)
                 self.credentials.participants[participant] = str(record["digest"])
@@ -171,7 +179,7 @@ class LiveStudy:
 
     def save_participants(self) -> None:
         with self.lock:
-            records = {str(p): self.withdrawn[p] if p in self.withdrawn else
+            records = {str(p): self.withdrawn.get(p) or self.declined.get(p) or
                        {"digest": self.credentials.participants.get(p), "label": s.label,
                         "consented": s.phase != "consent", "client": s.client,
                         "warmed_up": s.warmed_up, "lockstep": s.lockstep,
@@ -247,6 +255,27 @@ class LiveStudy:
         with self.lock:
             return self.credentials.new_login()
 
+    def decline(self, participant: int) -> None:
+        """`participant` did not agree to take part (their session's phase is "declined"): as after
+        a withdrawal, their registry record keeps only that and its time (no label, no token, so
+        their link and cookie open nothing), and nothing else of theirs exists (the consent comes
+        before any drive or answer). Their index is not reused; a new link from the console asks
+        for their consent again (`ask_again`)."""
+        with self.lock:
+            self.credentials.participants.pop(participant, None)
+            self.declined[participant] = {"declined": True,
+                                          "declined_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+            self.save_participants()
+
+    def ask_again(self, participant: int) -> None:
+        """A participant who declined is asked for their consent again (with the new link the
+        console makes next: they may have changed their mind, or pressed the wrong button)."""
+        session = self.sessions[participant]
+        with session.lock:   # not inside the study's lock (the lock order: LiveStudy.lock)
+            session.phase = "consent"
+        with self.lock:
+            self.declined.pop(participant, None)
+
     def withdraw(self, participant: int, reason: str = "") -> dict:
         """The experimenter withdraws `participant` (harness/live/withdraw.py): their episode
         stopped, their data removed and the dataset consolidated without them; the audit entry.
@@ -255,6 +284,8 @@ class LiveStudy:
         refusal = f"participant {participant} does not exist or has withdrawn already"
         if session is None:
             raise ValueError(refusal)
+        if participant in self.declined:
+            raise ValueError(declined_refusal(self.study_dir, participant).one_line())
         with session.lock, self.lock:   # the withdrawal begins: no token is issued after it (replace_token)
             if participant in self.withdrawn:
                 raise ValueError(refusal)

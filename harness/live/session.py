@@ -1,7 +1,8 @@
 """One participant's session: the phase it is in, its trials, its running episode.
 
 Phases: "consent" (the consent text is shown) -> "ready" (a trial can start) -> "driving" <->
-"paused" -> "ready" ... -> "done" (every trial of the participant has a part); with the study's
+"paused" -> "ready" ... -> "done" (every trial of the participant has a part), or "consent" ->
+"declined" (they did not agree: nothing of theirs is kept, every message refused); with the study's
 questionnaires, "questionnaire" (one is shown) comes after the consent, after a trial and at the
 end, until each is answered. A client message
 that does not fit the phase (a takeover before consent, a hand-back on autopilot, a resume of the
@@ -147,6 +148,10 @@ class Session:
                 return self.signal(message)
             if isinstance(message, Consent):
                 self.require("consent", message)
+                if not message.agree:
+                    self.phase, self.label = "declined", ""   # (the registry keeps no label either)
+                    self.study.decline(self.participant)
+                    return [self.progress()]
                 self.client, self.lockstep = message.client, message.lockstep
                 self.phase = self.next_phase()
                 self.study.save_participants()   # the consent holds across restarts

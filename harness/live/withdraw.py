@@ -108,6 +108,13 @@ def registry_record(study_dir: Path, records: dict, participant: int) -> dict:
     return record
 
 
+def declined_refusal(study_dir: Path, participant: int) -> InputError:
+    """The refusal to withdraw a participant who did not agree to take part: nothing of theirs is
+    kept (harness/live/server.py, `LiveStudy.decline`)."""
+    return InputError(str(study_dir), "PARTICIPANT", f"participant {participant} did not agree to take part",
+                      "nothing to do: nothing of theirs is kept")
+
+
 def withdraw_participant(study_dir: Path, participant: int, by: str | None = None, reason: str = "") -> dict:
     """Withdraw `participant` (the directory's lock held by the caller); the audit entry. Everything
     it reads (the registry, the manifest and the study's inputs, the attempts journal, the answers)
@@ -118,6 +125,8 @@ def withdraw_participant(study_dir: Path, participant: int, by: str | None = Non
     if record.get("withdrawn"):
         raise InputError(str(study_dir), "PARTICIPANT", f"participant {participant} has withdrawn already",
                          "nothing to do (see live/withdrawals.jsonl)")
+    if record.get("declined"):
+        raise declined_refusal(study_dir, participant)
     consolidated = (study_dir / MANIFEST_FILE).exists()   # nothing to consolidate before a first episode
     config, manifest = study_config_from_manifest(study_dir) if consolidated else (None, {})
     context = study_context(config) if config is not None else None

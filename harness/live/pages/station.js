@@ -17,7 +17,7 @@ const $ = (id) => document.getElementById(id);
 function setText(element, text) {
   if (element.textContent !== text) element.textContent = text;
 }
-const steps = ["consent-step", "ready-step", "drive-step", "questionnaire-step", "done-step"];
+const steps = ["consent-step", "declined-step", "ready-step", "drive-step", "questionnaire-step", "done-step"];
 const MAP_SCALE = 3;        // pixels per metre of the large map
 const MINI_SPAN = 370;      // metres across the mini-map (square, drawn at its displayed size)
 const NOTICES = { obstacle: "Obstacle ahead in your lane", truck: "Truck ahead",
@@ -312,6 +312,23 @@ async function loadNet() {
 
 // -- the session ----------------------------------------------------------------------------------
 let shownEpisode = null;   // the episode the drive step shows
+let completed = "";        // the drive this window saw end ("Trial 1 of 4 is complete."), until the next starts
+
+// The consent text, a paragraph for each block of it (blocks are separated by a blank line).
+function showConsent(text) {
+  $("consent-text").replaceChildren(...text.split(/\n\s*\n/).filter((block) => block.trim()).map((block) => {
+    const paragraph = document.createElement("p");
+    paragraph.textContent = block.trim();
+    return paragraph;
+  }));
+}
+
+// Between drives (the next one's start, a questionnaire) the drive just ended is said complete.
+function showCompleted(phase) {
+  const text = phase === "ready" || phase === "questionnaire" ? completed : "";
+  setText($("completed"), text);
+  $("completed").classList.toggle("hidden", !text);
+}
 
 function onState(message) {
   const resumed = state.phase === "paused" && message.phase === "driving";
@@ -334,7 +351,9 @@ function onState(message) {
       : "Paused by the experimenter. Please wait.", message.paused_by === "disconnect");
   } else if (message.phase === "driving" && !latest) overlay("The vehicle is getting ready\u2026");
   else if (message.phase === "driving") overlay("");
+  showCompleted(message.phase);
   if (message.phase === "consent") show("consent-step");
+  else if (message.phase === "declined") closed("", "declined-step");
   else if (message.phase === "ready") {
     $("trial-text").textContent = message.warm_up === "pending"
       ? "Next: a warm-up drive, to get to know the vehicle."
@@ -353,6 +372,7 @@ function startEpisode(episodeId) {
   // `episode_start` comes once its SUMO runs) is
   if (episodeId !== shownEpisode) $("reported").textContent = "";
   shownEpisode = episodeId;
+  completed = "";
   latest = null;
   if (driverView) driverView.clear();
   setMode("auto");
@@ -368,7 +388,7 @@ function startEpisode(episodeId) {
 function onMessage(message) {
   switch (message.type) {
     case "welcome":
-      $("consent-text").textContent = message.consent;
+      showConsent(message.consent);
       setView(message.view === "map" ? "map" : "driver");
       setDriving(message.driving, message.inputs);
       break;
@@ -386,7 +406,10 @@ function onMessage(message) {
       if (message.prompt) { pendingPrompt = message.prompt; $("prompt").classList.remove("hidden"); }
       break;
     case "episode_start": startEpisode(message.episode_id); pendingPrompt = null; break;
-    case "episode_end": $("status").textContent = "Trial complete."; break;
+    case "episode_end":
+      completed = state.warm_up === "pending" ? "The warm-up drive is complete."
+        : `Trial ${state.trial} of ${state.trials} is complete.`;
+      break;
     case "notice": $("error").textContent = message.detail; break;
     case "episode_aborted":
       $("status").textContent = "The experimenter stopped this trial; it will be run again.";
@@ -411,12 +434,14 @@ const FINAL_CLOSE = { 4001: "This session is open in another window or tab; cont
                       1008: "This session's link was revoked or is not valid; ask the experimenter." };
 const WITHDRAWN = "You have withdrawn from the study; your data has been deleted. You can close this window.";
 
-// The session is over in this window: its text, and nothing left to press.
-function closed(text, withdrawn) {
+// The session is over in this window: its text, the step to show instead of the current one
+// (null: none), and nothing left to press.
+function closed(text, step) {
   state = { phase: "closed" };
   $("error").textContent = text;
   setText($("status"), "");
-  if (withdrawn) show(null);   // every drive and answer is deleted: no step of the study is shown
+  showCompleted("closed");
+  if (step !== undefined) show(step);
   for (const control of document.querySelectorAll("button, input")) control.disabled = true;
 }
 
@@ -425,8 +450,10 @@ function connect() {
   socket = new WebSocket(`${scheme}://${location.host}/ws`);
   socket.addEventListener("message", (event) => onMessage(JSON.parse(event.data)));
   socket.addEventListener("close", (event) => {
-    if (event.code === 1008 && event.reason === "withdrawn") { closed(WITHDRAWN, true); return; }
-    if (FINAL_CLOSE[event.code]) { closed(FINAL_CLOSE[event.code], false); return; }
+    // withdrawn: every drive and answer is deleted, no step of the study is shown
+    if (event.code === 1008 && event.reason === "withdrawn") { closed(WITHDRAWN, null); return; }
+    if (event.code === 1008 && event.reason === "declined") { closed("", "declined-step"); return; }
+    if (FINAL_CLOSE[event.code]) { closed(FINAL_CLOSE[event.code]); return; }
     $("error").textContent = "Connection lost; reconnecting...";
     setTimeout(connect, 1000);
   });
@@ -441,6 +468,7 @@ function toggle() {
 }
 
 $("agree").addEventListener("click", () => send({ type: "consent", agree: true }));
+$("decline").addEventListener("click", () => send({ type: "consent", agree: false }));
 trustButtons($("start-trust"), (value) => send({ type: "start", trust: value }));
 trustButtons($("trust"), report);
 $("toggle").addEventListener("click", toggle);

@@ -377,3 +377,67 @@ def test_the_arrow_keys_steer_more_gently_the_faster_the_car(station):
     assert max(lateral_acceleration(13.9, steer) for steer in fast) <= 4.4
     assert lateral_acceleration(13.9, fast[34]) > 3.5   # the most it asks, within 0.7 s
     assert all(later >= earlier for earlier, later in zip(fast, fast[1:], strict=False))
+
+
+PARAGRAPHS = ["You are about to drive in a simulated study.", "You may take over at any time.",
+              "You may stop at any time: your data is then deleted."]
+CONSENT = f"{PARAGRAPHS[0]}\n\n{PARAGRAPHS[1]}\n \n{PARAGRAPHS[2]}\n"   # a blank line may hold spaces
+
+
+def test_the_consent_is_shown_in_paragraphs_and_can_be_declined(station, tmp_path):
+    """Each block of the consent text (blank lines between them) is a paragraph set apart from the
+    next; *I do not agree* sends the refusal, and the server's closing ("declined") leaves a page
+    saying that nothing was recorded and nothing to press."""
+    with station.open(800, 800) as (page, socket):
+        received: list[dict] = []
+        socket.on_message(lambda text: received.append(json.loads(text)))
+        socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": CONSENT, "view": "driver"}))
+        socket.send(state_message("consent", trial=0, episode_id=None))
+        page.locator("#consent-step").wait_for(state="visible")
+        paragraphs = page.locator("#consent-text p")
+        assert paragraphs.all_inner_texts() == PARAGRAPHS
+        shown = [paragraphs.nth(i).bounding_box() for i in range(3)]
+        for above, below in zip(shown, shown[1:], strict=False):
+            assert below["y"] - (above["y"] + above["height"]) >= 10   # px between paragraphs
+        page.screenshot(path=str(tmp_path / "consent.png"))
+        page.locator("#decline").click()
+        deadline = time.monotonic() + 10
+        while not any(message["type"] == "consent" and message["agree"] is False for message in received):
+            assert time.monotonic() < deadline, received
+            page.wait_for_timeout(50)
+        socket.close(code=1008, reason="declined")   # the server's answer (test_live_sessions.py)
+        page.locator("#declined-step").wait_for(state="visible")
+        text = page.locator("#declined-step").inner_text()
+        assert "No data was recorded" in text and "close this window" in text
+        assert page.locator("#consent-step").is_hidden() and page.locator("#error").inner_text() == ""
+        assert page.locator("button:enabled").count() == 0
+        page.screenshot(path=str(tmp_path / "declined.png"))
+
+
+def test_a_completed_trial_and_the_end_of_the_study_are_said(station, tmp_path):
+    """After a drive the page says it is complete (with the next one's start below), until the
+    next drive starts; after the last, a page says the study is complete and may be closed."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver"}))
+        for trial, episode in ((1, "x"), (2, "y")):
+            socket.send(state_message("driving", trial=trial, trials=2, episode_id=episode,
+                                      done=["x"] if trial == 2 else []))
+            socket.send(json.dumps({"type": "episode_start", "episode_id": episode, "trust": 4}))
+            socket.send(json.dumps(frame))
+            wait_until(page, "document.getElementById('speed').textContent.includes('km/h')")
+            assert page.locator("#completed").is_hidden()
+            socket.send(json.dumps({"type": "episode_end", "episode_id": episode, "satisfied": True,
+                                    "end_reason": "goal", "junctions": 3, "takeovers": 0}))
+            if trial == 1:
+                socket.send(state_message("ready", trial=1, trials=2, episode_id=None, done=["x"]))
+                page.locator("#ready-step").wait_for(state="visible")
+                assert page.locator("#completed").inner_text() == "Trial 1 of 2 is complete."
+                assert page.locator("#trial-text").inner_text() == "Next: trial 2 of 2."
+                page.screenshot(path=str(tmp_path / "trial-complete.png"))
+        socket.send(state_message("done", trial=2, trials=2, episode_id=None, done=["x", "y"]))
+        page.locator("#done-step").wait_for(state="visible")
+        text = page.locator("#done-step").inner_text()
+        assert "The study is complete" in text and "close this window" in text
+        assert page.locator("#drive-step").is_hidden() and page.locator("#completed").is_hidden()
+        page.screenshot(path=str(tmp_path / "done.png"))

@@ -163,7 +163,7 @@ def test_malformed_oversized_and_out_of_order_messages_get_errors_and_change_not
         cases = [("not json", "malformed"), ('{"type": "trust", "value": 9}', "malformed"),
                  ('{"type": "trust", "value": "5"}', "malformed"), ('{"type": "warp"}', "malformed"),
                  ('{"type": "consent", "agree": true, "admin": true}', "malformed"),
-                 ('{"type": "consent", "agree": false}', "malformed"),
+                 ('{"type": "consent", "agree": "no"}', "malformed"), ('{"type": "consent"}', "malformed"),
                  (json.dumps({"type": "ping", "pad": "x" * MAX_MESSAGE_BYTES}), "oversized"),
                  ('{"type": "takeover"}', "out_of_order"), ('{"type": "hand_back"}', "out_of_order"),
                  ('{"type": "start"}', "out_of_order"), ('{"type": "trust", "value": 4}', "out_of_order"),

@@ -17,7 +17,7 @@ import pytest
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
-from tests.cli import run_cli
+from tests.cli import assert_one_line_error, run_cli
 from trustroute.harness.live import scripted
 from trustroute.harness.live.app import (
     IDLE,
@@ -404,3 +404,53 @@ def test_an_accepted_trust_report_is_acknowledged_and_a_refused_one_is_not(clien
     with pytest.raises(MessageError):   # refused: no acknowledgement, nothing told to the episode
         session.handle(parse_client_message('{"type": "trust", "value": 4}'))
     assert [c.get("value") for c in session.connection.controls if c["type"] == "trust"] == [5, 3]
+
+
+def test_a_participant_who_does_not_agree_leaves_only_that_fact(client, live_study):
+    """`{"type": "consent", "agree": false}` ends the session: the socket is closed with reason
+    "declined", the registry keeps only that and its time (no label, no token: their cookie opens
+    nothing), no other file is written, a withdrawal has nothing to do, and a new link from the
+    console asks for the consent again."""
+    experimenter = bearer(live_study.experimenter_token)
+    token = client.post("/api/participants", json={"label": "Ada L."}, headers=experimenter).json()["token"]
+    files = live_study.files()
+    with client.websocket_connect("/ws", headers=bearer(token)) as station:
+        station.receive_json(), station.receive_json()
+        station.send_json({"type": "consent", "agree": False})
+        with pytest.raises(WebSocketDisconnect) as closed:
+            while True:
+                station.receive_json()
+        assert (closed.value.code, closed.value.reason) == (POLICY_VIOLATION, "declined")
+    record = json.loads(live_study.registry_path().read_text())["participants"]["0"]
+    assert set(record) == {"declined", "declined_utc"} and record["declined"] is True
+    assert live_study.files() == files
+    assert client.get("/api/me", headers=bearer(token)).status_code == 403
+    shown = client.get("/api/participants/0", headers=experimenter).json()
+    assert (shown["phase"], shown["label"]) == ("declined", "")
+    withdrawn = client.post("/api/participants/0/withdraw", json={"confirm": True}, headers=experimenter)
+    assert withdrawn.status_code == 409 and "did not agree" in withdrawn.text
+    again = client.post("/api/participants/0/link", headers=experimenter).json()["token"]
+    with client.websocket_connect("/ws", headers=bearer(again)) as station:
+        assert station.receive_json()["type"] == "welcome"
+        assert station.receive_json()["phase"] == "consent"
+        station.send_json({"type": "consent", "agree": True})
+        assert station.receive_json()["phase"] == "ready"
+    assert json.loads(live_study.registry_path().read_text())["participants"]["0"]["consented"]
+
+
+def test_a_declined_consent_holds_across_restarts_and_is_not_withdrawn(tmp_path, capsys):
+    from trustroute.harness.live.protocol import Consent
+
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    try:
+        study.create_participant()
+        assert study.sessions[0].handle(Consent(type="consent", agree=False))[0]["phase"] == "declined"
+    finally:
+        study.close()
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    try:
+        assert study.sessions[0].phase == "declined" and 0 not in study.credentials.participants
+    finally:
+        study.close()
+    code, _, err = run_cli(capsys, "withdraw", str(tmp_path / "study"), "0")
+    assert_one_line_error(code, err, "participant 0 did not agree to take part")
