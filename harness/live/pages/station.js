@@ -114,9 +114,9 @@ function allowed(control) {
   return mode === "manual" && !(control === "accelerate" && handBackDue);
 }
 
-// The buttons' ids are the controls' names.
+const DRIVING_CONTROLS = ["toggle", "accelerate", "brake", "pull-out", "pull-in"];   // their buttons' ids
 function updateControls() {
-  for (const control of ["toggle", "accelerate", "brake", "pull-out", "pull-in"]) $(control).disabled = !allowed(control);
+  for (const control of DRIVING_CONTROLS) $(control).disabled = !allowed(control);
   if (pedal === "accelerate" && !allowed("accelerate")) press("release");
 }
 
@@ -125,7 +125,7 @@ function updateControls() {
 // when it resumes (the server takes no control while paused, and the episode keeps the last).
 let pedal = "release";
 function press(next) {
-  if (next === pedal || continuous || (next !== "release" && !allowed(next))) return;
+  if (next === pedal || continuous || mode !== "manual" || (next !== "release" && !allowed(next))) return;
   pedal = next;
   if (state.phase === "driving") send({ type: "drive", pedal: next });
 }
