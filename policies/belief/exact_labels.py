@@ -80,6 +80,10 @@ def symbol_code(incident: np.ndarray | int, human_action: np.ndarray | int,
         + np.asarray(performance, dtype=np.int64)
 
 
+# A scoped filter compacts its words only past this many (below, forgetting saves next to nothing).
+COMPACT_AT_LEAST = 4096
+
+
 @dataclass(eq=False)
 class ExactFilter:
     """The exact filter of `pomdp` under `rule`, its words and the float filter's distance to it.
@@ -97,9 +101,14 @@ class ExactFilter:
     prior: tuple[Fraction, ...] = field(init=False)
     prior_distance: float = field(init=False)       # d0
     step_distance: float = field(init=False)        # σ
-    _parent: list[int] = field(init=False)
-    _code: list[int] = field(init=False)
-    _length: np.ndarray = field(init=False)       # int64 [capacity]: word lengths, by word id
+    # The words, by id, in arrays of doubling capacity (a word is a few dozen bytes, not a few
+    # Python objects: an unfolding interns one per history): its prefix without the last symbol,
+    # that symbol's code (-1: the empty word) and its length.
+    _parent: np.ndarray = field(init=False)
+    _code: np.ndarray = field(init=False)
+    _length: np.ndarray = field(init=False)
+    _size: int = field(init=False)                  # words interned: ids 0 .. _size - 1
+    _kept: int = field(init=False)                  # words the last `compact` kept
     _ids: dict[int, int] = field(init=False)        # word * n_codes + code -> word id
     _beliefs: dict[int, tuple[Fraction, ...]] = field(init=False)
 
@@ -118,9 +127,15 @@ class ExactFilter:
                                                           strict=True) if b != 0]
         self.prior_distance = (float(max(ratios) / min(ratios)) if ratios else 1.0)
         self.prior_distance = math.log(self.prior_distance) * (1 + 4 * u) + 4 * u
-        self._parent, self._code = [0], [-1]
-        self._length = np.zeros(64, dtype=np.int64)
+        self._parent, self._code, self._length = (np.zeros(64, dtype=np.int64) for _ in range(3))
+        self._code[0] = -1
+        self._size = self._kept = 1
         self._ids, self._beliefs = {}, {0: self.prior}
+
+    def scoped(self) -> ExactFilter:
+        """A filter of the same model and rule with words of its own, for one owner that may
+        `compact` them (its symbol matrices are this one's)."""
+        return ExactFilter(pomdp=self.pomdp, rule=self.rule, like=self)
 
     def extend(self, words: np.ndarray, codes: np.ndarray) -> np.ndarray:
         """Word ids of words[i] + codes[i] (vectorised; an unchanging symbol keeps the word)."""
@@ -136,9 +151,12 @@ class ExactFilter:
         # one integer per (word, code) pair: a 1-D unique is many times cheaper than rows'
         n_codes = self.changing.size
         keys, inverse = np.unique(words[moving] * n_codes + codes[moving], return_inverse=True)
-        known, add = self._ids.get, self._add
-        ids = np.array([known(key) or add(key // n_codes, key % n_codes, key) for key in keys.tolist()],
-                       dtype=np.int64)
+        known = self._ids.get
+        ids = np.array([known(key, 0) for key in keys.tolist()], dtype=np.int64)
+        new = ids == 0      # id 0 is the empty word's, never an extension's
+        if new.any():
+            ids[new] = self._add_all(keys[new] // n_codes, keys[new] % n_codes)
+            self._ids.update(zip(keys[new].tolist(), ids[new].tolist(), strict=True))
         out[moving] = ids[inverse.ravel()]
         return out
 
@@ -147,18 +165,65 @@ class ExactFilter:
         if not self.changing[code]:
             return word
         key = word * self.changing.size + code
-        return self._ids.get(key) or self._add(word, code, key)
-
-    def _add(self, word: int, code: int, key: int) -> int:
-        """A new word: `word` + the changing symbol `code` (`key` is the pair's, as in `extend`);
-        its id, never 0 (the empty word's)."""
-        found = self._ids[key] = len(self._parent)
-        self._parent.append(word)
-        self._code.append(code)
-        if found == self._length.size:   # doubling: a lookup of lengths never copies them all
-            self._length = np.concatenate([self._length, np.zeros_like(self._length)])
-        self._length[found] = self._length[word] + 1
+        found = self._ids.get(key)
+        if found is None:
+            found = self._ids[key] = int(self._add_all(np.array([word]), np.array([code]))[0])
         return found
+
+    def _add_all(self, words: np.ndarray, codes: np.ndarray) -> np.ndarray:
+        """New words, words[i] + the changing symbol codes[i] (none interned yet), in order; their
+        ids (never 0, the empty word's). The caller enters them in `_ids`."""
+        begin, end = self._size, self._size + words.size
+        if end > self._length.size:   # doubling: adding a word never copies them all
+            capacity = max(2 * self._length.size, end)
+            self._parent, self._code, self._length = (
+                np.concatenate([a[:begin], np.zeros(capacity - begin, dtype=np.int64)])
+                for a in (self._parent, self._code, self._length))
+        self._parent[begin:end] = words
+        self._code[begin:end] = codes
+        self._length[begin:end] = self._length[words] + 1
+        self._size = end
+        return np.arange(begin, end, dtype=np.int64)
+
+    def compact(self, words: np.ndarray) -> np.ndarray:
+        """Forget the words that are neither in `words` nor a prefix of one; the ids of `words`
+        after it. Ids keep their order (a word's new id is the number of kept words before it), so
+        whatever sorts or groups rows by word does so as before, and a word interned later still
+        gets a larger id. Only a filter of one owner (`scoped`) is compacted, by that owner, with
+        every word it still holds: those are the only words it extends from then on, so the
+        lookup of extensions keeps theirs alone, at every call; the words themselves are
+        renumbered once they have doubled since the last time (a constant per word interned)."""
+        if self.pomdp.exact_filters.get(self.rule) is self:
+            raise ValueError("the model's shared exact filter is never compacted: compact a scoped() one")
+        words = np.asarray(words, dtype=np.int64)
+        held = np.zeros(self._size, dtype=bool)
+        held[words] = True
+        if self._size > max(2 * self._kept, COMPACT_AT_LEAST):
+            words, held = self._forget(words, held)
+        extensions = np.flatnonzero(held[self._parent[:self._size]])
+        extensions = extensions[extensions > 0]
+        n_codes = self.changing.size
+        self._ids = dict(zip((self._parent[extensions] * n_codes + self._code[extensions]).tolist(),
+                             extensions.tolist(), strict=True))
+        return words
+
+    def _forget(self, words: np.ndarray, held: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Keep the `held` words and their prefixes, renumbered in order; (`words`, `held`) in the
+        new ids."""
+        keep = held.copy()
+        keep[0] = True
+        current = np.unique(self._parent[words])
+        while current.size:
+            current = current[~keep[current]]
+            keep[current] = True
+            current = np.unique(self._parent[current])
+        new_id = np.cumsum(keep) - 1
+        kept = np.flatnonzero(keep)
+        self._parent, self._code, self._length = (new_id[self._parent[kept]], self._code[kept].copy(),
+                                                  self._length[kept].copy())
+        self._size = self._kept = int(kept.size)
+        self._beliefs = {int(new_id[w]): b for w, b in self._beliefs.items() if keep[w]}
+        return new_id[words], held[kept]
 
     def lengths(self, words: np.ndarray) -> np.ndarray:
         return self._length[np.asarray(words, dtype=np.int64)]
@@ -168,10 +233,10 @@ class ExactFilter:
         chain = []
         while word not in self._beliefs:
             chain.append(word)
-            word = self._parent[word]
+            word = int(self._parent[word])
         belief = self._beliefs[word]
         for w in reversed(chain):
-            matrix = self.matrices[self._code[w]]
+            matrix = self.matrices[int(self._code[w])]
             n = len(belief)
             image = [sum((belief[k] * matrix[k][m] for k in range(n) if belief[k]), Fraction(0))
                      for m in range(n)]
@@ -292,6 +357,11 @@ class ExactLabels:
             constants = self.labeller.exact_constants = _labeller_constants(self.labeller)
         self.coeffs, self.offsets, self.coeff_gap, offset_gap = constants
         self.offset_gap = offset_gap.copy()
+
+    def scoped(self) -> ExactLabels:
+        """The same labels on a filter with words of its own (ExactFilter.scoped), which its one
+        owner compacts."""
+        return ExactLabels(filter=self.filter.scoped(), labeller=self.labeller)
 
     def margins(self, beliefs: np.ndarray, words: np.ndarray) -> np.ndarray:
         """[n, m]: the bound on |c·b - fl(c·b̂)| + |offset - fl(offset)| (module docstring)."""

@@ -73,6 +73,35 @@ class NodeState(Protocol):
         """[n, width] float columns: rows equal in these (and road, the policy's route memory and
         the word) have equal futures."""
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its arrays (one that two fields share counted once)."""
+
+    def compact(self) -> Self:
+        """The same rows, their words renumbered by their labels' filter after it forgets the
+        words no row holds (ExactFilter.compact: the unfolding's filter is its own)."""
+
+
+def beliefs_at(posterior: np.ndarray, belief: np.ndarray, rows: np.ndarray | slice
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """(posterior[rows], belief[rows]); one array for both where the AV's belief is the true
+    posterior (the same object: the Bayes filter of the AV's own model), so a node carries one."""
+    chosen = posterior[rows]
+    return chosen, chosen if belief is posterior else belief[rows]
+
+
+def joined_beliefs(parts: list) -> tuple[np.ndarray, np.ndarray]:
+    """(posterior, belief) of the parts' rows in order, one array where every part has one."""
+    posterior = np.concatenate([part.posterior for part in parts])
+    if all(part.belief is part.posterior for part in parts):
+        return posterior, posterior
+    return posterior, np.concatenate([part.belief for part in parts])
+
+
+def distinct_nbytes(*arrays: np.ndarray) -> int:
+    """Bytes of `arrays`, each object counted once."""
+    return sum(array.nbytes for array in {id(array): array for array in arrays}.values())
+
 
 def row_bytes(*columns: np.ndarray) -> list[bytes]:
     """Per row, the bytes of its entries in `columns`, one after another (row by row in one
@@ -102,8 +131,9 @@ class Observation:
 
     @cached_property
     def labels(self) -> ExactLabels:
-        """The AV's belief labels, decided exactly where floats cannot decide them."""
-        return exact_labels(self.pomdp, self.compiled.labeller, self.belief_rule)
+        """The AV's belief labels, decided exactly where floats cannot decide them, on words of
+        this unfolding's own (ObservedState.compact forgets those no history holds)."""
+        return exact_labels(self.pomdp, self.compiled.labeller, self.belief_rule).scoped()
 
     @cached_property
     def av_step(self) -> AVStep:
@@ -125,7 +155,8 @@ class ObservedState:
     word: np.ndarray
 
     def take(self, rows: np.ndarray | slice) -> ObservedState:
-        return replace(self, q=self.q[rows], belief=self.belief[rows], posterior=self.posterior[rows],
+        posterior, belief = beliefs_at(self.posterior, self.belief, rows)
+        return replace(self, q=self.q[rows], belief=belief, posterior=posterior,
                        q_ref=self.q_ref[rows], ref_belief=self.ref_belief[rows], word=self.word[rows])
 
     def masses(self, rows: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -169,15 +200,16 @@ class ObservedState:
             ref_pomdp = model.reference[0]
             new_ref, _ = ref_pomdp.filter(new_ref, ref_pomdp.road_incident[road], h, e)
         possible = p_obs > 0
-        return p_obs, replace(self, q=self.q[possible], belief=new_av[possible],
-                              posterior=new_posterior[possible], q_ref=self.q_ref[possible],
-                              ref_belief=new_ref[possible], word=new_word[possible])
+        posterior, belief = beliefs_at(new_posterior, new_av, possible)
+        return p_obs, replace(self, q=self.q[possible], belief=belief, posterior=posterior,
+                              q_ref=self.q_ref[possible], ref_belief=new_ref[possible],
+                              word=new_word[possible])
 
     def joined(self, parts: list[ObservedState], road: np.ndarray) -> ObservedState:
         """The parts' rows with the DFA (and the reference's) stepped on the position (road, b)."""
-        q_before, belief, posterior, q_ref, ref_belief, word = (
-            np.concatenate([getattr(part, name) for part in parts])
-            for name in ("q", "belief", "posterior", "q_ref", "ref_belief", "word"))
+        q_before, q_ref, ref_belief, word = (np.concatenate([getattr(part, name) for part in parts])
+                                             for name in ("q", "q_ref", "ref_belief", "word"))
+        posterior, belief = joined_beliefs(parts)
         q = np.asarray(self.model.labels.step(q_before, road, belief, word), dtype=np.int64)
         if self.model.reference is not None:
             q_ref = self.model.reference[1].step(q_ref, road, ref_belief)
@@ -188,11 +220,18 @@ class ObservedState:
         return np.concatenate([self.q[:, None].astype(float), self.belief, self.posterior,
                                self.q_ref[:, None].astype(float), self.ref_belief], axis=1)
 
+    @property
+    def nbytes(self) -> int:
+        return distinct_nbytes(self.q, self.belief, self.posterior, self.q_ref, self.ref_belief, self.word)
+
+    def compact(self) -> ObservedState:
+        return replace(self, word=self.model.labels.filter.compact(self.word))
+
 
 def observed_root(model: Observation) -> ObservedState:
     """The root: the AV's initial belief and DFA state at position 0, the true driver's prior."""
     belief = np.asarray(model.pomdp.initial_belief, dtype=float)[None, :].copy()
-    posterior = (belief.copy() if model.truth is None
+    posterior = (belief if model.truth is None     # one array while the AV's filter is the true one
                  else np.asarray(model.truth.initial_belief, dtype=float)[None, :].copy())
     if model.reference is not None:
         ref_belief = np.asarray(model.reference[0].initial_belief, dtype=float)[None, :].copy()
@@ -213,14 +252,16 @@ class HiddenState:
 
     filter: JointFilter
     belief_rule: BeliefRule
+    labels: ExactLabels     # the AV filter's, on words of this unfolding's own (`compact`)
     joint: np.ndarray
     posterior: np.ndarray
     belief: np.ndarray
     word: np.ndarray
 
     def take(self, rows: np.ndarray | slice) -> HiddenState:
-        return replace(self, joint=self.joint[rows], posterior=self.posterior[rows],
-                       belief=self.belief[rows], word=self.word[rows])
+        posterior, belief = beliefs_at(self.posterior, self.belief, rows)
+        return replace(self, joint=self.joint[rows], posterior=posterior, belief=belief,
+                       word=self.word[rows])
 
     def masses(self, rows: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.filter.masses(self.joint if rows is None else self.joint[rows])
@@ -242,17 +283,16 @@ class HiddenState:
         new_av = (new_posterior if self.belief_rule == "bayes"
                   else pomdp.filter(self.belief, incident, h, e, rule=self.belief_rule)[0])
         possible = p_obs > 0
-        labels = self.filter.labels(self.belief_rule)
+        labels = self.labels
         new_word = labels.filter.extend(self.word[possible], symbol_code(incident[possible], h, e))
-        new_joint = self.filter.update(self.joint[possible], new_posterior[possible], new_av[possible],
-                                       road[possible], (incident[possible], h, e), p_obs[possible],
-                                       new_word, labels)
-        return p_obs, replace(self, joint=new_joint, posterior=new_posterior[possible],
-                              belief=new_av[possible], word=new_word)
+        posterior, belief = beliefs_at(new_posterior, new_av, possible)
+        new_joint = self.filter.update(self.joint[possible], posterior, belief, road[possible],
+                                       (incident[possible], h, e), p_obs[possible], new_word, labels)
+        return p_obs, replace(self, joint=new_joint, posterior=posterior, belief=belief, word=new_word)
 
     def joined(self, parts: list[HiddenState], road: np.ndarray) -> HiddenState:
-        joint, posterior, belief, word = (np.concatenate([getattr(part, name) for part in parts])
-                                          for name in ("joint", "posterior", "belief", "word"))
+        joint, word = (np.concatenate([getattr(part, name) for part in parts]) for name in ("joint", "word"))
+        posterior, belief = joined_beliefs(parts)
         return replace(self, joint=joint, posterior=posterior, belief=belief, word=word)
 
     def merge_columns(self) -> np.ndarray:
@@ -260,10 +300,18 @@ class HiddenState:
         return np.concatenate([self.joint.reshape(len(self.joint), -1), self.posterior, self.belief],
                               axis=1)
 
+    @property
+    def nbytes(self) -> int:
+        return distinct_nbytes(self.joint, self.posterior, self.belief, self.word)
+
+    def compact(self) -> HiddenState:
+        return replace(self, word=self.labels.filter.compact(self.word))
+
 
 def hidden_root(joint_filter: JointFilter, start: int, belief_rule: BeliefRule) -> HiddenState:
     """The root: θ0 ~ the AV's initial belief (the true posterior and b alike), q0 read at `start`."""
     belief = np.asarray(joint_filter.pomdp.initial_belief, dtype=float)[None, :].copy()
     return HiddenState(filter=joint_filter, belief_rule=belief_rule,
-                       joint=joint_filter.initial(start, belief[0]), posterior=belief.copy(),
-                       belief=belief.copy(), word=np.zeros(1, dtype=np.int64))
+                       labels=joint_filter.labels(belief_rule).scoped(),
+                       joint=joint_filter.initial(start, belief[0]), posterior=belief, belief=belief,
+                       word=np.zeros(1, dtype=np.int64))

@@ -25,6 +25,7 @@ from typing import Protocol
 
 import numpy as np
 
+from trustroute.core.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.policies.belief.trust_state_filter import distinct_rows, split_by_words
 from trustroute.policies.evaluation.node_state import HiddenState, NodeState
@@ -50,6 +51,17 @@ class Frontier:
     def take(self, rows: np.ndarray | slice) -> Frontier:
         return Frontier(road=self.road[rows], probability=self.probability[rows],
                         route_id=self.route_id[rows], state=self.state.take(rows))
+
+    @property
+    def bytes_per_node(self) -> float:
+        """Bytes of its arrays per node (0 without nodes)."""
+        total = self.road.nbytes + self.probability.nbytes + self.route_id.nbytes + self.state.nbytes
+        return total / self.size if self.size else 0.0
+
+    def compacted(self) -> Frontier:
+        """The same nodes, the words their node state no longer needs forgotten (NodeState.compact):
+        what the unfolding keeps between levels is its frontier, not every history it has seen."""
+        return replace(self, state=self.state.compact())
 
 
 def joint_beliefs(state: NodeState) -> np.ndarray:
@@ -348,9 +360,43 @@ def move(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits: L
     return branch(frontier, next_road, actor.moved(frontier.route_id, next_road), observations)
 
 
+# What a level holds at its peak, in copies of its children's arrays: the children of every
+# observation, their joined copy and the temporaries of the filter and the label step (measured
+# with tracemalloc on the unbounded phi1 policy: tests/policies/evaluation/test_memory.py).
+PEAK_COPIES = 4
+
+
+def available_memory() -> int | None:
+    """Bytes the kernel can give without swapping (MemAvailable); None where it does not say."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def check_memory(level: int, frontier: Frontier, n_observations: int) -> None:
+    """Refuse, before it is allocated, a level whose children would not fit in the memory
+    available: an InputError naming the node budget that fits."""
+    available = available_memory()
+    per_child = PEAK_COPIES * frontier.bytes_per_node
+    children = frontier.size * n_observations
+    if available is None or children * per_child <= available:
+        return
+    fits = int(available / (n_observations * per_child))
+    raise InputError("--max-nodes", "", f"junction {level + 1} would branch {frontier.size:,} histories "
+                     f"into up to {children:,}, about {children * per_child / 1e9:.1f} GB with "
+                     f"{available / 1e9:.1f} GB of memory available",
+                     f"pass --max-nodes {max(fits, 1):,} or less, or a lower --max-junctions")
+
+
 def advance(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits: Limits, pace: Pace,
             observations: tuple[tuple[int, int], ...]) -> Frontier | None:
     """The next level's frontier from the open nodes of this one (None: the unfolding stops)."""
+    check_memory(level, frontier, len(observations))
     parts: list[Frontier] = []
     late = False
     for rows in chunks(frontier.size, limits.chunk):
@@ -400,7 +446,7 @@ def unfold(frontier: Frontier, actor: Actor, ledger: Ledger, limits: Limits,
         if following is None:
             break
         kept = ledger.trim(following, level)
-        frontier = following if kept is None else following.take(kept)
+        frontier = (following if kept is None else following.take(kept)).compacted()
         nodes += frontier.size
         max_frontier = max(max_frontier, frontier.size)
     actor.done()

@@ -223,3 +223,28 @@ def test_a_type_prior_on_a_threshold_is_read_exactly(tmp_path, capsys):
             answer = json.loads(out)
             bounds = (answer["lower"], answer["upper"])
             assert bounds[0] <= value <= bounds[1], (name, objective, bounds)
+
+
+def test_a_compacted_filter_keeps_the_held_words_in_order_and_forgets_the_rest(pomdp, monkeypatch):
+    from trustroute.policies.belief import exact_labels as module
+
+    shared = exact_labels(pomdp, compile_spec(_spec(pomdp.town, [0, 0, 0, 1, 1, 1, 1], 0.5),
+                                              pomdp.town).labeller)
+    with pytest.raises(ValueError, match="shared"):
+        shared.filter.compact(np.zeros(1, dtype=np.int64))
+    monkeypatch.setattr(module, "COMPACT_AT_LEAST", 0)
+    scoped = shared.filter.scoped()
+    changing = np.flatnonzero(scoped.changing)
+    rng = np.random.default_rng(3)
+    words = np.zeros(1, dtype=np.int64)
+    for _ in range(6):   # six levels of every changing symbol: a full tree of words
+        words = scoped.extend(np.repeat(words, changing.size), np.tile(changing, words.size))
+    held = np.sort(rng.choice(words, size=10, replace=False))
+    beliefs, lengths, size = [scoped.belief(int(w)) for w in held], scoped.lengths(held), scoped._size
+    renumbered = scoped.compact(held)
+    assert scoped._size < size / 100 and np.all(np.diff(renumbered) > 0)   # forgotten, order kept
+    assert np.array_equal(scoped.lengths(renumbered), lengths)
+    assert [scoped.belief(int(w)) for w in renumbered] == beliefs
+    extended = scoped.extend(renumbered, np.full(held.size, changing[0]))   # new words, after the held
+    assert extended.min() >= scoped._size - held.size and np.array_equal(
+        scoped.extend(renumbered, np.full(held.size, changing[0])), extended)   # interned once
