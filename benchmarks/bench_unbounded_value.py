@@ -37,6 +37,6 @@ def run() -> list[dict]:
         rows.append({"name": f"unbounded_phi1_trust_policy_{nodes}_nodes", "lower": evaluated.lower,
                      "upper": evaluated.upper, "seconds": time.perf_counter() - began,
                      "junctions_unfolded": evaluated.junctions,
-                     "stopped_by": "convergence" if evaluated.converged else "time limit",
+                     "stopped_by": evaluated.stopped_by(),
                      "below_peers": PEER_VALUE - evaluated.lower})
     return rows

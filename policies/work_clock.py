@@ -99,17 +99,29 @@ def work_clock(work_limit: int | None, time_limit: float) -> Iterator[float]:
         _CLOCK.reset(token)
 
 
+# What of a method's own can end a synthesis unconverged before its limits (`stopped_by`'s `cap`):
+# its cluster policies' largest cap (policies/synthesis/cluster_policy.py); the nodes per level of
+# the trust-state search and of its evaluations, their dropped live mass unknown; the junctions of
+# an unbounded evaluation (UNBOUNDED_MAX_LEVELS, policies/evaluation/trust_state.py); the fixed
+# depths of the trust-state synthesis' unbounded searches and policy horizons; its allowance for
+# rounding when every search is exact and tau is below it (policies/trust_state_synthesis/
+# synthesis.py, JOINT_STOPS).
+CAPS = ("cluster cap", "node cap", "junction cap", "depth cap", "rounding margin")
+
+
 def stopped_by(converged: bool, clock: WorkClock | None, node_budget: bool = False,
-               cluster_cap: bool = False) -> str:
-    """Which limit ended a synthesis: "convergence" (the gap reached tau), "node budget" (its
-    search stopped at its node budget, `node_budget`, before any limit), "cluster cap" (its bounds
-    are its cluster policies' at their largest cap, `cluster_cap`, unless a run under a work limit
-    reached the wall clock, whose stop then depends on the machine), "work limit" (its work limit,
-    the wall clock never reached) or "time limit"."""
+               cap: str | None = None) -> str:
+    """Which limit ended a synthesis (or the evaluation of its policy): "convergence" (the gap
+    reached tau), "node budget" (its search stopped at its node budget, `node_budget`, before any
+    limit), `cap` (one of CAPS: its bounds are those its own cap left, unless a run under a work
+    limit reached the wall clock, whose stop then depends on the machine), "work limit" (its work
+    limit, the wall clock never reached) or "time limit"."""
+    if cap is not None and cap not in CAPS:
+        raise ValueError(f"unknown cap {cap!r}: one of {CAPS}")
     if converged:
         return "convergence"
     if node_budget:
         return "node budget"
-    if cluster_cap and (clock is None or not clock.timed_out):
-        return "cluster cap"
+    if cap is not None and (clock is None or not clock.timed_out):
+        return cap
     return "work limit" if clock is not None and not clock.timed_out else "time limit"

@@ -271,15 +271,27 @@ class JointLedger:
             **fields)
 
 
+# What ended the unfolding of a BoundLedger or an UnboundedLedger (`stopped`): "convergence" (what
+# is unresolved, open or dropped, is at most the tolerance: none within a cap, 1e-9 over unbounded
+# time), "node cap" (nodes dropped beyond `max_nodes` of a level left more live mass unknown),
+# "junction cap" (an unbounded unfolding reached its `max_junctions` with live mass open) or
+# "deadline". The caps are among work_clock.CAPS, so `stopped_by` names them as they are.
+UNFOLDING_STOPS = ("convergence", "node cap", "junction cap", "deadline")
+
+
 @dataclass(eq=False)
 class BoundLedger:
     """Accepted mass of the nodes that end (no live mass, or the cap) and the live mass of the
-    nodes cut (unknown): [lower, upper] of P(accepted within `max_junctions`)."""
+    nodes cut (unknown): [lower, upper] of P(accepted within `max_junctions`); what ended it
+    (`stopped`, UNFOLDING_STOPS) from the live mass it dropped beyond `max_nodes` (`dropped`)
+    and whether the deadline cut nodes (`late`)."""
 
     max_junctions: int
     max_nodes: int
     accepted: float = 0.0
     unknown: float = 0.0
+    dropped: float = 0.0
+    late: bool = False
     fallback_mass: float = 0.0   # a policy without episode rules has no fallback: stays 0
     # the level's (accepted, rejected, live) (settle -> prune)
     live_masses: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -293,6 +305,7 @@ class BoundLedger:
         p = frontier.probability[rows]
         self.accepted += float(p @ accepted)
         self.unknown += float(p @ live)
+        self.late = self.late or why == "past_deadline"
 
     def settle(self, frontier, level: int, out_of_time: bool) -> np.ndarray | None:
         """End the nodes without live mass and, at the cap, every node (None: stop)."""
@@ -307,22 +320,37 @@ class BoundLedger:
 
     def prune(self, frontier, go: np.ndarray, level: int) -> np.ndarray:
         """Beyond `max_nodes` open nodes, the least likely are cut."""
+        return self._drop(frontier, go, frontier.probability)
+
+    def _drop(self, frontier, go: np.ndarray, rank: np.ndarray) -> np.ndarray:
+        """`go` without the open nodes beyond the `max_nodes` of largest `rank`: their accepted
+        mass counts, their live mass is unknown."""
         if go.sum() <= self.max_nodes:
             return go
-        mass = frontier.probability
         if self.live_masses is None:
             raise TypeError("prune reads the level's masses, which settle computes first")
         accepted, _, live = self.live_masses
-        order = np.argsort(-np.where(go, mass, -np.inf), kind="stable")
+        mass = frontier.probability
+        order = np.argsort(-np.where(go, rank, -np.inf), kind="stable")
         dropped = np.zeros(mass.size, dtype=bool)
         dropped[order[self.max_nodes:]] = True
         dropped &= go
         self.accepted += float(mass[dropped] @ accepted[dropped])
-        self.unknown += float(mass[dropped] @ live[dropped])
+        lost = float(mass[dropped] @ live[dropped])
+        self.unknown += lost
+        self.dropped += lost
         return go & ~dropped
 
     def trim(self, frontier, level: int) -> None:
         return None
+
+    @property
+    def stopped(self) -> str:
+        """What ended the unfolding (UNFOLDING_STOPS): within the cap, exact unless nodes were
+        dropped or cut at the deadline."""
+        if self.late:
+            return "deadline"
+        return "node cap" if self.dropped > 0 else "convergence"
 
     def bounds(self) -> tuple[float, float]:
         return accepted_bounds(self.accepted, self.unknown)
@@ -340,12 +368,12 @@ class UnboundedLedger(BoundLedger):
     accepted mass is a lower bound (accepting states are absorbing), and it only grows with the
     levels, like value iteration from below on the policy's chain of beliefs; the live mass of the
     open nodes is still unresolved and counts in `upper` only. The unfolding stops when that mass
-    is at most `tolerance` (`converged`), at the deadline or after `max_junctions` junctions."""
+    is at most `tolerance`, at the deadline or after `max_junctions` junctions (`stopped`)."""
 
     tolerance: float = 1e-9
-    converged: bool = False
     levels_done: int = 0
-    open_live: float = 0.0
+    open_live: float = 0.0     # the live mass still open when it stopped (none at the deadline's cut)
+    capped: bool = False       # stopped at max_junctions with more than `tolerance` open
 
     def settle(self, frontier, level: int, out_of_time: bool) -> np.ndarray | None:
         self.levels_done = level
@@ -356,8 +384,9 @@ class UnboundedLedger(BoundLedger):
         accepted, _, live = self.live_masses
         open_live = float(frontier.probability @ live)
         if open_live <= self.tolerance or level == self.max_junctions:
-            self.converged = open_live <= self.tolerance
-            self.cut(frontier, slice(None), level, "converged" if self.converged else "cap")
+            self.open_live = open_live
+            self.capped = open_live > self.tolerance
+            self.cut(frontier, slice(None), level, "cap" if self.capped else "converged")
             return None
         ending = live <= 0
         self.accepted += float(frontier.probability[ending] @ accepted[ending])
@@ -368,19 +397,25 @@ class UnboundedLedger(BoundLedger):
         leaves unknown is its live mass, and with no cap a node's accepted mass is already
         counted, so this keeps the most of what is still to be decided (measured on the
         unbounded phi1_trust: docs/peers.md)."""
-        if go.sum() <= self.max_nodes:
-            return go
         if self.live_masses is None:
             raise TypeError("prune reads the level's masses, which settle computes first")
-        accepted, _, live = self.live_masses
-        mass = frontier.probability
-        order = np.argsort(-np.where(go, mass * live, -np.inf), kind="stable")
-        dropped = np.zeros(mass.size, dtype=bool)
-        dropped[order[self.max_nodes:]] = True
-        dropped &= go
-        self.accepted += float(mass[dropped] @ accepted[dropped])
-        self.unknown += float(mass[dropped] @ live[dropped])
-        return go & ~dropped
+        return self._drop(frontier, go, frontier.probability * self.live_masses[2])
+
+    @property
+    def stopped(self) -> str:
+        """What ended the unfolding (UNFOLDING_STOPS): the deadline, the junction cap, or the open
+        live mass at most the tolerance: "convergence" if with the live mass dropped beyond
+        `max_nodes` it still is, else "node cap" (the width of [lower, upper] is then mostly what
+        was dropped, which no longer unfolding resolves)."""
+        if self.late:
+            return "deadline"
+        if self.capped:
+            return "junction cap"
+        return "convergence" if self.open_live + self.dropped <= self.tolerance else "node cap"
+
+    @property
+    def converged(self) -> bool:
+        return self.stopped == "convergence"
 
     def bounds(self) -> tuple[float, float]:
         margin = ROUNDING_MARGIN_PER_LEVEL * (self.levels_done + 1)

@@ -55,6 +55,7 @@ from trustroute.policies.routing.episode_rules import episode_policy
 from trustroute.policies.routing.fallback import FallbackPolicy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
+from trustroute.policies.work_clock import CAPS, installed, stopped_by
 from trustroute.policies.work_clock import now as clock_now
 
 # Defaults for specs with trust-state atoms (docs/trust_states.md, "Bounded evaluation"): the
@@ -156,19 +157,38 @@ def evaluate_joint_by_type(pomdp: TrustPOMDP, spec: Spec, policy: RoutingPolicy,
 TABLE_CHUNK = 5_000     # nodes moved per batch in evaluate_joint_table (the deadline is checked between)
 
 
+@dataclass(frozen=True)
+class TableValue:
+    """Certified [lower, upper] of a table policy's value (`evaluate_joint_table`); `stopped`: what
+    ended its unfolding (ledgers.UNFOLDING_STOPS)."""
+
+    lower: float
+    upper: float
+    stopped: str
+
+    @property
+    def converged(self) -> bool:
+        return self.stopped == "convergence"
+
+    def stopped_by(self) -> str:
+        """`stopped` as the one rule names it (work_clock.stopped_by) on the clock installed now:
+        a cap by its name, the deadline as the work limit or the time limit."""
+        return stopped_by(self.converged, installed(), cap=self.stopped if self.stopped in CAPS else None)
+
+
 def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: int,
                          belief_rule: BeliefRule = "bayes",
                          max_nodes: int = DEFAULT_MAX_NODES,
-                         deadline: float | None = None) -> tuple[float, float]:
+                         deadline: float | None = None) -> TableValue:
     """Certified [lower, upper] of P(accepted within `max_junctions`) for a policy whose decision
     at a node is a function of (junctions driven, road, joint belief, AV belief) alone, asked in
     batches: `policy.action_slots(t, x, joint, beliefs)` (routing.trust_state_table.JointTablePolicy),
     without the fallback. Histories that reach bit-identical (road, J, posterior, AV belief) at the
     same level are merged (their decisions and futures are the same), so this is the unfolding of
     `evaluate_joint` on far fewer nodes; beyond `max_nodes` per level the least likely nodes are
-    dropped, their live mass unknown; by `deadline` (on the synthesis' clock) the unfolding stops (a
-    batch of TABLE_CHUNK nodes or a level's merge is not begun when, at the last one's pace, it
-    would end past it) and the live mass of every open node is unknown."""
+    dropped, their live mass unknown ("node cap"); by `deadline` (on the synthesis' clock) the
+    unfolding stops (a batch of TABLE_CHUNK nodes or a level's merge is not begun when, at the last
+    one's pace, it would end past it) and the live mass of every open node is unknown ("deadline")."""
     town = pomdp.town
     compiled = compile_spec(spec, town)
     filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
@@ -179,7 +199,7 @@ def evaluate_joint_table(pomdp: TrustPOMDP, spec: Spec, policy, max_junctions: i
                     merge=True)
     unfold(root(start, hidden_root(filter_, start, belief_rule)), actor, ledger, limits,
            outcomes(pomdp.driver.depends_on_performance))
-    return ledger.bounds()
+    return TableValue(*ledger.bounds(), stopped=ledger.stopped)
 
 
 UNBOUNDED_TOLERANCE = 1e-9    # live mass still open at which an unbounded evaluation has converged
@@ -187,14 +207,11 @@ UNBOUNDED_MAX_LEVELS = 100_000  # a guard only: the tolerance or the deadline en
 
 
 @dataclass(frozen=True)
-class UnboundedValue:
-    """Certified [lower, upper] of P(accepted eventually) under a policy; `converged`: the live
-    mass still open was at most the tolerance when it stopped (otherwise the deadline stopped it),
-    after `junctions` junctions."""
+class UnboundedValue(TableValue):
+    """Certified [lower, upper] of P(accepted eventually) under a policy, after `junctions`
+    junctions; `stopped`: "convergence" (the live mass still open and dropped was at most the
+    tolerance when it stopped), "node cap", "junction cap" or "deadline" (UnboundedLedger)."""
 
-    lower: float
-    upper: float
-    converged: bool
     junctions: int
 
 
@@ -207,9 +224,10 @@ def evaluate_joint_table_unbounded(pomdp: TrustPOMDP, spec: Spec, policy, belief
     steps of value iteration from below on that chain (monotone in k, each a lower bound of the
     policy's value); the live mass still open bounds what is missing. It stops when that mass is
     at most `tolerance` or at `deadline`; nodes dropped beyond `max_nodes` per level leave their
-    live mass unknown. lower is lowered and upper raised by a margin for floating-point
-    rounding (ledgers.ROUNDING_MARGIN_PER_LEVEL). `max_junctions` stops it after that many
-    junctions (an iterate of the value iteration, its open live mass unknown; tests compare it)."""
+    live mass unknown ("node cap" when it exceeds the tolerance). lower is lowered and upper raised
+    by a margin for floating-point rounding (ledgers.ROUNDING_MARGIN_PER_LEVEL). `max_junctions`
+    stops it after that many junctions ("junction cap": an iterate of the value iteration, its open
+    live mass unknown; tests compare it)."""
     town = pomdp.town
     compiled = compile_spec(spec, town)
     filter_ = joint_filter(pomdp, compiled.dfa, compiled.labeller)
@@ -221,4 +239,4 @@ def evaluate_joint_table_unbounded(pomdp: TrustPOMDP, spec: Spec, policy, belief
     unfold(root(start, hidden_root(filter_, start, belief_rule)), actor, ledger, limits,
            outcomes(pomdp.driver.depends_on_performance))
     lower, upper = ledger.bounds()
-    return UnboundedValue(lower=lower, upper=upper, converged=ledger.converged, junctions=ledger.levels_done)
+    return UnboundedValue(lower=lower, upper=upper, stopped=ledger.stopped, junctions=ledger.levels_done)

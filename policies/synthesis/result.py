@@ -195,8 +195,10 @@ class SynthesisResult(Generic[PolicyT, StatsT]):
     """lower <= Pr_max <= upper; lower is a certified lower bound of the value of `policy`.
 
     horizon: the junction horizon solved for (None: unbounded); stats: how the bounds were obtained.
-    stopped_by: what ended the call, "convergence", "node budget", "cluster cap", "work limit" or
-        "time limit"
+    stopped_by: what ended the call, "convergence", "node budget", one of the caps of the method's
+        own (work_clock.CAPS: "cluster cap" of the belief-MDP synthesis; "node cap", "junction cap",
+        "depth cap" or "rounding margin" of the trust-state synthesis, JOINT_STOPS in
+        policies/trust_state_synthesis/synthesis.py), "work limit" or "time limit"
     (policies/work_clock.py, `stopped_by`; None where the caller did not say).
     """
 

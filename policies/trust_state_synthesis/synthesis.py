@@ -39,8 +39,12 @@ from typing import Any, TypeAlias
 
 import numpy as np
 
-from trustroute.policies.belief.trust_state_relaxation import RelaxedGuide, relaxed_guide
-from trustroute.policies.evaluation.trust_state import evaluate_joint_table, evaluate_joint_table_unbounded
+from trustroute.policies.belief.trust_state_relaxation import RELAXATION_MARGIN, RelaxedGuide, relaxed_guide
+from trustroute.policies.evaluation.trust_state import (
+    UNBOUNDED_MAX_LEVELS,
+    evaluate_joint_table,
+    evaluate_joint_table_unbounded,
+)
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
@@ -56,7 +60,7 @@ from trustroute.policies.trust_state_synthesis.search import (
     JointLimits,
     joint_search,
 )
-from trustroute.policies.work_clock import work_clock
+from trustroute.policies.work_clock import CAPS, work_clock
 
 FIRST_NODES = 500                  # nodes per level of the first round
 NODE_GROWTH = 4                    # nodes per level grow by this factor per round
@@ -72,13 +76,16 @@ SEARCH_SHARE = 0.6                 # share of a round's time left for its search
 
 @dataclass(frozen=True)
 class PolicyValue:
-    """The returned policy's certified [lower, upper]; unbounded objective: whether its
-    evaluation converged (else the deadline stopped it) and how many junctions it unfolded."""
+    """The returned policy's certified [lower, upper] and what ended its evaluation (`stopped`,
+    policies/evaluation/ledgers.py UNFOLDING_STOPS); unbounded objective: how many junctions it
+    unfolded and `stopped_by`, that end as the one rule names it (work_clock.stopped_by, read on
+    the clock of the synthesis as the evaluation ended)."""
 
     lower: float
     upper: float
-    converged: bool | None = None
+    stopped: str
     junctions: int | None = None
+    stopped_by: str | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -98,14 +105,28 @@ class JointRun(Record):
         return out
 
 
+# What ended a trust-state synthesis (JointSynthesisStats.stopped): "convergence" (the gap reached
+# tau), "deadline" (a phase's rounds, or the returned policy's evaluation, ran out of the time or
+# work limit's share: more could tighten the bounds) or the cap that left the gap before any limit
+# (work_clock.CAPS): "node cap" (the policy's evaluation dropped nodes beyond EVALUATION_NODES, or
+# the search's rounds reached MAX_NODES per level), "junction cap" (the unbounded evaluation reached
+# UNBOUNDED_MAX_LEVELS), "depth cap" (unbounded: every search complete at its fixed depth,
+# UNBOUNDED_DEPTHS and UNBOUNDED_POLICY_HORIZONS, the gap what those depths leave) or "rounding
+# margin" (within a horizon: the search complete and the policy's value exact, the gap is the
+# search's allowance for floating-point rounding, RELAXATION_MARGIN, and tau is below it).
+JOINT_STOPS = ("convergence", "deadline", "node cap", "junction cap", "depth cap", "rounding margin")
+
+
 @dataclass(frozen=True, kw_only=True)
 class JointSynthesisStats:
     """How a trust-state synthesis obtained its bounds: its rounds, the returned policy's search
-    horizon, that search's own lower bound, and the policy's certified value within it."""
+    horizon, that search's own lower bound, the policy's certified value within it, and what
+    ended it (`stopped`, JOINT_STOPS)."""
 
     method: str = "search over joint (trust, DFA state) beliefs (policies/trust_state_synthesis)"
     belief_rule: str
     converged: bool
+    stopped: str
     tau: float
     runs: tuple[JointRun, ...]
     policy_rows: int
@@ -116,14 +137,38 @@ class JointSynthesisStats:
     def to_dict(self) -> dict:
         value = self.policy_value
         policy_value: dict[str, object]
-        if value.converged is None:
+        if value.stopped_by is None:
             policy_value = {"lower": value.lower, "upper": value.upper,
                             "max_junctions": self.policy_search_horizon}
         else:
             policy_value = {"lower": value.lower, "upper": value.upper, "unbounded": True,
-                            "junctions_unfolded": value.junctions,
-                            "stopped_by": "convergence" if value.converged else "time limit"}
+                            "junctions_unfolded": value.junctions, "stopped_by": value.stopped_by}
         return {**record_dict(self), "policy_value": policy_value}
+
+
+def joint_cap_note(cap: str, seconds: float) -> str:
+    """What a reader of a trust-state synthesis' bounds should know of the cap that ended it
+    (JOINT_STOPS; `seconds` it took): which cap, and that more time would not move the bounds."""
+    depths = " and ".join(map(str, UNBOUNDED_DEPTHS))
+    horizons = " and ".join(map(str, UNBOUNDED_POLICY_HORIZONS))
+    what = {
+        "node cap": f"the search reached {MAX_NODES:,} nodes per level, or the policy's evaluation "
+                    f"dropped nodes beyond {EVALUATION_NODES:,} per level (their live mass unknown),",
+        "junction cap": "the policy's evaluation over unbounded time stopped at "
+                        f"{UNBOUNDED_MAX_LEVELS:,} junctions with live mass still open,",
+        "depth cap": f"every search was complete at its fixed depth ({depths} junctions for the upper "
+                     f"bound, policy horizons {horizons}),",
+        "rounding margin": "the bounds are exact but for the search's allowance for rounding "
+                           f"({RELAXATION_MARGIN:g}), which is above tau,",
+    }[cap]
+    return (f"{what} after {seconds:.1f} s, before its time limit: a longer --time-limit would not "
+            "tighten these bounds")
+
+
+def reached_joint_cap(stats: object) -> str | None:
+    """The cap (work_clock.CAPS) that ended a trust-state synthesis before its limits, if one did
+    (the statistics of other syntheses never say so)."""
+    return stats.stopped if isinstance(stats, JointSynthesisStats) and stats.stopped in CAPS else None
 
 
 JointSynthesis: TypeAlias = SynthesisResult[JointTablePolicy, JointSynthesisStats]
@@ -146,21 +191,24 @@ def decision_table(decisions: JointDecisions) -> JointPolicyTable:
                             joint=decisions.joint, action=decisions.action)
 
 
-def _grow(run: Callable[[int, float], Any], stop: Callable[[Any], bool], deadline: float) -> None:
-    """run(nodes, deadline) with nodes per level growing from FIRST_NODES until stop(result) or
-    the next round (predicted NODE_GROWTH times the last) would pass the deadline. The first
-    round always starts; `run` itself stops at the deadline (the searches and the evaluation
-    check it level by level), so even the first round keeps to it."""
+def _grow(run: Callable[[int, float], Any], stop: Callable[[Any], bool], deadline: float) -> str:
+    """run(nodes, deadline) with nodes per level growing from FIRST_NODES until stop(result)
+    ("done"), the next round (predicted NODE_GROWTH times the last) would pass the deadline
+    ("deadline") or its nodes per level MAX_NODES ("node cap"); returns which. The first round
+    always starts; `run` itself stops at the deadline (the searches and the evaluation check it
+    level by level), so even the first round keeps to it."""
     nodes = FIRST_NODES
     budget = TimeBudget.until(deadline)
-    while nodes <= MAX_NODES:
+    while True:
         began = budget.used()
         result = run(nodes, deadline)
         if stop(result):
-            return
+            return "done"
         if not budget.fits(NODE_GROWTH * (budget.used() - began)):
-            return
+            return "deadline"
         nodes *= NODE_GROWTH
+        if nodes > MAX_NODES:
+            return "node cap"
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,9 +223,10 @@ class _Joint:
 
 
 def _unbounded_upper(problem: _Joint, deadline: float, log: list[JointRun],
-                     report: Callable[[float], None]) -> float:
+                     report: Callable[[float], None], ends: list[str]) -> float:
     """Upper bound of the unbounded objective: unbounded searches (UNBOUNDED_DEPTHS), leaves
-    valued by the relaxation, with growing nodes per level until the deadline."""
+    valued by the relaxation, with growing nodes per level until the deadline; what ended each
+    depth's rounds appended to `ends` (`_grow`)."""
     upper = 1.0
     for depth in UNBOUNDED_DEPTHS:
         def run_upper(nodes: int, deadline: float, depth: int = depth) -> JointBounds:
@@ -189,7 +238,7 @@ def _unbounded_upper(problem: _Joint, deadline: float, log: list[JointRun],
             report(upper)
             return bounds
 
-        _grow(run_upper, lambda bounds: bounds.cut_nodes == 0, deadline)
+        ends.append(_grow(run_upper, lambda bounds: bounds.cut_nodes == 0, deadline))
     return upper
 
 
@@ -199,19 +248,21 @@ def _policy_value(problem: _Joint, policy: JointTablePolicy, policy_horizon: int
     time for the unbounded one (its chain of beliefs unfolded past `policy_horizon` until the
     live mass left is negligible or the deadline)."""
     if problem.horizon is not None:
-        return PolicyValue(*evaluate_joint_table(problem.pomdp, problem.spec, policy, policy_horizon,
-                                                 problem.belief_rule, EVALUATION_NODES, deadline=deadline))
+        within = evaluate_joint_table(problem.pomdp, problem.spec, policy, policy_horizon,
+                                      problem.belief_rule, EVALUATION_NODES, deadline=deadline)
+        return PolicyValue(within.lower, within.upper, within.stopped)
     value = evaluate_joint_table_unbounded(problem.pomdp, problem.spec, policy, problem.belief_rule,
                                            EVALUATION_NODES, deadline=deadline)
-    return PolicyValue(value.lower, value.upper, value.converged, value.junctions)
+    return PolicyValue(value.lower, value.upper, value.stopped, value.junctions, value.stopped_by())
 
 
 def _policy_rounds(problem: _Joint, policy_horizon: int, until: float, upper: float,
                    best: list[_Candidate], guides: dict[int, RelaxedGuide], log: list[JointRun],
-                   report: Callable[[float], None]) -> float:
+                   report: Callable[[float], None]) -> tuple[float, str]:
     """Policies for `policy_horizon` junctions with growing nodes per level until `until`, each
     valued exactly within that horizon (a lower bound for any longer H and for the unbounded
-    objective); the best kept in `best`. Returns the upper bound (lowered by bounded searches)."""
+    objective); the best kept in `best`. Returns the upper bound (lowered by bounded searches)
+    and what ended the rounds (`_grow`)."""
     pomdp, spec, horizon = problem.pomdp, problem.spec, problem.horizon
 
     def run_policy(nodes: int, deadline: float) -> bool:
@@ -233,8 +284,24 @@ def _policy_rounds(problem: _Joint, policy_horizon: int, until: float, upper: fl
         report(upper)
         return upper - best[0].value.lower <= problem.tau or bounds.cut_nodes == 0
 
-    _grow(run_policy, lambda done: done, until)
-    return upper
+    ended = _grow(run_policy, lambda done: done, until)   # (it lowers `upper`)
+    return upper, ended
+
+
+def _stopped(converged: bool, ends: list[str], value: PolicyValue, horizon: int | None) -> str:
+    """What ended a synthesis (JOINT_STOPS) from what ended each phase's rounds (`ends`) and the
+    returned policy's evaluation (`value`): a cap only when no phase ran out of time first."""
+    if converged:
+        return "convergence"
+    if "deadline" in ends or value.stopped == "deadline":
+        return "deadline"
+    if value.stopped != "convergence":
+        return value.stopped                 # the evaluation's node or junction cap
+    if "node cap" in ends:
+        return "node cap"
+    # every search complete ("done"): unbounded, at its fixed depth; within a horizon it is exact,
+    # and so is the policy's value, so the gap is the search's allowance for rounding
+    return "depth cap" if horizon is None else "rounding margin"
 
 
 def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings = DEFAULT_SYNTHESIS,
@@ -264,13 +331,15 @@ def _synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings
             on_iteration(best[0].value.lower if best else 0.0, upper)
 
     upper = 1.0
+    ends: list[str] = []    # what ended each phase's rounds (`_grow`)
     if horizon is None:
-        upper = _unbounded_upper(problem, budget.share(UPPER_SHARE), log, report)
+        upper = _unbounded_upper(problem, budget.share(UPPER_SHARE), log, report, ends)
     horizons = (horizon,) if horizon is not None else UNBOUNDED_POLICY_HORIZONS
     guides: dict[int, RelaxedGuide] = {}
     for k, policy_horizon in enumerate(horizons):
         until = budget.share_of_rest(1.0 / (len(horizons) - k))
-        upper = _policy_rounds(problem, policy_horizon, until, upper, best, guides, log, report)
+        upper, ended = _policy_rounds(problem, policy_horizon, until, upper, best, guides, log, report)
+        ends.append(ended)
         if upper - best[0].value.lower <= tau:
             break
     chosen = best[0]
@@ -283,7 +352,8 @@ def _synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings
     lower = float(rounded_down(value.lower, relative_margin(rounding, depth, belief_rule)))
     policy.lower, policy.upper = lower, upper
     stats = JointSynthesisStats(
-        belief_rule=belief_rule, converged=converged, tau=tau, runs=tuple(log),
+        belief_rule=belief_rule, converged=converged, stopped=_stopped(converged, ends, value, horizon),
+        tau=tau, runs=tuple(log),
         policy_rows=policy.table.rows, policy_search_horizon=chosen.horizon,
         search_lower=chosen.bounds.lower, policy_value=value)
     return SynthesisResult(policy=policy, lower=lower, upper=upper, seconds=budget.elapsed(),

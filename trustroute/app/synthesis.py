@@ -37,7 +37,8 @@ from trustroute.policies.synthesis.rounding import problem_rounding, relative_ma
 from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
 from trustroute.policies.trust_state_synthesis.population import certified_type_values
-from trustroute.policies.work_clock import installed, stopped_by, work_clock
+from trustroute.policies.trust_state_synthesis.synthesis import joint_cap_note, reached_joint_cap
+from trustroute.policies.work_clock import CAPS, installed, stopped_by, work_clock
 
 
 def belief_rule_named(name: str) -> BeliefRule:
@@ -75,6 +76,15 @@ class SynthesisSettings(SearchSettings):
         super().__post_init__()
 
 
+def reached_cap(stats: object, lower: float, upper: float) -> str | None:
+    """The cap of a synthesis' own (work_clock.CAPS) whose bounds it returned (`lower`, `upper`),
+    if any: a trust-state synthesis says which (`reached_joint_cap`), a belief-MDP synthesis ends
+    at its cluster policies' largest cap (`reached_cluster_cap`)."""
+    if reached_cluster_cap(stats, lower, upper):
+        return "cluster cap"
+    return reached_joint_cap(stats)
+
+
 def synthesize_single(problem: Problem, settings: SynthesisSettings,
                       out: str | Path | None = None) -> SynthesisResult:
     """A policy for a one-model problem with bounds; its file written at `out` when given
@@ -86,7 +96,7 @@ def synthesize_single(problem: Problem, settings: SynthesisSettings,
                                         on_iteration=on_iteration)
     result = replace(result, stopped_by=stopped_by(
         result.stats.converged, clock, reached_node_budget(result.stats),
-        reached_cluster_cap(result.stats, result.lower, result.upper)))
+        reached_cap(result.stats, result.lower, result.upper)))
     if out is not None:
         save_policy(result, out, problem.town, problem.driver, problem.spec)
     return result
@@ -112,8 +122,9 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
                                           on_phase=phase_lines("synth", settings.progress))
     # the Bayes objective's bounds are its one search's; the robust one's candidates run on
     # until the time limit, whatever stopped one of their searches
-    ended = stopped_by(found.gap <= settings.tau, clock,
-                       objective == "bayes" and reached_node_budget(found.result.stats))
+    bayes = objective == "bayes"
+    ended = stopped_by(found.gap <= settings.tau, clock, bayes and reached_node_budget(found.result.stats),
+                       reached_joint_cap(found.result.stats) if bayes else None)
     found = replace(found, result=replace(found.result, stopped_by=ended))
     if out is not None:
         save_policy(found.result, out, problem.town, found.pomdp.driver, found.spec,
@@ -175,11 +186,14 @@ def policy_arrays(path: str | Path) -> Path:
 
 def stop_notes(result: SynthesisResult) -> list[str]:
     """What a reader should know of how the run ended: a search stopped at its node budget, which
-    more time would not have moved; bounds that are the cluster policies' at their largest cap."""
+    more time would not have moved; bounds that are the cluster policies' at their largest cap,
+    or those a trust-state synthesis' own cap left (`joint_cap_note`)."""
     if result.stopped_by == "cluster cap":
         return [f"the bounds are the cluster policies' at their largest cap ({CLUSTER_CAPS[-1]} clusters "
                 "per junction, road and automaton state), tighter than the search's before them: a longer "
                 "--time-limit lengthens that search and need not move them"]
+    if result.stopped_by in CAPS:
+        return [joint_cap_note(result.stopped_by, result.seconds)]
     if result.stopped_by != "node budget":
         return []
     nodes = max(run.nodes for run in result.stats.runs if isinstance(run, SearchRun))

@@ -1,5 +1,5 @@
 """The policy's value over unbounded time (evaluate_joint_table_unbounded) against brute force
-over trust paths and Monte Carlo, on a small town where the policy loops."""
+over trust paths and Monte Carlo, on a small town where the policy loops; what ends its unfolding."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from tests.policies.trust_specs import random_problem
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.model_engine import run_model_episode
 from trustroute.participants.synthetic_driver import SyntheticDriver
-from trustroute.policies.evaluation.trust_state import evaluate_joint_table_unbounded
+from trustroute.policies.evaluation.trust_state import evaluate_joint_table, evaluate_joint_table_unbounded
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
 from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesize_spec import synthesize_spec
@@ -68,6 +68,32 @@ def test_a_frontier_cut_by_live_mass_still_brackets_the_value(looping):
     cut = evaluate_joint_table_unbounded(pomdp, spec, policy, max_nodes=3, max_junctions=4)
     assert cut.lower <= reference + MARGIN <= cut.upper + 2 * MARGIN
     assert cut.lower < full.lower - 1e-6 and cut.upper - cut.lower > full.upper - full.lower
+
+
+def test_an_unfolding_says_what_ended_it(looping):
+    """Each way the unfolding of a table policy ends is told apart (ledgers.UNFOLDING_STOPS) and
+    named by the one rule (work_clock.stopped_by): within a cap it is exact unless nodes are
+    dropped; over unbounded time a junction cap, nodes dropped beyond the cap with the open mass
+    resolved (no deadline was given: the live mass it dropped is what is missing), the deadline
+    (the work limit on a work clock, the time limit outside one)."""
+    pomdp, spec, policy = looping
+    cut = evaluate_joint_table_unbounded(pomdp, spec, policy, max_nodes=3)
+    assert cut.upper - cut.lower > 1e-3 and cut.junctions < 100
+    assert not cut.converged
+    assert cut.stopped == cut.stopped_by() == "node cap"
+    capped = evaluate_joint_table_unbounded(pomdp, spec, policy, max_junctions=4)
+    assert capped.stopped == capped.stopped_by() == "junction cap" and not capped.converged
+    within = evaluate_joint_table(pomdp, spec, policy, 4)
+    assert within.stopped == "convergence" and within.lower == within.upper
+    dropped = evaluate_joint_table(pomdp, spec, policy, 4, max_nodes=3)
+    assert dropped.stopped == dropped.stopped_by() == "node cap" and dropped.upper > dropped.lower
+    resolved = evaluate_joint_table_unbounded(pomdp, spec, policy, tolerance=0.5)
+    assert resolved.stopped == resolved.stopped_by() == "convergence"
+    assert resolved.upper - resolved.lower <= 0.5 + MARGIN
+    with work_clock(DEADLINE_WORK, time_limit=600.0):
+        late = evaluate_joint_table_unbounded(pomdp, spec, policy, deadline=clock_now() + 0.5)
+        assert late.stopped == "deadline" and late.stopped_by() == "work limit"
+    assert late.stopped_by() == "time limit"
 
 
 @pytest.mark.slow

@@ -280,12 +280,12 @@ def test_bounds_of_the_largest_cluster_cap_are_said_to_end_the_run():
     assert not reached_cluster_cap(largest, 0.995, 0.999)          # L from another run
     assert not reached_cluster_cap(_stats_ending_in_clusters(CLUSTER_CAPS[-2], 0.99, 0.999), 0.99, 0.999)
     assert not reached_cluster_cap(None, 0.99, 0.999)
-    assert stopped_by(False, None, cluster_cap=True) == "cluster cap"
-    assert stopped_by(False, None, node_budget=True, cluster_cap=True) == "node budget"
-    assert stopped_by(True, None, cluster_cap=True) == "convergence"
+    assert stopped_by(False, None, cap="cluster cap") == "cluster cap"
+    assert stopped_by(False, None, node_budget=True, cap="cluster cap") == "node budget"
+    assert stopped_by(True, None, cap="cluster cap") == "convergence"
     assert stopped_by(False, None) == "time limit"
     # under a work limit, a run that reached the wall clock depends on the machine: that is said
     late = WorkClock(limit=10, wall_deadline=0.0, timed_out=True)
     in_time = WorkClock(limit=10, wall_deadline=1e18)
-    assert stopped_by(False, late, cluster_cap=True) == "time limit"
-    assert stopped_by(False, in_time, cluster_cap=True) == "cluster cap"
+    assert stopped_by(False, late, cap="cluster cap") == "time limit"
+    assert stopped_by(False, in_time, cap="cluster cap") == "cluster cap"

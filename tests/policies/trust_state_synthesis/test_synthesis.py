@@ -2,22 +2,33 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import trustroute
 from tests.policies.trust_paths import optimum, policy_value
 from tests.policies.trust_specs import random_problem
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.model_engine import run_model_episode
 from trustroute.participants.synthetic_driver import SyntheticDriver
+from trustroute.policies.belief.trust_state_relaxation import RELAXATION_MARGIN
 from trustroute.policies.evaluation.settings import EvaluationSettings
-from trustroute.policies.evaluation.trust_state import evaluate_joint, evaluate_joint_table
+from trustroute.policies.evaluation.trust_state import (
+    evaluate_joint,
+    evaluate_joint_table,
+    evaluate_joint_table_unbounded,
+)
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.trust_state_table import JointTablePolicy
+from trustroute.policies.synthesis.population import PopulationSynthesis
+from trustroute.policies.synthesis.result import SynthesisResult
 from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesize_spec import synthesize_spec
+from trustroute.policies.trust_state_synthesis import synthesis
 from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
 TOLERANCE = 1e-9
@@ -65,7 +76,7 @@ def test_unbounded_bounds_bracket_the_bounded_optimum_and_lower_is_the_policys_v
     value = unbounded.stats.policy_value
     # L is the evaluation's lower end rounded down (policies/synthesis/rounding.py)
     assert unbounded.lower < value.lower and value.lower - unbounded.lower < 1e-10
-    assert value.converged is not None
+    assert value.stopped_by is not None
     assert exact.lower <= value.upper + TOLERANCE
     assert unbounded.stats.to_dict()["policy_value"]["unbounded"] is True
 
@@ -78,8 +89,8 @@ def test_merged_evaluation_equals_the_tree_unfolding_of_evaluate_joint(pomdp):
         tree = evaluate_joint(pomdp, spec, result.policy,
                               EvaluationSettings(fallback_after=None, max_junctions=cap))
         merged = evaluate_joint_table(pomdp, spec, result.policy, cap)
-        assert tree.gap == 0.0 and merged[0] == merged[1]
-        assert merged[0] == pytest.approx(tree.lower, abs=1e-12)
+        assert tree.gap == 0.0 and merged.lower == merged.upper and merged.stopped == "convergence"
+        assert merged.lower == pytest.approx(tree.lower, abs=1e-12)
     assert result.lower == pytest.approx(evaluate_joint(pomdp, spec, result.policy,
                                                         EvaluationSettings(fallback_after=None,
                                                                            max_junctions=8)).lower, abs=1e-12)
@@ -97,8 +108,9 @@ def test_a_time_limit_shorter_than_the_first_round_stops_it_with_sound_bounds(po
     assert result.upper < 1.0
     # the statistics' JSON ("stats" of trustroute synth --json)
     stats = result.stats.to_dict()
-    assert list(stats) == ["method", "belief_rule", "converged", "tau", "runs", "policy_rows",
+    assert list(stats) == ["method", "belief_rule", "converged", "stopped", "tau", "runs", "policy_rows",
                            "policy_search_horizon", "search_lower", "policy_value"]
+    assert stats["stopped"] == "deadline"
     assert list(stats["runs"][0]) == ["search", "max_nodes", *result.stats.runs[0].bounds.to_dict(),
                                       "policy_lower", "policy_upper"]
     assert stats["runs"][0]["nodes"] == 1
@@ -125,3 +137,92 @@ def test_monte_carlo_of_the_returned_policy_with_hidden_trust_agrees_with_lower(
     p = result.lower
     se = max(np.sqrt(p * (1 - p) / episodes), 1.0 / episodes)
     assert abs(satisfied.mean() - p) <= 4 * se + result.gap, (satisfied.mean(), p, se)
+
+
+WORK = 5_000_000
+
+
+def _synthesized(spec: str, horizon: int | None, tau: float = 1e-3) -> SynthesisResult:
+    """`trustroute.synthesize` under a work limit far beyond what the runs below take (about 0.1 s
+    each), so a stop said to be the work or time limit would be untrue."""
+    result = trustroute.synthesize(spec, horizon=horizon, tau=tau, time_limit=600, work_limit=WORK)
+    assert isinstance(result, SynthesisResult)
+    return result
+
+
+def test_a_synthesis_exact_but_for_its_rounding_margin_says_so(capsys, tmp_path):
+    """Within a horizon the first round's search is complete and the policy's value exact: the gap is
+    the search's 1e-12 allowance for rounding, above a τ of 1e-15. The run ends in a fraction of a
+    second and says "rounding margin" (not its time or work limit), in the API, in --json and in the
+    summary."""
+    from tests.cli import cli_json, run_cli
+
+    result = _synthesized("phi1_trust", 6, tau=1e-15)
+    assert [run.bounds.cut_nodes for run in result.stats.runs] == [0]
+    assert 0 < result.upper - result.lower <= 2 * RELAXATION_MARGIN
+    assert result.stopped_by == "rounding margin"
+    assert result.stats.stopped == "rounding margin" and result.stats.policy_value.stopped == "convergence"
+    command = ["synth", "phi1_trust", "--horizon", "6", "--tau", "1e-15", "--time-limit", "600"]
+    payload = cli_json(capsys, *command, "--out", str(tmp_path / "a.json"))
+    assert payload["stopped_by"] == payload["stats"]["stopped"] == "rounding margin"
+    code, out, err = run_cli(capsys, *command, "--out", str(tmp_path / "b.json"))
+    assert code == 0, err
+    assert "allowance for rounding" in out and "would not tighten" in out
+
+
+def test_a_population_bayes_synthesis_says_the_cap_of_its_one_trust_state_run():
+    """The Bayes objective's bounds over driver types are its one trust-state synthesis' (on the
+    lifted model): exact but for the rounding margin, it says so too."""
+    found = trustroute.synthesize("phi1_trust", horizon=6, tau=1e-15, time_limit=600, work_limit=WORK,
+                                  population="driver_population_three_types", objective="bayes")
+    assert isinstance(found, PopulationSynthesis)
+    assert found.result.stopped_by == "rounding margin"
+    assert found.result.stats.stopped == "rounding margin"
+
+
+def test_the_search_at_its_largest_nodes_per_level_says_node_cap(monkeypatch):
+    """The rounds grow the nodes per level up to MAX_NODES: with MAX_NODES the first round's, a
+    first round that cut nodes ends the rounds with time to spare, at "node cap"."""
+    monkeypatch.setattr(synthesis, "MAX_NODES", synthesis.FIRST_NODES)
+    result = _synthesized("phi1_trust", 10, tau=1e-13)
+    assert len(result.stats.runs) == 1 and result.stats.runs[0].bounds.cut_nodes > 0
+    assert result.upper - result.lower > 1e-13
+    assert result.stopped_by == "node cap"
+    assert result.stats.stopped == "node cap"
+
+
+@pytest.fixture
+def shallow(monkeypatch):
+    """The unbounded synthesis with depth-3 searches and policy (complete in their first round on
+    the paper's town) and given limits of the evaluation of the policy over unbounded time (its
+    nodes per level are the synthesis' EVALUATION_NODES)."""
+    monkeypatch.setattr(synthesis, "UNBOUNDED_DEPTHS", (3,))
+    monkeypatch.setattr(synthesis, "UNBOUNDED_POLICY_HORIZONS", (3,))
+
+    def evaluated_with(max_nodes: int = synthesis.EVALUATION_NODES, **limits) -> None:
+        monkeypatch.setattr(synthesis, "EVALUATION_NODES", max_nodes)
+        monkeypatch.setattr(synthesis, "evaluate_joint_table_unbounded",
+                            functools.partial(evaluate_joint_table_unbounded, **limits))
+    return evaluated_with
+
+
+@pytest.mark.parametrize(("limits", "value_stop", "stop"), [
+    # the evaluation resolves its open mass, but dropped more than its tolerance
+    ({"max_nodes": 3}, "node cap", "node cap"),
+    # the evaluation stops at its junction cap with live mass open
+    ({"max_junctions": 4}, "junction cap", "junction cap"),
+    # the evaluation converges (at a tolerance of 0.5): U is what the searches' depth left
+    ({"tolerance": 0.5}, "convergence", "depth cap"),
+])
+def test_an_unbounded_synthesis_says_which_cap_ended_it(shallow, limits, value_stop, stop):
+    """Every search complete at depth 3, the policy's evaluation ended by its own cap or converged:
+    the run ends in a fraction of its work limit, and both the policy's value and the synthesis say
+    which cap ended them, not the time or work limit."""
+    shallow(**limits)
+    result = _synthesized("phi1_trust", None)
+    assert [run.bounds.cut_nodes for run in result.stats.runs] == [0, 0]
+    value = result.stats.to_dict()["policy_value"]
+    assert value["unbounded"] is True and value["stopped_by"] == value_stop
+    assert result.upper - result.lower > 1e-3
+    assert result.stopped_by == stop
+    assert result.stats.stopped == stop
