@@ -24,3 +24,12 @@ def test_api_synthesizes_a_trust_state_spec_for_a_population(tmp_path):
     with pytest.raises(ValueError, match="not both"):
         trustroute.synthesize("phi1", driver=trustroute.load_driver_model(),
                               population=EXAMPLE_POPULATION_PATH)
+
+
+def test_a_converged_bayes_population_synthesis_says_so_at_a_tau_below_the_rounding_margin():
+    """The search closes its gap on the values it computes; the reported L and U are rounded
+    outward (a few 1e-13 apart), which is no reason to call it stopped by its time limit."""
+    found = trustroute.synthesize("phi1", horizon=6, population=EXAMPLE_POPULATION_PATH, tau=1e-15)
+    assert found.result.stats.converged
+    assert 0 < found.upper - found.lower < 1e-11
+    assert found.result.stopped_by == "convergence"

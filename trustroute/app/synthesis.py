@@ -120,10 +120,12 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
                                           population_source=population.source_path,
                                           on_iteration=on_iteration,
                                           on_phase=phase_lines("synth", settings.progress))
-    # the Bayes objective's bounds are its one search's; the robust one's candidates run on
-    # until the time limit, whatever stopped one of their searches
+    # the Bayes objective's bounds are its one search's, converged on the values it computed
+    # (the reported ones are rounded outward, policies/synthesis/rounding.py); the robust one's
+    # candidates run on until the time limit, whatever stopped one of their searches
     bayes = objective == "bayes"
-    ended = stopped_by(found.gap <= settings.tau, clock, bayes and reached_node_budget(found.result.stats),
+    converged = found.result.stats.converged if bayes else found.gap <= settings.tau
+    ended = stopped_by(converged, clock, bayes and reached_node_budget(found.result.stats),
                        reached_joint_cap(found.result.stats) if bayes else None)
     found = replace(found, result=replace(found.result, stopped_by=ended))
     if out is not None:
@@ -170,12 +172,12 @@ class Baseline:
 
 def baseline(problem: Problem, belief_rule: BeliefRule = defaults.BELIEF_RULE) -> Baseline:
     """The trust-free baseline: the shortest route completing the spec's state-only task, and its
-    exact value without the fallback."""
+    certified value without the fallback (as `evaluate` gives it)."""
     town, spec = problem.town, problem.spec
     route = baseline_route(town, spec)
-    value = evaluate_plain(problem.pomdp, spec, trust_free_policy(town, spec),
-                           EvaluationSettings(fallback_after=None,
-                                              belief_rule=checked_belief_rule(belief_rule)))
+    value = certified(problem, evaluate_plain(problem.pomdp, spec, trust_free_policy(town, spec),
+                                              EvaluationSettings(fallback_after=None,
+                                                                 belief_rule=checked_belief_rule(belief_rule))))
     return Baseline(route=route, length_m=town.route_length(route), value=value)
 
 

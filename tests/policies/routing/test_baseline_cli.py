@@ -19,7 +19,14 @@ def test_baseline_json(capsys, town):
     assert payload["route"] == route
     assert payload["length_m"] == pytest.approx(town.route_length(route))
     assert 0.0 < payload["satisfaction_probability"] < 1.0
-    assert payload["lower"] == payload["upper"] == payload["satisfaction_probability"]
+    # exact up to the outward rounding of certified bounds (policies/synthesis/rounding.py)
+    lower, upper = payload["lower"], payload["upper"]
+    assert lower <= payload["satisfaction_probability"] <= upper <= lower + 1e-11
+    # the same certified bounds as `evaluate` of the free route gives
+    code, out, _ = run_cli(capsys, "evaluate", "specs/phi1.toml", "free", "--no-fallback", "--json")
+    assert code == 0
+    evaluated = json.loads(out)
+    assert (payload["lower"], payload["upper"]) == (evaluated["lower"], evaluated["upper"])
 
 
 def test_evaluate_free_json_matches_baseline(capsys):
