@@ -68,6 +68,7 @@ from trustroute.policies.synthesis.rounding import (
     model_rounding,
     relative_margin,
     rounded_down,
+    rounded_up,
     widen,
 )
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
@@ -118,10 +119,25 @@ class TypeValue:
         return cls(name, weight, lower, upper)
 
 
+def _mixture(weights: np.ndarray, ends: list[float]) -> tuple[float, float]:
+    """Σ_k w_k e_k / Σ_k w_k in floats and the relative margin of its error. The exact type prior
+    is the weights' decimals normalised (exact_labels.exact_prior): a population's weights may sum
+    to 1 ± WEIGHT_TOLERANCE, far more than a rounding. Each term carries its product and the sum's
+    k - 1 additions (nonnegative terms: γ_k), its weight against the weight's decimal (u), the
+    weights' correctly rounded sum (u) against the decimals' (u) and the division (u): γ_{k+4}."""
+    return float(weights @ ends) / math.fsum(weights.tolist()), gamma(len(ends) + 4)
+
+
 def mixture_lower(weights: np.ndarray, values: Iterable[TypeValue]) -> float:
-    """Σ_k w_k V_k's lower end, its float sum rounded down (a sum of nonnegative terms: γ_{k+1})."""
-    lowers = [v.lower for v in values]
-    return float(rounded_down(float(weights @ lowers), gamma(len(lowers) + 1)))
+    """Σ_k w̄_k V_k's lower end, w̄ the weights normalised, rounded down by its float error."""
+    value, margin = _mixture(weights, [v.lower for v in values])
+    return float(rounded_down(value, margin))
+
+
+def mixture_upper(weights: np.ndarray, values: Iterable[TypeValue]) -> float:
+    """Σ_k w̄_k V_k's upper end, w̄ the weights normalised, rounded up by its float error."""
+    value, margin = _mixture(weights, [v.upper for v in values])
+    return float(rounded_up(value, margin))
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,10 +169,9 @@ class PopulationSynthesis:
 
     @property
     def mixture_value(self) -> tuple[float, float]:
-        """Σ_k w_k V_k of the returned policy: [lower, upper]."""
+        """Σ_k w_k V_k of the returned policy, certified: [lower, upper]."""
         w = self.population.weights
-        return (float(w @ [v.lower for v in self.type_values]),
-                float(w @ [v.upper for v in self.type_values]))
+        return mixture_lower(w, self.type_values), mixture_upper(w, self.type_values)
 
     @property
     def worst_type_value(self) -> float:

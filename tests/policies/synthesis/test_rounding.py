@@ -11,40 +11,15 @@ from __future__ import annotations
 import functools
 from fractions import Fraction
 
-import numpy as np
 import pytest
 
-from tests.policies.evaluation.test_random_models import random_driver
-from tests.policies.synthesis.threshold_cases import FORMULAS, _without_failures, exact_value, random_town
-from trustroute.policies.logic.spec import spec_from_text
+from tests.policies.synthesis.threshold_cases import exact_value, small_case
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.rounding import model_rounding, relative_margin, widen
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 SEEDS = range(40)
-
-
-def small_case(seed: int, default_driver):
-    rng = np.random.default_rng(seed)
-    town = random_town(rng, quiet=float(rng.uniform(0.2, 0.6)), junctions=(3, 5))
-    model = default_driver if rng.random() < 0.5 else _without_failures(
-        random_driver(rng, default_driver.incident_types))
-    pomdp = build_pomdp(town, model)
-    coeffs = np.zeros(7)
-    coeffs[rng.choice(7, size=int(rng.integers(1, 7)), replace=False)] = 1.0
-    offset = float(rng.uniform(0.05, 0.6))
-    start = str(rng.choice(town.states))
-    reachable = sorted(town.reachable_states(start) - {start}) or [start]
-
-    def some(k: int) -> str:
-        return str(sorted(rng.choice(reachable, size=min(k, len(reachable)), replace=False).tolist()))
-
-    formula = FORMULAS[int(rng.integers(len(FORMULAS)))]
-    text = (f'name = "rounding"\nstart = "{start}"\nformula = "{formula}"\n'
-            f"[states]\na = {some(2)}\nb = {some(2)}\nv1 = {some(3)}\n".replace("'", '"')
-            + f"[beliefs.high]\ncoeffs = {coeffs.tolist()}\noffset = {offset!r}\n")
-    return pomdp, spec_from_text(text, "<rounding spec>", town), int(rng.integers(1, 6))
 
 
 @pytest.fixture(scope="module")

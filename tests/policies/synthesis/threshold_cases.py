@@ -6,7 +6,12 @@ observation sequence, a sum of prior entries, or k/7 under the uniform prior), e
 either side, and a horizon H = 2-8. `brute_force` is the optimum of the exact filter written here on
 its own: the model's numbers as the decimals they print as, the prior normalised, beliefs as
 integer-scaled vectors and observation probabilities as exact ratios, every belief label decided
-exactly; values in floats.
+exactly; values in floats. `exact_value` is the same in Fractions, of the optimum or of a policy,
+under either belief rule (the authors' belief MDP included) and with another true driver (a type of
+a population); exact_joint.py carries it over the joint law of trust and DFA state.
+
+`small_case` and `small_spec` draw the tiny cases of the rounding tests (test_rounding*.py);
+`sweep` marks all but a few of their seeds slow.
 
 `reset_case` is a belief many histories reach on a threshold: two histories of different words
 (a standstill and a takeover at an obstacle that resets trust) reach one belief, whose label floats
@@ -20,16 +25,18 @@ from dataclasses import dataclass
 from fractions import Fraction
 
 import numpy as np
+import pytest
 
 from tests.policies.evaluation.test_random_models import random_driver
 from tests.policies.synthesis.test_synthesis_random import random_junctions
 from trustroute.networks.town import INCIDENT_TYPES, town_from_dict
 from trustroute.participants.driver_model import DriverModel, driver_model_from_dict
+from trustroute.policies.belief.exact_labels import decimal, exact_prior
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.labelling import atom_values
 from trustroute.policies.logic.spec import Spec, spec_from_text
-from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, build_pomdp
 from trustroute.policies.routing.aware_table import BeliefTablePolicy
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
@@ -38,8 +45,10 @@ KINDS = ("reached", "prior_sum", "sevenths")
 BRUTE_FORCE_STATES = 60_000     # a case whose brute force would need more is drawn with a smaller H
 
 
-def _decimal(value: float) -> Fraction:
-    return Fraction(repr(float(value)))
+def sweep(seeds: int, fast: tuple[int, ...]) -> list:
+    """Seeds 0 .. seeds - 1 for a parametrized test, all but `fast` marked slow (the suite's budget
+    takes a few of them, the slow run the sweep)."""
+    return [seed if seed in fast else pytest.param(seed, marks=pytest.mark.slow) for seed in range(seeds)]
 
 
 def random_town(rng: np.random.Generator, quiet: float, junctions: tuple[int, int] = (4, 8)):
@@ -57,6 +66,47 @@ def random_town(rng: np.random.Generator, quiet: float, junctions: tuple[int, in
     incidents = {road: ("none" if rng.random() < quiet else str(rng.choice(eventful))) for road in directed}
     return town_from_dict({"junctions": junctions, "roads": [list(r) for r in sorted(roads)],
                            "incidents": incidents}, "<random town>")
+
+
+def small_case(seed: int, default_driver: DriverModel,
+               eventful: bool = False) -> tuple[TrustPOMDP, Spec, int]:
+    """A town of 3-5 junctions, the default or a random driver model (no AV failures), a spec with
+    a belief atom (`small_spec`) and a horizon of 1-5. `eventful`: at most a quarter of the roads
+    quiet, the atom's offset near its prior value and a horizon of 2-4, so that fewer optima are
+    0 or 1."""
+    rng = np.random.default_rng(seed)
+    quiet = (0.0, 0.25) if eventful else (0.2, 0.6)
+    town = random_town(rng, quiet=float(rng.uniform(*quiet)), junctions=(3, 5))
+    model = default_driver if rng.random() < 0.5 else _without_failures(
+        random_driver(rng, default_driver.incident_types))
+    spec = small_spec(rng, town, prior=model.initial_belief if eventful else None)
+    return build_pomdp(town, model), spec, int(rng.integers(2, 5) if eventful else rng.integers(1, 6))
+
+
+def small_spec(rng: np.random.Generator, town, type_atom: str = "", prior: np.ndarray | None = None) -> Spec:
+    """One of FORMULAS on random waypoints reachable from a random start, its belief atom `high` on
+    random trust levels at an offset in [0.05, 0.6] (with `prior`: within 0.15 of its value there,
+    in [0.01, 0.99]). With `type_atom` (the TOML of a type-belief atom `sure`), `high` reads
+    `(high | sure)` in the formula (`!high`: `(!high & !sure)`)."""
+    coeffs = np.zeros(7)
+    coeffs[rng.choice(7, size=int(rng.integers(1, 7)), replace=False)] = 1.0
+    if prior is None:
+        offset = float(rng.uniform(0.05, 0.6))
+    else:
+        offset = float(np.clip(coeffs @ prior + rng.uniform(-0.15, 0.15), 0.01, 0.99))
+    start = str(rng.choice(town.states))
+    reachable = sorted(town.reachable_states(start) - {start}) or [start]
+
+    def some(k: int) -> str:
+        return str(sorted(rng.choice(reachable, size=min(k, len(reachable)), replace=False).tolist()))
+
+    formula = FORMULAS[int(rng.integers(len(FORMULAS)))]
+    if type_atom:
+        formula = formula.replace("!high", "(!high & !sure)").replace(" high", " (high | sure)")
+    text = (f'name = "rounding"\nstart = "{start}"\nformula = "{formula}"\n'
+            f"[states]\na = {some(2)}\nb = {some(2)}\nv1 = {some(3)}\n".replace("'", '"')
+            + f"[beliefs.high]\ncoeffs = {coeffs.tolist()}\noffset = {offset!r}\n" + type_atom)
+    return spec_from_text(text, "<rounding spec>", town)
 
 
 def _without_failures(model: DriverModel) -> DriverModel:
@@ -190,45 +240,102 @@ def brute_force(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> float:
     return float(exact_value(pomdp, spec, horizon, number=float))
 
 
+@dataclass(frozen=True)
+class _ExactFilter:
+    """One model's exact filter under one rule, in integers: per symbol (i, h, e) the likelihood
+    (integer-scaled decimals and their scale) and the update matrix (Bayes: diag(ℓ) T, the
+    authors' rule: T alone; integer-scaled, so images are beliefs up to a positive scale); the
+    prior as integers. A belief is one integer vector per ray (divided by the gcd of its entries)."""
+
+    n: int
+    likelihood: dict
+    update: dict
+    prior: tuple[int, ...]
+
+    @classmethod
+    def of(cls, pomdp: TrustPOMDP, rule: BeliefRule) -> _ExactFilter:
+        driver, n = pomdp.driver, pomdp.n_trust
+        likelihood, update = {}, {}
+        for i in range(len(driver.incident_types)):
+            take = [decimal(t) for t in driver.takeover_probability[i]]
+            fail = [decimal(f) for f in driver.failure_probability[i]]
+            for h, e in ((0, 0), (0, 1), (1, 0), (1, 1)):
+                like = [(take[k] if h else 1 - take[k]) * (fail[k] if e else 1 - fail[k]) for k in range(n)]
+                likelihood[i, h, e] = _scaled(like)
+                weight = like if rule == "bayes" else [Fraction(1)] * n
+                flat, _ = _scaled([weight[k] * decimal(driver.trust_transition[i, h, e, k, m])
+                                   for k in range(n) for m in range(n)])
+                update[i, h, e] = [flat[k * n:(k + 1) * n] for k in range(n)]
+        return cls(n=n, likelihood=likelihood, update=update,
+                   prior=tuple(_scaled(list(exact_prior(driver)))[0]))
+
+    def probability(self, belief: tuple[int, ...], symbol: tuple[int, int, int]) -> Fraction:
+        """P(symbol | belief), exactly."""
+        like, scale = self.likelihood[symbol]
+        return Fraction(sum(b * w for b, w in zip(belief, like, strict=True)), sum(belief) * scale)
+
+    def update_belief(self, belief: tuple[int, ...], symbol: tuple[int, int, int]) -> tuple[int, ...]:
+        """The posterior's ray; the belief itself where the symbol is impossible under it (the
+        AV's filter keeps its belief then: TrustPOMDP.filter)."""
+        matrix = self.update[symbol]
+        image = [sum(belief[k] * matrix[k][m] for k in range(self.n) if belief[k]) for m in range(self.n)]
+        common = math.gcd(*image)
+        return belief if common == 0 else tuple(v // common for v in image)
+
+
+class ExactLabelling:
+    """The spec's atoms at a position, belief atoms c·b > offset compared in integers on an exact
+    belief (integer-scaled decimals), road and trust-state atoms as the labeller reads them."""
+
+    def __init__(self, labeller, n_hidden: int) -> None:
+        self.labeller = labeller
+        self.atoms = [(_scaled([decimal(c) for c in labeller.coeffs[:, j]]), decimal(offset))
+                      for j, offset in enumerate(labeller.offsets)]
+        self.n_hidden = n_hidden
+
+    def valuations(self, x: int, belief: tuple[int, ...], trust: np.ndarray | None = None) -> np.ndarray:
+        """bool [rows, atoms]: one row, or one per trust level index of `trust`."""
+        rows = 1 if trust is None else len(trust)
+        valuation = self.labeller.valuations(np.full(rows, x), np.zeros((rows, self.n_hidden)), trust)
+        mass = sum(belief)
+        for j, column in enumerate(self.labeller.belief_columns.tolist()):
+            (coeffs, scale), offset = self.atoms[j]
+            value = sum(c * b for c, b in zip(coeffs, belief, strict=True))
+            valuation[:, column] = value * offset.denominator > offset.numerator * mass * scale
+        return valuation
+
+
+def _outcomes(driver: DriverModel) -> list[tuple[int, int]]:
+    return [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
+
+
 def exact_value(pomdp: TrustPOMDP, spec: Spec, horizon: int, policy: BeliefTablePolicy | None = None,
-                number: type = Fraction) -> Fraction:
+                number: type = Fraction, rule: BeliefRule = "bayes",
+                truth: TrustPOMDP | None = None) -> Fraction:
     """max over policies (or the value of `policy`, acting on the vehicle's float filter) of
     P(spec accepted within `horizon` junctions) on the exact filter, exactly (`number` Fraction).
+
+    The AV's belief runs `pomdp`'s exact filter under `rule`; the spec's belief labels read it.
+    Observation probabilities are those of `truth`'s exact Bayes posterior from its own prior (the
+    driver who drives: a type of a population, or the model itself under the authors' rule), or,
+    without `truth`, of the AV's belief itself: under Bayes the real process, under the authors'
+    rule the authors' belief MDP (the paper-rule belief gives the probabilities).
 
     Beliefs are integer vectors (the exact belief times a positive scale, divided by the gcd of
     their entries: one representative per belief), updated by the integer-scaled decimal matrices;
     a label c·b > offset is compared in integers; probabilities are exact ratios. A policy reads
-    the float belief of TrustPOMDP.belief_update along the same history, and the DFA state of the
-    exact labels, as the vehicle does."""
-    driver, town = pomdp.driver, pomdp.town
-    n = pomdp.n_trust
+    the float belief of TrustPOMDP.filter under `rule` along the same history, and the DFA state of
+    the exact labels, as the vehicle does."""
+    town = pomdp.town
     compiled = compile_spec(spec, town)
-    labeller, dfa = compiled.labeller, compiled.dfa
-    atoms = [(_scaled([_decimal(c) for c in labeller.coeffs[:, j]]), _decimal(offset))
-             for j, offset in enumerate(labeller.offsets)]
-    outcomes = [(h, e) for h in (0, 1) for e in ((0, 1) if driver.depends_on_performance else (0,))]
-    likelihood, update = {}, {}
-    for i in range(len(driver.incident_types)):
-        for h, e in outcomes:
-            take = [_decimal(t) for t in driver.takeover_probability[i]]
-            fail = [_decimal(f) for f in driver.failure_probability[i]]
-            like = [(take[k] if h else 1 - take[k]) * (fail[k] if e else 1 - fail[k]) for k in range(n)]
-            likelihood[i, h, e] = _scaled(like)
-            flat, _ = _scaled([like[k] * _decimal(driver.trust_transition[i, h, e, k, m])
-                               for k in range(n) for m in range(n)])
-            update[i, h, e] = [flat[k * n:(k + 1) * n] for k in range(n)]
-    prior, _ = _scaled([_decimal(b) for b in driver.initial_belief])
+    labels = ExactLabelling(compiled.labeller, pomdp.n_trust)
+    outcomes = _outcomes(pomdp.driver)
+    av = _ExactFilter.of(pomdp, rule)
+    true = None if truth is None else _ExactFilter.of(truth, "bayes")
     successors = [[town.state_index(s) for s in town.successors(road)] for road in town.states]
-    dummy = np.zeros((1, n))
 
     def step(q: int, x: int, belief: tuple[int, ...]) -> int:
-        valuation = labeller.valuations(np.array([x]), dummy)
-        mass = sum(belief)
-        for j, column in enumerate(labeller.belief_columns.tolist()):
-            (coeffs, scale), offset = atoms[j]
-            value = sum(c * b for c, b in zip(coeffs, belief, strict=True))
-            valuation[0, column] = value * offset.denominator > offset.numerator * mass * scale
-        return int(dfa.step_many(np.array([q]), valuation)[0])
+        return int(compiled.dfa.step_many(np.array([q]), labels.valuations(x, belief))[0])
 
     memo: dict = {}
 
@@ -240,41 +347,39 @@ def exact_value(pomdp: TrustPOMDP, spec: Spec, horizon: int, policy: BeliefTable
                                              float_belief[None, :])[0])
         return [town.state_index(town.successors(town.states[x])[slot])]
 
-    def value(t: int, x: int, q: int, belief: tuple[int, ...], route: tuple[str, ...],
-              float_belief: np.ndarray):
+    def value(t: int, x: int, q: int, belief: tuple[int, ...], law: tuple[int, ...] | None,
+              route: tuple[str, ...], float_belief: np.ndarray):
         if compiled.accepting[q]:
             return number(1)
         if compiled.rejecting[q] or t == horizon:
             return number(0)
-        key = (t, x, q, belief) if policy is None else (t, x, q, belief, route, float_belief.tobytes())
+        key = (t, x, q, belief, law) if policy is None else (t, x, q, belief, law, route,
+                                                             float_belief.tobytes())
         if key in memo:
             return memo[key]
         best = number(0)
-        mass = sum(belief)
         for x2 in moves(t, x, q, route, float_belief):
             i = int(pomdp.road_incident[x2])
             total = number(0)
             for h, e in outcomes:
-                like, scale = likelihood[i, h, e]
-                weight = sum(b * w for b, w in zip(belief, like, strict=True))
-                if weight == 0:
+                probability = (av.probability(belief, (i, h, e)) if true is None or law is None
+                               else true.probability(law, (i, h, e)))
+                if probability == 0:
                     continue
-                matrix = update[i, h, e]
-                image = [sum(belief[k] * matrix[k][m] for k in range(n) if belief[k]) for m in range(n)]
-                common = math.gcd(*image)
-                posterior = tuple(v // common for v in image)
-                probability = number(Fraction(weight, mass * scale))
+                posterior = av.update_belief(belief, (i, h, e))
                 follow = (float_belief if policy is None
-                          else pomdp.belief_update(float_belief[None, :], i, h, e)[0][0])
-                total += probability * value(t + 1, x2, step(q, x2, posterior), posterior,
-                                             (*route, town.states[x2]), follow)
+                          else pomdp.filter(float_belief[None, :], i, h, e, rule=rule)[0][0])
+                total += number(probability) * value(
+                    t + 1, x2, step(q, x2, posterior), posterior,
+                    None if true is None or law is None else true.update_belief(law, (i, h, e)),
+                    (*route, town.states[x2]), follow)
             best = max(best, total)
         memo[key] = best
         return best
 
     start = town.state_index(spec.start)
-    root = tuple(prior)
-    return value(0, start, step(dfa.initial, start, root), root, (spec.start,),
+    return value(0, start, step(compiled.dfa.initial, start, av.prior), av.prior,
+                 None if true is None else true.prior, (spec.start,),
                  np.asarray(pomdp.initial_belief, dtype=float))
 
 
