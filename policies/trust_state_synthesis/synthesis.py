@@ -52,7 +52,7 @@ from trustroute.policies.routing.protocol import Certificate
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.result import Record, SynthesisResult, record_dict
-from trustroute.policies.synthesis.rounding import joint_rounding, relative_margin, rounded_down
+from trustroute.policies.synthesis.rounding import joint_rounding, relative_margin, rounded_down, rounded_up
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.search import (
     JointBounds,
@@ -345,11 +345,15 @@ def _synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings
     chosen = best[0]
     policy, value = chosen.policy, chosen.value
     # converged on the computed values; L reported rounded down for the joint filter's histories
-    # of at most the policy's evaluation cap (rounding.py; U carries its per-backup margins)
+    # of at most the policy's evaluation cap, U up for the searches' depth (rounding.py: the
+    # relaxation's per-backup margin covers its own sums, not the float model against the exact
+    # one, such as a prior whose type weights sum to 1 only within the population file's tolerance)
     converged = bool(upper - value.lower <= tau)
     rounding = joint_rounding(pomdp, compile_spec(spec, pomdp.town).dfa.n_states, belief_rule)
     depth = chosen.horizon if value.junctions is None else max(value.junctions, chosen.horizon)
     lower = float(rounded_down(value.lower, relative_margin(rounding, depth, belief_rule)))
+    upper_depth = horizon if horizon is not None else max(UNBOUNDED_DEPTHS)
+    upper = float(rounded_up(upper, relative_margin(rounding, upper_depth, belief_rule)))
     policy.lower, policy.upper = lower, upper
     stats = JointSynthesisStats(
         belief_rule=belief_rule, converged=converged, stopped=_stopped(converged, ends, value, horizon),
