@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import asyncio
 import ipaddress
-import json
 import logging
 import resource
 import socket
@@ -57,7 +56,7 @@ from trustroute.harness.live.protocol import (
     MessageError,
     TokenBucket,
     error_reply,
-    unique_keys,
+    json_value,
 )
 
 MAX_SOCKETS = 2        # open websockets per participant: the live one and the one replacing it
@@ -225,16 +224,15 @@ def request_refusal(method: str, headers: Headers, origins: frozenset[str] | Non
 
 
 def parse_body(received: list[Message], scope: Scope) -> JSONResponse | None:
-    """422 `malformed` for a JSON body that names a key twice (protocol.unique_keys) or is nested
-    too deeply to parse, else None, the parsed value kept as scope[PARSED_BODY] for the route (a
-    body that is no JSON keeps its ValueError there: the route's to refuse, if it reads a body)."""
+    """422 `malformed` for a JSON body that names a key twice or is nested too deeply to parse
+    (protocol.json_value, the websocket's reader too), else None, the parsed value kept as
+    scope[PARSED_BODY] for the route (a body that is no JSON keeps its ValueError there: the
+    route's to refuse, if it reads a body)."""
     body = b"".join(message.get("body", b"") for message in received)
     try:
-        scope[PARSED_BODY] = json.loads(body, object_pairs_hook=unique_keys)
+        scope[PARSED_BODY] = json_value(body, "body")
     except MessageError as exc:
         return refused(422, exc.reply)
-    except RecursionError:
-        return refused(422, error_reply("malformed", "the body is nested too deeply"))
     except ValueError as exc:
         scope[PARSED_BODY] = exc
     return None

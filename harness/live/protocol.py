@@ -233,23 +233,34 @@ def unique_keys(pairs: list[tuple[str, object]]) -> dict:
     return dict(pairs)
 
 
+def json_value(text: str | bytes, what: str) -> object:
+    """`text` (a websocket message or an HTTP body: `what`) read as JSON, once: MessageError
+    `malformed` for an object naming a key twice or nesting deeper than the parser goes, ValueError
+    for text that is no JSON. NaN, Infinity and numbers beyond a float's range (1e400) read as
+    floats, as pydantic's JSON mode reads them: the schemas' fields refuse them where they refuse them
+    in JSON."""
+    try:
+        return json.loads(text, object_pairs_hook=unique_keys)
+    except RecursionError:
+        raise MessageError("malformed", f"the {what} is nested too deeply") from None
+
+
 def parse_client_message(raw: str | bytes) -> ClientMessage:
-    """The validated message, or MessageError (binary, oversized or malformed)."""
+    """The validated message, or MessageError (binary, oversized or malformed). The text is parsed
+    once (`json_value`) and the value validated against CLIENT_MESSAGE."""
     if not isinstance(raw, str):
         raise MessageError("malformed", "a message is JSON text, not a binary frame")
     size = len(raw.encode())
     if size > MAX_MESSAGE_BYTES:
         raise MessageError("oversized", f"{size} bytes; a message holds at most {MAX_MESSAGE_BYTES}")
     try:
-        message = CLIENT_MESSAGE.validate_json(raw)
+        return CLIENT_MESSAGE.validate_python(json_value(raw, "message"))
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(part) for part in first.get("loc", ())) or "message"
         raise MessageError("malformed", f"{where}: {first.get('msg', 'invalid')}") from None
-    except (ValueError, json.JSONDecodeError) as exc:
+    except ValueError as exc:
         raise MessageError("malformed", f"not a JSON message ({exc})") from None
-    json.loads(raw, object_pairs_hook=unique_keys)   # (a valid message, so a shallow one)
-    return message
 
 
 @dataclass

@@ -10,6 +10,7 @@ import time
 
 import pytest
 from fastapi.testclient import TestClient
+from pydantic import TypeAdapter
 from starlette.websockets import WebSocketDisconnect
 
 from trustroute.core.errors import InputError
@@ -263,6 +264,31 @@ def test_a_body_is_parsed_once(client, live_study, monkeypatch):
     response = client.post("/api/participants", content=body, headers={
         **bearer(live_study.experimenter_token), "content-type": "application/json"})
     assert response.status_code == 200 and live_study.sessions[0].label == "parsed once"
+    assert len(parsed) == 1
+
+
+def test_a_message_is_parsed_once(client, live_study, monkeypatch):
+    """A websocket message's text is read by one JSON parser once (protocol.json_value, which
+    refuses a key given twice) and the value validated: neither pydantic's JSON mode nor a second
+    `json.loads` reads it again."""
+    loads, validate_json, parsed = json.loads, TypeAdapter.validate_json, []
+    message = '{"type": "ping"}'
+
+    def counting_loads(text, *args, **kwargs):
+        parsed.extend([text] if text == message else [])
+        return loads(text, *args, **kwargs)
+
+    def counting_validate_json(adapter, data, *args, **kwargs):
+        parsed.extend([data] if data == message else [])
+        return validate_json(adapter, data, *args, **kwargs)
+
+    monkeypatch.setattr(json, "loads", counting_loads)
+    monkeypatch.setattr(TypeAdapter, "validate_json", counting_validate_json)
+    token = create(client, live_study)
+    with client.websocket_connect("/ws", headers=bearer(token)) as socket:
+        socket.receive_json(), socket.receive_json()
+        socket.send_text(message)
+        assert socket.receive_json() == {"type": "pong"}
     assert len(parsed) == 1
 
 
