@@ -28,6 +28,7 @@ from pydantic import (
     model_validator,
 )
 
+from trustroute.harness.simulation.driving_style import AUTOPILOT, MANUAL
 from trustroute.harness.study.config import LiveInput
 
 MAX_MESSAGE_BYTES = 4096       # a websocket message larger than this is refused unread
@@ -80,6 +81,10 @@ class Takeover(ClientMessage):
 
 class HandBack(ClientMessage):
     type: Literal["hand_back"]
+
+
+# The mode each asks the episode for (the ego's driving style, harness/simulation/driving_style.py).
+REQUESTED_MODE = {"takeover": MANUAL.name, "hand_back": AUTOPILOT.name}
 
 
 class Drive(ClientMessage):

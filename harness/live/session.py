@@ -6,7 +6,8 @@ Phases: "consent" (the consent text is shown) -> "ready" (a trial can start) -> 
 questionnaires, "questionnaire" (one is shown) comes after the consent, after a trial and at the
 end, until each is answered. A client message
 that does not fit the phase (a takeover before consent, a hand-back on autopilot, a resume of the
-experimenter's pause) is refused with an `out_of_order` error and changes nothing.
+experimenter's pause) is refused with an `out_of_order` error and changes nothing; a hand-back that
+crosses the episode's own at the junction is not one (`Session.switch`).
 
 The trials are the participant's planned episodes in the study's order (harness/study/plan.py);
 a trial is done when its part exists, so an aborted, failed or interrupted episode is run again
@@ -24,6 +25,7 @@ from typing import Any
 
 from trustroute.harness.live.answers import answered, save_answers
 from trustroute.harness.live.protocol import (
+    REQUESTED_MODE,
     Answers,
     ClientMessage,
     Consent,
@@ -68,6 +70,8 @@ class Session:
         self.pause_reason: str | None = None
         self.task: EpisodeTask | None = None
         self.mode = "auto"
+        self.asked = "auto"              # the mode the participant's last takeover or hand-back asked for
+        self.switched_unasked = False    # the episode switched to `mode` on its own since then
         self.road: str | None = None
         self.reports = self.takeovers = 0
         self.prompted: set[int] = set()   # the roads the running episode has asked a report about
@@ -160,11 +164,7 @@ class Session:
                 self.start(self.pending()[0], message.trust)
             elif isinstance(message, (Takeover, HandBack)):
                 self.require("driving", message)
-                wanted = "auto" if isinstance(message, Takeover) else "manual"
-                if self.mode != wanted:
-                    raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
-                self.tell(message.model_dump())
-                return []
+                return self.switch(message)
             elif isinstance(message, (Drive, Steer, Control)):
                 self.drive(message)
                 return []
@@ -186,6 +186,23 @@ class Session:
                     raise MessageError("out_of_order", "the experimenter paused this episode")
                 self.resume()
             return [self.progress()]
+
+    def switch(self, message: Takeover | HandBack) -> list[dict]:
+        """A takeover or hand-back, told to the episode (its `mode` event confirms it). One asking
+        for the mode the episode switched to on its own since the participant last asked (the
+        junction's hand-back, crossed by a hand-back sent a moment late) is done already: the state
+        acknowledges it and the episode is told nothing, so nothing is logged. Any other asking for
+        the mode the ego is on is out of order: a second request, or one before its first is
+        applied."""
+        wanted = REQUESTED_MODE[message.type]
+        if self.mode == wanted and self.switched_unasked:
+            self.switched_unasked = False   # (asked for now: a second request is out of order)
+            return [self.progress()]
+        if self.mode == wanted:
+            raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
+        self.tell(message.model_dump())
+        self.asked, self.switched_unasked = wanted, False
+        return []
 
     def signal(self, message: Ping | Shown) -> list[dict]:
         """A ping's pong; the station's `shown` to the running episode, for its pace (no reply)."""
@@ -236,6 +253,7 @@ class Session:
         self.process, self.connection = start_episode_process(
             self.study.config, target, task, self.study.live_options(self.client, self.lockstep), trust)
         self.task, self.phase, self.mode, self.road, self.last_error = task, "driving", "auto", None, None
+        self.asked, self.switched_unasked = "auto", False
         self.prompted = set()
         self.study.attempt_started(task, task is self.warm_up)
         reader = threading.Thread(target=self.read_episode, args=(self.connection, self.process),
@@ -266,6 +284,9 @@ class Session:
             if kind == "mode":
                 self.mode = message["mode"]
                 self.takeovers += self.mode == "manual"
+                self.switched_unasked = self.mode != self.asked
+            elif kind == "warning" and message.get("kind") == "back_to_lane":
+                self.asked = self.mode   # the episode refused the hand-back (by wheel, off the lane)
             elif kind == "frame":
                 self.road = message["road"]
             elif kind == "road" and message.get("prompt"):   # (recorded before the station sees it)

@@ -53,6 +53,7 @@ from pathlib import Path
 import pyarrow as pa
 
 from trustroute.core.dataset import INCIDENTS_SCHEMA, table_from_rows
+from trustroute.harness.live.protocol import REQUESTED_MODE
 from trustroute.harness.live.view import Statics, dead_reckoned, ego_view, next_junction, surroundings
 from trustroute.harness.live.warmup import run_warm_up
 from trustroute.harness.simulation.drivers import NO_INPUTS, ManualInputs
@@ -221,9 +222,13 @@ class RemoteDriver:
             self.apply(control)
 
     def apply(self, control: dict, logged: bool = False) -> None:
-        kind = control.get("type")
+        kind = str(control.get("type", ""))
         if kind == "shown":   # the pace's, not the person's: not an event
             self.station_time = float(control["t"])
+            return
+        if REQUESTED_MODE.get(kind) == self.mode:
+            # it crossed the episode's own switch to that mode (the junction's hand-back) before the
+            # server was told of it (harness/live/session.py, Session.switch): done, not an event
             return
         if kind == "trust":   # the road it answers, else (a report outside a prompt) the road open
             answered = self.answered_road(control.get("prompt"))

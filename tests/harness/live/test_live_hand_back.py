@@ -3,13 +3,14 @@ against the mode the episode last told it of (harness/live/session.py), so in th
 comes within the warning's distance of the road's end, the mode must reach the session before the
 warning does: a participant who answers the warning at once, before the server has read the next
 message from the episode, would otherwise be refused, and the ego would wait short of the
-junction for a hand-back that no longer comes."""
+junction for a hand-back that no longer comes. Nor is a hand-back that comes a moment after the
+episode's own at the commit point: it is done already, and acknowledged as such."""
 
 from __future__ import annotations
 
 import pytest
 
-from trustroute.harness.live.protocol import parse_client_message
+from trustroute.harness.live.protocol import MessageError, parse_client_message
 from trustroute.harness.live.session import Session
 from trustroute.harness.live.worker import LiveOptions, RemoteDriver
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE
@@ -91,3 +92,59 @@ def test_a_takeover_near_the_road_end_reaches_the_session_before_its_warning(tmp
     first_manual = ticks["time"][ticks["mode"] == "manual"].min()
     back = ticks["time"][(ticks["mode"] == "auto") & (ticks["time"] > first_manual)].min()
     assert back - first_manual <= 2.0   # handed back at once, not held short of the junction
+
+
+class NoStudy:
+    """The study of a session run without a server: no trial of it is done yet."""
+
+    def is_done(self, task) -> bool:
+        return False
+
+
+class LateParticipant(Relay):
+    """A participant who does not answer the warning but hands back a moment after the episode has
+    handed back on its own (their hand-back crosses the episode's mode change on the way)."""
+
+    def __init__(self, session: Session) -> None:
+        super().__init__(session)
+        self.replies: list[list[dict]] = []   # the server's replies to each hand-back
+
+    def participant(self, message: dict) -> None:
+        if message["type"] == "mode" and message["mode"] == "auto":
+            for _ in range(2):   # the late hand-back, then the same again
+                try:
+                    self.replies.append(self.session.handle(parse_client_message('{"type": "hand_back"}')))
+                except MessageError as exc:
+                    self.replies.append([exc.reply])
+
+
+def test_a_hand_back_just_after_the_episodes_own_is_done_not_refused(tmp_path):
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    session = Session(NoStudy(), task.participant, [task], consented=False)
+    session.phase, session.task = "driving", task   # the session of the running episode
+    relay = LateParticipant(session)
+    driver = RemoteDriver(relay, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"),
+                          episode_id=task.episode_id)
+    taken: list[str] = []
+
+    def observe(sumo, ego, mode, road):
+        # a takeover applied in the next step, too close to the commit point to stop before it (the
+        # hold brakes at 3 m/s^2), but not in the step that reaches it (that one is carried to the
+        # next road): the episode hands back at the commit point
+        room = sumo.lane.getLength(ego.lane) - ego.lane_position if ego.road == road else 0.0
+        ahead = room - COMMIT_DISTANCE - ego.speed   # before the commit point after this step and the next
+        if not taken and mode == "auto" and ego.speed > 8.0 and 2.0 < ahead < 8.0:
+            taken.append(road)
+            session.handle(parse_client_message('{"type": "takeover"}'))
+        driver.observe(sumo, ego, mode, road)
+
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver)
+    modes = [(m["mode"], m["t"]) for m in relay.sent if m["type"] == "mode"]
+    assert [mode for mode, _ in modes] == ["manual", "auto"]
+    late, again = relay.replies
+    assert [(reply["type"], reply.get("mode")) for reply in late] == [("state", "auto")]   # done, no error
+    assert [reply.get("code") for reply in again] == ["out_of_order"]   # asked twice: out of order
+    assert [e["type"] for e in driver.events] == ["takeover"]   # the episode was told nothing more
+    (row,) = record.incidents[record.incidents["takeover"]].to_dict("records")
+    assert (row["takeover_start"], row["takeover_end"]) == (modes[0][1], modes[1][1])

@@ -406,6 +406,46 @@ def test_an_accepted_trust_report_is_acknowledged_and_a_refused_one_is_not(clien
     assert [c.get("value") for c in session.connection.controls if c["type"] == "trust"] == [5, 3]
 
 
+def test_a_hand_back_crossing_the_episodes_own_is_done_and_other_repeats_are_refused(client, live_study):
+    """A hand-back asking for the mode the episode switched to on its own since the participant last
+    asked (the commit point's hand-back) is acknowledged with the state and told to nobody; one on
+    an autopilot the participant never left, one before their takeover is applied, and a second
+    one stay out of order."""
+    session, pushed = running(client, live_study)
+    takeover, hand_back = (parse_client_message(json.dumps({"type": kind}))
+                           for kind in ("takeover", "hand_back"))
+
+    def refused(message) -> bool:
+        with pytest.raises(MessageError) as info:
+            session.handle(message)
+        return info.value.reply["code"] == "out_of_order"
+
+    assert refused(hand_back)   # never taken over
+    assert session.handle(takeover) == []
+    assert refused(hand_back)   # the takeover is not applied yet
+    session.on_episode_message({"type": "mode", "mode": "manual", "t": 10.0})
+    assert refused(takeover)
+    session.on_episode_message({"type": "mode", "mode": "auto", "t": 20.0})   # the commit point's
+    (reply,) = session.handle(hand_back)
+    assert (reply["type"], reply["phase"], reply["mode"]) == ("state", "driving", "auto")
+    assert refused(hand_back)   # asked twice
+    # the participant's own hand-back leaves nothing to cross; one the episode refused (by wheel,
+    # off the lane) still does, once the episode hands back itself
+    assert session.handle(takeover) == []
+    session.on_episode_message({"type": "mode", "mode": "manual", "t": 30.0})
+    assert session.handle(hand_back) == []
+    session.on_episode_message({"type": "mode", "mode": "auto", "t": 31.0})
+    assert refused(hand_back)
+    assert session.handle(takeover) == []
+    session.on_episode_message({"type": "mode", "mode": "manual", "t": 40.0})
+    assert session.handle(hand_back) == []
+    session.on_episode_message({"type": "warning", "kind": "back_to_lane", "t": 40.5})
+    session.on_episode_message({"type": "mode", "mode": "auto", "t": 45.0})
+    assert [m["type"] for m in session.handle(hand_back)] == ["state"]
+    told = [control["type"] for control in session.connection.controls]
+    assert told == ["takeover", "takeover", "hand_back", "takeover", "hand_back"]
+
+
 def test_a_participant_who_does_not_agree_leaves_only_that_fact(client, live_study):
     """`{"type": "consent", "agree": false}` ends the session: the socket is closed with reason
     "declined", the registry keeps only that and its time (no label, no token: their cookie opens

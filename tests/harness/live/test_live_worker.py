@@ -492,8 +492,26 @@ def test_road_events_prompt_every_report_every_roads_and_answers_name_their_road
     assert logged == [(6, 1, False), (3, 2, True), (5, 4, False), (2, 4, False)]
     driver.apply({"type": "takeover"})
     assert driver.takeover_request(1.0) is True and driver.takeover_request(1.5) is None
+    driver.announce_mode("manual", 1.5)   # (the episode applied the takeover)
     driver.apply({"type": "hand_back"})
     assert driver.takeover_request(2.0) is False
+
+
+def test_a_request_for_the_mode_the_ego_is_on_is_neither_applied_nor_logged():
+    """A hand-back that crossed the episode's own at the commit point before the server was told of
+    it reaches the episode on autopilot: done already, so it is no event of the part."""
+    driver = RemoteDriver(Pipe(), (1, 2, 3, 4, 5, 6, 7), None, LiveOptions(), episode_id="e1")
+    driver.apply({"type": "hand_back"})
+    assert driver.takeover_request(0.5) is None and driver.events == []
+    driver.apply({"type": "takeover"})
+    assert driver.takeover_request(1.0) is True
+    driver.announce_mode("manual", 1.5)
+    driver.apply({"type": "takeover"})
+    assert driver.takeover_request(2.0) is None
+    driver.announce_mode("auto", 2.5)   # the episode's own hand-back at the commit point
+    driver.apply({"type": "hand_back"})
+    assert driver.takeover_request(3.0) is None
+    assert [event["type"] for event in driver.events] == ["takeover"]
 
 
 def test_every_answer_goes_on_the_road_it_answers_and_the_last_is_awaited(tmp_path):
