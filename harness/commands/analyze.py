@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from trustroute.harness.commands.output import json_option, with_paths
+from trustroute.harness.commands.output import json_option, study_warnings, with_paths
 from trustroute.harness.commands.study import report_paths
 
 
@@ -39,6 +39,7 @@ def analyze(study_dir: str, as_json: bool, belief_source: str | None, wide: bool
     paired tests."""
     from trustroute.analysis.study.analysis import study_analysis
 
+    warnings = study_warnings(Path(study_dir))
     analysis = study_analysis(Path(study_dir), belief_source=belief_source)
     real = None
     if analysis.manifest.get("engine") == "carla-logs":
@@ -56,7 +57,7 @@ def analyze(study_dir: str, as_json: bool, belief_source: str | None, wide: bool
             written = write_real_study_report(real, Path(study_dir))
             real_paths = {"real_study_json": written, "real_study_text": written.with_suffix(".txt")}
     if as_json:
-        payload = analysis.to_dict()
+        payload = {**analysis.to_dict(), "warnings": warnings}
         if real is not None:
             payload["real_study"] = real.to_dict()
         payload = with_paths(payload, {**report_paths(paths), **real_paths} if paths is not None else {})

@@ -13,7 +13,7 @@ import click
 
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import UsageFix, bounded_int
-from trustroute.harness.commands.output import json_flag, quiet_flag, with_paths
+from trustroute.harness.commands.output import json_flag, quiet_flag, study_warnings, with_paths
 
 CHECK_REPLICATES = 50  # simulated drivers per real episode in `fit --check`
 CHECK_EPISODES = 20_000  # model-engine episodes per spec, condition and driver model in `fit --check`
@@ -70,13 +70,14 @@ def fit(study_dir: str, options: FitOptions) -> None:
             raise UsageFix("--types fits by EM; it takes neither --check nor --method counts",
                            "drop --check and --method counts, or drop --types")
         check_output_file(out, "--out", "driver-population file", studies={"DIR": study_dir})
-        fit_types(Path(study_dir), Path(out), options)
+        fit_types(Path(study_dir), Path(out), options, study_warnings(Path(study_dir)))
         return
     check_output_file(out, "--out", "driver model file", studies={"DIR": study_dir})
+    warnings = study_warnings(Path(study_dir))
     result = fit_study(Path(study_dir), method=method, iterations=iterations,
                        progress=not (quiet or as_json))
     path = result.write(Path(out))
-    payload = result.summary()
+    payload = {**result.summary(), "warnings": warnings}
     paths: dict[str, Path] = {"driver_model": path}
     if bootstrap:
         import numpy as np
@@ -174,8 +175,9 @@ def _type_count(types: str) -> int | None:
     return value
 
 
-def fit_types(study_dir: Path, out: Path, options: FitOptions) -> None:
-    """`trustroute fit --types`: the mixture, its BIC table and bootstrap, a driver-population file."""
+def fit_types(study_dir: Path, out: Path, options: FitOptions, warnings: list[str]) -> None:
+    """`trustroute fit --types`: the mixture, its BIC table and bootstrap, a driver-population file
+    (`warnings`: what reading the study could not check, already said)."""
     import time
 
     import numpy as np
@@ -224,7 +226,7 @@ def fit_types(study_dir: Path, out: Path, options: FitOptions) -> None:
                   f"shared report accuracy {best.report_accuracy:.4f}")
     path = write_driver_population(mixture_population(best, str(study_dir), provenance), out)
     criterion = "BIC (n = participants)" if fixed is None else "given"
-    payload: dict = {"types": best.n_types, "criterion": criterion,
+    payload: dict = {"types": best.n_types, "criterion": criterion, "warnings": warnings,
                      "fit": best.summary(), "provenance": provenance,
                      "responsibilities": {str(p): dict(zip(best.type_names(), row.tolist(), strict=True))
                                           for p, row in zip(best.participants, best.responsibilities,

@@ -61,3 +61,24 @@ def emit(as_json: bool, payload: Mapping, lines: list[str]) -> None:
     else:
         for line in lines:
             click.echo(line)
+
+
+def warn(line: str) -> None:
+    """A warning: one line on stderr, `warning: ` before it, with or without --json (whose object
+    lists the command's warnings under "warnings")."""
+    click.echo(f"warning: {line}", err=True)
+
+
+def study_warnings(study_dir: Path) -> list[str]:
+    """What a command reading the study directory cannot check, said (`warn`) before it reads the
+    study, so a command that then fails has said it too; the lines, for --json's "warnings": a
+    manifest without the hash of its config (harness/study/inputs.py, `unchecked_config`, which
+    the replay says too)."""
+    from trustroute.core.dataset import read_manifest
+    from trustroute.harness.study.inputs import unchecked_config
+
+    line = unchecked_config(read_manifest(study_dir), study_dir)
+    warnings = [] if line is None else [line]
+    for warning in warnings:
+        warn(warning)
+    return warnings

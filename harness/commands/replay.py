@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from trustroute.app.engines import ENGINES
-from trustroute.harness.commands.output import json_option, with_paths
+from trustroute.harness.commands.output import json_option, warn, with_paths
 
 VIEWER_PORT, DATA_PORT = 9090, 9876
 
@@ -71,7 +71,7 @@ def replay(
                     '(run the study with engine = "sumo" for recordings)' if rrd is None else None)
     # said on stderr before the episode runs, so even a replay that then fails says it
     result = replay_episode(Path(study_dir), episode_id, rrd_path=rrd, gui=gui,
-                            warn=lambda line: click.echo(f"warning: {line}", err=True))
+                            warn=warn)
     roads = result.record.roads
     payload = {
         "episode_id": episode_id,

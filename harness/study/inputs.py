@@ -183,7 +183,9 @@ def unchecked_config(manifest: dict, study_dir: Path) -> str | None:
     """The warning line for a manifest that stored its inputs but no `inputs.config_sha256` (one
     written before config hashes were recorded): nothing checks its config, so an edit to it shows
     only as a replay that differs from the log. None when the hash is recorded, or when the manifest
-    stored no inputs (its config is checked by `config_hash`, harness/study/replay.py)."""
+    stored no inputs (its config is checked by `config_hash`, harness/study/replay.py). The replay
+    says it, and so does every command reading a study (harness/commands/output.py,
+    `study_warnings`)."""
     inputs = manifest.get("inputs")
     if not inputs or "config_sha256" in inputs:
         return None
