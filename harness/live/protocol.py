@@ -241,9 +241,9 @@ def unique_keys(pairs: list[tuple[str, object]]) -> dict:
 def json_value(text: str | bytes, what: str) -> object:
     """`text` (a websocket message or an HTTP body: `what`) read as JSON, once: MessageError
     `malformed` for an object naming a key twice or nesting deeper than the parser goes, ValueError
-    for text that is no JSON. NaN, Infinity and numbers beyond a float's range (1e400) read as
-    floats, as pydantic's JSON mode reads them: the schemas' fields refuse them where they refuse them
-    in JSON."""
+    for text that is no JSON. NaN, Infinity and numbers beyond a float's range (1e400) read as the
+    floats pydantic's JSON mode reads, so each schema refuses them where it would refuse them in
+    JSON (a finite number field) and takes them where it would take them."""
     try:
         return json.loads(text, object_pairs_hook=unique_keys)
     except RecursionError:

@@ -15,7 +15,14 @@ from starlette.websockets import WebSocketDisconnect
 
 from trustroute.core.errors import InputError
 from trustroute.harness.live.app import POLICY_VIOLATION, live_app
-from trustroute.harness.live.protocol import BURST, MAX_BODY_BYTES, MAX_MESSAGE_BYTES
+from trustroute.harness.live.protocol import (
+    BURST,
+    MAX_BODY_BYTES,
+    MAX_MESSAGE_BYTES,
+    MessageError,
+    error_reply,
+    parse_client_message,
+)
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 from trustroute.harness.study.config import load_study_config
 
@@ -290,6 +297,25 @@ def test_a_message_is_parsed_once(client, live_study, monkeypatch):
         socket.send_text(message)
         assert socket.receive_json() == {"type": "pong"}
     assert len(parsed) == 1
+
+
+@pytest.mark.parametrize("number", ["NaN", "Infinity", "-Infinity", "1e400", "-1e400"])
+def test_a_number_that_is_not_finite_is_malformed_wherever_a_message_has_a_number(number):
+    """NaN, Infinity and 1e400 (beyond a float's range: infinite) read as floats; every number field
+    of the messages refuses them."""
+    steer = control(source="keyboard").replace('"steer": 0', f'"steer": {number}')
+    for raw in (f'{{"type": "shown", "t": {number}}}', steer, f'{{"type": "trust", "value": {number}}}',
+                f'{{"type": "trust", "value": 4, "prompt": {{"episode_id": "e", "road": {number}}}}}'):
+        with pytest.raises(MessageError) as info:
+            parse_client_message(raw)
+        assert info.value.reply["code"] == "malformed", raw
+
+
+def test_a_message_nested_too_deeply_is_malformed():
+    for raw in ("[" * 2000, '{"type": "ping", "x": ' + "[" * 1500 + "]" * 1500 + "}"):
+        with pytest.raises(MessageError) as info:
+            parse_client_message(raw)
+        assert info.value.reply == error_reply("malformed", "the message is nested too deeply")
 
 
 def test_a_body_is_counted_as_it_is_received(live_study):
