@@ -1,7 +1,8 @@
 """What a study's simulated rates are compared with: exact values and synthesized bounds.
 
 For every (spec, condition) policy of a study: its exact satisfaction probability with the study's
-fallback rule and junction cap (policies.evaluation.plain, for the nominal driver model: no sampling) and
+fallback rule and junction cap (policies.evaluation.plain, for the nominal driver model: no sampling),
+as `trustroute evaluate` reports it (rounded outward: policies/synthesis/rounding.py, `certify`), and
 the [lower, upper] that synthesis certified for it (read from its policy file), stored in the
 manifest by the runner and shown beside the simulated rates by the analysis.
 """
@@ -24,6 +25,7 @@ def expected_values(context: StudyContext) -> dict:
     from trustroute.policies.evaluation.settings import EvaluationSettings
     from trustroute.policies.evaluation.trust_state import evaluate_joint as evaluate
     from trustroute.policies.model.trust_pomdp import build_pomdp
+    from trustroute.policies.synthesis.rounding import certify, evaluation_rounding
 
     config = context.config
     pomdp = build_pomdp(context.town, context.nominal)
@@ -49,6 +51,10 @@ def expected_values(context: StudyContext) -> dict:
                                belief_rule=belief_rule(config)),
             truth=pomdp if own else None,
         )
+        # reported as `trustroute evaluate` reports it: rounded outward for the nominal driver's
+        # constants, whose posterior gives the probabilities (a hidden DFA state: its own model's)
+        value = certify(value, evaluation_rounding(pomdp, setup.spec,
+                                                   dfa_is_hidden(setup.driver_model, setup.spec)))
         entry: dict[str, float | None] = {
             "exact_lower": value.lower,
             "exact_upper": value.upper,

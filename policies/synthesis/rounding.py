@@ -23,8 +23,10 @@ import numpy as np
 
 from trustroute.policies.belief.exact_labels import decimal, exact_prior
 from trustroute.policies.belief.problem import Problem
+from trustroute.policies.evaluation.ledgers import Evaluation
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.labelling import UNIT_ROUNDOFF, gamma
+from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 
 # Outcomes (h, e) of one road: the terms of one backup's sum, at most.
@@ -127,10 +129,25 @@ def problem_rounding(problem: Problem, pomdp: TrustPOMDP | None = None) -> Model
     """The constants of the unfolding that values a policy on `problem` (or on `pomdp` in its
     place): the joint (θ, q) filter's when the DFA state is hidden, the model's otherwise. Its
     probabilities are the true process's, a Bayes posterior whatever the AV's own rule."""
-    pomdp = pomdp or problem.pomdp
-    if problem.dfa_hidden:
-        return joint_rounding(pomdp, compile_spec(problem.spec, problem.town).dfa.n_states)
+    return evaluation_rounding(pomdp or problem.pomdp, problem.spec, problem.dfa_hidden)
+
+
+def evaluation_rounding(pomdp: TrustPOMDP, spec: Spec, dfa_hidden: bool) -> ModelRounding:
+    """The constants of the unfolding that values a policy for `spec` with `pomdp` giving the
+    probabilities: the joint (θ, q) filter's when the DFA state is hidden (`dfa_hidden`), the
+    model's otherwise (Bayes: the true process's posterior, whatever the AV's own rule)."""
+    if dfa_hidden:
+        return joint_rounding(pomdp, compile_spec(spec, pomdp.town).dfa.n_states)
     return model_rounding(pomdp)
+
+
+def certify(value: Evaluation, rounding: ModelRounding) -> Evaluation:
+    """An evaluation's computed [lower, upper] rounded outward for its histories of at most
+    `value.max_junctions` steps under the constants `rounding` (`evaluation_rounding`), so that it
+    holds exactly: every evaluation reported to a user (`evaluate`, `baseline`, a study's
+    expected values) is this one."""
+    lower, upper = widen(value.lower, value.upper, relative_margin(rounding, value.max_junctions, "bayes"))
+    return replace(value, lower=lower, upper=upper)
 
 
 def relative_margin(rounding: ModelRounding, depth: int, rule: BeliefRule) -> float:

@@ -165,6 +165,14 @@ def joint_cap_note(cap: str, seconds: float) -> str:
             "tighten these bounds")
 
 
+def joint_margin(pomdp: TrustPOMDP, spec: Spec, belief_rule: BeliefRule, depth: int) -> float:
+    """The relative margin (rounding.py) of the joint (θ, q) filter's histories of at most `depth`
+    junctions under `belief_rule`: what a trust-state synthesis' L and U, and a value of its policy
+    reported beside them, are rounded outward by."""
+    rounding = joint_rounding(pomdp, compile_spec(spec, pomdp.town).dfa.n_states, belief_rule)
+    return relative_margin(rounding, depth, belief_rule)
+
+
 def reached_joint_cap(stats: object) -> str | None:
     """The cap (work_clock.CAPS) that ended a trust-state synthesis before its limits, if one did
     (the statistics of other syntheses never say so)."""
@@ -349,11 +357,10 @@ def _synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings
     # relaxation's per-backup margin covers its own sums, not the float model against the exact
     # one, such as a prior whose type weights sum to 1 only within the population file's tolerance)
     converged = bool(upper - value.lower <= tau)
-    rounding = joint_rounding(pomdp, compile_spec(spec, pomdp.town).dfa.n_states, belief_rule)
     depth = chosen.horizon if value.junctions is None else max(value.junctions, chosen.horizon)
-    lower = float(rounded_down(value.lower, relative_margin(rounding, depth, belief_rule)))
+    lower = float(rounded_down(value.lower, joint_margin(pomdp, spec, belief_rule, depth)))
     upper_depth = horizon if horizon is not None else max(UNBOUNDED_DEPTHS)
-    upper = float(rounded_up(upper, relative_margin(rounding, upper_depth, belief_rule)))
+    upper = float(rounded_up(upper, joint_margin(pomdp, spec, belief_rule, upper_depth)))
     policy.lower, policy.upper = lower, upper
     stats = JointSynthesisStats(
         belief_rule=belief_rule, converged=converged, stopped=_stopped(converged, ends, value, horizon),

@@ -33,7 +33,7 @@ from trustroute.policies.synthesis.population import (
 )
 from trustroute.policies.synthesis.refinement import reached_node_budget
 from trustroute.policies.synthesis.result import SearchRun, SynthesisResult
-from trustroute.policies.synthesis.rounding import problem_rounding, relative_margin, widen
+from trustroute.policies.synthesis.rounding import certify, problem_rounding
 from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
 from trustroute.policies.trust_state_synthesis.population import certified_type_values
@@ -136,10 +136,8 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
 
 def certified(problem: Problem, value: Evaluation) -> Evaluation:
     """An evaluation's computed [lower, upper] rounded outward for its histories of at most
-    `max_junctions` steps (policies/synthesis/rounding.py), so that it holds exactly."""
-    margin = relative_margin(problem_rounding(problem), value.max_junctions, "bayes")
-    lower, upper = widen(value.lower, value.upper, margin)
-    return replace(value, lower=lower, upper=upper)
+    `max_junctions` steps (policies/synthesis/rounding.py, `certify`), so that it holds exactly."""
+    return certify(value, problem_rounding(problem))
 
 
 def evaluate_single(problem: Problem, policy: RoutingPolicy, settings: EvaluationSettings) -> Evaluation:
