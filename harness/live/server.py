@@ -284,11 +284,11 @@ class LiveStudy:
         refusal = f"participant {participant} does not exist or has withdrawn already"
         if session is None:
             raise ValueError(refusal)
-        if participant in self.declined:
-            raise ValueError(declined_refusal(self.study_dir, participant).one_line())
         with session.lock, self.lock:   # the withdrawal begins: no token is issued after it (replace_token)
             if participant in self.withdrawn:
                 raise ValueError(refusal)
+            if participant in self.declined:   # (checked under the locks a decline takes too)
+                raise ValueError(declined_refusal(self.study_dir, participant).one_line())
             session.phase = "withdrawn"   # the episode's last message changes nothing now
             session.label = ""            # (the registry keeps none either)
             self.credentials.participants.pop(participant, None)   # their token revoked

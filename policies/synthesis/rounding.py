@@ -6,7 +6,8 @@ numbers as the decimals they print as; docs/synthesis.md, "Labels at thresholds"
 term carries a relative error at most γ_N, N = `history_units(...)`, so the computed value lies
 within a factor (1 ± γ_N) of the exact quantity it stands for (docs/synthesis.md, "Rounding"
 proves it). `widen` turns the computed [L, U] into one that holds exactly: L down by that factor,
-U up, each rounded outward once more, clamped to [0, 1]. Zero stays zero and one stays one.
+U up, each rounded outward once more, clamped to [0, 1]. Zero stays zero, and an upper bound of
+one stays one (a computed lower bound of one is moved down by its margin like any other).
 
 The per-step units depend on the model: the relative gaps of its float likelihoods and update
 matrices to the exact ones, and how far its exact transition rows sum from 1, each computed

@@ -494,3 +494,40 @@ def test_a_declined_consent_holds_across_restarts_and_is_not_withdrawn(tmp_path,
         study.close()
     code, _, err = run_cli(capsys, "withdraw", str(tmp_path / "study"), "0")
     assert_one_line_error(code, err, "participant 0 did not agree to take part")
+
+
+def test_a_decline_just_before_a_withdrawal_takes_its_locks_is_not_withdrawn(tmp_path):
+    """The participant declines between the experimenter's withdrawal being asked for and its
+    taking the session's lock: the withdrawal is refused as for anyone who declined, and the
+    session stays "declined" in memory as in the registry."""
+    from trustroute.harness.live.protocol import Consent
+
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    try:
+        study.create_participant()
+        session = study.sessions[0]
+        real = session.lock
+
+        class DeclineFirst:
+            """The session's lock, the participant's decline slipped in before its first taking."""
+
+            fired = False
+
+            def __enter__(self):
+                if not DeclineFirst.fired:
+                    DeclineFirst.fired = True
+                    session.lock = real
+                    session.handle(Consent(type="consent", agree=False))
+                return real.__enter__()
+
+            def __exit__(self, *exc):
+                return real.__exit__(*exc)
+
+        session.lock = DeclineFirst()
+        with pytest.raises(ValueError, match="did not agree to take part"):
+            study.withdraw(0, "asked to")
+        assert DeclineFirst.fired and session.phase == "declined"
+        assert set(json.loads(study.registry_path().read_text())["participants"]["0"]) == {
+            "declined", "declined_utc"}
+    finally:
+        study.close()
