@@ -261,7 +261,8 @@ PENDING_IMPORTS = {
     "trustroute.harness.study.expected": {
         "trustroute.policies.belief.problem", "trustroute.policies.evaluation.settings",
         "trustroute.policies.evaluation.trust_state", "trustroute.policies.model.trust_pomdp",
-        "trustroute.policies.routing.decision_tables", "trustroute.policies.routing.files"},
+        "trustroute.policies.routing.decision_tables", "trustroute.policies.routing.files",
+        "trustroute.policies.synthesis.rounding"},
     "trustroute.harness.study.replay": {
         "trustroute.core.dataset", "trustroute.harness.simulation.sumo_start",
         "trustroute.harness.study.inputs", "trustroute.harness.study.manifest",
