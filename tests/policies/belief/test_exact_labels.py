@@ -237,7 +237,7 @@ def test_a_compacted_filter_keeps_the_held_words_in_order_and_forgets_the_rest(p
     changing = np.flatnonzero(scoped.changing)
     rng = np.random.default_rng(3)
     words = np.zeros(1, dtype=np.int64)
-    for _ in range(6):   # six levels of every changing symbol: a full tree of words
+    for _ in range(5):   # five levels of every changing symbol: a full tree of words
         words = scoped.extend(np.repeat(words, changing.size), np.tile(changing, words.size))
     held = np.sort(rng.choice(words, size=10, replace=False))
     beliefs, lengths, size = [scoped.belief(int(w)) for w in held], scoped.lengths(held), scoped._size
