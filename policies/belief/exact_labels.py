@@ -37,7 +37,8 @@ import numpy as np
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.belief.driver_types import TypeLiftedModel
 from trustroute.policies.logic.labelling import UNIT_ROUNDOFF, Labeller, atom_values, gamma
-from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+from trustroute.policies.model import trust_pomdp
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, row_blocks
 
 
 def decimal(value: float) -> Fraction:
@@ -176,9 +177,10 @@ class ExactFilter:
         begin, end = self._size, self._size + words.size
         if end > self._length.size:   # doubling: adding a word never copies them all
             capacity = max(2 * self._length.size, end)
-            self._parent, self._code, self._length = (
-                np.concatenate([a[:begin], np.zeros(capacity - begin, dtype=np.int64)])
-                for a in (self._parent, self._code, self._length))
+            for array in (self._parent, self._code, self._length):
+                # in place (realloc, the new rows zero): the old and the new arrays are never held
+                # at once; no view of them outlives a call of this filter's (refcheck is for those)
+                array.resize(capacity, refcheck=False)
         self._parent[begin:end] = words
         self._code[begin:end] = codes
         self._length[begin:end] = self._length[words] + 1
@@ -398,9 +400,18 @@ class ExactLabels:
 
     def step(self, q: np.ndarray, x: np.ndarray, beliefs: np.ndarray, words: np.ndarray,
              trust: np.ndarray | None = None) -> np.ndarray:
-        """int [n]: DFA states after reading positions (x, beliefs) from q, belief labels exact."""
-        truth = self.truth(beliefs, words)
-        return self.labeller.step(q, x, beliefs, trust, belief_truth=truth)
+        """int [n]: DFA states after reading positions (x, beliefs) from q, belief labels exact;
+        trust_pomdp.BLOCK_ROWS rows at a time (a row's labels and step are its own: atom_values
+        sums alike in a batch of any size, and a label near its threshold is decided exactly)."""
+        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        n, block = beliefs.shape[0], trust_pomdp.BLOCK_ROWS
+        if n <= block:
+            return self.labeller.step(q, x, beliefs, trust, belief_truth=self.truth(beliefs, words))
+        q, x, words = (np.broadcast_to(np.asarray(a), (n,)) for a in (q, x, words))
+        return np.concatenate([
+            self.labeller.step(q[rows], x[rows], beliefs[rows], None if trust is None else trust[rows],
+                               belief_truth=self.truth(beliefs[rows], words[rows]))
+            for rows in row_blocks(n, block)])
 
 
 def exact_filter(pomdp: TrustPOMDP, rule: BeliefRule = "bayes", like: ExactFilter | None = None

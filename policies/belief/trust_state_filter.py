@@ -29,7 +29,7 @@ from trustroute.policies.belief.driver_types import base_trust_index
 from trustroute.policies.belief.exact_labels import ExactLabels, exact_labels
 from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.labelling import Labeller
-from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
+from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP, row_blocks
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,7 +132,7 @@ HASH_CHUNK = 32_768   # rows hashed and checked at a time: the temporaries stay 
 
 
 def _row_chunks(n: int) -> Iterator[slice]:
-    return (slice(begin, begin + HASH_CHUNK) for begin in range(0, n, HASH_CHUNK))
+    return row_blocks(n, HASH_CHUNK)
 
 
 def distinct_rows(*blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

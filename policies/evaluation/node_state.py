@@ -54,16 +54,29 @@ class NodeState(Protocol):
     def joint_row(self, row: int) -> np.ndarray | None:
         """J(θ, q) of a row for the policy's context; None when q is observed."""
 
-    def keys(self) -> list[bytes]:
-        """Per row, bytes equal for two rows of the same route iff a policy must decide them alike."""
+    def decision_columns(self) -> tuple[np.ndarray, ...]:
+        """[n, w] columns: two rows of one route and one DFA state told, bit for bit equal in
+        these, are decided alike by a policy."""
+
+    def observation_probability(self, road: np.ndarray, human_action: int, performance: int) -> np.ndarray:
+        """P(observation) per row after driving `road` (one per row) and observing (h, e) there:
+        `children`' own, bit for bit."""
 
     def children(self, road: np.ndarray, human_action: int, performance: int
                  ) -> tuple[np.ndarray, Self]:
         """(P(observation) per row, node state of the rows where it is possible) after driving
-        `road` (one per row) and observing (h, e) there."""
+        `road` (one per row) and observing (h, e) there; its DFA state is the parent's until
+        `stepped`."""
 
-    def joined(self, parts: list[Self], road: np.ndarray) -> Self:
-        """The children of one level in one state (`parts` in order; `road` their roads)."""
+    def allocate(self, rows: int) -> Self:
+        """A node state of `rows` rows like this one, its arrays' contents unset (`put` fills them)."""
+
+    def put(self, at: slice, part: Self) -> None:
+        """Write the rows of `part` into rows `at` of this one (one of `allocate`'s)."""
+
+    def stepped(self, road: np.ndarray) -> Self:
+        """The children of one level (the rows of `children` of every observation, `road` their
+        roads) with their DFA states stepped on the position they reached."""
 
     @property
     def word(self) -> np.ndarray:
@@ -90,29 +103,29 @@ def beliefs_at(posterior: np.ndarray, belief: np.ndarray, rows: np.ndarray | sli
     return chosen, chosen if belief is posterior else belief[rows]
 
 
-def joined_beliefs(parts: list) -> tuple[np.ndarray, np.ndarray]:
-    """(posterior, belief) of the parts' rows in order, one array where every part has one."""
-    posterior = np.concatenate([part.posterior for part in parts])
-    if all(part.belief is part.posterior for part in parts):
-        return posterior, posterior
-    return posterior, np.concatenate([part.belief for part in parts])
+def unset_rows(array: np.ndarray, rows: int) -> np.ndarray:
+    """An array of `rows` rows shaped and typed like `array`'s, its contents unset."""
+    return np.empty((rows, *array.shape[1:]), dtype=array.dtype)
+
+
+def allocated_beliefs(posterior: np.ndarray, belief: np.ndarray, rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """(posterior, belief) arrays of `rows` rows, one array for both where they are one."""
+    allocated = unset_rows(posterior, rows)
+    return allocated, allocated if belief is posterior else unset_rows(belief, rows)
+
+
+def put_beliefs(into, at: slice, part) -> None:
+    """Write `part`'s posterior and belief into rows `at` of `into`'s (allocated_beliefs')."""
+    if (into.belief is into.posterior) != (part.belief is part.posterior):
+        raise ValueError("a part's belief and posterior are one array where those it is put into are not")
+    into.posterior[at] = part.posterior
+    if into.belief is not into.posterior:
+        into.belief[at] = part.belief
 
 
 def distinct_nbytes(*arrays: np.ndarray) -> int:
     """Bytes of `arrays`, each object counted once."""
     return sum(array.nbytes for array in {id(array): array for array in arrays}.values())
-
-
-def row_bytes(*columns: np.ndarray) -> list[bytes]:
-    """Per row, the bytes of its entries in `columns`, one after another (row by row in one
-    buffer: a `tobytes` per row and column costs more than the decision it keys)."""
-    n = len(columns[0])
-    if n == 0:
-        return []
-    rows = np.concatenate([np.ascontiguousarray(c).reshape(n, -1).view(np.uint8) for c in columns],
-                          axis=1)
-    width, raw = rows.shape[1], rows.tobytes()
-    return [raw[i * width:(i + 1) * width] for i in range(n)]
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,8 +191,13 @@ class ObservedState:
     def joint_row(self, row: int) -> None:
         return None
 
-    def keys(self) -> list[bytes]:
-        return row_bytes(self.q.astype(np.int64), self.belief)
+    def decision_columns(self) -> tuple[np.ndarray, ...]:
+        return (self.belief,)      # q is the state told
+
+    def observation_probability(self, road: np.ndarray, human_action: int, performance: int) -> np.ndarray:
+        truth = self.model.true_pomdp
+        return truth.observation_probability(self.posterior, truth.road_incident[road], human_action,
+                                             performance)
 
     def children(self, road: np.ndarray, human_action: int, performance: int
                  ) -> tuple[np.ndarray, ObservedState]:
@@ -205,16 +223,24 @@ class ObservedState:
                               q_ref=self.q_ref[possible], ref_belief=new_ref[possible],
                               word=new_word[possible])
 
-    def joined(self, parts: list[ObservedState], road: np.ndarray) -> ObservedState:
-        """The parts' rows with the DFA (and the reference's) stepped on the position (road, b)."""
-        q_before, q_ref, ref_belief, word = (np.concatenate([getattr(part, name) for part in parts])
-                                             for name in ("q", "q_ref", "ref_belief", "word"))
-        posterior, belief = joined_beliefs(parts)
-        q = np.asarray(self.model.labels.step(q_before, road, belief, word), dtype=np.int64)
+    def allocate(self, rows: int) -> ObservedState:
+        posterior, belief = allocated_beliefs(self.posterior, self.belief, rows)
+        return replace(self, q=unset_rows(self.q, rows), belief=belief, posterior=posterior,
+                       q_ref=unset_rows(self.q_ref, rows), ref_belief=unset_rows(self.ref_belief, rows),
+                       word=unset_rows(self.word, rows))
+
+    def put(self, at: slice, part: ObservedState) -> None:
+        put_beliefs(self, at, part)
+        self.q[at], self.q_ref[at], self.word[at] = part.q, part.q_ref, part.word
+        self.ref_belief[at] = part.ref_belief
+
+    def stepped(self, road: np.ndarray) -> ObservedState:
+        """The DFA (and the reference's) stepped on the position (road, b)."""
+        q = np.asarray(self.model.labels.step(self.q, road, self.belief, self.word), dtype=np.int64)
+        q_ref = self.q_ref
         if self.model.reference is not None:
-            q_ref = self.model.reference[1].step(q_ref, road, ref_belief)
-        return replace(self, q=q, belief=belief, posterior=posterior, q_ref=q_ref, ref_belief=ref_belief,
-                       word=word)
+            q_ref = self.model.reference[1].step(q_ref, road, self.ref_belief)
+        return replace(self, q=q, q_ref=q_ref)
 
     def merge_columns(self) -> np.ndarray:
         return np.concatenate([self.q[:, None].astype(float), self.belief, self.posterior,
@@ -272,8 +298,13 @@ class HiddenState:
     def joint_row(self, row: int) -> np.ndarray:
         return self.joint[row]
 
-    def keys(self) -> list[bytes]:
-        return row_bytes(self.belief, self.joint)
+    def decision_columns(self) -> tuple[np.ndarray, ...]:
+        return self.belief, self.joint.reshape(len(self.joint), -1)
+
+    def observation_probability(self, road: np.ndarray, human_action: int, performance: int) -> np.ndarray:
+        pomdp = self.filter.pomdp
+        return pomdp.observation_probability(self.posterior, pomdp.road_incident[road], human_action,
+                                             performance)
 
     def children(self, road: np.ndarray, human_action: int, performance: int
                  ) -> tuple[np.ndarray, HiddenState]:
@@ -290,10 +321,17 @@ class HiddenState:
                                        (incident[possible], h, e), p_obs[possible], new_word, labels)
         return p_obs, replace(self, joint=new_joint, posterior=posterior, belief=belief, word=new_word)
 
-    def joined(self, parts: list[HiddenState], road: np.ndarray) -> HiddenState:
-        joint, word = (np.concatenate([getattr(part, name) for part in parts]) for name in ("joint", "word"))
-        posterior, belief = joined_beliefs(parts)
-        return replace(self, joint=joint, posterior=posterior, belief=belief, word=word)
+    def allocate(self, rows: int) -> HiddenState:
+        posterior, belief = allocated_beliefs(self.posterior, self.belief, rows)
+        return replace(self, joint=unset_rows(self.joint, rows), posterior=posterior, belief=belief,
+                       word=unset_rows(self.word, rows))
+
+    def put(self, at: slice, part: HiddenState) -> None:
+        put_beliefs(self, at, part)
+        self.joint[at], self.word[at] = part.joint, part.word
+
+    def stepped(self, road: np.ndarray) -> HiddenState:
+        return self      # J is stepped with the filter, in `children`
 
     def merge_columns(self) -> np.ndarray:
         """Columns of belief/trust_state_filter.distinct_nodes after the road: J, posterior, b."""

@@ -10,10 +10,13 @@ route and its node state: policies/evaluation/node_state.py). At every level, in
    picks the next road for a batch of nodes at once (`SlotActor`);
 4. every moved node branches on every observation (h, e) at its next road (the node state's
    filter); `Limits.chunk` nodes at a time, and with `Limits.paced` a batch is not begun when, at
-   the last batch's pace, it would end past the deadline (the nodes not moved are cut);
+   the last batch's pace, it would end past the deadline (the nodes not moved are cut). The
+   children are written, observation by observation, into arrays allocated once per level
+   (`Children`): a level never holds every observation's children and their joined copy at once;
 5. with `Limits.merge`, children at the same road and node state on routes the policy reads
    alike (`RoutingPolicy.route_memory`) become one node, their masses summed;
-6. the ledger keeps at most its budget of nodes (the rest are cut).
+6. the ledger keeps at most its budget of nodes (the rest are cut), and the routes and words no
+   kept node holds are forgotten (`Frontier.compacted`).
 Cut mass is unknown: it is the width of [lower, upper].
 """
 
@@ -29,6 +32,7 @@ from trustroute.core.errors import InputError
 from trustroute.networks.town import Town
 from trustroute.policies.belief.trust_state_filter import distinct_rows, split_by_words
 from trustroute.policies.evaluation.node_state import HiddenState, NodeState
+from trustroute.policies.model.trust_pomdp import row_blocks
 from trustroute.policies.routing.episode_rules import decide
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 from trustroute.policies.work_clock import now as clock_now
@@ -58,10 +62,21 @@ class Frontier:
         total = self.road.nbytes + self.probability.nbytes + self.route_id.nbytes + self.state.nbytes
         return total / self.size if self.size else 0.0
 
-    def compacted(self) -> Frontier:
-        """The same nodes, the words their node state no longer needs forgotten (NodeState.compact):
-        what the unfolding keeps between levels is its frontier, not every history it has seen."""
-        return replace(self, state=self.state.compact())
+    def compacted(self, actor: Actor) -> Frontier:
+        """The same nodes, the routes (Actor.compact) and the words (NodeState.compact) none of them
+        holds forgotten: what the unfolding keeps between levels is its frontier, not every history
+        it has seen."""
+        return replace(self, route_id=actor.compact(self.route_id), state=self.state.compact())
+
+    def allocate(self, rows: int) -> Frontier:
+        """Arrays for `rows` nodes like these, their contents unset (`put` fills them)."""
+        return Frontier(road=np.empty(rows, dtype=self.road.dtype), probability=np.empty(rows),
+                        route_id=np.empty(rows, dtype=self.route_id.dtype), state=self.state.allocate(rows))
+
+    def put(self, at: slice, part: Frontier) -> None:
+        """Write the nodes of `part` into rows `at` of these arrays (one of `allocate`'s)."""
+        self.road[at], self.probability[at], self.route_id[at] = part.road, part.probability, part.route_id
+        self.state.put(at, part.state)
 
 
 def joint_beliefs(state: NodeState) -> np.ndarray:
@@ -103,6 +118,9 @@ class Actor(Protocol):
     def memory(self, frontier: Frontier) -> np.ndarray | None:
         """A column for merging: equal for routes the policy reads alike (None: no routes)."""
 
+    def compact(self, route_id: np.ndarray) -> np.ndarray:
+        """The route ids of the open nodes once the routes none of them is on are forgotten."""
+
     def done(self) -> None: ...
 
 
@@ -137,10 +155,10 @@ def extend_routes(routes: list[tuple[str, ...]], route_id: np.ndarray, chosen: n
 class EpisodeActor:
     """A routing policy under the episode rules (policies/routing/episode_rules.py).
 
-    The policy is asked once per distinct (route, DFA state told, node key). A policy that says
-    its decision on a route is the same for every belief and non-accepting DFA state
-    (`route_determined`: the fallback phase, the trust-free route) is asked once per route for the
-    nodes told a non-accepting state (an accepting one may switch the fallback off). A policy that
+    The policy is asked once per distinct (route, DFA state told, NodeState.decision_columns). A
+    policy that says its decision on a route is the same for every belief and non-accepting DFA
+    state (`route_determined`: the fallback phase, the trust-free route) is asked once per route for
+    the nodes told a non-accepting state (an accepting one may switch the fallback off). A policy that
     decides batches of nodes at once (JointTablePolicy.prefetch) is given each level's nodes with
     their joint beliefs in one call first."""
 
@@ -184,25 +202,35 @@ class EpisodeActor:
         unique_routes, inverse = np.unique(frontier.route_id, return_inverse=True)
         order = np.argsort(inverse, kind="stable")
         bounds = np.searchsorted(inverse[order], np.arange(unique_routes.size + 1))
-        decisions: dict[tuple[int, int, bytes], tuple[bool, bool, int]] = {}
-        keys, told_rows, roads = state.keys(), told.tolist(), frontier.road.tolist()
-        rows: list[int] = []
-        chosen: list[tuple[bool, bool, int]] = []
-        for r, rid in enumerate(unique_routes.tolist()):
+        one_by_one = np.zeros(n, dtype=bool)
+        for r in range(unique_routes.size):
             members = order[bounds[r]:bounds[r + 1]]
             rest = self.decide_route(level, frontier, told, members[~told_accepting[members]], out)
-            for k in (members if rest else members[told_accepting[members]]).tolist():
-                key = (rid, told_rows[k], keys[k])
-                decision = decisions.get(key)
-                if decision is None:
-                    decision = decisions[key] = self.decide_node(self.context(frontier, told, k), roads[k],
-                                                                 level)
-                rows.append(k)
-                chosen.append(decision)
-        if rows:
-            finished, fired, next_road = zip(*chosen, strict=True)
-            out[0][rows], out[1][rows], out[2][rows] = finished, fired, next_road
+            one_by_one[members if rest else members[told_accepting[members]]] = True
+        self.decide_nodes(level, frontier, told, np.flatnonzero(one_by_one), out)
         return Moves(*out)
+
+    def decide_nodes(self, level: int, frontier: Frontier, told: np.ndarray, rows: np.ndarray,
+                     out: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """Decide `rows` (in order), asking the policy once per distinct (route, DFA state told,
+        NodeState.decision_columns), route by route in id order and within a route in the order of
+        their first rows. The rows are grouped in arrays (trust_state_filter.distinct_rows), not
+        by a Python key per row: a level of a million rows holds no million keys."""
+        if rows.size == 0:
+            return
+        columns = [frontier.route_id[:, None], told[:, None], *frontier.state.decision_columns()]
+        if rows.size < frontier.size:
+            columns = [column[rows] for column in columns]
+        first, inverse = distinct_rows(*columns)
+        heads = rows[first]
+        finished, fired = np.zeros(first.size, dtype=bool), np.zeros(first.size, dtype=bool)
+        next_road = np.empty(first.size, dtype=np.int64)
+        roads = frontier.road
+        for g in np.lexsort((heads, frontier.route_id[heads])).tolist():
+            k = int(heads[g])
+            finished[g], fired[g], next_road[g] = self.decide_node(self.context(frontier, told, k),
+                                                                   int(roads[k]), level)
+        out[0][rows], out[1][rows], out[2][rows] = finished[inverse], fired[inverse], next_road[inverse]
 
     def decide_route(self, level: int, frontier: Frontier, told: np.ndarray, members: np.ndarray,
                      out: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:
@@ -220,6 +248,18 @@ class EpisodeActor:
 
     def moved(self, route_id: np.ndarray, next_road: np.ndarray) -> np.ndarray:
         return extend_routes(self.routes, route_id, next_road, self.town.states)
+
+    def compact(self, route_id: np.ndarray) -> np.ndarray:
+        """Forget the routes no node of `route_id` is on; their ids after it. Every route a level's
+        nodes are on is new (`moved` gives each child the route it drove), so what is kept is the
+        routes of the open nodes alone. Ids keep their order (a route's new id is the number of
+        routes kept before it), so whatever groups or orders nodes by route does so as before, and
+        a route added later still gets a larger id."""
+        held, inverse = np.unique(route_id, return_inverse=True)
+        if held.size == len(self.routes):
+            return route_id
+        self.routes = [self.routes[r] for r in held.tolist()]
+        return inverse.reshape(route_id.shape)
 
     def memory(self, frontier: Frontier) -> np.ndarray:
         unique_routes, route_inverse = np.unique(frontier.route_id, return_inverse=True)
@@ -253,6 +293,9 @@ class SlotActor:
 
     def memory(self, frontier: Frontier) -> None:
         return None
+
+    def compact(self, route_id: np.ndarray) -> np.ndarray:
+        return route_id
 
     def done(self) -> None:
         return None
@@ -306,24 +349,50 @@ def outcomes(depends_on_performance: bool) -> tuple[tuple[int, int], ...]:
     return OUTCOMES_WITH_PERFORMANCE if depends_on_performance else OUTCOMES
 
 
+@dataclass(eq=False)
+class Children:
+    """A level's children, written batch by batch and observation by observation into arrays
+    allocated at the first (Frontier.allocate), for as many rows as can follow: exactly the
+    children of a level moved in one batch. `later`: at most how many rows the batches after the
+    current one add."""
+
+    frontier: Frontier | None = None
+    size: int = 0
+    later: int = 0
+
+    def add(self, part: Frontier, to_come: int) -> None:
+        """Append `part`; at most `to_come` more rows follow it in this batch."""
+        if self.frontier is None:
+            self.frontier = part.allocate(part.size + to_come + self.later)
+        self.frontier.put(slice(self.size, self.size + part.size), part)
+        self.size += part.size
+
+    def joined(self) -> Frontier | None:
+        """The children added, their node states stepped (NodeState.stepped); None: no batch moved."""
+        if self.frontier is None:
+            return None
+        children = self.frontier
+        if self.size < children.size:
+            children = children.take(slice(0, self.size))
+        return replace(children, state=children.state.stepped(children.road))
+
+
 def branch(frontier: Frontier, next_road: np.ndarray, route_id: np.ndarray,
-           observations: tuple[tuple[int, int], ...]) -> list[Frontier]:
-    """The children of every node, observation by observation (the impossible ones left out)."""
-    children = []
-    for h, e in observations:
-        p_obs, state = frontier.state.children(next_road, h, e)
-        possible = p_obs > 0
-        children.append(Frontier(road=next_road[possible],
-                                 probability=frontier.probability[possible] * p_obs[possible],
-                                 route_id=route_id[possible], state=state))
-    return children
+           observations: tuple[tuple[int, int], ...], children: Children) -> None:
+    """Add the children of every node, observation by observation (the impossible ones left out),
+    to `children`."""
+    counts = [int(np.count_nonzero(frontier.state.observation_probability(next_road, h, e) > 0))
+              for h, e in observations]
+    for k, (h, e) in enumerate(observations):
+        children.add(observed(frontier, next_road, route_id, h, e), to_come=sum(counts[k + 1:]))
 
 
-def joined(parts: list[Frontier]) -> Frontier:
-    road = np.concatenate([part.road for part in parts])
-    return Frontier(road=road, probability=np.concatenate([part.probability for part in parts]),
-                    route_id=np.concatenate([part.route_id for part in parts]),
-                    state=parts[0].state.joined([part.state for part in parts], road))
+def observed(frontier: Frontier, next_road: np.ndarray, route_id: np.ndarray, h: int, e: int) -> Frontier:
+    """The children of every node where (h, e) is observed at its next road, if possible there."""
+    p_obs, state = frontier.state.children(next_road, h, e)
+    possible = p_obs > 0
+    return Frontier(road=next_road[possible], probability=frontier.probability[possible] * p_obs[possible],
+                    route_id=route_id[possible], state=state)
 
 
 def merged(frontier: Frontier, memory: np.ndarray | None) -> Frontier:
@@ -339,30 +408,34 @@ def merged(frontier: Frontier, memory: np.ndarray | None) -> Frontier:
 
 
 def chunks(size: int, chunk: int | None) -> Iterator[slice]:
-    step = size if chunk is None else chunk
-    for begin in range(0, size, max(step, 1)):
-        yield slice(begin, begin + step)
+    return row_blocks(size, size if chunk is None else chunk)
 
 
 def move(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits: Limits,
-         observations: tuple[tuple[int, int], ...]) -> list[Frontier] | None:
-    """Decide and branch one batch of open nodes; None when the episode tree ends here (the cap)."""
+         observations: tuple[tuple[int, int], ...], children: Children) -> bool:
+    """Decide one batch of open nodes and add their children; False when the episode tree ends here
+    (the cap, or no node goes on)."""
     moves = actor.act(level, frontier)
     ledger.end(frontier, moves.finished, "destination", level)
     if level == limits.max_junctions:
         ledger.end(frontier, ~moves.finished, "cap", level)
-        return None
+        return False
     ledger.fallback_mass += float(frontier.probability[moves.fired].sum())
     going = ~moves.finished
     if not going.any():
-        return None
-    frontier, next_road = frontier.take(going), moves.next_road[going]
-    return branch(frontier, next_road, actor.moved(frontier.route_id, next_road), observations)
+        return False
+    if not going.all():
+        frontier = frontier.take(going)
+    next_road = moves.next_road[going]
+    branch(frontier, next_road, actor.moved(frontier.route_id, next_road), observations, children)
+    return True
 
 
-# What a level holds at its peak, in copies of its children's arrays: the children of every
-# observation, their joined copy and the temporaries of the filter and the label step (measured
-# with tracemalloc on the unbounded phi1 policy: tests/policies/evaluation/test_memory.py).
+# What a level holds at its peak, in copies of its children's arrays: the children (one set of
+# arrays, `Children`), the nodes moved, one observation's children before they are put in, and the
+# words of the exact labels with their lookup, which grow within a level (about 4 above what the
+# process holds before its first junction, measured with tracemalloc on the unbounded phi1 policy
+# at 80,000 histories per junction; docs/model.md gives its resident memory).
 PEAK_COPIES = 4
 
 
@@ -397,7 +470,7 @@ def advance(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits
             observations: tuple[tuple[int, int], ...]) -> Frontier | None:
     """The next level's frontier from the open nodes of this one (None: the unfolding stops)."""
     check_memory(level, frontier, len(observations))
-    parts: list[Frontier] = []
+    moved = Children()
     late = False
     for rows in chunks(frontier.size, limits.chunk):
         began = clock_now()
@@ -406,15 +479,15 @@ def advance(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits
             # Out of time within the level: the nodes not moved yet are cut.
             ledger.cut(frontier, slice(rows.start, None), level, "past_deadline")
             break
-        branched = move(level, frontier.take(rows), actor, ledger, limits, observations)
-        if branched is None:
+        moved.later = max(frontier.size - rows.stop, 0) * len(observations)
+        if not move(level, frontier.take(rows), actor, ledger, limits, observations, moved):
             return None
-        parts += branched
         spend(ROW_UNITS * (min(rows.stop, frontier.size) - rows.start))
         pace.batch_seconds = clock_now() - began
-    if not parts:
+    children = moved.joined()
+    if children is None:
         return None
-    children = joined(parts)
+    del moved       # the children's DFA states before the step are not held from here
     if limits.paced and (late or pace.merge_is_late(children.size)):
         # The children of the nodes moved are cut.
         ledger.cut(children, slice(None), level, "past_deadline")
@@ -441,12 +514,17 @@ def unfold(frontier: Frontier, actor: Actor, ledger: Ledger, limits: Limits,
         alive = ledger.prune(frontier, alive, level)
         if not alive.any():
             break
-        following = advance(level, frontier.take(np.flatnonzero(alive)), actor, ledger, limits, pace,
-                            observations)
+        if not alive.all():
+            frontier = frontier.take(np.flatnonzero(alive))
+        following = advance(level, frontier, actor, ledger, limits, pace, observations)
         if following is None:
             break
-        kept = ledger.trim(following, level)
-        frontier = (following if kept is None else following.take(kept)).compacted()
+        # held from here: the children alone (not the nodes moved), and once trimmed, the nodes kept
+        frontier, following = following, None
+        kept = ledger.trim(frontier, level)
+        if kept is not None:
+            frontier = frontier.take(kept)
+        frontier = frontier.compacted(actor)
         nodes += frontier.size
         max_frontier = max(max_frontier, frontier.size)
     actor.done()

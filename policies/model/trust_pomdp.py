@@ -7,6 +7,7 @@ o = (incident of x', human action h, AV performance e). See docs/model.md, "The 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Literal, get_args
 
@@ -19,6 +20,18 @@ from trustroute.participants.driver_model import DriverModel, check_covers_town
 BeliefRule = Literal["bayes", "paper"]
 BELIEF_RULES: tuple[BeliefRule, ...] = get_args(BeliefRule)
 BELIEF_RULE_NAMES = OneOf(choices=BELIEF_RULES, noun="belief rule")   # as a config or a setting names one
+
+
+# Rows a vectorised step (a belief update, a label step) computes at a time, so that its temporaries
+# (a belief update's [rows, θ, θ'] transition matrices: about 1.6 MB with 7 trust levels) stay
+# small however many rows it is given (an evaluation's level has up to millions).
+BLOCK_ROWS = 4096
+
+
+def row_blocks(n: int, size: int) -> Iterator[slice]:
+    """Slices of `size` rows (at least 1) covering rows 0 .. n - 1 in order."""
+    step = max(size, 1)
+    return (slice(begin, begin + step) for begin in range(0, n, step))
 
 
 def checked_belief_rule(rule: str) -> BeliefRule:
@@ -129,6 +142,20 @@ class TrustPOMDP:
         n = beliefs.shape[0]
         incident, human_action, performance = (_index_rows(value, n)
                                                for value in (incident, human_action, performance))
+        if n <= BLOCK_ROWS:
+            return self._update_rows(beliefs, (incident, human_action, performance), rule)
+        # Each row's arithmetic is its own, in the same order whatever rows come with it: rows in
+        # blocks give the values of one call bit for bit.
+        posterior, probability = np.empty_like(beliefs), np.empty(n)
+        for rows in row_blocks(n, BLOCK_ROWS):
+            posterior[rows], probability[rows] = self._update_rows(
+                beliefs[rows], (incident[rows], human_action[rows], performance[rows]), rule)
+        return posterior, probability
+
+    def _update_rows(self, beliefs: np.ndarray, observation: tuple[np.ndarray, np.ndarray, np.ndarray],
+                     rule: BeliefRule) -> tuple[np.ndarray, np.ndarray]:
+        """`belief_update` of rows given an index per row for each part of the observation."""
+        incident, human_action, performance = observation
         probability = self.observation_probability(beliefs, incident, human_action, performance)
         if rule == "bayes":
             matrices = self.weighted_transition[incident, human_action, performance]

@@ -5,6 +5,7 @@ on the exact belief of the history's word."""
 from __future__ import annotations
 
 import math
+import tracemalloc
 from fractions import Fraction
 
 import numpy as np
@@ -15,6 +16,7 @@ from trustroute.policies.belief.exact_labels import decimal, exact_labels, exact
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.labelling import UNIT_ROUNDOFF, atom_values
 from trustroute.policies.logic.spec import spec_from_text
+from trustroute.policies.model import trust_pomdp
 from trustroute.policies.model.trust_pomdp import build_pomdp
 
 
@@ -248,3 +250,37 @@ def test_a_compacted_filter_keeps_the_held_words_in_order_and_forgets_the_rest(p
     extended = scoped.extend(renumbered, np.full(held.size, changing[0]))   # new words, after the held
     assert extended.min() >= scoped._size - held.size and np.array_equal(
         scoped.extend(renumbered, np.full(held.size, changing[0])), extended)   # interned once
+
+
+def test_a_label_step_in_blocks_of_rows_is_one_step(pomdp, monkeypatch):
+    """ExactLabels.step reads BLOCK_ROWS rows at a time: the DFA states, and the labels decided
+    exactly, are those of one call, and its temporaries stay a fraction of the beliefs' bytes."""
+    town = pomdp.town
+    rng = np.random.default_rng(5)
+
+    def rows(n):
+        beliefs = rng.dirichlet(np.ones(7), size=n)
+        beliefs[::10] = pomdp.initial_belief       # c·b = 2/7 exactly: decided on the exact belief
+        return (np.zeros(n, dtype=np.int64), rng.integers(0, len(town.states), size=n), beliefs,
+                np.zeros(n, dtype=np.int64))
+
+    def labels():
+        return exact_labels(pomdp, compile_spec(_spec(town, [1, 1, 0, 0, 0, 0, 0], 2 / 7), town).labeller)
+
+    small = rows(2_000)
+    monkeypatch.setattr(trust_pomdp, "BLOCK_ROWS", 2_000)
+    whole = labels()
+    one_call = whole.step(*small)
+    monkeypatch.setattr(trust_pomdp, "BLOCK_ROWS", 37)
+    blocked = labels()
+    assert np.array_equal(blocked.step(*small), one_call)
+    assert blocked.exact_decisions == whole.exact_decisions == 200
+    monkeypatch.undo()
+    large = rows(200_000)
+    tracemalloc.start()
+    try:
+        labels().step(*large)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 0.5 * large[2].nbytes, f"{peak / large[2].nbytes:.2f} times the beliefs' bytes"

@@ -1,10 +1,12 @@
 """The memory of an exact evaluation follows its frontier, not every history it has seen.
 
-An unfolding keeps one level of histories at a time, and the words of its exact belief labels
-(policies/belief/exact_labels.py) are its own, compacted level by level to those the frontier still
-holds: a 60-junction evaluation under a node budget holds a few kB per budgeted history, however
-many histories it has seen, and still gives the exact values of the plain recursion. A level
-whose children would not fit in the memory available is refused before it is allocated."""
+An unfolding keeps one level of histories at a time: the routes and the words of its exact belief
+labels (policies/belief/exact_labels.py) are its own, forgotten level by level once no open history
+holds them; a level's children are written into one set of arrays, its decisions grouped in arrays,
+and its belief updates and label steps run in blocks of rows. A 40-junction evaluation under a
+node budget holds under 2 kB per budgeted history, however many histories it has seen, and still
+gives the exact values of the plain recursion. A level whose children would not fit in the memory
+available is refused before it is allocated."""
 
 from __future__ import annotations
 
@@ -22,18 +24,26 @@ from trustroute.policies.evaluation import unfolding
 from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.model import trust_pomdp
 from trustroute.policies.routing.fallback import with_fallback
 
-BUDGET = 300          # histories per junction
-JUNCTIONS = 40        # the budget is reached by junction 10: 30 levels at the budget
-# Bytes per budgeted history at the evaluation's peak: a node's arrays are 104 bytes (road,
-# probability, route, DFA states, word: 8 each; the AV's belief, which is the true posterior
-# here, 7 x 8); a level holds the children of its 4 observations in unfoldings.PEAK_COPIES = 4
-# copies (1.7 kB), its decisions' keys (about 0.5 kB) and its words (24 bytes each, at most
-# a few per history with their prefixes). Holding every word ever made instead adds about 160
-# bytes per history seen: 30 levels of 2 x 300 children make that about 10 kB per budgeted
-# history, past this bound by itself.
-BYTES_PER_HISTORY = 4_000
+BUDGET = 1_000        # histories per junction
+JUNCTIONS = 40        # the budget is reached by junction 16: 24 levels at the budget
+# Bytes per budgeted history at the evaluation's peak, measured 1,650 (phi1) and 1,520 (phi2): a
+# level holds its nodes' arrays (104 bytes: road, probability, route, DFA states, word: 8 each;
+# the AV's belief, which is the true posterior here, 7 x 8), its children in one set of arrays (up
+# to 2 per node), the words of its exact labels (24 bytes each in arrays, about 4 per history with
+# their prefixes, and a lookup entry per word the level makes; the largest part while they grow or
+# are compacted) and the unfolding's fixed costs spread over the budget. Each of these comes on
+# top: every observation's children and their joined copy at once, a Python key per decision, the
+# nodes moved held through the trim, the routes of every history seen (about 224 bytes each), a
+# belief update's [rows, 7, 7] matrices for all of a level's rows at once: 2,640 (phi1) and 2,320
+# (phi2) bytes with all of them.
+BYTES_PER_HISTORY = 1_800
+# Belief updates and label steps run trust_pomdp.BLOCK_ROWS rows at a time; blocks of 256 rows are
+# small beside a level of up to 2,000 children, as 4,096 rows are beside the levels of the default
+# budget (2,000,000).
+TEST_BLOCK_ROWS = 256
 
 
 def random_policy(pomdp, name):
@@ -51,7 +61,8 @@ def traced_peak(run):
 
 
 @pytest.mark.parametrize("name", ["phi1", "phi2"])
-def test_memory_per_budgeted_history_is_bounded_over_many_junctions(pomdp, name):
+def test_memory_per_budgeted_history_is_bounded_over_many_junctions(pomdp, name, monkeypatch):
+    monkeypatch.setattr(trust_pomdp, "BLOCK_ROWS", TEST_BLOCK_ROWS)
     spec = load_spec(f"specs/{name}.toml", pomdp.town)
     policy = random_policy(pomdp, name)
     settings = EvaluationSettings(fallback_after=None, max_junctions=JUNCTIONS, max_nodes=BUDGET)
@@ -61,6 +72,35 @@ def test_memory_per_budgeted_history_is_bounded_over_many_junctions(pomdp, name)
     evaluation, peak = traced_peak(lambda: evaluate(pomdp, spec, policy, settings))
     assert evaluation.max_frontier == BUDGET and evaluation.nodes > 25 * BUDGET
     assert peak < BYTES_PER_HISTORY * BUDGET, f"{peak / BUDGET:.0f} bytes per history"
+
+
+def test_the_routes_kept_are_those_of_the_open_histories(pomdp, monkeypatch):
+    """Every route a level's histories are on is new, so the unfolding holds the routes of the
+    histories its last level kept alone (at most its budget), not every route it has seen."""
+    budget = BUDGET // 10
+    held = []
+    act = unfolding.EpisodeActor.act
+
+    def spied(actor, level, frontier):
+        held.append((len(actor.routes), int(frontier.route_id.max())))
+        return act(actor, level, frontier)
+
+    monkeypatch.setattr(unfolding.EpisodeActor, "act", spied)
+    evaluate(pomdp, load_spec("specs/phi1.toml", pomdp.town), random_policy(pomdp, "phi1"),
+             EvaluationSettings(fallback_after=None, max_junctions=JUNCTIONS, max_nodes=budget))
+    assert len(held) == JUNCTIONS + 1 and max(kept for kept, _ in held) > 20
+    assert all(last < kept <= budget for kept, last in held)
+
+
+def test_compacting_routes_keeps_their_order(pomdp):
+    town = pomdp.town
+    actor = unfolding.EpisodeActor(policy=random_policy(pomdp, "phi1"), town=town, max_junctions=3,
+                                   fallback_level=None, accepting=np.zeros(1, dtype=bool),
+                                   routes=[(road,) for road in town.states[:4]])
+    assert actor.compact(np.array([3, 1, 3])).tolist() == [1, 0, 1]
+    assert actor.routes == [(town.states[1],), (town.states[3],)]
+    kept = np.array([0, 1])
+    assert actor.compact(kept) is kept      # nothing to forget: the ids as they are
 
 
 @pytest.mark.parametrize("name", ["phi1", "phi2"])

@@ -7,6 +7,7 @@ observation sequences. Paper: its own formula b' ∝ b·T[inc][h][e], written ou
 from __future__ import annotations
 
 import itertools
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from trustroute.participants.driver_model import DriverModel
+from trustroute.policies.model import trust_pomdp
 from trustroute.policies.model.trust_pomdp import TrustPOMDP, build_pomdp
 
 INCIDENTS = ("obstacle", "pedestrian", "truck", "none")
@@ -114,6 +116,40 @@ def test_vectorised_update_equals_row_by_row(town, seed, performance_dependent):
             one, p_one = pomdp.belief_update(beliefs[k], int(inc[k]), int(h[k]), int(e[k]), rule=rule)
             assert np.allclose(batch[k], one[0], rtol=1e-12, atol=1e-15)
             assert probability[k] == pytest.approx(p_one[0], rel=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_an_update_in_blocks_of_rows_is_one_update_bit_for_bit(town, seed, monkeypatch):
+    """belief_update computes BLOCK_ROWS rows at a time; a row's arithmetic is its own, so blocks
+    of any size give one call's values bit for bit (impossible observations and zero rows too)."""
+    rng = np.random.default_rng(seed)
+    pomdp = pomdp_for(town, random_model(rng, 7, performance_dependent=bool(seed % 2), sparse=True))
+    n = 1000
+    beliefs = rng.dirichlet(np.ones(7), size=n)
+    beliefs[::97] = 0.0
+    observation = (rng.integers(0, 4, size=n), rng.integers(0, 2, size=n), rng.integers(0, 2, size=n))
+    for rule in ("bayes", "paper"):
+        monkeypatch.setattr(trust_pomdp, "BLOCK_ROWS", n)
+        whole = pomdp.belief_update(beliefs, *observation, rule=rule)
+        monkeypatch.setattr(trust_pomdp, "BLOCK_ROWS", 37)
+        blocks = pomdp.belief_update(beliefs, *observation, rule=rule)
+        assert [a.tobytes() for a in blocks] == [a.tobytes() for a in whole]
+
+
+def test_an_update_of_many_rows_holds_no_transition_matrix_per_row(pomdp):
+    """The transition matrices an update gathers, [rows, θ, θ'] (seven times the beliefs' bytes),
+    are gathered BLOCK_ROWS rows at a time: an update of 200,000 rows holds little more than its
+    posteriors and their probabilities."""
+    n = 200_000
+    beliefs = np.tile(np.asarray(pomdp.initial_belief, dtype=float), (n, 1))
+    incident = np.arange(n) % len(pomdp.driver.incident_types)
+    tracemalloc.start()
+    try:
+        pomdp.belief_update(beliefs, incident, 1, 0)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2 * beliefs.nbytes, f"{peak / beliefs.nbytes:.1f} times the beliefs' bytes"
 
 
 def paper_update(model: DriverModel, belief: np.ndarray, inc: int, h: int, e: int) -> np.ndarray:
