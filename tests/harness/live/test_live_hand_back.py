@@ -64,14 +64,21 @@ class SessionEnd:
         self.controls.append(control)
 
 
-def test_a_takeover_near_the_road_end_reaches_the_session_before_its_warning(tmp_path):
+def running_episode(tmp_path, study, relay_type):
+    """(config, task, session, relay, driver) of one participant's first episode, its session
+    driving it, the participant's side `relay_type` (a Relay)."""
     config = tiny_config(tmp_path, participants=1)
     task = plan_episodes(config)[0]
-    session = Session(None, task.participant, [task], consented=False)
+    session = Session(study, task.participant, [task], consented=False)
     session.phase, session.task = "driving", task   # the session of the running episode
-    relay = Relay(session)
+    relay = relay_type(session)
     driver = RemoteDriver(relay, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"),
                           episode_id=task.episode_id)
+    return config, task, session, relay, driver
+
+
+def test_a_takeover_near_the_road_end_reaches_the_session_before_its_warning(tmp_path):
+    config, task, session, relay, driver = running_episode(tmp_path, None, Relay)
     taken: list[str] = []
 
     def observe(sumo, ego, mode, road):
@@ -119,13 +126,7 @@ class LateParticipant(Relay):
 
 
 def test_a_hand_back_just_after_the_episodes_own_is_done_not_refused(tmp_path):
-    config = tiny_config(tmp_path, participants=1)
-    task = plan_episodes(config)[0]
-    session = Session(NoStudy(), task.participant, [task], consented=False)
-    session.phase, session.task = "driving", task   # the session of the running episode
-    relay = LateParticipant(session)
-    driver = RemoteDriver(relay, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1e6, client="scripted"),
-                          episode_id=task.episode_id)
+    config, task, session, relay, driver = running_episode(tmp_path, NoStudy(), LateParticipant)
     taken: list[str] = []
 
     def observe(sumo, ego, mode, road):

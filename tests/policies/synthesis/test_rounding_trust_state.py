@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from tests.policies.synthesis.exact_joint import exact_joint_value
-from tests.policies.synthesis.test_rounding_population import exact_weights
+from tests.policies.synthesis.test_rounding_population import assert_type_values_sound
 from tests.policies.synthesis.threshold_cases import sweep
 from tests.policies.trust_specs import random_problem
 from tests.policies.trust_state_synthesis.test_population import random_population_problem
@@ -36,7 +36,6 @@ from trustroute.participants.driver_population import DriverPopulation
 from trustroute.policies.belief.problem import problem, problem_of
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.model.trust_pomdp import build_pomdp
-from trustroute.policies.synthesis.population import summary
 from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_spec
 from trustroute.policies.trust_state_synthesis.population import belief_free_spec
@@ -70,12 +69,7 @@ def assert_population_sound(found, horizon: int, seed: int) -> list[Fraction]:
     """Per-type values and the mixture against the exact values of the returned policy."""
     exact = [exact_joint_value(found.pomdp, found.spec, horizon, policy=found.result.policy, block=k)
              for k in range(found.population.n_types)]
-    for value, truth in zip(found.type_values, exact, strict=True):
-        assert Fraction(value.lower) <= truth <= Fraction(value.upper), (seed, value, truth)
-    mixture = sum((w * v for w, v in zip(exact_weights(found.population), exact, strict=True)), Fraction(0))
-    reported = summary(found)["mixture_value"]
-    assert Fraction(reported["lower"]) <= mixture <= Fraction(reported["upper"]), (seed, reported, mixture)
-    assert Fraction(found.result.lower) <= mixture, (seed, found.result.lower, mixture)
+    assert_type_values_sound(found, exact, seed)
     return exact
 
 
