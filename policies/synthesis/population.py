@@ -65,11 +65,10 @@ from trustroute.policies.synthesis.budget import TimeBudget
 from trustroute.policies.synthesis.result import SearchRun, SynthesisResult, SynthesisStats
 from trustroute.policies.synthesis.rounding import (
     ModelRounding,
+    evaluation_widened,
     model_rounding,
-    relative_margin,
     rounded_down,
     rounded_up,
-    widen,
 )
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.work_clock import now as clock_now
@@ -114,9 +113,7 @@ class TypeValue:
         histories of at most `max_junctions` steps under the true driver's constants `truth`
         (rounding.py: an evaluation sums the same products of observation probabilities as a
         search; the true driver's posterior gives them)."""
-        margin = relative_margin(truth, max_junctions, "bayes")
-        lower, upper = widen(computed[0], computed[1], margin)
-        return cls(name, weight, lower, upper)
+        return cls(name, weight, *evaluation_widened(computed[0], computed[1], truth, max_junctions))
 
 
 def _mixture(weights: np.ndarray, ends: list[float]) -> tuple[float, float]:

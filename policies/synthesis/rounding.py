@@ -147,8 +147,16 @@ def certify(value: Evaluation, rounding: ModelRounding) -> Evaluation:
     `value.max_junctions` steps under the constants `rounding` (`evaluation_rounding`), so that it
     holds exactly: every evaluation reported to a user (`evaluate`, `baseline`, a study's
     expected values) is this one."""
-    lower, upper = widen(value.lower, value.upper, relative_margin(rounding, value.max_junctions, "bayes"))
+    lower, upper = evaluation_widened(value.lower, value.upper, rounding, value.max_junctions)
     return replace(value, lower=lower, upper=upper)
+
+
+def evaluation_widened(lower: float, upper: float, rounding: ModelRounding, depth: int
+                       ) -> tuple[float, float]:
+    """An evaluation's computed [lower, upper] rounded outward for its histories of at most `depth`
+    steps under the constants `rounding`: its probabilities are the true driver's Bayes posterior
+    whatever the AV's own rule, so the Bayes units apply."""
+    return widen(lower, upper, relative_margin(rounding, depth, "bayes"))
 
 
 def relative_margin(rounding: ModelRounding, depth: int, rule: BeliefRule) -> float:
@@ -181,9 +189,3 @@ def widen(lower: float, upper: float, margin: float) -> tuple[float, float]:
     """[lower, upper] as computed, rounded outward by the relative `margin` (γ_N): `rounded_down`
     and `rounded_up`, clamped to [0, 1], so 0 and 1 stay as they are."""
     return float(rounded_down(lower, margin)), float(rounded_up(upper, margin))
-
-
-def widen_for(pomdp: TrustPOMDP, lower: float, upper: float, depth: int,
-              rule: BeliefRule = "bayes") -> tuple[float, float]:
-    """`widen` by the margin of `pomdp`'s histories of at most `depth` observation steps."""
-    return widen(lower, upper, relative_margin(model_rounding(pomdp, rule), depth, rule))
