@@ -61,12 +61,16 @@ function trustButtons(container, onPick) {
   }
 }
 
+let driveOver = false;   // the drive shown has ended (done, aborted or failed), the next phase not yet told
+// A drive runs: it is neither paused nor over. Nothing is sent for a drive that does not.
+const driveRuns = () => state.phase === "driving" && !driveOver;
+
 let pendingPrompt = null;   // the prompt a report answers ({episode_id, road}), else a free report
 
 // "You reported N." comes with the server's `reported`: a report refused (paused, the trial over)
 // is not one. Outside a drive nothing is sent, as with the keys.
 function report(value) {
-  if (state.phase !== "driving") return;
+  if (!driveRuns()) return;
   send(pendingPrompt ? { type: "trust", value, prompt: pendingPrompt } : { type: "trust", value });
   pendingPrompt = null;
   $("prompt").classList.add("hidden");
@@ -91,10 +95,32 @@ function overlay(text, resumable = false) {
 
 let toggling = false;   // a takeover or hand-back sent, its mode change not yet seen
 
+// The hold before the junction of a person driving by wheel, as the episode's warnings tell it
+// (harness/simulation/wheel_driving.py, `Wheel.held`): once it has begun (`hold`, or `guide_back`
+// off the lane), the car in its lane (or after a collision) is braked to a stand whatever the
+// pedals say; stopped off its lane at the road's end or off the road, it stands. Guided back from
+// the oncoming lane or off the road, the pedals still drive it (at a creep): without them a car
+// stopped there could never get back. Every change of mode ends the hold (a takeover starts none).
+const WHEEL_HOLD = { hold: { begun: true }, guide_back: { begun: true }, collision: { collided: true },
+                     held_off_lane: { stopped: true }, stopped_off_road: { stopped: true },
+                     oncoming: { offLane: true }, off_road: { offLane: true },
+                     own_lane: { offLane: false }, on_road: { offLane: false } };
+const NO_HOLD = { begun: false, offLane: false, collided: false, stopped: false };
+let wheelHold = { ...NO_HOLD };
+
+// The car is brought to a stand for the hand-back whatever the pedals say: by wheel, in the hold
+// above; in assisted driving from the warning on (the vehicle then stops for the hand-back).
+function held() {
+  if (!continuous) return handBackDue;
+  const { begun, offLane, collided, stopped } = wheelHold;
+  return stopped || (begun && (!offLane || collided));
+}
+
 function setMode(next) {
   mode = next;
   pedal = "release";
   toggling = false;
+  wheelHold = { ...NO_HOLD };
   if (next === "auto") { handBackDue = false; notice(""); }   // the hand-back warning is answered
   const indicator = $("mode");
   indicator.textContent = next === "manual" ? "MANUAL" : "AUTOPILOT";
@@ -104,14 +130,17 @@ function setMode(next) {
   if (next !== "manual") $("hint").textContent = "";
 }
 
-// Which driving control works now (its button, key and gamepad button alike): none while the drive
-// is paused or its vehicle is getting ready (no frame of it yet: nothing to take over), the pedals
-// and the pull-out in control only, and no accelerating once the hand-back is due (the vehicle
-// stops for it: harness/simulation/manual_driving.py).
+// Which driving control works now, whatever it comes from (a button, a key, a wheel or gamepad):
+// none unless a drive runs (not while it is paused, nor before its vehicle is ready: no frame of it
+// yet, nothing to take over; nor once it has ended, before the next phase is told), the pedals and
+// the steering in control only, no accelerating while held for the hand-back (`held`), and no
+// steering once the car stands held (it waits for the hand-back, and nothing else moves it).
 function allowed(control) {
-  if (state.phase !== "driving" || !latest) return false;
+  if (!driveRuns() || !latest) return false;
   if (control === "toggle") return true;
-  return mode === "manual" && !(control === "accelerate" && handBackDue);
+  if (mode !== "manual") return false;
+  if (control === "accelerate") return !held();
+  return !(control === "steer" && held() && latest.speed === 0);
 }
 
 const DRIVING_CONTROLS = ["toggle", "accelerate", "brake", "pull-out", "pull-in"];   // their buttons' ids
@@ -127,7 +156,7 @@ let pedal = "release";
 function press(next) {
   if (next === pedal || continuous || mode !== "manual" || (next !== "release" && !allowed(next))) return;
   pedal = next;
-  if (state.phase === "driving") send({ type: "drive", pedal: next });
+  if (driveRuns()) send({ type: "drive", pedal: next });
 }
 
 function steer(lane) {
@@ -228,8 +257,11 @@ function readInputs() {
   }
   if (askedForInput) { askedForInput = false; notice(""); }   // connected now
   if (controls.toggle) toggle();
-  if (mode !== "manual") { sentControl = null; return; }
-  const { steer, throttle, brake, source } = controls;
+  if (!allowed("steer")) { sentControl = null; return; }
+  // held, the episode brakes the car whatever the pedals say: they are sent let go
+  const pedals = allowed("accelerate");
+  const { steer, source } = controls;
+  const [throttle, brake] = pedals ? [controls.throttle, controls.brake] : [0, 0];
   const changed = !sentControl || Math.abs(steer - sentControl.steer) > 0.005
     || Math.abs(throttle - sentControl.throttle) > 0.01 || Math.abs(brake - sentControl.brake) > 0.01;
   if (changed && now - sentAt >= CONTROL_INTERVAL) {
@@ -367,12 +399,18 @@ function onState(message) {
   } else if (message.phase === "done") show("done-step");
 }
 
+function endDrive() {
+  driveOver = true;
+  updateControls();
+}
+
 function startEpisode(episodeId) {
   // the last drive's report is not this one's; one given while this drive got ready (its
   // `episode_start` comes once its SUMO runs) is
   if (episodeId !== shownEpisode) $("reported").textContent = "";
   shownEpisode = episodeId;
   completed = "";
+  driveOver = false;
   latest = null;
   if (driverView) driverView.clear();
   setMode("auto");
@@ -398,8 +436,10 @@ function onMessage(message) {
     case "mode": setMode(message.mode); break;
     case "incident": notice(NOTICES[message.kind] || ""); break;
     case "warning":
-      if (message.kind === "hand_back") { handBackDue = true; notice(""); updateControls(); }
+      if (message.kind in WHEEL_HOLD) Object.assign(wheelHold, WHEEL_HOLD[message.kind]);
+      if (message.kind === "hand_back") { handBackDue = true; notice(""); }
       else if (message.kind in WARNINGS) notice(WARNINGS[message.kind], FIRST.has(message.kind));
+      updateControls();
       break;
     case "road":
       notice("");
@@ -409,13 +449,15 @@ function onMessage(message) {
     case "episode_end":
       completed = state.warm_up === "pending" ? "The warm-up drive is complete."
         : `Trial ${state.trial} of ${state.trials} is complete.`;
+      endDrive();
       break;
     case "notice": $("error").textContent = message.detail; break;
     case "episode_aborted":
       $("status").textContent = "The experimenter stopped this trial; it will be run again.";
       overlay("The experimenter stopped this trial.");
+      endDrive();
       break;
-    case "episode_failed": $("error").textContent = "The trial failed; it will be run again."; break;
+    case "episode_failed": $("error").textContent = "The trial failed; it will be run again."; endDrive(); break;
     case "error": {
       toggling = false;   // a refused takeover or hand-back may be tried again
       if (state.phase === "paused") break;   // the overlay says why nothing moves

@@ -344,6 +344,86 @@ def test_the_driving_controls_work_only_while_the_drive_runs(station):
         assert enabled(page) == set(DRIVING) - {"accelerate"}
         page.keyboard.press("Space")
         assert len(sent("hand_back")) == 1
+        socket.send(json.dumps({"type": "mode", "mode": "auto", "t": 12.0}))
+        socket.send(json.dumps({"type": "episode_end", "episode_id": "x", "satisfied": True,
+                                "end_reason": "goal", "junctions": 3, "takeovers": 1}))
+        wait_until(page, "document.getElementById('toggle').disabled")   # the drive is over
+        assert enabled(page) == set()
+        page.keyboard.press("Space")
+        assert sent("takeover") == []
+
+
+# A gamepad in the browser's standard mapping (the left stick steers, the right trigger is the
+# accelerator, A takes over and hands back), set from the test through window.pad.
+GAMEPAD = """window.pad = { steer: 0, throttle: 0, button: false };
+navigator.getGamepads = () => [{
+  id: "virtual gamepad", index: 0, connected: true, mapping: "standard", timestamp: performance.now(),
+  axes: [window.pad.steer, 0, 0, 0], buttons: Array.from({ length: 17 }, (_, i) => {
+    const pressed = i === 0 && window.pad.button;
+    return { pressed, touched: pressed, value: i === 7 ? window.pad.throttle : Number(pressed) };
+  }),
+}];"""
+
+
+def test_a_gamepad_sends_nothing_while_the_car_is_held_paused_or_its_drive_over(station, tmp_path):
+    """The one rule of the buttons and keys holds for a wheel or gamepad: while the car is held for
+    the hand-back (in its lane, or back in it after being guided back) the accelerator is sent let
+    go and, once the car stands, nothing at all; guided back from the oncoming lane the pedals still
+    drive it; its button hands back; while paused, and once the drive is over, nothing is sent."""
+    frame, _ = scene_on(station.net_path)
+    moving = {**frame, "speed": 5.0}
+    with station.open() as (page, socket):
+        received: list[dict] = []
+        socket.on_message(lambda text: received.append(json.loads(text)))
+        page.evaluate(GAMEPAD)
+
+        def sent_for(**pad) -> list[dict]:
+            """The controls and hand-backs the page sends once the pad is set to `pad` (what the
+            messages before it brought is sent by then, and left out)."""
+            page.wait_for_timeout(300)
+            count = len(received)
+            page.evaluate("(values) => Object.assign(window.pad, values)", pad)
+            page.wait_for_timeout(400)   # many animation frames have read the pad by then
+            return [message for message in received[count:] if message["type"] in ("control", "hand_back")]
+
+        def warn(kind: str) -> None:
+            socket.send(json.dumps({"type": "warning", "kind": kind, "t": 11.0}))
+
+        socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver",
+                                "driving": "continuous", "inputs": ["gamepad"]}))
+        socket.send(state_message("driving"))
+        socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
+        socket.send(json.dumps(moving))
+        socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 10.0}))
+        wait_until(page, "document.getElementById('mode').textContent === 'MANUAL'")
+        assert [c["throttle"] for c in sent_for(throttle=1.0)] == [1.0]
+        for kind in ("oncoming", "hand_back", "guide_back"):   # guided back: the pedals still drive it
+            warn(kind)
+        assert [c["throttle"] for c in sent_for(throttle=0.6)] == [0.6]
+        warn("own_lane")   # back in its lane: the hold brakes it to a stand
+        held = sent_for(steer=0.5, throttle=0.9)
+        assert [(c["steer"], c["throttle"], c["brake"]) for c in held] == [(0.5, 0.0, 0.0)]
+        socket.send(json.dumps({**frame, "t": 10.5}))   # standing
+        assert sent_for(steer=-0.5, throttle=1.0) == []
+        assert [m["type"] for m in sent_for(button=True)] == ["hand_back"]
+        socket.send(json.dumps({"type": "mode", "mode": "auto", "t": 12.0}))
+        page.evaluate("window.pad.button = false")
+        socket.send(json.dumps({**moving, "t": 12.5}))
+        socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 13.0}))   # taken over again
+        assert [c["throttle"] for c in sent_for(throttle=0.8)] == [0.8]
+        warn("hold")   # held in its lane
+        page.locator("#incident").filter(has_text="the car stops here").wait_for()
+        assert [c["throttle"] for c in sent_for(steer=0.2, throttle=0.7)] == [0.0]
+        page.screenshot(path=str(tmp_path / "gamepad-held.png"))
+        socket.send(state_message("paused", paused_by="experimenter", mode="manual"))
+        page.locator("#overlay-text").filter(has_text="Paused by the experimenter").wait_for()
+        assert sent_for(steer=-0.3, button=True) == []
+        page.evaluate("window.pad.button = false")
+        socket.send(state_message("driving", mode="manual"))
+        socket.send(json.dumps({"type": "episode_end", "episode_id": "x", "satisfied": True,
+                                "end_reason": "goal", "junctions": 3, "takeovers": 1}))
+        assert sent_for(steer=0.4, throttle=1.0, button=True) == []
+        page.screenshot(path=str(tmp_path / "gamepad-over.png"))
 
 
 KEY_STEERING = """async ([speed, step, steps]) => {
