@@ -7,7 +7,7 @@ questionnaires, "questionnaire" (one is shown) comes after the consent, after a 
 end, until each is answered. A client message
 that does not fit the phase (a takeover before consent, a hand-back on autopilot, a resume of the
 experimenter's pause) is refused with an `out_of_order` error and changes nothing; a hand-back that
-crosses the episode's own at the junction is not one (`Session.switch`).
+crosses the episode's own at the junction, or the drive's end, is not one (`Session.switch`).
 
 The trials are the participant's planned episodes in the study's order (harness/study/plan.py);
 a trial is done when its part exists, so an aborted, failed or interrupted episode is run again
@@ -44,6 +44,7 @@ from trustroute.harness.live.protocol import (
     TrustReport,
 )
 from trustroute.harness.live.worker import start_episode_process
+from trustroute.harness.simulation.driving_style import AUTOPILOT
 from trustroute.harness.study.plan import EpisodeTask
 from trustroute.participants.questionnaires import Questionnaire
 
@@ -163,7 +164,6 @@ class Session:
                 self.require("ready", message)
                 self.start(self.pending()[0], message.trust)
             elif isinstance(message, (Takeover, HandBack)):
-                self.require("driving", message)
                 return self.switch(message)
             elif isinstance(message, (Drive, Steer, Control)):
                 self.drive(message)
@@ -189,15 +189,17 @@ class Session:
 
     def switch(self, message: Takeover | HandBack) -> list[dict]:
         """A takeover or hand-back, told to the episode (its `mode` event confirms it). One asking
-        for the mode the episode switched to on its own since the participant last asked (the
-        junction's hand-back, crossed by a hand-back sent a moment late) is done already: the state
-        acknowledges it and the episode is told nothing, so nothing is logged. Any other asking for
-        the mode the ego is on is out of order: a second request, or one before its first is
-        applied."""
+        for the mode the episode switched to on its own since the participant last asked is done
+        already: the junction's hand-back, or the drive's end (which takes the car from a person in
+        control, `end_drive`), crossed by a hand-back sent a moment late. The state acknowledges it
+        and no episode is told, so nothing is logged. Any other asking for the mode the ego is on,
+        or coming outside a drive, is out of order: a second request, one before its first is
+        applied, a hand-back on autopilot."""
         wanted = REQUESTED_MODE[message.type]
         if self.mode == wanted and self.switched_unasked:
             self.switched_unasked = False   # (asked for now: a second request is out of order)
             return [self.progress()]
+        self.require("driving", message)
         if self.mode == wanted:
             raise MessageError("out_of_order", f"{message.type} while the mode is {self.mode}")
         self.tell(message.model_dump())
@@ -300,6 +302,7 @@ class Session:
                     self.study.episode_finished(self.task)
                 else:
                     self.last_error = message.get("error") or message.get("reason")
+                self.end_drive()
                 self.phase = self.next_phase()
                 self.pause_reason, self.process, self.connection = None, None, None
                 if self.expiry is not None:
@@ -310,6 +313,12 @@ class Session:
             push({key: value for key, value in message.items() if key != "traceback"})
             if finished:
                 push(self.progress())
+
+    def end_drive(self) -> None:
+        """The drive is over, however it ended: the car is no longer the person's. Had they taken
+        over (or asked to), the end hands back on its own, so a hand-back sent as it ended is done
+        already (`switch`)."""
+        self.mode, self.switched_unasked = AUTOPILOT.name, self.asked != AUTOPILOT.name
 
     def control(self, action: str) -> dict:
         """The experimenter's pause, resume or abort of the running episode. A pause or resume is

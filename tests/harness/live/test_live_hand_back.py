@@ -149,3 +149,68 @@ def test_a_hand_back_just_after_the_episodes_own_is_done_not_refused(tmp_path):
     assert [e["type"] for e in driver.events] == ["takeover"]   # the episode was told nothing more
     (row,) = record.incidents[record.incidents["takeover"]].to_dict("records")
     assert (row["takeover_start"], row["takeover_end"]) == (modes[0][1], modes[1][1])
+
+
+class EndingStudy(NoStudy):
+    """The study of a session run without a server, without questionnaires, whose trials are done
+    when their episode ends."""
+
+    questionnaires: dict[str, list] = {"before": [], "after_each_trial": [], "end": []}
+    study_dir = None
+
+    def __init__(self) -> None:
+        self.done: set[str] = set()
+
+    def is_done(self, task) -> bool:
+        return task.episode_id in self.done
+
+    def attempt_ended(self, task, message: dict) -> None:
+        pass
+
+    def episode_finished(self, task) -> None:
+        self.done.add(task.episode_id)
+
+
+def answers(session: Session, kind: str) -> list[dict]:
+    """The server's replies to a participant's `kind` message (its error, when refused)."""
+    try:
+        return session.handle(parse_client_message(f'{{"type": "{kind}"}}'))
+    except MessageError as exc:
+        return [exc.reply]
+
+
+@pytest.mark.parametrize("end", [
+    {"type": "episode_end", "episode_id": "", "satisfied": True, "end_reason": "goal", "junctions": 3,
+     "takeovers": 1},
+    {"type": "episode_aborted", "episode_id": "", "reason": "aborted by the experimenter"},
+    {"type": "episode_failed", "episode_id": "", "error": "SUMO stopped"},
+])
+@pytest.mark.parametrize("switched_back", [False, True])
+def test_a_hand_back_after_the_drive_has_ended_is_done_not_refused(tmp_path, end, switched_back):
+    """A person in control whose drive ends (at its goal, aborted, failed) as they hand back: the
+    drive's end took the car from them, so their hand-back, arriving after it, is done already and
+    acknowledged with the state of the phase after the drive; so is one that crossed the junction's
+    own hand-back and then the end. Asked twice, or with no takeover in the drive, it is out of
+    order, as is a takeover outside a drive."""
+    config = tiny_config(tmp_path, participants=1, specs=("phi1", "phi2"))
+    first, second = plan_episodes(config)[:2]
+    session = Session(EndingStudy(), first.participant, [first, second], consented=True)
+    told: list[dict] = []
+
+    def drive(task, takeover: bool) -> None:
+        session.phase, session.task, session.asked, session.mode = "driving", task, "auto", "auto"
+        session.switched_unasked, session.connection = False, SessionEnd(told)
+        if takeover:
+            answers(session, "takeover")
+            session.on_episode_message({"type": "mode", "mode": "manual", "t": 10.0})
+        if switched_back:   # the episode's own hand-back at the junction
+            session.on_episode_message({"type": "mode", "mode": "auto", "t": 20.0})
+        session.on_episode_message({**end, "episode_id": task.episode_id})
+
+    drive(first, takeover=True)
+    late, again, takeover = (answers(session, kind) for kind in ("hand_back", "hand_back", "takeover"))
+    assert [(r["type"], r.get("phase"), r.get("mode")) for r in late] == [("state", "ready", "auto")]
+    assert [reply.get("code") for reply in again + takeover] == ["out_of_order", "out_of_order"]
+    assert told == [{"type": "takeover"}]   # no episode was told of the late hand-back
+    drive(second, takeover=False)   # on autopilot throughout: a hand-back after it is no answer to anything
+    assert [reply.get("code") for reply in answers(session, "hand_back")] == ["out_of_order"]
