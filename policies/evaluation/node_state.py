@@ -59,14 +59,13 @@ class NodeState(Protocol):
         these, are decided alike by a policy."""
 
     def observation_probability(self, road: np.ndarray, human_action: int, performance: int) -> np.ndarray:
-        """P(observation) per row after driving `road` (one per row) and observing (h, e) there:
-        `children`' own, bit for bit."""
+        """P(observation) per row after driving `road` (one per row) and observing (h, e) there
+        (the true posterior's: the filter's own, bit for bit)."""
 
-    def children(self, road: np.ndarray, human_action: int, performance: int
-                 ) -> tuple[np.ndarray, Self]:
-        """(P(observation) per row, node state of the rows where it is possible) after driving
-        `road` (one per row) and observing (h, e) there; its DFA state is the parent's until
-        `stepped`."""
+    def children(self, road: np.ndarray, human_action: int, performance: int, p_obs: np.ndarray) -> Self:
+        """The node state of the rows where (h, e) is possible (`p_obs`, their
+        `observation_probability`, > 0) after driving `road` (one per row) and observing it there;
+        its DFA state is the parent's until `stepped`."""
 
     def allocate(self, rows: int) -> Self:
         """A node state of `rows` rows like this one, its arrays' contents unset (`put` fills them)."""
@@ -199,11 +198,11 @@ class ObservedState:
         return truth.observation_probability(self.posterior, truth.road_incident[road], human_action,
                                              performance)
 
-    def children(self, road: np.ndarray, human_action: int, performance: int
-                 ) -> tuple[np.ndarray, ObservedState]:
+    def children(self, road: np.ndarray, human_action: int, performance: int, p_obs: np.ndarray
+                 ) -> ObservedState:
         model, h, e = self.model, human_action, performance
-        new_posterior, p_obs = model.true_pomdp.belief_update(
-            self.posterior, model.true_pomdp.road_incident[road], h, e, rule="bayes")
+        new_posterior = model.true_pomdp.posterior(self.posterior, model.true_pomdp.road_incident[road], h, e,
+                                                   rule="bayes")
         incident = model.pomdp.road_incident[road]
         if model.belief_rule == "bayes" and model.truth is None:
             # the AV's filter is the true one: its posterior is new_posterior (the rows of
@@ -219,9 +218,8 @@ class ObservedState:
             new_ref, _ = ref_pomdp.filter(new_ref, ref_pomdp.road_incident[road], h, e)
         possible = p_obs > 0
         posterior, belief = beliefs_at(new_posterior, new_av, possible)
-        return p_obs, replace(self, q=self.q[possible], belief=belief, posterior=posterior,
-                              q_ref=self.q_ref[possible], ref_belief=new_ref[possible],
-                              word=new_word[possible])
+        return replace(self, q=self.q[possible], belief=belief, posterior=posterior,
+                       q_ref=self.q_ref[possible], ref_belief=new_ref[possible], word=new_word[possible])
 
     def allocate(self, rows: int) -> ObservedState:
         posterior, belief = allocated_beliefs(self.posterior, self.belief, rows)
@@ -306,11 +304,11 @@ class HiddenState:
         return pomdp.observation_probability(self.posterior, pomdp.road_incident[road], human_action,
                                              performance)
 
-    def children(self, road: np.ndarray, human_action: int, performance: int
-                 ) -> tuple[np.ndarray, HiddenState]:
+    def children(self, road: np.ndarray, human_action: int, performance: int, p_obs: np.ndarray
+                 ) -> HiddenState:
         pomdp, h, e = self.filter.pomdp, human_action, performance
         incident = pomdp.road_incident[road]
-        new_posterior, p_obs = pomdp.belief_update(self.posterior, incident, h, e, rule="bayes")
+        new_posterior = pomdp.posterior(self.posterior, incident, h, e, rule="bayes")
         new_av = (new_posterior if self.belief_rule == "bayes"
                   else pomdp.filter(self.belief, incident, h, e, rule=self.belief_rule)[0])
         possible = p_obs > 0
@@ -319,7 +317,7 @@ class HiddenState:
         posterior, belief = beliefs_at(new_posterior, new_av, possible)
         new_joint = self.filter.update(self.joint[possible], posterior, belief, road[possible],
                                        (incident[possible], h, e), p_obs[possible], new_word, labels)
-        return p_obs, replace(self, joint=new_joint, posterior=posterior, belief=belief, word=new_word)
+        return replace(self, joint=new_joint, posterior=posterior, belief=belief, word=new_word)
 
     def allocate(self, rows: int) -> HiddenState:
         posterior, belief = allocated_beliefs(self.posterior, self.belief, rows)

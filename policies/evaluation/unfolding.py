@@ -380,16 +380,19 @@ class Children:
 def branch(frontier: Frontier, next_road: np.ndarray, route_id: np.ndarray,
            observations: tuple[tuple[int, int], ...], children: Children) -> None:
     """Add the children of every node, observation by observation (the impossible ones left out),
-    to `children`."""
-    counts = [int(np.count_nonzero(frontier.state.observation_probability(next_road, h, e) > 0))
-              for h, e in observations]
+    to `children`. Each observation's probabilities are computed once: they size the children's
+    arrays before the first observation's are written, and they are the children's masses."""
+    p_obs = [frontier.state.observation_probability(next_road, h, e) for h, e in observations]
+    counts = [int(np.count_nonzero(p > 0)) for p in p_obs]
     for k, (h, e) in enumerate(observations):
-        children.add(observed(frontier, next_road, route_id, h, e), to_come=sum(counts[k + 1:]))
+        children.add(observed(frontier, next_road, route_id, (h, e), p_obs[k]), to_come=sum(counts[k + 1:]))
 
 
-def observed(frontier: Frontier, next_road: np.ndarray, route_id: np.ndarray, h: int, e: int) -> Frontier:
-    """The children of every node where (h, e) is observed at its next road, if possible there."""
-    p_obs, state = frontier.state.children(next_road, h, e)
+def observed(frontier: Frontier, next_road: np.ndarray, route_id: np.ndarray, observation: tuple[int, int],
+             p_obs: np.ndarray) -> Frontier:
+    """The children of every node where `observation` (h, e) is observed at its next road, if
+    possible there (`p_obs`: its probability per node, `NodeState.observation_probability`)."""
+    state = frontier.state.children(next_road, *observation, p_obs)
     possible = p_obs > 0
     return Frontier(road=next_road[possible], probability=frontier.probability[possible] * p_obs[possible],
                     route_id=route_id[possible], state=state)

@@ -7,7 +7,7 @@ o = (incident of x', human action h, AV performance e). See docs/model.md, "The 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Literal, get_args
 
@@ -20,6 +20,7 @@ from trustroute.participants.driver_model import DriverModel, check_covers_town
 BeliefRule = Literal["bayes", "paper"]
 BELIEF_RULES: tuple[BeliefRule, ...] = get_args(BeliefRule)
 BELIEF_RULE_NAMES = OneOf(choices=BELIEF_RULES, noun="belief rule")   # as a config or a setting names one
+ObservationRows = tuple[np.ndarray, np.ndarray, np.ndarray]   # incident, human action, performance per row
 
 
 # Rows a vectorised step (a belief update, a label step) computes at a time, so that its temporaries
@@ -138,25 +139,28 @@ class TrustPOMDP:
         (it can cycle), so the belief would drift along roads where nothing happens
         (docs/synthesis.md, "One filter").
         """
-        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
-        n = beliefs.shape[0]
-        incident, human_action, performance = (_index_rows(value, n)
-                                               for value in (incident, human_action, performance))
-        if n <= BLOCK_ROWS:
-            return self._update_rows(beliefs, (incident, human_action, performance), rule)
-        # Each row's arithmetic is its own, in the same order whatever rows come with it: rows in
-        # blocks give the values of one call bit for bit.
-        posterior, probability = np.empty_like(beliefs), np.empty(n)
-        for rows in row_blocks(n, BLOCK_ROWS):
-            posterior[rows], probability[rows] = self._update_rows(
-                beliefs[rows], (incident[rows], human_action[rows], performance[rows]), rule)
-        return posterior, probability
+        beliefs, observation = _observation_rows(beliefs, incident, human_action, performance)
+        return (_in_blocks(self._posterior_rows, beliefs, observation, rule, beliefs.shape),
+                _in_blocks(self._probability_rows, beliefs, observation, rule, beliefs.shape[:1]))
 
-    def _update_rows(self, beliefs: np.ndarray, observation: tuple[np.ndarray, np.ndarray, np.ndarray],
-                     rule: BeliefRule) -> tuple[np.ndarray, np.ndarray]:
-        """`belief_update` of rows given an index per row for each part of the observation."""
+    def posterior(self, beliefs: np.ndarray, incident: np.ndarray | int, human_action: np.ndarray | int,
+                  performance: np.ndarray | int = 0, rule: BeliefRule = "bayes") -> np.ndarray:
+        """`belief_update`'s posteriors alone, bit for bit: for a caller that holds the rows'
+        observation probabilities already (`observation_probability` gives `belief_update`'s), so
+        that each is computed once."""
+        beliefs, observation = _observation_rows(beliefs, incident, human_action, performance)
+        return _in_blocks(self._posterior_rows, beliefs, observation, rule, beliefs.shape)
+
+    def _probability_rows(self, beliefs: np.ndarray, observation: ObservationRows,
+                          rule: BeliefRule) -> np.ndarray:
+        """`belief_update`'s observation probabilities of rows (Bayes' whatever the rule)."""
+        return self.observation_probability(beliefs, *observation)
+
+    def _posterior_rows(self, beliefs: np.ndarray, observation: ObservationRows,
+                        rule: BeliefRule) -> np.ndarray:
+        """`belief_update`'s posteriors of rows given an index per row for each part of the
+        observation."""
         incident, human_action, performance = observation
-        probability = self.observation_probability(beliefs, incident, human_action, performance)
         if rule == "bayes":
             matrices = self.weighted_transition[incident, human_action, performance]
         elif rule == "paper":
@@ -170,7 +174,7 @@ class TrustPOMDP:
         keep = self.preserves_belief(rule)[incident, human_action, performance]
         if keep.any():
             posterior[keep] = beliefs[keep]
-        return posterior, probability
+        return posterior
 
     def filter(self, beliefs: np.ndarray, incident: np.ndarray | int, human_action: np.ndarray | int,
                performance: np.ndarray | int = 0,
@@ -182,7 +186,7 @@ class TrustPOMDP:
         tracker, the model engine, the exact evaluation, the gym env and the analysis all step the
         AV's belief through here."""
         beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
-        posterior, _ = self.belief_update(beliefs, incident, human_action, performance, rule=rule)
+        posterior = self.posterior(beliefs, incident, human_action, performance, rule=rule)
         possible = posterior.sum(axis=1) > 0
         if not possible.all():
             posterior[~possible] = beliefs[~possible]
@@ -204,6 +208,29 @@ def _index_rows(value: np.ndarray | int, n: int) -> np.ndarray:
     """An index per row: `value` broadcast to [n]."""
     value = np.asarray(value)
     return np.full(n, value) if value.ndim == 0 else _shaped(value, (n,))
+
+
+def _observation_rows(beliefs: np.ndarray, incident: np.ndarray | int, human_action: np.ndarray | int,
+                      performance: np.ndarray | int) -> tuple[np.ndarray, ObservationRows]:
+    """Beliefs as float rows and an index per row for each part of the observation."""
+    beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+    n = beliefs.shape[0]
+    return beliefs, (_index_rows(incident, n), _index_rows(human_action, n), _index_rows(performance, n))
+
+
+def _in_blocks(of_rows: Callable[[np.ndarray, ObservationRows, BeliefRule], np.ndarray], beliefs: np.ndarray,
+               observation: ObservationRows, rule: BeliefRule, shape: tuple[int, ...]) -> np.ndarray:
+    """of_rows(beliefs, observation, rule), of `shape`, BLOCK_ROWS rows at a time (one call for
+    fewer). Each row's arithmetic is its own, in the same order whatever rows come with it: rows
+    in blocks give the values of one call bit for bit."""
+    n = beliefs.shape[0]
+    if n <= BLOCK_ROWS:
+        return of_rows(beliefs, observation, rule)
+    out = np.empty(shape)
+    for rows in row_blocks(n, BLOCK_ROWS):
+        out[rows] = of_rows(beliefs[rows], (observation[0][rows], observation[1][rows], observation[2][rows]),
+                            rule)
+    return out
 
 
 def _scaled_identity(matrices: np.ndarray) -> np.ndarray:

@@ -189,8 +189,8 @@ def _children(pomdp: TrustPOMDP, filter_: JointFilter, belief_rule: BeliefRule, 
         incident = pomdp.road_incident[x2]
         for h, e in outcomes:
             posterior, p_obs = pomdp.belief_update(nodes["posterior"][p_idx], incident, h, e)
-            belief = posterior if bayes else pomdp.belief_update(
-                nodes["belief"][p_idx], incident, h, e, rule=belief_rule)[0]
+            belief = posterior if bayes else pomdp.posterior(nodes["belief"][p_idx], incident, h, e,
+                                                             rule=belief_rule)
             ok = p_obs > 0
             labels = filter_.labels(belief_rule)
             # a history's word decides only belief labels: without them every node has the empty

@@ -10,11 +10,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from trustroute.policies.evaluation import unfolding
 from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.labelling import Labeller
 from trustroute.policies.logic.spec import load_spec
+from trustroute.policies.model.trust_pomdp import TrustPOMDP
 from trustroute.policies.routing.fallback import FallbackPolicy, with_fallback
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
@@ -231,3 +233,29 @@ def test_evaluate_equals_plain_recursion(pomdp, name, belief_rule):
     assert 0.05 < satisfied < 0.95 and evaluation.end_mass["destination"] > 0.01
     assert evaluation.lower == pytest.approx(satisfied, abs=1e-12)
     assert evaluation.expected_final_trust == pytest.approx(final_trust, abs=1e-9)
+
+
+@pytest.mark.parametrize("belief_rule", ["bayes", "paper"])
+def test_each_observation_probability_is_computed_once(pomdp, belief_rule, monkeypatch):
+    """A level's children are sized by every observation's probability per node before the first
+    observation's are written; those probabilities are then the children's masses, not computed
+    again by the filter: one per node moved and observation."""
+    computed, branched = [], []
+    probability, branch = TrustPOMDP.observation_probability, unfolding.branch
+
+    def counted(self, beliefs, *observation):
+        computed.append(np.atleast_2d(beliefs).shape[0])
+        return probability(self, beliefs, *observation)
+
+    def spied(frontier, next_road, route_id, observations, children):
+        branched.append(frontier.size * len(observations))
+        return branch(frontier, next_road, route_id, observations, children)
+
+    monkeypatch.setattr(TrustPOMDP, "observation_probability", counted)
+    monkeypatch.setattr(unfolding, "branch", spied)
+    spec = load_spec("specs/phi1.toml", pomdp.town)
+    policy = RandomStationaryPolicy(pomdp.town, np.random.default_rng(RANDOM_POLICY_SEED["phi1"]))
+    evaluate(pomdp, spec, policy, EvaluationSettings(fallback_after=None, max_junctions=12,
+                                                     belief_rule=belief_rule))
+    assert sum(branched) > 500
+    assert sum(computed) == sum(branched)

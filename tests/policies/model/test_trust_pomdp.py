@@ -136,6 +136,24 @@ def test_an_update_in_blocks_of_rows_is_one_update_bit_for_bit(town, seed, monke
         assert [a.tobytes() for a in blocks] == [a.tobytes() for a in whole]
 
 
+@pytest.mark.parametrize("seed", range(2))
+def test_posteriors_and_probabilities_apart_are_the_update_bit_for_bit(town, seed, monkeypatch):
+    """A caller holding the rows' observation probabilities (the evaluation, which sizes a level's
+    children by them) asks `posterior` for the rest: the two, each in one call over rows of several
+    blocks, are `belief_update`'s values bit for bit."""
+    rng = np.random.default_rng(seed)
+    pomdp = pomdp_for(town, random_model(rng, 7, performance_dependent=bool(seed % 2), sparse=True))
+    monkeypatch.setattr(trust_pomdp, "BLOCK_ROWS", 37)
+    n = 1000
+    beliefs = rng.dirichlet(np.ones(7), size=n)
+    beliefs[::97] = 0.0
+    observation = (rng.integers(0, 4, size=n), rng.integers(0, 2, size=n), rng.integers(0, 2, size=n))
+    for rule in ("bayes", "paper"):
+        posterior, probability = pomdp.belief_update(beliefs, *observation, rule=rule)
+        assert pomdp.posterior(beliefs, *observation, rule=rule).tobytes() == posterior.tobytes()
+        assert pomdp.observation_probability(beliefs, *observation).tobytes() == probability.tobytes()
+
+
 def test_an_update_of_many_rows_holds_no_transition_matrix_per_row(pomdp):
     """The transition matrices an update gathers, [rows, θ, θ'] (seven times the beliefs' bytes),
     are gathered BLOCK_ROWS rows at a time: an update of 200,000 rows holds little more than its

@@ -117,7 +117,9 @@ def exact_joint_value(pomdp: TrustPOMDP, spec: Spec, horizon: int, policy: Joint
                     probability, joint2, belief2 = model.step(joint, x2, belief, (i, h, e))
                     if probability == 0:
                         continue
-                    follow = None if vehicle is None else vehicle.children(np.array([x2]), h, e)[1]
+                    road = np.array([x2])
+                    follow = None if vehicle is None else vehicle.children(
+                        road, h, e, vehicle.observation_probability(road, h, e))
                     total += probability * value(t + 1, x2, joint2, belief2, follow)
                 best = max(best, total)
             memo[key] = best
