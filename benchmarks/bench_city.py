@@ -2,8 +2,9 @@
 `city5` on the town `city` (the RESCO Ingolstadt scenario) and `csomor5` on the town `csomor`
 (RouteRL's OpenStreetMap net of Csömör, 481 choice junctions; docs/cities.md).
 
-Per city, first the trust-free baseline of the same run: the shortest route completing the task,
-evaluated exactly (its value and seconds). Then each synthesis `synthesize(tau=1e-3,
+Per city, first the trust-free baseline of the same run: the shortest route completing the task
+and its exact value, certified, as `trustroute baseline` gives them (the lower end is the row's
+value; the seconds are the whole baseline's). Then each synthesis `synthesize(tau=1e-3,
 time_limit=60)` in a fresh subprocess (its own peak RSS, no warm caches): seconds, peak RSS (MB),
 L, U, whether the target is met (gap <= 1e-3 within 60 s under 1 GB), and whether L stays at or
 above the trust-free value minus the gap. The machine is shared: every row carries the 1-minute
@@ -22,7 +23,6 @@ import sys
 import time
 
 from benchmarks.bench_synthesis_scaling import MEMORY_TARGET_MB, TAU, TIME_LIMIT, run_json_subprocess
-from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 # (row name prefix, spec, town)
@@ -53,22 +53,21 @@ def _child(spec_name: str, town_name: str, horizon: int | None) -> dict:
     return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb}
 
 
-def _baseline(prefix: str, spec_name: str, town_name: str) -> dict:
+def baseline_row(prefix: str, spec_name: str, town_name: str) -> dict:
+    """The trust-free baseline as `trustroute baseline` gives it: its route and certified value."""
+    from trustroute.app.synthesis import baseline
     from trustroute.networks.road_lookup import choice_junctions
-    from trustroute.policies.evaluation.plain import evaluate
-    from trustroute.policies.routing.free import baseline_route, trust_free_policy
+    from trustroute.policies.belief.problem import problem_of
 
     town, pomdp, spec = _problem(spec_name, town_name)
     load = os.getloadavg()[0]
     start = time.perf_counter()
-    value = evaluate(pomdp, spec, trust_free_policy(town, spec), EvaluationSettings(fallback_after=None))
+    found = baseline(problem_of(pomdp, spec))
     seconds = time.perf_counter() - start
-    route = baseline_route(town, spec)
-    return {"name": f"{prefix}.trust_free", "value": value.satisfaction_probability, "unit": "probability",
-            "seconds": seconds, "junctions": len(town.junctions), "roads": len(town.states),
-            "choice_junctions": len(choice_junctions(town)),
-            "route_junctions": len(route) - 1, "route_m": town.route_length(route),
-            "load_average_1min": load}
+    return {"name": f"{prefix}.trust_free", "value": found.value.lower, "unit": "probability",
+            "upper": found.value.upper, "seconds": seconds, "junctions": len(town.junctions),
+            "roads": len(town.states), "choice_junctions": len(choice_junctions(town)),
+            "route_junctions": len(found.route) - 1, "route_m": found.length_m, "load_average_1min": load}
 
 
 def _synthesis_row(prefix: str, spec_name: str, town_name: str, horizon: int | None, free: float,
@@ -90,7 +89,7 @@ def _synthesis_row(prefix: str, spec_name: str, town_name: str, horizon: int | N
 
 
 def _city_rows(prefix: str, spec_name: str, town_name: str, table: list[str]) -> list[dict]:
-    baseline = _baseline(prefix, spec_name, town_name)
+    baseline = baseline_row(prefix, spec_name, town_name)
     results = [baseline]
     table += [f"{prefix} ({baseline['junctions']} junctions, {baseline['choice_junctions']} with a choice): "
               f"trust-free P = {baseline['value']:.6f} ({baseline['seconds']:.3f} s)",

@@ -10,8 +10,10 @@ participants/data/driver_population_real.json exists. Columns, for φ1 and φ2 a
   model of the mixture);
 - robust: the worst-type objective over the mixture (grid of candidate type priors).
 Each entry is P(accepted within 20 junctions) (no fallback, as synthesis scores it), exact
-(policies/evaluation/plain.py with the true driver of each type, certified [lower, upper]; the lower end
-is printed), per type and prior-weighted over the row's population. Belief atoms read each
+(policies/evaluation/plain.py with the true driver of each type), per type and prior-weighted over
+the row's population, certified [lower, upper] as a population synthesis reports them (each type's
+rounded outward for its true driver, `TypeValue.certified`; the mixture's by `mixture_lower` and
+`mixture_upper`); the lower end is printed. Belief atoms read each
 vehicle's own filter (the spec's meaning), so a vehicle whose model is wrong about the driver can
 count `hightrust` as reached while the driver's trust did not move. So each entry also has the
 reference reading `ref`: the same episodes with the spec read on the exact posterior under the
@@ -51,8 +53,14 @@ from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.synthesis.belief_synthesis import synthesize
-from trustroute.policies.synthesis.population import synthesize_population
+from trustroute.policies.synthesis.population import (
+    TypeValue,
+    mixture_lower,
+    mixture_upper,
+    synthesize_population,
+)
 from trustroute.policies.synthesis.result import SearchRun
+from trustroute.policies.synthesis.rounding import model_rounding
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 SPECS = ("phi1", "phi2")
@@ -68,19 +76,24 @@ SPEC_DIR = Path(__file__).resolve().parents[1] / "trustroute" / "core" / "specs"
 
 
 def row_values(av_pomdp, av_spec, policy, population: DriverPopulation, spec) -> dict:
-    """Exact P(accepted within H) of `policy` (its AV on av_pomdp) for each type of `population`,
-    and the reference reading on the population's own filter."""
+    """Exact P(accepted within H) of `policy` (its AV on av_pomdp) for each type of `population`
+    and over their mixture, certified as a population synthesis certifies them, and the reference
+    reading on the population's own filter."""
     reference = (build_pomdp(av_pomdp.town, lift_population(population)), lift_spec(spec, population))
-    per_type = {}
+    per_type, certified = {}, []
     for t in population.types:
+        truth = build_pomdp(av_pomdp.town, t.model)
         value = evaluate(av_pomdp, av_spec, policy,
                          EvaluationSettings(fallback_after=None, max_junctions=HORIZON),
-                         truth=build_pomdp(av_pomdp.town, t.model), reference=reference)
-        per_type[t.name] = {"weight": t.weight, "lower": value.lower, "upper": value.upper,
+                         truth=truth, reference=reference)
+        certified.append(TypeValue.certified(t.name, float(t.weight), (value.lower, value.upper),
+                                             model_rounding(truth), value.max_junctions))
+        per_type[t.name] = {"weight": t.weight, "lower": certified[-1].lower, "upper": certified[-1].upper,
                             "ref": value.reference_accepted, "final_trust": value.expected_final_trust}
     weights = population.weights
-    return {key: float(weights @ [v[key] for v in per_type.values()])
-            for key in ("lower", "upper", "ref", "final_trust")} | {"per_type": per_type}
+    return ({"lower": mixture_lower(weights, certified), "upper": mixture_upper(weights, certified)}
+            | {key: float(weights @ [v[key] for v in per_type.values()]) for key in ("ref", "final_trust")}
+            | {"per_type": per_type})
 
 
 def five_types(nominal, example: DriverPopulation) -> DriverPopulation:

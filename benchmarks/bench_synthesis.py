@@ -3,8 +3,8 @@
 For φ1, φ2 and the two strict specs, under the exact Bayes filter and the authors' released update
 ("paper"), for horizons 6, 7, 8, 10, 12, 20 and unbounded: lower, upper, gap and seconds of
 `synthesize(tau=1e-3, time_limit=60)`. At H = 20 also the exact value of "policy, then
-fallback after 20" (what the study measures, with the true Bayes observation probabilities) and its
-expected final trust; per spec
+fallback after 20" (what the study measures, with the true Bayes observation probabilities),
+certified as `trustroute evaluate` reports it, and its expected final trust; per spec
 pomdp-py POUCT's Monte Carlo satisfaction rate (with the fallback) and planning time per decision.
 The paper's Pr_max (0.8357 / 0.7288, τ = 0.01, unbounded) is reported beside φ1 / φ2, and beside
 it an emulation of the paper's finite belief approximation: the belief MDP restricted to the 210
@@ -23,14 +23,15 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from trustroute.analysis import paper_figures
+from trustroute.app.synthesis import evaluate_single
 from trustroute.harness.simulation.model_engine import monte_carlo
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
+from trustroute.policies.belief.problem import problem_of
 from trustroute.policies.belief.product_mdp import build_product
-from trustroute.policies.evaluation.plain import evaluate
 from trustroute.policies.evaluation.settings import EvaluationSettings
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.model.trust_pomdp import BeliefRule, build_pomdp
 from trustroute.policies.pomdp_py.pouct import pouct_policy
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 from trustroute.policies.synthesis.belief_cells import apply_symbol, observation_symbols
@@ -38,7 +39,7 @@ from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 SPECS = ("phi1", "phi2", "phi1_strict", "phi2_strict")
-RULES = ("bayes", "paper")
+RULES: tuple[BeliefRule, ...] = ("bayes", "paper")
 HORIZONS = (6, 7, 8, 10, 12, 20, None)
 PAPER_PR_MAX = paper_figures.PR_MAX
 TAU = 1e-3
@@ -113,6 +114,16 @@ def grid_emulation(pomdp, spec, rule: str, resolution: int, horizon: int | None)
     return best
 
 
+def with_fallback(pomdp, spec, policy, rule: BeliefRule) -> dict:
+    """What the study measures: the policy, then the fallback after 20 junctions, with the true
+    (Bayes) observation probabilities even when the AV filters by "paper"; certified as
+    `trustroute evaluate` reports it."""
+    study = evaluate_single(problem_of(pomdp, spec), policy,
+                            EvaluationSettings(fallback_after=DEFAULT_FALLBACK_AFTER, belief_rule=rule))
+    return {"with_fallback20_lower": study.lower, "with_fallback20_upper": study.upper,
+            "with_fallback20_final_trust": study.expected_final_trust}
+
+
 def run() -> list[dict]:
     town, driver = load_town(), load_driver_model()
     pomdp = build_pomdp(town, driver)
@@ -131,13 +142,7 @@ def run() -> list[dict]:
                        "policy_rows": result.stats.policy_rows,
                        "paper_pr_max": PAPER_PR_MAX.get(name)}
                 if horizon == DEFAULT_FALLBACK_AFTER:
-                    # What the study measures: the policy, then the fallback after 20 junctions, with
-                    # the true (Bayes) observation probabilities even when the AV filters by "paper".
-                    study = evaluate(pomdp, spec, result.policy,
-                                     EvaluationSettings(fallback_after=DEFAULT_FALLBACK_AFTER,
-                                                        belief_rule=rule))
-                    row.update({"with_fallback20_lower": study.lower, "with_fallback20_upper": study.upper,
-                                "with_fallback20_final_trust": study.expected_final_trust})
+                    row.update(with_fallback(pomdp, spec, result.policy, rule))
                 results.append(row)
         for rule in RULES:
             for horizon in GRID_HORIZONS.get(name, ()):
