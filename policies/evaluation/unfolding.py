@@ -434,12 +434,20 @@ def move(level: int, frontier: Frontier, actor: Actor, ledger: Ledger, limits: L
     return True
 
 
-# What a level holds at its peak, in copies of its children's arrays: the children (one set of
-# arrays, `Children`), the nodes moved, one observation's children before they are put in, and the
-# words of the exact labels with their lookup, which grow within a level (about 4 above what the
-# process holds before its first junction, measured with tracemalloc on the unbounded phi1 policy
-# at 80,000 histories per junction; docs/model.md gives its resident memory).
-PEAK_COPIES = 4
+# What a junction needs at its peak, in copies of its children's arrays (histories x observations x
+# bytes per history, `check_memory`): the children (one set of arrays, `Children`), the nodes moved,
+# one observation's children before they are put in, the merge's columns and their sort, the trim's
+# copy of the nodes kept, and the words of the exact labels with their lookup. Measured on the
+# unbounded phi1 policy at 20,000, 80,000 and 320,000 histories per junction (docs/model.md): one
+# junction's own growth is at most 3.5 copies in resident memory (its peak from the check to the
+# next) and at most 4.0 in allocations (tracemalloc), but the resident peak of the whole run above
+# the process before its first junction is 5.2-6.3 copies of its largest junction (the retained
+# heap, the words and routes held between junctions, the run's fixed costs; most at the smallest
+# budget). A refusal's suggested budget is one whole run at that budget, so the constant bounds the
+# whole run's. (Renumbering the words allocates in proportion to the words held, not to the
+# junction's histories: 12 copies of a late, small junction at 320,000, out of memory that the larger
+# junctions before it freed and the process still holds, so resident memory does not grow there.)
+PEAK_COPIES = 7
 
 
 def available_memory() -> int | None:

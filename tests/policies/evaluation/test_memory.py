@@ -11,11 +11,13 @@ available is refused before it is allocated."""
 from __future__ import annotations
 
 import tracemalloc
+from dataclasses import replace
 
 import numpy as np
 import numpy.ma  # noqa: F401  (numpy loads it on first use, inside the evaluation: not its memory)
 import pytest
 
+import trustroute
 from tests.cli import run_cli
 from tests.policies.evaluation.test_plain import RANDOM_POLICY_SEED, RandomStationaryPolicy, recursive_value
 from trustroute.core.errors import InputError
@@ -40,6 +42,9 @@ JUNCTIONS = 40        # the budget is reached by junction 16: 24 levels at the b
 # belief update's [rows, 7, 7] matrices for all of a level's rows at once: 2,640 (phi1) and 2,320
 # (phi2) bytes with all of them.
 BYTES_PER_HISTORY = 1_800
+# The run docs/model.md measures in resident memory: the unbounded phi1 policy (the result digest's
+# work limit) at 20,000 histories per junction, 60 junctions, no fallback.
+PEAK_BUDGET = 20_000
 # Belief updates and label steps run trust_pomdp.BLOCK_ROWS rows at a time; blocks of 256 rows are
 # small beside a level of up to 2,000 children, as 4,096 rows are beside the levels of the default
 # budget (2,000,000).
@@ -136,3 +141,28 @@ def test_the_command_says_so_in_one_line(capsys, monkeypatch):
     assert code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
     assert "--max-nodes 1 or less" in err and "--max-junctions" in err
+
+
+@pytest.mark.slow
+def test_a_whole_run_needs_at_most_peak_copies_of_its_largest_junction(pomdp, monkeypatch):
+    """A refusal's suggested budget is one whole run at that budget: what the run allocates beyond
+    what it holds at its first junction stays within PEAK_COPIES copies of its largest junction's
+    children as check_memory counts them (histories x observations x bytes per history). Measured
+    in allocations here (5.3 copies); in resident memory the same run needs 5.7-6.3
+    (unfolding.PEAK_COPIES says how)."""
+    spec = load_spec("specs/phi1.toml", pomdp.town)
+    policy = trustroute.synthesize("specs/phi1.toml", time_limit=600, work_limit=3_000_000).policy
+    settings = EvaluationSettings(fallback_after=None, max_junctions=60, max_nodes=PEAK_BUDGET)
+    evaluate(pomdp, spec, policy, replace(settings, max_nodes=PEAK_BUDGET // 100))  # caches, imports
+    checked, check = [], unfolding.check_memory
+
+    def counted(level, frontier, n_observations):
+        children = frontier.size * n_observations * frontier.bytes_per_node
+        checked.append((tracemalloc.get_traced_memory()[0], children))
+        return check(level, frontier, n_observations)
+
+    monkeypatch.setattr(unfolding, "check_memory", counted)
+    evaluation, peak = traced_peak(lambda: evaluate(pomdp, spec, policy, settings))
+    needed, largest = peak - checked[0][0], max(children for _, children in checked)
+    assert evaluation.max_frontier == PEAK_BUDGET
+    assert needed <= unfolding.PEAK_COPIES * largest, f"{needed / largest:.2f} copies"
