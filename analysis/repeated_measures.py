@@ -1,9 +1,18 @@
 """Repeated-measures models of a study, over every episode with one group per participant.
 
-Across specs (statsmodels): `conditional_logit` fits satisfaction on the condition with spec fixed
-effects and one stratum per participant (the participant effect is conditioned away, so four
-episodes of one person never count as four people); `mixed_trust_model` fits mean trust with a
-random intercept per participant.
+Across specs: `conditional_logit` fits satisfaction on the condition with spec fixed effects and
+one stratum per participant (statsmodels ConditionalLogit; the participant effect is conditioned
+away, so four episodes of one person never count as four people); `mixed_trust_model` fits mean
+trust with a random intercept per participant by REML (`random_intercept_reml`).
+
+The mixed model's REML fit is the profile likelihood over one number, the ratio of the
+participants' variance to the residual variance, maximised over [0, inf) with the boundary 0
+included: the fixed effects are then the GLS estimate and their covariance the residual variance
+times (X' V^-1 X)^-1. A study whose participants differ little has its REML optimum at that
+boundary (a variance of 0, the fit being ordinary least squares: the demo study's trust model
+is one); statsmodels' MixedLM does not converge there (its optimisers stop short of the boundary
+or fail on a singular matrix), so the fit is computed here and statsmodels checks it in the tests
+where its fit converges.
 
 Separation is detected from the data before the conditional logit is fitted (`separation`): the
 conditional likelihood grows without bound along a coefficient direction d exactly when, within every
@@ -230,6 +239,59 @@ def _constant_strata(y: np.ndarray, strata: np.ndarray | None) -> tuple[np.ndarr
         " no discordance, an infinite effect of its own)" for level in constant)
 
 
+# the profile is scanned on this grid of log variance ratios, then refined around its best point
+LOG_RATIO_GRID = np.arange(-12.0, 8.01, 0.5)
+BOUNDARY_NOTE = ("the participants' variance is estimated at 0 (REML on its boundary): the fit is "
+                 "ordinary least squares")
+
+
+@dataclass(frozen=True)
+class RandomInterceptFit:
+    """A random-intercept REML fit: the fixed effects, their covariance, the variance ratio."""
+
+    beta: np.ndarray
+    covariance: np.ndarray
+    ratio: float      # the participants' variance over the residual variance (0: on the boundary)
+    residual_variance: float
+
+
+def random_intercept_reml(y: np.ndarray, exog: np.ndarray, groups: np.ndarray) -> RandomInterceptFit:
+    """REML fit of y = exog beta + u_group + e, u ~ N(0, ratio s2), e ~ N(0, s2).
+
+    Within a group of k rows V = I + ratio 11', whose inverse is I - c 11' with c = ratio / (1 + k
+    ratio) and log det log(1 + k ratio); the profile REML criterion (n - p) log s2(ratio) + log det
+    V + log det X'V^-1 X is minimised over ratio on a grid of log ratios, refined, and compared with
+    ratio = 0 exactly."""
+    from scipy.optimize import minimize_scalar
+
+    codes = np.unique(groups, return_inverse=True)[1].ravel()
+    m = int(codes.max()) + 1
+    sizes = np.bincount(codes, minlength=m).astype(float)
+    sums = np.zeros((m, exog.shape[1]))
+    np.add.at(sums, codes, exog)
+    y_sums = np.bincount(codes, weights=y, minlength=m)
+    n, p = exog.shape
+
+    def fit(ratio: float) -> tuple[float, RandomInterceptFit]:
+        c = ratio / (1.0 + sizes * ratio)
+        gram = exog.T @ exog - sums.T @ (c[:, None] * sums)
+        beta = np.linalg.solve(gram, exog.T @ y - sums.T @ (c * y_sums))
+        residual = y - exog @ beta
+        residual_sums = np.bincount(codes, weights=residual, minlength=m)
+        s2 = float(residual @ residual - np.sum(c * residual_sums ** 2)) / (n - p)
+        log_s2 = math.log(s2) if s2 > 0 else -math.inf   # an exact fit: no residual variance
+        criterion = (n - p) * log_s2 + float(np.sum(np.log1p(sizes * ratio))) + np.linalg.slogdet(gram)[1]
+        return criterion, RandomInterceptFit(beta, s2 * np.linalg.inv(gram), ratio, s2)
+
+    scanned = [fit(math.exp(g))[0] for g in LOG_RATIO_GRID]
+    best = int(np.argmin(scanned))
+    low, high = LOG_RATIO_GRID[max(best - 1, 0)], LOG_RATIO_GRID[min(best + 1, len(LOG_RATIO_GRID) - 1)]
+    refined = minimize_scalar(lambda g: fit(math.exp(g))[0], bounds=(low, high), method="bounded",
+                              options={"xatol": 1e-10})
+    boundary, interior = fit(0.0), fit(math.exp(float(refined.x)))
+    return boundary[1] if boundary[0] <= interior[0] else interior[1]
+
+
 def mixed_trust_model(
     value: np.ndarray,
     treated: np.ndarray,
@@ -238,9 +300,9 @@ def mixed_trust_model(
     level: float = DEFAULT_LEVEL,
 ) -> ModelEffect:
     """Linear mixed model value ~ treated (+ stratum dummies) with a random intercept per
-    participant (statsmodels MixedLM, REML). Returns the treatment's difference in means."""
-    from statsmodels.regression.mixed_linear_model import MixedLM
-
+    participant, by REML (`random_intercept_reml`). Returns the treatment's difference in means with
+    its Wald interval and p-value; the note says when the participants' variance is estimated at
+    0."""
     y = np.asarray(value, dtype=float)
     keep = ~np.isnan(y)
     groups = np.asarray(participant)[keep]
@@ -254,14 +316,13 @@ def mixed_trust_model(
         return replace(base, note="too few observations")
     kept_strata = None if strata is None else np.asarray(strata)[keep]
     exog = np.column_stack([np.ones(keep.sum()), _design(np.asarray(treated)[keep], kept_strata)])
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            result = MixedLM(y[keep], exog, groups=groups).fit(reml=True)
-        beta, se, p = float(result.params[1]), float(result.bse[1]), float(result.pvalues[1])
-    except (np.linalg.LinAlgError, ValueError) as exc:
-        return replace(base, note=f"fit failed ({type(exc).__name__})")
-    if not (math.isfinite(beta) and math.isfinite(se)):
-        return replace(base, note="the fit did not converge")
+    if keep.sum() <= exog.shape[1] or np.linalg.matrix_rank(exog) < exog.shape[1]:
+        return replace(base, note="the condition is not estimable (too few observations or collinear)")
+    fitted = random_intercept_reml(y[keep], exog, groups)
+    beta, se = float(fitted.beta[1]), math.sqrt(float(fitted.covariance[1, 1]))
+    if not (math.isfinite(beta) and se > 0):
+        return replace(base, note="no residual variation: no interval")
     z = stats.norm.ppf(0.5 + level / 2)
-    return replace(base, estimate=beta, low=beta - z * se, high=beta + z * se, p_value=p)
+    return replace(base, estimate=beta, low=beta - z * se, high=beta + z * se,
+                   p_value=float(2 * stats.norm.sf(abs(beta / se))),
+                   note=BOUNDARY_NOTE if fitted.ratio == 0 else "")

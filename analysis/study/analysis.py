@@ -19,7 +19,7 @@ paper_comparison; shown by display) are:
   21 participants count as 21, never as 42 pairs;
 - `repeated`: models over every episode with one group per participant: conditional logistic
   regression of satisfaction on the condition with spec fixed effects, and a mixed model of mean
-  reported trust with a random intercept per participant (statsmodels);
+  reported trust with a random intercept per participant (REML, repeated_measures.py);
 - `takeovers`: per incident type and condition, roads met, takeovers, rate with exact interval;
 - `order`: per position in the Latin square: satisfaction (exact interval) and mean trust, with
   Cochran's Q (satisfaction) and Friedman (trust) across positions within participants;

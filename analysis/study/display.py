@@ -20,6 +20,7 @@ from trustroute.analysis.formatting import (
     terminal_table,
     wrapped_text,
 )
+from trustroute.analysis.statistics import WILCOXON_APPROXIMATE, WILCOXON_EXACT
 from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis
 from trustroute.analysis.study.design import order_text
 from trustroute.analysis.study.manual import manual_display
@@ -41,8 +42,8 @@ def paired_display(p: pd.DataFrame) -> pd.DataFrame:
             "trust difference [BCa CI]": estimate_column(
                 p, "trust_difference", "trust_diff_low", "trust_diff_high"
             ),
-            "Wilcoxon p (trust)": [format_p(finite_or_none(v)) for v in p["wilcoxon_p"]],
-            "Wilcoxon p (Holm)": _p_column(p, "wilcoxon_p_holm"),
+            "Wilcoxon p (trust)": wilcoxon_p_column(p, "wilcoxon_p"),
+            "Wilcoxon p (Holm)": wilcoxon_p_column(p, "wilcoxon_p_holm"),
         }
     )
     if "sign_test_p" in p and p["sign_test_p"].notna().any():  # the "all specs" rows' test
@@ -67,6 +68,17 @@ def _p_column(p: pd.DataFrame, column: str) -> list[str]:
     """A p-value column as shown (missing where the table has no such column or value)."""
     values = p[column] if column in p else [None] * len(p)
     return [format_p(finite_or_none(v)) for v in values]
+
+
+APPROXIMATE_MARK = "≈ "
+
+
+def wilcoxon_p_column(p: pd.DataFrame, column: str) -> list[str]:
+    """A Wilcoxon p-value column as shown: the exact p, or the normal approximation's marked
+    APPROXIMATE_MARK (statistics.py `wilcoxon_paired`, beyond WILCOXON_EXACT_PAIRS differences)."""
+    methods = p["wilcoxon_method"] if "wilcoxon_method" in p else [WILCOXON_EXACT] * len(p)
+    return [(APPROXIMATE_MARK if method == WILCOXON_APPROXIMATE and text != MISSING else "") + text
+            for text, method in zip(_p_column(p, column), methods, strict=True)]
 
 
 def sensitivity_display(s: pd.DataFrame) -> pd.DataFrame:
@@ -175,7 +187,7 @@ def questionnaire_test_display(t: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"questionnaire": t["questionnaire"], "pair": t["a"] + " vs " + t["b"],
                          "n": t["pairs"],
                          "median difference": [number_text(v, 2) for v in t["median_difference"]],
-                         "Wilcoxon p": [format_p(finite_or_none(v)) for v in t["wilcoxon_p"]]})
+                         "Wilcoxon p": wilcoxon_p_column(t, "wilcoxon_p")})
 
 
 def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:

@@ -107,6 +107,7 @@ def trust_difference_columns(trust, wx) -> dict:
         "trust_diff_high": finite_or_none(trust.high),
         "wilcoxon_pairs": wx.pairs,
         "wilcoxon_p": wx.p_value,
+        "wilcoxon_method": wx.method,
         "median_trust_difference": finite_or_none(wx.median_difference),
     }
 

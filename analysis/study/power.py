@@ -12,8 +12,8 @@ The tests, named as the report names them, for every pair of conditions (A, B):
 - `wilcoxon`: mean reported trust, per spec and over both specs per participant (the report's
   "all specs" row), Wilcoxon's signed-rank test (`wilcoxon_paired`); effect: the median difference;
 - `mixed_model`: mean reported trust over every spec, the mixed model with a random intercept per
-  participant (`mixed_trust_model`, spec as strata); effect: the difference in means. Slow (a
-  statsmodels fit per study), so not planned by default.
+  participant (`mixed_trust_model`, spec as strata); effect: the difference in means. A REML
+  fit per study, planned when asked for.
 Satisfaction is the episode's own verdict (the AV's filter): on the model engine with the AV's
 model as the drivers' this is every belief source's verdict.
 """

@@ -73,5 +73,5 @@ def questionnaire_tables(study_dir: Path, episodes: pd.DataFrame,
                 wx = wilcoxon_paired(wide[a].to_numpy(dtype=float), wide[b].to_numpy(dtype=float))
                 tests.append({"questionnaire": name, "a": a, "b": b, "pairs": wx.pairs,
                               "median_difference": finite_or_none(wx.median_difference),
-                              "wilcoxon_p": finite_or_none(wx.p_value)})
+                              "wilcoxon_p": finite_or_none(wx.p_value), "wilcoxon_method": wx.method})
     return pd.DataFrame(rows), pd.DataFrame(tests)

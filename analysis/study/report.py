@@ -17,9 +17,11 @@ import pandas as pd
 
 from trustroute.analysis.belief_sources import declared_belief_source, default_belief_source, source_label
 from trustroute.analysis.formatting import markdown_table
+from trustroute.analysis.statistics import WILCOXON_EXACT_PAIRS
 from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis, study_analysis
 from trustroute.analysis.study.design import design_text, study_participants
 from trustroute.analysis.study.display import (
+    APPROXIMATE_MARK,
     TABLE_TITLES,
     display_tables,
     fallback_only_lines,
@@ -46,8 +48,12 @@ NOTES = [
     "odds ratio is b/c of the discordant pairs with the exact interval of b/(b+c); trust differences use a "
     "BCa bootstrap over participants (scipy.stats.bootstrap, 10,000 resamples), as does the 'all specs' "
     "satisfaction difference: a bootstrap bound moves between seeds by a standard deviation of up to "
-    "about 0.02 (measured on 14 to 21 participants), so its third decimal is not reliable. p-values are "
-    "printed in scientific notation.",
+    "about 0.02 (measured on 14 to 21 participants), so its third decimal is not reliable. Wilcoxon "
+    "p-values are exact (the signed-rank sum over every sign flip, ties and zero differences included) up "
+    f"to {WILCOXON_EXACT_PAIRS} nonzero differences, beyond that the normal approximation, marked "
+    f"'{APPROXIMATE_MARK.strip()}'. The mixed model is fitted by REML, its interval and p-value are Wald's "
+    "(normal); a participants' variance estimated at 0 is said in its note. p-values are printed in "
+    "scientific notation.",
     "The 'all specs' row is per participant (the mean over specs of each participant's difference); its "
     "satisfaction test is the exact two-sided sign test of the participants ahead under A against those "
     "ahead under B (participants without a difference dropped), and the repeated-measures models use "
