@@ -22,11 +22,11 @@ from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis, stud
 from trustroute.analysis.study.design import design_text, study_participants
 from trustroute.analysis.study.display import (
     APPROXIMATE_MARK,
-    TABLE_TITLES,
     display_tables,
     fallback_only_lines,
     format_table,
     order_test_line,
+    table_title,
 )
 from trustroute.analysis.study.plots import write_plots
 from trustroute.analysis.study_directory import study_inputs
@@ -200,7 +200,7 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
         "multiplicity": MULTIPLICITY,
         "sensitivity_line": SENSITIVITY_LINE,
         "analyses": [_analysis_view(primary), _analysis_view(secondary)],
-        "titles": TABLE_TITLES,
+        "title_of": table_title,
         "plots": [
             {
                 "title": PLOT_TITLES[name],

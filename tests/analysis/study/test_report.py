@@ -70,6 +70,10 @@ def test_analyze_json_and_self_contained_report(model_study, capsys):
                    "Latin square", "Carry-over", "not comparable", "synthesized [L, U]", "McNemar"):
         assert needle in markdown, needle
     assert re.search(r"\d\.\d\de[-+]\d\d", markdown) and "0.0000" not in markdown
+    # a table whose figures do not depend on the belief source names none in its heading
+    assert "## Takeover rate per incident type and condition\n" in markdown
+    assert "## Order effects: by position in each participant's order (beliefs: true)\n" in markdown
+    assert "<h2>Takeover rate per incident type and condition</h2>" in html
     for name in ("satisfaction", "trust", "routes", "takeovers", "participants"):
         assert (model_study / "plots" / f"{name}.png").stat().st_size > 1000
 
