@@ -238,14 +238,16 @@ def test_the_mixed_model_with_its_participants_variance_at_zero_is_least_squares
 
 def test_the_conditional_logit_against_its_likelihood_maximised_by_hand():
     """The conditional likelihood of each participant's outcomes given how many succeeded, summed
-    over every arrangement, maximised by scipy; the standard error from its numerical Hessian."""
+    over every arrangement, maximised by scipy; the standard error from its numerical Hessian.
+    statsmodels' default optimiser (BFGS) stops with a gradient of about 1e-3 on these data, an odds
+    ratio 3e-4 off the maximum, which shows in a table's third decimal; Newton's method reaches it."""
     import itertools
 
     from scipy.optimize import minimize
 
     from trustroute.analysis.repeated_measures import conditional_logit
 
-    episodes = made_episodes(participants=30, conditions=("aware", "free"), seed=2)
+    episodes = made_episodes(participants=30, conditions=("aware", "free"), seed=1)
     outcome = episodes["satisfied"].to_numpy(dtype=float)
     treated = (episodes["condition"] == "aware").to_numpy(dtype=float)
     exog = np.column_stack([treated, (episodes["spec"] == "phi2").to_numpy(dtype=float)])
@@ -274,7 +276,7 @@ def test_the_conditional_logit_against_its_likelihood_maximised_by_hand():
                                episodes["spec"].to_numpy())
     assert effect.model == "conditional logit" and effect.groups == len(groups)
     z = stats.norm.ppf(0.975)
-    assert effect.estimate == pytest.approx(math.exp(beta[0]), rel=1e-5)
+    assert effect.estimate == pytest.approx(math.exp(beta[0]), rel=1e-7)
     assert (effect.low, effect.high) == pytest.approx(
         (math.exp(beta[0] - z * se), math.exp(beta[0] + z * se)), rel=1e-4)
     assert effect.p_value == pytest.approx(2 * stats.norm.sf(abs(beta[0] / se)), rel=1e-4)
