@@ -1,5 +1,6 @@
 """A study's design as far as its data show it, where its config does not say: how many
-participants it had (an imported study's config has no count), and whether every participant drove
+participants it had (an imported study's config has no count; a live study's is the number
+planned, not of the people who took part), and whether every participant drove
 the cells in one fixed order (an imported study's sessions; then position is confounded with the
 cell, and no order effect is estimable).
 """
@@ -8,15 +9,28 @@ from __future__ import annotations
 
 import pandas as pd
 
-from trustroute.harness.study.config import ENGINES
+from trustroute.harness.study.config import ENGINES, LIVE_ENGINE
 
 
 def study_participants(manifest: dict, episodes: pd.DataFrame) -> int:
-    """The study's participants: its config's count, else (an imported study) those in its episodes."""
+    """The study's participants: those in its episodes for a live study (a withdrawn participant's
+    data are deleted, one who declined has none, the config counts the participants planned) and an
+    imported one (its config has no count); the config's count for a simulated study, every planned
+    participant of which is run."""
     configured = manifest.get("config", {}).get("participants")
-    if configured is not None:
+    if configured is not None and manifest.get("engine") != LIVE_ENGINE:
         return int(configured)
     return int(episodes["participant"].nunique()) if "participant" in episodes else 0
+
+
+def participants_text(manifest: dict, episodes: pd.DataFrame) -> str:
+    """The participants as the report's design line shows them: a live study's with the number
+    planned beside them."""
+    text = f"{study_participants(manifest, episodes)} participants"
+    planned = manifest.get("config", {}).get("participants")
+    if manifest.get("engine") == LIVE_ENGINE and planned is not None:
+        text += f" with data (of {int(planned)} planned)"
+    return text
 
 
 def fixed_order(episodes: pd.DataFrame) -> list[tuple[str, str]] | None:

@@ -19,7 +19,7 @@ from trustroute.analysis.belief_sources import declared_belief_source, default_b
 from trustroute.analysis.formatting import markdown_table
 from trustroute.analysis.statistics import WILCOXON_EXACT_PAIRS
 from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis, study_analysis
-from trustroute.analysis.study.design import design_text, study_participants
+from trustroute.analysis.study.design import design_text, participants_text
 from trustroute.analysis.study.display import (
     APPROXIMATE_MARK,
     display_tables,
@@ -114,14 +114,15 @@ def _environment():
 
 
 def study_lines(manifest: dict, episodes: pd.DataFrame) -> list[str]:
-    """What was run: the design (participants from the episodes when the config has no count, the
-    order as the data show it), the episodes, the config and the versions."""
+    """What was run: the design (participants from the episodes when the config has no count or
+    counts those planned, the order as the data show it), the episodes, the config and the
+    versions."""
     config = manifest.get("config", {})
     n_specs, n_conditions = len(config.get("specs", [])), len(config.get("conditions", []))
     failed = len(manifest.get("failed_episodes", []))
     packages = ", ".join(f"{k} {v}" for k, v in manifest.get("packages", {}).items())
     return [
-        f"{manifest.get('study')}: {study_participants(manifest, episodes)} participants x {n_specs} specs x "
+        f"{manifest.get('study')}: {participants_text(manifest, episodes)} x {n_specs} specs x "
         f"{n_conditions} conditions, {manifest.get('engine')} engine, {design_text(manifest, episodes)}.",
         f"Episodes: {manifest.get('finished_episodes')} finished of "
         f"{manifest.get('planned_episodes')} planned; {failed} failed.",

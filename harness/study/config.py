@@ -76,7 +76,8 @@ from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP, JUNC
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
 DEFAULT_STUDIES_DIR = Path("studies")
-ENGINES: tuple[str, ...] = ("sumo", "model", "live")  # "live": `trustroute live`, people in the loop
+LIVE_ENGINE = "live"   # `trustroute live`: people in the loop
+ENGINES: tuple[str, ...] = ("sumo", "model", LIVE_ENGINE)
 ENGINE_NAMES = OneOf(choices=ENGINES, noun="engine")   # the config's `engine` and its override
 ENGINE_FIX = f"use one of {', '.join(repr(e) for e in ENGINES)}"
 NAMED_CONDITIONS: tuple[str, ...] = ("aware", "free", "robust")

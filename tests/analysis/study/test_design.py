@@ -74,3 +74,21 @@ def test_a_counterbalanced_study_keeps_its_order_tests():
     manifest = {"study": "s", "engine": "model", "config": {"participants": 8, "seed": 3, "specs": [1, 2],
                                                             "conditions": [1, 2]}}
     assert "seed 3, counterbalanced by a Williams Latin square" in study_lines(manifest, episodes)[0]
+
+
+def test_a_live_study_counts_the_participants_with_data_not_those_planned():
+    """A live study's config counts the participants planned; one who withdrew has their data
+    deleted and one who declined has none: the design line and the paper's comparison count the
+    participants in the episodes, with the number planned beside them."""
+    config = {"participants": 21, "specs": ["phi1.toml", "phi2.toml"], "conditions": ["aware", "free"],
+              "seed": 4}
+    manifest = {"study": "live-study", "engine": "live", "config_path": "live.toml", "config_hash": "0" * 64,
+                "config": config}
+    episodes = pd.DataFrame([{"participant": p, "position": i, "spec": s, "condition": c}
+                             for p in range(19) for i, (s, c) in enumerate(SESSIONS)])
+    assert study_participants(manifest, episodes) == 19
+    line = study_lines(manifest, episodes)[0]
+    assert line.startswith("live-study: 19 participants with data (of 21 planned) x 2 specs"), line
+    assert "19 participants, the paper had 21" in is_paper_comparable(manifest, episodes)[1]
+    simulated = {**manifest, "engine": "model"}
+    assert study_participants(simulated, episodes) == 21   # a simulated study runs every planned one
