@@ -275,8 +275,11 @@ def order_test_line(tests: dict) -> str:
                 "position is confounded with spec and condition, so the rows by position are the cells in "
                 "session order and the carry-over rows follow the same sequence; no order effect is "
                 "estimable (Cochran's Q and Friedman across positions would compare the cells, not orders).")
+    participants = tests.get("participants", 0)
+    friedman = tests.get("friedman_participants", participants)
+    within = "" if friedman == participants else f", within the {friedman} with a report at every position"
     return (
-        f"Across positions within {tests.get('participants', 0)} participants: Cochran's Q p = "
+        f"Across positions within {participants} participants: Cochran's Q p = "
         f"{format_p(tests.get('cochran_q_p'))} (satisfaction), Friedman p = "
-        f"{format_p(tests.get('friedman_p'))} (reported trust)."
+        f"{format_p(tests.get('friedman_p'))} (reported trust{within})."
     )

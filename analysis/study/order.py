@@ -55,6 +55,8 @@ def position_tests(episodes: pd.DataFrame, column: str) -> dict:
             index="participant", columns="position", values="mean_reported_trust", aggfunc="first"
         ).dropna()
         tests["participants"] = int(len(sat))
+        # Friedman reads the participants with a report at every position, which can be fewer
+        tests["friedman_participants"] = int(len(trust))
         if sat.to_numpy().std() > 0:
             tests["cochran_q_p"] = float(cochrans_q(sat.to_numpy(dtype=int)).pvalue)
         if positions >= 3 and len(trust) >= 2 and trust.to_numpy().std() > 0:

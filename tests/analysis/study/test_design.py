@@ -76,6 +76,25 @@ def test_a_counterbalanced_study_keeps_its_order_tests():
     assert "seed 3, counterbalanced by a Williams Latin square" in study_lines(manifest, episodes)[0]
 
 
+def test_friedman_names_the_participants_it_reads_when_fewer_than_cochrans():
+    """Cochran's Q reads every participant who drove every position, Friedman only those with a
+    trust report at every position: the line says how many Friedman's test rests on."""
+    from scipy import stats
+
+    episodes = _williams(8)
+    episodes.loc[(episodes["participant"] == 5) & (episodes["position"] == 2), "mean_reported_trust"] = None
+    _, tests, _ = order_tables(episodes, "satisfied")
+    assert tests["participants"] == 8 and tests["friedman_participants"] == 7
+    trust = episodes[episodes["participant"] != 5].pivot_table(
+        index="participant", columns="position", values="mean_reported_trust").to_numpy()
+    assert tests["friedman_p"] == stats.friedmanchisquare(*trust.T).pvalue
+    line = order_test_line(tests)
+    assert "within 8 participants" in line
+    assert "(reported trust, within the 7 with a report at every position)" in line
+    _, complete, _ = order_tables(_williams(8), "satisfied")
+    assert "with a report" not in order_test_line(complete)
+
+
 def test_a_live_study_counts_the_participants_with_data_not_those_planned():
     """A live study's config counts the participants planned; one who withdrew has their data
     deleted and one who declined has none: the design line and the paper's comparison count the
