@@ -187,7 +187,8 @@ def questionnaire_test_display(t: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"questionnaire": t["questionnaire"], "pair": t["a"] + " vs " + t["b"],
                          "n": t["pairs"],
                          "median difference": [number_text(v, 2) for v in t["median_difference"]],
-                         "Wilcoxon p": wilcoxon_p_column(t, "wilcoxon_p")})
+                         "Wilcoxon p": wilcoxon_p_column(t, "wilcoxon_p"),
+                         "Wilcoxon p (Holm)": wilcoxon_p_column(t, "wilcoxon_p_holm")})
 
 
 def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:

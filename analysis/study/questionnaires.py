@@ -1,6 +1,7 @@
 """Questionnaire scores of a live study (questionnaires.parquet): per questionnaire and condition
 the mean score, its spread and Cronbach's alpha, and the paired test of the single trust rating
-(Wilcoxon signed-rank on each participant's mean score per condition) for every pair of conditions.
+(Wilcoxon signed-rank on each participant's mean score per condition) for every pair of conditions,
+Holm-adjusted over the pairs per questionnaire (`wilcoxon_p_holm`), as the paired tables are.
 
 A response's score is the mean of its items, reversed items turned (scale_min + scale_max -
 value): Jian et al.'s scale on 1-7 with its five distrust items reversed, raw NASA-TLX on 0-100.
@@ -17,6 +18,7 @@ import pandas as pd
 
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.analysis.statistics import wilcoxon_paired
+from trustroute.analysis.study.paired import with_holm
 from trustroute.core.dataset import QUESTIONNAIRES_FILE, read_questionnaires
 
 KEYS = ["participant", "episode_id", "placement", "questionnaire"]
@@ -74,4 +76,4 @@ def questionnaire_tables(study_dir: Path, episodes: pd.DataFrame,
                 tests.append({"questionnaire": name, "a": a, "b": b, "pairs": wx.pairs,
                               "median_difference": finite_or_none(wx.median_difference),
                               "wilcoxon_p": finite_or_none(wx.p_value), "wilcoxon_method": wx.method})
-    return pd.DataFrame(rows), pd.DataFrame(tests)
+    return pd.DataFrame(rows), with_holm(pd.DataFrame(tests), ["questionnaire"], ("wilcoxon_p",))

@@ -326,3 +326,49 @@ def test_a_studys_cells_takeovers_and_order_tables_against_an_independent_comput
     ties = sum(float(np.sum(t**3 - t)) for t in (np.unique(r, return_counts=True)[1] for r in trust))
     chi2 /= 1 - ties / (n_ * k_ * (k_**2 - 1))
     assert analysis.order_tests["friedman_p"] == pytest.approx(stats.chi2.sf(chi2, k_ - 1), rel=1e-9)
+
+
+def test_questionnaire_scores_alpha_and_paired_tests_with_holm_against_an_independent_computation(tmp_path):
+    """Three conditions: the scores (mean of the items, reversed ones turned), their SD and
+    Cronbach's alpha by their formulas, Wilcoxon by enumeration, and each p-value's Holm value over
+    the pairs of conditions, as every paired p-value of the report has."""
+    from trustroute.analysis.study.display import questionnaire_test_display
+    from trustroute.analysis.study.paired import condition_pairs
+    from trustroute.analysis.study.questionnaires import questionnaire_tables
+    from trustroute.harness.live.answers import write_answer_table
+
+    conditions = ("aware", "robust", "free")
+    rng = np.random.default_rng(6)
+    episodes, rows = [], []
+    for person in range(12):
+        for k, condition in enumerate(conditions):
+            episode = f"p{person:05d}-phi1-{condition}"
+            episodes.append({"episode_id": episode, "participant": person, "condition": condition})
+            for index in range(4):
+                rows.append({"participant": person, "episode_id": episode, "placement": "after_trial",
+                             "questionnaire": "jian", "item": f"item{index}", "item_index": index,
+                             "value": float(np.clip(rng.integers(1, 8) + k, 1, 7)), "reversed": index == 3,
+                             "scale_min": 1.0, "scale_max": 7.0, "answered_utc": "2026-01-01T00:00:00Z"})
+    write_answer_table(tmp_path, rows)
+    scores, tests = questionnaire_tables(tmp_path, pd.DataFrame(episodes), condition_pairs(conditions))
+    answers = pd.DataFrame(rows)
+    answers["turned"] = np.where(answers["reversed"], 8 - answers["value"], answers["value"])
+    items = answers.pivot_table(index="episode_id", columns="item_index", values="turned")
+    items["condition"] = [e.rsplit("-", 1)[1] for e in items.index]
+    items["participant"] = [int(e[1:6]) for e in items.index]
+    for _, row in scores.iterrows():
+        group = items[items["condition"] == row["condition"]]
+        matrix = group[[0, 1, 2, 3]].to_numpy()
+        alpha = 4 / 3 * (1 - matrix.var(axis=0, ddof=1).sum() / matrix.sum(axis=1).var(ddof=1))
+        assert row["responses"] == 12 and row["mean_score"] == pytest.approx(matrix.mean(), abs=1e-12)
+        assert row["sd_score"] == pytest.approx(matrix.mean(axis=1).std(ddof=1), abs=1e-12)
+        assert row["cronbach_alpha"] == pytest.approx(alpha, abs=1e-12)
+    score = items.assign(score=items[[0, 1, 2, 3]].mean(axis=1)).pivot_table(
+        index="participant", columns="condition", values="score")
+    assert len(tests) == 3
+    for _, row in tests.iterrows():
+        assert row["wilcoxon_p"] == pytest.approx(
+            signed_rank_enumerated((score[row["a"]] - score[row["b"]]).to_numpy()), rel=1e-9)
+    assert tests["wilcoxon_p_holm"].to_numpy(dtype=float) == pytest.approx(
+        multipletests(tests["wilcoxon_p"].to_numpy(dtype=float), method="holm")[1], rel=1e-12)
+    assert "Wilcoxon p (Holm)" in questionnaire_test_display(tests)
