@@ -8,12 +8,15 @@ rounding U fell below the optimum by an ulp or two on some of these seeds.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from fractions import Fraction
 
+import numpy as np
 import pytest
 
-from tests.policies.synthesis.threshold_cases import exact_value, small_case
+from tests.policies.synthesis.threshold_cases import _ExactFilter, exact_value, small_case
+from trustroute.policies.belief.exact_labels import exact_prior
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.rounding import model_rounding, relative_margin, widen
@@ -60,3 +63,17 @@ def test_widening_keeps_zero_and_one_and_moves_the_rest_outward(driver):
     assert above_one[0] < 1.0 and above_one[1] == 1.0
     low, high = widen(0.5, 0.5, margin)
     assert low < 0.5 < high and 0.5 - low < 1e-12 and high - 0.5 < 1e-12
+
+
+def test_the_brute_force_builds_one_exact_filter_per_model_and_rule(driver):
+    """exact_value's filter is built once per model and rule: a model rebuilt from the same numbers
+    gets the filter already built, which is the one a fresh build gives; another rule, or the same
+    numbers under another prior, get their own."""
+    pomdp = build_pomdp(small_case(0, driver)[0].town, driver)
+    shared = _ExactFilter.of(pomdp, "bayes")
+    assert _ExactFilter.of(build_pomdp(pomdp.town, driver), "bayes") is shared
+    assert shared == _ExactFilter._build(pomdp, "bayes", exact_prior(driver))
+    assert _ExactFilter.of(pomdp, "paper") not in (shared, None)
+    skewed = dataclasses.replace(driver, initial_belief=np.array([0.1] * 4 + [0.2] * 3))
+    other = _ExactFilter.of(build_pomdp(pomdp.town, skewed), "bayes")
+    assert other.prior == (1, 1, 1, 1, 2, 2, 2) and other.update == shared.update

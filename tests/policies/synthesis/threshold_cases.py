@@ -229,9 +229,10 @@ def brute_force_states(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> int:
 
 
 def _scaled(values: list[Fraction]) -> tuple[list[int], int]:
-    """Integers and one denominator: values[i] = integers[i] / denominator."""
+    """Integers and one denominator: values[i] = integers[i] / denominator (each value's
+    denominator divides it: integer products, no Fraction arithmetic)."""
     denominator = math.lcm(*(v.denominator for v in values))
-    return [int(v * denominator) for v in values], denominator
+    return [v.numerator * (denominator // v.denominator) for v in values], denominator
 
 
 def brute_force(pomdp: TrustPOMDP, spec: Spec, horizon: int) -> float:
@@ -254,20 +255,43 @@ class _ExactFilter:
 
     @classmethod
     def of(cls, pomdp: TrustPOMDP, rule: BeliefRule) -> _ExactFilter:
+        """The filter of `pomdp`'s model, built once per model and rule in a process: the
+        rounding tests value each random model several times (its optimum, a policy, each type
+        as the true driver), and building it is most of an exact value's time."""
+        driver = pomdp.driver
+        prior = exact_prior(driver)
+        key = (rule, prior, driver.trust_transition.shape, driver.takeover_probability.tobytes(),
+               driver.failure_probability.tobytes(), driver.trust_transition.tobytes())
+        if key not in _FILTERS:
+            _FILTERS[key] = cls._build(pomdp, rule, prior)
+        return _FILTERS[key]
+
+    @classmethod
+    def _build(cls, pomdp: TrustPOMDP, rule: BeliefRule, prior: tuple[Fraction, ...]) -> _ExactFilter:
         driver, n = pomdp.driver, pomdp.n_trust
         likelihood, update = {}, {}
+        # a model's numbers repeat (a type-lifted model's matrices are mostly zeros): each
+        # distinct float is read as its decimal once, and a zero's products are zero
+        decimals: dict[float, Fraction] = {0.0: Fraction(0)}
+
+        def exact(value: float) -> Fraction:
+            found = decimals.get(value)
+            if found is None:
+                found = decimals[value] = decimal(value)
+            return found
+
         for i in range(len(driver.incident_types)):
-            take = [decimal(t) for t in driver.takeover_probability[i]]
-            fail = [decimal(f) for f in driver.failure_probability[i]]
+            take = [exact(t) for t in driver.takeover_probability[i].tolist()]
+            fail = [exact(f) for f in driver.failure_probability[i].tolist()]
             for h, e in ((0, 0), (0, 1), (1, 0), (1, 1)):
                 like = [(take[k] if h else 1 - take[k]) * (fail[k] if e else 1 - fail[k]) for k in range(n)]
                 likelihood[i, h, e] = _scaled(like)
                 weight = like if rule == "bayes" else [Fraction(1)] * n
-                flat, _ = _scaled([weight[k] * decimal(driver.trust_transition[i, h, e, k, m])
-                                   for k in range(n) for m in range(n)])
+                rows = driver.trust_transition[i, h, e].tolist()
+                flat, _ = _scaled([weight[k] * exact(value) if value else exact(value)
+                                   for k in range(n) for value in rows[k]])
                 update[i, h, e] = [flat[k * n:(k + 1) * n] for k in range(n)]
-        return cls(n=n, likelihood=likelihood, update=update,
-                   prior=tuple(_scaled(list(exact_prior(driver)))[0]))
+        return cls(n=n, likelihood=likelihood, update=update, prior=tuple(_scaled(list(prior))[0]))
 
     def probability(self, belief: tuple[int, ...], symbol: tuple[int, int, int]) -> Fraction:
         """P(symbol | belief), exactly."""
@@ -281,6 +305,9 @@ class _ExactFilter:
         image = [sum(belief[k] * matrix[k][m] for k in range(self.n) if belief[k]) for m in range(self.n)]
         common = math.gcd(*image)
         return belief if common == 0 else tuple(v // common for v in image)
+
+
+_FILTERS: dict[tuple, _ExactFilter] = {}   # _ExactFilter.of's, by the model's numbers and the rule
 
 
 class ExactLabelling:
