@@ -60,6 +60,9 @@ class TrustPOMDP:
     # The model's exact filters (rule -> policies/belief/exact_labels.py's ExactFilter), built
     # there on first use and held here: trackers, evaluations and searches of one model share one.
     exact_filters: dict = field(default_factory=dict, init=False, repr=False)
+    # The model's rounding constants (rule -> policies/synthesis/rounding.py's ModelRounding), computed
+    # there on first use and held here: every synthesis and evaluation of one model reads them.
+    roundings: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         town, driver = self.town, self.driver

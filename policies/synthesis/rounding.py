@@ -90,12 +90,29 @@ class ModelRounding:
 
 
 def model_rounding(pomdp: TrustPOMDP, rule: BeliefRule = "bayes") -> ModelRounding:
-    """The rounding constants of `pomdp` under `rule` (ModelRounding), computed exactly. The update
-    matrices' gap follows from the likelihoods': a float matrix entry is fl(ℓ̂_k T̂_kl) (Bayes) or
-    T̂_kl (the authors' rule), and T̂_kl is the float nearest its own decimal (within u)."""
+    """The rounding constants of `pomdp` under `rule` (ModelRounding), computed exactly, once per
+    model and rule (held on the model: TrustPOMDP.roundings). The update matrices' gap follows
+    from the likelihoods': a float matrix entry is fl(ℓ̂_k T̂_kl) (Bayes) or T̂_kl (the authors'
+    rule), and T̂_kl is the float nearest its own decimal (within u)."""
+    found = pomdp.roundings.get(rule)
+    if found is None:
+        found = pomdp.roundings[rule] = _model_rounding(pomdp, rule)
+    return found
+
+
+def _row_gap(row: list[float], decimals: dict[float, Fraction]) -> Fraction:
+    """|Σ row - 1| exactly, each entry the decimal it prints as (kept in `decimals`, by float):
+    summed in integers over the entries' common denominator."""
+    entries = [decimals.get(v) or decimals.setdefault(v, decimal(v)) for v in row if v]
+    denominator = math.lcm(*(entry.denominator for entry in entries))
+    total = sum(entry.numerator * (denominator // entry.denominator) for entry in entries)
+    return Fraction(abs(total - denominator), denominator)
+
+
+def _model_rounding(pomdp: TrustPOMDP, rule: BeliefRule) -> ModelRounding:
     driver, n = pomdp.driver, pomdp.n_trust
     likelihood_gap, row_gap = 0.0, Fraction(0)
-    seen: dict[float, Fraction] = {}        # a model's rows hold few distinct numbers
+    decimals: dict[float, Fraction] = {}        # a model's rows hold few distinct numbers
     for i in range(len(driver.incident_types)):
         take = [decimal(t) for t in driver.takeover_probability[i].tolist()]
         fail = [decimal(f) for f in driver.failure_probability[i].tolist()]
@@ -106,9 +123,7 @@ def model_rounding(pomdp: TrustPOMDP, rule: BeliefRule = "bayes") -> ModelRoundi
                     exact = (take[k] if h else 1 - take[k]) * (fail[k] if e else 1 - fail[k])
                     likelihood_gap = max(likelihood_gap, _relative(floats[k], exact))
                 for row in driver.trust_transition[i, h, e].tolist():
-                    total = sum((seen.get(v) or seen.setdefault(v, decimal(v)) for v in row if v),
-                                Fraction(0))
-                    row_gap = max(row_gap, abs(total - 1))
+                    row_gap = max(row_gap, _row_gap(row, decimals))
     prior = exact_prior(driver)
     prior_gap = max((_relative(f, b) for f, b in zip(np.asarray(pomdp.initial_belief).tolist(), prior,
                                                      strict=True)), default=0.0)

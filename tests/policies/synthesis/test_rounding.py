@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from fractions import Fraction
 
 import numpy as np
@@ -17,6 +18,7 @@ import pytest
 
 from tests.policies.synthesis.threshold_cases import _ExactFilter, exact_value, small_case
 from trustroute.policies.belief.exact_labels import exact_prior
+from trustroute.policies.logic.labelling import UNIT_ROUNDOFF
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.rounding import model_rounding, relative_margin, widen
@@ -63,6 +65,23 @@ def test_widening_keeps_zero_and_one_and_moves_the_rest_outward(driver):
     assert above_one[0] < 1.0 and above_one[1] == 1.0
     low, high = widen(0.5, 0.5, margin)
     assert low < 0.5 < high and 0.5 - low < 1e-12 and high - 0.5 < 1e-12
+
+
+def test_a_models_rounding_constants_are_held_on_it_and_count_its_rows_exactly(driver):
+    """model_rounding is computed once per model and rule (every synthesis of the model reads it),
+    and its row units are those of the exact gap |Σ row - 1| (the rows' decimals) of the row
+    furthest from 1: here one row of the packaged model moved off 1 by about 3e-10."""
+    transition = driver.trust_transition.copy()
+    transition[1, 1, 0, 2, 3] += 3e-10
+    town = small_case(0, driver)[0].town
+    moved = build_pomdp(town, dataclasses.replace(driver, trust_transition=transition))
+    rounding = model_rounding(moved)
+    assert model_rounding(moved) is rounding
+    assert model_rounding(moved, "paper") is model_rounding(moved, "paper")
+    gap = max(abs(sum((Fraction(repr(v)) for v in row), Fraction(0)) - 1)
+              for row in transition.reshape(-1, transition.shape[-1]).tolist())
+    assert 1e-10 < gap < 1e-9
+    assert rounding.rows == math.ceil(float(gap) * (1 + 4 * UNIT_ROUNDOFF) / UNIT_ROUNDOFF)
 
 
 def test_the_brute_force_builds_one_exact_filter_per_model_and_rule(driver):
