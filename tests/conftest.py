@@ -11,6 +11,7 @@ from hypothesis import settings
 
 from tests.harness.helpers import run_study
 from tests.suite import CACHE_ENV, LEDGER_ENV
+from trustroute.networks.sumo_net import build_net
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
 from trustroute.policies.model.trust_pomdp import build_pomdp
@@ -71,6 +72,13 @@ def driver():
 @pytest.fixture(scope="session")
 def pomdp(town, driver):
     return build_pomdp(town, driver)
+
+
+@pytest.fixture(scope="session")
+def net_path(town, temporary_cache) -> Path:
+    """The packaged town's SUMO net, built once into the run's cache root: every module that drives
+    SUMO on the packaged town reads this one entry, on any worker and in either lane."""
+    return build_net(town).path
 
 
 @pytest.fixture(scope="session")

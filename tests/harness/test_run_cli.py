@@ -10,14 +10,13 @@ from click.testing import CliRunner
 from tests.harness.helpers import SPECS
 from trustroute.core.dataset import KINEMATICS_SCHEMA, ROADS_SCHEMA, read_kinematics, read_roads
 from trustroute.harness.cli import cli, main
-from trustroute.networks.sumo_net import build_net
 
 PHI1 = str(SPECS / "phi1.toml")
 
 
 @pytest.fixture(scope="module")
-def net(town, tmp_path_factory):
-    return str(build_net(town, cache_dir=tmp_path_factory.mktemp("nets")).path)
+def net(net_path):
+    return str(net_path)
 
 
 def _main(args: list[str], capsys) -> tuple[int, str]:

@@ -22,11 +22,6 @@ from trustroute.policies.routing.protocol import RoutingPolicy
 
 
 @pytest.fixture(scope="module")
-def net_path(town, tmp_path_factory):
-    return build_net(town, cache_dir=tmp_path_factory.mktemp("nets")).path
-
-
-@pytest.fixture(scope="module")
 def phi1(town):
     return load_spec(SPECS / "phi1.toml", town)
 

@@ -12,15 +12,9 @@ from trustroute.harness.simulation.episode import EpisodeOptions, SumoEpisode, r
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.model_engine import ModelEpisode, run_model_episode
 from trustroute.harness.simulation.stepping import DecisionPoint, End
-from trustroute.networks.sumo_net import build_net
 from trustroute.participants.synthetic_driver import SyntheticDriver
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.routing.free import trust_free_policy
-
-
-@pytest.fixture(scope="module")
-def net_path(town, tmp_path_factory):
-    return build_net(town, cache_dir=tmp_path_factory.mktemp("nets")).path
 
 
 @pytest.fixture(scope="module")
