@@ -9,6 +9,10 @@ import trustroute
 from trustroute.app.runs import EpisodeSettings
 from trustroute.core.errors import InputError
 
+STUDY = {"study": {"participants": 1, "seed": 1, "engine": "model", "specs": ["phi1"],
+                   "conditions": ["free"]}}
+POPULATION = "driver_population_three_types"
+
 
 @pytest.mark.parametrize(("call", "named"), [
     (lambda: trustroute.load_town("nope"), "as town or a packaged town name"),
@@ -25,8 +29,9 @@ def test_api_errors_name_keyword_arguments(call, named):
 
 
 def test_analyze_names_its_belief_source_argument(tmp_path):
-    with pytest.raises(InputError) as caught:
-        trustroute.analyze(tmp_path, belief_source="bogus")
+    study = trustroute.run_study(STUDY, out=tmp_path / "study").study_dir
+    with pytest.raises(InputError, match="belief_source: unknown belief source 'bogus'") as caught:
+        trustroute.analyze(study, belief_source="bogus")
     assert "--" not in str(caught.value)
 
 
@@ -49,3 +54,42 @@ def test_the_largest_seed_and_a_numpy_seed_run():
 def test_an_empty_name_is_said_to_be_empty(call, what):
     with pytest.raises(InputError, match=f"the {what} name is empty"):
         call()
+
+
+# Each rule the CLI checks of these settings holds at the API's door too, as the same InputError
+# (the CLI's message with its flags said as keywords), never a bare ValueError or a silent run.
+@pytest.mark.parametrize(("call", "named"), [
+    (lambda: trustroute.synthesize("phi1", horizon=20, time_limit=0),
+     r"time_limit: 0 is not a number in \(0, "),
+    (lambda: trustroute.synthesize("phi1", horizon=20, time_limit=float("nan")),
+     "time_limit: nan is not a number"),
+    (lambda: trustroute.evaluate("phi1", "free", max_junctions=-1), "max_junctions: must be >= 0, got -1"),
+    (lambda: trustroute.evaluate("phi1", "free", fallback_after=-1), "fallback_after: must be >= 0, got -1"),
+    (lambda: trustroute.evaluate("phi1", "free", max_nodes=0), "max_nodes: expected an integer from 1"),
+    (lambda: trustroute.evaluate("phi1_trust", "free", time_limit=-1),
+     r"time_limit: -1 is not a number in \(0, "),
+    (lambda: trustroute.evaluate("phi1", "free", time_limit=1.0),
+     "time_limit: applies to specs with trust-state atoms only"),
+    (lambda: trustroute.evaluate("phi1", "free", population=POPULATION, max_nodes=5),
+     "max_nodes: the pruning limits are not used for a driver population"),
+    (lambda: trustroute.evaluate("phi1", "free", driver="driver_model", population=POPULATION),
+     "population: a driver model and a driver population were both given"),
+    (lambda: trustroute.synthesize("phi1", horizon=20, belief_rule="authors"),
+     "belief_rule: unknown belief rule 'authors'"),
+    (lambda: trustroute.evaluate("phi1", "free", belief_rule="authors"),
+     "belief_rule: unknown belief rule 'authors'"),
+    (lambda: trustroute.run_episode("phi1", engine="bogus"), "engine: unknown engine 'bogus'"),
+    (lambda: trustroute.run_episode("phi1", engine="model", rrd="x.rrd"),
+     "rrd: a Rerun recording needs the SUMO engine"),
+    (lambda: trustroute.run_study(STUDY, out="unused", workers=0), "workers: expected an integer from 1"),
+])
+def test_api_settings_follow_the_cli_rules(call, named):
+    with pytest.raises(InputError, match=named) as caught:
+        call()
+    assert "--" not in str(caught.value)
+
+
+def test_a_command_quoted_in_an_api_error_keeps_its_flags(tmp_path):
+    # "run `trustroute study CONFIG --out DIR` first" is a command to type: its --out stays
+    with pytest.raises(InputError, match="`trustroute study CONFIG --out DIR`"):
+        trustroute.analyze(tmp_path)

@@ -8,6 +8,7 @@ import json
 import pytest
 
 import trustroute
+from trustroute.core.errors import InputError
 from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH
 
 
@@ -21,7 +22,7 @@ def test_api_synthesizes_a_trust_state_spec_for_a_population(tmp_path):
     document = json.loads(out.read_text())
     assert document["kind"] == "joint-belief" and document["objective"] == "bayes"
     assert document["lower"] == found.result.lower
-    with pytest.raises(ValueError, match="not both"):
+    with pytest.raises(InputError, match="population: a driver model and a driver population were both"):
         trustroute.synthesize("phi1", driver=trustroute.load_driver_model(),
                               population=EXAMPLE_POPULATION_PATH)
 

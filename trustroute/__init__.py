@@ -115,8 +115,6 @@ def _compiled(spec: Spec | PathLike, town: Town | PathLike | None, driver: Drive
     """The compiled problem of the arguments, the packaged defaults filled in (trustroute/app)."""
     from trustroute.app.problem import load_problem
 
-    if driver is not None and population is not None:
-        raise ValueError("give driver or population, not both")
     return load_problem(spec, town, driver, population)
 
 
@@ -143,10 +141,11 @@ def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
     policy's value per type, `result` its SynthesisResult (`result.policy` the policy).
     """
     from trustroute.app.synthesis import SynthesisSettings, synthesize_population, synthesize_single
-    from trustroute.core.settings import with_options
+    from trustroute.core.settings import check_time_limit, with_options
 
-    problem = _compiled(spec, town, driver, population)
     chosen = with_options(settings, SynthesisSettings(), options, "synthesize")
+    check_time_limit(chosen.time_limit)
+    problem = _compiled(spec, town, driver, population)
     if problem.population is not None:
         return synthesize_population(problem, objective, chosen, out)
     return synthesize_single(problem, chosen, out)
@@ -184,12 +183,18 @@ def evaluate(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
     the AV filtering with its type-aware model; policy "free", "robust", "bayes" or a population
     policy file (docs/driver_types.md), as `trustroute evaluate --population`.
     """
-    from trustroute.app.synthesis import EvaluationSettings, evaluate_population, evaluate_single
+    from trustroute.app.synthesis import (
+        EvaluationSettings,
+        check_evaluation,
+        evaluate_population,
+        evaluate_single,
+    )
     from trustroute.core.settings import with_options
 
-    problem = _compiled(spec, town, driver, population)
-    routing = _policy(policy, problem, cache_dir)
     chosen = with_options(settings, EvaluationSettings(), options, "evaluate")
+    problem = _compiled(spec, town, driver, population)
+    check_evaluation(problem, chosen)
+    routing = _policy(policy, problem, cache_dir)
     if problem.population is not None:
         return evaluate_population(problem, routing, chosen)[0]
     return evaluate_single(problem, routing, chosen)
@@ -213,16 +218,10 @@ def run_episode(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
     `record.roads`, `record.kinematics`, `record.incidents` (DataFrames, docs/dataset.md); the
     episode follows the study's rules (20-junction fallback, 60-junction cap).
     """
-    from trustroute.app.engines import ENGINES, SIMULATED
     from trustroute.app.runs import EpisodeSettings, run_one_episode
     from trustroute.core.settings import with_options
 
     chosen = with_options(settings, EpisodeSettings(option="initial_trust"), options, "run_episode")
-    if chosen.engine not in SIMULATED:
-        raise ValueError(f"unknown engine {chosen.engine!r}; use one of "
-                         f"{', '.join(repr(e) for e in SIMULATED)}")
-    if chosen.rrd is not None and not ENGINES[chosen.engine].records:
-        raise ValueError("a Rerun recording needs the SUMO engine (engine='sumo')")
     problem = _compiled(spec, town, driver, population)
     routing = _policy(policy, problem, cache_dir)
     chosen = replace(chosen, rrd=Path(chosen.rrd) if chosen.rrd else None)
@@ -242,6 +241,7 @@ def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None
     engine ("sumo" or "model"). scheduler: a Dask scheduler address or "local". Returns the run;
     `run.study_dir` holds the dataset (docs/dataset.md) that `analyze` reads.
     """
+    from trustroute.core.fields import Integer, check_value
     from trustroute.harness.study.config import (
         StudyConfig,
         load_study_config,
@@ -250,13 +250,12 @@ def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None
     )
     from trustroute.harness.study.runner import run_and_consolidate
 
+    check_value(workers, Integer(minimum=1), "--workers", "", fix="pass 1 (this process) or more processes")
     if isinstance(config, dict):
         config = study_config_from_dict(config, "<study dict>", Path.cwd())
     elif not isinstance(config, StudyConfig):
         config = load_study_config(config)
     config = config.with_overrides(engine=engine)
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
     run, _ = run_and_consolidate(config, study_directory(config, None if out is None else str(out)),
                                  workers, scheduler, progress=progress, echo=lambda line: None)
     return run

@@ -38,9 +38,9 @@ def rule_field() -> Any:
 
 
 def command_time_limit(help: str, **attrs: Any) -> Any:
-    """--time-limit in seconds, at most a week."""
-    return option("--time-limit", type=FiniteFloat(0.0, 7 * 24 * 3600.0, open_minimum=True), help=help,
-                  **attrs)
+    """--time-limit in seconds, at most a week (the rule of `check_time_limit`, the API's)."""
+    return option("--time-limit", type=FiniteFloat(0.0, defaults.MAX_TIME_LIMIT, open_minimum=True),
+                  help=help, **attrs)
 
 
 rule_option = option_decorator("belief_rule", rule_field())
@@ -319,20 +319,11 @@ class EvaluateOptions:
         """The evaluation's settings, each limit checked (a usage error names its option)."""
         from trustroute.app.synthesis import EvaluationSettings, belief_rule_named
 
-        if self.fallback_after < 0:
-            raise InputError("--fallback-after", "", f"must be >= 0, got {self.fallback_after}",
-                             "pass a number of junctions or --no-fallback")
         cap = defaults.JUNCTION_CAP if self.max_junctions is None else self.max_junctions
-        if cap < 0:
-            raise InputError("--max-junctions", "", f"must be >= 0, got {cap}", "pass e.g. 60")
         if self.cache_dir is not None:
             from trustroute.core.output_files import check_output_dir
 
             check_output_dir(self.cache_dir, "--cache-dir", "policy cache")
-        if self.population_path is not None and (self.max_nodes is not None or self.time_limit is not None):
-            raise InputError("--max-nodes" if self.max_nodes is not None else "--time-limit", "",
-                             "the pruning limits are not used with --population",
-                             "drop --max-nodes and --time-limit, or evaluate for --driver")
         return EvaluationSettings(fallback_after=None if self.no_fallback else self.fallback_after,
                                   max_junctions=cap, belief_rule=belief_rule_named(self.belief_rule),
                                   max_nodes=self.max_nodes, time_limit=self.time_limit)
@@ -349,13 +340,11 @@ def evaluate(spec_path: str, policy_name: str, options: EvaluateOptions) -> None
     is exact (lower = upper) unless histories were pruned; their live mass is the width.
     """
     from trustroute.app.policy import PolicySettings, policy_for
-    from trustroute.app.synthesis import evaluate_single
+    from trustroute.app.synthesis import check_evaluation, evaluate_single
 
     settings = options.settings()
     problem = load_problem(spec_path, options.town_path, options.driver_path, options.population_path)
-    if options.time_limit is not None and not problem.dfa_hidden:
-        raise InputError("--time-limit", "", "applies to specs with trust-state atoms only (the others "
-                         "are evaluated exactly in full)", "drop --time-limit")
+    check_evaluation(problem, settings)
     policy = policy_for(problem, policy_name, PolicySettings(cache_dir=options.cache_dir,
                                                              progress=not (options.as_json or options.quiet)))
     if problem.population is not None:

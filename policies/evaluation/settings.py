@@ -5,7 +5,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from trustroute.policies.model.trust_pomdp import BELIEF_RULES, BeliefRule
+from trustroute.core.errors import InputError
+from trustroute.core.fields import Integer, check_value
+from trustroute.policies.model.trust_pomdp import BeliefRule, checked_belief_rule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
 
@@ -29,12 +31,18 @@ class EvaluationSettings:
     time_limit: float | None = None
 
     def __post_init__(self) -> None:
-        if self.belief_rule not in BELIEF_RULES:
-            raise ValueError(f"unknown belief rule {self.belief_rule!r}; use 'bayes' or 'paper'")
+        """Each setting checked as every door takes it: an InputError naming its option (the API's
+        messages say its keyword). The time limit is checked at the doors (`check_time_limit`):
+        inside a run it is the time left, which may be 0."""
+        checked_belief_rule(self.belief_rule)
         if self.max_junctions < 0:
-            raise ValueError("max_junctions must be >= 0")
+            raise InputError("--max-junctions", "", f"must be >= 0, got {self.max_junctions}", "pass e.g. 60")
         if self.fallback_after is not None and self.fallback_after < 0:
-            raise ValueError("fallback_after must be >= 0")
+            raise InputError("--fallback-after", "", f"must be >= 0, got {self.fallback_after}",
+                             "pass 0 or more junctions, e.g. 20")
+        if self.max_nodes is not None:
+            check_value(self.max_nodes, Integer(minimum=1), "--max-nodes", "",
+                        fix="pass a positive number of histories per junction")
 
 
 DEFAULT_EVALUATION = EvaluationSettings()

@@ -13,7 +13,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
-from trustroute.core.fields import OneOf
+from trustroute.core.fields import OneOf, check_value
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel, check_covers_town
 
@@ -36,11 +36,9 @@ def row_blocks(n: int, size: int) -> Iterator[slice]:
 
 
 def checked_belief_rule(rule: str) -> BeliefRule:
-    """`rule` as a BeliefRule, for a name read from outside (a config, a command line);
-    ValueError when it names no rule."""
-    if rule not in BELIEF_RULES:
-        raise ValueError(f"unknown belief rule {rule!r}; use 'bayes' or 'paper'")
-    return rule
+    """`rule` as a BeliefRule, for a name read from outside (a config, a command line, an API
+    keyword); an InputError naming --belief-rule when it names no rule."""
+    return check_value(rule, BELIEF_RULE_NAMES, "--belief-rule", "")
 
 
 @dataclass(frozen=True, eq=False)

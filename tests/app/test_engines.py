@@ -29,7 +29,7 @@ def test_an_unknown_or_unsimulated_engine_is_refused():
         engine_named("live", simulated=True)
     with pytest.raises(InputError, match="unknown engine 'carla'"):
         engine_named("carla")
-    with pytest.raises(ValueError, match="unknown engine 'live'"):
+    with pytest.raises(InputError, match="engine: unknown engine 'live' \\(fix: use one of sumo, model\\)"):
         trustroute.run_episode("phi1", engine="live")
-    with pytest.raises(ValueError, match="needs the SUMO engine"):
+    with pytest.raises(InputError, match="rrd: a Rerun recording needs the SUMO engine"):
         trustroute.run_episode("phi1", engine="model", rrd="x.rrd")

@@ -20,6 +20,7 @@ from trustroute.app.nets import net_for
 from trustroute.app.policy import PolicySettings, policy_for
 from trustroute.app.problem import check_initial_trust, compile_problem
 from trustroute.core import defaults
+from trustroute.core.errors import InputError
 from trustroute.core.fields import Integer, check_value
 from trustroute.harness.simulation.episode import EpisodeOptions, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
@@ -51,6 +52,10 @@ class EpisodeSettings:
             seed, Integer(minimum=0, maximum=defaults.MAX_SEED), "--seed", "",
             lambda seen: f"expected an integer from 0 to {defaults.MAX_SEED}, got {seen.value!r}",
             f"pass a whole number from 0 to {defaults.MAX_SEED}"))
+        engine = engine_named(self.engine, "--engine", simulated=True)
+        if self.rrd is not None and not engine.records:
+            raise InputError("--rrd", "", f"a Rerun recording needs the SUMO engine, not {self.engine!r}",
+                             "run on the SUMO engine (engine 'sumo') or drop --rrd")
 
 
 @dataclass(frozen=True)
@@ -65,7 +70,7 @@ def run_one_episode(problem: Problem, policy: RoutingPolicy, settings: EpisodeSe
     """One episode of `problem` with `policy`: a synthetic driver seeded by `settings.seed` (of a
     type drawn from the population first, when the problem has one), on the engine's episode
     function, with the study's rules (fallback, junction cap)."""
-    engine = engine_named(settings.engine, "engine", simulated=True)
+    engine = engine_named(settings.engine, "--engine", simulated=True)
     rng = np.random.default_rng(settings.seed)
     driver_type, model = None, problem.driver
     if problem.population is not None:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from trustroute.core import defaults
 from trustroute.core.errors import InputError
+from trustroute.core.settings import check_time_limit
 from trustroute.policies.belief.problem import Problem
 from trustroute.policies.evaluation.plain import Evaluation
 from trustroute.policies.evaluation.plain import evaluate as evaluate_plain
@@ -138,6 +139,23 @@ def certified(problem: Problem, value: Evaluation) -> Evaluation:
     """An evaluation's computed [lower, upper] rounded outward for its histories of at most
     `max_junctions` steps (policies/synthesis/rounding.py, `certify`), so that it holds exactly."""
     return certify(value, problem_rounding(problem))
+
+
+def check_evaluation(problem: Problem, settings: EvaluationSettings) -> None:
+    """The limits an exact evaluation of `problem` takes, checked where a door is given them (the
+    CLI before it makes the policy, the API before it evaluates): the pruning limits are not used
+    for a population, a time limit only for specs with trust-state atoms (the others are
+    evaluated exactly in full)."""
+    if problem.population is not None and (settings.max_nodes is not None or settings.time_limit is not None):
+        raise InputError("--max-nodes" if settings.max_nodes is not None else "--time-limit", "",
+                         "the pruning limits are not used for a driver population",
+                         "drop --max-nodes and --time-limit, or evaluate for --driver")
+    if settings.time_limit is None:
+        return
+    check_time_limit(settings.time_limit)
+    if not problem.dfa_hidden:
+        raise InputError("--time-limit", "", "applies to specs with trust-state atoms only (the others "
+                         "are evaluated exactly in full)", "drop --time-limit")
 
 
 def evaluate_single(problem: Problem, policy: RoutingPolicy, settings: EvaluationSettings) -> Evaluation:

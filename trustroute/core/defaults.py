@@ -14,6 +14,7 @@ from typing import Final
 # synthesis (`synthesize`, `trustroute synth`)
 TAU = 1e-3                           # target gap upper - lower
 TIME_LIMIT = 60.0                    # seconds for the whole synthesis
+MAX_TIME_LIMIT = 7 * 24 * 3600.0     # the longest time limit any door takes (a week), in seconds
 WORK_LIMIT: int | None = None        # units of work for the whole synthesis (policies/work_clock.py)
 # nodes a belief-MDP search may hold (about 1 kB each): past them it stops, whatever its limits
 NODE_BUDGET = 600_000

@@ -34,9 +34,15 @@ _WITH_FLAG = re.compile(r"\bwith (--[a-z])")
 def keyword_names(error: InputError) -> InputError:
     """`error` as the Python API says it: the command-line flags it names (`--initial-trust`), the
     CLI's words, become the API's keyword arguments of the same names (`initial_trust`)."""
-    def keyword(text: str) -> str:
+    def in_words(text: str) -> str:
         text = _WITH_FLAG.sub(r"as \1", text)   # "a file with --town": "a file as town"
         return _FLAG.sub(lambda flag: flag.group(1).replace("-", "_"), text)
+
+    def keyword(text: str) -> str:
+        # a command quoted in backticks ("run `trustroute study CONFIG --out DIR`") is typed as it
+        # is: its flags stay; the text outside the quotes (the even parts) is said as keywords
+        parts = text.split("`")
+        return "`".join(in_words(part) if index % 2 == 0 else part for index, part in enumerate(parts))
 
     said = InputError.__new__(type(error))
     said.__dict__.update(error.__dict__)
