@@ -153,37 +153,29 @@ class StudyConfig:
 
     @functools.cached_property
     def content_hash(self) -> str:
-        """SHA-256 of what determines the dataset: every setting (not the file's formatting or its
-        location, nor the output directory) plus the content of the spec, town, model and policy
-        files it names."""
+        """SHA-256 of what determines the dataset: every setting, each file it names as its name and
+        content, each population as its content hash; not the config's formatting, nor where its
+        files are (a copied project, another checkout), the output directory or the policy cache."""
         settings = {k: v for k, v in asdict(self).items()
-                    if k not in ("source_path", "output", "name", "record")}
-        if settings["robust_population"] is None:
-            # a study without the robust condition hashes without its keys
-            del settings["robust_population"], settings["robust_objective"]
-        if settings["driver_population"] is None:
-            del settings["driver_population"]  # a study without [drivers] hashes without it
-        if settings["questionnaires"] is None:
-            del settings["questionnaires"]  # a study without [questionnaires] hashes without it
-        if not settings["routes"]:
-            del settings["routes"]  # a study without background routes hashes without it
-        live_defaults = (("live_view", "driver"), ("live_driving", "assisted"), ("live_inputs", LIVE_INPUTS))
-        for key, default in live_defaults:
+                    if k not in ("source_path", "output", "name", "record", "policy_cache")}
+        for key, default in _UNSET.items():
             if settings[key] == default:
-                del settings[key]  # a default hashes as a config without [live]
-        if settings["belief_source"] is None:
-            del settings["belief_source"]  # a study without a declared source hashes without it
-        digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
-        for path in (*self.specs, self.town, self.driver_model, *self.conditions):
-            if path and Path(path).is_file():
-                digest.update(Path(path).read_bytes())
-        if self.robust_population is not None:
-            digest.update(load_driver_population(self.robust_population).content_hash.encode())
-        if self.driver_population is not None:
-            # the population's content hash covers the model files its types name
-
-            digest.update(load_driver_population(self.driver_population).content_hash.encode())
-        return digest.hexdigest()
+                del settings[key]  # a setting left at its default hashes as a config without its key
+        if "robust_population" not in settings:
+            del settings["robust_objective"]  # a study without the robust condition hashes without it
+        for key in ("specs", "conditions", "routes"):
+            if key in settings:
+                settings[key] = [_file_identity(entry) for entry in settings[key]]
+        for key in ("town", "driver_model"):
+            settings[key] = None if settings[key] is None else _file_identity(settings[key])
+        for key in ("robust_population", "driver_population"):
+            if key in settings:
+                # the population's content hash covers the model files its types name
+                settings[key] = load_driver_population(settings[key]).content_hash
+        if "questionnaires" in settings:
+            settings["questionnaires"] = {placement: [_file_identity(entry) for entry in entries]
+                                          for placement, entries in settings["questionnaires"].items()}
+        return hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()
 
     def with_overrides(self, *, engine: str | None = None) -> StudyConfig:
         """A copy, with `engine` replaced when given (not None), checked by the config key's rule
@@ -191,6 +183,22 @@ class StudyConfig:
         if engine is None:
             return replace(self)
         return replace(self, engine=check_value(engine, ENGINE_NAMES, "engine", "", fix=ENGINE_FIX))
+
+
+# The settings a config may leave out, at their defaults: hashed only when set otherwise.
+_UNSET: dict[str, object] = {"robust_population": None, "driver_population": None, "questionnaires": None,
+                             "routes": (), "live_view": "driver", "live_driving": "assisted",
+                             "live_inputs": LIVE_INPUTS, "belief_source": None}
+
+
+def _file_identity(entry: str) -> str | dict[str, str]:
+    """A config's entry as its hash sees it: a file as its name and the SHA-256 of its bytes (where
+    it lies does not change the study), anything else (a named condition, a packaged
+    questionnaire) as written."""
+    path = Path(entry)
+    if not path.is_file():
+        return entry
+    return {"file": path.name, "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
 
 
 def condition_label(condition: str) -> str:

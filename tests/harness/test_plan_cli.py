@@ -116,6 +116,7 @@ def test_the_demo_preregistration_in_docs_is_plans_answer(capsys, tmp_path):
     answer = cli_json(capsys, "plan", str(REPO / block["config_path"]), "--participants", str(size),
                       *[arg for test in block["tests"] for arg in ("--test", test)],
                       "--seed", str(block["seed"]), "--out", str(tmp_path))
-    # (the config's hash names its files by absolute path, so it differs between checkouts)
+    # the config's hash is of its settings and files' content, the same in every checkout
+    assert answer["config_hash"] == block["config_hash"]
     assert answer["tests"] == block["tests"] and answer["sizes"] == [size]
     assert answer["power"] == [row for row in block["power"] if row["participants"] == size]

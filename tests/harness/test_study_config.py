@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gzip
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -110,6 +111,35 @@ def test_hash_ignores_formatting_but_not_settings(tmp_path, monkeypatch):
     )
     c = load_study_config(_write(tmp_path, MINIMAL.replace("seed = 1", "seed = 2"), "c.toml"))
     assert a.content_hash == b.content_hash != c.content_hash
+
+
+def _project(folder: Path, routes: bytes = b'<routes><vType id="car"/></routes>') -> Path:
+    """A study config with its own spec, town, driver model, background routes and policy cache,
+    in `folder`, all named relative to the config."""
+    folder.mkdir()
+    shutil.copy(REPO / "specs" / "phi1.toml", folder / "phi1.toml")
+    shutil.copy(REPO / "networks" / "data" / "town01_carla.json", folder / "town.json")
+    shutil.copy(REPO / "participants" / "data" / "driver_model.json", folder / "driver.json")
+    (folder / "background.rou.xml").write_bytes(routes)
+    return _write(folder, MINIMAL.replace('["specs/phi1.toml", "specs/phi2.toml"]', '["phi1.toml"]')
+                  + 'town = "town.json"\ndriver_model = "driver.json"\nroutes = ["background.rou.xml"]\n'
+                  + 'policy_cache = "cache"\n')
+
+
+def test_hash_does_not_depend_on_where_the_files_are(tmp_path):
+    # the same config and files in another folder (a copied project, another checkout or
+    # installation of the packaged files) are the same study: it resumes there
+    here = load_study_config(_project(tmp_path / "here"))
+    there = load_study_config(_project(tmp_path / "there"))
+    assert here.specs != there.specs and here.policy_cache != there.policy_cache
+    assert here.content_hash == there.content_hash
+
+
+def test_hash_covers_the_content_of_every_file_named(tmp_path):
+    config = _project(tmp_path / "study")
+    before = load_study_config(config).content_hash
+    (tmp_path / "study" / "background.rou.xml").write_bytes(b'<routes><vType id="truck"/></routes>')
+    assert load_study_config(config).content_hash != before
 
 
 BAD = {
