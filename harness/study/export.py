@@ -4,8 +4,9 @@ with pseudonymous participant ids, the codebook generated from the dataset schem
 versions, checksums of every file and a README.
 
 Pseudonyms: each participant number is replaced by a three-digit code drawn without replacement
-(100-999) from a Generator seeded by the caller, in the `participant` column and in every
-`episode_id` (`p<code, 5 digits>-<spec>-<condition>`). The key (original number -> code) is
+(100-999; four digits for a study of more than 900 participants, five for more than 9,000, ...)
+from a Generator seeded by the caller, in the `participant` column and in every `episode_id`
+(`p<code, 5 digits>-<spec>-<condition>`). The key (original number -> code) is
 written into the study directory (`export-key.json`), never into the package. Nothing of the
 live registry (token digests, labels), the token log or the withdrawal audit is exported.
 """
@@ -33,7 +34,12 @@ EPISODE_PARTICIPANT = re.compile(r"^p(\d{5})-")
 
 
 def pseudonyms(participants: list[int], rng: np.random.Generator) -> dict[int, int]:
-    codes = rng.choice(np.arange(100, 1000), size=len(participants), replace=False)
+    """Each participant's code, drawn without replacement from the three-digit codes, or from the
+    codes of as many more digits as a larger study needs (1000-9999 for up to 9,000, ...)."""
+    digits = 3
+    while 9 * 10 ** (digits - 1) < len(participants):
+        digits += 1
+    codes = rng.choice(np.arange(10 ** (digits - 1), 10 ** digits), size=len(participants), replace=False)
     return {int(p): int(code) for p, code in zip(sorted(participants), codes, strict=True)}
 
 

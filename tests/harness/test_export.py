@@ -1,0 +1,33 @@
+"""`trustroute export` of a simulated study: every participant gets a distinct pseudonym, however
+many the study has (a config allows up to 100,000)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+import trustroute
+from tests.cli import run_cli
+from trustroute.harness.study.export import pseudonyms
+
+
+@pytest.mark.parametrize(("participants", "low", "high"), [(2, 100, 999), (900, 100, 999),
+                                                           (901, 1000, 9999), (9001, 10000, 99999)])
+def test_pseudonyms_are_distinct_codes_of_one_length(participants, low, high):
+    key = pseudonyms(list(range(participants)), np.random.default_rng(0))
+    codes = list(key.values())
+    assert sorted(key) == list(range(participants)) and len(set(codes)) == participants
+    assert low <= min(codes) and max(codes) <= high
+
+
+@pytest.mark.slow
+def test_a_study_of_more_than_900_participants_exports(tmp_path, capsys):
+    study = trustroute.run_study({"study": {"participants": 901, "seed": 1, "engine": "model",
+                                            "specs": ["phi1"], "conditions": ["free"]}},
+                                 out=tmp_path / "study").study_dir
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
+    assert code == 0, err
+    episodes = pq.read_table(tmp_path / "package" / "tables" / "episodes.parquet").to_pandas()
+    assert episodes["participant"].nunique() == 901
+    assert episodes["episode_id"].str.fullmatch(r"p\d{5}-phi1-free").all()
