@@ -142,6 +142,14 @@ def test_hash_covers_the_content_of_every_file_named(tmp_path):
     assert load_study_config(config).content_hash != before
 
 
+def test_a_file_named_like_a_condition_does_not_enter_the_hash(tmp_path, monkeypatch):
+    config = _write(tmp_path, MINIMAL.replace("specs/phi1.toml", "phi1").replace("specs/phi2.toml", "phi2"))
+    monkeypatch.chdir(tmp_path)
+    before = load_study_config(config).content_hash
+    (tmp_path / "aware").write_text("not a policy")
+    assert load_study_config(config).content_hash == before
+
+
 BAD = {
     "not toml": ("[study\nparticipants = 1", "not valid TOML"),
     "no study table": ("[population]\nconcentration = 1.0\n", "missing [study]"),
