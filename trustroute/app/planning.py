@@ -88,8 +88,9 @@ def pilot_model(config: StudyConfig, settings: PlanSettings,
 
     assert settings.pilot is not None
     rng = np.random.default_rng(np.random.SeedSequence(settings.seed, spawn_key=(PILOT_KEY,)))
-    with tqdm(total=settings.pilot_bootstrap, desc="pilot bootstrap refits", disable=not progress,
-              leave=False) as bar:
+    # a bar on a terminal only (disable=None), as every command's
+    with tqdm(total=settings.pilot_bootstrap, desc="pilot bootstrap refits",
+              disable=None if progress else True, leave=False) as bar:
         fit = fit_pilot(Path(settings.pilot), settings.pilot_bootstrap, rng, progress=bar.update,
                         expected=driver_of(config.driver_model))
     models = fit.models
