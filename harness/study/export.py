@@ -26,7 +26,7 @@ import pyarrow as pa
 from trustroute.core.codebook import codebook
 from trustroute.core.dataset import TABLES, read_manifest, read_study_table, write_table
 from trustroute.core.errors import InputError
-from trustroute.core.output_files import atomic_write_text
+from trustroute.core.output_files import atomic_write_text, check_output_dir
 
 KEY_FILE = "export-key.json"
 TEXTS = {"consent.txt": "live/consent.txt"}   # texts participants were shown: package name <- study path
@@ -84,6 +84,7 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
     """Write the package of `study_dir` into `out` (a new or empty directory); its index."""
     study_dir, out = Path(study_dir), Path(out)
     manifest = read_manifest(study_dir)
+    check_output_dir(out, "--out", "package directory")
     if out.exists() and any(out.iterdir()):
         raise InputError(str(out), "--out", "the directory is not empty", "pass a new or empty directory")
     if out.resolve().is_relative_to(study_dir.resolve()):

@@ -31,3 +31,12 @@ def test_a_study_of_more_than_900_participants_exports(tmp_path, capsys):
     episodes = pq.read_table(tmp_path / "package" / "tables" / "episodes.parquet").to_pandas()
     assert episodes["participant"].nunique() == 901
     assert episodes["episode_id"].str.fullmatch(r"p\d{5}-phi1-free").all()
+
+
+def test_a_package_path_that_is_a_file_is_one_line_naming_out(model_study, capsys, tmp_path):
+    taken = tmp_path / "package.zip"
+    taken.write_text("a file")
+    code, out, err = run_cli(capsys, "export", str(model_study), "--out", str(taken))
+    assert code == 2 and out == ""
+    assert err == (f"error: {taken}: --out: the package directory exists and is not a directory "
+                   "(fix: pass a directory to --out)\n")
