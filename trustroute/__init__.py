@@ -140,11 +140,17 @@ def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
     PopulationSynthesis: `lower <= optimum <= upper` of the objective, `type_values` the returned
     policy's value per type, `result` its SynthesisResult (`result.policy` the policy).
     """
-    from trustroute.app.synthesis import SynthesisSettings, synthesize_population, synthesize_single
+    from trustroute.app.synthesis import (
+        SynthesisSettings,
+        check_synthesis_options,
+        synthesize_population,
+        synthesize_single,
+    )
     from trustroute.core.settings import check_time_limit, with_options
 
     chosen = with_options(settings, SynthesisSettings(), options, "synthesize")
     check_time_limit(chosen.time_limit)
+    check_synthesis_options(population is not None, objective, chosen.clusters)
     problem = _compiled(spec, town, driver, population)
     if problem.population is not None:
         return synthesize_population(problem, objective, chosen, out)

@@ -16,7 +16,6 @@ import click
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults
-from trustroute.core.errors import InputError
 from trustroute.harness.commands.inputs import (
     driver_field,
     driver_option,
@@ -125,7 +124,7 @@ class SynthOptions:
 @takes(options=SynthOptions)
 def synth(spec_path: str, options: SynthOptions) -> None:
     """Synthesize a trust-aware policy for SPEC with certified bounds lower <= Pr_max <= upper."""
-    from trustroute.app.synthesis import policy_arrays, synthesize_single
+    from trustroute.app.synthesis import check_synthesis_options, policy_arrays, synthesize_single
     from trustroute.core.output_files import check_output_file
 
     settings, out_path = options.settings(), options.out_path
@@ -134,12 +133,7 @@ def synth(spec_path: str, options: SynthOptions) -> None:
                  "--population": options.population_path}
         check_output_file(out_path, "--out", "policy file", reads)
         check_output_file(policy_arrays(out_path), "--out", "policy array file (.npz beside it)", reads)
-    if options.population_path is not None and options.clusters != "auto":
-        raise InputError("--clusters", "", "cluster policies apply to a single driver model (--driver)",
-                         "drop --clusters, or synthesize for --driver instead of --population")
-    if options.population_path is None and options.objective != defaults.OBJECTIVE:
-        raise InputError("--objective", "", f"--objective {options.objective} needs the types to weigh",
-                         "add --population FILE (the driver types)")
+    check_synthesis_options(options.population_path is not None, options.objective, options.clusters)
     problem = load_problem(spec_path, options.town_path, options.driver_path, options.population_path)
     if problem.population is not None:
         _synth_population(problem, options.objective, settings, out_path, options.as_json)

@@ -25,6 +25,7 @@ from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS, reached_cluster_cap
 from trustroute.policies.synthesis.population import (
+    Objective,
     PopulationSynthesis,
     TypeValue,
     document_entries,
@@ -103,20 +104,34 @@ def synthesize_single(problem: Problem, settings: SynthesisSettings,
     return result
 
 
+def check_synthesis_options(population: bool, objective: str, clusters: str) -> Objective:
+    """The options a synthesis takes for whom it is for, checked by every door before any work: an
+    objective weighs a `population`'s driver types, cluster policies are for a single model. The
+    objective, checked."""
+    if not is_objective(objective):
+        raise InputError("--objective", "", f"unknown objective {objective!r}", "use 'bayes' or 'robust'")
+    if population and clusters != "auto":
+        raise InputError("--clusters", "", "cluster policies apply to a single driver model (--driver)",
+                         "drop --clusters, or synthesize for --driver instead of --population")
+    if not population and objective != defaults.OBJECTIVE:
+        raise InputError("--objective", "", f"--objective {objective} needs the types to weigh",
+                         "add --population FILE (the driver types)")
+    return objective
+
+
 def synthesize_population(problem: Problem, objective: str, settings: SynthesisSettings,
                           out: str | Path | None = None) -> PopulationSynthesis:
     """A policy for a population problem under `objective` ("bayes" or "robust"); its file
     written at `out` when given."""
     population = problem.population
     assert population is not None
-    if not is_objective(objective):
-        raise InputError("--objective", "", f"unknown objective {objective!r}", "use 'bayes' or 'robust'")
+    checked = check_synthesis_options(True, objective, settings.clusters)
     spec = problem.given_spec
     description = f"synthesizing {spec.name} ({objective}, {population.n_types} types)"
     with work_clock(settings.work_limit, settings.time_limit) as limit, \
             synthesis_progress(description, settings.progress) as on_iteration:
         clock = installed()
-        found = synthesize_for_population(problem.town, population, spec, objective,
+        found = synthesize_for_population(problem.town, population, spec, checked,
                                           replace(settings, time_limit=limit),
                                           population_source=population.source_path,
                                           on_iteration=on_iteration,
