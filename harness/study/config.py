@@ -193,8 +193,7 @@ _UNSET: dict[str, object] = {"robust_population": None, "driver_population": Non
 
 def _file_identity(entry: str) -> str | dict[str, str]:
     """A config's entry as its hash sees it: a file (the config keeps them absolute) as its name and
-    the SHA-256 of its bytes (where it lies does not change the study), anything else (a named
-    condition, a packaged questionnaire) as written."""
+    the SHA-256 of its bytes, anything else (a named condition, a packaged questionnaire) as is."""
     path = Path(entry)
     if not (path.is_absolute() and path.is_file()):
         return entry
