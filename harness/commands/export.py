@@ -18,7 +18,7 @@ from trustroute.harness.commands.output import emit, json_option, study_warnings
               help="Seed of the pseudonyms' draw (the key is kept in STUDY/export-key.json).")
 @json_option
 def export(study_dir: str, out: str, seed: int, as_json: bool) -> None:
-    """Package the consolidated study STUDY for sharing (OSF, a journal) in DIR."""
+    """Package the consolidated study STUDY for sharing (OSF, a journal) in the --out DIRECTORY."""
     import numpy as np
 
     from trustroute.analysis.study_directory import load_study

@@ -15,6 +15,8 @@ from trustroute.harness.commands.option_groups import option, option_decorator
 SPEC_HELP = "SPEC is a spec file or a packaged spec name, e.g. phi1."
 TOWN_HELP = "Town file or packaged town name, e.g. city"
 DRIVER_HELP = "Driver model file or packaged name (default: the packaged model)."
+# what --population takes, at the head of each command's help for it
+POPULATION_GIVEN = "Driver-population file or packaged name (e.g. driver_population_three_types)"
 
 
 def spec_argument(name: str = "spec_path", **attrs: Any) -> Callable[[Callable], Callable]:

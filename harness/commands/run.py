@@ -11,7 +11,7 @@ import click
 
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults
-from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
+from trustroute.harness.commands.inputs import POPULATION_GIVEN, driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import SEED, UsageFix
 from trustroute.harness.commands.output import json_flag, quiet_flag, with_paths
@@ -122,7 +122,7 @@ class RunOptions:
                                        help="Driver's initial trust (default: drawn).")
     population_path: str | None = option(
         "--population", type=click.Path(), default=None,
-        help="Driver-population FILE (instead of --driver): the driver's type is drawn from it "
+        help=f"{POPULATION_GIVEN} (instead of --driver): the driver's type is drawn from it "
              "(seeded), the AV filters with its type-aware model; POLICY 'free', 'robust', "
              "'bayes' or a population policy file (docs/driver_types.md).")
     cache_dir: str | None = option("--cache-dir", type=click.Path(), default=None,

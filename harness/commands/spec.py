@@ -14,7 +14,7 @@ from pathlib import Path
 import click
 
 from trustroute.app.spec_check import spec_report
-from trustroute.harness.commands.inputs import spec_argument, town_option
+from trustroute.harness.commands.inputs import POPULATION_GIVEN, spec_argument, town_option
 from trustroute.harness.commands.output import json_option, with_paths
 
 
@@ -42,7 +42,7 @@ def spec() -> None:
 @click.option("--driver", "driver_path", type=click.Path(), default=None,
               help="Driver model FILE the belief atoms' coefficients are checked against (default model).")
 @click.option("--population", "population_path", type=click.Path(), default=None,
-              help="Driver-population FILE to check type-belief atoms against (docs/driver_types.md).")
+              help=f"{POPULATION_GIVEN} to check type-belief atoms against (docs/driver_types.md).")
 def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | None,
           driver_path: str | None, population_path: str | None) -> None:
     """Parse SPEC, print its DFA size and the linter's warnings."""

@@ -17,6 +17,7 @@ from trustroute.analysis.formatting import finite_or_none
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults
 from trustroute.harness.commands.inputs import (
+    POPULATION_GIVEN,
     driver_field,
     driver_option,
     spec_argument,
@@ -101,7 +102,7 @@ class SynthOptions:
              "never (off).")
     population_path: str | None = option(
         "--population", type=click.Path(), default=None,
-        help="Driver-population FILE: synthesize for its mixture of driver types "
+        help=f"{POPULATION_GIVEN}: synthesize for its mixture of driver types "
              "(docs/driver_types.md); instead of --driver.")
     objective: str = option(
         "--objective", type=click.Choice(["bayes", "robust"]), default=defaults.OBJECTIVE, show_default=True,
@@ -285,7 +286,7 @@ class EvaluateOptions:
     driver_path: str | None = driver_field()
     population_path: str | None = option(
         "--population", type=click.Path(), default=None,
-        help="Driver-population FILE (instead of --driver): the AV filters with its type-aware model and "
+        help=f"{POPULATION_GIVEN} (instead of --driver): the AV filters with its type-aware model and "
              "the drivers are its mixture; POLICY may then be 'robust' or 'bayes' (docs/driver_types.md).")
     fallback_after: int = option("--fallback-after", type=JUNCTIONS, default=defaults.FALLBACK_AFTER,
                                  show_default=True,
