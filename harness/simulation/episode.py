@@ -461,7 +461,7 @@ class SumoEpisode:
             simulation_step()
             now = get_time()
             result = get_results(EGO_ID)
-            if not result:
+            if not result or not result[lane_id]:   # not on the net (yet): SUMO's lane id is ""
                 _check_missing_ego(now, start, current)
                 continue
             if isnan(current.time_in):

@@ -112,3 +112,12 @@ def test_policy_file_for_another_spec_exit_2(net, tmp_path, capsys):
                           "--time-limit", "20", "--out", str(policy)], capsys)
     assert code == 0 and policy.is_file(), stderr
     _one_line_error(_main(["run", PHI1, "--net", net, "--policy", str(policy)], capsys), "phi2")
+
+
+def test_an_ego_waiting_to_enter_a_busy_net_is_driven_once_it_enters(net):
+    # 100 background vehicles keep the start road busy: the ego is loaded but not yet on the net
+    # (SUMO reports its lane as "") for the first steps, and drives once it is inserted
+    result = CliRunner().invoke(cli, ["run", PHI1, "--background", "100", "--json", "--net", net])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.output)
+    assert summary["route"][0] == "E-A" and summary["end_reason"] in ("accepted", "rejected", "destination")
