@@ -178,8 +178,7 @@ class StudyConfig:
         return hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()
 
     def with_overrides(self, *, engine: str | None = None) -> StudyConfig:
-        """A copy, with `engine` replaced when given (not None), checked by the config key's rule
-        (an InputError naming `engine`)."""
+        """A copy with `engine` replaced when given, checked by the config key's rule (InputError)."""
         if engine is None:
             return replace(self)
         return replace(self, engine=check_value(engine, ENGINE_NAMES, "engine", "", fix=ENGINE_FIX))

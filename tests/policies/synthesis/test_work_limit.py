@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 import trustroute
+from trustroute.core import defaults
 
 POPULATION = "driver_population_three_types"
-SLOW = 1e6    # a time limit that never binds here, but for a dragging clock
+SLOW = defaults.MAX_TIME_LIMIT    # the longest limit a door takes: never binds, but for a dragging clock
 # The time limit a dragging clock reaches (each reading 0.05 s after the last) long before φ1 at
 # H = 10 converges, which takes about 1 s without it.
 DRAGGED_LIMIT = 0.5
