@@ -115,9 +115,11 @@ def terminal_table(header: Sequence[str], rows: Sequence[Sequence[object]],
                    width: int | None = TERMINAL_WIDTH, keys: int = 1) -> list[str]:
     """`aligned_columns` fitted to `width` characters: long cells wrapped, then the columns split
     into blocks (a blank line between them), each block repeating the first `keys` columns so its
-    rows stay identifiable. `width` None: one block, nothing wrapped (--wide)."""
-    if width is None:
-        return aligned_columns(header, rows)
+    rows stay identifiable. `width` None: one block, nothing wrapped (--wide). A table that fits
+    `width` as it is stays as it is: a cell is wrapped only to make room."""
+    whole = aligned_columns(header, rows)
+    if width is None or max(len(line.rstrip()) for line in whole) <= width:
+        return whole if width is None else [line.rstrip() for line in whole]
     rows = _wrapped_rows(rows, CELL_WIDTH)
     header = [str(h) for h in header]
     widths = [max(len(str(x)) for x in col) for col in zip(header, *rows, strict=True)]

@@ -81,3 +81,13 @@ def test_analyze_prints_within_120_columns_unless_wide(model_study):
     assert max(len(line) for line in narrow.output.splitlines()) <= 120
     wide = CliRunner().invoke(cli, ["analyze", str(model_study), "--no-report", "--wide"])
     assert wide.exit_code == 0 and max(len(line) for line in wide.output.splitlines()) > 120
+
+
+def test_a_table_that_fits_keeps_its_long_cells_whole():
+    from trustroute.analysis.formatting import CELL_WIDTH, terminal_table
+
+    label = "Pr_max(phi1), synthesized, ours within H=20 junctions"
+    assert len(label) > CELL_WIDTH
+    lines = terminal_table(["figure", "paper", "ours"], [[label, "0.8357", "[0.9989, 0.9999]"]])
+    assert len(lines) == 3 and lines[2].startswith(label) and lines[2].endswith("[0.9989, 0.9999]")
+    assert all(line == line.rstrip() for line in lines)
