@@ -93,11 +93,12 @@ def markdown_table(frame: pd.DataFrame) -> str:
 
 def aligned_columns(header: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
     """Plain-text lines of a table: left-aligned columns two spaces apart, a dashed rule under the
-    header."""
+    header, no trailing spaces."""
     widths = [max(len(str(x)) for x in col) for col in zip(header, *rows, strict=True)]
     pattern = "  ".join(f"{{:<{w}}}" for w in widths)
-    return [pattern.format(*header), pattern.format(*("-" * w for w in widths)),
-            *(pattern.format(*row) for row in rows)]
+    lines = [pattern.format(*header), pattern.format(*("-" * w for w in widths)),
+             *(pattern.format(*row) for row in rows)]
+    return [line.rstrip() for line in lines]
 
 
 def _wrapped_rows(rows: Sequence[Sequence[object]], cell_width: int) -> list[list[str]]:
@@ -118,8 +119,8 @@ def terminal_table(header: Sequence[str], rows: Sequence[Sequence[object]],
     rows stay identifiable. `width` None: one block, nothing wrapped (--wide). A table that fits
     `width` as it is stays as it is: a cell is wrapped only to make room."""
     whole = aligned_columns(header, rows)
-    if width is None or max(len(line.rstrip()) for line in whole) <= width:
-        return whole if width is None else [line.rstrip() for line in whole]
+    if width is None or max(len(line) for line in whole) <= width:
+        return whole
     rows = _wrapped_rows(rows, CELL_WIDTH)
     header = [str(h) for h in header]
     widths = [max(len(str(x)) for x in col) for col in zip(header, *rows, strict=True)]
@@ -141,7 +142,7 @@ def terminal_table(header: Sequence[str], rows: Sequence[Sequence[object]],
         if lines:
             lines.append("")
         lines += aligned_columns([header[i] for i in chosen], [[row[i] for i in chosen] for row in rows])
-    return [line.rstrip() for line in lines]
+    return lines
 
 
 def wrapped_text(text: str, width: int | None = TERMINAL_WIDTH, indent: str = "") -> list[str]:

@@ -49,7 +49,7 @@ def test_tables_as_markdown_and_aligned_text():
     assert markdown_table(frame).splitlines() == [
         "| a\\|b | n |", "|---|---|", "| x\\|y | 1 |", "| two lines | 22 |"]
     assert aligned_columns(["name", "n"], [["ab", "1"], ["a", "333"]]) == [
-        "name  n  ", "----  ---", "ab    1  ", "a     333"]
+        "name  n", "----  ---", "ab    1", "a     333"]
 
 
 def test_terminal_tables_fit_120_columns_and_keep_every_cell():
