@@ -374,7 +374,8 @@ function onState(message) {
   const next = message.done.length + 1;
   $("status").textContent = message.phase === "paused"
     ? `Paused (${message.paused_by === "disconnect" ? "connection lost" : "by the experimenter"})`
-    : message.warm_up === "pending" ? "Warm-up drive"
+    : message.phase === "consent" || message.phase === "declined" ? ""   // no drive is near yet
+      : message.warm_up === "pending" ? "Warm-up drive"
       : message.phase === "driving" ? `Trial ${message.trial} of ${message.trials}`
         : message.phase === "ready" ? `Trial ${next} of ${message.trials} is next` : "";
   if (message.phase === "paused") {

@@ -472,8 +472,9 @@ def test_the_consent_is_shown_in_paragraphs_and_can_be_declined(station, tmp_pat
         received: list[dict] = []
         socket.on_message(lambda text: received.append(json.loads(text)))
         socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": CONSENT, "view": "driver"}))
-        socket.send(state_message("consent", trial=0, episode_id=None))
+        socket.send(state_message("consent", trial=0, episode_id=None, warm_up="pending"))
         page.locator("#consent-step").wait_for(state="visible")
+        assert page.locator("#status").inner_text() == ""   # no drive is named before the consent
         paragraphs = page.locator("#consent-text p")
         assert paragraphs.all_inner_texts() == PARAGRAPHS
         shown = [paragraphs.nth(i).bounding_box() for i in range(3)]
