@@ -116,7 +116,7 @@ def plan(config_path: str, options: PlanOptions) -> None:
     if options.preregistration is not None:
         check_output_file(options.preregistration, "--preregistration", "pre-registration",
                           {"CONFIG": config_path, "--driver": options.driver,
-                           "--population": options.population}, {"--pilot": options.pilot})
+                           "--population": options.population}, {"--pilot": options.pilot}, suffix=".md")
     progress = None if options.quiet or options.as_json else (lambda line: click.echo(line, err=True))
     run = plan_study(config_path, options.settings(), progress)
     figure = run.figure

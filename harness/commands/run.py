@@ -86,7 +86,7 @@ def _check_paths(options: RunOptions, spec_path: str) -> None:
                  "--town": options.town_path,
                  "--driver": options.driver_path, "--net": net_path, "--population": options.population_path,
                  **{f"--routes #{number}": path for number, path in enumerate(options.routes_paths, 1)}}
-        check_output_file(rrd_path, "--rrd", "Rerun recording", reads)
+        check_output_file(rrd_path, "--rrd", "Rerun recording", reads, suffix=".rrd")
     if options.cache_dir is not None:
         check_output_dir(options.cache_dir, "--cache-dir", "policy cache")
     if net_path is not None:

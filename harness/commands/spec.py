@@ -51,7 +51,7 @@ def check(spec_path: str, town_path: str | None, as_json: bool, dot_path: str | 
     if dot_path is not None:
         check_output_file(dot_path, "--dot", "dot file", {"SPEC": spec_path, "--town": town_path,
                                                           "--driver": driver_path,
-                                                          "--population": population_path})
+                                                          "--population": population_path}, suffix=".dot")
     summary, dot = spec_report(spec_path, town_path, population_path, driver_path)
     if dot_path is not None:
         atomic_write_text(Path(dot_path), dot, "dot file", "pass a writable path to --dot")

@@ -86,6 +86,11 @@ def test_unreadable_net_exit_2(tmp_path, capsys):
     _one_line_error(_main(["run", PHI1, "--net", str(bad)], capsys), "not a readable SUMO net")
 
 
+def test_a_recording_path_that_is_a_folder_gets_an_rrd_file_to_pass(tmp_path, capsys):
+    _one_line_error(_main(["run", PHI1, "--rrd", str(tmp_path)], capsys),
+                    f"pass a file path to --rrd, e.g. {tmp_path / 'out.rrd'}")
+
+
 def test_missing_sumo_binary_exit_2(net, capsys, monkeypatch):
     import sumolib
 

@@ -151,16 +151,17 @@ Inputs = Mapping[str, str | Path | None]   # what the command reads, by the opti
 
 
 def check_output_file(path: str | Path, option: str, what: str, reads: Inputs | None = None,
-                      studies: Inputs | None = None) -> Path:
+                      studies: Inputs | None = None, suffix: str = ".json") -> Path:
     """Before work starts: `path` can be written as a file (not a directory, folder writable), is
-    none of the files the command `reads` and lies in none of the study directories it reads."""
+    none of the files the command `reads` and lies in none of the study directories it reads.
+    `suffix`: the file's usual ending, for the example path a refusal suggests."""
     path = Path(path)
     if "\x00" in str(path):
         raise InputError(option, "", f"the {what} path contains a NUL byte", "pass an ordinary path")
     check_apart(path, option, what, reads or {}, studies or {})
     if path.is_dir():
         raise InputError(str(path), option, f"the {what} path is a directory",
-                         f"pass a file path to {option}, e.g. {path / 'out'}")
+                         f"pass a file path to {option}, e.g. {path / f'out{suffix}'}")
     if path.exists() and not os.access(path, os.W_OK):
         raise InputError(str(path), option, f"the {what} exists and is not writable",
                          f"pass a writable path to {option}")
