@@ -146,6 +146,7 @@ function allowed(control) {
 const DRIVING_CONTROLS = ["toggle", "accelerate", "brake", "pull-out", "pull-in"];   // their buttons' ids
 function updateControls() {
   for (const control of DRIVING_CONTROLS) $(control).disabled = !allowed(control);
+  for (const button of $("trust").querySelectorAll("button")) button.disabled = !driveRuns();   // as `report`
   if (pedal === "accelerate" && !allowed("accelerate")) press("release");
 }
 

@@ -304,7 +304,8 @@ def enabled(page) -> set[str]:
 
 def test_the_driving_controls_work_only_while_the_drive_runs(station):
     """Before the vehicle is ready, while the drive is paused, and (accelerating) while the vehicle
-    stops for the hand-back, the buttons are disabled and their keys send nothing."""
+    stops for the hand-back, the buttons are disabled and their keys send nothing; the trust
+    buttons work while the drive runs, not while it is paused or over."""
     frame, _ = scene_on(station.net_path)
     with station.open() as (page, socket):
         received: list[dict] = []
@@ -325,6 +326,7 @@ def test_the_driving_controls_work_only_while_the_drive_runs(station):
         socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 10.0}))
         wait_until(page, "document.getElementById('mode').textContent === 'MANUAL'")
         assert enabled(page) == set(DRIVING)
+        assert page.locator("#trust button:enabled").count() == 7
         page.keyboard.down("ArrowUp")   # accelerating when the hand-back falls due: let go at once
         socket.send(json.dumps({"type": "warning", "kind": "hand_back", "distance": 100.0, "t": 11.0}))
         wait_until(page, "document.getElementById('accelerate').disabled")
@@ -335,7 +337,7 @@ def test_the_driving_controls_work_only_while_the_drive_runs(station):
         assert [message["pedal"] for message in sent("drive")] == ["accelerate", "release"]
         socket.send(state_message("paused", paused_by="experimenter", mode="manual"))
         page.locator("#overlay-text").filter(has_text="Paused by the experimenter").wait_for()
-        assert enabled(page) == set()
+        assert enabled(page) == set() and page.locator("#trust button:enabled").count() == 0
         for key in ("Space", "ArrowDown", "ArrowLeft"):
             page.keyboard.press(key)
         assert sent("hand_back") == [] and sent("steer") == [] and len(sent("drive")) == 2
@@ -348,7 +350,7 @@ def test_the_driving_controls_work_only_while_the_drive_runs(station):
         socket.send(json.dumps({"type": "episode_end", "episode_id": "x", "satisfied": True,
                                 "end_reason": "goal", "junctions": 3, "takeovers": 1}))
         wait_until(page, "document.getElementById('toggle').disabled")   # the drive is over
-        assert enabled(page) == set()
+        assert enabled(page) == set() and page.locator("#trust button:enabled").count() == 0
         page.keyboard.press("Space")
         assert sent("takeover") == []
 
