@@ -99,3 +99,19 @@ def test_a_command_quoted_in_an_api_error_keeps_its_flags(tmp_path):
     # "run `trustroute study CONFIG --out DIR` first" is a command to type: its --out stays
     with pytest.raises(InputError, match="`trustroute study CONFIG --out DIR`"):
         trustroute.analyze(tmp_path)
+
+
+def test_an_episode_jammed_by_background_traffic_is_bad_input_and_a_stuck_ego_a_bug():
+    from trustroute.harness.simulation.background import SimTimeCapReached, TrafficJam
+    from trustroute.harness.simulation.sumo_start import SumoConfig
+
+    # Town01 with 200 background vehicles locks up on seed 0 within 300 s of sim time
+    with pytest.raises(TrafficJam, match="the 200 background vehicles jammed the town's roads") as caught:
+        trustroute.run_episode("phi1", seed=0,
+                               sumo=SumoConfig(background_vehicles=200, max_sim_seconds=300.0))
+    assert isinstance(caught.value, InputError) and isinstance(caught.value, SimTimeCapReached)
+    # without background traffic an episode still running at its cap is not the input's fault: the
+    # error keeps its type and traceback (here the cap is shorter than any drive)
+    with pytest.raises(SimTimeCapReached, match="still running after 20 s of sim time") as caught:
+        trustroute.run_episode("phi1", seed=0, sumo=SumoConfig(max_sim_seconds=20.0))
+    assert not isinstance(caught.value, InputError)

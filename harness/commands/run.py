@@ -136,7 +136,8 @@ class RunOptions:
         help="SUMO route FILE of background traffic, e.g. an imported scenario's vehicle types and "
              "demand (repeat for several; types first); 'city': the demand of --town city.")
     background_vehicles: int = option(
-        "--background", type=click.IntRange(min=0, max=10_000), default=0, show_default=True,
+        "--background", type=click.IntRange(min=0, max=defaults.MAX_BACKGROUND_VEHICLES), default=0,
+        show_default=True,
         help="Seeded background traffic: vehicles kept on the net (an imported "
              "town: trips per minute from SUMO's randomTrips.py); docs/scenes.md.")
     quiet: bool = quiet_flag()

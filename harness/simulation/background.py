@@ -17,6 +17,12 @@ first one leaves when the episode starts (at 0 s). The episode never teleports a
 ego must show up as stuck), and a city's traffic without teleports can lock itself at a junction
 for good; `JamRelief` takes out a background vehicle that has stood for `STUCK_SECONDS`, as
 SUMO's own --time-to-teleport would, and leaves the ego and the incidents' vehicles alone.
+
+An episode still running at its sim-time cap (SumoConfig.max_sim_seconds) ends with
+`SimTimeCapReached`. When the ego stands in background traffic, the traffic has locked up (a town
+and seed can jam with fewer vehicles than the most a door takes, defaults.MAX_BACKGROUND_VEHICLES):
+that is `TrafficJam`, bad input told in one line with its fix. Otherwise nothing should hold the
+ego up that long: a bug, raised with its traceback.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from trustroute.core.errors import InputError
-from trustroute.harness.simulation.sumo_start import Sumo
+from trustroute.harness.simulation.sumo_start import Sumo, SumoConfig
 from trustroute.networks.cities import read_route_file
 
 TYPE_ID = "trustroute_background"
@@ -193,3 +199,31 @@ def background_routes(config, imported: bool, net_file: Path, seed: int, folder:
         return (str(random_trips(net_file, seed, config.background_vehicles, folder,
                                  end=config.max_sim_seconds)),)
     return ()
+
+
+class SimTimeCapReached(RuntimeError):
+    """The episode was still running at its sim-time cap (SumoConfig.max_sim_seconds)."""
+
+
+class TrafficJam(InputError, SimTimeCapReached):
+    """The sim-time cap reached with the ego standing in background traffic: the traffic locked up."""
+
+
+def sim_time_cap_reached(episode_id: str, road: str, standing: float,
+                         config: SumoConfig) -> SimTimeCapReached:
+    """The error of an episode at its sim-time cap, the ego on `road` and standing for `standing`
+    seconds: a TrafficJam when it stood for STUCK_SECONDS or more in background traffic."""
+    cap = f"{config.max_sim_seconds:.0f} s"
+    if standing >= STUCK_SECONDS and config.background_vehicles > 0:
+        return TrafficJam(f"episode {episode_id}", road,
+                          f"the ego stood still until the {cap} sim-time cap: the "
+                          f"{config.background_vehicles} background vehicles jammed the town's roads",
+                          "run it with fewer background vehicles (background_vehicles, `trustroute run "
+                          "--background N`); how many a town carries depends on its roads and the seed")
+    if standing >= STUCK_SECONDS and config.route_files:
+        return TrafficJam(f"episode {episode_id}", road,
+                          f"the ego stood still until the {cap} sim-time cap: the route files' "
+                          "traffic jammed the town's roads",
+                          "run it with a lighter demand (fewer or smaller route files: routes, "
+                          "`trustroute run --routes FILE`)")
+    return SimTimeCapReached(f"episode {episode_id} still running after {cap} of sim time on {road}")

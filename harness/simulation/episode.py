@@ -39,7 +39,12 @@ import pyarrow as pa
 
 from trustroute.harness.simulation import incidents as incident_kinds
 from trustroute.harness.simulation import takeover_decision
-from trustroute.harness.simulation.background import BackgroundTraffic, JamRelief, background_routes
+from trustroute.harness.simulation.background import (
+    BackgroundTraffic,
+    JamRelief,
+    background_routes,
+    sim_time_cap_reached,
+)
 from trustroute.harness.simulation.drivers import Driver, PersonControls
 from trustroute.harness.simulation.driving_style import AUTOPILOT, apply_style
 from trustroute.harness.simulation.episode_record import EpisodeRecord, StepLog
@@ -507,7 +512,7 @@ class SumoEpisode:
                 self._after_step(_Step(now, road, position, x, y, speed, lane, result[angle_id],
                                        result[accel_id], open_run.road))
             if now > max_sim_seconds:
-                self._too_long(now, road)
+                self._too_long(road)
 
     def _after_step(self, step: _Step) -> None:
         """The person's manual driving, then the observer, on the step's ego."""
@@ -518,9 +523,9 @@ class SumoEpisode:
         if self.observer is not None:
             self.observer(self.sumo, ego, self.mode, step.open_road)
 
-    def _too_long(self, now: float, road: str) -> None:
-        raise RuntimeError(f"episode {self.tracker.episode_id} still running after "
-                           f"{self.config.max_sim_seconds:.0f} s of sim time on {road}")
+    def _too_long(self, road: str) -> None:
+        raise sim_time_cap_reached(self.tracker.episode_id, road,
+                                   self.sumo.vehicle.getWaitingTime(EGO_ID), self.config)
 
     def _complete_step(self) -> None:
         """The rest of the step a decision was taken in: its log row, then the observer."""
@@ -538,7 +543,7 @@ class SumoEpisode:
     def _go_on_after_step(self) -> None:
         self._complete_step()
         if self._step.now > self.config.max_sim_seconds:
-            self._too_long(self._step.now, self._step.road)
+            self._too_long(self._step.road)
 
     def _ended(self, sim_seconds: float) -> End:
         stack, self._stack = self._stack, None

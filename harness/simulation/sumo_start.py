@@ -29,10 +29,16 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Protocol
 
+from trustroute.core import defaults
 from trustroute.core.errors import InputError
+from trustroute.core.fields import Integer, check_value
 from trustroute.harness.simulation.performance import DEFAULT_LIMITS, PerformanceLimits
 from trustroute.networks.sumo_import import require_net_file
 from trustroute.networks.sumo_net import find_binary
+
+BACKGROUND_VEHICLES = Integer(minimum=0, maximum=defaults.MAX_BACKGROUND_VEHICLES)
+BACKGROUND_FIX = (f"give a number of background vehicles from 0 to {defaults.MAX_BACKGROUND_VEHICLES}, "
+                  "e.g. 20, or 0 for none")
 
 
 @dataclass(frozen=True)
@@ -40,16 +46,21 @@ class SumoConfig:
     """Simulation settings of an episode.
 
     performance_limits: where `succ` ends, per incident kind (harness/simulation/performance.py).
-    background_vehicles: seeded background traffic, vehicles kept on the net (0: none).
+    background_vehicles: seeded background traffic, vehicles kept on the net (0: none), in
+    BACKGROUND_VEHICLES (the range every door takes).
     """
 
     step_length: float = 0.5        # seconds: large steps keep episodes fast, 0.5 s keeps yielding sane
-    max_sim_seconds: float = 7200.0  # a stuck ego is a bug: the runner stops with an error here
+    max_sim_seconds: float = 7200.0  # the sim-time cap: SimTimeCapReached, a bug or a jam (background.py)
     performance_limits: Mapping[str, PerformanceLimits] = field(default_factory=lambda: dict(DEFAULT_LIMITS))
     background_vehicles: int = 0
     gui: bool = False               # run in sumo-gui through TraCI (needs a display) instead of libsumo
     output_dir: str | None = None   # also write SUMO's own FCD and route outputs here (sumo_files.py)
     route_files: tuple[str, ...] = ()   # background traffic SUMO loads with the net (background.py)
+
+    def __post_init__(self) -> None:
+        check_value(self.background_vehicles, BACKGROUND_VEHICLES, "SumoConfig", "background_vehicles",
+                    fix=BACKGROUND_FIX)
 
 
 class Sumo(Protocol):

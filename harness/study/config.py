@@ -65,6 +65,7 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import SPECS, PackagedKind
 from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
+from trustroute.harness.simulation.sumo_start import BACKGROUND_FIX, BACKGROUND_VEHICLES
 from trustroute.networks.cities import ROUTES, check_route_set_town, read_route_file, route_set_town
 from trustroute.networks.town import TOWNS, load_town
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER_MODELS
@@ -348,7 +349,6 @@ FIELDS = field_table(
 TABLES: tuple[str, ...] = keys(FIELDS)
 _ENTRIES = ListOf(item=Text(), min_items=1, distinct=True)
 _FILE = Text()
-MAX_BACKGROUND_VEHICLES = 200  # what the town's roads hold
 MAX_PARTICIPANTS = 100_000  # of a study, and of every sample size `trustroute plan` simulates
 
 
@@ -400,9 +400,7 @@ STUDY_FIELDS = field_table(
           fix='write output = "out/paper"'),
     Field(key="policy_cache", kind=Text(), problem="expected a directory path",
           fix='write policy_cache = "cache/policies" or omit it'),
-    # the tighter limit, what the town's roads hold, is the rule _check_background_vehicles
-    Field(key="background_vehicles", kind=Integer(minimum=0, maximum=10_000), default=0,
-          fix="write background_vehicles = 20 (vehicles kept on the net), or 0 / omit it for none"),
+    Field(key="background_vehicles", kind=BACKGROUND_VEHICLES, default=0, fix=BACKGROUND_FIX),
     Field(key="routes", kind=_ENTRIES, default=(), fix=FILE_FIX["routes"]),
     Field(key="record", kind=_ENTRIES, default=(), fix='write record = ["p00000-phi1-aware"]'),
     Field(key="robust_population", kind=_FILE, problem=_file_path, fix=FILE_FIX["robust_population"]),
@@ -483,13 +481,6 @@ def _directory(value: str | None, base: Path) -> str | None:
     return None if value is None else str((base / value).resolve())
 
 
-def _check_background_vehicles(count: int, source: str) -> None:
-    if count > MAX_BACKGROUND_VEHICLES:
-        raise InputError(source, "study.background_vehicles", f"{count} vehicles is more than the town's "
-                         f"roads hold (at most {MAX_BACKGROUND_VEHICLES})",
-                         f"write a number from 0 to {MAX_BACKGROUND_VEHICLES}")
-
-
 def _robust_population(study: StudyValues, conditions: tuple[str, ...], base: Path,
                        source: str) -> str | None:
     """The "robust" condition's population file: required with that condition, read and validated."""
@@ -541,7 +532,6 @@ def study_config_from_dict(data: object, source: str = "<study>", base: Path | N
     study = check_fields(tables["study"], STUDY_FIELDS, source, "study config", "study")
     specs = _specs(study["specs"], base, source)
     conditions = _conditions(study["conditions"], base, source)
-    _check_background_vehicles(study["background_vehicles"], source)
     default_name = Path(source).stem if source.endswith(".toml") else "study"
     name = str(study["name"]) if study["name"] is not None else default_name
     town = _optional_file(study, "town", "town file", base, source, _towns())

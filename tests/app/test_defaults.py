@@ -75,6 +75,29 @@ def test_the_api_and_the_cli_cap_episodes_alike():
     assert _api_default(trustroute.run_episode, "engine") == defaults.EPISODE_ENGINE == "sumo"
 
 
+def test_every_door_takes_the_same_number_of_background_vehicles():
+    # `run --background`, the study key and the API's SumoConfig (run_episode's and a study's
+    # episodes) accept 0 to the one maximum and refuse one more
+    from trustroute.core.errors import InputError
+    from trustroute.harness.simulation.sumo_start import SumoConfig
+    from trustroute.harness.study.config import study_config_from_dict
+
+    top = defaults.MAX_BACKGROUND_VEHICLES
+    option = next(p for p in cli.get_command(None, "run").params  # type: ignore[union-attr]
+                  if p.name == "background_vehicles")
+    assert (option.type.min, option.type.max) == (0, top)
+    study = {"participants": 1, "seed": 1, "specs": ["phi1"], "conditions": ["free"]}
+    for count in (0, top):
+        config = study_config_from_dict({"study": {**study, "background_vehicles": count}})
+        assert config.background_vehicles == count
+        assert SumoConfig(background_vehicles=count).background_vehicles == count
+    for count in (-1, top + 1):
+        with pytest.raises(InputError, match=f"from 0 to {top}"):
+            study_config_from_dict({"study": {**study, "background_vehicles": count}})
+        with pytest.raises(InputError, match=f"background_vehicles: expected an integer from 0 to {top}"):
+            SumoConfig(background_vehicles=count)
+
+
 # their towns are built on first use (csomor from packaged plain XML, city from sumo-rl's data)
 SLOW_SPECS = {"csomor5", "city5"}
 SLOW_TOWNS = {"csomor", "city"}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import pytest
 from click.testing import CliRunner
@@ -126,3 +127,28 @@ def test_an_ego_waiting_to_enter_a_busy_net_is_driven_once_it_enters(net):
     assert result.exit_code == 0, result.output
     summary = json.loads(result.output)
     assert summary["route"][0] == "E-A" and summary["end_reason"] in ("accepted", "rejected", "destination")
+
+
+# Town01 with the most background vehicles a door takes locks up on seed 0 (at a junction near G,
+# within 300 s of sim time): the 7200 s cap is lowered to 300 s so the test takes a second.
+JAM_VEHICLES, JAM_SEED, JAM_CAP = 200, 0, 300.0
+
+
+def test_a_town_jammed_by_background_traffic_is_one_line_and_exit_2(net, capsys, monkeypatch):
+    from trustroute.harness.commands.run import RunOptions
+
+    sumo_config = RunOptions.sumo_config
+    monkeypatch.setattr(RunOptions, "sumo_config",
+                        lambda self: replace(sumo_config(self), max_sim_seconds=JAM_CAP))
+    _one_line_error(_main(["run", PHI1, "--net", net, "--background", str(JAM_VEHICLES),
+                           "--seed", str(JAM_SEED), "-q"], capsys),
+                    f"the {JAM_VEHICLES} background vehicles jammed the town's roads "
+                    "(fix: run it with fewer background vehicles")
+
+
+def test_run_takes_the_background_range_every_door_takes(net, capsys):
+    from trustroute.core import defaults
+
+    _one_line_error(_main(["run", PHI1, "--net", net, "--background",
+                           str(defaults.MAX_BACKGROUND_VEHICLES + 1)], capsys),
+                    f"is not in the range 0<=x<={defaults.MAX_BACKGROUND_VEHICLES}")

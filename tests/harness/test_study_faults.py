@@ -452,3 +452,29 @@ def test_enospc_during_an_atomic_write_leaves_the_old_file_and_no_temp(tmp_path,
         output_files.atomic_write_bytes(target, b"new contents" * 1000, "dataset table")
     assert target.read_bytes() == b"old contents"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["table.bin"]
+
+
+def test_an_episode_jammed_by_background_traffic_is_recorded_as_failed(tmp_path, monkeypatch, capsys):
+    """Town01 with 200 background vehicles locks up in one of this study's episodes: that episode
+    is recorded as failed with the jam's one line (not a traceback's last line), the others run.
+    The 7200 s sim-time cap is lowered to 300 s (the jam stands by then) to keep the test fast."""
+    from trustroute.harness.simulation.sumo_start import SumoConfig
+
+    config_path = tmp_path / "jam.toml"
+    config_path.write_text('[study]\nparticipants = 2\nseed = 1\nengine = "sumo"\nspecs = ["phi1"]\n'
+                           'conditions = ["free"]\nbackground_vehicles = 200\n')
+    planned = runner_module.run_planned_episode
+    monkeypatch.setattr(runner_module, "run_planned_episode", lambda context, task, rrd_path=None: planned(
+        context, task, rrd_path, sumo_config=SumoConfig(max_sim_seconds=300.0)))
+    study = tmp_path / "study"
+    code, _, err = run_cli(capsys, "study", str(config_path), "--out", str(study), "--no-report")
+    assert code == 1 and "1 episodes failed" in err, err
+    (failure,) = sorted((study / "failures").glob("*.json"))
+    record = json.loads(failure.read_text())
+    assert record["attempts"] == 2
+    assert all(error.startswith(f"TrafficJam: episode {record['episode_id']}: ") and "\n" not in error
+               and "the 200 background vehicles jammed the town's roads (fix: run it with fewer" in error
+               for error in record["errors"])
+    planned_ids = [task.episode_id for task in plan_episodes(load_study_config(config_path))]
+    episodes = pd.read_parquet(study / "episodes.parquet")
+    assert list(episodes["episode_id"]) == [e for e in planned_ids if e != record["episode_id"]]

@@ -30,6 +30,11 @@ AWARE_HORIZON = FALLBACK_AFTER       # "aware" is synthesized for the junctions 
 SEED = 0
 MAX_SEED = 2**31 - 1                 # the largest episode seed a door takes: SUMO's is a signed 32-bit int
 EPISODE_ENGINE = "sumo"
+# background vehicles (`run --background`, study key `background_vehicles`, SumoConfig): the most
+# any door takes. Not a count every town and seed can carry: a town's traffic can lock itself up
+# with fewer (Town01 with 100 on two seeds of ten), which ends the episode with a TrafficJam
+# (harness/simulation/background.py).
+MAX_BACKGROUND_VEHICLES = 200
 # the gymnasium environment's own (docs/gym_env.md): the model engine, fast and without SUMO, for
 # the many episodes an agent learns from
 GYM_ENGINE = "model"
