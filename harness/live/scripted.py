@@ -157,7 +157,8 @@ class ScriptedParticipant:
         obstacle in view: pull out, and hand back once past it (back in the own lane after the
         oncoming one), or without `pull_out` hand back once stopped behind it (with it too once
         stopped there after the hand-back warning, the pull-out not begun); otherwise hand back on
-        the warning."""
+        the warning. A pass is counted for every stay in the oncoming lane while in control, one the
+        autopilot began included (the takeover landed during its pull-out)."""
         kind = message["type"]
         if kind == "mode":
             self.mode = message["mode"]
@@ -165,6 +166,8 @@ class ScriptedParticipant:
                 self.pedal = "accelerate"
                 return [{"type": "drive", "pedal": "accelerate"}]
         elif kind == "road":
+            if self.pass_lane is not None:
+                self.passes += 1   # the road ended before a frame showed the ego back in its lane
             self.passing = self.warned = False
             self.pass_lane = None
             if self.mode == "auto":
@@ -212,8 +215,10 @@ class ScriptedParticipant:
             # ego stands for the hand-back short of the junction): the autopilot is to pass it
             self.passing = False
             replies.append({"type": "hand_back"})
-        elif self.passing and edge == reverse:
-            self.pass_lane = frame["lane"]   # in the oncoming lane
+        elif edge == reverse and (self.passing or self.pull_out):
+            # in the oncoming lane; not passing yet where the takeover landed during the
+            # autopilot's pull-out: the pass is the person's to finish from there
+            self.passing, self.pass_lane = True, frame["lane"]
         elif self.passing and self.pass_lane is not None and edge == road:
             self.passing, self.pass_lane = False, None
             self.passes += 1

@@ -120,3 +120,30 @@ def test_by_hand_a_pull_out_waits_for_its_gap_before_the_warning(tmp_path):
     player.respond(by_hand_frame(5.0, 0.2))
     assert player.respond(by_hand_frame(0.0, 0.3)) == []   # behind the obstacle, waiting to pull out
     assert player.passing
+
+
+def oncoming_frame(t: float, obstacle_y: float) -> dict:
+    """A frame of the ego on road A-B in the oncoming lane (B-A's), the obstacle at `obstacle_y`."""
+    return {**by_hand_frame(8.0, t), "lane": "B-A_0", "vehicles": [[0.0, obstacle_y, 0.0, "obstacle"]]}
+
+
+def test_by_hand_a_pass_the_autopilot_began_is_the_persons_once_in_control(tmp_path):
+    # the takeover lands during the autopilot's pull-out, the obstacle already beside the ego: the
+    # person finishes the pass and hands back once back in the own lane, and counts it
+    player = ScriptedParticipant(tiny_config(tmp_path, specs=("phi2",)), 0, by_hand=True)
+    player.respond({"type": "road", "road": "A-B", "t": 0.0})
+    player.respond({"type": "mode", "mode": "manual", "t": 0.1})
+    assert player.respond(oncoming_frame(0.2, -5.0)) == [{"type": "drive", "pedal": "release"}]
+    assert player.respond({**by_hand_frame(8.0, 0.3), "vehicles": []}) == [{"type": "hand_back"}]
+    assert player.passes == 1 and not player.passing
+
+
+def test_by_hand_a_pass_whose_return_no_frame_showed_counts_when_the_road_ends(tmp_path):
+    player = ScriptedParticipant(tiny_config(tmp_path, specs=("phi2",)), 0, by_hand=True)
+    player.respond({"type": "road", "road": "A-B", "t": 0.0})
+    player.respond({"type": "mode", "mode": "manual", "t": 0.1})
+    assert {"type": "steer", "lane": "oncoming"} in player.respond(by_hand_frame(5.0, 0.2))
+    player.respond(oncoming_frame(0.3, 10.0))
+    assert player.passes == 0
+    player.respond({"type": "road", "road": "B-C", "t": 0.4})   # no frame back in the own lane came
+    assert player.passes == 1 and not player.passing
