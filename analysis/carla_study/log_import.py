@@ -47,6 +47,7 @@ from trustroute.core import dataset
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import check_output_dir
 from trustroute.core.packaged import PACKAGED_SPECS
+from trustroute.core.progress import bar_disable
 from trustroute.harness.study.manifest import git_revision, package_versions
 from trustroute.networks.road import Road
 from trustroute.networks.town import load_town
@@ -368,8 +369,7 @@ def import_carla_logs(
     worst_distance = 0.0
     from tqdm import tqdm
 
-    # disable=None: tqdm shows the bar only on a terminal, so an error stays one line in logs
-    iterator = tqdm(logs, desc="import", unit="log", disable=None if progress else True)
+    iterator = tqdm(logs, desc="import", unit="log", disable=bar_disable(progress))
     for log in iterator:
         entry = {
             "file": log.relative,

@@ -41,6 +41,7 @@ from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.dataset import ROADS_FILE, check_allowed
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
+from trustroute.core.progress import bar_disable
 from trustroute.participants.driver_model import (
     DEFAULT_REPORT_ACCURACY,
     PERFORMANCES,
@@ -286,7 +287,7 @@ def fit_em(
     converged = False
     from tqdm import tqdm
 
-    with tqdm(total=iterations, desc="fitting (EM)", unit="iteration", disable=None if progress else True,
+    with tqdm(total=iterations, desc="fitting (EM)", unit="iteration", disable=bar_disable(progress),
               leave=False, dynamic_ncols=True) as bar:
         for _ in range(iterations):
             params = maximisation(stats, params, fixed_accuracy)

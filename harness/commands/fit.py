@@ -11,6 +11,7 @@ from pathlib import Path
 
 import click
 
+from trustroute.core.progress import bar_disable
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import UsageFix, bounded_int
 from trustroute.harness.commands.output import json_flag, quiet_flag, study_warnings, with_paths
@@ -87,7 +88,7 @@ def fit(study_dir: str, options: FitOptions) -> None:
 
         manifest, episodes, roads = load_study(Path(study_dir))
         _, template, _ = study_inputs(manifest, Path(study_dir))
-        with tqdm(total=bootstrap, desc="bootstrap", disable=True if quiet or as_json else None) as bar:
+        with tqdm(total=bootstrap, desc="bootstrap", disable=bar_disable(not (quiet or as_json))) as bar:
             payload["bootstrap"] = bootstrap_fit(
                 roads,
                 episodes,
@@ -205,7 +206,7 @@ def fit_types(study_dir: Path, out: Path, options: FitOptions, warnings: list[st
     settings = EMSettings(restarts=restarts, iterations=iterations, shared_dynamics=shared_dynamics)
     if fixed is None:
         with tqdm(total=min(max_types, len(participants)), desc="fitting K = 1..", unit="K",
-                  disable=True if quiet or as_json else None) as bar:
+                  disable=bar_disable(not (quiet or as_json))) as bar:
             selection = select_types(data, max_types, rng, settings, progress=bar.update)
     else:
         from trustroute.analysis.fitting.mixture import TypeSelection
@@ -234,7 +235,7 @@ def fit_types(study_dir: Path, out: Path, options: FitOptions, warnings: list[st
     if fixed is None:
         payload["bic_table"] = selection.table()
     if bootstrap:
-        with tqdm(total=bootstrap, desc="bootstrap", disable=True if quiet or as_json else None) as bar:
+        with tqdm(total=bootstrap, desc="bootstrap", disable=bar_disable(not (quiet or as_json))) as bar:
             payload["bootstrap"] = bootstrap_type_count(logs, selection, max_types, bootstrap, rng, settings,
                                                         progress=bar.update, choose=fixed is None)
     details = out.with_suffix(".fit.json")

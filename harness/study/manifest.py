@@ -49,6 +49,7 @@ from trustroute.core.dataset import (
     write_table,
 )
 from trustroute.core.output_files import atomic_write_text
+from trustroute.core.progress import bar_disable
 from trustroute.harness.simulation.manual_measures import episode_measures
 from trustroute.harness.study.context import StudyContext
 from trustroute.harness.study.inputs import store_inputs
@@ -150,7 +151,7 @@ def consolidate(
     types = participant_types(config)
     episode_rows, roads_tables, kinematics_tables, incident_tables = [], [], [], []
     parts, damaged = read_parts(study_dir, tasks)
-    for task in tqdm(tasks, desc="consolidating", unit="episode", disable=None if progress else True,
+    for task in tqdm(tasks, desc="consolidating", unit="episode", disable=bar_disable(progress),
                      leave=False, dynamic_ncols=True):
         part = parts.get(task.episode_id)
         if part is None:

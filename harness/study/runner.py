@@ -40,6 +40,7 @@ from trustroute.app.drivers import synthetic_driver
 from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
+from trustroute.core.progress import bar_disable
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext, study_context
 from trustroute.harness.study.expected import expected_values, fallback_only_warnings
@@ -486,7 +487,7 @@ def _progress_bar(total: int, initial: int, enabled: bool) -> tqdm:
         total=total,
         initial=initial,
         unit="episode",
-        disable=None if enabled else True,
+        disable=bar_disable(enabled),
         dynamic_ncols=True,
         leave=False,
     )

@@ -32,6 +32,7 @@ from trustroute.app.inputs import driver_of, population_of
 from trustroute.core import defaults
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
+from trustroute.core.progress import bar_disable
 from trustroute.harness.study.config import StudyConfig, load_study_config
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.manifest import package_versions
@@ -88,9 +89,8 @@ def pilot_model(config: StudyConfig, settings: PlanSettings,
 
     assert settings.pilot is not None
     rng = np.random.default_rng(np.random.SeedSequence(settings.seed, spawn_key=(PILOT_KEY,)))
-    # a bar on a terminal only (disable=None), as every command's
     with tqdm(total=settings.pilot_bootstrap, desc="pilot bootstrap refits",
-              disable=None if progress else True, leave=False) as bar:
+              disable=bar_disable(progress), leave=False) as bar:
         fit = fit_pilot(Path(settings.pilot), settings.pilot_bootstrap, rng, progress=bar.update,
                         expected=driver_of(config.driver_model))
     models = fit.models
