@@ -275,7 +275,8 @@ def random_intercept_reml(y: np.ndarray, exog: np.ndarray, groups: np.ndarray) -
     y_sums = np.bincount(codes, weights=y, minlength=m)
     n, p = exog.shape
 
-    def fit(ratio: float) -> tuple[float, RandomInterceptFit]:
+    def fit(ratio: float) -> tuple[float, np.ndarray, np.ndarray, float]:
+        """The REML criterion at `ratio`, with the GLS fixed effects, X'V^-1 X and s2 there."""
         c = ratio / (1.0 + sizes * ratio)
         gram = exog.T @ exog - sums.T @ (c[:, None] * sums)
         beta = np.linalg.solve(gram, exog.T @ y - sums.T @ (c * y_sums))
@@ -284,15 +285,18 @@ def random_intercept_reml(y: np.ndarray, exog: np.ndarray, groups: np.ndarray) -
         s2 = float(residual @ residual - np.sum(c * residual_sums ** 2)) / (n - p)
         log_s2 = math.log(s2) if s2 > 0 else -math.inf   # an exact fit: no residual variance
         criterion = (n - p) * log_s2 + float(np.sum(np.log1p(sizes * ratio))) + np.linalg.slogdet(gram)[1]
-        return criterion, RandomInterceptFit(beta, s2 * np.linalg.inv(gram), ratio, s2)
+        return criterion, beta, gram, s2
 
     scanned = [fit(math.exp(g))[0] for g in LOG_RATIO_GRID]
     best = int(np.argmin(scanned))
     low, high = LOG_RATIO_GRID[max(best - 1, 0)], LOG_RATIO_GRID[min(best + 1, len(LOG_RATIO_GRID) - 1)]
     refined = minimize_scalar(lambda g: fit(math.exp(g))[0], bounds=(low, high), method="bounded",
                               options={"xatol": 1e-10})
-    boundary, interior = fit(0.0), fit(math.exp(float(refined.x)))
-    return boundary[1] if boundary[0] <= interior[0] else interior[1]
+    interior = math.exp(float(refined.x))
+    ratio = 0.0 if fit(0.0)[0] <= fit(interior)[0] else interior
+    _, beta, gram, s2 = fit(ratio)
+    # the covariance only of the fit chosen: the scan needs the criterion alone
+    return RandomInterceptFit(beta, s2 * np.linalg.inv(gram), ratio, s2)
 
 
 def mixed_trust_model(
