@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -182,6 +183,49 @@ class Reported(Message):
     type: Literal["reported"] = "reported"
     value: Annotated[StrictInt, Field(ge=TRUST_LOW, le=TRUST_HIGH)]
     prompt: PromptId | None = None
+
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+# what the ego sees (harness/live/view.py `surroundings`): a vehicle is [x, y, angle, kind, speed,
+# handle, length, width, height, shape, signals], a person [x, y, kind, handle, angle]
+SeenVehicle = tuple[Finite, Finite, Finite, str, Finite, StrictInt, Finite, Finite, Finite, str, StrictInt]
+SeenPerson = tuple[Finite, Finite, str, StrictInt, Finite]
+
+
+def driving_mode(name: str) -> str:
+    """`name` when it is a driving style's (harness/simulation/driving_style.py), else ValueError."""
+    if name not in (AUTOPILOT.name, MANUAL.name):
+        raise ValueError(f"a mode is {AUTOPILOT.name!r} or {MANUAL.name!r}, not {name!r}")
+    return name
+
+
+class Frame(Message):
+    """Server -> client: one moment of the episode as the station shows it (docs/live_studies.md,
+    "Protocol"; built by harness/live/worker.py, which validates every stepped frame against this).
+    `held`: the car is brought to a stand for the hand-back whatever the pedals say, by the
+    episode's one rule (harness/simulation/wheel_driving.py `Wheel.held`; always false without a
+    wheel: in assisted driving the `hand_back` warning says the vehicle stops): the station then
+    sends the pedals let go, and no steering once the car stands. `predicted`: moved on between
+    two steps (harness/live/view.py `dead_reckoned`), never a stepped frame."""
+
+    type: Literal["frame"] = "frame"
+    t: Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+    x: Finite
+    y: Finite
+    angle: Finite
+    speed: Finite
+    road: str
+    lane: str
+    mode: Annotated[str, AfterValidator(driving_mode)]
+    junction: str | None
+    length: Finite
+    width: Finite
+    signals: StrictInt
+    route: list[str]
+    vehicles: list[SeenVehicle]
+    persons: list[SeenPerson]
+    held: StrictBool
+    predicted: StrictBool = False
 
 
 # -- HTTP bodies ---------------------------------------------------------------------------------

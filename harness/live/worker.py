@@ -53,7 +53,7 @@ from pathlib import Path
 import pyarrow as pa
 
 from trustroute.core.dataset import INCIDENTS_SCHEMA, table_from_rows
-from trustroute.harness.live.protocol import REQUESTED_MODE
+from trustroute.harness.live.protocol import REQUESTED_MODE, Frame
 from trustroute.harness.live.view import Statics, dead_reckoned, ego_view, next_junction, surroundings
 from trustroute.harness.live.warmup import run_warm_up
 from trustroute.harness.simulation.drivers import NO_INPUTS, ManualInputs
@@ -300,7 +300,9 @@ class RemoteDriver:
                           "speed": speed, "road": road, "lane": ego.lane, "mode": mode,
                           "junction": next_junction(road),
                           **surroundings(sumo, EGO_ID, ego.x, ego.y, self.statics),
-                          **ego_view(sumo, EGO_ID, self.statics)}
+                          **ego_view(sumo, EGO_ID, self.statics),
+                          "held": self.wheel is not None and self.wheel.held}
+            Frame.model_validate(self.shown)   # (a frame the protocol does not define is a bug here)
             self.send(self.shown)
             self.frame_time = ego.time
 

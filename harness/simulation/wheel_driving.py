@@ -434,7 +434,7 @@ class Wheel:
         self.follow_route(sumo)
         seen = len(self.driving.events)
         # no hold without a road, nor for a car stopped off its road
-        controls = self.controls if road is None or self.driving.stranded else self.held(sumo, road)
+        controls = self.controls if road is None or self.driving.stranded else self.held_controls(sumo, road)
         self.driving.step(sumo, controls, sumo.simulation.getDeltaT())
         self.sample(sumo)
         new = self.driving.events[seen:]
@@ -532,8 +532,23 @@ class Wheel:
         """An edge's length: its lane 0's."""
         return lambda edge: self.lane_length(sumo, f"{edge}_0")
 
-    def held(self, sumo, road: str) -> Controls:
-        """The person's controls under the hold before the junction (see the class)."""
+    @property
+    def held(self) -> bool:
+        """Whether the car is brought to a stand for the hand-back whatever the pedals say: once the
+        hold has begun (`hold`, or `guide_back` off its lane) with the car on a lane of its route or
+        after a collision (`ManualDriving.may_hand_back`), and once it is stopped off its lane at
+        the road's end (`held_off_lane`) or off the road (`stopped_off_road`). Guided back from the
+        oncoming lane or off the road it is not: the pedals still drive it (at a creep), or a car
+        stopped there could never get back. The station sends no pedals while held, and no steering
+        once the car stands (each frame's `held`, harness/live/worker.py). A hand-back ends the
+        hold; a takeover starts none."""
+        driving = self.driving
+        if driving is None:
+            return False
+        return driving.stranded or self.held_off_lane or (self.holding and driving.may_hand_back)
+
+    def held_controls(self, sumo, road: str) -> Controls:
+        """The person's controls under the hold before the junction (see the class and `held`)."""
         driving = self.driving
         assert driving is not None
         point = self.to_hold_point(sumo, road)
@@ -547,7 +562,7 @@ class Wheel:
             driving.events.append({"t": now, "type": kind, "remaining": round(point.remaining, 1)})
         if not self.holding:
             return self.controls
-        if driving.may_hand_back or self.held_off_lane:   # braking as the assisted hold does ...
+        if self.held:   # braking as the assisted hold does ...
             decel = MANUAL.decel
             if point is not None and point.firm:   # ... or harder, as it takes to stop short of it
                 room = point.remaining - point.short_of

@@ -95,32 +95,17 @@ function overlay(text, resumable = false) {
 
 let toggling = false;   // a takeover or hand-back sent, its mode change not yet seen
 
-// The hold before the junction of a person driving by wheel, as the episode's warnings tell it
-// (harness/simulation/wheel_driving.py, `Wheel.held`): once it has begun (`hold`, or `guide_back`
-// off the lane), the car in its lane (or after a collision) is braked to a stand whatever the
-// pedals say; stopped off its lane at the road's end or off the road, it stands. Guided back from
-// the oncoming lane or off the road, the pedals still drive it (at a creep): without them a car
-// stopped there could never get back. Every change of mode ends the hold (a takeover starts none).
-const WHEEL_HOLD = { hold: { begun: true }, guide_back: { begun: true }, collision: { collided: true },
-                     held_off_lane: { stopped: true }, stopped_off_road: { stopped: true },
-                     oncoming: { offLane: true }, off_road: { offLane: true },
-                     own_lane: { offLane: false }, on_road: { offLane: false } };
-const NO_HOLD = { begun: false, offLane: false, collided: false, stopped: false };
-let wheelHold = { ...NO_HOLD };
-
-// The car is brought to a stand for the hand-back whatever the pedals say: by wheel, in the hold
-// above; in assisted driving from the warning on (the vehicle then stops for the hand-back).
+// The car is brought to a stand for the hand-back whatever the pedals say: by wheel, while the
+// newest frame says so (`held`: the episode's one rule, harness/simulation/wheel_driving.py
+// `Wheel.held`); in assisted driving from the warning on (the vehicle then stops for the hand-back).
 function held() {
-  if (!continuous) return handBackDue;
-  const { begun, offLane, collided, stopped } = wheelHold;
-  return stopped || (begun && (!offLane || collided));
+  return continuous ? latest !== null && latest.held === true : handBackDue;
 }
 
 function setMode(next) {
   mode = next;
   pedal = "release";
   toggling = false;
-  wheelHold = { ...NO_HOLD };
   if (next === "auto") { handBackDue = false; notice(""); }   // the hand-back warning is answered
   const indicator = $("mode");
   indicator.textContent = next === "manual" ? "MANUAL" : "AUTOPILOT";
@@ -438,7 +423,6 @@ function onMessage(message) {
     case "mode": setMode(message.mode); break;
     case "incident": notice(NOTICES[message.kind] || ""); break;
     case "warning":
-      if (message.kind in WHEEL_HOLD) Object.assign(wheelHold, WHEEL_HOLD[message.kind]);
       if (message.kind === "hand_back") { handBackDue = true; notice(""); }
       else if (message.kind in WARNINGS) notice(WARNINGS[message.kind], FIRST.has(message.kind));
       updateControls();

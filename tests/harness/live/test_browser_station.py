@@ -367,45 +367,55 @@ navigator.getGamepads = () => [{
 }];"""
 
 
+def gamepad_station(page, socket, frame: dict):
+    """The page in a continuous drive read from the virtual gamepad, `frame` shown and the car
+    taken over; returns sent_for(**pad): the controls and hand-backs the page sends once the pad is
+    set to `pad` (what the messages before it brought is sent by then, and left out)."""
+    received: list[dict] = []
+    socket.on_message(lambda text: received.append(json.loads(text)))
+    page.evaluate(GAMEPAD)
+
+    def sent_for(**pad) -> list[dict]:
+        page.wait_for_timeout(300)
+        count = len(received)
+        page.evaluate("(values) => Object.assign(window.pad, values)", pad)
+        page.wait_for_timeout(400)   # many animation frames have read the pad by then
+        return [message for message in received[count:] if message["type"] in ("control", "hand_back")]
+
+    socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver",
+                            "driving": "continuous", "inputs": ["gamepad"]}))
+    socket.send(state_message("driving"))
+    socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
+    socket.send(json.dumps(frame))
+    socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 10.0}))
+    wait_until(page, "document.getElementById('mode').textContent === 'MANUAL'")
+    return sent_for
+
+
 def test_a_gamepad_sends_nothing_while_the_car_is_held_paused_or_its_drive_over(station, tmp_path):
     """The one rule of the buttons and keys holds for a wheel or gamepad: while the car is held for
     the hand-back (in its lane, or back in it after being guided back) the accelerator is sent let
     go and, once the car stands, nothing at all; guided back from the oncoming lane the pedals still
-    drive it; its button hands back; while paused, and once the drive is over, nothing is sent."""
+    drive it; its button hands back; while paused, and once the drive is over, nothing is sent.
+    Each driving event comes as the episode sends it: its warning, then the step's frame with the
+    hold as the episode has it then (`held`)."""
     frame, _ = scene_on(station.net_path)
     moving = {**frame, "speed": 5.0}
     with station.open() as (page, socket):
-        received: list[dict] = []
-        socket.on_message(lambda text: received.append(json.loads(text)))
-        page.evaluate(GAMEPAD)
+        sent_for = gamepad_station(page, socket, moving)
 
-        def sent_for(**pad) -> list[dict]:
-            """The controls and hand-backs the page sends once the pad is set to `pad` (what the
-            messages before it brought is sent by then, and left out)."""
-            page.wait_for_timeout(300)
-            count = len(received)
-            page.evaluate("(values) => Object.assign(window.pad, values)", pad)
-            page.wait_for_timeout(400)   # many animation frames have read the pad by then
-            return [message for message in received[count:] if message["type"] in ("control", "hand_back")]
-
-        def warn(kind: str) -> None:
+        def warn(kind: str, held: bool = False, **shown) -> None:
             socket.send(json.dumps({"type": "warning", "kind": kind, "t": 11.0}))
+            socket.send(json.dumps({**moving, "t": 11.0, **shown, "held": held}))
 
-        socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver",
-                                "driving": "continuous", "inputs": ["gamepad"]}))
-        socket.send(state_message("driving"))
-        socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
-        socket.send(json.dumps(moving))
-        socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 10.0}))
-        wait_until(page, "document.getElementById('mode').textContent === 'MANUAL'")
         assert [c["throttle"] for c in sent_for(throttle=1.0)] == [1.0]
         for kind in ("oncoming", "hand_back", "guide_back"):   # guided back: the pedals still drive it
             warn(kind)
         assert [c["throttle"] for c in sent_for(throttle=0.6)] == [0.6]
-        warn("own_lane")   # back in its lane: the hold brakes it to a stand
+        warn("own_lane", held=True)   # back in its lane: the hold brakes it to a stand
         held = sent_for(steer=0.5, throttle=0.9)
         assert [(c["steer"], c["throttle"], c["brake"]) for c in held] == [(0.5, 0.0, 0.0)]
-        socket.send(json.dumps({**frame, "t": 10.5}))   # standing
+        socket.send(json.dumps({**frame, "t": 10.5, "held": True}))   # standing
         assert sent_for(steer=-0.5, throttle=1.0) == []
         assert [m["type"] for m in sent_for(button=True)] == ["hand_back"]
         socket.send(json.dumps({"type": "mode", "mode": "auto", "t": 12.0}))
@@ -413,7 +423,7 @@ def test_a_gamepad_sends_nothing_while_the_car_is_held_paused_or_its_drive_over(
         socket.send(json.dumps({**moving, "t": 12.5}))
         socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 13.0}))   # taken over again
         assert [c["throttle"] for c in sent_for(throttle=0.8)] == [0.8]
-        warn("hold")   # held in its lane
+        warn("hold", held=True, t=13.5)   # held in its lane
         page.locator("#incident").filter(has_text="the car stops here").wait_for()
         assert [c["throttle"] for c in sent_for(steer=0.2, throttle=0.7)] == [0.0]
         page.screenshot(path=str(tmp_path / "gamepad-held.png"))
@@ -426,6 +436,29 @@ def test_a_gamepad_sends_nothing_while_the_car_is_held_paused_or_its_drive_over(
                                 "end_reason": "goal", "junctions": 3, "takeovers": 1}))
         assert sent_for(steer=0.4, throttle=1.0, button=True) == []
         page.screenshot(path=str(tmp_path / "gamepad-over.png"))
+
+
+def test_by_wheel_the_station_holds_the_pedals_as_the_frames_say_not_as_the_warnings_do(station, tmp_path):
+    """The hold is the episode's (each frame's `held`, harness/simulation/wheel_driving.py
+    `Wheel.held`), never worked out in the page from the warnings: frames held with no warning
+    at all make the page send the pedals let go, and nothing once the car stands; a `hold` warning
+    whose frames are not held leaves the pedals to the person."""
+    frame, _ = scene_on(station.net_path)
+    moving = {**frame, "speed": 5.0, "mode": "manual"}
+    with station.open() as (page, socket):
+        sent_for = gamepad_station(page, socket, moving)
+        assert [c["throttle"] for c in sent_for(throttle=1.0)] == [1.0]
+        page.screenshot(path=str(tmp_path / "wheel-normal.png"))
+        socket.send(json.dumps({**moving, "t": 10.5, "held": True}))
+        held = sent_for(steer=0.3, throttle=0.7)
+        assert [(c["steer"], c["throttle"], c["brake"]) for c in held] == [(0.3, 0.0, 0.0)]
+        page.screenshot(path=str(tmp_path / "wheel-held.png"))
+        socket.send(json.dumps({**moving, "t": 11.0, "speed": 0.0, "held": True}))   # standing
+        assert sent_for(steer=-0.3, throttle=1.0) == []
+        socket.send(json.dumps({"type": "warning", "kind": "hold", "t": 11.5}))
+        socket.send(json.dumps({**moving, "t": 11.5, "held": False}))
+        page.locator("#incident").filter(has_text="the car stops here").wait_for()
+        assert [(c["steer"], c["throttle"]) for c in sent_for(steer=0.1, throttle=0.5)] == [(0.1, 0.5)]
 
 
 KEY_STEERING = """async ([speed, step, steps]) => {

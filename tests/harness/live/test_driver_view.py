@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from tests.browser import chromium_executable
+from trustroute.harness.live.protocol import Frame
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 from trustroute.harness.simulation.incidents.oncoming import TRUCK_TYPE
 
@@ -180,8 +181,9 @@ def scene_on(net_path) -> tuple[dict, list]:
         frame = {"type": "frame", "t": 10.0, "x": x, "y": y, "angle": angle, "speed": 0.0,
                  "road": edge.getID(), "lane": lane.getID(), "mode": "auto",
                  "junction": edge.getToNode().getID(), "length": 5.0, "width": 1.8, "signals": 0,
-                 "route": [edge.getID()], "vehicles": [], "persons": []}
+                 "route": [edge.getID()], "vehicles": [], "persons": [], "held": False}
         truck = [tx, ty, tangle, "oncoming", 0.0, 7, TRUCK_LENGTH, TRUCK_TYPE.width, TRUCK_HEIGHT, "truck", 8]
+        Frame.model_validate({**frame, "vehicles": [truck]})   # the server's frame, as the protocol has it
         return frame, truck
     raise AssertionError(f"{net_path} has no straight road with an oncoming lane")
 
