@@ -146,7 +146,8 @@ def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
         synthesize_population,
         synthesize_single,
     )
-    from trustroute.core.settings import check_time_limit, with_options
+    from trustroute.core.ranges import check_time_limit
+    from trustroute.core.settings import with_options
 
     chosen = with_options(settings, SynthesisSettings(), options, "synthesize")
     check_time_limit(chosen.time_limit)
@@ -235,19 +236,21 @@ def run_episode(spec: Spec | PathLike, policy: PolicyLike = defaults.POLICY,
 
 
 @_door
-def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None, *, workers: int = 1,
-              engine: str | None = None, scheduler: str | None = None,
-              progress: bool = False) -> StudyRun:
+def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None, *,
+              workers: int | None = defaults.WORKERS, engine: str | None = None, scheduler: str | None = None,
+              attempts: int = defaults.ATTEMPTS, progress: bool = False) -> StudyRun:
     """Run (or resume) a simulated within-subject study and consolidate its dataset.
 
     config: a study config file (docs/formats/study_config.md), the same content as a dict
     ({"study": {...}, "population": {...}}; relative paths resolve against the current directory)
     or a StudyConfig. out: the study directory (default: the config's `output`, else
-    studies/<name>). workers: local processes (1: this process). engine: override the config's
-    engine ("sumo" or "model"). scheduler: a Dask scheduler address or "local". Returns the run;
-    `run.study_dir` holds the dataset (docs/dataset.md) that `analyze` reads.
+    studies/<name>). workers: local processes, 1 (this process) to 256 (default: the CPU count, as
+    `trustroute study`; every draw is seeded, so the count never changes the data). engine:
+    override the config's engine ("sumo" or "model"). scheduler: a Dask scheduler address or
+    "local". attempts: runs of a failing episode at most, 1 to 10 (the first and its retries).
+    Returns the run; `run.study_dir` holds the dataset (docs/dataset.md) that `analyze` reads.
     """
-    from trustroute.core.fields import Integer, check_value
+    from trustroute.core.ranges import study_workers
     from trustroute.harness.study.config import (
         StudyConfig,
         load_study_config,
@@ -256,20 +259,21 @@ def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None
     )
     from trustroute.harness.study.runner import run_and_consolidate
 
-    check_value(workers, Integer(minimum=1), "--workers", "", fix="pass 1 (this process) or more processes")
+    processes = study_workers(workers)
     if isinstance(config, dict):
         config = study_config_from_dict(config, "<study dict>", Path.cwd())
     elif not isinstance(config, StudyConfig):
         config = load_study_config(config)
     config = config.with_overrides(engine=engine)
     run, _ = run_and_consolidate(config, study_directory(config, None if out is None else str(out)),
-                                 workers, scheduler, progress=progress, echo=lambda line: None)
+                                 processes, scheduler, progress=progress, echo=lambda line: None,
+                                 attempts=attempts)
     return run
 
 
 @_door
 def analyze(study_dir: PathLike, *, belief_source: str | None = defaults.BELIEF_SOURCE,
-            report: bool = False) -> StudyAnalysis:
+            report: bool = defaults.REPORT_WITH_DATA) -> StudyAnalysis:
     """Per spec and condition of a study directory: n, satisfaction rate with its CI, mean trust,
     the policies' exact values, the paired tests of every pair of conditions with Holm-adjusted
     p-values, and every comparison on every belief source (`analysis.cells`, `analysis.paired`,
@@ -278,7 +282,9 @@ def analyze(study_dir: PathLike, *, belief_source: str | None = defaults.BELIEF_
     belief_source: the beliefs the specs are evaluated on ("true", "reported", "reference" or
     "filter"); None: the study's primary source, the same default as `trustroute analyze`
     (analysis/belief_sources.py `default_belief_source`). report: also write report.md,
-    report.html and the plots into the study directory (otherwise nothing is written).
+    report.html and the plots into the study directory; by default nothing is written, as with
+    `trustroute analyze --json` (the analysis is handed over as data; the command printing its
+    tables rewrites the report, trustroute/core/defaults.py `REPORT_WITH_DATA`).
     """
     from trustroute.analysis.study.analysis import study_analysis
 

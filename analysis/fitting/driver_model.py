@@ -38,10 +38,13 @@ from trustroute.analysis.fitting.forward_backward import (
     initial_posterior,
 )
 from trustroute.analysis.study_directory import load_study, study_inputs
+from trustroute.core import defaults
 from trustroute.core.dataset import ROADS_FILE, check_allowed
 from trustroute.core.errors import InputError
+from trustroute.core.fields import OneOf, check_value
 from trustroute.core.output_files import atomic_write_text
 from trustroute.core.progress import bar_disable
+from trustroute.core.ranges import ITERATIONS
 from trustroute.participants.driver_model import (
     DEFAULT_REPORT_ACCURACY,
     PERFORMANCES,
@@ -270,7 +273,7 @@ def _rows(matrix: np.ndarray) -> list[list[float]]:
 def fit_em(
     obs: Observations,
     template: DriverModel,
-    iterations: int = 200,
+    iterations: int = defaults.FIT_ITERATIONS,
     fixed_accuracy: float | None = None,
     start: Parameters | None = None,
     progress: bool = False,
@@ -363,7 +366,7 @@ def fit_counts(obs: Observations, template: DriverModel) -> FitResult:
 
 
 def fit_roads(
-    roads: pd.DataFrame, template: DriverModel, method: str = "em", iterations: int = 200,
+    roads: pd.DataFrame, template: DriverModel, method: str = "em", iterations: int = defaults.FIT_ITERATIONS,
     progress: bool = False, source: str = ROADS_FILE,
 ) -> FitResult:
     obs = observations_from_roads(roads, template, source)
@@ -378,12 +381,17 @@ def fit_roads(
     raise ValueError(f"unknown fitting method {method!r}")
 
 
+FIT_METHODS = OneOf(choices=defaults.FIT_METHODS, noun="fitting method")
+
+
 def fit_study(
-    study_dir: Path, method: str = "auto", iterations: int = 200, progress: bool = False
+    study_dir: Path, method: str = defaults.FIT_METHOD, iterations: int = defaults.FIT_ITERATIONS,
+    progress: bool = False
 ) -> FitResult:
-    """Fit a driver model to the consolidated logs of a study directory."""
-    if iterations < 1:
-        raise InputError("--iterations", "", f"must be >= 1, got {iterations}", "pass e.g. --iterations 200")
+    """Fit a driver model to the consolidated logs of a study directory (`method` and `iterations`
+    as `trustroute fit` takes them)."""
+    check_value(method, FIT_METHODS, "--method", "")
+    ITERATIONS.check(iterations)
     manifest, _, roads = load_study(Path(study_dir))
     _, template, _ = study_inputs(manifest, study_dir)
     config = manifest.get("config", {})

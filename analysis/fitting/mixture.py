@@ -48,13 +48,14 @@ from trustroute.analysis.fitting.driver_model import (
 )
 from trustroute.analysis.fitting.forward_backward import Forward, backward, forward
 from trustroute.analysis.study_directory import load_study, study_inputs
+from trustroute.core import defaults
 from trustroute.core.dataset import EPISODES_FILE, ROADS_FILE
 from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_population import DriverPopulation, DriverType
 
-DEFAULT_RESTARTS = 5
-DEFAULT_MAX_TYPES = 4
+DEFAULT_RESTARTS = defaults.FIT_RESTARTS
+DEFAULT_MAX_TYPES = defaults.FIT_MAX_TYPES
 START_HARDNESS = 0.8  # weight of the random partition in a restart's starting responsibilities
 RESPONSIBILITY_FLOOR = 1e-200  # keeps an emptied type's statistics finite (its rows stay at the start)
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from trustroute.analysis.fitting.driver_model import bootstrap_refits, fit_study
 from trustroute.analysis.study_directory import load_study, study_inputs
+from trustroute.core import defaults
 from trustroute.core.dataset import EPISODES_FILE, MANIFEST_FILE, ROADS_FILE
 from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DriverModel
@@ -92,8 +93,9 @@ def check_pilot(study_dir: Path, expected: DriverModel | None = None):
     return manifest, episodes, roads, template
 
 
-def fit_pilot(study_dir: Path, resamples: int, rng: np.random.Generator, iterations: int = 200,
-              progress: Callable[[], object] | None = None, expected: DriverModel | None = None) -> PilotFit:
+def fit_pilot(study_dir: Path, resamples: int, rng: np.random.Generator,
+              iterations: int = defaults.FIT_ITERATIONS, progress: Callable[[], object] | None = None,
+              expected: DriverModel | None = None) -> PilotFit:
     """The point fit of the pilot in `study_dir` and `resamples` refits on its participants drawn
     from `rng` (module docstring); progress() after each refit; `expected`: `check_pilot`'s."""
     study_dir = Path(study_dir)

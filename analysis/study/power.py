@@ -36,14 +36,15 @@ from trustroute.analysis.statistics import (
     rate_interval,
     wilcoxon_paired,
 )
+from trustroute.core import defaults
 
-TESTS: dict[str, str] = {
-    "mcnemar": "McNemar exact p (satisfaction)",
-    "conditional_or": "conditional OR [exact CI] (satisfaction)",
-    "wilcoxon": "Wilcoxon p (reported trust)",
-    "mixed_model": "mixed model, random intercept (reported trust)",
-}
-DEFAULT_TESTS = ("mcnemar", "conditional_or", "wilcoxon")
+TESTS: dict[str, str] = dict(zip(defaults.PLAN_TESTS, (
+    "McNemar exact p (satisfaction)",
+    "conditional OR [exact CI] (satisfaction)",
+    "Wilcoxon p (reported trust)",
+    "mixed model, random intercept (reported trust)",
+), strict=True))
+DEFAULT_TESTS: tuple[str, ...] = defaults.PLAN_DEFAULT_TESTS
 ALL_SPECS = "all specs"
 
 
@@ -245,8 +246,8 @@ class PowerSettings:
     interval is within ±`precision`, at most `max_simulations`."""
 
     tests: tuple[str, ...] = DEFAULT_TESTS
-    alpha: float = 0.05
-    target: float = 0.8
+    alpha: float = defaults.PLAN_ALPHA
+    target: float = defaults.PLAN_TARGET
     simulations: int | None = None
     precision: float = 0.02
     round_size: int = 200

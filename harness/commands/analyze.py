@@ -10,8 +10,10 @@ from pathlib import Path
 
 import click
 
+from trustroute.core import defaults
 from trustroute.harness.commands.output import json_option, study_warnings, with_paths
 from trustroute.harness.commands.study import report_paths
+from trustroute.harness.study.config import BELIEF_SOURCES
 
 
 @click.command("analyze")
@@ -19,8 +21,8 @@ from trustroute.harness.commands.study import report_paths
 @json_option
 @click.option(
     "--belief-source",
-    type=click.Choice(["filter", "reported", "reference", "true"]),
-    default=None,
+    type=click.Choice(BELIEF_SOURCES),
+    default=defaults.BELIEF_SOURCE,
     help="Beliefs the spec is evaluated on: each AV's own filter, induced from reported trust, one "
     "reference filter for every condition, or each driver's true model (simulation). Default: the "
     "study config's belief_source, else the neutral one (true in simulation, reported for live and "
@@ -31,7 +33,8 @@ from trustroute.harness.commands.study import report_paths
 @click.option(
     "--report/--no-report",
     default=None,
-    help="(Re)write report.md, report.html and plots/ in DIR (default: yes, but no with --json).",
+    help="(Re)write report.md, report.html and plots/ in DIR (default: yes, but no with --json, "
+         "which hands the analysis over as data, as the Python API's analyze does).",
 )
 def analyze(study_dir: str, as_json: bool, belief_source: str | None, wide: bool,
             report: bool | None) -> None:
@@ -48,8 +51,9 @@ def analyze(study_dir: str, as_json: bool, belief_source: str | None, wide: bool
         real = real_study_analysis(Path(study_dir))
     paths = None
     real_paths: dict[str, Path] = {}
-    write = (not as_json) if report is None else report
-    if write:
+    if report is None:
+        report = defaults.REPORT_WITH_DATA if as_json else defaults.REPORT_WITH_TABLES
+    if report:
         from trustroute.analysis.study.report import write_report
 
         paths = write_report(Path(study_dir), analysis=analysis)

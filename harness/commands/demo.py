@@ -12,13 +12,13 @@ scenario's own demand as background traffic; the recording is of `city5` instead
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import click
 
 from trustroute.app.engines import ENGINES, SIMULATED
 from trustroute.core import defaults
+from trustroute.core.ranges import study_workers
 from trustroute.harness.commands.options import WORKERS, bounded_int
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 from trustroute.harness.study.plan import episode_id as planned_episode_id
@@ -61,7 +61,8 @@ def record_episode(context, study_dir: Path, episode_id: str) -> Path:
     show_default=True,
     help="Study DIRECTORY (a rerun resumes).",
 )
-@click.option("--workers", type=WORKERS, default=None, help="Local worker processes (default: CPU count).")
+@click.option("--workers", type=WORKERS, default=defaults.WORKERS,
+              help=f"Local worker processes (default: the CPU count, at most {defaults.MAX_WORKERS}).")
 @click.option("--engine", type=click.Choice(SIMULATED), default=defaults.EPISODE_ENGINE, show_default=True)
 @click.option("--participants", type=bounded_int(1, 100_000), default=21, show_default=True)
 @click.option("--town", type=click.Choice([DEFAULT_TOWN, *DEMO_TOWNS]), default=DEFAULT_TOWN,
@@ -81,7 +82,7 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
     study = {**DEMO_STUDY, **DEMO_TOWNS.get(town, {}), "participants": participants, "engine": engine}
     config = study_config_from_dict({"study": study}, "trustroute demo", Path.cwd())
     study_dir = Path(out)
-    workers = workers if workers is not None else (os.cpu_count() or 1)
+    workers = study_workers(workers)
     silent = quiet or as_json
     say = (lambda line: None) if silent else click.echo
     specs = len(study["specs"])

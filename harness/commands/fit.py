@@ -11,9 +11,10 @@ from pathlib import Path
 
 import click
 
+from trustroute.core import defaults, ranges
 from trustroute.core.progress import bar_disable
 from trustroute.harness.commands.option_groups import option, takes
-from trustroute.harness.commands.options import UsageFix, bounded_int
+from trustroute.harness.commands.options import Checked, UsageFix, bounded_int
 from trustroute.harness.commands.output import json_flag, quiet_flag, study_warnings, with_paths
 
 CHECK_REPLICATES = 50  # simulated drivers per real episode in `fit --check`
@@ -27,11 +28,11 @@ class FitOptions:
     out: str = option("--out", type=click.Path(), default="driver.json", show_default=True,
                       help="Driver model FILE to write.")
     method: str = option(
-        "--method", type=click.Choice(["auto", "counts", "em"]), default="auto", show_default=True,
+        "--method", type=click.Choice(defaults.FIT_METHODS), default=defaults.FIT_METHOD, show_default=True,
         help="counts: reports are exact trust; em: reports are noisy (EM over hidden trust); "
         "auto: counts when the study's report accuracy is 1 and trust is reported every road.")
-    iterations: int = option("--iterations", type=bounded_int(1, 100_000), default=200, show_default=True,
-                             help="EM iterations at most.")
+    iterations: int = option("--iterations", type=Checked(ranges.ITERATIONS), default=defaults.FIT_ITERATIONS,
+                             show_default=True, help="EM iterations at most.")
     bootstrap: int = option("--bootstrap", type=bounded_int(0, 100_000), default=0, show_default=True,
                             help="Resamples of participants for percentile intervals (0: none).")
     seed: int = option("--seed", type=bounded_int(0, 2**63 - 1), default=0, show_default=True,
@@ -43,10 +44,10 @@ class FitOptions:
     types: str | None = option("--types", default=None, metavar="K|auto",
                                help="Fit a mixture of K driver types (or choose K by BIC with 'auto') and "
                                "write a driver-population file.")
-    max_types: int = option("--max-types", type=bounded_int(1, 20), default=4, show_default=True,
-                            help="With --types auto: the largest K tried.")
-    restarts: int = option("--restarts", type=bounded_int(1, 1_000), default=5, show_default=True,
-                           help="With --types: seeded EM restarts per K.")
+    max_types: int = option("--max-types", type=bounded_int(1, 20), default=defaults.FIT_MAX_TYPES,
+                            show_default=True, help="With --types auto: the largest K tried.")
+    restarts: int = option("--restarts", type=bounded_int(1, 1_000), default=defaults.FIT_RESTARTS,
+                           show_default=True, help="With --types: seeded EM restarts per K.")
     shared_dynamics: bool = option(
         "--shared-dynamics", is_flag=True,
         help="With --types: the types share the trust-transition rows and differ in initial "

@@ -15,8 +15,9 @@ from typing import TYPE_CHECKING
 
 import click
 
+from trustroute.core import defaults, ranges
 from trustroute.harness.commands.option_groups import option, takes
-from trustroute.harness.commands.options import FiniteFloat, bounded_int
+from trustroute.harness.commands.options import Checked, bounded_int
 
 if TYPE_CHECKING:
     from trustroute.harness.live.server import ServerOptions
@@ -32,13 +33,13 @@ class ServeOptions:
                        help="Port to bind.")
     out: str | None = option("--out", type=click.Path(), default=None,
                              help="Study DIRECTORY (default: the config's output, else studies/<name>).")
-    pace: float = option("--pace", type=FiniteFloat(0.0, 10_000.0, open_minimum=True), default=1.0,
+    pace: float = option("--pace", type=Checked(ranges.PACE), default=defaults.LIVE_PACE,
                          show_default=True, help="Simulated seconds per wall-clock second (1: real time).")
     resume_within: float = option(
-        "--resume-within", type=FiniteFloat(0.0, 86_400.0, open_minimum=True), default=120.0,
+        "--resume-within", type=Checked(ranges.RESUME_WITHIN), default=defaults.LIVE_RESUME_WITHIN,
         show_default=True, help="Seconds a disconnected participant has to resume; after that the "
         "episode is incomplete and runs again at the end of their plan.")
-    warm_up: bool = option("--warm-up/--no-warm-up", default=True, show_default=True,
+    warm_up: bool = option("--warm-up/--no-warm-up", default=defaults.LIVE_WARM_UP, show_default=True,
                            help="A warm-up drive before each participant's trials (not part of the dataset).")
     secure_cookies: bool = option(
         "--secure-cookies", is_flag=True,

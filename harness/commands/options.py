@@ -2,7 +2,8 @@
 
 click's FloatRange lets NaN through (every comparison with NaN is false), and an unbounded
 integer such as `--horizon 10**18` would start work that can never finish: options go through
-these types instead. A bad value is a one-line usage error with exit code 2.
+these types instead. A bad value is a one-line usage error with exit code 2. An option the API
+takes too is `Checked` by the range both doors share (trustroute/core/ranges.py).
 """
 
 from __future__ import annotations
@@ -13,7 +14,9 @@ from dataclasses import dataclass
 
 import click
 
-from trustroute.core import defaults
+from trustroute.core import ranges
+from trustroute.core.fields import Integer, Number
+from trustroute.core.ranges import UNBOUNDED, OptionRange
 
 
 class UsageFix(click.UsageError):
@@ -56,10 +59,36 @@ def bounded_int(minimum: int, maximum: int) -> click.IntRange:
     return click.IntRange(minimum, maximum)
 
 
-SEED = bounded_int(0, defaults.MAX_SEED)
-HORIZON = bounded_int(1, 1_000)
-JUNCTIONS = bounded_int(0, 10_000)
-WORKERS = bounded_int(1, 256)
+class Checked(click.ParamType):
+    """An option that another door takes too: its value is parsed as the range's kind and checked
+    by the range itself (trustroute/core/ranges.py `OptionRange`), the check the API makes, so
+    both doors refuse it with the same words (an InputError: one line, exit code 2)."""
+
+    def __init__(self, accepted: OptionRange) -> None:
+        self.accepted = accepted
+        self.name = "integer" if isinstance(accepted.kind, Integer) else "number"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str):
+            parse = int if isinstance(self.accepted.kind, Integer) else float
+            try:
+                value = parse(value)
+            except ValueError:
+                pass   # refused by the range, which names the text given
+        return self.accepted.check(value)
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context) -> str:
+        """The kind and its range, as --help lists the option (`INTEGER 1..1000`, `NUMBER (0, 1]`)."""
+        kind = self.accepted.kind
+        if isinstance(kind, Integer):
+            top = "" if kind.maximum == UNBOUNDED.maximum else str(kind.maximum)
+            return f"INTEGER {kind.minimum}..{top}"
+        assert isinstance(kind, Number)
+        return f"NUMBER {kind.interval()}"
+
+
+SEED = Checked(ranges.SEED)         # an episode's, a plan's, a population's draws
+WORKERS = Checked(ranges.WORKERS)   # a study's worker processes
 
 
 @dataclass(frozen=True)

@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING
 
 import click
 
-from trustroute.core import defaults
+from trustroute.core import defaults, ranges
 from trustroute.harness.commands.option_groups import option, takes
-from trustroute.harness.commands.options import SEED, FiniteFloat, bounded_int
+from trustroute.harness.commands.options import SEED, Checked
 from trustroute.harness.commands.output import emit, json_flag, quiet_flag, with_paths
 
 if TYPE_CHECKING:
@@ -65,14 +65,14 @@ class PlanOptions:
                         help="Sample sizes: N, FROM:TO or FROM:TO:STEP (each rounded up to the Williams "
                              "square).")
     simulations: int | None = option(
-        "--simulations", type=bounded_int(10, 100_000), default=None,
+        "--simulations", type=Checked(ranges.SIMULATIONS), default=None,
         help="Simulated studies per size (default: until every power is within ±0.02, at most 2400).")
     tests: tuple[str, ...] = option(
-        "--test", multiple=True, type=click.Choice(["mcnemar", "conditional_or", "wilcoxon", "mixed_model"]),
-        help="A planned test (repeatable; default: mcnemar, conditional_or, wilcoxon).")
-    alpha: float = option("--alpha", type=FiniteFloat(0.0, 0.5, open_minimum=True),
+        "--test", multiple=True, type=click.Choice(defaults.PLAN_TESTS),
+        help=f"A planned test (repeatable; default: {', '.join(defaults.PLAN_DEFAULT_TESTS)}).")
+    alpha: float = option("--alpha", type=Checked(ranges.ALPHA),
                           default=defaults.PLAN_ALPHA, show_default=True)
-    target: float = option("--target", type=FiniteFloat(0.0, 1.0, open_minimum=True),
+    target: float = option("--target", type=Checked(ranges.TARGET),
                            default=defaults.PLAN_TARGET, show_default=True, help="Target power.")
     driver: str | None = option("--driver", default=None,
                                 help="The participants' true driver model (default: the config's).")
@@ -82,7 +82,7 @@ class PlanOptions:
         "--pilot", default=None, metavar="STUDY_DIR",
         help="The participants as the driver model fitted on this pilot study, with its uncertainty "
              "(bootstrap refits over the pilot's participants, one drawn per simulated study).")
-    pilot_bootstrap: int = option("--pilot-bootstrap", type=bounded_int(0, 10_000),
+    pilot_bootstrap: int = option("--pilot-bootstrap", type=Checked(ranges.PILOT_BOOTSTRAP),
                                   default=defaults.PILOT_BOOTSTRAP, show_default=True,
                                   help="With --pilot: bootstrap refits (0: the point fit alone, no "
                                        "uncertainty).")

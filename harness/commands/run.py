@@ -10,10 +10,10 @@ from typing import TYPE_CHECKING
 import click
 
 from trustroute.app.problem import load_problem
-from trustroute.core import defaults
+from trustroute.core import defaults, ranges
 from trustroute.harness.commands.inputs import POPULATION_GIVEN, driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
-from trustroute.harness.commands.options import SEED, UsageFix
+from trustroute.harness.commands.options import SEED, Checked, UsageFix
 from trustroute.harness.commands.output import json_flag, quiet_flag, with_paths
 
 if TYPE_CHECKING:
@@ -136,7 +136,7 @@ class RunOptions:
         help="SUMO route FILE of background traffic, e.g. an imported scenario's vehicle types and "
              "demand (repeat for several; types first); 'city': the demand of --town city.")
     background_vehicles: int = option(
-        "--background", type=click.IntRange(min=0, max=defaults.MAX_BACKGROUND_VEHICLES), default=0,
+        "--background", type=Checked(ranges.BACKGROUND_VEHICLES), default=0,
         show_default=True,
         help="Seeded background traffic: vehicles kept on the net (an imported "
              "town: trips per minute from SUMO's randomTrips.py); docs/scenes.md.")

@@ -5,15 +5,16 @@ failed it names them and exits 1, and writes the report only with --report-anywa
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import click
 
 from trustroute.app.engines import SIMULATED
+from trustroute.core import defaults, ranges
+from trustroute.core.ranges import study_workers
 from trustroute.harness.commands.option_groups import option, takes
-from trustroute.harness.commands.options import WORKERS, bounded_int
+from trustroute.harness.commands.options import WORKERS, Checked
 from trustroute.harness.commands.output import emit, json_flag, quiet_flag, with_paths
 from trustroute.harness.study.config import study_directory
 
@@ -48,8 +49,9 @@ class StudyOptions:
 
     out: str | None = option("--out", type=click.Path(), default=None,
                              help="Study DIRECTORY (default: the config's output, else studies/<name>).")
-    workers: int | None = option("--workers", type=WORKERS, default=None,
-                                 help="Local worker processes (default: CPU count).")
+    workers: int | None = option("--workers", type=WORKERS, default=defaults.WORKERS,
+                                 help=f"Local worker processes (default: the CPU count, at most "
+                                      f"{defaults.MAX_WORKERS}).")
     scheduler: str | None = option(
         "--scheduler", default=None,
         help="Dask scheduler ADDRESS, or 'local' for a local Dask cluster (default: local pool).")
@@ -59,7 +61,8 @@ class StudyOptions:
     report_anyway: bool = option(
         "--report-anyway", is_flag=True,
         help="Write the report even when some episodes failed (default: only a complete study).")
-    attempts: int = option("--attempts", type=bounded_int(1, 10), default=2, show_default=True,
+    attempts: int = option("--attempts", type=Checked(ranges.ATTEMPTS), default=defaults.ATTEMPTS,
+                           show_default=True,
                            help="Runs of a failing episode at most (the first and its retries).")
     as_json: bool = json_flag()
     quiet: bool = quiet_flag()
@@ -76,7 +79,7 @@ def study(ctx: click.Context, config_path: str, options: StudyOptions) -> None:
     from trustroute.harness.study.config import load_study_config
 
     config = load_study_config(config_path).with_overrides(engine=options.engine)
-    workers = options.workers if options.workers is not None else (os.cpu_count() or 1)
+    workers = study_workers(options.workers)
     study_dir = study_directory(config, options.out)
     from trustroute.harness.study.runner import run_and_consolidate
 

@@ -15,7 +15,7 @@ import click
 
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.app.problem import load_problem
-from trustroute.core import defaults
+from trustroute.core import defaults, ranges
 from trustroute.harness.commands.inputs import (
     POPULATION_GIVEN,
     driver_field,
@@ -25,7 +25,7 @@ from trustroute.harness.commands.inputs import (
     town_option,
 )
 from trustroute.harness.commands.option_groups import option, option_decorator, takes
-from trustroute.harness.commands.options import HORIZON, JUNCTIONS, FiniteFloat, synthesis_time_left
+from trustroute.harness.commands.options import Checked, synthesis_time_left
 from trustroute.harness.commands.output import emit, json_flag, json_option, quiet_flag, with_paths
 
 if TYPE_CHECKING:
@@ -38,9 +38,8 @@ def rule_field() -> Any:
 
 
 def command_time_limit(help: str, **attrs: Any) -> Any:
-    """--time-limit in seconds, at most a week (the rule of `check_time_limit`, the API's)."""
-    return option("--time-limit", type=FiniteFloat(0.0, defaults.MAX_TIME_LIMIT, open_minimum=True),
-                  help=help, **attrs)
+    """--time-limit in seconds, at most a week (the range the API checks, `check_time_limit`)."""
+    return option("--time-limit", type=Checked(ranges.TIME_LIMIT), help=help, **attrs)
 
 
 rule_option = option_decorator("belief_rule", rule_field())
@@ -73,19 +72,19 @@ class SynthOptions:
 
     town_path: str | None = town_field()
     driver_path: str | None = driver_field()
-    tau: float = option("--tau", type=FiniteFloat(0.0, 1.0, open_minimum=True), default=defaults.TAU,
+    tau: float = option("--tau", type=Checked(ranges.TAU), default=defaults.TAU,
                         show_default=True, help="Target gap upper - lower.")
-    horizon: int | None = option("--horizon", type=HORIZON, default=defaults.SYNTH_HORIZON,
+    horizon: int | None = option("--horizon", type=Checked(ranges.HORIZON), default=defaults.SYNTH_HORIZON,
                                  help="At most H junctions (default: unbounded).")
     time_limit: float = command_time_limit("Seconds for the whole command (its synthesis runs share them).",
                                            default=defaults.TIME_LIMIT, show_default=True)
     work_limit: int | None = option(
-        "--work-limit", type=click.IntRange(min=1), default=defaults.WORK_LIMIT,
+        "--work-limit", type=Checked(ranges.WORK_LIMIT), default=defaults.WORK_LIMIT,
         help="Units of work for the whole command (node expansions, sweeps, ...): a stop that does not "
              "depend on the machine or its load, so the same inputs give the same policy; "
              '--time-limit still applies (default: none; docs/synthesis.md, "Work limit").')
     node_budget: int = option(
-        "--node-budget", type=click.IntRange(min=1), default=defaults.NODE_BUDGET, show_default=True,
+        "--node-budget", type=Checked(ranges.NODE_BUDGET), default=defaults.NODE_BUDGET, show_default=True,
         help="The most nodes the belief-MDP search holds (specs without trust-state atoms), about 1 kB "
              "of memory each: past them it stops, whatever its limits (it says so: \"stopped_by\": "
              "\"node budget\").")
@@ -96,7 +95,7 @@ class SynthOptions:
         help="Policy FILE to write (its arrays go beside it, same name with suffix .npz); "
              "default: the policy cache's synth/ folder, printed.")
     clusters: str = option(
-        "--clusters", type=click.Choice(["auto", "on", "off"]), default="auto", show_default=True,
+        "--clusters", type=click.Choice(defaults.CLUSTER_MODES), default=defaults.CLUSTERS, show_default=True,
         help="Cluster policies (Bayes rule; docs/synthesis.md, \"Cluster policies\"): before the "
              "search on large problems and after an unconverged one (auto), always first (on), "
              "never (off).")
@@ -288,12 +287,12 @@ class EvaluateOptions:
         "--population", type=click.Path(), default=None,
         help=f"{POPULATION_GIVEN} (instead of --driver): the AV filters with its type-aware model and "
              "the drivers are its mixture; POLICY may then be 'robust' or 'bayes' (docs/driver_types.md).")
-    fallback_after: int = option("--fallback-after", type=JUNCTIONS, default=defaults.FALLBACK_AFTER,
-                                 show_default=True,
+    fallback_after: int = option("--fallback-after", type=Checked(ranges.FALLBACK_AFTER),
+                                 default=defaults.FALLBACK_AFTER, show_default=True,
                                  help="Switch to the shortest completion after this many junctions.")
     no_fallback: bool = option("--no-fallback", is_flag=True,
                                help="Evaluate the policy without the fallback rule.")
-    max_junctions: int | None = option("--max-junctions", type=JUNCTIONS, default=None,
+    max_junctions: int | None = option("--max-junctions", type=Checked(ranges.MAX_JUNCTIONS), default=None,
                                        help=f"Episode cap (default {defaults.JUNCTION_CAP}).")
     belief_rule: str = rule_field()
     cache_dir: str | None = option(
@@ -301,7 +300,7 @@ class EvaluateOptions:
         help="Where 'aware' policies are cached (default: $XDG_CACHE_HOME/trustroute/policies, "
              "XDG_CACHE_HOME defaulting to ~/.cache).")
     max_nodes: int | None = option(
-        "--max-nodes", type=click.IntRange(min=1), default=None,
+        "--max-nodes", type=Checked(ranges.MAX_NODES), default=None,
         help="Follow at most this many (the likeliest) histories per junction; the rest widen "
              "[lower, upper] (default: 5,000 for specs with trust-state atoms, 2,000,000 otherwise).")
     time_limit: float | None = command_time_limit(

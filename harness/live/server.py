@@ -26,9 +26,11 @@ from pathlib import Path
 
 from trustroute.app.engines import ENGINES
 from trustroute.app.nets import net_for
+from trustroute.core import defaults
 from trustroute.core.dataset import part_path
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
+from trustroute.core.ranges import PACE, RESUME_WITHIN
 from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session
@@ -59,16 +61,21 @@ SPENT_LINK = "this link is spent or revoked; ask the experimenter for a new one"
 
 @dataclass(frozen=True)
 class ServerOptions:
-    pace: float = 1.0
+    pace: float = defaults.LIVE_PACE
     frame_rate: float = 25.0
-    resume_within: float = 120.0   # seconds a disconnected participant has to resume an episode
-    warm_up: bool = True           # a warm-up drive before the trials
+    resume_within: float = defaults.LIVE_RESUME_WITHIN   # seconds a disconnected participant has to resume
+    warm_up: bool = defaults.LIVE_WARM_UP   # a warm-up drive before the trials
     secure_cookies: bool = False   # cookies only over HTTPS (behind a TLS proxy)
     final_report_seconds: float = FINAL_REPORT_SECONDS   # a trial's end waits this for the last report
     public_origins: tuple[str, ...] = ()   # the origins the study is reached at behind a proxy
     idle_seconds: float = 60.0     # a websocket silent this long is closed (the station pings)
     request_seconds: float = 10.0  # an HTTP request not complete this long after it began is cut
     max_connections: int | None = None   # open at once (None: sized for the study, guard.connection_cap)
+
+    def __post_init__(self) -> None:
+        """The pace and the resume window as `trustroute live` takes them (the ranges both check)."""
+        PACE.check(self.pace)
+        RESUME_WITHIN.check(self.resume_within)
 
 
 def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:
@@ -122,9 +129,9 @@ class LiveStudy:
     def open(self) -> LiveStudy:
         from trustroute.harness.study.expected import expected_values
         from trustroute.harness.study.resume import check_study_dir, finished_episodes
-        from trustroute.harness.study.runner import DEFAULT_ATTEMPTS, check_before_writing, study_lock
+        from trustroute.harness.study.runner import check_before_writing, study_lock
 
-        self.context = check_before_writing(self.config, self.study_dir, None, DEFAULT_ATTEMPTS, False)
+        self.context = check_before_writing(self.config, self.study_dir, None, defaults.ATTEMPTS, False)
         self._stack.enter_context(study_lock(self.study_dir))
         start_fork_server()   # it imports the episodes' modules while the study opens
         try:

@@ -29,16 +29,15 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Protocol
 
-from trustroute.core import defaults
+from trustroute.core import ranges
 from trustroute.core.errors import InputError
-from trustroute.core.fields import Integer, check_value
+from trustroute.core.fields import check_value
 from trustroute.harness.simulation.performance import DEFAULT_LIMITS, PerformanceLimits
 from trustroute.networks.sumo_import import require_net_file
 from trustroute.networks.sumo_net import find_binary
 
-BACKGROUND_VEHICLES = Integer(minimum=0, maximum=defaults.MAX_BACKGROUND_VEHICLES)
-BACKGROUND_FIX = (f"give a number of background vehicles from 0 to {defaults.MAX_BACKGROUND_VEHICLES}, "
-                  "e.g. 20, or 0 for none")
+BACKGROUND_VEHICLES = ranges.BACKGROUND_VEHICLES.kind   # the range `run --background` takes
+BACKGROUND_FIX = ranges.BACKGROUND_VEHICLES.fix
 
 
 @dataclass(frozen=True)

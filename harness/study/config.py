@@ -49,6 +49,7 @@ from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Literal, TypedDict, get_args
 
+from trustroute.core import defaults
 from trustroute.core.errors import InputError
 from trustroute.core.fields import (
     Field,
@@ -385,9 +386,9 @@ STUDY_FIELDS = field_table(
           fix='write e.g. name = "paper"; --out or output chooses another folder'),
     Field(key="town", kind=_FILE, problem=_file_path, fix=FILE_FIX["town"]),
     Field(key="driver_model", kind=_FILE, problem=_file_path, fix=FILE_FIX["driver_model"]),
-    Field(key="horizon", kind=Integer(minimum=1, maximum=1_000),
+    Field(key="horizon", kind=Integer(minimum=1, maximum=defaults.MAX_HORIZON),
           fix=f"write a positive number of junctions or omit horizon ({DEFAULT_FALLBACK_AFTER})"),
-    Field(key="fallback_after", kind=Integer(minimum=0, maximum=10_000, false_allowed=True),
+    Field(key="fallback_after", kind=Integer(minimum=0, maximum=defaults.MAX_JUNCTIONS, false_allowed=True),
           default=DEFAULT_FALLBACK_AFTER,
           fix=f"write fallback_after = {DEFAULT_FALLBACK_AFTER}, or false to disable the rule"),
     Field(key="junction_cap", kind=JUNCTION_CAPS, default=DEFAULT_JUNCTION_CAP,

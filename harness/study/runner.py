@@ -38,9 +38,11 @@ from typing import TYPE_CHECKING
 
 from trustroute.app.drivers import synthetic_driver
 from trustroute.app.engines import ENGINES
+from trustroute.core import defaults
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.progress import bar_disable
+from trustroute.core.ranges import ATTEMPTS
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext, study_context
 from trustroute.harness.study.expected import expected_values, fallback_only_warnings
@@ -61,7 +63,6 @@ if TYPE_CHECKING:
     from trustroute.harness.simulation.episode import EpisodeRecord
     from trustroute.harness.simulation.sumo_start import SumoConfig
 
-DEFAULT_ATTEMPTS = 2
 BATCH_EPISODES = 250  # model-engine episodes per batch part (at most)
 # Fewer episodes to run: one part each (a batch saves nothing there, and a damaged part costs one
 # episode, not a batch)
@@ -69,7 +70,6 @@ BATCH_MIN_EPISODES = 1000
 CONSOLIDATION_ROUNDS = 3
 SYNC_EVERY = 64  # parts per file-system sync (harness/study/parts.py: sync_parts); for the model
 # engine's batches, episodes of SYNC_EVERY full batches
-MAX_ATTEMPTS = 10
 
 
 @dataclass(frozen=True)
@@ -320,7 +320,7 @@ def check_study_output(study_dir: Path) -> None:
 
 
 def validate_study(config: StudyConfig | StudyContext, scheduler: str | None = None,
-                   attempts: int = DEFAULT_ATTEMPTS, progress: bool = False) -> StudyContext:
+                   attempts: int = defaults.ATTEMPTS, progress: bool = False) -> StudyContext:
     """Every input of the study, checked before anything is written: the engine, the town, driver
     model, specs, policies and population (building the context, synthesizing missing "aware"
     policies into the policy cache), the retry bound and the scheduler address. Returns the study's
@@ -328,9 +328,7 @@ def validate_study(config: StudyConfig | StudyContext, scheduler: str | None = N
     were checked when it was)."""
     given = config if isinstance(config, StudyContext) else None
     config = config.config if isinstance(config, StudyContext) else config
-    if not 1 <= attempts <= MAX_ATTEMPTS:
-        raise InputError("--attempts", "", f"must be from 1 to {MAX_ATTEMPTS}, got {attempts}",
-                         "pass e.g. --attempts 2")
+    ATTEMPTS.check(attempts)
     if scheduler is not None and scheduler != "local":
         check_scheduler_address(scheduler)
         check_scheduler_reachable(scheduler)
@@ -393,7 +391,7 @@ def run_study(
     progress: bool = True,
     on_outcome: Callable[[EpisodeOutcome], None] | None = None,
     dask_processes: bool = True,
-    attempts: int = DEFAULT_ATTEMPTS,
+    attempts: int = defaults.ATTEMPTS,
 ) -> StudyRun:
     """Run (or resume) every episode of `config` in `study_dir`; return what happened.
 
@@ -501,7 +499,7 @@ def run_and_consolidate(
     progress: bool = True,
     echo: Callable[[str], object] = print,
     dask_processes: bool = True,
-    attempts: int = DEFAULT_ATTEMPTS,
+    attempts: int = defaults.ATTEMPTS,
 ) -> tuple[StudyRun, dict]:
     """Run (or resume) the study, then write the consolidated dataset and manifest (with the
     exact values and synthesized bounds of its policies). `echo` gets one summary line. The study

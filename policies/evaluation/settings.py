@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from trustroute.core.errors import InputError
-from trustroute.core.fields import Integer, check_value
+from trustroute.core import defaults
+from trustroute.core.ranges import FALLBACK_AFTER, MAX_JUNCTIONS, MAX_NODES
 from trustroute.policies.model.trust_pomdp import BeliefRule, checked_belief_rule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
@@ -24,25 +24,22 @@ class EvaluationSettings:
 
     fallback_after: int | None = DEFAULT_FALLBACK_AFTER
     max_junctions: int = DEFAULT_JUNCTION_CAP
-    belief_rule: BeliefRule = "bayes"
+    belief_rule: BeliefRule = defaults.BELIEF_RULE
     prune_below: float | None = None
     max_nodes: int | None = None
     merge: bool = True
     time_limit: float | None = None
 
     def __post_init__(self) -> None:
-        """Each setting checked as every door takes it: an InputError naming its option (the API's
-        messages say its keyword). The time limit is checked at the doors (`check_time_limit`):
-        inside a run it is the time left, which may be 0."""
+        """Each setting checked as every door takes it (trustroute/core/ranges.py): an InputError
+        naming its option (the API's messages say its keyword). The time limit is checked at the
+        doors (`check_time_limit`): inside a run it is the time left, which may be 0."""
         checked_belief_rule(self.belief_rule)
-        if self.max_junctions < 0:
-            raise InputError("--max-junctions", "", f"must be >= 0, got {self.max_junctions}", "pass e.g. 60")
-        if self.fallback_after is not None and self.fallback_after < 0:
-            raise InputError("--fallback-after", "", f"must be >= 0, got {self.fallback_after}",
-                             "pass 0 or more junctions, e.g. 20")
+        object.__setattr__(self, "max_junctions", MAX_JUNCTIONS.check(self.max_junctions))
+        if self.fallback_after is not None:
+            object.__setattr__(self, "fallback_after", FALLBACK_AFTER.check(self.fallback_after))
         if self.max_nodes is not None:
-            check_value(self.max_nodes, Integer(minimum=1), "--max-nodes", "",
-                        fix="pass a positive number of histories per junction")
+            object.__setattr__(self, "max_nodes", MAX_NODES.check(self.max_nodes))
 
 
 DEFAULT_EVALUATION = EvaluationSettings()

@@ -29,7 +29,8 @@ from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 END_REASONS: tuple[str, ...] = ("accepted", "rejected", "destination", "cap")
 DEFAULT_JUNCTION_CAP = defaults.JUNCTION_CAP   # an episode still running after this many junctions ends
-JUNCTION_CAPS = Integer(minimum=1, maximum=10_000)   # the caps a study config or an environment takes
+# the caps a study config or an environment takes
+JUNCTION_CAPS = Integer(minimum=1, maximum=defaults.MAX_JUNCTIONS)
 RUNNING, ACCEPTED, REJECTED = 0, 1, 2
 
 

@@ -83,9 +83,13 @@ def test_every_door_takes_the_same_number_of_background_vehicles():
     from trustroute.harness.study.config import study_config_from_dict
 
     top = defaults.MAX_BACKGROUND_VEHICLES
+    from trustroute.core.ranges import BACKGROUND_VEHICLES
+    from trustroute.harness.commands.options import Checked
+
     option = next(p for p in cli.get_command(None, "run").params  # type: ignore[union-attr]
                   if p.name == "background_vehicles")
-    assert (option.type.min, option.type.max) == (0, top)
+    assert isinstance(option.type, Checked) and option.type.accepted is BACKGROUND_VEHICLES
+    assert (BACKGROUND_VEHICLES.kind.minimum, BACKGROUND_VEHICLES.kind.maximum) == (0, top)
     study = {"participants": 1, "seed": 1, "specs": ["phi1"], "conditions": ["free"]}
     for count in (0, top):
         config = study_config_from_dict({"study": {**study, "background_vehicles": count}})

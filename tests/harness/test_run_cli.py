@@ -151,4 +151,5 @@ def test_run_takes_the_background_range_every_door_takes(net, capsys):
 
     _one_line_error(_main(["run", PHI1, "--net", net, "--background",
                            str(defaults.MAX_BACKGROUND_VEHICLES + 1)], capsys),
-                    f"is not in the range 0<=x<={defaults.MAX_BACKGROUND_VEHICLES}")
+                    f"--background: expected an integer from 0 to {defaults.MAX_BACKGROUND_VEHICLES}, got "
+                    f"{defaults.MAX_BACKGROUND_VEHICLES + 1}")

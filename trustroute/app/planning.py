@@ -29,8 +29,9 @@ from trustroute.analysis.study.power import (
 from trustroute.analysis.study.power_plot import power_curve_plot
 from trustroute.analysis.study.preregistration import preregistration_text
 from trustroute.app.inputs import driver_of, population_of
-from trustroute.core import defaults
+from trustroute.core import defaults, ranges
 from trustroute.core.errors import InputError
+from trustroute.core.fields import OneOf, check_value
 from trustroute.core.output_files import atomic_write_text
 from trustroute.core.progress import bar_disable
 from trustroute.harness.study.config import StudyConfig, load_study_config
@@ -44,6 +45,7 @@ from trustroute.harness.study.planning import (
 )
 
 DEFAULT_OUT = Path("out") / "plan"
+PLANNED_TEST = OneOf(choices=defaults.PLAN_TESTS, noun="test")
 PILOT_KEY = 0
 
 
@@ -66,6 +68,17 @@ class PlanSettings:
     pilot_bootstrap: int = defaults.PILOT_BOOTSTRAP
     seed: int = defaults.PLAN_SEED
     out: str | None = None
+
+    def __post_init__(self) -> None:
+        """Each number as `trustroute plan` takes it (the ranges both check, trustroute/core/ranges.py)."""
+        for test in self.tests:
+            check_value(test, PLANNED_TEST, "--test", "")
+        if self.simulations is not None:
+            ranges.SIMULATIONS.check(self.simulations)
+        ranges.ALPHA.check(self.alpha)
+        ranges.TARGET.check(self.target)
+        ranges.PILOT_BOOTSTRAP.check(self.pilot_bootstrap)
+        ranges.SEED.check(self.seed)
 
 
 @dataclass(frozen=True, eq=False)

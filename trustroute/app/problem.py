@@ -4,6 +4,8 @@ model (a population's type-aware model, its spec lifted onto it), the trust POMD
 
 from __future__ import annotations
 
+import numbers
+
 from trustroute.app.inputs import Inputs, PathLike, load_inputs
 from trustroute.core.errors import InputError
 from trustroute.networks.town import Town
@@ -23,9 +25,13 @@ def compile_problem(inputs: Inputs) -> Problem:
 
 def check_initial_trust(model: DriverModel, initial_trust: int | None,
                         option: str = "--initial-trust") -> None:
-    """A given initial trust is a trust level of `model` (InputError naming `option` otherwise)."""
-    if initial_trust is not None and initial_trust not in model.trust_levels:
-        raise InputError(option, "", f"{initial_trust} is not a trust level of the model",
+    """A given initial trust is a trust level of `model`, a whole number as the CLI's is (True and
+    1.0 are not); an InputError naming `option` otherwise."""
+    if initial_trust is None:
+        return
+    whole = isinstance(initial_trust, numbers.Integral) and not isinstance(initial_trust, bool)
+    if not (whole and initial_trust in model.trust_levels):
+        raise InputError(option, "", f"{initial_trust!r} is not a trust level of the model",
                          f"pass one of {list(model.trust_levels)}")
 
 

@@ -21,7 +21,7 @@ from trustroute.app.policy import PolicySettings, policy_for
 from trustroute.app.problem import check_initial_trust, compile_problem
 from trustroute.core import defaults
 from trustroute.core.errors import InputError
-from trustroute.core.fields import Integer, check_value
+from trustroute.core.ranges import SEED
 from trustroute.harness.simulation.episode import EpisodeOptions, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.model_engine import simulate_batch
@@ -47,11 +47,7 @@ class EpisodeSettings:
     option: str = "--initial-trust"   # how the initial trust is named in messages
 
     def __post_init__(self) -> None:
-        seed = int(self.seed) if isinstance(self.seed, np.integer) else self.seed
-        object.__setattr__(self, "seed", check_value(
-            seed, Integer(minimum=0, maximum=defaults.MAX_SEED), "--seed", "",
-            lambda seen: f"expected an integer from 0 to {defaults.MAX_SEED}, got {seen.value!r}",
-            f"pass a whole number from 0 to {defaults.MAX_SEED}"))
+        object.__setattr__(self, "seed", SEED.check(self.seed))
         engine = engine_named(self.engine, "--engine", simulated=True)
         if self.rrd is not None and not engine.records:
             raise InputError("--rrd", "", f"a Rerun recording needs the SUMO engine, not {self.engine!r}",

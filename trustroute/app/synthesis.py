@@ -7,9 +7,10 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from trustroute.core import defaults
+from trustroute.core import defaults, ranges
 from trustroute.core.errors import InputError
-from trustroute.core.settings import check_time_limit
+from trustroute.core.fields import OneOf, check_value
+from trustroute.core.ranges import check_time_limit
 from trustroute.policies.belief.problem import Problem
 from trustroute.policies.evaluation.plain import Evaluation
 from trustroute.policies.evaluation.plain import evaluate as evaluate_plain
@@ -36,6 +37,7 @@ from trustroute.policies.synthesis.population import (
 from trustroute.policies.synthesis.refinement import reached_node_budget
 from trustroute.policies.synthesis.result import SearchRun, SynthesisResult
 from trustroute.policies.synthesis.rounding import certify, problem_rounding
+from trustroute.policies.synthesis.settings import CLUSTER_MODES as SEARCH_CLUSTER_MODES
 from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
 from trustroute.policies.synthesize_spec import synthesize_for_population, synthesize_problem
 from trustroute.policies.trust_state_synthesis.population import certified_type_values
@@ -48,33 +50,36 @@ def belief_rule_named(name: str) -> BeliefRule:
     return checked_belief_rule(name)
 
 
+CLUSTER_MODES = OneOf(choices=defaults.CLUSTER_MODES, noun="clusters mode")
+
+
 @dataclass(frozen=True)
 class SynthesisSettings(SearchSettings):
     """The search's settings (policies/synthesis/settings.py) as the doors take them: the doors'
-    defaults, a usage error naming the option for a bad tau or horizon, and whether progress
-    shows on stderr. An instance is passed down to the search as it is."""
+    defaults, each number in the range the CLI takes (trustroute/core/ranges.py; an InputError
+    naming the option), and whether progress shows on stderr. An instance is passed down to the
+    search as it is."""
 
     tau: float = defaults.TAU
     time_limit: float = defaults.TIME_LIMIT
     work_limit: int | None = defaults.WORK_LIMIT
     horizon: int | None = defaults.SYNTH_HORIZON
     belief_rule: BeliefRule = defaults.BELIEF_RULE
-    clusters: str = "auto"
+    clusters: str = defaults.CLUSTERS
     progress: bool = False
 
     def __post_init__(self) -> None:
-        if not self.tau > 0:
-            raise InputError("--tau", "", f"tau must be positive, got {self.tau}", "pass e.g. --tau 1e-3")
-        if self.horizon is not None and self.horizon < 1:
-            raise InputError("--horizon", "", f"horizon must be at least 1, got {self.horizon}",
-                             "pass a positive number of junctions or omit --horizon")
-        if self.work_limit is not None and not (isinstance(self.work_limit, int) and self.work_limit >= 1):
-            raise InputError("--work-limit", "", f"work limit must be a positive whole number of units, "
-                             f"got {self.work_limit!r}", "pass e.g. --work-limit 20000000 or omit it")
-        if not (isinstance(self.node_budget, int) and self.node_budget >= 1):
-            raise InputError("--node-budget", "", f"node budget must be a positive whole number of nodes, "
-                             f"got {self.node_budget!r}", "pass e.g. --node-budget 2000000 or omit it")
-        object.__setattr__(self, "belief_rule", checked_belief_rule(self.belief_rule))
+        checked = {"tau": ranges.TAU.check(self.tau),
+                   "node_budget": ranges.NODE_BUDGET.check(self.node_budget),
+                   "belief_rule": checked_belief_rule(self.belief_rule)}
+        if self.horizon is not None:
+            checked["horizon"] = ranges.HORIZON.check(self.horizon)
+        if self.work_limit is not None:
+            checked["work_limit"] = ranges.WORK_LIMIT.check(self.work_limit)
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
+        if self.clusters not in SEARCH_CLUSTER_MODES:   # the search's own modes are set past the doors
+            check_value(self.clusters, CLUSTER_MODES, "--clusters", "")
         super().__post_init__()
 
 
@@ -110,6 +115,7 @@ def check_synthesis_options(population: bool, objective: str, clusters: str) -> 
     objective, checked."""
     if not is_objective(objective):
         raise InputError("--objective", "", f"unknown objective {objective!r}", "use 'bayes' or 'robust'")
+    check_value(clusters, CLUSTER_MODES, "--clusters", "")
     if population and clusters != "auto":
         raise InputError("--clusters", "", "cluster policies apply to a single driver model (--driver)",
                          "drop --clusters, or synthesize for --driver instead of --population")

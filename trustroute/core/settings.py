@@ -9,9 +9,6 @@ import dataclasses
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from trustroute.core import defaults
-from trustroute.core.fields import Number, check_value
-
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
 
@@ -35,14 +32,3 @@ def with_options(settings: object, default: Settings, options: Mapping[str, Any]
         raise TypeError(f"{where}() got an unexpected keyword argument {unknown[0]!r}; it takes the fields "
                         f"of {type(settings).__name__}: {', '.join(names)}")
     return dataclasses.replace(settings, **options) if options else settings
-
-
-TIME_LIMIT_SECONDS = Number(
-    minimum=0.0, maximum=defaults.MAX_TIME_LIMIT, open_below=True,
-    fix=f"pass a number of seconds above 0, at most {defaults.MAX_TIME_LIMIT:g} (a week)")
-
-
-def check_time_limit(seconds: object) -> float:
-    """A time limit as every door takes it: a finite number of seconds above 0, at most a week; an
-    InputError naming --time-limit otherwise (the API says `time_limit`)."""
-    return float(check_value(seconds, TIME_LIMIT_SECONDS, "--time-limit", ""))

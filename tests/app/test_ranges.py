@@ -1,0 +1,255 @@
+"""The API accepts what the CLI accepts: each option the two doors share is checked by one range
+(trustroute/core/ranges.py), so a value one door refuses the other refuses too, in the same words
+(the API's naming its keyword where the CLI's names its flag); and each shares its default."""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import click
+import pytest
+
+import trustroute
+from tests.cli import assert_one_line_error, run_cli
+from trustroute.analysis.fitting.driver_model import fit_study
+from trustroute.app.planning import PlanSettings
+from trustroute.app.runs import EpisodeSettings
+from trustroute.app.synthesis import EvaluationSettings, SynthesisSettings
+from trustroute.core import defaults, ranges
+from trustroute.core.errors import InputError
+from trustroute.harness.cli import cli
+from trustroute.harness.commands.options import Checked
+from trustroute.harness.live.server import ServerOptions
+from trustroute.harness.simulation.sumo_start import SumoConfig
+
+STUDY = {"study": {"participants": 1, "seed": 1, "engine": "model", "specs": ["phi1"],
+                   "conditions": ["free"]}}
+
+
+def _config(tmp_path: Path) -> str:
+    path = tmp_path / "study.toml"
+    path.write_text('[study]\nparticipants = 1\nseed = 1\nengine = "model"\nspecs = ["phi1"]\n'
+                    'conditions = ["free"]\n')
+    return str(path)
+
+
+def _fit_study(tmp_path: Path, iterations: int) -> object:
+    return fit_study(tmp_path / "no-study", iterations=iterations)
+
+
+# (CLI arguments before the value, the flag, the value, the same value given to the API)
+Refusal = tuple[list[str], str, str, Callable[[Path], object]]
+REFUSED: dict[str, Refusal] = {
+    # the gaps: the API took these while the CLI refused them
+    "workers": (["study", "CONFIG"], "--workers", "257",
+                lambda tmp: trustroute.run_study(STUDY, out=tmp / "s", workers=257)),
+    "max_junctions": (["evaluate", "phi1", "free"], "--max-junctions", "10001",
+                      lambda tmp: trustroute.evaluate("phi1", max_junctions=10001)),
+    "fallback_after": (["evaluate", "phi1", "free"], "--fallback-after", "10001",
+                       lambda tmp: trustroute.evaluate("phi1", fallback_after=10001)),
+    "horizon": (["synth", "phi1"], "--horizon", "1001",
+                lambda tmp: trustroute.synthesize("phi1", horizon=1001, work_limit=1000)),
+    "tau": (["synth", "phi1"], "--tau", "2",
+            lambda tmp: trustroute.synthesize("phi1", horizon=4, tau=2.0, work_limit=1000)),
+    "attempts": (["study", "CONFIG"], "--attempts", "11",
+                 lambda tmp: trustroute.run_study(STUDY, out=tmp / "s", attempts=11)),
+    "alpha": (["plan", "CONFIG"], "--alpha", "0.6", lambda tmp: PlanSettings(alpha=0.6)),
+    "target": (["plan", "CONFIG"], "--target", "1.5", lambda tmp: PlanSettings(target=1.5)),
+    "simulations": (["plan", "CONFIG"], "--simulations", "5", lambda tmp: PlanSettings(simulations=5)),
+    "pilot_bootstrap": (["plan", "CONFIG"], "--pilot-bootstrap", "10001",
+                        lambda tmp: PlanSettings(pilot_bootstrap=10_001)),
+    "plan_seed": (["plan", "CONFIG"], "--seed", "-1", lambda tmp: PlanSettings(seed=-1)),
+    "pace": (["live", "CONFIG"], "--pace", "0", lambda tmp: ServerOptions(pace=0.0)),
+    "resume_within": (["live", "CONFIG"], "--resume-within", "90000",
+                      lambda tmp: ServerOptions(resume_within=90_000.0)),
+    "iterations": (["fit", "DIR"], "--iterations", "100001", lambda tmp: _fit_study(tmp, 100_001)),
+    # refused by both before, each in words of its own
+    "time_limit": (["synth", "phi1"], "--time-limit", "1e9",
+                   lambda tmp: trustroute.synthesize("phi1", time_limit=1e9)),
+    "work_limit": (["synth", "phi1"], "--work-limit", "0",
+                   lambda tmp: trustroute.synthesize("phi1", work_limit=0)),
+    "node_budget": (["synth", "phi1"], "--node-budget", "0",
+                    lambda tmp: trustroute.synthesize("phi1", node_budget=0)),
+    "max_nodes": (["evaluate", "phi1", "free"], "--max-nodes", "0",
+                  lambda tmp: trustroute.evaluate("phi1", max_nodes=0)),
+    "seed": (["run", "phi1"], "--seed", "2147483648",
+             lambda tmp: trustroute.run_episode("phi1", engine="model", seed=2**31)),
+}
+
+
+def _problem(line: str, flag: str) -> str:
+    """The problem of a one-line error about `flag`: between `flag: ` and ` (fix: `."""
+    assert f"{flag}: " in line, line
+    return line.split(f"{flag}: ", 1)[1].rsplit(" (fix: ", 1)[0]
+
+
+@pytest.mark.parametrize("name", REFUSED)
+def test_a_value_the_cli_refuses_the_api_refuses_in_the_same_words(name, tmp_path, capsys):
+    before, flag, value, api = REFUSED[name]
+    arguments = [_config(tmp_path) if part == "CONFIG" else str(tmp_path) if part == "DIR" else part
+                 for part in before]
+    code, _, err = run_cli(capsys, *arguments, flag, value)
+    assert_one_line_error(code, err, f"error: {flag}: ")
+    with pytest.raises(InputError) as caught:
+        api(tmp_path)
+    # the API's calls (trustroute.*) name the keyword; the settings objects of the application layer,
+    # which the CLI builds too, the flag
+    keyword = flag.removeprefix("--").replace("-", "_")
+    assert caught.value.source in (keyword, flag)
+    assert caught.value.source == flag or "--" not in str(caught.value)
+    assert caught.value.problem == _problem(err.strip(), flag)
+
+
+def _command(command: str) -> click.Command:
+    found = cli.get_command(None, command)  # type: ignore[arg-type]
+    assert found is not None
+    return found
+
+
+def _options(command: str) -> dict[str, click.Parameter]:
+    return {param.name: param for param in _command(command).params if param.name is not None}
+
+
+def _cli_defaults(command: str) -> dict[str, object]:
+    """What the command receives for each option not given (click parses an empty command line)."""
+    return dict(_command(command).make_context(command, [], resilient_parsing=True).params)
+
+
+@pytest.mark.parametrize(("command", "option", "accepted"), [
+    ("synth", "tau", ranges.TAU), ("synth", "horizon", ranges.HORIZON),
+    ("synth", "time_limit", ranges.TIME_LIMIT), ("synth", "work_limit", ranges.WORK_LIMIT),
+    ("synth", "node_budget", ranges.NODE_BUDGET), ("evaluate", "fallback_after", ranges.FALLBACK_AFTER),
+    ("evaluate", "max_junctions", ranges.MAX_JUNCTIONS), ("evaluate", "max_nodes", ranges.MAX_NODES),
+    ("evaluate", "time_limit", ranges.TIME_LIMIT), ("run", "seed", ranges.SEED),
+    ("run", "background_vehicles", ranges.BACKGROUND_VEHICLES), ("study", "workers", ranges.WORKERS),
+    ("study", "attempts", ranges.ATTEMPTS), ("demo", "workers", ranges.WORKERS),
+    ("plan", "simulations", ranges.SIMULATIONS), ("plan", "alpha", ranges.ALPHA),
+    ("plan", "target", ranges.TARGET), ("plan", "pilot_bootstrap", ranges.PILOT_BOOTSTRAP),
+    ("plan", "seed", ranges.SEED), ("live", "pace", ranges.PACE),
+    ("live", "resume_within", ranges.RESUME_WITHIN),
+    ("fit", "iterations", ranges.ITERATIONS),
+])
+def test_each_shared_option_is_parsed_by_the_cli_and_checked_by_the_one_range(command, option, accepted):
+    kind = _options(command)[option].type
+    assert isinstance(kind, Checked) and kind.accepted is accepted
+
+
+@pytest.mark.parametrize(("accepted", "largest", "settings"), [
+    (ranges.WORKERS, defaults.MAX_WORKERS, None),
+    (ranges.MAX_JUNCTIONS, defaults.MAX_JUNCTIONS, lambda n: EvaluationSettings(max_junctions=n)),
+    (ranges.FALLBACK_AFTER, defaults.MAX_JUNCTIONS, lambda n: EvaluationSettings(fallback_after=n)),
+    (ranges.HORIZON, defaults.MAX_HORIZON, lambda n: SynthesisSettings(horizon=n)),
+    (ranges.SEED, defaults.MAX_SEED, lambda n: EpisodeSettings(seed=n)),
+])
+def test_the_largest_value_is_taken_and_one_more_refused(accepted, largest, settings):
+    import numpy as np
+
+    assert accepted.check(largest) == largest and accepted.check(np.int64(largest)) == largest
+    with pytest.raises(InputError, match=f"got {largest + 1}"):
+        accepted.check(largest + 1)
+    if settings is not None:
+        settings(largest)
+        with pytest.raises(InputError, match=f"got {largest + 1}"):
+            settings(largest + 1)
+
+
+def test_the_api_refuses_the_modes_and_names_the_cli_does_not_offer():
+    # "early" is the search's own clusters mode, not an option of any door
+    for mode in ("early", "bogus"):
+        with pytest.raises(InputError, match=f"clusters: unknown clusters mode '{mode}'"):
+            trustroute.synthesize("phi1", horizon=4, clusters=mode, work_limit=1000)
+    assert _options("synth")["clusters"].type.choices == defaults.CLUSTER_MODES  # type: ignore[attr-defined]
+    with pytest.raises(InputError, match="test: unknown test 'bogus'"):
+        PlanSettings(tests=("mcnemar", "bogus"))
+    assert tuple(_options("plan")["tests"].type.choices) == defaults.PLAN_TESTS  # type: ignore[attr-defined]
+    with pytest.raises(InputError, match="--method: unknown fitting method 'bogus'"):
+        fit_study(Path("no-study"), method="bogus")
+    assert tuple(_options("fit")["method"].type.choices) == defaults.FIT_METHODS  # type: ignore[attr-defined]
+    # the CLI's --initial-trust is a whole number: True and 1.0 are not trust level 1
+    for trust in (True, 1.0):
+        with pytest.raises(InputError, match=f"initial_trust: {trust!r} is not a trust level"):
+            trustroute.run_episode("phi1", engine="model", initial_trust=trust)
+
+
+# -- defaults ------------------------------------------------------------------------------------------
+# The API's calls and the settings objects they take (their fields are the calls' keywords): every
+# option of a command whose name is one of them has the same default, read programmatically, so a
+# default that drifts at one door fails here.
+DOORS: dict[str, list[Callable[..., object] | type]] = {
+    "synth": [trustroute.synthesize, SynthesisSettings],
+    "evaluate": [trustroute.evaluate, EvaluationSettings],
+    "run": [trustroute.run_episode, EpisodeSettings, SumoConfig],
+    "study": [trustroute.run_study],
+    "analyze": [trustroute.analyze],
+    "plan": [PlanSettings],
+    "live": [ServerOptions],
+    "fit": [fit_study],
+}
+# The options whose defaults differ by design, each tested on its own below.
+APART = {("evaluate", "max_junctions"), ("analyze", "report")}
+# Options named alike at both doors (a future rename that stops comparing one fails here).
+COMPARED = {"synth": {"tau", "horizon", "time_limit", "work_limit", "node_budget", "belief_rule", "clusters",
+                      "objective"},
+            "evaluate": {"fallback_after", "belief_rule", "max_nodes", "time_limit", "cache_dir"},
+            "run": {"seed", "initial_trust", "cache_dir", "background_vehicles"},
+            "study": {"out", "workers", "scheduler", "engine", "attempts"},
+            "analyze": {"belief_source"},
+            "plan": {"sizes", "simulations", "tests", "alpha", "target", "driver", "population", "pilot",
+                     "pilot_bootstrap", "seed", "out"},
+            "live": {"pace", "resume_within", "warm_up", "secure_cookies", "public_origins"},
+            "fit": {"method", "iterations"}}
+
+
+def _api_defaults(door: Callable[..., object] | type) -> dict[str, object]:
+    if dataclasses.is_dataclass(door):
+        return {f.name: f.default for f in dataclasses.fields(door)
+                if f.default is not dataclasses.MISSING}
+    return {name: p.default for name, p in inspect.signature(door).parameters.items()
+            if p.default is not inspect.Parameter.empty}
+
+
+@pytest.mark.parametrize("command", DOORS)
+def test_every_option_the_api_shares_has_the_same_default(command):
+    api: dict[str, object] = {}
+    for door in DOORS[command]:
+        api.update(_api_defaults(door))
+    options = _cli_defaults(command)
+    shared = (set(options) & set(api)) - {name for door, name in APART if door == command}
+    assert shared == COMPARED[command]
+    for name in shared:
+        assert options[name] == api[name], name
+
+
+def test_the_defaults_that_differ_by_design():
+    options, api = _cli_defaults("evaluate"), _api_defaults(EvaluationSettings)
+    # the CLI's --max-junctions says "the cap" (None), the API's max_junctions names it
+    assert options["max_junctions"] is None and api["max_junctions"] == defaults.JUNCTION_CAP
+    # analyze: the command printing its tables rewrites the report; the API, like --json, hands the
+    # analysis over as data and writes no file unless asked
+    assert _cli_defaults("analyze")["report"] is None
+    assert _api_defaults(trustroute.analyze)["report"] is defaults.REPORT_WITH_DATA is False
+    assert defaults.REPORT_WITH_TABLES is True
+
+
+def test_a_study_takes_the_cpu_count_at_both_doors(tmp_path):
+    from trustroute.core.ranges import study_workers
+    from trustroute.harness.study.runner import backend_name
+
+    assert _cli_defaults("study")["workers"] is defaults.WORKERS is None
+    assert study_workers(None) == min(os.cpu_count() or 1, defaults.MAX_WORKERS)
+    run = trustroute.run_study(STUDY, out=tmp_path / "study")
+    assert run.backend == backend_name(study_workers(None), None)
+
+
+def test_analyze_writes_the_report_only_when_asked_as_analyze_json_does(tmp_path, capsys):
+    study = trustroute.run_study(STUDY, out=tmp_path / "study", workers=1).study_dir
+    trustroute.analyze(study)
+    code, _, err = run_cli(capsys, "analyze", str(study), "--json")
+    assert code == 0, err
+    assert not (study / "report.md").exists()
+    trustroute.analyze(study, report=True)
+    assert (study / "report.md").is_file()

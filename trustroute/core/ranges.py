@@ -1,0 +1,125 @@
+"""The range of each option two doors share, defined once: the API's settings and calls check a
+value with its `OptionRange`, and the CLI's option of the same name parses its text and hands it to
+the same check (harness/commands/options.py `Checked`), so the doors accept the same values and
+refuse the others with the same words, the API's naming its keyword where the CLI's names its flag
+(`keyword_names`). The numbers (the largest horizon, worker count, ...) are trustroute/core/defaults.py's.
+"""
+
+from __future__ import annotations
+
+import numbers
+import os
+from dataclasses import dataclass
+from typing import Generic, TypeVar, cast
+
+from trustroute.core import defaults
+from trustroute.core.fields import Integer, Kind, Number, Seen, check_value
+
+T = TypeVar("T")
+
+UNBOUNDED = Integer()   # an integer option without a largest value
+
+
+@dataclass(frozen=True)
+class OptionRange(Generic[T]):
+    """The values one option takes at every door, and the fix its refusal names: the CLI's option
+    type (harness/commands/options.py `Checked`) and the API's settings both check a value with
+    `check`, so both doors refuse it with the same words (the API's naming its keyword,
+    `keyword_names`)."""
+
+    flag: str
+    kind: Kind[T]
+    fix: str
+
+    def check(self, value: object) -> T:
+        """`value` when the option takes it (a numpy integer as an int); an InputError naming the
+        flag otherwise."""
+        whole = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+        if isinstance(self.kind, Integer) and whole:
+            value = int(cast(numbers.Integral, value))
+        return check_value(value, self.kind, self.flag, "", self.problem, self.fix)
+
+    def problem(self, seen: Seen) -> str:
+        """What is wrong with a refused value: the kind's account, an integer's with the value as
+        Python writes it (`'3'` is not 3) and without the bound it does not have."""
+        kind = self.kind
+        if isinstance(kind, Integer):
+            span = (f">= {kind.minimum}" if kind.maximum == UNBOUNDED.maximum
+                    else f"from {kind.minimum} to {kind.maximum}")
+            return f"expected an integer {span}, got {seen.value!r}"
+        rejection = kind.reject(seen.value)
+        return rejection.problem if rejection is not None else ""
+
+
+def _junctions(flag: str, example: str) -> OptionRange[int]:
+    return OptionRange(flag, Integer(minimum=0, maximum=defaults.MAX_JUNCTIONS),
+                       f"pass 0 to {defaults.MAX_JUNCTIONS} junctions, e.g. {example}")
+
+
+def _positive(flag: str, unit: str, example: str) -> OptionRange[int]:
+    return OptionRange(flag, Integer(minimum=1), f"pass a positive whole number of {unit}, e.g. {example}")
+
+
+# synthesis (`synthesize`, `trustroute synth`)
+TAU = OptionRange("--tau", Number(minimum=0.0, maximum=1.0, open_below=True),
+                  "pass a gap above 0, at most 1, e.g. --tau 1e-3")
+HORIZON = OptionRange("--horizon", Integer(minimum=1, maximum=defaults.MAX_HORIZON),
+                      f"pass 1 to {defaults.MAX_HORIZON} junctions, or omit --horizon (unbounded)")
+TIME_LIMIT = OptionRange("--time-limit",
+                         Number(minimum=0.0, maximum=defaults.MAX_TIME_LIMIT, open_below=True),
+                         f"pass a number of seconds above 0, at most {defaults.MAX_TIME_LIMIT:g} (a week)")
+WORK_LIMIT = _positive("--work-limit", "units", "--work-limit 20000000, or omit it")
+NODE_BUDGET = _positive("--node-budget", "nodes", "--node-budget 2000000, or omit it")
+# exact evaluation and episodes (`evaluate`, `run_episode`, `trustroute evaluate`, `trustroute run`)
+FALLBACK_AFTER = _junctions("--fallback-after", str(defaults.FALLBACK_AFTER))
+MAX_JUNCTIONS = _junctions("--max-junctions", str(defaults.JUNCTION_CAP))
+MAX_NODES = _positive("--max-nodes", "histories per junction", "--max-nodes 5000")
+SEED = OptionRange("--seed", Integer(minimum=0, maximum=defaults.MAX_SEED),
+                   f"pass a whole number from 0 to {defaults.MAX_SEED}")
+# background traffic (`trustroute run --background`; SumoConfig's and the study config's
+# background_vehicles name it by their key)
+BACKGROUND_VEHICLES = OptionRange(
+    "--background", Integer(minimum=0, maximum=defaults.MAX_BACKGROUND_VEHICLES),
+    f"give a number of background vehicles from 0 to {defaults.MAX_BACKGROUND_VEHICLES}, e.g. 20, "
+    "or 0 for none")
+# studies (`run_study`, `trustroute study`)
+WORKERS = OptionRange("--workers", Integer(minimum=1, maximum=defaults.MAX_WORKERS),
+                      f"pass 1 (this process) to {defaults.MAX_WORKERS} processes, or omit --workers "
+                      "(the CPU count)")
+ATTEMPTS = OptionRange("--attempts", Integer(minimum=1, maximum=defaults.MAX_ATTEMPTS),
+                       f"pass 1 to {defaults.MAX_ATTEMPTS} runs, e.g. --attempts {defaults.ATTEMPTS}")
+
+
+def check_time_limit(seconds: object) -> float:
+    """A time limit as every door takes it: a finite number of seconds above 0, at most a week; an
+    InputError naming --time-limit otherwise (the API says `time_limit`)."""
+    return float(TIME_LIMIT.check(seconds))
+
+
+def study_workers(workers: int | None) -> int:
+    """The worker processes of a study as every door takes them: `workers` checked, or (None) the
+    CPU count, at most the largest count a door takes."""
+    if workers is None:
+        return min(os.cpu_count() or 1, defaults.MAX_WORKERS)
+    return WORKERS.check(workers)
+
+
+# planning (`trustroute plan`, trustroute/app/planning.py PlanSettings; its seed is SEED's range)
+SIMULATIONS = OptionRange("--simulations", Integer(minimum=10, maximum=100_000),
+                          "pass 10 to 100000 simulated studies per size, or omit --simulations")
+ALPHA = OptionRange("--alpha", Number(minimum=0.0, maximum=0.5, open_below=True),
+                    f"pass a level above 0, at most 0.5, e.g. --alpha {defaults.PLAN_ALPHA:g}")
+TARGET = OptionRange("--target", Number(minimum=0.0, maximum=1.0, open_below=True),
+                     f"pass a power above 0, at most 1, e.g. --target {defaults.PLAN_TARGET:g}")
+PILOT_BOOTSTRAP = OptionRange("--pilot-bootstrap", Integer(minimum=0, maximum=10_000),
+                              f"pass 0 to 10000 refits, e.g. --pilot-bootstrap {defaults.PILOT_BOOTSTRAP}")
+# live studies (`trustroute live`, harness/live/server.py ServerOptions)
+PACE = OptionRange("--pace", Number(minimum=0.0, maximum=10_000.0, open_below=True),
+                   "pass simulated seconds per second above 0, at most 10000, e.g. --pace "
+                   f"{defaults.LIVE_PACE:g}")
+RESUME_WITHIN = OptionRange("--resume-within", Number(minimum=0.0, maximum=86_400.0, open_below=True),
+                            "pass seconds above 0, at most 86400 (a day), e.g. --resume-within "
+                            f"{defaults.LIVE_RESUME_WITHIN:g}")
+# fitting (`trustroute fit`, analysis/fitting/driver_model.py fit_study)
+ITERATIONS = OptionRange("--iterations", Integer(minimum=1, maximum=100_000),
+                         f"pass 1 to 100000 iterations, e.g. --iterations {defaults.FIT_ITERATIONS}")
