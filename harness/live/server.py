@@ -3,9 +3,10 @@
 `LiveStudy.open()` does what `trustroute study` does before it writes anything (every input
 validated and the "aware" policies synthesized: `validate_study`; the study's context it builds
 is held as `LiveStudy.context`, for the expected values, every consolidation and the station's
-view of the net), takes the study directory's lock (`study_lock`: a second server, or a
-`trustroute study`, on the same directory is refused with the holder named) and marks the
-directory as this config's (`check_study_dir`). The directory then holds, besides a study's files,
+view of the net) and takes the study directory as `trustroute study` does (`open_study_dir`: a
+folder that is neither new, empty nor this study's is refused; the directory is marked as this
+config's first, then locked, so a second server, or a `trustroute study`, on it is refused with
+the holder named). The directory then holds, besides a study's files,
 
     live/participants.json   each created participant: SHA-256 of their token, label, consent,
                              whether the warm-up drive is done
@@ -128,14 +129,13 @@ class LiveStudy:
     # -- opening and closing --------------------------------------------------------------------
     def open(self) -> LiveStudy:
         from trustroute.harness.study.expected import expected_values
-        from trustroute.harness.study.resume import check_study_dir, finished_episodes
-        from trustroute.harness.study.runner import check_before_writing, study_lock
+        from trustroute.harness.study.resume import finished_episodes
+        from trustroute.harness.study.runner import check_before_writing, open_study_dir
 
         self.context = check_before_writing(self.config, self.study_dir, None, defaults.ATTEMPTS, False)
-        self._stack.enter_context(study_lock(self.study_dir))
+        self._stack.enter_context(open_study_dir(self.study_dir, self.config))
         start_fork_server()   # it imports the episodes' modules while the study opens
         try:
-            check_study_dir(self.study_dir, self.config, self.config.content_hash)
             self.done = finished_episodes(self.study_dir, self.tasks)[0]
             self.expected = expected_values(self.context)
             self.load_participants()

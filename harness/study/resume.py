@@ -1,8 +1,9 @@
-"""Where a study is resumed: the study directory is checked to hold this study (and marked as
-its own), and the episodes that already have a valid part are found so a rerun skips them. A part
-that fails its checksum, or that another plan wrote, is moved to damaged/ and its episode runs
-again; temporary files a killed run left are removed. Used by `trustroute study` (runner.py),
-`trustroute live` and consolidation (manifest.py)."""
+"""Where a study is resumed: the study directory is checked to be new, empty or this study's (and
+is marked as its own before anything else is written in it), and the episodes that already have a
+valid part are found so a rerun skips them. A part that fails its checksum, or that another plan
+wrote, is moved to damaged/ and its episode runs again; temporary files a killed run left are
+removed. Used by `trustroute study` and the API's `run_study` (runner.py), `trustroute live` and
+consolidation (manifest.py)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from pathlib import Path
 
 from trustroute.core.dataset import (
     DAMAGED_DIR,
+    LOCK_FILE,
     PART_FOLDERS,
     PLOTS_DIR,
     STUDY_FILE,
@@ -21,7 +23,7 @@ from trustroute.core.dataset import (
     study_files,
 )
 from trustroute.core.errors import InputError
-from trustroute.core.output_files import TEMP_PREFIX, atomic_write_text
+from trustroute.core.output_files import TEMP_PREFIX, atomic_create_bytes, atomic_write_text, temp_path
 from trustroute.core.validation import read_json
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.inputs import INPUTS_DIR
@@ -37,10 +39,11 @@ from trustroute.harness.study.plan import EpisodeTask
 
 
 def recorded_config_hash(study_dir: Path, config_hash: str) -> str | None:
-    """The config hash the study directory is marked with (None: no readable mark); InputError
-    when it holds a study with another config, or holds a study's files (`study_files`) without a
-    readable mark and its manifest does not name this config. Reads only: a refused directory is
-    left as it was, so callers check it before taking the directory's lock."""
+    """The config hash the study directory is marked with (None: new, empty, or a study without a
+    readable mark whose manifest names this config); InputError when it holds a study with another
+    config, holds a study's files (`study_files`) without a readable mark and its manifest does not
+    name this config, or holds anything else without being a study (`check_own_folder`). Reads
+    only: a refused directory is left as it was, so callers check it before marking it."""
     study_dir = Path(study_dir)
     marker = study_dir / STUDY_FILE
     recorded = _marked_hash(marker)
@@ -70,10 +73,12 @@ def _marked_hash(marker: Path) -> str | None:
 
 
 def _check_unmarked(study_dir: Path, config_hash: str, state: str) -> None:
-    """A directory without a readable mark is this study's to write when it holds none of a
-    study's files, or when its manifest names this config (a resume: the mark is written again)."""
+    """A directory without a readable mark is this study's to write when it is new or empty
+    (`check_own_folder`), or when its manifest names this config (a resume: the mark is written
+    again)."""
     found = study_files(study_dir)
     if not found:
+        check_own_folder(study_dir)
         return
     try:
         recorded = read_manifest(study_dir).get("config_hash")
@@ -90,6 +95,47 @@ def _check_unmarked(study_dir: Path, config_hash: str, state: str) -> None:
     )
 
 
+# The start of the mark's temporary files' names (`temp_path`: the writer's pid follows)
+MARK_TEMP = temp_path(Path(STUDY_FILE)).name.rsplit(".", 1)[0] + "."
+
+
+def check_own_folder(study_dir: Path) -> None:
+    """The study directory is new, empty, or a study's (its mark readable, or a study's files in
+    it): a folder of other files (a home folder, another program's data) is refused, not written
+    into. The lock file and a mark's temporary file (a run killed while marking) count as empty.
+    Reads only."""
+    study_dir = Path(study_dir)
+    if not study_dir.is_dir() or _marked_hash(study_dir / STUDY_FILE) is not None or study_files(study_dir):
+        return
+    try:
+        names = sorted(entry.name for entry in study_dir.iterdir())
+    except OSError as exc:
+        raise InputError(str(study_dir), "--out", f"cannot list the folder ({exc.strerror})",
+                         "pass a readable folder, or a new one, to --out") from None
+    others = [name for name in names if name != LOCK_FILE and not name.startswith(MARK_TEMP)]
+    if others:
+        raise InputError(str(study_dir), "--out",
+                         f"the folder holds files that are not a study's ({', '.join(others[:3])}"
+                         f"{', ...' if len(others) > 3 else ''})",
+                         f"pass a new or empty folder to --out, e.g. {study_dir / 'study'}")
+
+
+def mark_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:
+    """Mark the study directory as this study's before anything else is written in it (the folder
+    made, then STUDY_FILE, atomically), or InputError as `recorded_config_hash` refuses it: so a
+    run killed at any moment leaves a folder its rerun resumes. Another run marking it at the same
+    moment is seen: one mark is written, and the run of another config is refused."""
+    if recorded_config_hash(study_dir, config_hash) == config_hash:
+        return
+    marker = Path(study_dir) / STUDY_FILE
+    text = json.dumps({"config_hash": config_hash, "config": asdict(config)}, indent=1, default=str)
+    fix = "pass a writable --out"
+    if marker.exists() or marker.is_symlink():   # unreadable, and the manifest names this config
+        atomic_write_text(marker, text, "study marker", fix)
+    elif not atomic_create_bytes(marker, text.encode(), "study marker", fix):
+        mark_study_dir(study_dir, config, config_hash)   # marked meanwhile: this config's, or refused
+
+
 # The folders a study writes in: a file in the place of one would fail every episode (or the
 # consolidation) with the cause named only in each episode's failure.
 STUDY_FOLDERS: tuple[str, ...] = (*PART_FOLDERS, DAMAGED_DIR, INPUTS_DIR, PLOTS_DIR)
@@ -103,17 +149,6 @@ def check_study_folders(study_dir: Path) -> None:
         if (path.exists() or path.is_symlink()) and not path.is_dir():
             raise InputError(str(study_dir), name, f"not a folder (the study writes its {name} in it)",
                              f"move {path} aside, or pass another --out")
-
-
-def check_study_dir(study_dir: Path, config: StudyConfig, config_hash: str) -> None:
-    """Check that the study directory holds this study (resume) and not another; mark it as this
-    study's (the directory exists: `study_lock` made it)."""
-    marker = study_dir / STUDY_FILE
-    if recorded_config_hash(study_dir, config_hash) == config_hash:
-        return
-    config_dict = asdict(config)
-    atomic_write_text(marker, json.dumps({"config_hash": config_hash, "config": config_dict}, indent=1,
-                                         default=str), "study marker", "pass a writable --out")
 
 
 def quarantine_part(study_dir: Path, episode_id: str) -> None:

@@ -18,9 +18,11 @@ once); if it still fails, every attempt's reason is recorded in failures/ and th
 A rerun resumes: valid parts are skipped, damaged parts re-run.
 
 Nothing is written before every input has validated (town, driver model, specs, policies,
-population: `study_context`) and the output directory is known to be writable; a study directory
-is locked (`study.lock`, fcntl.flock) for the whole run, so a second run on it is refused with
-the holder's pid, host and start time. The local pool is harness/study/workers.py (workers that
+population: `study_context`) and the output directory is known to be writable and new, empty or
+this study's (a folder of other files is refused: harness/study/resume.py); the directory is
+marked as the study's before anything else is written in it (`open_study_dir`), then locked
+(`study.lock`, fcntl.flock) for the whole run, so a second run on it is refused with the holder's
+pid, host and start time. The local pool is harness/study/workers.py (workers that
 die with the parent, a worker death failing only its own episode).
 """
 
@@ -50,9 +52,10 @@ from trustroute.harness.study.manifest import DamagedParts, consolidate
 from trustroute.harness.study.parts import sync_parts, write_batch_part, write_failure, write_part_tables
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.harness.study.resume import (
-    check_study_dir,
+    check_own_folder,
     check_study_folders,
     finished_episodes,
+    mark_study_dir,
     recorded_config_hash,
 )
 
@@ -311,6 +314,18 @@ def study_lock(study_dir: Path) -> Iterator[None]:
         yield
 
 
+@contextlib.contextmanager
+def open_study_dir(study_dir: Path, config: StudyConfig) -> Iterator[None]:
+    """Take the study directory for a run of `config`, the one way `trustroute study`, the API's
+    `run_study` and `trustroute live` take it (after `check_before_writing`): marked as this
+    study's before anything else is written in it (`mark_study_dir`), then locked (`study_lock`),
+    then checked again under the lock (a run of another config that marked it first is refused)."""
+    mark_study_dir(study_dir, config, config.content_hash)
+    with study_lock(study_dir):
+        mark_study_dir(study_dir, config, config.content_hash)
+        yield
+
+
 def check_study_output(study_dir: Path) -> None:
     """The study directory (--out) is a directory or can be made: checked before any input is (a
     missing "aware" policy is synthesized then, which may take minutes) and before anything is said."""
@@ -342,10 +357,12 @@ def validate_study(config: StudyConfig | StudyContext, scheduler: str | None = N
 def check_before_writing(config: StudyConfig | StudyContext, study_dir: Path, scheduler: str | None,
                          attempts: int, progress: bool) -> StudyContext:
     """Every refusal of a study run, before its directory, its lock or its mark is written: the
-    inputs and the scheduler (`validate_study`), a directory that holds another study, and one where
-    a folder the study writes in is not a folder; the directory first, as the inputs may take minutes
-    (a missing policy is synthesized). Returns the study's context (`validate_study`'s)."""
+    inputs and the scheduler (`validate_study`), a directory that holds another study or files that
+    are not a study's, and one where a folder the study writes in is not a folder; the directory
+    first, as the inputs may take minutes (a missing policy is synthesized). Returns the study's
+    context (`validate_study`'s)."""
     check_study_output(study_dir)
+    check_own_folder(Path(study_dir))
     check_study_folders(Path(study_dir))
     context = validate_study(config, scheduler, attempts, progress)
     recorded_config_hash(Path(study_dir), context.config.content_hash)
@@ -402,7 +419,7 @@ def run_study(
     attempts: runs of a failing episode at most (the first and its retries)."""
     study_dir = Path(study_dir).resolve()
     context = check_before_writing(config, study_dir, scheduler, attempts, progress)
-    with study_lock(study_dir):
+    with open_study_dir(study_dir, context.config):
         return _run_locked(context, study_dir, workers, scheduler, progress, on_outcome, dask_processes,
                            attempts)
 
@@ -421,8 +438,6 @@ def _run_locked(
 
     started = time.perf_counter()
     config = context.config
-    config_hash = config.content_hash
-    check_study_dir(study_dir, config, config_hash)
     tasks = plan_episodes(config)
     check_record_ids(config, tasks)
     done, damaged = finished_episodes(study_dir, tasks)
@@ -513,7 +528,7 @@ def run_and_consolidate(
                          "serve it with `trustroute live CONFIG`, or simulate it with --engine sumo")
     study_dir = Path(study_dir).resolve()
     context = check_before_writing(config, study_dir, scheduler, attempts, progress)
-    with study_lock(study_dir):
+    with open_study_dir(study_dir, context.config):
         for _ in range(CONSOLIDATION_ROUNDS):
             run = _run_locked(context, study_dir, workers, scheduler, progress, None, dask_processes,
                               attempts)

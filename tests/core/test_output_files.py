@@ -8,6 +8,7 @@ import os
 
 import pytest
 
+from trustroute.core import output_files
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import OS_ERROR_FIXES, check_output_file, os_error_fix, write_error
 
@@ -88,3 +89,25 @@ def test_an_output_inside_a_study_it_reads_is_refused_through_any_link(tmp_path)
     assert check_output_file(tmp_path / "study.json", "--out", "x", studies={"DIR": study})
     with pytest.raises(InputError, match="inside the study directory"):
         check_output_file(study / "x.json", "--out", "x", studies={"DIR": tmp_path / "alias"})
+
+
+def test_atomic_create_writes_a_file_only_where_none_is(tmp_path):
+    """Of two writers creating one file, the first creates it whole and the second finds it there:
+    False, the file as the first wrote it, no temporary file left."""
+    target = tmp_path / "mark.json"
+    assert output_files.atomic_create_bytes(target, b"first", "study marker")
+    assert not output_files.atomic_create_bytes(target, b"second", "study marker")
+    assert target.read_bytes() == b"first"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mark.json"]
+
+
+def test_atomic_create_without_hard_links_takes_the_name_then_fills_it(tmp_path, monkeypatch):
+    def no_links(source, target):
+        raise OSError(errno.EPERM, "Operation not permitted")
+
+    monkeypatch.setattr(output_files.os, "link", no_links)
+    target = tmp_path / "mark.json"
+    assert output_files.atomic_create_bytes(target, b"first", "study marker")
+    assert not output_files.atomic_create_bytes(target, b"second", "study marker")
+    assert target.read_bytes() == b"first"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mark.json"]

@@ -8,6 +8,7 @@ import json
 import socket
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from tests.cli import assert_one_line_error, run_cli
@@ -117,3 +118,146 @@ def test_a_study_whose_mark_is_lost_is_refused_to_another_config_and_resumed_by_
     assert json.loads((out / "study.json").read_text())["config_hash"] == json.loads(
         (out / "manifest.json").read_text())["config_hash"]
     assert not (out / "damaged").exists()
+
+
+# -- a folder that is not a study's --------------------------------------------------------------------
+
+FOREIGN = {"notes.txt": "the user's own notes", "photos/holiday.jpg": "a photo",
+           "study.json": "a file of the user's that happens to share the mark's name"}
+
+
+@pytest.mark.parametrize("names", [("notes.txt", "photos/holiday.jpg"), ("study.json",)],
+                         ids=["files", "a-file-named-like-the-mark"])
+def test_a_folder_of_other_files_is_refused_and_left_as_it_was(names, capsys, tmp_path):
+    out = tmp_path / "home"
+    for name in names:
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        (out / name).write_text(FOREIGN[name])
+    before = _snapshot(out)
+    shown = ", ".join(sorted(name.split("/")[0] for name in names))
+    code, _, err = run_cli(capsys, "study", str(_config(tmp_path, 1)), "--out", str(out), "--workers", "1",
+                           "--no-report")
+    assert_one_line_error(code, err, f"{out}: --out: the folder holds files that are not a study's ({shown})",
+                          f"pass a new or empty folder to --out, e.g. {out / 'study'}")
+    assert _snapshot(out) == before and sorted(p.name for p in out.iterdir()) == sorted(
+        {name.split("/")[0] for name in names})
+
+
+def test_the_api_refuses_a_folder_of_other_files_by_its_keyword(tmp_path):
+    import trustroute
+    from trustroute.core.errors import InputError
+
+    out = tmp_path / "data"
+    out.mkdir()
+    (out / "results.csv").write_text("a,b\n1,2\n")
+    config = {"study": {"participants": 1, "seed": 1, "engine": "model", "specs": ["phi1"],
+                        "conditions": ["free"]}}
+    with pytest.raises(InputError, match=r"data: out: the folder holds files that are not a study's "
+                                         r"\(results.csv\) \(fix: pass a new or empty folder to out"):
+        trustroute.run_study(config, out=out)
+    assert [p.name for p in out.iterdir()] == ["results.csv"]
+
+
+def test_an_empty_folder_is_a_new_study(capsys, tmp_path):
+    out = tmp_path / "empty"
+    out.mkdir()
+    code, _, err = run_cli(capsys, "study", str(_config(tmp_path, 1)), "--out", str(out), "--workers", "1",
+                           "--no-report")
+    assert code == 0, err
+    assert (out / "study.json").exists() and (out / "manifest.json").exists()
+
+
+def test_the_mark_is_written_before_anything_else_in_the_folder(capsys, tmp_path, monkeypatch):
+    """A run killed at any moment leaves its mark: when the lock is taken (the first thing written
+    after the mark) the folder holds the mark and nothing else."""
+    from trustroute.harness.study import runner
+
+    out = tmp_path / "study"
+    seen: list[list[str]] = []
+    real_lock = runner.study_lock
+
+    def lock_after_looking(study_dir):
+        seen.append(sorted(p.name for p in Path(study_dir).iterdir()) if Path(study_dir).is_dir() else [])
+        return real_lock(study_dir)
+
+    monkeypatch.setattr(runner, "study_lock", lock_after_looking)
+    code, _, err = run_cli(capsys, "study", str(_config(tmp_path, 1)), "--out", str(out), "--workers", "1",
+                           "--no-report")
+    assert code == 0, err
+    assert seen == [["study.json"]]
+
+
+def test_a_folder_holding_only_the_mark_resumes_as_its_study(capsys, tmp_path):
+    """A run killed right after marking its folder (the mark, perhaps the lock and a temporary file
+    of a mark being written) is resumed by its config, and refused to another config."""
+    config = _config(tmp_path, 1)
+    reference = tmp_path / "reference"
+    code, _, err = run_cli(capsys, "study", str(config), "--out", str(reference), "--workers", "1",
+                           "--no-report")
+    assert code == 0, err
+    out = tmp_path / "study"
+    out.mkdir()
+    (out / "study.json").write_bytes((reference / "study.json").read_bytes())
+    (out / "study.lock").write_text("")
+    (out / ".tmp-study.json.4242").write_text('{"config_hash": ')
+    before = _snapshot(out)
+    code, _, err = run_cli(capsys, "study", str(_config(tmp_path, 2, "other.toml")), "--out", str(out),
+                           "--workers", "1", "--no-report")
+    assert_one_line_error(code, err, f"{out}: study.json", "different config")
+    assert _snapshot(out) == before
+    code, _, err = run_cli(capsys, "study", str(config), "--out", str(out), "--workers", "1", "--no-report")
+    assert code == 0, err
+    episodes = [pd.read_parquet(folder / "episodes.parquet").drop(columns=["wall_seconds"])
+                for folder in (out, reference)]
+    pd.testing.assert_frame_equal(*episodes)
+
+
+def test_a_study_killed_before_its_manifest_resumes_without_duplicating_rows(capsys, tmp_path, monkeypatch):
+    """Killed after its episodes' parts were written and before consolidation wrote the manifest:
+    the folder holds the mark and the parts (no manifest), and the rerun runs nothing again."""
+    from trustroute.harness.study import runner
+
+    config = _config(tmp_path, 1)
+    config.write_text(config.read_text().replace("participants = 1", "participants = 3"))
+    out = tmp_path / "study"
+
+    def killed(*_args, **_kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "consolidate", killed)
+    code, _, err = run_cli(capsys, "study", str(config), "--out", str(out), "--workers", "1", "--no-report")
+    assert code == 130, err
+    monkeypatch.undo()
+    assert not (out / "manifest.json").exists() and (out / "study.json").exists()
+    parts = sorted(p.name for p in (out / "parts").iterdir())
+    assert len(parts) == 3   # every episode's part (3 participants, one spec, one condition)
+    code, printed, err = run_cli(capsys, "study", str(config), "--out", str(out), "--workers", "1",
+                                 "--no-report", "--json")
+    assert code == 0, err
+    assert {key: json.loads(printed)[key] for key in ("planned", "skipped", "ran", "failed")} == {
+        "planned": 3, "skipped": 3, "ran": 0, "failed": []}
+    episodes = pd.read_parquet(out / "episodes.parquet")
+    assert len(episodes) == len(set(episodes["episode_id"])) == len(parts)
+    assert sorted(p.name for p in (out / "parts").iterdir()) == parts
+
+
+def test_of_two_runs_marking_one_new_folder_at_once_the_second_config_is_refused(tmp_path, monkeypatch):
+    """Both found the folder new; the other run's mark lands first: this run sees it, and refuses."""
+    from trustroute.core.errors import InputError
+    from trustroute.harness.study import resume
+    from trustroute.harness.study.config import load_study_config
+
+    mine = load_study_config(_config(tmp_path, 1))
+    theirs = load_study_config(_config(tmp_path, 2, "other.toml"))
+    out = tmp_path / "study"
+    real_create = resume.atomic_create_bytes
+
+    def another_run_marks_first(path, data, what, fix=""):
+        real_create(path, json.dumps({"config_hash": theirs.content_hash}).encode(), what, fix)
+        return real_create(path, data, what, fix)
+
+    monkeypatch.setattr(resume, "atomic_create_bytes", another_run_marks_first)
+    with pytest.raises(InputError, match="study.json: the directory holds a study with a different config"):
+        resume.mark_study_dir(out, mine, mine.content_hash)
+    assert json.loads((out / "study.json").read_text()) == {"config_hash": theirs.content_hash}
+    assert [p.name for p in out.iterdir()] == ["study.json"]

@@ -4,6 +4,8 @@
   `os.replace`, then fsync of the folder, so a reader (or a rerun after a crash, a full disk or a
   kill) sees the old file or the whole new one, never a partial one; on failure the temporary
   file is removed and the error is an InputError (one line, exit 2) naming the path and the cause.
+  `atomic_create_bytes` writes a file only where none exists (a hard link of the temporary file),
+  so of two processes creating it at once exactly one does.
 - `check_output_file` / `check_output_dir`: run before any work starts, so a command given an
   unwritable `--out` fails at once instead of after minutes of computation; `check_output_file`
   also refuses an output that is one of the command's input files or lies inside a study
@@ -102,6 +104,43 @@ def fsync_directory(directory: Path) -> None:
 def atomic_write_bytes(path: str | Path, data: bytes, what: str, fix: str = "", sync: bool = True) -> Path:
     """Replace `path` by `data` atomically (InputError on any OS failure; no temporary file left)."""
     path = Path(path)
+    move_into_place(_written_temp(path, data, what, fix, sync), path, what, fix, sync)
+    return path
+
+
+def atomic_create_bytes(path: str | Path, data: bytes, what: str, fix: str = "") -> bool:
+    """Create `path` holding `data` atomically, only where no file of that name exists: True when
+    it was created, False when one was there already (left as it was: another process may have
+    created it meanwhile). A hard link of the finished temporary file, so the name appears whole
+    or not at all (on a file system without hard links: the name taken empty, then filled by
+    `os.replace`); InputError on any other OS failure, no temporary file left."""
+    path = Path(path)
+    temp = _written_temp(path, data, what, fix, True)
+    try:
+        try:
+            os.link(temp, path)
+        except OSError as exc:
+            if exc.errno not in NO_HARD_LINKS:
+                raise
+            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+            os.replace(temp, path)
+    except FileExistsError:
+        return False
+    except OSError as exc:
+        raise write_error(path, what, exc, fix) from None
+    finally:
+        with contextlib.suppress(OSError):
+            temp.unlink()
+    fsync_directory(path.parent)
+    return True
+
+
+# os.link's errors on a file system that has no hard links (FAT, some network and FUSE mounts)
+NO_HARD_LINKS = frozenset({errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.ENOSYS})
+
+
+def _written_temp(path: Path, data: bytes, what: str, fix: str, sync: bool) -> Path:
+    """`data` in the temporary file of `path` (its folder made), flushed to disk with `sync`."""
     if path.is_dir():
         raise InputError(str(path), "", f"the {what} path is a directory", fix or "pass a file path")
     try:
@@ -119,8 +158,7 @@ def atomic_write_bytes(path: str | Path, data: bytes, what: str, fix: str = "", 
         with contextlib.suppress(OSError):
             temp.unlink()
         raise write_error(path, what, exc, fix) from None
-    move_into_place(temp, path, what, fix, sync)
-    return path
+    return temp
 
 
 def move_into_place(temp: Path, path: Path, what: str, fix: str = "", sync: bool = True) -> None:

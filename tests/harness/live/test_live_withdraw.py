@@ -114,11 +114,15 @@ def test_a_malformed_registry_is_one_line_naming_the_key(kind, readmit, tmp_path
 
 @pytest.mark.parametrize("kind", sorted(BAD_REGISTRIES))
 def test_the_station_reads_the_registry_with_the_same_checks(kind, tmp_path):
+    from trustroute.harness.study.resume import mark_study_dir
+
     text, place, problem = BAD_REGISTRIES[kind]
+    config = tiny_config(tmp_path)
+    mark_study_dir(tmp_path / "study", config, config.content_hash)   # the study's folder, as served
     registry = tmp_path / "study" / "live" / "participants.json"
     registry.parent.mkdir(parents=True)
     registry.write_text(text)
-    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions(pace=1000.0))
+    study = LiveStudy(config, tmp_path / "study", ServerOptions(pace=1000.0))
     with pytest.raises(InputError) as refused:
         study.open()
     assert f"{registry}: {place}: {problem}" in refused.value.one_line()
