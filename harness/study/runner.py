@@ -14,8 +14,10 @@ forked after it and inherit it, a Dask cluster gets one copy per worker (scatter
 tasks), so nothing large travels with the tasks and the result cannot depend on the backend. The
 consolidation is given the same context (the expected values, the inputs it stores). A failed
 episode (an error, or its worker process dying) is retried up to `attempts - 1` times (default:
-once); if it still fails, every attempt's reason is recorded in failures/ and the study goes on.
-A rerun resumes: valid parts are skipped, damaged parts re-run.
+once), unless the episode itself failed on bad input (an InputError, e.g. a town jammed by its
+background traffic: the same seed fails the same way again); if it still fails, every attempt's
+reason is recorded in failures/ and the study goes on. A rerun resumes: valid parts are skipped,
+damaged parts re-run.
 
 Nothing is written before every input has validated (town, driver model, specs, policies,
 population: `study_context`) and the output directory is known to be writable and new, empty or
@@ -82,6 +84,17 @@ class EpisodeOutcome:
     error: str = ""
     traceback: str = ""
     wall_seconds: float = 0.0
+    # another attempt may end otherwise: not after the episode's own bad input (an InputError, such
+    # as a TrafficJam), which the same seed meets again
+    retry: bool = True
+
+
+def failed_outcome(task: EpisodeTask, exc: Exception, started: float, in_episode: bool) -> EpisodeOutcome:
+    """The outcome of `task` failed by `exc`, `started` at its perf_counter time; `in_episode`: raised
+    by the episode itself (then an InputError is not retried), else by the writing of its part."""
+    return EpisodeOutcome(task.episode_id, False, f"{type(exc).__name__}: {exc}", traceback.format_exc(),
+                          time.perf_counter() - started,
+                          retry=not (in_episode and isinstance(exc, InputError)))
 
 
 @dataclass(frozen=True)
@@ -149,15 +162,12 @@ def run_task(context: StudyContext, study_dir: str, task: EpisodeTask) -> Episod
         recorded = task.episode_id in context.config.record
         rrd = recording_path(Path(study_dir), task.episode_id) if recorded else None
         record = run_planned_episode(context, task, rrd_path=rrd)
-        write_part_tables(Path(study_dir), task, record.summary, record.tables())
     except Exception as exc:  # one bad episode must never stop the study
-        return EpisodeOutcome(
-            task.episode_id,
-            False,
-            f"{type(exc).__name__}: {exc}",
-            traceback.format_exc(),
-            time.perf_counter() - started,
-        )
+        return failed_outcome(task, exc, started, in_episode=True)
+    try:
+        write_part_tables(Path(study_dir), task, record.summary, record.tables())
+    except Exception as exc:
+        return failed_outcome(task, exc, started, in_episode=False)
     return EpisodeOutcome(task.episode_id, True, wall_seconds=time.perf_counter() - started)
 
 
@@ -174,14 +184,14 @@ def run_batch(context: StudyContext, study_dir: str, tasks: tuple[EpisodeTask, .
             done.append((task, record.summary, record.tables()))
             outcomes.append(EpisodeOutcome(task.episode_id, True, wall_seconds=time.perf_counter() - started))
         except Exception as exc:  # one bad episode must never stop the others
-            outcomes.append(EpisodeOutcome(task.episode_id, False, f"{type(exc).__name__}: {exc}",
-                                           traceback.format_exc(), time.perf_counter() - started))
+            outcomes.append(failed_outcome(task, exc, started, in_episode=True))
     if done:
+        started = time.perf_counter()
         try:
             write_batch_part(Path(study_dir), *(list(column) for column in zip(*done, strict=True)))
         except Exception as exc:  # nothing of the batch was stored: every episode of it failed
-            return [EpisodeOutcome(task.episode_id, False, f"{type(exc).__name__}: {exc}",
-                                   traceback.format_exc()) for task in tasks]
+            return [failed_outcome(task, exc, started, in_episode=False) if outcome.ok else outcome
+                    for task, outcome in zip(tasks, outcomes, strict=True)]
     return outcomes
 
 
@@ -468,7 +478,7 @@ def _run_locked(
         consume(_outcomes(function, context, plan_units(config, todo, workers), workers, scheduler,
                           dask_processes))
         for _ in range(attempts - 1):  # after everything else: a transient failure gets another chance
-            retry = [task for task, _ in failed.values()]
+            retry = [task for task, outcome in failed.values() if outcome.retry]
             if not retry:
                 break
             retried += len(retry)

@@ -131,3 +131,33 @@ def test_a_batch_part_under_another_name_is_moved_aside(reference, batched, tmp_
     # the swapped file claims episodes that their own batch holds: none damaged, the first three rerun
     assert run.damaged == [] and run.ran == 3 and (study / DAMAGED_DIR / first.name).exists()
     _assert_same(study, reference)
+
+
+def test_a_batch_keeps_an_episode_s_own_bad_input_when_its_part_cannot_be_written(tmp_path, monkeypatch):
+    """An episode of a batch that failed on its own bad input stays that failure (not retried),
+    while the episodes that finished fail by the batch part's write error (retried)."""
+    from trustroute.core.errors import InputError
+    from trustroute.harness.study.context import study_context
+
+    config = _config(tmp_path)
+    context = study_context(config)
+    tasks = tuple(plan_episodes(config)[:3])
+    planned = runner_module.run_planned_episode
+    bad = InputError("episode", "road", "bad input", "fix it")
+
+    def run_planned_episode(context, task, rrd_path=None):
+        if task.episode_id == tasks[1].episode_id:
+            raise bad
+        return planned(context, task, rrd_path)
+
+    def full_disk(*_args):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(runner_module, "run_planned_episode", run_planned_episode)
+    monkeypatch.setattr(runner_module, "write_batch_part", full_disk)
+    outcomes = runner_module.run_batch(context, str(tmp_path / "study"), tasks)
+    assert [(o.episode_id, o.ok, o.retry) for o in outcomes] == [
+        (tasks[0].episode_id, False, True), (tasks[1].episode_id, False, False),
+        (tasks[2].episode_id, False, True)]
+    assert outcomes[1].error == f"InputError: {bad}"
+    assert outcomes[0].error == outcomes[2].error == "OSError: [Errno 28] No space left on device"

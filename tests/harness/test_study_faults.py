@@ -456,7 +456,8 @@ def test_enospc_during_an_atomic_write_leaves_the_old_file_and_no_temp(tmp_path,
 
 def test_an_episode_jammed_by_background_traffic_is_recorded_as_failed(tmp_path, monkeypatch, capsys):
     """Town01 with 200 background vehicles locks up in one of this study's episodes: that episode
-    is recorded as failed with the jam's one line (not a traceback's last line), the others run.
+    is recorded as failed with the jam's one line (not a traceback's last line) after its one run
+    (not retried: the same seed jams again), the others run.
     The 7200 s sim-time cap is lowered to 300 s (the jam stands by then) to keep the test fast."""
     from trustroute.harness.simulation.sumo_start import SumoConfig
 
@@ -467,14 +468,72 @@ def test_an_episode_jammed_by_background_traffic_is_recorded_as_failed(tmp_path,
     monkeypatch.setattr(runner_module, "run_planned_episode", lambda context, task, rrd_path=None: planned(
         context, task, rrd_path, sumo_config=SumoConfig(max_sim_seconds=300.0)))
     study = tmp_path / "study"
-    code, _, err = run_cli(capsys, "study", str(config_path), "--out", str(study), "--no-report")
+    code, printed, err = run_cli(capsys, "study", str(config_path), "--out", str(study), "--no-report",
+                                 "--json")
     assert code == 1 and "1 episodes failed" in err, err
     (failure,) = sorted((study / "failures").glob("*.json"))
     record = json.loads(failure.read_text())
-    assert record["attempts"] == 2
+    assert record["attempts"] == 1 and len(record["errors"]) == 1   # the same seed jams again: run once
+    assert json.loads(printed)["retried"] == 0
     assert all(error.startswith(f"TrafficJam: episode {record['episode_id']}: ") and "\n" not in error
                and "the 200 background vehicles jammed the town's roads (fix: run it with fewer" in error
                for error in record["errors"])
     planned_ids = [task.episode_id for task in plan_episodes(load_study_config(config_path))]
     episodes = pd.read_parquet(study / "episodes.parquet")
     assert list(episodes["episode_id"]) == [e for e in planned_ids if e != record["episode_id"]]
+
+
+def test_an_episode_failing_on_bad_input_runs_once_and_a_crash_is_retried(tmp_path, monkeypatch, capsys):
+    """An episode whose own input fails it (an InputError: here a TrafficJam, which the same seed
+    meets again) is recorded as failed after one run, with its one-line reason; a crash gets its
+    retry. The summary line, --json, the failure records, the manifest and the report count both."""
+    from collections import Counter
+
+    from trustroute.harness.simulation.background import STUCK_SECONDS, sim_time_cap_reached
+    from trustroute.harness.simulation.sumo_start import SumoConfig
+
+    config_path = _config(tmp_path, participants=4)
+    tasks = plan_episodes(load_study_config(config_path))
+    jammed, crashed = tasks[1].episode_id, tasks[2].episode_id
+    jam = sim_time_cap_reached(jammed, "A-B", STUCK_SECONDS, SumoConfig(background_vehicles=200))
+    runs: Counter[str] = Counter()
+    planned = runner_module.run_planned_episode
+
+    def run_planned_episode(context, task, rrd_path=None):
+        runs[task.episode_id] += 1
+        if task.episode_id == jammed:
+            raise jam
+        if task.episode_id == crashed:
+            raise RuntimeError("a crash in the episode")
+        return planned(context, task, rrd_path)
+
+    monkeypatch.setattr(runner_module, "run_planned_episode", run_planned_episode)
+    study = tmp_path / "study"
+    code, printed, err = run_cli(capsys, "study", str(config_path), "--out", str(study), "--workers", "1",
+                                 "--report-anyway")
+    assert code == 1 and f"2 episodes failed (reasons in {study / 'failures'}" in err, err
+    assert runs == {**{task.episode_id: 1 for task in tasks}, crashed: 2}
+    assert "4 episodes planned: 0 already done, 4 run, 1 retried, 2 failed" in printed
+    jam_line = f"TrafficJam: {jam}"
+    records = {name: json.loads((study / "failures" / f"{name}.json").read_text())
+               for name in (jammed, crashed)}
+    assert (records[jammed]["attempts"], records[jammed]["errors"], records[jammed]["error"]) == (
+        1, [jam_line], jam_line)
+    assert "\n" not in jam_line and "jammed the town's roads (fix: run it with fewer" in jam_line
+    assert records[crashed]["attempts"] == 2
+    assert records[crashed]["errors"] == ["RuntimeError: a crash in the episode"] * 2
+    manifest = json.loads((study / "manifest.json").read_text())
+    assert manifest["run"]["retried"] == 1 and sorted(manifest["failed_episodes"], key=str) == sorted(
+        [{"episode_id": jammed, "error": jam_line, "attempts": 1},
+         {"episode_id": crashed, "error": "RuntimeError: a crash in the episode", "attempts": 2}], key=str)
+    report = (study / "report.md").read_text()
+    assert "## Failed episodes" in report and f"| {jammed} | 1 | {jam_line} |" in report
+
+    runs.clear()   # a rerun runs the failed episodes again, by the same rule
+    code, printed, err = run_cli(capsys, "study", str(config_path), "--out", str(study), "--workers", "1",
+                                 "--no-report", "--json")
+    assert code == 1
+    assert runs == {jammed: 1, crashed: 2}
+    payload = json.loads(printed)
+    assert {key: payload[key] for key in ("planned", "skipped", "ran", "retried", "failed")} == {
+        "planned": 4, "skipped": 2, "ran": 3, "retried": 1, "failed": sorted([jammed, crashed])}
