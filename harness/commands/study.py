@@ -75,7 +75,8 @@ class StudyOptions:
 def study(ctx: click.Context, config_path: str, options: StudyOptions) -> None:
     """Run (or resume) the simulated within-subject study described by CONFIG (a TOML file).
 
-    Exit code 1 when episodes failed (they are named; a rerun retries them), 2 for bad input."""
+    Exit code 1 when episodes failed (they are named with their reason; a rerun runs them again, and
+    one that failed on its own input, such as a jammed town, fails again), 2 for bad input."""
     from trustroute.harness.study.config import load_study_config
 
     config = load_study_config(config_path).with_overrides(engine=options.engine)
