@@ -25,7 +25,10 @@ Paired values (a participant's trust under A and under B):
   limit the p-value is scipy's normal approximation (tie-corrected), and `Wilcoxon.method` says
   so (`WILCOXON_APPROXIMATE`), for the tables to mark it;
 - `mean_difference`: the mean paired difference with a BCa bootstrap interval over participants
-  from `scipy.stats.bootstrap` (the Generator passed in drives the resampling);
+  from `scipy.stats.bootstrap` (the Generator passed in drives the resampling); `Estimate.method`
+  names the interval given: BCa, or the percentile interval where BCa is undefined (differences
+  equal up to rounding, whose leave-one-out means are one float: scipy's acceleration is 0/0, nan),
+  or "degenerate" where every difference is the same (no resampling: the interval is the point);
 - `bootstrap_ci`: percentile bootstrap of a mean (scipy.stats.bootstrap), for single cells;
 - `keyed_rng`: the Generator of one resampling, from the analysis seed and a key naming what is
   resampled, so the same data and comparison get the same interval wherever and whenever computed.
@@ -159,6 +162,12 @@ class Estimate:
     low: float
     high: float
     note: str = ""
+    # the interval's method where one column holds intervals of several: `mean_difference`'s
+    # BOOTSTRAP_*, `paired_risk_difference`'s NEWCOMBE ("" where there is no interval)
+    method: str = ""
+
+
+NEWCOMBE = "Newcombe"   # the method of `paired_risk_difference`'s interval (Estimate.method)
 
 
 def paired_risk_difference(table: PairedTable, level: float = DEFAULT_LEVEL) -> Estimate:
@@ -179,6 +188,7 @@ def paired_risk_difference(table: PairedTable, level: float = DEFAULT_LEVEL) -> 
         difference,
         max(-1.0, difference - math.sqrt(max(lower, 0.0))),
         min(1.0, difference + math.sqrt(max(upper, 0.0))),
+        method=NEWCOMBE,
     )
 
 
@@ -322,14 +332,24 @@ def wilcoxon_paired(first: np.ndarray, second: np.ndarray) -> Wilcoxon:
     )
 
 
+# The interval a bootstrap of a mean gives (`Estimate.method` of `mean_difference`): BCa; the
+# percentile interval where BCa is undefined; none where every value is the same (the point).
+BOOTSTRAP_BCA = "BCa"
+BOOTSTRAP_PERCENTILE = "percentile"
+BOOTSTRAP_DEGENERATE = "degenerate"
+
+
 def _bootstrap_mean(
     data: np.ndarray, rng: np.random.Generator, resamples: int, level: float, method: str
-) -> tuple[float, float]:
+) -> tuple[float, float, str]:
+    """The `method` interval of the mean of `data` and the method that gave it (BOOTSTRAP_*)."""
     if data.size == 0:
-        return math.nan, math.nan
+        return math.nan, math.nan, ""
     if data.size == 1 or np.all(data == data[0]):
-        return float(data[0]), float(data[0])  # no spread: every resample has the same mean
-    with warnings.catch_warnings():
+        # no spread: every resample has the same mean
+        return float(data[0]), float(data[0]), BOOTSTRAP_DEGENERATE
+    # BCa's nan where it is undefined is handled below: neither scipy's warning nor numpy's 0/0 is shown
+    with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
         warnings.simplefilter("ignore", stats.DegenerateDataWarning)
         result = stats.bootstrap(
             (data,),
@@ -341,9 +361,12 @@ def _bootstrap_mean(
             batch=max(1, 2_000_000 // data.size),
         )
     low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
-    if math.isnan(low) or math.isnan(high):  # BCa undefined (e.g. all but one value equal)
-        return _bootstrap_mean(data, rng, resamples, level, "percentile")
-    return low, high
+    if method == BOOTSTRAP_BCA and (math.isnan(low) or math.isnan(high)):
+        # BCa undefined: values equal up to rounding (a participant's trust one level higher under
+        # A on episodes of different lengths), whose leave-one-out means are one float, so the
+        # jackknife's spread is 0 and scipy's acceleration 0/0
+        return _bootstrap_mean(data, rng, resamples, level, BOOTSTRAP_PERCENTILE)
+    return low, high, method
 
 
 def bootstrap_ci(
@@ -356,7 +379,8 @@ def bootstrap_ci(
     if not 0 < level < 1:
         raise ValueError(f"level must lie in (0, 1), got {level}")
     data = np.asarray(values, dtype=float)
-    return _bootstrap_mean(data[~np.isnan(data)], rng, resamples, level, "percentile")
+    low, high, _ = _bootstrap_mean(data[~np.isnan(data)], rng, resamples, level, BOOTSTRAP_PERCENTILE)
+    return low, high
 
 
 def keyed_rng(seed: int, *key: object) -> np.random.Generator:
@@ -377,10 +401,12 @@ def mean_difference(
     resamples: int = DEFAULT_RESAMPLES,
     level: float = DEFAULT_LEVEL,
 ) -> Estimate:
-    """Mean of first - second over pairs (NaN pairs dropped), BCa bootstrap interval over pairs."""
+    """Mean of first - second over pairs (NaN pairs dropped), BCa bootstrap interval over pairs;
+    `method` names the interval given (BOOTSTRAP_*: BCa, percentile where BCa is undefined,
+    degenerate where every difference is the same)."""
     a, b = _drop_nan_pairs(first, second)
     difference = a - b
     if difference.size == 0:
         return Estimate(math.nan, math.nan, math.nan)
-    low, high = _bootstrap_mean(difference, rng, resamples, level, "BCa")
-    return Estimate(float(difference.mean()), low, high)
+    low, high, method = _bootstrap_mean(difference, rng, resamples, level, BOOTSTRAP_BCA)
+    return Estimate(float(difference.mean()), low, high, method=method)

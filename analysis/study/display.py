@@ -20,7 +20,12 @@ from trustroute.analysis.formatting import (
     terminal_table,
     wrapped_text,
 )
-from trustroute.analysis.statistics import WILCOXON_APPROXIMATE, WILCOXON_EXACT
+from trustroute.analysis.statistics import (
+    BOOTSTRAP_DEGENERATE,
+    BOOTSTRAP_PERCENTILE,
+    WILCOXON_APPROXIMATE,
+    WILCOXON_EXACT,
+)
 from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis
 from trustroute.analysis.study.design import order_text
 from trustroute.analysis.study.manual import manual_display
@@ -35,12 +40,13 @@ def paired_display(p: pd.DataFrame) -> pd.DataFrame:
             "unit": p["unit"],
             "n": p["pairs"],
             "only A / only B sat.": _counts_column(p, "only_a_satisfied", "only_b_satisfied"),
-            "risk difference [95% CI]": estimate_column(p, "risk_difference", "rd_low", "rd_high"),
+            "risk difference [95% CI]": named_estimate_column(p, "risk_difference", "rd_low", "rd_high",
+                                                              "rd_method"),
             "conditional OR [exact CI]": estimate_column(p, "odds_ratio", "or_low", "or_high", 2),
             "McNemar exact p": [format_p(finite_or_none(v)) for v in p["mcnemar_p"]],
             "McNemar p (Holm)": _p_column(p, "mcnemar_p_holm"),
-            "trust difference [BCa CI]": estimate_column(
-                p, "trust_difference", "trust_diff_low", "trust_diff_high"
+            "trust difference [BCa CI]": named_estimate_column(
+                p, "trust_difference", "trust_diff_low", "trust_diff_high", "trust_diff_method"
             ),
             "Wilcoxon p (trust)": wilcoxon_p_column(p, "wilcoxon_p"),
             "Wilcoxon p (Holm)": wilcoxon_p_column(p, "wilcoxon_p_holm"),
@@ -71,6 +77,17 @@ def _p_column(p: pd.DataFrame, column: str) -> list[str]:
 
 
 APPROXIMATE_MARK = "≈ "
+# bootstrap intervals that are not the BCa interval a column's title names (statistics.py
+# `mean_difference`): each shown with its method after it, "(percentile)" or "(degenerate)"
+NAMED_METHODS = (BOOTSTRAP_PERCENTILE, BOOTSTRAP_DEGENERATE)
+
+
+def named_estimate_column(p: pd.DataFrame, value: str, low: str, high: str, method: str) -> list[str]:
+    """'estimate [low, high]' per row (formatting.py `estimate_column`), followed by the interval's
+    method in parentheses where it is one of NAMED_METHODS (column `method`)."""
+    methods = p[method] if method in p else [None] * len(p)
+    return [f"{text} ({how})" if how in NAMED_METHODS and text != MISSING else text
+            for text, how in zip(estimate_column(p, value, low, high), methods, strict=True)]
 
 
 def wilcoxon_p_column(p: pd.DataFrame, column: str) -> list[str]:
@@ -85,7 +102,7 @@ def sensitivity_display(s: pd.DataFrame) -> pd.DataFrame:
     """The sensitivity table as shown: one row per (pair, spec), one column per belief source (the
     leading one marked "(primary)") with the satisfaction difference A − B and its 95% interval."""
     shown = s.assign(pair=s["condition_a"] + " − " + s["condition_b"],
-                     value=estimate_column(s, "risk_difference", "rd_low", "rd_high"),
+                     value=named_estimate_column(s, "risk_difference", "rd_low", "rd_high", "rd_method"),
                      column=[f"{source} (primary)" if primary else source
                              for source, primary in zip(s["source"], s["primary"], strict=True)])
     wide = shown.pivot_table(index=["pair", "spec"], columns="column", values="value", aggfunc="first",

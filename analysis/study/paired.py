@@ -99,12 +99,13 @@ def per_participant_table(episodes: pd.DataFrame, column: str, pair: tuple[str, 
 
 
 def trust_difference_columns(trust, wx) -> dict:
-    """A paired row's trust columns: the mean difference with its interval, and Wilcoxon's test with
-    the median difference."""
+    """A paired row's trust columns: the mean difference with its interval and the interval's method
+    (statistics.py `mean_difference`), and Wilcoxon's test with the median difference."""
     return {
         "trust_difference": finite_or_none(trust.value),
         "trust_diff_low": finite_or_none(trust.low),
         "trust_diff_high": finite_or_none(trust.high),
+        "trust_diff_method": trust.method,
         "wilcoxon_pairs": wx.pairs,
         "wilcoxon_p": wx.p_value,
         "wilcoxon_method": wx.method,
@@ -147,6 +148,7 @@ def paired_table_rows(
                 "risk_difference": finite_or_none(rd.value),
                 "rd_low": finite_or_none(rd.low),
                 "rd_high": finite_or_none(rd.high),
+                "rd_method": rd.method,
                 "odds_ratio": finite_or_none(odds.value),
                 "or_low": finite_or_none(odds.low),
                 "or_high": finite_or_none(odds.high),
@@ -185,6 +187,7 @@ def paired_table_rows(
                 "risk_difference": finite_or_none(sat_mean.value),
                 "rd_low": finite_or_none(sat_mean.low),
                 "rd_high": finite_or_none(sat_mean.high),
+                "rd_method": sat_mean.method,
                 **trust_difference_columns(trust, wx),
             }
         )

@@ -17,7 +17,7 @@ import pandas as pd
 
 from trustroute.analysis.belief_sources import declared_belief_source, default_belief_source, source_label
 from trustroute.analysis.formatting import markdown_table
-from trustroute.analysis.statistics import WILCOXON_EXACT_PAIRS
+from trustroute.analysis.statistics import BOOTSTRAP_DEGENERATE, BOOTSTRAP_PERCENTILE, WILCOXON_EXACT_PAIRS
 from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis, study_analysis
 from trustroute.analysis.study.design import design_text, participants_text
 from trustroute.analysis.study.display import (
@@ -48,7 +48,10 @@ NOTES = [
     "odds ratio is b/c of the discordant pairs with the exact interval of b/(b+c); trust differences use a "
     "BCa bootstrap over participants (scipy.stats.bootstrap, 10,000 resamples), as does the 'all specs' "
     "satisfaction difference: a bootstrap bound moves between seeds by a standard deviation of up to "
-    "about 0.02 (measured on 14 to 21 participants), so its third decimal is not reliable. Wilcoxon "
+    "about 0.02 (measured on 14 to 21 participants), so its third decimal is not reliable. Where BCa is "
+    "undefined (differences equal up to rounding) the interval is the percentile bootstrap's, marked "
+    f"'({BOOTSTRAP_PERCENTILE})'; where every difference is the same there is nothing to resample and the "
+    f"interval is the point, marked '({BOOTSTRAP_DEGENERATE})'. Wilcoxon "
     "p-values are exact (the signed-rank sum over every sign flip, ties and zero differences included) up "
     f"to {WILCOXON_EXACT_PAIRS} nonzero differences, beyond that the normal approximation, marked "
     f"'{APPROXIMATE_MARK.strip()}'. The mixed model is fitted by REML, its interval and p-value are Wald's "
@@ -141,7 +144,8 @@ def config_text(manifest: dict) -> str:
 
 
 SENSITIVITY_LINE = ("Each comparison's satisfaction difference (A − B, per spec: Newcombe's interval; all "
-                    "specs: the participants' mean difference, BCa bootstrap) on every belief source the "
+                    "specs: the participants' mean difference, BCa bootstrap, its method named where it is "
+                    "another as in the paired table) on every belief source the "
                     "study has; the tables above lead with the one marked primary. 'filter' scores each "
                     "condition on its own AV's belief and 'reference' on the type-aware filter (the "
                     "robust AV's own), so neither is neutral when the conditions' filters differ.")

@@ -16,7 +16,8 @@ import pandas as pd
 
 from trustroute.analysis.study.paired import all_pairs_table, condition_pairs, per_participant_table
 
-SENSITIVITY_COLUMNS = ("spec", "condition_a", "condition_b", "pairs", "risk_difference", "rd_low", "rd_high")
+SENSITIVITY_COLUMNS = ("spec", "condition_a", "condition_b", "pairs", "risk_difference", "rd_low", "rd_high",
+                       "rd_method")
 
 
 def sensitivity_table(episodes: pd.DataFrame, sources: list[str], primary: str, paired: pd.DataFrame,
