@@ -6,9 +6,10 @@ informative); at C the AV picks one of two or three loops, C -> J1 -> ... -> Jm 
 which `turns` keep it in for ever. On a loop's roads the human's reaction is certain (takeover and
 failure probabilities 0 or 1 for every trust level), so the AV observes nothing there, while the
 hidden trust keeps moving with the road's incident (a random transition matrix). The spec reads the
-hidden trust on the loops' roads (tests/policies/trust_specs.py's formulas), so a loop's value is
-the probability that a finite Markov chain over (road, trust, DFA state) is absorbed in acceptance:
-a linear system, solved here in Fractions.
+hidden trust on the loops' roads (formulas like tests/policies/trust_specs.py's, no belief atom), so
+a loop's value is the probability that a finite Markov chain over (road, trust, DFA state) is
+absorbed in acceptance: a linear system over the states that can reach acceptance (the others are
+worth 0), solved here in Fractions.
 
 Every number of the model is a multiple of 1/20 (each transition row sums to 1 exactly as the
 decimals it prints as), so the exact process of docs/synthesis.md ("Labels at thresholds": the
@@ -165,6 +166,7 @@ class _Loops:
     def __init__(self, case: LoopCase) -> None:
         pomdp = case.pomdp
         self.model = _Joint(pomdp, case.spec)
+        assert self.model.compiled.labeller.belief_columns.size == 0   # labels read (road, trust) only
         driver = pomdp.driver
         self.transition = {}
         for x in range(pomdp.n_states):
@@ -174,6 +176,7 @@ class _Loops:
                 matrix = [[decimal(v) for v in row] for row in driver.trust_transition[i, h, e].tolist()]
                 assert all(sum(row) == 1 for row in matrix)
                 self.transition[x] = matrix
+        assert all(int((pomdp.successor_table[x] >= 0).sum()) == 1 for x in self.transition)
         self.next = {x: int(pomdp.successor_table[x, 0]) for x in self.transition}
         self.accepting, self.live = self.model.accepting, self.model.live
         self.steps = {x: self.model.successors(x, self.model.av.prior) for x in self.transition}   # [q, θ]
