@@ -76,7 +76,8 @@ from trustroute.core.errors import InputError
 # keyed by what it resamples (statistics.py `keyed_rng`)
 ANALYSIS_SEED = 20240513
 MULTIPLICITY = ("Holm over every pair of conditions, per spec and test (per outcome for the models; per "
-                "driver type and spec for the per-type tables); columns *_holm")
+                "driver type and spec for the per-type tables; per questionnaire for the questionnaire "
+                "tests); columns *_holm")
 
 
 @dataclass

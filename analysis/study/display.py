@@ -248,7 +248,7 @@ TABLE_TITLES = {
 
 
 # tables whose figures do not depend on the belief source (the others name it in their title)
-SOURCE_FREE_TABLES = ("takeovers", "sensitivity", "manual")
+SOURCE_FREE_TABLES = ("takeovers", "sensitivity", "manual", "questionnaires", "questionnaire_tests")
 
 
 def table_title(name: str, belief_source: str) -> str:

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
+from trustroute.analysis.formatting import number_text
 from trustroute.core.dataset import INCIDENTS_FILE, MANUAL_MEASURES, read_incidents
 
 MANUAL_COLUMNS = (
@@ -58,8 +58,10 @@ def manual_table(incidents: pd.DataFrame, episodes: pd.DataFrame, condition_orde
 
 
 def manual_display(m: pd.DataFrame) -> pd.DataFrame:
-    def number(values, digits: int) -> list[str]:
-        return ["–" if np.isnan(v) else ("inf" if np.isinf(v) else f"{v:.{digits}f}") for v in values]
+    """The table as shown: each measure rounded as every other table rounds it (formatting.py
+    `number_text`: "inf" where infinite, "-" where not measured)."""
+    def number(values: pd.Series, digits: int) -> list[str]:
+        return [number_text(v, digits) for v in values]
 
     return pd.DataFrame({
         "incident": m["incident"], "condition": m["condition"], "takeovers": m["takeovers"],

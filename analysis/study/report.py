@@ -1,10 +1,12 @@
 """The study report: report.md and one self-contained report.html (plots inlined as base64 PNG).
 
 Both are rendered by Jinja2 from the same data (templates/report.md.j2, templates/report.html.j2):
-what was run (config, engine, seeds, hashes, versions), the tables of analysis/study (pandas
-DataFrames) on the filter beliefs and on beliefs induced from reported trust, the per-participant,
-order and takeover tables, the paper's figures beside ours when the study is comparable (else a note
-saying why not), the plots, failures, and notes on reading the numbers.
+what was run (config, engine, seeds, hashes, versions), the terminal's display tables
+(display.py `display_tables`: every table the analysis has rows for) on the leading belief source
+and a second one, the takeover, manual-driving, order and carry-over tables, a live study's
+questionnaire scores and their paired tests, the sensitivity table, the paper's figures beside
+ours when the study is comparable (else a note saying why not), the plots, failures, and notes on
+reading the numbers.
 """
 
 from __future__ import annotations
@@ -90,6 +92,12 @@ PLOT_TITLES = {
     "takeovers": "Takeovers per incident type",
     "routes": "Routes driven",
 }
+# The report's sections of display tables (display.py `display_tables`), each table in one: those
+# shown on each belief source of the report, those shown once (on the leading source: the figures of
+# most do not depend on it), and the sensitivity and paper tables, which have sections of their own.
+PER_SOURCE_TABLES = ("cells", "paired", "repeated", "per_type", "per_type_paired")
+ONCE_TABLES = ("takeovers", "manual", "order", "carryover", "questionnaires", "questionnaire_tests")
+OWN_SECTION_TABLES = ("sensitivity", "paper")
 # The templates ship with the analysis package (pyproject package-data), beside this subpackage.
 TEMPLATES = Path(__file__).resolve().parents[1] / "templates"
 
@@ -206,6 +214,8 @@ def write_report(study_dir: Path, analysis: StudyAnalysis | None = None) -> Repo
         "sensitivity_line": SENSITIVITY_LINE,
         "analyses": [_analysis_view(primary), _analysis_view(secondary)],
         "title_of": table_title,
+        "per_source_tables": PER_SOURCE_TABLES,
+        "once_tables": ONCE_TABLES,
         "plots": [
             {
                 "title": PLOT_TITLES[name],

@@ -7,6 +7,7 @@ import math
 import pandas as pd
 import pytest
 
+from trustroute.analysis.formatting import MISSING
 from trustroute.analysis.study.manual import manual_display, manual_table
 
 
@@ -36,3 +37,8 @@ def test_the_measures_are_summarised_per_incident_type_and_condition():
     shown = manual_display(table)
     assert shown.loc[2, "min TTC (s)"] == "inf" and shown.loc[0, "SD lateral (m)"] == "0.40"
     assert len(manual_table(incidents.iloc[0:0], episodes, ["aware"])) == 0
+    # a group of assisted takeovers only has no wheel measures: shown as every table shows a missing figure
+    assisted = manual_display(manual_table(incidents.iloc[2:3], episodes, ["aware"])).iloc[0]
+    assert (assisted["reaction (s)"], assisted["by wheel"]) == ("3.00", 0)
+    assert [assisted[c] for c in ("SD lateral (m)", "min TTC (s)", "max decel (m/s²)", "oncoming (s)")] == [
+        MISSING] * 4

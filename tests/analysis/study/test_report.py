@@ -10,6 +10,7 @@ import pytest
 
 from tests.cli import run_cli
 from trustroute.analysis.statistics import rate_interval
+from trustroute.analysis.study.display import TABLE_TITLES
 
 
 @pytest.mark.slow
@@ -76,6 +77,18 @@ def test_analyze_json_and_self_contained_report(model_study, capsys):
     assert "<h2>Takeover rate per incident type and condition</h2>" in html
     for name in ("satisfaction", "trust", "routes", "takeovers", "participants"):
         assert (model_study / "plots" / f"{name}.png").stat().st_size > 1000
+    # a synthetic study has no questionnaires and no manual driving: no section for them, not even empty
+    for name in ("questionnaires", "questionnaire_tests", "manual"):
+        assert TABLE_TITLES[name] not in markdown and TABLE_TITLES[name] not in html, name
+
+
+def test_the_report_has_a_section_for_every_table_the_terminal_shows():
+    """Each display table is in exactly one of the report's sections: a table the terminal and
+    `--json` show is never left out of the report files."""
+    from trustroute.analysis.study.report import ONCE_TABLES, OWN_SECTION_TABLES, PER_SOURCE_TABLES
+
+    sections = [*PER_SOURCE_TABLES, *ONCE_TABLES, *OWN_SECTION_TABLES]
+    assert sorted(sections) == sorted(TABLE_TITLES)
 
 
 def test_paper_table_only_for_a_comparable_study():
