@@ -61,7 +61,7 @@ def test_an_empty_name_is_said_to_be_empty(call, what):
 # (the CLI's message with its flags said as keywords), never a bare ValueError or a silent run.
 @pytest.mark.parametrize(("call", "named"), [
     (lambda: trustroute.synthesize("phi1", horizon=20, time_limit=0),
-     r"time_limit: 0 is not a number in \(0, "),
+     r"time_limit: 0.0 is not a number in \(0, "),   # the CLI's words: --time-limit 0 is 0.0
     (lambda: trustroute.synthesize("phi1", horizon=20, time_limit=float("nan")),
      "time_limit: nan is not a number"),
     (lambda: trustroute.evaluate("phi1", "free", max_junctions=-1),
@@ -70,7 +70,7 @@ def test_an_empty_name_is_said_to_be_empty(call, what):
      "fallback_after: expected an integer from 0 to 10000, got -1"),
     (lambda: trustroute.evaluate("phi1", "free", max_nodes=0), "max_nodes: expected an integer >= 1, got 0"),
     (lambda: trustroute.evaluate("phi1_trust", "free", time_limit=-1),
-     r"time_limit: -1 is not a number in \(0, "),
+     r"time_limit: -1.0 is not a number in \(0, "),
     (lambda: trustroute.evaluate("phi1", "free", time_limit=1.0),
      "time_limit: applies to specs with trust-state atoms only"),
     (lambda: trustroute.evaluate("phi1", "free", population=POPULATION, max_nodes=5),

@@ -391,7 +391,7 @@ def fit_study(
     """Fit a driver model to the consolidated logs of a study directory (`method` and `iterations`
     as `trustroute fit` takes them)."""
     check_value(method, FIT_METHODS, "--method", "")
-    ITERATIONS.check(iterations)
+    iterations = ITERATIONS.check(iterations)
     manifest, _, roads = load_study(Path(study_dir))
     _, template, _ = study_inputs(manifest, study_dir)
     config = manifest.get("config", {})

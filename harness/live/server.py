@@ -31,7 +31,7 @@ from trustroute.core import defaults
 from trustroute.core.dataset import part_path
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
-from trustroute.core.ranges import PACE, RESUME_WITHIN
+from trustroute.core.ranges import PACE, RESUME_WITHIN, keep_checked
 from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session
@@ -75,8 +75,7 @@ class ServerOptions:
 
     def __post_init__(self) -> None:
         """The pace and the resume window as `trustroute live` takes them (the ranges both check)."""
-        PACE.check(self.pace)
-        RESUME_WITHIN.check(self.resume_within)
+        keep_checked(self, {"pace": PACE, "resume_within": RESUME_WITHIN})
 
 
 def warm_up_task(config: StudyConfig, participant: int) -> EpisodeTask:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from trustroute.core import defaults
-from trustroute.core.ranges import FALLBACK_AFTER, MAX_JUNCTIONS, MAX_NODES
+from trustroute.core.ranges import FALLBACK_AFTER, MAX_JUNCTIONS, MAX_NODES, keep_checked
 from trustroute.policies.model.trust_pomdp import BeliefRule, checked_belief_rule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.fallback import DEFAULT_FALLBACK_AFTER
@@ -35,11 +35,8 @@ class EvaluationSettings:
         naming its option (the API's messages say its keyword). The time limit is checked at the
         doors (`check_time_limit`): inside a run it is the time left, which may be 0."""
         checked_belief_rule(self.belief_rule)
-        object.__setattr__(self, "max_junctions", MAX_JUNCTIONS.check(self.max_junctions))
-        if self.fallback_after is not None:
-            object.__setattr__(self, "fallback_after", FALLBACK_AFTER.check(self.fallback_after))
-        if self.max_nodes is not None:
-            object.__setattr__(self, "max_nodes", MAX_NODES.check(self.max_nodes))
+        keep_checked(self, {"max_junctions": MAX_JUNCTIONS, "fallback_after": FALLBACK_AFTER,
+                            "max_nodes": MAX_NODES}, optional=("fallback_after", "max_nodes"))
 
 
 DEFAULT_EVALUATION = EvaluationSettings()

@@ -21,6 +21,7 @@ from trustroute.app.runs import EpisodeSettings
 from trustroute.app.synthesis import EvaluationSettings, SynthesisSettings
 from trustroute.core import defaults, ranges
 from trustroute.core.errors import InputError
+from trustroute.core.fields import Number
 from trustroute.harness.cli import cli
 from trustroute.harness.commands.options import Checked
 from trustroute.harness.live.server import ServerOptions
@@ -155,6 +156,57 @@ def test_the_largest_value_is_taken_and_one_more_refused(accepted, largest, sett
         settings(largest)
         with pytest.raises(InputError, match=f"got {largest + 1}"):
             settings(largest + 1)
+
+
+def _number_ranges() -> list[ranges.OptionRange]:
+    return [accepted for accepted in vars(ranges).values()
+            if isinstance(accepted, ranges.OptionRange) and isinstance(accepted.kind, Number)]
+
+
+@pytest.mark.parametrize("accepted", _number_ranges(), ids=lambda accepted: accepted.flag)
+def test_a_number_option_takes_a_numpy_number_as_the_float_the_cli_parses(accepted):
+    import numpy as np
+
+    top = accepted.kind.maximum
+    given = [np.float32(top), np.float64(top), top] + ([np.int64(top), int(top)] if top == int(top) else [])
+    for value in given:
+        checked = accepted.check(value)
+        assert checked == top and type(checked) is float, value
+    assert type(Checked(accepted).convert(str(top), None, None)) is float
+    for value, text in ((np.float64("nan"), "nan"), (np.float32("-inf"), "-inf"), (np.inf, "inf")):
+        with pytest.raises(InputError) as api:
+            accepted.check(value)
+        with pytest.raises(InputError) as cli_door:
+            Checked(accepted).convert(text, None, None)
+        assert api.value.problem == cli_door.value.problem and api.value.source == accepted.flag
+    for value in (True, np.True_):
+        with pytest.raises(InputError, match=f"^{accepted.flag}: "):
+            accepted.check(value)
+
+
+def test_a_settings_object_holds_the_numbers_the_cli_would_give_it():
+    """A script's numpy numbers are checked as the CLI's and kept as Python's int and float (a plan's
+    seed and alpha go into its JSON payload)."""
+    import json
+
+    import numpy as np
+
+    plan = PlanSettings(alpha=np.float32(0.25), target=np.int64(1), seed=np.int64(7),
+                        simulations=np.int32(10), pilot_bootstrap=np.uint16(3))
+    kept = {name: (type(value), value) for name, value in dataclasses.asdict(plan).items()
+            if name in ("alpha", "target", "seed", "simulations", "pilot_bootstrap")}
+    assert kept == {"alpha": (float, 0.25), "target": (float, 1.0), "seed": (int, 7),
+                    "simulations": (int, 10), "pilot_bootstrap": (int, 3)}
+    json.dumps(dataclasses.asdict(plan))
+    server = ServerOptions(pace=np.int64(2), resume_within=np.float32(30))
+    assert (type(server.pace), type(server.resume_within)) == (float, float)
+    synthesis = SynthesisSettings(tau=np.float32(0.5), horizon=np.int8(4), time_limit=5)
+    assert (type(synthesis.tau), type(synthesis.horizon)) == (float, int)
+    evaluation = EvaluationSettings(fallback_after=np.int64(3), max_junctions=np.int64(9), max_nodes=None)
+    assert (type(evaluation.fallback_after), type(evaluation.max_junctions)) == (int, int)
+    assert evaluation.max_nodes is None
+    with pytest.raises(InputError, match="--tau: "):
+        SynthesisSettings(tau=None)  # type: ignore[arg-type]
 
 
 def test_the_api_refuses_the_modes_and_names_the_cli_does_not_offer():

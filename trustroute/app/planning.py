@@ -73,12 +73,9 @@ class PlanSettings:
         """Each number as `trustroute plan` takes it (the ranges both check, trustroute/core/ranges.py)."""
         for test in self.tests:
             check_value(test, PLANNED_TEST, "--test", "")
-        if self.simulations is not None:
-            ranges.SIMULATIONS.check(self.simulations)
-        ranges.ALPHA.check(self.alpha)
-        ranges.TARGET.check(self.target)
-        ranges.PILOT_BOOTSTRAP.check(self.pilot_bootstrap)
-        ranges.SEED.check(self.seed)
+        ranges.keep_checked(self, {"simulations": ranges.SIMULATIONS, "alpha": ranges.ALPHA,
+                                   "target": ranges.TARGET, "pilot_bootstrap": ranges.PILOT_BOOTSTRAP,
+                                   "seed": ranges.SEED}, optional=("simulations",))
 
 
 @dataclass(frozen=True, eq=False)

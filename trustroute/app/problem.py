@@ -4,10 +4,9 @@ model (a population's type-aware model, its spec lifted onto it), the trust POMD
 
 from __future__ import annotations
 
-import numbers
-
 from trustroute.app.inputs import Inputs, PathLike, load_inputs
 from trustroute.core.errors import InputError
+from trustroute.core.ranges import is_whole
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_population import DriverPopulation
@@ -29,8 +28,7 @@ def check_initial_trust(model: DriverModel, initial_trust: int | None,
     1.0 are not); an InputError naming `option` otherwise."""
     if initial_trust is None:
         return
-    whole = isinstance(initial_trust, numbers.Integral) and not isinstance(initial_trust, bool)
-    if not (whole and initial_trust in model.trust_levels):
+    if not (is_whole(initial_trust) and initial_trust in model.trust_levels):
         raise InputError(option, "", f"{initial_trust!r} is not a trust level of the model",
                          f"pass one of {list(model.trust_levels)}")
 

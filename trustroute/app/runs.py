@@ -21,7 +21,7 @@ from trustroute.app.policy import PolicySettings, policy_for
 from trustroute.app.problem import check_initial_trust, compile_problem
 from trustroute.core import defaults
 from trustroute.core.errors import InputError
-from trustroute.core.ranges import SEED
+from trustroute.core.ranges import SEED, keep_checked
 from trustroute.harness.simulation.episode import EpisodeOptions, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.model_engine import simulate_batch
@@ -47,7 +47,7 @@ class EpisodeSettings:
     option: str = "--initial-trust"   # how the initial trust is named in messages
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "seed", SEED.check(self.seed))
+        keep_checked(self, {"seed": SEED})
         engine = engine_named(self.engine, "--engine", simulated=True)
         if self.rrd is not None and not engine.records:
             raise InputError("--rrd", "", f"a Rerun recording needs the SUMO engine, not {self.engine!r}",

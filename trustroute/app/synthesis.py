@@ -10,7 +10,7 @@ from pathlib import Path
 from trustroute.core import defaults, ranges
 from trustroute.core.errors import InputError
 from trustroute.core.fields import OneOf, check_value
-from trustroute.core.ranges import check_time_limit
+from trustroute.core.ranges import check_time_limit, keep_checked
 from trustroute.policies.belief.problem import Problem
 from trustroute.policies.evaluation.plain import Evaluation
 from trustroute.policies.evaluation.plain import evaluate as evaluate_plain
@@ -69,15 +69,9 @@ class SynthesisSettings(SearchSettings):
     progress: bool = False
 
     def __post_init__(self) -> None:
-        checked = {"tau": ranges.TAU.check(self.tau),
-                   "node_budget": ranges.NODE_BUDGET.check(self.node_budget),
-                   "belief_rule": checked_belief_rule(self.belief_rule)}
-        if self.horizon is not None:
-            checked["horizon"] = ranges.HORIZON.check(self.horizon)
-        if self.work_limit is not None:
-            checked["work_limit"] = ranges.WORK_LIMIT.check(self.work_limit)
-        for name, value in checked.items():
-            object.__setattr__(self, name, value)
+        keep_checked(self, {"tau": ranges.TAU, "horizon": ranges.HORIZON, "work_limit": ranges.WORK_LIMIT,
+                            "node_budget": ranges.NODE_BUDGET}, optional=("horizon", "work_limit"))
+        object.__setattr__(self, "belief_rule", checked_belief_rule(self.belief_rule))
         if self.clusters not in SEARCH_CLUSTER_MODES:   # the search's own modes are set past the doors
             check_value(self.clusters, CLUSTER_MODES, "--clusters", "")
         super().__post_init__()

@@ -7,10 +7,12 @@ refuse the others with the same words, the API's naming its keyword where the CL
 
 from __future__ import annotations
 
+import contextlib
 import numbers
 import os
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
-from typing import Generic, TypeVar, cast
+from typing import Generic, TypeGuard, TypeVar
 
 from trustroute.core import defaults
 from trustroute.core.fields import Integer, Kind, Number, Seen, check_value
@@ -18,6 +20,16 @@ from trustroute.core.fields import Integer, Kind, Number, Seen, check_value
 T = TypeVar("T")
 
 UNBOUNDED = Integer()   # an integer option without a largest value
+
+
+def is_whole(value: object) -> TypeGuard[numbers.Integral]:
+    """A whole number as the CLI parses one: an int or a numpy integer, not a bool."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def is_real(value: object) -> TypeGuard[numbers.Real]:
+    """A real number: an int, a float, a numpy number, not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 @dataclass(frozen=True)
@@ -32,11 +44,14 @@ class OptionRange(Generic[T]):
     fix: str
 
     def check(self, value: object) -> T:
-        """`value` when the option takes it (a numpy integer as an int); an InputError naming the
-        flag otherwise."""
-        whole = isinstance(value, numbers.Integral) and not isinstance(value, bool)
-        if isinstance(self.kind, Integer) and whole:
-            value = int(cast(numbers.Integral, value))
+        """`value` when the option takes it, as the CLI parses it: a whole number (a numpy integer
+        too) as an int, any real number of a number option (a numpy float or integer too) as a
+        float; an InputError naming the flag otherwise. A bool is neither."""
+        if isinstance(self.kind, Integer) and is_whole(value):
+            value = int(value)
+        elif isinstance(self.kind, Number) and is_real(value):
+            with contextlib.suppress(OverflowError):   # an int past every float is refused as it is
+                value = float(value)
         return check_value(value, self.kind, self.flag, "", self.problem, self.fix)
 
     def problem(self, seen: Seen) -> str:
@@ -88,6 +103,19 @@ WORKERS = OptionRange("--workers", Integer(minimum=1, maximum=defaults.MAX_WORKE
                       "(the CPU count)")
 ATTEMPTS = OptionRange("--attempts", Integer(minimum=1, maximum=defaults.MAX_ATTEMPTS),
                        f"pass 1 to {defaults.MAX_ATTEMPTS} runs, e.g. --attempts {defaults.ATTEMPTS}")
+
+
+def keep_checked(settings: object, accepted: Mapping[str, OptionRange],
+                 optional: Collection[str] = ()) -> None:
+    """Check each field of the frozen dataclass `settings` that `accepted` names by its range, and
+    keep the value as checked (a numpy number as the int or float the CLI parses), so a settings
+    object a script makes holds what the command's would; a field named in `optional` holding None
+    (the option omitted) is left as it is."""
+    for name, option in accepted.items():
+        value = getattr(settings, name)
+        if value is None and name in optional:
+            continue
+        object.__setattr__(settings, name, option.check(value))
 
 
 def check_time_limit(seconds: object) -> float:
