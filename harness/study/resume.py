@@ -97,13 +97,16 @@ def _check_unmarked(study_dir: Path, config_hash: str, state: str) -> None:
 
 # The start of the mark's temporary files' names (`temp_path`: the writer's pid follows)
 MARK_TEMP = temp_path(Path(STUDY_FILE)).name.rsplit(".", 1)[0] + "."
+# Files a desktop writes into any folder it shows (macOS Finder's, Windows Explorer's) and git's
+# placeholder of an empty folder: a folder holding only these is empty to the person who made it
+DESKTOP_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini", ".gitkeep"})
 
 
 def check_own_folder(study_dir: Path) -> None:
     """The study directory is new, empty, or a study's (its mark readable, or a study's files in
     it): a folder of other files (a home folder, another program's data) is refused, not written
-    into. The lock file and a mark's temporary file (a run killed while marking) count as empty.
-    Reads only."""
+    into. The lock file, a mark's temporary file (a run killed while marking) and DESKTOP_FILES
+    count as empty. Reads only."""
     study_dir = Path(study_dir)
     if not study_dir.is_dir() or _marked_hash(study_dir / STUDY_FILE) is not None or study_files(study_dir):
         return
@@ -112,7 +115,8 @@ def check_own_folder(study_dir: Path) -> None:
     except OSError as exc:
         raise InputError(str(study_dir), "--out", f"cannot list the folder ({exc.strerror})",
                          "pass a readable folder, or a new one, to --out") from None
-    others = [name for name in names if name != LOCK_FILE and not name.startswith(MARK_TEMP)]
+    others = [name for name in names
+              if name != LOCK_FILE and not name.startswith(MARK_TEMP) and name not in DESKTOP_FILES]
     if others:
         raise InputError(str(study_dir), "--out",
                          f"the folder holds files that are not a study's ({', '.join(others[:3])}"

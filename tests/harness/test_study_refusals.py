@@ -167,6 +167,32 @@ def test_an_empty_folder_is_a_new_study(capsys, tmp_path):
     assert (out / "study.json").exists() and (out / "manifest.json").exists()
 
 
+@pytest.mark.parametrize("made", [(".DS_Store",), ("Thumbs.db", "desktop.ini"), (".gitkeep",)])
+def test_a_folder_holding_only_what_a_desktop_makes_in_it_is_empty(made, capsys, tmp_path):
+    """A folder made in Finder or Explorer (which write their own files into a folder they show), or
+    kept in git by a placeholder, is empty to the person who made it: the study is written into it,
+    and those files are left as they were."""
+    out = tmp_path / "made"
+    out.mkdir()
+    for name in made:
+        (out / name).write_bytes(b"\x00\x01 the desktop's own")
+    before = _snapshot(out)
+    code, _, err = run_cli(capsys, "study", str(_config(tmp_path, 1)), "--out", str(out), "--workers", "1",
+                           "--no-report")
+    assert code == 0, err
+    assert (out / "study.json").exists() and (out / "manifest.json").exists()
+    assert {name: entry for name, entry in _snapshot(out).items() if name in before} == before
+    (out / "notes.txt").write_text("the user's own")   # beside them, a file of the person's is not
+    other = tmp_path / "other"
+    other.mkdir()
+    for name in (*made, "notes.txt"):
+        (other / name).write_bytes((out / name).read_bytes())
+    code, _, err = run_cli(capsys, "study", str(_config(tmp_path, 1)), "--out", str(other), "--workers", "1",
+                           "--no-report")
+    assert_one_line_error(code, err, f"{other}: --out: the folder holds files that are not a study's "
+                          "(notes.txt)")
+
+
 def test_the_mark_is_written_before_anything_else_in_the_folder(capsys, tmp_path, monkeypatch):
     """A run killed at any moment leaves its mark: when the lock is taken (the first thing written
     after the mark) the folder holds the mark and nothing else."""
