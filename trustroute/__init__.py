@@ -247,7 +247,8 @@ def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None
     studies/<name>). workers: local processes, 1 (this process) to 256 (default: the CPU count, as
     `trustroute study`; every draw is seeded, so the count never changes the data). engine:
     override the config's engine ("sumo" or "model"). scheduler: a Dask scheduler address or
-    "local". attempts: runs of a failing episode at most, 1 to 10 (the first and its retries).
+    "local". attempts: runs of a failing episode at most, 1 to 10 (the first and its retries; one
+    that failed on its own bad input, an InputError such as TrafficJam, runs once).
     Returns the run; `run.study_dir` holds the dataset (docs/dataset.md) that `analyze` reads.
     """
     from trustroute.core.ranges import study_workers

@@ -63,7 +63,9 @@ class StudyOptions:
         help="Write the report even when some episodes failed (default: only a complete study).")
     attempts: int = option("--attempts", type=Checked(ranges.ATTEMPTS), default=defaults.ATTEMPTS,
                            show_default=True,
-                           help="Runs of a failing episode at most (the first and its retries).")
+                           help="Runs of a failing episode at most (the first and its retries); one "
+                                "that failed on its own bad input (an InputError, e.g. a jammed town) "
+                                "runs once.")
     as_json: bool = json_flag()
     quiet: bool = quiet_flag()
 
