@@ -18,7 +18,7 @@ from trustroute.harness.live.worker import LiveOptions, RemoteDriver
 from trustroute.harness.simulation.driving_style import AUTOPILOT, MANUAL
 from trustroute.harness.simulation.vehicle_model import Controls
 
-from ..simulation.test_wheel_driving import net  # noqa: F401  (the Town01 net, a fixture)
+from ..simulation.test_wheel_driving import net, park_truck  # noqa: F401  (net: the Town01 net, a fixture)
 from .test_live_frames import FakeTime
 
 STEP = 0.1
@@ -40,12 +40,7 @@ def drive_live(net, program, start: float = 418.0, parked: float | None = None) 
         sumo.route.add("planned", ["A-E", "E-D"])
         sumo.vehicle.add("ego", "planned", departPos=str(start), departSpeed="8", departLane="1")
         if parked is not None:
-            sumo.vehicletype.copy("DEFAULT_VEHTYPE", "truck")
-            sumo.vehicletype.setLength("truck", 12.0)
-            sumo.route.add("against", ["E-A"])
-            sumo.vehicle.add("parked", "against", typeID="truck", departPos=str(parked), departLane="1")
-            sumo.vehicle.setSpeedMode("parked", 0)
-            sumo.vehicle.setSpeed("parked", 0.0)
+            park_truck(sumo, parked)
         sumo.simulationStep()
         for seconds, controls in program:
             for _ in range(round(seconds / STEP)):

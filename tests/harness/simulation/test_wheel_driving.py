@@ -84,6 +84,18 @@ def net():
     return build_net(study_context(config).town).path
 
 
+def park_truck(sumo, position: float, width: float | None = None) -> None:
+    """A 12 m truck, "parked", standing in the oncoming lane (E-A) `position` metres into it."""
+    sumo.vehicletype.copy("DEFAULT_VEHTYPE", "truck")
+    sumo.vehicletype.setLength("truck", 12.0)
+    if width is not None:
+        sumo.vehicletype.setWidth("truck", width)
+    sumo.route.add("against", ["E-A"])
+    sumo.vehicle.add("parked", "against", typeID="truck", departPos=str(position), departLane="1")
+    sumo.vehicle.setSpeedMode("parked", 0)
+    sumo.vehicle.setSpeed("parked", 0.0)
+
+
 def drive(net, program, obstacle=None):
     """The ego on A-E (a long straight stretch with an oncoming lane) driven by `program`: a list of
     (seconds, Controls); SUMO steps 0.1 s. Returns (trace of (time, x, y, lane, route), driving)."""
@@ -93,13 +105,7 @@ def drive(net, program, obstacle=None):
         sumo.route.add("planned", ["A-E"])
         sumo.vehicle.add("ego", "planned", departPos="10", departSpeed="8", departLane="1")
         if obstacle is not None:
-            sumo.vehicletype.copy("DEFAULT_VEHTYPE", "truck")
-            sumo.vehicletype.setLength("truck", 12.0)
-            sumo.vehicletype.setWidth("truck", 2.5)
-            sumo.route.add("against", ["E-A"])
-            sumo.vehicle.add("parked", "against", typeID="truck", departPos=str(obstacle), departLane="1")
-            sumo.vehicle.setSpeedMode("parked", 0)
-            sumo.vehicle.setSpeed("parked", 0.0)
+            park_truck(sumo, obstacle, width=2.5)
         sumo.simulationStep()
         driving = ManualDriving.take_over(sumo, "ego")
         trace = []
