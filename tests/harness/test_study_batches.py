@@ -161,3 +161,31 @@ def test_a_batch_keeps_an_episode_s_own_bad_input_when_its_part_cannot_be_writte
         (tasks[2].episode_id, False, True)]
     assert outcomes[1].error == f"InputError: {bad}"
     assert outcomes[0].error == outcomes[2].error == "OSError: [Errno 28] No space left on device"
+
+
+def test_an_episode_whose_own_part_cannot_be_written_is_retried(tmp_path, monkeypatch):
+    """The write of an episode's part failing (an InputError too: a full disk's one line) is not the
+    episode's own bad input: its outcome is retried, while the episode's own InputError is not."""
+    from trustroute.core.errors import InputError
+    from trustroute.core.output_files import write_error
+    from trustroute.harness.study.context import study_context
+
+    config = _config(tmp_path)
+    context = study_context(config)
+    task = plan_episodes(config)[0]
+    full = write_error(tmp_path / "study" / "parts", "episode part", OSError(28, "No space left on device"))
+
+    def full_disk(*_args):
+        raise full
+
+    monkeypatch.setattr(runner_module, "write_part_tables", full_disk)
+    outcome = runner_module.run_task(context, str(tmp_path / "study"), task)
+    assert (outcome.ok, outcome.retry, outcome.error) == (False, True, f"InputError: {full}")
+    monkeypatch.undo()
+
+    def bad_input(*_args, **_kwargs):
+        raise InputError("episode", "road", "bad input", "fix it")
+
+    monkeypatch.setattr(runner_module, "run_planned_episode", bad_input)
+    outcome = runner_module.run_task(context, str(tmp_path / "study"), task)
+    assert (outcome.ok, outcome.retry) == (False, False)
