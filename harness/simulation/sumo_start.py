@@ -31,7 +31,6 @@ from typing import Any, Protocol
 
 from trustroute.core import ranges
 from trustroute.core.errors import InputError
-from trustroute.core.fields import check_value
 from trustroute.harness.simulation.performance import DEFAULT_LIMITS, PerformanceLimits
 from trustroute.networks.sumo_import import require_net_file
 from trustroute.networks.sumo_net import find_binary
@@ -58,8 +57,8 @@ class SumoConfig:
     route_files: tuple[str, ...] = ()   # background traffic SUMO loads with the net (background.py)
 
     def __post_init__(self) -> None:
-        check_value(self.background_vehicles, BACKGROUND_VEHICLES, "SumoConfig", "background_vehicles",
-                    fix=BACKGROUND_FIX)
+        object.__setattr__(self, "background_vehicles", ranges.BACKGROUND_VEHICLES.check_as(
+            self.background_vehicles, "SumoConfig", "background_vehicles"))
 
 
 class Sumo(Protocol):

@@ -21,7 +21,7 @@ from trustroute.app.runs import EpisodeSettings
 from trustroute.app.synthesis import EvaluationSettings, SynthesisSettings
 from trustroute.core import defaults, ranges
 from trustroute.core.errors import InputError
-from trustroute.core.fields import Number
+from trustroute.core.fields import Number, Seen
 from trustroute.harness.cli import cli
 from trustroute.harness.commands.options import Checked
 from trustroute.harness.live.server import ServerOptions
@@ -207,6 +207,14 @@ def test_a_settings_object_holds_the_numbers_the_cli_would_give_it():
     assert evaluation.max_nodes is None
     with pytest.raises(InputError, match="--tau: "):
         SynthesisSettings(tau=None)  # type: ignore[arg-type]
+    # SumoConfig names the option by its key, in the words of `run --background`
+    top = defaults.MAX_BACKGROUND_VEHICLES
+    sumo = SumoConfig(background_vehicles=np.int64(top))
+    assert (type(sumo.background_vehicles), sumo.background_vehicles) == (int, top)
+    with pytest.raises(InputError) as caught:
+        SumoConfig(background_vehicles=np.int64(top + 1))
+    assert (caught.value.source, caught.value.place) == ("SumoConfig", "background_vehicles")
+    assert caught.value.problem == ranges.BACKGROUND_VEHICLES.problem(Seen("", top + 1))
 
 
 def test_the_api_refuses_the_modes_and_names_the_cli_does_not_offer():

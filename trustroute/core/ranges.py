@@ -47,12 +47,17 @@ class OptionRange(Generic[T]):
         """`value` when the option takes it, as the CLI parses it: a whole number (a numpy integer
         too) as an int, any real number of a number option (a numpy float or integer too) as a
         float; an InputError naming the flag otherwise. A bool is neither."""
+        return self.check_as(value, self.flag)
+
+    def check_as(self, value: object, source: str, place: str = "") -> T:
+        """`check`, the refusal naming `source` and `place` instead of the flag (a settings object
+        that names the option by its own key, SumoConfig's background_vehicles)."""
         if isinstance(self.kind, Integer) and is_whole(value):
             value = int(value)
         elif isinstance(self.kind, Number) and is_real(value):
             with contextlib.suppress(OverflowError):   # an int past every float is refused as it is
                 value = float(value)
-        return check_value(value, self.kind, self.flag, "", self.problem, self.fix)
+        return check_value(value, self.kind, source, place, self.problem, self.fix)
 
     def problem(self, seen: Seen) -> str:
         """What is wrong with a refused value: the kind's account, an integer's with the value as
