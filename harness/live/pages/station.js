@@ -356,6 +356,12 @@ function onState(message) {
   // a new trial starts driving: the last trial's frame, speed and mode go at once (its SUMO takes
   // seconds to start; meanwhile the person sees the vehicle getting ready, not the last trial)
   if (message.phase === "driving" && message.episode_id !== shownEpisode) startEpisode(message.episode_id);
+  // the mode is the session's: a page opened mid-drive (reloaded, another window) saw none of the
+  // `mode` events before it, and showing AUTOPILOT to a person in control, its button would ask for
+  // a takeover the server refuses and never hand back (a request in flight is answered by `mode`)
+  if ((message.phase === "driving" || message.phase === "paused") && !toggling && message.mode !== mode) {
+    setMode(message.mode);
+  }
   if (message.phase === "driving") startAnimating();
   const next = message.done.length + 1;
   $("status").textContent = message.phase === "paused"

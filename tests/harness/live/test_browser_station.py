@@ -557,3 +557,31 @@ def test_a_completed_trial_and_the_end_of_the_study_are_said(station, tmp_path):
         assert "The study is complete" in text and "close this window" in text
         assert page.locator("#drive-step").is_hidden() and page.locator("#completed").is_hidden()
         page.screenshot(path=str(tmp_path / "done.png"))
+
+
+def test_a_page_reopened_mid_drive_shows_the_mode_the_person_is_in_and_can_hand_back(station):
+    """A station reloaded (or reopened) while its person is in control: the server's state says
+    `manual` (the page's `mode` events of the takeover went to the window that was closed), so the
+    page shows MANUAL and its button hands back; showing AUTOPILOT, it sent a takeover the server
+    refuses, and the car held for the hand-back stood there for good."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        received: list[dict] = []
+        socket.on_message(lambda text: received.append(json.loads(text)))
+        socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver"}))
+        # the reconnection finds the episode paused by the lost connection, then the person resumes
+        socket.send(state_message("paused", paused_by="disconnect", mode="manual"))
+        page.locator("#overlay-text").filter(has_text="connection was lost").wait_for()
+        assert page.locator("#mode").inner_text() == "MANUAL"
+        socket.send(state_message("driving", mode="manual"))
+        socket.send(json.dumps({**frame, "mode": "manual"}))
+        wait_until(page, "!document.getElementById('toggle').disabled")
+        assert page.locator("#mode").inner_text() == "MANUAL"
+        assert page.locator("#toggle").inner_text() == "Hand back (space)"
+        assert enabled(page) == set(DRIVING)
+        page.keyboard.press("Space")
+        deadline = time.monotonic() + 10
+        while not any(m["type"] in ("hand_back", "takeover") for m in received):
+            assert time.monotonic() < deadline, received
+            page.wait_for_timeout(50)
+        assert [m["type"] for m in received if m["type"] in ("hand_back", "takeover")] == ["hand_back"]
