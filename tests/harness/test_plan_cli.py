@@ -76,6 +76,23 @@ def _check_preregistration(text: str, answer: dict) -> None:
     assert answer["config_hash"] in text
 
 
+def test_the_preregistration_names_the_study_it_registers(config_path, capsys, tmp_path):
+    """The plan simulates on the model engine, but what it registers is the study as it will run:
+    the hash `trustroute live` (or `study`) records for the config in study.json, and its engine.
+    A live config planned gave the hash and the engine of its model-engine simulation."""
+    live = tmp_path / "live.toml"
+    live.write_text(config_path.read_text().replace('engine = "model"', 'engine = "live"'))
+    config = load_study_config(live)
+    assert config.engine == "live"
+    document = tmp_path / "prereg.md"
+    answer = cli_json(capsys, "plan", str(live), "--participants", "4", "--simulations", "10",
+                      "--out", str(tmp_path), "--preregistration", str(document))
+    assert answer["config_hash"] == config.content_hash
+    assert answer["config_hash"] != config.with_overrides(engine="model").content_hash
+    text = document.read_text()
+    assert f"content hash `{config.content_hash}`" in text and "engine live." in text
+
+
 def test_simulated_outcomes_follow_the_model_engine(config_path):
     """Satisfaction of the free condition and the reports as the per-episode study gives them (in
     distribution: the fixture's study of 12 participants sets the scale)."""

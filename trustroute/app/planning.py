@@ -80,7 +80,8 @@ class PlanSettings:
 
 @dataclass(frozen=True, eq=False)
 class PlanRun:
-    """A finished plan: its config, the power table and minimal sizes, the power curve (PNG; the
+    """A finished plan: the study's config (its own engine: the plan simulated it on the model
+    engine), the power table and minimal sizes, the power curve (PNG; the
     SVG beside it), the pilot's fit when there was one, and the JSON payload."""
 
     config: StudyConfig
@@ -135,7 +136,8 @@ def plan_study(config_path: str | Path, settings: PlanSettings = PlanSettings(),
     """The plan of the study config at `config_path` (module docstring). progress(line): where the
     long work reports (the CLI's stderr); None: silent."""
     started = time.perf_counter()
-    config = load_study_config(config_path).with_overrides(engine="model")
+    study = load_study_config(config_path)   # what is registered: the study as it will run
+    config = study.with_overrides(engine="model")   # what is simulated
     check_plannable(config)
     cells = len(config.spec_names) * len(config.condition_names)
     size_list = participant_sizes(settings.sizes, cells)
@@ -166,7 +168,7 @@ def plan_study(config_path: str | Path, settings: PlanSettings = PlanSettings(),
                  f"the refits' powers, 2.5-97.5%; dashed: target {settings.target:g}, dotted: minimal N)")
     figure = power_curve_plot(table, settings.target, settings.alpha, folder / "power.png", title=title)
     payload = {
-        "study": config.name, "config_path": str(config.source_path), "config_hash": config.content_hash,
+        "study": config.name, "config_path": str(config.source_path), "config_hash": study.content_hash,
         "participants_model": who,
         **({} if pilot is None else {"pilot": pilot.summary()}),
         "sizes": size_list, "tests": list(power.tests), "alpha": settings.alpha, "target": settings.target,
@@ -176,7 +178,7 @@ def plan_study(config_path: str | Path, settings: PlanSettings = PlanSettings(),
                                  for (t, p, s), n in minimal.items()],
         "seconds": time.perf_counter() - started,
     }
-    return PlanRun(config=config, table=table, minimal=minimal, figure=figure, pilot=pilot, payload=payload)
+    return PlanRun(config=study, table=table, minimal=minimal, figure=figure, pilot=pilot, payload=payload)
 
 
 def power_rows(table: list[Power]) -> list[dict]:
