@@ -1,7 +1,9 @@
 """A study packaged for sharing (`trustroute export STUDY --out DIR`): the consolidated tables
 with pseudonymous participant ids, the codebook generated from the dataset schema
 (trustroute/core/codebook.py), the study config, the texts participants were shown, the software
-versions, checksums of every file and a README.
+versions, checksums of every file and a README. A live study's questionnaires go into
+`texts/questionnaires.json` as the station showed them, read from the study's own copies of their
+files (harness/study/inputs.py), so the package names no file of the lab's disk.
 
 Pseudonyms: each participant number is replaced by a three-digit code drawn without replacement
 (100-999; four digits for a study of more than 900 participants, five for more than 9,000, ...)
@@ -24,12 +26,15 @@ import numpy as np
 import pyarrow as pa
 
 from trustroute.core.codebook import codebook
-from trustroute.core.dataset import TABLES, read_manifest, read_study_table, write_table
+from trustroute.core.dataset import MANIFEST_FILE, TABLES, read_manifest, read_study_table, write_table
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text, check_output_dir
+from trustroute.harness.study.inputs import relocated_config
+from trustroute.participants.questionnaires import Questionnaire, questionnaire_plan
 
 KEY_FILE = "export-key.json"
 TEXTS = {"consent.txt": "live/consent.txt"}   # texts participants were shown: package name <- study path
+QUESTIONNAIRES_TEXT = "questionnaires.json"   # the questionnaires participants answered, where asked
 EPISODE_PARTICIPANT = re.compile(r"^p(\d{5})-")
 
 
@@ -112,6 +117,11 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
             (out / "texts").mkdir(exist_ok=True)
             shutil.copyfile(study_dir / source, out / "texts" / name)
             texts.append(name)
+    shown = questionnaires_shown(manifest, study_dir)
+    if shown is not None:
+        (out / "texts").mkdir(exist_ok=True)
+        atomic_write_text(out / "texts" / QUESTIONNAIRES_TEXT, json.dumps(shown, indent=1), "questionnaires")
+        texts.append(QUESTIONNAIRES_TEXT)
     atomic_write_text(out / "README.md", readme(manifest, tables, texts, len(key)), "README")
     atomic_write_text(study_dir / KEY_FILE, json.dumps({"pseudonyms": {str(p): c for p, c in key.items()},
                                                         "package": str(out.resolve())}, indent=1),
@@ -120,6 +130,24 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
     sums = "".join(f"{sha256_of(path)}  {path.relative_to(out)}\n" for path in files)
     atomic_write_text(out / "SHA256SUMS", sums, "checksums")
     return {"tables": tables, "texts": texts, "participants": len(key), "files": len(files) + 1}
+
+
+def questionnaires_shown(manifest: dict, study_dir: Path) -> dict | None:
+    """What each questionnaire of a live study asked where it was placed ({placement: [the station's
+    questionnaire, with each item's `reversed`]}), read from the study's own copies of its files;
+    None for a study without questionnaires."""
+    config = relocated_config(manifest.get("config") or {}, study_dir)
+    if not config.get("questionnaires"):
+        return None
+    plan = questionnaire_plan(config["questionnaires"], study_dir, str(study_dir / MANIFEST_FILE))
+
+    def shown(questionnaire: Questionnaire, placement: str) -> dict:
+        asked = questionnaire.to_client(placement)
+        reversed_ids = {item.id for item in questionnaire.items if item.reversed}
+        items = [{**item, "reversed": item["id"] in reversed_ids} for item in asked["items"]]
+        return {**asked, "items": items}
+
+    return {placement: [shown(q, placement) for q in found] for placement, found in plan.items()}
 
 
 def codebook_markdown(book: dict[str, list[dict]]) -> str:
@@ -144,7 +172,11 @@ def readme(manifest: dict, tables: list[str], texts: list[str], participants: in
         "- `codebook.md`, `codebook.json`: every column's type, whether it may be null, unit, meaning and "
         "allowed values.",
         "- `study_config.json`: the study's configuration; `versions.json`: the software that made it.",
-        "- `texts/`: what participants were shown (" + (", ".join(texts) or "none recorded") + ").",
+        "- `texts/`: what participants were shown (" + (", ".join(texts) or "none recorded") + ")"
+        + (f"; `{QUESTIONNAIRES_TEXT}`: per placement (`before`, `after_each_trial`, `end`) each "
+           "questionnaire as the station showed it (title, instructions, scale, items; an item's `id` is "
+           "the `item` of the questionnaires table, `reversed` items are scored as min + max - value)"
+           if QUESTIONNAIRES_TEXT in texts else "") + ".",
         "- `SHA256SUMS`: the SHA-256 of every other file (`sha256sum -c SHA256SUMS`).", "",
         "Participants are pseudonymous: each participant number is a random three-digit code, in the "
         "`participant` column and in every `episode_id` (`p<code>-<spec>-<condition>`). Missing values "

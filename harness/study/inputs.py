@@ -1,17 +1,17 @@
 """A study directory's own copy of its inputs, so it is analysed and replayed wherever it is copied.
 
-At consolidation `store_inputs` copies into the study directory every file the config names:
-specs, town (with the SUMO net of an imported town, where the town expects it) and driver model
-(the packaged ones when the config names none), background route files, the populations
-(`robust_population`, `[drivers] population`), the policy files among the conditions, the config
-file itself, and the "aware" and "robust" policies the study took from the policy cache. Each file
-is stored by content hash, `inputs/<first 16 hex of its SHA-256>/<its own file name>`: the name is
-kept because a spec's or a policy file's stem labels the tables, and a policy file's decision
-table (`.npz`) lies beside it. A population whose types name model files is stored with every
-model inline (its content hash, which the study's identity uses, is the same). Cached policies go
-to `inputs/policies/` under their cache names, which are keys of their inputs' content hashes, so
-a replay finds them there instead of synthesizing them again (a synthesis cut by its time limit
-need not repeat exactly).
+At consolidation `store_inputs` copies into the study directory every file the config names: specs,
+town (with the SUMO net of an imported town, where the town expects it) and driver model (the
+packaged ones when the config names none), background route files, the populations
+(`robust_population`, `[drivers] population`), a live study's questionnaire files, the policy files
+among the conditions, the config file itself, and the "aware" and "robust" policies the study took
+from the policy cache. Each file is stored by content hash, `inputs/<first 16 hex of its
+SHA-256>/<its own file name>`: the name is kept because a spec's or a policy file's stem labels the
+tables, and a policy file's decision table (`.npz`) lies beside it. A population whose types name
+model files is stored with every model inline (its content hash, which the study's identity uses, is
+the same). Cached policies go to `inputs/policies/` under their cache names, which are keys of their
+inputs' content hashes, so a replay finds them there instead of synthesizing them again (a synthesis
+cut by its time limit need not repeat exactly).
 
 The manifest's `config` names the copies by paths relative to the study directory, and its
 `inputs` lists each copy's path and SHA-256 with the file it was copied from (provenance, never
@@ -43,6 +43,7 @@ from trustroute.harness.study.context import (
 from trustroute.networks.town import DEFAULT_TOWN_PATH, load_town
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
 from trustroute.participants.driver_population import load_driver_population
+from trustroute.participants.questionnaires import PACKAGED
 from trustroute.policies.resolve import aware_cache_path, population_cache_path
 
 INPUTS_DIR = "inputs"
@@ -144,6 +145,11 @@ def store_inputs(study_dir: Path, context: StudyContext) -> tuple[dict, dict]:
         recorded[key] = None if value is None else _store_population(study_dir, record, value)
     for path in _cached_policies(context):
         _store_file(study_dir, record, path, study_dir / POLICIES_DIR)
+    if config.questionnaires is not None:   # a live study's questionnaire files; packaged ones by name
+        recorded["questionnaires"] = {
+            placement: [entry if entry in PACKAGED else _store_file(study_dir, record, entry)
+                        for entry in entries]
+            for placement, entries in config.questionnaires.items()}
     recorded["policy_cache"] = POLICIES_DIR
     recorded["output"] = None   # the directory is wherever it is copied to
     if Path(config.source_path).is_file():
@@ -174,6 +180,8 @@ def relocated_config(config: dict, study_dir: Path) -> dict:
             return str(path)
         if isinstance(value, list):
             return [place(key, v) for v in value]
+        if isinstance(value, dict):   # [questionnaires]: placement -> entries
+            return {k: place(f"{key}.{k}", v) for k, v in value.items()}
         return value
 
     return {key: place(key, value) for key, value in config.items()}

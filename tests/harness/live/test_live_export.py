@@ -16,7 +16,7 @@ from trustroute.core.codebook import type_name
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 
-from .conftest import serving, tiny_config
+from .conftest import TINY, serving, tiny_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 WORDS = re.compile(r"^[a-z_]+(, [a-z_]+)+$")
@@ -78,3 +78,57 @@ def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys
     assert not any("participants.json" in name or "tokens" in name for name in files)
     code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package))
     assert code == 2 and "not empty" in err
+
+
+COMFORT = """[questionnaire]
+name = "comfort"
+title = "Comfort"
+instructions = "How much do you agree?"
+scale = { min = 1, max = 5, step = 1, low = "strongly disagree", high = "strongly agree" }
+[[questionnaire.items]]
+id = "c1"
+text = "The ride felt smooth."
+[[questionnaire.items]]
+id = "c2"
+text = "The ride felt jerky."
+reversed = true
+"""
+
+
+def test_the_package_says_what_each_questionnaire_asked_and_names_no_file_of_the_lab(tmp_path, capsys):
+    """The questionnaires table holds item ids and values: the package carries the texts the
+    participants answered (instructions where asked, the scale, each item and whether it is
+    reversed), from the study's own copy of a questionnaire file, which may be gone from the lab's
+    folder by then; and the exported config names the copy, not the file's place on the lab's disk."""
+    from trustroute.harness.study.config import load_study_config
+
+    lab = tmp_path / "lab-folder"
+    lab.mkdir()
+    (lab / "comfort.toml").write_text(COMFORT)
+    path = lab / "live.toml"
+    path.write_text(TINY.format(participants=1, specs='["phi1"]')
+                    + '\n[questionnaires]\nafter_each_trial = ["jian"]\nend = ["comfort.toml"]\n')
+    config = load_study_config(path)
+    study_dir, package = tmp_path / "study", tmp_path / "package"
+    study = LiveStudy(config, study_dir, ServerOptions(pace=1000.0)).open()
+    try:
+        with serving(study) as (host, port):
+            token = study.create_participant()[1]
+            run_scripted(f"ws://{host}:{port}/ws", token, ScriptedParticipant(config, 0), 120)
+    finally:
+        study.close()
+    (lab / "comfort.toml").unlink()
+    code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package))
+    assert code == 0, err
+    shown = json.loads((package / "texts" / "questionnaires.json").read_text())
+    assert [q["name"] for q in shown["after_each_trial"]] == ["jian"] and shown["before"] == []
+    (comfort,) = shown["end"]
+    assert comfort["instructions"] == "How much do you agree?"
+    assert comfort["scale"] == {"min": 1, "max": 5, "step": 1, "low": "strongly disagree",
+                                "high": "strongly agree"}
+    assert [(i["id"], i["text"], i["reversed"]) for i in comfort["items"]] == [
+        ("c1", "The ride felt smooth.", False), ("c2", "The ride felt jerky.", True)]
+    answered = set(pq.read_table(package / "tables" / "questionnaires.parquet").column("item").to_pylist())
+    assert answered == {i["id"] for q in shown["after_each_trial"] + shown["end"] for i in q["items"]}
+    assert "questionnaires.json" in (package / "README.md").read_text()
+    assert str(tmp_path) not in (package / "study_config.json").read_text()
