@@ -48,6 +48,7 @@ import pandas as pd
 
 from trustroute.analysis.belief_sources import (
     BELIEF_SOURCES,
+    SIMULATED_ENGINES,
     declared_belief_source,
     default_belief_source,
     reference_model,
@@ -165,7 +166,7 @@ def source_satisfaction(study_dir: Path, manifest: dict, episodes: pd.DataFrame,
     satisfaction = episodes[["episode_id", "participant", "spec", "condition"]].copy()
     variants = {"filter": (roads, "filter"), "reported": (roads, "reported"),
                 "reference": (refiltered(roads, reference_model(manifest, driver), town), "filter")}
-    if manifest.get("engine") != "carla-logs":
+    if manifest.get("engine") in SIMULATED_ENGINES:   # a person (live, imported logs) has no model
         try:
             variants["true"] = (true_roads(study_dir, roads, episodes, driver, town), "filter")
         except InputError:
@@ -202,8 +203,11 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
                        "installation cannot rebuild from the study's config: 'reported' leads instead")
         belief_source = "reported"
     if f"satisfied_{belief_source}" not in satisfaction:
-        raise InputError("--belief-source", "", f"belief source {belief_source!r} needs a simulated study",
-                         "use filter, reported or reference on imported logs")
+        why = ("the drivers' own models, which this installation cannot rebuild from the study's config"
+               if manifest.get("engine") in SIMULATED_ENGINES else
+               f"a simulated study (this one is {manifest.get('engine')}: its drivers are people, no model)")
+        raise InputError("--belief-source", "", f"belief source {belief_source!r} needs {why}",
+                         "use filter, reported or reference")
     episodes = episodes.merge(
         satisfaction[["episode_id", *[c for c in satisfaction if c.startswith("satisfied_")]]],
         on="episode_id", how="left"

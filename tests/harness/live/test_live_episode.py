@@ -15,6 +15,7 @@ import uvicorn
 from fastapi.testclient import TestClient
 
 from benchmarks.bench_live import free_port
+from tests.cli import run_cli
 from trustroute.core.dataset import part_path, read_episodes, read_kinematics, read_manifest, read_roads
 from trustroute.harness.live.app import live_app
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
@@ -54,7 +55,7 @@ def served(live_study):
         yield live_study, address
 
 
-def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_it(served, tmp_path):
+def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_it(served, tmp_path, capsys):
     study, address = served
     headers = {"Authorization": f"Bearer {study.experimenter_token}"}
     created = httpx.post(f"http://{address}/api/participants", json={"label": "scripted"}, headers=headers)
@@ -98,6 +99,10 @@ def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_i
     analysis = json.loads(result.output)
     assert analysis["engine"] == "live"
     assert [(c["spec"], c["condition"], c["n"]) for c in analysis["cells"]] == [("phi1", "free", 1)]
+    # a person has no true driver model: a live study has no "true" belief source (docs/study.md);
+    # filtered with the study's driver model on the stated trust, it was shown as each driver's own
+    code, _, err = run_cli(capsys, "analyze", str(study.study_dir), "--no-report", "--belief-source", "true")
+    assert code == 2 and err.count("\n") == 1 and "needs a simulated study (this one is live" in err, err
     # the manual-driving table: one row per incident type with a takeover (assisted: the reaction only)
     incidents = pd.read_parquet(study.study_dir / "incidents.parquet")
     took = incidents[incidents["takeover"]]
