@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import pandas as pd
 
-from trustroute.analysis.belief_sources import beside_source, source_label
+from trustroute.analysis.belief_sources import SIMULATED_ENGINES, beside_source, source_label
 from trustroute.analysis.formatting import (
     MISSING,
     TERMINAL_WIDTH,
@@ -128,11 +128,15 @@ def _group_columns(groups: pd.DataFrame) -> dict[str, pd.Series]:
             "mean trust (reported)": groups["mean_trust"].map(number_text)}
 
 
+# the mean over positions of trust_after: a synthetic driver's hidden trust; a person's stated trust
+TRUE_TRUST, STATED_TRUST = "mean true trust", "mean stated trust"
+
+
 def _trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
     """Reported and true trust and takeovers, as every per-cell display table shows them."""
     return {"mean trust (reported)": cells["mean_trust"].map(number_text),
             "trust 95% CI": interval_column(cells, "trust_ci_low", "trust_ci_high", 2),
-            "mean true trust": cells["mean_true_trust"].map(number_text),
+            TRUE_TRUST: cells["mean_true_trust"].map(number_text),
             "takeovers / episode": cells["takeovers_per_episode"].map(lambda v: number_text(v, 2))}
 
 
@@ -227,7 +231,11 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
         "manual": (analysis.manual, manual_display),
         "paper": (analysis.paper, lambda paper: paper),
     }
-    return {name: show(frame) for name, (frame, show) in shown.items() if len(frame)}
+    tables = {name: show(frame) for name, (frame, show) in shown.items() if len(frame)}
+    if analysis.manifest.get("engine") in SIMULATED_ENGINES:
+        return tables
+    # people: the trust columns hold what each participant stated (docs/live_studies.md, "Log columns")
+    return {name: table.rename(columns={TRUE_TRUST: STATED_TRUST}) for name, table in tables.items()}
 
 
 TABLE_TITLES = {

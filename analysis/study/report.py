@@ -67,7 +67,8 @@ NOTES = [
     "conditional logit is fitted; on separated data the row shows the exact conditional odds ratio of "
     "the matched pairs and says why in its note.",
     "mean trust = mean over episodes of the episode's mean reported trust (as the paper's participants "
-    "reported); mean true trust = the synthetic driver's hidden trust averaged over positions.",
+    "reported); mean true trust = the synthetic driver's hidden trust averaged over positions (in a "
+    "study of people, mean stated trust: the participant's latest report, or their trust at the start).",
     "exact [L, U] = the exact evaluation (policies/evaluation) of the same policy with the study's "
     "fallback rule, for the nominal driver model: with a [population] the simulated drivers differ "
     "from it, so the rates may differ.",

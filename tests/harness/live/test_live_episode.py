@@ -101,6 +101,8 @@ def test_a_scripted_participant_drives_through_the_websocket_and_analyze_reads_i
     assert [(c["spec"], c["condition"], c["n"]) for c in analysis["cells"]] == [("phi1", "free", 1)]
     # a person has no true driver model: a live study has no "true" belief source (docs/study.md);
     # filtered with the study's driver model on the stated trust, it was shown as each driver's own
+    code, out, _ = run_cli(capsys, "analyze", str(study.study_dir), "--no-report")
+    assert code == 0 and "mean stated trust" in out and "true" not in out.replace("true)", "")
     code, _, err = run_cli(capsys, "analyze", str(study.study_dir), "--no-report", "--belief-source", "true")
     assert code == 2 and err.count("\n") == 1 and "needs a simulated study (this one is live" in err, err
     # the manual-driving table: one row per incident type with a takeover (assisted: the reaction only)
