@@ -70,4 +70,8 @@ def withdraw(study_dir: str, participant: int, reason: str, by: str | None, read
     else:
         line = (f"participant {participant} withdrawn: {len(entry['removed'])} file(s) removed, the "
                 f"dataset consolidated without them; audit entry in {audit}")
+        if "exported" in entry:
+            line += (f"; the package exported before, {entry['exported']['package']}, still holds their "
+                     f"data as participant {entry['exported']['participant']}: export the study again "
+                     "and replace it wherever it was shared")
     emit(as_json, with_paths(entry, written), [line])

@@ -7,7 +7,9 @@ attempts from the journal, and their label and token from `live/participants.jso
 stays, marked withdrawn, so their index is not reused and a re-run is refused until
 `readmit_participant`); then the dataset is consolidated again without them, and an audit entry
 is appended to `live/withdrawals.jsonl`: who, when, why, every file removed with its SHA-256 and
-size, and the SHA-256 of every consolidated table before and after.
+size, the SHA-256 of every consolidated table before and after, and, when a package exported
+before holds the participant (`exported_as`), that package and their code in it: the withdrawal
+cannot reach a package already shared, so it says which one to replace.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from trustroute.core.validation import read_json
 from trustroute.harness.live.answers import answer_rows, write_answer_table
 from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.study.context import study_context
+from trustroute.harness.study.export import KEY_FILE
 from trustroute.harness.study.manifest import consolidate
 from trustroute.harness.study.plan import plan_episodes
 from trustroute.harness.study.replay import study_config_from_manifest
@@ -115,6 +118,24 @@ def declined_refusal(study_dir: Path, participant: int) -> InputError:
                       "nothing to do: nothing of theirs is kept")
 
 
+def exported_as(study_dir: Path, participant: int) -> dict | None:
+    """{"package", "participant"}: the package `trustroute export` last wrote from this study and the
+    participant's code in it, when it holds them (its key, harness/study/export.py); else None. Their
+    data stay in a package already shared until the study is exported again without them."""
+    path = Path(study_dir) / KEY_FILE
+    if not path.exists():
+        return None
+    fix = "export the study again (trustroute export), which rewrites it"
+    key = read_json(path, "export key", fix=fix)
+    if not isinstance(key, dict):
+        raise InputError(str(path), "", "not an export key", fix)
+    codes, package = key.get("pseudonyms"), key.get("package")
+    if not isinstance(codes, dict) or not isinstance(package, str):
+        raise InputError(str(path), "pseudonyms", "not an export key", fix)
+    code = codes.get(str(participant))
+    return None if code is None else {"package": package, "participant": code}
+
+
 def withdraw_participant(study_dir: Path, participant: int, by: str | None = None, reason: str = "") -> dict:
     """Withdraw `participant` (the directory's lock held by the caller); the audit entry. Everything
     it reads (the registry, the manifest and the study's inputs, the attempts journal, the answers)
@@ -133,6 +154,7 @@ def withdraw_participant(study_dir: Path, participant: int, by: str | None = Non
     journal = AttemptLog(study_dir, LIVE_DIR)
     attempts = [entry for entry in journal.entries() if entry[1]["participant"] != participant]
     answers = [row for row in answer_rows(study_dir) if row["participant"] != participant]
+    exported = exported_as(study_dir, participant)
     before = table_checksums(study_dir)
     files = participant_files(study_dir, participant)
     removed = [{"path": str(path.relative_to(study_dir)), "sha256": sha256_of(path),
@@ -152,7 +174,8 @@ def withdraw_participant(study_dir: Path, participant: int, by: str | None = Non
     write_answer_table(study_dir, answers)
     entry = {"utc": withdrawn_utc,
              "by": by or getpass.getuser(), "participant": participant, "reason": reason,
-             "removed": removed, "tables_before": before, "tables_after": table_checksums(study_dir)}
+             "removed": removed, "tables_before": before, "tables_after": table_checksums(study_dir),
+             **({} if exported is None else {"exported": exported})}
     with (study_dir / LIVE_DIR / AUDIT).open("a", encoding="utf-8") as out:
         out.write(json.dumps(entry) + "\n")
     return entry

@@ -237,6 +237,25 @@ def test_withdraw_json_is_the_audit_entry_with_the_files_it_wrote(tmp_path, caps
     assert set(json.loads(out)["paths"]) == {"audit", "registry"}
 
 
+def test_a_withdrawal_names_the_package_exported_before_that_still_holds_them(tmp_path, capsys):
+    """A package written by `trustroute export` before the withdrawal is outside the study, where
+    the withdrawal cannot delete their data: the command, and the audit, say which package and the
+    participant's code in it, so the researcher replaces it."""
+    study = _unconsolidated(tmp_path, f"{_attempt(0)}\n{_attempt(1)}\n")
+    package = tmp_path / "shared-package"
+    (study / "export-key.json").write_text(json.dumps({"pseudonyms": {"0": 417, "1": 902},
+                                                      "package": str(package)}))
+    code, out, err = run_cli(capsys, "withdraw", str(study), "1")
+    assert code == 0, err
+    assert f"{package}, still holds their data as participant 902: export the study again" in out
+    entry = json.loads((study / "live" / "withdrawals.jsonl").read_text())
+    assert entry["exported"] == {"package": str(package), "participant": 902}
+    (study / "export-key.json").write_text('{"pseudonyms": [1]}')
+    code, out, err = run_cli(capsys, "withdraw", str(study), "0")
+    assert_one_line_error(code, err, "export-key.json")
+    assert (study / "parts" / "p00000-phi1-free.zip").exists()   # refused before anything is deleted
+
+
 def _issue_while_paused(study, client, issue: str, meanwhile):
     """`issue` ("claim": the participant's link opened; "link": the console's new link) for
     participant 0, paused where the server is about to issue the token (LiveStudy.replace_token
