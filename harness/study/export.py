@@ -95,6 +95,7 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
     if out.resolve().is_relative_to(study_dir.resolve()):
         raise InputError(str(out), "--out", "the package would be inside the study directory",
                          "pass a directory outside the study")
+    shown = questionnaires_shown(manifest, study_dir)   # read before anything is written
     key = pseudonyms(participants_of(study_dir), rng)
     (out / "tables").mkdir(parents=True, exist_ok=True)
     tables = []
@@ -117,7 +118,6 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
             (out / "texts").mkdir(exist_ok=True)
             shutil.copyfile(study_dir / source, out / "texts" / name)
             texts.append(name)
-    shown = questionnaires_shown(manifest, study_dir)
     if shown is not None:
         (out / "texts").mkdir(exist_ok=True)
         atomic_write_text(out / "texts" / QUESTIONNAIRES_TEXT, json.dumps(shown, indent=1), "questionnaires")
@@ -139,7 +139,13 @@ def questionnaires_shown(manifest: dict, study_dir: Path) -> dict | None:
     config = relocated_config(manifest.get("config") or {}, study_dir)
     if not config.get("questionnaires"):
         return None
-    plan = questionnaire_plan(config["questionnaires"], study_dir, str(study_dir / MANIFEST_FILE))
+    try:
+        plan = questionnaire_plan(config["questionnaires"], study_dir, str(study_dir / MANIFEST_FILE))
+    except InputError as error:   # a study consolidated before its questionnaire files were stored
+        raise InputError(str(study_dir / MANIFEST_FILE), "config.questionnaires",
+                         f"a questionnaire the study names cannot be read ({error.source}: {error.problem})",
+                         "put the file back where the manifest names it, so that its texts are exported"
+                         ) from None
 
     def shown(questionnaire: Questionnaire, placement: str) -> dict:
         asked = questionnaire.to_client(placement)

@@ -11,7 +11,7 @@ import re
 import pyarrow.parquet as pq
 import pytest
 
-from tests.cli import run_cli
+from tests.cli import assert_one_line_error, run_cli
 from trustroute.core.codebook import type_name
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
@@ -132,3 +132,9 @@ def test_the_package_says_what_each_questionnaire_asked_and_names_no_file_of_the
     assert answered == {i["id"] for q in shown["after_each_trial"] + shown["end"] for i in q["items"]}
     assert "questionnaires.json" in (package / "README.md").read_text()
     assert str(tmp_path) not in (package / "study_config.json").read_text()
+    # a questionnaire that cannot be read: one line, and no package begun
+    (copy,) = (study_dir / "inputs").glob("*/comfort.toml")
+    copy.unlink()
+    code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(tmp_path / "again"))
+    assert_one_line_error(code, err, "comfort.toml")
+    assert not (tmp_path / "again").exists()
