@@ -20,11 +20,12 @@ A Likert questionnaire file (TOML):
     text = "The ride felt smooth."
     reversed = false                 # optional
 
-A packaged questionnaire's instructions follow where it is asked (before any drive they speak
-of the drives to come, at the end of all of them); a file's are its `instructions`, wherever it
-is placed. The study config's `[questionnaires]` table places them: `before` (after the consent, before
-any drive), `after_each_trial` (after each trial, not the warm-up) and `end` (after the last
-trial), each a list of `jian`, `nasa_tlx` or file paths (relative to the config).
+A packaged questionnaire's instructions, and NASA-TLX's items, follow where it is asked (before any
+drive they speak of the drives to come, at the end of all of them); a file's are its `instructions`
+and items as written, wherever it is placed. The study config's `[questionnaires]` table places
+them: `before` (after the consent, before any drive), `after_each_trial` (after each trial, not the
+warm-up) and `end` (after the last trial), each a list of `jian`, `nasa_tlx` or file paths (relative
+to the config).
 """
 
 from __future__ import annotations
@@ -52,6 +53,13 @@ class Item:
     reversed: bool = False
     low: str = ""  # the item's own anchors (NASA-TLX's performance), else the scale's
     high: str = ""
+    # ((placement, text), ...): the text where it differs by where it is asked, as the
+    # questionnaire's instructions do (before any drive an item asks what one is expected to bring)
+    placed: tuple[tuple[str, str], ...] = ()
+
+    def text_for(self, placement: str) -> str:
+        """The item as asked where the questionnaire is placed (a placement of PLACEMENTS)."""
+        return dict(self.placed).get(placement, self.text)
 
 
 @dataclass(frozen=True)
@@ -115,7 +123,8 @@ class Questionnaire:
                 "low": self.low,
                 "high": self.high,
             },
-            "items": [{"id": i.id, "text": i.text, "low": i.low, "high": i.high} for i in self.items],
+            "items": [{"id": i.id, "text": i.text_for(placement), "low": i.low, "high": i.high}
+                      for i in self.items],
         }
 
 
@@ -162,23 +171,46 @@ JIAN = Questionnaire(
         ("end", "Rate how much each statement applies to the automated vehicle you rode in today."),
     ),
 )
+# NASA-TLX's items where they are asked other than after a trial: before any drive, what a drive is
+# expected to bring (as the instructions there ask); at the end, the session's drives
+TLX_PLACED: dict[str, tuple[tuple[str, str], ...]] = {
+    "mental": (("before", "Mental demand: how mentally demanding do you expect a drive to be?"),
+               ("end", "Mental demand: how mentally demanding were the drives?")),
+    "physical": (("before", "Physical demand: how physically demanding do you expect a drive to be?"),
+                 ("end", "Physical demand: how physically demanding were the drives?")),
+    "temporal": (("before", "Temporal demand: how hurried or rushed do you expect the pace of a drive "
+                  "to be?"),
+                 ("end", "Temporal demand: how hurried or rushed was the pace of the drives?")),
+    "performance": (("before", "Performance: how successful do you expect to be in doing what you are asked "
+                     "to do?"),),
+    "effort": (("before", "Effort: how hard do you expect to have to work to reach your level of "
+                "performance?"),),
+    "frustration": (("before", "Frustration: how insecure, discouraged, irritated, stressed and annoyed do "
+                     "you expect to be?"),),
+}
 NASA_TLX = Questionnaire(
     "nasa_tlx",
     "Workload (NASA-TLX)",
     "Rate the drive you just completed on each scale.",
     (
-        Item("mental", "Mental demand: how mentally demanding was the drive?"),
-        Item("physical", "Physical demand: how physically demanding was the drive?"),
-        Item("temporal", "Temporal demand: how hurried or rushed was the pace of the drive?"),
+        Item("mental", "Mental demand: how mentally demanding was the drive?", placed=TLX_PLACED["mental"]),
+        Item("physical", "Physical demand: how physically demanding was the drive?",
+             placed=TLX_PLACED["physical"]),
+        Item("temporal", "Temporal demand: how hurried or rushed was the pace of the drive?",
+             placed=TLX_PLACED["temporal"]),
         Item(
             "performance",
             "Performance: how successful were you in doing what you were asked to do?",
             low="perfect",
             high="failure",
+            placed=TLX_PLACED["performance"],
         ),
-        Item("effort", "Effort: how hard did you have to work to reach your level of performance?"),
+        Item("effort", "Effort: how hard did you have to work to reach your level of performance?",
+             placed=TLX_PLACED["effort"]),
         Item(
-            "frustration", "Frustration: how insecure, discouraged, irritated, stressed and annoyed were you?"
+            "frustration",
+            "Frustration: how insecure, discouraged, irritated, stressed and annoyed were you?",
+            placed=TLX_PLACED["frustration"],
         ),
     ),
     0,

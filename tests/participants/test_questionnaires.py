@@ -119,3 +119,17 @@ def test_the_packaged_instructions_follow_where_the_questionnaire_is_asked(tmp_p
     (tmp_path / "comfort.toml").write_text(LIKERT)
     comfort = load_questionnaire(tmp_path / "comfort.toml", "study.toml")   # a file's: as written, anywhere
     assert {comfort.to_client(p)["instructions"] for p in PLACEMENTS} == {"How much do you agree?"}
+
+
+def test_the_workload_items_speak_of_the_drive_that_is_rated():
+    """NASA-TLX's items asked before any drive ask what a drive is expected to bring, after a trial
+    of the drive just completed, at the end of the session's drives: no item asks how a drive 'was'
+    before there was one, under instructions asking for what is expected."""
+    before, after, end = ([item["text"] for item in NASA_TLX.to_client(p)["items"]] for p in PLACEMENTS)
+    assert after[0] == "Mental demand: how mentally demanding was the drive?"
+    assert all("expect" in text and " was " not in text and " were " not in text for text in before), before
+    assert all("the drive?" not in text for text in end) and "were the drives" in end[0], end
+    assert len(set(before)) == len(set(end)) == 6
+    # the ids, and so the answers' rows and scores, are the same wherever it is asked
+    assert {tuple(i["id"] for i in NASA_TLX.to_client(p)["items"]) for p in PLACEMENTS} == {
+        tuple(item.id for item in NASA_TLX.items)}
