@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from tests.questionnaire_files import COMFORT
 from trustroute.analysis.study.questionnaires import cronbach_alpha
 from trustroute.core.errors import InputError
 from trustroute.participants.questionnaires import (
@@ -13,20 +14,6 @@ from trustroute.participants.questionnaires import (
     load_questionnaire,
     questionnaire_plan,
 )
-
-LIKERT = """[questionnaire]
-name = "comfort"
-title = "Comfort"
-instructions = "How much do you agree?"
-scale = { min = 1, max = 5, low = "strongly disagree", high = "strongly agree" }
-[[questionnaire.items]]
-id = "c1"
-text = "The ride felt smooth."
-[[questionnaire.items]]
-id = "c2"
-text = "The ride felt jerky."
-reversed = true
-"""
 
 
 def test_the_packaged_scales():
@@ -57,7 +44,7 @@ def test_an_answer_is_a_point_of_the_scale_exactly():
 def test_a_scale_in_decimal_steps(tmp_path):
     """A step of 0.1 is one tenth: 0.3 is the scale's third point (in binary floating point
     0.3 / 0.1 is not 3), and 0.25 is no point of it."""
-    (tmp_path / "tenths.toml").write_text(LIKERT.replace("max = 5", "max = 0.3, step = 0.1")
+    (tmp_path / "tenths.toml").write_text(COMFORT.replace("max = 5", "max = 0.3, step = 0.1")
                                           .replace("min = 1", "min = 0"))
     tenths = load_questionnaire(tmp_path / "tenths.toml", "study.toml")
     assert tenths.check({"c1": 0.3, "c2": 0.1}) == {"c1": 0.3, "c2": 0.1}
@@ -66,7 +53,7 @@ def test_a_scale_in_decimal_steps(tmp_path):
 
 
 def test_a_likert_file_and_the_config_table(tmp_path):
-    (tmp_path / "comfort.toml").write_text(LIKERT)
+    (tmp_path / "comfort.toml").write_text(COMFORT)
     comfort = load_questionnaire(tmp_path / "comfort.toml", "study.toml")
     assert [item.reversed for item in comfort.items] == [False, True]
     assert comfort.score({"c1": 5, "c2": 5}) == 3
@@ -79,7 +66,7 @@ def test_a_likert_file_and_the_config_table(tmp_path):
                          ({"end": ["missing.toml"]}, "missing.toml")):
         with pytest.raises(InputError, match=where):
             questionnaire_plan(table, tmp_path, "study.toml")
-    (tmp_path / "bad.toml").write_text(LIKERT.replace("max = 5", "max = 0"))
+    (tmp_path / "bad.toml").write_text(COMFORT.replace("max = 5", "max = 0"))
     with pytest.raises(InputError, match="questionnaire.scale"):
         load_questionnaire(tmp_path / "bad.toml", "study.toml")
 
@@ -97,7 +84,7 @@ def test_cronbach_alpha():
 
 
 def test_a_misspelt_key_of_a_questionnaire_or_its_placement_names_the_closest(tmp_path):
-    (tmp_path / "typo.toml").write_text(LIKERT.replace("title =", "titel ="))
+    (tmp_path / "typo.toml").write_text(COMFORT.replace("title =", "titel ="))
     with pytest.raises(InputError) as error:
         load_questionnaire(tmp_path / "typo.toml", "study.toml")
     assert error.value.place == "questionnaire.titel"
@@ -116,7 +103,7 @@ def test_the_packaged_instructions_follow_where_the_questionnaire_is_asked(tmp_p
         assert len({before, after, end}) == 3
     after_trial = NASA_TLX.to_client("after_each_trial")["instructions"]
     assert after_trial == "Rate the drive you just completed on each scale."
-    (tmp_path / "comfort.toml").write_text(LIKERT)
+    (tmp_path / "comfort.toml").write_text(COMFORT)
     comfort = load_questionnaire(tmp_path / "comfort.toml", "study.toml")   # a file's: as written, anywhere
     assert {comfort.to_client(p)["instructions"] for p in PLACEMENTS} == {"How much do you agree?"}
 

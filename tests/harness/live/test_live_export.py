@@ -12,6 +12,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from tests.cli import assert_one_line_error, run_cli
+from tests.questionnaire_files import COMFORT
 from trustroute.core.codebook import type_name
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
@@ -80,19 +81,6 @@ def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys
     assert code == 2 and "not empty" in err
 
 
-COMFORT = """[questionnaire]
-name = "comfort"
-title = "Comfort"
-instructions = "How much do you agree?"
-scale = { min = 1, max = 5, step = 1, low = "strongly disagree", high = "strongly agree" }
-[[questionnaire.items]]
-id = "c1"
-text = "The ride felt smooth."
-[[questionnaire.items]]
-id = "c2"
-text = "The ride felt jerky."
-reversed = true
-"""
 
 
 def test_the_package_says_what_each_questionnaire_asked_and_names_no_file_of_the_lab(tmp_path, capsys):

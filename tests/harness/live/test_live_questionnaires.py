@@ -10,6 +10,7 @@ import pytest
 from click.testing import CliRunner
 from fastapi.testclient import TestClient
 
+from tests.questionnaire_files import COMFORT
 from trustroute.core.dataset import read_questionnaires
 from trustroute.harness.cli import cli
 from trustroute.harness.live.app import live_app
@@ -27,17 +28,6 @@ PLACED = """
 before = ["nasa_tlx"]
 after_each_trial = ["jian"]
 end = ["comfort.toml"]
-"""
-COMFORT = """[questionnaire]
-name = "comfort"
-scale = { min = 1, max = 5 }
-[[questionnaire.items]]
-id = "c1"
-text = "The ride felt smooth."
-[[questionnaire.items]]
-id = "c2"
-text = "The ride felt jerky."
-reversed = true
 """
 
 
