@@ -49,6 +49,7 @@ from trustroute.core.output_files import check_output_dir
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.core.progress import bar_disable
 from trustroute.harness.study.manifest import git_revision, package_versions
+from trustroute.harness.study.resume import check_own_folder
 from trustroute.networks.road import Road
 from trustroute.networks.town import load_town
 from trustroute.participants.driver_model import load_driver_model
@@ -320,10 +321,12 @@ def discover(source: Path) -> list[LogFile]:
 
 
 def check_import_target(out: Path, logs: list[LogFile]) -> None:
-    """Before anything is written: `out` holds no study's files (`dataset.study_files`), or is an
-    earlier import of the same logs (the same files found), which is imported again in place."""
+    """Before anything is written: `out` is new or empty (a folder of other files is refused, as a
+    study's --out is: `check_own_folder`), or is an earlier import of the same logs (the same files
+    found), which is imported again in place."""
     found = dataset.study_files(out)
     if not found:
+        check_own_folder(out)
         return
     try:
         manifest = dataset.read_manifest(out)

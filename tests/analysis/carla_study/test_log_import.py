@@ -241,6 +241,19 @@ def test_another_study_in_out_is_refused_and_left_as_it_was(imported, tmp_path, 
     assert read_episodes(earlier).equals(read_episodes(imported))
 
 
+def test_a_folder_of_other_files_is_refused_and_left_as_it_was(tmp_path, capsys):
+    """An import writes a study's tables: into a new or empty folder, or its own earlier import,
+    never among a person's files (the rule of a study's --out)."""
+    home = tmp_path / "home"
+    (home / "photos").mkdir(parents=True)
+    (home / "notes.txt").write_text("mine")
+    before = _files(home)
+    code, _, err = run_cli(capsys, "import", "carla-logs", str(RAW), "--out", str(home), "--quiet")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert f"{home}: --out: the folder holds files that are not a study's (notes.txt, photos)" in err
+    assert sorted(p.name for p in home.iterdir()) == ["notes.txt", "photos"] and _files(home) == before
+
+
 def test_missing_column_is_one_line(tmp_path, capsys):
     folder = _bad_copy(tmp_path, SAMPLE, lambda f: f.drop(columns=["if_autopilot"]))
     assert "if_autopilot" in _one_line_error(capsys, folder, tmp_path)
