@@ -98,6 +98,16 @@ def load_registry(path: Path, fix: str) -> dict:
     return records
 
 
+def withdrawn_count(study_dir: Path) -> int | None:
+    """How many of a live study's participants are withdrawn (not readmitted), as its registry says;
+    None for a study without a registry (a simulated one). `trustroute export` reports the count."""
+    path = Path(study_dir) / LIVE_DIR / REGISTRY
+    if not path.exists():
+        return None
+    records = load_registry(path, "restore it from a backup")
+    return sum(1 for record in records["participants"].values() if record.get("withdrawn"))
+
+
 def write_registry(study_dir: Path, records: dict) -> None:
     atomic_write_text(Path(study_dir) / LIVE_DIR / REGISTRY, json.dumps(records, indent=1),
                       "live participants", "free disk space")

@@ -11,6 +11,11 @@ from a Generator seeded by the caller, in the `participant` column and in every 
 (`p<code, 5 digits>-<spec>-<condition>`). The key (original number -> code) is
 written into the study directory (`export-key.json`), never into the package. Nothing of the
 live registry (token digests, labels), the token log or the withdrawal audit is exported.
+
+Neither is the order of enrolment or the lab's schedule: every table's rows are sorted by pseudonym
+(a participant's rows in the table's own order), and every wall-clock column becomes the seconds
+since the participant's first recorded wall-clock time (trustroute/core/codebook.py, EXPORTED_TIMES).
+The README reports the participant flow (planned, with data, and for a live study withdrawn: a count).
 """
 
 from __future__ import annotations
@@ -20,13 +25,21 @@ import json
 import platform
 import re
 import shutil
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 
-from trustroute.core.codebook import codebook
-from trustroute.core.dataset import MANIFEST_FILE, TABLES, read_manifest, read_study_table, write_table
+from trustroute.core.codebook import EXPORTED_TIMES, codebook, exported_schema
+from trustroute.core.dataset import (
+    MANIFEST_FILE,
+    REBUILD_FIX,
+    TABLES,
+    read_manifest,
+    read_study_table,
+    write_table,
+)
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text, check_output_dir
 from trustroute.harness.study.inputs import relocated_config
@@ -46,6 +59,61 @@ def pseudonyms(participants: list[int], rng: np.random.Generator) -> dict[int, i
         digits += 1
     codes = rng.choice(np.arange(10 ** (digits - 1), 10 ** digits), size=len(participants), replace=False)
     return {int(p): int(code) for p, code in zip(sorted(participants), codes, strict=True)}
+
+
+def row_participants(table: pa.Table) -> list[int | None]:
+    """Each row's participant number: its `participant`, else its `episode_id`'s (None: neither)."""
+    if "participant" in table.schema.names:
+        return [int(p) for p in table.column("participant").to_pylist()]
+    return [int(m.group(1)) if e and (m := EPISODE_PARTICIPANT.match(e)) else None
+            for e in table.column("episode_id").to_pylist()]
+
+
+def wall_clock_times(study_dir: Path, name: str, table: pa.Table) -> dict[str, list[datetime | None]]:
+    """The wall-clock columns of `table`, the study's table `name`, as times; InputError naming the
+    first row that is not an ISO 8601 date-time with its zone."""
+    times: dict[str, list[datetime | None]] = {}
+    for column in EXPORTED_TIMES.get(name, {}):
+        times[column] = []
+        for row, text in enumerate(table.column(column).to_pylist()):
+            try:
+                value = None if text is None else datetime.fromisoformat(text)
+            except ValueError:
+                value = None
+            if text is not None and (value is None or value.tzinfo is None):
+                raise InputError(str(Path(study_dir) / TABLES[name][0]), f"{column}, row {row}",
+                                 f"not an ISO 8601 UTC date-time: {text!r}", REBUILD_FIX)
+            times[column].append(value)
+    return times
+
+
+def first_times(study_dir: Path, tables: list[str]) -> dict[int, datetime]:
+    """Each participant's first recorded wall-clock time over the wall-clock columns of `tables`."""
+    first: dict[int, datetime] = {}
+    for name in tables:
+        if name in EXPORTED_TIMES:
+            table = read_study_table(study_dir, name)
+            numbers = row_participants(table)
+            for values in wall_clock_times(study_dir, name, table).values():
+                for p, value in zip(numbers, values, strict=True):
+                    if p is not None and value is not None and (p not in first or value < first[p]):
+                        first[p] = value
+    return first
+
+
+def exported_table(study_dir: Path, name: str, key: dict[int, int], first: dict[int, datetime]) -> pa.Table:
+    """The study's table `name` as the package holds it (`exported_schema`): pseudonymised, its
+    wall-clock columns as seconds since the participant's first time, its rows in pseudonym order."""
+    table = read_study_table(study_dir, name)
+    numbers = row_participants(table)
+    for column, values in wall_clock_times(study_dir, name, table).items():
+        seconds = [None if value is None or p is None else (value - first[p]).total_seconds()
+                   for p, value in zip(numbers, values, strict=True)]
+        index = table.schema.get_field_index(column)
+        table = table.set_column(index, exported_schema(name).field(index), pa.array(seconds, pa.float64()))
+    codes = np.array([-1 if p is None else key[p] for p in numbers], dtype=np.int64)
+    order = np.lexsort((np.arange(len(codes)), codes))   # by code, then the table's own order
+    return pseudonymised(table, key).take(pa.array(order))
 
 
 def participants_of(study_dir: Path) -> list[int]:
@@ -85,8 +153,9 @@ def sha256_of(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
-    """Write the package of `study_dir` into `out` (a new or empty directory); its index."""
+def export_study(study_dir: Path, out: Path, rng: np.random.Generator, withdrawn: int | None) -> dict:
+    """Write the package of `study_dir` into `out` (a new or empty directory); its index. `withdrawn`:
+    how many participants of a live study withdrew (None: a simulated study), for the README."""
     study_dir, out = Path(study_dir), Path(out)
     manifest = read_manifest(study_dir)
     check_output_dir(out, "--out", "package directory")
@@ -97,14 +166,12 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
                          "pass a directory outside the study")
     shown = questionnaires_shown(manifest, study_dir)   # read before anything is written
     key = pseudonyms(participants_of(study_dir), rng)
+    tables = [name for name, (file_name, _) in TABLES.items() if (study_dir / file_name).exists()]
+    first = first_times(study_dir, tables)   # every time read and checked before anything is written
     (out / "tables").mkdir(parents=True, exist_ok=True)
-    tables = []
-    for name, (file_name, _) in TABLES.items():
-        path = study_dir / file_name
-        if path.exists():
-            write_table(pseudonymised(read_study_table(study_dir, name), key), out / "tables" / file_name)
-            tables.append(name)
-    book = {name: entries for name, entries in codebook().items() if name in tables}
+    for name in tables:
+        write_table(exported_table(study_dir, name, key, first), out / "tables" / TABLES[name][0])
+    book = {name: entries for name, entries in codebook(exported=True).items() if name in tables}
     atomic_write_text(out / "codebook.json", json.dumps(book, indent=1), "codebook")
     atomic_write_text(out / "codebook.md", codebook_markdown(book), "codebook")
     atomic_write_text(out / "study_config.json", json.dumps(manifest["config"], indent=1, default=str),
@@ -122,7 +189,7 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator) -> dict:
         (out / "texts").mkdir(exist_ok=True)
         atomic_write_text(out / "texts" / QUESTIONNAIRES_TEXT, json.dumps(shown, indent=1), "questionnaires")
         texts.append(QUESTIONNAIRES_TEXT)
-    atomic_write_text(out / "README.md", readme(manifest, tables, texts, len(key)), "README")
+    atomic_write_text(out / "README.md", readme(manifest, tables, texts, len(key), withdrawn), "README")
     atomic_write_text(study_dir / KEY_FILE, json.dumps({"pseudonyms": {str(p): c for p, c in key.items()},
                                                         "package": str(out.resolve())}, indent=1),
                       "export key")
@@ -168,12 +235,23 @@ def codebook_markdown(book: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
-def readme(manifest: dict, tables: list[str], texts: list[str], participants: int) -> str:
+def participant_flow(manifest: dict, participants: int, withdrawn: int | None) -> str:
+    """The README's participant flow: planned (the study config's), with data in the package, and for
+    a live study withdrawn (a count: who withdrew is not said)."""
+    planned = (manifest.get("config") or {}).get("participants")
+    flow = f"{planned} planned, {participants} with data in this package"
+    if withdrawn is not None:
+        flow += f", {withdrawn} withdrawn (their data deleted before this export)"
+    return f"Participants: {flow}."
+
+
+def readme(manifest: dict, tables: list[str], texts: list[str], participants: int,
+           withdrawn: int | None) -> str:
     name = manifest.get("study", "the study")
     return "\n".join([
         f"# {name}: data package", "",
-        f"A trustroute study ({manifest.get('engine')} engine) of {participants} participant(s), "
-        "exported with `trustroute export`.", "",
+        f"A trustroute study ({manifest.get('engine')} engine), exported with `trustroute export`.", "",
+        participant_flow(manifest, participants, withdrawn), "",
         "- `tables/`: the consolidated tables (Apache Parquet): " + ", ".join(tables) + ".",
         "- `codebook.md`, `codebook.json`: every column's type, whether it may be null, unit, meaning and "
         "allowed values.",
@@ -186,4 +264,6 @@ def readme(manifest: dict, tables: list[str], texts: list[str], participants: in
         "- `SHA256SUMS`: the SHA-256 of every other file (`sha256sum -c SHA256SUMS`).", "",
         "Participants are pseudonymous: each participant number is a random three-digit code, in the "
         "`participant` column and in every `episode_id` (`p<code>-<spec>-<condition>`). Missing values "
-        "are nulls.", ""])
+        "are nulls. Rows are in the order of the codes (a participant's rows in the study's order), not "
+        "of enrolment, and times of day are not given: each wall-clock time is the seconds since the "
+        "participant's first recorded one (`codebook.md`).", ""])

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from trustroute.core.codebook import COLUMNS, codebook
+from trustroute.core.codebook import COLUMNS, EXPORTED_TIMES, UTC, codebook
 from trustroute.core.dataset import TABLES
 
 
@@ -14,3 +14,18 @@ def test_every_schema_column_has_one_codebook_entry():
     for table, (_, schema) in TABLES.items():
         assert [entry["column"] for entry in book[table]] == schema.names
         assert all(entry["meaning"] and entry["allowed"] for entry in book[table])
+
+
+def test_every_wall_clock_column_is_exported_as_seconds_with_an_entry():
+    utc = {table: {column for column, (unit, _, _) in entries.items() if unit == UTC}
+           for table, entries in COLUMNS.items()}
+    assert {table: set(columns) for table, columns in EXPORTED_TIMES.items()} == {
+        table: columns for table, columns in utc.items() if columns}
+    exported = codebook(exported=True)
+    for table, columns in EXPORTED_TIMES.items():
+        entries = {entry["column"]: entry for entry in exported[table]}
+        assert not set(columns) & set(entries)
+        for seconds in columns.values():
+            assert (entries[seconds]["type"], entries[seconds]["unit"]) == ("double", "s")
+            assert "first recorded wall-clock time" in entries[seconds]["meaning"]
+    assert all(entry["unit"] != UTC for entries in exported.values() for entry in entries)

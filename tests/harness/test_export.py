@@ -1,7 +1,11 @@
 """`trustroute export` of a simulated study: every participant gets a distinct pseudonym, however
-many the study has (a config allows up to 100,000)."""
+many the study has (a config allows up to 100,000); the rows follow the pseudonyms, not the order of
+enrolment; the README reports the participant flow."""
 
 from __future__ import annotations
+
+import json
+import shutil
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -9,6 +13,7 @@ import pytest
 
 import trustroute
 from tests.cli import run_cli
+from tests.export_checks import assert_no_wall_clock, assert_rows_in_code_order
 from trustroute.harness.study.export import pseudonyms
 
 
@@ -40,3 +45,17 @@ def test_a_package_path_that_is_a_file_is_one_line_naming_out(model_study, capsy
     assert code == 2 and out == ""
     assert err == (f"error: {taken}: --out: the package directory exists and is not a directory "
                    "(fix: pass a directory to --out)\n")
+
+
+def test_a_package_says_nothing_of_the_order_of_enrolment(model_study, tmp_path, capsys):
+    study = shutil.copytree(model_study, tmp_path / "study")
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"), "--seed", "2")
+    assert code == 0, err
+    key = json.loads((study / "export-key.json").read_text())["pseudonyms"]
+    codes = [key[str(p)] for p in range(12)]
+    assert codes != sorted(codes)   # enrolment order and code order differ: the check below means something
+    assert_rows_in_code_order(tmp_path / "package", study)
+    assert_no_wall_clock(tmp_path / "package")
+    readme = (tmp_path / "package" / "README.md").read_text()
+    assert "Participants: 12 planned, 12 with data in this package." in readme
+    assert "withdrawn" not in readme   # a simulated study has no withdrawals to report

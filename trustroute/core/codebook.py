@@ -2,6 +2,11 @@
 unit, meaning and allowed values (docs/dataset.md says the same in prose). `codebook()` joins these
 to the schemas' types and nullability; `trustroute export` writes it beside the tables, and
 tests/core/test_codebook.py checks that every schema column has an entry and every entry a column.
+
+An exported package holds no wall-clock time: each column of unit UTC is written as the seconds since
+the participant's first recorded wall-clock time (EXPORTED_TIMES; `codebook(exported=True)` and
+`exported_schema` describe the package's tables), so that the times keep each participant's
+durations and order without the dates and times of day that would show the lab's schedule.
 """
 
 from __future__ import annotations
@@ -10,6 +15,7 @@ import pyarrow as pa
 
 from trustroute.core.dataset import TABLES
 
+UTC = "UTC"   # the unit of a wall-clock column (an ISO 8601 date-time)
 TRUST = "integers 1-7 (1 = no trust, 7 = complete trust)"
 PROBABILITIES = "list of probabilities summing to 1, one per trust level 1-7"
 INCIDENTS = "obstacle, pedestrian, truck, none"
@@ -124,8 +130,8 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "attempt": ("", "the attempt's number for this drive", "integers >= 1"),
         "sequence": ("", "the attempt's number among the participant's attempts", "integers >= 1"),
         "run_position": ("", "a done trial's place in the order run", "integers >= 0"),
-        "started_utc": ("UTC", "when the attempt started", "ISO 8601 date-time"),
-        "ended_utc": ("UTC", "when the attempt ended", "ISO 8601 date-time"),
+        "started_utc": (UTC, "when the attempt started", "ISO 8601 date-time"),
+        "ended_utc": (UTC, "when the attempt ended", "ISO 8601 date-time"),
         "outcome": ("", "how the attempt ended", "started, aborted, failed, incomplete, done"),
         "reason": ("", "why it was aborted, failed or incomplete", "text"),
     },
@@ -141,9 +147,35 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "reversed": ("", "the item is scored reversed (scale_min + scale_max - value)", "true, false"),
         "scale_min": ("scale point", "the scale's lowest point", "real numbers"),
         "scale_max": ("scale point", "the scale's highest point", "real numbers"),
-        "answered_utc": ("UTC", "when the questionnaire was submitted", "ISO 8601 date-time"),
+        "answered_utc": (UTC, "when the questionnaire was submitted", "ISO 8601 date-time"),
     },
 }
+
+
+# table -> wall-clock column -> the column an export writes in its place (harness/study/export.py)
+EXPORTED_TIMES: dict[str, dict[str, str]] = {
+    "attempts": {"started_utc": "started_s", "ended_utc": "ended_s"},
+    "questionnaires": {"answered_utc": "answered_s"},
+}
+SINCE_FIRST = ("in seconds since the participant's first recorded wall-clock time (the earliest start of "
+               "their attempts or submission of their questionnaires, which is 0)")
+
+
+def exported_schema(table: str) -> pa.Schema:
+    """The schema of the table `table` in an exported package: its wall-clock columns as seconds."""
+    schema = TABLES[table][1]
+    for column, seconds in EXPORTED_TIMES.get(table, {}).items():
+        index = schema.get_field_index(column)
+        schema = schema.set(index, pa.field(seconds, pa.float64(), nullable=schema.field(index).nullable))
+    return schema
+
+
+def entry_of(table: str, column: str) -> tuple[str, str, str]:
+    """(unit, meaning, allowed values) of a column of a study's or an exported package's table."""
+    if column in COLUMNS[table]:
+        return COLUMNS[table][column]
+    (source,) = [utc for utc, seconds in EXPORTED_TIMES[table].items() if seconds == column]
+    return "s", f"{COLUMNS[table][source][1]}, {SINCE_FIRST}", ">= 0"
 
 
 def type_name(kind: pa.DataType) -> str:
@@ -151,13 +183,14 @@ def type_name(kind: pa.DataType) -> str:
     return f"list<{kind.value_type}>" if pa.types.is_list(kind) else str(kind)
 
 
-def codebook() -> dict[str, list[dict]]:
-    """{table: [{column, type, nullable, unit, meaning, allowed}, ...]} in schema order."""
+def codebook(exported: bool = False) -> dict[str, list[dict]]:
+    """{table: [{column, type, nullable, unit, meaning, allowed}, ...]} in schema order: of a study's
+    tables, or (`exported`) of an exported package's (`exported_schema`)."""
     book: dict[str, list[dict]] = {}
     for table, (file_name, schema) in TABLES.items():
-        entries = COLUMNS[table]
+        fields = exported_schema(table) if exported else schema
         book[table] = [{"column": field.name, "file": file_name, "type": type_name(field.type),
-                        "nullable": field.nullable, "unit": entries[field.name][0],
-                        "meaning": entries[field.name][1], "allowed": entries[field.name][2]}
-                       for field in schema]
+                        "nullable": field.nullable, **dict(zip(("unit", "meaning", "allowed"),
+                                                              entry_of(table, field.name), strict=True))}
+                       for field in fields]
     return book

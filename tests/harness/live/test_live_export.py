@@ -1,17 +1,20 @@
 """`trustroute export` of a live study, read back: every column of every table agrees with its
-codebook entry (type, nulls, allowed values), the participants are pseudonymous, and the
-checksums hold."""
+codebook entry (type, nulls, allowed values), the participants are pseudonymous, the rows follow the
+pseudonyms and no wall-clock time is left, the README reports the participant flow (withdrawals
+counted), and the checksums hold."""
 
 from __future__ import annotations
 
 import hashlib
 import json
 import re
+from datetime import datetime
 
 import pyarrow.parquet as pq
 import pytest
 
 from tests.cli import assert_one_line_error, run_cli
+from tests.export_checks import assert_no_wall_clock, assert_rows_in_code_order
 from tests.questionnaire_files import COMFORT
 from trustroute.core.codebook import type_name
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
@@ -35,6 +38,19 @@ def check_column(values: list, entry: dict) -> None:
         assert all(v >= int(allowed.rsplit(" ", 1)[1]) for v in present), entry["column"]
     elif allowed == ">= 0":
         assert all(v >= 0 for v in present), entry["column"]
+
+
+def check_seconds(package, study_dir, key: dict[str, int]) -> None:
+    """The attempts' times are seconds since each participant's first (0), with the study's durations."""
+    exported = pq.read_table(package / "tables" / "attempts.parquet").to_pylist()
+    study = pq.read_table(study_dir / "attempts.parquet").to_pylist()
+    for p, code in key.items():
+        mine = [row for row in study if row["participant"] == int(p)]
+        theirs = [row for row in exported if row["participant"] == code]
+        assert min(row["started_s"] for row in theirs) == 0
+        for row, original in zip(theirs, mine, strict=True):
+            start, end = (datetime.fromisoformat(original[c]) for c in ("started_utc", "ended_utc"))
+            assert row["ended_s"] - row["started_s"] == (end - start).total_seconds() >= 0
 
 
 def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys):
@@ -66,6 +82,10 @@ def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys
             assert not any(e.startswith(("p00000-", "p00001-")) for e in episodes)
     key = json.loads((study_dir / "export-key.json").read_text())["pseudonyms"]
     assert sorted(key) == ["0", "1"] and len(set(key.values())) == 2
+    assert key["0"] > key["1"]   # seed 5: code order is not enrolment order, so the check below tells
+    assert_rows_in_code_order(package, study_dir)
+    assert_no_wall_clock(package)
+    check_seconds(package, study_dir, key)
     assert (package / "texts" / "consent.txt").read_text() == "Consent: drive."
     assert json.loads((package / "study_config.json").read_text())["name"] == "tiny-live"
     assert "packages" in json.loads((package / "versions.json").read_text())
@@ -77,6 +97,8 @@ def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys
     for name, digest in listed.items():
         assert hashlib.sha256((package / name).read_bytes()).hexdigest() == digest, name
     assert not any("participants.json" in name or "tokens" in name for name in files)
+    readme = (package / "README.md").read_text()
+    assert "Participants: 2 planned, 2 with data in this package, 0 withdrawn" in readme
     code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package))
     assert code == 2 and "not empty" in err
 
@@ -119,6 +141,10 @@ def test_the_package_says_what_each_questionnaire_asked_and_names_no_file_of_the
     answered = set(pq.read_table(package / "tables" / "questionnaires.parquet").column("item").to_pylist())
     assert answered == {i["id"] for q in shown["after_each_trial"] + shown["end"] for i in q["items"]}
     assert "questionnaires.json" in (package / "README.md").read_text()
+    assert_no_wall_clock(package)
+    answered = pq.read_table(package / "tables" / "questionnaires.parquet").column("answered_s").to_pylist()
+    started = pq.read_table(package / "tables" / "attempts.parquet").column("started_s").to_pylist()
+    assert min(answered + started) == 0 and max(answered) >= max(started)   # the end questionnaire is last
     assert str(tmp_path) not in (package / "study_config.json").read_text()
     # a questionnaire that cannot be read: one line, and no package begun
     (copy,) = (study_dir / "inputs").glob("*/comfort.toml")
@@ -126,3 +152,27 @@ def test_the_package_says_what_each_questionnaire_asked_and_names_no_file_of_the
     code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(tmp_path / "again"))
     assert_one_line_error(code, err, "comfort.toml")
     assert not (tmp_path / "again").exists()
+
+
+def test_the_readme_counts_a_withdrawal_without_naming_who(tmp_path, capsys):
+    """Of three planned participants two drive and one of them withdraws: the package holds one
+    participant and its README says 3 planned, 1 with data, 1 withdrawn."""
+    config = tiny_config(tmp_path, participants=3)
+    study_dir, package = tmp_path / "study", tmp_path / "package"
+    study = LiveStudy(config, study_dir, ServerOptions(pace=1000.0)).open()
+    try:
+        with serving(study) as (host, port):
+            for p in range(2):
+                token = study.create_participant()[1]
+                run_scripted(f"ws://{host}:{port}/ws", token, ScriptedParticipant(config, p), 120)
+    finally:
+        study.close()
+    code, _, err = run_cli(capsys, "withdraw", str(study_dir), "1", "--reason", "asked by mail")
+    assert code == 0, err
+    code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package))
+    assert code == 0, err
+    readme = (package / "README.md").read_text()
+    assert "Participants: 3 planned, 1 with data in this package, 1 withdrawn" in readme
+    assert "asked by mail" not in readme and "p00001" not in readme
+    episodes = pq.read_table(package / "tables" / "episodes.parquet")
+    assert len(set(episodes.column("participant").to_pylist())) == 1

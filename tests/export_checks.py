@@ -1,0 +1,56 @@
+"""Checks of an exported package (`trustroute export`) shared by the simulated and the live export
+tests: its rows in pseudonym order, each participant's in the study's own order, and no wall-clock
+time in any table."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+ISO_DATE_TIME = re.compile(r"\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}")
+EPISODE_CODE = re.compile(r"^p(\d{5})-")
+
+
+def row_codes(table: pa.Table) -> list[int]:
+    """Each row's participant (number or code): its `participant`, else its `episode_id`'s."""
+    if "participant" in table.schema.names:
+        return table.column("participant").to_pylist()
+    return [int(EPISODE_CODE.match(e).group(1)) for e in table.column("episode_id").to_pylist()]
+
+
+def assert_rows_in_code_order(package: Path, study_dir: Path) -> None:
+    """Every table of the package has its rows sorted by pseudonym, and a participant's rows are the
+    study table's rows of that participant in the study's order (compared on their episode ids)."""
+    pseudonyms = json.loads((study_dir / "export-key.json").read_text())["pseudonyms"]
+    key = {int(p): code for p, code in pseudonyms.items()}
+    code_of = {f"p{p:05d}-": f"p{code:05d}-" for p, code in key.items()}
+    for path in sorted((package / "tables").glob("*.parquet")):
+        exported, study = pq.read_table(path), pq.read_table(study_dir / path.name)
+        codes = row_codes(exported)
+        assert codes == sorted(codes), path.name
+        if "episode_id" not in exported.schema.names:
+            continue
+        for p, code in key.items():
+            mine = [e for e, c in zip(study.column("episode_id").to_pylist(), row_codes(study), strict=True)
+                    if c == p]
+            theirs = [e for e, c in zip(exported.column("episode_id").to_pylist(), codes, strict=True)
+                      if c == code]
+            assert theirs == [None if e is None else code_of[e[:7]] + e[7:] for e in mine], path.name
+
+
+def assert_no_wall_clock(package: Path) -> None:
+    """No column of any table is a date or time type, none is in UTC by the codebook, and no text value
+    holds a date and time of day."""
+    book = json.loads((package / "codebook.json").read_text())
+    assert not [entry["column"] for entries in book.values() for entry in entries if entry["unit"] == "UTC"]
+    for path in sorted((package / "tables").glob("*.parquet")):
+        table = pq.read_table(path)
+        for field in table.schema:
+            assert not (pa.types.is_temporal(field.type)), (path.name, field.name)
+            if pa.types.is_string(field.type):
+                dated = [v for v in table.column(field.name).to_pylist() if v and ISO_DATE_TIME.search(v)]
+                assert not dated, (path.name, field.name, dated[:2])
