@@ -8,6 +8,7 @@ import json
 import shutil
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
@@ -59,3 +60,18 @@ def test_a_package_says_nothing_of_the_order_of_enrolment(model_study, tmp_path,
     readme = (tmp_path / "package" / "README.md").read_text()
     assert "Participants: 12 planned, 12 with data in this package." in readme
     assert "withdrawn" not in readme   # a simulated study has no withdrawals to report
+
+
+def test_a_time_that_is_not_a_utc_date_time_is_one_line_and_no_package(model_study, tmp_path, capsys):
+    from tests.cli import assert_one_line_error
+    from trustroute.core.dataset import ATTEMPTS_SCHEMA, write_table
+
+    study = shutil.copytree(model_study, tmp_path / "study")
+    row = {"participant": 0, "episode_id": "p00000-phi1-free", "warm_up": False, "planned_position": 0,
+           "attempt": 1, "sequence": 1, "run_position": 0, "started_utc": "2026-01-05T09:00:00Z",
+           "ended_utc": "at nine", "outcome": "done", "reason": None}
+    write_table(pa.Table.from_pylist([row], ATTEMPTS_SCHEMA), study / "attempts.parquet")
+    code, out, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
+    assert_one_line_error(code, err, str(study / "attempts.parquet"), "ended_utc, row 0",
+                          "not an ISO 8601 UTC date-time: 'at nine'")
+    assert out == "" and not (tmp_path / "package" / "tables").exists()
