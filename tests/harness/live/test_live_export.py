@@ -18,7 +18,7 @@ from tests.export_checks import assert_no_wall_clock, assert_rows_in_code_order
 from tests.questionnaire_files import COMFORT
 from trustroute.core.codebook import type_name
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
-from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.live.server import DEFAULT_CONSENT, LiveStudy, ServerOptions
 
 from .conftest import TINY, serving, tiny_config
 
@@ -53,10 +53,12 @@ def check_seconds(package, study_dir, key: dict[str, int]) -> None:
             assert row["ended_s"] - row["started_s"] == (end - start).total_seconds() >= 0
 
 
-def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys):
-    config = tiny_config(tmp_path, participants=2)
+def drive_two(tmp_path, planned: int, consent_text: str = DEFAULT_CONSENT):
+    """A live study of `planned` participants of whom the first two drive every trial (scripted);
+    its directory and the package's path."""
+    config = tiny_config(tmp_path, participants=planned)
     study_dir, package = tmp_path / "study", tmp_path / "package"
-    study = LiveStudy(config, study_dir, ServerOptions(pace=1000.0), consent_text="Consent: drive.").open()
+    study = LiveStudy(config, study_dir, ServerOptions(pace=1000.0), consent_text=consent_text).open()
     try:
         with serving(study) as (host, port):
             for p in range(2):
@@ -64,6 +66,11 @@ def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys
                 run_scripted(f"ws://{host}:{port}/ws", token, ScriptedParticipant(config, p), 120)
     finally:
         study.close()
+    return study_dir, package
+
+
+def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys):
+    study_dir, package = drive_two(tmp_path, 2, consent_text="Consent: drive.")
     code, out, err = run_cli(capsys, "export", str(study_dir), "--out", str(package), "--seed", "5")
     assert code == 0, err
     book = json.loads((package / "codebook.json").read_text())
@@ -157,16 +164,7 @@ def test_the_package_says_what_each_questionnaire_asked_and_names_no_file_of_the
 def test_the_readme_counts_a_withdrawal_without_naming_who(tmp_path, capsys):
     """Of three planned participants two drive and one of them withdraws: the package holds one
     participant and its README says 3 planned, 1 with data, 1 withdrawn."""
-    config = tiny_config(tmp_path, participants=3)
-    study_dir, package = tmp_path / "study", tmp_path / "package"
-    study = LiveStudy(config, study_dir, ServerOptions(pace=1000.0)).open()
-    try:
-        with serving(study) as (host, port):
-            for p in range(2):
-                token = study.create_participant()[1]
-                run_scripted(f"ws://{host}:{port}/ws", token, ScriptedParticipant(config, p), 120)
-    finally:
-        study.close()
+    study_dir, package = drive_two(tmp_path, 3)
     code, _, err = run_cli(capsys, "withdraw", str(study_dir), "1", "--reason", "asked by mail")
     assert code == 0, err
     code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package))
