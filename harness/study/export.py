@@ -31,7 +31,13 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from trustroute.core.codebook import EXPORTED_TIMES, codebook, exported_schema
+from trustroute.core.codebook import (
+    CONFIG_WITHOUT_PEOPLE_SEEDS,
+    EXPORTED_TIMES,
+    WITHOUT_PEOPLE_SEEDS,
+    codebook,
+    exported_schema,
+)
 from trustroute.core.dataset import (
     MANIFEST_FILE,
     REBUILD_FIX,
@@ -42,6 +48,7 @@ from trustroute.core.dataset import (
 )
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text, check_output_dir
+from trustroute.harness.study.config import LIVE_ENGINE
 from trustroute.harness.study.inputs import relocated_config
 from trustroute.participants.questionnaires import Questionnaire, questionnaire_plan
 
@@ -101,9 +108,11 @@ def first_times(study_dir: Path, tables: list[str]) -> dict[int, datetime]:
     return first
 
 
-def exported_table(study_dir: Path, name: str, key: dict[int, int], first: dict[int, datetime]) -> pa.Table:
+def exported_table(study_dir: Path, name: str, key: dict[int, int], first: dict[int, datetime],
+                   people: bool) -> pa.Table:
     """The study's table `name` as the package holds it (`exported_schema`): pseudonymised, its
-    wall-clock columns as seconds since the participant's first time, its rows in pseudonym order."""
+    wall-clock columns as seconds since the participant's first time, its rows in pseudonym order,
+    and (`people`: a live study) without the seeds that would give the participants' numbers back."""
     table = read_study_table(study_dir, name)
     numbers = row_participants(table)
     for column, values in wall_clock_times(study_dir, name, table).items():
@@ -111,6 +120,8 @@ def exported_table(study_dir: Path, name: str, key: dict[int, int], first: dict[
                    for p, value in zip(numbers, values, strict=True)]
         index = table.schema.get_field_index(column)
         table = table.set_column(index, exported_schema(name).field(index), pa.array(seconds, pa.float64()))
+    if people:
+        table = table.drop_columns(list(WITHOUT_PEOPLE_SEEDS.get(name, ())))
     codes = np.array([-1 if p is None else key[p] for p in numbers], dtype=np.int64)
     order = np.lexsort((np.arange(len(codes)), codes))   # by code, then the table's own order
     return pseudonymised(table, key).take(pa.array(order))
@@ -166,16 +177,19 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, withdrawn
                          "pass a directory outside the study")
     shown = questionnaires_shown(manifest, study_dir)   # read before anything is written
     key = pseudonyms(participants_of(study_dir), rng)
+    people = manifest.get("engine") == LIVE_ENGINE
     tables = [name for name, (file_name, _) in TABLES.items() if (study_dir / file_name).exists()]
     first = first_times(study_dir, tables)   # every time read and checked before anything is written
     (out / "tables").mkdir(parents=True, exist_ok=True)
     for name in tables:
-        write_table(exported_table(study_dir, name, key, first), out / "tables" / TABLES[name][0])
-    book = {name: entries for name, entries in codebook(exported=True).items() if name in tables}
+        write_table(exported_table(study_dir, name, key, first, people), out / "tables" / TABLES[name][0])
+    book = {name: entries for name, entries in codebook(exported=True, people=people).items()
+            if name in tables}
     atomic_write_text(out / "codebook.json", json.dumps(book, indent=1), "codebook")
     atomic_write_text(out / "codebook.md", codebook_markdown(book), "codebook")
-    atomic_write_text(out / "study_config.json", json.dumps(manifest["config"], indent=1, default=str),
-                      "study config")
+    config = {setting: value for setting, value in manifest["config"].items()
+              if not (people and setting in CONFIG_WITHOUT_PEOPLE_SEEDS)}
+    atomic_write_text(out / "study_config.json", json.dumps(config, indent=1, default=str), "study config")
     versions = {"python": platform.python_version(), "git_revision": manifest.get("git_revision"),
                 "packages": manifest.get("packages", {}), "engine": manifest.get("engine")}
     atomic_write_text(out / "versions.json", json.dumps(versions, indent=1), "software versions")

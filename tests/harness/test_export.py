@@ -60,6 +60,12 @@ def test_a_package_says_nothing_of_the_order_of_enrolment(model_study, tmp_path,
     readme = (tmp_path / "package" / "README.md").read_text()
     assert "Participants: 12 planned, 12 with data in this package." in readme
     assert "withdrawn" not in readme   # a simulated study has no withdrawals to report
+    # nor anyone to hide: it keeps the seeds that reproduce it
+    study_seed = json.loads((study / "manifest.json").read_text())["config"]["seed"]
+    assert json.loads((tmp_path / "package" / "study_config.json").read_text())["seed"] == study_seed
+    seeds = [pq.read_table(folder / "episodes.parquet").column("seed").to_pylist()
+             for folder in (tmp_path / "package" / "tables", study)]
+    assert sorted(seeds[0]) == sorted(seeds[1])
 
 
 def test_a_time_that_is_not_a_utc_date_time_is_one_line_and_no_package(model_study, tmp_path, capsys):

@@ -161,9 +161,20 @@ SINCE_FIRST = ("in seconds since the participant's first recorded wall-clock tim
                "their attempts or submission of their questionnaires, which is 0)")
 
 
-def exported_schema(table: str) -> pa.Schema:
-    """The schema of the table `table` in an exported package: its wall-clock columns as seconds."""
+# Columns a package of a study with people leaves out, with the config keys that go with them: an
+# episode's seed is drawn from the study's seed and the participant's number (harness/study/plan.py),
+# so both together would give each pseudonym's number, the order of enrolment, back. A simulated
+# study keeps them (it has no one to hide, and they reproduce it).
+WITHOUT_PEOPLE_SEEDS: dict[str, tuple[str, ...]] = {"episodes": ("seed",)}
+CONFIG_WITHOUT_PEOPLE_SEEDS: tuple[str, ...] = ("seed",)
+
+
+def exported_schema(table: str, people: bool = False) -> pa.Schema:
+    """The schema of the table `table` in an exported package: its wall-clock columns as seconds,
+    and (`people`: a live study's package) without the columns of WITHOUT_PEOPLE_SEEDS."""
     schema = TABLES[table][1]
+    for column in WITHOUT_PEOPLE_SEEDS.get(table, ()) if people else ():
+        schema = schema.remove(schema.get_field_index(column))
     for column, seconds in EXPORTED_TIMES.get(table, {}).items():
         index = schema.get_field_index(column)
         schema = schema.set(index, pa.field(seconds, pa.float64(), nullable=schema.field(index).nullable))
@@ -183,12 +194,12 @@ def type_name(kind: pa.DataType) -> str:
     return f"list<{kind.value_type}>" if pa.types.is_list(kind) else str(kind)
 
 
-def codebook(exported: bool = False) -> dict[str, list[dict]]:
+def codebook(exported: bool = False, people: bool = False) -> dict[str, list[dict]]:
     """{table: [{column, type, nullable, unit, meaning, allowed}, ...]} in schema order: of a study's
-    tables, or (`exported`) of an exported package's (`exported_schema`)."""
+    tables, or (`exported`) of an exported package's (`exported_schema`; `people`: a live study's)."""
     book: dict[str, list[dict]] = {}
     for table, (file_name, schema) in TABLES.items():
-        fields = exported_schema(table) if exported else schema
+        fields = exported_schema(table, people) if exported else schema
         book[table] = [{"column": field.name, "file": file_name, "type": type_name(field.type),
                         "nullable": field.nullable, **dict(zip(("unit", "meaning", "allowed"),
                                                               entry_of(table, field.name), strict=True))}

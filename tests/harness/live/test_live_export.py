@@ -94,7 +94,14 @@ def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys
     assert_no_wall_clock(package)
     check_seconds(package, study_dir, key)
     assert (package / "texts" / "consent.txt").read_text() == "Consent: drive."
-    assert json.loads((package / "study_config.json").read_text())["name"] == "tiny-live"
+    exported_config = json.loads((package / "study_config.json").read_text())
+    assert exported_config["name"] == "tiny-live"
+    # the seeds, drawn from the study's seed and each participant's number, would give the codes'
+    # numbers back: a study with people exports neither (the codebook check above saw the columns)
+    assert "seed" in json.loads((study_dir / "manifest.json").read_text())["config"]
+    assert "seed" not in exported_config
+    assert "seed" not in pq.read_schema(package / "tables" / "episodes.parquet").names
+    assert "seed" in pq.read_schema(study_dir / "episodes.parquet").names
     assert "packages" in json.loads((package / "versions.json").read_text())
     assert "pseudonymous" in (package / "README.md").read_text()
     sums = (package / "SHA256SUMS").read_text().splitlines()
