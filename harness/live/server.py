@@ -34,7 +34,7 @@ from trustroute.core.output_files import atomic_write_text
 from trustroute.core.ranges import PACE, RESUME_WITHIN, keep_checked
 from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
-from trustroute.harness.live.session import Session
+from trustroute.harness.live.session import Session, withdrawn_refusal
 from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study seed, (4, participant))
 from trustroute.harness.live.withdraw import (
     declined_refusal,
@@ -231,7 +231,7 @@ class LiveStudy:
         session = self.sessions[participant]
         with session.lock, self.lock:
             if session.phase == "withdrawn":
-                raise ValueError(f"participant {participant} has withdrawn")
+                raise ValueError(withdrawn_refusal(participant))
             if spent is not None and self.credentials.participant_of(spent) != participant:
                 raise ValueError(SPENT_LINK)
             token = self.credentials.add_participant(participant)

@@ -51,6 +51,13 @@ from trustroute.participants.questionnaires import Questionnaire
 STOP_SECONDS = 5.0
 
 
+def withdrawn_refusal(participant: int) -> str:
+    """Why nothing more is done for a withdrawn participant (no episode control, no new link): the
+    withdrawal is final while the server runs (a readmission needs it stopped)."""
+    return (f"participant {participant} has withdrawn from the study: their session is over and "
+            "their data deleted")
+
+
 class Session:
     """A participant's session (one per participant, whether or not a browser is connected)."""
 
@@ -325,6 +332,8 @@ class Session:
         pushed to the station too: the participant must see why the view stands still, and when
         it goes on (an abort is told by the episode's own `episode_aborted`)."""
         with self.lock:
+            if self.phase == "withdrawn":
+                raise MessageError("out_of_order", f"no {action}: {withdrawn_refusal(self.participant)}")
             if action == "pause" and self.phase == "driving":
                 self.pause("experimenter")
             elif action == "resume" and self.phase == "paused":

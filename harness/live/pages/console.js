@@ -103,6 +103,21 @@ function rowOf(body, participant) {
   return row;
 }
 
+// A withdrawal is final while the server runs (a readmission is `trustroute withdraw --readmit`,
+// which needs the server stopped): the row keeps its number, label and phase, says what the
+// withdrawal did in place of the progress it no longer has, and offers no buttons (the server
+// refuses the episode controls and a new link for a withdrawn participant too).
+const WITHDRAWN = "Withdrawn from the study: their drives and answers are deleted, so there is nothing to control.";
+const KEPT = 3;   // the cells a withdrawn row keeps: #, label, phase
+function showWithdrawn(row) {
+  const note = document.createElement("td");
+  note.className = "withdrawn-note";
+  note.colSpan = row.cells.length - KEPT;
+  note.textContent = WITHDRAWN;
+  row.replaceChildren(...[...row.cells].slice(0, KEPT), note);
+  row.classList.add("withdrawn");
+}
+
 async function refresh() {
   try {
     const { participants } = await call("GET", "/api/participants");
@@ -110,11 +125,12 @@ async function refresh() {
     const body = $("participants");
     for (const p of participants) {
       const row = rowOf(body, p.participant);
+      if (row.classList.contains("withdrawn")) continue;   // final: nothing of it changes
       texts(p).forEach((text, i) => {
         const shown = text === null || text === undefined ? "" : String(text);
         if (row.cells[i].textContent !== shown) row.cells[i].textContent = shown;
       });
-      if (p.phase === "withdrawn" && row.cells[TEXTS + 1].childElementCount) row.cells[TEXTS + 1].replaceChildren();
+      if (p.phase === "withdrawn") showWithdrawn(row);
     }
   } catch (error) { showError(error.message); }
 }

@@ -1,7 +1,7 @@
 """What a participant sees at the station, in real Chromium: the live application serves the page
 and the net, and the websocket is answered by the test (Playwright's route_web_socket) with the
-server's messages, so each case puts the page in the state it checks without running SUMO. And
-the experimenter's console, kept usable by keyboard and telling a lost login in words.
+server's messages, so each case puts the page in the state it checks without running SUMO. (The
+experimenter's console: test_browser_console.py.)
 
 Never skips: without Chromium it fails and says how to install it."""
 
@@ -53,13 +53,13 @@ class Station:
             context.close()
 
 
-@pytest.fixture(scope="module")
-def station(tmp_path_factory):
+@contextlib.contextmanager
+def served_station(tmp_path):
+    """A `Station`: a study of 32 participants in tmp_path, served, and Chromium."""
     from playwright.sync_api import sync_playwright
 
     from trustroute.app.nets import net_for
 
-    tmp_path = tmp_path_factory.mktemp("station")
     study = LiveStudy(tiny_config(tmp_path, participants=32), tmp_path / "study", ServerOptions()).open()
     server = Server(study)
     server.start()
@@ -75,6 +75,12 @@ def station(tmp_path_factory):
     finally:
         server.stop()
         study.close()
+
+
+@pytest.fixture(scope="module")
+def station(tmp_path_factory):
+    with served_station(tmp_path_factory.mktemp("station")) as served:
+        yield served
 
 
 def box(page, selector: str) -> dict:
@@ -197,34 +203,6 @@ def test_a_withdrawn_participant_is_told_so_and_has_nothing_left_to_press(statio
     assert "{" not in page.locator("body").inner_text()
     page.screenshot(path=str(tmp_path / "no-cookie.png"))
     page.close()
-
-
-def test_the_console_keeps_the_keyboards_focus_and_says_how_to_log_in_again(station, tmp_path):
-    made = httpx.post(f"{station.address}/api/login-link",
-                      headers={"Authorization": f"Bearer {station.study.experimenter_token}"}).json()
-    context = station.browser.new_context(viewport={"width": 1280, "height": 800})
-    page = context.new_page()
-    page.goto(station.address + made["link"])
-    for _ in range(2):
-        httpx.post(f"{station.address}/api/participants", json={},
-                   headers={"Authorization": f"Bearer {station.study.experimenter_token}"})
-    last = max(station.study.sessions)
-    pause = page.locator(f'#participants tr[data-participant="{last}"] button', has_text="pause")
-    pause.focus()
-    page.evaluate("window.kept = document.activeElement")
-    page.wait_for_timeout(2500)   # the table is refreshed every second
-    assert page.evaluate("document.activeElement === window.kept && window.kept.isConnected")
-    page.keyboard.press("Tab")   # on to the next control of the same participant, by keyboard
-    assert page.evaluate("document.activeElement.textContent") == "resume"
-    assert page.evaluate("document.activeElement.closest('tr').dataset.participant") == str(last)
-    context.clear_cookies()   # as after a restart: the server no longer knows this console
-    page.locator("#error").filter(has_text="no longer logged in").wait_for()
-    assert "new console link" in page.locator("#error").inner_text()
-    page.screenshot(path=str(tmp_path / "logged-out.png"))
-    response = page.reload()
-    assert response.status == 401 and "new console link" in page.locator("#message").inner_text()
-    page.screenshot(path=str(tmp_path / "console-refused.png"))
-    context.close()
 
 
 EGO_GREEN = (46, 125, 50)   # map_view.js: the ego on autopilot

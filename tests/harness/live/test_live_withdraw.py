@@ -20,6 +20,7 @@ from trustroute.harness.live import session as live_session
 from trustroute.harness.live.protocol import Consent, Start
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.live.session import withdrawn_refusal
 from trustroute.harness.live.withdraw import sha256_of
 
 from .conftest import experimenter, serving, tiny_config
@@ -218,6 +219,32 @@ def test_a_withdrawn_participants_label_is_gone_at_once(tmp_path):
             state = client.get("/api/participants/0", headers=headers).json()
             assert (state["phase"], state["label"]) == ("withdrawn", "")
             assert "Ada" not in client.get("/api/participants", headers=headers).text
+    finally:
+        study.close()
+
+
+def test_the_console_commands_for_a_withdrawn_participant_are_refused_saying_why(tmp_path):
+    """Pause, resume, abort and a new link for a withdrawn participant: each refused (409) with
+    the one line that says they have withdrawn, not a phase name to decode."""
+    from fastapi.testclient import TestClient
+
+    from trustroute.harness.live.app import live_app
+
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = experimenter(study)
+            assert client.post("/api/participants", json={}, headers=headers).status_code == 200
+            assert client.post("/api/participants/0/withdraw", json={"confirm": True},
+                               headers=headers).status_code == 200
+            for action in ("pause", "resume", "abort"):
+                refused = client.post("/api/participants/0/control", json={"action": action}, headers=headers)
+                assert refused.status_code == 409
+                assert refused.json()["detail"] == {"type": "error", "code": "out_of_order",
+                                                    "detail": f"no {action}: {withdrawn_refusal(0)}"}
+            link = client.post("/api/participants/0/link", headers=headers)
+            assert link.status_code == 409 and link.json()["detail"]["detail"] == withdrawn_refusal(0)
+            assert client.get("/api/participants/0", headers=headers).json()["phase"] == "withdrawn"
     finally:
         study.close()
 
