@@ -29,6 +29,7 @@ from pydantic import (
     model_validator,
 )
 
+from trustroute.harness.live.view import ROUTE_AHEAD, VIEW_RADIUS
 from trustroute.harness.simulation.driving_style import AUTOPILOT, MANUAL
 from trustroute.harness.study.config import LiveInput
 
@@ -186,8 +187,10 @@ class Reported(Message):
 
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
-# what the ego sees (harness/live/view.py `surroundings`): a vehicle is [x, y, angle, kind, speed,
-# handle, length, width, height, shape, signals], a person [x, y, kind, handle, angle]
+# What the ego sees (harness/live/view.py `surroundings`): the items of a vehicle and of a person,
+# in their order; the types below hold the same items in the same order.
+SEEN_VEHICLE = ("x", "y", "angle", "kind", "speed", "handle", "length", "width", "height", "shape", "signals")
+SEEN_PERSON = ("x", "y", "kind", "handle", "angle")
 SeenVehicle = tuple[Finite, Finite, Finite, str, Finite, StrictInt, Finite, Finite, Finite, str, StrictInt]
 SeenPerson = tuple[Finite, Finite, str, StrictInt, Finite]
 
@@ -202,30 +205,48 @@ def driving_mode(name: str) -> str:
 class Frame(Message):
     """Server -> client: one moment of the episode as the station shows it (docs/live_studies.md,
     "Protocol"; built by harness/live/worker.py, which validates every stepped frame against this).
-    `held`: the car is brought to a stand for the hand-back whatever the pedals say, by the
-    episode's one rule (harness/simulation/wheel_driving.py `Wheel.held`; always false without a
-    wheel: in assisted driving the `hand_back` warning says the vehicle stops): the station then
-    sends the pedals let go, and no steering once the car stands. `predicted`: moved on between
-    two steps (harness/live/view.py `dead_reckoned`), never a stepped frame."""
+    Each field's description is the one text of what it holds, which the docs' table of the frame
+    shows (tests/test_docs_frame.py keeps the two equal)."""
 
-    type: Literal["frame"] = "frame"
-    t: Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
-    x: Finite
-    y: Finite
-    angle: Finite
-    speed: Finite
-    road: str
-    lane: str
-    mode: Annotated[str, AfterValidator(driving_mode)]
-    junction: str | None
-    length: Finite
-    width: Finite
-    signals: StrictInt
-    route: list[str]
-    vehicles: list[SeenVehicle]
-    persons: list[SeenPerson]
-    held: StrictBool
-    predicted: StrictBool = False
+    type: Literal["frame"] = Field("frame", description="`frame`")
+    t: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = Field(
+        description="the simulated time of the frame, seconds")
+    x: Finite = Field(description="the ego's front centre, metres east in the net's (SUMO's) coordinates")
+    y: Finite = Field(description="the ego's front centre, metres north in the net's (SUMO's) coordinates")
+    angle: Finite = Field(description="the ego's heading, SUMO's: degrees clockwise from north")
+    speed: Finite = Field(description="the ego's speed, m/s")
+    road: str = Field(description="the road the ego is on: a town road `A-B`, or SUMO's edge in a junction")
+    lane: str = Field(description="the ego's lane (SUMO's id)")
+    mode: Annotated[str, AfterValidator(driving_mode)] = Field(
+        description=f"who drives: `{AUTOPILOT.name}` (the autopilot) or `{MANUAL.name}` (the person)")
+    junction: str | None = Field(
+        description="the junction at the end of `road`, the road under observation: where the next routing "
+                    "decision is made; null inside a junction")
+    length: Finite = Field(description="the ego's length, metres")
+    width: Finite = Field(description="the ego's width, metres")
+    signals: StrictInt = Field(description="the ego's signals, SUMO's bits as in `vehicles`")
+    route: list[str] = Field(
+        description=f"the roads of the ego's route from the one it is on, at most {ROUTE_AHEAD} "
+                    "(harness/live/view.py `ROUTE_AHEAD`)")
+    vehicles: list[SeenVehicle] = Field(
+        description=f"every other vehicle within {VIEW_RADIUS:g} m (harness/live/view.py `VIEW_RADIUS`), "
+                    f"each `[{', '.join(SEEN_VEHICLE)}]`: (x, y) its front centre and `angle` as the "
+                    "ego's; `kind` `traffic` or an incident object's role: `obstacle`, `oncoming` (the "
+                    "obstacle scene's truck), `truck` (the truck scene's), `parked`, `pedestrian`; `handle` "
+                    "a number stable within the episode (no SUMO id reaches the page); `shape` SUMO's shape "
+                    "class; `signals` SUMO's bits 1 (right indicator), 2 (left), 4 (hazard lights), 8 "
+                    "(brake light)")
+    persons: list[SeenPerson] = Field(
+        description=f"every person within {VIEW_RADIUS:g} m, each `[{', '.join(SEEN_PERSON)}]`, as in "
+                    "`vehicles`")
+    held: StrictBool = Field(
+        description="by wheel: the car is brought to a stand for the hand-back whatever the pedals say, by "
+                    "the episode's one rule (harness/simulation/wheel_driving.py `Wheel.held`); the station "
+                    "then sends the pedals let go, and no steering once the car stands. Always false in "
+                    "assisted driving, where the `hand_back` warning says the vehicle stops")
+    predicted: StrictBool = Field(
+        False, description="true on a frame between two SUMO steps: the last stepped frame moved on "
+                           "(harness/live/view.py `dead_reckoned`), never the simulation's state")
 
 
 # -- HTTP bodies ---------------------------------------------------------------------------------

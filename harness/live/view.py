@@ -5,12 +5,13 @@
 `surroundings` reads, at frame time only, every other vehicle and person within VIEW_RADIUS of
 the ego from the running simulation: background traffic, and the incidents' SUMO objects (ids
 "inc<road index>.<role>": the obstacle, the oncoming vehicle, the parked truck, the pedestrian).
-Reading changes nothing in the simulation. Each object carries what the driver's view draws: a
-handle (stable within the episode, so the station interpolates one object between frames), its
-size, SUMO's shape class and signals (brake lights, indicators); the sizes are read once per object
-(`Statics`). A SUMO step is 0.5 s of simulated time, so at wall-clock pace the steps alone give two
-frames a second; `dead_reckoned` fills the time between them (each vehicle moved on at its speed
-and heading), marked as predicted.
+Reading changes nothing in the simulation. Each object carries what the driver's view draws, in
+the items the frame's schema names and describes (harness/live/protocol.py `Frame`, `SEEN_VEHICLE`
+and `SEEN_PERSON`); its handle is stable within the episode, so the station interpolates one
+object between frames, and the sizes are read once per object (`Statics`). A SUMO step is 0.5 s
+of simulated time, so at wall-clock pace the steps alone give two frames a second;
+`dead_reckoned` fills the time between them (each vehicle moved on at its speed and heading),
+marked as predicted.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from trustroute.networks.road import Road
 
 VIEW_RADIUS = 150.0   # metres around the ego that a frame describes
 INCIDENT_PREFIX = "inc"
-# the signals the view shows: right (1), left (2) indicator, hazard lights (4), brake light (8)
+# the signals a frame carries, SUMO's four lowest bits (their meanings: protocol.py `Frame.vehicles`)
 SIGNAL_BITS = 0b1111
 ROUTE_AHEAD = 6       # roads of the ego's route a frame names, from the one it is on
 
@@ -97,11 +98,9 @@ class Statics:
 
 
 def surroundings(sumo, ego_id: str, x: float, y: float, statics: Statics | None = None) -> dict:
-    """{"vehicles": [[x, y, angle, kind, speed, handle, length, width, height, shape, signals]],
-    "persons": [[x, y, kind, handle, angle]]} within VIEW_RADIUS of (x, y); kind is an incident
-    object's role ("obstacle", "oncoming", "parked", "pedestrian"), else "traffic"; (x, y) is a
-    vehicle's front centre, angle SUMO's (degrees clockwise from north), signals SUMO's bits
-    (1 right indicator, 2 left, 4 hazard lights, 8 brake light)."""
+    """{"vehicles": [...], "persons": [...]}: every other vehicle and every person within
+    VIEW_RADIUS of (x, y), as a frame's `vehicles` and `persons` (harness/live/protocol.py `Frame`
+    describes their items)."""
     statics = statics if statics is not None else Statics()
     vehicles, persons = [], []
     for vehicle in sumo.vehicle.getIDList():
