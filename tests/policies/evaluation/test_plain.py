@@ -176,34 +176,24 @@ def test_baseline_value_agrees_with_large_monte_carlo(pomdp, name, belief_rule):
 
 
 def recursive_value(pomdp, spec, policy, max_junctions, belief_rule):
-    """Plain recursion over every observation sequence (scalar code): (P(satisfied), E[final trust])."""
+    """Plain recursion over every observation sequence: (P(satisfied), E[final trust]). A node's
+    observations are worked out together (their DFA states in one labeller call): the recursion
+    visits every node of every level, so its per-call costs are most of a test's time."""
     town, driver = pomdp.town, pomdp.driver
     dfa = build_dfa(spec)
     labeller = Labeller(spec, dfa, town)
     levels = np.asarray(driver.trust_levels, dtype=float)
-    n_trust = driver.n_trust
 
-    def label(q, road, belief):
-        return int(labeller.step(np.array([q]), np.array([town.state_index(road)]), belief[None])[0])
-
-    def visit(route, q, belief, posterior):
-        if dfa.accepting[q]:
-            return 1.0, float(posterior @ levels)
-        context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
-        if dfa.rejecting[q] or policy.finished(context) or len(route) - 1 == max_junctions:
-            return 0.0, float(posterior @ levels)
-        road = town.successor(route[-1], policy.next_junction(context))
+    def children(q, road, posterior, belief):
+        """(P(h, e), DFA state, AV belief, posterior) of each observation (h, e) on entering `road`."""
         inc = driver.incident_index(town.incident(road))
-        sat = trust = 0.0
+        p_h, p_e = driver.takeover_probability[inc], driver.failure_probability[inc]
+        found = []
         for h in (0, 1):
             for e in (0, 1):
                 # P(h, e, θ' | history) = Σθ posterior(θ) P(h|θ) P(e|θ) T(θ, θ')
-                joint = np.zeros(n_trust)
-                for theta in range(n_trust):
-                    p_h = driver.takeover_probability[inc, theta]
-                    p_e = driver.failure_probability[inc, theta]
-                    weight = posterior[theta] * (p_h if h else 1 - p_h) * (p_e if e else 1 - p_e)
-                    joint += weight * driver.trust_transition[inc, h, e, theta]
+                weight = posterior * (p_h if h else 1 - p_h) * (p_e if e else 1 - p_e)
+                joint = weight @ driver.trust_transition[inc, h, e]
                 p_obs = joint.sum()
                 if p_obs <= 0:
                     continue
@@ -212,13 +202,31 @@ def recursive_value(pomdp, spec, policy, max_junctions, belief_rule):
                 else:
                     raw = belief @ driver.trust_transition[inc, h, e]
                     new_belief = raw / raw.sum()
-                s, t = visit(route + [road], label(q, road, new_belief), new_belief, joint / p_obs)
-                sat += p_obs * s
-                trust += p_obs * t
+                found.append((p_obs, new_belief, joint / p_obs))
+        if not found:
+            return []
+        told = labeller.step(np.full(len(found), q), np.full(len(found), town.state_index(road)),
+                             np.stack([new_belief for _, new_belief, _ in found]))
+        return [(p_obs, int(q2), new_belief, posterior2)
+                for (p_obs, new_belief, posterior2), q2 in zip(found, told.tolist(), strict=True)]
+
+    def visit(route, q, belief, posterior):
+        if dfa.accepting[q]:
+            return 1.0, float(posterior @ levels)
+        context = DecisionContext(route=tuple(route), dfa_state=q, belief=belief)
+        if dfa.rejecting[q] or policy.finished(context) or len(route) - 1 == max_junctions:
+            return 0.0, float(posterior @ levels)
+        road = town.successor(route[-1], policy.next_junction(context))
+        sat = trust = 0.0
+        for p_obs, q2, new_belief, posterior2 in children(q, road, posterior, belief):
+            s, t = visit(route + [road], q2, new_belief, posterior2)
+            sat += p_obs * s
+            trust += p_obs * t
         return sat, trust
 
     belief = np.asarray(driver.initial_belief, dtype=float)
-    return visit([spec.start], label(dfa.initial, spec.start, belief), belief, belief)
+    start = labeller.step(np.array([dfa.initial]), np.array([town.state_index(spec.start)]), belief[None])
+    return visit([spec.start], int(start[0]), belief, belief)
 
 
 @pytest.mark.parametrize("name", ["phi1", "phi2"])

@@ -143,21 +143,40 @@ def loop_case(seed: int, incident_types: tuple[str, ...]) -> LoopCase:
     return LoopCase(pomdp=pomdp, spec=spec_from_text(text, "<loop spec>", town), kind=kind, choice_road="B-C")
 
 
-def _solve(matrix: list[list[Fraction]], rhs: list[Fraction]) -> list[Fraction]:
-    """x with matrix x = rhs (Gauss-Jordan in Fractions; the matrix is nonsingular)."""
+def _solve(matrix: list[dict[int, Fraction]], rhs: list[Fraction]) -> list[Fraction]:
+    """x with matrix x = rhs (Gauss-Jordan in Fractions; the matrix is nonsingular), its rows sparse
+    ({column: entry}, zeros left out): a road's rows reach the next road of its loop alone, so the
+    loops' blocks never mix and a row operation touches a head's few entries, not every column."""
     n = len(rhs)
-    rows = [row[:] + [r] for row, r in zip(matrix, rhs, strict=True)]
+    rows = [dict(row) for row in matrix]
+    rhs = list(rhs)
+    holding: list[set[int]] = [set() for _ in range(n)]   # per column, the rows with an entry there
+    for r, row in enumerate(rows):
+        for c in row:
+            holding[c].add(r)
     for col in range(n):
-        pivot = next(r for r in range(col, n) if rows[r][col] != 0)
+        pivot = min(r for r in holding[col] if r >= col)
+        for c in set(rows[col]) | set(rows[pivot]):
+            for r, other in ((col, pivot), (pivot, col)):
+                (holding[c].add if c in rows[other] else holding[c].discard)(r)
         rows[col], rows[pivot] = rows[pivot], rows[col]
-        head = rows[col]
-        inverse = 1 / head[col]
-        head[:] = [v * inverse for v in head]
-        for r in range(n):
-            factor = rows[r][col]
-            if r != col and factor != 0:
-                rows[r] = [v - factor * h for v, h in zip(rows[r], head, strict=True)]
-    return [row[n] for row in rows]
+        rhs[col], rhs[pivot] = rhs[pivot], rhs[col]
+        head, inverse = rows[col], 1 / rows[col][col]
+        for c in head:
+            head[c] *= inverse
+        rhs[col] *= inverse
+        for r in sorted(holding[col] - {col}):
+            row, factor = rows[r], rows[r][col]
+            for c, h in head.items():
+                value = row.get(c, 0) - factor * h
+                if value:
+                    row[c] = value
+                    holding[c].add(r)
+                else:
+                    row.pop(c, None)
+                    holding[c].discard(r)
+            rhs[r] -= factor * rhs[col]
+    return rhs
 
 
 class _Loops:
@@ -198,7 +217,7 @@ class _Loops:
                     grew = True
         order = sorted(good)
         index = {key: n for n, key in enumerate(order)}
-        matrix = [[Fraction(int(r == c)) for c in range(len(order))] for r in range(len(order))]
+        matrix: list[dict[int, Fraction]] = [{r: Fraction(1)} for r in range(len(order))]
         rhs = [Fraction(0)] * len(order)
         for key in order:
             r = index[key]
@@ -206,7 +225,7 @@ class _Loops:
                 if to == "accept":
                     rhs[r] += p
                 elif to in index:
-                    matrix[r][index[to]] -= p
+                    matrix[r][index[to]] = matrix[r].get(index[to], 0) - p
         solved = _solve(matrix, rhs)
         return {key: solved[index[key]] if key in index else Fraction(0) for key in keys}
 
