@@ -269,18 +269,23 @@ class BeliefTablePolicy(RoutingPolicy):
 
     def _exact_slot(self, t: int, x: int, q: int, p: int, belief: np.ndarray) -> int:
         """`exact_action_slots` of one context (an episode's decision): one dict access and one
-        nearest-row search, without the grouping of a batch (the same rows, so the same slot)."""
+        nearest-row search, without the grouping of a batch (the same rows, so the same slot). Most
+        contexts of a long evaluation lie past every row (the free completion acts there): those
+        return before their belief is read."""
         slot = int(self._free_slot[x, q, p])
+        key = self._key_tqp(t, x, q, p)
+        boxes = self._boxes if q < self._n_q else None
+        if key not in self._exact.rows and boxes is None:
+            return slot
         beliefs = self._policy_beliefs(belief)
-        if self.table.rows:
-            found = self._exact.nearest_with_distance(self._key_tqp(t, x, q, p), beliefs)
-            if found is not None and found[1][0] <= EXACT_BELIEF_DISTANCE:
-                return int(self.table.action[found[0][0]])
-        if self._boxes is not None and q < self._n_q:
-            boxed = int(self._boxes.slots(self._key_tq(np.array([t]), np.array([x]), np.array([q])),
-                                          beliefs)[0])
-            if boxed >= 0:
-                return boxed
+        found = self._exact.nearest_with_distance(key, beliefs)
+        if found is not None and found[1][0] <= EXACT_BELIEF_DISTANCE:
+            return int(self.table.action[found[0][0]])
+        if boxes is not None:
+            box_slot = int(boxes.slots(self._key_tq(np.array([t]), np.array([x]), np.array([q])),
+                                       beliefs)[0])
+            if box_slot >= 0:
+                return box_slot
         return slot
 
     def next_junction(self, context: DecisionContext) -> str:
