@@ -80,3 +80,25 @@ def test_the_settings_classes_import_from_where_the_readme_says():
         cls = getattr(importlib.import_module(module), name)
         annotation = str(inspect.signature(calls[name]).parameters["settings"].annotation)
         assert annotation.startswith(name) and inspect.isclass(cls) and cls() is not None
+
+
+UNGUARDED = """import trustroute
+trustroute.run_study({"study": {"participants": 4, "seed": 1, "engine": "model", "specs": ["phi1"],
+                                "conditions": ["aware", "free"]}}, out="studies/unguarded", workers=2)
+"""
+
+
+@pytest.mark.slow
+def test_a_script_without_a_main_guard_stops_with_the_fix_on_spawned_workers(tmp_path):
+    """Each spawned worker runs the unguarded script again and exits while it starts; the study
+    stops with one line saying why instead of spawning a worker per task (or blocking on one)."""
+    script = tmp_path / "unguarded.py"
+    script.write_text(UNGUARDED)
+    env = {**os.environ, "HOME": str(tmp_path / "home"), "XDG_CACHE_HOME": str(tmp_path / "home" / ".cache")}
+    done = subprocess.run([sys.executable, "-c", SPAWNED, str(script)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("trustroute.harness.study.workers.WorkersCannotStart: study workers: "
+                           "worker processes exit while they start"), last
+    assert 'if __name__ == "__main__":' in last

@@ -249,7 +249,7 @@ def _process_pool(function: UnitFunction, context: StudyContext, tasks: list[Uni
     def died(unit: Unit, reason: str) -> list[EpisodeOutcome]:
         return [EpisodeOutcome(task.episode_id, False, f"worker died: {reason}") for task in unit]
 
-    # the workers are forked: they inherit the context, nothing of it is sent
+    # forked workers inherit the context; spawned ones are sent it once each (workers.py)
     return process_pool(functools.partial(function, context), tasks, workers, died)
 
 

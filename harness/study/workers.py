@@ -11,7 +11,17 @@ which task a worker was running:
   thread that polls the parent pid wherever prctl is unavailable (and for the moment between
   fork and prctl);
 - the pool is shut down (workers terminated, then killed) whenever the parent leaves the
-  generator: normal end, an exception, or SIGTERM turned into an exception by `sigterm_raises`.
+  generator: normal end, an exception, or SIGTERM turned into an exception by `sigterm_raises`;
+- workers that exit before they are ready, twice in a row, stop the pool with `WorkersCannotStart`
+  rather than failing every task one spawned worker at a time. Where workers are spawned, each
+  imports the main script again: a script that runs a study outside an
+  `if __name__ == "__main__":` guard makes every worker exit while it starts.
+
+Where workers are spawned, the task function (with the study's context) is sent over the worker's
+own pipe once it runs, not as the process's arguments: CPython writes those to the new process
+while it keeps the pipe's reading end open itself, so a worker that exits before reading them all
+(they exceed a pipe's buffer) would block the parent for ever. Forked workers inherit the
+function, and nothing is sent.
 """
 
 from __future__ import annotations
@@ -31,12 +41,33 @@ from multiprocessing.context import DefaultContext
 from types import FrameType
 from typing import Any, Generic, TypeVar
 
+from trustroute.core.errors import InputError
+
 PR_SET_PDEATHSIG = 1
 PARENT_POLL_SECONDS = 0.5
 SHUTDOWN_SECONDS = 2.0
+# Workers exiting before they are ready this many times in a row stop the pool: one may be a
+# transient failure (a process killed for memory while it imports), two are the rule.
+START_FAILURES = 2
 
 Task = TypeVar("Task")
 Result = TypeVar("Result")
+
+
+class Ready:
+    """A worker's first message: it runs and holds the task function."""
+
+
+class WorkersCannotStart(InputError):
+    """Worker processes exit before they are ready, again and again."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(
+            "study workers", "",
+            f"worker processes exit while they start ({reason}, {START_FAILURES} in a row; each "
+            "printed its error above)",
+            'a script that calls run_study must call it under `if __name__ == "__main__":`, since '
+            "spawned workers import the script again; or pass workers=1")
 
 
 class Terminated(KeyboardInterrupt):
@@ -80,10 +111,16 @@ def die_with_parent(parent_pid: int) -> None:
         threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()
 
 
-def _worker_main(function: Callable[[Any], object], connection: Connection, parent_pid: int) -> None:
+def _worker_main(function: Callable[[Any], object] | None, connection: Connection, parent_pid: int) -> None:
     die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if function is None:   # spawned: the function comes over the pipe (the module's docstring)
+        try:
+            function = connection.recv()
+        except (EOFError, OSError):
+            return
+    connection.send(Ready())
     while True:
         try:
             task = connection.recv()
@@ -108,10 +145,16 @@ def describe_exit(exitcode: int | None) -> str:
 class _Worker(Generic[Task]):
     def __init__(self, context: DefaultContext, function: Callable[[Task], object]) -> None:
         self.connection, child = context.Pipe()
-        self.process = context.Process(target=_worker_main, args=(function, child, os.getpid()), daemon=True)
+        forked = context.get_start_method() == "fork"
+        arguments = (function if forked else None, child, os.getpid())
+        self.process = context.Process(target=_worker_main, args=arguments, daemon=True)
         self.process.start()
         child.close()
+        if not forked:
+            with contextlib.suppress(OSError):   # it exited already: its pipe's end is seen closed
+                self.connection.send(function)
         self.task: Task | None = None
+        self.ready = False
 
     def stop(self) -> None:
         with contextlib.suppress(OSError, ValueError):
@@ -128,6 +171,7 @@ def process_pool(
     context = multiprocessing.get_context()
     pending = deque(tasks)
     pool = [_Worker(context, function) for _ in range(min(workers, len(tasks)))]
+    start_failures = 0   # workers that exited before they were ready, in a row
     try:
         while pending or any(w.task is not None for w in pool):
             for worker in pool:
@@ -146,10 +190,18 @@ def process_pool(
                     result = worker.connection.recv()
                 except (EOFError, OSError):
                     worker.process.join(SHUTDOWN_SECONDS)
+                    reason = f"worker process {describe_exit(worker.process.exitcode)}"
+                    start_failures = 0 if worker.ready else start_failures + 1
+                    if start_failures >= START_FAILURES:
+                        raise WorkersCannotStart(reason) from None
                     worker.task = None
                     pool[pool.index(worker)] = _Worker(context, function)
                     worker.connection.close()
-                    yield died(task, f"worker process {describe_exit(worker.process.exitcode)}")
+                    yield died(task, reason)
+                    continue
+                if isinstance(result, Ready):
+                    worker.ready = True
+                    start_failures = 0
                     continue
                 worker.task = None
                 yield result

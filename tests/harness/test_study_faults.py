@@ -537,3 +537,26 @@ def test_an_episode_failing_on_bad_input_runs_once_and_a_crash_is_retried(tmp_pa
     payload = json.loads(printed)
     assert {key: payload[key] for key in ("planned", "skipped", "ran", "retried", "failed")} == {
         "planned": 4, "skipped": 2, "ran": 3, "retried": 1, "failed": sorted([jammed, crashed])}
+
+
+def test_workers_exiting_while_they_start_stop_the_pool(monkeypatch):
+    from trustroute.harness.study import workers
+
+    monkeypatch.setattr(workers, "die_with_parent", lambda _pid: os._exit(3))   # forked: the workers see it
+    with pytest.raises(workers.WorkersCannotStart, match=r"exited with code 3, 2 in a row.*__main__"):
+        list(workers.process_pool(abs, [-1, -2, -3], 2, lambda _task, reason: reason))
+
+
+def test_one_worker_exiting_while_it_starts_fails_only_its_task(monkeypatch, tmp_path):
+    from trustroute.harness.study import workers
+
+    once = tmp_path / "exited once"
+
+    def first_exits(_pid: int) -> None:
+        if not once.exists():
+            once.touch()
+            os._exit(3)
+
+    monkeypatch.setattr(workers, "die_with_parent", first_exits)
+    results = list(workers.process_pool(abs, [-1, -2], 1, lambda task, reason: (task, reason)))
+    assert results == [(-1, "worker process exited with code 3"), 2]
