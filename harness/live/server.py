@@ -34,10 +34,9 @@ from trustroute.core.output_files import atomic_write_text
 from trustroute.core.ranges import PACE, RESUME_WITHIN, keep_checked
 from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.live.auth import Credentials, experimenter_credentials
-from trustroute.harness.live.session import Session, withdrawn_refusal
+from trustroute.harness.live.session import Session, console_refusal
 from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study seed, (4, participant))
 from trustroute.harness.live.withdraw import (
-    declined_refusal,
     load_registry,
     read_registry,
     withdraw_participant,
@@ -230,8 +229,9 @@ class LiveStudy:
         other's check and its change."""
         session = self.sessions[participant]
         with session.lock, self.lock:
-            if session.phase == "withdrawn":
-                raise ValueError(withdrawn_refusal(participant))
+            refusal = console_refusal(participant, session.phase, "link")
+            if refusal is not None:
+                raise ValueError(refusal)
             if spent is not None and self.credentials.participant_of(spent) != participant:
                 raise ValueError(SPENT_LINK)
             token = self.credentials.add_participant(participant)
@@ -291,10 +291,10 @@ class LiveStudy:
         if session is None:
             raise ValueError(refusal)
         with session.lock, self.lock:   # the withdrawal begins: no token is issued after it (replace_token)
-            if participant in self.withdrawn:
-                raise ValueError(refusal)
-            if participant in self.declined:   # (checked under the locks a decline takes too)
-                raise ValueError(declined_refusal(self.study_dir, participant).one_line())
+            # (checked under the locks a decline and a withdrawal take too)
+            refused = console_refusal(participant, session.phase, "withdraw")
+            if refused is not None:
+                raise ValueError(refused)
             session.phase = "withdrawn"   # the episode's last message changes nothing now
             session.label = ""            # (the registry keeps none either)
             self.credentials.participants.pop(participant, None)   # their token revoked

@@ -43,6 +43,7 @@ from trustroute.harness.live.protocol import (
     Takeover,
     TrustReport,
 )
+from trustroute.harness.live.withdraw import declined
 from trustroute.harness.live.worker import start_episode_process
 from trustroute.harness.simulation.driving_style import AUTOPILOT
 from trustroute.harness.study.plan import EpisodeTask
@@ -56,6 +57,39 @@ def withdrawn_refusal(participant: int) -> str:
     withdrawal is final while the server runs (a readmission needs it stopped)."""
     return (f"participant {participant} has withdrawn from the study: their session is over and "
             "their data deleted")
+
+
+# The experimenter console's actions on a participant (harness/live/app.py) that each phase of
+# their session accepts: the episode controls need a running episode; a new link is refused only
+# once they have withdrawn (for one who declined it asks for their consent again), a withdrawal
+# once they have withdrawn or declined (nothing of theirs is kept). The server refuses any other
+# (`console_refusal`), and the state carries the phase's list (`actions`), so the console shows a
+# button for exactly these.
+CONSOLE_ACTIONS: dict[str, tuple[str, ...]] = {
+    "consent": ("link", "withdraw"),
+    "declined": ("link",),
+    "questionnaire": ("link", "withdraw"),
+    "ready": ("link", "withdraw"),
+    "driving": ("pause", "abort", "link", "withdraw"),
+    "paused": ("resume", "abort", "link", "withdraw"),
+    "done": ("link", "withdraw"),
+    "withdrawn": (),
+}
+
+
+def console_refusal(participant: int, phase: str, action: str) -> str | None:
+    """Why the console's `action` on `participant`, in `phase`, is refused; None when it is accepted
+    (CONSOLE_ACTIONS)."""
+    if action in CONSOLE_ACTIONS[phase]:
+        return None
+    if phase == "withdrawn":
+        why = withdrawn_refusal(participant)
+    elif phase == "declined":
+        why = "{} ({})".format(*declined(participant))
+    else:
+        accepted = ", ".join(CONSOLE_ACTIONS[phase])
+        why = f"participant {participant} is in phase {phase!r}, which accepts {accepted}"
+    return f"no {action}: {why}"
 
 
 class Session:
@@ -129,7 +163,8 @@ class Session:
                     "mode": self.mode, "road": self.road, "reports": self.reports,
                     "takeovers": self.takeovers, "done": done, "last_error": self.last_error,
                     "next_episode": pending[0].episode_id if pending else None,
-                    "questionnaire": self.questionnaire_shown()}
+                    "questionnaire": self.questionnaire_shown(),
+                    "actions": list(CONSOLE_ACTIONS[self.phase])}
 
     def questionnaire_shown(self) -> dict | None:
         """The questionnaire the station shows in phase "questionnaire" (with where it is asked)."""
@@ -332,16 +367,15 @@ class Session:
         pushed to the station too: the participant must see why the view stands still, and when
         it goes on (an abort is told by the episode's own `episode_aborted`)."""
         with self.lock:
-            if self.phase == "withdrawn":
-                raise MessageError("out_of_order", f"no {action}: {withdrawn_refusal(self.participant)}")
-            if action == "pause" and self.phase == "driving":
+            refusal = console_refusal(self.participant, self.phase, action)
+            if refusal is not None:
+                raise MessageError("out_of_order", refusal)
+            if action == "pause":
                 self.pause("experimenter")
-            elif action == "resume" and self.phase == "paused":
+            elif action == "resume":
                 self.resume()
-            elif action == "abort" and self.phase in ("driving", "paused"):
-                self.tell({"type": "abort", "reason": "aborted by the experimenter"})
             else:
-                raise MessageError("out_of_order", f"{action} in phase {self.phase!r}")
+                self.tell({"type": "abort", "reason": "aborted by the experimenter"})
             progress, push = self.progress(), self.push
         if push is not None and action != "abort":
             push(progress)

@@ -121,11 +121,15 @@ def registry_record(study_dir: Path, records: dict, participant: int) -> dict:
     return record
 
 
+def declined(participant: int) -> tuple[str, str]:
+    """(problem, fix): why nothing is done for a participant who did not agree to take part:
+    nothing of theirs is kept (harness/live/server.py, `LiveStudy.decline`)."""
+    return f"participant {participant} did not agree to take part", "nothing to do: nothing of theirs is kept"
+
+
 def declined_refusal(study_dir: Path, participant: int) -> InputError:
-    """The refusal to withdraw a participant who did not agree to take part: nothing of theirs is
-    kept (harness/live/server.py, `LiveStudy.decline`)."""
-    return InputError(str(study_dir), "PARTICIPANT", f"participant {participant} did not agree to take part",
-                      "nothing to do: nothing of theirs is kept")
+    """The refusal to withdraw a participant who did not agree to take part."""
+    return InputError(str(study_dir), "PARTICIPANT", *declined(participant))
 
 
 def exported_as(study_dir: Path, participant: int) -> dict | None:

@@ -36,7 +36,7 @@ function cell(row, text) {
   return td;
 }
 
-function controlButton(td, participant, action) {
+function controlButton(participant, action) {
   const button = document.createElement("button");
   button.textContent = action;
   button.addEventListener("click", async () => {
@@ -46,7 +46,7 @@ function controlButton(td, participant, action) {
     catch (error) { showError(error.message); }
     refresh();
   });
-  td.appendChild(button);
+  return button;
 }
 
 function showLink(participant, link) {
@@ -56,19 +56,20 @@ function showLink(participant, link) {
 }
 
 // The server keeps only digests of tokens: a link is shown once. A new one revokes the old.
-function linkButton(td, participant) {
+function linkButton(participant) {
   const button = document.createElement("button");
   button.textContent = "new link";
   button.addEventListener("click", async () => {
     if (!confirm(`A new link for participant ${participant}? Their current link and open station stop working.`)) return;
     try { const issued = await call("POST", `/api/participants/${participant}/link`); showLink(participant, issued.link); showError(""); }
     catch (error) { showError(error.message); }
+    refresh();
   });
-  td.appendChild(button);
+  return button;
 }
 
 // Withdrawal deletes the participant's data for good (audited in live/withdrawals.jsonl).
-function withdrawButton(td, participant) {
+function withdrawButton(participant) {
   const button = document.createElement("button");
   button.textContent = "withdraw";
   button.addEventListener("click", async () => {
@@ -77,11 +78,29 @@ function withdrawButton(td, participant) {
     catch (error) { showError(error.message); }
     refresh();
   });
-  td.appendChild(button);
+  return button;
 }
 
+// The buttons each console action has, in the cell it goes in (the episode's, the participant's).
+const BUTTONS = { pause: controlButton, resume: controlButton, abort: controlButton, link: linkButton,
+                  withdraw: withdrawButton };
+const EPISODE = ["pause", "resume", "abort"];
+
+// A participant who withdrew or declined has no progress to show: their row keeps its number,
+// label and phase and says why in place of the rest. A withdrawal is final while the server runs
+// (a readmission is `trustroute withdraw --readmit`, which needs the server stopped); one who
+// declined can be asked again with a new link.
+const NOTES = {
+  withdrawn: "Withdrawn from the study: their drives and answers are deleted, so there is nothing to control.",
+  declined: "Did not agree to take part: nothing of theirs is kept. A new link asks for their consent again.",
+};
+const KEPT = 3;   // the cells a noted row keeps: #, label, phase
+
 // The table is refreshed every second in place: each participant's row (by its number) is made
-// once with its buttons and only its texts change, so a button keeps the keyboard's focus.
+// once with its cells, and each button once; only texts change, and the cells and buttons are laid
+// out again only when the phase's note or the actions the server offers change (the state's
+// `actions`: the server's one rule, harness/live/session.py CONSOLE_ACTIONS), so a button keeps
+// the keyboard's focus.
 const TEXTS = 10;   // the cells before the episode control and participant buttons
 function texts(p) {
   return [p.participant, p.label, p.paused_by ? `${p.phase} (${p.paused_by})` : p.phase, `${p.trial} of ${p.trials}`,
@@ -93,29 +112,32 @@ function rowOf(body, participant) {
   if (found) return found;
   const row = document.createElement("tr");
   row.dataset.participant = participant;
-  for (let i = 0; i < TEXTS; i++) cell(row, "");
-  const controls = cell(row, "");
-  for (const action of ["pause", "resume", "abort"]) controlButton(controls, participant, action);
-  const links = cell(row, "");
-  linkButton(links, participant);
-  withdrawButton(links, participant);
+  const td = () => document.createElement("td");   // (placed in the row by `layOut`)
+  row.parts = { texts: Array.from({ length: TEXTS }, td), episode: td(), participant: td(), note: td(),
+                buttons: {} };
+  row.parts.note.className = "row-note";
   body.appendChild(row);
   return row;
 }
 
-// A withdrawal is final while the server runs (a readmission is `trustroute withdraw --readmit`,
-// which needs the server stopped): the row keeps its number, label and phase, says what the
-// withdrawal did in place of the progress it no longer has, and offers no buttons (the server
-// refuses the episode controls and a new link for a withdrawn participant too).
-const WITHDRAWN = "Withdrawn from the study: their drives and answers are deleted, so there is nothing to control.";
-const KEPT = 3;   // the cells a withdrawn row keeps: #, label, phase
-function showWithdrawn(row) {
-  const note = document.createElement("td");
-  note.className = "withdrawn-note";
-  note.colSpan = row.cells.length - KEPT;
-  note.textContent = WITHDRAWN;
-  row.replaceChildren(...[...row.cells].slice(0, KEPT), note);
-  row.classList.add("withdrawn");
+function button(row, action) {
+  const made = row.parts.buttons;
+  if (!made[action]) made[action] = BUTTONS[action](Number(row.dataset.participant), action);
+  return made[action];
+}
+
+function layOut(row, p) {
+  const { texts: cells, episode, participant, note } = row.parts;
+  const offered = (actions) => actions.filter((action) => p.actions.includes(action)).map((a) => button(row, a));
+  episode.replaceChildren(...offered(EPISODE));
+  participant.replaceChildren(...offered(Object.keys(BUTTONS).filter((action) => !EPISODE.includes(action))));
+  const noted = NOTES[p.phase];
+  row.className = noted ? `noted ${p.phase}` : "";
+  if (!noted) { row.replaceChildren(...cells, episode, participant); return; }
+  note.textContent = noted;
+  const ends = participant.childElementCount ? [participant] : [];
+  note.colSpan = TEXTS + 2 - KEPT - ends.length;
+  row.replaceChildren(...cells.slice(0, KEPT), note, ...ends);
 }
 
 async function refresh() {
@@ -125,12 +147,12 @@ async function refresh() {
     const body = $("participants");
     for (const p of participants) {
       const row = rowOf(body, p.participant);
-      if (row.classList.contains("withdrawn")) continue;   // final: nothing of it changes
       texts(p).forEach((text, i) => {
         const shown = text === null || text === undefined ? "" : String(text);
-        if (row.cells[i].textContent !== shown) row.cells[i].textContent = shown;
+        if (row.parts.texts[i].textContent !== shown) row.parts.texts[i].textContent = shown;
       });
-      if (p.phase === "withdrawn") showWithdrawn(row);
+      const view = `${p.phase}:${p.actions.join(",")}`;
+      if (row.dataset.view !== view) { row.dataset.view = view; layOut(row, p); }
     }
   } catch (error) { showError(error.message); }
 }

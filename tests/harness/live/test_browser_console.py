@@ -1,5 +1,6 @@
 """The experimenter's console in real Chromium: kept usable by keyboard, telling a lost login in
-words, and showing a withdrawn participant as withdrawn, with nothing to press.
+words, offering in each row only what the server accepts in that participant's phase, and showing
+a withdrawn or declined participant as such.
 
 Never skips: without Chromium it fails and says how to install it."""
 
@@ -46,13 +47,13 @@ def buttons(page, participant: int) -> list[str]:
 def test_the_console_keeps_the_keyboards_focus_and_says_how_to_log_in_again(station, tmp_path):
     context, page = open_console(station)
     last = [new_participant(station) for _ in range(2)][-1]
-    pause = page.locator(f'#participants tr[data-participant="{last}"] button', has_text="pause")
-    pause.focus()
+    link = page.locator(f'#participants tr[data-participant="{last}"] button', has_text="new link")
+    link.focus()
     page.evaluate("window.kept = document.activeElement")
     page.wait_for_timeout(2500)   # the table is refreshed every second
     assert page.evaluate("document.activeElement === window.kept && window.kept.isConnected")
     page.keyboard.press("Tab")   # on to the next control of the same participant, by keyboard
-    assert page.evaluate("document.activeElement.textContent") == "resume"
+    assert page.evaluate("document.activeElement.textContent") == "withdraw"
     assert page.evaluate("document.activeElement.closest('tr').dataset.participant") == str(last)
     context.clear_cookies()   # as after a restart: the server no longer knows this console
     page.locator("#error").filter(has_text="no longer logged in").wait_for()
@@ -72,7 +73,7 @@ def test_a_withdrawn_participants_row_says_so_and_offers_nothing_to_press(statio
     withdrawn, other = new_participant(station), new_participant(station)
     row = page.locator(f'#participants tr[data-participant="{withdrawn}"]')
     row.locator("button", has_text="withdraw").wait_for()
-    assert buttons(page, withdrawn) == ["pause", "resume", "abort", "new link", "withdraw"]
+    assert buttons(page, withdrawn) == ["new link", "withdraw"]
     page.once("dialog", lambda dialog: dialog.accept())
     row.locator("button", has_text="withdraw").click()
     phase = row.locator("td", has_text=re.compile("^withdrawn$"))
@@ -82,10 +83,46 @@ def test_a_withdrawn_participants_row_says_so_and_offers_nothing_to_press(statio
         cells = row.locator("td").all_inner_texts()
         assert cells[:3] == [str(withdrawn), "", "withdrawn"] and len(cells) == 4
         assert "Withdrawn from the study" in cells[3] and "deleted" in cells[3]
-        assert buttons(page, other) == ["pause", "resume", "abort", "new link", "withdraw"]
+        assert buttons(page, other) == ["new link", "withdraw"]
         assert page.locator("#error").inner_text() == ""
         page.screenshot(path=str(tmp_path / "console-withdrawn.png"))
         page.reload()
         phase.wait_for()
         page.locator(f'#participants tr[data-participant="{other}"] button').first.wait_for()
+    context.close()
+
+
+def test_each_row_offers_only_what_the_server_accepts_in_its_phase(station, tmp_path):
+    """Not yet consented, consented, finished and declined: no row offers to pause, resume or
+    abort (no episode runs); the declined row says why in place of its progress and offers only a
+    new link, which asks for the consent again and brings the row back."""
+    from trustroute.harness.live.protocol import Consent
+
+    context, page = open_console(station)
+    study = station.study
+    waiting, ready, finished, declined = (new_participant(station) for _ in range(4))
+    study.sessions[ready].handle(Consent(type="consent", agree=True))
+    study.sessions[finished].warmed_up = True
+    study.done |= {task.episode_id for task in study.sessions[finished].tasks}
+    study.sessions[finished].handle(Consent(type="consent", agree=True))
+    study.sessions[declined].handle(Consent(type="consent", agree=False))
+    phases = {waiting: "consent", ready: "ready", finished: "done", declined: "declined"}
+    for participant, phase in phases.items():
+        row = page.locator(f'#participants tr[data-participant="{participant}"]')
+        row.locator("td", has_text=re.compile(f"^{phase}$")).wait_for()
+        offered = buttons(page, participant)
+        assert not {"pause", "resume", "abort"} & set(offered), (phase, offered)
+        expected = ["new link"] if phase == "declined" else ["new link", "withdraw"]
+        assert offered == expected, (phase, offered)
+    row = page.locator(f'#participants tr[data-participant="{declined}"]')
+    cells = row.locator("td").all_inner_texts()
+    assert cells[:3] == [str(declined), "", "declined"] and len(cells) == 5
+    assert "Did not agree to take part" in cells[3] and "nothing of theirs is kept" in cells[3]
+    assert page.locator("#error").inner_text() == ""
+    page.screenshot(path=str(tmp_path / "console-phases.png"))
+    page.once("dialog", lambda dialog: dialog.accept())
+    row.locator("button", has_text="new link").click()
+    row.locator("td", has_text=re.compile("^consent$")).wait_for()
+    assert buttons(page, declined) == ["new link", "withdraw"]
+    assert len(row.locator("td").all_inner_texts()) == 12
     context.close()

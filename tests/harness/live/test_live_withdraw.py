@@ -243,7 +243,8 @@ def test_the_console_commands_for_a_withdrawn_participant_are_refused_saying_why
                 assert refused.json()["detail"] == {"type": "error", "code": "out_of_order",
                                                     "detail": f"no {action}: {withdrawn_refusal(0)}"}
             link = client.post("/api/participants/0/link", headers=headers)
-            assert link.status_code == 409 and link.json()["detail"]["detail"] == withdrawn_refusal(0)
+            assert link.status_code == 409
+            assert link.json()["detail"]["detail"] == f"no link: {withdrawn_refusal(0)}"
             assert client.get("/api/participants/0", headers=headers).json()["phase"] == "withdrawn"
     finally:
         study.close()

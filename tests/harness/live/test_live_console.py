@@ -1,0 +1,79 @@
+"""The experimenter console's actions: in every phase of a participant's session, each action the
+state offers the console (`actions`, the buttons it shows) is accepted by the server, and each it
+leaves out is refused with 409, saying why, and changes nothing."""
+
+from __future__ import annotations
+
+import itertools
+
+from fastapi.testclient import TestClient
+
+from trustroute.harness.live.app import live_app
+from trustroute.harness.live.protocol import Consent
+from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.live.session import CONSOLE_ACTIONS
+
+from .conftest import experimenter, tiny_config
+
+# every action the console has a button for, and the request each button sends
+REQUESTS = {"pause": ("control", {"action": "pause"}), "resume": ("control", {"action": "resume"}),
+            "abort": ("control", {"action": "abort"}), "link": ("link", None),
+            "withdraw": ("withdraw", {"confirm": True})}
+
+
+class Pipe:
+    """The session's end of a running episode's pipe: what the session tells the episode."""
+
+    def __init__(self) -> None:
+        self.told: list[dict] = []
+
+    def send(self, control: dict) -> None:
+        self.told.append(control)
+
+
+def into_phase(study: LiveStudy, participant: int, phase: str) -> None:
+    """Bring a new participant's session into `phase`: as created, by their consent (agreed or not;
+    with the warm-up and every trial done for "done"), by a withdrawal, or after the consent with
+    an episode on a pipe of its own for "driving" and "paused" (no SUMO) or a questionnaire shown."""
+    session = study.sessions[participant]
+    if phase in ("consent", "withdrawn"):
+        if phase == "withdrawn":
+            study.withdraw(participant)
+        assert session.phase == phase
+        return
+    if phase == "done":
+        study.done |= {task.episode_id for task in session.tasks}
+        session.warmed_up = True
+    session.handle(Consent(type="consent", agree=phase != "declined"))
+    if phase in ("driving", "paused", "questionnaire"):
+        session.phase, session.task, session.connection = phase, session.tasks[0], Pipe()
+        session.pause_reason = "experimenter" if phase == "paused" else None
+    assert session.phase == phase
+
+
+def test_the_console_is_offered_exactly_what_the_server_accepts_in_every_phase(tmp_path):
+    cases = list(itertools.product(CONSOLE_ACTIONS, REQUESTS))
+    study = LiveStudy(tiny_config(tmp_path, participants=len(cases)), tmp_path / "study",
+                      ServerOptions()).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = experimenter(study)
+            for phase, action in cases:
+                participant = client.post("/api/participants", json={}, headers=headers).json()["participant"]
+                into_phase(study, participant, phase)
+                shown = client.get(f"/api/participants/{participant}", headers=headers).json()
+                assert shown["phase"] == phase
+                assert set(shown["actions"]) <= set(REQUESTS), shown["actions"]
+                endpoint, body = REQUESTS[action]
+                address = f"/api/participants/{participant}/{endpoint}"
+                answer = client.post(address, json=body, headers=headers)
+                if action in shown["actions"]:
+                    assert answer.status_code == 200, (phase, action, answer.text)
+                else:
+                    assert answer.status_code == 409, (phase, action, answer.text)
+                    assert answer.json()["detail"]["detail"].startswith(f"no {action}: "), answer.text
+                    after = client.get(f"/api/participants/{participant}", headers=headers).json()
+                    assert after == shown, (phase, action)
+    finally:
+        study.close()
+
