@@ -22,13 +22,13 @@ def export(study_dir: str, out: str, seed: int, as_json: bool) -> None:
     import numpy as np
 
     from trustroute.analysis.study_directory import load_study
-    from trustroute.harness.live.withdraw import withdrawn_count
+    from trustroute.harness.live.withdraw import ended_counts
     from trustroute.harness.study.export import KEY_FILE, export_study
 
     warnings = study_warnings(Path(study_dir))
     load_study(Path(study_dir))   # its tables checked against its inputs before anything is written
-    withdrawn = withdrawn_count(Path(study_dir))
-    index = {**export_study(Path(study_dir), Path(out), np.random.default_rng(seed), withdrawn),
+    ended = ended_counts(Path(study_dir))
+    index = {**export_study(Path(study_dir), Path(out), np.random.default_rng(seed), ended),
              "warnings": warnings}
     # the package is a folder of many files, listed as the folder; the key stays in the study
     paths = {"package": Path(out), "export_key": Path(study_dir) / KEY_FILE}

@@ -37,6 +37,7 @@ from trustroute.harness.live.auth import Credentials, experimenter_credentials
 from trustroute.harness.live.session import Session, console_refusal
 from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study seed, (4, participant))
 from trustroute.harness.live.withdraw import (
+    ENDED,
     load_registry,
     read_registry,
     withdraw_participant,
@@ -167,7 +168,7 @@ class LiveStudy:
         for key, record in records["participants"].items():
             participant = int(key)
             # withdrawn (harness/live/withdraw.py) or declined (`decline`): no data, no token
-            ended = next((phase for phase in ("withdrawn", "declined") if record.get(phase)), None)
+            ended = next((phase for phase in ENDED if record.get(phase)), None)
             if ended is not None:
                 (self.withdrawn if ended == "withdrawn" else self.declined)[participant] = record
                 self.sessions[participant] = self.new_session(participant)

@@ -98,14 +98,18 @@ def load_registry(path: Path, fix: str) -> dict:
     return records
 
 
-def withdrawn_count(study_dir: Path) -> int | None:
-    """How many of a live study's participants are withdrawn (not readmitted), as its registry says;
-    None for a study without a registry (a simulated one). `trustroute export` reports the count."""
+ENDED = ("withdrawn", "declined")   # the registry's marks of a participant with no data
+
+
+def ended_counts(study_dir: Path) -> dict[str, int] | None:
+    """How many of a live study's participants are withdrawn (not readmitted) and how many declined
+    the consent (not asked again since), as its registry says: {"withdrawn": n, "declined": m}; None
+    for a study without a registry (a simulated one). `trustroute export` reports the counts."""
     path = Path(study_dir) / LIVE_DIR / REGISTRY
     if not path.exists():
         return None
-    records = load_registry(path, "restore it from a backup")
-    return sum(1 for record in records["participants"].values() if record.get("withdrawn"))
+    records = load_registry(path, "restore it from a backup")["participants"].values()
+    return {ended: sum(1 for record in records if record.get(ended)) for ended in ENDED}
 
 
 def write_registry(study_dir: Path, records: dict) -> None:

@@ -15,7 +15,8 @@ live registry (token digests, labels), the token log or the withdrawal audit is 
 Neither is the order of enrolment or the lab's schedule: every table's rows are sorted by pseudonym
 (a participant's rows in the table's own order), and every wall-clock column becomes the seconds
 since the participant's first recorded wall-clock time (trustroute/core/codebook.py, EXPORTED_TIMES).
-The README reports the participant flow (planned, with data, and for a live study withdrawn: a count).
+The README reports the participant flow (planned, with data, and for a live study withdrawn and
+declined: counts).
 """
 
 from __future__ import annotations
@@ -163,9 +164,10 @@ def sha256_of(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def export_study(study_dir: Path, out: Path, rng: np.random.Generator, withdrawn: int | None) -> dict:
-    """Write the package of `study_dir` into `out` (a new or empty directory); its index. `withdrawn`:
-    how many participants of a live study withdrew (None: a simulated study), for the README."""
+def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: dict[str, int] | None) -> dict:
+    """Write the package of `study_dir` into `out` (a new or empty directory); its index. `ended`: how
+    many participants of a live study withdrew and how many declined the consent (harness/live/
+    withdraw.py, `ended_counts`; None: a simulated study), for the README."""
     study_dir, out = Path(study_dir), Path(out)
     manifest = read_manifest(study_dir)
     check_output_dir(out, "--out", "package directory")
@@ -206,7 +208,7 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, withdrawn
         (out / "texts").mkdir(exist_ok=True)
         atomic_write_text(out / "texts" / QUESTIONNAIRES_TEXT, json.dumps(shown, indent=1), "questionnaires")
         texts.append(QUESTIONNAIRES_TEXT)
-    atomic_write_text(out / "README.md", readme(manifest, tables, texts, len(key), withdrawn), "README")
+    atomic_write_text(out / "README.md", readme(manifest, tables, texts, len(key), ended), "README")
     atomic_write_text(study_dir / KEY_FILE, json.dumps({"pseudonyms": {str(p): c for p, c in key.items()},
                                                         "package": str(out.resolve())}, indent=1),
                       "export key")
@@ -252,23 +254,24 @@ def codebook_markdown(book: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
-def participant_flow(manifest: dict, participants: int, withdrawn: int | None) -> str:
+def participant_flow(manifest: dict, participants: int, ended: dict[str, int] | None) -> str:
     """The README's participant flow: planned (the study config's), with data in the package, and for
-    a live study withdrawn (a count: who withdrew is not said)."""
+    a live study withdrawn and declined (counts: who withdrew or declined is not said)."""
     planned = (manifest.get("config") or {}).get("participants")
     flow = f"{planned} planned, {participants} with data in this package"
-    if withdrawn is not None:
-        flow += f", {withdrawn} withdrawn (their data deleted before this export)"
+    if ended is not None:
+        flow += (f", {ended['withdrawn']} withdrawn (their data deleted before this export), "
+                 f"{ended['declined']} declined consent (nothing of theirs was recorded)")
     return f"Participants: {flow}."
 
 
 def readme(manifest: dict, tables: list[str], texts: list[str], participants: int,
-           withdrawn: int | None) -> str:
+           ended: dict[str, int] | None) -> str:
     name = manifest.get("study", "the study")
     return "\n".join([
         f"# {name}: data package", "",
         f"A trustroute study ({manifest.get('engine')} engine), exported with `trustroute export`.", "",
-        participant_flow(manifest, participants, withdrawn), "",
+        participant_flow(manifest, participants, ended), "",
         "- `tables/`: the consolidated tables (Apache Parquet): " + ", ".join(tables) + ".",
         "- `codebook.md`, `codebook.json`: every column's type, whether it may be null, unit, meaning and "
         "allowed values.",

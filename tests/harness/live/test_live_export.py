@@ -178,6 +178,31 @@ def test_the_readme_counts_a_withdrawal_without_naming_who(tmp_path, capsys):
     assert code == 0, err
     readme = (package / "README.md").read_text()
     assert "Participants: 3 planned, 1 with data in this package, 1 withdrawn" in readme
+    assert "0 declined consent" in readme
     assert "asked by mail" not in readme and "p00001" not in readme
     episodes = pq.read_table(package / "tables" / "episodes.parquet")
     assert len(set(episodes.column("participant").to_pylist())) == 1
+
+
+def test_the_readme_counts_those_who_declined_without_naming_who(tmp_path, capsys):
+    """Of four planned participants two drive, a third declines the consent and a fourth declines
+    and is asked again: the README counts one who declined (the one asked again is not counted),
+    and names no one."""
+    from trustroute.harness.live.protocol import Consent
+
+    study_dir, package = drive_two(tmp_path, 4)
+    study = LiveStudy(tiny_config(tmp_path, participants=4), study_dir, ServerOptions()).open()
+    try:
+        for label in ("Ada L.", "Grace H."):
+            participant = study.create_participant(label)[0]
+            study.sessions[participant].handle(Consent(type="consent", agree=False))
+        study.ask_again(participant)
+        study.replace_token(participant, "new link issued by the experimenter")
+    finally:
+        study.close()
+    code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package))
+    assert code == 0, err
+    readme = (package / "README.md").read_text()
+    assert ("Participants: 4 planned, 2 with data in this package, 0 withdrawn (their data deleted "
+            "before this export), 1 declined consent (nothing of theirs was recorded).") in readme
+    assert not re.search(r"Ada|Grace|p0000[23]", readme)
