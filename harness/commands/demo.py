@@ -17,11 +17,10 @@ from pathlib import Path
 import click
 
 from trustroute.app.engines import ENGINES, SIMULATED
-from trustroute.core import defaults
+from trustroute.core import defaults, ranges
 from trustroute.core.ranges import study_workers
-from trustroute.harness.commands.options import WORKERS, bounded_int
+from trustroute.harness.commands.options import WORKERS, Checked
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
-from trustroute.harness.study.config import MAX_PARTICIPANTS
 from trustroute.harness.study.plan import episode_id as planned_episode_id
 
 DEFAULT_OUT = Path("out") / "demo"
@@ -65,7 +64,7 @@ def record_episode(context, study_dir: Path, episode_id: str) -> Path:
 @click.option("--workers", type=WORKERS, default=defaults.WORKERS,
               help=f"Local worker processes (default: the CPU count, at most {defaults.MAX_WORKERS}).")
 @click.option("--engine", type=click.Choice(SIMULATED), default=defaults.EPISODE_ENGINE, show_default=True)
-@click.option("--participants", type=bounded_int(1, MAX_PARTICIPANTS), default=21, show_default=True)
+@click.option("--participants", type=Checked(ranges.PARTICIPANTS), default=21, show_default=True)
 @click.option("--town", type=click.Choice([DEFAULT_TOWN, *DEMO_TOWNS]), default=DEFAULT_TOWN,
               show_default=True, help="The paper's town, or the city (the RESCO Ingolstadt scenario; "
               "needs pip install 'trustroute[cities]').")

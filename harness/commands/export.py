@@ -8,13 +8,15 @@ from pathlib import Path
 
 import click
 
+from trustroute.core import ranges
+from trustroute.harness.commands.options import Checked
 from trustroute.harness.commands.output import emit, json_option, study_warnings, with_paths
 
 
 @click.command("export")
 @click.argument("study_dir", metavar="STUDY", type=click.Path())
 @click.option("--out", "out", type=click.Path(), required=True, help="The package DIRECTORY (new or empty).")
-@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=0, show_default=True,
+@click.option("--seed", type=Checked(ranges.DRAW_SEED), default=0, show_default=True,
               help="Seed of the pseudonyms' draw (the key is kept in STUDY/export-key.json).")
 @json_option
 def export(study_dir: str, out: str, seed: int, as_json: bool) -> None:

@@ -14,7 +14,7 @@ import click
 from trustroute.core import defaults, ranges
 from trustroute.core.progress import bar_disable
 from trustroute.harness.commands.option_groups import option, takes
-from trustroute.harness.commands.options import Checked, UsageFix, bounded_int
+from trustroute.harness.commands.options import Checked, UsageFix
 from trustroute.harness.commands.output import json_flag, quiet_flag, study_warnings, with_paths
 
 CHECK_REPLICATES = 50  # simulated drivers per real episode in `fit --check`
@@ -33,9 +33,9 @@ class FitOptions:
         "auto: counts when the study's report accuracy is 1 and trust is reported every road.")
     iterations: int = option("--iterations", type=Checked(ranges.ITERATIONS), default=defaults.FIT_ITERATIONS,
                              show_default=True, help="EM iterations at most.")
-    bootstrap: int = option("--bootstrap", type=bounded_int(0, 100_000), default=0, show_default=True,
+    bootstrap: int = option("--bootstrap", type=Checked(ranges.BOOTSTRAP), default=0, show_default=True,
                             help="Resamples of participants for percentile intervals (0: none).")
-    seed: int = option("--seed", type=bounded_int(0, 2**63 - 1), default=0, show_default=True,
+    seed: int = option("--seed", type=Checked(ranges.DRAW_SEED), default=0, show_default=True,
                        help="Seed of the bootstrap and the check.")
     check: bool = option(
         "--check", is_flag=True,
@@ -44,9 +44,9 @@ class FitOptions:
     types: str | None = option("--types", default=None, metavar="K|auto",
                                help="Fit a mixture of K driver types (or choose K by BIC with 'auto') and "
                                "write a driver-population file.")
-    max_types: int = option("--max-types", type=bounded_int(1, 20), default=defaults.FIT_MAX_TYPES,
+    max_types: int = option("--max-types", type=Checked(ranges.MAX_TYPES), default=defaults.FIT_MAX_TYPES,
                             show_default=True, help="With --types auto: the largest K tried.")
-    restarts: int = option("--restarts", type=bounded_int(1, 1_000), default=defaults.FIT_RESTARTS,
+    restarts: int = option("--restarts", type=Checked(ranges.RESTARTS), default=defaults.FIT_RESTARTS,
                            show_default=True, help="With --types: seeded EM restarts per K.")
     shared_dynamics: bool = option(
         "--shared-dynamics", is_flag=True,
@@ -71,8 +71,9 @@ def fit(study_dir: str, options: FitOptions) -> None:
         if check or method == "counts":
             raise UsageFix("--types fits by EM; it takes neither --check nor --method counts",
                            "drop --check and --method counts, or drop --types")
+        fixed = _type_count(options.types)
         check_output_file(out, "--out", "driver-population file", studies={"DIR": study_dir})
-        fit_types(Path(study_dir), Path(out), options, study_warnings(Path(study_dir)))
+        fit_types(Path(study_dir), Path(out), options, fixed, study_warnings(Path(study_dir)))
         return
     check_output_file(out, "--out", "driver model file", studies={"DIR": study_dir})
     warnings = study_warnings(Path(study_dir))
@@ -164,22 +165,17 @@ def fit(study_dir: str, options: FitOptions) -> None:
 
 
 def _type_count(types: str) -> int | None:
-    """--types: an integer K >= 1, or None for 'auto'."""
+    """--types: an integer K in its range, or None for 'auto'."""
     if types == "auto":
         return None
-    try:
-        value = int(types)
-    except ValueError:
-        value = 0
-    if not 1 <= value <= 20:
-        raise click.BadParameter(f"{types!r} is neither 'auto' nor an integer from 1 to 20",
-                                 param_hint="--types")
-    return value
+    return Checked(ranges.TYPES).convert(types, None, None)
 
 
-def fit_types(study_dir: Path, out: Path, options: FitOptions, warnings: list[str]) -> None:
-    """`trustroute fit --types`: the mixture, its BIC table and bootstrap, a driver-population file
-    (`warnings`: what reading the study could not check, already said)."""
+def fit_types(study_dir: Path, out: Path, options: FitOptions, fixed: int | None,
+              warnings: list[str]) -> None:
+    """`trustroute fit --types`: the mixture of `fixed` types (None: chosen by BIC), its BIC table and
+    bootstrap, a driver-population file (`warnings`: what reading the study could not check, already
+    said)."""
     import time
 
     import numpy as np
@@ -200,7 +196,6 @@ def fit_types(study_dir: Path, out: Path, options: FitOptions, warnings: list[st
     iterations, bootstrap, seed = options.iterations, options.bootstrap, options.seed
     shared_dynamics, as_json, quiet = options.shared_dynamics, options.as_json, options.quiet
     assert types is not None   # (fit calls this only with --types)
-    fixed = _type_count(types)
     rng = np.random.default_rng(seed)
     data, logs = study_observations(study_dir)
     obs, participants = data.observations, data.participants

@@ -17,7 +17,7 @@ import click
 
 from trustroute.core import defaults, ranges
 from trustroute.harness.commands.option_groups import option, takes
-from trustroute.harness.commands.options import Checked, bounded_int
+from trustroute.harness.commands.options import Checked
 
 if TYPE_CHECKING:
     from trustroute.harness.live.server import ServerOptions
@@ -29,7 +29,7 @@ class ServeOptions:
 
     host: str = option("--host", default="127.0.0.1", show_default=True,
                        help="Address to bind (another than 127.0.0.1 exposes the study to the network).")
-    port: int = option("--port", type=bounded_int(0, 65535), default=8765, show_default=True,
+    port: int = option("--port", type=Checked(ranges.PORT), default=8765, show_default=True,
                        help="Port to bind.")
     out: str | None = option("--out", type=click.Path(), default=None,
                              help="Study DIRECTORY (default: the config's output, else studies/<name>).")

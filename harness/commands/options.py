@@ -1,14 +1,13 @@
 """Range and finiteness checks of command-line options, done before any work starts.
 
 click's FloatRange lets NaN through (every comparison with NaN is false), and an unbounded
-integer such as `--horizon 10**18` would start work that can never finish: options go through
-these types instead. A bad value is a one-line usage error with exit code 2. An option the API
-takes too is `Checked` by the range both doors share (trustroute/core/ranges.py).
+integer such as `--horizon 10**18` would start work that can never finish: every numeric option is
+`Checked` by its range in trustroute/core/ranges.py instead (the one the API checks, where the API
+takes the option too). A bad value is one line in the project's wording, exit code 2.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -28,41 +27,10 @@ class UsageFix(click.UsageError):
         self.fix = fix
 
 
-class FiniteFloat(click.ParamType):
-    """A finite float within [minimum, maximum] (minimum excluded when `open_minimum`)."""
-
-    name = "number"
-
-    def __init__(self, minimum: float | None = None, maximum: float | None = None,
-                 open_minimum: bool = False) -> None:
-        self.minimum, self.maximum, self.open_minimum = minimum, maximum, open_minimum
-
-    def convert(self, value, param, ctx):
-        if isinstance(value, float):
-            number = value
-        else:
-            try:
-                number = float(value)
-            except (TypeError, ValueError):
-                self.fail(f"{value!r} is not a number", param, ctx)
-        if not math.isfinite(number):
-            self.fail(f"{value!r} is not a finite number", param, ctx)
-        low = self.minimum
-        if low is not None and (number <= low if self.open_minimum else number < low):
-            self.fail(f"{number:g} must be {'>' if self.open_minimum else '>='} {low:g}", param, ctx)
-        if self.maximum is not None and number > self.maximum:
-            self.fail(f"{number:g} must be <= {self.maximum:g}", param, ctx)
-        return number
-
-
-def bounded_int(minimum: int, maximum: int) -> click.IntRange:
-    return click.IntRange(minimum, maximum)
-
-
 class Checked(click.ParamType):
-    """An option that another door takes too: its value is parsed as the range's kind and checked
-    by the range itself (trustroute/core/ranges.py `OptionRange`), the check the API makes, so
-    both doors refuse it with the same words (an InputError: one line, exit code 2)."""
+    """A numeric option: its value is parsed as the range's kind and checked by the range itself
+    (trustroute/core/ranges.py `OptionRange`), the check the API makes where it takes the option too,
+    so every door refuses it with the same words (an InputError: one line, exit code 2)."""
 
     def __init__(self, accepted: OptionRange) -> None:
         self.accepted = accepted

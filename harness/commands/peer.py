@@ -17,8 +17,10 @@ from typing import Any
 import click
 
 from trustroute.app.peers import paynt_comparison, storm_comparison
+from trustroute.core import ranges
 from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
+from trustroute.harness.commands.options import Checked
 from trustroute.harness.commands.output import emit, json_flag
 
 
@@ -29,7 +31,7 @@ class PeerProblem:
     town_path: str | None = town_field()
     driver_path: str | None = driver_field()
     horizon: int | None = option(
-        "--horizon", type=click.IntRange(min=0), default=None,
+        "--horizon", type=Checked(ranges.PEER_HORIZON), default=None,
         help="Accepted within H junctions (a step counter in the product; default: unbounded).")
 
 
@@ -37,16 +39,17 @@ class PeerProblem:
 class OurSide:
     """--depth, --max-nodes and --json: our side of a comparison, and the output."""
 
-    depth: int = option("--depth", type=click.IntRange(min=0), default=10, show_default=True,
+    depth: int = option("--depth", type=Checked(ranges.DEPTH), default=10, show_default=True,
                         help="Our search depth for the unbounded objective (the horizon when given).")
     max_nodes: int = option(
-        "--max-nodes", type=click.IntRange(min=1), default=200_000, show_default=True,
+        "--max-nodes", type=Checked(ranges.PEER_MAX_NODES), default=200_000, show_default=True,
         help="Our belief nodes per level; beyond, the least likely are bounded, not expanded.")
     as_json: bool = json_flag()
 
 
 def peer_time_limit(help: str) -> Any:
-    return option("--time-limit", type=click.FloatRange(min=1), default=30.0, show_default=True, help=help)
+    return option("--time-limit", type=Checked(ranges.PEER_TIME_LIMIT), default=30.0, show_default=True,
+                  help=help)
 
 
 @dataclass(frozen=True)
@@ -54,7 +57,7 @@ class StormLimits:
     """Storm's side: the seconds of its belief unfolding and its discretisation's resolution."""
 
     time_limit: float = peer_time_limit("Seconds of Storm's belief unfolding (lower bound).")
-    resolution: int = option("--resolution", type=click.IntRange(min=1), default=2, show_default=True,
+    resolution: int = option("--resolution", type=Checked(ranges.RESOLUTION), default=2, show_default=True,
                              help="Storm's discretisation resolution (upper bound).")
 
 
@@ -63,8 +66,8 @@ class PayntLimits:
     """PAYNT's side: the seconds of its controller search and the largest product it is handed."""
 
     time_limit: float = peer_time_limit("Seconds of PAYNT's controller search.")
-    max_states: int = option("--max-states", type=click.IntRange(min=1), default=200_000, show_default=True,
-                             help="Largest product POMDP handed to PAYNT; beyond, exit 2.")
+    max_states: int = option("--max-states", type=Checked(ranges.MAX_STATES), default=200_000,
+                             show_default=True, help="Largest product POMDP handed to PAYNT; beyond, exit 2.")
 
 
 def problem_line(result: dict) -> str:

@@ -12,7 +12,8 @@ from pathlib import Path
 import click
 import numpy as np
 
-from trustroute.harness.commands.options import SEED, FiniteFloat, bounded_int
+from trustroute.core import ranges
+from trustroute.harness.commands.options import SEED, Checked
 from trustroute.harness.commands.output import emit, json_option, with_paths
 
 
@@ -22,16 +23,17 @@ def population() -> None:
 
 
 @population.command("sample")
-@click.option("--types", "n_types", type=bounded_int(1, 1_000), required=True, help="Number of types K.")
+@click.option("--types", "n_types", type=Checked(ranges.SAMPLED_TYPES), required=True,
+              help="Number of types K.")
 @click.option("--seed", type=SEED, required=True, help="Seed of the draws.")
 @click.option("--out", type=click.Path(), required=True, help="Driver-population FILE to write.")
 @click.option("--driver", "driver_path", type=click.Path(), default=None,
               help="Nominal driver model file (default: the packaged model).")
 @click.option("--config", "config_path", type=click.Path(), default=None,
               help="TOML file whose [population] table gives the spread (e.g. a study config).")
-@click.option("--concentration", type=FiniteFloat(0.0, open_minimum=True), default=None,
+@click.option("--concentration", type=Checked(ranges.CONCENTRATION), default=None,
               help="Dirichlet concentration of the rows around the nominal ones (overrides --config).")
-@click.option("--takeover-spread", "spread", type=FiniteFloat(0.0), default=None,
+@click.option("--takeover-spread", "spread", type=Checked(ranges.TAKEOVER_SPREAD), default=None,
               help="sd of each type's logit shift of its takeover probabilities (overrides --config).")
 @json_option
 def sample(n_types: int, seed: int, out: str, driver_path: str | None, config_path: str | None,

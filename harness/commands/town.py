@@ -12,7 +12,8 @@ from pathlib import Path
 
 import click
 
-from trustroute.harness.commands.options import UsageFix
+from trustroute.core import ranges
+from trustroute.harness.commands.options import Checked, UsageFix
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 
 
@@ -26,7 +27,7 @@ def town() -> None:
 @click.option("--out", "out", type=click.Path(), required=True, help="The town file to write (JSON).")
 @click.option("--incidents", "incidents_path", type=click.Path(), default=None,
               help="JSON FILE of incidents by road \"U-V\" or SUMO edge id (others: none).")
-@click.option("--incident-seed", type=click.IntRange(min=0), default=None,
+@click.option("--incident-seed", type=Checked(ranges.INCIDENT_SEED), default=None,
               help="Draw the incidents by the seeded rule of docs/formats/town.md.")
 @click.option("--net-out", type=click.Path(), default=None,
               help="Where an OSM import writes its SUMO net (default: beside --out, NAME.net.xml).")
@@ -55,10 +56,10 @@ def import_command(source: str, out: str, incidents_path: str | None, incident_s
 
 @town.command("roads")
 @click.argument("town_path", metavar="TOWN", type=click.Path())
-@click.option("--near", type=(float, float), default=None, metavar="X Y",
+@click.option("--near", type=click.Tuple([Checked(ranges.COORDINATE)] * 2), default=None, metavar="X Y",
               help="List the roads nearest this point (metres, the town's coordinates) first.")
 @click.option("--street", default=None, metavar="NAME", help="Only the roads on this street (case ignored).")
-@click.option("--limit", type=click.IntRange(min=1), default=None,
+@click.option("--limit", type=Checked(ranges.ROAD_LIMIT), default=None,
               help="At most N roads (default: 10 with --near, else all).")
 @json_option
 def roads_command(town_path: str, near: tuple[float, float] | None, street: str | None, limit: int | None,

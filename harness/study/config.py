@@ -49,7 +49,7 @@ from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Literal, TypedDict, get_args
 
-from trustroute.core import defaults
+from trustroute.core import defaults, ranges
 from trustroute.core.errors import InputError
 from trustroute.core.fields import (
     Field,
@@ -350,7 +350,6 @@ FIELDS = field_table(
 TABLES: tuple[str, ...] = keys(FIELDS)
 _ENTRIES = ListOf(item=Text(), min_items=1, distinct=True)
 _FILE = Text()
-MAX_PARTICIPANTS = 100_000  # of a study, and of every sample size `trustroute plan` simulates
 
 
 def _file_path(seen: Seen) -> str:
@@ -373,10 +372,10 @@ FILE_FIX: dict[FileKey | Literal["routes"], str] = {
 }
 STUDY_FIELDS = field_table(
     StudyValues,
-    Field(key="participants", kind=Integer(minimum=1, maximum=MAX_PARTICIPANTS), required=True,
+    Field(key="participants", kind=ranges.PARTICIPANTS.kind, required=True,
           fix="write the number of participants, e.g. participants = 21",
           missing_fix="add participants = 21"),
-    Field(key="seed", kind=Integer(minimum=0, maximum=2**63 - 1), required=True,
+    Field(key="seed", kind=ranges.DRAW_SEED.kind, required=True,
           fix="write a non-negative integer, e.g. seed = 1", missing_fix="add seed = 1"),
     Field(key="engine", kind=ENGINE_NAMES, default="sumo", fix=ENGINE_FIX),
     Field(key="specs", kind=_ENTRIES, required=True,

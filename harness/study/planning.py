@@ -21,9 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trustroute.core.defaults import MAX_PARTICIPANTS
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.model_engine import simulate_batch
-from trustroute.harness.study.config import MAX_PARTICIPANTS, StudyConfig
+from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext
 from trustroute.harness.study.latin_square import williams_rows
 from trustroute.participants.driver_model import DriverModel

@@ -50,6 +50,7 @@ GYM_ENGINE = "model"
 # its data.
 WORKERS: int | None = None
 MAX_WORKERS = 256
+MAX_PARTICIPANTS = 100_000           # of a study, and of every sample size `trustroute plan` simulates
 ATTEMPTS = 2                         # runs of a failing episode at most: the first and its retries
 MAX_ATTEMPTS = 10
 

@@ -1,8 +1,10 @@
-"""The range of each option two doors share, defined once: the API's settings and calls check a
-value with its `OptionRange`, and the CLI's option of the same name parses its text and hands it to
-the same check (harness/commands/options.py `Checked`), so the doors accept the same values and
-refuse the others with the same words, the API's naming its keyword where the CLI's names its flag
-(`keyword_names`). The numbers (the largest horizon, worker count, ...) are trustroute/core/defaults.py's.
+"""The range of each numeric option, defined once: the API's settings and calls check a value with
+its `OptionRange`, and the CLI's option of the same name parses its text and hands it to the same
+check (harness/commands/options.py `Checked`), so the doors accept the same values and refuse the
+others with the same words, the API's naming its keyword where the CLI's names its flag
+(`keyword_names`). An option only the CLI has is checked by its range here too, so every refusal of
+a number has the one wording. The numbers (the largest horizon, worker count, ...) are
+trustroute/core/defaults.py's.
 """
 
 from __future__ import annotations
@@ -80,6 +82,10 @@ def _positive(flag: str, unit: str, example: str) -> OptionRange[int]:
     return OptionRange(flag, Integer(minimum=1), f"pass a positive whole number of {unit}, e.g. {example}")
 
 
+def _natural(flag: str, unit: str, example: str) -> OptionRange[int]:
+    return OptionRange(flag, Integer(minimum=0), f"pass a whole number of {unit} >= 0, e.g. {example}")
+
+
 # synthesis (`synthesize`, `trustroute synth`)
 TAU = OptionRange("--tau", Number(minimum=0.0, maximum=1.0, open_below=True),
                   "pass a gap above 0, at most 1, e.g. --tau 1e-3")
@@ -96,6 +102,10 @@ MAX_JUNCTIONS = _junctions("--max-junctions", str(defaults.JUNCTION_CAP))
 MAX_NODES = _positive("--max-nodes", "histories per junction", "--max-nodes 5000")
 SEED = OptionRange("--seed", Integer(minimum=0, maximum=defaults.MAX_SEED),
                    f"pass a whole number from 0 to {defaults.MAX_SEED}")
+# the seed of a command's own draws, a numpy generator's (`fit`, `export`, `town import`): any
+# non-negative integer, as a study config's seed
+DRAW_SEED = _natural("--seed", "draws", "--seed 1")
+INCIDENT_SEED = _natural("--incident-seed", "draws", "--incident-seed 1")
 # background traffic (`trustroute run --background`; SumoConfig's and the study config's
 # background_vehicles name it by their key)
 BACKGROUND_VEHICLES = OptionRange(
@@ -106,6 +116,8 @@ BACKGROUND_VEHICLES = OptionRange(
 WORKERS = OptionRange("--workers", Integer(minimum=1, maximum=defaults.MAX_WORKERS),
                       f"pass 1 (this process) to {defaults.MAX_WORKERS} processes, or omit --workers "
                       "(the CPU count)")
+PARTICIPANTS = OptionRange("--participants", Integer(minimum=1, maximum=defaults.MAX_PARTICIPANTS),
+                           f"pass 1 to {defaults.MAX_PARTICIPANTS} participants, e.g. --participants 21")
 ATTEMPTS = OptionRange("--attempts", Integer(minimum=1, maximum=defaults.MAX_ATTEMPTS),
                        f"pass 1 to {defaults.MAX_ATTEMPTS} runs, e.g. --attempts {defaults.ATTEMPTS}")
 
@@ -156,3 +168,33 @@ RESUME_WITHIN = OptionRange("--resume-within", Number(minimum=0.0, maximum=86_40
 # fitting (`trustroute fit`, analysis/fitting/driver_model.py fit_study)
 ITERATIONS = OptionRange("--iterations", Integer(minimum=1, maximum=100_000),
                          f"pass 1 to 100000 iterations, e.g. --iterations {defaults.FIT_ITERATIONS}")
+# fitting's bootstrap and driver types (`trustroute fit`); a sampled population's types
+# (`trustroute population sample`)
+BOOTSTRAP = OptionRange("--bootstrap", Integer(minimum=0, maximum=100_000),
+                        "pass 0 (none) to 100000 resamples, e.g. --bootstrap 200")
+TYPES = OptionRange("--types", Integer(minimum=1, maximum=20), "pass 1 to 20 driver types, or auto")
+MAX_TYPES = OptionRange("--max-types", TYPES.kind,
+                        f"pass 1 to 20 driver types, e.g. --max-types {defaults.FIT_MAX_TYPES}")
+RESTARTS = OptionRange("--restarts", Integer(minimum=1, maximum=1_000),
+                       f"pass 1 to 1000 restarts, e.g. --restarts {defaults.FIT_RESTARTS}")
+SAMPLED_TYPES = OptionRange("--types", Integer(minimum=1, maximum=1_000),
+                            "pass 1 to 1000 driver types, e.g. --types 3")
+CONCENTRATION = OptionRange("--concentration", Number(minimum=0.0, open_below=True),
+                            "pass a finite concentration above 0, e.g. --concentration 50")
+TAKEOVER_SPREAD = OptionRange("--takeover-spread", Number(minimum=0.0),
+                              "pass a finite sd >= 0, e.g. --takeover-spread 0.5")
+# live studies' socket (`trustroute live`)
+PORT = OptionRange("--port", Integer(minimum=0, maximum=65_535),
+                   "pass a port from 0 (any free one) to 65535, e.g. --port 8765")
+# a town's roads near a point (`trustroute town roads --near X Y`; --limit)
+COORDINATE = OptionRange("--near", Number(),
+                         "pass two finite numbers in the town's metres, e.g. --near 120 -45")
+ROAD_LIMIT = _positive("--limit", "roads", "--limit 10")
+# peers (`trustroute peer storm|paynt`): their limits and our search's
+PEER_HORIZON = _natural("--horizon", "junctions", "--horizon 10, or omit it (unbounded)")
+DEPTH = _natural("--depth", "junctions", "--depth 10")
+PEER_MAX_NODES = _positive("--max-nodes", "belief nodes per level", "--max-nodes 200000")
+PEER_TIME_LIMIT = OptionRange("--time-limit", Number(minimum=1.0),
+                              "pass a finite number of seconds >= 1, e.g. --time-limit 30")
+RESOLUTION = _positive("--resolution", "steps", "--resolution 2")
+MAX_STATES = _positive("--max-states", "states", "--max-states 200000")
