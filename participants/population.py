@@ -169,6 +169,20 @@ def _initial_trust(dist: list | None, source: str, n_trust: int | None) -> tuple
     return tuple(float(v) for v in dist)
 
 
+def _checked(data: object, source: str) -> PopulationTableValues:
+    if not isinstance(data, Mapping):
+        raise InputError(source, "population", "expected a table", "write a [population] table")
+    return check_fields(dict(data), FIELDS, source, "[population] table", "population")
+
+
+def population_table(data: Mapping[str, object], source: str) -> dict[str, object]:
+    """The keys a `[population]` table gives, each value as checked (a numpy number as Python's),
+    the table a study config keeps and writes; InputError as `population_config_from_dict`."""
+    population_config_from_dict(data, source)
+    values = _checked(data, source)
+    return {key: values[key] for key in data}   # type: ignore[literal-required]
+
+
 def population_config_from_dict(data: Mapping[str, object] | None, source: str,
                                 n_trust: int | None = None) -> PopulationConfig:
     """Validate a `[population]` table (parsed TOML) into a PopulationConfig, or raise InputError.
@@ -178,9 +192,7 @@ def population_config_from_dict(data: Mapping[str, object] | None, source: str,
     """
     if data is None:
         return PopulationConfig()
-    if not isinstance(data, Mapping):
-        raise InputError(source, "population", "expected a table", "write a [population] table")
-    values = check_fields(dict(data), FIELDS, source, "[population] table", "population")
+    values = _checked(data, source)
     initial_trust = _initial_trust(values["initial_trust"], source, n_trust)
     return PopulationConfig(concentration=float(values["concentration"]),
                             takeover_spread=float(values["takeover_spread"]),

@@ -71,7 +71,7 @@ from trustroute.networks.cities import ROUTES, check_route_set_town, read_route_
 from trustroute.networks.town import TOWNS, load_town
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER_MODELS
 from trustroute.participants.driver_population import POPULATIONS, load_driver_population
-from trustroute.participants.population import population_config_from_dict
+from trustroute.participants.population import population_table
 from trustroute.participants.questionnaires import resolved_table
 from trustroute.policies.model.trust_pomdp import BELIEF_RULE_NAMES, BeliefRule
 from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP, JUNCTION_CAPS
@@ -269,12 +269,10 @@ def _populations() -> PackagedKind:
 
 
 def _population(table: dict[str, object] | None, source: str) -> dict | None:
-    """The raw [population] table, validated by participants.population."""
+    """The [population] table as given, validated by participants.population."""
     if table is None:
         return None
-
-    population_config_from_dict(table, source)  # raises InputError naming the key
-    return dict(table)
+    return population_table(table, source)  # raises InputError naming the key
 
 
 # -- the field tables ---------------------------------------------------------------------------------

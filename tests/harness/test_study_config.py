@@ -286,3 +286,41 @@ def test_an_engine_override_follows_the_config_key_rule(engine, tmp_path, monkey
     with pytest.raises(InputError, match=refused):
         trustroute.run_study(config, tmp_path / "out", engine=engine)
     assert not (tmp_path / "out").exists()
+
+
+def _numpy_study(np, whole, real) -> dict:
+    """A study dict as a script computing its numbers with numpy (or with Python's) writes it."""
+    return {"study": {"participants": whole(2), "seed": whole(7), "engine": "model", "specs": ["phi1"],
+                      "conditions": ["free"], "horizon": whole(12), "background_vehicles": whole(0)},
+            "population": {"concentration": real(50.0), "takeover_spread": real(0.5),
+                           "initial_trust": [real(p) for p in (0.5, 0.25, 0.125, 0.0625, 0.0625, 0.0, 0.0)],
+                           "report_accuracy": real(0.75)}}
+
+
+def test_a_study_dict_takes_numpy_numbers_as_the_python_ones(tmp_path):
+    """A seed or a participant count a script computed with numpy is the int a TOML file gives, and the
+    study writes it as one; a bool is no integer, numpy's neither."""
+    import json
+
+    import numpy as np
+
+    import trustroute
+    from trustroute.harness.study.config import study_config_from_dict
+
+    computed = study_config_from_dict(_numpy_study(np, np.int64, np.float64))
+    written = study_config_from_dict(_numpy_study(np, int, float))
+    assert computed == written and computed.content_hash == written.content_hash
+    assert type(computed.seed) is type(computed.participants) is type(computed.horizon) is int
+    assert computed.population is not None
+    assert [type(v) for v in computed.population["initial_trust"]] == [float] * 7
+    assert type(computed.population["report_accuracy"]) is float
+    assert study_config_from_dict(_numpy_study(np, np.int32, np.float32)) == written
+    assert json.loads(json.dumps(computed.to_dict())) == json.loads(json.dumps(written.to_dict()))
+    run = trustroute.run_study(_numpy_study(np, np.int64, np.float64), out=tmp_path / "study", workers=1)
+    manifest = json.loads((run.study_dir / "manifest.json").read_text())
+    assert (manifest["config"]["seed"], manifest["config"]["participants"]) == (7, 2)
+    for refused in (True, np.True_):
+        data = _numpy_study(np, int, float)
+        data["study"]["seed"] = refused
+        with pytest.raises(InputError, match="study.seed"):
+            study_config_from_dict(data)

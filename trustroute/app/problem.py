@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from trustroute.app.inputs import Inputs, PathLike, load_inputs
 from trustroute.core.errors import InputError
-from trustroute.core.ranges import is_whole
+from trustroute.core.fields import is_whole
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_population import DriverPopulation

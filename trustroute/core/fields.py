@@ -29,6 +29,7 @@ bool is an int subclass in Python: no number kind accepts `true` or `false`.
 from __future__ import annotations
 
 import math
+import numbers
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -260,6 +261,33 @@ class Table(Kind[dict[str, object]]):
         return None
 
 
+def is_whole(value: object) -> TypeGuard[numbers.Integral]:
+    """A whole number as the CLI parses one: an int or a numpy integer, not a bool."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def is_real(value: object) -> TypeGuard[numbers.Real]:
+    """A real number: an int, a float, a numpy number, not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def as_python(value: object, kind: Kind[Any]) -> object:
+    """`value` with each number where `kind` expects one as Python's own: a whole number (a numpy
+    integer too) as an int where an integer or a number is expected, any other real number (a numpy
+    float) as a float where a number is, in a list's items and a table's entries too; a bool and
+    every other value as it is, for the kind to judge. A document or a keyword a script computed
+    with numpy is then checked, kept and written (TOML, JSON) as the one a file or the CLI gives."""
+    if isinstance(kind, Integer | Number) and is_whole(value):
+        return int(value)
+    if isinstance(kind, Number) and is_real(value):
+        return float(value)
+    if isinstance(kind, ListOf) and isinstance(value, list):
+        return [as_python(item, kind.item) for item in value]
+    if isinstance(kind, Table) and kind.values is not None and isinstance(value, dict):
+        return {key: as_python(entry, kind.values) for key, entry in value.items()}
+    return value
+
+
 # -- fields and the validator -------------------------------------------------------------------------
 
 
@@ -300,8 +328,9 @@ def field_table(values: type[D], *fields: Field) -> FieldTable[D]:
 
 def check_value(value: object, kind: Kind[T], source: str, place: str, problem: Message | None = None,
                 fix: Message | None = None, seen: Seen | None = None) -> T:
-    """`value` itself when `kind` accepts it (a table's entries checked too); InputError otherwise.
-    `problem`/`fix` replace the kind's messages (as a field's do)."""
+    """`value` when `kind` accepts it, its numbers as Python's (`as_python`; a table's entries
+    checked too); InputError otherwise. `problem`/`fix` replace the kind's messages (as a field's do)."""
+    value = as_python(value, kind)
     rejection = kind.reject(value)
     if rejection is not None:
         seen = seen if seen is not None else Seen("", value)

@@ -10,28 +10,17 @@ trustroute/core/defaults.py's.
 from __future__ import annotations
 
 import contextlib
-import numbers
 import os
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass
-from typing import Generic, TypeGuard, TypeVar
+from typing import Generic, TypeVar
 
 from trustroute.core import defaults
-from trustroute.core.fields import Integer, Kind, Number, Seen, check_value
+from trustroute.core.fields import Integer, Kind, Number, Seen, as_python, check_value, is_whole
 
 T = TypeVar("T")
 
 UNBOUNDED = Integer()   # an integer option without a largest value
-
-
-def is_whole(value: object) -> TypeGuard[numbers.Integral]:
-    """A whole number as the CLI parses one: an int or a numpy integer, not a bool."""
-    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
-
-
-def is_real(value: object) -> TypeGuard[numbers.Real]:
-    """A real number: an int, a float, a numpy number, not a bool."""
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 @dataclass(frozen=True)
@@ -54,9 +43,8 @@ class OptionRange(Generic[T]):
     def check_as(self, value: object, source: str, place: str = "") -> T:
         """`check`, the refusal naming `source` and `place` instead of the flag (a settings object
         that names the option by its own key, SumoConfig's background_vehicles)."""
-        if isinstance(self.kind, Integer) and is_whole(value):
-            value = int(value)
-        elif isinstance(self.kind, Number) and is_real(value):
+        value = as_python(value, self.kind)
+        if isinstance(self.kind, Number) and is_whole(value):   # a number option holds a float
             with contextlib.suppress(OverflowError):   # an int past every float is refused as it is
                 value = float(value)
         return check_value(value, self.kind, source, place, self.problem, self.fix)
