@@ -9,7 +9,8 @@ Schema (JSON; every key and its check: docs/formats/driver_population.md):
   the document `participants/driver_model.py` reads (docs/formats/driver_model.md).
 
 Every type shares the trust levels and incident types of the first; weights are > 0 and sum to 1
-within `WEIGHT_TOLERANCE`; names are unique. A population of one type of weight 1 is a single
+within `WEIGHT_TOLERANCE`, and are divided by their sum when loaded, so every consumer weighs with a
+distribution; names are unique. A population of one type of weight 1 is a single
 driver model (`single_type_population`).
 """
 
@@ -20,7 +21,7 @@ import hashlib
 import json
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TypedDict
 
@@ -239,7 +240,10 @@ def driver_population_from_dict(data: object, path: str = "<driver population>")
     if abs(total - 1.0) > WEIGHT_TOLERANCE:
         raise InputError(path, "types", f"the weights sum to {total:.12g}, not 1 "
                          f"(tolerance {WEIGHT_TOLERANCE:g})", "renormalise the prior weights")
-    return DriverPopulation(types=tuple(types), source_path=path, provenance=values["source"])
+    # weights within the tolerance of 1 are a distribution only after this division: the Bayes
+    # objective and every per-type bound weigh with the population's weights
+    normalised = tuple(replace(t, weight=t.weight / total) for t in types)
+    return DriverPopulation(types=normalised, source_path=path, provenance=values["source"])
 
 
 def load_driver_population(path: str | Path, given: str = "--population") -> DriverPopulation:

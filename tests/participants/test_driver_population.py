@@ -200,3 +200,18 @@ def test_not_json_and_not_an_object(tmp_path):
     path.write_text("[1, 2]")
     with pytest.raises(InputError, match="top level"):
         load_driver_population(path)
+
+
+@pytest.mark.parametrize("weights", [(0.3333333333, 0.3333333333, 0.3333333334), (0.4, 0.3, 0.3 - 5e-10)])
+def test_weights_within_the_tolerance_are_loaded_as_a_distribution(weights):
+    import math
+
+    data = example()
+    for entry, weight in zip(data["types"], weights, strict=True):
+        entry["weight"] = weight
+    population = driver_population_from_dict(data)
+    assert abs(math.fsum(population.weights) - 1.0) <= 1e-15
+    given = np.array(weights) / math.fsum(weights)
+    assert np.allclose(population.weights, given, rtol=0, atol=1e-16)
+    if math.fsum(weights) != 1.0:
+        assert not np.array_equal(population.weights, np.array(weights))

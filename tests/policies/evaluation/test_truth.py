@@ -49,3 +49,28 @@ def test_a_deadline_cuts_the_open_histories_into_the_bracket(town, pomdp):
     cut = evaluate(pomdp, spec, policy, settings, deadline=time.perf_counter())
     assert cut.lower <= exact.lower <= cut.upper and cut.upper - cut.lower > 0.5
     assert cut.end_mass["pruned"] == cut.upper - cut.lower
+
+
+def test_the_mixture_weighs_the_types_with_weights_summing_to_one(town):
+    """Weights a file writes within the tolerance of 1 (here 1 - 5e-10): the mixture's value is
+    the per-type values weighed with the weights divided by their sum."""
+    import json
+    import math
+
+    from trustroute.participants.driver_population import driver_population_from_dict
+
+    data = json.loads(EXAMPLE_POPULATION_PATH.read_text())
+    written = (0.4, 0.3, 0.3 - 5e-10)
+    for entry, weight in zip(data["types"], written, strict=True):
+        entry["weight"] = weight
+    population = driver_population_from_dict(data, str(EXAMPLE_POPULATION_PATH))
+    lifted = build_pomdp(town, lift_population(population))
+    spec = lift_spec(load_spec("specs/phi1.toml", town), population)
+    policy = trust_free_policy(town, spec)
+    settings = EvaluationSettings(fallback_after=None, max_junctions=12)
+    mixture = evaluate(lifted, spec, policy, settings)
+    per_type = [evaluate(lifted, spec, policy, settings, truth=build_pomdp(town, t.model))
+                for t in population.types]
+    total = math.fsum(written)
+    weighted = math.fsum(w / total * v.lower for w, v in zip(written, per_type, strict=True))
+    assert mixture.lower > 0.1 and abs(mixture.lower - weighted) <= 1e-13
