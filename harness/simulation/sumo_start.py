@@ -35,9 +35,6 @@ from trustroute.harness.simulation.performance import DEFAULT_LIMITS, Performanc
 from trustroute.networks.sumo_import import require_net_file
 from trustroute.networks.sumo_net import find_binary
 
-BACKGROUND_VEHICLES = ranges.BACKGROUND_VEHICLES.kind   # the range `run --background` takes
-BACKGROUND_FIX = ranges.BACKGROUND_VEHICLES.fix
-
 
 @dataclass(frozen=True)
 class SumoConfig:
@@ -45,7 +42,8 @@ class SumoConfig:
 
     performance_limits: where `succ` ends, per incident kind (harness/simulation/performance.py).
     background_vehicles: seeded background traffic, vehicles kept on the net (0: none), in
-    BACKGROUND_VEHICLES (the range every door takes).
+    ranges.BACKGROUND_VEHICLES (the range every door takes); a refusal names the keyword the
+    API's caller wrote.
     """
 
     step_length: float = 0.5        # seconds: large steps keep episodes fast, 0.5 s keeps yielding sane
@@ -58,7 +56,7 @@ class SumoConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "background_vehicles", ranges.BACKGROUND_VEHICLES.check_as(
-            self.background_vehicles, "SumoConfig", "background_vehicles"))
+            self.background_vehicles, "background_vehicles", where=ranges.BACKGROUND_KEYWORD))
 
 
 class Sumo(Protocol):

@@ -66,7 +66,6 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import SPECS, PackagedKind
 from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
-from trustroute.harness.simulation.sumo_start import BACKGROUND_FIX, BACKGROUND_VEHICLES
 from trustroute.networks.cities import ROUTES, check_route_set_town, read_route_file, route_set_town
 from trustroute.networks.town import TOWNS, load_town
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER_MODELS
@@ -398,7 +397,9 @@ STUDY_FIELDS = field_table(
           fix='write output = "out/paper"'),
     Field(key="policy_cache", kind=Text(), problem="expected a directory path",
           fix='write policy_cache = "cache/policies" or omit it'),
-    Field(key="background_vehicles", kind=BACKGROUND_VEHICLES, default=0, fix=BACKGROUND_FIX),
+    Field(key="background_vehicles", kind=ranges.BACKGROUND_VEHICLES.kind, default=0,
+          problem=ranges.BACKGROUND_VEHICLES.problem,
+          fix=ranges.BACKGROUND_VEHICLES.fix_at(ranges.BACKGROUND_KEY)),
     Field(key="routes", kind=_ENTRIES, default=(), fix=FILE_FIX["routes"]),
     Field(key="record", kind=_ENTRIES, default=(), fix='write record = ["p00000-phi1-aware"]'),
     Field(key="robust_population", kind=_FILE, problem=_file_path, fix=FILE_FIX["robust_population"]),

@@ -209,14 +209,42 @@ def test_a_settings_object_holds_the_numbers_the_cli_would_give_it():
     assert evaluation.max_nodes is None
     with pytest.raises(InputError, match="--tau: "):
         SynthesisSettings(tau=None)  # type: ignore[arg-type]
-    # SumoConfig names the option by its key, in the words of `run --background`
+    # SumoConfig names the option by its keyword, in the words of `run --background`
     top = defaults.MAX_BACKGROUND_VEHICLES
     sumo = SumoConfig(background_vehicles=np.int64(top))
     assert (type(sumo.background_vehicles), sumo.background_vehicles) == (int, top)
     with pytest.raises(InputError) as caught:
         SumoConfig(background_vehicles=np.int64(top + 1))
-    assert (caught.value.source, caught.value.place) == ("SumoConfig", "background_vehicles")
+    assert (caught.value.source, caught.value.place) == ("background_vehicles", "")
     assert caught.value.problem == ranges.BACKGROUND_VEHICLES.problem(Seen("", top + 1))
+
+
+@pytest.mark.parametrize("value", [defaults.MAX_BACKGROUND_VEHICLES + 1, -1, "3", True])
+def test_the_background_refusal_is_one_wording_naming_where_each_door_writes_it(value, capsys):
+    """The command line names --background, a study config its key, the API the keyword its caller
+    wrote: the same problem, the same fix but for where the number goes."""
+    from trustroute.harness.study.config import study_config_from_dict
+
+    accepted = ranges.BACKGROUND_VEHICLES
+    problem = accepted.problem(Seen("", value))
+
+    def fix(where: str) -> str:
+        return accepted.fix.replace("{where}", where)
+
+    if type(value) is int:   # the command line's text: "3" is 3, and it has no bool
+        code, _, err = run_cli(capsys, "run", "phi1", "--background", str(value))
+        assert code == 2
+        assert err.strip() == f"error: --background: {problem} (fix: {fix('with --background')})"
+    study = {"participants": 1, "seed": 1, "specs": ["phi1"], "conditions": ["free"],
+             "background_vehicles": value}
+    with pytest.raises(InputError) as config_error:
+        study_config_from_dict({"study": study}, "study.toml")
+    assert str(config_error.value) == (f"study.toml: study.background_vehicles: {problem} "
+                                       f"(fix: {fix('as background_vehicles in [study]')})")
+    with pytest.raises(InputError) as api_error:
+        SumoConfig(background_vehicles=value)  # type: ignore[arg-type]
+    assert str(api_error.value) == (f"background_vehicles: {problem} "
+                                    f"(fix: {fix('as SumoConfig(background_vehicles=...)')})")
 
 
 def test_the_api_refuses_the_modes_and_names_the_cli_does_not_offer():

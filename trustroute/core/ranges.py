@@ -32,7 +32,7 @@ class OptionRange(Generic[T]):
 
     flag: str
     kind: Kind[T]
-    fix: str
+    fix: str   # its "{where}", if any, names where the value is written (`fix_at`)
 
     def check(self, value: object) -> T:
         """`value` when the option takes it, as the CLI parses it: a whole number (a numpy integer
@@ -40,14 +40,21 @@ class OptionRange(Generic[T]):
         float; an InputError naming the flag otherwise. A bool is neither."""
         return self.check_as(value, self.flag)
 
-    def check_as(self, value: object, source: str, place: str = "") -> T:
-        """`check`, the refusal naming `source` and `place` instead of the flag (a settings object
-        that names the option by its own key, SumoConfig's background_vehicles)."""
+    def check_as(self, value: object, source: str, place: str = "", where: str | None = None) -> T:
+        """`check`, the refusal naming `source` and `place` instead of the flag and its fix `where`
+        the value is written (`fix_at`; a settings object that names the option by its own keyword,
+        SumoConfig's background_vehicles)."""
         value = as_python(value, self.kind)
         if isinstance(self.kind, Number) and is_whole(value):   # a number option holds a float
             with contextlib.suppress(OverflowError):   # an int past every float is refused as it is
                 value = float(value)
-        return check_value(value, self.kind, source, place, self.problem, self.fix)
+        fix = self.fix_at(where if where is not None else f"with {self.flag}")
+        return check_value(value, self.kind, source, place, self.problem, fix)
+
+    def fix_at(self, where: str) -> str:
+        """The fix, in one wording at every door, its "{where}" naming where the value is written
+        there: `with --background` on the command line, a config key, a settings object's keyword."""
+        return self.fix.replace("{where}", where)
 
     def problem(self, seen: Seen) -> str:
         """What is wrong with a refused value: the kind's account, an integer's with the value as
@@ -95,11 +102,13 @@ SEED = OptionRange("--seed", Integer(minimum=0, maximum=defaults.MAX_SEED),
 DRAW_SEED = _natural("--seed", "draws", "--seed 1")
 INCIDENT_SEED = _natural("--incident-seed", "draws", "--incident-seed 1")
 # background traffic (`trustroute run --background`; SumoConfig's and the study config's
-# background_vehicles name it by their key)
+# background_vehicles name it by their key, each refusal saying where it is written)
 BACKGROUND_VEHICLES = OptionRange(
     "--background", Integer(minimum=0, maximum=defaults.MAX_BACKGROUND_VEHICLES),
-    f"give a number of background vehicles from 0 to {defaults.MAX_BACKGROUND_VEHICLES}, e.g. 20, "
-    "or 0 for none")
+    f"give a number of background vehicles from 0 to {defaults.MAX_BACKGROUND_VEHICLES} {{where}}, "
+    "e.g. 20, or 0 for none")
+BACKGROUND_KEY = "as background_vehicles in [study]"                # where a study config writes it
+BACKGROUND_KEYWORD = "as SumoConfig(background_vehicles=...)"      # where the API's caller writes it
 # studies (`run_study`, `trustroute study`)
 WORKERS = OptionRange("--workers", Integer(minimum=1, maximum=defaults.MAX_WORKERS),
                       f"pass 1 (this process) to {defaults.MAX_WORKERS} processes, or omit --workers "
