@@ -169,9 +169,10 @@ ITERATIONS = OptionRange("--iterations", Integer(minimum=1, maximum=100_000),
 # (`trustroute population sample`)
 BOOTSTRAP = OptionRange("--bootstrap", Integer(minimum=0, maximum=100_000),
                         "pass 0 (none) to 100000 resamples, e.g. --bootstrap 200")
-TYPES = OptionRange("--types", Integer(minimum=1, maximum=20), "pass 1 to 20 driver types, or auto")
-MAX_TYPES = OptionRange("--max-types", TYPES.kind,
-                        f"pass 1 to 20 driver types, e.g. --max-types {defaults.FIT_MAX_TYPES}")
+_FIT_TYPES = Integer(minimum=1, maximum=20)
+TYPES = OptionRange("--types", _FIT_TYPES, f"pass 1 to {_FIT_TYPES.maximum} driver types, or auto")
+MAX_TYPES = OptionRange("--max-types", _FIT_TYPES, f"pass 1 to {_FIT_TYPES.maximum} driver types, e.g. "
+                        f"--max-types {defaults.FIT_MAX_TYPES}")
 RESTARTS = OptionRange("--restarts", Integer(minimum=1, maximum=1_000),
                        f"pass 1 to 1000 restarts, e.g. --restarts {defaults.FIT_RESTARTS}")
 SAMPLED_TYPES = OptionRange("--types", Integer(minimum=1, maximum=1_000),
