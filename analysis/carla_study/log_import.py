@@ -336,7 +336,7 @@ def check_import_target(out: Path, logs: list[LogFile]) -> None:
     inventory = real.get("inventory") if isinstance(real, dict) else None
     earlier = ({str(entry.get("file")) for entry in inventory if isinstance(entry, dict) and "role" in entry}
                if isinstance(inventory, list) else None)
-    if manifest.get("engine") == "carla-logs" and earlier == {log.relative for log in logs}:
+    if manifest.get("engine") == dataset.CARLA_LOGS_ENGINE and earlier == {log.relative for log in logs}:
         return
     raise InputError(str(out), "--out", f"holds a study ({', '.join(found[:3])}) that is not an import of "
                      "these logs", "pass another --out: a new or empty directory")
@@ -468,7 +468,7 @@ def import_carla_logs(
         "finished_episodes": int(len(episodes)),
         "seeds": {},
         "run": {"importer": __name__, "tick_seconds": TICK_SECONDS},
-        "engine": "carla-logs",
+        "engine": dataset.CARLA_LOGS_ENGINE,
         "config": {
             "name": "carla-real-study",
             "town": None,

@@ -41,11 +41,12 @@ def analyze(study_dir: str, as_json: bool, belief_source: str | None, wide: bool
     """Per spec and condition of the study directory DIR: n, satisfaction rate with CI, mean trust,
     paired tests."""
     from trustroute.analysis.study.analysis import study_analysis
+    from trustroute.core.dataset import CARLA_LOGS_ENGINE
 
     warnings = study_warnings(Path(study_dir))
     analysis = study_analysis(Path(study_dir), belief_source=belief_source)
     real = None
-    if analysis.manifest.get("engine") == "carla-logs":
+    if analysis.manifest.get("engine") == CARLA_LOGS_ENGINE:
         from trustroute.analysis.carla_study.analysis import real_study_analysis, write_real_study_report
 
         real = real_study_analysis(Path(study_dir))

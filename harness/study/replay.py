@@ -68,11 +68,15 @@ class Replay:
 
 def study_config_from_manifest(study_dir: Path) -> tuple[StudyConfig, dict]:
     """The StudyConfig a study was run with (from manifest.json), and the manifest."""
-    from trustroute.core.dataset import read_manifest
+    from trustroute.core.dataset import CARLA_LOGS_ENGINE, read_manifest
     from trustroute.harness.study.inputs import relocated_config
 
     path = Path(study_dir) / MANIFEST_FILE
     manifest = read_manifest(Path(study_dir))
+    if manifest.get("engine") == CARLA_LOGS_ENGINE:   # no config: people drove it, in CARLA
+        raise InputError(str(path), "engine",
+                         "a study imported from CARLA logs has no trustroute config to re-run it with",
+                         f"read it with `trustroute analyze {study_dir}`; its ticks are in ticks.parquet")
     data = relocated_config(dict(manifest.get("config") or {}), Path(study_dir))
     known = {f.name for f in fields(StudyConfig)}
     unknown = sorted(set(data) - known)

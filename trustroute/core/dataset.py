@@ -35,6 +35,7 @@ REBUILD_FIX = "rerun `trustroute study` on this directory to rebuild it"   # a d
 STUDY_FILE = "study.json"            # the config hash and config of the study in this directory
 LOCK_FILE = "study.lock"             # held (fcntl.flock) by the run using the directory; names it
 MANIFEST_FILE = "manifest.json"
+CARLA_LOGS_ENGINE = "carla-logs"   # the manifest's engine of a study imported from the authors' CARLA logs
 EPISODES_FILE = "episodes.parquet"
 ROADS_FILE = "roads.parquet"
 KINEMATICS_FILE = "kinematics.parquet"  # SUMO engine only

@@ -219,6 +219,13 @@ def _files(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
+def test_replaying_an_imported_episode_says_there_is_no_config_to_rerun(imported, capsys):
+    code, out, err = run_cli(capsys, "replay", str(imported), "d04-t1-aware")
+    assert code == 2 and out == "" and err.count("\n") == 1 and "Traceback" not in err
+    assert "imported from CARLA logs has no trustroute config" in err, err
+    assert f"trustroute analyze {imported}" in err, err
+
+
 def test_another_study_in_out_is_refused_and_left_as_it_was(imported, tmp_path, capsys):
     simulated = tmp_path / "simulated"
     (simulated / "parts").mkdir(parents=True)
