@@ -174,3 +174,21 @@ def test_a_study_without_a_manifest_is_told_the_command_that_writes_it(tmp_path,
     with pytest.raises(InputError) as error:
         dataset.read_manifest(tmp_path)
     assert error.value.place == dataset.MANIFEST_FILE and f"`{command}`" in error.value.fix
+
+
+def test_a_folder_of_logs_is_told_to_import_them_and_a_missing_folder_is_named_missing(tmp_path, capsys):
+    """A researcher's first mistakes: `trustroute fit` (or analyze, plan --pilot) on the authors' raw
+    CSV logs, which the importer turns into a study, or on a path that is not there."""
+    from tests.cli import run_cli
+
+    logs = tmp_path / "checkout"
+    (logs / "trust_level_record" / "driver_4").mkdir(parents=True)
+    (logs / "trust_level_record" / "driver_4" / "log.csv").write_text("a\n")
+    with pytest.raises(InputError) as error:
+        dataset.read_manifest(logs)
+    assert f"`trustroute import carla-logs {logs} --out STUDY`" in error.value.fix
+    for missing, problem in ((tmp_path / "nope", "no such directory"),
+                             (logs / "trust_level_record" / "driver_4" / "log.csv", "not a directory")):
+        code, out, err = run_cli(capsys, "fit", str(missing), "--out", str(tmp_path / "driver.json"))
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert f"{missing}: {problem} (fix: pass the folder" in err, err

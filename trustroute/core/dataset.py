@@ -36,6 +36,9 @@ STUDY_FILE = "study.json"            # the config hash and config of the study i
 LOCK_FILE = "study.lock"             # held (fcntl.flock) by the run using the directory; names it
 MANIFEST_FILE = "manifest.json"
 CARLA_LOGS_ENGINE = "carla-logs"   # the manifest's engine of a study imported from the authors' CARLA logs
+# where logs lie in a folder that is not a study (a checkout of the authors' repository keeps its
+# CSVs two folders down, trust_level_record/driver_N/): `import carla-logs` makes it one
+LOG_PATTERNS = ("*.csv", "*/*.csv", "*/*/*.csv")
 EPISODES_FILE = "episodes.parquet"
 ROADS_FILE = "roads.parquet"
 KINEMATICS_FILE = "kinematics.parquet"  # SUMO engine only
@@ -563,12 +566,20 @@ def no_manifest_fix(study_dir: Path) -> str:
     if isinstance(config, dict) and config.get("engine") == "live":
         return ("serve it with `trustroute live CONFIG --out DIR`: the dataset and its manifest are written "
                 "once a participant finishes an episode")
+    if any(next(study_dir.glob(pattern), None) is not None for pattern in LOG_PATTERNS):
+        return ("a folder of logs is read once imported: "
+                f"`trustroute import carla-logs {study_dir} --out STUDY` (the authors' CARLA logs), "
+                "then pass STUDY")
     return "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)"
 
 
 def read_manifest(study_dir: Path) -> dict:
     """manifest.json of a consolidated study, with every key of MANIFEST_KEYS."""
     path = Path(study_dir) / MANIFEST_FILE
+    if not Path(study_dir).is_dir():
+        problem = "not a directory" if Path(study_dir).exists() else "no such directory"
+        raise InputError(str(study_dir), "", problem,
+                         "pass the folder a study, demo, live study or import wrote (their --out)")
     if not path.exists():
         raise InputError(str(study_dir), MANIFEST_FILE, "not a finished study directory (no manifest)",
                          no_manifest_fix(Path(study_dir)))
