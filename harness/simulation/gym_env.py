@@ -30,7 +30,7 @@ from trustroute.app.drivers import draw_type, gym_episode_id, synthetic_driver
 from trustroute.app.engines import SIMULATED, engine_named
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults
-from trustroute.core.errors import InputError
+from trustroute.core.errors import InputError, keyword_names
 from trustroute.core.fields import PROBABILITY, check_value
 from trustroute.core.settings import with_options
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
@@ -139,7 +139,10 @@ class TrustRoutingEnv(gymnasium.Env):
         # The compiled problem (trustroute/app): with a driver population the AV filters with its
         # type-aware model and reads the lifted spec (docs/driver_types.md); each episode's driver
         # is of a type drawn from its weights.
-        self.problem = load_problem(spec, town, driver, population)
+        try:
+            self.problem = load_problem(spec, town, driver, population)
+        except InputError as error:   # said as the API says it: `town`, not the CLI's --town
+            raise keyword_names(error) from None
         self.town = self.problem.town
         self.population = self.problem.population
         self.driver_model = self.problem.driver

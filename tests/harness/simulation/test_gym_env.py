@@ -321,6 +321,19 @@ def test_every_env_setting_is_checked_when_made(field, value, problem):
         gymnasium.make(ENV_ID, spec="phi1", **{field: value})
 
 
+@pytest.mark.parametrize(("argument", "value", "said"), [
+    ("town", "city5", "pass an existing town file as town or a packaged town name"),
+    ("driver", "no_such_driver.json", "pass an existing driver model file as driver or a packaged"),
+])
+def test_a_bad_input_is_said_in_the_environments_keywords_not_the_cli_flags(argument, value, said):
+    """gymnasium.make is a door of the Python API: its errors name `town=`, as trustroute.load_town's do."""
+    from trustroute.core.errors import InputError
+
+    with pytest.raises(InputError) as error:
+        gymnasium.make(ENV_ID, spec="phi1", **{argument: value})
+    assert said in str(error.value) and "--" not in str(error.value), error.value
+
+
 def test_env_settings_read_the_shared_defaults():
     from trustroute.core import defaults
     from trustroute.harness.simulation.gym_env import EnvSettings
