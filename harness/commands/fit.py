@@ -62,7 +62,7 @@ class FitOptions:
 def fit(study_dir: str, options: FitOptions) -> None:
     """Estimate trust dynamics and the takeover model from a study's logs; write a driver model."""
     from trustroute.analysis.fitting.driver_model import bootstrap_fit, fit_study
-    from trustroute.core.output_files import check_output_file
+    from trustroute.core.output_files import atomic_write_text, check_output_file
 
     out, method, iterations, bootstrap, seed = (options.out, options.method, options.iterations,
                                                 options.bootstrap, options.seed)
@@ -101,8 +101,9 @@ def fit(study_dir: str, options: FitOptions) -> None:
                 np.random.default_rng(seed),
                 progress=bar.update,
             )
-        paths["bootstrap"] = Path(path).with_suffix(".bootstrap.json")
-        paths["bootstrap"].write_text(json.dumps(payload["bootstrap"], indent=1))
+        paths["bootstrap"] = atomic_write_text(Path(path).with_suffix(".bootstrap.json"),
+                                               json.dumps(payload["bootstrap"], indent=1),
+                                               "bootstrap intervals", "pass a writable path with --out")
     if check:
         import numpy as np
 
@@ -154,6 +155,11 @@ def fit(study_dir: str, options: FitOptions) -> None:
         f"{f', EM {result.iterations} iterations' if result.method == 'em' else ''}"
     )
     click.echo(f"driver model written to {path}")
+    if bootstrap:
+        resampled = payload["bootstrap"]
+        click.echo(f"bootstrap: {resampled['resamples']} resamples of participants "
+                   f"({resampled['converged']} converged); 2.5-97.5 % percentile intervals of every "
+                   f"takeover probability and expected trust change in {paths['bootstrap']}")
     if result.method == "em" and not result.converged:
         click.echo(f"warning: EM stopped at the iteration cap ({iterations}) before converging", err=True)
     for label, rows in (

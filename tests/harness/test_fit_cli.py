@@ -12,3 +12,19 @@ def test_fit_draws_no_bar_on_a_stderr_that_is_not_a_terminal(model_study, capsys
     assert code == 0, err
     assert "bootstrap" not in err and "\r" not in err, err
     assert "driver model written to" in out
+
+
+def test_fit_says_where_its_bootstrap_intervals_are(model_study, capsys, tmp_path):
+    """A researcher who asked for --bootstrap is told how many resamples ran and which file holds
+    the intervals, as --check names its files."""
+    import json
+
+    out_path = tmp_path / "driver.json"
+    code, out, err = run_cli(capsys, "fit", str(model_study), "--bootstrap", "2", "--out", str(out_path))
+    assert code == 0, err
+    written = tmp_path / "driver.bootstrap.json"
+    resampled = json.loads(written.read_text())
+    said = (f"bootstrap: 2 resamples of participants ({resampled['converged']} converged); 2.5-97.5 % "
+            f"percentile intervals of every takeover probability and expected trust change in {written}")
+    assert said in out, out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["driver.bootstrap.json", "driver.json"]
