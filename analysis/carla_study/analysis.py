@@ -413,21 +413,22 @@ def paper_matches(figures: list[dict]) -> list[dict]:
 def format_real_study(analysis: RealStudyAnalysis, width: int | None = TERMINAL_WIDTH) -> str:
     """The real study's figures for the terminal, fitted to `width` columns (None: as wide as they are)."""
     lines = ["Real CARLA study (paper's figures are the paper's, quoted for comparison)", ""]
-    header = ["figure", "reading", "subset", "aware", "free", "n (aware/free)"]
-    rows = []
+    # one table per subset: a row is then named by its figure and reading, which stay beside its
+    # values when the table is fitted to the terminal's width
+    header = ["figure", "reading", "aware", "free", "n (aware/free)"]
+    subsets: dict[str, list[list[str]]] = {}
     for r in analysis.figures:
-        rows.append(
+        subsets.setdefault(r["subset"], []).append(
             [
                 r["figure"],
                 r["reading"],
-                r["subset"],
                 number_text(r["aware"], 4),
                 number_text(r["free"], 4),
                 f"{r['n_aware']}/{r['n_free']}",
             ]
         )
-    lines += terminal_table(header, rows, width, keys=1)
-    lines.append("")
+    for subset, rows in subsets.items():
+        lines += [f"subset: {subset}", *terminal_table(header, rows, width, keys=2), ""]
     for m in analysis.matches:
         found = (
             "; ".join(f"{h['reading']} / {h['subset']} = {number_text(h['value'], 4)}"

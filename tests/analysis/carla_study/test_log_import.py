@@ -21,6 +21,7 @@ from trustroute.analysis.carla_study.analysis import (
 from trustroute.analysis.carla_study.log_import import import_carla_logs
 from trustroute.analysis.carla_study.log_schema import read_real_table
 from trustroute.analysis.carla_study.town01 import load_carla_tables
+from trustroute.analysis.formatting import number_text
 from trustroute.core.dataset import read_episodes, read_roads
 from trustroute.participants.driver_model import load_driver_model
 
@@ -217,6 +218,28 @@ def _one_line_error(capsys, folder: Path, tmp_path: Path) -> str:
 
 def _files(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_every_real_study_value_in_the_terminal_stands_beside_its_reading_and_subset(imported, capsys):
+    """At the terminal's 120 columns each value row keeps its figure and reading on its own line,
+    under a heading naming its subset: a row of numbers that names neither cannot be read."""
+    import json
+    import re
+
+    code, out, err = run_cli(capsys, "analyze", str(imported), "--json", "--no-report")
+    assert code == 0, err
+    figures = json.loads(out)["real_study"]["figures"]
+    code, out, err = run_cli(capsys, "analyze", str(imported), "--no-report")
+    assert code == 0, err
+    section = out[out.index("Real CARLA study"):]
+    assert max(len(line) for line in section.splitlines()) <= 120
+    blocks = {block.splitlines()[0]: block for block in section.split("\n\n") if block.startswith("subset: ")}
+    for row in figures:
+        aware, free = (re.escape(number_text(row[c], 4)) for c in ("aware", "free"))
+        values = re.compile(rf"  {aware} +{free} ")
+        block = blocks[f"subset: {row['subset']}"]
+        assert any(line.startswith(row["figure"]) and row["reading"][:30] in line and values.search(line)
+                   for line in block.splitlines()), (row, block)
 
 
 def test_replaying_an_imported_episode_says_there_is_no_config_to_rerun(imported, capsys):
