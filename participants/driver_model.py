@@ -399,9 +399,25 @@ def _initial_belief(value: object, n: int, path: str) -> np.ndarray:
     return initial
 
 
+# The two files a researcher confuses, each told by a key only it has, and how a command takes it.
+FILE_KINDS = {"driver model": ("trust_levels", "--driver", "docs/formats/driver_model.md"),
+              "driver population": ("types", "--population", "docs/formats/driver_population.md")}
+
+
+def refuse_the_other_kind(data: dict, path: str, expected: str) -> None:
+    """A driver model given where a driver population goes, or the reverse: one line saying which it
+    is, where the unknown-key error would name the first key of the other format."""
+    for kind, (key, flag, _doc) in FILE_KINDS.items():
+        if kind != expected and key in data and FILE_KINDS[expected][0] not in data:
+            raise InputError(path, "top level", f"this is a {kind} file, not a {expected}",
+                             f"pass it where a {kind} goes ({flag}), or a {expected} file here "
+                             f"({FILE_KINDS[expected][2]})")
+
+
 def driver_model_from_dict(data: object, path: str = "<driver model>") -> DriverModel:
     """Validate a parsed driver-model document, or raise InputError."""
     data = require_object(data, path, "start from the default model (participants/data/driver_model.json)")
+    refuse_the_other_kind(data, path, "driver model")
     values = check_fields(data, FIELDS, path, "driver model")
     levels, incidents = values["trust_levels"], values["incident_types"]
     _check_incident_keys(values, incidents, path)

@@ -47,6 +47,7 @@ from trustroute.participants.driver_model import (
     DriverModel,
     driver_model_from_dict,
     driver_model_from_text,
+    refuse_the_other_kind,
 )
 
 POPULATION_FORMAT = "trustroute-driver-population"
@@ -228,6 +229,7 @@ def driver_population_from_dict(data: object, path: str = "<driver population>")
     """Validate a parsed driver-population document, or raise InputError. A `model_file` is read
     relative to the folder of `path` (when `path` names a file)."""
     data = require_object(data, path, "start from participants/data/driver_population_three_types.json")
+    refuse_the_other_kind(data, path, "driver population")
     values = check_fields(data, FIELDS, path, "driver population")
     candidate = Path(path)
     base = candidate.parent if candidate.is_file() else None

@@ -215,3 +215,20 @@ def test_weights_within_the_tolerance_are_loaded_as_a_distribution(weights):
     assert np.allclose(population.weights, given, rtol=0, atol=1e-16)
     if math.fsum(weights) != 1.0:
         assert not np.array_equal(population.weights, np.array(weights))
+
+
+def test_a_driver_model_and_a_population_given_for_each_other_say_which_they_are(tmp_path, capsys):
+    """The natural mix-up (a fitted driver.json as --population, a fitted population as --driver):
+    one line saying what the file is and where it goes, not the other format's first unknown key."""
+    from tests.cli import run_cli
+
+    model, population = str(DEFAULT_DRIVER_MODEL_PATH), str(EXAMPLE_POPULATION_PATH)
+    code, out, err = run_cli(capsys, "population", "show", model)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert (f"{model}: top level: this is a driver model file, not a driver population (fix: pass it where a "
+            "driver model goes (--driver)") in err, err
+    with pytest.raises(InputError) as error:
+        load_driver_model(population)
+    assert (error.value.place, error.value.problem) == (
+        "top level", "this is a driver population file, not a driver model")
+    assert error.value.fix.startswith("pass it where a driver population goes (--population)")
