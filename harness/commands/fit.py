@@ -67,6 +67,13 @@ def fit(study_dir: str, options: FitOptions) -> None:
     out, method, iterations, bootstrap, seed = (options.out, options.method, options.iterations,
                                                 options.bootstrap, options.seed)
     check, as_json, quiet = options.check, options.as_json, options.quiet
+    mixture_only = [flag for flag, given in (
+        ("--max-types", options.max_types != defaults.FIT_MAX_TYPES),
+        ("--restarts", options.restarts != defaults.FIT_RESTARTS),
+        ("--shared-dynamics", options.shared_dynamics)) if given]
+    if options.types is None and mixture_only:   # else they would change nothing without a word
+        raise UsageFix(f"{mixture_only[0]} sets the fit of driver types, and --types is not given",
+                       f"add --types K or --types auto, or drop {mixture_only[0]}")
     if options.types is not None:
         if check or method == "counts":
             raise UsageFix("--types fits by EM; it takes neither --check nor --method counts",

@@ -28,3 +28,13 @@ def test_fit_says_where_its_bootstrap_intervals_are(model_study, capsys, tmp_pat
             f"percentile intervals of every takeover probability and expected trust change in {written}")
     assert said in out, out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["driver.bootstrap.json", "driver.json"]
+
+
+def test_options_of_the_types_fit_without_types_are_refused(model_study, capsys, tmp_path):
+    """--max-types, --restarts and --shared-dynamics set the mixture fit: without --types they
+    would change nothing, and the researcher who typed them would not know."""
+    for extra in (["--max-types", "3"], ["--restarts", "2"], ["--shared-dynamics"]):
+        code, out, err = run_cli(capsys, "fit", str(model_study), *extra, "--out", str(tmp_path / "d.json"))
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert f"{extra[0]} sets the fit of driver types, and --types is not given" in err, err
+        assert not (tmp_path / "d.json").exists()
