@@ -21,7 +21,9 @@ def sources() -> list[Path]:
     return found
 
 
-CITATION = re.compile(r"docs/([\w/.-]+\.md)((?:,? ?\"[^\"]+\"(?: and)?)*)")
+# A section follows its page after a comma or a space (docs/synthesis.md, "Work limit"); a quote
+# right after ".md" closes a string literal in code, whatever quoted text comes next.
+CITATION = re.compile(r"docs/([\w/.-]+\.md)((?:(?:, ?| )\"[^\"]+\"(?: and)?)*)")
 
 
 def headings(path: Path) -> set[str]:

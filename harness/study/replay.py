@@ -75,7 +75,7 @@ def study_config_from_manifest(study_dir: Path) -> tuple[StudyConfig, dict]:
     manifest = read_manifest(Path(study_dir))
     if manifest.get("engine") == CARLA_LOGS_ENGINE:   # no config: people drove it, in CARLA
         raise InputError(str(path), "engine",
-                         "a study imported from CARLA logs has no trustroute config to re-run it with",
+                         "a study imported from CARLA logs has no study config to re-run it with",
                          f"read it with `trustroute analyze {study_dir}`; its ticks are in ticks.parquet")
     data = relocated_config(dict(manifest.get("config") or {}), Path(study_dir))
     known = {f.name for f in fields(StudyConfig)}

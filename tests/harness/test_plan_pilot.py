@@ -94,7 +94,7 @@ def test_a_pilot_from_a_known_model_gives_that_models_power(config_path, pilot_s
 
 
 @pytest.mark.parametrize("args, where", [
-    (("--pilot", "no-such-study"), "manifest.json"),
+    (("--pilot", "no-such-study"), "no-such-study: no such directory"),
     (("--pilot", "no-such-study", "--driver", "packaged"), "--pilot"),
 ])
 def test_a_bad_pilot_is_one_line(config_path, capsys, tmp_path, args, where):

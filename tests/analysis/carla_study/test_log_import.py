@@ -245,7 +245,7 @@ def test_every_real_study_value_in_the_terminal_stands_beside_its_reading_and_su
 def test_replaying_an_imported_episode_says_there_is_no_config_to_rerun(imported, capsys):
     code, out, err = run_cli(capsys, "replay", str(imported), "d04-t1-aware")
     assert code == 2 and out == "" and err.count("\n") == 1 and "Traceback" not in err
-    assert "imported from CARLA logs has no trustroute config" in err, err
+    assert "imported from CARLA logs has no study config" in err, err
     assert f"trustroute analyze {imported}" in err, err
 
 
