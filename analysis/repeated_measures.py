@@ -36,7 +36,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import stats
 
-from trustroute.analysis.statistics import DEFAULT_LEVEL, binomial_half_p, exact_odds_ratio
+from trustroute.analysis.statistics import (
+    DEFAULT_LEVEL,
+    all_discordant_favour,
+    binomial_half_p,
+    exact_odds_ratio,
+)
 
 
 @dataclass(frozen=True)
@@ -154,7 +159,7 @@ def _separated_effect(base: ModelEffect, found: Separation, discordance: tuple[i
     b, c, unmatched = discordance
     side = sides[0] if found.favours == "treated" else sides[1]
     kind = "complete separation" if found.kind == "complete" else "quasi-separation"
-    reason = f"{kind}, all {b + c} discordant pairs ({b} / {c}) favour {side}: the logit's OR is infinite"
+    reason = f"{kind}, {all_discordant_favour(b + c, side)} ({b} / {c}): the logit's OR is infinite"
     if unmatched or b + c == 0:
         return replace(base, note=f"{reason}; no exact estimate (episodes not in matched pairs)")
     exact = exact_odds_ratio(b, c, level)

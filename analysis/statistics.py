@@ -225,10 +225,17 @@ def exact_odds_ratio(b: int, c: int, level: float = DEFAULT_LEVEL) -> Estimate:
     return Estimate(_odds(median_unbiased_proportion(b, b + c)), _odds(low), _odds(high))
 
 
+def all_discordant_favour(pairs: int, side: str) -> str:
+    """"all 3 discordant pairs favour A", or "the one discordant pair favours A"."""
+    if pairs == 1:
+        return f"the one discordant pair favours {side}"
+    return f"all {pairs} discordant pairs favour {side}"
+
+
 def one_sided_reason(b: int, c: int, first: str = "A", second: str = "B") -> str:
     """Why a paired odds ratio is median-unbiased: every discordant pair favours one side."""
     side = first if c == 0 else second
-    return (f"all {b + c} discordant pairs favour {side} (b / c = {'inf' if c == 0 else '0'}): "
+    return (f"{all_discordant_favour(b + c, side)} (b / c = {'inf' if c == 0 else '0'}): "
             f"median-unbiased OR, exact CI open {'above' if c == 0 else 'below'}")
 
 

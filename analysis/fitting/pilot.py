@@ -24,6 +24,7 @@ from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core import defaults
 from trustroute.core.dataset import EPISODES_FILE, MANIFEST_FILE, ROADS_FILE
 from trustroute.core.errors import InputError
+from trustroute.core.wording import counted
 from trustroute.participants.driver_model import DriverModel
 
 # Fewer participants leave the bootstrap too few distinct resamples to speak of uncertainty
@@ -73,8 +74,8 @@ def check_pilot(study_dir: Path, expected: DriverModel | None = None):
     participants = int(episodes["participant"].nunique())
     if participants < MIN_PILOT_PARTICIPANTS:
         raise InputError(str(study_dir / EPISODES_FILE), "participant",
-                         f"the pilot has {participants} participant(s); fitting it with its uncertainty "
-                         f"needs at least {MIN_PILOT_PARTICIPANTS}",
+                         f"the pilot has {counted(participants, 'participant')}; fitting it with its "
+                         f"uncertainty needs at least {MIN_PILOT_PARTICIPANTS}",
                          "run a pilot of at least 4 participants (8 or more: the fit is wide), or plan "
                          "with --driver")
     if int(roads["reported_trust"].notna().sum()) == 0:

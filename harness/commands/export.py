@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from trustroute.core import ranges
+from trustroute.core.wording import counted
 from trustroute.harness.commands.options import Checked
 from trustroute.harness.commands.output import emit, json_option, study_warnings, with_paths
 
@@ -34,6 +35,6 @@ def export(study_dir: str, out: str, seed: int, as_json: bool) -> None:
              "warnings": warnings}
     # the package is a folder of many files, listed as the folder; the key stays in the study
     paths = {"package": Path(out), "export_key": Path(study_dir) / KEY_FILE}
-    line = (f"exported {', '.join(index['tables'])} of {index['participants']} participant(s) to {out} "
-            f"({index['files']} files, with codebook.md and SHA256SUMS)")
+    line = (f"exported {', '.join(index['tables'])} of {counted(index['participants'], 'participant')} "
+            f"to {out} ({index['files']} files, with codebook.md and SHA256SUMS)")
     emit(as_json, with_paths(index, paths), [line])

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import click
 
+from trustroute.core.wording import counted
 from trustroute.harness.commands.output import json_option, quiet_option, with_paths
 
 
@@ -45,7 +46,8 @@ def carla_logs(source: str, out: str, quiet: bool, as_json: bool) -> None:
         click.echo(json.dumps(with_paths(summary, dataset_paths(Path(out), manifest))))
         return
     click.echo(
-        f"imported {summary['episodes']} episodes of {summary['participants']} participants into {out}; "
-        f"{summary['excluded_files']} files excluded (warm-up, pilot, sample); "
+        f"imported {counted(summary['episodes'], 'episode')} of "
+        f"{counted(summary['participants'], 'participant')} into {out}; "
+        f"{counted(summary['excluded_files'], 'file')} excluded (warm-up, pilot, sample); "
         f"missing sessions: {', '.join(summary['missing_sessions']) or 'none'}"
     )

@@ -349,6 +349,8 @@ def test_paired_odds_ratio_on_one_sided_pairs_is_median_unbiased_with_its_reason
     odds = conditional_odds_ratio(PairedTable(5, 3, 0, 2), sides=("aware", "free"))
     assert math.isfinite(odds.value) and odds.value == pytest.approx(0.5 ** (1 / 3) / (1 - 0.5 ** (1 / 3)))
     assert odds.high == math.inf and "all 3 discordant pairs favour aware" in odds.note
+    single = conditional_odds_ratio(PairedTable(5, 1, 0, 2), sides=("aware", "free"))
+    assert single.note.startswith("the one discordant pair favours aware (b / c = inf)"), single.note
     reverse = conditional_odds_ratio(PairedTable(5, 0, 2, 2), sides=("aware", "free"))
     assert reverse.low == 0.0 and 0 < reverse.value < 1 and "favour free" in reverse.note
     assert conditional_odds_ratio(PairedTable(10, 6, 1, 4)).note == ""
