@@ -44,6 +44,13 @@ TESTS: dict[str, str] = dict(zip(defaults.PLAN_TESTS, (
     "Wilcoxon p (reported trust)",
     "mixed model, random intercept (reported trust)",
 ), strict=True))
+# The effect each test's power rows estimate (the plan's table and JSON name it per row).
+EFFECTS: dict[str, str] = dict(zip(defaults.PLAN_TESTS, (
+    "(b − c) / n",
+    "odds ratio b / c",
+    "median difference",
+    "difference in means",
+), strict=True))
 DEFAULT_TESTS: tuple[str, ...] = defaults.PLAN_DEFAULT_TESTS
 ALL_SPECS = "all specs"
 

@@ -29,17 +29,19 @@ if TYPE_CHECKING:
 
 def table_lines(table, minimal, target: float) -> list[str]:
     from trustroute.analysis.formatting import aligned_columns
+    from trustroute.analysis.study.power import EFFECTS
 
     over_fit = any(p.models for p in table)   # a pilot's refits: the power's range over them
     rows = [(p.test, f"{p.pair[0]} vs {p.pair[1]}", p.spec, p.participants, p.studies,
              f"{p.power:.3f} [{p.low:.3f}, {p.high:.3f}]",
              *([f"[{p.fit_low:.3f}, {p.fit_high:.3f}]"] if over_fit else []),
-             f"{p.effect_median:.3g} [{p.effect_low:.3g}, {p.effect_high:.3g}]") for p in table]
+             EFFECTS[p.test], f"{p.effect_median:.3g} [{p.effect_low:.3g}, {p.effect_high:.3g}]")
+            for p in table]
     found = [(test, f"{pair[0]} vs {pair[1]}", spec, "not reached" if n is None else str(n))
              for (test, pair, spec), n in minimal.items()]
     return [*aligned_columns(("test", "pair", "spec", "N", "studies", "power [95% CI]",
                               *(["refits' powers [2.5%, 97.5%]"] if over_fit else []),
-                              "effect median [2.5%, 97.5%]"), rows), "",
+                              "effect", "its median [2.5%, 97.5%]"), rows), "",
             *aligned_columns(("test", "pair", "spec", f"minimal N for power {target:g}"), found)]
 
 

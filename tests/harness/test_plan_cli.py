@@ -5,12 +5,14 @@ simulated studies' outcomes are the model engine's (harness/study/planning.py)."
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests.cli import cli_json, run_cli
+from trustroute.analysis.study.power import DEFAULT_TESTS
 from trustroute.analysis.study.preregistration import chosen_size
 from trustroute.core.errors import InputError
 from trustroute.harness.study.config import load_study_config
@@ -137,3 +139,26 @@ def test_the_demo_preregistration_in_docs_is_plans_answer(capsys, tmp_path):
     assert answer["config_hash"] == block["config_hash"]
     assert answer["tests"] == block["tests"] and answer["sizes"] == [size]
     assert answer["power"] == [row for row in block["power"] if row["participants"] == size]
+
+
+def test_each_power_row_names_the_effect_it_estimates(config_path, capsys, tmp_path):
+    from trustroute.analysis.study.power import EFFECTS
+
+    args = ("plan", str(config_path), "--participants", "8", "--simulations", "30", "--out", str(tmp_path))
+    code, out, err = run_cli(capsys, *args)
+    assert code == 0, err
+    lines = out.splitlines()
+    header = next(line for line in lines if line.startswith("test ") and "power [95% CI]" in line)
+    assert "effect" in header.split() and "its median [2.5%, 97.5%]" in header
+    table = lines[lines.index(header) + 2:]   # after the header's rule
+    rows = table[:table.index("")]
+    assert {row.split()[0] for row in rows} == set(DEFAULT_TESTS)
+    for row in rows:
+        assert f" {EFFECTS[row.split()[0]]} " in row, row
+    answer = cli_json(capsys, *args)
+    measures = {(r["test"], r["effect"]["measure"]) for r in answer["power"]}
+    assert measures == {(t, EFFECTS[t]) for t in DEFAULT_TESTS}
+    # docs/planning.md's table of the tests shows each test's effect in these words
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "planning.md").read_text()
+    shown = dict(re.findall(r"^ *\| `(\w+)` \|.*\| ([^|]+) \|$", docs, re.M))
+    assert {test: shown[test].strip() for test in EFFECTS} == EFFECTS

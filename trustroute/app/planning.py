@@ -21,6 +21,7 @@ import numpy as np
 from trustroute.analysis.fitting.pilot import PilotFit, fit_pilot
 from trustroute.analysis.study.power import (
     DEFAULT_TESTS,
+    EFFECTS,
     Power,
     PowerSettings,
     estimate_power,
@@ -185,7 +186,8 @@ def power_rows(table: list[Power]) -> list[dict]:
     """The power table as JSON rows."""
     return [{"test": p.test, "pair": list(p.pair), "spec": p.spec, "participants": p.participants,
              "studies": p.studies, "rejected": p.rejected, "power": p.power, "low": p.low, "high": p.high,
-             "effect": {"median": p.effect_median, "low": p.effect_low, "high": p.effect_high},
+             "effect": {"measure": EFFECTS[p.test], "median": p.effect_median, "low": p.effect_low,
+                        "high": p.effect_high},
              **({"over_fit": {"models": p.models, "low": p.fit_low, "high": p.fit_high}} if p.models else {})}
             for p in table]
 
