@@ -53,8 +53,8 @@ from trustroute.networks.road_geometry import (
 )
 
 # The paper's town with the geometry of CARLA Town01, where the authors ran their study
-# (networks/data/PROVENANCE.md). An invented layout of the same roads and incidents is kept
-# as pentagon.json, so the figures measured on it (docs/real_study.md) can be re-run.
+# (networks/data/PROVENANCE.md). An invented layout of the same roads and incidents is packaged
+# as pentagon.json, to show what a layout alone does to the figures (docs/real_study.md).
 DEFAULT_TOWN_PATH = Path(__file__).parent / "data" / "town01_carla.json"
 PENTAGON_TOWN_PATH = Path(__file__).parent / "data" / "pentagon.json"
 # Towns built on first use, by name: registered by networks/__init__.py (the town `city`,

@@ -1,6 +1,6 @@
 """The trust-free shortest routes on the default town (Town01 geometry) beside the preset baseline
-routes of the authors' driver script (docs/real_study.md, "What changed with the real town
-geometry").
+routes of the authors' driver script (docs/real_study.md, "Trust-free routes against the authors'
+preset routes").
 
 The preset routes below are data transcribed by hand from the authors' repository
 (shuyang-dong/trust_aware_hrc_carla_sim, snapshot c702cbc); our routes are computed. Only
