@@ -130,8 +130,8 @@ def test_early_cluster_mode_never_follows_the_search(pomdp):
 
 
 def test_a_candidate_gets_its_fixed_costs_after_costly_evaluations():
-    # the evaluations predicted for every run to come used to be taken off first: after one
-    # evaluation of 7 s with 15 runs to come, a run got the floor of 0.05 s and never expanded
+    # taking off first the evaluations predicted for every run to come would leave, after one
+    # evaluation of 7 s with 15 runs to come, a run the floor of 0.05 s, never expanding
     schedule = RunSchedule(TimeBudget.start(30.0), runs=19, done=4, between=7.0, gaps=1)
     assert schedule.affords(0, 4.0)
     assert schedule.next_limit(at_least=4.0) >= 4.0
