@@ -9,7 +9,9 @@ which task a worker was running:
   running, with the reason (signal or exit code); a fresh worker takes its place;
 - workers die with their parent: `prctl(PR_SET_PDEATHSIG, SIGKILL)` on Linux, and a watchdog
   thread that polls the parent pid wherever prctl is unavailable (and for the moment between
-  fork and prctl);
+  fork and prctl); a forkserver's workers die with the fork server, which ends with the parent;
+- the workers are started inside the pool's shutdown, so a Ctrl-C while they start stops those
+  already started;
 - the pool is shut down (workers terminated, then killed) whenever the parent leaves the
   generator: normal end, an exception, or SIGTERM turned into an exception by `sigterm_raises`;
 - workers that exit before they are ready, twice in a row, stop the pool with `WorkersCannotStart`
@@ -111,8 +113,11 @@ def die_with_parent(parent_pid: int) -> None:
         threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()
 
 
-def _worker_main(function: Callable[[Any], object] | None, connection: Connection, parent_pid: int) -> None:
-    die_with_parent(parent_pid)
+def _worker_main(function: Callable[[Any], object] | None, connection: Connection,
+                 parent_pid: int | None) -> None:
+    # a forkserver's worker is the fork server's child, not the study's: it dies with the server,
+    # which ends when the study's process does
+    die_with_parent(parent_pid if parent_pid is not None else os.getppid())
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if function is None:   # spawned: the function comes over the pipe (the module's docstring)
@@ -145,14 +150,20 @@ def describe_exit(exitcode: int | None) -> str:
 class _Worker(Generic[Task]):
     def __init__(self, context: DefaultContext, function: Callable[[Task], object]) -> None:
         self.connection, child = context.Pipe()
-        forked = context.get_start_method() == "fork"
-        arguments = (function if forked else None, child, os.getpid())
+        method = context.get_start_method()
+        forked = method == "fork"
+        arguments = (function if forked else None, child, None if method == "forkserver" else os.getpid())
         self.process = context.Process(target=_worker_main, args=arguments, daemon=True)
         self.process.start()
         child.close()
         if not forked:
-            with contextlib.suppress(OSError):   # it exited already: its pipe's end is seen closed
-                self.connection.send(function)
+            try:
+                with contextlib.suppress(OSError):   # it exited already: its pipe's end is seen closed
+                    self.connection.send(function)
+            except BaseException:   # a Ctrl-C while it is handed the function: no pool holds it yet
+                self.process.kill()
+                self.process.join()
+                raise
         self.task: Task | None = None
         self.ready = False
 
@@ -170,9 +181,13 @@ def process_pool(
     A task whose worker died yields `died(task, reason)` instead (e.g. a failed outcome)."""
     context = multiprocessing.get_context()
     pending = deque(tasks)
-    pool = [_Worker(context, function) for _ in range(min(workers, len(tasks)))]
+    pool: list[_Worker[Task]] = []
     start_failures = 0   # workers that exited before they were ready, in a row
     try:
+        # started inside the try: a Ctrl-C while a spawned worker is handed the function shuts
+        # down the ones already started
+        for _ in range(min(workers, len(tasks))):
+            pool.append(_Worker(context, function))
         while pending or any(w.task is not None for w in pool):
             for worker in pool:
                 if worker.task is None and pending:
