@@ -230,7 +230,7 @@ class LiveStudy:
         other's check and its change."""
         session = self.sessions[participant]
         with session.lock, self.lock:
-            refusal = console_refusal(participant, session.phase, "link")
+            refusal = console_refusal(participant, session.console_phase(), "link")
             if refusal is not None:
                 raise ValueError(refusal)
             if spent is not None and self.credentials.participant_of(spent) != participant:
@@ -293,7 +293,7 @@ class LiveStudy:
             raise ValueError(refusal)
         with session.lock, self.lock:   # the withdrawal begins: no token is issued after it (replace_token)
             # (checked under the locks a decline and a withdrawal take too)
-            refused = console_refusal(participant, session.phase, "withdraw")
+            refused = console_refusal(participant, session.console_phase(), "withdraw")
             if refused is not None:
                 raise ValueError(refused)
             session.phase = "withdrawn"   # the episode's last message changes nothing now

@@ -62,9 +62,11 @@ def withdrawn_refusal(participant: int) -> str:
 # The experimenter console's actions on a participant (harness/live/app.py) that each phase of
 # their session accepts: the episode controls need a running episode; a new link is refused only
 # once they have withdrawn (for one who declined it asks for their consent again), a withdrawal
-# once they have withdrawn or declined (nothing of theirs is kept). The server refuses any other
-# (`console_refusal`), and the state carries the phase's list (`actions`), so the console shows a
-# button for exactly these.
+# once they have withdrawn or declined (nothing of theirs is kept). A pause the participant's
+# disconnect made ("disconnected", `Session.console_phase`) is theirs to end when they come back:
+# resumed by the experimenter, the car would drive with no one at the station and the deadline of
+# their return (`expire`) would be lifted. The server refuses any other action (`console_refusal`),
+# and the state carries the list (`actions`), so the console shows a button for exactly these.
 CONSOLE_ACTIONS: dict[str, tuple[str, ...]] = {
     "consent": ("link", "withdraw"),
     "declined": ("link",),
@@ -72,22 +74,26 @@ CONSOLE_ACTIONS: dict[str, tuple[str, ...]] = {
     "ready": ("link", "withdraw"),
     "driving": ("pause", "abort", "link", "withdraw"),
     "paused": ("resume", "abort", "link", "withdraw"),
+    "disconnected": ("abort", "link", "withdraw"),
     "done": ("link", "withdraw"),
     "withdrawn": (),
 }
 
 
 def console_refusal(participant: int, phase: str, action: str) -> str | None:
-    """Why the console's `action` on `participant`, in `phase`, is refused; None when it is accepted
-    (CONSOLE_ACTIONS)."""
+    """Why the console's `action` on `participant`, in `phase` (`Session.console_phase`), is
+    refused; None when it is accepted (CONSOLE_ACTIONS)."""
     if action in CONSOLE_ACTIONS[phase]:
         return None
+    accepted = ", ".join(CONSOLE_ACTIONS[phase])
     if phase == "withdrawn":
         why = withdrawn_refusal(participant)
     elif phase == "declined":
         why = "{} ({})".format(*declined(participant))
+    elif phase == "disconnected":
+        why = (f"participant {participant} disconnected while driving: their episode waits for them "
+               f"to come back and resume it, and accepts {accepted}")
     else:
-        accepted = ", ".join(CONSOLE_ACTIONS[phase])
         why = f"participant {participant} is in phase {phase!r}, which accepts {accepted}"
     return f"no {action}: {why}"
 
@@ -164,7 +170,12 @@ class Session:
                     "takeovers": self.takeovers, "done": done, "last_error": self.last_error,
                     "next_episode": pending[0].episode_id if pending else None,
                     "questionnaire": self.questionnaire_shown(),
-                    "actions": list(CONSOLE_ACTIONS[self.phase])}
+                    "actions": list(CONSOLE_ACTIONS[self.console_phase()])}
+
+    def console_phase(self) -> str:
+        """The phase whose console actions the session accepts (CONSOLE_ACTIONS): its own, or
+        "disconnected" while the participant's disconnect holds its episode paused."""
+        return "disconnected" if self.phase == "paused" and self.pause_reason == "disconnect" else self.phase
 
     def questionnaire_shown(self) -> dict | None:
         """The questionnaire the station shows in phase "questionnaire" (with where it is asked)."""
@@ -367,7 +378,7 @@ class Session:
         pushed to the station too: the participant must see why the view stands still, and when
         it goes on (an abort is told by the episode's own `episode_aborted`)."""
         with self.lock:
-            refusal = console_refusal(self.participant, self.phase, action)
+            refusal = console_refusal(self.participant, self.console_phase(), action)
             if refusal is not None:
                 raise MessageError("out_of_order", refusal)
             if action == "pause":

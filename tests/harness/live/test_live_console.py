@@ -34,7 +34,8 @@ class Pipe:
 def into_phase(study: LiveStudy, participant: int, phase: str) -> None:
     """Bring a new participant's session into `phase`: as created, by their consent (agreed or not;
     with the warm-up and every trial done for "done"), by a withdrawal, or after the consent with
-    an episode on a pipe of its own for "driving" and "paused" (no SUMO) or a questionnaire shown."""
+    an episode on a pipe of its own for "driving", "paused" (by the experimenter) and
+    "disconnected" (paused by the participant's disconnect; no SUMO) or a questionnaire shown."""
     session = study.sessions[participant]
     if phase in ("consent", "withdrawn"):
         if phase == "withdrawn":
@@ -45,10 +46,11 @@ def into_phase(study: LiveStudy, participant: int, phase: str) -> None:
         study.done |= {task.episode_id for task in session.tasks}
         session.warmed_up = True
     session.handle(Consent(type="consent", agree=phase != "declined"))
-    if phase in ("driving", "paused", "questionnaire"):
-        session.phase, session.task, session.connection = phase, session.tasks[0], Pipe()
-        session.pause_reason = "experimenter" if phase == "paused" else None
-    assert session.phase == phase
+    if phase in ("driving", "paused", "disconnected", "questionnaire"):
+        session.phase = "paused" if phase == "disconnected" else phase
+        session.task, session.connection = session.tasks[0], Pipe()
+        session.pause_reason = {"paused": "experimenter", "disconnected": "disconnect"}.get(phase)
+    assert session.phase == ("paused" if phase == "disconnected" else phase)
 
 
 def test_the_console_is_offered_exactly_what_the_server_accepts_in_every_phase(tmp_path):
@@ -62,7 +64,7 @@ def test_the_console_is_offered_exactly_what_the_server_accepts_in_every_phase(t
                 participant = client.post("/api/participants", json={}, headers=headers).json()["participant"]
                 into_phase(study, participant, phase)
                 shown = client.get(f"/api/participants/{participant}", headers=headers).json()
-                assert shown["phase"] == phase
+                assert shown["phase"] == ("paused" if phase == "disconnected" else phase)
                 assert set(shown["actions"]) <= set(REQUESTS), shown["actions"]
                 endpoint, body = REQUESTS[action]
                 address = f"/api/participants/{participant}/{endpoint}"
@@ -77,3 +79,25 @@ def test_the_console_is_offered_exactly_what_the_server_accepts_in_every_phase(t
     finally:
         study.close()
 
+
+
+def test_a_pause_the_participants_disconnect_made_is_theirs_to_resume(tmp_path):
+    """Resumed by the experimenter, the car would drive with no one at the station and their
+    deadline to come back would be lifted; an abort or a withdrawal is still the experimenter's."""
+    study = LiveStudy(tiny_config(tmp_path, participants=1), tmp_path / "study", ServerOptions()).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = experimenter(study)
+            client.post("/api/participants", json={}, headers=headers)
+            into_phase(study, 0, "paused")
+            session = study.sessions[0]
+            session.pause_reason = "disconnect"
+            shown = client.get("/api/participants/0", headers=headers).json()
+            assert "resume" not in shown["actions"] and "abort" in shown["actions"]
+            answer = client.post("/api/participants/0/control", json={"action": "resume"}, headers=headers)
+            assert answer.status_code == 409
+            assert "disconnected while driving" in answer.json()["detail"]["detail"]
+            told = session.connection.told
+            assert (session.phase, session.pause_reason, told) == ("paused", "disconnect", [])
+    finally:
+        study.close()
