@@ -324,3 +324,25 @@ def test_a_study_dict_takes_numpy_numbers_as_the_python_ones(tmp_path):
         data["study"]["seed"] = refused
         with pytest.raises(InputError, match="study.seed"):
             study_config_from_dict(data)
+
+
+def test_a_study_dict_takes_numpy_arrays_strings_and_bools_as_the_python_ones():
+    """A list a script holds as a numpy array, a name it took from one (np.str_) and a switch it
+    computed (np.bool_) are the list, the string and the bool a TOML file gives."""
+    import numpy as np
+
+    from trustroute.harness.study.config import study_config_from_dict
+
+    written = _numpy_study(np, int, float)
+    written["study"]["fallback_after"] = False
+    computed = _numpy_study(np, int, float)
+    computed["study"].update(engine=np.str_("model"), specs=np.array(["phi1"]), conditions=[np.str_("free")],
+                             fallback_after=np.bool_(False))
+    computed["population"]["initial_trust"] = np.array(written["population"]["initial_trust"])
+    checked, expected = study_config_from_dict(computed), study_config_from_dict(written)
+    assert checked == expected and checked.content_hash == expected.content_hash
+    assert checked.population is not None
+    assert [type(v) for v in checked.population["initial_trust"]] == [float] * 7
+    computed["study"]["seed"] = np.bool_(True)   # a bool is no integer, numpy's neither
+    with pytest.raises(InputError, match="study.seed"):
+        study_config_from_dict(computed)
