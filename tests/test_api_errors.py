@@ -63,7 +63,7 @@ def test_an_empty_name_is_said_to_be_empty(call, what):
     (lambda: trustroute.synthesize("phi1", horizon=20, time_limit=0),
      r"time_limit: 0.0 is not a number in \(0, "),   # the CLI's words: --time-limit 0 is 0.0
     (lambda: trustroute.synthesize("phi1", horizon=20, time_limit=float("nan")),
-     "time_limit: nan is not a number"),
+     "time_limit: nan is not a finite number"),
     (lambda: trustroute.evaluate("phi1", "free", max_junctions=-1),
      "max_junctions: expected an integer from 0 to 10000, got -1"),
     (lambda: trustroute.evaluate("phi1", "free", fallback_after=-1),

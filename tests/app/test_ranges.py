@@ -389,9 +389,15 @@ def test_every_numeric_option_of_every_command_is_checked_by_a_range():
     (["live", "CONFIG"], "--port", "65536", "expected an integer from 0 to 65535, got 65536"),
     (["demo"], "--participants", "0", f"expected an integer from 1 to {defaults.MAX_PARTICIPANTS}, got 0"),
     (["population", "sample", "--seed", "1", "--out", "OUT"], "--concentration", "nan",
-     "nan is not a number in (0, inf]"),
-    (["town", "roads", "town01_carla"], "--near", "nan", "nan is not a number in [-inf, inf]"),
-    (["peer", "storm", "phi1"], "--time-limit", "nan", "nan is not a number in [1, inf]"),
+     "nan is not a finite number"),
+    (["town", "roads", "town01_carla"], "--near", "nan", "nan is not a finite number"),
+    (["peer", "storm", "phi1"], "--time-limit", "nan", "nan is not a finite number"),
+    (["peer", "storm", "phi1"], "--time-limit", "inf", "inf is not a finite number"),
+    (["town", "roads", "town01_carla"], "--near", "-inf", "-inf is not a finite number"),
+    (["export", "DIR", "--out", "OUT"], "--seed", str(2**63),
+     f"expected an integer from 0 to {2**63 - 1}, got {2**63}"),
+    (["peer", "storm", "phi1"], "--depth", str(2**64),
+     f"expected an integer from 0 to {2**63 - 1}, got {2**64}"),
 ])
 def test_a_command_refuses_a_number_in_the_one_wording(arguments, flag, value, problem, tmp_path, capsys):
     given = {"DIR": str(tmp_path / "study"), "OUT": str(tmp_path / "out.json"), "CONFIG": _config(tmp_path)}

@@ -49,7 +49,10 @@ def test_number_kinds():
     assert problem_of(math.inf, Number()) is not None
     assert problem_of(math.inf, Number(finite=False)) is None
     assert problem_of(math.nan, Number(finite=False)) is not None
-    assert problem_of(0.0, Number(minimum=0.0, open_below=True)) == "0.0 is not a number in (0, inf]"
+    assert problem_of(0.0, Number(minimum=0.0, open_below=True)) == "0.0 is not a number in (0, inf)"
+    assert problem_of(math.inf, Number(minimum=1.0)) == "inf is not a finite number"
+    # an infinite end of a finite number's interval is open: inf is not among the values taken
+    assert (Number(minimum=1.0).interval(), Number(finite=False).interval()) == ("[1, inf)", "[-inf, inf]")
     assert problem_of(1.0, Number(minimum=0.0, maximum=1.0, open_above=True)) is not None
     assert problem_of(0.5, PROBABILITY) is None and problem_of(1.5, PROBABILITY) is not None
     assert is_number(2) and is_number(0.5) and not is_number(True) and not is_number(math.nan)

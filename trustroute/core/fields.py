@@ -143,6 +143,8 @@ class Number(Kind[float]):
     plural = "numbers"
 
     def reject(self, value: object) -> Rejection | None:
+        if self.finite and isinstance(value, float) and not math.isfinite(value):
+            return Rejection(f"{value!r} is not a finite number")
         if not self._accepts(value):
             return Rejection(f"{value!r} is not a number in {self.interval()}")
         return None
@@ -155,8 +157,10 @@ class Number(Kind[float]):
         return below and above
 
     def interval(self) -> str:
-        return (f"{'(' if self.open_below else '['}{self.minimum:g}, "
-                f"{self.maximum:g}{')' if self.open_above else ']'}")
+        """The values taken, as an interval: an infinite end is open where the number is finite."""
+        below = self.open_below or (self.finite and self.minimum == -math.inf)
+        above = self.open_above or (self.finite and self.maximum == math.inf)
+        return f"{'(' if below else '['}{self.minimum:g}, {self.maximum:g}{')' if above else ']'}"
 
 
 PROBABILITY = Number(minimum=0.0, maximum=1.0,

@@ -61,7 +61,9 @@ class OptionRange(Generic[T]):
         Python writes it (`'3'` is not 3) and without the bound it does not have."""
         kind = self.kind
         if isinstance(kind, Integer):
-            span = (f">= {kind.minimum}" if kind.maximum == UNBOUNDED.maximum
+            # an option without a largest value still has the kind's: past it, the range is said whole
+            beyond = is_whole(seen.value) and int(seen.value) > kind.maximum
+            span = (f">= {kind.minimum}" if kind.maximum == UNBOUNDED.maximum and not beyond
                     else f"from {kind.minimum} to {kind.maximum}")
             return f"expected an integer {span}, got {seen.value!r}"
         rejection = kind.reject(seen.value)
