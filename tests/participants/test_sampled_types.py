@@ -58,6 +58,20 @@ def test_population_sample_and_show_cli(tmp_path, capsys):
     assert again.read_bytes() == out.read_bytes()
 
 
+@pytest.mark.parametrize("n_types", [3, 49])
+def test_population_sample_says_the_hash_the_file_it_writes_loads_with(n_types, tmp_path, capsys):
+    """49 weights of 1/49 sum to 1 - 1e-16: the file loads them divided by their sum, and the hash
+    `sample` says is that population's, the one a policy file records."""
+    out = tmp_path / "pop.json"
+    with pytest.raises(SystemExit):
+        main(["population", "sample", "--types", str(n_types), "--seed", "1", "--concentration", "30",
+              "--out", str(out), "--json"])
+    said = json.loads(capsys.readouterr().out)
+    loaded = load_driver_population(out)
+    assert said["content_hash"] == loaded.content_hash
+    assert [t["weight"] for t in said["types"]] == list(loaded.weights)
+
+
 def _one_line_error(capsys, argv, *words):
     with pytest.raises(SystemExit) as exit_info:
         main(argv)

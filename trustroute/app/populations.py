@@ -12,7 +12,11 @@ from trustroute.app.inputs import driver_of
 from trustroute.core.errors import InputError
 from trustroute.core.validation import parse_toml, read_text
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY
-from trustroute.participants.driver_population import DriverPopulation, write_driver_population
+from trustroute.participants.driver_population import (
+    DriverPopulation,
+    load_driver_population,
+    write_driver_population,
+)
 from trustroute.participants.population import population_config_from_dict
 from trustroute.participants.sampled_types import sample_driver_population
 
@@ -39,7 +43,9 @@ def population_settings(config_path: str | None, concentration: float | None, sp
 
 def sample_population(n_types: int, seed: int, out: Path, driver: str | None, config_path: str | None,
                       concentration: float | None, spread: float | None) -> tuple[DriverPopulation, Path]:
-    """K types sampled around the nominal model (seeded), written to `out`: (population, path)."""
+    """K types sampled around the nominal model (seeded), written to `out`: (population, path), the
+    population as the file loads (its weights divided by their sum, docs/formats/driver_population.md),
+    so the content hash said is the one every consumer of the file computes."""
     nominal = driver_of(driver)
     settings = population_settings(config_path, concentration, spread, nominal.n_trust)
     if math.isinf(settings.concentration) and settings.takeover_spread == 0:
@@ -50,7 +56,8 @@ def sample_population(n_types: int, seed: int, out: Path, driver: str | None, co
                   f"{nominal.source_path}: concentration {settings.concentration:g}, takeover_spread "
                   f"{settings.takeover_spread:g}")
     result = sample_driver_population(nominal, n_types, settings, np.random.default_rng(seed), provenance)
-    return result, write_driver_population(result, out)
+    path = write_driver_population(result, out)
+    return load_driver_population(path, "--out"), path
 
 
 def write_population(population: DriverPopulation, path: Path) -> Path:
