@@ -126,3 +126,27 @@ def test_each_row_offers_only_what_the_server_accepts_in_its_phase(station, tmp_
     assert buttons(page, declined) == ["new link", "withdraw"]
     assert len(row.locator("td").all_inner_texts()) == 12
     context.close()
+
+
+def test_a_row_offers_the_episode_controls_its_pause_allows(station):
+    """An episode the experimenter paused can be resumed or aborted; one the participant's
+    disconnect paused only aborted (they resume it when they come back)."""
+    from trustroute.harness.live.protocol import Consent
+
+    from .test_live_console import Pipe
+
+    context, page = open_console(station)
+    study = station.study
+    for paused_by, offered in (("experimenter", ["resume", "abort", "new link", "withdraw"]),
+                               ("disconnect", ["abort", "new link", "withdraw"])):
+        participant = new_participant(station)
+        session = study.sessions[participant]
+        session.handle(Consent(type="consent", agree=True))
+        with session.lock:
+            session.phase, session.pause_reason = "paused", paused_by
+            session.task, session.connection = session.tasks[0], Pipe()
+        row = page.locator(f'#participants tr[data-participant="{participant}"]')
+        row.locator("td", has_text=f"paused ({paused_by})").wait_for()
+        row.locator("button", has_text="abort").wait_for()
+        assert buttons(page, participant) == offered, paused_by
+    context.close()
