@@ -62,11 +62,13 @@ def withdrawn_refusal(participant: int) -> str:
 # The experimenter console's actions on a participant (harness/live/app.py) that each phase of
 # their session accepts: the episode controls need a running episode; a new link is refused only
 # once they have withdrawn (for one who declined it asks for their consent again), a withdrawal
-# once they have withdrawn or declined (nothing of theirs is kept). A pause the participant's
-# disconnect made ("disconnected", `Session.console_phase`) is theirs to end when they come back:
-# resumed by the experimenter, the car would drive with no one at the station and the deadline of
-# their return (`expire`) would be lifted. The server refuses any other action (`console_refusal`),
-# and the state carries the list (`actions`), so the console shows a button for exactly these.
+# once they have withdrawn or declined (nothing of theirs is kept). A paused episode whose
+# participant is not at their station ("disconnected", `Session.console_phase`: their disconnect
+# paused it, or they left while the experimenter held it) is not the experimenter's to resume: the
+# car would drive with no one at the station, and the deadline of a disconnect's pause (`expire`)
+# would be lifted; they resume it when they come back. The server refuses any other action
+# (`console_refusal`), and the state carries the list (`actions`), so the console shows a button
+# for exactly these.
 CONSOLE_ACTIONS: dict[str, tuple[str, ...]] = {
     "consent": ("link", "withdraw"),
     "declined": ("link",),
@@ -91,8 +93,8 @@ def console_refusal(participant: int, phase: str, action: str) -> str | None:
     elif phase == "declined":
         why = "{} ({})".format(*declined(participant))
     elif phase == "disconnected":
-        why = (f"participant {participant} disconnected while driving: their episode waits for them "
-               f"to come back and resume it, and accepts {accepted}")
+        why = (f"participant {participant} is not at their station: their paused episode waits for them "
+               f"to come back, and accepts {accepted}")
     else:
         why = f"participant {participant} is in phase {phase!r}, which accepts {accepted}"
     return f"no {action}: {why}"
@@ -174,8 +176,9 @@ class Session:
 
     def console_phase(self) -> str:
         """The phase whose console actions the session accepts (CONSOLE_ACTIONS): its own, or
-        "disconnected" while the participant's disconnect holds its episode paused."""
-        return "disconnected" if self.phase == "paused" and self.pause_reason == "disconnect" else self.phase
+        "disconnected" while its episode is paused with no station connected."""
+        away = self.pause_reason == "disconnect" or self.push is None
+        return "disconnected" if self.phase == "paused" and away else self.phase
 
     def questionnaire_shown(self) -> dict | None:
         """The questionnaire the station shows in phase "questionnaire" (with where it is asked)."""

@@ -129,8 +129,9 @@ def test_each_row_offers_only_what_the_server_accepts_in_its_phase(station, tmp_
 
 
 def test_a_row_offers_the_episode_controls_its_pause_allows(station):
-    """An episode the experimenter paused can be resumed or aborted; one the participant's
-    disconnect paused only aborted (they resume it when they come back)."""
+    """An episode the experimenter paused, its participant at the station, can be resumed or
+    aborted; one the participant's disconnect paused only aborted (they resume it when they come
+    back)."""
     from trustroute.harness.live.protocol import Consent
 
     from .test_live_console import Pipe
@@ -145,6 +146,7 @@ def test_a_row_offers_the_episode_controls_its_pause_allows(station):
         with session.lock:
             session.phase, session.pause_reason = "paused", paused_by
             session.task, session.connection = session.tasks[0], Pipe()
+            session.push = None if paused_by == "disconnect" else Pipe().send   # their station
         row = page.locator(f'#participants tr[data-participant="{participant}"]')
         row.locator("td", has_text=f"paused ({paused_by})").wait_for()
         row.locator("button", has_text="abort").wait_for()

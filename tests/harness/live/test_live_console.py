@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 
+import pytest
 from fastapi.testclient import TestClient
 
 from trustroute.harness.live.app import live_app
@@ -35,7 +36,8 @@ def into_phase(study: LiveStudy, participant: int, phase: str) -> None:
     """Bring a new participant's session into `phase`: as created, by their consent (agreed or not;
     with the warm-up and every trial done for "done"), by a withdrawal, or after the consent with
     an episode on a pipe of its own for "driving", "paused" (by the experimenter) and
-    "disconnected" (paused by the participant's disconnect; no SUMO) or a questionnaire shown."""
+    "disconnected" (paused by the participant's disconnect; no SUMO) or a questionnaire shown, their
+    station connected but after a disconnect."""
     session = study.sessions[participant]
     if phase in ("consent", "withdrawn"):
         if phase == "withdrawn":
@@ -50,6 +52,7 @@ def into_phase(study: LiveStudy, participant: int, phase: str) -> None:
         session.phase = "paused" if phase == "disconnected" else phase
         session.task, session.connection = session.tasks[0], Pipe()
         session.pause_reason = {"paused": "experimenter", "disconnected": "disconnect"}.get(phase)
+        session.push = None if phase == "disconnected" else Pipe().send   # their station connected
     assert session.phase == ("paused" if phase == "disconnected" else phase)
 
 
@@ -81,9 +84,11 @@ def test_the_console_is_offered_exactly_what_the_server_accepts_in_every_phase(t
 
 
 
-def test_a_pause_the_participants_disconnect_made_is_theirs_to_resume(tmp_path):
-    """Resumed by the experimenter, the car would drive with no one at the station and their
-    deadline to come back would be lifted; an abort or a withdrawal is still the experimenter's."""
+@pytest.mark.parametrize("paused_by", ["disconnect", "experimenter"])
+def test_a_paused_episode_whose_participant_is_away_is_theirs_to_resume(paused_by, tmp_path):
+    """Resumed by the experimenter, the car would drive with no one at the station (and a
+    disconnect's deadline to come back would be lifted), whoever paused it; an abort or a
+    withdrawal is still the experimenter's."""
     study = LiveStudy(tiny_config(tmp_path, participants=1), tmp_path / "study", ServerOptions()).open()
     try:
         with TestClient(live_app(study)) as client:
@@ -91,13 +96,13 @@ def test_a_pause_the_participants_disconnect_made_is_theirs_to_resume(tmp_path):
             client.post("/api/participants", json={}, headers=headers)
             into_phase(study, 0, "paused")
             session = study.sessions[0]
-            session.pause_reason = "disconnect"
+            session.pause_reason, session.push = paused_by, None
             shown = client.get("/api/participants/0", headers=headers).json()
             assert "resume" not in shown["actions"] and "abort" in shown["actions"]
             answer = client.post("/api/participants/0/control", json={"action": "resume"}, headers=headers)
             assert answer.status_code == 409
-            assert "disconnected while driving" in answer.json()["detail"]["detail"]
+            assert "is not at their station" in answer.json()["detail"]["detail"]
             told = session.connection.told
-            assert (session.phase, session.pause_reason, told) == ("paused", "disconnect", [])
+            assert (session.phase, session.pause_reason, told) == ("paused", paused_by, [])
     finally:
         study.close()
