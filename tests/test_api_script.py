@@ -102,3 +102,4 @@ def test_a_script_without_a_main_guard_stops_with_the_fix_on_spawned_workers(tmp
     assert last.startswith("trustroute.harness.study.workers.WorkersCannotStart: study workers: "
                            "worker processes exit while they start"), last
     assert 'if __name__ == "__main__":' in last
+    assert last.endswith("or run with one worker (workers 1))"), last   # the API's keyword, not the flag

@@ -69,7 +69,8 @@ class WorkersCannotStart(InputError):
             f"worker processes exit while they start ({reason}, {START_FAILURES} in a row; each "
             "printed its error above)",
             'a script that calls run_study must call it under `if __name__ == "__main__":`, since '
-            "spawned workers import the script again; or pass workers=1")
+            "spawned workers import the script again; otherwise see the workers' errors, or run with "
+            "one worker (--workers 1)")
 
 
 class Terminated(KeyboardInterrupt):

@@ -543,7 +543,8 @@ def test_workers_exiting_while_they_start_stop_the_pool(monkeypatch):
     from trustroute.harness.study import workers
 
     monkeypatch.setattr(workers, "die_with_parent", lambda _pid: os._exit(3))   # forked: the workers see it
-    with pytest.raises(workers.WorkersCannotStart, match=r"exited with code 3, 2 in a row.*__main__"):
+    said = r"exited with code 3, 2 in a row.*__main__.*one worker \(--workers 1\)"
+    with pytest.raises(workers.WorkersCannotStart, match=said):
         list(workers.process_pool(abs, [-1, -2, -3], 2, lambda _task, reason: reason))
 
 
