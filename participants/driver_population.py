@@ -244,8 +244,27 @@ def driver_population_from_dict(data: object, path: str = "<driver population>")
                          f"(tolerance {WEIGHT_TOLERANCE:g})", "renormalise the prior weights")
     # weights within the tolerance of 1 are a distribution only after this division: the Bayes
     # objective and every per-type bound weigh with the population's weights
-    normalised = tuple(replace(t, weight=t.weight / total) for t in types)
+    weights = as_distribution([t.weight for t in types])
+    normalised = tuple(replace(t, weight=w) for t, w in zip(types, weights, strict=True))
     return DriverPopulation(types=normalised, source_path=path, provenance=values["source"])
+
+
+def as_distribution(weights: list[float]) -> list[float]:
+    """`weights` divided by their sum, with the rounding left over given to the largest, so that
+    they sum to exactly 1.0 (math.fsum) and loading them again changes nothing: a population
+    written back as loaded keeps its weights and content hash. Weights summing to exactly 1.0 are
+    returned as they are."""
+    total = math.fsum(weights)
+    if total == 1.0:
+        return list(weights)
+    out = [w / total for w in weights]
+    largest = max(range(len(out)), key=out.__getitem__)
+    for _ in range(4):   # each pass leaves at most half an ulp of the largest; two suffice in practice
+        left = 1.0 - math.fsum(out)
+        if not left:
+            break
+        out[largest] += left
+    return out
 
 
 def load_driver_population(path: str | Path, given: str = "--population") -> DriverPopulation:

@@ -232,3 +232,23 @@ def test_a_driver_model_and_a_population_given_for_each_other_say_which_they_are
     assert (error.value.place, error.value.problem) == (
         "top level", "this is a driver population file, not a driver model")
     assert error.value.fix.startswith("pass it where a driver population goes (--population)")
+
+
+def test_weights_loaded_once_load_again_unchanged():
+    """A population written back as loaded keeps its weights and content hash: the loaded weights
+    sum to exactly 1.0, and weights summing to exactly 1.0 are kept as they are."""
+    import math
+
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        data = example()
+        weights = rng.dirichlet(np.ones(len(data["types"]))) * (1 + rng.uniform(-5e-10, 5e-10))
+        for entry, weight in zip(data["types"], weights.tolist(), strict=True):
+            entry["weight"] = weight
+        first = driver_population_from_dict(data)
+        assert math.fsum(first.weights.tolist()) == 1.0
+        for entry, weight in zip(data["types"], first.weights.tolist(), strict=True):
+            entry["weight"] = weight
+        again = driver_population_from_dict(data)
+        assert again.weights.tolist() == first.weights.tolist()
+        assert again.content_hash == first.content_hash
