@@ -12,6 +12,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from trustroute.app.populations import NOMINAL, sample_population
 from trustroute.core import ranges
 from trustroute.harness.commands.options import SEED, Checked
 from trustroute.harness.commands.output import emit, json_option, with_paths
@@ -32,14 +33,19 @@ def population() -> None:
 @click.option("--config", "config_path", type=click.Path(), default=None,
               help="TOML file whose [population] table gives the spread (e.g. a study config).")
 @click.option("--concentration", type=Checked(ranges.CONCENTRATION), default=None,
-              help="Dirichlet concentration of the rows around the nominal ones (overrides --config).")
+              help="Dirichlet concentration of the rows around the nominal ones (overrides --config; "
+                   f"default: --config's, else {NOMINAL.concentration:g}, the nominal rows).")
 @click.option("--takeover-spread", "spread", type=Checked(ranges.TAKEOVER_SPREAD), default=None,
-              help="sd of each type's logit shift of its takeover probabilities (overrides --config).")
+              help="sd of each type's logit shift of its takeover probabilities (overrides --config; "
+                   f"default: --config's, else {NOMINAL.takeover_spread:g}).")
 @json_option
 def sample(n_types: int, seed: int, out: str, driver_path: str | None, config_path: str | None,
            concentration: float | None, spread: float | None, as_json: bool) -> None:
-    """Sample K driver types around a nominal model; equal weights."""
-    from trustroute.app.populations import sample_population
+    """Sample K driver types around a nominal model; equal weights.
+
+    Needs a spread: a finite --concentration, a --takeover-spread above 0, or a --config whose
+    [population] table gives one. The defaults give every type the nominal model, which is refused.
+    """
     from trustroute.core.output_files import check_output_file
 
     check_output_file(out, "--out", "driver-population file",

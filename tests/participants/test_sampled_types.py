@@ -85,8 +85,13 @@ def _one_line_error(capsys, argv, *words):
 def test_bad_population_settings_are_one_line_errors(tmp_path, capsys):
     out = str(tmp_path / "pop.json")
     _one_line_error(capsys, ["population", "sample", "--types", "2", "--seed", "1", "--out", out],
-                    "nominal model")
+                    "error: --concentration: concentration inf and takeover spread 0 give every type "
+                    "the nominal model (fix: ")
     config = tmp_path / "settings.toml"
+    config.write_text("[population]\nreport_accuracy = 0.9\n")
+    _one_line_error(capsys, ["population", "sample", "--types", "2", "--seed", "1", "--config",
+                             str(config), "--out", out],
+                    f"error: {config}: population: concentration inf and takeover spread 0 give")
     config.write_text("[population]\nconcentration = -1\n")
     _one_line_error(capsys, ["population", "sample", "--types", "2", "--seed", "1", "--config",
                              str(config), "--out", out], "settings.toml", "population.concentration")
@@ -96,3 +101,15 @@ def test_bad_population_settings_are_one_line_errors(tmp_path, capsys):
     bad.write_text(json.dumps({"format": "trustroute-driver-population", "version": 1, "types": []}))
     _one_line_error(capsys, ["population", "show", str(bad)], "bad.json", "types")
     assert not (tmp_path / "pop.json").exists()
+
+
+def test_population_sample_help_says_a_spread_is_needed_and_its_defaults(capsys):
+    """Only --types, --seed and --out are required options, yet the defaults of the spread are
+    refused: the help says which option is needed and what each spread option defaults to."""
+    with pytest.raises(SystemExit):
+        main(["population", "sample", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert ("Needs a spread: a finite --concentration, a --takeover-spread above 0, or a --config "
+            "whose [population] table gives one.") in text
+    assert "default: --config's, else inf, the nominal rows" in text
+    assert "default: --config's, else 0)" in text

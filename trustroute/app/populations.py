@@ -17,10 +17,11 @@ from trustroute.participants.driver_population import (
     load_driver_population,
     write_driver_population,
 )
-from trustroute.participants.population import population_config_from_dict
+from trustroute.participants.population import PopulationConfig, population_config_from_dict
 from trustroute.participants.sampled_types import sample_driver_population
 
 REPORT_ACCURACY = DEFAULT_REPORT_ACCURACY   # the packaged drivers' trust-report accuracy
+NOMINAL = PopulationConfig()   # the [population] defaults: every driver the nominal model
 
 
 def population_settings(config_path: str | None, concentration: float | None, spread: float | None,
@@ -49,9 +50,12 @@ def sample_population(n_types: int, seed: int, out: Path, driver: str | None, co
     nominal = driver_of(driver)
     settings = population_settings(config_path, concentration, spread, nominal.n_trust)
     if math.isinf(settings.concentration) and settings.takeover_spread == 0:
-        raise InputError(config_path or "--concentration", "population",
-                         "these settings give every type the nominal model",
-                         "give a finite --concentration or a --takeover-spread > 0")
+        # --concentration cannot be inf (its range refuses it): a file's table or the default set it
+        source, place = (config_path, "population") if config_path is not None else ("--concentration", "")
+        raise InputError(source, place, f"concentration {settings.concentration:g} and takeover spread "
+                         f"{settings.takeover_spread:g} give every type the nominal model",
+                         "give a finite --concentration, a --takeover-spread above 0, or a --config "
+                         "whose [population] table sets one")
     provenance = (f"trustroute population sample --types {n_types} --seed {seed} around "
                   f"{nominal.source_path}: concentration {settings.concentration:g}, takeover_spread "
                   f"{settings.takeover_spread:g}")
