@@ -8,10 +8,11 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
+import click
 import pytest
 
 from trustroute.core.errors import InputError
-from trustroute.harness.cli import main
+from trustroute.harness.cli import cli, main
 
 
 def run_cli(capsys: pytest.CaptureFixture, *args: str) -> tuple[int, str, str]:
@@ -20,6 +21,21 @@ def run_cli(capsys: pytest.CaptureFixture, *args: str) -> tuple[int, str, str]:
         main(list(args))
     captured = capsys.readouterr()
     return exit_info.value.code, captured.out, captured.err
+
+
+def every_command(group: click.Group = cli, path: str = "") -> list[tuple[str, click.Command]]:
+    """Every command of the CLI, the subcommands of its groups included, as ("population sample",
+    command), in the order `--help` lists them."""
+    found: list[tuple[str, click.Command]] = []
+    context = click.Context(group)
+    for name in group.list_commands(context):
+        command = group.get_command(context, name)
+        assert command is not None
+        if isinstance(command, click.Group):
+            found += every_command(command, f"{path}{name} ")
+        else:
+            found.append((f"{path}{name}", command))
+    return found
 
 
 def cli_json(capsys: pytest.CaptureFixture, *args: str) -> dict:

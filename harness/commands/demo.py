@@ -63,8 +63,11 @@ def record_episode(context, study_dir: Path, episode_id: str) -> Path:
 )
 @click.option("--workers", type=WORKERS, default=defaults.WORKERS,
               help=f"Local worker processes (default: the CPU count, at most {defaults.MAX_WORKERS}).")
-@click.option("--engine", type=click.Choice(SIMULATED), default=defaults.EPISODE_ENGINE, show_default=True)
-@click.option("--participants", type=Checked(ranges.PARTICIPANTS), default=21, show_default=True)
+@click.option("--engine", type=click.Choice(SIMULATED), default=defaults.EPISODE_ENGINE, show_default=True,
+              help="What runs the episodes: " + "; ".join(f"{name} ({ENGINES[name].description})"
+                                                          for name in SIMULATED) + ".")
+@click.option("--participants", type=Checked(ranges.PARTICIPANTS), default=DEMO_STUDY["participants"],
+              show_default=True, help="Synthetic participants; each drives every spec in both conditions.")
 @click.option("--town", type=click.Choice([DEFAULT_TOWN, *DEMO_TOWNS]), default=DEFAULT_TOWN,
               show_default=True, help="The paper's town, or the city (the RESCO Ingolstadt scenario; "
               "needs pip install 'trustroute[cities]').")

@@ -73,7 +73,9 @@ class PlanOptions:
         "--test", multiple=True, type=click.Choice(defaults.PLAN_TESTS),
         help=f"A planned test (repeatable; default: {', '.join(defaults.PLAN_DEFAULT_TESTS)}).")
     alpha: float = option("--alpha", type=Checked(ranges.ALPHA),
-                          default=defaults.PLAN_ALPHA, show_default=True)
+                          default=defaults.PLAN_ALPHA, show_default=True,
+                          help="Significance level α of every planned test (a p-value below it, or a "
+                               "(1 − α) interval excluding 1, rejects).")
     target: float = option("--target", type=Checked(ranges.TARGET),
                            default=defaults.PLAN_TARGET, show_default=True, help="Target power.")
     driver: str | None = option("--driver", default=None,
@@ -88,7 +90,9 @@ class PlanOptions:
                                   default=defaults.PILOT_BOOTSTRAP, show_default=True,
                                   help="With --pilot: bootstrap refits (0: the point fit alone, no "
                                        "uncertainty).")
-    seed: int = option("--seed", type=SEED, default=defaults.PLAN_SEED, show_default=True)
+    seed: int = option("--seed", type=SEED, default=defaults.PLAN_SEED, show_default=True,
+                       help="Seed of the simulated studies and the pilot's bootstrap (the same seed "
+                            "gives the same table).")
     out: str | None = option("--out", type=click.Path(), default=None,
                              help="Folder of the power curve (default: out/plan/<study name>).")
     preregistration: str | None = option(

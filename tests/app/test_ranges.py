@@ -15,7 +15,7 @@ import click
 import pytest
 
 import trustroute
-from tests.cli import assert_one_line_error, run_cli
+from tests.cli import assert_one_line_error, every_command, run_cli
 from trustroute.analysis.fitting.driver_model import fit_study
 from trustroute.app.planning import PlanSettings
 from trustroute.app.runs import EpisodeSettings
@@ -346,23 +346,14 @@ def test_analyze_writes_the_report_only_when_asked_as_analyze_json_does(tmp_path
 
 
 # -- every numeric option -----------------------------------------------------------------------------
-def _every_option(group: click.Group, path: str = "") -> list[tuple[str, click.Parameter]]:
-    found = []
-    context = click.Context(group)
-    for name in group.list_commands(context):
-        command = group.get_command(context, name)
-        assert command is not None
-        if isinstance(command, click.Group):
-            found += _every_option(command, f"{path}{name} ")
-        else:
-            found += [(f"{path}{name} {param.name}", param) for param in command.params]
-    return found
+def _every_option() -> list[tuple[str, click.Parameter]]:
+    return [(f"{path} {param.name}", param) for path, command in every_command() for param in command.params]
 
 
 def test_every_numeric_option_of_every_command_is_checked_by_a_range():
     """A number a command takes is checked by its range in trustroute/core/ranges.py (click's own
     ranges word their refusals otherwise, and FloatRange lets NaN through)."""
-    options = _every_option(cli)
+    options = _every_option()
     commands = {where.split()[0] for where, _ in options}
     assert {"peer", "population", "town", "fit", "export", "live"} <= commands   # groups' commands too
     unchecked = []

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import json
 
+import click
 import pytest
 
-from tests.cli import run_cli
+from tests.cli import every_command, run_cli
 
 RESULT_COMMANDS = [("net", "build"), ("spec", "check"), ("model",), ("synth",), ("baseline",),
                    ("evaluate",), ("run",), ("study",), ("analyze",), ("fit",), ("demo",),
@@ -76,29 +77,12 @@ def test_study_json_quiet_and_analyze_writes_nothing_without_report(tmp_path, ca
                                      "plots"}
 
 
-def _commands():
-    """Every command of the CLI, subcommands of groups included, as (path, command)."""
-    import click
-
-    from trustroute.harness.cli import cli
-
-    context = click.Context(cli)
-    stack = [(name, cli.get_command(context, name)) for name in cli.list_commands(context)]
-    while stack:
-        path, command = stack.pop()
-        if isinstance(command, click.Group):
-            stack += [(f"{path} {name}", command.get_command(context, name))
-                      for name in command.list_commands(context)]
-        else:
-            yield path, command
-
-
 def test_every_spec_town_and_driver_says_it_takes_a_packaged_name():
     """SPEC, --town PATH and --driver PATH have one help text each (harness/commands/inputs.py)."""
     from trustroute.harness.commands.inputs import DRIVER_HELP, SPEC_HELP, TOWN_HELP
 
     seen = {"SPEC": 0, "--town": 0, "--driver": 0}
-    for path, command in _commands():
+    for path, command in every_command():
         for param in command.params:
             if param.human_readable_name == "SPEC":
                 seen["SPEC"] += 1
@@ -111,3 +95,15 @@ def test_every_spec_town_and_driver_says_it_takes_a_packaged_name():
                 seen["--driver"] += 1
                 assert param.help == DRIVER_HELP, (path, param.help)
     assert seen == {"SPEC": 7, "--town": 9, "--driver": 7}
+
+
+def test_every_option_of_every_command_has_a_help_text():
+    """`--help` explains every option of every command and subcommand (click shows an option
+    without help as its flag and metavar alone)."""
+    missing = [f"{path} {'/'.join(param.opts)}" for path, command in every_command()
+               for param in command.params
+               if isinstance(param, click.Option) and not (param.help or "").strip()]
+    commands = {path for path, _ in every_command()}
+    assert {"plan", "demo", "population sample", "peer storm", "import carla-logs"} <= commands
+    assert missing == []
+    assert [path for path, command in every_command() if not (command.help or "").strip()] == []
