@@ -299,17 +299,19 @@ def episode_tables(
 
 
 def discover(source: Path) -> list[LogFile]:
+    """The logs of `source`: every CSV under a folder, or one log file. A file is named by its
+    relative path under the folder, and a single log by its file name."""
     source = Path(source)
     if not source.exists():
         raise InputError(
             str(source),
             "",
-            "no such directory",
-            "pass a checkout of the authors' repository or a folder of their CSVs",
+            "no such file or directory",
+            "pass a checkout of the authors' repository, a folder of their CSVs or one of their CSVs",
         )
-    paths = sorted(source.rglob("*.csv")) if source.is_dir() else [source]
+    paths, root = (sorted(source.rglob("*.csv")), source) if source.is_dir() else ([source], source.parent)
     # statistic_test/ holds copies of the same files; they are read as subsets, not episodes
-    logs = [c for p in paths if "statistic_test" not in p.parts and (c := classify(p, source)) is not None]
+    logs = [c for p in paths if "statistic_test" not in p.parts and (c := classify(p, root)) is not None]
     if not logs:
         raise InputError(
             str(source),

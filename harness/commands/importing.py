@@ -1,8 +1,9 @@
 """`trustroute import`: convert logs of real studies into study directories.
 
-import carla-logs DIR --out STUDY_DIR   the CARLA study of Yu et al. (ICRA 2024): DIR is a checkout
-                                        of shuyang-dong/trust_aware_hrc_carla_sim or a folder of
-                                        its trust_level_record CSVs (docs/real_study.md)
+import carla-logs SOURCE --out STUDY_DIR  the CARLA study of Yu et al. (ICRA 2024): SOURCE is a
+                                          checkout of shuyang-dong/trust_aware_hrc_carla_sim, a folder
+                                          of its trust_level_record CSVs or one of them
+                                          (docs/real_study.md)
 """
 
 from __future__ import annotations
@@ -22,12 +23,16 @@ def import_group() -> None:
 
 
 @import_group.command("carla-logs")
-@click.argument("source", metavar="DIR", type=click.Path())
+@click.argument("source", metavar="SOURCE", type=click.Path())
 @click.option("--out", "out", type=click.Path(), required=True, help="Study DIRECTORY to write.")
 @quiet_option
 @json_option
 def carla_logs(source: str, out: str, quiet: bool, as_json: bool) -> None:
-    """Import the authors' CARLA logs under DIR into the study directory --out."""
+    """Import the authors' CARLA logs in SOURCE into the study directory --out.
+
+    SOURCE is a checkout of their repository, a folder of their trust_level_record CSVs (searched
+    recursively) or one such CSV (a study of that one episode).
+    """
     from trustroute.analysis.carla_study.log_import import import_carla_logs
 
     manifest = import_carla_logs(Path(source), Path(out), progress=not (quiet or as_json))

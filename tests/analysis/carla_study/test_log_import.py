@@ -199,6 +199,31 @@ def test_analyze_reads_the_imported_study(imported, capsys):
     }
 
 
+def test_one_log_file_imports_as_a_study_of_its_episode(tmp_path, capsys):
+    import json
+
+    out = tmp_path / "one"
+    code, _, err = run_cli(capsys, "import", "carla-logs", str(RAW / SAMPLE), "--out", str(out), "--quiet")
+    assert code == 0, err
+    real = json.loads((out / "manifest.json").read_text())["real_study"]
+    assert [(entry["file"], entry["status"]) for entry in real["inventory"]] == [(SAMPLE, "imported")]
+    assert list(_episodes(out)["episode_id"]) == ["d04-t1-aware"]
+    code, text, err = run_cli(capsys, "analyze", str(out), "--json", "--no-report")
+    assert code == 0, err
+    assert [row["episode_id"] for row in json.loads(text)["real_study"]["per_episode"]] == ["d04-t1-aware"]
+    code, text, _ = run_cli(capsys, "import", "carla-logs", "--help")
+    assert "or one such CSV (a study of that one episode)" in " ".join(text.split())
+    # imported again in place, as an earlier import of the same logs
+    code, _, err = run_cli(capsys, "import", "carla-logs", str(RAW / SAMPLE), "--out", str(out), "--quiet")
+    assert code == 0, err
+
+
+def test_a_malformed_single_log_is_named_by_its_file(tmp_path, capsys):
+    folder = _bad_copy(tmp_path, SAMPLE, _ticks(lambda t: _set(t, 40, "x")))
+    err = _one_line_error(capsys, folder / SAMPLE, tmp_path)
+    assert err.startswith(f"error: {SAMPLE}: row 40, column tick "), err
+
+
 # -- malformed inputs: one line, exit 2 ---------------------------------------------------
 def _bad_copy(tmp_path: Path, name: str, edit) -> Path:
     folder = tmp_path / "logs"
@@ -363,6 +388,8 @@ def test_not_a_log_folder_is_one_line(tmp_path, capsys):
     (tmp_path / "logs").mkdir()
     err = _one_line_error(capsys, tmp_path / "logs", tmp_path)
     assert "no trust_level_record" in err
+    err = _one_line_error(capsys, tmp_path / "no-logs", tmp_path)
+    assert "no-logs: no such file or directory (fix: pass a checkout" in err and "one of their CSVs" in err
 
 
 def test_sample_files_are_unchanged_copies_of_the_authors_format():
