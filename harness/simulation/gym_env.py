@@ -75,7 +75,7 @@ class EnvSettings:
     net_path: str | Path | None = None
 
     def __post_init__(self) -> None:
-        engine_named(self.engine, "EnvSettings.engine", simulated=True)
+        engine_named(self.engine, "EnvSettings", "engine", simulated=True)
         check_value(self.junction_cap, JUNCTION_CAPS, "EnvSettings", "junction_cap",
                     lambda seen: f"expected an integer from {JUNCTION_CAPS.minimum} to "
                                  f"{JUNCTION_CAPS.maximum}, got {seen.value!r}",

@@ -42,9 +42,10 @@ ENGINES: dict[str, Engine] = {engine.name: engine for engine in (
 SIMULATED: tuple[str, ...] = tuple(name for name, engine in ENGINES.items() if engine.synthetic)
 
 
-def engine_named(name: str, where: str = "engine", simulated: bool = False) -> Engine:
-    """The engine called `name` (`simulated`: one a synthetic driver drives); InputError otherwise."""
+def engine_named(name: str, where: str = "engine", place: str = "", simulated: bool = False) -> Engine:
+    """The engine called `name` (`simulated`: one a synthetic driver drives); InputError otherwise,
+    at `where` (a flag, a keyword, a file) and `place` in it (a field), as any other check there."""
     names = SIMULATED if simulated else tuple(ENGINES)
     if name not in names:
-        raise InputError(where, "", f"unknown engine {name!r}", f"use one of {', '.join(names)}")
+        raise InputError(where, place, f"unknown engine {name!r}", f"use one of {', '.join(names)}")
     return ENGINES[name]

@@ -315,10 +315,13 @@ def test_every_env_setting_is_checked_when_made(field, value, problem):
     from trustroute.core.errors import InputError
     from trustroute.harness.simulation.gym_env import EnvSettings
 
-    with pytest.raises(InputError, match=problem):
+    with pytest.raises(InputError, match=problem) as made:
         EnvSettings(**{field: value})
-    with pytest.raises(InputError, match=problem):   # before any episode
+    with pytest.raises(InputError, match=problem) as through_make:   # before any episode
         gymnasium.make(ENV_ID, spec="phi1", **{field: value})
+    # every field's refusal has one form: the settings object, then the field
+    for error in (made.value, through_make.value):
+        assert str(error).startswith(f"EnvSettings: {field}: "), error
 
 
 @pytest.mark.parametrize(("argument", "value", "said"), [
