@@ -101,14 +101,14 @@ def aligned_columns(header: Sequence[str], rows: Sequence[Sequence[object]]) -> 
     return [line.rstrip() for line in lines]
 
 
-def _wrapped_rows(rows: Sequence[Sequence[object]], cell_width: int) -> list[list[str]]:
-    """Rows whose cells longer than `cell_width` continue on lines of their own below."""
-    out: list[list[str]] = []
+def _wrapped_rows(rows: Sequence[Sequence[object]], cell_width: int) -> list[list[list[str]]]:
+    """Each row as its lines: cells longer than `cell_width` continue on lines of their own below."""
+    out: list[list[list[str]]] = []
     for row in rows:
         parts = [textwrap.wrap(str(v), cell_width) or [""] if len(str(v)) > cell_width else [str(v)]
                  for v in row]
         depth = max(len(p) for p in parts)
-        out += [[p[k] if k < len(p) else "" for p in parts] for k in range(depth)]
+        out.append([[p[k] if k < len(p) else "" for p in parts] for k in range(depth)])
     return out
 
 
@@ -121,9 +121,10 @@ def terminal_table(header: Sequence[str], rows: Sequence[Sequence[object]],
     whole = aligned_columns(header, rows)
     if width is None or max(len(line) for line in whole) <= width:
         return whole
-    rows = _wrapped_rows(rows, CELL_WIDTH)
+    wrapped = _wrapped_rows(rows, CELL_WIDTH)
     header = [str(h) for h in header]
-    widths = [max(len(str(x)) for x in col) for col in zip(header, *rows, strict=True)]
+    widths = [max(len(str(x)) for x in col)
+              for col in zip(header, *(line for row in wrapped for line in row), strict=True)]
     keys = max(0, min(keys, len(header) - 1))
     key_width = sum(widths[:keys]) + 2 * keys
     blocks: list[list[int]] = []
@@ -141,7 +142,11 @@ def terminal_table(header: Sequence[str], rows: Sequence[Sequence[object]],
         chosen = [*range(keys), *block]
         if lines:
             lines.append("")
-        lines += aligned_columns([header[i] for i in chosen], [[row[i] for i in chosen] for row in rows])
+        # a row's continuation lines hold the wrapped cells of one block: in the others they would
+        # only be blank lines inside the table
+        shown = [[line[i] for i in chosen] for row in wrapped for k, line in enumerate(row)
+                 if k == 0 or any(line[i] for i in chosen)]
+        lines += aligned_columns([header[i] for i in chosen], shown)
     return lines
 
 

@@ -71,6 +71,23 @@ def test_terminal_tables_fit_120_columns_and_keep_every_cell():
     assert all(len(line) <= 120 for line in wrapped_text("word " * 100))
 
 
+def test_a_cell_wrapped_in_one_block_leaves_no_blank_lines_in_the_others():
+    """A long note wraps over several lines of its own block; the other blocks show each row on
+    one line, so the only blank lines are the one between blocks."""
+    from trustroute.analysis.formatting import terminal_table
+
+    header = ["outcome", *[f"estimate of a long name {i}" for i in range(4)], "note"]
+    rows = [[f"outcome {r}", *[f"{r}.{i:03d} [0.100, 0.900]" for i in range(4)],
+             "complete separation, the one discordant pair favours aware: shown the exact OR " * r]
+            for r in (2, 0)]
+    lines = terminal_table(header, rows)
+    blocks = "\n".join(lines).split("\n\n")
+    assert len(blocks) == 2 and all("" not in block.splitlines() for block in blocks), lines
+    first = blocks[0].splitlines()
+    assert [line.split("  ")[0] for line in first[2:]] == ["outcome 2", "outcome 0"]
+    assert " ".join(blocks[1].split()).count("shown the exact OR") == 2
+
+
 def test_analyze_prints_within_120_columns_unless_wide(model_study):
     from click.testing import CliRunner
 
