@@ -38,6 +38,7 @@ from scipy import stats
 
 from trustroute.analysis.statistics import (
     DEFAULT_LEVEL,
+    TOO_FEW,
     all_discordant_favour,
     binomial_half_p,
     exact_odds_ratio,
@@ -325,11 +326,11 @@ def mixed_trust_model(
         observations=int(keep.sum()),
     )
     if keep.sum() < 4 or len(np.unique(groups)) < 2:
-        return replace(base, note="too few observations")
+        return replace(base, note=TOO_FEW)
     kept_strata = None if strata is None else np.asarray(strata)[keep]
     exog = np.column_stack([np.ones(keep.sum()), _design(np.asarray(treated)[keep], kept_strata)])
     if keep.sum() <= exog.shape[1] or np.linalg.matrix_rank(exog) < exog.shape[1]:
-        return replace(base, note="the condition is not estimable (too few observations or collinear)")
+        return replace(base, note=f"the condition is not estimable ({TOO_FEW} or collinear)")
     fitted = random_intercept_reml(y[keep], exog, groups)
     beta, se = float(fitted.beta[1]), math.sqrt(float(fitted.covariance[1, 1]))
     if not (math.isfinite(beta) and se > 0):

@@ -212,6 +212,7 @@ def median_unbiased_proportion(k: int, n: int) -> float:
     return 1.0 / (1.0 + math.exp(-midpoint))
 
 
+TOO_FEW = "too few observations"   # why an estimate or a test is missing: not enough data to compute it
 NO_DISCORDANCE = "no discordant pair (equal outcomes under both): no odds ratio is estimable"
 
 

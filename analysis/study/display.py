@@ -29,6 +29,7 @@ from trustroute.analysis.statistics import (
 from trustroute.analysis.study.analysis import MULTIPLICITY, StudyAnalysis
 from trustroute.analysis.study.design import order_text
 from trustroute.analysis.study.manual import manual_display
+from trustroute.core.wording import counted
 
 
 def paired_display(p: pd.DataFrame) -> pd.DataFrame:
@@ -304,8 +305,17 @@ def order_test_line(tests: dict) -> str:
     participants = tests.get("participants", 0)
     friedman = tests.get("friedman_participants", participants)
     within = "" if friedman == participants else f", within the {friedman} with a report at every position"
+    cochran_note, friedman_note = tests.get("cochran_q_note", ""), tests.get("friedman_note", "")
+    if cochran_note and cochran_note == friedman_note:
+        return (f"Across positions within {counted(participants, 'participant')}: no Cochran's Q or "
+                f"Friedman p ({cochran_note}).")
     return (
-        f"Across positions within {participants} participants: Cochran's Q p = "
-        f"{format_p(tests.get('cochran_q_p'))} (satisfaction), Friedman p = "
-        f"{format_p(tests.get('friedman_p'))} (reported trust{within})."
+        f"Across positions within {counted(participants, 'participant')}: Cochran's Q p = "
+        f"{format_p(tests.get('cochran_q_p'))} (satisfaction{_reason(cochran_note)}), Friedman p = "
+        f"{format_p(tests.get('friedman_p'))} (reported trust{within}{_reason(friedman_note)})."
     )
+
+
+def _reason(note: str) -> str:
+    """Why a p-value is missing, after its outcome's name."""
+    return f"; {note}" if note else ""

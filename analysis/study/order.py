@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from trustroute.analysis.formatting import finite_or_none
-from trustroute.analysis.statistics import rate_interval
+from trustroute.analysis.statistics import TOO_FEW, rate_interval
 from trustroute.analysis.study.design import fixed_order
 from trustroute.core.dataset import ATTEMPTS_FILE, read_attempts
 from trustroute.harness.study.config import LIVE_ENGINE
@@ -38,30 +38,52 @@ def position_tests(episodes: pd.DataFrame, column: str) -> dict:
     """Cochran's Q (satisfaction) and Friedman (reported trust) across positions within the
     participants who drove every position. When every participant drove the cells in one fixed order
     (design.py `fixed_order`), position is the cell: those tests would compare the cells, not the
-    orders, so there are none, and `fixed_order` lists the cells by position instead."""
-    from scipy import stats
-    from statsmodels.stats.contingency_tables import cochrans_q
-
+    orders, so there are none, and `fixed_order` lists the cells by position instead. A test that
+    cannot be computed has p None and its reason in `cochran_q_note` / `friedman_note`."""
     tests: dict = {"cochran_q_p": None, "friedman_p": None, "participants": 0}
     positions = episodes["position"].nunique()
     complete = episodes.groupby("participant").filter(lambda g: g["position"].nunique() == positions)
+    tests["participants"] = int(complete["participant"].nunique())
     fixed = fixed_order(episodes)
     if fixed is not None:
-        return {**tests, "participants": int(complete["participant"].nunique()),
-                "fixed_order": [list(cell) for cell in fixed]}
-    if positions >= 2 and complete["participant"].nunique() >= 2:
-        sat = complete.pivot_table(index="participant", columns="position", values=column, aggfunc="first")
-        trust = complete.pivot_table(
-            index="participant", columns="position", values="mean_reported_trust", aggfunc="first"
-        ).dropna()
-        tests["participants"] = int(len(sat))
-        # Friedman reads the participants with a report at every position, which can be fewer
-        tests["friedman_participants"] = int(len(trust))
-        if sat.to_numpy().std() > 0:
-            tests["cochran_q_p"] = float(cochrans_q(sat.to_numpy(dtype=int)).pvalue)
-        if positions >= 3 and len(trust) >= 2 and trust.to_numpy().std() > 0:
-            tests["friedman_p"] = float(stats.friedmanchisquare(*trust.to_numpy().T).pvalue)
+        return {**tests, "fixed_order": [list(cell) for cell in fixed]}
+    if positions < 2:
+        reason = "one position: no order to compare"
+        return {**tests, "cochran_q_note": reason, "friedman_note": reason}
+    if tests["participants"] < 2:
+        reason = f"{TOO_FEW}: fewer than 2 participants drove every position"
+        return {**tests, "cochran_q_note": reason, "friedman_note": reason}
+    sat = complete.pivot_table(index="participant", columns="position", values=column, aggfunc="first")
+    trust = complete.pivot_table(
+        index="participant", columns="position", values="mean_reported_trust", aggfunc="first"
+    ).dropna()
+    # Friedman reads the participants with a report at every position, which can be fewer
+    tests["friedman_participants"] = int(len(trust))
+    tests["cochran_q_p"], tests["cochran_q_note"] = _cochran_q(sat.to_numpy())
+    tests["friedman_p"], tests["friedman_note"] = _friedman(trust.to_numpy())
     return tests
+
+
+def _cochran_q(satisfied: np.ndarray) -> tuple[float | None, str]:
+    """Cochran's Q p-value of participants x positions, or None and why not."""
+    from statsmodels.stats.contingency_tables import cochrans_q
+
+    if satisfied.std() == 0:
+        return None, "no variation: every episode's outcome the same"
+    return float(cochrans_q(satisfied.astype(int)).pvalue), ""
+
+
+def _friedman(trust: np.ndarray) -> tuple[float | None, str]:
+    """Friedman's p-value of participants x positions (mean reported trust), or None and why not."""
+    from scipy import stats
+
+    if trust.shape[1] < 3:
+        return None, f"{trust.shape[1]} positions: Friedman's test needs 3 or more"
+    if len(trust) < 2:
+        return None, f"{TOO_FEW}: fewer than 2 participants with a report at every position"
+    if trust.std() == 0:
+        return None, "no variation: every mean reported trust the same"
+    return float(stats.friedmanchisquare(*trust.T).pvalue), ""
 
 
 def order_tables(episodes: pd.DataFrame, column: str) -> tuple[pd.DataFrame, dict, pd.DataFrame]:

@@ -95,6 +95,36 @@ def test_friedman_names_the_participants_it_reads_when_fewer_than_cochrans():
     assert "with a report" not in order_test_line(complete)
 
 
+def _two_cells(participants: int) -> pd.DataFrame:
+    """Participants alternating the orders (aware, free) and (free, aware) of one spec."""
+    return pd.DataFrame([
+        {"participant": p, "position": position, "spec": "phi1", "condition": condition,
+         "satisfied": (p + position) % 3 != 0, "mean_reported_trust": float(1 + (p * 5 + position * 3) % 7)}
+        for p in range(participants)
+        for position, condition in enumerate(("aware", "free") if p % 2 == 0 else ("free", "aware"))])
+
+
+def test_a_missing_order_test_says_why():
+    """A p-value shown as "-" carries its reason, in the analysis' words for missing estimates."""
+    _, two, _ = order_tables(_two_cells(6), "satisfied")
+    assert two["cochran_q_p"] is not None and two["friedman_p"] is None
+    assert two["cochran_q_note"] == ""
+    assert two["friedman_note"] == "2 positions: Friedman's test needs 3 or more"
+    assert order_test_line(two).endswith(
+        "(satisfaction), Friedman p = - (reported trust; 2 positions: Friedman's test needs 3 or more).")
+    _, one, _ = order_tables(_williams(1), "satisfied")
+    assert order_test_line(one) == (
+        "Across positions within 1 participant: no Cochran's Q or Friedman p (too few observations: "
+        "fewer than 2 participants drove every position).")
+    same = _williams(8).assign(satisfied=True, mean_reported_trust=5.0)
+    _, tied, _ = order_tables(same, "satisfied")
+    line = order_test_line(tied)
+    assert "Cochran's Q p = - (satisfaction; no variation: every episode's outcome the same)" in line
+    assert "Friedman p = - (reported trust; no variation: every mean reported trust the same)" in line
+    _, single, _ = order_tables(_two_cells(4)[lambda e: e["position"] == 0], "satisfied")
+    assert single["cochran_q_note"] == single["friedman_note"] == "one position: no order to compare"
+
+
 def test_a_live_study_counts_the_participants_with_data_not_those_planned():
     """A live study's config counts the participants planned; one who withdrew has their data
     deleted and one who declined has none: the design line and the paper's comparison count the
