@@ -288,8 +288,8 @@ def format_table(analysis: StudyAnalysis, width: int | None = TERMINAL_WIDTH) ->
                   *terminal_table(header, table.values.tolist(), width, max(1, keys))]
         if name == "paired":
             lines += wrapped_text(f"Multiplicity: {MULTIPLICITY}.", width)
-    if analysis.order_tests:
-        lines += wrapped_text(order_test_line(analysis.order_tests), width)
+        if name == "order" and analysis.order_tests:   # under its table, as the report has it
+            lines += wrapped_text(order_test_line(analysis.order_tests), width)
     if analysis.paper_note:
         lines += ["", *wrapped_text(analysis.paper_note, width)]
     return "\n".join(lines)

@@ -125,6 +125,18 @@ def test_a_missing_order_test_says_why():
     assert single["cochran_q_note"] == single["friedman_note"] == "one position: no order to compare"
 
 
+def test_the_terminal_prints_the_order_tests_under_the_order_table(model_study):
+    """As the report does: the line belongs to the table by position, not to the last table."""
+    from trustroute.analysis.study.analysis import study_analysis
+    from trustroute.analysis.study.display import format_table
+
+    analysis = study_analysis(model_study)
+    lines = format_table(analysis).splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("Order effects"))
+    after = lines[start + 3 + len(analysis.order):]
+    assert after[0].startswith("Across positions within 12 participants: Cochran's Q p = "), after[:2]
+
+
 def test_a_live_study_counts_the_participants_with_data_not_those_planned():
     """A live study's config counts the participants planned; one who withdrew has their data
     deleted and one who declined has none: the design line and the paper's comparison count the
