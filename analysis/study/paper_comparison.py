@@ -14,6 +14,7 @@ from trustroute.analysis.statistics import rate_interval
 from trustroute.analysis.study.design import study_participants
 from trustroute.analysis.study_directory import spec_path
 from trustroute.core.packaged import PACKAGED_SPECS
+from trustroute.core.wording import counted
 from trustroute.networks.town import load_town
 from trustroute.policies.logic.spec import load_spec
 
@@ -24,7 +25,7 @@ def is_paper_comparable(manifest: dict, episodes: pd.DataFrame) -> tuple[bool, s
     reasons = []
     participants = study_participants(manifest, episodes)
     if participants != paper_figures.PARTICIPANTS:
-        reasons.append(f"{participants} participants, the paper had {paper_figures.PARTICIPANTS}")
+        reasons.append(f"{counted(participants, 'participant')}, the paper had {paper_figures.PARTICIPANTS}")
     default_town = load_town(None)
     town = load_town(config.get("town")) if config.get("town") else default_town
     if town.content_hash != default_town.content_hash:

@@ -151,5 +151,7 @@ def test_a_live_study_counts_the_participants_with_data_not_those_planned():
     line = study_lines(manifest, episodes)[0]
     assert line.startswith("live-study: 19 participants with data (of 21 planned) x 2 specs"), line
     assert "19 participants, the paper had 21" in is_paper_comparable(manifest, episodes)[1]
+    one = episodes[episodes["participant"] == episodes["participant"].iloc[0]]
+    assert "1 participant, the paper had 21" in is_paper_comparable(manifest, one)[1]
     simulated = {**manifest, "engine": "model"}
     assert study_participants(simulated, episodes) == 21   # a simulated study runs every planned one
