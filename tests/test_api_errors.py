@@ -29,6 +29,14 @@ def test_api_errors_name_keyword_arguments(call, named):
     assert "--" not in str(caught.value)
 
 
+def test_a_command_in_an_api_error_keeps_its_flags(tmp_path):
+    spec = tmp_path / "street.toml"
+    spec.write_text('name = "street"\nstart = "E-A"\nformula = "F v"\n\n[states]\n'
+                    'v = { street = "Rudower Chaussee" }\n')
+    with pytest.raises(InputError, match=r"\(trustroute town roads TOWN --street NAME\)"):
+        trustroute.load_spec(spec)
+
+
 def test_analyze_names_its_belief_source_argument(tmp_path):
     study = trustroute.run_study(STUDY, out=tmp_path / "study").study_dir
     with pytest.raises(InputError, match="belief_source: unknown belief source 'bogus'") as caught:

@@ -29,6 +29,9 @@ class InputError(Exception):
 # A command-line flag in a message ("--initial-trust"), not a dash inside a word or a path.
 _FLAG = re.compile(r"(?<![\w/.-])--([a-z][a-z0-9]*(?:-[a-z0-9]+)*)")
 _WITH_FLAG = re.compile(r"\bwith (--[a-z])")
+# A trustroute command a message tells the reader to type ("trustroute town roads TOWN --street
+# NAME"): its subcommand words, then its placeholders and flags; typed as it is, so its flags stay.
+_COMMAND = re.compile(r"(\btrustroute(?: [a-z][a-z-]*)+(?: (?:[A-Z][A-Z_.]*|--[a-z][a-z0-9-]*))*)")
 
 
 def keyword_names(error: InputError) -> InputError:
@@ -38,11 +41,17 @@ def keyword_names(error: InputError) -> InputError:
         text = _WITH_FLAG.sub(r"as \1", text)   # "a file with --town": "a file as town"
         return _FLAG.sub(lambda flag: flag.group(1).replace("-", "_"), text)
 
+    def outside_commands(text: str) -> str:
+        # re.split with one group: the odd parts are the commands
+        parts = _COMMAND.split(text)
+        return "".join(in_words(part) if index % 2 == 0 else part for index, part in enumerate(parts))
+
     def keyword(text: str) -> str:
-        # a command quoted in backticks ("run `trustroute study CONFIG --out DIR`") is typed as it
-        # is: its flags stay; the text outside the quotes (the even parts) is said as keywords
+        # a command, quoted in backticks ("run `trustroute study CONFIG --out DIR`") or not, is typed
+        # as it is: its flags stay; the text outside the quotes (the even parts) is said as keywords
         parts = text.split("`")
-        return "`".join(in_words(part) if index % 2 == 0 else part for index, part in enumerate(parts))
+        return "`".join(outside_commands(part) if index % 2 == 0 else part
+                        for index, part in enumerate(parts))
 
     said = InputError.__new__(type(error))
     said.__dict__.update(error.__dict__)
