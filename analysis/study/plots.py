@@ -22,6 +22,7 @@ takeover_plot       takeover rate per incident type and condition with exact 95 
 from __future__ import annotations
 
 import itertools
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,6 +68,13 @@ def _save(fig, path: Path, tight_box: bool = False) -> Path:
     fig.savefig(vector_path(path), **box)
     _pyplot().close(fig)
     return path
+
+
+def _suptitle(fig, text: str, fontsize: float) -> None:
+    """The figure's title wrapped to the figure's width, which a plot of one spec makes narrower than
+    the title (a character is taken as 0.6 of the font size: DejaVu Sans' widest letters stay under)."""
+    fig.suptitle(textwrap.fill(text, max(20, int(fig.get_figwidth() * 72 / (0.6 * fontsize)))),
+                 fontsize=fontsize)
 
 
 def _legend_outside(ax) -> None:
@@ -164,8 +172,7 @@ def paired_plot(per_participant: pd.DataFrame, conditions: tuple[str, ...], path
     axes[0][0].set_ylabel("participant's mean reported trust")
     source = f" on {belief_source}" if belief_source else ""
     colours = f"; green = higher under {conditions[0]}" if k == 2 else ""
-    fig.suptitle(f"Per participant: {' / '.join(conditions)} (filled = spec satisfied{source}{colours})",
-                 fontsize=9)
+    _suptitle(fig, f"Per participant: {' / '.join(conditions)} (filled = spec satisfied{source}{colours})", 9)
     return _save(fig, path)
 
 

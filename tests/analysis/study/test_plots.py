@@ -46,3 +46,22 @@ def test_trust_bands_rest_on_enough_episodes():
     true, stats, band = trust_series(_cell(MIN_BAND_EPISODES + 2))
     assert len(band) == 6 and (band["count"] >= MIN_BAND_EPISODES).all()
     assert np.allclose((band["low"] + band["high"]) / 2, stats["mean"])
+
+
+def test_the_participants_title_fits_a_plot_of_one_spec(tmp_path, monkeypatch):
+    from trustroute.analysis.study import plots
+
+    figures = []
+    real = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, path, **kw: figures.append(fig) or real(fig, path, **kw))
+    one_spec = pd.DataFrame({"participant": range(4), "spec": ["drt"] * 4, "trust_aware": [5.0, 6, 4, 3],
+                             "trust_free": [4.0, 6, 5, 3], "satisfied_aware": [True] * 4,
+                             "satisfied_free": [True, False, True, True]})
+    plots.paired_plot(one_spec, ("aware", "free"), tmp_path / "participants.png", belief_source="true")
+    (fig,) = figures
+    title = fig.get_suptitle()
+    assert "green = higher under aware" in title.replace("\n", " ")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    box = fig._suptitle.get_window_extent(FigureCanvasAgg(fig).get_renderer())  # as saved
+    assert 0 <= box.x0 and box.x1 <= fig.bbox.width and 0 <= box.y0 and box.y1 <= fig.bbox.height
