@@ -12,7 +12,7 @@ paired_plot         per participant, mean reported trust under every condition j
 trust_plot          mean reported and true trust against the road index, per spec and condition,
                     with a 95 % band of the mean of reported trust (normal approximation), drawn
                     only at indices with at least MIN_BAND_EPISODES reports, the legend saying
-                    how many episodes the band rests on
+                    how many episodes the band rests on (or that no mean is drawn, and why)
 route_plot          share of episodes driving each road on the town map (colour bar), with the
                     spec's start road, its waypoint roads and the incident types marked; roads
                     along their courses, offsets and markers scaled to the town (networks/town_map.py)
@@ -239,7 +239,7 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
             true, stats, band = trust_series(group)
             if len(band):
                 ax.fill_between(band.index, band["low"], band["high"], color=colour, alpha=0.2, lw=0)
-            notes.append(f"{condition}: {band_note(band)}")
+            notes.append(f"{condition}: {band_note(band) if len(true) else line_note()}")
             ax.plot(stats.index, stats["mean"], color=colour, label=f"{condition} reported (mean, 95% band)")
             ax.plot(true.index, true.values, color=colour, ls="--", lw=1, label=f"{condition} true")
         ax.set_title("\n".join([spec, *notes]), fontsize=8)
@@ -252,6 +252,11 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
                  f"still run; bands where >= {MIN_BAND_EPISODES} report)", fontsize=9,
                  y=1.03 + 0.045 * episodes["condition"].nunique())  # above the panels' band notes
     return _save(fig, path, tight_box=True)
+
+
+def line_note() -> str:
+    """Why a cell draws no mean: at no index enough of its episodes still run (a small study)."""
+    return f"no mean (< {MIN_LINE_EPISODES} episodes at every index)"
 
 
 def band_note(band: pd.DataFrame) -> str:

@@ -65,3 +65,21 @@ def test_the_participants_title_fits_a_plot_of_one_spec(tmp_path, monkeypatch):
 
     box = fig._suptitle.get_window_extent(FigureCanvasAgg(fig).get_renderer())  # as saved
     assert 0 <= box.x0 and box.x1 <= fig.bbox.width and 0 <= box.y0 and box.y1 <= fig.bbox.height
+
+
+def test_a_trust_panel_without_a_mean_says_why(tmp_path, monkeypatch):
+    from trustroute.analysis.study import plots
+
+    figures = []
+    real = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, path, **kw: figures.append(fig) or real(fig, path, **kw))
+    roads = pd.concat([_cell(MIN_LINE_EPISODES - 1).assign(episode_id=lambda f: "a" + f["episode_id"]),
+                       _cell(MIN_LINE_EPISODES).assign(episode_id=lambda f: "f" + f["episode_id"])])
+    roads = roads.rename(columns={"reported": "reported_trust"})
+    episodes = pd.DataFrame({"episode_id": sorted(set(roads["episode_id"])), "spec": "drt"})
+    episodes["condition"] = np.where(episodes["episode_id"].str.startswith("a"), "aware", "free")
+    plots.trust_plot(roads, episodes, tmp_path / "trust.png")
+    (fig,) = figures
+    notes = fig.axes[0].get_title().splitlines()
+    assert notes[1] == f"aware: no mean (< {MIN_LINE_EPISODES} episodes at every index)"
+    assert notes[2] == f"free: no band (< {MIN_BAND_EPISODES} reports per index)"
