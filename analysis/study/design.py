@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import pandas as pd
 
+from trustroute.core.wording import counted
 from trustroute.harness.study.config import ENGINES, LIVE_ENGINE
 
 
@@ -26,7 +27,7 @@ def study_participants(manifest: dict, episodes: pd.DataFrame) -> int:
 def participants_text(manifest: dict, episodes: pd.DataFrame) -> str:
     """The participants as the report's design line shows them: a live study's with the number
     planned beside them."""
-    text = f"{study_participants(manifest, episodes)} participants"
+    text = counted(study_participants(manifest, episodes), "participant")
     planned = manifest.get("config", {}).get("participants")
     if manifest.get("engine") == LIVE_ENGINE and planned is not None:
         text += f" with data (of {int(planned)} planned)"

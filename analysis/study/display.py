@@ -242,7 +242,7 @@ def display_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
 TABLE_TITLES = {
     "cells": "Satisfaction and trust per spec and condition",
     "paired": "Paired effects over participants",
-    "repeated": "Repeated-measures models (one group per participant, both specs)",
+    "repeated": "Repeated-measures models (one group per participant, all specs)",
     "takeovers": "Takeover rate per incident type and condition",
     "order": "Order effects: by position in each participant's order",
     "carryover": "Carry-over: by the condition driven just before",

@@ -33,6 +33,7 @@ from trustroute.analysis.study.display import (
 from trustroute.analysis.study.plots import write_plots
 from trustroute.analysis.study_directory import study_inputs
 from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE, read_roads
+from trustroute.core.wording import counted
 
 NOTES = [
     "Satisfaction is re-evaluated from the logged roads with the spec's DFA (policies.trace). "
@@ -62,7 +63,7 @@ NOTES = [
     "The 'all specs' row is per participant (the mean over specs of each participant's difference); its "
     "satisfaction test is the exact two-sided sign test of the participants ahead under A against those "
     "ahead under B (participants without a difference dropped), and the repeated-measures models use "
-    "one group per participant, so a participant's episodes under both specs never count as independent "
+    "one group per participant, so a participant's episodes under several specs never count as independent "
     "pairs. Separation is checked from the data before the "
     "conditional logit is fitted; on separated data the row shows the exact conditional odds ratio of "
     "the matched pairs and says why in its note.",
@@ -134,8 +135,9 @@ def study_lines(manifest: dict, episodes: pd.DataFrame) -> list[str]:
     failed = len(manifest.get("failed_episodes", []))
     packages = ", ".join(f"{k} {v}" for k, v in manifest.get("packages", {}).items())
     return [
-        f"{manifest.get('study')}: {participants_text(manifest, episodes)} x {n_specs} specs x "
-        f"{n_conditions} conditions, {manifest.get('engine')} engine, {design_text(manifest, episodes)}.",
+        f"{manifest.get('study')}: {participants_text(manifest, episodes)} x {counted(n_specs, 'spec')} "
+        f"x {counted(n_conditions, 'condition')}, {manifest.get('engine')} engine, "
+        f"{design_text(manifest, episodes)}.",
         f"Episodes: {manifest.get('finished_episodes')} finished of "
         f"{manifest.get('planned_episodes')} planned; {failed} failed.",
         f"{config_text(manifest)}, git {manifest.get('git_revision')}, "

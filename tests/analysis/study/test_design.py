@@ -155,3 +155,18 @@ def test_a_live_study_counts_the_participants_with_data_not_those_planned():
     assert "1 participant, the paper had 21" in is_paper_comparable(manifest, one)[1]
     simulated = {**manifest, "engine": "model"}
     assert study_participants(simulated, episodes) == 21   # a simulated study runs every planned one
+
+
+def test_a_study_of_one_spec_is_described_in_the_singular():
+    """The design line counts in the singular for one, and the models' title does not speak of two
+    specs on a study of one."""
+    from trustroute.analysis.study.display import TABLE_TITLES
+
+    config = {"participants": 1, "specs": ["drt.toml"], "conditions": ["aware", "free"], "seed": 3}
+    manifest = {"study": "drt", "engine": "sumo", "config_path": "drt.toml", "config_hash": "0" * 64,
+                "config": config}
+    episodes = pd.DataFrame([{"participant": 0, "position": i, "spec": "drt", "condition": c}
+                             for i, c in enumerate(["aware", "free"])])
+    line = study_lines(manifest, episodes)[0]
+    assert line.startswith("drt: 1 participant x 1 spec x 2 conditions, sumo engine"), line
+    assert "both" not in TABLE_TITLES["repeated"]
