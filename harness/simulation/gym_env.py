@@ -294,6 +294,11 @@ class TrustRoutingEnv(gymnasium.Env):
                              "legal ones)")
         return int(action)  # type: ignore[call-overload]
 
+    def render(self) -> None:
+        """Nothing: there are no render modes, and gymnasium's rule for `render_mode=None` is that no
+        render is computed (the base class would raise NotImplementedError instead)."""
+        return None
+
     def close(self) -> None:
         self._close_episode()
         super().close()

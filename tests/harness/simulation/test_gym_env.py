@@ -72,6 +72,18 @@ def test_registered_id_makes_the_environment():
     env.close()
 
 
+@pytest.mark.filterwarnings("ignore:.*render_mode='rgb_array' that is not in the possible")
+def test_render_without_a_render_mode_renders_nothing():
+    """gymnasium's rule for render_mode None: no render is computed, render() returns None."""
+    env = gymnasium.make(ENV_ID, spec="phi1", engine="model")
+    env.reset(seed=0)
+    assert env.render_mode is None and env.metadata["render_modes"] == []
+    assert env.render() is None
+    with pytest.raises(ValueError, match="no render modes"):
+        gymnasium.make(ENV_ID, spec="phi1", render_mode="rgb_array")
+    env.close()
+
+
 def test_check_env_model_engine():
     env = gymnasium.make(ENV_ID, spec="phi1", engine="model")
     check_env(env.unwrapped)
