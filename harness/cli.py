@@ -97,6 +97,10 @@ def usage_fix(exc: click.UsageError, command: str) -> str:
     return f"follow the usage `{command} --help` prints"
 
 
+INTERRUPTED = ("interrupted (what a study or demo wrote stays: the same command resumes it, running only "
+               "the episodes not yet finished)")
+
+
 def main(argv: list[str] | None = None) -> None:
     # when the command began, which a --time-limit counts from (harness/commands/options.py): the
     # process's start when the process is the command (no argv given: the console script, python -m
@@ -107,8 +111,9 @@ def main(argv: list[str] | None = None) -> None:
     except InputError as exc:
         click.echo(f"error: {exc.one_line()}", err=True)
         sys.exit(2)
-    except click.exceptions.Abort:
-        click.echo("aborted", err=True)
+    except click.exceptions.Abort as exc:
+        # click turns Ctrl-C (and SIGTERM during a study, harness/study/workers.py) into Abort
+        click.echo(INTERRUPTED if isinstance(exc.__context__, KeyboardInterrupt) else "aborted", err=True)
         sys.exit(130)
     except click.UsageError as exc:
         # One line naming the fix, like every other error (click would print the usage, a hint and
@@ -122,7 +127,7 @@ def main(argv: list[str] | None = None) -> None:
         click.echo(f"error: {' '.join(exc.format_message().split())}", err=True)
         sys.exit(2 if exc.exit_code == 2 else exc.exit_code)
     except KeyboardInterrupt:
-        click.echo("interrupted", err=True)
+        click.echo(INTERRUPTED, err=True)
         sys.exit(130)
     except OSError as exc:
         # The last net under every command: an I/O failure no command foresaw (a disk that filled
