@@ -10,6 +10,8 @@ from trustroute.networks.road_lookup import roads_into, roads_on_street
 from trustroute.networks.town import Town
 
 STATE_SELECTOR_KEYS = ("junction", "street")
+# a spec written for an imported town, checked against another (the default one, without --town)
+OTHER_TOWN_FIX = "pass the town the spec is written for (--town)"
 SELECTOR_EXAMPLE = 'write v1 = {junction = "J12"} or v1 = {street = "Main Street"} (or a list of names)'
 
 
@@ -41,14 +43,14 @@ def selected_roads(entry: dict, atom: str, place: str, source: str, town: Town |
         if key == "junction":
             if name not in town.junctions:
                 raise InputError(source, place, f"state atom '{atom}': '{name}' is not a junction of the "
-                                 f"town ({town_name})", "use a junction of the town (trustroute town roads "
-                                 "TOWN --near X Y lists the roads near a point)")
+                                 f"town ({town_name})", f"{OTHER_TOWN_FIX}, or use a junction of the town "
+                                 "(trustroute town roads TOWN --near X Y lists the roads near a point)")
             roads |= roads_into(town, name)
         else:
             found = roads_on_street(town, name)
             if not found:
                 raise InputError(source, place, f"state atom '{atom}': no road of the town ({town_name}) "
-                                 f"is on a street named '{name}'", "use a street name the town's geometry "
-                                 "gives (trustroute town roads TOWN --street NAME)")
+                                 f"is on a street named '{name}'", f"{OTHER_TOWN_FIX}, or use a street name "
+                                 "the town's geometry gives (trustroute town roads TOWN --street NAME)")
             roads |= found
     return sorted(roads)

@@ -209,6 +209,19 @@ def test_bad_selectors_name_the_atom_line_and_fix(town, selector, message):
     assert "state atom 'v1'" in str(info.value) and "line 8" in str(info.value)
 
 
+@pytest.mark.parametrize("selector", ['{junction = "J12"}', '{street = "Rudower Chaussee"}'])
+def test_a_selector_of_another_town_names_the_town_option(capsys, tmp_path, selector):
+    """A spec written for an imported town, checked without --town (against the default town):
+    the fix names --town first, then the names the town has."""
+    from tests.cli import run_cli
+
+    spec = tmp_path / "drt.toml"
+    spec.write_text(PHI1_TEXT.replace('v1 = ["B-G", "F-G", "I-G"]', f"v1 = {selector}"))
+    code, _, err = run_cli(capsys, "spec", "check", str(spec))
+    assert code == 2 and "(default town)" in err, err
+    assert "(fix: pass the town the spec is written for (--town), or " in err
+
+
 def test_a_selector_needs_a_town():
     with pytest.raises(InputError, match="names its roads by junction, which only a town can resolve"):
         spec_from_text(_by_junction("G", "J", "L"), "by_junction.toml")
