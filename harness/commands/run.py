@@ -11,6 +11,7 @@ import click
 
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults, ranges
+from trustroute.core.wording import counted
 from trustroute.harness.commands.inputs import POPULATION_GIVEN, driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import SEED, Checked, UsageFix
@@ -200,7 +201,7 @@ def run(spec_argument: str | None, options: RunOptions) -> None:
     if as_json:
         click.echo(json.dumps(with_paths(summary, written)))
         return
-    click.echo(f"{episode_id}: {summary['end_reason']} after {summary['junctions']} junctions, "
+    click.echo(f"{episode_id}: {summary['end_reason']} after {counted(summary['junctions'], 'junction')}, "
                f"satisfied={summary['satisfied']}, takeovers={summary['takeovers']}, final trust "
                f"{summary['final_trust']}, sim {summary['sim_seconds']:.1f} s, wall "
                f"{summary['wall_seconds']:.2f} s")

@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from trustroute.app.spec_check import spec_report
+from trustroute.core.wording import counted
 from trustroute.harness.commands.inputs import POPULATION_GIVEN, spec_argument, town_option
 from trustroute.harness.commands.output import json_option, with_paths
 
@@ -22,9 +23,8 @@ def waypoint_line(start: str, waypoints: list[dict]) -> str:
     """`start E-A -> v1 (3 roads): 2 junctions -> ...`."""
     parts = [f"start {start}"]
     for leg in waypoints:
-        apart = "unreachable" if leg["junctions"] is None else (
-            f"{leg['junctions']} junction{'' if leg['junctions'] == 1 else 's'}")
-        parts.append(f"{leg['to']} ({leg['roads']} roads): {apart}")
+        apart = "unreachable" if leg["junctions"] is None else counted(leg["junctions"], "junction")
+        parts.append(f"{leg['to']} ({counted(leg['roads'], 'road')}): {apart}")
     return "waypoints, fewest junctions from the previous: " + " -> ".join(parts)
 
 

@@ -16,6 +16,7 @@ import click
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults, ranges
+from trustroute.core.wording import counted
 from trustroute.harness.commands.inputs import (
     POPULATION_GIVEN,
     driver_field,
@@ -271,7 +272,7 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
                "lower": value.lower, "upper": value.upper,
                "expected_final_trust": finite_or_none(value.expected_final_trust), "belief_rule": belief_rule}
     emit(as_json, payload, [
-        f"{spec.name} trust-free route ({len(route) - 1} junctions, {payload['length_m']:.0f} m): "
+        f"{spec.name} trust-free route ({counted(len(route) - 1, 'junction')}, {payload['length_m']:.0f} m): "
         + " ".join(route),
         f"P(satisfied) = {value.satisfaction_probability:.6f}, E[final trust] = "
         f"{value.expected_final_trust:.4f}"])

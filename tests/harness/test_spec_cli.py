@@ -87,3 +87,19 @@ def test_waypoint_distances_in_junctions(capsys, tmp_path):
     assert json.loads(out)["waypoints"] == [
         {"from": "start", "to": "there", "junctions": 3, "roads": 3},  # no U-turn at A: A-F, F-H, H-L
         {"from": "there", "to": "back", "junctions": 1, "roads": 1}]  # K-L (or H-L), then L-E
+
+
+def test_one_road_and_one_junction_are_said_in_the_singular(capsys, tmp_path):
+    """A town of one street (two junctions, as an OpenStreetMap race track imports): the waypoint
+    line, the trust-free route and the episode count one road and one junction in the singular."""
+    town = tmp_path / "track.json"
+    town.write_text(json.dumps({"junctions": {"A": [0, 0], "B": [500, 0]}, "roads": [["A", "B"]],
+                                "incidents": {"A-B": "none", "B-A": "none"}}))
+    spec = tmp_path / "back.toml"
+    spec.write_text('name = "back"\nstart = "A-B"\nformula = "F v"\n[states]\nv = ["B-A"]\n')
+    code, out, err = run_cli(capsys, "spec", "check", str(spec), "--town", str(town))
+    assert code == 0 and "start A-B -> v (1 road): 1 junction" in out, err
+    code, out, err = run_cli(capsys, "baseline", str(spec), "--town", str(town))
+    assert code == 0 and "back trust-free route (1 junction, 500 m): A-B B-A" in out, err
+    code, out, err = run_cli(capsys, "run", str(spec), "--town", str(town), "--policy", "free")
+    assert code == 0 and out.startswith("back-free-s0: accepted after 1 junction, satisfied=True"), err
