@@ -376,9 +376,10 @@ def _check_roads(roads: list[str], owner: str, place: Callable[[str], str], sour
 def _state_atoms(raw: Mapping[str, object], spec: _SpecSource,
                  town: Town | None) -> dict[str, frozenset[str]]:
     """The `[states]` table: atom -> list of directed roads, or a selector naming them by junction
-    or street."""
+    or street. Checked in the file's order, so the first error reported is the first in the file;
+    kept sorted by name."""
     atoms: dict[str, frozenset[str]] = {}
-    for atom in sorted(raw):
+    for atom in raw:
         spec.check_atom_name(atom, "states")
         label = f"states.{atom}"
         needles = (r"^\s*\[states\]", rf"^\s*{re.escape(atom)}\s*=")
@@ -396,7 +397,7 @@ def _state_atoms(raw: Mapping[str, object], spec: _SpecSource,
 
         _check_roads(roads, f"state atom '{atom}'", road_place, spec.source, town)
         atoms[atom] = frozenset(roads)
-    return atoms
+    return dict(sorted(atoms.items()))
 
 
 def _belief_atoms(raw: Mapping[str, object], spec: _SpecSource, taken: set[str]) -> dict[str, BeliefAtom]:

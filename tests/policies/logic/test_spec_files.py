@@ -222,6 +222,16 @@ def test_a_selector_of_another_town_names_the_town_option(capsys, tmp_path, sele
     assert "(fix: pass the town the spec is written for (--town), or " in err
 
 
+def test_the_first_bad_atom_in_the_file_is_the_one_reported(town):
+    """Atoms are checked in the file's order: 'zeta' (line 5) before 'alpha' (line 6)."""
+    text = ('name = "s"\nstart = "E-A"\nformula = "F (zeta & F alpha)"\n[states]\n'
+            'zeta = {junction = "Z1"}\nalpha = {street = "Rudower Chaussee"}\n')
+    with pytest.raises(InputError, match=r"line 5 column 1 \(states.zeta\): state atom 'zeta'"):
+        spec_from_text(text, "s.toml", town)
+    good = text.replace('"Z1"', '"G"').replace('{street = "Rudower Chaussee"}', '["I-J"]')
+    assert list(spec_from_text(good, "s.toml", town).state_atoms) == ["alpha", "zeta"]
+
+
 def test_a_selector_needs_a_town():
     with pytest.raises(InputError, match="names its roads by junction, which only a town can resolve"):
         spec_from_text(_by_junction("G", "J", "L"), "by_junction.toml")
