@@ -204,6 +204,15 @@ def condition_label(condition: str) -> str:
     return condition if condition in NAMED_CONDITIONS else Path(condition).stem
 
 
+def _looked_in(value: str, base: Path, *more: str) -> str:
+    """' (looked in A, B and C)': the config's folder and the current directory (once when they are
+    one; neither for an absolute path), then `more`."""
+    relative = [] if Path(value).is_absolute() else [base.resolve(), Path.cwd().resolve()]
+    places = [*map(str, dict.fromkeys(relative)), *more]
+    return f" (looked in {', '.join(places[:-1])} and {places[-1]})" if len(places) > 1 else (
+        f" (looked in {places[0]})" if places else "")
+
+
 def _resolve_path(value: str, base: Path, source: str, key: str, what: str, fix: str,
                   packaged: PackagedKind | None = None) -> Path:
     """Config folder first, then the current directory, then a packaged file of that name."""
@@ -215,7 +224,7 @@ def _resolve_path(value: str, base: Path, source: str, key: str, what: str, fix:
     if found is not None:
         return found.resolve()
     names = f" or a packaged name ({', '.join(packaged.names())})" if packaged is not None else ""
-    raise InputError(source, key, f"{what} {value!r} not found (looked in {base} and {Path.cwd()})",
+    raise InputError(source, key, f"{what} {value!r} not found{_looked_in(value, base)}",
                      fix + names)
 
 
@@ -232,7 +241,7 @@ def _resolve_spec(value: str, base: Path, source: str, key: str) -> Path:
     raise InputError(
         source,
         key,
-        f"spec {value!r} not found (looked in {base}, {Path.cwd()} and the packaged specs)",
+        f"spec {value!r} not found{_looked_in(value, base, 'the packaged specs')}",
         SPECS.fix(),
     )
 

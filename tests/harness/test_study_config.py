@@ -346,3 +346,23 @@ def test_a_study_dict_takes_numpy_arrays_strings_and_bools_as_the_python_ones():
     computed["study"]["seed"] = np.bool_(True)   # a bool is no integer, numpy's neither
     with pytest.raises(InputError, match="study.seed"):
         study_config_from_dict(computed)
+
+
+def test_a_missing_file_names_each_folder_searched_once(tmp_path, monkeypatch):
+    """The config's folder and the current directory are named once when they are one folder, and
+    not at all for an absolute path, which is looked for nowhere else."""
+    import re
+
+    monkeypatch.chdir(tmp_path)
+    folder = re.escape(str(tmp_path.resolve()))
+    config = _write(tmp_path, MINIMAL + 'town = "drtx.json"\n')
+    with pytest.raises(InputError, match=rf"town file 'drtx.json' not found \(looked in {folder}\) \(fix"):
+        load_study_config(config)
+    absolute = tmp_path / "gone.json"
+    config.write_text(MINIMAL + f'town = "{absolute}"\n')
+    with pytest.raises(InputError, match=rf"town file '{re.escape(str(absolute))}' not found \(fix: "):
+        load_study_config(config)
+    config.write_text(MINIMAL.replace('"specs/phi2.toml"', '"nope.toml"'))
+    with pytest.raises(InputError, match=rf"spec 'nope.toml' not found \(looked in {folder} and the packaged "
+                                         r"specs\)"):
+        load_study_config(config)
