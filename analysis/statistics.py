@@ -382,13 +382,14 @@ def bootstrap_ci(
     rng: np.random.Generator,
     resamples: int = DEFAULT_RESAMPLES,
     level: float = DEFAULT_LEVEL,
-) -> tuple[float, float]:
-    """Percentile bootstrap interval of the mean (scipy.stats.bootstrap); NaNs dropped, empty: nan."""
+) -> tuple[float, float, str]:
+    """Percentile bootstrap interval of the mean (scipy.stats.bootstrap) and its method:
+    BOOTSTRAP_PERCENTILE, or BOOTSTRAP_DEGENERATE where every value is the same (the interval is
+    the point). NaNs dropped; empty: nan, nan and ""."""
     if not 0 < level < 1:
         raise ValueError(f"level must lie in (0, 1), got {level}")
     data = np.asarray(values, dtype=float)
-    low, high, _ = _bootstrap_mean(data[~np.isnan(data)], rng, resamples, level, BOOTSTRAP_PERCENTILE)
-    return low, high
+    return _bootstrap_mean(data[~np.isnan(data)], rng, resamples, level, BOOTSTRAP_PERCENTILE)
 
 
 def keyed_rng(seed: int, *key: object) -> np.random.Generator:

@@ -38,7 +38,7 @@ def cell_table(
             wilson_low, wilson_high = rate_interval(k, n, method="wilson")
             trust = group["mean_reported_trust"].to_numpy(dtype=float)
             rng = keyed_rng(seed, TRUST_MEAN, spec, condition)
-            trust_low, trust_high = bootstrap_ci(trust, rng, resamples)
+            trust_low, trust_high, trust_method = bootstrap_ci(trust, rng, resamples)
             exp = expected.get(spec, {}).get(condition, {})
             rows.append(
                 {
@@ -58,6 +58,7 @@ def cell_table(
                     "mean_trust": finite_or_none(np.nanmean(trust)) if np.isfinite(trust).any() else None,
                     "trust_ci_low": finite_or_none(trust_low),
                     "trust_ci_high": finite_or_none(trust_high),
+                    "trust_ci_method": trust_method or None,
                     "mean_true_trust": finite_or_none(group["mean_trust"].mean()) if n else None,
                     "mean_final_trust": finite_or_none(group["final_trust"].mean()) if n else None,
                     "mean_junctions": finite_or_none(group["junctions"].mean()) if n else None,

@@ -83,6 +83,14 @@ APPROXIMATE_MARK = "≈ "
 NAMED_METHODS = (BOOTSTRAP_PERCENTILE, BOOTSTRAP_DEGENERATE)
 
 
+def named_interval_column(cells: pd.DataFrame, low: str, high: str, method: str, digits: int) -> list[str]:
+    """'[low, high]' per row (formatting.py `interval_column`), followed by "(degenerate)" where
+    the interval is the point (column `method`): the column's title names the percentile interval."""
+    methods = cells[method] if method in cells else [None] * len(cells)
+    return [f"{text} ({how})" if how == BOOTSTRAP_DEGENERATE else text
+            for text, how in zip(interval_column(cells, low, high, digits), methods, strict=True)]
+
+
 def named_estimate_column(p: pd.DataFrame, value: str, low: str, high: str, method: str) -> list[str]:
     """'estimate [low, high]' per row (formatting.py `estimate_column`), followed by the interval's
     method in parentheses where it is one of NAMED_METHODS (column `method`)."""
@@ -133,10 +141,11 @@ def _group_columns(groups: pd.DataFrame) -> dict[str, pd.Series]:
 TRUE_TRUST, STATED_TRUST = "mean true trust", "mean stated trust"
 
 
-def _trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
+def trust_columns(cells: pd.DataFrame) -> dict[str, pd.Series]:
     """Reported and true trust and takeovers, as every per-cell display table shows them."""
     return {"mean trust (reported)": cells["mean_trust"].map(number_text),
-            "trust 95% CI": interval_column(cells, "trust_ci_low", "trust_ci_high", 2),
+            "trust 95% CI": named_interval_column(cells, "trust_ci_low", "trust_ci_high",
+                                                  "trust_ci_method", 2),
             TRUE_TRUST: cells["mean_true_trust"].map(number_text),
             "takeovers / episode": cells["takeovers_per_episode"].map(lambda v: number_text(v, 2))}
 
@@ -148,7 +157,7 @@ def _cell_columns(c: pd.DataFrame, other: str) -> dict[str, pd.Series]:
             f"rate ({other})": c[f"satisfaction_rate_{other}"].map(number_text),
             "exact value [L, U]": interval_column(c, "exact_lower", "exact_upper"),
             "synthesized [L, U]": interval_column(c, "synthesized_lower", "synthesized_upper"),
-            **_trust_columns(c),
+            **trust_columns(c),
             "junctions": c["mean_junctions"].map(lambda v: number_text(v, 1)),
             "fallback": c["fallback_rate"].map(lambda v: number_text(v, 2))}
 
@@ -194,7 +203,7 @@ def _carryover_columns(k: pd.DataFrame) -> dict[str, pd.Series]:
 
 def _per_type_columns(c: pd.DataFrame) -> dict[str, pd.Series]:
     return {"driver type": c["driver_type"], "participants": c["participants"], "spec": c["spec"],
-            "condition": c["condition"], "n": c["n"], **_outcome_columns(c), **_trust_columns(c)}
+            "condition": c["condition"], "n": c["n"], **_outcome_columns(c), **trust_columns(c)}
 
 
 def questionnaire_display(q: pd.DataFrame) -> pd.DataFrame:

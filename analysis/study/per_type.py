@@ -19,7 +19,7 @@ from trustroute.analysis.study.paired import (
 ALL_TYPES = "all"
 PER_TYPE_CELL_COLUMNS = (
     "spec", "condition", "n", "satisfied", "satisfaction_rate", "ci_low", "ci_high", "mean_trust",
-    "trust_ci_low", "trust_ci_high", "mean_true_trust", "takeovers_per_episode",
+    "trust_ci_low", "trust_ci_high", "trust_ci_method", "mean_true_trust", "takeovers_per_episode",
 )
 
 

@@ -11,7 +11,13 @@ import warnings
 import numpy as np
 import pytest
 
-from trustroute.analysis.statistics import bootstrap_ci, mcnemar_exact, wilcoxon_paired
+from trustroute.analysis.statistics import (
+    BOOTSTRAP_DEGENERATE,
+    BOOTSTRAP_PERCENTILE,
+    bootstrap_ci,
+    mcnemar_exact,
+    wilcoxon_paired,
+)
 
 
 def _binomial_two_sided(k: int, n: int) -> float:
@@ -156,17 +162,19 @@ def test_bootstrap_is_seeded_and_covers_the_mean():
     trials = 150
     for _ in range(trials):
         sample = (rng.random(80) < 0.8).astype(float)
-        low, high = bootstrap_ci(sample, rng, 1000)
+        low, high, method = bootstrap_ci(sample, rng, 1000)
+        assert method == BOOTSTRAP_PERCENTILE
         hits += low <= 0.8 <= high
     # percentile bootstrap of a proportion at n=80: coverage close to 0.95 (binomial noise of 150 trials)
     assert 0.86 <= hits / trials <= 0.995
 
 
 def test_bootstrap_edge_cases():
-    assert all(math.isnan(v) for v in bootstrap_ci(np.array([]), np.random.default_rng(0)))
-    assert bootstrap_ci(np.ones(10), np.random.default_rng(0), 100) == (1.0, 1.0)
+    low, high, method = bootstrap_ci(np.array([]), np.random.default_rng(0))
+    assert math.isnan(low) and math.isnan(high) and method == ""
+    assert bootstrap_ci(np.ones(10), np.random.default_rng(0), 100) == (1.0, 1.0, BOOTSTRAP_DEGENERATE)
     big = np.random.default_rng(0).random(100_000)
-    low, high = bootstrap_ci(big, np.random.default_rng(0), 200)
+    low, high, _ = bootstrap_ci(big, np.random.default_rng(0), 200)
     assert low < big.mean() < high and high - low < 0.01
 
 

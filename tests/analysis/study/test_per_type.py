@@ -75,3 +75,22 @@ def test_the_all_rows_are_the_main_tables_rows_every_interval_included(types):
         assert _rows(mine_cells, PER_TYPE_CELL_COLUMNS) == _rows(cells, PER_TYPE_CELL_COLUMNS)
     again = per_type_tables(episodes, specs, conditions, "true", ANALYSIS_SEED, 400)[1]
     assert _rows(again, again.columns) == _rows(per_type_paired, per_type_paired.columns)
+
+
+def test_a_cell_whose_trust_has_no_spread_says_its_interval_is_the_point():
+    """The cells' "trust 95% CI" is the percentile bootstrap's; a cell whose episodes all report one
+    mean has nothing to resample, and the table says so rather than show [6.00, 6.00] as an interval."""
+    from trustroute.analysis.study.analysis import ANALYSIS_SEED
+    from trustroute.analysis.study.cells import cell_table
+    from trustroute.analysis.study.display import trust_columns
+
+    episodes = made_episodes()
+    flat = (episodes["spec"] == "phi1") & (episodes["condition"] == "aware")
+    episodes.loc[flat, "mean_reported_trust"] = 6.0
+    specs, conditions = ["phi1", "phi2"], ["aware", "robust", "free"]
+    cells = cell_table(episodes, specs, conditions, "true", {}, ANALYSIS_SEED, 400)
+    keys = zip(cells["spec"], cells["condition"], strict=True)
+    methods = dict(zip(keys, cells["trust_ci_method"], strict=True))
+    assert methods.pop(("phi1", "aware")) == "degenerate" and set(methods.values()) == {"percentile"}
+    shown = list(trust_columns(cells)["trust 95% CI"])
+    assert shown[0] == "[6.00, 6.00] (degenerate)" and not any("(" in text for text in shown[1:]), shown
