@@ -20,7 +20,7 @@ from trustroute.networks.town import Town
 from trustroute.policies.logic.compiled import compile_spec
 from trustroute.policies.logic.dfa import DFA
 from trustroute.policies.logic.spec import Spec
-from trustroute.policies.routing.free import StateOnlyTask, state_only_task
+from trustroute.policies.routing.free import StateOnlyTask, TrustFreePolicy, state_only_task
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 DEFAULT_FALLBACK_AFTER = defaults.FALLBACK_AFTER
@@ -37,10 +37,15 @@ class FallbackPolicy(RoutingPolicy):
         self.dfa = dfa
         self.after = int(after)
         self.name = f"{inner.name}+fallback{after}"
+        # The trust-free policy of the same task already drives the shortest completion the rule
+        # switches to, move for move, and ends where it ends: the rule never takes over from it, so
+        # its long routes are not reported as fallen back.
+        self.takes_over = not (isinstance(inner, TrustFreePolicy) and inner.task.same_moves(task))
 
     def fallback_active(self, context: DecisionContext) -> bool:
-        """True from the `after`-th junction on while the spec is not accepted."""
-        return (context.junctions_driven >= self.after
+        """True from the `after`-th junction on while the spec is not accepted, unless the inner
+        policy is the trust-free one of the same task (`takes_over`)."""
+        return (self.takes_over and context.junctions_driven >= self.after
                 and not bool(self.dfa.accepting[context.dfa_state]))
 
     def route_determined(self, context: DecisionContext) -> bool:

@@ -77,6 +77,15 @@ class StateOnlyTask:
             self.route_cache.popitem(last=False)
         return q
 
+    def same_moves(self, other: StateOnlyTask) -> bool:
+        """True when `other` reads every route into the same state and moves the same from it (the
+        same town's roads, DFA start, transitions and shortest-completion moves)."""
+        return self is other or (
+            self.town.content_hash == other.town.content_hash and self.road_index == other.road_index
+            and int(self.dfa.initial) == int(other.dfa.initial)
+            and np.array_equal(self.next_state, other.next_state)
+            and np.array_equal(self.next_slot, other.next_slot))
+
     def next_junction(self, road: str, q: int) -> str | None:
         """First junction of the shortest completion from (road, q); None if complete or impossible."""
         key = (road, q)

@@ -38,7 +38,8 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "final_trust": ("trust level", "true (simulated) or stated (live) trust at the end", TRUST),
         "mean_trust": ("trust level", "mean true or stated trust over the episode's roads", "1.0-7.0"),
         "end_reason": ("", "why the episode ended", "accepted, rejected, destination, cap"),
-        "fallback_fired": ("", "the fallback route chose a junction at least once", "true, false"),
+        "fallback_fired": ("", "the 20-junction rule took over from the policy at least once (never from "
+                           "the trust-free policy, which already drives the rule's route)", "true, false"),
         "sim_seconds": ("s", "simulated time of the episode", ">= 0"),
         "wall_seconds": ("s", "wall-clock time of the episode", ">= 0"),
         "mean_reported_trust": ("trust level", "mean of the episode's trust reports", "1.0-7.0"),

@@ -255,3 +255,29 @@ def test_a_label_floats_cannot_decide_is_read_as_synthesis_and_evaluate_read_it(
     assert (batch.end_reason == "rejected").all()
     free = trust_free_policy(town, spec)
     assert evaluate(pomdp, spec, free, EvaluationSettings(fallback_after=None)).lower == 0.0
+
+
+def test_the_fallback_never_takes_over_from_the_trust_free_policy(town, driver, phi1, pomdp):
+    """The trust-free policy drives the shortest completion the rule switches to: past the rule's
+    junction it drives on as without the rule, and neither the episode nor the exact evaluation
+    counts it as fallen back; a policy that drives otherwise still is."""
+    free = trust_free_policy(town, phi1)
+    routes = {}
+    for after in (None, 2):
+        setup = EpisodeSetup(town=town, driver_model=driver, spec=phi1, fallback_after=after)
+        tracker = model_episode(setup, free, SyntheticDriver(driver, np.random.default_rng(5)))
+        assert tracker.junctions > 2 and not tracker.fallback_fired
+        assert not tracker.roads_frame()["fallback"].any()
+        routes[after] = tracker.roads_frame()["directed_road"].tolist()
+    assert routes[2] == routes[None]
+    exact = evaluate(pomdp, phi1, free, EvaluationSettings(fallback_after=2))
+    assert exact.fallback_probability == 0.0
+    assert exact.satisfaction_probability == evaluate(
+        pomdp, phi1, free, EvaluationSettings(fallback_after=None)).satisfaction_probability
+    from trustroute.policies.routing.fallback import with_fallback
+
+    assert not with_fallback(free, town, phi1, after=2).takes_over
+    other = trust_free_policy(town, load_spec(SPECS / "phi2.toml", town))   # another task's moves
+    assert with_fallback(other, town, phi1, after=2).takes_over
+    looping = evaluate(pomdp, phi1, LoopPolicy(), EvaluationSettings(fallback_after=2))
+    assert looping.fallback_probability == pytest.approx(1.0, abs=1e-12)
