@@ -298,27 +298,24 @@ def episode_tables(
     return episode, roads, runs
 
 
+SOURCE_FIX = "pass a checkout of the authors' repository, a folder of their CSVs or one of their CSVs"
+LOG_PATTERN = "trust_level_record_driver_*_trial_*_if_baseline_*.csv"   # LOG_NAME, as a reader types it
+
+
 def discover(source: Path) -> list[LogFile]:
     """The logs of `source`: every CSV under a folder, or one log file. A file is named by its
     relative path under the folder, and a single log by its file name."""
     source = Path(source)
     if not source.exists():
-        raise InputError(
-            str(source),
-            "",
-            "no such file or directory",
-            "pass a checkout of the authors' repository, a folder of their CSVs or one of their CSVs",
-        )
+        raise InputError(str(source), "", "no such file or directory", SOURCE_FIX)
     paths, root = (sorted(source.rglob("*.csv")), source) if source.is_dir() else ([source], source.parent)
-    # statistic_test/ holds copies of the same files; they are read as subsets, not episodes
-    logs = [c for p in paths if "statistic_test" not in p.parts and (c := classify(p, root)) is not None]
+    # the statistic_test/ under the folder given holds copies of the same files, read as subsets
+    # (`authors_subsets`), not episodes; where the folder itself lies does not matter
+    logs = [c for p in paths if "statistic_test" not in p.relative_to(root).parts
+            and (c := classify(p, root)) is not None]
     if not logs:
-        raise InputError(
-            str(source),
-            "",
-            "no trust_level_record_driver_*_trial_*_if_baseline_*.csv files",
-            "pass a checkout of shuyang-dong/trust_aware_hrc_carla_sim or a folder of its logs",
-        )
+        problem = f"no {LOG_PATTERN} files" if source.is_dir() else f"not a {LOG_PATTERN} file"
+        raise InputError(str(source), "", problem, SOURCE_FIX)
     return logs
 
 

@@ -390,6 +390,29 @@ def test_not_a_log_folder_is_one_line(tmp_path, capsys):
     assert "no trust_level_record" in err
     err = _one_line_error(capsys, tmp_path / "no-logs", tmp_path)
     assert "no-logs: no such file or directory (fix: pass a checkout" in err and "one of their CSVs" in err
+    # a single file that is not a log: said of the file, with the fix every other refusal gives
+    other = tmp_path / "notes.csv"
+    other.write_text("trust_level\n1\n")
+    err = _one_line_error(capsys, other, tmp_path)
+    assert err.startswith(f"error: {other}: not a trust_level_record_driver_*_trial_*_if_baseline_*.csv file "
+                          "(fix: pass a checkout of the authors' repository, a folder of their CSVs or one "
+                          "of their CSVs)"), err
+
+
+def test_a_log_is_found_wherever_the_folder_or_file_given_lies(tmp_path, capsys):
+    """Only statistic_test/ under the folder given holds the copies read as subsets: a log passed
+    alone, or a folder that itself lies under a statistic_test/ folder, is imported."""
+    import json
+
+    inside = tmp_path / "statistic_test" / "trust_aware"
+    inside.mkdir(parents=True)
+    (inside / SAMPLE).write_bytes((RAW / SAMPLE).read_bytes())
+    for source in (inside / SAMPLE, inside):
+        out = tmp_path / f"out-{source.name}"
+        code, _, err = run_cli(capsys, "import", "carla-logs", str(source), "--out", str(out), "--quiet")
+        assert code == 0, err
+        inventory = json.loads((out / "manifest.json").read_text())["real_study"]["inventory"]
+        assert [(entry["file"], entry["status"]) for entry in inventory] == [(SAMPLE, "imported")]
 
 
 def test_sample_files_are_unchanged_copies_of_the_authors_format():
