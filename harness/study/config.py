@@ -204,11 +204,21 @@ def condition_label(condition: str) -> str:
     return condition if condition in NAMED_CONDITIONS else Path(condition).stem
 
 
+def _folders(value: str, base: Path) -> list[Path]:
+    """Where a relative path is looked for: the config's folder, then the current directory (an
+    absolute path is looked for nowhere else)."""
+    return [] if Path(value).is_absolute() else [base, Path.cwd()]
+
+
+def _found(value: str, base: Path) -> Path | None:
+    """The file `value` names, looked for in `_folders` (or as it is, when absolute)."""
+    candidates = [folder / value for folder in _folders(value, base)] or [Path(value)]
+    return next((candidate.resolve() for candidate in candidates if candidate.is_file()), None)
+
+
 def _looked_in(value: str, base: Path, *more: str) -> str:
-    """' (looked in A, B and C)': the config's folder and the current directory (once when they are
-    one; neither for an absolute path), then `more`."""
-    relative = [] if Path(value).is_absolute() else [base.resolve(), Path.cwd().resolve()]
-    places = [*map(str, dict.fromkeys(relative)), *more]
+    """' (looked in A, B and C)': `_folders` (once when they are one), then `more`."""
+    places = [*map(str, dict.fromkeys(folder.resolve() for folder in _folders(value, base))), *more]
     return f" (looked in {', '.join(places[:-1])} and {places[-1]})" if len(places) > 1 else (
         f" (looked in {places[0]})" if places else "")
 
@@ -216,11 +226,7 @@ def _looked_in(value: str, base: Path, *more: str) -> str:
 def _resolve_path(value: str, base: Path, source: str, key: str, what: str, fix: str,
                   packaged: PackagedKind | None = None) -> Path:
     """Config folder first, then the current directory, then a packaged file of that name."""
-    candidates = [Path(value)] if Path(value).is_absolute() else [base / value, Path.cwd() / value]
-    for candidate in candidates:
-        if candidate.is_file():
-            return candidate.resolve()
-    found = packaged.path(value) if packaged is not None else None
+    found = _found(value, base) or (packaged.path(value) if packaged is not None else None)
     if found is not None:
         return found.resolve()
     names = f" or a packaged name ({', '.join(packaged.names())})" if packaged is not None else ""
@@ -231,13 +237,9 @@ def _resolve_path(value: str, base: Path, source: str, key: str, what: str, fix:
 def _resolve_spec(value: str, base: Path, source: str, key: str) -> Path:
     """A spec file: relative to the config, the current directory, or a packaged spec by name
     (a path's file name too: "specs/phi1.toml" is the packaged phi1 where that path is missing)."""
-    candidates = [Path(value)] if Path(value).is_absolute() else [base / value, Path.cwd() / value]
-    for candidate in candidates:
-        if candidate.is_file():
-            return candidate.resolve()
-    packaged = SPECS.path(Path(value).name)
-    if packaged is not None:
-        return packaged.resolve()
+    found = _found(value, base) or SPECS.path(Path(value).name)
+    if found is not None:
+        return found.resolve()
     raise InputError(
         source,
         key,
