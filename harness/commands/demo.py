@@ -19,6 +19,7 @@ import click
 from trustroute.app.engines import ENGINES, SIMULATED
 from trustroute.core import defaults, ranges
 from trustroute.core.ranges import study_workers
+from trustroute.core.wording import counted
 from trustroute.harness.commands.options import WORKERS, Checked
 from trustroute.harness.commands.output import emit, json_option, quiet_option, with_paths
 from trustroute.harness.study.plan import episode_id as planned_episode_id
@@ -78,7 +79,7 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
          as_json: bool, quiet: bool) -> None:
     """Run the paper-size study (21 participants) on the defaults and show where the results are."""
     from trustroute.harness.commands.replay import viewer_hint
-    from trustroute.harness.commands.study import dataset_paths, report_paths
+    from trustroute.harness.commands.study import dataset_paths, failed_line, report_paths
     from trustroute.harness.study.config import study_config_from_dict
     from trustroute.harness.study.runner import check_study_output, run_and_consolidate
 
@@ -91,12 +92,11 @@ def demo(ctx: click.Context, out: str, workers: int | None, engine: str, partici
     specs = len(study["specs"])
     on_town = "" if town == DEFAULT_TOWN else f", town {town}"
     check_study_output(study_dir)   # before the line announcing the run (the run checks it again)
-    say(f"demo: {participants} participants x {specs} spec{'s' * (specs > 1)} x 2 conditions, {engine} engine"
-        f"{on_town}, into {study_dir}")
+    say(f"demo: {counted(participants, 'participant')} x {counted(specs, 'spec')} x 2 conditions, "
+        f"{engine} engine{on_town}, into {study_dir}")
     run, manifest = run_and_consolidate(config, study_dir, workers, None, progress=not silent, echo=say)
     if run.failed:
-        click.echo(f"error: {len(run.failed)} episodes failed (reasons in {run.study_dir / 'failures'}; "
-                   f"rerun the demo to retry them): {', '.join(run.failed[:10])}", err=True)
+        click.echo(failed_line(run, "rerun the demo to retry them"), err=True)
         ctx.exit(1)
     from trustroute.analysis.study.analysis import study_analysis
     from trustroute.analysis.study.report import write_report

@@ -7,16 +7,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from trustroute.app.engines import SIMULATED
 from trustroute.core import defaults, ranges
 from trustroute.core.ranges import study_workers
+from trustroute.core.wording import counted
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import WORKERS, Checked
 from trustroute.harness.commands.output import emit, json_flag, quiet_flag, with_paths
 from trustroute.harness.study.config import study_directory
+
+if TYPE_CHECKING:   # the runner is imported when a study runs, not when the CLI starts
+    from trustroute.harness.study.runner import StudyRun
 
 
 def dataset_paths(study_dir: Path, manifest: dict) -> dict[str, Path]:
@@ -90,17 +95,13 @@ def study(ctx: click.Context, config_path: str, options: StudyOptions) -> None:
     run, manifest = run_and_consolidate(config, study_dir, workers, options.scheduler, progress=not silent,
                                         echo=(lambda line: None) if silent else click.echo,
                                         attempts=options.attempts)
-    from trustroute.core.dataset import EPISODES_FILE, FAILURES_DIR, ROADS_FILE
+    from trustroute.core.dataset import EPISODES_FILE, ROADS_FILE
 
     paths = {**dataset_paths(run.study_dir, manifest), **recordings_paths(run.study_dir, config.record)}
     lines = [f"dataset: {run.study_dir / EPISODES_FILE}, {run.study_dir / ROADS_FILE}"]
     if run.failed:
         # On stderr, so --json keeps exactly one JSON object on stdout.
-        click.echo(
-            f"error: {len(run.failed)} episodes failed (reasons in {run.study_dir / FAILURES_DIR}; a rerun "
-            f"retries them): {', '.join(run.failed[:10])}{' ...' if len(run.failed) > 10 else ''}",
-            err=True,
-        )
+        click.echo(failed_line(run, "a rerun retries them"), err=True)
     payload = {"study_dir": str(run.study_dir), "planned": run.planned, "skipped": run.skipped,
                "ran": run.ran, "retried": run.retried, "failed": run.failed, "backend": run.backend,
                "seconds": run.seconds}
@@ -116,3 +117,13 @@ def study(ctx: click.Context, config_path: str, options: StudyOptions) -> None:
     emit(options.as_json, with_paths(payload, paths), lines)
     if run.failed:
         ctx.exit(1)
+
+
+def failed_line(run: StudyRun, rerun: str) -> str:
+    """The error line of a run with failed episodes: how many, where their reasons are, how a rerun
+    (`rerun`) retries them, and the first ten."""
+    from trustroute.core.dataset import FAILURES_DIR
+
+    more = " ..." if len(run.failed) > 10 else ""
+    return (f"error: {counted(len(run.failed), 'episode')} failed (reasons in "
+            f"{run.study_dir / FAILURES_DIR}; {rerun}): {', '.join(run.failed[:10])}{more}")

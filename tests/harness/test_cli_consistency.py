@@ -107,3 +107,22 @@ def test_every_option_of_every_command_has_a_help_text():
     assert {"plan", "demo", "population sample", "peer storm", "import carla-logs"} <= commands
     assert missing == []
     assert [path for path, command in every_command() if not (command.help or "").strip()] == []
+
+
+def test_the_study_and_the_demo_say_their_failed_episodes_in_one_wording(tmp_path):
+    """One failed episode in the singular; the demo's line is the study's, with its own rerun."""
+    from trustroute.core.dataset import FAILURES_DIR
+    from trustroute.harness.commands.study import failed_line
+    from trustroute.harness.study.runner import StudyRun
+
+    def run(failed: list[str]) -> StudyRun:
+        return StudyRun(tmp_path, planned=12, skipped=0, damaged=[], ran=12, failed=failed, retried=0,
+                        seconds=1.0, backend="local")
+
+    assert failed_line(run(["p0-phi1-free"]), "a rerun retries them") == (
+        f"error: 1 episode failed (reasons in {tmp_path / FAILURES_DIR}; a rerun retries them): p0-phi1-free")
+    eleven = [f"e{i}" for i in range(11)]
+    demo = failed_line(run(eleven), "rerun the demo to retry them")
+    assert demo.startswith(f"error: 11 episodes failed (reasons in {tmp_path / FAILURES_DIR}; rerun the "
+                           "demo to retry them): e0, "), demo
+    assert failed_line(run(eleven), "").endswith(", e9 ...")

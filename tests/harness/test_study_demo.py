@@ -16,6 +16,19 @@ def test_demo_refuses_an_out_that_is_a_file_before_it_says_anything(tmp_path, ca
     assert text == "" and policy.read_text() == "{}\n"
 
 
+def test_the_demo_announces_one_participant_in_the_singular(tmp_path, capsys, monkeypatch):
+    """The line said before the run (the run itself stopped at once: Ctrl-C)."""
+    from trustroute.harness.study import runner
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "run_and_consolidate", interrupted)
+    code, text, _ = run_cli(capsys, "demo", "--engine", "model", "--participants", "1", "--out",
+                            str(tmp_path / "demo"))
+    assert code == 130 and text.startswith("demo: 1 participant x 2 specs x 2 conditions, model engine"), text
+
+
 @pytest.mark.slow
 def test_demo_model_engine_small_and_resumable(tmp_path, capsys):
     out = tmp_path / "demo"

@@ -231,7 +231,7 @@ def test_a_worker_killed_twice_fails_only_its_episode_and_a_rerun_completes(tmp_
     study = tmp_path / "study"
     code, out, err = run_cli(capsys, "study", str(config_path), "--out", str(study), "--workers", "2")
     assert code == 1, err
-    assert victim in err and "1 episodes failed" in err
+    assert victim in err and "1 episode failed" in err
     assert not (study / "report.md").exists()  # no report from an incomplete study unless asked
     record = json.loads((study / "failures" / f"{victim}.json").read_text())
     assert record["attempts"] == 2 and len(record["errors"]) == 2
@@ -470,7 +470,7 @@ def test_an_episode_jammed_by_background_traffic_is_recorded_as_failed(tmp_path,
     study = tmp_path / "study"
     code, printed, err = run_cli(capsys, "study", str(config_path), "--out", str(study), "--no-report",
                                  "--json")
-    assert code == 1 and "1 episodes failed" in err, err
+    assert code == 1 and "1 episode failed" in err, err
     (failure,) = sorted((study / "failures").glob("*.json"))
     record = json.loads(failure.read_text())
     assert record["attempts"] == 1 and len(record["errors"]) == 1   # the same seed jams again: run once
