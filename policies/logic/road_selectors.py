@@ -10,8 +10,9 @@ from trustroute.networks.road_lookup import roads_into, roads_on_street
 from trustroute.networks.town import Town
 
 STATE_SELECTOR_KEYS = ("junction", "street")
-# a spec written for an imported town, checked against another (the default one, without --town)
-OTHER_TOWN_FIX = "pass the town the spec is written for (--town)"
+# a spec written for an imported town, checked against another (the default one, without a town):
+# the spec is read alike by the commands (--town), the API (town) and a study (its config's key)
+OTHER_TOWN_FIX = "pass the town the spec is written for (--town; in a study config, town in [study])"
 SELECTOR_EXAMPLE = 'write v1 = {junction = "J12"} or v1 = {street = "Main Street"} (or a list of names)'
 
 

@@ -219,7 +219,14 @@ def test_a_selector_of_another_town_names_the_town_option(capsys, tmp_path, sele
     spec.write_text(PHI1_TEXT.replace('v1 = ["B-G", "F-G", "I-G"]', f"v1 = {selector}"))
     code, _, err = run_cli(capsys, "spec", "check", str(spec))
     assert code == 2 and "(default town)" in err, err
-    assert "(fix: pass the town the spec is written for (--town), or " in err
+    fix = "(fix: pass the town the spec is written for (--town; in a study config, town in [study]), or "
+    assert fix in err, err
+    # a study has no --town: its config's key is the door
+    config = tmp_path / "study.toml"
+    config.write_text('[study]\nparticipants = 1\nseed = 1\nengine = "model"\nspecs = ["drt.toml"]\n'
+                      'conditions = ["free"]\n')
+    code, _, err = run_cli(capsys, "study", str(config), "--out", str(tmp_path / "out"), "--workers", "1")
+    assert code == 2 and "in a study config, town in [study]" in err, err
 
 
 def test_the_first_bad_atom_in_the_file_is_the_one_reported(town):
