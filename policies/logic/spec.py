@@ -43,6 +43,7 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import SPECS
 from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
+from trustroute.core.wording import counted
 from trustroute.networks.town import Town
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
@@ -401,9 +402,10 @@ def _state_atoms(raw: Mapping[str, object], spec: _SpecSource,
 
 
 def _belief_atoms(raw: Mapping[str, object], spec: _SpecSource, taken: set[str]) -> dict[str, BeliefAtom]:
-    """The `[beliefs.NAME]` tables: coeffs (one per trust level, at least 2) and offset."""
+    """The `[beliefs.NAME]` tables: coeffs (one per trust level, at least 2) and offset. Checked in
+    the file's order and kept sorted by name, as `[states]`."""
     atoms: dict[str, BeliefAtom] = {}
-    for atom in sorted(raw):
+    for atom in raw:
         spec.check_atom_name(atom, "beliefs")
         label, header = f"beliefs.{atom}", (rf"^\s*\[beliefs\.{re.escape(atom)}\]",)
         entry = raw[atom]
@@ -420,20 +422,21 @@ def _belief_atoms(raw: Mapping[str, object], spec: _SpecSource, taken: set[str])
         values = check_fields(entry, BELIEF_FIELDS, spec.source, f"belief atom '{atom}'", place, owner=atom)
         coeffs = values["coeffs"]
         if len(coeffs) < 2:
-            raise InputError(spec.source, place("coeffs"), f"belief atom '{atom}': coeffs has {len(coeffs)} "
-                             "entries, expected one per trust level of the driver model (at least 2)",
+            raise InputError(spec.source, place("coeffs"), f"belief atom '{atom}': coeffs has "
+                             f"{counted(len(coeffs), 'entry', 'entries')}, expected one per trust level of "
+                             "the driver model (at least 2)",
                              f"give one coefficient per trust level, e.g. {N_TRUST_LEVELS} for the default "
                              "model")
         atoms[atom] = BeliefAtom(tuple(float(c) for c in coeffs), float(values["offset"]))
-    return atoms
+    return dict(sorted(atoms.items()))
 
 
 def _inline_atoms(raw: Mapping[str, object], table: str, noun: str, fields: FieldTable[AtomValues],
                   example: str, spec: _SpecSource, taken: set[str]) -> Iterator[tuple[str, AtomValues, str]]:
     """The atom tables of inline tables (`[trust_states]`, `[type_beliefs]`): names unique across
-    every atom table, each entry checked against `fields`. Yields (atom, values, place) in name
-    order; `place` is the atom's line."""
-    for atom in sorted(raw):
+    every atom table, each entry checked against `fields`. Yields (atom, values, place) in the
+    file's order, as `[states]` is checked; `place` is the atom's line."""
+    for atom in raw:
         spec.check_atom_name(atom, table)
         place = spec.place(f"{table}.{atom}", rf"^\s*\[{table}", rf"^\s*{re.escape(atom)}\s*=")
         if atom in taken:
@@ -465,15 +468,16 @@ def _trust_state_atoms(raw: Mapping[str, object], spec: _SpecSource, town: Town 
             _check_roads(roads, f"trust-state atom '{atom}'", atom_place, spec.source, town)
         atoms[atom] = TrustStateAtom(trust=frozenset(values["trust"]),
                                      roads=None if roads is None else frozenset(roads))
-    return atoms
+    return dict(sorted(atoms.items()))
 
 
 def _type_belief_atoms(raw: Mapping[str, object], spec: _SpecSource,
                        taken: set[str]) -> dict[str, TypeBeliefAtom]:
     """The `[type_beliefs]` table: NAME = { types = ["flat", ...], above = 0.7 }."""
-    return {atom: TypeBeliefAtom(types=tuple(values["types"]), above=float(values["above"]))
-            for atom, values, _ in _inline_atoms(raw, "type_beliefs", "type-belief", TYPE_BELIEF_FIELDS,
-                                                 TYPE_BELIEF_EXAMPLE, spec, taken)}
+    atoms = {atom: TypeBeliefAtom(types=tuple(values["types"]), above=float(values["above"]))
+             for atom, values, _ in _inline_atoms(raw, "type_beliefs", "type-belief", TYPE_BELIEF_FIELDS,
+                                                  TYPE_BELIEF_EXAMPLE, spec, taken)}
+    return dict(sorted(atoms.items()))
 
 
 def _formula(formula_text: str, atoms: set[str], spec: _SpecSource) -> Formula:

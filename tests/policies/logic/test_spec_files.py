@@ -239,6 +239,22 @@ def test_the_first_bad_atom_in_the_file_is_the_one_reported(town):
     assert list(spec_from_text(good, "s.toml", town).state_atoms) == ["alpha", "zeta"]
 
 
+@pytest.mark.parametrize(("tables", "first"), [
+    ('[beliefs.zeta]\ncoeffs = [1]\noffset = 0\n[beliefs.alpha]\ncoeffs = [1]\noffset = 0\n',
+     r"\(beliefs.zeta\): belief atom 'zeta': coeffs has 1 entry, expected"),
+    ('[trust_states]\nzeta = {trust = [9]}\nalpha = {trust = [9]}\n',
+     r"\(trust_states.zeta\): trust-state atom 'zeta'"),
+    ('[type_beliefs]\nzeta = {types = "x"}\nalpha = {types = "x"}\n',
+     r"\(type_beliefs.zeta\): type-belief atom 'zeta'"),
+])
+def test_every_atom_table_reports_its_first_bad_atom_in_the_file(tables, first):
+    """The rule of [states] holds in every atom table: the first error reported is the first in the
+    file, whatever the names' order."""
+    text = 'name = "s"\nstart = "E-A"\nformula = "F (zeta & F alpha)"\n' + tables
+    with pytest.raises(InputError, match=first):
+        spec_from_text(text, "s.toml")
+
+
 def test_a_selector_needs_a_town():
     with pytest.raises(InputError, match="names its roads by junction, which only a town can resolve"):
         spec_from_text(_by_junction("G", "J", "L"), "by_junction.toml")
