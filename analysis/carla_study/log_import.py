@@ -48,6 +48,7 @@ from trustroute.core.errors import InputError
 from trustroute.core.output_files import check_output_dir
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.core.progress import bar_disable
+from trustroute.core.wording import counted
 from trustroute.harness.study.manifest import git_revision, package_versions
 from trustroute.harness.study.resume import check_own_folder
 from trustroute.networks.road import Road
@@ -431,7 +432,7 @@ def import_carla_logs(
             )
         )
         if echo is not None:
-            echo(f"  {log.relative}: {len(roads)} roads, {episode['end_reason']}")
+            echo(f"  {log.relative}: {counted(len(roads), 'road')}, {episode['end_reason']}")
     for name in listed_absent or []:
         inventory.append({"file": name, "status": "listed but absent (no content in the source)"})
     drivers = sorted({log.driver for log in logs if log.role in ("study", "warmup")})

@@ -13,6 +13,7 @@ import click
 
 from trustroute.core import defaults, ranges
 from trustroute.core.progress import bar_disable
+from trustroute.core.wording import counted
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import Checked, UsageFix
 from trustroute.harness.commands.output import json_flag, quiet_flag, study_warnings, with_paths
@@ -151,13 +152,14 @@ def fit(study_dir: str, options: FitOptions) -> None:
             )
         for row in payload["check"]["aware_vs_free"]:
             click.echo(
-                f"{row['spec']} {row['condition']} with {row['drivers']} drivers: satisfaction "
+                f"{row['spec']} {row['condition']} with {counted(row['drivers'], 'driver')}: satisfaction "
                 f"{row['satisfaction_rate']:.4f}, mean trust {row['mean_trust']:.3f} "
-                f"({row['episodes']} episodes)"
+                f"({counted(row['episodes'], 'episode')})"
             )
         click.echo(f"check: {paths['check_json']} and {paths['check_plot']}")
     click.echo(
-        f"fitted by {result.method} on {result.episodes} episodes ({result.transitions} roads driven)"
+        f"fitted by {result.method} on {counted(result.episodes, 'episode')} "
+        f"({counted(result.transitions, 'road')} driven)"
         f"{f', report accuracy {result.report_accuracy:.3f}' if result.report_accuracy is not None else ''}"
         f"{f', EM {result.iterations} iterations' if result.method == 'em' else ''}"
     )
@@ -229,7 +231,8 @@ def fit_types(study_dir: Path, out: Path, options: FitOptions, fixed: int | None
          *(["--shared-dynamics"] if shared_dynamics else []),
          *(["--bootstrap", str(bootstrap)] if bootstrap else [])])
     provenance = (f"fitted by `{command}` ({time.strftime('%Y-%m-%d', time.gmtime())}) on "
-                  f"{len(participants)} participants, {obs.episodes} episodes, {obs.steps} roads: "
+                  f"{counted(len(participants), 'participant')}, {counted(obs.episodes, 'episode')}, "
+                  f"{counted(obs.steps, 'road')}: "
                   f"EM over a mixture of {best.n_types} driver models"
                   f"{' sharing their trust dynamics' if shared_dynamics else ''}, "
                   f"{'chosen by BIC (n = participants)' if fixed is None else 'K given'}; "

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from trustroute.app.engines import ENGINES
+from trustroute.core.wording import counted
 from trustroute.harness.commands.output import json_option, warn, with_paths
 
 VIEWER_PORT, DATA_PORT = 9090, 9876
@@ -88,7 +89,7 @@ def replay(
         click.echo(json.dumps(with_paths(payload, {"rrd": rrd})))
         return
     click.echo(
-        f"{episode_id}: replay reproduces the log ({len(roads)} roads, trust "
+        f"{episode_id}: replay reproduces the log ({counted(len(roads), 'road')}, trust "
         f"{' '.join(str(t) for t in payload['trust'])})"
     )
     click.echo("route: " + " ".join(payload["route"]))
@@ -116,7 +117,7 @@ def draw_live(study_dir: Path, episode_id: str, rrd_path: str | None, no_rrd: bo
     if as_json:
         click.echo(json.dumps(with_paths(payload, {"rrd": rrd})))
         return
-    click.echo(f"{episode_id}: a live episode, drawn from its log ({len(roads)} roads, "
+    click.echo(f"{episode_id}: a live episode, drawn from its log ({counted(len(roads), 'road')}, "
                f"{payload['ticks']} ticks; a person is not re-simulated)")
     click.echo("route: " + " ".join(payload["route"]))
     click.echo(f"wrote {rrd} ({payload['rrd_bytes'] / 1000:.0f} kB); {viewer_hint(rrd)}")

@@ -47,6 +47,7 @@ from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
 from trustroute.core.progress import bar_disable
 from trustroute.core.ranges import ATTEMPTS
+from trustroute.core.wording import counted
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext, study_context
 from trustroute.harness.study.expected import expected_values, fallback_only_warnings
@@ -553,7 +554,7 @@ def run_and_consolidate(
 def _consolidate_run(context: StudyContext, run: StudyRun, echo: Callable[[str], object],
                      progress: bool = False) -> dict:
     echo(
-        f"{run.planned} episodes planned: {run.skipped} already done, {run.ran - run.retried} run"
+        f"{counted(run.planned, 'episode')} planned: {run.skipped} already done, {run.ran - run.retried} run"
         f"{f', {run.retried} retried' if run.retried else ''}, {len(run.failed)} failed"
         f"{f', {len(run.damaged)} damaged parts re-run' if run.damaged else ''} "
         f"({run.backend}, {run.seconds:.1f} s)"
