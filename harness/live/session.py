@@ -313,6 +313,7 @@ class Session:
         self.task, self.phase, self.mode, self.road, self.last_error = task, "driving", "auto", None, None
         self.asked, self.switched_unasked = "auto", False
         self.prompted = set()
+        self.reports = self.takeovers = 0   # the console shows them beside this drive's episode
         self.study.attempt_started(task, task is self.warm_up)
         reader = threading.Thread(target=self.read_episode, args=(self.connection, self.process),
                                   name=f"live-reader-{task.episode_id}", daemon=True)

@@ -5,6 +5,7 @@ leaves out is refused with 409, saying why, and changes nothing."""
 from __future__ import annotations
 
 import itertools
+import threading
 
 import pytest
 from fastapi.testclient import TestClient
@@ -104,5 +105,36 @@ def test_a_paused_episode_whose_participant_is_away_is_theirs_to_resume(paused_b
             assert "is not at their station" in answer.json()["detail"]["detail"]
             told = session.connection.told
             assert (session.phase, session.pause_reason, told) == ("paused", paused_by, [])
+    finally:
+        study.close()
+
+
+def test_the_console_counts_the_reports_and_takeovers_of_the_drive_shown(tmp_path, monkeypatch):
+    """The console shows the reports and takeovers beside the drive's episode: those of that
+    drive, not of the warm-up and trials before it."""
+    class Silent(Pipe):
+        """A running episode's pipe on which no message comes."""
+
+        def recv(self) -> dict:
+            threading.Event().wait()
+            return {}
+
+    monkeypatch.setattr("trustroute.harness.live.session.start_episode_process",
+                        lambda *args: (None, Silent()))
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = experimenter(study)
+            participant = client.post("/api/participants", json={}, headers=headers).json()["participant"]
+            session = study.sessions[participant]
+            session.handle(Consent(type="consent", agree=True))
+            session.start(session.warm_up, None)
+            session.on_episode_message({"type": "mode", "mode": "manual", "t": 1.0})
+            session.reports += 1
+            assert session.progress()["takeovers"] == 1 and session.progress()["reports"] == 1
+            session.start(session.tasks[0], None)
+            shown = client.get(f"/api/participants/{participant}", headers=headers).json()
+            assert (shown["episode_id"], shown["reports"], shown["takeovers"]) == \
+                (session.tasks[0].episode_id, 0, 0)
     finally:
         study.close()
