@@ -38,19 +38,16 @@ from trustroute.analysis.statistics import (
 )
 from trustroute.core import defaults
 
-TESTS: dict[str, str] = dict(zip(defaults.PLAN_TESTS, (
-    "McNemar exact p (satisfaction)",
-    "conditional OR [exact CI] (satisfaction)",
-    "Wilcoxon p (reported trust)",
-    "mixed model, random intercept (reported trust)",
+# Each planned test: its title as the report shows it, and the effect its power rows estimate
+# (the plan's table and JSON name it per row).
+_WORDS: dict[str, tuple[str, str]] = dict(zip(defaults.PLAN_TESTS, (
+    ("McNemar exact p (satisfaction)", "(b − c) / n"),
+    ("conditional OR [exact CI] (satisfaction)", "odds ratio b / c"),
+    ("Wilcoxon p (reported trust)", "median difference"),
+    ("mixed model, random intercept (reported trust)", "difference in means"),
 ), strict=True))
-# The effect each test's power rows estimate (the plan's table and JSON name it per row).
-EFFECTS: dict[str, str] = dict(zip(defaults.PLAN_TESTS, (
-    "(b − c) / n",
-    "odds ratio b / c",
-    "median difference",
-    "difference in means",
-), strict=True))
+TESTS: dict[str, str] = {test: title for test, (title, _) in _WORDS.items()}
+EFFECTS: dict[str, str] = {test: effect for test, (_, effect) in _WORDS.items()}
 DEFAULT_TESTS: tuple[str, ...] = defaults.PLAN_DEFAULT_TESTS
 ALL_SPECS = "all specs"
 
