@@ -163,16 +163,37 @@ class Session:
         with self.lock:
             done = [task.episode_id for task in self.tasks if self.study.is_done(task)]
             pending = self.pending()
+            trial = len(done) + (self.in_drive and not self.warming_up)
             return {"type": "state", "participant": self.participant, "label": self.label,
-                    "phase": self.phase, "paused_by": self.pause_reason,
-                    "trial": len(done) + (self.phase in ("driving", "paused") and not self.warming_up),
+                    "phase": self.phase, "paused_by": self.pause_reason, "trial": trial,
                     "warm_up": None if self.warm_up is None else ("done" if self.warmed_up else "pending"),
-                    "trials": len(self.tasks), "episode_id": self.task.episode_id if self.task else None,
-                    "mode": self.mode, "road": self.road, "reports": self.reports,
-                    "takeovers": self.takeovers, "done": done, "last_error": self.last_error,
+                    "trials": len(self.tasks), "trial_status": self.trial_status(trial),
+                    **self.drive_shown(), "done": done, "last_error": self.last_error,
                     "next_episode": pending[0].episode_id if pending else None,
                     "questionnaire": self.questionnaire_shown(),
                     "actions": list(CONSOLE_ACTIONS[self.console_phase()])}
+
+    @property
+    def in_drive(self) -> bool:
+        """A drive (the warm-up or a trial) runs, or is paused."""
+        return self.phase in ("driving", "paused")
+
+    def trial_status(self, trial: int) -> str:
+        """Where the participant is among their trials, in words that cannot be misread: the trial
+        driven ("driving 2 of 3", "paused in 2 of 3", or the warm-up), else how many are done ("1 of 3
+        done"), whatever comes next."""
+        if not self.in_drive:
+            return f"{trial} of {len(self.tasks)} done"
+        which = "the warm-up" if self.warming_up else f"{trial} of {len(self.tasks)}"
+        return f"{'driving' if self.phase == 'driving' else 'paused in'} {which}"
+
+    def drive_shown(self) -> dict:
+        """The state's fields of the drive: its episode, road, reports and takeovers while one runs
+        or is paused; all null between drives, where the drive that ended is no longer shown as if
+        it were on. (The mode is the session's at any time: autopilot between drives.)"""
+        shown = {"episode_id": self.task.episode_id if self.task else None, "road": self.road,
+                 "reports": self.reports, "takeovers": self.takeovers}
+        return {"mode": self.mode, **(shown if self.in_drive else dict.fromkeys(shown))}
 
     def console_phase(self) -> str:
         """The phase whose console actions the session accepts (CONSOLE_ACTIONS): its own, or

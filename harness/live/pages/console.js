@@ -103,7 +103,7 @@ const KEPT = 3;   // the cells a noted row keeps: #, label, phase
 // the keyboard's focus.
 const TEXTS = 10;   // the cells before the episode control and participant buttons
 function texts(p) {
-  return [p.participant, p.label, p.paused_by ? `${p.phase} (${p.paused_by})` : p.phase, `${p.trial} of ${p.trials}`,
+  return [p.participant, p.label, p.paused_by ? `${p.phase} (${p.paused_by})` : p.phase, p.trial_status,
           p.episode_id, p.mode, p.road, p.reports, p.takeovers, p.last_error];
 }
 
@@ -177,6 +177,7 @@ $("create").addEventListener("click", async () => {
   try {
     const created = await call("POST", "/api/participants", { label: $("label").value });
     showLink(created.participant, created.link);
+    $("label").value = "";   // the next participant's label is typed afresh (a refused one is kept to correct)
     showError("");
     refresh();
   } catch (error) { showError(error.message); }

@@ -152,3 +152,58 @@ def test_a_row_offers_the_episode_controls_its_pause_allows(station):
         row.locator("button", has_text="abort").wait_for()
         assert buttons(page, participant) == offered, paused_by
     context.close()
+
+
+def test_a_created_participants_label_is_cleared_and_a_refused_ones_kept(station, tmp_path):
+    """After *Create participant* the label field is empty for the next participant; after a
+    refused create (here: the login gone) the label typed stays, to create it again."""
+    context, page = open_console(station)
+    page.locator("#label").fill("alice")
+    page.locator("#create").click()
+    page.locator("#created").filter(has_text="participant").wait_for()
+    created = int(page.locator("#created").inner_text().split(":")[0].split()[-1])
+    assert station.study.sessions[created].label == "alice"
+    assert page.locator("#label").input_value() == ""
+    context.clear_cookies()
+    page.locator("#label").fill("bob")
+    page.locator("#create").click()
+    page.locator("#error").filter(has_text="no longer logged in").wait_for()
+    assert page.locator("#label").input_value() == "bob"
+    context.close()
+
+
+def test_a_row_shows_the_drive_only_while_it_runs_and_which_trial_it_is(station, tmp_path):
+    """Driving a trial, the row shows its episode, road and "driving 1 of 1"; once it has ended,
+    no episode or road, and "1 of 1 done": the state's words (`trial_status`), not the page's."""
+    from trustroute.harness.live.protocol import Consent
+
+    from .test_live_console import Pipe
+
+    context, page = open_console(station)
+    study = station.study
+    participant = new_participant(station)
+    session = study.sessions[participant]
+    session.handle(Consent(type="consent", agree=True))
+    task = session.tasks[0]
+    with session.lock:
+        session.warmed_up = True
+        session.phase, session.task, session.connection, session.road = "driving", task, Pipe(), "A-B"
+    row = page.locator(f'#participants tr[data-participant="{participant}"]')
+    header = page.locator("thead th").all_inner_texts()
+    column = {name: header.index(name) for name in ("trial", "episode", "road")}
+
+    def cells() -> dict:
+        texts = row.locator("td").all_inner_texts()
+        return {name: texts[index] for name, index in column.items()}
+
+    row.locator("td", has_text=re.compile("^driving 1 of 1$")).wait_for()
+    assert cells() == {"trial": "driving 1 of 1", "episode": task.episode_id, "road": "A-B"}
+    page.screenshot(path=str(tmp_path / "console-driving.png"))
+    with session.lock:
+        study.done.add(task.episode_id)
+        session.phase = session.next_phase()
+    row.locator("td", has_text=re.compile("^1 of 1 done$")).wait_for()
+    assert cells() == {"trial": "1 of 1 done", "episode": "", "road": ""}
+    page.screenshot(path=str(tmp_path / "console-done.png"))
+    context.close()
+

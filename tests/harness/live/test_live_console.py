@@ -138,3 +138,51 @@ def test_the_console_counts_the_reports_and_takeovers_of_the_drive_shown(tmp_pat
                 (session.tasks[0].episode_id, 0, 0)
     finally:
         study.close()
+
+
+def test_between_drives_the_state_shows_no_drive_and_says_which_trial_is_done(tmp_path, monkeypatch):
+    """The console's row follows the state: while a drive runs it shows the drive (its episode and
+    road) and which trial it is ("driving 1 of 2"); once the drive has ended, no episode, mode,
+    road or counts of it (the mode: autopilot), and how many trials are done ("1 of 2 done"), never
+    the same "1 of 2" during the trial and after it."""
+    class Silent(Pipe):
+        def recv(self) -> dict:
+            threading.Event().wait()
+            return {}
+
+    monkeypatch.setattr("trustroute.harness.live.session.start_episode_process",
+                        lambda *args: (None, Silent()))
+    config = tiny_config(tmp_path, specs=("phi1", "phi2"))
+    study = LiveStudy(config, tmp_path / "study", ServerOptions()).open()
+    monkeypatch.setattr(study, "episode_finished", lambda task: study.done.add(task.episode_id))
+    drive = ("episode_id", "road", "reports", "takeovers")
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = experimenter(study)
+            participant = client.post("/api/participants", json={}, headers=headers).json()["participant"]
+            session = study.sessions[participant]
+
+            def shown() -> dict:
+                return client.get(f"/api/participants/{participant}", headers=headers).json()
+
+            session.handle(Consent(type="consent", agree=True))
+            assert shown()["trial_status"] == "0 of 2 done"
+            for task, during, after in ((session.warm_up, "driving the warm-up", "0 of 2 done"),
+                                        (session.tasks[0], "driving 1 of 2", "1 of 2 done"),
+                                        (session.tasks[1], "driving 2 of 2", "2 of 2 done")):
+                session.start(task, None)
+                session.on_episode_message({"type": "frame", "road": "A-B"})
+                state = shown()
+                assert (state["trial_status"], state["episode_id"], state["road"], state["mode"]) == \
+                    (during, task.episode_id, "A-B", "auto")
+                if task is session.tasks[1]:
+                    client.post(f"/api/participants/{participant}/control", json={"action": "pause"},
+                                headers=headers)
+                    assert shown()["trial_status"] == "paused in 2 of 2"
+                session.on_episode_message({"type": "episode_end"})
+                state = shown()
+                assert state["phase"] in ("ready", "done") and state["trial_status"] == after
+                assert [state[field] for field in drive] == [None] * len(drive), state
+                assert state["mode"] == "auto"
+    finally:
+        study.close()
