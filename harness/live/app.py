@@ -11,6 +11,7 @@ state-changing request and websocket handshake its Origin (harness/live/guard.py
                                        cookie (the link in the browser's history is spent)
     GET  /console, /station            the pages (experimenter; participant), plain HTML and JS
     GET  /static/{name}                their scripts and style sheet
+    GET  /favicon.ico                  the site's icon (browsers ask for it by themselves)
     GET  /api/me                       participant: their own progress and the consent text
     GET  /api/net                      participant or experimenter: the net's lanes (the view)
     POST /api/participants             experimenter: create the next participant -> link
@@ -310,6 +311,13 @@ def console(request: Request) -> FileResponse | HTMLResponse:
 @router.get("/station", response_model=None)
 def station(request: Request) -> FileResponse | HTMLResponse:
     return guarded_page(request, participant_token, "station.html", STATION_TITLE, STATION_REFUSED)
+
+
+@router.get("/favicon.ico")
+def favicon() -> FileResponse:
+    """The site's icon, which a browser asks for by itself on every page (a missing one is a 404
+    in the browser's console); the pages name none, so this address is the one."""
+    return FileResponse(PAGES / "favicon.svg", media_type="image/svg+xml")
 
 
 @router.get("/static/{name:path}")

@@ -207,3 +207,30 @@ def test_a_row_shows_the_drive_only_while_it_runs_and_which_trial_it_is(station,
     page.screenshot(path=str(tmp_path / "console-done.png"))
     context.close()
 
+
+def test_the_console_and_the_station_load_without_an_error_or_a_missing_resource(station, tmp_path):
+    """Every resource the console, the link's page and the station ask for is served and the
+    browser logs no error on loading them: nothing answers 404, the icon a browser asks for by
+    itself (/favicon.ico) included. Each page is opened in a browser of its own, as a station's or
+    the experimenter's is: a browser asks for a site's icon once, and remembers a missing one."""
+    from tests.browser import chromium_executable
+
+    from .test_browser import CHROMIUM_ARGS
+
+    problems: list[str] = []
+    created = httpx.post(f"{station.address}/api/participants", json={}, headers=experimenter(station)).json()
+    made = httpx.post(f"{station.address}/api/login-link", headers=experimenter(station)).json()
+    for link, shown in ((made["link"], "#participants tr"), (created["link"], "#consent-step")):
+        launch = station.browser.browser_type.launch
+        browser = launch(executable_path=chromium_executable(), args=CHROMIUM_ARGS)
+        page = browser.new_page()
+        page.on("console", lambda message: problems.append(f"{message.text} {message.location['url']}")
+                if message.type == "error" else None)
+        page.on("response", lambda response: problems.append(f"{response.status}: {response.url}")
+                if response.status >= 400 else None)
+        page.on("requestfailed", lambda request: problems.append(f"failed: {request.url}"))
+        page.goto(station.address + link)
+        page.locator(shown).first.wait_for(state="visible")
+        page.wait_for_timeout(1500)   # (the icon is asked for after the page has loaded)
+        browser.close()
+    assert problems == []
