@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from trustroute.harness.live.server import warm_up_task
-from trustroute.harness.live.warmup import run_warm_up, warm_up_plan
+from trustroute.harness.live.warmup import WARM_UP_ROADS, run_warm_up, warm_up_plan
 from trustroute.harness.live.worker import LiveOptions, RemoteDriver
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.plan import plan_episodes
@@ -33,6 +33,9 @@ def test_the_warm_up_drives_its_own_drawn_route_and_incidents(tmp_path):
     assert plans[0] == warm_up_plan(setup.town, setup.spec.start, config.seed, 0)   # seeded
     assert len({plan[0] for plan in plans}) == 3 or len({str(plan[1]) for plan in plans}) == 3
     route, incidents = plans[0]
+    # the start road and WARM_UP_ROADS roads after it (docs/live_studies.md, "The warm-up")
+    assert len(route) == 1 + WARM_UP_ROADS and route[0] == setup.spec.start
+    assert set(incidents) == set(route[1:])                            # an incident on each but the start
     steps = zip(route, route[1:], strict=False)
     assert all(setup.town.successor(a, Road.parse(b).to_junction) == b for a, b in steps)
     assert set(incidents.values()) <= set(setup.town.incidents.values())
