@@ -15,8 +15,8 @@ live registry (token digests, labels), the token log or the withdrawal audit is 
 Neither is the order of enrolment or the lab's schedule: every table's rows are sorted by pseudonym
 (a participant's rows in the table's own order), and every wall-clock column becomes the seconds
 since the participant's first recorded wall-clock time (trustroute/core/codebook.py, EXPORTED_TIMES).
-The README reports the participant flow (planned, with data, and for a live study withdrawn and
-declined: counts).
+The README reports the participant flow (planned, with data, and for a live study withdrawn,
+declined and did not take part: counts adding up to the planned).
 """
 
 from __future__ import annotations
@@ -256,12 +256,17 @@ def codebook_markdown(book: dict[str, list[dict]]) -> str:
 
 def participant_flow(manifest: dict, participants: int, ended: dict[str, int] | None) -> str:
     """The README's participant flow: planned (the study config's), with data in the package, and for
-    a live study withdrawn and declined (counts: who withdrew or declined is not said)."""
+    a live study withdrawn, declined and the rest of the planned, who did not take part (counts: who
+    is not said), so that the counts add up to the planned."""
     planned = (manifest.get("config") or {}).get("participants")
     flow = f"{planned} planned, {participants} with data in this package"
     if ended is not None:
         flow += (f", {ended['withdrawn']} withdrawn (their data deleted before this export), "
                  f"{ended['declined']} declined consent (nothing of theirs was recorded)")
+    if ended is not None and planned is not None:
+        absent = planned - participants - ended["withdrawn"] - ended["declined"]
+        flow += (f", {absent} did not take part (their link not opened, or nothing of theirs recorded "
+                 "after it)")
     return f"Participants: {flow}."
 
 

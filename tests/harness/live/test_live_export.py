@@ -113,6 +113,7 @@ def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys
     assert not any("participants.json" in name or "tokens" in name for name in files)
     readme = (package / "README.md").read_text()
     assert "Participants: 2 planned, 2 with data in this package, 0 withdrawn" in readme
+    assert "0 did not take part" in readme
     code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package))
     assert code == 2 and "not empty" in err
 
@@ -170,7 +171,8 @@ def test_the_package_says_what_each_questionnaire_asked_and_names_no_file_of_the
 
 def test_the_readme_counts_a_withdrawal_without_naming_who(tmp_path, capsys):
     """Of three planned participants two drive and one of them withdraws: the package holds one
-    participant and its README says 3 planned, 1 with data, 1 withdrawn."""
+    participant and its README says 3 planned, 1 with data, 1 withdrawn, and 1 (never created) did
+    not take part."""
     study_dir, package = drive_two(tmp_path, 3)
     code, _, err = run_cli(capsys, "withdraw", str(study_dir), "1", "--reason", "asked by mail")
     assert code == 0, err
@@ -178,7 +180,7 @@ def test_the_readme_counts_a_withdrawal_without_naming_who(tmp_path, capsys):
     assert code == 0, err
     readme = (package / "README.md").read_text()
     assert "Participants: 3 planned, 1 with data in this package, 1 withdrawn" in readme
-    assert "0 declined consent" in readme
+    assert "0 declined consent" in readme and "1 did not take part" in readme
     assert "asked by mail" not in readme and "p00001" not in readme
     episodes = pq.read_table(package / "tables" / "episodes.parquet")
     assert len(set(episodes.column("participant").to_pylist())) == 1
@@ -186,8 +188,9 @@ def test_the_readme_counts_a_withdrawal_without_naming_who(tmp_path, capsys):
 
 def test_the_readme_counts_those_who_declined_without_naming_who(tmp_path, capsys):
     """Of four planned participants two drive, a third declines the consent and a fourth declines
-    and is asked again: the README counts one who declined (the one asked again is not counted),
-    and names no one."""
+    and is asked again, and does not open the new link: the README counts one who declined and one
+    who did not take part (the one asked again), so the counts add up to the four planned, and
+    names no one."""
     from trustroute.harness.live.protocol import Consent
 
     study_dir, package = drive_two(tmp_path, 4)
@@ -204,5 +207,6 @@ def test_the_readme_counts_those_who_declined_without_naming_who(tmp_path, capsy
     assert code == 0, err
     readme = (package / "README.md").read_text()
     assert ("Participants: 4 planned, 2 with data in this package, 0 withdrawn (their data deleted "
-            "before this export), 1 declined consent (nothing of theirs was recorded).") in readme
+            "before this export), 1 declined consent (nothing of theirs was recorded), 1 did not take "
+            "part (their link not opened, or nothing of theirs recorded after it).") in readme
     assert not re.search(r"Ada|Grace|p0000[23]", readme)
