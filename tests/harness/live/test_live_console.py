@@ -109,24 +109,36 @@ def test_a_paused_episode_whose_participant_is_away_is_theirs_to_resume(paused_b
         study.close()
 
 
-def test_the_console_counts_the_reports_and_takeovers_of_the_drive_shown(tmp_path, monkeypatch):
+class SilentPipe(Pipe):
+    """A running episode's pipe on which no message comes."""
+
+    def recv(self) -> dict:
+        threading.Event().wait()
+        return {}
+
+
+@pytest.fixture
+def silent_episodes(monkeypatch):
+    """Drives start no SUMO: each episode's process is a pipe on which nothing comes, and the test
+    sends the session the episode's messages itself."""
+    monkeypatch.setattr("trustroute.harness.live.session.start_episode_process",
+                        lambda *args: (None, SilentPipe()))
+
+
+def created(client: TestClient, study: LiveStudy):
+    """The experimenter's headers, and a participant the console creates, with their session."""
+    headers = experimenter(study)
+    participant = client.post("/api/participants", json={}, headers=headers).json()["participant"]
+    return headers, participant, study.sessions[participant]
+
+
+def test_the_console_counts_the_reports_and_takeovers_of_the_drive_shown(tmp_path, silent_episodes):
     """The console shows the reports and takeovers beside the drive's episode: those of that
     drive, not of the warm-up and trials before it."""
-    class Silent(Pipe):
-        """A running episode's pipe on which no message comes."""
-
-        def recv(self) -> dict:
-            threading.Event().wait()
-            return {}
-
-    monkeypatch.setattr("trustroute.harness.live.session.start_episode_process",
-                        lambda *args: (None, Silent()))
     study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
     try:
         with TestClient(live_app(study)) as client:
-            headers = experimenter(study)
-            participant = client.post("/api/participants", json={}, headers=headers).json()["participant"]
-            session = study.sessions[participant]
+            headers, participant, session = created(client, study)
             session.handle(Consent(type="consent", agree=True))
             session.start(session.warm_up, None)
             session.on_episode_message({"type": "mode", "mode": "manual", "t": 1.0})
@@ -140,27 +152,19 @@ def test_the_console_counts_the_reports_and_takeovers_of_the_drive_shown(tmp_pat
         study.close()
 
 
-def test_between_drives_the_state_shows_no_drive_and_says_which_trial_is_done(tmp_path, monkeypatch):
+def test_between_drives_the_state_shows_no_drive_and_says_which_trial_is_done(tmp_path, monkeypatch,
+                                                                              silent_episodes):
     """The console's row follows the state: while a drive runs it shows the drive (its episode and
     road) and which trial it is ("driving 1 of 2"); once the drive has ended, no episode, mode,
     road or counts of it (the mode: autopilot), and how many trials are done ("1 of 2 done"), never
     the same "1 of 2" during the trial and after it."""
-    class Silent(Pipe):
-        def recv(self) -> dict:
-            threading.Event().wait()
-            return {}
-
-    monkeypatch.setattr("trustroute.harness.live.session.start_episode_process",
-                        lambda *args: (None, Silent()))
     config = tiny_config(tmp_path, specs=("phi1", "phi2"))
     study = LiveStudy(config, tmp_path / "study", ServerOptions()).open()
     monkeypatch.setattr(study, "episode_finished", lambda task: study.done.add(task.episode_id))
     drive = ("episode_id", "road", "reports", "takeovers")
     try:
         with TestClient(live_app(study)) as client:
-            headers = experimenter(study)
-            participant = client.post("/api/participants", json={}, headers=headers).json()["participant"]
-            session = study.sessions[participant]
+            headers, participant, session = created(client, study)
 
             def shown() -> dict:
                 return client.get(f"/api/participants/{participant}", headers=headers).json()
