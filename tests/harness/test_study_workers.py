@@ -1,0 +1,84 @@
+"""The study's process pool (harness/study/workers.py): workers that exit while they start, start
+methods other than fork, and Ctrl-C while workers start. Workers killed mid-task and workers dying
+with their parent are in test_study_faults.py, with the studies they fail."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+
+def test_workers_exiting_while_they_start_stop_the_pool(monkeypatch):
+    from trustroute.harness.study import workers
+
+    monkeypatch.setattr(workers, "die_with_parent", lambda _pid: os._exit(3))   # forked: the workers see it
+    said = r"exited with code 3, 2 in a row.*__main__.*one worker \(--workers 1\)"
+    with pytest.raises(workers.WorkersCannotStart, match=said):
+        list(workers.process_pool(abs, [-1, -2, -3], 2, lambda _task, reason: reason))
+
+
+def test_one_worker_exiting_while_it_starts_fails_only_its_task(monkeypatch, tmp_path):
+    from trustroute.harness.study import workers
+
+    once = tmp_path / "exited once"
+
+    def first_exits(_pid: int) -> None:
+        if not once.exists():
+            once.touch()
+            os._exit(3)
+
+    monkeypatch.setattr(workers, "die_with_parent", first_exits)
+    results = list(workers.process_pool(abs, [-1, -2], 1, lambda task, reason: (task, reason)))
+    assert results == [(-1, "worker process exited with code 3"), 2]
+
+
+@pytest.mark.parametrize("method", ["spawn", "forkserver"])
+def test_workers_that_are_not_forked_run_their_tasks(monkeypatch, method):
+    """A spawned worker's parent is the study's process; a forkserver's is the fork server."""
+    import multiprocessing
+
+    from trustroute.harness.study import workers
+
+    context = multiprocessing.get_context(method)
+    monkeypatch.setattr(workers.multiprocessing, "get_context", lambda: context)
+    results = list(workers.process_pool(abs, [-1, -2, -3], 2, lambda task, reason: (task, reason)))
+    assert sorted(results) == [1, 2, 3]
+
+
+def test_ctrl_c_while_workers_start_stops_those_started(monkeypatch):
+    from trustroute.harness.study import workers
+
+    started: list = []
+
+    class InterruptedSecond(workers._Worker):
+        def __init__(self, context, function) -> None:
+            if started:
+                raise KeyboardInterrupt
+            super().__init__(context, function)
+            started.append(self)
+
+    monkeypatch.setattr(workers, "_Worker", InterruptedSecond)
+    with pytest.raises(KeyboardInterrupt):
+        list(workers.process_pool(abs, [-1, -2], 2, lambda task, reason: reason))
+    assert len(started) == 1 and started[0].process.exitcode is not None
+
+
+def test_ctrl_c_while_a_spawned_worker_is_handed_its_function_stops_it(monkeypatch):
+    import multiprocessing
+    import multiprocessing.connection
+
+    from trustroute.harness.study import workers
+
+    send = multiprocessing.connection.Connection.send
+
+    def interrupted(connection, message) -> None:
+        if callable(message):   # the task function, handed to a spawned worker
+            raise KeyboardInterrupt
+        send(connection, message)
+
+    monkeypatch.setattr(multiprocessing.connection.Connection, "send", interrupted)
+    before = set(multiprocessing.active_children())
+    with pytest.raises(KeyboardInterrupt):
+        workers._Worker(multiprocessing.get_context("spawn"), abs)
+    assert set(multiprocessing.active_children()) <= before
