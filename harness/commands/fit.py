@@ -15,7 +15,7 @@ from trustroute.core import defaults, ranges
 from trustroute.core.progress import bar_disable
 from trustroute.core.wording import counted
 from trustroute.harness.commands.option_groups import option, takes
-from trustroute.harness.commands.options import Checked, UsageFix
+from trustroute.harness.commands.options import Checked, UsageFix, range_metavar
 from trustroute.harness.commands.output import json_flag, quiet_flag, study_warnings, with_paths
 
 CHECK_REPLICATES = 50  # simulated drivers per real episode in `fit --check`
@@ -42,13 +42,13 @@ class FitOptions:
         "--check", is_flag=True,
         help="Posterior-predictive check: simulate the packaged and the fitted model on the study's "
         "roads and compare with its logs (writes <out>.check.json and <out>.check.png).")
-    types: str | None = option("--types", default=None, metavar="K|auto",
-                               help="Fit a mixture of K driver types (or choose K by BIC with 'auto') and "
-                               "write a driver-population file.")
+    types: str | None = option("--types", default=None, metavar=f"{range_metavar(ranges.TYPES)}|auto",
+                               help="Fit a mixture of this many driver types (or choose how many by BIC "
+                               "with 'auto') and write a driver-population file.")
     max_types: int = option("--max-types", type=Checked(ranges.MAX_TYPES), default=defaults.FIT_MAX_TYPES,
-                            show_default=True, help="With --types auto: the largest K tried.")
+                            show_default=True, help="With --types auto: the largest number of types tried.")
     restarts: int = option("--restarts", type=Checked(ranges.RESTARTS), default=defaults.FIT_RESTARTS,
-                           show_default=True, help="With --types: seeded EM restarts per K.")
+                           show_default=True, help="With --types: seeded EM restarts per number of types.")
     shared_dynamics: bool = option(
         "--shared-dynamics", is_flag=True,
         help="With --types: the types share the trust-transition rows and differ in initial "

@@ -46,13 +46,17 @@ class Checked(click.ParamType):
         return self.accepted.check(value)
 
     def get_metavar(self, param: click.Parameter, ctx: click.Context) -> str:
-        """The kind and its range, as --help lists the option (`INTEGER 1..1000`, `NUMBER (0, 1]`)."""
-        kind = self.accepted.kind
-        if isinstance(kind, Integer):
-            top = "" if kind.maximum == UNBOUNDED.maximum else str(kind.maximum)
-            return f"INTEGER {kind.minimum}..{top}"
-        assert isinstance(kind, Number)
-        return f"NUMBER {kind.interval()}"
+        return range_metavar(self.accepted)
+
+
+def range_metavar(accepted: OptionRange) -> str:
+    """The kind and range of an option, as --help lists it (`INTEGER 1..1000`, `NUMBER (0, 1]`)."""
+    kind = accepted.kind
+    if isinstance(kind, Integer):
+        top = "" if kind.maximum == UNBOUNDED.maximum else str(kind.maximum)
+        return f"INTEGER {kind.minimum}..{top}"
+    assert isinstance(kind, Number)
+    return f"NUMBER {kind.interval()}"
 
 
 SEED = Checked(ranges.SEED)         # an episode's, a plan's, a population's draws

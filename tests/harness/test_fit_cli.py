@@ -38,3 +38,16 @@ def test_options_of_the_types_fit_without_types_are_refused(model_study, capsys,
         assert code == 2 and out == "" and err.count("\n") == 1, err
         assert f"{extra[0]} sets the fit of driver types, and --types is not given" in err, err
         assert not (tmp_path / "d.json").exists()
+
+
+def test_the_help_of_types_gives_the_range_its_refusal_names(capsys):
+    """`fit --help` shows --types' range, the one its refusal names (trustroute/core/ranges.py)."""
+    from trustroute.core import ranges
+
+    code, out, _ = run_cli(capsys, "fit", "--help")
+    assert code == 0
+    (line,) = [line for line in out.splitlines() if line.strip().startswith("--types ")]
+    low, high = ranges.TYPES.kind.minimum, ranges.TYPES.kind.maximum
+    assert line.split()[1:3] == ["INTEGER", f"{low}..{high}|auto"], line
+    code, _, err = run_cli(capsys, "fit", "study", "--out", "model.json", "--types", str(high + 1))
+    assert code == 2 and f"from {low} to {high}" in err and f"pass {low} to {high} driver types" in err, err
