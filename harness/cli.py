@@ -45,6 +45,14 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
 }
 
 
+class Interrupted(Exception):
+    """Ctrl-C or SIGTERM ended `command` (None: before a command was chosen)."""
+
+    def __init__(self, command: str | None) -> None:
+        super().__init__(command)
+        self.command = command
+
+
 class LazyGroup(click.Group):
     def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted(COMMANDS)
@@ -65,6 +73,15 @@ class LazyGroup(click.Group):
         rows = [(name, COMMANDS[name][2]) for name in sorted(COMMANDS)]
         with formatter.section("Commands"):
             formatter.write_dl(rows)
+
+    def invoke(self, ctx: click.Context) -> object:
+        # Ctrl-C (and SIGTERM during a study, harness/study/workers.py) leaves the command here as
+        # `Interrupted`, naming it, before click's `main` sees it: click would print a blank line
+        # and raise a bare Abort, which names no command.
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as exc:
+            raise Interrupted(ctx.invoked_subcommand) from exc
 
 
 @click.group(cls=LazyGroup)
@@ -97,8 +114,34 @@ def usage_fix(exc: click.UsageError, command: str) -> str:
     return f"follow the usage `{command} --help` prints"
 
 
-INTERRUPTED = ("interrupted (what a study or demo wrote stays: the same command resumes it, running only "
-               "the episodes not yet finished)")
+# What an interrupted command leaves behind, said only where it holds: a study (and the demo's)
+# keeps every finished episode's part (harness/study/runner.py) and a live study its registry and
+# parts (harness/live/session.py); synth, fit and plan write each file atomically
+# (trustroute/core/output_files.py); export fills a package directory it then refuses as not empty.
+_RESUMED = "what it wrote stays: the same command resumes it, running only the episodes not yet finished"
+_WHOLE_FILES = "no file was left half-written: each is whole or not written; run the command again"
+INTERRUPTED_NOTES: dict[str, str] = {
+    "study": _RESUMED,
+    "demo": _RESUMED,
+    "live": ("what the study wrote stays: the same command serves it again, each participant "
+             "continuing at their unfinished trial"),
+    "synth": _WHOLE_FILES,
+    "fit": _WHOLE_FILES,
+    "plan": _WHOLE_FILES,
+    "export": "the package directory is incomplete: delete it, then run the command again",
+}
+
+
+def interrupted_line(command: str | None) -> str:
+    """The one line an interrupted `command` ends with: what it left behind, where that is known."""
+    note = INTERRUPTED_NOTES.get(command or "")
+    return "interrupted" if note is None else f"interrupted ({note})"
+
+
+def _echo_interrupted(command: str | None) -> None:
+    # On a terminal the ^C the terminal echoed has no newline: the line starts on its own row.
+    lead = "\n" if sys.stderr.isatty() else ""
+    click.echo(lead + interrupted_line(command), err=True)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -111,9 +154,15 @@ def main(argv: list[str] | None = None) -> None:
     except InputError as exc:
         click.echo(f"error: {exc.one_line()}", err=True)
         sys.exit(2)
+    except Interrupted as exc:
+        _echo_interrupted(exc.command)
+        sys.exit(130)
     except click.exceptions.Abort as exc:
-        # click turns Ctrl-C (and SIGTERM during a study, harness/study/workers.py) into Abort
-        click.echo(INTERRUPTED if isinstance(exc.__context__, KeyboardInterrupt) else "aborted", err=True)
+        # click turns a Ctrl-C while it parses the command line (before `LazyGroup.invoke`) into Abort
+        if isinstance(exc.__context__, KeyboardInterrupt):
+            _echo_interrupted(None)
+        else:
+            click.echo("aborted", err=True)
         sys.exit(130)
     except click.UsageError as exc:
         # One line naming the fix, like every other error (click would print the usage, a hint and
@@ -127,7 +176,7 @@ def main(argv: list[str] | None = None) -> None:
         click.echo(f"error: {' '.join(exc.format_message().split())}", err=True)
         sys.exit(2 if exc.exit_code == 2 else exc.exit_code)
     except KeyboardInterrupt:
-        click.echo(INTERRUPTED, err=True)
+        _echo_interrupted(None)
         sys.exit(130)
     except OSError as exc:
         # The last net under every command: an I/O failure no command foresaw (a disk that filled

@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from trustroute.analysis.study.plots import save_figure
+from trustroute.core.output_files import atomic_write_text
 from trustroute.participants.driver_model import DriverModel
 
 CHANGE_VALUES = np.arange(-6, 7)
@@ -190,12 +192,12 @@ def plot_check(check: dict, path: Path) -> Path:
         ax.set_title(title)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return Path(path)
 
 
 def write_check(check: dict, path: Path) -> Path:
     payload = {k: v for k, v in check.items() if not k.startswith("_")}
-    Path(path).write_text(json.dumps(payload, indent=1))
-    return Path(path)
+    return atomic_write_text(path, json.dumps(payload, indent=1), "posterior check",
+                             "pass a writable path with --out")

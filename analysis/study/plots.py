@@ -21,6 +21,7 @@ takeover_plot       takeover rate per incident type and condition with exact 95 
 
 from __future__ import annotations
 
+import io
 import itertools
 import textwrap
 from dataclasses import dataclass
@@ -30,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from trustroute.core.dataset import PLOTS_DIR
+from trustroute.core.output_files import atomic_write_bytes
 from trustroute.networks.road import Road
 from trustroute.networks.road_lookup import road_shape
 from trustroute.networks.town import Town
@@ -59,13 +61,22 @@ def vector_path(path: Path) -> Path:
     return Path(path).with_suffix(".svg")
 
 
+def save_figure(fig, path: Path, **options) -> Path:
+    """`fig` written to `path` in the format its suffix names, atomically (trustroute/core/
+    output_files.py): an interrupted or failed save leaves the old file or none, never half of one.
+    `options`: savefig's (dpi, bbox_inches)."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format=Path(path).suffix.lstrip("."), **options)
+    return atomic_write_bytes(path, buffer.getvalue(), "figure", "pass a writable output path")
+
+
 def _save(fig, path: Path, tight_box: bool = False) -> Path:
     """The PNG at PNG_DPI and the SVG beside it; `tight_box` keeps legends placed outside the axes."""
     box = {"bbox_inches": "tight"} if tight_box else {}
     if not tight_box:
         fig.tight_layout()
-    fig.savefig(path, dpi=PNG_DPI, **box)
-    fig.savefig(vector_path(path), **box)
+    save_figure(fig, path, dpi=PNG_DPI, **box)
+    save_figure(fig, vector_path(path), **box)
     _pyplot().close(fig)
     return path
 
@@ -240,7 +251,7 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
             true, stats, band = trust_series(group)
             if len(band):
                 ax.fill_between(band.index, band["low"], band["high"], color=colour, alpha=0.2, lw=0)
-            notes.append(f"{condition}: {band_note(band) if len(true) else line_note()}")
+            notes.append(f"{condition}: {cell_note(true, stats, band)}")
             ax.plot(stats.index, stats["mean"], color=colour, label=f"{condition} reported (mean, 95% band)")
             ax.plot(true.index, true.values, color=colour, ls="--", lw=1, label=f"{condition} true")
         ax.set_title("\n".join([spec, *notes]), fontsize=8)
@@ -255,9 +266,14 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
     return _save(fig, path, tight_box=True)
 
 
-def line_note() -> str:
-    """Why a cell draws no mean: at no index enough of its episodes still run (a small study)."""
-    return f"no mean (< {MIN_LINE_EPISODES} episodes at every index)"
+def cell_note(true: pd.Series, stats: pd.DataFrame, band: pd.DataFrame) -> str:
+    """What a cell's reported mean rests on (`band_note`), or why it draws none: at no index enough
+    of its episodes still run (a small study), or enough run and none reported trust."""
+    if not len(true):
+        return f"no mean (< {MIN_LINE_EPISODES} episodes at every index)"
+    if not len(stats):
+        return "no mean (no trust reports)"
+    return band_note(band)
 
 
 def band_note(band: pd.DataFrame) -> str:

@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from trustroute.analysis.study.plots import COLOURS, PNG_DPI, vector_path
+from trustroute.analysis.study.plots import COLOURS, PNG_DPI, save_figure, vector_path
 from trustroute.analysis.study.power import TESTS, Power, minimal_sizes
 
 
@@ -56,7 +56,7 @@ def power_curve_plot(table: Sequence[Power], target: float, alpha: float, path: 
     axes[0][0].set_ylabel(f"power at α = {alpha:g} (95% interval)")
     fig.suptitle(title or f"Power by simulation (dashed: target {target:g}; dotted: minimal N)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=PNG_DPI)
-    fig.savefig(vector_path(path))
+    save_figure(fig, path, dpi=PNG_DPI)
+    save_figure(fig, vector_path(path))
     plt.close(fig)
     return Path(path)

@@ -1,4 +1,5 @@
-"""The CLI's last net: an OSError no command foresaw is one line whose fix follows the errno."""
+"""The CLI's last nets: an OSError no command foresaw is one line whose fix follows the errno; a
+Ctrl-C is one line saying what the interrupted command left behind."""
 
 from __future__ import annotations
 
@@ -50,3 +51,31 @@ def test_an_unforeseen_os_error_gets_the_fix_of_its_errno(code, fix, monkeypatch
     monkeypatch.setattr(cli.LazyGroup, "get_command", lambda self, ctx, name: boom)
     exit_code, _, err = run_cli(capsys, "boom")
     assert_one_line_error(exit_code, err, "/x/y", fix)
+
+
+@click.command()
+def ctrl_c() -> None:
+    """A command the user interrupts at once (Ctrl-C)."""
+    raise KeyboardInterrupt
+
+
+@pytest.mark.parametrize("command, says", [
+    ("study", "the same command resumes it"),
+    ("demo", "the same command resumes it"),
+    ("live", "the same command serves it again"),
+    ("synth", "no file was left half-written"),
+    ("fit", "no file was left half-written"),
+    ("plan", "no file was left half-written"),
+    ("export", "the package directory is incomplete: delete it"),
+    ("analyze", None),   # its report's files are written in place: nothing is claimed of them
+])
+def test_an_interrupted_command_says_in_one_line_what_it_left(command, says, monkeypatch, capsys):
+    monkeypatch.setitem(cli.COMMANDS, command, (__name__, "ctrl_c", "stands in for the command"))
+    code, out, err = run_cli(capsys, command)
+    assert code == 130 and out == ""
+    assert err.count("\n") == 1 and err.endswith("\n"), err   # one line: no blank one before it
+    line = err.rstrip("\n")
+    if says is None:
+        assert line == "interrupted", err
+    else:
+        assert line.startswith("interrupted (") and line.endswith(")") and says in line, err

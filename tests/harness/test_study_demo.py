@@ -24,9 +24,10 @@ def test_the_demo_announces_one_participant_in_the_singular(tmp_path, capsys, mo
         raise KeyboardInterrupt
 
     monkeypatch.setattr(runner, "run_and_consolidate", interrupted)
-    code, text, _ = run_cli(capsys, "demo", "--engine", "model", "--participants", "1", "--out",
-                            str(tmp_path / "demo"))
+    code, text, err = run_cli(capsys, "demo", "--engine", "model", "--participants", "1", "--out",
+                              str(tmp_path / "demo"))
     assert code == 130 and text.startswith("demo: 1 participant x 2 specs x 2 conditions, model engine"), text
+    assert err.count("\n") == 1 and "the same command resumes it" in err, err
 
 
 @pytest.mark.slow

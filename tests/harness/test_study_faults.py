@@ -8,6 +8,7 @@ point (2 episodes); the model engine everywhere else.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import signal
@@ -310,6 +311,12 @@ def test_workers_die_with_their_parent_and_a_second_run_is_refused(kill, tmp_pat
         assert lock["pid"] == process.pid and lock["host"] and lock["started_utc"]
         os.kill(process.pid, kill)
         process.wait(timeout=30)
+        if kill == signal.SIGTERM:   # as Ctrl-C: code 130, the interrupted line last, no blank one
+            from trustroute.harness.cli import interrupted_line
+
+            lines = process.stderr.read().decode().splitlines()
+            assert process.returncode == 130 and lines[-1] == interrupted_line("study"), lines[-3:]
+            assert len(lines) == 1 or lines[-2].strip(), lines[-3:]
         deadline = time.monotonic() + 5
         while time.monotonic() < deadline and any(_alive(w) for w in workers):
             time.sleep(0.05)
@@ -415,10 +422,12 @@ def test_read_only_output_gives_one_line_and_writes_nothing(tiny_mount, tmp_path
     assert list(tiny_mount.iterdir()) == []
 
 
-def test_enospc_during_an_atomic_write_leaves_the_old_file_and_no_temp(tmp_path, monkeypatch):
-    """The write path itself, without a mount: the disk fills up half-way through a write."""
-    import errno
-
+@pytest.mark.parametrize("stop, raised", [
+    (OSError(errno.ENOSPC, "No space left on device"), "no space left"),
+    (KeyboardInterrupt(), None),   # Ctrl-C: the interrupt goes on, the half-written temporary file not
+], ids=["enospc", "ctrl-c"])
+def test_a_write_stopped_half_way_leaves_the_old_file_and_no_temp(tmp_path, monkeypatch, stop, raised):
+    """The write path itself, without a mount: the disk fills up (or Ctrl-C) half-way through a write."""
     import trustroute.core.output_files as output_files
     from trustroute.core.errors import InputError
 
@@ -438,7 +447,7 @@ def test_enospc_during_an_atomic_write_leaves_the_old_file_and_no_temp(tmp_path,
 
         def write(self, data):
             self.handle.write(data[: len(data) // 2])
-            raise OSError(errno.ENOSPC, "No space left on device")
+            raise stop
 
         def fileno(self):
             return self.handle.fileno()
@@ -448,7 +457,7 @@ def test_enospc_during_an_atomic_write_leaves_the_old_file_and_no_temp(tmp_path,
 
     monkeypatch.setattr(output_files, "open", lambda path, mode: FillsUp(real_open(path, mode)),
                         raising=False)
-    with pytest.raises(InputError, match="no space left"):
+    with pytest.raises(InputError if raised else KeyboardInterrupt, match=raised):
         output_files.atomic_write_bytes(target, b"new contents" * 1000, "dataset table")
     assert target.read_bytes() == b"old contents"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["table.bin"]

@@ -253,9 +253,9 @@ def test_a_study_killed_before_its_manifest_resumes_without_duplicating_rows(cap
     monkeypatch.setattr(runner, "consolidate", killed)
     code, _, err = run_cli(capsys, "study", str(config), "--out", str(out), "--workers", "1", "--no-report")
     assert code == 130, err
-    from trustroute.harness.cli import INTERRUPTED
+    from trustroute.harness.cli import interrupted_line
 
-    assert err.strip() == INTERRUPTED and "the same command resumes it" in INTERRUPTED, err
+    assert err == interrupted_line("study") + "\n" and "the same command resumes it" in err, err
     monkeypatch.undo()
     assert not (out / "manifest.json").exists() and (out / "study.json").exists()
     parts = sorted(p.name for p in (out / "parts").iterdir())

@@ -2,8 +2,9 @@
 
 - `atomic_write_bytes` / `atomic_write_text`: a temporary file in the target's folder, fsync,
   `os.replace`, then fsync of the folder, so a reader (or a rerun after a crash, a full disk or a
-  kill) sees the old file or the whole new one, never a partial one; on failure the temporary
-  file is removed and the error is an InputError (one line, exit 2) naming the path and the cause.
+  kill) sees the old file or the whole new one, never a partial one; on failure or Ctrl-C the
+  temporary file is removed, and a failure is an InputError (one line, exit 2) naming the path
+  and the cause.
   `atomic_create_bytes` writes a file only where none exists (a hard link of the temporary file),
   so of two processes creating it at once exactly one does.
 - `check_output_file` / `check_output_dir`: run before any work starts, so a command given an
@@ -154,10 +155,12 @@ def _written_temp(path: Path, data: bytes, what: str, fix: str, sync: bool) -> P
             handle.flush()
             if sync:
                 os.fsync(handle.fileno())
-    except OSError as exc:
+    except BaseException as exc:   # an OS failure, or Ctrl-C: no half-written temporary file stays
         with contextlib.suppress(OSError):
             temp.unlink()
-        raise write_error(path, what, exc, fix) from None
+        if isinstance(exc, OSError):
+            raise write_error(path, what, exc, fix) from None
+        raise
     return temp
 
 
@@ -166,10 +169,12 @@ def move_into_place(temp: Path, path: Path, what: str, fix: str = "", sync: bool
     `sync`, make the rename durable; InputError on an OS failure, the temporary file removed."""
     try:
         os.replace(temp, path)
-    except OSError as exc:
+    except BaseException as exc:   # an OS failure, or Ctrl-C: no temporary file stays
         with contextlib.suppress(OSError):
             temp.unlink()
-        raise write_error(path, what, exc, fix) from None
+        if isinstance(exc, OSError):
+            raise write_error(path, what, exc, fix) from None
+        raise
     if sync:
         fsync_directory(path.parent)
 

@@ -48,3 +48,23 @@ def test_the_avs_performance_is_drawn_from_the_model():
     fails = int(sim.failed.sum())
     assert stats.binomtest(fails, n, p).pvalue > 1e-4
     assert stats.binomtest(fails, n, min(p + 0.05, 1.0)).pvalue < 1e-4
+
+
+def test_a_check_file_interrupted_while_it_is_written_leaves_the_old_file(tmp_path, monkeypatch):
+    """Ctrl-C before the written check reaches the disk: the old file stays whole, nothing beside it."""
+    import os
+
+    import pytest
+
+    from trustroute.analysis.fitting.posterior_check import write_check
+
+    def interrupted(fd):
+        raise KeyboardInterrupt
+
+    path = tmp_path / "model.check.json"
+    path.write_text('{"old": true}')
+    monkeypatch.setattr(os, "fsync", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_check({"models": {"fitted": {"distance": 0.1}}, "_stats": {}}, path)
+    assert path.read_text() == '{"old": true}'
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]

@@ -3,6 +3,8 @@ enough episodes report."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -67,19 +69,54 @@ def test_the_participants_title_fits_a_plot_of_one_spec(tmp_path, monkeypatch):
     assert 0 <= box.x0 and box.x1 <= fig.bbox.width and 0 <= box.y0 and box.y1 <= fig.bbox.height
 
 
-def test_a_trust_panel_without_a_mean_says_why(tmp_path, monkeypatch):
+def _trust_notes(tmp_path, monkeypatch, cells: dict[str, pd.DataFrame]) -> list[str]:
+    """The notes under the spec's name in the title of `trust_plot`'s panel of one spec whose
+    conditions' roads are `cells` (condition: `_cell` rows)."""
     from trustroute.analysis.study import plots
 
     figures = []
     real = plots._save
     monkeypatch.setattr(plots, "_save", lambda fig, path, **kw: figures.append(fig) or real(fig, path, **kw))
-    roads = pd.concat([_cell(MIN_LINE_EPISODES - 1).assign(episode_id=lambda f: "a" + f["episode_id"]),
-                       _cell(MIN_LINE_EPISODES).assign(episode_id=lambda f: "f" + f["episode_id"])])
+    roads = pd.concat([cell.assign(episode_id=lambda f, c=condition: c + "-" + f["episode_id"])
+                       for condition, cell in cells.items()])
     roads = roads.rename(columns={"reported": "reported_trust"})
-    episodes = pd.DataFrame({"episode_id": sorted(set(roads["episode_id"])), "spec": "drt"})
-    episodes["condition"] = np.where(episodes["episode_id"].str.startswith("a"), "aware", "free")
+    episodes = pd.DataFrame({"episode_id": list(dict.fromkeys(roads["episode_id"])), "spec": "drt"})
+    episodes["condition"] = episodes["episode_id"].str.split("-").str[0]
     plots.trust_plot(roads, episodes, tmp_path / "trust.png")
     (fig,) = figures
-    notes = fig.axes[0].get_title().splitlines()
-    assert notes[1] == f"aware: no mean (< {MIN_LINE_EPISODES} episodes at every index)"
-    assert notes[2] == f"free: no band (< {MIN_BAND_EPISODES} reports per index)"
+    return fig.axes[0].get_title().splitlines()[1:]
+
+
+def test_a_trust_panel_without_a_mean_says_why(tmp_path, monkeypatch):
+    notes = _trust_notes(tmp_path, monkeypatch, {"aware": _cell(MIN_LINE_EPISODES - 1),
+                                                 "free": _cell(MIN_LINE_EPISODES)})
+    assert notes == [f"aware: no mean (< {MIN_LINE_EPISODES} episodes at every index)",
+                     f"free: no band (< {MIN_BAND_EPISODES} reports per index)"]
+
+
+def test_a_trust_panel_of_enough_episodes_without_reports_says_none_reported(tmp_path, monkeypatch):
+    silent = _cell(MIN_BAND_EPISODES + 2).assign(reported=np.nan)
+    notes = _trust_notes(tmp_path, monkeypatch, {"aware": silent, "free": _cell(MIN_BAND_EPISODES + 2)})
+    assert notes == ["aware: no mean (no trust reports)", f"free: band on {MIN_BAND_EPISODES + 2} episodes"]
+
+
+def test_a_plot_interrupted_while_it_is_saved_leaves_the_old_file(tmp_path, monkeypatch):
+    """Ctrl-C half-way through matplotlib's write: the plot file is the old one, whole, and nothing
+    else is left beside it."""
+    from matplotlib.figure import Figure
+
+    def half_written(self, fname, **options):
+        if isinstance(fname, (str, Path)):
+            with open(fname, "wb") as handle:
+                handle.write(b"half a PNG")
+        else:
+            fname.write(b"half a PNG")
+        raise KeyboardInterrupt
+
+    path = tmp_path / "trust.png"
+    path.write_bytes(b"the old plot")
+    monkeypatch.setattr(Figure, "savefig", half_written)
+    with pytest.raises(KeyboardInterrupt):
+        _trust_notes(tmp_path, monkeypatch, {"aware": _cell(MIN_BAND_EPISODES)})
+    assert path.read_bytes() == b"the old plot"
+    assert [p.name for p in tmp_path.iterdir()] == ["trust.png"]
