@@ -484,7 +484,8 @@ async def converse(websocket: WebSocket, session: Session, link: Link, consent_t
                                                      "continue there."})
         offer(link.queue, {"type": "notice", "kind": "replaced",
                            "detail": "This session was open in another window or tab; that one is closed."})
-    offer(link.queue, session.progress())
+    for message in session.opening():
+        offer(link.queue, message)
     try:
         await receive_all(websocket, session, buckets, link, idle_seconds, sender)
     except (WebSocketDisconnect, RuntimeError):

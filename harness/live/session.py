@@ -100,6 +100,26 @@ def console_refusal(participant: int, phase: str, action: str) -> str | None:
     return f"no {action}: {why}"
 
 
+def station_texts(phase: str, trial: int, trials: int, warm_up: bool) -> dict[str, str | None]:
+    """Where the participant is among their `trials`, in the participant's words, which the station
+    shows as they are (the console's words: `Session.trial_status`): `status`, its status line
+    ("Warm-up drive", "Trial 2 of 3" while driven, "Trial 2 of 3 is next" before it); `next`, the
+    start step's sentence (null outside phase "ready"); `complete`, what the station says once the
+    drive under way ends (null between drives). `trial` is the state's (the trials done, plus the
+    one driven); `warm_up`: the drive under way, or the next, is the warm-up."""
+    if phase in ("driving", "paused"):
+        which = "The warm-up drive" if warm_up else f"Trial {trial} of {trials}"
+        return {"status": "Warm-up drive" if warm_up else which, "next": None,
+                "complete": f"{which} is complete."}
+    if phase != "ready":
+        return {"status": "", "next": None, "complete": None}
+    if warm_up:
+        return {"status": "Warm-up drive", "next": "Next: a warm-up drive, to get to know the vehicle.",
+                "complete": None}
+    return {"status": f"Trial {trial + 1} of {trials} is next",
+            "next": f"Next: trial {trial + 1} of {trials}.", "complete": None}
+
+
 class Session:
     """A participant's session (one per participant, whether or not a browser is connected)."""
 
@@ -123,6 +143,7 @@ class Session:
         self.asked = "auto"              # the mode the participant's last takeover or hand-back asked for
         self.switched_unasked = False    # the episode switched to `mode` on its own since then
         self.road: str | None = None
+        self.frame: dict | None = None   # the running drive's newest frame (`opening`)
         self.reports = self.takeovers = 0
         self.prompted: set[int] = set()   # the roads the running episode has asked a report about
         self.last_error: str | None = None
@@ -168,6 +189,7 @@ class Session:
                     "phase": self.phase, "paused_by": self.pause_reason, "trial": trial,
                     "warm_up": None if self.warm_up is None else ("done" if self.warmed_up else "pending"),
                     "trials": len(self.tasks), "trial_status": self.trial_status(trial),
+                    "station": station_texts(self.phase, trial, len(self.tasks), self.warm_up_shown),
                     **self.drive_shown(), "done": done, "last_error": self.last_error,
                     "next_episode": pending[0].episode_id if pending else None,
                     "questionnaire": self.questionnaire_shown(),
@@ -177,6 +199,11 @@ class Session:
     def in_drive(self) -> bool:
         """A drive (the warm-up or a trial) runs, or is paused."""
         return self.phase in ("driving", "paused")
+
+    @property
+    def warm_up_shown(self) -> bool:
+        """The drive under way (or paused), or between drives the next one, is the warm-up."""
+        return self.warming_up if self.in_drive else self.warm_up is not None and not self.warmed_up
 
     def trial_status(self, trial: int) -> str:
         """Where the participant is among their trials, in words that cannot be misread: the trial
@@ -194,6 +221,14 @@ class Session:
         shown = {"episode_id": self.task.episode_id if self.task else None, "road": self.road,
                  "reports": self.reports, "takeovers": self.takeovers}
         return {"mode": self.mode, **(shown if self.in_drive else dict.fromkeys(shown))}
+
+    def opening(self) -> list[dict]:
+        """What a station that connects is sent first: the state, and while the drive is paused
+        (no frame streams then) the drive's newest frame, so that a station opened again during the
+        pause shows where the car stands before the participant resumes."""
+        with self.lock:
+            frame = [self.frame] if self.phase == "paused" and self.frame is not None else []
+            return [self.progress(), *frame]
 
     def console_phase(self) -> str:
         """The phase whose console actions the session accepts (CONSOLE_ACTIONS): its own, or
@@ -332,6 +367,7 @@ class Session:
         self.process, self.connection = start_episode_process(
             self.study.config, target, task, self.study.live_options(self.client, self.lockstep), trust)
         self.task, self.phase, self.mode, self.road, self.last_error = task, "driving", "auto", None, None
+        self.frame = None
         self.asked, self.switched_unasked = "auto", False
         self.prompted = set()
         self.reports = self.takeovers = 0   # the console shows them beside this drive's episode
@@ -368,7 +404,7 @@ class Session:
             elif kind == "warning" and message.get("kind") == "back_to_lane":
                 self.asked = self.mode   # the episode refused the hand-back (by wheel, off the lane)
             elif kind == "frame":
-                self.road = message["road"]
+                self.road, self.frame = message["road"], message
             elif kind == "road" and message.get("prompt"):   # (recorded before the station sees it)
                 self.prompted.add(int(message["prompt"]["road"]))
             elif finished:
@@ -382,7 +418,7 @@ class Session:
                     self.last_error = message.get("error") or message.get("reason")
                 self.end_drive()
                 self.phase = self.next_phase()
-                self.pause_reason, self.process, self.connection = None, None, None
+                self.pause_reason, self.process, self.connection, self.frame = None, None, None, None
                 if self.expiry is not None:
                     self.expiry.cancel()
                     self.expiry = None

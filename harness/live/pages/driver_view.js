@@ -377,10 +377,12 @@ export class DriverView {
   }
 
   // Draws the view at this moment if its picture changed (see Drawing above); the state drawn, or
-  // null when nothing was drawn.
-  render() {
+  // null when nothing was drawn. `still`: the newest frame as it is, neither interpolated nor
+  // moved on (a paused drive: the car stands where its last frame put it).
+  render(still = false) {
     const now = performance.now() / 1000;
-    const state = this.state(now);
+    const newestFrame = this.frames.length ? this.frames[this.frames.length - 1].frame : null;
+    const state = still ? newestFrame && this.blend(null, newestFrame, 1, 0) : this.state(now);
     const blinkOn = Math.floor(now * 3) % 2 === 0;   // indicators at 1.5 Hz
     const resized = this.resize();
     const picture = DriverView.picture(state, blinkOn);

@@ -226,8 +226,21 @@ function onFrame(frame) {
         : "");
   showNextTurn(frame);
   if (driverView) driverView.push(frame);
-  if (net) drawMap($("view"), net, frame, viewKind === "map" ? MAP_SCALE : miniScale($("view")));
+  if (state.phase === "paused") drawStill();
+  else if (net) drawMap($("view"), net, frame, mapScale());
   confirmShown();
+}
+
+const mapScale = () => (viewKind === "map" ? MAP_SCALE : miniScale($("view")));
+
+// A paused drive streams no frames and runs no animation loop: the view and the map show the
+// newest frame where it stands (not moved on), drawn once both it and the net are here. A station
+// opened during the pause gets the server's last frame, so the person sees where the car is
+// before they resume.
+function drawStill() {
+  if (state.phase !== "paused" || !latest) return;
+  if (net) drawMap($("view"), net, latest, mapScale());
+  if (driverView) requestAnimationFrame(() => { if (state.phase === "paused") driverView.render(true); });
 }
 
 // Continuous driving: the wheel and pedals (or the keyboard) read at every animation frame; the
@@ -326,6 +339,7 @@ async function loadNet() {
     if (!(edge in edges) || (lane.index ?? 0) === 0) edges[edge] = lane.shape;
   }
   if (driverView) driverView.setNet(net);
+  drawStill();
 }
 
 // -- the session ----------------------------------------------------------------------------------
@@ -348,6 +362,8 @@ function showCompleted(phase) {
   $("completed").classList.toggle("hidden", !text);
 }
 
+const inDrive = (phase) => phase === "driving" || phase === "paused";
+
 function onState(message) {
   const resumed = state.phase === "paused" && message.phase === "driving";
   state = message;
@@ -355,21 +371,20 @@ function onState(message) {
   updateControls();
   // a new trial starts driving: the last trial's frame, speed and mode go at once (its SUMO takes
   // seconds to start; meanwhile the person sees the vehicle getting ready, not the last trial)
-  if (message.phase === "driving" && message.episode_id !== shownEpisode) startEpisode(message.episode_id);
+  // (a page opened while the drive is paused shows its episode too: the server's last frame of it
+  // follows, and the resume goes on from it)
+  if (inDrive(message.phase) && message.episode_id !== shownEpisode) startEpisode(message.episode_id);
   // the mode is the session's: a page opened mid-drive (reloaded, another window) saw none of the
   // `mode` events before it, and showing AUTOPILOT to a person in control, its button would ask for
   // a takeover the server refuses and never hand back (a request in flight is answered by `mode`)
-  if ((message.phase === "driving" || message.phase === "paused") && !toggling && message.mode !== mode) {
+  if (inDrive(message.phase) && !toggling && message.mode !== mode) {
     setMode(message.mode);
   }
   if (message.phase === "driving") startAnimating();
-  const next = message.done.length + 1;
+  // the trial's words are the server's (harness/live/session.py, `Session.station_texts`)
   $("status").textContent = message.phase === "paused"
     ? `Paused (${message.paused_by === "disconnect" ? "connection lost" : "by the experimenter"})`
-    : message.phase === "consent" || message.phase === "declined" ? ""   // no drive is near yet
-      : message.warm_up === "pending" ? "Warm-up drive"
-      : message.phase === "driving" ? `Trial ${message.trial} of ${message.trials}`
-        : message.phase === "ready" ? `Trial ${next} of ${message.trials} is next` : "";
+    : message.station.status;
   if (message.phase === "paused") {
     overlay(message.paused_by === "disconnect"
       ? "Paused: the connection was lost. Press Resume to go on."
@@ -380,11 +395,9 @@ function onState(message) {
   if (message.phase === "consent") show("consent-step");
   else if (message.phase === "declined") closed("", "declined-step");
   else if (message.phase === "ready") {
-    $("trial-text").textContent = message.warm_up === "pending"
-      ? "Next: a warm-up drive, to get to know the vehicle."
-      : `Next: trial ${next} of ${message.trials}.`;
+    $("trial-text").textContent = message.station.next;
     show("ready-step");
-  } else if (message.phase === "driving" || message.phase === "paused") show("drive-step");
+  } else if (inDrive(message.phase)) show("drive-step");
   else if (message.phase === "questionnaire") {   // questionnaire.js
     $("status").textContent = "Questionnaire";
     renderQuestionnaire(message.questionnaire, send);
@@ -439,8 +452,7 @@ function onMessage(message) {
       break;
     case "episode_start": startEpisode(message.episode_id); pendingPrompt = null; break;
     case "episode_end":
-      completed = state.warm_up === "pending" ? "The warm-up drive is complete."
-        : `Trial ${state.trial} of ${state.trials} is complete.`;
+      completed = state.station.complete;
       endDrive();
       break;
     case "notice": $("error").textContent = message.detail; break;

@@ -17,10 +17,19 @@ import pytest
 
 from tests.browser import chromium_executable
 from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.live.session import station_texts
 
 from .conftest import tiny_config
 from .test_browser import CHROMIUM_ARGS
-from .test_driver_view import Server, assert_sky_and_road, scene_on, show, start_driving, wait_until
+from .test_driver_view import (
+    Server,
+    assert_sky_and_road,
+    canvas_pixels,
+    scene_on,
+    show,
+    start_driving,
+    wait_until,
+)
 
 pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
@@ -179,11 +188,7 @@ def test_you_reported_is_said_on_the_servers_acknowledgement_and_not_into_the_ne
 def test_a_withdrawn_participant_is_told_so_and_has_nothing_left_to_press(station, tmp_path):
     with station.open() as (page, socket):
         socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver"}))
-        socket.send(json.dumps({"type": "state", "participant": 0, "label": "", "phase": "ready",
-                                "paused_by": None, "warm_up": None, "trial": 0, "trials": 1,
-                                "episode_id": None, "next_episode": "x", "mode": "auto", "road": None,
-                                "reports": 0, "takeovers": 0, "done": [], "last_error": None,
-                                "questionnaire": None}))
+        socket.send(state_message("ready", trial=0, episode_id=None, next_episode="x"))
         page.locator("#ready-step").wait_for(state="visible")
         # the server's withdrawal (harness/live/app.py revoke_stale): told, then closed with 1008
         socket.send(json.dumps({"type": "revoked", "detail": "withdrawn from the study"}))
@@ -210,15 +215,9 @@ EGO_GREEN = (46, 125, 50)   # map_view.js: the ego on autopilot
 
 def ego_pixels(page) -> int:
     """How many pixels of the mini-map's canvas are the ego's colour."""
-    import base64
-    import io
-
     import numpy as np
-    from PIL import Image
 
-    data = page.evaluate("document.getElementById('view').toDataURL('image/png')")
-    image = Image.open(io.BytesIO(base64.b64decode(data.split(",", 1)[1]))).convert("RGB")
-    pixels = np.asarray(image).astype(int)
+    pixels = canvas_pixels(page, "view")
     return int((np.abs(pixels - np.array(EGO_GREEN)) <= 12).all(axis=-1).sum())
 
 
@@ -265,12 +264,14 @@ def test_the_driver_view_draws_the_road_in_a_narrow_window(station, width, phone
 
 
 def state_message(phase: str, **changes) -> str:
-    """The server's `state` message for participant 0 of one trial, in `phase`."""
+    """The server's `state` message for participant 0 of one trial, in `phase` (its texts for the
+    station by the server's rule, `station_texts`, unless `changes` give them)."""
     message = {"type": "state", "participant": 0, "label": "", "phase": phase, "paused_by": None,
                "warm_up": None, "trial": 1, "trials": 1, "episode_id": "x", "next_episode": None,
                "mode": "auto", "road": None, "reports": 0, "takeovers": 0, "done": [], "last_error": None,
-               "questionnaire": None}
-    return json.dumps({**message, **changes})
+               "questionnaire": None, **changes}
+    texts = station_texts(phase, message["trial"], message["trials"], message["warm_up"] == "pending")
+    return json.dumps({"station": texts, **message})
 
 
 DRIVING = ("toggle", "accelerate", "brake", "pull-out", "pull-in")
@@ -563,3 +564,53 @@ def test_a_page_reopened_mid_drive_shows_the_mode_the_person_is_in_and_can_hand_
             assert time.monotonic() < deadline, received
             page.wait_for_timeout(50)
         assert [m["type"] for m in received if m["type"] in ("hand_back", "takeover")] == ["hand_back"]
+
+
+def test_a_station_opened_during_a_disconnect_pause_shows_where_the_car_stands(station, tmp_path):
+    """Opened again while the lost connection holds the drive paused, the station gets the state
+    and then the drive's last frame (the server's `Session.opening`: no frame streams while
+    paused) and draws it, in the view and on the mini-map, before the person resumes: the view was
+    an empty grey until then, and the map empty."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        received: list[dict] = []
+        socket.on_message(lambda text: received.append(json.loads(text)))
+        socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver"}))
+        socket.send(state_message("paused", paused_by="disconnect"))
+        socket.send(json.dumps(frame))
+        page.locator("#overlay-text").filter(has_text="connection was lost").wait_for()
+        wait_until(page, "Boolean(window.driverView && window.driverView.stats.pose)", seconds=15)
+        assert page.evaluate("window.driverView.stats.pose") == pytest.approx(
+            [frame["x"], frame["y"], frame["angle"]], abs=1e-6)
+        page.screenshot(path=str(tmp_path / "reopened-paused.png"))
+        assert_sky_and_road(canvas_pixels(page, "driver"), frame)
+        assert ego_pixels(page) > 0   # the mini-map shows the car too
+        assert page.locator("#resume").is_visible()
+        assert not [m for m in received if m["type"] == "resume"]   # drawn with no resume sent
+        # the resume goes on from the frame shown: the drive is not started anew ("getting ready")
+        socket.send(state_message("driving"))
+        wait_until(page, "document.getElementById('overlay').classList.contains('hidden')")
+        assert page.evaluate("window.driverView.frames.length") == 1
+
+
+def test_the_station_says_the_trial_in_the_servers_words(station):
+    """The status line, the start step's sentence and the drive's completion are the state's
+    `station` texts as sent (harness/live/session.py `station_texts`), not counted again by the
+    page from `done` and `trial`: here they name another trial than those fields would."""
+    frame, _ = scene_on(station.net_path)
+    ready = {"status": "Trial 7 of 9 is next", "next": "Next: trial 7 of 9.", "complete": None}
+    driving = {"status": "Trial 7 of 9", "next": None, "complete": "Trial 7 of 9 is complete."}
+    with station.open() as (page, socket):
+        socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver"}))
+        socket.send(state_message("ready", trial=0, trials=2, episode_id=None, station=ready))
+        page.locator("#ready-step").wait_for(state="visible")
+        assert page.locator("#status").inner_text() == ready["status"]
+        assert page.locator("#trial-text").inner_text() == ready["next"]
+        socket.send(state_message("driving", trial=1, trials=2, station=driving))
+        socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
+        socket.send(json.dumps(frame))
+        page.locator("#status").filter(has_text=driving["status"]).wait_for()
+        socket.send(json.dumps({"type": "episode_end", "episode_id": "x", "satisfied": True,
+                                "end_reason": "goal", "junctions": 3, "takeovers": 0}))
+        socket.send(state_message("ready", trial=1, trials=2, episode_id=None, done=["x"], station=ready))
+        page.locator("#completed").filter(has_text=driving["complete"]).wait_for()

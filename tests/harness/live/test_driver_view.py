@@ -25,6 +25,7 @@ import pytest
 from tests.browser import chromium_executable
 from trustroute.harness.live.protocol import Frame
 from trustroute.harness.live.server import LiveStudy, ServerOptions
+from trustroute.harness.live.session import station_texts
 from trustroute.harness.simulation.incidents.oncoming import TRUCK_TYPE
 
 from .conftest import tiny_config
@@ -217,8 +218,6 @@ def truck_box(truck: list) -> list:
 
 def show(page, socket, frame: dict) -> np.ndarray:
     """The canvas's pixels (rows, columns, RGB) once the view has rendered `frame`."""
-    from PIL import Image
-
     frames = page.evaluate("window.driverView.stats.frames")
     for _ in range(3):
         socket.send(json.dumps(frame))
@@ -228,7 +227,14 @@ def show(page, socket, frame: dict) -> np.ndarray:
     wait_until(page, f"window.driverView.stats.settled === {frames + 3}")
     pose = page.evaluate("window.driverView.stats.pose")
     assert pose == pytest.approx([frame["x"], frame["y"], frame["angle"]], abs=1e-6)
-    data = page.evaluate("document.getElementById('driver').toDataURL('image/png')")
+    return canvas_pixels(page, "driver")
+
+
+def canvas_pixels(page, canvas: str) -> np.ndarray:
+    """The pixels (rows, columns, RGB) of the page's canvas whose id is `canvas`."""
+    from PIL import Image
+
+    data = page.evaluate(f"document.getElementById('{canvas}').toDataURL('image/png')")
     image = Image.open(io.BytesIO(base64.b64decode(data.split(",", 1)[1]))).convert("RGB")
     return np.asarray(image).astype(int)
 
@@ -251,7 +257,8 @@ def start_driving(page, socket, view: str) -> None:
     socket.send(json.dumps({"type": "state", "participant": 0, "label": "view", "phase": "driving",
                             "paused_by": None, "warm_up": None, "trial": 1, "trials": 1, "episode_id": "x",
                             "next_episode": None, "mode": "auto", "road": None, "reports": 0, "takeovers": 0,
-                            "done": [], "last_error": None}))
+                            "done": [], "last_error": None,
+                            "station": station_texts("driving", 1, 1, False)}))
     socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
     if view == "driver":
         wait_until(page, "Boolean(window.driverView && window.driverView.net)")
@@ -307,8 +314,6 @@ def map_pixels(page, socket, frame: dict) -> np.ndarray:
     """The map canvas's pixels (rows, columns, RGB) once it has drawn `frame` with the net: the
     frame is sent until the page shows its speed (each frame here has its own) on a map drawn
     to its corner (nothing is drawn before the net has come)."""
-    from PIL import Image
-
     shown = f"{frame['speed'] * 3.6:.0f} km/h"
     drawn = "document.getElementById('view').getContext('2d').getImageData(0, 0, 1, 1).data[3] === 255"
     deadline = time.monotonic() + 60
@@ -317,9 +322,7 @@ def map_pixels(page, socket, frame: dict) -> np.ndarray:
         assert time.monotonic() < deadline, "the map never drew the frame"
         socket.send(json.dumps(frame))
         page.wait_for_timeout(100)
-    data = page.evaluate("document.getElementById('view').toDataURL('image/png')")
-    image = Image.open(io.BytesIO(base64.b64decode(data.split(",", 1)[1]))).convert("RGB")
-    return np.asarray(image).astype(int)
+    return canvas_pixels(page, "view")
 
 
 def on_map(pixels: np.ndarray, frame: dict, x: float, y: float) -> np.ndarray:

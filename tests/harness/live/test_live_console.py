@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import threading
+import time
 
 import pytest
 from fastapi.testclient import TestClient
@@ -15,7 +16,7 @@ from trustroute.harness.live.protocol import Consent
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 from trustroute.harness.live.session import CONSOLE_ACTIONS
 
-from .conftest import experimenter, tiny_config
+from .conftest import consenting_participant, experimenter, tiny_config
 
 # every action the console has a button for, and the request each button sends
 REQUESTS = {"pause": ("control", {"action": "pause"}), "resume": ("control", {"action": "resume"}),
@@ -188,5 +189,65 @@ def test_between_drives_the_state_shows_no_drive_and_says_which_trial_is_done(tm
                 assert state["phase"] in ("ready", "done") and state["trial_status"] == after
                 assert [state[field] for field in drive] == [None] * len(drive), state
                 assert state["mode"] == "auto"
+    finally:
+        study.close()
+
+
+def test_a_station_opened_during_a_disconnect_pause_is_sent_the_drives_last_frame(tmp_path, silent_episodes):
+    """No frame streams while a drive is paused: a station that connects then is sent, after the
+    state, the drive's newest frame (`Session.opening`), so it shows where the car stands before
+    the participant resumes; without it the reopened view stayed empty until the resume."""
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    try:
+        with TestClient(live_app(study)) as client:
+            with consenting_participant(client, study) as (station, participant):
+                while station.receive_json().get("phase") != "ready":
+                    pass
+                station.send_json({"type": "start", "trust": 4})
+                while station.receive_json().get("phase") != "driving":
+                    pass
+                session = study.sessions[0]
+                frames = [{"type": "frame", "t": t, "road": "A-B", "x": t, "y": 0.0} for t in (1.0, 2.0)]
+                for frame in frames:   # the episode's (it sends none once paused)
+                    session.on_episode_message(frame)
+            deadline = time.monotonic() + 10
+            while session.phase != "paused":   # the closed socket paused the drive
+                assert time.monotonic() < deadline, session.phase
+                time.sleep(0.02)
+            with client.websocket_connect("/ws", headers=participant) as station:
+                assert station.receive_json()["type"] == "welcome"
+                state = station.receive_json()
+                assert (state["phase"], state["paused_by"]) == ("paused", "disconnect")
+                station.send_json({"type": "ping"})
+                assert station.receive_json() == frames[-1]
+                assert station.receive_json() == {"type": "pong"}
+                assert session.phase == "paused"   # shown, not resumed
+    finally:
+        study.close()
+
+
+def test_the_state_says_the_trial_in_the_participants_words_too(tmp_path, silent_episodes):
+    """Beside the console's `trial_status`, the state carries the station's texts (`station`):
+    the status line, the start step's sentence and what is said once the drive ends."""
+    config = tiny_config(tmp_path, specs=("phi1", "phi2"))
+    study = LiveStudy(config, tmp_path / "study", ServerOptions()).open()
+    try:
+        with TestClient(live_app(study)):
+            session = study.sessions[study.create_participant("")[0]]
+            assert session.progress()["station"] == {"status": "", "next": None, "complete": None}
+            session.handle(Consent(type="consent", agree=True))
+            assert session.progress()["station"] == {
+                "status": "Warm-up drive", "next": "Next: a warm-up drive, to get to know the vehicle.",
+                "complete": None}
+            session.start(session.warm_up, None)
+            assert session.progress()["station"] == {"status": "Warm-up drive", "next": None,
+                                                     "complete": "The warm-up drive is complete."}
+            session.on_episode_message({"type": "episode_end"})
+            assert session.progress()["station"] == {"status": "Trial 1 of 2 is next",
+                                                     "next": "Next: trial 1 of 2.", "complete": None}
+            session.start(session.tasks[0], None)
+            session.phase = "paused"
+            assert session.progress()["station"] == {"status": "Trial 1 of 2", "next": None,
+                                                     "complete": "Trial 1 of 2 is complete."}
     finally:
         study.close()
