@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 from trustroute.core import defaults
-from trustroute.core.fields import Integer, Kind, Number, Seen, as_python, check_value, is_whole
+from trustroute.core.fields import Integer, Kind, Number, Seen, check_value, is_whole
 
 T = TypeVar("T")
 
@@ -44,7 +44,6 @@ class OptionRange(Generic[T]):
         """`check`, the refusal naming `source` and `place` instead of the flag and its fix `where`
         the value is written (`fix_at`; a settings object that names the option by its own keyword,
         SumoConfig's background_vehicles)."""
-        value = as_python(value, self.kind)
         if isinstance(self.kind, Number) and is_whole(value):   # a number option holds a float
             with contextlib.suppress(OverflowError):   # an int past every float is refused as it is
                 value = float(value)
