@@ -95,27 +95,28 @@ def wall_clock_times(study_dir: Path, name: str, table: pa.Table) -> dict[str, l
     return times
 
 
-def first_times(study_dir: Path, timed: dict[str, pa.Table]) -> dict[int, datetime]:
-    """Each participant's first recorded wall-clock time over the wall-clock columns of `timed`, the
-    study's tables that have them (by name)."""
+def first_times(timed: dict[str, pa.Table], times: dict[str, dict[str, list[datetime | None]]]
+                ) -> dict[int, datetime]:
+    """Each participant's first recorded wall-clock time over the study's tables that have wall-clock
+    columns (`timed`, by name), whose `times` (`wall_clock_times`) are given."""
     first: dict[int, datetime] = {}
     for name, table in timed.items():
         numbers = row_participants(table)
-        for values in wall_clock_times(study_dir, name, table).values():
+        for values in times[name].values():
             for p, value in zip(numbers, values, strict=True):
                 if p is not None and value is not None and (p not in first or value < first[p]):
                     first[p] = value
     return first
 
 
-def exported_table(study_dir: Path, name: str, table: pa.Table, key: dict[int, int],
-                   first: dict[int, datetime], people: bool) -> pa.Table:
+def exported_table(name: str, table: pa.Table, times: dict[str, list[datetime | None]],
+                   key: dict[int, int], first: dict[int, datetime], people: bool) -> pa.Table:
     """The study's table `name` (`table`, as read) as the package holds it (`exported_schema`):
-    pseudonymised, its wall-clock columns as seconds since the participant's first time, its rows in
-    pseudonym order, and (`people`: a live study) without the seeds that would give the participants'
-    numbers back."""
+    pseudonymised, its wall-clock columns (`times`, `wall_clock_times`) as seconds since the
+    participant's first time, its rows in pseudonym order, and (`people`: a live study) without the
+    seeds that would give the participants' numbers back."""
     numbers = row_participants(table)
-    for column, values in wall_clock_times(study_dir, name, table).items():
+    for column, values in times.items():
         seconds = [None if value is None or p is None else (value - first[p]).total_seconds()
                    for p, value in zip(numbers, values, strict=True)]
         index = table.schema.get_field_index(column)
@@ -182,11 +183,12 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
     tables = [name for name, (file_name, _) in TABLES.items() if (study_dir / file_name).exists()]
     # the tables with wall-clock times (small), read once; every time checked before anything is written
     timed = {name: read_study_table(study_dir, name) for name in tables if name in EXPORTED_TIMES}
-    first = first_times(study_dir, timed)
+    times = {name: wall_clock_times(study_dir, name, table) for name, table in timed.items()}
+    first = first_times(timed, times)
     (out / "tables").mkdir(parents=True, exist_ok=True)
     for name in tables:
         table = timed[name] if name in timed else read_study_table(study_dir, name)
-        write_table(exported_table(study_dir, name, table, key, first, people),
+        write_table(exported_table(name, table, times.get(name, {}), key, first, people),
                     out / "tables" / TABLES[name][0])
     book = {name: entries for name, entries in codebook(exported=True, people=people).items()
             if name in tables}
