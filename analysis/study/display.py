@@ -83,20 +83,24 @@ APPROXIMATE_MARK = "≈ "
 NAMED_METHODS = (BOOTSTRAP_PERCENTILE, BOOTSTRAP_DEGENERATE)
 
 
+def _method_named(texts: list[str], frame: pd.DataFrame, method: str, named: tuple[str, ...]) -> list[str]:
+    """Each shown interval followed by its method in parentheses where it is one of `named` (the
+    methods the column's title does not name; column `method` of `frame`)."""
+    methods = frame[method] if method in frame else [None] * len(frame)
+    return [f"{text} ({how})" if how in named and text != MISSING else text
+            for text, how in zip(texts, methods, strict=True)]
+
+
 def named_interval_column(cells: pd.DataFrame, low: str, high: str, method: str, digits: int) -> list[str]:
     """'[low, high]' per row (formatting.py `interval_column`), followed by "(degenerate)" where
     the interval is the point (column `method`): the column's title names the percentile interval."""
-    methods = cells[method] if method in cells else [None] * len(cells)
-    return [f"{text} ({how})" if how == BOOTSTRAP_DEGENERATE else text
-            for text, how in zip(interval_column(cells, low, high, digits), methods, strict=True)]
+    return _method_named(interval_column(cells, low, high, digits), cells, method, (BOOTSTRAP_DEGENERATE,))
 
 
 def named_estimate_column(p: pd.DataFrame, value: str, low: str, high: str, method: str) -> list[str]:
     """'estimate [low, high]' per row (formatting.py `estimate_column`), followed by the interval's
     method in parentheses where it is one of NAMED_METHODS (column `method`)."""
-    methods = p[method] if method in p else [None] * len(p)
-    return [f"{text} ({how})" if how in NAMED_METHODS and text != MISSING else text
-            for text, how in zip(estimate_column(p, value, low, high), methods, strict=True)]
+    return _method_named(estimate_column(p, value, low, high), p, method, NAMED_METHODS)
 
 
 def wilcoxon_p_column(p: pd.DataFrame, column: str) -> list[str]:
