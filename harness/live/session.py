@@ -142,8 +142,7 @@ class Session:
         self.mode = "auto"
         self.asked = "auto"              # the mode the participant's last takeover or hand-back asked for
         self.switched_unasked = False    # the episode switched to `mode` on its own since then
-        self.road: str | None = None
-        self.frame: dict | None = None   # the running drive's newest frame (`opening`)
+        self.frame: dict | None = None   # the running drive's newest frame (`road`, `opening`)
         self.reports = self.takeovers = 0
         self.prompted: set[int] = set()   # the roads the running episode has asked a report about
         self.last_error: str | None = None
@@ -199,6 +198,11 @@ class Session:
     def in_drive(self) -> bool:
         """A drive (the warm-up or a trial) runs, or is paused."""
         return self.phase in ("driving", "paused")
+
+    @property
+    def road(self) -> str | None:
+        """The road the running drive's car is on (its newest frame's)."""
+        return None if self.frame is None else self.frame["road"]
 
     @property
     def warm_up_shown(self) -> bool:
@@ -366,8 +370,7 @@ class Session:
         target = self.study.warm_up_dir() if task is self.warm_up else self.study.study_dir
         self.process, self.connection = start_episode_process(
             self.study.config, target, task, self.study.live_options(self.client, self.lockstep), trust)
-        self.task, self.phase, self.mode, self.road, self.last_error = task, "driving", "auto", None, None
-        self.frame = None
+        self.task, self.phase, self.mode, self.frame, self.last_error = task, "driving", "auto", None, None
         self.asked, self.switched_unasked = "auto", False
         self.prompted = set()
         self.reports = self.takeovers = 0   # the console shows them beside this drive's episode
@@ -404,7 +407,7 @@ class Session:
             elif kind == "warning" and message.get("kind") == "back_to_lane":
                 self.asked = self.mode   # the episode refused the hand-back (by wheel, off the lane)
             elif kind == "frame":
-                self.road, self.frame = message["road"], message
+                self.frame = message
             elif kind == "road" and message.get("prompt"):   # (recorded before the station sees it)
                 self.prompted.add(int(message["prompt"]["road"]))
             elif finished:

@@ -187,7 +187,8 @@ def test_a_row_shows_the_drive_only_while_it_runs_and_which_trial_it_is(station,
     task = session.tasks[0]
     with session.lock:
         session.warmed_up = True
-        session.phase, session.task, session.connection, session.road = "driving", task, Pipe(), "A-B"
+        session.phase, session.task, session.connection = "driving", task, Pipe()
+        session.frame = {"type": "frame", "road": "A-B"}
     row = page.locator(f'#participants tr[data-participant="{participant}"]')
     header = page.locator("thead th").all_inner_texts()
     column = {name: header.index(name) for name in ("trial", "episode", "road")}
