@@ -62,13 +62,14 @@ def withdrawn_refusal(participant: int) -> str:
 # The experimenter console's actions on a participant (harness/live/app.py) that each phase of
 # their session accepts: the episode controls need a running episode; a new link is refused only
 # once they have withdrawn (for one who declined it asks for their consent again), a withdrawal
-# once they have withdrawn or declined (nothing of theirs is kept). A paused episode whose
-# participant is not at their station ("disconnected", `Session.console_phase`: their disconnect
-# paused it, or they left while the experimenter held it) is not the experimenter's to resume: the
-# car would drive with no one at the station, and the deadline of a disconnect's pause (`expire`)
-# would be lifted; they resume it when they come back. The server refuses any other action
-# (`console_refusal`), and the state carries the list (`actions`), so the console shows a button
-# for exactly these.
+# once they have withdrawn or declined (nothing of theirs is kept). Two pauses are not the
+# experimenter's to resume (`Session.console_phase`): one the participant's disconnect made
+# ("disconnected"), whether or not they are back yet, is theirs (their station says "Press Resume"),
+# and one the experimenter made while the participant has left their station ("away") waits for
+# them to come back: the car would drive with no one at the station, or before the person pressed
+# Resume, and the deadline of a disconnect's pause (`expire`) would be lifted. The server refuses
+# any other action (`console_refusal`), and the state carries the list (`actions`), so the console
+# shows a button for exactly these.
 CONSOLE_ACTIONS: dict[str, tuple[str, ...]] = {
     "consent": ("link", "withdraw"),
     "declined": ("link",),
@@ -77,6 +78,7 @@ CONSOLE_ACTIONS: dict[str, tuple[str, ...]] = {
     "driving": ("pause", "abort", "link", "withdraw"),
     "paused": ("resume", "abort", "link", "withdraw"),
     "disconnected": ("abort", "link", "withdraw"),
+    "away": ("abort", "link", "withdraw"),
     "done": ("link", "withdraw"),
     "withdrawn": (),
 }
@@ -93,6 +95,9 @@ def console_refusal(participant: int, phase: str, action: str) -> str | None:
     elif phase == "declined":
         why = "{} ({})".format(*declined(participant))
     elif phase == "disconnected":
+        why = (f"participant {participant}'s episode is paused by their disconnect: they resume it at "
+               f"their station, and it accepts {accepted}")
+    elif phase == "away":
         why = (f"participant {participant} is not at their station: their paused episode waits for them "
                f"to come back, and accepts {accepted}")
     else:
@@ -235,10 +240,12 @@ class Session:
             return [self.progress(), *frame]
 
     def console_phase(self) -> str:
-        """The phase whose console actions the session accepts (CONSOLE_ACTIONS): its own, or
-        "disconnected" while its episode is paused with no station connected."""
-        away = self.pause_reason == "disconnect" or self.push is None
-        return "disconnected" if self.phase == "paused" and away else self.phase
+        """The phase whose console actions the session accepts (CONSOLE_ACTIONS): its own, or for
+        a paused episode "disconnected" (the participant's disconnect paused it) or "away" (the
+        experimenter paused it, and no station is connected)."""
+        if self.phase != "paused" or (self.pause_reason != "disconnect" and self.push is not None):
+            return self.phase
+        return "disconnected" if self.pause_reason == "disconnect" else "away"
 
     def questionnaire_shown(self) -> dict | None:
         """The questionnaire the station shows in phase "questionnaire" (with where it is asked)."""

@@ -37,9 +37,9 @@ class Pipe:
 def into_phase(study: LiveStudy, participant: int, phase: str) -> None:
     """Bring a new participant's session into `phase`: as created, by their consent (agreed or not;
     with the warm-up and every trial done for "done"), by a withdrawal, or after the consent with
-    an episode on a pipe of its own for "driving", "paused" (by the experimenter) and
-    "disconnected" (paused by the participant's disconnect; no SUMO) or a questionnaire shown, their
-    station connected but after a disconnect."""
+    an episode on a pipe of its own for "driving", "paused" (by the experimenter), "disconnected"
+    (paused by the participant's disconnect) and "away" (paused by the experimenter, their station
+    closed since; no SUMO) or a questionnaire shown, their station connected but in the last two."""
     session = study.sessions[participant]
     if phase in ("consent", "withdrawn"):
         if phase == "withdrawn":
@@ -50,12 +50,14 @@ def into_phase(study: LiveStudy, participant: int, phase: str) -> None:
         study.done |= {task.episode_id for task in session.tasks}
         session.warmed_up = True
     session.handle(Consent(type="consent", agree=phase != "declined"))
-    if phase in ("driving", "paused", "disconnected", "questionnaire"):
-        session.phase = "paused" if phase == "disconnected" else phase
+    paused = phase in ("disconnected", "away")
+    if phase in ("driving", "paused", "disconnected", "away", "questionnaire"):
+        session.phase = "paused" if paused else phase
         session.task, session.connection = session.tasks[0], Pipe()
-        session.pause_reason = {"paused": "experimenter", "disconnected": "disconnect"}.get(phase)
-        session.push = None if phase == "disconnected" else Pipe().send   # their station connected
-    assert session.phase == ("paused" if phase == "disconnected" else phase)
+        session.pause_reason = {"paused": "experimenter", "disconnected": "disconnect",
+                                "away": "experimenter"}.get(phase)
+        session.push = None if paused else Pipe().send   # their station connected
+    assert session.phase == ("paused" if paused else phase)
 
 
 def test_the_console_is_offered_exactly_what_the_server_accepts_in_every_phase(tmp_path):
@@ -69,7 +71,7 @@ def test_the_console_is_offered_exactly_what_the_server_accepts_in_every_phase(t
                 participant = client.post("/api/participants", json={}, headers=headers).json()["participant"]
                 into_phase(study, participant, phase)
                 shown = client.get(f"/api/participants/{participant}", headers=headers).json()
-                assert shown["phase"] == ("paused" if phase == "disconnected" else phase)
+                assert shown["phase"] == ("paused" if phase in ("disconnected", "away") else phase)
                 assert set(shown["actions"]) <= set(REQUESTS), shown["actions"]
                 endpoint, body = REQUESTS[action]
                 address = f"/api/participants/{participant}/{endpoint}"
@@ -86,11 +88,17 @@ def test_the_console_is_offered_exactly_what_the_server_accepts_in_every_phase(t
 
 
 
-@pytest.mark.parametrize("paused_by", ["disconnect", "experimenter"])
-def test_a_paused_episode_whose_participant_is_away_is_theirs_to_resume(paused_by, tmp_path):
-    """Resumed by the experimenter, the car would drive with no one at the station (and a
-    disconnect's deadline to come back would be lifted), whoever paused it; an abort or a
-    withdrawal is still the experimenter's."""
+@pytest.mark.parametrize("paused_by, at_station, says", [
+    ("disconnect", False, "paused by their disconnect: they resume it at their station"),
+    ("disconnect", True, "paused by their disconnect: they resume it at their station"),
+    ("experimenter", False, "is not at their station: their paused episode waits for them"),
+])
+def test_a_paused_episode_is_the_participants_to_resume_after_a_disconnect_or_while_they_are_away(
+        paused_by, at_station, says, tmp_path):
+    """Resumed by the experimenter, the car would drive with no one at the station, or (a
+    disconnect's pause, the participant back) before they pressed Resume, and a disconnect's
+    deadline to come back would be lifted; an abort or a withdrawal is still the experimenter's.
+    The refusal says which: a participant back at their station is not said to be away."""
     study = LiveStudy(tiny_config(tmp_path, participants=1), tmp_path / "study", ServerOptions()).open()
     try:
         with TestClient(live_app(study)) as client:
@@ -98,12 +106,15 @@ def test_a_paused_episode_whose_participant_is_away_is_theirs_to_resume(paused_b
             client.post("/api/participants", json={}, headers=headers)
             into_phase(study, 0, "paused")
             session = study.sessions[0]
-            session.pause_reason, session.push = paused_by, None
+            session.pause_reason, session.push = paused_by, Pipe().send if at_station else None
             shown = client.get("/api/participants/0", headers=headers).json()
             assert "resume" not in shown["actions"] and "abort" in shown["actions"]
             answer = client.post("/api/participants/0/control", json={"action": "resume"}, headers=headers)
             assert answer.status_code == 409
-            assert "is not at their station" in answer.json()["detail"]["detail"]
+            detail = answer.json()["detail"]["detail"]
+            assert says in detail, detail
+            away = not at_station and paused_by == "experimenter"
+            assert ("not at their station" in detail) == away, detail
             told = session.connection.told
             assert (session.phase, session.pause_reason, told) == ("paused", paused_by, [])
     finally:
