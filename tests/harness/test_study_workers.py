@@ -82,3 +82,51 @@ def test_ctrl_c_while_a_spawned_worker_is_handed_its_function_stops_it(monkeypat
     with pytest.raises(KeyboardInterrupt):
         workers._Worker(multiprocessing.get_context("spawn"), abs)
     assert set(multiprocessing.active_children()) <= before
+
+
+def test_a_worker_that_became_ready_breaks_the_row_of_workers_exiting_while_they_start(monkeypatch):
+    """Two workers exiting while they start stop the pool only in a row: one that became ready
+    between them (it runs its tasks) shows the workers can start, and the next one's exit fails
+    only its task. Workers stand in on pipes of this process, so the order is the test's: the
+    first exits, the second becomes ready, then the third (the first's replacement) exits."""
+    import multiprocessing
+    import threading
+
+    from trustroute.harness.study import workers
+
+    class Exited:
+        exitcode = 3
+
+        def join(self, _timeout: float | None = None) -> None:
+            pass
+
+        def is_alive(self) -> bool:
+            return False
+
+    made: list = []
+
+    class StandIn:
+        def __init__(self, _context, _function) -> None:
+            self.connection, self.other = multiprocessing.Pipe()
+            self.process, self.task, self.ready = Exited(), None, False
+            made.append(self)
+            if len(made) == 1:
+                self.other.close()   # exits before it is ready
+
+        def stop(self) -> None:
+            self.connection.close()
+
+    def second_ready_then_third_exits() -> None:
+        made[1].other.send(workers.Ready())
+        while not made[1].ready:
+            threading.Event().wait(0.01)
+        made[2].other.close()
+
+    monkeypatch.setattr(workers, "_Worker", StandIn)
+    pool = workers.process_pool(abs, [-1, -2, -3, -4], 2, lambda task, reason: (task, reason))
+    assert next(pool) == (-1, "worker process exited with code 3")
+    helper = threading.Thread(target=second_ready_then_third_exits, daemon=True)
+    helper.start()
+    assert next(pool) == (-3, "worker process exited with code 3")
+    pool.close()
+    helper.join(5)
