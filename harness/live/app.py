@@ -477,14 +477,14 @@ async def converse(websocket: WebSocket, session: Session, link: Link, consent_t
     offer(link.queue, {"type": "welcome", "participant": session.participant, "consent": consent_text,
                        "view": session.study.config.live_view, "driving": session.study.config.live_driving,
                        "inputs": list(session.study.config.live_inputs)})
-    previous = None if link.closed else session.attach(link)
+    previous, opening = (None, session.opening()) if link.closed else session.attach(link)
     if isinstance(previous, Link):
         previous.shut(REPLACED, "opened in another window",
                       {"type": "replaced", "detail": "This session was opened in another window or tab; "
                                                      "continue there."})
         offer(link.queue, {"type": "notice", "kind": "replaced",
                            "detail": "This session was open in another window or tab; that one is closed."})
-    for message in session.opening():
+    for message in opening:
         offer(link.queue, message)
     try:
         await receive_all(websocket, session, buckets, link, idle_seconds, sender)

@@ -501,12 +501,14 @@ class Session:
                 self.study.save_participants()   # the new order holds across restarts
 
     # -- the participant's connection -----------------------------------------------------------
-    def attach(self, push: Callable[[dict], None]) -> Callable[[dict], None] | None:
-        """The participant's connection opened; the one it replaces (None if none): one window
-        holds the session at a time."""
+    def attach(self, push: Callable[[dict], None]) -> tuple[Callable[[dict], None] | None, list[dict]]:
+        """The participant's connection opened: the one it replaces (None if none: one window holds
+        the session at a time), and what it is sent first (`opening`), read in the lock section
+        that gives it the episode's messages, so that none it is pushed (an `episode_end`) comes
+        before a state older than it."""
         with self.lock:
             previous, self.push = self.push, push
-            return previous
+            return previous, self.opening()
 
     def detach(self, push: Callable[[dict], None]) -> None:
         """The participant's connection closed: a running episode pauses until they resume."""

@@ -237,6 +237,45 @@ def test_a_station_opened_during_a_disconnect_pause_is_sent_the_drives_last_fram
         study.close()
 
 
+def test_a_station_opened_as_the_drive_ends_is_told_the_end_after_the_drives_state(tmp_path, monkeypatch,
+                                                                                 silent_episodes):
+    """A station that connects while the drive ends gets what it is sent first (the state) and
+    what the episode pushes to it in the order they happened: the drive's state, its
+    `episode_end`, then the next phase's; never the next phase's state before the end of the drive
+    (the station says "... is complete." from the drive's state when its `episode_end` comes).
+    Here the episode's end is read the moment the new station's connection is attached."""
+    from trustroute.harness.live.session import Session
+
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    attach = Session.attach
+
+    def ended_as_attached(session: Session, push):
+        attached = attach(session, push)
+        reader = threading.Thread(target=session.on_episode_message, args=({"type": "episode_end"},))
+        reader.start()   # the episode's reader thread, as it reads the drive's end
+        reader.join(10)
+        return attached
+
+    try:
+        with TestClient(live_app(study)) as client:
+            with consenting_participant(client, study) as (station, participant):
+                while station.receive_json().get("phase") != "ready":
+                    pass
+                station.send_json({"type": "start", "trust": 4})
+                while station.receive_json().get("phase") != "driving":
+                    pass
+                monkeypatch.setattr(Session, "attach", ended_as_attached)
+                with client.websocket_connect("/ws", headers=participant) as again:
+                    seen: list[tuple] = []
+                    while not seen or seen[-1] != ("state", "ready"):
+                        message = again.receive_json()
+                        if message["type"] in ("state", "episode_end"):
+                            seen.append((message["type"], message.get("phase")))
+                    assert seen == [("state", "driving"), ("episode_end", None), ("state", "ready")], seen
+    finally:
+        study.close()
+
+
 def test_the_state_says_the_trial_in_the_participants_words_too(tmp_path, silent_episodes):
     """Beside the console's `trial_status`, the state carries the station's texts (`station`):
     the status line, the start step's sentence and what is said once the drive ends."""
