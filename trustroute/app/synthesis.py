@@ -203,12 +203,12 @@ class Baseline:
 
 def baseline(problem: Problem, belief_rule: BeliefRule = defaults.BELIEF_RULE) -> Baseline:
     """The trust-free baseline: the shortest route completing the spec's state-only task, and its
-    certified value without the fallback (as `evaluate` gives it)."""
+    certified value without the fallback (as `evaluate` gives it: the joint unfolding for a spec
+    with trust-state atoms)."""
     town, spec = problem.town, problem.spec
     route = baseline_route(town, spec)
-    value = certified(problem, evaluate_plain(problem.pomdp, spec, trust_free_policy(town, spec),
-                                              EvaluationSettings(fallback_after=None,
-                                                                 belief_rule=checked_belief_rule(belief_rule))))
+    settings = EvaluationSettings(fallback_after=None, belief_rule=checked_belief_rule(belief_rule))
+    value = evaluate_single(problem, trust_free_policy(town, spec), settings)
     return Baseline(route=route, length_m=town.route_length(route), value=value)
 
 

@@ -51,3 +51,16 @@ def test_evaluate_rejects_a_negative_fallback(capsys):
     code, _, err = run_cli(capsys, "evaluate", "specs/phi1.toml", "free", "--fallback-after", "-1")
     assert code == 2
     assert "fallback" in err
+
+
+def test_baseline_of_a_trust_state_spec_is_the_joint_value_of_the_free_route(capsys):
+    # phi1_trust tests the hidden trust: the free route's value is the joint unfolding's, as
+    # `evaluate free --no-fallback` gives it
+    code, out, err = run_cli(capsys, "baseline", "phi1_trust", "--json")
+    assert code == 0, err
+    payload = json.loads(out)
+    code, out, _ = run_cli(capsys, "evaluate", "phi1_trust", "free", "--no-fallback", "--json")
+    assert code == 0
+    evaluated = json.loads(out)
+    assert (payload["lower"], payload["upper"]) == (evaluated["lower"], evaluated["upper"])
+    assert 0.0 < payload["lower"] <= payload["upper"] < 1.0
