@@ -106,7 +106,12 @@ def storm_lines(result: dict) -> list[str]:
              f"{s['build_seconds'] + s['lower_seconds'] + s['upper_seconds']:.1f} s",
              ours_line(result["ours"]),
              f"  overlap: {'yes' if result['overlap'] else 'NO'}"]
-    return lines + ([f"  note: {s['note']}"] if s.get("note") else [])
+    return lines + note_lines(s)
+
+
+def note_lines(side: dict) -> list[str]:
+    """A peer's note (why it was not run), as a line of a comparison's text."""
+    return [f"  note: {side['note']}"] if side.get("note") else []
 
 
 @peer.command("paynt")
@@ -123,11 +128,12 @@ def paynt_lines(result: dict) -> list[str]:
     """PAYNT's comparison as text."""
     p = result["paynt"]
     found = (f"{p['value']:.6f}" if p["found"] else "no controller found in time (lower bound 0)")
+    searched = ("not run (note below)" if p.get("note") else
+                f"{p['seconds']:.1f} s, controllers up to {p['memory_nodes']} memory nodes per observation")
     return [problem_line(result),
-            f"  paynt  {found}  {p['seconds']:.1f} s, controllers up to "
-            f"{p['memory_nodes']} memory nodes per observation",
+            f"  paynt  {found}  {searched}",
             ours_line(result["ours"]),
             "  PAYNT's value is a LOWER bound of Pr_max: the value of one finite-state controller. "
             "A controller with k memory nodes may be worth less than the best history-dependent "
             "policy, so compare it with our L, not U.",
-            f"  within our U: {'yes' if result['within_ours'] else 'NO'}"]
+            f"  within our U: {'yes' if result['within_ours'] else 'NO'}"] + note_lines(p)

@@ -29,11 +29,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.core.errors import InputError
-from trustroute.policies.peer.product_pomdp import ExplicitProduct
+from trustroute.policies.peer.product_pomdp import ExplicitProduct, no_goal_note
 
 INSTALL_HINT = "install the optional peer extra: pip install 'trustroute[peer]' (paynt==0.5.0, GPL-3.0)"
 PRECISION = 1e-6                 # PAYNT's model-checking precision (its default is 1e-4)
 MAX_PRODUCT_STATES = 200_000     # beyond, PAYNT's colored MDP (states × memory) does not fit
+NO_GOAL_NOTE = no_goal_note("PAYNT")
 
 
 def paynt_available() -> bool:
@@ -67,6 +68,7 @@ class PayntResult:
     time_limit: float
     precision: float = PRECISION
     bound: str = "lower"
+    note: str = ""   # why PAYNT was not run, when the answer needs no solver
 
     @property
     def lower(self) -> float:
@@ -77,7 +79,7 @@ class PayntResult:
         return {"value": self.value, "found": self.found, "lower": self.lower, "bound": self.bound,
                 "seconds": self.seconds, "build_seconds": self.build_seconds,
                 "memory_nodes": self.memory_nodes, "states": self.states,
-                "time_limit": self.time_limit, "precision": self.precision}
+                "time_limit": self.time_limit, "precision": self.precision, "note": self.note}
 
 
 @contextlib.contextmanager
@@ -104,12 +106,16 @@ def _quiet() -> Iterator[None]:
 
 def run_paynt(product: ExplicitProduct, time_limit: float = 10.0,
               max_states: int = MAX_PRODUCT_STATES) -> PayntResult:
-    """PAYNT's FSC synthesis (abstraction refinement, memory 1, 2, ...) for `time_limit` seconds."""
+    """PAYNT's FSC synthesis (abstraction refinement, memory 1, 2, ...) for `time_limit` seconds;
+    the value 0 with a note, without PAYNT, when no reachable state satisfies the spec."""
     require_paynt()
     if product.n_states > max_states:
         raise InputError("trustroute peer paynt", "", f"the product POMDP has {product.n_states} states, "
                          f"more than PAYNT is run on here ({max_states})",
                          "use a smaller town or horizon, or raise --max-states")
+    if not product.goal.any():
+        return PayntResult(value=0.0, found=True, seconds=0.0, build_seconds=0.0, memory_nodes=0,
+                           states=product.n_states, time_limit=float(time_limit), note=NO_GOAL_NOTE)
     import paynt.api
     import paynt.parser.sketch
     import paynt.utils.timer

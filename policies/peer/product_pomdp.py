@@ -41,6 +41,13 @@ GOAL_LABEL = "goal"
 PROPERTY = f'Pmax=? [F "{GOAL_LABEL}"]'
 
 
+def no_goal_note(peer: str) -> str:
+    """Why `peer` was not run on a product no reachable state of which satisfies the spec: the
+    answer is 0 exactly, and the peers reject a property whose label no state carries."""
+    return ("no reachable state of the product satisfies the spec (no satisfying route fits the "
+            f"horizon): the maximum probability is 0, and {peer} was not run")
+
+
 def check_exportable(spec: Spec) -> None:
     """InputError unless every atom the spec's minimal DFA tests is a road or trust-state atom
     (a belief atom no state tests, like lowtrust in the paper's φ1, does not matter)."""

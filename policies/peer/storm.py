@@ -23,7 +23,7 @@ from typing import Any
 
 from trustroute.core.errors import InputError
 from trustroute.policies.bracket import Bracket
-from trustroute.policies.peer.product_pomdp import ExplicitProduct
+from trustroute.policies.peer.product_pomdp import ExplicitProduct, no_goal_note
 
 INSTALL_HINT = "install the optional peer extra: pip install 'trustroute[peer]' (stormpy==2.0.0)"
 
@@ -58,8 +58,7 @@ class StormResult(Bracket):
     max_beliefs: int | None = None   # the unfolding's limit on discovered beliefs, if any
 
 
-NO_GOAL_NOTE = ("no reachable state of the product satisfies the spec (no satisfying route fits the "
-                "horizon): the maximum probability is 0, and Storm was not run")
+NO_GOAL_NOTE = no_goal_note("Storm")
 
 
 def build_storm_model(product: ExplicitProduct) -> tuple[Any, Any, float]:

@@ -152,3 +152,17 @@ def test_cli_reports_the_value_as_a_lower_bound(capsys):
     result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert result["paynt"]["bound"] == "lower" and result["within_ours"]
     assert result["paynt"]["lower"] <= result["ours"]["upper"] + PRECISION
+
+
+
+def test_no_reachable_goal_is_the_value_0_with_its_reason(capsys):
+    # no satisfying route fits 3 junctions: the answer is 0 exactly, as `peer storm` says, and
+    # PAYNT (which rejects a property whose label no state carries) is not run
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exited:
+        main(["peer", "paynt", "specs/phi1_trust.toml", "--horizon", "3", "--time-limit", "1", "--json"])
+    captured = capsys.readouterr()
+    assert exited.value.code in (0, None), captured.err
+    result = json.loads(captured.out)
+    assert result["paynt"]["lower"] == 0.0 and "no reachable state" in result["paynt"]["note"]
+    assert result["within_ours"] and result["ours"]["upper"] <= 1e-11
