@@ -25,6 +25,7 @@ from trustroute.core.cache import POLICIES, entry_lock_path
 from trustroute.core.cache import cache_dir as cache_dir_of
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import file_lock
+from trustroute.core.wording import outward
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.belief.driver_types import lift_population, lift_spec
@@ -178,11 +179,17 @@ def synthesis_progress(description: str, enabled: bool) -> Iterator[Callable[[fl
                   file=sys.stderr) as bar:
             def on_round(lower: float, upper: float) -> None:
                 bar.update(1)
-                bar.set_postfix_str(f"L={lower:.4f} U={upper:.4f}", refresh=False)
+                bar.set_postfix_str(_bounds_text(lower, upper), refresh=False)
 
             yield on_round
         return
     yield _progress_lines(description)
+
+
+def _bounds_text(lower: float, upper: float) -> str:
+    """A progress report's current bounds, four decimals rounded outward (`outward`)."""
+    low, high = outward(lower, upper, 4)
+    return f"L={low} U={high}"
 
 
 def _progress_lines(description: str) -> Callable[[float, float], None]:
@@ -196,7 +203,7 @@ def _progress_lines(description: str) -> Callable[[float, float], None]:
         rounds += 1
         elapsed = time.perf_counter() - started
         if elapsed >= due:
-            print(f"{description}: {rounds} rounds, L={lower:.4f} U={upper:.4f} ({elapsed:.0f} s)",
+            print(f"{description}: {rounds} rounds, {_bounds_text(lower, upper)} ({elapsed:.0f} s)",
                   file=sys.stderr, flush=True)
             due = elapsed + PROGRESS_EVERY
 

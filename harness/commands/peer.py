@@ -18,6 +18,7 @@ import click
 
 from trustroute.app.peers import paynt_comparison, storm_comparison
 from trustroute.core import ranges
+from trustroute.core.wording import interval
 from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import Checked
@@ -79,7 +80,7 @@ def problem_line(result: dict) -> str:
 
 def ours_line(ours: dict) -> str:
     """Our bounds, gap and seconds, as one line of a comparison's text."""
-    return (f"  ours   [{ours['lower']:.6f}, {ours['upper']:.6f}]  gap {ours['gap']:.2e}  "
+    return (f"  ours   {interval(ours['lower'], ours['upper'])}  gap {ours['gap']:.2e}  "
             f"{ours['seconds']:.1f} s")
 
 
@@ -102,7 +103,7 @@ def storm_lines(result: dict) -> list[str]:
     """Storm's comparison as text."""
     s = result["storm"]
     lines = [problem_line(result),
-             f"  storm  [{s['lower']:.6f}, {s['upper']:.6f}]  gap {s['gap']:.2e}  "
+             f"  storm  {interval(s['lower'], s['upper'])}  gap {s['gap']:.2e}  "
              f"{s['build_seconds'] + s['lower_seconds'] + s['upper_seconds']:.1f} s",
              ours_line(result["ours"]),
              f"  overlap: {'yes' if result['overlap'] else 'NO'}"]

@@ -16,7 +16,7 @@ import click
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults, ranges
-from trustroute.core.wording import counted
+from trustroute.core.wording import counted, interval, outward
 from trustroute.harness.commands.inputs import (
     POPULATION_GIVEN,
     driver_field,
@@ -157,7 +157,8 @@ def synth(spec_path: str, options: SynthOptions) -> None:
                           "fallback_only": _warn_fallback_only(f"the policy for {spec.name}", result.policy,
                                                                result.stats.converged)},
                          {"policy": path, "policy_arrays": policy_arrays(path)})
-    lines = [f"{spec.name}: {result.lower:.6f} <= Pr_max <= {result.upper:.6f} (gap {result.gap:.2e}, "
+    low, high = outward(result.lower, result.upper, 6)
+    lines = [f"{spec.name}: {low} <= Pr_max <= {high} (gap {result.gap:.2e}, "
              f"{result.seconds:.1f} s)"]
     lines += bounds_notes(result)
     if options.belief_rule == "paper":
@@ -174,7 +175,7 @@ def synth(spec_path: str, options: SynthOptions) -> None:
         lines.append("L and U refer to the authors' belief MDP (--belief-rule paper), not the real "
                      "process")
         lines.append(f"the policy's value under the real (Bayes) process within {cap} junctions: "
-                     f"[{real.lower:.6f}, {real.upper:.6f}]")
+                     f"{interval(real.lower, real.upper)}")
     lines.append(f"policy written to {path}")
     emit(options.as_json, payload, lines)
 
@@ -225,13 +226,14 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
                               any(c.get("rows", 0) > 0 for c in found.candidates))},
                          {"policy": path, "policy_arrays": policy_arrays(path)})
     what = "P(satisfied), prior-weighted" if objective == "bayes" else "worst type's P(satisfied)"
+    low, high = outward(found.lower, found.upper, 6)
     lines = [f"{spec.name} ({population.n_types} driver types, objective {objective}): "
-             f"{found.lower:.6f} <= max {what} <= {found.upper:.6f} (gap {found.gap:.2e}, "
+             f"{low} <= max {what} <= {high} (gap {found.gap:.2e}, "
              f"{found.seconds:.1f} s)"]
     lines.append("returned policy per type (exact, true driver of that type): " + "; ".join(
-        f"{v.name} (weight {v.weight:g}) [{v.lower:.6f}, {v.upper:.6f}]" for v in found.type_values))
+        f"{v.name} (weight {v.weight:g}) {interval(v.lower, v.upper)}" for v in found.type_values))
     mixture = found.mixture_value
-    lines.append(f"returned policy under the type prior: [{mixture[0]:.6f}, {mixture[1]:.6f}]; worst type "
+    lines.append(f"returned policy under the type prior: {interval(*mixture)}; worst type "
                  f"{found.worst_type_value:.6f}; AV type prior {', '.join(f'{p:g}' for p in found.prior)}")
     if objective == "robust":
         worst_bayes = summary["bayes"]["worst_type_value"]
@@ -353,7 +355,7 @@ def evaluate(spec_path: str, policy_name: str, options: EvaluateOptions) -> None
     payload["expected_junctions"] = finite_or_none(value.expected_junctions)
     _mark_fallback_only(payload, f"policy {policy_name}", policy)
     lines = [
-        f"{spec.name} / {value.policy}: P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], "
+        f"{spec.name} / {value.policy}: P(satisfied) in {interval(value.lower, value.upper)}, "
         f"E[final trust] = {value.expected_final_trust:.4f}, E[junctions] = "
         f"{value.expected_junctions:.2f}, P(fallback fired) = {value.fallback_probability:.4f}",
         "episode ends: " + ", ".join(f"{k} {v:.4f}" for k, v in value.end_mass.items())]
@@ -403,7 +405,7 @@ def _evaluate_population(problem, policy, settings, as_json: bool, what: str) ->
     _mark_fallback_only(payload, what, policy)
     emit(as_json, payload, [
         f"{spec.name} / {value.policy} over the population's {population.n_types} driver types: "
-        f"P(satisfied) in [{value.lower:.6f}, {value.upper:.6f}], E[final trust] = "
+        f"P(satisfied) in {interval(value.lower, value.upper)}, E[final trust] = "
         f"{value.expected_final_trust:.4f}",
-        "per type: " + "; ".join(f"{t.name} (weight {t.weight:g}) [{t.lower:.6f}, {t.upper:.6f}]"
+        "per type: " + "; ".join(f"{t.name} (weight {t.weight:g}) {interval(t.lower, t.upper)}"
                                  for t in types)])

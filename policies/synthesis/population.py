@@ -48,6 +48,7 @@ from typing import Literal, TypeAlias
 
 import numpy as np
 
+from trustroute.core.wording import interval
 from trustroute.networks.town import Town
 from trustroute.participants.driver_population import DriverPopulation
 from trustroute.policies.belief.driver_types import lift_population, lift_spec
@@ -330,7 +331,7 @@ class RunSchedule:
         self.last_end = clock_now()
         if self.on_phase is not None:
             self.on_phase(f"[{self.done}/{self.runs}, {self.budget.elapsed():.1f} s] {what}: "
-                          f"[{lower:.6f}, {upper:.6f}]")
+                          f"{interval(lower, upper)}")
 
 
 def run_count(population: DriverPopulation, objective: str, grid_points: int) -> int:

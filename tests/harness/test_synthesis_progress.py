@@ -11,6 +11,7 @@ import pytest
 
 from tests.cli import run_cli
 from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH
+from trustroute.core.wording import interval, outward
 from trustroute.policies import resolve
 
 
@@ -76,3 +77,13 @@ def test_a_cached_population_policy_announces_its_runs(tmp_path, capsys, town, a
     resolve.population_policy(town, population, spec, "robust",
                               resolve.PolicySettings(tmp_path / "d", horizon=3, progress=False))
     assert capsys.readouterr().err == ""
+
+
+def test_bounds_are_printed_rounded_outward(capsys, at_once):
+    # a lower bound just below 1 must not read as 1: the printed interval holds the certified one
+    on_round = resolve._progress_lines("synthesizing x")
+    on_round(0.99999, 0.12341)
+    assert "L=0.9999 U=0.1235" in capsys.readouterr().err
+    assert outward(0.99999996, 0.99999996, 6) == ("0.999999", "1.000000")
+    assert interval(0.0, 1e-12) == "[0.000000, 0.000001]"
+    assert interval(0.25, 0.25) == "[0.250000, 0.250000]"

@@ -1,8 +1,26 @@
-"""Counts in messages, in the singular for one ("1 file excluded", "3 files excluded")."""
+"""Counts in messages, in the singular for one ("1 file excluded", "3 files excluded"), and certified
+bounds as text rounded outward."""
 
 from __future__ import annotations
+
+from decimal import ROUND_CEILING, ROUND_FLOOR, Decimal
 
 
 def counted(count: int, noun: str, plural: str | None = None) -> str:
     """`count` and `noun`, the noun's plural (`plural`, or `noun` + "s") unless count is 1."""
     return f"{count} {noun if count == 1 else plural or noun + 's'}"
+
+
+def outward(lower: float, upper: float, digits: int) -> tuple[str, str]:
+    """A certified [lower, upper] as text of `digits` decimals rounded outward, lower down and upper
+    up, so the printed interval holds the certified one: a lower bound of 0.99999996 reads 0.999999
+    at six decimals, never 1.000000, which would claim more than was certified."""
+    step = Decimal(1).scaleb(-digits)
+    return (str(Decimal(lower).quantize(step, rounding=ROUND_FLOOR)),
+            str(Decimal(upper).quantize(step, rounding=ROUND_CEILING)))
+
+
+def interval(lower: float, upper: float, digits: int = 6) -> str:
+    """A certified interval as "[lower, upper]", rounded outward (`outward`)."""
+    low, high = outward(lower, upper, digits)
+    return f"[{low}, {high}]"
