@@ -24,6 +24,7 @@ from collections.abc import Callable
 from typing import Any
 
 from trustroute.harness.live.answers import answered, save_answers
+from trustroute.harness.live.attempts import outcome_of
 from trustroute.harness.live.protocol import (
     REQUESTED_MODE,
     Answers,
@@ -105,24 +106,43 @@ def console_refusal(participant: int, phase: str, action: str) -> str | None:
     return f"no {action}: {why}"
 
 
+def drive_named(trial: int, trials: int, warm_up: bool) -> str:
+    """The drive in the participant's words, as a sentence begins: "The warm-up drive" or "Trial 2
+    of 3" (`trial` as `station_texts` has it)."""
+    return "The warm-up drive" if warm_up else f"Trial {trial} of {trials}"
+
+
+# What the station says once a drive ends, by the attempt's outcome (harness/live/attempts.py
+# `outcome_of`, the journal's rule): every end but "done" leaves the drive to be run again.
+DRIVE_ENDS = {"done": "{drive} is complete.",
+              "aborted": "{drive} was stopped by the experimenter; it will be run again.",
+              "incomplete": "{drive} was stopped: the connection was lost for too long. "
+                            "It will be run again.",
+              "failed": "{drive} failed for a technical reason; it will be run again."}
+
+
 def station_texts(phase: str, trial: int, trials: int, warm_up: bool) -> dict[str, str | None]:
     """Where the participant is among their `trials`, in the participant's words, which the station
     shows as they are (the console's words: `Session.trial_status`): `status`, its status line
     ("Warm-up drive", "Trial 2 of 3" while driven, "Trial 2 of 3 is next" before it); `next`, the
-    start step's sentence (null outside phase "ready"); `complete`, what the station says once the
-    drive under way ends (null between drives). `trial` is the state's (the trials done, plus the
-    one driven); `warm_up`: the drive under way, or the next, is the warm-up."""
+    start step's sentence (null outside phase "ready"). `trial` is the state's (the trials done,
+    plus the one driven); `warm_up`: the drive under way, or the next, is the warm-up. What is said
+    once the drive ends comes with its end (`station_end`)."""
     if phase in ("driving", "paused"):
-        which = "The warm-up drive" if warm_up else f"Trial {trial} of {trials}"
-        return {"status": "Warm-up drive" if warm_up else which, "next": None,
-                "complete": f"{which} is complete."}
+        return {"status": "Warm-up drive" if warm_up else drive_named(trial, trials, warm_up), "next": None}
     if phase != "ready":
-        return {"status": "", "next": None, "complete": None}
+        return {"status": "", "next": None}
     if warm_up:
-        return {"status": "Warm-up drive", "next": "Next: a warm-up drive, to get to know the vehicle.",
-                "complete": None}
+        return {"status": "Warm-up drive", "next": "Next: a warm-up drive, to get to know the vehicle."}
     return {"status": f"Trial {trial + 1} of {trials} is next",
-            "next": f"Next: trial {trial + 1} of {trials}.", "complete": None}
+            "next": f"Next: trial {trial + 1} of {trials}."}
+
+
+def station_end(message: dict, trial: int, trials: int, warm_up: bool) -> str:
+    """What the station says of the drive that the episode's last `message` ended (its `station`
+    field), in the words of `station_texts`: "Trial 2 of 3 is complete.", "The warm-up drive was
+    stopped by the experimenter; it will be run again." (`DRIVE_ENDS`)."""
+    return DRIVE_ENDS[outcome_of(message)[0]].format(drive=drive_named(trial, trials, warm_up))
 
 
 class Session:
@@ -188,7 +208,7 @@ class Session:
         with self.lock:
             done = [task.episode_id for task in self.tasks if self.study.is_done(task)]
             pending = self.pending()
-            trial = len(done) + (self.in_drive and not self.warming_up)
+            trial = self.trial_number(len(done))
             return {"type": "state", "participant": self.participant, "label": self.label,
                     "phase": self.phase, "paused_by": self.pause_reason, "trial": trial,
                     "warm_up": None if self.warm_up is None else ("done" if self.warmed_up else "pending"),
@@ -198,6 +218,10 @@ class Session:
                     "next_episode": pending[0].episode_id if pending else None,
                     "questionnaire": self.questionnaire_shown(),
                     "actions": list(CONSOLE_ACTIONS[self.console_phase()])}
+
+    def trial_number(self, done: int) -> int:
+        """The state's `trial`: the `done` trials, plus the one driven (not the warm-up)."""
+        return done + (self.in_drive and not self.warming_up)
 
     @property
     def in_drive(self) -> bool:
@@ -404,6 +428,7 @@ class Session:
     def on_episode_message(self, message: dict) -> None:
         kind = message.get("type")
         finished = kind in ("episode_end", "episode_aborted", "episode_failed")
+        shown = {key: value for key, value in message.items() if key != "traceback"}   # the station's
         with self.lock:
             if self.phase == "withdrawn":
                 return   # withdrawn: nothing of this episode is kept, nothing is sent
@@ -418,6 +443,9 @@ class Session:
             elif kind == "road" and message.get("prompt"):   # (recorded before the station sees it)
                 self.prompted.add(int(message["prompt"]["road"]))
             elif finished:
+                done = sum(self.study.is_done(task) for task in self.tasks)
+                said = station_end(message, self.trial_number(done), len(self.tasks), self.warming_up)
+                shown = {**shown, "station": said}
                 self.study.attempt_ended(self.task, message)
                 if kind == "episode_end" and self.warming_up:
                     self.warmed_up = True
@@ -434,7 +462,7 @@ class Session:
                     self.expiry = None
             push = self.push
         if push is not None:
-            push({key: value for key, value in message.items() if key != "traceback"})
+            push(shown)
             if finished:
                 push(self.progress())
 

@@ -344,7 +344,10 @@ async function loadNet() {
 
 // -- the session ----------------------------------------------------------------------------------
 let shownEpisode = null;   // the episode the drive step shows
-let completed = "";        // the drive this window saw end ("Trial 1 of 4 is complete."), until the next starts
+// What the server said of the drive this window saw end (its end's `station`: "Trial 1 of 4 is
+// complete.", "The warm-up drive was stopped by the experimenter; ..."), until the next starts;
+// `stopped`: it ended otherwise than complete, and is run again.
+let ended = { text: "", stopped: false };
 
 // The consent text, a paragraph for each block of it (blocks are separated by a blank line).
 function showConsent(text) {
@@ -355,11 +358,12 @@ function showConsent(text) {
   }));
 }
 
-// Between drives (the next one's start, a questionnaire) the drive just ended is said complete.
+// Between drives (the next one's start, a questionnaire) how the drive just ended is said.
 function showCompleted(phase) {
-  const text = phase === "ready" || phase === "questionnaire" ? completed : "";
+  const text = phase === "ready" || phase === "questionnaire" ? ended.text : "";
   setText($("completed"), text);
   $("completed").classList.toggle("hidden", !text);
+  $("completed").classList.toggle("stopped", ended.stopped);
 }
 
 const inDrive = (phase) => phase === "driving" || phase === "paused";
@@ -405,8 +409,12 @@ function onState(message) {
   } else if (message.phase === "done") show("done-step");
 }
 
-function endDrive() {
+// The drive's end, in the server's words (harness/live/session.py `station_end`): said over the
+// view standing still when the drive did not complete, and above the next step until the next drive.
+function endDrive(message) {
   driveOver = true;
+  ended = { text: message.station, stopped: message.type !== "episode_end" };
+  if (ended.stopped) overlay(message.station);
   updateControls();
 }
 
@@ -415,7 +423,7 @@ function startEpisode(episodeId) {
   // `episode_start` comes once its SUMO runs) is
   if (episodeId !== shownEpisode) $("reported").textContent = "";
   shownEpisode = episodeId;
-  completed = "";
+  ended = { text: "", stopped: false };
   driveOver = false;
   latest = null;
   if (driverView) driverView.clear();
@@ -451,17 +459,8 @@ function onMessage(message) {
       if (message.prompt) { pendingPrompt = message.prompt; $("prompt").classList.remove("hidden"); }
       break;
     case "episode_start": startEpisode(message.episode_id); pendingPrompt = null; break;
-    case "episode_end":
-      completed = state.station.complete;
-      endDrive();
-      break;
+    case "episode_end": case "episode_aborted": case "episode_failed": endDrive(message); break;
     case "notice": $("error").textContent = message.detail; break;
-    case "episode_aborted":
-      $("status").textContent = "The experimenter stopped this trial; it will be run again.";
-      overlay("The experimenter stopped this trial.");
-      endDrive();
-      break;
-    case "episode_failed": $("error").textContent = "The trial failed; it will be run again."; endDrive(); break;
     case "error": {
       toggling = false;   // a refused takeover or hand-back may be tried again
       if (state.phase === "paused") break;   // the overlay says why nothing moves

@@ -17,7 +17,7 @@ import pytest
 
 from tests.browser import chromium_executable
 from trustroute.harness.live.server import LiveStudy, ServerOptions
-from trustroute.harness.live.session import station_texts
+from trustroute.harness.live.session import station_end, station_texts
 
 from .conftest import tiny_config
 from .test_browser import CHROMIUM_ARGS
@@ -274,6 +274,16 @@ def state_message(phase: str, **changes) -> str:
     return json.dumps({"station": texts, **message})
 
 
+GOAL = {"type": "episode_end", "satisfied": True, "end_reason": "goal", "junctions": 3, "takeovers": 0}
+
+
+def end_message(end: dict, trial: int = 1, trials: int = 1, warm_up: bool = False, **changes) -> str:
+    """The server's message of the end of a drive (`end`, the episode's message, for episode "x"),
+    with what the station says of it by the server's rule, `station_end`, unless `changes` give it."""
+    message = {"episode_id": "x", **end, **changes}
+    return json.dumps({"station": station_end(message, trial, trials, warm_up), **message})
+
+
 DRIVING = ("toggle", "accelerate", "brake", "pull-out", "pull-in")
 
 
@@ -326,8 +336,7 @@ def test_the_driving_controls_work_only_while_the_drive_runs(station):
         page.keyboard.press("Space")
         assert len(sent("hand_back")) == 1
         socket.send(json.dumps({"type": "mode", "mode": "auto", "t": 12.0}))
-        socket.send(json.dumps({"type": "episode_end", "episode_id": "x", "satisfied": True,
-                                "end_reason": "goal", "junctions": 3, "takeovers": 1}))
+        socket.send(end_message({**GOAL, "takeovers": 1}))
         wait_until(page, "document.getElementById('toggle').disabled")   # the drive is over
         assert enabled(page) == set() and page.locator("#trust button:enabled").count() == 0
         page.keyboard.press("Space")
@@ -411,8 +420,7 @@ def test_a_gamepad_sends_nothing_while_the_car_is_held_paused_or_its_drive_over(
         assert sent_for(steer=-0.3, button=True) == []
         page.evaluate("window.pad.button = false")
         socket.send(state_message("driving", mode="manual"))
-        socket.send(json.dumps({"type": "episode_end", "episode_id": "x", "satisfied": True,
-                                "end_reason": "goal", "junctions": 3, "takeovers": 1}))
+        socket.send(end_message({**GOAL, "takeovers": 1}))
         assert sent_for(steer=0.4, throttle=1.0, button=True) == []
         page.screenshot(path=str(tmp_path / "gamepad-over.png"))
 
@@ -522,8 +530,7 @@ def test_a_completed_trial_and_the_end_of_the_study_are_said(station, tmp_path):
             socket.send(json.dumps(frame))
             wait_until(page, "document.getElementById('speed').textContent.includes('km/h')")
             assert page.locator("#completed").is_hidden()
-            socket.send(json.dumps({"type": "episode_end", "episode_id": episode, "satisfied": True,
-                                    "end_reason": "goal", "junctions": 3, "takeovers": 0}))
+            socket.send(end_message(GOAL, trial=trial, trials=2, episode_id=episode))
             if trial == 1:
                 socket.send(state_message("ready", trial=1, trials=2, episode_id=None, done=["x"]))
                 page.locator("#ready-step").wait_for(state="visible")
@@ -598,8 +605,9 @@ def test_the_station_says_the_trial_in_the_servers_words(station):
     `station` texts as sent (harness/live/session.py `station_texts`), not counted again by the
     page from `done` and `trial`: here they name another trial than those fields would."""
     frame, _ = scene_on(station.net_path)
-    ready = {"status": "Trial 7 of 9 is next", "next": "Next: trial 7 of 9.", "complete": None}
-    driving = {"status": "Trial 7 of 9", "next": None, "complete": "Trial 7 of 9 is complete."}
+    ready = {"status": "Trial 7 of 9 is next", "next": "Next: trial 7 of 9."}
+    driving = {"status": "Trial 7 of 9", "next": None}
+    complete = "Trial 7 of 9 is complete."
     with station.open() as (page, socket):
         socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver"}))
         socket.send(state_message("ready", trial=0, trials=2, episode_id=None, station=ready))
@@ -610,7 +618,44 @@ def test_the_station_says_the_trial_in_the_servers_words(station):
         socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
         socket.send(json.dumps(frame))
         page.locator("#status").filter(has_text=driving["status"]).wait_for()
-        socket.send(json.dumps({"type": "episode_end", "episode_id": "x", "satisfied": True,
-                                "end_reason": "goal", "junctions": 3, "takeovers": 0}))
+        socket.send(end_message(GOAL, trial=1, trials=2, station=complete))
         socket.send(state_message("ready", trial=1, trials=2, episode_id=None, done=["x"], station=ready))
-        page.locator("#completed").filter(has_text=driving["complete"]).wait_for()
+        page.locator("#completed").filter(has_text=complete).wait_for()
+
+
+# How a drive may end other than complete (the episode's last message, as harness/live/worker.py,
+# Session.control and Session.expire have it): stopped by the experimenter, incomplete, failed.
+STOPPED = [{"type": "episode_aborted", "reason": "aborted by the experimenter"},
+           {"type": "episode_aborted", "reason": "incomplete: no reconnection within 120 s"},
+           {"type": "episode_failed", "error": "RuntimeError: SUMO stopped"}]
+
+
+@pytest.mark.parametrize("end", STOPPED, ids=["aborted", "incomplete", "failed"])
+def test_a_stopped_warm_up_or_trial_is_said_in_the_servers_words(station, tmp_path, end):
+    """A drive that ends without completing is said in the server's words for that drive and that
+    end (its end's `station`, harness/live/session.py `station_end`), over the view that stands still
+    and, as a notice, above the start of the drive run again: the warm-up's end speaks of the
+    warm-up, a trial's of that trial, never of "this trial" for the warm-up."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver"}))
+        for warm_up, trial, name in ((True, 0, "warm-up"), (False, 2, "trial-2")):
+            pending = "pending" if warm_up else "done"
+            said = json.loads(end_message(end, trial=trial, trials=4, warm_up=warm_up))["station"]
+            assert ("The warm-up drive" if warm_up else "Trial 2 of 4") in said
+            socket.send(state_message("driving", warm_up=pending, trial=trial, trials=4))
+            socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
+            socket.send(json.dumps(frame))
+            wait_until(page, "document.getElementById('speed').textContent.includes('km/h')")
+            socket.send(end_message(end, trial=trial, trials=4, warm_up=warm_up))
+            page.locator("#overlay-text").filter(has_text=said).wait_for()
+            assert page.locator("#overlay-text").inner_text() == said
+            assert ("trial" in said.lower()) is not warm_up
+            page.screenshot(path=str(tmp_path / f"{name}-{end['type']}-view.png"))
+            socket.send(state_message("ready", warm_up=pending, trial=trial - (not warm_up), trials=4,
+                                      episode_id=None))
+            page.locator("#ready-step").wait_for(state="visible")
+            assert page.locator("#completed").inner_text() == said
+            assert "stopped" in page.locator("#completed").get_attribute("class")
+            assert page.locator("#error").inner_text() == ""
+            page.screenshot(path=str(tmp_path / f"{name}-{end['type']}.png"))

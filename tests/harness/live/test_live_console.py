@@ -242,7 +242,8 @@ def test_a_station_opened_as_the_drive_ends_is_told_the_end_after_the_drives_sta
     """A station that connects while the drive ends gets what it is sent first (the state) and
     what the episode pushes to it in the order they happened: the drive's state, its
     `episode_end`, then the next phase's; never the next phase's state before the end of the drive
-    (the station says "... is complete." from the drive's state when its `episode_end` comes).
+    (the station says how the drive ended, its end's `station`, above the step the state after it
+    shows).
     Here the episode's end is read the moment the new station's connection is attached."""
     from trustroute.harness.live.session import Session
 
@@ -278,26 +279,65 @@ def test_a_station_opened_as_the_drive_ends_is_told_the_end_after_the_drives_sta
 
 def test_the_state_says_the_trial_in_the_participants_words_too(tmp_path, silent_episodes):
     """Beside the console's `trial_status`, the state carries the station's texts (`station`):
-    the status line, the start step's sentence and what is said once the drive ends."""
+    the status line and the start step's sentence."""
     config = tiny_config(tmp_path, specs=("phi1", "phi2"))
     study = LiveStudy(config, tmp_path / "study", ServerOptions()).open()
     try:
         with TestClient(live_app(study)):
             session = study.sessions[study.create_participant("")[0]]
-            assert session.progress()["station"] == {"status": "", "next": None, "complete": None}
+            assert session.progress()["station"] == {"status": "", "next": None}
             session.handle(Consent(type="consent", agree=True))
             assert session.progress()["station"] == {
-                "status": "Warm-up drive", "next": "Next: a warm-up drive, to get to know the vehicle.",
-                "complete": None}
+                "status": "Warm-up drive", "next": "Next: a warm-up drive, to get to know the vehicle."}
             session.start(session.warm_up, None)
-            assert session.progress()["station"] == {"status": "Warm-up drive", "next": None,
-                                                     "complete": "The warm-up drive is complete."}
+            assert session.progress()["station"] == {"status": "Warm-up drive", "next": None}
             session.on_episode_message({"type": "episode_end"})
             assert session.progress()["station"] == {"status": "Trial 1 of 2 is next",
-                                                     "next": "Next: trial 1 of 2.", "complete": None}
+                                                     "next": "Next: trial 1 of 2."}
             session.start(session.tasks[0], None)
             session.phase = "paused"
-            assert session.progress()["station"] == {"status": "Trial 1 of 2", "next": None,
-                                                     "complete": "Trial 1 of 2 is complete."}
+            assert session.progress()["station"] == {"status": "Trial 1 of 2", "next": None}
+    finally:
+        study.close()
+
+
+# Each way an episode ends (its last message, as harness/live/worker.py and Session.control and
+# Session.expire have it) and what the station is told of the warm-up's end and of a trial's.
+ENDS = [({"type": "episode_aborted", "reason": "aborted by the experimenter"},
+         "The warm-up drive was stopped by the experimenter; it will be run again.",
+         "Trial 1 of 2 was stopped by the experimenter; it will be run again."),
+        ({"type": "episode_aborted", "reason": "incomplete: no reconnection within 120 s"},
+         "The warm-up drive was stopped: the connection was lost for too long. It will be run again.",
+         "Trial 1 of 2 was stopped: the connection was lost for too long. It will be run again."),
+        ({"type": "episode_failed", "error": "RuntimeError: SUMO stopped"},
+         "The warm-up drive failed for a technical reason; it will be run again.",
+         "Trial 1 of 2 failed for a technical reason; it will be run again."),
+        ({"type": "episode_end", "satisfied": True, "end_reason": "goal", "junctions": 3, "takeovers": 0},
+         "The warm-up drive is complete.", "Trial 1 of 2 is complete.")]
+
+
+@pytest.mark.parametrize(("end", "warm_up_said", "trial_said"), ENDS,
+                         ids=["aborted", "incomplete", "failed", "done"])
+def test_the_station_is_told_how_the_warm_up_and_each_trial_ended(tmp_path, monkeypatch, silent_episodes,
+                                                                 end, warm_up_said, trial_said):
+    """The episode's end reaches the station with what the station says of it (`station`), by the
+    server's one rule for the drive's words: the warm-up's end names the warm-up, a trial's names
+    the trial, whether the drive completed, was stopped by the experimenter, ended incomplete (no
+    reconnection in time) or failed; the traceback of a failure stays on the server."""
+    config = tiny_config(tmp_path, specs=("phi1", "phi2"))
+    study = LiveStudy(config, tmp_path / "study", ServerOptions()).open()
+    monkeypatch.setattr(study, "episode_finished", lambda task: study.done.add(task.episode_id))
+    try:
+        with TestClient(live_app(study)):
+            session = study.sessions[study.create_participant("")[0]]
+            session.handle(Consent(type="consent", agree=True))
+            pushed: list[dict] = []
+            session.push = pushed.append
+            for task, said in ((session.warm_up, warm_up_said), (session.tasks[0], trial_said)):
+                session.start(task, None)
+                session.on_episode_message({**end, "episode_id": task.episode_id, "traceback": "Traceback"})
+                assert pushed[-2] == {**end, "episode_id": task.episode_id, "station": said}
+                assert pushed[-1]["type"] == "state" and pushed[-1]["phase"] == "ready"
+                session.warmed_up = True   # whatever its end, the next drive here is the first trial
     finally:
         study.close()
