@@ -60,17 +60,34 @@ class Ready:
     """A worker's first message: it runs and holds the task function."""
 
 
-class WorkersCannotStart(InputError):
-    """Worker processes exit before they are ready, again and again."""
+# Where a worker that ended while it started said why: one that exited (a Python error) printed it;
+# one killed by a signal printed nothing, and SIGKILL there is most often the out-of-memory killer.
+EXITED_SAID = "printed its error above"
+KILLED_SAID = ("a process killed by a signal prints no error: the kernel's log (dmesg) says whether the "
+               "out-of-memory killer killed it")
+EXITED_FIX = ('a script that calls run_study must call it under `if __name__ == "__main__":`, since '
+              "spawned workers import the script again; otherwise see the workers' errors, or run with "
+              "one worker (--workers 1)")
+KILLED_FIX = "give the workers more memory, or run fewer of them (--workers 1)"
 
-    def __init__(self, reason: str) -> None:
-        super().__init__(
-            "study workers", "",
-            f"worker processes exit while they start ({reason}, {START_FAILURES} in a row; each "
-            "printed its error above)",
-            'a script that calls run_study must call it under `if __name__ == "__main__":`, since '
-            "spawned workers import the script again; otherwise see the workers' errors, or run with "
-            "one worker (--workers 1)")
+
+class WorkersCannotStart(InputError):
+    """Worker processes exit before they are ready, again and again: `exitcodes`, theirs in order
+    (`multiprocessing.Process.exitcode`: minus the signal for a worker killed by one)."""
+
+    def __init__(self, exitcodes: list[int | None]) -> None:
+        exited = [code is not None and code >= 0 for code in exitcodes]
+        killed = [code is not None and code < 0 for code in exitcodes]
+        ends = ", then ".join(dict.fromkeys(describe_exit(code) for code in exitcodes))
+        said = [f"{ends}, {len(exitcodes)} in a row"]
+        if any(exited):
+            said.append(f"each {EXITED_SAID}" if all(exited) else f"each that exited {EXITED_SAID}")
+        if any(killed):
+            said.append(KILLED_SAID)
+        fixes = ([KILLED_FIX] if any(killed) else []) + ([] if all(killed) else [EXITED_FIX])
+        super().__init__("study workers", "",
+                         f"worker processes exit while they start (worker process {'; '.join(said)})",
+                         "; ".join(fixes))
 
 
 class Terminated(KeyboardInterrupt):
@@ -183,7 +200,7 @@ def process_pool(
     context = multiprocessing.get_context()
     pending = deque(tasks)
     pool: list[_Worker[Task]] = []
-    start_failures = 0   # workers that exited before they were ready, in a row
+    start_failures: list[int | None] = []   # exit codes of workers ended before they were ready, in a row
     try:
         # started inside the try: a Ctrl-C while a spawned worker is handed the function shuts
         # down the ones already started
@@ -207,9 +224,9 @@ def process_pool(
                 except (EOFError, OSError):
                     worker.process.join(SHUTDOWN_SECONDS)
                     reason = f"worker process {describe_exit(worker.process.exitcode)}"
-                    start_failures = 0 if worker.ready else start_failures + 1
-                    if start_failures >= START_FAILURES:
-                        raise WorkersCannotStart(reason) from None
+                    start_failures = [] if worker.ready else [*start_failures, worker.process.exitcode]
+                    if len(start_failures) >= START_FAILURES:
+                        raise WorkersCannotStart(start_failures) from None
                     worker.task = None
                     pool[pool.index(worker)] = _Worker(context, function)
                     worker.connection.close()
@@ -217,7 +234,7 @@ def process_pool(
                     continue
                 if isinstance(result, Ready):
                     worker.ready = True
-                    start_failures = 0
+                    start_failures = []
                     continue
                 worker.task = None
                 yield result

@@ -5,6 +5,7 @@ with their parent are in test_study_faults.py, with the studies they fail."""
 from __future__ import annotations
 
 import os
+import signal
 
 import pytest
 
@@ -13,9 +14,46 @@ def test_workers_exiting_while_they_start_stop_the_pool(monkeypatch):
     from trustroute.harness.study import workers
 
     monkeypatch.setattr(workers, "die_with_parent", lambda _pid: os._exit(3))   # forked: the workers see it
-    said = r"exited with code 3, 2 in a row.*__main__.*one worker \(--workers 1\)"
+    said = (r"exited with code 3, 2 in a row; each printed its error above\)"
+            r".*__main__.*one worker \(--workers 1\)")
     with pytest.raises(workers.WorkersCannotStart, match=said):
         list(workers.process_pool(abs, [-1, -2, -3], 2, lambda _task, reason: reason))
+
+
+def test_workers_killed_while_they_start_are_said_killed_not_to_have_printed_an_error(monkeypatch):
+    """A worker killed by a signal (the out-of-memory killer's SIGKILL) prints nothing: the refusal
+    names the signal and where to learn why, and never says each printed its error."""
+    from trustroute.harness.study import workers
+
+    monkeypatch.setattr(workers, "die_with_parent", lambda _pid: os.kill(os.getpid(), signal.SIGKILL))
+    with pytest.raises(workers.WorkersCannotStart) as refused:
+        list(workers.process_pool(abs, [-1, -2, -3], 2, lambda _task, reason: reason))
+    said = str(refused.value)
+    assert "(worker process killed by SIGKILL, 2 in a row; a process killed by a signal prints no " in said
+    assert "dmesg" in said and "out-of-memory" in said and "printed its error" not in said
+    assert refused.value.fix == workers.KILLED_FIX
+
+
+def test_a_row_of_a_worker_exiting_then_one_killed_says_each_how_it_ended(monkeypatch, tmp_path):
+    """One worker exits with an error (printed), the next is killed (nothing printed): the refusal
+    says both, and which of them printed an error."""
+    from trustroute.harness.study import workers
+
+    once = tmp_path / "exited once"
+
+    def exits_then_killed(_pid: int) -> None:
+        if not once.exists():
+            once.touch()
+            os._exit(3)
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    monkeypatch.setattr(workers, "die_with_parent", exits_then_killed)
+    with pytest.raises(workers.WorkersCannotStart) as refused:
+        list(workers.process_pool(abs, [-1, -2, -3], 1, lambda _task, reason: reason))
+    said = str(refused.value)
+    assert ("(worker process exited with code 3, then killed by SIGKILL, 2 in a row; each that exited "
+            "printed its error above; a process killed by a signal prints no error") in said
+    assert "__main__" in refused.value.fix and workers.KILLED_FIX in refused.value.fix
 
 
 def test_one_worker_exiting_while_it_starts_fails_only_its_task(monkeypatch, tmp_path):
