@@ -10,8 +10,8 @@ import json
 import pytest
 
 from tests.cli import run_cli
-from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH
 from trustroute.core.wording import interval, outward
+from trustroute.participants.driver_population import EXAMPLE_POPULATION_PATH
 from trustroute.policies import resolve
 
 
