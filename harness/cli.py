@@ -14,6 +14,7 @@ import time
 import click
 
 from trustroute.core.errors import InputError
+from trustroute.core.interrupts import sigterm_raises
 from trustroute.harness.commands.options import CommandStart, UsageFix
 
 # name -> (module, attribute, one-line help)
@@ -75,7 +76,7 @@ class LazyGroup(click.Group):
             formatter.write_dl(rows)
 
     def invoke(self, ctx: click.Context) -> object:
-        # Ctrl-C (and SIGTERM during a study, harness/study/workers.py) leaves the command here as
+        # Ctrl-C, and SIGTERM (`main` turns it into a KeyboardInterrupt), leave the command here as
         # `Interrupted`, naming it, before click's `main` sees it: click would print a blank line
         # and raise a bare Abort, which names no command.
         try:
@@ -150,7 +151,9 @@ def main(argv: list[str] | None = None) -> None:
     # trustroute), else now (a caller running it in-process)
     started = CommandStart.now() if argv is None else CommandStart(time.perf_counter())
     try:
-        code = cli.main(args=argv, prog_name="trustroute", standalone_mode=False, obj=started)
+        # SIGTERM ends every command as Ctrl-C does: its clean-up runs, then the one interrupted line
+        with sigterm_raises():
+            code = cli.main(args=argv, prog_name="trustroute", standalone_mode=False, obj=started)
     except InputError as exc:
         click.echo(f"error: {exc.one_line()}", err=True)
         sys.exit(2)

@@ -45,6 +45,7 @@ from trustroute.app.engines import ENGINES
 from trustroute.core import defaults
 from trustroute.core.dataset import LOCK_FILE
 from trustroute.core.errors import InputError
+from trustroute.core.interrupts import sigterm_raises
 from trustroute.core.progress import bar_disable
 from trustroute.core.ranges import ATTEMPTS
 from trustroute.core.wording import counted
@@ -445,8 +446,6 @@ def _run_locked(
     dask_processes: bool,
     attempts: int,
 ) -> StudyRun:
-    from trustroute.harness.study.workers import sigterm_raises
-
     started = time.perf_counter()
     config = context.config
     tasks = plan_episodes(config)

@@ -13,7 +13,8 @@ which task a worker was running:
 - the workers are started inside the pool's shutdown, so a Ctrl-C while they start stops those
   already started;
 - the pool is shut down (workers terminated, then killed) whenever the parent leaves the
-  generator: normal end, an exception, or SIGTERM turned into an exception by `sigterm_raises`;
+  generator: normal end, an exception, or SIGTERM turned into an exception by `sigterm_raises`
+  (trustroute/core/interrupts.py);
 - workers that exit before they are ready, twice in a row, stop the pool with `WorkersCannotStart`
   rather than failing every task one spawned worker at a time. Where workers are spawned, each
   imports the main script again: a script that runs a study outside an
@@ -40,7 +41,6 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from multiprocessing.connection import Connection
 from multiprocessing.context import DefaultContext
-from types import FrameType
 from typing import Any, Generic, TypeVar
 
 from trustroute.core.errors import InputError
@@ -88,27 +88,6 @@ class WorkersCannotStart(InputError):
         super().__init__("study workers", "",
                          f"worker processes exit while they start (worker process {'; '.join(said)})",
                          "; ".join(fixes))
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM received: unwinds like Ctrl-C so every pool is shut down on the way out."""
-
-
-@contextlib.contextmanager
-def sigterm_raises() -> Iterator[None]:
-    """Within the block, SIGTERM raises `Terminated` in the main thread (no-op elsewhere)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum: int, frame: FrameType | None) -> None:  # noqa: ARG001 - the signal API's signature
-        raise Terminated()
-
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def die_with_parent(parent_pid: int) -> None:

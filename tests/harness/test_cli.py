@@ -1,9 +1,12 @@
 """The CLI's last nets: an OSError no command foresaw is one line whose fix follows the errno; a
-Ctrl-C is one line saying what the interrupted command left behind."""
+Ctrl-C, or a SIGTERM, is one line saying what the interrupted command left behind."""
 
 from __future__ import annotations
 
 import errno
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import click
@@ -12,7 +15,8 @@ import pytest
 from tests.cli import assert_one_line_error, run_cli
 from trustroute.harness import cli
 
-RAW = Path(__file__).resolve().parents[2] / "analysis" / "data" / "real_study" / "raw"
+REPO = Path(__file__).resolve().parents[2]
+RAW = REPO / "analysis" / "data" / "real_study" / "raw"
 
 
 def test_an_output_directory_that_is_a_file_is_named_in_the_fix(tmp_path, monkeypatch, capsys):
@@ -79,3 +83,25 @@ def test_an_interrupted_command_says_in_one_line_what_it_left(command, says, mon
         assert line == "interrupted", err
     else:
         assert line.startswith("interrupted (") and line.endswith(")") and says in line, err
+
+
+@pytest.mark.slow
+def test_sigterm_ends_a_command_as_ctrl_c_does(tmp_path):
+    """A real SIGTERM to `trustroute synth` (a synthesis of about 30 s): the one interrupted line,
+    exit 130, no traceback, and no file left behind, half-written or whole."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "trustroute", "synth", "city5", "--tau", "1e-9", "--time-limit", "60",
+         "--out", str(tmp_path / "policy.json")],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # its first progress line (after 2 s): the synthesis runs
+        assert process.stderr.readline().startswith("synthesizing city5"), process.stderr.read()
+        process.send_signal(signal.SIGTERM)
+        out, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 130 and "Traceback" not in err, err
+    assert err.splitlines()[-1] == cli.interrupted_line("synth"), err
+    assert out == "" and list(tmp_path.iterdir()) == []

@@ -1,6 +1,6 @@
 """A server killed (SIGKILL) in the middle of an episode loses no finished episode: its episode
 process dies with it, and a restarted server continues the participant at the interrupted trial
-without a duplicated row."""
+without a duplicated row. A server stopped with SIGTERM closes the study as Ctrl-C does."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from websockets.exceptions import ConnectionClosed
 from benchmarks.bench_live import start_live_server
 from trustroute.core.dataset import part_path, read_episodes, read_roads
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
+from trustroute.harness.live.server import LIVE_DIR, PARTICIPANTS_FILE
 from trustroute.harness.study.plan import plan_episodes
 
 from .conftest import tiny_config
@@ -64,26 +65,32 @@ def play_until_the_server_dies(url: str, token: str, participant: ScriptedPartic
         run_scripted(url, token, participant, 120)
 
 
+def drive_into_the_second_trial(config, address: str, token: str, first: str) -> tuple[str, threading.Thread]:
+    """A new participant's token and the thread that drives them (until the server dies), once they
+    finished the episode `first` and drive the next."""
+    headers = {"Authorization": f"Bearer {token}"}
+    created = httpx.post(f"http://{address}/api/participants", json={}, headers=headers)
+    participant = created.json()["token"]
+    player = threading.Thread(target=play_until_the_server_dies, daemon=True,
+                              args=(f"ws://{address}/ws", participant, ScriptedParticipant(config, 0)))
+    player.start()
+    deadline = time.monotonic() + 120
+    with httpx.Client(headers=headers) as client:   # one TLS context for the polling, not one per poll
+        while True:
+            progress = client.get(f"http://{address}/api/participants/0").json()
+            if progress["done"] == [first] and progress["phase"] == "driving":
+                return participant, player
+            assert time.monotonic() < deadline, progress
+            time.sleep(0.05)
+
+
 def test_sigkill_mid_episode_then_restart_continues_at_the_interrupted_trial(tmp_path):
     config = tiny_config(tmp_path, participants=1, specs=("phi1", "phi2"))
     study_dir = tmp_path / "study"
     first, second = sorted(plan_episodes(config), key=lambda t: t.position)
     server, address, token = start_server(config.source_path, study_dir, pace=10.0)
     try:
-        headers = {"Authorization": f"Bearer {token}"}
-        created = httpx.post(f"http://{address}/api/participants", json={}, headers=headers)
-        participant = created.json()["token"]
-        player = threading.Thread(target=play_until_the_server_dies, daemon=True,
-                                  args=(f"ws://{address}/ws", participant, ScriptedParticipant(config, 0)))
-        player.start()
-        deadline = time.monotonic() + 120
-        with httpx.Client(headers=headers) as client:   # one TLS context for the polling, not one per poll
-            while True:
-                progress = client.get(f"http://{address}/api/participants/0").json()
-                if progress["done"] == [first.episode_id] and progress["phase"] == "driving":
-                    break
-                assert time.monotonic() < deadline, progress
-                time.sleep(0.05)
+        participant, player = drive_into_the_second_trial(config, address, token, first.episode_id)
         workers = descendants(server.pid)
         assert len(workers) > len(children(server.pid)), "the episode runs in a process of its own"
         server.send_signal(signal.SIGKILL)
@@ -114,3 +121,33 @@ def test_sigkill_mid_episode_then_restart_continues_at_the_interrupted_trial(tmp
     assert sorted(episodes["episode_id"]) == sorted([first.episode_id, second.episode_id])
     assert not roads.duplicated(["episode_id", "index"]).any()
     assert len(roads) == int(episodes["junctions"].sum()) + len(episodes)
+
+
+def test_sigterm_mid_episode_closes_the_study_with_the_interrupted_line(tmp_path):
+    """SIGTERM while a participant drives: the server shuts down as on Ctrl-C (exit 130, the one
+    interrupted line, no traceback), its episode processes end, and what was written stays."""
+    from trustroute.harness.cli import interrupted_line
+
+    config = tiny_config(tmp_path, participants=1, specs=("phi1", "phi2"))
+    study_dir = tmp_path / "study"
+    first, second = sorted(plan_episodes(config), key=lambda t: t.position)
+    server, address, token = start_server(config.source_path, study_dir, pace=10.0)
+    try:
+        _, player = drive_into_the_second_trial(config, address, token, first.episode_id)
+        workers = descendants(server.pid)
+        server.send_signal(signal.SIGTERM)
+        printed, _ = server.communicate(timeout=60)
+    finally:
+        if server.poll() is None:
+            server.kill()
+            server.wait()
+    assert server.returncode == 130 and "Traceback" not in printed, printed
+    assert printed.splitlines()[-1] == interrupted_line("live"), printed
+    deadline = time.monotonic() + 5   # the fork server sees its server gone a moment later
+    while any(alive(pid) for pid in workers):
+        assert time.monotonic() < deadline, "an episode process outlived its server"
+        time.sleep(0.05)
+    player.join(30)
+    assert part_path(study_dir, first.episode_id).exists()
+    assert not part_path(study_dir, second.episode_id).exists()
+    assert (study_dir / LIVE_DIR / PARTICIPANTS_FILE).exists()
