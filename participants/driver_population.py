@@ -9,7 +9,8 @@ Schema (JSON; every key and its check: docs/formats/driver_population.md):
   the document `participants/driver_model.py` reads (docs/formats/driver_model.md).
 
 Every type shares the trust levels and incident types of the first; weights are > 0 and sum to 1
-within `WEIGHT_TOLERANCE`, and are divided by their sum when loaded, so every consumer weighs with a
+within `WEIGHT_TOLERANCE`, and are divided by their sum whenever a population is made (loaded from a
+file or built in code: `DriverPopulation.__post_init__`), so every consumer weighs with a
 distribution; names are unique. A population of one type of weight 1 is a single
 driver model (`single_type_population`).
 """
@@ -76,6 +77,19 @@ class DriverPopulation:
     types: tuple[DriverType, ...]
     source_path: str = ""
     provenance: str = ""
+
+    def __post_init__(self) -> None:
+        # One rule for a population loaded from a file and one built in code: weights within the
+        # tolerance of 1 become a distribution (the Bayes objective and every per-type bound weigh
+        # with them), others are refused.
+        weights = [t.weight for t in self.types]
+        total = math.fsum(weights)
+        if abs(total - 1.0) > WEIGHT_TOLERANCE:
+            raise InputError(self.source_path or "<driver population>", "types",
+                             f"the weights sum to {total:.12g}, not 1 (tolerance {WEIGHT_TOLERANCE:g})",
+                             "renormalise the prior weights")
+        normalised = zip(self.types, as_distribution(weights), strict=True)
+        object.__setattr__(self, "types", tuple(replace(t, weight=w) for t, w in normalised))
 
     @property
     def n_types(self) -> int:
@@ -238,25 +252,15 @@ def driver_population_from_dict(data: object, path: str = "<driver population>")
         name, weight, model = _type_entry(entry, index, path, base)
         types.append(DriverType(name=name, weight=weight, model=model))
         _check_alike(types, index, path)
-    total = math.fsum(t.weight for t in types)
-    if abs(total - 1.0) > WEIGHT_TOLERANCE:
-        raise InputError(path, "types", f"the weights sum to {total:.12g}, not 1 "
-                         f"(tolerance {WEIGHT_TOLERANCE:g})", "renormalise the prior weights")
-    # weights within the tolerance of 1 are a distribution only after this division: the Bayes
-    # objective and every per-type bound weigh with the population's weights
-    weights = as_distribution([t.weight for t in types])
-    normalised = tuple(replace(t, weight=w) for t, w in zip(types, weights, strict=True))
-    return DriverPopulation(types=normalised, source_path=path, provenance=values["source"])
+    return DriverPopulation(types=tuple(types), source_path=path, provenance=values["source"])
 
 
 def as_distribution(weights: list[float]) -> list[float]:
     """`weights` divided by their sum, with the rounding left over given to the largest, so that
     they sum to exactly 1.0 (math.fsum) and loading them again changes nothing: a population
-    written back as loaded keeps its weights and content hash. Weights summing to exactly 1.0 are
-    returned as they are."""
+    written back as loaded keeps its weights and content hash. Weights summing to exactly 1.0 come
+    back as they are: divided by 1.0, with nothing left over."""
     total = math.fsum(weights)
-    if total == 1.0:
-        return list(weights)
     out = [w / total for w in weights]
     largest = max(range(len(out)), key=out.__getitem__)
     for _ in range(4):   # each pass leaves at most half an ulp of the largest; two suffice in practice

@@ -119,10 +119,12 @@ class TypeValue:
 
 def _mixture(weights: np.ndarray, ends: list[float]) -> tuple[float, float]:
     """Σ_k w_k e_k / Σ_k w_k in floats and the relative margin of its error. The exact type prior
-    is the weights' decimals normalised (exact_labels.exact_prior): a population's weights may sum
-    to 1 ± WEIGHT_TOLERANCE, far more than a rounding. Each term carries its product and the sum's
-    k - 1 additions (nonnegative terms: γ_k), its weight against the weight's decimal (u), the
-    weights' correctly rounded sum (u) against the decimals' (u) and the division (u): γ_{k+4}."""
+    is the weights' decimals normalised (exact_labels.exact_prior): a population's weights sum to
+    1.0 in floats (DriverPopulation divides them by their sum), their decimals only within
+    roundings, and dividing by the sum keeps the mixture right for any weights. Each term carries
+    its product and the sum's k - 1 additions (nonnegative terms: γ_k), its weight against the
+    weight's decimal (u), the weights' correctly rounded sum (u) against the decimals' (u) and the
+    division (u): γ_{k+4}."""
     return float(weights @ ends) / math.fsum(weights.tolist()), gamma(len(ends) + 4)
 
 

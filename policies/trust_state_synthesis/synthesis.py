@@ -355,7 +355,7 @@ def _synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings
     # converged on the computed values; L reported rounded down for the joint filter's histories
     # of at most the policy's evaluation cap, U up for the searches' depth (rounding.py: the
     # relaxation's per-backup margin covers its own sums, not the float model against the exact
-    # one, such as a prior whose type weights sum to 1 only within the population file's tolerance)
+    # one, such as a candidate's type prior that sums to 1 only within its tolerance)
     converged = bool(upper - value.lower <= tau)
     depth = chosen.horizon if value.junctions is None else max(value.junctions, chosen.horizon)
     lower = float(rounded_down(value.lower, joint_margin(pomdp, spec, belief_rule, depth)))

@@ -12,6 +12,8 @@ from trustroute.core.errors import InputError
 from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH, load_driver_model
 from trustroute.participants.driver_population import (
     EXAMPLE_POPULATION_PATH,
+    DriverPopulation,
+    DriverType,
     driver_population_from_dict,
     load_driver_population,
     single_type_population,
@@ -215,6 +217,38 @@ def test_weights_within_the_tolerance_are_loaded_as_a_distribution(weights):
     assert np.allclose(population.weights, given, rtol=0, atol=1e-16)
     if math.fsum(weights) != 1.0:
         assert not np.array_equal(population.weights, np.array(weights))
+
+
+@pytest.mark.parametrize("weights", [(0.3333333333, 0.3333333333, 0.3333333334), (0.4, 0.3, 0.3 - 5e-10),
+                                     (1 / 3, 1 / 3, 1 / 3)])
+def test_a_population_built_in_code_is_a_distribution_as_a_loaded_one_is(weights):
+    """The one rule of the weights holds for a population built in code (the API, a sampled or a
+    fitted population): within the tolerance of 1 they sum to exactly 1.0, the loaded file's
+    weights, hash alike; farther off, the loaded file's one-line refusal."""
+    import math
+
+    data = example()
+    for entry, weight in zip(data["types"], weights, strict=True):
+        entry["weight"] = weight
+    loaded = driver_population_from_dict(data)
+
+    def built(with_weights: tuple[float, ...]) -> DriverPopulation:
+        return DriverPopulation(tuple(DriverType(t.name, w, t.model)
+                                      for t, w in zip(loaded.types, with_weights, strict=True)))
+
+    assert math.fsum(built(weights).weights.tolist()) == 1.0
+    assert built(weights).weights.tolist() == loaded.weights.tolist()
+    assert built(weights).content_hash == loaded.content_hash
+    off = (0.5, 0.5, 1e-8)
+    with pytest.raises(InputError) as refused:
+        built(off)
+    for entry, weight in zip(data["types"], off, strict=True):
+        entry["weight"] = weight
+    with pytest.raises(InputError) as refused_loaded:
+        driver_population_from_dict(data)
+    assert (refused.value.source, refused.value.place) == ("<driver population>", "types")
+    said = refused_loaded.value
+    assert (refused.value.problem, refused.value.fix) == (said.problem, said.fix)
 
 
 def test_a_driver_model_and_a_population_given_for_each_other_say_which_they_are(tmp_path, capsys):

@@ -1,10 +1,10 @@
 """Certified bounds of driver populations hold exactly, rounding included.
 
 On tiny random towns (3-5 junctions, H <= 4) with populations of 2-3 driver types (random models,
-the default one among them; some specs with a type-belief atom; some type weights off 1 by up to
-the population file's tolerance, 1e-9), against the exact-rational brute force of
-threshold_cases.py (`exact_value` on the lifted model, and with each type as the true driver),
-with no tolerance:
+the default one among them; some specs with a type-belief atom; some type weights scaled off 1 by up
+to the population file's tolerance, 1e-9, which the population divides by their sum), against the
+exact-rational brute force of threshold_cases.py (`exact_value` on the lifted model, and with each
+type as the true driver), with no tolerance:
 
 - Bayes objective: L <= the lifted model's exact optimum (the prior-weighted optimum) <= U, and L
   at most the returned policy's exact prior-weighted value;
@@ -45,8 +45,9 @@ ROBUST_SEEDS = sweep(12, fast=(1,))
 def population_case(seed: int, default_driver):
     """(town, population, spec, horizon): an eventful town (threshold_cases.small_case), 2-3 types
     alike (all with AV failures, the default model first, or all without), weights from a Dirichlet
-    law, on half the seeds scaled off 1 by up to 1e-9; the belief atom's offset near its prior value,
-    half the specs with a type-belief atom on the first type; H = 2-4."""
+    law, on half the seeds scaled off 1 by up to 1e-9 (the population divides them by their sum);
+    the belief atom's offset near its prior value, half the specs with a type-belief atom on the
+    first type; H = 2-4."""
     rng = np.random.default_rng(seed)
     town = random_town(rng, quiet=float(rng.uniform(0.0, 0.25)), junctions=(3, 5))
     k = 2 if rng.random() < 0.75 else 3

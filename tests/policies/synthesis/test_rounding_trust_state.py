@@ -4,8 +4,9 @@ driver model and for driver populations.
 On the small random problems of tests/policies/trust_specs.py (4-5 junctions, random driver models
 with AV failures, road, belief and trust-state atoms; populations of 2-3 such types as
 tests/policies/trust_state_synthesis/test_population.py draws them, on odd seeds with the weights
-scaled off 1 by up to the population file's tolerance, 1e-9), H = 1-3, against the exact-rational
-brute force over the joint law of hidden index and DFA state (exact_joint.py), with no tolerance:
+scaled off 1 by up to the population file's tolerance, 1e-9, then divided by their sum), H = 1-3,
+against the exact-rational brute force over the joint law of hidden index and DFA state
+(exact_joint.py), with no tolerance:
 
 - one model: L <= the exact optimum <= U, L at most the returned policy's exact value, and
   `evaluate`'s certified [lower, upper] of that policy brackets its exact value;
@@ -55,7 +56,8 @@ def evaluation(horizon: int) -> EvaluationSettings:
 
 
 def population_problem(seed: int, driver):
-    """(town, population, spec, horizon): 2-3 types, odd seeds with weights off 1 by up to 1e-9."""
+    """(town, population, spec, horizon): 2-3 types, odd seeds with weights scaled off 1 by up to
+    1e-9 (the population divides them by their sum)."""
     rng = np.random.default_rng(seed)
     town, population, spec = random_population_problem(rng, driver, 2 + seed % 2, KINDS[seed // 2 % 2])
     if seed % 2:
