@@ -149,6 +149,7 @@ class SumoEpisode:
     sumo: Sumo
     current: RoadRun                 # the road the ego is on
     _calls: HotCalls
+    _step_ms: int                     # SUMO's step in its clock's milliseconds
     _step: _Step                      # the step a decision point was reached in
 
     def __init__(self, setup: EpisodeSetup, policy: RoutingPolicy, driver: Driver, episode_id: str,
@@ -437,6 +438,7 @@ class SumoEpisode:
         self.runs.append(self.current)
         self.commit_at = self.length(self.current.road) - COMMIT_DISTANCE
         self._calls = hot_calls(sumo)
+        self._step_ms = round(sumo.simulation.getDeltaT() * 1000)
         self.colliding_number = self._calls.colliding_number
 
     def _loop(self) -> DecisionPoint | End:
@@ -451,8 +453,10 @@ class SumoEpisode:
         # Hot loop: local names, one subscription read, three appends, Python work only where
         # something happens (an incident still live, a driver still to decide).
         calls = self._calls
-        simulation_step, get_time = calls.step, calls.time
-        get_results = calls.subscription_results
+        simulation_step, get_results = calls.step, calls.subscription_results
+        # SUMO's clock counts whole milliseconds and reads as ms / 1000: read once here, then
+        # counted step by step in the same units (the same float as asking every step).
+        now_ms, step_ms = round(calls.time() * 1000), self._step_ms
         lane_roads = self._lane_roads
         auto = AUTOPILOT.name
         log_floats, log_lane, log_mode = (self.steps.floats.extend, self.steps.lanes.append,
@@ -464,7 +468,8 @@ class SumoEpisode:
         isnan = math.isnan
         while True:
             simulation_step()
-            now = get_time()
+            now_ms += step_ms
+            now = now_ms / 1000
             result = get_results(EGO_ID)
             if not result or not result[lane_id]:   # not on the net (yet): SUMO's lane id is ""
                 _check_missing_ego(now, start, current)

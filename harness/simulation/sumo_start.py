@@ -171,7 +171,8 @@ def check_display() -> None:
 
 @dataclass(frozen=True)
 class HotCalls:
-    """The four calls an episode makes every step, bound once per episode."""
+    """The calls an episode makes every step (the step, the subscription, the collision count)
+    and its clock (read once per `advance`, then counted in steps), bound once per episode."""
 
     step: Callable[[], object]
     time: Callable[[], float]

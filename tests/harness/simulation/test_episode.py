@@ -91,6 +91,33 @@ def test_same_seed_same_logs(setup, net_path):
                 and other.kinematics.equals(first.kinematics))
 
 
+def test_the_clock_is_read_once_per_advance_and_counted_in_steps(setup, net_path, monkeypatch):
+    """SUMO's clock is asked once per `advance` and counted step by step from there: every step's
+    time is the one SUMO reports (read here by an observer), and no step asks SUMO for it."""
+    import libsumo
+
+    native = libsumo.libsumo._libsumo
+    asked = []
+    get_time = native.simulation_getTime
+
+    def counted():
+        asked.append(1)
+        return get_time()
+
+    monkeypatch.setattr(native, "simulation_getTime", counted)
+    seen = []
+
+    def observer(sumo, ego, mode, road):
+        seen.append((ego.time, get_time()))
+
+    driver = SyntheticDriver(setup.driver_model, np.random.default_rng(3))
+    record = run_episode(setup, trust_free_policy(setup.town, setup.spec), driver, "e", 3,
+                         EpisodeOptions(net_path=net_path, observer=observer))
+    assert seen and all(ours == sumo for ours, sumo in seen)
+    assert record.kinematics["time"].tolist() == [ours for ours, _ in seen]
+    assert len(asked) <= len(record.roads)   # one per advance: one per road and the end
+
+
 class LoopPolicy(RoutingPolicy):
     """Circles F-G-I-H-F (never finished): the 20-junction rule has to end the loop."""
 
