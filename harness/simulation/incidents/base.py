@@ -154,23 +154,19 @@ def define_vehicle_type(sumo, vehicle_type: VehicleType) -> None:
             setter(type_id, value)
 
 
-def vehicle_present(sumo, vehicle_id: str) -> bool:
-    # getRoadID raises for a vehicle not (or no longer) in the simulation: one call, no ID list.
-    try:
-        sumo.vehicle.getRoadID(vehicle_id)
-    except sumo.TraCIException:
-        return False
-    return True
+def vehicle_on_the_net(sumo, vehicle_id: str) -> tuple[float, float] | None:
+    """Where the vehicle is, or None while it is added but not yet inserted (SUMO's invalid
+    position); SUMO's TraCIException when it is not (or no longer) in the simulation."""
+    x, y = sumo.vehicle.getPosition(vehicle_id)
+    return None if abs(x) > NOT_ON_THE_NET or abs(y) > NOT_ON_THE_NET else (x, y)
 
 
 def vehicle_position(sumo, vehicle_id: str) -> tuple[float, float] | None:
     """Where the incident's vehicle is, or None when it is not in the simulation."""
     try:
-        x, y = sumo.vehicle.getPosition(vehicle_id)
+        return vehicle_on_the_net(sumo, vehicle_id)
     except sumo.TraCIException:
         return None
-    # A vehicle added this step but not yet inserted reports SUMO's invalid position.
-    return None if abs(x) > NOT_ON_THE_NET or abs(y) > NOT_ON_THE_NET else (x, y)
 
 
 def remove_vehicle(sumo, vehicle_id: str) -> None:

@@ -30,8 +30,7 @@ from trustroute.harness.simulation.incidents.base import (
     define_vehicle_type,
     head_on_ttc,
     remove_vehicle,
-    vehicle_position,
-    vehicle_present,
+    vehicle_on_the_net,
 )
 from trustroute.harness.simulation.performance import PerformanceMonitor
 from trustroute.harness.simulation.sumo_start import Sumo
@@ -82,9 +81,14 @@ class OncomingVehicle:
 
     def _position(self, sumo: Sumo, now: float) -> tuple[float, float] | None:
         """Where the vehicle is in the step at `now`: read from SUMO once per step (the meeting
-        check and the TTC both read it in the same steps, their schedules being the same bound)."""
+        check and the TTC both read it in the same steps, their schedules being the same bound).
+        None also once it has left the simulation, which the failed read tells (`_gone`)."""
         if now != self._read_at:
-            self._where, self._read_at = vehicle_position(sumo, self.vehicle_id), now
+            self._read_at = now
+            try:
+                self._where = vehicle_on_the_net(sumo, self.vehicle_id)
+            except sumo.TraCIException:
+                self._where, self._gone = None, True
         return self._where
 
     def _quiet_until(self, now: float, gap: float) -> float:
@@ -102,8 +106,7 @@ class OncomingVehicle:
             self._leave_when_behind(sumo, ego)
             return
         where = self._position(sumo, ego.time)
-        if where is None:
-            self._gone = self._gone or not vehicle_present(sumo, self.vehicle_id)
+        if where is None:   # not yet inserted, or gone
             return
         x, y = where
         self._next_meeting_check = self._quiet_until(ego.time, math.dist((x, y), (ego.x, ego.y)))
@@ -128,7 +131,6 @@ class OncomingVehicle:
         gap = math.dist(where, (ego.x, ego.y))
         if gap >= GONE_BEHIND:
             self.remove(sumo)
-            self._gone = True
         else:
             self._next_meeting_check = ego.time + (GONE_BEHIND - gap) / MAX_CLOSING
 
@@ -146,8 +148,11 @@ class OncomingVehicle:
             monitor.head_on(ttc)
 
     def remove(self, sumo: Sumo) -> None:
-        remove_vehicle(sumo, self.vehicle_id)
-        self._where, self._read_at = None, math.nan
+        # One known to be out of the simulation (never added, left, or taken out behind the ego)
+        # is not asked for: SUMO's refusal is an exception, dearer than the removal itself.
+        if self.inserted and not self._gone:
+            remove_vehicle(sumo, self.vehicle_id)
+        self._where, self._read_at, self._gone = None, math.nan, True
 
     def details(self) -> str:
         return (f"oncoming={self.vehicle_id} meet_at={self.meet_at:.1f} meet_in={self.meet_in:.1f} "

@@ -205,7 +205,9 @@ class PedestrianIncident:
             self.braking = self.emergency = False
 
     def measure(self, sumo, ego: EgoState, monitor) -> None:
-        if not self.inserted or self.timing == "none":
+        # A person taken out (`step`, once behind the ego) is not asked for: SUMO would refuse
+        # with an exception, dearer than a read.
+        if not self.inserted or self.timing == "none" or self.left:
             return
         # Only near the crossing can the ego come close to a person on it (no SUMO call otherwise).
         if math.dist((ego.x, ego.y), self.crossing_xy) > MEASURE_NEAR:

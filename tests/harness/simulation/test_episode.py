@@ -118,6 +118,34 @@ def test_the_clock_is_read_once_per_advance_and_counted_in_steps(setup, net_path
     assert len(asked) <= len(record.roads)   # one per advance: one per road and the end
 
 
+def test_no_object_known_to_be_out_of_the_simulation_is_asked_for(setup, net_path, monkeypatch):
+    """A truck taken out behind the ego, or one seen to have left, is not removed again at the
+    road's end, and a person taken out is not looked for: SUMO's refusal of each is an exception.
+    (The first read that finds a truck gone is the one refusal left.)"""
+    import libsumo
+
+    native = libsumo.libsumo._libsumo
+    refused = []
+
+    def refusals_noted(name):
+        call = getattr(native, name)
+
+        def asked(*args):
+            try:
+                return call(*args)
+            except Exception:
+                refused.append(name)
+                raise
+
+        return asked
+
+    for name in ("vehicle_remove", "vehicle_getRoadID", "person_getRoadID", "person_getPosition"):
+        monkeypatch.setattr(native, name, refusals_noted(name))
+    records = [_episode(setup, net_path, seed) for seed in range(8)]
+    assert sum(len(record.incidents) for record in records) >= 16   # trucks and pedestrians met
+    assert refused == []
+
+
 class LoopPolicy(RoutingPolicy):
     """Circles F-G-I-H-F (never finished): the 20-junction rule has to end the loop."""
 
