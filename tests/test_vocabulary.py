@@ -99,7 +99,7 @@ IO_CACHES = frozenset({
     "trustroute.harness.live.view:net_view",            # a net file read for the station's view
     "trustroute.harness.simulation.sumo_start:sumo_binary",   # SUMO's binary found on disk
     "trustroute.networks.cities:importer_fingerprint",  # the importer's source files read
-    "trustroute.harness.simulation.incidents.pedestrian:_CROSSINGS",   # crossings read off a net
+    "trustroute.harness.simulation.sumo_start:_NET_FACTS",   # read off the running SUMO's net
     "trustroute.networks.town:BUILT_TOWNS",             # a registry of built towns, not a cache
 })
 # Caches of computed objects still to be replaced by the object passed down from where it is made

@@ -176,7 +176,6 @@ class SumoEpisode:
         self.carried_takeover = False   # a person's takeover in a road's closing step, for the next road
         self.runs: list[RoadRun] = []
         self.steps = StepLog()         # the kinematics table, one row per step
-        self.lengths: dict[str, float] = {}
         self.min_gap = 2.5
         self.defined_types: set = set()   # incident type definers run in this simulation
         self._stack: contextlib.ExitStack | None = None
@@ -194,9 +193,7 @@ class SumoEpisode:
         return self.tracker.policy
 
     def length(self, road: str) -> float:
-        if road not in self.lengths:
-            self.lengths[road] = self.roads.length(self.sumo, road)
-        return self.lengths[road]
+        return self.roads.length(self.sumo, road)
 
     # -- stepping ---------------------------------------------------------------
     def advance(self) -> DecisionPoint | End:

@@ -15,7 +15,7 @@ from typing import Protocol
 from trustroute.app.nets import net_for
 from trustroute.harness.simulation.episode_net import check_net_matches, check_readable, net_key
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
-from trustroute.harness.simulation.incidents.base import Scene
+from trustroute.harness.simulation.incidents.base import Scene, lane_length
 from trustroute.harness.simulation.manual_driving import one_edge
 from trustroute.harness.simulation.real_roads import RealRoads, real_scene
 from trustroute.harness.simulation.sumo_start import Sumo, SumoConfig
@@ -80,7 +80,7 @@ class BuiltRoads:
         check_net_matches(sumo, setup, self.net, self.key)
 
     def length(self, sumo: Sumo, road: str) -> float:
-        return sumo.lane.getLength(f"{road}_1")
+        return lane_length(sumo, f"{road}_1")
 
     def offsets(self, road: str) -> dict[str, float]:
         return {road: 0.0}

@@ -27,13 +27,15 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 from trustroute.core import ranges
 from trustroute.core.errors import InputError
 from trustroute.harness.simulation.performance import DEFAULT_LIMITS, PerformanceLimits
 from trustroute.networks.sumo_import import require_net_file
 from trustroute.networks.sumo_net import find_binary
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -213,6 +215,11 @@ class _OpenSimulation:
 
 
 _open: list[_OpenSimulation] = []   # at most one: libsumo runs one simulation per process
+# Facts of the running simulation's net (a lane's length, its links, a crossing's path), read
+# from SUMO once per start (`net_fact`): returning to the snapshot (loadState) never changes the
+# net, so episodes in one simulation share them. Every start and close forgets them (code that
+# starts libsumo itself calls close_simulation first).
+_NET_FACTS: dict[tuple, Any] = {}
 _closes_at_exit: list[int] = []     # the pid whose exit closes it (close_at_exit)
 _in_use: list[int] = []             # the pid of a process whose simulation an episode is driving
 
@@ -248,9 +255,19 @@ def _started_on(command: list[str], net_path: Path) -> tuple:
     return (*command[:at], *command[at + 2:], stat.st_ino, stat.st_size, stat.st_mtime_ns)
 
 
+def net_fact(key: tuple, read: Callable[[], T]) -> T:
+    """What `read()` gives, asked of SUMO once per started simulation: a fact of its net that no
+    episode changes, named by `key` (what is read, and of which lane or road)."""
+    if key in _NET_FACTS:
+        return _NET_FACTS[key]
+    value = _NET_FACTS[key] = read()
+    return value
+
+
 def close_simulation() -> None:
     """Close the simulation kept open between episodes, if any (also run at the process's exit).
     Code that starts libsumo itself calls this first."""
+    _NET_FACTS.clear()
     while _open:
         simulation = _open.pop()
         with contextlib.suppress(Exception):
@@ -274,6 +291,7 @@ def _close_at_exit() -> None:
 
 def _start(sumo: Sumo, command: list[str], net_path: Path, config: SumoConfig) -> None:
     """Start SUMO on `command`; an unreadable net or an unusable SUMO installation is an InputError."""
+    _NET_FACTS.clear()
     try:
         sumo.start(command)
     except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError types
@@ -353,5 +371,6 @@ def fresh_session(net_path: Path, seed: int, config: SumoConfig) -> Iterator[Sum
         try:
             yield sumo
         finally:
+            _NET_FACTS.clear()
             sumo.close()
 

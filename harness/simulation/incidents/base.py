@@ -20,6 +20,7 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
+from trustroute.harness.simulation.sumo_start import net_fact
 from trustroute.networks.road import Road
 
 NOT_ON_THE_NET = 1e8   # metres: beyond any town; SUMO's invalid position is about -1.07e9
@@ -152,6 +153,11 @@ def define_vehicle_type(sumo, vehicle_type: VehicleType) -> None:
     for setter, value in setters:
         if value is not None:
             setter(type_id, value)
+
+
+def lane_length(sumo, lane: str) -> float:
+    """The lane's length, read once per started simulation (sumo_start.net_fact)."""
+    return net_fact(("lane length", lane), lambda: sumo.lane.getLength(lane))
 
 
 def vehicle_on_the_net(sumo, vehicle_id: str) -> tuple[float, float] | None:

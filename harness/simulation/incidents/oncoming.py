@@ -29,11 +29,12 @@ from trustroute.harness.simulation.incidents.base import (
     VehicleType,
     define_vehicle_type,
     head_on_ttc,
+    lane_length,
     remove_vehicle,
     vehicle_on_the_net,
 )
 from trustroute.harness.simulation.performance import PerformanceMonitor
-from trustroute.harness.simulation.sumo_start import Sumo
+from trustroute.harness.simulation.sumo_start import Sumo, net_fact
 
 TYPE_ID = "trustroute_truck"
 TRUCK_SPEED = 11.0     # m/s (40 km/h): a loaded truck on a 50 km/h town road
@@ -173,8 +174,9 @@ def _lanes(sumo: Sumo, scene: Scene, edge: str) -> list[str]:
 
 def allows_trucks(sumo: Sumo, lane: str) -> bool:
     """Whether SUMO lets the oncoming vehicle (a truck) drive on `lane`; SUMO refuses to insert a
-    vehicle on a lane closed to its class."""
-    return TRUCK_TYPE.vehicle_class not in sumo.lane.getDisallowed(lane)
+    vehicle on a lane closed to its class. Read once per started simulation (net_fact)."""
+    return net_fact(("allows trucks", lane),
+                    lambda: TRUCK_TYPE.vehicle_class not in sumo.lane.getDisallowed(lane))
 
 
 def oncoming_possible(sumo: Sumo, scene: Scene) -> bool:
@@ -187,7 +189,12 @@ def oncoming_possible(sumo: Sumo, scene: Scene) -> bool:
 def upstream_lane(sumo: Sumo, scene: Scene) -> str | None:
     """The lane of the road that leads into scene.reverse_road at the junction where the ego's road
     ends, other than the ego's own road, without a U-turn: the straightest, then the longest, then
-    by id. Where an oncoming truck comes from."""
+    by id. Where an oncoming truck comes from. Read once per started simulation (net_fact)."""
+    return net_fact(("upstream lane", scene.ends_at, scene.road, scene.reverse_road, scene.end_junction),
+                    lambda: _upstream_lane(sumo, scene))
+
+
+def _upstream_lane(sumo: Sumo, scene: Scene) -> str | None:
     roads = []
     for edge in sumo.junction.getIncomingEdges(scene.ends_at):
         if edge.startswith(":") or edge == scene.road:
@@ -195,7 +202,7 @@ def upstream_lane(sumo: Sumo, scene: Scene) -> str | None:
         for lane in _lanes(sumo, scene, edge):
             for link in sumo.lane.getLinks(lane):
                 if link[0].rsplit("_", 1)[0] == scene.reverse_road and link[6] in TURNS:
-                    roads.append((TURNS[link[6]], -sumo.lane.getLength(lane), edge, lane))
+                    roads.append((TURNS[link[6]], -lane_length(sumo, lane), edge, lane))
     return min(roads)[3] if roads else None
 
 
@@ -208,7 +215,7 @@ def schedule_oncoming(sumo: Sumo, scene: Scene, meet_at: float, meet_in: float, 
     road = scene.reverse_road
     if road is None:
         raise ValueError(f"oncoming vehicle on {scene.road}: the road has no opposite direction")
-    reverse_length = sumo.lane.getLength(f"{road}_{scene.reverse_lane}")
+    reverse_length = lane_length(sumo, f"{road}_{scene.reverse_lane}")
     meeting_on_reverse = max(0.0, reverse_length - meet_at)
     depart = meeting_on_reverse - speed * max(meet_in, 0.0)
     roads = [road]
@@ -218,10 +225,10 @@ def schedule_oncoming(sumo: Sumo, scene: Scene, meet_at: float, meet_in: float, 
         before = before_lane.rsplit("_", 1)[0]
         # The junction's internal lane adds its length to the way; the turn's slowing is not
         # modelled (met_time records when the two really passed each other).
-        before_length = sumo.lane.getLength(before_lane)
-        via = sumo.lane.getLinks(before_lane)
-        inside = next((sumo.lane.getLength(link[4]) for link in via
-                       if link[0].rsplit("_", 1)[0] == road and link[4]), 0.0)
+        before_length = lane_length(sumo, before_lane)
+        inside = net_fact(("turn length", before_lane, road), lambda: next(
+            (sumo.lane.getLength(link[4]) for link in sumo.lane.getLinks(before_lane)
+             if link[0].rsplit("_", 1)[0] == road and link[4]), 0.0))
         depart += before_length + inside
         roads = [before, road]
     delay = 0.0 if depart >= 0 else -depart / speed

@@ -30,7 +30,14 @@ import math
 from dataclasses import dataclass, field
 
 from trustroute.harness.simulation.driving_style import SAFE_SPEED_MODE
-from trustroute.harness.simulation.incidents.base import EgoState, Scene, VehicleType, define_vehicle_type
+from trustroute.harness.simulation.incidents.base import (
+    EgoState,
+    Scene,
+    VehicleType,
+    define_vehicle_type,
+    lane_length,
+)
+from trustroute.harness.simulation.sumo_start import net_fact
 from trustroute.networks.road import Road
 
 KIND = "pedestrian"
@@ -248,21 +255,13 @@ class CrossingPath:
     arrival: float
 
 
-_CROSSINGS: dict[tuple, CrossingPath] = {}
-
-
 def crossing_path(sumo, road: str, lane: int = 1, junction: str | None = None) -> CrossingPath:
     """The crossing over `road` at its start junction (networks/sumo_net.py puts one there; on a
     real net, `junction` names the edge's start junction and `lane` its driving lane). Static
-    geometry: looked up once per road and lane shape in a process. ValueError: no crossing."""
-    shape = tuple(sumo.lane.getShape(f"{road}_{lane}"))
-    key = (road, shape)
-    cached = _CROSSINGS.get(key)
-    if cached is None:
-        if len(_CROSSINGS) > 4096:
-            _CROSSINGS.clear()
-        cached = _CROSSINGS[key] = _find_crossing(sumo, road, shape[0], junction)
-    return cached
+    geometry: looked up once per started simulation (sumo_start.net_fact). ValueError: no
+    crossing."""
+    return net_fact(("crossing", road, lane, junction), lambda: _find_crossing(
+        sumo, road, sumo.lane.getShape(f"{road}_{lane}")[0], junction))
 
 
 def _find_crossing(sumo, road: str, lane_start: tuple[float, float], junction: str | None) -> CrossingPath:
@@ -307,7 +306,7 @@ def inject(sumo, scene: Scene) -> PedestrianIncident | None:
         raise ValueError(f"pedestrian timing {timing!r} is not one of {', '.join(TIMINGS)}")
     late_deceleration = float(scene.draw("late_deceleration", lambda rng: rng.uniform(*LATE_DECELERATION)))
     before_kerb = float(scene.draw("early_start", lambda rng: rng.uniform(*EARLY_START)))
-    kerb = max(0.0, sumo.lane.getLength(f"{scene.reverse_road}_0") - START_BEFORE_JUNCTION)
+    kerb = max(0.0, lane_length(sumo, f"{scene.reverse_road}_0") - START_BEFORE_JUNCTION)
     if scene.end_junction is None:
         crossing = crossing_path(sumo, scene.road)
     else:

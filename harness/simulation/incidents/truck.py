@@ -20,6 +20,7 @@ from trustroute.harness.simulation.incidents.base import (
     Scene,
     VehicleType,
     define_vehicle_type,
+    lane_length,
     park_vehicle,
     remove_vehicle,
     vehicle_position,
@@ -108,7 +109,7 @@ def inject(sumo, scene: Scene) -> TruckIncident | None:
     # for good. So the parked car stands no further back than keeps the ego on the road.
     before = min(before, meet_at * TRUCK_SPEED / scene.road_speed)
     parked_id = None
-    reverse_length = sumo.lane.getLength(f"{scene.reverse_road}_{scene.reverse_lane}")
+    reverse_length = lane_length(sumo, f"{scene.reverse_road}_{scene.reverse_lane}")
     if parked and scene.overtake and reverse_length >= PARKED_MIN_LANE:
         parked_id = f"{scene.prefix}.parked"
         on_reverse = reverse_length - meet_at - before

@@ -146,6 +146,36 @@ def test_no_object_known_to_be_out_of_the_simulation_is_asked_for(setup, net_pat
     assert refused == []
 
 
+def test_the_nets_static_facts_are_read_once_per_started_simulation(setup, net_path, monkeypatch):
+    """Lane lengths, links, a junction's edges, lanes closed to trucks and crossings are read from
+    SUMO once in a simulation: the same episode again reads none; a new start reads them again."""
+    import libsumo
+
+    native = libsumo.libsumo._libsumo
+    read = []
+
+    def reads_noted(name):
+        call = getattr(native, name)
+
+        def asked(*args):
+            read.append(name)
+            return call(*args)
+
+        return asked
+
+    for name in ("lane_getLength", "lane_getLinks", "lane_getShape", "lane_getDisallowed",
+                 "junction_getIncomingEdges", "junction_getOutgoingEdges"):
+        monkeypatch.setattr(native, name, reads_noted(name))
+    sumo_start.close_simulation()
+    _episode(setup, net_path, 0)
+    first = len(read)
+    _episode(setup, net_path, 0)
+    assert first > 0 and len(read) == first
+    sumo_start.close_simulation()
+    _episode(setup, net_path, 0)
+    assert len(read) == 2 * first
+
+
 class LoopPolicy(RoutingPolicy):
     """Circles F-G-I-H-F (never finished): the 20-junction rule has to end the loop."""
 
