@@ -40,8 +40,12 @@ function controlButton(participant, action) {
   const button = document.createElement("button");
   button.textContent = action;
   button.addEventListener("click", async () => {
-    // an abort throws the trial's drive away (it is run again): the experimenter confirms it
-    if (action === "abort" && !window.confirm(`Abort participant ${participant}'s trial? It will be run again.`)) return;
+    // an abort throws the drive away (it is run again): the experimenter confirms it, told which
+    // drive it is in the row's words (the state's `trial_status`: "driving the warm-up")
+    if (action === "abort") {
+      const drive = button.closest("tr").cells[TRIAL_STATUS].textContent;
+      if (!window.confirm(`Abort participant ${participant}'s drive (${drive})? It will be run again.`)) return;
+    }
     try { await call("POST", `/api/participants/${participant}/control`, { action }); showError(""); }
     catch (error) { showError(error.message); }
     refresh();
@@ -102,6 +106,7 @@ const KEPT = 3;   // the cells a noted row keeps: #, label, phase
 // `actions`: the server's one rule, harness/live/session.py CONSOLE_ACTIONS), so a button keeps
 // the keyboard's focus.
 const TEXTS = 10;   // the cells before the episode control and participant buttons
+const TRIAL_STATUS = 3;   // the cell of `trial_status` among them
 function texts(p) {
   return [p.participant, p.label, p.paused_by ? `${p.phase} (${p.paused_by})` : p.phase, p.trial_status,
           p.episode_id, p.mode, p.road, p.reports, p.takeovers, p.last_error];

@@ -131,7 +131,7 @@ def test_each_row_offers_only_what_the_server_accepts_in_its_phase(station, tmp_
 def test_a_row_offers_the_episode_controls_its_pause_allows(station):
     """An episode the experimenter paused, its participant at the station, can be resumed or
     aborted; one the participant's disconnect paused only aborted (they resume it when they come
-    back)."""
+    back). Aborting asks first, naming the drive as the row does."""
     from trustroute.harness.live.protocol import Consent
 
     from .test_live_console import Pipe
@@ -151,6 +151,12 @@ def test_a_row_offers_the_episode_controls_its_pause_allows(station):
         row.locator("td", has_text=f"paused ({paused_by})").wait_for()
         row.locator("button", has_text="abort").wait_for()
         assert buttons(page, participant) == offered, paused_by
+        asked: list[str] = []   # the abort's confirmation names the drive in the state's words
+        page.once("dialog", lambda dialog, asked=asked: (asked.append(dialog.message), dialog.dismiss()))
+        row.locator("button", has_text="abort").click()
+        drive = session.progress()["trial_status"]
+        assert drive == "paused in 1 of 1"
+        assert asked == [f"Abort participant {participant}'s drive ({drive})? It will be run again."]
     context.close()
 
 
