@@ -8,7 +8,8 @@ files (harness/study/inputs.py), so the package names no file of the lab's disk.
 Pseudonyms: each participant number is replaced by a three-digit code drawn without replacement
 (100-999; four digits for a study of more than 900 participants, five for more than 9,000, ...)
 from a Generator seeded by the caller, in the `participant` column and in every `episode_id`
-(`p<code, 5 digits>-<spec>-<condition>`). The key (original number -> code) is
+(`p<code, 5 digits>-<spec>-<condition>`; an imported study's ids, such as `d04-t1-aware`, which
+carry the driver's number, are renamed so from the episodes table). The key (original number -> code) is
 written into the study directory (`export-key.json`), never into the package. Nothing of the
 live registry (token digests, labels), the token log or the withdrawal audit is exported.
 
@@ -69,12 +70,22 @@ def pseudonyms(participants: list[int], rng: np.random.Generator) -> dict[int, i
     return {int(p): int(code) for p, code in zip(sorted(participants), codes, strict=True)}
 
 
-def row_participants(table: pa.Table) -> list[int | None]:
-    """Each row's participant number: its `participant`, else its `episode_id`'s (None: neither)."""
+def row_participants(table: pa.Table, owners: dict[str, int] | None = None) -> list[int | None]:
+    """Each row's participant number: its `participant`, else its `episode_id`'s, read from the id
+    (`p<number>-`) or looked up in `owners` (episode id -> participant; None: neither)."""
     if "participant" in table.schema.names:
         return [int(p) for p in table.column("participant").to_pylist()]
-    return [int(m.group(1)) if e and (m := EPISODE_PARTICIPANT.match(e)) else None
+    owners = owners or {}
+    return [int(m.group(1)) if e and (m := EPISODE_PARTICIPANT.match(e)) else owners.get(e)
             for e in table.column("episode_id").to_pylist()]
+
+
+def imported_episode_names(study_dir: Path) -> dict[str, tuple[int, str]]:
+    """The episodes whose ids do not start `p<number>-` (an imported study's, `d04-t1-aware`, which
+    name the driver): id -> (participant, the id's pseudonymous tail `<spec>-<condition>`)."""
+    episodes = read_study_table(study_dir, "episodes", ["episode_id", "participant", "spec", "condition"])
+    return {row["episode_id"]: (int(row["participant"]), f"{row['spec']}-{row['condition']}")
+            for row in episodes.to_pylist() if not EPISODE_PARTICIPANT.match(row["episode_id"])}
 
 
 def wall_clock_times(study_dir: Path, name: str, table: pa.Table) -> dict[str, list[datetime | None]]:
@@ -110,12 +121,14 @@ def first_times(timed: dict[str, pa.Table], times: dict[str, dict[str, list[date
 
 
 def exported_table(name: str, table: pa.Table, times: dict[str, list[datetime | None]],
-                   key: dict[int, int], first: dict[int, datetime], people: bool) -> pa.Table:
+                   key: dict[int, int], first: dict[int, datetime], people: bool,
+                   imported: dict[str, tuple[int, str]] | None = None) -> pa.Table:
     """The study's table `name` (`table`, as read) as the package holds it (`exported_schema`):
-    pseudonymised, its wall-clock columns (`times`, `wall_clock_times`) as seconds since the
-    participant's first time, its rows in pseudonym order, and (`people`: a live study) without the
-    seeds that would give the participants' numbers back."""
-    numbers = row_participants(table)
+    pseudonymised (`imported`: `imported_episode_names`), its wall-clock columns (`times`,
+    `wall_clock_times`) as seconds since the participant's first time, its rows in pseudonym order,
+    and (`people`: a live study) without the seeds that would give the participants' numbers back."""
+    imported = imported or {}
+    numbers = row_participants(table, {e: p for e, (p, _) in imported.items()})
     for column, values in times.items():
         seconds = [None if value is None or p is None else (value - first[p]).total_seconds()
                    for p, value in zip(numbers, values, strict=True)]
@@ -125,7 +138,7 @@ def exported_table(name: str, table: pa.Table, times: dict[str, list[datetime | 
         table = table.drop_columns(list(WITHOUT_PEOPLE_SEEDS.get(name, ())))
     codes = np.array([-1 if p is None else key[p] for p in numbers], dtype=np.int64)
     order = np.lexsort((np.arange(len(codes)), codes))   # by code, then the table's own order
-    return pseudonymised(table, key).take(pa.array(order))
+    return pseudonymised(table, key, imported).take(pa.array(order))
 
 
 def participants_of(study_dir: Path) -> list[int]:
@@ -141,8 +154,11 @@ def participants_of(study_dir: Path) -> list[int]:
     return sorted(found)
 
 
-def pseudonymised(table: pa.Table, key: dict[int, int]) -> pa.Table:
-    """`table` with its participant numbers and episode ids under the pseudonyms of `key`."""
+def pseudonymised(table: pa.Table, key: dict[int, int],
+                  imported: dict[str, tuple[int, str]] | None = None) -> pa.Table:
+    """`table` with its participant numbers and episode ids under the pseudonyms of `key`
+    (`imported`: `imported_episode_names`, the ids that do not carry `p<number>-`)."""
+    imported = imported or {}
     names = table.schema.names
     if "participant" in names:
         index = names.index("participant")
@@ -152,6 +168,9 @@ def pseudonymised(table: pa.Table, key: dict[int, int]) -> pa.Table:
         index = names.index("episode_id")
 
         def renamed(episode: str | None) -> str | None:
+            if episode in imported:
+                participant, tail = imported[episode]
+                return f"p{key[participant]:05d}-{tail}"
             if episode is None or (match := EPISODE_PARTICIPANT.match(episode)) is None:
                 return episode
             return f"p{key[int(match.group(1))]:05d}-{episode[match.end():]}"
@@ -185,10 +204,11 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
     timed = {name: read_study_table(study_dir, name) for name in tables if name in EXPORTED_TIMES}
     times = {name: wall_clock_times(study_dir, name, table) for name, table in timed.items()}
     first = first_times(timed, times)
+    imported = imported_episode_names(study_dir)
     (out / "tables").mkdir(parents=True, exist_ok=True)
     for name in tables:
         table = timed[name] if name in timed else read_study_table(study_dir, name)
-        write_table(exported_table(name, table, times.get(name, {}), key, first, people),
+        write_table(exported_table(name, table, times.get(name, {}), key, first, people, imported),
                     out / "tables" / TABLES[name][0])
     book = {name: entries for name, entries in codebook(exported=True, people=people).items()
             if name in tables}
@@ -259,9 +279,12 @@ def codebook_markdown(book: dict[str, list[dict]]) -> str:
 def participant_flow(manifest: dict, participants: int, ended: dict[str, int] | None) -> str:
     """The README's participant flow: planned (the study config's), with data in the package, and for
     a live study withdrawn, declined and the rest of the planned, who did not take part (counts: who
-    is not said), so that the counts add up to the planned."""
+    is not said), so that the counts add up to the planned. An imported study planned none: its flow
+    is who has data."""
     planned = (manifest.get("config") or {}).get("participants")
-    flow = f"{planned} planned, {participants} with data in this package"
+    flow = f"{participants} with data in this package"
+    if planned is not None:
+        flow = f"{planned} planned, {flow}"
     if ended is not None:
         flow += (f", {ended['withdrawn']} withdrawn (their data deleted before this export), "
                  f"{ended['declined']} declined consent (nothing of theirs was recorded)")
@@ -272,6 +295,16 @@ def participant_flow(manifest: dict, participants: int, ended: dict[str, int] | 
     return f"Participants: {flow}."
 
 
+def source_of(manifest: dict) -> list[str]:
+    """The README's lines naming whose data an imported study's are, under what licence (the
+    importer's attribution in the manifest); none for a study trustroute ran."""
+    attribution = (manifest.get("real_study") or {}).get("attribution")
+    if not attribution:
+        return []
+    return [f"Source: {attribution} The tables are derived from those logs by `trustroute import "
+            "carla-logs`; cite the authors' paper and keep this attribution with the data.", ""]
+
+
 def readme(manifest: dict, tables: list[str], texts: list[str], participants: int,
            ended: dict[str, int] | None) -> str:
     name = manifest.get("study", "the study")
@@ -279,6 +312,7 @@ def readme(manifest: dict, tables: list[str], texts: list[str], participants: in
         f"# {name}: data package", "",
         f"A trustroute study ({manifest.get('engine')} engine), exported with `trustroute export`.", "",
         participant_flow(manifest, participants, ended), "",
+        *source_of(manifest),
         "- `tables/`: the consolidated tables (Apache Parquet): " + ", ".join(tables) + ".",
         "- `codebook.md`, `codebook.json`: every column's type, whether it may be null, unit, meaning and "
         "allowed values.",

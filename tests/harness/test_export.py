@@ -81,3 +81,28 @@ def test_a_time_that_is_not_a_utc_date_time_is_one_line_and_no_package(model_stu
     assert_one_line_error(code, err, str(study / "attempts.parquet"), "ended_utc, row 0",
                           "not an ISO 8601 UTC date-time: 'at nine'")
     assert out == "" and not (tmp_path / "package" / "tables").exists()
+
+
+def test_an_imported_study_exports_without_the_drivers_numbers(tmp_path, capsys):
+    """The real CARLA study's episode ids (`d24-t1-aware`) carry the authors' driver numbers: the
+    package renames them to the pseudonym's `p<code>-<spec>-<condition>` in every table, sorts every
+    table by code, counts the participants without a plan, and names the logs' authors and licence."""
+    study = shutil.copytree("analysis/data/real_study/study", tmp_path / "study")
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
+    assert code == 0, err
+    key = {int(p): c for p, c in json.loads((study / "export-key.json").read_text())["pseudonyms"].items()}
+    tables = tmp_path / "package" / "tables"
+    originals = pq.read_table(study / "episodes.parquet").to_pandas()
+    exported = pq.read_table(tables / "episodes.parquet").to_pandas()
+    expected = {f"p{key[p]:05d}-{s}-{c}" for p, s, c in
+                originals[["participant", "spec", "condition"]].itertuples(index=False)}
+    assert set(exported["episode_id"]) == expected and len(exported) == len(originals)
+    assert (exported["episode_id"].str[1:6].astype(int) == exported["participant"]).all()
+    for name in ("roads", "kinematics"):
+        ids = pq.read_table(tables / f"{name}.parquet").column("episode_id").to_pylist()
+        assert set(ids) <= expected, name
+        codes = [int(e[1:6]) for e in ids]
+        assert codes == sorted(codes), name
+    readme = (tmp_path / "package" / "README.md").read_text()
+    assert "Participants: 21 with data in this package." in readme
+    assert "Copyright (c) 2025 Shuyang Dong" in readme and "MIT licence" in readme
