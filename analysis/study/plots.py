@@ -9,9 +9,10 @@ paired_plot         per participant, mean reported trust under every condition j
                     participants' density instead: per pair of conditions a 2-D histogram of
                     (trust under A, under B) with the diagonal, how many lie on each side, and
                     the satisfaction pairs
-trust_plot          mean reported and true trust against the road index, per spec and condition,
-                    with a 95 % band of the mean of reported trust (normal approximation), drawn
-                    only at indices with at least MIN_BAND_EPISODES reports, the legend saying
+trust_plot          mean reported and (where known: simulated drivers) true trust against the
+                    road index, per spec and condition, with a 95 % band of the mean of reported
+                    trust (normal approximation), drawn only at indices with at least
+                    MIN_BAND_EPISODES reports, the legend saying
                     how many episodes the band rests on (or that no mean is drawn, and why)
 route_plot          share of episodes driving each road on the town map (colour bar), with the
                     spec's start road, its waypoint roads and the incident types marked; roads
@@ -253,7 +254,8 @@ def trust_plot(roads: pd.DataFrame, episodes: pd.DataFrame, path: Path, max_inde
                 ax.fill_between(band.index, band["low"], band["high"], color=colour, alpha=0.2, lw=0)
             notes.append(f"{condition}: {cell_note(true, stats, band)}")
             ax.plot(stats.index, stats["mean"], color=colour, label=f"{condition} reported (mean, 95% band)")
-            ax.plot(true.index, true.values, color=colour, ls="--", lw=1, label=f"{condition} true")
+            if true.notna().any():   # people's hidden trust (imported, live) is unknown: no line
+                ax.plot(true.index, true.values, color=colour, ls="--", lw=1, label=f"{condition} true")
         ax.set_title("\n".join([spec, *notes]), fontsize=8)
         ax.set_xlabel("road index (junctions driven)")
         ax.set_ylim(1, 7)

@@ -72,6 +72,11 @@ def test_the_participants_title_fits_a_plot_of_one_spec(tmp_path, monkeypatch):
 def _trust_notes(tmp_path, monkeypatch, cells: dict[str, pd.DataFrame]) -> list[str]:
     """The notes under the spec's name in the title of `trust_plot`'s panel of one spec whose
     conditions' roads are `cells` (condition: `_cell` rows)."""
+    return _trust_panel(tmp_path, monkeypatch, cells).get_title().splitlines()[1:]
+
+
+def _trust_panel(tmp_path, monkeypatch, cells: dict[str, pd.DataFrame]):
+    """`trust_plot`'s panel (axes) of one spec whose conditions' roads are `cells`."""
     from trustroute.analysis.study import plots
 
     figures = []
@@ -84,7 +89,7 @@ def _trust_notes(tmp_path, monkeypatch, cells: dict[str, pd.DataFrame]) -> list[
     episodes["condition"] = episodes["episode_id"].str.split("-").str[0]
     plots.trust_plot(roads, episodes, tmp_path / "trust.png")
     (fig,) = figures
-    return fig.axes[0].get_title().splitlines()[1:]
+    return fig.axes[0]
 
 
 def test_a_trust_panel_without_a_mean_says_why(tmp_path, monkeypatch):
@@ -98,6 +103,15 @@ def test_a_trust_panel_of_enough_episodes_without_reports_says_none_reported(tmp
     silent = _cell(MIN_BAND_EPISODES + 2).assign(reported=np.nan)
     notes = _trust_notes(tmp_path, monkeypatch, {"aware": silent, "free": _cell(MIN_BAND_EPISODES + 2)})
     assert notes == ["aware: no mean (no trust reports)", f"free: band on {MIN_BAND_EPISODES + 2} episodes"]
+
+
+def test_a_trust_panel_draws_no_true_trust_where_none_is_known(tmp_path, monkeypatch):
+    """People's hidden trust is unknown (an imported or live study: `trust_after` null): the legend
+    offers no "true" line that the panel cannot draw; a simulated cell still has one."""
+    hidden = _cell(MIN_BAND_EPISODES + 2).assign(trust_after=None)
+    panel = _trust_panel(tmp_path, monkeypatch, {"aware": hidden, "free": _cell(MIN_BAND_EPISODES + 2)})
+    labels = [line.get_label() for line in panel.get_lines()]
+    assert labels == ["aware reported (mean, 95% band)", "free reported (mean, 95% band)", "free true"]
 
 
 def test_a_plot_interrupted_while_it_is_saved_leaves_the_old_file(tmp_path, monkeypatch):
