@@ -379,21 +379,22 @@ def _mean(series: pd.Series) -> float | None:
 
 
 def paper_matches(figures: list[dict]) -> list[dict]:
-    """Which computed readings equal each paper figure at the paper's printed precision."""
+    """Which computed readings equal each paper figure at the paper's printed precision. The paper's
+    counts are of the aware condition; they are sought among the free readings too, and such a row
+    is named for the aware figure it is, sought in the free condition."""
     out = []
-    targets: list[tuple[str, str, str | float, int | None]] = [
-        ("phi1 satisfied (count)", "aware", paper_figures.count_text("phi1"), None),
-        ("phi2 satisfied (count)", "aware", paper_figures.count_text("phi2"), None),
-        ("satisfaction rate", "aware", paper_figures.SATISFACTION_RATE["aware"], 3),
-        ("satisfaction rate", "free", paper_figures.SATISFACTION_RATE["free"], 3),
-        ("mean trust", "aware", paper_figures.MEAN_TRUST["aware"], 4),
-        ("mean trust", "free", paper_figures.MEAN_TRUST["free"], 4),
+    # (figure, the paper's condition, the condition searched, the paper's value, its digits)
+    targets: list[tuple[str, str, str, str | float, int | None]] = [
+        ("phi1 satisfied (count)", "aware", "aware", paper_figures.count_text("phi1"), None),
+        ("phi2 satisfied (count)", "aware", "aware", paper_figures.count_text("phi2"), None),
+        ("satisfaction rate", "aware", "aware", paper_figures.SATISFACTION_RATE["aware"], 3),
+        ("satisfaction rate", "free", "free", paper_figures.SATISFACTION_RATE["free"], 3),
+        ("mean trust", "aware", "aware", paper_figures.MEAN_TRUST["aware"], 4),
+        ("mean trust", "free", "free", paper_figures.MEAN_TRUST["free"], 4),
+        ("phi1 satisfied (count)", "aware", "free", paper_figures.count_text("phi1"), None),
+        ("phi2 satisfied (count)", "aware", "free", paper_figures.count_text("phi2"), None),
     ]
-    targets += [
-        ("phi1 satisfied (count)", "free", paper_figures.count_text("phi1"), None),
-        ("phi2 satisfied (count)", "free", paper_figures.count_text("phi2"), None),
-    ]
-    for figure, condition, paper, digits in targets:
+    for figure, paper_condition, condition, paper, digits in targets:
         hits = []
         for row in figures:
             if row["figure"] != figure or row[condition] is None:
@@ -406,7 +407,8 @@ def paper_matches(figures: list[dict]) -> list[dict]:
                 same = round(float(value), digits) == round(float(paper), digits)
             if same:
                 hits.append({"reading": row["reading"], "subset": row["subset"], "value": value})
-        out.append({"figure": f"{figure} ({condition})", "paper": paper, "reproduced_by": hits})
+        sought = "" if condition == paper_condition else f", sought in the {condition} condition"
+        out.append({"figure": f"{figure} ({paper_condition}){sought}", "paper": paper, "reproduced_by": hits})
     return out
 
 

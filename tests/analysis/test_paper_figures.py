@@ -46,3 +46,16 @@ def test_the_real_study_matches_against_the_module():
     assert [h["value"] for h in matches["satisfaction rate (aware)"]["reproduced_by"]] == [0.8504]
     assert matches["satisfaction rate (free)"]["reproduced_by"] == []
     assert [h["value"] for h in matches["phi1 satisfied (count) (aware)"]["reproduced_by"]] == ["18/21"]
+
+
+def test_a_paper_count_sought_in_the_free_condition_is_named_as_the_aware_figure_it_is():
+    """The paper printed 18/21 and 17/21 for the aware condition only: where the real study's free
+    readings are searched for them, the match names the aware figure, never a free figure the paper
+    does not have."""
+    figures = [{"figure": "phi2 satisfied (count)", "reading": "r", "subset": "s", "aware": "14/14",
+                "free": "17/21"}]
+    matches = [m for m in paper_matches(figures) if m["figure"].startswith("phi2 satisfied")]
+    assert [(m["figure"], [h["value"] for h in m["reproduced_by"]]) for m in matches] == [
+        ("phi2 satisfied (count) (aware)", []),
+        ("phi2 satisfied (count) (aware), sought in the free condition", ["17/21"])]
+    assert all(m["paper"] == paper_figures.count_text("phi2") for m in matches)
