@@ -153,7 +153,7 @@ def fit(study_dir: str, options: FitOptions) -> None:
         for row in payload["check"]["aware_vs_free"]:
             click.echo(
                 f"{row['spec']} {row['condition']} with {counted(row['drivers'], 'driver')}: satisfaction "
-                f"{row['satisfaction_rate']:.4f}, mean trust {row['mean_trust']:.3f} "
+                f"{row['satisfaction_rate']:.4f}, mean true trust {row['mean_trust']:.3f} "
                 f"({counted(row['episodes'], 'episode')})"
             )
         click.echo(f"check: {paths['check_json']} and {paths['check_plot']}")

@@ -51,3 +51,16 @@ def test_the_help_of_types_gives_the_range_its_refusal_names(capsys):
     assert line.split()[1:3] == ["INTEGER", f"{low}..{high}|auto"], line
     code, _, err = run_cli(capsys, "fit", "study", "--out", "model.json", "--types", str(high + 1))
     assert code == 2 and f"from {low} to {high}" in err and f"pass {low} to {high} driver types" in err, err
+
+
+def test_fit_check_names_the_simulated_mean_trust_as_true_trust(model_study, capsys, tmp_path, monkeypatch):
+    """The check's aware-vs-free rows average the simulated drivers' hidden trust, not reports: the
+    terminal says "mean true trust", as the study tables name it beside the reported trust."""
+    from trustroute.harness.commands import fit
+
+    monkeypatch.setattr(fit, "CHECK_EPISODES", 200)
+    code, out, err = run_cli(capsys, "fit", str(model_study), "--check", "--out",
+                             str(tmp_path / "driver.json"))
+    assert code == 0, err
+    rows = [line for line in out.splitlines() if " drivers: satisfaction " in line]
+    assert len(rows) == 8 and all(", mean true trust " in line for line in rows), out
