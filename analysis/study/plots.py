@@ -180,13 +180,22 @@ def paired_plot(per_participant: pd.DataFrame, conditions: tuple[str, ...], path
                            color="black" if bool(sat) else "white")
         ax.set_xticks(list(range(k)), list(conditions))
         ax.set_xlim(-0.4, k - 0.6)
-        ax.set_title(f"{spec} (n={len(group)})", fontsize=9)
+        ax.set_title(f"{spec} ({participants_note(group, conditions)})", fontsize=9)
         ax.grid(alpha=0.3, axis="y")
     axes[0][0].set_ylabel("participant's mean reported trust")
     source = f" on {belief_source}" if belief_source else ""
     colours = f"; green = higher under {conditions[0]}" if k == 2 else ""
     _suptitle(fig, f"Per participant: {' / '.join(conditions)} (filled = spec satisfied{source}{colours})", 9)
     return _save(fig, path)
+
+
+def participants_note(group: pd.DataFrame, conditions: tuple[str, ...]) -> str:
+    """How many participants a panel of `paired_plot` shows, and how many of them drove every
+    condition (the pairs the paired tests use) when some did not (an imported study's missing logs)."""
+    driven = [f"satisfied_{c}" for c in conditions]
+    complete = int(group.reindex(columns=driven).notna().all(axis=1).sum())
+    return f"n={len(group)}" if complete == len(group) else (
+        f"n={len(group)}, {complete} with every condition")
 
 
 def paired_density_plot(per_participant: pd.DataFrame, conditions: tuple[str, ...], path: Path,

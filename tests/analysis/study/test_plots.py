@@ -69,6 +69,23 @@ def test_the_participants_title_fits_a_plot_of_one_spec(tmp_path, monkeypatch):
     assert 0 <= box.x0 and box.x1 <= fig.bbox.width and 0 <= box.y0 and box.y1 <= fig.bbox.height
 
 
+def test_a_participants_panel_says_how_many_drove_every_condition(tmp_path, monkeypatch):
+    """A participant without an episode of a condition (a log the authors did not release) is a
+    lone point, not a pair: the panel's n says how many of its participants are pairs."""
+    from trustroute.analysis.study import plots
+
+    figures = []
+    real = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, path, **kw: figures.append(fig) or real(fig, path, **kw))
+    rows = pd.DataFrame({"participant": range(4), "spec": ["phi2"] * 4, "trust_aware": [5.0, 6, np.nan, 3],
+                         "trust_free": [4.0, 6, 5, 3], "satisfied_aware": [True, True, None, False],
+                         "satisfied_free": [True, False, True, True]})
+    plots.paired_plot(rows, ("aware", "free"), tmp_path / "participants.png")
+    plots.paired_plot(rows.iloc[[0, 1, 3]], ("aware", "free"), tmp_path / "paired.png")
+    assert [fig.axes[0].get_title() for fig in figures] == ["phi2 (n=4, 3 with every condition)",
+                                                            "phi2 (n=3)"]
+
+
 def _trust_notes(tmp_path, monkeypatch, cells: dict[str, pd.DataFrame]) -> list[str]:
     """The notes under the spec's name in the title of `trust_plot`'s panel of one spec whose
     conditions' roads are `cells` (condition: `_cell` rows)."""
