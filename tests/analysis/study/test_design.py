@@ -33,7 +33,10 @@ def test_the_real_study_is_described_as_it_was_run_and_compared_with_the_paper()
     assert line.startswith("carla-real-study: 21 participants x 2 specs x 2 conditions"), line
     assert "None" not in line and "no seed" in line and "Latin square" not in line
     assert not any("None" in later for later in study_lines(manifest, episodes)[1:3])
-    assert "episodes imported from trust_aware_hrc_carla_sim" in study_lines(manifest, episodes)[2]
+    provenance = study_lines(manifest, episodes)[2]
+    assert "episodes imported from trust_aware_hrc_carla_sim" in provenance
+    # the revision is trustroute's (the importer's), not a commit of the authors' repository
+    assert f", trustroute git {manifest['git_revision']}, created" in provenance, provenance
     assert "one fixed order (phi1 aware, phi1 free, phi2 aware, phi2 free)" in line
     comparable, note = is_paper_comparable(manifest, episodes)
     assert comparable and note == ""
