@@ -453,7 +453,7 @@ def format_real_study(analysis: RealStudyAnalysis, width: int | None = TERMINAL_
     by_status: dict[str, int] = {}
     for e in excluded:
         by_status[e["status"]] = by_status.get(e["status"], 0) + 1
-    lines.append("excluded files: " + (", ".join(f"{v} {k}" for k, v in by_status.items()) or "none"))
+    lines.append("excluded files: " + ("; ".join(f"{v} {k}" for k, v in by_status.items()) or "none"))
     return "\n".join(part for line in lines for part in wrapped_text(line, width, indent="    "))
 
 

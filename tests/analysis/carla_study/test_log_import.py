@@ -467,3 +467,14 @@ def test_committed_study_is_analysed_with_every_file_accounted_for(tmp_path, cap
     tests = real["authors_paired_tests"]
     assert {t["quantity"] for t in tests} >= {"average trust (autopilot ticks)", "LDTL satisfied (0/1)"}
     assert all(t["pairs"] in (20, 21) for t in tests)
+
+
+def test_the_excluded_files_line_keeps_each_count_beside_its_reason():
+    """Each status is a phrase with a comma of its own ("pilot/test driver, excluded"): the counts are
+    kept apart by semicolons, so that every count reads with its reason."""
+    from trustroute.analysis.carla_study.analysis import RealStudyAnalysis, format_real_study
+
+    inventory = [{"status": "pilot/test driver, excluded"}] * 2 + [{"status": "warm-up trial, not analysed"}]
+    analysis = RealStudyAnalysis(pd.DataFrame(), [], [], {"real_study": {"inventory": inventory}})
+    lines = format_real_study(analysis, width=None).splitlines()
+    assert lines[-1] == "excluded files: 2 pilot/test driver, excluded; 1 warm-up trial, not analysed"
