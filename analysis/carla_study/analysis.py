@@ -42,6 +42,7 @@ from trustroute.analysis.satisfaction import (
 )
 from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.dataset import REPORT_HTML_FILE, REPORT_MARKDOWN_FILE
+from trustroute.core.wording import counted
 from trustroute.policies.belief.problem import reads_hidden_trust
 
 AUTHORS_SATISFIED_FRACTION = 0.99  # statistic_test_point_based.py: precetage >= 0.99
@@ -171,7 +172,9 @@ def authors_paired_tests(per: pd.DataFrame) -> list[dict]:
             a, b = both[(column, "aware")].to_numpy(), both[(column, "free")].to_numpy()
             if column == "authors_takeover_probability":
                 a, b = b, a  # their script tests free against aware here
-            if len(a) < 2 or np.allclose(a - b, 0):
+            note = ("fewer than 2 pairs" if len(a) < 2
+                    else "every difference is 0" if np.allclose(a - b, 0) else "")
+            if note:
                 t, p_value = float("nan"), float("nan")
             else:
                 result = stats.ttest_rel(a, b)
@@ -183,6 +186,7 @@ def authors_paired_tests(per: pd.DataFrame) -> list[dict]:
                     "pairs": int(len(a)),
                     "t_statistic": finite_or_none(t),
                     "p_value": finite_or_none(p_value),
+                    "note": note,   # why no t-test was computed
                 }
             )
     return rows
@@ -442,9 +446,10 @@ def format_real_study(analysis: RealStudyAnalysis, width: int | None = TERMINAL_
     for test in analysis.paired_tests:
         t = number_text(test["t_statistic"], 4)
         p = MISSING if test["p_value"] is None else f"{test['p_value']:.4g}"
+        why = f"{test['note']}; " if test.get("note") else ""
         lines.append(
             f"authors' paired t-test, {test['subset']}: {test['quantity']}: t = {t}, p = {p} "
-            f"({test['pairs']} pairs)"
+            f"({why}{counted(test['pairs'], 'pair')})"
         )
     info = analysis.manifest.get("real_study", {})
     lines.append("")

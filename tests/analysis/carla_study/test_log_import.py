@@ -478,3 +478,23 @@ def test_the_excluded_files_line_keeps_each_count_beside_its_reason():
     analysis = RealStudyAnalysis(pd.DataFrame(), [], [], {"real_study": {"inventory": inventory}})
     lines = format_real_study(analysis, width=None).splitlines()
     assert lines[-1] == "excluded files: 2 pilot/test driver, excluded; 1 warm-up trial, not analysed"
+
+
+def test_an_authors_t_test_that_cannot_be_computed_says_why():
+    """One pair (a single driver's logs) gives no t-test: the line says so, in the singular, rather
+    than 't = -, p = - (1 pairs)'."""
+    from trustroute.analysis.carla_study.analysis import (
+        RealStudyAnalysis,
+        authors_paired_tests,
+        format_real_study,
+    )
+
+    per = pd.DataFrame({"participant": [4, 4], "trial": [1, 1], "condition": ["aware", "free"],
+                        "in_authors_subset": [False, False], "fraction_trust_at_least_2": [1.0, 0.9],
+                        "authors_average_trust": [5.0, 4.0], "authors_takeover_probability": [0.0, 0.1],
+                        "authors_satisfied": [1.0, 0.0]})
+    tests = authors_paired_tests(per)
+    analysis = RealStudyAnalysis(per, [], [], {"real_study": {}}, tests)
+    lines = [line for line in format_real_study(analysis, width=None).splitlines() if "t-test" in line]
+    assert len(lines) == 4
+    assert all(line.endswith("t = -, p = - (fewer than 2 pairs; 1 pair)") for line in lines), lines
