@@ -317,11 +317,11 @@ def readme(manifest: dict, tables: list[str], texts: list[str], participants: in
         "- `codebook.md`, `codebook.json`: every column's type, whether it may be null, unit, meaning and "
         "allowed values.",
         "- `study_config.json`: the study's configuration; `versions.json`: the software that made it.",
-        "- `texts/`: what participants were shown (" + (", ".join(texts) or "none recorded") + ")"
-        + (f"; `{QUESTIONNAIRES_TEXT}`: per placement (`before`, `after_each_trial`, `end`) each "
-           "questionnaire as the station showed it (title, instructions, scale, items; an item's `id` is "
-           "the `item` of the questionnaires table, `reversed` items are scored as min + max - value)"
-           if QUESTIONNAIRES_TEXT in texts else "") + ".",
+        *(["- `texts/`: what participants were shown (" + ", ".join(texts) + ")"
+           + (f"; `{QUESTIONNAIRES_TEXT}`: per placement (`before`, `after_each_trial`, `end`) each "
+              "questionnaire as the station showed it (title, instructions, scale, items; an item's `id` "
+              "is the `item` of the questionnaires table, `reversed` items are scored as min + max - value)"
+              if QUESTIONNAIRES_TEXT in texts else "") + "."] if texts else []),
         "- `SHA256SUMS`: the SHA-256 of every other file (`sha256sum -c SHA256SUMS`).", "",
         "Participants are pseudonymous: each participant number is a random three-digit code, in the "
         "`participant` column and in every `episode_id` (`p<code>-<spec>-<condition>`). Missing values "

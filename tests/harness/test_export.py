@@ -60,6 +60,8 @@ def test_a_package_says_nothing_of_the_order_of_enrolment(model_study, tmp_path,
     readme = (tmp_path / "package" / "README.md").read_text()
     assert "Participants: 12 planned, 12 with data in this package." in readme
     assert "withdrawn" not in readme   # a simulated study has no withdrawals to report
+    # nor texts shown to anyone: the README lists no `texts/` folder the package does not have
+    assert not (tmp_path / "package" / "texts").exists() and "`texts/`" not in readme
     # nor anyone to hide: it keeps the seeds that reproduce it
     study_seed = json.loads((study / "manifest.json").read_text())["config"]["seed"]
     assert json.loads((tmp_path / "package" / "study_config.json").read_text())["seed"] == study_seed
