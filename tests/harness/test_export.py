@@ -105,6 +105,13 @@ def test_an_imported_study_exports_without_the_drivers_numbers(tmp_path, capsys)
         assert set(ids) <= expected, name
         codes = [int(e[1:6]) for e in ids]
         assert codes == sorted(codes), name
+    # the codebook describes the values the import writes where no simulator ran (-1)
+    book = {(table, e["column"]): e["allowed"]
+            for table, entries in json.loads((tmp_path / "package" / "codebook.json").read_text()).items()
+            for e in entries}
+    for table, column in (("episodes", "seed"), ("roads", "dfa_state")):
+        values = set(pq.read_table(tables / f"{table}.parquet").column(column).to_pylist())
+        assert values == {-1} and "; -1: " in book[table, column], (column, book[table, column])
     readme = (tmp_path / "package" / "README.md").read_text()
     assert "Participants: 21 with data in this package." in readme
     assert "Copyright (c) 2025 Shuyang Dong" in readme and "MIT licence" in readme

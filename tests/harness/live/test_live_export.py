@@ -34,8 +34,8 @@ def check_column(values: list, entry: dict) -> None:
         assert {str(v).lower() for v in present} <= set(allowed.split(", ")), (entry["column"], set(present))
     elif allowed.startswith("integers 1-7"):
         assert all(1 <= v <= 7 for v in present), entry["column"]
-    elif allowed.startswith("integers >= "):
-        assert all(v >= int(allowed.rsplit(" ", 1)[1]) for v in present), entry["column"]
+    elif allowed.startswith("integers >= "):   # the range, before any value of an imported study
+        assert all(v >= int(allowed.split(";")[0].rsplit(" ", 1)[1]) for v in present), entry["column"]
     elif allowed == ">= 0":
         assert all(v >= 0 for v in present), entry["column"]
 
