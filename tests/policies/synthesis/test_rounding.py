@@ -3,7 +3,8 @@
 On small random towns (3-5 junctions, H <= 5, the default and random driver models, a belief atom
 at a random offset) the synthesized [L, U] contains the exact-rational optimum with no tolerance,
 L is at most the returned policy's exact value, and both lie in [0, 1]. Without the outward
-rounding U fell below the optimum by an ulp or two on some of these seeds.
+rounding the optimum lies outside [L, U], or a bound above 1, on some of these seeds
+(`python -m benchmarks bench_rounding_power` counts them).
 """
 
 from __future__ import annotations
@@ -49,11 +50,11 @@ def test_bounds_contain_the_exact_optimum_with_no_tolerance(outcome, seed):
     assert result.stats.converged      # decided on the computed bounds (their gap, not the margin)
 
 
-def test_unbounded_bounds_lie_in_the_unit_interval(driver):
-    for seed in range(6):
-        pomdp, spec, _ = small_case(seed, driver)
-        result = synthesize(pomdp, spec, SynthesisSettings(horizon=None, time_limit=5.0))
-        assert 0.0 <= result.lower <= result.upper <= 1.0
+@pytest.mark.parametrize("seed", range(6))
+def test_unbounded_bounds_lie_in_the_unit_interval(driver, seed):
+    pomdp, spec, _ = small_case(seed, driver)
+    result = synthesize(pomdp, spec, SynthesisSettings(horizon=None, time_limit=5.0))
+    assert 0.0 <= result.lower <= result.upper <= 1.0, (seed, result.lower, result.upper)
 
 
 def test_widening_keeps_zero_and_one_and_moves_the_rest_outward(driver):

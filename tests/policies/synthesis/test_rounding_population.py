@@ -12,7 +12,11 @@ type as the true driver), with no tolerance:
   policy, and the reported mixture lower is at most the exact prior-weighted value (the exact type
   weights: the decimals they print as, normalised, as the lifted prior is);
 - robust objective: the same of its returned policy, its lower end at most the worst type's exact
-  value, and each U_k at least type k's own exact optimum.
+  value, and each U_k at least type k's own exact optimum;
+- the mixture alone (`mixture_lower`, `mixture_upper`), its type values each one float that is the
+  exact value: brackets the exact prior-weighted value. The synthesized type values lie below and
+  above their exact values by their own margin, which hides the mixture's float error; a certified
+  bound may equal the exact value, and then only the mixture's own margin holds it.
 """
 
 from __future__ import annotations
@@ -35,7 +39,13 @@ from trustroute.participants.driver_population import DriverPopulation, DriverTy
 from trustroute.policies.belief.exact_labels import decimal
 from trustroute.policies.logic.spec import state_only_projection
 from trustroute.policies.model.trust_pomdp import BeliefRule, build_pomdp
-from trustroute.policies.synthesis.population import summary, synthesize_population
+from trustroute.policies.synthesis.population import (
+    TypeValue,
+    mixture_lower,
+    mixture_upper,
+    summary,
+    synthesize_population,
+)
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 SEEDS = sweep(40, fast=(1, 4, 10))
@@ -134,3 +144,17 @@ def test_robust_values_bracket_the_exact_ones(driver, seed):
         own = exact_value(build_pomdp(town, t.model), own_spec, horizon)
         assert own <= Fraction(bound), (seed, t.name, own, bound)
     assert found.lower <= found.upper
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_the_mixture_brackets_the_exact_value_of_type_values_with_no_slack(driver, seed):
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(2, 6))
+    population = DriverPopulation(types=tuple(DriverType(f"t{j}", float(w), driver)
+                                              for j, w in enumerate(rng.dirichlet(np.full(k, 2.0)))))
+    ends = rng.uniform(0.0, 1.0, k).tolist()
+    values = [TypeValue(t.name, t.weight, v, v) for t, v in zip(population.types, ends, strict=True)]
+    exact = sum((w * Fraction(v.lower) for w, v in zip(exact_weights(population), values, strict=True)),
+                Fraction(0))
+    lower, upper = mixture_lower(population.weights, values), mixture_upper(population.weights, values)
+    assert Fraction(lower) <= exact <= Fraction(upper), (seed, lower, float(exact), upper)
