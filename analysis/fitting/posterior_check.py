@@ -157,6 +157,16 @@ def add_model(check: dict, name: str, model: DriverModel, accuracy: float, incid
                              "distance": distances(sim, check["_stats"]["real"])}
 
 
+# Each panel of the check's figure: (title, x label, y label). The rates and shares are fractions
+# (no unit); trust is on the 1-7 scale, its changes in levels.
+CHECK_PANELS = (
+    ("takeover rate per incident", "incident on the road", "takeovers per road driven"),
+    ("reported trust change per road", "change of the reported trust on a road (levels)", "share of roads"),
+    ("final reported trust", "reported trust at the episode's end (level, 1-7)", "share of episodes"),
+    ("roads with a changed report per episode", "roads whose report changed", "share of episodes"),
+)
+
+
 def plot_check(check: dict, path: Path) -> Path:
     import matplotlib
 
@@ -164,32 +174,23 @@ def plot_check(check: dict, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     stats: dict[str, Statistics] = check["_stats"]
-    fig, axes = plt.subplots(1, 4, figsize=(18, 4))
+    fig, axes = plt.subplots(1, len(CHECK_PANELS), figsize=(18, 4))
     names = list(stats)
     width = 0.8 / len(names)
     incidents = list(stats["real"].takeover_rate)
     for j, name in enumerate(names):
         s = stats[name]
-        axes[0].bar(
-            np.arange(len(incidents)) + j * width,
-            [s.takeover_rate.get(i, 0) for i in incidents],
-            width,
-            label=name,
-        )
-        axes[1].bar(CHANGE_VALUES + j * width, s.trust_change, width, label=name)
-        axes[2].bar(np.arange(1, 8) + j * width, s.final_trust, width, label=name)
-        axes[3].bar(
-            np.arange(s.changes_per_episode.size) + j * width, s.changes_per_episode, width, label=name
-        )
-    axes[0].set_xticks(np.arange(len(incidents)) + 0.4 - width / 2, incidents)
-    titles = (
-        "takeover rate per incident",
-        "reported trust change per road",
-        "final reported trust",
-        "roads with a changed report per episode",
-    )
-    for ax, title in zip(axes, titles, strict=True):
+        shift = (j - (len(names) - 1) / 2) * width   # each value's bars centred on its tick
+        axes[0].bar(np.arange(len(incidents)) + shift, [s.takeover_rate.get(i, 0) for i in incidents], width,
+                    label=name)
+        axes[1].bar(CHANGE_VALUES + shift, s.trust_change, width, label=name)
+        axes[2].bar(np.arange(1, 8) + shift, s.final_trust, width, label=name)
+        axes[3].bar(np.arange(s.changes_per_episode.size) + shift, s.changes_per_episode, width, label=name)
+    axes[0].set_xticks(np.arange(len(incidents)), incidents)
+    for ax, (title, x_label, y_label) in zip(axes, CHECK_PANELS, strict=True):
         ax.set_title(title)
+        ax.set_xlabel(x_label)
+        ax.set_ylabel(y_label)
         ax.legend(fontsize=7)
     fig.tight_layout()
     save_figure(fig, path, dpi=100)

@@ -11,8 +11,13 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
+from tests.analysis.fitting.test_fit_real import STUDY
 from tests.policies.model.test_trust_pomdp import random_model
+from trustroute.analysis.fitting import posterior_check as check_module
 from trustroute.app.drivers import simulate
+from trustroute.app.runs import posterior_check
+from trustroute.core.dataset import read_roads
+from trustroute.participants.driver_model import load_driver_model
 from trustroute.participants.synthetic_driver import SyntheticDriver
 
 
@@ -68,3 +73,21 @@ def test_a_check_file_interrupted_while_it_is_written_leaves_the_old_file(tmp_pa
         write_check({"models": {"fitted": {"distance": 0.1}}, "_stats": {}}, path)
     assert path.read_text() == '{"old": true}'
     assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+def test_every_axis_of_the_check_figure_says_what_it_counts(tmp_path, monkeypatch):
+    """The saved figure of `fit --check`: each panel names its x and y quantity, and the trust axes
+    their unit (levels of the 1-7 scale)."""
+    saved = []
+    real = check_module.save_figure
+    monkeypatch.setattr(check_module, "save_figure",
+                        lambda fig, path, **kw: saved.append(fig) or real(fig, path, **kw))
+    check = posterior_check(read_roads(STUDY), {"packaged": (load_driver_model(None), 0.8)}, 2,
+                            np.random.default_rng(3))
+    path = check_module.plot_check(check, tmp_path / "driver.check.png")
+    (fig,) = saved
+    assert path.stat().st_size > 0 and len(fig.axes) == 4
+    for ax in fig.axes:
+        assert ax.get_title() and ax.get_xlabel().strip() and ax.get_ylabel().strip(), ax.get_title()
+    trust_axes = [ax.get_xlabel() for ax in fig.axes if "trust" in ax.get_title()]
+    assert len(trust_axes) == 2 and all("level" in label for label in trust_axes), trust_axes
