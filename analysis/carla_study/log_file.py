@@ -7,7 +7,7 @@ wrote; absent, the rows are ticks 0, 1, ...), `trust_level` (the displayed trust
 (docs/real_study.md, "Mapping decisions"): the ticks are integers that increase from row to row,
 x and y are finite, road and lane ids integers, the trust a level 1..7, the belief a probability
 vector (trustroute.core.validation `first_non_belief`). A bad cell is an InputError naming the
-file, the row (0-based, as pandas counts the log's rows) and the column.
+file, the line an editor shows the row on (`csv_place`) and the column.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from trustroute.core.errors import InputError
-from trustroute.core.validation import first_non_belief
+from trustroute.core.validation import csv_place, first_non_belief
 
 LOG_COLUMNS = ("trust_level", "location", "if_autopilot", "trust_belief")
 TRUST_LEVELS = (1, 7)  # the displayed scale, lowest and highest
@@ -27,8 +27,12 @@ LOCATION_FORM = '"(x, y, road_id, lane_id)"'
 UNCHANGED = "pass the authors' CSV unchanged"
 
 
-def _bad_cell(relative: str, row: int, column: str, problem: str, fix: str = UNCHANGED) -> InputError:
-    return InputError(relative, f"row {row}, column {column}", problem, fix)
+class _BadCell(Exception):
+    """A bad cell found by a check of `read_log`, by its data row; `read_log` places it in the file."""
+
+    def __init__(self, row: int, column: str, problem: str, fix: str = UNCHANGED) -> None:
+        super().__init__(row, column, problem, fix)
+        self.row, self.column, self.problem, self.fix = row, column, problem, fix
 
 
 def _cell(raw: pd.DataFrame, column: str, row: int) -> str:
@@ -47,26 +51,26 @@ def _numbers(cells: pd.Series) -> np.ndarray:
     return pd.to_numeric(cells.astype(str).str.strip(), errors="coerce").to_numpy(dtype=float)
 
 
-def _tuples(raw: pd.DataFrame, column: str, width: int, relative: str, form: str) -> np.ndarray:
+def _tuples(raw: pd.DataFrame, column: str, width: int, form: str) -> np.ndarray:
     """The "(a, b, ...)" cells of `column` as floats [n, width]; InputError at the first cell that
     is not `width` numbers."""
     text = raw[column].astype(str).str.strip().str.strip("()")
     counts = (text.str.count(",") + 1).to_numpy()
     if (counts != width).any():
         row = int(np.flatnonzero(counts != width)[0])
-        raise _bad_cell(relative, row, column, f"{_cell(raw, column, row)} has {counts[row]} entries, not "
+        raise _BadCell(row, column, f"{_cell(raw, column, row)} has {counts[row]} entries, not "
                         f"{width}", f"{column} is {form}")
     parts = text.str.split(",", expand=True)
     values = np.column_stack([_numbers(parts[i]) for i in range(width)])
     missing = np.isnan(values).any(axis=1)
     if missing.any():
         row = int(np.flatnonzero(missing)[0])
-        raise _bad_cell(relative, row, column, f"{_cell(raw, column, row)} is not {width} numbers",
+        raise _BadCell(row, column, f"{_cell(raw, column, row)} is not {width} numbers",
                         f"{column} is {form}")
     return values
 
 
-def _ticks(raw: pd.DataFrame, relative: str) -> np.ndarray:
+def _ticks(raw: pd.DataFrame) -> np.ndarray:
     """The tick index of each row: the unnamed first column, else 0, 1, ...; integers increasing
     from row to row (a repeated or earlier tick is no log of one drive)."""
     column = raw.columns[0]
@@ -76,43 +80,43 @@ def _ticks(raw: pd.DataFrame, relative: str) -> np.ndarray:
     whole = _integers(ticks) & (ticks >= 0)
     if not whole.all():
         row = int(np.flatnonzero(~whole)[0])
-        raise _bad_cell(relative, row, "tick (the first column)",
+        raise _BadCell(row, "tick (the first column)",
                         f"{_cell(raw, column, row)} is not a tick index (a whole number >= 0)")
     later = np.diff(ticks) > 0
     if not later.all():
         row = int(np.flatnonzero(~later)[0]) + 1
-        raise _bad_cell(relative, row, "tick (the first column)", f"tick {int(ticks[row])} does not follow "
+        raise _BadCell(row, "tick (the first column)", f"tick {int(ticks[row])} does not follow "
                         f"tick {int(ticks[row - 1])} of the row before",
                         "pass the ticks in the order logged, once each")
     return ticks.astype(np.int64)
 
 
-def _location(raw: pd.DataFrame, relative: str) -> np.ndarray:
-    location = _tuples(raw, "location", 4, relative, LOCATION_FORM)
+def _location(raw: pd.DataFrame) -> np.ndarray:
+    location = _tuples(raw, "location", 4, LOCATION_FORM)
     bad = ~(np.isfinite(location[:, :2]).all(axis=1) & _integers(location[:, 2:]).all(axis=1))
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
-        raise _bad_cell(relative, row, "location", f"{_cell(raw, 'location', row)} is not finite x, y and "
+        raise _BadCell(row, "location", f"{_cell(raw, 'location', row)} is not finite x, y and "
                         "whole road and lane ids", f"location is {LOCATION_FORM}")
     return location
 
 
-def _belief(raw: pd.DataFrame, relative: str) -> np.ndarray:
-    belief = _tuples(raw, "trust_belief", BELIEF_WIDTH, relative, f"a {BELIEF_WIDTH}-tuple of probabilities")
+def _belief(raw: pd.DataFrame) -> np.ndarray:
+    belief = _tuples(raw, "trust_belief", BELIEF_WIDTH, f"a {BELIEF_WIDTH}-tuple of probabilities")
     wrong = first_non_belief(belief)
     if wrong is not None:
         row, problem = wrong
-        raise _bad_cell(relative, row, "trust_belief", f"not a probability vector: {problem}")
+        raise _BadCell(row, "trust_belief", f"not a probability vector: {problem}")
     return belief
 
 
-def _trust(raw: pd.DataFrame, relative: str) -> np.ndarray:
+def _trust(raw: pd.DataFrame) -> np.ndarray:
     trust = _numbers(raw["trust_level"])
     low, high = TRUST_LEVELS
     bad = ~(_integers(trust) & (trust >= low) & (trust <= high))
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
-        raise _bad_cell(relative, row, "trust_level", f"{_cell(raw, 'trust_level', row)} is not a level "
+        raise _BadCell(row, "trust_level", f"{_cell(raw, 'trust_level', row)} is not a level "
                         f"{low}..{high}")
     return trust.astype(np.int64)
 
@@ -129,14 +133,22 @@ def read_log(path: Path, relative: str) -> pd.DataFrame:
                          f"a trust_level_record file has columns {', '.join(LOG_COLUMNS)}")
     if raw.empty:
         raise InputError(relative, "rows", "no ticks", "pass a non-empty log")
-    tick = _ticks(raw, relative)
-    location = _location(raw, relative)
-    belief = _belief(raw, relative)
-    trust = _trust(raw, relative)
+    try:
+        return _tick_table(raw)
+    except _BadCell as bad:
+        raise InputError(relative, csv_place(path, bad.row, bad.column), bad.problem, bad.fix) from None
+
+
+def _tick_table(raw: pd.DataFrame) -> pd.DataFrame:
+    """`raw`'s cells checked and converted (read_log); _BadCell at the first bad one."""
+    tick = _ticks(raw)
+    location = _location(raw)
+    belief = _belief(raw)
+    trust = _trust(raw)
     autopilot = raw["if_autopilot"].astype(str).str.strip().map({"True": True, "False": False})
     if autopilot.isna().any():
         row = int(np.flatnonzero(autopilot.isna().to_numpy())[0])
-        raise _bad_cell(relative, row, "if_autopilot", f"{_cell(raw, 'if_autopilot', row)} is not True/False")
+        raise _BadCell(row, "if_autopilot", f"{_cell(raw, 'if_autopilot', row)} is not True/False")
     return pd.DataFrame(
         {
             "tick": tick,

@@ -48,6 +48,7 @@ from trustroute.core.errors import InputError
 from trustroute.core.output_files import check_output_dir
 from trustroute.core.packaged import PACKAGED_SPECS
 from trustroute.core.progress import bar_disable
+from trustroute.core.validation import csv_place
 from trustroute.core.wording import counted
 from trustroute.harness.study.manifest import git_revision, package_versions
 from trustroute.harness.study.resume import check_own_folder
@@ -166,15 +167,16 @@ def cut_roads(xy: np.ndarray, trial: int, tables: CarlaTables, relative: str = "
         state, first = best[1], arrival + 1
 
 
-def check_on_road(ticks: pd.DataFrame, tables: CarlaTables, relative: str) -> float:
+def check_on_road(ticks: pd.DataFrame, tables: CarlaTables, log: LogFile) -> float:
+    """The largest distance of a tick from every Town01 spawn point; InputError past OFF_ROAD_M."""
     xy = ticks[["x", "y"]].to_numpy()
     d = np.sqrt(((xy[:, None, :] - tables.spawn_points[None, :, :]) ** 2).sum(-1)).min(axis=1)
     worst = int(np.argmax(d))
     if d[worst] > OFF_ROAD_M:
         raise InputError(
-            relative,
-            f"row {worst}",
-            f"location ({xy[worst, 0]:.1f}, {xy[worst, 1]:.1f}) maps to no road of Town01 "
+            log.relative,
+            csv_place(log.path, worst, "location"),
+            f"({xy[worst, 0]:.1f}, {xy[worst, 1]:.1f}) maps to no road of Town01 "
             f"({d[worst]:.0f} m from the nearest spawn point, limit {OFF_ROAD_M:.0f} m)",
             "pass an unmodified log of the authors' Town01 study",
         )
@@ -382,7 +384,7 @@ def import_carla_logs(
             "role": log.role,
         }
         ticks = read_log(log.path, log.relative)
-        worst_distance = max(worst_distance, check_on_road(ticks, tables, log.relative))
+        worst_distance = max(worst_distance, check_on_road(ticks, tables, log))
         if log.role != "study":
             entry["status"] = {
                 "warmup": "warm-up trial, not analysed",

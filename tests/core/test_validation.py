@@ -118,3 +118,21 @@ def test_beliefs_are_probability_vectors_within_the_tolerance():
         bad[2, 3] = value
         row, found = first_non_belief(bad)
         assert row == 2 and problem in found
+
+
+def test_a_csv_row_is_named_by_the_line_an_editor_shows_it_on(tmp_path):
+    """Data rows count from 0 after the header, as pandas reads them; blank lines are skipped and a
+    quoted cell may span lines, so the line is found in the file, not computed from the row."""
+    import pandas as pd
+
+    from trustroute.core.validation import csv_line, csv_place
+
+    path = tmp_path / "log.csv"
+    path.write_text('tick,note\n0,a\n\n1,"two\nlines"\n   \n2,c\n')
+    lines = path.read_text().splitlines()
+    frame = pd.read_csv(path)
+    for row in range(len(frame)):
+        line = csv_line(path, row)
+        assert lines[line - 1].startswith(f"{frame['tick'].iloc[row]},"), (row, line)
+    assert [csv_line(path, row) for row in range(3)] == [2, 4, 7]
+    assert csv_place(path, 2, "note") == "line 7, column note" and csv_place(path, 0) == "line 2"

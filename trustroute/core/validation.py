@@ -19,11 +19,13 @@ any parser sees a byte:
   allow it).
 
 Every failure is an InputError (trustroute/core/errors.py) naming the file, the place and the fix, so a
-bad input is one line on stderr and exit code 2 whatever kind of file it is.
+bad input is one line on stderr and exit code 2 whatever kind of file it is. A row of a CSV file is
+placed by the line an editor shows it on (`csv_place`), never by its index among the data rows.
 """
 
 from __future__ import annotations
 
+import csv
 import difflib
 import json
 import math
@@ -324,6 +326,31 @@ def _check_depth(data: object, source: str, what: str) -> None:
 def read_toml(path: str | Path, what: str, max_bytes: int = MAX_TEXT_BYTES, fix: str = "") -> dict:
     """Read and parse a TOML input file with every guard; `what` names it in errors."""
     return parse_toml(read_input_text(path, what, max_bytes, fix), str(path), what)
+
+
+# -- CSV --------------------------------------------------------------------------------------------
+
+
+def csv_line(path: str | Path, row: int) -> int:
+    """The line of `path`, numbered from 1 as an editor shows it, where data row `row` starts; rows
+    count from 0 after the header, as pandas reads them (blank lines skipped, a quoted cell may
+    span lines). Read only when an error names a row, so a valid file is read once."""
+    with open(path, newline="", encoding="utf-8", errors="replace") as handle:
+        reader = csv.reader(handle)
+        start, index = 1, -1   # the header is the record before row 0
+        for record in reader:
+            if record and (len(record) > 1 or record[0].strip()):
+                if index == row:
+                    return start
+                index += 1
+            start = reader.line_num + 1
+    return start
+
+
+def csv_place(path: str | Path, row: int, column: str = "") -> str:
+    """The place of data row `row` (and `column`) of a CSV file in an error: "line 42, column x"."""
+    line = f"line {csv_line(path, row)}"
+    return f"{line}, column {column}" if column else line
 
 
 # -- documented key policy --------------------------------------------------------------------------

@@ -221,7 +221,7 @@ def test_one_log_file_imports_as_a_study_of_its_episode(tmp_path, capsys):
 def test_a_malformed_single_log_is_named_by_its_file(tmp_path, capsys):
     folder = _bad_copy(tmp_path, SAMPLE, _ticks(lambda t: _set(t, 40, "x")))
     err = _one_line_error(capsys, folder / SAMPLE, tmp_path)
-    assert err.startswith(f"error: {SAMPLE}: row 40, column tick "), err
+    assert err.startswith(f"error: {SAMPLE}: line 42, column tick "), err   # row 40 after the header
 
 
 # -- malformed inputs: one line, exit 2 ---------------------------------------------------
@@ -326,7 +326,7 @@ def test_location_off_every_road_is_one_line(tmp_path, capsys):
 
     folder = _bad_copy(tmp_path, SAMPLE, move)
     err = _one_line_error(capsys, folder, tmp_path)
-    assert "maps to no road" in err and "row 40" in err
+    assert "maps to no road" in err and f"{SAMPLE}: line 42, column location: (900.0, -700.0)" in err
 
 
 def _cell(column: str, value: object, row: int = 40):
@@ -358,30 +358,36 @@ def _swap(ticks, row):
 
 
 MALFORMED_CELLS = {
-    "tick_not_a_number": (_ticks(lambda t: _set(t, 40, "x")), "row 40, column tick", "not a tick index"),
-    "tick_repeated": (_ticks(lambda t: _set(t, 41, t[40])), "row 41, column tick", "does not follow"),
-    "ticks_reversed": (_ticks(lambda t: _swap(t, 40)), "row 41, column tick", "does not follow"),
-    "location_of_two_numbers": (_cell("location", "(67.1, 1.9)"), "row 40, column location", "2 entries"),
-    "location_nan": (_cell("location", "(nan, 1.9, 3, 1)"), "row 40, column location", "not 4 numbers"),
-    "location_inf": (_cell("location", "(inf, 1.9, 3, 1)"), "row 40, column location", "not finite"),
-    "location_fractional_road_id": (_cell("location", "(67.1, 1.9, 3.5, 1)"), "row 40, column location",
+    "tick_not_a_number": (_ticks(lambda t: _set(t, 40, "x")), "line 42, column tick", "not a tick index"),
+    "tick_repeated": (_ticks(lambda t: _set(t, 41, t[40])), "line 43, column tick", "does not follow"),
+    "ticks_reversed": (_ticks(lambda t: _swap(t, 40)), "line 43, column tick", "does not follow"),
+    "location_of_two_numbers": (_cell("location", "(67.1, 1.9)"), "line 42, column location", "2 entries"),
+    "location_nan": (_cell("location", "(nan, 1.9, 3, 1)"), "line 42, column location", "not 4 numbers"),
+    "location_inf": (_cell("location", "(inf, 1.9, 3, 1)"), "line 42, column location", "not finite"),
+    "location_fractional_road_id": (_cell("location", "(67.1, 1.9, 3.5, 1)"), "line 42, column location",
                                     "whole road"),
-    "trust_between_levels": (_cell("trust_level", 4.5), "row 40, column trust_level", "not a level 1..7"),
-    "belief_of_two_levels": (_cell("trust_belief", "(0.5, 0.5)"), "row 40, column trust_belief",
+    "trust_between_levels": (_cell("trust_level", 4.5), "line 42, column trust_level", "not a level 1..7"),
+    "belief_of_two_levels": (_cell("trust_belief", "(0.5, 0.5)"), "line 42, column trust_belief",
                              "2 entries, not 7"),
     "belief_with_negative_entries": (_cell("trust_belief", "(-0.5, 0.5, 0.5, 0.5, 0, 0, 0)"),
-                                     "row 40, column trust_belief", "outside [0, 1]"),
+                                     "line 42, column trust_belief", "outside [0, 1]"),
     "belief_not_summing_to_one": (_cell("trust_belief", "(0.5, 0.5, 0.5, 0, 0, 0, 0)"),
-                                  "row 40, column trust_belief", "sum to 1.5"),
+                                  "line 42, column trust_belief", "sum to 1.5"),
 }
 
 
 @pytest.mark.parametrize("case", sorted(MALFORMED_CELLS))
-def test_a_malformed_cell_is_one_line_naming_its_row_and_column(case, tmp_path, capsys):
+def test_a_malformed_cell_is_one_line_naming_its_line_and_column(case, tmp_path, capsys):
+    """The line is the file's, as an editor numbers it: the header is line 1, row 40 is line 42."""
     edit, place, problem = MALFORMED_CELLS[case]
-    err = _one_line_error(capsys, _bad_copy(tmp_path, SAMPLE, edit), tmp_path)
+    folder = _bad_copy(tmp_path, SAMPLE, edit)
+    err = _one_line_error(capsys, folder, tmp_path)
     assert f"{SAMPLE}: {place}" in err and problem in err, err
     assert not (tmp_path / "out").exists()
+    line = int(place.split()[1].rstrip(","))
+    edited = pd.read_csv(folder / SAMPLE, index_col=0)
+    row = line - 2
+    assert (folder / SAMPLE).read_text().splitlines()[line - 1].startswith(f"{edited.index[row]},"), line
 
 
 def test_not_a_log_folder_is_one_line(tmp_path, capsys):
