@@ -68,6 +68,8 @@ LOG_NAME = re.compile(
 # line every road of Town01; the largest distance of any logged tick in the released logs is
 # reported by the importer (manifest "max_distance_to_spawn_point_m") and is far below this.
 OFF_ROAD_M = 60.0
+# log_end of a log cut before its route's end (`log_ending`); the import's summary names such logs
+LOG_TRUNCATED = "truncated"
 KINEMATICS_EVERY = 25  # ticks between kept positions in kinematics.parquet (ticks.parquet is lossless)
 # The session order of the README: the warm-up (trial 3), then trial 1 aware, trial 1 baseline, trial 2
 # aware, trial 2 baseline. An episode's position is its place among the study sessions, 0-based as
@@ -165,6 +167,23 @@ def cut_roads(xy: np.ndarray, trial: int, tables: CarlaTables, relative: str = "
             cuts.append(RoadCut(nearest, arrival + 1, len(xy) - 1, False))
             return cuts
         state, first = best[1], arrival + 1
+
+
+def log_ending(roads: pd.DataFrame, goal: str) -> tuple[str, str]:
+    """(end_reason, log_end) of an episode from its roads (`directed_road`, `arrived`).
+
+    The authors' script writes the log when the car arrives at the last state of its route (the
+    arrival whose next state is the end token: `World.check_destination` -> `World.destroy`), so a
+    complete log's last row is the arrival at the goal junction (76 of the 77 released study logs),
+    or the goal was reached before the run was stopped (d06-t1-free reached L by E-L, not by its
+    preset K-L, drove on and ended 247 ticks later on the road). A log whose car never arrived at
+    the goal junction was cut before the route's end: LOG_TRUNCATED (its end_reason stays `cap`, an
+    episode that did not finish: the dataset's reasons have none for a cut log)."""
+    # the car reached the goal junction on some road (their run ends there, or loops on)
+    reached_goal = bool((roads["arrived"] & roads["directed_road"].str.endswith(f"-{goal}")).any())
+    if not reached_goal:
+        return "cap", LOG_TRUNCATED
+    return "destination", "arrived" if bool(roads["arrived"].iloc[-1]) else "log ended on the road"
 
 
 def check_on_road(ticks: pd.DataFrame, tables: CarlaTables, log: LogFile) -> float:
@@ -268,8 +287,7 @@ def episode_tables(
         }
     )
     driven = roads.iloc[1:]
-    goal = tables.trials[log.trial]["goal"]
-    reached_goal = bool((roads["arrived"] & roads["directed_road"].str.endswith(f"-{goal}")).any())
+    end_reason, log_end = log_ending(roads, tables.trials[log.trial]["goal"])
     episode = {
         "episode_id": log.episode_id,
         "participant": log.driver,
@@ -285,9 +303,8 @@ def episode_tables(
         "final_reported_trust": int(trust[-1]),
         "mean_trust": None,
         "fallback_fired": bool(log.baseline == 0 and len(roads) - 1 > 20),
-        # the car reached the goal junction on some road (their run ends there, or loops on)
-        "end_reason": "destination" if reached_goal else "cap",
-        "log_end": "arrived" if bool(roads["arrived"].iloc[-1]) else "log ended on the road",
+        "end_reason": end_reason,
+        "log_end": log_end,
         "sim_seconds": float(ticks["tick"].iloc[-1] - ticks["tick"].iloc[0]) * TICK_SECONDS,
         "wall_seconds": 0.0,  # not run by trustroute
         "ticks": int(len(ticks)),
@@ -408,6 +425,7 @@ def import_carla_logs(
                 "episode_id": log.episode_id,
                 "roads": int(len(roads)),
                 "end_reason": episode["end_reason"],
+                "log_end": episode["log_end"],
             }
         )
         inventory.append(entry)
@@ -434,7 +452,8 @@ def import_carla_logs(
             )
         )
         if echo is not None:
-            echo(f"  {log.relative}: {counted(len(roads), 'road')}, {episode['end_reason']}")
+            echo(f"  {log.relative}: {counted(len(roads), 'road')}, {episode['end_reason']}, "
+                 f"{episode['log_end']}")
     for name in listed_absent or []:
         inventory.append({"file": name, "status": "listed but absent (no content in the source)"})
     drivers = sorted({log.driver for log in logs if log.role in ("study", "warmup")})

@@ -33,7 +33,7 @@ def carla_logs(source: str, out: str, quiet: bool, as_json: bool) -> None:
     SOURCE is a checkout of their repository, a folder of their trust_level_record CSVs (searched
     recursively) or one such CSV (a study of that one episode).
     """
-    from trustroute.analysis.carla_study.log_import import import_carla_logs
+    from trustroute.analysis.carla_study.log_import import LOG_TRUNCATED, import_carla_logs
 
     manifest = import_carla_logs(Path(source), Path(out), progress=not (quiet or as_json))
     info = manifest["real_study"]
@@ -44,6 +44,7 @@ def carla_logs(source: str, out: str, quiet: bool, as_json: bool) -> None:
         "episodes": len(imported),
         "excluded_files": len(info["inventory"]) - len(imported),
         "missing_sessions": info["missing_sessions"],
+        "truncated_logs": [e["file"] for e in imported if e["log_end"] == LOG_TRUNCATED],
     }
     if as_json:
         from trustroute.harness.commands.study import dataset_paths
@@ -56,3 +57,8 @@ def carla_logs(source: str, out: str, quiet: bool, as_json: bool) -> None:
         f"{counted(summary['excluded_files'], 'file')} excluded (warm-up, pilot, sample); "
         f"missing sessions: {', '.join(summary['missing_sessions']) or 'none'}"
     )
+    truncated = summary["truncated_logs"]
+    if truncated:
+        click.echo(f"{counted(len(truncated), 'log')} truncated (the drive ended on a road before the "
+                   f"route's end; log_end {LOG_TRUNCATED!r} in real_episodes.parquet): "
+                   f"{', '.join(truncated)}")

@@ -18,7 +18,7 @@ from trustroute.analysis.carla_study.analysis import (
     authors_segment_rule,
     with_real_columns,
 )
-from trustroute.analysis.carla_study.log_import import import_carla_logs
+from trustroute.analysis.carla_study.log_import import LOG_TRUNCATED, import_carla_logs, log_ending
 from trustroute.analysis.carla_study.log_schema import read_real_table
 from trustroute.analysis.carla_study.town01 import load_carla_tables
 from trustroute.analysis.formatting import number_text
@@ -216,6 +216,31 @@ def test_one_log_file_imports_as_a_study_of_its_episode(tmp_path, capsys):
     # imported again in place, as an earlier import of the same logs
     code, _, err = run_cli(capsys, "import", "carla-logs", str(RAW / SAMPLE), "--out", str(out), "--quiet")
     assert code == 0, err
+
+
+def test_a_log_cut_at_a_line_boundary_is_named_as_truncated(imported, tmp_path, capsys):
+    """A log cut mid-drive at a newline holds only valid cells: the import names it as truncated (its
+    summary, --json and log_end); the complete packaged logs are not."""
+    import json
+
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    lines = (RAW / SAMPLE).read_text().splitlines(keepends=True)
+    (folder / SAMPLE).write_text("".join(lines[: len(lines) // 2]))
+    def run(source: Path, out: str, *options: str) -> str:
+        code, text, err = run_cli(capsys, "import", "carla-logs", str(source), "--out", str(tmp_path / out),
+                                  *options)
+        assert code == 0, err
+        return text
+
+    text = run(folder, "a", "--json")
+    assert json.loads(text)["truncated_logs"] == [SAMPLE]
+    assert list(read_real_table(tmp_path / "a", "real_episodes")["log_end"]) == [LOG_TRUNCATED]
+    (line,) = [line for line in run(folder, "b").splitlines() if "truncated" in line]
+    assert line.startswith("1 log truncated (the drive ended on a road before the route's end") and \
+        line.endswith(f": {SAMPLE}"), line
+    assert json.loads(run(RAW, "c", "--json"))["truncated_logs"] == []
+    assert LOG_TRUNCATED not in set(read_real_table(imported, "real_episodes")["log_end"])
 
 
 def test_a_malformed_single_log_is_named_by_its_file(tmp_path, capsys):
@@ -450,6 +475,20 @@ def test_committed_study_free_runs_follow_the_preset_routes_except_two_recorded_
         if states != [tables.trials[episode.trial]["start"], *tables.baseline_routes[episode.trial]]:
             detours.append(episode.episode_id)
     assert detours == ["d03-t2-free", "d06-t1-free"]  # docs/real_study.md, "Mapping decisions"
+
+
+def test_no_log_of_the_release_ends_truncated():
+    """Every committed log ends as the authors' script ends a run (their last row is the arrival at
+    the goal junction, or the goal was reached before the run was stopped): the ending rule, run
+    on each episode's roads, flags none and gives the log_end the import wrote."""
+    tables = load_carla_tables()
+    roads, episodes = _roads(STUDY), _episodes(STUDY)
+    endings = {}
+    for episode in episodes.itertuples():
+        group = roads[roads["episode_id"] == episode.episode_id].sort_values("index")
+        endings[episode.episode_id] = log_ending(group, tables.trials[episode.trial]["goal"])
+        assert endings[episode.episode_id] == (episode.end_reason, episode.log_end), episode.episode_id
+    assert len(endings) == 77 and LOG_TRUNCATED not in {end for _, end in endings.values()}
 
 
 @pytest.mark.slow
