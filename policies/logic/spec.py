@@ -315,6 +315,11 @@ class _SpecSource:
     def error(self, label: str, needles: tuple[str, ...], problem: str, fix: str) -> InputError:
         return InputError(self.source, self.place(label, *needles), problem, fix)
 
+    def belief_place(self, atom: str, key: str | None = None) -> str:
+        """Where the table `[beliefs.ATOM]` is written, or its `key` in it (the line of `key = ...`)."""
+        return self.place(f"beliefs.{atom}", rf"^\s*\[beliefs\.{re.escape(atom)}\]",
+                          *((rf"^\s*{re.escape(key)}\s*=",) if key is not None else ()))
+
     def key_place(self, key: str) -> str:
         """Where a top-level key (or table) is written."""
         return self.place(key, rf"^\s*\[?{re.escape(key)}\b")
@@ -407,17 +412,16 @@ def _belief_atoms(raw: Mapping[str, object], spec: _SpecSource, taken: set[str])
     atoms: dict[str, BeliefAtom] = {}
     for atom in raw:
         spec.check_atom_name(atom, "beliefs")
-        label, header = f"beliefs.{atom}", (rf"^\s*\[beliefs\.{re.escape(atom)}\]",)
         entry = raw[atom]
         if atom in taken:
-            raise spec.error(label, header, f"atom '{atom}' is defined both under [states] and [beliefs]",
-                             "rename one of them")
+            raise InputError(spec.source, spec.belief_place(atom), f"atom '{atom}' is defined both under "
+                             "[states] and [beliefs]", "rename one of them")
         if not isinstance(entry, dict):
-            raise spec.error(label, header, f"belief atom '{atom}' must be a table",
+            raise InputError(spec.source, spec.belief_place(atom), f"belief atom '{atom}' must be a table",
                              f"write [beliefs.{atom}] with coeffs = [...] and offset = ...")
 
-        def place(key: str, label: str = label, header: tuple[str, ...] = header, entry: dict = entry) -> str:
-            return spec.place(label, *header, *((rf"^\s*{re.escape(key)}\s*=",) if key in entry else ()))
+        def place(key: str, atom: str = atom, entry: dict = entry) -> str:
+            return spec.belief_place(atom, key if key in entry else None)
 
         values = check_fields(entry, BELIEF_FIELDS, spec.source, f"belief atom '{atom}'", place, owner=atom)
         coeffs = values["coeffs"]
@@ -523,11 +527,15 @@ def spec_from_text(text: str, source: str = "<spec>", town: Town | None = None) 
                 trust_atoms=trust_atoms, type_atoms=type_atoms)
 
 
-def check_coefficient_length(spec: Spec, n_trust: int, driver_source: str = "") -> None:
-    """InputError (one line, exit 2) when a belief atom's coeffs do not have one entry per trust level."""
+def check_coefficient_length(spec: Spec, n_trust: int, driver_source: str = "",
+                             text: str | None = None) -> None:
+    """InputError (one line, exit 2) when a belief atom's coeffs do not have one entry per trust level;
+    given the spec's `text`, it names the line and column of the coeffs, as the loader's errors do."""
+    source = spec.source_path or spec.name
     for name, atom in spec.belief_atoms.items():
         if len(atom.coeffs) != n_trust:
-            raise InputError(spec.source_path or spec.name, f"beliefs.{name}.coeffs",
+            raise InputError(source, f"beliefs.{name}.coeffs" if text is None
+                             else _SpecSource(text, source).belief_place(name, "coeffs"),
                              f"belief atom '{name}' has {len(atom.coeffs)} coefficients but the driver "
                              f"model{f' ({driver_source})' if driver_source else ''} defines {n_trust} "
                              "trust levels",
@@ -545,7 +553,7 @@ def load_spec(path: str | Path, town: Town | None = None, n_trust: int | None = 
     text = read_text(path, str(path), "the spec file", SPECS.fix())
     spec = spec_from_text(text, str(path), town)
     if n_trust is not None:
-        check_coefficient_length(spec, n_trust, driver_source)
+        check_coefficient_length(spec, n_trust, driver_source, text)
     return spec
 
 

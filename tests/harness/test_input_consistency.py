@@ -38,7 +38,9 @@ def test_six_coefficients_are_rejected_by_spec_check_as_by_synth(tmp_path, capsy
     spec = tmp_path / "six.toml"
     spec.write_text(PHI1.read_text().replace("coeffs = [0, 0, 0, 0, 0, 1, 1]", "coeffs = [0, 0, 0, 0, 1, 1]"))
     errors = {name: _one_line_error(capsys, args) for name, args in _commands(spec, tmp_path).items()}
-    expected = (f"error: {spec}: beliefs.hightrust.coeffs: belief atom 'hightrust' has 6 coefficients but "
+    line = spec.read_text().splitlines().index("coeffs = [0, 0, 0, 0, 1, 1]") + 1
+    expected = (f"error: {spec}: line {line} column 1 (beliefs.hightrust): belief atom 'hightrust' has 6 "
+                "coefficients but "
                 "the driver model (default driver model) defines 7 trust levels")
     for name, error in errors.items():
         assert error.startswith(expected), (name, error)
@@ -61,7 +63,9 @@ def test_a_five_level_model_is_judged_the_same_by_every_command(tmp_path, capsys
     assert code == 0 and "trust levels 1..5" in out
     errors = {name: _one_line_error(capsys, args)
               for name, args in _commands(PHI1, tmp_path, "--driver", str(driver)).items()}
-    expected = (f"error: {PHI1}: beliefs.hightrust.coeffs: belief atom 'hightrust' has 7 coefficients but "
+    line = PHI1.read_text().splitlines().index("coeffs = [0, 0, 0, 0, 0, 1, 1]") + 1
+    expected = (f"error: {PHI1}: line {line} column 1 (beliefs.hightrust): belief atom 'hightrust' has 7 "
+                "coefficients but "
                 f"the driver model ({driver}) defines 5 trust levels")
     for name, error in errors.items():
         assert error.startswith(expected), (name, error)

@@ -115,6 +115,22 @@ def test_coefficients_of_the_wrong_length(coeffs):
     assert "expected one per trust level of the driver model" in message
 
 
+@pytest.mark.parametrize(("atom", "coeffs"), [("lowtrust", "[1, 0, 0, 0, 0, 0, 0]"),
+                                             ("hightrust", "[0, 0, 0, 0, 0, 1, 1]")])
+def test_coefficients_not_one_per_trust_level_name_their_line(tmp_path, atom, coeffs):
+    """Against the driver model's trust levels (load_spec with n_trust), a belief atom's coeffs of
+    another length are placed at the line and column of `coeffs = [...]`, as the loader's errors."""
+    text = PHI1_TEXT.replace(f"coeffs = {coeffs}", f"coeffs = {coeffs[:-4]}]")
+    path = tmp_path / "six.toml"
+    path.write_text(text)
+    line = text.splitlines().index(f"coeffs = {coeffs[:-4]}]") + 1
+    with pytest.raises(InputError) as raised:
+        load_spec(path, n_trust=7)
+    assert str(raised.value).startswith(f"{path}: line {line} column 1 (beliefs.{atom}): belief atom "
+                                        f"'{atom}' has 6 coefficients but the driver model defines 7 "
+                                        "trust levels")
+
+
 @pytest.mark.parametrize(("formula", "words"), [
     ("G v1", ["'G' (globally) is not co-safe"]),
     ("!(v1 & v2)", ["negation of a compound formula is not co-safe"]),
