@@ -36,6 +36,7 @@ from trustroute.policies.routing.files import array_path, load_policy, load_popu
 from trustroute.policies.routing.free import trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.population import OBJECTIVES, document_entries, policy_name, run_count
+from trustroute.policies.synthesis.result import RoundProgress
 from trustroute.policies.synthesis.settings import SynthesisSettings
 from trustroute.policies.synthesis.version import JOINT_SYNTHESIS_VERSION, SYNTHESIS_VERSION
 from trustroute.policies.synthesize_spec import synthesize_for_population
@@ -164,7 +165,7 @@ PROGRESS_EVERY = 5.0    # seconds between progress lines when stderr is not a te
 
 
 @contextlib.contextmanager
-def synthesis_progress(description: str, enabled: bool) -> Iterator[Callable[[float, float], None]]:
+def synthesis_progress(description: str, enabled: bool) -> Iterator[RoundProgress]:
     """Progress of a synthesis on stderr once it has run PROGRESS_AFTER seconds, nothing when not
     `enabled`: on a terminal a tqdm bar of its rounds with the current bounds; elsewhere (a pipe, a
     log file) a line at most every PROGRESS_EVERY seconds with the rounds, the bounds and the time.
@@ -177,7 +178,7 @@ def synthesis_progress(description: str, enabled: bool) -> Iterator[Callable[[fl
 
         with tqdm(desc=description, unit="round", delay=PROGRESS_AFTER, leave=False, dynamic_ncols=True,
                   file=sys.stderr) as bar:
-            def on_round(lower: float, upper: float) -> None:
+            def on_round(lower: float | None, upper: float) -> None:
                 bar.update(1)
                 bar.set_postfix_str(_bounds_text(lower, upper), refresh=False)
 
@@ -186,19 +187,20 @@ def synthesis_progress(description: str, enabled: bool) -> Iterator[Callable[[fl
     yield _progress_lines(description)
 
 
-def _bounds_text(lower: float, upper: float) -> str:
-    """A progress report's current bounds, four decimals rounded outward (`outward`)."""
-    low, high = outward(lower, upper, 4)
-    return f"L={low} U={high}"
+def _bounds_text(lower: float | None, upper: float) -> str:
+    """A progress report's current bounds, four decimals rounded outward (`outward`); before the
+    synthesis has an L to show (no policy valued yet), it says so rather than print a 0."""
+    low, high = outward(0.0 if lower is None else lower, upper, 4)
+    return f"{'L not yet (no policy valued)' if lower is None else f'L={low}'} U={high}"
 
 
-def _progress_lines(description: str) -> Callable[[float, float], None]:
+def _progress_lines(description: str) -> RoundProgress:
     """The on_iteration callback of `synthesis_progress` away from a terminal."""
     started = time.perf_counter()
     rounds = 0
     due = PROGRESS_AFTER
 
-    def on_round(lower: float, upper: float) -> None:
+    def on_round(lower: float | None, upper: float) -> None:
         nonlocal rounds, due
         rounds += 1
         elapsed = time.perf_counter() - started

@@ -24,7 +24,7 @@ from trustroute.policies.logic.spec import Spec
 from trustroute.policies.model.trust_pomdp import TrustPOMDP
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.population import MAX_GRID_CANDIDATES, synthesize_population
-from trustroute.policies.synthesis.result import SynthesisResult
+from trustroute.policies.synthesis.result import RoundProgress, SynthesisResult
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.population import synthesize_population_joint
 from trustroute.policies.trust_state_synthesis.synthesis import synthesize_joint
@@ -36,12 +36,12 @@ if TYPE_CHECKING:
 
 
 def belief_search(problem: Problem, settings: SynthesisSettings,
-                  on_iteration: Callable[[float, float], None] | None) -> SynthesisResult:
+                  on_iteration: RoundProgress | None) -> SynthesisResult:
     return synthesize(problem.pomdp, problem.spec, settings, on_iteration=on_iteration)
 
 
 def joint_search(problem: Problem, settings: SynthesisSettings,
-                 on_iteration: Callable[[float, float], None] | None) -> SynthesisResult:
+                 on_iteration: RoundProgress | None) -> SynthesisResult:
     """The belief-MDP search's settings (`clusters`, `compress`, ...) do not apply here."""
     return synthesize_joint(problem.pomdp, problem.spec, settings, on_iteration=on_iteration)
 
@@ -51,14 +51,14 @@ METHODS: dict[str, Callable[..., SynthesisResult]] = {
 
 
 def synthesize_problem(problem: Problem, settings: SynthesisSettings = DEFAULT_SYNTHESIS,
-                       on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
+                       on_iteration: RoundProgress | None = None) -> SynthesisResult:
     """lower <= Pr_max(spec) <= upper and a policy whose value is at least lower (see `synthesize`;
     `settings.clusters` applies to belief-MDP searches, docs/synthesis.md "Cluster policies")."""
     return METHODS[problem.case](problem, settings, on_iteration)
 
 
 def synthesize_spec(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings = DEFAULT_SYNTHESIS,
-                    on_iteration: Callable[[float, float], None] | None = None) -> SynthesisResult:
+                    on_iteration: RoundProgress | None = None) -> SynthesisResult:
     """`synthesize_problem` of the problem of `pomdp` and `spec`."""
     return synthesize_problem(problem_of(pomdp, spec), settings, on_iteration=on_iteration)
 
@@ -66,7 +66,7 @@ def synthesize_spec(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings =
 def synthesize_for_population(town: Town, population: DriverPopulation, spec: Spec,
                               objective: Objective = "bayes",
                               settings: SynthesisSettings = DEFAULT_SYNTHESIS, population_source: str = "",
-                              on_iteration: Callable[[float, float], None] | None = None,
+                              on_iteration: RoundProgress | None = None,
                               on_phase: Callable[[str], None] | None = None,
                               ) -> PopulationSynthesis:
     """Synthesis for driver population `population` under `objective` ("bayes": the prior-weighted
@@ -83,7 +83,7 @@ def synthesize_for_population(town: Town, population: DriverPopulation, spec: Sp
 
 def _for_population(town: Town, population: DriverPopulation, spec: Spec, objective: Objective,
                     settings: SynthesisSettings, population_source: str,
-                    listeners: tuple[Callable[[float, float], None] | None, Callable[[str], None] | None],
+                    listeners: tuple[RoundProgress | None, Callable[[str], None] | None],
                     ) -> PopulationSynthesis:
     """`synthesize_for_population` on the clock installed for it."""
     on_iteration, on_phase = listeners

@@ -100,13 +100,35 @@ UNBOUNDED_CLUSTER_CAPS = (16, 64, 256)
 BeliefSynthesis: TypeAlias = SynthesisResult[BeliefTablePolicy, SynthesisStats]
 
 
+@dataclass(eq=False)
+class _Progress:
+    """What the progress callback is told after each round: the largest L of any run so far (each a
+    lower bound of the value of the policy that run returns, and the synthesis returns the best) and
+    the smallest U so far of the problem asked (a search within fewer junctions than the unbounded
+    problem bounds another probability, so its U is not told), the bounds the result will show."""
+
+    on_iteration: Callable[[float, float], None] | None
+    lower: float = 0.0
+    upper: float = 1.0
+
+    def narrow(self, upper: float) -> None:
+        self.upper = min(self.upper, upper)
+
+    def report(self, lower: float, upper: float | None) -> None:
+        self.lower = max(self.lower, lower)
+        if upper is not None:
+            self.narrow(upper)
+        if self.on_iteration is not None:
+            self.on_iteration(self.lower, self.upper)
+
+
 @dataclass(frozen=True, eq=False)
 class _Problem:
     """One synthesize call's product, settings and time budget, shared by its phases."""
 
     tables: ProductTables
     settings: SynthesisSettings      # its suffix_length chosen (not None)
-    on_iteration: Callable[[float, float], None] | None
+    progress: _Progress
     budget: TimeBudget
     roots_q: tuple[int, ...]         # the DFA states position 0 can be read as
     shortest: int                    # junctions to acceptance in the road x DFA graph, at least
@@ -129,11 +151,15 @@ class _Problem:
                ) -> tuple[PolicyTable, SearchRun]:
         return bounded_search(self.tables, replace(self.settings, tau=tau, suffix_length=suffix_length),
                               horizon, self.budget.ending(until), value, abstraction,
-                              on_iteration=self.on_iteration)
+                              on_iteration=self.round_of(horizon))
+
+    def round_of(self, horizon: int | None) -> Callable[[float, float], None]:
+        """The progress of one search's rounds: its U is told only when it bounds the problem asked."""
+        asked = horizon == self.settings.horizon
+        return lambda lower, upper: self.progress.report(lower, upper if asked else None)
 
     def report(self, lower: float, upper: float) -> None:
-        if self.on_iteration is not None:
-            self.on_iteration(lower, upper)
+        self.progress.report(lower, upper)
 
 
 @dataclass(frozen=True, eq=False)
@@ -316,6 +342,7 @@ def _unbounded(problem: _Problem) -> _Answer:
             "end-component bound stopped by the time limit: 1 wherever acceptance is possible")
     value = np.minimum(bound.value, 1.0)
     upper = float(max(value[tables.start, q, 0] for q in problem.roots_q))
+    problem.progress.narrow(upper)
     best = _Answer(-1.0, upper, None, 0.0, (), note)
     runs: list[Run] = []
     order = cluster_order(tables, symbols, None, problem.settings.completion, problem.settings.clusters)
@@ -400,8 +427,8 @@ def _synthesize(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings,
     distance = acceptance_distance(tables)
     roots_q = _root_dfa_states(tables)
     shortest = int(min(distance[tables.start, q] for q in roots_q))
-    problem = _Problem(tables, replace(settings, suffix_length=suffix_length), on_iteration, budget, roots_q,
-                       shortest)
+    problem = _Problem(tables, replace(settings, suffix_length=suffix_length), _Progress(on_iteration),
+                       budget, roots_q, shortest)
     never = shortest > tables.n_x * tables.n_q      # unreachable in the road x DFA graph
     if never or (horizon is not None and shortest > horizon):
         answer = _by_graph_distance(problem, horizon, never)

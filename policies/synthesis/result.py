@@ -8,10 +8,16 @@ a search (SearchRun), a cluster policy (ClusterRun) or an answer by graph distan
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Any, Generic, Protocol, TypeVar
+from typing import Any, Generic, Protocol, TypeAlias, TypeVar
 
 PolicyT = TypeVar("PolicyT")
+
+
+# A synthesis' progress after each round: (L, U), the bounds its result will show so far; L is None
+# while it has none yet (a synthesis whose L is a valued policy's, before the first is valued).
+RoundProgress: TypeAlias = Callable[[float | None, float], None]
 
 
 class Statistics(Protocol):

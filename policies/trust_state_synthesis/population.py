@@ -64,7 +64,7 @@ from trustroute.policies.synthesis.population import (
     within_tau,
     worst_type,
 )
-from trustroute.policies.synthesis.result import SynthesisResult
+from trustroute.policies.synthesis.result import RoundProgress, SynthesisResult
 from trustroute.policies.synthesis.rounding import problem_rounding
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.synthesis import (
@@ -143,7 +143,7 @@ def type_optimum_bounds(problem: Problem, settings: SynthesisSettings, schedule:
 
 def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[TypeValue, ...],
                       settings: SynthesisSettings, schedule: RunSchedule, bound: float,
-                      on_iteration: Callable[[float, float], None] | None
+                      on_iteration: RoundProgress | None
                       ) -> tuple[JointTablePolicy, tuple[TypeValue, ...], np.ndarray, list[dict]]:
     """The candidate with the best worst type: the Bayes policy and, for every prior λ of the
     simplex grid, the trust-state synthesis as if the type prior were λ, run on the AV's filter
@@ -188,7 +188,7 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
 
 def synthesize_population_joint(problem: Problem, objective: str, synthesize: Callable[..., SynthesisResult],
                                 settings: SynthesisSettings = DEFAULT_SYNTHESIS,
-                                on_iteration: Callable[[float, float], None] | None = None,
+                                on_iteration: RoundProgress | None = None,
                                 on_phase: Callable[[str], None] | None = None,
                                 ) -> PopulationSynthesis:
     """The population synthesis (module docstring) of a TRUST_STATE problem with a population.

@@ -51,7 +51,7 @@ from trustroute.policies.model.trust_pomdp import BeliefRule, TrustPOMDP
 from trustroute.policies.routing.protocol import Certificate
 from trustroute.policies.routing.trust_state_table import JointPolicyTable, JointTablePolicy
 from trustroute.policies.synthesis.budget import TimeBudget
-from trustroute.policies.synthesis.result import Record, SynthesisResult, record_dict
+from trustroute.policies.synthesis.result import Record, RoundProgress, SynthesisResult, record_dict
 from trustroute.policies.synthesis.rounding import joint_rounding, relative_margin, rounded_down, rounded_up
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.search import (
@@ -313,7 +313,7 @@ def _stopped(converged: bool, ends: list[str], value: PolicyValue, horizon: int 
 
 
 def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings = DEFAULT_SYNTHESIS,
-                     on_iteration: Callable[[float, float], None] | None = None) -> JointSynthesis:
+                     on_iteration: RoundProgress | None = None) -> JointSynthesis:
     """A JointTablePolicy for `spec` and certified lower <= Pr_max <= upper (a SynthesisResult);
     of `settings`, tau, time_limit, work_limit, horizon and belief_rule apply (the others are the
     belief-MDP search's)."""
@@ -322,7 +322,7 @@ def synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings 
 
 
 def _synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings,
-                      on_iteration: Callable[[float, float], None] | None) -> JointSynthesis:
+                      on_iteration: RoundProgress | None) -> JointSynthesis:
     """`synthesize_joint` on the clock installed for it."""
     tau, time_limit, horizon = settings.tau, settings.time_limit, settings.horizon
     belief_rule = settings.belief_rule
@@ -336,7 +336,7 @@ def _synthesize_joint(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings
 
     def report(upper: float) -> None:
         if on_iteration is not None:
-            on_iteration(best[0].value.lower if best else 0.0, upper)
+            on_iteration(best[0].value.lower if best else None, upper)   # L: a valued policy's
 
     upper = 1.0
     ends: list[str] = []    # what ended each phase's rounds (`_grow`)

@@ -87,3 +87,16 @@ def test_bounds_are_printed_rounded_outward(capsys, at_once):
     assert outward(0.99999996, 0.99999996, 6) == ("0.999999", "1.000000")
     assert interval(0.0, 1e-12) == "[0.000000, 0.000001]"
     assert interval(0.25, 0.25) == "[0.250000, 0.250000]"
+
+
+def test_progress_says_when_there_is_no_lower_bound_yet(tmp_path, capsys, at_once, monkeypatch):
+    """The trust-state synthesis' L is a valued policy's: the rounds before the first policy is
+    valued (the unbounded U's) say there is none yet instead of printing L=0.0000."""
+    monkeypatch.setattr(resolve, "PROGRESS_EVERY", 0.0)   # a line every round
+    code, _, err = run_cli(capsys, "synth", "phi1_trust", "--work-limit", "300000", "--out",
+                           str(tmp_path / "t.json"))
+    assert code == 0, err
+    lines = [line for line in err.splitlines() if line.startswith("synthesizing phi1_trust: ")]
+    assert "L not yet (no policy valued) U=1.0000" in lines[0], err
+    assert not [line for line in lines if "L=0.0000" in line], err
+    assert [line for line in lines if "L=0.8092" in line], err
