@@ -14,6 +14,7 @@ import contextlib
 import hashlib
 import re
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -210,6 +211,36 @@ def _progress_lines(description: str) -> RoundProgress:
             due = elapsed + PROGRESS_EVERY
 
     return on_round
+
+
+@contextlib.contextmanager
+def step_progress(description: str, enabled: bool) -> Iterator[Callable[[str], None]]:
+    """Progress of a run of long steps that report nothing while they run (a peer's solver, an
+    export): once the run has taken PROGRESS_AFTER seconds, a line on stderr every PROGRESS_EVERY seconds
+    naming the step under way and the time so far, from a timer thread; nothing when not `enabled`.
+    Yields `step(name)`, called as each step starts."""
+    if not enabled:
+        yield lambda name: None
+        return
+    started = time.perf_counter()
+    current = [""]
+    stop = threading.Event()
+
+    def tick() -> None:
+        wait = PROGRESS_AFTER
+        while not stop.wait(wait):
+            if current[0]:
+                print(f"{description}: {current[0]} ({time.perf_counter() - started:.0f} s)",
+                      file=sys.stderr, flush=True)
+            wait = PROGRESS_EVERY
+
+    timer = threading.Thread(target=tick, daemon=True)
+    timer.start()
+    try:
+        yield lambda name: current.__setitem__(0, name)
+    finally:
+        stop.set()
+        timer.join()
 
 
 def phase_lines(description: str, enabled: bool) -> Callable[[str], None]:

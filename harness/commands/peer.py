@@ -16,7 +16,7 @@ from typing import Any
 
 import click
 
-from trustroute.app.peers import paynt_comparison, storm_comparison
+from trustroute.app.peers import ComparedProblem, paynt_comparison, storm_comparison
 from trustroute.core import ranges
 from trustroute.core.wording import interval
 from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
@@ -32,8 +32,12 @@ class PeerProblem:
     town_path: str | None = town_field()
     driver_path: str | None = driver_field()
     horizon: int | None = option(
-        "--horizon", type=Checked(ranges.PEER_HORIZON), default=None,
+        "--horizon", type=Checked(ranges.HORIZON), default=None,
         help="Accepted within H junctions (a step counter in the product; default: unbounded).")
+
+    def compared(self, spec_path: str) -> ComparedProblem:
+        """The problem both sides are given."""
+        return ComparedProblem(spec_path, self.town_path, self.driver_path, self.horizon)
 
 
 @dataclass(frozen=True)
@@ -94,8 +98,8 @@ def peer() -> None:
 @takes(problem=PeerProblem, limits=StormLimits, ours=OurSide)
 def storm(spec_path: str, problem: PeerProblem, limits: StormLimits, ours: OurSide) -> None:
     """Storm's [lower, upper] and time beside ours, for SPEC."""
-    result = storm_comparison(spec_path, problem.town_path, problem.driver_path, problem.horizon,
-                              limits.time_limit, limits.resolution, ours.depth, ours.max_nodes)
+    result = storm_comparison(problem.compared(spec_path), limits.time_limit, limits.resolution, ours.depth,
+                              ours.max_nodes, progress=not ours.as_json)
     emit(ours.as_json, result, [] if ours.as_json else storm_lines(result))
 
 
@@ -120,8 +124,8 @@ def note_lines(side: dict) -> list[str]:
 @takes(problem=PeerProblem, limits=PayntLimits, ours=OurSide)
 def paynt(spec_path: str, problem: PeerProblem, limits: PayntLimits, ours: OurSide) -> None:
     """PAYNT's finite-state controller value (a lower bound of Pr_max) beside ours, for SPEC."""
-    result = paynt_comparison(spec_path, problem.town_path, problem.driver_path, problem.horizon,
-                              limits.time_limit, limits.max_states, ours.depth, ours.max_nodes)
+    result = paynt_comparison(problem.compared(spec_path), limits.time_limit, limits.max_states, ours.depth,
+                              ours.max_nodes, progress=not ours.as_json)
     emit(ours.as_json, result, [] if ours.as_json else paynt_lines(result))
 
 

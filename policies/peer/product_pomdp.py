@@ -30,6 +30,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order
 
+from trustroute.core import defaults
 from trustroute.core.errors import InputError
 from trustroute.policies.belief.driver_types import base_trust_index
 from trustroute.policies.logic.compiled import compile_spec
@@ -59,6 +60,24 @@ def check_exportable(spec: Spec) -> None:
                          f"belief atoms ({', '.join(belief)}) cannot be exported to a POMDP model: "
                          "the AV's belief is not a state of it",
                          "use road atoms and [trust_states] atoms only (docs/trust_states.md)")
+
+
+def check_product_size(spec: Spec, shape: tuple[int, ...], horizon: int | None) -> None:
+    """InputError naming --horizon, before anything is allocated, when the grid of the product
+    (`shape`: roads, trust levels, DFA states, last (h, e), steps) has more states than
+    defaults.MAX_PEER_PRODUCT: the export holds arrays over the whole grid, about 2 kB a state."""
+    limit = defaults.MAX_PEER_PRODUCT
+    n_grid = int(np.prod(shape, dtype=object))   # exact, however large the horizon
+    if n_grid <= limit:
+        return
+    per_step = n_grid // shape[-1]
+    largest = limit // per_step - 1
+    fix = (f"pass --horizon {largest} or less, or use a smaller town" if largest >= 1
+           else "use a smaller town or a spec with fewer DFA states")
+    raise InputError(spec.source_path or spec.name, "--horizon" if horizon is not None else "product",
+                     f"the product POMDP handed to the peer would have {n_grid:,} grid states "
+                     f"({' x '.join(map(str, shape))}: roads, trust levels, DFA states, last (h, e), "
+                     f"steps), more than the {limit:,} it is built within", fix)
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,6 +136,7 @@ def explicit_product(pomdp: TrustPOMDP, spec: Spec, horizon: int | None = None) 
     next_q = np.asarray(labeller.step(qs.ravel(), xs.ravel(), np.zeros((qs.size, n_t)), levels),
                         dtype=np.int64).reshape(n_q, n_x, n_t)
     shape = (n_x, n_t, n_q, n_o, n_k)
+    check_product_size(spec, shape, horizon)
     n_grid = int(np.prod(shape))
 
     def index(x: np.ndarray, t: np.ndarray, q: np.ndarray, o: np.ndarray, k: np.ndarray) -> np.ndarray:

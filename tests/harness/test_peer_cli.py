@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import pytest
 
@@ -36,7 +37,7 @@ def test_json_reports_both_sides(capsys):
     assert storm["lower_seconds"] >= 0 and ours["seconds"] >= 0
 
 
-@pytest.mark.parametrize("horizon", ["0", "5"])
+@pytest.mark.parametrize("horizon", ["1", "5"])
 def test_no_route_within_the_horizon_is_an_answer_not_an_error(capsys, horizon):
     pytest.importorskip("stormpy", reason="needs the optional extra: pip install -e '.[peer]'")
     code, out, err = run_cli(capsys, "peer", "storm", "specs/phi1_trust.toml", "--horizon", horizon,
@@ -83,3 +84,42 @@ def test_a_storm_failure_is_one_line_and_exit_2(capsys, monkeypatch):
     code, out, err = run_cli(capsys, "peer", "storm", "specs/phi1_trust.toml", "--horizon", "6",
                              "--time-limit", "1")
     assert code == 2 and out == "" and err.count("\n") == 1 and "Storm cannot take" in err
+
+
+@pytest.mark.parametrize(("command", "horizon"), [("storm", "0"), ("paynt", "0"), ("storm", "5000"),
+                                                  ("paynt", "1001")])
+def test_the_peers_take_synths_horizons(capsys, command, horizon):
+    """--horizon means the same step bound to the peers as to synth: one range, one refusal."""
+    code, out, err = run_cli(capsys, "peer", command, "specs/phi1_trust.toml", "--horizon", horizon)
+    _, _, synth_err = run_cli(capsys, "synth", "specs/phi1_trust.toml", "--horizon", horizon)
+    assert code == 2 and out == "" and err == synth_err
+    assert f"expected an integer from 1 to 1000, got {horizon}" in err
+
+
+@pytest.mark.parametrize("command", ["storm", "paynt"])
+def test_a_product_past_the_limit_is_refused_before_it_is_built(capsys, command):
+    """At --horizon 1000 the paper's town's product would hold about 2 million grid states (some
+    5 GB while built): refused at once, naming the largest horizon that fits."""
+    pytest.importorskip("stormpy", reason="needs the optional extra: pip install -e '.[peer]'")
+    started = time.perf_counter()
+    code, out, err = run_cli(capsys, "peer", command, "specs/phi1_trust.toml", "--horizon", "1000")
+    assert time.perf_counter() - started < 30
+    assert code == 2 and out == "" and err.count("\n") == 1 and "Traceback" not in err
+    assert "--horizon: the product POMDP handed to the peer would have 2,018,016 grid states" in err
+    assert "(fix: pass --horizon 495 or less, or use a smaller town)" in err
+
+
+def test_a_long_comparison_names_its_step_on_stderr_and_json_silences_it(capsys, monkeypatch):
+    pytest.importorskip("stormpy", reason="needs the optional extra: pip install -e '.[peer]'")
+    from trustroute.policies import resolve
+
+    monkeypatch.setattr(resolve, "PROGRESS_AFTER", 0.0)
+    monkeypatch.setattr(resolve, "PROGRESS_EVERY", 0.01)
+    args = ("peer", "storm", "specs/phi1_trust.toml", "--horizon", "6", "--time-limit", "1")
+    code, _, err = run_cli(capsys, *args)
+    steps = {line.rsplit(" (", 1)[0] for line in err.splitlines()}
+    assert code == 0 and steps <= {"peer storm: exporting the product POMDP",
+                                   "peer storm: Storm on 1,016 product states", "peer storm: our search"}
+    assert "peer storm: our search" in steps, err
+    code, _, err = run_cli(capsys, *args, "--json")
+    assert code == 0 and err == ""

@@ -1,24 +1,38 @@
 """The independent peers beside ours on one problem (docs/peers.md): the problem loaded as every
 command loads it, exported as the explicit product a peer is given, and both sides' bounds;
 `trustroute peer storm` and `trustroute peer paynt` print them. The peers themselves are the
-optional `[peer]` extra, imported only when a comparison runs."""
+optional `[peer]` extra, imported only when a comparison runs. Each step after loading (the
+export, the peer, ours) reports nothing while it runs, so with `progress` a line on stderr names the
+step under way every few seconds once they have run 2 s (`step_progress`); the inputs are loaded and
+checked before, so that bad input stays one line."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 from trustroute.app.inputs import load_inputs
 from trustroute.policies.model.trust_pomdp import build_pomdp
 from trustroute.policies.peer.product_pomdp import check_exportable, explicit_product
+from trustroute.policies.resolve import step_progress
 from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
 
-def exported_problem(spec_path: str, town_path: str | None, driver_path: str | None,
-                     horizon: int | None) -> tuple:
-    """(spec, our POMDP, the explicit product a peer is given) for one comparison."""
-    inputs = load_inputs(spec_path, town_path, driver_path)
-    spec = inputs.spec
-    check_exportable(spec)
-    pomdp = build_pomdp(inputs.town, inputs.model)
-    return spec, pomdp, explicit_product(pomdp, spec, horizon)
+@dataclass(frozen=True)
+class ComparedProblem:
+    """The problem both a peer and ours are given: SPEC, --town, --driver and --horizon (None:
+    unbounded)."""
+
+    spec_path: str
+    town_path: str | None = None
+    driver_path: str | None = None
+    horizon: int | None = None
+
+
+def loaded_problem(problem: ComparedProblem) -> tuple:
+    """(spec, our POMDP) for one comparison, the spec one a peer can state."""
+    inputs = load_inputs(problem.spec_path, problem.town_path, problem.driver_path)
+    check_exportable(inputs.spec)
+    return inputs.spec, build_pomdp(inputs.town, inputs.model)
 
 
 def our_bounds(pomdp, spec, horizon: int | None, depth: int, max_nodes: int):
@@ -26,31 +40,39 @@ def our_bounds(pomdp, spec, horizon: int | None, depth: int, max_nodes: int):
     return joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
 
 
-def storm_comparison(spec_path: str, town_path: str | None, driver_path: str | None,
-                     horizon: int | None, time_limit: float, resolution: int, depth: int,
-                     max_nodes: int) -> dict:
+def storm_comparison(problem: ComparedProblem, time_limit: float, resolution: int, depth: int,
+                     max_nodes: int, progress: bool = False) -> dict:
     """Both sides' bounds and seconds, JSON-ready."""
     from trustroute.policies.peer.storm import require_storm, run_storm
 
     require_storm("trustroute peer storm")
-    spec, pomdp, product = exported_problem(spec_path, town_path, driver_path, horizon)
-    storm = run_storm(product, time_limit=time_limit, resolution=resolution)
-    ours = our_bounds(pomdp, spec, horizon, depth, max_nodes)
-    return {"spec": spec.name, "file": spec.source_path, "horizon": horizon,
+    spec, pomdp = loaded_problem(problem)
+    with step_progress("peer storm", progress) as step:
+        step("exporting the product POMDP")
+        product = explicit_product(pomdp, spec, problem.horizon)
+        step(f"Storm on {product.n_states:,} product states")
+        storm = run_storm(product, time_limit=time_limit, resolution=resolution)
+        step("our search")
+        ours = our_bounds(pomdp, spec, problem.horizon, depth, max_nodes)
+    return {"spec": spec.name, "file": spec.source_path, "horizon": problem.horizon,
             "product_states": product.n_states, "storm": storm.to_dict(), "ours": ours.to_dict(),
             "overlap": bool(max(storm.lower, ours.lower) <= min(storm.upper, ours.upper) + 1e-9)}
 
 
-def paynt_comparison(spec_path: str, town_path: str | None, driver_path: str | None,
-                     horizon: int | None, time_limit: float, max_states: int, depth: int,
-                     max_nodes: int) -> dict:
+def paynt_comparison(problem: ComparedProblem, time_limit: float, max_states: int, depth: int,
+                     max_nodes: int, progress: bool = False) -> dict:
     """PAYNT's controller value beside our bounds, JSON-ready."""
     from trustroute.policies.peer.paynt import require_paynt, run_paynt
 
     require_paynt("trustroute peer paynt")
-    spec, pomdp, product = exported_problem(spec_path, town_path, driver_path, horizon)
-    paynt = run_paynt(product, time_limit=time_limit, max_states=max_states)
-    ours = our_bounds(pomdp, spec, horizon, depth, max_nodes)
-    return {"spec": spec.name, "file": spec.source_path, "horizon": horizon,
+    spec, pomdp = loaded_problem(problem)
+    with step_progress("peer paynt", progress) as step:
+        step("exporting the product POMDP")
+        product = explicit_product(pomdp, spec, problem.horizon)
+        step(f"PAYNT on {product.n_states:,} product states")
+        paynt = run_paynt(product, time_limit=time_limit, max_states=max_states)
+        step("our search")
+        ours = our_bounds(pomdp, spec, problem.horizon, depth, max_nodes)
+    return {"spec": spec.name, "file": spec.source_path, "horizon": problem.horizon,
             "product_states": product.n_states, "paynt": paynt.to_dict(), "ours": ours.to_dict(),
             "within_ours": bool(paynt.lower <= ours.upper + paynt.precision)}

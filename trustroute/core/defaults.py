@@ -20,6 +20,9 @@ WORK_LIMIT: int | None = None        # units of work for the whole synthesis (po
 NODE_BUDGET = 600_000
 SYNTH_HORIZON: int | None = None     # junctions; None: unbounded
 MAX_HORIZON = 1_000                  # the longest horizon any door takes (a study config's too)
+# grid states (x, θ, q, last (h, e), step) of the product POMDP a peer is handed, about 2 kB each
+# while it is built: past them the export is refused before it allocates (policies/peer/product_pomdp.py)
+MAX_PEER_PRODUCT = 1_000_000
 OBJECTIVE: Final = "bayes"            # of a population synthesis ("robust": the worst type's)
 BELIEF_RULE: Final = "bayes"            # the AV's filter ("paper": the authors' update)
 # cluster policies (docs/synthesis.md): the modes a door takes (the search has one more of its own,

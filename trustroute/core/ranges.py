@@ -189,8 +189,8 @@ PORT = OptionRange("--port", Integer(minimum=0, maximum=65_535),
 COORDINATE = OptionRange("--near", Number(),
                          "pass two finite numbers in the town's metres, e.g. --near 120 -45")
 ROAD_LIMIT = _positive("--limit", "roads", "--limit 10")
-# peers (`trustroute peer storm|paynt`): their limits and our search's
-PEER_HORIZON = _natural("--horizon", "junctions", "--horizon 10, or omit it (unbounded)")
+# peers (`trustroute peer storm|paynt`): their limits and our search's (their --horizon is HORIZON:
+# the same step bound, and its product is bounded by defaults.MAX_PEER_PRODUCT)
 DEPTH = _natural("--depth", "junctions", "--depth 10")
 PEER_MAX_NODES = _positive("--max-nodes", "belief nodes per level", "--max-nodes 200000")
 PEER_TIME_LIMIT = OptionRange("--time-limit", Number(minimum=1.0),

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from tests.policies.trust_specs import random_problem
+from trustroute.core import defaults
 from trustroute.core.errors import InputError
 from trustroute.policies.logic.dfa import build_dfa
 from trustroute.policies.logic.spec import load_spec
-from trustroute.policies.peer.product_pomdp import explicit_product
+from trustroute.policies.peer.product_pomdp import check_product_size, explicit_product
 
 
 def dfa_step(dfa, spec, driver, q, road, theta):
@@ -84,3 +85,32 @@ def test_specs_testing_belief_atoms_are_refused_and_untested_ones_allowed(pomdp)
     spec = load_spec("specs/phi1_trust.toml", pomdp.town)
     assert not explicit_product(pomdp, spec, 5).goal.any()   # the route needs 6 junctions
     assert explicit_product(pomdp, spec, 6).goal.any()
+
+
+def _per_step(pomdp, spec) -> tuple[int, ...]:
+    """The grid of one step of the product: roads, trust levels, DFA states, last (h, e)."""
+    outcomes = 4 if pomdp.driver.depends_on_performance else 2
+    return (pomdp.n_states, pomdp.n_trust, build_dfa(spec).n_states, outcomes)
+
+
+def test_the_largest_product_that_fits_is_taken_and_one_step_more_is_refused(pomdp):
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    per_step = _per_step(pomdp, spec)
+    largest = defaults.MAX_PEER_PRODUCT // int(np.prod(per_step)) - 1   # steps 0..H
+    check_product_size(spec, (*per_step, largest + 1), largest)
+    with pytest.raises(InputError) as refused:
+        check_product_size(spec, (*per_step, largest + 2), largest + 1)
+    assert refused.value.place == "--horizon"
+    assert refused.value.fix.startswith(f"pass --horizon {largest} or less")
+
+
+def test_the_export_checks_its_size_before_it_builds(pomdp, monkeypatch):
+    spec = load_spec("specs/phi1_trust.toml", pomdp.town)
+    step = int(np.prod(_per_step(pomdp, spec)))
+    monkeypatch.setattr(defaults, "MAX_PEER_PRODUCT", step * 11)        # horizons up to 10
+    assert explicit_product(pomdp, spec, 10).n_states > 0
+    with pytest.raises(InputError, match=r"--horizon: .* grid states .*\(fix: pass --horizon 10 or less"):
+        explicit_product(pomdp, spec, 11)
+    monkeypatch.setattr(defaults, "MAX_PEER_PRODUCT", step - 1)         # not even one step
+    with pytest.raises(InputError, match=r"product: .*\(fix: use a smaller town"):
+        explicit_product(pomdp, spec, None)
