@@ -8,11 +8,13 @@ checked before, so that bad input stays one line."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from trustroute.app.inputs import load_inputs
 from trustroute.policies.model.trust_pomdp import build_pomdp
-from trustroute.policies.peer.product_pomdp import check_exportable, explicit_product
+from trustroute.policies.peer.product_pomdp import ExplicitProduct, check_exportable, explicit_product
 from trustroute.policies.resolve import step_progress
 from trustroute.policies.trust_state_synthesis.search import joint_bounds
 
@@ -40,22 +42,33 @@ def our_bounds(pomdp, spec, horizon: int | None, depth: int, max_nodes: int):
     return joint_bounds(pomdp, spec, depth=depth, horizon=horizon, max_nodes=max_nodes)
 
 
+def _both_sides(problem: ComparedProblem, peer: str, run_peer: Callable[[ExplicitProduct], Any], depth: int,
+                max_nodes: int, progress: bool) -> tuple[dict, Any, Any]:
+    """(the problem's JSON fields, the peer's result, ours): the product exported, `run_peer` on it
+    and our search, each step named by the progress lines of `trustroute peer <peer>`."""
+    spec, pomdp = loaded_problem(problem)
+    with step_progress(f"peer {peer.lower()}", progress) as step:
+        step("exporting the product POMDP")
+        product = explicit_product(pomdp, spec, problem.horizon)
+        step(f"{peer} on {product.n_states:,} product states")
+        theirs = run_peer(product)
+        step("our search")
+        ours = our_bounds(pomdp, spec, problem.horizon, depth, max_nodes)
+    fields = {"spec": spec.name, "file": spec.source_path, "horizon": problem.horizon,
+              "product_states": product.n_states}
+    return fields, theirs, ours
+
+
 def storm_comparison(problem: ComparedProblem, time_limit: float, resolution: int, depth: int,
                      max_nodes: int, progress: bool = False) -> dict:
     """Both sides' bounds and seconds, JSON-ready."""
     from trustroute.policies.peer.storm import require_storm, run_storm
 
     require_storm("trustroute peer storm")
-    spec, pomdp = loaded_problem(problem)
-    with step_progress("peer storm", progress) as step:
-        step("exporting the product POMDP")
-        product = explicit_product(pomdp, spec, problem.horizon)
-        step(f"Storm on {product.n_states:,} product states")
-        storm = run_storm(product, time_limit=time_limit, resolution=resolution)
-        step("our search")
-        ours = our_bounds(pomdp, spec, problem.horizon, depth, max_nodes)
-    return {"spec": spec.name, "file": spec.source_path, "horizon": problem.horizon,
-            "product_states": product.n_states, "storm": storm.to_dict(), "ours": ours.to_dict(),
+    fields, storm, ours = _both_sides(
+        problem, "Storm", lambda product: run_storm(product, time_limit=time_limit, resolution=resolution),
+        depth, max_nodes, progress)
+    return {**fields, "storm": storm.to_dict(), "ours": ours.to_dict(),
             "overlap": bool(max(storm.lower, ours.lower) <= min(storm.upper, ours.upper) + 1e-9)}
 
 
@@ -65,14 +78,8 @@ def paynt_comparison(problem: ComparedProblem, time_limit: float, max_states: in
     from trustroute.policies.peer.paynt import require_paynt, run_paynt
 
     require_paynt("trustroute peer paynt")
-    spec, pomdp = loaded_problem(problem)
-    with step_progress("peer paynt", progress) as step:
-        step("exporting the product POMDP")
-        product = explicit_product(pomdp, spec, problem.horizon)
-        step(f"PAYNT on {product.n_states:,} product states")
-        paynt = run_paynt(product, time_limit=time_limit, max_states=max_states)
-        step("our search")
-        ours = our_bounds(pomdp, spec, problem.horizon, depth, max_nodes)
-    return {"spec": spec.name, "file": spec.source_path, "horizon": problem.horizon,
-            "product_states": product.n_states, "paynt": paynt.to_dict(), "ours": ours.to_dict(),
+    fields, paynt, ours = _both_sides(
+        problem, "PAYNT", lambda product: run_paynt(product, time_limit=time_limit, max_states=max_states),
+        depth, max_nodes, progress)
+    return {**fields, "paynt": paynt.to_dict(), "ours": ours.to_dict(),
             "within_ours": bool(paynt.lower <= ours.upper + paynt.precision)}
