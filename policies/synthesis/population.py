@@ -63,7 +63,8 @@ from trustroute.policies.routing.episode_rules import DEFAULT_JUNCTION_CAP
 from trustroute.policies.routing.protocol import RoutingPolicy
 from trustroute.policies.synthesis.belief_synthesis import BeliefSynthesis, synthesize
 from trustroute.policies.synthesis.budget import TimeBudget
-from trustroute.policies.synthesis.result import SearchRun, SynthesisResult, SynthesisStats
+from trustroute.policies.synthesis.result import RoundProgress, SearchRun, SynthesisResult, SynthesisStats
+from trustroute.policies.synthesis.result import robust_progress as told_robust
 from trustroute.policies.synthesis.rounding import (
     ModelRounding,
     evaluation_widened,
@@ -431,7 +432,7 @@ def candidate_record(prior: np.ndarray | None, found: tuple[TypeValue | None, ..
 
 def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, settings: SynthesisSettings,
                       schedule: RunSchedule, bayes_run: BayesRun, bound: float,
-                      on_iteration: Callable[[float, float], None] | None) -> tuple[Candidate, list[dict]]:
+                      on_iteration: RoundProgress | None) -> tuple[Candidate, list[dict]]:
     """The candidate with the best worst type: the Bayes policy (`bayes_run`: the AV's model, the
     run, its per-type values) and the λ-policies of the grid the time affords, those favouring
     the Bayes policy's worst type first, each given at least CANDIDATE_SETUP_FACTOR times the
@@ -463,12 +464,13 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
     # converge within their fixed costs; larger ones need time to expand)
     def settled() -> bool:
         return within_tau(best[1], bound, settings.tau)
+    candidate_progress = told_robust(on_iteration, lambda: worst_type(best[1]), bound, False)
 
     for prior in candidate_priors(weights, population.n_types, grid_points, schedule, settled,
                                   worst_first[0], setup / CANDIDATE_SETUP_FACTOR):
         made = synthesize(build_pomdp(town, lift_population(population, prior)), spec,
                           replace(settings, time_limit=schedule.next_limit(at_least=setup)),
-                          on_iteration=on_iteration)
+                          on_iteration=candidate_progress)
         schedule.finished(candidate_name(prior), made.lower, made.upper)
         policy = BeliefTablePolicy(made.policy.table, town, spec, name="robust",
                                    horizon=horizon, reweight=reweighting(population, prior))
@@ -484,7 +486,7 @@ def robust_candidates(town: Town, population: DriverPopulation, spec: Spec, sett
 def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
                           objective: Objective = "bayes", settings: SynthesisSettings = DEFAULT_SYNTHESIS,
                           population_source: str = "",
-                          on_iteration: Callable[[float, float], None] | None = None,
+                          on_iteration: RoundProgress | None = None,
                           on_phase: Callable[[str], None] | None = None,
                           ) -> PopulationSynthesis:
     """Synthesize for `population` under `objective` (module docstring) within `settings.time_limit`
@@ -512,7 +514,8 @@ def synthesize_population(town: Town, population: DriverPopulation, spec: Spec,
         limit = schedule.next_limit(BAYES_SHARE)
     else:   # one type: the single-model synthesis with its whole limit (the same result)
         limit = schedule.capped_limit(1.0 - (EVALUATION_SHARE if population.n_types > 1 else 0.0))
-    bayes = synthesize(pomdp, lifted_spec, replace(settings, time_limit=limit), on_iteration=on_iteration)
+    told = told_robust(on_iteration, lambda: None, min(type_upper), True) if type_upper else on_iteration
+    bayes = synthesize(pomdp, lifted_spec, replace(settings, time_limit=limit), on_iteration=told)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
     bayes_values = per_type_values(pomdp, lifted_spec, bayes.policy, population, cap, belief_rule,
                                    deadline=schedule.evaluation_deadline(0))

@@ -16,8 +16,26 @@ PolicyT = TypeVar("PolicyT")
 
 
 # A synthesis' progress after each round: (L, U), the bounds its result will show so far; L is None
-# while it has none yet (a synthesis whose L is a valued policy's, before the first is valued).
+# while it has none yet (a synthesis whose L is a valued policy's, before the first is valued; a
+# robust population synthesis before its Bayes policy's worst type is valued).
 RoundProgress: TypeAlias = Callable[[float | None, float], None]
+
+
+def robust_progress(on_iteration: RoundProgress | None, lower: Callable[[], float | None], upper: float,
+                    own_upper: bool) -> RoundProgress | None:
+    """The progress a synthesis run inside a robust population synthesis tells: the robust result's
+    bounds so far, not the run's own (the Bayes objective's or a candidate prior's, another
+    probability). `lower()`: the best candidate's worst type (None before one is valued); `upper`:
+    the robust bound known so far, narrowed by the run's own U when `own_upper` (the Bayes run,
+    whose U the robust bound takes)."""
+    if on_iteration is None:
+        return None
+    told = on_iteration
+
+    def on_round(_lower: float | None, run_upper: float) -> None:
+        told(lower(), min(upper, run_upper) if own_upper else upper)
+
+    return on_round
 
 
 class Statistics(Protocol):

@@ -64,7 +64,7 @@ from trustroute.policies.synthesis.population import (
     within_tau,
     worst_type,
 )
-from trustroute.policies.synthesis.result import RoundProgress, SynthesisResult
+from trustroute.policies.synthesis.result import RoundProgress, SynthesisResult, robust_progress
 from trustroute.policies.synthesis.rounding import problem_rounding
 from trustroute.policies.synthesis.settings import DEFAULT_SYNTHESIS, SynthesisSettings
 from trustroute.policies.trust_state_synthesis.synthesis import (
@@ -165,6 +165,7 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
     candidates = [record(weights, values)]
     def settled() -> bool:
         return within_tau(best[1], bound, settings.tau)
+    candidate_progress = robust_progress(on_iteration, lambda: worst_type(best[1]), bound, False)
 
     for prior in candidate_priors(weights, population.n_types, grid_points, schedule, settled):
         model = build_pomdp(problem.town, lift_population(population, prior))
@@ -174,7 +175,7 @@ def robust_candidates(problem: Problem, bayes: JointSynthesis, values: tuple[Typ
             exact_filter(model, rule, like=source)
         made = synthesize_joint(model, problem.spec,
                                 replace(settings, time_limit=schedule.next_limit()),
-                                on_iteration=on_iteration)
+                                on_iteration=candidate_progress)
         schedule.finished(candidate_name(prior), made.lower, made.upper)
         policy = JointTablePolicy(made.policy.table, problem.pomdp, problem.spec, made.policy.guide_horizon,
                                   name="robust", certificate=Certificate(horizon=horizon),
@@ -215,8 +216,9 @@ def synthesize_population_joint(problem: Problem, objective: str, synthesize: Ca
         limit = schedule.next_limit(BAYES_SHARE)
     else:   # the rest for its per-type evaluation (one type: the single-model run's whole limit)
         limit = schedule.capped_limit(1.0 - (EVALUATION_SHARE if population.n_types > 1 else 0.0))
+    told = robust_progress(on_iteration, lambda: None, min(type_upper), True) if robust else on_iteration
     bayes = synthesize_joint(problem.pomdp, problem.spec, replace(settings, time_limit=limit),
-                             on_iteration=on_iteration)
+                             on_iteration=told)
     schedule.finished("Bayes objective, the population's weights", bayes.lower, bayes.upper)
     values = joint_type_values(problem, bayes.policy, evaluation_cap(horizon), belief_rule,
                                deadline=schedule.budget.deadline)

@@ -5,6 +5,8 @@ before there is one to show (the trust-state synthesis' L is a valued policy's).
 
 from __future__ import annotations
 
+import itertools
+
 from trustroute.policies.logic.spec import load_spec
 from trustroute.policies.synthesis.belief_synthesis import synthesize
 from trustroute.policies.synthesis.settings import SynthesisSettings
@@ -39,3 +41,50 @@ def test_trust_state_synthesis_tells_no_lower_bound_before_a_policy_is_valued(po
     valued = [lower for lower, _ in told if lower is not None]
     assert valued and valued == sorted(valued) and abs(valued[-1] - result.lower) <= ROUNDING, told
     assert 0.0 not in valued
+
+
+def _robust_told(problem) -> tuple[list[tuple[float | None, float]], object]:
+    """What a robust population synthesis of (town, population, spec) tells its progress, and its
+    result; its runs (the Bayes objective's, each candidate prior's) bound other probabilities."""
+    from trustroute.policies.synthesize_spec import synthesize_for_population
+
+    town, population, spec = problem
+    told: list[tuple[float | None, float]] = []
+    made = synthesize_for_population(town, population, spec, "robust",
+                                     SynthesisSettings(horizon=3, time_limit=10, grid_points=3),
+                                     on_iteration=lambda lower, upper: told.append((lower, upper)))
+    return told, made
+
+
+def _assert_robust_bounds(told, made) -> None:
+    """Every report is a bound of the robust value the result will show: no L above it (the Bayes
+    objective's L is the prior-weighted value, above the worst type's), no U below it."""
+    assert told and made.lower < made.bayes_lower, "the robust value differs from the Bayes one"
+    valued = [lower for lower, _ in told if lower is not None]
+    uppers = [upper for _, upper in told]
+    assert all(lower <= made.lower + ROUNDING for lower in valued), (told, made.lower)
+    assert valued == sorted(valued), told
+    # the Bayes run's U as computed; the bound the candidates are told is rounded outward
+    assert all(later <= earlier + ROUNDING for earlier, later in itertools.pairwise(uppers)), told
+    assert min(uppers) >= made.upper - ROUNDING, (told, made.upper)
+
+
+def test_a_robust_belief_population_synthesis_tells_the_robust_bounds():
+    import numpy as np
+
+    from tests.policies.synthesis.test_population_synthesis import population_of, small_spec
+    from tests.policies.synthesis.test_synthesis_random import random_town
+
+    rng = np.random.default_rng(11)
+    town = random_town(rng)
+    population = population_of(rng, 2)
+    _assert_robust_bounds(*_robust_told((town, population, small_spec(rng, town, population, False))))
+
+
+def test_a_robust_trust_state_population_synthesis_tells_the_robust_bounds(driver):
+    import numpy as np
+
+    from tests.policies.trust_state_synthesis.test_population import random_population_problem
+
+    rng = np.random.default_rng(3)
+    _assert_robust_bounds(*_robust_told(random_population_problem(rng, driver, 3)))
