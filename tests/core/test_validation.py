@@ -136,3 +136,29 @@ def test_a_csv_row_is_named_by_the_line_an_editor_shows_it_on(tmp_path):
         assert lines[line - 1].startswith(f"{frame['tick'].iloc[row]},"), (row, line)
     assert [csv_line(path, row) for row in range(3)] == [2, 4, 7]
     assert csv_place(path, 2, "note") == "line 7, column note" and csv_place(path, 0) == "line 2"
+
+
+@pytest.mark.parametrize(("name", "text"), [
+    ("bom", "\ufefftick,note\n0,a\n\n1,b\n2,c\n"),
+    ("crlf", 'tick,note\r\n0,a\r\n\r\n1,"x\r\ny"\r\n2,c\r\n'),
+    ("cr", "tick,note\r0,a\r\r1,b\r2,c\r"),
+    ("blank_lines_before_the_header", "\n\ntick,note\n0,a\n1,b\n2,c\n"),
+    ("an_empty_quoted_cell", 'tick,note\n0,a\n""\n1,b\n2,c\n'),
+])
+def test_a_csv_row_is_found_on_its_line_whatever_the_line_ends(tmp_path, name, text):
+    """Each row pandas reads is named by its own line: a BOM, CRLF or CR line ends and blank lines
+    before the header move no row; a line holding only an empty quoted cell is a row to pandas (of
+    empty cells), not a blank line it skips."""
+    import re
+
+    import pandas as pd
+
+    from trustroute.core.validation import csv_line
+
+    path = tmp_path / f"{name}.csv"
+    path.write_bytes(text.encode())
+    lines = re.split(r"\r\n|\n|\r", path.read_bytes().decode("utf-8-sig"))
+    frame = pd.read_csv(path)
+    for row, tick in enumerate(frame["tick"]):
+        shown = lines[csv_line(path, row) - 1]
+        assert shown == '""' if pd.isna(tick) else shown.startswith(f"{int(tick)},"), (row, shown)

@@ -339,7 +339,9 @@ def csv_line(path: str | Path, row: int) -> int:
         reader = csv.reader(handle)
         start, index = 1, -1   # the header is the record before row 0
         for record in reader:
-            if record and (len(record) > 1 or record[0].strip()):
+            # pandas skips a line of nothing or of white space alone; a line `""` (one empty quoted
+            # cell, the record [""]) is a row of empty cells to it
+            if record and (len(record) > 1 or record[0] == "" or record[0].strip()):
                 if index == row:
                     return start
                 index += 1
