@@ -6,6 +6,7 @@ as long ones."""
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -99,4 +100,6 @@ def test_progress_says_when_there_is_no_lower_bound_yet(tmp_path, capsys, at_onc
     lines = [line for line in err.splitlines() if line.startswith("synthesizing phi1_trust: ")]
     assert "L not yet (no policy valued) U=1.0000" in lines[0], err
     assert not [line for line in lines if "L=0.0000" in line], err
-    assert [line for line in lines if "L=0.8092" in line], err
+    valued = [float(lower) for line in lines for lower in re.findall(r"L=([0-9.]+)", line)]
+    lower = json.loads((tmp_path / "t.json").read_text())["lower"]   # the policy's certified L
+    assert valued and abs(max(valued) - lower) <= 1e-4, (valued, lower)   # four decimals shown
