@@ -105,8 +105,17 @@ def test_a_product_past_the_limit_is_refused_before_it_is_built(capsys, command)
     code, out, err = run_cli(capsys, "peer", command, "specs/phi1_trust.toml", "--horizon", "1000")
     assert time.perf_counter() - started < 30
     assert code == 2 and out == "" and err.count("\n") == 1 and "Traceback" not in err
-    assert "--horizon: the product POMDP handed to the peer would have 2,018,016 grid states" in err
-    assert "(fix: pass --horizon 495 or less, or use a smaller town)" in err
+    # the grid a step: roads x trust levels x DFA states x last (h, e), as the loaded problem has them
+    from trustroute.app.peers import ComparedProblem, loaded_problem
+    from trustroute.core import defaults
+    from trustroute.policies.logic.dfa import build_dfa
+
+    spec, pomdp = loaded_problem(ComparedProblem("specs/phi1_trust.toml"))
+    outcomes = 4 if pomdp.driver.depends_on_performance else 2
+    step = pomdp.n_states * pomdp.n_trust * build_dfa(spec).n_states * outcomes
+    assert f"--horizon: the product POMDP handed to the peer would have {step * 1001:,} grid states" in err
+    largest = defaults.MAX_PEER_PRODUCT // step - 1   # steps 0..H
+    assert f"(fix: pass --horizon {largest} or less, or use a smaller town)" in err
 
 
 def test_a_long_comparison_names_its_step_on_stderr_and_json_silences_it(capsys, monkeypatch):
@@ -116,10 +125,11 @@ def test_a_long_comparison_names_its_step_on_stderr_and_json_silences_it(capsys,
     monkeypatch.setattr(resolve, "PROGRESS_AFTER", 0.0)
     monkeypatch.setattr(resolve, "PROGRESS_EVERY", 0.01)
     args = ("peer", "storm", "specs/phi1_trust.toml", "--horizon", "6", "--time-limit", "1")
+    code, out, err = run_cli(capsys, *args, "--json")
+    assert code == 0 and err == ""
+    states = json.loads(out)["product_states"]
     code, _, err = run_cli(capsys, *args)
     steps = {line.rsplit(" (", 1)[0] for line in err.splitlines()}
-    assert code == 0 and steps <= {"peer storm: exporting the product POMDP",
-                                   "peer storm: Storm on 1,016 product states", "peer storm: our search"}
+    assert code == 0 and steps <= {"peer storm: exporting the product POMDP", "peer storm: our search",
+                                   f"peer storm: Storm on {states:,} product states"}
     assert "peer storm: our search" in steps, err
-    code, _, err = run_cli(capsys, *args, "--json")
-    assert code == 0 and err == ""
