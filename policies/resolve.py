@@ -195,6 +195,12 @@ def _bounds_text(lower: float | None, upper: float) -> str:
     return f"{'L not yet (no policy valued)' if lower is None else f'L={low}'} U={high}"
 
 
+def _say(description: str, text: str, seconds: float | None = None) -> None:
+    """One progress line on stderr, `description: text (N s)` (the time so far, when given)."""
+    print(f"{description}: {text}" + ("" if seconds is None else f" ({seconds:.0f} s)"), file=sys.stderr,
+          flush=True)
+
+
 def _progress_lines(description: str) -> RoundProgress:
     """The on_iteration callback of `synthesis_progress` away from a terminal."""
     started = time.perf_counter()
@@ -206,8 +212,7 @@ def _progress_lines(description: str) -> RoundProgress:
         rounds += 1
         elapsed = time.perf_counter() - started
         if elapsed >= due:
-            print(f"{description}: {rounds} rounds, {_bounds_text(lower, upper)} ({elapsed:.0f} s)",
-                  file=sys.stderr, flush=True)
+            _say(description, f"{rounds} rounds, {_bounds_text(lower, upper)}", elapsed)
             due = elapsed + PROGRESS_EVERY
 
     return on_round
@@ -230,8 +235,7 @@ def step_progress(description: str, enabled: bool) -> Iterator[Callable[[str], N
         wait = PROGRESS_AFTER
         while not stop.wait(wait):
             if current[0]:
-                print(f"{description}: {current[0]} ({time.perf_counter() - started:.0f} s)",
-                      file=sys.stderr, flush=True)
+                _say(description, current[0], time.perf_counter() - started)
             wait = PROGRESS_EVERY
 
     timer = threading.Thread(target=tick, daemon=True)
@@ -250,7 +254,7 @@ def phase_lines(description: str, enabled: bool) -> Callable[[str], None]:
 
     def on_phase(line: str) -> None:
         if enabled and time.perf_counter() - started >= PROGRESS_AFTER:
-            print(f"{description}: {line}", file=sys.stderr, flush=True)
+            _say(description, line)
 
     return on_phase
 
