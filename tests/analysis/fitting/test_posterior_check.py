@@ -75,9 +75,8 @@ def test_a_check_file_interrupted_while_it_is_written_leaves_the_old_file(tmp_pa
     assert [p.name for p in tmp_path.iterdir()] == [path.name]
 
 
-def test_every_axis_of_the_check_figure_says_what_it_counts(tmp_path, monkeypatch):
-    """The saved figure of `fit --check`: each panel names its x and y quantity, and the trust axes
-    their unit (levels of the 1-7 scale)."""
+def _check_figure(tmp_path, monkeypatch):
+    """The figure `fit --check` saves for the real study and the packaged model, and its file."""
     saved = []
     real = check_module.save_figure
     monkeypatch.setattr(check_module, "save_figure",
@@ -86,8 +85,27 @@ def test_every_axis_of_the_check_figure_says_what_it_counts(tmp_path, monkeypatc
                             np.random.default_rng(3))
     path = check_module.plot_check(check, tmp_path / "driver.check.png")
     (fig,) = saved
+    return fig, path
+
+
+def test_every_axis_of_the_check_figure_says_what_it_counts(tmp_path, monkeypatch):
+    """The saved figure of `fit --check`: each panel names its x and y quantity, and the trust axes
+    their unit (levels of the 1-7 scale)."""
+    fig, path = _check_figure(tmp_path, monkeypatch)
     assert path.stat().st_size > 0 and len(fig.axes) == 4
     for ax in fig.axes:
         assert ax.get_title() and ax.get_xlabel().strip() and ax.get_ylabel().strip(), ax.get_title()
     trust_axes = [ax.get_xlabel() for ax in fig.axes if "trust" in ax.get_title()]
     assert len(trust_axes) == 2 and all("level" in label for label in trust_axes), trust_axes
+
+
+def test_the_bars_of_each_value_are_centred_on_it(tmp_path, monkeypatch):
+    """Every panel draws one bar a source (the real study, each model) at each value: the bars of
+    a value are centred on that value, and the incidents' ticks stand at their bars' centre."""
+    fig, _ = _check_figure(tmp_path, monkeypatch)
+    for ax in fig.axes:
+        centres = np.array([bar.get_x() + bar.get_width() / 2 for bar in ax.patches])
+        per_value = centres.reshape(2, -1).mean(axis=0)   # drawn one source after another
+        assert np.allclose(per_value, np.round(per_value)), (ax.get_title(), per_value)
+    incidents = fig.axes[0]
+    assert np.allclose(incidents.get_xticks(), np.arange(len(incidents.get_xticklabels())))
