@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -249,6 +250,27 @@ def test_a_population_built_in_code_is_a_distribution_as_a_loaded_one_is(weights
     assert (refused.value.source, refused.value.place) == ("<driver population>", "types")
     said = refused_loaded.value
     assert (refused.value.problem, refused.value.fix) == (said.problem, said.fix)
+
+
+@pytest.mark.parametrize("weights", [(float("nan"), 0.5, 0.5), (1.5, -0.25, -0.25), (1.0, 0.0, 0.0),
+                                     (float("inf"), 0.5, 0.5)])
+def test_a_population_built_in_code_refuses_the_weights_a_file_may_not_hold(weights):
+    """A weight that is not a finite number > 0 is refused in code as in a file, naming the type's
+    weight with the file's words: a NaN passes the test of the sum, and negative weights that sum
+    to 1 would weigh a type against the others."""
+    data = example()
+    types = driver_population_from_dict(data).types
+    index = next(i for i, w in enumerate(weights) if not 0 < w < math.inf)
+    with pytest.raises(InputError) as refused:
+        DriverPopulation(tuple(DriverType(t.name, w, t.model) for t, w in zip(types, weights, strict=True)))
+    assert refused.value.place == f"types[{index}].weight"
+    data["types"][index]["weight"] = weights[index]
+    if math.isfinite(weights[index]):   # JSON holds no NaN or infinity
+        with pytest.raises(InputError) as refused_loaded:
+            driver_population_from_dict(data)
+        said = refused_loaded.value
+        assert (refused.value.place, refused.value.problem, refused.value.fix) == (said.place, said.problem,
+                                                                                   said.fix)
 
 
 def test_a_driver_model_and_a_population_given_for_each_other_say_which_they_are(tmp_path, capsys):
