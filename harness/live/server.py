@@ -133,8 +133,10 @@ class LiveStudy:
 
         self.context = check_before_writing(self.config, self.study_dir, None, defaults.ATTEMPTS, False)
         self._stack.enter_context(open_study_dir(self.study_dir, self.config))
-        start_fork_server()   # it imports the episodes' modules while the study opens
         try:
+            # it imports the episodes' modules while the study opens: the opening's slowest step,
+            # where a SIGTERM or Ctrl-C most likely lands, so inside what lets the directory go
+            start_fork_server()
             self.done = finished_episodes(self.study_dir, self.tasks)[0]
             self.expected = expected_values(self.context)
             self.load_participants()

@@ -151,3 +151,24 @@ def test_sigterm_mid_episode_closes_the_study_with_the_interrupted_line(tmp_path
     assert part_path(study_dir, first.episode_id).exists()
     assert not part_path(study_dir, second.episode_id).exists()
     assert (study_dir / LIVE_DIR / PARTICIPANTS_FILE).exists()
+
+
+def test_sigterm_while_the_study_opens_leaves_its_directory_free(tmp_path, monkeypatch):
+    """SIGTERM (or Ctrl-C) while the fork server starts, the slowest part of opening a study,
+    unwinds what the opening took: the study directory's lock is let go, so the same study opens
+    again in this process (an API caller's retry) as in a new one."""
+    from trustroute.core.interrupts import Terminated
+    from trustroute.harness.live import server as live_server
+    from trustroute.harness.live.server import LiveStudy, ServerOptions
+
+    config = tiny_config(tmp_path)
+
+    def terminated() -> None:
+        raise Terminated()
+
+    monkeypatch.setattr(live_server, "start_fork_server", terminated)
+    interrupted = LiveStudy(config, tmp_path / "study", ServerOptions())   # held, as a caller may
+    with pytest.raises(Terminated):
+        interrupted.open()
+    monkeypatch.undo()
+    LiveStudy(config, tmp_path / "study", ServerOptions()).open().close()
