@@ -16,7 +16,7 @@ import click
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults, ranges
-from trustroute.core.wording import counted, interval, outward
+from trustroute.core.wording import at_most, counted, interval, outward
 from trustroute.harness.commands.inputs import (
     POPULATION_GIVEN,
     driver_field,
@@ -225,25 +225,33 @@ def _synth_population(problem, objective: str, settings, out_path: str | None, a
                               f"the {objective} policy for {spec.name}", result.policy, found.gap <= tau,
                               any(c.get("rows", 0) > 0 for c in found.candidates))},
                          {"policy": path, "policy_arrays": policy_arrays(path)})
-    what = "P(satisfied), prior-weighted" if objective == "bayes" else "worst type's P(satisfied)"
-    low, high = outward(found.lower, found.upper, 6)
-    lines = [f"{spec.name} ({population.n_types} driver types, objective {objective}): "
-             f"{low} <= max {what} <= {high} (gap {found.gap:.2e}, "
-             f"{found.seconds:.1f} s)"]
-    lines.append("returned policy per type (exact, true driver of that type): " + "; ".join(
-        f"{v.name} (weight {v.weight:g}) {interval(v.lower, v.upper)}" for v in found.type_values))
-    mixture = found.mixture_value
-    lines.append(f"returned policy under the type prior: {interval(*mixture)}; worst type "
-                 f"{found.worst_type_value:.6f}; AV type prior {', '.join(f'{p:g}' for p in found.prior)}")
-    if objective == "robust":
-        worst_bayes = summary["bayes"]["worst_type_value"]
-        lines.append(f"Bayes-optimal synthesis beside it: {found.bayes_lower:.6f} <= prior-weighted <= "
-                     f"{found.bayes_upper:.6f}, its worst type {worst_bayes:.6f}; robust value certified "
-                     f">= {found.lower:.6f} (best of {len(found.candidates)} candidate priors"
-                     f"{not_needed_note(found.candidates_not_needed)}), <= {found.upper:.6f}")
+    lines = population_lines(spec.name, population.n_types, objective, found,
+                             summary["bayes"]["worst_type_value"])
     lines += stop_notes(result)
     lines.append(f"policy written to {path}")
     emit(as_json, payload, lines)
+
+
+def population_lines(spec_name: str, n_types: int, objective: str, found, worst_bayes: float) -> list[str]:
+    """A population synthesis' bounds as text (`found`: its PopulationSynthesis; `worst_bayes`: the
+    worst type's value of the Bayes policy beside a robust one), every bound rounded outward
+    (core/wording.py) so that no printed figure claims more than was certified."""
+    what = "P(satisfied), prior-weighted" if objective == "bayes" else "worst type's P(satisfied)"
+    low, high = outward(found.lower, found.upper, 6)
+    lines = [f"{spec_name} ({n_types} driver types, objective {objective}): "
+             f"{low} <= max {what} <= {high} (gap {found.gap:.2e}, {found.seconds:.1f} s)"]
+    lines.append("returned policy per type (exact, true driver of that type): " + "; ".join(
+        f"{v.name} (weight {v.weight:g}) {interval(v.lower, v.upper)}" for v in found.type_values))
+    prior = ", ".join(f"{p:g}" for p in found.prior)
+    lines.append(f"returned policy under the type prior: {interval(*found.mixture_value)}; worst type "
+                 f"{at_most(found.worst_type_value)}; AV type prior {prior}")
+    if objective == "robust":
+        bayes_low, bayes_high = outward(found.bayes_lower, found.bayes_upper, 6)
+        lines.append(f"Bayes-optimal synthesis beside it: {bayes_low} <= prior-weighted <= {bayes_high}, "
+                     f"its worst type {at_most(worst_bayes)}; robust value certified >= {low} (best of "
+                     f"{len(found.candidates)} candidate priors"
+                     f"{not_needed_note(found.candidates_not_needed)}), <= {high}")
+    return lines
 
 
 def not_needed_note(not_needed: int) -> str:
