@@ -204,6 +204,15 @@ def test_between_drives_the_state_shows_no_drive_and_says_which_trial_is_done(tm
         study.close()
 
 
+def start_driving(station) -> None:
+    """The participant's station, once ready, starts the drive and sees it driving."""
+    while station.receive_json().get("phase") != "ready":
+        pass
+    station.send_json({"type": "start", "trust": 4})
+    while station.receive_json().get("phase") != "driving":
+        pass
+
+
 def test_a_station_opened_during_a_disconnect_pause_is_sent_the_drives_last_frame(tmp_path, silent_episodes):
     """No frame streams while a drive is paused: a station that connects then is sent, after the
     state, the drive's newest frame (`Session.opening`), so it shows where the car stands before
@@ -212,11 +221,7 @@ def test_a_station_opened_during_a_disconnect_pause_is_sent_the_drives_last_fram
     try:
         with TestClient(live_app(study)) as client:
             with consenting_participant(client, study) as (station, participant):
-                while station.receive_json().get("phase") != "ready":
-                    pass
-                station.send_json({"type": "start", "trust": 4})
-                while station.receive_json().get("phase") != "driving":
-                    pass
+                start_driving(station)
                 session = study.sessions[0]
                 frames = [{"type": "frame", "t": t, "road": "A-B", "x": t, "y": 0.0} for t in (1.0, 2.0)]
                 for frame in frames:   # the episode's (it sends none once paused)
@@ -260,11 +265,7 @@ def test_a_station_opened_as_the_drive_ends_is_told_the_end_after_the_drives_sta
     try:
         with TestClient(live_app(study)) as client:
             with consenting_participant(client, study) as (station, participant):
-                while station.receive_json().get("phase") != "ready":
-                    pass
-                station.send_json({"type": "start", "trust": 4})
-                while station.receive_json().get("phase") != "driving":
-                    pass
+                start_driving(station)
                 monkeypatch.setattr(Session, "attach", ended_as_attached)
                 with client.websocket_connect("/ws", headers=participant) as again:
                     seen: list[tuple] = []
