@@ -16,7 +16,7 @@ import click
 from trustroute.analysis.formatting import finite_or_none
 from trustroute.app.problem import load_problem
 from trustroute.core import defaults, ranges
-from trustroute.core.wording import at_most, counted, interval, outward
+from trustroute.core.wording import counted, interval, lower_text, outward
 from trustroute.harness.commands.inputs import (
     POPULATION_GIVEN,
     driver_field,
@@ -244,11 +244,11 @@ def population_lines(spec_name: str, n_types: int, objective: str, found, worst_
         f"{v.name} (weight {v.weight:g}) {interval(v.lower, v.upper)}" for v in found.type_values))
     prior = ", ".join(f"{p:g}" for p in found.prior)
     lines.append(f"returned policy under the type prior: {interval(*found.mixture_value)}; worst type "
-                 f"{at_most(found.worst_type_value)}; AV type prior {prior}")
+                 f"{lower_text(found.worst_type_value)}; AV type prior {prior}")
     if objective == "robust":
         bayes_low, bayes_high = outward(found.bayes_lower, found.bayes_upper, 6)
         lines.append(f"Bayes-optimal synthesis beside it: {bayes_low} <= prior-weighted <= {bayes_high}, "
-                     f"its worst type {at_most(worst_bayes)}; robust value certified >= {low} (best of "
+                     f"its worst type {lower_text(worst_bayes)}; robust value certified >= {low} (best of "
                      f"{len(found.candidates)} candidate priors"
                      f"{not_needed_note(found.candidates_not_needed)}), <= {high}")
     return lines

@@ -15,15 +15,15 @@ def outward(lower: float, upper: float, digits: int) -> tuple[str, str]:
     """A certified [lower, upper] as text of `digits` decimals rounded outward, lower down and upper
     up, so the printed interval holds the certified one: a lower bound of 0.99999996 reads 0.999999
     at six decimals, never 1.000000, which would claim more than was certified."""
-    return at_most(lower, digits), at_least(upper, digits)
+    return lower_text(lower, digits), upper_text(upper, digits)
 
 
-def at_most(lower: float, digits: int = 6) -> str:
+def lower_text(lower: float, digits: int = 6) -> str:
     """A certified lower bound alone (a worst type's value, "certified >= ..."), rounded down."""
     return str(Decimal(lower).quantize(Decimal(1).scaleb(-digits), rounding=ROUND_FLOOR))
 
 
-def at_least(upper: float, digits: int = 6) -> str:
+def upper_text(upper: float, digits: int = 6) -> str:
     """A certified upper bound alone, rounded up."""
     return str(Decimal(upper).quantize(Decimal(1).scaleb(-digits), rounding=ROUND_CEILING))
 

@@ -154,7 +154,6 @@ def test_cli_reports_the_value_as_a_lower_bound(capsys):
     assert result["paynt"]["lower"] <= result["ours"]["upper"] + PRECISION
 
 
-
 def test_no_reachable_goal_is_the_value_0_with_its_reason(capsys):
     # no satisfying route fits 3 junctions: the answer is 0 exactly, as `peer storm` says, and
     # PAYNT (which rejects a property whose label no state carries) is not run
