@@ -134,8 +134,8 @@ def _worker_main(function: Callable[[Any], object] | None, connection: Connectio
 
 
 def describe_exit(exitcode: int | None) -> str:
-    if exitcode is None:
-        return "did not exit"
+    if exitcode is None:   # its pipe closed, yet the process still ran SHUTDOWN_SECONDS later
+        return f"closed its pipe and had not exited {SHUTDOWN_SECONDS:g} s later"
     if exitcode < 0:
         try:
             return f"killed by {signal.Signals(-exitcode).name}"

@@ -168,3 +168,15 @@ def test_a_worker_that_became_ready_breaks_the_row_of_workers_exiting_while_they
     assert next(pool) == (-3, "worker process exited with code 3")
     pool.close()
     helper.join(5)
+
+
+def test_workers_whose_pipe_closed_while_they_still_run_are_said_so():
+    """A worker whose pipe closed but which had not exited when the pool looked (exit code None)
+    neither exited nor printed an error: the refusal says what was seen."""
+    from trustroute.harness.study import workers
+
+    said = str(workers.WorkersCannotStart([None, None]))
+    assert (f"(worker process closed its pipe and had not exited {workers.SHUTDOWN_SECONDS:g} s later, "
+            "2 in a row)") in said, said
+    assert "printed" not in said and "did not exit" not in said
+
