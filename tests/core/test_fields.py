@@ -44,6 +44,9 @@ def test_number_kinds():
     assert problem_of(3, Integer(minimum=1, maximum=5)) is None
     assert problem_of(6, Integer(minimum=1, maximum=5)) == "expected an integer from 1 to 5, got 6"
     assert problem_of(3.0, Integer()) is not None
+    # a string is shown as one: `seed = "3"` in a TOML file is not 3
+    assert problem_of("3", Integer(minimum=1, maximum=5)) == "expected an integer from 1 to 5, got '3'"
+    assert problem_of("9" * 60, Integer()).endswith("got '" + "9" * 39)
     assert problem_of(False, Integer(false_allowed=True)) is None
     assert problem_of(True, Integer(false_allowed=True)) is not None
     assert problem_of(math.inf, Number()) is not None

@@ -126,7 +126,7 @@ class Integer(Kind[int]):
             return None
         if isinstance(value, bool) or not isinstance(value, int) or not self.minimum <= value <= self.maximum:
             return Rejection(f"expected an integer from {self.minimum} to {self.maximum}, "
-                             f"got {str(value)[:40]}")
+                             f"got {value!r:.40}")
         return None
 
 
