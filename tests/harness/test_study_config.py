@@ -348,6 +348,27 @@ def test_a_study_dict_takes_numpy_arrays_strings_and_bools_as_the_python_ones():
         study_config_from_dict(computed)
 
 
+def test_a_study_dict_takes_paths_and_tuples_as_the_strings_and_lists(tmp_path):
+    """A file a script names with pathlib and a list it writes as a tuple are the string and the list
+    a TOML file gives: the same config, the same hash."""
+    import numpy as np
+
+    from trustroute.harness.study.config import study_config_from_dict
+    from trustroute.participants.driver_population import POPULATIONS
+
+    population = POPULATIONS.resolve("driver_population_three_types")
+    written = _numpy_study(np, int, float)
+    written["drivers"] = {"population": str(population)}
+    computed = _numpy_study(np, int, float)
+    computed["study"].update(specs=("phi1",), conditions=("free",))
+    computed["study"]["policy_cache"] = tmp_path / "cache"
+    written["study"]["policy_cache"] = str(tmp_path / "cache")
+    computed["drivers"] = {"population": population}
+    computed["population"]["initial_trust"] = tuple(written["population"]["initial_trust"])
+    checked, expected = study_config_from_dict(computed), study_config_from_dict(written)
+    assert checked == expected and checked.content_hash == expected.content_hash
+
+
 def test_a_missing_file_names_each_folder_searched_once(tmp_path, monkeypatch):
     """The config's folder and the current directory are named once when they are one folder, and
     not at all for an absolute path, which is looked for nowhere else."""

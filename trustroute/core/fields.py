@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 import re
 import sys
 from collections.abc import Callable, Mapping, Sequence
@@ -277,15 +278,20 @@ def is_real(value: object) -> TypeGuard[numbers.Real]:
 
 
 def as_python(value: object, kind: Kind[Any]) -> object:
-    """`value` as Python's own where numpy's stands in for it: a numpy array as a list, a numpy
-    scalar (a bool, a string, a number) as the Python one; then a whole number as an int where an
-    integer or a number is expected, any other real number as a float where a number is, in a
-    list's items and a table's entries too; a bool and every other value as it is, for the kind to
-    judge. A document or a keyword a script computed with numpy is then checked, kept and written
+    """`value` as Python's own where numpy's or a script's stands in for it: a numpy array as a
+    list, a numpy scalar (a bool, a string, a number) as the Python one, a tuple as a list where a
+    list is expected, a path (pathlib's) as its string where a string is; then a whole number as an
+    int where an integer or a number is expected, any other real number as a float where a number
+    is, in a list's items and a table's entries too; a bool and every other value as it is, for the
+    kind to judge. A document or a keyword a script computed is then checked, kept and written
     (TOML, JSON) as the one a file or the CLI gives."""
     numpy = sys.modules.get("numpy")   # a numpy value means numpy is imported: never imported here
     if numpy is not None and isinstance(value, numpy.ndarray | numpy.generic):
         value = value.tolist()
+    if isinstance(kind, ListOf) and isinstance(value, tuple):
+        value = list(value)
+    if isinstance(kind, Text) and isinstance(value, os.PathLike):
+        return os.fspath(value)
     if isinstance(kind, Integer | Number) and is_whole(value):
         return int(value)
     if isinstance(kind, Number) and is_real(value):
