@@ -126,3 +126,24 @@ def test_an_episode_jammed_by_background_traffic_is_bad_input_and_a_stuck_ego_a_
     with pytest.raises(SimTimeCapReached, match="still running after 20 s of sim time") as caught:
         trustroute.run_episode("phi1", seed=0, sumo=SumoConfig(max_sim_seconds=20.0))
     assert not isinstance(caught.value, InputError)
+
+
+# An argument of the wrong type is bad input like a bad value: an InputError naming the argument
+# and what it takes, never a TypeError or AttributeError from deep inside.
+@pytest.mark.parametrize(("call", "named"), [
+    (lambda: trustroute.load_spec(3), "spec: expected a Spec, a file path or a packaged name, got 3"),
+    (lambda: trustroute.run_episode(3, engine="model"), "spec: expected a Spec"),
+    (lambda: trustroute.load_town(3.5), "town: expected a Town, a file path or a packaged name, got 3.5"),
+    (lambda: trustroute.evaluate("phi1", "free", town=["pentagon"]), "town: expected a Town"),
+    (lambda: trustroute.load_driver_model(1), "driver: expected a DriverModel"),
+    (lambda: trustroute.synthesize("phi1", driver={"trust": 1}, horizon=2), "driver: expected a DriverModel"),
+    (lambda: trustroute.evaluate("phi1", "free", population=3), "population: expected a DriverPopulation"),
+    (lambda: trustroute.run_episode("phi1", 5, engine="model"),
+     "policy: expected a policy name .*, a policy file, a SynthesisResult or a RoutingPolicy, got 5"),
+    (lambda: trustroute.run_study(42, out="unused"),
+     "config: expected a study config file, a dict or a StudyConfig, got 42"),
+])
+def test_an_argument_of_the_wrong_type_is_named(call, named):
+    with pytest.raises(InputError, match=named) as caught:
+        call()
+    assert "--" not in str(caught.value)

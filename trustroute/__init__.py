@@ -21,6 +21,7 @@ documentation of the model and the file formats.
 from __future__ import annotations
 
 import functools
+import os
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -162,12 +163,17 @@ def _policy(policy: PolicyLike, problem: Problem, cache_dir: PathLike | None) ->
     """A RoutingPolicy from "free", "aware", "robust"/"bayes" (a population's), a policy file path,
     a SynthesisResult or a policy."""
     from trustroute.app.policy import PolicySettings, policy_for
+    from trustroute.policies.routing.protocol import RoutingPolicy
     from trustroute.policies.synthesis.result import SynthesisResult
 
     if isinstance(policy, str | Path):
         return policy_for(problem, policy, PolicySettings(cache_dir=cache_dir))
     if isinstance(policy, SynthesisResult):
         return policy.policy
+    if not isinstance(policy, RoutingPolicy):
+        raise InputError("policy", "", "expected a policy name ('free', 'aware', 'robust', 'bayes'), "
+                         f"a policy file, a SynthesisResult or a RoutingPolicy, got {policy!r:.40}",
+                         "pass one of those")
     return policy
 
 
@@ -263,8 +269,11 @@ def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None
     processes = study_workers(workers)
     if isinstance(config, dict):
         config = study_config_from_dict(config, "<study dict>", Path.cwd())
-    elif not isinstance(config, StudyConfig):
+    elif isinstance(config, str | os.PathLike):
         config = load_study_config(config)
+    elif not isinstance(config, StudyConfig):
+        raise InputError("config", "", "expected a study config file, a dict or a StudyConfig, "
+                         f"got {config!r:.40}", "pass one of those (docs/formats/study_config.md)")
     config = config.with_overrides(engine=engine)
     run, _ = run_and_consolidate(config, study_directory(config, None if out is None else str(out)),
                                  processes, scheduler, progress=progress, echo=lambda line: None,

@@ -7,6 +7,7 @@ default (`SPEC_TOWNS`: `city5` on `city`, `csomor5` on `csomor`) brings its town
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,10 +21,21 @@ from trustroute.policies.logic.spec import Spec, load_spec
 PathLike = str | Path
 
 
+def check_given(value: object, kind: type, given: str) -> None:
+    """The one check of an input argument's type (a script can pass anything): None (the default),
+    a `kind` object, or a file path or packaged name; an InputError naming `given` otherwise."""
+    if value is None or isinstance(value, kind | str | os.PathLike):
+        return
+    name = kind.__name__
+    raise InputError(given, "", f"expected a {name}, a file path or a packaged name, got {value!r:.40}",
+                     f"pass a {name}, the path of its file or its packaged name")
+
+
 def packaged_spec_town(spec: Spec | PathLike) -> str | None:
     """The packaged town a packaged spec is written for (None: the default town, or not a packaged
     spec). An existing file wins over a packaged name, as everywhere; a path into the packaged
     folder (the repository's specs/ links there) is the packaged spec."""
+    check_given(spec, Spec, "spec")
     if isinstance(spec, Spec):
         return None
     path = SPECS.resolve(spec)
@@ -37,6 +49,7 @@ def packaged_spec_town(spec: Spec | PathLike) -> str | None:
 def town_of(town: Town | PathLike | None, spec: Spec | PathLike | None = None, given: str = "--town") -> Town:
     """A Town from an object, a file, a packaged name, or None: the town a packaged `spec` is
     written for, else the packaged default town (`given`: how the command line takes it)."""
+    check_given(town, Town, given)
     if isinstance(town, Town):
         return town
     if town is None and spec is not None:
@@ -46,12 +59,14 @@ def town_of(town: Town | PathLike | None, spec: Spec | PathLike | None = None, g
 
 def driver_of(driver: DriverModel | PathLike | None) -> DriverModel:
     """A DriverModel from an object, a file, a packaged name, or None (the packaged model)."""
+    check_given(driver, DriverModel, "--driver")
     return driver if isinstance(driver, DriverModel) else load_driver_model(driver)
 
 
 def population_of(population: DriverPopulation | PathLike, given: str = "--population") -> DriverPopulation:
     """A DriverPopulation from an object, a file or a packaged name (`given`: how the command line
     takes it)."""
+    check_given(population, DriverPopulation, given)
     if isinstance(population, DriverPopulation):
         return population
     return load_driver_population(population, given)
@@ -81,6 +96,7 @@ def spec_of(spec: Spec | PathLike, town: Town, driver: DriverModel | None = None
             source: str = "") -> Spec:
     """A Spec from an object, a file or a packaged name, checked against `town` (and the trust
     levels of `driver`; `source` names the driver's file in messages)."""
+    check_given(spec, Spec, "spec")
     if isinstance(spec, Spec):
         return spec
     if driver is None:
