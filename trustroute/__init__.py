@@ -133,7 +133,8 @@ def synthesize(spec: Spec | PathLike, town: Town | PathLike | None = None,
     upper - lower <= tau), time_limit (seconds, about), belief_rule (the AV's filter, exact
     "bayes" or the authors' "paper" update, docs/model.md), ... out: also write the policy file
     there (docs/formats/policy_file.md). `result.policy` is the policy; `result.lower` is its
-    exact value.
+    exact value; `result.fallback_only` says what drives when the policy has no synthesized
+    decision (None when it has one), as `trustroute synth` warns.
 
     population: a driver population (object, file or packaged name; instead of `driver`): synthesis
     for its mixture of driver types under `objective` ("bayes": the prior-weighted value, "robust":

@@ -12,6 +12,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any, Generic, Protocol, TypeAlias, TypeVar
 
+from trustroute.policies.routing.decision_tables import fallback_only
+from trustroute.policies.routing.protocol import RoutingPolicy
+
 PolicyT = TypeVar("PolicyT")
 
 
@@ -238,3 +241,10 @@ class SynthesisResult(Generic[PolicyT, StatsT]):
     @property
     def gap(self) -> float:
         return self.upper - self.lower
+
+    @property
+    def fallback_only(self) -> str | None:
+        """What drives everywhere, in words, when the policy has no synthesized decision and is only
+        its table kind's fallback (docs/synthesis.md, "A policy that is only its fallback"); None
+        when it has one."""
+        return fallback_only(self.policy) if isinstance(self.policy, RoutingPolicy) else None

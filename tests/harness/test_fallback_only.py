@@ -38,6 +38,21 @@ def test_a_policy_with_rows_is_not_flagged(tmp_path, capsys):
     assert code == 0 and "fallback_only" not in json.loads(stdout) and "warning" not in err
 
 
+def test_the_api_result_says_what_drives_when_it_is_only_its_fallback():
+    """A script reads it from the result (`fallback_only`: the fallback in the commands' words),
+    as the commands print it; a population synthesis's from its `result`."""
+    import trustroute
+    from trustroute.app.synthesis import fallback_only
+
+    only = trustroute.synthesize("phi1", horizon=1)
+    assert only.fallback_only == fallback_only(only.policy) is not None
+    assert "free completion" in only.fallback_only
+    assert trustroute.synthesize("phi1", horizon=8).fallback_only is None
+    robust = trustroute.synthesize("phi1", horizon=1, population="driver_population_three_types",
+                                   objective="robust")
+    assert robust.result.fallback_only is not None
+
+
 @pytest.mark.slow
 def test_a_robust_synthesis_without_rows_says_so(tmp_path, capsys):
     code, stdout, err = run_cli(capsys, "synth", "phi1", "--horizon", "3", "--population",
