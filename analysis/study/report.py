@@ -140,7 +140,7 @@ def study_lines(manifest: dict, episodes: pd.DataFrame) -> list[str]:
         f"{design_text(manifest, episodes)}.",
         f"Episodes: {manifest.get('finished_episodes')} finished of "
         f"{manifest.get('planned_episodes')} planned; {failed} failed.",
-        f"{config_text(manifest)}, trustroute git {manifest.get('git_revision')}, "
+        f"{config_text(manifest)}, trustroute's git revision {manifest.get('git_revision')}, "
         f"created {manifest.get('created_utc')}.",
         f"Packages: {packages}",
     ]

@@ -36,7 +36,7 @@ def test_the_real_study_is_described_as_it_was_run_and_compared_with_the_paper()
     provenance = study_lines(manifest, episodes)[2]
     assert "episodes imported from trust_aware_hrc_carla_sim" in provenance
     # the revision is trustroute's (the importer's), not a commit of the authors' repository
-    assert f", trustroute git {manifest['git_revision']}, created" in provenance, provenance
+    assert f", trustroute's git revision {manifest['git_revision']}, created" in provenance, provenance
     assert "one fixed order (phi1 aware, phi1 free, phi2 aware, phi2 free)" in line
     comparable, note = is_paper_comparable(manifest, episodes)
     assert comparable and note == ""
