@@ -11,6 +11,8 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from trustroute.harness.study.export import read_export_keys
+
 ISO_DATE_TIME = re.compile(r"\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}")
 EPISODE_CODE = re.compile(r"^p(\d{5})-")
 
@@ -22,11 +24,16 @@ def row_codes(table: pa.Table) -> list[int]:
     return [int(EPISODE_CODE.match(e).group(1)) for e in table.column("episode_id").to_pylist()]
 
 
+def package_key(study_dir: Path, package: Path) -> dict[int, int]:
+    """The key (participant number -> code) of `package`, as the study's key file holds it."""
+    (entry,) = [entry for entry in read_export_keys(study_dir) if entry["package"] == str(package.resolve())]
+    return {int(p): code for p, code in entry["pseudonyms"].items()}
+
+
 def assert_rows_in_code_order(package: Path, study_dir: Path) -> None:
     """Every table of the package has its rows sorted by pseudonym, and a participant's rows are the
     study table's rows of that participant in the study's order (compared on their episode ids)."""
-    pseudonyms = json.loads((study_dir / "export-key.json").read_text())["pseudonyms"]
-    key = {int(p): code for p, code in pseudonyms.items()}
+    key = package_key(study_dir, package)
     code_of = {f"p{p:05d}-": f"p{code:05d}-" for p, code in key.items()}
     for path in sorted((package / "tables").glob("*.parquet")):
         exported, study = pq.read_table(path), pq.read_table(study_dir / path.name)

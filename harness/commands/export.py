@@ -18,7 +18,7 @@ from trustroute.harness.commands.output import emit, json_option, study_warnings
 @click.argument("study_dir", metavar="STUDY", type=click.Path())
 @click.option("--out", "out", type=click.Path(), required=True, help="The package DIRECTORY (new or empty).")
 @click.option("--seed", type=Checked(ranges.DRAW_SEED), default=0, show_default=True,
-              help="Seed of the pseudonyms' draw (the key is kept in STUDY/export-key.json).")
+              help="Seed of the pseudonyms' draw (each package's key is kept in STUDY/export-key.json).")
 @json_option
 def export(study_dir: str, out: str, seed: int, as_json: bool) -> None:
     """Package the consolidated study STUDY for sharing (OSF, a journal) in the --out DIRECTORY."""

@@ -34,6 +34,18 @@ class Participant(click.ParamType):
         return int(match.group(1))
 
 
+def still_exported(exported: list[dict]) -> str:
+    """What the withdrawal's line says of the packages exported before that hold the participant
+    (harness/live/withdraw.py, `exported_as`): each one and their code in it, to be replaced."""
+    if len(exported) == 1:
+        return (f"the package exported before, {exported[0]['package']}, still holds their data as "
+                f"participant {exported[0]['participant']}: export the study again and replace it "
+                "wherever it was shared")
+    held = ", ".join(f"{package['package']} as participant {package['participant']}" for package in exported)
+    return (f"the {len(exported)} packages exported before still hold their data ({held}): export the "
+            "study again and replace each wherever it was shared")
+
+
 @click.command("withdraw")
 @click.argument("study_dir", metavar="STUDY", type=click.Path())
 @click.argument("participant", metavar="PARTICIPANT", type=Participant())
@@ -71,7 +83,5 @@ def withdraw(study_dir: str, participant: int, reason: str, by: str | None, read
         line = (f"participant {participant} withdrawn: {len(entry['removed'])} file(s) removed, the "
                 f"dataset consolidated without them; audit entry in {audit}")
         if "exported" in entry:
-            line += (f"; the package exported before, {entry['exported']['package']}, still holds their "
-                     f"data as participant {entry['exported']['participant']}: export the study again "
-                     "and replace it wherever it was shared")
+            line += "; " + still_exported(entry["exported"])
     emit(as_json, with_paths(entry, written), [line])

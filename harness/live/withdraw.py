@@ -7,9 +7,9 @@ attempts from the journal, and their label and token from `live/participants.jso
 stays, marked withdrawn, so their index is not reused and a re-run is refused until
 `readmit_participant`); then the dataset is consolidated again without them, and an audit entry
 is appended to `live/withdrawals.jsonl`: who, when, why, every file removed with its SHA-256 and
-size, the SHA-256 of every consolidated table before and after, and, when a package exported
-before holds the participant (`exported_as`), that package and their code in it: the withdrawal
-cannot reach a package already shared, so it says which one to replace.
+size, the SHA-256 of every consolidated table before and after, and, when packages exported
+before hold the participant (`exported_as`), each of those packages and their code in it: the
+withdrawal cannot reach a package already shared, so it says which ones to replace.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from trustroute.core.validation import read_json
 from trustroute.harness.live.answers import answer_rows, write_answer_table
 from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.study.context import study_context
-from trustroute.harness.study.export import KEY_FILE
+from trustroute.harness.study.export import read_export_keys
 from trustroute.harness.study.manifest import consolidate
 from trustroute.harness.study.plan import plan_episodes
 from trustroute.harness.study.replay import study_config_from_manifest
@@ -136,22 +136,14 @@ def declined_refusal(study_dir: Path, participant: int) -> InputError:
     return InputError(str(study_dir), "PARTICIPANT", *declined(participant))
 
 
-def exported_as(study_dir: Path, participant: int) -> dict | None:
-    """{"package", "participant"}: the package `trustroute export` last wrote from this study and the
-    participant's code in it, when it holds them (its key, harness/study/export.py); else None. Their
-    data stay in a package already shared until the study is exported again without them."""
-    path = Path(study_dir) / KEY_FILE
-    if not path.exists():
-        return None
-    fix = "export the study again (trustroute export), which rewrites it"
-    key = read_json(path, "export key", fix=fix)
-    if not isinstance(key, dict):
-        raise InputError(str(path), "", "not an export key", fix)
-    codes, package = key.get("pseudonyms"), key.get("package")
-    if not isinstance(codes, dict) or not isinstance(package, str):
-        raise InputError(str(path), "pseudonyms", "not an export key", fix)
-    code = codes.get(str(participant))
-    return None if code is None else {"package": package, "participant": code}
+def exported_as(study_dir: Path, participant: int) -> list[dict]:
+    """[{"package", "written_utc", "participant"}]: every package `trustroute export` wrote from
+    this study that holds the participant, when it was written and their code in it, as the study's
+    key file says (harness/study/export.py, `read_export_keys`); [] when none does. Their data stay
+    in a package already shared until the study is exported again without them."""
+    return [{"package": entry["package"], "written_utc": entry["written_utc"], "participant": code}
+            for entry in read_export_keys(study_dir)
+            if (code := entry["pseudonyms"].get(str(participant))) is not None]
 
 
 def withdraw_participant(study_dir: Path, participant: int, by: str | None = None, reason: str = "") -> dict:
@@ -193,7 +185,7 @@ def withdraw_participant(study_dir: Path, participant: int, by: str | None = Non
     entry = {"utc": withdrawn_utc,
              "by": by or getpass.getuser(), "participant": participant, "reason": reason,
              "removed": removed, "tables_before": before, "tables_after": table_checksums(study_dir),
-             **({} if exported is None else {"exported": exported})}
+             **({"exported": exported} if exported else {})}
     with (study_dir / LIVE_DIR / AUDIT).open("a", encoding="utf-8") as out:
         out.write(json.dumps(entry) + "\n")
     return entry

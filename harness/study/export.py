@@ -10,8 +10,11 @@ Pseudonyms: each participant number is replaced by a three-digit code drawn with
 from a Generator seeded by the caller, in the `participant` column and in every `episode_id`
 (`p<code, 5 digits>-<spec>-<condition>`; an imported study's ids, such as `d04-t1-aware`, which
 carry the driver's number, are renamed so from the episodes table). The key (original number -> code) is
-written into the study directory (`export-key.json`), never into the package. Nothing of the
-live registry (token digests, labels), the token log or the withdrawal audit is exported.
+written into the study directory (`export-key.json`), never into the package: one entry per package
+(its resolved path, when it was written, the key), so that a withdrawal (harness/live/withdraw.py)
+names every package shared with the participant's data in it, not only the newest; an export to
+the same path again replaces that package's entry. Nothing of the live registry (token digests,
+labels), the token log or the withdrawal audit is exported.
 
 Neither is the order of enrolment or the lab's schedule: every table's rows are sorted by pseudonym
 (a participant's rows in the table's own order), and every wall-clock column becomes the seconds
@@ -50,11 +53,15 @@ from trustroute.core.dataset import (
 )
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text, check_output_dir
+from trustroute.core.validation import read_json
+from trustroute.harness.live.attempts import utc_now
 from trustroute.harness.study.config import LIVE_ENGINE
 from trustroute.harness.study.inputs import relocated_config
 from trustroute.participants.questionnaires import Questionnaire, questionnaire_plan
 
 KEY_FILE = "export-key.json"
+# the key file holds the only way back from the codes of every package shared: never rewritten unread
+KEY_FIX = "restore it from a backup: it holds the key of every package exported from the study"
 TEXTS = {"consent.txt": "live/consent.txt"}   # texts participants were shown: package name <- study path
 QUESTIONNAIRES_TEXT = "questionnaires.json"   # the questionnaires participants answered, where asked
 EPISODE_PARTICIPANT = re.compile(r"^p(\d{5})-")
@@ -197,6 +204,7 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
         raise InputError(str(out), "--out", "the package would be inside the study directory",
                          "pass a directory outside the study")
     shown = questionnaires_shown(manifest, study_dir)   # read before anything is written
+    earlier = read_export_keys(study_dir)
     key = pseudonyms(participants_of(study_dir), rng)
     people = manifest.get("engine") == LIVE_ENGINE
     tables = [name for name, (file_name, _) in TABLES.items() if (study_dir / file_name).exists()]
@@ -231,13 +239,51 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
         atomic_write_text(out / "texts" / QUESTIONNAIRES_TEXT, json.dumps(shown, indent=1), "questionnaires")
         texts.append(QUESTIONNAIRES_TEXT)
     atomic_write_text(out / "README.md", readme(manifest, tables, texts, len(key), ended), "README")
-    atomic_write_text(study_dir / KEY_FILE, json.dumps({"pseudonyms": {str(p): c for p, c in key.items()},
-                                                        "package": str(out.resolve())}, indent=1),
-                      "export key")
+    write_export_keys(study_dir, earlier, out, key)
     files = sorted(path for path in out.rglob("*") if path.is_file())
     sums = "".join(f"{sha256_of(path)}  {path.relative_to(out)}\n" for path in files)
     atomic_write_text(out / "SHA256SUMS", sums, "checksums")
     return {"tables": tables, "texts": texts, "participants": len(key), "files": len(files) + 1}
+
+
+def read_export_keys(study_dir: Path) -> list[dict]:
+    """The packages exported from the study, as its key file holds them: [{"package": its resolved
+    path, "written_utc": when (None for the single-package form's, which did not say), "pseudonyms":
+    {"number": code}}], oldest first; [] before a first export. The single-package form, {"package",
+    "pseudonyms"}, is read as one entry of the list form, {"packages": [...]}; InputError naming the
+    place otherwise."""
+    path = Path(study_dir) / KEY_FILE
+    if not path.exists():
+        return []
+    key = read_json(path, "export key", fix=KEY_FIX)
+    single = isinstance(key, dict) and "packages" not in key   # the form that held one package
+    entries = [key] if single else key.get("packages") if isinstance(key, dict) else None
+    if not isinstance(entries, list):
+        raise InputError(str(path), "packages", "not an export key (a list of the packages exported)",
+                         KEY_FIX)
+    found = []
+    for index, entry in enumerate(entries):
+        place = "" if single else f"packages[{index}]."
+        if not isinstance(entry, dict) or not isinstance(entry.get("package"), str):
+            raise InputError(str(path), f"{place}package", "expected the package's path", KEY_FIX)
+        codes, written = entry.get("pseudonyms"), entry.get("written_utc")
+        if not isinstance(codes, dict) or any(isinstance(code, bool) or not isinstance(code, int)
+                                               for code in codes.values()):
+            raise InputError(str(path), f"{place}pseudonyms", "expected participant number -> code", KEY_FIX)
+        if written is not None and not isinstance(written, str):
+            raise InputError(str(path), f"{place}written_utc", "expected a UTC date-time", KEY_FIX)
+        found.append({"package": entry["package"], "written_utc": written, "pseudonyms": codes})
+    return found
+
+
+def write_export_keys(study_dir: Path, earlier: list[dict], out: Path, key: dict[int, int]) -> None:
+    """Write the study's key file: the `earlier` packages (`read_export_keys`) and the package `out`
+    with its `key`, which replaces an earlier entry of the same path."""
+    package = str(Path(out).resolve())
+    entries = [entry for entry in earlier if entry["package"] != package]
+    entries.append({"package": package, "written_utc": utc_now(),
+                    "pseudonyms": {str(p): code for p, code in key.items()}})
+    atomic_write_text(Path(study_dir) / KEY_FILE, json.dumps({"packages": entries}, indent=1), "export key")
 
 
 def questionnaires_shown(manifest: dict, study_dir: Path) -> dict | None:

@@ -5,6 +5,7 @@ enrolment; the README reports the participant flow."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 
 import numpy as np
@@ -13,9 +14,9 @@ import pyarrow.parquet as pq
 import pytest
 
 import trustroute
-from tests.cli import run_cli
-from tests.export_checks import assert_no_wall_clock, assert_rows_in_code_order
-from trustroute.harness.study.export import pseudonyms
+from tests.cli import assert_one_line_error, run_cli
+from tests.export_checks import assert_no_wall_clock, assert_rows_in_code_order, package_key
+from trustroute.harness.study.export import pseudonyms, read_export_keys
 
 
 @pytest.mark.parametrize(("participants", "low", "high"), [(2, 100, 999), (900, 100, 999),
@@ -52,8 +53,8 @@ def test_a_package_says_nothing_of_the_order_of_enrolment(model_study, tmp_path,
     study = shutil.copytree(model_study, tmp_path / "study")
     code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"), "--seed", "2")
     assert code == 0, err
-    key = json.loads((study / "export-key.json").read_text())["pseudonyms"]
-    codes = [key[str(p)] for p in range(12)]
+    key = package_key(study, tmp_path / "package")
+    codes = [key[p] for p in range(12)]
     assert codes != sorted(codes)   # enrolment order and code order differ: the check below means something
     assert_rows_in_code_order(tmp_path / "package", study)
     assert_no_wall_clock(tmp_path / "package")
@@ -70,8 +71,48 @@ def test_a_package_says_nothing_of_the_order_of_enrolment(model_study, tmp_path,
     assert sorted(seeds[0]) == sorted(seeds[1])
 
 
+def test_each_package_keeps_its_key_and_an_export_to_it_again_replaces_that_key(model_study, tmp_path,
+                                                                                 capsys):
+    """A lab shares one package on OSF and another (another --seed) with a journal: the study's key
+    file keeps the key of each, so that a withdrawal can name both; exporting to the first package's
+    path again replaces its entry only, with the key of what the path now holds."""
+    study = shutil.copytree(model_study, tmp_path / "study")
+    osf, journal = tmp_path / "osf", tmp_path / "journal"
+    for package, seed in ((osf, "2"), (journal, "3"), (osf, "4")):
+        shutil.rmtree(package, ignore_errors=True)
+        code, _, err = run_cli(capsys, "export", str(study), "--out", str(package), "--seed", seed)
+        assert code == 0, err
+    entries = read_export_keys(study)
+    assert [entry["package"] for entry in entries] == [str(journal.resolve()), str(osf.resolve())]
+    assert all(re.fullmatch(r"\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}Z", entry["written_utc"])
+               for entry in entries)
+    for package in (osf, journal):   # each entry is the key of the package at its path
+        assert_rows_in_code_order(package, study)
+    assert package_key(study, osf) != package_key(study, journal)
+    assert not list(osf.rglob("export-key*"))   # the keys stay in the study
+
+
+def test_a_key_file_of_the_single_package_form_is_read_and_kept(model_study, tmp_path, capsys):
+    """A key file written with one package's key ({"package", "pseudonyms"}) is that package's entry:
+    a later export adds its own beside it. A key file that cannot be read refuses the export before
+    anything is written, since writing it again would lose the keys of the packages it holds."""
+    study = shutil.copytree(model_study, tmp_path / "study")
+    shared = str(tmp_path / "shared-before")
+    single = {"pseudonyms": {"0": 417, "1": 902}, "package": shared}
+    (study / "export-key.json").write_text(json.dumps(single))
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
+    assert code == 0, err
+    first, second = read_export_keys(study)
+    assert first == {**single, "written_utc": None}
+    assert second["package"] == str((tmp_path / "package").resolve())
+    (study / "export-key.json").write_text(json.dumps({"packages": [first, {"package": 3}]}))
+    code, out, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "again"))
+    assert_one_line_error(code, err, str(study / "export-key.json"), "packages[1].package",
+                          "restore it from a backup")
+    assert out == "" and not (tmp_path / "again").exists()
+
+
 def test_a_time_that_is_not_a_utc_date_time_is_one_line_and_no_package(model_study, tmp_path, capsys):
-    from tests.cli import assert_one_line_error
     from trustroute.core.dataset import ATTEMPTS_SCHEMA, write_table
 
     study = shutil.copytree(model_study, tmp_path / "study")
@@ -92,7 +133,7 @@ def test_an_imported_study_exports_without_the_drivers_numbers(tmp_path, capsys)
     study = shutil.copytree("analysis/data/real_study/study", tmp_path / "study")
     code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
     assert code == 0, err
-    key = {int(p): c for p, c in json.loads((study / "export-key.json").read_text())["pseudonyms"].items()}
+    key = package_key(study, tmp_path / "package")
     tables = tmp_path / "package" / "tables"
     originals = pq.read_table(study / "episodes.parquet").to_pandas()
     exported = pq.read_table(tables / "episodes.parquet").to_pandas()

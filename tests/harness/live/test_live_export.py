@@ -14,7 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from tests.cli import assert_one_line_error, run_cli
-from tests.export_checks import assert_no_wall_clock, assert_rows_in_code_order
+from tests.export_checks import assert_no_wall_clock, assert_rows_in_code_order, package_key
 from tests.questionnaire_files import COMFORT
 from trustroute.core.codebook import type_name
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
@@ -40,7 +40,7 @@ def check_column(values: list, entry: dict) -> None:
         assert all(v >= 0 for v in present), entry["column"]
 
 
-def check_seconds(package, study_dir, key: dict[str, int]) -> None:
+def check_seconds(package, study_dir, key: dict[int, int]) -> None:
     """The attempts' times are seconds since each participant's first (0), with the study's durations."""
     exported = pq.read_table(package / "tables" / "attempts.parquet").to_pylist()
     study = pq.read_table(study_dir / "attempts.parquet").to_pylist()
@@ -87,9 +87,9 @@ def test_an_exported_live_study_reads_back_against_its_codebook(tmp_path, capsys
         if "episode_id" in data.schema.names:
             episodes = data.column("episode_id").to_pylist()
             assert not any(e.startswith(("p00000-", "p00001-")) for e in episodes)
-    key = json.loads((study_dir / "export-key.json").read_text())["pseudonyms"]
-    assert sorted(key) == ["0", "1"] and len(set(key.values())) == 2
-    assert key["0"] > key["1"]   # seed 5: code order is not enrolment order, so the check below tells
+    key = package_key(study_dir, package)
+    assert sorted(key) == [0, 1] and len(set(key.values())) == 2
+    assert key[0] > key[1]   # seed 5: code order is not enrolment order, so the check below tells
     assert_rows_in_code_order(package, study_dir)
     assert_no_wall_clock(package)
     check_seconds(package, study_dir, key)
@@ -184,6 +184,29 @@ def test_the_readme_counts_a_withdrawal_without_naming_who(tmp_path, capsys):
     assert "asked by mail" not in readme and "p00001" not in readme
     episodes = pq.read_table(package / "tables" / "episodes.parquet")
     assert len(set(episodes.column("participant").to_pylist())) == 1
+
+
+def test_a_withdrawal_names_every_package_that_holds_them_with_their_code_in_each(tmp_path, capsys):
+    """A lab shares one package on OSF and another, of another --seed, with a journal: a withdrawal
+    afterwards names both packages, each with the participant's code in it, in its line and in the
+    audit entry, so that neither keeps the withdrawn person's data unnoticed."""
+    study_dir, _ = drive_two(tmp_path, 2)
+    packages = [tmp_path / "osf", tmp_path / "journal"]
+    for package, seed in zip(packages, ("5", "6"), strict=True):
+        code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package), "--seed", seed)
+        assert code == 0, err
+    held = [(str(package.resolve()), package_key(study_dir, package)[1]) for package in packages]
+    for package, (_, their_code) in zip(packages, held, strict=True):   # the code is theirs there
+        episodes = pq.read_table(package / "tables" / "episodes.parquet").to_pylist()
+        assert {row["episode_id"][:7] for row in episodes if row["participant"] == their_code} == {
+            f"p{their_code:05d}-"}
+    code, out, err = run_cli(capsys, "withdraw", str(study_dir), "1")
+    assert code == 0, err
+    assert "the 2 packages exported before still hold their data (" in out
+    for path, their_code in held:
+        assert f"{path} as participant {their_code}" in out
+    entry = json.loads((study_dir / "live" / "withdrawals.jsonl").read_text())
+    assert [(exported["package"], exported["participant"]) for exported in entry["exported"]] == held
 
 
 def test_the_readme_counts_those_who_declined_without_naming_who(tmp_path, capsys):

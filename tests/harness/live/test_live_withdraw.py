@@ -268,7 +268,8 @@ def test_withdraw_json_is_the_audit_entry_with_the_files_it_wrote(tmp_path, caps
 def test_a_withdrawal_names_the_package_exported_before_that_still_holds_them(tmp_path, capsys):
     """A package written by `trustroute export` before the withdrawal is outside the study, where
     the withdrawal cannot delete their data: the command, and the audit, say which package and the
-    participant's code in it, so the researcher replaces it."""
+    participant's code in it, so the researcher replaces it; a key file of the single-package form
+    ({"package", "pseudonyms"}, no time) is read as that one package's entry."""
     study = _unconsolidated(tmp_path, f"{_attempt(0)}\n{_attempt(1)}\n")
     package = tmp_path / "shared-package"
     (study / "export-key.json").write_text(json.dumps({"pseudonyms": {"0": 417, "1": 902},
@@ -277,10 +278,10 @@ def test_a_withdrawal_names_the_package_exported_before_that_still_holds_them(tm
     assert code == 0, err
     assert f"{package}, still holds their data as participant 902: export the study again" in out
     entry = json.loads((study / "live" / "withdrawals.jsonl").read_text())
-    assert entry["exported"] == {"package": str(package), "participant": 902}
-    (study / "export-key.json").write_text('{"pseudonyms": [1]}')
+    assert entry["exported"] == [{"package": str(package), "written_utc": None, "participant": 902}]
+    (study / "export-key.json").write_text(json.dumps({"pseudonyms": [1], "package": str(package)}))
     code, out, err = run_cli(capsys, "withdraw", str(study), "0")
-    assert_one_line_error(code, err, "export-key.json")
+    assert_one_line_error(code, err, "export-key.json", "pseudonyms", "restore it from a backup")
     assert (study / "parts" / "p00000-phi1-free.zip").exists()   # refused before anything is deleted
 
 
