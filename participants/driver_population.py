@@ -35,8 +35,10 @@ from trustroute.core.fields import (
     ListOf,
     Number,
     OneOf,
+    Seen,
     Text,
     check_fields,
+    check_value,
     field_table,
     keys,
 )
@@ -82,12 +84,13 @@ class DriverPopulation:
         # One rule for a population loaded from a file and one built in code: weights within the
         # tolerance of 1 become a distribution (the Bayes objective and every per-type bound weigh
         # with them), others are refused; so is a weight that is not a finite number > 0 (a NaN
-        # would pass the sum's test, a negative one would weigh a type against the others).
+        # would pass the sum's test, a negative one would weigh a type against the others), checked
+        # by the file's own field (a bool, a string or None is refused as there, a numpy number or a
+        # Fraction taken as its float).
         where = self.source_path or "<driver population>"
-        weights = [t.weight for t in self.types]
-        for index, weight in enumerate(weights):
-            if not (math.isfinite(weight) and weight > 0):
-                raise InputError(where, f"types[{index}].weight", not_a_weight(weight), WEIGHT_FIX)
+        weights = [check_value(t.weight, WEIGHT_KIND, where, f"types[{index}].weight", WEIGHT.problem,
+                               WEIGHT.fix, Seen(WEIGHT.key, t.weight))
+                   for index, t in enumerate(self.types)]
         total = math.fsum(weights)
         if abs(total - 1.0) > WEIGHT_TOLERANCE:
             raise InputError(where, "types",
@@ -178,22 +181,18 @@ FIELDS = field_table(
 )
 POPULATION_KEYS: tuple[str, ...] = keys(FIELDS)
 _NAME_AND_WEIGHT = "give every type a name and a prior weight"
-WEIGHT_FIX = "give a prior weight > 0 (the weights sum to 1)"
-
-
-def not_a_weight(value: object) -> str:
-    """The refusal of a type's weight that is not a finite number > 0."""
-    return f"{value!r} is not a positive number"
-
-
+# a type's prior weight, in a file and in a population built in code (`DriverPopulation`)
+WEIGHT_KIND = Number(minimum=0.0, open_below=True)
+WEIGHT = Field(key="weight", kind=WEIGHT_KIND, required=True,
+               problem=lambda seen: f"{seen.value!r} is not a positive number",
+               fix="give a prior weight > 0 (the weights sum to 1)", missing_fix=_NAME_AND_WEIGHT)
 TYPE_FIELDS = field_table(
     TypeValues,
     Field(key="name", kind=Text(pattern=TYPE_NAME), required=True,
           problem=lambda seen: f"{str(seen.value)[:60]!r} is not a type name",
           fix="use letters, digits, '_' or '-' (at most 64, starting with a letter or '_')",
           missing_fix=_NAME_AND_WEIGHT),
-    Field(key="weight", kind=Number(minimum=0.0, open_below=True), required=True,
-          problem=lambda seen: not_a_weight(seen.value), fix=WEIGHT_FIX, missing_fix=_NAME_AND_WEIGHT),
+    WEIGHT,
     Field(key="model", kind=Anything()),  # a driver model document (participants/driver_model.py)
     Field(key="model_file", kind=Text(pattern=re.compile(r"[^\x00]+")), problem="expected a file path",
           fix="name the driver model file relative to this population file"),

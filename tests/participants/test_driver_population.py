@@ -273,6 +273,37 @@ def test_a_population_built_in_code_refuses_the_weights_a_file_may_not_hold(weig
                                                                                    said.fix)
 
 
+@pytest.mark.parametrize("weight", [True, "1", None])
+def test_a_weight_that_is_no_number_is_refused_in_code_with_the_files_line(weight):
+    """A bool, a string or None as a weight in code is the one-line refusal the file gives (not a
+    TypeError, and True is no weight of 1)."""
+    data = example()
+    data["types"] = [{**data["types"][0], "weight": 1.0}]
+    model = driver_population_from_dict(data).types[0].model
+    with pytest.raises(InputError) as refused:
+        DriverPopulation((DriverType("nominal", weight, model),))
+    data["types"][0]["weight"] = weight
+    with pytest.raises(InputError) as refused_loaded:
+        driver_population_from_dict(data)
+    said, given = refused_loaded.value, refused.value
+    assert (given.place, given.problem, given.fix) == (said.place, said.problem, said.fix)
+
+
+def test_a_numpy_or_fraction_weight_is_its_float():
+    """A weight a script computed (numpy, fractions) is the float a file gives: the same weights,
+    the same hash, a float in the file written."""
+    from fractions import Fraction
+
+    types = driver_population_from_dict(example()).types
+    given = [Fraction(1, 2), np.float32(0.25), np.float64(0.25)][:len(types)]
+    built = DriverPopulation(tuple(DriverType(t.name, w, t.model) for t, w in zip(types, given, strict=True)))
+    plain = DriverPopulation(tuple(DriverType(t.name, float(w), t.model)
+                                   for t, w in zip(types, given, strict=True)))
+    assert [type(t.weight) for t in built.types] == [float] * len(types)
+    assert built.content_hash == plain.content_hash
+    assert json.dumps(built.to_dict()) == json.dumps(plain.to_dict())
+
+
 def test_a_driver_model_and_a_population_given_for_each_other_say_which_they_are(tmp_path, capsys):
     """The natural mix-up (a fitted driver.json as --population, a fitted population as --driver):
     one line saying what the file is and where it goes, not the other format's first unknown key."""
