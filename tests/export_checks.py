@@ -25,8 +25,9 @@ def row_codes(table: pa.Table) -> list[int]:
 
 
 def package_key(study_dir: Path, package: Path) -> dict[int, int]:
-    """The key (participant number -> code) of `package`, as the study's key file holds it."""
-    (entry,) = [entry for entry in read_export_keys(study_dir) if entry["package"] == str(package.resolve())]
+    """The key (participant number -> code) of `package`, as the study's key file holds it: the
+    newest entry of its path, the package the path holds now."""
+    entry = [entry for entry in read_export_keys(study_dir) if entry["package"] == str(package.resolve())][-1]
     return {int(p): code for p, code in entry["pseudonyms"].items()}
 
 

@@ -36,14 +36,22 @@ class Participant(click.ParamType):
 
 def still_exported(exported: list[dict]) -> str:
     """What the withdrawal's line says of the packages exported before that hold the participant
-    (harness/live/withdraw.py, `exported_as`): each one and their code in it, to be replaced."""
+    (harness/live/withdraw.py, `exported_as`): each one and their code in it, to be replaced; each
+    with when it was written, where known, since two packages written to one path have two keys."""
     if len(exported) == 1:
-        return (f"the package exported before, {exported[0]['package']}, still holds their data as "
+        return (f"the package exported before, {package_named(exported[0])}, still holds their data as "
                 f"participant {exported[0]['participant']}: export the study again and replace it "
                 "wherever it was shared")
-    held = ", ".join(f"{package['package']} as participant {package['participant']}" for package in exported)
+    held = ", ".join(f"{package_named(package)} as participant {package['participant']}"
+                     for package in exported)
     return (f"the {len(exported)} packages exported before still hold their data ({held}): export the "
             "study again and replace each wherever it was shared")
+
+
+def package_named(exported: dict) -> str:
+    """An exported package in the withdrawal's line: its path, and when it was written where known."""
+    written = exported["written_utc"]
+    return exported["package"] if written is None else f"{exported['package']} (written {written})"
 
 
 @click.command("withdraw")

@@ -10,11 +10,12 @@ Pseudonyms: each participant number is replaced by a three-digit code drawn with
 from a Generator seeded by the caller, in the `participant` column and in every `episode_id`
 (`p<code, 5 digits>-<spec>-<condition>`; an imported study's ids, such as `d04-t1-aware`, which
 carry the driver's number, are renamed so from the episodes table). The key (original number -> code) is
-written into the study directory (`export-key.json`), never into the package: one entry per package
-(its resolved path, when it was written, the key), so that a withdrawal (harness/live/withdraw.py)
-names every package shared with the participant's data in it, not only the newest; an export to
-the same path again replaces that package's entry. Nothing of the live registry (token digests,
-labels), the token log or the withdrawal audit is exported.
+written into the study directory (`export-key.json`), never into the package: one entry per
+package written (its resolved path, when it was written, the key), so that a withdrawal
+(harness/live/withdraw.py) names every package shared with the participant's data in it, not only
+the newest; an export to the same path again replaces that path's entry only when the key is the
+same (an earlier package there, of another key, may have been shared before the path was emptied).
+Nothing of the live registry (token digests, labels), the token log or the withdrawal audit is exported.
 
 Neither is the order of enrolment or the lab's schedule: every table's rows are sorted by pseudonym
 (a participant's rows in the table's own order), and every wall-clock column becomes the seconds
@@ -278,11 +279,13 @@ def read_export_keys(study_dir: Path) -> list[dict]:
 
 def write_export_keys(study_dir: Path, earlier: list[dict], out: Path, key: dict[int, int]) -> None:
     """Write the study's key file: the `earlier` packages (`read_export_keys`) and the package `out`
-    with its `key`, which replaces an earlier entry of the same path."""
+    with its `key`, which replaces an earlier entry of the same path only where that entry's key is
+    the same: a package written there before with another key may have been shared, moved or
+    copied before the path was emptied for this one, and its key is the only way back from its codes."""
     package = str(Path(out).resolve())
-    entries = [entry for entry in earlier if entry["package"] != package]
-    entries.append({"package": package, "written_utc": utc_now(),
-                    "pseudonyms": {str(p): code for p, code in key.items()}})
+    codes = {str(p): code for p, code in key.items()}
+    entries = [entry for entry in earlier if (entry["package"], entry["pseudonyms"]) != (package, codes)]
+    entries.append({"package": package, "written_utc": utc_now(), "pseudonyms": codes})
     atomic_write_text(Path(study_dir) / KEY_FILE, json.dumps({"packages": entries}, indent=1), "export key")
 
 

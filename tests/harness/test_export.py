@@ -71,22 +71,26 @@ def test_a_package_says_nothing_of_the_order_of_enrolment(model_study, tmp_path,
     assert sorted(seeds[0]) == sorted(seeds[1])
 
 
-def test_each_package_keeps_its_key_and_an_export_to_it_again_replaces_that_key(model_study, tmp_path,
-                                                                                 capsys):
+def test_each_package_keeps_its_key_and_a_key_is_never_dropped(model_study, tmp_path, capsys):
     """A lab shares one package on OSF and another (another --seed) with a journal: the study's key
-    file keeps the key of each, so that a withdrawal can name both; exporting to the first package's
-    path again replaces its entry only, with the key of what the path now holds."""
+    file keeps the key of each, so that a withdrawal can name both. Emptying the OSF package's
+    folder and exporting there again with another key keeps the first key (that package may have
+    been shared, moved or copied); exporting there again with the same key replaces its entry."""
     study = shutil.copytree(model_study, tmp_path / "study")
     osf, journal = tmp_path / "osf", tmp_path / "journal"
-    for package, seed in ((osf, "2"), (journal, "3"), (osf, "4")):
+    first: dict[int, int] = {}
+    for package, seed in ((osf, "2"), (journal, "3"), (osf, "4"), (osf, "4")):
         shutil.rmtree(package, ignore_errors=True)
         code, _, err = run_cli(capsys, "export", str(study), "--out", str(package), "--seed", seed)
         assert code == 0, err
+        first = first or package_key(study, osf)   # the key of the package first shared on OSF
     entries = read_export_keys(study)
-    assert [entry["package"] for entry in entries] == [str(journal.resolve()), str(osf.resolve())]
+    assert [entry["package"] for entry in entries] == [str(p.resolve()) for p in (osf, journal, osf)]
     assert all(re.fullmatch(r"\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}Z", entry["written_utc"])
                for entry in entries)
-    for package in (osf, journal):   # each entry is the key of the package at its path
+    seed_2 = {int(p): code for p, code in entries[0]["pseudonyms"].items()}
+    assert seed_2 == first != package_key(study, osf)   # the first OSF package's key is kept
+    for package in (osf, journal):   # the newest entry of each path is the key of its package
         assert_rows_in_code_order(package, study)
     assert package_key(study, osf) != package_key(study, journal)
     assert not list(osf.rglob("export-key*"))   # the keys stay in the study

@@ -19,6 +19,7 @@ from tests.questionnaire_files import COMFORT
 from trustroute.core.codebook import type_name
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
 from trustroute.harness.live.server import DEFAULT_CONSENT, LiveStudy, ServerOptions
+from trustroute.harness.study.export import read_export_keys
 
 from .conftest import TINY, serving, tiny_config
 
@@ -203,8 +204,9 @@ def test_a_withdrawal_names_every_package_that_holds_them_with_their_code_in_eac
     code, out, err = run_cli(capsys, "withdraw", str(study_dir), "1")
     assert code == 0, err
     assert "the 2 packages exported before still hold their data (" in out
+    written = {entry["package"]: entry["written_utc"] for entry in read_export_keys(study_dir)}
     for path, their_code in held:
-        assert f"{path} as participant {their_code}" in out
+        assert f"{path} (written {written[path]}) as participant {their_code}" in out
     entry = json.loads((study_dir / "live" / "withdrawals.jsonl").read_text())
     assert [(exported["package"], exported["participant"]) for exported in entry["exported"]] == held
 
