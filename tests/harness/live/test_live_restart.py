@@ -10,6 +10,7 @@ import subprocess
 import threading
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import httpx
 import pytest
@@ -84,7 +85,22 @@ def drive_into_the_second_trial(config, address: str, token: str, first: str) ->
             time.sleep(0.05)
 
 
-def test_sigkill_mid_episode_then_restart_continues_at_the_interrupted_trial(tmp_path):
+class Signalled(NamedTuple):
+    """A study whose server got a signal mid-drive (`signalled_in_the_second_trial`)."""
+
+    config: object
+    study_dir: Path
+    first: object        # the trial that was done (an EpisodeTask)
+    second: object       # the trial that was driven when the signal came
+    participant: str     # the participant's token
+    printed: str         # what the server printed
+    returncode: int
+
+
+def signalled_in_the_second_trial(tmp_path: Path, sent: signal.Signals) -> Signalled:
+    """A served study of one participant and two trials, sent `sent` while its participant drives
+    the second: once its episode processes (which die with their server) and the participant's
+    thread have ended, the first trial's part is kept and the second's was never written."""
     config = tiny_config(tmp_path, participants=1, specs=("phi1", "phi2"))
     study_dir = tmp_path / "study"
     first, second = sorted(plan_episodes(config), key=lambda t: t.position)
@@ -93,19 +109,25 @@ def test_sigkill_mid_episode_then_restart_continues_at_the_interrupted_trial(tmp
         participant, player = drive_into_the_second_trial(config, address, token, first.episode_id)
         workers = descendants(server.pid)
         assert len(workers) > len(children(server.pid)), "the episode runs in a process of its own"
-        server.send_signal(signal.SIGKILL)
-        server.wait(10)
+        server.send_signal(sent)
+        printed, _ = server.communicate(timeout=60)
     finally:
         if server.poll() is None:
             server.kill()
-    deadline = time.monotonic() + 10
-    while any(alive(pid) for pid in workers):   # the episode process dies with its server
+            server.wait()
+    deadline = time.monotonic() + 10   # the fork server sees its server gone a moment later
+    while any(alive(pid) for pid in workers):
         assert time.monotonic() < deadline, "an episode process outlived its server"
         time.sleep(0.05)
     player.join(30)
     assert part_path(study_dir, first.episode_id).exists()
     assert not part_path(study_dir, second.episode_id).exists()
+    return Signalled(config, study_dir, first, second, participant, printed, server.returncode)
 
+
+def test_sigkill_mid_episode_then_restart_continues_at_the_interrupted_trial(tmp_path):
+    killed = signalled_in_the_second_trial(tmp_path, signal.SIGKILL)
+    config, study_dir, first, second, participant = killed[:5]
     server, address, token = start_server(config.source_path, study_dir, pace=1000.0)
     try:
         progress = httpx.get(f"http://{address}/api/participants/0",
@@ -128,29 +150,10 @@ def test_sigterm_mid_episode_closes_the_study_with_the_interrupted_line(tmp_path
     interrupted line, no traceback), its episode processes end, and what was written stays."""
     from trustroute.harness.cli import interrupted_line
 
-    config = tiny_config(tmp_path, participants=1, specs=("phi1", "phi2"))
-    study_dir = tmp_path / "study"
-    first, second = sorted(plan_episodes(config), key=lambda t: t.position)
-    server, address, token = start_server(config.source_path, study_dir, pace=10.0)
-    try:
-        _, player = drive_into_the_second_trial(config, address, token, first.episode_id)
-        workers = descendants(server.pid)
-        server.send_signal(signal.SIGTERM)
-        printed, _ = server.communicate(timeout=60)
-    finally:
-        if server.poll() is None:
-            server.kill()
-            server.wait()
-    assert server.returncode == 130 and "Traceback" not in printed, printed
-    assert printed.splitlines()[-1] == interrupted_line("live"), printed
-    deadline = time.monotonic() + 5   # the fork server sees its server gone a moment later
-    while any(alive(pid) for pid in workers):
-        assert time.monotonic() < deadline, "an episode process outlived its server"
-        time.sleep(0.05)
-    player.join(30)
-    assert part_path(study_dir, first.episode_id).exists()
-    assert not part_path(study_dir, second.episode_id).exists()
-    assert (study_dir / LIVE_DIR / PARTICIPANTS_FILE).exists()
+    ended = signalled_in_the_second_trial(tmp_path, signal.SIGTERM)
+    assert ended.returncode == 130 and "Traceback" not in ended.printed, ended.printed
+    assert ended.printed.splitlines()[-1] == interrupted_line("live"), ended.printed
+    assert (ended.study_dir / LIVE_DIR / PARTICIPANTS_FILE).exists()
 
 
 def test_sigterm_while_the_study_opens_leaves_its_directory_free(tmp_path, monkeypatch):
