@@ -43,13 +43,12 @@ def _problem(spec_name: str, town_name: str):
 
 def _child(spec_name: str, town_name: str, horizon: int | None) -> dict:
     """Runs in the subprocess: one synthesis, its numbers and the process's peak RSS."""
-    import resource
-
+    from benchmarks.timing import peak_rss_mb
     from trustroute.policies.synthesis.belief_synthesis import synthesize
 
     _, pomdp, spec = _problem(spec_name, town_name)
     result = synthesize(pomdp, spec, SynthesisSettings(tau=TAU, time_limit=TIME_LIMIT, horizon=horizon))
-    rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    rss_mb = peak_rss_mb()
     return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb}
 
 

@@ -12,11 +12,10 @@ table goes to stderr, one JSON line per problem to stdout.
 
 from __future__ import annotations
 
-import multiprocessing
-import resource
 import sys
 import time
 
+from benchmarks.timing import in_spawned_process, peak_rss_mb
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 OUR_TAU = 1e-3
@@ -50,10 +49,6 @@ def problem(town_kind: str, paper_spec: str | None):
     return build_pomdp(town, load_driver_model()), spec
 
 
-def _peak_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-
-
 def _ours(queue, town_kind: str, paper_spec: str | None, horizon: int | None) -> None:
     from trustroute.policies.synthesize_spec import synthesize_spec
 
@@ -62,7 +57,7 @@ def _ours(queue, town_kind: str, paper_spec: str | None, horizon: int | None) ->
     result = synthesize_spec(pomdp, spec,
                              SynthesisSettings(tau=OUR_TAU, time_limit=OUR_TIME_LIMIT, horizon=horizon))
     queue.put({"lower": result.lower, "upper": result.upper, "seconds": time.perf_counter() - started,
-               "peak_rss_mb": _peak_mb()})
+               "peak_rss_mb": peak_rss_mb()})
 
 
 def _storm(queue, town_kind: str, paper_spec: str | None, horizon: int | None) -> None:
@@ -79,7 +74,7 @@ def _storm(queue, town_kind: str, paper_spec: str | None, horizon: int | None) -
         return
     result = run_storm(product, time_limit=STORM_TIME_LIMIT, resolution=STORM_RESOLUTION)
     queue.put({"lower": result.lower, "upper": result.upper, "product_states": product.n_states,
-               "seconds": time.perf_counter() - started, "peak_rss_mb": _peak_mb()})
+               "seconds": time.perf_counter() - started, "peak_rss_mb": peak_rss_mb()})
 
 
 def _paynt(queue, town_kind: str, paper_spec: str | None, horizon: int | None) -> None:
@@ -95,17 +90,7 @@ def _paynt(queue, town_kind: str, paper_spec: str | None, horizon: int | None) -
         queue.put({"cannot_express": exc.problem})
         return
     queue.put({"value": result.value, "memory_nodes": result.memory_nodes,
-               "seconds": time.perf_counter() - started, "peak_rss_mb": _peak_mb()})
-
-
-def in_process(target, *args) -> dict:
-    context = multiprocessing.get_context("spawn")
-    queue = context.Queue()
-    process = context.Process(target=target, args=(queue, *args))
-    process.start()
-    result = queue.get()
-    process.join()
-    return result
+               "seconds": time.perf_counter() - started, "peak_rss_mb": peak_rss_mb()})
 
 
 def _ratio(ours: dict, peer: dict, key: str) -> float | None:
@@ -130,9 +115,9 @@ def run() -> list[dict]:
     rows = []
     for name, town_kind, paper_spec, horizon in PROBLEMS:
         args = (town_kind, paper_spec, horizon)
-        ours = in_process(_ours, *args)
-        storm = in_process(_storm, *args) if storm_available() else {"skipped": "stormpy absent"}
-        paynt = in_process(_paynt, *args) if paynt_available() else {"skipped": "paynt absent"}
+        ours = in_spawned_process(_ours, *args)
+        storm = in_spawned_process(_storm, *args) if storm_available() else {"skipped": "stormpy absent"}
+        paynt = in_spawned_process(_paynt, *args) if paynt_available() else {"skipped": "paynt absent"}
         rows.append({"name": f"peers_{name}", "horizon": horizon, "ours": ours, "storm": storm,
                      "paynt": paynt,
                      "time_ratio_ours_over_storm": _ratio(ours, storm, "seconds"),

@@ -4,17 +4,17 @@ then the same task shape on grid towns of 25 and 50 junctions (incidents drawn w
 Bounded objective with a step counter (H = 20 junctions, as in docs/trust_states.md). Ours is the
 synthesis `trustroute synth` runs (policies/trust_state_synthesis/synthesis.py): its lower
 bound is the exact value of the policy it returns, its upper bound the search's. Each side
-runs in its own spawned process so that its peak resident memory (ru_maxrss, which includes
-Storm's C++ heap) is its own. Reports both bounds, both times, the memory, and ratios ours/Storm
-measured in this run. Skipped (one line saying so) when the optional `[peer]` extra is absent.
+runs in its own spawned process so that its peak resident memory (benchmarks/timing.py
+peak_rss_mb, which includes Storm's C++ heap) is its own. Reports both bounds, both times, the
+memory, and ratios ours/Storm measured in this run. Skipped (one line saying so) when the
+optional `[peer]` extra is absent.
 """
 
 from __future__ import annotations
 
-import multiprocessing
-import resource
 import time
 
+from benchmarks.timing import in_spawned_process, peak_rss_mb
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 HORIZON = 20
@@ -93,7 +93,7 @@ def _storm(queue, town_kind: str) -> None:
                + result.upper_seconds, "lower_seconds": result.lower_seconds,
                "upper_seconds": result.upper_seconds, "lower_beliefs": result.lower_beliefs,
                "lower_complete": result.lower_complete,
-               "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024})
+               "peak_rss_mb": peak_rss_mb()})
 
 
 def _ours(queue, town_kind: str) -> None:
@@ -109,17 +109,7 @@ def _ours(queue, town_kind: str) -> None:
                "search_lower": result.stats.search_lower, "policy_rows": result.stats.policy_rows,
                "max_nodes_per_level": last.max_nodes, "nodes": last.bounds.nodes,
                "cut_nodes": last.bounds.cut_nodes, "seconds": time.perf_counter() - started,
-               "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024})
-
-
-def _in_process(target, town_kind: str) -> dict:
-    context = multiprocessing.get_context("spawn")
-    queue = context.Queue()
-    process = context.Process(target=target, args=(queue, town_kind))
-    process.start()
-    result = queue.get()
-    process.join()
-    return result
+               "peak_rss_mb": peak_rss_mb()})
 
 
 def run(town_kinds: tuple[str, ...] = ("paper", "grid25", "grid50")) -> list[dict]:
@@ -129,8 +119,8 @@ def run(town_kinds: tuple[str, ...] = ("paper", "grid25", "grid50")) -> list[dic
         return [{"name": "storm_vs_ours", "skipped": "stormpy absent: pip install -e '.[peer]'"}]
     results = []
     for kind in town_kinds:
-        storm = _in_process(_storm, kind)
-        ours = _in_process(_ours, kind)
+        storm = in_spawned_process(_storm, kind)
+        ours = in_spawned_process(_ours, kind)
         results.append({
             "name": f"storm_vs_ours_{kind}_phi1_trust_h{HORIZON}", "horizon": HORIZON, "storm": storm,
             "ours": ours, "storm_gap": storm["upper"] - storm["lower"],

@@ -85,13 +85,12 @@ def grid_or_paper_problem(junctions: int, waypoints: int, paper_spec: str | None
 
 def _child(junctions: int, waypoints: int, horizon: int | None, paper_spec: str | None) -> dict:
     """Runs in the subprocess: one synthesis, its numbers and the process's peak RSS."""
-    import resource
-
+    from benchmarks.timing import peak_rss_mb
     from trustroute.policies.synthesis.belief_synthesis import synthesize
 
     pomdp, spec = grid_or_paper_problem(junctions, waypoints, paper_spec)
     result = synthesize(pomdp, spec, SynthesisSettings(tau=TAU, time_limit=TIME_LIMIT, horizon=horizon))
-    rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    rss_mb = peak_rss_mb()
     last = result.stats.runs[-1]
     return {"lower": result.lower, "upper": result.upper, "seconds": result.seconds, "rss_mb": rss_mb,
             "nodes": last.nodes, "completion_closed": last.completion_closed}

@@ -7,6 +7,8 @@ median by one rank only), with the load average beside it. `TimingProcess`: a fu
 timed in a process of its own (`ForkedCalls`: any function called in one), for a pair whose
 members cannot share one (libsumo runs one simulation per process: an episode that keeps its
 simulation open between runs, against a bare loop that starts and closes its own).
+`peak_rss_mb`: this process's own peak resident memory, and `in_spawned_process`: a function run in
+a spawned process of its own, for a figure that must be that process's alone.
 """
 
 from __future__ import annotations
@@ -20,6 +22,30 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from types import TracebackType
 from typing import Any, Self
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory (MB): the high-water mark of its own address space
+    (`VmHWM`, which an exec starts afresh). Not `ru_maxrss`: Linux keeps that across an exec, so a
+    process started from a large one (`multiprocessing`'s spawn, `subprocess`) would report at
+    least its parent's resident memory at the fork."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    raise RuntimeError("/proc/self/status has no VmHWM line: peak memory needs Linux")
+
+
+def in_spawned_process(target: Callable[..., None], *arguments: object) -> Any:
+    """`target(queue, *arguments)` in a spawned process (no state of this one, its peak memory its
+    own); what it puts on the queue."""
+    context = multiprocessing.get_context("spawn")
+    queue = context.Queue()
+    process = context.Process(target=target, args=(queue, *arguments))
+    process.start()
+    result = queue.get()
+    process.join()
+    return result
 
 
 def best_seconds(function: Callable[[], object], repeats: int = 5) -> float:
