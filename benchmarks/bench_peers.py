@@ -6,12 +6,14 @@ grid of benchmarks/bench_synthesis_scaling.py (5 waypoint sets, H = 40). Ours is
 synth` (policies/synthesize_spec.py: L the returned policy's exact value, U the search's); Storm
 gives [lower, upper] (belief unfolding, discretisation); PAYNT the value of its best finite-state
 controller (a lower bound). Each side runs in its own spawned process, so its peak resident
-memory is its own. Where a peer cannot express a problem (belief atoms), the row says so. The
-table goes to stderr, one JSON line per problem to stdout.
+memory is its own, and carries the 1-minute load average at its start. Where a peer cannot express
+a problem (belief atoms), the row says so. The table goes to stderr, one JSON line per problem to
+stdout.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 
@@ -104,20 +106,31 @@ def _cell(side: dict) -> str:
         return "cannot express: belief atoms"
     if "value" in side:
         value = "none found" if side["value"] is None else f"{side['value']:.5f} (lower)"
-        return f"{value} k<={side['memory_nodes']} {side['seconds']:.0f} s {side['peak_rss_mb']:.0f} MB"
-    return f"[{side['lower']:.5f}, {side['upper']:.5f}] {side['seconds']:.1f} s {side['peak_rss_mb']:.0f} MB"
+        return (f"{value} k<={side['memory_nodes']} {side['seconds']:.0f} s {side['peak_rss_mb']:.0f} MB"
+                f" load {side['load_average_1min']:.1f}")
+    return (f"[{side['lower']:.5f}, {side['upper']:.5f}] {side['seconds']:.1f} s {side['peak_rss_mb']:.0f} MB"
+            f" load {side['load_average_1min']:.1f}")
 
 
-def run() -> list[dict]:
+def _side(target, args: tuple, available: bool, absent: str) -> dict:
+    """One side of a row in its own spawned process, with the 1-minute load average at its start
+    (the machine is shared: above 2 on its 2 cores, wall time includes the wait for a core)."""
+    if not available:
+        return {"skipped": absent}
+    load = os.getloadavg()[0]
+    return {**in_spawned_process(target, *args), "load_average_1min": load}
+
+
+def run(problems: tuple[tuple[str, str, str | None, int | None], ...] = PROBLEMS) -> list[dict]:
     from trustroute.policies.peer.paynt import paynt_available
     from trustroute.policies.peer.storm import storm_available
 
     rows = []
-    for name, town_kind, paper_spec, horizon in PROBLEMS:
+    for name, town_kind, paper_spec, horizon in problems:
         args = (town_kind, paper_spec, horizon)
-        ours = in_spawned_process(_ours, *args)
-        storm = in_spawned_process(_storm, *args) if storm_available() else {"skipped": "stormpy absent"}
-        paynt = in_spawned_process(_paynt, *args) if paynt_available() else {"skipped": "paynt absent"}
+        ours = _side(_ours, args, True, "")
+        storm = _side(_storm, args, storm_available(), "stormpy absent")
+        paynt = _side(_paynt, args, paynt_available(), "paynt absent")
         rows.append({"name": f"peers_{name}", "horizon": horizon, "ours": ours, "storm": storm,
                      "paynt": paynt,
                      "time_ratio_ours_over_storm": _ratio(ours, storm, "seconds"),
