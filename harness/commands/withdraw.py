@@ -34,26 +34,6 @@ class Participant(click.ParamType):
         return int(match.group(1))
 
 
-def still_exported(exported: list[dict]) -> str:
-    """What the withdrawal's line says of the packages exported before that hold the participant
-    (harness/live/withdraw.py, `exported_as`): each one and their code in it, to be replaced; each
-    with when it was written, where known, since two packages written to one path have two keys."""
-    if len(exported) == 1:
-        return (f"the package exported before, {package_named(exported[0])}, still holds their data as "
-                f"participant {exported[0]['participant']}: export the study again and replace it "
-                "wherever it was shared")
-    held = ", ".join(f"{package_named(package)} as participant {package['participant']}"
-                     for package in exported)
-    return (f"the {len(exported)} packages exported before still hold their data ({held}): export the "
-            "study again and replace each wherever it was shared")
-
-
-def package_named(exported: dict) -> str:
-    """An exported package in the withdrawal's line: its path, and when it was written where known."""
-    written = exported["written_utc"]
-    return exported["package"] if written is None else f"{exported['package']} (written {written})"
-
-
 @click.command("withdraw")
 @click.argument("study_dir", metavar="STUDY", type=click.Path())
 @click.argument("participant", metavar="PARTICIPANT", type=Participant())
@@ -73,6 +53,7 @@ def withdraw(study_dir: str, participant: int, reason: str, by: str | None, read
         REGISTRY,
         readmit_participant,
         withdraw_participant,
+        withdrawal_line,
     )
     from trustroute.harness.study.runner import study_lock
 
@@ -85,11 +66,6 @@ def withdraw(study_dir: str, participant: int, reason: str, by: str | None, read
     audit = path / LIVE_DIR / AUDIT
     # the audit entry appended, the registry rewritten; a withdrawal also consolidates the tables again
     written = {"audit": audit, "registry": path / LIVE_DIR / REGISTRY, "study": None if readmit else path}
-    if readmit:
-        line = f"participant {participant} readmitted (a new link from the console lets them in)"
-    else:
-        line = (f"participant {participant} withdrawn: {len(entry['removed'])} file(s) removed, the "
-                f"dataset consolidated without them; audit entry in {audit}")
-        if "exported" in entry:
-            line += "; " + still_exported(entry["exported"])
+    line = (f"participant {participant} readmitted (a new link from the console lets them in)" if readmit
+            else withdrawal_line(path, entry))
     emit(as_json, with_paths(entry, written), [line])

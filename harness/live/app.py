@@ -20,7 +20,8 @@ state-changing request and websocket handshake its Origin (harness/live/guard.py
     POST /api/participants/{p}/control experimenter: pause, resume or abort p's episode
     POST /api/participants/{p}/link    experimenter: a new link for p (the old token revoked; one
                                        who declined is asked for their consent again)
-    POST /api/participants/{p}/withdraw experimenter: p's data deleted (harness/live/withdraw.py)
+    POST /api/participants/{p}/withdraw experimenter: p's data deleted (harness/live/withdraw.py);
+                                       the packages exported before that still hold p named
     GET  /api/files                    experimenter: the study directory's files
     GET  /api/download/{path}          experimenter: one file, inside the study directory only
     WS   /ws                           participant: the protocol of harness/live/protocol.py
@@ -79,6 +80,7 @@ from trustroute.harness.live.protocol import (
 )
 from trustroute.harness.live.server import LiveStudy
 from trustroute.harness.live.session import Session
+from trustroute.harness.live.withdraw import withdrawal_line
 
 PAGES = Path(__file__).with_name("pages")
 # The driver's view renders with three.js, shipped in pages/vendor/ with its licence (pinned:
@@ -389,7 +391,9 @@ def new_link(request: Request, participant: int) -> dict:
 @router.post("/api/participants/{participant}/withdraw", dependencies=[Depends(experimenter)])
 def withdraw(request: Request, participant: int, body: Withdrawal) -> dict:
     """Withdraw `participant`: their data deleted, the dataset consolidated without them, the
-    deletion audited (harness/live/withdraw.py); their open station closed."""
+    deletion audited (harness/live/withdraw.py); their open station closed. The answer names the
+    packages exported before that still hold them (the audit's `exported`) and carries the line
+    `trustroute withdraw` prints, which the console shows."""
     study = study_of(request)
     session_of(request, participant)
     try:
@@ -397,7 +401,8 @@ def withdraw(request: Request, participant: int, body: Withdrawal) -> dict:
     except ValueError as exc:
         raise refused(409, "out_of_order", str(exc)) from None
     revoke_stale(request, participant, "withdrawn", "withdrawn from the study")
-    return {"participant": participant, "removed": len(entry["removed"]), "utc": entry["utc"]}
+    return {"participant": participant, "removed": len(entry["removed"]), "utc": entry["utc"],
+            "exported": entry.get("exported", []), "line": withdrawal_line(study.study_dir, entry)}
 
 
 @router.get("/api/files", dependencies=[Depends(experimenter)])

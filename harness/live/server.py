@@ -38,6 +38,7 @@ from trustroute.harness.live.session import Session, console_refusal
 from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study seed, (4, participant))
 from trustroute.harness.live.withdraw import (
     ENDED,
+    exported_as,
     load_registry,
     read_registry,
     withdraw_participant,
@@ -288,7 +289,8 @@ class LiveStudy:
     def withdraw(self, participant: int, reason: str = "") -> dict:
         """The experimenter withdraws `participant` (harness/live/withdraw.py): their episode
         stopped, their data removed and the dataset consolidated without them; the audit entry.
-        ValueError when there is no such participant or they have withdrawn already."""
+        ValueError when there is no such participant or they have withdrawn already, or (one line,
+        the participant left as they were) when the study's export key cannot be read."""
         session = self.sessions.get(participant)
         refusal = f"participant {participant} does not exist or has withdrawn already"
         if session is None:
@@ -298,6 +300,10 @@ class LiveStudy:
             refused = console_refusal(participant, session.console_phase(), "withdraw")
             if refused is not None:
                 raise ValueError(refused)
+            try:   # the key file checked before the session ends: one that cannot be read leaves it
+                exported_as(self.study_dir, participant)   # (read again by the withdrawal, as it is then)
+            except InputError as exc:
+                raise ValueError(exc.one_line()) from None
             session.phase = "withdrawn"   # the episode's last message changes nothing now
             session.label = ""            # (the registry keeps none either)
             self.credentials.participants.pop(participant, None)   # their token revoked

@@ -146,10 +146,40 @@ def exported_as(study_dir: Path, participant: int) -> list[dict]:
             if (code := entry["pseudonyms"].get(str(participant))) is not None]
 
 
+def still_exported(exported: list[dict]) -> str:
+    """What the withdrawal's line says of the packages exported before that hold the participant
+    (`exported_as`): each one and their code in it, to be replaced; each with when it was written,
+    where known, since two packages written to one path have two keys."""
+    if len(exported) == 1:
+        return (f"the package exported before, {package_named(exported[0])}, still holds their data as "
+                f"participant {exported[0]['participant']}: export the study again and replace it "
+                "wherever it was shared")
+    held = ", ".join(f"{package_named(package)} as participant {package['participant']}"
+                     for package in exported)
+    return (f"the {len(exported)} packages exported before still hold their data ({held}): export the "
+            "study again and replace each wherever it was shared")
+
+
+def package_named(exported: dict) -> str:
+    """An exported package in the withdrawal's line: its path, and when it was written where known."""
+    written = exported["written_utc"]
+    return exported["package"] if written is None else f"{exported['package']} (written {written})"
+
+
+def withdrawal_line(study_dir: Path, entry: dict) -> str:
+    """The line that tells the experimenter what the withdrawal of the audit `entry` did and, where
+    packages exported before still hold the participant, which ones to replace (`trustroute
+    withdraw` prints it; the console shows it)."""
+    line = (f"participant {entry['participant']} withdrawn: {len(entry['removed'])} file(s) removed, the "
+            f"dataset consolidated without them; audit entry in {Path(study_dir) / LIVE_DIR / AUDIT}")
+    return f"{line}; {still_exported(entry['exported'])}" if "exported" in entry else line
+
+
 def withdraw_participant(study_dir: Path, participant: int, by: str | None = None, reason: str = "") -> dict:
     """Withdraw `participant` (the directory's lock held by the caller); the audit entry. Everything
-    it reads (the registry, the manifest and the study's inputs, the attempts journal, the answers)
-    is read and checked before a file is removed, so a refusal leaves the study as it was."""
+    it reads (the registry, the manifest and the study's inputs, the attempts journal, the answers,
+    the export key) is read and checked before a file is removed, so a refusal leaves the study as
+    it was."""
     study_dir = Path(study_dir)
     records = read_registry(study_dir)
     record = registry_record(study_dir, records, participant)

@@ -6,6 +6,14 @@ const $ = (id) => document.getElementById(id);
 
 function showError(text) { if ($("error").textContent !== (text || "")) $("error").textContent = text || ""; }
 
+// What a withdrawal did, in the words `trustroute withdraw` prints (the server's `line`): above all
+// which packages exported before still hold the participant's data, to be replaced wherever they
+// were shared. Kept until dismissed or the next action, so it is not missed.
+function showNotice(text) {
+  $("notice-text").textContent = text || "";
+  $("notice").classList.toggle("hidden", !text);
+}
+
 // the server restarted (its console logins are new at every start) or the cookie is gone
 const LOGGED_OUT = "This console is no longer logged in (the server was restarted, or the login is gone): "
   + "open the new console link the server printed, or make one with POST /api/login-link.";
@@ -46,6 +54,7 @@ function controlButton(participant, action) {
       const drive = button.closest("tr").cells[TRIAL_STATUS].textContent;
       if (!window.confirm(`Abort participant ${participant}'s drive (${drive})? It will be run again.`)) return;
     }
+    showNotice("");
     try { await call("POST", `/api/participants/${participant}/control`, { action }); showError(""); }
     catch (error) { showError(error.message); }
     refresh();
@@ -65,6 +74,7 @@ function linkButton(participant) {
   button.textContent = "new link";
   button.addEventListener("click", async () => {
     if (!confirm(`A new link for participant ${participant}? Their current link and open station stop working.`)) return;
+    showNotice("");
     try { const issued = await call("POST", `/api/participants/${participant}/link`); showLink(participant, issued.link); showError(""); }
     catch (error) { showError(error.message); }
     refresh();
@@ -78,7 +88,12 @@ function withdrawButton(participant) {
   button.textContent = "withdraw";
   button.addEventListener("click", async () => {
     if (!confirm(`Withdraw participant ${participant}? Every drive and answer of theirs is deleted from the study; this cannot be undone.`)) return;
-    try { await call("POST", `/api/participants/${participant}/withdraw`, { confirm: true }); showError(""); }
+    showNotice("");
+    try {
+      const done = await call("POST", `/api/participants/${participant}/withdraw`, { confirm: true });
+      showNotice(done.line);
+      showError("");
+    }
     catch (error) { showError(error.message); }
     refresh();
   });
@@ -179,6 +194,7 @@ async function listFiles() {
 }
 
 $("create").addEventListener("click", async () => {
+  showNotice("");
   try {
     const created = await call("POST", "/api/participants", { label: $("label").value });
     showLink(created.participant, created.link);
@@ -188,5 +204,6 @@ $("create").addEventListener("click", async () => {
   } catch (error) { showError(error.message); }
 });
 $("refresh-files").addEventListener("click", listFiles);
+$("dismiss").addEventListener("click", () => showNotice(""));
 refresh();
 setInterval(refresh, 1000);

@@ -6,6 +6,7 @@ Never skips: without Chromium it fails and says how to install it."""
 
 from __future__ import annotations
 
+import json
 import re
 
 import httpx
@@ -90,6 +91,47 @@ def test_a_withdrawn_participants_row_says_so_and_offers_nothing_to_press(statio
         phase.wait_for()
         page.locator(f'#participants tr[data-participant="{other}"] button').first.wait_for()
     context.close()
+
+
+def test_a_withdrawal_says_which_exported_packages_still_hold_the_participant(station, tmp_path):
+    """Withdrawn from the console while a package exported before holds them (the key file written
+    as `trustroute export` writes it), the console says so in the line `trustroute withdraw`
+    prints: the package, when it was written and their code in it. The sentence stays through
+    the table's refreshes until dismissed, and goes at the next action."""
+    from trustroute.harness.live.withdraw import AUDIT, LIVE_DIR, withdrawal_line
+    from trustroute.harness.study.export import KEY_FILE, read_export_keys, write_export_keys
+
+    study_dir = station.study.study_dir
+    context, page = open_console(station)
+    withdrawn, other = new_participant(station), new_participant(station)
+    package = tmp_path / "shared-package"
+    write_export_keys(study_dir, read_export_keys(study_dir), package, {withdrawn: 417, other: 902})
+    notice = page.locator("#notice")
+    try:
+        for participant, code in ((withdrawn, 417), (other, 902)):
+            row = page.locator(f'#participants tr[data-participant="{participant}"]')
+            page.once("dialog", lambda dialog: dialog.accept())
+            row.locator("button", has_text="withdraw").click()
+            notice.wait_for(state="visible")
+            entry = json.loads((study_dir / LIVE_DIR / AUDIT).read_text().splitlines()[-1])
+            assert entry["participant"] == participant and entry["exported"][0]["participant"] == code
+            said = notice.locator("#notice-text").inner_text()
+            assert said == withdrawal_line(study_dir, entry)
+            assert f"{package} (written {entry['exported'][0]['written_utc']}), still holds their data " \
+                   f"as participant {code}: export the study again and replace it wherever" in said
+            page.wait_for_timeout(2500)   # the table is refreshed every second: the sentence stays
+            assert notice.is_visible() and notice.locator("#notice-text").inner_text() == said
+            page.screenshot(path=str(tmp_path / f"console-withdrawn-exported-{participant}.png"))
+            if participant == withdrawn:
+                notice.locator("button", has_text="dismiss").click()
+            else:
+                page.locator("#create").click()   # the next action
+                page.locator("#created").filter(has_text=f"participant {other + 1}").wait_for()
+            notice.wait_for(state="hidden")
+        assert page.locator("#error").inner_text() == ""
+    finally:
+        (study_dir / KEY_FILE).unlink()
+        context.close()
 
 
 def test_each_row_offers_only_what_the_server_accepts_in_its_phase(station, tmp_path):

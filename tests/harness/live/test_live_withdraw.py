@@ -285,6 +285,73 @@ def test_a_withdrawal_names_the_package_exported_before_that_still_holds_them(tm
     assert (study / "parts" / "p00000-phi1-free.zip").exists()   # refused before anything is deleted
 
 
+def test_a_console_withdrawal_answers_with_the_packages_that_still_hold_them(tmp_path):
+    """Withdrawn from the console, the answer names the packages exported before that hold the
+    participant, as the audit entry does, and carries the command's line that says so."""
+    from fastapi.testclient import TestClient
+
+    from trustroute.harness.live.app import live_app
+    from trustroute.harness.study.export import KEY_FILE, write_export_keys
+
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    package = tmp_path / "shared-package"
+    try:
+        with TestClient(live_app(study)) as client:
+            headers = experimenter(study)
+            for _ in range(2):
+                assert client.post("/api/participants", json={}, headers=headers).status_code == 200
+            write_export_keys(study.study_dir, [], package, {0: 417, 1: 902})
+            withdraw = "/api/participants/{}/withdraw"
+            answer = client.post(withdraw.format(1), json={"confirm": True}, headers=headers).json()
+            entry = json.loads((study.study_dir / "live" / "withdrawals.jsonl").read_text())
+            assert answer["exported"] == entry["exported"]
+            assert [held["participant"] for held in entry["exported"]] == [902]
+            assert answer["line"].startswith("participant 1 withdrawn: 0 file(s) removed")
+            assert f"{package} (written {entry['exported'][0]['written_utc']}), still holds their data as " \
+                   "participant 902: export the study again" in answer["line"]
+            (study.study_dir / KEY_FILE).unlink()   # no package holds participant 0
+            alone = client.post(withdraw.format(0), json={"confirm": True}, headers=headers).json()
+            assert alone["exported"] == [] and "still holds" not in alone["line"]
+    finally:
+        study.close()
+
+
+def test_an_unreadable_key_file_refuses_a_console_withdrawal_before_anything_changes(tmp_path):
+    """The key file is read before the withdrawal begins: one that cannot be read refuses it with
+    the one line naming the file, the place and the fix, and the participant stays as they were
+    (their link opens their station, their session is not withdrawn); once it is mended, the
+    withdrawal goes through."""
+    from fastapi.testclient import TestClient
+
+    from trustroute.harness.live.app import live_app
+    from trustroute.harness.study.export import KEY_FILE
+
+    study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
+    key = study.study_dir / KEY_FILE
+    try:
+        with TestClient(live_app(study)) as client:
+            link = client.post("/api/participants", json={}, headers=experimenter(study)).json()["token"]
+            registry = study.registry_path().read_text()
+            key.write_text(json.dumps({"pseudonyms": [1], "package": str(tmp_path / "shared")}))
+            refused = client.post("/api/participants/0/withdraw", json={"confirm": True},
+                                  headers=experimenter(study))
+            assert refused.status_code == 409, refused.text
+            detail = refused.json()["detail"]["detail"]
+            assert detail.startswith(f"{key}: pseudonyms: expected participant number -> code")
+            assert "restore it from a backup" in detail and "\n" not in detail
+            assert study.sessions[0].phase == "consent" and 0 not in study.withdrawn
+            assert study.registry_path().read_text() == registry
+            assert not (study.study_dir / "live" / "withdrawals.jsonl").exists()
+            assert client.post("/api/claim", json={"token": link}).status_code == 200   # the link still opens
+            assert client.get("/api/me").json()["participant"] == 0
+            key.unlink()
+            assert client.post("/api/participants/0/withdraw", json={"confirm": True},
+                               headers=experimenter(study)).status_code == 200
+            assert study.sessions[0].phase == "withdrawn"
+    finally:
+        study.close()
+
+
 def _issue_while_paused(study, client, issue: str, meanwhile):
     """`issue` ("claim": the participant's link opened; "link": the console's new link) for
     participant 0, paused where the server is about to issue the token (LiveStudy.replace_token
