@@ -264,7 +264,7 @@ def fit_types(study_dir: Path, out: Path, options: FitOptions, fixed: int | None
                        f"{row['bic']:<20.2f} {row['delta_bic']:<7.2f} {row['bic_roads']:<13.2f} "
                        f"{row['restarts_converged']}")
     weights = ", ".join(f"{k} {v:.3f}" for k, v in best.summary()["weights"].items())
-    click.echo(f"{best.n_types} type(s) ({payload['criterion']}): weights {weights}; EM "
+    click.echo(f"{counted(best.n_types, 'type')} ({payload['criterion']}): weights {weights}; EM "
                f"{best.iterations} iterations, {'converged' if best.converged else 'NOT converged'}")
     if bootstrap:
         b = payload["bootstrap"]

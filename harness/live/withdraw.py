@@ -25,6 +25,7 @@ from trustroute.core.dataset import ATTEMPTS_FILE, FAILURES_DIR, MANIFEST_FILE, 
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
 from trustroute.core.validation import read_json
+from trustroute.core.wording import counted
 from trustroute.harness.live.answers import answer_rows, write_answer_table
 from trustroute.harness.live.attempts import AttemptLog
 from trustroute.harness.study.context import study_context
@@ -170,8 +171,9 @@ def withdrawal_line(study_dir: Path, entry: dict) -> str:
     """The line that tells the experimenter what the withdrawal of the audit `entry` did and, where
     packages exported before still hold the participant, which ones to replace (`trustroute
     withdraw` prints it; the console shows it)."""
-    line = (f"participant {entry['participant']} withdrawn: {len(entry['removed'])} file(s) removed, the "
-            f"dataset consolidated without them; audit entry in {Path(study_dir) / LIVE_DIR / AUDIT}")
+    removed = counted(len(entry["removed"]), "file")
+    line = (f"participant {entry['participant']} withdrawn: {removed} removed, "
+            f"the dataset consolidated without them; audit entry in {Path(study_dir) / LIVE_DIR / AUDIT}")
     return f"{line}; {still_exported(entry['exported'])}" if "exported" in entry else line
 
 

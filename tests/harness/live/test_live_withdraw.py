@@ -306,7 +306,7 @@ def test_a_console_withdrawal_answers_with_the_packages_that_still_hold_them(tmp
             entry = json.loads((study.study_dir / "live" / "withdrawals.jsonl").read_text())
             assert answer["exported"] == entry["exported"]
             assert [held["participant"] for held in entry["exported"]] == [902]
-            assert answer["line"].startswith("participant 1 withdrawn: 0 file(s) removed")
+            assert answer["line"].startswith("participant 1 withdrawn: 0 files removed")
             assert f"{package} (written {entry['exported'][0]['written_utc']}), still holds their data as " \
                    "participant 902: export the study again" in answer["line"]
             (study.study_dir / KEY_FILE).unlink()   # no package holds participant 0
