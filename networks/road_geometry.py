@@ -23,6 +23,7 @@ from pathlib import Path
 
 from trustroute.core.errors import InputError
 from trustroute.core.validation import check_keys
+from trustroute.core.wording import shown_value
 from trustroute.networks.road import Road
 
 EXTRA_TOWN_KEYS: tuple[str, ...] = ("one_way", "geometry", "sumo_net", "turns")
@@ -114,7 +115,7 @@ def parse_one_way(data: Mapping, path: str, roads: Iterable[tuple[str, str]]) ->
     for i, pair in enumerate(raw):
         place = f"one_way[{i}]"
         if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(j, str) for j in pair)):
-            raise InputError(path, place, f"{str(pair)[:60]} is not a pair of junction names",
+            raise InputError(path, place, f"{shown_value(pair, 60)} is not a pair of junction names",
                              "write the one-way road as [\"U\", \"V\"]")
         key = frozenset(pair)
         if key not in known:
@@ -144,7 +145,7 @@ def parse_geometry_entry(raw: object, path: str, place: str) -> RoadGeometry:
     shape = parse_shape(raw["shape"], path, f"{place}.shape")
     length = raw.get("length", polyline_length(shape))
     if not _is_number(length) or length <= 0:
-        raise InputError(path, f"{place}.length", f"length {str(length)[:40]} is not a positive number "
+        raise InputError(path, f"{place}.length", f"length {shown_value(length)} is not a positive number "
                          "of metres", "give the driven length in metres, or a shape that is not a point")
     edges = raw.get("edges", [])
     if not (isinstance(edges, list) and all(isinstance(e, str) and e for e in edges)):

@@ -39,6 +39,7 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import PackagedKind
 from trustroute.core.validation import parse_json, read_text, require_object
+from trustroute.core.wording import shown_value
 from trustroute.networks.road import Road
 from trustroute.networks.road_geometry import (
     EXTRA_TOWN_KEYS,
@@ -284,10 +285,11 @@ def _junctions(raw: Mapping[str, object], path: str) -> dict[str, tuple[float, f
         check_value(name, JUNCTION, path, place, f"junction names must be 1-{MAX_JUNCTION_NAME} letters, "
                     "digits or '_' and contain no '-' (it joins road names)", "rename the junction")
         x, y = check_value(xy, COORDINATES, path, place,
-                           f"coordinates {str(xy)[:60]} are not two finite numbers",
+                           f"coordinates {shown_value(xy, 60)} are not two finite numbers",
                            "write [x, y] in metres, e.g. [0, 700]")
-        check_value(xy, NEAR_ORIGIN, path, place, f"coordinates {xy!r} lie more than {MAX_COORDINATE:g} m "
-                    "from the origin", "give coordinates in metres of one town")
+        check_value(xy, NEAR_ORIGIN, path, place,
+                    f"coordinates {shown_value(xy, 60)} lie more than {MAX_COORDINATE:g} m from the origin",
+                    "give coordinates in metres of one town")
         junctions[name] = (float(x), float(y))
     return junctions
 
@@ -297,7 +299,7 @@ def _road(road: object, place: str, junctions: dict[str, tuple[float, float]], p
     """One [U, V] pair: two known, different junctions at least MIN_ROAD_LENGTH apart (a road with
     a geometry has its own length: its junctions may stand closer than a car, not at one point,
     where their coordinates would say nothing of where the road runs)."""
-    u, v = check_value(road, ROAD, path, place, f"{road!r} is not a pair of junction names",
+    u, v = check_value(road, ROAD, path, place, f"{shown_value(road, 60)} is not a pair of junction names",
                        "write the road as [\"U\", \"V\"]")
     for j in (u, v):
         if j not in junctions:

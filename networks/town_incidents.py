@@ -22,6 +22,7 @@ import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.core.validation import parse_json, read_text
+from trustroute.core.wording import shown_value
 from trustroute.networks.town import INCIDENT_TYPES, NO_INCIDENT
 
 INCIDENT_SPACING = 500.0  # metres of road per incident, on average
@@ -86,7 +87,7 @@ def incidents_from_file(path: str, roads: Sequence[RoadFacts]) -> dict[str, str]
             raise InputError(path, key, "neither a road of the imported town nor a SUMO edge id of its roads",
                              "name a road as \"U-V\" (see the imported town) or an edge of the net")
         if kind not in INCIDENT_TYPES:
-            raise InputError(path, key, f"unknown incident type {str(kind)[:40]!r}",
+            raise InputError(path, key, f"unknown incident type {shown_value(kind)}",
                              f"use one of {', '.join(INCIDENT_TYPES)}")
         out.update(dict.fromkeys(targets, kind))
     return out

@@ -51,6 +51,7 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import PackagedKind
 from trustroute.core.validation import check_keys, parse_json, read_text, require_object
+from trustroute.core.wording import shown_value
 
 DEFAULT_DRIVER_MODEL_PATH = Path(__file__).parent / "data" / "driver_model.json"
 # the packaged driver models by name (participants/data/driver_model*.json)
@@ -255,7 +256,7 @@ FIELDS = field_table(
     DriverModelValues,
     Field(key="trust_levels", required=True,
           kind=ListOf(item=Integer(), min_items=2, max_items=MAX_TRUST_LEVELS, increasing=True),
-          problem=lambda seen: (f"{str(seen.value)[:60]} is not an increasing list of 2 to "
+          problem=lambda seen: (f"{shown_value(seen.value, 60)} is not an increasing list of 2 to "
                                 f"{MAX_TRUST_LEVELS} integers"),
           fix="write e.g. [1, 2, 3, 4, 5, 6, 7]", missing_fix="add 'trust_levels' as in the default model"),
     Field(key="incident_types", required=True,

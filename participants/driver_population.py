@@ -45,6 +45,7 @@ from trustroute.core.fields import (
 from trustroute.core.output_files import atomic_write_text
 from trustroute.core.packaged import PackagedKind
 from trustroute.core.validation import decode_utf8, parse_json, read_input_bytes, read_text, require_object
+from trustroute.core.wording import shown_value
 from trustroute.participants.driver_model import (
     DRIVER_MODELS,
     DriverModel,
@@ -165,11 +166,11 @@ class TypeValues(TypedDict):
 FIELDS = field_table(
     PopulationValues,
     Field(key="format", kind=OneOf(choices=(POPULATION_FORMAT,)), required=True,
-          problem=lambda seen: f"{str(seen.value)[:60]!r} is not a driver-population file",
+          problem=lambda seen: f"{shown_value(seen.value, 60)} is not a driver-population file",
           fix=f"write \"format\": \"{POPULATION_FORMAT}\"",
           missing_fix="add 'format' as in participants/data/driver_population_three_types.json"),
     Field(key="version", kind=OneOf(choices=(POPULATION_VERSION,)), required=True,
-          problem=lambda seen: f"version {str(seen.value)[:20]} is not supported",
+          problem=lambda seen: f"version {shown_value(seen.value, 20)} is not supported",
           fix=f"write \"version\": {POPULATION_VERSION}",
           missing_fix="add 'version' as in participants/data/driver_population_three_types.json"),
     Field(key="source", kind=Text(nonempty=False), default="", problem="expected text",
@@ -184,12 +185,12 @@ _NAME_AND_WEIGHT = "give every type a name and a prior weight"
 # a type's prior weight, in a file and in a population built in code (`DriverPopulation`)
 WEIGHT_KIND = Number(minimum=0.0, open_below=True)
 WEIGHT = Field(key="weight", kind=WEIGHT_KIND, required=True,
-               problem=lambda seen: f"{seen.value!r} is not a positive number",
+               problem=lambda seen: f"{shown_value(seen.value)} is not a positive number",
                fix="give a prior weight > 0 (the weights sum to 1)", missing_fix=_NAME_AND_WEIGHT)
 TYPE_FIELDS = field_table(
     TypeValues,
     Field(key="name", kind=Text(pattern=TYPE_NAME), required=True,
-          problem=lambda seen: f"{str(seen.value)[:60]!r} is not a type name",
+          problem=lambda seen: f"{shown_value(seen.value, 60)} is not a type name",
           fix="use letters, digits, '_' or '-' (at most 64, starting with a letter or '_')",
           missing_fix=_NAME_AND_WEIGHT),
     WEIGHT,

@@ -24,6 +24,7 @@ import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.core.fields import PROBABILITY, Field, ListOf, Number, check_fields, field_table
+from trustroute.core.wording import shown_value
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, ROW_TOLERANCE, DriverModel
 
 
@@ -142,16 +143,17 @@ class PopulationTableValues(TypedDict):
 FIELDS = field_table(
     PopulationTableValues,
     Field(key="concentration", kind=Number(minimum=0.0, open_below=True, finite=False), default=math.inf,
-          problem=lambda seen: f"{seen.value!r} is not a number > 0",
+          problem=lambda seen: f"{shown_value(seen.value)} is not a number > 0",
           fix="give a positive concentration, or inf for the nominal model"),
     Field(key="takeover_spread", kind=Number(minimum=0.0), default=0.0,
-          problem=lambda seen: f"{seen.value!r} is not a finite number >= 0",
+          problem=lambda seen: f"{shown_value(seen.value)} is not a finite number >= 0",
           fix="give the sd of the logit shift, 0 for none"),
     Field(key="initial_trust", kind=ListOf(item=PROBABILITY, min_items=1),
-          problem=lambda seen: f"{seen.value!r} is not a list of probabilities",
+          problem=lambda seen: f"{shown_value(seen.value, 60)} is not a list of probabilities",
           fix="give one probability per trust level"),
     Field(key="report_accuracy", kind=PROBABILITY, default=DEFAULT_REPORT_ACCURACY,
-          problem=lambda seen: f"{seen.value!r} is not a probability", fix="give a number in [0, 1]"),
+          problem=lambda seen: f"{shown_value(seen.value)} is not a probability",
+          fix="give a number in [0, 1]"),
 )
 
 

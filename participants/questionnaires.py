@@ -39,6 +39,7 @@ from typing import cast
 
 from trustroute.core.errors import InputError
 from trustroute.core.validation import check_keys, parse_toml, read_text
+from trustroute.core.wording import shown_value
 
 PLACEMENTS: tuple[str, ...] = ("before", "after_each_trial", "end")
 QUESTIONNAIRE_KEYS: tuple[str, ...] = ("name", "title", "instructions", "scale", "items")
@@ -103,10 +104,9 @@ class Questionnaire:
                 or not self.minimum <= value <= self.maximum   # first: a huge number goes no further
                 or not whole_steps(value, self.minimum, self.step)
             ):
-                shown = repr(value) if len(repr(value)) <= 24 else repr(value)[:21] + "..."
                 raise ValueError(
-                    f"{self.name}.{key}: {shown} is not on the scale {self.minimum:g}-{self.maximum:g} "
-                    f"in steps of {self.step:g}"
+                    f"{self.name}.{key}: {shown_value(value, 24)} is not on the scale "
+                    f"{self.minimum:g}-{self.maximum:g} in steps of {self.step:g}"
                 )
         return {key: float(value) for key, value in answers.items()}
 

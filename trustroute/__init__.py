@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from trustroute.core import defaults
 from trustroute.core.errors import InputError, keyword_names
+from trustroute.core.wording import shown_value
 
 if TYPE_CHECKING:
     from trustroute.analysis.study.analysis import StudyAnalysis
@@ -173,7 +174,7 @@ def _policy(policy: PolicyLike, problem: Problem, cache_dir: PathLike | None) ->
         return policy.policy
     if not isinstance(policy, RoutingPolicy):
         raise InputError("policy", "", "expected a policy name ('free', 'aware', 'robust', 'bayes'), "
-                         f"a policy file, a SynthesisResult or a RoutingPolicy, got {policy!r:.40}",
+                         f"a policy file, a SynthesisResult or a RoutingPolicy, got {shown_value(policy)}",
                          "pass one of those")
     return policy
 
@@ -274,7 +275,7 @@ def run_study(config: StudyConfig | dict | PathLike, out: PathLike | None = None
         config = load_study_config(config)
     elif not isinstance(config, StudyConfig):
         raise InputError("config", "", "expected a study config file, a dict or a StudyConfig, "
-                         f"got {config!r:.40}", "pass one of those (docs/formats/study_config.md)")
+                         f"got {shown_value(config)}", "pass one of those (docs/formats/study_config.md)")
     config = config.with_overrides(engine=engine)
     run, _ = run_and_consolidate(config, study_directory(config, None if out is None else str(out)),
                                  processes, scheduler, progress=progress, echo=lambda line: None,

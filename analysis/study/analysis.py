@@ -72,6 +72,7 @@ from trustroute.analysis.study.questionnaires import questionnaire_tables
 from trustroute.analysis.study.sensitivity import sensitivity_table
 from trustroute.analysis.study_directory import load_study, study_inputs
 from trustroute.core.errors import InputError
+from trustroute.core.wording import shown_value
 
 # bootstrap resampling: fixed, so an analysis is reproducible; each bootstrap draws from a Generator
 # keyed by what it resamples (statistics.py `keyed_rng`)
@@ -191,7 +192,7 @@ def study_analysis(study_dir: Path, belief_source: str | None = None,
         raise InputError(
             "--belief-source",
             "",
-            f"unknown belief source {belief_source!r}",
+            f"unknown belief source {shown_value(belief_source)}",
             f"use one of {', '.join(BELIEF_SOURCES)}",
         )
     satisfaction = source_satisfaction(Path(study_dir), manifest, episodes, roads)

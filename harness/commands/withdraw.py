@@ -12,6 +12,7 @@ from pathlib import Path
 
 import click
 
+from trustroute.core.wording import shown_value
 from trustroute.harness.commands.options import UsageFix
 from trustroute.harness.commands.output import emit, json_option, with_paths
 
@@ -29,7 +30,7 @@ class Participant(click.ParamType):
             return value
         match = PARTICIPANT.fullmatch(str(value).strip())
         if match is None:
-            raise UsageFix(f"{str(value)[:40]!r} is not a participant",
+            raise UsageFix(f"{shown_value(value)} is not a participant",
                            "pass the participant's id as in the dataset (p00003) or its index (3)", ctx)
         return int(match.group(1))
 

@@ -33,6 +33,7 @@ from trustroute.core import defaults
 from trustroute.core.errors import InputError, keyword_names
 from trustroute.core.fields import PROBABILITY, check_value
 from trustroute.core.settings import with_options
+from trustroute.core.wording import shown_value
 from trustroute.harness.simulation.episode_tracker import EpisodeSetup
 from trustroute.harness.simulation.stepping import DecisionPoint, SteppableEpisode
 from trustroute.networks.town import Town
@@ -78,14 +79,15 @@ class EnvSettings:
         engine_named(self.engine, "EnvSettings", "engine", simulated=True)
         check_value(self.junction_cap, JUNCTION_CAPS, "EnvSettings", "junction_cap",
                     lambda seen: f"expected an integer from {JUNCTION_CAPS.minimum} to "
-                                 f"{JUNCTION_CAPS.maximum}, got {seen.value!r}",
+                                 f"{JUNCTION_CAPS.maximum}, got {shown_value(seen.value)}",
                     f"pass a whole number of junctions, e.g. junction_cap={DEFAULT_JUNCTION_CAP}")
         check_value(self.belief_rule, BELIEF_RULE_NAMES, "EnvSettings", "belief_rule",
                     fix="pass 'bayes' or 'paper'")
         check_value(self.report_accuracy, PROBABILITY, "EnvSettings", "report_accuracy",
                     fix=f"pass a number in [0, 1], e.g. report_accuracy={DEFAULT_REPORT_ACCURACY}")
         if self.net_path is not None and not isinstance(self.net_path, str | Path):
-            raise InputError("EnvSettings", "net_path", f"expected a file path, got {self.net_path!r}",
+            raise InputError("EnvSettings", "net_path",
+                             f"expected a file path, got {shown_value(self.net_path)}",
                              "pass the path of a SUMO .net.xml, or None for the town's net")
 
 

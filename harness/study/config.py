@@ -66,6 +66,7 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import SPECS, PackagedKind
 from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
+from trustroute.core.wording import shown_value
 from trustroute.networks.cities import ROUTES, check_route_set_town, read_route_file, route_set_town
 from trustroute.networks.town import TOWNS, load_town
 from trustroute.participants.driver_model import DEFAULT_REPORT_ACCURACY, DRIVER_MODELS
@@ -361,14 +362,14 @@ _FILE = Text()
 
 
 def _file_path(seen: Seen) -> str:
-    return f"expected a file path, got {seen.value!r}"
+    return f"expected a file path, got {shown_value(seen.value)}"
 
 
 def _study_name(seen: Seen) -> str:
     # the name is the default folder studies/<name>: a path in it would write elsewhere
     if not isinstance(seen.value, str):
-        return f"expected a non-empty string, got {seen.value!r}"
-    return f"study name {seen.value[:40]!r} is not {FILE_NAME_RULE} (it names the study's folder)"
+        return f"expected a non-empty string, got {shown_value(seen.value)}"
+    return f"study name {shown_value(seen.value)} is not {FILE_NAME_RULE} (it names the study's folder)"
 
 
 FILE_FIX: dict[FileKey | Literal["routes"], str] = {
@@ -404,8 +405,8 @@ STUDY_FIELDS = field_table(
           fix="write e.g. report_every = 1"),
     Field(key="belief_rule", kind=BELIEF_RULE_NAMES, default="bayes",
           fix="use 'bayes' or 'paper'"),
-    Field(key="output", kind=Text(), problem=lambda seen: f"expected a directory path, got {seen.value!r}",
-          fix='write output = "out/paper"'),
+    Field(key="output", kind=Text(), fix='write output = "out/paper"',
+          problem=lambda seen: f"expected a directory path, got {shown_value(seen.value)}"),
     Field(key="policy_cache", kind=Text(), problem="expected a directory path",
           fix='write policy_cache = "cache/policies" or omit it'),
     Field(key="background_vehicles", kind=ranges.BACKGROUND_VEHICLES.kind, default=0,
@@ -414,8 +415,7 @@ STUDY_FIELDS = field_table(
     Field(key="routes", kind=_ENTRIES, default=(), fix=FILE_FIX["routes"]),
     Field(key="record", kind=_ENTRIES, default=(), fix='write record = ["p00000-phi1-aware"]'),
     Field(key="robust_population", kind=_FILE, problem=_file_path, fix=FILE_FIX["robust_population"]),
-    Field(key="robust_objective", kind=OneOf(choices=ROBUST_OBJECTIVES), default="robust",
-          problem=lambda seen: f"unknown objective {str(seen.value)[:40]!r}",
+    Field(key="robust_objective", kind=OneOf(choices=ROBUST_OBJECTIVES, noun="objective"), default="robust",
           fix="use 'robust' (the worst type's value) or 'bayes' (the prior-weighted value)"),
     Field(key="belief_source", kind=OneOf(choices=BELIEF_SOURCES, noun="belief source"),
           fix="use 'true' (simulated studies), 'reported', 'reference' or 'filter', or omit it for the "

@@ -31,6 +31,7 @@ from trustroute.app.engines import ENGINES
 from trustroute.core.dataset import BELIEF_COLUMNS, EPISODE_ROWS, EPISODES_SCHEMA, TABLES, frame_from_table
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import move_into_place, temp_path
+from trustroute.core.wording import shown_value
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import study_context
 from trustroute.harness.study.manifest import MANIFEST_FILE, episode_row, package_versions
@@ -274,7 +275,7 @@ def find_task(config: StudyConfig, episode_id: str, study_dir: Path) -> EpisodeT
     raise InputError(
         str(study_dir),
         "EPISODE_ID",
-        f"{episode_id!r} is not an episode of this study",
+        f"{shown_value(episode_id)} is not an episode of this study",
         f"pass one of its ids, e.g. {tasks[0].episode_id!r} (see episodes.parquet)",
     )
 

@@ -48,7 +48,7 @@ from trustroute.core.errors import InputError
 from trustroute.core.interrupts import sigterm_raises
 from trustroute.core.progress import bar_disable
 from trustroute.core.ranges import ATTEMPTS
-from trustroute.core.wording import counted
+from trustroute.core.wording import counted, shown_value
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext, study_context
 from trustroute.harness.study.expected import expected_values, fallback_only_warnings
@@ -228,7 +228,7 @@ def check_record_ids(config: StudyConfig, tasks: list[EpisodeTask]) -> None:
     unknown = [e for e in config.record if e not in planned]
     if unknown:
         raise InputError(config.source_path, "study.record",
-                         f"{unknown[0]!r} is not an episode of this study",
+                         f"{shown_value(unknown[0])} is not an episode of this study",
                          f"use ids like {tasks[0].episode_id!r} (p<participant>-<spec>-<condition>)")
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from trustroute.core.errors import InputError
+from trustroute.core.wording import shown_value
 from trustroute.networks.town import Town
 from trustroute.policies.logic.dfa import DFA, build_dfa
 from trustroute.policies.logic.labelling import Labeller
@@ -91,7 +92,7 @@ def compile_spec(spec: Spec, town: Town) -> CompiledSpec:
     if compiled is None:
         if spec.start not in town.states:
             raise InputError(spec.source_path or spec.name, "start",
-                             f"start road {spec.start!r} is not a directed road of the town",
+                             f"start road {shown_value(spec.start)} is not a directed road of the town",
                              "use a road 'U-V' of the town the spec is checked against")
         dfa = build_dfa(spec)
         labeller = Labeller(spec, dfa, town)

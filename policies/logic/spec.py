@@ -43,7 +43,7 @@ from trustroute.core.fields import (
 )
 from trustroute.core.packaged import SPECS
 from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
-from trustroute.core.wording import counted
+from trustroute.core.wording import counted, shown_value
 from trustroute.networks.town import Town
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
@@ -348,7 +348,7 @@ def _check_name(name: str, spec: _SpecSource) -> None:
     if not name.strip():
         raise spec.error("name", needles, "'name' is empty", 'write name = "phi1"')
     if not FILE_NAME.fullmatch(name):
-        raise spec.error("name", needles, f"spec name {name[:40]!r}{'...' if len(name) > 40 else ''} "
+        raise spec.error("name", needles, f"spec name {shown_value(name)} "
                          f"is not {FILE_NAME_RULE} (it names cache files)",
                          'write e.g. name = "phi1"')
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from trustroute.core.errors import InputError
 from trustroute.core.validation import first_non_belief
+from trustroute.core.wording import shown_value
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.logic.spec import Spec
@@ -283,8 +284,8 @@ def check_junction_count(value: object, key: str, where: str) -> None:
     """A horizon of the header: a junction count from 0 to 10 000, or null (unbounded)."""
     count = isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= 10_000
     if not (value is None or count):
-        raise InputError(where, key, f"{key.replace('_', ' ')} {str(value)[:30]} is not a junction count or "
-                         "null", RESYNTH)
+        raise InputError(where, key, f"{key.replace('_', ' ')} {shown_value(value, 30)} is not a junction "
+                         "count or null", RESYNTH)
 
 
 def check_guide_horizon(document: dict, where: str) -> None:

@@ -26,6 +26,7 @@ import numpy as np
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes, atomic_write_text
 from trustroute.core.validation import MAX_ARRAY_BYTES, check_keys, decode_utf8, parse_json, read_input_bytes
+from trustroute.core.wording import shown_value
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.policies.belief.driver_types import TypeLiftedModel, lift_population, lift_spec
@@ -139,11 +140,11 @@ def read_policy_document(path: str | Path) -> dict:
         older = ("; version 2 policies drive the state-only completion where they have no row, which "
                  "their bounds were certified for, not this trustroute's acting rule"
                  if version == 2 else "")
-        raise InputError(where, "version", f"policy file version {str(version)[:30]}, this "
+        raise InputError(where, "version", f"policy file version {shown_value(version, 30)}, this "
                          f"trustroute reads version {VERSION}{older}", "re-run trustroute synth")
     if kind is None:
         named = ", ".join(repr(k.kind) for k in TABLE_KINDS if k.kind is not None)
-        raise InputError(where, "kind", f"unknown policy kind {str(document['kind'])[:30]!r} "
+        raise InputError(where, "kind", f"unknown policy kind {shown_value(document['kind'], 30)} "
                          f"(only {named})", RESYNTH)
     check_keys(document, DOCUMENT_KEYS + kind.keys, where, "", "policy file")
     kind.check(document, where)
@@ -152,7 +153,8 @@ def read_policy_document(path: str | Path) -> dict:
         value = document.get(key)
         if value is not None and not (isinstance(value, int | float) and not isinstance(value, bool)
                                       and math.isfinite(value) and 0 <= value <= 1):
-            raise InputError(where, key, f"{key} bound {str(value)[:30]} is not a probability", RESYNTH)
+            raise InputError(where, key, f"{key} bound {shown_value(value, 30)} is not a probability",
+                             RESYNTH)
     if not isinstance(document.get("arrays"), str) or Path(document["arrays"]).name != document["arrays"]:
         raise InputError(where, "arrays", "must name the .npz file beside the policy file", RESYNTH)
     return document
@@ -172,7 +174,7 @@ def checked_table_kind(document: dict) -> TableKind[Any, Any]:
     """The table kind of a document that read_policy_document accepted (it names a known kind)."""
     kind = document_table_kind(document)
     if kind is None:
-        raise AttributeError(f"policy document of unknown kind {str(document.get('kind'))[:30]!r}; "
+        raise AttributeError(f"policy document of unknown kind {shown_value(document.get('kind'), 30)}; "
                              "read it with read_policy_document")
     return kind
 

@@ -46,7 +46,7 @@ def test_number_kinds():
     assert problem_of(3.0, Integer()) is not None
     # a string is shown as one: `seed = "3"` in a TOML file is not 3
     assert problem_of("3", Integer(minimum=1, maximum=5)) == "expected an integer from 1 to 5, got '3'"
-    assert problem_of("9" * 60, Integer()).endswith("got '" + "9" * 39)
+    assert problem_of("9" * 60, Integer()).endswith("got '" + "9" * 36 + "...")
     assert problem_of(False, Integer(false_allowed=True)) is None
     assert problem_of(True, Integer(false_allowed=True)) is not None
     assert problem_of(math.inf, Number()) is not None
@@ -69,6 +69,8 @@ def test_text_choice_flag_and_lists():
     assert problem_of("abc", Text(max_length=2)) is not None
     assert problem_of(1, OneOf(choices=(True, 1))) is None
     assert problem_of(True, OneOf(choices=(1,))) == "unknown value True"  # bool is not 1
+    assert problem_of(5, OneOf(choices=("5",))) == "unknown value 5"
+    assert problem_of("y" * 60, OneOf(choices=("5",))) == "unknown value '" + "y" * 36 + "..."
     assert problem_of(1, Flag()) is not None and problem_of(False, Flag()) is None
     strings = ListOf(item=Text(), min_items=1, distinct=True)
     assert problem_of([], strings) == "expected a non-empty list of strings, got []"
@@ -77,6 +79,9 @@ def test_text_choice_flag_and_lists():
     assert problem_of([1, 2, 2], ListOf(item=Integer(), increasing=True)) is not None
     assert problem_of([[1], [1]], ListOf(distinct=True)) == "lists the same entry twice"  # unhashable items
     assert problem_of([1, 2], ListOf(max_items=1)) is not None
+    long = problem_of(list(range(100)), ListOf(max_items=1))
+    assert long == ("expected a list of values, got "
+                    "[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16...")  # 60 characters
 
 
 FIELDS = (

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from trustroute.core.errors import InputError
+from trustroute.core.wording import shown_value
 from trustroute.harness.simulation.episode import EpisodeRecord, run_episode
 from trustroute.harness.simulation.model_engine import run_model_episode
 
@@ -47,5 +48,6 @@ def engine_named(name: str, where: str = "engine", place: str = "", simulated: b
     at `where` (a flag, a keyword, a file) and `place` in it (a field), as any other check there."""
     names = SIMULATED if simulated else tuple(ENGINES)
     if name not in names:
-        raise InputError(where, place, f"unknown engine {name!r}", f"use one of {', '.join(names)}")
+        raise InputError(where, place, f"unknown engine {shown_value(name)}",
+                         f"use one of {', '.join(names)}")
     return ENGINES[name]

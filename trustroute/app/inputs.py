@@ -13,6 +13,7 @@ from pathlib import Path
 
 from trustroute.core.errors import InputError
 from trustroute.core.packaged import PACKAGED_SPECS, SPEC_TOWNS, SPECS
+from trustroute.core.wording import shown_value
 from trustroute.networks.town import Town, load_town
 from trustroute.participants.driver_model import DriverModel, load_driver_model
 from trustroute.participants.driver_population import DriverPopulation, load_driver_population
@@ -27,7 +28,8 @@ def check_given(value: object, kind: type, given: str) -> None:
     if value is None or isinstance(value, kind | str | os.PathLike):
         return
     name = kind.__name__
-    raise InputError(given, "", f"expected a {name}, a file path or a packaged name, got {value!r:.40}",
+    raise InputError(given, "", f"expected a {name}, a file path or a packaged name, "
+                     f"got {shown_value(value)}",
                      f"pass a {name}, the path of its file or its packaged name")
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 from trustroute.app.inputs import Inputs, PathLike, load_inputs
 from trustroute.core.errors import InputError
 from trustroute.core.fields import is_whole
+from trustroute.core.wording import shown_value
 from trustroute.networks.town import Town
 from trustroute.participants.driver_model import DriverModel
 from trustroute.participants.driver_population import DriverPopulation
@@ -29,7 +30,7 @@ def check_initial_trust(model: DriverModel, initial_trust: int | None,
     if initial_trust is None:
         return
     if not (is_whole(initial_trust) and initial_trust in model.trust_levels):
-        raise InputError(option, "", f"{initial_trust!r} is not a trust level of the model",
+        raise InputError(option, "", f"{shown_value(initial_trust)} is not a trust level of the model",
                          f"pass one of {list(model.trust_levels)}")
 
 

@@ -11,6 +11,7 @@ from trustroute.core import defaults, ranges
 from trustroute.core.errors import InputError
 from trustroute.core.fields import OneOf, check_value
 from trustroute.core.ranges import check_time_limit, keep_checked
+from trustroute.core.wording import shown_value
 from trustroute.policies.belief.problem import Problem
 from trustroute.policies.evaluation.plain import Evaluation
 from trustroute.policies.evaluation.plain import evaluate as evaluate_plain
@@ -108,7 +109,8 @@ def check_synthesis_options(population: bool, objective: str, clusters: str) -> 
     objective weighs a `population`'s driver types, cluster policies are for a single model. The
     objective, checked."""
     if not is_objective(objective):
-        raise InputError("--objective", "", f"unknown objective {objective!r}", "use 'bayes' or 'robust'")
+        raise InputError("--objective", "", f"unknown objective {shown_value(objective)}",
+                         "use 'bayes' or 'robust'")
     check_value(clusters, CLUSTER_MODES, "--clusters", "")
     if population and clusters != "auto":
         raise InputError("--clusters", "", "cluster policies apply to a single driver model (--driver)",

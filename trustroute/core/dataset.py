@@ -29,6 +29,7 @@ import pyarrow.parquet as pq
 from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_bytes
 from trustroute.core.validation import first_non_belief, read_input_bytes, read_json
+from trustroute.core.wording import shown_value
 
 # -- files of a study directory ------------------------------------------------------------------
 REBUILD_FIX = "rerun `trustroute study` on this directory to rebuild it"   # a damaged file's fix
@@ -410,8 +411,7 @@ def check_allowed(values: pd.Series, allowed: Iterable, source: str, column: str
     if outside.any():
         row = int(np.flatnonzero(outside)[0])
         value = values.iloc[row]
-        shown = repr(value) if isinstance(value, str) else str(value)
-        raise InputError(source, f"{column}, row {row}", f"{shown} is not {what}", fix)
+        raise InputError(source, f"{column}, row {row}", f"{shown_value(value)} is not {what}", fix)
 
 
 def _check_unique(table: pa.Table, keys: tuple[str, ...], source: str) -> None:

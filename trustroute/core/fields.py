@@ -40,6 +40,7 @@ from typing import Any, Generic, NamedTuple, TypeGuard, TypeVar, cast, overload
 
 from trustroute.core.errors import InputError
 from trustroute.core.validation import Place, check_keys, key_place
+from trustroute.core.wording import shown_value
 
 
 @dataclass(frozen=True)
@@ -127,7 +128,7 @@ class Integer(Kind[int]):
             return None
         if isinstance(value, bool) or not isinstance(value, int) or not self.minimum <= value <= self.maximum:
             return Rejection(f"expected an integer from {self.minimum} to {self.maximum}, "
-                             f"got {value!r:.40}")
+                             f"got {shown_value(value)}")
         return None
 
 
@@ -145,9 +146,9 @@ class Number(Kind[float]):
 
     def reject(self, value: object) -> Rejection | None:
         if self.finite and isinstance(value, float) and not math.isfinite(value):
-            return Rejection(f"{value!r} is not a finite number")
+            return Rejection(f"{shown_value(value)} is not a finite number")
         if not self._accepts(value):
-            return Rejection(f"{value!r} is not a number in {self.interval()}")
+            return Rejection(f"{shown_value(value)} is not a number in {self.interval()}")
         return None
 
     def _accepts(self, value: object) -> bool:
@@ -165,7 +166,7 @@ class Number(Kind[float]):
 
 
 PROBABILITY = Number(minimum=0.0, maximum=1.0,
-                     problem=lambda seen: f"{seen.value!r} is not a probability in [0, 1]",
+                     problem=lambda seen: f"{shown_value(seen.value)} is not a probability in [0, 1]",
                      fix="give a number in [0, 1]")
 
 
@@ -184,7 +185,8 @@ class Text(Kind[str]):
               and (self.max_length is None or len(value) <= self.max_length)
               and (self.pattern is None or self.pattern.fullmatch(value) is not None))
         if not ok:
-            return Rejection(f"expected a {'non-empty ' if self.nonempty else ''}string, got {value!r}")
+            size = "non-empty " if self.nonempty else ""
+            return Rejection(f"expected a {size}string, got {shown_value(value)}")
         return None
 
 
@@ -195,7 +197,9 @@ class Flag(Kind[bool]):
     plural = "booleans"
 
     def reject(self, value: object) -> Rejection | None:
-        return None if isinstance(value, bool) else Rejection(f"expected true or false, got {value!r}")
+        if isinstance(value, bool):
+            return None
+        return Rejection(f"expected true or false, got {shown_value(value)}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -208,7 +212,7 @@ class OneOf(Kind[T_co]):
     def reject(self, value: object) -> Rejection | None:
         if any(type(value) is type(choice) and value == choice for choice in self.choices):
             return None
-        return Rejection(f"unknown {self.noun} {value!r}",
+        return Rejection(f"unknown {self.noun} {shown_value(value)}",
                          hint=f"use one of {', '.join(map(str, self.choices))}")
 
 
@@ -233,7 +237,8 @@ class ListOf(Kind[list[T]]):
         if not (isinstance(value, list) and self._shaped(value)):
             size = "non-empty " if self.min_items == 1 and self.max_items is None else ""
             order = "increasing " if self.increasing else ""
-            return Rejection(f"expected a {size}{order}list of {self.item.plural}, got {value!r}")
+            return Rejection(f"expected a {size}{order}list of {self.item.plural}, "
+                             f"got {shown_value(value, 60)}")
         if self.distinct and _repeats(value):
             return Rejection("lists the same entry twice", "list each entry once")
         return None

@@ -17,6 +17,7 @@ from typing import Generic, TypeVar
 
 from trustroute.core import defaults
 from trustroute.core.fields import Integer, Kind, Number, Seen, check_value, is_whole
+from trustroute.core.wording import shown_value
 
 T = TypeVar("T")
 
@@ -64,7 +65,7 @@ class OptionRange(Generic[T]):
             beyond = is_whole(seen.value) and int(seen.value) > kind.maximum
             span = (f">= {kind.minimum}" if kind.maximum == UNBOUNDED.maximum and not beyond
                     else f"from {kind.minimum} to {kind.maximum}")
-            return f"expected an integer {span}, got {seen.value!r}"
+            return f"expected an integer {span}, got {shown_value(seen.value)}"
         rejection = kind.reject(seen.value)
         return rejection.problem if rejection is not None else ""
 

@@ -1,5 +1,5 @@
-"""Counts in messages, in the singular for one ("1 file excluded", "3 files excluded"), and certified
-bounds as text rounded outward."""
+"""Counts in messages, in the singular for one ("1 file excluded", "3 files excluded"), certified
+bounds as text rounded outward, and a refused value as a message shows it."""
 
 from __future__ import annotations
 
@@ -9,6 +9,14 @@ from decimal import ROUND_CEILING, ROUND_FLOOR, Decimal
 def counted(count: int, noun: str, plural: str | None = None) -> str:
     """`count` and `noun`, the noun's plural (`plural`, or `noun` + "s") unless count is 1."""
     return f"{count} {noun if count == 1 else plural or noun + 's'}"
+
+
+def shown_value(value: object, limit: int = 40) -> str:
+    """A refused value as a message shows it: a string as Python writes it, quoted, so that the
+    string "5" never reads as the number 5 a message asks for; any other value as its text (numpy's
+    3 as 3); cut to `limit` characters, "..." marking the cut."""
+    text = repr(value) if isinstance(value, str) else str(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def outward(lower: float, upper: float, digits: int) -> tuple[str, str]:
