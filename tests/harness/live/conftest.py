@@ -36,9 +36,9 @@ def live_study(tmp_path):
 
 
 @contextlib.contextmanager
-def serving(study):
-    """The application of the open `study` on uvicorn in a thread, on a free port of 127.0.0.1:
-    yields its (host, port)."""
+def live_server_of(study):
+    """The application of the open `study` on uvicorn in a thread, on a free port of 127.0.0.1
+    bound as `trustroute live` binds it: yields (the uvicorn server, its (host, port))."""
     from trustroute.harness.live.app import live_server
     from trustroute.harness.live.guard import bind
 
@@ -49,11 +49,18 @@ def serving(study):
     try:
         while not server.started:
             time.sleep(0.01)
-        yield sock.getsockname()[:2]
+        yield server, sock.getsockname()[:2]
     finally:
         server.should_exit = True
         thread.join(5)
         sock.close()
+
+
+@contextlib.contextmanager
+def serving(study):
+    """`live_server_of`'s (host, port)."""
+    with live_server_of(study) as (_, address):
+        yield address
 
 
 def experimenter(study) -> dict:

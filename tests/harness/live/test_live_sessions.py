@@ -39,7 +39,7 @@ from trustroute.harness.live.guard import (
 from trustroute.harness.live.protocol import MessageError, parse_client_message
 from trustroute.harness.live.server import LiveStudy, ServerOptions
 
-from .conftest import serving, tiny_config
+from .conftest import live_server_of, serving, tiny_config
 from .test_live_cli import write_config
 
 OWN = "http://testserver"
@@ -279,6 +279,23 @@ def test_a_public_host_warns_and_prints_usable_addresses(live_study, capsys):
     assert any(line.startswith("console: https://study.example.org/login?token=") for line in consoles)
     announce(live_study, "127.0.0.1", 8765, ())
     assert capsys.readouterr().err == ""
+
+
+def test_the_server_sends_each_message_at_once_nagle_off(live_study):
+    """A station's connection to the server as `trustroute live` binds it has Nagle's algorithm
+    off: with it on, a mode event written behind a frame not yet acknowledged waits for the
+    station's delayed acknowledgement (40 ms on Linux), the whole of the input latency."""
+    from websockets.sync.client import connect
+
+    with live_server_of(live_study) as (server, (host, port)):
+        token = httpx.post(f"http://{host}:{port}/api/participants", json={},
+                           headers=bearer(live_study.experimenter_token)).json()["token"]
+        with connect(f"ws://{host}:{port}/ws", additional_headers=bearer(token)) as station:
+            assert json.loads(station.recv(timeout=10))["type"] == "welcome"
+            accepted = [connection.transport.get_extra_info("socket")
+                        for connection in list(server.server_state.connections)]
+            assert accepted
+            assert all(sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) for sock in accepted)
 
 
 def test_a_port_in_use_is_one_line_and_exit_2_and_leaves_nothing(tmp_path, capsys):
