@@ -57,7 +57,7 @@ from trustroute.harness.live.protocol import REQUESTED_MODE, Frame
 from trustroute.harness.live.view import Statics, dead_reckoned, ego_view, next_junction, surroundings
 from trustroute.harness.live.warmup import run_warm_up
 from trustroute.harness.simulation.drivers import NO_INPUTS, ManualInputs
-from trustroute.harness.simulation.driving_style import MANUAL
+from trustroute.harness.simulation.driving_style import AUTOPILOT, MANUAL
 from trustroute.harness.simulation.episode import COMMIT_DISTANCE, EGO_ID, EpisodeRecord
 from trustroute.harness.simulation.episode_tracker import reports_after_road
 from trustroute.harness.simulation.manual_driving import RoadChain
@@ -117,6 +117,7 @@ class RemoteDriver:
         self.held_at = 0.0                 # the simulated time shown when paused
         self.predicted = False             # the last frame sent was dead-reckoned
         self.hurry = False                 # a control to apply at once: the next step does not wait
+        self.unsettled: str | None = None  # the mode a request the episode took asks for, until observed
         self.frame_time = 0.0              # the simulated time of the last frame sent
         self.station_time: float | None = None   # of the last frame the station confirmed (`shown`)
         self.behind_since: float | None = None   # wall time the wait for the station began
@@ -140,6 +141,8 @@ class RemoteDriver:
             # the hand-back rule: back on a lane of the route first
             self.send({"type": "warning", "kind": "back_to_lane", "t": now})
             return None
+        if request is not None and self.wheel is None:
+            self.unsettled = MANUAL.name if request else AUTOPILOT.name
         return request
 
     def manual_inputs(self) -> ManualInputs:
@@ -278,6 +281,11 @@ class RemoteDriver:
         episode has applied the person's manual inputs of this step just before.)"""
         self.sim_now = ego.time
         self.announce_mode(mode, ego.time)
+        if self.unsettled is not None:
+            # the episode took the request but applies it at its next step (a takeover in the step a
+            # road closes goes to the next road): that step is hurried too, not paced
+            self.hurry |= mode != self.unsettled
+            self.unsettled = None
         if self.previous_time is not None and ego.time > self.previous_time:
             self.step_seconds = ego.time - self.previous_time
         self.previous_time = ego.time

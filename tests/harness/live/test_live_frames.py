@@ -10,6 +10,12 @@ import pytest
 
 from trustroute.harness.live.view import dead_reckoned
 from trustroute.harness.live.worker import LiveOptions, RemoteDriver
+from trustroute.harness.study.context import study_context
+from trustroute.harness.study.plan import plan_episodes
+from trustroute.harness.study.runner import run_planned_episode
+
+from .conftest import tiny_config
+from .test_live_worker import live_episode
 
 
 def frame(**changes) -> dict:
@@ -112,3 +118,39 @@ def test_a_takeover_does_not_wait_for_the_pace_and_the_frames_go_on_without_a_ga
     hurried = next(m for m in frames if m["wall"] >= 1.2 and not m.get("predicted"))
     assert hurried["wall"] == pytest.approx(1.2) and hurried["t"] == 1.5   # shown at once, not at 1.5 s
     assert frames[-1]["t"] == 4.0 and frames[-1]["wall"] == pytest.approx(4.0 - 0.3)   # 0.3 s gained
+
+
+class HandingBack(FakeTime):
+    """A station that hands back when warned of the road's end."""
+
+    def send(self, message: dict) -> None:
+        super().send(message)
+        if message["type"] == "warning":
+            self.controls.append((self.now, {"type": "hand_back"}))
+
+
+def test_a_takeover_carried_to_the_next_road_does_not_wait_for_the_pace_either(tmp_path):
+    """A takeover read in the step before a road's commit point is taken by the episode in the
+    closing step and applied at the step after it (the next road's): that step is not paced either,
+    so the mode change follows the takeover by no wall time (the clock is the test's, moved only by
+    the worker's waits), not by a step (0.5 s at pace 1)."""
+    *_, quiet, _ = live_episode(tmp_path, [])
+    before_closing = next(m["t"] for m in quiet.sent if m["type"] == "road" and m["index"] == 1)
+    config = tiny_config(tmp_path, participants=1)
+    task = plan_episodes(config)[0]
+    clock = HandingBack()
+    driver = RemoteDriver(clock, (1, 2, 3, 4, 5, 6, 7), 5, LiveOptions(pace=1.0, client="scripted"),
+                          clock=clock, episode_id=task.episode_id)
+    sent_at = []
+
+    def observe(sumo, ego, mode, road):
+        if ego.time == before_closing:   # read now, so the episode takes it in the closing step
+            sent_at.append(clock.now)
+            clock.controls.append((clock.now, {"type": "takeover"}))
+        driver.observe(sumo, ego, mode, road)
+
+    record = run_planned_episode(study_context(config), task, driver=driver, observer=observe, person=driver)
+    assert bool(record.roads["takeover"].iloc[2])   # carried to the next road
+    manual = next(m for m in clock.sent if m["type"] == "mode" and m["mode"] == "manual")
+    assert manual["t"] == pytest.approx(before_closing + 1.0)   # applied two steps on ...
+    assert manual["wall"] - sent_at[0] < driver.frame_interval   # ... without waiting for either
