@@ -23,28 +23,21 @@ from trustroute.policies.logic.spec import spec_from_text
 from trustroute.policies.routing.files import FORMAT, VERSION, read_policy_document
 
 
-def town(change: Callable[[dict], None]) -> Callable[[Path], object]:
-    def load(_: Path) -> object:
-        data = json.loads(DEFAULT_TOWN_PATH.read_text())
-        change(data)
-        return town_from_dict(data, "town.json")
-    return load
+def loaded_after(path: Path | str, reader: Callable[[dict, str], object],
+                 name: str) -> Callable[[Callable[[dict], None]], Callable[[Path], object]]:
+    """A loader of the packaged file `path`'s data after `change`, read by `reader` as file `name`."""
+    def with_change(change: Callable[[dict], None]) -> Callable[[Path], object]:
+        def load(_: Path) -> object:
+            data = json.loads(Path(path).read_text())
+            change(data)
+            return reader(data, name)
+        return load
+    return with_change
 
 
-def driver_model(change: Callable[[dict], None]) -> Callable[[Path], object]:
-    def load(_: Path) -> object:
-        data = json.loads(Path(DEFAULT_DRIVER_MODEL_PATH).read_text())
-        change(data)
-        return driver_model_from_dict(data, "model.json")
-    return load
-
-
-def population(change: Callable[[dict], None]) -> Callable[[Path], object]:
-    def load(_: Path) -> object:
-        data = json.loads(EXAMPLE_POPULATION_PATH.read_text())
-        change(data)
-        return driver_population_from_dict(data, "population.json")
-    return load
+town = loaded_after(DEFAULT_TOWN_PATH, town_from_dict, "town.json")
+driver_model = loaded_after(DEFAULT_DRIVER_MODEL_PATH, driver_model_from_dict, "model.json")
+population = loaded_after(EXAMPLE_POPULATION_PATH, driver_population_from_dict, "population.json")
 
 
 def policy(**document: object) -> Callable[[Path], object]:
