@@ -12,15 +12,12 @@ import re
 import httpx
 import pytest
 
-from .test_browser_station import served_station
+from .test_browser_station import station_fixture
 
 pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 
 
-@pytest.fixture(scope="module")
-def station(tmp_path_factory):
-    with served_station(tmp_path_factory.mktemp("console")) as served:
-        yield served
+station = station_fixture("console")
 
 
 def experimenter(station) -> dict:

@@ -1,0 +1,156 @@
+"""The station's driving controls in real Chromium (a gamepad read through the Gamepad API, a
+wheel's pedals, the arrow keys), the websocket answered by the test with the server's messages as
+in test_browser_station.py.
+
+Never skips: without Chromium it fails and says how to install it."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from .test_browser_station import GOAL, end_message, state_message, station_fixture
+from .test_driver_view import scene_on, wait_until
+
+pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
+
+
+station = station_fixture("controls")
+
+
+GAMEPAD = """window.pad = { steer: 0, throttle: 0, button: false };
+navigator.getGamepads = () => [{
+  id: "virtual gamepad", index: 0, connected: true, mapping: "standard", timestamp: performance.now(),
+  axes: [window.pad.steer, 0, 0, 0], buttons: Array.from({ length: 17 }, (_, i) => {
+    const pressed = i === 0 && window.pad.button;
+    return { pressed, touched: pressed, value: i === 7 ? window.pad.throttle : Number(pressed) };
+  }),
+}];"""
+
+
+def gamepad_station(page, socket, frame: dict):
+    """The page in a continuous drive read from the virtual gamepad, `frame` shown and the car
+    taken over; returns sent_for(**pad): the controls and hand-backs the page sends once the pad is
+    set to `pad` (what the messages before it brought is sent by then, and left out)."""
+    received: list[dict] = []
+    socket.on_message(lambda text: received.append(json.loads(text)))
+    page.evaluate(GAMEPAD)
+
+    def sent_for(**pad) -> list[dict]:
+        page.wait_for_timeout(300)
+        count = len(received)
+        page.evaluate("(values) => Object.assign(window.pad, values)", pad)
+        page.wait_for_timeout(400)   # many animation frames have read the pad by then
+        return [message for message in received[count:] if message["type"] in ("control", "hand_back")]
+
+    socket.send(json.dumps({"type": "welcome", "participant": 0, "consent": "", "view": "driver",
+                            "driving": "continuous", "inputs": ["gamepad"]}))
+    socket.send(state_message("driving"))
+    socket.send(json.dumps({"type": "episode_start", "episode_id": "x", "trust": 4}))
+    socket.send(json.dumps(frame))
+    socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 10.0}))
+    wait_until(page, "document.getElementById('mode').textContent === 'MANUAL'")
+    return sent_for
+
+
+def test_a_gamepad_sends_nothing_while_the_car_is_held_paused_or_its_drive_over(station, tmp_path):
+    """The one rule of the buttons and keys holds for a wheel or gamepad: while the car is held for
+    the hand-back (in its lane, or back in it after being guided back) the accelerator is sent let
+    go and, once the car stands, nothing at all; guided back from the oncoming lane the pedals still
+    drive it; its button hands back; while paused, and once the drive is over, nothing is sent.
+    Each driving event comes as the episode sends it: its warning, then the step's frame with the
+    hold as the episode has it then (`held`)."""
+    frame, _ = scene_on(station.net_path)
+    moving = {**frame, "speed": 5.0}
+    with station.open() as (page, socket):
+        sent_for = gamepad_station(page, socket, moving)
+
+        def warn(kind: str, held: bool = False, **shown) -> None:
+            socket.send(json.dumps({"type": "warning", "kind": kind, "t": 11.0}))
+            socket.send(json.dumps({**moving, "t": 11.0, **shown, "held": held}))
+
+        assert [c["throttle"] for c in sent_for(throttle=1.0)] == [1.0]
+        for kind in ("oncoming", "hand_back", "guide_back"):   # guided back: the pedals still drive it
+            warn(kind)
+        assert [c["throttle"] for c in sent_for(throttle=0.6)] == [0.6]
+        warn("own_lane", held=True)   # back in its lane: the hold brakes it to a stand
+        held = sent_for(steer=0.5, throttle=0.9)
+        assert [(c["steer"], c["throttle"], c["brake"]) for c in held] == [(0.5, 0.0, 0.0)]
+        socket.send(json.dumps({**frame, "t": 10.5, "held": True}))   # standing
+        assert sent_for(steer=-0.5, throttle=1.0) == []
+        assert [m["type"] for m in sent_for(button=True)] == ["hand_back"]
+        socket.send(json.dumps({"type": "mode", "mode": "auto", "t": 12.0}))
+        page.evaluate("window.pad.button = false")
+        socket.send(json.dumps({**moving, "t": 12.5}))
+        socket.send(json.dumps({"type": "mode", "mode": "manual", "t": 13.0}))   # taken over again
+        assert [c["throttle"] for c in sent_for(throttle=0.8)] == [0.8]
+        warn("hold", held=True, t=13.5)   # held in its lane
+        page.locator("#incident").filter(has_text="the car stops here").wait_for()
+        assert [c["throttle"] for c in sent_for(steer=0.2, throttle=0.7)] == [0.0]
+        page.screenshot(path=str(tmp_path / "gamepad-held.png"))
+        socket.send(state_message("paused", paused_by="experimenter", mode="manual"))
+        page.locator("#overlay-text").filter(has_text="Paused by the experimenter").wait_for()
+        assert sent_for(steer=-0.3, button=True) == []
+        page.evaluate("window.pad.button = false")
+        socket.send(state_message("driving", mode="manual"))
+        socket.send(end_message({**GOAL, "takeovers": 1}))
+        assert sent_for(steer=0.4, throttle=1.0, button=True) == []
+        page.screenshot(path=str(tmp_path / "gamepad-over.png"))
+
+
+def test_by_wheel_the_station_holds_the_pedals_as_the_frames_say_not_as_the_warnings_do(station, tmp_path):
+    """The hold is the episode's (each frame's `held`, harness/simulation/wheel_driving.py
+    `Wheel.held`), never worked out in the page from the warnings: frames held with no warning
+    at all make the page send the pedals let go, and nothing once the car stands; a `hold` warning
+    whose frames are not held leaves the pedals to the person."""
+    frame, _ = scene_on(station.net_path)
+    moving = {**frame, "speed": 5.0, "mode": "manual"}
+    with station.open() as (page, socket):
+        sent_for = gamepad_station(page, socket, moving)
+        assert [c["throttle"] for c in sent_for(throttle=1.0)] == [1.0]
+        page.screenshot(path=str(tmp_path / "wheel-normal.png"))
+        socket.send(json.dumps({**moving, "t": 10.5, "held": True}))
+        held = sent_for(steer=0.3, throttle=0.7)
+        assert [(c["steer"], c["throttle"], c["brake"]) for c in held] == [(0.3, 0.0, 0.0)]
+        page.screenshot(path=str(tmp_path / "wheel-held.png"))
+        socket.send(json.dumps({**moving, "t": 11.0, "speed": 0.0, "held": True}))   # standing
+        assert sent_for(steer=-0.3, throttle=1.0) == []
+        socket.send(json.dumps({"type": "warning", "kind": "hold", "t": 11.5}))
+        socket.send(json.dumps({**moving, "t": 11.5, "held": False}))
+        page.locator("#incident").filter(has_text="the car stops here").wait_for()
+        assert [(c["steer"], c["throttle"]) for c in sent_for(steer=0.1, throttle=0.5)] == [(0.1, 0.5)]
+
+
+KEY_STEERING = """async ([speed, step, steps]) => {
+  if (!window.keyInputs) window.keyInputs = new (await import("/static/inputs.js")).Inputs(["keyboard"]);
+  window.keyInputs.keySteer = 0;
+  return Array.from({ length: steps }, () => window.keyInputs.read(step, speed).steer);
+}"""
+
+
+def lateral_acceleration(speed: float, steer: float) -> float:
+    """m/s^2 of the vehicle model (harness/simulation/vehicle_model.py) at `speed` and `steer`."""
+    from trustroute.harness.simulation.vehicle_model import VehicleParams
+
+    params = VehicleParams()
+    return speed**2 * math.tan(math.radians(abs(steer) * params.max_wheel_angle)) / params.wheelbase
+
+
+def test_the_arrow_keys_steer_more_gently_the_faster_the_car(station):
+    """A held arrow key turns the wheel to full lock in about 0.67 s at a walking pace; at 50 km/h
+    a tap of 0.1 s asks for under 1 m/s^2 of lateral acceleration and a key held on for 3 s for no
+    more than about 4.3 m/s^2 (full lock at 4.5 m/s), reached in about the same 0.67 s."""
+    step = 0.02
+    with station.open() as (page, _):
+        page.evaluate(KEY_STEERING, [0, step, 1])   # listening to the keys
+        page.keyboard.down("ArrowRight")
+        slow = page.evaluate(KEY_STEERING, [2.0, step, 40])
+        fast = page.evaluate(KEY_STEERING, [13.9, step, 150])
+        page.keyboard.up("ArrowRight")
+    assert slow[33] == pytest.approx(1.0)   # full lock after 0.68 s
+    assert lateral_acceleration(13.9, fast[4]) < 1.0   # a tap of 0.1 s
+    assert max(lateral_acceleration(13.9, steer) for steer in fast) <= 4.4
+    assert lateral_acceleration(13.9, fast[34]) > 3.5   # the most it asks, within 0.7 s
+    assert all(later >= earlier for earlier, later in zip(fast, fast[1:], strict=False))
