@@ -16,3 +16,9 @@ def test_a_refused_value_shows_a_string_quoted_and_a_number_bare():
     assert shown_value("x" * 50) == "'" + "x" * 36 + "..." and len(shown_value("x" * 50)) == 40
     assert shown_value(list(range(30)), 20) == "[0, 1, 2, 3, 4, 5..."
     assert shown_value("x" * 38) == repr("x" * 38)  # 40 characters: not cut
+
+
+def test_a_refused_value_is_one_line_and_a_numpy_string_is_quoted_as_a_string():
+    assert shown_value(np.array([[1, 2], [3, 4]])) == "[[1 2] [3 4]]"
+    assert shown_value(np.str_("5")) == "'5'"
+    assert shown_value(b"ab\ncd") == "b'ab\\ncd'" and shown_value("a\nb") == "'a\\nb'"

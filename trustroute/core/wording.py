@@ -14,8 +14,10 @@ def counted(count: int, noun: str, plural: str | None = None) -> str:
 def shown_value(value: object, limit: int = 40) -> str:
     """A refused value as a message shows it: a string as Python writes it, quoted, so that the
     string "5" never reads as the number 5 a message asks for; any other value as its text (numpy's
-    3 as 3); cut to `limit` characters, "..." marking the cut."""
-    text = repr(value) if isinstance(value, str) else str(value)
+    3 as 3, numpy's "5" as '5'); on one line, since a message is one (a 2-D array's rows joined);
+    cut to `limit` characters, "..." marking the cut."""
+    text = repr(str(value)) if isinstance(value, str) else str(value)
+    text = " ".join(line.strip() for line in text.splitlines())
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
