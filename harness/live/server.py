@@ -38,7 +38,6 @@ from trustroute.harness.live.session import Session, console_refusal
 from trustroute.harness.live.warmup import WARM_UP_KEY  # SeedSequence(study seed, (4, participant))
 from trustroute.harness.live.withdraw import (
     ENDED,
-    exported_as,
     load_registry,
     read_registry,
     withdraw_participant,
@@ -46,6 +45,7 @@ from trustroute.harness.live.withdraw import (
 from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions, start_fork_server
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext
+from trustroute.harness.study.export import read_export_keys
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.participants.questionnaires import questionnaire_plan
 
@@ -301,7 +301,7 @@ class LiveStudy:
             if refused is not None:
                 raise ValueError(refused)
             try:   # the key file checked before the session ends: one that cannot be read leaves it
-                exported_as(self.study_dir, participant)   # (read again by the withdrawal, as it is then)
+                read_export_keys(self.study_dir)   # (read again by the withdrawal, as it is then)
             except InputError as exc:
                 raise ValueError(exc.one_line()) from None
             session.phase = "withdrawn"   # the episode's last message changes nothing now

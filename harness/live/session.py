@@ -129,7 +129,7 @@ def station_texts(phase: str, trial: int, trials: int, warm_up: bool) -> dict[st
     plus the one driven); `warm_up`: the drive under way, or the next, is the warm-up. What is said
     once the drive ends comes with its end (`station_end`)."""
     if phase in ("driving", "paused"):
-        return {"status": "Warm-up drive" if warm_up else drive_named(trial, trials, warm_up), "next": None}
+        return {"status": "Warm-up drive" if warm_up else drive_named(trial, trials, False), "next": None}
     if phase != "ready":
         return {"status": "", "next": None}
     if warm_up:
