@@ -12,8 +12,10 @@ policies' and their incidents the town's; the warm-up's are neither.
 
 The vehicle is driven along the drawn route by `DrawnRoute` (a routing policy that declares the
 episode over at the route's end) on the town with the drawn incidents (`DrawnTown`: the town's
-SUMO net, since the town's identity is unchanged, with `incident(road)` the drawn kind). The
-warm-up is not part of the dataset (its part goes to live/warmup/parts/).
+SUMO net, since the town's identity is unchanged, with `incident(road)` the drawn kind). Its spec
+is the trial's start with a formula the drive never decides (`undecided_spec`): the trial's own
+could accept or reject on a road of the drawn route and end the warm-up there. The warm-up is not
+part of the dataset (its part goes to live/warmup/parts/).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from trustroute.harness.study.context import StudyContext
 from trustroute.networks.road import Road
 from trustroute.networks.sumo_net import pedestrian_roads
 from trustroute.networks.town import NO_INCIDENT, Town
+from trustroute.policies.logic.spec import Spec, spec_from_text
 from trustroute.policies.routing.protocol import DecisionContext, RoutingPolicy
 
 WARM_UP_ROADS = 6      # roads after the start road
@@ -102,6 +105,17 @@ def warm_up_plan(town: Town, start: str, study_seed: int, participant: int) -> t
     return route, draw_incidents(town, route, rng)
 
 
+def undecided_spec(spec: Spec, town: Town, route: tuple[str, ...]) -> Spec:
+    """`spec`'s start with the formula `F off`, `off` a road of the town the drawn `route` does not
+    take: its DFA neither accepts nor rejects on the route, so the episode ends at the route's end
+    ("destination"). `spec` itself in a town whose every road is on the route."""
+    off = next((road for road in town.states if road not in route), None)
+    if off is None:
+        return spec
+    return spec_from_text(f'name = "warm-up"\nstart = "{spec.start}"\nformula = "F off"\n\n'
+                          f'[states]\noff = ["{off}"]\n', f"{spec.source_path} (warm-up)", town)
+
+
 def run_warm_up(context: StudyContext, task, driver, observer, person=None, sumo_config=None):
     """The warm-up episode `task` (server.warm_up_task) of the study whose context is `context`, on
     its drawn route and incidents, with the remote `driver` (and `person`, their controls at the
@@ -114,5 +128,6 @@ def run_warm_up(context: StudyContext, task, driver, observer, person=None, sumo
     sumo_config = replace(sumo_config if sumo_config is not None else SumoConfig(),
                           background_vehicles=config.background_vehicles, route_files=tuple(config.routes))
     options = EpisodeOptions(config=sumo_config, observer=observer, person=person)
-    warm_up = replace(setup, town=drawn, junction_cap=len(route))
+    spec = undecided_spec(setup.spec, town, route)
+    warm_up = replace(setup, town=drawn, spec=spec, junction_cap=len(route))
     return run_to_end(SumoEpisode(warm_up, DrawnRoute(route), driver, task.episode_id, task.seed, options))

@@ -46,3 +46,16 @@ def test_the_warm_up_drives_its_own_drawn_route_and_incidents(tmp_path):
     trial = drive(config, plan_episodes(config)[0], warm_up=False).roads   # the first trial
     assert (tuple(trial["directed_road"]), tuple(trial["incident"])) != (route, tuple(warm_up["incident"]))
     assert warm_up["directed_road"].iloc[0] == trial["directed_road"].iloc[0]   # the same start road
+
+
+def test_the_warm_up_drives_its_whole_route_whatever_the_trial_spec_says(tmp_path):
+    """A first trial's spec that the drawn route satisfies on its way (a waypoint among its roads)
+    does not end the warm-up there: it rehearses no trial, so it ends at its route's end."""
+    setup = study_context(tiny_config(tmp_path)).setup("phi1", "free")
+    route, _ = warm_up_plan(setup.town, setup.spec.start, 1, 0)   # tiny_config's seed, participant 0
+    (tmp_path / "early.toml").write_text(f'name = "early"\nstart = "{route[0]}"\nformula = "F v1"\n\n'
+                                         f'[states]\nv1 = ["{route[1]}"]\n')
+    config = tiny_config(tmp_path, specs=("early.toml",))
+    warm_up = drive(config, warm_up_task(config, 0), warm_up=True)
+    assert tuple(warm_up.roads["directed_road"]) == route
+    assert warm_up.summary["end_reason"] == "destination"
