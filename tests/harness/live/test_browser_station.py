@@ -119,6 +119,40 @@ def test_the_prompt_and_the_trust_buttons_fit_the_window_beside_the_view(station
         assert box(page, "#scene")["width"] >= 0.6 * min(width, 960)   # the view is not shrunk away
 
 
+def overlaps(one: dict, other: dict) -> bool:
+    return (one["x"] < other["x"] + other["width"] and other["x"] < one["x"] + one["width"]
+            and one["y"] < other["y"] + other["height"] and other["y"] < one["y"] + one["height"])
+
+
+# the longest notices over the view: the hand-back due, and the wheel's hold and guidance
+NOTICES = [{"type": "warning", "kind": "hand_back", "distance": 90.0, "t": 10.0},
+           {"type": "warning", "kind": "guide_back", "t": 10.0},
+           {"type": "warning", "kind": "stopped_off_road", "t": 10.0}]
+
+
+@pytest.mark.parametrize(("width", "height", "phone"),
+                         [(1280, 720, False), (1024, 600, False), (400, 800, True)])
+def test_a_notice_over_the_view_is_whole_and_clear_of_the_mini_map(station, width, height, phone, tmp_path):
+    frame, _ = scene_on(station.net_path)
+    with station.open(width, height, phone) as (page, socket):
+        start_driving(page, socket, "driver")
+        socket.send(json.dumps(frame))
+        wait_until(page, "document.getElementById('speed').textContent.includes('km/h')")
+        for notice in NOTICES:
+            socket.send(json.dumps(notice))
+            wait_until(page, "document.getElementById('incident').textContent.length > 0")
+            page.wait_for_timeout(100)
+            page.screenshot(path=str(tmp_path / f"notice-{width}-{notice['kind']}.png"))
+            shown, scene, mini = box(page, "#incident"), box(page, "#scene"), box(page, "#view")
+            text = page.locator("#incident").inner_text()
+            assert not overlaps(shown, mini), (notice["kind"], text, shown, mini)
+            right = scene["x"] + scene["width"] + 1
+            assert scene["x"] <= shown["x"] and shown["x"] + shown["width"] <= right, notice["kind"]
+            # its text within its box: none of it runs out of it, under the mini-map or off the window
+            fits = "(e => e.scrollWidth <= e.clientWidth)(document.getElementById('incident'))"
+            assert page.evaluate(fits), (notice["kind"], text)
+
+
 # A road's lane that bends: 100 m east, then 100 m north (its end is the junction).
 BEND = [[0, 0], [100, 0], [100, 100]]
 REMAINING = """async ([shape, points]) => {
