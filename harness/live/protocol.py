@@ -215,13 +215,15 @@ class Frame(Message):
     y: Finite = Field(description="the ego's front centre, metres north in the net's (SUMO's) coordinates")
     angle: Finite = Field(description="the ego's heading, SUMO's: degrees clockwise from north")
     speed: Finite = Field(description="the ego's speed, m/s")
-    road: str = Field(description="the road the ego is on: a town road `A-B`, or SUMO's edge in a junction")
+    road: str = Field(description="the road under observation, a town road `A-B`: the one a takeover "
+                                  "counts for, from the commit point 30 m before the end of the road before "
+                                  "it (the ego may still be on that road, or in the junction: `lane` says "
+                                  "where it is)")
     lane: str = Field(description="the ego's lane (SUMO's id)")
     mode: Annotated[str, AfterValidator(driving_mode)] = Field(
         description=f"who drives: `{AUTOPILOT.name}` (the autopilot) or `{MANUAL.name}` (the person)")
     junction: str | None = Field(
-        description="the junction at the end of `road`, the road under observation: where the next routing "
-                    "decision is made; null inside a junction")
+        description="the junction at the end of `road`: where the next routing decision is made")
     length: Finite = Field(description="the ego's length, metres")
     width: Finite = Field(description="the ego's width, metres")
     signals: StrictInt = Field(description="the ego's signals, SUMO's bits as in `vehicles`")
