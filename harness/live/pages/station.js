@@ -252,6 +252,9 @@ function readInputs() {
   if (!controls) {   // nothing the study allows is connected: say so, with the hand-back rule when due
     setText($("incident"), [inputs.missing(), handBackDue ? HAND_BACK_DUE : ""].join(" ").trim());
     askedForInput = true;
+    // the episode keeps the last control it was sent: a wheel or pad unplugged with the
+    // accelerator down is let go (hands and feet off it), in the input it was read from
+    if (sentControl && allowed("steer")) sendControl(now, sentControl.source, 0, 0, 0);
     return;
   }
   if (askedForInput) { askedForInput = false; notice(""); }   // connected now
@@ -259,12 +262,16 @@ function readInputs() {
   if (!allowed("steer")) { sentControl = null; return; }
   // held, the episode brakes the car whatever the pedals say: they are sent let go
   const pedals = allowed("accelerate");
-  const { steer, source } = controls;
   const [throttle, brake] = pedals ? [controls.throttle, controls.brake] : [0, 0];
+  sendControl(now, controls.source, controls.steer, throttle, brake);
+}
+
+// The controls, sent when they differ from those last sent, at most every CONTROL_INTERVAL.
+function sendControl(now, source, steer, throttle, brake) {
   const changed = !sentControl || Math.abs(steer - sentControl.steer) > 0.005
     || Math.abs(throttle - sentControl.throttle) > 0.01 || Math.abs(brake - sentControl.brake) > 0.01;
   if (changed && now - sentAt >= CONTROL_INTERVAL) {
-    sentControl = { steer, throttle, brake };
+    sentControl = { source, steer, throttle, brake };
     sentAt = now;
     send({ type: "control", source, steer: round(steer), throttle: round(throttle), brake: round(brake) });
   }

@@ -20,8 +20,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.wallclock]
 station = station_fixture("controls")
 
 
-GAMEPAD = """window.pad = { steer: 0, throttle: 0, button: false };
-navigator.getGamepads = () => [{
+GAMEPAD = """window.pad = { steer: 0, throttle: 0, button: false, connected: true };
+navigator.getGamepads = () => !window.pad.connected ? [null] : [{
   id: "virtual gamepad", index: 0, connected: true, mapping: "standard", timestamp: performance.now(),
   axes: [window.pad.steer, 0, 0, 0], buttons: Array.from({ length: 17 }, (_, i) => {
     const pressed = i === 0 && window.pad.button;
@@ -121,6 +121,21 @@ def test_by_wheel_the_station_holds_the_pedals_as_the_frames_say_not_as_the_warn
         socket.send(json.dumps({**moving, "t": 11.5, "held": False}))
         page.locator("#incident").filter(has_text="the car stops here").wait_for()
         assert [(c["steer"], c["throttle"]) for c in sent_for(steer=0.1, throttle=0.5)] == [(0.1, 0.5)]
+
+
+def test_a_gamepad_disconnected_in_control_lets_go_of_what_it_last_sent(station):
+    """The episode keeps the last control it was sent: a pad unplugged (or its batteries flat)
+    with the accelerator down would leave the car accelerating with no one's foot on it. The page
+    sends the controls let go (steer, throttle and brake 0, as a person's hands and feet off a
+    wheel and pedals), once, says what to connect, and the pad drives again when it is back."""
+    frame, _ = scene_on(station.net_path)
+    with station.open() as (page, socket):
+        sent_for = gamepad_station(page, socket, {**frame, "speed": 5.0})
+        assert [(c["steer"], c["throttle"]) for c in sent_for(steer=0.2, throttle=1.0)] == [(0.2, 1.0)]
+        gone = sent_for(connected=False)
+        assert [(c["source"], c["steer"], c["throttle"], c["brake"]) for c in gone] == [("gamepad", 0, 0, 0)]
+        page.locator("#incident").filter(has_text="Connect a gamepad").wait_for()
+        assert [c["throttle"] for c in sent_for(connected=True, throttle=0.5)] == [0.5]
 
 
 KEY_STEERING = """async ([speed, step, steps]) => {
