@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING, SupportsFloat
 
 import numpy as np
 
+from trustroute.core.wording import interval
+
 if TYPE_CHECKING:
     import pandas as pd
 
@@ -60,6 +62,19 @@ def interval_text(low: object, high: object, digits: int = 3) -> str:
 def interval_column(frame: pd.DataFrame, low: str, high: str, digits: int = 3) -> list[str]:
     """The column pair (low, high) of a table as formatted intervals."""
     return [interval_text(a, b, digits) for a, b in zip(frame[low], frame[high], strict=True)]
+
+
+def bounds_text(lower: SupportsFloat | None, upper: SupportsFloat | None, digits: int = 3) -> str:
+    """A certified [L, U] as "[lower, upper]" rounded outward, L down and U up, as every command
+    prints one (trustroute/core/wording.py `interval`), so that it holds the certified interval;
+    "-" when either end is missing."""
+    low, high = finite_or_none(lower), finite_or_none(upper)
+    return MISSING if low is None or high is None else interval(low, high, digits)
+
+
+def bounds_column(frame: pd.DataFrame, lower: str, upper: str, digits: int = 3) -> list[str]:
+    """The certified bounds (lower, upper) of a table as intervals rounded outward (`bounds_text`)."""
+    return [bounds_text(a, b, digits) for a, b in zip(frame[lower], frame[upper], strict=True)]
 
 
 def estimate_column(frame: pd.DataFrame, value: str, low: str, high: str, digits: int = 3) -> list[str]:

@@ -12,6 +12,7 @@ from trustroute.analysis.belief_sources import SIMULATED_ENGINES, beside_source,
 from trustroute.analysis.formatting import (
     MISSING,
     TERMINAL_WIDTH,
+    bounds_column,
     estimate_column,
     finite_or_none,
     format_p,
@@ -159,8 +160,8 @@ def _cell_columns(c: pd.DataFrame, other: str) -> dict[str, pd.Series]:
     return {"spec": c["spec"], "condition": condition_marked(c), "n": c["n"], **_outcome_columns(c),
             "Wilson 95% CI": interval_column(c, "wilson_low", "wilson_high"),
             f"rate ({other})": c[f"satisfaction_rate_{other}"].map(number_text),
-            "exact value [L, U]": interval_column(c, "exact_lower", "exact_upper"),
-            "synthesized [L, U]": interval_column(c, "synthesized_lower", "synthesized_upper"),
+            "exact value [L, U]": bounds_column(c, "exact_lower", "exact_upper"),
+            "synthesized [L, U]": bounds_column(c, "synthesized_lower", "synthesized_upper"),
             **trust_columns(c),
             "junctions": c["mean_junctions"].map(lambda v: number_text(v, 1)),
             "fallback": c["fallback_rate"].map(lambda v: number_text(v, 2))}

@@ -10,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 
 from trustroute.analysis import paper_figures
+from trustroute.analysis.formatting import MISSING, bounds_text
 from trustroute.analysis.statistics import rate_interval
 from trustroute.analysis.study.design import study_participants
 from trustroute.analysis.study_directory import spec_path
@@ -93,9 +94,9 @@ def paper_comparison(episodes: pd.DataFrame, cells: pd.DataFrame, belief_source:
         within = ""
         if by_cell is not None and (spec, "aware") in by_cell.index:
             cell = by_cell.loc[(spec, "aware")]
-            lower, upper = cell["synthesized_lower"], cell["synthesized_upper"]
-            if lower is not None and upper is not None and not pd.isna(lower) and not pd.isna(upper):
-                ours = f"[{lower:.4f}, {upper:.4f}]"
+            shown = bounds_text(cell["synthesized_lower"], cell["synthesized_upper"], 4)
+            if shown != MISSING:
+                ours = shown
             if cell["synthesized_horizon"] is not None and not pd.isna(cell["synthesized_horizon"]):
                 within = f", ours within H={int(cell['synthesized_horizon'])} junctions"
         rows.append({"figure": f"Pr_max({spec}), synthesized{within}", "paper": f"{value}", "ours": ours})
