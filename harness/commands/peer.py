@@ -18,7 +18,7 @@ import click
 
 from trustroute.app.peers import ComparedProblem, paynt_comparison, storm_comparison
 from trustroute.core import ranges
-from trustroute.core.wording import interval
+from trustroute.core.wording import interval, lower_text
 from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
 from trustroute.harness.commands.option_groups import option, takes
 from trustroute.harness.commands.options import Checked
@@ -132,7 +132,8 @@ def paynt(spec_path: str, problem: PeerProblem, limits: PayntLimits, ours: OurSi
 def paynt_lines(result: dict) -> list[str]:
     """PAYNT's comparison as text."""
     p = result["paynt"]
-    found = (f"{p['value']:.6f}" if p["found"] else "no controller found in time (lower bound 0)")
+    # a lower bound of Pr_max, set beside our L: rounded down as ours is
+    found = lower_text(p["value"]) if p["found"] else "no controller found in time (lower bound 0)"
     searched = ("not run (note below)" if p.get("note") else
                 f"{p['seconds']:.1f} s, controllers up to {p['memory_nodes']} memory nodes per observation")
     return [problem_line(result),

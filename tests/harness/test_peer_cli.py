@@ -133,3 +133,17 @@ def test_a_long_comparison_names_its_step_on_stderr_and_json_silences_it(capsys,
     assert code == 0 and steps <= {"peer storm: exporting the product POMDP", "peer storm: our search",
                                    f"peer storm: Storm on {states:,} product states"}
     assert "peer storm: our search" in steps, err
+
+
+def test_the_text_rounds_paynts_lower_bound_down_as_ours():
+    """PAYNT's value is a lower bound of Pr_max, set beside our L: a value a hair below 1 reads
+    0.999999, as our L would, never 1.000000."""
+    from trustroute.harness.commands.peer import paynt_lines
+
+    value = 1.0 - 4e-8
+    result = {"spec": "phi1_trust", "file": "specs/phi1_trust.toml", "horizon": 6, "product_states": 10,
+              "paynt": {"value": value, "found": True, "seconds": 1.0, "memory_nodes": 1, "note": ""},
+              "ours": {"lower": value, "upper": 1.0, "gap": 4e-8, "seconds": 1.0}, "within_ours": True}
+    lines = paynt_lines(result)
+    assert "  paynt  0.999999  " in lines[1], lines
+    assert "  ours   [0.999999, 1.000000]" in lines[2], lines
