@@ -20,8 +20,11 @@ import statistics
 import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
+from queue import Empty
 from types import TracebackType
 from typing import Any, Self
+
+ANSWER_POLL_SECONDS = 1.0   # how often `in_spawned_process` looks whether its process still runs
 
 
 def peak_rss_mb() -> float:
@@ -38,12 +41,23 @@ def peak_rss_mb() -> float:
 
 def in_spawned_process(target: Callable[..., None], *arguments: object) -> Any:
     """`target(queue, *arguments)` in a spawned process (no state of this one, its peak memory its
-    own); what it puts on the queue."""
+    own); what it puts on the queue. RuntimeError when the process ends without putting anything
+    (an error it printed, or killed: a side measured for its memory may meet the out-of-memory
+    killer), rather than a wait for ever."""
     context = multiprocessing.get_context("spawn")
     queue = context.Queue()
     process = context.Process(target=target, args=(queue, *arguments))
     process.start()
-    result = queue.get()
+    while True:
+        ended = process.exitcode is not None   # read before the wait: what it put is then in the pipe
+        try:
+            result = queue.get(timeout=ANSWER_POLL_SECONDS)
+            break
+        except Empty:
+            if ended:
+                raise RuntimeError(f"the spawned process of {target.__name__} ended (exit code "
+                                   f"{process.exitcode}; minus a signal's number when one killed it, "
+                                   "-9 most often the out-of-memory killer) before it answered") from None
     process.join()
     return result
 

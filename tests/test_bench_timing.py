@@ -37,3 +37,32 @@ def test_a_subprocess_reports_its_own_peak_memory_not_its_parents():
     child = json.loads(done.stdout)
     assert 0 < child < PARENT_MB / 2, f"the subprocess reports {child:.0f} MB"
     del held
+
+
+def _dies(queue) -> None:
+    import os
+
+    os._exit(3)   # as a side killed by the out-of-memory killer ends: nothing on the queue
+
+
+def test_a_spawned_process_that_dies_before_it_answers_is_an_error_not_a_hang():
+    import threading
+
+    import pytest
+
+    outcome: list[BaseException | object] = []
+
+    def run() -> None:
+        try:
+            outcome.append(in_spawned_process(_dies))
+        except RuntimeError as error:
+            outcome.append(error)
+
+    waiting = threading.Thread(target=run, daemon=True)
+    waiting.start()
+    waiting.join(60)
+    assert not waiting.is_alive(), "in_spawned_process still waits for a process that has ended"
+    [error] = outcome
+    assert isinstance(error, RuntimeError) and "exit code 3" in str(error), error
+    with pytest.raises(RuntimeError, match="_dies"):
+        in_spawned_process(_dies)
