@@ -18,6 +18,7 @@ import sys
 import time
 
 from benchmarks.timing import in_spawned_process, peak_rss_mb
+from trustroute.core.wording import interval, lower_text
 from trustroute.policies.synthesis.settings import SynthesisSettings
 
 OUR_TAU = 1e-3
@@ -105,11 +106,11 @@ def _cell(side: dict) -> str:
     if "cannot_express" in side:
         return "cannot express: belief atoms"
     if "value" in side:
-        value = "none found" if side["value"] is None else f"{side['value']:.5f} (lower)"
+        value = "none found" if side["value"] is None else f"{lower_text(side['value'], 5)} (lower)"
         return (f"{value} k<={side['memory_nodes']} {side['seconds']:.0f} s {side['peak_rss_mb']:.0f} MB"
                 f" load {side['load_average_1min']:.1f}")
-    return (f"[{side['lower']:.5f}, {side['upper']:.5f}] {side['seconds']:.1f} s {side['peak_rss_mb']:.0f} MB"
-            f" load {side['load_average_1min']:.1f}")
+    return (f"{interval(side['lower'], side['upper'], 5)} {side['seconds']:.1f} s "
+            f"{side['peak_rss_mb']:.0f} MB load {side['load_average_1min']:.1f}")
 
 
 def _side(target, args: tuple, available: bool, absent: str) -> dict:
