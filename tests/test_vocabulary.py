@@ -230,7 +230,7 @@ PENDING_IMPORTS = {
         "trustroute.harness.simulation.model_engine", "trustroute.networks.town",
         "trustroute.participants.driver_model", "trustroute.policies.logic.spec",
         "trustroute.policies.resolve"},
-    "trustroute.app.peers": {"trustroute.policies.peer.paynt", "trustroute.policies.peer.storm"},
+    "trustroute.app.peers": {"trustroute.policies.peer.storm"},
     "trustroute.harness.live.replay": {
         "trustroute.harness.simulation.episode", "trustroute.harness.simulation.rerun_log",
         "trustroute.harness.study.context", "trustroute.harness.study.parts",

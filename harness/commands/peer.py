@@ -16,7 +16,13 @@ from typing import Any
 
 import click
 
-from trustroute.app.peers import ComparedProblem, paynt_comparison, storm_comparison
+from trustroute.app.peers import (
+    DEFAULT_MAX_NODES,
+    DEFAULT_MAX_STATES,
+    ComparedProblem,
+    paynt_comparison,
+    storm_comparison,
+)
 from trustroute.core import ranges
 from trustroute.core.wording import interval, lower_text
 from trustroute.harness.commands.inputs import driver_field, spec_argument, town_field
@@ -47,7 +53,7 @@ class OurSide:
     depth: int = option("--depth", type=Checked(ranges.DEPTH), default=10, show_default=True,
                         help="Our search depth for the unbounded objective (the horizon when given).")
     max_nodes: int = option(
-        "--max-nodes", type=Checked(ranges.PEER_MAX_NODES), default=200_000, show_default=True,
+        "--max-nodes", type=Checked(ranges.PEER_MAX_NODES), default=DEFAULT_MAX_NODES, show_default=True,
         help="Our belief nodes per level; beyond, the least likely are bounded, not expanded.")
     as_json: bool = json_flag()
 
@@ -71,7 +77,7 @@ class PayntLimits:
     """PAYNT's side: the seconds of its controller search and the largest product it is handed."""
 
     time_limit: float = peer_time_limit("Seconds of PAYNT's controller search.")
-    max_states: int = option("--max-states", type=Checked(ranges.MAX_STATES), default=200_000,
+    max_states: int = option("--max-states", type=Checked(ranges.MAX_STATES), default=DEFAULT_MAX_STATES,
                              show_default=True, help="Largest product POMDP handed to PAYNT; beyond, exit 2.")
 
 

@@ -351,7 +351,7 @@ class _Leaves:
 
 def joint_bounds(pomdp: TrustPOMDP, spec: Spec, depth: int, horizon: int | None = None,
                  belief_rule: BeliefRule = "bayes", prune_below: float = 0.0,
-                 max_nodes: int = 200_000) -> JointBounds:
+                 max_nodes: int = JointLimits.max_nodes) -> JointBounds:
     """[lower, upper] on max over policies of P(accepted) (within `horizon` junctions when given;
     then depth = horizon)."""
     return joint_search(pomdp, spec, depth, horizon, belief_rule,

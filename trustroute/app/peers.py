@@ -14,9 +14,14 @@ from typing import Any
 
 from trustroute.app.inputs import load_inputs
 from trustroute.policies.model.trust_pomdp import build_pomdp
+from trustroute.policies.peer.paynt import MAX_PRODUCT_STATES, require_paynt, run_paynt
 from trustroute.policies.peer.product_pomdp import ExplicitProduct, check_exportable, explicit_product
 from trustroute.policies.resolve import step_progress
-from trustroute.policies.trust_state_synthesis.search import joint_bounds
+from trustroute.policies.trust_state_synthesis.search import JointLimits, joint_bounds
+
+# The defaults the CLI offers, from the definitions the solvers use.
+DEFAULT_MAX_NODES = JointLimits.max_nodes
+DEFAULT_MAX_STATES = MAX_PRODUCT_STATES
 
 
 @dataclass(frozen=True)
@@ -75,8 +80,6 @@ def storm_comparison(problem: ComparedProblem, time_limit: float, resolution: in
 def paynt_comparison(problem: ComparedProblem, time_limit: float, max_states: int, depth: int,
                      max_nodes: int, progress: bool = False) -> dict:
     """PAYNT's controller value beside our bounds, JSON-ready."""
-    from trustroute.policies.peer.paynt import require_paynt, run_paynt
-
     require_paynt("trustroute peer paynt")
     fields, paynt, ours = _both_sides(
         problem, "PAYNT", lambda product: run_paynt(product, time_limit=time_limit, max_states=max_states),
