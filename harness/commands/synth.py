@@ -284,7 +284,7 @@ def baseline(spec_path: str, town_path: str | None, driver_path: str | None, bel
     emit(as_json, payload, [
         f"{spec.name} trust-free route ({counted(len(route) - 1, 'junction')}, {payload['length_m']:.0f} m): "
         + " ".join(route),
-        f"P(satisfied) = {value.satisfaction_probability:.6f}, E[final trust] = "
+        f"P(satisfied) in {interval(value.lower, value.upper)}, E[final trust] = "
         f"{value.expected_final_trust:.4f}"])
 
 

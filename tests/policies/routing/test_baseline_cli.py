@@ -64,3 +64,15 @@ def test_baseline_of_a_trust_state_spec_is_the_joint_value_of_the_free_route(cap
     evaluated = json.loads(out)
     assert (payload["lower"], payload["upper"]) == (evaluated["lower"], evaluated["upper"])
     assert 0.0 < payload["lower"] <= payload["upper"] < 1.0
+
+
+def test_baseline_text_prints_its_certified_interval_rounded_outward_as_evaluate_does(capsys):
+    code, out, _ = run_cli(capsys, "baseline", "phi1", "--json")
+    payload = json.loads(out)
+    code, out, _ = run_cli(capsys, "baseline", "phi1")
+    assert code == 0
+    code, evaluated, _ = run_cli(capsys, "evaluate", "phi1", "free", "--no-fallback")
+    shown = out.splitlines()[1].split("P(satisfied) in ")[1].split("]")[0] + "]"
+    assert shown in evaluated
+    low, high = (float(x) for x in shown.strip("[]").split(", "))
+    assert low <= payload["lower"] <= payload["upper"] <= high
