@@ -109,13 +109,15 @@ def run_paynt(product: ExplicitProduct, time_limit: float = 10.0,
     """PAYNT's FSC synthesis (abstraction refinement, memory 1, 2, ...) for `time_limit` seconds;
     the value 0 with a note, without PAYNT, when no reachable state satisfies the spec."""
     require_paynt()
+    if not product.goal.any():
+        # the answer is known whatever the product's size: PAYNT is not run, so --max-states has
+        # nothing to refuse
+        return PayntResult(value=0.0, found=True, seconds=0.0, build_seconds=0.0, memory_nodes=0,
+                           states=product.n_states, time_limit=float(time_limit), note=NO_GOAL_NOTE)
     if product.n_states > max_states:
         raise InputError("trustroute peer paynt", "", f"the product POMDP has {product.n_states} states, "
                          f"more than PAYNT is run on here ({max_states})",
                          "use a smaller town or horizon, or raise --max-states")
-    if not product.goal.any():
-        return PayntResult(value=0.0, found=True, seconds=0.0, build_seconds=0.0, memory_nodes=0,
-                           states=product.n_states, time_limit=float(time_limit), note=NO_GOAL_NOTE)
     import paynt.api
     import paynt.parser.sketch
     import paynt.utils.timer

@@ -165,3 +165,16 @@ def test_no_reachable_goal_is_the_value_0_with_its_reason(capsys):
     result = json.loads(captured.out)
     assert result["paynt"]["lower"] == 0.0 and "no reachable state" in result["paynt"]["note"]
     assert result["within_ours"] and result["ours"]["upper"] <= 1e-11
+
+
+def test_no_reachable_goal_is_the_value_0_whatever_the_products_size(capsys):
+    # PAYNT is not run, so a product above --max-states is not refused: the answer 0 is known
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exited:
+        main(["peer", "paynt", "specs/phi1_trust.toml", "--horizon", "3", "--time-limit", "1",
+              "--max-states", "1", "--json"])
+    captured = capsys.readouterr()
+    assert exited.value.code in (0, None), captured.err
+    result = json.loads(captured.out)
+    assert result["paynt"]["lower"] == 0.0 and "no reachable state" in result["paynt"]["note"]
+    assert result["paynt"]["states"] > 1
