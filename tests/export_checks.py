@@ -1,9 +1,11 @@
 """Checks of an exported package (`trustroute export`) shared by the simulated and the live export
-tests: its rows in pseudonym order, each participant's in the study's own order, and no wall-clock
-time in any table."""
+tests: its rows in pseudonym order, each participant's in the study's own order, no wall-clock
+time in any table, the inputs that define the task where its config names them, and nothing of the
+lab's disk or of a participant's identity in any file."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from pathlib import Path
@@ -62,3 +64,39 @@ def assert_no_wall_clock(package: Path) -> None:
             if pa.types.is_string(field.type):
                 dated = [v for v in table.column(field.name).to_pylist() if v and ISO_DATE_TIME.search(v)]
                 assert not dated, (path.name, field.name, dated[:2])
+
+
+TASK_INPUTS = ("specs", "town", "driver_model", "source_path")   # what every stored study names
+# an absolute path in a text: a slash that begins no URL, fraction or unit (m/s), two segments or more
+ABSOLUTE = re.compile(rb"(?<![\w.:/])/[\w.-]+/")
+
+
+def assert_task_inputs(package: Path) -> None:
+    """The package holds every input its study_config.json names (the specs, the town, the driver
+    model, the config file and any policy file, population or route file), where the config names
+    it, each listed in SHA256SUMS with its hash and in the README."""
+    config = json.loads((package / "study_config.json").read_text())
+    named = [config[key] for key in TASK_INPUTS]
+    for key in ("conditions", "routes", "robust_population", "driver_population"):
+        value = config.get(key) or []
+        named += [v for v in (value if isinstance(value, list) else [value]) if v.startswith("inputs/")]
+    flat = [p for value in named for p in (value if isinstance(value, list) else [value])]
+    assert flat and all(p.startswith("inputs/") and (package / p).is_file() for p in flat), flat
+    sums = dict(reversed(line.split("  ", 1)) for line in (package / "SHA256SUMS").read_text().splitlines())
+    readme = (package / "README.md").read_text()
+    copied = sorted(p.relative_to(package).as_posix() for p in (package / "inputs").rglob("*") if p.is_file())
+    assert set(flat) <= set(copied)
+    for path in copied:
+        assert sums[path] == hashlib.sha256((package / path).read_bytes()).hexdigest(), path
+        assert f"`{path}`" in readme, path
+
+
+def assert_nothing_identifying(package: Path, words: list[str]) -> None:
+    """No file of the package, read as bytes, holds any of `words` (paths of the lab's disk, names,
+    tokens) or, being text, an absolute path."""
+    for path in sorted(p for p in package.rglob("*") if p.is_file()):
+        data = path.read_bytes()
+        found = [word for word in words if word.encode() in data]
+        assert not found, (path, found)
+        if path.suffix in (".json", ".toml", ".md", ".txt", ".xml") or path.name == "SHA256SUMS":
+            assert not ABSOLUTE.findall(data), (path, ABSOLUTE.findall(data)[:3])

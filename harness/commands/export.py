@@ -1,5 +1,6 @@
 """`trustroute export STUDY --out DIR`: a study packaged for sharing, with pseudonymous
-participants, a codebook, the config, the texts shown, the versions, checksums and a README
+participants, a codebook, the config and the inputs that define the task, the texts shown, the
+versions, checksums and a README
 (harness/study/export.py; docs/live_studies.md, "Export")."""
 
 from __future__ import annotations
@@ -25,13 +26,14 @@ def export(study_dir: str, out: str, seed: int, as_json: bool) -> None:
     import numpy as np
 
     from trustroute.analysis.study_directory import load_study
-    from trustroute.harness.live.withdraw import ended_counts
+    from trustroute.harness.live.withdraw import ended_counts, registry_words
     from trustroute.harness.study.export import KEY_FILE, export_study
 
     warnings = study_warnings(Path(study_dir))
     load_study(Path(study_dir))   # its tables checked against its inputs before anything is written
     ended = ended_counts(Path(study_dir))
-    index = {**export_study(Path(study_dir), Path(out), np.random.default_rng(seed), ended),
+    index = {**export_study(Path(study_dir), Path(out), np.random.default_rng(seed), ended,
+                           registry_words(Path(study_dir))),
              "warnings": warnings}
     # the package is a folder of many files, listed as the folder; the key stays in the study
     paths = {"package": Path(out), "export_key": Path(study_dir) / KEY_FILE}

@@ -113,6 +113,18 @@ def ended_counts(study_dir: Path) -> dict[str, int] | None:
     return {ended: sum(1 for record in records if record.get(ended)) for ended in ENDED}
 
 
+def registry_words(study_dir: Path) -> list[tuple[str, str]]:
+    """The words of a live study's registry that name a participant, with what each is: every label
+    and token digest ([] for a study without a registry). `trustroute export` keeps them out of the
+    package's copied inputs (harness/study/export_inputs.py)."""
+    path = Path(study_dir) / LIVE_DIR / REGISTRY
+    if not path.exists():
+        return []
+    kinds = (("label", "a participant's label"), ("digest", "a participant's token digest"))
+    records = load_registry(path, "restore it from a backup")["participants"].values()
+    return [(str(record[key]), what) for record in records for key, what in kinds if record.get(key)]
+
+
 def write_registry(study_dir: Path, records: dict) -> None:
     atomic_write_text(Path(study_dir) / LIVE_DIR / REGISTRY, json.dumps(records, indent=1),
                       "live participants", "free disk space")

@@ -57,6 +57,7 @@ from trustroute.core.output_files import atomic_write_text, check_output_dir
 from trustroute.core.validation import read_json
 from trustroute.harness.live.attempts import utc_now
 from trustroute.harness.study.config import LIVE_ENGINE
+from trustroute.harness.study.export_inputs import PackagedInputs, config_text, export_inputs, inputs_readme
 from trustroute.harness.study.inputs import relocated_config
 from trustroute.participants.questionnaires import Questionnaire, questionnaire_plan
 
@@ -192,10 +193,12 @@ def sha256_of(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: dict[str, int] | None) -> dict:
+def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: dict[str, int] | None,
+                 registry: list[tuple[str, str]]) -> dict:
     """Write the package of `study_dir` into `out` (a new or empty directory); its index. `ended`: how
     many participants of a live study withdrew and how many declined the consent (harness/live/
-    withdraw.py, `ended_counts`; None: a simulated study), for the README."""
+    withdraw.py, `ended_counts`; None: a simulated study), for the README; `registry`: the labels and
+    token digests of its participants (`registry_words`), which no copied input may hold."""
     study_dir, out = Path(study_dir), Path(out)
     manifest = read_manifest(study_dir)
     check_output_dir(out, "--out", "package directory")
@@ -225,7 +228,8 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
     atomic_write_text(out / "codebook.md", codebook_markdown(book), "codebook")
     config = {setting: value for setting, value in manifest["config"].items()
               if not (people and setting in CONFIG_WITHOUT_PEOPLE_SEEDS)}
-    atomic_write_text(out / "study_config.json", json.dumps(config, indent=1, default=str), "study config")
+    atomic_write_text(out / "study_config.json", config_text(config, manifest), "study config")
+    packaged = export_inputs(study_dir, manifest, out, key, registry)
     versions = {"python": platform.python_version(), "git_revision": manifest.get("git_revision"),
                 "packages": manifest.get("packages", {}), "engine": manifest.get("engine")}
     atomic_write_text(out / "versions.json", json.dumps(versions, indent=1), "software versions")
@@ -239,12 +243,13 @@ def export_study(study_dir: Path, out: Path, rng: np.random.Generator, ended: di
         (out / "texts").mkdir(exist_ok=True)
         atomic_write_text(out / "texts" / QUESTIONNAIRES_TEXT, json.dumps(shown, indent=1), "questionnaires")
         texts.append(QUESTIONNAIRES_TEXT)
-    atomic_write_text(out / "README.md", readme(manifest, tables, texts, len(key), ended), "README")
+    atomic_write_text(out / "README.md", readme(manifest, tables, texts, len(key), ended, packaged), "README")
     write_export_keys(study_dir, earlier, out, key)
     files = sorted(path for path in out.rglob("*") if path.is_file())
     sums = "".join(f"{sha256_of(path)}  {path.relative_to(out)}\n" for path in files)
     atomic_write_text(out / "SHA256SUMS", sums, "checksums")
-    return {"tables": tables, "texts": texts, "participants": len(key), "files": len(files) + 1}
+    return {"tables": tables, "texts": texts, "inputs": list(packaged.roles),
+            "inputs_left_out": packaged.left_out, "participants": len(key), "files": len(files) + 1}
 
 
 def read_export_keys(study_dir: Path) -> list[dict]:
@@ -355,7 +360,7 @@ def source_of(manifest: dict) -> list[str]:
 
 
 def readme(manifest: dict, tables: list[str], texts: list[str], participants: int,
-           ended: dict[str, int] | None) -> str:
+           ended: dict[str, int] | None, packaged: PackagedInputs) -> str:
     name = manifest.get("study", "the study")
     return "\n".join([
         f"# {name}: data package", "",
@@ -366,6 +371,7 @@ def readme(manifest: dict, tables: list[str], texts: list[str], participants: in
         "- `codebook.md`, `codebook.json`: every column's type, whether it may be null, unit, meaning and "
         "allowed values.",
         "- `study_config.json`: the study's configuration; `versions.json`: the software that made it.",
+        *inputs_readme(packaged),
         *(["- `texts/`: what participants were shown (" + ", ".join(texts) + ")"
            + (f"; `{QUESTIONNAIRES_TEXT}`: per placement (`before`, `after_each_trial`, `end`) each "
               "questionnaire as the station showed it (title, instructions, scale, items; an item's `id` "

@@ -4,9 +4,11 @@ enrolment; the README reports the participant flow."""
 
 from __future__ import annotations
 
+import getpass
 import json
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -15,7 +17,13 @@ import pytest
 
 import trustroute
 from tests.cli import assert_one_line_error, run_cli
-from tests.export_checks import assert_no_wall_clock, assert_rows_in_code_order, package_key
+from tests.export_checks import (
+    assert_no_wall_clock,
+    assert_nothing_identifying,
+    assert_rows_in_code_order,
+    assert_task_inputs,
+    package_key,
+)
 from trustroute.harness.study.export import pseudonyms, read_export_keys
 
 
@@ -160,3 +168,86 @@ def test_an_imported_study_exports_without_the_drivers_numbers(tmp_path, capsys)
     readme = (tmp_path / "package" / "README.md").read_text()
     assert "Participants: 21 with data in this package." in readme
     assert "Copyright (c) 2025 Shuyang Dong" in readme and "MIT licence" in readme
+
+
+def test_a_package_holds_the_inputs_that_define_the_task(model_study, tmp_path, capsys):
+    """The specs, the town, the driver model, the config file and the policies the aware condition
+    drove are in the package where its study_config.json names them, with their hashes; the config
+    file's policy cache, an absolute path of the lab's disk, names the package's copy instead."""
+    study = shutil.copytree(model_study, tmp_path / "study")
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
+    assert code == 0, err
+    package = tmp_path / "package"
+    assert_task_inputs(package)
+    config = json.loads((package / "study_config.json").read_text())
+    assert [Path(p).name for p in config["specs"]] == ["phi1.toml", "phi2.toml"]
+    policies = sorted(p.name for p in (package / config["policy_cache"]).iterdir())
+    assert [p for p in policies if p.startswith("aware-")] == policies and len(policies) == 4
+    written = (package / config["source_path"]).read_text()
+    assert 'policy_cache = "inputs/policies"' in written
+    cache = str(model_study.parent.parent / "policies")   # the fixture's policy cache
+    assert_nothing_identifying(package, [str(tmp_path), str(model_study), cache, str(Path.cwd()),
+                                         str(Path(trustroute.__file__).parent)])
+
+
+def test_an_input_is_read_before_it_enters_the_package(tmp_path, capsys):
+    """An absolute path in a copied file becomes the package's copy it names, or a mark; a file
+    naming the account that exports is left out, and so is one holding a token-shaped string, and
+    the README says why; a symbolic link in inputs/ to a file outside the study is not followed."""
+    from trustroute.harness.live.auth import new_token
+    from trustroute.harness.study.export_inputs import PATH_LEFT_OUT
+    from trustroute.participants.driver_model import DEFAULT_DRIVER_MODEL_PATH
+
+    lab = tmp_path / "lab"
+    lab.mkdir()
+    model = json.loads(Path(DEFAULT_DRIVER_MODEL_PATH).read_text())
+    spec = lab / "route.toml"
+    spec.write_text(Path(trustroute.__file__).parent.joinpath("core/specs/phi1.toml").read_text()
+                    + f"# link: https://lab.example/s?t={new_token()}\n")
+    model["source"] = f"fitted by `trustroute fit {lab}/pilot` beside {spec}"
+    (lab / "driver.json").write_text(json.dumps(model))
+    (lab / "study.toml").write_text(f"""# run by {getpass.getuser()}
+[study]
+participants = 2
+seed = 1
+engine = "model"
+specs = ["route.toml", "phi2"]
+conditions = ["free"]
+driver_model = "driver.json"
+""")
+    study = trustroute.run_study(lab / "study.toml", out=tmp_path / "study").study_dir
+    config = json.loads((study / "manifest.json").read_text())["config"]
+    town = study / config["town"]
+    outside = tmp_path / "elsewhere.json"
+    outside.write_bytes(town.read_bytes())   # the same bytes: the study's hash check passes
+    town.unlink()
+    town.symlink_to(outside)
+    package = tmp_path / "package"
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(package))
+    assert code == 0, err
+    readme = (package / "README.md").read_text()
+    model_copy = (package / config["driver_model"]).read_text()
+    assert f"beside {config['specs'][0]}" in model_copy and PATH_LEFT_OUT in model_copy
+    for left_out, why in ((config["specs"][0], "a string of the form of a participant's token"),
+                          (config["source_path"], "the user name of the account that runs the export"),
+                          (config["town"], "a symbolic link leading out of the study directory")):
+        assert not (package / left_out).exists()
+        assert re.search(rf"`{left_out}`: left out, since [^\n]*{why}", readme), left_out
+    assert (package / config["specs"][1]).is_file()
+    assert_nothing_identifying(package, [str(tmp_path), getpass.getuser()])
+
+
+def test_an_imported_study_names_no_path_of_the_lab_in_its_package(tmp_path, capsys):
+    """The import names its specs by their absolute paths where it ran (the packaged specs) and stores
+    no inputs: the package's config names none of them, and the README says it holds no inputs."""
+    from trustroute.core.packaged import PACKAGED_SPECS
+
+    study = shutil.copytree("analysis/data/real_study/study", tmp_path / "study")
+    manifest = json.loads((study / "manifest.json").read_text())
+    manifest["config"]["specs"] = [str(PACKAGED_SPECS / Path(p).name) for p in manifest["config"]["specs"]]
+    (study / "manifest.json").write_text(json.dumps(manifest))
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
+    assert code == 0, err
+    assert "- `inputs/`: none; the study directory holds no copy of its inputs" in (
+        tmp_path / "package" / "README.md").read_text()
+    assert_nothing_identifying(tmp_path / "package", [str(tmp_path), str(PACKAGED_SPECS)])

@@ -14,7 +14,13 @@ import pyarrow.parquet as pq
 import pytest
 
 from tests.cli import assert_one_line_error, run_cli
-from tests.export_checks import assert_no_wall_clock, assert_rows_in_code_order, package_key
+from tests.export_checks import (
+    assert_no_wall_clock,
+    assert_nothing_identifying,
+    assert_rows_in_code_order,
+    assert_task_inputs,
+    package_key,
+)
 from tests.questionnaire_files import COMFORT
 from trustroute.core.codebook import type_name
 from trustroute.harness.live.scripted import ScriptedParticipant, run_scripted
@@ -235,3 +241,26 @@ def test_the_readme_counts_those_who_declined_without_naming_who(tmp_path, capsy
             "before this export), 1 declined consent (nothing of theirs was recorded), 1 did not take "
             "part (their link not opened, or nothing of theirs recorded after it).") in readme
     assert not re.search(r"Ada|Grace|p0000[23]", readme)
+
+
+def test_a_live_package_holds_the_task_and_no_token_label_or_path(tmp_path, capsys):
+    """A live study's package holds its spec, town, driver model and config file where its
+    study_config.json names them, and no byte of any file is a participant's token, its digest or
+    label, or a path of the lab's disk."""
+    from trustroute.harness.live.auth import token_digest
+
+    config = tiny_config(tmp_path)
+    study_dir, package = tmp_path / "study", tmp_path / "package"
+    study = LiveStudy(config, study_dir, ServerOptions(pace=1000.0)).open()
+    tokens, labels = [], ["Dana Smith", "Room B-12 Tuesday"]
+    try:
+        with serving(study) as (host, port):
+            for p, label in enumerate(labels):
+                tokens.append(study.create_participant(label)[1])
+                run_scripted(f"ws://{host}:{port}/ws", tokens[-1], ScriptedParticipant(config, p), 120)
+    finally:
+        study.close()
+    code, _, err = run_cli(capsys, "export", str(study_dir), "--out", str(package))
+    assert code == 0, err
+    assert_task_inputs(package)
+    assert_nothing_identifying(package, [*tokens, *map(token_digest, tokens), *labels, str(tmp_path)])
