@@ -262,10 +262,17 @@ class LinkClaim(Message):
     token: Annotated[str, Field(min_length=1, max_length=128)]
 
 
-class Withdrawal(Message):
-    """The experimenter withdraws a participant: `confirm` must be true (the console asks first)."""
+def confirmed(value: bool) -> bool:
+    if not value:
+        raise ValueError("a withdrawal needs confirm: true")
+    return value
 
-    confirm: Literal[True]
+
+class Withdrawal(Message):
+    """The experimenter withdraws a participant: `confirm` must be the JSON `true` (the console
+    asks first); a StrictBool, since a Literal[True] takes 1 and 1.0 as equal to it."""
+
+    confirm: Annotated[StrictBool, AfterValidator(confirmed)]
     reason: Annotated[str, Field(max_length=300, pattern=r"^[\w .,:;()'/-]*$")] = ""
 
 
@@ -307,14 +314,20 @@ def unique_keys(pairs: list[tuple[str, object]]) -> dict:
 
 def json_value(text: str | bytes, what: str) -> object:
     """`text` (a websocket message or an HTTP body: `what`) read as JSON, once: MessageError
-    `malformed` for an object naming a key twice or nesting deeper than the parser goes, ValueError
-    for text that is no JSON. NaN, Infinity and numbers beyond a float's range (1e400) read as the
-    floats pydantic's JSON mode reads, so each schema refuses them where it would refuse them in
-    JSON (a finite number field) and takes them where it would take them."""
+    `malformed` for an object naming a key twice or nesting deeper than the parser goes,
+    json.JSONDecodeError for text that is no JSON (bytes are read as UTF-8, JSON's one encoding:
+    no other, no byte-order mark; an integer longer than Python converts is no JSON either). NaN,
+    Infinity and numbers beyond a float's range (1e400) read as the floats pydantic's JSON mode
+    reads, so each schema refuses them where it would refuse them in JSON (a finite number field)
+    and takes them where it would take them."""
     try:
-        return json.loads(text, object_pairs_hook=unique_keys)
+        return json.loads(text.decode() if isinstance(text, bytes) else text, object_pairs_hook=unique_keys)
     except RecursionError:
         raise MessageError("malformed", f"the {what} is nested too deeply") from None
+    except json.JSONDecodeError:
+        raise
+    except ValueError as exc:   # bytes that are no UTF-8, an integer longer than Python converts
+        raise json.JSONDecodeError(str(exc), "", 0) from None
 
 
 def parse_client_message(raw: str | bytes) -> ClientMessage:

@@ -257,6 +257,31 @@ def test_bad_http_bodies_get_errors_and_change_nothing(client, live_study):
     assert state_of(client, live_study) == before
 
 
+def test_a_withdrawal_is_confirmed_by_true_and_nothing_else(client, live_study):
+    """A withdrawal deletes data: its `confirm` is the JSON `true`; 1, 1.0 or "true" (which a
+    literal True would take as equal) are malformed and withdraw no one."""
+    headers = bearer(live_study.experimenter_token)
+    create(client, live_study)
+    for confirm in ("1", "1.0", '"true"', "false", "null"):
+        response = client.post("/api/participants/0/withdraw", content=f'{{"confirm": {confirm}}}',
+                               headers={**headers, "content-type": "application/json"})
+        assert response.status_code == 422 and response.json()["code"] == "malformed", confirm
+        assert live_study.sessions[0].phase == "consent" and 0 in live_study.credentials.participants
+    response = client.post("/api/participants/0/withdraw", json={"confirm": True}, headers=headers)
+    assert response.status_code == 200 and live_study.sessions[0].phase == "withdrawn"
+
+
+@pytest.mark.parametrize("body", [b'{"label": "\xff"}', b'{"label": ' + b"9" * 5000 + b"}",
+                                  '{"label": "a"}'.encode("utf-16")])
+def test_a_body_the_json_parser_cannot_read_is_malformed_in_the_protocols_form(client, live_study, body):
+    """Bytes that are no UTF-8, or an integer longer than Python reads, are refused as any other
+    body that is no JSON: 422 `malformed`, the protocol's error."""
+    response = client.post("/api/participants", content=body, headers={
+        **bearer(live_study.experimenter_token), "content-type": "application/json"})
+    assert response.status_code == 422 and response.json()["code"] == "malformed", response.text
+    assert live_study.sessions == {}
+
+
 def test_a_body_is_parsed_once(client, live_study, monkeypatch):
     """The guard parses a JSON body (refusing a key given twice) and the route validates what it
     parsed: the body's text is read by the JSON parser once."""
