@@ -1,7 +1,8 @@
 """`trustroute live`: serve one study to people (docs/live_studies.md).
 
 The study config is `trustroute study`'s, with engine = "live". The server binds 127.0.0.1 by
-default (another host: a warning on stderr), takes the port before it writes or prints anything
+default (another host: a warning on stderr; so is an HTTPS --public-origin without
+--secure-cookies), takes the port before it writes or prints anything
 (a port in use: one line, exit 2), prints the experimenter's console address for each address it
 is reachable at (carrying the token once) and the token, and serves until interrupted; a second
 server on the same study directory is refused (exit 2).
@@ -109,8 +110,8 @@ def checked_origins(origins: tuple[str, ...]) -> tuple[str, ...]:
 def announce(study, host: str, port: int, public: tuple[str, ...]) -> None:
     """The study, its console address(es) (one login token: the link works once, at any of them)
     and the experimenter token (for scripts); a warning on stderr when the study is reachable from
-    other computers."""
-    from trustroute.harness.live.guard import is_loopback, shown_host, usable_addresses
+    other computers, and one for each HTTPS public origin while the cookies are not Secure."""
+    from trustroute.harness.live.guard import is_loopback, normal_origin, shown_host, usable_addresses
 
     login = study.login_token
     click.echo(f"live study {study.config.name}: {study.study_dir}")
@@ -118,6 +119,10 @@ def announce(study, host: str, port: int, public: tuple[str, ...]) -> None:
         click.echo(f"warning: --host {host} serves this study to every computer that reaches this one's "
                    f"network at port {port}; use it on a lab network or behind an HTTPS proxy "
                    "(--secure-cookies, --public-origin)", err=True)
+    for origin in public:
+        if (normal_origin(origin) or "").startswith("https://") and not study.options.secure_cookies:
+            click.echo(f"warning: {origin} is HTTPS but the cookies are not marked Secure, so a browser also "
+                       "sends them over plain HTTP; add --secure-cookies", err=True)
     for address in usable_addresses(host):
         click.echo(f"console: http://{shown_host(address)}:{port}/login?token={login}")
     for origin in public:

@@ -272,13 +272,30 @@ def test_a_public_host_warns_and_prints_usable_addresses(live_study, capsys):
 
     announce(live_study, "0.0.0.0", 8765, ("https://study.example.org",))
     out, err = capsys.readouterr()
-    assert err.startswith("warning: --host 0.0.0.0") and err.count("\n") == 1
+    host_warning, cookie_warning = err.splitlines()   # (without --secure-cookies: the test below)
+    assert host_warning.startswith("warning: --host 0.0.0.0") and "--secure-cookies" in cookie_warning
     consoles = [line for line in out.splitlines() if line.startswith("console: ")]
     assert consoles and not any("0.0.0.0" in line for line in consoles)
     assert any("http://127.0.0.1:8765/login?token=" in line for line in consoles)
     assert any(line.startswith("console: https://study.example.org/login?token=") for line in consoles)
     announce(live_study, "127.0.0.1", 8765, ())
     assert capsys.readouterr().err == ""
+
+
+def test_an_https_public_origin_without_secure_cookies_warns(tmp_path, capsys):
+    """Behind an HTTPS proxy the cookies must be Secure, or a browser sends them over plain HTTP
+    too (a participant typing http://...): served so without --secure-cookies, the server says so."""
+    from trustroute.harness.commands.live import announce
+
+    for secure in (False, True):
+        options = ServerOptions(secure_cookies=secure, public_origins=("https://study.example.org",))
+        with LiveStudy(tiny_config(tmp_path), tmp_path / f"study-{secure}", options) as study:
+            announce(study, "127.0.0.1", 8765, options.public_origins)
+            announce(study, "127.0.0.1", 8765, ("http://study.example.org",))
+        err = capsys.readouterr().err
+        assert err == ("" if secure else
+                       "warning: https://study.example.org is HTTPS but the cookies are not marked Secure, "
+                       "so a browser also sends them over plain HTTP; add --secure-cookies\n")
 
 
 def test_the_server_sends_each_message_at_once_nagle_off(live_study):
