@@ -28,7 +28,9 @@ state-changing request and websocket handshake its Origin (harness/live/guard.py
 
 Request bodies are capped (MAX_BODY_BYTES, counted as received), parsed once (a key given twice
 refused: guard.py) and validated (protocol.py models); every refusal is a JSON error of the
-protocol's form with an HTTP status, and changes nothing. A participant has one live websocket:
+protocol's form with an HTTP status, and changes nothing. A browser holds one role: a console
+login is refused where a participant's session cookie is held, a link's claim where the console's
+is (`holds_role`). A participant has one live websocket:
 a second one replaces the first (both are told); a socket silent for `idle_seconds` is closed.
 `serve` runs the application on uvicorn on a socket bound beforehand (websocket frames capped at
 the transport too, slow requests cut: guard.py).
@@ -200,6 +202,16 @@ def study_of(connection: HTTPConnection) -> LiveStudy:
     return connection.app.state.study
 
 
+def holds_role(request: Request, cookie: str) -> bool:
+    """Whether the request's browser holds a valid token in `cookie` (the experimenter's or a
+    participant's: a console login and a link's claim are refused where the other role's is)."""
+    token = presented_token({}, request.cookies, cookie)
+    credentials = study_of(request).credentials
+    if cookie == EXPERIMENTER_COOKIE:
+        return credentials.is_experimenter(token)
+    return credentials.participant_of(token) is not None
+
+
 def experimenter(request: Request) -> None:
     """Dependency: the request carries the experimenter's token (401 without a token, 403 with another)."""
     token = presented_token(request.headers, request.cookies, EXPERIMENTER_COOKIE)
@@ -237,6 +249,11 @@ NEW_CONSOLE_LINK = ("open the new console link the server printed when it starte
 CONSOLE_REFUSED = ("This browser is not logged in to the console: the server was restarted, or the login "
                    "is gone. To go on, " + NEW_CONSOLE_LINK)
 LOGIN_REFUSED = "This console link is spent or unknown. To log in, " + NEW_CONSOLE_LINK
+# A browser holds one role: whoever sits at a browser holding both cookies could open the console.
+CONSOLE_HERE = ("This browser is logged in to the experimenter console, where a participant could open it: "
+                "open the participant's link in another browser (or a private window).")
+STATION_HERE = ("A participant's session is open in this browser, where they could open the console: open "
+                "the console link in another browser (or a private window).")
 STATION_REFUSED = ("This session is not open in this browser. Open the link the experimenter gave you, or "
                    "ask the experimenter for a new one. If you have withdrawn from the study, your data "
                    "has been deleted; if you did not agree to take part, none was recorded: you can close "
@@ -257,6 +274,9 @@ def refused_page(request: Request, refusal: HTTPException, title: str, text: str
 def login(request: Request, token: str = "") -> RedirectResponse | HTMLResponse:
     """The console link: its one-time token is exchanged for a fresh session token, which only the
     cookie holds (the link left in the browser's history, or a proxy's log, is spent)."""
+    if holds_role(request, PARTICIPANT_COOKIE):   # (the link is not spent: it works in another browser)
+        refusal = refused(409, "out_of_order", STATION_HERE)
+        return refused_page(request, refusal, CONSOLE_TITLE, STATION_HERE)
     session = study_of(request).login(token[:200] or None)
     if session is None:
         refusal = refused(403, "forbidden", "this login link is spent or unknown; ask the server for a new "
@@ -283,6 +303,8 @@ def claim(request: Request, body: LinkClaim) -> JSONResponse:
     """The token of a link opened in a browser is replaced by a fresh one, which only the cookie
     holds: the link left in the browser's history is spent (403 when opened again)."""
     study = study_of(request)
+    if holds_role(request, EXPERIMENTER_COOKIE):   # (the link is not spent: it works in another browser)
+        raise refused(409, "out_of_order", CONSOLE_HERE)
     try:
         participant, token = study.claim_link(body.token)
     except ValueError as exc:

@@ -13,9 +13,11 @@ async function claim() {
     location.replace((await response.json()).next);
     return;
   }
+  // 409: the browser is logged in to the console; the server's text says where to open the link
   document.getElementById("message").textContent = response.status === 403
     ? "This link has been used already (or was revoked). If this is your session, ask the experimenter for a new link."
-    : `The session could not be opened (${response.status}).`;
+    : response.status === 409 ? (await response.json()).detail.detail
+      : `The session could not be opened (${response.status}).`;
 }
 
 claim();

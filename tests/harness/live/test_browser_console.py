@@ -280,3 +280,20 @@ def test_the_console_and_the_station_load_without_an_error_or_a_missing_resource
         page.wait_for_timeout(1500)   # (the icon is asked for after the page has loaded)
         browser.close()
     assert problems == []
+
+
+def test_a_participants_link_opened_in_the_consoles_browser_says_where_to_open_it(station):
+    """A browser logged in to the console claims no participant's link (tests/harness/live/
+    test_live_security.py): the link's page says so in the server's words, and the link is unspent."""
+    from trustroute.harness.live.app import CONSOLE_HERE
+
+    context, console = open_console(station)
+    console.wait_for_url("**/console")   # logged in: the cookie is set
+    created = httpx.post(f"{station.address}/api/participants", json={}, headers=experimenter(station)).json()
+    page = context.new_page()
+    page.goto(station.address + created["link"])
+    page.locator("#message").filter(has_text="another browser").wait_for()
+    assert page.locator("#message").inner_text() == CONSOLE_HERE
+    context.close()
+    claimed = httpx.post(f"{station.address}/api/claim", json={"token": created["token"]})
+    assert claimed.status_code == 200

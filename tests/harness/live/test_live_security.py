@@ -7,6 +7,7 @@ import json
 import os
 import secrets
 import time
+from html import escape
 
 import pytest
 from fastapi.testclient import TestClient
@@ -14,7 +15,7 @@ from pydantic import TypeAdapter
 from starlette.websockets import WebSocketDisconnect
 
 from trustroute.core.errors import InputError
-from trustroute.harness.live.app import POLICY_VIOLATION, live_app
+from trustroute.harness.live.app import CONSOLE_HERE, POLICY_VIOLATION, STATION_HERE, live_app
 from trustroute.harness.live.protocol import (
     BURST,
     MAX_BODY_BYTES,
@@ -89,6 +90,7 @@ def test_links_set_httponly_cookies_that_authenticate_and_spend_the_link(client,
     assert client.get("/api/me", headers=bearer(token)).status_code == 403
     log = (live_study.study_dir / "live" / "tokens.jsonl").read_text().splitlines()
     assert [json.loads(line)["participant"] for line in log] == [0]
+    client.cookies.clear()   # another browser: this one is the participant's (one role a browser)
     login = client.get(f"/login?token={live_study.login_token}", follow_redirects=False)
     assert login.status_code == 303 and "HttpOnly" in login.headers["set-cookie"]
     assert client.get("/api/participants").status_code == 200
@@ -115,6 +117,26 @@ def test_the_console_link_works_once_and_its_cookie_holds_a_fresh_token(client, 
     assert client.get("/api/participants").status_code == 200
     assert client.get(link, follow_redirects=False).status_code == 403
     assert client.get("/api/participants", headers=bearer(experimenter)).status_code == 200   # scripts
+
+
+def test_a_browser_holds_one_role_the_console_or_a_participants_session(client, live_study):
+    """Whoever sits at a browser logged in to the console could open it: a participant's link is
+    not claimed there, nor is a console link where a participant's session is open. A refused link
+    is not spent: it works in another browser."""
+    token = create(client, live_study)
+    assert client.get(f"/login?token={live_study.login_token}", follow_redirects=False).status_code == 303
+    refused = client.post("/api/claim", json={"token": token})
+    assert refused.status_code == 409 and refused.json()["detail"]["detail"] == CONSOLE_HERE
+    assert client.get("/api/me").status_code == 403
+    link = client.post("/api/login-link").json()["link"]
+    with TestClient(live_app(live_study)) as station, TestClient(live_app(live_study)) as other:
+        assert station.post("/api/claim", json={"token": token}).status_code == 200   # the link unspent
+        assert station.get(link, follow_redirects=False).status_code == 409
+        page = station.get(link, headers={"Accept": "text/html"}, follow_redirects=False)
+        assert page.status_code == 409 and escape(STATION_HERE) in page.text
+        assert station.get("/console").status_code == 401
+        assert other.get(link, follow_redirects=False).status_code == 303   # the console link unspent
+        assert other.get("/api/participants").status_code == 200
 
 
 def test_secure_cookies_for_studies_served_over_https(tmp_path):
