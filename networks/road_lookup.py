@@ -41,6 +41,22 @@ def roads_into(town: Town, junction: str) -> frozenset[str]:
     return frozenset(road for road in town.states if Road.parse(road).to_junction == junction)
 
 
+def unknown_road_fix(town: Town, road_id: str) -> str:
+    """The fix for a directed road id "U-V" that `town` lacks: its other direction when that is a
+    road of the town (a one-way street written the other way round), else the roads leaving U when
+    U is a junction of the town, else a few of the town's roads."""
+    road = Road.parse_or_none(road_id)
+    if road is not None and road.reverse.id in town.states:
+        return (f"the road between {road.from_junction} and {road.to_junction} is one-way, driven from "
+                f"{road.to_junction} to {road.from_junction}: write '{road.reverse.id}' ('U-V' is "
+                "driven from U to V)")
+    leaving = [] if road is None else sorted(r for r in town.states
+                                             if Road.parse(r).from_junction == road.from_junction)
+    examples = ", ".join(leaving[:5] or sorted(town.states)[:3])
+    where = f"from {road.from_junction}: " if leaving and road is not None else "e.g. "
+    return f"use directed roads 'U-V' of the town, the keys of its \"incidents\" ({where}{examples})"
+
+
 def roads_on_street(town: Town, street: str) -> frozenset[str]:
     """Every directed road one of whose street names is `street` (case and surrounding spaces
     ignored)."""

@@ -44,6 +44,7 @@ from trustroute.core.fields import (
 from trustroute.core.packaged import SPECS
 from trustroute.core.validation import FILE_NAME, FILE_NAME_RULE, parse_toml, read_text
 from trustroute.core.wording import counted, shown_value
+from trustroute.networks.road_lookup import unknown_road_fix
 from trustroute.networks.town import Town
 from trustroute.policies.logic.formula import (
     ATOM_PATTERN,
@@ -374,9 +375,7 @@ def _check_roads(roads: list[str], owner: str, place: Callable[[str], str], sour
                              "write roads as \"U-V\"")
         if town is not None and road not in town.states:
             raise InputError(source, place(road), f"{owner}: '{road}' is not a directed road of the town "
-                             f"({town.source_path or 'given town'})",
-                             "use directed roads 'U-V' of the town, the keys of its \"incidents\" "
-                             f"(e.g. {', '.join(sorted(town.states)[:3])})")
+                             f"({town.source_path or 'given town'})", unknown_road_fix(town, road))
 
 
 def _state_atoms(raw: Mapping[str, object], spec: _SpecSource,
@@ -497,8 +496,7 @@ def _check_start(start: str, spec: _SpecSource, town: Town | None) -> None:
     needles = (r"^\s*start\s*=",)
     if town is not None and start not in town.states:
         raise spec.error("start", needles, f"start road '{start}' is not a directed road of the "
-                         f"town ({town.source_path or 'given town'})",
-                         "use a directed road 'U-V' of the town")
+                         f"town ({town.source_path or 'given town'})", unknown_road_fix(town, start))
     if "-" not in start:
         raise spec.error("start", needles, f"start '{start}' is not a directed road \"U-V\"",
                          'write start = "E-A"')

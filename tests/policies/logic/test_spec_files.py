@@ -108,6 +108,27 @@ def test_state_not_in_the_town(town):
     assert "line 4" in message and "start road 'E-B'" in message
 
 
+def test_a_one_way_road_written_the_other_way_round_is_named_the_right_way():
+    from tests.networks.test_road_lookup import LOOP
+    from trustroute.networks.town import town_from_dict
+
+    loop = town_from_dict(LOOP, "loop.json")   # one way round B-C-D-E
+    text = 'name = "x"\nstart = "C-B"\nformula = "F a"\n[states]\na = ["C-D"]\n'
+    message = error(text, loop)
+    assert "start road 'C-B' is not a directed road of the town (loop.json)" in message
+    assert "one-way, driven from B to C: write 'B-C'" in message
+    message = error(text.replace('"C-D"', '"D-C"'), loop)
+    assert "(states.a): state atom 'a': 'D-C' is not a directed road" in message
+    assert "one-way, driven from C to D: write 'C-D'" in message
+
+
+def test_an_unknown_road_lists_the_roads_leaving_its_first_junction(town):
+    message = error(PHI1_TEXT.replace('"F-G"', '"F-Z"'), town)
+    assert "(from F: F-A, F-G, F-H)" in message
+    message = error(PHI1_TEXT.replace('start = "E-A"', 'start = "E-B"'), town)
+    assert "(from E: E-A, E-D, E-L)" in message
+
+
 @pytest.mark.parametrize("coeffs", ["[1]", "[]"])
 def test_coefficients_of_the_wrong_length(coeffs):
     message = error(PHI1_TEXT.replace("coeffs = [1, 0, 0, 0, 0, 0, 0]", f"coeffs = {coeffs}"))
