@@ -20,9 +20,8 @@ from pathlib import Path
 
 from trustroute.core.errors import InputError
 from trustroute.networks.sumo_net import find_binary
+from trustroute.networks.town import NET_SUFFIXES, OSM_SUFFIXES
 
-OSM_SUFFIXES: tuple[str, ...] = (".osm", ".osm.xml")
-NET_SUFFIXES: tuple[str, ...] = (".net.xml", ".net.xml.gz")
 OSM_OPTIONS: tuple[str, ...] = (
     "--opposites.guess", "--junctions.join", "--geometry.remove", "--roundabouts.guess",
     "--ramps.guess", "--tls.guess-signals", "--tls.discard-simple", "--tls.join",

@@ -37,7 +37,7 @@ from trustroute.core.fields import (
     field_table,
     keys,
 )
-from trustroute.core.packaged import PackagedKind
+from trustroute.core.packaged import PackagedKind, passed_how
 from trustroute.core.validation import parse_json, read_text, require_object
 from trustroute.core.wording import shown_value
 from trustroute.networks.road import Road
@@ -62,6 +62,10 @@ PENTAGON_TOWN_PATH = Path(__file__).parent / "data" / "pentagon.json"
 # networks/cities.py, which imports this module).
 BUILT_TOWNS: dict[str, Callable[[], Path]] = {}
 TOWNS = PackagedKind("town", DEFAULT_TOWN_PATH.parent, ".json", built=BUILT_TOWNS)   # packaged towns by name
+# The files `trustroute town import` makes a town of (networks/osm_convert.py): read as a town file,
+# they would fail as JSON, so load_town names the import instead.
+OSM_SUFFIXES: tuple[str, ...] = (".osm", ".osm.xml")
+NET_SUFFIXES: tuple[str, ...] = (".net.xml", ".net.xml.gz")
 NO_INCIDENT = "none"  # a road without an incident (and the start road of an episode)
 INCIDENT_TYPES: tuple[str, ...] = ("obstacle", "pedestrian", "truck", NO_INCIDENT)
 # SUMO works in metres with float coordinates: a town beyond 1000 km, or a road shorter than a car,
@@ -400,5 +404,9 @@ def load_town(path: str | Path | None = None, given: str = "--town") -> Town:
     cannot be read (PackagedKind.fix)."""
     file_path = TOWNS.resolve(path) if path is not None else DEFAULT_TOWN_PATH
     shown = "default town" if path is None else str(path if file_path == Path(path) else file_path)
+    if file_path.name.lower().endswith(NET_SUFFIXES + OSM_SUFFIXES) and file_path.is_file():
+        raise InputError(shown, "", "a SUMO net or an OpenStreetMap file, not a town file (JSON)",
+                         f"import it as a town first: trustroute town import {shown} --out town.json, "
+                         f"then pass town.json{passed_how(given)}")
     text = read_text(file_path, shown, "the town file", TOWNS.fix(given))
     return town_from_dict(parse_json(text, shown, "town file"), shown)

@@ -30,6 +30,19 @@ def test_content_hash_ignores_formatting(tmp_path, town):
     assert load_town(tmp_path / "t.json").content_hash == town.content_hash
 
 
+@pytest.mark.parametrize("name", ["grid.net.xml", "grid.net.xml.gz", "map.osm", "Map.OSM.xml"])
+def test_a_sumo_net_or_osm_file_given_as_a_town_names_the_import(tmp_path, name):
+    from trustroute.core.errors import InputError
+
+    source = tmp_path / name
+    source.write_text('<net version="1.20"></net>\n')
+    with pytest.raises(InputError) as error:
+        load_town(source, given="--town")
+    line = error.value.one_line()
+    assert "not a town file (JSON)" in line and "not valid JSON" not in line
+    assert f"trustroute town import {source} --out town.json, then pass town.json with --town" in line
+
+
 def test_shortest_route_reaches_target(town):
     route = town.shortest_route("E-A", {"B-G", "F-G", "I-G"})
     assert route[0] == "E-A" and route[-1] in {"B-G", "F-G", "I-G"}

@@ -71,8 +71,14 @@ class PackagedKind:
         `given` is how the command line takes it: an option ("--town": "with --town") or a
         positional argument ("TOWN": "as TOWN"); "" names neither (a config key, the API)."""
         names = ", ".join(self.names())
-        how = "" if not given else f" with {given}" if given.startswith("-") else f" as {given}"
-        return f"pass an existing {self.what} file{how} or a packaged {self.what} name ({names})"
+        return (f"pass an existing {self.what} file{passed_how(given)} or a packaged {self.what} "
+                f"name ({names})")
+
+
+def passed_how(given: str) -> str:
+    """How the command line takes an input, for a hint: " with --town" for an option, " as TOWN"
+    for a positional argument, "" for neither (a config key, the API)."""
+    return "" if not given else f" with {given}" if given.startswith("-") else f" as {given}"
 
 
 SPECS = PackagedKind("spec", PACKAGED_SPECS, ".toml")
