@@ -219,10 +219,12 @@ def load_policy(path: str | Path, town: Town, driver: DriverModel, spec: Spec) -
     made_for_population = document.get("population_hash")
     given_population = driver.population_hash if isinstance(driver, TypeLiftedModel) else ""
     if made_for_population is not None and given_population != made_for_population:
+        given, synth = (("not for a single driver model", "without --population for the driver model")
+                        if not given_population else ("not for the one given", "--population for this one"))
         raise InputError(where, "population_hash", "policy was synthesized for a driver population "
-                         f"(hash {str(made_for_population)[:12]}...) that is not the one given",
+                         f"(hash {str(made_for_population)[:12]}...), {given}",
                          "pass the driver population it was made for (--population), or re-run "
-                         "trustroute synth --population for this one")
+                         f"trustroute synth {synth}")
     if made_for_population is None and given_population:
         raise InputError(where, "population_hash", "policy was synthesized for a single driver model, "
                          "not for a driver population", "pass the driver model it was made for "

@@ -78,7 +78,9 @@ def test_routing_with_a_policy_made_for_another_population_is_exit_2(tmp_path, c
     code, _, err = run_cli(capsys, "evaluate", SPEC, str(policy), "--population", str(other))
     assert_one_line_error(code, err, str(policy), "another driver population")
     code, _, err = run_cli(capsys, "evaluate", SPEC, str(policy))
-    assert_one_line_error(code, err, str(policy), "driver population")
+    assert_one_line_error(code, err, str(policy), "for a driver population (hash ",
+                          "), not for a single driver model", "pass the driver population it was made for",
+                          "re-run trustroute synth without --population")
     code, out, _ = run_cli(capsys, "evaluate", SPEC, str(policy), "--population",
                            str(EXAMPLE_POPULATION_PATH), "--json", "--max-junctions", "3")
     assert code == 0
