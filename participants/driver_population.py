@@ -211,6 +211,10 @@ def _type_entry(entry: object, index: int, path: str, base: Path | None) -> tupl
     if (values["model"] is None) == (file is None):
         raise InputError(path, place, "give exactly one of 'model' and 'model_file'",
                          "inline the driver model or name its file relative to this one")
+    if isinstance(values["model"], str):
+        raise InputError(path, f"{place}.model", f"expected a driver model (an object), got "
+                         f"{shown_value(values['model'])}", f"to name a driver model file or a packaged "
+                         f"model, write \"model_file\": {json.dumps(values['model'][:80])}")
     if file is None:
         model = driver_model_from_dict(values["model"], f"{path} ({place}.model)")
     else:
@@ -222,13 +226,15 @@ def _model_file(file: str, base: Path | None, path: str, place: str) -> DriverMo
     """The driver model a type's `model_file` names. A file that cannot be read (missing, a
     directory, far too large) is an error of the population file at that key; what is wrong inside
     the model file is an error of the model file."""
-    model_path = DRIVER_MODELS.resolve((base / file) if base is not None and not Path(file).is_absolute()
-                                       else Path(file))
+    relative = (base / file) if base is not None and not Path(file).is_absolute() else Path(file)
+    # the packaged-name rule (core/packaged.py): a file wins, else a bare name names a packaged model
+    model_path = relative if relative.is_file() else DRIVER_MODELS.path(file) or relative
     try:
         data = read_input_bytes(model_path, f"driver model {file[:80]!r}")
     except InputError as exc:
         raise InputError(path, place, exc.problem, f"set {place} to an existing driver model file, "
-                         "relative to the population file's folder") from None
+                         "relative to the population file's folder, or a packaged driver model name "
+                         f"({', '.join(DRIVER_MODELS.names())})") from None
     shown = str(model_path)
     return driver_model_from_text(decode_utf8(data, shown, "driver model"), shown)
 

@@ -80,7 +80,42 @@ def test_a_model_file_that_cannot_be_read_is_placed_at_its_key(tmp_path, model_f
     error = refused_file(load_driver_population, doc, path)
     assert (error.source, error.place, error.problem) == (str(path), "types[0].model_file", problem)
     assert error.fix == ("set types[0].model_file to an existing driver model file, relative to the "
-                         "population file's folder")
+                         "population file's folder, or a packaged driver model name (driver_model, "
+                         "driver_model_performance)")
+
+
+@pytest.mark.parametrize("name", ["driver_model_performance", "driver_model_performance.json"])
+def test_a_packaged_model_name_is_read_wherever_the_population_file_lies(tmp_path, monkeypatch, name):
+    # the packaged-name rule holds from any folder, not only where the population's folder is "."
+    doc = {"format": "trustroute-driver-population", "version": 1,
+           "types": [{"name": "performance", "weight": 1.0, "model_file": name}]}
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "pop.json").write_text(json.dumps(doc))
+    expected = load_driver_model("driver_model_performance").content_hash
+    monkeypatch.chdir(tmp_path)
+    for given in ("sub/pop.json", tmp_path / "sub" / "pop.json"):
+        assert load_driver_population(given).types[0].model.content_hash == expected
+    monkeypatch.chdir(tmp_path / "sub")
+    assert load_driver_population("pop.json").types[0].model.content_hash == expected
+
+
+def test_a_file_beside_the_population_wins_over_a_packaged_name(tmp_path):
+    (tmp_path / "driver_model_performance.json").write_text(DEFAULT_DRIVER_MODEL_PATH.read_text())
+    doc = {"format": "trustroute-driver-population", "version": 1,
+           "types": [{"name": "nominal", "weight": 1.0, "model_file": "driver_model_performance.json"}]}
+    (tmp_path / "pop.json").write_text(json.dumps(doc))
+    population = load_driver_population(tmp_path / "pop.json")
+    assert population.types[0].model.content_hash == load_driver_model().content_hash
+
+
+def test_a_model_named_where_an_inline_model_goes_points_to_model_file(tmp_path):
+    doc = {"format": "trustroute-driver-population", "version": 1,
+           "types": [{"name": "nominal", "weight": 1.0, "model": "driver_model"}]}
+    path = tmp_path / "pop.json"
+    error = refused_file(load_driver_population, doc, path)
+    assert (error.source, error.place) == (str(path), "types[0].model")
+    assert error.problem == "expected a driver model (an object), got 'driver_model'"
+    assert error.fix == 'to name a driver model file or a packaged model, write "model_file": "driver_model"'
 
 
 def test_what_is_wrong_inside_a_model_file_names_that_file(tmp_path):
