@@ -156,6 +156,11 @@ def read_net_graph(net_path: str | Path, shown: str | None = None) -> NetGraph:
     except Exception as exc:  # sumolib raises what its XML parser raises
         raise InputError(shown, "", f"not a readable SUMO net ({type(exc).__name__}: {exc})",
                          "pass a .net.xml(.gz) written by netconvert, or an .osm file") from None
+    if not net.getNodes() and not net.getEdges(withInternal=False):
+        # sumolib reads any XML without complaint: a route or additional file gives an empty net
+        raise InputError(shown, "", "holds no SUMO net (no junction, no edge)",
+                         "pass a .net.xml(.gz) written by netconvert (not a route, additional or "
+                         "configuration file), or an .osm file")
     edges: dict[str, NetEdge] = {}
     connections: dict[str, frozenset[str]] = {}
     dropped = 0

@@ -110,7 +110,8 @@ def test_incident_options_exclude_each_other(wheel, tmp_path, capsys):
     assert code == 2 and "not both" in err and not (tmp_path / "t.json").exists()
 
 
-@pytest.mark.parametrize("case", ["no_passenger", "disconnected", "bad_osm", "nan_shape", "suffix"])
+@pytest.mark.parametrize("case", ["no_passenger", "disconnected", "bad_osm", "nan_shape", "suffix",
+                                  "routes_file"])
 def test_bad_input_is_one_line_exit_2_and_no_town(case, tmp_path, capsys):
     out = tmp_path / "town.json"
     out.write_text("the town before")
@@ -132,6 +133,10 @@ def test_bad_input_is_one_line_exit_2_and_no_town(case, tmp_path, capsys):
         assert lane is not None
         source.write_text(net[:lane.end()] + "nan,nan " + net[lane.end():])
         expected = "not finite"
+    elif case == "routes_file":   # a route file named as a net: sumolib reads it as an empty net
+        source = tmp_path / "demand.net.xml"
+        source.write_text('<routes><vehicle id="v" depart="0"/></routes>\n')
+        expected = "holds no SUMO net (no junction, no edge)"
     else:
         source = tmp_path / "town.txt"
         source.write_text("x")
