@@ -21,6 +21,8 @@ With a town (and a driver model: the packaged one unless given):
   or the posterior after up to THRESHOLD_DEPTH observations (e.g. a multiple of 1/n under a
   uniform prior, which no `none` road moves). Synthesis then treats the label as either value,
   which widens [L, U]; moving the offset off the hit avoids that.
+- `rejected-at-start`: the DFA rejects at position 0 (the start road read with the prior belief,
+  e.g. `(!lowtrust) U ...` whose lowtrust holds at the prior): every policy is worth 0.
 - `state-unreachable`: a state atom none of whose roads can be reached from the start.
 - `town-unsatisfiable`: no route satisfies even the state-only projection (every belief literal
   true): no accepting (road, q) is reachable in the town × projected-DFA product.
@@ -290,6 +292,25 @@ def threshold_warnings(spec: Spec, town: Town, driver: DriverModel) -> list[Lint
     return warnings
 
 
+def start_warnings(spec: Spec, town: Town, driver: DriverModel) -> list[LintWarning]:
+    """The DFA rejects at position 0: the start road with the driver model's prior belief (not
+    decided for trust-state atoms, whose position 0 reads the hidden trust)."""
+    if (spec.trust_atoms or spec.type_atoms
+            or any(len(a.coeffs) != driver.n_trust for a in spec.belief_atoms.values())):
+        return []
+    compiled = compile_spec(spec, town)
+    prior = np.asarray(driver.initial_belief, dtype=float)
+    if not compiled.rejecting[compiled.initial_state(prior)]:
+        return []
+    held = [f"{name} (c·b = {float(prior @ np.asarray(atom.coeffs)):.4g} > {atom.offset!r})"
+            for name, atom in sorted(spec.belief_atoms.items())
+            if name in compiled.dfa.atoms and float(prior @ np.asarray(atom.coeffs)) > atom.offset]
+    return [LintWarning(
+        "rejected-at-start", f"the spec is rejected at position 0, the start road {spec.start} read with "
+        "the prior belief, so every policy is worth 0"
+        + (f": {', '.join(held)} already holds there" if held else ""))]
+
+
 def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None,
          driver: DriverModel | None = None) -> list[LintWarning]:
     """Every warning that applies to `spec` (and to `town` when given, with `driver` or the
@@ -309,10 +330,11 @@ def lint(spec: Spec, town: Town | None = None, dfa: DFA | None = None,
         warnings.append(LintWarning("unsatisfiable", "no trace satisfies the formula (the DFA's "
                                     "initial state cannot reach acceptance)"))
     elif town is not None:
-        warnings += unreachable_warnings(spec, town)
+        driver = driver if driver is not None else load_driver_model()
+        warnings += start_warnings(spec, town, driver) + unreachable_warnings(spec, town)
         if not town_satisfiable(spec, town):
             warnings.append(LintWarning(
                 "town-unsatisfiable", f"no route from {spec.start} satisfies the spec on this town, "
                 "even with every belief atom true"))
-        warnings += threshold_warnings(spec, town, driver if driver is not None else load_driver_model())
+        warnings += threshold_warnings(spec, town, driver)
     return warnings

@@ -187,3 +187,26 @@ def test_threshold_hit_by_a_reachable_belief(town):
     hit = [w for w in lint(on, town) if w.code == "threshold-hit"]
     assert len(hit) == 1 and hit[0].atom == "low" and "0.2857142857142857" in hit[0].message
     assert not [w for w in lint(off, town) if w.code == "threshold-hit"]
+
+
+def test_rejected_at_start_when_the_prior_or_the_start_road_already_breaks_the_until(town):
+    """Position 0 is the start road read with the prior: (!low) U v1 rejects there when low holds
+    at the uniform prior (c·b = 2/7 > 0.25), or when the start road is itself one of the avoided
+    roads; every policy is then worth 0, which the exact evaluation of the free route confirms."""
+    from trustroute.participants.driver_model import load_driver_model
+    from trustroute.policies.evaluation.plain import evaluate
+    from trustroute.policies.model.trust_pomdp import build_pomdp
+    from trustroute.policies.routing.free import trust_free_policy
+
+    pomdp = build_pomdp(town, load_driver_model())
+    states, low = {"v1": ["B-G"]}, [1, 1, 0, 0, 0, 0, 0]
+    for offset, rejected in ((0.25, True), (0.3, False)):
+        spec = spec_from_text(spec_text("(!low) U v1", states, {"low": (low, offset)}), "<t>", town)
+        found = [w.message for w in lint(spec, town) if w.code == "rejected-at-start"]
+        assert (evaluate(pomdp, spec, trust_free_policy(town, spec)).lower == 0) == rejected
+        assert found == ([] if not rejected else [
+            "the spec is rejected at position 0, the start road E-A read with the prior belief, so every "
+            "policy is worth 0: low (c·b = 0.2857 > 0.25) already holds there"])
+    road = spec_from_text(spec_text("(!a) U v1", {**states, "a": ["E-A"]}), "<t>", town)
+    (warning,) = [w for w in lint(road, town) if w.code == "rejected-at-start"]
+    assert warning.message.endswith("so every policy is worth 0")
