@@ -100,7 +100,9 @@ def work_clock(work_limit: int | None, time_limit: float) -> Iterator[float]:
 
 
 # What of a method's own can end a synthesis unconverged before its limits (`stopped_by`'s `cap`):
-# its cluster policies' largest cap (policies/synthesis/cluster_policy.py); the nodes per level of
+# its cluster policies' largest cap (policies/synthesis/cluster_policy.py); the whole schedule of an
+# unbounded belief-MDP synthesis, run to its end ("depth cap", policies/synthesis/belief_synthesis.py,
+# UNBOUNDED_HORIZONS and the cluster rounds); the nodes per level of
 # the trust-state search and of its evaluations, their dropped live mass unknown; the junctions of
 # an unbounded evaluation (UNBOUNDED_MAX_LEVELS, policies/evaluation/trust_state.py); the fixed
 # depths of the trust-state synthesis' unbounded searches and policy horizons; its allowance for

@@ -173,6 +173,7 @@ class _Answer:
     strict: float
     runs: tuple[Run, ...]
     unbounded_upper: str | None = None
+    ran_out: bool = False    # (unbounded) every step ran to its end, none cut by the clock
 
 
 def cluster_order(tables: ProductTables, symbols: ObservationSymbols, horizon: int | None,
@@ -255,20 +256,26 @@ def _bounded(problem: _Problem, horizon: int) -> _Answer:
 
 
 def _unbounded_clusters(problem: _Problem, symbols: ObservationSymbols, upper: float, lower: float,
-                        until: float, runs: list[Run]) -> ClusterSolution | None:
+                        until: float, runs: list[Run]) -> tuple[ClusterSolution | None, bool]:
     """Cluster policies for L (accepting within H junctions): growing horizons with the
     first cap (more junctions to come back to a waypoint usually lift L most), then larger
-    caps at the best horizon; the one of the largest L above `lower`, if any."""
+    caps at the best horizon; the one of the largest L above `lower`, if any, and whether a round
+    or a cap was left out (by the clock, or by the memory a cap would take)."""
     budget, tau = problem.budget, problem.tau
     best: tuple[ClusterSolution, int] | None = None      # (solution, its depth)
     rounds: list[tuple[int, tuple[int, ...]]] = [(problem.shortest + slack, UNBOUNDED_CLUSTER_CAPS[:1])
                                                  for slack in UNBOUNDED_CLUSTER_SLACK]
+    cut = False
     while rounds:
         depth, caps = rounds.pop(0)
-        if upper - lower <= tau or budget.expired(until):
+        if upper - lower <= tau:
+            break
+        if budget.expired(until):
+            cut = True
             break
         found, _, tried = best_cluster_solution(problem.tables, symbols, list(problem.roots_q), depth,
                                                 tau, until, caps, enough=upper - tau)
+        cut = cut or len(tried) < len(caps) or any(attempt.lower is None for attempt in tried)
         if found is None:
             break
         runs.append(_cluster_run(found, upper, depth, tried))
@@ -277,7 +284,7 @@ def _unbounded_clusters(problem: _Problem, symbols: ObservationSymbols, upper: f
             best, lower = (found, depth), found.lower
         if not rounds and best is not None and len(caps) == 1:
             rounds.append((best[1], UNBOUNDED_CLUSTER_CAPS))
-    return None if best is None else best[0]
+    return (None if best is None else best[0]), cut
 
 
 @dataclass(frozen=True, eq=False)
@@ -346,16 +353,33 @@ def _unbounded(problem: _Problem) -> _Answer:
     best = _Answer(-1.0, upper, None, 0.0, (), note)
     runs: list[Run] = []
     order = cluster_order(tables, symbols, None, problem.settings.completion, problem.settings.clusters)
+    cut = not bound.complete
     if order == "first":
-        best = _with_cluster(best, _unbounded_clusters(problem, symbols, upper, best.lower,
-                                                       budget.share(CLUSTER_SHARE), runs), tables)
+        found, clusters_cut = _unbounded_clusters(problem, symbols, upper, best.lower,
+                                                  budget.share(CLUSTER_SHARE), runs)
+        best, cut = _with_cluster(best, found, tables), cut or clusters_cut
     until = budget.share(SEARCH_SHARE) if order == "after" else budget.deadline
     best = _unbounded_searches(problem, symbols, _UnboundedBound(k, abstraction, bound, value), best,
                                until, runs)
-    if order == "after" and best.upper - best.lower > tau and not budget.expired():
-        best = _with_cluster(best, _unbounded_clusters(problem, symbols, best.upper, best.lower,
-                                                       budget.deadline, runs), tables)
-    return replace(best, lower=max(best.lower, 0.0), runs=tuple(runs))
+    if order == "after" and best.upper - best.lower > tau:
+        found, clusters_cut = ((None, True) if budget.expired() else
+                               _unbounded_clusters(problem, symbols, best.upper, best.lower,
+                                                   budget.deadline, runs))
+        best, cut = _with_cluster(best, found, tables), cut or clusters_cut
+    searches = [run for run in runs if isinstance(run, SearchRun)]
+    ran_out = (not cut and not budget.expired()
+               and {run.horizon for run in searches} >= {*UNBOUNDED_HORIZONS, None}
+               and all(run.stopped != "deadline" for run in searches))
+    return replace(best, lower=max(best.lower, 0.0), runs=tuple(runs), ran_out=ran_out)
+
+
+def unbounded_schedule_note(seconds: float) -> str:
+    """What a reader of an unbounded synthesis that ran its whole schedule unconverged ("depth
+    cap", `seconds` it took) should know: more time would not move its bounds."""
+    return (f"every step of the unbounded synthesis ran to its end (bounded searches up to "
+            f"{UNBOUNDED_HORIZONS[-1]} junctions, the unbounded search to depth {UNBOUNDED_DEPTH} with "
+            f"the end-component bound beyond, the cluster policies' rounds) after {seconds:.1f} s, "
+            "before its time limit: a longer --time-limit would not tighten these bounds")
 
 
 def _with_cluster(best: _Answer, found: ClusterSolution | None, tables: ProductTables) -> _Answer:
@@ -451,6 +475,7 @@ def _synthesize(pomdp: TrustPOMDP, spec: Spec, settings: SynthesisSettings,
         policy_rows=table.rows, lower_strict_labels=max(float(rounded_down(answer.strict, margin)), lower),
         unbounded_upper=answer.unbounded_upper,
         lower_from_horizon=(max(answer.runs, key=lambda r: r.lower).horizon
-                            if horizon is None else None))
+                            if horizon is None else None),
+        stopped="depth cap" if answer.ran_out and not converged else None)
     return SynthesisResult(policy=policy, lower=lower, upper=upper, seconds=budget.elapsed(),
                            stats=stats, horizon=horizon, belief_rule=belief_rule)

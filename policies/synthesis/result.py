@@ -206,9 +206,12 @@ class SynthesisStats:
     unbounded_upper: str | None = None
     lower_from_horizon: int | None = None
     objective: str | None = None
+    # "depth cap": an unbounded synthesis ran every step of its schedule (belief_synthesis.py,
+    # UNBOUNDED_HORIZONS and the cluster rounds) unconverged, none cut by its limit
+    stopped: str | None = None
 
     def to_dict(self) -> dict:
-        out = record_dict(self, optional=("unbounded_upper", "lower_from_horizon", "objective"))
+        out = record_dict(self, optional=("unbounded_upper", "lower_from_horizon", "objective", "stopped"))
         if self.unbounded_upper is not None:
             # (kept when None: the unbounded search's own run has no horizon)
             out["lower_from_horizon"] = self.lower_from_horizon
@@ -223,7 +226,8 @@ class SynthesisResult(Generic[PolicyT, StatsT]):
 
     horizon: the junction horizon solved for (None: unbounded); stats: how the bounds were obtained.
     stopped_by: what ended the call, "convergence", "node budget", one of the caps of the method's
-        own (work_clock.CAPS: "cluster cap" of the belief-MDP synthesis; "node cap", "junction cap",
+        own (work_clock.CAPS: "cluster cap" and, unbounded, "depth cap" (SynthesisStats.stopped) of
+        the belief-MDP synthesis; "node cap", "junction cap",
         "depth cap" or "rounding margin" of the trust-state synthesis, JOINT_STOPS in
         policies/trust_state_synthesis/synthesis.py), "work limit" or "time limit"
     (policies/work_clock.py, `stopped_by`; None where the caller did not say).

@@ -25,6 +25,7 @@ from trustroute.policies.routing.decision_tables import fallback_warning as fall
 from trustroute.policies.routing.files import array_path, save_policy
 from trustroute.policies.routing.free import baseline_route, trust_free_policy
 from trustroute.policies.routing.protocol import RoutingPolicy
+from trustroute.policies.synthesis.belief_synthesis import unbounded_schedule_note
 from trustroute.policies.synthesis.cluster_policy import CLUSTER_CAPS, reached_cluster_cap
 from trustroute.policies.synthesis.population import (
     Objective,
@@ -36,7 +37,7 @@ from trustroute.policies.synthesis.population import (
     summary,
 )
 from trustroute.policies.synthesis.refinement import reached_node_budget
-from trustroute.policies.synthesis.result import SearchRun, SynthesisResult
+from trustroute.policies.synthesis.result import SearchRun, SynthesisResult, SynthesisStats
 from trustroute.policies.synthesis.rounding import certify, problem_rounding
 from trustroute.policies.synthesis.settings import CLUSTER_MODES as SEARCH_CLUSTER_MODES
 from trustroute.policies.synthesis.settings import SynthesisSettings as SearchSettings
@@ -84,6 +85,8 @@ def reached_cap(stats: object, lower: float, upper: float) -> str | None:
     at its cluster policies' largest cap (`reached_cluster_cap`)."""
     if reached_cluster_cap(stats, lower, upper):
         return "cluster cap"
+    if isinstance(stats, SynthesisStats) and stats.stopped in CAPS:
+        return stats.stopped            # an unbounded schedule run to its end (belief_synthesis.py)
     return reached_joint_cap(stats)
 
 
@@ -144,7 +147,8 @@ def synthesize_population(problem: Problem, objective: str, settings: SynthesisS
     bayes = objective == "bayes"
     converged = found.result.stats.converged if bayes else found.gap <= settings.tau
     ended = stopped_by(converged, clock, bayes and reached_node_budget(found.result.stats),
-                       reached_joint_cap(found.result.stats) if bayes else None)
+                       reached_cap(found.result.stats, found.result.lower, found.result.upper)
+                       if bayes else None)
     found = replace(found, result=replace(found.result, stopped_by=ended))
     if out is not None:
         save_policy(found.result, out, problem.town, found.pomdp.driver, found.spec,
@@ -227,6 +231,8 @@ def stop_notes(result: SynthesisResult) -> list[str]:
         return [f"the bounds are the cluster policies' at their largest cap ({CLUSTER_CAPS[-1]} clusters "
                 "per junction, road and automaton state), tighter than the search's before them: a longer "
                 "--time-limit lengthens that search and need not move them"]
+    if result.stopped_by in CAPS and isinstance(result.stats, SynthesisStats):
+        return [unbounded_schedule_note(result.seconds)]
     if result.stopped_by in CAPS:
         return [joint_cap_note(result.stopped_by, result.seconds)]
     if result.stopped_by != "node budget":

@@ -159,3 +159,36 @@ def test_a_bad_node_budget_is_one_error_line_with_its_fix(capsys):
     assert_one_line_error(code, err, "--node-budget")
     with pytest.raises(InputError, match="expected an integer >= 1"):
         trustroute.synthesize("phi1", horizon=8, node_budget=0)
+
+
+# Two junctions joined by one road without incidents: the belief never moves off the uniform prior,
+# so P(trust >= 6) > 0.5 never holds and every policy is worth 0; the unbounded abstraction, which
+# forgets the prior after a few `none` roads, keeps U at 1 whatever the time.
+STILL_TOWN = {"junctions": {"A": [0, 0], "B": [500, 0]}, "roads": [["A", "B"]],
+              "incidents": {"A-B": "none", "B-A": "none"}}
+STILL_SPEC = ('name = "still"\nstart = "A-B"\nformula = "F (back & high)"\n[states]\nback = ["B-A"]\n'
+              "[beliefs.high]\ncoeffs = [0, 0, 0, 0, 0, 1, 1]\noffset = 0.5\n")
+
+
+def test_an_unbounded_synthesis_that_runs_its_whole_schedule_says_so_not_time_limit(capsys, tmp_path):
+    """Every bounded horizon, the unbounded search and the cluster rounds end long before the
+    limit with [0, 1]: `stopped_by` is "depth cap" (more time would not move the bounds), in the API,
+    in --json and in a line of the summary; a population's Bayes objective says the same. The same
+    problem cut by a short limit still says "time limit"."""
+    from tests.cli import cli_json, run_cli
+
+    (tmp_path / "still.json").write_text(json.dumps(STILL_TOWN))
+    (tmp_path / "still.toml").write_text(STILL_SPEC)
+    town, spec = tmp_path / "still.json", tmp_path / "still.toml"
+    result = trustroute.synthesize(spec, town, time_limit=60.0)
+    assert (result.lower, result.upper) == (0.0, 1.0) and result.seconds < 30
+    assert result.stopped_by == "depth cap" and result.stats.stopped == "depth cap"
+    command = ["synth", str(spec), "--town", str(town), "--time-limit", "60"]
+    assert cli_json(capsys, *command, "--out", str(tmp_path / "a.json"))["stopped_by"] == "depth cap"
+    code, out, err = run_cli(capsys, *command, "--out", str(tmp_path / "b.json"))
+    assert code == 0, err
+    assert "every step of the unbounded synthesis ran to its end" in out and "would not tighten" in out
+    bayes = trustroute.synthesize(spec, town, time_limit=60.0, population=POPULATION, objective="bayes")
+    assert bayes.result.stopped_by == "depth cap"
+    cut = trustroute.synthesize(spec, town, time_limit=DRAGGED_LIMIT, work_limit=1000)
+    assert cut.stopped_by in ("work limit", "time limit") and cut.stats.stopped is None
