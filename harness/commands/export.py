@@ -1,7 +1,10 @@
 """`trustroute export STUDY --out DIR`: a study packaged for sharing, with pseudonymous
 participants, a codebook, the config and the inputs that define the task, the texts shown, the
 versions, checksums and a README
-(harness/study/export.py; docs/live_studies.md, "Export")."""
+(harness/study/export.py; docs/live_studies.md, "Export").
+
+The study directory's lock is held throughout, so a study run or a live server writing the study
+refuses the export (one line naming it), as it refuses a second run."""
 
 from __future__ import annotations
 
@@ -26,15 +29,21 @@ def export(study_dir: str, out: str, seed: int, as_json: bool) -> None:
     import numpy as np
 
     from trustroute.analysis.study_directory import load_study
+    from trustroute.core.dataset import check_study_dir
     from trustroute.harness.live.withdraw import ended_counts, registry_words
     from trustroute.harness.study.export import KEY_FILE, export_study
+    from trustroute.harness.study.runner import held_study
 
-    warnings = study_warnings(Path(study_dir))
-    load_study(Path(study_dir))   # its tables checked against its inputs before anything is written
-    ended = ended_counts(Path(study_dir))
-    index = {**export_study(Path(study_dir), Path(out), np.random.default_rng(seed), ended,
-                           registry_words(Path(study_dir))),
-             "warnings": warnings}
+    check_study_dir(Path(study_dir))
+    # a run writing the study (`study`, `live`) holds its lock: the package is of one state of it,
+    # and the key file is written by one command at a time
+    with held_study(Path(study_dir), "wait for that run to finish (or stop it), then export again"):
+        warnings = study_warnings(Path(study_dir))
+        load_study(Path(study_dir))   # its tables checked against its inputs before anything is written
+        ended = ended_counts(Path(study_dir))
+        index = {**export_study(Path(study_dir), Path(out), np.random.default_rng(seed), ended,
+                               registry_words(Path(study_dir))),
+                 "warnings": warnings}
     # the package is a folder of many files, listed as the folder; the key stays in the study
     paths = {"package": Path(out), "export_key": Path(study_dir) / KEY_FILE}
     line = (f"exported {', '.join(index['tables'])} of {counted(index['participants'], 'participant')} "

@@ -318,12 +318,18 @@ def backend_name(workers: int, scheduler: str | None) -> str:
 def study_lock(study_dir: Path) -> Iterator[None]:
     """Create the study directory (checked writable first) and hold its lock, or InputError naming
     the run that holds it."""
+    check_study_output(study_dir)
+    with held_study(study_dir, "wait for that run to finish (or stop it), or pass another --out"):
+        yield
+
+
+def held_study(study_dir: Path, fix: str) -> contextlib.AbstractContextManager[None]:
+    """The study directory's lock, the one every command writing or reading the whole study holds
+    (`study`, `live`, `withdraw`, `export`): taken at once or InputError naming the run that holds it
+    and `fix`."""
     from trustroute.core.output_files import file_lock
 
-    check_study_output(study_dir)
-    with file_lock(Path(study_dir) / LOCK_FILE, "study directory", wait=False,
-                   fix="wait for that run to finish (or stop it), or pass another --out"):
-        yield
+    return file_lock(Path(study_dir) / LOCK_FILE, "study directory", wait=False, fix=fix)
 
 
 @contextlib.contextmanager

@@ -8,6 +8,8 @@ import getpass
 import json
 import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +104,40 @@ def test_each_package_keeps_its_key_and_a_key_is_never_dropped(model_study, tmp_
         assert_rows_in_code_order(package, study)
     assert package_key(study, osf) != package_key(study, journal)
     assert not list(osf.rglob("export-key*"))   # the keys stay in the study
+
+
+HOLD_THE_STUDY = """
+import sys
+from pathlib import Path
+from trustroute.harness.study.runner import study_lock
+with study_lock(Path(sys.argv[1])):   # the lock `trustroute study` and `trustroute live` hold
+    print("held", flush=True)
+    sys.stdin.read()
+"""
+
+
+def test_an_export_is_refused_while_another_process_holds_the_study(model_study, tmp_path, capsys):
+    """A run writing the study (a live server, a study resumed) holds its lock: an export then is
+    one line naming that process, with no package and no key written; once it has let go, the
+    export goes ahead. A folder that is no study is refused before any lock file is made in it."""
+    study = shutil.copytree(model_study, tmp_path / "study")
+    holder = subprocess.Popen([sys.executable, "-c", HOLD_THE_STUDY, str(study)],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "held\n"
+        code, out, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
+        assert_one_line_error(code, err, str(study), f"in use by pid {holder.pid}", "then export again")
+        assert out == "" and not (tmp_path / "package").exists()
+        assert not (study / "export-key.json").exists()
+    finally:
+        holder.communicate("", timeout=60)
+    code, _, err = run_cli(capsys, "export", str(study), "--out", str(tmp_path / "package"))
+    assert code == 0, err
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    code, _, err = run_cli(capsys, "export", str(logs), "--out", str(tmp_path / "other"))
+    assert_one_line_error(code, err, str(logs), "no manifest")
+    assert list(logs.iterdir()) == []
 
 
 def test_a_key_file_of_the_single_package_form_is_read_and_kept(model_study, tmp_path, capsys):

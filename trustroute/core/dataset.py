@@ -573,8 +573,9 @@ def no_manifest_fix(study_dir: Path) -> str:
     return "run `trustroute study CONFIG --out DIR` first (a rerun resumes and consolidates)"
 
 
-def read_manifest(study_dir: Path) -> dict:
-    """manifest.json of a consolidated study, with every key of MANIFEST_KEYS."""
+def check_study_dir(study_dir: Path) -> Path:
+    """`study_dir` is a consolidated study's folder (it has a manifest), or InputError: checked
+    before its lock is taken, so that a command refused a folder leaves nothing in it."""
     path = Path(study_dir) / MANIFEST_FILE
     if not Path(study_dir).is_dir():
         problem = "not a directory" if Path(study_dir).exists() else "no such directory"
@@ -583,9 +584,13 @@ def read_manifest(study_dir: Path) -> dict:
     if not path.exists():
         raise InputError(str(study_dir), MANIFEST_FILE, "not a finished study directory (no manifest)",
                          no_manifest_fix(Path(study_dir)))
+    return path
 
-    manifest = read_json(path, "study manifest",
-                         fix=REBUILD_FIX)
+
+def read_manifest(study_dir: Path) -> dict:
+    """manifest.json of a consolidated study, with every key of MANIFEST_KEYS."""
+    path = check_study_dir(study_dir)
+    manifest = read_json(path, "study manifest", fix=REBUILD_FIX)
     missing = ([key for key in MANIFEST_KEYS if key not in manifest and key not in MANIFEST_OPTIONAL_KEYS]
                if isinstance(manifest, dict) else ["all"])
     if missing or not isinstance(manifest, dict):   # not a dict: missing is ["all"]
