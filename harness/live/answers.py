@@ -14,10 +14,13 @@ import time
 from pathlib import Path
 
 from trustroute.core.dataset import QUESTIONNAIRES_FILE, QUESTIONNAIRES_SCHEMA, table_from_rows, write_table
+from trustroute.core.errors import InputError
 from trustroute.core.output_files import atomic_write_text
+from trustroute.core.validation import read_json
 from trustroute.participants.questionnaires import Questionnaire
 
 FOLDER = "live/questionnaires"
+ANSWERS_FIX = "restore it from a backup"
 
 
 def answer_path(study_dir: Path, participant: int, placement: str, trial: str | None, name: str) -> Path:
@@ -44,17 +47,24 @@ def answered(study_dir: Path, participant: int, placement: str, trial: str | Non
 
 def answer_rows(study_dir: Path) -> list[dict]:
     """One row per item answered (QUESTIONNAIRES_SCHEMA's columns), from every answer file in
-    file-name order."""
+    file-name order; InputError naming a file that is not a submitted questionnaire's answers."""
     rows = []
     folder = Path(study_dir) / FOLDER
     for path in sorted(folder.glob("p*.json")) if folder.is_dir() else []:
-        record = json.loads(path.read_text(encoding="utf-8"))
-        low, high = record["scale"]
-        rows += [{"participant": record["participant"], "episode_id": record["episode_id"],
-                  "placement": record["placement"], "questionnaire": record["questionnaire"],
-                  "item": item["item"], "item_index": index, "value": float(item["value"]),
-                  "reversed": bool(item["reversed"]), "scale_min": float(low), "scale_max": float(high),
-                  "answered_utc": record["utc"]} for index, item in enumerate(record["items"])]
+        record = read_json(path, "questionnaire answers", fix=ANSWERS_FIX)
+        try:
+            if not isinstance(record, dict):
+                raise TypeError(record)
+            low, high = record["scale"]
+            rows += [{"participant": record["participant"], "episode_id": record["episode_id"],
+                      "placement": record["placement"], "questionnaire": record["questionnaire"],
+                      "item": item["item"], "item_index": index, "value": float(item["value"]),
+                      "reversed": bool(item["reversed"]), "scale_min": float(low), "scale_max": float(high),
+                      "answered_utc": record["utc"]} for index, item in enumerate(record["items"])]
+        except (KeyError, TypeError, ValueError) as exc:
+            place = str(exc.args[0]) if isinstance(exc, KeyError) else ""
+            raise InputError(str(path), place, "not a submitted questionnaire's answers",
+                             ANSWERS_FIX) from None
     return rows
 
 

@@ -40,12 +40,12 @@ from trustroute.harness.live.withdraw import (
     ENDED,
     load_registry,
     read_registry,
+    read_withdrawal,
     withdraw_participant,
 )
 from trustroute.harness.live.worker import FINAL_REPORT_SECONDS, LiveOptions, start_fork_server
 from trustroute.harness.study.config import StudyConfig
 from trustroute.harness.study.context import StudyContext
-from trustroute.harness.study.export import read_export_keys
 from trustroute.harness.study.plan import EpisodeTask, plan_episodes
 from trustroute.participants.questionnaires import questionnaire_plan
 
@@ -290,7 +290,8 @@ class LiveStudy:
         """The experimenter withdraws `participant` (harness/live/withdraw.py): their episode
         stopped, their data removed and the dataset consolidated without them; the audit entry.
         ValueError when there is no such participant or they have withdrawn already, or (one line,
-        the participant left as they were) when the study's export key cannot be read."""
+        the participant left as they were) when a file the withdrawal reads (the registry, the
+        manifest and the study's inputs, the journal, the answers, the export key) cannot be read."""
         session = self.sessions.get(participant)
         refusal = f"participant {participant} does not exist or has withdrawn already"
         if session is None:
@@ -300,9 +301,9 @@ class LiveStudy:
             refused = console_refusal(participant, session.console_phase(), "withdraw")
             if refused is not None:
                 raise ValueError(refused)
-            try:   # the key file checked before the session ends: one that cannot be read leaves it
-                read_export_keys(self.study_dir)   # (read again by the withdrawal, as it is then)
-            except InputError as exc:
+            try:   # everything the withdrawal reads, checked before the session ends: a file that
+                read_withdrawal(self.study_dir, participant)   # cannot be read leaves it as it was
+            except InputError as exc:   # (all read again by the withdrawal, as they are then)
                 raise ValueError(exc.one_line()) from None
             session.phase = "withdrawn"   # the episode's last message changes nothing now
             session.label = ""            # (the registry keeps none either)

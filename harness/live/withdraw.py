@@ -19,6 +19,7 @@ import hashlib
 import json
 import re
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from trustroute.core.dataset import ATTEMPTS_FILE, FAILURES_DIR, MANIFEST_FILE, PARTS_DIR, TABLES
@@ -28,7 +29,8 @@ from trustroute.core.validation import read_json
 from trustroute.core.wording import counted
 from trustroute.harness.live.answers import answer_rows, write_answer_table
 from trustroute.harness.live.attempts import AttemptLog
-from trustroute.harness.study.context import study_context
+from trustroute.harness.study.config import StudyConfig
+from trustroute.harness.study.context import StudyContext, study_context
 from trustroute.harness.study.export import read_export_keys
 from trustroute.harness.study.manifest import consolidate
 from trustroute.harness.study.plan import plan_episodes
@@ -189,11 +191,25 @@ def withdrawal_line(study_dir: Path, entry: dict) -> str:
     return f"{line}; {still_exported(entry['exported'])}" if "exported" in entry else line
 
 
-def withdraw_participant(study_dir: Path, participant: int, by: str | None = None, reason: str = "") -> dict:
-    """Withdraw `participant` (the directory's lock held by the caller); the audit entry. Everything
-    it reads (the registry, the manifest and the study's inputs, the attempts journal, the answers,
-    the export key) is read and checked before a file is removed, so a refusal leaves the study as
-    it was."""
+@dataclass
+class WithdrawalInputs:
+    """Everything a withdrawal reads, read and checked (`read_withdrawal`) before it changes anything."""
+
+    records: dict                  # the registry
+    config: StudyConfig | None     # the study's config and manifest, once consolidated
+    manifest: dict
+    context: StudyContext | None
+    journal: AttemptLog
+    attempts: list[tuple[str, dict]]   # the journal's entries of the other participants
+    answers: list[dict]                # the questionnaires' rows of the other participants
+    exported: list[dict]               # the packages exported before that hold the participant
+
+
+def read_withdrawal(study_dir: Path, participant: int) -> WithdrawalInputs:
+    """Read and check everything the withdrawal of `participant` needs (the registry, the manifest
+    and the study's inputs, the attempts journal, the answers, the export key); InputError, with
+    nothing changed, when a file cannot be read or the participant cannot withdraw. The console
+    calls it before the participant's session ends, so that such a file leaves them as they were."""
     study_dir = Path(study_dir)
     records = read_registry(study_dir)
     record = registry_record(study_dir, records, participant)
@@ -208,28 +224,37 @@ def withdraw_participant(study_dir: Path, participant: int, by: str | None = Non
     journal = AttemptLog(study_dir, LIVE_DIR)
     attempts = [entry for entry in journal.entries() if entry[1]["participant"] != participant]
     answers = [row for row in answer_rows(study_dir) if row["participant"] != participant]
-    exported = exported_as(study_dir, participant)
+    return WithdrawalInputs(records, config, manifest, context, journal, attempts, answers,
+                            exported_as(study_dir, participant))
+
+
+def withdraw_participant(study_dir: Path, participant: int, by: str | None = None, reason: str = "") -> dict:
+    """Withdraw `participant` (the directory's lock held by the caller); the audit entry. Everything
+    it reads is read and checked first (`read_withdrawal`), before a file is removed, so a refusal
+    leaves the study as it was."""
+    study_dir = Path(study_dir)
+    read = read_withdrawal(study_dir, participant)
     before = table_checksums(study_dir)
     files = participant_files(study_dir, participant)
     removed = [{"path": str(path.relative_to(study_dir)), "sha256": sha256_of(path),
                 "bytes": path.stat().st_size} for path in files]
     for path in files:
         path.unlink()
-    if journal.path.exists():
-        journal.rewrite(attempts)
+    if read.journal.path.exists():
+        read.journal.rewrite(read.attempts)
     withdrawn_utc = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-    records["participants"][str(participant)] = {"withdrawn": True, "withdrawn_utc": withdrawn_utc}
-    write_registry(study_dir, records)
-    if config is not None and context is not None:
-        consolidate(study_dir, context, plan_episodes(config), manifest["config_hash"],
-                    manifest.get("expected"), manifest.get("run"))
-    if (study_dir / ATTEMPTS_FILE).exists() or journal.path.exists():
-        journal.write()
-    write_answer_table(study_dir, answers)
+    read.records["participants"][str(participant)] = {"withdrawn": True, "withdrawn_utc": withdrawn_utc}
+    write_registry(study_dir, read.records)
+    if read.config is not None and read.context is not None:
+        consolidate(study_dir, read.context, plan_episodes(read.config), read.manifest["config_hash"],
+                    read.manifest.get("expected"), read.manifest.get("run"))
+    if (study_dir / ATTEMPTS_FILE).exists() or read.journal.path.exists():
+        read.journal.write()
+    write_answer_table(study_dir, read.answers)
     entry = {"utc": withdrawn_utc,
              "by": by or getpass.getuser(), "participant": participant, "reason": reason,
              "removed": removed, "tables_before": before, "tables_after": table_checksums(study_dir),
-             **({"exported": exported} if exported else {})}
+             **({"exported": read.exported} if read.exported else {})}
     with (study_dir / LIVE_DIR / AUDIT).open("a", encoding="utf-8") as out:
         out.write(json.dumps(entry) + "\n")
     return entry

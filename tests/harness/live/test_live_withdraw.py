@@ -316,35 +316,47 @@ def test_a_console_withdrawal_answers_with_the_packages_that_still_hold_them(tmp
         study.close()
 
 
-def test_an_unreadable_key_file_refuses_a_console_withdrawal_before_anything_changes(tmp_path):
-    """The key file is read before the withdrawal begins: one that cannot be read refuses it with
-    the one line naming the file, the place and the fix, and the participant stays as they were
-    (their link opens their station, their session is not withdrawn); once it is mended, the
-    withdrawal goes through."""
+UNREADABLE = {   # a file the withdrawal reads: (its path in the study, its text, the refusal's start, fix)
+    "key file": ("export-key.json", json.dumps({"pseudonyms": [1], "package": "/shared"}),
+                 "pseudonyms: expected participant number -> code", "restore it from a backup"),
+    "manifest": ("manifest.json", "{", "line 1 column 2: not valid JSON", "fix the JSON syntax"),
+    "journal": ("live/attempts.jsonl", '{"partic\n', "line 1 column 2: not valid JSON",
+                "restore it from a backup"),
+    "answers": ("live/questionnaires/p00000-before-study-trust.json", "{}",
+                "scale: not a submitted questionnaire's answers", "restore it from a backup"),
+}
+
+
+@pytest.mark.parametrize("damaged", list(UNREADABLE))
+def test_an_unreadable_file_refuses_a_console_withdrawal_before_anything_changes(damaged, tmp_path):
+    """Everything the withdrawal reads (the key file, the manifest, the journal, the answers) is read
+    before the withdrawal begins: a file that cannot be read refuses it with the one line naming
+    the file, the place and the fix, and the participant stays as they were (their link opens
+    their station, their session is not withdrawn); once it is mended, the withdrawal goes through."""
     from fastapi.testclient import TestClient
 
     from trustroute.harness.live.app import live_app
-    from trustroute.harness.study.export import KEY_FILE
 
+    name, text, problem, fix = UNREADABLE[damaged]
     study = LiveStudy(tiny_config(tmp_path), tmp_path / "study", ServerOptions()).open()
-    key = study.study_dir / KEY_FILE
+    path = study.study_dir / name
+    path.parent.mkdir(parents=True, exist_ok=True)
     try:
         with TestClient(live_app(study)) as client:
             link = client.post("/api/participants", json={}, headers=experimenter(study)).json()["token"]
             registry = study.registry_path().read_text()
-            key.write_text(json.dumps({"pseudonyms": [1], "package": str(tmp_path / "shared")}))
+            path.write_text(text)
             refused = client.post("/api/participants/0/withdraw", json={"confirm": True},
                                   headers=experimenter(study))
             assert refused.status_code == 409, refused.text
             detail = refused.json()["detail"]["detail"]
-            assert detail.startswith(f"{key}: pseudonyms: expected participant number -> code")
-            assert "restore it from a backup" in detail and "\n" not in detail
+            assert detail.startswith(f"{path}: {problem}") and fix in detail and "\n" not in detail
             assert study.sessions[0].phase == "consent" and 0 not in study.withdrawn
             assert study.registry_path().read_text() == registry
             assert not (study.study_dir / "live" / "withdrawals.jsonl").exists()
             assert client.post("/api/claim", json={"token": link}).status_code == 200   # the link still opens
             assert client.get("/api/me").json()["participant"] == 0
-            key.unlink()
+            path.unlink()
             assert client.post("/api/participants/0/withdraw", json={"confirm": True},
                                headers=experimenter(study)).status_code == 200
             assert study.sessions[0].phase == "withdrawn"
